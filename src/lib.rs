@@ -1,0 +1,67 @@
+//! # warp-lang
+//!
+//! GPU and CPU kernels written as plain Rust functions, in the spirit of NVIDIA Warp.
+//!
+//! ```
+//! use warp_lang as wp;
+//! use wp::prelude::*;
+//!
+//! #[wp::kernel]
+//! fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, dt: f32) {
+//!     let i = tid();
+//!     let a = -b * v[i] / mass + gravity;
+//!     v[i] += a * dt;
+//!     x[i] += v[i] * dt;
+//! }
+//!
+//! fn main() -> wp::Result<()> {
+//!     let dev = wp::get_preferred_device();
+//!     let x = wp::Array::from_slice(&[Vec3::ZERO; 4], &dev)?;
+//!     let v = wp::Array::from_slice(&[Vec3::X; 4], &dev)?;
+//!     for _ in 0..10 {
+//!         wp::launch(integrate, 4, (&x, &v, 0.05, 0.1, Vec3::new(0.0, 0.0, -9.81), 0.01), &dev)?;
+//!     }
+//!     assert!(x.to_vec()?[0].x > 0.0);
+//!     Ok(())
+//! }
+//! ```
+//!
+//! - `#[kernel]` turns a function into a kernel launched over a 1-D to 4-D grid with
+//!   [`launch`]; `#[func]` makes a function callable from kernels; `#[derive(Struct)]` makes a
+//!   `#[repr(C)]` struct a kernel argument and array element.
+//! - Kernel arguments are checked at compile time: an `Array<f32>` where the kernel takes
+//!   `Array<Vec3>` does not compile.
+//! - Kernel threads never panic: an out-of-bounds index or an integer division by zero
+//!   returns an [`Error`] naming the kernel, the argument and the values.
+//!
+//! The kernel language (types, the literal rule, builtins) is described in ARCHITECTURE.md
+//! and in the docs of [`kernel`].
+
+pub use warp_macros::{func, kernel, Struct};
+pub use warp_runtime::{
+    cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch, synchronize, Array,
+    ArgCtx, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel, KernelArg, KernelInfo, Result, Runtime,
+};
+pub use warp_core::{Fault, FaultKind};
+pub use glam;
+
+/// Everything a kernel file needs: `use warp_lang::prelude::*;`.
+pub mod prelude {
+    pub use crate::{func, kernel, Array, Struct};
+    pub use glam::{
+        dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2, DMat3, DMat4, DQuat,
+        DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat, UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
+    };
+}
+
+/// Names that generated code refers to. Not part of the public API.
+#[doc(hidden)]
+pub mod __private {
+    pub use bytemuck;
+    pub use glam;
+    pub use warp_core::{builtins, max_depth, ops, ArrayView, Grid, KResult, RangeProg};
+    pub use warp_runtime::{ArgCtx, Device, Element, Kernel, KernelArg, KernelInfo, Result};
+}
+
+// Lets the crate's own unit tests and doc tests use the macros, which name `::warp_lang`.
+extern crate self as warp_lang;

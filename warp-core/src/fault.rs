@@ -1,0 +1,63 @@
+//! Faults: what a kernel thread reports instead of panicking or invoking undefined behaviour.
+//!
+//! Generated kernel code returns `KResult<()>` from every thread; the executor stops at the
+//! first fault and the runtime turns it into an `Err` that names the kernel, the argument and
+//! the offending values. Faults are boxed so that the `Ok` path stays one word wide.
+
+use std::fmt;
+
+/// The result type of generated kernel and func code on the CPU.
+pub type KResult<T> = Result<T, Box<Fault>>;
+
+/// A fault raised by one kernel thread.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fault {
+    /// Name of the kernel (or func) whose code raised the fault.
+    pub kernel: &'static str,
+    /// What went wrong.
+    pub kind: FaultKind,
+}
+
+/// The kinds of kernel fault.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FaultKind {
+    /// An array index outside the array's shape.
+    OutOfBounds {
+        /// The kernel parameter the array came from.
+        arg: &'static str,
+        /// The index, one entry per dimension (negative or huge values are shown as given).
+        index: Vec<i128>,
+        /// The array's shape.
+        shape: Vec<usize>,
+    },
+    /// Integer division or remainder by zero.
+    DivisionByZero,
+    /// `step_by(0)` in a range loop.
+    ZeroStep,
+}
+
+impl Fault {
+    /// A new boxed fault.
+    #[cold]
+    pub fn new(kernel: &'static str, kind: FaultKind) -> Box<Fault> {
+        Box::new(Fault { kernel, kind })
+    }
+}
+
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.kind {
+            FaultKind::OutOfBounds { arg, index, shape } => write!(
+                f,
+                "kernel `{}`: index {:?} is out of bounds for argument `{}` of shape {:?}",
+                self.kernel, index, arg, shape
+            ),
+            FaultKind::DivisionByZero => {
+                write!(f, "kernel `{}`: integer division by zero", self.kernel)
+            }
+            FaultKind::ZeroStep => write!(f, "kernel `{}`: step_by(0) in a range loop", self.kernel),
+        }
+    }
+}
+
+impl std::error::Error for Fault {}

@@ -1,0 +1,3 @@
+//! Back ends: code emitted from the IR. Each walks the same statements.
+
+pub mod rust;

@@ -1,0 +1,309 @@
+//! Rust back end: the IR to the CPU forward code (what the rayon executor runs per thread).
+//!
+//! Each statement is emitted with the user's span, so a rustc error in generated code points
+//! at the kernel source. Arithmetic follows `warp_core::ops`: integers wrap, integer division
+//! by zero is a fault; every array access is checked and a failed check is a fault (`?`).
+
+use crate::ir::*;
+use crate::types::{Scalar, Ty};
+use proc_macro2::{Literal, Span, TokenStream};
+use quote::{format_ident, quote, quote_spanned};
+
+/// Emits Rust for one lowered function.
+pub struct RustEmitter<'a> {
+    pub f: &'a Function,
+}
+
+impl<'a> RustEmitter<'a> {
+    pub fn var(&self, v: VarId) -> syn::Ident {
+        match &self.f.vars[v].name {
+            Some(n) => format_ident!("{}_{}", n.trim_start_matches("r#"), v),
+            None => format_ident!("__t{}", v),
+        }
+    }
+
+    fn name_lit(&self) -> Literal {
+        Literal::string(&self.f.name)
+    }
+
+    /// The body: statements, in order.
+    pub fn block(&self, b: &Block) -> TokenStream {
+        b.iter().map(|s| self.stmt(s)).collect()
+    }
+
+    fn stmt(&self, s: &Stmt) -> TokenStream {
+        let sp = s.span;
+        match &s.kind {
+            StmtKind::Declare { var } => {
+                let v = self.var(*var);
+                match ty_tokens(&self.f.vars[*var].ty) {
+                    Some(t) => quote_spanned!(sp=> let mut #v: #t;),
+                    None => quote_spanned!(sp=> let mut #v;),
+                }
+            }
+            StmtKind::Assign { dst, op, define } => {
+                let v = self.var(*dst);
+                let rhs = self.op(op, &self.f.vars[*dst].ty, sp);
+                if !define {
+                    return quote_spanned!(sp=> #v = #rhs;);
+                }
+                let m = if self.f.vars[*dst].mutable { quote!(mut) } else { quote!() };
+                match ty_tokens(&self.f.vars[*dst].ty) {
+                    Some(t) => quote_spanned!(sp=> let #m #v: #t = #rhs;),
+                    None => quote_spanned!(sp=> let #m #v = #rhs;),
+                }
+            }
+            StmtKind::Store { array, index, value } => {
+                let a = self.var(*array);
+                let idx = self.index(index);
+                let val = self.var(*value);
+                quote_spanned!(sp=> #a.store(#idx, #val)?;)
+            }
+            StmtKind::SetMember { var, path, value } => {
+                let v = self.var(*var);
+                let path = path.iter().map(|m| format_ident!("{}", m));
+                let val = self.var(*value);
+                quote_spanned!(sp=> #v #(.#path)* = #val;)
+            }
+            StmtKind::If { cond, then, els } => {
+                let c = self.var(*cond);
+                let t = self.block(then);
+                if els.is_empty() {
+                    quote_spanned!(sp=> if #c { #t })
+                } else {
+                    let e = self.block(els);
+                    quote_spanned!(sp=> if #c { #t } else { #e })
+                }
+            }
+            StmtKind::For { var, range, body } => {
+                let start = self.var(range.start);
+                let end = self.var(range.end);
+                let incl = range.inclusive;
+                let name = self.name_lit();
+                let adapters = range.adapters.iter().map(|a| match a {
+                    RangeAdapter::Rev => quote!(.rev()),
+                    RangeAdapter::StepBy(k) => {
+                        let k = self.var(*k);
+                        quote!(.step_by(#k as i64, #name)?)
+                    }
+                });
+                let v = self.var(*var);
+                let m = if self.f.vars[*var].mutable { quote!(mut) } else { quote!() };
+                let cast = ty_tokens(&self.f.vars[*var].ty).unwrap_or_else(|| quote!(_));
+                let body = self.block(body);
+                quote_spanned! {sp=>
+                    {
+                        let __range = __wp::RangeProg::new(#start as i64, #end as i64, #incl) #(#adapters)*;
+                        for __n in 0..__range.count {
+                            let #m #v = __range.at(__n) as #cast;
+                            #body
+                        }
+                    }
+                }
+            }
+            StmtKind::Loop { body } => {
+                let body = self.block(body);
+                quote_spanned!(sp=> loop { #body })
+            }
+            StmtKind::Break => quote_spanned!(sp=> break;),
+            StmtKind::Continue => quote_spanned!(sp=> continue;),
+            StmtKind::Return { value: None } => quote_spanned!(sp=> return ::core::result::Result::Ok(());),
+            StmtKind::Return { value: Some(v) } => {
+                let v = self.var(*v);
+                quote_spanned!(sp=> return ::core::result::Result::Ok(#v);)
+            }
+            StmtKind::Print { pieces, newline } => {
+                let mut fmt = String::new();
+                let mut args = Vec::new();
+                for p in pieces {
+                    match p {
+                        FmtPiece::Text(t) => fmt.push_str(&t.replace('{', "{{").replace('}', "}}")),
+                        FmtPiece::Arg { var, debug } => {
+                            fmt.push_str(if *debug { "{:?}" } else { "{}" });
+                            args.push(self.var(*var));
+                        }
+                    }
+                }
+                if *newline {
+                    quote_spanned!(sp=> ::std::println!(#fmt #(, #args)*);)
+                } else {
+                    quote_spanned!(sp=> ::std::print!(#fmt #(, #args)*);)
+                }
+            }
+        }
+    }
+
+    fn index(&self, index: &[VarId]) -> TokenStream {
+        let vs: Vec<_> = index.iter().map(|v| self.var(*v)).collect();
+        if vs.len() == 1 {
+            let v = &vs[0];
+            quote!(#v)
+        } else {
+            quote!((#(#vs),*))
+        }
+    }
+
+    fn op(&self, op: &Op, ty: &Ty, sp: Span) -> TokenStream {
+        let name = self.name_lit();
+        match op {
+            Op::Lit(l) => literal(l, ty),
+            Op::Copy(v) => {
+                let v = self.var(*v);
+                quote_spanned!(sp=> #v)
+            }
+            Op::Unary(UnOp::Neg, v) => {
+                let x = self.var(*v);
+                if self.f.ty(*v).is_int_scalar() {
+                    quote_spanned!(sp=> __wp::ops::WrapInt::w_neg(#x))
+                } else {
+                    quote_spanned!(sp=> -#x)
+                }
+            }
+            Op::Unary(UnOp::Not, v) => {
+                let x = self.var(*v);
+                quote_spanned!(sp=> !#x)
+            }
+            Op::Binary(op, l, r) => {
+                let (a, b) = (self.var(*l), self.var(*r));
+                let int = self.f.ty(*l).is_int_scalar();
+                match op {
+                    BinOp::Add if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_add(#a, #b)),
+                    BinOp::Sub if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_sub(#a, #b)),
+                    BinOp::Mul if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_mul(#a, #b)),
+                    BinOp::Div if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_div(#a, #b, #name)?),
+                    BinOp::Rem if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_rem(#a, #b, #name)?),
+                    BinOp::Shl if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_shl(#a, #b as u32)),
+                    BinOp::Shr if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_shr(#a, #b as u32)),
+                    _ => {
+                        let o: TokenStream = op.symbol().parse().expect("operator");
+                        quote_spanned!(sp=> (#a #o #b))
+                    }
+                }
+            }
+            Op::Cast(v, t) => {
+                let x = self.var(*v);
+                let t = ty_tokens(t).expect("casts are to scalars");
+                quote_spanned!(sp=> (#x as #t))
+            }
+            Op::Builtin { builtin, args } => {
+                let f = format_ident!("{}", builtin.rust);
+                if builtin.grad == crate::builtins::Grad::Atomic {
+                    let a = self.var(args[0]);
+                    let idx = self.index(&args[1..args.len() - 1]);
+                    let val = self.var(args[args.len() - 1]);
+                    quote_spanned!(sp=> __wp::builtins::#f(&#a, #idx, #val)?)
+                } else {
+                    let args = args.iter().map(|v| self.var(*v));
+                    quote_spanned!(sp=> __wp::builtins::#f(#(#args),*))
+                }
+            }
+            Op::Func { path, args } => {
+                let args = args.iter().map(|v| self.var(*v));
+                quote_spanned!(sp=> #path::__wp_cpu(#(#args),*)?)
+            }
+            Op::Load { array, index } => {
+                let a = self.var(*array);
+                let idx = self.index(index);
+                quote_spanned!(sp=> #a.load(#idx)?)
+            }
+            Op::Member(v, m) => {
+                let x = self.var(*v);
+                let m = format_ident!("{}", m);
+                quote_spanned!(sp=> #x.#m)
+            }
+            Op::Construct { ty, ctor, args } => {
+                let t = ty_tokens(ty).expect("constructed types are glam types");
+                let args: Vec<_> = args.iter().map(|v| self.var(*v)).collect();
+                let f = match (ty, ctor) {
+                    (Ty::Vector(..), Ctor::Components) => format_ident!("new"),
+                    (Ty::Quat(_), Ctor::Components) => format_ident!("from_xyzw"),
+                    (Ty::Matrix(..), Ctor::Components) => format_ident!("from_cols"),
+                    (Ty::Vector(..), Ctor::Splat) => format_ident!("splat"),
+                    (Ty::Matrix(..), Ctor::Splat) => format_ident!("from_diagonal"),
+                    (_, Ctor::Const(c)) => {
+                        let c = format_ident!("{}", c);
+                        return quote_spanned!(sp=> #t::#c);
+                    }
+                    _ => unreachable!("constructor checked by the front end"),
+                };
+                quote_spanned!(sp=> #t::#f(#(#args),*))
+            }
+            Op::Tid(k) => {
+                let k = *k as usize;
+                quote_spanned!(sp=> __tid[#k])
+            }
+            Op::Extent(a, k) => {
+                let a = self.var(*a);
+                let k = *k as usize;
+                quote_spanned!(sp=> #a.shape()[#k])
+            }
+            Op::Len(a) => {
+                let a = self.var(*a);
+                quote_spanned!(sp=> #a.len())
+            }
+        }
+    }
+}
+
+/// The Rust type of a value, where the macro knows it.
+pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
+    match t {
+        Ty::Scalar(s) => {
+            let id = format_ident!("{}", s.name());
+            Some(quote!(#id))
+        }
+        Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) => {
+            let id = format_ident!("{}", t.glam_name()?);
+            Some(quote!(__wp::glam::#id))
+        }
+        _ => None,
+    }
+}
+
+/// A literal with its type written out (unsuffixed only where the type is deferred).
+fn literal(l: &Lit, ty: &Ty) -> TokenStream {
+    match (l, ty) {
+        (Lit::Bool(b), _) => quote!(#b),
+        (Lit::Int(v), Ty::Scalar(s)) if s.is_int() => {
+            let lit = match s {
+                Scalar::I8 => Literal::i8_suffixed(*v as i8),
+                Scalar::I16 => Literal::i16_suffixed(*v as i16),
+                Scalar::I32 => Literal::i32_suffixed(*v as i32),
+                Scalar::I64 => Literal::i64_suffixed(*v as i64),
+                Scalar::Isize => Literal::isize_suffixed(*v as isize),
+                Scalar::U8 => Literal::u8_suffixed(*v as u8),
+                Scalar::U16 => Literal::u16_suffixed(*v as u16),
+                Scalar::U32 => Literal::u32_suffixed(*v as u32),
+                Scalar::U64 => Literal::u64_suffixed(*v as u64),
+                _ => Literal::usize_suffixed(*v as usize),
+            };
+            quote!(#lit)
+        }
+        (Lit::Int(v), _) => {
+            let lit = Literal::i128_unsuffixed(*v);
+            quote!(#lit)
+        }
+        (Lit::Float(v), Ty::Scalar(s)) if s.is_float() => {
+            let t = format_ident!("{}", s.name());
+            if v.is_nan() {
+                quote!(#t::NAN)
+            } else if v.is_infinite() {
+                if *v > 0.0 {
+                    quote!(#t::INFINITY)
+                } else {
+                    quote!(#t::NEG_INFINITY)
+                }
+            } else if *s == Scalar::F32 {
+                let lit = Literal::f32_suffixed(*v as f32);
+                quote!(#lit)
+            } else {
+                let lit = Literal::f64_suffixed(*v);
+                quote!(#lit)
+            }
+        }
+        (Lit::Float(v), _) => {
+            let lit = Literal::f64_unsuffixed(*v);
+            quote!(#lit)
+        }
+    }
+}

@@ -1,0 +1,368 @@
+//! The builtin table: one declarative entry per builtin.
+//!
+//! An entry gives the builtin's name, which types its type variable `T` may take, its
+//! signature in terms of `T`, whether method syntax is allowed (`v.dot(w)`), the Rust path of
+//! its CPU implementation (in `warp_core::builtins`), its CUDA C++ name, the section of the
+//! CUDA builtin library it needs, and how it is differentiated. Adding a builtin is one entry
+//! here plus the two implementations and their tests.
+//!
+//! Signature matching binds `T` from the first argument whose type is known and fixed by `T`
+//! (a `T` or `Array<T>` position); literal arguments are then typed from `T`, which is the
+//! one literal rule both backends share (see `front::lower`).
+
+use crate::types::{Scalar, Ty};
+
+/// Which types the type variable `T` of a builtin may take.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Class {
+    /// f32, f64.
+    Float,
+    /// Any integer or float scalar.
+    Number,
+    /// Signed integers and floats.
+    SignedNumber,
+    /// Float vectors (Vec2-4, DVec2-4).
+    FloatVector,
+    /// Integer vectors (IVec2-4, UVec2-4).
+    IntVector,
+    /// Signed vectors (float vectors and IVec2-4).
+    SignedVector,
+    /// Vec3, DVec3, IVec3 (cross).
+    Vector3,
+    /// Types CPU and GPU atomics exist for: i32, u32, i64, u64, f32, f64 and float vectors.
+    Atomic,
+}
+
+impl Class {
+    pub fn admits(self, ty: &Ty) -> bool {
+        match (self, ty) {
+            (Class::Float, Ty::Scalar(s)) => s.is_float(),
+            (Class::Number, Ty::Scalar(s)) => *s != Scalar::Bool,
+            (Class::SignedNumber, Ty::Scalar(s)) => s.is_float() || s.is_signed_int(),
+            (Class::FloatVector, Ty::Vector(s, _)) => s.is_float(),
+            (Class::IntVector, Ty::Vector(s, _)) => !s.is_float(),
+            (Class::SignedVector, Ty::Vector(s, _)) => *s != Scalar::U32,
+            (Class::Vector3, Ty::Vector(_, 3)) => true,
+            (Class::Atomic, Ty::Scalar(s)) => {
+                matches!(s, Scalar::I32 | Scalar::U32 | Scalar::I64 | Scalar::U64 | Scalar::F32 | Scalar::F64)
+            }
+            (Class::Atomic, Ty::Vector(s, _)) => s.is_float(),
+            _ => false,
+        }
+    }
+
+    pub fn describe(self) -> &'static str {
+        match self {
+            Class::Float => "f32 or f64",
+            Class::Number => "an integer or float scalar",
+            Class::SignedNumber => "a signed integer or float scalar",
+            Class::FloatVector => "a float vector (Vec2-4, DVec2-4)",
+            Class::IntVector => "an integer vector (IVec2-4, UVec2-4)",
+            Class::SignedVector => "a signed vector (Vec2-4, DVec2-4, IVec2-4)",
+            Class::Vector3 => "a 3-vector (Vec3, DVec3, IVec3)",
+            Class::Atomic => "i32, u32, i64, u64, f32, f64 or a float vector",
+        }
+    }
+}
+
+/// A parameter or result position in a signature.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pos {
+    /// The type variable itself.
+    T,
+    /// The scalar `T` is made of.
+    ScalarOfT,
+    /// An `Array<T, N>` (any N).
+    ArrayOfT,
+    /// An index into the preceding array: an integer, or a tuple for N > 1.
+    Index,
+}
+
+/// How a builtin is differentiated (used by the adjoint transform).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Grad {
+    /// Through `adj_<name>` in both libraries.
+    Adjoint,
+    /// Piecewise constant: zero gradient (floor, ceil, sign).
+    Zero,
+    /// Atomics: special rules in the adjoint transform.
+    Atomic,
+}
+
+/// One builtin.
+#[derive(Debug)]
+pub struct Builtin {
+    pub name: &'static str,
+    /// The classes `T` may belong to (any of them).
+    pub classes: &'static [Class],
+    pub params: &'static [Pos],
+    pub ret: Pos,
+    /// Method syntax allowed: `x.sqrt()`, `v.dot(w)`.
+    pub method: bool,
+    /// Function in `warp_core::builtins`.
+    pub rust: &'static str,
+    /// Function in the CUDA builtin library (namespace `wp`).
+    pub cuda: &'static str,
+    /// Section of the CUDA builtin library that defines it.
+    pub section: &'static str,
+    pub grad: Grad,
+}
+
+use Class::*;
+use Pos::*;
+
+const NUM_OR_VEC: &[Class] = &[Number, FloatVector, IntVector];
+const SIGNED: &[Class] = &[SignedNumber, SignedVector];
+const FLOAT: &[Class] = &[Float];
+const FLOAT_OR_VEC: &[Class] = &[Float, FloatVector];
+const FVEC: &[Class] = &[FloatVector];
+const ANY_VEC: &[Class] = &[FloatVector, IntVector];
+
+macro_rules! table {
+    ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, method = $m:literal, section = $sec:literal, grad = $g:ident; )*) => {
+        /// Every builtin.
+        pub static BUILTINS: &[Builtin] = &[$(
+            Builtin {
+                name: $name,
+                classes: $classes,
+                params: &[$($p),*],
+                ret: $ret,
+                method: $m,
+                rust: $name,
+                cuda: concat!("wp::", $name),
+                section: $sec,
+                grad: Grad::$g,
+            },
+        )*];
+    };
+}
+
+table! {
+    "min":        NUM_OR_VEC,   (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
+    "max":        NUM_OR_VEC,   (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
+    "abs":        SIGNED,       (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "sign":       SIGNED,       (T) -> T,                method = false, section = "scalar", grad = Zero;
+    "clamp":      NUM_OR_VEC,   (T, T, T) -> T,          method = true,  section = "scalar", grad = Adjoint;
+    "floor":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
+    "ceil":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
+    "sqrt":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "exp":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "log":        FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "sin":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "cos":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "tan":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "atan2":      FLOAT,        (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
+    "pow":        FLOAT,        (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
+    "lerp":       FLOAT_OR_VEC, (T, T, ScalarOfT) -> T,  method = true,  section = "scalar", grad = Adjoint;
+    "dot":        ANY_VEC,      (T, T) -> ScalarOfT,     method = true,  section = "vector", grad = Adjoint;
+    "cross":      &[Vector3],   (T, T) -> T,             method = true,  section = "vector", grad = Adjoint;
+    "length":     FVEC,         (T) -> ScalarOfT,        method = true,  section = "vector", grad = Adjoint;
+    "normalize":  FVEC,         (T) -> T,                method = true,  section = "vector", grad = Adjoint;
+    "atomic_add": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
+    "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
+    "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
+    "atomic_max": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
+}
+
+/// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,
+/// `x.ln()` is `log(x)`).
+pub const METHOD_ALIASES: &[(&str, &str)] = &[("powf", "pow"), ("ln", "log")];
+
+/// Looks a builtin up by name.
+pub fn lookup(name: &str) -> Option<&'static Builtin> {
+    BUILTINS.iter().find(|b| b.name == name)
+}
+
+/// Looks a builtin up by method name (aliases included).
+pub fn lookup_method(name: &str) -> Option<&'static Builtin> {
+    match METHOD_ALIASES.iter().find(|(a, _)| *a == name) {
+        Some((_, target)) => lookup(target),
+        None => lookup(name).filter(|b| b.method),
+    }
+}
+
+/// An argument as the matcher sees it.
+#[derive(Clone, Debug)]
+pub enum ArgTy {
+    /// A value of known (possibly deferred) type.
+    Known(Ty),
+    /// An unsuffixed numeric literal, typed by the signature.
+    Literal { float: bool },
+}
+
+/// The outcome of matching a call against a builtin's signature.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resolved {
+    /// The type each argument takes (literals included); `Deferred` where unknown.
+    pub params: Vec<Ty>,
+    pub ret: Ty,
+}
+
+impl Builtin {
+    /// Matches argument types against the signature, binding `T`.
+    pub fn resolve(&self, args: &[ArgTy]) -> Result<Resolved, String> {
+        if args.len() != self.params.len() {
+            return Err(format!(
+                "`{}` takes {} argument{}, found {}",
+                self.name,
+                self.params.len(),
+                if self.params.len() == 1 { "" } else { "s" },
+                args.len()
+            ));
+        }
+        // Bind T from the first known argument in a T or Array<T> position.
+        let mut t: Option<Ty> = None;
+        let mut array_ndim = 1u8;
+        for (pos, arg) in self.params.iter().zip(args) {
+            match (pos, arg) {
+                (Pos::T, ArgTy::Known(ty)) if !ty.is_deferred() && t.is_none() => t = Some(ty.clone()),
+                (Pos::ArrayOfT, ArgTy::Known(Ty::Array(elem, n))) => {
+                    array_ndim = *n;
+                    if t.is_none() {
+                        t = Some((**elem).clone());
+                    }
+                }
+                (Pos::ArrayOfT, ArgTy::Known(ty)) if !ty.is_deferred() => {
+                    return Err(format!("`{}` expects an array as its first argument, found `{ty}`", self.name))
+                }
+                _ => {}
+            }
+        }
+        let Some(t) = t else {
+            // Nothing known: leave typing to the target compiler.
+            let params = self.params.iter().map(|_| Ty::Deferred).collect();
+            return Ok(Resolved { params, ret: Ty::Deferred });
+        };
+        if !self.classes.iter().any(|c| c.admits(&t)) {
+            let want: Vec<_> = self.classes.iter().map(|c| c.describe()).collect();
+            return Err(format!("`{}` is not defined for `{t}`: it takes {}", self.name, want.join(", or ")));
+        }
+        let scalar = t.scalar().map(Ty::Scalar).unwrap_or(Ty::Deferred);
+        let index_ty = if array_ndim == 1 { crate::types::USIZE } else { Ty::TidTuple(array_ndim) };
+        let want = |p: &Pos| match p {
+            Pos::T => t.clone(),
+            Pos::ScalarOfT => scalar.clone(),
+            Pos::ArrayOfT => Ty::Array(Box::new(t.clone()), array_ndim),
+            Pos::Index => index_ty.clone(),
+        };
+        let mut params = Vec::new();
+        for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
+            let w = want(pos);
+            match arg {
+                ArgTy::Known(ty) if ty.is_deferred() => {}
+                ArgTy::Known(ty) if *pos == Pos::Index => {
+                    let ok = (array_ndim == 1 && ty.is_int_scalar()) || matches!(ty, Ty::TidTuple(n) if *n == array_ndim);
+                    if !ok {
+                        return Err(format!("argument {} of `{}` must be an index, found `{ty}`", i + 1, self.name));
+                    }
+                }
+                ArgTy::Known(ty) if *pos == Pos::ArrayOfT => {
+                    if let Ty::Array(e, _) = ty {
+                        if **e != t {
+                            return Err(format!("`{}`: array of `{e}` where `{t}` was expected", self.name));
+                        }
+                    }
+                }
+                ArgTy::Known(ty) if *ty != w => {
+                    return Err(format!(
+                        "mismatched types in `{}`: argument {} is `{ty}`, expected `{w}`",
+                        self.name,
+                        i + 1
+                    ))
+                }
+                ArgTy::Literal { float: true } if !matches!(w, Ty::Scalar(s) if s.is_float()) && !w.is_deferred() => {
+                    return Err(format!(
+                        "argument {} of `{}` is a float literal where `{w}` is expected",
+                        i + 1,
+                        self.name
+                    ))
+                }
+                _ => {}
+            }
+            let ty = match (arg, pos) {
+                (ArgTy::Known(ty), Pos::Index) => ty.clone(),
+                _ => w,
+            };
+            params.push(ty);
+        }
+        Ok(Resolved { params, ret: want(&self.ret) })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::{F32, I32};
+
+    fn k(t: Ty) -> ArgTy {
+        ArgTy::Known(t)
+    }
+
+    #[test]
+    fn every_entry_is_unique_and_well_formed() {
+        for (i, b) in BUILTINS.iter().enumerate() {
+            assert!(BUILTINS[..i].iter().all(|o| o.name != b.name), "duplicate {}", b.name);
+            assert!(!b.classes.is_empty());
+            assert!(b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT), "{} cannot bind T", b.name);
+        }
+        for name in ["min", "max", "abs", "sign", "clamp", "floor", "ceil", "sqrt", "exp", "log", "sin", "cos",
+            "tan", "atan2", "pow", "dot", "cross", "length", "normalize", "lerp", "atomic_add", "atomic_sub",
+            "atomic_min", "atomic_max"] {
+            assert!(lookup(name).is_some(), "{name} missing");
+        }
+    }
+
+    #[test]
+    fn literals_take_the_bound_type() {
+        let max = lookup("max").unwrap();
+        let r = max.resolve(&[k(Ty::Scalar(Scalar::F64)), ArgTy::Literal { float: true }]).unwrap();
+        assert_eq!(r.params, vec![Ty::Scalar(Scalar::F64); 2]);
+        assert_eq!(r.ret, Ty::Scalar(Scalar::F64));
+        // An integer literal next to a float is typed as the float.
+        let r = max.resolve(&[ArgTy::Literal { float: false }, k(F32)]).unwrap();
+        assert_eq!(r.params, vec![F32, F32]);
+    }
+
+    #[test]
+    fn vector_builtins() {
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let dot = lookup_method("dot").unwrap();
+        assert_eq!(dot.resolve(&[k(v3.clone()), k(v3.clone())]).unwrap().ret, F32);
+        let lerp = lookup("lerp").unwrap();
+        let r = lerp.resolve(&[k(v3.clone()), k(v3.clone()), ArgTy::Literal { float: true }]).unwrap();
+        assert_eq!(r.params[2], F32);
+        assert!(lookup("length").unwrap().resolve(&[k(Ty::Vector(Scalar::I32, 3))]).is_err());
+        assert!(lookup("cross").unwrap().resolve(&[k(Ty::Vector(Scalar::F32, 2)), k(Ty::Vector(Scalar::F32, 2))]).is_err());
+    }
+
+    #[test]
+    fn mismatches_are_reported() {
+        let min = lookup("min").unwrap();
+        let e = min.resolve(&[k(F32), k(Ty::Scalar(Scalar::F64))]).unwrap_err();
+        assert!(e.contains("mismatched"), "{e}");
+        assert!(lookup("sqrt").unwrap().resolve(&[k(I32)]).unwrap_err().contains("not defined for `i32`"));
+        assert!(lookup("sqrt").unwrap().resolve(&[k(F32), k(F32)]).unwrap_err().contains("takes 1 argument"));
+        assert!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: true }]).unwrap().ret.is_deferred());
+    }
+
+    #[test]
+    fn atomics_bind_from_the_array() {
+        let add = lookup("atomic_add").unwrap();
+        let arr = Ty::Array(Box::new(F32), 1);
+        let r = add.resolve(&[k(arr.clone()), k(I32), ArgTy::Literal { float: false }]).unwrap();
+        assert_eq!(r.params, vec![arr, I32, F32]);
+        assert_eq!(r.ret, F32);
+        let arr2 = Ty::Array(Box::new(F32), 2);
+        assert!(add.resolve(&[k(arr2), k(I32), k(F32)]).is_err(), "1-D index into 2-D array");
+        let bad = Ty::Array(Box::new(Ty::Scalar(Scalar::I8)), 1);
+        assert!(add.resolve(&[k(bad), k(I32), k(Ty::Scalar(Scalar::I8))]).is_err());
+    }
+
+    #[test]
+    fn method_aliases() {
+        assert_eq!(lookup_method("powf").unwrap().name, "pow");
+        assert_eq!(lookup_method("ln").unwrap().name, "log");
+        assert!(lookup_method("log").is_none(), "x.log(base) means something else in Rust");
+        assert!(lookup_method("pow").is_none());
+    }
+}

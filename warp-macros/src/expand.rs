@@ -1,0 +1,273 @@
+//! Expansion of the three macros: front end, then back ends, then the items around them.
+
+use crate::back::rust::RustEmitter;
+use crate::front::{attrs, lower};
+use crate::ir::FnKind;
+use proc_macro2::{Literal, TokenStream};
+use quote::{format_ident, quote, quote_spanned};
+use syn::spanned::Spanned;
+
+fn errors_to_tokens(errors: Vec<syn::Error>) -> TokenStream {
+    errors.into_iter().map(|e| e.to_compile_error()).collect()
+}
+
+/// `#[kernel]`.
+pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
+    let item: syn::ItemFn = match syn::parse2(item) {
+        Ok(i) => i,
+        Err(e) => return e.to_compile_error(),
+    };
+    let mut errors = Vec::new();
+    let opts = attrs::parse_kernel_attrs(attr).unwrap_or_else(|e| {
+        errors.push(e);
+        Default::default()
+    });
+    let f = match lower::lower_fn(&item, FnKind::Kernel) {
+        Ok(f) => Some(f),
+        Err(e) => {
+            errors.extend(e);
+            None
+        }
+    };
+    // same_shape groups as parameter indices (usize::MAX = the launch dim).
+    let mut groups = Vec::new();
+    if let Some(f) = &f {
+        for g in &opts.same_shape {
+            let mut idx = Vec::new();
+            for name in g {
+                if name == "dim" {
+                    idx.push(usize::MAX);
+                } else if let Some(i) = f.params.iter().position(|p| name == &p.name) {
+                    if !matches!(f.params[i].ty, crate::types::Ty::Array(..)) {
+                        errors.push(syn::Error::new(name.span(), format!("`{name}` is not an array parameter")));
+                    }
+                    idx.push(i);
+                } else {
+                    errors.push(syn::Error::new(name.span(), format!("no parameter named `{name}`")));
+                }
+            }
+            groups.push(idx);
+        }
+    }
+    let (Some(f), true) = (f, errors.is_empty()) else {
+        // Keep a unit struct so that uses of the kernel do not add errors of their own.
+        let vis = &item.vis;
+        let name = &item.sig.ident;
+        let errs = errors_to_tokens(errors);
+        return quote!(#errs #[allow(non_camel_case_types)] #vis struct #name;);
+    };
+
+    let em = RustEmitter { f: &f };
+    let vis = &item.vis;
+    let name = &item.sig.ident;
+    let name_str = Literal::string(&f.name);
+    let doc_attrs = item.attrs.iter().filter(|a| a.path().is_ident("doc"));
+    let tys: Vec<&syn::Type> = f.params.iter().map(|p| &p.syn_ty).collect();
+    let pnames: Vec<Literal> = f.params.iter().map(|p| Literal::string(&p.name)).collect();
+    let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
+    let pvars: Vec<TokenStream> = f
+        .params
+        .iter()
+        .map(|p| {
+            let v = em.var(p.var);
+            if f.vars[p.var].mutable {
+                quote!(mut #v)
+            } else {
+                quote!(#v)
+            }
+        })
+        .collect();
+    let tid = match f.tid_ndim {
+        Some(n) => {
+            let n = n as usize;
+            quote!(::core::option::Option::Some(#n))
+        }
+        None => quote!(::core::option::Option::None),
+    };
+    let tid_setup = f.tid_ndim.map(|n| {
+        let n = n as usize;
+        quote!(let __tid: [usize; #n] = __grid.unflatten::<#n>(__flat);)
+    });
+    let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
+    let body = em.block(&f.body);
+    let callee_checks = callee_depths(&f.callees);
+
+    quote! {
+        #(#doc_attrs)*
+        #[allow(non_camel_case_types)]
+        #[derive(Clone, Copy, Debug, Default)]
+        #vis struct #name;
+
+        const _: () = {
+            use ::warp_lang::__private as __wp;
+            #callee_checks
+            impl __wp::Kernel for #name {
+                type Args<'__a> = ( #( <#tys as __wp::KernelArg>::Arg<'__a>, )* );
+                type CpuParams = ( #( <#tys as __wp::KernelArg>::CpuView, )* );
+                const INFO: __wp::KernelInfo = __wp::KernelInfo {
+                    name: #name_str,
+                    module: ::core::module_path!(),
+                    params: &[#(#pnames),*],
+                    tid_ndim: #tid,
+                    same_shape: &[#(#groups),*],
+                };
+                unsafe fn cpu_params(
+                    __args: &Self::Args<'_>,
+                    __device: &__wp::Device,
+                ) -> __wp::Result<Self::CpuParams> {
+                    // SAFETY: forwarded contract: the views do not outlive `__args`.
+                    ::core::result::Result::Ok(( #( unsafe {
+                        <#tys as __wp::KernelArg>::cpu_view(
+                            &__args.#idx,
+                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, device: __device },
+                        )?
+                    }, )* ))
+                }
+                fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
+                    ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
+                }
+                #[inline(always)]
+                #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+                fn run_cpu(__params: &Self::CpuParams, __grid: &__wp::Grid, __flat: usize) -> __wp::KResult<()> {
+                    let ( #(#pvars,)* ) = *__params;
+                    #tid_setup
+                    #body
+                    ::core::result::Result::Ok(())
+                }
+            }
+        };
+    }
+}
+
+/// Forces the recursion-depth constants of called funcs to be evaluated: a cycle of funcs
+/// calling each other is then a compile-time error (a cycle in const evaluation).
+fn callee_depths(callees: &[syn::Path]) -> TokenStream {
+    let checks = callees.iter().map(|p| quote_spanned!(p.span()=> let _ = #p::__WP_DEPTH;));
+    quote!(const _: () = { #(#checks)* };)
+}
+
+/// `#[func]`.
+pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
+    let item: syn::ItemFn = match syn::parse2(item) {
+        Ok(i) => i,
+        Err(e) => return e.to_compile_error(),
+    };
+    let mut errors = Vec::new();
+    if let Err(e) = attrs::parse_func_attrs(attr) {
+        errors.push(e);
+    }
+    let f = match lower::lower_fn(&item, FnKind::Func) {
+        Ok(f) => Some(f),
+        Err(e) => {
+            errors.extend(e);
+            None
+        }
+    };
+    let vis = &item.vis;
+    let name = &item.sig.ident;
+    let (Some(f), true) = (f, errors.is_empty()) else {
+        let errs = errors_to_tokens(errors);
+        return quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {});
+    };
+    let em = RustEmitter { f: &f };
+    let doc_attrs = item.attrs.iter().filter(|a| a.path().is_ident("doc"));
+    let params = f.params.iter().map(|p| {
+        let v = em.var(p.var);
+        let m = if f.vars[p.var].mutable { quote!(mut) } else { quote!() };
+        let t = &p.syn_ty;
+        quote!(#m #v: <#t as ::warp_lang::__private::KernelArg>::CpuView)
+    });
+    let ret = match &f.ret_syn {
+        Some(t) => quote!(#t),
+        None => quote!(()),
+    };
+    let body = em.block(&f.body);
+    let tail = if f.ret_syn.is_none() { quote!(::core::result::Result::Ok(())) } else { quote!() };
+    let depths = f.callees.iter().map(|p| quote_spanned!(p.span()=> #p::__WP_DEPTH));
+    let cpu = format_ident!("__wp_cpu");
+    quote! {
+        #(#doc_attrs)*
+        ///
+        /// A `#[func]`: callable from kernels and other funcs.
+        #[allow(non_camel_case_types)]
+        #vis struct #name {}
+
+        impl #name {
+            /// Longest chain of funcs below this one (a cycle fails to compile).
+            #[doc(hidden)]
+            #vis const __WP_DEPTH: usize = 1 + ::warp_lang::__private::max_depth(&[#(#depths),*]);
+
+            #[doc(hidden)]
+            #[inline(always)]
+            #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+            #vis fn #cpu(#(#params),*) -> ::warp_lang::__private::KResult<#ret> {
+                use ::warp_lang::__private as __wp;
+                #body
+                #tail
+            }
+        }
+
+        const _: usize = #name::__WP_DEPTH;
+    }
+}
+
+/// `#[derive(Struct)]`.
+pub fn derive_struct(item: TokenStream) -> TokenStream {
+    let input: syn::DeriveInput = match syn::parse2(item) {
+        Ok(i) => i,
+        Err(e) => return e.to_compile_error(),
+    };
+    let name = &input.ident;
+    let syn::Data::Struct(data) = &input.data else {
+        return syn::Error::new(input.span(), "#[derive(Struct)] is for structs").to_compile_error();
+    };
+    if !input.generics.params.is_empty() {
+        return syn::Error::new(input.generics.span(), "kernel structs cannot be generic yet").to_compile_error();
+    }
+    let repr_c = input.attrs.iter().any(|a| {
+        a.path().is_ident("repr") && a.parse_args::<syn::Ident>().map(|i| i == "C").unwrap_or(false)
+    });
+    if !repr_c {
+        return syn::Error::new(name.span(), "kernel structs need #[repr(C)] (the CUDA side must see the same layout)")
+            .to_compile_error();
+    }
+    let mut errors = Vec::new();
+    let fields: Vec<&syn::Type> = data.fields.iter().map(|f| &f.ty).collect();
+    for t in &fields {
+        if let Err(e) = crate::front::signature::parse_type(t) {
+            errors.push(e);
+        } else if let Ok(crate::types::Ty::Array(..)) = crate::front::signature::parse_type(t) {
+            errors.push(syn::Error::new(t.span(), "arrays cannot be struct fields yet: pass them as kernel parameters"));
+        }
+    }
+    if !errors.is_empty() {
+        return errors_to_tokens(errors);
+    }
+    let name_str = Literal::string(&name.to_string());
+    let field_asserts = fields.iter().map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
+    quote! {
+        const _: () = {
+            use ::warp_lang::__private as __wp;
+            const fn __assert_pod<T: __wp::bytemuck::Pod>() {}
+            const _: () = { #(#field_asserts)* };
+            // No padding: the byte image of the struct is exactly its fields.
+            const _: () = ::core::assert!(
+                ::core::mem::size_of::<#name>() == 0 #( + ::core::mem::size_of::<#fields>() )*,
+                "kernel structs must have no padding: reorder the fields or add explicit padding fields"
+            );
+            // SAFETY: repr(C), every field is Pod (asserted above) and there is no padding.
+            unsafe impl __wp::bytemuck::Zeroable for #name {}
+            unsafe impl __wp::bytemuck::Pod for #name {}
+            impl __wp::Element for #name {
+                const TYPE_NAME: &'static str = #name_str;
+            }
+            impl __wp::KernelArg for #name {
+                type Arg<'a> = #name;
+                type CpuView = #name;
+                unsafe fn cpu_view(arg: &Self::Arg<'_>, _ctx: &__wp::ArgCtx<'_>) -> __wp::Result<Self::CpuView> {
+                    ::core::result::Result::Ok(*arg)
+                }
+            }
+        };
+    }
+}

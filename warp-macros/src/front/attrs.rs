@@ -1,0 +1,39 @@
+//! Arguments of `#[kernel(...)]` and `#[func(...)]`.
+
+use syn::parse::Parser;
+
+/// Options of `#[kernel]`.
+#[derive(Default, Debug)]
+pub struct KernelAttrs {
+    /// `same_shape(a, b, dim)` groups: parameter names, `dim` for the launch dim.
+    pub same_shape: Vec<Vec<syn::Ident>>,
+}
+
+/// Parses `#[kernel(same_shape(x, v, dim), ...)]`.
+pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<KernelAttrs> {
+    let mut out = KernelAttrs::default();
+    let parser = syn::meta::parser(|meta| {
+        if meta.path.is_ident("same_shape") {
+            let mut group = Vec::new();
+            meta.parse_nested_meta(|inner| {
+                group.push(inner.path.require_ident()?.clone());
+                Ok(())
+            })?;
+            if group.len() < 2 {
+                return Err(meta.error("same_shape needs at least two names (parameters, or `dim`)"));
+            }
+            out.same_shape.push(group);
+            Ok(())
+        } else {
+            Err(meta.error("unknown kernel option; supported: same_shape(a, b, ..)"))
+        }
+    });
+    parser.parse2(tokens)?;
+    Ok(out)
+}
+
+/// Parses `#[func]` options (none yet).
+pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<()> {
+    let parser = syn::meta::parser(|meta| Err(meta.error("#[func] takes no options yet")));
+    parser.parse2(tokens)
+}

@@ -1,0 +1,126 @@
+//! Kernel and func signatures: parameter types and the return type.
+
+use crate::types::{Scalar, Ty};
+use syn::spanned::Spanned;
+use syn::{GenericArgument, PathArguments, Type};
+
+/// Maps a parameter or return type as written to the language's type, or explains why the
+/// language has no such type.
+pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
+    match ty {
+        Type::Path(tp) if tp.qself.is_none() => {
+            let last = tp.path.segments.last().expect("a path has a segment");
+            let name = last.ident.to_string();
+            if let Some(s) = Scalar::from_name(&name) {
+                return Ok(Ty::Scalar(s));
+            }
+            if let Some(t) = Ty::from_glam_name(&name) {
+                return Ok(t);
+            }
+            match name.as_str() {
+                "Array" => parse_array(last, ty),
+                "String" | "Vec" | "Box" | "Rc" | "Arc" | "HashMap" | "BTreeMap" | "VecDeque" => Err(syn::Error::new(
+                    ty.span(),
+                    format!("heap type `{name}` is not supported in kernels: use Array<T> arguments"),
+                )),
+                "str" => Err(syn::Error::new(ty.span(), "strings are not supported in kernels")),
+                "Option" | "Result" => {
+                    Err(syn::Error::new(ty.span(), format!("`{name}` is not supported in kernels")))
+                }
+                _ if !matches!(last.arguments, PathArguments::None) => Err(syn::Error::new(
+                    ty.span(),
+                    format!("generic type `{name}<..>` is not supported in kernels"),
+                )),
+                _ => Ok(Ty::Struct(name)),
+            }
+        }
+        Type::Reference(_) => Err(syn::Error::new(
+            ty.span(),
+            "references are not supported in kernels: pass arrays as Array<T> and values by value",
+        )),
+        Type::Ptr(_) => Err(syn::Error::new(ty.span(), "raw pointers are not supported in kernels")),
+        Type::Array(_) | Type::Slice(_) => Err(syn::Error::new(
+            ty.span(),
+            "fixed-size arrays and slices are not supported in kernels: use Array<T>, a glam vector or a struct",
+        )),
+        Type::Tuple(t) if t.elems.is_empty() => Ok(Ty::Unit),
+        Type::Tuple(_) => Err(syn::Error::new(ty.span(), "tuples are not supported as kernel types")),
+        Type::Paren(p) => parse_type(&p.elem),
+        Type::Group(g) => parse_type(&g.elem),
+        _ => Err(syn::Error::new(ty.span(), "this type is not supported in kernels")),
+    }
+}
+
+fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
+    let PathArguments::AngleBracketed(args) = &seg.arguments else {
+        return Err(syn::Error::new(whole.span(), "Array needs an element type: Array<f32>, Array<Vec3, 2>"));
+    };
+    let mut it = args.args.iter();
+    let elem = match it.next() {
+        Some(GenericArgument::Type(t)) => parse_type(t)?,
+        _ => return Err(syn::Error::new(whole.span(), "Array needs an element type: Array<f32>")),
+    };
+    if matches!(elem, Ty::Array(..) | Ty::Unit) || elem == Ty::Scalar(Scalar::Bool) {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("`{elem}` cannot be an array element (bool arrays: use u8)"),
+        ));
+    }
+    let ndim = match it.next() {
+        None => 1,
+        Some(arg) => {
+            let n = const_usize(arg).ok_or_else(|| {
+                syn::Error::new(arg.span(), "the array dimension must be a literal 1, 2, 3 or 4")
+            })?;
+            if !(1..=4).contains(&n) {
+                return Err(syn::Error::new(arg.span(), "arrays have 1 to 4 dimensions"));
+            }
+            n as u8
+        }
+    };
+    if let Some(extra) = it.next() {
+        return Err(syn::Error::new(extra.span(), "Array takes an element type and a dimension count"));
+    }
+    Ok(Ty::Array(Box::new(elem), ndim))
+}
+
+fn const_usize(arg: &GenericArgument) -> Option<usize> {
+    let expr = match arg {
+        GenericArgument::Const(e) => e,
+        // `Array<f32, 2>` parses the `2` as a const expression; syn may also see a type here.
+        _ => return None,
+    };
+    match expr {
+        syn::Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }) => i.base10_parse().ok(),
+        syn::Expr::Block(b) if b.block.stmts.len() == 1 => match &b.block.stmts[0] {
+            syn::Stmt::Expr(syn::Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }), None) => {
+                i.base10_parse().ok()
+            }
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use syn::parse_quote;
+
+    #[test]
+    fn types() {
+        assert_eq!(parse_type(&parse_quote!(f32)).unwrap(), Ty::Scalar(Scalar::F32));
+        assert_eq!(parse_type(&parse_quote!(glam::DVec3)).unwrap(), Ty::Vector(Scalar::F64, 3));
+        assert_eq!(
+            parse_type(&parse_quote!(Array<Vec3>)).unwrap(),
+            Ty::Array(Box::new(Ty::Vector(Scalar::F32, 3)), 1)
+        );
+        assert_eq!(parse_type(&parse_quote!(wp::Array<u32, 3>)).unwrap(), Ty::Array(Box::new(Ty::Scalar(Scalar::U32)), 3));
+        assert_eq!(parse_type(&parse_quote!(Params)).unwrap(), Ty::Struct("Params".into()));
+        for bad in [quote::quote!(&f32), quote::quote!(String), quote::quote!(Vec<f32>), quote::quote!([f32; 3]),
+            quote::quote!(Array<f32, 5>), quote::quote!(Array<bool>), quote::quote!(Option<f32>)] {
+            let t: Type = syn::parse2(bad.clone()).unwrap();
+            assert!(parse_type(&t).is_err(), "{bad}");
+        }
+    }
+}

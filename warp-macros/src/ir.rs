@@ -1,0 +1,233 @@
+//! The one IR that every emitter walks.
+//!
+//! A kernel or func body is lowered to three-address statements over typed variables: every
+//! operation reads variables and writes one, so an emitter handles one operation at a time,
+//! and the adjoint transform (reverse mode) can pair each forward statement with its adjoint
+//! statement. Control flow stays structured (`If`, `For`, `Loop`, `Break`, `Continue`,
+//! `Return`), which maps directly onto Rust and CUDA C++ and tells the adjoint where loops
+//! carry values. Short-circuit `&&`/`||`, `if` expressions and `while` are lowered to these.
+//!
+//! Every statement keeps the span of the user's code it came from, for rustc errors and (in
+//! the CUDA emitter) `#line` directives.
+
+use crate::builtins::Builtin;
+use crate::types::Ty;
+use proc_macro2::Span;
+
+/// Index of a variable in [`Body::vars`].
+pub type VarId = usize;
+
+/// A variable: a kernel parameter, a user `let`, or a temporary made by lowering.
+#[derive(Clone, Debug)]
+pub struct Var {
+    /// User name (`None` for temporaries).
+    pub name: Option<String>,
+    pub ty: Ty,
+    /// Assigned more than once (user `let mut`, or a lowering result variable).
+    pub mutable: bool,
+}
+
+/// What the function is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FnKind {
+    Kernel,
+    Func,
+}
+
+/// A parameter.
+#[derive(Clone, Debug)]
+pub struct Param {
+    pub name: String,
+    pub var: VarId,
+    pub ty: Ty,
+    /// The type as the user wrote it (resolved in the user's scope by rustc).
+    pub syn_ty: syn::Type,
+    pub span: Span,
+}
+
+/// A lowered kernel or func.
+#[derive(Clone, Debug)]
+pub struct Function {
+    pub kind: FnKind,
+    pub name: String,
+    pub params: Vec<Param>,
+    /// The return type (`Ty::Unit` for kernels).
+    pub ret: Ty,
+    pub ret_syn: Option<syn::Type>,
+    pub vars: Vec<Var>,
+    pub body: Block,
+    /// How many dimensions `tid()` was destructured into (`None` if never called).
+    pub tid_ndim: Option<u8>,
+    /// User funcs called (paths as written), for dependency tracking.
+    pub callees: Vec<syn::Path>,
+}
+
+pub type Block = Vec<Stmt>;
+
+/// A statement and the user span it came from.
+#[derive(Clone, Debug)]
+pub struct Stmt {
+    pub kind: StmtKind,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug)]
+pub enum StmtKind {
+    /// Declares `var` without a value (a result variable assigned in both branches of an if).
+    Declare { var: VarId },
+    /// `dst = op`. `define` marks the statement that introduces `dst`.
+    Assign { dst: VarId, op: Op, define: bool },
+    /// `array[index] = value`.
+    Store { array: VarId, index: Vec<VarId>, value: VarId },
+    /// `var.m1.m2 = value` on a local.
+    SetMember { var: VarId, path: Vec<String>, value: VarId },
+    If { cond: VarId, then: Block, els: Block },
+    /// `for var in range`: the range is an arithmetic progression (see `RangeSpec`).
+    For { var: VarId, range: RangeSpec, body: Block },
+    /// `loop { .. }` (also what `while` lowers to).
+    Loop { body: Block },
+    Break,
+    Continue,
+    Return { value: Option<VarId> },
+    /// `print!` / `println!` from a kernel: `{}` and `{:?}` placeholders only.
+    Print { pieces: Vec<FmtPiece>, newline: bool },
+}
+
+/// A piece of a print format.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FmtPiece {
+    Text(String),
+    Arg { var: VarId, debug: bool },
+}
+
+/// `start..end` or `start..=end`, then `.rev()` and `.step_by(k)` in the order written.
+#[derive(Clone, Debug)]
+pub struct RangeSpec {
+    pub start: VarId,
+    pub end: VarId,
+    pub inclusive: bool,
+    pub adapters: Vec<RangeAdapter>,
+}
+
+#[derive(Clone, Debug)]
+pub enum RangeAdapter {
+    Rev,
+    StepBy(VarId),
+}
+
+/// A literal value with its final type.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Lit {
+    Bool(bool),
+    /// An integer literal; `ty` is its scalar type, or `Deferred`.
+    Int(i128),
+    Float(f64),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UnOp {
+    Neg,
+    Not,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Rem,
+    BitAnd,
+    BitOr,
+    BitXor,
+    Shl,
+    Shr,
+    Eq,
+    Ne,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+}
+
+impl BinOp {
+    pub fn is_comparison(self) -> bool {
+        matches!(self, BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge)
+    }
+    pub fn symbol(self) -> &'static str {
+        match self {
+            BinOp::Add => "+",
+            BinOp::Sub => "-",
+            BinOp::Mul => "*",
+            BinOp::Div => "/",
+            BinOp::Rem => "%",
+            BinOp::BitAnd => "&",
+            BinOp::BitOr => "|",
+            BinOp::BitXor => "^",
+            BinOp::Shl => "<<",
+            BinOp::Shr => ">>",
+            BinOp::Eq => "==",
+            BinOp::Ne => "!=",
+            BinOp::Lt => "<",
+            BinOp::Le => "<=",
+            BinOp::Gt => ">",
+            BinOp::Ge => ">=",
+        }
+    }
+}
+
+/// How a vector, matrix or quaternion value is built.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Ctor {
+    /// `Vec3::new(x, y, z)`, `vec3(x, y, z)`, `Quat::from_xyzw(..)`, `Mat3::from_cols(..)`.
+    Components,
+    /// `Vec3::splat(s)`, `Mat3::from_diagonal(v)`.
+    Splat,
+    /// `Vec3::ZERO`, `Mat3::IDENTITY`, ...: the associated constant's name.
+    Const(String),
+}
+
+/// An operation producing one value.
+#[derive(Clone, Debug)]
+pub enum Op {
+    Lit(Lit),
+    Copy(VarId),
+    Unary(UnOp, VarId),
+    Binary(BinOp, VarId, VarId),
+    Cast(VarId, Ty),
+    Builtin { builtin: &'static Builtin, args: Vec<VarId> },
+    /// A call of a user `#[func]`, by the path written at the call site.
+    Func { path: syn::Path, args: Vec<VarId> },
+    /// `array[index]`: one index variable per dimension.
+    Load { array: VarId, index: Vec<VarId> },
+    /// `v.x`, `m.x_axis`, `s.field`.
+    Member(VarId, String),
+    Construct { ty: Ty, ctor: Ctor, args: Vec<VarId> },
+    /// Component `k` of the thread index.
+    Tid(u8),
+    /// `array.shape()[k]` (usize).
+    Extent(VarId, u8),
+    /// `array.len()` (usize).
+    Len(VarId),
+}
+
+impl Function {
+    pub fn ty(&self, v: VarId) -> &Ty {
+        &self.vars[v].ty
+    }
+}
+
+/// Visits every statement of a block, depth first.
+pub fn walk_stmts<'a>(block: &'a Block, f: &mut dyn FnMut(&'a Stmt)) {
+    for s in block {
+        f(s);
+        match &s.kind {
+            StmtKind::If { then, els, .. } => {
+                walk_stmts(then, f);
+                walk_stmts(els, f);
+            }
+            StmtKind::For { body, .. } | StmtKind::Loop { body } => walk_stmts(body, f),
+            _ => {}
+        }
+    }
+}

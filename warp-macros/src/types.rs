@@ -1,0 +1,225 @@
+//! The kernel language's types, and how Rust type syntax maps onto them.
+//!
+//! The macro knows the types of parameters, literals, builtins, vectors and matrices. What it
+//! cannot see from inside one function (a user func's return type, a user struct's fields) is
+//! `Ty::Deferred`: such values pass through unchecked here and are typed by the target
+//! compiler (rustc for the CPU, nvcc-style `auto` for CUDA), with the literal rule below
+//! applied the same way on both.
+
+use std::fmt;
+
+/// Scalar types.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Scalar {
+    Bool,
+    I8,
+    I16,
+    I32,
+    I64,
+    Isize,
+    U8,
+    U16,
+    U32,
+    U64,
+    Usize,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    pub const ALL: [Scalar; 13] = [
+        Scalar::Bool,
+        Scalar::I8,
+        Scalar::I16,
+        Scalar::I32,
+        Scalar::I64,
+        Scalar::Isize,
+        Scalar::U8,
+        Scalar::U16,
+        Scalar::U32,
+        Scalar::U64,
+        Scalar::Usize,
+        Scalar::F32,
+        Scalar::F64,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Scalar::Bool => "bool",
+            Scalar::I8 => "i8",
+            Scalar::I16 => "i16",
+            Scalar::I32 => "i32",
+            Scalar::I64 => "i64",
+            Scalar::Isize => "isize",
+            Scalar::U8 => "u8",
+            Scalar::U16 => "u16",
+            Scalar::U32 => "u32",
+            Scalar::U64 => "u64",
+            Scalar::Usize => "usize",
+            Scalar::F32 => "f32",
+            Scalar::F64 => "f64",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Scalar> {
+        Scalar::ALL.into_iter().find(|k| k.name() == s)
+    }
+
+    pub fn is_float(self) -> bool {
+        matches!(self, Scalar::F32 | Scalar::F64)
+    }
+
+    pub fn is_int(self) -> bool {
+        !self.is_float() && self != Scalar::Bool
+    }
+
+    pub fn is_signed_int(self) -> bool {
+        matches!(self, Scalar::I8 | Scalar::I16 | Scalar::I32 | Scalar::I64 | Scalar::Isize)
+    }
+}
+
+/// A kernel-language type.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Ty {
+    Scalar(Scalar),
+    /// glam vectors: Vec2-4 (f32), DVec2-4 (f64), IVec2-4 (i32), UVec2-4 (u32).
+    Vector(Scalar, u8),
+    /// glam column-major matrices: Mat2-4 (f32), DMat2-4 (f64).
+    Matrix(Scalar, u8),
+    /// glam quaternions: Quat (f32), DQuat (f64).
+    Quat(Scalar),
+    /// `Array<T, N>`.
+    Array(Box<Ty>, u8),
+    /// A user struct (made kernel-ready by the derive), by its last path segment.
+    Struct(String),
+    /// The tuple `tid()` returns for 2-D to 4-D launches.
+    TidTuple(u8),
+    /// `()`.
+    Unit,
+    /// Not knowable from inside this function; typed by the target compiler.
+    Deferred,
+}
+
+pub const F32: Ty = Ty::Scalar(Scalar::F32);
+pub const BOOL: Ty = Ty::Scalar(Scalar::Bool);
+pub const USIZE: Ty = Ty::Scalar(Scalar::Usize);
+pub const I32: Ty = Ty::Scalar(Scalar::I32);
+
+impl Ty {
+    /// The scalar a value of this type is made of (`None` for arrays, structs, unit).
+    pub fn scalar(&self) -> Option<Scalar> {
+        match self {
+            Ty::Scalar(s) | Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) => Some(*s),
+            _ => None,
+        }
+    }
+
+    pub fn is_deferred(&self) -> bool {
+        matches!(self, Ty::Deferred)
+    }
+
+    pub fn is_float_scalar(&self) -> bool {
+        matches!(self, Ty::Scalar(s) if s.is_float())
+    }
+
+    pub fn is_int_scalar(&self) -> bool {
+        matches!(self, Ty::Scalar(s) if s.is_int())
+    }
+
+    /// The glam name of a vector, matrix or quaternion type.
+    pub fn glam_name(&self) -> Option<String> {
+        let prefix = |s: Scalar| match s {
+            Scalar::F32 => Some(""),
+            Scalar::F64 => Some("D"),
+            Scalar::I32 => Some("I"),
+            Scalar::U32 => Some("U"),
+            _ => None,
+        };
+        match self {
+            Ty::Vector(s, n) => Some(format!("{}Vec{}", prefix(*s)?, n)),
+            Ty::Matrix(s, n) => Some(format!("{}Mat{}", prefix(*s)?, n)),
+            Ty::Quat(s) => Some(format!("{}Quat", prefix(*s)?)),
+            _ => None,
+        }
+    }
+
+    /// Parses a glam type name (`Vec3`, `DMat4`, `Quat`, ...).
+    pub fn from_glam_name(name: &str) -> Option<Ty> {
+        let (scalar, rest) = if let Some(r) = name.strip_prefix('D') {
+            (Scalar::F64, r)
+        } else if let Some(r) = name.strip_prefix('I') {
+            (Scalar::I32, r)
+        } else if let Some(r) = name.strip_prefix('U') {
+            (Scalar::U32, r)
+        } else {
+            (Scalar::F32, name)
+        };
+        if rest == "Quat" {
+            return scalar.is_float().then_some(Ty::Quat(scalar));
+        }
+        let (kind, n) = rest.split_at(rest.len().checked_sub(1)?);
+        let n: u8 = n.parse().ok().filter(|n| (2..=4).contains(n))?;
+        match kind {
+            "Vec" => Some(Ty::Vector(scalar, n)),
+            "Mat" if scalar.is_float() => Some(Ty::Matrix(scalar, n)),
+            _ => None,
+        }
+    }
+
+    /// Field names of vectors and quaternions, and the column names of matrices.
+    pub fn member_ty(&self, name: &str) -> Option<Ty> {
+        match self {
+            Ty::Vector(s, n) => {
+                let idx = ["x", "y", "z", "w"].iter().position(|c| *c == name)?;
+                (idx < *n as usize).then_some(Ty::Scalar(*s))
+            }
+            Ty::Quat(s) => ["x", "y", "z", "w"].contains(&name).then_some(Ty::Scalar(*s)),
+            Ty::Matrix(s, n) => {
+                let idx = ["x_axis", "y_axis", "z_axis", "w_axis"].iter().position(|c| *c == name)?;
+                (idx < *n as usize).then_some(Ty::Vector(*s, *n))
+            }
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Ty {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Ty::Scalar(s) => f.write_str(s.name()),
+            Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) => {
+                f.write_str(&self.glam_name().unwrap_or_else(|| "?".into()))
+            }
+            Ty::Array(t, 1) => write!(f, "Array<{t}>"),
+            Ty::Array(t, n) => write!(f, "Array<{t}, {n}>"),
+            Ty::Struct(name) => f.write_str(name),
+            Ty::TidTuple(n) => write!(f, "({})", vec!["usize"; *n as usize].join(", ")),
+            Ty::Unit => f.write_str("()"),
+            Ty::Deferred => f.write_str("_"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn glam_names_round_trip() {
+        for name in ["Vec2", "Vec3", "Vec4", "DVec3", "IVec2", "UVec4", "Mat3", "DMat4", "Quat", "DQuat"] {
+            let ty = Ty::from_glam_name(name).unwrap();
+            assert_eq!(ty.glam_name().unwrap(), name);
+        }
+        for bad in ["Vec5", "IMat3", "IQuat", "Vec", "Foo"] {
+            assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn members() {
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        assert_eq!(v3.member_ty("z"), Some(F32));
+        assert_eq!(v3.member_ty("w"), None);
+        assert_eq!(Ty::Matrix(Scalar::F64, 2).member_ty("y_axis"), Some(Ty::Vector(Scalar::F64, 2)));
+    }
+}

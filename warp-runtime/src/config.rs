@@ -1,0 +1,105 @@
+//! Process-wide settings, like Warp's `wp.config`.
+//!
+//! Each setting is an atomic so that it can be read on every launch without a lock and changed
+//! from any thread. Changes apply to launches that start afterwards.
+
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
+
+static DEBUG: AtomicBool = AtomicBool::new(cfg!(debug_assertions));
+
+// 0: not decided yet (read WARP_QUIET at first use), 1: false, 2: true. A tri-state lets
+// `set_quiet` win over the environment whichever comes first.
+static QUIET: AtomicU8 = AtomicU8::new(0);
+
+static CPU_MIN_CHUNK: AtomicUsize = AtomicUsize::new(DEFAULT_CPU_MIN_CHUNK);
+
+/// The default of [`cpu_min_chunk`].
+pub const DEFAULT_CPU_MIN_CHUNK: usize = 4096;
+
+/// Turns debug mode on or off.
+///
+/// On the CPU every array index is checked whatever this says: the CPU backend is safe Rust and
+/// has no unchecked path to switch to. Debug mode governs the bounds checks compiled into GPU
+/// kernels (once the CUDA backend exists) and extra verification that costs time.
+pub fn set_debug(on: bool) {
+    DEBUG.store(on, Ordering::Relaxed);
+}
+
+/// Whether debug mode is on. Defaults to `cfg!(debug_assertions)` of this crate's build.
+pub fn debug() -> bool {
+    DEBUG.load(Ordering::Relaxed)
+}
+
+/// Suppresses (or restores) the banner that [`init`](crate::init) prints.
+pub fn set_quiet(on: bool) {
+    QUIET.store(if on { 2 } else { 1 }, Ordering::Relaxed);
+}
+
+/// Whether the init banner is suppressed.
+///
+/// Defaults to false, unless the environment variable `WARP_QUIET` is `1` (or `true`) when this
+/// is first read and [`set_quiet`] has not been called.
+pub fn quiet() -> bool {
+    match QUIET.load(Ordering::Relaxed) {
+        1 => false,
+        2 => true,
+        _ => {
+            let env = std::env::var("WARP_QUIET")
+                .map(|v| matches!(v.trim(), "1" | "true" | "TRUE" | "True"))
+                .unwrap_or(false);
+            // Only fill in the default: a concurrent `set_quiet` must not be overwritten.
+            let _ = QUIET.compare_exchange(
+                0,
+                if env { 2 } else { 1 },
+                Ordering::Relaxed,
+                Ordering::Relaxed,
+            );
+            QUIET.load(Ordering::Relaxed) == 2
+        }
+    }
+}
+
+/// Sets the smallest number of threads one rayon task of a CPU launch runs.
+///
+/// A launch of at most this many threads runs serially on the calling thread, so tiny launches
+/// do not pay for waking the pool; larger launches are cut into chunks of at least this size so
+/// that the per-task overhead stays small next to the work. Zero is treated as one.
+pub fn set_cpu_min_chunk(threads: usize) {
+    CPU_MIN_CHUNK.store(threads.max(1), Ordering::Relaxed);
+}
+
+/// The smallest number of threads one rayon task of a CPU launch runs (default
+/// [`DEFAULT_CPU_MIN_CHUNK`]); see [`set_cpu_min_chunk`].
+pub fn cpu_min_chunk() -> usize {
+    CPU_MIN_CHUNK.load(Ordering::Relaxed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    // Only the setters whose effect other tests cannot observe are exercised here: tests run in
+    // parallel and share these globals.
+    #[test]
+    fn debug_round_trips() {
+        let before = debug();
+        set_debug(!before);
+        assert_eq!(debug(), !before);
+        set_debug(before);
+        assert_eq!(debug(), before);
+    }
+
+    #[test]
+    fn quiet_round_trips() {
+        set_quiet(true);
+        assert!(quiet());
+        set_quiet(false);
+        assert!(!quiet());
+        set_quiet(true);
+    }
+
+    #[test]
+    fn min_chunk_default() {
+        assert_eq!(cpu_min_chunk(), DEFAULT_CPU_MIN_CHUNK);
+    }
+}

@@ -1,0 +1,322 @@
+//! Devices: where arrays live and kernels run.
+//!
+//! Devices are named by Warp's aliases: `"cpu"`, `"cuda:0"`, `"cuda:1"`, ... This build has
+//! only the CPU backend; asking for a CUDA device is an error that says so, and code written as
+//! `get_device("cuda:0").unwrap_or(cpu())` runs on the CPU. No GPU is a normal situation.
+
+use crate::config;
+use crate::error::{Error, Result};
+use std::fmt;
+use std::hash::{Hash, Hasher};
+use std::sync::{Arc, OnceLock};
+
+/// Why CUDA devices cannot be used by this build.
+const CUDA_UNAVAILABLE: &str = "the CUDA backend is not built into this version of warp-lang yet";
+
+/// What kind of device a [`Device`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DeviceKind {
+    /// The host CPU; kernels run on the rayon thread pool.
+    Cpu,
+    /// A CUDA GPU.
+    Cuda {
+        /// The CUDA device ordinal (the `N` of `"cuda:N"`).
+        ordinal: usize,
+    },
+}
+
+/// A device: the CPU or a CUDA GPU.
+///
+/// Cheap to clone (a shared handle). Two `Device`s are equal when they denote the same device,
+/// i.e. when their [`kind`](Device::kind) is equal.
+#[derive(Clone, Debug)]
+pub struct Device {
+    kind: DeviceKind,
+    // Shared so that cloning a device (every `Array` holds one) never allocates.
+    info: Arc<DeviceInfo>,
+}
+
+#[derive(Debug)]
+struct DeviceInfo {
+    alias: String,
+    name: String,
+}
+
+impl PartialEq for Device {
+    fn eq(&self, other: &Self) -> bool {
+        // The kind identifies the device; the other fields are derived from it.
+        self.kind == other.kind
+    }
+}
+
+impl Eq for Device {}
+
+impl Hash for Device {
+    fn hash<H: Hasher>(&self, state: &mut H) {
+        self.kind.hash(state);
+    }
+}
+
+impl Device {
+    fn new(kind: DeviceKind, name: String) -> Device {
+        let alias = match kind {
+            DeviceKind::Cpu => "cpu".to_string(),
+            DeviceKind::Cuda { ordinal } => format!("cuda:{ordinal}"),
+        };
+        Device {
+            kind,
+            info: Arc::new(DeviceInfo { alias, name }),
+        }
+    }
+
+    /// A CUDA device handle for tests of the code paths that reject it; no such device can be
+    /// obtained through the public API of this build.
+    #[cfg(test)]
+    pub(crate) fn fake_cuda(ordinal: usize) -> Device {
+        Device::new(DeviceKind::Cuda { ordinal }, "fake GPU".to_string())
+    }
+
+    /// The kind of device.
+    pub fn kind(&self) -> DeviceKind {
+        self.kind
+    }
+
+    /// Warp's alias: `"cpu"` or `"cuda:N"`.
+    pub fn alias(&self) -> &str {
+        &self.info.alias
+    }
+
+    /// A human-readable name: the CPU model (from `/proc/cpuinfo` where readable, else `"CPU"`)
+    /// or the GPU's product name.
+    pub fn name(&self) -> &str {
+        &self.info.name
+    }
+
+    /// True for the CPU.
+    pub fn is_cpu(&self) -> bool {
+        self.kind == DeviceKind::Cpu
+    }
+
+    /// True for a CUDA GPU.
+    pub fn is_cuda(&self) -> bool {
+        matches!(self.kind, DeviceKind::Cuda { .. })
+    }
+}
+
+impl fmt::Display for Device {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.alias())
+    }
+}
+
+/// The model name of the host CPU, read once.
+fn cpu_model_name() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|text| {
+            text.lines().find_map(|line| {
+                let (key, value) = line.split_once(':')?;
+                (key.trim() == "model name").then(|| value.trim().to_string())
+            })
+        })
+        .filter(|name| !name.is_empty())
+        .unwrap_or_else(|| "CPU".to_string())
+}
+
+/// The process-wide runtime state: the devices found at initialisation.
+#[derive(Debug)]
+pub struct Runtime {
+    devices: Vec<Device>,
+    cuda_status: String,
+}
+
+impl Runtime {
+    /// All devices, the CPU first.
+    pub fn devices(&self) -> &[Device] {
+        &self.devices
+    }
+
+    /// Whether any CUDA device is usable.
+    pub fn cuda_available(&self) -> bool {
+        self.devices.iter().any(Device::is_cuda)
+    }
+
+    /// The warp-lang version, as printed in the banner.
+    pub fn version(&self) -> &'static str {
+        env!("CARGO_PKG_VERSION")
+    }
+
+    /// The banner [`init`] prints.
+    pub fn banner(&self) -> String {
+        let mut s = format!("warp-lang {} initialized:\n   Devices:\n", self.version());
+        for d in &self.devices {
+            let alias = format!("\"{}\"", d.alias());
+            let extra = match d.kind() {
+                DeviceKind::Cpu => format!("  ({} threads)", rayon::current_num_threads()),
+                DeviceKind::Cuda { .. } => String::new(),
+            };
+            s.push_str(&format!("     {alias:<10} | {}{extra}\n", d.name()));
+        }
+        if self.cuda_available() {
+            s.push_str("   CUDA: available");
+        } else {
+            s.push_str(&format!("   CUDA: not available ({})", self.cuda_status));
+        }
+        s
+    }
+}
+
+/// The runtime, built on first use without printing anything.
+fn runtime() -> &'static Runtime {
+    static RUNTIME: OnceLock<Runtime> = OnceLock::new();
+    RUNTIME.get_or_init(|| Runtime {
+        devices: vec![Device::new(DeviceKind::Cpu, cpu_model_name())],
+        cuda_status: CUDA_UNAVAILABLE.to_string(),
+    })
+}
+
+/// Initialises the runtime and prints the device list once, like Warp's `wp.init()`.
+///
+/// Idempotent: later calls return the same runtime and print nothing. The banner is not
+/// printed when [`config::quiet`] is set (`WARP_QUIET=1`). Calling `init` is optional: the
+/// other functions initialise the runtime on demand, silently.
+pub fn init() -> &'static Runtime {
+    static PRINTED: OnceLock<()> = OnceLock::new();
+    let rt = runtime();
+    PRINTED.get_or_init(|| {
+        if !config::quiet() {
+            println!("{}", rt.banner());
+        }
+    });
+    rt
+}
+
+/// The CPU device.
+pub fn cpu() -> Device {
+    runtime().devices[0].clone()
+}
+
+/// All devices, the CPU first (only the CPU in this build).
+pub fn devices() -> Vec<Device> {
+    runtime().devices.clone()
+}
+
+/// The device Warp would pick by default: the first GPU, else the CPU.
+pub fn get_preferred_device() -> Device {
+    let rt = runtime();
+    rt.devices
+        .iter()
+        .find(|d| d.is_cuda())
+        .unwrap_or(&rt.devices[0])
+        .clone()
+}
+
+/// The device named by `alias`: `"cpu"`, `"cuda"` (the first GPU) or `"cuda:N"`.
+///
+/// # Errors
+/// [`Error::NoDevice`] for a CUDA alias when no such GPU is usable (always, in this build), and
+/// for an alias that names no device at all (the message lists the valid ones).
+pub fn get_device(alias: &str) -> Result<Device> {
+    let rt = runtime();
+    if let Some(d) = rt.devices.iter().find(|d| d.alias() == alias) {
+        return Ok(d.clone());
+    }
+    let ordinal = match alias {
+        "cuda" => Some(0),
+        _ => alias
+            .strip_prefix("cuda:")
+            .and_then(|n| n.parse::<usize>().ok()),
+    };
+    let valid = || {
+        rt.devices
+            .iter()
+            .map(|d| format!("\"{}\"", d.alias()))
+            .collect::<Vec<_>>()
+    };
+    let reason = match ordinal {
+        Some(n) => match rt
+            .devices
+            .iter()
+            .find(|d| d.kind == DeviceKind::Cuda { ordinal: n })
+        {
+            Some(d) => return Ok(d.clone()),
+            None if !rt.cuda_available() => {
+                format!("CUDA is not available: {}; use \"cpu\"", rt.cuda_status)
+            }
+            None => format!(
+                "no CUDA device with ordinal {n}; valid aliases: {}",
+                valid().join(", ")
+            ),
+        },
+        None => format!(
+            "unknown device alias; valid aliases: {} (and \"cuda:N\" where CUDA is available)",
+            valid().join(", ")
+        ),
+    };
+    Err(Error::NoDevice {
+        name: alias.to_string(),
+        reason,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cpu_device() {
+        let d = cpu();
+        assert_eq!(d.kind(), DeviceKind::Cpu);
+        assert_eq!(d.alias(), "cpu");
+        assert_eq!(d.to_string(), "cpu");
+        assert!(d.is_cpu() && !d.is_cuda());
+        assert!(!d.name().is_empty());
+        assert_eq!(get_device("cpu").unwrap(), d);
+        assert_eq!(devices(), vec![d.clone()]);
+        assert_eq!(get_preferred_device(), d);
+        assert_ne!(d, Device::fake_cuda(0));
+    }
+
+    #[test]
+    fn cuda_is_not_built() {
+        for alias in ["cuda:0", "cuda", "cuda:3"] {
+            let err = get_device(alias).unwrap_err();
+            match &err {
+                Error::NoDevice { name, reason } => {
+                    assert_eq!(name, alias);
+                    assert!(reason.contains("CUDA backend is not built"), "{reason}");
+                }
+                other => panic!("unexpected {other:?}"),
+            }
+            assert!(err
+                .to_string()
+                .starts_with(&format!("no device \"{alias}\": CUDA is not")));
+        }
+    }
+
+    #[test]
+    fn unknown_alias_lists_valid_ones() {
+        let err = get_device("gpu7").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "no device \"gpu7\": unknown device alias; valid aliases: \"cpu\" (and \"cuda:N\" \
+             where CUDA is available)"
+        );
+        assert!(get_device("cuda:x").is_err());
+    }
+
+    #[test]
+    fn init_is_idempotent_and_banner_lists_cpu() {
+        config::set_quiet(true);
+        let a = init() as *const Runtime;
+        let b = init() as *const Runtime;
+        assert_eq!(a, b);
+        let banner = init().banner();
+        assert!(banner.starts_with("warp-lang 0.1.0 initialized:\n   Devices:\n     \"cpu\""));
+        assert!(banner.contains("threads)"));
+        assert!(banner.ends_with(
+            "CUDA: not available (the CUDA backend is not built into this \
+                                  version of warp-lang yet)"
+        ));
+    }
+}

@@ -1,0 +1,220 @@
+//! The runtime's error type.
+//!
+//! Every fallible host-side operation returns [`Result`]. Messages name the kernel, the argument
+//! and the offending values, because the person reading them usually has only the message and
+//! the kernel source in front of them.
+
+use std::fmt;
+use warp_core::Fault;
+
+/// The result type of the runtime.
+pub type Result<T> = std::result::Result<T, Error>;
+
+/// What can go wrong on the host side of warp-lang.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Error {
+    /// A kernel thread faulted (out-of-bounds index, integer division by zero, zero step). The
+    /// launch stopped at the first fault it saw.
+    Fault(Fault),
+    /// An array argument lives on another device than the one the launch runs on.
+    DeviceMismatch {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// The parameter the array was passed as.
+        arg: &'static str,
+        /// The launch device's alias.
+        expected: String,
+        /// The array's device alias.
+        found: String,
+    },
+    /// The launch dimensions are not usable.
+    InvalidDim {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// The dimensions as given.
+        dim: Vec<usize>,
+        /// Why they were rejected.
+        reason: String,
+    },
+    /// The kernel destructures `tid()` into a different number of dimensions than the launch has.
+    TidMismatch {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// How many dimensions the kernel's `tid()` yields.
+        tid_ndim: usize,
+        /// How many dimensions the launch has.
+        launch_ndim: usize,
+    },
+    /// Arguments declared with `same_shape` have different shapes.
+    ShapeMismatch {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// The parameters of the group (`"dim"` stands for the launch dimensions).
+        args: Vec<String>,
+        /// Their shapes, in the same order.
+        shapes: Vec<Vec<usize>>,
+    },
+    /// A device is unknown or not available in this build.
+    NoDevice {
+        /// The alias that was asked for.
+        name: String,
+        /// Why it cannot be used.
+        reason: String,
+    },
+    /// A host-side API was called with unusable arguments (lengths that do not match a shape,
+    /// a view range out of bounds, an impossible reinterpretation, ...).
+    InvalidArgument {
+        /// What was wrong, with the values involved.
+        what: String,
+    },
+}
+
+impl From<Box<Fault>> for Error {
+    #[cold]
+    fn from(fault: Box<Fault>) -> Self {
+        Error::Fault(*fault)
+    }
+}
+
+impl From<Fault> for Error {
+    #[cold]
+    fn from(fault: Fault) -> Self {
+        Error::Fault(fault)
+    }
+}
+
+impl Error {
+    /// Shorthand for [`Error::InvalidArgument`]; cold because errors are the rare path.
+    #[cold]
+    pub(crate) fn invalid(what: impl Into<String>) -> Self {
+        Error::InvalidArgument { what: what.into() }
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            // The fault already names the kernel, argument, index and shape.
+            Error::Fault(fault) => write!(f, "{fault}"),
+            Error::DeviceMismatch {
+                kernel,
+                arg,
+                expected,
+                found,
+            } => write!(
+                f,
+                "kernel `{kernel}`: argument `{arg}` is on device \"{found}\" but the launch is \
+                 on device \"{expected}\""
+            ),
+            Error::InvalidDim {
+                kernel,
+                dim,
+                reason,
+            } => {
+                write!(f, "kernel `{kernel}`: invalid launch dim {dim:?}: {reason}")
+            }
+            Error::TidMismatch {
+                kernel,
+                tid_ndim,
+                launch_ndim,
+            } => write!(
+                f,
+                "kernel `{kernel}`: tid() is destructured into {tid_ndim} dimension(s) but the \
+                 kernel was launched with {launch_ndim} dimension(s)"
+            ),
+            Error::ShapeMismatch {
+                kernel,
+                args,
+                shapes,
+            } => {
+                write!(
+                    f,
+                    "kernel `{kernel}`: arguments declared same_shape differ in shape: "
+                )?;
+                for (i, (arg, shape)) in args.iter().zip(shapes).enumerate() {
+                    if i > 0 {
+                        write!(f, ", ")?;
+                    }
+                    write!(f, "`{arg}` has shape {shape:?}")?;
+                }
+                Ok(())
+            }
+            Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
+            Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Error::Fault(fault) => Some(fault),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use warp_core::FaultKind;
+
+    #[test]
+    fn fault_converts_and_displays() {
+        let fault = Fault::new(
+            "k",
+            FaultKind::OutOfBounds {
+                arg: "a",
+                index: vec![-1],
+                shape: vec![4],
+            },
+        );
+        let err = Error::from(fault);
+        assert_eq!(
+            err.to_string(),
+            "kernel `k`: index [-1] is out of bounds for argument `a` of shape [4]"
+        );
+        assert!(std::error::Error::source(&err).is_some());
+    }
+
+    #[test]
+    fn messages_name_everything() {
+        let e = Error::DeviceMismatch {
+            kernel: "k",
+            arg: "x",
+            expected: "cpu".into(),
+            found: "cuda:0".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "kernel `k`: argument `x` is on device \"cuda:0\" but the launch is on device \"cpu\""
+        );
+        let e = Error::ShapeMismatch {
+            kernel: "k",
+            args: vec!["a".into(), "dim".into()],
+            shapes: vec![vec![3], vec![4]],
+        };
+        assert_eq!(
+            e.to_string(),
+            "kernel `k`: arguments declared same_shape differ in shape: `a` has shape [3], `dim` \
+             has shape [4]"
+        );
+        let e = Error::TidMismatch {
+            kernel: "k",
+            tid_ndim: 2,
+            launch_ndim: 1,
+        };
+        assert_eq!(
+            e.to_string(),
+            "kernel `k`: tid() is destructured into 2 dimension(s) but the kernel was launched \
+             with 1 dimension(s)"
+        );
+        let e = Error::InvalidDim {
+            kernel: "k",
+            dim: vec![0],
+            reason: "zero".into(),
+        };
+        assert_eq!(e.to_string(), "kernel `k`: invalid launch dim [0]: zero");
+    }
+}

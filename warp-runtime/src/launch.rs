@@ -1,0 +1,491 @@
+//! Typed kernel launch and the CPU executor.
+//!
+//! [`launch`] validates the launch dimensions and the kernel's declared shape constraints,
+//! converts the arguments into kernel-side views, and runs every thread of the grid. On the CPU
+//! the grid is cut into chunks run on the rayon pool; the loop is generic over the kernel so
+//! that `Kernel::run_cpu` is inlined into it and the per-thread cost is the kernel body alone.
+
+use crate::config;
+use crate::device::{Device, DeviceKind};
+use crate::error::{Error, Result};
+use crate::kernel::Kernel;
+use rayon::prelude::*;
+use warp_core::{Grid, KResult};
+
+/// Launch dimensions: 1 to 4 extents, like Warp's `dim=`.
+///
+/// Built from a `usize`, an array `[usize; K]` or a tuple of 2 to 4 `usize`s. Validity (no zero
+/// extent, each extent at most `i32::MAX`, no overflow of the thread count) is checked by
+/// [`launch`], which can name the kernel in the error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dim {
+    dims: [usize; 4],
+    ndim: usize,
+}
+
+impl Dim {
+    /// The extents, one per dimension.
+    pub fn as_slice(&self) -> &[usize] {
+        &self.dims[..self.ndim]
+    }
+
+    /// The number of dimensions.
+    pub fn ndim(&self) -> usize {
+        self.ndim
+    }
+
+    fn from_array<const K: usize>(a: [usize; K]) -> Dim {
+        const { assert!(K >= 1 && K <= 4, "a launch has 1 to 4 dimensions") };
+        let mut dims = [1usize; 4];
+        dims[..K].copy_from_slice(&a);
+        Dim { dims, ndim: K }
+    }
+}
+
+impl From<usize> for Dim {
+    fn from(n: usize) -> Dim {
+        Dim::from_array([n])
+    }
+}
+
+impl<const K: usize> From<[usize; K]> for Dim {
+    /// Only `K` from 1 to 4 compiles.
+    fn from(a: [usize; K]) -> Dim {
+        Dim::from_array(a)
+    }
+}
+
+impl From<(usize, usize)> for Dim {
+    fn from((a, b): (usize, usize)) -> Dim {
+        Dim::from_array([a, b])
+    }
+}
+
+impl From<(usize, usize, usize)> for Dim {
+    fn from((a, b, c): (usize, usize, usize)) -> Dim {
+        Dim::from_array([a, b, c])
+    }
+}
+
+impl From<(usize, usize, usize, usize)> for Dim {
+    fn from((a, b, c, d): (usize, usize, usize, usize)) -> Dim {
+        Dim::from_array([a, b, c, d])
+    }
+}
+
+/// Checks `dim` and turns it into the grid kernel code sees.
+fn grid_of(kernel: &'static str, dim: Dim) -> Result<Grid> {
+    let invalid = |reason: String| Error::InvalidDim {
+        kernel,
+        dim: dim.as_slice().to_vec(),
+        reason,
+    };
+    if !(1..=4).contains(&dim.ndim) {
+        return Err(invalid(format!(
+            "a launch has 1 to 4 dimensions, not {}",
+            dim.ndim
+        )));
+    }
+    let mut total = 1usize;
+    for (d, &e) in dim.as_slice().iter().enumerate() {
+        if e == 0 {
+            return Err(invalid(format!("a launch dim of zero (dimension {d})")));
+        }
+        if e > i32::MAX as usize {
+            // The GPU backend indexes threads with 32-bit extents, as Warp does; the CPU keeps
+            // the same limit so that a launch valid on one backend is valid on the other.
+            return Err(invalid(format!(
+                "extent {e} of dimension {d} exceeds i32::MAX ({})",
+                i32::MAX
+            )));
+        }
+        total = total
+            .checked_mul(e)
+            .ok_or_else(|| invalid("the number of threads overflows usize".to_string()))?;
+    }
+    Ok(Grid {
+        dims: dim.dims,
+        ndim: dim.ndim,
+        total,
+    })
+}
+
+/// Checks the kernel's `tid()` arity and `same_shape` groups against the launch.
+fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
+    let info = &K::INFO;
+    if let Some(k) = info.tid_ndim {
+        if k != grid.ndim {
+            return Err(Error::TidMismatch {
+                kernel: info.name,
+                tid_ndim: k,
+                launch_ndim: grid.ndim,
+            });
+        }
+    }
+    if info.same_shape.is_empty() {
+        // Skip `arg_shapes`, which allocates: launch cost matters.
+        return Ok(());
+    }
+    let shapes = K::arg_shapes(args);
+    for group in info.same_shape {
+        let mut names = Vec::with_capacity(group.len());
+        let mut group_shapes = Vec::with_capacity(group.len());
+        for &i in group.iter() {
+            let (name, shape) = if i == usize::MAX {
+                ("dim".to_string(), grid.dims[..grid.ndim].to_vec())
+            } else {
+                let name = info
+                    .params
+                    .get(i)
+                    .map_or_else(|| format!("#{i}"), |n| n.to_string());
+                // A non-array in a group is rejected by the macro; nothing to compare here.
+                match shapes.get(i).cloned().flatten() {
+                    Some(shape) => (name, shape),
+                    None => continue,
+                }
+            };
+            names.push(name);
+            group_shapes.push(shape);
+        }
+        if group_shapes.windows(2).any(|w| w[0] != w[1]) {
+            return Err(Error::ShapeMismatch {
+                kernel: info.name,
+                args: names,
+                shapes: group_shapes,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Launches `kernel` over `dim` threads with `args` on `device`, and waits for it on the CPU.
+///
+/// `args` is the tuple of host arguments in parameter order: `&Array<T, N>` for arrays, values
+/// for everything else. A thread's fault stops the launch and is returned as
+/// [`Error::Fault`]; when several threads fault, which one is reported is unspecified, and
+/// threads in other chunks may have run.
+///
+/// # Errors
+/// [`Error::InvalidDim`], [`Error::TidMismatch`], [`Error::ShapeMismatch`],
+/// [`Error::DeviceMismatch`], [`Error::Fault`], and [`Error::NoDevice`] for a CUDA device
+/// (not built yet).
+pub fn launch<K: Kernel>(
+    kernel: K,
+    dim: impl Into<Dim>,
+    args: K::Args<'_>,
+    device: &Device,
+) -> Result<()> {
+    // The kernel value is a unit struct: its type says everything.
+    let _ = kernel;
+    let grid = grid_of(K::INFO.name, dim.into())?;
+    check_shapes::<K>(&args, &grid)?;
+    match device.kind() {
+        DeviceKind::Cpu => {
+            // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
+            let params = unsafe { K::cpu_params(&args, device)? };
+            run_cpu::<K>(&params, &grid)
+        }
+        DeviceKind::Cuda { .. } => Err(Error::NoDevice {
+            name: device.alias().to_string(),
+            reason: format!(
+                "cannot launch kernel `{}`: the CUDA backend is not built into this version of \
+                 warp-lang yet",
+                K::INFO.name
+            ),
+        }),
+    }
+}
+
+/// Threads per rayon task: at least `min_chunk`, and about four tasks per pool thread so that
+/// uneven progress balances out without drowning the work in task overhead.
+fn chunk_len(total: usize, min_chunk: usize, pool_threads: usize) -> usize {
+    min_chunk.max(1).max(total / (pool_threads.max(1) * 4))
+}
+
+/// Runs threads `range` of the grid in order, stopping at the first fault.
+#[inline(always)]
+fn run_range<K: Kernel>(
+    params: &K::CpuParams,
+    grid: &Grid,
+    range: std::ops::Range<usize>,
+) -> KResult<()> {
+    for flat in range {
+        K::run_cpu(params, grid, flat)?;
+    }
+    Ok(())
+}
+
+/// Runs every thread of `grid` on the CPU: serially for small grids, in rayon chunks otherwise.
+fn run_cpu<K: Kernel>(params: &K::CpuParams, grid: &Grid) -> Result<()> {
+    let total = grid.total;
+    let min_chunk = config::cpu_min_chunk();
+    if total <= min_chunk {
+        // Waking the pool costs microseconds; a small launch is faster on this thread.
+        return run_range::<K>(params, grid, 0..total).map_err(Error::from);
+    }
+    let chunk = chunk_len(total, min_chunk, rayon::current_num_threads());
+    let chunks = total.div_ceil(chunk);
+    (0..chunks)
+        .into_par_iter()
+        .try_for_each(|c| {
+            let start = c * chunk;
+            run_range::<K>(params, grid, start..(start + chunk).min(total))
+        })
+        .map_err(Error::from)
+}
+
+/// Waits for all outstanding work on all devices. CPU launches finish before [`launch`]
+/// returns, so this does nothing yet; it exists so that code written for the GPU runs unchanged.
+pub fn synchronize() -> Result<()> {
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::array::Array;
+    use crate::device::cpu;
+    use crate::kernel::{ArgCtx, KernelArg, KernelInfo};
+    use warp_core::{ArrayView, Fault, FaultKind};
+
+    /// `out[tid] = tid`, written by hand the way `#[kernel]` would generate it.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct write_flat;
+
+    impl Kernel for write_flat {
+        type Args<'a> = (&'a Array<u64>,);
+        type CpuParams = (ArrayView<u64, 1>,);
+        const INFO: KernelInfo = KernelInfo {
+            name: "write_flat",
+            module: module_path!(),
+            params: &["out"],
+            tid_ndim: Some(1),
+            same_shape: &[&[0, usize::MAX]],
+        };
+        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
+            let ctx = ArgCtx {
+                kernel: Self::INFO.name,
+                arg: "out",
+                device,
+            };
+            Ok((<Array<u64> as KernelArg>::cpu_view(&args.0, &ctx)?,))
+        }
+        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
+            vec![<Array<u64> as KernelArg>::shape(&args.0)]
+        }
+        fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()> {
+            let [i] = grid.unflatten::<1>(flat);
+            params.0.store(i, i as u64)
+        }
+    }
+
+    /// `out[tid] = data[tid]`: faults for every thread past `data`'s end.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct oob;
+
+    impl Kernel for oob {
+        type Args<'a> = (&'a Array<f32>, f32);
+        type CpuParams = (ArrayView<f32, 1>, f32);
+        const INFO: KernelInfo = KernelInfo {
+            name: "oob",
+            module: module_path!(),
+            params: &["data", "scale"],
+            tid_ndim: Some(1),
+            same_shape: &[],
+        };
+        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
+            let data = ArgCtx {
+                kernel: Self::INFO.name,
+                arg: "data",
+                device,
+            };
+            let scale = ArgCtx {
+                arg: "scale",
+                ..data
+            };
+            Ok((
+                <Array<f32> as KernelArg>::cpu_view(&args.0, &data)?,
+                <f32 as KernelArg>::cpu_view(&args.1, &scale)?,
+            ))
+        }
+        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
+            vec![<Array<f32> as KernelArg>::shape(&args.0), None]
+        }
+        fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()> {
+            let [i] = grid.unflatten::<1>(flat);
+            let v = params.0.load(i)?;
+            params.0.store(i, v * params.1)
+        }
+    }
+
+    /// `out[i, j] = flat` over a 2-D grid.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct write_2d;
+
+    impl Kernel for write_2d {
+        type Args<'a> = (&'a Array<u64, 2>,);
+        type CpuParams = (ArrayView<u64, 2>,);
+        const INFO: KernelInfo = KernelInfo {
+            name: "write_2d",
+            module: module_path!(),
+            params: &["out"],
+            tid_ndim: Some(2),
+            same_shape: &[],
+        };
+        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
+            let ctx = ArgCtx {
+                kernel: Self::INFO.name,
+                arg: "out",
+                device,
+            };
+            Ok((<Array<u64, 2> as KernelArg>::cpu_view(&args.0, &ctx)?,))
+        }
+        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
+            vec![<Array<u64, 2> as KernelArg>::shape(&args.0)]
+        }
+        fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()> {
+            let [i, j] = grid.unflatten::<2>(flat);
+            params.0.store((i, j), flat as u64)
+        }
+    }
+
+    #[test]
+    fn every_thread_runs_once() {
+        let dev = cpu();
+        for n in [1usize, 4095, 4096, 4097, 100_003] {
+            let out = Array::<u64>::full(n, u64::MAX, &dev).unwrap();
+            launch(write_flat, n, (&out,), &dev).unwrap();
+            let v = out.to_vec().unwrap();
+            assert!(v.iter().enumerate().all(|(i, &x)| x == i as u64), "n = {n}");
+        }
+    }
+
+    #[test]
+    fn chunking() {
+        assert_eq!(chunk_len(4097, 4096, 2), 4096);
+        assert_eq!(chunk_len(100_003, 4096, 2), 12_500);
+        assert_eq!(chunk_len(100_003, 4096, 64), 4096);
+        assert_eq!(chunk_len(3, 0, 0), 1);
+        assert_eq!(chunk_len(10, 0, 0), 2);
+        // The last chunk of 100_003 threads in chunks of 12_500 is partial and still covered.
+        assert_eq!(100_003usize.div_ceil(12_500), 9);
+    }
+
+    #[test]
+    fn fault_names_kernel_arg_index_shape() {
+        let dev = cpu();
+        // Serial path (small) and parallel path (large).
+        for n in [10usize, 50_000] {
+            let data = Array::<f32>::full(n, 1.0, &dev).unwrap();
+            let err = launch(oob, n + 1, (&data, 2.0), &dev).unwrap_err();
+            assert_eq!(
+                err,
+                Error::Fault(Fault {
+                    kernel: "oob",
+                    kind: FaultKind::OutOfBounds {
+                        arg: "data",
+                        index: vec![n as i128],
+                        shape: vec![n]
+                    },
+                })
+            );
+            assert_eq!(
+                err.to_string(),
+                format!(
+                    "kernel `oob`: index [{n}] is out of bounds for argument `data` of shape [{n}]"
+                )
+            );
+        }
+        // Without the extra thread the kernel runs cleanly.
+        let data = Array::<f32>::full(5, 1.5, &dev).unwrap();
+        launch(oob, 5, (&data, 2.0), &dev).unwrap();
+        assert_eq!(data.to_vec().unwrap(), vec![3.0; 5]);
+    }
+
+    #[test]
+    fn two_d_launch_is_row_major() {
+        let dev = cpu();
+        for (rows, cols) in [(3usize, 5usize), (70, 130)] {
+            let out = Array::<u64, 2>::zeros((rows, cols), &dev).unwrap();
+            launch(write_2d, (rows, cols), (&out,), &dev).unwrap();
+            let v = out.to_vec().unwrap();
+            for i in 0..rows {
+                for j in 0..cols {
+                    assert_eq!(v[i * cols + j], (i * cols + j) as u64);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn dim_validation() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        let err = launch(write_flat, 0, (&out,), &dev).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "kernel `write_flat`: invalid launch dim [0]: a launch dim of zero (dimension 0)"
+        );
+        let err = launch(write_flat, [0], (&out,), &dev).unwrap_err();
+        assert!(matches!(
+            err,
+            Error::InvalidDim {
+                kernel: "write_flat",
+                ..
+            }
+        ));
+        let err = launch(write_flat, i32::MAX as usize + 1, (&out,), &dev).unwrap_err();
+        assert!(err.to_string().contains("exceeds i32::MAX"), "{err}");
+        let huge = i32::MAX as usize;
+        let err = grid_of("k", Dim::from([huge, huge, huge, huge])).unwrap_err();
+        assert!(err.to_string().contains("overflows"), "{err}");
+        let g = grid_of("k", Dim::from((2, 3, 4))).unwrap();
+        assert_eq!(
+            g,
+            Grid {
+                dims: [2, 3, 4, 1],
+                ndim: 3,
+                total: 24
+            }
+        );
+        assert_eq!(Dim::from([1, 2, 3, 4]).as_slice(), &[1, 2, 3, 4]);
+        assert_eq!(Dim::from((5, 6, 7, 8)).ndim(), 4);
+        assert_eq!(Dim::from(7), Dim::from([7]));
+    }
+
+    #[test]
+    fn tid_and_shape_checks() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        let err = launch(write_flat, (2, 2), (&out,), &dev).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "kernel `write_flat`: tid() is destructured into 1 dimension(s) but the kernel was \
+             launched with 2 dimension(s)"
+        );
+        let err = launch(write_flat, 5, (&out,), &dev).unwrap_err();
+        assert_eq!(
+            err,
+            Error::ShapeMismatch {
+                kernel: "write_flat",
+                args: vec!["out".into(), "dim".into()],
+                shapes: vec![vec![4], vec![5]],
+            }
+        );
+    }
+
+    #[test]
+    fn cuda_launch_is_refused() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        let err = launch(write_flat, 4, (&out,), &crate::device::Device::fake_cuda(0)).unwrap_err();
+        assert!(
+            err.to_string().contains("CUDA backend is not built"),
+            "{err}"
+        );
+        synchronize().unwrap();
+    }
+}

@@ -1,0 +1,31 @@
+//! Runtime of warp-lang: devices, arrays, typed launch, the CPU executor and configuration.
+//!
+//! - [`device`]: `"cpu"` and `"cuda:N"` devices, [`init`] and its banner. This build has only
+//!   the CPU backend; asking for a GPU is an [`Error::NoDevice`], not a panic.
+//! - [`array`](mod@array): [`Array<T, N>`], a cheap-to-clone handle to shaped, strided memory with
+//!   zero-copy views, reshapes and reinterpretations.
+//! - [`launch()`]: checks a launch against what the kernel declared and runs it, on the CPU
+//!   in rayon chunks.
+//! - [`kernel`]: the traits that `#[kernel]` implements.
+//! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
+//!
+//! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
+//! zero becomes an [`Error::Fault`] naming the kernel, the argument and the values.
+
+#![warn(missing_docs)]
+
+pub mod array;
+pub mod config;
+pub mod device;
+pub mod error;
+pub mod kernel;
+pub mod launch;
+
+pub use array::{copy, Array, Element, IntoShape};
+pub use bytemuck::cast_slice;
+pub use device::{
+    cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
+};
+pub use error::{Error, Result};
+pub use kernel::{ArgCtx, Kernel, KernelArg, KernelInfo};
+pub use launch::{launch, synchronize, Dim};
