@@ -7,8 +7,11 @@
 /// An index into an array of `N` dimensions: one integer for `N = 1`, a tuple of `N` integers
 /// otherwise.
 pub trait KernelIndex<const N: usize>: Copy {
-    /// The index, one entry per dimension, widened losslessly.
+    /// The index, one entry per dimension, widened losslessly (for fault reports).
     fn components(self) -> [i128; N];
+    /// The index as `usize`s for the bounds check: a negative value sign-extends to a huge
+    /// one, so the single unsigned comparison `i < extent` rejects it too.
+    fn to_usize(self) -> [usize; N];
 }
 
 macro_rules! index_impls {
@@ -16,6 +19,8 @@ macro_rules! index_impls {
         impl KernelIndex<1> for $t {
             #[inline(always)]
             fn components(self) -> [i128; 1] { [self as i128] }
+            #[inline(always)]
+            fn to_usize(self) -> [usize; 1] { [IndexInt::as_usize(self)] }
         }
     )*};
 }
@@ -25,12 +30,17 @@ index_impls!(i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
 pub trait IndexInt: Copy {
     /// The value widened losslessly.
     fn widen(self) -> i128;
+    /// The value as `usize`, negative values sign-extended (so they fail a bounds check).
+    fn as_usize(self) -> usize;
 }
 macro_rules! index_ints {
     ($($t:ty),*) => {$(
         impl IndexInt for $t {
             #[inline(always)]
             fn widen(self) -> i128 { self as i128 }
+            #[inline(always)]
+            #[allow(clippy::cast_possible_wrap)]
+            fn as_usize(self) -> usize { self as isize as usize }
         }
     )*};
 }
@@ -41,11 +51,19 @@ impl<A: IndexInt> KernelIndex<1> for (A,) {
     fn components(self) -> [i128; 1] {
         [self.0.widen()]
     }
+    #[inline(always)]
+    fn to_usize(self) -> [usize; 1] {
+        [self.0.as_usize()]
+    }
 }
 impl<A: IndexInt, B: IndexInt> KernelIndex<2> for (A, B) {
     #[inline(always)]
     fn components(self) -> [i128; 2] {
         [self.0.widen(), self.1.widen()]
+    }
+    #[inline(always)]
+    fn to_usize(self) -> [usize; 2] {
+        [self.0.as_usize(), self.1.as_usize()]
     }
 }
 impl<A: IndexInt, B: IndexInt, C: IndexInt> KernelIndex<3> for (A, B, C) {
@@ -53,10 +71,18 @@ impl<A: IndexInt, B: IndexInt, C: IndexInt> KernelIndex<3> for (A, B, C) {
     fn components(self) -> [i128; 3] {
         [self.0.widen(), self.1.widen(), self.2.widen()]
     }
+    #[inline(always)]
+    fn to_usize(self) -> [usize; 3] {
+        [self.0.as_usize(), self.1.as_usize(), self.2.as_usize()]
+    }
 }
 impl<A: IndexInt, B: IndexInt, C: IndexInt, D: IndexInt> KernelIndex<4> for (A, B, C, D) {
     #[inline(always)]
     fn components(self) -> [i128; 4] {
         [self.0.widen(), self.1.widen(), self.2.widen(), self.3.widen()]
+    }
+    #[inline(always)]
+    fn to_usize(self) -> [usize; 4] {
+        [self.0.as_usize(), self.1.as_usize(), self.2.as_usize(), self.3.as_usize()]
     }
 }

@@ -69,13 +69,13 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     /// The element offset of `idx`, or an out-of-bounds fault.
     #[inline(always)]
     fn offset<I: KernelIndex<N>>(&self, idx: I) -> KResult<isize> {
-        let c = idx.components();
+        let u = idx.to_usize();
         let mut off = 0isize;
         for d in 0..N {
-            if c[d] < 0 || c[d] >= self.shape[d] as i128 {
-                return Err(self.out_of_bounds(&c));
+            if u[d] >= self.shape[d] {
+                return Err(self.out_of_bounds(&idx.components()));
             }
-            off += c[d] as isize * self.strides[d];
+            off += u[d] as isize * self.strides[d];
         }
         Ok(off)
     }
@@ -117,5 +117,47 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     /// The kernel and argument names this view reports faults under.
     pub fn names(&self) -> (&'static str, &'static str) {
         (self.kernel, self.arg)
+    }
+}
+
+impl<T: Copy, const N: usize> ArrayView<T, N> {
+    /// The element offset of an index already known to be in bounds.
+    #[inline(always)]
+    fn offset_unchecked<I: KernelIndex<N>>(&self, idx: I) -> isize {
+        let u = idx.to_usize();
+        let mut off = 0isize;
+        for d in 0..N {
+            debug_assert!(u[d] < self.shape[d]);
+            off += u[d] as isize * self.strides[d];
+        }
+        off
+    }
+
+    /// Reads the element at `idx` without a bounds check.
+    ///
+    /// # Safety
+    /// `idx` must be in bounds. Generated code calls this only for accesses indexed by the
+    /// thread index, after checking once per chunk that the array covers the launch grid.
+    #[inline(always)]
+    pub unsafe fn load_unchecked<I: KernelIndex<N>>(&self, idx: I) -> T {
+        // SAFETY: in bounds by the caller's contract, aligned and live by `new`'s.
+        unsafe { self.ptr.offset(self.offset_unchecked(idx)).read() }
+    }
+
+    /// Writes the element at `idx` without a bounds check.
+    ///
+    /// # Safety
+    /// As [`ArrayView::load_unchecked`].
+    #[inline(always)]
+    pub unsafe fn store_unchecked<I: KernelIndex<N>>(&self, idx: I, value: T) {
+        // SAFETY: in bounds by the caller's contract, aligned and live by `new`'s.
+        unsafe { self.ptr.offset(self.offset_unchecked(idx)).write(value) }
+    }
+
+    /// True when the view covers `dims` (one extent per dimension): every index drawn from
+    /// the launch grid is then in bounds.
+    #[inline(always)]
+    pub fn covers(&self, dims: &[usize; 4]) -> bool {
+        (0..N).all(|d| self.shape[d] >= dims[d])
     }
 }

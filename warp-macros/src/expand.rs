@@ -57,7 +57,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         return quote!(#errs #[allow(non_camel_case_types)] #vis struct #name;);
     };
 
-    let em = RustEmitter { f: &f };
+    let em = RustEmitter::new(&f);
     let vis = &item.vis;
     let name = &item.sig.ident;
     let name_str = Literal::string(&f.name);
@@ -77,6 +77,9 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
             }
         })
         .collect();
+    let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
+    let fast_arrays: Vec<syn::Ident> =
+        crate::analysis::tid_accessed_params(&f, &em.tid).into_iter().map(|v| em.var(v)).collect();
     let tid = match f.tid_ndim {
         Some(n) => {
             let n = n as usize;
@@ -92,7 +95,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
 
-    quote! {
+    let out = quote! {
         #(#doc_attrs)*
         #[allow(non_camel_case_types)]
         #[derive(Clone, Copy, Debug, Default)]
@@ -126,16 +129,54 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                 fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
                     ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
                 }
-                #[inline(always)]
-                #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-                fn run_cpu(__params: &Self::CpuParams, __grid: &__wp::Grid, __flat: usize) -> __wp::KResult<()> {
-                    let ( #(#pvars,)* ) = *__params;
-                    #tid_setup
-                    #body
+                fn run_cpu(
+                    __params: &Self::CpuParams,
+                    __grid: &__wp::Grid,
+                    __range: ::core::ops::Range<usize>,
+                ) -> __wp::KResult<()> {
+                    // One thread. Its parameters arrive by value, so that they live in registers:
+                    // read through `__params`, every array access would have to reload the views,
+                    // since a store through a raw pointer might alias them.
+                    #[inline(always)]
+                    #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+                    fn __thread<const __FAST: bool>(
+                        #( #pvars: <#tys as __wp::KernelArg>::CpuView, )*
+                        __grid: &__wp::Grid,
+                        __flat: usize,
+                    ) -> __wp::KResult<()> {
+                        #tid_setup
+                        #body
+                        ::core::result::Result::Ok(())
+                    }
+                    let ( #(#pnames_plain,)* ) = *__params;
+                    let __grid = *__grid;
+                    // Arrays indexed by the thread index: if they cover the grid, those accesses
+                    // are in bounds for every thread and the per-thread checks can go.
+                    if true #( && #fast_arrays.covers(&__grid.dims) )* {
+                        for __flat in __range {
+                            __thread::<true>( #(#pnames_plain,)* &__grid, __flat)?;
+                        }
+                    } else {
+                        for __flat in __range {
+                            __thread::<false>( #(#pnames_plain,)* &__grid, __flat)?;
+                        }
+                    }
                     ::core::result::Result::Ok(())
                 }
             }
         };
+    };
+    dump(&f.name, &out);
+    out
+}
+
+/// With `WARP_LANG_DUMP=1` (or the kernel's name) in the environment at build time, prints the
+/// generated code of kernels and funcs to stderr: a debugging aid for the language and for users.
+fn dump(name: &str, tokens: &TokenStream) {
+    if let Ok(v) = std::env::var("WARP_LANG_DUMP") {
+        if v == "1" || v == name {
+            eprintln!("// ---- warp-lang expansion of `{name}`\n{tokens}");
+        }
     }
 }
 
@@ -169,7 +210,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         let errs = errors_to_tokens(errors);
         return quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {});
     };
-    let em = RustEmitter { f: &f };
+    let em = RustEmitter::new(&f);
     let doc_attrs = item.attrs.iter().filter(|a| a.path().is_ident("doc"));
     let params = f.params.iter().map(|p| {
         let v = em.var(p.var);

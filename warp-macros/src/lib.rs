@@ -10,6 +10,7 @@
 
 use proc_macro::TokenStream;
 
+mod analysis;
 mod back;
 mod builtins;
 mod expand;

@@ -75,6 +75,8 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams>;
     /// The shapes of the arguments (`None` for non-arrays), in parameter order.
     fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>>;
-    /// Runs thread `flat` of `grid` on the CPU.
-    fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()>;
+    /// Runs threads `range` (flat indices) of `grid` on the CPU, in order, stopping at the
+    /// first fault. A range rather than one thread, so that the parameters are unpacked once
+    /// per chunk and stay in registers across threads.
+    fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: std::ops::Range<usize>) -> KResult<()>;
 }

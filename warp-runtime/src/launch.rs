@@ -209,10 +209,7 @@ fn run_range<K: Kernel>(
     grid: &Grid,
     range: std::ops::Range<usize>,
 ) -> KResult<()> {
-    for flat in range {
-        K::run_cpu(params, grid, flat)?;
-    }
-    Ok(())
+    K::run_cpu(params, grid, range)
 }
 
 /// Runs every thread of `grid` on the CPU: serially for small grids, in rayon chunks otherwise.
@@ -247,6 +244,7 @@ mod tests {
     use crate::device::cpu;
     use crate::kernel::{ArgCtx, KernelArg, KernelInfo};
     use warp_core::{ArrayView, Fault, FaultKind};
+    use std::ops::Range;
 
     /// `out[tid] = tid`, written by hand the way `#[kernel]` would generate it.
     #[derive(Clone, Copy)]
@@ -274,9 +272,12 @@ mod tests {
         fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
             vec![<Array<u64> as KernelArg>::shape(&args.0)]
         }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()> {
-            let [i] = grid.unflatten::<1>(flat);
-            params.0.store(i, i as u64)
+        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            for flat in range {
+                let [i] = grid.unflatten::<1>(flat);
+                params.0.store(i, i as u64)?;
+            }
+            Ok(())
         }
     }
 
@@ -313,10 +314,13 @@ mod tests {
         fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
             vec![<Array<f32> as KernelArg>::shape(&args.0), None]
         }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()> {
-            let [i] = grid.unflatten::<1>(flat);
-            let v = params.0.load(i)?;
-            params.0.store(i, v * params.1)
+        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            for flat in range {
+                let [i] = grid.unflatten::<1>(flat);
+                let v = params.0.load(i)?;
+                params.0.store(i, v * params.1)?;
+            }
+            Ok(())
         }
     }
 
@@ -346,9 +350,12 @@ mod tests {
         fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
             vec![<Array<u64, 2> as KernelArg>::shape(&args.0)]
         }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, flat: usize) -> KResult<()> {
-            let [i, j] = grid.unflatten::<2>(flat);
-            params.0.store((i, j), flat as u64)
+        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            for flat in range {
+                let [i, j] = grid.unflatten::<2>(flat);
+                params.0.store((i, j), flat as u64)?;
+            }
+            Ok(())
         }
     }
 

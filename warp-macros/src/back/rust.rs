@@ -12,9 +12,21 @@ use quote::{format_ident, quote, quote_spanned};
 /// Emits Rust for one lowered function.
 pub struct RustEmitter<'a> {
     pub f: &'a Function,
+    /// Which thread-index component each variable holds (see `analysis::tid_components`).
+    pub tid: Vec<Option<u8>>,
 }
 
 impl<'a> RustEmitter<'a> {
+    pub fn new(f: &'a Function) -> Self {
+        RustEmitter { f, tid: crate::analysis::tid_components(f) }
+    }
+
+    /// Accesses indexed by the thread index skip their per-thread check when the launch has
+    /// checked, once per chunk, that the array covers the grid (`__FAST`).
+    fn fast(&self, array: VarId, index: &[VarId]) -> bool {
+        crate::analysis::is_tid_access(self.f, &self.tid, array, index)
+    }
+
     pub fn var(&self, v: VarId) -> syn::Ident {
         match &self.f.vars[v].name {
             Some(n) => format_ident!("{}_{}", n.trim_start_matches("r#"), v),
@@ -57,7 +69,11 @@ impl<'a> RustEmitter<'a> {
                 let a = self.var(*array);
                 let idx = self.index(index);
                 let val = self.var(*value);
-                quote_spanned!(sp=> #a.store(#idx, #val)?;)
+                if self.fast(*array, index) {
+                    quote_spanned!(sp=> if __FAST { unsafe { #a.store_unchecked(#idx, #val) } } else { #a.store(#idx, #val)?; })
+                } else {
+                    quote_spanned!(sp=> #a.store(#idx, #val)?;)
+                }
             }
             StmtKind::SetMember { var, path, value } => {
                 let v = self.var(*var);
@@ -204,7 +220,11 @@ impl<'a> RustEmitter<'a> {
             Op::Load { array, index } => {
                 let a = self.var(*array);
                 let idx = self.index(index);
-                quote_spanned!(sp=> #a.load(#idx)?)
+                if self.fast(*array, index) {
+                    quote_spanned!(sp=> (if __FAST { unsafe { #a.load_unchecked(#idx) } } else { #a.load(#idx)? }))
+                } else {
+                    quote_spanned!(sp=> #a.load(#idx)?)
+                }
             }
             Op::Member(v, m) => {
                 let x = self.var(*v);

@@ -1,0 +1,130 @@
+//! The runtime test suite of warp-lang: every construct of the kernel language, run on every
+//! backend and compared with the same computation written in plain Rust on the host.
+//!
+//! Each test is a plain function `fn name(dev: &wp::Device)`. A module lists its tests once,
+//! in `backend_tests!(..)`, which instantiates every one of them for every backend:
+//! `module::cpu_backend::name` runs it on the CPU, `module::cuda_backend::name` on `cuda:0`,
+//! or prints `SKIPPED` when there is no CUDA device.
+//!
+//! Numeric comparisons are exact wherever the operation is exact or deterministic. On the CPU
+//! a kernel runs exactly the Rust arithmetic the host reference runs (rustc never contracts
+//! `a * b + c` into an FMA), so even multi-step float results are compared bit for bit there;
+//! on CUDA the compiler may contract into FMAs and the transcendental functions are not the
+//! host's, so [`fma_rel`] and [`math_rel`] give a relative tolerance there (see each).
+
+use warp_lang as wp;
+
+/// Instantiates the listed test functions of the calling module for every backend.
+macro_rules! backend_tests {
+    ($($name:ident),* $(,)?) => {
+        /// The module's tests on the CPU backend.
+        mod cpu_backend {
+            $(
+                #[test]
+                fn $name() {
+                    super::$name(&::warp_lang::cpu());
+                }
+            )*
+        }
+
+        /// The module's tests on the first CUDA device; each prints that it skipped when there
+        /// is none.
+        mod cuda_backend {
+            $(
+                #[test]
+                fn $name() {
+                    match ::warp_lang::get_device("cuda:0") {
+                        Ok(dev) => super::$name(&dev),
+                        Err(e) => eprintln!(
+                            "SKIPPED {}::{}: no CUDA device ({e})",
+                            module_path!(),
+                            stringify!($name)
+                        ),
+                    }
+                }
+            )*
+        }
+    };
+}
+
+mod arith;
+mod arrays;
+mod builtins;
+mod control;
+mod errors;
+mod funcs;
+mod launch;
+mod params;
+mod structs;
+
+/// A 1-D array holding `data` on `dev`.
+fn arr<T: wp::Element>(data: &[T], dev: &wp::Device) -> wp::Array<T> {
+    wp::Array::from_slice(data, dev).expect("array from slice")
+}
+
+/// A zero-filled array of the given shape on `dev`.
+fn zeros<T: wp::Element, const N: usize>(shape: impl wp::IntoShape<N>, dev: &wp::Device) -> wp::Array<T, N> {
+    wp::Array::zeros(shape, dev).expect("zeros")
+}
+
+/// The elements of `a`, row-major.
+fn host<T: wp::Element, const N: usize>(a: &wp::Array<T, N>) -> Vec<T> {
+    a.to_vec().expect("to_vec")
+}
+
+/// Relative tolerance for f32 results of several roundings (`a * b + c`, matrix products, dot
+/// products). The CPU kernel runs the very same Rust arithmetic as the host reference: 0, i.e.
+/// bit-exact. CUDA may contract a multiply and an add into an FMA, which changes the last bits:
+/// 1e-6 relative.
+fn fma_rel(dev: &wp::Device) -> f32 {
+    if dev.is_cpu() {
+        0.0
+    } else {
+        1e-6
+    }
+}
+
+/// Relative tolerance for f32 transcendental functions (sin, exp, pow, ...). The CPU builtins
+/// call the same `std` functions as the host reference: 0, bit-exact. CUDA's `sinf`, `expf`,
+/// `powf`, ... are within a few ulp of the correctly rounded result, and FMA contraction may
+/// add another: 1e-5 relative.
+fn math_rel(dev: &wp::Device) -> f32 {
+    if dev.is_cpu() {
+        0.0
+    } else {
+        1e-5
+    }
+}
+
+/// [`fma_rel`] for f64 results: 0 on the CPU, 1e-15 relative on CUDA (FMA contraction).
+fn fma_rel64(dev: &wp::Device) -> f64 {
+    if dev.is_cpu() {
+        0.0
+    } else {
+        1e-15
+    }
+}
+
+/// `got` equals `want` within `rel` relative to the larger magnitude (NaN equals NaN; `rel = 0`
+/// asks for bit-exact equality up to the sign of zero).
+#[track_caller]
+fn assert_close_f32(got: f32, want: f32, rel: f32, what: &str) {
+    let ok = got == want || (got.is_nan() && want.is_nan()) || (got - want).abs() <= rel * got.abs().max(want.abs());
+    assert!(ok, "{what}: got {got:e}, want {want:e} (relative tolerance {rel:e})");
+}
+
+/// [`assert_close_f32`] for f64.
+#[track_caller]
+fn assert_close_f64(got: f64, want: f64, rel: f64, what: &str) {
+    let ok = got == want || (got.is_nan() && want.is_nan()) || (got - want).abs() <= rel * got.abs().max(want.abs());
+    assert!(ok, "{what}: got {got:e}, want {want:e} (relative tolerance {rel:e})");
+}
+
+/// [`assert_close_f32`] for each component of two equally long slices of f32 components.
+#[track_caller]
+fn assert_close_slice(got: &[f32], want: &[f32], rel: f32, what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: lengths");
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        assert_close_f32(*g, *w, rel, &format!("{what} [component {k}]"));
+    }
+}

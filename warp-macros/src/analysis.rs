@@ -1,0 +1,75 @@
+//! Facts about a lowered function that emitters use.
+
+use crate::ir::*;
+
+/// For each variable, the component of the thread index it is known to hold (an immutable
+/// copy of `tid()` or of such a copy), if any.
+pub fn tid_components(f: &Function) -> Vec<Option<u8>> {
+    let mut comp = vec![None; f.vars.len()];
+    // Immutable variables have exactly one (defining) assignment, which precedes every use in
+    // statement order, so one walk in order settles them.
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign { dst, op, define: true } = &s.kind {
+            if f.vars[*dst].mutable {
+                return;
+            }
+            comp[*dst] = match op {
+                Op::Tid(k) => Some(*k),
+                Op::Copy(v) => comp[*v],
+                _ => None,
+            };
+        }
+    });
+    comp
+}
+
+/// Is an access `array[index]` indexed exactly by the thread index, dimension by dimension?
+/// Then the launch can check it once for the whole grid instead of once per thread.
+pub fn is_tid_access(f: &Function, tid: &[Option<u8>], array: VarId, index: &[VarId]) -> bool {
+    let is_param = f.params.iter().any(|p| p.var == array);
+    is_param
+        && f.tid_ndim == Some(index.len() as u8)
+        && index.iter().enumerate().all(|(d, v)| tid[*v] == Some(d as u8))
+}
+
+/// The parameters accessed through [`is_tid_access`] accesses.
+pub fn tid_accessed_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
+    let mut out = Vec::new();
+    walk_stmts(&f.body, &mut |s| {
+        let access = match &s.kind {
+            StmtKind::Assign { op: Op::Load { array, index }, .. } => Some((*array, index)),
+            StmtKind::Store { array, index, .. } => Some((*array, index)),
+            _ => None,
+        };
+        if let Some((a, idx)) = access {
+            if is_tid_access(f, tid, a, idx) && !out.contains(&a) {
+                out.push(a);
+            }
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use syn::parse_quote;
+
+    #[test]
+    fn tid_accesses_are_found() {
+        let item: syn::ItemFn = parse_quote! {
+            fn k(a: Array<f32>, b: Array<f32>, c: Array<f32>) {
+                let i = tid();
+                let j = i;
+                let mut m = i;
+                m += 0;
+                a[j] = b[i] + c[m] + c[0];
+            }
+        };
+        let f = crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap();
+        let tid = tid_components(&f);
+        let params: Vec<String> =
+            tid_accessed_params(&f, &tid).iter().map(|v| f.vars[*v].name.clone().unwrap()).collect();
+        assert_eq!(params, vec!["b", "a"], "c is indexed by a mutable copy and by a constant");
+    }
+}
