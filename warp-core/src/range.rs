@@ -72,7 +72,10 @@ mod tests {
                 assert_eq!(values(r.step_by(k as i64, "t").unwrap().rev()), (a..b).step_by(k).rev().collect::<Vec<_>>());
                 let ri = RangeProg::new(a as i64, b as i64, true);
                 assert_eq!(values(ri), (a..=b).collect::<Vec<_>>());
-                assert_eq!(values(ri.step_by(k as i64, "t").unwrap().rev()), (a..=b).step_by(k).rev().collect::<Vec<_>>());
+                // std has no `.rev()` after `step_by` on inclusive ranges; reversing the sequence is the meaning.
+                let mut want: Vec<i32> = (a..=b).step_by(k).collect();
+                want.reverse();
+                assert_eq!(values(ri.step_by(k as i64, "t").unwrap().rev()), want);
             }
         }
     }

@@ -1064,7 +1064,8 @@ mod tests {
             arg: "x",
             device: &fake,
         };
-        let Err(err) = <Array<f32> as KernelArg>::cpu_view(&&a, &ctx) else {
+        // SAFETY: the view is not used after `a`.
+        let Err(err) = (unsafe { <Array<f32> as KernelArg>::cpu_view(&&a, &ctx) }) else {
             panic!("a CPU array passed to a CUDA launch must be rejected")
         };
         assert_eq!(
@@ -1076,11 +1077,13 @@ mod tests {
             arg: "x",
             device: &dev,
         };
-        let view = <Array<f32> as KernelArg>::cpu_view(&&a, &ctx).unwrap();
+        // SAFETY: the view is not used after `a`.
+        let view = unsafe { <Array<f32> as KernelArg>::cpu_view(&&a, &ctx) }.unwrap();
         view.store(2usize, 4.0).unwrap();
         assert_eq!(a.to_vec().unwrap(), vec![0.0, 0.0, 4.0]);
         assert_eq!(<Array<f32> as KernelArg>::shape(&&a), Some(vec![3]));
-        assert_eq!(<f32 as KernelArg>::cpu_view(&2.5, &ctx).unwrap(), 2.5);
+        // SAFETY: a value argument borrows nothing.
+        assert_eq!(unsafe { <f32 as KernelArg>::cpu_view(&2.5, &ctx) }.unwrap(), 2.5);
         assert_eq!(<Vec3 as KernelArg>::shape(&Vec3::ONE), None);
         assert!(Array::<f32>::zeros(3, &fake).is_err());
     }

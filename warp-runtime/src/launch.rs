@@ -267,7 +267,8 @@ mod tests {
                 arg: "out",
                 device,
             };
-            Ok((<Array<u64> as KernelArg>::cpu_view(&args.0, &ctx)?,))
+            // SAFETY: forwarded contract.
+            Ok((unsafe { <Array<u64> as KernelArg>::cpu_view(&args.0, &ctx)? },))
         }
         fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
             vec![<Array<u64> as KernelArg>::shape(&args.0)]
@@ -307,8 +308,9 @@ mod tests {
                 ..data
             };
             Ok((
-                <Array<f32> as KernelArg>::cpu_view(&args.0, &data)?,
-                <f32 as KernelArg>::cpu_view(&args.1, &scale)?,
+                // SAFETY: forwarded contract.
+                unsafe { <Array<f32> as KernelArg>::cpu_view(&args.0, &data)? },
+                unsafe { <f32 as KernelArg>::cpu_view(&args.1, &scale)? },
             ))
         }
         fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
@@ -345,7 +347,8 @@ mod tests {
                 arg: "out",
                 device,
             };
-            Ok((<Array<u64, 2> as KernelArg>::cpu_view(&args.0, &ctx)?,))
+            // SAFETY: forwarded contract.
+            Ok((unsafe { <Array<u64, 2> as KernelArg>::cpu_view(&args.0, &ctx)? },))
         }
         fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
             vec![<Array<u64, 2> as KernelArg>::shape(&args.0)]
