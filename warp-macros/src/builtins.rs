@@ -228,6 +228,22 @@ impl Builtin {
                 _ => {}
             }
         }
+        // Only literals in T positions: the literal rule's defaults (f32, else i32).
+        if t.is_none() {
+            let t_lits: Vec<bool> = self
+                .params
+                .iter()
+                .zip(args)
+                .filter_map(|(p, a)| match (p, a) {
+                    (Pos::T, ArgTy::Literal { float }) => Some(*float),
+                    _ => None,
+                })
+                .collect();
+            let deferred = args.iter().any(|a| matches!(a, ArgTy::Known(t) if t.is_deferred()));
+            if !t_lits.is_empty() && !deferred {
+                t = Some(if t_lits.contains(&true) { crate::types::F32 } else { crate::types::I32 });
+            }
+        }
         let Some(t) = t else {
             // Nothing known: leave typing to the target compiler.
             let params = self.params.iter().map(|_| Ty::Deferred).collect();
@@ -342,7 +358,11 @@ mod tests {
         assert!(e.contains("mismatched"), "{e}");
         assert!(lookup("sqrt").unwrap().resolve(&[k(I32)]).unwrap_err().contains("not defined for `i32`"));
         assert!(lookup("sqrt").unwrap().resolve(&[k(F32), k(F32)]).unwrap_err().contains("takes 1 argument"));
-        assert!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: true }]).unwrap().ret.is_deferred());
+        // Literal-only calls follow the literal rule's defaults.
+        assert_eq!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: true }]).unwrap().ret, F32);
+        assert!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: false }]).unwrap_err().contains("i32"));
+        assert_eq!(lookup("max").unwrap().resolve(&[ArgTy::Literal { float: false }; 2]).unwrap().ret, I32);
+        assert!(lookup("sqrt").unwrap().resolve(&[k(Ty::Deferred)]).unwrap().ret.is_deferred());
     }
 
     #[test]

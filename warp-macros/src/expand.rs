@@ -183,7 +183,7 @@ fn dump(name: &str, tokens: &TokenStream) {
 /// Forces the recursion-depth constants of called funcs to be evaluated: a cycle of funcs
 /// calling each other is then a compile-time error (a cycle in const evaluation).
 fn callee_depths(callees: &[syn::Path]) -> TokenStream {
-    let checks = callees.iter().map(|p| quote_spanned!(p.span()=> let _ = #p::__WP_DEPTH;));
+    let checks = callees.iter().map(|p| quote_spanned!(p.span()=> let _ = #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;));
     quote!(const _: () = { #(#checks)* };)
 }
 
@@ -224,8 +224,16 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     };
     let body = em.block(&f.body);
     let tail = if f.ret_syn.is_none() { quote!(::core::result::Result::Ok(())) } else { quote!() };
-    let depths = f.callees.iter().map(|p| quote_spanned!(p.span()=> #p::__WP_DEPTH));
+    let depths = f.callees.iter().map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
+    // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
+    // points there and names this constant.
+    let depth_const = quote_spanned! {name.span()=>
+        /// Longest chain of funcs below this one (a cycle fails to compile).
+        #[doc(hidden)]
+        #vis const __WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED: usize =
+            1 + ::warp_lang::__private::max_depth(&[#(#depths),*]);
+    };
     quote! {
         #(#doc_attrs)*
         ///
@@ -234,9 +242,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         #vis struct #name {}
 
         impl #name {
-            /// Longest chain of funcs below this one (a cycle fails to compile).
-            #[doc(hidden)]
-            #vis const __WP_DEPTH: usize = 1 + ::warp_lang::__private::max_depth(&[#(#depths),*]);
+            #depth_const
 
             #[doc(hidden)]
             #[inline(always)]
@@ -248,7 +254,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             }
         }
 
-        const _: usize = #name::__WP_DEPTH;
+        const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
     }
 }
 

@@ -376,7 +376,9 @@ impl Lowerer {
                 syn::Stmt::Item(item) => err(item.span(), "items (fn, struct, use, ...) cannot be declared inside kernels"),
                 syn::Stmt::Macro(m) => self.macro_stmt(&m.mac),
                 syn::Stmt::Expr(e, None) if last && (!is_block_like(e) || (value && is_value_block(e))) => {
-                    self.expr(e, want).map(|v| tail = Some(v))
+                    // A failed tail is the block's failure: report it once, through the caller.
+                    tail = Some(self.expr(e, want)?);
+                    Ok(())
                 }
                 syn::Stmt::Expr(e, _) => self.stmt_expr(e),
             };

@@ -1,0 +1,278 @@
+//! `#[func]`s: funcs calling funcs, funcs in other modules (by path and through `use`), funcs
+//! taking arrays, returning vectors, returning early, and writing through an array.
+
+use crate::{arr, assert_close_slice, fma_rel, host, zeros};
+use warp_lang as wp;
+use wp::prelude::*;
+
+backend_tests!(func_calls_func, func_in_other_module, func_with_array_argument, func_returning_vector, func_with_early_return, func_literal_arguments, func_writing_array);
+
+#[wp::func]
+fn sq(x: f32) -> f32 {
+    x * x
+}
+
+#[wp::func]
+fn sum_sq(a: f32, b: f32) -> f32 {
+    sq(a) + sq(b)
+}
+
+#[wp::func]
+fn poly(x: f32) -> f32 {
+    let s = sum_sq(x, 1.0);
+    s * 2.0 + sq(s)
+}
+
+#[wp::kernel]
+fn k_calls(a: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let x = a[i];
+    out[(i, 0)] = sq(x);
+    out[(i, 1)] = sum_sq(x, 2.0);
+    out[(i, 2)] = poly(x);
+    out[(i, 3)] = sq(sq(x)) + 1.0;
+}
+
+fn func_calls_func(dev: &wp::Device) {
+    let a = [1.0f32, 2.0, 3.0, -0.5];
+    let out = zeros::<f32, 2>((4, 4), dev);
+    wp::launch(k_calls, 4, (&arr(&a, dev), &out), dev).unwrap();
+    let want: Vec<f32> = a
+        .iter()
+        .flat_map(|&x| {
+            let s = x * x + 1.0;
+            [x * x, x * x + 4.0, s * 2.0 + s * s, (x * x) * (x * x) + 1.0]
+        })
+        .collect();
+    // Sums of products: FMA on CUDA.
+    assert_close_slice(&host(&out), &want, fma_rel(dev), "nested func calls");
+}
+
+/// Funcs in another module, called by path and through `use`.
+mod physics {
+    use warp_lang as wp;
+    use wp::prelude::*;
+
+    #[wp::func]
+    pub fn kinetic(m: f32, v: Vec3) -> f32 {
+        0.5 * m * dot(v, v)
+    }
+
+    pub mod units {
+        use warp_lang as wp;
+
+        #[wp::func]
+        pub fn to_cm(x: f32) -> f32 {
+            x * 100.0
+        }
+    }
+
+    #[wp::func]
+    pub fn kinetic_cm(m: f32, v: Vec3) -> f32 {
+        units::to_cm(units::to_cm(kinetic(m, v)))
+    }
+}
+
+use physics::units::to_cm;
+
+#[wp::kernel]
+fn k_modules(m: Array<f32>, v: Array<Vec3>, out: Array<f32, 2>) {
+    let i = tid();
+    out[(i, 0)] = physics::kinetic(m[i], v[i]);
+    out[(i, 1)] = to_cm(m[i]);
+    out[(i, 2)] = physics::kinetic_cm(m[i], v[i]);
+    out[(i, 3)] = physics::units::to_cm(1.5);
+}
+
+fn func_in_other_module(dev: &wp::Device) {
+    let m = [2.0f32, 0.5];
+    let v = [vec3(1.0, 2.0, 3.0), vec3(-0.5, 0.25, 4.0)];
+    let out = zeros::<f32, 2>((2, 4), dev);
+    wp::launch(k_modules, 2, (&arr(&m, dev), &arr(&v, dev), &out), dev).unwrap();
+    let want: Vec<f32> = (0..2)
+        .flat_map(|i| {
+            let k = 0.5 * m[i] * (v[i].x * v[i].x + v[i].y * v[i].y + v[i].z * v[i].z);
+            [k, m[i] * 100.0, k * 100.0 * 100.0, 150.0]
+        })
+        .collect();
+    assert_close_slice(&host(&out), &want, fma_rel(dev), "funcs in modules");
+}
+
+/// A func reading an array argument (and its length).
+#[wp::func]
+fn window_sum(a: Array<f32>, center: usize, radius: usize) -> f32 {
+    let mut s: f32 = 0.0;
+    let lo = if center >= radius { center - radius } else { 0 };
+    let hi = min(center + radius + 1, a.len());
+    for j in lo..hi {
+        s += a[j];
+    }
+    s
+}
+
+#[wp::func]
+fn grid_at(g: Array<i32, 2>, i: usize, j: usize) -> i32 {
+    g[(i, j)] * 10
+}
+
+#[wp::kernel]
+fn k_window(a: Array<f32>, g: Array<i32, 2>, out: Array<f32>, gout: Array<i32>) {
+    let i = tid();
+    out[i] = window_sum(a, i, 2);
+    gout[i] = grid_at(g, i % 2, i % 3);
+}
+
+fn func_with_array_argument(dev: &wp::Device) {
+    let a: Vec<f32> = (0..9).map(|k| k as f32 * 0.5).collect();
+    let g: Vec<i32> = (0..6).collect();
+    let (out, gout) = (zeros::<f32, 1>(9, dev), zeros::<i32, 1>(9, dev));
+    wp::launch(k_window, 9, (&arr(&a, dev), &wp::Array::from_slice_shape(&g, (2, 3), dev).unwrap(), &out, &gout), dev).unwrap();
+    let want: Vec<f32> = (0..9usize)
+        .map(|c| {
+            let mut s = 0.0;
+            for x in &a[c.saturating_sub(2)..(c + 3).min(9)] {
+                s += x;
+            }
+            s
+        })
+        .collect();
+    assert_eq!(host(&out), want, "half-integer sums are exact");
+    assert_eq!(host(&gout), (0..9).map(|i| g[(i % 2) * 3 + i % 3] * 10).collect::<Vec<_>>());
+}
+
+#[wp::func]
+fn reflect(v: Vec3, n: Vec3) -> Vec3 {
+    v - n * (2.0 * dot(v, n))
+}
+
+#[wp::func]
+fn orbit(t: f32) -> Vec2 {
+    vec2(cos(t), sin(t)) * 2.0
+}
+
+#[wp::kernel]
+fn k_vectors(v: Array<Vec3>, n: Vec3, out: Array<Vec3>, t: Array<f32>, o2: Array<Vec2>) {
+    let i = tid();
+    out[i] = reflect(v[i], n);
+    o2[i] = orbit(t[i]);
+    let r = reflect(v[i], n);
+    out[i] += r * 0.0;
+}
+
+fn func_returning_vector(dev: &wp::Device) {
+    let v = [vec3(1.0, -1.0, 0.0), vec3(0.3, 0.5, -0.25)];
+    let n = vec3(0.0, 1.0, 0.0);
+    let t = [0.0f32, 1.0];
+    let (out, o2) = (zeros::<Vec3, 1>(2, dev), zeros::<Vec2, 1>(2, dev));
+    wp::launch(k_vectors, 2, (&arr(&v, dev), n, &out, &arr(&t, dev), &o2), dev).unwrap();
+    let out = host(&out);
+    for i in 0..2 {
+        let d = v[i].x * n.x + v[i].y * n.y + v[i].z * n.z;
+        let want = v[i] - n * (2.0 * d);
+        assert_close_slice(&out[i].to_array(), &want.to_array(), fma_rel(dev), "reflect");
+        let o = host(&o2)[i];
+        assert_close_slice(&o.to_array(), &[t[i].cos() * 2.0, t[i].sin() * 2.0], crate::math_rel(dev), "orbit");
+    }
+}
+
+#[wp::func]
+fn safe_div(a: f32, b: f32) -> f32 {
+    if b == 0.0 {
+        return 0.0;
+    }
+    a / b
+}
+
+#[wp::func]
+fn first_multiple(start: i32, k: i32) -> i32 {
+    let mut x = start;
+    loop {
+        if x % k == 0 {
+            return x;
+        }
+        x += 1;
+    }
+}
+
+#[wp::func]
+fn classify(x: i32) -> i32 {
+    if x < 0 {
+        return -1;
+    } else if x == 0 {
+        return 0;
+    }
+    1
+}
+
+#[wp::kernel]
+fn k_early(a: Array<f32>, b: Array<f32>, out: Array<f32>, m: Array<i32, 2>) {
+    let i = tid();
+    out[i] = safe_div(a[i], b[i]);
+    let s = i as i32 * 5 - 7;
+    m[(i, 0)] = first_multiple(s, 4);
+    m[(i, 1)] = classify(s);
+}
+
+fn func_with_early_return(dev: &wp::Device) {
+    let a = [1.0f32, 2.0, 3.0, 4.0];
+    let b = [2.0f32, 0.0, -0.5, 0.0];
+    let (out, m) = (zeros::<f32, 1>(4, dev), zeros::<i32, 2>((4, 2), dev));
+    wp::launch(k_early, 4, (&arr(&a, dev), &arr(&b, dev), &out, &m), dev).unwrap();
+    assert_eq!(host(&out), vec![0.5, 0.0, -6.0, 0.0]);
+    let want: Vec<i32> = (0..4)
+        .flat_map(|i: i32| {
+            let s = i * 5 - 7;
+            let fm = (s..).find(|x| x % 4 == 0).unwrap();
+            [fm, s.signum()]
+        })
+        .collect();
+    assert_eq!(host(&m), want);
+}
+
+#[wp::func]
+fn scale64(x: f64, s: f64) -> f64 {
+    x * s
+}
+
+#[wp::func]
+fn twice64(x: f64) -> f64 {
+    x * 2.0
+}
+
+/// Literals passed to a func take the type of its parameter (the literal rule's "the
+/// parameter it is passed to"), and a literal combined with a func's result takes that
+/// result's type.
+#[wp::kernel]
+fn k_func_literals(x: f64, out: Array<f64>) {
+    out[0] = scale64(x, 0.1);
+    out[1] = twice64(0.1);
+    out[2] = twice64(x) + 0.1;
+}
+
+fn func_literal_arguments(dev: &wp::Device) {
+    let out = zeros::<f64, 1>(3, dev);
+    wp::launch(k_func_literals, 1, (3.0f64, &out), dev).unwrap();
+    assert_eq!(host(&out), vec![3.0 * 0.1, 0.1 * 2.0, 6.0 + 0.1]);
+}
+
+/// A func without a result, writing through the array it is given.
+#[wp::func]
+fn put(a: Array<i32>, i: usize, v: i32) {
+    if i >= a.len() {
+        return;
+    }
+    a[i] = v;
+}
+
+#[wp::kernel]
+fn k_put(out: Array<i32>) {
+    let i = tid();
+    put(out, i, i as i32 * 2);
+    put(out, i + 100, 7);
+}
+
+fn func_writing_array(dev: &wp::Device) {
+    let out = zeros::<i32, 1>(6, dev);
+    wp::launch(k_put, 6, (&out,), dev).unwrap();
+    assert_eq!(host(&out), vec![0, 2, 4, 6, 8, 10]);
+}

@@ -1,0 +1,131 @@
+//! Launches: sizes around the CPU executor's chunking (1 thread, exactly one chunk, one more,
+//! a large odd count), multi-dimensional launches, dims given in every form, repeated
+//! launches, a kernel without parameters, and print!/println! from kernel threads.
+
+use crate::{arr, host, zeros};
+use warp_lang as wp;
+use wp::prelude::*;
+
+backend_tests!(launch_sizes, large_2d_launch, dim_forms, repeated_launches, no_parameters, print_from_kernel);
+
+#[wp::kernel]
+fn k_fill(out: Array<u32>, count: Array<u32>) {
+    let i = tid();
+    out[i] = i as u32 * 3 + 1;
+    atomic_add(count, 0, 1);
+}
+
+fn launch_sizes(dev: &wp::Device) {
+    // A launch of at most `cpu_min_chunk` threads runs serially; larger ones are cut into
+    // chunks, the last of which is partial for odd counts.
+    let chunk = wp::config::cpu_min_chunk();
+    for n in [1, 2, chunk - 1, chunk, chunk + 1, 3 * chunk + 7, 1_000_003] {
+        let out = wp::Array::<u32>::full(n, u32::MAX, dev).unwrap();
+        let count = zeros::<u32, 1>(1, dev);
+        wp::launch(k_fill, n, (&out, &count), dev).unwrap();
+        let got = host(&out);
+        if let Some(bad) = (0..n).find(|&i| got[i] != i as u32 * 3 + 1) {
+            panic!("n = {n}: thread {bad} wrote {} (every thread must run once)", got[bad]);
+        }
+        assert_eq!(host(&count), vec![n as u32], "n = {n}: threads run");
+    }
+}
+
+#[wp::kernel]
+fn k_fill_2d(out: Array<u32, 2>) {
+    let (i, j) = tid();
+    out[(i, j)] = (i * 10_000 + j) as u32;
+}
+
+fn large_2d_launch(dev: &wp::Device) {
+    let (rows, cols) = (101usize, 4099usize);
+    let out = wp::Array::<u32, 2>::full((rows, cols), u32::MAX, dev).unwrap();
+    wp::launch(k_fill_2d, (rows, cols), (&out,), dev).unwrap();
+    let got = host(&out);
+    for i in 0..rows {
+        for j in 0..cols {
+            assert_eq!(got[i * cols + j], (i * 10_000 + j) as u32, "({i}, {j})");
+        }
+    }
+}
+
+#[wp::kernel]
+fn k_mark(out: Array<i32>) {
+    let i = tid();
+    out[i] += 1;
+}
+
+#[wp::kernel]
+fn k_mark_2d(out: Array<i32, 2>) {
+    let (i, j) = tid();
+    out[(i, j)] += 1;
+}
+
+/// Launch dims as a `usize`, a one-element array, a tuple, an array and a `wp::Dim`.
+fn dim_forms(dev: &wp::Device) {
+    let a = zeros::<i32, 1>(6, dev);
+    wp::launch(k_mark, 6, (&a,), dev).unwrap();
+    wp::launch(k_mark, [6], (&a,), dev).unwrap();
+    wp::launch(k_mark, wp::Dim::from(6), (&a,), dev).unwrap();
+    assert_eq!(host(&a), vec![3; 6]);
+    let b = zeros::<i32, 2>((2, 3), dev);
+    wp::launch(k_mark_2d, (2, 3), (&b,), dev).unwrap();
+    wp::launch(k_mark_2d, [2, 3], (&b,), dev).unwrap();
+    wp::launch(k_mark_2d, wp::Dim::from((2, 3)), (&b,), dev).unwrap();
+    assert_eq!(host(&b), vec![3; 6]);
+    // Fewer threads than elements: only the first ones are touched.
+    wp::launch(k_mark_2d, (1, 2), (&b,), dev).unwrap();
+    assert_eq!(host(&b), vec![4, 4, 3, 3, 3, 3]);
+}
+
+#[wp::kernel]
+fn k_step(x: Array<f32>, v: Array<f32>, dt: f32) {
+    let i = tid();
+    v[i] -= 9.5 * dt;
+    x[i] += v[i] * dt;
+}
+
+fn repeated_launches(dev: &wp::Device) {
+    let x0 = [0.0f32, 1.0, 2.0];
+    let v0 = [1.0f32, 0.0, -1.0];
+    let (x, v) = (arr(&x0, dev), arr(&v0, dev));
+    let (mut hx, mut hv) = (x0, v0);
+    for _ in 0..10 {
+        wp::launch(k_step, 3, (&x, &v, 0.25), dev).unwrap();
+        for i in 0..3 {
+            hv[i] -= 9.5 * 0.25;
+            hx[i] += hv[i] * 0.25;
+        }
+    }
+    // Multiples of 1/32 well inside f32's precision: exact, fused or not.
+    assert_eq!(host(&v), hv);
+    assert_eq!(host(&x), hx);
+    wp::synchronize().unwrap();
+}
+
+#[wp::kernel]
+fn k_noop() {
+    let i = tid();
+    let _ = i * 2;
+}
+
+fn no_parameters(dev: &wp::Device) {
+    wp::launch(k_noop, 5, (), dev).unwrap();
+}
+
+#[wp::kernel]
+fn k_print(v: Array<Vec3>, x: f32, flag: bool) {
+    let i = tid();
+    let n = i as i32 - 1;
+    println!("thread {} of v: {:?}, x = {}, flag = {}", i, v[i], x, flag);
+    print!("n = {n}, ");
+    print!("{{braces}} {:?}\n", n);
+    println!();
+}
+
+/// Output is not captured from kernel threads in a checkable way: this only checks that
+/// `{}`, `{:?}`, `{name}` and `{{`/`}}` compile and run.
+fn print_from_kernel(dev: &wp::Device) {
+    let v = arr(&[vec3(1.0, 2.0, 3.0), Vec3::NEG_ONE], dev);
+    wp::launch(k_print, 2, (&v, 0.5, true), dev).unwrap();
+}
