@@ -361,7 +361,7 @@ mod tests {
         // Literal-only calls follow the literal rule's defaults.
         assert_eq!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: true }]).unwrap().ret, F32);
         assert!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: false }]).unwrap_err().contains("i32"));
-        assert_eq!(lookup("max").unwrap().resolve(&[ArgTy::Literal { float: false }; 2]).unwrap().ret, I32);
+        assert_eq!(lookup("max").unwrap().resolve(&[ArgTy::Literal { float: false }, ArgTy::Literal { float: false }]).unwrap().ret, I32);
         assert!(lookup("sqrt").unwrap().resolve(&[k(Ty::Deferred)]).unwrap().ret.is_deferred());
     }
 
