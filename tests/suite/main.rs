@@ -56,6 +56,7 @@ mod funcs;
 mod launch;
 mod params;
 mod structs;
+mod probe;
 
 /// A 1-D array holding `data` on `dev`.
 fn arr<T: wp::Element>(data: &[T], dev: &wp::Device) -> wp::Array<T> {

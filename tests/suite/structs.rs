@@ -34,7 +34,9 @@ fn k_params(p: Params, out: Array<f64>, v: Array<Vec3>) {
     out[3] = p.gravity.z as f64;
     out[4] = p.flags as f64;
     let mut g = p.gravity;
-    for _ in 0..p.steps {
+    // `for _ in 0..p.steps` (a bound of a type the macro cannot see) does not compile: see
+    // the report. The cast gives the bound a known type.
+    for _ in 0..(p.steps as i32) {
         g *= 2.0;
     }
     v[0] = g;
