@@ -102,8 +102,10 @@ pub struct Builtin {
     /// Function in `warp_core::builtins`.
     pub rust: &'static str,
     /// Function in the CUDA builtin library (namespace `wp`).
+    #[allow(dead_code)] // read by the CUDA emitter
     pub cuda: &'static str,
     /// Section of the CUDA builtin library that defines it.
+    #[allow(dead_code)] // read by the CUDA emitter
     pub section: &'static str,
     pub grad: Grad,
 }
@@ -272,13 +274,10 @@ impl Builtin {
                         return Err(format!("argument {} of `{}` must be an index, found `{ty}`", i + 1, self.name));
                     }
                 }
-                ArgTy::Known(ty) if *pos == Pos::ArrayOfT => {
-                    if let Ty::Array(e, _) = ty {
-                        if **e != t {
-                            return Err(format!("`{}`: array of `{e}` where `{t}` was expected", self.name));
-                        }
-                    }
+                ArgTy::Known(Ty::Array(e, _)) if *pos == Pos::ArrayOfT && **e != t => {
+                    return Err(format!("`{}`: array of `{e}` where `{t}` was expected", self.name));
                 }
+                ArgTy::Known(_) if *pos == Pos::ArrayOfT => {}
                 ArgTy::Known(ty) if *ty != w => {
                     return Err(format!(
                         "mismatched types in `{}`: argument {} is `{ty}`, expected `{w}`",

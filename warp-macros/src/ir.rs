@@ -42,16 +42,17 @@ pub struct Param {
     pub ty: Ty,
     /// The type as the user wrote it (resolved in the user's scope by rustc).
     pub syn_ty: syn::Type,
-    pub span: Span,
 }
 
 /// A lowered kernel or func.
 #[derive(Clone, Debug)]
 pub struct Function {
+    #[allow(dead_code)] // read by the CUDA emitter and the adjoint transform
     pub kind: FnKind,
     pub name: String,
     pub params: Vec<Param>,
     /// The return type (`Ty::Unit` for kernels).
+    #[allow(dead_code)] // read by the CUDA emitter and the adjoint transform
     pub ret: Ty,
     pub ret_syn: Option<syn::Type>,
     pub vars: Vec<Var>,

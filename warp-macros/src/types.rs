@@ -118,10 +118,6 @@ impl Ty {
         matches!(self, Ty::Deferred)
     }
 
-    pub fn is_float_scalar(&self) -> bool {
-        matches!(self, Ty::Scalar(s) if s.is_float())
-    }
-
     pub fn is_int_scalar(&self) -> bool {
         matches!(self, Ty::Scalar(s) if s.is_int())
     }

@@ -71,7 +71,7 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
                     Ok(ty) => {
                         let var = cx.new_var(Some(name.clone()), ty.clone(), mutable);
                         cx.scopes[0].insert(name.clone(), var);
-                        params.push(Param { name, var, ty, syn_ty: (*pt.ty).clone(), span: pt.span() });
+                        params.push(Param { name, var, ty, syn_ty: (*pt.ty).clone() });
                     }
                     Err(e) => cx.errors.push(e),
                 }
