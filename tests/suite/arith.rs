@@ -17,6 +17,7 @@ backend_tests!(
     vector_operators,
     int_vector_operators,
     int_vector_wrapping,
+    int_vector_division_by_zero,
     matrix_operators,
     quat_operators,
     comparisons,
@@ -85,9 +86,19 @@ fn i32_operators(dev: &wp::Device) {
     ];
     let (a, b): (Vec<i32>, Vec<i32>) = pairs.iter().copied().unzip();
     let out = zeros::<i32, 2>((pairs.len(), 10), dev);
-    wp::launch(k_i32_ops, pairs.len(), (&arr(&a, dev), &arr(&b, dev), &out), dev).unwrap();
+    wp::launch(
+        k_i32_ops,
+        pairs.len(),
+        (&arr(&a, dev), &arr(&b, dev), &out),
+        dev,
+    )
+    .unwrap();
     for (row, &(x, y)) in host(&out).chunks(10).zip(&pairs) {
-        assert_eq!(row, i32_ops_ref(x, y), "x = {x}, y = {y}: + - * / % & | ^ << >>");
+        assert_eq!(
+            row,
+            i32_ops_ref(x, y),
+            "x = {x}, y = {y}: + - * / % & | ^ << >>"
+        );
     }
 }
 
@@ -109,10 +120,25 @@ fn k_u8_ops(a: Array<u8>, b: Array<u8>, out: Array<u8, 2>) {
 }
 
 fn u8_operators(dev: &wp::Device) {
-    let pairs: [(u8, u8); 8] = [(200, 100), (255, 1), (0, 1), (17, 5), (1, 9), (128, 7), (3, 200), (0xF0, 0x3C)];
+    let pairs: [(u8, u8); 8] = [
+        (200, 100),
+        (255, 1),
+        (0, 1),
+        (17, 5),
+        (1, 9),
+        (128, 7),
+        (3, 200),
+        (0xF0, 0x3C),
+    ];
     let (a, b): (Vec<u8>, Vec<u8>) = pairs.iter().copied().unzip();
     let out = zeros::<u8, 2>((pairs.len(), 10), dev);
-    wp::launch(k_u8_ops, pairs.len(), (&arr(&a, dev), &arr(&b, dev), &out), dev).unwrap();
+    wp::launch(
+        k_u8_ops,
+        pairs.len(),
+        (&arr(&a, dev), &arr(&b, dev), &out),
+        dev,
+    )
+    .unwrap();
     for (row, &(x, y)) in host(&out).chunks(10).zip(&pairs) {
         let want = [
             x.wrapping_add(y),
@@ -159,7 +185,13 @@ fn i64_operators(dev: &wp::Device) {
     ];
     let (a, b): (Vec<i64>, Vec<i64>) = pairs.iter().copied().unzip();
     let out = zeros::<i64, 2>((pairs.len(), 10), dev);
-    wp::launch(k_i64_ops, pairs.len(), (&arr(&a, dev), &arr(&b, dev), &out), dev).unwrap();
+    wp::launch(
+        k_i64_ops,
+        pairs.len(),
+        (&arr(&a, dev), &arr(&b, dev), &out),
+        dev,
+    )
+    .unwrap();
     for (row, &(x, y)) in host(&out).chunks(10).zip(&pairs) {
         let want = [
             x.wrapping_add(y),
@@ -201,7 +233,11 @@ fn k_wrap(one: i32, out: Array<i32>, out64: Array<i64>, out8: Array<i8>) {
 }
 
 fn integer_wrapping(dev: &wp::Device) {
-    let (out, out64, out8) = (zeros::<i32, 1>(8, dev), zeros::<i64, 1>(2, dev), zeros::<i8, 1>(2, dev));
+    let (out, out64, out8) = (
+        zeros::<i32, 1>(8, dev),
+        zeros::<i64, 1>(2, dev),
+        zeros::<i8, 1>(2, dev),
+    );
     wp::launch(k_wrap, 1, (1, &out, &out64, &out8), dev).unwrap();
     let (big, small) = (i32::MAX, i32::MIN);
     assert_eq!(
@@ -222,7 +258,13 @@ fn integer_wrapping(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_compound_locals(a: Array<i32>, b: Array<i32>, fa: Array<f32>, out: Array<i32, 2>, fout: Array<f32, 2>) {
+fn k_compound_locals(
+    a: Array<i32>,
+    b: Array<i32>,
+    fa: Array<f32>,
+    out: Array<i32, 2>,
+    fout: Array<f32, 2>,
+) {
     let i = tid();
     let y = b[i];
     let mut x = a[i];
@@ -264,7 +306,13 @@ fn compound_assign_locals(dev: &wp::Device) {
     let b = [3, 5, 2, -9];
     let fa = [1.0f32, -2.5, 0.1, 1e6];
     let (out, fout) = (zeros::<i32, 2>((4, 10), dev), zeros::<f32, 2>((4, 5), dev));
-    wp::launch(k_compound_locals, 4, (&arr(&a, dev), &arr(&b, dev), &arr(&fa, dev), &out, &fout), dev).unwrap();
+    wp::launch(
+        k_compound_locals,
+        4,
+        (&arr(&a, dev), &arr(&b, dev), &arr(&fa, dev), &out, &fout),
+        dev,
+    )
+    .unwrap();
     let (out, fout) = (host(&out), host(&fout));
     for i in 0..4 {
         let y = b[i];
@@ -333,10 +381,26 @@ fn compound_assign_elements(dev: &wp::Device) {
     let b = [3, -5, 7, 33];
     let init: Vec<i32> = (0..40).map(|k| k * 7919 - 100_000).collect();
     let o = wp::Array::from_slice_shape(&init, (4, 10), dev).unwrap();
-    let v0 = [vec3(1.0, 2.0, 3.0), vec3(-1.0, 0.5, 0.25), vec3(0.1, 0.2, 0.3), Vec3::ZERO];
-    let w = [vec3(0.5, 0.5, 0.5), vec3(2.0, -3.0, 4.0), vec3(0.3, 0.2, 0.1), Vec3::ONE];
+    let v0 = [
+        vec3(1.0, 2.0, 3.0),
+        vec3(-1.0, 0.5, 0.25),
+        vec3(0.1, 0.2, 0.3),
+        Vec3::ZERO,
+    ];
+    let w = [
+        vec3(0.5, 0.5, 0.5),
+        vec3(2.0, -3.0, 4.0),
+        vec3(0.3, 0.2, 0.1),
+        Vec3::ONE,
+    ];
     let v = arr(&v0, dev);
-    wp::launch(k_compound_elems, 4, (&arr(&b, dev), &o, &v, &arr(&w, dev)), dev).unwrap();
+    wp::launch(
+        k_compound_elems,
+        4,
+        (&arr(&b, dev), &o, &v, &arr(&w, dev)),
+        dev,
+    )
+    .unwrap();
     let got = host(&o);
     for i in 0..4 {
         let y = b[i];
@@ -365,7 +429,15 @@ fn compound_assign_elements(dev: &wp::Device) {
 // ------------------------------------------------------------------------------ floats
 
 #[wp::kernel]
-fn k_float_ops(a: Array<f32>, b: Array<f32>, c: Array<f32>, out: Array<f32, 2>, da: Array<f64>, db: Array<f64>, dout: Array<f64, 2>) {
+fn k_float_ops(
+    a: Array<f32>,
+    b: Array<f32>,
+    c: Array<f32>,
+    out: Array<f32, 2>,
+    da: Array<f64>,
+    db: Array<f64>,
+    dout: Array<f64, 2>,
+) {
     let i = tid();
     let x = a[i];
     let y = b[i];
@@ -392,7 +464,21 @@ fn float_operators(dev: &wp::Device) {
     let da: Vec<f64> = a.iter().map(|&x| f64::from(x) * 1.1).collect();
     let db: Vec<f64> = b.iter().map(|&x| f64::from(x) + 0.01).collect();
     let (out, dout) = (zeros::<f32, 2>((n, 6), dev), zeros::<f64, 2>((n, 5), dev));
-    wp::launch(k_float_ops, n, (&arr(&a, dev), &arr(&b, dev), &arr(&c, dev), &out, &arr(&da, dev), &arr(&db, dev), &dout), dev).unwrap();
+    wp::launch(
+        k_float_ops,
+        n,
+        (
+            &arr(&a, dev),
+            &arr(&b, dev),
+            &arr(&c, dev),
+            &out,
+            &arr(&da, dev),
+            &arr(&db, dev),
+            &dout,
+        ),
+        dev,
+    )
+    .unwrap();
     let (out, dout) = (host(&out), host(&dout));
     for i in 0..n {
         let (x, y) = (a[i], b[i]);
@@ -405,12 +491,23 @@ fn float_operators(dev: &wp::Device) {
         // `x * y + c` may become one FMA on CUDA.
         assert_close_f32(row[5], x * y + c[i], fma_rel(dev), "x * y + c");
         let (p, q) = (da[i], db[i]);
-        assert_eq!(&dout[i * 5..i * 5 + 5], [p + q, p - q, p * q, p / q, p % q], "f64 ops on ({p}, {q})");
+        assert_eq!(
+            &dout[i * 5..i * 5 + 5],
+            [p + q, p - q, p * q, p / q, p % q],
+            "f64 ops on ({p}, {q})"
+        );
     }
 }
 
 #[wp::kernel]
-fn k_vec_ops(a: Array<Vec3>, b: Array<Vec3>, s: f32, out: Array<Vec3, 2>, da: Array<DVec2>, dout: Array<DVec2, 2>) {
+fn k_vec_ops(
+    a: Array<Vec3>,
+    b: Array<Vec3>,
+    s: f32,
+    out: Array<Vec3, 2>,
+    da: Array<DVec2>,
+    dout: Array<DVec2, 2>,
+) {
     let i = tid();
     let v = a[i];
     let w = b[i];
@@ -432,19 +529,44 @@ fn k_vec_ops(a: Array<Vec3>, b: Array<Vec3>, s: f32, out: Array<Vec3, 2>, da: Ar
 }
 
 fn vector_operators(dev: &wp::Device) {
-    let a = [vec3(1.0, 2.0, 3.0), vec3(-0.1, 0.2, -0.3), vec3(1e20, -1e-20, 0.0)];
-    let b = [vec3(4.0, -5.0, 6.0), vec3(0.7, 0.11, 13.0), vec3(3.0, 2.0, 1.0)];
+    let a = [
+        vec3(1.0, 2.0, 3.0),
+        vec3(-0.1, 0.2, -0.3),
+        vec3(1e20, -1e-20, 0.0),
+    ];
+    let b = [
+        vec3(4.0, -5.0, 6.0),
+        vec3(0.7, 0.11, 13.0),
+        vec3(3.0, 2.0, 1.0),
+    ];
     let s = 0.3f32;
     let da = [dvec2(0.1, 0.2), dvec2(-1e100, 3.0), dvec2(7.0, -0.5)];
     let out = zeros::<Vec3, 2>((3, 10), dev);
     let dout = zeros::<DVec2, 2>((3, 4), dev);
-    wp::launch(k_vec_ops, 3, (&arr(&a, dev), &arr(&b, dev), s, &out, &arr(&da, dev), &dout), dev).unwrap();
+    wp::launch(
+        k_vec_ops,
+        3,
+        (&arr(&a, dev), &arr(&b, dev), s, &out, &arr(&da, dev), &dout),
+        dev,
+    )
+    .unwrap();
     let (out, dout) = (host(&out), host(&dout));
     for i in 0..3 {
         let (v, w) = (a[i], b[i]);
         // Single IEEE operations per component (2.0 * v and w * 0.5 are exact, so the sum has
         // one rounding even when fused): exact everywhere.
-        let want = [v * s, s * v, v + w, v - w, v * w, v / w, v / s, -v, 2.0 * v + w * 0.5, v * 3.0];
+        let want = [
+            v * s,
+            s * v,
+            v + w,
+            v - w,
+            v * w,
+            v / w,
+            v / s,
+            -v,
+            2.0 * v + w * 0.5,
+            v * 3.0,
+        ];
         assert_eq!(&out[i * 10..i * 10 + 10], want, "Vec3 row {i}");
         let d = da[i];
         assert_eq!(dout[i * 4], d * 0.1, "DVec2 * literal (f64, not 0.1f32)");
@@ -458,7 +580,13 @@ fn vector_operators(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_ivec_ops(a: Array<IVec3>, b: Array<IVec3>, u: Array<UVec2>, out: Array<IVec3, 2>, uout: Array<UVec2, 2>) {
+fn k_ivec_ops(
+    a: Array<IVec3>,
+    b: Array<IVec3>,
+    u: Array<UVec2>,
+    out: Array<IVec3, 2>,
+    uout: Array<UVec2, 2>,
+) {
     let i = tid();
     let v = a[i];
     let w = b[i];
@@ -481,14 +609,31 @@ fn int_vector_operators(dev: &wp::Device) {
     let a = [ivec3(1, -2, 3), ivec3(100, 7, -7), ivec3(-9, 0, 5)];
     let b = [ivec3(4, 5, -6), ivec3(3, -2, 2), ivec3(2, 1, -5)];
     let u = [uvec2(1, 2), uvec2(100, 7), uvec2(9, 0)];
-    let (out, uout) = (zeros::<IVec3, 2>((3, 8), dev), zeros::<UVec2, 2>((3, 3), dev));
-    wp::launch(k_ivec_ops, 3, (&arr(&a, dev), &arr(&b, dev), &arr(&u, dev), &out, &uout), dev).unwrap();
+    let (out, uout) = (
+        zeros::<IVec3, 2>((3, 8), dev),
+        zeros::<UVec2, 2>((3, 3), dev),
+    );
+    wp::launch(
+        k_ivec_ops,
+        3,
+        (&arr(&a, dev), &arr(&b, dev), &arr(&u, dev), &out, &uout),
+        dev,
+    )
+    .unwrap();
     let (out, uout) = (host(&out), host(&uout));
     for i in 0..3 {
         let (v, w) = (a[i], b[i]);
-        assert_eq!(&out[i * 8..i * 8 + 8], [v + w, v - w, v * w, v / w, v * 3, v * 2, -v, v % w], "IVec3 row {i}");
+        assert_eq!(
+            &out[i * 8..i * 8 + 8],
+            [v + w, v - w, v * w, v / w, v * 3, v * 2, -v, v % w],
+            "IVec3 row {i}"
+        );
         let x = u[i];
-        assert_eq!(&uout[i * 3..i * 3 + 3], [x + x, x * 5, x / 2], "UVec2 row {i}");
+        assert_eq!(
+            &uout[i * 3..i * 3 + 3],
+            [x + x, x * 5, x / 2],
+            "UVec2 row {i}"
+        );
     }
 }
 
@@ -510,7 +655,34 @@ fn int_vector_wrapping(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_mat_ops(m: Array<Mat3>, n: Array<Mat3>, v: Array<Vec3>, mv: Array<Vec3>, mm: Array<Mat3, 2>, m4: Mat4, v4: Vec4, out4: Array<Vec4>, dm: DMat3, dv: DVec3, dout: Array<DVec3>) {
+fn k_ivec_div(a: IVec2, b: IVec2, out: Array<IVec2>) {
+    out[0] = a / b;
+}
+
+/// Like integer scalars, integer vectors fault on division by zero instead of panicking.
+fn int_vector_division_by_zero(dev: &wp::Device) {
+    let out = zeros::<IVec2, 1>(1, dev);
+    let r = wp::launch(k_ivec_div, 1, (ivec2(1, 2), ivec2(1, 0), &out), dev);
+    assert!(
+        matches!(&r, Err(wp::Error::Fault(f)) if f.kind == wp::FaultKind::DivisionByZero),
+        "{r:?}"
+    );
+}
+
+#[wp::kernel]
+fn k_mat_ops(
+    m: Array<Mat3>,
+    n: Array<Mat3>,
+    v: Array<Vec3>,
+    mv: Array<Vec3>,
+    mm: Array<Mat3, 2>,
+    m4: Mat4,
+    v4: Vec4,
+    out4: Array<Vec4>,
+    dm: DMat3,
+    dv: DVec3,
+    dout: Array<DVec3>,
+) {
     let i = tid();
     mv[i] = m[i] * v[i];
     mm[(i, 0)] = m[i] * n[i];
@@ -524,29 +696,83 @@ fn k_mat_ops(m: Array<Mat3>, n: Array<Mat3>, v: Array<Vec3>, mv: Array<Vec3>, mm
 
 fn matrix_operators(dev: &wp::Device) {
     let m = [
-        Mat3::from_cols(vec3(1.0, 2.0, 3.0), vec3(4.0, 5.0, 6.0), vec3(7.0, 8.0, 10.0)),
-        Mat3::from_cols(vec3(0.1, -0.2, 0.3), vec3(0.7, 0.5, -0.6), vec3(1.7, 0.8, 0.9)),
+        Mat3::from_cols(
+            vec3(1.0, 2.0, 3.0),
+            vec3(4.0, 5.0, 6.0),
+            vec3(7.0, 8.0, 10.0),
+        ),
+        Mat3::from_cols(
+            vec3(0.1, -0.2, 0.3),
+            vec3(0.7, 0.5, -0.6),
+            vec3(1.7, 0.8, 0.9),
+        ),
     ];
-    let n = [Mat3::from_diagonal(vec3(2.0, 3.0, 4.0)), Mat3::from_cols(vec3(0.3, 0.3, 0.1), vec3(-1.0, 2.0, 0.25), vec3(0.0, 0.6, 0.7))];
+    let n = [
+        Mat3::from_diagonal(vec3(2.0, 3.0, 4.0)),
+        Mat3::from_cols(
+            vec3(0.3, 0.3, 0.1),
+            vec3(-1.0, 2.0, 0.25),
+            vec3(0.0, 0.6, 0.7),
+        ),
+    ];
     let v = [vec3(1.0, -1.0, 0.5), vec3(0.3, 0.2, 0.1)];
-    let m4 = Mat4::from_cols_array(&[0.5, 1.0, 1.5, 2.0, -1.0, 0.1, 0.2, 0.3, 3.0, 2.0, 1.0, 0.0, 0.7, 0.6, 0.5, 0.4]);
+    let m4 = Mat4::from_cols_array(&[
+        0.5, 1.0, 1.5, 2.0, -1.0, 0.1, 0.2, 0.3, 3.0, 2.0, 1.0, 0.0, 0.7, 0.6, 0.5, 0.4,
+    ]);
     let v4 = vec4(0.1, 0.2, 0.3, 0.4);
-    let dm = DMat3::from_cols(dvec3(0.1, 0.2, 0.3), dvec3(1.1, 1.2, 1.3), dvec3(-2.0, 0.5, 0.25));
+    let dm = DMat3::from_cols(
+        dvec3(0.1, 0.2, 0.3),
+        dvec3(1.1, 1.2, 1.3),
+        dvec3(-2.0, 0.5, 0.25),
+    );
     let dv = dvec3(0.7, 0.8, 0.9);
     let (mv, mm) = (zeros::<Vec3, 1>(2, dev), zeros::<Mat3, 2>((2, 5), dev));
     let (out4, dout) = (zeros::<Vec4, 1>(2, dev), zeros::<DVec3, 1>(2, dev));
-    wp::launch(k_mat_ops, 2, (&arr(&m, dev), &arr(&n, dev), &arr(&v, dev), &mv, &mm, m4, v4, &out4, dm, dv, &dout), dev).unwrap();
+    wp::launch(
+        k_mat_ops,
+        2,
+        (
+            &arr(&m, dev),
+            &arr(&n, dev),
+            &arr(&v, dev),
+            &mv,
+            &mm,
+            m4,
+            v4,
+            &out4,
+            dm,
+            dv,
+            &dout,
+        ),
+        dev,
+    )
+    .unwrap();
     let (mv, mm, out4, dout) = (host(&mv), host(&mm), host(&out4), host(&dout));
     // Products sum several products: FMA on CUDA (fma_rel); the rest is one rounding each.
     let rel = fma_rel(dev);
     for i in 0..2 {
-        assert_close_slice(&mv[i].to_array(), &(m[i] * v[i]).to_array(), rel, "Mat3 * Vec3");
-        assert_close_slice(&mm[i * 5].to_cols_array(), &(m[i] * n[i]).to_cols_array(), rel, "Mat3 * Mat3");
+        assert_close_slice(
+            &mv[i].to_array(),
+            &(m[i] * v[i]).to_array(),
+            rel,
+            "Mat3 * Vec3",
+        );
+        assert_close_slice(
+            &mm[i * 5].to_cols_array(),
+            &(m[i] * n[i]).to_cols_array(),
+            rel,
+            "Mat3 * Mat3",
+        );
         assert_eq!(mm[i * 5 + 1], m[i] + n[i], "Mat3 + Mat3");
         assert_eq!(mm[i * 5 + 2], m[i] - n[i], "Mat3 - Mat3");
         assert_eq!(mm[i * 5 + 3], 0.5 * m[i], "f32 * Mat3");
         assert_eq!(mm[i * 5 + 4], m[i] / 4.0, "Mat3 / f32");
-        assert_close_slice(&out4[i].to_array(), &(m4 * v4).to_array(), rel, "Mat4 * Vec4");
+        assert_close_slice(
+            &out4[i].to_array(),
+            &(m4 * v4).to_array(),
+            rel,
+            "Mat4 * Vec4",
+        );
         let want = dm * dv;
         for k in 0..3 {
             crate::assert_close_f64(dout[i][k], want[k], crate::fma_rel64(dev), "DMat3 * DVec3");
@@ -566,17 +792,39 @@ fn k_quat_ops(q: Array<Quat>, r: Array<Quat>, v: Array<Vec3>, qv: Array<Vec3>, q
 }
 
 fn quat_operators(dev: &wp::Device) {
-    let q = [Quat::from_rotation_z(std::f32::consts::FRAC_PI_2), Quat::from_axis_angle(vec3(1.0, 2.0, 3.0).normalize(), 0.7)];
-    let r = [Quat::from_rotation_x(0.3), Quat::from_xyzw(0.5, 0.5, 0.5, 0.5)];
+    let q = [
+        Quat::from_rotation_z(std::f32::consts::FRAC_PI_2),
+        Quat::from_axis_angle(vec3(1.0, 2.0, 3.0).normalize(), 0.7),
+    ];
+    let r = [
+        Quat::from_rotation_x(0.3),
+        Quat::from_xyzw(0.5, 0.5, 0.5, 0.5),
+    ];
     let v = [vec3(1.0, 0.0, 0.0), vec3(0.3, -0.4, 2.0)];
     let (qv, qq) = (zeros::<Vec3, 1>(2, dev), zeros::<Quat, 2>((2, 5), dev));
-    wp::launch(k_quat_ops, 2, (&arr(&q, dev), &arr(&r, dev), &arr(&v, dev), &qv, &qq), dev).unwrap();
+    wp::launch(
+        k_quat_ops,
+        2,
+        (&arr(&q, dev), &arr(&r, dev), &arr(&v, dev), &qv, &qq),
+        dev,
+    )
+    .unwrap();
     let (qv, qq) = (host(&qv), host(&qq));
     let rel = fma_rel(dev);
     for i in 0..2 {
         // Rotation and the Hamilton product sum products: FMA on CUDA.
-        assert_close_slice(&qv[i].to_array(), &(q[i] * v[i]).to_array(), rel, "Quat * Vec3");
-        assert_close_slice(&qq[i * 5].to_array(), &(q[i] * r[i]).to_array(), rel, "Quat * Quat");
+        assert_close_slice(
+            &qv[i].to_array(),
+            &(q[i] * v[i]).to_array(),
+            rel,
+            "Quat * Vec3",
+        );
+        assert_close_slice(
+            &qq[i * 5].to_array(),
+            &(q[i] * r[i]).to_array(),
+            rel,
+            "Quat * Quat",
+        );
         assert_eq!(qq[i * 5 + 1], q[i] + r[i]);
         assert_eq!(qq[i * 5 + 2], q[i] - r[i]);
         assert_eq!(qq[i * 5 + 3], -q[i]);
@@ -589,7 +837,15 @@ fn quat_operators(dev: &wp::Device) {
 // ------------------------------------------------------------------------------ comparisons
 
 #[wp::kernel]
-fn k_cmp(a: Array<f32>, b: Array<f32>, ia: Array<i32>, ib: Array<i32>, va: Array<Vec3>, vb: Array<Vec3>, out: Array<u8, 2>) {
+fn k_cmp(
+    a: Array<f32>,
+    b: Array<f32>,
+    ia: Array<i32>,
+    ib: Array<i32>,
+    va: Array<Vec3>,
+    vb: Array<Vec3>,
+    out: Array<u8, 2>,
+) {
     let i = tid();
     let x = a[i];
     let y = b[i];
@@ -618,14 +874,53 @@ fn comparisons(dev: &wp::Device) {
     let b = [2.0f32, 2.0, 0.0, 1.0, f32::MAX, f32::NAN];
     let ia = [1, 2, -3, i32::MIN, 7, 0];
     let ib = [2, 2, -4, i32::MAX, -7, 0];
-    let va = [Vec3::ONE, Vec3::X, vec3(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::NAN, vec3(-0.0, 0.0, 0.0)];
-    let vb = [Vec3::ONE, Vec3::Y, vec3(1.0, 2.0, 3.5), Vec3::ZERO, Vec3::NAN, Vec3::ZERO];
+    let va = [
+        Vec3::ONE,
+        Vec3::X,
+        vec3(1.0, 2.0, 3.0),
+        Vec3::ZERO,
+        Vec3::NAN,
+        vec3(-0.0, 0.0, 0.0),
+    ];
+    let vb = [
+        Vec3::ONE,
+        Vec3::Y,
+        vec3(1.0, 2.0, 3.5),
+        Vec3::ZERO,
+        Vec3::NAN,
+        Vec3::ZERO,
+    ];
     let out = zeros::<u8, 2>((6, 16), dev);
-    let args = (&arr(&a, dev), &arr(&b, dev), &arr(&ia, dev), &arr(&ib, dev), &arr(&va, dev), &arr(&vb, dev), &out);
+    let args = (
+        &arr(&a, dev),
+        &arr(&b, dev),
+        &arr(&ia, dev),
+        &arr(&ib, dev),
+        &arr(&va, dev),
+        &arr(&vb, dev),
+        &out,
+    );
     wp::launch(k_cmp, 6, args, dev).unwrap();
     for (i, row) in host(&out).chunks(16).enumerate() {
         let (x, y, m, n) = (a[i], b[i], ia[i], ib[i]);
-        let want = [x < y, x <= y, x > y, x >= y, x == y, x != y, m < n, m <= n, m > n, m >= n, m == n, m != n, va[i] == vb[i], va[i] != vb[i], x < 0.5, 0 > m];
+        let want = [
+            x < y,
+            x <= y,
+            x > y,
+            x >= y,
+            x == y,
+            x != y,
+            m < n,
+            m <= n,
+            m > n,
+            m >= n,
+            m == n,
+            m != n,
+            va[i] == vb[i],
+            va[i] != vb[i],
+            x < 0.5,
+            0 > m,
+        ];
         let want: Vec<u8> = want.iter().map(|&b| u8::from(b)).collect();
         assert_eq!(row, want, "row {i}: ({x}, {y}), ({m}, {n})");
     }
@@ -675,18 +970,42 @@ fn short_circuit_skips_side_effects(dev: &wp::Device) {
     let a: Vec<i32> = (0..20).map(|k| if k % 3 == 0 { k } else { -k }).collect();
     let (and_count, or_count) = (zeros::<i32, 1>(1, dev), zeros::<i32, 1>(1, dev));
     let out = zeros::<u8, 2>((20, 2), dev);
-    wp::launch(k_short_effects, 20, (&arr(&a, dev), &and_count, &or_count, &out), dev).unwrap();
+    wp::launch(
+        k_short_effects,
+        20,
+        (&arr(&a, dev), &and_count, &or_count, &out),
+        dev,
+    )
+    .unwrap();
     let positive = a.iter().filter(|&&x| x > 0).count() as i32;
-    assert_eq!(host(&and_count), vec![positive], "&& evaluates its right side only when the left is true");
-    assert_eq!(host(&or_count), vec![20 - positive], "|| evaluates its right side only when the left is false");
-    let want: Vec<u8> = a.iter().flat_map(|&x| [u8::from(x > 0), u8::from(x > 0)]).collect();
+    assert_eq!(
+        host(&and_count),
+        vec![positive],
+        "&& evaluates its right side only when the left is true"
+    );
+    assert_eq!(
+        host(&or_count),
+        vec![20 - positive],
+        "|| evaluates its right side only when the left is false"
+    );
+    let want: Vec<u8> = a
+        .iter()
+        .flat_map(|&x| [u8::from(x > 0), u8::from(x > 0)])
+        .collect();
     assert_eq!(host(&out), want);
 }
 
 // ------------------------------------------------------------------------------ unary, casts
 
 #[wp::kernel]
-fn k_unary(xi: Array<i32>, xf: Array<f32>, xb: Array<u8>, oi: Array<i32, 2>, of: Array<f32>, ob: Array<u8, 2>) {
+fn k_unary(
+    xi: Array<i32>,
+    xf: Array<f32>,
+    xb: Array<u8>,
+    oi: Array<i32, 2>,
+    of: Array<f32>,
+    ob: Array<u8, 2>,
+) {
     let i = tid();
     oi[(i, 0)] = -xi[i];
     oi[(i, 1)] = !xi[i];
@@ -702,20 +1021,49 @@ fn unary_operators(dev: &wp::Device) {
     let xi = [0, 5, -7, i32::MIN, i32::MAX];
     let xf = [0.0f32, 1.5, -2.0, f32::INFINITY, -0.0];
     let xb = [0u8, 1, 2, 255, 0];
-    let (oi, of, ob) = (zeros::<i32, 2>((5, 3), dev), zeros::<f32, 1>(5, dev), zeros::<u8, 2>((5, 3), dev));
-    wp::launch(k_unary, 5, (&arr(&xi, dev), &arr(&xf, dev), &arr(&xb, dev), &oi, &of, &ob), dev).unwrap();
+    let (oi, of, ob) = (
+        zeros::<i32, 2>((5, 3), dev),
+        zeros::<f32, 1>(5, dev),
+        zeros::<u8, 2>((5, 3), dev),
+    );
+    wp::launch(
+        k_unary,
+        5,
+        (
+            &arr(&xi, dev),
+            &arr(&xf, dev),
+            &arr(&xb, dev),
+            &oi,
+            &of,
+            &ob,
+        ),
+        dev,
+    )
+    .unwrap();
     let want_i: Vec<i32> = xi.iter().flat_map(|&x| [x.wrapping_neg(), !x, x]).collect();
     assert_eq!(host(&oi), want_i);
     let of = host(&of);
     for (g, x) in of.iter().zip(xf) {
         assert_eq!(g.to_bits(), (-x).to_bits(), "-{x} (sign of zero included)");
     }
-    let want_b: Vec<u8> = xb.iter().flat_map(|&x| [u8::from(x == 0), !x, u8::from(x != 0)]).collect();
+    let want_b: Vec<u8> = xb
+        .iter()
+        .flat_map(|&x| [u8::from(x == 0), !x, u8::from(x != 0)])
+        .collect();
     assert_eq!(host(&ob), want_b);
 }
 
 #[wp::kernel]
-fn k_float_casts(x: Array<f32>, y: Array<f64>, oi32: Array<i32>, ou8: Array<u8>, oi64: Array<i64>, ou64: Array<u64>, of64: Array<f64>, of32: Array<f32>) {
+fn k_float_casts(
+    x: Array<f32>,
+    y: Array<f64>,
+    oi32: Array<i32>,
+    ou8: Array<u8>,
+    oi64: Array<i64>,
+    ou64: Array<u64>,
+    of64: Array<f64>,
+    of32: Array<f32>,
+) {
     let i = tid();
     oi32[i] = x[i] as i32;
     ou8[i] = x[i] as u8;
@@ -726,12 +1074,48 @@ fn k_float_casts(x: Array<f32>, y: Array<f64>, oi32: Array<i32>, ou8: Array<u8>,
 }
 
 fn float_casts(dev: &wp::Device) {
-    let x = [2.7f32, -2.7, 1e10, -1e10, f32::NAN, 255.9, 300.0, -0.5, f32::INFINITY, f32::NEG_INFINITY];
-    let y = [2.7f64, -2.7, 1e20, -1e20, f64::NAN, 0.1, 9_007_199_254_740_993.0, -0.5, f64::INFINITY, 1e300];
+    let x = [
+        2.7f32,
+        -2.7,
+        1e10,
+        -1e10,
+        f32::NAN,
+        255.9,
+        300.0,
+        -0.5,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    let y = [
+        2.7f64,
+        -2.7,
+        1e20,
+        -1e20,
+        f64::NAN,
+        0.1,
+        9_007_199_254_740_993.0,
+        -0.5,
+        f64::INFINITY,
+        1e300,
+    ];
     let n = x.len();
-    let (oi32, ou8, oi64, ou64) = (zeros::<i32, 1>(n, dev), zeros::<u8, 1>(n, dev), zeros::<i64, 1>(n, dev), zeros::<u64, 1>(n, dev));
+    let (oi32, ou8, oi64, ou64) = (
+        zeros::<i32, 1>(n, dev),
+        zeros::<u8, 1>(n, dev),
+        zeros::<i64, 1>(n, dev),
+        zeros::<u64, 1>(n, dev),
+    );
     let (of64, of32) = (zeros::<f64, 1>(n, dev), zeros::<f32, 1>(n, dev));
-    let args = (&arr(&x, dev), &arr(&y, dev), &oi32, &ou8, &oi64, &ou64, &of64, &of32);
+    let args = (
+        &arr(&x, dev),
+        &arr(&y, dev),
+        &oi32,
+        &ou8,
+        &oi64,
+        &ou64,
+        &of64,
+        &of32,
+    );
     wp::launch(k_float_casts, n, args, dev).unwrap();
     // Float to int saturates and maps NaN to 0, as Rust's `as` does.
     assert_eq!(host(&oi32), x.iter().map(|&v| v as i32).collect::<Vec<_>>());
@@ -749,7 +1133,17 @@ fn float_casts(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_int_casts(a: Array<i64>, oi32: Array<i32>, ou32: Array<u32>, oi8: Array<i8>, ou8: Array<u8>, of32: Array<f32>, of64: Array<f64>, ou64: Array<u64>, os: Array<i64, 2>) {
+fn k_int_casts(
+    a: Array<i64>,
+    oi32: Array<i32>,
+    ou32: Array<u32>,
+    oi8: Array<i8>,
+    ou8: Array<u8>,
+    of32: Array<f32>,
+    of64: Array<f64>,
+    ou64: Array<u64>,
+    os: Array<i64, 2>,
+) {
     let i = tid();
     let x = a[i];
     oi32[i] = x as i32;
@@ -770,23 +1164,81 @@ fn k_int_casts(a: Array<i64>, oi32: Array<i32>, ou32: Array<u32>, oi8: Array<i8>
 }
 
 fn int_casts(dev: &wp::Device) {
-    let a = [0i64, 1, -1, 255, 256, -129, i64::from(i32::MAX) + 1, i64::MIN, i64::MAX, 16_777_217, (1 << 53) + 1];
+    let a = [
+        0i64,
+        1,
+        -1,
+        255,
+        256,
+        -129,
+        i64::from(i32::MAX) + 1,
+        i64::MIN,
+        i64::MAX,
+        16_777_217,
+        (1 << 53) + 1,
+    ];
     let n = a.len();
-    let (oi32, ou32, oi8, ou8) = (zeros::<i32, 1>(n, dev), zeros::<u32, 1>(n, dev), zeros::<i8, 1>(n, dev), zeros::<u8, 1>(n, dev));
-    let (of32, of64, ou64, os) = (zeros::<f32, 1>(n, dev), zeros::<f64, 1>(n, dev), zeros::<u64, 1>(n, dev), zeros::<i64, 2>((n, 5), dev));
-    wp::launch(k_int_casts, n, (&arr(&a, dev), &oi32, &ou32, &oi8, &ou8, &of32, &of64, &ou64, &os), dev).unwrap();
-    assert_eq!(host(&oi32), a.iter().map(|&v| v as i32).collect::<Vec<_>>(), "i64 as i32 truncates");
+    let (oi32, ou32, oi8, ou8) = (
+        zeros::<i32, 1>(n, dev),
+        zeros::<u32, 1>(n, dev),
+        zeros::<i8, 1>(n, dev),
+        zeros::<u8, 1>(n, dev),
+    );
+    let (of32, of64, ou64, os) = (
+        zeros::<f32, 1>(n, dev),
+        zeros::<f64, 1>(n, dev),
+        zeros::<u64, 1>(n, dev),
+        zeros::<i64, 2>((n, 5), dev),
+    );
+    wp::launch(
+        k_int_casts,
+        n,
+        (
+            &arr(&a, dev),
+            &oi32,
+            &ou32,
+            &oi8,
+            &ou8,
+            &of32,
+            &of64,
+            &ou64,
+            &os,
+        ),
+        dev,
+    )
+    .unwrap();
+    assert_eq!(
+        host(&oi32),
+        a.iter().map(|&v| v as i32).collect::<Vec<_>>(),
+        "i64 as i32 truncates"
+    );
     assert_eq!(host(&ou32), a.iter().map(|&v| v as u32).collect::<Vec<_>>());
     assert_eq!(host(&oi8), a.iter().map(|&v| v as i8).collect::<Vec<_>>());
     assert_eq!(host(&ou8), a.iter().map(|&v| v as u8).collect::<Vec<_>>());
-    assert_eq!(host(&of32), a.iter().map(|&v| v as f32).collect::<Vec<_>>(), "int to float rounds to nearest");
+    assert_eq!(
+        host(&of32),
+        a.iter().map(|&v| v as f32).collect::<Vec<_>>(),
+        "int to float rounds to nearest"
+    );
     assert_eq!(host(&of64), a.iter().map(|&v| v as f64).collect::<Vec<_>>());
     assert_eq!(host(&ou64), a.iter().map(|&v| v as u64).collect::<Vec<_>>());
     let want: Vec<i64> = a
         .iter()
-        .flat_map(|&x| [i64::from(x as i8), i64::from(x as u32 as i32), i64::from(x as i32 as u32), i64::from(x < 0), i64::from(i32::from(x > 0))])
+        .flat_map(|&x| {
+            [
+                i64::from(x as i8),
+                i64::from(x as u32 as i32),
+                i64::from(x as i32 as u32),
+                i64::from(x < 0),
+                i64::from(i32::from(x > 0)),
+            ]
+        })
         .collect();
-    assert_eq!(host(&os), want, "sign extension, reinterpretation, bool as int");
+    assert_eq!(
+        host(&os),
+        want,
+        "sign extension, reinterpretation, bool as int"
+    );
 }
 
 // ------------------------------------------------------------------------------ literals
@@ -819,7 +1271,11 @@ fn k_literals(x: f64, n: i32, out: Array<f64>, outi: Array<i64>, outf: Array<f32
 }
 
 fn literal_rule(dev: &wp::Device) {
-    let (out, outi, outf) = (zeros::<f64, 1>(9, dev), zeros::<i64, 1>(4, dev), zeros::<f32, 1>(2, dev));
+    let (out, outi, outf) = (
+        zeros::<f64, 1>(9, dev),
+        zeros::<i64, 1>(4, dev),
+        zeros::<f32, 1>(2, dev),
+    );
     let x = 0.1f64;
     wp::launch(k_literals, 1, (x, 7, &out, &outi, &outf), dev).unwrap();
     let out = host(&out);
@@ -829,11 +1285,25 @@ fn literal_rule(dev: &wp::Device) {
     assert_eq!(out[2], f64::from(0.1f32), "`let b = 0.1;` is f32");
     assert_eq!(out[3], 2.0 * x, "`2 * x` is a float product");
     assert_eq!(out[4], 0.1f64, "an annotated let types its literal");
-    assert_eq!(out[5], 0.1f64, "if/else branches take the type of the place");
-    assert_eq!(out[6], f64::from(1.0f32 / 3.0), "1.0 / 3.0 with no context is f32");
+    assert_eq!(
+        out[5], 0.1f64,
+        "if/else branches take the type of the place"
+    );
+    assert_eq!(
+        out[6],
+        f64::from(1.0f32 / 3.0),
+        "1.0 / 3.0 with no context is f32"
+    );
     assert_eq!(out[7], 1.0f64 / 3.0, "annotated f64");
-    assert_eq!(out[8], 0.1f64, "a builtin's literal argument takes the other argument's type");
-    assert_eq!(host(&outi), vec![i64::from(i32::MIN), 21, 0, 3_000_000_001], "integer literals are i32 without context");
+    assert_eq!(
+        out[8], 0.1f64,
+        "a builtin's literal argument takes the other argument's type"
+    );
+    assert_eq!(
+        host(&outi),
+        vec![i64::from(i32::MIN), 21, 0, 3_000_000_001],
+        "integer literals are i32 without context"
+    );
     assert_eq!(host(&outf), vec![0.1f32, -1.0]);
 }
 
@@ -865,21 +1335,59 @@ fn k_consts(out: Array<f32>, outd: Array<f64>, outi: Array<i64>, outu: Array<u64
 }
 
 fn constants(dev: &wp::Device) {
-    let (out, outd, outi, outu) = (zeros::<f32, 1>(10, dev), zeros::<f64, 1>(6, dev), zeros::<i64, 1>(4, dev), zeros::<u64, 1>(2, dev));
+    let (out, outd, outi, outu) = (
+        zeros::<f32, 1>(10, dev),
+        zeros::<f64, 1>(6, dev),
+        zeros::<i64, 1>(4, dev),
+        zeros::<u64, 1>(2, dev),
+    );
     wp::launch(k_consts, 1, (&out, &outd, &outi, &outu), dev).unwrap();
     use std::f32::consts as c32;
     use std::f64::consts as c64;
     assert_eq!(
         host(&out),
-        vec![f32::MAX, c32::PI, c32::PI, f32::EPSILON, f32::MIN_POSITIVE, f32::INFINITY, f32::MIN, c32::TAU, c32::FRAC_PI_2, 1.0]
+        vec![
+            f32::MAX,
+            c32::PI,
+            c32::PI,
+            f32::EPSILON,
+            f32::MIN_POSITIVE,
+            f32::INFINITY,
+            f32::MIN,
+            c32::TAU,
+            c32::FRAC_PI_2,
+            1.0
+        ]
     );
-    assert_eq!(host(&outd), vec![c64::PI, c64::E, c64::SQRT_2, f64::MAX, f64::NEG_INFINITY, c64::LN_2]);
-    assert_eq!(host(&outi), vec![i64::from(i32::MIN), i64::MAX, 255, -32768]);
+    assert_eq!(
+        host(&outd),
+        vec![
+            c64::PI,
+            c64::E,
+            c64::SQRT_2,
+            f64::MAX,
+            f64::NEG_INFINITY,
+            c64::LN_2
+        ]
+    );
+    assert_eq!(
+        host(&outi),
+        vec![i64::from(i32::MIN), i64::MAX, 255, -32768]
+    );
     assert_eq!(host(&outu), vec![u64::MAX, u64::from(u32::MAX)]);
 }
 
 #[wp::kernel]
-fn k_ctors(s: f32, ov: Array<Vec3>, om: Array<Mat3>, oq: Array<Quat>, o2: Array<DVec2>, oi: Array<IVec3>, ou: Array<UVec2>, o4: Array<Vec4>) {
+fn k_ctors(
+    s: f32,
+    ov: Array<Vec3>,
+    om: Array<Mat3>,
+    oq: Array<Quat>,
+    o2: Array<DVec2>,
+    oi: Array<IVec3>,
+    ou: Array<UVec2>,
+    o4: Array<Vec4>,
+) {
     ov[0] = Vec3::new(1.0, 2.0, s);
     ov[1] = vec3(s, 0.5, -1);
     ov[2] = Vec3::splat(s);
@@ -906,18 +1414,51 @@ fn k_ctors(s: f32, ov: Array<Vec3>, om: Array<Mat3>, oq: Array<Quat>, o2: Array<
 }
 
 fn glam_constructors(dev: &wp::Device) {
-    let (ov, om, oq) = (zeros::<Vec3, 1>(8, dev), zeros::<Mat3, 1>(4, dev), zeros::<Quat, 1>(2, dev));
-    let (o2, oi, ou, o4) = (zeros::<DVec2, 1>(2, dev), zeros::<IVec3, 1>(2, dev), zeros::<UVec2, 1>(2, dev), zeros::<Vec4, 1>(2, dev));
+    let (ov, om, oq) = (
+        zeros::<Vec3, 1>(8, dev),
+        zeros::<Mat3, 1>(4, dev),
+        zeros::<Quat, 1>(2, dev),
+    );
+    let (o2, oi, ou, o4) = (
+        zeros::<DVec2, 1>(2, dev),
+        zeros::<IVec3, 1>(2, dev),
+        zeros::<UVec2, 1>(2, dev),
+        zeros::<Vec4, 1>(2, dev),
+    );
     let s = 0.7f32;
     wp::launch(k_ctors, 1, (s, &ov, &om, &oq, &o2, &oi, &ou, &o4), dev).unwrap();
     let m0 = Mat3::from_cols(Vec3::X, vec3(0.0, 2.0, 0.0), Vec3::splat(s));
     assert_eq!(
         host(&ov),
-        vec![vec3(1.0, 2.0, s), vec3(s, 0.5, -1.0), Vec3::splat(s), Vec3::ZERO, vec3(2.0, 1.0, 1.0), m0.y_axis, vec3(0.0, 0.0, 3.0), Vec3::NEG_Z]
+        vec![
+            vec3(1.0, 2.0, s),
+            vec3(s, 0.5, -1.0),
+            Vec3::splat(s),
+            Vec3::ZERO,
+            vec3(2.0, 1.0, 1.0),
+            m0.y_axis,
+            vec3(0.0, 0.0, 3.0),
+            Vec3::NEG_Z
+        ]
     );
-    assert_eq!(host(&om), vec![m0, Mat3::IDENTITY, Mat3::from_diagonal(vec3(1.0, 2.0, 3.0)), Mat3::ZERO]);
-    assert_eq!(host(&oq), vec![Quat::from_xyzw(0.0, 0.0, s, 1.0), Quat::IDENTITY]);
-    assert_eq!(host(&o2), vec![dvec2(0.1, 0.2), dvec2(1.0, 2.0)], "f64 components take f64 literals");
+    assert_eq!(
+        host(&om),
+        vec![
+            m0,
+            Mat3::IDENTITY,
+            Mat3::from_diagonal(vec3(1.0, 2.0, 3.0)),
+            Mat3::ZERO
+        ]
+    );
+    assert_eq!(
+        host(&oq),
+        vec![Quat::from_xyzw(0.0, 0.0, s, 1.0), Quat::IDENTITY]
+    );
+    assert_eq!(
+        host(&o2),
+        vec![dvec2(0.1, 0.2), dvec2(1.0, 2.0)],
+        "f64 components take f64 literals"
+    );
     assert_eq!(host(&oi), vec![ivec3(1, -2, 3), IVec3::splat(7)]);
     assert_eq!(host(&ou), vec![uvec2(1, 2), uvec2(3, 4)]);
     assert_eq!(host(&o4), vec![vec4(1.0, 2.0, 3.0, 4.0), Vec4::W]);

@@ -21,14 +21,18 @@ backend_tests!(
 
 #[wp::kernel]
 fn k_tid_1d(out: Array<u64>) {
-    let i = tid();
+    // `wp::tid()` is `tid()`.
+    let i = wp::tid();
     out[i] = i as u64 * 3 + 1;
 }
 
 fn tid_1d(dev: &wp::Device) {
     let out = zeros::<u64, 1>(37, dev);
     wp::launch(k_tid_1d, 37, (&out,), dev).unwrap();
-    assert_eq!(host(&out), (0..37u64).map(|i| i * 3 + 1).collect::<Vec<_>>());
+    assert_eq!(
+        host(&out),
+        (0..37u64).map(|i| i * 3 + 1).collect::<Vec<_>>()
+    );
 }
 
 /// Checks the launch order recorded by an atomic counter: every thread ran once and, on the
@@ -37,15 +41,23 @@ fn tid_1d(dev: &wp::Device) {
 fn check_order(dev: &wp::Device, order: Vec<i32>) {
     let mut sorted = order.clone();
     sorted.sort_unstable();
-    assert_eq!(sorted, (0..order.len() as i32).collect::<Vec<_>>(), "every thread runs exactly once");
+    assert_eq!(
+        sorted,
+        (0..order.len() as i32).collect::<Vec<_>>(),
+        "every thread runs exactly once"
+    );
     if dev.is_cpu() {
-        assert_eq!(order, (0..order.len() as i32).collect::<Vec<_>>(), "row-major: the last index varies fastest");
+        assert_eq!(
+            order,
+            (0..order.len() as i32).collect::<Vec<_>>(),
+            "row-major: the last index varies fastest"
+        );
     }
 }
 
 #[wp::kernel]
 fn k_tid_2d(out: Array<i32, 2>, order: Array<i32, 2>, counter: Array<i32>) {
-    let (i, j) = tid();
+    let (i, j) = wp::tid();
     out[(i, j)] = (i * 1000 + j) as i32;
     order[(i, j)] = atomic_add(counter, 0, 1);
 }
@@ -56,7 +68,9 @@ fn tid_2d_row_major(dev: &wp::Device) {
     let order = zeros::<i32, 2>((rows, cols), dev);
     let counter = zeros::<i32, 1>(1, dev);
     wp::launch(k_tid_2d, (rows, cols), (&out, &order, &counter), dev).unwrap();
-    let want: Vec<i32> = (0..rows).flat_map(|i| (0..cols).map(move |j| (i * 1000 + j) as i32)).collect();
+    let want: Vec<i32> = (0..rows)
+        .flat_map(|i| (0..cols).map(move |j| (i * 1000 + j) as i32))
+        .collect();
     assert_eq!(host(&out), want, "i runs over dim 0, j over dim 1");
     check_order(dev, host(&order));
 }
@@ -115,7 +129,13 @@ fn tid_4d_row_major(dev: &wp::Device) {
 
 /// Reads arrays of 1 to 4 dimensions over a 1-D launch, summing along the last axes.
 #[wp::kernel]
-fn k_read_nd(a1: Array<f64>, a2: Array<f64, 2>, a3: Array<f64, 3>, a4: Array<f64, 4>, out: Array<f64, 2>) {
+fn k_read_nd(
+    a1: Array<f64>,
+    a2: Array<f64, 2>,
+    a3: Array<f64, 3>,
+    a4: Array<f64, 4>,
+    out: Array<f64, 2>,
+) {
     let i = tid();
     out[(i, 0)] = a1[i];
     let mut s2: f64 = 0.0;
@@ -201,13 +221,27 @@ fn index_types(dev: &wp::Device) {
     let a = [10, 20, 30, 40];
     let m: Vec<i32> = (0..8).map(|k| k * k).collect();
     let out = zeros::<i32, 2>((4, 5), dev);
-    wp::launch(k_index_types, 4, (&arr(&a, dev), &wp::Array::from_slice_shape(&m, (4, 2), dev).unwrap(), &out), dev).unwrap();
-    let want: Vec<i32> = (0..4).flat_map(|i| [a[i], a[3 - i], 2 * a[i], m[i * 2 + 1], m[i * 2]]).collect();
+    wp::launch(
+        k_index_types,
+        4,
+        (
+            &arr(&a, dev),
+            &wp::Array::from_slice_shape(&m, (4, 2), dev).unwrap(),
+            &out,
+        ),
+        dev,
+    )
+    .unwrap();
+    let want: Vec<i32> = (0..4)
+        .flat_map(|i| [a[i], a[3 - i], 2 * a[i], m[i * 2 + 1], m[i * 2]])
+        .collect();
     assert_eq!(host(&out), want);
 }
 
 #[wp::kernel]
-fn k_shape(a: Array<f32, 3>, b: Array<i32>, c: Array<Vec3, 2>, out: Array<u64>) {
+fn k_shape(a: Array<f32, 3>, b: Array<i32>, c: Array<Vec3, 2>, e: Array<f64, 2>, out: Array<u64>) {
+    out[8] = e.len() as u64;
+    out[9] = e.shape()[1] as u64;
     out[0] = a.len() as u64;
     out[1] = a.shape()[0] as u64;
     out[2] = a.shape()[1] as u64;
@@ -222,9 +256,14 @@ fn len_and_shape(dev: &wp::Device) {
     let a = zeros::<f32, 3>((2, 3, 5), dev);
     let b = zeros::<i32, 1>(7, dev);
     let c = zeros::<Vec3, 2>((4, 6), dev);
-    let out = zeros::<u64, 1>(8, dev);
-    wp::launch(k_shape, 1, (&a, &b, &c, &out), dev).unwrap();
-    assert_eq!(host(&out), vec![30, 2, 3, 5, 7, 7, 6, 24]);
+    let e = zeros::<f64, 2>((0, 3), dev);
+    let out = zeros::<u64, 1>(10, dev);
+    wp::launch(k_shape, 1, (&a, &b, &c, &e, &out), dev).unwrap();
+    assert_eq!(
+        host(&out),
+        vec![30, 2, 3, 5, 7, 7, 6, 24, 0, 3],
+        "an empty array has length 0"
+    );
 }
 
 /// Fields of array elements: read, assign, compound-assign.
@@ -246,9 +285,22 @@ fn vector_element_fields(dev: &wp::Device) {
     let out = zeros::<f32, 1>(2, dev);
     wp::launch(k_vec_fields, 2, (&v, &w, &out), dev).unwrap();
     // y * z is exact for these values, so a fused multiply-add cannot change the sum.
-    assert_eq!(host(&out), v0.iter().map(|p| p.x + p.y * p.z).collect::<Vec<_>>());
-    assert_eq!(host(&v), v0.iter().map(|p| vec3(5.0, p.y + 1.5, p.z * -2.0)).collect::<Vec<_>>());
-    assert_eq!(host(&w), w0.iter().map(|p| dvec4(p.y, p.y, p.z, p.w - 0.1)).collect::<Vec<_>>());
+    assert_eq!(
+        host(&out),
+        v0.iter().map(|p| p.x + p.y * p.z).collect::<Vec<_>>()
+    );
+    assert_eq!(
+        host(&v),
+        v0.iter()
+            .map(|p| vec3(5.0, p.y + 1.5, p.z * -2.0))
+            .collect::<Vec<_>>()
+    );
+    assert_eq!(
+        host(&w),
+        w0.iter()
+            .map(|p| dvec4(p.y, p.y, p.z, p.w - 0.1))
+            .collect::<Vec<_>>()
+    );
 }
 
 #[wp::kernel]
@@ -261,7 +313,10 @@ fn k_mat_cols(m: Array<Mat3>, out: Array<Vec3>) {
 }
 
 fn matrix_element_columns(dev: &wp::Device) {
-    let m0 = [Mat3::from_cols_array(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]), Mat3::IDENTITY];
+    let m0 = [
+        Mat3::from_cols_array(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]),
+        Mat3::IDENTITY,
+    ];
     let m = arr(&m0, dev);
     let out = zeros::<Vec3, 1>(2, dev);
     wp::launch(k_mat_cols, 2, (&m, &out), dev).unwrap();
@@ -337,7 +392,11 @@ fn views_and_strides(dev: &wp::Device) {
     let a = arr(&base, dev);
     let mid = a.view(3..7).unwrap();
     wp::launch(k_scale, 4, (&mid, 10.0), dev).unwrap();
-    let want: Vec<f32> = base.iter().enumerate().map(|(k, &x)| if (3..7).contains(&k) { x * 10.0 } else { x }).collect();
+    let want: Vec<f32> = base
+        .iter()
+        .enumerate()
+        .map(|(k, &x)| if (3..7).contains(&k) { x * 10.0 } else { x })
+        .collect();
     assert_eq!(host(&a), want);
 
     let m: Vec<f32> = (0..6).map(|k| k as f32).collect();

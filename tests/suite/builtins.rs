@@ -1,7 +1,10 @@
 //! Builtins, in function syntax and in method syntax: scalar math on floats and integers,
 //! vector math, and the atomics (with many threads on one element, and on a 2-D array).
 
-use crate::{arr, assert_close_f32, assert_close_f64, assert_close_slice, fma_rel, fma_rel64, host, math_rel, zeros};
+use crate::{
+    arr, assert_close_f32, assert_close_f64, assert_close_slice, fma_rel, fma_rel64, host,
+    math_rel, zeros,
+};
 use warp_lang as wp;
 use wp::prelude::*;
 
@@ -26,6 +29,13 @@ fn sign_f32(x: f32) -> f32 {
     }
 }
 
+/// Warp's `clamp`: `min(max(x, lo), hi)`, so a NaN `x` gives `lo` (`f32::clamp` would keep the
+/// NaN).
+#[allow(clippy::manual_clamp)]
+fn clamp_f32(x: f32, lo: f32, hi: f32) -> f32 {
+    x.max(lo).min(hi)
+}
+
 /// Host reference for the 16 scalar builtins of `k_scalar_fns` and `k_scalar_methods`:
 /// (value, tolerance class) where the class is 0 = exact, 1 = transcendental, 2 = FMA.
 fn scalar_ref(a: f32, b: f32) -> [(f32, u8); 16] {
@@ -34,7 +44,7 @@ fn scalar_ref(a: f32, b: f32) -> [(f32, u8); 16] {
         (a.max(b), 0),
         (a.abs(), 0),
         (sign_f32(a), 0),
-        (a.max(-1.0).min(1.0), 0),
+        (clamp_f32(a, -1.0, 1.0), 0),
         (a.floor(), 0),
         (a.ceil(), 0),
         (b.sqrt(), 0),
@@ -61,7 +71,12 @@ fn check_scalar_rows(dev: &wp::Device, out: &wp::Array<f32, 2>, what: &str) {
                 1 => math_rel(dev),
                 _ => fma_rel(dev),
             };
-            assert_close_f32(row[k], want, rel, &format!("{what}: builtin #{k} of ({a}, {b})"));
+            assert_close_f32(
+                row[k],
+                want,
+                rel,
+                &format!("{what}: builtin #{k} of ({a}, {b})"),
+            );
         }
     }
 }
@@ -92,7 +107,13 @@ fn k_scalar_fns(x: Array<f32>, y: Array<f32>, out: Array<f32, 2>) {
 fn float_builtins_function_syntax(dev: &wp::Device) {
     let n = SCALAR_X.len();
     let out = zeros::<f32, 2>((n, 16), dev);
-    wp::launch(k_scalar_fns, n, (&arr(&SCALAR_X, dev), &arr(&SCALAR_Y, dev), &out), dev).unwrap();
+    wp::launch(
+        k_scalar_fns,
+        n,
+        (&arr(&SCALAR_X, dev), &arr(&SCALAR_Y, dev), &out),
+        dev,
+    )
+    .unwrap();
     check_scalar_rows(dev, &out, "function syntax");
 }
 
@@ -126,11 +147,22 @@ fn k_scalar_methods(x: Array<f32>, y: Array<f32>, out: Array<f32, 2>, typed: Arr
 fn float_builtins_method_syntax(dev: &wp::Device) {
     let n = SCALAR_X.len();
     let (out, typed) = (zeros::<f32, 2>((n, 16), dev), zeros::<f32, 2>((n, 3), dev));
-    wp::launch(k_scalar_methods, n, (&arr(&SCALAR_X, dev), &arr(&SCALAR_Y, dev), &out, &typed), dev).unwrap();
+    wp::launch(
+        k_scalar_methods,
+        n,
+        (&arr(&SCALAR_X, dev), &arr(&SCALAR_Y, dev), &out, &typed),
+        dev,
+    )
+    .unwrap();
     check_scalar_rows(dev, &out, "method syntax");
     for (i, row) in host(&typed).chunks(3).enumerate() {
         let (a, b) = (SCALAR_X[i], SCALAR_Y[i]);
-        assert_close_slice(row, &[b.sqrt(), a.max(b), a.abs()], 0.0, "f32::sqrt / f32::max / f32::abs");
+        assert_close_slice(
+            row,
+            &[b.sqrt(), a.max(b), a.abs()],
+            0.0,
+            "f32::sqrt / f32::max / f32::abs",
+        );
     }
 }
 
@@ -164,20 +196,55 @@ fn f64_builtins(dev: &wp::Device) {
     wp::launch(k_f64_fns, 5, (&arr(&x, dev), &arr(&y, dev), &out), dev).unwrap();
     for (i, row) in host(&out).chunks(16).enumerate() {
         let (a, b) = (x[i], y[i]);
-        let exact = [a.min(b), a.max(0.5), a.abs(), if a < 0.0 { -1.0 } else { 1.0 }, a.clamp(-1.0, 1.0), a.floor(), a.ceil(), b.sqrt()];
+        let exact = [
+            a.min(b),
+            a.max(0.5),
+            a.abs(),
+            if a < 0.0 { -1.0 } else { 1.0 },
+            a.clamp(-1.0, 1.0),
+            a.floor(),
+            a.ceil(),
+            b.sqrt(),
+        ];
         assert_eq!(&row[..8], exact, "exact f64 builtins on ({a}, {b})");
-        let math = [a.exp(), b.ln(), a.sin(), a.cos(), a.tan(), a.atan2(b), b.powf(a)];
+        let math = [
+            a.exp(),
+            b.ln(),
+            a.sin(),
+            a.cos(),
+            a.tan(),
+            a.atan2(b),
+            b.powf(a),
+        ];
         // CUDA's double-precision functions are within a couple of ulp: 1e-14 relative there.
         let rel = if dev.is_cpu() { 0.0 } else { 1e-14 };
         for (k, w) in math.into_iter().enumerate() {
-            assert_close_f64(row[8 + k], w, rel, &format!("f64 transcendental #{k} of ({a}, {b})"));
+            assert_close_f64(
+                row[8 + k],
+                w,
+                rel,
+                &format!("f64 transcendental #{k} of ({a}, {b})"),
+            );
         }
-        assert_close_f64(row[15], a * (1.0 - 0.1) + b * 0.1, fma_rel64(dev), "f64 lerp");
+        assert_close_f64(
+            row[15],
+            a * (1.0 - 0.1) + b * 0.1,
+            fma_rel64(dev),
+            "f64 lerp",
+        );
     }
 }
 
 #[wp::kernel]
-fn k_int_fns(x: Array<i32>, y: Array<i32>, u: Array<u32>, l: Array<i64>, out: Array<i32, 2>, uout: Array<u32, 2>, lout: Array<i64, 2>) {
+fn k_int_fns(
+    x: Array<i32>,
+    y: Array<i32>,
+    u: Array<u32>,
+    l: Array<i64>,
+    out: Array<i32, 2>,
+    uout: Array<u32, 2>,
+    lout: Array<i64, 2>,
+) {
     let i = tid();
     let a = x[i];
     let b = y[i];
@@ -205,26 +272,72 @@ fn integer_builtins(dev: &wp::Device) {
     let y = [3, -2, 0, 0, -1, 20];
     let u = [0u32, 7, 100, u32::MAX, 3, 8];
     let l = [-6_000_000_000i64, 0, 1, i64::MIN, 6_000_000_000, -1];
-    let (out, uout, lout) = (zeros::<i32, 2>((6, 9), dev), zeros::<u32, 2>((6, 3), dev), zeros::<i64, 2>((6, 3), dev));
-    wp::launch(k_int_fns, 6, (&arr(&x, dev), &arr(&y, dev), &arr(&u, dev), &arr(&l, dev), &out, &uout, &lout), dev).unwrap();
+    let (out, uout, lout) = (
+        zeros::<i32, 2>((6, 9), dev),
+        zeros::<u32, 2>((6, 3), dev),
+        zeros::<i64, 2>((6, 3), dev),
+    );
+    wp::launch(
+        k_int_fns,
+        6,
+        (
+            &arr(&x, dev),
+            &arr(&y, dev),
+            &arr(&u, dev),
+            &arr(&l, dev),
+            &out,
+            &uout,
+            &lout,
+        ),
+        dev,
+    )
+    .unwrap();
     let sign = |v: i64| if v < 0 { -1 } else { 1 };
     // clamp is min(max(x, lo), hi): defined (never a panic) even when lo > hi.
     let clamp = |v: i32, lo: i32, hi: i32| v.max(lo).min(hi);
     let want: Vec<i32> = (0..6)
         .flat_map(|i| {
             let (a, b) = (x[i], y[i]);
-            [a.min(b), a.max(b), a.wrapping_abs(), sign(a.into()) as i32, clamp(a, -10, 10), a.min(b), a.max(3), a.wrapping_abs(), clamp(a, b, 100)]
+            [
+                a.min(b),
+                a.max(b),
+                a.wrapping_abs(),
+                sign(a.into()) as i32,
+                clamp(a, -10, 10),
+                a.min(b),
+                a.max(3),
+                a.wrapping_abs(),
+                clamp(a, b, 100),
+            ]
         })
         .collect();
-    assert_eq!(host(&out), want, "abs(i32::MIN) wraps to i32::MIN, as on CUDA");
-    let want: Vec<u32> = u.iter().flat_map(|&c| [c.min(7), c.max(7), c.clamp(2, 9)]).collect();
+    assert_eq!(
+        host(&out),
+        want,
+        "abs(i32::MIN) wraps to i32::MIN, as on CUDA"
+    );
+    let want: Vec<u32> = u
+        .iter()
+        .flat_map(|&c| [c.min(7), c.max(7), c.clamp(2, 9)])
+        .collect();
     assert_eq!(host(&uout), want);
-    let want: Vec<i64> = l.iter().flat_map(|&d| [d.wrapping_abs(), sign(d), d.max(5_000_000_000)]).collect();
+    let want: Vec<i64> = l
+        .iter()
+        .flat_map(|&d| [d.wrapping_abs(), sign(d), d.max(5_000_000_000)])
+        .collect();
     assert_eq!(host(&lout), want);
 }
 
 #[wp::kernel]
-fn k_vec_fns(v: Array<Vec3>, w: Array<Vec3>, s: Array<f32, 2>, out: Array<Vec3, 2>, d: Array<DVec4>, dout: Array<DVec4>, ds: Array<f64>) {
+fn k_vec_fns(
+    v: Array<Vec3>,
+    w: Array<Vec3>,
+    s: Array<f32, 2>,
+    out: Array<Vec3, 2>,
+    d: Array<DVec4>,
+    dout: Array<DVec4>,
+    ds: Array<f64>,
+) {
     let i = tid();
     let a = v[i];
     let b = w[i];
@@ -255,28 +368,84 @@ fn dot3(a: Vec3, b: Vec3) -> f32 {
 }
 
 fn vector_builtins(dev: &wp::Device) {
-    let v = [vec3(1.0, 2.0, 3.0), vec3(-0.3, 0.4, 1.2), Vec3::ZERO, vec3(3.0, -4.0, 0.0)];
-    let w = [vec3(4.0, -5.0, 6.0), vec3(0.7, 0.1, -2.0), vec3(1.0, 1.0, 1.0), vec3(0.5, 0.5, -0.5)];
-    let d = [dvec4(1.0, 2.0, 2.0, 4.0), DVec4::ZERO, dvec4(0.1, 0.2, 0.3, 0.4), dvec4(-3.0, 0.0, 0.0, 4.0)];
+    let v = [
+        vec3(1.0, 2.0, 3.0),
+        vec3(-0.3, 0.4, 1.2),
+        Vec3::ZERO,
+        vec3(3.0, -4.0, 0.0),
+    ];
+    let w = [
+        vec3(4.0, -5.0, 6.0),
+        vec3(0.7, 0.1, -2.0),
+        vec3(1.0, 1.0, 1.0),
+        vec3(0.5, 0.5, -0.5),
+    ];
+    let d = [
+        dvec4(1.0, 2.0, 2.0, 4.0),
+        DVec4::ZERO,
+        dvec4(0.1, 0.2, 0.3, 0.4),
+        dvec4(-3.0, 0.0, 0.0, 4.0),
+    ];
     let n = v.len();
     let (s, out) = (zeros::<f32, 2>((n, 4), dev), zeros::<Vec3, 2>((n, 11), dev));
     let (dout, ds) = (zeros::<DVec4, 1>(n, dev), zeros::<f64, 1>(n, dev));
-    wp::launch(k_vec_fns, n, (&arr(&v, dev), &arr(&w, dev), &s, &out, &arr(&d, dev), &dout, &ds), dev).unwrap();
+    wp::launch(
+        k_vec_fns,
+        n,
+        (
+            &arr(&v, dev),
+            &arr(&w, dev),
+            &s,
+            &out,
+            &arr(&d, dev),
+            &dout,
+            &ds,
+        ),
+        dev,
+    )
+    .unwrap();
     let (s, out, dout, ds) = (host(&s), host(&out), host(&dout), host(&ds));
     let rel = fma_rel(dev);
     for i in 0..n {
         let (a, b) = (v[i], w[i]);
         let len = dot3(a, a).sqrt();
         let norm = if len > 0.0 { a / len } else { Vec3::ZERO };
-        let cross = vec3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+        let cross = vec3(
+            a.y * b.z - a.z * b.y,
+            a.z * b.x - a.x * b.z,
+            a.x * b.y - a.y * b.x,
+        );
         let lerp = a * (1.0 - 0.75) + b * 0.75;
-        assert_close_slice(&s[i * 4..i * 4 + 4], &[dot3(a, b), dot3(a, b), len, len], rel, "dot / length");
+        assert_close_slice(
+            &s[i * 4..i * 4 + 4],
+            &[dot3(a, b), dot3(a, b), len, len],
+            rel,
+            "dot / length",
+        );
         let row = &out[i * 11..i * 11 + 11];
-        for (k, want) in [cross, cross, norm, norm, lerp, lerp].into_iter().enumerate() {
-            assert_close_slice(&row[k].to_array(), &want.to_array(), rel, &format!("vector builtin #{k} of {a}, {b}"));
+        for (k, want) in [cross, cross, norm, norm, lerp, lerp]
+            .into_iter()
+            .enumerate()
+        {
+            assert_close_slice(
+                &row[k].to_array(),
+                &want.to_array(),
+                rel,
+                &format!("vector builtin #{k} of {a}, {b}"),
+            );
         }
         let sign = Vec3::from_array(a.to_array().map(sign_f32));
-        assert_eq!(&row[6..], [a.min(b), a.max(b), a.abs(), sign, a.clamp(Vec3::splat(-1.0), Vec3::ONE)], "componentwise builtins");
+        assert_eq!(
+            &row[6..],
+            [
+                a.min(b),
+                a.max(b),
+                a.abs(),
+                sign,
+                a.clamp(Vec3::splat(-1.0), Vec3::ONE)
+            ],
+            "componentwise builtins"
+        );
         let e = d[i];
         let dl = (e.x * e.x + e.y * e.y + e.z * e.z + e.w * e.w).sqrt();
         assert_close_f64(ds[i], dl, fma_rel64(dev), "DVec4 length");
@@ -285,11 +454,22 @@ fn vector_builtins(dev: &wp::Device) {
             assert_close_f64(dout[i][k], dn[k], fma_rel64(dev), "DVec4 normalize");
         }
     }
-    assert_eq!(out[2 * 11 + 2], Vec3::ZERO, "normalize of the zero vector is zero, not NaN");
+    assert_eq!(
+        out[2 * 11 + 2],
+        Vec3::ZERO,
+        "normalize of the zero vector is zero, not NaN"
+    );
 }
 
 #[wp::kernel]
-fn k_ivec_fns(a: Array<IVec3>, b: Array<IVec3>, u: Array<UVec2>, dots: Array<i32>, udots: Array<u32>, out: Array<IVec3, 2>) {
+fn k_ivec_fns(
+    a: Array<IVec3>,
+    b: Array<IVec3>,
+    u: Array<UVec2>,
+    dots: Array<i32>,
+    udots: Array<u32>,
+    out: Array<IVec3, 2>,
+) {
     let i = tid();
     dots[i] = dot(a[i], b[i]);
     udots[i] = u[i].dot(u[i]);
@@ -299,13 +479,38 @@ fn k_ivec_fns(a: Array<IVec3>, b: Array<IVec3>, u: Array<UVec2>, dots: Array<i32
 }
 
 fn int_vector_builtins(dev: &wp::Device) {
-    let a = [ivec3(1, 2, 3), ivec3(i32::MAX, -1, 0), ivec3(-4, 5, i32::MIN)];
+    let a = [
+        ivec3(1, 2, 3),
+        ivec3(i32::MAX, -1, 0),
+        ivec3(-4, 5, i32::MIN),
+    ];
     let b = [ivec3(4, 5, 6), ivec3(2, 3, 1), ivec3(1, 1, 1)];
     let u = [uvec2(3, 4), uvec2(u32::MAX, 2), uvec2(65_536, 0)];
-    let (dots, udots, out) = (zeros::<i32, 1>(3, dev), zeros::<u32, 1>(3, dev), zeros::<IVec3, 2>((3, 3), dev));
-    wp::launch(k_ivec_fns, 3, (&arr(&a, dev), &arr(&b, dev), &arr(&u, dev), &dots, &udots, &out), dev).unwrap();
+    let (dots, udots, out) = (
+        zeros::<i32, 1>(3, dev),
+        zeros::<u32, 1>(3, dev),
+        zeros::<IVec3, 2>((3, 3), dev),
+    );
+    wp::launch(
+        k_ivec_fns,
+        3,
+        (
+            &arr(&a, dev),
+            &arr(&b, dev),
+            &arr(&u, dev),
+            &dots,
+            &udots,
+            &out,
+        ),
+        dev,
+    )
+    .unwrap();
     // Integer vector builtins wrap like CUDA.
-    let wdot = |p: IVec3, q: IVec3| p.x.wrapping_mul(q.x).wrapping_add(p.y.wrapping_mul(q.y)).wrapping_add(p.z.wrapping_mul(q.z));
+    let wdot = |p: IVec3, q: IVec3| {
+        p.x.wrapping_mul(q.x)
+            .wrapping_add(p.y.wrapping_mul(q.y))
+            .wrapping_add(p.z.wrapping_mul(q.z))
+    };
     let wcross = |p: IVec3, q: IVec3| {
         ivec3(
             p.y.wrapping_mul(q.z).wrapping_sub(p.z.wrapping_mul(q.y)),
@@ -313,9 +518,25 @@ fn int_vector_builtins(dev: &wp::Device) {
             p.x.wrapping_mul(q.y).wrapping_sub(p.y.wrapping_mul(q.x)),
         )
     };
-    assert_eq!(host(&dots), (0..3).map(|i| wdot(a[i], b[i])).collect::<Vec<_>>());
-    assert_eq!(host(&udots), u.iter().map(|p| p.x.wrapping_mul(p.x).wrapping_add(p.y.wrapping_mul(p.y))).collect::<Vec<_>>());
-    let want: Vec<IVec3> = (0..3).flat_map(|i| [wcross(a[i], b[i]), a[i].min(b[i]), IVec3::from_array(a[i].to_array().map(i32::wrapping_abs))]).collect();
+    assert_eq!(
+        host(&dots),
+        (0..3).map(|i| wdot(a[i], b[i])).collect::<Vec<_>>()
+    );
+    assert_eq!(
+        host(&udots),
+        u.iter()
+            .map(|p| p.x.wrapping_mul(p.x).wrapping_add(p.y.wrapping_mul(p.y)))
+            .collect::<Vec<_>>()
+    );
+    let want: Vec<IVec3> = (0..3)
+        .flat_map(|i| {
+            [
+                wcross(a[i], b[i]),
+                a[i].min(b[i]),
+                IVec3::from_array(a[i].to_array().map(i32::wrapping_abs)),
+            ]
+        })
+        .collect();
     assert_eq!(host(&out), want);
 }
 
@@ -325,7 +546,15 @@ fn int_vector_builtins(dev: &wp::Device) {
 const MANY: usize = 10_000;
 
 #[wp::kernel]
-fn k_atomic_add(ti: Array<i32>, tf: Array<f32>, tl: Array<i64>, tu: Array<u64>, td: Array<f64>, tickets: Array<i32>, counter: Array<u32>) {
+fn k_atomic_add(
+    ti: Array<i32>,
+    tf: Array<f32>,
+    tl: Array<i64>,
+    tu: Array<u64>,
+    td: Array<f64>,
+    tickets: Array<i32>,
+    counter: Array<u32>,
+) {
     let i = tid();
     atomic_add(ti, 0, 1);
     atomic_add(ti, 1, (i % 7) as i32);
@@ -334,21 +563,42 @@ fn k_atomic_add(ti: Array<i32>, tf: Array<f32>, tl: Array<i64>, tu: Array<u64>, 
     atomic_add(tl, 0, i as i64 * 1_000_000);
     atomic_add(tu, 0, 3);
     atomic_add(td, 0, 0.25);
+    // An i32 index, and the builtin named through `wp::`.
+    let j = (i % 2) as i32;
+    wp::atomic_add(ti, j + 2, 1);
     let old = atomic_add(counter, 0, 1);
     tickets[i] = old as i32;
 }
 
 fn atomic_add_many_threads(dev: &wp::Device) {
-    let (ti, tf, tl) = (zeros::<i32, 1>(2, dev), zeros::<f32, 1>(2, dev), zeros::<i64, 1>(1, dev));
+    let (ti, tf, tl) = (
+        zeros::<i32, 1>(4, dev),
+        zeros::<f32, 1>(2, dev),
+        zeros::<i64, 1>(1, dev),
+    );
     let (tu, td) = (zeros::<u64, 1>(1, dev), zeros::<f64, 1>(1, dev));
     let (tickets, counter) = (zeros::<i32, 1>(MANY, dev), zeros::<u32, 1>(1, dev));
-    wp::launch(k_atomic_add, MANY, (&ti, &tf, &tl, &tu, &td, &tickets, &counter), dev).unwrap();
+    wp::launch(
+        k_atomic_add,
+        MANY,
+        (&ti, &tf, &tl, &tu, &td, &tickets, &counter),
+        dev,
+    )
+    .unwrap();
     let mod7: i32 = (0..MANY).map(|i| (i % 7) as i32).sum();
-    assert_eq!(host(&ti), vec![MANY as i32, mod7], "integer totals are exact");
+    let half = MANY as i32 / 2;
+    assert_eq!(
+        host(&ti),
+        vec![MANY as i32, mod7, half, half],
+        "integer totals are exact"
+    );
     // Every partial sum is a small integer or half-integer, exactly representable in f32, so
     // the total does not depend on the order of the additions.
     assert_eq!(host(&tf), vec![MANY as f32 * 0.5, mod7 as f32]);
-    assert_eq!(host(&tl), vec![(0..MANY as i64).map(|i| i * 1_000_000).sum::<i64>()]);
+    assert_eq!(
+        host(&tl),
+        vec![(0..MANY as i64).map(|i| i * 1_000_000).sum::<i64>()]
+    );
     assert_eq!(host(&tu), vec![3 * MANY as u64]);
     assert_eq!(host(&td), vec![MANY as f64 * 0.25]);
     assert_eq!(host(&counter), vec![MANY as u32]);
@@ -359,7 +609,15 @@ fn atomic_add_many_threads(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_atomic_sub_min_max(vals: Array<i32>, si: Array<i32>, su: Array<u32>, sf: Array<f32>, mi: Array<i32>, mf: Array<f32>, mu: Array<u64>) {
+fn k_atomic_sub_min_max(
+    vals: Array<i32>,
+    si: Array<i32>,
+    su: Array<u32>,
+    sf: Array<f32>,
+    mi: Array<i32>,
+    mf: Array<f32>,
+    mu: Array<u64>,
+) {
     let i = tid();
     let v = vals[i];
     atomic_sub(si, 0, 3);
@@ -374,16 +632,28 @@ fn k_atomic_sub_min_max(vals: Array<i32>, si: Array<i32>, su: Array<u32>, sf: Ar
 }
 
 fn atomic_sub_min_max(dev: &wp::Device) {
-    let vals: Vec<i32> = (0..MANY as i32).map(|i| (i * 7919) % 10_007 - 5000).collect();
+    let vals: Vec<i32> = (0..MANY as i32)
+        .map(|i| (i * 7919) % 10_007 - 5000)
+        .collect();
     let si = arr(&[100_000], dev);
     let su = zeros::<u32, 1>(1, dev);
     let sf = arr(&[10_000.0f32], dev);
     let mi = arr(&[i32::MAX, i32::MIN], dev);
     let mf = arr(&[f32::INFINITY, f32::NEG_INFINITY], dev);
     let mu = arr(&[0u64, u64::MAX], dev);
-    wp::launch(k_atomic_sub_min_max, MANY, (&arr(&vals, dev), &si, &su, &sf, &mi, &mf, &mu), dev).unwrap();
+    wp::launch(
+        k_atomic_sub_min_max,
+        MANY,
+        (&arr(&vals, dev), &si, &su, &sf, &mi, &mf, &mu),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&si), vec![100_000 - 3 * MANY as i32]);
-    assert_eq!(host(&su), vec![0u32.wrapping_sub(MANY as u32)], "unsigned atomic_sub wraps");
+    assert_eq!(
+        host(&su),
+        vec![0u32.wrapping_sub(MANY as u32)],
+        "unsigned atomic_sub wraps"
+    );
     assert_eq!(host(&sf), vec![10_000.0 - 0.25 * MANY as f32]);
     let (lo, hi) = (*vals.iter().min().unwrap(), *vals.iter().max().unwrap());
     assert_eq!(host(&mi), vec![lo, hi]);
@@ -419,7 +689,11 @@ fn atomic_2d_and_vectors(dev: &wp::Device) {
     assert_eq!(host(&hist), want_hist);
     assert_eq!(host(&peak), want_peak);
     let n = (rows * cols) as f32;
-    assert_eq!(host(&vsum), vec![vec3(n, n * 0.5, -2.0 * n)], "vector atomics add componentwise");
+    assert_eq!(
+        host(&vsum),
+        vec![vec3(n, n * 0.5, -2.0 * n)],
+        "vector atomics add componentwise"
+    );
     let half = (rows * cols / 2) as f64;
     assert_eq!(host(&dsum), vec![dvec2(-0.5 * half, -half); 2]);
 }

@@ -110,7 +110,13 @@ fn if_else_statement(dev: &wp::Device) {
 fn k_if_expr(a: Array<f32>, out: Array<f32>, cls: Array<i32>) {
     let i = tid();
     let x = a[i];
-    let s = if x < 0.0 { -1 } else if x == 0.0 { 0 } else { 1 };
+    let s = if x < 0.0 {
+        -1
+    } else if x == 0.0 {
+        0
+    } else {
+        1
+    };
     cls[i] = s;
     let y = if x > 1.0 {
         let t = x * x;
@@ -175,7 +181,13 @@ fn k_range_rev(a: Array<i32>, b: Array<i32>, out: Array<i32, 2>, count: Array<i3
 }
 
 #[wp::kernel]
-fn k_range_step(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32, 2>, count: Array<i32>) {
+fn k_range_step(
+    a: Array<i32>,
+    b: Array<i32>,
+    k: Array<i32>,
+    out: Array<i32, 2>,
+    count: Array<i32>,
+) {
     let c = tid();
     let mut n = 0;
     for j in (a[c]..b[c]).step_by(k[c]) {
@@ -186,7 +198,13 @@ fn k_range_step(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32, 2>,
 }
 
 #[wp::kernel]
-fn k_range_rev_step(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32, 2>, count: Array<i32>) {
+fn k_range_rev_step(
+    a: Array<i32>,
+    b: Array<i32>,
+    k: Array<i32>,
+    out: Array<i32, 2>,
+    count: Array<i32>,
+) {
     let c = tid();
     let mut n = 0;
     for j in (a[c]..b[c]).rev().step_by(k[c]) {
@@ -197,7 +215,13 @@ fn k_range_rev_step(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32,
 }
 
 #[wp::kernel]
-fn k_range_step_rev(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32, 2>, count: Array<i32>) {
+fn k_range_step_rev(
+    a: Array<i32>,
+    b: Array<i32>,
+    k: Array<i32>,
+    out: Array<i32, 2>,
+    count: Array<i32>,
+) {
     let c = tid();
     let mut n = 0;
     for j in (a[c]..b[c]).step_by(k[c]).rev() {
@@ -219,7 +243,13 @@ fn k_range_incl(a: Array<i32>, b: Array<i32>, out: Array<i32, 2>, count: Array<i
 }
 
 #[wp::kernel]
-fn k_range_incl_rev_step(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32, 2>, count: Array<i32>) {
+fn k_range_incl_rev_step(
+    a: Array<i32>,
+    b: Array<i32>,
+    k: Array<i32>,
+    out: Array<i32, 2>,
+    count: Array<i32>,
+) {
     let c = tid();
     let mut n = 0;
     for j in (a[c]..=b[c]).rev().step_by(k[c]) {
@@ -230,7 +260,13 @@ fn k_range_incl_rev_step(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array
 }
 
 #[wp::kernel]
-fn k_range_incl_step_rev(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array<i32, 2>, count: Array<i32>) {
+fn k_range_incl_step_rev(
+    a: Array<i32>,
+    b: Array<i32>,
+    k: Array<i32>,
+    out: Array<i32, 2>,
+    count: Array<i32>,
+) {
     let c = tid();
     let mut n = 0;
     for j in (a[c]..=b[c]).step_by(k[c]).rev() {
@@ -240,16 +276,29 @@ fn k_range_incl_step_rev(a: Array<i32>, b: Array<i32>, k: Array<i32>, out: Array
     count[c] = n;
 }
 
+/// Launches one loop kernel on (output rows, visit counts).
+type LaunchLoop<'a> = dyn Fn(&wp::Array<i32, 2>, &wp::Array<i32>) -> wp::Result<()> + 'a;
+
 /// Widest loop of the cases below.
 const MAX_VISITS: usize = 16;
 
 /// Checks one loop kernel's rows against Rust iterators.
-fn check_rows(what: &str, cases: &[(i32, i32, i32)], out: &wp::Array<i32, 2>, count: &wp::Array<i32>, want: impl Fn(i32, i32, usize) -> Vec<i32>) {
+fn check_rows(
+    what: &str,
+    cases: &[(i32, i32, i32)],
+    out: &wp::Array<i32, 2>,
+    count: &wp::Array<i32>,
+    want: impl Fn(i32, i32, usize) -> Vec<i32>,
+) {
     let (out, count) = (host(out), host(count));
     for (c, &(a, b, k)) in cases.iter().enumerate() {
         let want = want(a, b, k as usize);
         let n = count[c] as usize;
-        assert_eq!(&out[c * MAX_VISITS..c * MAX_VISITS + n], want.as_slice(), "{what} with a = {a}, b = {b}, k = {k}");
+        assert_eq!(
+            &out[c * MAX_VISITS..c * MAX_VISITS + n],
+            want.as_slice(),
+            "{what} with a = {a}, b = {b}, k = {k}"
+        );
         assert_eq!(n, want.len(), "{what} count with a = {a}, b = {b}, k = {k}");
     }
 }
@@ -257,39 +306,78 @@ fn check_rows(what: &str, cases: &[(i32, i32, i32)], out: &wp::Array<i32, 2>, co
 fn range_loops_match_rust(dev: &wp::Device) {
     // (start, end, step): the brief's 0..11 by 3 (where rev/step_by order matters), empty
     // ranges (3..3, 5..2), negative bounds, steps larger than the range.
-    let cases = [(0, 11, 3), (0, 10, 3), (3, 3, 2), (5, 2, 1), (-4, 7, 2), (-7, -1, 4), (0, 1, 5), (2, 12, 1), (-3, 3, 6)];
+    let cases = [
+        (0, 11, 3),
+        (0, 10, 3),
+        (3, 3, 2),
+        (5, 2, 1),
+        (-4, 7, 2),
+        (-7, -1, 4),
+        (0, 1, 5),
+        (2, 12, 1),
+        (-3, 3, 6),
+    ];
     let n = cases.len();
     let a = arr(&cases.map(|c| c.0), dev);
     let b = arr(&cases.map(|c| c.1), dev);
     let k = arr(&cases.map(|c| c.2), dev);
-    let run = |what: &str, launch: &dyn Fn(&wp::Array<i32, 2>, &wp::Array<i32>) -> wp::Result<()>, want: &dyn Fn(i32, i32, usize) -> Vec<i32>| {
+    let run = |what: &str, launch: &LaunchLoop, want: &dyn Fn(i32, i32, usize) -> Vec<i32>| {
         let out = wp::Array::<i32, 2>::full((n, MAX_VISITS), i32::MIN, dev).unwrap();
         let count = zeros::<i32, 1>(n, dev);
         launch(&out, &count).unwrap();
         check_rows(what, &cases, &out, &count, want);
     };
-    run("a..b", &|o, c| wp::launch(k_range_plain, n, (&a, &b, o, c), dev), &|a, b, _| (a..b).collect());
-    run("(a..b).rev()", &|o, c| wp::launch(k_range_rev, n, (&a, &b, o, c), dev), &|a, b, _| (a..b).rev().collect());
-    run("(a..b).step_by(k)", &|o, c| wp::launch(k_range_step, n, (&a, &b, &k, o, c), dev), &|a, b, k| (a..b).step_by(k).collect());
-    run("(a..b).rev().step_by(k)", &|o, c| wp::launch(k_range_rev_step, n, (&a, &b, &k, o, c), dev), &|a, b, k| {
-        (a..b).rev().step_by(k).collect()
-    });
-    run("(a..b).step_by(k).rev()", &|o, c| wp::launch(k_range_step_rev, n, (&a, &b, &k, o, c), dev), &|a, b, k| {
-        (a..b).step_by(k).rev().collect()
-    });
-    run("a..=b", &|o, c| wp::launch(k_range_incl, n, (&a, &b, o, c), dev), &|a, b, _| (a..=b).collect());
-    run("(a..=b).rev().step_by(k)", &|o, c| wp::launch(k_range_incl_rev_step, n, (&a, &b, &k, o, c), dev), &|a, b, k| {
-        (a..=b).rev().step_by(k).collect()
-    });
+    run(
+        "a..b",
+        &|o, c| wp::launch(k_range_plain, n, (&a, &b, o, c), dev),
+        &|a, b, _| (a..b).collect(),
+    );
+    run(
+        "(a..b).rev()",
+        &|o, c| wp::launch(k_range_rev, n, (&a, &b, o, c), dev),
+        &|a, b, _| (a..b).rev().collect(),
+    );
+    run(
+        "(a..b).step_by(k)",
+        &|o, c| wp::launch(k_range_step, n, (&a, &b, &k, o, c), dev),
+        &|a, b, k| (a..b).step_by(k).collect(),
+    );
+    run(
+        "(a..b).rev().step_by(k)",
+        &|o, c| wp::launch(k_range_rev_step, n, (&a, &b, &k, o, c), dev),
+        &|a, b, k| (a..b).rev().step_by(k).collect(),
+    );
+    run(
+        "(a..b).step_by(k).rev()",
+        &|o, c| wp::launch(k_range_step_rev, n, (&a, &b, &k, o, c), dev),
+        &|a, b, k| (a..b).step_by(k).rev().collect(),
+    );
+    run(
+        "a..=b",
+        &|o, c| wp::launch(k_range_incl, n, (&a, &b, o, c), dev),
+        &|a, b, _| (a..=b).collect(),
+    );
+    run(
+        "(a..=b).rev().step_by(k)",
+        &|o, c| wp::launch(k_range_incl_rev_step, n, (&a, &b, &k, o, c), dev),
+        &|a, b, k| (a..=b).rev().step_by(k).collect(),
+    );
     // Rust has no `.rev()` on `(a..=b).step_by(k)` for i32 (not an ExactSizeIterator); the
     // kernel language has, with the meaning "the same values, last first".
-    run("(a..=b).step_by(k).rev()", &|o, c| wp::launch(k_range_incl_step_rev, n, (&a, &b, &k, o, c), dev), &|a, b, k| {
-        let mut v: Vec<i32> = (a..=b).step_by(k).collect();
-        v.reverse();
-        v
-    });
+    run(
+        "(a..=b).step_by(k).rev()",
+        &|o, c| wp::launch(k_range_incl_step_rev, n, (&a, &b, &k, o, c), dev),
+        &|a, b, k| {
+            let mut v: Vec<i32> = (a..=b).step_by(k).collect();
+            v.reverse();
+            v
+        },
+    );
     // The brief's example: the two orders differ on 0..11 by 3.
-    assert_ne!((0..11).rev().step_by(3).collect::<Vec<_>>(), (0..11).step_by(3).rev().collect::<Vec<_>>());
+    assert_ne!(
+        (0..11).rev().step_by(3).collect::<Vec<_>>(),
+        (0..11).step_by(3).rev().collect::<Vec<_>>()
+    );
 }
 
 /// Loop variables take the bounds' type: u8, i64 and usize ranges, with literal bounds typed
@@ -367,7 +455,10 @@ fn while_loop(dev: &wp::Device) {
         }
         n
     };
-    assert_eq!(host(&steps), a.iter().map(|&x| collatz(x)).collect::<Vec<_>>());
+    assert_eq!(
+        host(&steps),
+        a.iter().map(|&x| collatz(x)).collect::<Vec<_>>()
+    );
 }
 
 #[wp::kernel]
@@ -388,7 +479,12 @@ fn loop_break(dev: &wp::Device) {
     let a = [0u32, 1, 2, 3, 17, 64, 1000, 1 << 31];
     let out = zeros::<u32, 1>(a.len(), dev);
     wp::launch(k_loop_break, a.len(), (&arr(&a, dev), &out), dev).unwrap();
-    assert_eq!(host(&out), a.iter().map(|&x| x.max(1).next_power_of_two()).collect::<Vec<_>>());
+    assert_eq!(
+        host(&out),
+        a.iter()
+            .map(|&x| x.max(1).next_power_of_two())
+            .collect::<Vec<_>>()
+    );
 }
 
 #[wp::kernel]

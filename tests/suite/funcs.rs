@@ -5,7 +5,17 @@ use crate::{arr, assert_close_slice, fma_rel, host, zeros};
 use warp_lang as wp;
 use wp::prelude::*;
 
-backend_tests!(func_calls_func, func_in_other_module, func_with_array_argument, func_returning_vector, func_with_early_return, func_literal_arguments, func_writing_array);
+backend_tests!(
+    func_calls_func,
+    func_in_other_module,
+    func_with_array_argument,
+    func_returning_vector,
+    func_with_early_return,
+    func_literal_arguments,
+    func_writing_array,
+    func_mutable_and_bool,
+    literals_next_to_untyped_values,
+);
 
 #[wp::func]
 fn sq(x: f32) -> f32 {
@@ -128,7 +138,19 @@ fn func_with_array_argument(dev: &wp::Device) {
     let a: Vec<f32> = (0..9).map(|k| k as f32 * 0.5).collect();
     let g: Vec<i32> = (0..6).collect();
     let (out, gout) = (zeros::<f32, 1>(9, dev), zeros::<i32, 1>(9, dev));
-    wp::launch(k_window, 9, (&arr(&a, dev), &wp::Array::from_slice_shape(&g, (2, 3), dev).unwrap(), 2, &out, &gout), dev).unwrap();
+    wp::launch(
+        k_window,
+        9,
+        (
+            &arr(&a, dev),
+            &wp::Array::from_slice_shape(&g, (2, 3), dev).unwrap(),
+            2,
+            &out,
+            &gout,
+        ),
+        dev,
+    )
+    .unwrap();
     let want: Vec<f32> = (0..9usize)
         .map(|c| {
             let mut s = 0.0;
@@ -139,7 +161,12 @@ fn func_with_array_argument(dev: &wp::Device) {
         })
         .collect();
     assert_eq!(host(&out), want, "half-integer sums are exact");
-    assert_eq!(host(&gout), (0..9).map(|i| g[(i % 2) * 3 + i % 3] * 10).collect::<Vec<_>>());
+    assert_eq!(
+        host(&gout),
+        (0..9)
+            .map(|i| g[(i % 2) * 3 + i % 3] * 10)
+            .collect::<Vec<_>>()
+    );
 }
 
 #[wp::func]
@@ -166,14 +193,30 @@ fn func_returning_vector(dev: &wp::Device) {
     let n = vec3(0.0, 1.0, 0.0);
     let t = [0.0f32, 1.0];
     let (out, o2) = (zeros::<Vec3, 1>(2, dev), zeros::<Vec2, 1>(2, dev));
-    wp::launch(k_vectors, 2, (&arr(&v, dev), n, &out, &arr(&t, dev), &o2), dev).unwrap();
+    wp::launch(
+        k_vectors,
+        2,
+        (&arr(&v, dev), n, &out, &arr(&t, dev), &o2),
+        dev,
+    )
+    .unwrap();
     let out = host(&out);
     for i in 0..2 {
         let d = v[i].x * n.x + v[i].y * n.y + v[i].z * n.z;
         let want = v[i] - n * (2.0 * d);
-        assert_close_slice(&out[i].to_array(), &want.to_array(), fma_rel(dev), "reflect");
+        assert_close_slice(
+            &out[i].to_array(),
+            &want.to_array(),
+            fma_rel(dev),
+            "reflect",
+        );
         let o = host(&o2)[i];
-        assert_close_slice(&o.to_array(), &[t[i].cos() * 2.0, t[i].sin() * 2.0], crate::math_rel(dev), "orbit");
+        assert_close_slice(
+            &o.to_array(),
+            &[t[i].cos() * 2.0, t[i].sin() * 2.0],
+            crate::math_rel(dev),
+            "orbit",
+        );
     }
 }
 
@@ -286,4 +329,110 @@ fn func_writing_array(dev: &wp::Device) {
     let out = zeros::<i32, 1>(6, dev);
     wp::launch(k_put, 6, (&out,), dev).unwrap();
     assert_eq!(host(&out), vec![0, 2, 4, 6, 8, 10]);
+}
+
+/// A func with a mutable parameter.
+#[wp::func]
+fn bump(mut x: i32, by: i32) -> i32 {
+    x += by;
+    x *= 2;
+    x
+}
+
+#[wp::func]
+fn is_positive(x: f32) -> bool {
+    x > 0.0
+}
+
+/// Kernels with a mutable parameter, funcs returning bool in conditions, and builtins on func
+/// results (whose type the macro cannot see).
+#[wp::kernel]
+fn k_mut_bool(a: Array<f32>, mut n: i32, out: Array<i32>, f: Array<f32>) {
+    let i = tid();
+    n += bump(n, i as i32);
+    if is_positive(a[i]) && n > 5 {
+        out[i] = n;
+    } else if !is_positive(a[i]) {
+        out[i] = -n;
+    }
+    f[i] = sq(a[i]).min(1.0);
+    f[i] += max(sq(a[i]), 0.5);
+}
+
+fn func_mutable_and_bool(dev: &wp::Device) {
+    let a = [0.5f32, -2.0, 3.0, 0.0];
+    let (out, f) = (zeros::<i32, 1>(4, dev), zeros::<f32, 1>(4, dev));
+    wp::launch(k_mut_bool, 4, (&arr(&a, dev), 1, &out, &f), dev).unwrap();
+    let want: Vec<i32> = (0..4)
+        .map(|i| {
+            let n = 1 + (1 + i as i32) * 2;
+            if a[i] > 0.0 && n > 5 {
+                n
+            } else if a[i] <= 0.0 {
+                -n
+            } else {
+                0
+            }
+        })
+        .collect();
+    assert_eq!(host(&out), want);
+    assert_eq!(
+        host(&f),
+        a.iter()
+            .map(|x| (x * x).min(1.0) + (x * x).max(0.5))
+            .collect::<Vec<_>>()
+    );
+}
+
+// ------------------------------------------------- literals next to values the macro can't type
+
+
+#[wp::func]
+fn count_of(n: usize) -> usize {
+    n
+}
+
+#[derive(Clone, Copy, wp::Struct)]
+#[repr(C)]
+struct Span64 {
+    scale: f64,
+    n: i32,
+    _pad: i32,
+}
+
+/// A user func's result and a struct field are typed by rustc, not by the macro: a literal
+/// beside them must take their type (f64 here, where the default would be f32), also as a
+/// func argument, as a range bound and as the other branch of an `if`.
+#[wp::kernel]
+fn k_untyped(s: Span64, x: f64, c: bool, out: Array<f64>, iv: IVec3, ov: Array<IVec3>) {
+    out[0] = twice64(0.1); // literal argument typed by the func's signature (f64)
+    out[1] = twice64(x) + 1; // integer literal beside an f64 result
+    out[2] = s.scale * 2; // integer literal beside an f64 field
+    let mut n = 0;
+    for _ in 0..s.n {
+        n += 1;
+    }
+    out[3] = n as f64;
+    let y = if c { twice64(x) } else { 0.1 };
+    out[4] = y;
+    let z = 1.5 + twice64(x);
+    out[5] = z;
+    out[6] = count_of(3) as f64;
+    ov[0] = 2 * iv; // scalar integer times integer vector
+}
+
+fn literals_next_to_untyped_values(dev: &wp::Device) {
+    let out = zeros::<f64, 1>(7, dev);
+    let ov = zeros::<IVec3, 1>(1, dev);
+    let s = Span64 { scale: 0.3, n: 5, _pad: 0 };
+    let x = 0.1f64;
+    wp::launch(k_untyped, 1, (s, x, false, &out, ivec3(1, -2, 3), &ov), dev).expect("launch");
+    // 0.1 and 0.3 are not f32 values: these only match if every literal was typed f64.
+    // f64 results of one or two roundings: on CUDA FMA may change the last bit (fma_rel).
+    let want = [0.1 * 2.0, x * 2.0 + 1.0, 0.3 * 2.0, 5.0, 0.1, 1.5 + x * 2.0, 3.0];
+    let got = host(&out);
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        assert!((g - w).abs() <= w.abs() * 1e-15, "out[{k}] = {g}, expected {w}");
+    }
+    assert_eq!(host(&ov), vec![ivec3(2, -4, 6)]);
 }

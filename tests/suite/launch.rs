@@ -6,7 +6,49 @@ use crate::{arr, host, zeros};
 use warp_lang as wp;
 use wp::prelude::*;
 
-backend_tests!(launch_sizes, large_2d_launch, dim_forms, repeated_launches, no_parameters, print_from_kernel);
+backend_tests!(
+    integrate_particles,
+    launch_sizes,
+    large_2d_launch,
+    dim_forms,
+    repeated_launches,
+    no_parameters,
+    print_from_kernel
+);
+
+/// The example of the crate documentation: explicit Euler steps of damped particles.
+#[wp::kernel]
+fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, dt: f32) {
+    let i = tid();
+    let a = -b * v[i] / mass + gravity;
+    v[i] += a * dt;
+    x[i] += v[i] * dt;
+}
+
+fn integrate_particles(dev: &wp::Device) {
+    let n = 4;
+    let x0: Vec<Vec3> = (0..n).map(|k| vec3(k as f32, 0.0, 1.0)).collect();
+    let v0: Vec<Vec3> = (0..n).map(|k| vec3(1.0, 0.5 * k as f32, 0.0)).collect();
+    let (x, v) = (arr(&x0, dev), arr(&v0, dev));
+    let (b, mass, gravity, dt) = (0.05f32, 0.1f32, vec3(0.0, 0.0, -9.81), 0.01f32);
+    let (mut hx, mut hv) = (x0, v0);
+    for _ in 0..10 {
+        wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), dev).unwrap();
+        for i in 0..n {
+            let a = -b * hv[i] / mass + gravity;
+            hv[i] += a * dt;
+            hx[i] += hv[i] * dt;
+        }
+    }
+    // Ten steps of products and sums: FMA on CUDA may change the last bits of each; the
+    // tolerance is a few FMA roundings per step.
+    let rel = 20.0 * crate::fma_rel(dev);
+    for i in 0..n {
+        crate::assert_close_slice(&host(&v)[i].to_array(), &hv[i].to_array(), rel, "velocity");
+        crate::assert_close_slice(&host(&x)[i].to_array(), &hx[i].to_array(), rel, "position");
+    }
+    assert!(host(&x)[0].x > 0.0);
+}
 
 #[wp::kernel]
 fn k_fill(out: Array<u32>, count: Array<u32>) {
@@ -25,7 +67,10 @@ fn launch_sizes(dev: &wp::Device) {
         wp::launch(k_fill, n, (&out, &count), dev).unwrap();
         let got = host(&out);
         if let Some(bad) = (0..n).find(|&i| got[i] != i as u32 * 3 + 1) {
-            panic!("n = {n}: thread {bad} wrote {} (every thread must run once)", got[bad]);
+            panic!(
+                "n = {n}: thread {bad} wrote {} (every thread must run once)",
+                got[bad]
+            );
         }
         assert_eq!(host(&count), vec![n as u32], "n = {n}: threads run");
     }

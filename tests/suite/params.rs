@@ -6,7 +6,16 @@ use crate::{host, zeros};
 use warp_lang as wp;
 use wp::prelude::*;
 
-backend_tests!(bool_param, integer_params, float_params, float_vector_params, double_vector_params, int_vector_params, matrix_params, quat_params);
+backend_tests!(
+    bool_param,
+    integer_params,
+    float_params,
+    float_vector_params,
+    double_vector_params,
+    int_vector_params,
+    matrix_params,
+    quat_params
+);
 
 #[wp::kernel]
 fn k_bool(flag: bool, out: Array<u8>) {
@@ -65,11 +74,44 @@ fn k_ints(
 }
 
 fn integer_params(dev: &wp::Device) {
-    let (o8, o16, o32, o64) = (zeros::<i8, 1>(2, dev), zeros::<i16, 1>(2, dev), zeros::<i32, 1>(2, dev), zeros::<i64, 1>(2, dev));
-    let (p8, p16, p32, p64) = (zeros::<u8, 1>(2, dev), zeros::<u16, 1>(2, dev), zeros::<u32, 1>(2, dev), zeros::<u64, 1>(2, dev));
+    let (o8, o16, o32, o64) = (
+        zeros::<i8, 1>(2, dev),
+        zeros::<i16, 1>(2, dev),
+        zeros::<i32, 1>(2, dev),
+        zeros::<i64, 1>(2, dev),
+    );
+    let (p8, p16, p32, p64) = (
+        zeros::<u8, 1>(2, dev),
+        zeros::<u16, 1>(2, dev),
+        zeros::<u32, 1>(2, dev),
+        zeros::<u64, 1>(2, dev),
+    );
     let outs = (&o8, &o16, &o32, &o64, &p8, &p16, &p32, &p64);
     // Small values, then every type's maximum (wraps to its minimum).
-    wp::launch(k_ints, 1, (-5i8, -300i16, -70_000i32, -5_000_000_000i64, 7u8, 300u16, 70_000u32, 5_000_000_000u64, outs.0, outs.1, outs.2, outs.3, outs.4, outs.5, outs.6, outs.7), dev).unwrap();
+    wp::launch(
+        k_ints,
+        1,
+        (
+            -5i8,
+            -300i16,
+            -70_000i32,
+            -5_000_000_000i64,
+            7u8,
+            300u16,
+            70_000u32,
+            5_000_000_000u64,
+            outs.0,
+            outs.1,
+            outs.2,
+            outs.3,
+            outs.4,
+            outs.5,
+            outs.6,
+            outs.7,
+        ),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&o8), vec![-5, -4]);
     assert_eq!(host(&o16), vec![-300, -299]);
     assert_eq!(host(&o32), vec![-70_000, -69_999]);
@@ -78,7 +120,30 @@ fn integer_params(dev: &wp::Device) {
     assert_eq!(host(&p16), vec![300, 301]);
     assert_eq!(host(&p32), vec![70_000, 70_001]);
     assert_eq!(host(&p64), vec![5_000_000_000, 5_000_000_001]);
-    wp::launch(k_ints, 1, (i8::MAX, i16::MAX, i32::MAX, i64::MAX, u8::MAX, u16::MAX, u32::MAX, u64::MAX, outs.0, outs.1, outs.2, outs.3, outs.4, outs.5, outs.6, outs.7), dev).unwrap();
+    wp::launch(
+        k_ints,
+        1,
+        (
+            i8::MAX,
+            i16::MAX,
+            i32::MAX,
+            i64::MAX,
+            u8::MAX,
+            u16::MAX,
+            u32::MAX,
+            u64::MAX,
+            outs.0,
+            outs.1,
+            outs.2,
+            outs.3,
+            outs.4,
+            outs.5,
+            outs.6,
+            outs.7,
+        ),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&o8), vec![i8::MAX, i8::MIN]);
     assert_eq!(host(&o16), vec![i16::MAX, i16::MIN]);
     assert_eq!(host(&o32), vec![i32::MAX, i32::MIN]);
@@ -119,8 +184,16 @@ fn k_vecs(a: Vec2, b: Vec3, c: Vec4, oa: Array<Vec2>, ob: Array<Vec3>, oc: Array
 }
 
 fn float_vector_params(dev: &wp::Device) {
-    let (oa, ob, oc) = (zeros::<Vec2, 1>(2, dev), zeros::<Vec3, 1>(2, dev), zeros::<Vec4, 1>(2, dev));
-    let (a, b, c) = (vec2(1.5, -2.0), vec3(0.1, 0.2, 0.3), vec4(1.0, 2.0, 3.0, -4.25));
+    let (oa, ob, oc) = (
+        zeros::<Vec2, 1>(2, dev),
+        zeros::<Vec3, 1>(2, dev),
+        zeros::<Vec4, 1>(2, dev),
+    );
+    let (a, b, c) = (
+        vec2(1.5, -2.0),
+        vec3(0.1, 0.2, 0.3),
+        vec4(1.0, 2.0, 3.0, -4.25),
+    );
     wp::launch(k_vecs, 1, (a, b, c, &oa, &ob, &oc), dev).unwrap();
     assert_eq!(host(&oa), vec![a, a + a]);
     assert_eq!(host(&ob), vec![b, b + b]);
@@ -138,8 +211,16 @@ fn k_dvecs(a: DVec2, b: DVec3, c: DVec4, oa: Array<DVec2>, ob: Array<DVec3>, oc:
 }
 
 fn double_vector_params(dev: &wp::Device) {
-    let (oa, ob, oc) = (zeros::<DVec2, 1>(2, dev), zeros::<DVec3, 1>(2, dev), zeros::<DVec4, 1>(2, dev));
-    let (a, b, c) = (dvec2(1.5, -2.0), dvec3(0.1, 0.2, 0.3), dvec4(1e300, 2.0, 3.0, -4.25));
+    let (oa, ob, oc) = (
+        zeros::<DVec2, 1>(2, dev),
+        zeros::<DVec3, 1>(2, dev),
+        zeros::<DVec4, 1>(2, dev),
+    );
+    let (a, b, c) = (
+        dvec2(1.5, -2.0),
+        dvec3(0.1, 0.2, 0.3),
+        dvec4(1e300, 2.0, 3.0, -4.25),
+    );
     wp::launch(k_dvecs, 1, (a, b, c, &oa, &ob, &oc), dev).unwrap();
     assert_eq!(host(&oa), vec![a, a + a]);
     assert_eq!(host(&ob), vec![b, b + b]);
@@ -176,11 +257,25 @@ fn k_ivecs(
 }
 
 fn int_vector_params(dev: &wp::Device) {
-    let (oa, ob, oc) = (zeros::<IVec2, 1>(2, dev), zeros::<IVec3, 1>(2, dev), zeros::<IVec4, 1>(2, dev));
-    let (od, oe, of) = (zeros::<UVec2, 1>(2, dev), zeros::<UVec3, 1>(2, dev), zeros::<UVec4, 1>(2, dev));
+    let (oa, ob, oc) = (
+        zeros::<IVec2, 1>(2, dev),
+        zeros::<IVec3, 1>(2, dev),
+        zeros::<IVec4, 1>(2, dev),
+    );
+    let (od, oe, of) = (
+        zeros::<UVec2, 1>(2, dev),
+        zeros::<UVec3, 1>(2, dev),
+        zeros::<UVec4, 1>(2, dev),
+    );
     let (a, b, c) = (ivec2(1, -2), ivec3(-3, 4, 5), ivec4(6, -7, 8, 1 << 20));
     let (d, e, f) = (uvec2(1, 2), uvec3(3, 4, 5), uvec4(6, 7, 8, 1 << 30));
-    wp::launch(k_ivecs, 1, (a, b, c, d, e, f, &oa, &ob, &oc, &od, &oe, &of), dev).unwrap();
+    wp::launch(
+        k_ivecs,
+        1,
+        (a, b, c, d, e, f, &oa, &ob, &oc, &od, &oe, &of),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&oa), vec![a, a * 3]);
     assert_eq!(host(&ob), vec![b, b * 3]);
     assert_eq!(host(&oc), vec![c, c * 3]);
@@ -220,8 +315,16 @@ fn k_mats(
 }
 
 fn matrix_params(dev: &wp::Device) {
-    let (oa, ob, oc) = (zeros::<Mat2, 1>(2, dev), zeros::<Mat3, 1>(2, dev), zeros::<Mat4, 1>(2, dev));
-    let (od, oe, of) = (zeros::<DMat2, 1>(2, dev), zeros::<DMat3, 1>(2, dev), zeros::<DMat4, 1>(2, dev));
+    let (oa, ob, oc) = (
+        zeros::<Mat2, 1>(2, dev),
+        zeros::<Mat3, 1>(2, dev),
+        zeros::<Mat4, 1>(2, dev),
+    );
+    let (od, oe, of) = (
+        zeros::<DMat2, 1>(2, dev),
+        zeros::<DMat3, 1>(2, dev),
+        zeros::<DMat4, 1>(2, dev),
+    );
     let seq = |n: usize| (0..n).map(|k| k as f32 * 0.5 - 1.0).collect::<Vec<f32>>();
     let dseq = |n: usize| (0..n).map(|k| k as f64 * 0.1 - 1.0).collect::<Vec<f64>>();
     let a = Mat2::from_cols_slice(&seq(4));
@@ -230,7 +333,13 @@ fn matrix_params(dev: &wp::Device) {
     let d = DMat2::from_cols_slice(&dseq(4));
     let e = DMat3::from_cols_slice(&dseq(9));
     let f = DMat4::from_cols_slice(&dseq(16));
-    wp::launch(k_mats, 1, (a, b, c, d, e, f, &oa, &ob, &oc, &od, &oe, &of), dev).unwrap();
+    wp::launch(
+        k_mats,
+        1,
+        (a, b, c, d, e, f, &oa, &ob, &oc, &od, &oe, &of),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&oa), vec![a, a * 2.0]);
     assert_eq!(host(&ob), vec![b, b * 2.0]);
     assert_eq!(host(&oc), vec![c, c * 2.0]);
@@ -252,7 +361,11 @@ fn k_quats(q: Quat, d: DQuat, oq: Array<Quat>, od: Array<DQuat>, parts: Array<f6
 }
 
 fn quat_params(dev: &wp::Device) {
-    let (oq, od, parts) = (zeros::<Quat, 1>(2, dev), zeros::<DQuat, 1>(2, dev), zeros::<f64, 1>(4, dev));
+    let (oq, od, parts) = (
+        zeros::<Quat, 1>(2, dev),
+        zeros::<DQuat, 1>(2, dev),
+        zeros::<f64, 1>(4, dev),
+    );
     let q = Quat::from_xyzw(0.1, 0.2, 0.3, 0.9);
     let d = DQuat::from_xyzw(0.4, 0.5, 0.6, 0.7);
     wp::launch(k_quats, 1, (q, d, &oq, &od, &parts), dev).unwrap();

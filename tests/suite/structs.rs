@@ -5,7 +5,12 @@ use crate::{arr, host, zeros};
 use warp_lang as wp;
 use wp::prelude::*;
 
-backend_tests!(struct_parameter, struct_array_fields, struct_local_copy, struct_in_func);
+backend_tests!(
+    struct_parameter,
+    struct_array_fields,
+    struct_local_copy,
+    struct_in_func
+);
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
 #[repr(C)]
@@ -43,10 +48,25 @@ fn k_params(p: Params, out: Array<f64>, v: Array<Vec3>) {
 }
 
 fn struct_parameter(dev: &wp::Device) {
-    let p = Params { gravity: vec3(0.0, 0.0, -9.81), dt: 0.01, steps: 3, damping: 0.1, flags: 0xABCD };
+    let p = Params {
+        gravity: vec3(0.0, 0.0, -9.81),
+        dt: 0.01,
+        steps: 3,
+        damping: 0.1,
+        flags: 0xABCD,
+    };
     let (out, v) = (zeros::<f64, 1>(5, dev), zeros::<Vec3, 1>(1, dev));
     wp::launch(k_params, 1, (p, &out, &v), dev).unwrap();
-    assert_eq!(host(&out), vec![f64::from(0.01f32), 3.0, 0.1, f64::from(-9.81f32), f64::from(0xABCDu32)]);
+    assert_eq!(
+        host(&out),
+        vec![
+            f64::from(0.01f32),
+            3.0,
+            0.1,
+            f64::from(-9.81f32),
+            f64::from(0xABCDu32)
+        ]
+    );
     assert_eq!(host(&v), vec![p.gravity * 8.0]);
 }
 
@@ -75,13 +95,22 @@ fn particles() -> Vec<Particle> {
 }
 
 fn struct_array_fields(dev: &wp::Device) {
-    let p = Params { gravity: vec3(0.0, -10.0, 0.0), dt: 0.5, steps: 0, damping: 0.0, flags: 0 };
+    let p = Params {
+        gravity: vec3(0.0, -10.0, 0.0),
+        dt: 0.5,
+        steps: 0,
+        damping: 0.0,
+        flags: 0,
+    };
     let ps0 = particles();
     let ps = arr(&ps0, dev);
     let (ids, speed) = (zeros::<i32, 1>(5, dev), zeros::<f32, 1>(5, dev));
     wp::launch(k_particles, 5, (&ps, p, &ids, &speed), dev).unwrap();
     assert_eq!(host(&ids), ps0.iter().map(|q| q.id).collect::<Vec<_>>());
-    assert_eq!(host(&speed), ps0.iter().map(|q| q.vel.y).collect::<Vec<_>>());
+    assert_eq!(
+        host(&speed),
+        ps0.iter().map(|q| q.vel.y).collect::<Vec<_>>()
+    );
     let want: Vec<Particle> = ps0
         .iter()
         .map(|q| {
@@ -149,9 +178,21 @@ fn k_struct_func(ps: Array<Particle>, p: Params, out: Array<Vec3>, m: Array<f32>
 
 fn struct_in_func(dev: &wp::Device) {
     let ps0 = particles();
-    let p = Params { gravity: Vec3::ZERO, dt: 0.25, steps: 1, damping: 1.0, flags: 0 };
+    let p = Params {
+        gravity: Vec3::ZERO,
+        dt: 0.25,
+        steps: 1,
+        damping: 1.0,
+        flags: 0,
+    };
     let (out, m) = (zeros::<Vec3, 1>(5, dev), zeros::<f32, 1>(5, dev));
     wp::launch(k_struct_func, 5, (&arr(&ps0, dev), p, &out, &m), dev).unwrap();
-    assert_eq!(host(&out), ps0.iter().map(|q| q.vel * q.mass).collect::<Vec<_>>());
-    assert_eq!(host(&m), ps0.iter().map(|q| q.mass * 0.25).collect::<Vec<_>>());
+    assert_eq!(
+        host(&out),
+        ps0.iter().map(|q| q.vel * q.mass).collect::<Vec<_>>()
+    );
+    assert_eq!(
+        host(&m),
+        ps0.iter().map(|q| q.mass * 0.25).collect::<Vec<_>>()
+    );
 }

@@ -32,8 +32,11 @@ pub enum FaultKind {
     },
     /// Integer division or remainder by zero.
     DivisionByZero,
-    /// `step_by(0)` in a range loop.
-    ZeroStep,
+    /// `step_by(k)` with `k <= 0` in a range loop (Rust panics at `step_by(0)`).
+    BadStep {
+        /// The step given.
+        step: i64,
+    },
 }
 
 impl Fault {
@@ -55,7 +58,11 @@ impl fmt::Display for Fault {
             FaultKind::DivisionByZero => {
                 write!(f, "kernel `{}`: integer division by zero", self.kernel)
             }
-            FaultKind::ZeroStep => write!(f, "kernel `{}`: step_by(0) in a range loop", self.kernel),
+            FaultKind::BadStep { step } => write!(
+                f,
+                "kernel `{}`: step_by({step}) in a range loop: the step must be positive",
+                self.kernel
+            ),
         }
     }
 }

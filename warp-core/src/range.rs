@@ -35,12 +35,12 @@ impl RangeProg {
         RangeProg { first: self.first + self.step * (self.count - 1), step: -self.step, count: self.count }
     }
 
-    /// `.step_by(k)`: every `k`-th value, starting with the first. `k = 0` is a fault (Rust
-    /// panics there; a kernel reports it).
+    /// `.step_by(k)`: every `k`-th value, starting with the first. `k <= 0` is a fault (Rust
+    /// panics at 0; a kernel reports it).
     #[inline(always)]
     pub fn step_by(self, k: i64, kernel: &'static str) -> KResult<Self> {
         if k <= 0 {
-            return Err(Fault::new(kernel, FaultKind::ZeroStep));
+            return Err(Fault::new(kernel, FaultKind::BadStep { step: k }));
         }
         Ok(RangeProg { first: self.first, step: self.step * k, count: (self.count + k - 1) / k })
     }
@@ -82,6 +82,7 @@ mod tests {
 
     #[test]
     fn zero_step_is_a_fault() {
-        assert_eq!(RangeProg::new(0, 4, false).step_by(0, "k").unwrap_err().kind, FaultKind::ZeroStep);
+        assert_eq!(RangeProg::new(0, 4, false).step_by(0, "k").unwrap_err().kind, FaultKind::BadStep { step: 0 });
+        assert_eq!(RangeProg::new(0, 4, false).step_by(-2, "k").unwrap_err().kind, FaultKind::BadStep { step: -2 });
     }
 }

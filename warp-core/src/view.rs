@@ -71,11 +71,11 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     fn offset<I: KernelIndex<N>>(&self, idx: I) -> KResult<isize> {
         let u = idx.to_usize();
         let mut off = 0isize;
-        for d in 0..N {
-            if u[d] >= self.shape[d] {
+        for ((&i, &extent), &stride) in u.iter().zip(&self.shape).zip(&self.strides) {
+            if i >= extent {
                 return Err(self.out_of_bounds(&idx.components()));
             }
-            off += u[d] as isize * self.strides[d];
+            off += i as isize * stride;
         }
         Ok(off)
     }
@@ -126,9 +126,9 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     fn offset_unchecked<I: KernelIndex<N>>(&self, idx: I) -> isize {
         let u = idx.to_usize();
         let mut off = 0isize;
-        for d in 0..N {
-            debug_assert!(u[d] < self.shape[d]);
-            off += u[d] as isize * self.strides[d];
+        for ((&i, &extent), &stride) in u.iter().zip(&self.shape).zip(&self.strides) {
+            debug_assert!(i < extent);
+            off += i as isize * stride;
         }
         off
     }

@@ -192,6 +192,9 @@ pub enum Ctor {
 #[derive(Clone, Debug)]
 pub enum Op {
     Lit(Lit),
+    /// A literal of the same type as the variable (whose type the macro cannot see): an
+    /// unsuffixed literal next to a user func's result or a struct field.
+    LitLike(Lit, VarId),
     Copy(VarId),
     Unary(UnOp, VarId),
     Binary(BinOp, VarId, VarId),

@@ -7,7 +7,12 @@
 use crate::ir::*;
 use crate::types::{Scalar, Ty};
 use proc_macro2::{Literal, Span, TokenStream};
-use quote::{format_ident, quote, quote_spanned};
+use quote::{format_ident, quote, quote_spanned, ToTokens};
+
+/// Integer scalars and integer vectors: the types with wrapping arithmetic.
+fn is_int(t: &Ty) -> bool {
+    t.is_int_scalar() || matches!(t, Ty::Vector(s, _) if !s.is_float())
+}
 
 /// Emits Rust for one lowered function.
 pub struct RustEmitter<'a> {
@@ -105,13 +110,17 @@ impl<'a> RustEmitter<'a> {
                 });
                 let v = self.var(*var);
                 let m = if self.f.vars[*var].mutable { quote!(mut) } else { quote!() };
-                let cast = ty_tokens(&self.f.vars[*var].ty).unwrap_or_else(|| quote!(_));
+                // A loop variable whose type the macro cannot see takes the end bound's type.
+                let value = match ty_tokens(&self.f.vars[*var].ty) {
+                    Some(t) => quote!(__range.at(__n) as #t),
+                    None => quote!(__wp::ops::int_like(&#end, __range.at(__n))),
+                };
                 let body = self.block(body);
                 quote_spanned! {sp=>
                     {
                         let __range = __wp::RangeProg::new(#start as i64, #end as i64, #incl) #(#adapters)*;
                         for __n in 0..__range.count {
-                            let #m #v = __range.at(__n) as #cast;
+                            let #m #v = #value;
                             #body
                         }
                     }
@@ -163,13 +172,23 @@ impl<'a> RustEmitter<'a> {
         let name = self.name_lit();
         match op {
             Op::Lit(l) => literal(l, ty),
+            Op::LitLike(l, like) => {
+                let like = self.var(*like);
+                let v = match l {
+                    Lit::Int(i) => *i as f64,
+                    Lit::Float(f) => *f,
+                    Lit::Bool(_) => unreachable!("bool literals are always typed"),
+                };
+                let v = Literal::f64_unsuffixed(v);
+                quote_spanned!(sp=> __wp::ops::lit_like(&#like, #v))
+            }
             Op::Copy(v) => {
                 let v = self.var(*v);
                 quote_spanned!(sp=> #v)
             }
             Op::Unary(UnOp::Neg, v) => {
                 let x = self.var(*v);
-                if self.f.ty(*v).is_int_scalar() {
+                if is_int(self.f.ty(*v)) {
                     quote_spanned!(sp=> __wp::ops::WrapInt::w_neg(#x))
                 } else {
                     quote_spanned!(sp=> -#x)
@@ -180,8 +199,21 @@ impl<'a> RustEmitter<'a> {
                 quote_spanned!(sp=> !#x)
             }
             Op::Binary(op, l, r) => {
-                let (a, b) = (self.var(*l), self.var(*r));
-                let int = self.f.ty(*l).is_int_scalar();
+                let (mut a, mut b) = (self.var(*l).into_token_stream(), self.var(*r).into_token_stream());
+                let (lt, rt) = (self.f.ty(*l), self.f.ty(*r));
+                // Integer scalars and vectors wrap and fault on division by zero (warp_core::ops);
+                // a scalar meeting an integer vector is splatted first.
+                let int = is_int(lt) && is_int(rt);
+                if int && !op.is_comparison() && !matches!(op, BinOp::Shl | BinOp::Shr) {
+                    if let (Ty::Scalar(_), v @ Ty::Vector(..)) = (lt, rt) {
+                        let v = ty_tokens(v).expect("vector");
+                        a = quote!(#v::splat(#a));
+                    }
+                    if let (v @ Ty::Vector(..), Ty::Scalar(_)) = (lt, rt) {
+                        let v = ty_tokens(v).expect("vector");
+                        b = quote!(#v::splat(#b));
+                    }
+                }
                 match op {
                     BinOp::Add if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_add(#a, #b)),
                     BinOp::Sub if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_sub(#a, #b)),

@@ -156,6 +156,30 @@ fn flex_literal(e: &Expr) -> Option<bool> {
     }
 }
 
+/// The value of an unsuffixed numeric literal (possibly negated or parenthesised).
+fn flex_value(e: &Expr) -> Option<Lit> {
+    match e {
+        Expr::Lit(l) => match &l.lit {
+            syn::Lit::Int(i) if i.suffix().is_empty() => i.base10_parse::<i128>().ok().map(Lit::Int),
+            syn::Lit::Float(f) if f.suffix().is_empty() => f.base10_parse::<f64>().ok().map(Lit::Float),
+            _ => None,
+        },
+        Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => match flex_value(&u.expr)? {
+            Lit::Int(v) => Some(Lit::Int(-v)),
+            Lit::Float(v) => Some(Lit::Float(-v)),
+            b => Some(b),
+        },
+        Expr::Paren(p) => flex_value(&p.expr),
+        Expr::Group(g) => flex_value(&g.expr),
+        // `else { 0.5 }`
+        Expr::Block(b) if b.label.is_none() => match b.block.stmts.as_slice() {
+            [syn::Stmt::Expr(e, None)] => flex_value(e),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
 fn strip(e: &Expr) -> &Expr {
     match e {
         Expr::Paren(p) => strip(&p.expr),
@@ -669,15 +693,19 @@ impl Lowerer {
         })?;
         let tt = self.ty(tv);
         let want2 = if tt.is_deferred() { want.cloned() } else { Some(tt.clone()) };
-        let (mut els, ev) = self.in_block(|cx| {
-            let v = cx.expr(else_e, want2.as_ref())?;
-            Ok(v)
-        })?;
+        // Beside a `then` value the macro cannot type, a literal `else` is left unsuffixed:
+        // rustc types it from the result variable both branches assign.
+        let want2 = match want2 {
+            None if tt.is_deferred() && flex_value(else_e).is_some() => Some(Ty::Deferred),
+            w => w,
+        };
+        let (mut els, ev) = self.in_block(|cx| cx.expr(else_e, want2.as_ref()))?;
         let et = self.ty(ev);
         if !tt.is_deferred() && !et.is_deferred() && tt != et {
             return err(else_e.span(), format!("`if` and `else` have different types: `{tt}` and `{et}`"));
         }
-        self.vars[result].ty = if tt.is_deferred() { et } else { tt };
+        // If either side is deferred, so is the result: the target compiler checks the other.
+        self.vars[result].ty = if tt.is_deferred() || et.is_deferred() { Ty::Deferred } else { tt };
         let mut then = then;
         then.push(Stmt { kind: StmtKind::Assign { dst: result, op: Op::Copy(tv), define: false }, span: i.then_branch.span() });
         els.push(Stmt { kind: StmtKind::Assign { dst: result, op: Op::Copy(ev), define: false }, span: else_e.span() });
@@ -701,8 +729,11 @@ impl Lowerer {
             }
             Some(op) => {
                 let old = self.read_place(&place, place_ty.clone(), lhs.span());
-                let hint = literal_hint(&place_ty, op);
-                let r = if flex_literal(rhs).is_some() { self.expr(rhs, hint.as_ref())? } else { self.expr(rhs, None)? };
+                let r = if flex_literal(rhs).is_some() && !matches!(op, BinOp::Shl | BinOp::Shr) {
+                    self.literal_next_to(rhs, old, op)?
+                } else {
+                    self.expr(rhs, None)?
+                };
                 let rt = self.ty(r);
                 let res = binary_result(op, &place_ty, &rt).map_err(|m| syn::Error::new(span, m))?;
                 if !res.is_deferred() && !place_ty.is_deferred() && res != place_ty {
@@ -1047,14 +1078,16 @@ impl Lowerer {
             (true, false) => {
                 // Literals have no side effects, so lowering the right side first is safe.
                 let rv = self.expr(r, None)?;
-                let hint = if shift { want.cloned() } else { literal_hint(&self.ty(rv), op) };
-                let lv = self.expr(l, hint.as_ref())?;
+                let lv = if shift {
+                    self.expr(l, want)?
+                } else {
+                    self.literal_next_to(l, rv, op)?
+                };
                 Ok((lv, rv))
             }
             (false, true) => {
                 let lv = self.expr(l, want)?;
-                let hint = if shift { None } else { literal_hint(&self.ty(lv), op) };
-                let rv = self.expr(r, hint.as_ref())?;
+                let rv = if shift { self.expr(r, None)? } else { self.literal_next_to(r, lv, op)? };
                 Ok((lv, rv))
             }
             (true, true) => {
@@ -1065,6 +1098,18 @@ impl Lowerer {
             }
             (false, false) => Ok((self.expr(l, None)?, self.expr(r, None)?)),
         }
+    }
+
+    /// An unsuffixed literal `lit` that meets `other` under `op`: typed from `other`'s type, or,
+    /// when the macro cannot see that type, made "a literal of the type of `other`".
+    fn literal_next_to(&mut self, lit: &Expr, other: VarId, op: BinOp) -> R<VarId> {
+        if self.ty(other).is_deferred() {
+            if let Some(value) = flex_value(lit) {
+                return Ok(self.def(Op::LitLike(value, other), Ty::Deferred, lit.span()));
+            }
+        }
+        let hint = literal_hint(&self.ty(other), op);
+        self.expr(lit, hint.as_ref())
     }
 
     fn short_circuit(&mut self, b: &syn::ExprBinary) -> R<VarId> {
@@ -1277,9 +1322,12 @@ impl Lowerer {
         if segs.len() == 1 && last == self.fn_name {
             return err(span, format!("recursion is not supported in kernels: `{last}` calls itself"));
         }
+        // The func's parameter types are not visible here: literals are left to rustc, which
+        // types them from the func's signature.
         let mut args = Vec::new();
         for a in &c.args {
-            args.push(self.expr(a, None)?);
+            let want = flex_literal(a).map(|_| Ty::Deferred);
+            args.push(self.expr(a, want.as_ref())?);
         }
         if !self.callees.iter().any(|p| p == &fp.path) {
             self.callees.push(fp.path.clone());
