@@ -41,7 +41,12 @@ struct Params {
 }
 
 fn params() -> Params {
-    black_box(Params { b: B, mass: MASS, gravity: GRAVITY, dt: DT })
+    black_box(Params {
+        b: B,
+        mass: MASS,
+        gravity: GRAVITY,
+        dt: DT,
+    })
 }
 
 #[inline(always)]
@@ -60,12 +65,18 @@ fn serial(x: &mut [Vec3], v: &mut [Vec3]) {
 
 fn hand_rayon(x: &mut [Vec3], v: &mut [Vec3]) {
     let p = params();
-    x.par_iter_mut().zip(v.par_iter_mut()).for_each(|(x, v)| step_one(x, v, p));
+    x.par_iter_mut()
+        .zip(v.par_iter_mut())
+        .for_each(|(x, v)| step_one(x, v, p));
 }
 
 fn start() -> (Vec<Vec3>, Vec<Vec3>) {
-    let x = (0..N).map(|i| Vec3::new(i as f32 * 1e-6, 0.5, -0.25)).collect();
-    let v = (0..N).map(|i| Vec3::new(0.1, -((i % 7) as f32) * 0.01, 0.2)).collect();
+    let x = (0..N)
+        .map(|i| Vec3::new(i as f32 * 1e-6, 0.5, -0.25))
+        .collect();
+    let v = (0..N)
+        .map(|i| Vec3::new(0.1, -((i % 7) as f32) * 0.01, 0.2))
+        .collect();
     (x, v)
 }
 
@@ -90,18 +101,28 @@ fn main() {
     let (mut xs, mut vs) = (x0.clone(), v0.clone());
     let (mut xr, mut vr) = (x0.clone(), v0.clone());
 
-    let mut c = Criterion::default().configure_from_args().warm_up_time(Duration::from_millis(500));
+    let mut c = Criterion::default()
+        .configure_from_args()
+        .warm_up_time(Duration::from_millis(500));
     let mut g = c.benchmark_group("particles_1M_step");
     g.bench_function("warp_kernel", |bch| {
-        bch.iter(|| wp::launch(integrate, N, (&xa, &va, B, MASS, GRAVITY, DT), &dev).expect("launch"))
+        bch.iter(|| {
+            wp::launch(integrate, N, (&xa, &va, B, MASS, GRAVITY, DT), &dev).expect("launch")
+        })
     });
-    g.bench_function("serial_loop", |bch| bch.iter(|| serial(black_box(&mut xs), black_box(&mut vs))));
-    g.bench_function("hand_rayon", |bch| bch.iter(|| hand_rayon(black_box(&mut xr), black_box(&mut vr))));
+    g.bench_function("serial_loop", |bch| {
+        bch.iter(|| serial(black_box(&mut xs), black_box(&mut vs)))
+    });
+    g.bench_function("hand_rayon", |bch| {
+        bch.iter(|| hand_rayon(black_box(&mut xr), black_box(&mut vr)))
+    });
     g.finish();
 
     // The ratio table, from medians taken here in the same process.
     let runs = 31;
-    let tk = median(runs, || wp::launch(integrate, N, (&xa, &va, B, MASS, GRAVITY, DT), &dev).expect("launch"));
+    let tk = median(runs, || {
+        wp::launch(integrate, N, (&xa, &va, B, MASS, GRAVITY, DT), &dev).expect("launch")
+    });
     let ts = median(runs, || serial(black_box(&mut xs), black_box(&mut vs)));
     let tr = median(runs, || hand_rayon(black_box(&mut xr), black_box(&mut vr)));
 
@@ -113,14 +134,31 @@ fn main() {
         wp::launch(integrate, N, (&xk, &vk, B, MASS, GRAVITY, DT), &dev).expect("launch");
         serial(&mut xc, &mut vc);
     }
-    let max_diff = xk.to_vec().expect("read").iter().zip(&xc).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0f32, f32::max);
+    let max_diff = xk
+        .to_vec()
+        .expect("read")
+        .iter()
+        .zip(&xc)
+        .map(|(a, b)| (*a - *b).abs().max_element())
+        .fold(0.0f32, f32::max);
 
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
-    println!("\nparticles, 1M, one step, {} rayon threads (median of {runs}):", rayon::current_num_threads());
+    println!(
+        "\nparticles, 1M, one step, {} rayon threads (median of {runs}):",
+        rayon::current_num_threads()
+    );
     println!("  warp kernel : {:8.3} ms", ms(tk));
     println!("  serial loop : {:8.3} ms", ms(ts));
     println!("  hand rayon  : {:8.3} ms", ms(tr));
-    println!("  kernel / hand rayon = {:.2}x (target <= 1.2x)", ms(tk) / ms(tr));
-    println!("  serial / kernel     = {:.2}x (target >= 1.6x on 2 cores)", ms(ts) / ms(tk));
-    println!("  accuracy: max |x_kernel - x_serial| after 10 steps = {max_diff:e} (same f32 arithmetic)");
+    println!(
+        "  kernel / hand rayon = {:.2}x (target <= 1.2x)",
+        ms(tk) / ms(tr)
+    );
+    println!(
+        "  serial / kernel     = {:.2}x (target >= 1.6x on 2 cores)",
+        ms(ts) / ms(tk)
+    );
+    println!(
+        "  accuracy: max |x_kernel - x_serial| after 10 steps = {max_diff:e} (same f32 arithmetic)"
+    );
 }

@@ -30,13 +30,26 @@ struct Options {
 }
 
 fn parse_args() -> Result<Options, String> {
-    let mut o = Options { n: 10_000_000, steps: 100, device: None };
+    let mut o = Options {
+        n: 10_000_000,
+        steps: 100,
+        device: None,
+    };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value"));
         match a.as_str() {
-            "--n" => o.n = value("--n")?.replace('_', "").parse().map_err(|e| format!("--n: {e}"))?,
-            "--steps" => o.steps = value("--steps")?.parse().map_err(|e| format!("--steps: {e}"))?,
+            "--n" => {
+                o.n = value("--n")?
+                    .replace('_', "")
+                    .parse()
+                    .map_err(|e| format!("--n: {e}"))?
+            }
+            "--steps" => {
+                o.steps = value("--steps")?
+                    .parse()
+                    .map_err(|e| format!("--steps: {e}"))?
+            }
             "--device" => o.device = Some(value("--device")?),
             "-h" | "--help" => {
                 println!("usage: particles [--n COUNT] [--steps STEPS] [--device cpu|cuda:N]");
@@ -91,7 +104,10 @@ fn main() -> wp::Result<()> {
     let v = wp::Array::from_slice(&v0, &dev)?;
 
     // One warm-up launch on copies, so that the timing below excludes first-launch costs.
-    let (xw, vw) = (wp::Array::from_slice(&x0[..1], &dev)?, wp::Array::from_slice(&v0[..1], &dev)?);
+    let (xw, vw) = (
+        wp::Array::from_slice(&x0[..1], &dev)?,
+        wp::Array::from_slice(&v0[..1], &dev)?,
+    );
     wp::launch(integrate, 1, (&xw, &vw, b, mass, gravity, dt), &dev)?;
     wp::synchronize()?;
 
@@ -115,7 +131,7 @@ fn main() -> wp::Result<()> {
             let gc = gravity[c] as f64;
             let (xi, vi) = (x0[i][c] as f64, v0[i][c] as f64);
             let vinf = gc / k; // terminal velocity
-            // Closed form of x' = v, v' = -k v + g.
+                               // Closed form of x' = v, v' = -k v + g.
             let exact = xi + vinf * t + (vi - vinf) * (1.0 - (-k * t).exp()) / k;
             // Closed form of v_{n+1} = r v_n + g dt, x_{n+1} = x_n + v_{n+1} dt.
             let geometric = r * (1.0 - r.powi(steps)) / (1.0 - r);
@@ -126,7 +142,10 @@ fn main() -> wp::Result<()> {
         }
     }
 
-    println!("particles: {} particles x {} steps on \"{}\" (dt = {dt} s)", opts.n, opts.steps, dev);
+    println!(
+        "particles: {} particles x {} steps on \"{}\" (dt = {dt} s)",
+        opts.n, opts.steps, dev
+    );
     for (i, p) in xs.iter().take(3).enumerate() {
         println!("  x[{i}] = [{:.6}, {:.6}, {:.6}]", p.x, p.y, p.z);
     }
@@ -137,7 +156,9 @@ fn main() -> wp::Result<()> {
         // Each step reads and writes x and v: 4 x 12 bytes per particle.
         (48.0 * opts.n as f64 * opts.steps as f64) / elapsed.as_secs_f64() / 1e9
     );
-    println!("  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))");
+    println!(
+        "  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))"
+    );
     println!("  max |x - exact discrete solution, f64| = {err_discrete:.3e} m (f32 rounding)");
     Ok(())
 }

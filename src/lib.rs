@@ -37,20 +37,22 @@
 //! The kernel language (types, the literal rule, builtins) is described in ARCHITECTURE.md
 //! and in the docs of [`kernel`].
 
+pub use glam;
+pub use warp_core::{Fault, FaultKind};
 pub use warp_macros::{func, kernel, Struct};
 pub use warp_runtime::{
-    cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch, synchronize, Array,
-    ArgCtx, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel, KernelArg, KernelInfo, Result, Runtime,
+    cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch,
+    synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel,
+    KernelArg, KernelInfo, Result, Runtime,
 };
-pub use warp_core::{Fault, FaultKind};
-pub use glam;
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
     pub use crate::{func, kernel, Array, Struct};
     pub use glam::{
-        dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2, DMat3, DMat4, DQuat,
-        DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat, UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
+        dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
+        DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
+        UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
     };
 }
 

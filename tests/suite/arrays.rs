@@ -17,6 +17,7 @@ backend_tests!(
     matrix_element_columns,
     local_fields,
     views_and_strides,
+    usize_builtins,
 );
 
 #[wp::kernel]
@@ -410,4 +411,29 @@ fn views_and_strides(dev: &wp::Device) {
     let row = src.row(1).unwrap();
     wp::launch(k_scale, 3, (&row, -1.0), dev).unwrap();
     assert_eq!(host(&src), vec![0.0, 1.0, 2.0, -3.0, -4.0, -5.0]);
+}
+
+/// Builtins on `usize`, the type of `tid()`: a clamped window around each thread.
+#[wp::kernel]
+fn k_usize_window(a: Array<f32>, out: Array<f32>, radius: usize) {
+    let i = tid();
+    let lo = max(i, radius) - radius;
+    let hi = min(i + radius + 1, a.len());
+    let mut s = 0.0;
+    for j in lo..hi {
+        s += a[j];
+    }
+    out[i] = s;
+}
+
+fn usize_builtins(dev: &wp::Device) {
+    let data: Vec<f32> = (0..10).map(|k| k as f32).collect();
+    let a = crate::arr(&data, dev);
+    let out = crate::zeros::<f32, 1>(10, dev);
+    wp::launch(k_usize_window, 10, (&a, &out, 2), dev).expect("launch");
+    let want: Vec<f32> = (0..10usize)
+        .map(|i| data[i.saturating_sub(2)..(i + 3).min(10)].iter().sum())
+        .collect();
+    // Sums of small integers: exact in f32 on every backend.
+    assert_eq!(crate::host(&out), want);
 }

@@ -243,7 +243,10 @@ fn zero_step(dev: &wp::Device) {
             kind: FaultKind::BadStep { step: 0 }
         }
     );
-    assert_eq!(msg, "kernel `k_zero_step`: step_by(0) in a range loop: the step must be positive");
+    assert_eq!(
+        msg,
+        "kernel `k_zero_step`: step_by(0) in a range loop: the step must be positive"
+    );
     wp::launch(k_zero_step, 1, (3, &out), dev).unwrap();
     assert_eq!(host(&out), vec![(0..10).step_by(3).sum::<i32>()]);
 }

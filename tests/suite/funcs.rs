@@ -386,7 +386,6 @@ fn func_mutable_and_bool(dev: &wp::Device) {
 
 // ------------------------------------------------- literals next to values the macro can't type
 
-
 #[wp::func]
 fn count_of(n: usize) -> usize {
     n
@@ -424,15 +423,30 @@ fn k_untyped(s: Span64, x: f64, c: bool, out: Array<f64>, iv: IVec3, ov: Array<I
 fn literals_next_to_untyped_values(dev: &wp::Device) {
     let out = zeros::<f64, 1>(7, dev);
     let ov = zeros::<IVec3, 1>(1, dev);
-    let s = Span64 { scale: 0.3, n: 5, _pad: 0 };
+    let s = Span64 {
+        scale: 0.3,
+        n: 5,
+        _pad: 0,
+    };
     let x = 0.1f64;
     wp::launch(k_untyped, 1, (s, x, false, &out, ivec3(1, -2, 3), &ov), dev).expect("launch");
     // 0.1 and 0.3 are not f32 values: these only match if every literal was typed f64.
     // f64 results of one or two roundings: on CUDA FMA may change the last bit (fma_rel).
-    let want = [0.1 * 2.0, x * 2.0 + 1.0, 0.3 * 2.0, 5.0, 0.1, 1.5 + x * 2.0, 3.0];
+    let want = [
+        0.1 * 2.0,
+        x * 2.0 + 1.0,
+        0.3 * 2.0,
+        5.0,
+        0.1,
+        1.5 + x * 2.0,
+        3.0,
+    ];
     let got = host(&out);
     for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!((g - w).abs() <= w.abs() * 1e-15, "out[{k}] = {g}, expected {w}");
+        assert!(
+            (g - w).abs() <= w.abs() * 1e-15,
+            "out[{k}] = {g}, expected {w}"
+        );
     }
     assert_eq!(host(&ov), vec![ivec3(2, -4, 6)]);
 }

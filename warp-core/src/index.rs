@@ -79,10 +79,20 @@ impl<A: IndexInt, B: IndexInt, C: IndexInt> KernelIndex<3> for (A, B, C) {
 impl<A: IndexInt, B: IndexInt, C: IndexInt, D: IndexInt> KernelIndex<4> for (A, B, C, D) {
     #[inline(always)]
     fn components(self) -> [i128; 4] {
-        [self.0.widen(), self.1.widen(), self.2.widen(), self.3.widen()]
+        [
+            self.0.widen(),
+            self.1.widen(),
+            self.2.widen(),
+            self.3.widen(),
+        ]
     }
     #[inline(always)]
     fn to_usize(self) -> [usize; 4] {
-        [self.0.as_usize(), self.1.as_usize(), self.2.as_usize(), self.3.as_usize()]
+        [
+            self.0.as_usize(),
+            self.1.as_usize(),
+            self.2.as_usize(),
+            self.3.as_usize(),
+        ]
     }
 }

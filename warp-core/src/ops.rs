@@ -132,7 +132,10 @@ mod tests {
     fn integer_semantics() {
         assert_eq!(i32::MAX.w_add(1), i32::MIN);
         assert_eq!(i32::MIN.w_div(-1, "k").unwrap(), i32::MIN);
-        assert_eq!(7i32.w_div(0, "k").unwrap_err().kind, FaultKind::DivisionByZero);
+        assert_eq!(
+            7i32.w_div(0, "k").unwrap_err().kind,
+            FaultKind::DivisionByZero
+        );
         assert_eq!((-7i32).w_rem(3, "k").unwrap(), -1);
         assert_eq!(1u32.w_shl(33), 2);
     }
@@ -140,10 +143,16 @@ mod tests {
     #[test]
     fn integer_vector_semantics() {
         use glam::{ivec2, uvec2};
-        assert_eq!(ivec2(i32::MAX, 1).w_add(glam::IVec2::ONE), ivec2(i32::MIN, 2));
+        assert_eq!(
+            ivec2(i32::MAX, 1).w_add(glam::IVec2::ONE),
+            ivec2(i32::MIN, 2)
+        );
         assert_eq!(uvec2(0, 5).w_sub(uvec2(1, 1)), uvec2(u32::MAX, 4));
         assert_eq!(ivec2(i32::MIN, 3).w_neg(), ivec2(i32::MIN, -3));
-        assert_eq!(ivec2(7, 7).w_div(ivec2(1, 0), "k").unwrap_err().kind, FaultKind::DivisionByZero);
+        assert_eq!(
+            ivec2(7, 7).w_div(ivec2(1, 0), "k").unwrap_err().kind,
+            FaultKind::DivisionByZero
+        );
         assert_eq!(ivec2(-7, 7).w_rem(ivec2(3, 3), "k").unwrap(), ivec2(-1, 1));
     }
 

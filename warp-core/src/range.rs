@@ -22,8 +22,16 @@ impl RangeProg {
     /// `start..end`, or `start..=end` when `inclusive`.
     #[inline(always)]
     pub fn new(start: i64, end: i64, inclusive: bool) -> Self {
-        let count = if inclusive { end as i128 - start as i128 + 1 } else { end as i128 - start as i128 };
-        RangeProg { first: start, step: 1, count: count.clamp(0, i64::MAX as i128) as i64 }
+        let count = if inclusive {
+            end as i128 - start as i128 + 1
+        } else {
+            end as i128 - start as i128
+        };
+        RangeProg {
+            first: start,
+            step: 1,
+            count: count.clamp(0, i64::MAX as i128) as i64,
+        }
     }
 
     /// `.rev()`: the same values, last first.
@@ -32,7 +40,11 @@ impl RangeProg {
         if self.count == 0 {
             return self;
         }
-        RangeProg { first: self.first + self.step * (self.count - 1), step: -self.step, count: self.count }
+        RangeProg {
+            first: self.first + self.step * (self.count - 1),
+            step: -self.step,
+            count: self.count,
+        }
     }
 
     /// `.step_by(k)`: every `k`-th value, starting with the first. `k <= 0` is a fault (Rust
@@ -42,7 +54,11 @@ impl RangeProg {
         if k <= 0 {
             return Err(Fault::new(kernel, FaultKind::BadStep { step: k }));
         }
-        Ok(RangeProg { first: self.first, step: self.step * k, count: (self.count + k - 1) / k })
+        Ok(RangeProg {
+            first: self.first,
+            step: self.step * k,
+            count: (self.count + k - 1) / k,
+        })
     }
 
     /// The `n`-th value.
@@ -67,9 +83,18 @@ mod tests {
                 let r = RangeProg::new(a as i64, b as i64, false);
                 assert_eq!(values(r), (a..b).collect::<Vec<_>>());
                 assert_eq!(values(r.rev()), (a..b).rev().collect::<Vec<_>>());
-                assert_eq!(values(r.step_by(k as i64, "t").unwrap()), (a..b).step_by(k).collect::<Vec<_>>());
-                assert_eq!(values(r.rev().step_by(k as i64, "t").unwrap()), (a..b).rev().step_by(k).collect::<Vec<_>>());
-                assert_eq!(values(r.step_by(k as i64, "t").unwrap().rev()), (a..b).step_by(k).rev().collect::<Vec<_>>());
+                assert_eq!(
+                    values(r.step_by(k as i64, "t").unwrap()),
+                    (a..b).step_by(k).collect::<Vec<_>>()
+                );
+                assert_eq!(
+                    values(r.rev().step_by(k as i64, "t").unwrap()),
+                    (a..b).rev().step_by(k).collect::<Vec<_>>()
+                );
+                assert_eq!(
+                    values(r.step_by(k as i64, "t").unwrap().rev()),
+                    (a..b).step_by(k).rev().collect::<Vec<_>>()
+                );
                 let ri = RangeProg::new(a as i64, b as i64, true);
                 assert_eq!(values(ri), (a..=b).collect::<Vec<_>>());
                 // std has no `.rev()` after `step_by` on inclusive ranges; reversing the sequence is the meaning.
@@ -82,7 +107,19 @@ mod tests {
 
     #[test]
     fn zero_step_is_a_fault() {
-        assert_eq!(RangeProg::new(0, 4, false).step_by(0, "k").unwrap_err().kind, FaultKind::BadStep { step: 0 });
-        assert_eq!(RangeProg::new(0, 4, false).step_by(-2, "k").unwrap_err().kind, FaultKind::BadStep { step: -2 });
+        assert_eq!(
+            RangeProg::new(0, 4, false)
+                .step_by(0, "k")
+                .unwrap_err()
+                .kind,
+            FaultKind::BadStep { step: 0 }
+        );
+        assert_eq!(
+            RangeProg::new(0, 4, false)
+                .step_by(-2, "k")
+                .unwrap_err()
+                .kind,
+            FaultKind::BadStep { step: -2 }
+        );
     }
 }

@@ -45,7 +45,13 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
         kernel: &'static str,
         arg: &'static str,
     ) -> Self {
-        ArrayView { ptr, shape, strides, kernel, arg }
+        ArrayView {
+            ptr,
+            shape,
+            strides,
+            kernel,
+            arg,
+        }
     }
 
     /// The shape, one extent per dimension.
@@ -85,7 +91,11 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     fn out_of_bounds(&self, c: &[i128; N]) -> Box<Fault> {
         Fault::new(
             self.kernel,
-            FaultKind::OutOfBounds { arg: self.arg, index: c.to_vec(), shape: self.shape.to_vec() },
+            FaultKind::OutOfBounds {
+                arg: self.arg,
+                index: c.to_vec(),
+                shape: self.shape.to_vec(),
+            },
         )
     }
 

@@ -9,7 +9,12 @@ pub fn tid_components(f: &Function) -> Vec<Option<u8>> {
     // Immutable variables have exactly one (defining) assignment, which precedes every use in
     // statement order, so one walk in order settles them.
     walk_stmts(&f.body, &mut |s| {
-        if let StmtKind::Assign { dst, op, define: true } = &s.kind {
+        if let StmtKind::Assign {
+            dst,
+            op,
+            define: true,
+        } = &s.kind
+        {
             if f.vars[*dst].mutable {
                 return;
             }
@@ -29,7 +34,10 @@ pub fn is_tid_access(f: &Function, tid: &[Option<u8>], array: VarId, index: &[Va
     let is_param = f.params.iter().any(|p| p.var == array);
     is_param
         && f.tid_ndim == Some(index.len() as u8)
-        && index.iter().enumerate().all(|(d, v)| tid[*v] == Some(d as u8))
+        && index
+            .iter()
+            .enumerate()
+            .all(|(d, v)| tid[*v] == Some(d as u8))
 }
 
 /// The parameters accessed through [`is_tid_access`] accesses.
@@ -37,7 +45,10 @@ pub fn tid_accessed_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
     let mut out = Vec::new();
     walk_stmts(&f.body, &mut |s| {
         let access = match &s.kind {
-            StmtKind::Assign { op: Op::Load { array, index }, .. } => Some((*array, index)),
+            StmtKind::Assign {
+                op: Op::Load { array, index },
+                ..
+            } => Some((*array, index)),
             StmtKind::Store { array, index, .. } => Some((*array, index)),
             _ => None,
         };
@@ -68,8 +79,14 @@ mod tests {
         };
         let f = crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap();
         let tid = tid_components(&f);
-        let params: Vec<String> =
-            tid_accessed_params(&f, &tid).iter().map(|v| f.vars[*v].name.clone().unwrap()).collect();
-        assert_eq!(params, vec!["b", "a"], "c is indexed by a mutable copy and by a constant");
+        let params: Vec<String> = tid_accessed_params(&f, &tid)
+            .iter()
+            .map(|v| f.vars[*v].name.clone().unwrap())
+            .collect();
+        assert_eq!(
+            params,
+            vec!["b", "a"],
+            "c is indexed by a mutable copy and by a constant"
+        );
     }
 }

@@ -44,7 +44,15 @@ impl Class {
             (Class::SignedVector, Ty::Vector(s, _)) => *s != Scalar::U32,
             (Class::Vector3, Ty::Vector(_, 3)) => true,
             (Class::Atomic, Ty::Scalar(s)) => {
-                matches!(s, Scalar::I32 | Scalar::U32 | Scalar::I64 | Scalar::U64 | Scalar::F32 | Scalar::F64)
+                matches!(
+                    s,
+                    Scalar::I32
+                        | Scalar::U32
+                        | Scalar::I64
+                        | Scalar::U64
+                        | Scalar::F32
+                        | Scalar::F64
+                )
             }
             (Class::Atomic, Ty::Vector(s, _)) => s.is_float(),
             _ => false,
@@ -217,7 +225,9 @@ impl Builtin {
         let mut array_ndim = 1u8;
         for (pos, arg) in self.params.iter().zip(args) {
             match (pos, arg) {
-                (Pos::T, ArgTy::Known(ty)) if !ty.is_deferred() && t.is_none() => t = Some(ty.clone()),
+                (Pos::T, ArgTy::Known(ty)) if !ty.is_deferred() && t.is_none() => {
+                    t = Some(ty.clone())
+                }
                 (Pos::ArrayOfT, ArgTy::Known(Ty::Array(elem, n))) => {
                     array_ndim = *n;
                     if t.is_none() {
@@ -225,7 +235,10 @@ impl Builtin {
                     }
                 }
                 (Pos::ArrayOfT, ArgTy::Known(ty)) if !ty.is_deferred() => {
-                    return Err(format!("`{}` expects an array as its first argument, found `{ty}`", self.name))
+                    return Err(format!(
+                        "`{}` expects an array as its first argument, found `{ty}`",
+                        self.name
+                    ))
                 }
                 _ => {}
             }
@@ -241,22 +254,39 @@ impl Builtin {
                     _ => None,
                 })
                 .collect();
-            let deferred = args.iter().any(|a| matches!(a, ArgTy::Known(t) if t.is_deferred()));
+            let deferred = args
+                .iter()
+                .any(|a| matches!(a, ArgTy::Known(t) if t.is_deferred()));
             if !t_lits.is_empty() && !deferred {
-                t = Some(if t_lits.contains(&true) { crate::types::F32 } else { crate::types::I32 });
+                t = Some(if t_lits.contains(&true) {
+                    crate::types::F32
+                } else {
+                    crate::types::I32
+                });
             }
         }
         let Some(t) = t else {
             // Nothing known: leave typing to the target compiler.
             let params = self.params.iter().map(|_| Ty::Deferred).collect();
-            return Ok(Resolved { params, ret: Ty::Deferred });
+            return Ok(Resolved {
+                params,
+                ret: Ty::Deferred,
+            });
         };
         if !self.classes.iter().any(|c| c.admits(&t)) {
             let want: Vec<_> = self.classes.iter().map(|c| c.describe()).collect();
-            return Err(format!("`{}` is not defined for `{t}`: it takes {}", self.name, want.join(", or ")));
+            return Err(format!(
+                "`{}` is not defined for `{t}`: it takes {}",
+                self.name,
+                want.join(", or ")
+            ));
         }
         let scalar = t.scalar().map(Ty::Scalar).unwrap_or(Ty::Deferred);
-        let index_ty = if array_ndim == 1 { crate::types::USIZE } else { Ty::TidTuple(array_ndim) };
+        let index_ty = if array_ndim == 1 {
+            crate::types::USIZE
+        } else {
+            Ty::TidTuple(array_ndim)
+        };
         let want = |p: &Pos| match p {
             Pos::T => t.clone(),
             Pos::ScalarOfT => scalar.clone(),
@@ -269,13 +299,21 @@ impl Builtin {
             match arg {
                 ArgTy::Known(ty) if ty.is_deferred() => {}
                 ArgTy::Known(ty) if *pos == Pos::Index => {
-                    let ok = (array_ndim == 1 && ty.is_int_scalar()) || matches!(ty, Ty::TidTuple(n) if *n == array_ndim);
+                    let ok = (array_ndim == 1 && ty.is_int_scalar())
+                        || matches!(ty, Ty::TidTuple(n) if *n == array_ndim);
                     if !ok {
-                        return Err(format!("argument {} of `{}` must be an index, found `{ty}`", i + 1, self.name));
+                        return Err(format!(
+                            "argument {} of `{}` must be an index, found `{ty}`",
+                            i + 1,
+                            self.name
+                        ));
                     }
                 }
                 ArgTy::Known(Ty::Array(e, _)) if *pos == Pos::ArrayOfT && **e != t => {
-                    return Err(format!("`{}`: array of `{e}` where `{t}` was expected", self.name));
+                    return Err(format!(
+                        "`{}`: array of `{e}` where `{t}` was expected",
+                        self.name
+                    ));
                 }
                 ArgTy::Known(_) if *pos == Pos::ArrayOfT => {}
                 ArgTy::Known(ty) if *ty != w => {
@@ -285,7 +323,9 @@ impl Builtin {
                         i + 1
                     ))
                 }
-                ArgTy::Literal { float: true } if !matches!(w, Ty::Scalar(s) if s.is_float()) && !w.is_deferred() => {
+                ArgTy::Literal { float: true }
+                    if !matches!(w, Ty::Scalar(s) if s.is_float()) && !w.is_deferred() =>
+                {
                     return Err(format!(
                         "argument {} of `{}` is a float literal where `{w}` is expected",
                         i + 1,
@@ -300,7 +340,10 @@ impl Builtin {
             };
             params.push(ty);
         }
-        Ok(Resolved { params, ret: want(&self.ret) })
+        Ok(Resolved {
+            params,
+            ret: want(&self.ret),
+        })
     }
 }
 
@@ -316,13 +359,44 @@ mod tests {
     #[test]
     fn every_entry_is_unique_and_well_formed() {
         for (i, b) in BUILTINS.iter().enumerate() {
-            assert!(BUILTINS[..i].iter().all(|o| o.name != b.name), "duplicate {}", b.name);
+            assert!(
+                BUILTINS[..i].iter().all(|o| o.name != b.name),
+                "duplicate {}",
+                b.name
+            );
             assert!(!b.classes.is_empty());
-            assert!(b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT), "{} cannot bind T", b.name);
+            assert!(
+                b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT),
+                "{} cannot bind T",
+                b.name
+            );
         }
-        for name in ["min", "max", "abs", "sign", "clamp", "floor", "ceil", "sqrt", "exp", "log", "sin", "cos",
-            "tan", "atan2", "pow", "dot", "cross", "length", "normalize", "lerp", "atomic_add", "atomic_sub",
-            "atomic_min", "atomic_max"] {
+        for name in [
+            "min",
+            "max",
+            "abs",
+            "sign",
+            "clamp",
+            "floor",
+            "ceil",
+            "sqrt",
+            "exp",
+            "log",
+            "sin",
+            "cos",
+            "tan",
+            "atan2",
+            "pow",
+            "dot",
+            "cross",
+            "length",
+            "normalize",
+            "lerp",
+            "atomic_add",
+            "atomic_sub",
+            "atomic_min",
+            "atomic_max",
+        ] {
             assert!(lookup(name).is_some(), "{name} missing");
         }
     }
@@ -330,11 +404,15 @@ mod tests {
     #[test]
     fn literals_take_the_bound_type() {
         let max = lookup("max").unwrap();
-        let r = max.resolve(&[k(Ty::Scalar(Scalar::F64)), ArgTy::Literal { float: true }]).unwrap();
+        let r = max
+            .resolve(&[k(Ty::Scalar(Scalar::F64)), ArgTy::Literal { float: true }])
+            .unwrap();
         assert_eq!(r.params, vec![Ty::Scalar(Scalar::F64); 2]);
         assert_eq!(r.ret, Ty::Scalar(Scalar::F64));
         // An integer literal next to a float is typed as the float.
-        let r = max.resolve(&[ArgTy::Literal { float: false }, k(F32)]).unwrap();
+        let r = max
+            .resolve(&[ArgTy::Literal { float: false }, k(F32)])
+            .unwrap();
         assert_eq!(r.params, vec![F32, F32]);
     }
 
@@ -342,46 +420,103 @@ mod tests {
     fn vector_builtins() {
         let v3 = Ty::Vector(Scalar::F32, 3);
         let dot = lookup_method("dot").unwrap();
-        assert_eq!(dot.resolve(&[k(v3.clone()), k(v3.clone())]).unwrap().ret, F32);
+        assert_eq!(
+            dot.resolve(&[k(v3.clone()), k(v3.clone())]).unwrap().ret,
+            F32
+        );
         let lerp = lookup("lerp").unwrap();
-        let r = lerp.resolve(&[k(v3.clone()), k(v3.clone()), ArgTy::Literal { float: true }]).unwrap();
+        let r = lerp
+            .resolve(&[k(v3.clone()), k(v3.clone()), ArgTy::Literal { float: true }])
+            .unwrap();
         assert_eq!(r.params[2], F32);
-        assert!(lookup("length").unwrap().resolve(&[k(Ty::Vector(Scalar::I32, 3))]).is_err());
-        assert!(lookup("cross").unwrap().resolve(&[k(Ty::Vector(Scalar::F32, 2)), k(Ty::Vector(Scalar::F32, 2))]).is_err());
+        assert!(lookup("length")
+            .unwrap()
+            .resolve(&[k(Ty::Vector(Scalar::I32, 3))])
+            .is_err());
+        assert!(lookup("cross")
+            .unwrap()
+            .resolve(&[k(Ty::Vector(Scalar::F32, 2)), k(Ty::Vector(Scalar::F32, 2))])
+            .is_err());
     }
 
     #[test]
     fn mismatches_are_reported() {
         let min = lookup("min").unwrap();
-        let e = min.resolve(&[k(F32), k(Ty::Scalar(Scalar::F64))]).unwrap_err();
+        let e = min
+            .resolve(&[k(F32), k(Ty::Scalar(Scalar::F64))])
+            .unwrap_err();
         assert!(e.contains("mismatched"), "{e}");
-        assert!(lookup("sqrt").unwrap().resolve(&[k(I32)]).unwrap_err().contains("not defined for `i32`"));
-        assert!(lookup("sqrt").unwrap().resolve(&[k(F32), k(F32)]).unwrap_err().contains("takes 1 argument"));
+        assert!(lookup("sqrt")
+            .unwrap()
+            .resolve(&[k(I32)])
+            .unwrap_err()
+            .contains("not defined for `i32`"));
+        assert!(lookup("sqrt")
+            .unwrap()
+            .resolve(&[k(F32), k(F32)])
+            .unwrap_err()
+            .contains("takes 1 argument"));
         // Literal-only calls follow the literal rule's defaults.
-        assert_eq!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: true }]).unwrap().ret, F32);
-        assert!(lookup("sqrt").unwrap().resolve(&[ArgTy::Literal { float: false }]).unwrap_err().contains("i32"));
-        assert_eq!(lookup("max").unwrap().resolve(&[ArgTy::Literal { float: false }, ArgTy::Literal { float: false }]).unwrap().ret, I32);
-        assert!(lookup("sqrt").unwrap().resolve(&[k(Ty::Deferred)]).unwrap().ret.is_deferred());
+        assert_eq!(
+            lookup("sqrt")
+                .unwrap()
+                .resolve(&[ArgTy::Literal { float: true }])
+                .unwrap()
+                .ret,
+            F32
+        );
+        assert!(lookup("sqrt")
+            .unwrap()
+            .resolve(&[ArgTy::Literal { float: false }])
+            .unwrap_err()
+            .contains("i32"));
+        assert_eq!(
+            lookup("max")
+                .unwrap()
+                .resolve(&[
+                    ArgTy::Literal { float: false },
+                    ArgTy::Literal { float: false }
+                ])
+                .unwrap()
+                .ret,
+            I32
+        );
+        assert!(lookup("sqrt")
+            .unwrap()
+            .resolve(&[k(Ty::Deferred)])
+            .unwrap()
+            .ret
+            .is_deferred());
     }
 
     #[test]
     fn atomics_bind_from_the_array() {
         let add = lookup("atomic_add").unwrap();
         let arr = Ty::Array(Box::new(F32), 1);
-        let r = add.resolve(&[k(arr.clone()), k(I32), ArgTy::Literal { float: false }]).unwrap();
+        let r = add
+            .resolve(&[k(arr.clone()), k(I32), ArgTy::Literal { float: false }])
+            .unwrap();
         assert_eq!(r.params, vec![arr, I32, F32]);
         assert_eq!(r.ret, F32);
         let arr2 = Ty::Array(Box::new(F32), 2);
-        assert!(add.resolve(&[k(arr2), k(I32), k(F32)]).is_err(), "1-D index into 2-D array");
+        assert!(
+            add.resolve(&[k(arr2), k(I32), k(F32)]).is_err(),
+            "1-D index into 2-D array"
+        );
         let bad = Ty::Array(Box::new(Ty::Scalar(Scalar::I8)), 1);
-        assert!(add.resolve(&[k(bad), k(I32), k(Ty::Scalar(Scalar::I8))]).is_err());
+        assert!(add
+            .resolve(&[k(bad), k(I32), k(Ty::Scalar(Scalar::I8))])
+            .is_err());
     }
 
     #[test]
     fn method_aliases() {
         assert_eq!(lookup_method("powf").unwrap().name, "pow");
         assert_eq!(lookup_method("ln").unwrap().name, "log");
-        assert!(lookup_method("log").is_none(), "x.log(base) means something else in Rust");
+        assert!(
+            lookup_method("log").is_none(),
+            "x.log(base) means something else in Rust"
+        );
         assert!(lookup_method("pow").is_none());
     }
 }

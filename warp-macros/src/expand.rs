@@ -39,11 +39,17 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     idx.push(usize::MAX);
                 } else if let Some(i) = f.params.iter().position(|p| name == &p.name) {
                     if !matches!(f.params[i].ty, crate::types::Ty::Array(..)) {
-                        errors.push(syn::Error::new(name.span(), format!("`{name}` is not an array parameter")));
+                        errors.push(syn::Error::new(
+                            name.span(),
+                            format!("`{name}` is not an array parameter"),
+                        ));
                     }
                     idx.push(i);
                 } else {
-                    errors.push(syn::Error::new(name.span(), format!("no parameter named `{name}`")));
+                    errors.push(syn::Error::new(
+                        name.span(),
+                        format!("no parameter named `{name}`"),
+                    ));
                 }
             }
             groups.push(idx);
@@ -78,8 +84,10 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         })
         .collect();
     let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
-    let fast_arrays: Vec<syn::Ident> =
-        crate::analysis::tid_accessed_params(&f, &em.tid).into_iter().map(|v| em.var(v)).collect();
+    let fast_arrays: Vec<syn::Ident> = crate::analysis::tid_accessed_params(&f, &em.tid)
+        .into_iter()
+        .map(|v| em.var(v))
+        .collect();
     let tid = match f.tid_ndim {
         Some(n) => {
             let n = n as usize;
@@ -183,7 +191,9 @@ fn dump(name: &str, tokens: &TokenStream) {
 /// Forces the recursion-depth constants of called funcs to be evaluated: a cycle of funcs
 /// calling each other is then a compile-time error (a cycle in const evaluation).
 fn callee_depths(callees: &[syn::Path]) -> TokenStream {
-    let checks = callees.iter().map(|p| quote_spanned!(p.span()=> let _ = #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;));
+    let checks = callees.iter().map(
+        |p| quote_spanned!(p.span()=> let _ = #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;),
+    );
     quote!(const _: () = { #(#checks)* };)
 }
 
@@ -214,7 +224,11 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     let doc_attrs = item.attrs.iter().filter(|a| a.path().is_ident("doc"));
     let params = f.params.iter().map(|p| {
         let v = em.var(p.var);
-        let m = if f.vars[p.var].mutable { quote!(mut) } else { quote!() };
+        let m = if f.vars[p.var].mutable {
+            quote!(mut)
+        } else {
+            quote!()
+        };
         let t = &p.syn_ty;
         quote!(#m #v: <#t as ::warp_lang::__private::KernelArg>::CpuView)
     });
@@ -223,8 +237,15 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         None => quote!(()),
     };
     let body = em.block(&f.body);
-    let tail = if f.ret_syn.is_none() { quote!(::core::result::Result::Ok(())) } else { quote!() };
-    let depths = f.callees.iter().map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
+    let tail = if f.ret_syn.is_none() {
+        quote!(::core::result::Result::Ok(()))
+    } else {
+        quote!()
+    };
+    let depths = f
+        .callees
+        .iter()
+        .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
     // points there and names this constant.
@@ -266,17 +287,28 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
     };
     let name = &input.ident;
     let syn::Data::Struct(data) = &input.data else {
-        return syn::Error::new(input.span(), "#[derive(Struct)] is for structs").to_compile_error();
+        return syn::Error::new(input.span(), "#[derive(Struct)] is for structs")
+            .to_compile_error();
     };
     if !input.generics.params.is_empty() {
-        return syn::Error::new(input.generics.span(), "kernel structs cannot be generic yet").to_compile_error();
+        return syn::Error::new(
+            input.generics.span(),
+            "kernel structs cannot be generic yet",
+        )
+        .to_compile_error();
     }
     let repr_c = input.attrs.iter().any(|a| {
-        a.path().is_ident("repr") && a.parse_args::<syn::Ident>().map(|i| i == "C").unwrap_or(false)
+        a.path().is_ident("repr")
+            && a.parse_args::<syn::Ident>()
+                .map(|i| i == "C")
+                .unwrap_or(false)
     });
     if !repr_c {
-        return syn::Error::new(name.span(), "kernel structs need #[repr(C)] (the CUDA side must see the same layout)")
-            .to_compile_error();
+        return syn::Error::new(
+            name.span(),
+            "kernel structs need #[repr(C)] (the CUDA side must see the same layout)",
+        )
+        .to_compile_error();
     }
     let mut errors = Vec::new();
     let fields: Vec<&syn::Type> = data.fields.iter().map(|f| &f.ty).collect();
@@ -284,14 +316,19 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
         if let Err(e) = crate::front::signature::parse_type(t) {
             errors.push(e);
         } else if let Ok(crate::types::Ty::Array(..)) = crate::front::signature::parse_type(t) {
-            errors.push(syn::Error::new(t.span(), "arrays cannot be struct fields yet: pass them as kernel parameters"));
+            errors.push(syn::Error::new(
+                t.span(),
+                "arrays cannot be struct fields yet: pass them as kernel parameters",
+            ));
         }
     }
     if !errors.is_empty() {
         return errors_to_tokens(errors);
     }
     let name_str = Literal::string(&name.to_string());
-    let field_asserts = fields.iter().map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
+    let field_asserts = fields
+        .iter()
+        .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
     quote! {
         const _: () = {
             use ::warp_lang::__private as __wp;

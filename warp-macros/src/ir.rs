@@ -75,23 +75,52 @@ pub struct Stmt {
 #[derive(Clone, Debug)]
 pub enum StmtKind {
     /// Declares `var` without a value (a result variable assigned in both branches of an if).
-    Declare { var: VarId },
+    Declare {
+        var: VarId,
+    },
     /// `dst = op`. `define` marks the statement that introduces `dst`.
-    Assign { dst: VarId, op: Op, define: bool },
+    Assign {
+        dst: VarId,
+        op: Op,
+        define: bool,
+    },
     /// `array[index] = value`.
-    Store { array: VarId, index: Vec<VarId>, value: VarId },
+    Store {
+        array: VarId,
+        index: Vec<VarId>,
+        value: VarId,
+    },
     /// `var.m1.m2 = value` on a local.
-    SetMember { var: VarId, path: Vec<String>, value: VarId },
-    If { cond: VarId, then: Block, els: Block },
+    SetMember {
+        var: VarId,
+        path: Vec<String>,
+        value: VarId,
+    },
+    If {
+        cond: VarId,
+        then: Block,
+        els: Block,
+    },
     /// `for var in range`: the range is an arithmetic progression (see `RangeSpec`).
-    For { var: VarId, range: RangeSpec, body: Block },
+    For {
+        var: VarId,
+        range: RangeSpec,
+        body: Block,
+    },
     /// `loop { .. }` (also what `while` lowers to).
-    Loop { body: Block },
+    Loop {
+        body: Block,
+    },
     Break,
     Continue,
-    Return { value: Option<VarId> },
+    Return {
+        value: Option<VarId>,
+    },
     /// `print!` / `println!` from a kernel: `{}` and `{:?}` placeholders only.
-    Print { pieces: Vec<FmtPiece>, newline: bool },
+    Print {
+        pieces: Vec<FmtPiece>,
+        newline: bool,
+    },
 }
 
 /// A piece of a print format.
@@ -153,7 +182,10 @@ pub enum BinOp {
 
 impl BinOp {
     pub fn is_comparison(self) -> bool {
-        matches!(self, BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge)
+        matches!(
+            self,
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+        )
     }
     pub fn symbol(self) -> &'static str {
         match self {
@@ -199,14 +231,27 @@ pub enum Op {
     Unary(UnOp, VarId),
     Binary(BinOp, VarId, VarId),
     Cast(VarId, Ty),
-    Builtin { builtin: &'static Builtin, args: Vec<VarId> },
+    Builtin {
+        builtin: &'static Builtin,
+        args: Vec<VarId>,
+    },
     /// A call of a user `#[func]`, by the path written at the call site.
-    Func { path: syn::Path, args: Vec<VarId> },
+    Func {
+        path: syn::Path,
+        args: Vec<VarId>,
+    },
     /// `array[index]`: one index variable per dimension.
-    Load { array: VarId, index: Vec<VarId> },
+    Load {
+        array: VarId,
+        index: Vec<VarId>,
+    },
     /// `v.x`, `m.x_axis`, `s.field`.
     Member(VarId, String),
-    Construct { ty: Ty, ctor: Ctor, args: Vec<VarId> },
+    Construct {
+        ty: Ty,
+        ctor: Ctor,
+        args: Vec<VarId>,
+    },
     /// Component `k` of the thread index.
     Tid(u8),
     /// `array.shape()[k]` (usize).

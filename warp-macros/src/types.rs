@@ -74,7 +74,10 @@ impl Scalar {
     }
 
     pub fn is_signed_int(self) -> bool {
-        matches!(self, Scalar::I8 | Scalar::I16 | Scalar::I32 | Scalar::I64 | Scalar::Isize)
+        matches!(
+            self,
+            Scalar::I8 | Scalar::I16 | Scalar::I32 | Scalar::I64 | Scalar::Isize
+        )
     }
 }
 
@@ -169,9 +172,13 @@ impl Ty {
                 let idx = ["x", "y", "z", "w"].iter().position(|c| *c == name)?;
                 (idx < *n as usize).then_some(Ty::Scalar(*s))
             }
-            Ty::Quat(s) => ["x", "y", "z", "w"].contains(&name).then_some(Ty::Scalar(*s)),
+            Ty::Quat(s) => ["x", "y", "z", "w"]
+                .contains(&name)
+                .then_some(Ty::Scalar(*s)),
             Ty::Matrix(s, n) => {
-                let idx = ["x_axis", "y_axis", "z_axis", "w_axis"].iter().position(|c| *c == name)?;
+                let idx = ["x_axis", "y_axis", "z_axis", "w_axis"]
+                    .iter()
+                    .position(|c| *c == name)?;
                 (idx < *n as usize).then_some(Ty::Vector(*s, *n))
             }
             _ => None,
@@ -202,7 +209,9 @@ mod tests {
 
     #[test]
     fn glam_names_round_trip() {
-        for name in ["Vec2", "Vec3", "Vec4", "DVec3", "IVec2", "UVec4", "Mat3", "DMat4", "Quat", "DQuat"] {
+        for name in [
+            "Vec2", "Vec3", "Vec4", "DVec3", "IVec2", "UVec4", "Mat3", "DMat4", "Quat", "DQuat",
+        ] {
             let ty = Ty::from_glam_name(name).unwrap();
             assert_eq!(ty.glam_name().unwrap(), name);
         }
@@ -216,6 +225,9 @@ mod tests {
         let v3 = Ty::Vector(Scalar::F32, 3);
         assert_eq!(v3.member_ty("z"), Some(F32));
         assert_eq!(v3.member_ty("w"), None);
-        assert_eq!(Ty::Matrix(Scalar::F64, 2).member_ty("y_axis"), Some(Ty::Vector(Scalar::F64, 2)));
+        assert_eq!(
+            Ty::Matrix(Scalar::F64, 2).member_ty("y_axis"),
+            Some(Ty::Vector(Scalar::F64, 2))
+        );
     }
 }

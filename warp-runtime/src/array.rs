@@ -1083,7 +1083,10 @@ mod tests {
         assert_eq!(a.to_vec().unwrap(), vec![0.0, 0.0, 4.0]);
         assert_eq!(<Array<f32> as KernelArg>::shape(&&a), Some(vec![3]));
         // SAFETY: a value argument borrows nothing.
-        assert_eq!(unsafe { <f32 as KernelArg>::cpu_view(&2.5, &ctx) }.unwrap(), 2.5);
+        assert_eq!(
+            unsafe { <f32 as KernelArg>::cpu_view(&2.5, &ctx) }.unwrap(),
+            2.5
+        );
         assert_eq!(<Vec3 as KernelArg>::shape(&Vec3::ONE), None);
         assert!(Array::<f32>::zeros(3, &fake).is_err());
     }

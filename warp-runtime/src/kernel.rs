@@ -78,5 +78,6 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     /// Runs threads `range` (flat indices) of `grid` on the CPU, in order, stopping at the
     /// first fault. A range rather than one thread, so that the parameters are unpacked once
     /// per chunk and stay in registers across threads.
-    fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: std::ops::Range<usize>) -> KResult<()>;
+    fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: std::ops::Range<usize>)
+        -> KResult<()>;
 }

@@ -243,8 +243,8 @@ mod tests {
     use crate::array::Array;
     use crate::device::cpu;
     use crate::kernel::{ArgCtx, KernelArg, KernelInfo};
-    use warp_core::{ArrayView, Fault, FaultKind};
     use std::ops::Range;
+    use warp_core::{ArrayView, Fault, FaultKind};
 
     /// `out[tid] = tid`, written by hand the way `#[kernel]` would generate it.
     #[derive(Clone, Copy)]

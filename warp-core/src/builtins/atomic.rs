@@ -340,8 +340,14 @@ mod tests {
         let mut u = vec![0u64; 2];
         let mut v3 = vec![Vec3::ZERO; 2];
         let mut dv4 = vec![DVec4::ZERO; 2];
-        let (fv, iv, dv, uv, v3v, dv4v) =
-            (view(&mut f), view(&mut i), view(&mut d), view(&mut u), view(&mut v3), view(&mut dv4));
+        let (fv, iv, dv, uv, v3v, dv4v) = (
+            view(&mut f),
+            view(&mut i),
+            view(&mut d),
+            view(&mut u),
+            view(&mut v3),
+            view(&mut dv4),
+        );
         std::thread::scope(|s| {
             for _ in 0..THREADS {
                 s.spawn(|| {
@@ -363,7 +369,13 @@ mod tests {
         assert_eq!(d, [5_000.0, 0.0]);
         assert_eq!(u, [0, 3 * n as u64]);
         assert_eq!(v3, [Vec3::ZERO, Vec3::new(10_000.0, 20_000.0, -10_000.0)]);
-        assert_eq!(dv4, [DVec4::new(-10_000.0, -5_000.0, -2_500.0, -20_000.0), DVec4::ZERO]);
+        assert_eq!(
+            dv4,
+            [
+                DVec4::new(-10_000.0, -5_000.0, -2_500.0, -20_000.0),
+                DVec4::ZERO
+            ]
+        );
     }
 
     #[test]
@@ -473,7 +485,11 @@ mod tests {
         assert_eq!(err.kernel, "test");
         assert_eq!(
             err.kind,
-            FaultKind::OutOfBounds { arg: "a", index: vec![3], shape: vec![3] }
+            FaultKind::OutOfBounds {
+                arg: "a",
+                index: vec![3],
+                shape: vec![3]
+            }
         );
         let err = atomic_min(&fv, -1i32, 1.0).unwrap_err();
         assert!(matches!(err.kind, FaultKind::OutOfBounds { arg: "a", .. }));

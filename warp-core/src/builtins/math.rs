@@ -254,7 +254,7 @@ macro_rules! int_scalar {
         }
     )*};
 }
-int_scalar!(i8, i16, i32, i64, u8, u16, u32, u64);
+int_scalar!(i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
 
 macro_rules! signed_int {
     ($($t:ty),*) => {$(
@@ -264,7 +264,7 @@ macro_rules! signed_int {
         }
     )*};
 }
-signed_int!(i8, i16, i32, i64);
+signed_int!(i8, i16, i32, i64, isize);
 
 macro_rules! float_scalar {
     ($($t:ident),*) => {$(
@@ -315,8 +315,12 @@ trait Lanes: Copy {
     fn lane_map(self, f: impl Fn(Self::S) -> Self::S) -> Self;
     fn lane_zip(self, o: Self, f: impl Fn(Self::S, Self::S) -> Self::S) -> Self;
     /// `f(... f(f(init, a.x, b.x), a.y, b.y) ..., a.last, b.last)`.
-    fn lane_fold2(self, o: Self, init: Self::S, f: impl Fn(Self::S, Self::S, Self::S) -> Self::S)
-        -> Self::S;
+    fn lane_fold2(
+        self,
+        o: Self,
+        init: Self::S,
+        f: impl Fn(Self::S, Self::S, Self::S) -> Self::S,
+    ) -> Self::S;
 }
 
 /// Lanes plus the operations every vector supports (`min`, `max`, `dot`).
@@ -440,6 +444,10 @@ mod tests {
         assert_eq!(max(7u16, 200), 200);
         assert_eq!(min(u32::MAX, 0), 0);
         assert_eq!(max(u64::MAX, 1), u64::MAX);
+        // usize: what tid() returns.
+        assert_eq!(min(7usize, 3), 3);
+        assert_eq!(clamp(-5isize, -2, 2), -2);
+        assert_eq!(abs(-5isize), 5);
     }
 
     #[test]
@@ -463,16 +471,37 @@ mod tests {
         assert_eq!(min(a, b), Vec4::new(2.0, 1.0, -4.0, 5.0));
         assert_eq!(max(a, b), Vec4::new(2.0, 1.0, -3.0, 6.0));
         assert_eq!(min(Vec2::new(1.0, 2.0), Vec2::new(2.0, 1.0)), Vec2::ONE);
-        assert_eq!(max(Vec3::new(1.0, f32::NAN, 0.0), Vec3::ZERO), Vec3::new(1.0, 0.0, 0.0));
-        assert_eq!(min(DVec3::new(1.0, -2.0, f64::NAN), DVec3::ZERO), DVec3::new(0.0, -2.0, 0.0));
-        assert_eq!(max(DVec2::new(1.0, -2.0), DVec2::ZERO), DVec2::new(1.0, 0.0));
+        assert_eq!(
+            max(Vec3::new(1.0, f32::NAN, 0.0), Vec3::ZERO),
+            Vec3::new(1.0, 0.0, 0.0)
+        );
+        assert_eq!(
+            min(DVec3::new(1.0, -2.0, f64::NAN), DVec3::ZERO),
+            DVec3::new(0.0, -2.0, 0.0)
+        );
+        assert_eq!(
+            max(DVec2::new(1.0, -2.0), DVec2::ZERO),
+            DVec2::new(1.0, 0.0)
+        );
         assert_eq!(max(DVec4::splat(-1.0), DVec4::ZERO), DVec4::ZERO);
-        assert_eq!(min(IVec3::new(i32::MIN, 5, 0), IVec3::new(0, -5, 0)), IVec3::new(i32::MIN, -5, 0));
+        assert_eq!(
+            min(IVec3::new(i32::MIN, 5, 0), IVec3::new(0, -5, 0)),
+            IVec3::new(i32::MIN, -5, 0)
+        );
         assert_eq!(max(IVec2::new(1, -1), IVec2::ZERO), IVec2::new(1, 0));
-        assert_eq!(max(IVec4::new(1, -1, 3, -3), IVec4::ZERO), IVec4::new(1, 0, 3, 0));
-        assert_eq!(min(UVec3::new(u32::MAX, 5, 0), UVec3::splat(4)), UVec3::new(4, 4, 0));
+        assert_eq!(
+            max(IVec4::new(1, -1, 3, -3), IVec4::ZERO),
+            IVec4::new(1, 0, 3, 0)
+        );
+        assert_eq!(
+            min(UVec3::new(u32::MAX, 5, 0), UVec3::splat(4)),
+            UVec3::new(4, 4, 0)
+        );
         assert_eq!(max(UVec2::new(1, 9), UVec2::splat(4)), UVec2::new(4, 9));
-        assert_eq!(max(UVec4::new(1, 9, 4, 0), UVec4::splat(4)), UVec4::new(4, 9, 4, 4));
+        assert_eq!(
+            max(UVec4::new(1, 9, 4, 0), UVec4::splat(4)),
+            UVec4::new(4, 9, 4, 4)
+        );
     }
 
     #[test]
@@ -490,8 +519,14 @@ mod tests {
             clamp(Vec3::new(-1.0, 0.5, 2.0), Vec3::ZERO, Vec3::ONE),
             Vec3::new(0.0, 0.5, 1.0)
         );
-        assert_eq!(clamp(IVec2::new(-7, 7), IVec2::splat(5), IVec2::splat(-5)), IVec2::splat(-5));
-        assert_eq!(clamp(UVec4::new(0, 3, 9, 5), UVec4::splat(2), UVec4::splat(5)), UVec4::new(2, 3, 5, 5));
+        assert_eq!(
+            clamp(IVec2::new(-7, 7), IVec2::splat(5), IVec2::splat(-5)),
+            IVec2::splat(-5)
+        );
+        assert_eq!(
+            clamp(UVec4::new(0, 3, 9, 5), UVec4::splat(2), UVec4::splat(5)),
+            UVec4::new(2, 3, 5, 5)
+        );
     }
 
     #[test]
@@ -504,7 +539,10 @@ mod tests {
         assert_eq!(abs(-2.5f64), 2.5);
         assert!(abs(f32::NAN).is_nan());
         assert_eq!(abs(IVec3::new(i32::MIN, -1, 2)), IVec3::new(i32::MIN, 1, 2));
-        assert_eq!(abs(Vec4::new(-1.0, 2.0, -0.0, -3.0)), Vec4::new(1.0, 2.0, 0.0, 3.0));
+        assert_eq!(
+            abs(Vec4::new(-1.0, 2.0, -0.0, -3.0)),
+            Vec4::new(1.0, 2.0, 0.0, 3.0)
+        );
         assert_eq!(abs(DVec2::new(-1.0, 2.0)), DVec2::new(1.0, 2.0));
 
         assert_eq!(sign(0i32), 1);
@@ -518,7 +556,10 @@ mod tests {
         assert_eq!(sign(-1e-30f32), -1.0);
         assert_eq!(sign(f64::NEG_INFINITY), -1.0);
         assert_eq!(sign(Vec3::new(-2.0, 0.0, 3.0)), Vec3::new(-1.0, 1.0, 1.0));
-        assert_eq!(sign(DVec4::new(-2.0, -0.0, 3.0, f64::NAN)), DVec4::new(-1.0, 1.0, 1.0, 1.0));
+        assert_eq!(
+            sign(DVec4::new(-2.0, -0.0, 3.0, f64::NAN)),
+            DVec4::new(-1.0, 1.0, 1.0, 1.0)
+        );
         assert_eq!(sign(IVec2::new(-9, 0)), IVec2::new(-1, 1));
     }
 
@@ -562,8 +603,14 @@ mod tests {
         // Warp's form a*(1-t) + b*t, not a + (b-a)*t.
         let (a, b, t) = (1e8f32, 1.0f32, 0.3f32);
         assert_eq!(lerp(a, b, t).to_bits(), (a * (1.0 - t) + b * t).to_bits());
-        assert_eq!(lerp(Vec2::ZERO, Vec2::new(2.0, 4.0), 0.5), Vec2::new(1.0, 2.0));
-        assert_eq!(lerp(Vec3::ZERO, Vec3::new(2.0, 4.0, 8.0), 0.5), Vec3::new(1.0, 2.0, 4.0));
+        assert_eq!(
+            lerp(Vec2::ZERO, Vec2::new(2.0, 4.0), 0.5),
+            Vec2::new(1.0, 2.0)
+        );
+        assert_eq!(
+            lerp(Vec3::ZERO, Vec3::new(2.0, 4.0, 8.0), 0.5),
+            Vec3::new(1.0, 2.0, 4.0)
+        );
         assert_eq!(lerp(Vec4::ONE, Vec4::splat(3.0), 0.5), Vec4::splat(2.0));
         assert_eq!(lerp(DVec2::ONE, DVec2::splat(3.0), 0.5), DVec2::splat(2.0));
         assert_eq!(lerp(DVec3::ONE, DVec3::splat(3.0), 0.5), DVec3::splat(2.0));
@@ -573,7 +620,10 @@ mod tests {
     #[test]
     fn dot_length_normalize_cross() {
         assert_eq!(dot(Vec2::new(1.0, 2.0), Vec2::new(3.0, 4.0)), 11.0);
-        assert_eq!(dot(Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)), 32.0);
+        assert_eq!(
+            dot(Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)),
+            32.0
+        );
         assert_eq!(dot(Vec4::new(1.0, 2.0, 3.0, 4.0), Vec4::ONE), 10.0);
         // Left-to-right summation order.
         let a = Vec4::new(1e8, 1.0, -1e8, 1.0);
@@ -583,7 +633,10 @@ mod tests {
         assert_eq!(dot(DVec4::new(1.0, 2.0, 3.0, 4.0), DVec4::ONE), 10.0);
         assert_eq!(dot(IVec3::new(1, -2, 3), IVec3::new(4, 5, 6)), 12);
         // Integer dot wraps like CUDA instead of panicking.
-        assert_eq!(dot(IVec2::new(i32::MAX, 1), IVec2::new(2, 0)), i32::MAX.wrapping_mul(2));
+        assert_eq!(
+            dot(IVec2::new(i32::MAX, 1), IVec2::new(2, 0)),
+            i32::MAX.wrapping_mul(2)
+        );
         assert_eq!(dot(IVec4::ONE, IVec4::ONE), 4);
         assert_eq!(dot(UVec2::new(u32::MAX, 1), UVec2::new(1, 1)), 0);
         assert_eq!(dot(UVec3::new(1, 2, 3), UVec3::ONE), 6);
@@ -599,7 +652,10 @@ mod tests {
         assert_eq!(normalize(DVec3::ZERO), DVec3::ZERO);
         assert_eq!(normalize(DVec2::ZERO), DVec2::ZERO);
         assert_eq!(normalize(DVec4::ZERO), DVec4::ZERO);
-        assert_eq!(normalize(Vec3::new(0.0, 3.0, 4.0)), Vec3::new(0.0, 0.6, 0.8));
+        assert_eq!(
+            normalize(Vec3::new(0.0, 3.0, 4.0)),
+            Vec3::new(0.0, 0.6, 0.8)
+        );
         assert_eq!(normalize(DVec2::new(0.0, -2.0)), DVec2::new(0.0, -1.0));
         let v = Vec4::new(1.0, 2.0, 3.0, 4.0);
         let l = (1.0f32 + 4.0 + 9.0 + 16.0).sqrt();
@@ -609,7 +665,10 @@ mod tests {
 
         assert_eq!(cross(Vec3::X, Vec3::Y), Vec3::Z);
         assert_eq!(cross(DVec3::Y, DVec3::X), -DVec3::Z);
-        assert_eq!(cross(IVec3::new(1, 2, 3), IVec3::new(4, 5, 6)), IVec3::new(-3, 6, -3));
+        assert_eq!(
+            cross(IVec3::new(1, 2, 3), IVec3::new(4, 5, 6)),
+            IVec3::new(-3, 6, -3)
+        );
         assert_eq!(
             cross(IVec3::new(i32::MAX, 0, 0), IVec3::new(0, 2, 0)),
             IVec3::new(0, 0, i32::MAX.wrapping_mul(2))

@@ -23,7 +23,10 @@ pub struct RustEmitter<'a> {
 
 impl<'a> RustEmitter<'a> {
     pub fn new(f: &'a Function) -> Self {
-        RustEmitter { f, tid: crate::analysis::tid_components(f) }
+        RustEmitter {
+            f,
+            tid: crate::analysis::tid_components(f),
+        }
     }
 
     /// Accesses indexed by the thread index skip their per-thread check when the launch has
@@ -64,13 +67,21 @@ impl<'a> RustEmitter<'a> {
                 if !define {
                     return quote_spanned!(sp=> #v = #rhs;);
                 }
-                let m = if self.f.vars[*dst].mutable { quote!(mut) } else { quote!() };
+                let m = if self.f.vars[*dst].mutable {
+                    quote!(mut)
+                } else {
+                    quote!()
+                };
                 match ty_tokens(&self.f.vars[*dst].ty) {
                     Some(t) => quote_spanned!(sp=> let #m #v: #t = #rhs;),
                     None => quote_spanned!(sp=> let #m #v = #rhs;),
                 }
             }
-            StmtKind::Store { array, index, value } => {
+            StmtKind::Store {
+                array,
+                index,
+                value,
+            } => {
                 let a = self.var(*array);
                 let idx = self.index(index);
                 let val = self.var(*value);
@@ -109,7 +120,11 @@ impl<'a> RustEmitter<'a> {
                     }
                 });
                 let v = self.var(*var);
-                let m = if self.f.vars[*var].mutable { quote!(mut) } else { quote!() };
+                let m = if self.f.vars[*var].mutable {
+                    quote!(mut)
+                } else {
+                    quote!()
+                };
                 // A loop variable whose type the macro cannot see takes the end bound's type.
                 let value = match ty_tokens(&self.f.vars[*var].ty) {
                     Some(t) => quote!(__range.at(__n) as #t),
@@ -132,7 +147,9 @@ impl<'a> RustEmitter<'a> {
             }
             StmtKind::Break => quote_spanned!(sp=> break;),
             StmtKind::Continue => quote_spanned!(sp=> continue;),
-            StmtKind::Return { value: None } => quote_spanned!(sp=> return ::core::result::Result::Ok(());),
+            StmtKind::Return { value: None } => {
+                quote_spanned!(sp=> return ::core::result::Result::Ok(());)
+            }
             StmtKind::Return { value: Some(v) } => {
                 let v = self.var(*v);
                 quote_spanned!(sp=> return ::core::result::Result::Ok(#v);)
@@ -199,7 +216,10 @@ impl<'a> RustEmitter<'a> {
                 quote_spanned!(sp=> !#x)
             }
             Op::Binary(op, l, r) => {
-                let (mut a, mut b) = (self.var(*l).into_token_stream(), self.var(*r).into_token_stream());
+                let (mut a, mut b) = (
+                    self.var(*l).into_token_stream(),
+                    self.var(*r).into_token_stream(),
+                );
                 let (lt, rt) = (self.f.ty(*l), self.f.ty(*r));
                 // Integer scalars and vectors wrap and fault on division by zero (warp_core::ops);
                 // a scalar meeting an integer vector is splatted first.
@@ -218,10 +238,18 @@ impl<'a> RustEmitter<'a> {
                     BinOp::Add if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_add(#a, #b)),
                     BinOp::Sub if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_sub(#a, #b)),
                     BinOp::Mul if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_mul(#a, #b)),
-                    BinOp::Div if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_div(#a, #b, #name)?),
-                    BinOp::Rem if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_rem(#a, #b, #name)?),
-                    BinOp::Shl if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_shl(#a, #b as u32)),
-                    BinOp::Shr if int => quote_spanned!(sp=> __wp::ops::WrapInt::w_shr(#a, #b as u32)),
+                    BinOp::Div if int => {
+                        quote_spanned!(sp=> __wp::ops::WrapInt::w_div(#a, #b, #name)?)
+                    }
+                    BinOp::Rem if int => {
+                        quote_spanned!(sp=> __wp::ops::WrapInt::w_rem(#a, #b, #name)?)
+                    }
+                    BinOp::Shl if int => {
+                        quote_spanned!(sp=> __wp::ops::WrapInt::w_shl(#a, #b as u32))
+                    }
+                    BinOp::Shr if int => {
+                        quote_spanned!(sp=> __wp::ops::WrapInt::w_shr(#a, #b as u32))
+                    }
                     _ => {
                         let o: TokenStream = op.symbol().parse().expect("operator");
                         quote_spanned!(sp=> (#a #o #b))

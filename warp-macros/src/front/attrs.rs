@@ -20,7 +20,9 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
                 Ok(())
             })?;
             if group.len() < 2 {
-                return Err(meta.error("same_shape needs at least two names (parameters, or `dim`)"));
+                return Err(
+                    meta.error("same_shape needs at least two names (parameters, or `dim`)")
+                );
             }
             out.same_shape.push(group);
             Ok(())

@@ -46,7 +46,10 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         (sig.unsafety.is_some(), "unsafe kernels are not supported"),
         (sig.constness.is_some(), "const kernels are not supported"),
         (sig.variadic.is_some(), "variadic kernels are not supported"),
-        (!sig.generics.params.is_empty(), "generic kernels and funcs are not supported yet"),
+        (
+            !sig.generics.params.is_empty(),
+            "generic kernels and funcs are not supported yet",
+        ),
     ];
     for (bad, msg) in unsupported {
         if bad {
@@ -56,14 +59,19 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
     let mut params = Vec::new();
     for input in &sig.inputs {
         match input {
-            syn::FnArg::Receiver(r) => cx.errors.push(syn::Error::new(r.span(), "kernels take no `self`")),
+            syn::FnArg::Receiver(r) => cx
+                .errors
+                .push(syn::Error::new(r.span(), "kernels take no `self`")),
             syn::FnArg::Typed(pt) => {
                 let (name, mutable) = match &*pt.pat {
                     Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() => {
                         (pi.ident.to_string(), pi.mutability.is_some())
                     }
                     other => {
-                        cx.errors.push(syn::Error::new(other.span(), "parameters must be plain names"));
+                        cx.errors.push(syn::Error::new(
+                            other.span(),
+                            "parameters must be plain names",
+                        ));
                         continue;
                     }
                 };
@@ -71,7 +79,12 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
                     Ok(ty) => {
                         let var = cx.new_var(Some(name.clone()), ty.clone(), mutable);
                         cx.scopes[0].insert(name.clone(), var);
-                        params.push(Param { name, var, ty, syn_ty: (*pt.ty).clone() });
+                        params.push(Param {
+                            name,
+                            var,
+                            ty,
+                            syn_ty: (*pt.ty).clone(),
+                        });
                     }
                     Err(e) => cx.errors.push(e),
                 }
@@ -84,19 +97,30 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
     };
     if let Some(t) = &ret_syn {
         match parse_type(t) {
-            Ok(Ty::Array(..)) => cx.errors.push(syn::Error::new(t.span(), "funcs cannot return arrays")),
+            Ok(Ty::Array(..)) => cx
+                .errors
+                .push(syn::Error::new(t.span(), "funcs cannot return arrays")),
             Ok(ty) => cx.ret = ty,
             Err(e) => cx.errors.push(e),
         }
     }
     if kind == FnKind::Kernel && !matches!(cx.ret, Ty::Unit) {
-        cx.errors.push(syn::Error::new(sig.output.span(), "kernels return nothing: write results into arrays"));
+        cx.errors.push(syn::Error::new(
+            sig.output.span(),
+            "kernels return nothing: write results into arrays",
+        ));
     }
 
     let ret = cx.ret.clone();
-    let tail = cx.block_stmts(&item.block.stmts, (!matches!(ret, Ty::Unit)).then_some(&ret), !matches!(ret, Ty::Unit));
+    let tail = cx.block_stmts(
+        &item.block.stmts,
+        (!matches!(ret, Ty::Unit)).then_some(&ret),
+        !matches!(ret, Ty::Unit),
+    );
     match tail {
-        Ok(Some(v)) if kind == FnKind::Func => cx.push(StmtKind::Return { value: Some(v) }, item.block.span()),
+        Ok(Some(v)) if kind == FnKind::Func => {
+            cx.push(StmtKind::Return { value: Some(v) }, item.block.span())
+        }
         Ok(Some(_)) => {}
         Ok(None) if kind == FnKind::Func && !matches!(ret, Ty::Unit) => {
             // Allowed when every path returns explicitly; rustc checks that on the CPU side.
@@ -137,8 +161,15 @@ struct Lowerer {
 
 /// An assignable place: a local (with a member path) or an array element (with a member path).
 enum Place {
-    Local { var: VarId, path: Vec<String> },
-    Elem { array: VarId, index: Vec<VarId>, path: Vec<String> },
+    Local {
+        var: VarId,
+        path: Vec<String>,
+    },
+    Elem {
+        array: VarId,
+        index: Vec<VarId>,
+        path: Vec<String>,
+    },
 }
 
 /// Is `e` an unsuffixed numeric literal (possibly negated or parenthesised)? `Some(is_float)`.
@@ -160,8 +191,12 @@ fn flex_literal(e: &Expr) -> Option<bool> {
 fn flex_value(e: &Expr) -> Option<Lit> {
     match e {
         Expr::Lit(l) => match &l.lit {
-            syn::Lit::Int(i) if i.suffix().is_empty() => i.base10_parse::<i128>().ok().map(Lit::Int),
-            syn::Lit::Float(f) if f.suffix().is_empty() => f.base10_parse::<f64>().ok().map(Lit::Float),
+            syn::Lit::Int(i) if i.suffix().is_empty() => {
+                i.base10_parse::<i128>().ok().map(Lit::Int)
+            }
+            syn::Lit::Float(f) if f.suffix().is_empty() => {
+                f.base10_parse::<f64>().ok().map(Lit::Float)
+            }
             _ => None,
         },
         Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => match flex_value(&u.expr)? {
@@ -233,15 +268,23 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             (Vector(a, n), Vector(b, m)) if a == b && n == m => Ok(l.clone()),
             (Vector(a, _), Scalar(b)) if a == b => Ok(l.clone()),
             (Scalar(a), Vector(b, _)) if a == b => Ok(r.clone()),
-            (Matrix(a, n), Matrix(b, m)) if a == b && n == m && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) => {
+            (Matrix(a, n), Matrix(b, m))
+                if a == b && n == m && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) =>
+            {
                 Ok(l.clone())
             }
             (Matrix(a, n), Vector(b, m)) if a == b && n == m && op == BinOp::Mul => Ok(r.clone()),
-            (Matrix(a, _), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => Ok(l.clone()),
+            (Matrix(a, _), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
+                Ok(l.clone())
+            }
             (Scalar(a), Matrix(b, _)) if a == b && op == BinOp::Mul => Ok(r.clone()),
-            (Quat(a), Quat(b)) if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) => Ok(l.clone()),
+            (Quat(a), Quat(b)) if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) => {
+                Ok(l.clone())
+            }
             (Quat(a), Vector(b, 3)) if a == b && op == BinOp::Mul => Ok(r.clone()),
-            (Quat(a), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => Ok(l.clone()),
+            (Quat(a), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
+                Ok(l.clone())
+            }
             _ => bad(),
         },
     }
@@ -289,9 +332,14 @@ fn is_compound_assign(op: &syn::BinOp) -> bool {
 
 /// Constants reachable as paths: `f32::MAX`, `std::f64::consts::PI`, `i32::MIN`, ...
 fn path_constant(segments: &[String]) -> Option<(Scalar, f64, Option<i128>)> {
-    let scalar_pos = segments.iter().position(|s| Scalar::from_name(s).is_some())?;
+    let scalar_pos = segments
+        .iter()
+        .position(|s| Scalar::from_name(s).is_some())?;
     let s = Scalar::from_name(&segments[scalar_pos])?;
-    let rest: Vec<&str> = segments[scalar_pos + 1..].iter().map(|x| x.as_str()).collect();
+    let rest: Vec<&str> = segments[scalar_pos + 1..]
+        .iter()
+        .map(|x| x.as_str())
+        .collect();
     let name = match rest.as_slice() {
         [n] => *n,
         ["consts", n] => *n,
@@ -300,10 +348,34 @@ fn path_constant(segments: &[String]) -> Option<(Scalar, f64, Option<i128>)> {
     if s.is_float() {
         let f32 = s == Scalar::F32;
         let v = match name {
-            "MAX" => if f32 { f32::MAX as f64 } else { f64::MAX },
-            "MIN" => if f32 { f32::MIN as f64 } else { f64::MIN },
-            "EPSILON" => if f32 { f32::EPSILON as f64 } else { f64::EPSILON },
-            "MIN_POSITIVE" => if f32 { f32::MIN_POSITIVE as f64 } else { f64::MIN_POSITIVE },
+            "MAX" => {
+                if f32 {
+                    f32::MAX as f64
+                } else {
+                    f64::MAX
+                }
+            }
+            "MIN" => {
+                if f32 {
+                    f32::MIN as f64
+                } else {
+                    f64::MIN
+                }
+            }
+            "EPSILON" => {
+                if f32 {
+                    f32::EPSILON as f64
+                } else {
+                    f64::EPSILON
+                }
+            }
+            "MIN_POSITIVE" => {
+                if f32 {
+                    f32::MIN_POSITIVE as f64
+                } else {
+                    f64::MIN_POSITIVE
+                }
+            }
             "INFINITY" => f64::INFINITY,
             "NEG_INFINITY" => f64::NEG_INFINITY,
             "NAN" => f64::NAN,
@@ -359,13 +431,23 @@ impl Lowerer {
     }
 
     fn push(&mut self, kind: StmtKind, span: Span) {
-        self.blocks.last_mut().expect("open block").push(Stmt { kind, span });
+        self.blocks
+            .last_mut()
+            .expect("open block")
+            .push(Stmt { kind, span });
     }
 
     /// Defines a new temporary holding `op`.
     fn def(&mut self, op: Op, ty: Ty, span: Span) -> VarId {
         let v = self.new_var(None, ty, false);
-        self.push(StmtKind::Assign { dst: v, op, define: true }, span);
+        self.push(
+            StmtKind::Assign {
+                dst: v,
+                op,
+                define: true,
+            },
+            span,
+        );
         v
     }
 
@@ -391,15 +473,25 @@ impl Lowerer {
 
     /// Lowers statements; returns the tail expression's value, if any. Errors inside single
     /// statements are recorded and lowering goes on, so that many are reported at once.
-    fn block_stmts(&mut self, stmts: &[syn::Stmt], want: Option<&Ty>, value: bool) -> R<Option<VarId>> {
+    fn block_stmts(
+        &mut self,
+        stmts: &[syn::Stmt],
+        want: Option<&Ty>,
+        value: bool,
+    ) -> R<Option<VarId>> {
         let mut tail = None;
         for (i, st) in stmts.iter().enumerate() {
             let last = i + 1 == stmts.len();
             let r = match st {
                 syn::Stmt::Local(local) => self.local(local),
-                syn::Stmt::Item(item) => err(item.span(), "items (fn, struct, use, ...) cannot be declared inside kernels"),
+                syn::Stmt::Item(item) => err(
+                    item.span(),
+                    "items (fn, struct, use, ...) cannot be declared inside kernels",
+                ),
                 syn::Stmt::Macro(m) => self.macro_stmt(&m.mac),
-                syn::Stmt::Expr(e, None) if last && (!is_block_like(e) || (value && is_value_block(e))) => {
+                syn::Stmt::Expr(e, None)
+                    if last && (!is_block_like(e) || (value && is_value_block(e))) =>
+                {
                     // A failed tail is the block's failure: report it once, through the caller.
                     tail = Some(self.expr(e, want)?);
                     Ok(())
@@ -428,7 +520,10 @@ impl Lowerer {
         // `let (i, j) = tid();`
         if let Pat::Tuple(tuple) = pat {
             if !is_tid_call(&init.expr) {
-                return err(pat.span(), "tuple patterns are only supported for `let (i, j) = tid();`");
+                return err(
+                    pat.span(),
+                    "tuple patterns are only supported for `let (i, j) = tid();`",
+                );
             }
             let n = tuple.elems.len();
             if !(2..=4).contains(&n) {
@@ -445,7 +540,10 @@ impl Lowerer {
         if let Some(a) = &annot {
             let vt = self.ty(value);
             if !vt.is_deferred() && vt != *a {
-                return err(init.expr.span(), format!("mismatched types: expected `{a}`, found `{vt}`"));
+                return err(
+                    init.expr.span(),
+                    format!("mismatched types: expected `{a}`, found `{vt}`"),
+                );
             }
         }
         self.bind_pat(pat, value, span)
@@ -458,22 +556,40 @@ impl Lowerer {
                 let ty = self.ty(value);
                 let name = pi.ident.to_string();
                 let v = self.new_var(Some(name.clone()), ty, pi.mutability.is_some());
-                self.push(StmtKind::Assign { dst: v, op: Op::Copy(value), define: true }, span);
+                self.push(
+                    StmtKind::Assign {
+                        dst: v,
+                        op: Op::Copy(value),
+                        define: true,
+                    },
+                    span,
+                );
                 self.scopes.last_mut().expect("scope").insert(name, v);
                 Ok(())
             }
             Pat::Wild(_) => Ok(()),
-            Pat::Ident(pi) if pi.by_ref.is_some() => err(pi.span(), "`ref` bindings are not supported in kernels"),
-            other => err(other.span(), "only plain names (and `let (i, j) = tid();`) can be bound in kernels"),
+            Pat::Ident(pi) if pi.by_ref.is_some() => {
+                err(pi.span(), "`ref` bindings are not supported in kernels")
+            }
+            other => err(
+                other.span(),
+                "only plain names (and `let (i, j) = tid();`) can be bound in kernels",
+            ),
         }
     }
 
     fn use_tid(&mut self, n: u8, span: Span) -> R<()> {
         if self.kind == FnKind::Func {
-            return err(span, "tid() is only available in kernels: pass the index to the func");
+            return err(
+                span,
+                "tid() is only available in kernels: pass the index to the func",
+            );
         }
         match self.tid_ndim {
-            Some(m) if m != n => err(span, format!("tid() is used with {m} and with {n} dimensions in one kernel")),
+            Some(m) if m != n => err(
+                span,
+                format!("tid() is used with {m} and with {n} dimensions in one kernel"),
+            ),
             _ => {
                 self.tid_ndim = Some(n);
                 Ok(())
@@ -511,7 +627,10 @@ impl Lowerer {
             }
             Expr::Break(b) => {
                 if b.label.is_some() || b.expr.is_some() {
-                    return err(span, "`break` with a label or a value is not supported in kernels");
+                    return err(
+                        span,
+                        "`break` with a label or a value is not supported in kernels",
+                    );
                 }
                 if self.loops == 0 {
                     return err(span, "`break` outside of a loop");
@@ -541,18 +660,29 @@ impl Lowerer {
     fn ret_stmt(&mut self, r: &syn::ExprReturn) -> R<()> {
         let span = r.span();
         let value = match (&r.expr, self.kind) {
-            (Some(e), FnKind::Kernel) => return err(e.span(), "kernels return nothing: `return;` ends the thread"),
+            (Some(e), FnKind::Kernel) => {
+                return err(
+                    e.span(),
+                    "kernels return nothing: `return;` ends the thread",
+                )
+            }
             (Some(e), FnKind::Func) => {
                 let ret = self.ret.clone();
                 let v = self.expr(e, Some(&ret))?;
                 let vt = self.ty(v);
                 if !vt.is_deferred() && !ret.is_deferred() && vt != ret {
-                    return err(e.span(), format!("mismatched types: the func returns `{ret}`, found `{vt}`"));
+                    return err(
+                        e.span(),
+                        format!("mismatched types: the func returns `{ret}`, found `{vt}`"),
+                    );
                 }
                 Some(v)
             }
             (None, FnKind::Func) if !matches!(self.ret, Ty::Unit) => {
-                return err(span, format!("`return;` in a func returning `{}`", self.ret))
+                return err(
+                    span,
+                    format!("`return;` in a func returning `{}`", self.ret),
+                )
             }
             (None, _) => None,
         };
@@ -578,7 +708,17 @@ impl Lowerer {
             let c = cx.expr(&w.cond, Some(&BOOL))?;
             cx.expect_bool(c, w.cond.span())?;
             let not = cx.def(Op::Unary(UnOp::Not, c), BOOL, w.cond.span());
-            cx.push(StmtKind::If { cond: not, then: vec![Stmt { kind: StmtKind::Break, span: w.cond.span() }], els: vec![] }, w.cond.span());
+            cx.push(
+                StmtKind::If {
+                    cond: not,
+                    then: vec![Stmt {
+                        kind: StmtKind::Break,
+                        span: w.cond.span(),
+                    }],
+                    els: vec![],
+                },
+                w.cond.span(),
+            );
             cx.block_stmts(&w.body.stmts, None, false)
         })?;
         self.push(StmtKind::Loop { body }, w.span());
@@ -603,13 +743,22 @@ impl Lowerer {
                     cur = strip(&m.receiver);
                 }
                 Expr::MethodCall(m) => {
-                    return err(m.method.span(), format!("`.{}()` is not supported on loop ranges: use .rev() and .step_by(k)", m.method))
+                    return err(
+                        m.method.span(),
+                        format!(
+                            "`.{}()` is not supported on loop ranges: use .rev() and .step_by(k)",
+                            m.method
+                        ),
+                    )
                 }
                 _ => break,
             }
         }
         let Expr::Range(range) = cur else {
-            return err(f.expr.span(), "kernels loop over integer ranges: `for i in 0..n`, with .rev() and .step_by(k)");
+            return err(
+                f.expr.span(),
+                "kernels loop over integer ranges: `for i in 0..n`, with .rev() and .step_by(k)",
+            );
         };
         let (Some(start), Some(end)) = (&range.start, &range.end) else {
             return err(range.span(), "loop ranges need a start and an end");
@@ -618,12 +767,22 @@ impl Lowerer {
         let (s, e) = self.operand_pair(start, end, None, BinOp::Lt)?;
         let st = self.ty(s);
         let et = self.ty(e);
-        let ty = if st.is_deferred() { et.clone() } else { st.clone() };
+        let ty = if st.is_deferred() {
+            et.clone()
+        } else {
+            st.clone()
+        };
         if !st.is_deferred() && !et.is_deferred() && st != et {
-            return err(range.span(), format!("mismatched range bounds: `{st}` and `{et}`"));
+            return err(
+                range.span(),
+                format!("mismatched range bounds: `{st}` and `{et}`"),
+            );
         }
         if !ty.is_deferred() && !ty.is_int_scalar() {
-            return err(range.span(), format!("loop ranges are over integers, found `{ty}`"));
+            return err(
+                range.span(),
+                format!("loop ranges are over integers, found `{ty}`"),
+            );
         }
         let mut adapters = Vec::new();
         for (name, arg, span) in adapters_rev.into_iter().rev() {
@@ -641,7 +800,9 @@ impl Lowerer {
             }
         }
         let (pat_name, mutable) = match &*f.pat {
-            Pat::Ident(pi) if pi.subpat.is_none() && pi.by_ref.is_none() => (Some(pi.ident.to_string()), pi.mutability.is_some()),
+            Pat::Ident(pi) if pi.subpat.is_none() && pi.by_ref.is_none() => {
+                (Some(pi.ident.to_string()), pi.mutability.is_some())
+            }
             Pat::Wild(_) => (None, false),
             p => return err(p.span(), "loop variables must be plain names"),
         };
@@ -652,7 +813,19 @@ impl Lowerer {
             }
             cx.block_stmts(&f.body.stmts, None, false)
         })?;
-        self.push(StmtKind::For { var, range: RangeSpec { start: s, end: e, inclusive, adapters }, body }, f.span());
+        self.push(
+            StmtKind::For {
+                var,
+                range: RangeSpec {
+                    start: s,
+                    end: e,
+                    inclusive,
+                    adapters,
+                },
+                body,
+            },
+            f.span(),
+        );
         Ok(())
     }
 
@@ -673,7 +846,8 @@ impl Lowerer {
         let c = self.expr(&i.cond, Some(&BOOL))?;
         self.expect_bool(c, i.cond.span())?;
         if !value {
-            let (then, _) = self.in_block(|cx| cx.block_stmts(&i.then_branch.stmts, None, false))?;
+            let (then, _) =
+                self.in_block(|cx| cx.block_stmts(&i.then_branch.stmts, None, false))?;
             let els = match &i.else_branch {
                 None => vec![],
                 Some((_, e)) => self.in_block(|cx| cx.stmt_expr(e))?.0,
@@ -688,11 +862,17 @@ impl Lowerer {
         let decl_at = self.blocks.last().expect("block").len();
         let (then, tv) = self.in_block(|cx| {
             let v = cx.block_stmts(&i.then_branch.stmts, want, true)?;
-            let Some(v) = v else { return err(i.then_branch.span(), "this branch yields no value") };
+            let Some(v) = v else {
+                return err(i.then_branch.span(), "this branch yields no value");
+            };
             Ok(v)
         })?;
         let tt = self.ty(tv);
-        let want2 = if tt.is_deferred() { want.cloned() } else { Some(tt.clone()) };
+        let want2 = if tt.is_deferred() {
+            want.cloned()
+        } else {
+            Some(tt.clone())
+        };
         // Beside a `then` value the macro cannot type, a literal `else` is left unsuffixed:
         // rustc types it from the result variable both branches assign.
         let want2 = match want2 {
@@ -702,14 +882,41 @@ impl Lowerer {
         let (mut els, ev) = self.in_block(|cx| cx.expr(else_e, want2.as_ref()))?;
         let et = self.ty(ev);
         if !tt.is_deferred() && !et.is_deferred() && tt != et {
-            return err(else_e.span(), format!("`if` and `else` have different types: `{tt}` and `{et}`"));
+            return err(
+                else_e.span(),
+                format!("`if` and `else` have different types: `{tt}` and `{et}`"),
+            );
         }
         // If either side is deferred, so is the result: the target compiler checks the other.
-        self.vars[result].ty = if tt.is_deferred() || et.is_deferred() { Ty::Deferred } else { tt };
+        self.vars[result].ty = if tt.is_deferred() || et.is_deferred() {
+            Ty::Deferred
+        } else {
+            tt
+        };
         let mut then = then;
-        then.push(Stmt { kind: StmtKind::Assign { dst: result, op: Op::Copy(tv), define: false }, span: i.then_branch.span() });
-        els.push(Stmt { kind: StmtKind::Assign { dst: result, op: Op::Copy(ev), define: false }, span: else_e.span() });
-        self.blocks.last_mut().expect("block").insert(decl_at, Stmt { kind: StmtKind::Declare { var: result }, span: i.span() });
+        then.push(Stmt {
+            kind: StmtKind::Assign {
+                dst: result,
+                op: Op::Copy(tv),
+                define: false,
+            },
+            span: i.then_branch.span(),
+        });
+        els.push(Stmt {
+            kind: StmtKind::Assign {
+                dst: result,
+                op: Op::Copy(ev),
+                define: false,
+            },
+            span: else_e.span(),
+        });
+        self.blocks.last_mut().expect("block").insert(
+            decl_at,
+            Stmt {
+                kind: StmtKind::Declare { var: result },
+                span: i.span(),
+            },
+        );
         self.push(StmtKind::If { cond: c, then, els }, i.span());
         Ok(Some(result))
     }
@@ -723,7 +930,10 @@ impl Lowerer {
                 let v = self.expr(rhs, Some(&place_ty))?;
                 let vt = self.ty(v);
                 if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
-                    return err(rhs.span(), format!("mismatched types: expected `{place_ty}`, found `{vt}`"));
+                    return err(
+                        rhs.span(),
+                        format!("mismatched types: expected `{place_ty}`, found `{vt}`"),
+                    );
                 }
                 v
             }
@@ -735,9 +945,16 @@ impl Lowerer {
                     self.expr(rhs, None)?
                 };
                 let rt = self.ty(r);
-                let res = binary_result(op, &place_ty, &rt).map_err(|m| syn::Error::new(span, m))?;
+                let res =
+                    binary_result(op, &place_ty, &rt).map_err(|m| syn::Error::new(span, m))?;
                 if !res.is_deferred() && !place_ty.is_deferred() && res != place_ty {
-                    return err(span, format!("`{}=` would change the type of `{place_ty}` to `{res}`", op.symbol()));
+                    return err(
+                        span,
+                        format!(
+                            "`{}=` would change the type of `{place_ty}` to `{res}`",
+                            op.symbol()
+                        ),
+                    );
                 }
                 self.def(Op::Binary(op, old, r), place_ty.clone(), span)
             }
@@ -751,13 +968,19 @@ impl Lowerer {
             Expr::Path(p) if p.path.get_ident().is_some() => {
                 let name = p.path.get_ident().expect("ident").to_string();
                 let Some(var) = self.lookup(&name) else {
-                    return err(p.span(), format!("cannot assign to `{name}`: no such variable"));
+                    return err(
+                        p.span(),
+                        format!("cannot assign to `{name}`: no such variable"),
+                    );
                 };
                 if !self.vars[var].mutable {
                     return err(p.span(), format!("cannot assign to immutable variable `{name}`: declare it `let mut {name}`"));
                 }
                 if matches!(self.vars[var].ty, Ty::Array(..)) {
-                    return err(p.span(), "arrays cannot be reassigned in kernels: write to their elements");
+                    return err(
+                        p.span(),
+                        "arrays cannot be reassigned in kernels: write to their elements",
+                    );
                 }
                 Ok(Place::Local { var, path: vec![] })
             }
@@ -767,13 +990,19 @@ impl Lowerer {
                 };
                 let mut inner = self.place(&f.base)?;
                 match &mut inner {
-                    Place::Local { path, .. } | Place::Elem { path, .. } => path.push(m.to_string()),
+                    Place::Local { path, .. } | Place::Elem { path, .. } => {
+                        path.push(m.to_string())
+                    }
                 }
                 Ok(inner)
             }
             Expr::Index(ix) => {
                 let (array, index) = self.array_index(ix)?;
-                Ok(Place::Elem { array, index, path: vec![] })
+                Ok(Place::Elem {
+                    array,
+                    index,
+                    path: vec![],
+                })
             }
             other => err(other.span(), "cannot assign to this expression"),
         }
@@ -782,7 +1011,9 @@ impl Lowerer {
     fn member_ty(&self, base: &Ty, name: &str, span: Span) -> R<Ty> {
         match base {
             Ty::Deferred | Ty::Struct(_) => Ok(Ty::Deferred),
-            t => t.member_ty(name).ok_or_else(|| syn::Error::new(span, format!("`{t}` has no field `{name}`"))),
+            t => t
+                .member_ty(name)
+                .ok_or_else(|| syn::Error::new(span, format!("`{t}` has no field `{name}`"))),
         }
     }
 
@@ -808,12 +1039,27 @@ impl Lowerer {
                     Ty::Array(e, _) => *e,
                     _ => Ty::Deferred,
                 };
-                (self.def(Op::Load { array: *array, index: index.clone() }, elem, span), path.clone())
+                (
+                    self.def(
+                        Op::Load {
+                            array: *array,
+                            index: index.clone(),
+                        },
+                        elem,
+                        span,
+                    ),
+                    path.clone(),
+                )
             }
         };
         let n = path.len();
         for (k, m) in path.into_iter().enumerate() {
-            let t = if k + 1 == n { ty.clone() } else { self.member_ty(&self.ty(v), &m, span).unwrap_or(Ty::Deferred) };
+            let t = if k + 1 == n {
+                ty.clone()
+            } else {
+                self.member_ty(&self.ty(v), &m, span)
+                    .unwrap_or(Ty::Deferred)
+            };
             v = self.def(Op::Member(v, m), t, span);
         }
         v
@@ -821,36 +1067,81 @@ impl Lowerer {
 
     fn write_place(&mut self, p: Place, value: VarId, span: Span) {
         match p {
-            Place::Local { var, path } if path.is_empty() => {
-                self.push(StmtKind::Assign { dst: var, op: Op::Copy(value), define: false }, span)
-            }
+            Place::Local { var, path } if path.is_empty() => self.push(
+                StmtKind::Assign {
+                    dst: var,
+                    op: Op::Copy(value),
+                    define: false,
+                },
+                span,
+            ),
             Place::Local { var, path } => self.push(StmtKind::SetMember { var, path, value }, span),
-            Place::Elem { array, index, path } if path.is_empty() => {
-                self.push(StmtKind::Store { array, index, value }, span)
-            }
+            Place::Elem { array, index, path } if path.is_empty() => self.push(
+                StmtKind::Store {
+                    array,
+                    index,
+                    value,
+                },
+                span,
+            ),
             Place::Elem { array, index, path } => {
                 let elem = match self.ty(array) {
                     Ty::Array(e, _) => *e,
                     _ => Ty::Deferred,
                 };
-                let old = self.def(Op::Load { array, index: index.clone() }, elem.clone(), span);
+                let old = self.def(
+                    Op::Load {
+                        array,
+                        index: index.clone(),
+                    },
+                    elem.clone(),
+                    span,
+                );
                 let tmp = self.new_var(None, elem, true);
-                self.push(StmtKind::Assign { dst: tmp, op: Op::Copy(old), define: true }, span);
-                self.push(StmtKind::SetMember { var: tmp, path, value }, span);
-                self.push(StmtKind::Store { array, index, value: tmp }, span);
+                self.push(
+                    StmtKind::Assign {
+                        dst: tmp,
+                        op: Op::Copy(old),
+                        define: true,
+                    },
+                    span,
+                );
+                self.push(
+                    StmtKind::SetMember {
+                        var: tmp,
+                        path,
+                        value,
+                    },
+                    span,
+                );
+                self.push(
+                    StmtKind::Store {
+                        array,
+                        index,
+                        value: tmp,
+                    },
+                    span,
+                );
             }
         }
     }
 
     fn macro_stmt(&mut self, mac: &syn::Macro) -> R<()> {
-        let name = mac.path.segments.last().map(|s| s.ident.to_string()).unwrap_or_default();
+        let name = mac
+            .path
+            .segments
+            .last()
+            .map(|s| s.ident.to_string())
+            .unwrap_or_default();
         let newline = match name.as_str() {
             "println" => true,
             "print" => false,
             _ => {
                 return err(
                     mac.path.span(),
-                    format!("macro `{name}!` is not supported in kernels (print! and println! are)"),
+                    format!(
+                        "macro `{name}!` is not supported in kernels (print! and println! are)"
+                    ),
                 )
             }
         };
@@ -859,8 +1150,16 @@ impl Lowerer {
         let mut it = args.iter();
         let fmt = match it.next() {
             None => String::new(),
-            Some(Expr::Lit(syn::ExprLit { lit: syn::Lit::Str(s), .. })) => s.value(),
-            Some(other) => return err(other.span(), "the first argument of print! must be a format string"),
+            Some(Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Str(s),
+                ..
+            })) => s.value(),
+            Some(other) => {
+                return err(
+                    other.span(),
+                    "the first argument of print! must be a format string",
+                )
+            }
         };
         let fmt_span = mac.tokens.span();
         let mut values = Vec::new();
@@ -901,11 +1200,15 @@ impl Lowerer {
                         Some(_) => return err(span, format!("format spec `{{{spec}}}` is not supported in kernels: use {{}} or {{:?}}")),
                     };
                     let var = if name.is_empty() {
-                        let v = *values.get(next).ok_or_else(|| syn::Error::new(span, "more {} placeholders than arguments"))?;
+                        let v = *values.get(next).ok_or_else(|| {
+                            syn::Error::new(span, "more {} placeholders than arguments")
+                        })?;
                         next += 1;
                         v
                     } else {
-                        self.lookup(name).ok_or_else(|| syn::Error::new(span, format!("no variable `{name}` to print")))?
+                        self.lookup(name).ok_or_else(|| {
+                            syn::Error::new(span, format!("no variable `{name}` to print"))
+                        })?
                     };
                     if !text.is_empty() {
                         pieces.push(FmtPiece::Text(std::mem::take(&mut text)));
@@ -917,7 +1220,10 @@ impl Lowerer {
             }
         }
         if next != values.len() {
-            return err(span, format!("{} arguments but {} placeholders", values.len(), next));
+            return err(
+                span,
+                format!("{} arguments but {} placeholders", values.len(), next),
+            );
         }
         if !text.is_empty() {
             pieces.push(FmtPiece::Text(text));
@@ -963,7 +1269,10 @@ impl Lowerer {
                     }
                     Ok(self.def(Op::Unary(UnOp::Not, v), t, span))
                 }
-                syn::UnOp::Deref(_) => err(span, "references are not supported in kernels (no `*` dereference)"),
+                syn::UnOp::Deref(_) => err(
+                    span,
+                    "references are not supported in kernels (no `*` dereference)",
+                ),
                 _ => err(span, "this operator is not supported in kernels"),
             },
             Expr::Binary(b) => {
@@ -973,10 +1282,12 @@ impl Lowerer {
                 match b.op {
                     syn::BinOp::And(_) | syn::BinOp::Or(_) => self.short_circuit(b),
                     _ => {
-                        let op = map_binop(&b.op).ok_or_else(|| syn::Error::new(span, "unsupported operator"))?;
+                        let op = map_binop(&b.op)
+                            .ok_or_else(|| syn::Error::new(span, "unsupported operator"))?;
                         let hint = if op.is_comparison() { None } else { want };
                         let (l, r) = self.operand_pair(&b.left, &b.right, hint, op)?;
-                        let res = binary_result(op, &self.ty(l), &self.ty(r)).map_err(|m| syn::Error::new(b.op.span(), m))?;
+                        let res = binary_result(op, &self.ty(l), &self.ty(r))
+                            .map_err(|m| syn::Error::new(b.op.span(), m))?;
                         Ok(self.def(Op::Binary(op, l, r), res, span))
                     }
                 }
@@ -1021,8 +1332,16 @@ impl Lowerer {
                             return err(m.receiver.span(), "`.shape()` is defined on arrays");
                         };
                         let k = match strip(&ix.index) {
-                            Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }) => i.base10_parse::<u8>()?,
-                            other => return err(other.span(), "index `.shape()` with a literal dimension"),
+                            Expr::Lit(syn::ExprLit {
+                                lit: syn::Lit::Int(i),
+                                ..
+                            }) => i.base10_parse::<u8>()?,
+                            other => {
+                                return err(
+                                    other.span(),
+                                    "index `.shape()` with a literal dimension",
+                                )
+                            }
                         };
                         if k >= n {
                             return err(ix.index.span(), format!("the array has {n} dimension(s)"));
@@ -1046,33 +1365,70 @@ impl Lowerer {
                 self.blocks.last_mut().expect("block").extend(block);
                 v.ok_or_else(|| syn::Error::new(span, "this block yields no value"))
             }
-            Expr::Closure(_) => err(span, "closures are not supported in kernels: write a #[func]"),
-            Expr::Reference(_) => err(span, "references are not supported in kernels: pass values and arrays directly"),
-            Expr::Array(_) | Expr::Repeat(_) => err(span, "fixed-size arrays are not supported in kernels: use a glam vector or Array<T>"),
-            Expr::Tuple(_) => err(span, "tuples are not supported in kernels (except array indices a[(i, j)])"),
+            Expr::Closure(_) => err(
+                span,
+                "closures are not supported in kernels: write a #[func]",
+            ),
+            Expr::Reference(_) => err(
+                span,
+                "references are not supported in kernels: pass values and arrays directly",
+            ),
+            Expr::Array(_) | Expr::Repeat(_) => err(
+                span,
+                "fixed-size arrays are not supported in kernels: use a glam vector or Array<T>",
+            ),
+            Expr::Tuple(_) => err(
+                span,
+                "tuples are not supported in kernels (except array indices a[(i, j)])",
+            ),
             Expr::Match(_) => err(span, "`match` is not supported in kernels: use if / else"),
-            Expr::Struct(_) => err(span, "struct literals are not supported in kernels yet: pass the struct as an argument"),
+            Expr::Struct(_) => err(
+                span,
+                "struct literals are not supported in kernels yet: pass the struct as an argument",
+            ),
             Expr::Range(_) => err(span, "ranges are only supported as `for` loop bounds"),
             Expr::Try(_) => err(span, "`?` is not supported in kernels"),
             Expr::Async(_) | Expr::Await(_) => err(span, "async is not supported in kernels"),
             Expr::Unsafe(_) => err(span, "`unsafe` blocks are not supported in kernels"),
             Expr::Macro(m) => {
-                let name = m.mac.path.segments.last().map(|s| s.ident.to_string()).unwrap_or_default();
+                let name = m
+                    .mac
+                    .path
+                    .segments
+                    .last()
+                    .map(|s| s.ident.to_string())
+                    .unwrap_or_default();
                 if name == "vec" || name == "format" {
-                    err(span, format!("`{name}!` allocates on the heap, which kernels cannot do"))
+                    err(
+                        span,
+                        format!("`{name}!` allocates on the heap, which kernels cannot do"),
+                    )
                 } else {
-                    err(span, format!("macro `{name}!` cannot be used as a value in kernels"))
+                    err(
+                        span,
+                        format!("macro `{name}!` cannot be used as a value in kernels"),
+                    )
                 }
             }
             Expr::Assign(_) => err(span, "assignment is a statement, not a value"),
-            Expr::While(_) | Expr::ForLoop(_) | Expr::Loop(_) => err(span, "loops do not yield values in kernels"),
-            Expr::Return(_) | Expr::Break(_) | Expr::Continue(_) => err(span, "control flow is a statement, not a value"),
+            Expr::While(_) | Expr::ForLoop(_) | Expr::Loop(_) => {
+                err(span, "loops do not yield values in kernels")
+            }
+            Expr::Return(_) | Expr::Break(_) | Expr::Continue(_) => {
+                err(span, "control flow is a statement, not a value")
+            }
             _ => err(span, "this expression is not supported in kernels"),
         }
     }
 
     /// Lowers two operands, typing an unsuffixed literal on either side from the other.
-    fn operand_pair(&mut self, l: &Expr, r: &Expr, want: Option<&Ty>, op: BinOp) -> R<(VarId, VarId)> {
+    fn operand_pair(
+        &mut self,
+        l: &Expr,
+        r: &Expr,
+        want: Option<&Ty>,
+        op: BinOp,
+    ) -> R<(VarId, VarId)> {
         let shift = matches!(op, BinOp::Shl | BinOp::Shr);
         match (flex_literal(l).is_some(), flex_literal(r).is_some()) {
             (true, false) => {
@@ -1087,13 +1443,21 @@ impl Lowerer {
             }
             (false, true) => {
                 let lv = self.expr(l, want)?;
-                let rv = if shift { self.expr(r, None)? } else { self.literal_next_to(r, lv, op)? };
+                let rv = if shift {
+                    self.expr(r, None)?
+                } else {
+                    self.literal_next_to(r, lv, op)?
+                };
                 Ok((lv, rv))
             }
             (true, true) => {
                 let w = want.and_then(|w| literal_hint(w, op));
                 let lv = self.expr(l, w.as_ref())?;
-                let rv = if shift { self.expr(r, None)? } else { self.expr(r, w.as_ref())? };
+                let rv = if shift {
+                    self.expr(r, None)?
+                } else {
+                    self.expr(r, w.as_ref())?
+                };
                 Ok((lv, rv))
             }
             (false, false) => Ok((self.expr(l, None)?, self.expr(r, None)?)),
@@ -1117,15 +1481,33 @@ impl Lowerer {
         let l = self.expr(&b.left, Some(&BOOL))?;
         self.expect_bool(l, b.left.span())?;
         let result = self.new_var(None, BOOL, true);
-        self.push(StmtKind::Assign { dst: result, op: Op::Copy(l), define: true }, b.left.span());
+        self.push(
+            StmtKind::Assign {
+                dst: result,
+                op: Op::Copy(l),
+                define: true,
+            },
+            b.left.span(),
+        );
         let (rblock, rv) = self.in_block(|cx| {
             let rv = cx.expr(&b.right, Some(&BOOL))?;
             cx.expect_bool(rv, b.right.span())?;
-            cx.push(StmtKind::Assign { dst: result, op: Op::Copy(rv), define: false }, b.right.span());
+            cx.push(
+                StmtKind::Assign {
+                    dst: result,
+                    op: Op::Copy(rv),
+                    define: false,
+                },
+                b.right.span(),
+            );
             Ok(rv)
         })?;
         let _ = rv;
-        let (then, els) = if is_and { (rblock, vec![]) } else { (vec![], rblock) };
+        let (then, els) = if is_and {
+            (rblock, vec![])
+        } else {
+            (vec![], rblock)
+        };
         self.push(StmtKind::If { cond: l, then, els }, b.span());
         Ok(result)
     }
@@ -1143,12 +1525,19 @@ impl Lowerer {
                 Ok(self.def(Op::Lit(Lit::Bool(b.value)), BOOL, span))
             }
             syn::Lit::Int(i) => {
-                let v: i128 = i.base10_parse::<u128>().map_err(|_| syn::Error::new(span, "integer literal too large"))? as i128;
+                let v: i128 = i
+                    .base10_parse::<u128>()
+                    .map_err(|_| syn::Error::new(span, "integer literal too large"))?
+                    as i128;
                 let v = if neg { -v } else { v };
                 let ty = match i.suffix() {
                     "" => match want_scalar {
                         Some(Ty::Scalar(s)) if s.is_float() => {
-                            return Ok(self.def(Op::Lit(Lit::Float(v as f64)), Ty::Scalar(s), span));
+                            return Ok(self.def(
+                                Op::Lit(Lit::Float(v as f64)),
+                                Ty::Scalar(s),
+                                span,
+                            ));
                         }
                         Some(Ty::Scalar(s)) if s.is_int() => Ty::Scalar(s),
                         Some(Ty::Deferred) => Ty::Deferred,
@@ -1156,7 +1545,11 @@ impl Lowerer {
                     },
                     suf => match Scalar::from_name(suf) {
                         Some(s) if s.is_float() => {
-                            return Ok(self.def(Op::Lit(Lit::Float(v as f64)), Ty::Scalar(s), span));
+                            return Ok(self.def(
+                                Op::Lit(Lit::Float(v as f64)),
+                                Ty::Scalar(s),
+                                span,
+                            ));
                         }
                         Some(s) if s.is_int() => Ty::Scalar(s),
                         _ => return err(span, format!("unknown literal suffix `{suf}`")),
@@ -1171,13 +1564,18 @@ impl Lowerer {
                 Ok(self.def(Op::Lit(Lit::Int(v)), ty, span))
             }
             syn::Lit::Float(f) => {
-                let v: f64 = f.base10_parse().map_err(|_| syn::Error::new(span, "bad float literal"))?;
+                let v: f64 = f
+                    .base10_parse()
+                    .map_err(|_| syn::Error::new(span, "bad float literal"))?;
                 let v = if neg { -v } else { v };
                 let ty = match f.suffix() {
                     "" => match want_scalar {
                         Some(Ty::Scalar(s)) if s.is_float() => Ty::Scalar(s),
                         Some(Ty::Scalar(s)) if s.is_int() => {
-                            return err(span, format!("float literal where `{}` is expected", s.name()));
+                            return err(
+                                span,
+                                format!("float literal where `{}` is expected", s.name()),
+                            );
                         }
                         Some(Ty::Deferred) => Ty::Deferred,
                         _ => crate::types::F32,
@@ -1188,9 +1586,10 @@ impl Lowerer {
                 };
                 Ok(self.def(Op::Lit(Lit::Float(v)), ty, span))
             }
-            syn::Lit::Str(_) | syn::Lit::ByteStr(_) | syn::Lit::CStr(_) => {
-                err(span, "strings are not supported in kernels (except as print! formats)")
-            }
+            syn::Lit::Str(_) | syn::Lit::ByteStr(_) | syn::Lit::CStr(_) => err(
+                span,
+                "strings are not supported in kernels (except as print! formats)",
+            ),
             _ => err(span, "this literal is not supported in kernels"),
         }
     }
@@ -1206,7 +1605,12 @@ impl Lowerer {
             }
             return err(span, format!("cannot find `{name}` in this kernel: kernels see their parameters and locals (use a parameter for outside values)"));
         }
-        let segs: Vec<String> = p.path.segments.iter().map(|s| s.ident.to_string()).collect();
+        let segs: Vec<String> = p
+            .path
+            .segments
+            .iter()
+            .map(|s| s.ident.to_string())
+            .collect();
         if let Some((s, f, i)) = path_constant(&segs) {
             let lit = match i {
                 Some(i) => Lit::Int(i),
@@ -1219,7 +1623,11 @@ impl Lowerer {
             if let Some(ty) = Ty::from_glam_name(&segs[segs.len() - 2]) {
                 let name = segs[segs.len() - 1].clone();
                 let known = match &ty {
-                    Ty::Vector(..) => ["ZERO", "ONE", "NEG_ONE", "X", "Y", "Z", "W", "NEG_X", "NEG_Y", "NEG_Z", "NEG_W", "MIN", "MAX", "INFINITY", "NAN"].contains(&name.as_str()),
+                    Ty::Vector(..) => [
+                        "ZERO", "ONE", "NEG_ONE", "X", "Y", "Z", "W", "NEG_X", "NEG_Y", "NEG_Z",
+                        "NEG_W", "MIN", "MAX", "INFINITY", "NAN",
+                    ]
+                    .contains(&name.as_str()),
                     Ty::Matrix(..) => ["ZERO", "IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Quat(_) => ["IDENTITY", "NAN"].contains(&name.as_str()),
                     _ => false,
@@ -1227,10 +1635,21 @@ impl Lowerer {
                 if !known {
                     return err(span, format!("`{ty}::{name}` is not supported in kernels"));
                 }
-                return Ok(self.def(Op::Construct { ty: ty.clone(), ctor: Ctor::Const(name), args: vec![] }, ty, span));
+                return Ok(self.def(
+                    Op::Construct {
+                        ty: ty.clone(),
+                        ctor: Ctor::Const(name),
+                        args: vec![],
+                    },
+                    ty,
+                    span,
+                ));
             }
         }
-        err(span, "paths to outside items are not supported in kernels: pass the value as a parameter")
+        err(
+            span,
+            "paths to outside items are not supported in kernels: pass the value as a parameter",
+        )
     }
 
     /// `a[i]`, `a[(i, j)]`: the array variable and one index variable per dimension.
@@ -1240,7 +1659,12 @@ impl Lowerer {
         let ndim = match &at {
             Ty::Array(_, n) => *n,
             Ty::Deferred => return err(ix.expr.span(), "only arrays can be indexed"),
-            t => return err(ix.expr.span(), format!("`{t}` cannot be indexed: vectors use .x .y .z .w")),
+            t => {
+                return err(
+                    ix.expr.span(),
+                    format!("`{t}` cannot be indexed: vectors use .x .y .z .w"),
+                )
+            }
         };
         let index = self.index_vars(&ix.index, ndim)?;
         Ok((array, index))
@@ -1253,7 +1677,10 @@ impl Lowerer {
         };
         if parts.len() != ndim as usize {
             let example = ["i", "(i, j)", "(i, j, k)", "(i, j, k, l)"][ndim as usize - 1];
-            return err(e.span(), format!("this array has {ndim} dimension(s): index it as a[{example}]"));
+            return err(
+                e.span(),
+                format!("this array has {ndim} dimension(s): index it as a[{example}]"),
+            );
         }
         let mut out = Vec::new();
         for p in parts {
@@ -1270,11 +1697,20 @@ impl Lowerer {
     fn call(&mut self, c: &syn::ExprCall, want: Option<&Ty>) -> R<VarId> {
         let span = c.span();
         let Expr::Path(fp) = strip(&c.func) else {
-            return err(c.func.span(), "only functions named by a path can be called in kernels");
+            return err(
+                c.func.span(),
+                "only functions named by a path can be called in kernels",
+            );
         };
-        let segs: Vec<String> = fp.path.segments.iter().map(|s| s.ident.to_string()).collect();
+        let segs: Vec<String> = fp
+            .path
+            .segments
+            .iter()
+            .map(|s| s.ident.to_string())
+            .collect();
         let last = segs.last().cloned().unwrap_or_default();
-        let prefix_ok = segs.len() == 1 || (segs.len() == 2 && (segs[0] == "wp" || segs[0] == "warp_lang"));
+        let prefix_ok =
+            segs.len() == 1 || (segs.len() == 2 && (segs[0] == "wp" || segs[0] == "warp_lang"));
 
         if prefix_ok && last == "tid" {
             if !c.args.is_empty() {
@@ -1311,7 +1747,9 @@ impl Lowerer {
         if segs.len() >= 2 {
             let ty_name = &segs[segs.len() - 2];
             if ty_name.starts_with(|c: char| c.is_ascii_uppercase()) {
-                let heap = ["String", "Vec", "Box", "Rc", "Arc", "HashMap", "BTreeMap", "VecDeque"];
+                let heap = [
+                    "String", "Vec", "Box", "Rc", "Arc", "HashMap", "BTreeMap", "VecDeque",
+                ];
                 if heap.contains(&ty_name.as_str()) {
                     return err(span, format!("heap type `{ty_name}` is not supported in kernels: kernels cannot allocate"));
                 }
@@ -1320,7 +1758,10 @@ impl Lowerer {
         }
         // A user #[func].
         if segs.len() == 1 && last == self.fn_name {
-            return err(span, format!("recursion is not supported in kernels: `{last}` calls itself"));
+            return err(
+                span,
+                format!("recursion is not supported in kernels: `{last}` calls itself"),
+            );
         }
         // The func's parameter types are not visible here: literals are left to rustc, which
         // types them from the func's signature.
@@ -1332,7 +1773,14 @@ impl Lowerer {
         if !self.callees.iter().any(|p| p == &fp.path) {
             self.callees.push(fp.path.clone());
         }
-        Ok(self.def(Op::Func { path: fp.path.clone(), args }, Ty::Deferred, span))
+        Ok(self.def(
+            Op::Func {
+                path: fp.path.clone(),
+                args,
+            },
+            Ty::Deferred,
+            span,
+        ))
     }
 
     fn construct(&mut self, ty: Ty, ctor: &str, c: &syn::ExprCall, span: Span) -> R<VarId> {
@@ -1341,28 +1789,63 @@ impl Lowerer {
             (Ty::Vector(_, n), "new") => (Ctor::Components, vec![scalar.clone(); *n as usize]),
             (Ty::Vector(..), "splat") => (Ctor::Splat, vec![scalar.clone()]),
             (Ty::Quat(_), "from_xyzw") => (Ctor::Components, vec![scalar.clone(); 4]),
-            (Ty::Matrix(s, n), "from_cols") => (Ctor::Components, vec![Ty::Vector(*s, *n); *n as usize]),
+            (Ty::Matrix(s, n), "from_cols") => {
+                (Ctor::Components, vec![Ty::Vector(*s, *n); *n as usize])
+            }
             (Ty::Matrix(s, n), "from_diagonal") => (Ctor::Splat, vec![Ty::Vector(*s, *n)]),
-            _ => return err(c.func.span(), format!("`{ty}::{ctor}` is not supported in kernels")),
+            _ => {
+                return err(
+                    c.func.span(),
+                    format!("`{ty}::{ctor}` is not supported in kernels"),
+                )
+            }
         };
         if c.args.len() != arg_tys.len() {
-            return err(span, format!("`{ty}::{ctor}` takes {} argument(s)", arg_tys.len()));
+            return err(
+                span,
+                format!("`{ty}::{ctor}` takes {} argument(s)", arg_tys.len()),
+            );
         }
         let mut args = Vec::new();
         for (a, want) in c.args.iter().zip(&arg_tys) {
             let v = self.expr(a, Some(want))?;
             let t = self.ty(v);
             if !t.is_deferred() && t != *want {
-                return err(a.span(), format!("mismatched types: expected `{want}`, found `{t}`"));
+                return err(
+                    a.span(),
+                    format!("mismatched types: expected `{want}`, found `{t}`"),
+                );
             }
             args.push(v);
         }
-        Ok(self.def(Op::Construct { ty: ty.clone(), ctor: ctor_kind, args }, ty, span))
+        Ok(self.def(
+            Op::Construct {
+                ty: ty.clone(),
+                ctor: ctor_kind,
+                args,
+            },
+            ty,
+            span,
+        ))
     }
 
-    fn builtin_call(&mut self, b: &'static Builtin, args: &[&Expr], _want: Option<&Ty>, span: Span) -> R<VarId> {
+    fn builtin_call(
+        &mut self,
+        b: &'static Builtin,
+        args: &[&Expr],
+        _want: Option<&Ty>,
+        span: Span,
+    ) -> R<VarId> {
         if args.len() != b.params.len() {
-            return err(span, format!("`{}` takes {} argument(s), found {}", b.name, b.params.len(), args.len()));
+            return err(
+                span,
+                format!(
+                    "`{}` takes {} argument(s), found {}",
+                    b.name,
+                    b.params.len(),
+                    args.len()
+                ),
+            );
         }
         // First pass: everything but unsuffixed literals (and index tuples), in order.
         let mut vals: Vec<Option<Vec<VarId>>> = vec![None; args.len()];
@@ -1389,7 +1872,11 @@ impl Lowerer {
         for (i, (a, pos)) in args.iter().zip(b.params).enumerate() {
             if *pos == Pos::Index {
                 let vs = self.index_vars(a, array_ndim)?;
-                arg_tys[i] = ArgTy::Known(if array_ndim == 1 { self.ty(vs[0]) } else { Ty::TidTuple(array_ndim) });
+                arg_tys[i] = ArgTy::Known(if array_ndim == 1 {
+                    self.ty(vs[0])
+                } else {
+                    Ty::TidTuple(array_ndim)
+                });
                 vals[i] = Some(vs);
             }
         }
@@ -1401,7 +1888,14 @@ impl Lowerer {
                 None => out.push(self.expr(a, Some(&resolved.params[i]))?),
             }
         }
-        Ok(self.def(Op::Builtin { builtin: b, args: out }, resolved.ret, span))
+        Ok(self.def(
+            Op::Builtin {
+                builtin: b,
+                args: out,
+            },
+            resolved.ret,
+            span,
+        ))
     }
 
     fn method_call(&mut self, m: &syn::ExprMethodCall, want: Option<&Ty>) -> R<VarId> {
@@ -1416,7 +1910,10 @@ impl Lowerer {
             if matches!(self.ty(a), Ty::Array(..)) {
                 return Ok(self.def(Op::Len(a), USIZE, span));
             }
-            return err(m.method.span(), format!("`len()` is defined on arrays, not on `{}`", self.ty(a)));
+            return err(
+                m.method.span(),
+                format!("`len()` is defined on arrays, not on `{}`", self.ty(a)),
+            );
         }
         if let Some(b) = builtins::lookup_method(&name) {
             let mut args: Vec<&Expr> = vec![&m.receiver];
@@ -1425,7 +1922,11 @@ impl Lowerer {
         }
         let recv = self.expr(&m.receiver, None)?;
         let rt = self.ty(recv);
-        let known: Vec<&str> = builtins::BUILTINS.iter().filter(|b| b.method).map(|b| b.name).collect();
+        let known: Vec<&str> = builtins::BUILTINS
+            .iter()
+            .filter(|b| b.method)
+            .map(|b| b.name)
+            .collect();
         err(
             m.method.span(),
             format!("unknown method `{name}` on `{rt}` in a kernel; methods available: {}, powf, ln, len", known.join(", ")),
@@ -1453,7 +1954,9 @@ fn lower_ctor_fn(name: &str) -> Option<Ty> {
 fn is_tid_call(e: &Expr) -> bool {
     match strip(e) {
         Expr::Call(c) => match strip(&c.func) {
-            Expr::Path(p) => p.path.segments.last().is_some_and(|s| s.ident == "tid") && c.args.is_empty(),
+            Expr::Path(p) => {
+                p.path.segments.last().is_some_and(|s| s.ident == "tid") && c.args.is_empty()
+            }
             _ => false,
         },
         _ => false,
@@ -1464,8 +1967,16 @@ fn is_tid_call(e: &Expr) -> bool {
 fn is_block_like(e: &Expr) -> bool {
     matches!(
         e,
-        Expr::If(_) | Expr::While(_) | Expr::ForLoop(_) | Expr::Loop(_) | Expr::Block(_) | Expr::Assign(_) | Expr::Macro(_)
-            | Expr::Return(_) | Expr::Break(_) | Expr::Continue(_)
+        Expr::If(_)
+            | Expr::While(_)
+            | Expr::ForLoop(_)
+            | Expr::Loop(_)
+            | Expr::Block(_)
+            | Expr::Assign(_)
+            | Expr::Macro(_)
+            | Expr::Return(_)
+            | Expr::Break(_)
+            | Expr::Continue(_)
     ) || matches!(e, Expr::Binary(b) if is_compound_assign(&b.op))
 }
 
@@ -1481,7 +1992,8 @@ mod tests {
     use syn::parse_quote;
 
     fn lower(item: syn::ItemFn) -> Function {
-        lower_fn(&item, FnKind::Kernel).unwrap_or_else(|e| panic!("{:?}", e.iter().map(|e| e.to_string()).collect::<Vec<_>>()))
+        lower_fn(&item, FnKind::Kernel)
+            .unwrap_or_else(|e| panic!("{:?}", e.iter().map(|e| e.to_string()).collect::<Vec<_>>()))
     }
 
     fn errors(item: syn::ItemFn, kind: FnKind) -> Vec<String> {
@@ -1492,7 +2004,13 @@ mod tests {
     }
 
     fn find_var(f: &Function, name: &str) -> Ty {
-        f.vars.iter().rev().find(|v| v.name.as_deref() == Some(name)).unwrap().ty.clone()
+        f.vars
+            .iter()
+            .rev()
+            .find(|v| v.name.as_deref() == Some(name))
+            .unwrap()
+            .ty
+            .clone()
     }
 
     #[test]
@@ -1544,7 +2062,11 @@ mod tests {
             FnKind::Kernel,
         );
         assert_eq!(e.len(), 4, "{e:?}");
-        assert!(e[0].contains("cannot apply `+` to `f32` and `f64`"), "{}", e[0]);
+        assert!(
+            e[0].contains("cannot apply `+` to `f32` and `f64`"),
+            "{}",
+            e[0]
+        );
         assert!(e[1].contains("unknown method `frobnicate`"), "{}", e[1]);
         assert!(e[2].contains("closures"), "{}", e[2]);
         assert!(e[3].contains("references"), "{}", e[3]);
@@ -1553,22 +2075,101 @@ mod tests {
     #[test]
     fn subset_errors() {
         let cases: Vec<(syn::ItemFn, &str)> = vec![
-            (parse_quote!(fn k(a: Array<f32>) { let s = String::new(); }), "heap type `String`"),
-            (parse_quote!(fn k(a: Vec<f32>) {}), "heap type"),
-            (parse_quote!(fn k(a: &f32) {}), "references"),
-            (parse_quote!(fn k(x: f32) { x = 1.0; }), "immutable"),
-            (parse_quote!(fn k(a: Array<f32, 2>) { let v = a[0]; }), "2 dimension"),
-            (parse_quote!(fn k(x: f32) { break; }), "outside of a loop"),
-            (parse_quote!(fn k(x: i32) { match x { _ => {} } }), "match"),
-            (parse_quote!(fn k(x: f32) -> f32 { x }), "kernels return nothing"),
-            (parse_quote!(fn k(x: u8) { let y = x + 300; }), "out of range"),
-            (parse_quote!(fn k(x: i32) { let y = x + 1.5; }), "float literal"),
+            (
+                parse_quote!(
+                    fn k(a: Array<f32>) {
+                        let s = String::new();
+                    }
+                ),
+                "heap type `String`",
+            ),
+            (
+                parse_quote!(
+                    fn k(a: Vec<f32>) {}
+                ),
+                "heap type",
+            ),
+            (
+                parse_quote!(
+                    fn k(a: &f32) {}
+                ),
+                "references",
+            ),
+            (
+                parse_quote!(
+                    fn k(x: f32) {
+                        x = 1.0;
+                    }
+                ),
+                "immutable",
+            ),
+            (
+                parse_quote!(
+                    fn k(a: Array<f32, 2>) {
+                        let v = a[0];
+                    }
+                ),
+                "2 dimension",
+            ),
+            (
+                parse_quote!(
+                    fn k(x: f32) {
+                        break;
+                    }
+                ),
+                "outside of a loop",
+            ),
+            (
+                parse_quote!(
+                    fn k(x: i32) {
+                        match x {
+                            _ => {}
+                        }
+                    }
+                ),
+                "match",
+            ),
+            (
+                parse_quote!(
+                    fn k(x: f32) -> f32 {
+                        x
+                    }
+                ),
+                "kernels return nothing",
+            ),
+            (
+                parse_quote!(
+                    fn k(x: u8) {
+                        let y = x + 300;
+                    }
+                ),
+                "out of range",
+            ),
+            (
+                parse_quote!(
+                    fn k(x: i32) {
+                        let y = x + 1.5;
+                    }
+                ),
+                "float literal",
+            ),
         ];
         for (item, want) in cases {
             let e = errors(item.clone(), FnKind::Kernel);
-            assert!(e.iter().any(|m| m.contains(want)), "{} -> {e:?}", quote::quote!(#item));
+            assert!(
+                e.iter().any(|m| m.contains(want)),
+                "{} -> {e:?}",
+                quote::quote!(#item)
+            );
         }
-        let e = errors(parse_quote!(fn f(x: f32) -> f32 { f(x) }), FnKind::Func);
+        let e = errors(
+            parse_quote!(
+                fn f(x: f32) -> f32 {
+                    f(x)
+                }
+            ),
+            FnKind::Func,
+        );
         assert!(e[0].contains("recursion"), "{e:?}");
     }
 
@@ -1589,7 +2190,10 @@ mod tests {
         walk_stmts(&f.body, &mut |s| match &s.kind {
             StmtKind::For { range, .. } => {
                 fors += 1;
-                assert!(matches!(range.adapters.as_slice(), [RangeAdapter::Rev, RangeAdapter::StepBy(_)]));
+                assert!(matches!(
+                    range.adapters.as_slice(),
+                    [RangeAdapter::Rev, RangeAdapter::StepBy(_)]
+                ));
             }
             StmtKind::Loop { .. } => loops += 1,
             _ => {}
@@ -1600,9 +2204,22 @@ mod tests {
 
     #[test]
     fn tid_forms() {
-        let f = lower(parse_quote!(fn k(a: Array<f32, 2>) { let (i, j) = tid(); a[(i, j)] = 1.0; }));
+        let f = lower(parse_quote!(
+            fn k(a: Array<f32, 2>) {
+                let (i, j) = tid();
+                a[(i, j)] = 1.0;
+            }
+        ));
         assert_eq!(f.tid_ndim, Some(2));
-        let e = errors(parse_quote!(fn k() { let i = tid(); let (a, b) = tid(); }), FnKind::Kernel);
+        let e = errors(
+            parse_quote!(
+                fn k() {
+                    let i = tid();
+                    let (a, b) = tid();
+                }
+            ),
+            FnKind::Kernel,
+        );
         assert!(e[0].contains("1 and with 2"), "{e:?}");
     }
 }

@@ -53,12 +53,20 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
 
 fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     let PathArguments::AngleBracketed(args) = &seg.arguments else {
-        return Err(syn::Error::new(whole.span(), "Array needs an element type: Array<f32>, Array<Vec3, 2>"));
+        return Err(syn::Error::new(
+            whole.span(),
+            "Array needs an element type: Array<f32>, Array<Vec3, 2>",
+        ));
     };
     let mut it = args.args.iter();
     let elem = match it.next() {
         Some(GenericArgument::Type(t)) => parse_type(t)?,
-        _ => return Err(syn::Error::new(whole.span(), "Array needs an element type: Array<f32>")),
+        _ => {
+            return Err(syn::Error::new(
+                whole.span(),
+                "Array needs an element type: Array<f32>",
+            ))
+        }
     };
     if matches!(elem, Ty::Array(..) | Ty::Unit) || elem == Ty::Scalar(Scalar::Bool) {
         return Err(syn::Error::new(
@@ -70,7 +78,10 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         None => 1,
         Some(arg) => {
             let n = const_usize(arg).ok_or_else(|| {
-                syn::Error::new(arg.span(), "the array dimension must be a literal 1, 2, 3 or 4")
+                syn::Error::new(
+                    arg.span(),
+                    "the array dimension must be a literal 1, 2, 3 or 4",
+                )
             })?;
             if !(1..=4).contains(&n) {
                 return Err(syn::Error::new(arg.span(), "arrays have 1 to 4 dimensions"));
@@ -79,7 +90,10 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         }
     };
     if let Some(extra) = it.next() {
-        return Err(syn::Error::new(extra.span(), "Array takes an element type and a dimension count"));
+        return Err(syn::Error::new(
+            extra.span(),
+            "Array takes an element type and a dimension count",
+        ));
     }
     Ok(Ty::Array(Box::new(elem), ndim))
 }
@@ -91,11 +105,18 @@ fn const_usize(arg: &GenericArgument) -> Option<usize> {
         _ => return None,
     };
     match expr {
-        syn::Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }) => i.base10_parse().ok(),
+        syn::Expr::Lit(syn::ExprLit {
+            lit: syn::Lit::Int(i),
+            ..
+        }) => i.base10_parse().ok(),
         syn::Expr::Block(b) if b.block.stmts.len() == 1 => match &b.block.stmts[0] {
-            syn::Stmt::Expr(syn::Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }), None) => {
-                i.base10_parse().ok()
-            }
+            syn::Stmt::Expr(
+                syn::Expr::Lit(syn::ExprLit {
+                    lit: syn::Lit::Int(i),
+                    ..
+                }),
+                None,
+            ) => i.base10_parse().ok(),
             _ => None,
         },
         _ => None,
@@ -109,16 +130,35 @@ mod tests {
 
     #[test]
     fn types() {
-        assert_eq!(parse_type(&parse_quote!(f32)).unwrap(), Ty::Scalar(Scalar::F32));
-        assert_eq!(parse_type(&parse_quote!(glam::DVec3)).unwrap(), Ty::Vector(Scalar::F64, 3));
+        assert_eq!(
+            parse_type(&parse_quote!(f32)).unwrap(),
+            Ty::Scalar(Scalar::F32)
+        );
+        assert_eq!(
+            parse_type(&parse_quote!(glam::DVec3)).unwrap(),
+            Ty::Vector(Scalar::F64, 3)
+        );
         assert_eq!(
             parse_type(&parse_quote!(Array<Vec3>)).unwrap(),
             Ty::Array(Box::new(Ty::Vector(Scalar::F32, 3)), 1)
         );
-        assert_eq!(parse_type(&parse_quote!(wp::Array<u32, 3>)).unwrap(), Ty::Array(Box::new(Ty::Scalar(Scalar::U32)), 3));
-        assert_eq!(parse_type(&parse_quote!(Params)).unwrap(), Ty::Struct("Params".into()));
-        for bad in [quote::quote!(&f32), quote::quote!(String), quote::quote!(Vec<f32>), quote::quote!([f32; 3]),
-            quote::quote!(Array<f32, 5>), quote::quote!(Array<bool>), quote::quote!(Option<f32>)] {
+        assert_eq!(
+            parse_type(&parse_quote!(wp::Array<u32, 3>)).unwrap(),
+            Ty::Array(Box::new(Ty::Scalar(Scalar::U32)), 3)
+        );
+        assert_eq!(
+            parse_type(&parse_quote!(Params)).unwrap(),
+            Ty::Struct("Params".into())
+        );
+        for bad in [
+            quote::quote!(&f32),
+            quote::quote!(String),
+            quote::quote!(Vec<f32>),
+            quote::quote!([f32; 3]),
+            quote::quote!(Array<f32, 5>),
+            quote::quote!(Array<bool>),
+            quote::quote!(Option<f32>),
+        ] {
             let t: Type = syn::parse2(bad.clone()).unwrap();
             assert!(parse_type(&t).is_err(), "{bad}");
         }
