@@ -391,16 +391,7 @@ fn path_constant(segments: &[String]) -> Option<(Scalar, f64, Option<i128>)> {
         };
         Some((s, v, None))
     } else if s.is_int() {
-        let (min, max): (i128, i128) = match s {
-            Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
-            Scalar::I16 => (i16::MIN.into(), i16::MAX.into()),
-            Scalar::I32 => (i32::MIN.into(), i32::MAX.into()),
-            Scalar::I64 | Scalar::Isize => (i64::MIN.into(), i64::MAX.into()),
-            Scalar::U8 => (0, u8::MAX.into()),
-            Scalar::U16 => (0, u16::MAX.into()),
-            Scalar::U32 => (0, u32::MAX.into()),
-            _ => (0, u64::MAX.into()),
-        };
+        let (min, max) = int_range(s);
         match name {
             "MAX" => Some((s, 0.0, Some(max))),
             "MIN" => Some((s, 0.0, Some(min))),
