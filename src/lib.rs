@@ -61,7 +61,7 @@ pub mod prelude {
 pub mod __private {
     pub use bytemuck;
     pub use glam;
-    pub use warp_core::{builtins, max_depth, ops, ArrayView, Grid, KResult, RangeProg};
+    pub use warp_core::{builtins, max_depth, ops, ArrayView, FuncInfo, Grid, KResult, RangeProg};
     pub use warp_runtime::{ArgCtx, Device, Element, Kernel, KernelArg, KernelInfo, Result};
 }
 

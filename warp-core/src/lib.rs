@@ -10,6 +10,7 @@ pub mod builtins;
 pub mod fault;
 pub mod grid;
 pub mod index;
+pub mod meta;
 pub mod ops;
 pub mod range;
 pub mod view;
@@ -17,6 +18,7 @@ pub mod view;
 pub use fault::{Fault, FaultKind, KResult};
 pub use grid::Grid;
 pub use index::KernelIndex;
+pub use meta::FuncInfo;
 pub use range::RangeProg;
 pub use view::ArrayView;
 

@@ -102,6 +102,8 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
+    let (cuda_src, cuda_sections) = cuda_template(&f);
+    let callees = &f.callees;
 
     let out = quote! {
         #(#doc_attrs)*
@@ -121,6 +123,10 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     params: &[#(#pnames),*],
                     tid_ndim: #tid,
                     same_shape: &[#(#groups),*],
+                    file: ::core::file!(),
+                    cuda: #cuda_src,
+                    cuda_sections: &[#(#cuda_sections),*],
+                    callees: &[#(&#callees::__WP_FUNC),*],
                 };
                 unsafe fn cpu_params(
                     __args: &Self::Args<'_>,
@@ -188,6 +194,16 @@ fn dump(name: &str, tokens: &TokenStream) {
     }
 }
 
+/// The CUDA template of a function, and its library sections. A function the CUDA emitter
+/// cannot express yet still compiles for the CPU; its template is an `#error` that NVRTC
+/// reports at the first CUDA launch.
+fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>) {
+    match crate::back::cuda::emit(f, "@@FILE@@") {
+        Ok(t) => (Literal::string(&t.source), t.sections.iter().map(|s| Literal::string(s)).collect()),
+        Err(e) => (Literal::string(&format!("#error \"`{}` cannot run on CUDA yet: {e}\"\n", f.name)), vec![]),
+    }
+}
+
 /// Forces the recursion-depth constants of called funcs to be evaluated: a cycle of funcs
 /// calling each other is then a compile-time error (a cycle in const evaluation).
 fn callee_depths(callees: &[syn::Path]) -> TokenStream {
@@ -247,6 +263,21 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         .iter()
         .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
+    let (cuda_src, cuda_sections) = cuda_template(&f);
+    let name_str = Literal::string(&f.name);
+    let callees = &f.callees;
+    let func_info = quote! {
+        /// What the CUDA assembler needs to know about this func.
+        #[doc(hidden)]
+        #vis const __WP_FUNC: ::warp_lang::__private::FuncInfo = ::warp_lang::__private::FuncInfo {
+            name: #name_str,
+            module: ::core::module_path!(),
+            file: ::core::file!(),
+            cuda: #cuda_src,
+            sections: &[#(#cuda_sections),*],
+            callees: &[#(&#callees::__WP_FUNC),*],
+        };
+    };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
     // points there and names this constant.
     let depth_const = quote_spanned! {name.span()=>
@@ -264,6 +295,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 
         impl #name {
             #depth_const
+            #func_info
 
             #[doc(hidden)]
             #[inline(always)]

@@ -57,6 +57,14 @@ pub struct KernelInfo {
     /// Groups of parameters (by index; `usize::MAX` stands for the launch dim) that the kernel
     /// declared with `#[kernel(same_shape(a, b, dim))]`.
     pub same_shape: &'static [&'static [usize]],
+    /// `file!()` at the definition (for `#line` directives in CUDA source).
+    pub file: &'static str,
+    /// The CUDA C++ template of the kernel (see `warp-macros/src/back/cuda.rs`).
+    pub cuda: &'static str,
+    /// CUDA library sections the kernel itself uses.
+    pub cuda_sections: &'static [&'static str],
+    /// The funcs the kernel calls, in the order of its `@@F<k>@@` placeholders.
+    pub callees: &'static [&'static warp_core::FuncInfo],
 }
 
 /// A compiled kernel. Implemented by `#[kernel]`; not meant to be implemented by hand.

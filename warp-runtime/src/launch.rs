@@ -260,6 +260,10 @@ mod tests {
             params: &["out"],
             tid_ndim: Some(1),
             same_shape: &[&[0, usize::MAX]],
+            file: file!(),
+            cuda: "",
+            cuda_sections: &[],
+            callees: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {
@@ -296,6 +300,10 @@ mod tests {
             params: &["data", "scale"],
             tid_ndim: Some(1),
             same_shape: &[],
+            file: file!(),
+            cuda: "",
+            cuda_sections: &[],
+            callees: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let data = ArgCtx {
@@ -340,6 +348,10 @@ mod tests {
             params: &["out"],
             tid_ndim: Some(2),
             same_shape: &[],
+            file: file!(),
+            cuda: "",
+            cuda_sections: &[],
+            callees: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {

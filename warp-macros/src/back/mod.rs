@@ -1,3 +1,4 @@
 //! Back ends: code emitted from the IR. Each walks the same statements.
 
+pub mod cuda;
 pub mod rust;

@@ -1,0 +1,493 @@
+//! CUDA C++ back end: the IR to a source template for one kernel or func.
+//!
+//! The template is C++ over the builtin library in `warp-cuda/cuda/` (namespace `wp`), with
+//! two kinds of placeholder that the runtime's assembler fills in when it builds the kernel's
+//! translation unit:
+//! - `@@SELF@@`: this function's C++ name;
+//! - `@@F<k>@@`: the C++ name of the `k`-th func in this function's callee list.
+//!
+//! Funcs are named by the assembler, not here, because two funcs of the same name may live in
+//! different modules and the macro cannot see module paths. Every statement is preceded by a
+//! `#line` directive pointing at the user's Rust file and line, so NVRTC errors and device
+//! faults name Rust source lines.
+//!
+//! Conventions shared with the library: every function takes a trailing `wp::ctx_t* __ctx`
+//! (where faults are recorded); array parameters are `wp::array_t<T, N>`; integer arithmetic
+//! goes through `wp::w_*`; `as` casts through `wp::cast<T>` (Rust semantics, no C++ UB);
+//! a literal beside a value the macro cannot type is `wp::lit_like<decltype(v)>(..)`.
+
+use crate::ir::*;
+use crate::types::{Scalar, Ty};
+use std::fmt::Write;
+
+/// A CUDA template and what it needs.
+pub struct CudaTemplate {
+    pub source: String,
+    /// Library sections used (`scalar`, `vector`, `atomic`), beyond the always-present core.
+    pub sections: Vec<&'static str>,
+}
+
+/// Emits the CUDA template of a kernel (`kind == Kernel`) or func.
+pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
+    let mut e = Emitter { f, out: String::new(), indent: 1, file: file.to_string(), sections: Vec::new(), tmp: 0 };
+    e.function()?;
+    Ok(CudaTemplate { source: e.out, sections: e.sections })
+}
+
+struct Emitter<'a> {
+    f: &'a Function,
+    out: String,
+    indent: usize,
+    file: String,
+    sections: Vec<&'static str>,
+    tmp: usize,
+}
+
+/// The C++ spelling of a type the macro knows.
+pub fn cpp_type(t: &Ty) -> Option<String> {
+    Some(match t {
+        Ty::Scalar(Scalar::Bool) => "bool".into(),
+        Ty::Scalar(s) => format!("wp::{}", s.name()),
+        Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) => format!("wp::{}", t.glam_name()?),
+        Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
+        Ty::Struct(name) => name.clone(),
+        _ => return None,
+    })
+}
+
+/// A float literal as C++ source of the given type, exactly (hex floats round-trip).
+fn float_lit(v: f64, s: Scalar) -> String {
+    let ty = if s == Scalar::F32 { "wp::f32" } else { "wp::f64" };
+    if v.is_nan() {
+        return format!("wp::nan<{ty}>()");
+    }
+    if v.is_infinite() {
+        return format!("{}wp::inf<{ty}>()", if v < 0.0 { "-" } else { "" });
+    }
+    if s == Scalar::F32 {
+        // f32 literal: the f32 value, written so that C++ parses exactly it.
+        format!("{:?}f", v as f32).replace("inf", "INFINITY")
+    } else {
+        format!("{v:?}")
+    }
+}
+
+fn int_lit(v: i128, s: Scalar) -> String {
+    match s {
+        Scalar::I64 | Scalar::Isize if v == i64::MIN as i128 => "(-9223372036854775807LL - 1)".into(),
+        Scalar::I32 if v == i32::MIN as i128 => "(-2147483647 - 1)".into(),
+        Scalar::U64 | Scalar::Usize => format!("(wp::{})({}ULL)", s.name(), v as u64),
+        Scalar::I64 | Scalar::Isize => format!("(wp::{})({}LL)", s.name(), v as i64),
+        Scalar::U32 => format!("{}u", v as u32),
+        Scalar::I32 => format!("{}", v as i32),
+        _ => format!("(wp::{})({v})", s.name()),
+    }
+}
+
+fn is_int(t: &Ty) -> bool {
+    t.is_int_scalar() || matches!(t, Ty::Vector(s, _) if !s.is_float())
+}
+
+impl<'a> Emitter<'a> {
+    fn var(&self, v: VarId) -> String {
+        match &self.f.vars[v].name {
+            Some(n) => format!("{}_{v}", n.trim_start_matches("r#")),
+            None => format!("t{v}"),
+        }
+    }
+
+    fn section(&mut self, s: &'static str) {
+        if !self.sections.contains(&s) {
+            self.sections.push(s);
+        }
+    }
+
+    fn line(&mut self, span: proc_macro2::Span, text: &str) {
+        let line = span.start().line;
+        if line > 0 {
+            let _ = writeln!(self.out, "#line {line} \"{}\"", self.file);
+        }
+        for _ in 0..self.indent {
+            self.out.push_str("    ");
+        }
+        self.out.push_str(text);
+        self.out.push('\n');
+    }
+
+    fn ty_of(&self, v: VarId) -> String {
+        cpp_type(self.f.ty(v)).unwrap_or_else(|| format!("decltype({})", self.var(v)))
+    }
+
+    fn function(&mut self) -> Result<(), String> {
+        let mut params: Vec<String> = Vec::new();
+        for p in &self.f.params {
+            let t = cpp_type(&p.ty).ok_or_else(|| format!("parameter `{}` has no CUDA type", p.name))?;
+            params.push(format!("{t} {}", self.var(p.var)));
+        }
+        match self.f.kind {
+            FnKind::Kernel => {
+                // The per-thread function; the entry point (emitted by the assembler) runs the
+                // grid-stride loop and calls it, so that `return;` ends only this thread.
+                params.push("const wp::launch_t& __launch".into());
+                params.push("wp::i64 __flat".into());
+                params.push("wp::ctx_t* __ctx".into());
+                let _ = writeln!(self.out, "static WP_FN void @@SELF@@({}) {{", params.join(", "));
+                if let Some(n) = self.f.tid_ndim {
+                    let _ = writeln!(self.out, "    wp::i64 __tid[4];\n    wp::unflatten(__launch, __flat, __tid, {n});");
+                }
+            }
+            FnKind::Func => {
+                params.push("wp::ctx_t* __ctx".into());
+                let ret = if matches!(self.f.ret, Ty::Unit) {
+                    "void".to_string()
+                } else {
+                    cpp_type(&self.f.ret).ok_or("the func's return type has no CUDA type")?
+                };
+                let _ = writeln!(self.out, "static WP_FN {ret} @@SELF@@({}) {{", params.join(", "));
+            }
+        }
+        let body = self.f.body.clone();
+        self.block(&body)?;
+        if self.f.kind == FnKind::Func && !matches!(self.f.ret, Ty::Unit) {
+            // Rust proved every path returns; C++ compilers cannot always see it.
+            let _ = writeln!(self.out, "    return {{}};");
+        }
+        self.out.push_str("}\n");
+        if self.f.kind == FnKind::Kernel {
+            // The entry point: a grid-stride loop over the launch, one call per thread.
+            let mut decl: Vec<String> = vec!["wp::launch_t __launch".into(), "wp::ctx_t __ctx_value".into()];
+            let mut call: Vec<String> = Vec::new();
+            for p in &self.f.params {
+                decl.push(format!("{} {}", cpp_type(&p.ty).expect("checked above"), self.var(p.var)));
+                call.push(self.var(p.var));
+            }
+            call.extend(["__launch".into(), "__flat".into(), "&__ctx_value".into()]);
+            let _ = write!(
+                self.out,
+                "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@({}) {{\n    \
+                 const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
+                 for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
+                 @@SELF@@({});\n    }}\n}}\n#endif\n",
+                decl.join(", "),
+                call.join(", ")
+            );
+        }
+        Ok(())
+    }
+
+    fn block(&mut self, b: &Block) -> Result<(), String> {
+        for s in b {
+            self.stmt(s)?;
+        }
+        Ok(())
+    }
+
+    fn nested(&mut self, b: &Block) -> Result<(), String> {
+        self.indent += 1;
+        let r = self.block(b);
+        self.indent -= 1;
+        r
+    }
+
+    fn close(&mut self) {
+        for _ in 0..self.indent {
+            self.out.push_str("    ");
+        }
+        self.out.push_str("}\n");
+    }
+
+    fn stmt(&mut self, s: &Stmt) -> Result<(), String> {
+        let sp = s.span;
+        match &s.kind {
+            StmtKind::Declare { var } => {
+                let t = cpp_type(self.f.ty(*var))
+                    .ok_or("an `if` expression whose value the macro cannot type is not supported on CUDA yet: annotate the `let`")?;
+                let v = self.var(*var);
+                self.line(sp, &format!("{t} {v}{{}};"));
+            }
+            StmtKind::Assign { dst, op, define } => {
+                let rhs = self.op(op, *dst)?;
+                let v = self.var(*dst);
+                if *define {
+                    let t = cpp_type(self.f.ty(*dst)).unwrap_or_else(|| "auto".into());
+                    self.line(sp, &format!("{t} {v} = {rhs};"));
+                } else {
+                    self.line(sp, &format!("{v} = {rhs};"));
+                }
+            }
+            StmtKind::Store { array, index, value } => {
+                let idx = self.index(index);
+                let (a, val) = (self.var(*array), self.var(*value));
+                self.line(sp, &format!("wp::store({a}, {idx}, {val}, __ctx);"));
+            }
+            StmtKind::SetMember { var, path, value } => {
+                let (v, val) = (self.var(*var), self.var(*value));
+                self.line(sp, &format!("{v}.{} = {val};", path.join(".")));
+            }
+            StmtKind::If { cond, then, els } => {
+                let c = self.var(*cond);
+                self.line(sp, &format!("if ({c}) {{"));
+                self.nested(then)?;
+                if !els.is_empty() {
+                    self.line(sp, "} else {");
+                    self.nested(els)?;
+                }
+                self.close();
+            }
+            StmtKind::For { var, range, body } => {
+                self.tmp += 1;
+                let r = format!("__range{}", self.tmp);
+                let n = format!("__n{}", self.tmp);
+                let (s0, e0) = (self.var(range.start), self.var(range.end));
+                self.line(sp, "{");
+                self.indent += 1;
+                self.line(sp, &format!("wp::range_t {r} = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {});", range.inclusive));
+                for a in &range.adapters {
+                    match a {
+                        RangeAdapter::Rev => self.line(sp, &format!("{r} = wp::range_rev({r});")),
+                        RangeAdapter::StepBy(k) => {
+                            let k = self.var(*k);
+                            self.line(sp, &format!("{r} = wp::range_step_by({r}, (wp::i64)({k}), __ctx);"));
+                        }
+                    }
+                }
+                let t = cpp_type(self.f.ty(*var)).unwrap_or_else(|| format!("decltype({e0})"));
+                let v = self.var(*var);
+                self.line(sp, &format!("for (wp::i64 {n} = 0; {n} < {r}.count; ++{n}) {{"));
+                self.indent += 1;
+                self.line(sp, &format!("{t} {v} = wp::cast<{t}>(wp::range_at({r}, {n}));"));
+                self.block(body)?;
+                self.indent -= 1;
+                self.close();
+                self.indent -= 1;
+                self.close();
+            }
+            StmtKind::Loop { body } => {
+                self.line(sp, "for (;;) {");
+                self.nested(body)?;
+                self.close();
+            }
+            StmtKind::Break => self.line(sp, "break;"),
+            StmtKind::Continue => self.line(sp, "continue;"),
+            StmtKind::Return { value: None } => self.line(sp, "return;"),
+            StmtKind::Return { value: Some(v) } => {
+                let v = self.var(*v);
+                self.line(sp, &format!("return {v};"));
+            }
+            StmtKind::Print { pieces, newline } => {
+                let mut parts = Vec::new();
+                for p in pieces {
+                    match p {
+                        FmtPiece::Text(t) => parts.push(format!("printf(\"%s\", {});", c_string(t))),
+                        FmtPiece::Arg { var, .. } => parts.push(format!("wp::print_value({});", self.var(*var))),
+                    }
+                }
+                if *newline {
+                    parts.push("printf(\"\\n\");".into());
+                }
+                self.line(sp, &parts.join(" "));
+            }
+        }
+        Ok(())
+    }
+
+    fn index(&self, index: &[VarId]) -> String {
+        index.iter().map(|v| format!("(wp::i64)({})", self.var(*v))).collect::<Vec<_>>().join(", ")
+    }
+
+    fn op(&mut self, op: &Op, dst: VarId) -> Result<String, String> {
+        let ty = self.f.ty(dst).clone();
+        Ok(match op {
+            Op::Lit(Lit::Bool(b)) => b.to_string(),
+            Op::Lit(Lit::Int(v)) => match &ty {
+                Ty::Scalar(s) if s.is_int() => int_lit(*v, *s),
+                Ty::Scalar(s) if s.is_float() => float_lit(*v as f64, *s),
+                // Deferred on the CPU means rustc types it; in C++ an int literal is `int`.
+                _ => format!("{v}"),
+            },
+            Op::Lit(Lit::Float(v)) => match &ty {
+                Ty::Scalar(s) if s.is_float() => float_lit(*v, *s),
+                _ => format!("{v:?}"),
+            },
+            Op::LitLike(l, like) => {
+                let v = match l {
+                    Lit::Int(i) => *i as f64,
+                    Lit::Float(f) => *f,
+                    Lit::Bool(_) => return Err("bool literal beside an untyped value".into()),
+                };
+                format!("wp::lit_like<decltype({})>({v:?})", self.var(*like))
+            }
+            Op::Copy(v) => self.var(*v),
+            Op::Unary(UnOp::Neg, v) if is_int(self.f.ty(*v)) => format!("wp::w_neg({})", self.var(*v)),
+            Op::Unary(UnOp::Neg, v) => format!("-{}", self.var(*v)),
+            Op::Unary(UnOp::Not, v) if *self.f.ty(*v) == crate::types::BOOL => format!("!{}", self.var(*v)),
+            Op::Unary(UnOp::Not, v) => format!("~{}", self.var(*v)),
+            Op::Binary(op, l, r) => {
+                let (lt, rt) = (self.f.ty(*l).clone(), self.f.ty(*r).clone());
+                let (mut a, mut b) = (self.var(*l), self.var(*r));
+                let int = is_int(&lt) && is_int(&rt);
+                if int && !op.is_comparison() && !matches!(op, BinOp::Shl | BinOp::Shr) {
+                    if let (Ty::Scalar(_), v @ Ty::Vector(..)) = (&lt, &rt) {
+                        a = format!("wp::{}_splat({a})", v.glam_name().unwrap_or_default());
+                    }
+                    if let (v @ Ty::Vector(..), Ty::Scalar(_)) = (&lt, &rt) {
+                        b = format!("wp::{}_splat({b})", v.glam_name().unwrap_or_default());
+                    }
+                }
+                match op {
+                    BinOp::Add if int => format!("wp::w_add({a}, {b})"),
+                    BinOp::Sub if int => format!("wp::w_sub({a}, {b})"),
+                    BinOp::Mul if int => format!("wp::w_mul({a}, {b})"),
+                    BinOp::Div if int => format!("wp::w_div({a}, {b}, __ctx)"),
+                    BinOp::Rem if int => format!("wp::w_rem({a}, {b}, __ctx)"),
+                    BinOp::Shl if int => format!("wp::w_shl({a}, (wp::u32)({b}))"),
+                    BinOp::Shr if int => format!("wp::w_shr({a}, (wp::u32)({b}))"),
+                    // Float `%` is C's fmod, as in Rust.
+                    BinOp::Rem if lt.is_float_scalar_ty() => format!("wp::fmod({a}, {b})"),
+                    _ => format!("({a} {} {b})", op.symbol()),
+                }
+            }
+            Op::Cast(v, t) => {
+                let t = cpp_type(t).ok_or("cast to a non-scalar")?;
+                format!("wp::cast<{t}>({})", self.var(*v))
+            }
+            Op::Builtin { builtin, args } => {
+                self.section(builtin.section);
+                if builtin.grad == crate::builtins::Grad::Atomic {
+                    let a = self.var(args[0]);
+                    let idx = self.index(&args[1..args.len() - 1]);
+                    let val = self.var(args[args.len() - 1]);
+                    format!("{}({a}, {idx}, {val}, __ctx)", builtin.cuda)
+                } else {
+                    let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                    format!("{}({})", builtin.cuda, args.join(", "))
+                }
+            }
+            Op::Func { path, args } => {
+                let k = self.f.callees.iter().position(|p| p == path).ok_or("callee not recorded")?;
+                let mut args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                args.push("__ctx".into());
+                format!("@@F{k}@@({})", args.join(", "))
+            }
+            Op::Load { array, index } => format!("wp::load({}, {}, __ctx)", self.var(*array), self.index(index)),
+            Op::Member(v, m) => format!("{}.{m}", self.var(*v)),
+            Op::Construct { ty: t, ctor, args } => {
+                let name = t.glam_name().ok_or("constructed types are glam types")?;
+                let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                match (t, ctor) {
+                    (Ty::Vector(..), Ctor::Components) => format!("wp::{name}_new({})", args.join(", ")),
+                    (Ty::Quat(_), Ctor::Components) => format!("wp::{name}_from_xyzw({})", args.join(", ")),
+                    (Ty::Matrix(..), Ctor::Components) => format!("wp::{name}_from_cols({})", args.join(", ")),
+                    (Ty::Vector(..), Ctor::Splat) => format!("wp::{name}_splat({})", args.join(", ")),
+                    (Ty::Matrix(..), Ctor::Splat) => format!("wp::{name}_from_diagonal({})", args.join(", ")),
+                    (_, Ctor::Const(c)) => format!("wp::{name}_{c}()"),
+                    _ => return Err("unsupported constructor".into()),
+                }
+            }
+            Op::Tid(k) => format!("(wp::usize)__tid[{k}]"),
+            Op::Extent(a, k) => format!("(wp::usize)wp::extent({}, {k})", self.var(*a)),
+            Op::Len(a) => format!("(wp::usize)wp::len({})", self.var(*a)),
+        })
+    }
+}
+
+trait FloatScalar {
+    fn is_float_scalar_ty(&self) -> bool;
+}
+impl FloatScalar for Ty {
+    fn is_float_scalar_ty(&self) -> bool {
+        matches!(self, Ty::Scalar(s) if s.is_float())
+    }
+}
+
+/// A C string literal.
+fn c_string(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '%' => out.push('%'),
+            c if c.is_ascii() && !c.is_ascii_control() => out.push(c),
+            c => {
+                let mut buf = [0u8; 4];
+                for b in c.encode_utf8(&mut buf).bytes() {
+                    let _ = write!(out, "\\x{b:02x}\"\"");
+                }
+            }
+        }
+    }
+    out.push('"');
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use syn::parse_quote;
+
+    fn emit_kernel(item: syn::ItemFn) -> String {
+        let f = crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap();
+        emit(&f, "k.rs").unwrap().source
+    }
+
+    #[test]
+    fn particle_kernel() {
+        let src = emit_kernel(parse_quote! {
+            fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, dt: f32) {
+                let i = tid();
+                let a = -b * v[i] / mass + gravity;
+                v[i] += a * dt;
+                x[i] += v[i] * dt;
+            }
+        });
+        assert!(src.contains("static WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"), "{src}");
+        assert!(src.contains("wp::load(v_1, (wp::i64)(i_"), "{src}");
+        assert!(src.contains("wp::store(x_0,"), "{src}");
+        assert!(src.contains("wp::unflatten(__launch, __flat, __tid, 1);"), "{src}");
+    }
+
+    #[test]
+    fn literals_keep_their_type() {
+        let src = emit_kernel(parse_quote! {
+            fn k(a: Array<f32>, d: Array<f64>) {
+                let i = tid();
+                a[i] = a[i] * 0.1 + 2.0;
+                d[i] = d[i] * 0.1;
+            }
+        });
+        assert!(src.contains("wp::f32 t") && src.contains("= 0.1f;"), "{src}");
+        assert!(src.contains("wp::f64 t") && src.contains("= 0.1;"), "{src}");
+        assert!(!src.contains("= 2.0;"), "an f32 literal must not be a double: {src}");
+    }
+
+    #[test]
+    fn funcs_and_control_flow() {
+        let item: syn::ItemFn = parse_quote! {
+            fn f(x: f32, n: i32) -> f32 {
+                let mut s = 0.0;
+                for k in (0..n).rev().step_by(2) { if k == 3 { continue; } s += helper(x); }
+                while s > 10.0 { s -= 1.0; }
+                if s < 0.0 { return 0.0; }
+                s / (n as f32)
+            }
+        };
+        let f = crate::front::lower::lower_fn(&item, FnKind::Func).unwrap();
+        let src = emit(&f, "k.rs").unwrap().source;
+        assert!(src.contains("static WP_FN wp::f32 @@SELF@@(wp::f32 x_0, wp::i32 n_1, wp::ctx_t* __ctx)"), "{src}");
+        assert!(src.contains("@@F0@@(x_0, __ctx)"), "{src}");
+        assert!(src.contains("wp::range_rev("), "{src}");
+        assert!(src.contains("wp::range_step_by("), "{src}");
+        assert!(src.contains("wp::cast<wp::f32>(n_1)"), "{src}");
+        assert!(src.contains("#line "), "{src}");
+    }
+
+    #[test]
+    fn exact_float_literals() {
+        assert_eq!(float_lit(0.1, Scalar::F32), "0.1f");
+        assert_eq!(float_lit(1e30, Scalar::F32), "1e30f");
+        assert_eq!(float_lit(0.1, Scalar::F64), "0.1");
+        assert_eq!(int_lit(i32::MIN as i128, Scalar::I32), "(-2147483647 - 1)");
+    }
+}
