@@ -16,6 +16,7 @@
 
 pub mod array;
 pub mod config;
+pub mod cuda_source;
 pub mod device;
 pub mod error;
 pub mod kernel;

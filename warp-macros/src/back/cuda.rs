@@ -275,6 +275,7 @@ impl<'a> Emitter<'a> {
                 self.line(sp, &format!("return {v};"));
             }
             StmtKind::Print { pieces, newline } => {
+                self.section("print");
                 let mut parts = Vec::new();
                 for p in pieces {
                     match p {

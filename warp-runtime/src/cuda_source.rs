@@ -1,0 +1,145 @@
+//! Assembles the CUDA translation unit of one kernel from the templates the macro recorded.
+//!
+//! The kernel's template and its funcs' templates (found through `KernelInfo::callees`,
+//! transitively) are concatenated, callees first, with their placeholders filled: each func
+//! gets a unique C++ name here (`wpf<k>_<name>`), because funcs of the same name may live in
+//! different modules. Only the library sections that these templates use are included, so
+//! NVRTC parses no more than the kernel needs.
+
+use crate::kernel::KernelInfo;
+use warp_core::FuncInfo;
+
+/// The assembled source of one kernel.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CudaSource {
+    /// The whole translation unit.
+    pub text: String,
+    /// The `extern "C"` entry point to look up in the compiled module.
+    pub entry: String,
+    /// The per-thread function (useful for host-side tests of the generated code).
+    pub thread_fn: String,
+    /// The library headers it includes, in order (`wp_core.h` first).
+    pub headers: Vec<String>,
+}
+
+/// Funcs reachable from `roots`, callees before callers, each once (keyed by module and name:
+/// two references to one `const` need not share an address).
+fn collect(roots: &[&'static FuncInfo], out: &mut Vec<&'static FuncInfo>) {
+    for f in roots {
+        if out.iter().any(|g| g.module == f.module && g.name == f.name) {
+            continue;
+        }
+        collect(f.callees, out);
+        out.push(f);
+    }
+}
+
+fn fill(template: &str, self_name: &str, file: &str, callees: &[String]) -> String {
+    let mut s = template.replace("@@SELF@@", self_name).replace("@@FILE@@", file);
+    // Highest index first, so that `@@F1@@` is not a prefix problem for `@@F10@@`.
+    for (k, name) in callees.iter().enumerate().rev() {
+        s = s.replace(&format!("@@F{k}@@"), name);
+    }
+    s
+}
+
+/// Builds the translation unit for `info`.
+pub fn assemble(info: &KernelInfo) -> CudaSource {
+    let mut funcs = Vec::new();
+    collect(info.callees, &mut funcs);
+    let name_of = |f: &FuncInfo| -> String {
+        let k = funcs.iter().position(|g| g.module == f.module && g.name == f.name).expect("collected");
+        format!("wpf{k}_{}", f.name)
+    };
+    let mut sections: Vec<&str> = info.cuda_sections.to_vec();
+    for f in &funcs {
+        for s in f.sections {
+            if !sections.contains(s) {
+                sections.push(s);
+            }
+        }
+    }
+    let mut headers = vec!["wp_core.h".to_string()];
+    for s in ["scalar", "vector", "atomic", "print"] {
+        if sections.contains(&s) {
+            headers.push(format!("wp_{s}.h"));
+        }
+    }
+    let mut text = format!("// warp-lang kernel `{}` from {} ({})\n", info.name, info.module, info.file);
+    for h in &headers {
+        text.push_str(&format!("#include \"{h}\"\n"));
+    }
+    for f in &funcs {
+        let callees: Vec<String> = f.callees.iter().map(|c| name_of(c)).collect();
+        text.push('\n');
+        text.push_str(&fill(f.cuda, &name_of(f), f.file, &callees));
+    }
+    let thread_fn = format!("wpk_{}_thread", info.name);
+    let entry = format!("wpk_{}", info.name);
+    let callees: Vec<String> = info.callees.iter().map(|c| name_of(c)).collect();
+    text.push('\n');
+    text.push_str(&fill(info.cuda, &thread_fn, info.file, &callees).replace("@@ENTRY@@", &entry));
+    CudaSource { text, entry, thread_fn, headers }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    static LEAF: FuncInfo = FuncInfo {
+        name: "sq",
+        module: "m::a",
+        file: "src/a.rs",
+        cuda: "static WP_FN wp::f32 @@SELF@@(wp::f32 x, wp::ctx_t* __ctx) {\n#line 3 \"@@FILE@@\"\n    return x * x;\n}\n",
+        sections: &[],
+        callees: &[],
+    };
+    // A func of the same name in another module.
+    static OTHER_SQ: FuncInfo = FuncInfo {
+        name: "sq",
+        module: "m::b",
+        file: "src/b.rs",
+        cuda: "static WP_FN wp::f32 @@SELF@@(wp::f32 x, wp::ctx_t* __ctx) { return x; }\n",
+        sections: &["scalar"],
+        callees: &[],
+    };
+    static MID: FuncInfo = FuncInfo {
+        name: "both",
+        module: "m::a",
+        file: "src/a.rs",
+        cuda: "static WP_FN wp::f32 @@SELF@@(wp::f32 x, wp::ctx_t* __ctx) { return @@F0@@(x, __ctx) + @@F1@@(x, __ctx); }\n",
+        sections: &[],
+        callees: &[&LEAF, &OTHER_SQ],
+    };
+
+    static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];
+
+    #[test]
+    fn funcs_are_named_ordered_and_deduplicated() {
+        let info = KernelInfo {
+            name: "k",
+            module: "m",
+            params: &[],
+            tid_ndim: None,
+            same_shape: &[],
+            file: "src/k.rs",
+            cuda: "static WP_FN void @@SELF@@(wp::ctx_t* __ctx) { @@F0@@(1.0f, __ctx); @@F1@@(2.0f, __ctx); }\nvoid @@ENTRY@@() {}\n",
+            cuda_sections: &["vector"],
+            callees: &KERNEL_CALLEES,
+        };
+        let src = assemble(&info);
+        assert_eq!(src.headers, vec!["wp_core.h", "wp_scalar.h", "wp_vector.h"]);
+        let t = &src.text;
+        // Callees before callers, each once; same-named funcs get different names.
+        let leaf = t.find("wp::f32 wpf0_sq(").expect("leaf");
+        let other = t.find("wp::f32 wpf1_sq(").expect("other sq");
+        let mid = t.find("wp::f32 wpf2_both(").expect("mid");
+        assert!(leaf < mid && other < mid, "{t}");
+        assert_eq!(t.matches("wpf0_sq(wp::f32").count(), 1, "{t}");
+        assert!(t.contains("return wpf0_sq(x, __ctx) + wpf1_sq(x, __ctx);"), "{t}");
+        assert!(t.contains("void wpk_k_thread(wp::ctx_t* __ctx) { wpf2_both(1.0f, __ctx); wpf0_sq(2.0f, __ctx); }"), "{t}");
+        assert!(t.contains("void wpk_k() {}"), "{t}");
+        assert!(t.contains("#line 3 \"src/a.rs\""), "{t}");
+        assert_eq!(src.entry, "wpk_k");
+    }
+}
