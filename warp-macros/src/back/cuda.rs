@@ -114,10 +114,6 @@ impl<'a> Emitter<'a> {
         self.out.push('\n');
     }
 
-    fn ty_of(&self, v: VarId) -> String {
-        cpp_type(self.f.ty(v)).unwrap_or_else(|| format!("decltype({})", self.var(v)))
-    }
-
     fn function(&mut self) -> Result<(), String> {
         let mut params: Vec<String> = Vec::new();
         for p in &self.f.params {
@@ -344,7 +340,7 @@ impl<'a> Emitter<'a> {
                     BinOp::Shl if int => format!("wp::w_shl({a}, (wp::u32)({b}))"),
                     BinOp::Shr if int => format!("wp::w_shr({a}, (wp::u32)({b}))"),
                     // Float `%` is C's fmod, as in Rust.
-                    BinOp::Rem if lt.is_float_scalar_ty() => format!("wp::fmod({a}, {b})"),
+                    BinOp::Rem if matches!(lt, Ty::Scalar(s) if s.is_float()) => format!("wp::fmod({a}, {b})"),
                     _ => format!("({a} {} {b})", op.symbol()),
                 }
             }
@@ -392,14 +388,6 @@ impl<'a> Emitter<'a> {
     }
 }
 
-trait FloatScalar {
-    fn is_float_scalar_ty(&self) -> bool;
-}
-impl FloatScalar for Ty {
-    fn is_float_scalar_ty(&self) -> bool {
-        matches!(self, Ty::Scalar(s) if s.is_float())
-    }
-}
 
 /// A C string literal.
 fn c_string(s: &str) -> String {
