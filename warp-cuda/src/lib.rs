@@ -1,17 +1,45 @@
-//! CUDA backend of warp-lang — a skeleton.
+//! CUDA backend of warp-lang: the driver layer.
 //!
-//! This crate will hold the CUDA side of the runtime, layered as cudarc is:
-//! - `sys`: cudarc's driver and NVRTC bindings, loaded dynamically so that everything builds
-//!   and runs without CUDA installed;
-//! - `result`: thin fallible wrappers (context, module load, launch, memory);
-//! - `safe`: devices, streams, events, device buffers, the NVRTC-to-cubin compiler and the
-//!   on-disk kernel cache;
-//! - the CUDA C++ builtin library (`.cuh` files embedded with `include_str!`), layout-identical
-//!   to the Rust types (glam matrices are column-major).
+//! Built on [cudarc]'s driver and NVRTC bindings, loaded with dlopen at run time, so this crate
+//! builds and runs on machines without CUDA: there, [`probe`] returns the reason and every
+//! fallible call returns [`CudaError::NotAvailable`]. Nothing panics when CUDA is missing.
 //!
-//! The kernel IR in `warp-macros` is already shaped for its CUDA emitter: three-address
-//! statements with types, structured control flow, spans for `#line` directives, and a
-//! builtin table that names each builtin's CUDA function and library section.
+//! Layout (as in cudarc):
+//! - [`error`]: [`CudaError`], [`Result`];
+//! - [`device`]: [`probe`], [`GpuInfo`], [`Gpu`] (primary context + default stream),
+//!   [`Stream`], [`Event`];
+//! - [`memory`]: [`DeviceBuffer`] (untyped, stream-ordered), [`PinnedBuffer`];
+//! - [`compile`](mod@compile): NVRTC to cubin ([`compile()`], [`CompileOptions`], [`nvrtc_version`]);
+//! - [`cache`]: the on-disk kernel cache ([`compile_cached`], [`KernelCache`]);
+//! - [`launch`]: [`Module`], [`Function`], [`Gpu::launch_raw`].
+//!
+//! The CUDA C++ builtin library (the `.cuh` sections named in the builtin table) lives in
+//! `cuda/` and is embedded by the code generator.
+
+#![warn(missing_docs)]
+
+pub mod cache;
+pub mod compile;
+pub mod device;
+pub mod error;
+pub mod launch;
+pub mod memory;
+
+#[cfg(test)]
+mod gpu_tests;
+
+pub use cache::{
+    cache_dir, cache_key, clear_kernel_cache, compile_cached, set_cache_dir, CacheLookup,
+    CacheOutcome, KernelCache, CACHE_DIR_ENV,
+};
+pub use compile::{compile, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled};
+pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_VERSION};
+pub use error::{CudaError, Result};
+pub use launch::{Function, Module};
+pub use memory::{DeviceBuffer, PinnedBuffer};
+
+/// The raw bindings, for callers that need a driver call this crate does not wrap.
+pub use cudarc;
 
 /// The CUDA library sections a kernel can need, as named in the builtin table.
 pub const SECTIONS: &[&str] = &["scalar", "vector", "atomic"];

@@ -1,0 +1,325 @@
+//! NVRTC: CUDA C++ source to a cubin for one architecture.
+//!
+//! We ask for SASS (`--gpu-architecture=sm_XX`, `nvrtcGetCUBIN`) rather than PTX so that the
+//! driver does no JIT at load time: a warm start is then a file read plus `cuModuleLoadData`.
+//! libnvrtc is loaded with dlopen on first use; its absence is an `Err`, never a panic.
+
+use std::ffi::{c_char, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::OnceLock;
+use std::time::Instant;
+
+use cudarc::nvrtc::result::NvrtcError;
+use cudarc::nvrtc::sys;
+
+use crate::device::panic_message;
+use crate::error::{CudaError, Result};
+
+/// NVRTC options. `Default` gives IEEE-faithful code with FMA contraction on (NVRTC's own
+/// default), no fast math, no line info.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CompileOptions<'a> {
+    /// `--use_fast_math` (approximate division, sqrt and transcendentals, flush to zero).
+    pub fast_math: bool,
+    /// `--fmad=true` (contract `a * b + c` into FMA). Set `false` for results that match a
+    /// separate multiply and add bit for bit.
+    pub fmad: bool,
+    /// `-lineinfo`: line tables for profilers and sanitizers (no effect on code).
+    pub line_info: bool,
+    /// Preprocessor definitions, `-DNAME=VALUE` (`-DNAME` when the value is empty).
+    pub defines: &'a [(&'a str, &'a str)],
+    /// In-memory headers `(include name, contents)`, found by `#include "name"`.
+    pub headers: &'a [(&'a str, &'a str)],
+    /// Further NVRTC options, passed verbatim after ours.
+    pub extra_options: &'a [&'a str],
+}
+
+impl Default for CompileOptions<'_> {
+    fn default() -> Self {
+        CompileOptions {
+            fast_math: false,
+            fmad: true,
+            line_info: false,
+            defines: &[],
+            headers: &[],
+            extra_options: &[],
+        }
+    }
+}
+
+impl CompileOptions<'_> {
+    /// The NVRTC command-line options these settings give for `sm_{arch}` (headers are passed
+    /// separately, to `nvrtcCreateProgram`).
+    pub fn nvrtc_args(&self, arch: u32) -> Vec<String> {
+        let mut args = vec![
+            format!("--gpu-architecture=sm_{arch}"),
+            "-std=c++17".to_string(),
+            format!("--fmad={}", self.fmad),
+        ];
+        if self.fast_math {
+            args.push("--use_fast_math".into());
+        }
+        if self.line_info {
+            args.push("-lineinfo".into());
+        }
+        for (name, value) in self.defines {
+            if value.is_empty() {
+                args.push(format!("-D{name}"));
+            } else {
+                args.push(format!("-D{name}={value}"));
+            }
+        }
+        args.extend(self.extra_options.iter().map(|s| s.to_string()));
+        args
+    }
+}
+
+/// A compiled kernel image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Compiled {
+    /// The cubin (ELF with SASS for the requested architecture).
+    pub cubin: Vec<u8>,
+    /// NVRTC's log (warnings); empty when the cubin came from the disk cache.
+    pub log: String,
+    /// Wall time of the NVRTC compile in milliseconds; 0 when it came from the disk cache.
+    pub compile_ms: f64,
+}
+
+static NVRTC: OnceLock<std::result::Result<(i32, i32), String>> = OnceLock::new();
+
+/// Loads libnvrtc (once) and returns its version, or why it cannot be used.
+fn nvrtc_state() -> &'static std::result::Result<(i32, i32), String> {
+    NVRTC.get_or_init(|| {
+        // SAFETY: only tries Library::new on cudarc's candidate names.
+        if !unsafe { sys::is_culib_present() } {
+            return Err(
+                "libnvrtc.so not found (CUDA toolkit runtime libraries not installed, \
+                        or not on the library search path)"
+                    .to_string(),
+            );
+        }
+        let r = catch_unwind(AssertUnwindSafe(|| {
+            let (mut major, mut minor) = (0, 0);
+            // SAFETY: out-parameter call; library present.
+            unsafe { sys::nvrtcVersion(&mut major, &mut minor) }
+                .result()
+                .map(|_| (major, minor))
+        }));
+        match r {
+            Ok(Ok(v)) => Ok(v),
+            Ok(Err(e)) => Err(format!("nvrtcVersion failed: {e}")),
+            Err(p) => Err(format!(
+                "libnvrtc could not be used: {}",
+                panic_message(p.as_ref())
+            )),
+        }
+    })
+}
+
+/// NVRTC's version (major, minor), e.g. (13, 0). Fails with
+/// [`CudaError::NotAvailable`] when libnvrtc cannot be loaded.
+pub fn nvrtc_version() -> Result<(i32, i32)> {
+    nvrtc_state().clone().map_err(CudaError::NotAvailable)
+}
+
+/// The `sm_XX` architectures this NVRTC can compile for, e.g. `[75, 80, 86, 89, 90, 100, ...]`.
+pub fn nvrtc_supported_archs() -> Result<Vec<u32>> {
+    nvrtc_version()?;
+    let mut n = 0;
+    // SAFETY: out-parameter calls; the buffer has the size NVRTC reported.
+    unsafe { sys::nvrtcGetNumSupportedArchs(&mut n) }
+        .result()
+        .map_err(|e| CudaError::nvrtc(e, "nvrtcGetNumSupportedArchs"))?;
+    let mut archs = vec![0i32; n.max(0) as usize];
+    if !archs.is_empty() {
+        unsafe { sys::nvrtcGetSupportedArchs(archs.as_mut_ptr()) }
+            .result()
+            .map_err(|e| CudaError::nvrtc(e, "nvrtcGetSupportedArchs"))?;
+    }
+    Ok(archs.into_iter().map(|a| a.max(0) as u32).collect())
+}
+
+/// Destroys the program on every exit path.
+struct Program(sys::nvrtcProgram);
+
+impl Drop for Program {
+    fn drop(&mut self) {
+        // SAFETY: created by nvrtcCreateProgram, destroyed once.
+        let _ = unsafe { sys::nvrtcDestroyProgram(&mut self.0) };
+    }
+}
+
+fn cstring(s: &str, what: &str) -> Result<CString> {
+    CString::new(s).map_err(|_| CudaError::InvalidArgument(format!("{what} contains a NUL byte")))
+}
+
+fn program_log(prog: sys::nvrtcProgram) -> String {
+    let mut size = 0usize;
+    // SAFETY: out-parameter calls on a live program; buffer of the reported size.
+    if unsafe { sys::nvrtcGetProgramLogSize(prog, &mut size) }
+        .result()
+        .is_err()
+        || size == 0
+    {
+        return String::new();
+    }
+    let mut buf = vec![0u8; size];
+    if unsafe { sys::nvrtcGetProgramLog(prog, buf.as_mut_ptr() as *mut c_char) }
+        .result()
+        .is_err()
+    {
+        return String::new();
+    }
+    while buf.last() == Some(&0) {
+        buf.pop();
+    }
+    String::from_utf8_lossy(&buf).trim_end().to_string()
+}
+
+/// Compiles `source` (program name `name`, used in NVRTC's messages) to a cubin for
+/// `sm_{arch}`. On a compile error the result is [`CudaError::Compile`] with NVRTC's log.
+pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Result<Compiled> {
+    nvrtc_version()?;
+    let start = Instant::now();
+    let c_src = cstring(source, "kernel source")?;
+    let c_name = cstring(name, "program name")?;
+    let mut header_srcs = Vec::with_capacity(opts.headers.len());
+    let mut header_names = Vec::with_capacity(opts.headers.len());
+    for (hname, hsrc) in opts.headers {
+        header_names.push(cstring(hname, "header name")?);
+        header_srcs.push(cstring(hsrc, "header contents")?);
+    }
+    let src_ptrs: Vec<*const c_char> = header_srcs.iter().map(|c| c.as_ptr()).collect();
+    let name_ptrs: Vec<*const c_char> = header_names.iter().map(|c| c.as_ptr()).collect();
+    let args = opts.nvrtc_args(arch);
+    let c_args = args
+        .iter()
+        .map(|a| cstring(a, "NVRTC option"))
+        .collect::<Result<Vec<_>>>()?;
+    let arg_ptrs: Vec<*const c_char> = c_args.iter().map(|c| c.as_ptr()).collect();
+
+    let mut raw: sys::nvrtcProgram = std::ptr::null_mut();
+    // SAFETY: all strings are NUL-terminated and outlive the program (dropped at function end,
+    // after `Program`); header arrays have `len` entries each.
+    unsafe {
+        sys::nvrtcCreateProgram(
+            &mut raw,
+            c_src.as_ptr(),
+            c_name.as_ptr(),
+            src_ptrs.len() as i32,
+            if src_ptrs.is_empty() {
+                std::ptr::null()
+            } else {
+                src_ptrs.as_ptr()
+            },
+            if name_ptrs.is_empty() {
+                std::ptr::null()
+            } else {
+                name_ptrs.as_ptr()
+            },
+        )
+    }
+    .result()
+    .map_err(|e| CudaError::nvrtc(e, format!("nvrtcCreateProgram({name})")))?;
+    let prog = Program(raw);
+
+    // SAFETY: live program; option pointers valid for the call.
+    let compiled =
+        unsafe { sys::nvrtcCompileProgram(prog.0, arg_ptrs.len() as i32, arg_ptrs.as_ptr()) }
+            .result();
+    let log = program_log(prog.0);
+    if let Err(NvrtcError(code)) = compiled {
+        let log = if code == sys::nvrtcResult::NVRTC_ERROR_COMPILATION {
+            log
+        } else {
+            // Invalid options and the like: say which, with the options we passed.
+            let why = CudaError::nvrtc(NvrtcError(code), "nvrtcCompileProgram");
+            format!("{why}\noptions: {}\n{log}", args.join(" "))
+        };
+        return Err(CudaError::Compile {
+            name: name.to_string(),
+            arch,
+            log,
+        });
+    }
+
+    let mut size = 0usize;
+    // SAFETY: live, successfully compiled program; buffer of the reported size.
+    unsafe { sys::nvrtcGetCUBINSize(prog.0, &mut size) }
+        .result()
+        .map_err(|e| CudaError::nvrtc(e, format!("nvrtcGetCUBINSize({name}, sm_{arch})")))?;
+    if size == 0 {
+        return Err(CudaError::Nvrtc {
+            op: format!("nvrtcGetCUBIN({name})"),
+            message: format!("NVRTC produced no cubin for sm_{arch} (is it a real architecture?)"),
+        });
+    }
+    let mut cubin = vec![0u8; size];
+    unsafe { sys::nvrtcGetCUBIN(prog.0, cubin.as_mut_ptr() as *mut c_char) }
+        .result()
+        .map_err(|e| CudaError::nvrtc(e, format!("nvrtcGetCUBIN({name}, sm_{arch})")))?;
+    drop(prog);
+    Ok(Compiled {
+        cubin,
+        log,
+        compile_ms: start.elapsed().as_secs_f64() * 1e3,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_args() {
+        let o = CompileOptions::default();
+        assert_eq!(
+            o.nvrtc_args(90),
+            ["--gpu-architecture=sm_90", "-std=c++17", "--fmad=true"]
+        );
+    }
+
+    #[test]
+    fn all_args() {
+        let o = CompileOptions {
+            fast_math: true,
+            fmad: false,
+            line_info: true,
+            defines: &[("N", "4"), ("FLAG", "")],
+            headers: &[("a.h", "")],
+            extra_options: &["--extra-device-vectorization"],
+        };
+        assert_eq!(
+            o.nvrtc_args(89),
+            [
+                "--gpu-architecture=sm_89",
+                "-std=c++17",
+                "--fmad=false",
+                "--use_fast_math",
+                "-lineinfo",
+                "-DN=4",
+                "-DFLAG",
+                "--extra-device-vectorization"
+            ]
+        );
+    }
+
+    #[test]
+    fn missing_nvrtc_is_an_error_not_a_panic() {
+        let r = compile(
+            "extern \"C\" __global__ void k() {}",
+            "k.cu",
+            &Default::default(),
+            90,
+        );
+        match nvrtc_version() {
+            Err(CudaError::NotAvailable(reason)) => {
+                assert!(matches!(r, Err(CudaError::NotAvailable(ref r2)) if *r2 == reason));
+            }
+            Err(e) => panic!("unexpected {e}"),
+            Ok(_) => {
+                // NVRTC present: whether sm_90 compiles is checked by the GPU tests.
+            }
+        }
+    }
+}
