@@ -40,6 +40,7 @@
 pub use glam;
 pub use warp_core::{Fault, FaultKind};
 pub use warp_macros::{func, kernel, Struct};
+pub use warp_runtime::cuda_source;
 pub use warp_runtime::{
     cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch,
     synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel,

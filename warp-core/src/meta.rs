@@ -11,6 +11,8 @@ pub struct FuncInfo {
     pub file: &'static str,
     /// The CUDA C++ template (`@@SELF@@`, `@@F<k>@@`, `@@FILE@@` placeholders).
     pub cuda: &'static str,
+    /// The C++ return type (what `@@R<k>@@` placeholders of callers become).
+    pub cuda_ret: &'static str,
     /// CUDA library sections the func uses.
     pub sections: &'static [&'static str],
     /// The funcs it calls, in the order of the `@@F<k>@@` placeholders.

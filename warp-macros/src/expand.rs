@@ -102,7 +102,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
-    let (cuda_src, cuda_sections) = cuda_template(&f);
+    let (cuda_src, cuda_sections, _) = cuda_template(&f);
     let callees = &f.callees;
 
     let out = quote! {
@@ -197,10 +197,21 @@ fn dump(name: &str, tokens: &TokenStream) {
 /// The CUDA template of a function, and its library sections. A function the CUDA emitter
 /// cannot express yet still compiles for the CPU; its template is an `#error` that NVRTC
 /// reports at the first CUDA launch.
-fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>) {
+fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>, Literal) {
     match crate::back::cuda::emit(f, "@@FILE@@") {
-        Ok(t) => (Literal::string(&t.source), t.sections.iter().map(|s| Literal::string(s)).collect()),
-        Err(e) => (Literal::string(&format!("#error \"`{}` cannot run on CUDA yet: {e}\"\n", f.name)), vec![]),
+        Ok(t) => (
+            Literal::string(&t.source),
+            t.sections.iter().map(|s| Literal::string(s)).collect(),
+            Literal::string(&t.ret),
+        ),
+        Err(e) => (
+            Literal::string(&format!(
+                "#error \"`{}` cannot run on CUDA yet: {e}\"\n",
+                f.name
+            )),
+            vec![],
+            Literal::string("void"),
+        ),
     }
 }
 
@@ -263,7 +274,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         .iter()
         .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
-    let (cuda_src, cuda_sections) = cuda_template(&f);
+    let (cuda_src, cuda_sections, cuda_ret) = cuda_template(&f);
     let name_str = Literal::string(&f.name);
     let callees = &f.callees;
     let func_info = quote! {
@@ -274,6 +285,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             module: ::core::module_path!(),
             file: ::core::file!(),
             cuda: #cuda_src,
+            cuda_ret: #cuda_ret,
             sections: &[#(#cuda_sections),*],
             callees: &[#(&#callees::__WP_FUNC),*],
         };

@@ -34,11 +34,14 @@ fn collect(roots: &[&'static FuncInfo], out: &mut Vec<&'static FuncInfo>) {
     }
 }
 
-fn fill(template: &str, self_name: &str, file: &str, callees: &[String]) -> String {
-    let mut s = template.replace("@@SELF@@", self_name).replace("@@FILE@@", file);
-    // Highest index first, so that `@@F1@@` is not a prefix problem for `@@F10@@`.
-    for (k, name) in callees.iter().enumerate().rev() {
-        s = s.replace(&format!("@@F{k}@@"), name);
+fn fill(template: &str, self_name: &str, file: &str, callees: &[(String, &str)]) -> String {
+    let mut s = template
+        .replace("@@SELF@@", self_name)
+        .replace("@@FILE@@", file);
+    for (k, (name, ret)) in callees.iter().enumerate() {
+        s = s
+            .replace(&format!("@@F{k}@@"), name)
+            .replace(&format!("@@R{k}@@"), ret);
     }
     s
 }
@@ -48,7 +51,10 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
     let mut funcs = Vec::new();
     collect(info.callees, &mut funcs);
     let name_of = |f: &FuncInfo| -> String {
-        let k = funcs.iter().position(|g| g.module == f.module && g.name == f.name).expect("collected");
+        let k = funcs
+            .iter()
+            .position(|g| g.module == f.module && g.name == f.name)
+            .expect("collected");
         format!("wpf{k}_{}", f.name)
     };
     let mut sections: Vec<&str> = info.cuda_sections.to_vec();
@@ -65,21 +71,36 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
             headers.push(format!("wp_{s}.h"));
         }
     }
-    let mut text = format!("// warp-lang kernel `{}` from {} ({})\n", info.name, info.module, info.file);
+    let mut text = format!(
+        "// warp-lang kernel `{}` from {} ({})\n",
+        info.name, info.module, info.file
+    );
     for h in &headers {
         text.push_str(&format!("#include \"{h}\"\n"));
     }
+    // For the type expressions of values the macro could not type (unevaluated contexts only).
+    text.push_str("namespace wp { template <typename T> T declval(); }\n");
     for f in &funcs {
-        let callees: Vec<String> = f.callees.iter().map(|c| name_of(c)).collect();
+        let callees: Vec<(String, &str)> =
+            f.callees.iter().map(|c| (name_of(c), c.cuda_ret)).collect();
         text.push('\n');
         text.push_str(&fill(f.cuda, &name_of(f), f.file, &callees));
     }
     let thread_fn = format!("wpk_{}_thread", info.name);
     let entry = format!("wpk_{}", info.name);
-    let callees: Vec<String> = info.callees.iter().map(|c| name_of(c)).collect();
+    let callees: Vec<(String, &str)> = info
+        .callees
+        .iter()
+        .map(|c| (name_of(c), c.cuda_ret))
+        .collect();
     text.push('\n');
     text.push_str(&fill(info.cuda, &thread_fn, info.file, &callees).replace("@@ENTRY@@", &entry));
-    CudaSource { text, entry, thread_fn, headers }
+    CudaSource {
+        text,
+        entry,
+        thread_fn,
+        headers,
+    }
 }
 
 #[cfg(test)]
@@ -91,6 +112,7 @@ mod tests {
         module: "m::a",
         file: "src/a.rs",
         cuda: "static WP_FN wp::f32 @@SELF@@(wp::f32 x, wp::ctx_t* __ctx) {\n#line 3 \"@@FILE@@\"\n    return x * x;\n}\n",
+        cuda_ret: "wp::f32",
         sections: &[],
         callees: &[],
     };
@@ -100,6 +122,7 @@ mod tests {
         module: "m::b",
         file: "src/b.rs",
         cuda: "static WP_FN wp::f32 @@SELF@@(wp::f32 x, wp::ctx_t* __ctx) { return x; }\n",
+        cuda_ret: "wp::f32",
         sections: &["scalar"],
         callees: &[],
     };
@@ -108,6 +131,7 @@ mod tests {
         module: "m::a",
         file: "src/a.rs",
         cuda: "static WP_FN wp::f32 @@SELF@@(wp::f32 x, wp::ctx_t* __ctx) { return @@F0@@(x, __ctx) + @@F1@@(x, __ctx); }\n",
+        cuda_ret: "wp::f32",
         sections: &[],
         callees: &[&LEAF, &OTHER_SQ],
     };
@@ -136,7 +160,10 @@ mod tests {
         let mid = t.find("wp::f32 wpf2_both(").expect("mid");
         assert!(leaf < mid && other < mid, "{t}");
         assert_eq!(t.matches("wpf0_sq(wp::f32").count(), 1, "{t}");
-        assert!(t.contains("return wpf0_sq(x, __ctx) + wpf1_sq(x, __ctx);"), "{t}");
+        assert!(
+            t.contains("return wpf0_sq(x, __ctx) + wpf1_sq(x, __ctx);"),
+            "{t}"
+        );
         assert!(t.contains("void wpk_k_thread(wp::ctx_t* __ctx) { wpf2_both(1.0f, __ctx); wpf0_sq(2.0f, __ctx); }"), "{t}");
         assert!(t.contains("void wpk_k() {}"), "{t}");
         assert!(t.contains("#line 3 \"src/a.rs\""), "{t}");

@@ -23,15 +23,33 @@ use std::fmt::Write;
 /// A CUDA template and what it needs.
 pub struct CudaTemplate {
     pub source: String,
+    /// The C++ return type of a func (`void` for kernels).
+    pub ret: String,
     /// Library sections used (`scalar`, `vector`, `atomic`), beyond the always-present core.
     pub sections: Vec<&'static str>,
 }
 
 /// Emits the CUDA template of a kernel (`kind == Kernel`) or func.
 pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
-    let mut e = Emitter { f, out: String::new(), indent: 1, file: file.to_string(), sections: Vec::new(), tmp: 0 };
+    let mut e = Emitter {
+        f,
+        out: String::new(),
+        indent: 1,
+        file: file.to_string(),
+        sections: Vec::new(),
+        tmp: 0,
+    };
     e.function()?;
-    Ok(CudaTemplate { source: e.out, sections: e.sections })
+    let ret = if matches!(f.ret, Ty::Unit) {
+        "void".into()
+    } else {
+        cpp_type(&f.ret).unwrap_or_default()
+    };
+    Ok(CudaTemplate {
+        source: e.out,
+        ret,
+        sections: e.sections,
+    })
 }
 
 struct Emitter<'a> {
@@ -57,7 +75,11 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
 
 /// A float literal as C++ source of the given type, exactly (hex floats round-trip).
 fn float_lit(v: f64, s: Scalar) -> String {
-    let ty = if s == Scalar::F32 { "wp::f32" } else { "wp::f64" };
+    let ty = if s == Scalar::F32 {
+        "wp::f32"
+    } else {
+        "wp::f64"
+    };
     if v.is_nan() {
         return format!("wp::nan<{ty}>()");
     }
@@ -74,7 +96,9 @@ fn float_lit(v: f64, s: Scalar) -> String {
 
 fn int_lit(v: i128, s: Scalar) -> String {
     match s {
-        Scalar::I64 | Scalar::Isize if v == i64::MIN as i128 => "(-9223372036854775807LL - 1)".into(),
+        Scalar::I64 | Scalar::Isize if v == i64::MIN as i128 => {
+            "(-9223372036854775807LL - 1)".into()
+        }
         Scalar::I32 if v == i32::MIN as i128 => "(-2147483647 - 1)".into(),
         Scalar::U64 | Scalar::Usize => format!("(wp::{})({}ULL)", s.name(), v as u64),
         Scalar::I64 | Scalar::Isize => format!("(wp::{})({}LL)", s.name(), v as i64),
@@ -93,6 +117,57 @@ impl<'a> Emitter<'a> {
         match &self.f.vars[v].name {
             Some(n) => format!("{}_{v}", n.trim_start_matches("r#")),
             None => format!("t{v}"),
+        }
+    }
+
+    /// The C++ type of a variable: its spelling when the macro knows it, else a type
+    /// expression built from how the value was made (a callee's declared return type,
+    /// `@@R<k>@@`, filled in by the assembler; `decltype` over `wp::declval` otherwise).
+    fn type_expr(&self, v: VarId, depth: usize) -> Option<String> {
+        if let Some(t) = cpp_type(self.f.ty(v)) {
+            return Some(t);
+        }
+        if depth > 64 {
+            return None;
+        }
+        let decl = |w: VarId| {
+            self.type_expr(w, depth + 1)
+                .map(|t| format!("wp::declval<{t}>()"))
+        };
+        let mut found = None;
+        walk_stmts(&self.f.body, &mut |s| {
+            if found.is_some() {
+                return;
+            }
+            if let StmtKind::Assign { dst, op, .. } = &s.kind {
+                if *dst == v {
+                    found = Some(op.clone());
+                }
+            }
+        });
+        match found? {
+            Op::Copy(w) | Op::LitLike(_, w) => self.type_expr(w, depth + 1),
+            Op::Func { path, .. } => Some(format!(
+                "@@R{}@@",
+                self.f.callees.iter().position(|p| p == &path)?
+            )),
+            Op::Member(w, m) => Some(format!("decltype({}.{m})", decl(w)?)),
+            Op::Binary(op, a, b) if op.is_comparison() => {
+                let _ = (a, b);
+                Some("bool".into())
+            }
+            Op::Binary(op, a, b) => Some(format!(
+                "decltype({} {} {})",
+                decl(a)?,
+                op.symbol(),
+                decl(b)?
+            )),
+            Op::Unary(UnOp::Neg, a) => Some(format!("decltype(-{})", decl(a)?)),
+            Op::Builtin { builtin, args } if builtin.grad != crate::builtins::Grad::Atomic => {
+                let args: Option<Vec<String>> = args.iter().map(|a| decl(*a)).collect();
+                Some(format!("decltype({}({}))", builtin.cuda, args?.join(", ")))
+            }
+            _ => None,
         }
     }
 
@@ -117,7 +192,8 @@ impl<'a> Emitter<'a> {
     fn function(&mut self) -> Result<(), String> {
         let mut params: Vec<String> = Vec::new();
         for p in &self.f.params {
-            let t = cpp_type(&p.ty).ok_or_else(|| format!("parameter `{}` has no CUDA type", p.name))?;
+            let t = cpp_type(&p.ty)
+                .ok_or_else(|| format!("parameter `{}` has no CUDA type", p.name))?;
             params.push(format!("{t} {}", self.var(p.var)));
         }
         match self.f.kind {
@@ -127,9 +203,16 @@ impl<'a> Emitter<'a> {
                 params.push("const wp::launch_t& __launch".into());
                 params.push("wp::i64 __flat".into());
                 params.push("wp::ctx_t* __ctx".into());
-                let _ = writeln!(self.out, "static WP_FN void @@SELF@@({}) {{", params.join(", "));
+                let _ = writeln!(
+                    self.out,
+                    "static WP_FN void @@SELF@@({}) {{",
+                    params.join(", ")
+                );
                 if let Some(n) = self.f.tid_ndim {
-                    let _ = writeln!(self.out, "    wp::i64 __tid[4];\n    wp::unflatten(__launch, __flat, __tid, {n});");
+                    let _ = writeln!(
+                        self.out,
+                        "    wp::i64 __tid[4];\n    wp::unflatten(__launch, __flat, __tid, {n});"
+                    );
                 }
             }
             FnKind::Func => {
@@ -139,7 +222,11 @@ impl<'a> Emitter<'a> {
                 } else {
                     cpp_type(&self.f.ret).ok_or("the func's return type has no CUDA type")?
                 };
-                let _ = writeln!(self.out, "static WP_FN {ret} @@SELF@@({}) {{", params.join(", "));
+                let _ = writeln!(
+                    self.out,
+                    "static WP_FN {ret} @@SELF@@({}) {{",
+                    params.join(", ")
+                );
             }
         }
         let body = self.f.body.clone();
@@ -151,10 +238,17 @@ impl<'a> Emitter<'a> {
         self.out.push_str("}\n");
         if self.f.kind == FnKind::Kernel {
             // The entry point: a grid-stride loop over the launch, one call per thread.
-            let mut decl: Vec<String> = vec!["wp::launch_t __launch".into(), "wp::ctx_t __ctx_value".into()];
+            let mut decl: Vec<String> = vec![
+                "wp::launch_t __launch".into(),
+                "wp::ctx_t __ctx_value".into(),
+            ];
             let mut call: Vec<String> = Vec::new();
             for p in &self.f.params {
-                decl.push(format!("{} {}", cpp_type(&p.ty).expect("checked above"), self.var(p.var)));
+                decl.push(format!(
+                    "{} {}",
+                    cpp_type(&p.ty).expect("checked above"),
+                    self.var(p.var)
+                ));
                 call.push(self.var(p.var));
             }
             call.extend(["__launch".into(), "__flat".into(), "&__ctx_value".into()]);
@@ -196,7 +290,8 @@ impl<'a> Emitter<'a> {
         let sp = s.span;
         match &s.kind {
             StmtKind::Declare { var } => {
-                let t = cpp_type(self.f.ty(*var))
+                let t = self
+                    .type_expr(*var, 0)
                     .ok_or("an `if` expression whose value the macro cannot type is not supported on CUDA yet: annotate the `let`")?;
                 let v = self.var(*var);
                 self.line(sp, &format!("{t} {v}{{}};"));
@@ -211,7 +306,11 @@ impl<'a> Emitter<'a> {
                     self.line(sp, &format!("{v} = {rhs};"));
                 }
             }
-            StmtKind::Store { array, index, value } => {
+            StmtKind::Store {
+                array,
+                index,
+                value,
+            } => {
                 let idx = self.index(index);
                 let (a, val) = (self.var(*array), self.var(*value));
                 self.line(sp, &format!("wp::store({a}, {idx}, {val}, __ctx);"));
@@ -237,21 +336,38 @@ impl<'a> Emitter<'a> {
                 let (s0, e0) = (self.var(range.start), self.var(range.end));
                 self.line(sp, "{");
                 self.indent += 1;
-                self.line(sp, &format!("wp::range_t {r} = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {});", range.inclusive));
+                self.line(
+                    sp,
+                    &format!(
+                        "wp::range_t {r} = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {});",
+                        range.inclusive
+                    ),
+                );
                 for a in &range.adapters {
                     match a {
                         RangeAdapter::Rev => self.line(sp, &format!("{r} = wp::range_rev({r});")),
                         RangeAdapter::StepBy(k) => {
                             let k = self.var(*k);
-                            self.line(sp, &format!("{r} = wp::range_step_by({r}, (wp::i64)({k}), __ctx);"));
+                            self.line(
+                                sp,
+                                &format!("{r} = wp::range_step_by({r}, (wp::i64)({k}), __ctx);"),
+                            );
                         }
                     }
                 }
-                let t = cpp_type(self.f.ty(*var)).unwrap_or_else(|| format!("decltype({e0})"));
+                let t = self
+                    .type_expr(*var, 0)
+                    .unwrap_or_else(|| format!("decltype({e0})"));
                 let v = self.var(*var);
-                self.line(sp, &format!("for (wp::i64 {n} = 0; {n} < {r}.count; ++{n}) {{"));
+                self.line(
+                    sp,
+                    &format!("for (wp::i64 {n} = 0; {n} < {r}.count; ++{n}) {{"),
+                );
                 self.indent += 1;
-                self.line(sp, &format!("{t} {v} = wp::cast<{t}>(wp::range_at({r}, {n}));"));
+                self.line(
+                    sp,
+                    &format!("{t} {v} = wp::cast<{t}>(wp::range_at({r}, {n}));"),
+                );
                 self.block(body)?;
                 self.indent -= 1;
                 self.close();
@@ -275,8 +391,12 @@ impl<'a> Emitter<'a> {
                 let mut parts = Vec::new();
                 for p in pieces {
                     match p {
-                        FmtPiece::Text(t) => parts.push(format!("printf(\"%s\", {});", c_string(t))),
-                        FmtPiece::Arg { var, .. } => parts.push(format!("wp::print_value({});", self.var(*var))),
+                        FmtPiece::Text(t) => {
+                            parts.push(format!("printf(\"%s\", {});", c_string(t)))
+                        }
+                        FmtPiece::Arg { var, .. } => {
+                            parts.push(format!("wp::print_value({});", self.var(*var)))
+                        }
                     }
                 }
                 if *newline {
@@ -289,7 +409,11 @@ impl<'a> Emitter<'a> {
     }
 
     fn index(&self, index: &[VarId]) -> String {
-        index.iter().map(|v| format!("(wp::i64)({})", self.var(*v))).collect::<Vec<_>>().join(", ")
+        index
+            .iter()
+            .map(|v| format!("(wp::i64)({})", self.var(*v)))
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 
     fn op(&mut self, op: &Op, dst: VarId) -> Result<String, String> {
@@ -315,9 +439,13 @@ impl<'a> Emitter<'a> {
                 format!("wp::lit_like<decltype({})>({v:?})", self.var(*like))
             }
             Op::Copy(v) => self.var(*v),
-            Op::Unary(UnOp::Neg, v) if is_int(self.f.ty(*v)) => format!("wp::w_neg({})", self.var(*v)),
+            Op::Unary(UnOp::Neg, v) if is_int(self.f.ty(*v)) => {
+                format!("wp::w_neg({})", self.var(*v))
+            }
             Op::Unary(UnOp::Neg, v) => format!("-{}", self.var(*v)),
-            Op::Unary(UnOp::Not, v) if *self.f.ty(*v) == crate::types::BOOL => format!("!{}", self.var(*v)),
+            Op::Unary(UnOp::Not, v) if *self.f.ty(*v) == crate::types::BOOL => {
+                format!("!{}", self.var(*v))
+            }
             Op::Unary(UnOp::Not, v) => format!("~{}", self.var(*v)),
             Op::Binary(op, l, r) => {
                 let (lt, rt) = (self.f.ty(*l).clone(), self.f.ty(*r).clone());
@@ -340,7 +468,9 @@ impl<'a> Emitter<'a> {
                     BinOp::Shl if int => format!("wp::w_shl({a}, (wp::u32)({b}))"),
                     BinOp::Shr if int => format!("wp::w_shr({a}, (wp::u32)({b}))"),
                     // Float `%` is C's fmod, as in Rust.
-                    BinOp::Rem if matches!(lt, Ty::Scalar(s) if s.is_float()) => format!("wp::fmod({a}, {b})"),
+                    BinOp::Rem if matches!(lt, Ty::Scalar(s) if s.is_float()) => {
+                        format!("wp::fmod({a}, {b})")
+                    }
                     _ => format!("({a} {} {b})", op.symbol()),
                 }
             }
@@ -361,22 +491,41 @@ impl<'a> Emitter<'a> {
                 }
             }
             Op::Func { path, args } => {
-                let k = self.f.callees.iter().position(|p| p == path).ok_or("callee not recorded")?;
+                let k = self
+                    .f
+                    .callees
+                    .iter()
+                    .position(|p| p == path)
+                    .ok_or("callee not recorded")?;
                 let mut args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                 args.push("__ctx".into());
                 format!("@@F{k}@@({})", args.join(", "))
             }
-            Op::Load { array, index } => format!("wp::load({}, {}, __ctx)", self.var(*array), self.index(index)),
+            Op::Load { array, index } => format!(
+                "wp::load({}, {}, __ctx)",
+                self.var(*array),
+                self.index(index)
+            ),
             Op::Member(v, m) => format!("{}.{m}", self.var(*v)),
             Op::Construct { ty: t, ctor, args } => {
                 let name = t.glam_name().ok_or("constructed types are glam types")?;
                 let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                 match (t, ctor) {
-                    (Ty::Vector(..), Ctor::Components) => format!("wp::{name}_new({})", args.join(", ")),
-                    (Ty::Quat(_), Ctor::Components) => format!("wp::{name}_from_xyzw({})", args.join(", ")),
-                    (Ty::Matrix(..), Ctor::Components) => format!("wp::{name}_from_cols({})", args.join(", ")),
-                    (Ty::Vector(..), Ctor::Splat) => format!("wp::{name}_splat({})", args.join(", ")),
-                    (Ty::Matrix(..), Ctor::Splat) => format!("wp::{name}_from_diagonal({})", args.join(", ")),
+                    (Ty::Vector(..), Ctor::Components) => {
+                        format!("wp::{name}_new({})", args.join(", "))
+                    }
+                    (Ty::Quat(_), Ctor::Components) => {
+                        format!("wp::{name}_from_xyzw({})", args.join(", "))
+                    }
+                    (Ty::Matrix(..), Ctor::Components) => {
+                        format!("wp::{name}_from_cols({})", args.join(", "))
+                    }
+                    (Ty::Vector(..), Ctor::Splat) => {
+                        format!("wp::{name}_splat({})", args.join(", "))
+                    }
+                    (Ty::Matrix(..), Ctor::Splat) => {
+                        format!("wp::{name}_from_diagonal({})", args.join(", "))
+                    }
                     (_, Ctor::Const(c)) => format!("wp::{name}_{c}()"),
                     _ => return Err("unsupported constructor".into()),
                 }
@@ -387,7 +536,6 @@ impl<'a> Emitter<'a> {
         })
     }
 }
-
 
 /// A C string literal.
 fn c_string(s: &str) -> String {
@@ -431,10 +579,16 @@ mod tests {
                 x[i] += v[i] * dt;
             }
         });
-        assert!(src.contains("static WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"), "{src}");
+        assert!(
+            src.contains("static WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"),
+            "{src}"
+        );
         assert!(src.contains("wp::load(v_1, (wp::i64)(i_"), "{src}");
         assert!(src.contains("wp::store(x_0,"), "{src}");
-        assert!(src.contains("wp::unflatten(__launch, __flat, __tid, 1);"), "{src}");
+        assert!(
+            src.contains("wp::unflatten(__launch, __flat, __tid, 1);"),
+            "{src}"
+        );
     }
 
     #[test]
@@ -446,9 +600,15 @@ mod tests {
                 d[i] = d[i] * 0.1;
             }
         });
-        assert!(src.contains("wp::f32 t") && src.contains("= 0.1f;"), "{src}");
+        assert!(
+            src.contains("wp::f32 t") && src.contains("= 0.1f;"),
+            "{src}"
+        );
         assert!(src.contains("wp::f64 t") && src.contains("= 0.1;"), "{src}");
-        assert!(!src.contains("= 2.0;"), "an f32 literal must not be a double: {src}");
+        assert!(
+            !src.contains("= 2.0;"),
+            "an f32 literal must not be a double: {src}"
+        );
     }
 
     #[test]
@@ -464,7 +624,12 @@ mod tests {
         };
         let f = crate::front::lower::lower_fn(&item, FnKind::Func).unwrap();
         let src = emit(&f, "k.rs").unwrap().source;
-        assert!(src.contains("static WP_FN wp::f32 @@SELF@@(wp::f32 x_0, wp::i32 n_1, wp::ctx_t* __ctx)"), "{src}");
+        assert!(
+            src.contains(
+                "static WP_FN wp::f32 @@SELF@@(wp::f32 x_0, wp::i32 n_1, wp::ctx_t* __ctx)"
+            ),
+            "{src}"
+        );
         assert!(src.contains("@@F0@@(x_0, __ctx)"), "{src}");
         assert!(src.contains("wp::range_rev("), "{src}");
         assert!(src.contains("wp::range_step_by("), "{src}");

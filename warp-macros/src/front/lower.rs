@@ -1872,11 +1872,24 @@ impl Lowerer {
             }
         }
         let resolved = b.resolve(&arg_tys).map_err(|m| syn::Error::new(span, m))?;
+        // A literal in a `T` position whose type the macro cannot see takes the type of an
+        // argument in another `T` position (`v.max(0.5)` with `v` from a user func).
+        let like = b.params.iter().zip(&vals).find_map(|(p, v)| match (p, v) {
+            (Pos::T, Some(vs)) if self.ty(vs[0]).is_deferred() => Some(vs[0]),
+            _ => None,
+        });
         let mut out = Vec::new();
         for (i, a) in args.iter().enumerate() {
             match vals[i].take() {
                 Some(vs) => out.extend(vs),
-                None => out.push(self.expr(a, Some(&resolved.params[i]))?),
+                None => match (like, flex_value(a)) {
+                    (Some(w), Some(value))
+                        if b.params[i] == Pos::T && resolved.params[i].is_deferred() =>
+                    {
+                        out.push(self.def(Op::LitLike(value, w), Ty::Deferred, a.span()))
+                    }
+                    _ => out.push(self.expr(a, Some(&resolved.params[i]))?),
+                },
             }
         }
         Ok(self.def(

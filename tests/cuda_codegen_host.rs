@@ -1,0 +1,367 @@
+//! The CUDA code generator, checked without a GPU: real kernels' CUDA translation units (as
+//! the runtime assembles them for NVRTC) are compiled as host C++ with g++ against the CUDA
+//! builtin library in `warp-cuda/cuda/`, their per-thread functions are run over the grid, and
+//! the results are compared with the CPU backend's, bit for bit.
+//!
+//! Bit-exact is the right tolerance here: both sides do the same IEEE operations in the same
+//! order (g++ is run with `-ffp-contract=off`, so no FMA contraction; sqrt is correctly
+//! rounded on both). On the GPU, FMA contraction changes the last bits, which the backend
+//! suite allows for; this test is about the generated code's meaning.
+
+use std::fmt::Write as _;
+use std::process::Command;
+use warp_lang as wp;
+use wp::prelude::*;
+use wp::Kernel;
+
+#[wp::kernel]
+fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, dt: f32) {
+    let i = tid();
+    let a = -b * v[i] / mass + gravity;
+    v[i] += a * dt;
+    x[i] += v[i] * dt;
+}
+
+#[wp::func]
+fn poly(x: f32, n: i32) -> f32 {
+    let mut s = 0.0;
+    for k in (0..n).rev().step_by(2) {
+        s += x * (k as f32);
+    }
+    s
+}
+
+#[wp::func]
+fn half_or_neg(x: f32, odd: bool) -> f32 {
+    if odd {
+        return -x;
+    }
+    x * 0.5
+}
+
+#[wp::kernel]
+fn mixed(a: Array<f32>, b: Array<i32>, out: Array<f32>, total: Array<i32>) {
+    let i = tid();
+    let v = if b[i] % 2 == 0 {
+        poly(a[i], b[i])
+    } else {
+        half_or_neg(a[i], true)
+    };
+    out[i] = v.max(0.5) + sqrt(a[i].abs()) + (b[i] as f32) / 3.0;
+    let w = b[i] / 3 + (b[i] << 2) - i32::MAX;
+    atomic_add(total, 0, w);
+    let mut k = 0;
+    while k < 10 && a[i] > 0.0 {
+        k += 1;
+        if k == 7 {
+            break;
+        }
+    }
+    out[i] += k as f32 * 0.25;
+}
+
+#[wp::kernel]
+fn grid2d(m: Array<f32, 2>, s: f32) {
+    let (i, j) = tid();
+    let c = vec2(i as f32, j as f32);
+    m[(i, j)] = c.dot(c) * s + m[(i, j)] - c.length();
+}
+
+/// A host argument: how to declare it in C++, and how to print it back.
+enum Arg<'a> {
+    F32(f32),
+    Vec3(Vec3),
+    F32s(&'a wp::Array<f32>),
+    I32s(&'a wp::Array<i32>),
+    Vec3s(&'a wp::Array<Vec3>),
+    F32Grid(&'a wp::Array<f32, 2>),
+}
+
+fn f32_bits(x: f32) -> String {
+    format!("0x{:08x}u", x.to_bits())
+}
+
+/// C++ that declares the arguments (`p0`, `p1`, ..), and C++ that prints every array's
+/// elements as bit patterns, one per line.
+fn cpp_args(args: &[Arg]) -> (String, String) {
+    let mut decl = String::new();
+    let mut print = String::new();
+    let floats = |v: &[f32]| {
+        v.iter()
+            .map(|x| format!("bits_f32({})", f32_bits(*x)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    for (k, a) in args.iter().enumerate() {
+        match a {
+            Arg::F32(x) => writeln!(decl, "wp::f32 p{k} = bits_f32({});", f32_bits(*x)).unwrap(),
+            Arg::Vec3(v) => writeln!(
+                decl,
+                "wp::Vec3 p{k} = wp::Vec3_new({});",
+                floats(&v.to_array())
+            )
+            .unwrap(),
+            Arg::F32s(a) => {
+                let d = a.to_vec().unwrap();
+                writeln!(decl, "static wp::f32 d{k}[] = {{{}}};", floats(&d)).unwrap();
+                writeln!(
+                    decl,
+                    "wp::array_t<wp::f32, 1> p{k} = {{d{k}, {{{}}}, {{4}}, {k}, 0}};",
+                    d.len()
+                )
+                .unwrap();
+                writeln!(
+                    print,
+                    "for (int e = 0; e < {}; ++e) print_f32(d{k}[e]);",
+                    d.len()
+                )
+                .unwrap();
+            }
+            Arg::I32s(a) => {
+                let d = a.to_vec().unwrap();
+                let list = d
+                    .iter()
+                    .map(|x| format!("{x}"))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                writeln!(decl, "static wp::i32 d{k}[] = {{{list}}};").unwrap();
+                writeln!(
+                    decl,
+                    "wp::array_t<wp::i32, 1> p{k} = {{d{k}, {{{}}}, {{4}}, {k}, 0}};",
+                    d.len()
+                )
+                .unwrap();
+                writeln!(
+                    print,
+                    "for (int e = 0; e < {}; ++e) printf(\"%d\\n\", d{k}[e]);",
+                    d.len()
+                )
+                .unwrap();
+            }
+            Arg::Vec3s(a) => {
+                let d = a.to_vec().unwrap();
+                let items = d
+                    .iter()
+                    .map(|v| format!("wp::Vec3_new({})", floats(&v.to_array())))
+                    .collect::<Vec<_>>();
+                writeln!(decl, "static wp::Vec3 d{k}[] = {{{}}};", items.join(", ")).unwrap();
+                writeln!(
+                    decl,
+                    "wp::array_t<wp::Vec3, 1> p{k} = {{d{k}, {{{}}}, {{12}}, {k}, 0}};",
+                    d.len()
+                )
+                .unwrap();
+                writeln!(
+                    print,
+                    "for (int e = 0; e < {}; ++e) {{ print_f32(d{k}[e].x); print_f32(d{k}[e].y); print_f32(d{k}[e].z); }}",
+                    d.len()
+                )
+                .unwrap();
+            }
+            Arg::F32Grid(a) => {
+                let d = a.to_vec().unwrap();
+                let [r, c] = a.shape();
+                writeln!(decl, "static wp::f32 d{k}[] = {{{}}};", floats(&d)).unwrap();
+                writeln!(
+                    decl,
+                    "wp::array_t<wp::f32, 2> p{k} = {{d{k}, {{{r}, {c}}}, {{{}, 4}}, {k}, 0}};",
+                    c * 4
+                )
+                .unwrap();
+                writeln!(
+                    print,
+                    "for (int e = 0; e < {}; ++e) print_f32(d{k}[e]);",
+                    d.len()
+                )
+                .unwrap();
+            }
+        }
+    }
+    (decl, print)
+}
+
+/// The host's view of the same arrays after the CPU launch, in the C++ program's print order.
+fn cpu_results(args: &[Arg]) -> Vec<String> {
+    let bits = |v: Vec<f32>| {
+        v.into_iter()
+            .map(|x| format!("{:08x}", x.to_bits()))
+            .collect::<Vec<_>>()
+    };
+    let mut out = Vec::new();
+    for a in args {
+        match a {
+            Arg::F32s(a) => out.extend(bits(a.to_vec().unwrap())),
+            Arg::F32Grid(a) => out.extend(bits(a.to_vec().unwrap())),
+            Arg::Vec3s(a) => out.extend(bits(
+                a.to_vec()
+                    .unwrap()
+                    .into_iter()
+                    .flat_map(|v| v.to_array())
+                    .collect(),
+            )),
+            Arg::I32s(a) => out.extend(a.to_vec().unwrap().into_iter().map(|x| x.to_string())),
+            Arg::F32(_) | Arg::Vec3(_) => {}
+        }
+    }
+    out
+}
+
+/// Compiles and runs `K`'s CUDA translation unit on the host over `dims`, with `args`
+/// (the state before the launch); returns what it printed, one value per line.
+fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host: no g++ on this machine");
+        return None;
+    }
+    let src = wp::cuda_source::assemble(&K::INFO);
+    let (decl, print) = cpp_args(args);
+    let mut dims4 = [1usize; 4];
+    dims4[..dims.len()].copy_from_slice(dims);
+    let total: usize = dims.iter().product();
+    let params: Vec<String> = (0..args.len()).map(|k| format!("p{k}")).collect();
+    let program = format!(
+        "{text}\n\
+         static void print_f32(wp::f32 x) {{ unsigned u; memcpy(&u, &x, 4); printf(\"%08x\\n\", u); }}\n\
+         static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+         int main() {{\n\
+         {decl}\n\
+         wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+         wp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::launch_t launch = {{{{{d0}, {d1}, {d2}, {d3}}}, {total}, {ndim}, 0}};\n\
+         for (wp::i64 flat = 0; flat < {total}; ++flat) {thread}({params}, launch, flat, &ctx);\n\
+         if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
+         {print}\n\
+         return 0;\n}}\n",
+        text = src.text,
+        d0 = dims4[0],
+        d1 = dims4[1],
+        d2 = dims4[2],
+        d3 = dims4[3],
+        ndim = dims.len(),
+        thread = src.thread_fn,
+        params = params.join(", "),
+    );
+    let dir = std::env::temp_dir().join(format!(
+        "wp_codegen_{}_{}",
+        K::INFO.name,
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cpp = dir.join("k.cpp");
+    std::fs::write(&cpp, format!("#include <cstring>\n{program}")).unwrap();
+    let exe = dir.join("k");
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let out = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-Wno-unused",
+            "-I",
+            include,
+        ])
+        .arg(&cpp)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "g++ failed on {}:\n{}",
+        cpp.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = Command::new(&exe).output().unwrap();
+    assert!(
+        run.status.success(),
+        "generated code faulted: {}",
+        String::from_utf8_lossy(&run.stdout)
+    );
+    Some(
+        String::from_utf8(run.stdout)
+            .unwrap()
+            .lines()
+            .map(str::to_string)
+            .collect(),
+    )
+}
+
+#[test]
+fn particle_kernel_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let x0: Vec<Vec3> = (0..37)
+        .map(|k| Vec3::new(k as f32 * 0.1, -0.3, 1.7 - k as f32 * 0.01))
+        .collect();
+    let v0: Vec<Vec3> = (0..37)
+        .map(|k| Vec3::new(0.5, k as f32 * -0.02, 0.25))
+        .collect();
+    let x = wp::Array::from_slice(&x0, &dev).unwrap();
+    let v = wp::Array::from_slice(&v0, &dev).unwrap();
+    let gravity = Vec3::new(0.0, 0.0, -9.81);
+    let host = {
+        let args = [
+            Arg::Vec3s(&x),
+            Arg::Vec3s(&v),
+            Arg::F32(0.05),
+            Arg::F32(0.1),
+            Arg::Vec3(gravity),
+            Arg::F32(0.04),
+        ];
+        run_on_host::<integrate>(&[37], &args)
+    };
+    wp::launch(integrate, 37, (&x, &v, 0.05, 0.1, gravity, 0.04), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::Vec3s(&x), Arg::Vec3s(&v)]));
+    }
+}
+
+#[test]
+fn control_flow_funcs_ints_and_atomics_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let a = wp::Array::from_slice(
+        &(0..25).map(|k| k as f32 * 0.37 - 3.0).collect::<Vec<_>>(),
+        &dev,
+    )
+    .unwrap();
+    let b =
+        wp::Array::from_slice(&(0..25).map(|k| k * 7 - 40).collect::<Vec<i32>>(), &dev).unwrap();
+    let out = wp::Array::<f32>::zeros(25, &dev).unwrap();
+    let total = wp::Array::<i32>::zeros(1, &dev).unwrap();
+    let host = run_on_host::<mixed>(
+        &[25],
+        &[
+            Arg::F32s(&a),
+            Arg::I32s(&b),
+            Arg::F32s(&out),
+            Arg::I32s(&total),
+        ],
+    );
+    wp::launch(mixed, 25, (&a, &b, &out, &total), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(
+            host,
+            cpu_results(&[
+                Arg::F32s(&a),
+                Arg::I32s(&b),
+                Arg::F32s(&out),
+                Arg::I32s(&total)
+            ])
+        );
+    }
+}
+
+#[test]
+fn two_dimensional_launch_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let m = wp::Array::<f32, 2>::from_slice_shape(
+        &(0..12).map(|k| k as f32 * 0.5).collect::<Vec<_>>(),
+        [3, 4],
+        &dev,
+    )
+    .unwrap();
+    let host = run_on_host::<grid2d>(&[3, 4], &[Arg::F32Grid(&m), Arg::F32(0.3)]);
+    wp::launch(grid2d, (3, 4), (&m, 0.3), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32Grid(&m)]));
+    }
+}

@@ -1,0 +1,159 @@
+// wp_atomic.h: section "atomic" of the builtin table (warp-core/src/builtins/atomic.rs).
+//
+//   atomic_add / atomic_sub / atomic_min / atomic_max (a, idx..., value, ctx) -> old value
+//
+// for arrays of i32, u32, i64, u64 (wrapping add/sub), f32, f64 (min/max with fmin/fmax
+// semantics: a NaN operand loses) and float vectors (componentwise, x first, each component
+// atomic on its own; the vector as a whole is not updated atomically, as in Warp/CUDA).
+// The index is bounds-checked like `load`: out of bounds records OutOfBounds, touches no
+// memory and returns T{}.
+//
+// Device: CUDA's atomicAdd/Sub/Min/Max (relaxed, device scope); f32/f64 min/max are an
+// atomicCAS loop on the bit pattern; f64 add falls back to a CAS loop below sm_60.
+// Host (g++ checks of generated code): a plain read-modify-write, NOT atomic; the host build
+// is only used single-threaded.
+#pragma once
+#include "wp_scalar.h"
+
+namespace wp {
+
+namespace detail {
+
+#if defined(__CUDACC__)
+
+// ----- integers -----
+WP_FN i32 atomic_add_p(i32* p, i32 v) { return atomicAdd(p, v); }
+WP_FN i32 atomic_sub_p(i32* p, i32 v) { return atomicSub(p, v); }
+WP_FN i32 atomic_min_p(i32* p, i32 v) { return atomicMin(p, v); }
+WP_FN i32 atomic_max_p(i32* p, i32 v) { return atomicMax(p, v); }
+WP_FN u32 atomic_add_p(u32* p, u32 v) { return atomicAdd(p, v); }
+WP_FN u32 atomic_sub_p(u32* p, u32 v) { return atomicSub(p, v); }
+WP_FN u32 atomic_min_p(u32* p, u32 v) { return atomicMin(p, v); }
+WP_FN u32 atomic_max_p(u32* p, u32 v) { return atomicMax(p, v); }
+WP_FN i64 atomic_add_p(i64* p, i64 v) {
+  return (i64)atomicAdd((unsigned long long*)p, (unsigned long long)v);
+}
+WP_FN i64 atomic_sub_p(i64* p, i64 v) {
+  return (i64)atomicAdd((unsigned long long*)p, 0ull - (unsigned long long)v);
+}
+WP_FN i64 atomic_min_p(i64* p, i64 v) { return (i64)atomicMin((long long*)p, (long long)v); }
+WP_FN i64 atomic_max_p(i64* p, i64 v) { return (i64)atomicMax((long long*)p, (long long)v); }
+WP_FN u64 atomic_add_p(u64* p, u64 v) { return atomicAdd((unsigned long long*)p, v); }
+WP_FN u64 atomic_sub_p(u64* p, u64 v) { return atomicAdd((unsigned long long*)p, 0ull - v); }
+WP_FN u64 atomic_min_p(u64* p, u64 v) { return atomicMin((unsigned long long*)p, v); }
+WP_FN u64 atomic_max_p(u64* p, u64 v) { return atomicMax((unsigned long long*)p, v); }
+
+// ----- floats -----
+template <typename F>
+WP_FN f32 cas_loop_f32(f32* p, F f) {
+  unsigned int* ip = (unsigned int*)p;
+  unsigned int old = *(volatile unsigned int*)ip;
+  unsigned int assumed;
+  do {
+    assumed = old;
+    old = atomicCAS(ip, assumed, f32_to_bits(f(f32_from_bits(assumed))));
+  } while (old != assumed);
+  return f32_from_bits(old);
+}
+template <typename F>
+WP_FN f64 cas_loop_f64(f64* p, F f) {
+  unsigned long long* ip = (unsigned long long*)p;
+  unsigned long long old = *(volatile unsigned long long*)ip;
+  unsigned long long assumed;
+  do {
+    assumed = old;
+    old = atomicCAS(ip, assumed, (unsigned long long)f64_to_bits(f(f64_from_bits(assumed))));
+  } while (old != assumed);
+  return f64_from_bits(old);
+}
+WP_FN f32 atomic_add_p(f32* p, f32 v) { return atomicAdd(p, v); }
+WP_FN f32 atomic_sub_p(f32* p, f32 v) { return atomicAdd(p, -v); }  // x + (-v) == x - v
+WP_FN f32 atomic_min_p(f32* p, f32 v) { return cas_loop_f32(p, [v](f32 x) { return ::fminf(x, v); }); }
+WP_FN f32 atomic_max_p(f32* p, f32 v) { return cas_loop_f32(p, [v](f32 x) { return ::fmaxf(x, v); }); }
+#if !defined(__CUDA_ARCH__) || __CUDA_ARCH__ >= 600
+WP_FN f64 atomic_add_p(f64* p, f64 v) { return atomicAdd(p, v); }
+WP_FN f64 atomic_sub_p(f64* p, f64 v) { return atomicAdd(p, -v); }
+#else
+WP_FN f64 atomic_add_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return x + v; }); }
+WP_FN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return x - v; }); }
+#endif
+WP_FN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
+WP_FN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
+
+#else  // host: single-threaded read-modify-write (not atomic)
+
+#define WP_HOST_RMW(T)                                                           \
+  WP_FN T atomic_add_p(T* p, T v) { const T o = *p; *p = w_add(o, v); return o; } \
+  WP_FN T atomic_sub_p(T* p, T v) { const T o = *p; *p = w_sub(o, v); return o; } \
+  WP_FN T atomic_min_p(T* p, T v) { const T o = *p; *p = min(o, v); return o; }   \
+  WP_FN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
+WP_HOST_RMW(i32)
+WP_HOST_RMW(u32)
+WP_HOST_RMW(i64)
+WP_HOST_RMW(u64)
+#undef WP_HOST_RMW
+#define WP_HOST_RMW_F(T)                                                         \
+  WP_FN T atomic_add_p(T* p, T v) { const T o = *p; *p = o + v; return o; }      \
+  WP_FN T atomic_sub_p(T* p, T v) { const T o = *p; *p = o - v; return o; }      \
+  WP_FN T atomic_min_p(T* p, T v) { const T o = *p; *p = min(o, v); return o; }  \
+  WP_FN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
+WP_HOST_RMW_F(f32)
+WP_HOST_RMW_F(f64)
+#undef WP_HOST_RMW_F
+
+#endif
+
+// ----- float vectors: componentwise, x first -----
+#define WP_VEC_ATOMIC(V, S, OP)                                                  \
+  WP_FN V atomic_##OP##_p(V* p, V v) {                                           \
+    V old;                                                                       \
+    for (int i = 0; i < vec_traits<V>::N; ++i)                                   \
+      vec_traits<V>::at(old, i) =                                                \
+          atomic_##OP##_p(&vec_traits<V>::at(*p, i), vec_traits<V>::get(v, i));  \
+    return old;                                                                  \
+  }
+#define WP_VEC_ATOMICS(V, S) \
+  WP_VEC_ATOMIC(V, S, add)   \
+  WP_VEC_ATOMIC(V, S, sub)   \
+  WP_VEC_ATOMIC(V, S, min)   \
+  WP_VEC_ATOMIC(V, S, max)
+WP_VEC_ATOMICS(Vec2, f32)
+WP_VEC_ATOMICS(Vec3, f32)
+WP_VEC_ATOMICS(Vec4, f32)
+WP_VEC_ATOMICS(DVec2, f64)
+WP_VEC_ATOMICS(DVec3, f64)
+WP_VEC_ATOMICS(DVec4, f64)
+#undef WP_VEC_ATOMICS
+#undef WP_VEC_ATOMIC
+
+}  // namespace detail
+
+// The builtins: (array, one i64 index per dimension, value, ctx) -> old value.
+#define WP_ATOMIC_BUILTIN(OP)                                                                  \
+  template <typename T>                                                                        \
+  WP_FN T atomic_##OP(const array_t<T, 1>& a, i64 i0, T v, ctx_t* ctx) {                       \
+    T* p = elem_ptr(a, i0, ctx);                                                               \
+    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+  }                                                                                            \
+  template <typename T>                                                                        \
+  WP_FN T atomic_##OP(const array_t<T, 2>& a, i64 i0, i64 i1, T v, ctx_t* ctx) {               \
+    T* p = elem_ptr(a, i0, i1, ctx);                                                           \
+    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+  }                                                                                            \
+  template <typename T>                                                                        \
+  WP_FN T atomic_##OP(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, T v, ctx_t* ctx) {       \
+    T* p = elem_ptr(a, i0, i1, i2, ctx);                                                       \
+    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+  }                                                                                            \
+  template <typename T>                                                                        \
+  WP_FN T atomic_##OP(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, T v, ctx_t* ctx) { \
+    T* p = elem_ptr(a, i0, i1, i2, i3, ctx);                                                   \
+    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+  }
+WP_ATOMIC_BUILTIN(add)
+WP_ATOMIC_BUILTIN(sub)
+WP_ATOMIC_BUILTIN(min)
+WP_ATOMIC_BUILTIN(max)
+#undef WP_ATOMIC_BUILTIN
+
+}  // namespace wp

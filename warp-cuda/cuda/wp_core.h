@@ -1,0 +1,1214 @@
+// wp_core.h: the core of warp-lang's CUDA C++ builtin library (namespace `wp`).
+//
+// Generated kernels include this library and are compiled by NVRTC; the same headers also
+// compile as plain host C++17 (g++/clang++) so that generated code can be checked on the CPU.
+// Every function here must agree bit for bit with the CPU implementation in warp-core
+// (warp-core/src/{ops,range,view,grid,fault}.rs and builtins/): same types, same edge cases.
+//
+// Contents:
+//   * integer/float typedefs (i8..u64, isize = i64, usize = u64, f32, f64) and `num<T>` traits;
+//   * the glam types with glam 0.30's x86_64 layout (Vec4, Mat2, Mat4 and Quat are 16-byte
+//     aligned because glam stores them in SSE registers), constructors and constants as free
+//     functions (`Vec3_new`, `Vec3_splat`, `Vec3_ZERO()`, `Mat3_from_cols`, `Quat_IDENTITY()`...);
+//   * operators with glam's meaning, including two glam quirks (Vec4 `%`, scalar / matrix);
+//   * integer semantics of warp_core::ops (`w_add` ... `w_shr`), Rust `as` casts (`cast<To>`),
+//     literals (`lit_like`, `int_like`);
+//   * faults (`fault_t`, `ctx_t`, `raise`), arrays (`array_t`, `load`, `store`, ...), range
+//     loops (`range_t`), the launch grid (`launch_t`, `unflatten`).
+//
+// Floating point: results match the CPU only if the compiler does not contract a*b+c into an
+// FMA. NVRTC contracts by default: compile with `--fmad=false` (and without
+// `--use_fast_math`, which would also flush denormals and approximate division and sqrt).
+#pragma once
+
+#if defined(__CUDACC__)
+#define WP_FN __device__ __forceinline__
+#else
+#define WP_FN inline
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#endif
+
+namespace wp {
+
+// ------------------------------------------------------------------------------------------
+// Scalars
+// ------------------------------------------------------------------------------------------
+
+typedef signed char i8;
+typedef short i16;
+typedef int i32;
+typedef long long i64;
+typedef unsigned char u8;
+typedef unsigned short u16;
+typedef unsigned int u32;
+typedef unsigned long long u64;
+typedef i64 isize;
+typedef u64 usize;
+typedef float f32;
+typedef double f64;
+
+static_assert(sizeof(i8) == 1 && sizeof(i16) == 2 && sizeof(i32) == 4 && sizeof(i64) == 8,
+              "integer sizes");
+static_assert(sizeof(u8) == 1 && sizeof(u16) == 2 && sizeof(u32) == 4 && sizeof(u64) == 8,
+              "integer sizes");
+static_assert(sizeof(f32) == 4 && sizeof(f64) == 8, "float sizes");
+
+/// Traits of a scalar type. `unsigned_t`: the unsigned type of the same width; `wide_t`: the
+/// unsigned type wrapping arithmetic is done in (at least 32 bits, so that `u16 * u16` never
+/// goes through a signed `int`); `lo`/`hi`: the bounds of Rust's saturating float->int `as`
+/// (`x <= lo` gives MIN, `x >= hi` gives MAX; both are powers of two, exact in f32 and f64).
+template <typename T>
+struct num {
+  static constexpr bool is_int = false;
+  static constexpr bool is_float = false;
+  static constexpr bool is_signed = false;
+  static constexpr bool is_bool = false;
+};
+
+#define WP_NUM_INT(T, U, W, BITS, SIGNED, MINV, MAXV, LO, HI) \
+  template <>                                                  \
+  struct num<T> {                                              \
+    typedef U unsigned_t;                                      \
+    typedef W wide_t;                                          \
+    static constexpr bool is_int = true;                       \
+    static constexpr bool is_float = false;                    \
+    static constexpr bool is_signed = SIGNED;                  \
+    static constexpr bool is_bool = false;                     \
+    static constexpr int bits = BITS;                          \
+    static constexpr T min_value = MINV;                       \
+    static constexpr T max_value = MAXV;                       \
+    static constexpr double lo = LO;                           \
+    static constexpr double hi = HI;                           \
+  };
+
+WP_NUM_INT(i8, u8, u32, 8, true, (i8)(-128), (i8)127, -128.0, 128.0)
+WP_NUM_INT(i16, u16, u32, 16, true, (i16)(-32768), (i16)32767, -32768.0, 32768.0)
+WP_NUM_INT(i32, u32, u32, 32, true, (-2147483647 - 1), 2147483647, -2147483648.0, 2147483648.0)
+WP_NUM_INT(i64, u64, u64, 64, true, (-9223372036854775807LL - 1), 9223372036854775807LL,
+           -9223372036854775808.0, 9223372036854775808.0)
+WP_NUM_INT(u8, u8, u32, 8, false, (u8)0, (u8)255, 0.0, 256.0)
+WP_NUM_INT(u16, u16, u32, 16, false, (u16)0, (u16)65535, 0.0, 65536.0)
+WP_NUM_INT(u32, u32, u32, 32, false, 0u, 4294967295u, 0.0, 4294967296.0)
+WP_NUM_INT(u64, u64, u64, 64, false, 0ull, 18446744073709551615ull, 0.0, 18446744073709551616.0)
+#undef WP_NUM_INT
+
+template <>
+struct num<f32> {
+  static constexpr bool is_int = false;
+  static constexpr bool is_float = true;
+  static constexpr bool is_signed = true;
+  static constexpr bool is_bool = false;
+  static constexpr int bits = 32;
+};
+template <>
+struct num<f64> {
+  static constexpr bool is_int = false;
+  static constexpr bool is_float = true;
+  static constexpr bool is_signed = true;
+  static constexpr bool is_bool = false;
+  static constexpr int bits = 64;
+};
+template <>
+struct num<bool> {
+  static constexpr bool is_int = false;
+  static constexpr bool is_float = false;
+  static constexpr bool is_signed = false;
+  static constexpr bool is_bool = true;
+  static constexpr int bits = 1;
+};
+
+// Bit casts (IEEE bit patterns).
+WP_FN u32 f32_to_bits(f32 x) {
+#if defined(__CUDACC__)
+  return __float_as_uint(x);
+#else
+  u32 u;
+  std::memcpy(&u, &x, 4);
+  return u;
+#endif
+}
+WP_FN f32 f32_from_bits(u32 u) {
+#if defined(__CUDACC__)
+  return __uint_as_float(u);
+#else
+  f32 x;
+  std::memcpy(&x, &u, 4);
+  return x;
+#endif
+}
+WP_FN u64 f64_to_bits(f64 x) {
+#if defined(__CUDACC__)
+  return (u64)__double_as_longlong(x);
+#else
+  u64 u;
+  std::memcpy(&u, &x, 8);
+  return u;
+#endif
+}
+WP_FN f64 f64_from_bits(u64 u) {
+#if defined(__CUDACC__)
+  return __longlong_as_double((long long)u);
+#else
+  f64 x;
+  std::memcpy(&x, &u, 8);
+  return x;
+#endif
+}
+
+/// Rust's float constants (bit exact).
+WP_FN f32 f32_nan() { return f32_from_bits(0x7fc00000u); }
+WP_FN f32 f32_inf() { return f32_from_bits(0x7f800000u); }
+WP_FN f32 f32_max() { return f32_from_bits(0x7f7fffffu); }
+WP_FN f64 f64_nan() { return f64_from_bits(0x7ff8000000000000ull); }
+WP_FN f64 f64_inf() { return f64_from_bits(0x7ff0000000000000ull); }
+WP_FN f64 f64_max() { return f64_from_bits(0x7fefffffffffffffull); }
+template <typename S> WP_FN S float_nan();
+template <> WP_FN f32 float_nan<f32>() { return f32_nan(); }
+template <> WP_FN f64 float_nan<f64>() { return f64_nan(); }
+template <typename S> WP_FN S float_inf();
+template <> WP_FN f32 float_inf<f32>() { return f32_inf(); }
+template <> WP_FN f64 float_inf<f64>() { return f64_inf(); }
+template <typename S> WP_FN S float_max();
+template <> WP_FN f32 float_max<f32>() { return f32_max(); }
+template <> WP_FN f64 float_max<f64>() { return f64_max(); }
+
+// ------------------------------------------------------------------------------------------
+// Faults
+// ------------------------------------------------------------------------------------------
+
+/// Fault kinds (fault_t::kind).
+enum fault_kind : i32 {
+  FAULT_NONE = 0,
+  FAULT_OUT_OF_BOUNDS = 1,
+  FAULT_DIVISION_BY_ZERO = 2,
+  FAULT_BAD_STEP = 3,
+};
+
+/// The first fault of a launch, filled by the first faulting thread (80 bytes, align 8):
+///   0 kind (i32), 4 arg (i32: the kernel parameter index for OutOfBounds, else -1),
+///   8 index[4] (i64), 40 shape[4] (i64), 72 ndim (i32), 76 pad (i32).
+/// OutOfBounds: index/shape hold `ndim` entries. DivisionByZero: ndim 0. BadStep: ndim 1,
+/// index[0] is the step, shape all 0. Unused entries are 0.
+struct fault_t {
+  i32 kind;
+  i32 arg;
+  i64 index[4];
+  i64 shape[4];
+  i32 ndim;
+  i32 pad;
+};
+static_assert(sizeof(fault_t) == 80 && alignof(fault_t) == 8, "fault_t layout");
+
+/// Per-thread fault context (24 bytes, align 8):
+///   0 fault (fault_t*, device memory), 8 fault_flag (u32*, device memory, 0 = no fault yet),
+///   16 raised (i32: set to 1 by `raise` in this thread; starts at 0), 20 pad.
+/// A kernel builds one per thread (`ctx_make(fault, flag)`) and passes its address down; after
+/// any call that may fault, generated code checks `ctx->raised` and returns (the CPU's `?`).
+/// `fault` and `fault_flag` may be null: faults then only set `raised`.
+struct ctx_t {
+  fault_t* fault;
+  u32* fault_flag;
+  i32 raised;
+  i32 pad;
+};
+static_assert(sizeof(ctx_t) == 24 && alignof(ctx_t) == 8, "ctx_t layout");
+
+WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
+  ctx_t c;
+  c.fault = fault;
+  c.fault_flag = fault_flag;
+  c.raised = 0;
+  c.pad = 0;
+  return c;
+}
+
+/// Records a fault: marks this thread's context, and if this is the first fault of the launch
+/// (compare-and-swap of `*fault_flag` from 0 to 1) fills the shared record.
+WP_FN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* index = nullptr,
+                 const i64* shape = nullptr) {
+  ctx->raised = 1;
+  if (ctx->fault_flag == nullptr || ctx->fault == nullptr) return;
+  bool first;
+#if defined(__CUDACC__)
+  first = atomicCAS(ctx->fault_flag, 0u, 1u) == 0u;
+#elif defined(__GNUC__) || defined(__clang__)
+  u32 expected = 0u;
+  first = __atomic_compare_exchange_n(ctx->fault_flag, &expected, 1u, false, __ATOMIC_ACQ_REL,
+                                      __ATOMIC_ACQUIRE);
+#else
+  first = *ctx->fault_flag == 0u;  // single-threaded host fallback
+  if (first) *ctx->fault_flag = 1u;
+#endif
+  if (!first) return;
+  fault_t* f = ctx->fault;
+  f->kind = kind;
+  f->arg = arg;
+  f->ndim = ndim;
+  f->pad = 0;
+  for (int k = 0; k < 4; ++k) {
+    f->index[k] = (index != nullptr && k < ndim) ? index[k] : 0;
+    f->shape[k] = (shape != nullptr && k < ndim) ? shape[k] : 0;
+  }
+#if defined(__CUDACC__)
+  __threadfence();
+#endif
+}
+
+/// True once this thread raised a fault.
+WP_FN bool faulted(const ctx_t* ctx) { return ctx->raised != 0; }
+
+// ------------------------------------------------------------------------------------------
+// Casts: Rust `as`
+// ------------------------------------------------------------------------------------------
+
+/// `x as To` with Rust's semantics: float -> int saturates (NaN -> 0, no C++ UB); int -> int
+/// truncates or sign/zero-extends; int -> float and float -> float round to nearest;
+/// bool -> int is 0 or 1.
+template <typename To, typename From>
+WP_FN To cast(From x) {
+  if constexpr (num<From>::is_float && num<To>::is_int) {
+    if (!(x == x)) return (To)0;
+    if constexpr (num<To>::is_signed) {
+      if (x <= (From)num<To>::lo) return num<To>::min_value;
+    } else {
+      if (x <= (From)0) return (To)0;
+    }
+    if (x >= (From)num<To>::hi) return num<To>::max_value;
+    return (To)x;  // in range after truncation
+  } else if constexpr (num<From>::is_int && num<To>::is_int) {
+    return (To)(typename num<To>::unsigned_t)x;  // modular
+  } else if constexpr (num<From>::is_bool && num<To>::is_int) {
+    return x ? (To)1 : (To)0;
+  } else {
+    return (To)x;  // int -> float, float -> float, identity
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Integer semantics (warp_core::ops::WrapInt): wrapping + - * neg, checked / %, masked shifts
+// ------------------------------------------------------------------------------------------
+
+#define WP_INT_OPS(T)                                                                       \
+  WP_FN T w_add(T a, T b) {                                                                 \
+    typedef num<T>::unsigned_t U;                                                           \
+    typedef num<T>::wide_t W;                                                               \
+    return (T)(U)((W)(U)a + (W)(U)b);                                                       \
+  }                                                                                         \
+  WP_FN T w_sub(T a, T b) {                                                                 \
+    typedef num<T>::unsigned_t U;                                                           \
+    typedef num<T>::wide_t W;                                                               \
+    return (T)(U)((W)(U)a - (W)(U)b);                                                       \
+  }                                                                                         \
+  WP_FN T w_mul(T a, T b) {                                                                 \
+    typedef num<T>::unsigned_t U;                                                           \
+    typedef num<T>::wide_t W;                                                               \
+    return (T)(U)((W)(U)a * (W)(U)b);                                                       \
+  }                                                                                         \
+  WP_FN T w_neg(T a) {                                                                      \
+    typedef num<T>::unsigned_t U;                                                           \
+    typedef num<T>::wide_t W;                                                               \
+    return (T)(U)((W)0 - (W)(U)a);                                                          \
+  }                                                                                         \
+  /* `/`: DivisionByZero fault (returns 0) on b == 0; MIN / -1 wraps to MIN. */             \
+  WP_FN T w_div(T a, T b, ctx_t* ctx) {                                                     \
+    if (b == (T)0) {                                                                        \
+      raise(ctx, FAULT_DIVISION_BY_ZERO);                                                   \
+      return (T)0;                                                                          \
+    }                                                                                       \
+    if (num<T>::is_signed && a == num<T>::min_value && b == (T)-1) return a;                \
+    return (T)(a / b);                                                                      \
+  }                                                                                         \
+  /* `%`: DivisionByZero fault (returns 0) on b == 0; MIN % -1 is 0. Sign of the dividend. */ \
+  WP_FN T w_rem(T a, T b, ctx_t* ctx) {                                                     \
+    if (b == (T)0) {                                                                        \
+      raise(ctx, FAULT_DIVISION_BY_ZERO);                                                   \
+      return (T)0;                                                                          \
+    }                                                                                       \
+    if (num<T>::is_signed && a == num<T>::min_value && b == (T)-1) return (T)0;             \
+    return (T)(a % b);                                                                      \
+  }                                                                                         \
+  /* `<<`: the shift amount is masked to the bit width (Rust wrapping_shl). */              \
+  WP_FN T w_shl(T a, u32 s) {                                                               \
+    typedef num<T>::unsigned_t U;                                                           \
+    typedef num<T>::wide_t W;                                                               \
+    return (T)(U)((W)(U)a << (s & (u32)(num<T>::bits - 1)));                                \
+  }                                                                                         \
+  /* `>>`: arithmetic for signed types, amount masked (Rust wrapping_shr). */               \
+  WP_FN T w_shr(T a, u32 s) { return (T)(a >> (s & (u32)(num<T>::bits - 1))); }
+
+WP_INT_OPS(i8)
+WP_INT_OPS(i16)
+WP_INT_OPS(i32)
+WP_INT_OPS(i64)
+WP_INT_OPS(u8)
+WP_INT_OPS(u16)
+WP_INT_OPS(u32)
+WP_INT_OPS(u64)
+#undef WP_INT_OPS
+
+/// Float `%` (Rust's `%` on f32/f64 is C's fmod: the result has the sign of the dividend).
+WP_FN f32 frem(f32 a, f32 b) { return ::fmodf(a, b); }
+WP_FN f64 frem(f64 a, f64 b) { return ::fmod(a, b); }
+
+namespace detail {
+// Scalar arithmetic of builtins (warp_core::builtins::Scalar): wrapping for ints, IEEE else.
+#define WP_S_INT(T)                                       \
+  WP_FN T s_add(T a, T b) { return w_add(a, b); }         \
+  WP_FN T s_sub(T a, T b) { return w_sub(a, b); }         \
+  WP_FN T s_mul(T a, T b) { return w_mul(a, b); }
+WP_S_INT(i8)
+WP_S_INT(i16)
+WP_S_INT(i32)
+WP_S_INT(i64)
+WP_S_INT(u8)
+WP_S_INT(u16)
+WP_S_INT(u32)
+WP_S_INT(u64)
+#undef WP_S_INT
+WP_FN f32 s_add(f32 a, f32 b) { return a + b; }
+WP_FN f32 s_sub(f32 a, f32 b) { return a - b; }
+WP_FN f32 s_mul(f32 a, f32 b) { return a * b; }
+WP_FN f64 s_add(f64 a, f64 b) { return a + b; }
+WP_FN f64 s_sub(f64 a, f64 b) { return a - b; }
+WP_FN f64 s_mul(f64 a, f64 b) { return a * b; }
+}  // namespace detail
+
+// ------------------------------------------------------------------------------------------
+// Vectors (glam 0.30 on x86_64)
+// ------------------------------------------------------------------------------------------
+
+/// Traits of vector, matrix and quaternion types: `scalar`, `N` (components, matrices: number
+/// of scalars), `get(v, i)` / `at(v, i)` (component i, x first).
+template <typename V>
+struct vec_traits {
+  static constexpr bool is_vec = false;
+};
+
+#define WP_VEC_COMMON(V, S, NN, GET)                                                  \
+  template <>                                                                         \
+  struct vec_traits<V> {                                                              \
+    typedef S scalar;                                                                 \
+    static constexpr int N = NN;                                                      \
+    static constexpr bool is_vec = true;                                              \
+    static WP_FN S get(const V& v, int i) { return GET; }                             \
+    static WP_FN S& at(V& v, int i) { return GET; }                                   \
+  };                                                                                  \
+  WP_FN V V##_splat(S s) {                                                            \
+    V r;                                                                              \
+    for (int i = 0; i < NN; ++i) vec_traits<V>::at(r, i) = s;                         \
+    return r;                                                                         \
+  }                                                                                   \
+  WP_FN V V##_ZERO() { return V##_splat((S)0); }                                      \
+  WP_FN V V##_ONE() { return V##_splat((S)1); }                                       \
+  WP_FN V V##_unit(int k, S s) {                                                      \
+    V r = V##_ZERO();                                                                 \
+    vec_traits<V>::at(r, k) = s;                                                      \
+    return r;                                                                         \
+  }                                                                                   \
+  WP_FN V V##_X() { return V##_unit(0, (S)1); }                                       \
+  WP_FN V V##_Y() { return V##_unit(1, (S)1); }                                       \
+  WP_FN bool operator==(const V& a, const V& b) {                                     \
+    bool r = true;                                                                    \
+    for (int i = 0; i < NN; ++i) r = r && (vec_traits<V>::get(a, i) == vec_traits<V>::get(b, i)); \
+    return r;                                                                         \
+  }                                                                                   \
+  WP_FN bool operator!=(const V& a, const V& b) { return !(a == b); }
+
+#define WP_GET2 (i == 0 ? v.x : v.y)
+#define WP_GET3 (i == 0 ? v.x : (i == 1 ? v.y : v.z))
+#define WP_GET4 (i == 0 ? v.x : (i == 1 ? v.y : (i == 2 ? v.z : v.w)))
+
+#define WP_VEC2(V, S, AL)                                                            \
+  struct alignas(AL) V {                                                             \
+    S x, y;                                                                          \
+  };                                                                                 \
+  WP_FN V V##_new(S x, S y) {                                                        \
+    V r;                                                                             \
+    r.x = x;                                                                         \
+    r.y = y;                                                                         \
+    return r;                                                                        \
+  }                                                                                  \
+  WP_VEC_COMMON(V, S, 2, WP_GET2)
+#define WP_VEC3(V, S, AL)                                                            \
+  struct alignas(AL) V {                                                             \
+    S x, y, z;                                                                       \
+  };                                                                                 \
+  WP_FN V V##_new(S x, S y, S z) {                                                   \
+    V r;                                                                             \
+    r.x = x;                                                                         \
+    r.y = y;                                                                         \
+    r.z = z;                                                                         \
+    return r;                                                                        \
+  }                                                                                  \
+  WP_VEC_COMMON(V, S, 3, WP_GET3)                                                    \
+  WP_FN V V##_Z() { return V##_unit(2, (S)1); }
+#define WP_VEC4(V, S, AL)                                                            \
+  struct alignas(AL) V {                                                             \
+    S x, y, z, w;                                                                    \
+  };                                                                                 \
+  WP_FN V V##_new(S x, S y, S z, S w) {                                              \
+    V r;                                                                             \
+    r.x = x;                                                                         \
+    r.y = y;                                                                         \
+    r.z = z;                                                                         \
+    r.w = w;                                                                         \
+    return r;                                                                        \
+  }                                                                                  \
+  WP_VEC_COMMON(V, S, 4, WP_GET4)                                                    \
+  WP_FN V V##_Z() { return V##_unit(2, (S)1); }                                      \
+  WP_FN V V##_W() { return V##_unit(3, (S)1); }
+
+WP_VEC2(Vec2, f32, 4)
+WP_VEC3(Vec3, f32, 4)
+WP_VEC4(Vec4, f32, 16)  // glam's Vec4 is an __m128 on x86_64
+WP_VEC2(DVec2, f64, 8)
+WP_VEC3(DVec3, f64, 8)
+WP_VEC4(DVec4, f64, 8)
+WP_VEC2(IVec2, i32, 4)
+WP_VEC3(IVec3, i32, 4)
+WP_VEC4(IVec4, i32, 4)
+WP_VEC2(UVec2, u32, 4)
+WP_VEC3(UVec3, u32, 4)
+WP_VEC4(UVec4, u32, 4)
+
+// Signed constants (float and IVec): NEG_ONE, NEG_X.. NEG_W; MIN/MAX for every vector.
+#define WP_VEC_NEG2(V, S)                                        \
+  WP_FN V V##_NEG_ONE() { return V##_splat((S)-1); }             \
+  WP_FN V V##_NEG_X() { return V##_unit(0, (S)-1); }             \
+  WP_FN V V##_NEG_Y() { return V##_unit(1, (S)-1); }
+#define WP_VEC_NEG3(V, S) \
+  WP_VEC_NEG2(V, S)       \
+  WP_FN V V##_NEG_Z() { return V##_unit(2, (S)-1); }
+#define WP_VEC_NEG4(V, S) \
+  WP_VEC_NEG3(V, S)       \
+  WP_FN V V##_NEG_W() { return V##_unit(3, (S)-1); }
+WP_VEC_NEG2(Vec2, f32)
+WP_VEC_NEG3(Vec3, f32)
+WP_VEC_NEG4(Vec4, f32)
+WP_VEC_NEG2(DVec2, f64)
+WP_VEC_NEG3(DVec3, f64)
+WP_VEC_NEG4(DVec4, f64)
+WP_VEC_NEG2(IVec2, i32)
+WP_VEC_NEG3(IVec3, i32)
+WP_VEC_NEG4(IVec4, i32)
+#undef WP_VEC_NEG2
+#undef WP_VEC_NEG3
+#undef WP_VEC_NEG4
+
+#define WP_VEC_FLOAT_CONSTS(V, S)                                      \
+  WP_FN V V##_MIN() { return V##_splat(-float_max<S>()); }             \
+  WP_FN V V##_MAX() { return V##_splat(float_max<S>()); }              \
+  WP_FN V V##_INFINITY() { return V##_splat(float_inf<S>()); }         \
+  WP_FN V V##_NEG_INFINITY() { return V##_splat(-float_inf<S>()); }    \
+  WP_FN V V##_NAN() { return V##_splat(float_nan<S>()); }
+WP_VEC_FLOAT_CONSTS(Vec2, f32)
+WP_VEC_FLOAT_CONSTS(Vec3, f32)
+WP_VEC_FLOAT_CONSTS(Vec4, f32)
+WP_VEC_FLOAT_CONSTS(DVec2, f64)
+WP_VEC_FLOAT_CONSTS(DVec3, f64)
+WP_VEC_FLOAT_CONSTS(DVec4, f64)
+#undef WP_VEC_FLOAT_CONSTS
+#define WP_VEC_INT_CONSTS(V, S)                                        \
+  WP_FN V V##_MIN() { return V##_splat(num<S>::min_value); }           \
+  WP_FN V V##_MAX() { return V##_splat(num<S>::max_value); }
+WP_VEC_INT_CONSTS(IVec2, i32)
+WP_VEC_INT_CONSTS(IVec3, i32)
+WP_VEC_INT_CONSTS(IVec4, i32)
+WP_VEC_INT_CONSTS(UVec2, u32)
+WP_VEC_INT_CONSTS(UVec3, u32)
+WP_VEC_INT_CONSTS(UVec4, u32)
+#undef WP_VEC_INT_CONSTS
+
+#undef WP_VEC2
+#undef WP_VEC3
+#undef WP_VEC4
+#undef WP_VEC_COMMON
+
+namespace detail {
+template <typename V, typename F>
+WP_FN V vmap(const V& a, F f) {
+  V r;
+  for (int i = 0; i < vec_traits<V>::N; ++i) vec_traits<V>::at(r, i) = f(vec_traits<V>::get(a, i));
+  return r;
+}
+template <typename V, typename F>
+WP_FN V vzip(const V& a, const V& b, F f) {
+  V r;
+  for (int i = 0; i < vec_traits<V>::N; ++i)
+    vec_traits<V>::at(r, i) = f(vec_traits<V>::get(a, i), vec_traits<V>::get(b, i));
+  return r;
+}
+/// glam's SSE floor (DirectXMath XMVectorFloor): as floorf except that -0.0 floors to +0.0
+/// (and values in (-1, 0) go through truncation then -1). Used by Vec4's `%` only.
+WP_FN f32 sse_floor(f32 v) {
+  const u32 mag = f32_to_bits(v) & 0x7fffffffu;
+  if ((i32)mag < (i32)0x4b000000) {  // |v| < 2^23: has a fraction; NaN and inf excluded
+    f32 r = (f32)(i32)v;             // truncate (cvttps2dq + cvtdq2ps)
+    if (r > v) r = r + -1.0f;
+    return r;
+  }
+  return v;
+}
+}  // namespace detail
+
+// Float vector arithmetic: componentwise, glam's operators.
+#define WP_FVEC_OPS(V, S)                                                                        \
+  WP_FN V operator+(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x + y; }); } \
+  WP_FN V operator-(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x - y; }); } \
+  WP_FN V operator*(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x * y; }); } \
+  WP_FN V operator/(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x / y; }); } \
+  WP_FN V operator+(const V& a, S s) { return a + V##_splat(s); }                               \
+  WP_FN V operator-(const V& a, S s) { return a - V##_splat(s); }                               \
+  WP_FN V operator*(const V& a, S s) { return a * V##_splat(s); }                               \
+  WP_FN V operator/(const V& a, S s) { return a / V##_splat(s); }                               \
+  WP_FN V operator%(const V& a, S s) { return a % V##_splat(s); }                               \
+  WP_FN V operator+(S s, const V& a) { return V##_splat(s) + a; }                               \
+  WP_FN V operator-(S s, const V& a) { return V##_splat(s) - a; }                               \
+  WP_FN V operator*(S s, const V& a) { return V##_splat(s) * a; }                               \
+  WP_FN V operator/(S s, const V& a) { return V##_splat(s) / a; }                               \
+  WP_FN V operator%(S s, const V& a) { return V##_splat(s) % a; }                               \
+  WP_FN V operator-(const V& a) { return detail::vmap(a, [](S x) { return -x; }); }            \
+  WP_FN V& operator+=(V& a, const V& b) { return a = a + b; }                                   \
+  WP_FN V& operator-=(V& a, const V& b) { return a = a - b; }                                   \
+  WP_FN V& operator*=(V& a, const V& b) { return a = a * b; }                                   \
+  WP_FN V& operator/=(V& a, const V& b) { return a = a / b; }                                   \
+  WP_FN V& operator%=(V& a, const V& b) { return a = a % b; }                                   \
+  WP_FN V& operator*=(V& a, S s) { return a = a * s; }                                          \
+  WP_FN V& operator/=(V& a, S s) { return a = a / s; }
+
+// `%` is Rust's float `%` (fmod) per component, except for Vec4: glam's SSE Vec4 computes
+// `a - floor(a / b) * b` (a floored modulo, with glam's SSE floor).
+WP_FN Vec2 operator%(const Vec2& a, const Vec2& b) { return detail::vzip(a, b, [](f32 x, f32 y) { return frem(x, y); }); }
+WP_FN Vec3 operator%(const Vec3& a, const Vec3& b) { return detail::vzip(a, b, [](f32 x, f32 y) { return frem(x, y); }); }
+WP_FN Vec4 operator%(const Vec4& a, const Vec4& b) {
+  return detail::vzip(a, b, [](f32 x, f32 y) { return x - detail::sse_floor(x / y) * y; });
+}
+WP_FN DVec2 operator%(const DVec2& a, const DVec2& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
+WP_FN DVec3 operator%(const DVec3& a, const DVec3& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
+WP_FN DVec4 operator%(const DVec4& a, const DVec4& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
+
+WP_FVEC_OPS(Vec2, f32)
+WP_FVEC_OPS(Vec3, f32)
+WP_FVEC_OPS(Vec4, f32)
+WP_FVEC_OPS(DVec2, f64)
+WP_FVEC_OPS(DVec3, f64)
+WP_FVEC_OPS(DVec4, f64)
+#undef WP_FVEC_OPS
+
+// Integer vectors: arithmetic only through w_* (componentwise; a zero in any component of a
+// divisor faults before anything is computed, as in warp_core::ops).
+#define WP_IVEC_OPS(V, S)                                                                        \
+  WP_FN V w_add(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_add(x, y); }); } \
+  WP_FN V w_sub(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_sub(x, y); }); } \
+  WP_FN V w_mul(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_mul(x, y); }); } \
+  WP_FN V w_neg(const V& a) { return detail::vmap(a, [](S x) { return w_neg(x); }); }           \
+  WP_FN bool any_zero(const V& b) {                                                             \
+    bool z = false;                                                                             \
+    for (int i = 0; i < vec_traits<V>::N; ++i) z = z || vec_traits<V>::get(b, i) == (S)0;      \
+    return z;                                                                                   \
+  }                                                                                             \
+  WP_FN V w_div(const V& a, const V& b, ctx_t* ctx) {                                           \
+    if (any_zero(b)) {                                                                          \
+      raise(ctx, FAULT_DIVISION_BY_ZERO);                                                       \
+      return V##_ZERO();                                                                        \
+    }                                                                                           \
+    return detail::vzip(a, b, [ctx](S x, S y) { return w_div(x, y, ctx); });                    \
+  }                                                                                             \
+  WP_FN V w_rem(const V& a, const V& b, ctx_t* ctx) {                                           \
+    if (any_zero(b)) {                                                                          \
+      raise(ctx, FAULT_DIVISION_BY_ZERO);                                                       \
+      return V##_ZERO();                                                                        \
+    }                                                                                           \
+    return detail::vzip(a, b, [ctx](S x, S y) { return w_rem(x, y, ctx); });                    \
+  }                                                                                             \
+  WP_FN V w_shl(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shl(x, s); }); } \
+  WP_FN V w_shr(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shr(x, s); }); }
+WP_IVEC_OPS(IVec2, i32)
+WP_IVEC_OPS(IVec3, i32)
+WP_IVEC_OPS(IVec4, i32)
+WP_IVEC_OPS(UVec2, u32)
+WP_IVEC_OPS(UVec3, u32)
+WP_IVEC_OPS(UVec4, u32)
+#undef WP_IVEC_OPS
+
+// ------------------------------------------------------------------------------------------
+// Matrices (column-major, columns x_axis.. w_axis)
+// ------------------------------------------------------------------------------------------
+
+struct alignas(16) Mat2 {  // glam's Mat2 is one __m128 on x86_64
+  Vec2 x_axis, y_axis;
+};
+struct Mat3 {
+  Vec3 x_axis, y_axis, z_axis;
+};
+struct alignas(16) Mat4 {
+  Vec4 x_axis, y_axis, z_axis, w_axis;
+};
+struct DMat2 {
+  DVec2 x_axis, y_axis;
+};
+struct DMat3 {
+  DVec3 x_axis, y_axis, z_axis;
+};
+struct DMat4 {
+  DVec4 x_axis, y_axis, z_axis, w_axis;
+};
+
+/// Column access for matrices: `mat_traits<M>::col(m, i)`.
+template <typename M>
+struct mat_traits {
+  static constexpr bool is_mat = false;
+};
+
+#define WP_MAT_COMMON(M, V, S, NN, GETC, FROMCOLS_PARAMS, FROMCOLS_BODY)                       \
+  template <>                                                                                  \
+  struct mat_traits<M> {                                                                       \
+    typedef V column;                                                                          \
+    typedef S scalar;                                                                          \
+    static constexpr int N = NN;                                                               \
+    static constexpr bool is_mat = true;                                                       \
+    static WP_FN V get(const M& m, int i) { return GETC; }                                     \
+    static WP_FN V& at(M& m, int i) { return GETC; }                                           \
+  };                                                                                           \
+  template <>                                                                                  \
+  struct vec_traits<M> {                                                                       \
+    typedef S scalar;                                                                          \
+    static constexpr int N = NN * NN;                                                          \
+    static constexpr bool is_vec = false;                                                      \
+    static WP_FN S get(const M& m, int i) {                                                    \
+      return vec_traits<V>::get(mat_traits<M>::get(m, i / NN), i % NN);                        \
+    }                                                                                          \
+    static WP_FN S& at(M& m, int i) { return vec_traits<V>::at(mat_traits<M>::at(m, i / NN), i % NN); } \
+  };                                                                                           \
+  WP_FN M M##_from_cols FROMCOLS_PARAMS {                                                      \
+    M m;                                                                                       \
+    FROMCOLS_BODY;                                                                             \
+    return m;                                                                                  \
+  }                                                                                            \
+  WP_FN M M##_from_diagonal(const V& d) {                                                      \
+    M m;                                                                                       \
+    for (int i = 0; i < NN; ++i) {                                                             \
+      V c = V##_ZERO();                                                                        \
+      vec_traits<V>::at(c, i) = vec_traits<V>::get(d, i);                                      \
+      mat_traits<M>::at(m, i) = c;                                                             \
+    }                                                                                          \
+    return m;                                                                                  \
+  }                                                                                            \
+  WP_FN M M##_splat_cols(const V& c) {                                                         \
+    M m;                                                                                       \
+    for (int i = 0; i < NN; ++i) mat_traits<M>::at(m, i) = c;                                  \
+    return m;                                                                                  \
+  }                                                                                            \
+  WP_FN M M##_ZERO() { return M##_splat_cols(V##_ZERO()); }                                    \
+  WP_FN M M##_NAN() { return M##_splat_cols(V##_NAN()); }                                      \
+  WP_FN M M##_IDENTITY() { return M##_from_diagonal(V##_ONE()); }                              \
+  template <typename F>                                                                        \
+  WP_FN M mmap_##M(const M& a, F f) {                                                          \
+    M r;                                                                                       \
+    for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = f(mat_traits<M>::get(a, i));       \
+    return r;                                                                                  \
+  }                                                                                            \
+  WP_FN M operator+(const M& a, const M& b) {                                                  \
+    M r;                                                                                       \
+    for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = mat_traits<M>::get(a, i) + mat_traits<M>::get(b, i); \
+    return r;                                                                                  \
+  }                                                                                            \
+  WP_FN M operator-(const M& a, const M& b) {                                                  \
+    M r;                                                                                       \
+    for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = mat_traits<M>::get(a, i) - mat_traits<M>::get(b, i); \
+    return r;                                                                                  \
+  }                                                                                            \
+  WP_FN M operator-(const M& a) { return mmap_##M(a, [](const V& c) { return -c; }); }         \
+  /* M * v: x_axis * v.x + y_axis * v.y + ..., summed left to right. */                        \
+  WP_FN V operator*(const M& a, const V& v) {                                                  \
+    V r = mat_traits<M>::get(a, 0) * vec_traits<V>::get(v, 0);                                 \
+    for (int i = 1; i < NN; ++i) r = r + mat_traits<M>::get(a, i) * vec_traits<V>::get(v, i);  \
+    return r;                                                                                  \
+  }                                                                                            \
+  WP_FN M operator*(const M& a, const M& b) {                                                  \
+    M r;                                                                                       \
+    for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = a * mat_traits<M>::get(b, i);       \
+    return r;                                                                                  \
+  }                                                                                            \
+  WP_FN M operator*(const M& a, S s) { return mmap_##M(a, [s](const V& c) { return c * s; }); } \
+  WP_FN M operator*(S s, const M& a) { return a * s; }                                         \
+  WP_FN M operator/(const M& a, S s) { return mmap_##M(a, [s](const V& c) { return c / s; }); } \
+  /* glam 0.30 quirk: `s / M` is implemented as `M.div_scalar(s)`, i.e. M / s. */              \
+  WP_FN M operator/(S s, const M& a) { return a / s; }                                         \
+  WP_FN M& operator+=(M& a, const M& b) { return a = a + b; }                                  \
+  WP_FN M& operator-=(M& a, const M& b) { return a = a - b; }                                  \
+  WP_FN M& operator*=(M& a, const M& b) { return a = a * b; }                                  \
+  WP_FN M& operator*=(M& a, S s) { return a = a * s; }                                         \
+  WP_FN M& operator/=(M& a, S s) { return a = a / s; }                                         \
+  WP_FN bool operator==(const M& a, const M& b) {                                              \
+    bool r = true;                                                                             \
+    for (int i = 0; i < NN; ++i) r = r && (mat_traits<M>::get(a, i) == mat_traits<M>::get(b, i)); \
+    return r;                                                                                  \
+  }                                                                                            \
+  WP_FN bool operator!=(const M& a, const M& b) { return !(a == b); }
+
+#define WP_GETC2 (i == 0 ? m.x_axis : m.y_axis)
+#define WP_GETC3 (i == 0 ? m.x_axis : (i == 1 ? m.y_axis : m.z_axis))
+#define WP_GETC4 (i == 0 ? m.x_axis : (i == 1 ? m.y_axis : (i == 2 ? m.z_axis : m.w_axis)))
+#define WP_COMMA ,
+
+WP_MAT_COMMON(Mat2, Vec2, f32, 2, WP_GETC2, (const Vec2& x WP_COMMA const Vec2& y),
+              m.x_axis = x; m.y_axis = y)
+WP_MAT_COMMON(Mat3, Vec3, f32, 3, WP_GETC3,
+              (const Vec3& x WP_COMMA const Vec3& y WP_COMMA const Vec3& z),
+              m.x_axis = x; m.y_axis = y; m.z_axis = z)
+WP_MAT_COMMON(Mat4, Vec4, f32, 4, WP_GETC4,
+              (const Vec4& x WP_COMMA const Vec4& y WP_COMMA const Vec4& z WP_COMMA const Vec4& w),
+              m.x_axis = x; m.y_axis = y; m.z_axis = z; m.w_axis = w)
+WP_MAT_COMMON(DMat2, DVec2, f64, 2, WP_GETC2, (const DVec2& x WP_COMMA const DVec2& y),
+              m.x_axis = x; m.y_axis = y)
+WP_MAT_COMMON(DMat3, DVec3, f64, 3, WP_GETC3,
+              (const DVec3& x WP_COMMA const DVec3& y WP_COMMA const DVec3& z),
+              m.x_axis = x; m.y_axis = y; m.z_axis = z)
+WP_MAT_COMMON(DMat4, DVec4, f64, 4, WP_GETC4,
+              (const DVec4& x WP_COMMA const DVec4& y WP_COMMA const DVec4& z WP_COMMA const DVec4& w),
+              m.x_axis = x; m.y_axis = y; m.z_axis = z; m.w_axis = w)
+#undef WP_MAT_COMMON
+#undef WP_GETC2
+#undef WP_GETC3
+#undef WP_GETC4
+#undef WP_COMMA
+
+// ------------------------------------------------------------------------------------------
+// Quaternions (x, y, z, w)
+// ------------------------------------------------------------------------------------------
+
+struct alignas(16) Quat {  // an __m128 on x86_64
+  f32 x, y, z, w;
+};
+struct DQuat {
+  f64 x, y, z, w;
+};
+
+#define WP_QUAT_COMMON(Q, V3, S)                                                          \
+  template <>                                                                             \
+  struct vec_traits<Q> {                                                                  \
+    typedef S scalar;                                                                     \
+    static constexpr int N = 4;                                                           \
+    static constexpr bool is_vec = false;                                                 \
+    static WP_FN S get(const Q& v, int i) { return WP_GET4; }                             \
+    static WP_FN S& at(Q& v, int i) { return WP_GET4; }                                   \
+  };                                                                                      \
+  WP_FN Q Q##_from_xyzw(S x, S y, S z, S w) {                                             \
+    Q q;                                                                                  \
+    q.x = x;                                                                              \
+    q.y = y;                                                                              \
+    q.z = z;                                                                              \
+    q.w = w;                                                                              \
+    return q;                                                                             \
+  }                                                                                       \
+  WP_FN Q Q##_IDENTITY() { return Q##_from_xyzw((S)0, (S)0, (S)0, (S)1); }                \
+  WP_FN Q Q##_NAN() {                                                                     \
+    const S n = float_nan<S>();                                                           \
+    return Q##_from_xyzw(n, n, n, n);                                                     \
+  }                                                                                       \
+  WP_FN Q operator+(const Q& a, const Q& b) { return detail::vzip(a, b, [](S p, S q) { return p + q; }); } \
+  WP_FN Q operator-(const Q& a, const Q& b) { return detail::vzip(a, b, [](S p, S q) { return p - q; }); } \
+  WP_FN Q operator*(const Q& a, S s) { return detail::vmap(a, [s](S p) { return p * s; }); }   \
+  WP_FN Q operator/(const Q& a, S s) { return detail::vmap(a, [s](S p) { return p / s; }); }   \
+  /* glam: -q is q * -1.0 */                                                              \
+  WP_FN Q operator-(const Q& a) { return a * (S)-1; }                                     \
+  /* glam's mul_vec3: v*(w*w - b.b) + b*(2 v.b) + (b x v)*(2w), b = (x, y, z). */         \
+  WP_FN V3 operator*(const Q& q, const V3& v) {                                           \
+    const S w = q.w;                                                                      \
+    const V3 b = V3##_new(q.x, q.y, q.z);                                                 \
+    const S b2 = (b.x * b.x + b.y * b.y) + b.z * b.z;                                     \
+    const S vb = (v.x * b.x + v.y * b.y) + v.z * b.z;                                     \
+    const V3 c = V3##_new(b.y * v.z - v.y * b.z, b.z * v.x - v.z * b.x, b.x * v.y - v.x * b.y); \
+    return (v * (w * w - b2) + b * (vb * (S)2)) + c * (w * (S)2);                         \
+  }                                                                                       \
+  WP_FN Q& operator+=(Q& a, const Q& b) { return a = a + b; }                             \
+  WP_FN Q& operator-=(Q& a, const Q& b) { return a = a - b; }                             \
+  WP_FN Q& operator*=(Q& a, const Q& b) { return a = a * b; }                             \
+  WP_FN Q& operator*=(Q& a, S s) { return a = a * s; }                                    \
+  WP_FN Q& operator/=(Q& a, S s) { return a = a / s; }                                    \
+  WP_FN bool operator==(const Q& a, const Q& b) {                                         \
+    return a.x == b.x && a.y == b.y && a.z == b.z && a.w == b.w;                          \
+  }                                                                                       \
+  WP_FN bool operator!=(const Q& a, const Q& b) { return !(a == b); }
+
+// Hamilton products, each in glam's exact evaluation order (they differ: Quat uses SSE).
+struct Quat;
+WP_FN Quat operator*(const Quat& l, const Quat& r);
+struct DQuat;
+WP_FN DQuat operator*(const DQuat& l, const DQuat& r);
+WP_QUAT_COMMON(Quat, Vec3, f32)
+WP_QUAT_COMMON(DQuat, DVec3, f64)
+#undef WP_QUAT_COMMON
+#undef WP_GET2
+#undef WP_GET3
+#undef WP_GET4
+
+/// glam's SSE `Quat::mul_quat` (rtm::quat_mul), lane by lane.
+WP_FN Quat operator*(const Quat& l, const Quat& r) {
+  Quat q;
+  q.x = (l.w * r.x + l.x * r.w) + (l.y * r.z - l.z * r.y);
+  q.y = (l.w * r.y - l.x * r.z) + (l.y * r.w + l.z * r.x);
+  q.z = (l.w * r.z + l.x * r.y) + (l.z * r.w - l.y * r.x);
+  q.w = (l.w * r.w - l.x * r.x) + (-(l.y * r.y) - l.z * r.z);
+  return q;
+}
+/// glam's scalar `DQuat::mul_quat`.
+WP_FN DQuat operator*(const DQuat& l, const DQuat& r) {
+  DQuat q;
+  q.x = ((l.w * r.x + l.x * r.w) + l.y * r.z) - l.z * r.y;
+  q.y = ((l.w * r.y - l.x * r.z) + l.y * r.w) + l.z * r.x;
+  q.z = ((l.w * r.z + l.x * r.y) - l.y * r.x) + l.z * r.w;
+  q.w = ((l.w * r.w - l.x * r.x) - l.y * r.y) - l.z * r.z;
+  return q;
+}
+
+// ------------------------------------------------------------------------------------------
+// Layout: glam 0.30, x86_64, default features (SSE2, no "cuda"/"scalar-math" feature)
+// ------------------------------------------------------------------------------------------
+
+#define WP_LAYOUT(T, SIZE, ALIGN) \
+  static_assert(sizeof(T) == SIZE && alignof(T) == ALIGN, #T " must match glam's layout");
+WP_LAYOUT(Vec2, 8, 4)
+WP_LAYOUT(Vec3, 12, 4)
+WP_LAYOUT(Vec4, 16, 16)
+WP_LAYOUT(DVec2, 16, 8)
+WP_LAYOUT(DVec3, 24, 8)
+WP_LAYOUT(DVec4, 32, 8)
+WP_LAYOUT(IVec2, 8, 4)
+WP_LAYOUT(IVec3, 12, 4)
+WP_LAYOUT(IVec4, 16, 4)
+WP_LAYOUT(UVec2, 8, 4)
+WP_LAYOUT(UVec3, 12, 4)
+WP_LAYOUT(UVec4, 16, 4)
+WP_LAYOUT(Mat2, 16, 16)
+WP_LAYOUT(Mat3, 36, 4)
+WP_LAYOUT(Mat4, 64, 16)
+WP_LAYOUT(DMat2, 32, 8)
+WP_LAYOUT(DMat3, 72, 8)
+WP_LAYOUT(DMat4, 128, 8)
+WP_LAYOUT(Quat, 16, 16)
+WP_LAYOUT(DQuat, 32, 8)
+#undef WP_LAYOUT
+
+// ------------------------------------------------------------------------------------------
+// Literals (warp_core::ops::FromLiteral)
+// ------------------------------------------------------------------------------------------
+
+namespace detail {
+template <typename T, bool IsVec = vec_traits<T>::is_vec>
+struct literal;
+template <typename T>
+struct literal<T, false> {  // scalars
+  static WP_FN T from_f64(f64 v) { return cast<T>(v); }
+  static WP_FN T from_i64(i64 v) { return cast<T>(v); }
+};
+template <typename T>
+struct literal<T, true> {  // vectors: splat
+  typedef typename vec_traits<T>::scalar S;
+  static WP_FN T splat(S s) {
+    T r;
+    for (int i = 0; i < vec_traits<T>::N; ++i) vec_traits<T>::at(r, i) = s;
+    return r;
+  }
+  static WP_FN T from_f64(f64 v) { return splat(cast<S>(v)); }
+  static WP_FN T from_i64(i64 v) { return splat(cast<S>(v)); }
+};
+}  // namespace detail
+
+/// The literal `v` as a `T` (`v as T`; vectors splat `v as S`).
+template <typename T>
+WP_FN T lit_like(f64 v) {
+  return detail::literal<T>::from_f64(v);
+}
+template <typename T>
+WP_FN T lit_like(const T&, f64 v) {
+  return detail::literal<T>::from_f64(v);
+}
+/// The integer `v` (a range loop's value) as a `T`.
+template <typename T>
+WP_FN T int_like(i64 v) {
+  return detail::literal<T>::from_i64(v);
+}
+template <typename T>
+WP_FN T int_like(const T&, i64 v) {
+  return detail::literal<T>::from_i64(v);
+}
+
+// ------------------------------------------------------------------------------------------
+// Arrays
+// ------------------------------------------------------------------------------------------
+
+/// An `Array<T, N>` kernel argument. Byte layout (align 8, size 16 + 16 N):
+///   0 data (T*), 8 shape[N] (i64), 8 + 8N strides[N] (i64, in BYTES),
+///   8 + 16N arg (i32: the parameter's index, reported in OutOfBounds faults), 12 + 16N pad.
+/// N = 1: 32 bytes, 2: 48, 3: 64, 4: 80.
+template <typename T, int N>
+struct array_t {
+  T* data;
+  i64 shape[N];
+  i64 strides[N];
+  i32 arg;
+  i32 pad;
+};
+static_assert(sizeof(array_t<float, 1>) == 32 && sizeof(array_t<float, 2>) == 48 &&
+                  sizeof(array_t<float, 3>) == 64 && sizeof(array_t<float, 4>) == 80 &&
+                  alignof(array_t<float, 1>) == 8,
+              "array_t layout");
+
+/// Number of elements (usize, like ArrayView::len).
+template <typename T, int N>
+WP_FN usize len(const array_t<T, N>& a) {
+  u64 n = 1;
+  for (int k = 0; k < N; ++k) n *= (u64)a.shape[k];
+  return n;
+}
+/// Extent of dimension k (usize, like ArrayView::shape()[k]).
+template <typename T, int N>
+WP_FN usize extent(const array_t<T, N>& a, int k) {
+  return (usize)a.shape[k];
+}
+
+namespace detail {
+template <typename T, int N>
+WP_FN T* elem_ptr_idx(const array_t<T, N>& a, const i64* idx, ctx_t* ctx) {
+  i64 off = 0;
+  for (int k = 0; k < N; ++k) {
+    // Negative indices compare as huge unsigned values, as in warp-core.
+    if ((u64)idx[k] >= (u64)a.shape[k]) {
+      raise(ctx, FAULT_OUT_OF_BOUNDS, a.arg, N, idx, a.shape);
+      return nullptr;
+    }
+    off += idx[k] * a.strides[k];
+  }
+  return (T*)((char*)a.data + off);
+}
+template <typename T, int N>
+WP_FN T* elem_ptr_unchecked_idx(const array_t<T, N>& a, const i64* idx) {
+  i64 off = 0;
+  for (int k = 0; k < N; ++k) off += idx[k] * a.strides[k];
+  return (T*)((char*)a.data + off);
+}
+template <typename T, int N>
+WP_FN T load_idx(const array_t<T, N>& a, const i64* idx, ctx_t* ctx) {
+  T* p = elem_ptr_idx(a, idx, ctx);
+  if (p == nullptr) return T{};
+  return *p;
+}
+template <typename T, int N>
+WP_FN void store_idx(const array_t<T, N>& a, const i64* idx, const T& v, ctx_t* ctx) {
+  T* p = elem_ptr_idx(a, idx, ctx);
+  if (p != nullptr) *p = v;
+}
+}  // namespace detail
+
+// Bounds-checked access: an index outside [0, shape) records OutOfBounds (with the array's
+// `arg`, the whole index and the shape) and touches nothing; load returns T{}.
+template <typename T>
+WP_FN T* elem_ptr(const array_t<T, 1>& a, i64 i0, ctx_t* ctx) {
+  const i64 idx[1] = {i0};
+  return detail::elem_ptr_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T* elem_ptr(const array_t<T, 2>& a, i64 i0, i64 i1, ctx_t* ctx) {
+  const i64 idx[2] = {i0, i1};
+  return detail::elem_ptr_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T* elem_ptr(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, ctx_t* ctx) {
+  const i64 idx[3] = {i0, i1, i2};
+  return detail::elem_ptr_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T* elem_ptr(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, ctx_t* ctx) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  return detail::elem_ptr_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T load(const array_t<T, 1>& a, i64 i0, ctx_t* ctx) {
+  const i64 idx[1] = {i0};
+  return detail::load_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T load(const array_t<T, 2>& a, i64 i0, i64 i1, ctx_t* ctx) {
+  const i64 idx[2] = {i0, i1};
+  return detail::load_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T load(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, ctx_t* ctx) {
+  const i64 idx[3] = {i0, i1, i2};
+  return detail::load_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN T load(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, ctx_t* ctx) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  return detail::load_idx(a, idx, ctx);
+}
+template <typename T>
+WP_FN void store(const array_t<T, 1>& a, i64 i0, const T& v, ctx_t* ctx) {
+  const i64 idx[1] = {i0};
+  detail::store_idx(a, idx, v, ctx);
+}
+template <typename T>
+WP_FN void store(const array_t<T, 2>& a, i64 i0, i64 i1, const T& v, ctx_t* ctx) {
+  const i64 idx[2] = {i0, i1};
+  detail::store_idx(a, idx, v, ctx);
+}
+template <typename T>
+WP_FN void store(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, const T& v, ctx_t* ctx) {
+  const i64 idx[3] = {i0, i1, i2};
+  detail::store_idx(a, idx, v, ctx);
+}
+template <typename T>
+WP_FN void store(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const T& v, ctx_t* ctx) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  detail::store_idx(a, idx, v, ctx);
+}
+
+// Unchecked access: only for indices known to be in bounds (thread-index accesses after the
+// launch checked that the array covers the grid).
+template <typename T>
+WP_FN T load_unchecked(const array_t<T, 1>& a, i64 i0) {
+  const i64 idx[1] = {i0};
+  return *detail::elem_ptr_unchecked_idx(a, idx);
+}
+template <typename T>
+WP_FN T load_unchecked(const array_t<T, 2>& a, i64 i0, i64 i1) {
+  const i64 idx[2] = {i0, i1};
+  return *detail::elem_ptr_unchecked_idx(a, idx);
+}
+template <typename T>
+WP_FN T load_unchecked(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2) {
+  const i64 idx[3] = {i0, i1, i2};
+  return *detail::elem_ptr_unchecked_idx(a, idx);
+}
+template <typename T>
+WP_FN T load_unchecked(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  return *detail::elem_ptr_unchecked_idx(a, idx);
+}
+template <typename T>
+WP_FN void store_unchecked(const array_t<T, 1>& a, i64 i0, const T& v) {
+  const i64 idx[1] = {i0};
+  *detail::elem_ptr_unchecked_idx(a, idx) = v;
+}
+template <typename T>
+WP_FN void store_unchecked(const array_t<T, 2>& a, i64 i0, i64 i1, const T& v) {
+  const i64 idx[2] = {i0, i1};
+  *detail::elem_ptr_unchecked_idx(a, idx) = v;
+}
+template <typename T>
+WP_FN void store_unchecked(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, const T& v) {
+  const i64 idx[3] = {i0, i1, i2};
+  *detail::elem_ptr_unchecked_idx(a, idx) = v;
+}
+template <typename T>
+WP_FN void store_unchecked(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const T& v) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  *detail::elem_ptr_unchecked_idx(a, idx) = v;
+}
+
+/// True when the array covers the launch dims (every thread-index access is in bounds).
+template <typename T, int N>
+WP_FN bool covers(const array_t<T, N>& a, const i64* dims) {
+  for (int k = 0; k < N; ++k)
+    if (a.shape[k] < dims[k]) return false;
+  return true;
+}
+
+// ------------------------------------------------------------------------------------------
+// Range loops (warp_core::RangeProg)
+// ------------------------------------------------------------------------------------------
+
+/// `count` values `first + n * step`, n in [0, count) (24 bytes).
+struct range_t {
+  i64 first;
+  i64 step;
+  i64 count;
+};
+
+namespace detail {
+// Wrapping i64 arithmetic (Rust release-build semantics; no C++ signed-overflow UB).
+WP_FN i64 wadd64(i64 a, i64 b) { return (i64)((u64)a + (u64)b); }
+WP_FN i64 wmul64(i64 a, i64 b) { return (i64)((u64)a * (u64)b); }
+}  // namespace detail
+
+/// `start..end`, or `start..=end` when `inclusive`; count clamped to [0, i64::MAX].
+WP_FN range_t range_new(i64 start, i64 end, bool inclusive) {
+  range_t r;
+  r.first = start;
+  r.step = 1;
+  if (inclusive ? end < start : end <= start) {
+    r.count = 0;
+  } else {
+    const u64 d = (u64)end - (u64)start;  // exact: end >= start
+    const u64 maxc = 9223372036854775807ull;
+    if (inclusive)
+      r.count = d >= maxc ? (i64)maxc : (i64)(d + 1);
+    else
+      r.count = d > maxc ? (i64)maxc : (i64)d;
+  }
+  return r;
+}
+/// `.rev()`.
+WP_FN range_t range_rev(range_t r) {
+  if (r.count == 0) return r;
+  range_t o;
+  o.first = detail::wadd64(r.first, detail::wmul64(r.step, r.count - 1));
+  o.step = (i64)(0ull - (u64)r.step);
+  o.count = r.count;
+  return o;
+}
+/// `.step_by(k)`; k <= 0 records BadStep (ndim 1, index[0] = k) and gives an empty range.
+WP_FN range_t range_step_by(range_t r, i64 k, ctx_t* ctx) {
+  if (k <= 0) {
+    const i64 idx[1] = {k};
+    raise(ctx, FAULT_BAD_STEP, -1, 1, idx, nullptr);
+    range_t e;
+    e.first = r.first;
+    e.step = r.step;
+    e.count = 0;
+    return e;
+  }
+  range_t o;
+  o.first = r.first;
+  o.step = detail::wmul64(r.step, k);
+  o.count = detail::wadd64(r.count, k - 1) / k;
+  return o;
+}
+/// The n-th value.
+WP_FN i64 range_at(const range_t& r, i64 n) { return detail::wadd64(r.first, detail::wmul64(n, r.step)); }
+
+// ------------------------------------------------------------------------------------------
+// Launch grid (warp_core::Grid)
+// ------------------------------------------------------------------------------------------
+
+/// Launch dimensions (48 bytes, align 8): 0 dims[4] (i64; unused trailing entries 1),
+/// 32 total (i64), 40 ndim (i32), 44 pad.
+struct launch_t {
+  i64 dims[4];
+  i64 total;
+  i32 ndim;
+  i32 pad;
+};
+static_assert(sizeof(launch_t) == 48 && alignof(launch_t) == 8, "launch_t layout");
+
+/// The n-dimensional index of thread `flat`, row-major (the last dimension varies fastest).
+WP_FN void unflatten(const launch_t& l, i64 flat, i64* out, int n) {
+  for (int d = n - 1; d >= 1; --d) {
+    const i64 e = l.dims[d];
+    out[d] = flat % e;
+    flat /= e;
+  }
+  if (n > 0) out[0] = flat;
+}
+
+#if defined(__CUDACC__)
+/// This thread's flat index in a 1-D CUDA launch (i64, so that grids over 2^31 work).
+WP_FN i64 flat_thread_id() { return (i64)blockIdx.x * (i64)blockDim.x + (i64)threadIdx.x; }
+#endif
+
+}  // namespace wp
