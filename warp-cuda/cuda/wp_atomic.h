@@ -131,22 +131,22 @@ WP_VEC_ATOMICS(DVec4, f64)
 // The builtins: (array, one i64 index per dimension, value, ctx) -> old value.
 #define WP_ATOMIC_BUILTIN(OP)                                                                  \
   template <typename T>                                                                        \
-  WP_FN T atomic_##OP(const array_t<T, 1>& a, i64 i0, T v, ctx_t* ctx) {                       \
+  WP_FN T atomic_##OP(const array_t<T, 1>& a, i64 i0, typename identity<T>::type v, ctx_t* ctx) {                       \
     T* p = elem_ptr(a, i0, ctx);                                                               \
     return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
   }                                                                                            \
   template <typename T>                                                                        \
-  WP_FN T atomic_##OP(const array_t<T, 2>& a, i64 i0, i64 i1, T v, ctx_t* ctx) {               \
+  WP_FN T atomic_##OP(const array_t<T, 2>& a, i64 i0, i64 i1, typename identity<T>::type v, ctx_t* ctx) {               \
     T* p = elem_ptr(a, i0, i1, ctx);                                                           \
     return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
   }                                                                                            \
   template <typename T>                                                                        \
-  WP_FN T atomic_##OP(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, T v, ctx_t* ctx) {       \
+  WP_FN T atomic_##OP(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, typename identity<T>::type v, ctx_t* ctx) {       \
     T* p = elem_ptr(a, i0, i1, i2, ctx);                                                       \
     return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
   }                                                                                            \
   template <typename T>                                                                        \
-  WP_FN T atomic_##OP(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, T v, ctx_t* ctx) { \
+  WP_FN T atomic_##OP(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, typename identity<T>::type v, ctx_t* ctx) { \
     T* p = elem_ptr(a, i0, i1, i2, i3, ctx);                                                   \
     return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
   }

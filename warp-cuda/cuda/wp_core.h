@@ -175,6 +175,17 @@ template <typename S> WP_FN S float_max();
 template <> WP_FN f32 float_max<f32>() { return f32_max(); }
 template <> WP_FN f64 float_max<f64>() { return f64_max(); }
 
+/// `nan<T>()` / `inf<T>()` for T = f32, f64: Rust's f32::NAN (0x7fc00000) and INFINITY.
+template <typename T> WP_FN T nan() { return float_nan<T>(); }
+template <typename T> WP_FN T inf() { return float_inf<T>(); }
+
+/// Like std::declval: only for unevaluated operands (`decltype(wp::declval<T>().x)`).
+template <typename T> T declval();
+
+/// The type T itself, in a non-deduced context (the value parameter of store and atomics is
+/// converted to the array's element type instead of taking part in deduction).
+template <typename T> struct identity { typedef T type; };
+
 // ------------------------------------------------------------------------------------------
 // Faults
 // ------------------------------------------------------------------------------------------
@@ -352,6 +363,8 @@ WP_INT_OPS(u64)
 /// Float `%` (Rust's `%` on f32/f64 is C's fmod: the result has the sign of the dividend).
 WP_FN f32 frem(f32 a, f32 b) { return ::fmodf(a, b); }
 WP_FN f64 frem(f64 a, f64 b) { return ::fmod(a, b); }
+WP_FN f32 fmod(f32 a, f32 b) { return ::fmodf(a, b); }  // same as frem
+WP_FN f64 fmod(f64 a, f64 b) { return ::fmod(a, b); }
 
 namespace detail {
 // Scalar arithmetic of builtins (warp_core::builtins::Scalar): wrapping for ints, IEEE else.
@@ -1048,22 +1061,22 @@ WP_FN T load(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, ctx_t* ctx)
   return detail::load_idx(a, idx, ctx);
 }
 template <typename T>
-WP_FN void store(const array_t<T, 1>& a, i64 i0, const T& v, ctx_t* ctx) {
+WP_FN void store(const array_t<T, 1>& a, i64 i0, const typename identity<T>::type& v, ctx_t* ctx) {
   const i64 idx[1] = {i0};
   detail::store_idx(a, idx, v, ctx);
 }
 template <typename T>
-WP_FN void store(const array_t<T, 2>& a, i64 i0, i64 i1, const T& v, ctx_t* ctx) {
+WP_FN void store(const array_t<T, 2>& a, i64 i0, i64 i1, const typename identity<T>::type& v, ctx_t* ctx) {
   const i64 idx[2] = {i0, i1};
   detail::store_idx(a, idx, v, ctx);
 }
 template <typename T>
-WP_FN void store(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, const T& v, ctx_t* ctx) {
+WP_FN void store(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, const typename identity<T>::type& v, ctx_t* ctx) {
   const i64 idx[3] = {i0, i1, i2};
   detail::store_idx(a, idx, v, ctx);
 }
 template <typename T>
-WP_FN void store(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const T& v, ctx_t* ctx) {
+WP_FN void store(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const typename identity<T>::type& v, ctx_t* ctx) {
   const i64 idx[4] = {i0, i1, i2, i3};
   detail::store_idx(a, idx, v, ctx);
 }
@@ -1091,22 +1104,22 @@ WP_FN T load_unchecked(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3) {
   return *detail::elem_ptr_unchecked_idx(a, idx);
 }
 template <typename T>
-WP_FN void store_unchecked(const array_t<T, 1>& a, i64 i0, const T& v) {
+WP_FN void store_unchecked(const array_t<T, 1>& a, i64 i0, const typename identity<T>::type& v) {
   const i64 idx[1] = {i0};
   *detail::elem_ptr_unchecked_idx(a, idx) = v;
 }
 template <typename T>
-WP_FN void store_unchecked(const array_t<T, 2>& a, i64 i0, i64 i1, const T& v) {
+WP_FN void store_unchecked(const array_t<T, 2>& a, i64 i0, i64 i1, const typename identity<T>::type& v) {
   const i64 idx[2] = {i0, i1};
   *detail::elem_ptr_unchecked_idx(a, idx) = v;
 }
 template <typename T>
-WP_FN void store_unchecked(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, const T& v) {
+WP_FN void store_unchecked(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, const typename identity<T>::type& v) {
   const i64 idx[3] = {i0, i1, i2};
   *detail::elem_ptr_unchecked_idx(a, idx) = v;
 }
 template <typename T>
-WP_FN void store_unchecked(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const T& v) {
+WP_FN void store_unchecked(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const typename identity<T>::type& v) {
   const i64 idx[4] = {i0, i1, i2, i3};
   *detail::elem_ptr_unchecked_idx(a, idx) = v;
 }

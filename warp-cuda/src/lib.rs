@@ -41,5 +41,15 @@ pub use memory::{DeviceBuffer, PinnedBuffer};
 /// The raw bindings, for callers that need a driver call this crate does not wrap.
 pub use cudarc;
 
+/// The CUDA builtin library, embedded: `(name, contents)` pairs to hand to NVRTC as in-memory
+/// headers. `wp_core.h` is always needed; the others are the sections of the builtin table.
+pub const HEADERS: &[(&str, &str)] = &[
+    ("wp_core.h", include_str!("../cuda/wp_core.h")),
+    ("wp_scalar.h", include_str!("../cuda/wp_scalar.h")),
+    ("wp_vector.h", include_str!("../cuda/wp_vector.h")),
+    ("wp_atomic.h", include_str!("../cuda/wp_atomic.h")),
+    ("wp_print.h", include_str!("../cuda/wp_print.h")),
+];
+
 /// The CUDA library sections a kernel can need, as named in the builtin table.
 pub const SECTIONS: &[&str] = &["scalar", "vector", "atomic"];

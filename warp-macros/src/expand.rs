@@ -71,6 +71,8 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     let tys: Vec<&syn::Type> = f.params.iter().map(|p| &p.syn_ty).collect();
     let pnames: Vec<Literal> = f.params.iter().map(|p| Literal::string(&p.name)).collect();
     let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
+    let idx_usize: Vec<usize> = (0..f.params.len()).collect();
+    let n_params = f.params.len();
     let pvars: Vec<TokenStream> = f
         .params
         .iter()
@@ -136,9 +138,32 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     ::core::result::Result::Ok(( #( unsafe {
                         <#tys as __wp::KernelArg>::cpu_view(
                             &__args.#idx,
-                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, device: __device },
+                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
                         )?
                     }, )* ))
+                }
+                type CudaParams = ( #( <#tys as __wp::KernelArg>::CudaArg, )* );
+                fn cuda_params(
+                    __args: &Self::Args<'_>,
+                    __device: &__wp::Device,
+                ) -> __wp::Result<Self::CudaParams> {
+                    ::core::result::Result::Ok(( #(
+                        <#tys as __wp::KernelArg>::cuda_arg(
+                            &__args.#idx,
+                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
+                        )?,
+                    )* ))
+                }
+                #[allow(unused_variables)]
+                fn cuda_param_ptrs(
+                    __params: &mut Self::CudaParams,
+                    __out: &mut [*mut ::core::ffi::c_void],
+                ) -> usize {
+                    #( __out[#idx_usize] = (&mut __params.#idx) as *mut _ as *mut ::core::ffi::c_void; )*
+                    #n_params
+                }
+                fn info() -> &'static __wp::KernelInfo {
+                    &<Self as __wp::Kernel>::INFO
                 }
                 fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
                     ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
@@ -393,6 +418,10 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
                 type Arg<'a> = #name;
                 type CpuView = #name;
                 unsafe fn cpu_view(arg: &Self::Arg<'_>, _ctx: &__wp::ArgCtx<'_>) -> __wp::Result<Self::CpuView> {
+                    ::core::result::Result::Ok(*arg)
+                }
+                type CudaArg = #name;
+                fn cuda_arg(arg: &Self::Arg<'_>, _ctx: &__wp::ArgCtx<'_>) -> __wp::Result<Self::CudaArg> {
                     ::core::result::Result::Ok(*arg)
                 }
             }

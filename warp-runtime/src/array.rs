@@ -10,7 +10,7 @@
 
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
-use crate::kernel::{ArgCtx, KernelArg};
+use crate::kernel::{ArgCtx, CudaArray, KernelArg};
 use glam::{
     DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
     UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
@@ -139,22 +139,42 @@ impl Drop for HostBuffer {
     }
 }
 
-/// The memory behind an array. An enum so that device memory can join host memory later.
+/// The memory behind an array.
 pub(crate) enum Storage {
     /// Memory in the host's address space.
     Host(HostBuffer),
+    /// Memory on a GPU.
+    #[cfg(feature = "cuda")]
+    Cuda(warp_cuda::DeviceBuffer),
 }
 
 impl Storage {
     fn host(&self) -> &HostBuffer {
         match self {
             Storage::Host(h) => h,
+            #[cfg(feature = "cuda")]
+            Storage::Cuda(_) => {
+                unreachable!("host access to device memory is guarded by `on_host`")
+            }
         }
     }
 
     /// Size of the storage in bytes.
     fn bytes(&self) -> usize {
-        self.host().bytes
+        match self {
+            Storage::Host(h) => h.bytes,
+            #[cfg(feature = "cuda")]
+            Storage::Cuda(d) => d.len(),
+        }
+    }
+
+    /// The device buffer, for arrays on a GPU.
+    #[cfg(feature = "cuda")]
+    fn device(&self) -> Option<&warp_cuda::DeviceBuffer> {
+        match self {
+            Storage::Cuda(d) => Some(d),
+            Storage::Host(_) => None,
+        }
     }
 }
 
@@ -165,15 +185,19 @@ fn alloc_zeroed<T: Element>(bytes: usize, device: &Device) -> Result<Arc<Storage
             bytes,
             std::mem::align_of::<T>(),
         )?))),
-        DeviceKind::Cuda { .. } => Err(cuda_unsupported(device)),
-    }
-}
-
-#[cold]
-fn cuda_unsupported(device: &Device) -> Error {
-    Error::NoDevice {
-        name: device.alias().to_string(),
-        reason: "the CUDA backend is not built into this version of warp-lang yet".to_string(),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda { ordinal } => {
+            let gpu = crate::cuda::gpu(ordinal)?;
+            let buf = warp_cuda::DeviceBuffer::zeros(&gpu, bytes)
+                .map_err(|e| crate::cuda::err(device, e))?;
+            Ok(Arc::new(Storage::Cuda(buf)))
+        }
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda { .. } => Err(Error::NoDevice {
+            name: device.alias().to_string(),
+            reason: "this build of warp-lang has no CUDA support (the `cuda` feature is off)"
+                .to_string(),
+        }),
     }
 }
 
@@ -346,9 +370,7 @@ impl<T: Element, const N: usize> Array<T, N> {
             )));
         }
         let a = Self::alloc(shape, device)?;
-        // SAFETY: `a` is fresh, contiguous and exactly `len` elements long; `data` is a
-        // distinct allocation.
-        unsafe { std::ptr::copy_nonoverlapping(data.as_ptr(), a.base_ptr(), len) };
+        a.write_row_major(data)?;
         Ok(a)
     }
 
@@ -423,17 +445,55 @@ impl<T: Element, const N: usize> Array<T, N> {
         Offsets::new(self.shape, self.strides)
     }
 
-    /// Fails on device memory, which the host cannot touch directly (not built yet).
-    fn host_only(&self) -> Result<()> {
-        match self.device.kind() {
-            DeviceKind::Cpu => Ok(()),
-            DeviceKind::Cuda { .. } => Err(cuda_unsupported(&self.device)),
-        }
+    /// The device buffer of an array on a GPU (`None` in host memory).
+    #[cfg(feature = "cuda")]
+    fn device_buffer(&self) -> Option<&warp_cuda::DeviceBuffer> {
+        self.storage.device()
     }
 
-    /// The elements in row-major order (honouring strides). On a GPU this will synchronise.
+    #[cfg(not(feature = "cuda"))]
+    fn device_buffer(&self) -> Option<&std::convert::Infallible> {
+        None
+    }
+
+    /// The device address of element zero, for kernel arguments.
+    #[cfg(feature = "cuda")]
+    pub(crate) fn device_ptr(&self) -> Option<u64> {
+        self.device_buffer()
+            .map(|b| b.device_ptr() + self.byte_offset as u64)
+    }
+
+    /// The whole storage, copied to the host (device arrays only), for strided access.
+    #[cfg(feature = "cuda")]
+    fn download_storage(&self, buf: &warp_cuda::DeviceBuffer) -> Result<Vec<u8>> {
+        let mut bytes = vec![0u8; buf.len()];
+        buf.download(0, &mut bytes)
+            .map_err(|e| crate::cuda::err(&self.device, e))?;
+        Ok(bytes)
+    }
+
+    /// The elements in row-major order (honouring strides). On a GPU this synchronises the
+    /// device's stream and reports a fault recorded by an earlier launch.
     pub fn to_vec(&self) -> Result<Vec<T>> {
-        self.host_only()?;
+        #[cfg(feature = "cuda")]
+        if let Some(buf) = self.device_buffer() {
+            crate::cuda::check_faults(&self.device)?;
+            let len = self.len();
+            let size = std::mem::size_of::<T>();
+            let mut out = vec![T::zeroed(); len];
+            if self.is_contiguous() {
+                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+                buf.download(self.byte_offset, bytes)
+                    .map_err(|e| crate::cuda::err(&self.device, e))?;
+            } else {
+                let all = self.download_storage(buf)?;
+                for (o, off) in out.iter_mut().zip(self.offsets()) {
+                    let at = (self.byte_offset as isize + off * size as isize) as usize;
+                    *o = bytemuck::pod_read_unaligned(&all[at..at + size]);
+                }
+            }
+            return Ok(out);
+        }
         let base = self.base_ptr();
         if self.is_contiguous() {
             let len = self.len();
@@ -455,7 +515,16 @@ impl<T: Element, const N: usize> Array<T, N> {
 
     /// Sets every element to `value`.
     pub fn fill(&self, value: T) -> Result<()> {
-        self.host_only()?;
+        #[cfg(feature = "cuda")]
+        if let Some(buf) = self.device_buffer() {
+            if self.is_contiguous() {
+                let bytes = self.len() * std::mem::size_of::<T>();
+                return buf
+                    .fill_pattern(self.byte_offset, bytes, bytemuck::bytes_of(&value))
+                    .map_err(|e| crate::cuda::err(&self.device, e));
+            }
+            return self.write_row_major(&vec![value; self.len()]);
+        }
         let base = self.base_ptr();
         if self.is_contiguous() {
             for i in 0..self.len() {
@@ -482,8 +551,27 @@ impl<T: Element, const N: usize> Array<T, N> {
                 self.shape, src.shape
             )));
         }
-        self.host_only()?;
-        src.host_only()?;
+        #[cfg(feature = "cuda")]
+        if self.device_buffer().is_some() || src.device_buffer().is_some() {
+            let size = std::mem::size_of::<T>();
+            let bytes = self.len() * size;
+            let contiguous = self.is_contiguous() && src.is_contiguous();
+            let overlap = Arc::ptr_eq(&self.storage, &src.storage);
+            if let (Some(d), Some(s), true, false) = (
+                self.device_buffer(),
+                src.device_buffer(),
+                contiguous,
+                overlap,
+            ) {
+                crate::cuda::check_faults(&src.device)?;
+                return d
+                    .copy_from_device(self.byte_offset, s, src.byte_offset, bytes)
+                    .map_err(|e| crate::cuda::err(&self.device, e));
+            }
+            // Host <-> device, strided or overlapping: through a host copy in row-major order.
+            let tmp = src.to_vec()?;
+            return self.write_row_major(&tmp);
+        }
         if Arc::ptr_eq(&self.storage, &src.storage) {
             // The two may overlap in any pattern: go through a temporary so that every source
             // element is read before any is overwritten.
@@ -506,6 +594,22 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// Writes `data` (exactly `len` elements, row-major) into the array.
     fn write_row_major(&self, data: &[T]) -> Result<()> {
         debug_assert_eq!(data.len(), self.len());
+        #[cfg(feature = "cuda")]
+        if let Some(buf) = self.device_buffer() {
+            let err = |e| crate::cuda::err(&self.device, e);
+            if self.is_contiguous() {
+                return buf
+                    .upload(self.byte_offset, bytemuck::cast_slice(data))
+                    .map_err(err);
+            }
+            let size = std::mem::size_of::<T>();
+            let mut all = self.download_storage(buf)?;
+            for (v, off) in data.iter().zip(self.offsets()) {
+                let at = (self.byte_offset as isize + off * size as isize) as usize;
+                all[at..at + size].copy_from_slice(bytemuck::bytes_of(v));
+            }
+            return buf.upload(0, &all).map_err(err);
+        }
         let base = self.base_ptr();
         for (off, &v) in self.offsets().zip(data) {
             // SAFETY: every offset produced for the shape and strides is in bounds.
@@ -730,7 +834,7 @@ impl<T: Element + fmt::Debug, const N: usize> fmt::Debug for Array<T, N> {
             self.shape,
             self.device
         )?;
-        if self.host_only().is_ok() {
+        if self.device_buffer().is_none() {
             let base = self.base_ptr();
             // SAFETY: every offset produced for the shape and strides is in bounds.
             let head: Vec<T> = self
@@ -763,6 +867,31 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
         Ok(arg.cpu_view(ctx.kernel, ctx.arg))
     }
 
+    type CudaArg = CudaArray<N>;
+
+    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
+        if arg.device() != ctx.device {
+            return Err(Error::DeviceMismatch {
+                kernel: ctx.kernel,
+                arg: ctx.arg,
+                expected: ctx.device.alias().to_string(),
+                found: arg.device().alias().to_string(),
+            });
+        }
+        #[cfg(feature = "cuda")]
+        let data = arg.device_ptr().unwrap_or(0);
+        #[cfg(not(feature = "cuda"))]
+        let data = 0;
+        let size = std::mem::size_of::<T>() as i64;
+        Ok(CudaArray {
+            data,
+            shape: arg.shape.map(|e| e as i64),
+            strides: arg.strides.map(|s| s as i64 * size),
+            arg: ctx.index as i32,
+            pad: 0,
+        })
+    }
+
     fn shape(arg: &Self::Arg<'_>) -> Option<Vec<usize>> {
         Some(arg.shape.to_vec())
     }
@@ -778,6 +907,13 @@ macro_rules! value_kernel_args {
 
             #[inline(always)]
             unsafe fn cpu_view(arg: &Self::Arg<'_>, _ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
+                Ok(*arg)
+            }
+
+            type CudaArg = $t;
+
+            #[inline(always)]
+            fn cuda_arg(arg: &Self::Arg<'_>, _ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
                 Ok(*arg)
             }
         }
@@ -1062,6 +1198,7 @@ mod tests {
         let ctx = ArgCtx {
             kernel: "k",
             arg: "x",
+            index: 0,
             device: &fake,
         };
         // SAFETY: the view is not used after `a`.
@@ -1075,6 +1212,7 @@ mod tests {
         let ctx = ArgCtx {
             kernel: "k",
             arg: "x",
+            index: 0,
             device: &dev,
         };
         // SAFETY: the view is not used after `a`.

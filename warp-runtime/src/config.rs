@@ -74,6 +74,31 @@ pub fn cpu_min_chunk() -> usize {
     CPU_MIN_CHUNK.load(Ordering::Relaxed)
 }
 
+static CUDA_FMAD: AtomicBool = AtomicBool::new(true);
+static CUDA_BLOCK_DIM: AtomicUsize = AtomicUsize::new(256);
+
+/// Lets NVRTC contract `a * b + c` into fused multiply-adds (the default, as nvcc does). Turn
+/// it off for IEEE results that match the CPU backend bit for bit; kernels already compiled
+/// keep the setting they were compiled with.
+pub fn set_cuda_fmad(on: bool) {
+    CUDA_FMAD.store(on, Ordering::Relaxed);
+}
+
+/// Whether CUDA kernels are compiled with FMA contraction.
+pub fn cuda_fmad() -> bool {
+    CUDA_FMAD.load(Ordering::Relaxed)
+}
+
+/// Threads per block of CUDA launches (default 256, as Warp). Clamped to 32..=1024.
+pub fn set_cuda_block_dim(threads: u32) {
+    CUDA_BLOCK_DIM.store(threads.clamp(32, 1024) as usize, Ordering::Relaxed);
+}
+
+/// Threads per block of CUDA launches.
+pub fn cuda_block_dim() -> u32 {
+    CUDA_BLOCK_DIM.load(Ordering::Relaxed) as u32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

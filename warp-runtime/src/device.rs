@@ -11,7 +11,9 @@ use std::hash::{Hash, Hasher};
 use std::sync::{Arc, OnceLock};
 
 /// Why CUDA devices cannot be used by this build.
-const CUDA_UNAVAILABLE: &str = "the CUDA backend is not built into this version of warp-lang yet";
+#[cfg(not(feature = "cuda"))]
+const CUDA_UNAVAILABLE: &str =
+    "this build of warp-lang has no CUDA support (the `cuda` feature is off)";
 
 /// What kind of device a [`Device`] is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -169,10 +171,42 @@ impl Runtime {
 /// The runtime, built on first use without printing anything.
 fn runtime() -> &'static Runtime {
     static RUNTIME: OnceLock<Runtime> = OnceLock::new();
-    RUNTIME.get_or_init(|| Runtime {
-        devices: vec![Device::new(DeviceKind::Cpu, cpu_model_name())],
-        cuda_status: CUDA_UNAVAILABLE.to_string(),
+    RUNTIME.get_or_init(|| {
+        let mut devices = vec![Device::new(DeviceKind::Cpu, cpu_model_name())];
+        let (gpus, cuda_status) = cuda_devices();
+        devices.extend(gpus);
+        Runtime {
+            devices,
+            cuda_status,
+        }
     })
+}
+
+/// The GPUs the CUDA driver reports, or why there are none. Never panics: no driver, no
+/// device and an old driver are all ordinary answers.
+#[cfg(feature = "cuda")]
+fn cuda_devices() -> (Vec<Device>, String) {
+    match warp_cuda::probe() {
+        Ok(gpus) if !gpus.is_empty() => {
+            let devices = gpus
+                .iter()
+                .map(|g| {
+                    Device::new(
+                        DeviceKind::Cuda { ordinal: g.ordinal },
+                        format!("{} (sm_{})", g.name, g.arch()),
+                    )
+                })
+                .collect();
+            (devices, "available".to_string())
+        }
+        Ok(_) => (Vec::new(), "the driver reports no CUDA device".to_string()),
+        Err(reason) => (Vec::new(), reason),
+    }
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda_devices() -> (Vec<Device>, String) {
+    (Vec::new(), CUDA_UNAVAILABLE.to_string())
 }
 
 /// Initialises the runtime and prints the device list once, like Warp's `wp.init()`.
@@ -278,13 +312,19 @@ mod tests {
     }
 
     #[test]
-    fn cuda_is_not_built() {
+    fn cuda_without_a_device_is_an_error_with_a_reason() {
+        if runtime().cuda_available() {
+            eprintln!(
+                "SKIPPED cuda_without_a_device_is_an_error_with_a_reason: this machine has a GPU"
+            );
+            return;
+        }
         for alias in ["cuda:0", "cuda", "cuda:3"] {
             let err = get_device(alias).unwrap_err();
             match &err {
                 Error::NoDevice { name, reason } => {
                     assert_eq!(name, alias);
-                    assert!(reason.contains("CUDA backend is not built"), "{reason}");
+                    assert!(reason.contains(&runtime().cuda_status), "{reason}");
                 }
                 other => panic!("unexpected {other:?}"),
             }
@@ -314,9 +354,14 @@ mod tests {
         let banner = init().banner();
         assert!(banner.starts_with("warp-lang 0.1.0 initialized:\n   Devices:\n     \"cpu\""));
         assert!(banner.contains("threads)"));
-        assert!(banner.ends_with(
-            "CUDA: not available (the CUDA backend is not built into this \
-                                  version of warp-lang yet)"
-        ));
+        let rt = init();
+        if rt.cuda_available() {
+            assert!(banner.ends_with("CUDA: available"), "{banner}");
+        } else {
+            assert!(
+                banner.ends_with(&format!("CUDA: not available ({})", rt.cuda_status)),
+                "{banner}"
+            );
+        }
     }
 }

@@ -56,6 +56,14 @@ pub enum Error {
         shapes: Vec<Vec<usize>>,
     },
     /// A device is unknown or not available in this build.
+    /// The CUDA driver or NVRTC reported an error (allocation, copy, compilation, launch).
+    Cuda {
+        /// The device.
+        device: String,
+        /// What failed and why (an NVRTC error includes the compiler's log).
+        message: String,
+    },
+    /// No such device, or it cannot be used.
     NoDevice {
         /// The alias that was asked for.
         name: String,
@@ -141,6 +149,7 @@ impl fmt::Display for Error {
                 Ok(())
             }
             Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
+            Error::Cuda { device, message } => write!(f, "CUDA error on \"{device}\": {message}"),
             Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
         }
     }

@@ -18,6 +18,8 @@ pub struct ArgCtx<'d> {
     pub kernel: &'static str,
     /// The parameter's name in the kernel signature.
     pub arg: &'static str,
+    /// The parameter's position in the kernel signature.
+    pub index: usize,
     /// The launch device.
     pub device: &'d Device,
 }
@@ -36,11 +38,32 @@ pub trait KernelArg: 'static {
     /// the whole run, which is the only use the runtime makes of it.
     #[doc(hidden)]
     unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView>;
+    /// What a CUDA kernel receives for this parameter (laid out as the C++ side expects).
+    type CudaArg: Copy;
+    /// Converts a host argument for a CUDA launch on `ctx.device`.
+    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg>;
     /// The shape of an array argument (`None` for values), for the kernel's shape checks.
     fn shape(arg: &Self::Arg<'_>) -> Option<Vec<usize>> {
         let _ = arg;
         None
     }
+}
+
+/// An array as a CUDA kernel receives it: `wp::array_t<T, N>` in `warp-cuda/cuda/wp_core.h`
+/// (device address, extents, strides in bytes, parameter index for fault reports).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CudaArray<const N: usize> {
+    /// Device address of element zero.
+    pub data: u64,
+    /// Extents.
+    pub shape: [i64; N],
+    /// Strides in bytes.
+    pub strides: [i64; N],
+    /// The kernel parameter this array was passed as.
+    pub arg: i32,
+    /// Padding (the C++ struct has it too).
+    pub pad: i32,
 }
 
 /// Static facts about a kernel, produced by the macro.
@@ -83,6 +106,15 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams>;
     /// The shapes of the arguments (`None` for non-arrays), in parameter order.
     fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>>;
+    /// The kernel-side parameters of a CUDA launch.
+    type CudaParams: Copy;
+    /// Converts and checks the arguments for a CUDA launch.
+    fn cuda_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CudaParams>;
+    /// Writes a pointer to each parameter of `params` into `out` (as `cuLaunchKernel` wants
+    /// them) and returns how many it wrote.
+    fn cuda_param_ptrs(params: &mut Self::CudaParams, out: &mut [*mut std::ffi::c_void]) -> usize;
+    /// [`Kernel::INFO`] with a `'static` address (for fault reports after the launch).
+    fn info() -> &'static KernelInfo;
     /// Runs threads `range` (flat indices) of `grid` on the CPU, in order, stopping at the
     /// first fault. A range rather than one thread, so that the parameters are unpacked once
     /// per chunk and stay in registers across threads.

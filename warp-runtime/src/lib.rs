@@ -16,6 +16,8 @@
 
 pub mod array;
 pub mod config;
+#[cfg(feature = "cuda")]
+pub mod cuda;
 pub mod cuda_source;
 pub mod device;
 pub mod error;
@@ -28,5 +30,5 @@ pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };
 pub use error::{Error, Result};
-pub use kernel::{ArgCtx, Kernel, KernelArg, KernelInfo};
+pub use kernel::{ArgCtx, CudaArray, Kernel, KernelArg, KernelInfo};
 pub use launch::{launch, synchronize, Dim};

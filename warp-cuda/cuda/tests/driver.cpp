@@ -73,7 +73,7 @@ static const char* const OP_NAMES[] = {
 
 struct case_t {
   int op, ty, ty2, n;
-  u64 a[24];
+  u64 a[40];
 };
 
 struct alignas(16) out_t {
@@ -740,11 +740,11 @@ int main(int argc, char** argv) {
     c.ty = std::string(ty) == "-" ? -1 : lookup(TYPE_NAMES, T_COUNT, ty);
     c.ty2 = std::string(ty2) == "-" ? -1 : lookup(TYPE_NAMES, T_COUNT, ty2);
     c.n = n;
-    if (n < 0 || n > 24) {
+    if (n < 0 || n > 40) {
       fprintf(stderr, "bad arg count %d\n", n);
       return 2;
     }
-    for (int k = 0; k < 24; ++k) c.a[k] = 0;
+    for (int k = 0; k < 40; ++k) c.a[k] = 0;
     for (int k = 0; k < n; ++k) {
       if (fscanf(f, "%llx", &c.a[k]) != 1) {
         fprintf(stderr, "bad case line\n");

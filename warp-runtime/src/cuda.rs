@@ -1,0 +1,308 @@
+//! The CUDA side of the runtime: GPU handles, compiled kernels, fault records, launch.
+//!
+//! A kernel is compiled for a GPU at its first launch there: its translation unit is assembled
+//! (`cuda_source`), compiled by NVRTC to a cubin for that GPU's architecture through the disk
+//! cache (`warp_cuda::compile_cached`), loaded, and kept for the process. Launches are
+//! asynchronous on the GPU's stream. Threads record faults (out-of-bounds index, integer
+//! division by zero, bad step) in a per-GPU record; it is read after each launch in debug mode,
+//! and otherwise at the next synchronisation (`synchronize`, `to_vec`).
+
+use crate::config;
+use crate::cuda_source;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::{Kernel, KernelInfo};
+use std::collections::HashMap;
+use std::ffi::c_void;
+use std::sync::{Arc, Mutex, OnceLock};
+use warp_core::{Fault, FaultKind, Grid};
+use warp_cuda::{CacheOutcome, CompileOptions, CudaError, DeviceBuffer, Function, Gpu, Module};
+
+/// A CUDA error on `device` as a runtime error.
+pub(crate) fn err(device: &Device, e: CudaError) -> Error {
+    Error::Cuda {
+        device: device.alias().to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// The opened GPU `ordinal`.
+pub(crate) fn gpu(ordinal: usize) -> Result<Arc<Gpu>> {
+    Gpu::open(ordinal).map_err(|e| Error::Cuda {
+        device: format!("cuda:{ordinal}"),
+        message: e.to_string(),
+    })
+}
+
+/// `wp::fault_t` (80 bytes) followed by the `u32` flag the first faulting thread sets.
+const FAULT_RECORD_BYTES: usize = 80;
+const FAULT_BYTES: usize = FAULT_RECORD_BYTES + 8;
+
+/// Per-GPU state: the fault record and the last kernel launched (named in fault reports).
+struct GpuState {
+    gpu: Arc<Gpu>,
+    fault: DeviceBuffer,
+    last: Mutex<Option<&'static KernelInfo>>,
+}
+
+fn states_map() -> &'static Mutex<HashMap<usize, Arc<GpuState>>> {
+    static STATES: OnceLock<Mutex<HashMap<usize, Arc<GpuState>>>> = OnceLock::new();
+    STATES.get_or_init(Default::default)
+}
+
+fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
+    let mut map = states_map().lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(s) = map.get(&ordinal) {
+        return Ok(s.clone());
+    }
+    let g = gpu(ordinal)?;
+    let fault = DeviceBuffer::zeros(&g, FAULT_BYTES).map_err(|e| err(device, e))?;
+    let s = Arc::new(GpuState {
+        gpu: g,
+        fault,
+        last: Mutex::new(None),
+    });
+    map.insert(ordinal, s.clone());
+    Ok(s)
+}
+
+/// The states of the GPUs used so far (a GPU never used has nothing to synchronise).
+fn states() -> Vec<Arc<GpuState>> {
+    states_map()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .values()
+        .cloned()
+        .collect()
+}
+
+/// A kernel compiled and loaded for one GPU.
+struct Loaded {
+    _module: Module,
+    function: Function,
+}
+
+/// What compiling a kernel cost, for reports.
+#[derive(Clone, Debug)]
+pub struct CompileReport {
+    /// The kernel.
+    pub kernel: &'static str,
+    /// The device it was compiled for.
+    pub device: String,
+    /// Bytes of generated CUDA source (without the library headers).
+    pub source_bytes: usize,
+    /// NVRTC time (0 on a cache hit).
+    pub compile_ms: f64,
+    /// Whether the cubin came from the disk cache.
+    pub cache_hit: bool,
+    /// Time from the start of the first launch to a loaded module.
+    pub total_ms: f64,
+}
+
+fn reports() -> &'static Mutex<Vec<CompileReport>> {
+    static R: OnceLock<Mutex<Vec<CompileReport>>> = OnceLock::new();
+    R.get_or_init(Default::default)
+}
+
+/// What each kernel compiled so far in this process cost (forward kernels, per device).
+pub fn compile_reports() -> Vec<CompileReport> {
+    reports().lock().unwrap_or_else(|p| p.into_inner()).clone()
+}
+
+fn loaded(device: &Device, st: &GpuState, info: &'static KernelInfo) -> Result<Arc<Loaded>> {
+    type Key = (usize, &'static str, &'static str);
+    static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
+    let key = (st.gpu.ordinal(), info.module, info.name);
+    let cache = CACHE.get_or_init(Default::default);
+    if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+        return Ok(l.clone());
+    }
+    let t0 = std::time::Instant::now();
+    let src = cuda_source::assemble(info);
+    let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
+    let opts = CompileOptions {
+        fmad: config::cuda_fmad(),
+        line_info: true,
+        headers: &headers,
+        ..Default::default()
+    };
+    let (compiled, outcome) = warp_cuda::compile_cached(&src.text, info.name, &opts, st.gpu.arch())
+        .map_err(|e| err(device, e))?;
+    let module = st
+        .gpu
+        .load_module(&compiled.cubin)
+        .map_err(|e| err(device, e))?;
+    let function = module.function(&src.entry).map_err(|e| err(device, e))?;
+    reports()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .push(CompileReport {
+            kernel: info.name,
+            device: device.alias().to_string(),
+            source_bytes: src.text.len(),
+            compile_ms: compiled.compile_ms,
+            cache_hit: matches!(outcome, CacheOutcome::Hit),
+            total_ms: t0.elapsed().as_secs_f64() * 1e3,
+        });
+    let l = Arc::new(Loaded {
+        _module: module,
+        function,
+    });
+    cache
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .insert(key, l.clone());
+    Ok(l)
+}
+
+/// `wp::launch_t`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct LaunchDims {
+    dims: [i64; 4],
+    total: i64,
+    ndim: i32,
+    pad: i32,
+}
+
+/// `wp::ctx_t`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct Ctx {
+    fault: u64,
+    fault_flag: u64,
+    raised: i32,
+    pad: i32,
+}
+
+/// Most parameters a CUDA kernel can take (two slots go to the launch and the context).
+const MAX_PARAMS: usize = 62;
+
+/// Launches `K` over `grid` on GPU `ordinal`.
+pub(crate) fn launch<K: Kernel>(
+    args: &K::Args<'_>,
+    grid: &Grid,
+    device: &Device,
+    ordinal: usize,
+) -> Result<()> {
+    let info = K::info();
+    if info.params.len() > MAX_PARAMS {
+        return Err(Error::invalid(format!(
+            "kernel `{}` has more than {MAX_PARAMS} parameters",
+            info.name
+        )));
+    }
+    // Arguments first: a wrong device is reported before anything is compiled.
+    let mut params = K::cuda_params(args, device)?;
+    let st = state(device, ordinal)?;
+    let kernel = loaded(device, &st, info)?;
+    let mut dims = LaunchDims {
+        dims: grid.dims.map(|d| d as i64),
+        total: grid.total as i64,
+        ndim: grid.ndim as i32,
+        pad: 0,
+    };
+    let base = st.fault.device_ptr();
+    let mut ctx = Ctx {
+        fault: base,
+        fault_flag: base + FAULT_RECORD_BYTES as u64,
+        raised: 0,
+        pad: 0,
+    };
+    let mut ptrs = [std::ptr::null_mut::<c_void>(); MAX_PARAMS + 2];
+    ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
+    ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
+    let n = 2 + K::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+    let block = config::cuda_block_dim();
+    let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
+    *st.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(info);
+    // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters (launch_t,
+    // ctx_t, then each parameter's CudaArg, which mirrors its C++ type), alive until the call
+    // returns; cuLaunchKernel copies them.
+    unsafe {
+        st.gpu
+            .launch_raw(
+                &kernel.function,
+                st.gpu.default_stream(),
+                blocks,
+                block,
+                0,
+                &mut ptrs[..n],
+            )
+            .map_err(|e| err(device, e))?;
+    }
+    if config::debug() {
+        check_state(device, &st)?;
+    }
+    Ok(())
+}
+
+/// Waits for `device` and reports a fault recorded since the last check.
+pub(crate) fn check_faults(device: &Device) -> Result<()> {
+    match device.kind() {
+        crate::device::DeviceKind::Cuda { ordinal } => {
+            check_state(device, &*state(device, ordinal)?)
+        }
+        crate::device::DeviceKind::Cpu => Ok(()),
+    }
+}
+
+fn check_state(device: &Device, st: &GpuState) -> Result<()> {
+    st.gpu.synchronize().map_err(|e| err(device, e))?;
+    let mut rec = [0u8; FAULT_BYTES];
+    st.fault.download(0, &mut rec).map_err(|e| err(device, e))?;
+    let flag = u32::from_le_bytes(
+        rec[FAULT_RECORD_BYTES..FAULT_RECORD_BYTES + 4]
+            .try_into()
+            .expect("4 bytes"),
+    );
+    if flag == 0 {
+        return Ok(());
+    }
+    st.fault
+        .upload(0, &[0u8; FAULT_BYTES])
+        .map_err(|e| err(device, e))?;
+    let i32_at = |o: usize| i32::from_le_bytes(rec[o..o + 4].try_into().expect("4 bytes"));
+    let i64_at = |o: usize| i64::from_le_bytes(rec[o..o + 8].try_into().expect("8 bytes"));
+    let (kind, arg, ndim) = (i32_at(0), i32_at(4), i32_at(72).clamp(0, 4) as usize);
+    let info = st
+        .last
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .unwrap_or(&UNKNOWN);
+    let kind = match kind {
+        1 => FaultKind::OutOfBounds {
+            arg: info.params.get(arg as usize).copied().unwrap_or("?"),
+            index: (0..ndim).map(|k| i64_at(8 + 8 * k) as i128).collect(),
+            shape: (0..ndim).map(|k| i64_at(40 + 8 * k) as usize).collect(),
+        },
+        2 => FaultKind::DivisionByZero,
+        _ => FaultKind::BadStep { step: i64_at(8) },
+    };
+    Err(Error::Fault(Fault {
+        kernel: info.name,
+        kind,
+    }))
+}
+
+static UNKNOWN: KernelInfo = KernelInfo {
+    name: "?",
+    module: "",
+    params: &[],
+    tid_ndim: None,
+    same_shape: &[],
+    file: "",
+    cuda: "",
+    cuda_sections: &[],
+    callees: &[],
+};
+
+/// Waits for every GPU used so far and reports the first recorded fault.
+pub(crate) fn synchronize_all() -> Result<()> {
+    for st in states() {
+        let d = crate::device::get_device(&format!("cuda:{}", st.gpu.ordinal()))?;
+        check_state(&d, &st)?;
+        let _ = &d;
+    }
+    Ok(())
+}
