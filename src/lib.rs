@@ -63,7 +63,9 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{builtins, max_depth, ops, ArrayView, FuncInfo, Grid, KResult, RangeProg};
-    pub use warp_runtime::{ArgCtx, Device, Element, Kernel, KernelArg, KernelInfo, Result};
+    pub use warp_runtime::{
+        ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Result,
+    };
 }
 
 // Lets the crate's own unit tests and doc tests use the macros, which name `::warp_lang`.

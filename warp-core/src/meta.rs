@@ -17,4 +17,6 @@ pub struct FuncInfo {
     pub sections: &'static [&'static str],
     /// The funcs it calls, in the order of the `@@F<k>@@` placeholders.
     pub callees: &'static [&'static FuncInfo],
+    /// C++ definitions of the user structs its parameters use.
+    pub structs: &'static [&'static str],
 }

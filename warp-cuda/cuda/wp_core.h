@@ -23,6 +23,9 @@
 
 #if defined(__CUDACC__)
 #define WP_FN __device__ __forceinline__
+#if !defined(__CUDACC_RTC__)
+#include <cstdio>  // device printf under nvcc (NVRTC declares printf itself)
+#endif
 #else
 #define WP_FN inline
 #include <cmath>
@@ -180,7 +183,11 @@ template <typename T> WP_FN T nan() { return float_nan<T>(); }
 template <typename T> WP_FN T inf() { return float_inf<T>(); }
 
 /// Like std::declval: only for unevaluated operands (`decltype(wp::declval<T>().x)`).
+#if defined(__CUDACC__)
+template <typename T> __device__ T declval();
+#else
 template <typename T> T declval();
+#endif
 
 /// The type T itself, in a non-deduced context (the value parameter of store and atomics is
 /// converted to the array's element type instead of taking part in deduction).
@@ -932,10 +939,20 @@ struct literal<T, true> {  // vectors: splat
 };
 }  // namespace detail
 
-/// The literal `v` as a `T` (`v as T`; vectors splat `v as S`).
+namespace detail {
+template <typename T> struct remove_cvref { typedef T type; };
+template <typename T> struct remove_cvref<const T> { typedef T type; };
+template <typename T> struct remove_cvref<volatile T> { typedef T type; };
+template <typename T> struct remove_cvref<const volatile T> { typedef T type; };
+template <typename T> struct remove_cvref<T&> : remove_cvref<T> {};
+template <typename T> struct remove_cvref<T&&> : remove_cvref<T> {};
+}  // namespace detail
+
+/// The literal `v` as a `T` (`v as T`; vectors splat `v as S`). `T` may be cv/ref-qualified
+/// (`wp::lit_like<decltype(x)>(2.0)` with x a `const Vec3&` gives a Vec3).
 template <typename T>
-WP_FN T lit_like(f64 v) {
-  return detail::literal<T>::from_f64(v);
+WP_FN typename detail::remove_cvref<T>::type lit_like(f64 v) {
+  return detail::literal<typename detail::remove_cvref<T>::type>::from_f64(v);
 }
 template <typename T>
 WP_FN T lit_like(const T&, f64 v) {
@@ -943,8 +960,8 @@ WP_FN T lit_like(const T&, f64 v) {
 }
 /// The integer `v` (a range loop's value) as a `T`.
 template <typename T>
-WP_FN T int_like(i64 v) {
-  return detail::literal<T>::from_i64(v);
+WP_FN typename detail::remove_cvref<T>::type int_like(i64 v) {
+  return detail::literal<typename detail::remove_cvref<T>::type>::from_i64(v);
 }
 template <typename T>
 WP_FN T int_like(const T&, i64 v) {
@@ -1224,4 +1241,11 @@ WP_FN void unflatten(const launch_t& l, i64 flat, i64* out, int n) {
 WP_FN i64 flat_thread_id() { return (i64)blockIdx.x * (i64)blockDim.x + (i64)threadIdx.x; }
 #endif
 
+}  // namespace wp
+
+namespace wp {
+/// Rust's `!` on a value whose type the macro could not see: logical on bool, bitwise on
+/// integers (what `!` means in Rust for each).
+WP_FN bool not_(bool x) { return !x; }
+template <typename T> WP_FN T not_(T x) { return ~x; }
 }  // namespace wp

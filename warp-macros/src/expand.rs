@@ -106,6 +106,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(&f);
     let callees = &f.callees;
+    let struct_tys = struct_types(&f);
 
     let out = quote! {
         #(#doc_attrs)*
@@ -129,6 +130,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     cuda: #cuda_src,
                     cuda_sections: &[#(#cuda_sections),*],
                     callees: &[#(&#callees::__WP_FUNC),*],
+                    structs: &[#(<#struct_tys as __wp::CudaStruct>::CUDA_DEF),*],
                 };
                 unsafe fn cpu_params(
                     __args: &Self::Args<'_>,
@@ -240,6 +242,35 @@ fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>, Literal) {
     }
 }
 
+/// The user struct types a function's parameters name (`S` and `Array<S, N>`), as written.
+fn struct_types(f: &crate::ir::Function) -> Vec<syn::Type> {
+    use crate::types::Ty;
+    let mut out = Vec::new();
+    for p in &f.params {
+        let ty = match &p.ty {
+            Ty::Struct(_) => Some(p.syn_ty.clone()),
+            Ty::Array(e, _) if matches!(**e, Ty::Struct(_)) => array_elem(&p.syn_ty),
+            _ => None,
+        };
+        if let Some(t) = ty {
+            out.push(t);
+        }
+    }
+    out
+}
+
+/// `T` of `Array<T, N>`.
+fn array_elem(t: &syn::Type) -> Option<syn::Type> {
+    let syn::Type::Path(tp) = t else { return None };
+    let syn::PathArguments::AngleBracketed(a) = &tp.path.segments.last()?.arguments else {
+        return None;
+    };
+    match a.args.first()? {
+        syn::GenericArgument::Type(t) => Some(t.clone()),
+        _ => None,
+    }
+}
+
 /// Forces the recursion-depth constants of called funcs to be evaluated: a cycle of funcs
 /// calling each other is then a compile-time error (a cycle in const evaluation).
 fn callee_depths(callees: &[syn::Path]) -> TokenStream {
@@ -300,6 +331,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
     let (cuda_src, cuda_sections, cuda_ret) = cuda_template(&f);
+    let struct_tys = struct_types(&f);
     let name_str = Literal::string(&f.name);
     let callees = &f.callees;
     let func_info = quote! {
@@ -313,6 +345,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             cuda_ret: #cuda_ret,
             sections: &[#(#cuda_sections),*],
             callees: &[#(&#callees::__WP_FUNC),*],
+            structs: &[#(<#struct_tys as ::warp_lang::__private::CudaStruct>::CUDA_DEF),*],
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
@@ -395,6 +428,15 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
         return errors_to_tokens(errors);
     }
     let name_str = Literal::string(&name.to_string());
+    let mut def = format!("struct {name} {{");
+    for f in data.fields.iter() {
+        let ty = crate::front::signature::parse_type(&f.ty).expect("checked above");
+        let cpp = crate::back::cuda::cpp_type(&ty).unwrap_or_else(|| name.to_string());
+        let field = f.ident.as_ref().map(|i| i.to_string()).unwrap_or_default();
+        def.push_str(&format!(" {cpp} {field};"));
+    }
+    def.push_str(" };");
+    let cuda_def = Literal::string(&def);
     let field_asserts = fields
         .iter()
         .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
@@ -413,6 +455,9 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             unsafe impl __wp::bytemuck::Pod for #name {}
             impl __wp::Element for #name {
                 const TYPE_NAME: &'static str = #name_str;
+            }
+            impl __wp::CudaStruct for #name {
+                const CUDA_DEF: &'static str = #cuda_def;
             }
             impl __wp::KernelArg for #name {
                 type Arg<'a> = #name;

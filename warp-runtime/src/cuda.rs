@@ -295,6 +295,7 @@ static UNKNOWN: KernelInfo = KernelInfo {
     cuda: "",
     cuda_sections: &[],
     callees: &[],
+    structs: &[],
 };
 
 /// Waits for every GPU used so far and reports the first recorded fault.

@@ -78,8 +78,17 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
     for h in &headers {
         text.push_str(&format!("#include \"{h}\"\n"));
     }
-    // For the type expressions of values the macro could not type (unevaluated contexts only).
-    text.push_str("namespace wp { template <typename T> T declval(); }\n");
+    // User structs, each once, in the order first met (callees first).
+    let mut structs: Vec<&str> = Vec::new();
+    for def in funcs.iter().flat_map(|f| f.structs).chain(info.structs) {
+        if !structs.contains(def) {
+            structs.push(def);
+        }
+    }
+    for def in structs {
+        text.push_str(def);
+        text.push('\n');
+    }
     for f in &funcs {
         let callees: Vec<(String, &str)> =
             f.callees.iter().map(|c| (name_of(c), c.cuda_ret)).collect();
@@ -115,6 +124,7 @@ mod tests {
         cuda_ret: "wp::f32",
         sections: &[],
         callees: &[],
+        structs: &[],
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -125,6 +135,7 @@ mod tests {
         cuda_ret: "wp::f32",
         sections: &["scalar"],
         callees: &[],
+        structs: &[],
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -134,6 +145,7 @@ mod tests {
         cuda_ret: "wp::f32",
         sections: &[],
         callees: &[&LEAF, &OTHER_SQ],
+        structs: &[],
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];
@@ -150,6 +162,7 @@ mod tests {
             cuda: "static WP_FN void @@SELF@@(wp::ctx_t* __ctx) { @@F0@@(1.0f, __ctx); @@F1@@(2.0f, __ctx); }\nvoid @@ENTRY@@() {}\n",
             cuda_sections: &["vector"],
             callees: &KERNEL_CALLEES,
+            structs: &[],
         };
         let src = assemble(&info);
         assert_eq!(src.headers, vec!["wp_core.h", "wp_scalar.h", "wp_vector.h"]);

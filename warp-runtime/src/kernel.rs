@@ -88,6 +88,14 @@ pub struct KernelInfo {
     pub cuda_sections: &'static [&'static str],
     /// The funcs the kernel calls, in the order of its `@@F<k>@@` placeholders.
     pub callees: &'static [&'static warp_core::FuncInfo],
+    /// C++ definitions of the user structs its parameters use.
+    pub structs: &'static [&'static str],
+}
+
+/// A `#[derive(Struct)]` struct's C++ definition, for CUDA kernels that take it.
+pub trait CudaStruct {
+    /// `struct Name { ... };`, field for field.
+    const CUDA_DEF: &'static str;
 }
 
 /// A compiled kernel. Implemented by `#[kernel]`; not meant to be implemented by hand.

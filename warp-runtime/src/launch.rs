@@ -286,6 +286,7 @@ mod tests {
             cuda: "",
             cuda_sections: &[],
             callees: &[],
+            structs: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {
@@ -328,6 +329,7 @@ mod tests {
             cuda: "",
             cuda_sections: &[],
             callees: &[],
+            structs: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let data = ArgCtx {
@@ -378,6 +380,7 @@ mod tests {
             cuda: "",
             cuda_sections: &[],
             callees: &[],
+            structs: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {

@@ -30,5 +30,5 @@ pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };
 pub use error::{Error, Result};
-pub use kernel::{ArgCtx, CudaArray, Kernel, KernelArg, KernelInfo};
+pub use kernel::{ArgCtx, CudaArray, CudaStruct, Kernel, KernelArg, KernelInfo};
 pub use launch::{launch, synchronize, Dim};

@@ -33,6 +33,7 @@ pub struct CudaTemplate {
 pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     let mut e = Emitter {
         f,
+        used: used_vars(f),
         out: String::new(),
         indent: 1,
         file: file.to_string(),
@@ -54,6 +55,8 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
 
 struct Emitter<'a> {
     f: &'a Function,
+    /// Variables read somewhere (a func result nobody reads may be `void`).
+    used: Vec<bool>,
     out: String,
     indent: usize,
     file: String,
@@ -296,6 +299,14 @@ impl<'a> Emitter<'a> {
                 let v = self.var(*var);
                 self.line(sp, &format!("{t} {v}{{}};"));
             }
+            StmtKind::Assign {
+                dst,
+                op: op @ Op::Func { .. },
+                define: true,
+            } if !self.used[*dst] => {
+                let call = self.op(op, *dst)?;
+                self.line(sp, &format!("{call};"));
+            }
             StmtKind::Assign { dst, op, define } => {
                 let rhs = self.op(op, *dst)?;
                 let v = self.var(*dst);
@@ -535,6 +546,70 @@ impl<'a> Emitter<'a> {
             Op::Len(a) => format!("(wp::usize)wp::len({})", self.var(*a)),
         })
     }
+}
+
+/// Which variables are read by some statement.
+fn used_vars(f: &Function) -> Vec<bool> {
+    let mut used = vec![false; f.vars.len()];
+    let mut mark = |v: &VarId| used[*v] = true;
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::Assign { op, .. } => match op {
+            Op::Copy(v)
+            | Op::Unary(_, v)
+            | Op::Cast(v, _)
+            | Op::Member(v, _)
+            | Op::LitLike(_, v)
+            | Op::Extent(v, _)
+            | Op::Len(v) => mark(v),
+            Op::Binary(_, a, b) => {
+                mark(a);
+                mark(b)
+            }
+            Op::Builtin { args, .. } | Op::Func { args, .. } | Op::Construct { args, .. } => {
+                args.iter().for_each(&mut mark)
+            }
+            Op::Load { array, index } => {
+                mark(array);
+                index.iter().for_each(&mut mark)
+            }
+            Op::Lit(_) | Op::Tid(_) => {}
+        },
+        StmtKind::Store {
+            array,
+            index,
+            value,
+        } => {
+            mark(array);
+            index.iter().for_each(&mut mark);
+            mark(value)
+        }
+        StmtKind::SetMember { var, value, .. } => {
+            mark(var);
+            mark(value)
+        }
+        StmtKind::If { cond, .. } => mark(cond),
+        StmtKind::For { range, .. } => {
+            mark(&range.start);
+            mark(&range.end);
+            for a in &range.adapters {
+                if let RangeAdapter::StepBy(k) = a {
+                    mark(k)
+                }
+            }
+        }
+        StmtKind::Return { value: Some(v) } => mark(v),
+        StmtKind::Print { pieces, .. } => pieces.iter().for_each(|p| {
+            if let FmtPiece::Arg { var, .. } = p {
+                mark(var)
+            }
+        }),
+        StmtKind::Declare { .. }
+        | StmtKind::Loop { .. }
+        | StmtKind::Break
+        | StmtKind::Continue
+        | StmtKind::Return { value: None } => {}
+    });
+    used
 }
 
 /// A C string literal.
