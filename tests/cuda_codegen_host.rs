@@ -39,6 +39,11 @@ fn half_or_neg(x: f32, odd: bool) -> f32 {
     x * 0.5
 }
 
+#[wp::func]
+fn is_pos(x: f32) -> bool {
+    x > 0.0
+}
+
 #[wp::kernel]
 fn mixed(a: Array<f32>, b: Array<i32>, out: Array<f32>, total: Array<i32>) {
     let i = tid();
@@ -58,6 +63,10 @@ fn mixed(a: Array<f32>, b: Array<i32>, out: Array<f32>, total: Array<i32>) {
         }
     }
     out[i] += k as f32 * 0.25;
+    // `!` on a func's bool (a type the kernel macro cannot see): logical, not bitwise.
+    if !is_pos(a[i]) {
+        out[i] -= 1.0;
+    }
 }
 
 #[wp::kernel]

@@ -457,6 +457,10 @@ impl<'a> Emitter<'a> {
             Op::Unary(UnOp::Not, v) if *self.f.ty(*v) == crate::types::BOOL => {
                 format!("!{}", self.var(*v))
             }
+            // Rust's `!` is logical on bool and bitwise on integers; a func's result may be either.
+            Op::Unary(UnOp::Not, v) if self.f.ty(*v).is_deferred() => {
+                format!("wp::not_({})", self.var(*v))
+            }
             Op::Unary(UnOp::Not, v) => format!("~{}", self.var(*v)),
             Op::Binary(op, l, r) => {
                 let (lt, rt) = (self.f.ty(*l).clone(), self.f.ty(*r).clone());
