@@ -306,8 +306,15 @@ mod tests {
         assert!(d.is_cpu() && !d.is_cuda());
         assert!(!d.name().is_empty());
         assert_eq!(get_device("cpu").unwrap(), d);
-        assert_eq!(devices(), vec![d.clone()]);
-        assert_eq!(get_preferred_device(), d);
+        // The CPU comes first; any other device is a GPU, and the preferred device is the
+        // first GPU when there is one.
+        let all = devices();
+        assert_eq!(all[0], d);
+        assert!(all[1..].iter().all(Device::is_cuda));
+        assert_eq!(
+            get_preferred_device(),
+            all.get(1).cloned().unwrap_or(d.clone())
+        );
         assert_ne!(d, Device::fake_cuda(0));
     }
 
@@ -337,10 +344,17 @@ mod tests {
     #[test]
     fn unknown_alias_lists_valid_ones() {
         let err = get_device("gpu7").unwrap_err();
+        let valid: Vec<String> = devices()
+            .iter()
+            .map(|d| format!("\"{}\"", d.alias()))
+            .collect();
         assert_eq!(
             err.to_string(),
-            "no device \"gpu7\": unknown device alias; valid aliases: \"cpu\" (and \"cuda:N\" \
-             where CUDA is available)"
+            format!(
+                "no device \"gpu7\": unknown device alias; valid aliases: {} (and \"cuda:N\" where CUDA \
+                 is available)",
+                valid.join(", ")
+            )
         );
         assert!(get_device("cuda:x").is_err());
     }

@@ -1,0 +1,1608 @@
+//! The CUDA C++ builtin library (`warp-cuda/cuda/*.h`) against the CPU backend, on the host.
+//!
+//! The library must mean exactly what warp-core's CPU code means. This test generates about
+//! 126,000 cases (every builtin, operator, constructor and constant for every type it takes,
+//! integer semantics, Rust `as` casts, literals, arrays and faults, range loops, the launch
+//! grid, atomics, layouts, printing), computes the expected results in Rust through
+//! `warp_lang::__private` (warp-core's builtins and ops) and glam, evaluates the same cases
+//! in C++ through `warp-cuda/cuda/tests/driver.cpp` (one `g++ -std=c++17 -O1 -Wall -Wextra
+//! -Werror` build, one run), and compares. Skipped, saying so, without g++ or off x86_64.
+//!
+//! Tolerances:
+//! * bit-exact for everything but the transcendental functions: integer ops, casts (NaN and
+//!   out-of-range floats included), floor/ceil/sqrt/abs/sign/lerp/dot/cross/length/normalize,
+//!   the vector, matrix and quaternion operators (glam's evaluation order is reproduced, and
+//!   g++ on x86_64 without -march contracts nothing into FMAs), NaN compared as "is NaN";
+//! * min/max/clamp: exact except that the sign of a zero result is not compared (IEEE minNum
+//!   leaves min(-0, +0) unspecified: Rust on x86_64 returns the first operand, CUDA's fminf -0);
+//! * exp, log, sin, cos, tan, atan2, pow: 2 ulp on the host. Both sides call glibc's libm, so
+//!   they normally agree bit for bit, but either compiler may constant-fold with another
+//!   implementation (glibc's results are not correctly rounded). Against GPU results 4 ulp:
+//!   CUDA documents up to 4 ulp for some (tanf, powf); measured on an H200 (CUDA 13): 1 ulp.
+//!
+//! The same cases run on a GPU: set `WARP_CUDA_HOST_CPP_CASES=FILE` to write the case file,
+//! build the driver there with `nvcc -std=c++17 -O2 -x cu --fmad=false -arch=native
+//! -DWP_DRIVER_NVRTC driver.cpp -lnvrtc -lcuda` (the kernel is then compiled by NVRTC at run
+//! time, as generated kernels are; without -DWP_DRIVER_NVRTC by nvcc), run `driver FILE
+//! warp-cuda/cuda > OUT`, and set `WARP_CUDA_HOST_CPP_RESULTS=OUT` to compare its output here
+//! instead of running g++. On an H200 every case matched; with NVRTC's default
+//! `--fmad=true` about 2,300 (products in dot, cross, lerp, matrices, quaternions) do not.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::process::Command;
+
+use warp_lang::__private::glam::{
+    DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
+    UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
+};
+use warp_lang::__private::ops::{self, WrapInt};
+use warp_lang::__private::{builtins as b, ArrayView, Grid, RangeProg};
+use warp_lang::{Fault, FaultKind};
+
+// ------------------------------------------------------------------------------------------
+// Values as the driver sees them: scalar bit patterns, in memory order
+// ------------------------------------------------------------------------------------------
+
+#[derive(Clone, Copy, Debug)]
+enum C {
+    I(u64),
+    F32(f32),
+    F64(f64),
+}
+
+trait Comps {
+    fn comps(&self) -> Vec<C>;
+}
+trait Val: Comps + Copy {
+    const TY: &'static str;
+}
+
+macro_rules! int_val {
+    ($($t:ty => $u:ty, $name:literal);* $(;)?) => {$(
+        impl Comps for $t {
+            fn comps(&self) -> Vec<C> { vec![C::I(*self as $u as u64)] }
+        }
+        impl Val for $t { const TY: &'static str = $name; }
+    )*};
+}
+int_val!(
+    i8 => u8, "i8"; i16 => u16, "i16"; i32 => u32, "i32"; i64 => u64, "i64"; isize => usize, "i64";
+    u8 => u8, "u8"; u16 => u16, "u16"; u32 => u32, "u32"; u64 => u64, "u64"; usize => usize, "u64";
+);
+impl Comps for bool {
+    fn comps(&self) -> Vec<C> {
+        vec![C::I(*self as u64)]
+    }
+}
+impl Val for bool {
+    const TY: &'static str = "bool";
+}
+impl Comps for f32 {
+    fn comps(&self) -> Vec<C> {
+        vec![C::F32(*self)]
+    }
+}
+impl Val for f32 {
+    const TY: &'static str = "f32";
+}
+impl Comps for f64 {
+    fn comps(&self) -> Vec<C> {
+        vec![C::F64(*self)]
+    }
+}
+impl Val for f64 {
+    const TY: &'static str = "f64";
+}
+macro_rules! arr_val {
+    ($($t:ident . $f:ident);* $(;)?) => {$(
+        impl Comps for $t {
+            fn comps(&self) -> Vec<C> { self.$f().iter().flat_map(|x| x.comps()).collect() }
+        }
+        impl Val for $t { const TY: &'static str = stringify!($t); }
+    )*};
+}
+arr_val!(
+    Vec2.to_array; Vec3.to_array; Vec4.to_array; DVec2.to_array; DVec3.to_array; DVec4.to_array;
+    IVec2.to_array; IVec3.to_array; IVec4.to_array; UVec2.to_array; UVec3.to_array; UVec4.to_array;
+    Mat2.to_cols_array; Mat3.to_cols_array; Mat4.to_cols_array;
+    DMat2.to_cols_array; DMat3.to_cols_array; DMat4.to_cols_array;
+    Quat.to_array; DQuat.to_array;
+);
+
+// ------------------------------------------------------------------------------------------
+// Expected results
+// ------------------------------------------------------------------------------------------
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Tol {
+    /// Same bits (any NaN matches any NaN).
+    Exact,
+    /// At most this many ulps apart (+0 and -0 are 0 apart).
+    Ulps(u64),
+}
+use Tol::{Exact, Ulps};
+
+#[derive(Clone, Debug)]
+enum Tok {
+    Int(u64),
+    F32(f32, Tol),
+    F64(f64, Tol),
+    Word(&'static str),
+}
+
+#[derive(Clone, Debug)]
+enum Want {
+    Toks(Vec<Tok>),
+    /// A `print` case: the text after `P `.
+    Text(String),
+}
+
+fn toks(v: &dyn Comps, tol: Tol) -> Vec<Tok> {
+    v.comps()
+        .into_iter()
+        .map(|c| match c {
+            C::I(u) => Tok::Int(u),
+            C::F32(x) => Tok::F32(x, tol),
+            C::F64(x) => Tok::F64(x, tol),
+        })
+        .collect()
+}
+
+fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
+    let mut t = vec![Tok::Word("F")];
+    let (kind, arg, ndim, index, shape): (i64, i64, i64, Vec<i64>, Vec<i64>) = match &f.kind {
+        FaultKind::OutOfBounds { index, shape, .. } => (
+            1,
+            arg,
+            index.len() as i64,
+            index.iter().map(|&i| i as i64).collect(),
+            shape.iter().map(|&s| s as i64).collect(),
+        ),
+        FaultKind::DivisionByZero => (2, -1, 0, vec![], vec![]),
+        FaultKind::BadStep { step } => (3, -1, 1, vec![*step], vec![]),
+    };
+    for v in [kind, arg, ndim] {
+        t.push(Tok::Int(v as u64));
+    }
+    for k in 0..4 {
+        t.push(Tok::Int(*index.get(k).unwrap_or(&0) as u64));
+    }
+    for k in 0..4 {
+        t.push(Tok::Int(*shape.get(k).unwrap_or(&0) as u64));
+    }
+    t
+}
+
+/// A `KResult`: the value, or the zero value the C++ returns plus the recorded fault.
+fn kres<T: Comps + Default>(r: Result<T, Box<Fault>>, arg: i64) -> Vec<Tok> {
+    match r {
+        Ok(v) => toks(&v, Exact),
+        Err(f) => {
+            let mut t = toks(&T::default(), Exact);
+            t.extend(fault_toks(&f, arg));
+            t
+        }
+    }
+}
+
+fn ulps32(a: f32, b: f32) -> u64 {
+    let o = |x: f32| {
+        let i = x.to_bits() as i32;
+        if i < 0 {
+            -((i & 0x7fff_ffff) as i64)
+        } else {
+            i as i64
+        }
+    };
+    (o(a) - o(b)).unsigned_abs()
+}
+fn ulps64(a: f64, b: f64) -> u64 {
+    let o = |x: f64| {
+        let i = x.to_bits() as i64;
+        if i < 0 {
+            -((i & 0x7fff_ffff_ffff_ffff) as i128)
+        } else {
+            i as i128
+        }
+    };
+    (o(a) - o(b)).unsigned_abs() as u64
+}
+
+fn tok_matches(want: &Tok, got: &str) -> bool {
+    if let Tok::Word(w) = want {
+        return *w == got;
+    }
+    let Ok(g) = u64::from_str_radix(got, 16) else {
+        return false;
+    };
+    match *want {
+        Tok::Int(v) => v == g,
+        Tok::F32(w, tol) => {
+            let g = f32::from_bits(g as u32);
+            if w.is_nan() || g.is_nan() {
+                return w.is_nan() && g.is_nan();
+            }
+            match tol {
+                Exact => w.to_bits() == g.to_bits(),
+                Ulps(n) => ulps32(w, g) <= n,
+            }
+        }
+        Tok::F64(w, tol) => {
+            let g = f64::from_bits(g);
+            if w.is_nan() || g.is_nan() {
+                return w.is_nan() && g.is_nan();
+            }
+            match tol {
+                Exact => w.to_bits() == g.to_bits(),
+                Ulps(n) => ulps64(w, g) <= n,
+            }
+        }
+        Tok::Word(_) => unreachable!(),
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Cases
+// ------------------------------------------------------------------------------------------
+
+struct Cases {
+    text: String,
+    lines: Vec<String>,
+    wants: Vec<Want>,
+    /// Tolerance of the transcendental functions.
+    tr: Tol,
+}
+
+impl Cases {
+    fn raw(&mut self, op: &str, ty: &str, ty2: &str, words: &[u64], want: Want) {
+        let mut line = format!("{op} {ty} {ty2} {}", words.len());
+        for w in words {
+            let _ = write!(line, " {w:x}");
+        }
+        self.text.push_str(&line);
+        self.text.push('\n');
+        self.lines.push(line);
+        self.wants.push(want);
+    }
+    fn push(&mut self, op: &str, ty: &str, args: &[&dyn Comps], want: Vec<Tok>) {
+        let words: Vec<u64> = args
+            .iter()
+            .flat_map(|a| a.comps())
+            .map(|c| match c {
+                C::I(u) => u,
+                C::F32(x) => x.to_bits() as u64,
+                C::F64(x) => x.to_bits(),
+            })
+            .collect();
+        self.raw(op, ty, "-", &words, Want::Toks(want));
+    }
+}
+
+// ----- integer scalars and vectors: warp_core::ops::WrapInt, min/max/clamp, abs/sign -----
+
+const SHIFTS: [u32; 12] = [0, 1, 3, 7, 8, 15, 16, 31, 32, 33, 63, u32::MAX];
+
+fn int_cases<T>(c: &mut Cases, vals: &[T])
+where
+    T: Val + WrapInt + b::MinMax + Default,
+{
+    let ty = T::TY;
+    for &x in vals {
+        for &y in vals {
+            c.push("w_add", ty, &[&x, &y], toks(&x.w_add(y), Exact));
+            c.push("w_sub", ty, &[&x, &y], toks(&x.w_sub(y), Exact));
+            c.push("w_mul", ty, &[&x, &y], toks(&x.w_mul(y), Exact));
+            c.push("w_div", ty, &[&x, &y], kres(x.w_div(y, "k"), -1));
+            c.push("w_rem", ty, &[&x, &y], kres(x.w_rem(y, "k"), -1));
+            c.push("min", ty, &[&x, &y], toks(&b::min(x, y), Exact));
+            c.push("max", ty, &[&x, &y], toks(&b::max(x, y), Exact));
+        }
+        c.push("w_neg", ty, &[&x], toks(&x.w_neg(), Exact));
+        for s in SHIFTS {
+            c.push("w_shl", ty, &[&x, &s], toks(&x.w_shl(s), Exact));
+            c.push("w_shr", ty, &[&x, &s], toks(&x.w_shr(s), Exact));
+        }
+    }
+    let few = &vals[..vals.len().min(6)];
+    for &x in few {
+        for &lo in few {
+            for &hi in few {
+                c.push(
+                    "clamp",
+                    ty,
+                    &[&x, &lo, &hi],
+                    toks(&b::clamp(x, lo, hi), Exact),
+                );
+            }
+        }
+    }
+}
+
+fn signed_cases<T: Val + b::Signed>(c: &mut Cases, vals: &[T]) {
+    for &x in vals {
+        c.push("abs", T::TY, &[&x], toks(&b::abs(x), Exact));
+        c.push("sign", T::TY, &[&x], toks(&b::sign(x), Exact));
+    }
+}
+
+macro_rules! int_scalar_cases {
+    ($c:expr, signed: $($s:ident),*; unsigned: $($u:ident),*) => {
+        $({
+            let v: Vec<$s> = vec![0, 1, -1, $s::MIN, $s::MAX, 2, -2, 7, -7, 3, $s::MIN + 1, $s::MAX - 1,
+                                  (0x5a5a_5a5a_5a5a_5a5au64 as $s), 100 as $s];
+            int_cases::<$s>($c, &v);
+            signed_cases::<$s>($c, &v);
+        })*
+        $({
+            let v: Vec<$u> = vec![0, 1, $u::MAX, 2, 7, 3, $u::MAX - 1, $u::MAX / 2, $u::MAX / 2 + 1,
+                                  (0x5a5a_5a5a_5a5a_5a5au64 as $u), 100 as $u];
+            int_cases::<$u>($c, &v);
+        })*
+    };
+}
+
+// ----- float scalars -----
+
+fn float_vals<T: From<f32> + Copy>(extra: &[T]) -> Vec<T> {
+    let mut v: Vec<T> = [
+        0.0f32, -0.0, 1.0, -1.0, 0.5, -0.5, 1.5, -2.5, 3.0, 10.25, 1e-3, 100.0, 0.1, -0.7, 2.0,
+        7.0, -7.0,
+    ]
+    .iter()
+    .map(|&x| T::from(x))
+    .collect();
+    v.extend_from_slice(extra);
+    v
+}
+
+macro_rules! float_scalar_cases {
+    ($c:expr, $t:ident, $extra:expr) => {{
+        let c: &mut Cases = $c;
+        let ty = <$t as Val>::TY;
+        let vals: Vec<$t> = float_vals::<$t>(&$extra);
+        let tr = c.tr;
+        for &x in &vals {
+            c.push("floor", ty, &[&x], toks(&b::floor(x), Exact));
+            c.push("ceil", ty, &[&x], toks(&b::ceil(x), Exact));
+            c.push("sqrt", ty, &[&x], toks(&b::sqrt(x), Exact));
+            c.push("exp", ty, &[&x], toks(&b::exp(x), tr));
+            c.push("log", ty, &[&x], toks(&b::log(x), tr));
+            c.push("sin", ty, &[&x], toks(&b::sin(x), tr));
+            c.push("cos", ty, &[&x], toks(&b::cos(x), tr));
+            c.push("tan", ty, &[&x], toks(&b::tan(x), tr));
+            c.push("abs", ty, &[&x], toks(&b::abs(x), Exact));
+            c.push("sign", ty, &[&x], toks(&b::sign(x), Exact));
+            for &y in &vals {
+                c.push("min", ty, &[&x, &y], toks(&b::min(x, y), Ulps(0)));
+                c.push("max", ty, &[&x, &y], toks(&b::max(x, y), Ulps(0)));
+                c.push("atan2", ty, &[&x, &y], toks(&b::atan2(x, y), tr));
+                c.push("pow", ty, &[&x, &y], toks(&b::pow(x, y), tr));
+                c.push("frem", ty, &[&x, &y], toks(&(x % y), Exact));
+            }
+        }
+        let few: Vec<$t> = vals.iter().copied().step_by(3).collect();
+        for &x in &few {
+            for &y in &few {
+                for &t in &few {
+                    c.push(
+                        "clamp",
+                        ty,
+                        &[&x, &y, &t],
+                        toks(&b::clamp(x, y, t), Ulps(0)),
+                    );
+                    c.push("lerp", ty, &[&x, &y, &t], toks(&b::lerp(x, y, t), Exact));
+                }
+            }
+        }
+    }};
+}
+
+// ----- vectors -----
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    /// A full-precision float in [-4, 4) (so that evaluation order shows in the last bits).
+    fn f(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 8.0 - 4.0
+    }
+    fn i(&mut self) -> i32 {
+        let r = self.next();
+        match r % 4 {
+            0 => (r >> 8) as i32,
+            1 => ((r >> 8) % 21) as i32 - 10,
+            2 => [i32::MIN, i32::MAX, 0, -1, 1][((r >> 8) % 5) as usize],
+            _ => ((r >> 8) % 1000) as i32,
+        }
+    }
+}
+
+macro_rules! fvec_cases {
+    ($c:expr, $rng:expr, $v:ident, $s:ident, $n:tt) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($v);
+        let special: [$s; 8] = [0.0, -0.0, 1.0, -2.5, $s::NAN, $s::INFINITY, 0.75, -3.0];
+        let mut vs: Vec<$v> = Vec::new();
+        for k in 0..8 {
+            vs.push($v::from_array(std::array::from_fn(|i| {
+                special[(k + 3 * i) % 8]
+            })));
+        }
+        for _ in 0..10 {
+            vs.push($v::from_array(std::array::from_fn(|_| rng.f() as $s)));
+        }
+        vs.push($v::ZERO);
+        vs.push($v::from_array(std::array::from_fn(|i| {
+            if i == 0 {
+                $s::MAX
+            } else {
+                0.0
+            }
+        })));
+        let ss: Vec<$s> = vec![0.0, -1.0, 2.5, rng.f() as $s, rng.f() as $s, $s::NAN];
+        for &x in &vs {
+            c.push("abs", ty, &[&x], toks(&b::abs(x), Exact));
+            c.push("sign", ty, &[&x], toks(&b::sign(x), Exact));
+            c.push("length", ty, &[&x], toks(&b::length(x), Exact));
+            c.push("normalize", ty, &[&x], toks(&b::normalize(x), Exact));
+            c.push("neg", ty, &[&x], toks(&(-x), Exact));
+            c.push("make", ty, &[&x], toks(&x, Exact));
+            for &y in &vs {
+                c.push("min", ty, &[&x, &y], toks(&b::min(x, y), Ulps(0)));
+                c.push("max", ty, &[&x, &y], toks(&b::max(x, y), Ulps(0)));
+                c.push("dot", ty, &[&x, &y], toks(&b::dot(x, y), Exact));
+                c.push("add", ty, &[&x, &y], toks(&(x + y), Exact));
+                c.push("sub", ty, &[&x, &y], toks(&(x - y), Exact));
+                c.push("mul", ty, &[&x, &y], toks(&(x * y), Exact));
+                c.push("div", ty, &[&x, &y], toks(&(x / y), Exact));
+                c.push("rem", ty, &[&x, &y], toks(&(x % y), Exact));
+                c.push("eq", ty, &[&x, &y], toks(&((x == y) as u32), Exact));
+                c.push("ne", ty, &[&x, &y], toks(&((x != y) as u32), Exact));
+                c.push(
+                    "addassign",
+                    ty,
+                    &[&x, &y],
+                    toks(
+                        &{
+                            let mut a = x;
+                            a += y;
+                            a *= 2.0;
+                            a
+                        },
+                        Exact,
+                    ),
+                );
+                for &t in &ss[..3] {
+                    c.push("lerp", ty, &[&x, &y, &t], toks(&b::lerp(x, y, t), Exact));
+                }
+                cross_case!(c, $n, ty, x, y);
+            }
+            for &s in &ss {
+                c.push("adds", ty, &[&x, &s], toks(&(x + s), Exact));
+                c.push("subs", ty, &[&x, &s], toks(&(x - s), Exact));
+                c.push("muls", ty, &[&x, &s], toks(&(x * s), Exact));
+                c.push("divs", ty, &[&x, &s], toks(&(x / s), Exact));
+                c.push("rems", ty, &[&x, &s], toks(&(x % s), Exact));
+                c.push("sadd", ty, &[&s, &x], toks(&(s + x), Exact));
+                c.push("ssub", ty, &[&s, &x], toks(&(s - x), Exact));
+                c.push("smul", ty, &[&s, &x], toks(&(s * x), Exact));
+                c.push("sdiv", ty, &[&s, &x], toks(&(s / x), Exact));
+                c.push("srem", ty, &[&s, &x], toks(&(s % x), Exact));
+            }
+        }
+        for &x in &vs[..6] {
+            for &lo in &vs[..6] {
+                for &hi in &vs[..6] {
+                    c.push(
+                        "clamp",
+                        ty,
+                        &[&x, &lo, &hi],
+                        toks(&b::clamp(x, lo, hi), Ulps(0)),
+                    );
+                }
+            }
+        }
+        for &s in &ss {
+            c.push("splat", ty, &[&s], toks(&$v::splat(s), Exact));
+        }
+        let consts: Vec<(u64, $v)> = fvec_consts!($v, $n);
+        for (id, v) in consts {
+            c.push("konst", ty, &[&id], toks(&v, Exact));
+        }
+        lit_cases::<$v>(c);
+    }};
+}
+
+macro_rules! cross_case {
+    ($c:expr, 3, $ty:expr, $x:expr, $y:expr) => {
+        $c.push("cross", $ty, &[&$x, &$y], toks(&b::cross($x, $y), Exact));
+    };
+    ($c:expr, $n:literal, $ty:expr, $x:expr, $y:expr) => {};
+}
+
+// Constant ids (the driver's K_* enum).
+const K_ZERO: u64 = 0;
+const K_ONE: u64 = 1;
+const K_NEG_ONE: u64 = 2;
+const K_X: u64 = 3;
+const K_Y: u64 = 4;
+const K_Z: u64 = 5;
+const K_W: u64 = 6;
+const K_NEG_X: u64 = 7;
+const K_NEG_Y: u64 = 8;
+const K_NEG_Z: u64 = 9;
+const K_NEG_W: u64 = 10;
+const K_MIN: u64 = 11;
+const K_MAX: u64 = 12;
+const K_INFINITY: u64 = 13;
+const K_NEG_INFINITY: u64 = 14;
+const K_NAN: u64 = 15;
+const K_IDENTITY: u64 = 16;
+
+macro_rules! fvec_consts {
+    ($v:ident, 2) => {
+        vec![
+            (K_ZERO, $v::ZERO),
+            (K_ONE, $v::ONE),
+            (K_NEG_ONE, $v::NEG_ONE),
+            (K_X, $v::X),
+            (K_Y, $v::Y),
+            (K_NEG_X, $v::NEG_X),
+            (K_NEG_Y, $v::NEG_Y),
+            (K_MIN, $v::MIN),
+            (K_MAX, $v::MAX),
+            (K_INFINITY, $v::INFINITY),
+            (K_NEG_INFINITY, $v::NEG_INFINITY),
+            (K_NAN, $v::NAN),
+        ]
+    };
+    ($v:ident, 3) => {{
+        let mut k = fvec_consts!($v, 2);
+        k.extend([(K_Z, $v::Z), (K_NEG_Z, $v::NEG_Z)]);
+        k
+    }};
+    ($v:ident, 4) => {{
+        let mut k = fvec_consts!($v, 3);
+        k.extend([(K_W, $v::W), (K_NEG_W, $v::NEG_W)]);
+        k
+    }};
+}
+
+macro_rules! ivec_consts {
+    ($v:ident, 2, $signed:tt) => {{
+        #[allow(unused_mut)]
+        let mut k = vec![(K_ZERO, $v::ZERO), (K_ONE, $v::ONE), (K_X, $v::X), (K_Y, $v::Y), (K_MIN, $v::MIN), (K_MAX, $v::MAX)];
+        ivec_consts!(@neg k, $v, $signed, [(K_NEG_ONE, NEG_ONE), (K_NEG_X, NEG_X), (K_NEG_Y, NEG_Y)]);
+        k
+    }};
+    ($v:ident, 3, $signed:tt) => {{
+        let mut k = ivec_consts!($v, 2, $signed);
+        k.push((K_Z, $v::Z));
+        ivec_consts!(@neg k, $v, $signed, [(K_NEG_Z, NEG_Z)]);
+        k
+    }};
+    ($v:ident, 4, $signed:tt) => {{
+        let mut k = ivec_consts!($v, 3, $signed);
+        k.push((K_W, $v::W));
+        ivec_consts!(@neg k, $v, $signed, [(K_NEG_W, NEG_W)]);
+        k
+    }};
+    (@neg $k:ident, $v:ident, true, [$(($id:expr, $name:ident)),*]) => { $( $k.push(($id, $v::$name)); )* };
+    (@neg $k:ident, $v:ident, false, [$(($id:expr, $name:ident)),*]) => {};
+}
+
+macro_rules! ivec_cases {
+    ($c:expr, $rng:expr, $v:ident, $s:ident, $n:tt, $signed:tt) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($v);
+        let mut vs: Vec<$v> = Vec::new();
+        for _ in 0..9 {
+            vs.push($v::from_array(std::array::from_fn(|_| rng.i() as $s)));
+        }
+        vs.push($v::ZERO);
+        vs.push($v::ONE);
+        vs.push($v::from_array(std::array::from_fn(|i| {
+            if i == 0 {
+                0
+            } else {
+                3
+            }
+        })));
+        vs.push($v::MAX);
+        vs.push($v::MIN);
+        int_cases::<$v>(c, &vs);
+        ivec_signed!(c, vs, $signed);
+        for &x in &vs {
+            c.push("make", ty, &[&x], toks(&x, Exact));
+            for &y in &vs {
+                c.push("dot", ty, &[&x, &y], toks(&b::dot(x, y), Exact));
+                c.push("eq", ty, &[&x, &y], toks(&((x == y) as u32), Exact));
+                c.push("ne", ty, &[&x, &y], toks(&((x != y) as u32), Exact));
+                ivec_cross!(c, $n, $signed, ty, x, y);
+            }
+            c.push("splat", ty, &[&x.x], toks(&$v::splat(x.x), Exact));
+        }
+        for (id, v) in ivec_consts!($v, $n, $signed) {
+            c.push("konst", ty, &[&id], toks(&v, Exact));
+        }
+        lit_cases::<$v>(c);
+    }};
+}
+macro_rules! ivec_signed {
+    ($c:expr, $vs:expr, true) => {
+        signed_cases($c, &$vs);
+    };
+    ($c:expr, $vs:expr, false) => {};
+}
+macro_rules! ivec_cross {
+    ($c:expr, 3, true, $ty:expr, $x:expr, $y:expr) => {
+        $c.push("cross", $ty, &[&$x, &$y], toks(&b::cross($x, $y), Exact));
+    };
+    ($c:expr, $n:literal, $signed:tt, $ty:expr, $x:expr, $y:expr) => {};
+}
+
+// ----- literals (warp_core::ops::FromLiteral) -----
+
+fn lit_cases<T: Val + ops::FromLiteral + Default>(c: &mut Cases) {
+    let like = T::default();
+    for v in [
+        0.0f64,
+        -0.0,
+        1.0,
+        -1.0,
+        2.5,
+        -2.5,
+        0.1,
+        300.0,
+        -300.0,
+        65535.0,
+        65536.0,
+        1e10,
+        -1e10,
+        1e20,
+        4294967296.0,
+        1e300,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        3.4e38,
+        3.5e38,
+    ] {
+        c.push("lit", T::TY, &[&v], toks(&ops::lit_like(&like, v), Exact));
+    }
+    for v in [
+        0i64,
+        1,
+        -1,
+        300,
+        -300,
+        65536,
+        1 << 40,
+        i64::MAX,
+        i64::MIN,
+        (1 << 53) + 1,
+    ] {
+        c.push(
+            "intlit",
+            T::TY,
+            &[&v],
+            toks(&ops::int_like(&like, v), Exact),
+        );
+    }
+}
+
+// ----- matrices and quaternions -----
+
+macro_rules! mat_cases {
+    ($c:expr, $rng:expr, $m:ident, $v:ident, $s:ident, $n:tt) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($m);
+        let mut ms: Vec<$m> = Vec::new();
+        for _ in 0..8 {
+            ms.push($m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s)));
+        }
+        ms.push($m::IDENTITY);
+        ms.push($m::from_cols_array(&std::array::from_fn(|k| {
+            [0.0, -0.0, 1.0, $s::NAN, $s::INFINITY][k % 5]
+        })));
+        let vs: Vec<$v> = (0..6)
+            .map(|_| $v::from_array(std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        let ss: Vec<$s> = vec![0.0, -1.0, 2.5, rng.f() as $s, $s::NAN];
+        for &a in &ms {
+            c.push("make", ty, &[&a], toks(&a, Exact));
+            c.push("neg", ty, &[&a], toks(&(-a), Exact));
+            for &bm in &ms {
+                c.push("add", ty, &[&a, &bm], toks(&(a + bm), Exact));
+                c.push("sub", ty, &[&a, &bm], toks(&(a - bm), Exact));
+                c.push("mul", ty, &[&a, &bm], toks(&(a * bm), Exact));
+                c.push("eq", ty, &[&a, &bm], toks(&((a == bm) as u32), Exact));
+                c.push("ne", ty, &[&a, &bm], toks(&((a != bm) as u32), Exact));
+                c.push(
+                    "mulassign",
+                    ty,
+                    &[&a, &bm],
+                    toks(
+                        &{
+                            let mut x = a;
+                            x *= bm;
+                            x += bm;
+                            x
+                        },
+                        Exact,
+                    ),
+                );
+            }
+            for &v in &vs {
+                c.push("mulv", ty, &[&a, &v], toks(&(a * v), Exact));
+            }
+            for &s in &ss {
+                c.push("muls", ty, &[&a, &s], toks(&(a * s), Exact));
+                c.push("smul", ty, &[&s, &a], toks(&(s * a), Exact));
+                c.push("divs", ty, &[&a, &s], toks(&(a / s), Exact));
+                c.push("sdiv", ty, &[&s, &a], toks(&(s / a), Exact));
+            }
+        }
+        for &v in &vs {
+            c.push("from_diag", ty, &[&v], toks(&$m::from_diagonal(v), Exact));
+        }
+        for (id, m) in [
+            (K_ZERO, $m::ZERO),
+            (K_IDENTITY, $m::IDENTITY),
+            (K_NAN, $m::NAN),
+        ] {
+            c.push("konst", ty, &[&id], toks(&m, Exact));
+        }
+    }};
+}
+
+macro_rules! quat_cases {
+    ($c:expr, $rng:expr, $q:ident, $v:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($q);
+        let mut qs: Vec<$q> = Vec::new();
+        for _ in 0..8 {
+            qs.push($q::from_xyzw(
+                rng.f() as $s,
+                rng.f() as $s,
+                rng.f() as $s,
+                rng.f() as $s,
+            ));
+        }
+        for _ in 0..4 {
+            // Unit quaternions, as rotations are.
+            let q = $q::from_xyzw(rng.f() as $s, rng.f() as $s, rng.f() as $s, rng.f() as $s);
+            qs.push(q.normalize());
+        }
+        qs.push($q::IDENTITY);
+        qs.push($q::from_xyzw(0.0, -0.0, $s::NAN, 1.0));
+        let vs: Vec<$v> = (0..6)
+            .map(|_| $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s))
+            .collect();
+        let ss: Vec<$s> = vec![0.0, -1.0, 2.5, rng.f() as $s];
+        for &a in &qs {
+            c.push("make", ty, &[&a], toks(&a, Exact));
+            c.push("neg", ty, &[&a], toks(&(-a), Exact));
+            for &bq in &qs {
+                c.push("add", ty, &[&a, &bq], toks(&(a + bq), Exact));
+                c.push("sub", ty, &[&a, &bq], toks(&(a - bq), Exact));
+                c.push("mul", ty, &[&a, &bq], toks(&(a * bq), Exact));
+                c.push("eq", ty, &[&a, &bq], toks(&((a == bq) as u32), Exact));
+                c.push("ne", ty, &[&a, &bq], toks(&((a != bq) as u32), Exact));
+                c.push(
+                    "mulassign",
+                    ty,
+                    &[&a, &bq],
+                    toks(
+                        &{
+                            let mut x = a;
+                            x *= bq;
+                            x += bq;
+                            x
+                        },
+                        Exact,
+                    ),
+                );
+            }
+            for &v in &vs {
+                c.push("mulv", ty, &[&a, &v], toks(&(a * v), Exact));
+            }
+            for &s in &ss {
+                c.push("muls", ty, &[&a, &s], toks(&(a * s), Exact));
+                c.push("divs", ty, &[&a, &s], toks(&(a / s), Exact));
+            }
+        }
+        for (id, q) in [(K_IDENTITY, $q::IDENTITY), (K_NAN, $q::NAN)] {
+            c.push("konst", ty, &[&id], toks(&q, Exact));
+        }
+    }};
+}
+
+// ----- casts: Rust `as` between every pair of scalar types -----
+
+macro_rules! cast_from {
+    ($c:expr, $from:ident, $vals:expr; $($to:ident),*) => {
+        for &x in $vals.iter() {
+            let x: $from = x;
+            $( $c.raw("cast", <$from as Val>::TY, <$to as Val>::TY, &[words(&x)],
+                      Want::Toks(toks(&(x as $to), Exact))); )*
+        }
+    };
+}
+
+fn words(v: &dyn Comps) -> u64 {
+    match v.comps()[0] {
+        C::I(u) => u,
+        C::F32(x) => x.to_bits() as u64,
+        C::F64(x) => x.to_bits(),
+    }
+}
+
+fn cast_cases(c: &mut Cases) {
+    let ints: Vec<i128> = vec![
+        0,
+        1,
+        -1,
+        127,
+        128,
+        255,
+        256,
+        -128,
+        -129,
+        32767,
+        32768,
+        65535,
+        65536,
+        -32769,
+        i32::MAX as i128,
+        i32::MIN as i128,
+        u32::MAX as i128,
+        1 << 32,
+        (1 << 53) + 1,
+        (1 << 24) + 1,
+        i64::MAX as i128,
+        i64::MIN as i128,
+        u64::MAX as i128,
+        0x1234_5678_9abc_def0,
+    ];
+    macro_rules! from_int {
+        ($($t:ident),*) => {$({
+            let v: Vec<$t> = ints.iter().map(|&i| i as $t).collect();
+            cast_from!(c, $t, v; i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64);
+        })*};
+    }
+    from_int!(i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
+    let floats: Vec<f64> = vec![
+        0.0,
+        -0.0,
+        0.5,
+        -0.5,
+        0.99,
+        -0.99,
+        1.0,
+        -1.0,
+        127.5,
+        128.0,
+        -128.5,
+        -129.0,
+        255.5,
+        256.0,
+        32767.5,
+        -32768.9,
+        65535.9,
+        65536.0,
+        2147483520.0,
+        2147483647.0,
+        2147483648.0,
+        -2147483648.0,
+        -2147483904.0,
+        4294967295.0,
+        4294967296.0,
+        9223372036854774784.0, // the f64 below 2^63
+        9223372036854775807.0,
+        -9223372036854775808.0,
+        -9.3e18,
+        18446744073709549568.0, // the f64 below 2^64
+        18446744073709551615.0,
+        1e20,
+        -1e20,
+        f32::MAX as f64,
+        f64::MAX,
+        f64::MIN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+        -f64::NAN,
+        1e-40,
+        1e-310,
+        0.1,
+        16777217.0,
+    ];
+    let f32s: Vec<f32> = floats.iter().map(|&x| x as f32).collect();
+    cast_from!(c, f32, f32s; i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64);
+    cast_from!(c, f64, floats; i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64);
+    let bools = [false, true];
+    cast_from!(c, bool, bools; i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
+}
+
+// ----- range loops (warp_core::RangeProg) -----
+
+#[derive(Clone, Copy, Debug)]
+enum Adapter {
+    Rev,
+    Step(i64),
+}
+
+fn range_cases(c: &mut Cases) -> usize {
+    let bounds: Vec<i64> = vec![-5, -1, 0, 1, 2, 3, 5, 7, 11];
+    let extremes: Vec<(i64, i64)> = vec![
+        (i64::MIN, i64::MAX),
+        (0, i64::MAX),
+        (-1, i64::MAX),
+        (i64::MIN, 0),
+        (i64::MAX, i64::MIN),
+        (i64::MAX - 3, i64::MAX),
+        (i64::MIN, i64::MIN + 2),
+    ];
+    let mut adapters: Vec<Vec<Adapter>> = vec![vec![]];
+    let one: Vec<Adapter> = vec![
+        Adapter::Rev,
+        Adapter::Step(1),
+        Adapter::Step(2),
+        Adapter::Step(3),
+        Adapter::Step(7),
+        Adapter::Step(0),
+        Adapter::Step(-2),
+    ];
+    for &a in &one {
+        adapters.push(vec![a]);
+        for &b2 in &one {
+            adapters.push(vec![a, b2]);
+            for &c3 in &[Adapter::Rev, Adapter::Step(2)] {
+                adapters.push(vec![a, b2, c3]);
+            }
+        }
+    }
+    let mut pairs: Vec<(i64, i64)> = Vec::new();
+    for &s in &bounds {
+        for &e in &bounds {
+            pairs.push((s, e));
+        }
+    }
+    // Debug-build Rust panics on overflow where the C++ (like release Rust) wraps: such
+    // combinations are skipped (only reachable with extreme bounds).
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let mut skipped = 0;
+    for (set, extreme) in [(&pairs, false), (&extremes, true)] {
+        for &(s, e) in set.iter() {
+            for incl in [false, true] {
+                for ad in &adapters {
+                    if extreme && ad.len() > 1 {
+                        continue;
+                    }
+                    let r = std::panic::catch_unwind(|| {
+                        let mut p = RangeProg::new(s, e, incl);
+                        for a in ad {
+                            p = match a {
+                                Adapter::Rev => p.rev(),
+                                Adapter::Step(k) => p.step_by(*k, "k")?,
+                            };
+                        }
+                        Ok::<RangeProg, Box<Fault>>(p)
+                    });
+                    let Ok(r) = r else {
+                        skipped += 1;
+                        continue;
+                    };
+                    let mut words: Vec<u64> =
+                        vec![s as u64, e as u64, incl as u64, ad.len() as u64];
+                    for a in ad {
+                        match a {
+                            Adapter::Rev => words.extend([0, 0]),
+                            Adapter::Step(k) => words.extend([1, *k as u64]),
+                        }
+                    }
+                    let want = match r {
+                        Ok(p) => {
+                            let at = |n: i64| p.first.wrapping_add(n.wrapping_mul(p.step));
+                            let last = if p.count > 0 { p.count - 1 } else { 0 };
+                            [p.first, p.step, p.count, p.at(0), at(1), at(last)]
+                                .iter()
+                                .map(|&v| Tok::Int(v as u64))
+                                .collect()
+                        }
+                        Err(f) => {
+                            // The C++ keeps going with an empty range; compare the fault only.
+                            let mut t: Vec<Tok> = Vec::new();
+                            t.push(Tok::Word("*6"));
+                            t.extend(fault_toks(&f, -1));
+                            t
+                        }
+                    };
+                    c.raw("range", "-", "-", &words, Want::Toks(want));
+                }
+            }
+        }
+    }
+    std::panic::set_hook(hook);
+    // Values themselves: the progression against Rust's own iterators (small cases).
+    for &(s, e) in &pairs {
+        let p = RangeProg::new(s, e, false);
+        let got: Vec<i64> = (0..p.count).map(|n| p.at(n)).collect();
+        assert_eq!(got, (s..e).collect::<Vec<_>>());
+    }
+    skipped
+}
+
+// ----- arrays and faults -----
+
+fn array_cases(c: &mut Cases) {
+    let shapes: Vec<Vec<usize>> = vec![vec![5], vec![2, 3], vec![2, 3, 2], vec![2, 1, 3, 2]];
+    for shape in &shapes {
+        let n = shape.len();
+        // Indices: every in-bounds index of small shapes, then out-of-bounds ones.
+        let mut idxs: Vec<Vec<i64>> = Vec::new();
+        let total: usize = shape.iter().product();
+        for l in 0..total {
+            let mut rem = l;
+            let mut ix = vec![0i64; n];
+            for k in (0..n).rev() {
+                ix[k] = (rem % shape[k]) as i64;
+                rem /= shape[k];
+            }
+            idxs.push(ix);
+        }
+        for k in 0..n {
+            for bad in [-1i64, shape[k] as i64, i64::MIN, i64::MAX, 1 << 40] {
+                let mut ix = vec![0i64; n];
+                ix[k] = bad;
+                idxs.push(ix);
+            }
+        }
+        for colmajor in [false, true] {
+            for ix in &idxs {
+                for store in [false, true] {
+                    let mut words: Vec<u64> = vec![n as u64];
+                    words.extend(shape.iter().map(|&s| s as u64));
+                    words.push(colmajor as u64);
+                    words.extend(ix.iter().map(|&i| i as u64));
+                    let value = 1234.5f32;
+                    if store {
+                        words.push(value.to_bits() as u64);
+                    }
+                    let want = array_expect(shape, colmajor, ix, store.then_some(value));
+                    c.raw(
+                        if store { "store" } else { "load" },
+                        "f32",
+                        "-",
+                        &words,
+                        Want::Toks(want),
+                    );
+                }
+            }
+            let mut words: Vec<u64> = vec![n as u64];
+            words.extend(shape.iter().map(|&s| s as u64));
+            words.push(colmajor as u64);
+            words.extend(std::iter::repeat_n(0, n));
+            let mut want = vec![Tok::Int(total as u64)];
+            want.extend(shape.iter().map(|&s| Tok::Int(s as u64)));
+            c.raw("len", "f32", "-", &words, Want::Toks(want));
+        }
+    }
+}
+
+/// Load or store through warp-core's ArrayView over the same memory layout as the driver's.
+fn array_expect(shape: &[usize], colmajor: bool, ix: &[i64], store: Option<f32>) -> Vec<Tok> {
+    let n = shape.len();
+    let total: usize = shape.iter().product();
+    let mut strides = vec![0isize; n];
+    let mut s = 1isize;
+    if colmajor {
+        for k in 0..n {
+            strides[k] = s;
+            s *= shape[k] as isize;
+        }
+    } else {
+        for k in (0..n).rev() {
+            strides[k] = s;
+            s *= shape[k] as isize;
+        }
+    }
+    let mut data = vec![0f32; total];
+    for l in 0..total {
+        let (mut rem, mut off) = (l, 0isize);
+        for k in (0..n).rev() {
+            off += (rem % shape[k]) as isize * strides[k];
+            rem /= shape[k];
+        }
+        data[off as usize] = l as f32;
+    }
+    let p = data.as_mut_ptr();
+    macro_rules! view {
+        ($n:literal) => {
+            // SAFETY: every in-bounds index addresses an element of `data` (strides computed
+            // from the shape above), which outlives the view.
+            unsafe {
+                ArrayView::<f32, $n>::new(
+                    p,
+                    std::array::from_fn(|k| shape[k]),
+                    std::array::from_fn(|k| strides[k]),
+                    "k",
+                    "a",
+                )
+            }
+        };
+    }
+    let r: Result<Option<f32>, Box<Fault>> = match (n, store) {
+        (1, None) => view!(1).load(ix[0]).map(Some),
+        (2, None) => view!(2).load((ix[0], ix[1])).map(Some),
+        (3, None) => view!(3).load((ix[0], ix[1], ix[2])).map(Some),
+        (4, None) => view!(4).load((ix[0], ix[1], ix[2], ix[3])).map(Some),
+        (1, Some(v)) => view!(1).store(ix[0], v).map(|_| None),
+        (2, Some(v)) => view!(2).store((ix[0], ix[1]), v).map(|_| None),
+        (3, Some(v)) => view!(3).store((ix[0], ix[1], ix[2]), v).map(|_| None),
+        (4, Some(v)) => view!(4)
+            .store((ix[0], ix[1], ix[2], ix[3]), v)
+            .map(|_| None),
+        _ => unreachable!(),
+    };
+    let mut t = Vec::new();
+    if store.is_none() {
+        let v = *r.as_ref().ok().and_then(|v| v.as_ref()).unwrap_or(&0.0);
+        t.push(Tok::F32(v, Exact));
+        t.push(Tok::F32(v, Exact));
+        t.push(Tok::Int(r.is_ok() as u64));
+    } else {
+        let h = data.iter().enumerate().fold(0u64, |h, (k, x)| {
+            h.wrapping_add(x.to_bits() as u64 * (k as u64 + 1))
+        });
+        t.push(Tok::Int(h));
+    }
+    if let Err(f) = r {
+        t.extend(fault_toks(&f, 7));
+    }
+    t
+}
+
+fn div_fault_smoke(c: &mut Cases) {
+    // Division faults for every integer type are in int_cases; one explicit check of the
+    // record's layout here.
+    c.push("w_div", "i32", &[&7i32, &0i32], {
+        let mut t = vec![Tok::Int(0), Tok::Word("F"), Tok::Int(2), Tok::Int(u64::MAX)];
+        t.extend(std::iter::repeat_n(Tok::Int(0), 9));
+        t
+    });
+}
+
+// ----- atomics -----
+
+fn atomic_expect<T>(op: &str, init: T, v: T, i: i64) -> Vec<Tok>
+where
+    T: b::AtomicElement + Comps + Default,
+{
+    let mut buf = vec![init; 4];
+    // SAFETY: the view covers exactly `buf`, which outlives it.
+    let view = unsafe { ArrayView::<T, 1>::new(buf.as_mut_ptr(), [4], [1], "k", "a") };
+    let r = match op {
+        "atomic_add" => b::atomic_add(&view, i, v),
+        "atomic_sub" => b::atomic_sub(&view, i, v),
+        "atomic_min" => b::atomic_min(&view, i, v),
+        _ => b::atomic_max(&view, i, v),
+    };
+    let k = if (0..4).contains(&i) { i as usize } else { 0 };
+    let mut t = match &r {
+        Ok(old) => toks(old, Exact),
+        Err(_) => toks(&T::default(), Exact),
+    };
+    t.extend(toks(&buf[k], Exact));
+    if let Err(f) = r {
+        t.extend(fault_toks(&f, 3));
+    }
+    t
+}
+
+fn atomic_cases_for<T>(c: &mut Cases, vals: &[T])
+where
+    T: Val + b::AtomicElement + Default,
+{
+    for op in ["atomic_add", "atomic_sub", "atomic_min", "atomic_max"] {
+        for &init in vals {
+            for &v in vals {
+                for i in [0i64, 3] {
+                    c.push(op, T::TY, &[&init, &v, &i], atomic_expect(op, init, v, i));
+                }
+            }
+        }
+        for i in [4i64, -1] {
+            c.push(
+                op,
+                T::TY,
+                &[&vals[0], &vals[1], &i],
+                atomic_expect(op, vals[0], vals[1], i),
+            );
+        }
+    }
+}
+
+fn atomic_cases(c: &mut Cases) {
+    atomic_cases_for::<i32>(c, &[0, 1, -5, i32::MAX, i32::MIN]);
+    atomic_cases_for::<u32>(c, &[0, 1, 5, u32::MAX]);
+    atomic_cases_for::<i64>(c, &[0, 1, -5, i64::MAX, i64::MIN]);
+    atomic_cases_for::<u64>(c, &[0, 1, 5, u64::MAX]);
+    atomic_cases_for::<f32>(c, &[0.0, 1.5, -2.25, f32::NAN, f32::INFINITY, 0.1]);
+    atomic_cases_for::<f64>(c, &[0.0, 1.5, -2.25, f64::NAN, f64::NEG_INFINITY, 0.1]);
+    atomic_cases_for::<Vec2>(c, &[Vec2::new(1.0, f32::NAN), Vec2::new(-2.0, 3.0)]);
+    atomic_cases_for::<Vec3>(
+        c,
+        &[Vec3::new(1.0, f32::NAN, 0.5), Vec3::new(-2.0, 3.0, 0.25)],
+    );
+    atomic_cases_for::<Vec4>(
+        c,
+        &[
+            Vec4::new(1.0, f32::NAN, 0.5, 9.0),
+            Vec4::new(-2.0, 3.0, 0.25, -9.0),
+        ],
+    );
+    atomic_cases_for::<DVec2>(c, &[DVec2::new(1.0, f64::NAN), DVec2::new(-2.0, 3.0)]);
+    atomic_cases_for::<DVec3>(
+        c,
+        &[DVec3::new(1.0, f64::NAN, 0.5), DVec3::new(-2.0, 3.0, 0.25)],
+    );
+    atomic_cases_for::<DVec4>(
+        c,
+        &[
+            DVec4::new(1.0, f64::NAN, 0.5, 9.0),
+            DVec4::new(-2.0, 3.0, 0.25, -9.0),
+        ],
+    );
+}
+
+// ----- launch grid -----
+
+fn unflatten_cases(c: &mut Cases) {
+    let grids: Vec<Vec<usize>> = vec![
+        vec![7],
+        vec![3, 4],
+        vec![2, 3, 4],
+        vec![2, 3, 1, 5],
+        vec![1, 1, 6],
+    ];
+    for dims in &grids {
+        let n = dims.len();
+        let mut d4 = [1usize; 4];
+        d4[..n].copy_from_slice(dims);
+        let total: usize = dims.iter().product();
+        let grid = Grid {
+            dims: d4,
+            ndim: n,
+            total,
+        };
+        for flat in 0..total {
+            let want: Vec<usize> = match n {
+                1 => grid.unflatten::<1>(flat).to_vec(),
+                2 => grid.unflatten::<2>(flat).to_vec(),
+                3 => grid.unflatten::<3>(flat).to_vec(),
+                _ => grid.unflatten::<4>(flat).to_vec(),
+            };
+            let mut words = vec![n as u64];
+            words.extend(d4.iter().map(|&d| d as u64));
+            words.push(flat as u64);
+            c.raw(
+                "unflatten",
+                "-",
+                "-",
+                &words,
+                Want::Toks(want.iter().map(|&v| Tok::Int(v as u64)).collect()),
+            );
+        }
+    }
+}
+
+// ----- layout -----
+
+fn layout_cases(c: &mut Cases) -> Vec<String> {
+    let mut report = Vec::new();
+    macro_rules! layout {
+        ($($t:ident),*) => {$(
+            let (s, a) = (std::mem::size_of::<$t>(), std::mem::align_of::<$t>());
+            report.push(format!("{}: size {s} align {a}", stringify!($t)));
+            c.raw("layout", stringify!($t), "-", &[], Want::Toks(vec![Tok::Int(s as u64), Tok::Int(a as u64)]));
+        )*};
+    }
+    layout!(
+        Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4, Mat2,
+        Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat, i8, i16, i32, i64, u8, u16, u32, u64, f32,
+        f64, bool
+    );
+    report
+}
+
+// ----- printing -----
+
+fn print_cases(c: &mut Cases) {
+    fn p<T: Val + std::fmt::Display>(c: &mut Cases, v: T) {
+        let words: Vec<u64> = v
+            .comps()
+            .iter()
+            .map(|c| match *c {
+                C::I(u) => u,
+                C::F32(x) => x.to_bits() as u64,
+                C::F64(x) => x.to_bits(),
+            })
+            .collect();
+        c.raw("print", T::TY, "-", &words, Want::Text(format!("{v}")));
+    }
+    p(c, true);
+    p(c, false);
+    p(c, i8::MIN);
+    p(c, i16::MIN);
+    p(c, i32::MIN);
+    p(c, i64::MIN);
+    p(c, u8::MAX);
+    p(c, u16::MAX);
+    p(c, u32::MAX);
+    p(c, u64::MAX);
+    for x in [
+        0.0f32,
+        -0.0,
+        1.0,
+        -2.5,
+        0.1,
+        0.25,
+        100000.0,
+        123.5,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+    ] {
+        p(c, x);
+    }
+    for x in [
+        0.0f64,
+        -0.0,
+        1.0,
+        -2.5,
+        0.1,
+        0.25,
+        100000.0,
+        123.5,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+    ] {
+        p(c, x);
+    }
+    p(c, Vec3::new(1.0, 1.5, f32::NAN));
+    p(c, Vec2::new(-0.5, 2.0));
+    p(c, Vec4::new(1.0, 2.0, 3.0, 4.0));
+    p(c, DVec3::new(1.0, -1.5, 0.1));
+    p(c, IVec2::new(-3, 4));
+    p(c, UVec4::new(1, 2, 3, u32::MAX));
+    p(c, Mat2::IDENTITY);
+    p(
+        c,
+        Mat3::from_cols_array(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.5]),
+    );
+    p(c, DMat4::IDENTITY);
+    p(c, Quat::IDENTITY);
+    p(c, DQuat::from_xyzw(0.5, -0.5, 0.25, 1.0));
+    // The documented difference: %g keeps 6 significant digits, Rust the shortest round trip.
+    c.raw(
+        "print",
+        "f32",
+        "-",
+        &[(1.0f32 / 3.0).to_bits() as u64],
+        Want::Text("0.333333".into()),
+    );
+    c.raw(
+        "print",
+        "f32",
+        "-",
+        &[1e7f32.to_bits() as u64],
+        Want::Text("1e+07".into()),
+    );
+    assert_eq!(format!("{}", 1.0f32 / 3.0), "0.33333334");
+    assert_eq!(format!("{}", 1e7f32), "10000000");
+}
+
+// ------------------------------------------------------------------------------------------
+// The test
+// ------------------------------------------------------------------------------------------
+
+fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
+    let mut c = Cases {
+        text: String::new(),
+        lines: Vec::new(),
+        wants: Vec::new(),
+        tr: if device { Ulps(4) } else { Ulps(2) },
+    };
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+
+    int_scalar_cases!(&mut c, signed: i8, i16, i32, i64, isize; unsigned: u8, u16, u32, u64, usize);
+    macro_rules! scalar_lits {
+        ($($t:ident),*) => {$( lit_cases::<$t>(&mut c); )*};
+    }
+    scalar_lits!(i8, i16, i32, i64, u8, u16, u32, u64, f32, f64);
+    float_scalar_cases!(
+        &mut c,
+        f32,
+        [
+            1e10f32,
+            -1e10,
+            1e-40,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            std::f32::consts::PI
+        ]
+    );
+    float_scalar_cases!(
+        &mut c,
+        f64,
+        [
+            1e10f64,
+            -1e10,
+            1e-310,
+            f64::MAX,
+            f64::MIN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            std::f64::consts::PI
+        ]
+    );
+    cast_cases(&mut c);
+
+    fvec_cases!(&mut c, &mut rng, Vec2, f32, 2);
+    fvec_cases!(&mut c, &mut rng, Vec3, f32, 3);
+    fvec_cases!(&mut c, &mut rng, Vec4, f32, 4);
+    fvec_cases!(&mut c, &mut rng, DVec2, f64, 2);
+    fvec_cases!(&mut c, &mut rng, DVec3, f64, 3);
+    fvec_cases!(&mut c, &mut rng, DVec4, f64, 4);
+    ivec_cases!(&mut c, &mut rng, IVec2, i32, 2, true);
+    ivec_cases!(&mut c, &mut rng, IVec3, i32, 3, true);
+    ivec_cases!(&mut c, &mut rng, IVec4, i32, 4, true);
+    ivec_cases!(&mut c, &mut rng, UVec2, u32, 2, false);
+    ivec_cases!(&mut c, &mut rng, UVec3, u32, 3, false);
+    ivec_cases!(&mut c, &mut rng, UVec4, u32, 4, false);
+
+    mat_cases!(&mut c, &mut rng, Mat2, Vec2, f32, 2);
+    mat_cases!(&mut c, &mut rng, Mat3, Vec3, f32, 3);
+    mat_cases!(&mut c, &mut rng, Mat4, Vec4, f32, 4);
+    mat_cases!(&mut c, &mut rng, DMat2, DVec2, f64, 2);
+    mat_cases!(&mut c, &mut rng, DMat3, DVec3, f64, 3);
+    mat_cases!(&mut c, &mut rng, DMat4, DVec4, f64, 4);
+    quat_cases!(&mut c, &mut rng, Quat, Vec3, f32);
+    quat_cases!(&mut c, &mut rng, DQuat, DVec3, f64);
+
+    let skipped = range_cases(&mut c);
+    array_cases(&mut c);
+    div_fault_smoke(&mut c);
+    atomic_cases(&mut c);
+    unflatten_cases(&mut c);
+    let layout = layout_cases(&mut c);
+    print_cases(&mut c);
+    (c, skipped, layout)
+}
+
+fn compare(c: &Cases, output: &str, device: bool) {
+    let got: Vec<&str> = output.lines().collect();
+    assert_eq!(got.len(), c.wants.len(), "one result line per case");
+    let mut failures = Vec::new();
+    for ((line, want), g) in c.lines.iter().zip(&c.wants).zip(&got) {
+        let ok = match want {
+            Want::Text(t) => {
+                if device {
+                    *g == "SKIP"
+                } else {
+                    g.strip_prefix("P ") == Some(t.as_str())
+                }
+            }
+            Want::Toks(ts) => {
+                let gt: Vec<&str> = g.split_whitespace().collect();
+                match ts.first() {
+                    // A faulting range: "*6" skips the six value tokens.
+                    Some(Tok::Word("*6")) => {
+                        gt.len() == 6 + ts.len() - 1
+                            && ts[1..].iter().zip(&gt[6..]).all(|(w, g)| tok_matches(w, g))
+                    }
+                    _ => gt.len() == ts.len() && ts.iter().zip(&gt).all(|(w, g)| tok_matches(w, g)),
+                }
+            }
+        };
+        if !ok {
+            failures.push(format!("case   {line}\n  want {want:?}\n  got  {g}"));
+        }
+    }
+    if !failures.is_empty() {
+        let n = failures.len();
+        let mut by_kind: std::collections::BTreeMap<String, usize> = Default::default();
+        for f in &failures {
+            let w: Vec<&str> = f.split_whitespace().take(3).collect();
+            *by_kind.entry(format!("{} {}", w[1], w[2])).or_default() += 1;
+        }
+        let summary: Vec<String> = by_kind.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+        failures.truncate(40);
+        panic!(
+            "{n} of {} cases differ ({}):\n{}",
+            c.wants.len(),
+            summary.join(", "),
+            failures.join("\n")
+        );
+    }
+}
+
+#[test]
+fn cuda_library_matches_cpu_builtins_on_the_host() {
+    if !cfg!(target_arch = "x86_64") {
+        println!("SKIPPED: the library reproduces glam's x86_64 (SSE2) layout and arithmetic");
+        return;
+    }
+    let results = std::env::var_os("WARP_CUDA_HOST_CPP_RESULTS");
+    let device = results.is_some();
+    let (c, skipped, layout) = build_cases(device);
+    println!(
+        "{} cases ({skipped} range combinations skipped: they overflow i64 in debug Rust)",
+        c.wants.len()
+    );
+    for l in &layout {
+        println!("glam {l}");
+    }
+    if let Some(path) = std::env::var_os("WARP_CUDA_HOST_CPP_CASES") {
+        std::fs::write(&path, &c.text).expect("write the case file");
+    }
+    let output = if let Some(path) = results {
+        std::fs::read_to_string(path).expect("read the GPU results")
+    } else {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let driver = root.join("warp-cuda/cuda/tests/driver.cpp");
+        let dir = std::env::temp_dir().join(format!("warp_cuda_host_cpp_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let exe = dir.join("driver");
+        let cases = dir.join("cases.txt");
+        std::fs::write(&cases, &c.text).unwrap();
+        let cxx = std::env::var("CXX").unwrap_or_else(|_| "g++".into());
+        let build = match Command::new(&cxx)
+            .args(["-std=c++17", "-O1", "-Wall", "-Wextra", "-Werror", "-o"])
+            .arg(&exe)
+            .arg(&driver)
+            .output()
+        {
+            Ok(o) => o,
+            Err(_) => {
+                println!("SKIPPED: no g++ ({cxx} could not be run)");
+                return;
+            }
+        };
+        assert!(
+            build.status.success(),
+            "the C++ test driver does not compile:\n{}",
+            String::from_utf8_lossy(&build.stderr)
+        );
+        let run = Command::new(&exe)
+            .arg(&cases)
+            .output()
+            .expect("run the driver");
+        assert!(
+            run.status.success(),
+            "driver failed: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+        String::from_utf8(run.stdout).expect("utf-8 output")
+    };
+    compare(&c, &output, device);
+}
