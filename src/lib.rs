@@ -39,7 +39,11 @@
 
 pub use glam;
 pub use warp_core::{Fault, FaultKind};
+#[cfg(feature = "cuda")]
+pub use warp_cuda::clear_kernel_cache;
 pub use warp_macros::{func, kernel, Struct};
+#[cfg(feature = "cuda")]
+pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
 pub use warp_runtime::{
     cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch,

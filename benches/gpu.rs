@@ -1,0 +1,442 @@
+//! GPU benchmark: each workload as a warp-lang kernel and as hand-written CUDA C++ (compiled
+//! with NVRTC and launched through `warp_cuda` directly), measured in the same run; prints the
+//! times, the ratios and each workload's accuracy.
+//!
+//! ```text
+//! cargo bench --bench gpu            # needs a CUDA device; prints SKIPPED otherwise
+//! ```
+//!
+//! Workloads (DESIGN.md, "Figures to beat"): the seed particle program (10M x 100 steps),
+//! brute-force n-body (64K bodies, f32), host cost per launch of a small kernel with 6
+//! arguments, and the first launch in a fresh process with an empty and with a warm cache.
+
+use std::ffi::c_void;
+use std::process::Command;
+use std::sync::Arc;
+use std::time::Instant;
+use warp_lang as wp;
+use wp::prelude::*;
+
+#[wp::kernel]
+fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, dt: f32) {
+    let i = tid();
+    let a = -b * v[i] / mass + gravity;
+    v[i] += a * dt;
+    x[i] += v[i] * dt;
+}
+
+#[wp::kernel]
+fn nbody(pos: Array<Vec3>, mass: Array<f32>, acc: Array<Vec3>, eps2: f32, n: i32) {
+    let i = tid();
+    let pi = pos[i];
+    let mut a = Vec3::ZERO;
+    for j in 0..n {
+        let d = pos[j] - pi;
+        let r2 = d.dot(d) + eps2;
+        let inv = 1.0 / sqrt(r2);
+        a += d * (mass[j] * (inv * inv * inv));
+    }
+    acc[i] = a;
+}
+
+#[wp::kernel]
+fn small(a: Array<f32>, b: Array<f32>, s: f32, t: f32, k: i32, c: Array<f32>) {
+    let i = tid();
+    c[i] = a[i] * s + b[i] * t + k as f32;
+}
+
+const HAND: &str = r#"
+extern "C" __global__ void hand_integrate(float* x, float* v, float b, float mass, float gx, float gy, float gz,
+                                          float dt, long long n) {
+    long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    float* xi = x + 3 * i;
+    float* vi = v + 3 * i;
+    float vx = vi[0], vy = vi[1], vz = vi[2];
+    float ax = -b * vx / mass + gx, ay = -b * vy / mass + gy, az = -b * vz / mass + gz;
+    vx += ax * dt; vy += ay * dt; vz += az * dt;
+    vi[0] = vx; vi[1] = vy; vi[2] = vz;
+    xi[0] += vx * dt; xi[1] += vy * dt; xi[2] += vz * dt;
+}
+extern "C" __global__ void hand_nbody(const float* pos, const float* mass, float* acc, float eps2, int n) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    float px = pos[3 * i], py = pos[3 * i + 1], pz = pos[3 * i + 2];
+    float ax = 0.0f, ay = 0.0f, az = 0.0f;
+    for (int j = 0; j < n; ++j) {
+        float dx = pos[3 * j] - px, dy = pos[3 * j + 1] - py, dz = pos[3 * j + 2] - pz;
+        float r2 = dx * dx + dy * dy + dz * dz + eps2;
+        float inv = 1.0f / sqrtf(r2);
+        float s = mass[j] * (inv * inv * inv);
+        ax += dx * s; ay += dy * s; az += dz * s;
+    }
+    acc[3 * i] = ax; acc[3 * i + 1] = ay; acc[3 * i + 2] = az;
+}
+extern "C" __global__ void hand_small(const float* a, const float* b, float s, float t, int k, float* c, long long n) {
+    long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    c[i] = a[i] * s + b[i] * t + (float)k;
+}
+"#;
+
+struct Hand {
+    gpu: Arc<warp_cuda::Gpu>,
+    _module: warp_cuda::Module,
+    f_integrate: warp_cuda::Function,
+    f_nbody: warp_cuda::Function,
+    f_small: warp_cuda::Function,
+}
+
+impl Hand {
+    fn new() -> Hand {
+        let gpu = warp_cuda::Gpu::open(0).expect("gpu");
+        let compiled =
+            warp_cuda::compile(HAND, "hand", &Default::default(), gpu.arch()).expect("nvrtc");
+        let module = gpu.load_module(&compiled.cubin).expect("load");
+        let f = |n: &str| module.function(n).expect("function");
+        let (f_integrate, f_nbody, f_small) =
+            (f("hand_integrate"), f("hand_nbody"), f("hand_small"));
+        Hand {
+            gpu,
+            _module: module,
+            f_integrate,
+            f_nbody,
+            f_small,
+        }
+    }
+
+    /// Launches `f` over `n` threads, 256 per block, with pointers to each argument.
+    fn launch(&self, f: &warp_cuda::Function, n: usize, args: &mut [*mut c_void]) {
+        let blocks = n.div_ceil(256) as u32;
+        // SAFETY: `args` point at values laid out as the kernel's parameters.
+        unsafe {
+            self.gpu
+                .launch_raw(f, self.gpu.default_stream(), blocks, 256, 0, args)
+                .expect("launch")
+        };
+    }
+}
+
+fn ptr<T>(v: &mut T) -> *mut c_void {
+    v as *mut T as *mut c_void
+}
+
+fn splitmix(seed: &mut u64) -> f32 {
+    *seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *seed;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn particles(dev: &wp::Device, hand: &Hand) {
+    let (n, steps) = (10_000_000usize, 100);
+    let (b, mass, g) = (0.05f32, 0.1f32, 9.81f32);
+    let dt = 0.01 * (2.0 * mass / b);
+    let gravity = Vec3::new(0.0, 0.0, -g);
+    let mut seed = 12345u64;
+    let x0: Vec<Vec3> = (0..n)
+        .map(|_| {
+            Vec3::new(
+                splitmix(&mut seed),
+                splitmix(&mut seed),
+                splitmix(&mut seed),
+            ) * 2.0
+                - 1.0
+        })
+        .collect();
+    let v0: Vec<Vec3> = (0..n)
+        .map(|_| {
+            Vec3::new(
+                splitmix(&mut seed),
+                splitmix(&mut seed),
+                splitmix(&mut seed),
+            ) - 0.5
+        })
+        .collect();
+
+    let x = wp::Array::from_slice(&x0, dev).unwrap();
+    let v = wp::Array::from_slice(&v0, dev).unwrap();
+    wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), dev).unwrap(); // compile + warm up
+    x.copy_from(&wp::Array::from_slice(&x0, dev).unwrap())
+        .unwrap();
+    v.copy_from(&wp::Array::from_slice(&v0, dev).unwrap())
+        .unwrap();
+    wp::synchronize().unwrap();
+    let t = Instant::now();
+    for _ in 0..steps {
+        wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), dev).unwrap();
+    }
+    wp::synchronize().unwrap();
+    let t_wp = ms(t);
+    let xs = x.to_vec().unwrap();
+
+    let hx = warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&x0)).unwrap();
+    let hv = warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&v0)).unwrap();
+    let (mut px, mut pv) = (hx.device_ptr(), hv.device_ptr());
+    let (mut b_, mut m_, mut gx, mut gy, mut gz, mut dt_, mut n_) =
+        (b, mass, 0.0f32, 0.0f32, -g, dt, n as i64);
+    let mut run = |h: &Hand| {
+        let mut args = [
+            ptr(&mut px),
+            ptr(&mut pv),
+            ptr(&mut b_),
+            ptr(&mut m_),
+            ptr(&mut gx),
+            ptr(&mut gy),
+            ptr(&mut gz),
+            ptr(&mut dt_),
+            ptr(&mut n_),
+        ];
+        h.launch(&h.f_integrate, n, &mut args);
+    };
+    run(hand); // warm up
+    hx.upload(0, bytemuck::cast_slice(&x0)).unwrap();
+    hv.upload(0, bytemuck::cast_slice(&v0)).unwrap();
+    hand.gpu.synchronize().unwrap();
+    let t = Instant::now();
+    for _ in 0..steps {
+        run(hand);
+    }
+    hand.gpu.synchronize().unwrap();
+    let t_hand = ms(t);
+    let mut hx_host = vec![Vec3::ZERO; n];
+    hx.download(0, bytemuck::cast_slice_mut(&mut hx_host))
+        .unwrap();
+
+    // Accuracy against the exact solution of the scheme's recurrence, in f64.
+    let (k, r) = ((b / mass) as f64, 1.0 - (b / mass) as f64 * dt as f64);
+    let geometric = r * (1.0 - r.powi(steps)) / (1.0 - r);
+    let mut err = 0.0f64;
+    let mut diff = 0.0f32;
+    for i in 0..n {
+        for c in 0..3 {
+            let vinf = gravity[c] as f64 / k;
+            let exact = x0[i][c] as f64
+                + dt as f64 * (steps as f64 * vinf + (v0[i][c] as f64 - vinf) * geometric);
+            err = err.max((xs[i][c] as f64 - exact).abs());
+            diff = diff.max((xs[i][c] - hx_host[i][c]).abs());
+        }
+    }
+    println!(
+        "particles 10M x 100   warp {t_wp:8.2} ms   hand {t_hand:8.2} ms   ratio {:.3} (target <= 1.1)   \
+         max err vs exact recurrence {err:.2e} m, max |warp - hand| {diff:.2e} m",
+        t_wp / t_hand
+    );
+}
+
+fn nbody_bench(dev: &wp::Device, hand: &Hand) {
+    let n = 65_536usize;
+    let eps2 = 1e-4f32;
+    let mut seed = 7u64;
+    let p: Vec<Vec3> = (0..n)
+        .map(|_| {
+            Vec3::new(
+                splitmix(&mut seed),
+                splitmix(&mut seed),
+                splitmix(&mut seed),
+            ) * 2.0
+                - 1.0
+        })
+        .collect();
+    let m: Vec<f32> = (0..n).map(|_| 0.5 + splitmix(&mut seed)).collect();
+    let (pos, mass, acc) = (
+        wp::Array::from_slice(&p, dev).unwrap(),
+        wp::Array::from_slice(&m, dev).unwrap(),
+        wp::Array::<Vec3>::zeros(n, dev).unwrap(),
+    );
+    wp::launch(nbody, n, (&pos, &mass, &acc, eps2, n as i32), dev).unwrap();
+    wp::synchronize().unwrap();
+    let reps = 5;
+    let t = Instant::now();
+    for _ in 0..reps {
+        wp::launch(nbody, n, (&pos, &mass, &acc, eps2, n as i32), dev).unwrap();
+    }
+    wp::synchronize().unwrap();
+    let t_wp = ms(t) / reps as f64;
+    let a_wp = acc.to_vec().unwrap();
+
+    let hp = warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&p)).unwrap();
+    let hm = warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&m)).unwrap();
+    let ha = warp_cuda::DeviceBuffer::zeros(&hand.gpu, n * 12).unwrap();
+    let (mut pp, mut pm, mut pa, mut e, mut nn) = (
+        hp.device_ptr(),
+        hm.device_ptr(),
+        ha.device_ptr(),
+        eps2,
+        n as i32,
+    );
+    let mut run = || {
+        let mut args = [
+            ptr(&mut pp),
+            ptr(&mut pm),
+            ptr(&mut pa),
+            ptr(&mut e),
+            ptr(&mut nn),
+        ];
+        hand.launch(&hand.f_nbody, n, &mut args);
+    };
+    run();
+    hand.gpu.synchronize().unwrap();
+    let t = Instant::now();
+    for _ in 0..reps {
+        run();
+    }
+    hand.gpu.synchronize().unwrap();
+    let t_hand = ms(t) / reps as f64;
+    let mut a_hand = vec![Vec3::ZERO; n];
+    ha.download(0, bytemuck::cast_slice_mut(&mut a_hand))
+        .unwrap();
+
+    // Accuracy: a sample of bodies against an f64 sum.
+    let mut rel = 0.0f64;
+    for i in (0..n).step_by(4099) {
+        let pi = p[i].as_dvec3();
+        let mut a = glam::DVec3::ZERO;
+        for j in 0..n {
+            let d = p[j].as_dvec3() - pi;
+            let r2 = d.dot(d) + eps2 as f64;
+            a += d * (m[j] as f64 / (r2 * r2.sqrt()));
+        }
+        rel = rel.max((a_wp[i].as_dvec3() - a).length() / a.length());
+    }
+    println!(
+        "n-body 64K (f32)      warp {t_wp:8.2} ms   hand {t_hand:8.2} ms   ratio {:.3} (target <= 1.05)  \
+         max rel err vs f64 (16 bodies) {rel:.2e}",
+        t_wp / t_hand
+    );
+}
+
+fn launch_cost(dev: &wp::Device, hand: &Hand) {
+    let n = 1usize;
+    let (a, b, c) = (
+        wp::Array::<f32>::full(n, 1.0, dev).unwrap(),
+        wp::Array::<f32>::full(n, 2.0, dev).unwrap(),
+        wp::Array::<f32>::zeros(n, dev).unwrap(),
+    );
+    wp::launch(small, n, (&a, &b, 0.5, 0.25, 3, &c), dev).unwrap();
+    wp::synchronize().unwrap();
+    let reps = 2000;
+    let mut host = 0.0;
+    for _ in 0..reps {
+        let t = Instant::now();
+        wp::launch(small, n, (&a, &b, 0.5, 0.25, 3, &c), dev).unwrap();
+        host += t.elapsed().as_secs_f64();
+    }
+    wp::synchronize().unwrap();
+    let got = c.to_vec().unwrap()[0];
+    let us_wp = host / reps as f64 * 1e6;
+
+    let ha =
+        warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&[1.0f32])).unwrap();
+    let hb =
+        warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&[2.0f32])).unwrap();
+    let hc = warp_cuda::DeviceBuffer::zeros(&hand.gpu, 4).unwrap();
+    let (mut pa, mut pb, mut s, mut t_, mut k, mut pc, mut nn) = (
+        ha.device_ptr(),
+        hb.device_ptr(),
+        0.5f32,
+        0.25f32,
+        3i32,
+        hc.device_ptr(),
+        1i64,
+    );
+    let mut host = 0.0;
+    for _ in 0..reps {
+        let t = Instant::now();
+        let mut args = [
+            ptr(&mut pa),
+            ptr(&mut pb),
+            ptr(&mut s),
+            ptr(&mut t_),
+            ptr(&mut k),
+            ptr(&mut pc),
+            ptr(&mut nn),
+        ];
+        hand.launch(&hand.f_small, n, &mut args);
+        host += t.elapsed().as_secs_f64();
+    }
+    hand.gpu.synchronize().unwrap();
+    let us_hand = host / reps as f64 * 1e6;
+    println!(
+        "host cost per launch  warp {us_wp:8.2} us   raw  {us_hand:8.2} us   ratio {:.2} (target <= 4 us)   \
+         result {got} (want 4.0)",
+        us_wp / us_hand
+    );
+}
+
+/// Times the first launch of `integrate` in this process (the child mode of `first_launch`).
+fn first_launch_child() {
+    let dev = wp::get_device("cuda:0").unwrap();
+    let x = wp::Array::<Vec3>::zeros(1024, &dev).unwrap();
+    let v = wp::Array::<Vec3>::zeros(1024, &dev).unwrap();
+    let t = Instant::now();
+    wp::launch(
+        integrate,
+        1024,
+        (&x, &v, 0.05, 0.1, Vec3::new(0.0, 0.0, -9.81), 0.04),
+        &dev,
+    )
+    .unwrap();
+    wp::synchronize().unwrap();
+    let total = ms(t);
+    let r = wp::compile_reports();
+    let r = r.iter().find(|r| r.kernel == "integrate").expect("report");
+    println!(
+        "{total:.2} {:.2} {} {}",
+        r.compile_ms, r.source_bytes, r.cache_hit
+    );
+}
+
+fn first_launch() {
+    let dir = std::env::temp_dir().join(format!("warp-lang-bench-cache-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let me = std::env::current_exe().unwrap();
+    let run = || {
+        let out = Command::new(&me)
+            .arg("--first-launch-child")
+            .env("WARP_LANG_CACHE_DIR", &dir)
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    };
+    let (cold, warm) = (run(), run());
+    let cold: Vec<&str> = cold.split_whitespace().collect();
+    let warm: Vec<&str> = warm.split_whitespace().collect();
+    println!(
+        "first launch          cold {} ms (NVRTC {} ms, {} bytes of source, cache hit {})   warm {} ms (cache hit {})   \
+         targets: cold <= 150 ms, warm <= 10 ms",
+        cold[0], cold[1], cold[2], cold[3], warm[0], warm[3]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--first-launch-child") {
+        return first_launch_child();
+    }
+    let dev = match wp::get_device("cuda:0") {
+        Ok(d) => d,
+        Err(e) => {
+            println!("SKIPPED gpu bench: {e}");
+            return;
+        }
+    };
+    println!("gpu bench on {} ({})", dev, dev.name());
+    let hand = Hand::new();
+    particles(&dev, &hand);
+    nbody_bench(&dev, &hand);
+    launch_cost(&dev, &hand);
+    first_launch();
+    println!("\ngenerated source and compile time per kernel (this process):");
+    for r in wp::compile_reports() {
+        println!(
+            "  {:<10} {:>6} bytes  NVRTC {:7.2} ms  first-launch total {:7.2} ms  cache hit {}",
+            r.kernel, r.source_bytes, r.compile_ms, r.total_ms, r.cache_hit
+        );
+    }
+}
