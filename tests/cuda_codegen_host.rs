@@ -63,6 +63,15 @@ fn mixed(a: Array<f32>, b: Array<i32>, out: Array<f32>, total: Array<i32>) {
         }
     }
     out[i] += k as f32 * 0.25;
+    // A plain range loop (emitted as a native C++ loop) with `continue`.
+    let mut acc = 0;
+    for q in 0..b[i].abs() % 7 {
+        if q == 2 {
+            continue;
+        }
+        acc += q;
+    }
+    out[i] += acc as f32;
     // `!` on a func's bool (a type the kernel macro cannot see): logical, not bitwise.
     if !is_pos(a[i]) {
         out[i] -= 1.0;

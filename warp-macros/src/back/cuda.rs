@@ -340,6 +340,23 @@ impl<'a> Emitter<'a> {
                 }
                 self.close();
             }
+            // `a..b` with no adapters, over a type the macro knows: a native loop. `v < b`
+            // before each increment means `v` never passes `b`, so no overflow, exactly Rust's
+            // iteration; and no 64-bit progression arithmetic in hot loops.
+            StmtKind::For { var, range, body }
+                if range.adapters.is_empty()
+                    && !range.inclusive
+                    && !self.f.vars[*var].mutable
+                    && self.f.ty(*var).is_int_scalar()
+                    && self.f.ty(range.start) == self.f.ty(*var)
+                    && self.f.ty(range.end) == self.f.ty(*var) =>
+            {
+                let t = cpp_type(self.f.ty(*var)).expect("integer");
+                let (s0, e0, v) = (self.var(range.start), self.var(range.end), self.var(*var));
+                self.line(sp, &format!("for ({t} {v} = {s0}; {v} < {e0}; ++{v}) {{"));
+                self.nested(body)?;
+                self.close();
+            }
             StmtKind::For { var, range, body } => {
                 self.tmp += 1;
                 let r = format!("__range{}", self.tmp);
