@@ -241,15 +241,18 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
         "{text}\n\
          static void print_f32(wp::f32 x) {{ unsigned u; memcpy(&u, &x, 4); printf(\"%08x\\n\", u); }}\n\
          static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
-         int main() {{\n\
+         template <bool FAST> static int run() {{\n\
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
          wp::ctx_t ctx = {{&fault, &flag}};\n\
          wp::launch_t launch = {{{{{d0}, {d1}, {d2}, {d3}}}, {total}, {ndim}, 0}};\n\
-         for (wp::i64 flat = 0; flat < {total}; ++flat) {thread}({params}, launch, flat, &ctx);\n\
+         for (wp::i64 flat = 0; flat < {total}; ++flat) {thread}<FAST>({params}, launch, flat, &ctx);\n\
          if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
          {print}\n\
-         return 0;\n}}\n",
+         return 0;\n}}\n\
+         // Both variants of the thread function, each on fresh data: the unchecked one (what\n\
+         // a launch whose arrays cover the grid runs) and the checked one.\n\
+         int main() {{ if (run<true>()) return 1; printf(\"--\\n\"); return run<false>(); }}\n",
         text = src.text,
         d0 = dims4[0],
         d1 = dims4[1],
@@ -295,13 +298,10 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
         "generated code faulted: {}",
         String::from_utf8_lossy(&run.stdout)
     );
-    Some(
-        String::from_utf8(run.stdout)
-            .unwrap()
-            .lines()
-            .map(str::to_string)
-            .collect(),
-    )
+    let text = String::from_utf8(run.stdout).unwrap();
+    let (fast, checked) = text.split_once("--\n").expect("two runs");
+    assert_eq!(fast, checked, "the unchecked and checked variants disagree");
+    Some(fast.lines().map(str::to_string).collect())
 }
 
 #[test]

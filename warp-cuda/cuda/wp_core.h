@@ -1222,7 +1222,9 @@ struct launch_t {
   i64 dims[4];
   i64 total;
   i32 ndim;
-  i32 pad;
+  /// Nonzero when every array the kernel indexes by the thread index covers the grid (checked
+  /// by the host): those accesses then skip their bounds checks.
+  i32 fast;
 };
 static_assert(sizeof(launch_t) == 48 && alignof(launch_t) == 8, "launch_t layout");
 

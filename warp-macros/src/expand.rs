@@ -86,10 +86,14 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         })
         .collect();
     let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
-    let fast_arrays: Vec<syn::Ident> = crate::analysis::tid_accessed_params(&f, &em.tid)
-        .into_iter()
-        .map(|v| em.var(v))
+    let fast_params = crate::analysis::tid_accessed_params(&f, &em.tid);
+    let fast_arrays: Vec<syn::Ident> = fast_params.iter().map(|v| em.var(*v)).collect();
+    let fast_pos: Vec<usize> = fast_params
+        .iter()
+        .map(|v| f.params.iter().position(|p| p.var == *v).expect("a param"))
         .collect();
+    let fast_idx: Vec<syn::Index> = fast_pos.iter().map(|k| syn::Index::from(*k)).collect();
+    let fast_tys: Vec<&syn::Type> = fast_pos.iter().map(|k| &f.params[*k].syn_ty).collect();
     let tid = match f.tid_ndim {
         Some(n) => {
             let n = n as usize;
@@ -166,6 +170,9 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                 }
                 fn info() -> &'static __wp::KernelInfo {
                     &<Self as __wp::Kernel>::INFO
+                }
+                fn tid_arrays_cover(__args: &Self::Args<'_>, __grid: &__wp::Grid) -> bool {
+                    true #( && <#fast_tys as __wp::KernelArg>::covers(&__args.#fast_idx, &__grid.dims) )*
                 }
                 fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
                     ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]

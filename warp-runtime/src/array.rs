@@ -892,6 +892,10 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
         })
     }
 
+    fn covers(arg: &Self::Arg<'_>, dims: &[usize; 4]) -> bool {
+        (0..N).all(|d| arg.shape[d] >= dims[d])
+    }
+
     fn shape(arg: &Self::Arg<'_>) -> Option<Vec<usize>> {
         Some(arg.shape.to_vec())
     }

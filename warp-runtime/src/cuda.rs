@@ -162,7 +162,7 @@ struct LaunchDims {
     dims: [i64; 4],
     total: i64,
     ndim: i32,
-    pad: i32,
+    fast: i32,
 }
 
 /// `wp::ctx_t`.
@@ -200,7 +200,7 @@ pub(crate) fn launch<K: Kernel>(
         dims: grid.dims.map(|d| d as i64),
         total: grid.total as i64,
         ndim: grid.ndim as i32,
-        pad: 0,
+        fast: K::tid_arrays_cover(args, grid) as i32,
     };
     let base = st.fault.device_ptr();
     let mut ctx = Ctx {

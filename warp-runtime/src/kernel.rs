@@ -42,6 +42,11 @@ pub trait KernelArg: 'static {
     type CudaArg: Copy;
     /// Converts a host argument for a CUDA launch on `ctx.device`.
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg>;
+    /// True when an array argument's extents are at least `dims` (always true for values).
+    fn covers(arg: &Self::Arg<'_>, dims: &[usize; 4]) -> bool {
+        let _ = (arg, dims);
+        true
+    }
     /// The shape of an array argument (`None` for values), for the kernel's shape checks.
     fn shape(arg: &Self::Arg<'_>) -> Option<Vec<usize>> {
         let _ = arg;
@@ -121,6 +126,9 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     /// Writes a pointer to each parameter of `params` into `out` (as `cuLaunchKernel` wants
     /// them) and returns how many it wrote.
     fn cuda_param_ptrs(params: &mut Self::CudaParams, out: &mut [*mut std::ffi::c_void]) -> usize;
+    /// True when every array the kernel indexes by the thread index covers `grid`: those
+    /// accesses are then in bounds for every thread and skip their checks on the GPU.
+    fn tid_arrays_cover(args: &Self::Args<'_>, grid: &Grid) -> bool;
     /// [`Kernel::INFO`] with a `'static` address (for fault reports after the launch).
     fn info() -> &'static KernelInfo;
     /// Runs threads `range` (flat indices) of `grid` on the CPU, in order, stopping at the

@@ -263,6 +263,9 @@ mod tests {
             fn info() -> &'static KernelInfo {
                 &Self::INFO
             }
+            fn tid_arrays_cover(_: &Self::Args<'_>, _: &Grid) -> bool {
+                false
+            }
         };
     }
     use warp_core::{ArrayView, Fault, FaultKind};

@@ -33,6 +33,7 @@ pub struct CudaTemplate {
 pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     let mut e = Emitter {
         f,
+        tid: crate::analysis::tid_components(f),
         used: used_vars(f),
         out: String::new(),
         indent: 1,
@@ -55,6 +56,8 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
 
 struct Emitter<'a> {
     f: &'a Function,
+    /// Which thread-index component each variable holds.
+    tid: Vec<Option<u8>>,
     /// Variables read somewhere (a func result nobody reads may be `void`).
     used: Vec<bool>,
     out: String,
@@ -174,6 +177,12 @@ impl<'a> Emitter<'a> {
         }
     }
 
+    /// An access indexed exactly by the thread index: unchecked when the launch says the
+    /// arrays cover the grid (`__FAST`, a template parameter: no per-access branch).
+    fn fast(&self, array: VarId, index: &[VarId]) -> bool {
+        crate::analysis::is_tid_access(self.f, &self.tid, array, index)
+    }
+
     fn section(&mut self, s: &'static str) {
         if !self.sections.contains(&s) {
             self.sections.push(s);
@@ -208,7 +217,7 @@ impl<'a> Emitter<'a> {
                 params.push("wp::ctx_t* __ctx".into());
                 let _ = writeln!(
                     self.out,
-                    "static WP_FN void @@SELF@@({}) {{",
+                    "template <bool __FAST>\nstatic WP_FN void @@SELF@@({}) {{",
                     params.join(", ")
                 );
                 if let Some(n) = self.f.tid_ndim {
@@ -259,8 +268,12 @@ impl<'a> Emitter<'a> {
                 self.out,
                 "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@({}) {{\n    \
                  const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
-                 for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
-                 @@SELF@@({});\n    }}\n}}\n#endif\n",
+                 const wp::i64 __first = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x;\n    \
+                 if (__launch.fast) {{\n        \
+                 for (wp::i64 __flat = __first; __flat < __launch.total; __flat += __stride) @@SELF@@<true>({1});\n    \
+                 }} else {{\n        \
+                 for (wp::i64 __flat = __first; __flat < __launch.total; __flat += __stride) @@SELF@@<false>({1});\n    \
+                 }}\n}}\n#endif\n",
                 decl.join(", "),
                 call.join(", ")
             );
@@ -324,7 +337,11 @@ impl<'a> Emitter<'a> {
             } => {
                 let idx = self.index(index);
                 let (a, val) = (self.var(*array), self.var(*value));
-                self.line(sp, &format!("wp::store({a}, {idx}, {val}, __ctx);"));
+                if self.fast(*array, index) {
+                    self.line(sp, &format!("if (__FAST) wp::store_unchecked({a}, {idx}, {val}); else wp::store({a}, {idx}, {val}, __ctx);"));
+                } else {
+                    self.line(sp, &format!("wp::store({a}, {idx}, {val}, __ctx);"));
+                }
             }
             StmtKind::SetMember { var, path, value } => {
                 let (v, val) = (self.var(*var), self.var(*value));
@@ -533,6 +550,10 @@ impl<'a> Emitter<'a> {
                 args.push("__ctx".into());
                 format!("@@F{k}@@({})", args.join(", "))
             }
+            Op::Load { array, index } if self.fast(*array, index) => {
+                let (a, idx) = (self.var(*array), self.index(index));
+                format!("(__FAST ? wp::load_unchecked({a}, {idx}) : wp::load({a}, {idx}, __ctx))")
+            }
             Op::Load { array, index } => format!(
                 "wp::load({}, {}, __ctx)",
                 self.var(*array),
@@ -676,10 +697,15 @@ mod tests {
             }
         });
         assert!(
-            src.contains("static WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"),
+            src.contains(
+                "template <bool __FAST>\nstatic WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"
+            ),
             "{src}"
         );
-        assert!(src.contains("wp::load(v_1, (wp::i64)(i_"), "{src}");
+        assert!(
+            src.contains("(__FAST ? wp::load_unchecked(v_1, (wp::i64)(i_"),
+            "{src}"
+        );
         assert!(src.contains("wp::store(x_0,"), "{src}");
         assert!(
             src.contains("wp::unflatten(__launch, __flat, __tid, 1);"),
