@@ -245,8 +245,8 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
          wp::ctx_t ctx = {{&fault, &flag}};\n\
-         wp::launch_t launch = {{{{{d0}, {d1}, {d2}, {d3}}}, {total}, {ndim}, 0}};\n\
-         for (wp::i64 flat = 0; flat < {total}; ++flat) {thread}<FAST>({params}, launch, flat, &ctx);\n\
+         wp::launch_t launch = {{{{{d0}, {d1}, {d2}, {d3}}}, {total}, {ndim}, FAST ? 1 : 0}};\n\
+         for (wp::i64 flat = 0; flat < {total}; ++flat) {thread}({params}, launch, flat, &ctx);\n\
          if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
          {print}\n\
          return 0;\n}}\n\

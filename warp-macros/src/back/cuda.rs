@@ -178,7 +178,8 @@ impl<'a> Emitter<'a> {
     }
 
     /// An access indexed exactly by the thread index: unchecked when the launch says the
-    /// arrays cover the grid (`__FAST`, a template parameter: no per-access branch).
+    /// arrays cover the grid (`__FAST`, read once per thread from `launch_t::fast`; the branch
+    /// is the same for every thread, and one function body keeps the code small).
     fn fast(&self, array: VarId, index: &[VarId]) -> bool {
         crate::analysis::is_tid_access(self.f, &self.tid, array, index)
     }
@@ -217,7 +218,7 @@ impl<'a> Emitter<'a> {
                 params.push("wp::ctx_t* __ctx".into());
                 let _ = writeln!(
                     self.out,
-                    "template <bool __FAST>\nstatic WP_FN void @@SELF@@({}) {{",
+                    "static WP_FN void @@SELF@@({}) {{\n    const bool __FAST = __launch.fast != 0;",
                     params.join(", ")
                 );
                 if let Some(n) = self.f.tid_ndim {
@@ -268,12 +269,8 @@ impl<'a> Emitter<'a> {
                 self.out,
                 "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@({}) {{\n    \
                  const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
-                 const wp::i64 __first = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x;\n    \
-                 if (__launch.fast) {{\n        \
-                 for (wp::i64 __flat = __first; __flat < __launch.total; __flat += __stride) @@SELF@@<true>({1});\n    \
-                 }} else {{\n        \
-                 for (wp::i64 __flat = __first; __flat < __launch.total; __flat += __stride) @@SELF@@<false>({1});\n    \
-                 }}\n}}\n#endif\n",
+                 for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
+                 @@SELF@@({1});\n    }}\n}}\n#endif\n",
                 decl.join(", "),
                 call.join(", ")
             );
@@ -697,9 +694,7 @@ mod tests {
             }
         });
         assert!(
-            src.contains(
-                "template <bool __FAST>\nstatic WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"
-            ),
+            src.contains("static WP_FN void @@SELF@@(wp::array_t<wp::Vec3, 1> x_0"),
             "{src}"
         );
         assert!(
