@@ -50,6 +50,3 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_atomic.h", include_str!("../cuda/wp_atomic.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
 ];
-
-/// The CUDA library sections a kernel can need, as named in the builtin table.
-pub const SECTIONS: &[&str] = &["scalar", "vector", "atomic"];

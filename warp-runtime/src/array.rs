@@ -154,7 +154,7 @@ impl Storage {
             Storage::Host(h) => h,
             #[cfg(feature = "cuda")]
             Storage::Cuda(_) => {
-                unreachable!("host access to device memory is guarded by `on_host`")
+                unreachable!("host access to device memory: callers check `device_buffer()` first")
             }
         }
     }
@@ -851,33 +851,34 @@ impl<T: Element + fmt::Debug, const N: usize> fmt::Debug for Array<T, N> {
     }
 }
 
+impl<T: Element, const N: usize> Array<T, N> {
+    /// An argument must live on the launch device.
+    fn check_device(&self, ctx: &ArgCtx<'_>) -> Result<()> {
+        if self.device() == ctx.device {
+            return Ok(());
+        }
+        Err(Error::DeviceMismatch {
+            kernel: ctx.kernel,
+            arg: ctx.arg,
+            expected: ctx.device.alias().to_string(),
+            found: self.device().alias().to_string(),
+        })
+    }
+}
+
 impl<T: Element, const N: usize> KernelArg for Array<T, N> {
     type Arg<'a> = &'a Array<T, N>;
     type CpuView = ArrayView<T, N>;
 
     unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
-        if arg.device() != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: arg.device().alias().to_string(),
-            });
-        }
+        arg.check_device(ctx)?;
         Ok(arg.cpu_view(ctx.kernel, ctx.arg))
     }
 
     type CudaArg = CudaArray<N>;
 
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
-        if arg.device() != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: arg.device().alias().to_string(),
-            });
-        }
+        arg.check_device(ctx)?;
         #[cfg(feature = "cuda")]
         let data = arg.device_ptr().unwrap_or(0);
         #[cfg(not(feature = "cuda"))]
