@@ -40,6 +40,7 @@ const FAULT_BYTES: usize = FAULT_RECORD_BYTES + 8;
 
 /// Per-GPU state: the fault record and the last kernel launched (named in fault reports).
 struct GpuState {
+    device: Device,
     gpu: Arc<Gpu>,
     fault: DeviceBuffer,
     last: Mutex<Option<&'static KernelInfo>>,
@@ -58,6 +59,7 @@ fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
     let g = gpu(ordinal)?;
     let fault = DeviceBuffer::zeros(&g, FAULT_BYTES).map_err(|e| err(device, e))?;
     let s = Arc::new(GpuState {
+        device: device.clone(),
         gpu: g,
         fault,
         last: Mutex::new(None),
@@ -76,8 +78,9 @@ fn states() -> Vec<Arc<GpuState>> {
         .collect()
 }
 
-/// A kernel compiled and loaded for one GPU.
+/// A kernel compiled and loaded for one GPU, with that GPU's state (one lookup per launch).
 struct Loaded {
+    st: Arc<GpuState>,
     _module: Module,
     function: Function,
 }
@@ -109,14 +112,15 @@ pub fn compile_reports() -> Vec<CompileReport> {
     reports().lock().unwrap_or_else(|p| p.into_inner()).clone()
 }
 
-fn loaded(device: &Device, st: &GpuState, info: &'static KernelInfo) -> Result<Arc<Loaded>> {
+fn loaded(device: &Device, ordinal: usize, info: &'static KernelInfo) -> Result<Arc<Loaded>> {
     type Key = (usize, &'static str, &'static str);
     static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
-    let key = (st.gpu.ordinal(), info.module, info.name);
+    let key = (ordinal, info.module, info.name);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
+    let st = state(device, ordinal)?;
     let t0 = std::time::Instant::now();
     let src = cuda_source::assemble(info);
     let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
@@ -145,6 +149,7 @@ fn loaded(device: &Device, st: &GpuState, info: &'static KernelInfo) -> Result<A
             total_ms: t0.elapsed().as_secs_f64() * 1e3,
         });
     let l = Arc::new(Loaded {
+        st,
         _module: module,
         function,
     });
@@ -194,8 +199,8 @@ pub(crate) fn launch<K: Kernel>(
     }
     // Arguments first: a wrong device is reported before anything is compiled.
     let mut params = K::cuda_params(args, device)?;
-    let st = state(device, ordinal)?;
-    let kernel = loaded(device, &st, info)?;
+    let kernel = loaded(device, ordinal, info)?;
+    let st = &kernel.st;
     let mut dims = LaunchDims {
         dims: grid.dims.map(|d| d as i64),
         total: grid.total as i64,
@@ -232,7 +237,7 @@ pub(crate) fn launch<K: Kernel>(
             .map_err(|e| err(device, e))?;
     }
     if config::debug() {
-        check_state(device, &st)?;
+        check_state(st)?;
     }
     Ok(())
 }
@@ -240,14 +245,13 @@ pub(crate) fn launch<K: Kernel>(
 /// Waits for `device` and reports a fault recorded since the last check.
 pub(crate) fn check_faults(device: &Device) -> Result<()> {
     match device.kind() {
-        crate::device::DeviceKind::Cuda { ordinal } => {
-            check_state(device, &*state(device, ordinal)?)
-        }
+        crate::device::DeviceKind::Cuda { ordinal } => check_state(&*state(device, ordinal)?),
         crate::device::DeviceKind::Cpu => Ok(()),
     }
 }
 
-fn check_state(device: &Device, st: &GpuState) -> Result<()> {
+fn check_state(st: &GpuState) -> Result<()> {
+    let device = &st.device;
     st.gpu.synchronize().map_err(|e| err(device, e))?;
     let mut rec = [0u8; FAULT_BYTES];
     st.fault.download(0, &mut rec).map_err(|e| err(device, e))?;
@@ -301,9 +305,7 @@ static UNKNOWN: KernelInfo = KernelInfo {
 /// Waits for every GPU used so far and reports the first recorded fault.
 pub(crate) fn synchronize_all() -> Result<()> {
     for st in states() {
-        let d = crate::device::get_device(&format!("cuda:{}", st.gpu.ordinal()))?;
-        check_state(&d, &st)?;
-        let _ = &d;
+        check_state(&st)?;
     }
     Ok(())
 }
