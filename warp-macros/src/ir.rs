@@ -260,6 +260,78 @@ pub enum Op {
     Len(VarId),
 }
 
+impl Op {
+    /// Calls `f` with every variable the operation reads.
+    pub fn for_each_read(&self, f: &mut dyn FnMut(VarId)) {
+        match self {
+            Op::Copy(v)
+            | Op::Unary(_, v)
+            | Op::Cast(v, _)
+            | Op::Member(v, _)
+            | Op::LitLike(_, v)
+            | Op::Extent(v, _)
+            | Op::Len(v) => f(*v),
+            Op::Binary(_, a, b) => {
+                f(*a);
+                f(*b)
+            }
+            Op::Builtin { args, .. } | Op::Func { args, .. } | Op::Construct { args, .. } => {
+                args.iter().for_each(|v| f(*v))
+            }
+            Op::Load { array, index } => {
+                f(*array);
+                index.iter().for_each(|v| f(*v))
+            }
+            Op::Lit(_) | Op::Tid(_) => {}
+        }
+    }
+}
+
+impl StmtKind {
+    /// Calls `f` with every variable the statement itself reads (not those of nested blocks).
+    pub fn for_each_read(&self, f: &mut dyn FnMut(VarId)) {
+        match self {
+            StmtKind::Assign { op, .. } => op.for_each_read(f),
+            StmtKind::Store {
+                array,
+                index,
+                value,
+            } => {
+                f(*array);
+                index.iter().for_each(|v| f(*v));
+                f(*value)
+            }
+            StmtKind::SetMember { var, value, .. } => {
+                f(*var);
+                f(*value)
+            }
+            StmtKind::If { cond, .. } => f(*cond),
+            StmtKind::For { range, .. } => {
+                f(range.start);
+                f(range.end);
+                for a in &range.adapters {
+                    if let RangeAdapter::StepBy(k) = a {
+                        f(*k)
+                    }
+                }
+            }
+            StmtKind::Return { value: Some(v) } => f(*v),
+            StmtKind::Print { pieces, .. } => {
+                for p in pieces {
+                    if let FmtPiece::Arg { var, .. } = p {
+                        f(*var)
+                    }
+                }
+            }
+            StmtKind::Declare { .. }
+            | StmtKind::Loop { .. }
+            | StmtKind::Break
+            | StmtKind::Continue
+            | StmtKind::Return { value: None } => {}
+        }
+    }
+}
+
 impl Function {
     pub fn ty(&self, v: VarId) -> &Ty {
         &self.vars[v].ty

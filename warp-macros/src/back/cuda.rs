@@ -590,63 +590,8 @@ impl<'a> Emitter<'a> {
 /// Which variables are read by some statement.
 fn used_vars(f: &Function) -> Vec<bool> {
     let mut used = vec![false; f.vars.len()];
-    let mut mark = |v: &VarId| used[*v] = true;
-    walk_stmts(&f.body, &mut |s| match &s.kind {
-        StmtKind::Assign { op, .. } => match op {
-            Op::Copy(v)
-            | Op::Unary(_, v)
-            | Op::Cast(v, _)
-            | Op::Member(v, _)
-            | Op::LitLike(_, v)
-            | Op::Extent(v, _)
-            | Op::Len(v) => mark(v),
-            Op::Binary(_, a, b) => {
-                mark(a);
-                mark(b)
-            }
-            Op::Builtin { args, .. } | Op::Func { args, .. } | Op::Construct { args, .. } => {
-                args.iter().for_each(&mut mark)
-            }
-            Op::Load { array, index } => {
-                mark(array);
-                index.iter().for_each(&mut mark)
-            }
-            Op::Lit(_) | Op::Tid(_) => {}
-        },
-        StmtKind::Store {
-            array,
-            index,
-            value,
-        } => {
-            mark(array);
-            index.iter().for_each(&mut mark);
-            mark(value)
-        }
-        StmtKind::SetMember { var, value, .. } => {
-            mark(var);
-            mark(value)
-        }
-        StmtKind::If { cond, .. } => mark(cond),
-        StmtKind::For { range, .. } => {
-            mark(&range.start);
-            mark(&range.end);
-            for a in &range.adapters {
-                if let RangeAdapter::StepBy(k) = a {
-                    mark(k)
-                }
-            }
-        }
-        StmtKind::Return { value: Some(v) } => mark(v),
-        StmtKind::Print { pieces, .. } => pieces.iter().for_each(|p| {
-            if let FmtPiece::Arg { var, .. } = p {
-                mark(var)
-            }
-        }),
-        StmtKind::Declare { .. }
-        | StmtKind::Loop { .. }
-        | StmtKind::Break
-        | StmtKind::Continue
-        | StmtKind::Return { value: None } => {}
+    walk_stmts(&f.body, &mut |s| {
+        s.kind.for_each_read(&mut |v| used[v] = true)
     });
     used
 }
