@@ -72,6 +72,10 @@ fn mixed(a: Array<f32>, b: Array<i32>, out: Array<f32>, total: Array<i32>) {
         acc += q;
     }
     out[i] += acc as f32;
+    // Accesses at a loop variable (checked once before the loop when the range is inside).
+    for j in 0..(b[i].abs() % 9) as usize {
+        out[i] += a[j] * 0.5;
+    }
     // `!` on a func's bool (a type the kernel macro cannot see): logical, not bitwise.
     if !is_pos(a[i]) {
         out[i] -= 1.0;
@@ -270,35 +274,49 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
     std::fs::create_dir_all(&dir).unwrap();
     let cpp = dir.join("k.cpp");
     std::fs::write(&cpp, format!("#include <cstring>\n{program}")).unwrap();
-    let exe = dir.join("k");
     let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wno-unused",
-            "-I",
-            include,
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "g++ failed on {}:\n{}",
-        cpp.display(),
-        String::from_utf8_lossy(&out.stderr)
+    // Both translation units the runtime may compile: the general one and the variant for
+    // launches whose arrays are all contiguous (the arrays here are).
+    let mut outputs = Vec::new();
+    for (k, define) in ["-DWP_GENERAL_STRIDES", "-DWP_CONTIGUOUS=1"]
+        .iter()
+        .enumerate()
+    {
+        let exe = dir.join(format!("k{k}"));
+        let out = Command::new("g++")
+            .args([
+                "-std=c++17",
+                "-O1",
+                "-ffp-contract=off",
+                "-Wno-unused",
+                define,
+                "-I",
+                include,
+            ])
+            .arg(&cpp)
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "g++ {define} failed on {}:\n{}",
+            cpp.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let run = Command::new(&exe).output().unwrap();
+        assert!(
+            run.status.success(),
+            "generated code ({define}) faulted: {}",
+            String::from_utf8_lossy(&run.stdout)
+        );
+        outputs.push(String::from_utf8(run.stdout).unwrap());
+    }
+    assert_eq!(
+        outputs[0], outputs[1],
+        "the general and the contiguous-array translation units disagree"
     );
-    let run = Command::new(&exe).output().unwrap();
-    assert!(
-        run.status.success(),
-        "generated code faulted: {}",
-        String::from_utf8_lossy(&run.stdout)
-    );
-    let text = String::from_utf8(run.stdout).unwrap();
+    let text = outputs.swap_remove(0);
     let (fast, checked) = text.split_once("--\n").expect("two runs");
     assert_eq!(fast, checked, "the unchecked and checked variants disagree");
     Some(fast.lines().map(str::to_string).collect())

@@ -17,7 +17,43 @@ backend_tests!(
     continue_in_loops,
     early_return,
     nested_loops,
+    loop_end_evaluated_once,
 );
+
+/// A range's end is evaluated once, before the loop (Rust's semantics): assigning the variable
+/// it came from inside the body changes nothing.
+#[wp::kernel]
+fn k_end_once(n: i32, out: Array<i32>) {
+    let i = tid();
+    let mut m = n;
+    let mut count = 0;
+    for _j in 0..m {
+        m -= 1;
+        count += 1;
+    }
+    let mut k = 0;
+    for j in k..m + 2 {
+        k += j;
+        count += 100;
+    }
+    out[i] = count + k * 10000;
+}
+
+fn loop_end_evaluated_once(dev: &wp::Device) {
+    let out = zeros::<i32, 1>(1, dev);
+    wp::launch(k_end_once, 1, (6, &out), dev).unwrap();
+    let (mut m, mut count) = (6, 0);
+    for _j in 0..m {
+        m -= 1;
+        count += 1;
+    }
+    let mut k = 0;
+    for j in k..m + 2 {
+        k += j;
+        count += 100;
+    }
+    assert_eq!(out.to_vec().unwrap(), vec![count + k * 10000]);
+}
 
 #[wp::kernel]
 fn k_let(a: Array<i32>, out: Array<f32, 2>) {

@@ -12,6 +12,7 @@ backend_tests!(
     negative_index,
     out_of_bounds_in_parallel_launch,
     out_of_bounds_in_func,
+    out_of_bounds_in_loop,
     integer_division_by_zero,
     zero_step,
     zero_launch_dim,
@@ -58,6 +59,51 @@ fn out_of_bounds_read(dev: &wp::Device) {
         msg,
         "kernel `k_oob_read`: index [4] is out of bounds for argument `a` of shape [4]"
     );
+}
+
+/// Sums `a[lo..hi]`, stopping before index `stop` (a loop whose accesses are checked once
+/// for the whole range on the GPU when the range is inside the array).
+#[wp::kernel]
+fn k_loop_sum(a: Array<f32>, lo: i32, hi: i32, stop: i32, out: Array<f32>) {
+    let i = tid();
+    let mut s = 0.0;
+    for j in lo..hi {
+        if j == stop {
+            break;
+        }
+        s += a[j];
+    }
+    out[i] = s;
+}
+
+/// A loop range that runs past the array faults at the first index outside it, with the
+/// loop's earlier iterations done; a loop that leaves before the bad index does not fault.
+fn out_of_bounds_in_loop(dev: &wp::Device) {
+    let a = arr(&[1.0f32, 2.0, 4.0, 8.0], dev);
+    let out = zeros::<f32, 1>(2, dev);
+    let sum = |lo: i32, hi: i32, stop: i32| {
+        wp::launch(k_loop_sum, 2, (&a, lo, hi, stop, &out), dev)
+            .and_then(|_| out.to_vec())
+            .map(|v| v[0])
+    };
+    assert_eq!(sum(0, 4, -1).unwrap(), 15.0);
+    assert_eq!(sum(1, 3, -1).unwrap(), 6.0);
+    assert_eq!(sum(3, 1, -1).unwrap(), 0.0);
+    // The range passes the end, but the loop breaks before it gets there.
+    assert_eq!(sum(0, 9, 4).unwrap(), 15.0);
+    assert_eq!(sum(2, 9, 3).unwrap(), 4.0);
+    for (lo, hi, bad) in [(0, 5, 4i128), (-2, 3, -2), (3, 7, 4)] {
+        let (f, _) = fault_of(sum(lo, hi, -1).map(|_| ()));
+        assert_eq!(
+            f.kind,
+            FaultKind::OutOfBounds {
+                arg: "a",
+                index: vec![bad],
+                shape: vec![4]
+            },
+            "range {lo}..{hi}"
+        );
+    }
 }
 
 #[wp::kernel]

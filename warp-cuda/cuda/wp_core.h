@@ -1003,24 +1003,32 @@ WP_FN usize extent(const array_t<T, N>& a, int k) {
 }
 
 namespace detail {
+/// The element at `idx` (assumed in bounds). With `WP_CONTIGUOUS` defined, the translation
+/// unit was compiled for a launch whose array arguments are all contiguous and row-major
+/// (the runtime checks that): the strides follow from the shape and the element size, which
+/// the compiler knows, instead of being loaded and multiplied at run time.
+template <typename T, int N>
+WP_FN T* elem_ptr_unchecked_idx(const array_t<T, N>& a, const i64* idx) {
+#if defined(WP_CONTIGUOUS)
+  i64 flat = idx[0];
+  for (int k = 1; k < N; ++k) flat = flat * a.shape[k] + idx[k];
+  return a.data + flat;
+#else
+  i64 off = 0;
+  for (int k = 0; k < N; ++k) off += idx[k] * a.strides[k];
+  return (T*)((char*)a.data + off);
+#endif
+}
 template <typename T, int N>
 WP_FN T* elem_ptr_idx(const array_t<T, N>& a, const i64* idx, ctx_t* ctx) {
-  i64 off = 0;
   for (int k = 0; k < N; ++k) {
     // Negative indices compare as huge unsigned values, as in warp-core.
     if ((u64)idx[k] >= (u64)a.shape[k]) {
       raise(ctx, FAULT_OUT_OF_BOUNDS, a.arg, N, idx, a.shape);
       return nullptr;
     }
-    off += idx[k] * a.strides[k];
   }
-  return (T*)((char*)a.data + off);
-}
-template <typename T, int N>
-WP_FN T* elem_ptr_unchecked_idx(const array_t<T, N>& a, const i64* idx) {
-  i64 off = 0;
-  for (int k = 0; k < N; ++k) off += idx[k] * a.strides[k];
-  return (T*)((char*)a.data + off);
+  return elem_ptr_unchecked_idx(a, idx);
 }
 template <typename T, int N>
 WP_FN T load_idx(const array_t<T, N>& a, const i64* idx, ctx_t* ctx) {
@@ -1139,6 +1147,17 @@ template <typename T>
 WP_FN void store_unchecked(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, const typename identity<T>::type& v) {
   const i64 idx[4] = {i0, i1, i2, i3};
   *detail::elem_ptr_unchecked_idx(a, idx) = v;
+}
+
+/// True when every index of `lo..hi` (a loop's range, any integer type) is inside the 1-D
+/// array `a`: then the loop's accesses of `a` at its variable need no check each. An empty
+/// range is inside every array.
+template <typename T, typename I>
+WP_FN bool range_inside(const array_t<T, 1>& a, I lo, I hi) {
+  if (!(lo < hi)) return true;
+  // lo >= 0 (only a signed type can fail it; i64 holds every signed value) and hi <= shape;
+  // with 0 <= lo < hi, hi is non-negative, so the u64 comparison is exact.
+  return !(num<I>::is_signed && (i64)lo < 0) && (u64)hi <= (u64)a.shape[0];
 }
 
 /// True when the array covers the launch dims (every thread-index access is in bounds).

@@ -61,6 +61,30 @@ pub fn tid_accessed_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
     out
 }
 
+/// The 1-D array parameters that `body` accesses (loads and stores) at exactly `var`, a loop
+/// variable. For a loop over `lo..hi`, one check that `lo..hi` lies inside such an array
+/// before the loop makes every one of those accesses in bounds.
+pub fn loop_indexed_params(f: &Function, body: &Block, var: VarId) -> Vec<VarId> {
+    let mut out = Vec::new();
+    walk_stmts(body, &mut |s| {
+        let access = match &s.kind {
+            StmtKind::Assign {
+                op: Op::Load { array, index },
+                ..
+            } => Some((*array, index)),
+            StmtKind::Store { array, index, .. } => Some((*array, index)),
+            _ => None,
+        };
+        if let Some((a, idx)) = access {
+            let is_param = f.params.iter().any(|p| p.var == a);
+            if is_param && idx.as_slice() == [var] && !out.contains(&a) {
+                out.push(a);
+            }
+        }
+    });
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -174,6 +174,9 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                 fn tid_arrays_cover(__args: &Self::Args<'_>, __grid: &__wp::Grid) -> bool {
                     true #( && <#fast_tys as __wp::KernelArg>::covers(&__args.#fast_idx, &__grid.dims) )*
                 }
+                fn arrays_contiguous(__args: &Self::Args<'_>) -> bool {
+                    true #( && <#tys as __wp::KernelArg>::contiguous(&__args.#idx) )*
+                }
                 fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
                     ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
                 }

@@ -897,6 +897,10 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
         (0..N).all(|d| arg.shape[d] >= dims[d])
     }
 
+    fn contiguous(arg: &Self::Arg<'_>) -> bool {
+        arg.is_contiguous()
+    }
+
     fn shape(arg: &Self::Arg<'_>) -> Option<Vec<usize>> {
         Some(arg.shape.to_vec())
     }

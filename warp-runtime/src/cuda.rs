@@ -92,6 +92,8 @@ pub struct CompileReport {
     pub kernel: &'static str,
     /// The device it was compiled for.
     pub device: String,
+    /// Whether this is the variant for launches whose arrays are all contiguous.
+    pub contiguous: bool,
     /// Bytes of generated CUDA source (without the library headers).
     pub source_bytes: usize,
     /// NVRTC time (0 on a cache hit).
@@ -112,10 +114,18 @@ pub fn compile_reports() -> Vec<CompileReport> {
     reports().lock().unwrap_or_else(|p| p.into_inner()).clone()
 }
 
-fn loaded(device: &Device, ordinal: usize, info: &'static KernelInfo) -> Result<Arc<Loaded>> {
-    type Key = (usize, &'static str, &'static str);
+/// The kernel `info` compiled for GPU `ordinal`; `contiguous` picks the variant for launches
+/// whose arrays are all contiguous (`WP_CONTIGUOUS`: strides known to the compiler). Each
+/// variant is compiled the first time a launch needs it.
+fn loaded(
+    device: &Device,
+    ordinal: usize,
+    info: &'static KernelInfo,
+    contiguous: bool,
+) -> Result<Arc<Loaded>> {
+    type Key = (usize, &'static str, &'static str, bool);
     static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
-    let key = (ordinal, info.module, info.name);
+    let key = (ordinal, info.module, info.name, contiguous);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
@@ -124,9 +134,15 @@ fn loaded(device: &Device, ordinal: usize, info: &'static KernelInfo) -> Result<
     let t0 = std::time::Instant::now();
     let src = cuda_source::assemble(info);
     let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
+    let defines: &[(&str, &str)] = if contiguous {
+        &[("WP_CONTIGUOUS", "1")]
+    } else {
+        &[]
+    };
     let opts = CompileOptions {
         fmad: config::cuda_fmad(),
         line_info: true,
+        defines,
         headers: &headers,
         ..Default::default()
     };
@@ -143,6 +159,7 @@ fn loaded(device: &Device, ordinal: usize, info: &'static KernelInfo) -> Result<
         .push(CompileReport {
             kernel: info.name,
             device: device.alias().to_string(),
+            contiguous,
             source_bytes: src.text.len(),
             compile_ms: compiled.compile_ms,
             cache_hit: matches!(outcome, CacheOutcome::Hit),
@@ -199,7 +216,7 @@ pub(crate) fn launch<K: Kernel>(
     }
     // Arguments first: a wrong device is reported before anything is compiled.
     let mut params = K::cuda_params(args, device)?;
-    let kernel = loaded(device, ordinal, info)?;
+    let kernel = loaded(device, ordinal, info, K::arrays_contiguous(args))?;
     let st = &kernel.st;
     let mut dims = LaunchDims {
         dims: grid.dims.map(|d| d as i64),

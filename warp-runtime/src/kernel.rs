@@ -47,6 +47,12 @@ pub trait KernelArg: 'static {
         let _ = (arg, dims);
         true
     }
+    /// True unless an array argument's elements have gaps or are not row-major (see
+    /// [`Array::is_contiguous`](crate::Array::is_contiguous)).
+    fn contiguous(arg: &Self::Arg<'_>) -> bool {
+        let _ = arg;
+        true
+    }
     /// The shape of an array argument (`None` for values), for the kernel's shape checks.
     fn shape(arg: &Self::Arg<'_>) -> Option<Vec<usize>> {
         let _ = arg;
@@ -129,6 +135,9 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     /// True when every array the kernel indexes by the thread index covers `grid`: those
     /// accesses are then in bounds for every thread and skip their checks on the GPU.
     fn tid_arrays_cover(args: &Self::Args<'_>, grid: &Grid) -> bool;
+    /// True when every array argument is contiguous: the GPU then runs a variant of the
+    /// kernel whose strides are compile-time functions of the shape.
+    fn arrays_contiguous(args: &Self::Args<'_>) -> bool;
     /// [`Kernel::INFO`] with a `'static` address (for fault reports after the launch).
     fn info() -> &'static KernelInfo;
     /// Runs threads `range` (flat indices) of `grid` on the CPU, in order, stopping at the

@@ -266,6 +266,9 @@ mod tests {
             fn tid_arrays_cover(_: &Self::Args<'_>, _: &Grid) -> bool {
                 false
             }
+            fn arrays_contiguous(_: &Self::Args<'_>) -> bool {
+                false
+            }
         };
     }
     use warp_core::{ArrayView, Fault, FaultKind};

@@ -40,6 +40,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
         file: file.to_string(),
         sections: Vec::new(),
         tmp: 0,
+        in_range: Vec::new(),
     };
     e.function()?;
     let ret = if matches!(f.ret, Ty::Unit) {
@@ -65,6 +66,9 @@ struct Emitter<'a> {
     file: String,
     sections: Vec<&'static str>,
     tmp: usize,
+    /// `(array, loop variable, flag)`: inside a native loop, accesses of `array` at exactly
+    /// the loop variable are in bounds when `flag` (checked once before the loop) is true.
+    in_range: Vec<(VarId, VarId, String)>,
 }
 
 /// The C++ spelling of a type the macro knows.
@@ -180,8 +184,19 @@ impl<'a> Emitter<'a> {
     /// An access indexed exactly by the thread index: unchecked when the launch says the
     /// arrays cover the grid (`__FAST`, read once per thread from `launch_t::fast`; the branch
     /// is the same for every thread, and one function body keeps the code small).
-    fn fast(&self, array: VarId, index: &[VarId]) -> bool {
-        crate::analysis::is_tid_access(self.f, &self.tid, array, index)
+    ///
+    /// Likewise an access at exactly a native loop's variable, when a check before the loop
+    /// found the loop's whole range inside the array. Returns the condition under which the
+    /// access may skip its check, if any.
+    fn unchecked_when(&self, array: VarId, index: &[VarId]) -> Option<&str> {
+        if crate::analysis::is_tid_access(self.f, &self.tid, array, index) {
+            return Some("__FAST");
+        }
+        self.in_range
+            .iter()
+            .rev()
+            .find(|(a, v, _)| *a == array && index == [*v])
+            .map(|(_, _, flag)| flag.as_str())
     }
 
     fn section(&mut self, s: &'static str) {
@@ -334,8 +349,9 @@ impl<'a> Emitter<'a> {
             } => {
                 let idx = self.index(index);
                 let (a, val) = (self.var(*array), self.var(*value));
-                if self.fast(*array, index) {
-                    self.line(sp, &format!("if (__FAST) wp::store_unchecked({a}, {idx}, {val}); else wp::store({a}, {idx}, {val}, __ctx);"));
+                if let Some(c) = self.unchecked_when(*array, index) {
+                    let text = format!("if ({c}) wp::store_unchecked({a}, {idx}, {val}); else wp::store({a}, {idx}, {val}, __ctx);");
+                    self.line(sp, &text);
                 } else {
                     self.line(sp, &format!("wp::store({a}, {idx}, {val}, __ctx);"));
                 }
@@ -367,8 +383,34 @@ impl<'a> Emitter<'a> {
             {
                 let t = cpp_type(self.f.ty(*var)).expect("integer");
                 let (s0, e0, v) = (self.var(range.start), self.var(range.end), self.var(*var));
-                self.line(sp, &format!("for ({t} {v} = {s0}; {v} < {e0}; ++{v}) {{"));
-                self.nested(body)?;
+                self.tmp += 1;
+                let k = self.tmp;
+                // Rust evaluates the end once: a body that assigns the variable holding it
+                // must not move it.
+                let end = format!("__end{k}");
+                // One check before the loop covers every access at exactly the loop variable
+                // of a 1-D array parameter: the per-access checks go when it passes (the
+                // flag is loop-invariant, so the compiler can hoist the branch).
+                let arrays = crate::analysis::loop_indexed_params(self.f, body, *var);
+                let pushed = arrays.len();
+                if !arrays.is_empty() {
+                    let flag = format!("__inb{k}");
+                    let conds: Vec<String> = arrays
+                        .iter()
+                        .map(|a| format!("wp::range_inside({}, {s0}, {e0})", self.var(*a)))
+                        .collect();
+                    self.line(sp, &format!("const bool {flag} = {};", conds.join(" && ")));
+                    for a in arrays {
+                        self.in_range.push((a, *var, flag.clone()));
+                    }
+                }
+                self.line(
+                    sp,
+                    &format!("for ({t} {v} = {s0}, {end} = {e0}; {v} < {end}; ++{v}) {{"),
+                );
+                let r = self.nested(body);
+                self.in_range.truncate(self.in_range.len() - pushed);
+                r?;
                 self.close();
             }
             StmtKind::For { var, range, body } => {
@@ -547,9 +589,10 @@ impl<'a> Emitter<'a> {
                 args.push("__ctx".into());
                 format!("@@F{k}@@({})", args.join(", "))
             }
-            Op::Load { array, index } if self.fast(*array, index) => {
+            Op::Load { array, index } if self.unchecked_when(*array, index).is_some() => {
+                let c = self.unchecked_when(*array, index).expect("guarded");
                 let (a, idx) = (self.var(*array), self.index(index));
-                format!("(__FAST ? wp::load_unchecked({a}, {idx}) : wp::load({a}, {idx}, __ctx))")
+                format!("({c} ? wp::load_unchecked({a}, {idx}) : wp::load({a}, {idx}, __ctx))")
             }
             Op::Load { array, index } => format!(
                 "wp::load({}, {}, __ctx)",
