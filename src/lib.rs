@@ -50,6 +50,8 @@ pub use warp_runtime::{
     synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel,
     KernelArg, KernelInfo, Result, Runtime,
 };
+#[cfg(feature = "cuda")]
+pub use warp_runtime::{get_stream, launch_on, Event, ScopedStream, Stream};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {

@@ -72,6 +72,7 @@ mod errors;
 mod funcs;
 mod launch;
 mod params;
+mod streams;
 mod structs;
 
 /// A 1-D array holding `data` on `dev`.

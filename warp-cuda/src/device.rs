@@ -404,6 +404,11 @@ impl Stream {
         self.ordinal
     }
 
+    /// Whether `self` and `other` are handles of the same stream.
+    pub fn is(&self, other: &Stream) -> bool {
+        Arc::ptr_eq(&self.inner, &other.inner)
+    }
+
     /// The raw `CUstream` handle. Do not destroy it.
     pub fn cu_stream(&self) -> sys::CUstream {
         self.inner.cu_stream()

@@ -178,6 +178,19 @@ impl Storage {
     }
 }
 
+#[cfg(feature = "cuda")]
+impl Drop for Storage {
+    fn drop(&mut self) {
+        if let Storage::Cuda(buf) = self {
+            // The buffer's free is queued on the default stream: order it after the kernels
+            // of user streams that may still use the memory. A failure here means the
+            // context is broken, which the next fallible call reports.
+            let ordinal = buf.gpu().ordinal();
+            let _ = crate::cuda::join_ordinal(ordinal);
+        }
+    }
+}
+
 /// Allocates zeroed memory for `bytes` bytes of `T`s on `device`.
 fn alloc_zeroed<T: Element>(bytes: usize, device: &Device) -> Result<Arc<Storage>> {
     match device.kind() {
@@ -517,6 +530,7 @@ impl<T: Element, const N: usize> Array<T, N> {
     pub fn fill(&self, value: T) -> Result<()> {
         #[cfg(feature = "cuda")]
         if let Some(buf) = self.device_buffer() {
+            crate::cuda::before_default_work(&self.device)?;
             if self.is_contiguous() {
                 let bytes = self.len() * std::mem::size_of::<T>();
                 return buf
@@ -564,6 +578,7 @@ impl<T: Element, const N: usize> Array<T, N> {
                 overlap,
             ) {
                 crate::cuda::check_faults(&src.device)?;
+                crate::cuda::before_default_work(&self.device)?;
                 return d
                     .copy_from_device(self.byte_offset, s, src.byte_offset, bytes)
                     .map_err(|e| crate::cuda::err(&self.device, e));
@@ -596,6 +611,7 @@ impl<T: Element, const N: usize> Array<T, N> {
         debug_assert_eq!(data.len(), self.len());
         #[cfg(feature = "cuda")]
         if let Some(buf) = self.device_buffer() {
+            crate::cuda::before_default_work(&self.device)?;
             let err = |e| crate::cuda::err(&self.device, e);
             if self.is_contiguous() {
                 return buf

@@ -18,9 +18,10 @@ pub const DEFAULT_CPU_MIN_CHUNK: usize = 4096;
 
 /// Turns debug mode on or off.
 ///
-/// On the CPU every array index is checked whatever this says: the CPU backend is safe Rust and
-/// has no unchecked path to switch to. Debug mode governs the bounds checks compiled into GPU
-/// kernels (once the CUDA backend exists) and extra verification that costs time.
+/// Array indices are checked on both backends whatever this says. In debug mode every GPU
+/// launch waits for its kernel and reports the kernel's own fault at once, as a CPU launch does;
+/// otherwise a GPU fault is reported by the next synchronisation (`synchronize`, `to_vec`,
+/// `Stream::synchronize`), which costs no waiting per launch.
 pub fn set_debug(on: bool) {
     DEBUG.store(on, Ordering::Relaxed);
 }

@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::kernel::{Kernel, KernelInfo};
 use std::collections::HashMap;
 use std::ffi::c_void;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use warp_core::{Fault, FaultKind, Grid};
 use warp_cuda::{CacheOutcome, CompileOptions, CudaError, DeviceBuffer, Function, Gpu, Module};
@@ -38,12 +39,68 @@ pub(crate) fn gpu(ordinal: usize) -> Result<Arc<Gpu>> {
 const FAULT_RECORD_BYTES: usize = 80;
 const FAULT_BYTES: usize = FAULT_RECORD_BYTES + 8;
 
-/// Per-GPU state: the fault record and the last kernel launched (named in fault reports).
-struct GpuState {
+/// Per-GPU state: the fault record, the last kernel launched (named in fault reports), and
+/// the user streams with work queued since the default stream last waited for them.
+///
+/// The ordering model (see `stream.rs`): array operations (allocation, copies, fills, frees)
+/// and launches without a stream run on the GPU's default stream, which first waits for every
+/// user stream that has had work since it last did (`pending`); a launch on a user stream
+/// first waits for the default stream. So array memory is never freed or rewritten under a
+/// kernel still using it, and kernels on different user streams may overlap.
+pub(crate) struct GpuState {
     device: Device,
-    gpu: Arc<Gpu>,
+    pub(crate) gpu: Arc<Gpu>,
     fault: DeviceBuffer,
     last: Mutex<Option<&'static KernelInfo>>,
+    pending: Mutex<Vec<warp_cuda::Stream>>,
+    has_pending: AtomicBool,
+}
+
+impl GpuState {
+    /// Makes the default stream wait for the user streams with work queued since it last did.
+    fn join_pending(&self) -> Result<()> {
+        if !self.has_pending.load(Ordering::Acquire) {
+            return Ok(());
+        }
+        let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
+        let default = self.gpu.default_stream();
+        for s in pending.drain(..) {
+            default.wait_stream(&s).map_err(|e| err(&self.device, e))?;
+        }
+        self.has_pending.store(false, Ordering::Release);
+        Ok(())
+    }
+
+    /// Records that `stream` (a user stream) has work the default stream must wait for.
+    fn mark_pending(&self, stream: &warp_cuda::Stream) {
+        let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
+        if !pending.iter().any(|s| s.is(stream)) {
+            pending.push(stream.clone());
+        }
+        self.has_pending.store(true, Ordering::Release);
+    }
+}
+
+/// Orders work about to be queued on `device`'s default stream (an array operation) after
+/// the work of its user streams. Nothing to do for the CPU or a GPU never used.
+pub(crate) fn before_default_work(device: &Device) -> Result<()> {
+    match device.kind() {
+        crate::device::DeviceKind::Cuda { ordinal } => join_ordinal(ordinal),
+        crate::device::DeviceKind::Cpu => Ok(()),
+    }
+}
+
+/// [`before_default_work`] for GPU `ordinal`.
+pub(crate) fn join_ordinal(ordinal: usize) -> Result<()> {
+    let st = states_map()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .get(&ordinal)
+        .cloned();
+    match st {
+        Some(st) => st.join_pending(),
+        None => Ok(()),
+    }
 }
 
 fn states_map() -> &'static Mutex<HashMap<usize, Arc<GpuState>>> {
@@ -51,7 +108,7 @@ fn states_map() -> &'static Mutex<HashMap<usize, Arc<GpuState>>> {
     STATES.get_or_init(Default::default)
 }
 
-fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
+pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
     let mut map = states_map().lock().unwrap_or_else(|p| p.into_inner());
     if let Some(s) = map.get(&ordinal) {
         return Ok(s.clone());
@@ -63,6 +120,8 @@ fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
         gpu: g,
         fault,
         last: Mutex::new(None),
+        pending: Mutex::new(Vec::new()),
+        has_pending: AtomicBool::new(false),
     });
     map.insert(ordinal, s.clone());
     Ok(s)
@@ -200,12 +259,14 @@ struct Ctx {
 /// Most parameters a CUDA kernel can take (two slots go to the launch and the context).
 const MAX_PARAMS: usize = 62;
 
-/// Launches `K` over `grid` on GPU `ordinal`.
+/// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
+/// thread's current stream for the GPU (`ScopedStream`), else on the default stream.
 pub(crate) fn launch<K: Kernel>(
     args: &K::Args<'_>,
     grid: &Grid,
     device: &Device,
     ordinal: usize,
+    stream: Option<&warp_cuda::Stream>,
 ) -> Result<()> {
     let info = K::info();
     if info.params.len() > MAX_PARAMS {
@@ -238,20 +299,37 @@ pub(crate) fn launch<K: Kernel>(
     let block = config::cuda_block_dim();
     let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
     *st.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(info);
+    let default = st.gpu.default_stream();
+    let scoped;
+    let user = match stream {
+        Some(s) => Some(s),
+        None => {
+            scoped = crate::stream::current(ordinal);
+            scoped.as_ref()
+        }
+    }
+    .filter(|s| !s.is(default));
+    let on = match user {
+        Some(s) => {
+            // The kernel's arrays were allocated and written on the default stream.
+            s.wait_stream(default).map_err(|e| err(device, e))?;
+            s
+        }
+        None => {
+            st.join_pending()?;
+            default
+        }
+    };
     // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters (launch_t,
     // ctx_t, then each parameter's CudaArg, which mirrors its C++ type), alive until the call
     // returns; cuLaunchKernel copies them.
     unsafe {
         st.gpu
-            .launch_raw(
-                &kernel.function,
-                st.gpu.default_stream(),
-                blocks,
-                block,
-                0,
-                &mut ptrs[..n],
-            )
+            .launch_raw(&kernel.function, on, blocks, block, 0, &mut ptrs[..n])
             .map_err(|e| err(device, e))?;
+    }
+    if user.is_some() {
+        st.mark_pending(on);
     }
     if config::debug() {
         check_state(st)?;
@@ -268,8 +346,17 @@ pub(crate) fn check_faults(device: &Device) -> Result<()> {
 }
 
 fn check_state(st: &GpuState) -> Result<()> {
+    st.gpu.synchronize().map_err(|e| err(&st.device, e))?;
+    // Every stream is idle: nothing is pending any more.
+    st.pending.lock().unwrap_or_else(|p| p.into_inner()).clear();
+    st.has_pending.store(false, Ordering::Release);
+    read_fault(st)
+}
+
+/// Reports (and clears) the fault recorded on the GPU, if any, without waiting for the
+/// GPU's other work (the read waits for the default stream only).
+pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
     let device = &st.device;
-    st.gpu.synchronize().map_err(|e| err(device, e))?;
     let mut rec = [0u8; FAULT_BYTES];
     st.fault.download(0, &mut rec).map_err(|e| err(device, e))?;
     let flag = u32::from_le_bytes(

@@ -9,6 +9,8 @@ use crate::config;
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
 use crate::kernel::Kernel;
+#[cfg(feature = "cuda")]
+use crate::stream::Stream;
 use rayon::prelude::*;
 use warp_core::{Grid, KResult};
 
@@ -158,7 +160,12 @@ fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
     Ok(())
 }
 
-/// Launches `kernel` over `dim` threads with `args` on `device`, and waits for it on the CPU.
+/// Launches `kernel` over `dim` threads with `args` on `device`.
+///
+/// On the CPU the launch has finished when this returns. On a GPU it is queued on the calling
+/// thread's current stream for the device (see [`crate::stream`]: the default stream unless a
+/// `ScopedStream` is active); faults are then reported by the next synchronisation, or at
+/// once in debug mode ([`config::set_debug`]).
 ///
 /// `args` is the tuple of host arguments in parameter order: `&Array<T, N>` for arrays, values
 /// for everything else. A thread's fault stops the launch and is returned as
@@ -175,9 +182,41 @@ pub fn launch<K: Kernel>(
     args: K::Args<'_>,
     device: &Device,
 ) -> Result<()> {
+    launch_with(kernel, dim.into(), args, device, None)
+}
+
+/// Launches `kernel` on `stream` (a CUDA stream; see [`crate::stream`] for how streams are
+/// ordered against array operations). Returns once the launch is queued; a fault is
+/// reported by a later synchronisation ([`Stream::synchronize`], `to_vec`,
+/// [`synchronize`]), or at once in debug mode.
+///
+/// # Errors
+/// As [`launch`].
+#[cfg(feature = "cuda")]
+pub fn launch_on<K: Kernel>(
+    kernel: K,
+    dim: impl Into<Dim>,
+    args: K::Args<'_>,
+    stream: &Stream,
+) -> Result<()> {
+    launch_with(kernel, dim.into(), args, stream.device(), Some(stream))
+}
+
+#[cfg(feature = "cuda")]
+type StreamArg<'s> = Option<&'s Stream>;
+#[cfg(not(feature = "cuda"))]
+type StreamArg<'s> = Option<&'s std::convert::Infallible>;
+
+fn launch_with<K: Kernel>(
+    kernel: K,
+    dim: Dim,
+    args: K::Args<'_>,
+    device: &Device,
+    stream: StreamArg<'_>,
+) -> Result<()> {
     // The kernel value is a unit struct: its type says everything.
-    let _ = kernel;
-    let grid = grid_of(K::INFO.name, dim.into())?;
+    let _ = (kernel, stream);
+    let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
     match device.kind() {
         DeviceKind::Cpu => {
@@ -186,7 +225,13 @@ pub fn launch<K: Kernel>(
             run_cpu::<K>(&params, &grid)
         }
         #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { ordinal } => crate::cuda::launch::<K>(&args, &grid, device, ordinal),
+        DeviceKind::Cuda { ordinal } => crate::cuda::launch::<K>(
+            &args,
+            &grid,
+            device,
+            ordinal,
+            stream.map(Stream::cuda_stream),
+        ),
         #[cfg(not(feature = "cuda"))]
         DeviceKind::Cuda { .. } => Err(Error::NoDevice {
             name: device.alias().to_string(),

@@ -1,11 +1,13 @@
 //! Runtime of warp-lang: devices, arrays, typed launch, the CPU executor and configuration.
 //!
-//! - [`device`]: `"cpu"` and `"cuda:N"` devices, [`init`] and its banner. This build has only
-//!   the CPU backend; asking for a GPU is an [`Error::NoDevice`], not a panic.
+//! - [`device`]: `"cpu"` and `"cuda:N"` devices, [`init`] and its banner. Without a usable GPU
+//!   (or without the `cuda` feature) asking for one is an [`Error::NoDevice`], not a panic.
 //! - [`array`](mod@array): [`Array<T, N>`], a cheap-to-clone handle to shaped, strided memory with
 //!   zero-copy views, reshapes and reinterpretations.
 //! - [`launch()`]: checks a launch against what the kernel declared and runs it, on the CPU
-//!   in rayon chunks.
+//!   in rayon chunks, on a GPU through `cuda` (compiled at first launch).
+//! - `stream` (with `cuda`): streams, events, `ScopedStream`, `launch_on`, and the ordering
+//!   rules between streams and array operations.
 //! - [`kernel`]: the traits that `#[kernel]` implements.
 //! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
 //!
@@ -23,6 +25,8 @@ pub mod device;
 pub mod error;
 pub mod kernel;
 pub mod launch;
+#[cfg(feature = "cuda")]
+pub mod stream;
 
 pub use array::{copy, Array, Element, IntoShape};
 pub use bytemuck::cast_slice;
@@ -31,4 +35,8 @@ pub use device::{
 };
 pub use error::{Error, Result};
 pub use kernel::{ArgCtx, CudaArray, CudaStruct, Kernel, KernelArg, KernelInfo};
+#[cfg(feature = "cuda")]
+pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
+#[cfg(feature = "cuda")]
+pub use stream::{get_stream, Event, ScopedStream, Stream};

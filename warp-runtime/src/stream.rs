@@ -1,0 +1,251 @@
+//! CUDA streams and events, as Warp exposes them: `Stream`, `Event`, `ScopedStream`,
+//! `get_stream`, and launches on a given stream ([`launch_on`](crate::launch_on)).
+//!
+//! # Ordering
+//! Each GPU has a default stream. Array operations (allocation, uploads, downloads, copies,
+//! fills, frees) and launches that name no stream run there. A launch on another stream runs
+//! after everything queued on the default stream before it; the default stream, before its
+//! next operation, waits for the streams that have had launches since it last did. So:
+//! - kernels on different user streams may run concurrently (order them with
+//!   [`Stream::wait_stream`] and [`Stream::wait_event`] where they share data);
+//! - an array is never freed, overwritten by a copy or fill, or read back while a kernel on any
+//!   stream may still use it: no use-after-free on the GPU through safe code;
+//! - `to_vec` and [`synchronize`](crate::synchronize) wait for every stream.
+//!
+//! Streams exist on CUDA devices only; CPU launches complete before `launch` returns.
+
+use crate::device::{Device, DeviceKind};
+use crate::error::{Error, Result};
+use std::cell::RefCell;
+use std::marker::PhantomData;
+use std::sync::Arc;
+
+thread_local! {
+    /// The calling thread's current streams, innermost last: `(GPU ordinal, stream)`.
+    static CURRENT: RefCell<Vec<(usize, warp_cuda::Stream)>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The calling thread's current stream for GPU `ordinal`, when a [`ScopedStream`] set one.
+pub(crate) fn current(ordinal: usize) -> Option<warp_cuda::Stream> {
+    CURRENT.with(|c| {
+        let c = c.borrow();
+        if c.is_empty() {
+            return None;
+        }
+        c.iter()
+            .rev()
+            .find(|(o, _)| *o == ordinal)
+            .map(|(_, s)| s.clone())
+    })
+}
+
+/// The GPU ordinal of `device`, or an error naming what needed a GPU.
+fn ordinal_of(device: &Device, what: &str) -> Result<usize> {
+    match device.kind() {
+        DeviceKind::Cuda { ordinal } => Ok(ordinal),
+        DeviceKind::Cpu => Err(Error::invalid(format!(
+            "{what} needs a CUDA device, got \"{device}\" (CPU launches complete before \
+             `launch` returns; there is nothing to order)"
+        ))),
+    }
+}
+
+/// A CUDA stream: a queue of GPU work that runs in order. Cheap to clone (a shared handle);
+/// the stream is destroyed when the last clone is dropped, after its queued work.
+#[derive(Clone, Debug)]
+pub struct Stream {
+    device: Device,
+    inner: warp_cuda::Stream,
+}
+
+impl Stream {
+    /// Creates a new stream on `device` (a GPU).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for the CPU; [`Error::Cuda`] when the driver fails.
+    pub fn new(device: &Device) -> Result<Stream> {
+        let ordinal = ordinal_of(device, "a stream")?;
+        let st = crate::cuda::state(device, ordinal)?;
+        let inner = st
+            .gpu
+            .new_stream()
+            .map_err(|e| crate::cuda::err(device, e))?;
+        Ok(Stream {
+            device: device.clone(),
+            inner,
+        })
+    }
+
+    /// The device the stream belongs to.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// Whether this is the device's default stream (where array operations run).
+    pub fn is_default(&self) -> bool {
+        crate::cuda::state(&self.device, self.inner.ordinal())
+            .map(|st| st.gpu.default_stream().is(&self.inner))
+            .unwrap_or(false)
+    }
+
+    /// Waits until the work queued on this stream has finished, then reports a fault that a
+    /// kernel on this GPU recorded (as [`Error::Fault`]).
+    pub fn synchronize(&self) -> Result<()> {
+        self.inner
+            .synchronize()
+            .map_err(|e| crate::cuda::err(&self.device, e))?;
+        let st = crate::cuda::state(&self.device, self.inner.ordinal())?;
+        crate::cuda::read_fault(&st)
+    }
+
+    /// Makes work queued on this stream from now on wait for the work queued on `other` so
+    /// far (any GPU). The host does not block.
+    pub fn wait_stream(&self, other: &Stream) -> Result<()> {
+        self.inner
+            .wait_stream(&other.inner)
+            .map_err(|e| crate::cuda::err(&self.device, e))
+    }
+
+    /// Makes work queued on this stream from now on wait for the work `event` captured.
+    pub fn wait_event(&self, event: &Event) -> Result<()> {
+        self.inner
+            .wait_event(&event.inner)
+            .map_err(|e| crate::cuda::err(&self.device, e))
+    }
+
+    /// Records a new timing event capturing the work queued on this stream so far.
+    pub fn record_event(&self) -> Result<Event> {
+        let event = Event::new(&self.device, true)?;
+        event.record(self)?;
+        Ok(event)
+    }
+
+    /// The underlying stream (for interop with other CUDA code).
+    pub fn cuda_stream(&self) -> &warp_cuda::Stream {
+        &self.inner
+    }
+}
+
+/// The calling thread's current stream on `device`: the innermost [`ScopedStream`]'s, else the
+/// device's default stream.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for the CPU.
+pub fn get_stream(device: &Device) -> Result<Stream> {
+    let ordinal = ordinal_of(device, "get_stream")?;
+    let inner = match current(ordinal) {
+        Some(s) => s,
+        None => crate::cuda::state(device, ordinal)?
+            .gpu
+            .default_stream()
+            .clone(),
+    };
+    Ok(Stream {
+        device: device.clone(),
+        inner,
+    })
+}
+
+/// A CUDA event: a marker in a stream's work, for ordering streams and timing.
+#[derive(Clone, Debug)]
+pub struct Event {
+    device: Device,
+    inner: Arc<warp_cuda::Event>,
+}
+
+impl Event {
+    /// Creates an event on `device`; `timing` lets it measure elapsed time
+    /// ([`Event::elapsed_ms`]), at a small cost per record.
+    pub fn new(device: &Device, timing: bool) -> Result<Event> {
+        let ordinal = ordinal_of(device, "an event")?;
+        let inner = crate::cuda::state(device, ordinal)?
+            .gpu
+            .new_event(timing)
+            .map_err(|e| crate::cuda::err(device, e))?;
+        Ok(Event {
+            device: device.clone(),
+            inner: Arc::new(inner),
+        })
+    }
+
+    /// Captures the work queued on `stream` so far (a stream of the event's device).
+    pub fn record(&self, stream: &Stream) -> Result<()> {
+        if stream.device != self.device {
+            return Err(Error::invalid(format!(
+                "an event of \"{}\" cannot record a stream of \"{}\"",
+                self.device, stream.device
+            )));
+        }
+        self.inner
+            .record(&stream.inner)
+            .map_err(|e| crate::cuda::err(&self.device, e))
+    }
+
+    /// Waits until the captured work has finished.
+    pub fn synchronize(&self) -> Result<()> {
+        self.inner
+            .synchronize()
+            .map_err(|e| crate::cuda::err(&self.device, e))
+    }
+
+    /// Whether the captured work has finished (an event never recorded counts as finished).
+    pub fn is_complete(&self) -> Result<bool> {
+        self.inner
+            .is_complete()
+            .map_err(|e| crate::cuda::err(&self.device, e))
+    }
+
+    /// Milliseconds of GPU time from this event to `end` (both timing events, both recorded);
+    /// waits for both.
+    pub fn elapsed_ms(&self, end: &Event) -> Result<f32> {
+        self.inner
+            .elapsed_ms(&end.inner)
+            .map_err(|e| crate::cuda::err(&self.device, e))
+    }
+
+    /// The device the event belongs to.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+}
+
+/// While alive, makes `stream` the calling thread's current stream for its device: launches
+/// that name no stream go there (like Warp's `wp.ScopedStream`). On creation the stream waits
+/// for the previously current stream, so work queued before the scope is ordered before work
+/// inside it. Scopes nest; dropping one restores the previous stream. Not `Send`: a scope
+/// belongs to the thread that opened it.
+#[derive(Debug)]
+pub struct ScopedStream {
+    ordinal: usize,
+    stream: warp_cuda::Stream,
+    _not_send: PhantomData<*const ()>,
+}
+
+impl ScopedStream {
+    /// Makes `stream` current on this thread until the guard is dropped.
+    pub fn new(stream: &Stream) -> Result<ScopedStream> {
+        let ordinal = stream.inner.ordinal();
+        let previous = get_stream(&stream.device)?;
+        stream.wait_stream(&previous)?;
+        CURRENT.with(|c| c.borrow_mut().push((ordinal, stream.inner.clone())));
+        Ok(ScopedStream {
+            ordinal,
+            stream: stream.inner.clone(),
+            _not_send: PhantomData,
+        })
+    }
+}
+
+impl Drop for ScopedStream {
+    fn drop(&mut self) {
+        CURRENT.with(|c| {
+            let mut c = c.borrow_mut();
+            if let Some(k) = c
+                .iter()
+                .rposition(|(o, s)| *o == self.ordinal && s.is(&self.stream))
+            {
+                c.remove(k);
+            }
+        });
+    }
+}
