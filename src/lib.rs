@@ -51,7 +51,7 @@ pub use warp_runtime::{
     KernelArg, KernelInfo, Result, Runtime,
 };
 #[cfg(feature = "cuda")]
-pub use warp_runtime::{get_stream, launch_on, Event, ScopedStream, Stream};
+pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {

@@ -39,6 +39,8 @@ fn k_end_once(n: i32, out: Array<i32>) {
     out[i] = count + k * 10000;
 }
 
+// The host reference deliberately does what the kernel does.
+#[allow(clippy::mut_range_bound)]
 fn loop_end_evaluated_once(dev: &wp::Device) {
     let out = zeros::<i32, 1>(1, dev);
     wp::launch(k_end_once, 1, (6, &out), dev).unwrap();

@@ -11,7 +11,55 @@ backend_tests!(
     scoped_stream_is_current,
     arrays_outlive_kernels_of_other_streams,
     stream_synchronize_reports_faults,
+    pinned_copies,
 );
+
+/// Pinned memory: upload, a kernel and a download all queued on a user stream; the result
+/// is read through the pinned vector (which waits). Mismatched arrays are errors.
+fn pinned_copies(dev: &wp::Device) {
+    if dev.is_cpu() {
+        let e = wp::PinnedVec::<f32>::zeros(4, dev).unwrap_err().to_string();
+        assert!(e.contains("pairs with a CUDA device"), "{e}");
+        return;
+    }
+    wp::config::set_debug(false);
+    let n = 1 << 18;
+    let host: Vec<f32> = (0..n).map(|i| i as f32).collect();
+    let mut up = wp::PinnedVec::from_slice(&host, dev).unwrap();
+    let mut down = wp::PinnedVec::<f32>::zeros(n, dev).unwrap();
+    let a = zeros::<f32, 1>(n, dev);
+    let s = wp::Stream::new(dev).unwrap();
+    {
+        let _scope = wp::ScopedStream::new(&s).unwrap();
+        a.copy_from_pinned_async(&mut up).unwrap();
+        wp::launch(k_scale, n, (&a, 2.0), dev).unwrap();
+        a.copy_to_pinned_async(&mut down).unwrap();
+    }
+    // Exact: i * 2 for i < 2^18 is exact in f32.
+    assert!(down
+        .as_slice()
+        .iter()
+        .enumerate()
+        .all(|(i, &x)| x == 2.0 * i as f32));
+    assert_eq!(up.as_slice(), &host[..]);
+    // Wrong length, strided array, CPU array: errors naming the problem.
+    let short = zeros::<f32, 1>(n - 1, dev);
+    let e = short
+        .copy_from_pinned_async(&mut up)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(&format!("contiguous array of {n} elements")),
+        "{e}"
+    );
+    let cpu = wp::Array::<f32>::zeros(n, &wp::cpu()).unwrap();
+    assert!(cpu.copy_to_pinned_async(&mut down).is_err());
+    let m = zeros::<f32, 2>((2, 3), dev).transpose();
+    let mut six = wp::PinnedVec::<f32>::zeros(6, dev).unwrap();
+    let e = m.copy_to_pinned_async(&mut six).unwrap_err().to_string();
+    assert!(e.contains("strided"), "{e}");
+    wp::config::set_debug(true);
+}
 
 #[wp::kernel]
 fn k_add(a: Array<f32>, v: f32) {

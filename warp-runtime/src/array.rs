@@ -476,6 +476,15 @@ impl<T: Element, const N: usize> Array<T, N> {
             .map(|b| b.device_ptr() + self.byte_offset as u64)
     }
 
+    /// The device buffer, byte offset and byte length of a contiguous GPU array.
+    #[cfg(feature = "cuda")]
+    pub(crate) fn device_range(&self) -> (&warp_cuda::DeviceBuffer, usize, usize) {
+        let buf = self
+            .device_buffer()
+            .expect("a GPU array (checked by the caller)");
+        (buf, self.byte_offset, self.len() * std::mem::size_of::<T>())
+    }
+
     /// The whole storage, copied to the host (device arrays only), for strided access.
     #[cfg(feature = "cuda")]
     fn download_storage(&self, buf: &warp_cuda::DeviceBuffer) -> Result<Vec<u8>> {

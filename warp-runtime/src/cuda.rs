@@ -71,6 +71,41 @@ impl GpuState {
         Ok(())
     }
 
+    /// Queues work (`enqueue`) on `stream` when given, else on the calling thread's current
+    /// stream for this GPU (`ScopedStream`), else on the default stream, with the ordering of
+    /// the model above: a user stream first waits for the default stream and is then pending;
+    /// the default stream first joins the pending streams.
+    pub(crate) fn queue(
+        &self,
+        ordinal: usize,
+        stream: Option<&warp_cuda::Stream>,
+        enqueue: impl FnOnce(&warp_cuda::Stream) -> Result<()>,
+    ) -> Result<()> {
+        let default = self.gpu.default_stream();
+        let scoped;
+        let user = match stream {
+            Some(s) => Some(s),
+            None => {
+                scoped = crate::stream::current(ordinal);
+                scoped.as_ref()
+            }
+        }
+        .filter(|s| !s.is(default));
+        match user {
+            Some(s) => {
+                // Arrays are allocated and written on the default stream.
+                s.wait_stream(default).map_err(|e| err(&self.device, e))?;
+                enqueue(s)?;
+                self.mark_pending(s);
+                Ok(())
+            }
+            None => {
+                self.join_pending()?;
+                enqueue(default)
+            }
+        }
+    }
+
     /// Records that `stream` (a user stream) has work the default stream must wait for.
     fn mark_pending(&self, stream: &warp_cuda::Stream) {
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
@@ -299,38 +334,16 @@ pub(crate) fn launch<K: Kernel>(
     let block = config::cuda_block_dim();
     let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
     *st.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(info);
-    let default = st.gpu.default_stream();
-    let scoped;
-    let user = match stream {
-        Some(s) => Some(s),
-        None => {
-            scoped = crate::stream::current(ordinal);
-            scoped.as_ref()
+    st.queue(ordinal, stream, |on| {
+        // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
+        // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type), alive
+        // until the call returns; cuLaunchKernel copies them.
+        unsafe {
+            st.gpu
+                .launch_raw(&kernel.function, on, blocks, block, 0, &mut ptrs[..n])
+                .map_err(|e| err(device, e))
         }
-    }
-    .filter(|s| !s.is(default));
-    let on = match user {
-        Some(s) => {
-            // The kernel's arrays were allocated and written on the default stream.
-            s.wait_stream(default).map_err(|e| err(device, e))?;
-            s
-        }
-        None => {
-            st.join_pending()?;
-            default
-        }
-    };
-    // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters (launch_t,
-    // ctx_t, then each parameter's CudaArg, which mirrors its C++ type), alive until the call
-    // returns; cuLaunchKernel copies them.
-    unsafe {
-        st.gpu
-            .launch_raw(&kernel.function, on, blocks, block, 0, &mut ptrs[..n])
-            .map_err(|e| err(device, e))?;
-    }
-    if user.is_some() {
-        st.mark_pending(on);
-    }
+    })?;
     if config::debug() {
         check_state(st)?;
     }

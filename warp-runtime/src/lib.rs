@@ -26,6 +26,8 @@ pub mod error;
 pub mod kernel;
 pub mod launch;
 #[cfg(feature = "cuda")]
+pub mod pinned;
+#[cfg(feature = "cuda")]
 pub mod stream;
 
 pub use array::{copy, Array, Element, IntoShape};
@@ -38,5 +40,7 @@ pub use kernel::{ArgCtx, CudaArray, CudaStruct, Kernel, KernelArg, KernelInfo};
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
+#[cfg(feature = "cuda")]
+pub use pinned::PinnedVec;
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
