@@ -43,6 +43,8 @@ pub use warp_core::{Fault, FaultKind};
 pub use warp_cuda::clear_kernel_cache;
 pub use warp_macros::{func, kernel, Struct};
 #[cfg(feature = "cuda")]
+pub use warp_runtime::aot;
+#[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
 pub use warp_runtime::{

@@ -13,8 +13,72 @@ backend_tests!(
     dim_forms,
     repeated_launches,
     no_parameters,
-    print_from_kernel
+    print_from_kernel,
+    ahead_of_time_compile,
 );
+
+/// Launched only by `ahead_of_time_compile`, so that its first launch is the one measured.
+#[wp::kernel]
+fn k_aot(a: Array<f32>, s: f32) {
+    let i = tid();
+    a[i] = a[i] * s + 1.0;
+}
+
+/// `wp::aot::compile` writes both variants per architecture (needs NVRTC, not a GPU); with
+/// the directory set, the first launch loads the cubin from it instead of compiling, even with
+/// an empty kernel cache.
+fn ahead_of_time_compile(dev: &wp::Device) {
+    let dir = std::env::temp_dir().join(format!(
+        "wp-aot-{}-{}",
+        dev.alias().replace(':', ""),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let arch = match dev.kind() {
+        wp::DeviceKind::Cuda { ordinal } => warp_cuda::Gpu::open(ordinal).unwrap().arch(),
+        wp::DeviceKind::Cpu => 90,
+    };
+    let built = match wp::aot::compile(&[wp::aot::kernel(k_aot)], &[arch], &dir) {
+        Ok(b) => b,
+        Err(e) => {
+            // No NVRTC on this machine (CI): the error says what is missing.
+            assert!(e.to_string().contains("nvrtc"), "{e}");
+            assert!(
+                warp_cuda::nvrtc_version().is_err(),
+                "NVRTC is there, yet: {e}"
+            );
+            eprintln!("SKIPPED ahead_of_time_compile on {dev}: no NVRTC ({e})");
+            return;
+        }
+    };
+    assert_eq!(built.len(), 2);
+    assert!(built.iter().all(|b| b.path.is_file() && b.arch == arch));
+    assert_eq!(built.iter().filter(|b| b.contiguous).count(), 1);
+    if dev.is_cpu() {
+        let _ = std::fs::remove_dir_all(&dir);
+        return;
+    }
+    let empty_cache = dir.join("empty-cache");
+    warp_cuda::set_cache_dir(Some(empty_cache.clone()));
+    wp::aot::set_aot_dir(Some(dir.clone()));
+    let a = arr(&[1.0f32, 2.0, 3.0], dev);
+    let r = wp::launch(k_aot, 3, (&a, 2.0), dev);
+    wp::aot::set_aot_dir(None);
+    warp_cuda::set_cache_dir(None);
+    r.unwrap();
+    assert_eq!(a.to_vec().unwrap(), vec![3.0, 5.0, 7.0]);
+    let report = wp::compile_reports()
+        .into_iter()
+        .find(|r| r.kernel == "k_aot")
+        .expect("a compile report for k_aot");
+    assert!(
+        report.aot && report.cache_hit && report.compile_ms == 0.0,
+        "{report:?}"
+    );
+    // Nothing was compiled, so nothing went to the (empty) kernel cache.
+    assert!(!empty_cache.exists() || std::fs::read_dir(&empty_cache).unwrap().next().is_none());
+    let _ = std::fs::remove_dir_all(&dir);
+}
 
 /// The example of the crate documentation: explicit Euler steps of damped particles.
 #[wp::kernel]

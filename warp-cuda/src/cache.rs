@@ -80,9 +80,23 @@ pub fn cache_key(
 ) -> u128 {
     let mut h = Fnv128::new();
     h.field(b"warp-lang kernel cache v1");
-    h.field(CRATE_VERSION.as_bytes());
     h.field(&nvrtc_version.0.to_le_bytes());
     h.field(&nvrtc_version.1.to_le_bytes());
+    hash_inputs(h, source, name, opts, arch)
+}
+
+/// The key of an ahead-of-time entry: as [`cache_key`] without the NVRTC version. A cubin
+/// compiled ahead of time by any NVRTC runs on any driver at least as new, so the machine
+/// that loads it need not have (or load) NVRTC at all; the cost is that a toolkit upgrade
+/// does not rebuild the entries: compile them again with the build.
+pub fn aot_key(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> u128 {
+    let mut h = Fnv128::new();
+    h.field(b"warp-lang ahead-of-time v1");
+    hash_inputs(h, source, name, opts, arch)
+}
+
+fn hash_inputs(mut h: Fnv128, source: &str, name: &str, opts: &CompileOptions, arch: u32) -> u128 {
+    h.field(CRATE_VERSION.as_bytes());
     h.field(&arch.to_le_bytes());
     h.field(name.as_bytes());
     h.field(source.as_bytes());

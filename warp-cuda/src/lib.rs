@@ -29,7 +29,7 @@ pub mod memory;
 mod gpu_tests;
 
 pub use cache::{
-    cache_dir, cache_key, clear_kernel_cache, compile_cached, set_cache_dir, CacheLookup,
+    aot_key, cache_dir, cache_key, clear_kernel_cache, compile_cached, set_cache_dir, CacheLookup,
     CacheOutcome, KernelCache, CACHE_DIR_ENV,
 };
 pub use compile::{compile, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled};

@@ -192,8 +192,10 @@ pub struct CompileReport {
     pub source_bytes: usize,
     /// NVRTC time (0 on a cache hit).
     pub compile_ms: f64,
-    /// Whether the cubin came from the disk cache.
+    /// Whether the cubin came from the disk cache (or the ahead-of-time directory).
     pub cache_hit: bool,
+    /// Whether it came from the ahead-of-time directory (`aot`).
+    pub aot: bool,
     /// Time from the start of the first launch to a loaded module.
     pub total_ms: f64,
 }
@@ -227,21 +229,20 @@ fn loaded(
     let st = state(device, ordinal)?;
     let t0 = std::time::Instant::now();
     let src = cuda_source::assemble(info);
-    let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
-    let defines: &[(&str, &str)] = if contiguous {
-        &[("WP_CONTIGUOUS", "1")]
-    } else {
-        &[]
-    };
-    let opts = CompileOptions {
-        fmad: config::cuda_fmad(),
-        line_info: true,
-        defines,
-        headers: &headers,
-        ..Default::default()
-    };
-    let (compiled, outcome) = warp_cuda::compile_cached(&src.text, info.name, &opts, st.gpu.arch())
-        .map_err(|e| err(device, e))?;
+    let arch = st.gpu.arch();
+    let (compiled, outcome, aot) = with_compile_options(contiguous, |opts| {
+        // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
+        if let Some(cubin) = crate::aot::lookup(&src.text, info.name, opts, arch) {
+            let c = warp_cuda::Compiled {
+                cubin,
+                log: String::new(),
+                compile_ms: 0.0,
+            };
+            return Ok((c, CacheOutcome::Hit, true));
+        }
+        warp_cuda::compile_cached(&src.text, info.name, opts, arch).map(|(c, o)| (c, o, false))
+    })
+    .map_err(|e| err(device, e))?;
     let module = st
         .gpu
         .load_module(&compiled.cubin)
@@ -257,6 +258,7 @@ fn loaded(
             source_bytes: src.text.len(),
             compile_ms: compiled.compile_ms,
             cache_hit: matches!(outcome, CacheOutcome::Hit),
+            aot,
             total_ms: t0.elapsed().as_secs_f64() * 1e3,
         });
     let l = Arc::new(Loaded {
@@ -269,6 +271,24 @@ fn loaded(
         .unwrap_or_else(|p| p.into_inner())
         .insert(key, l.clone());
     Ok(l)
+}
+
+/// Calls `f` with the NVRTC options of a kernel translation unit (the runtime's and the
+/// ahead-of-time compiler's, which must agree for AOT entries to be found).
+pub(crate) fn with_compile_options<R>(contiguous: bool, f: impl FnOnce(&CompileOptions) -> R) -> R {
+    let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
+    let defines: &[(&str, &str)] = if contiguous {
+        &[("WP_CONTIGUOUS", "1")]
+    } else {
+        &[]
+    };
+    f(&CompileOptions {
+        fmad: config::cuda_fmad(),
+        line_info: true,
+        defines,
+        headers: &headers,
+        ..Default::default()
+    })
 }
 
 /// `wp::launch_t`.

@@ -16,6 +16,8 @@
 
 #![warn(missing_docs)]
 
+#[cfg(feature = "cuda")]
+pub mod aot;
 pub mod array;
 pub mod config;
 #[cfg(feature = "cuda")]

@@ -1,0 +1,130 @@
+//! Ahead-of-time compilation: cubins built before the program runs (from a build script, or a
+//! packaging step), so that no kernel is compiled at first launch and the running machine
+//! needs no NVRTC.
+//!
+//! [`compile`] runs NVRTC (no GPU needed: only `libnvrtc`) for each kernel, each listed
+//! architecture and both variants the runtime may launch (arrays all contiguous, or not),
+//! and writes the cubins to a directory. At run time, when that directory is named by
+//! [`set_aot_dir`] or `WARP_LANG_AOT_DIR`, a first launch looks there before the kernel
+//! cache and before NVRTC. Entries are keyed by the generated source, the compile options
+//! (including `config::cuda_fmad`, which must be the same at both times) and the architecture;
+//! one that is missing or damaged falls back to the ordinary path.
+//!
+//! From a build script of the crate that launches the kernels (the crate defining them is a
+//! build-dependency):
+//! ```no_run
+//! # mod my_kernels { use warp_lang as wp; use wp::prelude::*;
+//! #   #[wp::kernel] pub fn integrate(x: Array<f32>) { let i = tid(); x[i] += 1.0; } }
+//! use warp_lang as wp;
+//! let dir = std::path::Path::new(&std::env::var("CARGO_MANIFEST_DIR").unwrap()).join("kernels");
+//! // sm_90 (H100, H200) and sm_80 (A100).
+//! let built = wp::aot::compile(&[wp::aot::kernel(my_kernels::integrate)], &[90, 80], &dir)
+//!     .expect("NVRTC");
+//! println!("cargo:rustc-env=WARP_LANG_AOT_DIR_BUILT={}", dir.display());
+//! # let _ = built;
+//! ```
+//! and at start-up: `wp::aot::set_aot_dir(Some(env!("WARP_LANG_AOT_DIR_BUILT").into()))`.
+
+use crate::cuda_source;
+use crate::error::{Error, Result};
+use crate::kernel::{Kernel, KernelInfo};
+use std::path::{Path, PathBuf};
+use std::sync::RwLock;
+use warp_cuda::{CacheLookup, CompileOptions, KernelCache};
+
+/// Environment variable naming the ahead-of-time directory; wins over [`set_aot_dir`].
+pub const AOT_DIR_ENV: &str = "WARP_LANG_AOT_DIR";
+
+static AOT_DIR: RwLock<Option<PathBuf>> = RwLock::new(None);
+
+/// Sets (or with `None` clears) the directory where first launches look for ahead-of-time
+/// cubins. `WARP_LANG_AOT_DIR`, when set and not empty, wins.
+pub fn set_aot_dir(dir: Option<PathBuf>) {
+    *AOT_DIR.write().unwrap_or_else(|p| p.into_inner()) = dir;
+}
+
+/// The ahead-of-time directory in effect, if any.
+pub fn aot_dir() -> Option<PathBuf> {
+    match std::env::var_os(AOT_DIR_ENV) {
+        Some(v) if !v.is_empty() => Some(PathBuf::from(v)),
+        _ => AOT_DIR.read().unwrap_or_else(|p| p.into_inner()).clone(),
+    }
+}
+
+/// The static description of a kernel, for [`compile`]: `wp::aot::kernel(integrate)`.
+pub fn kernel<K: Kernel>(kernel: K) -> &'static KernelInfo {
+    let _ = kernel;
+    K::info()
+}
+
+/// One cubin written by [`compile`].
+#[derive(Clone, Debug)]
+pub struct AotEntry {
+    /// The kernel.
+    pub kernel: &'static str,
+    /// The architecture (major * 10 + minor).
+    pub arch: u32,
+    /// Whether this is the variant for launches whose arrays are all contiguous.
+    pub contiguous: bool,
+    /// Where it was written.
+    pub path: PathBuf,
+    /// NVRTC time.
+    pub compile_ms: f64,
+}
+
+/// Compiles `kernels` for every architecture in `archs` (both launch variants each) into
+/// `dir`, creating it. Needs NVRTC, not a GPU.
+///
+/// # Errors
+/// [`Error::Cuda`] (device `"nvrtc"`) when NVRTC is missing, rejects an architecture, or
+/// fails on a kernel, or when `dir` cannot be written.
+pub fn compile(
+    kernels: &[&'static KernelInfo],
+    archs: &[u32],
+    dir: &Path,
+) -> Result<Vec<AotEntry>> {
+    let err = |e: warp_cuda::CudaError| Error::Cuda {
+        device: "nvrtc".into(),
+        message: e.to_string(),
+    };
+    let cache = KernelCache::new(dir);
+    let mut out = Vec::new();
+    for info in kernels {
+        let src = cuda_source::assemble(info);
+        for &arch in archs {
+            for contiguous in [true, false] {
+                let entry = crate::cuda::with_compile_options(contiguous, |opts| {
+                    let compiled = warp_cuda::compile(&src.text, info.name, opts, arch)?;
+                    let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
+                    let path = cache.store(info.name, key, &compiled.cubin)?;
+                    Ok(AotEntry {
+                        kernel: info.name,
+                        arch,
+                        contiguous,
+                        path,
+                        compile_ms: compiled.compile_ms,
+                    })
+                })
+                .map_err(err)?;
+                out.push(entry);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The ahead-of-time cubin for this compile, when an AOT directory is set and holds a sound
+/// entry for it.
+pub(crate) fn lookup(
+    source: &str,
+    name: &str,
+    opts: &CompileOptions,
+    arch: u32,
+) -> Option<Vec<u8>> {
+    let dir = aot_dir()?;
+    let key = warp_cuda::aot_key(source, name, opts, arch);
+    match KernelCache::new(dir).load(name, key) {
+        CacheLookup::Hit(cubin) => Some(cubin),
+        CacheLookup::Absent | CacheLookup::Damaged => None,
+    }
+}
