@@ -396,15 +396,18 @@ fn first_launch() {
     let dir = std::env::temp_dir().join(format!("warp-lang-bench-cache-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let me = std::env::current_exe().unwrap();
-    let run = || {
+    let run_mode = |mode: &str| {
         let out = Command::new(&me)
-            .arg("--first-launch-child")
+            .arg(mode)
             .env("WARP_LANG_CACHE_DIR", &dir)
             .output()
             .unwrap();
         String::from_utf8_lossy(&out.stdout).trim().to_string()
     };
+    let run = || run_mode("--first-launch-child");
     let (cold, warm) = (run(), run());
+    let parts = run_mode("--first-launch-parts");
+    let parts: Vec<&str> = parts.split_whitespace().collect();
     let cold: Vec<&str> = cold.split_whitespace().collect();
     let warm: Vec<&str> = warm.split_whitespace().collect();
     println!(
@@ -412,12 +415,43 @@ fn first_launch() {
          targets: cold <= 150 ms, warm <= 10 ms",
         cold[0], cold[1], cold[2], cold[3], warm[0], warm[3]
     );
+    println!(
+        "  warm first launch, in parts (another fresh process): opening the GPU and two arrays {} ms \
+         (before the timed launch), loading NVRTC {} ms, launch {} ms",
+        parts[0], parts[1], parts[2]
+    );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Times the steps of a warm first launch in a fresh process (the child mode
+/// `--first-launch-parts`): opening the GPU, loading NVRTC (to key the cache), and the launch.
+fn first_launch_parts_child() {
+    let t = Instant::now();
+    let dev = wp::get_device("cuda:0").unwrap();
+    let x = wp::Array::<Vec3>::zeros(1024, &dev).unwrap();
+    let v = wp::Array::<Vec3>::zeros(1024, &dev).unwrap();
+    let open = ms(t);
+    let t = Instant::now();
+    let _ = warp_cuda::nvrtc_version();
+    let nvrtc = ms(t);
+    let t = Instant::now();
+    wp::launch(
+        integrate,
+        1024,
+        (&x, &v, 0.05, 0.1, Vec3::new(0.0, 0.0, -9.81), 0.04),
+        &dev,
+    )
+    .unwrap();
+    wp::synchronize().unwrap();
+    println!("{open:.2} {nvrtc:.2} {:.2}", ms(t));
 }
 
 fn main() {
     if std::env::args().any(|a| a == "--first-launch-child") {
         return first_launch_child();
+    }
+    if std::env::args().any(|a| a == "--first-launch-parts") {
+        return first_launch_parts_child();
     }
     let dev = match wp::get_device("cuda:0") {
         Ok(d) => d,

@@ -330,7 +330,10 @@ impl KernelCache {
         for entry in entries.flatten() {
             let name = entry.file_name();
             let name = name.to_string_lossy();
-            if name.ends_with(".cubin") || name.contains(".cubin.tmp.") {
+            if name.ends_with(".cubin")
+                || name.contains(".cubin.tmp.")
+                || name.starts_with("nvrtc-version")
+            {
                 match fs::remove_file(entry.path()) {
                     Ok(()) => removed += 1,
                     Err(e) if e.kind() == ErrorKind::NotFound => {}
@@ -346,7 +349,41 @@ impl KernelCache {
         Ok(removed)
     }
 
+    /// Path of the stamp recording the NVRTC version that last compiled into this cache.
+    fn stamp_path(&self) -> PathBuf {
+        self.dir.join("nvrtc-version")
+    }
+
+    /// The NVRTC version in the stamp, if it is there and well formed.
+    fn read_stamp(&self) -> Option<(i32, i32)> {
+        let text = fs::read_to_string(self.stamp_path()).ok()?;
+        let (major, minor) = text.trim().split_once('.')?;
+        Some((major.parse().ok()?, minor.parse().ok()?))
+    }
+
+    /// Records `version` as the NVRTC of this cache (atomically; failures are ignored: the
+    /// stamp only saves time).
+    fn write_stamp(&self, version: (i32, i32)) {
+        if self.read_stamp() == Some(version) {
+            return;
+        }
+        let tmp = self
+            .dir
+            .join(format!("nvrtc-version.tmp.{}", unique_suffix()));
+        let text = format!("{}.{}\n", version.0, version.1);
+        if fs::write(&tmp, text).is_err() || fs::rename(&tmp, self.stamp_path()).is_err() {
+            let _ = fs::remove_file(&tmp);
+        }
+    }
+
     /// Returns the cubin for this compile from the cache, or compiles and stores it.
+    ///
+    /// Loading NVRTC only to learn its version (part of the key) costs about 10 ms, nearly all
+    /// of a warm first launch, so the cache first tries the key under the version recorded in
+    /// its stamp by the last compile. A hit there never loads NVRTC. After a toolkit upgrade,
+    /// such hits keep serving cubins of the previous NVRTC (valid: a cubin runs on any newer
+    /// driver) until the first miss loads the new NVRTC and rewrites the stamp; from then on
+    /// every kernel is keyed, and rebuilt, under the new version.
     ///
     /// A failure to write the entry is ignored (the compile result is still returned): a
     /// read-only cache must not stop kernels from running.
@@ -357,7 +394,19 @@ impl KernelCache {
         opts: &CompileOptions,
         arch: u32,
     ) -> Result<(Compiled, CacheOutcome)> {
-        let key = cache_key(source, name, opts, arch, nvrtc_version()?);
+        if let Some(stamped) = self.read_stamp() {
+            let key = cache_key(source, name, opts, arch, stamped);
+            if let CacheLookup::Hit(cubin) = self.load(name, key) {
+                let compiled = Compiled {
+                    cubin,
+                    log: String::new(),
+                    compile_ms: 0.0,
+                };
+                return Ok((compiled, CacheOutcome::Hit));
+            }
+        }
+        let version = nvrtc_version()?;
+        let key = cache_key(source, name, opts, arch, version);
         let outcome = match self.load(name, key) {
             CacheLookup::Hit(cubin) => {
                 return Ok((
@@ -373,7 +422,9 @@ impl KernelCache {
             CacheLookup::Damaged => CacheOutcome::Rebuilt,
         };
         let compiled = compile(source, name, opts, arch)?;
-        let _ = self.store(name, key, &compiled.cubin);
+        if self.store(name, key, &compiled.cubin).is_ok() {
+            self.write_stamp(version);
+        }
         Ok((compiled, outcome))
     }
 }
@@ -603,9 +654,38 @@ pub(crate) mod tests {
         c.store("b", 2, b"y").unwrap();
         fs::write(t.0.join("a-1.cubin.tmp.1.2"), b"").unwrap();
         fs::write(t.0.join("notes.txt"), b"keep").unwrap();
-        assert_eq!(c.clear().unwrap(), 3);
+        c.write_stamp((13, 0));
+        assert_eq!(c.clear().unwrap(), 4);
         assert_eq!(files(&t.0), ["notes.txt"]);
         assert_eq!(KernelCache::new(t.0.join("missing")).clear().unwrap(), 0);
+    }
+
+    /// A warm cache serves a hit under the NVRTC version of its stamp without loading NVRTC
+    /// (this test passes on machines without NVRTC); a damaged stamp is ignored.
+    #[test]
+    fn stamped_version_hits_without_nvrtc() {
+        let t = TempDir::new("stamp");
+        let c = KernelCache::new(&t.0);
+        let opts = CompileOptions::default();
+        let stamped = (99, 7);
+        let key = cache_key("src", "k", &opts, 90, stamped);
+        c.store("k", key, b"cubin bytes").unwrap();
+        c.write_stamp(stamped);
+        assert_eq!(c.read_stamp(), Some(stamped));
+        let (compiled, outcome) = c.compile_cached("src", "k", &opts, 90).unwrap();
+        assert_eq!(
+            (compiled.cubin.as_slice(), outcome),
+            (&b"cubin bytes"[..], CacheOutcome::Hit)
+        );
+        // Another source under the stamp misses and goes to NVRTC (an error where there is
+        // none, never a wrong cubin).
+        if nvrtc_version().is_err() {
+            assert!(c.compile_cached("other", "k", &opts, 90).is_err());
+        }
+        for bad in ["", "13", "x.y", "13.0.1"] {
+            fs::write(c.stamp_path(), bad).unwrap();
+            assert_eq!(c.read_stamp(), None, "{bad:?}");
+        }
     }
 
     #[test]
