@@ -18,7 +18,7 @@ pub mod view;
 pub use fault::{Fault, FaultKind, KResult};
 pub use grid::Grid;
 pub use index::KernelIndex;
-pub use meta::FuncInfo;
+pub use meta::{FuncInfo, StructDefs};
 pub use range::RangeProg;
 pub use view::ArrayView;
 

@@ -17,6 +17,11 @@ pub struct FuncInfo {
     pub sections: &'static [&'static str],
     /// The funcs it calls, in the order of the `@@F<k>@@` placeholders.
     pub callees: &'static [&'static FuncInfo],
-    /// C++ definitions of the user structs its parameters use.
-    pub structs: &'static [&'static str],
+    /// The user structs its parameters use: each adds its C++ definition, after those of the
+    /// structs its fields use, to the list (once).
+    pub structs: &'static [StructDefs],
 }
+
+/// Adds a user struct's C++ definition to a list, after the definitions it depends on, each
+/// once (`CudaStruct::cuda_defs` in the runtime).
+pub type StructDefs = fn(&mut Vec<&'static str>);

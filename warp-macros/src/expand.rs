@@ -134,7 +134,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     cuda: #cuda_src,
                     cuda_sections: &[#(#cuda_sections),*],
                     callees: &[#(&#callees::__WP_FUNC),*],
-                    structs: &[#(<#struct_tys as __wp::CudaStruct>::CUDA_DEF),*],
+                    structs: &[#(<#struct_tys as __wp::CudaStruct>::cuda_defs),*],
                 };
                 unsafe fn cpu_params(
                     __args: &Self::Args<'_>,
@@ -355,7 +355,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             cuda_ret: #cuda_ret,
             sections: &[#(#cuda_sections),*],
             callees: &[#(&#callees::__WP_FUNC),*],
-            structs: &[#(<#struct_tys as ::warp_lang::__private::CudaStruct>::CUDA_DEF),*],
+            structs: &[#(<#struct_tys as ::warp_lang::__private::CudaStruct>::cuda_defs),*],
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
@@ -447,6 +447,17 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
     }
     def.push_str(" };");
     let cuda_def = Literal::string(&def);
+    // Fields of user struct types: their definitions come first.
+    let nested: Vec<&syn::Type> = fields
+        .iter()
+        .copied()
+        .filter(|t| {
+            matches!(
+                crate::front::signature::parse_type(t),
+                Ok(crate::types::Ty::Struct(_))
+            )
+        })
+        .collect();
     let field_asserts = fields
         .iter()
         .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
@@ -468,6 +479,12 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             }
             impl __wp::CudaStruct for #name {
                 const CUDA_DEF: &'static str = #cuda_def;
+                fn cuda_defs(out: &mut ::std::vec::Vec<&'static str>) {
+                    #( <#nested as __wp::CudaStruct>::cuda_defs(out); )*
+                    if !out.contains(&Self::CUDA_DEF) {
+                        out.push(Self::CUDA_DEF);
+                    }
+                }
             }
             impl __wp::KernelArg for #name {
                 type Arg<'a> = #name;

@@ -78,12 +78,11 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
     for h in &headers {
         text.push_str(&format!("#include \"{h}\"\n"));
     }
-    // User structs, each once, in the order first met (callees first).
+    // User structs, each once, in the order first met (callees first), a struct after those
+    // its fields use.
     let mut structs: Vec<&str> = Vec::new();
-    for def in funcs.iter().flat_map(|f| f.structs).chain(info.structs) {
-        if !structs.contains(def) {
-            structs.push(def);
-        }
+    for defs in funcs.iter().flat_map(|f| f.structs).chain(info.structs) {
+        defs(&mut structs);
     }
     for def in structs {
         text.push_str(def);

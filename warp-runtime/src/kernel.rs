@@ -99,14 +99,22 @@ pub struct KernelInfo {
     pub cuda_sections: &'static [&'static str],
     /// The funcs the kernel calls, in the order of its `@@F<k>@@` placeholders.
     pub callees: &'static [&'static warp_core::FuncInfo],
-    /// C++ definitions of the user structs its parameters use.
-    pub structs: &'static [&'static str],
+    /// The user structs its parameters use (see [`CudaStruct::cuda_defs`]).
+    pub structs: &'static [warp_core::StructDefs],
 }
 
 /// A `#[derive(Struct)]` struct's C++ definition, for CUDA kernels that take it.
 pub trait CudaStruct {
     /// `struct Name { ... };`, field for field.
     const CUDA_DEF: &'static str;
+    /// Adds the definitions of the user structs this one's fields use (recursively), then
+    /// [`CudaStruct::CUDA_DEF`], each only if absent: C++ needs a struct defined before a
+    /// field of its type.
+    fn cuda_defs(out: &mut Vec<&'static str>) {
+        if !out.contains(&Self::CUDA_DEF) {
+            out.push(Self::CUDA_DEF);
+        }
+    }
 }
 
 /// A compiled kernel. Implemented by `#[kernel]`; not meant to be implemented by hand.
