@@ -26,6 +26,30 @@
 //! }
 //! ```
 //!
+//! Gradients: give arrays a gradient, record launches on a [`Tape`], run backward.
+//!
+//! ```
+//! use warp_lang as wp;
+//! use wp::prelude::*;
+//!
+//! #[wp::kernel]
+//! fn square_sum(x: Array<f32>, loss: Array<f32>) {
+//!     let i = tid();
+//!     atomic_add(loss, 0, x[i] * x[i]);
+//! }
+//!
+//! let dev = wp::cpu();
+//! let x = wp::Array::from_slice(&[1.0f32, 2.0, 3.0], &dev).unwrap().with_grad().unwrap();
+//! let loss = wp::Array::<f32>::zeros(1, &dev).unwrap().with_grad().unwrap();
+//! let tape = wp::Tape::new();
+//! {
+//!     let _rec = tape.record();
+//!     wp::launch(square_sum, 3, (&x, &loss), &dev).unwrap();
+//! }
+//! tape.backward(&loss).unwrap();
+//! assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, 4.0, 6.0]);
+//! ```
+//!
 //! - `#[kernel]` turns a function into a kernel launched over a 1-D to 4-D grid with
 //!   [`launch`]; `#[func]` makes a function callable from kernels; `#[derive(Struct)]` makes a
 //!   `#[repr(C)]` struct a kernel argument and array element.
@@ -48,9 +72,12 @@ pub use warp_runtime::aot;
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
 pub use warp_runtime::{
+    autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
+};
+pub use warp_runtime::{
     cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch,
     synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel,
-    KernelArg, KernelInfo, Result, Runtime,
+    KernelArg, KernelInfo, Recording, Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
@@ -70,7 +97,10 @@ pub mod prelude {
 pub mod __private {
     pub use bytemuck;
     pub use glam;
-    pub use warp_core::{builtins, max_depth, ops, ArrayView, FuncInfo, Grid, KResult, RangeProg};
+    pub use warp_core::{
+        adjoint, builtins, max_depth, ops, zero_like, AdStack, ArrayView, FuncInfo, GradElement,
+        GradView, Grid, KResult, RangeProg,
+    };
     pub use warp_runtime::{
         ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Result,
     };

@@ -161,6 +161,7 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         ),
         FaultKind::DivisionByZero => (2, -1, 0, vec![], vec![]),
         FaultKind::BadStep { step } => (3, -1, 1, vec![*step], vec![]),
+        FaultKind::AdStackOverflow { .. } => unreachable!("forward library calls never push"),
     };
     for v in [kind, arg, ndim] {
         t.push(Tok::Int(v as u64));

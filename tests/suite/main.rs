@@ -70,6 +70,7 @@ mod builtins;
 mod control;
 mod errors;
 mod funcs;
+mod grad;
 mod launch;
 mod params;
 mod streams;

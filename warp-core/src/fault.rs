@@ -37,6 +37,14 @@ pub enum FaultKind {
         /// The step given.
         step: i64,
     },
+    /// The reverse sweep of an adjoint kernel needed more per-thread stack than configured
+    /// (`wp::config::set_adstack_bytes`).
+    AdStackOverflow {
+        /// The kernel source line whose value did not fit.
+        line: u32,
+        /// The capacity in bytes.
+        capacity: usize,
+    },
 }
 
 impl Fault {
@@ -58,6 +66,13 @@ impl fmt::Display for Fault {
             FaultKind::DivisionByZero => {
                 write!(f, "kernel `{}`: integer division by zero", self.kernel)
             }
+            FaultKind::AdStackOverflow { line, capacity } => write!(
+                f,
+                "kernel `{}`: backward needs more than the {capacity} bytes of per-thread \
+                 stack configured for loop values (at line {line}); raise it with \
+                 wp::config::set_adstack_bytes",
+                self.kernel
+            ),
             FaultKind::BadStep { step } => write!(
                 f,
                 "kernel `{}`: step_by({step}) in a range loop: the step must be positive",

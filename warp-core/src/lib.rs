@@ -6,8 +6,10 @@
 //! wrapping semantics, range loops as arithmetic progressions, the builtin functions and CPU
 //! atomics. Nothing here allocates or talks to a device: that is `warp-runtime`'s job.
 
+pub mod adjoint;
 pub mod builtins;
 pub mod fault;
+pub mod grad;
 pub mod grid;
 pub mod index;
 pub mod meta;
@@ -16,6 +18,7 @@ pub mod range;
 pub mod view;
 
 pub use fault::{Fault, FaultKind, KResult};
+pub use grad::{zero_like, AdStack, GradElement, GradView};
 pub use grid::Grid;
 pub use index::KernelIndex;
 pub use meta::{FuncInfo, StructDefs};

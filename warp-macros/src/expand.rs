@@ -111,6 +111,36 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     let (cuda_src, cuda_sections, _) = cuda_template(&f);
     let callees = &f.callees;
     let struct_tys = struct_types(&f);
+    // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
+    // does not handle yet becomes an error that backward reports.
+    let adjoint = if opts.disable_backward {
+        Err("was declared with #[kernel(enable_backward = false)]".to_string())
+    } else {
+        crate::back::rust_adjoint::emit(&f)
+    };
+    let (adjoint_body, adjoint_error) = match adjoint {
+        Ok(body) => (body, quote!(::core::option::Option::None)),
+        Err(why) => {
+            let why = Literal::string(&why);
+            (quote!(), quote!(::core::option::Option::Some(#why)))
+        }
+    };
+    let grad_pats: Vec<TokenStream> = f
+        .params
+        .iter()
+        .map(|p| {
+            if matches!(p.ty, crate::types::Ty::Array(..)) {
+                let v = em.var(p.var);
+                let a = quote::format_ident!("adj_{}", v);
+                quote!(#a)
+            } else {
+                quote!(_)
+            }
+        })
+        .collect();
+    let grad_names: Vec<syn::Ident> = (0..f.params.len())
+        .map(|k| quote::format_ident!("__grad{}", k))
+        .collect();
 
     let out = quote! {
         #(#doc_attrs)*
@@ -135,7 +165,64 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     cuda_sections: &[#(#cuda_sections),*],
                     callees: &[#(&#callees::__WP_FUNC),*],
                     structs: &[#(<#struct_tys as __wp::CudaStruct>::cuda_defs),*],
+                    adjoint_error: #adjoint_error,
                 };
+                type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
+                unsafe fn cpu_grads(
+                    __args: &Self::Args<'_>,
+                    __device: &__wp::Device,
+                ) -> __wp::Result<Self::CpuGrads> {
+                    // SAFETY: forwarded contract: the views do not outlive `__args`.
+                    ::core::result::Result::Ok(( #( unsafe {
+                        <#tys as __wp::KernelArg>::grad_view(
+                            &__args.#idx,
+                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
+                        )?
+                    }, )* ))
+                }
+                type Owned = ( #( <#tys as __wp::KernelArg>::Owned, )* );
+                #[allow(clippy::unused_unit)]
+                fn own(__args: &Self::Args<'_>) -> Self::Owned {
+                    ( #( <#tys as __wp::KernelArg>::own(&__args.#idx), )* )
+                }
+                #[allow(clippy::unused_unit)]
+                fn borrow(__owned: &Self::Owned) -> Self::Args<'_> {
+                    ( #( <#tys as __wp::KernelArg>::borrow(&__owned.#idx), )* )
+                }
+                fn zero_grads(__args: &Self::Args<'_>) -> __wp::Result<()> {
+                    #( <#tys as __wp::KernelArg>::zero_grad(&__args.#idx)?; )*
+                    ::core::result::Result::Ok(())
+                }
+                fn run_cpu_adjoint(
+                    __params: &Self::CpuParams,
+                    __grads: &Self::CpuGrads,
+                    __grid: &__wp::Grid,
+                    __range: ::core::ops::Range<usize>,
+                    __stack: &mut __wp::AdStack,
+                ) -> __wp::KResult<()> {
+                    #[inline(always)]
+                    #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+                    fn __adj_thread(
+                        #( mut #pnames_plain: <#tys as __wp::KernelArg>::CpuView, )*
+                        #( #grad_pats: <#tys as __wp::KernelArg>::GradView, )*
+                        __grid: &__wp::Grid,
+                        __flat: usize,
+                        __stack: &mut __wp::AdStack,
+                    ) -> __wp::KResult<()> {
+                        const __FAST: bool = false;
+                        #tid_setup
+                        #adjoint_body
+                        ::core::result::Result::Ok(())
+                    }
+                    let ( #(#pnames_plain,)* ) = *__params;
+                    let ( #(#grad_names,)* ) = *__grads;
+                    let __grid = *__grid;
+                    for __flat in __range {
+                        __stack.clear();
+                        __adj_thread( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
+                    }
+                    ::core::result::Result::Ok(())
+                }
                 unsafe fn cpu_params(
                     __args: &Self::Args<'_>,
                     __device: &__wp::Device,
@@ -458,6 +545,15 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             )
         })
         .collect();
+    let members: Vec<syn::Member> = data
+        .fields
+        .iter()
+        .enumerate()
+        .map(|(k, f)| match &f.ident {
+            Some(i) => syn::Member::Named(i.clone()),
+            None => syn::Member::Unnamed(syn::Index::from(k)),
+        })
+        .collect();
     let field_asserts = fields
         .iter()
         .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
@@ -477,6 +573,20 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             impl __wp::Element for #name {
                 const TYPE_NAME: &'static str = #name_str;
             }
+            impl __wp::GradElement for #name {
+                unsafe fn grad_add(p: *mut Self, v: Self) {
+                    // SAFETY: field by field, forwarded contract (p is live and aligned).
+                    #( unsafe { <#fields as __wp::GradElement>::grad_add(::core::ptr::addr_of_mut!((*p).#members), v.#members) }; )*
+                }
+            }
+            impl __wp::adjoint::Adjoint for #name {
+                fn adj_zero() -> Self {
+                    <Self as __wp::bytemuck::Zeroable>::zeroed()
+                }
+                fn adj_accum(&mut self, v: Self) {
+                    #( <#fields as __wp::adjoint::Adjoint>::adj_accum(&mut self.#members, v.#members); )*
+                }
+            }
             impl __wp::CudaStruct for #name {
                 const CUDA_DEF: &'static str = #cuda_def;
                 fn cuda_defs(out: &mut ::std::vec::Vec<&'static str>) {
@@ -495,6 +605,17 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
                 type CudaArg = #name;
                 fn cuda_arg(arg: &Self::Arg<'_>, _ctx: &__wp::ArgCtx<'_>) -> __wp::Result<Self::CudaArg> {
                     ::core::result::Result::Ok(*arg)
+                }
+                type GradView = ();
+                unsafe fn grad_view(_: &Self::Arg<'_>, _: &__wp::ArgCtx<'_>) -> __wp::Result<()> {
+                    ::core::result::Result::Ok(())
+                }
+                type Owned = #name;
+                fn own(arg: &Self::Arg<'_>) -> #name {
+                    *arg
+                }
+                fn borrow(owned: &#name) -> #name {
+                    *owned
                 }
             }
         };

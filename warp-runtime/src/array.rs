@@ -30,7 +30,7 @@ use warp_core::ArrayView;
 /// vectors, matrices and quaternions that are `Pod` (not `Vec3A` or `Mat3A`, which have
 /// padding); `#[derive(Struct)]` implements it for user structs. `bool` is not an element: it is
 /// not `Pod`.
-pub trait Element: bytemuck::Pod + Send + Sync + 'static {
+pub trait Element: bytemuck::Pod + warp_core::GradElement + Send + Sync + 'static {
     /// The type's name as written in Rust (`"f32"`, `"Vec3"`), for messages and code generation.
     const TYPE_NAME: &'static str;
 }
@@ -310,6 +310,8 @@ impl<const N: usize> Iterator for Offsets<N> {
 /// the constructors are contiguous and row-major.
 pub struct Array<T: Element, const N: usize = 1> {
     storage: Arc<Storage>,
+    /// The gradient's storage (same size and layout as `storage`), when the array has one.
+    grad: Option<Arc<Storage>>,
     // In bytes rather than elements, so that a reinterpretation as a larger type can start at
     // any suitably aligned byte.
     byte_offset: usize,
@@ -323,6 +325,7 @@ impl<T: Element, const N: usize> Clone for Array<T, N> {
     fn clone(&self) -> Self {
         Array {
             storage: Arc::clone(&self.storage),
+            grad: self.grad.clone(),
             byte_offset: self.byte_offset,
             shape: self.shape,
             strides: self.strides,
@@ -342,6 +345,7 @@ impl<T: Element, const N: usize> Array<T, N> {
         let (_, bytes) = checked_size::<T>(&shape)?;
         Ok(Array {
             storage: alloc_zeroed::<T>(bytes, device)?,
+            grad: None,
             byte_offset: 0,
             shape,
             strides: row_major(&shape),
@@ -431,6 +435,42 @@ impl<T: Element, const N: usize> Array<T, N> {
             expected *= self.shape[d] as isize;
         }
         true
+    }
+
+    /// This array with a gradient: zeroed memory of the same layout on the same device, shared
+    /// by every clone and view made from the result (Warp's `requires_grad=True`). An array
+    /// that already has one keeps it.
+    pub fn with_grad(mut self) -> Result<Self> {
+        if self.grad.is_none() {
+            self.grad = Some(alloc_zeroed::<T>(self.storage.bytes(), &self.device)?);
+        }
+        Ok(self)
+    }
+
+    /// Whether the array has a gradient ([`with_grad`](Self::with_grad)).
+    pub fn requires_grad(&self) -> bool {
+        self.grad.is_some()
+    }
+
+    /// The gradient as an array of the same shape (sharing the gradient's memory), if any.
+    pub fn grad(&self) -> Option<Array<T, N>> {
+        self.grad.as_ref().map(|g| Array {
+            storage: Arc::clone(g),
+            grad: None,
+            byte_offset: self.byte_offset,
+            shape: self.shape,
+            strides: self.strides,
+            device: self.device.clone(),
+            _elem: PhantomData,
+        })
+    }
+
+    /// Sets the gradient to zero (nothing without one).
+    pub fn zero_grad(&self) -> Result<()> {
+        match self.grad() {
+            Some(g) => g.fill(T::zeroed()),
+            None => Ok(()),
+        }
     }
 
     /// True when `self` and `other` share storage (one is a clone or view of the other).
@@ -727,6 +767,7 @@ impl<T: Element, const N: usize> Array<T, N> {
         }
         Ok(Array {
             storage: Arc::clone(&self.storage),
+            grad: self.grad.clone(),
             byte_offset: self.byte_offset,
             shape,
             strides: row_major(&shape),
@@ -769,6 +810,7 @@ impl<T: Element, const N: usize> Array<T, N> {
         let len = bytes / u;
         Ok(Array {
             storage: Arc::clone(&self.storage),
+            grad: self.grad.clone(),
             byte_offset: self.byte_offset,
             shape: [len],
             strides: [1],
@@ -807,6 +849,7 @@ impl<T: Element> Array<T, 1> {
                 checked_size::<T>(&[len])?;
                 Ok(Array {
                     storage: Arc::new(Storage::Host(HostBuffer::from_vec(data)?)),
+                    grad: None,
                     byte_offset: 0,
                     shape: [len],
                     strides: [1],
@@ -833,6 +876,7 @@ impl<T: Element> Array<T, 2> {
         }
         Ok(Array {
             storage: Arc::clone(&self.storage),
+            grad: self.grad.clone(),
             byte_offset: self.offset_of_first(i),
             shape: [self.shape[1]],
             strides: [self.strides[1]],
@@ -918,6 +962,32 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
         })
     }
 
+    type GradView = warp_core::GradView<T, N>;
+
+    unsafe fn grad_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::GradView> {
+        arg.check_device(ctx)?;
+        Ok(match arg.grad() {
+            Some(g) if arg.device().is_cpu() => {
+                warp_core::GradView::new(g.cpu_view(ctx.kernel, ctx.arg))
+            }
+            _ => warp_core::GradView::none(),
+        })
+    }
+
+    fn zero_grad(arg: &Self::Arg<'_>) -> Result<()> {
+        arg.zero_grad()
+    }
+
+    type Owned = Array<T, N>;
+
+    fn own(arg: &Self::Arg<'_>) -> Self::Owned {
+        (*arg).clone()
+    }
+
+    fn borrow(owned: &Self::Owned) -> Self::Arg<'_> {
+        owned
+    }
+
     fn covers(arg: &Self::Arg<'_>, dims: &[usize; 4]) -> bool {
         (0..N).all(|d| arg.shape[d] >= dims[d])
     }
@@ -949,6 +1019,22 @@ macro_rules! value_kernel_args {
             #[inline(always)]
             fn cuda_arg(arg: &Self::Arg<'_>, _ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
                 Ok(*arg)
+            }
+
+            type GradView = ();
+
+            unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+                Ok(())
+            }
+
+            type Owned = $t;
+
+            fn own(arg: &Self::Arg<'_>) -> $t {
+                *arg
+            }
+
+            fn borrow(owned: &$t) -> $t {
+                *owned
             }
         }
     )*};

@@ -76,6 +76,22 @@ pub fn cpu_min_chunk() -> usize {
 }
 
 static CUDA_FMAD: AtomicBool = AtomicBool::new(true);
+static ADSTACK_BYTES: AtomicUsize = AtomicUsize::new(DEFAULT_ADSTACK_BYTES);
+
+/// The default of [`adstack_bytes`].
+pub const DEFAULT_ADSTACK_BYTES: usize = 4096;
+
+/// Sets the per-thread stack (in bytes) that adjoint kernels use to keep the values loops
+/// overwrite for the reverse sweep. A backward that needs more fails with a fault naming the
+/// kernel and the line; it never returns a wrong gradient.
+pub fn set_adstack_bytes(bytes: usize) {
+    ADSTACK_BYTES.store(bytes, Ordering::Relaxed);
+}
+
+/// The per-thread adjoint stack capacity in bytes (default [`DEFAULT_ADSTACK_BYTES`]).
+pub fn adstack_bytes() -> usize {
+    ADSTACK_BYTES.load(Ordering::Relaxed)
+}
 static CUDA_BLOCK_DIM: AtomicUsize = AtomicUsize::new(256);
 
 /// Lets NVRTC contract `a * b + c` into fused multiply-adds (the default, as nvcc does). Turn

@@ -437,6 +437,7 @@ static UNKNOWN: KernelInfo = KernelInfo {
     cuda_sections: &[],
     callees: &[],
     structs: &[],
+    adjoint_error: None,
 };
 
 /// Waits for every GPU used so far and reports the first recorded fault.

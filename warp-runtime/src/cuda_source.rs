@@ -162,6 +162,7 @@ mod tests {
             cuda_sections: &["vector"],
             callees: &KERNEL_CALLEES,
             structs: &[],
+            adjoint_error: None,
         };
         let src = assemble(&info);
         assert_eq!(src.headers, vec!["wp_core.h", "wp_scalar.h", "wp_vector.h"]);

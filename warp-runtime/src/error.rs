@@ -70,6 +70,14 @@ pub enum Error {
         /// Why it cannot be used.
         reason: String,
     },
+    /// Backward through a kernel that has no adjoint.
+    NotDifferentiable {
+        /// The kernel.
+        kernel: &'static str,
+        /// Why (a construct the reverse sweep does not handle yet, `enable_backward = false`,
+        /// or a device without adjoint support yet).
+        reason: String,
+    },
     /// A host-side API was called with unusable arguments (lengths that do not match a shape,
     /// a view range out of bounds, an impossible reinterpretation, ...).
     InvalidArgument {
@@ -151,6 +159,12 @@ impl fmt::Display for Error {
             Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
             Error::Cuda { device, message } => write!(f, "CUDA error on \"{device}\": {message}"),
             Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
+            Error::NotDifferentiable { kernel, reason } => {
+                write!(
+                    f,
+                    "cannot run backward through kernel `{kernel}`: it {reason}"
+                )
+            }
         }
     }
 }

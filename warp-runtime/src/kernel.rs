@@ -42,6 +42,27 @@ pub trait KernelArg: 'static {
     type CudaArg: Copy;
     /// Converts a host argument for a CUDA launch on `ctx.device`.
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg>;
+    /// What an adjoint kernel thread sees of this parameter's gradient on the CPU: a
+    /// [`GradView`](warp_core::GradView) for arrays, nothing for values (their adjoints stay
+    /// inside the thread).
+    type GradView: Copy + Send + Sync;
+    /// The gradient view of a host argument.
+    ///
+    /// # Safety
+    /// As [`KernelArg::cpu_view`].
+    #[doc(hidden)]
+    unsafe fn grad_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::GradView>;
+    /// An owned copy of a host argument (a handle for arrays), kept by a `Tape`.
+    type Owned: Send + Sync + 'static;
+    /// Makes the owned copy.
+    fn own(arg: &Self::Arg<'_>) -> Self::Owned;
+    /// The host argument again, from the owned copy.
+    fn borrow(owned: &Self::Owned) -> Self::Arg<'_>;
+    /// Zeroes an array argument's gradient (nothing for values or arrays without one).
+    fn zero_grad(arg: &Self::Arg<'_>) -> Result<()> {
+        let _ = arg;
+        Ok(())
+    }
     /// True when an array argument's extents are at least `dims` (always true for values).
     fn covers(arg: &Self::Arg<'_>, dims: &[usize; 4]) -> bool {
         let _ = (arg, dims);
@@ -101,6 +122,9 @@ pub struct KernelInfo {
     pub callees: &'static [&'static warp_core::FuncInfo],
     /// The user structs its parameters use (see [`CudaStruct::cuda_defs`]).
     pub structs: &'static [warp_core::StructDefs],
+    /// Why the kernel has no adjoint (a construct the reverse sweep does not handle yet, or
+    /// `enable_backward = false`); `None` when backward through it works.
+    pub adjoint_error: Option<&'static str>,
 }
 
 /// A `#[derive(Struct)]` struct's C++ definition, for CUDA kernels that take it.
@@ -146,6 +170,32 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     /// True when every array argument is contiguous: the GPU then runs a variant of the
     /// kernel whose strides are compile-time functions of the shape.
     fn arrays_contiguous(args: &Self::Args<'_>) -> bool;
+    /// Gradient views of the arguments for a CPU adjoint launch.
+    type CpuGrads: Copy + Send + Sync;
+    /// Converts the arguments' gradients for a CPU adjoint launch.
+    ///
+    /// # Safety
+    /// As [`KernelArg::cpu_view`].
+    #[doc(hidden)]
+    unsafe fn cpu_grads(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuGrads>;
+    /// The arguments, owned (array handles and values), as a `Tape` keeps them.
+    type Owned: Send + Sync + 'static;
+    /// Owns the arguments.
+    fn own(args: &Self::Args<'_>) -> Self::Owned;
+    /// Borrows owned arguments back.
+    fn borrow(owned: &Self::Owned) -> Self::Args<'_>;
+    /// Zeroes the gradients of the array arguments.
+    fn zero_grads(args: &Self::Args<'_>) -> Result<()>;
+    /// Runs the adjoint of threads `range` of `grid` on the CPU: each thread replays its
+    /// forward computation and accumulates gradients into the arrays' grads. `stack` is the
+    /// per-thread adjoint stack (cleared for each thread).
+    fn run_cpu_adjoint(
+        params: &Self::CpuParams,
+        grads: &Self::CpuGrads,
+        grid: &Grid,
+        range: std::ops::Range<usize>,
+        stack: &mut warp_core::AdStack,
+    ) -> KResult<()>;
     /// [`Kernel::INFO`] with a `'static` address (for fault reports after the launch).
     fn info() -> &'static KernelInfo;
     /// Runs threads `range` (flat indices) of `grid` on the CPU, in order, stopping at the

@@ -218,7 +218,7 @@ fn launch_with<K: Kernel>(
     let _ = (kernel, stream);
     let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
-    match device.kind() {
+    let result = match device.kind() {
         DeviceKind::Cpu => {
             // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
             let params = unsafe { K::cpu_params(&args, device)? };
@@ -238,7 +238,10 @@ fn launch_with<K: Kernel>(
             reason: "this build of warp-lang has no CUDA support (the `cuda` feature is off)"
                 .to_string(),
         }),
-    }
+    };
+    result?;
+    crate::tape::on_launch::<K>(&args, &grid, device);
+    Ok(())
 }
 
 /// Threads per rayon task: at least `min_chunk`, and about four tasks per pool thread so that
@@ -294,7 +297,30 @@ mod tests {
 
     /// The CUDA half of a hand-written test kernel that only runs on the CPU.
     macro_rules! cpu_only {
-        () => {
+        ($owned:ty, |$a:ident| $own:expr, |$o:ident| $borrow:expr) => {
+            type CpuGrads = ();
+            unsafe fn cpu_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
+                Ok(())
+            }
+            type Owned = $owned;
+            fn own($a: &Self::Args<'_>) -> Self::Owned {
+                $own
+            }
+            fn borrow($o: &Self::Owned) -> Self::Args<'_> {
+                $borrow
+            }
+            fn zero_grads(_: &Self::Args<'_>) -> Result<()> {
+                Ok(())
+            }
+            fn run_cpu_adjoint(
+                _: &Self::CpuParams,
+                _: &(),
+                _: &Grid,
+                _: std::ops::Range<usize>,
+                _: &mut warp_core::AdStack,
+            ) -> KResult<()> {
+                Ok(())
+            }
             type CudaParams = ();
             fn cuda_params(_: &Self::Args<'_>, device: &Device) -> Result<()> {
                 Err(Error::NoDevice {
@@ -326,7 +352,7 @@ mod tests {
     impl Kernel for write_flat {
         type Args<'a> = (&'a Array<u64>,);
         type CpuParams = (ArrayView<u64, 1>,);
-        cpu_only!();
+        cpu_only!((Array<u64>,), |a| (a.0.clone(),), |o| (&o.0,));
         const INFO: KernelInfo = KernelInfo {
             name: "write_flat",
             module: module_path!(),
@@ -338,6 +364,7 @@ mod tests {
             cuda_sections: &[],
             callees: &[],
             structs: &[],
+            adjoint_error: None,
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {
@@ -368,8 +395,8 @@ mod tests {
 
     impl Kernel for oob {
         type Args<'a> = (&'a Array<f32>, f32);
+        cpu_only!((Array<f32>, f32), |a| (a.0.clone(), a.1), |o| (&o.0, o.1));
         type CpuParams = (ArrayView<f32, 1>, f32);
-        cpu_only!();
         const INFO: KernelInfo = KernelInfo {
             name: "oob",
             module: module_path!(),
@@ -381,6 +408,7 @@ mod tests {
             cuda_sections: &[],
             callees: &[],
             structs: &[],
+            adjoint_error: None,
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let data = ArgCtx {
@@ -419,8 +447,8 @@ mod tests {
 
     impl Kernel for write_2d {
         type Args<'a> = (&'a Array<u64, 2>,);
+        cpu_only!((Array<u64, 2>,), |a| (a.0.clone(),), |o| (&o.0,));
         type CpuParams = (ArrayView<u64, 2>,);
-        cpu_only!();
         const INFO: KernelInfo = KernelInfo {
             name: "write_2d",
             module: module_path!(),
@@ -432,6 +460,7 @@ mod tests {
             cuda_sections: &[],
             callees: &[],
             structs: &[],
+            adjoint_error: None,
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {

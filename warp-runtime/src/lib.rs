@@ -19,6 +19,7 @@
 #[cfg(feature = "cuda")]
 pub mod aot;
 pub mod array;
+pub mod autograd;
 pub mod config;
 #[cfg(feature = "cuda")]
 pub mod cuda;
@@ -31,8 +32,10 @@ pub mod launch;
 pub mod pinned;
 #[cfg(feature = "cuda")]
 pub mod stream;
+pub mod tape;
 
 pub use array::{copy, Array, Element, IntoShape};
+pub use autograd::{gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;
 pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
@@ -46,3 +49,4 @@ pub use launch::{launch, synchronize, Dim};
 pub use pinned::PinnedVec;
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
+pub use tape::{Recording, Seed, Tape};

@@ -175,6 +175,14 @@ impl<'a> RustEmitter<'a> {
         }
     }
 
+    pub fn index_tokens(&self, index: &[VarId]) -> TokenStream {
+        self.index(index)
+    }
+
+    pub fn op_tokens(&self, op: &Op, ty: &Ty, sp: Span) -> TokenStream {
+        self.op(op, ty, sp)
+    }
+
     fn index(&self, index: &[VarId]) -> TokenStream {
         let vs: Vec<_> = index.iter().map(|v| self.var(*v)).collect();
         if vs.len() == 1 {

@@ -7,6 +7,9 @@ use syn::parse::Parser;
 pub struct KernelAttrs {
     /// `same_shape(a, b, dim)` groups: parameter names, `dim` for the launch dim.
     pub same_shape: Vec<Vec<syn::Ident>>,
+    /// `enable_backward = false`: no adjoint is generated; backward through the kernel is an
+    /// error.
+    pub disable_backward: bool,
 }
 
 /// Parses `#[kernel(same_shape(x, v, dim), ...)]`.
@@ -26,8 +29,14 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
             }
             out.same_shape.push(group);
             Ok(())
+        } else if meta.path.is_ident("enable_backward") {
+            let v: syn::LitBool = meta.value()?.parse()?;
+            out.disable_backward = !v.value;
+            Ok(())
         } else {
-            Err(meta.error("unknown kernel option; supported: same_shape(a, b, ..)"))
+            Err(meta.error(
+                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false",
+            ))
         }
     });
     parser.parse2(tokens)?;

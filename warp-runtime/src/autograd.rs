@@ -1,0 +1,249 @@
+//! Gradient checks: the Jacobian from a [`Tape`], the same by central differences, and a
+//! comparison of the two (Warp's `wp.autograd.jacobian`, `jacobian_fd`, `gradcheck`).
+//!
+//! The computation is a closure that runs the forward launches; it is called once under a
+//! tape and then twice per input element with that element nudged. Outputs are zeroed before
+//! every call, so kernels that accumulate into them (`atomic_add`) give the same result each
+//! time. Inputs and outputs are 1-D float arrays with gradients (`with_grad`).
+
+use crate::array::{Array, Element};
+use crate::error::{Error, Result};
+use crate::tape::{Seed, Tape};
+
+/// A float element type for gradient checks (f32, f64), with its default check settings.
+pub trait CheckFloat: Seed {
+    /// Converts to f64.
+    fn to_f64(self) -> f64;
+    /// Converts from f64 (rounding).
+    fn from_f64(v: f64) -> Self;
+    /// Default central-difference step and tolerances: see [`GradcheckOptions::for_type`].
+    const DEFAULTS: GradcheckOptions;
+}
+
+impl CheckFloat for f32 {
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+    // f32 has a unit roundoff of 6e-8: a difference quotient with step h carries a rounding
+    // error of about 6e-8 |f| / h, and a truncation error of about h^2 |f'''|. h = 1e-3 puts
+    // both near 1e-4 relative, so 1e-2 relative (1e-3 absolute near zero) still catches a wrong
+    // gradient while never flagging a right one (Warp uses the same values).
+    const DEFAULTS: GradcheckOptions = GradcheckOptions {
+        eps: 1e-3,
+        atol: 1e-3,
+        rtol: 1e-2,
+    };
+}
+
+impl CheckFloat for f64 {
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+    // f64: roundoff 1e-16 / h and truncation h^2: h = 1e-6 gives about 1e-10 each, so a
+    // relative tolerance of 1e-6 leaves a wide margin for functions of moderate curvature.
+    const DEFAULTS: GradcheckOptions = GradcheckOptions {
+        eps: 1e-6,
+        atol: 1e-8,
+        rtol: 1e-6,
+    };
+}
+
+/// Step and tolerances of [`gradcheck`]: an entry passes when
+/// `|analytic - numeric| <= atol + rtol * |numeric|`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GradcheckOptions {
+    /// Central-difference step.
+    pub eps: f64,
+    /// Absolute tolerance.
+    pub atol: f64,
+    /// Relative tolerance.
+    pub rtol: f64,
+}
+
+impl GradcheckOptions {
+    /// The defaults for element type `T` (f32: eps 1e-3, atol 1e-3, rtol 1e-2; f64: eps
+    /// 1e-6, atol 1e-8, rtol 1e-6; the reasons are in the source).
+    pub fn for_type<T: CheckFloat>() -> Self {
+        T::DEFAULTS
+    }
+}
+
+/// What [`gradcheck`] found.
+#[derive(Clone, Debug)]
+pub struct GradcheckReport {
+    /// Whether every entry was within tolerance.
+    pub passed: bool,
+    /// Largest |analytic - numeric|.
+    pub max_abs_error: f64,
+    /// Largest |analytic - numeric| / |numeric| over entries whose numeric value exceeds
+    /// `atol` (near zero, a difference quotient's rounding noise is all there is).
+    pub max_rel_error: f64,
+    /// The worst entry: (output element, input element, analytic, numeric).
+    pub worst: Option<(usize, usize, f64, f64)>,
+    /// The Jacobian from the tape (rows: output elements, columns: input elements).
+    pub analytic: Vec<Vec<f64>>,
+    /// The Jacobian by central differences.
+    pub numeric: Vec<Vec<f64>>,
+}
+
+fn check_arrays<T: Element>(inputs: &[&Array<T>], outputs: &[&Array<T>]) -> Result<()> {
+    if inputs.is_empty() || outputs.is_empty() {
+        return Err(Error::invalid(
+            "jacobian: needs at least one input and one output",
+        ));
+    }
+    for (what, a) in inputs
+        .iter()
+        .map(|a| ("input", a))
+        .chain(outputs.iter().map(|a| ("output", a)))
+    {
+        if !a.requires_grad() {
+            return Err(Error::invalid(format!(
+                "jacobian: an {what} of shape {:?} has no gradient (use .with_grad())",
+                a.shape()
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn zero_outputs<T: Element>(outputs: &[&Array<T>]) -> Result<()> {
+    outputs.iter().try_for_each(|o| o.fill(T::zeroed()))
+}
+
+fn set_element<T: CheckFloat>(a: &Array<T>, k: usize, v: T) -> Result<()> {
+    let mut host = a.to_vec()?;
+    host[k] = v;
+    a.copy_from(&Array::from_slice(&host, a.device())?)
+}
+
+/// The Jacobian of `outputs` with respect to `inputs` from reverse mode: one backward per
+/// output element (rows: output elements in order, columns: input elements in order).
+pub fn jacobian<T: CheckFloat>(
+    mut forward: impl FnMut() -> Result<()>,
+    inputs: &[&Array<T>],
+    outputs: &[&Array<T>],
+) -> Result<Vec<Vec<f64>>> {
+    check_arrays(inputs, outputs)?;
+    zero_outputs(outputs)?;
+    let tape = Tape::new();
+    {
+        let _rec = tape.record();
+        forward()?;
+    }
+    let mut rows = Vec::new();
+    for out in outputs {
+        for k in 0..out.len() {
+            tape.zero()?;
+            for a in inputs.iter().chain(outputs.iter()) {
+                a.zero_grad()?;
+            }
+            let g = out.grad().expect("checked");
+            let mut seed = vec![T::zeroed(); out.len()];
+            seed[k] = T::ONE;
+            g.copy_from(&Array::from_slice(&seed, g.device())?)?;
+            tape.backward_from_grads()?;
+            let mut row = Vec::new();
+            for a in inputs {
+                row.extend(
+                    a.grad()
+                        .expect("checked")
+                        .to_vec()?
+                        .into_iter()
+                        .map(T::to_f64),
+                );
+            }
+            rows.push(row);
+        }
+    }
+    Ok(rows)
+}
+
+/// The same Jacobian by central differences with step `eps`: the closure runs twice per input
+/// element, with the element at `x + eps` and `x - eps` (outputs zeroed before each run).
+pub fn jacobian_fd<T: CheckFloat>(
+    mut forward: impl FnMut() -> Result<()>,
+    inputs: &[&Array<T>],
+    outputs: &[&Array<T>],
+    eps: f64,
+) -> Result<Vec<Vec<f64>>> {
+    check_arrays(inputs, outputs)?;
+    let n_out: usize = outputs.iter().map(|o| o.len()).sum();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let run = |forward: &mut dyn FnMut() -> Result<()>| -> Result<Vec<f64>> {
+        zero_outputs(outputs)?;
+        forward()?;
+        let mut v = Vec::with_capacity(n_out);
+        for o in outputs {
+            v.extend(o.to_vec()?.into_iter().map(T::to_f64));
+        }
+        Ok(v)
+    };
+    for a in inputs {
+        for k in 0..a.len() {
+            let x = a.to_vec()?[k];
+            // The step actually taken, after rounding x +- eps to T.
+            let (hi, lo) = (T::from_f64(x.to_f64() + eps), T::from_f64(x.to_f64() - eps));
+            set_element(a, k, hi)?;
+            let f_hi = run(&mut forward)?;
+            set_element(a, k, lo)?;
+            let f_lo = run(&mut forward)?;
+            set_element(a, k, x)?;
+            let h = hi.to_f64() - lo.to_f64();
+            cols.push(f_hi.iter().zip(&f_lo).map(|(p, m)| (p - m) / h).collect());
+        }
+    }
+    // Transpose columns (one per input element) into rows (one per output element).
+    Ok((0..n_out)
+        .map(|r| cols.iter().map(|c| c[r]).collect())
+        .collect())
+}
+
+/// Compares [`jacobian`] with [`jacobian_fd`] under `opts` (use
+/// [`GradcheckOptions::for_type`] for the defaults). The forward closure is run again at the
+/// end, so outputs hold the unperturbed result afterwards.
+pub fn gradcheck<T: CheckFloat>(
+    mut forward: impl FnMut() -> Result<()>,
+    inputs: &[&Array<T>],
+    outputs: &[&Array<T>],
+    opts: GradcheckOptions,
+) -> Result<GradcheckReport> {
+    let analytic = jacobian(&mut forward, inputs, outputs)?;
+    let numeric = jacobian_fd(&mut forward, inputs, outputs, opts.eps)?;
+    zero_outputs(outputs)?;
+    forward()?;
+    let mut report = GradcheckReport {
+        passed: true,
+        max_abs_error: 0.0,
+        max_rel_error: 0.0,
+        worst: None,
+        analytic,
+        numeric,
+    };
+    let mut worst_excess = f64::NEG_INFINITY;
+    for (r, (ra, rn)) in report.analytic.iter().zip(&report.numeric).enumerate() {
+        for (c, (&a, &n)) in ra.iter().zip(rn).enumerate() {
+            let err = (a - n).abs();
+            let err = if err.is_nan() { f64::INFINITY } else { err };
+            report.max_abs_error = report.max_abs_error.max(err);
+            if n.abs() > opts.atol {
+                report.max_rel_error = report.max_rel_error.max(err / n.abs());
+            }
+            let excess = err - (opts.atol + opts.rtol * n.abs());
+            if excess > 0.0 {
+                report.passed = false;
+            }
+            if excess > worst_excess {
+                worst_excess = excess;
+                report.worst = Some((r, c, a, n));
+            }
+        }
+    }
+    Ok(report)
+}

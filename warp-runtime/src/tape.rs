@@ -1,0 +1,243 @@
+//! Reverse-mode differentiation over launches: [`Tape`].
+//!
+//! While a tape is recording on a thread (`let _rec = tape.record();`), every kernel launch
+//! made on that thread is recorded with its arguments (array handles, values). `backward`
+//! seeds the loss's gradient with one and runs the recorded launches' adjoints in reverse
+//! order: each adjoint replays its thread's forward computation and accumulates into the
+//! gradients of the arrays it read (`Array::with_grad`). Gradients accumulate: a second
+//! backward without [`Tape::zero`] adds to the first.
+
+use crate::array::{Array, Element};
+use crate::config;
+use crate::device::{Device, DeviceKind};
+use crate::error::{Error, Result};
+use crate::kernel::Kernel;
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::marker::PhantomData;
+use std::rc::{Rc, Weak};
+use warp_core::{AdStack, Grid};
+
+type Thunk = Box<dyn Fn() -> Result<()>>;
+
+/// One recorded step.
+struct Record {
+    /// What the step was (a kernel's name, or "custom").
+    name: &'static str,
+    backward: Thunk,
+    zero: Thunk,
+}
+
+#[derive(Default)]
+struct TapeInner {
+    records: Vec<Record>,
+}
+
+thread_local! {
+    /// The tapes recording on this thread, innermost last.
+    static RECORDING: RefCell<Vec<Weak<RefCell<TapeInner>>>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Records launches for reverse-mode differentiation (Warp's `wp.Tape`).
+///
+/// (This example runs as a doctest of the `warp-lang` crate, which re-exports the tape.)
+/// ```ignore
+/// use warp_lang as wp;
+/// use wp::prelude::*;
+///
+/// #[wp::kernel]
+/// fn square_sum(x: Array<f32>, loss: Array<f32>) {
+///     let i = tid();
+///     atomic_add(loss, 0, x[i] * x[i]);
+/// }
+///
+/// let dev = wp::cpu();
+/// let x = wp::Array::from_slice(&[1.0f32, 2.0, 3.0], &dev).unwrap().with_grad().unwrap();
+/// let loss = wp::Array::<f32>::zeros(1, &dev).unwrap().with_grad().unwrap();
+/// let tape = wp::Tape::new();
+/// {
+///     let _rec = tape.record();
+///     wp::launch(square_sum, 3, (&x, &loss), &dev).unwrap();
+/// }
+/// tape.backward(&loss).unwrap();
+/// assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, 4.0, 6.0]);
+/// ```
+#[derive(Default)]
+pub struct Tape {
+    inner: Rc<RefCell<TapeInner>>,
+}
+
+/// While alive, launches on this thread are recorded on the tape (see [`Tape::record`]).
+pub struct Recording<'t> {
+    inner: Weak<RefCell<TapeInner>>,
+    _tape: PhantomData<&'t Tape>,
+}
+
+impl Drop for Recording<'_> {
+    fn drop(&mut self) {
+        RECORDING.with(|r| {
+            let mut r = r.borrow_mut();
+            if let Some(k) = r.iter().rposition(|w| w.ptr_eq(&self.inner)) {
+                r.remove(k);
+            }
+        });
+    }
+}
+
+/// A gradient seed: the value `backward` writes into the loss's gradient.
+pub trait Seed: Element {
+    /// One.
+    const ONE: Self;
+}
+
+impl Seed for f32 {
+    const ONE: f32 = 1.0;
+}
+
+impl Seed for f64 {
+    const ONE: f64 = 1.0;
+}
+
+impl Tape {
+    /// An empty tape.
+    pub fn new() -> Tape {
+        Tape::default()
+    }
+
+    /// Starts recording launches made on this thread; recording stops when the guard drops.
+    pub fn record(&self) -> Recording<'_> {
+        let inner = Rc::downgrade(&self.inner);
+        RECORDING.with(|r| r.borrow_mut().push(inner.clone()));
+        Recording {
+            inner,
+            _tape: PhantomData,
+        }
+    }
+
+    /// How many steps are recorded.
+    pub fn len(&self) -> usize {
+        self.inner.borrow().records.len()
+    }
+
+    /// Whether nothing is recorded.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The names of the recorded steps, in launch order.
+    pub fn steps(&self) -> Vec<&'static str> {
+        self.inner.borrow().records.iter().map(|r| r.name).collect()
+    }
+
+    /// Seeds `loss`'s gradient with one (every element) and runs the recorded steps' adjoints
+    /// in reverse order. Gradients accumulate into what the arrays' grads already hold.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when `loss` has no gradient; [`Error::NotDifferentiable`]
+    /// for a kernel without an adjoint; [`Error::Fault`] from an adjoint thread (including
+    /// an adjoint stack overflow, naming the kernel and line).
+    pub fn backward<T: Seed, const N: usize>(&self, loss: &Array<T, N>) -> Result<()> {
+        let Some(g) = loss.grad() else {
+            return Err(Error::invalid(
+                "backward: the loss has no gradient (create it with .with_grad())",
+            ));
+        };
+        g.fill(T::ONE)?;
+        self.backward_from_grads()
+    }
+
+    /// Runs the recorded adjoints in reverse order with the output gradients the caller has
+    /// already set (for several outputs, or seeds other than one).
+    pub fn backward_from_grads(&self) -> Result<()> {
+        let inner = self.inner.borrow();
+        for r in inner.records.iter().rev() {
+            (r.backward)()?;
+        }
+        Ok(())
+    }
+
+    /// Zeroes the gradients of every array the recorded launches took.
+    pub fn zero(&self) -> Result<()> {
+        for r in &self.inner.borrow().records {
+            (r.zero)()?;
+        }
+        Ok(())
+    }
+
+    /// Forgets the recorded steps (gradients are left as they are).
+    pub fn reset(&self) {
+        self.inner.borrow_mut().records.clear();
+    }
+
+    /// Records a host-side step: `backward` runs at its place in the reverse order (for
+    /// gradients of work done outside kernels, such as a host-side copy).
+    pub fn record_func(&self, backward: impl Fn() -> Result<()> + 'static) {
+        self.push(Record {
+            name: "custom",
+            backward: Box::new(backward),
+            zero: Box::new(|| Ok(())),
+        });
+    }
+
+    fn push(&self, r: Record) {
+        self.inner.borrow_mut().records.push(r);
+    }
+}
+
+/// Records the launch of `K` on every tape recording on this thread.
+pub(crate) fn on_launch<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) {
+    RECORDING.with(|r| {
+        let r = r.borrow();
+        for inner in r.iter().filter_map(Weak::upgrade) {
+            let owned = Rc::new(K::own(args));
+            let (o1, o2) = (owned.clone(), owned);
+            let (grid, device) = (*grid, device.clone());
+            inner.borrow_mut().records.push(Record {
+                name: K::INFO.name,
+                backward: Box::new(move || launch_adjoint::<K>(&K::borrow(&o1), &grid, &device)),
+                zero: Box::new(move || K::zero_grads(&K::borrow(&o2))),
+            });
+        }
+    });
+}
+
+/// Runs the adjoint of `K` over `grid`.
+fn launch_adjoint<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) -> Result<()> {
+    if let Some(reason) = K::INFO.adjoint_error {
+        return Err(Error::NotDifferentiable {
+            kernel: K::INFO.name,
+            reason: reason.to_string(),
+        });
+    }
+    match device.kind() {
+        DeviceKind::Cpu => {
+            // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
+            let params = unsafe { K::cpu_params(args, device)? };
+            let grads = unsafe { K::cpu_grads(args, device)? };
+            let total = grid.total;
+            let chunk = config::cpu_min_chunk().max(1);
+            let cap = config::adstack_bytes();
+            (0..total.div_ceil(chunk))
+                .into_par_iter()
+                .try_for_each(|c| {
+                    let mut stack = AdStack::new(cap, K::INFO.name);
+                    let start = c * chunk;
+                    K::run_cpu_adjoint(
+                        &params,
+                        &grads,
+                        grid,
+                        start..(start + chunk).min(total),
+                        &mut stack,
+                    )
+                })
+                .map_err(Error::from)
+        }
+        DeviceKind::Cuda { .. } => Err(Error::NotDifferentiable {
+            kernel: K::INFO.name,
+            reason: format!(
+                "was launched on \"{device}\": adjoints run on the CPU only so far (the CUDA \
+                 adjoint is being built)"
+            ),
+        }),
+    }
+}
