@@ -20,7 +20,61 @@ backend_tests!(
     kernels_without_adjoint,
     tape_zero_accumulate_reset,
     gradcheck_builtins,
+    funcs_gradient,
 );
+
+#[wp::func]
+fn poly3(x: f64, c: f64) -> f64 {
+    // A loop inside a func: x^3 + c x.
+    let mut p: f64 = 1.0;
+    for _k in 0..3 {
+        p = p * x;
+    }
+    p + c * x
+}
+
+#[wp::func]
+fn weighted(a: Array<f64>, i: usize, w: f64) -> f64 {
+    poly3(a[i], w) * w
+}
+
+#[wp::func]
+fn put(out: Array<f64>, i: usize, v: f64) {
+    out[i] = v * 2.0;
+}
+
+#[wp::kernel]
+fn k_funcs(x: Array<f64>, w: f64, out: Array<f64>) {
+    let i = tid();
+    let y = weighted(x, i, w) + poly3(w, x[i]);
+    put(out, i, y);
+}
+
+/// Gradients through funcs: nested calls, a loop inside a func, an array read inside a func
+/// and a unit func that writes the output.
+fn funcs_gradient(dev: &wp::Device) {
+    // out = 2 ((x^3 + w x) w + w^3 + x w): d/dx = 2 ((3x^2 + w) w + w).
+    let (xs, w) = ([0.5f64, -1.25, 2.0], 0.75f64);
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(3, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_funcs, 3, (&x, w, &out), dev).unwrap();
+    }
+    let got = out.to_vec().unwrap();
+    for (o, &v) in got.iter().zip(&xs) {
+        let want = 2.0 * ((v * v * v + w * v) * w + w * w * w + v * w);
+        assert!((o - want).abs() <= 1e-12 * want.abs().max(1.0));
+    }
+    if !cpu_only(dev, tape.backward(&out)) {
+        return;
+    }
+    for (g, &v) in x.grad().unwrap().to_vec().unwrap().iter().zip(&xs) {
+        let want = 2.0 * ((3.0 * v * v + w) * w + w);
+        assert!(((g - want) / want).abs() <= 1e-12, "x = {v}: {g} vs {want}");
+    }
+}
 
 /// Every differentiable builtin of the table in one kernel (f64 and f32 versions), checked
 /// by `wp::gradcheck` against central differences; and a wrong gradient is caught.

@@ -13,6 +13,25 @@ pub fn zero_like<T: crate::adjoint::Adjoint>(x: &T) -> T {
     T::adj_zero()
 }
 
+// `()` (a unit func's result) carries no gradient; the adjoint of such a call still runs.
+impl crate::adjoint::Adjoint for () {
+    fn adj_zero() -> Self {}
+    fn adj_accum(&mut self, _: Self) {}
+}
+
+/// The first reason in `reasons` (a kernel's own, then its funcs'), for
+/// `KernelInfo::adjoint_error`.
+pub const fn first_error(reasons: &[Option<&'static str>]) -> Option<&'static str> {
+    let mut k = 0;
+    while k < reasons.len() {
+        if reasons[k].is_some() {
+            return reasons[k];
+        }
+        k += 1;
+    }
+    None
+}
+
 /// An array element type whose gradients can be accumulated by many threads at once.
 ///
 /// Floats, float vectors, matrices and quaternions add atomically (component by component);

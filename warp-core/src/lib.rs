@@ -18,7 +18,7 @@ pub mod range;
 pub mod view;
 
 pub use fault::{Fault, FaultKind, KResult};
-pub use grad::{zero_like, AdStack, GradElement, GradView};
+pub use grad::{first_error, zero_like, AdStack, GradElement, GradView};
 pub use grid::Grid;
 pub use index::KernelIndex;
 pub use meta::{FuncInfo, StructDefs};

@@ -165,7 +165,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     cuda_sections: &[#(#cuda_sections),*],
                     callees: &[#(&#callees::__WP_FUNC),*],
                     structs: &[#(<#struct_tys as __wp::CudaStruct>::cuda_defs),*],
-                    adjoint_error: #adjoint_error,
+                    adjoint_error: __wp::first_error(&[#adjoint_error #(, #callees::__WP_ADJOINT_ERROR)*]),
                 };
                 type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
                 unsafe fn cpu_grads(
@@ -427,6 +427,42 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         .iter()
         .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
+    // The replay (no stores, no atomics) and the adjoint, for kernels' adjoints.
+    let mut replay_em = RustEmitter::new(&f);
+    replay_em.replay = true;
+    let replay_body = replay_em.block(&f.body);
+    let (adj_body, adj_error) = match crate::back::rust_adjoint::emit(&f) {
+        Ok(b) => (b, quote!(::core::option::Option::None)),
+        Err(why) => {
+            let why = Literal::string(&format!("calls func `{}`, which {why}", f.name));
+            // Never run: backward refuses kernels whose funcs have no adjoint.
+            (quote!(), quote!(::core::option::Option::Some(#why)))
+        }
+    };
+    let replay_params: Vec<TokenStream> = f
+        .params
+        .iter()
+        .map(|p| {
+            let v = em.var(p.var);
+            let t = &p.syn_ty;
+            quote!(mut #v: <#t as ::warp_lang::__private::KernelArg>::CpuView)
+        })
+        .collect();
+    let adj_params: Vec<TokenStream> = f
+        .params
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let t = &p.syn_ty;
+            if matches!(p.ty, crate::types::Ty::Array(..)) {
+                let a = format_ident!("adj_{}", em.var(p.var));
+                quote!(#a: <#t as ::warp_lang::__private::KernelArg>::GradView)
+            } else {
+                let o = format_ident!("__adj_out{}", k);
+                quote!(#o: &mut <#t as ::warp_lang::__private::KernelArg>::CpuView)
+            }
+        })
+        .collect();
     let (cuda_src, cuda_sections, cuda_ret) = cuda_template(&f);
     let struct_tys = struct_types(&f);
     let name_str = Literal::string(&f.name);
@@ -471,6 +507,35 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                 use ::warp_lang::__private as __wp;
                 #body
                 #tail
+            }
+
+            /// Why backward cannot go through this func (`None`: it can).
+            #[doc(hidden)]
+            #vis const __WP_ADJOINT_ERROR: ::core::option::Option<&'static str> = #adj_error;
+
+            #[doc(hidden)]
+            #[inline(always)]
+            #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+            #vis fn __wp_replay(#(#replay_params),*) -> ::warp_lang::__private::KResult<#ret> {
+                use ::warp_lang::__private as __wp;
+                const __FAST: bool = false;
+                #replay_body
+                #tail
+            }
+
+            #[doc(hidden)]
+            #[inline(always)]
+            #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+            #vis fn __wp_adj(
+                #(#replay_params,)*
+                #(#adj_params,)*
+                __adj_ret: #ret,
+                __stack: &mut ::warp_lang::__private::AdStack,
+            ) -> ::warp_lang::__private::KResult<()> {
+                use ::warp_lang::__private as __wp;
+                const __FAST: bool = false;
+                #adj_body
+                ::core::result::Result::Ok(())
             }
         }
 

@@ -19,6 +19,9 @@ pub struct RustEmitter<'a> {
     pub f: &'a Function,
     /// Which thread-index component each variable holds (see `analysis::tid_components`).
     pub tid: Vec<Option<u8>>,
+    /// Emit the replay of the body for an adjoint: no stores, no atomics, funcs called through
+    /// their replay.
+    pub replay: bool,
 }
 
 impl<'a> RustEmitter<'a> {
@@ -26,6 +29,7 @@ impl<'a> RustEmitter<'a> {
         RustEmitter {
             f,
             tid: crate::analysis::tid_components(f),
+            replay: false,
         }
     }
 
@@ -77,6 +81,7 @@ impl<'a> RustEmitter<'a> {
                     None => quote_spanned!(sp=> let #m #v = #rhs;),
                 }
             }
+            StmtKind::Store { .. } | StmtKind::Print { .. } if self.replay => TokenStream::new(),
             StmtKind::Store {
                 array,
                 index,
@@ -271,7 +276,10 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);
-                if builtin.grad == crate::builtins::Grad::Atomic {
+                if builtin.grad == crate::builtins::Grad::Atomic && self.replay {
+                    // Not replayed: the forward launch did it.
+                    quote_spanned!(sp=> __wp::adjoint::zero())
+                } else if builtin.grad == crate::builtins::Grad::Atomic {
                     let a = self.var(args[0]);
                     let idx = self.index(&args[1..args.len() - 1]);
                     let val = self.var(args[args.len() - 1]);
@@ -283,7 +291,11 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Func { path, args } => {
                 let args = args.iter().map(|v| self.var(*v));
-                quote_spanned!(sp=> #path::__wp_cpu(#(#args),*)?)
+                if self.replay {
+                    quote_spanned!(sp=> #path::__wp_replay(#(#args),*)?)
+                } else {
+                    quote_spanned!(sp=> #path::__wp_cpu(#(#args),*)?)
+                }
             }
             Op::Load { array, index } => {
                 let a = self.var(*array);

@@ -25,23 +25,47 @@ use crate::types::Ty;
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 
-/// Emits the adjoint thread body of kernel `f` (forward parameters and `adj_<param>` gradient
-/// views in scope, plus `__tid`, `__stack`), or why it cannot yet.
+/// Emits the adjoint body of kernel or func `f`, or why it cannot yet. In scope: the forward
+/// parameters, `adj_<param>` gradient views for array parameters, `__stack`, and for a kernel
+/// `__tid`; for a func also `__adj_ret` (the adjoint of its result) and `__adj_out<k>`
+/// (`&mut` adjoints of its value parameters, accumulated into at the end).
 pub fn emit(f: &Function) -> Result<TokenStream, String> {
+    let mut fwd = RustEmitter::new(f);
+    fwd.replay = true;
     let e = AdjEmitter {
-        fwd: RustEmitter::new(f),
+        fwd,
         f,
         overwritten: overwritten_vars(f),
         params: f.params.iter().map(|p| p.var).collect(),
     };
-    e.check(&f.body)?;
+    let body = e.body_without_tail();
+    e.check(body)?;
     let decls = e.declarations();
-    let forward = e.forward(&f.body, false);
-    let reverse = e.reverse(&f.body, false);
+    let forward = e.forward(body, false);
+    let mut reverse = TokenStream::new();
+    if let Some(v) = e.tail_value() {
+        // The func's result: its adjoint is what the caller passed.
+        if e.diff(v) {
+            let a = e.adj(v);
+            reverse.extend(quote!(__wp::adjoint::Adjoint::adj_accum(&mut #a, __adj_ret);));
+        }
+    }
+    reverse.extend(e.reverse(body, false));
+    let mut outs = TokenStream::new();
+    if f.kind == FnKind::Func {
+        for (k, p) in f.params.iter().enumerate() {
+            if e.is_array(p.var) || !e.diff(p.var) {
+                continue;
+            }
+            let (a, out) = (e.adj(p.var), format_ident!("__adj_out{}", k));
+            outs.extend(quote!(__wp::adjoint::Adjoint::adj_accum(#out, #a);));
+        }
+    }
     Ok(quote! {
         #decls
         #forward
         #reverse
+        #outs
     })
 }
 
@@ -92,6 +116,28 @@ fn differentiable(t: &Ty) -> bool {
 }
 
 impl<'a> AdjEmitter<'a> {
+    /// A func's body without its final `return value` (the result, handled apart).
+    fn body_without_tail(&self) -> &'a [Stmt] {
+        match self.f.body.last() {
+            Some(Stmt {
+                kind: StmtKind::Return { .. },
+                ..
+            }) if self.f.kind == FnKind::Func => &self.f.body[..self.f.body.len() - 1],
+            _ => &self.f.body[..],
+        }
+    }
+
+    /// The variable a func returns at its end.
+    fn tail_value(&self) -> Option<VarId> {
+        match self.f.body.last() {
+            Some(Stmt {
+                kind: StmtKind::Return { value },
+                ..
+            }) if self.f.kind == FnKind::Func => *value,
+            _ => None,
+        }
+    }
+
     fn var(&self, v: VarId) -> syn::Ident {
         self.fwd.var(v)
     }
@@ -113,22 +159,9 @@ impl<'a> AdjEmitter<'a> {
     }
 
     /// Rejects what the reverse sweep does not handle yet.
-    fn check(&self, b: &Block) -> Result<(), String> {
+    fn check(&self, b: &[Stmt]) -> Result<(), String> {
         for s in b {
             match &s.kind {
-                StmtKind::Assign {
-                    op: Op::Func { path, .. },
-                    ..
-                } => {
-                    let name = path
-                        .segments
-                        .last()
-                        .map(|s| s.ident.to_string())
-                        .unwrap_or_default();
-                    return Err(format!(
-                        "calls func `{name}` (adjoints of funcs are not implemented yet)"
-                    ));
-                }
                 StmtKind::Assign {
                     op: Op::Builtin { builtin, .. },
                     ..
@@ -198,7 +231,7 @@ impl<'a> AdjEmitter<'a> {
 
     /// The forward replay of `b`: the kernel's statements without stores and atomics, with the
     /// pushes the reverse sweep pops.
-    fn forward(&self, b: &Block, in_loop: bool) -> TokenStream {
+    fn forward(&self, b: &[Stmt], in_loop: bool) -> TokenStream {
         let mut out = TokenStream::new();
         for s in b {
             let sp = s.span;
@@ -287,7 +320,7 @@ impl<'a> AdjEmitter<'a> {
     }
 
     /// The reverse sweep of `b`.
-    fn reverse(&self, b: &Block, in_loop: bool) -> TokenStream {
+    fn reverse(&self, b: &[Stmt], in_loop: bool) -> TokenStream {
         let mut out = TokenStream::new();
         for s in b.iter().rev() {
             let sp = s.span;
@@ -362,6 +395,9 @@ impl<'a> AdjEmitter<'a> {
         } else {
             TokenStream::new()
         };
+        if let Op::Func { path, args } = op {
+            return self.reverse_call(dst, path, args, restore, sp);
+        }
         if !self.diff(dst) {
             return restore;
         }
@@ -376,6 +412,52 @@ impl<'a> AdjEmitter<'a> {
             return quote_spanned!(sp=> #ad = __wp::zero_like(&#x); #restore);
         }
         quote_spanned!(sp=> { #take #restore #acc })
+    }
+
+    /// Reverse of `dst = path(args)`: the func's adjoint (it replays and reverses its own body
+    /// on the same stack), called even when the result carries no gradient, since the func may
+    /// have read arrays.
+    fn reverse_call(
+        &self,
+        dst: VarId,
+        path: &syn::Path,
+        args: &[VarId],
+        restore: TokenStream,
+        sp: Span,
+    ) -> TokenStream {
+        let x = self.var(dst);
+        let take = if self.diff(dst) {
+            let ad = self.adj(dst);
+            quote_spanned!(sp=> let __r = #ad; #ad = __wp::zero_like(&#x);)
+        } else {
+            quote_spanned!(sp=> let __r = __wp::zero_like(&#x);)
+        };
+        let mut temps = TokenStream::new();
+        let mut pass = Vec::new();
+        let mut after = TokenStream::new();
+        for (k, a) in args.iter().enumerate() {
+            let v = self.var(*a);
+            if self.is_array(*a) {
+                let g = self.adj(*a);
+                pass.push(quote!(#g));
+                continue;
+            }
+            let g = format_ident!("__g{}", k);
+            temps.extend(quote_spanned!(sp=> let mut #g = __wp::zero_like(&#v);));
+            pass.push(quote!(&mut #g));
+            if self.diff(*a) {
+                let ad = self.adj(*a);
+                after.extend(quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(&mut #ad, #g);));
+            }
+        }
+        let xs = args.iter().map(|a| self.var(*a));
+        quote_spanned!(sp=> {
+            #take
+            #restore
+            #temps
+            #path::__wp_adj(#(#xs,)* #(#pass,)* __r, __stack)?;
+            #after
+        })
     }
 
     /// Adds `__r` (the adjoint of `op`'s result) into the adjoints of `op`'s operands.

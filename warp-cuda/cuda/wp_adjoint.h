@@ -1,0 +1,681 @@
+// wp_adjoint.h: reverse-mode adjoints (namespace `wp`), the CUDA mirror of warp-core's
+// `adjoint` module (warp-core/src/adjoint/{mod,ops,builtins,cast,lanes}.rs) and of the gradient
+// accessors of `GradView` (warp-core/src/grad.rs).
+//
+// Conventions (as on the CPU):
+//   * The adjoint of a value has the value's own type. Integer, integer-vector and bool values
+//     are not differentiable: every adjoint function taking them is a no-op.
+//   * Every adjoint function ACCUMULATES (`+=`) into its adjoint arguments (non-const
+//     references), given the adjoint `adj_ret` of the operation's result:
+//       adj_<op>(a, b, adj_a, adj_b, adj_ret)     op in add sub mul div rem
+//       adj_neg(a, adj_a, adj_ret)
+//       adj_<builtin>(args.., adj_args.., adj_ret) min max clamp abs sign floor ceil sqrt exp
+//                                                 log sin cos tan atan2 pow lerp dot length
+//                                                 normalize cross
+//       adj_cast(adj_from, adj_to)                template over the 13 scalar types
+//     for exactly the operand types the Rust functions take (the kernel language's operator
+//     combinations and the builtin table's signatures, with glam's meaning of each operator).
+//   * adj_zero<T>() / zero<T>() / zero_like(x): the zero adjoint (quaternions: (0, 0, 0, 0));
+//     adj_accum(a, v): `a += v` for float types, a no-op for the others.
+//   * grad_accum / grad_take / grad_get: an array's gradient in an adjoint kernel (an
+//     `array_t` whose `data` is null when the array has no gradient).
+//
+// Floating point: every formula is evaluated in the order the Rust function documents
+// (left to right, the same temporaries), so that the GPU agrees with the CPU bit for bit when
+// nothing is contracted into an FMA (NVRTC: `--fmad=false`) and the math library agrees
+// (sqrt, floor, trunc are exact everywhere; exp, log, sin, cos, tan, pow come from CUDA's
+// libdevice on the GPU and may differ in the last bits from glibc, as the forward ones do).
+// The edge rules are the CPU's: min/max send the whole adjoint to the operand the forward
+// returned (ties to the first, a lone NaN loses, two NaNs to the first); clamp goes through
+// max then min in reverse; abs uses sign(0) = +1; length/normalize give nothing at the zero
+// vector; pow skips d/dx when y == 0 and d/dy unless x > 0; atan2 gives nothing at (0, 0);
+// division is `gb = g / b; adj_a += gb; adj_b -= gb * (a / b)`.
+//
+// `%`: Rust's float `%` (fmod) has the adjoint `adj_b -= g * trunc(a / b)`. This library's
+// Vec4 `%` is glam's SSE floored modulo `a - floor(a / b) * b` (wp_core.h); its adjoint is
+// `adj_b -= g * floor(a / b)`, with the ordinary floor, which is what warp-core computes where
+// glam's Vec4 `%` is floored (x86_64: it asks glam at run time).
+#pragma once
+#include "wp_core.h"
+#include "wp_scalar.h"
+#include "wp_vector.h"
+#include "wp_atomic.h"
+
+namespace wp {
+
+// ------------------------------------------------------------------------------------------
+// Zero and accumulation (warp_core::adjoint::Adjoint)
+// ------------------------------------------------------------------------------------------
+
+namespace detail {
+/// The scalar type of T (T itself for scalars; the lane type of vectors, matrices, quats).
+template <typename T, bool Scalar = num<T>::is_int || num<T>::is_float || num<T>::is_bool>
+struct adj_scalar_of {
+  typedef T type;
+};
+template <typename T>
+struct adj_scalar_of<T, false> {
+  typedef typename vec_traits<T>::scalar type;
+};
+template <typename T>
+struct adj_is_scalar {
+  static constexpr bool value = num<T>::is_int || num<T>::is_float || num<T>::is_bool;
+};
+/// Whether T has a (float) adjoint: f32, f64 and the float vectors, matrices, quaternions.
+template <typename T>
+struct adj_is_float {
+  static constexpr bool value = num<typename adj_scalar_of<T>::type>::is_float;
+};
+}  // namespace detail
+
+/// The zero adjoint of T: 0, 0.0, false, the zero vector or matrix, the quaternion (0, 0, 0, 0).
+template <typename T>
+WP_FN T adj_zero() {
+  if constexpr (detail::adj_is_scalar<T>::value) {
+    return (T)0;
+  } else {
+    typedef typename vec_traits<T>::scalar S;
+    T r;
+    for (int i = 0; i < vec_traits<T>::N; ++i) vec_traits<T>::at(r, i) = (S)0;
+    return r;
+  }
+}
+/// `warp_core::adjoint::zero`: the same as adj_zero<T>().
+template <typename T>
+WP_FN T zero() {
+  return adj_zero<T>();
+}
+/// `warp_core::zero_like`: the zero adjoint of x's type.
+template <typename T>
+WP_FN T zero_like(const T&) {
+  return adj_zero<T>();
+}
+/// `a += v` for float types (componentwise); a no-op for integer, integer-vector and bool
+/// types, whose adjoint is always zero.
+template <typename T>
+WP_FN void adj_accum(T& a, const typename identity<T>::type& v) {
+  if constexpr (detail::adj_is_float<T>::value) a += v;
+}
+
+// ------------------------------------------------------------------------------------------
+// Lane adjoints (warp-core/src/adjoint/lanes.rs)
+// ------------------------------------------------------------------------------------------
+
+namespace detail {
+template <typename F> WP_FN bool adj_isnan(F x) { return !(x == x); }
+WP_FN f32 adj_trunc(f32 x) { return ::truncf(x); }
+WP_FN f64 adj_trunc(f64 x) { return ::trunc(x); }
+
+/// `min(a, b)` returned `a`: `a <= b`, or `b` alone is NaN, or both are NaN.
+template <typename F>
+WP_FN bool min_takes_first(F a, F b) {
+  if (adj_isnan(a)) return adj_isnan(b);
+  return adj_isnan(b) || a <= b;
+}
+/// `max(a, b)` returned `a` (as min_takes_first with `a >= b`).
+template <typename F>
+WP_FN bool max_takes_first(F a, F b) {
+  if (adj_isnan(a)) return adj_isnan(b);
+  return adj_isnan(b) || a >= b;
+}
+
+// Binary lanes: (a, b, adj_a, adj_b, g).
+struct l_add {
+  template <typename F> WP_FN void operator()(F, F, F& aa, F& ab, F g) const { aa += g; ab += g; }
+};
+struct l_sub {
+  template <typename F> WP_FN void operator()(F, F, F& aa, F& ab, F g) const { aa += g; ab -= g; }
+};
+struct l_mul {
+  template <typename F> WP_FN void operator()(F a, F b, F& aa, F& ab, F g) const {
+    aa += g * b;
+    ab += g * a;
+  }
+};
+struct l_div {
+  template <typename F> WP_FN void operator()(F a, F b, F& aa, F& ab, F g) const {
+    const F gb = g / b;
+    aa += gb;
+    ab -= gb * (a / b);
+  }
+};
+/// Rust's float `%` (fmod): `adj_a += g; adj_b -= g * trunc(a / b)`.
+struct l_rem_trunc {
+  template <typename F> WP_FN void operator()(F a, F b, F& aa, F& ab, F g) const {
+    aa += g;
+    ab -= g * adj_trunc(a / b);
+  }
+};
+/// Floored `%` (this library's Vec4 `%`): `adj_a += g; adj_b -= g * floor(a / b)`.
+struct l_rem_floor {
+  template <typename F> WP_FN void operator()(F a, F b, F& aa, F& ab, F g) const {
+    aa += g;
+    ab -= g * wp::floor(a / b);
+  }
+};
+struct l_min {
+  template <typename F> WP_FN void operator()(F a, F b, F& aa, F& ab, F g) const {
+    if (min_takes_first(a, b))
+      aa += g;
+    else
+      ab += g;
+  }
+};
+struct l_max {
+  template <typename F> WP_FN void operator()(F a, F b, F& aa, F& ab, F g) const {
+    if (max_takes_first(a, b))
+      aa += g;
+    else
+      ab += g;
+  }
+};
+/// `abs`: `adj_x += g * sign(x)` (sign(0) = sign(-0) = sign(NaN) = +1).
+template <typename F>
+WP_FN void l_abs(F x, F& ax, F g) {
+  ax += g * wp::sign(x);
+}
+/// `lerp`: `adj_a += g * (1 - t); adj_b += g * t; adj_t += g * (b - a)`.
+template <typename F>
+WP_FN void l_lerp(F a, F b, F t, F& aa, F& ab, F& at, F g) {
+  aa += g * ((F)1 - t);
+  ab += g * t;
+  at += g * (b - a);
+}
+
+// Lane iteration over vectors, matrices (column-major) and quaternions (x, y, z, w).
+template <typename V, typename L>
+WP_FN void zip_vv(const V& a, const V& b, V& aa, V& ab, const V& g, L f) {
+  typedef vec_traits<V> T;
+  for (int i = 0; i < T::N; ++i) f(T::get(a, i), T::get(b, i), T::at(aa, i), T::at(ab, i), T::get(g, i));
+}
+/// `v op s`: `s`'s adjoint collects the lanes' contributions in lane order.
+template <typename V, typename L>
+WP_FN void zip_vs(const V& a, typename vec_traits<V>::scalar s, V& aa,
+                  typename vec_traits<V>::scalar& as, const V& g, L f) {
+  typedef vec_traits<V> T;
+  for (int i = 0; i < T::N; ++i) f(T::get(a, i), s, T::at(aa, i), as, T::get(g, i));
+}
+/// `s op v`: `s`'s adjoint collects the lanes' contributions in lane order.
+template <typename V, typename L>
+WP_FN void zip_sv(typename vec_traits<V>::scalar s, const V& b, typename vec_traits<V>::scalar& as,
+                  V& ab, const V& g, L f) {
+  typedef vec_traits<V> T;
+  for (int i = 0; i < T::N; ++i) f(s, T::get(b, i), as, T::at(ab, i), T::get(g, i));
+}
+
+/// The transpose of a square matrix (data movement only).
+template <typename M>
+WP_FN M adj_transpose(const M& m) {
+  constexpr int n = mat_traits<M>::N;
+  M r;
+  for (int c = 0; c < n; ++c)
+    for (int k = 0; k < n; ++k) vec_traits<M>::at(r, c * n + k) = vec_traits<M>::get(m, k * n + c);
+  return r;
+}
+/// glam's Vec3::dot / DVec3::dot: `(x*x' + y*y') + z*z'` (not the builtin dot, which starts
+/// from 0 and so differs in the sign of a zero result).
+template <typename V3>
+WP_FN typename vec_traits<V3>::scalar glam_dot3(const V3& a, const V3& b) {
+  return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+}  // namespace detail
+
+// ------------------------------------------------------------------------------------------
+// Operators (warp-core/src/adjoint/ops.rs)
+// ------------------------------------------------------------------------------------------
+
+// ----- integers: no-ops -----
+// (LT, RT, OT: the operand and result types as passed; L, R: the operand types.)
+#define WP_ADJ_NOOP_BIN(LT, RT, OT, L, R)                                           \
+  WP_FN void adj_add(LT, RT, L&, R&, OT) {}                                         \
+  WP_FN void adj_sub(LT, RT, L&, R&, OT) {}                                         \
+  WP_FN void adj_mul(LT, RT, L&, R&, OT) {}                                         \
+  WP_FN void adj_div(LT, RT, L&, R&, OT) {}                                         \
+  WP_FN void adj_rem(LT, RT, L&, R&, OT) {}
+#define WP_ADJ_NOOP_INT(T)          \
+  WP_ADJ_NOOP_BIN(T, T, T, T, T)    \
+  WP_FN void adj_neg(T, T&, T) {}
+WP_ADJ_NOOP_INT(i8)
+WP_ADJ_NOOP_INT(i16)
+WP_ADJ_NOOP_INT(i32)
+WP_ADJ_NOOP_INT(i64)
+WP_ADJ_NOOP_INT(u8)
+WP_ADJ_NOOP_INT(u16)
+WP_ADJ_NOOP_INT(u32)
+WP_ADJ_NOOP_INT(u64)
+#define WP_ADJ_NOOP_IVEC(V, S)                                 \
+  WP_ADJ_NOOP_BIN(const V&, const V&, const V&, V, V)          \
+  WP_ADJ_NOOP_BIN(const V&, S, const V&, V, S)                 \
+  WP_ADJ_NOOP_BIN(S, const V&, const V&, S, V)                 \
+  WP_FN void adj_neg(const V&, V&, const V&) {}
+WP_ADJ_NOOP_IVEC(IVec2, i32)
+WP_ADJ_NOOP_IVEC(IVec3, i32)
+WP_ADJ_NOOP_IVEC(IVec4, i32)
+WP_ADJ_NOOP_IVEC(UVec2, u32)
+WP_ADJ_NOOP_IVEC(UVec3, u32)
+WP_ADJ_NOOP_IVEC(UVec4, u32)
+#undef WP_ADJ_NOOP_IVEC
+#undef WP_ADJ_NOOP_INT
+#undef WP_ADJ_NOOP_BIN
+
+// ----- float scalars -----
+#define WP_ADJ_FSCALAR_OPS(S)                                                                        \
+  WP_FN void adj_add(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_add()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_FN void adj_sub(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_sub()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_FN void adj_mul(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_mul()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_FN void adj_div(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_div()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_FN void adj_rem(S a, S b, S& adj_a, S& adj_b, S adj_ret) {                                      \
+    detail::l_rem_trunc()(a, b, adj_a, adj_b, adj_ret);                                              \
+  }                                                                                                  \
+  WP_FN void adj_neg(S, S& adj_a, S adj_ret) { adj_a -= adj_ret; }
+WP_ADJ_FSCALAR_OPS(f32)
+WP_ADJ_FSCALAR_OPS(f64)
+#undef WP_ADJ_FSCALAR_OPS
+
+// ----- float vectors: lane by lane, with a scalar on either side -----
+#define WP_ADJ_FVEC_OP(V, S, NAME, LANE)                                                          \
+  WP_FN void NAME(const V& a, const V& b, V& adj_a, V& adj_b, const V& adj_ret) {                \
+    detail::zip_vv(a, b, adj_a, adj_b, adj_ret, LANE());                                         \
+  }                                                                                              \
+  WP_FN void NAME(const V& a, S b, V& adj_a, S& adj_b, const V& adj_ret) {                       \
+    detail::zip_vs(a, b, adj_a, adj_b, adj_ret, LANE());                                         \
+  }                                                                                              \
+  WP_FN void NAME(S a, const V& b, S& adj_a, V& adj_b, const V& adj_ret) {                       \
+    detail::zip_sv(a, b, adj_a, adj_b, adj_ret, LANE());                                         \
+  }
+#define WP_ADJ_FVEC_OPS(V, S, REM)                                     \
+  WP_ADJ_FVEC_OP(V, S, adj_add, detail::l_add)                         \
+  WP_ADJ_FVEC_OP(V, S, adj_sub, detail::l_sub)                         \
+  WP_ADJ_FVEC_OP(V, S, adj_mul, detail::l_mul)                         \
+  WP_ADJ_FVEC_OP(V, S, adj_div, detail::l_div)                         \
+  WP_ADJ_FVEC_OP(V, S, adj_rem, REM)                                   \
+  WP_FN void adj_neg(const V&, V& adj_a, const V& adj_ret) { adj_a -= adj_ret; }
+WP_ADJ_FVEC_OPS(Vec2, f32, detail::l_rem_trunc)
+WP_ADJ_FVEC_OPS(Vec3, f32, detail::l_rem_trunc)
+WP_ADJ_FVEC_OPS(Vec4, f32, detail::l_rem_floor)  // Vec4 `%` is floored (see the top)
+WP_ADJ_FVEC_OPS(DVec2, f64, detail::l_rem_trunc)
+WP_ADJ_FVEC_OPS(DVec3, f64, detail::l_rem_trunc)
+WP_ADJ_FVEC_OPS(DVec4, f64, detail::l_rem_trunc)
+#undef WP_ADJ_FVEC_OPS
+#undef WP_ADJ_FVEC_OP
+
+// ----- matrices (column-major) -----
+#define WP_ADJ_MAT_OPS(M, V, S)                                                                  \
+  /* A + B, A - B */                                                                             \
+  WP_FN void adj_add(const M&, const M&, M& adj_a, M& adj_b, const M& adj_ret) {                 \
+    adj_a += adj_ret;                                                                            \
+    adj_b += adj_ret;                                                                            \
+  }                                                                                              \
+  WP_FN void adj_sub(const M&, const M&, M& adj_a, M& adj_b, const M& adj_ret) {                 \
+    adj_a += adj_ret;                                                                            \
+    adj_b -= adj_ret;                                                                            \
+  }                                                                                              \
+  /* A * B: adj_a += g * B^T; adj_b += A^T * g (glam products). */                               \
+  WP_FN void adj_mul(const M& a, const M& b, M& adj_a, M& adj_b, const M& adj_ret) {             \
+    adj_a += adj_ret * detail::adj_transpose(b);                                                 \
+    adj_b += detail::adj_transpose(a) * adj_ret;                                                 \
+  }                                                                                              \
+  /* M * v: adj_m.col(j) += g * v[j]; adj_v += M^T * g. */                                       \
+  WP_FN void adj_mul(const M& a, const V& b, M& adj_a, V& adj_b, const V& adj_ret) {             \
+    for (int j = 0; j < mat_traits<M>::N; ++j)                                                   \
+      mat_traits<M>::at(adj_a, j) += adj_ret * vec_traits<V>::get(b, j);                         \
+    adj_b += detail::adj_transpose(a) * adj_ret;                                                 \
+  }                                                                                              \
+  WP_FN void adj_mul(const M& a, S b, M& adj_a, S& adj_b, const M& adj_ret) {                    \
+    detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_mul());                                \
+  }                                                                                              \
+  WP_FN void adj_div(const M& a, S b, M& adj_a, S& adj_b, const M& adj_ret) {                    \
+    detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_div());                                \
+  }                                                                                              \
+  WP_FN void adj_mul(S a, const M& b, S& adj_a, M& adj_b, const M& adj_ret) {                    \
+    detail::zip_sv(a, b, adj_a, adj_b, adj_ret, detail::l_mul());                                \
+  }                                                                                              \
+  /* s / M is M / s (glam 0.30's quirk, mirrored by the forward): roles swapped back. */         \
+  WP_FN void adj_div(S a, const M& b, S& adj_a, M& adj_b, const M& adj_ret) {                    \
+    detail::zip_vs(b, a, adj_b, adj_a, adj_ret, detail::l_div());                                \
+  }                                                                                              \
+  WP_FN void adj_neg(const M&, M& adj_a, const M& adj_ret) { adj_a -= adj_ret; }
+WP_ADJ_MAT_OPS(Mat2, Vec2, f32)
+WP_ADJ_MAT_OPS(Mat3, Vec3, f32)
+WP_ADJ_MAT_OPS(Mat4, Vec4, f32)
+WP_ADJ_MAT_OPS(DMat2, DVec2, f64)
+WP_ADJ_MAT_OPS(DMat3, DVec3, f64)
+WP_ADJ_MAT_OPS(DMat4, DVec4, f64)
+#undef WP_ADJ_MAT_OPS
+
+// ----- quaternions -----
+#define WP_ADJ_QUAT_OPS(Q, V3, S)                                                                \
+  WP_FN void adj_add(const Q&, const Q&, Q& adj_a, Q& adj_b, const Q& adj_ret) {                 \
+    adj_a += adj_ret;                                                                            \
+    adj_b += adj_ret;                                                                            \
+  }                                                                                              \
+  WP_FN void adj_sub(const Q&, const Q&, Q& adj_a, Q& adj_b, const Q& adj_ret) {                 \
+    adj_a += adj_ret;                                                                            \
+    adj_b -= adj_ret;                                                                            \
+  }                                                                                              \
+  /* p * q (Hamilton): the transpose of the bilinear map in each argument. */                    \
+  WP_FN void adj_mul(const Q& a, const Q& b, Q& adj_a, Q& adj_b, const Q& adj_ret) {             \
+    const S x0 = a.x, y0 = a.y, z0 = a.z, w0 = a.w;                                              \
+    const S x1 = b.x, y1 = b.y, z1 = b.z, w1 = b.w;                                              \
+    const S gx = adj_ret.x, gy = adj_ret.y, gz = adj_ret.z, gw = adj_ret.w;                      \
+    adj_a += Q##_from_xyzw(gx * w1 - gy * z1 + gz * y1 - gw * x1,                                \
+                           gx * z1 + gy * w1 - gz * x1 - gw * y1,                                \
+                           -gx * y1 + gy * x1 + gz * w1 - gw * z1,                               \
+                           gx * x1 + gy * y1 + gz * z1 + gw * w1);                               \
+    adj_b += Q##_from_xyzw(gx * w0 + gy * z0 - gz * y0 - gw * x0,                                \
+                           -gx * z0 + gy * w0 + gz * x0 - gw * y0,                               \
+                           gx * y0 - gy * x0 + gz * w0 - gw * z0,                                \
+                           gx * x0 + gy * y0 + gz * z0 + gw * w0);                               \
+  }                                                                                              \
+  /* q * v (glam's rotation formula, exact for any q = (b, w)): */                               \
+  /*   adj_v += g (w^2 - b.b) + b (2 b.g) + (g x b)(2 w)                         */              \
+  /*   adj_w += 2 (w (g.v) + g.(b x v))                                          */              \
+  /*   adj_b += g (2 v.b) + v (2 b.g) - b (2 v.g) + (v x g)(2 w)                 */              \
+  WP_FN void adj_mul(const Q& a, const V3& v, Q& adj_a, V3& adj_b, const V3& adj_ret) {          \
+    const S two = (S)2;                                                                          \
+    const S w = a.w;                                                                             \
+    const V3 b = V3##_new(a.x, a.y, a.z);                                                        \
+    const V3 g = adj_ret;                                                                        \
+    const S bb = detail::glam_dot3(b, b);                                                        \
+    const S bg = detail::glam_dot3(b, g);                                                        \
+    const S vb = detail::glam_dot3(v, b);                                                        \
+    const S vg = detail::glam_dot3(v, g);                                                        \
+    adj_b += g * (w * w - bb) + b * (two * bg) + wp::cross(g, b) * (two * w);                    \
+    const V3 ab = g * (two * vb) + v * (two * bg) - b * (two * vg) + wp::cross(v, g) * (two * w); \
+    const S aw = two * (w * vg + detail::glam_dot3(g, wp::cross(b, v)));                         \
+    adj_a += Q##_from_xyzw(ab.x, ab.y, ab.z, aw);                                                \
+  }                                                                                              \
+  WP_FN void adj_mul(const Q& a, S b, Q& adj_a, S& adj_b, const Q& adj_ret) {                    \
+    detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_mul());                                \
+  }                                                                                              \
+  WP_FN void adj_div(const Q& a, S b, Q& adj_a, S& adj_b, const Q& adj_ret) {                    \
+    detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_div());                                \
+  }                                                                                              \
+  WP_FN void adj_neg(const Q&, Q& adj_a, const Q& adj_ret) { adj_a -= adj_ret; }
+WP_ADJ_QUAT_OPS(Quat, Vec3, f32)
+WP_ADJ_QUAT_OPS(DQuat, DVec3, f64)
+#undef WP_ADJ_QUAT_OPS
+
+// ------------------------------------------------------------------------------------------
+// Builtins (warp-core/src/adjoint/builtins.rs)
+// ------------------------------------------------------------------------------------------
+
+// ----- min, max, clamp -----
+// (T: the type; CT: the type as passed.)
+#define WP_ADJ_NOOP_MINMAX(T, CT)                          \
+  WP_FN void adj_min(CT, CT, T&, T&, CT) {}                \
+  WP_FN void adj_max(CT, CT, T&, T&, CT) {}                \
+  WP_FN void adj_clamp(CT, CT, CT, T&, T&, T&, CT) {}
+WP_ADJ_NOOP_MINMAX(i8, i8)
+WP_ADJ_NOOP_MINMAX(i16, i16)
+WP_ADJ_NOOP_MINMAX(i32, i32)
+WP_ADJ_NOOP_MINMAX(i64, i64)
+WP_ADJ_NOOP_MINMAX(u8, u8)
+WP_ADJ_NOOP_MINMAX(u16, u16)
+WP_ADJ_NOOP_MINMAX(u32, u32)
+WP_ADJ_NOOP_MINMAX(u64, u64)
+WP_ADJ_NOOP_MINMAX(IVec2, const IVec2&)
+WP_ADJ_NOOP_MINMAX(IVec3, const IVec3&)
+WP_ADJ_NOOP_MINMAX(IVec4, const IVec4&)
+WP_ADJ_NOOP_MINMAX(UVec2, const UVec2&)
+WP_ADJ_NOOP_MINMAX(UVec3, const UVec3&)
+WP_ADJ_NOOP_MINMAX(UVec4, const UVec4&)
+#undef WP_ADJ_NOOP_MINMAX
+
+/// clamp(x, lo, hi) = min(max(x, lo), hi): the min rule, then the max rule (reverse order);
+/// the max step always runs, with the (possibly zero) adjoint the min step left for m.
+#define WP_ADJ_FMINMAX(T, CT, MIN_BODY, MAX_BODY)                                          \
+  WP_FN void adj_min(CT a, CT b, T& adj_a, T& adj_b, CT adj_ret) { MIN_BODY; }             \
+  WP_FN void adj_max(CT a, CT b, T& adj_a, T& adj_b, CT adj_ret) { MAX_BODY; }             \
+  WP_FN void adj_clamp(CT x, CT lo, CT hi, T& adj_x, T& adj_lo, T& adj_hi, CT adj_ret) {   \
+    const T m = wp::max(x, lo);                                                            \
+    T adj_m = adj_zero<T>();                                                               \
+    adj_min(m, hi, adj_m, adj_hi, adj_ret);                                                \
+    adj_max(x, lo, adj_x, adj_lo, adj_m);                                                  \
+  }
+#define WP_ADJ_FMINMAX_S(S)                                                                \
+  WP_ADJ_FMINMAX(S, S, detail::l_min()(a, b, adj_a, adj_b, adj_ret),                       \
+                 detail::l_max()(a, b, adj_a, adj_b, adj_ret))
+#define WP_ADJ_FMINMAX_V(V)                                                                \
+  WP_ADJ_FMINMAX(V, const V&, detail::zip_vv(a, b, adj_a, adj_b, adj_ret, detail::l_min()), \
+                 detail::zip_vv(a, b, adj_a, adj_b, adj_ret, detail::l_max()))
+WP_ADJ_FMINMAX_S(f32)
+WP_ADJ_FMINMAX_S(f64)
+WP_ADJ_FMINMAX_V(Vec2)
+WP_ADJ_FMINMAX_V(Vec3)
+WP_ADJ_FMINMAX_V(Vec4)
+WP_ADJ_FMINMAX_V(DVec2)
+WP_ADJ_FMINMAX_V(DVec3)
+WP_ADJ_FMINMAX_V(DVec4)
+#undef WP_ADJ_FMINMAX_V
+#undef WP_ADJ_FMINMAX_S
+#undef WP_ADJ_FMINMAX
+
+// ----- abs, sign, floor, ceil -----
+#define WP_ADJ_NOOP_SIGNED(T, CT)         \
+  WP_FN void adj_abs(CT, T&, CT) {}         \
+  WP_FN void adj_sign(CT, T&, CT) {}
+WP_ADJ_NOOP_SIGNED(i8, i8)
+WP_ADJ_NOOP_SIGNED(i16, i16)
+WP_ADJ_NOOP_SIGNED(i32, i32)
+WP_ADJ_NOOP_SIGNED(i64, i64)
+WP_ADJ_NOOP_SIGNED(IVec2, const IVec2&)
+WP_ADJ_NOOP_SIGNED(IVec3, const IVec3&)
+WP_ADJ_NOOP_SIGNED(IVec4, const IVec4&)
+#undef WP_ADJ_NOOP_SIGNED
+
+/// abs: `adj_x += adj_ret * sign(x)` (sign(0) = +1); sign, floor, ceil: piecewise constant.
+#define WP_ADJ_FSCALAR_SIGNED(S)                                                      \
+  WP_FN void adj_abs(S x, S& adj_x, S adj_ret) { detail::l_abs(x, adj_x, adj_ret); }  \
+  WP_FN void adj_sign(S, S&, S) {}                                                    \
+  WP_FN void adj_floor(S, S&, S) {}                                                   \
+  WP_FN void adj_ceil(S, S&, S) {}
+WP_ADJ_FSCALAR_SIGNED(f32)
+WP_ADJ_FSCALAR_SIGNED(f64)
+#undef WP_ADJ_FSCALAR_SIGNED
+#define WP_ADJ_FVEC_SIGNED(V)                                                              \
+  WP_FN void adj_abs(const V& x, V& adj_x, const V& adj_ret) {                             \
+    for (int i = 0; i < vec_traits<V>::N; ++i)                                             \
+      detail::l_abs(vec_traits<V>::get(x, i), vec_traits<V>::at(adj_x, i), vec_traits<V>::get(adj_ret, i)); \
+  }                                                                                        \
+  WP_FN void adj_sign(const V&, V&, const V&) {}
+WP_ADJ_FVEC_SIGNED(Vec2)
+WP_ADJ_FVEC_SIGNED(Vec3)
+WP_ADJ_FVEC_SIGNED(Vec4)
+WP_ADJ_FVEC_SIGNED(DVec2)
+WP_ADJ_FVEC_SIGNED(DVec3)
+WP_ADJ_FVEC_SIGNED(DVec4)
+#undef WP_ADJ_FVEC_SIGNED
+
+// ----- float scalar functions -----
+#define WP_ADJ_FSCALAR_FNS(S)                                                                \
+  /* sqrt: adj_x += g * (0.5 / sqrt(x)) (infinite at 0, NaN below, as in Warp). */           \
+  WP_FN void adj_sqrt(S x, S& adj_x, S adj_ret) {                                            \
+    const S half = (S)1 / ((S)1 + (S)1);                                                     \
+    adj_x += adj_ret * (half / wp::sqrt(x));                                                 \
+  }                                                                                          \
+  WP_FN void adj_exp(S x, S& adj_x, S adj_ret) { adj_x += adj_ret * wp::exp(x); }            \
+  WP_FN void adj_log(S x, S& adj_x, S adj_ret) { adj_x += adj_ret / x; }                     \
+  WP_FN void adj_sin(S x, S& adj_x, S adj_ret) { adj_x += adj_ret * wp::cos(x); }            \
+  WP_FN void adj_cos(S x, S& adj_x, S adj_ret) { adj_x -= adj_ret * wp::sin(x); }            \
+  WP_FN void adj_tan(S x, S& adj_x, S adj_ret) {                                             \
+    const S c = wp::cos(x);                                                                  \
+    adj_x += adj_ret / (c * c);                                                              \
+  }                                                                                          \
+  /* atan2(y, x): d = x*x + y*y; nothing at the origin. */                                   \
+  WP_FN void adj_atan2(S y, S x, S& adj_y, S& adj_x, S adj_ret) {                            \
+    if (x == (S)0 && y == (S)0) return;                                                      \
+    const S d = x * x + y * y;                                                               \
+    adj_y += adj_ret * (x / d);                                                              \
+    adj_x -= adj_ret * (y / d);                                                              \
+  }                                                                                          \
+  /* pow(x, y): d/dx unless y == 0; d/dy only when x > 0. */                                 \
+  WP_FN void adj_pow(S x, S y, S& adj_x, S& adj_y, S adj_ret) {                              \
+    if (y != (S)0) adj_x += adj_ret * (y * wp::pow(x, y - (S)1));                            \
+    if (x > (S)0) adj_y += adj_ret * (wp::pow(x, y) * wp::log(x));                           \
+  }                                                                                          \
+  WP_FN void adj_lerp(S a, S b, S t, S& adj_a, S& adj_b, S& adj_t, S adj_ret) {              \
+    detail::l_lerp(a, b, t, adj_a, adj_b, adj_t, adj_ret);                                   \
+  }
+WP_ADJ_FSCALAR_FNS(f32)
+WP_ADJ_FSCALAR_FNS(f64)
+#undef WP_ADJ_FSCALAR_FNS
+
+// ----- float vector functions: lerp, dot, length, normalize -----
+#define WP_ADJ_FVEC_FNS(V, S)                                                                     \
+  /* lerp, per component in order: the lane rule, adj_t collecting every lane. */                \
+  WP_FN void adj_lerp(const V& a, const V& b, S t, V& adj_a, V& adj_b, S& adj_t, const V& adj_ret) { \
+    typedef vec_traits<V> T;                                                                      \
+    for (int i = 0; i < T::N; ++i)                                                                \
+      detail::l_lerp(T::get(a, i), T::get(b, i), t, T::at(adj_a, i), T::at(adj_b, i), adj_t,      \
+                     T::get(adj_ret, i));                                                         \
+  }                                                                                               \
+  /* dot: adj_a[i] += g * b[i]; adj_b[i] += g * a[i]. */                                          \
+  WP_FN void adj_dot(const V& a, const V& b, V& adj_a, V& adj_b, S adj_ret) {                     \
+    typedef vec_traits<V> T;                                                                      \
+    for (int i = 0; i < T::N; ++i) {                                                              \
+      T::at(adj_a, i) += adj_ret * T::get(b, i);                                                  \
+      T::at(adj_b, i) += adj_ret * T::get(a, i);                                                  \
+    }                                                                                             \
+  }                                                                                               \
+  /* length: adj_v[i] += v[i] * (g / l) when l > 0. */                                            \
+  WP_FN void adj_length(const V& v, V& adj_v, S adj_ret) {                                        \
+    typedef vec_traits<V> T;                                                                      \
+    const S l = wp::length(v);                                                                    \
+    if (l > (S)0) {                                                                               \
+      const S gl = adj_ret / l;                                                                   \
+      for (int i = 0; i < T::N; ++i) T::at(adj_v, i) += T::get(v, i) * gl;                        \
+    }                                                                                             \
+  }                                                                                               \
+  /* normalize: n = v / l, d = dot(n, g); adj_v[i] += (g[i] - n[i] * d) / l when l > 0. */        \
+  WP_FN void adj_normalize(const V& v, V& adj_v, const V& adj_ret) {                              \
+    typedef vec_traits<V> T;                                                                      \
+    const S l = wp::length(v);                                                                    \
+    if (l > (S)0) {                                                                               \
+      V n;                                                                                        \
+      for (int i = 0; i < T::N; ++i) T::at(n, i) = T::get(v, i) / l;                              \
+      const S d = wp::dot(n, adj_ret);                                                            \
+      for (int i = 0; i < T::N; ++i)                                                              \
+        T::at(adj_v, i) += (T::get(adj_ret, i) - T::get(n, i) * d) / l;                           \
+    }                                                                                             \
+  }
+WP_ADJ_FVEC_FNS(Vec2, f32)
+WP_ADJ_FVEC_FNS(Vec3, f32)
+WP_ADJ_FVEC_FNS(Vec4, f32)
+WP_ADJ_FVEC_FNS(DVec2, f64)
+WP_ADJ_FVEC_FNS(DVec3, f64)
+WP_ADJ_FVEC_FNS(DVec4, f64)
+#undef WP_ADJ_FVEC_FNS
+
+#define WP_ADJ_NOOP_DOT(V, S) \
+  WP_FN void adj_dot(const V&, const V&, V&, V&, S) {}
+WP_ADJ_NOOP_DOT(IVec2, i32)
+WP_ADJ_NOOP_DOT(IVec3, i32)
+WP_ADJ_NOOP_DOT(IVec4, i32)
+WP_ADJ_NOOP_DOT(UVec2, u32)
+WP_ADJ_NOOP_DOT(UVec3, u32)
+WP_ADJ_NOOP_DOT(UVec4, u32)
+#undef WP_ADJ_NOOP_DOT
+
+// ----- cross: adj_a += b x g; adj_b += g x a (the builtin cross) -----
+#define WP_ADJ_CROSS(V)                                                              \
+  WP_FN void adj_cross(const V& a, const V& b, V& adj_a, V& adj_b, const V& adj_ret) { \
+    adj_a += wp::cross(b, adj_ret);                                                  \
+    adj_b += wp::cross(adj_ret, a);                                                  \
+  }
+WP_ADJ_CROSS(Vec3)
+WP_ADJ_CROSS(DVec3)
+#undef WP_ADJ_CROSS
+WP_FN void adj_cross(const IVec3&, const IVec3&, IVec3&, IVec3&, const IVec3&) {}
+
+// ------------------------------------------------------------------------------------------
+// Casts (warp-core/src/adjoint/cast.rs)
+// ------------------------------------------------------------------------------------------
+
+/// Adjoint of `x as To` for the 13 scalar types: between f32 and f64 (either way, or to the
+/// same type) `adj_from += (From)adj_to`; a no-op when either side is an integer or bool.
+template <typename From, typename To>
+WP_FN void adj_cast(From& adj_from, To adj_to) {
+  static_assert(detail::adj_is_scalar<From>::value && detail::adj_is_scalar<To>::value,
+                "adj_cast: scalar types only");
+  if constexpr (num<From>::is_float && num<To>::is_float) adj_from += (From)adj_to;
+}
+
+// ------------------------------------------------------------------------------------------
+// Gradients of array arguments (warp_core::GradView)
+// ------------------------------------------------------------------------------------------
+//
+// `g` is the gradient array of an array argument, of the same shape; `g.data == nullptr` when
+// the array has none. Indices are checked like `load`/`store` (OutOfBounds with `g.arg`).
+//   grad_accum(g, idx.., v, ctx)      g[idx] += v, atomically per float component (the
+//                                     adjoint of a read); nothing without a gradient; a
+//                                     bounds-checked no-op for integer and bool elements.
+//   grad_take(g, idx.., zero, ctx)    returns g[idx] and sets it to `zero` (the adjoint of a
+//                                     write); `zero` without a gradient; T{} on a fault.
+//   grad_get(g, idx.., zero, ctx)     returns g[idx] (the adjoint of an atomic add); `zero`
+//                                     without a gradient; T{} on a fault.
+// Device: each float component is one atomicAdd (wp_atomic.h's helpers), the element as a
+// whole is not updated atomically. Host builds: a plain add (single-threaded use only).
+
+namespace detail {
+template <typename T>
+WP_FN void grad_add_p(T* p, const T& v) {
+  if constexpr (num<T>::is_float) {
+    atomic_add_p(p, v);
+  } else if constexpr (!adj_is_scalar<T>::value) {
+    if constexpr (adj_is_float<T>::value) {
+      for (int i = 0; i < vec_traits<T>::N; ++i)
+        atomic_add_p(&vec_traits<T>::at(*p, i), vec_traits<T>::get(v, i));
+    }
+  }
+}
+template <typename T, int N>
+WP_FN void grad_accum_idx(const array_t<T, N>& g, const i64* idx, const T& v, ctx_t* ctx) {
+  if (g.data == nullptr) return;
+  T* p = elem_ptr_idx(g, idx, ctx);
+  if (p != nullptr) grad_add_p(p, v);
+}
+template <typename T, int N>
+WP_FN T grad_take_idx(const array_t<T, N>& g, const i64* idx, const T& zero, ctx_t* ctx) {
+  if (g.data == nullptr) return zero;
+  T* p = elem_ptr_idx(g, idx, ctx);
+  if (p == nullptr) return T{};
+  const T r = *p;
+  *p = zero;
+  return r;
+}
+template <typename T, int N>
+WP_FN T grad_get_idx(const array_t<T, N>& g, const i64* idx, const T& zero, ctx_t* ctx) {
+  if (g.data == nullptr) return zero;
+  return load_idx(g, idx, ctx);
+}
+}  // namespace detail
+
+#define WP_GRAD_FNS(N, PARAMS, ...)                                                                \
+  template <typename T>                                                                            \
+  WP_FN void grad_accum(const array_t<T, N>& g, PARAMS, const typename identity<T>::type& v,       \
+                        ctx_t* ctx) {                                                              \
+    const i64 idx[N] = {__VA_ARGS__};                                                              \
+    detail::grad_accum_idx(g, idx, v, ctx);                                                        \
+  }                                                                                                \
+  template <typename T>                                                                            \
+  WP_FN T grad_take(const array_t<T, N>& g, PARAMS, const typename identity<T>::type& zero,        \
+                    ctx_t* ctx) {                                                                  \
+    const i64 idx[N] = {__VA_ARGS__};                                                              \
+    return detail::grad_take_idx(g, idx, zero, ctx);                                               \
+  }                                                                                                \
+  template <typename T>                                                                            \
+  WP_FN T grad_get(const array_t<T, N>& g, PARAMS, const typename identity<T>::type& zero,         \
+                   ctx_t* ctx) {                                                                   \
+    const i64 idx[N] = {__VA_ARGS__};                                                              \
+    return detail::grad_get_idx(g, idx, zero, ctx);                                                \
+  }
+#define WP_COMMA ,
+WP_GRAD_FNS(1, i64 i0, i0)
+WP_GRAD_FNS(2, i64 i0 WP_COMMA i64 i1, i0, i1)
+WP_GRAD_FNS(3, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2, i0, i1, i2)
+WP_GRAD_FNS(4, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2 WP_COMMA i64 i3, i0, i1, i2, i3)
+#undef WP_COMMA
+#undef WP_GRAD_FNS
+
+}  // namespace wp
