@@ -21,6 +21,7 @@ backend_tests!(
     tape_zero_accumulate_reset,
     gradcheck_builtins,
     funcs_gradient,
+    jumps_gradient,
 );
 
 #[wp::func]
@@ -395,13 +396,9 @@ fn adjoint_stack_limit(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_while(x: Array<f32>, y: Array<f32>) {
+fn k_min(x: Array<f32>, y: Array<f32>) {
     let i = tid();
-    let mut v = x[i];
-    while v > 1.0 {
-        v = v * 0.5;
-    }
-    y[i] = v;
+    atomic_min(y, 0, x[i]);
 }
 
 #[wp::kernel(enable_backward = false)]
@@ -414,12 +411,12 @@ fn k_no_adjoint(x: Array<f32>, y: Array<f32>) {
 fn kernels_without_adjoint(dev: &wp::Device) {
     let x = arr(&[3.0f32], dev).with_grad().unwrap();
     let y = zeros::<f32, 1>(1, dev).with_grad().unwrap();
-    for (k, why) in [(0, "`while`"), (1, "enable_backward = false")] {
+    for (k, why) in [(0, "`atomic_min`"), (1, "enable_backward = false")] {
         let tape = wp::Tape::new();
         {
             let _rec = tape.record();
             if k == 0 {
-                wp::launch(k_while, 1, (&x, &y), dev).unwrap();
+                wp::launch(k_min, 1, (&x, &y), dev).unwrap();
             } else {
                 wp::launch(k_no_adjoint, 1, (&x, &y), dev).unwrap();
             }
@@ -428,6 +425,84 @@ fn kernels_without_adjoint(dev: &wp::Device) {
         assert!(matches!(e, Error::NotDifferentiable { .. }), "{e:?}");
         assert!(e.to_string().contains(why), "{e}");
     }
+}
+
+#[wp::func]
+fn first_above(x: Array<f64>, n: i32, t: f64) -> f64 {
+    // Early return from inside a loop; the tail value otherwise.
+    for j in 0..n {
+        if x[j] > t {
+            return x[j] * x[j];
+        }
+    }
+    -1.0
+}
+
+/// `while` (halving until at most 1), `break` and `continue` in a `for`, an early `return`
+/// from a kernel and from inside a func's loop: gradients follow the path actually taken.
+#[wp::kernel]
+fn k_jumps(x: Array<f64>, y: Array<f64>) {
+    let i = tid();
+    let mut v = x[i];
+    while v > 1.0 {
+        v = v * 0.5;
+    }
+    let mut s: f64 = 0.0;
+    for k in 0..10 {
+        if k == 1 {
+            continue;
+        }
+        if k == 4 {
+            break;
+        }
+        s += v * (k as f64);
+    }
+    y[i] = s + first_above(x, 3, 2.5);
+    if x[i] < 0.0 {
+        return;
+    }
+    y[i] += x[i] * 3.0;
+}
+
+fn jumps_gradient(dev: &wp::Device) {
+    // v = x / 2^m (m halvings), s = v (0 + 2 + 3) = 5 v; first_above over x = [0.75, 3.0, 6.0]
+    // returns x[1]^2 (the first above 2.5) for every thread; x >= 0 adds 3 x.
+    let xs = [0.75f64, 3.0, 6.0, -0.5];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let y = zeros::<f64, 1>(4, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_jumps, 4, (&x, &y), dev).unwrap();
+    }
+    let halvings = |v: f64| {
+        let (mut v, mut m) = (v, 0);
+        while v > 1.0 {
+            v *= 0.5;
+            m += 1;
+        }
+        m
+    };
+    let want_y: Vec<f64> = xs
+        .iter()
+        .map(|&v| 5.0 * v / 2f64.powi(halvings(v)) + 9.0 + if v < 0.0 { 0.0 } else { 3.0 * v })
+        .collect();
+    assert_eq!(y.to_vec().unwrap(), want_y);
+    if !cpu_only(dev, tape.backward(&y)) {
+        return;
+    }
+    // dy_i/dx_i = 5 / 2^m (+ 3 unless the thread returned early), and each of the 4 threads
+    // adds 2 x[1] = 6 to x[1]'s gradient.
+    let want: Vec<f64> = xs
+        .iter()
+        .enumerate()
+        .map(|(k, &v)| {
+            let ret = if v < 0.0 { 0.0 } else { 3.0 };
+            5.0 / 2f64.powi(halvings(v)) + ret + if k == 1 { 24.0 } else { 0.0 }
+        })
+        .collect();
+    // Exact: binary fractions.
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), want);
 }
 
 /// Gradients accumulate across backward calls; zero() clears them; reset() forgets.

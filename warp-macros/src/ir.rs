@@ -116,6 +116,12 @@ pub enum StmtKind {
     Return {
         value: Option<VarId>,
     },
+    /// Leaves the enclosing loop if any of `flags` is set. Made only by the adjoint's jump
+    /// removal (`adjoint_prep`), always as a loop body's first statement, where leaving
+    /// happens before the iteration does anything.
+    ExitIf {
+        flags: Vec<VarId>,
+    },
     /// `print!` / `println!` from a kernel: `{}` and `{:?}` placeholders only.
     Print {
         pieces: Vec<FmtPiece>,
@@ -316,6 +322,7 @@ impl StmtKind {
                 }
             }
             StmtKind::Return { value: Some(v) } => f(*v),
+            StmtKind::ExitIf { flags } => flags.iter().for_each(|v| f(*v)),
             StmtKind::Print { pieces, .. } => {
                 for p in pieces {
                     if let FmtPiece::Arg { var, .. } = p {

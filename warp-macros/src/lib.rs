@@ -10,6 +10,7 @@
 
 use proc_macro::TokenStream;
 
+mod adjoint_prep;
 mod analysis;
 mod back;
 mod builtins;

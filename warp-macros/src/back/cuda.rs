@@ -504,6 +504,11 @@ impl<'a> Emitter<'a> {
                 self.nested(body)?;
                 self.close();
             }
+            StmtKind::ExitIf { .. } => {
+                return Err(
+                    "internal: an adjoint-only statement reached the forward emitter".into(),
+                )
+            }
             StmtKind::Break => self.line(sp, "break;"),
             StmtKind::Continue => self.line(sp, "continue;"),
             StmtKind::Return { value: None } => self.line(sp, "return;"),

@@ -150,6 +150,10 @@ impl<'a> RustEmitter<'a> {
                 let body = self.block(body);
                 quote_spanned!(sp=> loop { #body })
             }
+            StmtKind::ExitIf { flags } => {
+                let fs = flags.iter().map(|v| self.var(*v));
+                quote_spanned!(sp=> if false #(|| #fs)* { break; })
+            }
             StmtKind::Break => quote_spanned!(sp=> break;),
             StmtKind::Continue => quote_spanned!(sp=> continue;),
             StmtKind::Return { value: None } => {

@@ -30,6 +30,9 @@ use quote::{format_ident, quote, quote_spanned};
 /// `__tid`; for a func also `__adj_ret` (the adjoint of its result) and `__adj_out<k>`
 /// (`&mut` adjoints of its value parameters, accumulated into at the end).
 pub fn emit(f: &Function) -> Result<TokenStream, String> {
+    // Jumps become flags: the reverse sweep then follows `if` decisions and trip counts only.
+    let prepared = crate::adjoint_prep::without_jumps(f);
+    let f = &prepared;
     let mut fwd = RustEmitter::new(f);
     fwd.replay = true;
     let e = AdjEmitter {
@@ -173,15 +176,10 @@ impl<'a> AdjEmitter<'a> {
                         builtin.name
                     ));
                 }
-                StmtKind::Loop { .. } => {
-                    return Err("has a `loop` or `while` (not differentiable yet)".into())
+                StmtKind::Break | StmtKind::Continue | StmtKind::Return { .. } => {
+                    return Err("internal: a jump survived jump removal".into())
                 }
-                StmtKind::Break | StmtKind::Continue => {
-                    return Err("has `break` or `continue` (not differentiable yet)".into())
-                }
-                StmtKind::Return { .. } => {
-                    return Err("has an early `return` (not differentiable yet)".into())
-                }
+                StmtKind::Loop { body } => self.check(body)?,
                 StmtKind::If { then, els, .. } => {
                     self.check(then)?;
                     self.check(els)?;
@@ -274,17 +272,38 @@ impl<'a> AdjEmitter<'a> {
                 StmtKind::For { var, range, body } => {
                     let (range_tokens, value) = self.range(*var, range, sp);
                     let v = self.var(*var);
+                    let (exit, body) = self.split_exit(body);
+                    let body = self.forward(body, true);
+                    let line = Self::line(sp);
+                    // The trip count: iterations that ran (an exit check leaves before one).
+                    out.extend(quote_spanned! {sp=>
+                        {
+                            let __range = #range_tokens;
+                            let mut __count: i64 = 0;
+                            for __n in 0..__range.count {
+                                #exit
+                                __stack.push(#v, #line)?;
+                                #v = #value;
+                                #body
+                                __count += 1;
+                            }
+                            __stack.push(__count, #line)?;
+                        }
+                    });
+                }
+                StmtKind::Loop { body } => {
+                    let (exit, body) = self.split_exit(body);
                     let body = self.forward(body, true);
                     let line = Self::line(sp);
                     out.extend(quote_spanned! {sp=>
                         {
-                            let __range = #range_tokens;
-                            for __n in 0..__range.count {
-                                __stack.push(#v, #line)?;
-                                #v = #value;
+                            let mut __count: i64 = 0;
+                            loop {
+                                #exit
                                 #body
+                                __count += 1;
                             }
-                            __stack.push(__range.count, #line)?;
+                            __stack.push(__count, #line)?;
                         }
                     });
                 }
@@ -293,6 +312,24 @@ impl<'a> AdjEmitter<'a> {
             }
         }
         out
+    }
+
+    /// A loop body's leading exit check (emitted before anything of the iteration runs, so a
+    /// left iteration pushes nothing and is not counted) and the rest of the body.
+    fn split_exit<'b>(&self, body: &'b [Stmt]) -> (TokenStream, &'b [Stmt]) {
+        match body.first() {
+            Some(Stmt {
+                kind: StmtKind::ExitIf { flags },
+                span,
+            }) => {
+                let fs = flags.iter().map(|v| self.var(*v));
+                (
+                    quote_spanned!(*span=> if false #(|| #fs)* { break; }),
+                    &body[1..],
+                )
+            }
+            _ => (TokenStream::new(), body),
+        }
     }
 
     /// The range progression of a `for` and the loop variable's value at step `__n`.
@@ -368,8 +405,21 @@ impl<'a> AdjEmitter<'a> {
                         out.extend(quote_spanned!(sp=> if #c { #t } else { #e }));
                     }
                 }
+                StmtKind::Loop { body } => {
+                    let (_, body) = self.split_exit(body);
+                    let body = self.reverse(body, true);
+                    out.extend(quote_spanned! {sp=>
+                        {
+                            let __count: i64 = __stack.pop();
+                            for _ in 0..__count {
+                                #body
+                            }
+                        }
+                    });
+                }
                 StmtKind::For { var, body, .. } => {
                     let v = self.var(*var);
+                    let (_, body) = self.split_exit(body);
                     let body = self.reverse(body, true);
                     out.extend(quote_spanned! {sp=>
                         {
