@@ -140,6 +140,26 @@ impl<T: Copy + GradElement, const N: usize> GradView<T, N> {
         Ok(())
     }
 
+    /// `grad[idx] += v` without an atomic, for an element no other thread of the launch
+    /// touches.
+    ///
+    /// # Safety
+    /// `idx` must be in bounds, and no other thread may access `grad[idx]` during the launch.
+    #[inline(always)]
+    pub unsafe fn accumulate_own<I: KernelIndex<N>>(&self, idx: I, v: T)
+    where
+        T: crate::adjoint::Adjoint,
+    {
+        if let Some(view) = &self.view {
+            // SAFETY: forwarded contract.
+            unsafe {
+                let mut g = view.load_unchecked(idx);
+                g.adj_accum(v);
+                view.store_unchecked(idx, g);
+            }
+        }
+    }
+
     /// Returns `grad[idx]` and sets it to `zero` (the adjoint of a write at `idx`: the
     /// gradient flows to the written value, and the overwritten value had none).
     #[inline(always)]

@@ -61,6 +61,31 @@ pub fn tid_accessed_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
     out
 }
 
+/// The array parameters accessed only through [`is_tid_access`] accesses (loads, stores; no
+/// other access, no atomic, no func argument): in a launch whose arrays cover the grid, each
+/// element of such an array is touched by one thread only, so its gradient can be
+/// accumulated without atomics.
+pub fn tid_only_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
+    let mut other: Vec<VarId> = Vec::new();
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::Assign {
+            op: Op::Load { array, index },
+            ..
+        }
+        | StmtKind::Store { array, index, .. } => {
+            if !is_tid_access(f, tid, *array, index) {
+                other.push(*array);
+            }
+        }
+        StmtKind::Assign { op, .. } => op.for_each_read(&mut |v| other.push(v)),
+        _ => {}
+    });
+    tid_accessed_params(f, tid)
+        .into_iter()
+        .filter(|a| !other.contains(a))
+        .collect()
+}
+
 /// The 1-D array parameters that `body` accesses (loads and stores) at exactly `var`, a loop
 /// variable. For a loop over `lo..hi`, one check that `lo..hi` lies inside such an array
 /// before the loop makes every one of those accesses in bounds.

@@ -202,14 +202,13 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                 ) -> __wp::KResult<()> {
                     #[inline(always)]
                     #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-                    fn __adj_thread(
+                    fn __adj_thread<const __FAST: bool>(
                         #( mut #pnames_plain: <#tys as __wp::KernelArg>::CpuView, )*
                         #( #grad_pats: <#tys as __wp::KernelArg>::GradView, )*
                         __grid: &__wp::Grid,
                         __flat: usize,
                         __stack: &mut __wp::AdStack,
                     ) -> __wp::KResult<()> {
-                        const __FAST: bool = false;
                         #tid_setup
                         #adjoint_body
                         ::core::result::Result::Ok(())
@@ -217,9 +216,18 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     let ( #(#pnames_plain,)* ) = *__params;
                     let ( #(#grad_names,)* ) = *__grads;
                     let __grid = *__grid;
-                    for __flat in __range {
-                        __stack.clear();
-                        __adj_thread( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
+                    // As in `run_cpu`: thread-index accesses skip their checks when the arrays
+                    // cover the grid (and their gradients skip atomics where that is safe).
+                    if true #( && #fast_arrays.covers(&__grid.dims) )* {
+                        for __flat in __range {
+                            __stack.clear();
+                            __adj_thread::<true>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
+                        }
+                    } else {
+                        for __flat in __range {
+                            __stack.clear();
+                            __adj_thread::<false>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
+                        }
                     }
                     ::core::result::Result::Ok(())
                 }

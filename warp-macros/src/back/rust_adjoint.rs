@@ -35,8 +35,10 @@ pub fn emit(f: &Function) -> Result<TokenStream, String> {
     let f = &prepared;
     let mut fwd = RustEmitter::new(f);
     fwd.replay = true;
+    let own = crate::analysis::tid_only_params(f, &fwd.tid);
     let e = AdjEmitter {
         fwd,
+        own,
         f,
         overwritten: overwritten_vars(f),
         params: f.params.iter().map(|p| p.var).collect(),
@@ -74,6 +76,9 @@ pub fn emit(f: &Function) -> Result<TokenStream, String> {
 
 struct AdjEmitter<'a> {
     fwd: RustEmitter<'a>,
+    /// Array parameters accessed only at the thread index: when the launch's arrays cover the
+    /// grid (`__FAST`), their gradients are accumulated without atomics.
+    own: Vec<VarId>,
     f: &'a Function,
     /// Variables assigned more than once per thread (their old values go on the stack).
     overwritten: Vec<bool>,
@@ -588,7 +593,15 @@ impl<'a> AdjEmitter<'a> {
             Op::Load { array, index } => {
                 let g = self.adj(*array);
                 let idx = self.fwd.index_tokens(index);
-                quote_spanned!(sp=> #g.accumulate(#idx, __r)?;)
+                if self.own.contains(array)
+                    && crate::analysis::is_tid_access(self.f, &self.fwd.tid, *array, index)
+                {
+                    // SAFETY (of the generated code): under __FAST the array covers the grid,
+                    // so the index is in bounds, and only this thread touches the element.
+                    quote_spanned!(sp=> if __FAST { unsafe { #g.accumulate_own(#idx, __r) } } else { #g.accumulate(#idx, __r)?; })
+                } else {
+                    quote_spanned!(sp=> #g.accumulate(#idx, __r)?;)
+                }
             }
             Op::Member(v, m) => {
                 if !self.diff(*v) {
