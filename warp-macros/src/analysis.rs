@@ -72,11 +72,16 @@ pub fn tid_only_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
             op: Op::Load { array, index },
             ..
         }
-        | StmtKind::Store { array, index, .. } => {
-            if !is_tid_access(f, tid, *array, index) {
-                other.push(*array);
-            }
+        | StmtKind::Store { array, index, .. }
+            if !is_tid_access(f, tid, *array, index) =>
+        {
+            other.push(*array)
         }
+        StmtKind::Assign {
+            op: Op::Load { .. },
+            ..
+        }
+        | StmtKind::Store { .. } => {}
         StmtKind::Assign { op, .. } => op.for_each_read(&mut |v| other.push(v)),
         _ => {}
     });
