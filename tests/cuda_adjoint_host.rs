@@ -1,2 +1,1039 @@
+//! The CUDA C++ adjoint library (`warp-cuda/cuda/wp_adjoint.h`) against warp-core's CPU
+//! adjoints (`warp_lang::__private::adjoint`) and `GradView`, on the host.
+//!
+//! Every adjoint function is called on both sides with the same inputs, the same nonzero
+//! starting adjoints (so that accumulation, not assignment, is checked) and the same `adj_ret`,
+//! for every operand-type combination the Rust side implements: operators and builtins on
+//! `f32`/`f64`, the float vectors, matrices and quaternions, the integer types (no-ops), all
+//! 13 x 13 casts, `adj_zero`/`zero`/`zero_like`/`adj_accum`, and the array gradient helpers
+//! `grad_accum`/`grad_take`/`grad_get` (1-D to 4-D, row- and column-major, in and out of
+//! bounds, with and without a gradient array). Inputs mix special values (0, -0, NaN,
+//! infinities, ties, zero vectors) with full-precision random ones; scalar operands also run
+//! over every pair of special values.
+//!
+//! The C++ side is a program generated here (one function per signature, reading its cases
+//! at run time so that nothing is constant-folded), built with `g++ -std=c++17 -O1
+//! -ffp-contract=off` and run once; each case prints the resulting adjoints as hex bit
+//! patterns. Comparison is bit for bit (any NaN matches any NaN, as NaN payloads depend on
+//! operand order, which compilers may swap). That includes the adjoints that call `exp`,
+//! `log`, `sin`, `cos`, `tan` and `pow`: both sides call the same libm (glibc) at run time, so
+//! they agree exactly here (against CUDA's libdevice on a GPU they would agree to a few ulps
+//! only, as `tests/cuda_host_cpp.rs` documents for the forward functions). Skipped, saying so,
+//! without g++ or off x86_64 (the library reproduces glam's x86_64 layout and arithmetic).
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::process::Command;
+
+use warp_lang::__private::adjoint::{self as ad, Adjoint};
+use warp_lang::__private::glam::{
+    DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
+    UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
+};
+use warp_lang::__private::{zero_like, ArrayView, GradElement, GradView};
+use warp_lang::{Fault, FaultKind};
+
+// ------------------------------------------------------------------------------------------
+// Values as lanes of bit patterns (vectors x first, matrices column by column, quats x y z w)
+// ------------------------------------------------------------------------------------------
+
+trait Val: Copy {
+    /// The C++ type (in namespace `wp` unless `bool`).
+    const TY: &'static str;
+    /// 32 or 64 for float lanes, 0 for integer and bool lanes.
+    const FLOAT: u32;
+    const LANES: usize;
+    fn bits(&self) -> Vec<u64>;
+    fn from_bits(w: &[u64]) -> Self;
+}
+
+macro_rules! float_val {
+    ($($t:ident: $width:literal, $u:ty);*) => {$(
+        impl Val for $t {
+            const TY: &'static str = stringify!($t);
+            const FLOAT: u32 = $width;
+            const LANES: usize = 1;
+            fn bits(&self) -> Vec<u64> { vec![self.to_bits() as u64] }
+            fn from_bits(w: &[u64]) -> Self { $t::from_bits(w[0] as $u) }
+        }
+    )*};
+}
+float_val!(f32: 32, u32; f64: 64, u64);
+
+macro_rules! int_val {
+    ($($t:ty => $u:ty, $name:literal);*) => {$(
+        impl Val for $t {
+            const TY: &'static str = $name;
+            const FLOAT: u32 = 0;
+            const LANES: usize = 1;
+            fn bits(&self) -> Vec<u64> { vec![*self as $u as u64] }
+            fn from_bits(w: &[u64]) -> Self { w[0] as $u as $t }
+        }
+    )*};
+}
+int_val!(
+    i8 => u8, "i8"; i16 => u16, "i16"; i32 => u32, "i32"; i64 => u64, "i64"; isize => usize, "i64";
+    u8 => u8, "u8"; u16 => u16, "u16"; u32 => u32, "u32"; u64 => u64, "u64"; usize => usize, "u64"
+);
+impl Val for bool {
+    const TY: &'static str = "bool";
+    const FLOAT: u32 = 0;
+    const LANES: usize = 1;
+    fn bits(&self) -> Vec<u64> {
+        vec![*self as u64]
+    }
+    fn from_bits(w: &[u64]) -> Self {
+        w[0] != 0
+    }
+}
+
+macro_rules! comp_val {
+    ($($t:ident: $s:ident, $n:literal, $to:ident, $from:ident $(, $by_ref:tt)?);* $(;)?) => {$(
+        impl Val for $t {
+            const TY: &'static str = stringify!($t);
+            const FLOAT: u32 = <$s as Val>::FLOAT;
+            const LANES: usize = $n;
+            fn bits(&self) -> Vec<u64> {
+                self.$to().iter().flat_map(|x| x.bits()).collect()
+            }
+            fn from_bits(w: &[u64]) -> Self {
+                let a: [$s; $n] = std::array::from_fn(|i| <$s as Val>::from_bits(&w[i..]));
+                $t::$from($($by_ref)? a)
+            }
+        }
+    )*};
+}
+comp_val!(
+    Vec2: f32, 2, to_array, from_array; Vec3: f32, 3, to_array, from_array;
+    Vec4: f32, 4, to_array, from_array; DVec2: f64, 2, to_array, from_array;
+    DVec3: f64, 3, to_array, from_array; DVec4: f64, 4, to_array, from_array;
+    IVec2: i32, 2, to_array, from_array; IVec3: i32, 3, to_array, from_array;
+    IVec4: i32, 4, to_array, from_array; UVec2: u32, 2, to_array, from_array;
+    UVec3: u32, 3, to_array, from_array; UVec4: u32, 4, to_array, from_array;
+    Quat: f32, 4, to_array, from_array; DQuat: f64, 4, to_array, from_array;
+    Mat2: f32, 4, to_cols_array, from_cols_array, &; Mat3: f32, 9, to_cols_array, from_cols_array, &;
+    Mat4: f32, 16, to_cols_array, from_cols_array, &; DMat2: f64, 4, to_cols_array, from_cols_array, &;
+    DMat3: f64, 9, to_cols_array, from_cols_array, &; DMat4: f64, 16, to_cols_array, from_cols_array, &;
+);
+
+fn cxx(ty: &str) -> String {
+    if ty == "bool" {
+        ty.into()
+    } else {
+        format!("wp::{ty}")
+    }
+}
+
+/// One lane holding `x` (floats rounded to the lane's width, integers saturated).
+fn lane_bits(float: u32, x: f64) -> u64 {
+    match float {
+        32 => (x as f32).to_bits() as u64,
+        64 => x.to_bits(),
+        _ => x as i64 as u64,
+    }
+}
+
+fn splat<T: Val>(x: f64) -> T {
+    T::from_bits(&vec![lane_bits(T::FLOAT, x); T::LANES])
+}
+
+// ------------------------------------------------------------------------------------------
+// Inputs
+// ------------------------------------------------------------------------------------------
+
+const SPECIAL: [f64; 12] = [
+    0.0,
+    -0.0,
+    1.0,
+    -1.0,
+    2.0,
+    0.5,
+    -2.5,
+    3.0,
+    f64::NAN,
+    f64::INFINITY,
+    f64::NEG_INFINITY,
+    1e-3,
+];
+
+struct Gen(u64);
+impl Gen {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    /// A full-precision float in [-4, 4) (so that evaluation order shows in the last bits).
+    fn rand(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 8.0 - 4.0
+    }
+    fn lane(&mut self, float: u32, special: bool) -> u64 {
+        let r = self.next();
+        if float == 0 {
+            return match r % 3 {
+                0 => (r >> 8) % 7,
+                1 => ((r >> 8) % 2001).wrapping_sub(1000),
+                _ => r >> 3,
+            };
+        }
+        let x = if special {
+            SPECIAL[(r >> 8) as usize % SPECIAL.len()]
+        } else {
+            self.rand()
+        };
+        lane_bits(float, x)
+    }
+    /// An input: one in 8 a splat of a special value (the zero vector, NaNs, ...), else lanes
+    /// that are special 3 times in 8 and random otherwise.
+    fn val<T: Val>(&mut self) -> T {
+        let r = self.next();
+        if r % 8 == 0 {
+            return splat(SPECIAL[(r >> 8) as usize % SPECIAL.len()]);
+        }
+        let w: Vec<u64> = (0..T::LANES)
+            .map(|_| {
+                let special = self.next() % 8 < 3;
+                self.lane(T::FLOAT, special)
+            })
+            .collect();
+        T::from_bits(&w)
+    }
+    /// A starting adjoint: random lanes.
+    fn adj<T: Val>(&mut self) -> T {
+        let w: Vec<u64> = (0..T::LANES).map(|_| self.lane(T::FLOAT, false)).collect();
+        T::from_bits(&w)
+    }
+    /// An `adj_ret`: random lanes, one in 8 an input-like value (zeros, NaN, infinities).
+    fn ret<T: Val>(&mut self) -> T {
+        if self.next() % 8 == 0 {
+            self.val()
+        } else {
+            self.adj()
+        }
+    }
+}
+
+fn same<A: Val, B: Val>(a: A) -> Option<B> {
+    (A::TY == B::TY).then(|| B::from_bits(&a.bits()))
+}
+
+fn is_fscalar<T: Val>() -> bool {
+    T::FLOAT != 0 && T::LANES == 1
+}
+
+// ------------------------------------------------------------------------------------------
+// Cases: one C++ function per signature, one line per case
+// ------------------------------------------------------------------------------------------
+
+#[derive(Clone, Debug)]
+enum Tok {
+    /// A value's lane: its bits and float width (0: integer).
+    Bits(u64, u32),
+    Word(&'static str),
+}
+
+fn toks<T: Val>(v: &T) -> Vec<Tok> {
+    v.bits()
+        .into_iter()
+        .map(|b| Tok::Bits(b, T::FLOAT))
+        .collect()
+}
+
+fn tok_matches(want: &Tok, got: &str) -> bool {
+    match *want {
+        Tok::Word(w) => w == got,
+        Tok::Bits(w, float) => {
+            let Ok(g) = u64::from_str_radix(got, 16) else {
+                return false;
+            };
+            match float {
+                32 => {
+                    let (w, g) = (f32::from_bits(w as u32), f32::from_bits(g as u32));
+                    (w.is_nan() && g.is_nan()) || w.to_bits() == g.to_bits()
+                }
+                64 => {
+                    let (w, g) = (f64::from_bits(w), f64::from_bits(g));
+                    (w.is_nan() && g.is_nan()) || w.to_bits() == g.to_bits()
+                }
+                _ => w == g,
+            }
+        }
+    }
+}
+
+struct Suite {
+    g: Gen,
+    /// Random cases per signature.
+    n: usize,
+    /// (name, C++ body) per signature.
+    ops: Vec<(String, String)>,
+    by_body: HashMap<String, usize>,
+    text: String,
+    cases: Vec<(usize, String, Vec<Tok>)>,
+}
+
+impl Suite {
+    fn op(&mut self, name: String, body: String) -> usize {
+        if let Some(&k) = self.by_body.get(&body) {
+            return k;
+        }
+        self.ops.push((name, body.clone()));
+        self.by_body.insert(body, self.ops.len() - 1);
+        self.ops.len() - 1
+    }
+
+    /// `call` with `$` replaced by the value arguments, the adjoints and `adj_ret`; prints
+    /// the adjoints after the call.
+    fn sig(&mut self, call: &str, vals: &[&str], adjs: &[&str], ret: Option<&str>) -> usize {
+        let mut body = String::new();
+        let mut args = Vec::new();
+        let decls = vals
+            .iter()
+            .map(|t| ('v', t))
+            .chain(adjs.iter().map(|t| ('a', t)));
+        let mut counts = [0, 0];
+        for (p, t) in decls {
+            let i = &mut counts[(p == 'a') as usize];
+            let _ = writeln!(body, "  {} {p}{i}; rd(r, {p}{i});", cxx(t));
+            args.push(format!("{p}{i}"));
+            *i += 1;
+        }
+        if let Some(t) = ret {
+            let _ = writeln!(body, "  {} g; rd(r, g);", cxx(t));
+            args.push("g".into());
+        }
+        let _ = writeln!(body, "  {};", call.replace('$', &args.join(", ")));
+        for i in 0..adjs.len() {
+            let _ = writeln!(body, "  wr(a{i});");
+        }
+        let name = format!(
+            "{} ({}) [{}] -> {}",
+            call.replace("($)", ""),
+            vals.join(", "),
+            adjs.join(", "),
+            ret.unwrap_or("-")
+        );
+        self.op(name, body)
+    }
+
+    fn case(&mut self, op: usize, words: &[u64], want: Vec<Tok>) {
+        let mut line = format!("{op:x} {:x}", words.len());
+        for w in words {
+            let _ = write!(line, " {w:x}");
+        }
+        self.text.push_str(&line);
+        self.text.push('\n');
+        self.cases.push((op, line, want));
+    }
+
+    fn inputs1<A: Val>(&mut self) -> Vec<A> {
+        let mut v: Vec<A> = Vec::new();
+        if is_fscalar::<A>() {
+            v.extend(SPECIAL.iter().map(|&x| splat::<A>(x)));
+        }
+        v.extend((0..self.n).map(|_| self.g.val::<A>()));
+        v
+    }
+
+    fn inputs2<A: Val, B: Val>(&mut self) -> Vec<(A, B)> {
+        let mut v = Vec::new();
+        if is_fscalar::<A>() && is_fscalar::<B>() {
+            for &x in &SPECIAL {
+                for &y in &SPECIAL {
+                    v.push((splat::<A>(x), splat::<B>(y)));
+                }
+            }
+        }
+        for k in 0..self.n {
+            let a = self.g.val::<A>();
+            let b = match same::<A, B>(a) {
+                Some(b) if k % 8 == 7 => b, // ties in every lane
+                _ => self.g.val::<B>(),
+            };
+            v.push((a, b));
+        }
+        v
+    }
+
+    fn inputs3<A: Val, B: Val, C: Val>(&mut self) -> Vec<(A, B, C)> {
+        let mut v = Vec::new();
+        if is_fscalar::<A>() && is_fscalar::<B>() && is_fscalar::<C>() {
+            let few = &SPECIAL[..8];
+            for &x in few.iter().chain(&[f64::NAN]) {
+                for &y in few {
+                    for &z in few {
+                        v.push((splat::<A>(x), splat::<B>(y), splat::<C>(z)));
+                    }
+                }
+            }
+        }
+        for k in 0..self.n {
+            let a = self.g.val::<A>();
+            let b = match same::<A, B>(a) {
+                Some(b) if k % 8 == 5 => b,
+                _ => self.g.val::<B>(),
+            };
+            let c = match same::<A, C>(a) {
+                Some(c) if k % 8 == 6 => c,
+                _ => self.g.val::<C>(),
+            };
+            v.push((a, b, c));
+        }
+        v
+    }
+}
+
+fn call(name: &str) -> String {
+    format!("wp::{name}($)")
+}
+
+/// `adj_<name>(a, adj_a, adj_ret)`.
+fn un<A: Val, R: Val>(s: &mut Suite, name: &str, f: fn(A, &mut A, R)) {
+    let op = s.sig(&call(name), &[A::TY], &[A::TY], Some(R::TY));
+    for a in s.inputs1::<A>() {
+        let (mut aa, g) = (s.g.adj::<A>(), s.g.ret::<R>());
+        let words = [a.bits(), aa.bits(), g.bits()].concat();
+        f(a, &mut aa, g);
+        s.case(op, &words, toks(&aa));
+    }
+}
+
+/// `adj_<name>(a, b, adj_a, adj_b, adj_ret)`.
+fn bin<A: Val, B: Val, R: Val>(s: &mut Suite, name: &str, f: fn(A, B, &mut A, &mut B, R)) {
+    let op = s.sig(&call(name), &[A::TY, B::TY], &[A::TY, B::TY], Some(R::TY));
+    for (a, b) in s.inputs2::<A, B>() {
+        let (mut aa, mut ab, g) = (s.g.adj::<A>(), s.g.adj::<B>(), s.g.ret::<R>());
+        let words = [a.bits(), b.bits(), aa.bits(), ab.bits(), g.bits()].concat();
+        f(a, b, &mut aa, &mut ab, g);
+        s.case(op, &words, [toks(&aa), toks(&ab)].concat());
+    }
+}
+
+type Tri<A, B, C, R> = fn(A, B, C, &mut A, &mut B, &mut C, R);
+
+/// `adj_<name>(a, b, c, adj_a, adj_b, adj_c, adj_ret)`.
+fn tri<A: Val, B: Val, C: Val, R: Val>(s: &mut Suite, name: &str, f: Tri<A, B, C, R>) {
+    let tys = [A::TY, B::TY, C::TY];
+    let op = s.sig(&call(name), &tys, &tys, Some(R::TY));
+    for (a, b, c) in s.inputs3::<A, B, C>() {
+        let (mut aa, mut ab, mut ac) = (s.g.adj::<A>(), s.g.adj::<B>(), s.g.adj::<C>());
+        let g = s.g.ret::<R>();
+        let words = [
+            a.bits(),
+            b.bits(),
+            c.bits(),
+            aa.bits(),
+            ab.bits(),
+            ac.bits(),
+            g.bits(),
+        ];
+        f(a, b, c, &mut aa, &mut ab, &mut ac, g);
+        s.case(
+            op,
+            &words.concat(),
+            [toks(&aa), toks(&ab), toks(&ac)].concat(),
+        );
+    }
+}
+
+/// `adj_cast(adj_from, adj_to)`.
+fn cast<F: Val, T: Val>(s: &mut Suite, f: fn(&mut F, T)) {
+    let op = s.sig(&call("adj_cast"), &[], &[F::TY], Some(T::TY));
+    let extreme = [1e300, -1e-300, f64::MAX, 3.4e38, 1e-45, 0.1, -0.0, f64::NAN];
+    let mut tos: Vec<T> = extreme.iter().map(|&x| splat::<T>(x)).collect();
+    tos.extend((0..8).map(|_| s.g.ret::<T>()));
+    for to in tos {
+        let mut a = s.g.adj::<F>();
+        let words = [a.bits(), to.bits()].concat();
+        f(&mut a, to);
+        s.case(op, &words, toks(&a));
+    }
+}
+
+/// `adj_zero<T>()`, `zero<T>()`, `zero_like(x)` and `adj_accum(a, v)`.
+fn zero_accum<T: Val + Adjoint>(s: &mut Suite) {
+    let ty = cxx(T::TY);
+    for c in [
+        format!("a0 = wp::adj_zero<{ty}>()"),
+        format!("a0 = wp::zero<{ty}>()"),
+        "a0 = wp::zero_like(a0)".into(),
+    ] {
+        let op = s.sig(&c, &[], &[T::TY], None);
+        let start = s.g.adj::<T>();
+        let (z1, z2) = (ad::zero::<T>(), zero_like(&start));
+        assert_eq!(z1.bits(), z2.bits());
+        s.case(op, &start.bits(), toks(&z1));
+    }
+    let op = s.sig(&call("adj_accum"), &[], &[T::TY], Some(T::TY));
+    for _ in 0..s.n {
+        let (mut a, v) = (s.g.adj::<T>(), s.g.ret::<T>());
+        let words = [a.bits(), v.bits()].concat();
+        a.adj_accum(v);
+        s.case(op, &words, toks(&a));
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// The operand-type combinations of warp-core/src/adjoint
+// ------------------------------------------------------------------------------------------
+
+/// `+ - * / %` for each `A op B => R`.
+macro_rules! arith {
+    ($s:expr; $($a:ty, $b:ty => $r:ty);* $(;)?) => {$(
+        bin::<$a, $b, $r>($s, "adj_add", ad::adj_add);
+        bin::<$a, $b, $r>($s, "adj_sub", ad::adj_sub);
+        bin::<$a, $b, $r>($s, "adj_mul", ad::adj_mul);
+        bin::<$a, $b, $r>($s, "adj_div", ad::adj_div);
+        bin::<$a, $b, $r>($s, "adj_rem", ad::adj_rem);
+    )*};
+}
+
+/// min, max, clamp.
+macro_rules! minmax {
+    ($s:expr; $($t:ty),*) => {$(
+        bin::<$t, $t, $t>($s, "adj_min", ad::adj_min);
+        bin::<$t, $t, $t>($s, "adj_max", ad::adj_max);
+        tri::<$t, $t, $t, $t>($s, "adj_clamp", ad::adj_clamp);
+    )*};
+}
+
+fn float_scalars(s: &mut Suite) {
+    macro_rules! each {
+        ($($t:ident),*) => {$(
+            arith!(s; $t, $t => $t);
+            un::<$t, $t>(s, "adj_neg", ad::adj_neg);
+            minmax!(s; $t);
+            un::<$t, $t>(s, "adj_abs", ad::adj_abs);
+            un::<$t, $t>(s, "adj_sign", ad::adj_sign);
+            un::<$t, $t>(s, "adj_floor", ad::adj_floor);
+            un::<$t, $t>(s, "adj_ceil", ad::adj_ceil);
+            un::<$t, $t>(s, "adj_sqrt", ad::adj_sqrt);
+            un::<$t, $t>(s, "adj_exp", ad::adj_exp);
+            un::<$t, $t>(s, "adj_log", ad::adj_log);
+            un::<$t, $t>(s, "adj_sin", ad::adj_sin);
+            un::<$t, $t>(s, "adj_cos", ad::adj_cos);
+            un::<$t, $t>(s, "adj_tan", ad::adj_tan);
+            bin::<$t, $t, $t>(s, "adj_atan2", ad::adj_atan2);
+            bin::<$t, $t, $t>(s, "adj_pow", ad::adj_pow);
+            tri::<$t, $t, $t, $t>(s, "adj_lerp", ad::adj_lerp);
+        )*};
+    }
+    each!(f32, f64);
+}
+
+fn float_vectors(s: &mut Suite) {
+    macro_rules! each {
+        ($($v:ident: $s:ident),*) => {$(
+            arith!(s; $v, $v => $v; $v, $s => $v; $s, $v => $v);
+            un::<$v, $v>(s, "adj_neg", ad::adj_neg);
+            minmax!(s; $v);
+            un::<$v, $v>(s, "adj_abs", ad::adj_abs);
+            un::<$v, $v>(s, "adj_sign", ad::adj_sign);
+            tri::<$v, $v, $s, $v>(s, "adj_lerp", ad::adj_lerp);
+            bin::<$v, $v, $s>(s, "adj_dot", ad::adj_dot);
+            un::<$v, $s>(s, "adj_length", ad::adj_length);
+            un::<$v, $v>(s, "adj_normalize", ad::adj_normalize);
+        )*};
+    }
+    each!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64);
+    bin::<Vec3, Vec3, Vec3>(s, "adj_cross", ad::adj_cross);
+    bin::<DVec3, DVec3, DVec3>(s, "adj_cross", ad::adj_cross);
+}
+
+fn matrices_and_quats(s: &mut Suite) {
+    macro_rules! mats {
+        ($($m:ident: $v:ident, $s:ident),*) => {$(
+            bin::<$m, $m, $m>(s, "adj_add", ad::adj_add);
+            bin::<$m, $m, $m>(s, "adj_sub", ad::adj_sub);
+            bin::<$m, $m, $m>(s, "adj_mul", ad::adj_mul);
+            bin::<$m, $v, $v>(s, "adj_mul", ad::adj_mul);
+            bin::<$m, $s, $m>(s, "adj_mul", ad::adj_mul);
+            bin::<$m, $s, $m>(s, "adj_div", ad::adj_div);
+            bin::<$s, $m, $m>(s, "adj_mul", ad::adj_mul);
+            bin::<$s, $m, $m>(s, "adj_div", ad::adj_div);
+            un::<$m, $m>(s, "adj_neg", ad::adj_neg);
+        )*};
+    }
+    mats!(Mat2: Vec2, f32, Mat3: Vec3, f32, Mat4: Vec4, f32);
+    mats!(DMat2: DVec2, f64, DMat3: DVec3, f64, DMat4: DVec4, f64);
+    macro_rules! quats {
+        ($($q:ident: $v:ident, $s:ident),*) => {$(
+            bin::<$q, $q, $q>(s, "adj_add", ad::adj_add);
+            bin::<$q, $q, $q>(s, "adj_sub", ad::adj_sub);
+            bin::<$q, $q, $q>(s, "adj_mul", ad::adj_mul);
+            bin::<$q, $v, $v>(s, "adj_mul", ad::adj_mul);
+            bin::<$q, $s, $q>(s, "adj_mul", ad::adj_mul);
+            bin::<$q, $s, $q>(s, "adj_div", ad::adj_div);
+            un::<$q, $q>(s, "adj_neg", ad::adj_neg);
+        )*};
+    }
+    quats!(Quat: Vec3, f32, DQuat: DVec3, f64);
+}
+
+/// Integers: every adjoint is a no-op (the starting adjoints come back unchanged).
+fn integers(s: &mut Suite) {
+    let n = s.n;
+    s.n = 4;
+    macro_rules! scalars {
+        ($($t:ident),*) => {$(
+            arith!(s; $t, $t => $t);
+            un::<$t, $t>(s, "adj_neg", ad::adj_neg);
+            minmax!(s; $t);
+        )*};
+    }
+    scalars!(i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
+    macro_rules! signed {
+        ($($t:ident),*) => {$(
+            un::<$t, $t>(s, "adj_abs", ad::adj_abs);
+            un::<$t, $t>(s, "adj_sign", ad::adj_sign);
+        )*};
+    }
+    signed!(i8, i16, i32, i64, isize, IVec2, IVec3, IVec4);
+    macro_rules! vectors {
+        ($($v:ident: $s:ident),*) => {$(
+            arith!(s; $v, $v => $v; $v, $s => $v; $s, $v => $v);
+            un::<$v, $v>(s, "adj_neg", ad::adj_neg);
+            minmax!(s; $v);
+            bin::<$v, $v, $s>(s, "adj_dot", ad::adj_dot);
+        )*};
+    }
+    vectors!(IVec2: i32, IVec3: i32, IVec4: i32, UVec2: u32, UVec3: u32, UVec4: u32);
+    bin::<IVec3, IVec3, IVec3>(s, "adj_cross", ad::adj_cross);
+    s.n = n;
+}
+
+fn casts(s: &mut Suite) {
+    macro_rules! row {
+        ($f:ty; $($t:ty),*) => {$( cast::<$f, $t>(s, ad::adj_cast); )*};
+    }
+    macro_rules! all {
+        ($($f:ty),*) => {$(
+            row!($f; bool, i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64);
+        )*};
+    }
+    all!(bool, i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64);
+}
+
+fn zeros(s: &mut Suite) {
+    macro_rules! all {
+        ($($t:ty),*) => {$( zero_accum::<$t>(s); )*};
+    }
+    all!(bool, i8, i16, i32, i64, u8, u16, u32, u64, f32, f64);
+    all!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
+    all!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
+}
+
+// ------------------------------------------------------------------------------------------
+// Gradient arrays: grad_accum / grad_take / grad_get against GradView
+// ------------------------------------------------------------------------------------------
+
+/// The initial lane `k` of element `l` (the C++ `init`).
+fn init_lane(float: u32, l: usize, k: usize) -> u64 {
+    let n = (l * 8 + k) as u64;
+    match float {
+        32 => (n as f32 + 0.5).to_bits() as u64,
+        64 => (n as f64 + 0.5).to_bits(),
+        _ => n,
+    }
+}
+
+/// `op`: 0 accumulate, 1 take, 2 get; the result value (take, get), the fault if any, then
+/// the whole gradient buffer in storage order.
+fn grad_expect<T: Val + GradElement>(
+    shape: &[usize],
+    colmajor: bool,
+    op: u64,
+    has: bool,
+    ix: &[i64],
+    v: T,
+) -> Vec<Tok> {
+    let n = shape.len();
+    let total: usize = shape.iter().product();
+    let mut strides = vec![0isize; n];
+    let mut st = 1isize;
+    let order: Vec<usize> = if colmajor {
+        (0..n).collect()
+    } else {
+        (0..n).rev().collect()
+    };
+    for k in order {
+        strides[k] = st;
+        st *= shape[k] as isize;
+    }
+    let mut data: Vec<T> = (0..total)
+        .map(|l| {
+            let w: Vec<u64> = (0..T::LANES).map(|k| init_lane(T::FLOAT, l, k)).collect();
+            T::from_bits(&w)
+        })
+        .collect();
+    let p = data.as_mut_ptr();
+    macro_rules! run {
+        ($n:literal, $idx:expr) => {{
+            // SAFETY: every in-bounds index addresses an element of `data` (strides computed
+            // from the shape above), which outlives the view.
+            let view = unsafe {
+                ArrayView::<T, $n>::new(
+                    p,
+                    std::array::from_fn(|k| shape[k]),
+                    std::array::from_fn(|k| strides[k]),
+                    "k",
+                    "g",
+                )
+            };
+            let gv = if has {
+                GradView::new(view)
+            } else {
+                GradView::none()
+            };
+            match op {
+                0 => gv.accumulate($idx, v).map(|_| None),
+                1 => gv.take($idx, v).map(Some),
+                _ => gv.get($idx, v).map(Some),
+            }
+        }};
+    }
+    let r: Result<Option<T>, Box<Fault>> = match n {
+        1 => run!(1, ix[0]),
+        2 => run!(2, (ix[0], ix[1])),
+        3 => run!(3, (ix[0], ix[1], ix[2])),
+        _ => run!(4, (ix[0], ix[1], ix[2], ix[3])),
+    };
+    let mut want = Vec::new();
+    match r {
+        Ok(Some(x)) => want.extend(toks(&x)),
+        Ok(None) => {}
+        Err(f) => {
+            if op != 0 {
+                want.extend(toks(&T::from_bits(&vec![0; T::LANES])));
+            }
+            let FaultKind::OutOfBounds { index, shape, .. } = &f.kind else {
+                panic!("unexpected fault {f}");
+            };
+            want.push(Tok::Word("F"));
+            let words = [1, 3, n as u64];
+            want.extend(words.iter().map(|&w| Tok::Bits(w, 0)));
+            let at = |k: usize| Tok::Bits(index.get(k).map_or(0, |&i| i as i64 as u64), 0);
+            want.extend((0..4).map(at));
+            let at = |k: usize| Tok::Bits(shape.get(k).map_or(0, |&e| e as u64), 0);
+            want.extend((0..4).map(at));
+        }
+    }
+    for x in &data {
+        want.extend(toks(x));
+    }
+    want
+}
+
+fn grad_cases<T: Val + GradElement>(s: &mut Suite) {
+    let shapes: [&[usize]; 4] = [&[5], &[2, 3], &[2, 3, 2], &[2, 1, 3, 2]];
+    for shape in shapes {
+        let n = shape.len();
+        let body = format!("  grad_case<{}, {n}>(r);\n", cxx(T::TY));
+        let op = s.op(format!("grad {} {n}-D", T::TY), body);
+        let total: usize = shape.iter().product();
+        let mut idxs: Vec<Vec<i64>> = (0..total)
+            .map(|l| {
+                let mut rem = l;
+                let mut ix = vec![0i64; n];
+                for k in (0..n).rev() {
+                    ix[k] = (rem % shape[k]) as i64;
+                    rem /= shape[k];
+                }
+                ix
+            })
+            .collect();
+        for k in 0..n {
+            for bad in [-1, shape[k] as i64] {
+                let mut ix = vec![0i64; n];
+                ix[k] = bad;
+                idxs.push(ix);
+            }
+        }
+        for colmajor in [false, true] {
+            for has in [false, true] {
+                for kind in 0..3u64 {
+                    for ix in &idxs {
+                        let v = s.g.ret::<T>();
+                        let mut words: Vec<u64> = shape.iter().map(|&e| e as u64).collect();
+                        words.extend([colmajor as u64, kind, has as u64]);
+                        words.extend(ix.iter().map(|&i| i as u64));
+                        words.extend(v.bits());
+                        let want = grad_expect(shape, colmajor, kind, has, ix, v);
+                        s.case(op, &words, want);
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn grads(s: &mut Suite) {
+    grad_cases::<f32>(s);
+    grad_cases::<f64>(s);
+    grad_cases::<Vec3>(s);
+    grad_cases::<Vec4>(s);
+    grad_cases::<DVec3>(s);
+    grad_cases::<Mat3>(s);
+    grad_cases::<DMat2>(s);
+    grad_cases::<Quat>(s);
+    grad_cases::<DQuat>(s);
+    grad_cases::<i32>(s);
+    grad_cases::<u8>(s);
+    grad_cases::<bool>(s);
+}
+
+// ------------------------------------------------------------------------------------------
+// The generated C++ program
+// ------------------------------------------------------------------------------------------
+
+const PRELUDE: &str = r#"// Generated by tests/cuda_adjoint_host.rs.
+#include "wp_adjoint.h"
+
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
+namespace {
+struct R {
+  const unsigned long long* w;
+  int p;
+};
+template <typename T>
+void rd(R& r, T& x) {
+  if constexpr (wp::num<T>::is_float) {
+    if constexpr (sizeof(T) == 4)
+      x = wp::f32_from_bits((wp::u32)r.w[r.p++]);
+    else
+      x = wp::f64_from_bits(r.w[r.p++]);
+  } else if constexpr (wp::num<T>::is_int || wp::num<T>::is_bool) {
+    x = (T)r.w[r.p++];
+  } else {
+    for (int i = 0; i < wp::vec_traits<T>::N; ++i) rd(r, wp::vec_traits<T>::at(x, i));
+  }
+}
+template <typename T>
+void wr(const T& x) {
+  if constexpr (wp::num<T>::is_float) {
+    if constexpr (sizeof(T) == 4)
+      printf(" %x", wp::f32_to_bits(x));
+    else
+      printf(" %llx", wp::f64_to_bits(x));
+  } else if constexpr (wp::num<T>::is_bool) {
+    printf(" %x", x ? 1u : 0u);
+  } else if constexpr (wp::num<T>::is_int) {
+    printf(" %llx", (unsigned long long)(typename wp::num<T>::unsigned_t)x);
+  } else {
+    for (int i = 0; i < wp::vec_traits<T>::N; ++i) wr(wp::vec_traits<T>::get(x, i));
+  }
+}
+
+// ----- gradient arrays -----
+template <typename T>
+constexpr int lanes() {
+  if constexpr (wp::detail::adj_is_scalar<T>::value)
+    return 1;
+  else
+    return wp::vec_traits<T>::N;
+}
+template <typename T>
+typename wp::detail::adj_scalar_of<T>::type& lane(T& x, int k) {
+  if constexpr (wp::detail::adj_is_scalar<T>::value) {
+    (void)k;
+    return x;
+  } else {
+    return wp::vec_traits<T>::at(x, k);
+  }
+}
+#define GRAD_OP(N, ...)                                                                    \
+  template <typename T>                                                                    \
+  T grad_op(const wp::array_t<T, N>& g, const wp::i64* i, int op, const T& v, wp::ctx_t* c) { \
+    if (op == 0) {                                                                         \
+      wp::grad_accum(g, __VA_ARGS__, v, c);                                                \
+      return T{};                                                                          \
+    }                                                                                      \
+    if (op == 1) return wp::grad_take(g, __VA_ARGS__, v, c);                               \
+    return wp::grad_get(g, __VA_ARGS__, v, c);                                             \
+  }
+GRAD_OP(1, i[0])
+GRAD_OP(2, i[0], i[1])
+GRAD_OP(3, i[0], i[1], i[2])
+GRAD_OP(4, i[0], i[1], i[2], i[3])
+#undef GRAD_OP
+// Words: shape[N], colmajor, op (0 accum, 1 take, 2 get), has_grad, index[N], value.
+// Prints: the result (take, get), `F kind arg ndim index[4] shape[4]` on a fault, the buffer.
+template <typename T, int N>
+void grad_case(R& r) {
+  typedef typename wp::detail::adj_scalar_of<T>::type S;
+  wp::i64 shape[N], idx[N];
+  for (int k = 0; k < N; ++k) shape[k] = (wp::i64)r.w[r.p++];
+  const bool colmajor = r.w[r.p++] != 0;
+  const int op = (int)r.w[r.p++];
+  const bool has = r.w[r.p++] != 0;
+  for (int k = 0; k < N; ++k) idx[k] = (wp::i64)r.w[r.p++];
+  T v;
+  rd(r, v);
+  wp::i64 total = 1;
+  for (int k = 0; k < N; ++k) total *= shape[k];
+  T* buf = new T[total];
+  for (wp::i64 l = 0; l < total; ++l)
+    for (int k = 0; k < lanes<T>(); ++k) {
+      if constexpr (wp::num<S>::is_float)
+        lane(buf[l], k) = (S)(l * 8 + k) + (S)0.5;
+      else
+        lane(buf[l], k) = (S)(l * 8 + k);
+    }
+  wp::array_t<T, N> g;
+  g.data = has ? buf : nullptr;
+  wp::i64 st = (wp::i64)sizeof(T);
+  for (int j = 0; j < N; ++j) {
+    const int k = colmajor ? j : N - 1 - j;
+    g.shape[k] = shape[k];
+    g.strides[k] = st;
+    st *= shape[k];
+  }
+  g.arg = 3;
+  g.pad = 0;
+  wp::fault_t f;
+  std::memset(&f, 0, sizeof f);
+  wp::u32 flag = 0;
+  wp::ctx_t ctx = wp::ctx_make(&f, &flag);
+  const T res = grad_op(g, idx, op, v, &ctx);
+  if (op != 0) wr(res);
+  if (flag) {
+    printf(" F %x %x %x", (unsigned)f.kind, (unsigned)f.arg, (unsigned)f.ndim);
+    for (int k = 0; k < 4; ++k) printf(" %llx", (unsigned long long)f.index[k]);
+    for (int k = 0; k < 4; ++k) printf(" %llx", (unsigned long long)f.shape[k]);
+  }
+  for (wp::i64 l = 0; l < total; ++l) wr(buf[l]);
+  delete[] buf;
+}
+"#;
+
+const MAIN: &str = r#"
+int main(int argc, char** argv) {
+  if (argc < 2) return 2;
+  FILE* f = fopen(argv[1], "r");
+  if (!f) return 2;
+  unsigned op, n;
+  std::vector<unsigned long long> w;
+  while (fscanf(f, "%x %x", &op, &n) == 2) {
+    w.resize(n + 1);
+    for (unsigned i = 0; i < n; ++i)
+      if (fscanf(f, "%llx", &w[i]) != 1) return 3;
+    R r{w.data(), 0};
+    if (op >= sizeof(OPS) / sizeof(OPS[0])) return 4;
+    OPS[op](r);
+    printf(r.p == (int)n ? "\n" : " BADLEN\n");
+  }
+  fclose(f);
+  return 0;
+}
+"#;
+
+fn program(s: &Suite) -> String {
+    let mut src = PRELUDE.to_string();
+    for (k, (name, body)) in s.ops.iter().enumerate() {
+        let _ = write!(src, "// {name}\nvoid op_{k}(R& r) {{\n{body}}}\n");
+    }
+    src.push_str("void (*const OPS[])(R&) = {\n");
+    for k in 0..s.ops.len() {
+        let _ = writeln!(src, "    op_{k},");
+    }
+    src.push_str("};\n}  // namespace\n");
+    src.push_str(MAIN);
+    src
+}
+
+// ------------------------------------------------------------------------------------------
+// The test
+// ------------------------------------------------------------------------------------------
+
 #[test]
-fn stub() {}
+fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
+    if !cfg!(target_arch = "x86_64") {
+        println!("SKIPPED: the library reproduces glam's x86_64 (SSE2) layout and arithmetic");
+        return;
+    }
+    let mut s = Suite {
+        g: Gen(0x2545_f491_4f6c_dd1d),
+        n: 96,
+        ops: Vec::new(),
+        by_body: HashMap::new(),
+        text: String::new(),
+        cases: Vec::new(),
+    };
+    float_scalars(&mut s);
+    float_vectors(&mut s);
+    matrices_and_quats(&mut s);
+    integers(&mut s);
+    casts(&mut s);
+    zeros(&mut s);
+    grads(&mut s);
+    println!("{} cases, {} C++ signatures", s.cases.len(), s.ops.len());
+
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::temp_dir().join(format!("warp_cuda_adjoint_host_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (src, exe, cases) = (dir.join("adj.cpp"), dir.join("adj"), dir.join("cases.txt"));
+    std::fs::write(&src, program(&s)).unwrap();
+    std::fs::write(&cases, &s.text).unwrap();
+    let cxx = std::env::var("CXX").unwrap_or_else(|_| "g++".into());
+    let build = Command::new(&cxx)
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+        ])
+        .arg("-I")
+        .arg(root.join("warp-cuda/cuda"))
+        .arg("-o")
+        .arg(&exe)
+        .arg(&src)
+        .output();
+    let Ok(build) = build else {
+        println!("SKIPPED: no g++ ({cxx} could not be run)");
+        return;
+    };
+    assert!(
+        build.status.success(),
+        "the generated C++ program ({}) does not compile:\n{}",
+        src.display(),
+        String::from_utf8_lossy(&build.stderr)
+    );
+    let run = Command::new(&exe).arg(&cases).output().expect("run it");
+    assert!(run.status.success(), "the C++ program failed: {run:?}");
+    let out = String::from_utf8(run.stdout).expect("utf-8 output");
+    let got: Vec<&str> = out.lines().collect();
+    assert_eq!(got.len(), s.cases.len(), "one result line per case");
+
+    let mut failures = Vec::new();
+    let mut by_op: std::collections::BTreeMap<&str, usize> = Default::default();
+    for ((op, line, want), g) in s.cases.iter().zip(&got) {
+        let gt: Vec<&str> = g.split_whitespace().collect();
+        let ok = gt.len() == want.len() && want.iter().zip(&gt).all(|(w, g)| tok_matches(w, g));
+        if !ok {
+            *by_op.entry(&s.ops[*op].0).or_default() += 1;
+            if failures.len() < 30 {
+                failures.push(format!(
+                    "{}\n  case {line}\n  want {want:x?}\n  got  {g}",
+                    s.ops[*op].0
+                ));
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    if !by_op.is_empty() {
+        let summary: Vec<String> = by_op.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+        panic!(
+            "{} cases differ:\n{}\n\n{}",
+            by_op.values().sum::<usize>(),
+            summary.join("\n"),
+            failures.join("\n")
+        );
+    }
+}

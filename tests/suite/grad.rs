@@ -22,7 +22,37 @@ backend_tests!(
     gradcheck_builtins,
     funcs_gradient,
     jumps_gradient,
+    copy_and_custom_steps,
 );
+
+/// `wp::copy` is recorded (the gradient flows back through it) and `record_func` runs a
+/// host-side step at its place in the reverse order.
+fn copy_and_custom_steps(dev: &wp::Device) {
+    let x = arr(&[1.0f32, 2.0, 3.0], dev).with_grad().unwrap();
+    let x2 = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+    let y = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+    let loss = zeros::<f32, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    let order = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+    {
+        let _rec = tape.record();
+        wp::copy(&x2, &x).unwrap();
+        let o = order.clone();
+        tape.record_func(move || {
+            o.borrow_mut().push("custom");
+            Ok(())
+        });
+        wp::launch(k_poly, 3, (&x2, &y), dev).unwrap();
+        wp::launch(k_sum, 3, (&y, &loss), dev).unwrap();
+    }
+    assert_eq!(tape.steps(), vec!["copy", "custom", "k_poly", "k_sum"]);
+    if !cpu_only(dev, tape.backward(&loss)) {
+        return;
+    }
+    assert_eq!(*order.borrow(), vec!["custom"]);
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![5.0, 7.0, 9.0]);
+    assert_eq!(x2.grad().unwrap().to_vec().unwrap(), vec![0.0; 3]);
+}
 
 #[wp::func]
 fn poly3(x: f64, c: f64) -> f64 {

@@ -632,6 +632,7 @@ WP_FN void grad_add_p(T* p, const T& v) {
 template <typename T, int N>
 WP_FN void grad_accum_idx(const array_t<T, N>& g, const i64* idx, const T& v, ctx_t* ctx) {
   if (g.data == nullptr) return;
+  if (idx[0] < 0) return;
   T* p = elem_ptr_idx(g, idx, ctx);
   if (p != nullptr) grad_add_p(p, v);
 }

@@ -886,9 +886,14 @@ impl<T: Element> Array<T, 2> {
     }
 }
 
-/// Copies `src` into `dst` (same shape); see [`Array::copy_from`].
+/// Copies `src` into `dst` (same shape); see [`Array::copy_from`]. A recording [`Tape`]
+/// records it: backward adds `dst`'s gradient into `src`'s and clears `dst`'s.
+///
+/// [`Tape`]: crate::Tape
 pub fn copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> Result<()> {
-    dst.copy_from(src)
+    dst.copy_from(src)?;
+    crate::tape::on_copy(dst, src);
+    Ok(())
 }
 
 /// How many leading elements `Debug` prints.

@@ -201,6 +201,41 @@ pub(crate) fn on_launch<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Dev
     });
 }
 
+/// Records `wp::copy(dst, src)` on every tape recording on this thread (when `dst` has a
+/// gradient to hand back).
+pub(crate) fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) {
+    if !dst.requires_grad() {
+        return;
+    }
+    RECORDING.with(|r| {
+        for inner in r.borrow().iter().filter_map(Weak::upgrade) {
+            let (d, s) = (dst.clone(), src.clone());
+            let (d2, s2) = (dst.clone(), src.clone());
+            inner.borrow_mut().records.push(Record {
+                name: "copy",
+                backward: Box::new(move || {
+                    let Some(dg) = d.grad() else { return Ok(()) };
+                    if let Some(sg) = s.grad() {
+                        let mut acc = sg.to_vec()?;
+                        for (a, b) in acc.iter_mut().zip(dg.to_vec()?) {
+                            // SAFETY: `a` is a live, aligned element of a local vector.
+                            unsafe { <T as warp_core::GradElement>::grad_add(a, b) };
+                        }
+                        let host =
+                            Array::from_slice_shape(&acc, sg.shape(), &crate::device::cpu())?;
+                        sg.copy_from(&host)?;
+                    }
+                    dg.fill(T::zeroed())
+                }),
+                zero: Box::new(move || {
+                    d2.zero_grad()?;
+                    s2.zero_grad()
+                }),
+            });
+        }
+    });
+}
+
 /// Runs the adjoint of `K` over `grid`.
 fn launch_adjoint<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) -> Result<()> {
     if let Some(reason) = K::INFO.adjoint_error {
