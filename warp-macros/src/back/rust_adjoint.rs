@@ -410,20 +410,15 @@ impl<'a> AdjEmitter<'a> {
                         out.extend(quote_spanned!(sp=> if #c { #t } else { #e }));
                     }
                 }
-                StmtKind::Loop { body } => {
-                    let (_, body) = self.split_exit(body);
-                    let body = self.reverse(body, true);
-                    out.extend(quote_spanned! {sp=>
-                        {
-                            let __count: i64 = __stack.pop();
-                            for _ in 0..__count {
-                                #body
-                            }
+                StmtKind::For { body, .. } | StmtKind::Loop { body } => {
+                    // A `for` restores its variable after each reversed iteration.
+                    let restore = match &s.kind {
+                        StmtKind::For { var, .. } => {
+                            let v = self.var(*var);
+                            quote!(#v = __stack.pop();)
                         }
-                    });
-                }
-                StmtKind::For { var, body, .. } => {
-                    let v = self.var(*var);
+                        _ => TokenStream::new(),
+                    };
                     let (_, body) = self.split_exit(body);
                     let body = self.reverse(body, true);
                     out.extend(quote_spanned! {sp=>
@@ -431,7 +426,7 @@ impl<'a> AdjEmitter<'a> {
                             let __count: i64 = __stack.pop();
                             for _ in 0..__count {
                                 #body
-                                #v = __stack.pop();
+                                #restore
                             }
                         }
                     });
