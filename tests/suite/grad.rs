@@ -394,11 +394,9 @@ fn adjoint_stack_limit(dev: &wp::Device) {
         let _ = cpu_only(dev, tape.backward(&out));
         return;
     }
-    let old = wp::config::adstack_bytes();
-    wp::config::set_adstack_bytes(256);
-    let r = tape.backward(&out);
-    wp::config::set_adstack_bytes(old);
-    match r {
+    // A per-tape capacity: the process-wide one (other tests run in parallel) is untouched.
+    tape.set_adstack_bytes(Some(256));
+    match tape.backward(&out) {
         Err(Error::Fault(f)) => {
             assert_eq!(f.kernel, "k_prod");
             assert!(
@@ -412,10 +410,8 @@ fn adjoint_stack_limit(dev: &wp::Device) {
     // With room it works (about 16 bytes per iteration here): every gradient is the
     // product of the other ones, 1.
     x.zero_grad().unwrap();
-    wp::config::set_adstack_bytes(1 << 16);
-    let r = tape.backward(&out);
-    wp::config::set_adstack_bytes(old);
-    r.unwrap();
+    tape.set_adstack_bytes(Some(1 << 16));
+    tape.backward(&out).unwrap();
     assert!(x
         .grad()
         .unwrap()

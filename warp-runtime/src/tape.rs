@@ -19,18 +19,22 @@ use std::rc::{Rc, Weak};
 use warp_core::{AdStack, Grid};
 
 type Thunk = Box<dyn Fn() -> Result<()>>;
+/// A step's backward, given the adjoint stack capacity in bytes.
+type Backward = Box<dyn Fn(usize) -> Result<()>>;
 
 /// One recorded step.
 struct Record {
     /// What the step was (a kernel's name, or "custom").
     name: &'static str,
-    backward: Thunk,
+    backward: Backward,
     zero: Thunk,
 }
 
 #[derive(Default)]
 struct TapeInner {
     records: Vec<Record>,
+    /// Adjoint stack bytes per thread for this tape (else `config::adstack_bytes`).
+    adstack_bytes: Option<usize>,
 }
 
 thread_local! {
@@ -150,10 +154,17 @@ impl Tape {
     /// already set (for several outputs, or seeds other than one).
     pub fn backward_from_grads(&self) -> Result<()> {
         let inner = self.inner.borrow();
+        let cap = inner.adstack_bytes.unwrap_or_else(config::adstack_bytes);
         for r in inner.records.iter().rev() {
-            (r.backward)()?;
+            (r.backward)(cap)?;
         }
         Ok(())
+    }
+
+    /// Sets this tape's per-thread adjoint stack capacity in bytes (`None`: the process-wide
+    /// [`config::adstack_bytes`]).
+    pub fn set_adstack_bytes(&self, bytes: Option<usize>) {
+        self.inner.borrow_mut().adstack_bytes = bytes;
     }
 
     /// Zeroes the gradients of every array the recorded launches took.
@@ -174,7 +185,7 @@ impl Tape {
     pub fn record_func(&self, backward: impl Fn() -> Result<()> + 'static) {
         self.push(Record {
             name: "custom",
-            backward: Box::new(backward),
+            backward: Box::new(move |_| backward()),
             zero: Box::new(|| Ok(())),
         });
     }
@@ -194,7 +205,9 @@ pub(crate) fn on_launch<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Dev
             let (grid, device) = (*grid, device.clone());
             inner.borrow_mut().records.push(Record {
                 name: K::INFO.name,
-                backward: Box::new(move || launch_adjoint::<K>(&K::borrow(&o1), &grid, &device)),
+                backward: Box::new(move |cap| {
+                    launch_adjoint::<K>(&K::borrow(&o1), &grid, &device, cap)
+                }),
                 zero: Box::new(move || K::zero_grads(&K::borrow(&o2))),
             });
         }
@@ -213,7 +226,7 @@ pub(crate) fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array
             let (d2, s2) = (dst.clone(), src.clone());
             inner.borrow_mut().records.push(Record {
                 name: "copy",
-                backward: Box::new(move || {
+                backward: Box::new(move |_| {
                     let Some(dg) = d.grad() else { return Ok(()) };
                     if let Some(sg) = s.grad() {
                         let mut acc = sg.to_vec()?;
@@ -237,7 +250,12 @@ pub(crate) fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array
 }
 
 /// Runs the adjoint of `K` over `grid`.
-fn launch_adjoint<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) -> Result<()> {
+fn launch_adjoint<K: Kernel>(
+    args: &K::Args<'_>,
+    grid: &Grid,
+    device: &Device,
+    cap: usize,
+) -> Result<()> {
     if let Some(reason) = K::INFO.adjoint_error {
         return Err(Error::NotDifferentiable {
             kernel: K::INFO.name,
@@ -251,7 +269,6 @@ fn launch_adjoint<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) -
             let grads = unsafe { K::cpu_grads(args, device)? };
             let total = grid.total;
             let chunk = config::cpu_min_chunk().max(1);
-            let cap = config::adstack_bytes();
             (0..total.div_ceil(chunk))
                 .into_par_iter()
                 .try_for_each(|c| {
