@@ -98,8 +98,8 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adjoint, builtins, first_error, max_depth, ops, zero_like, AdStack, ArrayView, FuncInfo,
-        GradElement, GradView, Grid, KResult, RangeProg,
+        adj_atomic_extreme, adjoint, builtins, first_error, max_depth, ops, zero_like, AdStack,
+        ArrayView, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
     };
     pub use warp_runtime::{
         ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Result,

@@ -18,7 +18,9 @@ pub mod range;
 pub mod view;
 
 pub use fault::{Fault, FaultKind, KResult};
-pub use grad::{first_error, zero_like, AdStack, GradElement, GradView};
+pub use grad::{
+    adj_atomic_extreme, first_error, zero_like, AdStack, AtomicExtreme, GradElement, GradView,
+};
 pub use grid::Grid;
 pub use index::KernelIndex;
 pub use meta::{FuncInfo, StructDefs};

@@ -13,10 +13,15 @@
 //!    as they were when the statement ran: the invariant is that when the sweep reaches a
 //!    statement, every variable holds the value it had just after that statement ran).
 //!
+//! Jumps (`break`, `continue`, early `return`) are first rewritten into flags by
+//! `adjoint_prep`, so loops only need their trip counts. A func call replays through the
+//! func's `__wp_replay` and reverses through its `__wp_adj`, on the same stack.
+//!
 //! Reading `a[i]` accumulates into `a`'s gradient atomically; writing `a[i] = v` hands the
-//! gradient at `i` to `v` and clears it. Constructs the sweep does not handle yet (func calls,
-//! `loop`/`while`, `break`, `continue`, early `return`, atomic min/max) make [`emit`] return
-//! the reason, which backward reports as an error (never a wrong gradient).
+//! gradient at `i` to `v` and clears it; `atomic_add`/`atomic_sub` pass the gradient at the
+//! index to the value (negated for sub); `atomic_min`/`atomic_max` pass it to the value that
+//! won. A construct the sweep cannot handle makes [`emit`] return the reason, which backward
+//! reports as an error (never a wrong gradient).
 
 use super::rust::{ty_tokens, RustEmitter};
 use crate::builtins::Grad;
@@ -170,17 +175,6 @@ impl<'a> AdjEmitter<'a> {
     fn check(&self, b: &[Stmt]) -> Result<(), String> {
         for s in b {
             match &s.kind {
-                StmtKind::Assign {
-                    op: Op::Builtin { builtin, .. },
-                    ..
-                } if builtin.grad == Grad::Atomic
-                    && !matches!(builtin.name, "atomic_add" | "atomic_sub") =>
-                {
-                    return Err(format!(
-                        "uses `{}` (its adjoint is not implemented yet)",
-                        builtin.name
-                    ));
-                }
                 StmtKind::Break | StmtKind::Continue | StmtKind::Return { .. } => {
                     return Err("internal: a jump survived jump removal".into())
                 }
@@ -574,10 +568,14 @@ impl<'a> AdjEmitter<'a> {
                     let g = self.adj(arr);
                     let idx = self.fwd.index_tokens(&args[1..args.len() - 1]);
                     let (x, av) = (self.var(v), self.adj(v));
-                    let sign = if builtin.name == "atomic_sub" {
-                        quote!(__wp::adjoint::adj_neg(#x, &mut #av, __grad))
-                    } else {
-                        quote!(__wp::adjoint::Adjoint::adj_accum(&mut #av, __grad))
+                    let value = self.var(arr);
+                    let sign = match builtin.name {
+                        "atomic_sub" => quote!(__wp::adjoint::adj_neg(#x, &mut #av, __grad)),
+                        "atomic_add" => quote!(__wp::adjoint::Adjoint::adj_accum(&mut #av, __grad)),
+                        // min/max: to the value that won (the array's value after the launch).
+                        _ => {
+                            quote!(__wp::adj_atomic_extreme(#value.load(#idx)?, #x, &mut #av, __grad))
+                        }
                     };
                     quote_spanned!(sp=>
                         let __grad = #g.get(#idx, __wp::zero_like(&#x))?;
