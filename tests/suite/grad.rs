@@ -24,7 +24,61 @@ backend_tests!(
     jumps_gradient,
     copy_and_custom_steps,
     atomic_extremes_gradient,
+    custom_gradients,
 );
+
+#[wp::func(grad(x = safe_sqrt_dx))]
+fn safe_sqrt(x: f64) -> f64 {
+    sqrt(x)
+}
+
+/// d sqrt(x)/dx, but 0 instead of infinity at x = 0.
+#[wp::func]
+fn safe_sqrt_dx(x: f64, adj_ret: f64) -> f64 {
+    if x > 0.0 {
+        adj_ret * 0.5 / sqrt(x)
+    } else {
+        0.0
+    }
+}
+
+/// A custom gradient for `a` only (scaled by 10 so that the test sees it is used); `b` gets
+/// none.
+#[wp::func(grad(a = scaled_da))]
+fn product(a: f64, b: f64) -> f64 {
+    a * b
+}
+
+#[wp::func]
+fn scaled_da(a: f64, b: f64, adj_ret: f64) -> f64 {
+    let _ = a;
+    adj_ret * b * 10.0
+}
+
+#[wp::kernel]
+fn k_custom(x: Array<f64>, w: Array<f64>, y: Array<f64>) {
+    let i = tid();
+    y[i] = safe_sqrt(x[i]) + product(x[i], w[i]);
+}
+
+/// `#[func(grad(x = f))]` replaces a func's generated adjoint.
+fn custom_gradients(dev: &wp::Device) {
+    let x = arr(&[0.0f64, 4.0], dev).with_grad().unwrap();
+    let w = arr(&[2.0f64, 2.0], dev).with_grad().unwrap();
+    let y = zeros::<f64, 1>(2, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_custom, 2, (&x, &w, &y), dev).unwrap();
+    }
+    assert_eq!(y.to_vec().unwrap(), vec![0.0, 10.0]);
+    if !cpu_only(dev, tape.backward(&y)) {
+        return;
+    }
+    // Exact: 0 + 10 * 2, and 0.5 / 2 + 10 * 2.
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![20.0, 20.25]);
+    assert_eq!(w.grad().unwrap().to_vec().unwrap(), vec![0.0, 0.0]);
+}
 
 /// `wp::copy` is recorded (the gradient flows back through it) and `record_func` runs a
 /// host-side step at its place in the reverse order.

@@ -392,9 +392,13 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         Err(e) => return e.to_compile_error(),
     };
     let mut errors = Vec::new();
-    if let Err(e) = attrs::parse_func_attrs(attr) {
-        errors.push(e);
-    }
+    let fattrs = match attrs::parse_func_attrs(attr) {
+        Ok(a) => a,
+        Err(e) => {
+            errors.push(e);
+            attrs::FuncAttrs::default()
+        }
+    };
     let f = match lower::lower_fn(&item, FnKind::Func) {
         Ok(f) => Some(f),
         Err(e) => {
@@ -439,7 +443,39 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     let mut replay_em = RustEmitter::new(&f);
     replay_em.replay = true;
     let replay_body = replay_em.block(&f.body);
-    let (adj_body, adj_error) = match crate::back::rust_adjoint::emit(&f) {
+    // Custom gradients replace the generated adjoint: each named parameter's adjoint is what
+    // its gradient func returns for (params.., adjoint of the result).
+    let mut custom = None;
+    if !fattrs.grad.is_empty() {
+        let mut body = TokenStream::new();
+        for (param, gf) in &fattrs.grad {
+            let Some(k) = f.params.iter().position(|p| *param == p.name) else {
+                return syn::Error::new(
+                    param.span(),
+                    format!("`{param}` is not a parameter of this func"),
+                )
+                .to_compile_error();
+            };
+            if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
+                return syn::Error::new(
+                    param.span(),
+                    "custom gradients are for value parameters; an array's gradient comes from the accesses",
+                )
+                .to_compile_error();
+            }
+            let out = format_ident!("__adj_out{}", k);
+            let args = f.params.iter().map(|p| em.var(p.var));
+            body.extend(quote_spanned! {gf.span()=>
+                __wp::adjoint::Adjoint::adj_accum(#out, #gf::__wp_cpu(#(#args,)* __adj_ret)?);
+            });
+        }
+        custom = Some(body);
+    }
+    let generated = match custom {
+        Some(body) => Ok(body),
+        None => crate::back::rust_adjoint::emit(&f),
+    };
+    let (adj_body, adj_error) = match generated {
         Ok(b) => (b, quote!(::core::option::Option::None)),
         Err(why) => {
             let why = Literal::string(&format!("calls func `{}`, which {why}", f.name));

@@ -43,8 +43,29 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
     Ok(out)
 }
 
-/// Parses `#[func]` options (none yet).
-pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<()> {
-    let parser = syn::meta::parser(|meta| Err(meta.error("#[func] takes no options yet")));
-    parser.parse2(tokens)
+/// Options of `#[func]`.
+#[derive(Default)]
+pub struct FuncAttrs {
+    /// `grad(x = fx, y = fy)`: custom gradients, one func per parameter. `fx` takes the func's
+    /// parameters followed by the adjoint of its result and returns the adjoint of `x`.
+    pub grad: Vec<(syn::Ident, syn::Path)>,
+}
+
+/// Parses `#[func(grad(x = dfdx, ..))]`.
+pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<FuncAttrs> {
+    let mut out = FuncAttrs::default();
+    let parser = syn::meta::parser(|meta| {
+        if meta.path.is_ident("grad") {
+            meta.parse_nested_meta(|inner| {
+                let param = inner.path.require_ident()?.clone();
+                let f: syn::Path = inner.value()?.parse()?;
+                out.grad.push((param, f));
+                Ok(())
+            })
+        } else {
+            Err(meta.error("unknown func option; supported: grad(param = gradient_func, ..)"))
+        }
+    });
+    parser.parse2(tokens)?;
+    Ok(out)
 }
