@@ -23,13 +23,19 @@ mod types;
 /// `warp_lang::Kernel`, launched with `wp::launch(name, dim, (args..), &device)`.
 ///
 /// Options: `#[kernel(same_shape(a, b, dim))]` makes the launch check that the named array
-/// parameters (and `dim`, the launch dimensions) have equal shapes.
+/// parameters (and `dim`, the launch dimensions) have equal shapes;
+/// `#[kernel(enable_backward = false)]` generates no adjoint (backward through the kernel is
+/// then an error).
 #[proc_macro_attribute]
 pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     expand::kernel(attr.into(), item.into()).into()
 }
 
 /// Turns a Rust function into a func callable from kernels and other funcs.
+///
+/// Option: `#[func(grad(x = dfdx, ..))]` replaces the generated adjoint with custom gradients:
+/// `dfdx` is a `#[func]` taking this func's parameters followed by the adjoint of its result,
+/// and returning the adjoint of `x`; value parameters not listed get no gradient.
 #[proc_macro_attribute]
 pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     expand::func(attr.into(), item.into()).into()
