@@ -20,6 +20,11 @@ pub struct FuncInfo {
     /// The user structs its parameters use: each adds its C++ definition, after those of the
     /// structs its fields use, to the list (once).
     pub structs: &'static [StructDefs],
+    /// The CUDA C++ templates of its replay (`@@SELF@@_replay`) and adjoint (`@@SELF@@_adj`),
+    /// for adjoint translation units; empty when `cuda_adj_error` says why there are none.
+    pub cuda_adj: &'static str,
+    /// Why the func has no CUDA adjoint.
+    pub cuda_adj_error: Option<&'static str>,
 }
 
 /// Adds a user struct's C++ definition to a list, after the definitions it depends on, each

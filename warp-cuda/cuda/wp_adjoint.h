@@ -681,4 +681,115 @@ WP_GRAD_FNS(4, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2 WP_COMMA i64 i3, i0, i1, i
 #undef WP_COMMA
 #undef WP_GRAD_FNS
 
+// ------------------------------------------------------------------------------------------
+// Adjoint kernels: unit results, the per-thread stack, thread-owned gradients, atomic winners
+// ------------------------------------------------------------------------------------------
+
+/// A unit func's result (carries no gradient).
+struct unit_t {};
+WP_FN unit_t zero_like(const unit_t&) { return unit_t{}; }
+WP_FN void adj_accum(unit_t&, const unit_t&) {}
+/// A value type for a declared result: `void` (a unit func's) becomes `unit_t`.
+template <typename T>
+struct value_of {
+  typedef T type;
+};
+template <>
+struct value_of<void> {
+  typedef unit_t type;
+};
+
+/// Fault kind of a full adjoint stack (warp_core::FaultKind::AdStackOverflow): index[0] is the
+/// source line, shape[0] the capacity in bytes.
+enum { FAULT_ADSTACK_OVERFLOW = 4 };
+
+/// The bounded per-thread stack of an adjoint kernel (warp_core::AdStack), in the thread's
+/// local memory. After an overflow (a fault) pushes do nothing and pops give zero values, so
+/// the thread finishes without touching memory out of bounds; backward reports the fault.
+struct adstack_t {
+  char* base;
+  i32 cap;
+  i32 top;
+  i32 overflow;
+  i32 pad;
+};
+
+WP_FN adstack_t adstack_new(char* buf, i32 cap) {
+  adstack_t s;
+  s.base = buf;
+  s.cap = cap;
+  s.top = 0;
+  s.overflow = 0;
+  s.pad = 0;
+  return s;
+}
+
+template <typename T>
+WP_FN void adstack_push(adstack_t* s, const T& v, i32 line, ctx_t* ctx) {
+  if (s->overflow) return;
+  if (s->top + (i32)sizeof(T) > s->cap) {
+    s->overflow = 1;
+    const i64 idx[1] = {(i64)line};
+    const i64 shape[1] = {(i64)s->cap};
+    raise(ctx, FAULT_ADSTACK_OVERFLOW, -1, 1, idx, shape);
+    return;
+  }
+  __builtin_memcpy(s->base + s->top, &v, sizeof(T));
+  s->top += (i32)sizeof(T);
+}
+
+template <typename T>
+WP_FN T adstack_pop(adstack_t* s) {
+  T v{};
+  if (s->overflow || s->top < (i32)sizeof(T)) return v;
+  s->top -= (i32)sizeof(T);
+  __builtin_memcpy(&v, s->base + s->top, sizeof(T));
+  return v;
+}
+
+/// `g[idx] += v` without atomics and without a bounds check: only for an element no other
+/// thread touches, at an index known to be in bounds (thread-index accesses of a launch whose
+/// arrays cover the grid).
+template <typename T, int N>
+WP_FN void grad_accum_own_idx(const array_t<T, N>& g, const i64* idx, const T& v) {
+  if (g.data == nullptr) return;
+  adj_accum(*detail::elem_ptr_unchecked_idx(g, idx), v);
+}
+template <typename T>
+WP_FN void grad_accum_own(const array_t<T, 1>& g, i64 i0, const typename identity<T>::type& v) {
+  const i64 idx[1] = {i0};
+  grad_accum_own_idx(g, idx, v);
+}
+template <typename T>
+WP_FN void grad_accum_own(const array_t<T, 2>& g, i64 i0, i64 i1,
+                          const typename identity<T>::type& v) {
+  const i64 idx[2] = {i0, i1};
+  grad_accum_own_idx(g, idx, v);
+}
+template <typename T>
+WP_FN void grad_accum_own(const array_t<T, 3>& g, i64 i0, i64 i1, i64 i2,
+                          const typename identity<T>::type& v) {
+  const i64 idx[3] = {i0, i1, i2};
+  grad_accum_own_idx(g, idx, v);
+}
+template <typename T>
+WP_FN void grad_accum_own(const array_t<T, 4>& g, i64 i0, i64 i1, i64 i2, i64 i3,
+                          const typename identity<T>::type& v) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  grad_accum_own_idx(g, idx, v);
+}
+
+/// warp_core::adj_atomic_extreme: the adjoint of atomic_min/atomic_max goes to `v` where it
+/// equals the array's value after the launch (componentwise for vectors).
+template <typename T>
+WP_FN void adj_atomic_extreme(const T& cur, const T& v, T& adj_v, const T& grad) {
+  if constexpr (num<T>::is_float) {
+    if (cur == v) adj_v += grad;
+  } else if constexpr (!detail::adj_is_scalar<T>::value && detail::adj_is_float<T>::value) {
+    for (int i = 0; i < vec_traits<T>::N; ++i)
+      if (vec_traits<T>::get(cur, i) == vec_traits<T>::get(v, i))
+        vec_traits<T>::at(adj_v, i) += vec_traits<T>::get(grad, i);
+  }
+}
+
 }  // namespace wp

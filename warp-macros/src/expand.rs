@@ -125,6 +125,22 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
             (quote!(), quote!(::core::option::Option::Some(#why)))
         }
     };
+    let (cuda_adjoint, cuda_adjoint_stack, cuda_adjoint_error) =
+        match crate::back::cuda_adjoint::emit(&f, "@@FILE@@") {
+            Ok(a) => (
+                Literal::string(&a.source),
+                a.uses_stack,
+                quote!(::core::option::Option::None),
+            ),
+            Err(why) => {
+                let why = Literal::string(&format!("cannot run backward on CUDA yet: {why}"));
+                (
+                    Literal::string(""),
+                    false,
+                    quote!(::core::option::Option::Some(#why)),
+                )
+            }
+        };
     let grad_pats: Vec<TokenStream> = f
         .params
         .iter()
@@ -138,6 +154,20 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
             }
         })
         .collect();
+    // Array parameters (their gradients are the CUDA adjoint's extra parameters).
+    let arr_k: Vec<usize> = (0..f.params.len())
+        .filter(|k| matches!(f.params[*k].ty, crate::types::Ty::Array(..)))
+        .collect();
+    let arr_tys: Vec<&syn::Type> = arr_k.iter().map(|k| &f.params[*k].syn_ty).collect();
+    let arr_idx: Vec<syn::Index> = arr_k.iter().map(|k| syn::Index::from(*k)).collect();
+    let arr_idx_usize: Vec<usize> = arr_k.clone();
+    let arr_names: Vec<Literal> = arr_k
+        .iter()
+        .map(|k| Literal::string(&f.params[*k].name))
+        .collect();
+    let arr_pos: Vec<usize> = (0..arr_k.len()).collect();
+    let arr_pos_idx: Vec<syn::Index> = (0..arr_k.len()).map(syn::Index::from).collect();
+    let n_arrays = arr_k.len();
     let grad_names: Vec<syn::Ident> = (0..f.params.len())
         .map(|k| quote::format_ident!("__grad{}", k))
         .collect();
@@ -166,6 +196,9 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     callees: &[#(&#callees::__WP_FUNC),*],
                     structs: &[#(<#struct_tys as __wp::CudaStruct>::cuda_defs),*],
                     adjoint_error: __wp::first_error(&[#adjoint_error #(, #callees::__WP_ADJOINT_ERROR)*]),
+                    cuda_adjoint: #cuda_adjoint,
+                    cuda_adjoint_stack: #cuda_adjoint_stack,
+                    cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                 };
                 type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
                 unsafe fn cpu_grads(
@@ -179,6 +212,26 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                             &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
                         )?
                     }, )* ))
+                }
+                type CudaGrads = ( #( <#arr_tys as __wp::KernelArg>::CudaGrad, )* );
+                fn cuda_grads(
+                    __args: &Self::Args<'_>,
+                    __device: &__wp::Device,
+                ) -> __wp::Result<Self::CudaGrads> {
+                    ::core::result::Result::Ok(( #(
+                        <#arr_tys as __wp::KernelArg>::cuda_grad(
+                            &__args.#arr_idx,
+                            &__wp::ArgCtx { kernel: #name_str, arg: #arr_names, index: #arr_idx_usize, device: __device },
+                        )?,
+                    )* ))
+                }
+                #[allow(unused_variables)]
+                fn cuda_grad_ptrs(
+                    __grads: &mut Self::CudaGrads,
+                    __out: &mut [*mut ::core::ffi::c_void],
+                ) -> usize {
+                    #( __out[#arr_pos] = (&mut __grads.#arr_pos_idx) as *mut _ as *mut ::core::ffi::c_void; )*
+                    #n_arrays
                 }
                 type Owned = ( #( <#tys as __wp::KernelArg>::Owned, )* );
                 #[allow(clippy::unused_unit)]
@@ -475,6 +528,32 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         Some(body) => Ok(body),
         None => crate::back::rust_adjoint::emit(&f),
     };
+    // The CUDA replay and adjoint templates (custom gradients: calls of the gradient funcs,
+    // which are recorded as extra callees after the body's).
+    let mut all_callees: Vec<syn::Path> = f.callees.clone();
+    let (cuda_adj, cuda_adj_error) = if fattrs.grad.is_empty() {
+        match crate::back::cuda_adjoint::emit(&f, "@@FILE@@") {
+            Ok(a) => (a.source, None),
+            Err(why) => (String::new(), Some(why)),
+        }
+    } else {
+        match crate::back::cuda_adjoint::emit_custom(&f, "@@FILE@@", &fattrs.grad, &mut all_callees)
+        {
+            Ok(src) => (src, None),
+            Err(why) => (String::new(), Some(why)),
+        }
+    };
+    let cuda_adj = Literal::string(&cuda_adj);
+    let cuda_adj_error = match cuda_adj_error {
+        None => quote!(::core::option::Option::None),
+        Some(why) => {
+            let why = Literal::string(&format!(
+                "calls func `{}`, which cannot run backward on CUDA yet: {why}",
+                f.name
+            ));
+            quote!(::core::option::Option::Some(#why))
+        }
+    };
     let (adj_body, adj_error) = match generated {
         Ok(b) => (b, quote!(::core::option::Option::None)),
         Err(why) => {
@@ -521,8 +600,10 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             cuda: #cuda_src,
             cuda_ret: #cuda_ret,
             sections: &[#(#cuda_sections),*],
-            callees: &[#(&#callees::__WP_FUNC),*],
+            callees: &[#(&#all_callees::__WP_FUNC),*],
             structs: &[#(<#struct_tys as ::warp_lang::__private::CudaStruct>::cuda_defs),*],
+            cuda_adj: #cuda_adj,
+            cuda_adj_error: ::warp_lang::__private::first_error(&[#cuda_adj_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
@@ -717,6 +798,10 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
                 }
                 type GradView = ();
                 unsafe fn grad_view(_: &Self::Arg<'_>, _: &__wp::ArgCtx<'_>) -> __wp::Result<()> {
+                    ::core::result::Result::Ok(())
+                }
+                type CudaGrad = ();
+                fn cuda_grad(_: &Self::Arg<'_>, _: &__wp::ArgCtx<'_>) -> __wp::Result<()> {
                     ::core::result::Result::Ok(())
                 }
                 type Owned = #name;

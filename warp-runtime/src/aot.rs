@@ -91,7 +91,7 @@ pub fn compile(
         let src = cuda_source::assemble(info);
         for &arch in archs {
             for contiguous in [true, false] {
-                let entry = crate::cuda::with_compile_options(contiguous, |opts| {
+                let entry = crate::cuda::with_compile_options(contiguous, None, |opts| {
                     let compiled = warp_cuda::compile(&src.text, info.name, opts, arch)?;
                     let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
                     let path = cache.store(info.name, key, &compiled.cubin)?;

@@ -967,6 +967,19 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
         })
     }
 
+    type CudaGrad = CudaArray<N>;
+
+    fn cuda_grad(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaGrad> {
+        match arg.grad() {
+            Some(g) => <Self as KernelArg>::cuda_arg(&&g, ctx),
+            None => {
+                let mut a = <Self as KernelArg>::cuda_arg(arg, ctx)?;
+                a.data = 0;
+                Ok(a)
+            }
+        }
+    }
+
     type GradView = warp_core::GradView<T, N>;
 
     unsafe fn grad_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::GradView> {
@@ -1029,6 +1042,12 @@ macro_rules! value_kernel_args {
             type GradView = ();
 
             unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+                Ok(())
+            }
+
+            type CudaGrad = ();
+
+            fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
                 Ok(())
             }
 

@@ -188,6 +188,8 @@ pub struct CompileReport {
     pub device: String,
     /// Whether this is the variant for launches whose arrays are all contiguous.
     pub contiguous: bool,
+    /// Whether this is the kernel's adjoint (compiled when backward first ran on the GPU).
+    pub adjoint: bool,
     /// Bytes of generated CUDA source (without the library headers).
     pub source_bytes: usize,
     /// NVRTC time (0 on a cache hit).
@@ -213,36 +215,45 @@ pub fn compile_reports() -> Vec<CompileReport> {
 /// The kernel `info` compiled for GPU `ordinal`; `contiguous` picks the variant for launches
 /// whose arrays are all contiguous (`WP_CONTIGUOUS`: strides known to the compiler). Each
 /// variant is compiled the first time a launch needs it.
+///
+/// `adjoint: Some(bytes)` picks the adjoint unit instead, with `bytes` of adjoint stack per
+/// thread (`WP_ADSTACK_BYTES`).
 fn loaded(
     device: &Device,
     ordinal: usize,
     info: &'static KernelInfo,
     contiguous: bool,
+    adjoint: Option<usize>,
 ) -> Result<Arc<Loaded>> {
-    type Key = (usize, &'static str, &'static str, bool);
+    type Key = (usize, &'static str, &'static str, bool, Option<usize>);
     static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
-    let key = (ordinal, info.module, info.name, contiguous);
+    let key = (ordinal, info.module, info.name, contiguous, adjoint);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
     let st = state(device, ordinal)?;
     let t0 = std::time::Instant::now();
-    let src = cuda_source::assemble(info);
+    let src = match adjoint {
+        Some(_) => cuda_source::assemble_adjoint(info),
+        None => cuda_source::assemble(info),
+    };
     let arch = st.gpu.arch();
-    let (compiled, outcome, aot) = with_compile_options(contiguous, |opts| {
-        // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
-        if let Some(cubin) = crate::aot::lookup(&src.text, info.name, opts, arch) {
-            let c = warp_cuda::Compiled {
-                cubin,
-                log: String::new(),
-                compile_ms: 0.0,
-            };
-            return Ok((c, CacheOutcome::Hit, true));
-        }
-        warp_cuda::compile_cached(&src.text, info.name, opts, arch).map(|(c, o)| (c, o, false))
-    })
-    .map_err(|e| err(device, e))?;
+    let stack_define = adjoint.map(|b| b.to_string());
+    let (compiled, outcome, aot) =
+        with_compile_options(contiguous, stack_define.as_deref(), |opts| {
+            // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
+            if let Some(cubin) = crate::aot::lookup(&src.text, info.name, opts, arch) {
+                let c = warp_cuda::Compiled {
+                    cubin,
+                    log: String::new(),
+                    compile_ms: 0.0,
+                };
+                return Ok((c, CacheOutcome::Hit, true));
+            }
+            warp_cuda::compile_cached(&src.text, info.name, opts, arch).map(|(c, o)| (c, o, false))
+        })
+        .map_err(|e| err(device, e))?;
     let module = st
         .gpu
         .load_module(&compiled.cubin)
@@ -255,6 +266,7 @@ fn loaded(
             kernel: info.name,
             device: device.alias().to_string(),
             contiguous,
+            adjoint: adjoint.is_some(),
             source_bytes: src.text.len(),
             compile_ms: compiled.compile_ms,
             cache_hit: matches!(outcome, CacheOutcome::Hit),
@@ -275,13 +287,21 @@ fn loaded(
 
 /// Calls `f` with the NVRTC options of a kernel translation unit (the runtime's and the
 /// ahead-of-time compiler's, which must agree for AOT entries to be found).
-pub(crate) fn with_compile_options<R>(contiguous: bool, f: impl FnOnce(&CompileOptions) -> R) -> R {
+/// `adstack_bytes`: the per-thread adjoint stack of an adjoint unit.
+pub(crate) fn with_compile_options<R>(
+    contiguous: bool,
+    adstack_bytes: Option<&str>,
+    f: impl FnOnce(&CompileOptions) -> R,
+) -> R {
     let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
-    let defines: &[(&str, &str)] = if contiguous {
-        &[("WP_CONTIGUOUS", "1")]
-    } else {
-        &[]
-    };
+    let mut defines: Vec<(&str, &str)> = Vec::new();
+    if contiguous {
+        defines.push(("WP_CONTIGUOUS", "1"));
+    }
+    if let Some(b) = adstack_bytes {
+        defines.push(("WP_ADSTACK_BYTES", b));
+    }
+    let defines = &defines[..];
     f(&CompileOptions {
         fmad: config::cuda_fmad(),
         line_info: true,
@@ -316,12 +336,16 @@ const MAX_PARAMS: usize = 62;
 
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
 /// thread's current stream for the GPU (`ScopedStream`), else on the default stream.
+///
+/// `adjoint: Some(bytes)` launches the kernel's adjoint instead (with `bytes` of adjoint stack
+/// per thread): the arrays' gradients follow the parameters.
 pub(crate) fn launch<K: Kernel>(
     args: &K::Args<'_>,
     grid: &Grid,
     device: &Device,
     ordinal: usize,
     stream: Option<&warp_cuda::Stream>,
+    adjoint: Option<usize>,
 ) -> Result<()> {
     let info = K::info();
     if info.params.len() > MAX_PARAMS {
@@ -330,9 +354,21 @@ pub(crate) fn launch<K: Kernel>(
             info.name
         )));
     }
+    if adjoint.is_some() {
+        if let Some(reason) = info.cuda_adjoint_error {
+            return Err(Error::NotDifferentiable {
+                kernel: info.name,
+                reason: reason.to_string(),
+            });
+        }
+    }
     // Arguments first: a wrong device is reported before anything is compiled.
     let mut params = K::cuda_params(args, device)?;
-    let kernel = loaded(device, ordinal, info, K::arrays_contiguous(args))?;
+    let mut grads = match adjoint {
+        Some(_) => Some(K::cuda_grads(args, device)?),
+        None => None,
+    };
+    let kernel = loaded(device, ordinal, info, K::arrays_contiguous(args), adjoint)?;
     let st = &kernel.st;
     let mut dims = LaunchDims {
         dims: grid.dims.map(|d| d as i64),
@@ -347,10 +383,13 @@ pub(crate) fn launch<K: Kernel>(
         raised: 0,
         pad: 0,
     };
-    let mut ptrs = [std::ptr::null_mut::<c_void>(); MAX_PARAMS + 2];
+    let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 * MAX_PARAMS + 2];
     ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
     ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
-    let n = 2 + K::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+    let mut n = 2 + K::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+    if let Some(g) = grads.as_mut() {
+        n += K::cuda_grad_ptrs(g, &mut ptrs[n..]);
+    }
     let block = config::cuda_block_dim();
     let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
     *st.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(info);
@@ -412,6 +451,10 @@ pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
         .unwrap_or_else(|p| p.into_inner())
         .unwrap_or(&UNKNOWN);
     let kind = match kind {
+        4 => FaultKind::AdStackOverflow {
+            line: i64_at(8) as u32,
+            capacity: i64_at(40) as usize,
+        },
         1 => FaultKind::OutOfBounds {
             arg: info.params.get(arg as usize).copied().unwrap_or("?"),
             index: (0..ndim).map(|k| i64_at(8 + 8 * k) as i128).collect(),
@@ -438,6 +481,9 @@ static UNKNOWN: KernelInfo = KernelInfo {
     callees: &[],
     structs: &[],
     adjoint_error: None,
+    cuda_adjoint: "",
+    cuda_adjoint_stack: false,
+    cuda_adjoint_error: None,
 };
 
 /// Waits for every GPU used so far and reports the first recorded fault.

@@ -48,6 +48,17 @@ fn fill(template: &str, self_name: &str, file: &str, callees: &[(String, &str)])
 
 /// Builds the translation unit for `info`.
 pub fn assemble(info: &KernelInfo) -> CudaSource {
+    assemble_unit(info, false)
+}
+
+/// Builds the adjoint translation unit for `info`: the adjoint library, every func's forward,
+/// replay and adjoint templates, and the kernel's adjoint (entry `wpk_<name>_adj`). Compiled
+/// only when backward first runs through the kernel on a GPU.
+pub fn assemble_adjoint(info: &KernelInfo) -> CudaSource {
+    assemble_unit(info, true)
+}
+
+fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
     let mut funcs = Vec::new();
     collect(info.callees, &mut funcs);
     let name_of = |f: &FuncInfo| -> String {
@@ -71,6 +82,9 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
             headers.push(format!("wp_{s}.h"));
         }
     }
+    if adjoint {
+        headers.push("wp_adjoint.h".to_string());
+    }
     let mut text = format!(
         "// warp-lang kernel `{}` from {} ({})\n",
         info.name, info.module, info.file
@@ -93,6 +107,9 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
             f.callees.iter().map(|c| (name_of(c), c.cuda_ret)).collect();
         text.push('\n');
         text.push_str(&fill(f.cuda, &name_of(f), f.file, &callees));
+        if adjoint {
+            text.push_str(&fill(f.cuda_adj, &name_of(f), f.file, &callees));
+        }
     }
     let thread_fn = format!("wpk_{}_thread", info.name);
     let entry = format!("wpk_{}", info.name);
@@ -102,7 +119,21 @@ pub fn assemble(info: &KernelInfo) -> CudaSource {
         .map(|c| (name_of(c), c.cuda_ret))
         .collect();
     text.push('\n');
-    text.push_str(&fill(info.cuda, &thread_fn, info.file, &callees).replace("@@ENTRY@@", &entry));
+    let (template, entry, thread_fn) = if adjoint {
+        (
+            info.cuda_adjoint,
+            format!("{entry}_adj"),
+            format!("{thread_fn}_adj"),
+        )
+    } else {
+        (info.cuda, entry, thread_fn)
+    };
+    // The adjoint template names its functions `@@SELF@@_adj` and `@@ENTRY@@_adj`.
+    let base_self = thread_fn.trim_end_matches("_adj").to_string();
+    let base_entry = entry.trim_end_matches("_adj").to_string();
+    text.push_str(
+        &fill(template, &base_self, info.file, &callees).replace("@@ENTRY@@", &base_entry),
+    );
     CudaSource {
         text,
         entry,
@@ -124,6 +155,8 @@ mod tests {
         sections: &[],
         callees: &[],
         structs: &[],
+        cuda_adj: "",
+        cuda_adj_error: None,
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -135,6 +168,8 @@ mod tests {
         sections: &["scalar"],
         callees: &[],
         structs: &[],
+        cuda_adj: "",
+        cuda_adj_error: None,
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -145,6 +180,8 @@ mod tests {
         sections: &[],
         callees: &[&LEAF, &OTHER_SQ],
         structs: &[],
+        cuda_adj: "",
+        cuda_adj_error: None,
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];
@@ -163,6 +200,9 @@ mod tests {
             callees: &KERNEL_CALLEES,
             structs: &[],
             adjoint_error: None,
+            cuda_adjoint: "",
+            cuda_adjoint_stack: false,
+            cuda_adjoint_error: None,
         };
         let src = assemble(&info);
         assert_eq!(src.headers, vec!["wp_core.h", "wp_scalar.h", "wp_vector.h"]);

@@ -52,6 +52,11 @@ pub trait KernelArg: 'static {
     /// As [`KernelArg::cpu_view`].
     #[doc(hidden)]
     unsafe fn grad_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::GradView>;
+    /// What a CUDA adjoint kernel receives for this parameter's gradient: the gradient array
+    /// (`data == 0` when the array has none) for arrays; nothing is passed for values.
+    type CudaGrad: Copy;
+    /// The CUDA gradient argument of a host argument.
+    fn cuda_grad(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaGrad>;
     /// An owned copy of a host argument (a handle for arrays), kept by a `Tape`.
     type Owned: Send + Sync + 'static;
     /// Makes the owned copy.
@@ -125,6 +130,14 @@ pub struct KernelInfo {
     /// Why the kernel has no adjoint (a construct the reverse sweep does not handle yet, or
     /// `enable_backward = false`); `None` when backward through it works.
     pub adjoint_error: Option<&'static str>,
+    /// The CUDA C++ template of the kernel's adjoint (`@@SELF@@_adj`, `@@ENTRY@@_adj`), for a
+    /// translation unit compiled only when backward first runs on a GPU.
+    pub cuda_adjoint: &'static str,
+    /// Whether the CUDA adjoint pushes on its per-thread stack (then it reserves
+    /// `WP_ADSTACK_BYTES` of local memory per thread).
+    pub cuda_adjoint_stack: bool,
+    /// Why the kernel has no CUDA adjoint, beyond `adjoint_error`.
+    pub cuda_adjoint_error: Option<&'static str>,
 }
 
 /// A `#[derive(Struct)]` struct's C++ definition, for CUDA kernels that take it.
@@ -178,6 +191,13 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     /// As [`KernelArg::cpu_view`].
     #[doc(hidden)]
     unsafe fn cpu_grads(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuGrads>;
+    /// The gradient parameters of a CUDA adjoint launch (array parameters only).
+    type CudaGrads: Copy;
+    /// Converts the arguments' gradients for a CUDA adjoint launch.
+    fn cuda_grads(args: &Self::Args<'_>, device: &Device) -> Result<Self::CudaGrads>;
+    /// Writes a pointer to each gradient parameter (array parameters, in order) into `out`
+    /// and returns how many it wrote.
+    fn cuda_grad_ptrs(grads: &mut Self::CudaGrads, out: &mut [*mut std::ffi::c_void]) -> usize;
     /// The arguments, owned (array handles and values), as a `Tape` keeps them.
     type Owned: Send + Sync + 'static;
     /// Owns the arguments.

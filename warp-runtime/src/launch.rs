@@ -231,6 +231,7 @@ fn launch_with<K: Kernel>(
             device,
             ordinal,
             stream.map(Stream::cuda_stream),
+            None,
         ),
         #[cfg(not(feature = "cuda"))]
         DeviceKind::Cuda { .. } => Err(Error::NoDevice {
@@ -298,6 +299,13 @@ mod tests {
     /// The CUDA half of a hand-written test kernel that only runs on the CPU.
     macro_rules! cpu_only {
         ($owned:ty, |$a:ident| $own:expr, |$o:ident| $borrow:expr) => {
+            type CudaGrads = ();
+            fn cuda_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
+                Ok(())
+            }
+            fn cuda_grad_ptrs(_: &mut (), _: &mut [*mut std::ffi::c_void]) -> usize {
+                0
+            }
             type CpuGrads = ();
             unsafe fn cpu_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
                 Ok(())
@@ -365,6 +373,9 @@ mod tests {
             callees: &[],
             structs: &[],
             adjoint_error: None,
+            cuda_adjoint: "",
+            cuda_adjoint_stack: false,
+            cuda_adjoint_error: None,
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {
@@ -409,6 +420,9 @@ mod tests {
             callees: &[],
             structs: &[],
             adjoint_error: None,
+            cuda_adjoint: "",
+            cuda_adjoint_stack: false,
+            cuda_adjoint_error: None,
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let data = ArgCtx {
@@ -461,6 +475,9 @@ mod tests {
             callees: &[],
             structs: &[],
             adjoint_error: None,
+            cuda_adjoint: "",
+            cuda_adjoint_stack: false,
+            cuda_adjoint_error: None,
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {

@@ -31,18 +31,7 @@ pub struct CudaTemplate {
 
 /// Emits the CUDA template of a kernel (`kind == Kernel`) or func.
 pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
-    let mut e = Emitter {
-        f,
-        tid: crate::analysis::tid_components(f),
-        used: used_vars(f),
-        out: String::new(),
-        indent: 1,
-        file: file.to_string(),
-        sections: Vec::new(),
-        tmp: 0,
-        in_range: Vec::new(),
-        unswitched: 0,
-    };
+    let mut e = Emitter::new(f, file);
     e.function()?;
     let ret = if matches!(f.ret, Ty::Unit) {
         "void".into()
@@ -56,17 +45,20 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     })
 }
 
-struct Emitter<'a> {
-    f: &'a Function,
+pub(crate) struct Emitter<'a> {
+    pub(crate) f: &'a Function,
     /// Which thread-index component each variable holds.
-    tid: Vec<Option<u8>>,
+    pub(crate) tid: Vec<Option<u8>>,
     /// Variables read somewhere (a func result nobody reads may be `void`).
     used: Vec<bool>,
-    out: String,
-    indent: usize,
+    pub(crate) out: String,
+    pub(crate) indent: usize,
     file: String,
-    sections: Vec<&'static str>,
-    tmp: usize,
+    pub(crate) sections: Vec<&'static str>,
+    pub(crate) tmp: usize,
+    /// Emit expressions for an adjoint's replay: atomics are not redone (zero) and funcs are
+    /// called through their replay (`@@F<k>@@_replay`).
+    pub(crate) replay: bool,
     /// `(array, loop variable, flag)`: inside a native loop, accesses of `array` at exactly
     /// the loop variable are in bounds when `flag` (checked once before the loop) is true; an
     /// empty flag means always (the copy of the loop that runs when the check passed).
@@ -130,7 +122,23 @@ fn is_int(t: &Ty) -> bool {
 }
 
 impl<'a> Emitter<'a> {
-    fn var(&self, v: VarId) -> String {
+    pub(crate) fn new(f: &'a Function, file: &str) -> Self {
+        Emitter {
+            f,
+            tid: crate::analysis::tid_components(f),
+            used: used_vars(f),
+            out: String::new(),
+            indent: 1,
+            file: file.to_string(),
+            sections: Vec::new(),
+            tmp: 0,
+            replay: false,
+            in_range: Vec::new(),
+            unswitched: 0,
+        }
+    }
+
+    pub(crate) fn var(&self, v: VarId) -> String {
         match &self.f.vars[v].name {
             Some(n) => format!("{}_{v}", n.trim_start_matches("r#")),
             None => format!("t{v}"),
@@ -140,7 +148,7 @@ impl<'a> Emitter<'a> {
     /// The C++ type of a variable: its spelling when the macro knows it, else a type
     /// expression built from how the value was made (a callee's declared return type,
     /// `@@R<k>@@`, filled in by the assembler; `decltype` over `wp::declval` otherwise).
-    fn type_expr(&self, v: VarId, depth: usize) -> Option<String> {
+    pub(crate) fn type_expr(&self, v: VarId, depth: usize) -> Option<String> {
         if let Some(t) = cpp_type(self.f.ty(v)) {
             return Some(t);
         }
@@ -206,13 +214,13 @@ impl<'a> Emitter<'a> {
             .map(|(_, _, flag)| flag.as_str())
     }
 
-    fn section(&mut self, s: &'static str) {
+    pub(crate) fn section(&mut self, s: &'static str) {
         if !self.sections.contains(&s) {
             self.sections.push(s);
         }
     }
 
-    fn line(&mut self, span: proc_macro2::Span, text: &str) {
+    pub(crate) fn line(&mut self, span: proc_macro2::Span, text: &str) {
         let line = span.start().line;
         if line > 0 {
             let _ = writeln!(self.out, "#line {line} \"{}\"", self.file);
@@ -222,6 +230,12 @@ impl<'a> Emitter<'a> {
         }
         self.out.push_str(text);
         self.out.push('\n');
+    }
+
+    /// The whole function (the forward template), consuming the emitter.
+    pub(crate) fn function_text(mut self) -> Result<String, String> {
+        self.function()?;
+        Ok(self.out)
     }
 
     fn function(&mut self) -> Result<(), String> {
@@ -538,7 +552,7 @@ impl<'a> Emitter<'a> {
         Ok(())
     }
 
-    fn index(&self, index: &[VarId]) -> String {
+    pub(crate) fn index(&self, index: &[VarId]) -> String {
         index
             .iter()
             .map(|v| format!("(wp::i64)({})", self.var(*v)))
@@ -546,7 +560,7 @@ impl<'a> Emitter<'a> {
             .join(", ")
     }
 
-    fn op(&mut self, op: &Op, dst: VarId) -> Result<String, String> {
+    pub(crate) fn op(&mut self, op: &Op, dst: VarId) -> Result<String, String> {
         let ty = self.f.ty(dst).clone();
         Ok(match op {
             Op::Lit(Lit::Bool(b)) => b.to_string(),
@@ -614,7 +628,11 @@ impl<'a> Emitter<'a> {
             }
             Op::Builtin { builtin, args } => {
                 self.section(builtin.section);
-                if builtin.grad == crate::builtins::Grad::Atomic {
+                if builtin.grad == crate::builtins::Grad::Atomic && self.replay {
+                    // Not redone in an adjoint's replay: the forward launch did it.
+                    let val = self.var(args[args.len() - 1]);
+                    format!("wp::zero_like({val})")
+                } else if builtin.grad == crate::builtins::Grad::Atomic {
                     let a = self.var(args[0]);
                     let idx = self.index(&args[1..args.len() - 1]);
                     let val = self.var(args[args.len() - 1]);
@@ -633,7 +651,8 @@ impl<'a> Emitter<'a> {
                     .ok_or("callee not recorded")?;
                 let mut args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                 args.push("__ctx".into());
-                format!("@@F{k}@@({})", args.join(", "))
+                let suffix = if self.replay { "_replay" } else { "" };
+                format!("@@F{k}@@{suffix}({})", args.join(", "))
             }
             Op::Load { array, index } if self.unchecked_when(*array, index).is_some() => {
                 let c = self.unchecked_when(*array, index).expect("guarded");

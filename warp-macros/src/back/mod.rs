@@ -1,5 +1,6 @@
 //! Back ends: code emitted from the IR. Each walks the same statements.
 
 pub mod cuda;
+pub mod cuda_adjoint;
 pub mod rust;
 pub mod rust_adjoint;

@@ -92,7 +92,7 @@ struct AdjEmitter<'a> {
 
 /// Variables that may be assigned more than once in one thread: `mut` ones and everything
 /// assigned inside a loop (including loop variables).
-fn overwritten_vars(f: &Function) -> Vec<bool> {
+pub(crate) fn overwritten_vars(f: &Function) -> Vec<bool> {
     let mut out: Vec<bool> = f.vars.iter().map(|v| v.mutable).collect();
     fn walk(b: &Block, in_loop: bool, out: &mut Vec<bool>) {
         for s in b {
