@@ -724,6 +724,13 @@ WP_FN adstack_t adstack_new(char* buf, i32 cap) {
   return s;
 }
 
+namespace detail {
+// Byte copy (NVRTC has no __builtin_memcpy; the compiler turns this into plain moves).
+WP_FN void copy_bytes(char* dst, const char* src, int n) {
+  for (int i = 0; i < n; ++i) dst[i] = src[i];
+}
+}  // namespace detail
+
 template <typename T>
 WP_FN void adstack_push(adstack_t* s, const T& v, i32 line, ctx_t* ctx) {
   if (s->overflow) return;
@@ -734,7 +741,7 @@ WP_FN void adstack_push(adstack_t* s, const T& v, i32 line, ctx_t* ctx) {
     raise(ctx, FAULT_ADSTACK_OVERFLOW, -1, 1, idx, shape);
     return;
   }
-  __builtin_memcpy(s->base + s->top, &v, sizeof(T));
+  detail::copy_bytes(s->base + s->top, reinterpret_cast<const char*>(&v), (int)sizeof(T));
   s->top += (i32)sizeof(T);
 }
 
@@ -743,7 +750,7 @@ WP_FN T adstack_pop(adstack_t* s) {
   T v{};
   if (s->overflow || s->top < (i32)sizeof(T)) return v;
   s->top -= (i32)sizeof(T);
-  __builtin_memcpy(&v, s->base + s->top, sizeof(T));
+  detail::copy_bytes(reinterpret_cast<char*>(&v), s->base + s->top, (int)sizeof(T));
   return v;
 }
 

@@ -366,6 +366,10 @@ impl<'a> Adj<'a> {
             "&__ctx_value".into(),
             "&__st".into(),
         ]);
+        // Funcs may push too (the macro cannot see their bodies from here).
+        if !self.f.callees.is_empty() {
+            self.pushes = true;
+        }
         let bytes = if self.pushes { "WP_ADSTACK_BYTES" } else { "0" };
         self.e.out.push_str(&format!(
             "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@_adj({}) {{\n    \
