@@ -786,6 +786,34 @@ WP_FN void grad_accum_own(const array_t<T, 4>& g, i64 i0, i64 i1, i64 i2, i64 i3
   grad_accum_own_idx(g, idx, v);
 }
 
+/// Sets `g[idx]` to the zero adjoint without a bounds check (same contract as
+/// `grad_accum_own`): the deferred clear of a write-only thread-owned array's gradient.
+template <typename T, int N>
+WP_FN void grad_clear_own_idx(const array_t<T, N>& g, const i64* idx) {
+  if (g.data == nullptr) return;
+  *detail::elem_ptr_unchecked_idx(g, idx) = adj_zero<T>();
+}
+template <typename T>
+WP_FN void grad_clear_own(const array_t<T, 1>& g, i64 i0) {
+  const i64 idx[1] = {i0};
+  grad_clear_own_idx(g, idx);
+}
+template <typename T>
+WP_FN void grad_clear_own(const array_t<T, 2>& g, i64 i0, i64 i1) {
+  const i64 idx[2] = {i0, i1};
+  grad_clear_own_idx(g, idx);
+}
+template <typename T>
+WP_FN void grad_clear_own(const array_t<T, 3>& g, i64 i0, i64 i1, i64 i2) {
+  const i64 idx[3] = {i0, i1, i2};
+  grad_clear_own_idx(g, idx);
+}
+template <typename T>
+WP_FN void grad_clear_own(const array_t<T, 4>& g, i64 i0, i64 i1, i64 i2, i64 i3) {
+  const i64 idx[4] = {i0, i1, i2, i3};
+  grad_clear_own_idx(g, idx);
+}
+
 /// warp_core::adj_atomic_extreme: the adjoint of atomic_min/atomic_max goes to `v` where it
 /// equals the array's value after the launch (componentwise for vectors).
 template <typename T>
