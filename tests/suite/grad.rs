@@ -25,7 +25,101 @@ backend_tests!(
     copy_and_custom_steps,
     atomic_extremes_gradient,
     custom_gradients,
+    structs_and_nested_loops,
 );
+
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Body {
+    pos: DVec3,
+    scale: f64,
+}
+
+/// Struct fields read and written (`b.pos.x += ..`), vector components, a 2-D array, and
+/// nested dynamic loops carrying a value.
+#[wp::kernel]
+fn k_struct_loops(bodies: Array<Body>, m: Array<f64, 2>, n: i32, out: Array<f64>) {
+    let i = tid();
+    let mut b = bodies[i];
+    let mut acc: f64 = 0.0;
+    for r in 0..n {
+        for c in 0..n {
+            acc = acc * 0.5 + m[(r, c)] * b.scale;
+        }
+        b.pos.x += acc;
+    }
+    out[i] = b.pos.x * b.pos.y + b.pos.z;
+}
+
+fn structs_and_nested_loops(dev: &wp::Device) {
+    let bodies_h = [
+        Body {
+            pos: DVec3::new(1.0, 2.0, 3.0),
+            scale: 0.5,
+        },
+        Body {
+            pos: DVec3::new(-1.0, 0.25, 0.0),
+            scale: 2.0,
+        },
+    ];
+    let m_h: Vec<f64> = (0..9).map(|k| 0.25 * k as f64 - 1.0).collect();
+    let bodies = arr(&bodies_h, dev).with_grad().unwrap();
+    let m = wp::Array::from_slice_shape(&m_h, (3, 3), dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let out = zeros::<f64, 1>(2, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_struct_loops, 2, (&bodies, &m, 3, &out), dev),
+        &[&m.reshape::<1>(9).unwrap()],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    // The struct's gradient: d out / d pos = (pos.y, pos.x + sum, 1) and d/d scale.
+    let tape = wp::Tape::new();
+    out.fill(0.0).unwrap();
+    {
+        let _rec = tape.record();
+        wp::launch(k_struct_loops, 2, (&bodies, &m, 3, &out), dev).unwrap();
+    }
+    bodies.zero_grad().unwrap();
+    assert!(backward_ok(dev, tape.backward(&out)));
+    let g = bodies.grad().unwrap().to_vec().unwrap();
+    let f = |b: Body| {
+        let mut b = b;
+        let mut acc = 0.0;
+        for r in 0..3 {
+            for c in 0..3 {
+                acc = acc * 0.5 + m_h[r * 3 + c] * b.scale;
+            }
+            b.pos.x += acc;
+        }
+        b.pos.x * b.pos.y + b.pos.z
+    };
+    for (k, b) in bodies_h.iter().enumerate() {
+        let h = 1e-6;
+        let d = |mut p: Body, mut q: Body, set: &dyn Fn(&mut Body, f64)| {
+            set(&mut p, h);
+            set(&mut q, -h);
+            (f(p) - f(q)) / (2.0 * h)
+        };
+        let want_y = d(*b, *b, &|x, e| x.pos.y += e);
+        let want_s = d(*b, *b, &|x, e| x.scale += e);
+        assert!(
+            (g[k].pos.y - want_y).abs() <= 1e-6 * want_y.abs().max(1.0),
+            "{:?}",
+            g[k]
+        );
+        assert!(
+            (g[k].scale - want_s).abs() <= 1e-6 * want_s.abs().max(1.0),
+            "{:?}",
+            g[k]
+        );
+        assert_eq!(g[k].pos.z, 1.0);
+    }
+}
 
 #[wp::func(grad(x = safe_sqrt_dx))]
 fn safe_sqrt(x: f64) -> f64 {
@@ -640,6 +734,7 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <k_jumps as wp::Kernel>::info(),
         <k_extremes as wp::Kernel>::info(),
         <k_custom as wp::Kernel>::info(),
+        <k_struct_loops as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

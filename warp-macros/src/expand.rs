@@ -723,6 +723,33 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
         def.push_str(&format!(" {cpp} {field};"));
     }
     def.push_str(" };");
+    // Adjoint units (`WP_ADJOINT_UNIT`) also get the struct's adjoint helpers, field by field:
+    // global overloads (found by argument-dependent lookup from the library's templates) and
+    // `wp::` ones (for the qualified calls of generated code).
+    let fields_named: Vec<String> = data
+        .fields
+        .iter()
+        .filter_map(|f| f.ident.as_ref().map(|i| i.to_string()))
+        .collect();
+    let accum: String = fields_named
+        .iter()
+        .map(|f| format!(" adj_accum(a.{f}, v.{f});"))
+        .collect();
+    let grad_add: String = fields_named
+        .iter()
+        .map(|f| format!(" grad_add_p(&p->{f}, v.{f});"))
+        .collect();
+    def.push_str(&format!(
+        "\n#ifdef WP_ADJOINT_UNIT\n\
+         WP_FN void adj_accum({name}& a, const {name}& v) {{ using wp::adj_accum;{accum} }}\n\
+         WP_FN void grad_add_p({name}* p, const {name}& v) {{ using wp::detail::grad_add_p;{grad_add} }}\n\
+         namespace wp {{\n\
+         WP_FN void adj_accum(::{name}& a, const ::{name}& v) {{ ::adj_accum(a, v); }}\n\
+         WP_FN ::{name} zero_like(const ::{name}&) {{ return ::{name}{{}}; }}\n\
+         template <> WP_FN ::{name} adj_zero<::{name}>() {{ return ::{name}{{}}; }}\n\
+         }}\n\
+         #endif"
+    ));
     let cuda_def = Literal::string(&def);
     // Fields of user struct types: their definitions come first.
     let nested: Vec<&syn::Type> = fields

@@ -89,6 +89,10 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         "// warp-lang kernel `{}` from {} ({})\n",
         info.name, info.module, info.file
     );
+    if adjoint {
+        // User structs add their adjoint helpers (see `derive(Struct)`).
+        text.push_str("#define WP_ADJOINT_UNIT 1\n");
+    }
     for h in &headers {
         text.push_str(&format!("#include \"{h}\"\n"));
     }
