@@ -15,6 +15,17 @@
 use crate::ir::*;
 use crate::types::{Ty, BOOL};
 
+/// Whether a value of this type carries a gradient (`Deferred`, unknown to the macro: yes; the
+/// adjoint functions are no-ops for integer types).
+pub fn differentiable(t: &Ty) -> bool {
+    match t {
+        Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
+        Ty::Matrix(..) | Ty::Quat(_) => true,
+        Ty::Array(..) | Ty::Unit => false,
+        _ => true,
+    }
+}
+
 /// `f` with its jumps turned into flags (a copy; `f` itself is untouched).
 pub fn without_jumps(f: &Function) -> Function {
     let mut g = f.clone();

@@ -193,6 +193,19 @@ impl BinOp {
             BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
         )
     }
+    /// The name of the operator's adjoint in both adjoint libraries (`adj_add`, ..), for the
+    /// arithmetic operators (the others have no gradient).
+    pub fn adjoint_fn(self) -> Option<&'static str> {
+        Some(match self {
+            BinOp::Add => "adj_add",
+            BinOp::Sub => "adj_sub",
+            BinOp::Mul => "adj_mul",
+            BinOp::Div => "adj_div",
+            BinOp::Rem => "adj_rem",
+            _ => return None,
+        })
+    }
+
     pub fn symbol(self) -> &'static str {
         match self {
             BinOp::Add => "+",

@@ -162,15 +162,6 @@ struct Adj<'a> {
     pushes: bool,
 }
 
-fn differentiable(t: &Ty) -> bool {
-    match t {
-        Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
-        Ty::Matrix(..) | Ty::Quat(_) => true,
-        Ty::Array(..) | Ty::Unit => false,
-        _ => true,
-    }
-}
-
 impl<'a> Adj<'a> {
     fn var(&self, v: VarId) -> String {
         self.e.var(v)
@@ -179,7 +170,7 @@ impl<'a> Adj<'a> {
         format!("adj_{}", self.e.var(v))
     }
     fn diff(&self, v: VarId) -> bool {
-        differentiable(self.f.ty(v))
+        crate::adjoint_prep::differentiable(self.f.ty(v))
     }
     fn is_array(&self, v: VarId) -> bool {
         matches!(self.f.ty(v), Ty::Array(..))
@@ -760,13 +751,8 @@ impl<'a> Adj<'a> {
             Op::Copy(a) => self.acc(*a, "__r", sp),
             Op::Unary(UnOp::Neg, a) => self.call("adj_neg", &[*a], sp),
             Op::Binary(o, a, b) => {
-                let f = match o {
-                    BinOp::Add => "adj_add",
-                    BinOp::Sub => "adj_sub",
-                    BinOp::Mul => "adj_mul",
-                    BinOp::Div => "adj_div",
-                    BinOp::Rem => "adj_rem",
-                    _ => return Ok(()),
+                let Some(f) = o.adjoint_fn() else {
+                    return Ok(());
                 };
                 self.call(f, &[*a, *b], sp);
             }

@@ -116,18 +116,6 @@ pub(crate) fn overwritten_vars(f: &Function) -> Vec<bool> {
     out
 }
 
-/// Whether a value of this type can carry a gradient (`Deferred`: unknown to the macro, so
-/// yes; the adjoint functions are no-ops for integer types).
-fn differentiable(t: &Ty) -> bool {
-    match t {
-        Ty::Scalar(s) => s.is_float(),
-        Ty::Vector(s, _) => s.is_float(),
-        Ty::Matrix(..) | Ty::Quat(_) => true,
-        Ty::Array(..) | Ty::Unit => false,
-        _ => true,
-    }
-}
-
 impl<'a> AdjEmitter<'a> {
     /// A func's body without its final `return value` (the result, handled apart).
     fn body_without_tail(&self) -> &'a [Stmt] {
@@ -160,7 +148,7 @@ impl<'a> AdjEmitter<'a> {
     }
 
     fn diff(&self, v: VarId) -> bool {
-        differentiable(self.f.ty(v))
+        crate::adjoint_prep::differentiable(self.f.ty(v))
     }
 
     fn is_array(&self, v: VarId) -> bool {
@@ -534,13 +522,8 @@ impl<'a> AdjEmitter<'a> {
             Op::Copy(a) => acc(*a, quote!(__r)),
             Op::Unary(UnOp::Neg, a) => call(format_ident!("adj_neg"), &[*a]),
             Op::Binary(o, a, b) => {
-                let f = match o {
-                    BinOp::Add => "adj_add",
-                    BinOp::Sub => "adj_sub",
-                    BinOp::Mul => "adj_mul",
-                    BinOp::Div => "adj_div",
-                    BinOp::Rem => "adj_rem",
-                    _ => return TokenStream::new(),
+                let Some(f) = o.adjoint_fn() else {
+                    return TokenStream::new();
                 };
                 call(format_ident!("{}", f), &[*a, *b])
             }
