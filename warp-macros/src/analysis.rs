@@ -61,6 +61,30 @@ pub fn tid_accessed_params(f: &Function, tid: &[Option<u8>]) -> Vec<VarId> {
     out
 }
 
+/// Indices of the array parameters a kernel may write: stored to, updated atomically, or
+/// passed to a func (which may store).
+pub fn written_params(f: &Function) -> Vec<usize> {
+    let mut w: Vec<VarId> = Vec::new();
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::Store { array, .. } => w.push(*array),
+        StmtKind::Assign {
+            op: Op::Builtin { builtin, args },
+            ..
+        } if builtin.grad == crate::builtins::Grad::Atomic => w.push(args[0]),
+        StmtKind::Assign {
+            op: Op::Func { args, .. },
+            ..
+        } => w.extend(args.iter().copied()),
+        _ => {}
+    });
+    f.params
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| matches!(p.ty, crate::types::Ty::Array(..)) && w.contains(&p.var))
+        .map(|(k, _)| k)
+        .collect()
+}
+
 /// The array parameters accessed only through [`is_tid_access`] accesses (loads, stores; no
 /// other access, no atomic, no func argument): in a launch whose arrays cover the grid, each
 /// element of such an array is touched by one thread only, so its gradient can be

@@ -106,6 +106,13 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         quote!(let __tid: [usize; #n] = __grid.unflatten::<#n>(__flat);)
     });
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
+    let written = crate::analysis::written_params(&f);
+    let w_tys: Vec<&syn::Type> = written.iter().map(|k| &f.params[*k].syn_ty).collect();
+    let w_idx: Vec<syn::Index> = written.iter().map(|k| syn::Index::from(*k)).collect();
+    let w_names: Vec<Literal> = written
+        .iter()
+        .map(|k| Literal::string(&f.params[*k].name))
+        .collect();
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(&f);
@@ -190,6 +197,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                     params: &[#(#pnames),*],
                     tid_ndim: #tid,
                     same_shape: &[#(#groups),*],
+                    written: &[#(#written),*],
                     file: ::core::file!(),
                     cuda: #cuda_src,
                     cuda_sections: &[#(#cuda_sections),*],
@@ -241,6 +249,10 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
                 #[allow(clippy::unused_unit)]
                 fn borrow(__owned: &Self::Owned) -> Self::Args<'_> {
                     ( #( <#tys as __wp::KernelArg>::borrow(&__owned.#idx), )* )
+                }
+                fn verify_fp(__args: &Self::Args<'_>) -> __wp::Result<()> {
+                    #( <#w_tys as __wp::KernelArg>::check_finite(&__args.#w_idx, #name_str, #w_names)?; )*
+                    ::core::result::Result::Ok(())
                 }
                 fn zero_grads(__args: &Self::Args<'_>) -> __wp::Result<()> {
                     #( <#tys as __wp::KernelArg>::zero_grad(&__args.#idx)?; )*
@@ -789,6 +801,15 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             unsafe impl __wp::bytemuck::Pod for #name {}
             impl __wp::Element for #name {
                 const TYPE_NAME: &'static str = #name_str;
+                fn is_finite_value(&self) -> bool {
+                    true #( && <#fields as __wp::Element>::is_finite_value(&self.#members) )*
+                }
+                fn describe(&self) -> ::std::string::String {
+                    let parts: ::std::vec::Vec<::std::string::String> = ::std::vec![
+                        #( <#fields as __wp::Element>::describe(&self.#members) ),*
+                    ];
+                    ::std::format!("{} {{ {} }}", #name_str, parts.join(", "))
+                }
             }
             impl __wp::GradElement for #name {
                 unsafe fn grad_add(p: *mut Self, v: Self) {

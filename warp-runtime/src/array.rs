@@ -33,6 +33,15 @@ use warp_core::ArrayView;
 pub trait Element: bytemuck::Pod + warp_core::GradElement + Send + Sync + 'static {
     /// The type's name as written in Rust (`"f32"`, `"Vec3"`), for messages and code generation.
     const TYPE_NAME: &'static str;
+    /// False when a float component is NaN or infinite (always true for integer types); what
+    /// `config::set_verify_fp` checks.
+    fn is_finite_value(&self) -> bool {
+        true
+    }
+    /// The value as text, for messages.
+    fn describe(&self) -> String {
+        String::new()
+    }
 }
 
 macro_rules! elements {
@@ -42,9 +51,23 @@ macro_rules! elements {
         }
     )*};
 }
-elements!(i8, i16, i32, i64, u8, u16, u32, u64, f32, f64);
-elements!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
-elements!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
+macro_rules! float_elements {
+    ($($t:ident),* $(,)?) => {$(
+        impl Element for $t {
+            const TYPE_NAME: &'static str = stringify!($t);
+            fn is_finite_value(&self) -> bool {
+                self.is_finite()
+            }
+            fn describe(&self) -> String {
+                format!("{:?}", self)
+            }
+        }
+    )*};
+}
+elements!(i8, i16, i32, i64, u8, u16, u32, u64);
+elements!(IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
+float_elements!(f32, f64, Vec2, Vec3, Vec4, DVec2, DVec3, DVec4);
+float_elements!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 
 /// Something that names the shape of an `N`-dimensional array: a `usize` (for `N = 1`), an
 /// array `[usize; N]`, or a tuple of 2 to 4 `usize`s.
@@ -470,6 +493,36 @@ impl<T: Element, const N: usize> Array<T, N> {
         match self.grad() {
             Some(g) => g.fill(T::zeroed()),
             None => Ok(()),
+        }
+    }
+
+    /// The index (row-major order) and value of the first NaN or infinite element, if any.
+    fn first_non_finite(&self) -> Result<Option<(Vec<usize>, String)>> {
+        let values = self.to_vec()?;
+        let Some(k) = values.iter().position(|v| !v.is_finite_value()) else {
+            return Ok(None);
+        };
+        let mut index = vec![0usize; N];
+        let mut rest = k;
+        for d in (0..N).rev() {
+            let extent = self.shape[d].max(1);
+            index[d] = rest % extent;
+            rest /= extent;
+        }
+        Ok(Some((index, values[k].describe())))
+    }
+
+    /// A divergence guard for simulations (like MuJoCo's bad-value check): an
+    /// [`Error::Diverged`] naming `what`, the index and the value of the first NaN or
+    /// infinite element. On a GPU this reads the array back.
+    pub fn check_finite(&self, what: &str) -> Result<()> {
+        match self.first_non_finite()? {
+            None => Ok(()),
+            Some((index, value)) => Err(Error::Diverged {
+                what: what.to_string(),
+                index,
+                value,
+            }),
         }
     }
 
@@ -994,6 +1047,18 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
 
     fn zero_grad(arg: &Self::Arg<'_>) -> Result<()> {
         arg.zero_grad()
+    }
+
+    fn check_finite(arg: &Self::Arg<'_>, kernel: &'static str, name: &'static str) -> Result<()> {
+        match arg.first_non_finite()? {
+            None => Ok(()),
+            Some((index, value)) => Err(Error::NonFinite {
+                kernel,
+                arg: name,
+                index,
+                value,
+            }),
+        }
     }
 
     type Owned = Array<T, N>;

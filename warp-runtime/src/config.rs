@@ -76,6 +76,35 @@ pub fn cpu_min_chunk() -> usize {
 }
 
 static CUDA_FMAD: AtomicBool = AtomicBool::new(true);
+static VERIFY_FP: AtomicBool = AtomicBool::new(false);
+
+/// Turns on checking, after every launch on either backend, every array the kernel may write
+/// for NaN and infinite values: the first one found is an [`Error::NonFinite`] naming the
+/// kernel, the argument and the index. Costs a read-back of those arrays per launch (on a GPU,
+/// a synchronisation): a debugging aid, like Warp's `verify_fp`.
+///
+/// [`Error::NonFinite`]: crate::Error::NonFinite
+pub fn set_verify_fp(on: bool) {
+    VERIFY_FP.store(on, Ordering::Relaxed);
+}
+
+thread_local! {
+    static VERIFY_FP_HERE: std::cell::Cell<Option<bool>> = const { std::cell::Cell::new(None) };
+}
+
+/// Overrides [`set_verify_fp`] for launches made on the calling thread (`None`: follow the
+/// process-wide setting).
+pub fn set_verify_fp_for_thread(on: Option<bool>) {
+    VERIFY_FP_HERE.with(|c| c.set(on));
+}
+
+/// Whether launches on this thread check written arrays for NaN and infinities (default off).
+pub fn verify_fp() -> bool {
+    VERIFY_FP_HERE
+        .with(|c| c.get())
+        .unwrap_or_else(|| VERIFY_FP.load(Ordering::Relaxed))
+}
+
 static ADSTACK_BYTES: AtomicUsize = AtomicUsize::new(DEFAULT_ADSTACK_BYTES);
 
 /// The default of [`adstack_bytes`].

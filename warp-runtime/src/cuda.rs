@@ -473,6 +473,7 @@ static UNKNOWN: KernelInfo = KernelInfo {
     name: "?",
     module: "",
     params: &[],
+    written: &[],
     tid_ndim: None,
     same_shape: &[],
     file: "",

@@ -196,6 +196,7 @@ mod tests {
             name: "k",
             module: "m",
             params: &[],
+            written: &[],
             tid_ndim: None,
             same_shape: &[],
             file: "src/k.rs",

@@ -70,6 +70,26 @@ pub enum Error {
         /// Why it cannot be used.
         reason: String,
     },
+    /// A launch in `config::set_verify_fp` mode left a NaN or an infinity in an array.
+    NonFinite {
+        /// The kernel.
+        kernel: &'static str,
+        /// The array parameter.
+        arg: &'static str,
+        /// The index of the first such element (row-major order).
+        index: Vec<usize>,
+        /// The element.
+        value: String,
+    },
+    /// [`Array::check_finite`](crate::Array::check_finite) found a NaN or an infinity.
+    Diverged {
+        /// What was checked (the caller's words).
+        what: String,
+        /// The index of the first such element (row-major order).
+        index: Vec<usize>,
+        /// The element.
+        value: String,
+    },
     /// Backward through a kernel that has no adjoint.
     NotDifferentiable {
         /// The kernel.
@@ -159,6 +179,21 @@ impl fmt::Display for Error {
             Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
             Error::Cuda { device, message } => write!(f, "CUDA error on \"{device}\": {message}"),
             Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
+            Error::NonFinite {
+                kernel,
+                arg,
+                index,
+                value,
+            } => write!(
+                f,
+                "kernel `{kernel}` wrote a non-finite value to `{arg}` at index {index:?}: {value}"
+            ),
+            Error::Diverged { what, index, value } => {
+                write!(
+                    f,
+                    "{what} diverged: non-finite value at index {index:?}: {value}"
+                )
+            }
             Error::NotDifferentiable { kernel, reason } => {
                 write!(
                     f,

@@ -63,6 +63,11 @@ pub trait KernelArg: 'static {
     fn own(arg: &Self::Arg<'_>) -> Self::Owned;
     /// The host argument again, from the owned copy.
     fn borrow(owned: &Self::Owned) -> Self::Arg<'_>;
+    /// Checks an array argument for NaN and infinite values (nothing for values).
+    fn check_finite(arg: &Self::Arg<'_>, kernel: &'static str, name: &'static str) -> Result<()> {
+        let _ = (arg, kernel, name);
+        Ok(())
+    }
     /// Zeroes an array argument's gradient (nothing for values or arrays without one).
     fn zero_grad(arg: &Self::Arg<'_>) -> Result<()> {
         let _ = arg;
@@ -112,6 +117,9 @@ pub struct KernelInfo {
     pub module: &'static str,
     /// Parameter names, in order.
     pub params: &'static [&'static str],
+    /// The array parameters the kernel may write (stores, atomics, or passed to a func), by
+    /// index: what `config::set_verify_fp` checks after a launch.
+    pub written: &'static [usize],
     /// How many dimensions the kernel's `tid()` destructures (`None` when it never calls tid).
     pub tid_ndim: Option<usize>,
     /// Groups of parameters (by index; `usize::MAX` stands for the launch dim) that the kernel
@@ -204,6 +212,9 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     fn own(args: &Self::Args<'_>) -> Self::Owned;
     /// Borrows owned arguments back.
     fn borrow(owned: &Self::Owned) -> Self::Args<'_>;
+    /// Checks the arrays the kernel may write for NaN and infinite values (after a launch in
+    /// `config::set_verify_fp` mode).
+    fn verify_fp(args: &Self::Args<'_>) -> Result<()>;
     /// Zeroes the gradients of the array arguments.
     fn zero_grads(args: &Self::Args<'_>) -> Result<()>;
     /// Runs the adjoint of threads `range` of `grid` on the CPU: each thread replays its

@@ -242,6 +242,9 @@ fn launch_with<K: Kernel>(
     };
     result?;
     crate::tape::on_launch::<K>(&args, &grid, device);
+    if config::verify_fp() {
+        K::verify_fp(&args)?;
+    }
     Ok(())
 }
 
@@ -320,6 +323,9 @@ mod tests {
             fn zero_grads(_: &Self::Args<'_>) -> Result<()> {
                 Ok(())
             }
+            fn verify_fp(_: &Self::Args<'_>) -> Result<()> {
+                Ok(())
+            }
             fn run_cpu_adjoint(
                 _: &Self::CpuParams,
                 _: &(),
@@ -365,6 +371,7 @@ mod tests {
             name: "write_flat",
             module: module_path!(),
             params: &["out"],
+            written: &[],
             tid_ndim: Some(1),
             same_shape: &[&[0, usize::MAX]],
             file: file!(),
@@ -412,6 +419,7 @@ mod tests {
             name: "oob",
             module: module_path!(),
             params: &["data", "scale"],
+            written: &[],
             tid_ndim: Some(1),
             same_shape: &[],
             file: file!(),
@@ -467,6 +475,7 @@ mod tests {
             name: "write_2d",
             module: module_path!(),
             params: &["out"],
+            written: &[],
             tid_ndim: Some(2),
             same_shape: &[],
             file: file!(),

@@ -1,0 +1,166 @@
+//! Numerical stability on stiff and extreme cases: NaN/Inf detection (`verify_fp` and the
+//! divergence guard), the stability limit of symplectic Euler, IEEE edge cases the language
+//! documents, and compensated summation.
+
+use crate::{arr, zeros};
+use warp_lang as wp;
+use wp::prelude::*;
+use wp::Error;
+
+backend_tests!(
+    verify_fp_names_kernel_argument_and_index,
+    symplectic_euler_stability_limit,
+    ieee_edge_cases,
+    compensated_summation,
+);
+
+#[wp::kernel]
+fn k_recip(x: Array<f32>, y: Array<f32, 2>) {
+    let i = tid();
+    y[(i / 2, i % 2)] = 1.0 / x[i];
+}
+
+/// With `verify_fp` a launch that writes 1/0 is an error naming kernel, argument and index;
+/// without it the infinity is written and the divergence guard finds it.
+fn verify_fp_names_kernel_argument_and_index(dev: &wp::Device) {
+    let x = arr(&[1.0f32, 2.0, 0.0, 4.0], dev);
+    let y = zeros::<f32, 2>((2, 2), dev);
+    wp::config::set_verify_fp_for_thread(Some(true));
+    let r = wp::launch(k_recip, 4, (&x, &y), dev);
+    wp::config::set_verify_fp_for_thread(None);
+    match r {
+        Err(e @ Error::NonFinite { .. }) => assert_eq!(
+            e.to_string(),
+            "kernel `k_recip` wrote a non-finite value to `y` at index [1, 0]: inf"
+        ),
+        other => panic!("expected NonFinite, got {other:?}"),
+    }
+    wp::launch(k_recip, 4, (&x, &y), dev).unwrap();
+    let e = y.check_finite("reciprocals").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "reciprocals diverged: non-finite value at index [1, 0]: inf"
+    );
+    let ok = arr(&[1.0f32, 2.0], dev);
+    ok.check_finite("fine").unwrap();
+}
+
+/// `steps` steps of symplectic Euler for x'' = -omega^2 x, one oscillator per thread.
+#[wp::kernel]
+fn k_spring(x: Array<f32>, v: Array<f32>, omega: f32, dt: f32, steps: i32, peak: Array<f32>) {
+    let i = tid();
+    let mut xi = x[i];
+    let mut vi = v[i];
+    let mut p = peak[i];
+    for _s in 0..steps {
+        vi += -omega * omega * xi * dt;
+        xi += vi * dt;
+        p = max(p, abs(xi));
+    }
+    x[i] = xi;
+    v[i] = vi;
+    peak[i] = p;
+}
+
+/// Symplectic Euler is stable for omega * dt < 2: at 1.99 the amplitude stays bounded (by
+/// 1 / sqrt(1 - (omega dt / 2)^2) ~ 10 of the initial one), at 2.01 it grows by ~1.22 per step,
+/// overflows f32 within a few hundred steps, and the divergence guard reports it.
+fn symplectic_euler_stability_limit(dev: &wp::Device) {
+    let omega = 10.0f32;
+    for (h, stable) in [(1.99f32, true), (2.01, false)] {
+        let x = arr(&[1.0f32], dev);
+        let v = arr(&[0.0f32], dev);
+        let peak = arr(&[0.0f32], dev);
+        let mut diverged_at = None;
+        for chunk in 0..100 {
+            wp::launch(k_spring, 1, (&x, &v, omega, h / omega, 100, &peak), dev).unwrap();
+            if x.check_finite("spring").is_err() {
+                diverged_at = Some((chunk + 1) * 100);
+                break;
+            }
+        }
+        if stable {
+            assert_eq!(diverged_at, None);
+            let p = peak.to_vec().unwrap()[0];
+            assert!(p < 11.0, "peak {p}");
+        } else {
+            let at = diverged_at.expect("omega dt = 2.01 must blow up");
+            // |lambda| = 1.2214 per step: f32 overflows (3.4e38) after about 430 steps.
+            assert!(at <= 600, "diverged only after {at} steps");
+        }
+    }
+}
+
+#[wp::kernel]
+fn k_edges(out: Array<f32>) {
+    out[0] = normalize(vec3(0.0, 0.0, 0.0)).x;
+    out[1] = length(vec3(1.0e-30, 0.0, 0.0));
+    out[2] = length(vec3(1.0e30, 0.0, 0.0));
+    let z = out[9];
+    out[3] = 1.0 / z;
+    out[4] = z / z;
+    out[5] = 3.0e38 * 10.0;
+    let d = 1.0e-40;
+    out[6] = d * 0.5;
+    out[7] = sqrt(-1.0);
+    out[8] = max(z / z, 2.0);
+}
+
+/// The language's documented IEEE behaviour (ARCHITECTURE.md, "The kernel language"), the
+/// same on both backends: normalize(0) = 0; length is sqrt(dot) with no rescaling, so it
+/// underflows to 0 for (1e-30, 0, 0) and overflows to inf for (1e30, 0, 0) in f32; float
+/// division by zero gives inf and 0/0 NaN; overflow gives inf; denormals are kept (no
+/// flush-to-zero); max with a NaN returns the other operand.
+fn ieee_edge_cases(dev: &wp::Device) {
+    let out = zeros::<f32, 1>(10, dev);
+    wp::launch(k_edges, 1, (&out,), dev).unwrap();
+    let o = out.to_vec().unwrap();
+    assert_eq!(o[0], 0.0);
+    assert_eq!(o[1], 0.0);
+    assert_eq!(o[2], f32::INFINITY);
+    assert_eq!(o[3], f32::INFINITY);
+    assert!(o[4].is_nan());
+    assert_eq!(o[5], f32::INFINITY);
+    assert_eq!(o[6], 1.0e-40f32 * 0.5);
+    assert!(o[6] > 0.0 && !o[6].is_normal());
+    assert!(o[7].is_nan());
+    assert_eq!(o[8], 2.0);
+}
+
+#[wp::kernel]
+fn k_sums(n: i32, x: f32, out: Array<f32>) {
+    let mut naive = 0.0;
+    let mut sum = 0.0;
+    let mut c = 0.0;
+    for _k in 0..n {
+        naive += x;
+        let y = x - c;
+        let t = sum + y;
+        c = (t - sum) - y;
+        sum = t;
+    }
+    out[0] = naive;
+    out[1] = sum;
+}
+
+/// Adding 1e-3 a million times in f32: the plain sum drifts by about 1e-2 relative (reported),
+/// the compensated (Kahan) sum stays within 1e-6 of the exact 1000.
+fn compensated_summation(dev: &wp::Device) {
+    let out = zeros::<f32, 1>(2, dev);
+    wp::launch(k_sums, 1, (1_000_000, 1.0e-3f32, &out), dev).unwrap();
+    let o = out.to_vec().unwrap();
+    // The exact sum of a million copies of the f32 nearest 1e-3.
+    let exact = 1.0e6 * (1.0e-3f32 as f64);
+    let (naive, kahan) = (
+        ((o[0] as f64 - exact) / exact).abs(),
+        ((o[1] as f64 - exact) / exact).abs(),
+    );
+    eprintln!(
+        "f32 sum of 1e-3 x 1e6 on {dev}: plain rel. error {naive:.2e}, compensated {kahan:.2e}"
+    );
+    assert!(
+        naive > 1e-4,
+        "the plain f32 sum is expected to drift: {naive:e}"
+    );
+    assert!(kahan <= 1e-6, "{kahan:e}");
+}
