@@ -73,6 +73,7 @@ fn main() -> wp::Result<()> {
         let mut next = wp::Array::<f32>::zeros(n, &dev)?;
         // Warm-up (compiles on a GPU), outside the timing.
         wp::launch(first_step, n, (&a, &b, r2), &dev)?;
+        wp::launch(leapfrog, n, (&a, &b, &next, r2), &dev)?;
         wp::synchronize()?;
         let t = Instant::now();
         wp::launch(first_step, n, (&a, &b, r2), &dev)?;
