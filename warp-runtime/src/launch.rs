@@ -254,33 +254,31 @@ fn chunk_len(total: usize, min_chunk: usize, pool_threads: usize) -> usize {
     min_chunk.max(1).max(total / (pool_threads.max(1) * 4))
 }
 
-/// Runs threads `range` of the grid in order, stopping at the first fault.
-#[inline(always)]
-fn run_range<K: Kernel>(
-    params: &K::CpuParams,
-    grid: &Grid,
-    range: std::ops::Range<usize>,
-) -> KResult<()> {
-    K::run_cpu(params, grid, range)
-}
-
-/// Runs every thread of `grid` on the CPU: serially for small grids, in rayon chunks otherwise.
-fn run_cpu<K: Kernel>(params: &K::CpuParams, grid: &Grid) -> Result<()> {
-    let total = grid.total;
+/// Runs `run` over the flat thread indices `0..total` on the CPU: serially for small grids,
+/// in rayon chunks otherwise, stopping at the first fault. `run` is generic so that the
+/// kernel's thread loop is inlined into it (forward launches and adjoints share this).
+pub(crate) fn for_each_chunk<F>(total: usize, run: F) -> Result<()>
+where
+    F: Fn(std::ops::Range<usize>) -> KResult<()> + Sync,
+{
     let min_chunk = config::cpu_min_chunk();
     if total <= min_chunk {
         // Waking the pool costs microseconds; a small launch is faster on this thread.
-        return run_range::<K>(params, grid, 0..total).map_err(Error::from);
+        return run(0..total).map_err(Error::from);
     }
     let chunk = chunk_len(total, min_chunk, rayon::current_num_threads());
-    let chunks = total.div_ceil(chunk);
-    (0..chunks)
+    (0..total.div_ceil(chunk))
         .into_par_iter()
         .try_for_each(|c| {
             let start = c * chunk;
-            run_range::<K>(params, grid, start..(start + chunk).min(total))
+            run(start..(start + chunk).min(total))
         })
         .map_err(Error::from)
+}
+
+/// Runs every thread of `grid` on the CPU.
+fn run_cpu<K: Kernel>(params: &K::CpuParams, grid: &Grid) -> Result<()> {
+    for_each_chunk(grid.total, |range| K::run_cpu(params, grid, range))
 }
 
 /// Waits for all outstanding work on every GPU used so far, and reports a fault that a kernel

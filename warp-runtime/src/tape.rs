@@ -12,7 +12,6 @@ use crate::config;
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
 use crate::kernel::Kernel;
-use rayon::prelude::*;
 use std::cell::RefCell;
 use std::marker::PhantomData;
 use std::rc::{Rc, Weak};
@@ -267,22 +266,11 @@ fn launch_adjoint<K: Kernel>(
             // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
             let params = unsafe { K::cpu_params(args, device)? };
             let grads = unsafe { K::cpu_grads(args, device)? };
-            let total = grid.total;
-            let chunk = config::cpu_min_chunk().max(1);
-            (0..total.div_ceil(chunk))
-                .into_par_iter()
-                .try_for_each(|c| {
-                    let mut stack = AdStack::new(cap, K::INFO.name);
-                    let start = c * chunk;
-                    K::run_cpu_adjoint(
-                        &params,
-                        &grads,
-                        grid,
-                        start..(start + chunk).min(total),
-                        &mut stack,
-                    )
-                })
-                .map_err(Error::from)
+            // One adjoint stack per chunk, reused (cleared) thread by thread.
+            crate::launch::for_each_chunk(grid.total, |range| {
+                let mut stack = AdStack::new(cap, K::INFO.name);
+                K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack)
+            })
         }
         #[cfg(feature = "cuda")]
         DeviceKind::Cuda { ordinal } => {
