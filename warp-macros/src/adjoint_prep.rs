@@ -26,6 +26,18 @@ pub fn differentiable(t: &Ty) -> bool {
     }
 }
 
+/// A func's body without its final `return value` (its result, which the adjoint seeds with
+/// the caller's adjoint), and that value; a kernel's whole body and `None`.
+pub fn split_tail(f: &Function) -> (&[Stmt], Option<VarId>) {
+    match f.body.last() {
+        Some(Stmt {
+            kind: StmtKind::Return { value },
+            ..
+        }) if f.kind == FnKind::Func => (&f.body[..f.body.len() - 1], *value),
+        _ => (&f.body[..], None),
+    }
+}
+
 /// `f` with its jumps turned into flags (a copy; `f` itself is untouched).
 pub fn without_jumps(f: &Function) -> Function {
     let mut g = f.clone();

@@ -115,26 +115,23 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
             text.push_str(&fill(f.cuda_adj, &name_of(f), f.file, &callees));
         }
     }
-    let thread_fn = format!("wpk_{}_thread", info.name);
-    let entry = format!("wpk_{}", info.name);
+    // The names the templates' `@@SELF@@`/`@@ENTRY@@` stand for; the adjoint template appends
+    // `_adj` to both.
+    let base_self = format!("wpk_{}_thread", info.name);
+    let base_entry = format!("wpk_{}", info.name);
     let callees: Vec<(String, &str)> = info
         .callees
         .iter()
         .map(|c| (name_of(c), c.cuda_ret))
         .collect();
     text.push('\n');
-    let (template, entry, thread_fn) = if adjoint {
-        (
-            info.cuda_adjoint,
-            format!("{entry}_adj"),
-            format!("{thread_fn}_adj"),
-        )
+    let (template, suffix) = if adjoint {
+        (info.cuda_adjoint, "_adj")
     } else {
-        (info.cuda, entry, thread_fn)
+        (info.cuda, "")
     };
-    // The adjoint template names its functions `@@SELF@@_adj` and `@@ENTRY@@_adj`.
-    let base_self = thread_fn.trim_end_matches("_adj").to_string();
-    let base_entry = entry.trim_end_matches("_adj").to_string();
+    let entry = format!("{base_entry}{suffix}");
+    let thread_fn = format!("{base_self}{suffix}");
     text.push_str(
         &fill(template, &base_self, info.file, &callees).replace("@@ENTRY@@", &base_entry),
     );

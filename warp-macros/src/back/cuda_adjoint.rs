@@ -204,32 +204,18 @@ impl<'a> Adj<'a> {
         if let Some(t) = lit {
             return Ok(t.to_string());
         }
-        self.e.type_expr(v, 0).ok_or_else(|| {
-            let mut how = String::new();
-            walk_stmts(&self.f.body, &mut |s| {
-                if let StmtKind::Assign { dst, op, .. } = &s.kind {
-                    if *dst == v && how.is_empty() {
-                        how = format!("{op:?}");
-                    }
+        let mut how = String::new();
+        walk_stmts(&self.f.body, &mut |s| {
+            if let StmtKind::Assign { dst, op, .. } = &s.kind {
+                if *dst == v && how.is_empty() {
+                    how = format!("{op:?}");
                 }
-            });
-            format!(
-                "the type of `{}` ({how}) is not known to the CUDA adjoint",
-                self.var(v)
-            )
-        })
-    }
-
-    /// A func's body without its final `return value`, and that value.
-    fn split_tail(&self) -> (&'a [Stmt], Option<VarId>) {
-        let f: &'a Function = self.f;
-        match f.body.last() {
-            Some(Stmt {
-                kind: StmtKind::Return { value },
-                ..
-            }) if f.kind == FnKind::Func => (&f.body[..f.body.len() - 1], *value),
-            _ => (&f.body[..], None),
-        }
+            }
+        });
+        Err(format!(
+            "the type of `{}` ({how}) is not known to the CUDA adjoint",
+            self.var(v)
+        ))
     }
 
     /// The parameter list: forward parameters, then gradients of arrays (kernels and funcs)
@@ -348,7 +334,7 @@ impl<'a> Adj<'a> {
                 self.e.out.push_str(&format!("    {t} __acc_{v}{{}};\n"));
             }
         }
-        let (body, tail) = self.split_tail();
+        let (body, tail) = crate::adjoint_prep::split_tail(self.f);
         self.forward(body, false)?;
         if let Some(v) = tail {
             if self.diff(v) {

@@ -48,12 +48,12 @@ pub fn emit(f: &Function) -> Result<TokenStream, String> {
         overwritten: overwritten_vars(f),
         params: f.params.iter().map(|p| p.var).collect(),
     };
-    let body = e.body_without_tail();
+    let (body, tail) = crate::adjoint_prep::split_tail(f);
     e.check(body)?;
     let decls = e.declarations();
     let forward = e.forward(body, false);
     let mut reverse = TokenStream::new();
-    if let Some(v) = e.tail_value() {
+    if let Some(v) = tail {
         // The func's result: its adjoint is what the caller passed.
         if e.diff(v) {
             let a = e.adj(v);
@@ -117,28 +117,6 @@ pub(crate) fn overwritten_vars(f: &Function) -> Vec<bool> {
 }
 
 impl<'a> AdjEmitter<'a> {
-    /// A func's body without its final `return value` (the result, handled apart).
-    fn body_without_tail(&self) -> &'a [Stmt] {
-        match self.f.body.last() {
-            Some(Stmt {
-                kind: StmtKind::Return { .. },
-                ..
-            }) if self.f.kind == FnKind::Func => &self.f.body[..self.f.body.len() - 1],
-            _ => &self.f.body[..],
-        }
-    }
-
-    /// The variable a func returns at its end.
-    fn tail_value(&self) -> Option<VarId> {
-        match self.f.body.last() {
-            Some(Stmt {
-                kind: StmtKind::Return { value },
-                ..
-            }) if self.f.kind == FnKind::Func => *value,
-            _ => None,
-        }
-    }
-
     fn var(&self, v: VarId) -> syn::Ident {
         self.fwd.var(v)
     }
