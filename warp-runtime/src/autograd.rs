@@ -117,10 +117,10 @@ fn zero_outputs<T: Element>(outputs: &[&Array<T>]) -> Result<()> {
     outputs.iter().try_for_each(|o| o.fill(T::zeroed()))
 }
 
-fn set_element<T: CheckFloat>(a: &Array<T>, k: usize, v: T) -> Result<()> {
-    let mut host = a.to_vec()?;
+/// Sets element `k` of `a` to `v`, through `host` (a copy of `a` the caller keeps in step).
+fn set_element<T: CheckFloat>(a: &Array<T>, host: &mut [T], k: usize, v: T) -> Result<()> {
     host[k] = v;
-    a.copy_from(&Array::from_slice(&host, a.device())?)
+    a.copy_from(&Array::from_slice(host, a.device())?)
 }
 
 /// The Jacobian of `outputs` with respect to `inputs` from reverse mode: one backward per
@@ -186,15 +186,17 @@ pub fn jacobian_fd<T: CheckFloat>(
         Ok(v)
     };
     for a in inputs {
+        // Read once; each nudge uploads this copy with one element changed.
+        let mut host = a.to_vec()?;
         for k in 0..a.len() {
-            let x = a.to_vec()?[k];
+            let x = host[k];
             // The step actually taken, after rounding x +- eps to T.
             let (hi, lo) = (T::from_f64(x.to_f64() + eps), T::from_f64(x.to_f64() - eps));
-            set_element(a, k, hi)?;
+            set_element(a, &mut host, k, hi)?;
             let f_hi = run(&mut forward)?;
-            set_element(a, k, lo)?;
+            set_element(a, &mut host, k, lo)?;
             let f_lo = run(&mut forward)?;
-            set_element(a, k, x)?;
+            set_element(a, &mut host, k, x)?;
             let h = hi.to_f64() - lo.to_f64();
             cols.push(f_hi.iter().zip(&f_lo).map(|(p, m)| (p - m) / h).collect());
         }
