@@ -2,16 +2,21 @@
 //! difference scheme, against the analytic standing wave u = sin(pi x) cos(pi c t).
 //!
 //! ```text
-//! cargo run --release --example wave -- [--n 1024] [--device cpu|cuda:0]
+//! cargo run --release --example wave -- [--n 1024] [--device cpu|cuda:0] [--plot-dir DIR]
 //! ```
 //! Sweeps the Courant number r = c dt / dx at a fixed grid: below 1 the error is the scheme's
 //! dispersion, about (1 - r^2) dx^2 (plus f32 rounding over more steps), so it shrinks toward
 //! r = 1, where the 1-D scheme is exact up to rounding; past 1 (the CFL limit) it blows up,
 //! which the divergence guard (`Array::check_finite`) reports with the step and the index.
-//! Prints error against run time for each r, and what it compiled.
+//! Prints error against run time for each r on two grids, writes the plot
+//! (target/report/wave.svg), and prints what it compiled.
 
+mod common;
+
+use std::f64::consts::PI;
 use std::time::Instant;
 use warp_lang as wp;
+use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
 /// One leapfrog step: u_next = 2 u - u_prev + r^2 (u[i+1] - 2 u[i] + u[i-1]), ends held at 0.
@@ -38,92 +43,76 @@ fn first_step(u0: Array<f32>, u1: Array<f32>, r2: f32) {
     }
 }
 
-fn arg(name: &str) -> Option<String> {
-    let args: Vec<String> = std::env::args().collect();
-    let k = args.iter().position(|a| a == name)?;
-    args.get(k + 1).cloned()
+fn main() -> wp::Result<()> {
+    let dev = common::device()?;
+    let n: usize = common::parsed("--n", 1024);
+    let (c, t_end) = (1.0f64, 1.0f64);
+    println!(
+        "wave equation on \"{dev}\", c = {c}, until t = {t_end}, grids of {} and {n} points",
+        n / 4
+    );
+    let ratios = [0.25f64, 0.5, 0.9, 1.0, 1.01, 1.1];
+    let grids = [n / 4, n];
+    let mut sweep = Sweep::new(
+        format!("1-D wave equation, leapfrog f32, on {dev}"),
+        "r = c dt/dx",
+    )
+    .progress((ratios.len() * grids.len()) as u64);
+    for n in grids {
+        for r in ratios {
+            let run = run(&dev, n, c, r, t_end)?;
+            sweep.record(&format!("{n} points"), r, run);
+        }
+    }
+    common::finish(&sweep, "wave");
+    common::print_compiled();
+    Ok(())
 }
 
-fn main() -> wp::Result<()> {
-    wp::init();
-    let dev = match arg("--device") {
-        Some(d) => wp::get_device(&d)?,
-        None => wp::get_preferred_device(),
-    };
-    let n: usize = arg("--n").and_then(|v| v.parse().ok()).unwrap_or(1024);
+/// Runs the scheme at Courant number `r` on `n` points until `t_end`; the error is the max
+/// difference from the analytic standing wave at the time reached.
+fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64) -> wp::Result<Run> {
     let dx = 1.0 / (n - 1) as f64;
-    let c = 1.0f64;
-    let t_end = 1.0f64;
     let x: Vec<f64> = (0..n).map(|i| i as f64 * dx).collect();
-    let u0: Vec<f32> = x
+    let u0: Vec<f32> = x.iter().map(|&x| (PI * x).sin() as f32).collect();
+    let dt = r * dx / c;
+    let steps = (t_end / dt).round() as usize;
+    let r2 = (r * r) as f32;
+    let mut a = wp::Array::from_slice(&u0, dev)?;
+    let mut b = wp::Array::<f32>::zeros(n, dev)?;
+    let mut next = wp::Array::<f32>::zeros(n, dev)?;
+    // Warm-up (compiles on a GPU), outside the timing.
+    wp::launch(first_step, n, (&a, &b, r2), dev)?;
+    wp::launch(leapfrog, n, (&a, &b, &next, r2), dev)?;
+    wp::synchronize()?;
+    let t = Instant::now();
+    wp::launch(first_step, n, (&a, &b, r2), dev)?;
+    for s in 1..steps {
+        wp::launch(leapfrog, n, (&a, &b, &next, r2), dev)?;
+        (a, b, next) = (b, next, a);
+        // The divergence guard: a NaN or infinity stops the run and says where.
+        if s % 64 == 0 {
+            if let Err(e) = b.check_finite("u") {
+                return Ok(Run::unstable(
+                    s as u64,
+                    t.elapsed().as_secs_f64(),
+                    format!("step {s}: {e}"),
+                ));
+            }
+        }
+    }
+    let u = b.to_vec()?;
+    let seconds = t.elapsed().as_secs_f64();
+    let t_reached = steps as f64 * dt;
+    let err = x
         .iter()
-        .map(|&x| (std::f64::consts::PI * x).sin() as f32)
-        .collect();
-    println!("wave equation, {n} points on \"{dev}\", c = {c}, until t = {t_end}");
-    println!(
-        "{:>6} {:>8} {:>12} {:>10}  stable",
-        "r", "steps", "max error", "time (ms)"
-    );
-    for r in [0.25f64, 0.5, 0.9, 1.0, 1.01, 1.1] {
-        let dt = r * dx / c;
-        let steps = (t_end / dt).round() as usize;
-        let r2 = (r * r) as f32;
-        let mut a = wp::Array::from_slice(&u0, &dev)?;
-        let mut b = wp::Array::<f32>::zeros(n, &dev)?;
-        let mut next = wp::Array::<f32>::zeros(n, &dev)?;
-        // Warm-up (compiles on a GPU), outside the timing.
-        wp::launch(first_step, n, (&a, &b, r2), &dev)?;
-        wp::launch(leapfrog, n, (&a, &b, &next, r2), &dev)?;
-        wp::synchronize()?;
-        let t = Instant::now();
-        wp::launch(first_step, n, (&a, &b, r2), &dev)?;
-        let mut blew_up = None;
-        for s in 1..steps {
-            wp::launch(leapfrog, n, (&a, &b, &next, r2), &dev)?;
-            (a, b, next) = (b, next, a);
-            if s % 64 == 0 {
-                if let Err(e) = b.check_finite("u") {
-                    blew_up = Some((s, e));
-                    break;
-                }
-            }
-        }
-        let u = b.to_vec()?;
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        let t_reached = steps as f64 * dt;
-        let err = x
-            .iter()
-            .zip(&u)
-            .map(|(&x, &v)| {
-                let exact =
-                    (std::f64::consts::PI * x).sin() * (std::f64::consts::PI * c * t_reached).cos();
-                (v as f64 - exact).abs()
-            })
-            .fold(0.0f64, f64::max);
-        match blew_up {
-            None if err.is_finite() && err < 1.0 => {
-                println!("{r:>6} {steps:>8} {err:>12.3e} {ms:>10.2}  yes")
-            }
-            None => println!("{r:>6} {steps:>8} {err:>12.3e} {ms:>10.2}  no (error {err:.1e})"),
-            Some((s, e)) => println!(
-                "{r:>6} {steps:>8} {:>12} {ms:>10.2}  no: at step {s}, {e}",
-                "-"
-            ),
-        }
-    }
-    println!("compiled:");
-    for r in wp::compile_reports() {
-        println!(
-            "  {}{}: {} bytes of CUDA, NVRTC {:.1} ms (cache hit {})",
-            r.kernel,
-            if r.adjoint { " (adjoint)" } else { "" },
-            r.source_bytes,
-            r.compile_ms,
-            r.cache_hit
-        );
-    }
-    if wp::compile_reports().is_empty() {
-        println!("  (CPU: the kernels are Rust, compiled by cargo; no adjoint was built)");
-    }
-    Ok(())
+        .zip(&u)
+        .map(|(&x, &v)| (v as f64 - (PI * x).sin() * (PI * c * t_reached).cos()).abs())
+        .fold(0.0f64, f64::max);
+    // Growth the guard has not caught yet (finite but far above the wave's amplitude 1).
+    Ok(if err.is_finite() && err < 1.0 {
+        Run::stable(steps as u64, err, seconds)
+    } else {
+        Run::unstable(steps as u64, seconds, format!("error {err:.1e} at the end"))
+    })
 }

@@ -66,6 +66,9 @@ pub use warp_core::{Fault, FaultKind};
 #[cfg(feature = "cuda")]
 pub use warp_cuda::clear_kernel_cache;
 pub use warp_macros::{func, kernel, Struct};
+/// Work-precision sweeps: tables, SVG plots and progress (the `report` feature).
+#[cfg(feature = "report")]
+pub use warp_report as report;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
@@ -75,9 +78,9 @@ pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };
 pub use warp_runtime::{
-    cast_slice, config, copy, cpu, devices, get_device, get_preferred_device, init, launch,
-    synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape, Kernel,
-    KernelArg, KernelInfo, Recording, Result, Runtime, Seed, Tape,
+    cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
+    init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape,
+    Kernel, KernelArg, KernelInfo, Recording, Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};

@@ -207,9 +207,43 @@ fn reports() -> &'static Mutex<Vec<CompileReport>> {
     R.get_or_init(Default::default)
 }
 
-/// What each kernel compiled so far in this process cost (forward kernels, per device).
+/// What each kernel compiled so far in this process cost (per device, variant, and forward
+/// or adjoint).
 pub fn compile_reports() -> Vec<CompileReport> {
     reports().lock().unwrap_or_else(|p| p.into_inner()).clone()
+}
+
+/// One line per report (see `compile_summary`).
+pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
+    use std::fmt::Write as _;
+    let mut s = format!(
+        "compiled at run time: {} kernel variant(s)\n",
+        reports.len()
+    );
+    for r in reports {
+        let source = if r.aot {
+            "ahead-of-time cubin".to_string()
+        } else if r.cache_hit {
+            "disk cache hit".to_string()
+        } else {
+            format!("NVRTC {:.1} ms", r.compile_ms)
+        };
+        let _ = writeln!(
+            s,
+            "  {:<24} {:<7} {:<10} {:>6} bytes of CUDA, {source}, loaded in {:.1} ms on {}",
+            r.kernel,
+            if r.adjoint { "adjoint" } else { "forward" },
+            if r.contiguous {
+                "contiguous"
+            } else {
+                "strided"
+            },
+            r.source_bytes,
+            r.total_ms,
+            r.device
+        );
+    }
+    s
 }
 
 /// The kernel `info` compiled for GPU `ordinal`; `contiguous` picks the variant for launches

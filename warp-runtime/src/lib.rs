@@ -50,3 +50,22 @@ pub use pinned::PinnedVec;
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
 pub use tape::{Recording, Seed, Tape};
+
+/// What this process compiled at run time, one line per kernel variant, for scenes and
+/// benchmarks to print beside their results: the kernel, forward or adjoint, the contiguous
+/// variant or not, bytes of generated CUDA, NVRTC time and whether the cache or the
+/// ahead-of-time directory served it.
+///
+/// Kernels are compiled when first launched, adjoints when a backward pass first needs them,
+/// so the list is also the proof that a scene compiled nothing it did not run. On the CPU
+/// nothing is compiled at run time (kernels are Rust, built by cargo), and the summary says so.
+pub fn compile_summary() -> String {
+    #[cfg(feature = "cuda")]
+    {
+        let reports = cuda::compile_reports();
+        if !reports.is_empty() {
+            return cuda::format_compile_reports(&reports);
+        }
+    }
+    "compiled at run time: nothing (CPU kernels are Rust code built by cargo)\n".to_string()
+}

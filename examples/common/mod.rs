@@ -1,0 +1,66 @@
+//! What the scenes share: arguments, the device, and printing a sweep with its plot and
+//! what was compiled.
+
+#![allow(dead_code)] // each example uses its own subset
+
+use std::path::PathBuf;
+
+use warp_lang as wp;
+use warp_report::Sweep;
+
+/// The value after `--name` on the command line, if given.
+pub fn arg(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    let k = args.iter().position(|a| a == name)?;
+    args.get(k + 1).cloned()
+}
+
+/// Whether `--name` is on the command line.
+pub fn flag(name: &str) -> bool {
+    std::env::args().any(|a| a == name)
+}
+
+/// `--name VALUE` parsed, or `default`; a value that does not parse stops the scene with a
+/// message naming the argument.
+pub fn parsed<T: std::str::FromStr>(name: &str, default: T) -> T
+where
+    T::Err: std::fmt::Display,
+{
+    match arg(name) {
+        None => default,
+        Some(v) => v.replace('_', "").parse().unwrap_or_else(|e| {
+            eprintln!("{name} {v}: {e}");
+            std::process::exit(2)
+        }),
+    }
+}
+
+/// `--device NAME`, else the preferred device (the first GPU, or the CPU without one).
+pub fn device() -> wp::Result<wp::Device> {
+    wp::init();
+    match arg("--device") {
+        Some(d) => wp::get_device(&d),
+        None => Ok(wp::get_preferred_device()),
+    }
+}
+
+/// Prints the sweep's table, writes its plot to `<--plot-dir or target/report>/<name>.svg`,
+/// and prints what the run compiled.
+pub fn finish(sweep: &Sweep, name: &str) {
+    sweep.finish();
+    println!("\n{}", sweep.table());
+    let dir = PathBuf::from(arg("--plot-dir").unwrap_or_else(|| "target/report".into()));
+    let path = dir.join(format!("{name}.svg"));
+    match std::fs::create_dir_all(&dir)
+        .map_err(|e| e.to_string())
+        .and_then(|()| sweep.write_svg(&path).map_err(|e| e.to_string()))
+    {
+        Ok(()) => println!("plot: {}", path.display()),
+        Err(e) => println!("plot not written: {e}"),
+    }
+}
+
+/// Prints what the process compiled at run time (ask 3: only what was launched).
+pub fn print_compiled() {
+    print!("\n{}", wp::compile_summary());
+}
