@@ -64,3 +64,26 @@ pub fn finish(sweep: &Sweep, name: &str) {
 pub fn print_compiled() {
     print!("\n{}", wp::compile_summary());
 }
+
+/// SplitMix64: a small, well-known generator, so that start states are reproducible
+/// without extra dependencies.
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// Uniform in [0, 1).
+    pub fn next_f64(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Standard normal (Box-Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u = 1.0 - self.next_f64(); // (0, 1]: the log is finite
+        let w = self.next_f64();
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * w).cos()
+    }
+}

@@ -1,0 +1,270 @@
+//! Gravitational n-body with softening, integrated by leapfrog (kick-drift-kick): energy and
+//! momentum drift over long runs, f32 against f64, compensated (Kahan) against plain
+//! accumulation.
+//!
+//! ```text
+//! cargo run --release --example nbody -- [--device cpu|cuda:0] [--n 256] [--t-end 2]
+//!     [--halvings 5] [--plot-dir DIR]
+//! ```
+//! The bodies start in a uniform ball with isotropic random velocities near virial
+//! equilibrium (G = 1, total mass 1, radius 1, softening 0.05), centre of mass at rest.
+//! The reference is what the exact dynamics conserve:
+//! - energy: the relative energy error |E(T) - E(0)| / |E(0)| is the sweep's error. It has two
+//!   parts, the scheme's truncation (O(dt^2), shrinking with dt) and rounding, which grows with
+//!   the number of steps; f32 plain accumulation reaches its rounding floor first.
+//! - momentum: leapfrog with pairwise forces conserves the total momentum exactly in exact
+//!   arithmetic (the pair forces cancel), so its drift, relative to the sum of |m v|, is
+//!   rounding alone: it separates f32 from f64 and plain from compensated sums cleanly.
+//!
+//! "Compensated" applies Kahan summation both to each body's force sum and to the position
+//! and velocity updates (with a compensation array each).
+
+mod common;
+
+use std::time::Instant;
+
+use glam::DVec3;
+use warp_lang as wp;
+use warp_report::{Run, Sweep};
+
+/// The three kernels of a leapfrog step, for one scalar type (`$s`) and its vector (`$v`).
+/// The f32 and f64 versions differ in nothing else; generic kernels (`T: wp::Float`) will
+/// replace this macro.
+macro_rules! leapfrog_kernels {
+    ($module:ident, $s:ident, $v:ident) => {
+        pub mod $module {
+            use warp_lang as wp;
+            use wp::prelude::*;
+
+            /// Acceleration of body i: the sum over j of m_j d / (|d|^2 + eps^2)^(3/2), d = x_j - x_i
+            /// (the j = i term is zero), summed plainly or with Kahan compensation.
+            #[wp::kernel]
+            pub fn accelerations(
+                x: Array<$v>,
+                m: Array<$s>,
+                a: Array<$v>,
+                eps2: $s,
+                compensated: bool,
+            ) {
+                let i = tid();
+                let xi = x[i];
+                let mut sum = $v::ZERO;
+                let mut carry = $v::ZERO;
+                for j in 0..x.len() {
+                    let d = x[j] - xi;
+                    let r2 = dot(d, d) + eps2;
+                    let term = d * (m[j] / (r2 * sqrt(r2)));
+                    if compensated {
+                        let y = term - carry;
+                        let t = sum + y;
+                        carry = (t - sum) - y;
+                        sum = t;
+                    } else {
+                        sum += term;
+                    }
+                }
+                a[i] = sum;
+            }
+
+            /// `s += inc`, plainly or with the Kahan carry `c` (updated in place).
+            #[wp::func]
+            fn add(s: Array<$v>, c: Array<$v>, i: usize, inc: $v, compensated: bool) {
+                if compensated {
+                    let y = inc - c[i];
+                    let t = s[i] + y;
+                    c[i] = (t - s[i]) - y;
+                    s[i] = t;
+                } else {
+                    s[i] += inc;
+                }
+            }
+
+            /// Half kick then drift: v += a dt / 2; x += v dt.
+            #[wp::kernel]
+            pub fn kick_drift(
+                x: Array<$v>,
+                v: Array<$v>,
+                a: Array<$v>,
+                xc: Array<$v>,
+                vc: Array<$v>,
+                dt: $s,
+                compensated: bool,
+            ) {
+                let i = tid();
+                add(v, vc, i, a[i] * (0.5 * dt), compensated);
+                add(x, xc, i, v[i] * dt, compensated);
+            }
+
+            /// The closing half kick: v += a dt / 2.
+            #[wp::kernel]
+            pub fn kick(v: Array<$v>, a: Array<$v>, vc: Array<$v>, dt: $s, compensated: bool) {
+                let i = tid();
+                add(v, vc, i, a[i] * (0.5 * dt), compensated);
+            }
+        }
+    };
+}
+
+leapfrog_kernels!(single, f32, Vec3);
+leapfrog_kernels!(double, f64, DVec3);
+
+const SOFTENING: f64 = 0.05;
+
+/// The start state: positions, velocities, masses (f64).
+fn start(n: usize) -> (Vec<DVec3>, Vec<DVec3>, Vec<f64>) {
+    let mut rng = common::Rng(2026);
+    let mut x = Vec::with_capacity(n);
+    while x.len() < n {
+        let p = DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64()) * 2.0 - 1.0;
+        if p.length_squared() <= 1.0 {
+            x.push(p);
+        }
+    }
+    // Uniform ball of mass 1, radius 1: potential energy -3/5, so a virial kinetic energy of
+    // 3/10, i.e. an rms speed of sqrt(0.6).
+    let mut v: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.normal(), rng.normal(), rng.normal()) * (0.6f64 / 3.0).sqrt())
+        .collect();
+    let (cx, cv) = (
+        x.iter().sum::<DVec3>() / n as f64,
+        v.iter().sum::<DVec3>() / n as f64,
+    );
+    x.iter_mut().for_each(|p| *p -= cx);
+    v.iter_mut().for_each(|p| *p -= cv);
+    (x, v, vec![1.0 / n as f64; n])
+}
+
+/// Total energy with the same softened potential the kernels integrate, in f64.
+fn energy(x: &[DVec3], v: &[DVec3], m: &[f64]) -> f64 {
+    let kinetic: f64 = v
+        .iter()
+        .zip(m)
+        .map(|(v, m)| 0.5 * m * v.length_squared())
+        .sum();
+    let mut potential = 0.0;
+    for i in 0..x.len() {
+        for j in i + 1..x.len() {
+            let r2 = x[i].distance_squared(x[j]) + SOFTENING * SOFTENING;
+            potential -= m[i] * m[j] / r2.sqrt();
+        }
+    }
+    kinetic + potential
+}
+
+fn momentum(v: &[DVec3], m: &[f64]) -> (DVec3, f64) {
+    let p = v.iter().zip(m).map(|(v, m)| *v * *m).sum();
+    let scale = v.iter().zip(m).map(|(v, m)| v.length() * m).sum();
+    (p, scale)
+}
+
+/// One leapfrog run in f32 or f64; returns the final positions and velocities in f64.
+macro_rules! run_in {
+    ($module:ident, $s:ty, $vt:ty, $to:ident, $from:ident, $dev:expr, $x:expr, $v:expr, $m:expr, $dt:expr, $steps:expr, $comp:expr) => {{
+        let dev = $dev;
+        let n = $x.len();
+        let x = wp::Array::from_vec($x.iter().map(|p| p.$to()).collect(), dev)?;
+        let v = wp::Array::from_vec($v.iter().map(|p| p.$to()).collect(), dev)?;
+        let m = wp::Array::from_vec($m.iter().map(|&m| m as $s).collect(), dev)?;
+        let a = wp::Array::zeros(n, dev)?;
+        let (xc, vc) = (wp::Array::zeros(n, dev)?, wp::Array::zeros(n, dev)?);
+        let (eps2, dt) = ((SOFTENING * SOFTENING) as $s, $dt as $s);
+        use $module::{accelerations, kick, kick_drift};
+        // The first launches compile on a GPU: outside the timing.
+        wp::launch(accelerations, n, (&x, &m, &a, eps2, $comp), dev)?;
+        wp::synchronize()?;
+        let t = Instant::now();
+        let mut blew_up = None;
+        for s in 1..=$steps {
+            wp::launch(kick_drift, n, (&x, &v, &a, &xc, &vc, dt, $comp), dev)?;
+            wp::launch(accelerations, n, (&x, &m, &a, eps2, $comp), dev)?;
+            wp::launch(kick, n, (&v, &a, &vc, dt, $comp), dev)?;
+            if s % 512 == 0 {
+                if let Err(e) = v.check_finite("v") {
+                    blew_up = Some(format!("step {s}: {e}"));
+                    break;
+                }
+            }
+        }
+        wp::synchronize()?;
+        let seconds = t.elapsed().as_secs_f64();
+        let back = |a: &wp::Array<$vt>| -> wp::Result<Vec<DVec3>> {
+            Ok(a.to_vec()?.iter().map(|p| p.$from()).collect())
+        };
+        (back(&x)?, back(&v)?, seconds, blew_up)
+    }};
+}
+
+fn main() -> wp::Result<()> {
+    let dev = common::device()?;
+    let gpu = dev.is_cuda();
+    let n: usize = common::parsed("--n", if gpu { 4096 } else { 256 });
+    let t_end: f64 = common::parsed("--t-end", 2.0);
+    let halvings: u32 = common::parsed("--halvings", 5);
+    let (x0, v0, m) = start(n);
+    let e0 = energy(&x0, &v0, &m);
+    println!(
+        "n-body: {n} bodies on \"{dev}\", softening {SOFTENING}, leapfrog until t = {t_end}, \
+         E(0) = {e0:.6}"
+    );
+    let variants = [
+        ("f32 plain", false, false),
+        ("f32 Kahan", false, true),
+        ("f64 plain", true, false),
+        ("f64 Kahan", true, true),
+    ];
+    let dts: Vec<f64> = (0..=halvings).map(|j| 0.01 / 2f64.powi(j as i32)).collect();
+    let mut sweep = Sweep::new(
+        format!("n-body ({n} bodies), relative energy error, on {dev}"),
+        "dt",
+    )
+    .with_extras(&["momentum drift"])
+    .progress((variants.len() * dts.len()) as u64);
+    for (name, double, compensated) in variants {
+        for &dt in &dts {
+            let steps = (t_end / dt).round() as u64;
+            let (x, v, seconds, blew_up) = if double {
+                run_in!(
+                    double,
+                    f64,
+                    DVec3,
+                    clone,
+                    clone,
+                    &dev,
+                    x0,
+                    v0,
+                    m,
+                    dt,
+                    steps,
+                    compensated
+                )
+            } else {
+                run_in!(
+                    single,
+                    f32,
+                    glam::Vec3,
+                    as_vec3,
+                    as_dvec3,
+                    &dev,
+                    x0,
+                    v0,
+                    m,
+                    dt,
+                    steps,
+                    compensated
+                )
+            };
+            let run = match blew_up {
+                Some(why) => Run::unstable(steps, seconds, why),
+                None => {
+                    let error = ((energy(&x, &v, &m) - e0) / e0).abs();
+                    let (p, scale) = momentum(&v, &m);
+                    Run::stable(steps, error, seconds).extra(p.length() / scale)
+                }
+            };
+            sweep.record(name, dt, run);
+        }
+    }
+    common::finish(&sweep, "nbody");
+    common::print_compiled();
+    Ok(())
+}
