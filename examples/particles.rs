@@ -10,9 +10,17 @@
 //!   discretisation error of the scheme, O(dt));
 //! - against the exact solution of the discrete recurrence evaluated in f64 (this is the
 //!   rounding error of running the scheme in f32, which is what the kernel is responsible for).
+//!
+//! Then it sweeps dt over the same time span on `--sweep-n` particles (100,000; 0 skips it),
+//! in f32 and in f64, printing error against the closed form next to run time and writing
+//! the plot `<--plot-dir or target/report>/particles.svg`: the error falls as O(dt) until
+//! f32 rounding takes over.
+
+mod common;
 
 use std::time::Instant;
 use warp_lang as wp;
+use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
 #[wp::kernel]
@@ -26,6 +34,7 @@ fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, d
 struct Options {
     n: usize,
     steps: usize,
+    sweep_n: usize,
     device: Option<String>,
 }
 
@@ -33,6 +42,7 @@ fn parse_args() -> Result<Options, String> {
     let mut o = Options {
         n: 10_000_000,
         steps: 100,
+        sweep_n: 100_000,
         device: None,
     };
     let mut args = std::env::args().skip(1);
@@ -50,9 +60,21 @@ fn parse_args() -> Result<Options, String> {
                     .parse()
                     .map_err(|e| format!("--steps: {e}"))?
             }
+            "--sweep-n" => {
+                o.sweep_n = value("--sweep-n")?
+                    .replace('_', "")
+                    .parse()
+                    .map_err(|e| format!("--sweep-n: {e}"))?
+            }
             "--device" => o.device = Some(value("--device")?),
+            "--plot-dir" => {
+                value("--plot-dir")?; // read by common::finish
+            }
             "-h" | "--help" => {
-                println!("usage: particles [--n COUNT] [--steps STEPS] [--device cpu|cuda:N]");
+                println!(
+                    "usage: particles [--n COUNT] [--steps STEPS] [--sweep-n COUNT (0: no sweep)] \
+                     [--device cpu|cuda:N] [--plot-dir DIR]"
+                );
                 std::process::exit(0);
             }
             other => return Err(format!("unknown argument {other} (try --help)")),
@@ -61,22 +83,74 @@ fn parse_args() -> Result<Options, String> {
     Ok(o)
 }
 
-/// SplitMix64: a small, well-known generator, so that the start state is reproducible
-/// without extra dependencies.
-struct Rng(u64);
-impl Rng {
-    fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
+fn uniform_vec3(rng: &mut common::Rng, lo: f32, hi: f32) -> Vec3 {
+    let mut c = || lo + (hi - lo) * rng.next_f64() as f32;
+    Vec3::new(c(), c(), c())
+}
+
+/// The closed form of x' = v, v' = -k v + g at time t, per component.
+fn exact(x0: f64, v0: f64, g: f64, k: f64, t: f64) -> f64 {
+    let vinf = g / k; // terminal velocity
+    x0 + vinf * t + (v0 - vinf) * (1.0 - (-k * t).exp()) / k
+}
+
+/// The same scheme in f64, for the sweep's precision series.
+#[wp::kernel]
+fn integrate_f64(x: Array<DVec3>, v: Array<DVec3>, b: f64, mass: f64, gravity: DVec3, dt: f64) {
+    let i = tid();
+    let a = -b * v[i] / mass + gravity;
+    v[i] += a * dt;
+    x[i] += v[i] * dt;
+}
+
+/// The dt sweep: `n` particles from the same start until the same end time `t_end`, in f32
+/// and in f64; the error is the max distance from the closed form.
+fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp::Result<()> {
+    let (mass, b, g) = (0.1f64, 0.05f64, 9.81f64);
+    let (x0, v0) = (&x0[..n], &v0[..n]);
+    let counts = [25u64, 50, 100, 200, 400, 800, 1600];
+    let mut sweep = Sweep::new(
+        format!("particles: linear drag with gravity, semi-implicit Euler, {n} particles on {dev}"),
+        "dt",
+    )
+    .progress(2 * counts.len() as u64);
+    for double in [false, true] {
+        for &steps in &counts {
+            let dt = t_end / steps as f64;
+            let t = Instant::now();
+            let xs: Vec<DVec3> = if double {
+                let x = wp::Array::from_vec(x0.iter().map(|p| p.as_dvec3()).collect(), dev)?;
+                let v = wp::Array::from_vec(v0.iter().map(|p| p.as_dvec3()).collect(), dev)?;
+                let gravity = DVec3::new(0.0, 0.0, -g);
+                for _ in 0..steps {
+                    wp::launch(integrate_f64, n, (&x, &v, b, mass, gravity, dt), dev)?;
+                }
+                x.to_vec()?
+            } else {
+                let x = wp::Array::from_slice(x0, dev)?;
+                let v = wp::Array::from_slice(v0, dev)?;
+                let gravity = Vec3::new(0.0, 0.0, -g as f32);
+                let (b, mass, dt) = (b as f32, mass as f32, dt as f32);
+                for _ in 0..steps {
+                    wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), dev)?;
+                }
+                x.to_vec()?.iter().map(|p| p.as_dvec3()).collect()
+            };
+            let seconds = t.elapsed().as_secs_f64();
+            let mut error = 0.0f64;
+            for i in 0..n {
+                for c in 0..3 {
+                    let gc = if c == 2 { -g } else { 0.0 };
+                    let want = exact(x0[i][c] as f64, v0[i][c] as f64, gc, b / mass, t_end);
+                    error = error.max((xs[i][c] - want).abs());
+                }
+            }
+            let series = if double { "f64" } else { "f32" };
+            sweep.record(series, dt, Run::stable(steps, error, seconds));
+        }
     }
-    fn uniform_vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
-        let mut c = || lo + (hi - lo) * self.next_f64() as f32;
-        Vec3::new(c(), c(), c())
-    }
+    common::finish(&sweep, "particles");
+    Ok(())
 }
 
 fn main() -> wp::Result<()> {
@@ -97,9 +171,13 @@ fn main() -> wp::Result<()> {
     let dt = 0.01 * (2.0 * mass / b); // s
     let gravity = Vec3::new(0.0, 0.0, -g);
 
-    let mut rng = Rng(12345);
-    let x0: Vec<Vec3> = (0..opts.n).map(|_| rng.uniform_vec3(-1.0, 1.0)).collect();
-    let v0: Vec<Vec3> = (0..opts.n).map(|_| rng.uniform_vec3(-0.5, 0.5)).collect();
+    let mut rng = common::Rng(12345);
+    let x0: Vec<Vec3> = (0..opts.n)
+        .map(|_| uniform_vec3(&mut rng, -1.0, 1.0))
+        .collect();
+    let v0: Vec<Vec3> = (0..opts.n)
+        .map(|_| uniform_vec3(&mut rng, -0.5, 0.5))
+        .collect();
     let x = wp::Array::from_slice(&x0, &dev)?;
     let v = wp::Array::from_slice(&v0, &dev)?;
 
@@ -131,8 +209,7 @@ fn main() -> wp::Result<()> {
             let gc = gravity[c] as f64;
             let (xi, vi) = (x0[i][c] as f64, v0[i][c] as f64);
             let vinf = gc / k; // terminal velocity
-                               // Closed form of x' = v, v' = -k v + g.
-            let exact = xi + vinf * t + (vi - vinf) * (1.0 - (-k * t).exp()) / k;
+            let exact = exact(xi, vi, gc, k, t);
             // Closed form of v_{n+1} = r v_n + g dt, x_{n+1} = x_n + v_{n+1} dt.
             let geometric = r * (1.0 - r.powi(steps)) / (1.0 - r);
             let discrete = xi + dt64 * (opts.steps as f64 * vinf + (vi - vinf) * geometric);
@@ -160,5 +237,9 @@ fn main() -> wp::Result<()> {
         "  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))"
     );
     println!("  max |x - exact discrete solution, f64| = {err_discrete:.3e} m (f32 rounding)");
+    if opts.sweep_n > 0 {
+        sweep(&dev, opts.sweep_n.min(opts.n), &x0, &v0, t)?;
+    }
+    common::print_compiled();
     Ok(())
 }
