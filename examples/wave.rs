@@ -101,8 +101,9 @@ fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64) -> wp::Result<Run
             }
         }
     }
-    let u = b.to_vec()?;
+    wp::synchronize()?;
     let seconds = t.elapsed().as_secs_f64();
+    let u = b.to_vec()?;
     let t_reached = steps as f64 * dt;
     let err = x
         .iter()
