@@ -1,7 +1,7 @@
 //! The CUDA C++ builtin library (`warp-cuda/cuda/*.h`) against the CPU backend, on the host.
 //!
 //! The library must mean exactly what warp-core's CPU code means. This test generates about
-//! 126,000 cases (every builtin, operator, constructor and constant for every type it takes,
+//! 137,000 cases (every builtin, operator, constructor and constant for every type it takes,
 //! integer semantics, Rust `as` casts, literals, arrays and faults, range loops, the launch
 //! grid, atomics, layouts, printing), computes the expected results in Rust through
 //! `warp_lang::__private` (warp-core's builtins and ops) and glam, evaluates the same cases

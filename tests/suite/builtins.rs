@@ -732,7 +732,7 @@ const INPUTS: [[f32; ROWS]; COLS] = [
     [-2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.7, -3.7],    // 15 rint
     [-2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.7, -3.7],    // 16 trunc
     [-2.5, -1.5, -0.25, 0.5, 1.75, 2.5, 3.7, -3.7],  // 17 frac
-    [-6.3, -1.0, 0.0, 0.5, 1.0, 3.141_592_7, 100.0, 1e-3], // 18 degrees
+    [-6.3, -1.0, 0.0, 0.5, 1.0, std::f32::consts::PI, 100.0, 1e-3], // 18 degrees
     [-360.0, -90.0, 0.0, 1.0, 45.0, 180.0, 720.0, 0.5], // 19 radians
     [
         -2.0,
@@ -755,15 +755,9 @@ const INPUTS: [[f32; ROWS]; COLS] = [
 /// against 50-digit mpmath values to 4 eps in its unit tests).
 fn scalar_math_ref(k: usize, x: f64) -> f64 {
     use wp::__private::builtins::special;
-    let unit = |x: f64| {
-        if x < -1.0 {
-            -1.0
-        } else if x > 1.0 {
-            1.0
-        } else {
-            x
-        }
-    };
+    let unit = |x: f64| x.clamp(-1.0, 1.0);
+    // max/min, not clamp: with equal edges the quotient may be NaN, which must clamp to 0.
+    #[allow(clippy::manual_clamp)]
     let smooth = |e0: f64, e1: f64, x: f64| {
         let t = ((x - e0) / (e1 - e0)).max(0.0).min(1.0);
         t * t * (3.0 - 2.0 * t)

@@ -1936,10 +1936,14 @@ impl Lowerer {
             .iter()
             .filter(|b| b.method)
             .map(|b| b.name)
+            .chain(builtins::METHOD_ALIASES.iter().map(|(a, _)| *a))
             .collect();
         err(
             m.method.span(),
-            format!("unknown method `{name}` on `{rt}` in a kernel; methods available: {}, powf, ln, len", known.join(", ")),
+            format!(
+                "unknown method `{name}` on `{rt}` in a kernel; methods available: {}, len",
+                known.join(", ")
+            ),
         )
     }
 }
