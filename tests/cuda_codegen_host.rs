@@ -89,6 +89,24 @@ fn grid2d(m: Array<f32, 2>, s: f32) {
     m[(i, j)] = c.dot(c) * s + m[(i, j)] - c.length();
 }
 
+/// Warp's scalar math builtins (the ones with a CUDA transcription or glibc on both sides;
+/// `cbrt` is left out: Rust's is no longer glibc's), `mod` lowered to `%`, and the
+/// classification builtins returning bool.
+#[wp::kernel]
+fn scalar_math(x: Array<f32>, out: Array<f32, 2>, flags: Array<i32>) {
+    let i = tid();
+    let a = x[i];
+    let u = a * 0.125;
+    out[(i, 0)] = asin(u) + acos(u) * atan(a);
+    out[(i, 1)] = sinh(u) + cosh(u) * tanh(a);
+    out[(i, 2)] = exp2(u) + log2(abs(a)) * log10(abs(a));
+    out[(i, 3)] = erf(a) + erfc(u) * erfinv(u) + erfcinv(u + 1.0);
+    out[(i, 4)] = round(a) + rint(a) * 2.0 + trunc(a) * 4.0 + frac(a) * 8.0;
+    out[(i, 5)] = degrees(a) + radians(a) + step(a) + smoothstep(-1.0, 2.0, a);
+    out[(i, 6)] = r#mod(a, 0.75) + smoothstep(0.5, 0.5, a);
+    flags[i] = isfinite(a) as i32 + isnan(u) as i32 * 2 + isinf(a * 1e38) as i32 * 4;
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -399,5 +417,27 @@ fn two_dimensional_launch_matches_the_cpu_backend() {
     wp::launch(grid2d, (3, 4), (&m, 0.3), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32Grid(&m)]));
+    }
+}
+
+#[test]
+fn scalar_math_builtins_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..40).map(|k| k as f32 * 0.37 - 7.0).collect();
+    xs.extend([0.5, -2.5, 1.5, 0.0, -0.0, f32::INFINITY, f32::NAN, 8.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 7), &dev).unwrap();
+    let flags = wp::Array::<i32>::zeros(n, &dev).unwrap();
+    let host = run_on_host::<scalar_math>(
+        &[n],
+        &[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&flags)],
+    );
+    wp::launch(scalar_math, n, (&x, &out, &flags), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(
+            host,
+            cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&flags)])
+        );
     }
 }

@@ -1,7 +1,7 @@
 //! The CUDA C++ builtin library (`warp-cuda/cuda/*.h`) against the CPU backend, on the host.
 //!
 //! The library must mean exactly what warp-core's CPU code means. This test generates about
-//! 126,000 cases (every builtin, operator, constructor and constant for every type it takes,
+//! 137,000 cases (every builtin, operator, constructor and constant for every type it takes,
 //! integer semantics, Rust `as` casts, literals, arrays and faults, range loops, the launch
 //! grid, atomics, layouts, printing), computes the expected results in Rust through
 //! `warp_lang::__private` (warp-core's builtins and ops) and glam, evaluates the same cases
@@ -15,7 +15,12 @@
 //!   g++ on x86_64 without -march contracts nothing into FMAs), NaN compared as "is NaN";
 //! * min/max/clamp: exact except that the sign of a zero result is not compared (IEEE minNum
 //!   leaves min(-0, +0) unspecified: Rust on x86_64 returns the first operand, CUDA's fminf -0);
-//! * exp, log, sin, cos, tan, atan2, pow: 2 ulp on the host. Both sides call glibc's libm, so
+//! * the erf family (erf, erfc, erfinv, erfcinv): bit-exact on the host, where the library
+//!   runs a transcription of warp-core's algorithm; 16 ulp against a GPU (see `build_cases`);
+//! * round, rint, trunc, frac, degrees, radians, step, smoothstep, isfinite/isnan/isinf:
+//!   bit-exact;
+//! * exp, log, sin, cos, tan, atan2, pow, asin, acos, atan, sinh, cosh, tanh, exp2, log2,
+//!   log10, cbrt: 2 ulp on the host. Both sides call glibc's libm, so
 //!   they normally agree bit for bit, but either compiler may constant-fold with another
 //!   implementation (glibc's results are not correctly rounded). Against GPU results 4 ulp:
 //!   CUDA documents up to 4 ulp for some (tanf, powf); measured on an H200 (CUDA 13): 1 ulp.
@@ -1421,6 +1426,84 @@ fn print_cases(c: &mut Cases) {
 // The test
 // ------------------------------------------------------------------------------------------
 
+/// The scalar builtins added for Warp's scalar math: the libm ones (`tr`), the erf family
+/// (`special`: warp-core's own code, transcribed on the host, so exact there; CUDA's on a GPU),
+/// and the exact ones (rounding, degrees/radians, step, smoothstep, classification).
+macro_rules! more_float_cases {
+    ($c:expr, $t:ident, $special:expr, $extra:expr) => {{
+        let c: &mut Cases = $c;
+        let ty = <$t as Val>::TY;
+        let vals: Vec<$t> = float_vals::<$t>(&$extra);
+        let (tr, sp) = (c.tr, $special);
+        for &x in &vals {
+            c.push("asin", ty, &[&x], toks(&b::asin(x), tr));
+            c.push("acos", ty, &[&x], toks(&b::acos(x), tr));
+            c.push("atan", ty, &[&x], toks(&b::atan(x), tr));
+            c.push("sinh", ty, &[&x], toks(&b::sinh(x), tr));
+            c.push("cosh", ty, &[&x], toks(&b::cosh(x), tr));
+            c.push("tanh", ty, &[&x], toks(&b::tanh(x), tr));
+            c.push("exp2", ty, &[&x], toks(&b::exp2(x), tr));
+            c.push("log2", ty, &[&x], toks(&b::log2(x), tr));
+            c.push("log10", ty, &[&x], toks(&b::log10(x), tr));
+            c.push("cbrt", ty, &[&x], toks(&b::cbrt(x), tr));
+            c.push("erf", ty, &[&x], toks(&b::erf(x), sp));
+            c.push("erfc", ty, &[&x], toks(&b::erfc(x), sp));
+            c.push("erfinv", ty, &[&x], toks(&b::erfinv(x), sp));
+            c.push("erfcinv", ty, &[&x], toks(&b::erfcinv(x), sp));
+            c.push("round", ty, &[&x], toks(&b::round(x), Exact));
+            c.push("rint", ty, &[&x], toks(&b::rint(x), Exact));
+            c.push("trunc", ty, &[&x], toks(&b::trunc(x), Exact));
+            c.push("frac", ty, &[&x], toks(&b::frac(x), Exact));
+            c.push("degrees", ty, &[&x], toks(&b::degrees(x), Exact));
+            c.push("radians", ty, &[&x], toks(&b::radians(x), Exact));
+            c.push("step", ty, &[&x], toks(&b::step(x), Exact));
+            c.push("isfinite", ty, &[&x], toks(&b::isfinite(x), Exact));
+            c.push("isnan", ty, &[&x], toks(&b::isnan(x), Exact));
+            c.push("isinf", ty, &[&x], toks(&b::isinf(x), Exact));
+        }
+        let few: Vec<$t> = vals.iter().copied().step_by(2).collect();
+        for &e0 in &few {
+            for &e1 in &few {
+                for &x in &few {
+                    let want = b::smoothstep(e0, e1, x);
+                    c.push("smoothstep", ty, &[&e0, &e1, &x], toks(&want, Exact));
+                }
+            }
+        }
+    }};
+}
+
+/// `step` on integers, and `isfinite`/`isnan`/`isinf` on float vectors.
+fn more_int_and_vec_cases(c: &mut Cases) {
+    macro_rules! step_ints {
+        ($($t:ident),*) => {$(
+            for x in [$t::MIN, $t::MAX, 0 as $t, 1 as $t, (0 as $t).wrapping_sub(1)] {
+                c.push("step", <$t as Val>::TY, &[&x], toks(&b::step(x), Exact));
+            }
+        )*};
+    }
+    step_ints!(i8, i16, i32, i64, u8, u16, u32, u64);
+    macro_rules! classify_vecs {
+        ($($v:ident: $s:ident),*) => {$(
+            for (k, special) in [0.0, $s::NAN, $s::INFINITY, $s::NEG_INFINITY].into_iter().enumerate() {
+                for lane in 0..$v::ZERO.to_array().len() {
+                    let mut a = $v::splat(1.5).to_array();
+                    a[lane] = special;
+                    if k == 1 && lane == 0 {
+                        a[a.len() - 1] = $s::INFINITY;
+                    }
+                    let v = $v::from_array(a);
+                    let ty = <$v as Val>::TY;
+                    c.push("isfinite", ty, &[&v], toks(&b::isfinite(v), Exact));
+                    c.push("isnan", ty, &[&v], toks(&b::isnan(v), Exact));
+                    c.push("isinf", ty, &[&v], toks(&b::isinf(v), Exact));
+                }
+            }
+        )*};
+    }
+    classify_vecs!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64);
+}
+
 fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
     let mut c = Cases {
         text: String::new(),
@@ -1465,6 +1548,57 @@ fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
             std::f64::consts::PI
         ]
     );
+    // The erf family: exact on the host (the same algorithm); on a GPU CUDA's own functions,
+    // documented within 2 to 6 ulp of the correctly rounded result (erff 2, erfcf 4, erfinvf
+    // 2, erfcinvf 4; erf 2, erfc 5, erfinv 5, erfcinv 6), against warp-core's within 1 ulp (f32)
+    // and 4 eps relative (f64: up to 8 ulp at the bottom of a binade): 16 ulp.
+    let special = if device { Ulps(16) } else { Exact };
+    more_float_cases!(
+        &mut c,
+        f32,
+        special,
+        [
+            0.9f32,
+            -0.999,
+            0.999_999,
+            1.999,
+            1.25,
+            -1.75,
+            4.5,
+            9.0,
+            1e-30,
+            1e-40,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            std::f32::consts::PI
+        ]
+    );
+    more_float_cases!(
+        &mut c,
+        f64,
+        special,
+        [
+            0.9f64,
+            -0.999,
+            0.999_999_999_9,
+            1.999_999_9,
+            1.25,
+            -1.75,
+            4.5,
+            27.0,
+            30.0,
+            1e-300,
+            1e-310,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            std::f64::consts::PI
+        ]
+    );
+    more_int_and_vec_cases(&mut c);
     cast_cases(&mut c);
 
     fvec_cases!(&mut c, &mut rng, Vec2, f32, 2);

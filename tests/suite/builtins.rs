@@ -18,6 +18,10 @@ backend_tests!(
     atomic_add_many_threads,
     atomic_sub_min_max,
     atomic_2d_and_vectors,
+    scalar_math_f32,
+    scalar_math_f64,
+    scalar_math_methods,
+    classification_builtins,
 );
 
 /// Warp's `sign`: -1 below zero, else +1 (so +1 for 0, -0 and NaN).
@@ -696,4 +700,421 @@ fn atomic_2d_and_vectors(dev: &wp::Device) {
     );
     let half = (rows * cols / 2) as f64;
     assert_eq!(host(&dsum), vec![dvec2(-0.5 * half, -half); 2]);
+}
+
+// ------------------------------------------------------------------------------------------
+// Warp's scalar math: trigonometric, hyperbolic, exp/log, erf family, rounding, step,
+// smoothstep, degrees/radians, mod, classification.
+// ------------------------------------------------------------------------------------------
+
+/// Rows per builtin column in the scalar-math kernels.
+const ROWS: usize = 8;
+/// Columns of the scalar-math kernels: one builtin each, with inputs in its domain (and at its
+/// edges: asin/acos outside [-1, 1] are clamped, erfinv(1) = inf, erfcinv(0) = inf and
+/// erfcinv(2) = -inf, smoothstep with equal edges).
+const COLS: usize = 25;
+const INPUTS: [[f32; ROWS]; COLS] = [
+    [-1.5, -1.0, -0.7, -0.0, 0.25, 0.999, 1.0, 2.0], // 0 asin
+    [-1.5, -1.0, -0.7, -0.0, 0.25, 0.999, 1.0, 2.0], // 1 acos
+    [-1e3, -2.0, -0.5, 0.0, 0.3, 1.0, 7.5, f32::INFINITY], // 2 atan
+    [-5.0, -1.0, -0.1, 0.0, 0.2, 1.5, 10.0, 30.0],   // 3 sinh
+    [-5.0, -1.0, -0.1, 0.0, 0.2, 1.5, 10.0, 30.0],   // 4 cosh
+    [-20.0, -1.0, -0.1, 0.0, 0.05, 0.5, 2.0, 9.0],   // 5 tanh
+    [-10.0, -1.5, -0.25, 0.0, 0.5, 3.0, 10.5, 100.0], // 6 exp2
+    [1e-3, 0.1, 0.5, 1.0, 2.0, 10.0, 1000.0, 1e30],  // 7 log2
+    [1e-3, 0.1, 0.5, 1.0, 2.0, 10.0, 1000.0, 1e30],  // 8 log10
+    [-27.0, -2.0, -1e-3, 0.0, 1e-6, 0.5, 8.0, 1e9],  // 9 cbrt
+    [-3.0, -1.0, -0.5, -0.0, 0.1, 0.9, 2.0, 4.0],    // 10 erf
+    [-3.0, -1.0, -0.5, -0.0, 0.1, 0.9, 2.0, 4.0],    // 11 erfc
+    [-0.999, -0.5, -0.1, 0.0, 0.25, 0.75, 0.9999, 1.0], // 12 erfinv
+    [1e-20, 1e-3, 0.1, 0.5, 1.0, 1.5, 1.99, 2.0],    // 13 erfcinv
+    [-2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.7, -3.7],    // 14 round
+    [-2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.7, -3.7],    // 15 rint
+    [-2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.7, -3.7],    // 16 trunc
+    [-2.5, -1.5, -0.25, 0.5, 1.75, 2.5, 3.7, -3.7],  // 17 frac
+    [-6.3, -1.0, 0.0, 0.5, 1.0, std::f32::consts::PI, 100.0, 1e-3], // 18 degrees
+    [-360.0, -90.0, 0.0, 1.0, 45.0, 180.0, 720.0, 0.5], // 19 radians
+    [
+        -2.0,
+        -1e-30,
+        -0.0,
+        0.0,
+        1e-30,
+        1.0,
+        f32::NAN,
+        f32::NEG_INFINITY,
+    ], // 20 step
+    [-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0, 3.0],     // 21 smoothstep(-1, 2, x)
+    [-1.0, 0.0, 0.5, 0.500_001, 1.0, 2.0, -0.0, 100.0], // 22 smoothstep(0.5, 0.5, x)
+    [-2.5, -0.7, 0.0, 0.7, 1.6, 7.25, 100.0, -100.0], // 23 mod(x, 0.75)
+    [-1.0, -0.5, 0.0, 0.5, 1.0, 2.0, -2.0, 4.0],     // 24 atan(x) via f32::atan
+];
+
+/// The f64 reference of column `k` at `x`: Rust's f64 functions, the clamps and definitions
+/// of the builtins, and warp-core's f64 erf family (std has no erf; warp-core's is checked
+/// against 50-digit mpmath values to 4 eps in its unit tests).
+fn scalar_math_ref(k: usize, x: f64) -> f64 {
+    use wp::__private::builtins::special;
+    let unit = |x: f64| x.clamp(-1.0, 1.0);
+    // max/min, not clamp: with equal edges the quotient may be NaN, which must clamp to 0.
+    #[allow(clippy::manual_clamp)]
+    let smooth = |e0: f64, e1: f64, x: f64| {
+        let t = ((x - e0) / (e1 - e0)).max(0.0).min(1.0);
+        t * t * (3.0 - 2.0 * t)
+    };
+    match k {
+        0 => unit(x).asin(),
+        1 => unit(x).acos(),
+        2 | 24 => x.atan(),
+        3 => x.sinh(),
+        4 => x.cosh(),
+        5 => x.tanh(),
+        6 => x.exp2(),
+        7 => x.log2(),
+        8 => x.log10(),
+        9 => x.cbrt(),
+        10 => special::erf(x),
+        11 => special::erfc(x),
+        12 => special::erfinv(x),
+        13 => special::erfcinv(x),
+        14 => x.round(),
+        15 => x.round_ties_even(),
+        16 => x.trunc(),
+        17 => x.fract(),
+        18 => x.to_degrees(),
+        19 => x.to_radians(),
+        20 => {
+            if x < 0.0 {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        21 => smooth(-1.0, 2.0, x),
+        22 => smooth(0.5, 0.5, x),
+        23 => x % 0.75,
+        _ => unreachable!(),
+    }
+}
+
+/// Tolerance of column `k` in ulps of the result's type, against the f64 reference.
+///
+/// * CPU, f32: the libm group (asin .. cbrt) calls glibc's single-precision functions (or,
+///   for cbrt, std's own), within 1 ulp of the correctly rounded result in glibc's tables of
+///   known errors for x86_64 (2 allowed); the erf family is warp-core's f64 result rounded
+///   once (documented: 1 ulp); degrees/radians multiply by a constant rounded to f32 (1 ulp);
+///   smoothstep is about six roundings (4 ulp); rounding, frac, step and mod are exact.
+/// * CPU, f64: the reference is the very same computation: exact.
+/// * CUDA: the maximum ulp errors of CUDA's functions in the CUDA C++ Programming Guide
+///   ("Mathematical Functions" appendix, tables of single- and double-precision standard
+///   library functions), plus one: f32 asinf 2, acosf 2, atanf 2, sinhf 3, coshf 2, tanhf 2,
+///   exp2f 2, log2f 1, log10f 2, cbrtf 1, erff 2, erfcf 4, erfinvf 2, erfcinvf 4; f64 asin 2,
+///   acos 2, atan 2, sinh 2, cosh 1, tanh 1, exp2 1, log2 1, log10 1, cbrt 1, erf 2, erfc 5,
+///   erfinv 5, erfcinv 6; the rest as on the CPU (IEEE arithmetic, `--fmad=false`).
+fn scalar_math_ulps(k: usize, cpu: bool, f64_: bool) -> f64 {
+    const CUDA32: [f64; 14] = [2., 2., 2., 3., 2., 2., 2., 1., 2., 1., 2., 4., 2., 4.];
+    const CUDA64: [f64; 14] = [2., 2., 2., 2., 1., 1., 1., 1., 1., 1., 2., 5., 5., 6.];
+    match (k, cpu, f64_) {
+        (_, true, true) => 0.0,
+        (0..=9 | 24, true, false) => 2.0,
+        (10..=13, true, false) => 1.0,
+        (0..=13, false, false) => CUDA32[k] + 1.0,
+        (24, false, false) => CUDA32[2] + 1.0,
+        (0..=13, false, true) => CUDA64[k] + 1.0,
+        (24, false, true) => CUDA64[2] + 1.0,
+        (18 | 19, _, false) => 1.0,
+        (21 | 22, _, false) => 4.0,
+        _ => 0.0,
+    }
+}
+
+/// `got` within `ulps` ulps (of a type with machine epsilon `eps`) of `want`, relative to
+/// `|want|`; non-finite and zero references must match exactly (zeros up to sign).
+#[track_caller]
+fn assert_ulps(got: f64, want: f64, ulps: f64, eps: f64, what: &str) {
+    let ok = if want.is_nan() {
+        got.is_nan()
+    } else if !want.is_finite() || want == 0.0 {
+        got == want
+    } else {
+        (got - want).abs() <= ulps * eps * want.abs()
+    };
+    assert!(ok, "{what}: got {got:e}, want {want:e} ({ulps} ulp)");
+}
+
+#[wp::kernel]
+fn k_scalar_math_f32(x: Array<f32, 2>, out: Array<f32, 2>) {
+    let i = tid();
+    out[(0, i)] = asin(x[(0, i)]);
+    out[(1, i)] = acos(x[(1, i)]);
+    out[(2, i)] = atan(x[(2, i)]);
+    out[(3, i)] = sinh(x[(3, i)]);
+    out[(4, i)] = cosh(x[(4, i)]);
+    out[(5, i)] = tanh(x[(5, i)]);
+    out[(6, i)] = exp2(x[(6, i)]);
+    out[(7, i)] = log2(x[(7, i)]);
+    out[(8, i)] = log10(x[(8, i)]);
+    out[(9, i)] = cbrt(x[(9, i)]);
+    out[(10, i)] = erf(x[(10, i)]);
+    out[(11, i)] = erfc(x[(11, i)]);
+    out[(12, i)] = erfinv(x[(12, i)]);
+    out[(13, i)] = erfcinv(x[(13, i)]);
+    out[(14, i)] = round(x[(14, i)]);
+    out[(15, i)] = rint(x[(15, i)]);
+    out[(16, i)] = trunc(x[(16, i)]);
+    out[(17, i)] = frac(x[(17, i)]);
+    out[(18, i)] = degrees(x[(18, i)]);
+    out[(19, i)] = radians(x[(19, i)]);
+    out[(20, i)] = step(x[(20, i)]);
+    out[(21, i)] = smoothstep(-1.0, 2.0, x[(21, i)]);
+    out[(22, i)] = smoothstep(0.5, 0.5, x[(22, i)]);
+    out[(23, i)] = r#mod(x[(23, i)], 0.75);
+    out[(24, i)] = f32::atan(x[(24, i)]);
+}
+
+#[wp::kernel]
+fn k_scalar_math_f64(x: Array<f64, 2>, out: Array<f64, 2>) {
+    let i = tid();
+    out[(0, i)] = asin(x[(0, i)]);
+    out[(1, i)] = acos(x[(1, i)]);
+    out[(2, i)] = atan(x[(2, i)]);
+    out[(3, i)] = sinh(x[(3, i)]);
+    out[(4, i)] = cosh(x[(4, i)]);
+    out[(5, i)] = tanh(x[(5, i)]);
+    out[(6, i)] = exp2(x[(6, i)]);
+    out[(7, i)] = log2(x[(7, i)]);
+    out[(8, i)] = log10(x[(8, i)]);
+    out[(9, i)] = cbrt(x[(9, i)]);
+    out[(10, i)] = erf(x[(10, i)]);
+    out[(11, i)] = erfc(x[(11, i)]);
+    out[(12, i)] = erfinv(x[(12, i)]);
+    out[(13, i)] = erfcinv(x[(13, i)]);
+    out[(14, i)] = round(x[(14, i)]);
+    out[(15, i)] = rint(x[(15, i)]);
+    out[(16, i)] = trunc(x[(16, i)]);
+    out[(17, i)] = frac(x[(17, i)]);
+    out[(18, i)] = degrees(x[(18, i)]);
+    out[(19, i)] = radians(x[(19, i)]);
+    out[(20, i)] = step(x[(20, i)]);
+    out[(21, i)] = smoothstep(-1.0, 2.0, x[(21, i)]);
+    out[(22, i)] = smoothstep(0.5, 0.5, x[(22, i)]);
+    out[(23, i)] = wp::r#mod(x[(23, i)], 0.75);
+    out[(24, i)] = f64::atan(x[(24, i)]);
+}
+
+fn scalar_math_inputs() -> Vec<f32> {
+    INPUTS.iter().flatten().copied().collect()
+}
+
+fn scalar_math_f32(dev: &wp::Device) {
+    let x =
+        wp::Array::<f32, 2>::from_slice_shape(&scalar_math_inputs(), (COLS, ROWS), dev).unwrap();
+    let out = zeros::<f32, 2>((COLS, ROWS), dev);
+    wp::launch(k_scalar_math_f32, ROWS, (&x, &out), dev).unwrap();
+    for (k, row) in host(&out).chunks(ROWS).enumerate() {
+        let ulps = scalar_math_ulps(k, dev.is_cpu(), false);
+        for (j, &got) in row.iter().enumerate() {
+            let xin = INPUTS[k][j];
+            let want = scalar_math_ref(k, xin as f64);
+            // Compare with the reference rounded to f32 where it leaves the f32 range.
+            let want = if (want as f32).is_finite() {
+                want
+            } else {
+                want as f32 as f64
+            };
+            assert_ulps(
+                got as f64,
+                want,
+                ulps.max(0.5),
+                f32::EPSILON as f64,
+                &format!("f32 column {k} at {xin:e}"),
+            );
+        }
+    }
+}
+
+fn scalar_math_f64(dev: &wp::Device) {
+    let xs: Vec<f64> = scalar_math_inputs().iter().map(|&v| v as f64).collect();
+    let x = wp::Array::<f64, 2>::from_slice_shape(&xs, (COLS, ROWS), dev).unwrap();
+    let out = zeros::<f64, 2>((COLS, ROWS), dev);
+    wp::launch(k_scalar_math_f64, ROWS, (&x, &out), dev).unwrap();
+    for (k, row) in host(&out).chunks(ROWS).enumerate() {
+        let ulps = scalar_math_ulps(k, dev.is_cpu(), true);
+        for (j, &got) in row.iter().enumerate() {
+            let xin = INPUTS[k][j] as f64;
+            let want = scalar_math_ref(k, xin);
+            assert_ulps(
+                got,
+                want,
+                ulps,
+                f64::EPSILON,
+                &format!("f64 column {k} at {xin:e}"),
+            );
+        }
+    }
+}
+
+/// Rust method syntax for the new builtins: the same builtin as the function syntax, so the
+/// results must agree exactly with the function-syntax kernel's; on the CPU they also equal
+/// Rust's own methods.
+#[wp::kernel]
+fn k_scalar_math_methods(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let u = a * 0.1;
+    out[(i, 0)] = u.asin();
+    out[(i, 1)] = u.acos();
+    out[(i, 2)] = a.atan();
+    out[(i, 3)] = a.sinh();
+    out[(i, 4)] = a.cosh();
+    out[(i, 5)] = a.tanh();
+    out[(i, 6)] = a.exp2();
+    out[(i, 7)] = a.abs().log2();
+    out[(i, 8)] = a.abs().log10();
+    out[(i, 9)] = a.cbrt();
+    out[(i, 10)] = a.round();
+    out[(i, 11)] = a.round_ties_even();
+    out[(i, 12)] = a.trunc();
+    out[(i, 13)] = a.fract();
+    out[(i, 14)] = a.to_degrees();
+    out[(i, 15)] = a.to_radians();
+    let f = if a.is_finite() { 1.0 } else { 0.0 };
+    let n = if a.is_nan() { 2.0 } else { 0.0 };
+    let inf = if a.is_infinite() { 4.0 } else { 0.0 };
+    out[(i, 16)] = f + n + inf;
+}
+
+#[wp::kernel]
+fn k_scalar_math_fns(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let u = a * 0.1;
+    out[(i, 0)] = asin(u);
+    out[(i, 1)] = acos(u);
+    out[(i, 2)] = atan(a);
+    out[(i, 3)] = sinh(a);
+    out[(i, 4)] = cosh(a);
+    out[(i, 5)] = tanh(a);
+    out[(i, 6)] = exp2(a);
+    out[(i, 7)] = log2(abs(a));
+    out[(i, 8)] = log10(abs(a));
+    out[(i, 9)] = cbrt(a);
+    out[(i, 10)] = round(a);
+    out[(i, 11)] = rint(a);
+    out[(i, 12)] = trunc(a);
+    out[(i, 13)] = frac(a);
+    out[(i, 14)] = degrees(a);
+    out[(i, 15)] = radians(a);
+    let f = if isfinite(a) { 1.0 } else { 0.0 };
+    let n = if isnan(a) { 2.0 } else { 0.0 };
+    let inf = if isinf(a) { 4.0 } else { 0.0 };
+    out[(i, 16)] = f + n + inf;
+}
+
+fn scalar_math_methods(dev: &wp::Device) {
+    let xs = [
+        -12.5f32,
+        -2.5,
+        -0.5,
+        0.5,
+        1.5,
+        3.7,
+        9.0,
+        f32::NAN,
+        f32::INFINITY,
+    ];
+    let n = xs.len();
+    let (m, f) = (zeros::<f32, 2>((n, 17), dev), zeros::<f32, 2>((n, 17), dev));
+    let x = arr(&xs, dev);
+    wp::launch(k_scalar_math_methods, n, (&x, &m), dev).unwrap();
+    wp::launch(k_scalar_math_fns, n, (&x, &f), dev).unwrap();
+    let (m, f) = (host(&m), host(&f));
+    for (k, (a, b)) in m.iter().zip(&f).enumerate() {
+        assert!(
+            a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+            "method vs function syntax, case {k}: {a:e} vs {b:e}"
+        );
+    }
+    if dev.is_cpu() {
+        for (i, row) in m.chunks(17).enumerate() {
+            let a = xs[i];
+            let u = a * 0.1;
+            let want = [
+                u.clamp(-1.0, 1.0).asin(),
+                u.clamp(-1.0, 1.0).acos(),
+                a.atan(),
+                a.sinh(),
+                a.cosh(),
+                a.tanh(),
+                a.exp2(),
+                a.abs().log2(),
+                a.abs().log10(),
+                a.cbrt(),
+                a.round(),
+                a.round_ties_even(),
+                a.trunc(),
+                a.fract(),
+                a.to_degrees(),
+                a.to_radians(),
+                a.is_finite() as u8 as f32
+                    + 2.0 * a.is_nan() as u8 as f32
+                    + 4.0 * a.is_infinite() as u8 as f32,
+            ];
+            for (k, (g, w)) in row.iter().zip(want).enumerate() {
+                assert_close_f32(*g, w, 0.0, &format!("method {k} at {a}: Rust's meaning"));
+            }
+        }
+    }
+}
+
+#[wp::kernel]
+fn k_classify(x: Array<f64>, v: Array<Vec3>, out: Array<i32, 2>) {
+    let i = tid();
+    out[(i, 0)] = isfinite(x[i]) as i32;
+    out[(i, 1)] = isnan(x[i]) as i32;
+    out[(i, 2)] = isinf(x[i]) as i32;
+    out[(i, 3)] = isfinite(v[i]) as i32;
+    out[(i, 4)] = isnan(v[i]) as i32;
+    out[(i, 5)] = v[i].is_infinite() as i32;
+    out[(i, 6)] = step(i as i32 - 2);
+    out[(i, 7)] = r#mod(i as i32 - 3, 2);
+}
+
+fn classification_builtins(dev: &wp::Device) {
+    let xs = [
+        0.0,
+        -0.0,
+        1e-310,
+        f64::MAX,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+    ];
+    let vs = [
+        Vec3::ZERO,
+        Vec3::new(1.0, f32::NAN, 0.0),
+        Vec3::new(f32::INFINITY, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, f32::NEG_INFINITY),
+        Vec3::new(f32::NAN, f32::INFINITY, 1.0),
+        Vec3::splat(f32::MAX),
+        Vec3::new(1e-40, -1.0, 2.0),
+    ];
+    let n = xs.len();
+    let out = zeros::<i32, 2>((n, 8), dev);
+    wp::launch(k_classify, n, (&arr(&xs, dev), &arr(&vs, dev), &out), dev).unwrap();
+    for (i, row) in host(&out).chunks(8).enumerate() {
+        let (x, v) = (xs[i], vs[i]);
+        let a = v.to_array();
+        let want = [
+            x.is_finite() as i32,
+            x.is_nan() as i32,
+            x.is_infinite() as i32,
+            a.iter().all(|c| c.is_finite()) as i32,
+            a.iter().any(|c| c.is_nan()) as i32,
+            a.iter().any(|c| c.is_infinite()) as i32,
+            (i < 2) as i32,
+            (i as i32 - 3) % 2,
+        ];
+        assert_eq!(row, want, "classification row {i}");
+    }
 }

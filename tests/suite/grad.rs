@@ -20,6 +20,7 @@ backend_tests!(
     kernels_without_adjoint,
     tape_zero_accumulate_reset,
     gradcheck_builtins,
+    gradcheck_scalar_math,
     funcs_gradient,
     jumps_gradient,
     copy_and_custom_steps,
@@ -332,6 +333,110 @@ fn gradcheck_builtins(dev: &wp::Device) {
     .unwrap();
     assert!(!report.passed);
     assert_eq!(report.worst.unwrap().2, 0.0);
+}
+
+/// Every differentiable scalar-math builtin added for Warp parity, one per output (so that a
+/// failure names it), at points away from their kinks: `wp::gradcheck` against central
+/// differences, f64 and f32.
+#[wp::kernel]
+fn k_scalar_math(x: Array<f64>, out: Array<f64>) {
+    let a = x[0];
+    let b = x[1];
+    let c = x[2];
+    out[0] = asin(a);
+    out[1] = acos(b);
+    out[2] = atan(c);
+    out[3] = sinh(b);
+    out[4] = cosh(a);
+    out[5] = tanh(c);
+    out[6] = exp2(b);
+    out[7] = log2(c);
+    out[8] = log10(c);
+    out[9] = cbrt(b);
+    out[10] = erf(b);
+    out[11] = erfc(c);
+    out[12] = erfinv(a);
+    out[13] = erfcinv(c);
+    out[14] = frac(c) * a;
+    out[15] = degrees(a);
+    out[16] = radians(b);
+    out[17] = smoothstep(b, c, a);
+    out[18] = r#mod(c * 3.0, a + 1.0);
+    // Piecewise constant (zero gradient), away from their jumps.
+    out[19] = (round(a * 3.0) + rint(b) + trunc(c) + step(b)) * c;
+}
+
+#[wp::kernel]
+fn k_scalar_math32(x: Array<f32>, out: Array<f32>) {
+    let a = x[0];
+    let b = x[1];
+    let c = x[2];
+    out[0] = asin(a);
+    out[1] = acos(b);
+    out[2] = atan(c);
+    out[3] = sinh(b);
+    out[4] = cosh(a);
+    out[5] = tanh(c);
+    out[6] = exp2(b);
+    out[7] = log2(c);
+    out[8] = log10(c);
+    out[9] = cbrt(b);
+    out[10] = erf(b);
+    out[11] = erfc(c);
+    out[12] = erfinv(a);
+    out[13] = erfcinv(c);
+    out[14] = frac(c) * a;
+    out[15] = degrees(a);
+    out[16] = radians(b);
+    out[17] = smoothstep(b, c, a);
+    out[18] = r#mod(c * 3.0, a + 1.0);
+    // Piecewise constant (zero gradient), away from their jumps.
+    out[19] = (round(a * 3.0) + rint(b) + trunc(c) + step(b)) * c;
+}
+
+fn gradcheck_scalar_math(dev: &wp::Device) {
+    let x = arr(&[0.3f64, -0.45, 1.2], dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(20, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_scalar_math, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    assert!(report.max_rel_error < 1e-6, "{report:?}");
+    // The analytic Jacobian is the closed form: spot-check rows against it.
+    let j = &report.analytic;
+    let (a, b, c) = (0.3f64, -0.45f64, 1.2f64);
+    let close = |got: f64, want: f64, what: &str| {
+        assert!(
+            (got - want).abs() <= 1e-12 * want.abs().max(1.0),
+            "{what}: {got} vs {want}"
+        )
+    };
+    close(j[0][0], 1.0 / (1.0 - a * a).sqrt(), "d asin");
+    close(j[1][1], -1.0 / (1.0 - b * b).sqrt(), "d acos");
+    close(j[5][2], 1.0 - c.tanh().powi(2), "d tanh");
+    close(
+        j[10][1],
+        2.0 / std::f64::consts::PI.sqrt() * (-b * b).exp(),
+        "d erf",
+    );
+    close(j[14][2], a, "d frac");
+    close(j[18][0], -(c * 3.0 / (a + 1.0)).trunc(), "d mod / d b");
+    assert_eq!(j[19], vec![0.0, 0.0, 3.0], "piecewise-constant builtins");
+
+    let x = arr(&[0.3f32, -0.45, 1.2], dev).with_grad().unwrap();
+    let out = zeros::<f32, 1>(20, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_scalar_math32, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f32>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
 }
 
 /// Runs a backward; every test below runs on both backends (a failed backward panics with
@@ -730,6 +835,8 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <k_branches as wp::Kernel>::info(),
         <k_builtins as wp::Kernel>::info(),
         <k_builtins32 as wp::Kernel>::info(),
+        <k_scalar_math as wp::Kernel>::info(),
+        <k_scalar_math32 as wp::Kernel>::info(),
         <k_funcs as wp::Kernel>::info(),
         <k_jumps as wp::Kernel>::info(),
         <k_extremes as wp::Kernel>::info(),

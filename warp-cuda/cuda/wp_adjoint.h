@@ -11,7 +11,10 @@
 //       adj_neg(a, adj_a, adj_ret)
 //       adj_<builtin>(args.., adj_args.., adj_ret) min max clamp abs sign floor ceil sqrt exp
 //                                                 log sin cos tan atan2 pow lerp dot length
-//                                                 normalize cross
+//                                                 normalize cross asin acos atan sinh cosh
+//                                                 tanh exp2 log2 log10 cbrt erf erfc erfinv
+//                                                 erfcinv round rint trunc frac step degrees
+//                                                 radians smoothstep
 //       adj_cast(adj_from, adj_to)                template over the 13 scalar types
 //     for exactly the operand types the Rust functions take (the kernel language's operator
 //     combinations and the builtin table's signatures, with glam's meaning of each operator).
@@ -23,8 +26,9 @@
 // Floating point: every formula is evaluated in the order the Rust function documents
 // (left to right, the same temporaries), so that the GPU agrees with the CPU bit for bit when
 // nothing is contracted into an FMA (NVRTC: `--fmad=false`) and the math library agrees
-// (sqrt, floor, trunc are exact everywhere; exp, log, sin, cos, tan, pow come from CUDA's
-// libdevice on the GPU and may differ in the last bits from glibc, as the forward ones do).
+// (sqrt, floor, trunc are exact everywhere; exp, log, sin, cos, tan, pow, sinh, cosh, tanh,
+// exp2, cbrt, erfinv, erfcinv come from CUDA's libdevice on the GPU and may differ in the
+// last bits from the CPU's, as the forward ones do).
 // The edge rules are the CPU's: min/max send the whole adjoint to the operand the forward
 // returned (ties to the first, a lone NaN loses, two NaNs to the first); clamp goes through
 // max then min in reverse; abs uses sign(0) = +1; length/normalize give nothing at the zero
@@ -523,6 +527,85 @@ WP_ADJ_FVEC_SIGNED(DVec4)
 WP_ADJ_FSCALAR_FNS(f32)
 WP_ADJ_FSCALAR_FNS(f64)
 #undef WP_ADJ_FSCALAR_FNS
+
+// ----- more float scalar functions (warp-core/src/adjoint/builtins.rs, same order) -----
+// LN2, LN10, TWO_SQRTPI (2/sqrt(pi)), SQRTPI_2 (sqrt(pi)/2): Rust's constants, by bit pattern.
+#define WP_ADJ_FSCALAR_MORE(S, LN2, LN10, TWO_SQRTPI, SQRTPI_2)                               \
+  /* asin/acos: d = sqrt(1 - x*x); only when d > 0 (the clamp is flat at |x| >= 1). */       \
+  WP_FN void adj_asin(S x, S& adj_x, S adj_ret) {                                            \
+    const S d = wp::sqrt((S)1 - x * x);                                                      \
+    if (d > (S)0) adj_x += adj_ret / d;                                                      \
+  }                                                                                          \
+  WP_FN void adj_acos(S x, S& adj_x, S adj_ret) {                                            \
+    const S d = wp::sqrt((S)1 - x * x);                                                      \
+    if (d > (S)0) adj_x -= adj_ret / d;                                                      \
+  }                                                                                          \
+  WP_FN void adj_atan(S x, S& adj_x, S adj_ret) { adj_x += adj_ret / (x * x + (S)1); }       \
+  WP_FN void adj_sinh(S x, S& adj_x, S adj_ret) { adj_x += adj_ret * wp::cosh(x); }          \
+  WP_FN void adj_cosh(S x, S& adj_x, S adj_ret) { adj_x += adj_ret * wp::sinh(x); }          \
+  WP_FN void adj_tanh(S x, S& adj_x, S adj_ret) {                                            \
+    const S t = wp::tanh(x);                                                                 \
+    adj_x += adj_ret * ((S)1 - t * t);                                                       \
+  }                                                                                          \
+  WP_FN void adj_exp2(S x, S& adj_x, S adj_ret) { adj_x += adj_ret * (wp::exp2(x) * (LN2)); } \
+  WP_FN void adj_log2(S x, S& adj_x, S adj_ret) { adj_x += adj_ret / (x * (LN2)); }          \
+  WP_FN void adj_log10(S x, S& adj_x, S adj_ret) { adj_x += adj_ret / (x * (LN10)); }        \
+  WP_FN void adj_cbrt(S x, S& adj_x, S adj_ret) {                                            \
+    const S c = wp::cbrt(x);                                                                 \
+    const S three = (S)1 + (S)1 + (S)1;                                                      \
+    adj_x += adj_ret / (three * (c * c));                                                    \
+  }                                                                                          \
+  WP_FN void adj_erf(S x, S& adj_x, S adj_ret) {                                             \
+    adj_x += adj_ret * ((TWO_SQRTPI) * wp::exp(-(x * x)));                                   \
+  }                                                                                          \
+  WP_FN void adj_erfc(S x, S& adj_x, S adj_ret) {                                            \
+    adj_x -= adj_ret * ((TWO_SQRTPI) * wp::exp(-(x * x)));                                   \
+  }                                                                                          \
+  WP_FN void adj_erfinv(S x, S& adj_x, S adj_ret) {                                          \
+    const S r = wp::erfinv(x);                                                               \
+    adj_x += adj_ret * ((SQRTPI_2) * wp::exp(r * r));                                        \
+  }                                                                                          \
+  WP_FN void adj_erfcinv(S x, S& adj_x, S adj_ret) {                                         \
+    const S r = wp::erfcinv(x);                                                              \
+    adj_x -= adj_ret * ((SQRTPI_2) * wp::exp(r * r));                                        \
+  }                                                                                          \
+  WP_FN void adj_round(S, S&, S) {}                                                          \
+  WP_FN void adj_rint(S, S&, S) {}                                                           \
+  WP_FN void adj_trunc(S, S&, S) {}                                                          \
+  WP_FN void adj_step(S, S&, S) {}                                                           \
+  /* frac = x - trunc(x): slope 1. */                                                        \
+  WP_FN void adj_frac(S, S& adj_x, S adj_ret) { adj_x += adj_ret; }                          \
+  WP_FN void adj_degrees(S, S& adj_x, S adj_ret) { adj_x += adj_ret * wp::degrees((S)1); }   \
+  WP_FN void adj_radians(S, S& adj_x, S adj_ret) { adj_x += adj_ret * wp::radians((S)1); }   \
+  /* smoothstep: d = e1 - e0, t = (x - e0) / d; only when 0 < t < 1. */                     \
+  WP_FN void adj_smoothstep(S e0, S e1, S x, S& adj_e0, S& adj_e1, S& adj_x, S adj_ret) {    \
+    const S d = e1 - e0;                                                                     \
+    const S t = (x - e0) / d;                                                                \
+    if (t > (S)0 && t < (S)1) {                                                              \
+      const S six = ((S)1 + (S)1 + (S)1) * ((S)1 + (S)1);                                    \
+      const S g = adj_ret * (six * t * ((S)1 - t) / d);                                      \
+      adj_x += g;                                                                            \
+      adj_e0 += g * (t - (S)1);                                                              \
+      adj_e1 -= g * t;                                                                       \
+    }                                                                                        \
+  }
+WP_ADJ_FSCALAR_MORE(f32, f32_from_bits(0x3f317218u), f32_from_bits(0x40135d8eu),
+                    f32_from_bits(0x3f906ebbu), f32_from_bits(0x3f62dfc5u))
+WP_ADJ_FSCALAR_MORE(f64, f64_from_bits(0x3fe62e42fefa39efull), f64_from_bits(0x40026bb1bbb55516ull),
+                    f64_from_bits(0x3ff20dd750429b6dull), f64_from_bits(0x3fec5bf891b4ef6bull))
+#undef WP_ADJ_FSCALAR_MORE
+
+// step on integers: not differentiable.
+#define WP_ADJ_NOOP_STEP(T) WP_FN void adj_step(T, T&, T) {}
+WP_ADJ_NOOP_STEP(i8)
+WP_ADJ_NOOP_STEP(i16)
+WP_ADJ_NOOP_STEP(i32)
+WP_ADJ_NOOP_STEP(i64)
+WP_ADJ_NOOP_STEP(u8)
+WP_ADJ_NOOP_STEP(u16)
+WP_ADJ_NOOP_STEP(u32)
+WP_ADJ_NOOP_STEP(u64)
+#undef WP_ADJ_NOOP_STEP
 
 // ----- float vector functions: lerp, dot, length, normalize -----
 #define WP_ADJ_FVEC_FNS(V, S)                                                                     \

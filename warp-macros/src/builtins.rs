@@ -84,6 +84,8 @@ pub enum Pos {
     ArrayOfT,
     /// An index into the preceding array: an integer, or a tuple for N > 1.
     Index,
+    /// `bool` (the result of the classification builtins `isfinite`, `isnan`, `isinf`).
+    Bool,
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -91,7 +93,8 @@ pub enum Pos {
 pub enum Grad {
     /// Through `adj_<name>` in both libraries.
     Adjoint,
-    /// Piecewise constant: zero gradient (floor, ceil, sign).
+    /// Piecewise constant or not a float: zero gradient (floor, ceil, sign, round, step,
+    /// isnan, ...).
     Zero,
     /// Atomics: special rules in the adjoint transform.
     Atomic,
@@ -127,6 +130,7 @@ const FLOAT: &[Class] = &[Float];
 const FLOAT_OR_VEC: &[Class] = &[Float, FloatVector];
 const FVEC: &[Class] = &[FloatVector];
 const ANY_VEC: &[Class] = &[FloatVector, IntVector];
+const NUMBER: &[Class] = &[Number];
 
 macro_rules! table {
     ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, method = $m:literal, section = $sec:literal, grad = $g:ident; )*) => {
@@ -163,6 +167,35 @@ table! {
     "tan":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
     "atan2":      FLOAT,        (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
     "pow":        FLOAT,        (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
+    "asin":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "acos":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "atan":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "sinh":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "cosh":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "tanh":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "exp2":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "log2":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "log10":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "cbrt":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
+    "erf":        FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "erfc":       FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "erfinv":     FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "erfcinv":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "round":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
+    "rint":       FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Zero;
+    "trunc":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
+    "frac":       FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "step":       NUMBER,       (T) -> T,                method = false, section = "scalar", grad = Zero;
+    "smoothstep": FLOAT,        (T, T, T) -> T,          method = false, section = "scalar", grad = Adjoint;
+    "degrees":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "radians":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
+    "isfinite":   FLOAT_OR_VEC, (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    "isnan":      FLOAT_OR_VEC, (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    "isinf":      FLOAT_OR_VEC, (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    // `mod(a, b)` (`r#mod` in Rust source, as `mod` is a keyword) is lowered to the `%`
+    // operator: truncated remainder for integers (a fault on zero), C `fmod` for floats, and
+    // `%`'s adjoint. Its `rust`/`cuda` names are never emitted.
+    "mod":        NUMBER,       (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
     "lerp":       FLOAT_OR_VEC, (T, T, ScalarOfT) -> T,  method = true,  section = "scalar", grad = Adjoint;
     "dot":        ANY_VEC,      (T, T) -> ScalarOfT,     method = true,  section = "vector", grad = Adjoint;
     "cross":      &[Vector3],   (T, T) -> T,             method = true,  section = "vector", grad = Adjoint;
@@ -175,8 +208,21 @@ table! {
 }
 
 /// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,
-/// `x.ln()` is `log(x)`).
-pub const METHOD_ALIASES: &[(&str, &str)] = &[("powf", "pow"), ("ln", "log")];
+/// `x.ln()` is `log(x)`). Each alias has Rust's meaning exactly: `round_ties_even` is `rint`,
+/// `fract` is `x - trunc(x)` like `frac`, `to_degrees`/`to_radians` multiply by the same
+/// constants as `degrees`/`radians`. (`signum` is not an alias of `sign`: Rust's gives NaN for
+/// NaN and -1 for -0.0, Warp's `sign` +1 for both.)
+pub const METHOD_ALIASES: &[(&str, &str)] = &[
+    ("powf", "pow"),
+    ("ln", "log"),
+    ("round_ties_even", "rint"),
+    ("fract", "frac"),
+    ("to_degrees", "degrees"),
+    ("to_radians", "radians"),
+    ("is_finite", "isfinite"),
+    ("is_nan", "isnan"),
+    ("is_infinite", "isinf"),
+];
 
 /// Looks a builtin up by name.
 pub fn lookup(name: &str) -> Option<&'static Builtin> {
@@ -292,6 +338,7 @@ impl Builtin {
             Pos::ScalarOfT => scalar.clone(),
             Pos::ArrayOfT => Ty::Array(Box::new(t.clone()), array_ndim),
             Pos::Index => index_ty.clone(),
+            Pos::Bool => crate::types::BOOL,
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
@@ -396,6 +443,32 @@ mod tests {
             "atomic_sub",
             "atomic_min",
             "atomic_max",
+            "asin",
+            "acos",
+            "atan",
+            "sinh",
+            "cosh",
+            "tanh",
+            "exp2",
+            "log2",
+            "log10",
+            "cbrt",
+            "erf",
+            "erfc",
+            "erfinv",
+            "erfcinv",
+            "round",
+            "rint",
+            "trunc",
+            "frac",
+            "step",
+            "smoothstep",
+            "degrees",
+            "radians",
+            "isfinite",
+            "isnan",
+            "isinf",
+            "mod",
         ] {
             assert!(lookup(name).is_some(), "{name} missing");
         }
@@ -518,5 +591,38 @@ mod tests {
             "x.log(base) means something else in Rust"
         );
         assert!(lookup_method("pow").is_none());
+        for (alias, name) in [
+            ("round_ties_even", "rint"),
+            ("fract", "frac"),
+            ("to_degrees", "degrees"),
+            ("to_radians", "radians"),
+            ("is_finite", "isfinite"),
+            ("is_nan", "isnan"),
+            ("is_infinite", "isinf"),
+        ] {
+            assert_eq!(lookup_method(alias).unwrap().name, name);
+        }
+        for m in ["asin", "tanh", "cbrt", "exp2", "log10", "round", "trunc"] {
+            assert_eq!(lookup_method(m).unwrap().name, m);
+        }
+        // Warp's names without a Rust method of that meaning are function syntax only.
+        for m in ["frac", "rint", "erf", "isnan", "degrees", "signum", "mod"] {
+            assert!(lookup_method(m).is_none(), "{m}");
+        }
+    }
+
+    #[test]
+    fn classification_returns_bool() {
+        let isnan = lookup("isnan").unwrap();
+        assert_eq!(isnan.resolve(&[k(F32)]).unwrap().ret, crate::types::BOOL);
+        let v3 = Ty::Vector(Scalar::F64, 3);
+        assert_eq!(isnan.resolve(&[k(v3)]).unwrap().ret, crate::types::BOOL);
+        assert!(isnan.resolve(&[k(I32)]).is_err());
+        // step takes integers too (Warp's); smoothstep only floats.
+        assert_eq!(lookup("step").unwrap().resolve(&[k(I32)]).unwrap().ret, I32);
+        assert!(lookup("smoothstep")
+            .unwrap()
+            .resolve(&[k(I32), k(I32), k(I32)])
+            .is_err());
     }
 }

@@ -15,7 +15,12 @@
 //! * `pow(x, y)`: `d/dx` is skipped when `y == 0`; `d/dy` only when `x > 0` (see
 //!   [`adj_pow`]).
 //! * `atan2`: zero gradient at `(0, 0)`.
-//! * `sqrt` at `0` and `log` at `0`: infinite, as in Warp (`inf * adj_ret`).
+//! * `sqrt` at `0` and `log` at `0`: infinite, as in Warp (`inf * adj_ret`); likewise
+//!   `cbrt`, `log2`, `log10` at 0, `erfinv` at `±1`, `erfcinv` at 0 and 2.
+//! * `asin`/`acos`: nothing at `|x| >= 1`, where the forward's clamp is flat.
+//! * `smoothstep`: nothing outside `0 < t < 1` (clamped), nor when `e0 == e1`.
+//! * `frac`: slope 1; `round`, `rint`, `trunc`, `step`: no-ops; `isfinite`, `isnan`, `isinf`
+//!   return `bool` and have no adjoint.
 //!
 //! Integer operands (scalars and vectors) have no-op adjoints.
 
@@ -254,6 +259,167 @@ pub fn adj_pow<F: AdjFloat>(x: F, y: F, adj_x: &mut F, adj_y: &mut F, adj_ret: F
     }
     if x > F::ZERO {
         *adj_y += adj_ret * (x.w_pow(y) * x.w_log());
+    }
+}
+
+/// Adjoint of `asin(x)` (argument clamped to `[-1, 1]`): with `d = sqrt(1 - x * x)`,
+/// `adj_x += adj_ret / d` when `d > 0`; nothing at `|x| >= 1` (the clamp is flat there, and
+/// the derivative at `±1` is infinite) nor for NaN.
+#[inline(always)]
+pub fn adj_asin<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    let d = (F::ONE - x * x).w_sqrt();
+    if d > F::ZERO {
+        *adj_x += adj_ret / d;
+    }
+}
+
+/// Adjoint of `acos(x)`: with `d = sqrt(1 - x * x)`, `adj_x -= adj_ret / d` when `d > 0`
+/// (as [`adj_asin`]).
+#[inline(always)]
+pub fn adj_acos<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    let d = (F::ONE - x * x).w_sqrt();
+    if d > F::ZERO {
+        *adj_x -= adj_ret / d;
+    }
+}
+
+/// Adjoint of `atan(x)`: `adj_x += adj_ret / (x * x + 1)`.
+#[inline(always)]
+pub fn adj_atan<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret / (x * x + F::ONE);
+}
+
+/// Adjoint of `sinh(x)`: `adj_x += adj_ret * cosh(x)`.
+#[inline(always)]
+pub fn adj_sinh<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret * x.w_cosh();
+}
+
+/// Adjoint of `cosh(x)`: `adj_x += adj_ret * sinh(x)`.
+#[inline(always)]
+pub fn adj_cosh<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret * x.w_sinh();
+}
+
+/// Adjoint of `tanh(x)`: `t = tanh(x); adj_x += adj_ret * (1 - t * t)`.
+#[inline(always)]
+pub fn adj_tanh<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    let t = x.w_tanh();
+    *adj_x += adj_ret * (F::ONE - t * t);
+}
+
+/// Adjoint of `exp2(x)`: `adj_x += adj_ret * (exp2(x) * ln 2)`.
+#[inline(always)]
+pub fn adj_exp2<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret * (x.w_exp2() * F::LN_2);
+}
+
+/// Adjoint of `log2(x)`: `adj_x += adj_ret / (x * ln 2)` (infinite at `x = 0`).
+#[inline(always)]
+pub fn adj_log2<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret / (x * F::LN_2);
+}
+
+/// Adjoint of `log10(x)`: `adj_x += adj_ret / (x * ln 10)` (infinite at `x = 0`).
+#[inline(always)]
+pub fn adj_log10<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret / (x * F::LN_10);
+}
+
+/// Adjoint of `cbrt(x)`: `c = cbrt(x); adj_x += adj_ret / (3 * (c * c))` (infinite at `x = 0`,
+/// as `sqrt`'s).
+#[inline(always)]
+pub fn adj_cbrt<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    let c = x.w_cbrt();
+    let three = F::ONE + F::ONE + F::ONE;
+    *adj_x += adj_ret / (three * (c * c));
+}
+
+/// Adjoint of `erf(x)`: `adj_x += adj_ret * (2/√π * exp(-(x * x)))`.
+#[inline(always)]
+pub fn adj_erf<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret * (F::FRAC_2_SQRT_PI * (-(x * x)).w_exp());
+}
+
+/// Adjoint of `erfc(x)`: `adj_x -= adj_ret * (2/√π * exp(-(x * x)))`.
+#[inline(always)]
+pub fn adj_erfc<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x -= adj_ret * (F::FRAC_2_SQRT_PI * (-(x * x)).w_exp());
+}
+
+/// Adjoint of `erfinv(x)`: `r = erfinv(x); adj_x += adj_ret * (√π/2 * exp(r * r))` (infinite
+/// at `±1`).
+#[inline(always)]
+pub fn adj_erfinv<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    let r = x.w_erfinv();
+    *adj_x += adj_ret * (F::SQRT_PI_2 * (r * r).w_exp());
+}
+
+/// Adjoint of `erfcinv(x)`: `r = erfcinv(x); adj_x -= adj_ret * (√π/2 * exp(r * r))`
+/// (infinite at 0 and 2).
+#[inline(always)]
+pub fn adj_erfcinv<F: AdjFloat>(x: F, adj_x: &mut F, adj_ret: F) {
+    let r = x.w_erfcinv();
+    *adj_x -= adj_ret * (F::SQRT_PI_2 * (r * r).w_exp());
+}
+
+/// Adjoint of `round(x)`: piecewise constant, a no-op.
+#[inline(always)]
+pub fn adj_round<F: AdjFloat>(_x: F, _adj_x: &mut F, _adj_ret: F) {}
+
+/// Adjoint of `rint(x)`: piecewise constant, a no-op.
+#[inline(always)]
+pub fn adj_rint<F: AdjFloat>(_x: F, _adj_x: &mut F, _adj_ret: F) {}
+
+/// Adjoint of `trunc(x)`: piecewise constant, a no-op.
+#[inline(always)]
+pub fn adj_trunc<F: AdjFloat>(_x: F, _adj_x: &mut F, _adj_ret: F) {}
+
+/// Adjoint of `frac(x) = x - trunc(x)`: `adj_x += adj_ret` (slope 1 between integers; Warp's
+/// own `adj_frac` leaves this out).
+#[inline(always)]
+pub fn adj_frac<F: AdjFloat>(_x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret;
+}
+
+/// Adjoint of `step(x)`: piecewise constant, a no-op (integers included).
+#[inline(always)]
+pub fn adj_step<T: crate::builtins::math::Scalar + Adjoint>(_x: T, _adj_x: &mut T, _adj_ret: T) {}
+
+/// Adjoint of `degrees(x)`: `adj_x += adj_ret * degrees(1)` (the same constant as the forward).
+#[inline(always)]
+pub fn adj_degrees<F: AdjFloat>(_x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret * F::ONE.w_degrees();
+}
+
+/// Adjoint of `radians(x)`: `adj_x += adj_ret * radians(1)`.
+#[inline(always)]
+pub fn adj_radians<F: AdjFloat>(_x: F, adj_x: &mut F, adj_ret: F) {
+    *adj_x += adj_ret * F::ONE.w_radians();
+}
+
+/// Adjoint of `smoothstep(e0, e1, x)`: with `d = e1 - e0` and `t = (x - e0) / d`, only when
+/// `0 < t < 1` (elsewhere, at the clamp, for `e0 == e1` and for NaN the result is constant):
+/// `g = adj_ret * (6 * t * (1 - t) / d)`, then `adj_x += g`, `adj_e0 += g * (t - 1)`,
+/// `adj_e1 -= g * t`.
+#[inline(always)]
+pub fn adj_smoothstep<F: AdjFloat>(
+    e0: F,
+    e1: F,
+    x: F,
+    adj_e0: &mut F,
+    adj_e1: &mut F,
+    adj_x: &mut F,
+    adj_ret: F,
+) {
+    let d = e1 - e0;
+    let t = (x - e0) / d;
+    if t > F::ZERO && t < F::ONE {
+        let six = (F::ONE + F::ONE + F::ONE) * (F::ONE + F::ONE);
+        let g = adj_ret * (six * t * (F::ONE - t) / d);
+        *adj_x += g;
+        *adj_e0 += g * (t - F::ONE);
+        *adj_e1 -= g * t;
     }
 }
 

@@ -145,6 +145,14 @@ pub trait AdjFloat:
     fn adj_is_nan(self) -> bool;
     /// `self` rounded toward zero.
     fn adj_trunc(self) -> Self;
+    /// `ln 2`.
+    const LN_2: Self;
+    /// `ln 10`.
+    const LN_10: Self;
+    /// `2/√π` (the slope of `erf` at 0).
+    const FRAC_2_SQRT_PI: Self;
+    /// `√π/2` (the slope of `erfinv` at 0).
+    const SQRT_PI_2: Self;
 }
 
 macro_rules! adj_float {
@@ -158,6 +166,10 @@ macro_rules! adj_float {
             fn adj_trunc(self) -> Self {
                 $t::trunc(self)
             }
+            const LN_2: Self = core::$t::consts::LN_2;
+            const LN_10: Self = core::$t::consts::LN_10;
+            const FRAC_2_SQRT_PI: Self = core::$t::consts::FRAC_2_SQRT_PI;
+            const SQRT_PI_2: Self = 0.886_226_925_452_758_013_649_083_741_671;
         }
     )*};
 }

@@ -810,6 +810,86 @@ fn scalar_builtins() {
 }
 
 #[test]
+fn more_scalar_builtins() {
+    let rng = &mut Rng(0x5EED_0F5C);
+    unary_scalar!(rng;
+        asin, adj_asin, -0.95, 0.95, false;
+        acos, adj_acos, -0.95, 0.95, false;
+        atan, adj_atan, -4.0, 4.0, false;
+        sinh, adj_sinh, -3.0, 3.0, false;
+        cosh, adj_cosh, -3.0, 3.0, false;
+        tanh, adj_tanh, -3.0, 3.0, false;
+        exp2, adj_exp2, -3.0, 3.0, false;
+        log2, adj_log2, 0.1, 4.0, false;
+        log10, adj_log10, 0.1, 4.0, false;
+        cbrt, adj_cbrt, 0.1, 4.0, true;
+        erf, adj_erf, -2.5, 2.5, false;
+        erfc, adj_erfc, -2.5, 2.5, false;
+        erfinv, adj_erfinv, -0.95, 0.95, false;
+        erfcinv, adj_erfcinv, 0.05, 1.95, false;
+        degrees, adj_degrees, -4.0, 4.0, false;
+        radians, adj_radians, -400.0, 400.0, false;
+        frac, adj_frac, 0.1, 0.9, true;
+        round, adj_round, 0.1, 0.4, true;
+        rint, adj_rint, 0.1, 0.4, true;
+        trunc, adj_trunc, 0.1, 0.9, true;
+        step, adj_step, 0.1, 3.0, true;
+    );
+    // smoothstep inside (0 < t < 1), both edge orders.
+    for _ in 0..POINTS {
+        let (e0, e1) = (rng.range(-2.0, -1.0), rng.range(1.0, 2.0));
+        let x = rng.range(-0.9, 0.9);
+        check3(
+            "smoothstep",
+            (e0, e1, x),
+            m::smoothstep::<f64>,
+            adj_smoothstep::<f64>,
+            rng,
+        );
+        check3(
+            "smoothstep reversed",
+            (e1, e0, x),
+            m::smoothstep::<f64>,
+            adj_smoothstep::<f64>,
+            rng,
+        );
+        cmp3(
+            "smoothstep",
+            (e0, e1, x),
+            adj_smoothstep::<f64>,
+            adj_smoothstep::<f32>,
+            rng,
+        );
+    }
+    // Flat places give exactly nothing: asin/acos outside [-1, 1] (clamped) and at ±1,
+    // smoothstep outside its ramp and with equal edges.
+    for x in [-2.0, -1.0, 1.0, 3.0, f64::NAN] {
+        let (mut a, mut b) = (0.25, 0.25);
+        adj_asin(x, &mut a, 1.0);
+        adj_acos(x, &mut b, 1.0);
+        assert_eq!((a, b), (0.25, 0.25), "asin/acos at {x}");
+    }
+    for (e0, e1, x) in [
+        (0.0, 1.0, -0.5),
+        (0.0, 1.0, 1.5),
+        (1.0, 1.0, 1.0),
+        (1.0, 1.0, 0.0),
+    ] {
+        let mut adj = [0.5f64; 3];
+        let [a0, a1, ax] = &mut adj;
+        adj_smoothstep(e0, e1, x, a0, a1, ax, 1.0);
+        assert_eq!(adj, [0.5; 3], "smoothstep({e0}, {e1}, {x})");
+    }
+    // Infinite slopes where Warp's are: erfinv at ±1, cbrt at 0.
+    let mut a = 0.0;
+    adj_erfinv(1.0f64, &mut a, 1.0);
+    assert_eq!(a, f64::INFINITY);
+    let mut a = 0.0;
+    adj_cbrt(0.0f64, &mut a, 1.0);
+    assert_eq!(a, f64::INFINITY);
+}
+
+#[test]
 fn clamp_builtin() {
     let rng = &mut Rng(0x789A_BCDE);
     let away = |a: f64, b: f64| (a - b).abs() > 1e-3;

@@ -8,6 +8,17 @@
 //! * `clamp(x, lo, hi)` is `min(max(x, lo), hi)` and never panics, even when `lo > hi`;
 //! * `normalize` of a zero-length vector is the zero vector, never NaN;
 //! * `lerp(a, b, t)` is `a * (1 - t) + b * t`;
+//! * `asin`/`acos` clamp their argument to `[-1, 1]` first (Warp's rule, so a dot product
+//!   rounded to `1.0000001` still has an angle); NaN stays NaN;
+//! * `round` rounds half away from zero (C `round`, Rust `f32::round`), `rint` half to even
+//!   (C `rint`, Rust `round_ties_even`); `frac(x)` is `x - trunc(x)` (Rust's `fract`);
+//! * `step(x)` is `1` if `x < 0`, else `0` (Warp's definition, the reverse of GLSL's);
+//!   `smoothstep(e0, e1, x)` is `t * t * (3 - 2 * t)` with `t = clamp((x - e0) / (e1 - e0),
+//!   0, 1)`, so with `e0 == e1` it is `0` for `x <= e0` and `1` above;
+//! * `degrees`/`radians` multiply by `180/π` and `π/180` rounded to the type, exactly Rust's
+//!   `to_degrees`/`to_radians` (Warp's f32 versions multiply in double);
+//! * `isfinite`, `isnan`, `isinf` of a vector: all components finite, any NaN, any infinite;
+//! * `erf`, `erfc`, `erfinv`, `erfcinv` are implemented here ([`special`](super::special));
 //! * vector `dot` sums the component products left to right (`x`, then `y`, ...), never in
 //!   the SIMD order `glam` may use, so that results do not depend on the vector's backing.
 //!
@@ -16,6 +27,8 @@
 //! panic on overflow in debug builds.
 
 use glam::{DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4, Vec2, Vec3, Vec4};
+
+use super::special;
 
 // ------------------------------------------------------------------------------------------
 // Traits
@@ -78,6 +91,63 @@ pub trait Float: Scalar + MinMax + Signed {
     fn w_atan2(self, x: Self) -> Self;
     /// `self` raised to the power `y`.
     fn w_pow(self, y: Self) -> Self;
+    /// Arcsine of `self` clamped to `[-1, 1]` (NaN stays NaN).
+    fn w_asin(self) -> Self;
+    /// Arccosine of `self` clamped to `[-1, 1]` (NaN stays NaN).
+    fn w_acos(self) -> Self;
+    /// Arctangent.
+    fn w_atan(self) -> Self;
+    /// Hyperbolic sine.
+    fn w_sinh(self) -> Self;
+    /// Hyperbolic cosine.
+    fn w_cosh(self) -> Self;
+    /// Hyperbolic tangent.
+    fn w_tanh(self) -> Self;
+    /// `2^self`.
+    fn w_exp2(self) -> Self;
+    /// Base-2 logarithm.
+    fn w_log2(self) -> Self;
+    /// Base-10 logarithm.
+    fn w_log10(self) -> Self;
+    /// Cube root.
+    fn w_cbrt(self) -> Self;
+    /// Error function.
+    fn w_erf(self) -> Self;
+    /// Complementary error function.
+    fn w_erfc(self) -> Self;
+    /// Inverse error function.
+    fn w_erfinv(self) -> Self;
+    /// Inverse complementary error function.
+    fn w_erfcinv(self) -> Self;
+    /// Round to nearest, half away from zero.
+    fn w_round(self) -> Self;
+    /// Round to nearest, half to even.
+    fn w_rint(self) -> Self;
+    /// Round toward zero.
+    fn w_trunc(self) -> Self;
+    /// `self * (180/π)` (Rust's `to_degrees`).
+    fn w_degrees(self) -> Self;
+    /// `self * (π/180)` (Rust's `to_radians`).
+    fn w_radians(self) -> Self;
+    /// Not infinite and not NaN.
+    fn w_isfinite(self) -> bool;
+    /// NaN.
+    fn w_isnan(self) -> bool;
+    /// Positive or negative infinity.
+    fn w_isinf(self) -> bool;
+    /// `smoothstep(self, e1, x)` (see [`smoothstep`]).
+    fn w_smoothstep(self, e1: Self, x: Self) -> Self;
+}
+
+/// `isfinite`, `isnan`, `isinf`: `f32`, `f64`, and the float vectors (all components finite,
+/// any component NaN, any component infinite).
+pub trait Classify: Copy {
+    /// Every component is finite.
+    fn w_isfinite(self) -> bool;
+    /// Some component is NaN.
+    fn w_isnan(self) -> bool;
+    /// Some component is infinite.
+    fn w_isinf(self) -> bool;
 }
 
 /// `lerp`: `f32`, `f64`, `Vec2/3/4` (with `f32`), `DVec2/3/4` (with `f64`).
@@ -205,6 +275,162 @@ pub fn pow<F: Float>(x: F, y: F) -> F {
     x.w_pow(y)
 }
 
+/// Arcsine (radians) of `x` clamped to `[-1, 1]`; NaN for NaN.
+#[inline(always)]
+pub fn asin<F: Float>(x: F) -> F {
+    x.w_asin()
+}
+
+/// Arccosine (radians) of `x` clamped to `[-1, 1]`; NaN for NaN.
+#[inline(always)]
+pub fn acos<F: Float>(x: F) -> F {
+    x.w_acos()
+}
+
+/// Arctangent (radians).
+#[inline(always)]
+pub fn atan<F: Float>(x: F) -> F {
+    x.w_atan()
+}
+
+/// Hyperbolic sine.
+#[inline(always)]
+pub fn sinh<F: Float>(x: F) -> F {
+    x.w_sinh()
+}
+
+/// Hyperbolic cosine.
+#[inline(always)]
+pub fn cosh<F: Float>(x: F) -> F {
+    x.w_cosh()
+}
+
+/// Hyperbolic tangent.
+#[inline(always)]
+pub fn tanh<F: Float>(x: F) -> F {
+    x.w_tanh()
+}
+
+/// `2^x`.
+#[inline(always)]
+pub fn exp2<F: Float>(x: F) -> F {
+    x.w_exp2()
+}
+
+/// Base-2 logarithm.
+#[inline(always)]
+pub fn log2<F: Float>(x: F) -> F {
+    x.w_log2()
+}
+
+/// Base-10 logarithm.
+#[inline(always)]
+pub fn log10<F: Float>(x: F) -> F {
+    x.w_log10()
+}
+
+/// Cube root.
+#[inline(always)]
+pub fn cbrt<F: Float>(x: F) -> F {
+    x.w_cbrt()
+}
+
+/// Error function (see [`special`](super::special) for the accuracy).
+#[inline(always)]
+pub fn erf<F: Float>(x: F) -> F {
+    x.w_erf()
+}
+
+/// Complementary error function `1 - erf(x)`, accurate for large `x`.
+#[inline(always)]
+pub fn erfc<F: Float>(x: F) -> F {
+    x.w_erfc()
+}
+
+/// Inverse error function: `±inf` at `±1`, NaN outside `[-1, 1]`.
+#[inline(always)]
+pub fn erfinv<F: Float>(x: F) -> F {
+    x.w_erfinv()
+}
+
+/// Inverse complementary error function: `+inf` at 0, `-inf` at 2, NaN outside `[0, 2]`.
+#[inline(always)]
+pub fn erfcinv<F: Float>(x: F) -> F {
+    x.w_erfcinv()
+}
+
+/// Round to the nearest integer, halfway cases away from zero.
+#[inline(always)]
+pub fn round<F: Float>(x: F) -> F {
+    x.w_round()
+}
+
+/// Round to the nearest integer, halfway cases to even.
+#[inline(always)]
+pub fn rint<F: Float>(x: F) -> F {
+    x.w_rint()
+}
+
+/// Round toward zero.
+#[inline(always)]
+pub fn trunc<F: Float>(x: F) -> F {
+    x.w_trunc()
+}
+
+/// Radians to degrees: `x * (180/π)`, Rust's `to_degrees`.
+#[inline(always)]
+pub fn degrees<F: Float>(x: F) -> F {
+    x.w_degrees()
+}
+
+/// Degrees to radians: `x * (π/180)`, Rust's `to_radians`.
+#[inline(always)]
+pub fn radians<F: Float>(x: F) -> F {
+    x.w_radians()
+}
+
+/// The fractional part `x - trunc(x)` (Rust's `fract`; negative for negative `x`).
+#[inline(always)]
+pub fn frac<F: Float>(x: F) -> F {
+    x.s_sub(x.w_trunc())
+}
+
+/// Warp's `step`: `1` if `x < 0`, else `0` (so `0` for NaN, and always `0` for unsigned).
+#[inline(always)]
+pub fn step<T: Scalar>(x: T) -> T {
+    if x < T::ZERO {
+        T::ONE
+    } else {
+        T::ZERO
+    }
+}
+
+/// Hermite smoothstep: with `t = clamp((x - e0) / (e1 - e0), 0, 1)`, `t * t * (3 - 2 * t)`.
+/// With `e0 == e1` the quotient is infinite or NaN and the clamp gives `0` for `x <= e0`
+/// (NaN loses to 0 in the clamp) and `1` above.
+#[inline(always)]
+pub fn smoothstep<F: Float>(e0: F, e1: F, x: F) -> F {
+    e0.w_smoothstep(e1, x)
+}
+
+/// `x` is finite (vectors: every component).
+#[inline(always)]
+pub fn isfinite<T: Classify>(x: T) -> bool {
+    x.w_isfinite()
+}
+
+/// `x` is NaN (vectors: some component).
+#[inline(always)]
+pub fn isnan<T: Classify>(x: T) -> bool {
+    x.w_isnan()
+}
+
+/// `x` is infinite (vectors: some component).
+#[inline(always)]
+pub fn isinf<T: Classify>(x: T) -> bool {
+    x.w_isinf()
+}
+
 /// Linear interpolation `a * (1 - t) + b * t` (Warp's form).
 #[inline(always)]
 pub fn lerp<T: Lerp>(a: T, b: T, t: T::Scalar) -> T {
@@ -266,6 +492,21 @@ macro_rules! signed_int {
 }
 signed_int!(i8, i16, i32, i64, isize);
 
+/// `x` clamped to `[-1, 1]` by comparisons, so that NaN passes through (`f32::clamp` would
+/// too, but `max(min(..))` would not).
+#[inline(always)]
+fn unit_clamp<F: Float>(x: F) -> F {
+    let one = F::ONE;
+    let minus_one = F::ZERO.s_sub(one);
+    if x < minus_one {
+        minus_one
+    } else if x > one {
+        one
+    } else {
+        x
+    }
+}
+
 macro_rules! float_scalar {
     ($($t:ident),*) => {$(
         impl Scalar for $t {
@@ -295,6 +536,38 @@ macro_rules! float_scalar {
             #[inline(always)] fn w_tan(self) -> Self { $t::tan(self) }
             #[inline(always)] fn w_atan2(self, x: Self) -> Self { $t::atan2(self, x) }
             #[inline(always)] fn w_pow(self, y: Self) -> Self { $t::powf(self, y) }
+            #[inline(always)] fn w_asin(self) -> Self { unit_clamp(self).asin() }
+            #[inline(always)] fn w_acos(self) -> Self { unit_clamp(self).acos() }
+            #[inline(always)] fn w_atan(self) -> Self { $t::atan(self) }
+            #[inline(always)] fn w_sinh(self) -> Self { $t::sinh(self) }
+            #[inline(always)] fn w_cosh(self) -> Self { $t::cosh(self) }
+            #[inline(always)] fn w_tanh(self) -> Self { $t::tanh(self) }
+            #[inline(always)] fn w_exp2(self) -> Self { $t::exp2(self) }
+            #[inline(always)] fn w_log2(self) -> Self { $t::log2(self) }
+            #[inline(always)] fn w_log10(self) -> Self { $t::log10(self) }
+            #[inline(always)] fn w_cbrt(self) -> Self { $t::cbrt(self) }
+            #[inline(always)] fn w_erf(self) -> Self { special::erf(self as f64) as $t }
+            #[inline(always)] fn w_erfc(self) -> Self { special::erfc(self as f64) as $t }
+            #[inline(always)] fn w_erfinv(self) -> Self { special::erfinv(self as f64) as $t }
+            #[inline(always)] fn w_erfcinv(self) -> Self { special::erfcinv(self as f64) as $t }
+            #[inline(always)] fn w_round(self) -> Self { $t::round(self) }
+            #[inline(always)] fn w_rint(self) -> Self { $t::round_ties_even(self) }
+            #[inline(always)] fn w_trunc(self) -> Self { $t::trunc(self) }
+            #[inline(always)] fn w_degrees(self) -> Self { $t::to_degrees(self) }
+            #[inline(always)] fn w_radians(self) -> Self { $t::to_radians(self) }
+            #[inline(always)] fn w_isfinite(self) -> bool { $t::is_finite(self) }
+            #[inline(always)] fn w_isnan(self) -> bool { $t::is_nan(self) }
+            #[inline(always)] fn w_isinf(self) -> bool { $t::is_infinite(self) }
+            #[inline(always)]
+            fn w_smoothstep(self, e1: Self, x: Self) -> Self {
+                let t = clamp((x - self) / (e1 - self), 0.0, 1.0);
+                t * t * (3.0 - 2.0 * t)
+            }
+        }
+        impl Classify for $t {
+            #[inline(always)] fn w_isfinite(self) -> bool { $t::is_finite(self) }
+            #[inline(always)] fn w_isnan(self) -> bool { $t::is_nan(self) }
+            #[inline(always)] fn w_isinf(self) -> bool { $t::is_infinite(self) }
         }
         impl Lerp for $t {
             type Scalar = $t;
@@ -404,6 +677,17 @@ macro_rules! vec_float {
     )*};
 }
 vec_float!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64);
+
+macro_rules! vec_classify {
+    ($($v:ident),*) => {$(
+        impl Classify for $v {
+            #[inline(always)] fn w_isfinite(self) -> bool { self.to_array().iter().all(|x| x.is_finite()) }
+            #[inline(always)] fn w_isnan(self) -> bool { self.to_array().iter().any(|x| x.is_nan()) }
+            #[inline(always)] fn w_isinf(self) -> bool { self.to_array().iter().any(|x| x.is_infinite()) }
+        }
+    )*};
+}
+vec_classify!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4);
 
 macro_rules! vec_cross {
     ($($v:ident),*) => {$(

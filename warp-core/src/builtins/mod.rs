@@ -16,6 +16,7 @@
 
 pub mod atomic;
 pub mod math;
+pub mod special;
 
 pub use atomic::*;
 pub use math::*;

@@ -29,7 +29,10 @@ enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
   X(rem) X(adds) X(subs) X(muls) X(divs) X(rems) X(sadd) X(ssub) X(smul) X(sdiv) X(srem)       \
   X(neg) X(eq) X(ne) X(mulv) X(make) X(splat) X(from_diag) X(konst) X(cast) X(lit) X(intlit)   \
   X(range) X(load) X(store) X(len) X(atomic_add) X(atomic_sub) X(atomic_min) X(atomic_max)     \
-  X(unflatten) X(layout) X(print) X(addassign) X(mulassign)
+  X(unflatten) X(layout) X(print) X(addassign) X(mulassign) X(asin) X(acos) X(atan) X(sinh)   \
+  X(cosh) X(tanh) X(exp2) X(log2) X(log10) X(cbrt) X(erf) X(erfc) X(erfinv) X(erfcinv)        \
+  X(round) X(rint) X(trunc) X(frac) X(degrees) X(radians) X(smoothstep) X(step) X(isfinite)    \
+  X(isnan) X(isinf)
 
 #define ENUM_OP(o) OP_##o,
 enum op_id { OP_LIST(ENUM_OP) OP_COUNT };
@@ -450,6 +453,38 @@ DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
       case OP_atan2: { T a = get<T>(r), b = get<T>(r); put(o, wp::atan2(a, b)); return; }
       case OP_pow: { T a = get<T>(r), b = get<T>(r); put(o, wp::pow(a, b)); return; }
       case OP_frem: { T a = get<T>(r), b = get<T>(r); put(o, wp::frem(a, b)); return; }
+      case OP_asin: { T a = get<T>(r); put(o, wp::asin(a)); return; }
+      case OP_acos: { T a = get<T>(r); put(o, wp::acos(a)); return; }
+      case OP_atan: { T a = get<T>(r); put(o, wp::atan(a)); return; }
+      case OP_sinh: { T a = get<T>(r); put(o, wp::sinh(a)); return; }
+      case OP_cosh: { T a = get<T>(r); put(o, wp::cosh(a)); return; }
+      case OP_tanh: { T a = get<T>(r); put(o, wp::tanh(a)); return; }
+      case OP_exp2: { T a = get<T>(r); put(o, wp::exp2(a)); return; }
+      case OP_log2: { T a = get<T>(r); put(o, wp::log2(a)); return; }
+      case OP_log10: { T a = get<T>(r); put(o, wp::log10(a)); return; }
+      case OP_cbrt: { T a = get<T>(r); put(o, wp::cbrt(a)); return; }
+      case OP_erf: { T a = get<T>(r); put(o, wp::erf(a)); return; }
+      case OP_erfc: { T a = get<T>(r); put(o, wp::erfc(a)); return; }
+      case OP_erfinv: { T a = get<T>(r); put(o, wp::erfinv(a)); return; }
+      case OP_erfcinv: { T a = get<T>(r); put(o, wp::erfcinv(a)); return; }
+      case OP_round: { T a = get<T>(r); put(o, wp::round(a)); return; }
+      case OP_rint: { T a = get<T>(r); put(o, wp::rint(a)); return; }
+      case OP_trunc: { T a = get<T>(r); put(o, wp::trunc(a)); return; }
+      case OP_frac: { T a = get<T>(r); put(o, wp::frac(a)); return; }
+      case OP_degrees: { T a = get<T>(r); put(o, wp::degrees(a)); return; }
+      case OP_radians: { T a = get<T>(r); put(o, wp::radians(a)); return; }
+      case OP_smoothstep: { T a = get<T>(r), b = get<T>(r), d = get<T>(r); put(o, wp::smoothstep(a, b, d)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_int || is_float) {
+    if (op == OP_step) { T a = get<T>(r); put(o, wp::step(a)); return; }
+  }
+  if constexpr (is_float || is_fvec) {
+    switch (op) {
+      case OP_isfinite: { T a = get<T>(r); put(o, (u32)wp::isfinite(a)); return; }
+      case OP_isnan: { T a = get<T>(r); put(o, (u32)wp::isnan(a)); return; }
+      case OP_isinf: { T a = get<T>(r); put(o, (u32)wp::isinf(a)); return; }
       default: break;
     }
   }

@@ -1699,7 +1699,9 @@ impl Lowerer {
             .iter()
             .map(|s| s.ident.to_string())
             .collect();
+        // `r#mod(a, b)`: a raw identifier names the builtin without its `r#`.
         let last = segs.last().cloned().unwrap_or_default();
+        let last = last.strip_prefix("r#").map(str::to_owned).unwrap_or(last);
         let prefix_ok =
             segs.len() == 1 || (segs.len() == 2 && (segs[0] == "wp" || segs[0] == "warp_lang"));
 
@@ -1892,6 +1894,10 @@ impl Lowerer {
                 },
             }
         }
+        if b.name == "mod" {
+            // Warp's `mod` is the `%` operator: the same faults, float semantics and adjoint.
+            return Ok(self.def(Op::Binary(BinOp::Rem, out[0], out[1]), resolved.ret, span));
+        }
         Ok(self.def(
             Op::Builtin {
                 builtin: b,
@@ -1930,10 +1936,14 @@ impl Lowerer {
             .iter()
             .filter(|b| b.method)
             .map(|b| b.name)
+            .chain(builtins::METHOD_ALIASES.iter().map(|(a, _)| *a))
             .collect();
         err(
             m.method.span(),
-            format!("unknown method `{name}` on `{rt}` in a kernel; methods available: {}, powf, ln, len", known.join(", ")),
+            format!(
+                "unknown method `{name}` on `{rt}` in a kernel; methods available: {}, len",
+                known.join(", ")
+            ),
         )
     }
 }
