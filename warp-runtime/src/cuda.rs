@@ -184,6 +184,8 @@ struct Loaded {
 pub struct CompileReport {
     /// The kernel.
     pub kernel: &'static str,
+    /// `module_path!()` where the kernel is defined (two kernels may share a name).
+    pub module: &'static str,
     /// The device it was compiled for.
     pub device: String,
     /// Whether this is the variant for launches whose arrays are all contiguous.
@@ -228,10 +230,14 @@ pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
         } else {
             format!("NVRTC {:.1} ms", r.compile_ms)
         };
+        // The path below the crate: `single::accelerations` beside `double::accelerations`.
+        let name = match r.module.split_once("::") {
+            Some((_, inner)) => format!("{inner}::{}", r.kernel),
+            None => r.kernel.to_string(),
+        };
         let _ = writeln!(
             s,
-            "  {:<24} {:<7} {:<10} {:>6} bytes of CUDA, {source}, loaded in {:.1} ms on {}",
-            r.kernel,
+            "  {name:<26} {:<7} {:<10} {:>6} bytes of CUDA, {source}, loaded in {:.1} ms on {}",
             if r.adjoint { "adjoint" } else { "forward" },
             if r.contiguous {
                 "contiguous"
@@ -298,6 +304,7 @@ fn loaded(
         .unwrap_or_else(|p| p.into_inner())
         .push(CompileReport {
             kernel: info.name,
+            module: info.module,
             device: device.alias().to_string(),
             contiguous,
             adjoint: adjoint.is_some(),
@@ -527,4 +534,48 @@ pub(crate) fn synchronize_all() -> Result<()> {
         check_state(&st)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{format_compile_reports, CompileReport};
+
+    fn report(module: &'static str, adjoint: bool, cache_hit: bool) -> CompileReport {
+        CompileReport {
+            kernel: "accelerations",
+            module,
+            device: "cuda:0".into(),
+            contiguous: true,
+            adjoint,
+            source_bytes: 5730,
+            compile_ms: if cache_hit { 0.0 } else { 145.25 },
+            cache_hit,
+            aot: false,
+            total_ms: 156.3,
+        }
+    }
+
+    #[test]
+    fn summary_names_module_direction_and_source() {
+        let s = format_compile_reports(&[
+            report("nbody::single", false, false),
+            report("nbody::double", true, true),
+            report("top", false, true),
+        ]);
+        let lines: Vec<&str> = s.lines().collect();
+        assert_eq!(lines[0], "compiled at run time: 3 kernel variant(s)");
+        assert!(lines[1].contains("single::accelerations") && lines[1].contains("forward"));
+        assert!(
+            lines[1].contains("5730 bytes of CUDA, NVRTC 145.2 ms"),
+            "{}",
+            lines[1]
+        );
+        assert!(lines[2].contains("double::accelerations") && lines[2].contains("adjoint"));
+        assert!(lines[2].contains("disk cache hit"), "{}", lines[2]);
+        assert!(
+            lines[3].trim_start().starts_with("accelerations "),
+            "{}",
+            lines[3]
+        );
+    }
 }
