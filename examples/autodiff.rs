@@ -170,5 +170,7 @@ fn main() -> wp::Result<()> {
     );
     println!("  max relative error of dL/dx0 vs 2 x_T:   {ex:.2e}");
     println!("  max relative error of dL/dv0 vs 2 c x_T: {ev:.2e}");
+    // On a GPU: the forward kernels and, because backward ran, their adjoints.
+    print!("{}", wp::compile_summary());
     Ok(())
 }
