@@ -254,7 +254,9 @@ fn toks<T: Val>(v: &T) -> Vec<Tok> {
 /// (and, for `erfinv`/`erfcinv`, the same transcribed algorithm), and they match exactly; against a GPU (CUDA's libdevice,
 /// documented to 1 to 4 ulp) they are compared within 8 ulps of `max(|want|, 8)`: the term
 /// added is at most `|want| + |starting adjoint|` in size, and starting adjoints are below 4.
-const LOOSE_ON_GPU: [&str; 16] = [
+const LOOSE_ON_GPU: [&str; 18] = [
+    "adj_quat_from_axis_angle",
+    "adj_quat_slerp",
     "adj_exp",
     "adj_sin",
     "adj_cos",
@@ -636,6 +638,49 @@ fn matrices_and_quats(s: &mut Suite) {
         )*};
     }
     quats!(Quat: Vec3, f32, DQuat: DVec3, f64);
+}
+
+/// The vector, matrix and quaternion builtins of wp_linalg.h.
+fn linalg(s: &mut Suite) {
+    macro_rules! vecs {
+        ($($v:ident: $m:ident, $s:ident),*) => {$(
+            un::<$v, $s>(s, "adj_length_sq", ad::adj_length_sq);
+            bin::<$v, $v, $m>(s, "adj_outer", ad::adj_outer);
+            un::<$v, $m>(s, "adj_diag", ad::adj_diag);
+            bin::<$v, $v, $v>(s, "adj_cw_mul", ad::adj_cw_mul);
+            bin::<$v, $v, $v>(s, "adj_cw_div", ad::adj_cw_div);
+            bin::<$m, $m, $m>(s, "adj_cw_mul", ad::adj_cw_mul);
+            bin::<$m, $m, $m>(s, "adj_cw_div", ad::adj_cw_div);
+            un::<$m, $m>(s, "adj_transpose", ad::adj_transpose);
+            un::<$m, $s>(s, "adj_determinant", ad::adj_determinant);
+            un::<$m, $m>(s, "adj_inverse", ad::adj_inverse);
+            un::<$m, $s>(s, "adj_trace", ad::adj_trace);
+            bin::<$m, $m, $s>(s, "adj_ddot", ad::adj_ddot);
+        )*};
+    }
+    vecs!(Vec2: Mat2, f32, Vec3: Mat3, f32, Vec4: Mat4, f32);
+    vecs!(DVec2: DMat2, f64, DVec3: DMat3, f64, DVec4: DMat4, f64);
+    un::<Vec3, Mat3>(s, "adj_skew", ad::adj_skew);
+    un::<DVec3, DMat3>(s, "adj_skew", ad::adj_skew);
+    un::<IVec3, i32>(s, "adj_length_sq", ad::adj_length_sq);
+    un::<UVec2, u32>(s, "adj_length_sq", ad::adj_length_sq);
+    macro_rules! quats {
+        ($($q:ident: $v:ident, $m:ident, $s:ident),*) => {$(
+            un::<$q, $s>(s, "adj_length_sq", ad::adj_length_sq);
+            bin::<$q, $q, $s>(s, "adj_dot", ad::adj_dot);
+            un::<$q, $s>(s, "adj_length", ad::adj_length);
+            un::<$q, $q>(s, "adj_normalize", ad::adj_normalize);
+            un::<$q, $q>(s, "adj_inverse", ad::adj_inverse);
+            un::<$q, $q>(s, "adj_quat_inverse", ad::adj_quat_inverse::<$q>);
+            bin::<$v, $s, $q>(s, "adj_quat_from_axis_angle", ad::adj_quat_from_axis_angle::<$q>);
+            bin::<$q, $v, $v>(s, "adj_quat_rotate", ad::adj_quat_rotate::<$q>);
+            bin::<$q, $v, $v>(s, "adj_quat_rotate_inv", ad::adj_quat_rotate_inv::<$q>);
+            un::<$q, $m>(s, "adj_quat_to_matrix", ad::adj_quat_to_matrix::<$q>);
+            un::<$m, $q>(s, "adj_quat_from_matrix", ad::adj_quat_from_matrix::<$q>);
+            tri::<$q, $q, $s, $q>(s, "adj_quat_slerp", ad::adj_quat_slerp::<$q>);
+        )*};
+    }
+    quats!(Quat: Vec3, Mat3, f32, DQuat: DVec3, DMat3, f64);
 }
 
 /// Integers: every adjoint is a no-op (the starting adjoints come back unchanged).
@@ -1163,6 +1208,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     float_scalars(&mut s);
     float_vectors(&mut s);
     matrices_and_quats(&mut s);
+    linalg(&mut s);
     integers(&mut s);
     casts(&mut s);
     zeros(&mut s);

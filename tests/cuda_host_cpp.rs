@@ -834,6 +834,182 @@ macro_rules! quat_cases {
     }};
 }
 
+// ----- wp_linalg.h: vector, matrix and quaternion builtins -----
+
+macro_rules! linalg_vec_cases {
+    ($c:expr, $rng:expr, $v:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($v);
+        let mut vs: Vec<$v> = (0..6)
+            .map(|_| $v::from_array(std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        vs.push($v::ZERO);
+        vs.push($v::from_array(std::array::from_fn(|i| {
+            if i == 0 {
+                $s::NAN
+            } else {
+                -0.0
+            }
+        })));
+        for &a in &vs {
+            c.push("length_sq", ty, &[&a], toks(&b::length_sq(a), Exact));
+            c.push("diag", ty, &[&a], toks(&b::diag(a), Exact));
+            for &w in &vs {
+                c.push("outer", ty, &[&a, &w], toks(&b::outer(a, w), Exact));
+                c.push("cw_mul", ty, &[&a, &w], toks(&b::cw_mul(a, w), Exact));
+                c.push("cw_div", ty, &[&a, &w], toks(&b::cw_div(a, w), Exact));
+            }
+        }
+    }};
+}
+
+macro_rules! linalg_mat_cases {
+    ($c:expr, $rng:expr, $m:ident, $v:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($m);
+        let n = $v::ZERO.to_array().len();
+        let mut ms: Vec<$m> = (0..10)
+            .map(|_| $m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        // Singular: a repeated column, and the zero matrix; exact inverses; a NaN.
+        let mut cols = ms[0].to_cols_array();
+        for k in 0..n {
+            cols[n + k] = cols[k];
+        }
+        ms.push($m::from_cols_array(&cols));
+        ms.push($m::ZERO);
+        ms.push($m::IDENTITY);
+        ms.push($m::from_diagonal($v::from_array(std::array::from_fn(
+            |i| [2.0, -4.0, 0.5, 8.0][i],
+        ))));
+        let mut cols = ms[1].to_cols_array();
+        cols[1] = $s::NAN;
+        ms.push($m::from_cols_array(&cols));
+        for &a in &ms {
+            c.push("transpose", ty, &[&a], toks(&b::transpose(a), Exact));
+            c.push("determinant", ty, &[&a], toks(&b::determinant(a), Exact));
+            c.push("inverse", ty, &[&a], toks(&b::inverse(a), Exact));
+            c.push("trace", ty, &[&a], toks(&b::trace(a), Exact));
+            for &w in ms.iter().take(4) {
+                c.push("ddot", ty, &[&a, &w], toks(&b::ddot(a, w), Exact));
+                c.push("cw_mul", ty, &[&a, &w], toks(&b::cw_mul(a, w), Exact));
+                c.push("cw_div", ty, &[&a, &w], toks(&b::cw_div(a, w), Exact));
+            }
+        }
+    }};
+}
+
+macro_rules! linalg_quat_cases {
+    ($c:expr, $rng:expr, $q:ident, $v:ident, $m:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let tr = c.tr;
+        let ty = stringify!($q);
+        let mut qs: Vec<$q> = Vec::new();
+        for k in 0..10 {
+            let q = $q::from_xyzw(rng.f() as $s, rng.f() as $s, rng.f() as $s, rng.f() as $s);
+            qs.push(if k < 6 { q.normalize() } else { q });
+        }
+        qs.push($q::IDENTITY);
+        qs.push($q::from_xyzw(0.0, 0.0, 0.0, 0.0));
+        qs.push($q::from_xyzw(0.0, -0.0, $s::NAN, 1.0));
+        let vs: Vec<$v> = (0..4)
+            .map(|_| $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s))
+            .chain([$v::ZERO, $v::X])
+            .collect();
+        let vty = stringify!($v);
+        let mty = stringify!($m);
+        for &a in &qs {
+            c.push("length_sq", ty, &[&a], toks(&b::length_sq(a), Exact));
+            c.push("length", ty, &[&a], toks(&b::length(a), Exact));
+            c.push("normalize", ty, &[&a], toks(&b::normalize(a), Exact));
+            c.push("inverse", ty, &[&a], toks(&b::inverse(a), Exact));
+            c.push("qinv", ty, &[&a], toks(&b::quat_inverse(a), Exact));
+            c.push("q2m", ty, &[&a], toks(&b::quat_to_matrix(a), Exact));
+            let r = b::quat_to_matrix(a);
+            c.push(
+                "m2q",
+                mty,
+                &[&r],
+                toks(&b::quat_from_matrix::<$q>(r), Exact),
+            );
+            for &w in &qs {
+                c.push("dot", ty, &[&a, &w], toks(&b::dot(a, w), Exact));
+                for t in [0.0, 0.25, 1.0] {
+                    let t: $s = t;
+                    c.push(
+                        "slerp",
+                        ty,
+                        &[&a, &w, &t],
+                        toks(&b::quat_slerp(a, w, t), tr),
+                    );
+                }
+            }
+            for &v in &vs {
+                c.push("qrot", ty, &[&a, &v], toks(&b::quat_rotate(a, v), Exact));
+                c.push(
+                    "qrotinv",
+                    ty,
+                    &[&a, &v],
+                    toks(&b::quat_rotate_inv(a, v), Exact),
+                );
+            }
+        }
+        for &v in &vs {
+            c.push("skew", vty, &[&v], toks(&b::skew(v), Exact));
+            for angle in [0.0, 1.25, -3.0, $s::NAN] {
+                let angle: $s = angle;
+                c.push(
+                    "qaxis",
+                    vty,
+                    &[&v, &angle],
+                    toks(&b::quat_from_axis_angle::<$q>(v, angle), tr),
+                );
+            }
+        }
+        // 180-degree rotations (each branch of from_mat3), and non-rotations.
+        for d in [
+            [1.0, -1.0, -1.0],
+            [-1.0, 1.0, -1.0],
+            [-1.0, -1.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 0.0, 0.0],
+        ] {
+            let m = $m::from_diagonal($v::from_array(d));
+            c.push(
+                "m2q",
+                mty,
+                &[&m],
+                toks(&b::quat_from_matrix::<$q>(m), Exact),
+            );
+        }
+    }};
+}
+
+fn linalg_cases(c: &mut Cases, rng: &mut Rng) {
+    linalg_vec_cases!(c, rng, Vec2, f32);
+    linalg_vec_cases!(c, rng, Vec3, f32);
+    linalg_vec_cases!(c, rng, Vec4, f32);
+    linalg_vec_cases!(c, rng, DVec2, f64);
+    linalg_vec_cases!(c, rng, DVec3, f64);
+    linalg_vec_cases!(c, rng, DVec4, f64);
+    for v in [IVec3::new(1, -2, 40000), IVec3::new(i32::MAX, 1, 0)] {
+        c.push("length_sq", "IVec3", &[&v], toks(&b::length_sq(v), Exact));
+    }
+    let v = UVec4::new(1, 2, 70000, 4);
+    c.push("length_sq", "UVec4", &[&v], toks(&b::length_sq(v), Exact));
+    linalg_mat_cases!(c, rng, Mat2, Vec2, f32);
+    linalg_mat_cases!(c, rng, Mat3, Vec3, f32);
+    linalg_mat_cases!(c, rng, Mat4, Vec4, f32);
+    linalg_mat_cases!(c, rng, DMat2, DVec2, f64);
+    linalg_mat_cases!(c, rng, DMat3, DVec3, f64);
+    linalg_mat_cases!(c, rng, DMat4, DVec4, f64);
+    linalg_quat_cases!(c, rng, Quat, Vec3, Mat3, f32);
+    linalg_quat_cases!(c, rng, DQuat, DVec3, DMat3, f64);
+}
+
 // ----- casts: Rust `as` between every pair of scalar types -----
 
 macro_rules! cast_from {
@@ -1622,6 +1798,7 @@ fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
     mat_cases!(&mut c, &mut rng, DMat4, DVec4, f64, 4);
     quat_cases!(&mut c, &mut rng, Quat, Vec3, f32);
     quat_cases!(&mut c, &mut rng, DQuat, DVec3, f64);
+    linalg_cases(&mut c, &mut rng);
 
     let skipped = range_cases(&mut c);
     array_cases(&mut c);

@@ -22,6 +22,7 @@ backend_tests!(
     scalar_math_f64,
     scalar_math_methods,
     classification_builtins,
+    linalg_builtins,
 );
 
 /// Warp's `sign`: -1 below zero, else +1 (so +1 for 0, -0 and NaN).
@@ -1117,4 +1118,318 @@ fn classification_builtins(dev: &wp::Device) {
         ];
         assert_eq!(row, want, "classification row {i}");
     }
+}
+
+// ------------------------------------------------------------------------------------------
+// Vector, matrix and quaternion builtins (wp_linalg.h / warp-core builtins::linalg)
+// ------------------------------------------------------------------------------------------
+
+#[wp::kernel]
+fn k_linalg64(
+    m: Array<DMat3>,
+    v: Array<DVec3>,
+    q: Array<DQuat>,
+    mo: Array<DMat3, 2>,
+    vo: Array<DVec3, 2>,
+    qo: Array<DQuat, 2>,
+    so: Array<f64, 2>,
+) {
+    let i = tid();
+    let a = m[i];
+    let x = v[i];
+    let r = q[i];
+    mo[(i, 0)] = transpose(a);
+    mo[(i, 1)] = a.transpose();
+    mo[(i, 2)] = inverse(a);
+    mo[(i, 3)] = a.inverse();
+    mo[(i, 4)] = outer(x, x * 2.0);
+    mo[(i, 5)] = diag(x);
+    mo[(i, 6)] = skew(x);
+    mo[(i, 7)] = cw_mul(a, a);
+    mo[(i, 8)] = quat_to_matrix(r);
+    mo[(i, 9)] = DMat3::from_quat(r);
+    so[(i, 0)] = determinant(a);
+    so[(i, 1)] = a.determinant();
+    so[(i, 2)] = trace(a);
+    so[(i, 3)] = ddot(a, a);
+    so[(i, 4)] = length_sq(x);
+    so[(i, 5)] = x.length_squared();
+    so[(i, 6)] = dot(r, r);
+    so[(i, 7)] = r.length();
+    vo[(i, 0)] = quat_rotate(r, x);
+    vo[(i, 1)] = quat_rotate_inv(r, x);
+    vo[(i, 2)] = cw_div(x, DVec3::new(2.0, 4.0, 8.0));
+    vo[(i, 3)] = skew(x) * DVec3::new(0.5, -1.0, 2.0);
+    qo[(i, 0)] = normalize(r);
+    qo[(i, 1)] = r.inverse();
+    qo[(i, 2)] = quat_inverse(r);
+    qo[(i, 3)] = quat_from_axis_angle(normalize(x), 0.75);
+    qo[(i, 4)] = DQuat::from_axis_angle(normalize(x), 0.75);
+    qo[(i, 5)] = quat_from_matrix(quat_to_matrix(normalize(r)));
+    qo[(i, 6)] = quat_slerp(normalize(r), qo[(i, 3)], 0.25);
+    qo[(i, 7)] = quat_slerp(normalize(r), normalize(r), 0.5);
+}
+
+#[wp::kernel]
+fn k_linalg32(m: Array<Mat4>, v: Array<Vec4>, mo: Array<Mat4, 2>, so: Array<f32, 2>) {
+    let i = tid();
+    let a = m[i];
+    let x = v[i];
+    mo[(i, 0)] = a.inverse();
+    mo[(i, 1)] = transpose(a);
+    mo[(i, 2)] = outer(x, x);
+    so[(i, 0)] = a.determinant();
+    so[(i, 1)] = trace(a);
+    so[(i, 2)] = length_sq(x);
+}
+
+/// Max over components of |got - want| / max(1, max |want|).
+fn normwise(got: &[f64], want: &[f64]) -> f64 {
+    let scale = want.iter().fold(1.0f64, |m, w| m.max(w.abs()));
+    got.iter()
+        .zip(want)
+        .map(|(g, w)| if g == w { 0.0 } else { (g - w).abs() / scale })
+        .fold(0.0, f64::max)
+}
+
+/// The f64 builtins against independent f64 formulas (Warp's definitions written out here);
+/// f32 `Mat4` against the same formulas in f64. Tolerances: f64 1e-13 normwise (a few
+/// roundings, at most ~30 operations on numbers of size ~1 with condition numbers below 20,
+/// so under 100 ulp); f32 `Mat4` inverse and determinant 2e-5 normwise (cond(A) <= 20 times
+/// f32's 6e-8 times the ~16 roundings of the cofactor expansion), products 1e-6. Quaternion
+/// builtins that call sin/cos/atan2 get 1e-12 (f64) to allow CUDA's libdevice ulps.
+fn linalg_builtins(dev: &wp::Device) {
+    let ms = [
+        DMat3::from_cols(
+            DVec3::new(2.0, 0.5, -1.0),
+            DVec3::new(0.3, 3.0, 0.2),
+            DVec3::new(-0.7, 0.1, 1.5),
+        ),
+        DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::X), // singular
+        DMat3::IDENTITY,
+        DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0)), // 180 degrees about x
+    ];
+    let vs = [
+        DVec3::new(0.3, -1.2, 2.0),
+        DVec3::new(1.0, 0.0, 0.0),
+        DVec3::new(-0.5, 0.25, 0.125),
+        DVec3::new(0.0, 2.0, -1.0),
+    ];
+    let qs = [
+        DQuat::from_xyzw(0.1, 0.2, -0.3, 0.9),
+        DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0), // normalize gives the identity
+        DQuat::from_xyzw(1.0, 2.0, 3.0, 4.0),
+        DQuat::from_xyzw(0.0, 0.0, 1.0, 0.0), // 180 degrees about z
+    ];
+    let n = ms.len();
+    let (mo, vo) = (
+        zeros::<DMat3, 2>((n, 10), dev),
+        zeros::<DVec3, 2>((n, 4), dev),
+    );
+    let (qo, so) = (zeros::<DQuat, 2>((n, 8), dev), zeros::<f64, 2>((n, 8), dev));
+    wp::launch(
+        k_linalg64,
+        n,
+        (
+            &arr(&ms, dev),
+            &arr(&vs, dev),
+            &arr(&qs, dev),
+            &mo,
+            &vo,
+            &qo,
+            &so,
+        ),
+        dev,
+    )
+    .unwrap();
+    let (mo, vo, qo, so) = (host(&mo), host(&vo), host(&qo), host(&so));
+    let tol = 1e-13;
+    let tol_tr = 1e-12;
+    let cols = |m: DMat3| m.to_cols_array();
+    for i in 0..n {
+        let (a, x, r) = (ms[i], vs[i], qs[i]);
+        let e = |k: usize, c: usize| a.col(k)[c];
+        let det = e(0, 0) * (e(1, 1) * e(2, 2) - e(2, 1) * e(1, 2))
+            - e(1, 0) * (e(0, 1) * e(2, 2) - e(2, 1) * e(0, 2))
+            + e(2, 0) * (e(0, 1) * e(1, 2) - e(1, 1) * e(0, 2));
+        // Warp's inverse: the adjugate over det, zero when det == 0.
+        let inv = if det == 0.0 {
+            DMat3::ZERO
+        } else {
+            DMat3::from_cols_array(&std::array::from_fn(|k| {
+                let (c, rr) = (k / 3, k % 3);
+                let (c1, c2) = ((rr + 1) % 3, (rr + 2) % 3);
+                let (r1, r2) = ((c + 1) % 3, (c + 2) % 3);
+                (e(c1, r1) * e(c2, r2) - e(c2, r1) * e(c1, r2)) / det
+            }))
+        };
+        let tr: DMat3 = DMat3::from_cols_array(&std::array::from_fn(|k| e(k % 3, k / 3)));
+        let outer = DMat3::from_cols(x * (2.0 * x.x), x * (2.0 * x.y), x * (2.0 * x.z));
+        let skew = DMat3::from_cols(
+            DVec3::new(0.0, x.z, -x.y),
+            DVec3::new(-x.z, 0.0, x.x),
+            DVec3::new(x.y, -x.x, 0.0),
+        );
+        let sq = DMat3::from_cols_array(&cols(a).map(|c| c * c));
+        // Rotation matrix of r by rotating the axes (Warp's quat_to_matrix), exact for unit r.
+        let rot = |q: DQuat, v: DVec3| {
+            let b = DVec3::new(q.x, q.y, q.z);
+            v * (q.w * q.w - b.dot(b)) + b * (2.0 * v.dot(b)) + b.cross(v) * (2.0 * q.w)
+        };
+        let want_m = [tr, tr, inv, inv, outer, DMat3::from_diagonal(x), skew, sq];
+        for (k, w) in want_m.iter().enumerate() {
+            let d = normwise(&cols(mo[i * 10 + k]), &cols(*w));
+            assert!(
+                d <= tol,
+                "matrix builtin #{k} of row {i}: {:?} vs {w:?} ({d:e})",
+                mo[i * 10 + k]
+            );
+        }
+        let len2 = r.x * r.x + r.y * r.y + r.z * r.z + r.w * r.w;
+        if (len2 - 1.0).abs() < 1e-12 || i == 3 {
+            let m = DMat3::from_cols(rot(r, DVec3::X), rot(r, DVec3::Y), rot(r, DVec3::Z));
+            for k in [8, 9] {
+                assert!(
+                    normwise(&cols(mo[i * 10 + k]), &cols(m)) <= tol,
+                    "quat_to_matrix {i}"
+                );
+            }
+        }
+        let want_s = [
+            det,
+            det,
+            e(0, 0) + e(1, 1) + e(2, 2),
+            cols(a).iter().map(|c| c * c).sum(),
+            x.dot(x),
+            x.dot(x),
+            len2,
+            len2.sqrt(),
+        ];
+        for (k, w) in want_s.iter().enumerate() {
+            let d = normwise(&[so[i * 8 + k]], &[*w]);
+            assert!(
+                d <= tol,
+                "scalar builtin #{k} of row {i}: {} vs {w} ({d:e})",
+                so[i * 8 + k]
+            );
+        }
+        let rinv = DQuat::from_xyzw(-r.x, -r.y, -r.z, r.w);
+        let want_v = [
+            rot(r, x),
+            rot(rinv, x),
+            DVec3::new(x.x / 2.0, x.y / 4.0, x.z / 8.0),
+            x.cross(DVec3::new(0.5, -1.0, 2.0)),
+        ];
+        for (k, w) in want_v.iter().enumerate() {
+            let d = normwise(&vo[i * 4 + k].to_array(), &w.to_array());
+            assert!(
+                d <= tol,
+                "vector builtin #{k} of row {i}: {} vs {w} ({d:e})",
+                vo[i * 4 + k]
+            );
+        }
+        let unit = if len2 > 0.0 {
+            r / len2.sqrt()
+        } else {
+            DQuat::IDENTITY
+        };
+        let ax = x / x.length();
+        let (s, c) = (0.375f64.sin(), 0.375f64.cos());
+        let aa = DQuat::from_xyzw(ax.x * s, ax.y * s, ax.z * s, c);
+        let qa = |k: usize| qo[i * 8 + k].to_array();
+        let close = |k: usize, w: DQuat, t: f64, what: &str| {
+            let d = normwise(&qa(k), &w.to_array());
+            assert!(
+                d <= t,
+                "{what} of row {i}: {:?} vs {w:?} ({d:e})",
+                qo[i * 8 + k]
+            );
+        };
+        close(0, unit, tol, "normalize");
+        close(1, rinv, 0.0, "inverse");
+        close(2, rinv, 0.0, "quat_inverse");
+        close(3, aa, tol_tr, "quat_from_axis_angle");
+        close(4, aa, tol_tr, "Quat::from_axis_angle");
+        // from_matrix(to_matrix(q)) is q or -q (the same rotation).
+        let back = qo[i * 8 + 5];
+        let sgn = if back.dot(unit) < 0.0 { -1.0 } else { 1.0 };
+        close(5, unit * sgn, tol_tr, "quat_from_matrix(quat_to_matrix(q))");
+        // slerp at t = 1/4 from unit to aa, along the short path: rotation angle a quarter.
+        let rel = DQuat::from_xyzw(-unit.x, -unit.y, -unit.z, unit.w) * aa;
+        let (half, vlen) = (rel.w.abs(), DVec3::new(rel.x, rel.y, rel.z).length());
+        let angle = 2.0 * vlen.atan2(half);
+        let axis = DVec3::new(rel.x, rel.y, rel.z) / vlen * rel.w.signum();
+        let step = DQuat::from_xyzw(
+            axis.x * (0.125 * angle).sin(),
+            axis.y * (0.125 * angle).sin(),
+            axis.z * (0.125 * angle).sin(),
+            (0.125 * angle).cos(),
+        );
+        close(6, unit * step, tol_tr, "quat_slerp");
+        close(7, unit, 0.0, "quat_slerp of identical quaternions");
+    }
+    // Edge cases, exactly: the singular inverse is zero, the zero quaternion normalizes to the
+    // identity, the 180-degree rotation about x comes back as (1, 0, 0, 0).
+    assert_eq!(mo[10 + 2], DMat3::ZERO, "inverse of a singular matrix");
+    assert_eq!(qo[8], DQuat::IDENTITY, "normalize of the zero quaternion");
+    let m180 = host_from_matrix_180(dev);
+    assert_eq!(m180, DQuat::from_xyzw(1.0, 0.0, 0.0, 0.0));
+
+    // f32 Mat4.
+    let m4 = [
+        Mat4::from_cols(
+            vec4(2.0, 0.5, -1.0, 0.1),
+            vec4(0.3, 3.0, 0.2, -0.4),
+            vec4(-0.7, 0.1, 1.5, 0.3),
+            vec4(0.2, -0.3, 0.4, 2.5),
+        ),
+        Mat4::from_cols(Vec4::X, Vec4::Y, Vec4::Z, Vec4::X), // singular
+    ];
+    let v4 = [vec4(1.0, -2.0, 0.5, 3.0), vec4(0.25, 0.0, -1.0, 2.0)];
+    let (mo, so) = (zeros::<Mat4, 2>((2, 3), dev), zeros::<f32, 2>((2, 3), dev));
+    wp::launch(
+        k_linalg32,
+        2,
+        (&arr(&m4, dev), &arr(&v4, dev), &mo, &so),
+        dev,
+    )
+    .unwrap();
+    let (mo, so) = (host(&mo), host(&so));
+    for i in 0..2 {
+        let a = m4[i].as_dmat4();
+        let det = a.determinant();
+        let inv = if det == 0.0 { DMat4::ZERO } else { a.inverse() };
+        let f = |m: Mat4| m.as_dmat4().to_cols_array();
+        let d = normwise(&f(mo[i * 3]), &inv.to_cols_array());
+        assert!(d <= 2e-5, "Mat4 inverse {i}: {d:e}");
+        assert!(
+            normwise(&[so[i * 3] as f64], &[det]) <= 2e-5,
+            "Mat4 determinant {i}"
+        );
+        assert_eq!(mo[i * 3 + 1], m4[i].transpose());
+        let x = v4[i].as_dvec4();
+        let o = DMat4::from_cols(x * x.x, x * x.y, x * x.z, x * x.w);
+        assert!(normwise(&f(mo[i * 3 + 2]), &o.to_cols_array()) <= 1e-6);
+        assert!(
+            normwise(
+                &[so[i * 3 + 1] as f64],
+                &[a.x_axis.x + a.y_axis.y + a.z_axis.z + a.w_axis.w]
+            ) <= 1e-6
+        );
+        assert!(normwise(&[so[i * 3 + 2] as f64], &[x.dot(x)]) <= 1e-6);
+    }
+    assert_eq!(mo[3], Mat4::ZERO, "inverse of a singular Mat4");
+}
+
+#[wp::kernel]
+fn k_from_matrix(m: Array<DMat3>, q: Array<DQuat>) {
+    let i = tid();
+    q[i] = quat_from_matrix(m[i]);
+}
+
+fn host_from_matrix_180(dev: &wp::Device) -> DQuat {
+    let m = arr(&[DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0))], dev);
+    let q = zeros::<DQuat, 1>(1, dev);
+    wp::launch(k_from_matrix, 1, (&m, &q), dev).unwrap();
+    host(&q)[0]
 }

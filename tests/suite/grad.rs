@@ -27,6 +27,7 @@ backend_tests!(
     atomic_extremes_gradient,
     custom_gradients,
     structs_and_nested_loops,
+    gradcheck_linalg,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -842,6 +843,7 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <k_extremes as wp::Kernel>::info(),
         <k_custom as wp::Kernel>::info(),
         <k_struct_loops as wp::Kernel>::info(),
+        <k_linalg_grad as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -876,4 +878,57 @@ fn cuda_adjoint_units_compile_on_the_host() {
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The vector, matrix and quaternion builtins, one per output, by `wp::gradcheck` against
+/// central differences (f64; at generic points: an invertible matrix, non-unit and unit
+/// quaternions, a rotation matrix inside one branch of `quat_from_matrix`, a slerp between
+/// distinct rotations).
+#[wp::kernel]
+fn k_linalg_grad(x: Array<f64>, out: Array<f64>) {
+    let a = DMat3::from_cols(
+        DVec3::new(x[0], x[1], x[2]),
+        DVec3::new(x[3], x[4], x[5]),
+        DVec3::new(x[6], x[7], x[8]),
+    );
+    let v = DVec3::new(x[9], x[10], x[11]);
+    let w = DVec3::new(x[1], x[5], x[9]);
+    let q = DQuat::from_xyzw(x[0], x[4], x[8], x[11]);
+    let p = DQuat::from_xyzw(x[2], x[6], x[10], x[3]);
+    let probe = DVec3::new(0.3, -0.7, 1.1);
+    out[0] = length_sq(v);
+    out[1] = dot(outer(v, w) * probe, probe);
+    out[2] = dot(diag(v) * probe, w);
+    out[3] = dot(cw_mul(v, w) + cw_div(v, w), probe);
+    out[4] = dot(transpose(a) * probe, v);
+    out[5] = determinant(a);
+    out[6] = dot(inverse(a) * probe, w);
+    out[7] = trace(a) + ddot(a, cw_mul(a, a));
+    out[8] = dot(skew(v) * w, probe);
+    out[9] = dot(q, p) + length(q) + length_sq(p);
+    out[10] = dot(normalize(q), p);
+    out[11] = dot(inverse(q), p) + dot(quat_inverse(p), q);
+    out[12] = dot(quat_rotate(q, v), probe) + dot(quat_rotate_inv(p, w), probe);
+    out[13] = dot(quat_from_axis_angle(v, x[3]), p);
+    out[14] = ddot(quat_to_matrix(q), a);
+    out[15] = dot(quat_from_matrix(quat_to_matrix(normalize(q))), p);
+    out[16] = dot(quat_slerp(normalize(q), normalize(p), x[5] * 0.5), p);
+    out[17] = cw_div(a, transpose(a)).x_axis.y;
+}
+
+fn gradcheck_linalg(dev: &wp::Device) {
+    let xs = [
+        1.2f64, 0.3, -0.4, 0.5, 1.5, 0.2, -0.3, 0.6, 1.1, 0.7, -0.2, 0.9,
+    ];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(18, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_linalg_grad, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    assert!(report.max_rel_error < 1e-6, "{report:?}");
 }

@@ -31,6 +31,14 @@ pub enum Class {
     Vector3,
     /// Types CPU and GPU atomics exist for: i32, u32, i64, u64, f32, f64 and float vectors.
     Atomic,
+    /// Float square matrices (Mat2-4, DMat2-4).
+    Matrix,
+    /// Mat3, DMat3 (quat_from_matrix).
+    Matrix3,
+    /// Vec3, DVec3 (skew, quat_from_axis_angle).
+    FloatVector3,
+    /// Quat, DQuat.
+    Quaternion,
 }
 
 impl Class {
@@ -55,6 +63,10 @@ impl Class {
                 )
             }
             (Class::Atomic, Ty::Vector(s, _)) => s.is_float(),
+            (Class::Matrix, Ty::Matrix(..)) => true,
+            (Class::Matrix3, Ty::Matrix(_, 3)) => true,
+            (Class::FloatVector3, Ty::Vector(s, 3)) => s.is_float(),
+            (Class::Quaternion, Ty::Quat(_)) => true,
             _ => false,
         }
     }
@@ -69,6 +81,10 @@ impl Class {
             Class::SignedVector => "a signed vector (Vec2-4, DVec2-4, IVec2-4)",
             Class::Vector3 => "a 3-vector (Vec3, DVec3, IVec3)",
             Class::Atomic => "i32, u32, i64, u64, f32, f64 or a float vector",
+            Class::Matrix => "a matrix (Mat2-4, DMat2-4)",
+            Class::Matrix3 => "a 3x3 matrix (Mat3, DMat3)",
+            Class::FloatVector3 => "a float 3-vector (Vec3, DVec3)",
+            Class::Quaternion => "a quaternion (Quat, DQuat)",
         }
     }
 }
@@ -86,6 +102,13 @@ pub enum Pos {
     Index,
     /// `bool` (the result of the classification builtins `isfinite`, `isnan`, `isinf`).
     Bool,
+    /// The square matrix of `T`'s scalar whose size is `T`'s: `Mat3` for `Vec3` (`outer`,
+    /// `diag`, `skew`), `Mat3` for `Quat` (`quat_to_matrix`).
+    MatOfT,
+    /// The vector `T` acts on: a matrix's column type; `Vec3` for `Quat` (`quat_rotate`).
+    VecOfT,
+    /// The quaternion of `T`'s scalar (`quat_from_axis_angle`, `quat_from_matrix`).
+    QuatOfT,
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -129,8 +152,14 @@ const SIGNED: &[Class] = &[SignedNumber, SignedVector];
 const FLOAT: &[Class] = &[Float];
 const FLOAT_OR_VEC: &[Class] = &[Float, FloatVector];
 const FVEC: &[Class] = &[FloatVector];
-const ANY_VEC: &[Class] = &[FloatVector, IntVector];
 const NUMBER: &[Class] = &[Number];
+const VEC_OR_QUAT: &[Class] = &[FloatVector, IntVector, Quaternion];
+const FVEC_OR_QUAT: &[Class] = &[FloatVector, Quaternion];
+const FVEC_OR_MAT: &[Class] = &[FloatVector, Matrix];
+const MAT: &[Class] = &[Matrix];
+const MAT_OR_QUAT: &[Class] = &[Matrix, Quaternion];
+const QUAT: &[Class] = &[Quaternion];
+const FVEC3: &[Class] = &[FloatVector3];
 
 macro_rules! table {
     ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, method = $m:literal, section = $sec:literal, grad = $g:ident; )*) => {
@@ -197,10 +226,30 @@ table! {
     // `%`'s adjoint. Its `rust`/`cuda` names are never emitted.
     "mod":        NUMBER,       (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
     "lerp":       FLOAT_OR_VEC, (T, T, ScalarOfT) -> T,  method = true,  section = "scalar", grad = Adjoint;
-    "dot":        ANY_VEC,      (T, T) -> ScalarOfT,     method = true,  section = "vector", grad = Adjoint;
+    // dot, length and normalize take quaternions too, whose versions are in "linalg" (which
+    // includes "vector").
+    "dot":        VEC_OR_QUAT,  (T, T) -> ScalarOfT,     method = true,  section = "linalg", grad = Adjoint;
     "cross":      &[Vector3],   (T, T) -> T,             method = true,  section = "vector", grad = Adjoint;
-    "length":     FVEC,         (T) -> ScalarOfT,        method = true,  section = "vector", grad = Adjoint;
-    "normalize":  FVEC,         (T) -> T,                method = true,  section = "vector", grad = Adjoint;
+    "length":     FVEC_OR_QUAT, (T) -> ScalarOfT,        method = true,  section = "linalg", grad = Adjoint;
+    "normalize":  FVEC_OR_QUAT, (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
+    "length_sq":  VEC_OR_QUAT,  (T) -> ScalarOfT,        method = false, section = "linalg", grad = Adjoint;
+    "outer":      FVEC,         (T, T) -> MatOfT,        method = false, section = "linalg", grad = Adjoint;
+    "diag":       FVEC,         (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
+    "cw_mul":     FVEC_OR_MAT,  (T, T) -> T,             method = false, section = "linalg", grad = Adjoint;
+    "cw_div":     FVEC_OR_MAT,  (T, T) -> T,             method = false, section = "linalg", grad = Adjoint;
+    "transpose":  MAT,          (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
+    "determinant": MAT,         (T) -> ScalarOfT,        method = true,  section = "linalg", grad = Adjoint;
+    "inverse":    MAT_OR_QUAT,  (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
+    "trace":      MAT,          (T) -> ScalarOfT,        method = false, section = "linalg", grad = Adjoint;
+    "ddot":       MAT,          (T, T) -> ScalarOfT,     method = false, section = "linalg", grad = Adjoint;
+    "skew":       FVEC3,        (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
+    "quat_from_axis_angle": FVEC3, (T, ScalarOfT) -> QuatOfT, method = false, section = "linalg", grad = Adjoint;
+    "quat_rotate": QUAT,        (T, VecOfT) -> VecOfT,   method = false, section = "linalg", grad = Adjoint;
+    "quat_rotate_inv": QUAT,    (T, VecOfT) -> VecOfT,   method = false, section = "linalg", grad = Adjoint;
+    "quat_inverse": QUAT,       (T) -> T,                method = false, section = "linalg", grad = Adjoint;
+    "quat_to_matrix": QUAT,     (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
+    "quat_from_matrix": &[Matrix3], (T) -> QuatOfT,      method = false, section = "linalg", grad = Adjoint;
+    "quat_slerp": QUAT,         (T, T, ScalarOfT) -> T,  method = false, section = "linalg", grad = Adjoint;
     "atomic_add": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
@@ -222,6 +271,8 @@ pub const METHOD_ALIASES: &[(&str, &str)] = &[
     ("is_finite", "isfinite"),
     ("is_nan", "isnan"),
     ("is_infinite", "isinf"),
+    ("length_squared", "length_sq"),
+    ("conjugate", "quat_inverse"),
 ];
 
 /// Looks a builtin up by name.
@@ -339,6 +390,17 @@ impl Builtin {
             Pos::ArrayOfT => Ty::Array(Box::new(t.clone()), array_ndim),
             Pos::Index => index_ty.clone(),
             Pos::Bool => crate::types::BOOL,
+            Pos::MatOfT => match &t {
+                Ty::Vector(s, n) => Ty::Matrix(*s, *n),
+                Ty::Quat(s) => Ty::Matrix(*s, 3),
+                _ => Ty::Deferred,
+            },
+            Pos::VecOfT => match &t {
+                Ty::Matrix(s, n) => Ty::Vector(*s, *n),
+                Ty::Quat(s) => Ty::Vector(*s, 3),
+                _ => Ty::Deferred,
+            },
+            Pos::QuatOfT => scalar.scalar().map(Ty::Quat).unwrap_or(Ty::Deferred),
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {

@@ -36,12 +36,14 @@ use crate::builtins::math::Float;
 mod builtins;
 mod cast;
 mod lanes;
+mod linalg;
 mod ops;
 #[cfg(test)]
 mod tests;
 
 pub use builtins::*;
 pub use cast::*;
+pub use linalg::*;
 pub use ops::*;
 
 /// A type whose values have an adjoint of the same type.

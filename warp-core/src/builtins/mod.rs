@@ -12,11 +12,14 @@
 //! through a small trait implemented, by macros, for exactly the supported types:
 //!
 //! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
+//! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 
 pub mod atomic;
+pub mod linalg;
 pub mod math;
 pub mod special;
 
 pub use atomic::*;
+pub use linalg::*;
 pub use math::*;

@@ -32,7 +32,9 @@ enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
   X(unflatten) X(layout) X(print) X(addassign) X(mulassign) X(asin) X(acos) X(atan) X(sinh)   \
   X(cosh) X(tanh) X(exp2) X(log2) X(log10) X(cbrt) X(erf) X(erfc) X(erfinv) X(erfcinv)        \
   X(round) X(rint) X(trunc) X(frac) X(degrees) X(radians) X(smoothstep) X(step) X(isfinite)    \
-  X(isnan) X(isinf)
+  X(isnan) X(isinf) X(length_sq) X(outer) X(diag) X(cw_mul) X(cw_div) X(transpose)           \
+  X(determinant) X(inverse) X(trace) X(ddot) X(skew) X(qaxis) X(qrot) X(qrotinv) X(qinv) X(q2m) \
+  X(m2q) X(slerp)
 
 #define ENUM_OP(o) OP_##o,
 enum op_id { OP_LIST(ENUM_OP) OP_COUNT };
@@ -550,6 +552,57 @@ DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
       case OP_smul: { S s = get<S>(r); T a = get<T>(r); put(o, s * a); return; }
       case OP_sdiv: { S s = get<S>(r); T a = get<T>(r); put(o, s / a); return; }
       case OP_from_diag: { typename mat_traits<T>::column d = get<typename mat_traits<T>::column>(r); put(o, from_diag_of((T*)nullptr, d)); return; }
+      default: break;
+    }
+  }
+  // wp_linalg.h
+  if constexpr (is_vec) {
+    if (op == OP_length_sq) { T a = get<T>(r); put(o, wp::length_sq(a)); return; }
+  }
+  if constexpr (is_fvec) {
+    switch (op) {
+      case OP_outer: { T a = get<T>(r), b = get<T>(r); put(o, wp::outer(a, b)); return; }
+      case OP_diag: { T a = get<T>(r); put(o, wp::diag(a)); return; }
+      case OP_cw_mul: { T a = get<T>(r), b = get<T>(r); put(o, wp::cw_mul(a, b)); return; }
+      case OP_cw_div: { T a = get<T>(r), b = get<T>(r); put(o, wp::cw_div(a, b)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_v3 && num<S>::is_float) {
+    switch (op) {
+      case OP_skew: { T a = get<T>(r); put(o, wp::skew(a)); return; }
+      case OP_qaxis: { T a = get<T>(r); S s = get<S>(r); put(o, wp::quat_from_axis_angle(a, s)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_mat) {
+    switch (op) {
+      case OP_cw_mul: { T a = get<T>(r), b = get<T>(r); put(o, wp::cw_mul(a, b)); return; }
+      case OP_cw_div: { T a = get<T>(r), b = get<T>(r); put(o, wp::cw_div(a, b)); return; }
+      case OP_transpose: { T a = get<T>(r); put(o, wp::transpose(a)); return; }
+      case OP_determinant: { T a = get<T>(r); put(o, wp::determinant(a)); return; }
+      case OP_inverse: { T a = get<T>(r); put(o, wp::inverse(a)); return; }
+      case OP_trace: { T a = get<T>(r); put(o, wp::trace(a)); return; }
+      case OP_ddot: { T a = get<T>(r), b = get<T>(r); put(o, wp::ddot(a, b)); return; }
+      default: break;
+    }
+    if constexpr (mat_traits<T>::N == 3) {
+      if (op == OP_m2q) { T a = get<T>(r); put(o, wp::quat_from_matrix(a)); return; }
+    }
+  }
+  if constexpr (is_quat) {
+    typedef typename mulv_rhs<T>::type V3;
+    switch (op) {
+      case OP_length_sq: { T a = get<T>(r); put(o, wp::length_sq(a)); return; }
+      case OP_dot: { T a = get<T>(r), b = get<T>(r); put(o, wp::dot(a, b)); return; }
+      case OP_length: { T a = get<T>(r); put(o, wp::length(a)); return; }
+      case OP_normalize: { T a = get<T>(r); put(o, wp::normalize(a)); return; }
+      case OP_inverse: { T a = get<T>(r); put(o, wp::inverse(a)); return; }
+      case OP_qinv: { T a = get<T>(r); put(o, wp::quat_inverse(a)); return; }
+      case OP_qrot: { T a = get<T>(r); V3 v = get<V3>(r); put(o, wp::quat_rotate(a, v)); return; }
+      case OP_qrotinv: { T a = get<T>(r); V3 v = get<V3>(r); put(o, wp::quat_rotate_inv(a, v)); return; }
+      case OP_q2m: { T a = get<T>(r); put(o, wp::quat_to_matrix(a)); return; }
+      case OP_slerp: { T a = get<T>(r), b = get<T>(r); S t = get<S>(r); put(o, wp::quat_slerp(a, b, t)); return; }
       default: break;
     }
   }

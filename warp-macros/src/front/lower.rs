@@ -1715,6 +1715,28 @@ impl Lowerer {
         // glam constructors: Vec3::new, Vec3::splat, Mat3::from_cols, Quat::from_xyzw, vec3(..)
         if segs.len() >= 2 {
             if let Some(ty) = Ty::from_glam_name(&segs[segs.len() - 2]) {
+                // glam constructors that are builtins: `Quat::from_axis_angle(axis, angle)`,
+                // `Mat3::from_quat(q)`.
+                let builtin = match (&ty, last.as_str()) {
+                    (Ty::Quat(_), "from_axis_angle") => Some("quat_from_axis_angle"),
+                    (Ty::Matrix(_, 3), "from_quat") => Some("quat_to_matrix"),
+                    _ => None,
+                };
+                if let Some(name) = builtin {
+                    let b = builtins::lookup(name).expect("in the table");
+                    let args: Vec<&Expr> = c.args.iter().collect();
+                    let v = self.builtin_call(b, &args, want, span)?;
+                    let got = self.ty(v);
+                    if !got.is_deferred() && got != ty {
+                        return err(
+                            span,
+                            format!(
+                                "`{ty}::{last}` makes a `{ty}`, but these arguments make a `{got}`"
+                            ),
+                        );
+                    }
+                    return Ok(v);
+                }
                 return self.construct(ty, &last, c, span);
             }
             // `f32::sqrt(x)`: a builtin in function syntax on a scalar type.
