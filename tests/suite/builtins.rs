@@ -843,65 +843,43 @@ fn assert_ulps(got: f64, want: f64, ulps: f64, eps: f64, what: &str) {
     assert!(ok, "{what}: got {got:e}, want {want:e} ({ulps} ulp)");
 }
 
-#[wp::kernel]
-fn k_scalar_math_f32(x: Array<f32, 2>, out: Array<f32, 2>) {
-    let i = tid();
-    out[(0, i)] = asin(x[(0, i)]);
-    out[(1, i)] = acos(x[(1, i)]);
-    out[(2, i)] = atan(x[(2, i)]);
-    out[(3, i)] = sinh(x[(3, i)]);
-    out[(4, i)] = cosh(x[(4, i)]);
-    out[(5, i)] = tanh(x[(5, i)]);
-    out[(6, i)] = exp2(x[(6, i)]);
-    out[(7, i)] = log2(x[(7, i)]);
-    out[(8, i)] = log10(x[(8, i)]);
-    out[(9, i)] = cbrt(x[(9, i)]);
-    out[(10, i)] = erf(x[(10, i)]);
-    out[(11, i)] = erfc(x[(11, i)]);
-    out[(12, i)] = erfinv(x[(12, i)]);
-    out[(13, i)] = erfcinv(x[(13, i)]);
-    out[(14, i)] = round(x[(14, i)]);
-    out[(15, i)] = rint(x[(15, i)]);
-    out[(16, i)] = trunc(x[(16, i)]);
-    out[(17, i)] = frac(x[(17, i)]);
-    out[(18, i)] = degrees(x[(18, i)]);
-    out[(19, i)] = radians(x[(19, i)]);
-    out[(20, i)] = step(x[(20, i)]);
-    out[(21, i)] = smoothstep(-1.0, 2.0, x[(21, i)]);
-    out[(22, i)] = smoothstep(0.5, 0.5, x[(22, i)]);
-    out[(23, i)] = r#mod(x[(23, i)], 0.75);
-    out[(24, i)] = f32::atan(x[(24, i)]);
+/// One kernel body for both precisions, so that the f32 and f64 tests cannot drift apart.
+macro_rules! scalar_math_kernel {
+    ($name:ident, $t:ident) => {
+        #[wp::kernel]
+        fn $name(x: Array<$t, 2>, out: Array<$t, 2>) {
+            let i = tid();
+            out[(0, i)] = asin(x[(0, i)]);
+            out[(1, i)] = acos(x[(1, i)]);
+            out[(2, i)] = atan(x[(2, i)]);
+            out[(3, i)] = sinh(x[(3, i)]);
+            out[(4, i)] = cosh(x[(4, i)]);
+            out[(5, i)] = tanh(x[(5, i)]);
+            out[(6, i)] = exp2(x[(6, i)]);
+            out[(7, i)] = log2(x[(7, i)]);
+            out[(8, i)] = log10(x[(8, i)]);
+            out[(9, i)] = cbrt(x[(9, i)]);
+            out[(10, i)] = erf(x[(10, i)]);
+            out[(11, i)] = erfc(x[(11, i)]);
+            out[(12, i)] = erfinv(x[(12, i)]);
+            out[(13, i)] = erfcinv(x[(13, i)]);
+            out[(14, i)] = round(x[(14, i)]);
+            out[(15, i)] = rint(x[(15, i)]);
+            out[(16, i)] = trunc(x[(16, i)]);
+            out[(17, i)] = frac(x[(17, i)]);
+            out[(18, i)] = degrees(x[(18, i)]);
+            out[(19, i)] = radians(x[(19, i)]);
+            out[(20, i)] = step(x[(20, i)]);
+            out[(21, i)] = smoothstep(-1.0, 2.0, x[(21, i)]);
+            out[(22, i)] = smoothstep(0.5, 0.5, x[(22, i)]);
+            out[(23, i)] = wp::r#mod(x[(23, i)], 0.75);
+            out[(24, i)] = $t::atan(x[(24, i)]);
+        }
+    };
 }
 
-#[wp::kernel]
-fn k_scalar_math_f64(x: Array<f64, 2>, out: Array<f64, 2>) {
-    let i = tid();
-    out[(0, i)] = asin(x[(0, i)]);
-    out[(1, i)] = acos(x[(1, i)]);
-    out[(2, i)] = atan(x[(2, i)]);
-    out[(3, i)] = sinh(x[(3, i)]);
-    out[(4, i)] = cosh(x[(4, i)]);
-    out[(5, i)] = tanh(x[(5, i)]);
-    out[(6, i)] = exp2(x[(6, i)]);
-    out[(7, i)] = log2(x[(7, i)]);
-    out[(8, i)] = log10(x[(8, i)]);
-    out[(9, i)] = cbrt(x[(9, i)]);
-    out[(10, i)] = erf(x[(10, i)]);
-    out[(11, i)] = erfc(x[(11, i)]);
-    out[(12, i)] = erfinv(x[(12, i)]);
-    out[(13, i)] = erfcinv(x[(13, i)]);
-    out[(14, i)] = round(x[(14, i)]);
-    out[(15, i)] = rint(x[(15, i)]);
-    out[(16, i)] = trunc(x[(16, i)]);
-    out[(17, i)] = frac(x[(17, i)]);
-    out[(18, i)] = degrees(x[(18, i)]);
-    out[(19, i)] = radians(x[(19, i)]);
-    out[(20, i)] = step(x[(20, i)]);
-    out[(21, i)] = smoothstep(-1.0, 2.0, x[(21, i)]);
-    out[(22, i)] = smoothstep(0.5, 0.5, x[(22, i)]);
-    out[(23, i)] = wp::r#mod(x[(23, i)], 0.75);
-    out[(24, i)] = f64::atan(x[(24, i)]);
-}
+scalar_math_kernel!(k_scalar_math_f32, f32);
+scalar_math_kernel!(k_scalar_math_f64, f64);
 
 fn scalar_math_inputs() -> Vec<f32> {
     INPUTS.iter().flatten().copied().collect()

@@ -338,62 +338,41 @@ fn gradcheck_builtins(dev: &wp::Device) {
 
 /// Every differentiable scalar-math builtin added for Warp parity, one per output (so that a
 /// failure names it), at points away from their kinks: `wp::gradcheck` against central
-/// differences, f64 and f32.
-#[wp::kernel]
-fn k_scalar_math(x: Array<f64>, out: Array<f64>) {
-    let a = x[0];
-    let b = x[1];
-    let c = x[2];
-    out[0] = asin(a);
-    out[1] = acos(b);
-    out[2] = atan(c);
-    out[3] = sinh(b);
-    out[4] = cosh(a);
-    out[5] = tanh(c);
-    out[6] = exp2(b);
-    out[7] = log2(c);
-    out[8] = log10(c);
-    out[9] = cbrt(b);
-    out[10] = erf(b);
-    out[11] = erfc(c);
-    out[12] = erfinv(a);
-    out[13] = erfcinv(c);
-    out[14] = frac(c) * a;
-    out[15] = degrees(a);
-    out[16] = radians(b);
-    out[17] = smoothstep(b, c, a);
-    out[18] = r#mod(c * 3.0, a + 1.0);
-    // Piecewise constant (zero gradient), away from their jumps.
-    out[19] = (round(a * 3.0) + rint(b) + trunc(c) + step(b)) * c;
+/// differences, f64 and f32: one body for both precisions, so the two cannot drift apart.
+macro_rules! scalar_math_kernel {
+    ($name:ident, $t:ident) => {
+        #[wp::kernel]
+        fn $name(x: Array<$t>, out: Array<$t>) {
+            let a = x[0];
+            let b = x[1];
+            let c = x[2];
+            out[0] = asin(a);
+            out[1] = acos(b);
+            out[2] = atan(c);
+            out[3] = sinh(b);
+            out[4] = cosh(a);
+            out[5] = tanh(c);
+            out[6] = exp2(b);
+            out[7] = log2(c);
+            out[8] = log10(c);
+            out[9] = cbrt(b);
+            out[10] = erf(b);
+            out[11] = erfc(c);
+            out[12] = erfinv(a);
+            out[13] = erfcinv(c);
+            out[14] = frac(c) * a;
+            out[15] = degrees(a);
+            out[16] = radians(b);
+            out[17] = smoothstep(b, c, a);
+            out[18] = r#mod(c * 3.0, a + 1.0);
+            // Piecewise constant (zero gradient), away from their jumps.
+            out[19] = (round(a * 3.0) + rint(b) + trunc(c) + step(b)) * c;
+        }
+    };
 }
 
-#[wp::kernel]
-fn k_scalar_math32(x: Array<f32>, out: Array<f32>) {
-    let a = x[0];
-    let b = x[1];
-    let c = x[2];
-    out[0] = asin(a);
-    out[1] = acos(b);
-    out[2] = atan(c);
-    out[3] = sinh(b);
-    out[4] = cosh(a);
-    out[5] = tanh(c);
-    out[6] = exp2(b);
-    out[7] = log2(c);
-    out[8] = log10(c);
-    out[9] = cbrt(b);
-    out[10] = erf(b);
-    out[11] = erfc(c);
-    out[12] = erfinv(a);
-    out[13] = erfcinv(c);
-    out[14] = frac(c) * a;
-    out[15] = degrees(a);
-    out[16] = radians(b);
-    out[17] = smoothstep(b, c, a);
-    out[18] = r#mod(c * 3.0, a + 1.0);
-    // Piecewise constant (zero gradient), away from their jumps.
-    out[19] = (round(a * 3.0) + rint(b) + trunc(c) + step(b)) * c;
-}
+scalar_math_kernel!(k_scalar_math, f64);
+scalar_math_kernel!(k_scalar_math32, f32);
 
 fn gradcheck_scalar_math(dev: &wp::Device) {
     let x = arr(&[0.3f64, -0.45, 1.2], dev).with_grad().unwrap();

@@ -50,7 +50,8 @@ impl Class {
             (Class::FloatVector, Ty::Vector(s, _)) => s.is_float(),
             (Class::IntVector, Ty::Vector(s, _)) => !s.is_float(),
             (Class::SignedVector, Ty::Vector(s, _)) => *s != Scalar::U32,
-            (Class::Vector3, Ty::Vector(_, 3)) => true,
+            // Not UVec3: glam has no cross product for it (its result would wrap).
+            (Class::Vector3, Ty::Vector(s, 3)) => *s != Scalar::U32,
             (Class::Atomic, Ty::Scalar(s)) => {
                 matches!(
                     s,
