@@ -39,30 +39,9 @@ fn nbody(pos: Array<Vec3>, mass: Array<f32>, acc: Array<Vec3>, eps2: f32, n: i32
     acc[i] = a;
 }
 
-/// One recorded step of the particle program for the AD benchmark (new state arrays per step).
-#[wp::kernel]
-fn ad_step(
-    x0: Array<Vec3>,
-    v0: Array<Vec3>,
-    x1: Array<Vec3>,
-    v1: Array<Vec3>,
-    b: f32,
-    mass: f32,
-    gravity: Vec3,
-    dt: f32,
-) {
-    let i = tid();
-    let a = -b * v0[i] / mass + gravity;
-    let v = v0[i] + a * dt;
-    v1[i] = v;
-    x1[i] = x0[i] + v * dt;
-}
-
-#[wp::kernel]
-fn ad_loss(x: Array<Vec3>, loss: Array<f32>) {
-    let i = tid();
-    atomic_add(loss, 0, dot(x[i], x[i]));
-}
+/// The AD section's kernels are the autodiff example's (one step per tape record, and the loss).
+#[path = "../examples/common/seed_ad.rs"]
+mod seed_ad;
 
 #[wp::kernel]
 fn small(a: Array<f32>, b: Array<f32>, s: f32, t: f32, k: i32, c: Array<f32>) {
@@ -512,9 +491,9 @@ fn ad_bench(dev: &wp::Device) {
         let _rec = tape.record();
         for s in 0..steps {
             let args = (&xs[s], &vs[s], &xs[s + 1], &vs[s + 1], b, mass, gravity, dt);
-            wp::launch(ad_step, n, args, dev).unwrap();
+            wp::launch(seed_ad::step, n, args, dev).unwrap();
         }
-        wp::launch(ad_loss, n, (&xs[steps], &loss), dev).unwrap();
+        wp::launch(seed_ad::sum_sq, n, (&xs[steps], &loss), dev).unwrap();
     };
     // Warm-up: compiles the kernels and their adjoints.
     let warm = wp::Tape::new();

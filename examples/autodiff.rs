@@ -8,6 +8,10 @@
 //! ```
 //! Runs on the GPU when there is one.
 
+#[path = "common/seed_ad.rs"]
+mod seed_ad;
+
+use seed_ad::{step, sum_sq};
 use std::time::Instant;
 use warp_lang as wp;
 use wp::prelude::*;
@@ -17,31 +21,6 @@ fn seed(x: Array<f64>, y: Array<f64>) {
     let i = tid();
     let v = x[i];
     y[i] = sin(v * v) * log(v) + v * v * v / sqrt(1.0 - v * v);
-}
-
-/// One step of the seed program, writing new state arrays (so the tape can replay every step).
-#[wp::kernel]
-fn step(
-    x0: Array<Vec3>,
-    v0: Array<Vec3>,
-    x1: Array<Vec3>,
-    v1: Array<Vec3>,
-    b: f32,
-    mass: f32,
-    gravity: Vec3,
-    dt: f32,
-) {
-    let i = tid();
-    let a = -b * v0[i] / mass + gravity;
-    let v = v0[i] + a * dt;
-    v1[i] = v;
-    x1[i] = x0[i] + v * dt;
-}
-
-#[wp::kernel]
-fn sum_sq(x: Array<Vec3>, loss: Array<f32>) {
-    let i = tid();
-    atomic_add(loss, 0, dot(x[i], x[i]));
 }
 
 fn closed_form(x: f64) -> f64 {

@@ -200,6 +200,10 @@ macro_rules! run_in {
 }
 
 fn main() -> wp::Result<()> {
+    common::check_args(
+        &["--n", "--t-end", "--halvings"],
+        "nbody [--device cpu|cuda:N] [--n 256] [--t-end 2] [--halvings 5] [--plot-dir DIR]",
+    );
     let dev = common::device()?;
     let gpu = dev.is_cuda();
     let n: usize = common::parsed("--n", if gpu { 4096 } else { 256 });

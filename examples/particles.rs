@@ -31,58 +31,6 @@ fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, d
     x[i] += v[i] * dt;
 }
 
-struct Options {
-    n: usize,
-    steps: usize,
-    sweep_n: usize,
-    device: Option<String>,
-}
-
-fn parse_args() -> Result<Options, String> {
-    let mut o = Options {
-        n: 10_000_000,
-        steps: 100,
-        sweep_n: 100_000,
-        device: None,
-    };
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value"));
-        match a.as_str() {
-            "--n" => {
-                o.n = value("--n")?
-                    .replace('_', "")
-                    .parse()
-                    .map_err(|e| format!("--n: {e}"))?
-            }
-            "--steps" => {
-                o.steps = value("--steps")?
-                    .parse()
-                    .map_err(|e| format!("--steps: {e}"))?
-            }
-            "--sweep-n" => {
-                o.sweep_n = value("--sweep-n")?
-                    .replace('_', "")
-                    .parse()
-                    .map_err(|e| format!("--sweep-n: {e}"))?
-            }
-            "--device" => o.device = Some(value("--device")?),
-            "--plot-dir" => {
-                value("--plot-dir")?; // read by common::finish
-            }
-            "-h" | "--help" => {
-                println!(
-                    "usage: particles [--n COUNT] [--steps STEPS] [--sweep-n COUNT (0: no sweep)] \
-                     [--device cpu|cuda:N] [--plot-dir DIR]"
-                );
-                std::process::exit(0);
-            }
-            other => return Err(format!("unknown argument {other} (try --help)")),
-        }
-    }
-    Ok(o)
-}
-
 fn uniform_vec3(rng: &mut common::Rng, lo: f32, hi: f32) -> Vec3 {
     let mut c = || lo + (hi - lo) * rng.next_f64() as f32;
     Vec3::new(c(), c(), c())
@@ -115,17 +63,17 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
     )
     .progress(2 * counts.len() as u64);
     for double in [false, true] {
+        // Warm-up on one particle (compiles on a GPU), outside the timing.
+        if double {
+            let w = wp::Array::<DVec3>::zeros(1, dev)?;
+            wp::launch(integrate_f64, 1, (&w, &w, b, mass, DVec3::ZERO, 0.0), dev)?;
+        } else {
+            let w = wp::Array::<Vec3>::zeros(1, dev)?;
+            let (b, mass) = (b as f32, mass as f32);
+            wp::launch(integrate, 1, (&w, &w, b, mass, Vec3::ZERO, 0.0), dev)?;
+        }
         for &steps in &counts {
             let dt = t_end / steps as f64;
-            // Warm-up on one particle (compiles on a GPU), outside the timing.
-            if double {
-                let w = wp::Array::<DVec3>::zeros(1, dev)?;
-                wp::launch(integrate_f64, 1, (&w, &w, b, mass, DVec3::ZERO, dt), dev)?;
-            } else {
-                let w = wp::Array::<Vec3>::zeros(1, dev)?;
-                let (b, mass) = (b as f32, mass as f32);
-                wp::launch(integrate, 1, (&w, &w, b, mass, Vec3::ZERO, dt as f32), dev)?;
-            }
             wp::synchronize()?;
             // Timed: the steps, from uploaded start state to finished last step.
             let (xs, seconds): (Vec<DVec3>, f64) = if double {
@@ -172,15 +120,15 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
 }
 
 fn main() -> wp::Result<()> {
-    let opts = parse_args().unwrap_or_else(|e| {
-        eprintln!("particles: {e}");
-        std::process::exit(2)
-    });
-    wp::init();
-    let dev = match &opts.device {
-        Some(name) => wp::get_device(name)?,
-        None => wp::get_preferred_device(),
-    };
+    common::check_args(
+        &["--n", "--steps", "--sweep-n"],
+        "particles [--n COUNT] [--steps STEPS] [--sweep-n COUNT (0: no sweep)] \
+         [--device cpu|cuda:N] [--plot-dir DIR]",
+    );
+    let n: usize = common::parsed("--n", 10_000_000);
+    let steps: usize = common::parsed("--steps", 100);
+    let sweep_n: usize = common::parsed("--sweep-n", 100_000);
+    let dev = common::device()?;
 
     // The seed's constants.
     let mass = 0.1f32; // kg
@@ -190,12 +138,8 @@ fn main() -> wp::Result<()> {
     let gravity = Vec3::new(0.0, 0.0, -g);
 
     let mut rng = common::Rng(12345);
-    let x0: Vec<Vec3> = (0..opts.n)
-        .map(|_| uniform_vec3(&mut rng, -1.0, 1.0))
-        .collect();
-    let v0: Vec<Vec3> = (0..opts.n)
-        .map(|_| uniform_vec3(&mut rng, -0.5, 0.5))
-        .collect();
+    let x0: Vec<Vec3> = (0..n).map(|_| uniform_vec3(&mut rng, -1.0, 1.0)).collect();
+    let v0: Vec<Vec3> = (0..n).map(|_| uniform_vec3(&mut rng, -0.5, 0.5)).collect();
     let x = wp::Array::from_slice(&x0, &dev)?;
     let v = wp::Array::from_slice(&v0, &dev)?;
 
@@ -208,8 +152,8 @@ fn main() -> wp::Result<()> {
     wp::synchronize()?;
 
     let t0 = Instant::now();
-    for _ in 0..opts.steps {
-        wp::launch(integrate, opts.n, (&x, &v, b, mass, gravity, dt), &dev)?;
+    for _ in 0..steps {
+        wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), &dev)?;
     }
     wp::synchronize()?;
     let elapsed = t0.elapsed();
@@ -217,46 +161,43 @@ fn main() -> wp::Result<()> {
 
     // Errors, in f64.
     let k = (b / mass) as f64;
-    let (dt64, steps) = (dt as f64, opts.steps as i32);
-    let t = dt64 * opts.steps as f64;
+    let dt64 = dt as f64;
+    let t = dt64 * steps as f64;
     let r = 1.0 - k * dt64; // the scheme's per-step velocity factor
     let mut err_ode = 0.0f64;
     let mut err_discrete = 0.0f64;
-    for i in 0..opts.n {
+    for i in 0..n {
         for c in 0..3 {
             let gc = gravity[c] as f64;
             let (xi, vi) = (x0[i][c] as f64, v0[i][c] as f64);
             let vinf = gc / k; // terminal velocity
             let exact = exact(xi, vi, gc, k, t);
             // Closed form of v_{n+1} = r v_n + g dt, x_{n+1} = x_n + v_{n+1} dt.
-            let geometric = r * (1.0 - r.powi(steps)) / (1.0 - r);
-            let discrete = xi + dt64 * (opts.steps as f64 * vinf + (vi - vinf) * geometric);
+            let geometric = r * (1.0 - r.powi(steps as i32)) / (1.0 - r);
+            let discrete = xi + dt64 * (steps as f64 * vinf + (vi - vinf) * geometric);
             let got = xs[i][c] as f64;
             err_ode = err_ode.max((got - exact).abs());
             err_discrete = err_discrete.max((got - discrete).abs());
         }
     }
 
-    println!(
-        "particles: {} particles x {} steps on \"{}\" (dt = {dt} s)",
-        opts.n, opts.steps, dev
-    );
+    println!("particles: {n} particles x {steps} steps on \"{dev}\" (dt = {dt} s)");
     for (i, p) in xs.iter().take(3).enumerate() {
         println!("  x[{i}] = [{:.6}, {:.6}, {:.6}]", p.x, p.y, p.z);
     }
     let ms = elapsed.as_secs_f64() * 1e3;
     println!(
         "  time: {ms:.2} ms ({:.3} ms/step, {:.1} GB/s effective)",
-        ms / opts.steps as f64,
+        ms / steps as f64,
         // Each step reads and writes x and v: 4 x 12 bytes per particle.
-        (48.0 * opts.n as f64 * opts.steps as f64) / elapsed.as_secs_f64() / 1e9
+        (48.0 * n as f64 * steps as f64) / elapsed.as_secs_f64() / 1e9
     );
     println!(
         "  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))"
     );
     println!("  max |x - exact discrete solution, f64| = {err_discrete:.3e} m (f32 rounding)");
-    if opts.sweep_n > 0 {
-        sweep(&dev, opts.sweep_n.min(opts.n), &x0, &v0, t)?;
+    if sweep_n > 0 {
+        sweep(&dev, sweep_n.min(n), &x0, &v0, t)?;
     }
     common::print_compiled();
     Ok(())

@@ -78,6 +78,17 @@ fn run(
 }
 
 fn main() -> wp::Result<()> {
+    common::check_args(
+        &[
+            "--chains",
+            "--t-end",
+            "--substeps",
+            "--iterations",
+            "--halvings",
+        ],
+        "springs [--device cpu|cuda:N] [--chains N] [--t-end 0.5] [--substeps 10] \
+         [--iterations 1] [--halvings 8] [--plot-dir DIR]",
+    );
     let dev = common::device()?;
     let gpu = dev.is_cuda();
     let chains: usize = common::parsed("--chains", if gpu { 4096 } else { 16 });

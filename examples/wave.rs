@@ -44,6 +44,10 @@ fn first_step(u0: Array<f32>, u1: Array<f32>, r2: f32) {
 }
 
 fn main() -> wp::Result<()> {
+    common::check_args(
+        &["--n"],
+        "wave [--n 1024] [--device cpu|cuda:N] [--plot-dir DIR]",
+    );
     let dev = common::device()?;
     let n: usize = common::parsed("--n", 1024);
     let (c, t_end) = (1.0f64, 1.0f64);

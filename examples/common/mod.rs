@@ -8,6 +8,30 @@ use std::path::PathBuf;
 use warp_lang as wp;
 use warp_report::Sweep;
 
+/// Checks the command line against the scene's options (each `--name VALUE`): prints
+/// `usage` for `-h`/`--help`, and stops with a message on an unknown option or a missing value.
+/// `--device` and `--plot-dir` are known to every scene.
+pub fn check_args(known: &[&str], usage: &str) {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut k = 0;
+    while k < args.len() {
+        let a = args[k].as_str();
+        if a == "-h" || a == "--help" {
+            println!("usage: {usage}");
+            std::process::exit(0);
+        }
+        if !(known.contains(&a) || a == "--device" || a == "--plot-dir") {
+            eprintln!("unknown argument {a}\nusage: {usage}");
+            std::process::exit(2);
+        }
+        if k + 1 == args.len() {
+            eprintln!("{a} needs a value");
+            std::process::exit(2);
+        }
+        k += 2;
+    }
+}
+
 /// The value after `--name` on the command line, if given.
 pub fn arg(name: &str) -> Option<String> {
     let args: Vec<String> = std::env::args().collect();
