@@ -26,87 +26,80 @@ use std::time::Instant;
 use glam::DVec3;
 use warp_lang as wp;
 use warp_report::{Run, Sweep};
+use wp::prelude::*;
 
-/// The three kernels of a leapfrog step, for one scalar type (`$s`) and its vector (`$v`).
-/// The f32 and f64 versions differ in nothing else; generic kernels (`T: wp::Float`) will
-/// replace this macro.
-macro_rules! leapfrog_kernels {
-    ($module:ident, $s:ident, $v:ident) => {
-        pub mod $module {
-            use warp_lang as wp;
-            use wp::prelude::*;
-
-            /// Acceleration of body i: the sum over j of m_j d / (|d|^2 + eps^2)^(3/2), d = x_j - x_i
-            /// (the j = i term is zero), summed plainly or with Kahan compensation.
-            #[wp::kernel]
-            pub fn accelerations(
-                x: Array<$v>,
-                m: Array<$s>,
-                a: Array<$v>,
-                eps2: $s,
-                compensated: bool,
-            ) {
-                let i = tid();
-                let xi = x[i];
-                let mut sum = $v::ZERO;
-                let mut carry = $v::ZERO;
-                for j in 0..x.len() {
-                    let d = x[j] - xi;
-                    let r2 = dot(d, d) + eps2;
-                    let term = d * (m[j] / (r2 * sqrt(r2)));
-                    if compensated {
-                        let y = term - carry;
-                        let t = sum + y;
-                        carry = (t - sum) - y;
-                        sum = t;
-                    } else {
-                        sum += term;
-                    }
-                }
-                a[i] = sum;
-            }
-
-            /// `s += inc`, plainly or with the Kahan carry `c` (updated in place).
-            #[wp::func]
-            fn add(s: Array<$v>, c: Array<$v>, i: usize, inc: $v, compensated: bool) {
-                if compensated {
-                    let y = inc - c[i];
-                    let t = s[i] + y;
-                    c[i] = (t - s[i]) - y;
-                    s[i] = t;
-                } else {
-                    s[i] += inc;
-                }
-            }
-
-            /// Half kick then drift: v += a dt / 2; x += v dt.
-            #[wp::kernel]
-            pub fn kick_drift(
-                x: Array<$v>,
-                v: Array<$v>,
-                a: Array<$v>,
-                xc: Array<$v>,
-                vc: Array<$v>,
-                dt: $s,
-                compensated: bool,
-            ) {
-                let i = tid();
-                add(v, vc, i, a[i] * (0.5 * dt), compensated);
-                add(x, xc, i, v[i] * dt, compensated);
-            }
-
-            /// The closing half kick: v += a dt / 2.
-            #[wp::kernel]
-            pub fn kick(v: Array<$v>, a: Array<$v>, vc: Array<$v>, dt: $s, compensated: bool) {
-                let i = tid();
-                add(v, vc, i, a[i] * (0.5 * dt), compensated);
-            }
+/// Acceleration of body i: the sum over j of m_j d / (|d|^2 + eps^2)^(3/2), d = x_j - x_i (the
+/// j = i term is zero), summed plainly or with Kahan compensation. Generic: the launch runs
+/// the f32 or the f64 instance, after the arrays' type.
+#[wp::kernel]
+pub fn accelerations<T: Float>(
+    x: Array<Vec3<T>>,
+    m: Array<T>,
+    a: Array<Vec3<T>>,
+    eps2: T,
+    compensated: bool,
+) {
+    let i = tid();
+    let xi = x[i];
+    let mut sum = Vec3::<T>::ZERO;
+    let mut carry = Vec3::<T>::ZERO;
+    for j in 0..x.len() {
+        let d = x[j] - xi;
+        let r2 = dot(d, d) + eps2;
+        let term = d * (m[j] / (r2 * sqrt(r2)));
+        if compensated {
+            let y = term - carry;
+            let t = sum + y;
+            carry = (t - sum) - y;
+            sum = t;
+        } else {
+            sum += term;
         }
-    };
+    }
+    a[i] = sum;
 }
 
-leapfrog_kernels!(single, f32, Vec3);
-leapfrog_kernels!(double, f64, DVec3);
+/// `s += inc`, plainly or with the Kahan carry `c` (updated in place).
+#[wp::func]
+fn add<T: Float>(s: Array<Vec3<T>>, c: Array<Vec3<T>>, i: usize, inc: Vec3<T>, compensated: bool) {
+    if compensated {
+        let y = inc - c[i];
+        let t = s[i] + y;
+        c[i] = (t - s[i]) - y;
+        s[i] = t;
+    } else {
+        s[i] += inc;
+    }
+}
+
+/// Half kick then drift: v += a dt / 2; x += v dt.
+#[wp::kernel]
+pub fn kick_drift<T: Float>(
+    x: Array<Vec3<T>>,
+    v: Array<Vec3<T>>,
+    a: Array<Vec3<T>>,
+    xc: Array<Vec3<T>>,
+    vc: Array<Vec3<T>>,
+    dt: T,
+    compensated: bool,
+) {
+    let i = tid();
+    add::<T>(v, vc, i, a[i] * (0.5 * dt), compensated);
+    add::<T>(x, xc, i, v[i] * dt, compensated);
+}
+
+/// The closing half kick: v += a dt / 2.
+#[wp::kernel]
+pub fn kick<T: Float>(
+    v: Array<Vec3<T>>,
+    a: Array<Vec3<T>>,
+    vc: Array<Vec3<T>>,
+    dt: T,
+    compensated: bool,
+) {
+    let i = tid();
+    add::<T>(v, vc, i, a[i] * (0.5 * dt), compensated);
+}
 
 const SOFTENING: f64 = 0.05;
 
@@ -159,7 +152,7 @@ fn momentum(v: &[DVec3], m: &[f64]) -> (DVec3, f64) {
 
 /// One leapfrog run in f32 or f64; returns the final positions and velocities in f64.
 macro_rules! run_in {
-    ($module:ident, $s:ty, $vt:ty, $to:ident, $from:ident, $dev:expr, $x:expr, $v:expr, $m:expr, $dt:expr, $steps:expr, $comp:expr) => {{
+    ($s:ty, $vt:ty, $to:ident, $from:ident, $dev:expr, $x:expr, $v:expr, $m:expr, $dt:expr, $steps:expr, $comp:expr) => {{
         let dev = $dev;
         let n = $x.len();
         let x = wp::Array::from_vec($x.iter().map(|p| p.$to()).collect(), dev)?;
@@ -168,7 +161,6 @@ macro_rules! run_in {
         let a = wp::Array::zeros(n, dev)?;
         let (xc, vc) = (wp::Array::zeros(n, dev)?, wp::Array::zeros(n, dev)?);
         let (eps2, dt) = ((SOFTENING * SOFTENING) as $s, $dt as $s);
-        use $module::{accelerations, kick, kick_drift};
         // The first launches compile on a GPU: outside the timing (on scratch arrays, so
         // that the start state is untouched).
         let (ws, wv) = (wp::Array::zeros(1, dev)?, wp::Array::zeros(1, dev)?);
@@ -233,7 +225,6 @@ fn main() -> wp::Result<()> {
             let steps = (t_end / dt).round() as u64;
             let (x, v, seconds, blew_up) = if double {
                 run_in!(
-                    double,
                     f64,
                     DVec3,
                     clone,
@@ -248,7 +239,6 @@ fn main() -> wp::Result<()> {
                 )
             } else {
                 run_in!(
-                    single,
                     f32,
                     glam::Vec3,
                     as_vec3,

@@ -62,7 +62,7 @@
 //! and in the docs of [`kernel`].
 
 pub use glam;
-pub use warp_core::{Fault, FaultKind};
+pub use warp_core::{Fault, FaultKind, Float};
 #[cfg(feature = "cuda")]
 pub use warp_cuda::clear_kernel_cache;
 pub use warp_macros::{func, kernel, Struct};
@@ -80,14 +80,14 @@ pub use warp_runtime::{
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape,
-    Kernel, KernelArg, KernelInfo, Recording, Result, Runtime, Seed, Tape,
+    Kernel, KernelArg, KernelInfo, Launchable, Recording, Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{func, kernel, Array, Struct};
+    pub use crate::{func, kernel, Array, Float, Struct};
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -105,7 +105,7 @@ pub mod __private {
         ArrayView, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
     };
     pub use warp_runtime::{
-        ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Result,
+        ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Launchable, Result,
     };
 }
 

@@ -70,6 +70,7 @@ mod builtins;
 mod control;
 mod errors;
 mod funcs;
+mod generics;
 mod grad;
 mod launch;
 mod params;

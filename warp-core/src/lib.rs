@@ -43,3 +43,18 @@ pub const fn max_depth(depths: &[usize]) -> usize {
     }
     m
 }
+
+/// The bound of a generic kernel's or func's type parameter: `fn k<T: Float>(x: Array<T>)`.
+///
+/// `#[kernel]` and `#[func]` instantiate such a function for each type implementing it, f32
+/// and f64 (see the `generics` module of warp-macros); the trait is sealed, since the language
+/// must know each type's builtins and glam family (`Vec3<T>` is `Vec3` or `DVec3`).
+pub trait Float: Copy + private::Sealed {}
+impl Float for f32 {}
+impl Float for f64 {}
+
+mod private {
+    pub trait Sealed {}
+    impl Sealed for f32 {}
+    impl Sealed for f64 {}
+}

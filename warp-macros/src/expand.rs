@@ -1,7 +1,7 @@
 //! Expansion of the three macros: front end, then back ends, then the items around them.
 
 use crate::back::rust::RustEmitter;
-use crate::front::{attrs, lower};
+use crate::front::{attrs, generics, lower};
 use crate::ir::FnKind;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
@@ -22,8 +22,153 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         errors.push(e);
         Default::default()
     });
-    let f = match lower::lower_fn(&item, FnKind::Kernel) {
-        Ok(f) => Some(f),
+    let vis = &item.vis;
+    let name = &item.sig.ident;
+    let doc_attrs: Vec<&syn::Attribute> = item
+        .attrs
+        .iter()
+        .filter(|a| a.path().is_ident("doc"))
+        .collect();
+    // Keep a unit struct when there are errors, so that uses of the kernel do not add errors
+    // of their own.
+    let failed = |errors: Vec<syn::Error>| {
+        let errs = errors_to_tokens(errors);
+        quote!(#errs #[allow(non_camel_case_types)] #vis struct #name;)
+    };
+    let generics = match generics::parse(&item) {
+        Ok(g) => g,
+        Err(e) => {
+            errors.extend(e);
+            return failed(errors);
+        }
+    };
+    let Some(g) = generics else {
+        if !errors.is_empty() {
+            // Still lower, to report the body's errors with the attribute's.
+            if let Err(e) = lower::lower_fn(&item, FnKind::Kernel) {
+                errors.extend(e);
+            }
+            return failed(errors);
+        }
+        return match kernel_instance(&item, &opts, name, None) {
+            Ok((_, body)) => {
+                let out = quote! {
+                    #(#doc_attrs)*
+                    #[allow(non_camel_case_types)]
+                    #[derive(Clone, Copy, Debug, Default)]
+                    #vis struct #name;
+                    #body
+                };
+                dump(&name.to_string(), &out);
+                out
+            }
+            Err(e) => failed(e),
+        };
+    };
+    // A generic kernel: one hidden kernel struct per instance, and the named struct picks one
+    // from the launch arguments' types (`Launchable`).
+    errors.extend(generics::check_params_select(&item, &g));
+    let instances = generics::instances(&item, &g);
+    let mut bodies = TokenStream::new();
+    let mut inst_idents = Vec::new();
+    let mut inst_args = Vec::new();
+    let mut per_instance = Vec::new();
+    for inst in &instances {
+        let ident = format_ident!("__wp_kernel_{}_{}", name, inst.ident_suffix());
+        let display = inst.display_name(&name.to_string());
+        match kernel_instance(&inst.item, &opts, &ident, Some(display.clone())) {
+            Ok((args, body)) => {
+                inst_args.push(args);
+                bodies.extend(quote! {
+                    #[doc(hidden)]
+                    #[allow(non_camel_case_types)]
+                    #[derive(Clone, Copy, Debug, Default)]
+                    #vis struct #ident;
+                    #body
+                });
+                per_instance.push((display, Vec::new()));
+            }
+            Err(e) => per_instance.push((display, e)),
+        }
+        inst_idents.push(ident);
+    }
+    errors.extend(instance_errors(per_instance));
+    if !errors.is_empty() {
+        return failed(errors);
+    }
+    let bound_check = generics::bound_check(&g);
+    let out = quote! {
+        #(#doc_attrs)*
+        ///
+        /// A generic kernel: [`launch`](::warp_lang::launch) picks its instance from the types
+        /// of the launch arguments.
+        #[allow(non_camel_case_types)]
+        #[derive(Clone, Copy, Debug, Default)]
+        #vis struct #name;
+        #bound_check
+        #bodies
+        const _: () = {
+            #( impl<'__a> ::warp_lang::__private::Launchable<#inst_args> for #name {
+                type Kernel = #inst_idents;
+            } )*
+        };
+    };
+    dump(&name.to_string(), &out);
+    out
+}
+
+/// The errors of a generic function's instances: an error every instance has is reported
+/// once as it is; one that only some instances have names them (`in `k<f64>`: ..`), since it
+/// comes from what a type parameter became.
+fn instance_errors(per_instance: Vec<(String, Vec<syn::Error>)>) -> Vec<syn::Error> {
+    let key = |e: &syn::Error| {
+        let start = e.span().start();
+        (e.to_string(), start.line, start.column)
+    };
+    let n = per_instance.len();
+    let mut out: Vec<syn::Error> = Vec::new();
+    let mut done = Vec::new();
+    for (_, errs) in &per_instance {
+        for e in errs {
+            let k = key(e);
+            if done.contains(&k) {
+                continue;
+            }
+            let holders: Vec<&str> = per_instance
+                .iter()
+                .filter(|(_, es)| es.iter().any(|x| key(x) == k))
+                .map(|(d, _)| d.as_str())
+                .collect();
+            if holders.len() == n {
+                out.push(e.clone());
+            } else {
+                out.push(syn::Error::new(
+                    e.span(),
+                    format!("in `{}`: {e}", holders.join("`, `")),
+                ));
+            }
+            done.push(k);
+        }
+    }
+    out
+}
+
+/// The `Kernel` impl (and its checks) of one kernel or one instance of a generic kernel, for
+/// the unit struct `ident`; `display` names a generic instance in messages (`integrate<f32>`).
+fn kernel_instance(
+    item: &syn::ItemFn,
+    opts: &attrs::KernelAttrs,
+    ident: &syn::Ident,
+    display: Option<String>,
+) -> Result<(TokenStream, TokenStream), Vec<syn::Error>> {
+    let mut errors = Vec::new();
+    let f = match lower::lower_fn(item, FnKind::Kernel) {
+        Ok(mut f) => {
+            if let Some(d) = display {
+                f.name = d;
+            }
+            Some(f)
+        }
         Err(e) => {
             errors.extend(e);
             None
@@ -56,18 +201,12 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         }
     }
     let (Some(f), true) = (f, errors.is_empty()) else {
-        // Keep a unit struct so that uses of the kernel do not add errors of their own.
-        let vis = &item.vis;
-        let name = &item.sig.ident;
-        let errs = errors_to_tokens(errors);
-        return quote!(#errs #[allow(non_camel_case_types)] #vis struct #name;);
+        return Err(errors);
     };
 
     let em = RustEmitter::new(&f);
-    let vis = &item.vis;
-    let name = &item.sig.ident;
+    let name = ident;
     let name_str = Literal::string(&f.name);
-    let doc_attrs = item.attrs.iter().filter(|a| a.path().is_ident("doc"));
     let tys: Vec<&syn::Type> = f.params.iter().map(|p| &p.syn_ty).collect();
     let pnames: Vec<Literal> = f.params.iter().map(|p| Literal::string(&p.name)).collect();
     let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
@@ -179,206 +318,213 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         .map(|k| quote::format_ident!("__grad{}", k))
         .collect();
 
-    let out = quote! {
-        #(#doc_attrs)*
-        #[allow(non_camel_case_types)]
-        #[derive(Clone, Copy, Debug, Default)]
-        #vis struct #name;
-
-        const _: () = {
-            use ::warp_lang::__private as __wp;
-            #callee_checks
-            impl __wp::Kernel for #name {
-                type Args<'__a> = ( #( <#tys as __wp::KernelArg>::Arg<'__a>, )* );
-                type CpuParams = ( #( <#tys as __wp::KernelArg>::CpuView, )* );
-                const INFO: __wp::KernelInfo = __wp::KernelInfo {
-                    name: #name_str,
-                    module: ::core::module_path!(),
-                    params: &[#(#pnames),*],
-                    tid_ndim: #tid,
-                    same_shape: &[#(#groups),*],
-                    written: &[#(#written),*],
-                    file: ::core::file!(),
-                    cuda: #cuda_src,
-                    cuda_sections: &[#(#cuda_sections),*],
-                    callees: &[#(&#callees::__WP_FUNC),*],
-                    structs: &[#(<#struct_tys as __wp::CudaStruct>::cuda_defs),*],
-                    adjoint_error: __wp::first_error(&[#adjoint_error #(, #callees::__WP_ADJOINT_ERROR)*]),
-                    cuda_adjoint: #cuda_adjoint,
-                    cuda_adjoint_stack: #cuda_adjoint_stack,
-                    cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
-                };
-                type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
-                unsafe fn cpu_grads(
-                    __args: &Self::Args<'_>,
-                    __device: &__wp::Device,
-                ) -> __wp::Result<Self::CpuGrads> {
-                    // SAFETY: forwarded contract: the views do not outlive `__args`.
-                    ::core::result::Result::Ok(( #( unsafe {
-                        <#tys as __wp::KernelArg>::grad_view(
-                            &__args.#idx,
-                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
-                        )?
-                    }, )* ))
-                }
-                type CudaGrads = ( #( <#arr_tys as __wp::KernelArg>::CudaGrad, )* );
-                fn cuda_grads(
-                    __args: &Self::Args<'_>,
-                    __device: &__wp::Device,
-                ) -> __wp::Result<Self::CudaGrads> {
-                    ::core::result::Result::Ok(( #(
-                        <#arr_tys as __wp::KernelArg>::cuda_grad(
-                            &__args.#arr_idx,
-                            &__wp::ArgCtx { kernel: #name_str, arg: #arr_names, index: #arr_idx_usize, device: __device },
-                        )?,
-                    )* ))
-                }
-                #[allow(unused_variables)]
-                fn cuda_grad_ptrs(
-                    __grads: &mut Self::CudaGrads,
-                    __out: &mut [*mut ::core::ffi::c_void],
-                ) -> usize {
-                    #( __out[#arr_pos] = (&mut __grads.#arr_pos_idx) as *mut _ as *mut ::core::ffi::c_void; )*
-                    #n_arrays
-                }
-                type Owned = ( #( <#tys as __wp::KernelArg>::Owned, )* );
-                #[allow(clippy::unused_unit)]
-                fn own(__args: &Self::Args<'_>) -> Self::Owned {
-                    ( #( <#tys as __wp::KernelArg>::own(&__args.#idx), )* )
-                }
-                #[allow(clippy::unused_unit)]
-                fn borrow(__owned: &Self::Owned) -> Self::Args<'_> {
-                    ( #( <#tys as __wp::KernelArg>::borrow(&__owned.#idx), )* )
-                }
-                fn verify_fp(__args: &Self::Args<'_>) -> __wp::Result<()> {
-                    #( <#w_tys as __wp::KernelArg>::check_finite(&__args.#w_idx, #name_str, #w_names)?; )*
-                    ::core::result::Result::Ok(())
-                }
-                fn zero_grads(__args: &Self::Args<'_>) -> __wp::Result<()> {
-                    #( <#tys as __wp::KernelArg>::zero_grad(&__args.#idx)?; )*
-                    ::core::result::Result::Ok(())
-                }
-                fn run_cpu_adjoint(
-                    __params: &Self::CpuParams,
-                    __grads: &Self::CpuGrads,
-                    __grid: &__wp::Grid,
-                    __range: ::core::ops::Range<usize>,
-                    __stack: &mut __wp::AdStack,
-                ) -> __wp::KResult<()> {
-                    #[inline(always)]
-                    #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-                    fn __adj_thread<const __FAST: bool>(
-                        #( mut #pnames_plain: <#tys as __wp::KernelArg>::CpuView, )*
-                        #( #grad_pats: <#tys as __wp::KernelArg>::GradView, )*
+    // The launch arguments' type spelt out (what `Kernel::Args` normalises to): a generic
+    // kernel's `Launchable` impls are told apart by these, and coherence does not normalise.
+    let launch_args = f.params.iter().map(|p| {
+        let t = &p.syn_ty;
+        if matches!(p.ty, crate::types::Ty::Array(..)) {
+            quote!(&'__a #t)
+        } else {
+            quote!(#t)
+        }
+    });
+    let launch_args = quote!(( #(#launch_args,)* ));
+    Ok((
+        launch_args,
+        quote! {
+            const _: () = {
+                use ::warp_lang::__private as __wp;
+                #callee_checks
+                impl __wp::Kernel for #name {
+                    type Args<'__a> = ( #( <#tys as __wp::KernelArg>::Arg<'__a>, )* );
+                    type CpuParams = ( #( <#tys as __wp::KernelArg>::CpuView, )* );
+                    const INFO: __wp::KernelInfo = __wp::KernelInfo {
+                        name: #name_str,
+                        module: ::core::module_path!(),
+                        params: &[#(#pnames),*],
+                        tid_ndim: #tid,
+                        same_shape: &[#(#groups),*],
+                        written: &[#(#written),*],
+                        file: ::core::file!(),
+                        cuda: #cuda_src,
+                        cuda_sections: &[#(#cuda_sections),*],
+                        callees: &[#(&#callees::__WP_FUNC),*],
+                        structs: &[#(<#struct_tys as __wp::CudaStruct>::cuda_defs),*],
+                        adjoint_error: __wp::first_error(&[#adjoint_error #(, #callees::__WP_ADJOINT_ERROR)*]),
+                        cuda_adjoint: #cuda_adjoint,
+                        cuda_adjoint_stack: #cuda_adjoint_stack,
+                        cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
+                    };
+                    type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
+                    unsafe fn cpu_grads(
+                        __args: &Self::Args<'_>,
+                        __device: &__wp::Device,
+                    ) -> __wp::Result<Self::CpuGrads> {
+                        // SAFETY: forwarded contract: the views do not outlive `__args`.
+                        ::core::result::Result::Ok(( #( unsafe {
+                            <#tys as __wp::KernelArg>::grad_view(
+                                &__args.#idx,
+                                &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
+                            )?
+                        }, )* ))
+                    }
+                    type CudaGrads = ( #( <#arr_tys as __wp::KernelArg>::CudaGrad, )* );
+                    fn cuda_grads(
+                        __args: &Self::Args<'_>,
+                        __device: &__wp::Device,
+                    ) -> __wp::Result<Self::CudaGrads> {
+                        ::core::result::Result::Ok(( #(
+                            <#arr_tys as __wp::KernelArg>::cuda_grad(
+                                &__args.#arr_idx,
+                                &__wp::ArgCtx { kernel: #name_str, arg: #arr_names, index: #arr_idx_usize, device: __device },
+                            )?,
+                        )* ))
+                    }
+                    #[allow(unused_variables)]
+                    fn cuda_grad_ptrs(
+                        __grads: &mut Self::CudaGrads,
+                        __out: &mut [*mut ::core::ffi::c_void],
+                    ) -> usize {
+                        #( __out[#arr_pos] = (&mut __grads.#arr_pos_idx) as *mut _ as *mut ::core::ffi::c_void; )*
+                        #n_arrays
+                    }
+                    type Owned = ( #( <#tys as __wp::KernelArg>::Owned, )* );
+                    #[allow(clippy::unused_unit)]
+                    fn own(__args: &Self::Args<'_>) -> Self::Owned {
+                        ( #( <#tys as __wp::KernelArg>::own(&__args.#idx), )* )
+                    }
+                    #[allow(clippy::unused_unit)]
+                    fn borrow(__owned: &Self::Owned) -> Self::Args<'_> {
+                        ( #( <#tys as __wp::KernelArg>::borrow(&__owned.#idx), )* )
+                    }
+                    fn verify_fp(__args: &Self::Args<'_>) -> __wp::Result<()> {
+                        #( <#w_tys as __wp::KernelArg>::check_finite(&__args.#w_idx, #name_str, #w_names)?; )*
+                        ::core::result::Result::Ok(())
+                    }
+                    fn zero_grads(__args: &Self::Args<'_>) -> __wp::Result<()> {
+                        #( <#tys as __wp::KernelArg>::zero_grad(&__args.#idx)?; )*
+                        ::core::result::Result::Ok(())
+                    }
+                    fn run_cpu_adjoint(
+                        __params: &Self::CpuParams,
+                        __grads: &Self::CpuGrads,
                         __grid: &__wp::Grid,
-                        __flat: usize,
+                        __range: ::core::ops::Range<usize>,
                         __stack: &mut __wp::AdStack,
                     ) -> __wp::KResult<()> {
-                        #tid_setup
-                        #adjoint_body
+                        #[inline(always)]
+                        #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+                        fn __adj_thread<const __FAST: bool>(
+                            #( mut #pnames_plain: <#tys as __wp::KernelArg>::CpuView, )*
+                            #( #grad_pats: <#tys as __wp::KernelArg>::GradView, )*
+                            __grid: &__wp::Grid,
+                            __flat: usize,
+                            __stack: &mut __wp::AdStack,
+                        ) -> __wp::KResult<()> {
+                            #tid_setup
+                            #adjoint_body
+                            ::core::result::Result::Ok(())
+                        }
+                        let ( #(#pnames_plain,)* ) = *__params;
+                        let ( #(#grad_names,)* ) = *__grads;
+                        let __grid = *__grid;
+                        // As in `run_cpu`: thread-index accesses skip their checks when the arrays
+                        // cover the grid (and their gradients skip atomics where that is safe).
+                        if true #( && #fast_arrays.covers(&__grid.dims) )* {
+                            for __flat in __range {
+                                __stack.clear();
+                                __adj_thread::<true>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
+                            }
+                        } else {
+                            for __flat in __range {
+                                __stack.clear();
+                                __adj_thread::<false>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
+                            }
+                        }
                         ::core::result::Result::Ok(())
                     }
-                    let ( #(#pnames_plain,)* ) = *__params;
-                    let ( #(#grad_names,)* ) = *__grads;
-                    let __grid = *__grid;
-                    // As in `run_cpu`: thread-index accesses skip their checks when the arrays
-                    // cover the grid (and their gradients skip atomics where that is safe).
-                    if true #( && #fast_arrays.covers(&__grid.dims) )* {
-                        for __flat in __range {
-                            __stack.clear();
-                            __adj_thread::<true>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
-                        }
-                    } else {
-                        for __flat in __range {
-                            __stack.clear();
-                            __adj_thread::<false>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;
-                        }
+                    unsafe fn cpu_params(
+                        __args: &Self::Args<'_>,
+                        __device: &__wp::Device,
+                    ) -> __wp::Result<Self::CpuParams> {
+                        // SAFETY: forwarded contract: the views do not outlive `__args`.
+                        ::core::result::Result::Ok(( #( unsafe {
+                            <#tys as __wp::KernelArg>::cpu_view(
+                                &__args.#idx,
+                                &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
+                            )?
+                        }, )* ))
                     }
-                    ::core::result::Result::Ok(())
-                }
-                unsafe fn cpu_params(
-                    __args: &Self::Args<'_>,
-                    __device: &__wp::Device,
-                ) -> __wp::Result<Self::CpuParams> {
-                    // SAFETY: forwarded contract: the views do not outlive `__args`.
-                    ::core::result::Result::Ok(( #( unsafe {
-                        <#tys as __wp::KernelArg>::cpu_view(
-                            &__args.#idx,
-                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
-                        )?
-                    }, )* ))
-                }
-                type CudaParams = ( #( <#tys as __wp::KernelArg>::CudaArg, )* );
-                fn cuda_params(
-                    __args: &Self::Args<'_>,
-                    __device: &__wp::Device,
-                ) -> __wp::Result<Self::CudaParams> {
-                    ::core::result::Result::Ok(( #(
-                        <#tys as __wp::KernelArg>::cuda_arg(
-                            &__args.#idx,
-                            &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
-                        )?,
-                    )* ))
-                }
-                #[allow(unused_variables)]
-                fn cuda_param_ptrs(
-                    __params: &mut Self::CudaParams,
-                    __out: &mut [*mut ::core::ffi::c_void],
-                ) -> usize {
-                    #( __out[#idx_usize] = (&mut __params.#idx) as *mut _ as *mut ::core::ffi::c_void; )*
-                    #n_params
-                }
-                fn info() -> &'static __wp::KernelInfo {
-                    &<Self as __wp::Kernel>::INFO
-                }
-                fn tid_arrays_cover(__args: &Self::Args<'_>, __grid: &__wp::Grid) -> bool {
-                    true #( && <#fast_tys as __wp::KernelArg>::covers(&__args.#fast_idx, &__grid.dims) )*
-                }
-                fn arrays_contiguous(__args: &Self::Args<'_>) -> bool {
-                    true #( && <#tys as __wp::KernelArg>::contiguous(&__args.#idx) )*
-                }
-                fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
-                    ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
-                }
-                fn run_cpu(
-                    __params: &Self::CpuParams,
-                    __grid: &__wp::Grid,
-                    __range: ::core::ops::Range<usize>,
-                ) -> __wp::KResult<()> {
-                    // One thread. Its parameters arrive by value, so that they live in registers:
-                    // read through `__params`, every array access would have to reload the views,
-                    // since a store through a raw pointer might alias them.
-                    #[inline(always)]
-                    #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-                    fn __thread<const __FAST: bool>(
-                        #( #pvars: <#tys as __wp::KernelArg>::CpuView, )*
+                    type CudaParams = ( #( <#tys as __wp::KernelArg>::CudaArg, )* );
+                    fn cuda_params(
+                        __args: &Self::Args<'_>,
+                        __device: &__wp::Device,
+                    ) -> __wp::Result<Self::CudaParams> {
+                        ::core::result::Result::Ok(( #(
+                            <#tys as __wp::KernelArg>::cuda_arg(
+                                &__args.#idx,
+                                &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
+                            )?,
+                        )* ))
+                    }
+                    #[allow(unused_variables)]
+                    fn cuda_param_ptrs(
+                        __params: &mut Self::CudaParams,
+                        __out: &mut [*mut ::core::ffi::c_void],
+                    ) -> usize {
+                        #( __out[#idx_usize] = (&mut __params.#idx) as *mut _ as *mut ::core::ffi::c_void; )*
+                        #n_params
+                    }
+                    fn info() -> &'static __wp::KernelInfo {
+                        &<Self as __wp::Kernel>::INFO
+                    }
+                    fn tid_arrays_cover(__args: &Self::Args<'_>, __grid: &__wp::Grid) -> bool {
+                        true #( && <#fast_tys as __wp::KernelArg>::covers(&__args.#fast_idx, &__grid.dims) )*
+                    }
+                    fn arrays_contiguous(__args: &Self::Args<'_>) -> bool {
+                        true #( && <#tys as __wp::KernelArg>::contiguous(&__args.#idx) )*
+                    }
+                    fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
+                        ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
+                    }
+                    fn run_cpu(
+                        __params: &Self::CpuParams,
                         __grid: &__wp::Grid,
-                        __flat: usize,
+                        __range: ::core::ops::Range<usize>,
                     ) -> __wp::KResult<()> {
-                        #tid_setup
-                        #body
+                        // One thread. Its parameters arrive by value, so that they live in registers:
+                        // read through `__params`, every array access would have to reload the views,
+                        // since a store through a raw pointer might alias them.
+                        #[inline(always)]
+                        #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+                        fn __thread<const __FAST: bool>(
+                            #( #pvars: <#tys as __wp::KernelArg>::CpuView, )*
+                            __grid: &__wp::Grid,
+                            __flat: usize,
+                        ) -> __wp::KResult<()> {
+                            #tid_setup
+                            #body
+                            ::core::result::Result::Ok(())
+                        }
+                        let ( #(#pnames_plain,)* ) = *__params;
+                        let __grid = *__grid;
+                        // Arrays indexed by the thread index: if they cover the grid, those accesses
+                        // are in bounds for every thread and the per-thread checks can go.
+                        if true #( && #fast_arrays.covers(&__grid.dims) )* {
+                            for __flat in __range {
+                                __thread::<true>( #(#pnames_plain,)* &__grid, __flat)?;
+                            }
+                        } else {
+                            for __flat in __range {
+                                __thread::<false>( #(#pnames_plain,)* &__grid, __flat)?;
+                            }
+                        }
                         ::core::result::Result::Ok(())
                     }
-                    let ( #(#pnames_plain,)* ) = *__params;
-                    let __grid = *__grid;
-                    // Arrays indexed by the thread index: if they cover the grid, those accesses
-                    // are in bounds for every thread and the per-thread checks can go.
-                    if true #( && #fast_arrays.covers(&__grid.dims) )* {
-                        for __flat in __range {
-                            __thread::<true>( #(#pnames_plain,)* &__grid, __flat)?;
-                        }
-                    } else {
-                        for __flat in __range {
-                            __thread::<false>( #(#pnames_plain,)* &__grid, __flat)?;
-                        }
-                    }
-                    ::core::result::Result::Ok(())
                 }
-            }
-        };
-    };
-    dump(&f.name, &out);
-    out
+            };
+        },
+    ))
 }
 
 /// With `WARP_LANG_DUMP=1` (or the kernel's name) in the environment at build time, prints the
@@ -464,21 +610,119 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             attrs::FuncAttrs::default()
         }
     };
-    let f = match lower::lower_fn(&item, FnKind::Func) {
-        Ok(f) => Some(f),
+    let vis = &item.vis;
+    let name = &item.sig.ident;
+    let doc_attrs: Vec<&syn::Attribute> = item
+        .attrs
+        .iter()
+        .filter(|a| a.path().is_ident("doc"))
+        .collect();
+    let failed = |errors: Vec<syn::Error>| {
+        let errs = errors_to_tokens(errors);
+        quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {})
+    };
+    let generics = match generics::parse(&item) {
+        Ok(g) => g,
         Err(e) => {
             errors.extend(e);
-            None
+            return failed(errors);
         }
+    };
+    let Some(g) = generics else {
+        if !errors.is_empty() {
+            if let Err(e) = lower::lower_fn(&item, FnKind::Func) {
+                errors.extend(e);
+            }
+            return failed(errors);
+        }
+        return match func_instance(&item, &fattrs, None) {
+            Ok(items) => quote! {
+                #(#doc_attrs)*
+                ///
+                /// A `#[func]`: callable from kernels and other funcs.
+                #[allow(non_camel_case_types)]
+                #vis struct #name {}
+
+                impl #name {
+                    #items
+                }
+
+                const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+            },
+            Err(e) => failed(e),
+        };
+    };
+    // A generic func: `f<T>` is a type with one inherent impl per instance, so that a caller
+    // names the instance as `f::<T>(..)` (in a generic kernel, `T` is concrete by then).
+    if !fattrs.grad.is_empty() {
+        errors.push(syn::Error::new(
+            item.sig.generics.span(),
+            "custom gradients (`#[func(grad(..))]`) are not supported on generic funcs yet",
+        ));
+    }
+    errors.extend(generics::check_params_select(&item, &g));
+    let mut impls = TokenStream::new();
+    let mut per_instance = Vec::new();
+    for inst in generics::instances(&item, &g) {
+        let display = inst.display_name(&name.to_string());
+        let tys: Vec<syn::Ident> = inst
+            .types
+            .iter()
+            .map(|t| syn::Ident::new(t, name.span()))
+            .collect();
+        match func_instance(&inst.item, &fattrs, Some(display.clone())) {
+            Ok(items) => {
+                impls.extend(quote! {
+                    impl #name<#(#tys),*> {
+                        #items
+                    }
+                    const _: usize =
+                        #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                });
+                per_instance.push((display, Vec::new()));
+            }
+            Err(e) => per_instance.push((display, e)),
+        }
+    }
+    errors.extend(instance_errors(per_instance));
+    if !errors.is_empty() {
+        return failed(errors);
+    }
+    let params: Vec<&syn::Ident> = g.params.iter().map(|(id, _)| id).collect();
+    let bound_check = generics::bound_check(&g);
+    quote! {
+        #(#doc_attrs)*
+        ///
+        /// A generic `#[func]`: callable from kernels and other funcs as `name::<f32>(..)` or,
+        /// in a generic kernel, `name::<T>(..)`.
+        #[allow(non_camel_case_types)]
+        #vis struct #name<#(#params),*> {
+            _instance: ::core::marker::PhantomData<(#(#params,)*)>,
+        }
+        #bound_check
+        #impls
+    }
+}
+
+/// The inherent items of one func or one instance of a generic func (its CPU code, replay,
+/// adjoint, and what the CUDA assembler needs); `display` names a generic instance.
+fn func_instance(
+    item: &syn::ItemFn,
+    fattrs: &attrs::FuncAttrs,
+    display: Option<String>,
+) -> Result<TokenStream, Vec<syn::Error>> {
+    let f = match lower::lower_fn(item, FnKind::Func) {
+        Ok(mut f) => {
+            if let Some(d) = display {
+                f.name = d;
+            }
+            f
+        }
+        Err(e) => return Err(e),
     };
     let vis = &item.vis;
     let name = &item.sig.ident;
-    let (Some(f), true) = (f, errors.is_empty()) else {
-        let errs = errors_to_tokens(errors);
-        return quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {});
-    };
     let em = RustEmitter::new(&f);
-    let doc_attrs = item.attrs.iter().filter(|a| a.path().is_ident("doc"));
     let params = f.params.iter().map(|p| {
         let v = em.var(p.var);
         let m = if f.vars[p.var].mutable {
@@ -515,18 +759,16 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         let mut body = TokenStream::new();
         for (param, gf) in &fattrs.grad {
             let Some(k) = f.params.iter().position(|p| *param == p.name) else {
-                return syn::Error::new(
+                return Err(vec![syn::Error::new(
                     param.span(),
                     format!("`{param}` is not a parameter of this func"),
-                )
-                .to_compile_error();
+                )]);
             };
             if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
-                return syn::Error::new(
+                return Err(vec![syn::Error::new(
                     param.span(),
                     "custom gradients are for value parameters; an array's gradient comes from the accesses",
-                )
-                .to_compile_error();
+                )]);
             }
             let out = format_ident!("__adj_out{}", k);
             let args = f.params.iter().map(|p| em.var(p.var));
@@ -626,14 +868,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         #vis const __WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED: usize =
             1 + ::warp_lang::__private::max_depth(&[#(#depths),*]);
     };
-    quote! {
-        #(#doc_attrs)*
-        ///
-        /// A `#[func]`: callable from kernels and other funcs.
-        #[allow(non_camel_case_types)]
-        #vis struct #name {}
-
-        impl #name {
+    Ok(quote! {
             #depth_const
             #func_info
 
@@ -674,10 +909,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                 #adj_body
                 ::core::result::Result::Ok(())
             }
-        }
-
-        const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
-    }
+    })
 }
 
 /// `#[derive(Struct)]`.

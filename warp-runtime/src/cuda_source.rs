@@ -34,6 +34,21 @@ fn collect(roots: &[&'static FuncInfo], out: &mut Vec<&'static FuncInfo>) {
     }
 }
 
+/// A name as part of a C identifier: an instance of a generic kernel or func is named
+/// `integrate<f32>`, which C++ spells `integrate_f32_`.
+fn c_ident(name: &str) -> String {
+    name.chars()
+        .filter(|c| *c != ' ')
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
 fn fill(template: &str, self_name: &str, file: &str, callees: &[(String, &str)]) -> String {
     let mut s = template
         .replace("@@SELF@@", self_name)
@@ -66,7 +81,7 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
             .iter()
             .position(|g| g.module == f.module && g.name == f.name)
             .expect("collected");
-        format!("wpf{k}_{}", f.name)
+        format!("wpf{k}_{}", c_ident(f.name))
     };
     let mut sections: Vec<&str> = info.cuda_sections.to_vec();
     for f in &funcs {
@@ -117,8 +132,8 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
     }
     // The names the templates' `@@SELF@@`/`@@ENTRY@@` stand for; the adjoint template appends
     // `_adj` to both.
-    let base_self = format!("wpk_{}_thread", info.name);
-    let base_entry = format!("wpk_{}", info.name);
+    let base_self = format!("wpk_{}_thread", c_ident(info.name));
+    let base_entry = format!("wpk_{}", c_ident(info.name));
     let callees: Vec<(String, &str)> = info
         .callees
         .iter()

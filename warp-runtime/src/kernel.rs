@@ -162,7 +162,28 @@ pub trait CudaStruct {
     }
 }
 
+/// What [`launch`](crate::launch) accepts as a kernel with the arguments `A`: every
+/// [`Kernel`] (with its own [`Kernel::Args`]), and a generic kernel
+/// (`#[kernel] fn k<T: Float>(..)`), which has one instance per float type and picks the one
+/// whose parameter types the arguments have. Implemented by `#[kernel]`.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` takes no launch arguments of type `{A}`",
+    note = "a generic kernel has one instance per float type: its arrays and scalars must all agree on f32 or f64"
+)]
+pub trait Launchable<A>: Copy {
+    /// The kernel (or the instance of a generic kernel) that runs.
+    type Kernel: Kernel;
+}
+
+impl<'a, K: Kernel> Launchable<K::Args<'a>> for K {
+    type Kernel = K;
+}
+
 /// A compiled kernel. Implemented by `#[kernel]`; not meant to be implemented by hand.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a kernel, or is a generic kernel without an instance for these launch arguments",
+    note = "kernels are made by `#[kernel]`; a generic kernel has one instance per float type, and its arrays and scalars must all agree on f32 or f64"
+)]
 pub trait Kernel: Copy + Send + Sync + 'static {
     /// The host-side arguments, as a tuple in parameter order.
     type Args<'a>: Copy;

@@ -8,7 +8,7 @@
 use crate::config;
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
-use crate::kernel::Kernel;
+use crate::kernel::{Kernel, Launchable};
 #[cfg(feature = "cuda")]
 use crate::stream::Stream;
 use rayon::prelude::*;
@@ -176,13 +176,16 @@ fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
 /// [`Error::InvalidDim`], [`Error::TidMismatch`], [`Error::ShapeMismatch`],
 /// [`Error::DeviceMismatch`], [`Error::Fault`], and [`Error::NoDevice`] for a CUDA device
 /// (not built yet).
-pub fn launch<K: Kernel>(
-    kernel: K,
-    dim: impl Into<Dim>,
-    args: K::Args<'_>,
-    device: &Device,
-) -> Result<()> {
-    launch_with(kernel, dim.into(), args, device, None)
+///
+/// A generic kernel (`#[kernel] fn k<T: Float>(..)`) runs its instance for the arguments'
+/// types: `launch(k, n, (&x_f64, 0.5), &dev)` runs `k<f64>`.
+pub fn launch<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, device: &Device) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Kernel<Args<'a> = A>,
+{
+    let _ = kernel;
+    launch_with::<L::Kernel>(dim.into(), args, device, None)
 }
 
 /// Launches `kernel` on `stream` (a CUDA stream; see [`crate::stream`] for how streams are
@@ -193,13 +196,13 @@ pub fn launch<K: Kernel>(
 /// # Errors
 /// As [`launch`].
 #[cfg(feature = "cuda")]
-pub fn launch_on<K: Kernel>(
-    kernel: K,
-    dim: impl Into<Dim>,
-    args: K::Args<'_>,
-    stream: &Stream,
-) -> Result<()> {
-    launch_with(kernel, dim.into(), args, stream.device(), Some(stream))
+pub fn launch_on<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, stream: &Stream) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Kernel<Args<'a> = A>,
+{
+    let _ = kernel;
+    launch_with::<L::Kernel>(dim.into(), args, stream.device(), Some(stream))
 }
 
 #[cfg(feature = "cuda")]
@@ -208,14 +211,13 @@ type StreamArg<'s> = Option<&'s Stream>;
 type StreamArg<'s> = Option<&'s std::convert::Infallible>;
 
 fn launch_with<K: Kernel>(
-    kernel: K,
     dim: Dim,
     args: K::Args<'_>,
     device: &Device,
     stream: StreamArg<'_>,
 ) -> Result<()> {
     // The kernel value is a unit struct: its type says everything.
-    let _ = (kernel, stream);
+    let _ = stream;
     let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
     let result = match device.kind() {

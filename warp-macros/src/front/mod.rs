@@ -2,5 +2,6 @@
 //! rules. Errors carry the user's span and are gathered, many at once (one per statement).
 
 pub mod attrs;
+pub mod generics;
 pub mod lower;
 pub mod signature;
