@@ -79,8 +79,9 @@ pub use warp_runtime::{
 };
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, IntoShape,
-    Kernel, KernelArg, KernelInfo, Launchable, Recording, Result, Runtime, Seed, Tape,
+    init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error,
+    GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, Launchable, Recording, Result,
+    Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
@@ -105,7 +106,8 @@ pub mod __private {
         ArrayView, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
     };
     pub use warp_runtime::{
-        ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Launchable, Result,
+        ArgCtx, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg, KernelInfo,
+        Launchable, Result,
     };
 }
 

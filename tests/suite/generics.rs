@@ -12,6 +12,7 @@ backend_tests!(
     generic_vectors_and_constants,
     two_type_parameters,
     generic_kernel_gradients,
+    instances_are_named,
 );
 
 /// `y = a * x + y` in the array's precision.
@@ -209,4 +210,31 @@ fn generic_kernel_gradients(dev: &wp::Device) {
         assert_close_f64(g64[k], want, fma_rel64(dev), "d/dx power_sum<f64>");
         assert_close_f32(g32[k], want as f32, fma_rel(dev), "d/dx power_sum<f32>");
     }
+}
+
+/// Each instance is a kernel of its own: named after its types in reports and errors, with a
+/// CUDA entry point of its own.
+fn instances_are_named(dev: &wp::Device) {
+    let infos = wp::aot::instances(convert);
+    let names: Vec<&str> = infos.iter().map(|i| i.name).collect();
+    assert_eq!(
+        names,
+        [
+            "convert<f32, f32>",
+            "convert<f32, f64>",
+            "convert<f64, f32>",
+            "convert<f64, f64>"
+        ]
+    );
+    let entries: Vec<String> = infos
+        .iter()
+        .map(|i| wp::cuda_source::assemble(i).entry)
+        .collect();
+    assert_eq!(entries[1], "wpk_convert_f32_f64_");
+    assert!(entries.windows(2).all(|w| w[0] != w[1]));
+    // A fault names the instance.
+    let src = arr(&[1.0f64], dev);
+    let dst = zeros::<f32, 1>(1, dev);
+    let err = wp::launch(convert, 2, (&src, &dst), dev).unwrap_err();
+    assert!(err.to_string().contains("convert<f64, f32>"), "{err}");
 }

@@ -111,6 +111,11 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
             #( impl<'__a> ::warp_lang::__private::Launchable<#inst_args> for #name {
                 type Kernel = #inst_idents;
             } )*
+            impl ::warp_lang::__private::GenericKernel for #name {
+                fn instances() -> ::std::vec::Vec<&'static ::warp_lang::__private::KernelInfo> {
+                    ::std::vec![ #( <#inst_idents as ::warp_lang::__private::Kernel>::info() ),* ]
+                }
+            }
         };
     };
     dump(&name.to_string(), &out);

@@ -26,6 +26,11 @@ mod types;
 /// parameters (and `dim`, the launch dimensions) have equal shapes;
 /// `#[kernel(enable_backward = false)]` generates no adjoint (backward through the kernel is
 /// then an error).
+///
+/// Generic kernels: `fn k<T: Float>(x: Array<Vec3<T>>, s: T)` is instantiated for f32 and f64
+/// (`Vec3<T>` is `Vec3` or `DVec3`; likewise `Vec2`, `Vec4`, `Mat2`..`Mat4`, `Quat`), and
+/// `wp::launch(k, ..)` runs the instance the arguments' types select. Each type parameter must
+/// appear in a parameter's type.
 #[proc_macro_attribute]
 pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     expand::kernel(attr.into(), item.into()).into()
@@ -36,6 +41,9 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
 /// Option: `#[func(grad(x = dfdx, ..))]` replaces the generated adjoint with custom gradients:
 /// `dfdx` is a `#[func]` taking this func's parameters followed by the adjoint of its result,
 /// and returning the adjoint of `x`; value parameters not listed get no gradient.
+///
+/// Generic funcs (`fn f<T: Float>(v: Vec3<T>) -> T`) are instantiated like generic kernels;
+/// callers name the instance: `f::<T>(v)` in generic code, `f::<f32>(v)` elsewhere.
 #[proc_macro_attribute]
 pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     expand::func(attr.into(), item.into()).into()

@@ -21,11 +21,11 @@
 //! wp::aot::compile(&[wp::aot::kernel(my_kernels::integrate)], &[90, 80], &dir).expect("NVRTC");
 //! println!("cargo:rustc-env=WARP_LANG_AOT_DIR_BUILT={}", dir.display());
 //! ```
-//! and at start-up: `wp::aot::set_aot_dir(Some(env!("WARP_LANG_AOT_DIR_BUILT").into()))`.
+//! (a generic kernel's instances: `wp::aot::instances(my_kernels::axpy)`), and at start-up: `wp::aot::set_aot_dir(Some(env!("WARP_LANG_AOT_DIR_BUILT").into()))`.
 
 use crate::cuda_source;
 use crate::error::{Error, Result};
-use crate::kernel::{Kernel, KernelInfo};
+use crate::kernel::{GenericKernel, Kernel, KernelInfo};
 use std::path::{Path, PathBuf};
 use std::sync::RwLock;
 use warp_cuda::{CacheLookup, CompileOptions, KernelCache};
@@ -53,6 +53,13 @@ pub fn aot_dir() -> Option<PathBuf> {
 pub fn kernel<K: Kernel>(kernel: K) -> &'static KernelInfo {
     let _ = kernel;
     K::info()
+}
+
+/// The static descriptions of every instance of a generic kernel, for [`compile`]:
+/// `wp::aot::instances(integrate)` gives `integrate<f32>` and `integrate<f64>`.
+pub fn instances<G: GenericKernel>(kernel: G) -> Vec<&'static KernelInfo> {
+    let _ = kernel;
+    G::instances()
 }
 
 /// One cubin written by [`compile`].

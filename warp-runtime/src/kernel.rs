@@ -179,6 +179,14 @@ impl<'a, K: Kernel> Launchable<K::Args<'a>> for K {
     type Kernel = K;
 }
 
+/// A generic kernel (`#[kernel] fn k<T: Float>(..)`): the set of its instances, one per
+/// float type (or combination of them). Implemented by `#[kernel]`; used by
+/// [`aot::instances`](crate::aot::instances) and by reports.
+pub trait GenericKernel: Copy {
+    /// Every instance's static facts, in instance order (`k<f32>`, `k<f64>`).
+    fn instances() -> Vec<&'static KernelInfo>;
+}
+
 /// A compiled kernel. Implemented by `#[kernel]`; not meant to be implemented by hand.
 #[diagnostic::on_unimplemented(
     message = "`{Self}` is not a kernel, or is a generic kernel without an instance for these launch arguments",

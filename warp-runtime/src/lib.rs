@@ -41,7 +41,9 @@ pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };
 pub use error::{Error, Result};
-pub use kernel::{ArgCtx, CudaArray, CudaStruct, Kernel, KernelArg, KernelInfo, Launchable};
+pub use kernel::{
+    ArgCtx, CudaArray, CudaStruct, GenericKernel, Kernel, KernelArg, KernelInfo, Launchable,
+};
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
