@@ -107,6 +107,20 @@ fn scalar_math(x: Array<f32>, out: Array<f32, 2>, flags: Array<i32>) {
     flags[i] = isfinite(a) as i32 + isnan(u) as i32 * 2 + isinf(a * 1e38) as i32 * 4;
 }
 
+/// The atomics without an adjoint (the host build runs its threads one after another, as the
+/// CPU backend does for a launch this small, so even exchanges give the same order).
+#[wp::kernel]
+fn swaps_and_bits(a: Array<i32>, f: Array<f32>, flags: Array<i32>) {
+    let i = tid();
+    let k = i as i32;
+    a[i] = atomic_exch(flags, 0, k) + atomic_cas(flags, 1, k - 1, k) * 100;
+    atomic_or(flags, 2, 1 << (k % 31));
+    atomic_xor(flags, 3, k * 7);
+    atomic_and(flags, 4, !(k & 3));
+    let g = atomic_cas(f, i, -0.0, 1.5) + atomic_exch(f, (i + 1) % 25, 0.5) * 2.0;
+    f[i] += g;
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -439,5 +453,22 @@ fn scalar_math_builtins_match_the_cpu_backend() {
             host,
             cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&flags)])
         );
+    }
+}
+
+#[test]
+fn cas_exch_and_bitwise_atomics_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let a = wp::Array::<i32>::zeros(25, &dev).unwrap();
+    let mut fs: Vec<f32> = (0..25).map(|k| k as f32 * 0.25 - 2.0).collect();
+    fs[3] = -0.0;
+    fs[8] = 0.0;
+    let f = wp::Array::from_slice(&fs, &dev).unwrap();
+    let flags = wp::Array::from_slice(&[5, -1, 0, 0x55, -1], &dev).unwrap();
+    let args = [Arg::I32s(&a), Arg::F32s(&f), Arg::I32s(&flags)];
+    let host = run_on_host::<swaps_and_bits>(&[25], &args);
+    wp::launch(swaps_and_bits, 25, (&a, &f, &flags), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
     }
 }

@@ -66,6 +66,7 @@ fn gpu_lock() -> std::sync::MutexGuard<'static, ()> {
 
 mod arith;
 mod arrays;
+mod atomics;
 mod builtins;
 mod control;
 mod errors;

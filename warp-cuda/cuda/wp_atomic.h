@@ -1,6 +1,8 @@
 // wp_atomic.h: section "atomic" of the builtin table (warp-core/src/builtins/atomic.rs).
 //
 //   atomic_add / atomic_sub / atomic_min / atomic_max (a, idx..., value, ctx) -> old value
+//   atomic_exch, atomic_and / atomic_or / atomic_xor (integers), and
+//   atomic_cas (a, idx..., compare, value, ctx) -> old value (floats: bitwise compare)
 //
 // for arrays of i32, u32, i64, u64 (wrapping add/sub), f32, f64 (min/max with fmin/fmax
 // semantics: a NaN operand loses) and float vectors (componentwise, x first, each component
@@ -80,6 +82,43 @@ WP_FN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { retu
 WP_FN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
 WP_FN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
 
+// ----- compare-and-swap, exchange, bitwise (no adjoint) -----
+// Floats compare and swap bit patterns (as warp-core's AtomicSwapElement).
+WP_FN i32 atomic_cas_p(i32* p, i32 c, i32 v) { return atomicCAS(p, c, v); }
+WP_FN u32 atomic_cas_p(u32* p, u32 c, u32 v) { return atomicCAS(p, c, v); }
+WP_FN i64 atomic_cas_p(i64* p, i64 c, i64 v) {
+  return (i64)atomicCAS((unsigned long long*)p, (unsigned long long)c, (unsigned long long)v);
+}
+WP_FN u64 atomic_cas_p(u64* p, u64 c, u64 v) { return atomicCAS((unsigned long long*)p, c, v); }
+WP_FN f32 atomic_cas_p(f32* p, f32 c, f32 v) {
+  return f32_from_bits(atomicCAS((unsigned int*)p, f32_to_bits(c), f32_to_bits(v)));
+}
+WP_FN f64 atomic_cas_p(f64* p, f64 c, f64 v) {
+  return f64_from_bits(atomicCAS((unsigned long long*)p, (unsigned long long)f64_to_bits(c),
+                                 (unsigned long long)f64_to_bits(v)));
+}
+WP_FN i32 atomic_exch_p(i32* p, i32 v) { return atomicExch(p, v); }
+WP_FN u32 atomic_exch_p(u32* p, u32 v) { return atomicExch(p, v); }
+WP_FN i64 atomic_exch_p(i64* p, i64 v) {
+  return (i64)atomicExch((unsigned long long*)p, (unsigned long long)v);
+}
+WP_FN u64 atomic_exch_p(u64* p, u64 v) { return atomicExch((unsigned long long*)p, v); }
+WP_FN f32 atomic_exch_p(f32* p, f32 v) { return atomicExch(p, v); }
+WP_FN f64 atomic_exch_p(f64* p, f64 v) {
+  return f64_from_bits(atomicExch((unsigned long long*)p, (unsigned long long)f64_to_bits(v)));
+}
+#define WP_BITS_ATOMIC(OP, CU)                                                         \
+  WP_FN i32 atomic_##OP##_p(i32* p, i32 v) { return CU(p, v); }                        \
+  WP_FN u32 atomic_##OP##_p(u32* p, u32 v) { return CU(p, v); }                        \
+  WP_FN i64 atomic_##OP##_p(i64* p, i64 v) {                                           \
+    return (i64)CU((unsigned long long*)p, (unsigned long long)v);                     \
+  }                                                                                    \
+  WP_FN u64 atomic_##OP##_p(u64* p, u64 v) { return CU((unsigned long long*)p, v); }
+WP_BITS_ATOMIC(and, atomicAnd)
+WP_BITS_ATOMIC(or, atomicOr)
+WP_BITS_ATOMIC(xor, atomicXor)
+#undef WP_BITS_ATOMIC
+
 #else  // host: single-threaded read-modify-write (not atomic)
 
 #define WP_HOST_RMW(T)                                                           \
@@ -100,6 +139,31 @@ WP_HOST_RMW(u64)
 WP_HOST_RMW_F(f32)
 WP_HOST_RMW_F(f64)
 #undef WP_HOST_RMW_F
+#define WP_HOST_SWAP(T, BITS)                                                    \
+  WP_FN T atomic_cas_p(T* p, T c, T v) {                                         \
+    const T o = *p;                                                              \
+    if (BITS(o) == BITS(c)) *p = v;                                              \
+    return o;                                                                    \
+  }                                                                              \
+  WP_FN T atomic_exch_p(T* p, T v) { const T o = *p; *p = v; return o; }
+#define WP_SAME(x) (x)
+WP_HOST_SWAP(i32, WP_SAME)
+WP_HOST_SWAP(u32, WP_SAME)
+WP_HOST_SWAP(i64, WP_SAME)
+WP_HOST_SWAP(u64, WP_SAME)
+WP_HOST_SWAP(f32, f32_to_bits)
+WP_HOST_SWAP(f64, f64_to_bits)
+#undef WP_SAME
+#undef WP_HOST_SWAP
+#define WP_HOST_BITS(T)                                                          \
+  WP_FN T atomic_and_p(T* p, T v) { const T o = *p; *p = o & v; return o; }      \
+  WP_FN T atomic_or_p(T* p, T v) { const T o = *p; *p = o | v; return o; }       \
+  WP_FN T atomic_xor_p(T* p, T v) { const T o = *p; *p = o ^ v; return o; }
+WP_HOST_BITS(i32)
+WP_HOST_BITS(u32)
+WP_HOST_BITS(i64)
+WP_HOST_BITS(u64)
+#undef WP_HOST_BITS
 
 #endif
 
@@ -154,6 +218,36 @@ WP_ATOMIC_BUILTIN(add)
 WP_ATOMIC_BUILTIN(sub)
 WP_ATOMIC_BUILTIN(min)
 WP_ATOMIC_BUILTIN(max)
+WP_ATOMIC_BUILTIN(exch)
+WP_ATOMIC_BUILTIN(and)
+WP_ATOMIC_BUILTIN(or)
+WP_ATOMIC_BUILTIN(xor)
 #undef WP_ATOMIC_BUILTIN
+
+// atomic_cas: (array, one i64 index per dimension, compare, value, ctx) -> old value.
+template <typename T>
+WP_FN T atomic_cas(const array_t<T, 1>& a, i64 i0, typename identity<T>::type c,
+                   typename identity<T>::type v, ctx_t* ctx) {
+  T* p = elem_ptr(a, i0, ctx);
+  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+}
+template <typename T>
+WP_FN T atomic_cas(const array_t<T, 2>& a, i64 i0, i64 i1, typename identity<T>::type c,
+                   typename identity<T>::type v, ctx_t* ctx) {
+  T* p = elem_ptr(a, i0, i1, ctx);
+  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+}
+template <typename T>
+WP_FN T atomic_cas(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, typename identity<T>::type c,
+                   typename identity<T>::type v, ctx_t* ctx) {
+  T* p = elem_ptr(a, i0, i1, i2, ctx);
+  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+}
+template <typename T>
+WP_FN T atomic_cas(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3,
+                   typename identity<T>::type c, typename identity<T>::type v, ctx_t* ctx) {
+  T* p = elem_ptr(a, i0, i1, i2, i3, ctx);
+  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+}
 
 }  // namespace wp

@@ -70,7 +70,7 @@ pub fn written_params(f: &Function) -> Vec<usize> {
         StmtKind::Assign {
             op: Op::Builtin { builtin, args },
             ..
-        } if builtin.grad == crate::builtins::Grad::Atomic => w.push(args[0]),
+        } if builtin.is_atomic() => w.push(args[0]),
         StmtKind::Assign {
             op: Op::Func { args, .. },
             ..
@@ -137,6 +137,50 @@ pub fn loop_indexed_params(f: &Function, body: &Block, var: VarId) -> Vec<VarId>
         }
     });
     out
+}
+
+/// Why an adjoint of `f` cannot be generated because of an atomic without an adjoint
+/// (`atomic_cas`, `atomic_exch`, `atomic_and/or/xor`): its value is a float (the gradient it
+/// carries would be lost), or the old value it returns is used (the adjoint's replay does not
+/// redo atomics, so it would not have that value). Integer updates whose result is unused,
+/// the common case of flags and counters, are fine.
+pub fn atomic_without_adjoint(f: &Function) -> Option<String> {
+    let mut reads: Vec<VarId> = Vec::new();
+    walk_stmts(&f.body, &mut |s| {
+        s.kind.for_each_read(&mut |v| reads.push(v))
+    });
+    let mut why = None;
+    walk_stmts(&f.body, &mut |s| {
+        if why.is_some() {
+            return;
+        }
+        if let StmtKind::Assign {
+            dst,
+            op: Op::Builtin { builtin, args },
+            ..
+        } = &s.kind
+        {
+            if builtin.grad != crate::builtins::Grad::AtomicNone {
+                return;
+            }
+            let value_is_float = f
+                .ty(args[args.len() - 1])
+                .scalar()
+                .is_some_and(|s| s.is_float());
+            if value_is_float {
+                why = Some(format!(
+                    "uses `{}` on floats, which has no adjoint (as in Warp)",
+                    builtin.name
+                ));
+            } else if reads.contains(dst) {
+                why = Some(format!(
+                    "uses the old value `{}` returns, which the adjoint's replay cannot recompute",
+                    builtin.name
+                ));
+            }
+        }
+    });
+    why
 }
 
 #[cfg(test)]

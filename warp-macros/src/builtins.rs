@@ -39,6 +39,10 @@ pub enum Class {
     FloatVector3,
     /// Quat, DQuat.
     Quaternion,
+    /// Integer types with CPU and GPU atomics: i32, u32, i64, u64 (atomic_and/or/xor).
+    AtomicInt,
+    /// Scalars with CPU and GPU atomics: i32, u32, i64, u64, f32, f64 (atomic_cas/exch).
+    AtomicScalar,
 }
 
 impl Class {
@@ -68,6 +72,13 @@ impl Class {
             (Class::Matrix3, Ty::Matrix(_, 3)) => true,
             (Class::FloatVector3, Ty::Vector(s, 3)) => s.is_float(),
             (Class::Quaternion, Ty::Quat(_)) => true,
+            (Class::AtomicInt, Ty::Scalar(s)) => {
+                matches!(s, Scalar::I32 | Scalar::U32 | Scalar::I64 | Scalar::U64)
+            }
+            (Class::AtomicScalar, Ty::Scalar(s)) => matches!(
+                s,
+                Scalar::I32 | Scalar::U32 | Scalar::I64 | Scalar::U64 | Scalar::F32 | Scalar::F64
+            ),
             _ => false,
         }
     }
@@ -86,6 +97,8 @@ impl Class {
             Class::Matrix3 => "a 3x3 matrix (Mat3, DMat3)",
             Class::FloatVector3 => "a float 3-vector (Vec3, DVec3)",
             Class::Quaternion => "a quaternion (Quat, DQuat)",
+            Class::AtomicInt => "i32, u32, i64 or u64",
+            Class::AtomicScalar => "i32, u32, i64, u64, f32 or f64",
         }
     }
 }
@@ -122,6 +135,11 @@ pub enum Grad {
     Zero,
     /// Atomics: special rules in the adjoint transform.
     Atomic,
+    /// Atomics without an adjoint (cas, exch, and, or, xor; Warp has none either): not
+    /// replayed, and backward through a kernel is refused where one would lose a gradient or
+    /// where the replay would need the old value it returned (see
+    /// `analysis::atomic_without_adjoint`).
+    AtomicNone,
 }
 
 /// One builtin.
@@ -143,6 +161,26 @@ pub struct Builtin {
     #[allow(dead_code)] // read by the CUDA emitter
     pub section: &'static str,
     pub grad: Grad,
+}
+
+impl Builtin {
+    /// An atomic read-modify-write of an array element (`atomic_add`, `atomic_cas`, ...): it
+    /// has a side effect, is not replayed by adjoints, and its arguments are the array, the
+    /// index (one variable per dimension) and [`Builtin::atomic_values`] values.
+    pub fn is_atomic(&self) -> bool {
+        matches!(self.grad, Grad::Atomic | Grad::AtomicNone)
+    }
+
+    /// How many value arguments follow an atomic's index: 2 for `atomic_cas` (compare,
+    /// value), 1 for the others.
+    pub fn atomic_values(&self) -> usize {
+        let at = self
+            .params
+            .iter()
+            .position(|p| *p == Pos::Index)
+            .unwrap_or(self.params.len());
+        self.params.len().saturating_sub(at + 1)
+    }
 }
 
 use Class::*;
@@ -255,6 +293,11 @@ table! {
     "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_max": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
+    "atomic_cas": &[AtomicScalar], (ArrayOfT, Index, T, T) -> T, method = false, section = "atomic", grad = AtomicNone;
+    "atomic_exch": &[AtomicScalar], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
+    "atomic_and": &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
+    "atomic_or":  &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
+    "atomic_xor": &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
 }
 
 /// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,

@@ -503,3 +503,149 @@ mod tests {
         assert_eq!(v, [Vec3::ZERO; 2]);
     }
 }
+
+// ------------------------------------------------------------------------------------------
+// Compare-and-swap, exchange and bitwise atomics (no adjoint, as in Warp).
+// ------------------------------------------------------------------------------------------
+
+/// An element type of `atomic_cas` and `atomic_exch`: `i32`, `u32`, `i64`, `u64`, `f32`,
+/// `f64`. Floats compare and swap their bit patterns, as CUDA's `atomicCAS` on the
+/// reinterpreted bits does: `-0.0` does not match `0.0`, a NaN matches the same NaN bits.
+///
+/// # Safety (of every method)
+/// As [`AtomicElement`].
+pub trait AtomicSwapElement: Copy {
+    /// If `*p == compare` (bitwise), `*p = v`; returns the old value either way.
+    ///
+    /// # Safety
+    /// See the trait documentation.
+    unsafe fn atomic_cas(p: *mut Self, compare: Self, v: Self) -> Self;
+    /// `*p = v`; returns the old value.
+    ///
+    /// # Safety
+    /// See the trait documentation.
+    unsafe fn atomic_exch(p: *mut Self, v: Self) -> Self;
+}
+
+/// An element type of `atomic_and`, `atomic_or`, `atomic_xor`: `i32`, `u32`, `i64`, `u64`.
+///
+/// # Safety (of every method)
+/// As [`AtomicElement`].
+pub trait AtomicBitsElement: Copy {
+    /// `*p &= v`; returns the old value.
+    ///
+    /// # Safety
+    /// See the trait documentation.
+    unsafe fn atomic_and(p: *mut Self, v: Self) -> Self;
+    /// `*p |= v`; returns the old value.
+    ///
+    /// # Safety
+    /// See the trait documentation.
+    unsafe fn atomic_or(p: *mut Self, v: Self) -> Self;
+    /// `*p ^= v`; returns the old value.
+    ///
+    /// # Safety
+    /// See the trait documentation.
+    unsafe fn atomic_xor(p: *mut Self, v: Self) -> Self;
+}
+
+macro_rules! atomic_swap_bits {
+    ($($t:ty => $a:ty),*) => {$(
+        impl AtomicSwapElement for $t {
+            #[inline(always)]
+            unsafe fn atomic_cas(p: *mut Self, compare: Self, v: Self) -> Self {
+                // SAFETY: as in `AtomicElement::atomic_add` for integers.
+                match unsafe { atomic_ref::<$t, $a>(p) }.compare_exchange(compare, v, Relaxed, Relaxed) {
+                    Ok(old) | Err(old) => old,
+                }
+            }
+            #[inline(always)]
+            unsafe fn atomic_exch(p: *mut Self, v: Self) -> Self {
+                // SAFETY: as in `atomic_cas`.
+                unsafe { atomic_ref::<$t, $a>(p) }.swap(v, Relaxed)
+            }
+        }
+        impl AtomicBitsElement for $t {
+            #[inline(always)]
+            unsafe fn atomic_and(p: *mut Self, v: Self) -> Self {
+                // SAFETY: as in `atomic_cas`.
+                unsafe { atomic_ref::<$t, $a>(p) }.fetch_and(v, Relaxed)
+            }
+            #[inline(always)]
+            unsafe fn atomic_or(p: *mut Self, v: Self) -> Self {
+                // SAFETY: as in `atomic_cas`.
+                unsafe { atomic_ref::<$t, $a>(p) }.fetch_or(v, Relaxed)
+            }
+            #[inline(always)]
+            unsafe fn atomic_xor(p: *mut Self, v: Self) -> Self {
+                // SAFETY: as in `atomic_cas`.
+                unsafe { atomic_ref::<$t, $a>(p) }.fetch_xor(v, Relaxed)
+            }
+        }
+    )*};
+}
+atomic_swap_bits!(i32 => AtomicI32, u32 => AtomicU32, i64 => AtomicI64, u64 => AtomicU64);
+
+macro_rules! atomic_swap_float {
+    ($($t:ident => $a:ty),*) => {$(
+        impl AtomicSwapElement for $t {
+            #[inline(always)]
+            unsafe fn atomic_cas(p: *mut Self, compare: Self, v: Self) -> Self {
+                // SAFETY: as `float_rmw` requires, forwarded from the caller.
+                let a = unsafe { atomic_ref::<$t, $a>(p) };
+                match a.compare_exchange(compare.to_bits(), v.to_bits(), Relaxed, Relaxed) {
+                    Ok(old) | Err(old) => $t::from_bits(old),
+                }
+            }
+            #[inline(always)]
+            unsafe fn atomic_exch(p: *mut Self, v: Self) -> Self {
+                // SAFETY: as in `atomic_cas`.
+                $t::from_bits(unsafe { atomic_ref::<$t, $a>(p) }.swap(v.to_bits(), Relaxed))
+            }
+        }
+    )*};
+}
+atomic_swap_float!(f32 => AtomicU32, f64 => AtomicU64);
+
+/// Atomically: if `arr[idx] == compare` (bitwise for floats), stores `value`; returns the old
+/// value either way.
+#[inline(always)]
+pub fn atomic_cas<T: AtomicSwapElement, const N: usize, I: KernelIndex<N>>(
+    arr: &ArrayView<T, N>,
+    idx: I,
+    compare: T,
+    value: T,
+) -> KResult<T> {
+    let p = arr.ptr_at(idx)?;
+    // SAFETY: as in `atomic_add`: in-bounds, aligned, live, atomically shared.
+    Ok(unsafe { T::atomic_cas(p, compare, value) })
+}
+
+/// Atomically stores `value` in `arr[idx]` and returns the old value.
+#[inline(always)]
+pub fn atomic_exch<T: AtomicSwapElement, const N: usize, I: KernelIndex<N>>(
+    arr: &ArrayView<T, N>,
+    idx: I,
+    value: T,
+) -> KResult<T> {
+    let p = arr.ptr_at(idx)?;
+    // SAFETY: as in `atomic_add`: in-bounds, aligned, live, atomically shared.
+    Ok(unsafe { T::atomic_exch(p, value) })
+}
+
+macro_rules! atomic_bits_fn {
+    ($($name:ident: $what:literal),*) => {$(
+        #[doc = concat!("Atomically sets `arr[idx] ", $what, " value` and returns the old value.")]
+        #[inline(always)]
+        pub fn $name<T: AtomicBitsElement, const N: usize, I: KernelIndex<N>>(
+            arr: &ArrayView<T, N>,
+            idx: I,
+            value: T,
+        ) -> KResult<T> {
+            let p = arr.ptr_at(idx)?;
+            // SAFETY: as in `atomic_add`: in-bounds, aligned, live, atomically shared.
+            Ok(unsafe { T::$name(p, value) })
+        }
+    )*};
+}
+atomic_bits_fn!(atomic_and: "&=", atomic_or: "|=", atomic_xor: "^=");

@@ -188,7 +188,7 @@ impl<'a> Emitter<'a> {
                 decl(b)?
             )),
             Op::Unary(UnOp::Neg, a) => Some(format!("decltype(-{})", decl(a)?)),
-            Op::Builtin { builtin, args } if builtin.grad != crate::builtins::Grad::Atomic => {
+            Op::Builtin { builtin, args } if !builtin.is_atomic() => {
                 let args: Option<Vec<String>> = args.iter().map(|a| decl(*a)).collect();
                 Some(format!("decltype({}({}))", builtin.cuda, args?.join(", ")))
             }
@@ -628,15 +628,16 @@ impl<'a> Emitter<'a> {
             }
             Op::Builtin { builtin, args } => {
                 self.section(builtin.section);
-                if builtin.grad == crate::builtins::Grad::Atomic && self.replay {
+                if builtin.is_atomic() && self.replay {
                     // Not redone in an adjoint's replay: the forward launch did it.
                     let val = self.var(args[args.len() - 1]);
                     format!("wp::zero_like({val})")
-                } else if builtin.grad == crate::builtins::Grad::Atomic {
+                } else if builtin.is_atomic() {
                     let a = self.var(args[0]);
-                    let idx = self.index(&args[1..args.len() - 1]);
-                    let val = self.var(args[args.len() - 1]);
-                    format!("{}({a}, {idx}, {val}, __ctx)", builtin.cuda)
+                    let vals_at = args.len() - builtin.atomic_values();
+                    let idx = self.index(&args[1..vals_at]);
+                    let vals: Vec<String> = args[vals_at..].iter().map(|v| self.var(*v)).collect();
+                    format!("{}({a}, {idx}, {}, __ctx)", builtin.cuda, vals.join(", "))
                 } else {
                     let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                     format!("{}({})", builtin.cuda, args.join(", "))

@@ -25,6 +25,9 @@ pub struct CudaAdjoint {
 
 /// Emits the CUDA adjoint of `f`, or why it cannot.
 pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
+    if let Some(why) = crate::analysis::atomic_without_adjoint(f) {
+        return Err(why);
+    }
     let original = f;
     let prepared = crate::adjoint_prep::without_jumps(f);
     let f = &prepared;
@@ -747,7 +750,8 @@ impl<'a> Adj<'a> {
                 self.line(sp, &format!("wp::adj_cast({ad}, __r);"));
             }
             Op::Builtin { builtin, args } => match builtin.grad {
-                Grad::Zero => {}
+                // See the Rust adjoint: integer updates with unused results only.
+                Grad::Zero | Grad::AtomicNone => {}
                 Grad::Adjoint => self.call(&format!("adj_{}", builtin.name), args, sp),
                 Grad::Atomic => {
                     let (arr, v) = (args[0], args[args.len() - 1]);

@@ -280,14 +280,15 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);
-                if builtin.grad == crate::builtins::Grad::Atomic && self.replay {
+                if builtin.is_atomic() && self.replay {
                     // Not replayed: the forward launch did it.
                     quote_spanned!(sp=> __wp::adjoint::zero())
-                } else if builtin.grad == crate::builtins::Grad::Atomic {
+                } else if builtin.is_atomic() {
                     let a = self.var(args[0]);
-                    let idx = self.index(&args[1..args.len() - 1]);
-                    let val = self.var(args[args.len() - 1]);
-                    quote_spanned!(sp=> __wp::builtins::#f(&#a, #idx, #val)?)
+                    let vals_at = args.len() - builtin.atomic_values();
+                    let idx = self.index(&args[1..vals_at]);
+                    let vals = args[vals_at..].iter().map(|v| self.var(*v));
+                    quote_spanned!(sp=> __wp::builtins::#f(&#a, #idx, #(#vals),*)?)
                 } else {
                     let args = args.iter().map(|v| self.var(*v));
                     quote_spanned!(sp=> __wp::builtins::#f(#(#args),*))

@@ -35,6 +35,9 @@ use quote::{format_ident, quote, quote_spanned};
 /// `__tid`; for a func also `__adj_ret` (the adjoint of its result) and `__adj_out<k>`
 /// (`&mut` adjoints of its value parameters, accumulated into at the end).
 pub fn emit(f: &Function) -> Result<TokenStream, String> {
+    if let Some(why) = crate::analysis::atomic_without_adjoint(f) {
+        return Err(why);
+    }
     // Jumps become flags: the reverse sweep then follows `if` decisions and trip counts only.
     let prepared = crate::adjoint_prep::without_jumps(f);
     let f = &prepared;
@@ -206,7 +209,7 @@ impl<'a> AdjEmitter<'a> {
                     let x = self.var(*dst);
                     let rhs = match op {
                         // Atomics are not replayed: their effect happened in the forward launch.
-                        Op::Builtin { builtin, .. } if builtin.grad == Grad::Atomic => {
+                        Op::Builtin { builtin, .. } if builtin.is_atomic() => {
                             quote!(__wp::adjoint::zero())
                         }
                         _ => self.fwd.op_tokens(op, self.f.ty(*dst), sp),
@@ -517,7 +520,9 @@ impl<'a> AdjEmitter<'a> {
                 )
             }
             Op::Builtin { builtin, args } => match builtin.grad {
-                Grad::Zero => TokenStream::new(),
+                // AtomicNone: only integer updates whose result is unused get here
+                // (`analysis::atomic_without_adjoint`): nothing to propagate.
+                Grad::Zero | Grad::AtomicNone => TokenStream::new(),
                 Grad::Adjoint => call(format_ident!("adj_{}", builtin.name), args),
                 Grad::Atomic => {
                     // atomic_add(a, idx.., v): the value's adjoint is the gradient at idx.
