@@ -121,6 +121,20 @@ fn swaps_and_bits(a: Array<i32>, f: Array<f32>, flags: Array<i32>) {
     f[i] += g;
 }
 
+/// In-kernel views: rows of a 2-D array, ranges, a view of a view, lengths; thread 5 (in the
+/// CPU-only 6-thread launch) reads `v[5]` of a 5-element view and faults.
+#[wp::kernel]
+fn views(m: Array<f32, 2>, x: Array<f32>, out: Array<f32>) {
+    let i = tid();
+    let r = m.row(i % 3);
+    let v = x.view(1..6);
+    let w = v.view(2..);
+    out[i] = r[i % 4] * 2.0 + v[i % 5] + w[i % w.len()] * 0.5 + (r.len() + w.len()) as f32;
+    if i == 5 {
+        out[i] = v[5];
+    }
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -471,4 +485,30 @@ fn cas_exch_and_bitwise_atomics_match_the_cpu_backend() {
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));
     }
+}
+
+#[test]
+fn views_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let m = wp::Array::<f32, 2>::from_slice_shape(
+        &(0..12).map(|k| k as f32 * 0.25 - 1.0).collect::<Vec<_>>(),
+        [3, 4],
+        &dev,
+    )
+    .unwrap();
+    let x =
+        wp::Array::from_slice(&(0..8).map(|k| k as f32 * 1.5).collect::<Vec<_>>(), &dev).unwrap();
+    let out = wp::Array::<f32>::zeros(5, &dev).unwrap();
+    let args = [Arg::F32Grid(&m), Arg::F32s(&x), Arg::F32s(&out)];
+    let host = run_on_host::<views>(&[5], &args);
+    wp::launch(views, 5, (&m, &x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+    // Thread 5 faults on both sides; here on the CPU.
+    let out6 = wp::Array::<f32>::zeros(6, &dev).unwrap();
+    let e = wp::launch(views, 6, (&m, &x, &out6), &dev)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`x`"), "{e}");
 }

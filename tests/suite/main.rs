@@ -78,6 +78,7 @@ mod params;
 mod stability;
 mod streams;
 mod structs;
+mod views;
 
 /// A 1-D array holding `data` on `dev`.
 fn arr<T: wp::Element>(data: &[T], dev: &wp::Device) -> wp::Array<T> {

@@ -99,6 +99,37 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
         )
     }
 
+    /// The bounds check of an in-kernel view of this array (`a.view(lo..hi)`): `index` as a
+    /// usize when `index < bound` (`<=` when `inclusive`), else an out-of-bounds fault of
+    /// this array's parameter showing `index` against the shape `[bound]`.
+    #[inline(always)]
+    pub fn view_check<I: crate::index::IndexInt>(
+        &self,
+        index: I,
+        bound: usize,
+        inclusive: bool,
+    ) -> KResult<usize> {
+        let u = index.as_usize();
+        if u < bound || (inclusive && u == bound) {
+            Ok(u)
+        } else {
+            Err(self.view_out_of_bounds(index.widen(), bound))
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn view_out_of_bounds(&self, index: i128, bound: usize) -> Box<Fault> {
+        Fault::new(
+            self.kernel,
+            FaultKind::OutOfBounds {
+                arg: self.arg,
+                index: vec![index],
+                shape: vec![bound],
+            },
+        )
+    }
+
     /// A pointer to the element at `idx` (bounds-checked).
     #[inline(always)]
     pub fn ptr_at<I: KernelIndex<N>>(&self, idx: I) -> KResult<*mut T> {

@@ -1002,6 +1002,18 @@ WP_FN usize extent(const array_t<T, N>& a, int k) {
   return (usize)a.shape[k];
 }
 
+/// The bounds check of an in-kernel view (warp-core's ArrayView::view_check): `index` when
+/// `index < bound` (`<=` when `inclusive`), else an out-of-bounds fault of `a`'s parameter
+/// with the shape `[bound]`, and 0.
+template <typename T, int N>
+WP_FN usize view_check(const array_t<T, N>& a, i64 index, usize bound, bool inclusive, ctx_t* ctx) {
+  const u64 u = (u64)index;
+  if (u < (u64)bound || (inclusive && u == (u64)bound)) return (usize)u;
+  const i64 shape = (i64)bound;
+  raise(ctx, FAULT_OUT_OF_BOUNDS, a.arg, 1, &index, &shape);
+  return 0;
+}
+
 namespace detail {
 /// The element at `idx` (assumed in bounds). With `WP_CONTIGUOUS` defined, the translation
 /// unit was compiled for a launch whose array arguments are all contiguous and row-major

@@ -277,6 +277,17 @@ pub enum Op {
     Extent(VarId, u8),
     /// `array.len()` (usize).
     Len(VarId),
+    /// The bounds check of an in-kernel view (`a.view(lo..hi)`, see `front/lower/views.rs`):
+    /// `index` (any integer) as a usize, after checking `index < bound` (`<=` when
+    /// `inclusive`); a failed check is an out-of-bounds fault of `array`'s parameter with the
+    /// index and the bound as its shape. Accesses through views become accesses of the
+    /// viewed array, so this is the only operation views add.
+    ViewCheck {
+        array: VarId,
+        index: VarId,
+        bound: VarId,
+        inclusive: bool,
+    },
 }
 
 impl Op {
@@ -300,6 +311,16 @@ impl Op {
             Op::Load { array, index } => {
                 f(*array);
                 index.iter().for_each(|v| f(*v))
+            }
+            Op::ViewCheck {
+                array,
+                index,
+                bound,
+                ..
+            } => {
+                f(*array);
+                f(*index);
+                f(*bound)
             }
             Op::Lit(_) | Op::Tid(_) => {}
         }

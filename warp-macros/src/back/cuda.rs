@@ -696,6 +696,17 @@ impl<'a> Emitter<'a> {
             Op::Tid(k) => format!("(wp::usize)__tid[{k}]"),
             Op::Extent(a, k) => format!("(wp::usize)wp::extent({}, {k})", self.var(*a)),
             Op::Len(a) => format!("(wp::usize)wp::len({})", self.var(*a)),
+            Op::ViewCheck {
+                array,
+                index,
+                bound,
+                inclusive,
+            } => format!(
+                "wp::view_check({}, (wp::i64){}, {}, {inclusive}, __ctx)",
+                self.var(*array),
+                self.var(*index),
+                self.var(*bound)
+            ),
         })
     }
 }

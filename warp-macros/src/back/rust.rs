@@ -346,6 +346,15 @@ impl<'a> RustEmitter<'a> {
                 let a = self.var(*a);
                 quote_spanned!(sp=> #a.len())
             }
+            Op::ViewCheck {
+                array,
+                index,
+                bound,
+                inclusive,
+            } => {
+                let (a, i, b) = (self.var(*array), self.var(*index), self.var(*bound));
+                quote_spanned!(sp=> #a.view_check(#i, #b, #inclusive)?)
+            }
         }
     }
 }

@@ -625,6 +625,7 @@ impl<'a> AdjEmitter<'a> {
             | Op::Tid(_)
             | Op::Extent(..)
             | Op::Len(_)
+            | Op::ViewCheck { .. }
             | Op::Func { .. } => TokenStream::new(),
         }
     }

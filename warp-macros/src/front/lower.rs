@@ -20,6 +20,8 @@ use std::collections::HashMap;
 use syn::spanned::Spanned;
 use syn::{Expr, Pat};
 
+mod views;
+
 type R<T> = syn::Result<T>;
 
 fn err<T>(span: Span, msg: impl std::fmt::Display) -> R<T> {
@@ -39,6 +41,7 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         callees: Vec::new(),
         ret: Ty::Unit,
         loops: 0,
+        views: HashMap::new(),
     };
     let sig = &item.sig;
     let unsupported = [
@@ -128,6 +131,11 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         Ok(None) => {}
         Err(e) => cx.errors.push(e),
     }
+    if let Some(b) = cx.blocks.last() {
+        let mut errors = Vec::new();
+        cx.unsupported_view_uses(b, &mut errors);
+        cx.errors.extend(errors);
+    }
     if !cx.errors.is_empty() {
         return Err(cx.errors);
     }
@@ -157,6 +165,8 @@ struct Lowerer {
     callees: Vec<syn::Path>,
     ret: Ty,
     loops: usize,
+    /// In-kernel views (`a.row(i)`, `a.view(lo..hi)`), resolved into the arrays they view.
+    views: HashMap<VarId, views::ViewDef>,
 }
 
 /// An assignable place: a local (with a member path) or an array element (with a member path).
@@ -543,6 +553,15 @@ impl Lowerer {
     /// Binds a pattern (a name, `mut name` or `_`) to a value by copying it into a new variable.
     fn bind_pat(&mut self, pat: &Pat, value: VarId, span: Span) -> R<()> {
         match pat {
+            Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() && self.is_view(value) => {
+                // A view is a name for part of an array, not a value: bind the name to it.
+                if pi.mutability.is_some() {
+                    return err(pi.span(), "views are immutable: `let v = a.row(i);`");
+                }
+                let name = pi.ident.to_string();
+                self.scopes.last_mut().expect("scope").insert(name, value);
+                Ok(())
+            }
             Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() => {
                 let ty = self.ty(value);
                 let name = pi.ident.to_string();
@@ -1337,6 +1356,9 @@ impl Lowerer {
                         if k >= n {
                             return err(ix.index.span(), format!("the array has {n} dimension(s)"));
                         }
+                        if self.is_view(a) {
+                            return Ok(self.view_extent(a, k, span));
+                        }
                         return Ok(self.def(Op::Extent(a, k), USIZE, span));
                     }
                 }
@@ -1658,7 +1680,7 @@ impl Lowerer {
             }
         };
         let index = self.index_vars(&ix.index, ndim)?;
-        Ok((array, index))
+        Ok(self.resolve_view(array, index, ix.span()))
     }
 
     fn index_vars(&mut self, e: &Expr, ndim: u8) -> R<Vec<VarId>> {
@@ -1916,6 +1938,13 @@ impl Lowerer {
                 },
             }
         }
+        // An atomic on a view: on the viewed array, at the full index.
+        if b.is_atomic() && self.is_view(out[0]) {
+            let n_index = out.len() - 1 - b.atomic_values();
+            let (base, index) = self.resolve_view(out[0], out[1..1 + n_index].to_vec(), span);
+            let values = out[1 + n_index..].to_vec();
+            out = std::iter::once(base).chain(index).chain(values).collect();
+        }
         if b.name == "mod" {
             // Warp's `mod` is the `%` operator: the same faults, float semantics and adjoint.
             return Ok(self.def(Op::Binary(BinOp::Rem, out[0], out[1]), resolved.ret, span));
@@ -1937,8 +1966,14 @@ impl Lowerer {
             return err(span, "turbofish is not supported in kernels");
         }
         // Array methods.
+        if let Some(v) = self.view_method(m)? {
+            return Ok(v);
+        }
         if name == "len" && m.args.is_empty() {
             let a = self.expr(&m.receiver, None)?;
+            if self.is_view(a) {
+                return Ok(self.view_len(a, span));
+            }
             if matches!(self.ty(a), Ty::Array(..)) {
                 return Ok(self.def(Op::Len(a), USIZE, span));
             }
