@@ -18,6 +18,7 @@ backend_tests!(
     local_fields,
     views_and_strides,
     usize_builtins,
+    every_element_type_round_trips,
 );
 
 #[wp::kernel]
@@ -436,4 +437,87 @@ fn usize_builtins(dev: &wp::Device) {
         .collect();
     // Sums of small integers: exact in f32 on every backend.
     assert_eq!(crate::host(&out), want);
+}
+
+/// Arbitrary bit patterns of `len` elements of `T` (NaN payloads included for floats).
+fn patterned<T: wp::Element>(len: usize, seed: u8) -> Vec<T> {
+    let mut v = vec![<T as wp::__private::bytemuck::Zeroable>::zeroed(); len];
+    let bytes: &mut [u8] = wp::__private::bytemuck::cast_slice_mut(&mut v);
+    for (k, b) in bytes.iter_mut().enumerate() {
+        *b = (k as u8).wrapping_mul(31).wrapping_add(seed);
+    }
+    v
+}
+
+fn same_bits<T: wp::Element>(a: &[T], b: &[T]) -> bool {
+    let a: &[u8] = wp::__private::bytemuck::cast_slice(a);
+    let b: &[u8] = wp::__private::bytemuck::cast_slice(b);
+    a == b
+}
+
+/// from_vec, to_vec, fill, copy to and from the CPU, and strided copies, bit for bit.
+fn round_trip<T: wp::Element>(dev: &wp::Device) {
+    let cpu = wp::cpu();
+    let data = patterned::<T>(37, 7);
+    let a = wp::Array::from_vec(data.clone(), dev).unwrap();
+    assert!(
+        same_bits(&a.to_vec().unwrap(), &data),
+        "{}: to_vec",
+        T::TYPE_NAME
+    );
+    // Across devices, both ways.
+    let c = wp::Array::<T>::zeros(37, &cpu).unwrap();
+    wp::copy(&c, &a).unwrap();
+    assert!(
+        same_bits(&c.to_vec().unwrap(), &data),
+        "{}: to cpu",
+        T::TYPE_NAME
+    );
+    let back = wp::Array::<T>::zeros(37, dev).unwrap();
+    wp::copy(&back, &c).unwrap();
+    assert!(
+        same_bits(&back.to_vec().unwrap(), &data),
+        "{}: from cpu",
+        T::TYPE_NAME
+    );
+    // A strided view (every other element of a 2-D array's transpose) into a contiguous one.
+    let g = wp::Array::from_vec(patterned::<T>(6, 99), dev)
+        .unwrap()
+        .reshape::<2>([2, 3])
+        .unwrap();
+    let t = g.transpose();
+    let dst = wp::Array::<T, 2>::zeros([3, 2], &cpu).unwrap();
+    dst.copy_from(&t).unwrap();
+    let gh = g.to_vec().unwrap();
+    let want: Vec<T> = (0..3).flat_map(|i| [gh[i], gh[3 + i]]).collect();
+    assert!(
+        same_bits(&dst.to_vec().unwrap(), &want),
+        "{}: strided",
+        T::TYPE_NAME
+    );
+    // Fill.
+    let one = patterned::<T>(1, 3)[0];
+    a.fill(one).unwrap();
+    assert!(
+        same_bits(&a.to_vec().unwrap(), &vec![one; 37]),
+        "{}: fill",
+        T::TYPE_NAME
+    );
+}
+
+#[derive(Clone, Copy, Debug, Default, wp::Struct)]
+#[repr(C)]
+struct Particle {
+    pos: Vec3,
+    id: u32,
+}
+
+fn every_element_type_round_trips(dev: &wp::Device) {
+    macro_rules! all {
+        ($($t:ty),*) => {$( round_trip::<$t>(dev); )*};
+    }
+    all!(i8, i16, i32, i64, u8, u16, u32, u64, f32, f64);
+    all!(IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
+    all!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, Mat2, Mat3, Mat4, DMat2, DMat3, DMat4);
+    all!(Quat, DQuat, Particle);
 }
