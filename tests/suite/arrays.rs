@@ -499,7 +499,7 @@ fn round_trip<T: wp::Element>(dev: &wp::Device) {
     let one = patterned::<T>(1, 3)[0];
     a.fill(one).unwrap();
     assert!(
-        same_bits(&a.to_vec().unwrap(), &vec![one; 37]),
+        same_bits(&a.to_vec().unwrap(), &[one; 37]),
         "{}: fill",
         T::TYPE_NAME
     );
