@@ -73,6 +73,7 @@ mod funcs;
 mod grad;
 mod launch;
 mod params;
+mod rng;
 mod stability;
 mod streams;
 mod structs;

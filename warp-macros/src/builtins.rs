@@ -39,6 +39,8 @@ pub enum Class {
     FloatVector3,
     /// Quat, DQuat.
     Quaternion,
+    /// f32, Vec2, Vec3, Vec4 (Perlin noise: f32 only, as in Warp).
+    Noise,
 }
 
 impl Class {
@@ -68,6 +70,8 @@ impl Class {
             (Class::Matrix3, Ty::Matrix(_, 3)) => true,
             (Class::FloatVector3, Ty::Vector(s, 3)) => s.is_float(),
             (Class::Quaternion, Ty::Quat(_)) => true,
+            (Class::Noise, Ty::Scalar(Scalar::F32)) => true,
+            (Class::Noise, Ty::Vector(Scalar::F32, _)) => true,
             _ => false,
         }
     }
@@ -86,6 +90,7 @@ impl Class {
             Class::Matrix3 => "a 3x3 matrix (Mat3, DMat3)",
             Class::FloatVector3 => "a float 3-vector (Vec3, DVec3)",
             Class::Quaternion => "a quaternion (Quat, DQuat)",
+            Class::Noise => "f32, Vec2, Vec3 or Vec4",
         }
     }
 }
@@ -110,6 +115,13 @@ pub enum Pos {
     VecOfT,
     /// The quaternion of `T`'s scalar (`quat_from_axis_angle`, `quat_from_matrix`).
     QuatOfT,
+    /// `i32` for a scalar `T`, the `i32` vector of `T`'s size for a vector (`pnoise`'s
+    /// periods).
+    IntOfT,
+    /// A fixed scalar type, whatever `T` is (the RNG's `u32` state, `i32` seeds, `f32` draws).
+    Fixed(Scalar),
+    /// A fixed vector type (the samplers' `Vec2`, `Vec3`).
+    FixedVec(Scalar, u8),
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -161,6 +173,14 @@ const MAT: &[Class] = &[Matrix];
 const MAT_OR_QUAT: &[Class] = &[Matrix, Quaternion];
 const QUAT: &[Class] = &[Quaternion];
 const FVEC3: &[Class] = &[FloatVector3];
+/// The classes of a builtin whose signature does not mention `T` (every type is fixed).
+const NO_T: &[Class] = &[];
+const NOISE: &[Class] = &[Noise];
+const U32: Pos = Fixed(Scalar::U32);
+const I32: Pos = Fixed(Scalar::I32);
+const F32: Pos = Fixed(Scalar::F32);
+const VEC2: Pos = FixedVec(Scalar::F32, 2);
+const VEC3: Pos = FixedVec(Scalar::F32, 3);
 
 macro_rules! table {
     ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, method = $m:literal, section = $sec:literal, grad = $g:ident; )*) => {
@@ -255,7 +275,39 @@ table! {
     "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_max": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
+    // Random numbers and Perlin noise (warp-core `builtins::{rand, noise}`, wp_rand.h). A draw
+    // `randf(&mut s, ..)` is not a call of one row: `front::rng` lowers it into the row's pure
+    // function of the state before the draw and the write-back of the advanced state
+    // (`rand_pcg` once per uniform draw, `poisson_state` for `poisson`). Rows in `INTERNAL`
+    // are those pieces and overloads by arity; user code cannot name them.
+    "rand_init":  NO_T,         (I32) -> U32,            method = false, section = "rand",   grad = Zero;
+    "rand_init_offset": NO_T,   (I32, I32) -> U32,       method = false, section = "rand",   grad = Zero;
+    "rand_pcg":   NO_T,         (U32) -> U32,            method = false, section = "rand",   grad = Zero;
+    "randf":      NO_T,         (U32) -> F32,            method = false, section = "rand",   grad = Zero;
+    "randf_range": NO_T,        (U32, F32, F32) -> F32,  method = false, section = "rand",   grad = Zero;
+    "randn":      NO_T,         (U32) -> F32,            method = false, section = "rand",   grad = Zero;
+    "sample_triangle": NO_T,    (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_ring": NO_T,   (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_disk": NO_T,   (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_square": NO_T, (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_cube": NO_T,   (U32) -> VEC3,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_sphere_surface": NO_T, (U32) -> VEC3,   method = false, section = "rand",   grad = Zero;
+    "sample_unit_sphere": NO_T, (U32) -> VEC3,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_hemisphere_surface": NO_T, (U32) -> VEC3, method = false, section = "rand", grad = Zero;
+    "sample_unit_hemisphere": NO_T, (U32) -> VEC3,       method = false, section = "rand",   grad = Zero;
+    "poisson":    NO_T,         (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
+    "poisson_state": NO_T,      (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
+    "noise":      NOISE,        (U32, T) -> F32,         method = false, section = "rand",   grad = Adjoint;
+    "pnoise":     NOISE,        (U32, T, IntOfT) -> F32, method = false, section = "rand",   grad = Adjoint;
 }
+
+/// Rows that are pieces of other builtins (see the "rand" rows): not callable by name.
+pub const INTERNAL: &[&str] = &[
+    "rand_init_offset",
+    "rand_pcg",
+    "randf_range",
+    "poisson_state",
+];
 
 /// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,
 /// `x.ln()` is `log(x)`). Each alias has Rust's meaning exactly: `round_ties_even` is `rint`,
@@ -276,9 +328,14 @@ pub const METHOD_ALIASES: &[(&str, &str)] = &[
     ("conjugate", "quat_inverse"),
 ];
 
-/// Looks a builtin up by name.
+/// Looks a builtin up by name (internal rows included).
 pub fn lookup(name: &str) -> Option<&'static Builtin> {
     BUILTINS.iter().find(|b| b.name == name)
+}
+
+/// Looks up a builtin that user code may call by name (not an [`INTERNAL`] row).
+pub fn lookup_user(name: &str) -> Option<&'static Builtin> {
+    lookup(name).filter(|b| !INTERNAL.contains(&b.name))
 }
 
 /// Looks a builtin up by method name (aliases included).
@@ -363,6 +420,17 @@ impl Builtin {
                 });
             }
         }
+        let mentions_t = self.params.iter().chain([&self.ret]).any(|p| {
+            !matches!(
+                p,
+                Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index
+            )
+        });
+        let t = match t {
+            // Every position fixed: nothing to bind (the classes are empty).
+            None if !mentions_t => Some(Ty::Deferred),
+            t => t,
+        };
         let Some(t) = t else {
             // Nothing known: leave typing to the target compiler.
             let params = self.params.iter().map(|_| Ty::Deferred).collect();
@@ -371,7 +439,7 @@ impl Builtin {
                 ret: Ty::Deferred,
             });
         };
-        if !self.classes.iter().any(|c| c.admits(&t)) {
+        if mentions_t && !self.classes.iter().any(|c| c.admits(&t)) {
             let want: Vec<_> = self.classes.iter().map(|c| c.describe()).collect();
             return Err(format!(
                 "`{}` is not defined for `{t}`: it takes {}",
@@ -402,6 +470,13 @@ impl Builtin {
                 _ => Ty::Deferred,
             },
             Pos::QuatOfT => scalar.scalar().map(Ty::Quat).unwrap_or(Ty::Deferred),
+            Pos::IntOfT => match &t {
+                Ty::Scalar(_) => crate::types::I32,
+                Ty::Vector(_, n) => Ty::Vector(Scalar::I32, *n),
+                _ => Ty::Deferred,
+            },
+            Pos::Fixed(s) => Ty::Scalar(*s),
+            Pos::FixedVec(s, n) => Ty::Vector(*s, *n),
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
@@ -474,12 +549,18 @@ mod tests {
                 "duplicate {}",
                 b.name
             );
-            assert!(!b.classes.is_empty());
+            let binds_t = b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT);
+            let all_fixed = b
+                .params
+                .iter()
+                .chain([&b.ret])
+                .all(|p| matches!(p, Pos::Fixed(_) | Pos::FixedVec(..)));
             assert!(
-                b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT),
+                binds_t || all_fixed,
                 "{} cannot bind T",
                 b.name
             );
+            assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);
         }
         for name in [
             "min",

@@ -20,6 +20,9 @@ use std::collections::HashMap;
 use syn::spanned::Spanned;
 use syn::{Expr, Pat};
 
+#[path = "rng.rs"]
+mod rng;
+
 type R<T> = syn::Result<T>;
 
 fn err<T>(span: Span, msg: impl std::fmt::Display) -> R<T> {
@@ -1753,7 +1756,10 @@ impl Lowerer {
             }
         }
         if prefix_ok {
-            if let Some(b) = builtins::lookup(&last) {
+            if let Some(v) = self.rng_call(&last, c, want, span)? {
+                return Ok(v);
+            }
+            if let Some(b) = builtins::lookup_user(&last) {
                 let args: Vec<&Expr> = c.args.iter().collect();
                 return self.builtin_call(b, &args, want, span);
             }
