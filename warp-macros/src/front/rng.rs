@@ -78,8 +78,19 @@ impl Lowerer {
                 let ctor = format_ident(&format!("ivec{}", args.len() - 2), span);
                 let periods = &args[2..];
                 let packed: Expr = syn::parse_quote_spanned!(span=> #ctor(#(#periods),*));
+                let given = args.len() - 2;
                 self.builtin_call(row("pnoise"), &[args[0], args[1], &packed], want, span)
                     .map(Some)
+                    .map_err(|e| {
+                        if e.to_string().contains("argument 3") {
+                            syn::Error::new(
+                                span,
+                                format!("`pnoise` takes one integer period per lane of its position, found {given}: {e}"),
+                            )
+                        } else {
+                            e
+                        }
+                    })
             }
             "poisson" => self.rng_draw(name, 0, &args, span).map(Some),
             _ => match DRAWS.iter().find(|d| d.0 == name) {
