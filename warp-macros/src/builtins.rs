@@ -756,6 +756,57 @@ mod tests {
     }
 
     #[test]
+    fn rand_rows_have_fixed_types() {
+        let u32t = Ty::Scalar(Scalar::U32);
+        // Fixed signatures: literals take the parameter's type, other types are mismatches.
+        let init = lookup("rand_init").unwrap();
+        let r = init.resolve(&[ArgTy::Literal { float: false }]).unwrap();
+        assert_eq!((r.params, r.ret.clone()), (vec![I32], u32t.clone()));
+        assert!(init
+            .resolve(&[k(Ty::Scalar(Scalar::Usize))])
+            .unwrap_err()
+            .contains("expected `i32`"));
+        let range = lookup("randf_range").unwrap();
+        let r = range
+            .resolve(&[
+                k(u32t.clone()),
+                ArgTy::Literal { float: false },
+                ArgTy::Literal { float: true },
+            ])
+            .unwrap();
+        assert_eq!(r.params, vec![u32t.clone(), F32, F32]);
+        assert_eq!(
+            lookup("sample_unit_disk")
+                .unwrap()
+                .resolve(&[k(u32t.clone())])
+                .unwrap()
+                .ret,
+            Ty::Vector(Scalar::F32, 2)
+        );
+        // Noise: T is the position (f32 only), the periods follow its size.
+        let pn = lookup("pnoise").unwrap();
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let r = pn
+            .resolve(&[k(u32t.clone()), k(v3.clone()), k(Ty::Vector(Scalar::I32, 3))])
+            .unwrap();
+        assert_eq!(r.ret, F32);
+        assert!(pn
+            .resolve(&[k(u32t.clone()), k(v3), k(Ty::Vector(Scalar::I32, 2))])
+            .is_err());
+        assert!(lookup("noise")
+            .unwrap()
+            .resolve(&[k(u32t.clone()), k(Ty::Scalar(Scalar::F64))])
+            .unwrap_err()
+            .contains("f32, Vec2, Vec3 or Vec4"));
+        // Internal rows exist and are hidden from user code.
+        for name in INTERNAL {
+            assert!(lookup(name).is_some(), "{name}");
+            assert!(lookup_user(name).is_none(), "{name}");
+        }
+        assert!(lookup_user("randn").is_some());
+    }
+
+    #[test]
     fn classification_returns_bool() {
         let isnan = lookup("isnan").unwrap();
         assert_eq!(isnan.resolve(&[k(F32)]).unwrap().ret, crate::types::BOOL);
