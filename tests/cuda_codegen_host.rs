@@ -473,10 +473,8 @@ fn random_numbers_and_noise_match_the_cpu_backend() {
     .unwrap();
     let out = wp::Array::<f32, 2>::zeros([n, 5], &dev).unwrap();
     let ints = wp::Array::<i32>::zeros(n, &dev).unwrap();
-    let host = run_on_host::<rng_draws>(
-        &[n],
-        &[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&ints)],
-    );
+    let host =
+        run_on_host::<rng_draws>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&ints)]);
     wp::launch(rng_draws, n, (&x, &out, &ints), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(

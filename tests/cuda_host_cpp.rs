@@ -1036,18 +1036,48 @@ fn rand_cases(c: &mut Cases, rng: &mut Rng, device: bool) {
             toks(&b::randf_range(st, lo, hi), Exact),
         );
         c.push("randn", "u32", &[&st], toks(&b::randn(st), tr));
-        c.push("sample_triangle", "u32", &[&st], toks(&b::sample_triangle(st), Exact));
-        c.push("sample_unit_square", "u32", &[&st], toks(&b::sample_unit_square(st), Exact));
-        c.push("sample_unit_cube", "u32", &[&st], toks(&b::sample_unit_cube(st), Exact));
-        c.push("sample_unit_ring", "u32", &[&st], toks(&b::sample_unit_ring(st), tr));
-        c.push("sample_unit_disk", "u32", &[&st], toks(&b::sample_unit_disk(st), tr));
+        c.push(
+            "sample_triangle",
+            "u32",
+            &[&st],
+            toks(&b::sample_triangle(st), Exact),
+        );
+        c.push(
+            "sample_unit_square",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_square(st), Exact),
+        );
+        c.push(
+            "sample_unit_cube",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_cube(st), Exact),
+        );
+        c.push(
+            "sample_unit_ring",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_ring(st), tr),
+        );
+        c.push(
+            "sample_unit_disk",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_disk(st), tr),
+        );
         c.push(
             "sample_unit_sphere_surface",
             "u32",
             &[&st],
             toks(&b::sample_unit_sphere_surface(st), tr),
         );
-        c.push("sample_unit_sphere", "u32", &[&st], toks(&b::sample_unit_sphere(st), tr));
+        c.push(
+            "sample_unit_sphere",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_sphere(st), tr),
+        );
         c.push(
             "sample_unit_hemisphere_surface",
             "u32",
@@ -1061,8 +1091,24 @@ fn rand_cases(c: &mut Cases, rng: &mut Rng, device: bool) {
             toks(&b::sample_unit_hemisphere(st), tr),
         );
         if !device {
-            for lam in [0.0f32, -1.0, f32::NAN, 0.3, 5.0, 9.99, 10.0, 37.5, 1e4, f32::INFINITY] {
-                c.push("poisson", "u32", &[&st, &lam], toks(&b::poisson(st, lam), Exact));
+            for lam in [
+                0.0f32,
+                -1.0,
+                f32::NAN,
+                0.3,
+                5.0,
+                9.99,
+                10.0,
+                37.5,
+                1e4,
+                f32::INFINITY,
+            ] {
+                c.push(
+                    "poisson",
+                    "u32",
+                    &[&st, &lam],
+                    toks(&b::poisson(st, lam), Exact),
+                );
                 let after = b::poisson_state(st, lam);
                 c.push("poisson_state", "u32", &[&st, &lam], toks(&after, Exact));
             }
@@ -1080,7 +1126,17 @@ fn rand_cases(c: &mut Cases, rng: &mut Rng, device: bool) {
     }
     // Noise: random positions (also beyond i32's range and non-finite), states and periods
     // (zero, negative, huge).
-    let special = [0.0f32, -0.0, 1.0, -3.0, 1e10, -1e10, f32::NAN, f32::INFINITY, 0.5];
+    let special = [
+        0.0f32,
+        -0.0,
+        1.0,
+        -3.0,
+        1e10,
+        -1e10,
+        f32::NAN,
+        f32::INFINITY,
+        0.5,
+    ];
     let pos = |rng: &mut Rng| -> f32 {
         let r = rng.next();
         if r % 8 == 0 {
@@ -1103,15 +1159,40 @@ fn rand_cases(c: &mut Cases, rng: &mut Rng, device: bool) {
             IVec3::new(p[0], p[1], p[2]),
             IVec4::from_array(p),
         );
-        c.push("noise", "f32", &[&st, &x[0]], toks(&b::noise(st, x[0]), Exact));
+        c.push(
+            "noise",
+            "f32",
+            &[&st, &x[0]],
+            toks(&b::noise(st, x[0]), Exact),
+        );
         c.push("noise", "Vec2", &[&st, &v2], toks(&b::noise(st, v2), Exact));
         c.push("noise", "Vec3", &[&st, &v3], toks(&b::noise(st, v3), Exact));
         c.push("noise", "Vec4", &[&st, &v4], toks(&b::noise(st, v4), Exact));
         let pw = |w: f32| toks(&w, Exact);
-        c.push("pnoise", "f32", &[&st, &x[0], &p[0]], pw(b::pnoise(st, x[0], p[0])));
-        c.push("pnoise", "Vec2", &[&st, &v2, &p2], pw(b::pnoise(st, v2, p2)));
-        c.push("pnoise", "Vec3", &[&st, &v3, &p3], pw(b::pnoise(st, v3, p3)));
-        c.push("pnoise", "Vec4", &[&st, &v4, &p4], pw(b::pnoise(st, v4, p4)));
+        c.push(
+            "pnoise",
+            "f32",
+            &[&st, &x[0], &p[0]],
+            pw(b::pnoise(st, x[0], p[0])),
+        );
+        c.push(
+            "pnoise",
+            "Vec2",
+            &[&st, &v2, &p2],
+            pw(b::pnoise(st, v2, p2)),
+        );
+        c.push(
+            "pnoise",
+            "Vec3",
+            &[&st, &v3, &p3],
+            pw(b::pnoise(st, v3, p3)),
+        );
+        c.push(
+            "pnoise",
+            "Vec4",
+            &[&st, &v4, &p4],
+            pw(b::pnoise(st, v4, p4)),
+        );
     }
 }
 

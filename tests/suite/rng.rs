@@ -92,12 +92,21 @@ fn uniform_and_normal_statistics(dev: &wp::Device) {
     let (vu, vn) = (sum(1) / n - mu * mu, sum(3) / n - mn * mn);
     // Uniform [0, 1): mean 1/2, variance 1/12; the sample variance's own variance is
     // (μ4 - σ⁴)/n with μ4 = 1/80.
-    assert!((mu - 0.5).abs() < 5.0 * (1.0 / 12.0 / n).sqrt(), "randf mean {mu}");
+    assert!(
+        (mu - 0.5).abs() < 5.0 * (1.0 / 12.0 / n).sqrt(),
+        "randf mean {mu}"
+    );
     let sd_var_u = ((1.0 / 80.0 - 1.0 / 144.0) / n).sqrt();
-    assert!((vu - 1.0 / 12.0).abs() < 5.0 * sd_var_u, "randf variance {vu}");
+    assert!(
+        (vu - 1.0 / 12.0).abs() < 5.0 * sd_var_u,
+        "randf variance {vu}"
+    );
     // Standard normal: mean 0, variance 1 (the sample variance's variance is 2/n).
     assert!(mn.abs() < 5.0 / n.sqrt(), "randn mean {mn}");
-    assert!((vn - 1.0).abs() < 5.0 * (2.0 / n).sqrt(), "randn variance {vn}");
+    assert!(
+        (vn - 1.0).abs() < 5.0 * (2.0 / n).sqrt(),
+        "randn variance {vn}"
+    );
 }
 
 #[wp::kernel]
@@ -185,8 +194,15 @@ fn samplers_stay_in_their_domains(dev: &wp::Device) {
     let mut inner = 0usize;
     for t in 0..n {
         let tri = a[t * 4];
-        assert!(tri.x >= 0.0 && tri.y >= 0.0 && tri.x + tri.y <= 1.0, "triangle {tri}");
-        assert!((a[t * 4 + 1].length() - 1.0).abs() < unit, "ring {}", a[t * 4 + 1]);
+        assert!(
+            tri.x >= 0.0 && tri.y >= 0.0 && tri.x + tri.y <= 1.0,
+            "triangle {tri}"
+        );
+        assert!(
+            (a[t * 4 + 1].length() - 1.0).abs() < unit,
+            "ring {}",
+            a[t * 4 + 1]
+        );
         assert!(a[t * 4 + 2].length() <= 1.0 + unit, "disk {}", a[t * 4 + 2]);
         let sq = a[t * 4 + 3];
         assert!(half(sq.x) && half(sq.y), "square {sq}");
@@ -200,7 +216,10 @@ fn samplers_stay_in_their_domains(dev: &wp::Device) {
         // Uniform in the ball: P(|p| < 1/2) = 1/8.
         inner += (ball.length() < 0.5) as usize;
         let hs = b[t * 5 + 3];
-        assert!((hs.length() - 1.0).abs() < unit && hs.z >= 0.0, "hemisphere surface {hs}");
+        assert!(
+            (hs.length() - 1.0).abs() < unit && hs.z >= 0.0,
+            "hemisphere surface {hs}"
+        );
         let hb = b[t * 5 + 4];
         assert!(hb.length() <= 1.0 + unit && hb.z >= 0.0, "hemisphere {hb}");
     }
@@ -350,7 +369,10 @@ fn sequences_match_the_reference(dev: &wp::Device) {
     if dev.is_cpu() {
         assert_eq!(poisson_mismatch, 0);
     } else {
-        assert!(poisson_mismatch * 100 <= n, "{poisson_mismatch} Poisson draws differ");
+        assert!(
+            poisson_mismatch * 100 <= n,
+            "{poisson_mismatch} Poisson draws differ"
+        );
     }
 }
 
@@ -375,7 +397,11 @@ fn streams_differ_by_offset(dev: &wp::Device) {
     let mut sorted = a.clone();
     sorted.sort_unstable();
     sorted.dedup();
-    assert!(sorted.len() + 8 >= n, "only {} distinct first draws", sorted.len());
+    assert!(
+        sorted.len() + 8 >= n,
+        "only {} distinct first draws",
+        sorted.len()
+    );
     let same = a.iter().zip(&b).filter(|(x, y)| x == y).count();
     assert!(same < 8, "seeds 5 and 6 agree on {same} threads");
 }
@@ -475,7 +501,10 @@ fn poisson_statistics(dev: &wp::Device) {
         }
         // Mean and variance are both lam; the sample variance's variance is about
         // (μ4 - σ⁴)/n = (lam + 2 lam²)/n.
-        assert!((mean - l).abs() < 5.0 * (l / n).sqrt(), "lam {lam}: mean {mean}");
+        assert!(
+            (mean - l).abs() < 5.0 * (l / n).sqrt(),
+            "lam {lam}: mean {mean}"
+        );
         assert!(
             (var - l).abs() < 5.0 * ((l + 2.0 * l * l) / n).sqrt(),
             "lam {lam}: variance {var}"
@@ -535,9 +564,11 @@ fn noise_properties(dev: &wp::Device) {
     }
     let vals = noise_at(seed, &pts, dev);
     for k in 0..200 {
-        for lane in 0..8 {
-            let (a, b) = (vals[2 * k][lane], vals[2 * k + 1][lane]);
-            assert!((a - b).abs() < 10.0 * h, "point {k}, lane {lane}: {a} vs {b}");
+        for (lane, (&a, &b)) in vals[2 * k].iter().zip(&vals[2 * k + 1]).enumerate() {
+            assert!(
+                (a - b).abs() < 10.0 * h,
+                "point {k}, lane {lane}: {a} vs {b}"
+            );
             let dim = (lane % 4 + 1) as f32;
             assert!(a.abs() <= dim.sqrt() / 2.0 + 1e-6, "lane {lane}: {a}");
         }
@@ -545,7 +576,14 @@ fn noise_properties(dev: &wp::Device) {
     // Periods (3, 5, 2, 4): shifting by whole periods, on either side of zero, changes
     // nothing (the shifts are exact in f32).
     let base: Vec<Vec4> = (0..100)
-        .map(|k| Vec4::new(0.125 * k as f32 - 6.0, 0.25 * k as f32, -0.375 * k as f32, 0.5))
+        .map(|k| {
+            Vec4::new(
+                0.125 * k as f32 - 6.0,
+                0.25 * k as f32,
+                -0.375 * k as f32,
+                0.5,
+            )
+        })
         .collect();
     let shifted: Vec<Vec4> = base
         .iter()
@@ -568,7 +606,12 @@ fn noise_matches_the_reference(dev: &wp::Device) {
     let pts: Vec<Vec4> = (0..500)
         .map(|k| {
             let t = k as f32;
-            Vec4::new(t * 0.173 - 40.0, (t * 0.71).sin() * 9.0, t * -0.031, 1e4 - t * 13.7)
+            Vec4::new(
+                t * 0.173 - 40.0,
+                (t * 0.71).sin() * 9.0,
+                t * -0.031,
+                1e4 - t * 13.7,
+            )
         })
         .collect();
     let got = noise_at(seed, &pts, dev);
@@ -584,13 +627,11 @@ fn noise_matches_the_reference(dev: &wp::Device) {
             core::pnoise(seed, *p, IVec4::new(3, 5, 2, 4)),
         ];
         // Bit for bit on every backend (see the module documentation).
-        for lane in 0..8 {
+        for (lane, (g, w)) in got[k].iter().zip(want).enumerate() {
             assert_eq!(
-                got[k][lane].to_bits(),
-                want[lane].to_bits(),
-                "point {k} {p}, lane {lane}: {} vs {}",
-                got[k][lane],
-                want[lane]
+                g.to_bits(),
+                w.to_bits(),
+                "point {k} {p}, lane {lane}: {g} vs {w}"
             );
         }
     }

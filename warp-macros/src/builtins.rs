@@ -555,11 +555,7 @@ mod tests {
                 .iter()
                 .chain([&b.ret])
                 .all(|p| matches!(p, Pos::Fixed(_) | Pos::FixedVec(..)));
-            assert!(
-                binds_t || all_fixed,
-                "{} cannot bind T",
-                b.name
-            );
+            assert!(binds_t || all_fixed, "{} cannot bind T", b.name);
             assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);
         }
         for name in [
@@ -787,7 +783,11 @@ mod tests {
         let pn = lookup("pnoise").unwrap();
         let v3 = Ty::Vector(Scalar::F32, 3);
         let r = pn
-            .resolve(&[k(u32t.clone()), k(v3.clone()), k(Ty::Vector(Scalar::I32, 3))])
+            .resolve(&[
+                k(u32t.clone()),
+                k(v3.clone()),
+                k(Ty::Vector(Scalar::I32, 3)),
+            ])
             .unwrap();
         assert_eq!(r.ret, F32);
         assert!(pn

@@ -11,13 +11,7 @@ use crate::builtins::noise::{perlin, NoiseArg};
 
 /// Adjoint of `noise(state, x)`.
 #[inline(always)]
-pub fn adj_noise<T: NoiseArg>(
-    state: u32,
-    x: T,
-    _adj_state: &mut u32,
-    adj_x: &mut T,
-    adj_ret: f32,
-) {
+pub fn adj_noise<T: NoiseArg>(state: u32, x: T, _adj_state: &mut u32, adj_x: &mut T, adj_ret: f32) {
     let (_, g) = perlin(state, x.lanes(), None, T::N, true);
     adj_x.accum_scaled(g, adj_ret);
 }

@@ -24,6 +24,9 @@
 //! `sqrt` and `/` of non-fast-math CUDA: the backends agree bit for bit, with or without FMA
 //! contraction.
 
+// Lanes are indexed by axis throughout, as the definitions are written.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{IVec2, IVec3, IVec4, Vec2, Vec3, Vec4};
 
 use super::rand::rand_pcg;

@@ -374,7 +374,10 @@ mod tests {
         let u = unit(rand_pcg(s));
         assert_eq!(randf(s), u);
         assert_eq!(randf_range(s, -2.0, 6.0), 8.0 * u - 2.0);
-        assert_eq!(DRAWS.iter().find(|d| d.0 == "sample_unit_cube").unwrap().1, 3);
+        assert_eq!(
+            DRAWS.iter().find(|d| d.0 == "sample_unit_cube").unwrap().1,
+            3
+        );
     }
 
     #[test]
