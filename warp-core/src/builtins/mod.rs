@@ -15,7 +15,7 @@
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 //! * [`rand`]: Warp's random number generator ([`rand_init`], [`randf`], [`randn`], the
-//!   samplers, [`poisson`]) and [`noise`]: Perlin noise ([`noise()`], [`pnoise`]).
+//!   samplers, [`poisson`]) and [`noise`](mod@noise): Perlin noise ([`noise()`], [`pnoise`]).
 
 pub mod atomic;
 pub mod linalg;
