@@ -683,6 +683,19 @@ fn linalg(s: &mut Suite) {
     quats!(Quat: Vec3, Mat3, f32, DQuat: DVec3, DMat3, f64);
 }
 
+/// Perlin noise (wp_rand.h's `perlin` with a gradient, wp_adjoint.h's accumulation): every
+/// dimension, plain and periodic (periods from the integer lanes: 0, negative, huge).
+fn noise(s: &mut Suite) {
+    bin::<u32, f32, f32>(s, "adj_noise", ad::adj_noise::<f32>);
+    bin::<u32, Vec2, f32>(s, "adj_noise", ad::adj_noise::<Vec2>);
+    bin::<u32, Vec3, f32>(s, "adj_noise", ad::adj_noise::<Vec3>);
+    bin::<u32, Vec4, f32>(s, "adj_noise", ad::adj_noise::<Vec4>);
+    tri::<u32, f32, i32, f32>(s, "adj_pnoise", ad::adj_pnoise::<f32>);
+    tri::<u32, Vec2, IVec2, f32>(s, "adj_pnoise", ad::adj_pnoise::<Vec2>);
+    tri::<u32, Vec3, IVec3, f32>(s, "adj_pnoise", ad::adj_pnoise::<Vec3>);
+    tri::<u32, Vec4, IVec4, f32>(s, "adj_pnoise", ad::adj_pnoise::<Vec4>);
+}
+
 /// Integers: every adjoint is a no-op (the starting adjoints come back unchanged).
 fn integers(s: &mut Suite) {
     let n = s.n;
@@ -1209,6 +1222,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     float_vectors(&mut s);
     matrices_and_quats(&mut s);
     linalg(&mut s);
+    noise(&mut s);
     integers(&mut s);
     casts(&mut s);
     zeros(&mut s);

@@ -135,6 +135,26 @@ fn views(m: Array<f32, 2>, x: Array<f32>, out: Array<f32>) {
     }
 }
 
+/// The random-number lowering: draws advance a state in place (in a loop, so the state is
+/// loop-carried), ranges, the samplers, poisson, noise and pnoise with Warp's spelling.
+#[wp::kernel]
+fn rng_draws(x: Array<f32>, out: Array<f32, 2>, ints: Array<i32>) {
+    let i = tid();
+    let mut s = rand_init(7, i as i32);
+    let mut acc = 0.0;
+    for _k in 0..3 {
+        acc += randf(&mut s) + randf(&mut s, -1.0, x[i]);
+    }
+    out[(i, 0)] = acc;
+    out[(i, 1)] = randn(&mut s);
+    let d = sample_unit_disk(&mut s);
+    out[(i, 2)] = d.x * d.y;
+    let c = sample_unit_sphere(&mut s);
+    out[(i, 3)] = c.x + c.y + c.z;
+    out[(i, 4)] = noise(s, vec3(x[i], 0.5, -x[i])) + pnoise(s, vec2(x[i], 1.5), 3, 4);
+    ints[i] = randi(&mut s, -3, 9) + poisson(&mut s, 4.5) as i32 + (randu(&mut s) % 7) as i32;
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -511,4 +531,26 @@ fn views_match_the_cpu_backend() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("`x`"), "{e}");
+}
+
+#[test]
+fn random_numbers_and_noise_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 40;
+    let x = wp::Array::from_slice(
+        &(0..n).map(|k| k as f32 * 0.173 - 2.0).collect::<Vec<_>>(),
+        &dev,
+    )
+    .unwrap();
+    let out = wp::Array::<f32, 2>::zeros([n, 5], &dev).unwrap();
+    let ints = wp::Array::<i32>::zeros(n, &dev).unwrap();
+    let host =
+        run_on_host::<rng_draws>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&ints)]);
+    wp::launch(rng_draws, n, (&x, &out, &ints), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(
+            host,
+            cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&ints)])
+        );
+    }
 }

@@ -1012,6 +1012,190 @@ fn linalg_cases(c: &mut Cases, rng: &mut Rng) {
 
 // ----- casts: Rust `as` between every pair of scalar types -----
 
+// ----- wp_rand.h: the generator, the samplers, poisson, Perlin noise -----
+
+/// Random states (full 32-bit, and the edges), seeds and offsets; every draw of warp-core's
+/// `rand` against the library's. Exact: the hash and integer draws, uniform floats with and
+/// without a range (`__fmul_rn`/`__fadd_rn` on a GPU), the samplers that use `sqrt` only
+/// (`triangle`, `square`, `cube`) and the noise (every operation unfused, sqrt and `/`
+/// correctly rounded); `c.tr` for the samplers through logf/cosf/sinf/acosf/powf (glibc on
+/// both sides here); against a GPU 16 ulp for those (documented 1 to 4 ulp per call, then a
+/// few products). Poisson (logf/expf deciding the rejection loop) only on the host.
+fn rand_cases(c: &mut Cases, rng: &mut Rng, device: bool) {
+    let tr = if device { Ulps(16) } else { c.tr };
+    let mut states: Vec<u32> = vec![0, 1, u32::MAX, 0x8000_0000, 255, 256];
+    states.extend((0..200).map(|_| rng.next() as u32));
+    for &st in &states {
+        c.push("rand_pcg", "u32", &[&st], toks(&b::rand_pcg(st), Exact));
+        c.push("randf", "u32", &[&st], toks(&b::randf(st), Exact));
+        let (lo, hi) = (rng.f() as f32, rng.f() as f32);
+        c.push(
+            "randf_range",
+            "u32",
+            &[&st, &lo, &hi],
+            toks(&b::randf_range(st, lo, hi), Exact),
+        );
+        c.push("randn", "u32", &[&st], toks(&b::randn(st), tr));
+        c.push(
+            "sample_triangle",
+            "u32",
+            &[&st],
+            toks(&b::sample_triangle(st), Exact),
+        );
+        c.push(
+            "sample_unit_square",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_square(st), Exact),
+        );
+        c.push(
+            "sample_unit_cube",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_cube(st), Exact),
+        );
+        c.push(
+            "sample_unit_ring",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_ring(st), tr),
+        );
+        c.push(
+            "sample_unit_disk",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_disk(st), tr),
+        );
+        c.push(
+            "sample_unit_sphere_surface",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_sphere_surface(st), tr),
+        );
+        c.push(
+            "sample_unit_sphere",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_sphere(st), tr),
+        );
+        c.push(
+            "sample_unit_hemisphere_surface",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_hemisphere_surface(st), tr),
+        );
+        c.push(
+            "sample_unit_hemisphere",
+            "u32",
+            &[&st],
+            toks(&b::sample_unit_hemisphere(st), tr),
+        );
+        if !device {
+            for lam in [
+                0.0f32,
+                -1.0,
+                f32::NAN,
+                0.3,
+                5.0,
+                9.99,
+                10.0,
+                37.5,
+                1e4,
+                f32::INFINITY,
+            ] {
+                c.push(
+                    "poisson",
+                    "u32",
+                    &[&st, &lam],
+                    toks(&b::poisson(st, lam), Exact),
+                );
+                let after = b::poisson_state(st, lam);
+                c.push("poisson_state", "u32", &[&st, &lam], toks(&after, Exact));
+            }
+        }
+    }
+    for _ in 0..100 {
+        let (a, o) = (rng.i(), rng.i());
+        c.push("rand_init", "u32", &[&a], toks(&b::rand_init(a), Exact));
+        c.push(
+            "rand_init_offset",
+            "u32",
+            &[&a, &o],
+            toks(&b::rand_init_offset(a, o), Exact),
+        );
+    }
+    // Noise: random positions (also beyond i32's range and non-finite), states and periods
+    // (zero, negative, huge).
+    let special = [
+        0.0f32,
+        -0.0,
+        1.0,
+        -3.0,
+        1e10,
+        -1e10,
+        f32::NAN,
+        f32::INFINITY,
+        0.5,
+    ];
+    let pos = |rng: &mut Rng| -> f32 {
+        let r = rng.next();
+        if r % 8 == 0 {
+            special[(r >> 8) as usize % special.len()]
+        } else {
+            (rng.f() * 4.0) as f32
+        }
+    };
+    for k in 0..300 {
+        let st = if k % 7 == 0 { 0 } else { rng.next() as u32 };
+        let x: [f32; 4] = std::array::from_fn(|_| pos(rng));
+        let p: [i32; 4] = std::array::from_fn(|_| rng.i());
+        let (v2, v3, v4) = (
+            Vec2::new(x[0], x[1]),
+            Vec3::new(x[0], x[1], x[2]),
+            Vec4::from_array(x),
+        );
+        let (p2, p3, p4) = (
+            IVec2::new(p[0], p[1]),
+            IVec3::new(p[0], p[1], p[2]),
+            IVec4::from_array(p),
+        );
+        c.push(
+            "noise",
+            "f32",
+            &[&st, &x[0]],
+            toks(&b::noise(st, x[0]), Exact),
+        );
+        c.push("noise", "Vec2", &[&st, &v2], toks(&b::noise(st, v2), Exact));
+        c.push("noise", "Vec3", &[&st, &v3], toks(&b::noise(st, v3), Exact));
+        c.push("noise", "Vec4", &[&st, &v4], toks(&b::noise(st, v4), Exact));
+        let pw = |w: f32| toks(&w, Exact);
+        c.push(
+            "pnoise",
+            "f32",
+            &[&st, &x[0], &p[0]],
+            pw(b::pnoise(st, x[0], p[0])),
+        );
+        c.push(
+            "pnoise",
+            "Vec2",
+            &[&st, &v2, &p2],
+            pw(b::pnoise(st, v2, p2)),
+        );
+        c.push(
+            "pnoise",
+            "Vec3",
+            &[&st, &v3, &p3],
+            pw(b::pnoise(st, v3, p3)),
+        );
+        c.push(
+            "pnoise",
+            "Vec4",
+            &[&st, &v4, &p4],
+            pw(b::pnoise(st, v4, p4)),
+        );
+    }
+}
+
 macro_rules! cast_from {
     ($c:expr, $from:ident, $vals:expr; $($to:ident),*) => {
         for &x in $vals.iter() {
@@ -1799,6 +1983,7 @@ fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
     quat_cases!(&mut c, &mut rng, Quat, Vec3, f32);
     quat_cases!(&mut c, &mut rng, DQuat, DVec3, f64);
     linalg_cases(&mut c, &mut rng);
+    rand_cases(&mut c, &mut rng, device);
 
     let skipped = range_cases(&mut c);
     array_cases(&mut c);

@@ -28,6 +28,8 @@ backend_tests!(
     custom_gradients,
     structs_and_nested_loops,
     gradcheck_linalg,
+    gradcheck_noise,
+    rng_draws_have_zero_gradient,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -823,6 +825,8 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <k_custom as wp::Kernel>::info(),
         <k_struct_loops as wp::Kernel>::info(),
         <k_linalg_grad as wp::Kernel>::info(),
+        <k_noise_grad as wp::Kernel>::info(),
+        <k_rng_in_grad as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -910,4 +914,83 @@ fn gradcheck_linalg(dev: &wp::Device) {
     .unwrap();
     assert!(report.passed, "{:?}", report.worst);
     assert!(report.max_rel_error < 1e-6, "{report:?}");
+}
+
+/// Perlin noise and periodic noise in every dimension (f32 only, as in Warp), one per output,
+/// by `wp::gradcheck` against central differences (f32 defaults: eps 1e-3 against the
+/// noise's second derivatives of order 10, so a difference quotient is good to about 1e-3).
+#[wp::kernel]
+fn k_noise_grad(x: Array<f32>, out: Array<f32>) {
+    let s = rand_init(7);
+    let v = vec4(x[0], x[1], x[2], x[3]);
+    out[0] = noise(s, x[0]);
+    out[1] = noise(s, vec2(x[1], x[2]));
+    out[2] = noise(s, vec3(x[0], x[2], x[3]));
+    out[3] = noise(s, v);
+    out[4] = pnoise(s, x[3], 2);
+    out[5] = pnoise(s, vec2(x[0], x[3]), 2, 3);
+    out[6] = pnoise(s, vec3(x[1], x[2], x[3]), 4, 2, 3);
+    out[7] = pnoise(s, v * 2.0, 3, 5, 2, 4);
+}
+
+fn gradcheck_noise(dev: &wp::Device) {
+    let x = arr(&[0.3f32, 1.45, -0.7, 2.2], dev).with_grad().unwrap();
+    let out = zeros::<f32, 1>(8, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_noise_grad, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f32>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    // Every output depends on some input: the gradient is not trivially zero.
+    for (k, row) in report.analytic.iter().enumerate() {
+        assert!(row.iter().any(|g| *g != 0.0), "output {k}: {row:?}");
+    }
+}
+
+/// RNG draws inside a differentiated kernel (in a loop, so the state is pushed on the adjoint
+/// stack and replayed): the draws are constants of the gradient, the rest is differentiated.
+#[wp::kernel]
+fn k_rng_in_grad(x: Array<f32>, out: Array<f32>) {
+    let i = tid();
+    let mut s = rand_init(11, i as i32);
+    let mut acc = 0.0;
+    for _k in 0..3 {
+        acc += x[i] * randf(&mut s) + randn(&mut s);
+        let p = sample_unit_disk(&mut s);
+        acc += p.x * x[i] * x[i];
+    }
+    out[i] = acc + noise(s, x[i]);
+}
+
+fn rng_draws_have_zero_gradient(dev: &wp::Device) {
+    use wp::__private::builtins as core;
+    let xs = [0.3f32, -1.2, 2.7];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_rng_in_grad, 3, (&x, &out), dev).unwrap();
+    }
+    assert!(backward_ok(dev, tape.backward(&out)));
+    let g = x.grad().unwrap().to_vec().unwrap();
+    // The closed form: d/dx (x u + n + p.x x²) = u + 2 p.x x per round, plus the noise's
+    // derivative at the final state.
+    for (i, x) in xs.iter().enumerate() {
+        let mut s = core::rand_init_offset(11, i as i32);
+        let mut want = 0.0f32;
+        for _ in 0..3 {
+            let u = core::randf(s);
+            s = core::rand_pcg(core::rand_pcg(core::rand_pcg(s)));
+            let p = core::sample_unit_disk(s);
+            s = core::rand_pcg(core::rand_pcg(s));
+            want += u + 2.0 * p.x * x;
+        }
+        let h = 1e-3f32;
+        want += (core::noise(s, x + h) - core::noise(s, x - h)) / (2.0 * h);
+        assert!((g[i] - want).abs() < 2e-3, "thread {i}: {} vs {want}", g[i]);
+    }
 }

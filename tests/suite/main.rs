@@ -75,6 +75,7 @@ mod generics;
 mod grad;
 mod launch;
 mod params;
+mod rng;
 mod stability;
 mod streams;
 mod structs;

@@ -14,7 +14,7 @@
 //                                                 normalize cross asin acos atan sinh cosh
 //                                                 tanh exp2 log2 log10 cbrt erf erfc erfinv
 //                                                 erfcinv round rint trunc frac step degrees
-//                                                 radians smoothstep
+//                                                 radians smoothstep noise pnoise
 //       adj_cast(adj_from, adj_to)                template over the 13 scalar types
 //     for exactly the operand types the Rust functions take (the kernel language's operator
 //     combinations and the builtin table's signatures, with glam's meaning of each operator).
@@ -48,6 +48,7 @@
 #include "wp_vector.h"
 #include "wp_linalg.h"
 #include "wp_atomic.h"
+#include "wp_rand.h"
 
 namespace wp {
 
@@ -1175,5 +1176,48 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
 WP_ADJ_QUAT_LINALG(Quat, Vec3, Mat3, f32)
 WP_ADJ_QUAT_LINALG(DQuat, DVec3, DMat3, f64)
 #undef WP_ADJ_QUAT_LINALG
+
+// ------------------------------------------------------------------------------------------
+// Perlin noise (warp-core: adjoint/noise.rs): adj_x[k] += grad[k] * adj_ret, with the
+// gradient of wp_rand.h's `perlin` and unfused operations (so bit for bit with the CPU); the
+// state and the periods are integers and get nothing.
+// ------------------------------------------------------------------------------------------
+
+namespace detail {
+WP_FN void adj_noise_accum(f32& adj_x, const f32* g, f32 adj_ret) {
+  adj_x = rn_add(adj_x, rn_mul(g[0], adj_ret));
+}
+template <typename V>
+WP_FN void adj_noise_accum(V& adj_x, const f32* g, f32 adj_ret) {
+  for (int k = 0; k < vec_traits<V>::N; ++k) {
+    vec_traits<V>::at(adj_x, k) = rn_add(vec_traits<V>::get(adj_x, k), rn_mul(g[k], adj_ret));
+  }
+}
+}  // namespace detail
+
+#define WP_ADJ_NOISE(V, P)                                                                  \
+  WP_FN void adj_noise(u32 state, V x, u32& adj_state, V& adj_x, f32 adj_ret) {             \
+    (void)adj_state;                                                                        \
+    f32 l[4], g[4];                                                                         \
+    detail::noise_lanes(x, l);                                                              \
+    detail::perlin(state, l, nullptr, detail::noise_dim<V>::N, g);                          \
+    detail::adj_noise_accum(adj_x, g, adj_ret);                                             \
+  }                                                                                         \
+  WP_FN void adj_pnoise(u32 state, V x, P period, u32& adj_state, V& adj_x, P& adj_period, \
+                        f32 adj_ret) {                                                      \
+    (void)adj_state;                                                                        \
+    (void)adj_period;                                                                       \
+    f32 l[4], g[4];                                                                         \
+    i32 p[4];                                                                               \
+    detail::noise_lanes(x, l);                                                              \
+    detail::noise_periods(period, p);                                                       \
+    detail::perlin(state, l, p, detail::noise_dim<V>::N, g);                                \
+    detail::adj_noise_accum(adj_x, g, adj_ret);                                             \
+  }
+WP_ADJ_NOISE(f32, i32)
+WP_ADJ_NOISE(Vec2, IVec2)
+WP_ADJ_NOISE(Vec3, IVec3)
+WP_ADJ_NOISE(Vec4, IVec4)
+#undef WP_ADJ_NOISE
 
 }  // namespace wp

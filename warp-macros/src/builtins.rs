@@ -43,6 +43,8 @@ pub enum Class {
     AtomicInt,
     /// Scalars with CPU and GPU atomics: i32, u32, i64, u64, f32, f64 (atomic_cas/exch).
     AtomicScalar,
+    /// f32, Vec2, Vec3, Vec4 (Perlin noise: f32 only, as in Warp).
+    Noise,
 }
 
 impl Class {
@@ -79,6 +81,8 @@ impl Class {
                 s,
                 Scalar::I32 | Scalar::U32 | Scalar::I64 | Scalar::U64 | Scalar::F32 | Scalar::F64
             ),
+            (Class::Noise, Ty::Scalar(Scalar::F32)) => true,
+            (Class::Noise, Ty::Vector(Scalar::F32, _)) => true,
             _ => false,
         }
     }
@@ -99,6 +103,7 @@ impl Class {
             Class::Quaternion => "a quaternion (Quat, DQuat)",
             Class::AtomicInt => "i32, u32, i64 or u64",
             Class::AtomicScalar => "i32, u32, i64, u64, f32 or f64",
+            Class::Noise => "f32, Vec2, Vec3 or Vec4",
         }
     }
 }
@@ -123,6 +128,13 @@ pub enum Pos {
     VecOfT,
     /// The quaternion of `T`'s scalar (`quat_from_axis_angle`, `quat_from_matrix`).
     QuatOfT,
+    /// `i32` for a scalar `T`, the `i32` vector of `T`'s size for a vector (`pnoise`'s
+    /// periods).
+    IntOfT,
+    /// A fixed scalar type, whatever `T` is (the RNG's `u32` state, `i32` seeds, `f32` draws).
+    Fixed(Scalar),
+    /// A fixed vector type (the samplers' `Vec2`, `Vec3`).
+    FixedVec(Scalar, u8),
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -199,6 +211,14 @@ const MAT: &[Class] = &[Matrix];
 const MAT_OR_QUAT: &[Class] = &[Matrix, Quaternion];
 const QUAT: &[Class] = &[Quaternion];
 const FVEC3: &[Class] = &[FloatVector3];
+/// The classes of a builtin whose signature does not mention `T` (every type is fixed).
+const NO_T: &[Class] = &[];
+const NOISE: &[Class] = &[Noise];
+const U32: Pos = Fixed(Scalar::U32);
+const I32: Pos = Fixed(Scalar::I32);
+const F32: Pos = Fixed(Scalar::F32);
+const VEC2: Pos = FixedVec(Scalar::F32, 2);
+const VEC3: Pos = FixedVec(Scalar::F32, 3);
 
 macro_rules! table {
     ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, method = $m:literal, section = $sec:literal, grad = $g:ident; )*) => {
@@ -298,7 +318,39 @@ table! {
     "atomic_and": &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
     "atomic_or":  &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
     "atomic_xor": &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
+    // Random numbers and Perlin noise (warp-core `builtins::{rand, noise}`, wp_rand.h). A draw
+    // `randf(&mut s, ..)` is not a call of one row: `front::lower::rng` lowers it into the row's pure
+    // function of the state before the draw and the write-back of the advanced state
+    // (`rand_pcg` once per uniform draw, `poisson_state` for `poisson`). Rows in `INTERNAL`
+    // are those pieces and overloads by arity; user code cannot name them.
+    "rand_init":  NO_T,         (I32) -> U32,            method = false, section = "rand",   grad = Zero;
+    "rand_init_offset": NO_T,   (I32, I32) -> U32,       method = false, section = "rand",   grad = Zero;
+    "rand_pcg":   NO_T,         (U32) -> U32,            method = false, section = "rand",   grad = Zero;
+    "randf":      NO_T,         (U32) -> F32,            method = false, section = "rand",   grad = Zero;
+    "randf_range": NO_T,        (U32, F32, F32) -> F32,  method = false, section = "rand",   grad = Zero;
+    "randn":      NO_T,         (U32) -> F32,            method = false, section = "rand",   grad = Zero;
+    "sample_triangle": NO_T,    (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_ring": NO_T,   (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_disk": NO_T,   (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_square": NO_T, (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_cube": NO_T,   (U32) -> VEC3,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_sphere_surface": NO_T, (U32) -> VEC3,   method = false, section = "rand",   grad = Zero;
+    "sample_unit_sphere": NO_T, (U32) -> VEC3,           method = false, section = "rand",   grad = Zero;
+    "sample_unit_hemisphere_surface": NO_T, (U32) -> VEC3, method = false, section = "rand", grad = Zero;
+    "sample_unit_hemisphere": NO_T, (U32) -> VEC3,       method = false, section = "rand",   grad = Zero;
+    "poisson":    NO_T,         (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
+    "poisson_state": NO_T,      (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
+    "noise":      NOISE,        (U32, T) -> F32,         method = false, section = "rand",   grad = Adjoint;
+    "pnoise":     NOISE,        (U32, T, IntOfT) -> F32, method = false, section = "rand",   grad = Adjoint;
 }
+
+/// Rows that are pieces of other builtins (see the "rand" rows): not callable by name.
+pub const INTERNAL: &[&str] = &[
+    "rand_init_offset",
+    "rand_pcg",
+    "randf_range",
+    "poisson_state",
+];
 
 /// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,
 /// `x.ln()` is `log(x)`). Each alias has Rust's meaning exactly: `round_ties_even` is `rint`,
@@ -319,9 +371,14 @@ pub const METHOD_ALIASES: &[(&str, &str)] = &[
     ("conjugate", "quat_inverse"),
 ];
 
-/// Looks a builtin up by name.
+/// Looks a builtin up by name (internal rows included).
 pub fn lookup(name: &str) -> Option<&'static Builtin> {
     BUILTINS.iter().find(|b| b.name == name)
+}
+
+/// Looks up a builtin that user code may call by name (not an [`INTERNAL`] row).
+pub fn lookup_user(name: &str) -> Option<&'static Builtin> {
+    lookup(name).filter(|b| !INTERNAL.contains(&b.name))
 }
 
 /// Looks a builtin up by method name (aliases included).
@@ -406,6 +463,17 @@ impl Builtin {
                 });
             }
         }
+        let mentions_t = self.params.iter().chain([&self.ret]).any(|p| {
+            !matches!(
+                p,
+                Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index
+            )
+        });
+        let t = match t {
+            // Every position fixed: nothing to bind (the classes are empty).
+            None if !mentions_t => Some(Ty::Deferred),
+            t => t,
+        };
         let Some(t) = t else {
             // Nothing known: leave typing to the target compiler.
             let params = self.params.iter().map(|_| Ty::Deferred).collect();
@@ -414,7 +482,7 @@ impl Builtin {
                 ret: Ty::Deferred,
             });
         };
-        if !self.classes.iter().any(|c| c.admits(&t)) {
+        if mentions_t && !self.classes.iter().any(|c| c.admits(&t)) {
             let want: Vec<_> = self.classes.iter().map(|c| c.describe()).collect();
             return Err(format!(
                 "`{}` is not defined for `{t}`: it takes {}",
@@ -445,6 +513,13 @@ impl Builtin {
                 _ => Ty::Deferred,
             },
             Pos::QuatOfT => scalar.scalar().map(Ty::Quat).unwrap_or(Ty::Deferred),
+            Pos::IntOfT => match &t {
+                Ty::Scalar(_) => crate::types::I32,
+                Ty::Vector(_, n) => Ty::Vector(Scalar::I32, *n),
+                _ => Ty::Deferred,
+            },
+            Pos::Fixed(s) => Ty::Scalar(*s),
+            Pos::FixedVec(s, n) => Ty::Vector(*s, *n),
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
@@ -517,12 +592,14 @@ mod tests {
                 "duplicate {}",
                 b.name
             );
-            assert!(!b.classes.is_empty());
-            assert!(
-                b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT),
-                "{} cannot bind T",
-                b.name
-            );
+            let binds_t = b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT);
+            let all_fixed = b
+                .params
+                .iter()
+                .chain([&b.ret])
+                .all(|p| matches!(p, Pos::Fixed(_) | Pos::FixedVec(..)));
+            assert!(binds_t || all_fixed, "{} cannot bind T", b.name);
+            assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);
         }
         for name in [
             "min",
@@ -715,6 +792,61 @@ mod tests {
         for m in ["frac", "rint", "erf", "isnan", "degrees", "signum", "mod"] {
             assert!(lookup_method(m).is_none(), "{m}");
         }
+    }
+
+    #[test]
+    fn rand_rows_have_fixed_types() {
+        let u32t = Ty::Scalar(Scalar::U32);
+        // Fixed signatures: literals take the parameter's type, other types are mismatches.
+        let init = lookup("rand_init").unwrap();
+        let r = init.resolve(&[ArgTy::Literal { float: false }]).unwrap();
+        assert_eq!((r.params, r.ret.clone()), (vec![I32], u32t.clone()));
+        assert!(init
+            .resolve(&[k(Ty::Scalar(Scalar::Usize))])
+            .unwrap_err()
+            .contains("expected `i32`"));
+        let range = lookup("randf_range").unwrap();
+        let r = range
+            .resolve(&[
+                k(u32t.clone()),
+                ArgTy::Literal { float: false },
+                ArgTy::Literal { float: true },
+            ])
+            .unwrap();
+        assert_eq!(r.params, vec![u32t.clone(), F32, F32]);
+        assert_eq!(
+            lookup("sample_unit_disk")
+                .unwrap()
+                .resolve(&[k(u32t.clone())])
+                .unwrap()
+                .ret,
+            Ty::Vector(Scalar::F32, 2)
+        );
+        // Noise: T is the position (f32 only), the periods follow its size.
+        let pn = lookup("pnoise").unwrap();
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let r = pn
+            .resolve(&[
+                k(u32t.clone()),
+                k(v3.clone()),
+                k(Ty::Vector(Scalar::I32, 3)),
+            ])
+            .unwrap();
+        assert_eq!(r.ret, F32);
+        assert!(pn
+            .resolve(&[k(u32t.clone()), k(v3), k(Ty::Vector(Scalar::I32, 2))])
+            .is_err());
+        assert!(lookup("noise")
+            .unwrap()
+            .resolve(&[k(u32t.clone()), k(Ty::Scalar(Scalar::F64))])
+            .unwrap_err()
+            .contains("f32, Vec2, Vec3 or Vec4"));
+        // Internal rows exist and are hidden from user code.
+        for name in INTERNAL {
+            assert!(lookup(name).is_some(), "{name}");
+            assert!(lookup_user(name).is_none(), "{name}");
+        }
+        assert!(lookup_user("randn").is_some());
     }
 
     #[test]

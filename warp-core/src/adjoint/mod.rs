@@ -37,6 +37,7 @@ mod builtins;
 mod cast;
 mod lanes;
 mod linalg;
+mod noise;
 mod ops;
 #[cfg(test)]
 mod tests;
@@ -44,6 +45,7 @@ mod tests;
 pub use builtins::*;
 pub use cast::*;
 pub use linalg::*;
+pub use noise::*;
 pub use ops::*;
 
 /// A type whose values have an adjoint of the same type.

@@ -14,12 +14,18 @@
 //! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
+//! * [`rand`]: Warp's random number generator ([`rand_init`], [`randf`], [`randn`], the
+//!   samplers, [`poisson`]) and [`noise`](mod@noise): Perlin noise ([`noise()`], [`pnoise`]).
 
 pub mod atomic;
 pub mod linalg;
 pub mod math;
+pub mod noise;
+pub mod rand;
 pub mod special;
 
 pub use atomic::*;
 pub use linalg::*;
 pub use math::*;
+pub use noise::{noise, pnoise, NoiseArg};
+pub use rand::*;

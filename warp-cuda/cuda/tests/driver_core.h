@@ -34,7 +34,11 @@ enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
   X(round) X(rint) X(trunc) X(frac) X(degrees) X(radians) X(smoothstep) X(step) X(isfinite)    \
   X(isnan) X(isinf) X(length_sq) X(outer) X(diag) X(cw_mul) X(cw_div) X(transpose)           \
   X(determinant) X(inverse) X(trace) X(ddot) X(skew) X(qaxis) X(qrot) X(qrotinv) X(qinv) X(q2m) \
-  X(m2q) X(slerp)
+  X(m2q) X(slerp) X(rand_pcg) X(rand_init) X(rand_init_offset) X(randf) X(randf_range) X(randn) \
+  X(sample_triangle) X(sample_unit_ring) X(sample_unit_disk) X(sample_unit_square)            \
+  X(sample_unit_cube) X(sample_unit_sphere_surface) X(sample_unit_sphere)                    \
+  X(sample_unit_hemisphere_surface) X(sample_unit_hemisphere) X(poisson) X(poisson_state)    \
+  X(noise) X(pnoise)
 
 #define ENUM_OP(o) OP_##o,
 enum op_id { OP_LIST(ENUM_OP) OP_COUNT };
@@ -389,6 +393,24 @@ DRV_FN void dispatch_cast_to(int ty2, reader& r, out_t& o) {
   }
 }
 
+/// The period type of `pnoise` over T (i32 for f32, the IVec of a Vec's size).
+template <typename T>
+struct noise_period {
+  typedef i32 type;
+};
+template <>
+struct noise_period<Vec2> {
+  typedef IVec2 type;
+};
+template <>
+struct noise_period<Vec3> {
+  typedef IVec3 type;
+};
+template <>
+struct noise_period<Vec4> {
+  typedef IVec4 type;
+};
+
 template <typename T>
 DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
   typedef typename scalar_of<T>::type S;
@@ -617,6 +639,37 @@ DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
       // Both spellings: explicit (cv/ref-qualified, as `decltype(x)` may give) and deduced.
       if (op == OP_lit) { f64 v = get<f64>(r); put(o, lit_like<const T&>(v)); return; }
       if (op == OP_intlit) { i64 v = get<i64>(r); const T like{}; put(o, int_like(like, v)); return; }
+    }
+  }
+  // wp_rand.h: the generator on u32 states (i32 seeds), the noise on f32 and Vec2-4.
+  if constexpr (is_int && sizeof(T) == 4 && !num<T>::is_signed) {
+    switch (op) {
+      case OP_rand_pcg: { u32 a = get<u32>(r); put(o, wp::rand_pcg(a)); return; }
+      case OP_rand_init: { i32 a = get<i32>(r); put(o, wp::rand_init(a)); return; }
+      case OP_rand_init_offset: { i32 a = get<i32>(r), b = get<i32>(r); put(o, wp::rand_init_offset(a, b)); return; }
+      case OP_randf: { u32 a = get<u32>(r); put(o, wp::randf(a)); return; }
+      case OP_randf_range: { u32 a = get<u32>(r); f32 lo = get<f32>(r), hi = get<f32>(r); put(o, wp::randf_range(a, lo, hi)); return; }
+      case OP_randn: { u32 a = get<u32>(r); put(o, wp::randn(a)); return; }
+      case OP_sample_triangle: { u32 a = get<u32>(r); put(o, wp::sample_triangle(a)); return; }
+      case OP_sample_unit_ring: { u32 a = get<u32>(r); put(o, wp::sample_unit_ring(a)); return; }
+      case OP_sample_unit_disk: { u32 a = get<u32>(r); put(o, wp::sample_unit_disk(a)); return; }
+      case OP_sample_unit_square: { u32 a = get<u32>(r); put(o, wp::sample_unit_square(a)); return; }
+      case OP_sample_unit_cube: { u32 a = get<u32>(r); put(o, wp::sample_unit_cube(a)); return; }
+      case OP_sample_unit_sphere_surface: { u32 a = get<u32>(r); put(o, wp::sample_unit_sphere_surface(a)); return; }
+      case OP_sample_unit_sphere: { u32 a = get<u32>(r); put(o, wp::sample_unit_sphere(a)); return; }
+      case OP_sample_unit_hemisphere_surface: { u32 a = get<u32>(r); put(o, wp::sample_unit_hemisphere_surface(a)); return; }
+      case OP_sample_unit_hemisphere: { u32 a = get<u32>(r); put(o, wp::sample_unit_hemisphere(a)); return; }
+      case OP_poisson: { u32 a = get<u32>(r); f32 l = get<f32>(r); put(o, wp::poisson(a, l)); return; }
+      case OP_poisson_state: { u32 a = get<u32>(r); f32 l = get<f32>(r); put(o, wp::poisson_state(a, l)); return; }
+      default: break;
+    }
+  }
+  if constexpr ((is_float || is_fvec) && sizeof(S) == 4) {
+    typedef typename noise_period<T>::type P;
+    switch (op) {
+      case OP_noise: { u32 a = get<u32>(r); T x = get<T>(r); put(o, wp::noise(a, x)); return; }
+      case OP_pnoise: { u32 a = get<u32>(r); T x = get<T>(r); P p = get<P>(r); put(o, wp::pnoise(a, x, p)); return; }
+      default: break;
     }
   }
   if constexpr (is_int || is_float || is_fvec) {

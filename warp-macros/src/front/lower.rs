@@ -20,6 +20,7 @@ use std::collections::HashMap;
 use syn::spanned::Spanned;
 use syn::{Expr, Pat};
 
+mod rng;
 mod views;
 
 type R<T> = syn::Result<T>;
@@ -1775,7 +1776,10 @@ impl Lowerer {
             }
         }
         if prefix_ok {
-            if let Some(b) = builtins::lookup(&last) {
+            if let Some(v) = self.rng_call(&last, c, want, span)? {
+                return Ok(v);
+            }
+            if let Some(b) = builtins::lookup_user(&last) {
                 let args: Vec<&Expr> = c.args.iter().collect();
                 return self.builtin_call(b, &args, want, span);
             }

@@ -1,0 +1,267 @@
+//! Lowering of the random-number builtins: Warp's functions that advance a `u32` state in
+//! place (`randf(&mut state)`), and the builtins whose Warp overloads differ by arity
+//! (`rand_init(seed[, offset])`, `pnoise(state, x, px[, py[, pz[, pt]]])`).
+//!
+//! The IR has no references. A draw is lowered into pure operations and an assignment:
+//!
+//! ```text
+//! randf(&mut s)          pre = s; r = randf(pre); s = rand_pcg(pre)
+//! randn(&mut s)          pre = s; r = randn(pre); s = rand_pcg(rand_pcg(pre))
+//! randi(&mut s, lo, hi)  pre = s; t = rand_pcg(pre); s = t;
+//!                        r = ((t % ((hi - lo) as u32)) + lo as u32) as i32
+//! poisson(&mut s, lam)   pre = s; r = poisson(pre, lam); s = poisson_state(pre, lam)
+//! ```
+//!
+//! where `randf(pre)` is the table row's pure function of the state *before* the draw and
+//! `rand_pcg` is applied once per uniform draw the builtin consumes ([`DRAWS`]). The adjoint's
+//! replay therefore recomputes the same draws (the state is an ordinary `u32` variable, pushed
+//! on the adjoint stack where loops overwrite it), and every draw has zero gradient.
+//! The state may be any assignable place of type `u32`: a `let mut` local, a field of one, or
+//! an array element (`&mut states[i]`, loaded once and stored once). `randi`/`randu` with a
+//! range use the language's integer operators, so an empty range (`lo == hi`) is the integer
+//! remainder-by-zero fault on both backends (Warp: undefined behaviour).
+
+use super::*;
+
+/// Uniform draws (generator steps) each fixed-count draw consumes; the mirror of
+/// `warp_core::builtins::rand::DRAWS` (the suite checks the two agree through the sequences).
+const DRAWS: &[(&str, u32)] = &[
+    ("randi", 1),
+    ("randu", 1),
+    ("randf", 1),
+    ("randn", 2),
+    ("sample_triangle", 2),
+    ("sample_unit_ring", 1),
+    ("sample_unit_disk", 2),
+    ("sample_unit_square", 2),
+    ("sample_unit_cube", 3),
+    ("sample_unit_sphere_surface", 2),
+    ("sample_unit_sphere", 3),
+    ("sample_unit_hemisphere_surface", 2),
+    ("sample_unit_hemisphere", 3),
+];
+
+const U32: Ty = Ty::Scalar(Scalar::U32);
+const I32: Ty = Ty::Scalar(Scalar::I32);
+const F32: Ty = Ty::Scalar(Scalar::F32);
+
+fn row(name: &str) -> &'static Builtin {
+    builtins::lookup(name).expect("rand rows are in the table")
+}
+
+impl Lowerer {
+    /// Lowers `name(args)` if it is one of the builtins this module handles.
+    pub(super) fn rng_call(
+        &mut self,
+        name: &str,
+        c: &syn::ExprCall,
+        want: Option<&Ty>,
+        span: Span,
+    ) -> R<Option<VarId>> {
+        let args: Vec<&Expr> = c.args.iter().collect();
+        match name {
+            "rand_init" => {
+                let b = match args.len() {
+                    1 => row("rand_init"),
+                    2 => row("rand_init_offset"),
+                    n => {
+                        return err(
+                            span,
+                            format!("`rand_init` takes a seed and an optional offset (`rand_init(seed)`, `rand_init(seed, offset)`), found {n} argument(s)"),
+                        )
+                    }
+                };
+                self.builtin_call(b, &args, want, span).map(Some)
+            }
+            "pnoise" if args.len() > 3 && args.len() <= 6 => {
+                // Warp's `pnoise(state, xy, px, py)`: the periods become one integer vector.
+                let ctor = format_ident(&format!("ivec{}", args.len() - 2), span);
+                let periods = &args[2..];
+                let packed: Expr = syn::parse_quote_spanned!(span=> #ctor(#(#periods),*));
+                let given = args.len() - 2;
+                self.builtin_call(row("pnoise"), &[args[0], args[1], &packed], want, span)
+                    .map(Some)
+                    .map_err(|e| {
+                        if e.to_string().contains("argument 3") {
+                            syn::Error::new(
+                                span,
+                                format!("`pnoise` takes one integer period per lane of its position, found {given}: {e}"),
+                            )
+                        } else {
+                            e
+                        }
+                    })
+            }
+            "poisson" => self.rng_draw(name, 0, &args, span).map(Some),
+            _ => match DRAWS.iter().find(|d| d.0 == name) {
+                Some(&(_, k)) => self.rng_draw(name, k, &args, span).map(Some),
+                None => Ok(None),
+            },
+        }
+    }
+
+    /// A state-advancing draw; `steps` generator steps (0 for `poisson`, which writes back
+    /// its `poisson_state`).
+    fn rng_draw(&mut self, name: &str, steps: u32, args: &[&Expr], span: Span) -> R<VarId> {
+        let Some(first) = args.first() else {
+            return err(
+                span,
+                format!("`{name}` takes the generator state first: `{name}(&mut state)`"),
+            );
+        };
+        let place_expr = match strip(first) {
+            Expr::Reference(r) if r.mutability.is_some() => &*r.expr,
+            Expr::Reference(r) => {
+                return err(
+                    r.span(),
+                    format!("`{name}` advances the generator state in place: pass `&mut state`, not `&state`"),
+                )
+            }
+            other => {
+                return err(
+                    other.span(),
+                    format!("`{name}` advances the generator state in place: pass it as `&mut state` (a `u32` from `rand_init`)"),
+                )
+            }
+        };
+        if !matches!(
+            strip(place_expr),
+            Expr::Path(_) | Expr::Field(_) | Expr::Index(_)
+        ) {
+            return err(
+                place_expr.span(),
+                "the generator state must be a mutable variable, a field of one or an array element",
+            );
+        }
+        // Which extra arguments, of which types.
+        let extra: &[Ty] = match (name, args.len() - 1) {
+            ("randi", 0) | ("randu", 0) | ("randf", 0) => &[],
+            ("randi", 2) => &[I32, I32],
+            ("randu", 2) => &[U32, U32],
+            ("randf", 2) => &[F32, F32],
+            ("poisson", 1) => &[F32],
+            ("randi" | "randu" | "randf", n) => {
+                return err(
+                    span,
+                    format!("`{name}` takes the state and an optional range: `{name}(&mut state)` or `{name}(&mut state, lo, hi)`, found {n} argument(s) after the state"),
+                )
+            }
+            ("poisson", _) => {
+                return err(span, "`poisson` takes the state and the mean: `poisson(&mut state, lam)`")
+            }
+            (_, 0) => &[],
+            _ => return err(span, format!("`{name}` takes only the state: `{name}(&mut state)`")),
+        };
+        // The place (its index expressions), then the other arguments, then the read: a draw
+        // inside another argument happens first.
+        let place = self.place(place_expr)?;
+        let pty = self.place_ty(&place, place_expr.span())?;
+        if !pty.is_deferred() && pty != U32 {
+            return err(
+                place_expr.span(),
+                format!("the generator state is a `u32` (from `rand_init`), found `{pty}`"),
+            );
+        }
+        let mut xs = Vec::new();
+        for (a, want) in args[1..].iter().zip(extra) {
+            let v = self.expr(a, Some(want))?;
+            let t = self.ty(v);
+            if !t.is_deferred() && t != *want {
+                return err(
+                    a.span(),
+                    format!("mismatched types in `{name}`: expected `{want}`, found `{t}`"),
+                );
+            }
+            xs.push(v);
+        }
+        let pre = self.read_place(&place, U32, span);
+        let pcg = |cx: &mut Self, s: VarId| {
+            cx.def(
+                Op::Builtin {
+                    builtin: row("rand_pcg"),
+                    args: vec![s],
+                },
+                U32,
+                span,
+            )
+        };
+        let call = |cx: &mut Self, b: &str, args: Vec<VarId>| {
+            let b = row(b);
+            let ty = match b.ret {
+                Pos::Fixed(s) => Ty::Scalar(s),
+                Pos::FixedVec(s, n) => Ty::Vector(s, n),
+                _ => Ty::Deferred,
+            };
+            cx.def(Op::Builtin { builtin: b, args }, ty, span)
+        };
+        let (result, next) = match (name, xs.len()) {
+            ("randi" | "randu", n) => {
+                let t = pcg(self, pre);
+                let r = if n == 0 {
+                    t
+                } else {
+                    // Warp's `state % (hi - lo) + lo`, in u32 (wrapping), then as i32 for randi.
+                    let (lo, hi) = (xs[0], xs[1]);
+                    let ity = if name == "randi" { I32 } else { U32 };
+                    let d = self.def(Op::Binary(BinOp::Sub, hi, lo), ity.clone(), span);
+                    let (du, lou) = if name == "randi" {
+                        (
+                            self.def(Op::Cast(d, U32), U32, span),
+                            self.def(Op::Cast(lo, U32), U32, span),
+                        )
+                    } else {
+                        (d, lo)
+                    };
+                    let m = self.def(Op::Binary(BinOp::Rem, t, du), U32, span);
+                    self.def(Op::Binary(BinOp::Add, m, lou), U32, span)
+                };
+                let r = if name == "randi" {
+                    self.def(Op::Cast(r, I32), I32, span)
+                } else {
+                    r
+                };
+                (r, t)
+            }
+            ("poisson", _) => {
+                let r = call(self, "poisson", vec![pre, xs[0]]);
+                let next = call(self, "poisson_state", vec![pre, xs[0]]);
+                (r, next)
+            }
+            ("randf", 2) => {
+                let r = call(self, "randf_range", vec![pre, xs[0], xs[1]]);
+                (r, pcg(self, pre))
+            }
+            _ => {
+                let r = call(self, name, vec![pre]);
+                let mut next = pre;
+                for _ in 0..steps {
+                    next = pcg(self, next);
+                }
+                (r, next)
+            }
+        };
+        self.write_place(place, next, span);
+        Ok(result)
+    }
+}
+
+fn format_ident(name: &str, span: Span) -> syn::Ident {
+    syn::Ident::new(name, span)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DRAWS;
+
+    #[test]
+    fn draw_counts_match_warp_core() {
+        // The same table as warp-core's (this crate cannot depend on it): compare the text.
+        let core = include_str!("../../../../warp-core/src/builtins/rand.rs");
+        for (name, k) in DRAWS {
+            assert!(
+                core.contains(&format!("(\"{name}\", {k}),")),
+                "{name}: {k} draws here, not in warp-core's DRAWS"
+            );
+        }
+    }
+}
