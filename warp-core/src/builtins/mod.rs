@@ -13,13 +13,16 @@
 //!
 //! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
+//! * [`transform`]: rigid-transform builtins ([`transform_point`], [`transform_multiply`], ...).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 
 pub mod atomic;
 pub mod linalg;
 pub mod math;
 pub mod special;
+pub mod transform;
 
 pub use atomic::*;
 pub use linalg::*;
 pub use math::*;
+pub use transform::*;
