@@ -76,6 +76,7 @@ mod params;
 mod stability;
 mod streams;
 mod structs;
+mod transforms;
 
 /// A 1-D array holding `data` on `dev`.
 fn arr<T: wp::Element>(data: &[T], dev: &wp::Device) -> wp::Array<T> {
