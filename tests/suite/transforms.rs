@@ -195,7 +195,7 @@ fn inputs() -> Vec<(DTransform, DTransform, DTransform, DVec3)> {
 macro_rules! xform_kernel {
     ($name:ident, $x:ident, $v3:ident, $q:ident, $m4:ident, $s:ident) => {
         #[wp::kernel]
-        fn $name(
+        pub(crate) fn $name(
             a: Array<$x>,
             b: Array<$x>,
             c: Array<$x>,
@@ -439,7 +439,7 @@ fn transform_fields_and_arrays(dev: &wp::Device) {
 /// A transform as a struct field (the struct has no padding: 32 + 12 + 4 bytes).
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
 #[repr(C)]
-struct Body {
+pub(crate) struct Body {
     pose: Transform,
     vel: Vec3,
     mass: f32,
@@ -457,7 +457,7 @@ fn apply(t: Transform, x: Vec3) -> Vec3 {
 }
 
 #[wp::kernel]
-fn k_bodies(bodies: Array<Body>, dt: f32, out: Array<Transform>, tip: Array<Vec3>) {
+pub(crate) fn k_bodies(bodies: Array<Body>, dt: f32, out: Array<Transform>, tip: Array<Vec3>) {
     let i = tid();
     let b = bodies[i];
     out[i] = drift(b, dt);
@@ -499,7 +499,7 @@ fn transform_struct_field_and_func(dev: &wp::Device) {
 // ----- gradients of arrays of transforms -----
 
 #[wp::kernel]
-fn k_xform_loss(ts: Array<Transform>, xs: Array<Vec3>, w: Vec3, loss: Array<f32>) {
+pub(crate) fn k_xform_loss(ts: Array<Transform>, xs: Array<Vec3>, w: Vec3, loss: Array<f32>) {
     let i = tid();
     let y = ts[i].transform_point(xs[i]);
     atomic_add(loss, 0, dot(y, w));
