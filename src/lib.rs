@@ -102,7 +102,8 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, builtins, first_error, max_depth, ops, zero_like, AdStack,
-        ArrayView, DTransform, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg, Transform,
+        ArrayView, DTransform, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
+        Transform,
     };
     pub use warp_runtime::{
         ArgCtx, CudaStruct, Device, Element, Kernel, KernelArg, KernelInfo, Result,

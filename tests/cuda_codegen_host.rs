@@ -118,7 +118,10 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
         vec3(a, a * 0.5, -a),
         normalize(Quat::from_xyzw(0.1 * a, 0.2, -0.3, 1.0)),
     );
-    let u = transformation(vec3(0.25, a, 1.0), Quat::from_axis_angle(vec3(0.0, 0.6, 0.8), a));
+    let u = transformation(
+        vec3(0.25, a, 1.0),
+        Quat::from_axis_angle(vec3(0.0, 0.6, 0.8), a),
+    );
     let mut c = t * u * Transform::IDENTITY;
     c.p.y += 0.5;
     c.q = c.q * 0.5 + u.q * 0.5;
@@ -132,7 +135,9 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
         + lerp(t, u, 0.3).p
         + (t + u - t * 2.0 + 0.5 * (-u)).p
         + transform_get_translation(transform_inverse(c));
-    let q = transform_multiply(c, t).q + transform_get_rotation(t.lerp(c, a)) + transform_from_matrix(m).q;
+    let q = transform_multiply(c, t).q
+        + transform_get_rotation(t.lerp(c, a))
+        + transform_from_matrix(m).q;
     out[(i, 0)] = p.x;
     out[(i, 1)] = p.y;
     out[(i, 2)] = p.z;

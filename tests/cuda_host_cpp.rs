@@ -1004,7 +1004,10 @@ macro_rules! xform_cases {
             ts.push($x::new(p, if k < 5 { q.normalize() } else { q }));
         }
         ts.push($x::IDENTITY);
-        ts.push($x::new($v::new(0.0, -0.0, $s::NAN), $q::from_xyzw(1.0, 0.0, 0.0, 0.0)));
+        ts.push($x::new(
+            $v::new(0.0, -0.0, $s::NAN),
+            $q::from_xyzw(1.0, 0.0, 0.0, 0.0),
+        ));
         let vs: Vec<$v> = (0..4)
             .map(|_| $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s))
             .chain([$v::ZERO])
@@ -1036,10 +1039,30 @@ macro_rules! xform_cases {
                 }
             }
             for &v in &vs {
-                c.push("xpoint", ty, &[&a, &v], toks(&b::transform_point(a, v), Exact));
-                c.push("xvector", ty, &[&a, &v], toks(&b::transform_vector(a, v), Exact));
-                c.push("xpoint", mty, &[&m, &v], toks(&b::transform_point(m, v), Exact));
-                c.push("xvector", mty, &[&m, &v], toks(&b::transform_vector(m, v), Exact));
+                c.push(
+                    "xpoint",
+                    ty,
+                    &[&a, &v],
+                    toks(&b::transform_point(a, v), Exact),
+                );
+                c.push(
+                    "xvector",
+                    ty,
+                    &[&a, &v],
+                    toks(&b::transform_vector(a, v), Exact),
+                );
+                c.push(
+                    "xpoint",
+                    mty,
+                    &[&m, &v],
+                    toks(&b::transform_point(m, v), Exact),
+                );
+                c.push(
+                    "xvector",
+                    mty,
+                    &[&m, &v],
+                    toks(&b::transform_vector(m, v), Exact),
+                );
             }
             for &s in &ss {
                 c.push("muls", ty, &[&a, &s], toks(&(a * s), Exact));
@@ -1050,8 +1073,18 @@ macro_rules! xform_cases {
         let g = $m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s));
         c.push("m2x", mty, &[&g], toks(&b::transform_from_matrix(g), Exact));
         for &v in &vs {
-            c.push("xpoint", mty, &[&g, &v], toks(&b::transform_point(g, v), Exact));
-            c.push("xvector", mty, &[&g, &v], toks(&b::transform_vector(g, v), Exact));
+            c.push(
+                "xpoint",
+                mty,
+                &[&g, &v],
+                toks(&b::transform_point(g, v), Exact),
+            );
+            c.push(
+                "xvector",
+                mty,
+                &[&g, &v],
+                toks(&b::transform_vector(g, v), Exact),
+            );
         }
         c.push("konst", ty, &[&K_IDENTITY], toks(&$x::IDENTITY, Exact));
     }};
@@ -1651,7 +1684,13 @@ fn print_cases(c: &mut Cases) {
     p(c, Quat::IDENTITY);
     p(c, DQuat::from_xyzw(0.5, -0.5, 0.25, 1.0));
     p(c, Transform::new(Vec3::new(1.0, -2.5, 0.0), Quat::IDENTITY));
-    p(c, DTransform::new(DVec3::new(0.5, 0.25, -1.0), DQuat::from_xyzw(0.5, -0.5, 0.5, 0.5)));
+    p(
+        c,
+        DTransform::new(
+            DVec3::new(0.5, 0.25, -1.0),
+            DQuat::from_xyzw(0.5, -0.5, 0.5, 0.5),
+        ),
+    );
     // The documented difference: %g keeps 6 significant digits, Rust the shortest round trip.
     c.raw(
         "print",

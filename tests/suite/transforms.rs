@@ -112,8 +112,16 @@ fn close(got: &dyn Lanes, want: &dyn Lanes, tol: f64, what: &str) {
 #[track_caller]
 fn close_at(got: &dyn Lanes, want: &dyn Lanes, tol: f64, scale: f64, what: &str) {
     let (g, w) = (got.lanes(), want.lanes());
-    let d = g.iter().zip(&w).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale.max(1.0);
-    assert!(d <= tol, "{what}: got {g:?}, want {w:?} ({d:e} > {tol:e} at scale {scale})");
+    let d = g
+        .iter()
+        .zip(&w)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max)
+        / scale.max(1.0);
+    assert!(
+        d <= tol,
+        "{what}: got {g:?}, want {w:?} ({d:e} > {tol:e} at scale {scale})"
+    );
 }
 
 // ----- f64 references from Warp's definitions -----
@@ -184,7 +192,10 @@ fn inputs() -> Vec<(DTransform, DTransform, DTransform, DVec3)> {
     // The identity, and a half turn about x (w = 0).
     v.push((
         DTransform::IDENTITY,
-        DTransform::new(DVec3::new(1.0, -2.0, 0.5), DQuat::from_xyzw(1.0, 0.0, 0.0, 0.0)),
+        DTransform::new(
+            DVec3::new(1.0, -2.0, 0.5),
+            DQuat::from_xyzw(1.0, 0.0, 0.0, 0.0),
+        ),
         DTransform::new(DVec3::Z, DQuat::IDENTITY),
         DVec3::new(0.5, 0.25, -1.0),
     ));
@@ -324,12 +335,27 @@ macro_rules! xform_test {
                 (10, a * s, lanewise(da, da, |x, _| x * 0.625), "a * s"),
                 (11, a * 2.0, lanewise(da, da, |x, _| x * 2.0), "2 * a"),
                 (12, -a, lanewise(da, da, |x, _| -x), "-a"),
-                (13, a.lerp(b, 0.25), lanewise(da, db, |x, y| x * 0.75 + y * 0.25), "lerp"),
-                (14, a.lerp(b, s), lanewise(da, db, |x, y| x * 0.375 + y * 0.625), "a.lerp"),
+                (
+                    13,
+                    a.lerp(b, 0.25),
+                    lanewise(da, db, |x, y| x * 0.75 + y * 0.25),
+                    "lerp",
+                ),
+                (
+                    14,
+                    a.lerp(b, s),
+                    lanewise(da, db, |x, y| x * 0.375 + y * 0.625),
+                    "a.lerp",
+                ),
             ];
             for (k, host_v, reference, what) in cases {
                 close(&t(k), &host_v, gt, &format!("{what} vs host, {w}"));
-                close(&up(t(k)), &reference, rt, &format!("{what} vs Warp's definition, {w}"));
+                close(
+                    &up(t(k)),
+                    &reference,
+                    rt,
+                    &format!("{what} vs Warp's definition, {w}"),
+                );
             }
             // Exact ones.
             assert_eq!(t(5), $x::new(v, b.q), "Transform::new, {w}");
@@ -341,46 +367,123 @@ macro_rules! xform_test {
             assert_eq!(vv(11), $v3::ZERO, "transform_vector(t, 0) is 0, {w}");
             assert_eq!(qo[i * 3 + 2], $q::IDENTITY, "== and !=, {w}");
             // The matrix round trip gives q or -q (the same rotation).
-            for (k, want, what) in [(15, a, "from_matrix(to_matrix(a))"), (16, b, "transform_from_matrix")] {
+            for (k, want, what) in [
+                (15, a, "from_matrix(to_matrix(a))"),
+                (16, b, "transform_from_matrix"),
+            ] {
                 let got = up(t(k));
                 let dw = up(want);
                 let sgn = if got.q.dot(dw.q) < 0.0 { -1.0 } else { 1.0 };
-                close(&DTransform::new(got.p, got.q * sgn), &dw, rt, &format!("{what}, {w}"));
-                close(&t(k), &$x::from_matrix(want.to_matrix()), gt, &format!("{what} vs host, {w}"));
+                close(
+                    &DTransform::new(got.p, got.q * sgn),
+                    &dw,
+                    rt,
+                    &format!("{what}, {w}"),
+                );
+                close(
+                    &t(k),
+                    &$x::from_matrix(want.to_matrix()),
+                    gt,
+                    &format!("{what} vs host, {w}"),
+                );
             }
             // Associativity and the inverse round trip (the identity up to the sign of q).
-            close(&up(t(17)), &up(t(18)), rt, &format!("(a * b) * c = a * (b * c), {w}"));
+            close(
+                &up(t(17)),
+                &up(t(18)),
+                rt,
+                &format!("(a * b) * c = a * (b * c), {w}"),
+            );
             for k in [19, 20] {
                 let id = up(t(k));
                 let id = DTransform::new(id.p, id.q * id.q.w.signum());
                 let scale = da.p.length();
-                close_at(&id, &DTransform::IDENTITY, rt, scale, &format!("a * a⁻¹ = 1 (#{k}), {w}"));
+                close_at(
+                    &id,
+                    &DTransform::IDENTITY,
+                    rt,
+                    scale,
+                    &format!("a * a⁻¹ = 1 (#{k}), {w}"),
+                );
             }
             let pv = [
                 (0, a.transform_point(v), da.p + rot(da.q, dv)),
                 (1, a.transform_point(v), da.p + rot(da.q, dv)),
                 (2, a.transform_vector(v), rot(da.q, dv)),
                 (3, a.transform_vector(v), rot(da.q, dv)),
-                (6, a.to_matrix().transform_point3(v), (matrix(da) * dv.extend(1.0)).truncate()),
-                (7, a.to_matrix().transform_point3(v), (matrix(da) * dv.extend(1.0)).truncate()),
-                (8, a.to_matrix().transform_vector3(v), (matrix(da) * dv.extend(0.0)).truncate()),
-                (9, a.to_matrix().transform_vector3(v), (matrix(da) * dv.extend(0.0)).truncate()),
+                (
+                    6,
+                    a.to_matrix().transform_point3(v),
+                    (matrix(da) * dv.extend(1.0)).truncate(),
+                ),
+                (
+                    7,
+                    a.to_matrix().transform_point3(v),
+                    (matrix(da) * dv.extend(1.0)).truncate(),
+                ),
+                (
+                    8,
+                    a.to_matrix().transform_vector3(v),
+                    (matrix(da) * dv.extend(0.0)).truncate(),
+                ),
+                (
+                    9,
+                    a.to_matrix().transform_vector3(v),
+                    (matrix(da) * dv.extend(0.0)).truncate(),
+                ),
                 (12, a.transform_point(v) - a.transform_vector(v), da.p),
             ];
             for (k, host_v, reference) in pv {
-                close(&vv(k), &host_v, gt, &format!("vector output #{k} vs host, {w}"));
-                close(&vv(k), &reference, rt, &format!("vector output #{k} vs Warp's definition, {w}"));
+                close(
+                    &vv(k),
+                    &host_v,
+                    gt,
+                    &format!("vector output #{k} vs host, {w}"),
+                );
+                close(
+                    &vv(k),
+                    &reference,
+                    rt,
+                    &format!("vector output #{k} vs Warp's definition, {w}"),
+                );
             }
-            close(&mo[i * 4], &a.to_matrix(), gt, &format!("transform_to_matrix vs host, {w}"));
-            close(&mo[i * 4], &matrix(da), rt, &format!("transform_to_matrix vs Warp's, {w}"));
-            close(&mo[i * 4 + 2], &mo[i * 4 + 3], rt, &format!("matrix of a * b, {w}"));
+            close(
+                &mo[i * 4],
+                &a.to_matrix(),
+                gt,
+                &format!("transform_to_matrix vs host, {w}"),
+            );
+            close(
+                &mo[i * 4],
+                &matrix(da),
+                rt,
+                &format!("transform_to_matrix vs Warp's, {w}"),
+            );
+            close(
+                &mo[i * 4 + 2],
+                &mo[i * 4 + 3],
+                rt,
+                &format!("matrix of a * b, {w}"),
+            );
             let _ = c;
         }
     }};
 }
 
 fn transforms_f64(dev: &wp::Device) {
-    xform_test!(dev, k_xform64, DTransform, DVec3, DQuat, DMat4, f64, false, |t| t, |v| v, |t| t);
+    xform_test!(
+        dev,
+        k_xform64,
+        DTransform,
+        DVec3,
+        DQuat,
+        DMat4,
+        f64,
+        false,
+        |t| t,
+        |v| v,
+        |t| t
+    );
 }
 
 fn transforms_f32(dev: &wp::Device) {
@@ -432,7 +535,11 @@ fn transform_fields_and_arrays(dev: &wp::Device) {
         w.q = spin.q * w.q;
         w.p.z = 7.0;
         close(&got[k], &w, gpu_tol(dev, true), &format!("element {k}"));
-        assert_eq!(after[k], Transform::new(t.p, Quat::IDENTITY), "ts[{k}].q = ..");
+        assert_eq!(
+            after[k],
+            Transform::new(t.p, Quat::IDENTITY),
+            "ts[{k}].q = .."
+        );
     }
 }
 
@@ -479,14 +586,22 @@ fn transform_struct_field_and_func(dev: &wp::Device) {
         })
         .collect();
     let n = bodies.len();
-    let (arr_b, out, tip) = (arr(&bodies, dev), zeros::<Transform, 1>(n, dev), zeros::<Vec3, 1>(n, dev));
+    let (arr_b, out, tip) = (
+        arr(&bodies, dev),
+        zeros::<Transform, 1>(n, dev),
+        zeros::<Vec3, 1>(n, dev),
+    );
     wp::launch(k_bodies, n, (&arr_b, 0.25f32, &out, &tip), dev).unwrap();
     let (got_b, got_t, got_tip) = (host(&arr_b), host(&out), host(&tip));
     for (k, b) in bodies.iter().enumerate() {
         let want = Transform::new(b.vel * 0.25, Quat::IDENTITY) * b.pose;
         close(&got_t[k], &want, gpu_tol(dev, true), &format!("drift {k}"));
         assert_eq!(got_b[k].pose, got_t[k], "struct field written back {k}");
-        assert_eq!((got_b[k].vel, got_b[k].mass), (b.vel, 3.0), "other fields {k}");
+        assert_eq!(
+            (got_b[k].vel, got_b[k].mass),
+            (b.vel, 3.0),
+            "other fields {k}"
+        );
         close(
             &got_tip[k],
             &got_t[k].transform_point(Vec3::X),
@@ -530,8 +645,22 @@ fn transform_array_gradients(dev: &wp::Device) {
         let (mut at, mut ax) = (Transform::adj_zero(), Vec3::ZERO);
         adj_transform_point(t0[k], x0[k], &mut at, &mut ax, w);
         assert_eq!(gt[k].p, w, "d loss / d p, element {k}");
-        close(&gt[k].q, &at.q, gpu_tol(dev, true), &format!("d loss / d q, element {k}"));
-        close(&gx[k], &ax, gpu_tol(dev, true), &format!("d loss / d x, element {k}"));
-        assert_eq!(raw[k * 8 + 3], 0, "padding lane of the gradient, element {k}");
+        close(
+            &gt[k].q,
+            &at.q,
+            gpu_tol(dev, true),
+            &format!("d loss / d q, element {k}"),
+        );
+        close(
+            &gx[k],
+            &ax,
+            gpu_tol(dev, true),
+            &format!("d loss / d x, element {k}"),
+        );
+        assert_eq!(
+            raw[k * 8 + 3],
+            0,
+            "padding lane of the gradient, element {k}"
+        );
     }
 }

@@ -375,7 +375,10 @@ mod tests {
         assert_eq!((t - t).to_array(), [0.0; 7]);
         assert_eq!((-t).to_array(), t.to_array().map(|x| -x));
         assert_eq!(t.lerp(-t, 0.5).to_array(), [0.0; 7]);
-        assert_eq!(format!("{}", Transform::IDENTITY), "{p: [0, 0, 0], q: [0, 0, 0, 1]}");
+        assert_eq!(
+            format!("{}", Transform::IDENTITY),
+            "{p: [0, 0, 0], q: [0, 0, 0, 1]}"
+        );
         assert!(!Transform::new(Vec3::NAN, Quat::IDENTITY).is_finite());
         assert_eq!(Transform::default(), Transform::IDENTITY);
         assert_eq!(t.as_dtransform().as_transform(), t);

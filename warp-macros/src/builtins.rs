@@ -737,7 +737,9 @@ mod tests {
                 .ret,
             Ty::Vector(Scalar::F64, 3)
         );
-        assert!(tp.resolve(&[k(Ty::Matrix(Scalar::F32, 3)), k(v3.clone())]).is_err());
+        assert!(tp
+            .resolve(&[k(Ty::Matrix(Scalar::F32, 3)), k(v3.clone())])
+            .is_err());
         assert_eq!(
             lookup("transform_to_matrix")
                 .unwrap()
@@ -754,14 +756,25 @@ mod tests {
                 .ret,
             d
         );
-        assert_eq!(lookup_method("inverse").unwrap().resolve(&[k(x.clone())]).unwrap().ret, x);
+        assert_eq!(
+            lookup_method("inverse")
+                .unwrap()
+                .resolve(&[k(x.clone())])
+                .unwrap()
+                .ret,
+            x
+        );
         let lerp = lookup_method("lerp").unwrap();
         let r = lerp
             .resolve(&[k(d.clone()), k(d.clone()), ArgTy::Literal { float: true }])
             .unwrap();
         assert_eq!(r.params[2], Ty::Scalar(Scalar::F64));
         assert_eq!(
-            lookup("transform_get_rotation").unwrap().resolve(&[k(d)]).unwrap().ret,
+            lookup("transform_get_rotation")
+                .unwrap()
+                .resolve(&[k(d)])
+                .unwrap()
+                .ret,
             Ty::Quat(Scalar::F64)
         );
     }

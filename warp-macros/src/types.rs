@@ -228,13 +228,31 @@ mod tests {
     #[test]
     fn glam_names_round_trip() {
         for name in [
-            "Vec2", "Vec3", "Vec4", "DVec3", "IVec2", "UVec4", "Mat3", "DMat4", "Quat", "DQuat",
-            "Transform", "DTransform",
+            "Vec2",
+            "Vec3",
+            "Vec4",
+            "DVec3",
+            "IVec2",
+            "UVec4",
+            "Mat3",
+            "DMat4",
+            "Quat",
+            "DQuat",
+            "Transform",
+            "DTransform",
         ] {
             let ty = Ty::from_glam_name(name).unwrap();
             assert_eq!(ty.glam_name().unwrap(), name);
         }
-        for bad in ["Vec5", "IMat3", "IQuat", "Vec", "Foo", "ITransform", "UTransform"] {
+        for bad in [
+            "Vec5",
+            "IMat3",
+            "IQuat",
+            "Vec",
+            "Foo",
+            "ITransform",
+            "UTransform",
+        ] {
             assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
         }
     }

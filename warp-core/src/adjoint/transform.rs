@@ -79,13 +79,7 @@ pub fn adj_transform_get_rotation<X: AdjXform>(t: X, adj_t: &mut X, adj_ret: X::
 
 /// Adjoint of `transform_multiply(a, b)` (`a * b`; see the module documentation).
 #[inline(always)]
-pub fn adj_transform_multiply<X: AdjXform>(
-    a: X,
-    b: X,
-    adj_a: &mut X,
-    adj_b: &mut X,
-    adj_ret: X,
-) {
+pub fn adj_transform_multiply<X: AdjXform>(a: X, b: X, adj_a: &mut X, adj_b: &mut X, adj_ret: X) {
     X::adj_multiply(a, b, adj_a, adj_b, adj_ret)
 }
 
@@ -329,7 +323,10 @@ mod tests {
 
     /// Central differences of a scalar function of the seven lanes of a transform and the
     /// three of a vector, against the adjoints (f64).
-    fn check(f: impl Fn(DTransform, DVec3) -> f64, adj: impl Fn(DTransform, DVec3, &mut DTransform, &mut DVec3)) {
+    fn check(
+        f: impl Fn(DTransform, DVec3) -> f64,
+        adj: impl Fn(DTransform, DVec3, &mut DTransform, &mut DVec3),
+    ) {
         let t = DTransform::new(
             DVec3::new(0.4, -1.1, 0.7),
             DQuat::from_xyzw(0.3, -0.2, 0.5, 0.8),
@@ -343,8 +340,13 @@ mod tests {
             let mut m = p;
             p[k] += h;
             m[k] -= h;
-            let fd = (f(DTransform::from_array(p), x) - f(DTransform::from_array(m), x)) / (2.0 * h);
-            assert!((fd - at.to_array()[k]).abs() < 1e-7, "lane {k}: {fd} vs {}", at.to_array()[k]);
+            let fd =
+                (f(DTransform::from_array(p), x) - f(DTransform::from_array(m), x)) / (2.0 * h);
+            assert!(
+                (fd - at.to_array()[k]).abs() < 1e-7,
+                "lane {k}: {fd} vs {}",
+                at.to_array()[k]
+            );
         }
         for k in 0..3 {
             let (mut p, mut m) = (x, x);
@@ -358,7 +360,10 @@ mod tests {
     #[test]
     fn adjoints_match_central_differences() {
         let probe = DVec3::new(0.3, -0.7, 1.1);
-        let pt = DTransform::new(DVec3::new(1.0, 2.0, -0.5), DQuat::from_xyzw(-0.1, 0.4, 0.2, 0.9));
+        let pt = DTransform::new(
+            DVec3::new(1.0, 2.0, -0.5),
+            DQuat::from_xyzw(-0.1, 0.4, 0.2, 0.9),
+        );
         check(
             |t, x| t.transform_point(x).dot(probe),
             |t, x, at, ax| adj_transform_point(t, x, at, ax, probe),
@@ -369,7 +374,13 @@ mod tests {
         );
         // t * pt and pt * t, through the lanes of the result.
         let w = DTransform::from_array([0.5, -0.25, 1.0, 0.3, -0.6, 0.2, 0.7]);
-        let dotx = |a: DTransform| a.to_array().iter().zip(w.to_array()).map(|(a, b)| a * b).sum::<f64>();
+        let dotx = |a: DTransform| {
+            a.to_array()
+                .iter()
+                .zip(w.to_array())
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+        };
         check(
             |t, _| dotx(t * pt),
             |t, _, at, _| {
@@ -392,13 +403,20 @@ mod tests {
         check(
             |t, _| {
                 let m = t.to_matrix();
-                m.to_cols_array().iter().zip(gm.to_cols_array()).map(|(a, b)| a * b).sum()
+                m.to_cols_array()
+                    .iter()
+                    .zip(gm.to_cols_array())
+                    .map(|(a, b)| a * b)
+                    .sum()
             },
             |t, _, at, _| adj_transform_to_matrix(t, at, gm),
         );
         // The matrix overloads, with the lanes of t's matrix as the inputs.
         check(
-            |t, x| t.to_matrix().transform_point3(x).dot(probe) + t.to_matrix().transform_vector3(x).dot(x),
+            |t, x| {
+                t.to_matrix().transform_point3(x).dot(probe)
+                    + t.to_matrix().transform_vector3(x).dot(x)
+            },
             |t, x, at, ax| {
                 let m = t.to_matrix();
                 let mut am = DMat4::ZERO;

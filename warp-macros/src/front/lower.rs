@@ -247,7 +247,12 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
     }
     match op {
         BinOp::Eq | BinOp::Ne => {
-            if l == r && matches!(l, Scalar(_) | Vector(..) | Quat(_) | Matrix(..) | Transform(_)) {
+            if l == r
+                && matches!(
+                    l,
+                    Scalar(_) | Vector(..) | Quat(_) | Matrix(..) | Transform(_)
+                )
+            {
                 Ok(BOOL)
             } else {
                 bad()
