@@ -4,7 +4,7 @@
 //! Every adjoint function is called on both sides with the same inputs, the same nonzero
 //! starting adjoints (so that accumulation, not assignment, is checked) and the same `adj_ret`,
 //! for every operand-type combination the Rust side implements: operators and builtins on
-//! `f32`/`f64`, the float vectors, matrices and quaternions, the integer types (no-ops), all
+//! `f32`/`f64`, the float vectors, matrices, quaternions and transforms, the integer types (no-ops), all
 //! 13 x 13 casts, `adj_zero`/`zero`/`zero_like`/`adj_accum`, and the array gradient helpers
 //! `grad_accum`/`grad_take`/`grad_get` (1-D to 4-D, row- and column-major, in and out of
 //! bounds, with and without a gradient array). Inputs mix special values (0, -0, NaN,
@@ -39,7 +39,7 @@ use warp_lang::__private::glam::{
     UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
 };
 use warp_lang::__private::{zero_like, ArrayView, GradElement, GradView};
-use warp_lang::{Fault, FaultKind};
+use warp_lang::{DTransform, Fault, FaultKind, Transform};
 
 // ------------------------------------------------------------------------------------------
 // Values as lanes of bit patterns (vectors x first, matrices column by column, quats x y z w)
@@ -122,6 +122,7 @@ comp_val!(
     Mat2: f32, 4, to_cols_array, from_cols_array, &; Mat3: f32, 9, to_cols_array, from_cols_array, &;
     Mat4: f32, 16, to_cols_array, from_cols_array, &; DMat2: f64, 4, to_cols_array, from_cols_array, &;
     DMat3: f64, 9, to_cols_array, from_cols_array, &; DMat4: f64, 16, to_cols_array, from_cols_array, &;
+    Transform: f32, 7, to_array, from_array; DTransform: f64, 7, to_array, from_array;
 );
 
 fn cxx(ty: &str) -> String {
@@ -696,6 +697,34 @@ fn noise(s: &mut Suite) {
     tri::<u32, Vec4, IVec4, f32>(s, "adj_pnoise", ad::adj_pnoise::<Vec4>);
 }
 
+/// The rigid-transform operators and builtins (wp_core.h, wp_transform.h).
+fn transforms(s: &mut Suite) {
+    macro_rules! xforms {
+        ($($x:ident: $v:ident, $q:ident, $m:ident, $s:ident),*) => {$(
+            bin::<$x, $x, $x>(s, "adj_add", ad::adj_add);
+            bin::<$x, $x, $x>(s, "adj_sub", ad::adj_sub);
+            bin::<$x, $x, $x>(s, "adj_mul", ad::adj_mul);
+            bin::<$x, $s, $x>(s, "adj_mul", ad::adj_mul);
+            bin::<$s, $x, $x>(s, "adj_mul", ad::adj_mul);
+            un::<$x, $x>(s, "adj_neg", ad::adj_neg);
+            tri::<$x, $x, $s, $x>(s, "adj_lerp", ad::adj_lerp);
+            un::<$x, $x>(s, "adj_inverse", ad::adj_inverse);
+            bin::<$v, $q, $x>(s, "adj_transformation", ad::adj_transformation::<$v>);
+            un::<$x, $v>(s, "adj_transform_get_translation", ad::adj_transform_get_translation::<$x>);
+            un::<$x, $q>(s, "adj_transform_get_rotation", ad::adj_transform_get_rotation::<$x>);
+            bin::<$x, $x, $x>(s, "adj_transform_multiply", ad::adj_transform_multiply::<$x>);
+            bin::<$x, $v, $v>(s, "adj_transform_point", ad::adj_transform_point::<$x>);
+            bin::<$x, $v, $v>(s, "adj_transform_vector", ad::adj_transform_vector::<$x>);
+            un::<$x, $x>(s, "adj_transform_inverse", ad::adj_transform_inverse::<$x>);
+            un::<$x, $m>(s, "adj_transform_to_matrix", ad::adj_transform_to_matrix::<$x>);
+            un::<$m, $x>(s, "adj_transform_from_matrix", ad::adj_transform_from_matrix::<$m>);
+            bin::<$m, $v, $v>(s, "adj_transform_point", ad::adj_transform_point::<$m>);
+            bin::<$m, $v, $v>(s, "adj_transform_vector", ad::adj_transform_vector::<$m>);
+        )*};
+    }
+    xforms!(Transform: Vec3, Quat, Mat4, f32, DTransform: DVec3, DQuat, DMat4, f64);
+}
+
 /// Integers: every adjoint is a no-op (the starting adjoints come back unchanged).
 fn integers(s: &mut Suite) {
     let n = s.n;
@@ -747,7 +776,7 @@ fn zeros(s: &mut Suite) {
     }
     all!(bool, i8, i16, i32, i64, u8, u16, u32, u64, f32, f64);
     all!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
-    all!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
+    all!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat, Transform, DTransform);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -906,6 +935,8 @@ fn grads(s: &mut Suite) {
     grad_cases::<DMat2>(s);
     grad_cases::<Quat>(s);
     grad_cases::<DQuat>(s);
+    grad_cases::<Transform>(s);
+    grad_cases::<DTransform>(s);
     grad_cases::<i32>(s);
     grad_cases::<u8>(s);
     grad_cases::<bool>(s);
@@ -1223,6 +1254,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     matrices_and_quats(&mut s);
     linalg(&mut s);
     noise(&mut s);
+    transforms(&mut s);
     integers(&mut s);
     casts(&mut s);
     zeros(&mut s);

@@ -155,6 +155,47 @@ fn rng_draws(x: Array<f32>, out: Array<f32, 2>, ints: Array<i32>) {
     ints[i] = randi(&mut s, -3, 9) + poisson(&mut s, 4.5) as i32 + (randu(&mut s) % 7) as i32;
 }
 
+/// Rigid transforms: construction (`Transform::new`, `transformation`, `IDENTITY`,
+/// `from_matrix`), fields (read, nested compound write), composition and the lane operators,
+/// every transform builtin (the 4x4 overloads too), `inverse`, `lerp`, `==`.
+#[wp::kernel]
+fn transforms(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let t = Transform::new(
+        vec3(a, a * 0.5, -a),
+        normalize(Quat::from_xyzw(0.1 * a, 0.2, -0.3, 1.0)),
+    );
+    let u = transformation(
+        vec3(0.25, a, 1.0),
+        Quat::from_axis_angle(vec3(0.0, 0.6, 0.8), a),
+    );
+    let mut c = t * u * Transform::IDENTITY;
+    c.p.y += 0.5;
+    c.q = c.q * 0.5 + u.q * 0.5;
+    let v = vec3(a, 1.0, 2.0);
+    let m = transform_to_matrix(u);
+    let p = c.transform_point(v)
+        + transform_vector(inverse(t), v)
+        + transform_point(m, v)
+        + m.transform_vector3(v)
+        + Transform::from_matrix(transform_to_matrix(t)).p
+        + lerp(t, u, 0.3).p
+        + (t + u - t * 2.0 + 0.5 * (-u)).p
+        + transform_get_translation(transform_inverse(c));
+    let q = transform_multiply(c, t).q
+        + transform_get_rotation(t.lerp(c, a))
+        + transform_from_matrix(m).q;
+    out[(i, 0)] = p.x;
+    out[(i, 1)] = p.y;
+    out[(i, 2)] = p.z;
+    out[(i, 3)] = q.x;
+    out[(i, 4)] = q.y;
+    out[(i, 5)] = q.z;
+    out[(i, 6)] = q.w;
+    out[(i, 7)] = if t == t && t != u { 1.0 } else { 0.0 };
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -552,5 +593,20 @@ fn random_numbers_and_noise_match_the_cpu_backend() {
             host,
             cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&ints)])
         );
+    }
+}
+
+#[test]
+fn transforms_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..30).map(|k| k as f32 * 0.29 - 4.0).collect();
+    xs.extend([0.0, -0.0, 1.0, 3.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<transforms>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(transforms, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }
 }

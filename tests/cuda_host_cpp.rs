@@ -1,7 +1,7 @@
 //! The CUDA C++ builtin library (`warp-cuda/cuda/*.h`) against the CPU backend, on the host.
 //!
 //! The library must mean exactly what warp-core's CPU code means. This test generates about
-//! 137,000 cases (every builtin, operator, constructor and constant for every type it takes,
+//! 144,000 cases (every builtin, operator, constructor and constant for every type it takes,
 //! integer semantics, Rust `as` casts, literals, arrays and faults, range loops, the launch
 //! grid, atomics, layouts, printing), computes the expected results in Rust through
 //! `warp_lang::__private` (warp-core's builtins and ops) and glam, evaluates the same cases
@@ -43,7 +43,7 @@ use warp_lang::__private::glam::{
 };
 use warp_lang::__private::ops::{self, WrapInt};
 use warp_lang::__private::{builtins as b, ArrayView, Grid, RangeProg};
-use warp_lang::{Fault, FaultKind};
+use warp_lang::{DTransform, Fault, FaultKind, Transform};
 
 // ------------------------------------------------------------------------------------------
 // Values as the driver sees them: scalar bit patterns, in memory order
@@ -112,7 +112,7 @@ arr_val!(
     IVec2.to_array; IVec3.to_array; IVec4.to_array; UVec2.to_array; UVec3.to_array; UVec4.to_array;
     Mat2.to_cols_array; Mat3.to_cols_array; Mat4.to_cols_array;
     DMat2.to_cols_array; DMat3.to_cols_array; DMat4.to_cols_array;
-    Quat.to_array; DQuat.to_array;
+    Quat.to_array; DQuat.to_array; Transform.to_array; DTransform.to_array;
 );
 
 // ------------------------------------------------------------------------------------------
@@ -988,7 +988,111 @@ macro_rules! linalg_quat_cases {
     }};
 }
 
+// ----- wp_core.h / wp_transform.h: rigid transforms -----
+
+macro_rules! xform_cases {
+    ($c:expr, $rng:expr, $x:ident, $v:ident, $q:ident, $m:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($x);
+        let mty = stringify!($m);
+        let mut ts: Vec<$x> = Vec::new();
+        for k in 0..8 {
+            let q = $q::from_xyzw(rng.f() as $s, rng.f() as $s, rng.f() as $s, rng.f() as $s);
+            let p = $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s);
+            // Unit rotations (rigid motions) and general quaternions.
+            ts.push($x::new(p, if k < 5 { q.normalize() } else { q }));
+        }
+        ts.push($x::IDENTITY);
+        ts.push($x::new(
+            $v::new(0.0, -0.0, $s::NAN),
+            $q::from_xyzw(1.0, 0.0, 0.0, 0.0),
+        ));
+        let vs: Vec<$v> = (0..4)
+            .map(|_| $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s))
+            .chain([$v::ZERO])
+            .collect();
+        let ss: Vec<$s> = vec![0.0, -1.0, 2.5, rng.f() as $s];
+        for &a in &ts {
+            c.push("make", ty, &[&a.p, &a.q], toks(&a, Exact));
+            c.push("neg", ty, &[&a], toks(&(-a), Exact));
+            c.push("inverse", ty, &[&a], toks(&b::inverse(a), Exact));
+            c.push("xinv", ty, &[&a], toks(&b::transform_inverse(a), Exact));
+            c.push("x2m", ty, &[&a], toks(&b::transform_to_matrix(a), Exact));
+            let m = b::transform_to_matrix(a);
+            c.push("m2x", mty, &[&m], toks(&b::transform_from_matrix(m), Exact));
+            let mut get = toks(&b::transform_get_translation(a), Exact);
+            get.extend(toks(&b::transform_get_rotation(a), Exact));
+            c.push("xget", ty, &[&a], get);
+            for &bx in &ts {
+                c.push("add", ty, &[&a, &bx], toks(&(a + bx), Exact));
+                c.push("sub", ty, &[&a, &bx], toks(&(a - bx), Exact));
+                let mut mul = toks(&(a * bx), Exact);
+                mul.extend(toks(&b::transform_multiply(a, bx), Exact));
+                c.push("mul", ty, &[&a, &bx], mul);
+                c.push("eq", ty, &[&a, &bx], toks(&((a == bx) as u32), Exact));
+                c.push("ne", ty, &[&a, &bx], toks(&((a != bx) as u32), Exact));
+                c.push("mulassign", ty, &[&a, &bx], toks(&(a * bx + bx), Exact));
+                for t in [0.0, 0.3, 1.0] {
+                    let t: $s = t;
+                    c.push("lerp", ty, &[&a, &bx, &t], toks(&b::lerp(a, bx, t), Exact));
+                }
+            }
+            for &v in &vs {
+                c.push(
+                    "xpoint",
+                    ty,
+                    &[&a, &v],
+                    toks(&b::transform_point(a, v), Exact),
+                );
+                c.push(
+                    "xvector",
+                    ty,
+                    &[&a, &v],
+                    toks(&b::transform_vector(a, v), Exact),
+                );
+                c.push(
+                    "xpoint",
+                    mty,
+                    &[&m, &v],
+                    toks(&b::transform_point(m, v), Exact),
+                );
+                c.push(
+                    "xvector",
+                    mty,
+                    &[&m, &v],
+                    toks(&b::transform_vector(m, v), Exact),
+                );
+            }
+            for &s in &ss {
+                c.push("muls", ty, &[&a, &s], toks(&(a * s), Exact));
+                c.push("smul", ty, &[&s, &a], toks(&(s * a), Exact));
+            }
+        }
+        // A general 4x4 matrix (not a rigid motion) through the matrix builtins.
+        let g = $m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s));
+        c.push("m2x", mty, &[&g], toks(&b::transform_from_matrix(g), Exact));
+        for &v in &vs {
+            c.push(
+                "xpoint",
+                mty,
+                &[&g, &v],
+                toks(&b::transform_point(g, v), Exact),
+            );
+            c.push(
+                "xvector",
+                mty,
+                &[&g, &v],
+                toks(&b::transform_vector(g, v), Exact),
+            );
+        }
+        c.push("konst", ty, &[&K_IDENTITY], toks(&$x::IDENTITY, Exact));
+    }};
+}
+
 fn linalg_cases(c: &mut Cases, rng: &mut Rng) {
+    xform_cases!(c, rng, Transform, Vec3, Quat, Mat4, f32);
+    xform_cases!(c, rng, DTransform, DVec3, DQuat, DMat4, f64);
     linalg_vec_cases!(c, rng, Vec2, f32);
     linalg_vec_cases!(c, rng, Vec3, f32);
     linalg_vec_cases!(c, rng, Vec4, f32);
@@ -1688,8 +1792,8 @@ fn layout_cases(c: &mut Cases) -> Vec<String> {
     }
     layout!(
         Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4, Mat2,
-        Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat, i8, i16, i32, i64, u8, u16, u32, u64, f32,
-        f64, bool
+        Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat, Transform, DTransform, i8, i16, i32, i64, u8,
+        u16, u32, u64, f32, f64, bool
     );
     report
 }
@@ -1763,6 +1867,14 @@ fn print_cases(c: &mut Cases) {
     p(c, DMat4::IDENTITY);
     p(c, Quat::IDENTITY);
     p(c, DQuat::from_xyzw(0.5, -0.5, 0.25, 1.0));
+    p(c, Transform::new(Vec3::new(1.0, -2.5, 0.0), Quat::IDENTITY));
+    p(
+        c,
+        DTransform::new(
+            DVec3::new(0.5, 0.25, -1.0),
+            DQuat::from_xyzw(0.5, -0.5, 0.5, 0.5),
+        ),
+    );
     // The documented difference: %g keeps 6 significant digits, Rust the shortest round trip.
     c.raw(
         "print",

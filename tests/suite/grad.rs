@@ -30,6 +30,7 @@ backend_tests!(
     gradcheck_linalg,
     gradcheck_noise,
     rng_draws_have_zero_gradient,
+    gradcheck_transforms,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -827,6 +828,11 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <k_linalg_grad as wp::Kernel>::info(),
         <k_noise_grad as wp::Kernel>::info(),
         <k_rng_in_grad as wp::Kernel>::info(),
+        <k_xform_grad as wp::Kernel>::info(),
+        <crate::transforms::k_xform_loss as wp::Kernel>::info(),
+        <crate::transforms::k_xform64 as wp::Kernel>::info(),
+        <crate::transforms::k_xform32 as wp::Kernel>::info(),
+        <crate::transforms::k_bodies as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -993,4 +999,62 @@ fn rng_draws_have_zero_gradient(dev: &wp::Device) {
         want += (core::noise(s, x + h) - core::noise(s, x - h)) / (2.0 * h);
         assert!((g[i] - want).abs() < 2e-3, "thread {i}: {} vs {want}", g[i]);
     }
+}
+
+/// The transform builtins and operators, one or two per output, by `wp::gradcheck` against
+/// central differences (f64; generic points: non-unit rotations, where the glam rotation
+/// formula the adjoints differentiate is not Warp's, and a unit one with a clear
+/// `quat_from_matrix` branch for the matrix round trip).
+#[wp::kernel]
+fn k_xform_grad(x: Array<f64>, out: Array<f64>) {
+    let a = DTransform::new(
+        DVec3::new(x[0], x[1], x[2]),
+        DQuat::from_xyzw(x[3], x[4], x[5], x[6]),
+    );
+    let b = transformation(
+        DVec3::new(x[7], x[8], x[9]),
+        DQuat::from_xyzw(x[10], x[11], x[12], x[13]),
+    );
+    let v = DVec3::new(x[14], x[15], x[16]);
+    let probe = DVec3::new(0.3, -0.7, 1.1);
+    let w = DQuat::from_xyzw(0.2, -0.4, 0.6, 0.5);
+    out[0] = dot(transform_point(a, v), probe);
+    out[1] = dot(a.transform_vector(v), probe);
+    let ab = a * b;
+    out[2] = dot(ab.p, probe) + dot(ab.q, w);
+    let ba = transform_multiply(b, a);
+    out[3] = dot(ba.p, v) + dot(ba.q, w);
+    out[4] = dot(a.inverse().p, probe) + dot(transform_inverse(b).q, w) + dot(inverse(b).p, v);
+    out[5] = dot(transform_get_translation(a), v) + dot(transform_get_rotation(b), w);
+    out[6] = ddot(transform_to_matrix(a), transform_to_matrix(b));
+    let u = DTransform::new(a.p, normalize(a.q));
+    let back = transform_from_matrix(transform_to_matrix(u));
+    out[7] = dot(back.q, w) + dot(back.p, probe);
+    out[8] = dot((a + b).q, w) + dot((a - b).p, probe) + dot((a * x[2]).p, v);
+    out[9] = dot((x[3] * b).q, w) + dot((-a).p, probe);
+    out[10] = dot(lerp(a, b, x[16]).p, probe) + dot(a.lerp(b, 0.3).q, w);
+    let m = transform_to_matrix(b);
+    out[11] = dot(transform_point(m, v), probe) + dot(m.transform_vector3(v), probe);
+    let mut t = a;
+    t.p = v;
+    t.q = b.q * 2.0;
+    out[12] = dot(t.transform_point(probe), probe);
+}
+
+fn gradcheck_transforms(dev: &wp::Device) {
+    let xs = [
+        0.4f64, -1.1, 0.7, 0.1, 0.2, -0.3, 0.9, 1.3, 0.25, -0.6, -0.5, 0.45, 0.3, 0.6, -0.6, 0.9,
+        0.35,
+    ];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(13, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_xform_grad, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    assert!(report.max_rel_error < 1e-6, "{report:?}");
 }

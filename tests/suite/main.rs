@@ -79,6 +79,7 @@ mod rng;
 mod stability;
 mod streams;
 mod structs;
+mod transforms;
 mod views;
 
 /// A 1-D array holding `data` on `dev`.

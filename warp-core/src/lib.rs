@@ -15,6 +15,7 @@ pub mod index;
 pub mod meta;
 pub mod ops;
 pub mod range;
+pub mod transform;
 pub mod view;
 
 pub use fault::{Fault, FaultKind, KResult};
@@ -25,6 +26,7 @@ pub use grid::Grid;
 pub use index::KernelIndex;
 pub use meta::{FuncInfo, StructDefs};
 pub use range::RangeProg;
+pub use transform::{DTransform, Transform};
 pub use view::ArrayView;
 
 pub use glam;

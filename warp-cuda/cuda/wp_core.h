@@ -11,6 +11,8 @@
 //     aligned because glam stores them in SSE registers), constructors and constants as free
 //     functions (`Vec3_new`, `Vec3_splat`, `Vec3_ZERO()`, `Mat3_from_cols`, `Quat_IDENTITY()`...);
 //   * operators with glam's meaning, including two glam quirks (Vec4 `%`, scalar / matrix);
+//   * warp-core's rigid transforms (`Transform`, `DTransform`: p, padding, q) and their
+//     operators (`Transform_new`, `Transform_IDENTITY()`, composition `*`, lane-by-lane ops);
 //   * integer semantics of warp_core::ops (`w_add` ... `w_shr`), Rust `as` casts (`cast<To>`),
 //     literals (`lit_like`, `int_like`);
 //   * faults (`fault_t`, `ctx_t`, `raise`), arrays (`array_t`, `load`, `store`, ...), range
@@ -887,6 +889,62 @@ WP_FN DQuat operator*(const DQuat& l, const DQuat& r) {
 }
 
 // ------------------------------------------------------------------------------------------
+// Rigid transforms (warp-core's Transform, DTransform; warp-core/src/transform.rs)
+// ------------------------------------------------------------------------------------------
+
+// Transform: p at 0, a padding lane at 12 (zero in every transform made here, ignored by every
+// operation), q at 16: 32 bytes, 16-byte aligned like Quat. DTransform: p at 0, q at 24, 56
+// bytes. As lanes (vec_traits, N = 7): p.x, p.y, p.z, q.x, q.y, q.z, q.w.
+// The operators here are the type's own (composition, lane-by-lane +, -, * by a scalar,
+// negation, ==); the builtins are in wp_transform.h.
+struct alignas(16) Transform {
+  Vec3 p;
+  f32 pad = 0.0f;
+  Quat q;
+};
+struct DTransform {
+  DVec3 p;
+  DQuat q;
+};
+
+#define WP_XFORM_COMMON(X, V3, Q, S)                                                      \
+  template <>                                                                             \
+  struct vec_traits<X> {                                                                  \
+    typedef S scalar;                                                                     \
+    static constexpr int N = 7;                                                           \
+    static constexpr bool is_vec = false;                                                 \
+    static WP_FN S get(const X& t, int i) {                                               \
+      return i < 3 ? vec_traits<V3>::get(t.p, i) : vec_traits<Q>::get(t.q, i - 3);        \
+    }                                                                                     \
+    static WP_FN S& at(X& t, int i) {                                                     \
+      return i < 3 ? vec_traits<V3>::at(t.p, i) : vec_traits<Q>::at(t.q, i - 3);          \
+    }                                                                                     \
+  };                                                                                      \
+  WP_FN X X##_new(const V3& p, const Q& q) {                                              \
+    X t;                                                                                  \
+    t.p = p;                                                                              \
+    t.q = q;                                                                              \
+    return t;                                                                             \
+  }                                                                                       \
+  WP_FN X X##_IDENTITY() { return X##_new(V3##_ZERO(), Q##_IDENTITY()); }                 \
+  /* a * b: b applies first (Warp's transform_multiply). */                               \
+  WP_FN X operator*(const X& a, const X& b) { return X##_new(a.q * b.p + a.p, a.q * b.q); } \
+  WP_FN X operator*(const X& a, S s) { return X##_new(a.p * s, a.q * s); }                \
+  WP_FN X operator*(S s, const X& a) { return a * s; }                                    \
+  WP_FN X operator+(const X& a, const X& b) { return X##_new(a.p + b.p, a.q + b.q); }     \
+  WP_FN X operator-(const X& a, const X& b) { return X##_new(a.p - b.p, a.q - b.q); }     \
+  WP_FN X operator-(const X& a) { return X##_new(-a.p, -a.q); }                           \
+  WP_FN X& operator+=(X& a, const X& b) { return a = a + b; }                             \
+  WP_FN X& operator-=(X& a, const X& b) { return a = a - b; }                             \
+  WP_FN X& operator*=(X& a, const X& b) { return a = a * b; }                             \
+  WP_FN X& operator*=(X& a, S s) { return a = a * s; }                                    \
+  WP_FN bool operator==(const X& a, const X& b) { return a.p == b.p && a.q == b.q; }      \
+  WP_FN bool operator!=(const X& a, const X& b) { return !(a == b); }
+WP_XFORM_COMMON(Transform, Vec3, Quat, f32)
+WP_XFORM_COMMON(DTransform, DVec3, DQuat, f64)
+#undef WP_XFORM_COMMON
+
+// ------------------------------------------------------------------------------------------
 // Layout: glam 0.30, x86_64, default features (SSE2, no "cuda"/"scalar-math" feature)
 // ------------------------------------------------------------------------------------------
 
@@ -912,6 +970,8 @@ WP_LAYOUT(DMat3, 72, 8)
 WP_LAYOUT(DMat4, 128, 8)
 WP_LAYOUT(Quat, 16, 16)
 WP_LAYOUT(DQuat, 32, 8)
+WP_LAYOUT(Transform, 32, 16)  // p (12) + pad (4) + q (16): q at 16, as warp-core's
+WP_LAYOUT(DTransform, 56, 8)  // p (24) + q (32): q at 24
 #undef WP_LAYOUT
 
 // ------------------------------------------------------------------------------------------

@@ -7,7 +7,8 @@
 //     Rust prints the shortest string that round-trips and never uses an exponent, so the
 //     two agree on short values (`1`, `-2.5`, `0.1`, `inf`, `-0`) but not on others:
 //     1/3 prints `0.333333` (Rust `0.33333334`), 1e7 prints `1e+07` (Rust `10000000`).
-//   * vectors and quaternions: `[x, y, z]`; matrices: `[[col0], [col1], ...]` (glam's Display).
+//   * vectors and quaternions: `[x, y, z]`; matrices: `[[col0], [col1], ...]` (glam's Display);
+//     transforms: `{p: [x, y, z], q: [x, y, z, w]}` (warp-core's Display).
 // Device printf output of different threads may interleave between print_value calls.
 #pragma once
 #include "wp_core.h"
@@ -78,5 +79,17 @@ WP_PRINT_MAT(DMat2)
 WP_PRINT_MAT(DMat3)
 WP_PRINT_MAT(DMat4)
 #undef WP_PRINT_MAT
+/// Transforms: `{p: [x, y, z], q: [x, y, z, w]}` (warp-core's Display).
+#define WP_PRINT_XFORM(X)                  \
+  WP_FN void print_value(const X& t) {     \
+    printf("{p: ");                        \
+    detail::print_components(t.p);         \
+    printf(", q: ");                       \
+    detail::print_components(t.q);         \
+    printf("}");                           \
+  }
+WP_PRINT_XFORM(Transform)
+WP_PRINT_XFORM(DTransform)
+#undef WP_PRINT_XFORM
 
 }  // namespace wp

@@ -45,6 +45,10 @@ pub enum Class {
     AtomicScalar,
     /// f32, Vec2, Vec3, Vec4 (Perlin noise: f32 only, as in Warp).
     Noise,
+    /// Transform, DTransform.
+    Transform,
+    /// Mat4, DMat4 (the matrix overloads of transform_point, transform_vector).
+    Matrix4,
 }
 
 impl Class {
@@ -83,6 +87,8 @@ impl Class {
             ),
             (Class::Noise, Ty::Scalar(Scalar::F32)) => true,
             (Class::Noise, Ty::Vector(Scalar::F32, _)) => true,
+            (Class::Transform, Ty::Transform(_)) => true,
+            (Class::Matrix4, Ty::Matrix(_, 4)) => true,
             _ => false,
         }
     }
@@ -104,6 +110,8 @@ impl Class {
             Class::AtomicInt => "i32, u32, i64 or u64",
             Class::AtomicScalar => "i32, u32, i64, u64, f32 or f64",
             Class::Noise => "f32, Vec2, Vec3 or Vec4",
+            Class::Transform => "a transform (Transform, DTransform)",
+            Class::Matrix4 => "a 4x4 matrix (Mat4, DMat4)",
         }
     }
 }
@@ -122,7 +130,8 @@ pub enum Pos {
     /// `bool` (the result of the classification builtins `isfinite`, `isnan`, `isinf`).
     Bool,
     /// The square matrix of `T`'s scalar whose size is `T`'s: `Mat3` for `Vec3` (`outer`,
-    /// `diag`, `skew`), `Mat3` for `Quat` (`quat_to_matrix`).
+    /// `diag`, `skew`), `Mat3` for `Quat` (`quat_to_matrix`), `Mat4` for `Transform`
+    /// (`transform_to_matrix`).
     MatOfT,
     /// The vector `T` acts on: a matrix's column type; `Vec3` for `Quat` (`quat_rotate`).
     VecOfT,
@@ -135,6 +144,10 @@ pub enum Pos {
     Fixed(Scalar),
     /// A fixed vector type (the samplers' `Vec2`, `Vec3`).
     FixedVec(Scalar, u8),
+    /// The 3-vector of `T`'s scalar (`transform_point`, `transform_get_translation`).
+    Vec3OfT,
+    /// The transform of `T`'s scalar (`transformation`, `transform_from_matrix`).
+    XformOfT,
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -208,7 +221,10 @@ const VEC_OR_QUAT: &[Class] = &[FloatVector, IntVector, Quaternion];
 const FVEC_OR_QUAT: &[Class] = &[FloatVector, Quaternion];
 const FVEC_OR_MAT: &[Class] = &[FloatVector, Matrix];
 const MAT: &[Class] = &[Matrix];
-const MAT_OR_QUAT: &[Class] = &[Matrix, Quaternion];
+const MAT_QUAT_XFORM: &[Class] = &[Matrix, Quaternion, Transform];
+const LERP: &[Class] = &[Float, FloatVector, Transform];
+const XFORM: &[Class] = &[Transform];
+const XFORM_OR_MAT4: &[Class] = &[Transform, Matrix4];
 const QUAT: &[Class] = &[Quaternion];
 const FVEC3: &[Class] = &[FloatVector3];
 /// The classes of a builtin whose signature does not mention `T` (every type is fixed).
@@ -284,7 +300,9 @@ table! {
     // operator: truncated remainder for integers (a fault on zero), C `fmod` for floats, and
     // `%`'s adjoint. Its `rust`/`cuda` names are never emitted.
     "mod":        NUMBER,       (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
-    "lerp":       FLOAT_OR_VEC, (T, T, ScalarOfT) -> T,  method = true,  section = "scalar", grad = Adjoint;
+    // lerp and inverse take transforms too (wp_transform.h: the emitter adds the section where
+    // a value is a transform).
+    "lerp":       LERP,         (T, T, ScalarOfT) -> T,  method = true,  section = "scalar", grad = Adjoint;
     // dot, length and normalize take quaternions too, whose versions are in "linalg" (which
     // includes "vector").
     "dot":        VEC_OR_QUAT,  (T, T) -> ScalarOfT,     method = true,  section = "linalg", grad = Adjoint;
@@ -298,7 +316,7 @@ table! {
     "cw_div":     FVEC_OR_MAT,  (T, T) -> T,             method = false, section = "linalg", grad = Adjoint;
     "transpose":  MAT,          (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
     "determinant": MAT,         (T) -> ScalarOfT,        method = true,  section = "linalg", grad = Adjoint;
-    "inverse":    MAT_OR_QUAT,  (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
+    "inverse":    MAT_QUAT_XFORM, (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
     "trace":      MAT,          (T) -> ScalarOfT,        method = false, section = "linalg", grad = Adjoint;
     "ddot":       MAT,          (T, T) -> ScalarOfT,     method = false, section = "linalg", grad = Adjoint;
     "skew":       FVEC3,        (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
@@ -309,6 +327,17 @@ table! {
     "quat_to_matrix": QUAT,     (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
     "quat_from_matrix": &[Matrix3], (T) -> QuatOfT,      method = false, section = "linalg", grad = Adjoint;
     "quat_slerp": QUAT,         (T, T, ScalarOfT) -> T,  method = false, section = "linalg", grad = Adjoint;
+    // Rigid transforms (wp_transform.h, warp-core builtins::transform). `Transform::new(p, q)`
+    // is `transformation`, `Transform::from_matrix(m)` is `transform_from_matrix`.
+    "transformation": FVEC3,    (T, QuatOfT) -> XformOfT, method = false, section = "transform", grad = Adjoint;
+    "transform_get_translation": XFORM, (T) -> Vec3OfT,  method = false, section = "transform", grad = Adjoint;
+    "transform_get_rotation": XFORM, (T) -> QuatOfT,     method = false, section = "transform", grad = Adjoint;
+    "transform_multiply": XFORM, (T, T) -> T,            method = false, section = "transform", grad = Adjoint;
+    "transform_point": XFORM_OR_MAT4, (T, Vec3OfT) -> Vec3OfT, method = true, section = "transform", grad = Adjoint;
+    "transform_vector": XFORM_OR_MAT4, (T, Vec3OfT) -> Vec3OfT, method = true, section = "transform", grad = Adjoint;
+    "transform_inverse": XFORM, (T) -> T,                method = false, section = "transform", grad = Adjoint;
+    "transform_to_matrix": XFORM, (T) -> MatOfT,         method = false, section = "transform", grad = Adjoint;
+    "transform_from_matrix": &[Matrix4], (T) -> XformOfT, method = false, section = "transform", grad = Adjoint;
     "atomic_add": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
@@ -369,6 +398,9 @@ pub const METHOD_ALIASES: &[(&str, &str)] = &[
     ("is_infinite", "isinf"),
     ("length_squared", "length_sq"),
     ("conjugate", "quat_inverse"),
+    // glam's names of the 4x4-matrix overloads (`m.transform_point3(x)`).
+    ("transform_point3", "transform_point"),
+    ("transform_vector3", "transform_vector"),
 ];
 
 /// Looks a builtin up by name (internal rows included).
@@ -505,6 +537,7 @@ impl Builtin {
             Pos::MatOfT => match &t {
                 Ty::Vector(s, n) => Ty::Matrix(*s, *n),
                 Ty::Quat(s) => Ty::Matrix(*s, 3),
+                Ty::Transform(s) => Ty::Matrix(*s, 4),
                 _ => Ty::Deferred,
             },
             Pos::VecOfT => match &t {
@@ -520,6 +553,11 @@ impl Builtin {
             },
             Pos::Fixed(s) => Ty::Scalar(*s),
             Pos::FixedVec(s, n) => Ty::Vector(*s, *n),
+            Pos::Vec3OfT => scalar
+                .scalar()
+                .map(|s| Ty::Vector(s, 3))
+                .unwrap_or(Ty::Deferred),
+            Pos::XformOfT => scalar.scalar().map(Ty::Transform).unwrap_or(Ty::Deferred),
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
@@ -847,6 +885,73 @@ mod tests {
             assert!(lookup_user(name).is_none(), "{name}");
         }
         assert!(lookup_user("randn").is_some());
+    }
+
+    #[test]
+    fn transform_builtins() {
+        let (x, d) = (Ty::Transform(Scalar::F32), Ty::Transform(Scalar::F64));
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let q = Ty::Quat(Scalar::F32);
+        let r = lookup("transformation")
+            .unwrap()
+            .resolve(&[k(v3.clone()), k(q.clone())])
+            .unwrap();
+        assert_eq!(r.ret, x);
+        assert!(lookup("transformation")
+            .unwrap()
+            .resolve(&[k(v3.clone()), k(Ty::Quat(Scalar::F64))])
+            .is_err());
+        let tp = lookup_method("transform_point").unwrap();
+        assert_eq!(tp.resolve(&[k(x.clone()), k(v3.clone())]).unwrap().ret, v3);
+        let m4 = Ty::Matrix(Scalar::F64, 4);
+        assert_eq!(
+            lookup_method("transform_point3")
+                .unwrap()
+                .resolve(&[k(m4.clone()), k(Ty::Vector(Scalar::F64, 3))])
+                .unwrap()
+                .ret,
+            Ty::Vector(Scalar::F64, 3)
+        );
+        assert!(tp
+            .resolve(&[k(Ty::Matrix(Scalar::F32, 3)), k(v3.clone())])
+            .is_err());
+        assert_eq!(
+            lookup("transform_to_matrix")
+                .unwrap()
+                .resolve(&[k(d.clone())])
+                .unwrap()
+                .ret,
+            m4
+        );
+        assert_eq!(
+            lookup("transform_from_matrix")
+                .unwrap()
+                .resolve(&[k(m4)])
+                .unwrap()
+                .ret,
+            d
+        );
+        assert_eq!(
+            lookup_method("inverse")
+                .unwrap()
+                .resolve(&[k(x.clone())])
+                .unwrap()
+                .ret,
+            x
+        );
+        let lerp = lookup_method("lerp").unwrap();
+        let r = lerp
+            .resolve(&[k(d.clone()), k(d.clone()), ArgTy::Literal { float: true }])
+            .unwrap();
+        assert_eq!(r.params[2], Ty::Scalar(Scalar::F64));
+        assert_eq!(
+            lookup("transform_get_rotation")
+                .unwrap()
+                .resolve(&[k(d)])
+                .unwrap()
+                .ret,
+            Ty::Quat(Scalar::F64)
+        );
     }
 
     #[test]

@@ -91,6 +91,9 @@ pub enum Ty {
     Matrix(Scalar, u8),
     /// glam quaternions: Quat (f32), DQuat (f64).
     Quat(Scalar),
+    /// Rigid transforms (warp-core's, not glam's): Transform (f32), DTransform (f64); fields
+    /// `p` (the 3-vector) and `q` (the quaternion).
+    Transform(Scalar),
     /// `Array<T, N>`.
     Array(Box<Ty>, u8),
     /// A user struct (made kernel-ready by the derive), by its last path segment.
@@ -112,7 +115,11 @@ impl Ty {
     /// The scalar a value of this type is made of (`None` for arrays, structs, unit).
     pub fn scalar(&self) -> Option<Scalar> {
         match self {
-            Ty::Scalar(s) | Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) => Some(*s),
+            Ty::Scalar(s)
+            | Ty::Vector(s, _)
+            | Ty::Matrix(s, _)
+            | Ty::Quat(s)
+            | Ty::Transform(s) => Some(*s),
             _ => None,
         }
     }
@@ -125,7 +132,8 @@ impl Ty {
         matches!(self, Ty::Scalar(s) if s.is_int())
     }
 
-    /// The glam name of a vector, matrix or quaternion type.
+    /// The glam name of a vector, matrix or quaternion type; for transforms, warp-core's name
+    /// (`Transform`, `DTransform`), which the CUDA library uses too.
     pub fn glam_name(&self) -> Option<String> {
         let prefix = |s: Scalar| match s {
             Scalar::F32 => Some(""),
@@ -138,11 +146,13 @@ impl Ty {
             Ty::Vector(s, n) => Some(format!("{}Vec{}", prefix(*s)?, n)),
             Ty::Matrix(s, n) => Some(format!("{}Mat{}", prefix(*s)?, n)),
             Ty::Quat(s) => Some(format!("{}Quat", prefix(*s)?)),
+            Ty::Transform(s) if s.is_float() => Some(format!("{}Transform", prefix(*s)?)),
             _ => None,
         }
     }
 
-    /// Parses a glam type name (`Vec3`, `DMat4`, `Quat`, ...).
+    /// Parses a glam type name (`Vec3`, `DMat4`, `Quat`, ...) or a transform's (`Transform`,
+    /// `DTransform`).
     pub fn from_glam_name(name: &str) -> Option<Ty> {
         let (scalar, rest) = if let Some(r) = name.strip_prefix('D') {
             (Scalar::F64, r)
@@ -156,6 +166,9 @@ impl Ty {
         if rest == "Quat" {
             return scalar.is_float().then_some(Ty::Quat(scalar));
         }
+        if rest == "Transform" {
+            return scalar.is_float().then_some(Ty::Transform(scalar));
+        }
         let (kind, n) = rest.split_at(rest.len().checked_sub(1)?);
         let n: u8 = n.parse().ok().filter(|n| (2..=4).contains(n))?;
         match kind {
@@ -165,7 +178,7 @@ impl Ty {
         }
     }
 
-    /// Field names of vectors and quaternions, and the column names of matrices.
+    /// Field names of vectors, quaternions and transforms, and the column names of matrices.
     pub fn member_ty(&self, name: &str) -> Option<Ty> {
         match self {
             Ty::Vector(s, n) => {
@@ -181,6 +194,11 @@ impl Ty {
                     .position(|c| *c == name)?;
                 (idx < *n as usize).then_some(Ty::Vector(*s, *n))
             }
+            Ty::Transform(s) => match name {
+                "p" => Some(Ty::Vector(*s, 3)),
+                "q" => Some(Ty::Quat(*s)),
+                _ => None,
+            },
             _ => None,
         }
     }
@@ -190,7 +208,7 @@ impl fmt::Display for Ty {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Ty::Scalar(s) => f.write_str(s.name()),
-            Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) => {
+            Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => {
                 f.write_str(&self.glam_name().unwrap_or_else(|| "?".into()))
             }
             Ty::Array(t, 1) => write!(f, "Array<{t}>"),
@@ -210,12 +228,31 @@ mod tests {
     #[test]
     fn glam_names_round_trip() {
         for name in [
-            "Vec2", "Vec3", "Vec4", "DVec3", "IVec2", "UVec4", "Mat3", "DMat4", "Quat", "DQuat",
+            "Vec2",
+            "Vec3",
+            "Vec4",
+            "DVec3",
+            "IVec2",
+            "UVec4",
+            "Mat3",
+            "DMat4",
+            "Quat",
+            "DQuat",
+            "Transform",
+            "DTransform",
         ] {
             let ty = Ty::from_glam_name(name).unwrap();
             assert_eq!(ty.glam_name().unwrap(), name);
         }
-        for bad in ["Vec5", "IMat3", "IQuat", "Vec", "Foo"] {
+        for bad in [
+            "Vec5",
+            "IMat3",
+            "IQuat",
+            "Vec",
+            "Foo",
+            "ITransform",
+            "UTransform",
+        ] {
             assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
         }
     }
@@ -229,5 +266,10 @@ mod tests {
             Ty::Matrix(Scalar::F64, 2).member_ty("y_axis"),
             Some(Ty::Vector(Scalar::F64, 2))
         );
+        let t = Ty::Transform(Scalar::F64);
+        assert_eq!(t.member_ty("p"), Some(Ty::Vector(Scalar::F64, 3)));
+        assert_eq!(t.member_ty("q"), Some(Ty::Quat(Scalar::F64)));
+        assert_eq!(t.member_ty("x"), None);
+        assert_eq!(t.to_string(), "DTransform");
     }
 }

@@ -91,8 +91,22 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
             }
         }
     }
+    // The user structs the kernel and its funcs use. One with a transform field
+    // (`wp::Transform` in its C++ definition) needs the transform section even where the
+    // kernel never names a transform itself.
+    let mut struct_defs: Vec<&str> = Vec::new();
+    for defs in funcs.iter().flat_map(|f| f.structs).chain(info.structs) {
+        defs(&mut struct_defs);
+    }
+    if struct_defs
+        .iter()
+        .any(|d| d.contains("wp::Transform") || d.contains("wp::DTransform"))
+        && !sections.contains(&"transform")
+    {
+        sections.push("transform");
+    }
     let mut headers = vec!["wp_core.h".to_string()];
-    for s in ["scalar", "vector", "linalg", "atomic", "rand", "print"] {
+    for s in ["scalar", "vector", "linalg", "transform", "atomic", "rand", "print"] {
         if sections.contains(&s) {
             headers.push(format!("wp_{s}.h"));
         }
@@ -111,13 +125,9 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
     for h in &headers {
         text.push_str(&format!("#include \"{h}\"\n"));
     }
-    // User structs, each once, in the order first met (callees first), a struct after those
-    // its fields use.
-    let mut structs: Vec<&str> = Vec::new();
-    for defs in funcs.iter().flat_map(|f| f.structs).chain(info.structs) {
-        defs(&mut structs);
-    }
-    for def in structs {
+    // User structs (gathered above), each once, in the order first met (callees first), a
+    // struct after those its fields use.
+    for def in struct_defs {
         text.push_str(def);
         text.push('\n');
     }

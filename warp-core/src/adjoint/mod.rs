@@ -41,17 +41,20 @@ mod noise;
 mod ops;
 #[cfg(test)]
 mod tests;
+mod transform;
 
 pub use builtins::*;
 pub use cast::*;
 pub use linalg::*;
 pub use noise::*;
 pub use ops::*;
+pub use transform::*;
 
 /// A type whose values have an adjoint of the same type.
 ///
 /// Implemented for `bool`, every integer and float scalar, and the glam types of the kernel
-/// language (`Vec2-4`, `DVec2-4`, `IVec2-4`, `UVec2-4`, `Mat2-4`, `DMat2-4`, `Quat`, `DQuat`).
+/// language (`Vec2-4`, `DVec2-4`, `IVec2-4`, `UVec2-4`, `Mat2-4`, `DMat2-4`, `Quat`, `DQuat`),
+/// and the transforms (`Transform`, `DTransform`: all seven lanes zero, accumulated lane by lane).
 pub trait Adjoint: Copy {
     /// The zero adjoint: `0`, `0.0`, `false`, the zero vector or matrix, and for quaternions
     /// the all-zero quaternion `(0, 0, 0, 0)` (not the identity).

@@ -13,6 +13,7 @@
 //!
 //! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
+//! * [`transform`]: rigid-transform builtins ([`transform_point`], [`transform_multiply`], ...).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 //! * [`rand`]: Warp's random number generator ([`rand_init`], [`randf`], [`randn`], the
 //!   samplers, [`poisson`]) and [`noise`](mod@noise): Perlin noise ([`noise()`], [`pnoise`]).
@@ -23,9 +24,11 @@ pub mod math;
 pub mod noise;
 pub mod rand;
 pub mod special;
+pub mod transform;
 
 pub use atomic::*;
 pub use linalg::*;
 pub use math::*;
 pub use noise::{noise, pnoise, NoiseArg};
 pub use rand::*;
+pub use transform::*;

@@ -16,7 +16,8 @@ using namespace wp;
 #define TYPE_LIST(X)                                                                          \
   X(i8) X(i16) X(i32) X(i64) X(u8) X(u16) X(u32) X(u64) X(f32) X(f64) X(bool) X(Vec2) X(Vec3) \
   X(Vec4) X(DVec2) X(DVec3) X(DVec4) X(IVec2) X(IVec3) X(IVec4) X(UVec2) X(UVec3) X(UVec4)    \
-  X(Mat2) X(Mat3) X(Mat4) X(DMat2) X(DMat3) X(DMat4) X(Quat) X(DQuat)
+  X(Mat2) X(Mat3) X(Mat4) X(DMat2) X(DMat3) X(DMat4) X(Quat) X(DQuat) X(Transform)           \
+  X(DTransform)
 
 #define ENUM_T(t) T_##t,
 enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
@@ -38,7 +39,8 @@ enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
   X(sample_triangle) X(sample_unit_ring) X(sample_unit_disk) X(sample_unit_square)            \
   X(sample_unit_cube) X(sample_unit_sphere_surface) X(sample_unit_sphere)                    \
   X(sample_unit_hemisphere_surface) X(sample_unit_hemisphere) X(poisson) X(poisson_state)    \
-  X(noise) X(pnoise)
+  X(noise) X(pnoise) \
+  X(xinv) X(xpoint) X(xvector) X(x2m) X(m2x) X(xget)
 
 #define ENUM_OP(o) OP_##o,
 enum op_id { OP_LIST(ENUM_OP) OP_COUNT };
@@ -106,6 +108,14 @@ template <>
 struct is_composite<DQuat> {
   static constexpr bool value = true;
 };
+template <>
+struct is_composite<Transform> {
+  static constexpr bool value = true;
+};
+template <>
+struct is_composite<DTransform> {
+  static constexpr bool value = true;
+};
 
 template <typename T>
 DRV_FN T get(reader& r) {
@@ -138,18 +148,28 @@ struct cls {
   static constexpr bool vec = vec_traits<T>::is_vec;
   static constexpr bool mat = mat_traits<T>::is_mat;
   static constexpr bool quat = false;
+  static constexpr bool xform = false;
   static constexpr bool scalar = !vec && !mat;
 };
 template <>
 struct cls<Quat> {
-  static constexpr bool vec = false, mat = false, quat = true, scalar = false;
+  static constexpr bool vec = false, mat = false, quat = true, xform = false, scalar = false;
 };
 template <>
 struct cls<DQuat> {
-  static constexpr bool vec = false, mat = false, quat = true, scalar = false;
+  static constexpr bool vec = false, mat = false, quat = true, xform = false, scalar = false;
+};
+template <>
+struct cls<Transform> {
+  static constexpr bool vec = false, mat = false, quat = false, xform = true, scalar = false;
+};
+template <>
+struct cls<DTransform> {
+  static constexpr bool vec = false, mat = false, quat = false, xform = true, scalar = false;
 };
 
-template <typename T, bool V = vec_traits<T>::is_vec || mat_traits<T>::is_mat || cls<T>::quat>
+template <typename T, bool V = vec_traits<T>::is_vec || mat_traits<T>::is_mat || cls<T>::quat ||
+                               cls<T>::xform>
 struct scalar_of {
   typedef T type;
 };
@@ -236,6 +256,8 @@ KFN(DMat3, KC(DMat3, ZERO) KC(DMat3, IDENTITY) KC(DMat3, NAN))
 KFN(DMat4, KC(DMat4, ZERO) KC(DMat4, IDENTITY) KC(DMat4, NAN))
 KFN(Quat, KC(Quat, IDENTITY) KC(Quat, NAN))
 KFN(DQuat, KC(DQuat, IDENTITY) KC(DQuat, NAN))
+KFN(Transform, KC(Transform, IDENTITY))
+KFN(DTransform, KC(DTransform, IDENTITY))
 #undef KC
 #undef K_COMMON
 #undef K_SIGNED
@@ -626,6 +648,43 @@ DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
       case OP_q2m: { T a = get<T>(r); put(o, wp::quat_to_matrix(a)); return; }
       case OP_slerp: { T a = get<T>(r), b = get<T>(r); S t = get<S>(r); put(o, wp::quat_slerp(a, b, t)); return; }
       default: break;
+    }
+  }
+  // wp_core.h / wp_transform.h: transforms
+  if constexpr (cls<T>::xform) {
+    typedef typename detail::remove_cvref<decltype(T{}.p)>::type V3;
+    typedef typename detail::remove_cvref<decltype(T{}.q)>::type Q;
+    switch (op) {
+      case OP_make: { V3 p = get<V3>(r); Q q = get<Q>(r); put(o, transformation(p, q)); return; }
+      case OP_add: { T a = get<T>(r), b = get<T>(r); put(o, a + b); return; }
+      case OP_sub: { T a = get<T>(r), b = get<T>(r); put(o, a - b); return; }
+      case OP_mul: { T a = get<T>(r), b = get<T>(r); put(o, a * b); put(o, transform_multiply(a, b)); return; }
+      case OP_muls: { T a = get<T>(r); S s = get<S>(r); put(o, a * s); return; }
+      case OP_smul: { S s = get<S>(r); T a = get<T>(r); put(o, s * a); return; }
+      case OP_neg: { T a = get<T>(r); put(o, -a); return; }
+      case OP_eq: { T a = get<T>(r), b = get<T>(r); put(o, (u32)(a == b)); return; }
+      case OP_ne: { T a = get<T>(r), b = get<T>(r); put(o, (u32)(a != b)); return; }
+      case OP_mulassign: { T a = get<T>(r), b = get<T>(r); a *= b; a += b; put(o, a); return; }
+      case OP_lerp: { T a = get<T>(r), b = get<T>(r); S t = get<S>(r); put(o, wp::lerp(a, b, t)); return; }
+      case OP_inverse: { T a = get<T>(r); put(o, wp::inverse(a)); return; }
+      case OP_xinv: { T a = get<T>(r); put(o, transform_inverse(a)); return; }
+      case OP_xpoint: { T a = get<T>(r); V3 v = get<V3>(r); put(o, transform_point(a, v)); return; }
+      case OP_xvector: { T a = get<T>(r); V3 v = get<V3>(r); put(o, transform_vector(a, v)); return; }
+      case OP_x2m: { T a = get<T>(r); put(o, transform_to_matrix(a)); return; }
+      case OP_xget: { T a = get<T>(r); put(o, transform_get_translation(a)); put(o, transform_get_rotation(a)); return; }
+      case OP_konst: { if (!konst_of((T*)nullptr, (int)r.a[r.pos++], o)) o.n = -1; return; }
+      default: break;
+    }
+  }
+  if constexpr (is_mat) {
+    if constexpr (mat_traits<T>::N == 4) {
+      typedef typename detail::remove_cvref<decltype(transform_from_matrix(T{}).p)>::type V3;
+      switch (op) {
+        case OP_xpoint: { T a = get<T>(r); V3 v = get<V3>(r); put(o, transform_point(a, v)); return; }
+        case OP_xvector: { T a = get<T>(r); V3 v = get<V3>(r); put(o, transform_vector(a, v)); return; }
+        case OP_m2x: { T a = get<T>(r); put(o, transform_from_matrix(a)); return; }
+        default: break;
+      }
     }
   }
   if constexpr (is_vec || is_mat || is_quat) {

@@ -33,6 +33,11 @@ pub struct CudaTemplate {
 pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     let mut e = Emitter::new(f, file);
     e.function()?;
+    // Transform values need wp_transform.h even where no transform builtin is called (`inverse`
+    // and `lerp` are in other sections).
+    if f.vars.iter().any(|v| matches!(v.ty, Ty::Transform(_))) {
+        e.section("transform");
+    }
     let ret = if matches!(f.ret, Ty::Unit) {
         "void".into()
     } else {
@@ -75,7 +80,9 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
     Some(match t {
         Ty::Scalar(Scalar::Bool) => "bool".into(),
         Ty::Scalar(s) => format!("wp::{}", s.name()),
-        Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) => format!("wp::{}", t.glam_name()?),
+        Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => {
+            format!("wp::{}", t.glam_name()?)
+        }
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::Struct(name) => name.clone(),
         _ => return None,

@@ -370,6 +370,11 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::glam::#id))
         }
+        // warp-core's transforms, re-exported next to glam.
+        Ty::Transform(_) => {
+            let id = format_ident!("{}", t.glam_name()?);
+            Some(quote!(__wp::#id))
+        }
         _ => None,
     }
 }

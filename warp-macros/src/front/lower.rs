@@ -240,7 +240,9 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
         BinOp::Shl | BinOp::Shr => None,
         _ => match other {
             Ty::Scalar(_) => Some(other.clone()),
-            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) => Some(Ty::Scalar(*s)),
+            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => {
+                Some(Ty::Scalar(*s))
+            }
             Ty::Deferred => Some(Ty::Deferred),
             _ => None,
         },
@@ -256,7 +258,12 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
     }
     match op {
         BinOp::Eq | BinOp::Ne => {
-            if l == r && matches!(l, Scalar(_) | Vector(..) | Quat(_) | Matrix(..)) {
+            if l == r
+                && matches!(
+                    l,
+                    Scalar(_) | Vector(..) | Quat(_) | Matrix(..) | Transform(_)
+                )
+            {
                 Ok(BOOL)
             } else {
                 bad()
@@ -296,6 +303,15 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             (Quat(a), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
                 Ok(l.clone())
             }
+            // Transforms: `*` composes (Warp's transform_multiply); `+`, `-` and `*` by a
+            // scalar are lane by lane (Warp's add, sub, mul overloads).
+            (Transform(a), Transform(b))
+                if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) =>
+            {
+                Ok(l.clone())
+            }
+            (Transform(a), Scalar(b)) if a == b && op == BinOp::Mul => Ok(l.clone()),
+            (Scalar(a), Transform(b)) if a == b && op == BinOp::Mul => Ok(r.clone()),
             _ => bad(),
         },
     }
@@ -1264,7 +1280,7 @@ impl Lowerer {
                     let ok = match &t {
                         Ty::Scalar(s) => s.is_float() || s.is_signed_int(),
                         Ty::Vector(s, _) => *s != Scalar::U32,
-                        Ty::Matrix(..) | Ty::Quat(_) | Ty::Deferred => true,
+                        Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) | Ty::Deferred => true,
                         _ => false,
                     };
                     if !ok {
@@ -1528,7 +1544,7 @@ impl Lowerer {
 
     fn literal(&mut self, lit: &syn::Lit, neg: bool, want: Option<&Ty>, span: Span) -> R<VarId> {
         let want_scalar = want.map(|w| match w {
-            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) => Ty::Scalar(*s),
+            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => Ty::Scalar(*s),
             t => t.clone(),
         });
         match lit {
@@ -1644,6 +1660,7 @@ impl Lowerer {
                     .contains(&name.as_str()),
                     Ty::Matrix(..) => ["ZERO", "IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Quat(_) => ["IDENTITY", "NAN"].contains(&name.as_str()),
+                    Ty::Transform(_) => name == "IDENTITY",
                     _ => false,
                 };
                 if !known {
@@ -1743,6 +1760,8 @@ impl Lowerer {
                 let builtin = match (&ty, last.as_str()) {
                     (Ty::Quat(_), "from_axis_angle") => Some("quat_from_axis_angle"),
                     (Ty::Matrix(_, 3), "from_quat") => Some("quat_to_matrix"),
+                    (Ty::Transform(_), "new") => Some("transformation"),
+                    (Ty::Transform(_), "from_matrix") => Some("transform_from_matrix"),
                     _ => None,
                 };
                 if let Some(name) = builtin {
