@@ -38,6 +38,7 @@ mod cast;
 mod lanes;
 mod linalg;
 mod ops;
+mod svd;
 #[cfg(test)]
 mod tests;
 
@@ -45,6 +46,7 @@ pub use builtins::*;
 pub use cast::*;
 pub use linalg::*;
 pub use ops::*;
+pub use svd::*;
 
 /// A type whose values have an adjoint of the same type.
 ///

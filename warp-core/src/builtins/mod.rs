@@ -13,13 +13,16 @@
 //!
 //! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
+//! * [`svd`]: matrix decompositions returning tuples ([`svd3`], [`eig3`], [`qr3`], [`svd2`]).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 
 pub mod atomic;
 pub mod linalg;
 pub mod math;
 pub mod special;
+pub mod svd;
 
 pub use atomic::*;
 pub use linalg::*;
 pub use math::*;
+pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};
