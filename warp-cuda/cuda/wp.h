@@ -1,11 +1,12 @@
 // wp.h: the whole warp-lang CUDA C++ builtin library (include this from generated code).
 // Sections: wp_core.h (types, operators, integer semantics, casts, faults, arrays, ranges,
-// launch grid), wp_scalar.h ("scalar"), wp_vector.h ("vector"), wp_linalg.h ("linalg"), wp_atomic.h ("atomic"),
+// launch grid), wp_scalar.h ("scalar"), wp_vector.h ("vector"), wp_linalg.h ("linalg"), wp_svd.h ("svd"), wp_atomic.h ("atomic"),
 // wp_print.h (print_value).
 #pragma once
 #include "wp_core.h"
 #include "wp_scalar.h"
 #include "wp_vector.h"
 #include "wp_linalg.h"
+#include "wp_svd.h"
 #include "wp_atomic.h"
 #include "wp_print.h"

@@ -48,6 +48,7 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_scalar.h", include_str!("../cuda/wp_scalar.h")),
     ("wp_vector.h", include_str!("../cuda/wp_vector.h")),
     ("wp_linalg.h", include_str!("../cuda/wp_linalg.h")),
+    ("wp_svd.h", include_str!("../cuda/wp_svd.h")),
     ("wp_atomic.h", include_str!("../cuda/wp_atomic.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
     ("wp_adjoint.h", include_str!("../cuda/wp_adjoint.h")),

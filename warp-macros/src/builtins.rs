@@ -33,8 +33,10 @@ pub enum Class {
     Atomic,
     /// Float square matrices (Mat2-4, DMat2-4).
     Matrix,
-    /// Mat3, DMat3 (quat_from_matrix).
+    /// Mat3, DMat3 (quat_from_matrix, svd3, eig3, qr3).
     Matrix3,
+    /// Mat2, DMat2 (svd2).
+    Matrix2,
     /// Vec3, DVec3 (skew, quat_from_axis_angle).
     FloatVector3,
     /// Quat, DQuat.
@@ -70,6 +72,7 @@ impl Class {
             (Class::Atomic, Ty::Vector(s, _)) => s.is_float(),
             (Class::Matrix, Ty::Matrix(..)) => true,
             (Class::Matrix3, Ty::Matrix(_, 3)) => true,
+            (Class::Matrix2, Ty::Matrix(_, 2)) => true,
             (Class::FloatVector3, Ty::Vector(s, 3)) => s.is_float(),
             (Class::Quaternion, Ty::Quat(_)) => true,
             (Class::AtomicInt, Ty::Scalar(s)) => {
@@ -95,6 +98,7 @@ impl Class {
             Class::Atomic => "i32, u32, i64, u64, f32, f64 or a float vector",
             Class::Matrix => "a matrix (Mat2-4, DMat2-4)",
             Class::Matrix3 => "a 3x3 matrix (Mat3, DMat3)",
+            Class::Matrix2 => "a 2x2 matrix (Mat2, DMat2)",
             Class::FloatVector3 => "a float 3-vector (Vec3, DVec3)",
             Class::Quaternion => "a quaternion (Quat, DQuat)",
             Class::AtomicInt => "i32, u32, i64 or u64",
@@ -123,6 +127,8 @@ pub enum Pos {
     VecOfT,
     /// The quaternion of `T`'s scalar (`quat_from_axis_angle`, `quat_from_matrix`).
     QuatOfT,
+    /// A tuple of these (results only: the decompositions, `svd3(a) -> (T, VecOfT, T)`).
+    Tuple(&'static [Pos]),
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -289,6 +295,12 @@ table! {
     "quat_to_matrix": QUAT,     (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
     "quat_from_matrix": &[Matrix3], (T) -> QuatOfT,      method = false, section = "linalg", grad = Adjoint;
     "quat_slerp": QUAT,         (T, T, ScalarOfT) -> T,  method = false, section = "linalg", grad = Adjoint;
+    // Decompositions: tuples in the order of Warp's output arguments, only bound by a
+    // destructuring `let` (see `front::lower`).
+    "svd3":       &[Matrix3],   (T) -> Tuple(&[T, VecOfT, T]), method = false, section = "svd", grad = Adjoint;
+    "svd2":       &[Matrix2],   (T) -> Tuple(&[T, VecOfT, T]), method = false, section = "svd", grad = Adjoint;
+    "qr3":        &[Matrix3],   (T) -> Tuple(&[T, T]),         method = false, section = "svd", grad = Adjoint;
+    "eig3":       &[Matrix3],   (T) -> Tuple(&[T, VecOfT]),    method = false, section = "svd", grad = Adjoint;
     "atomic_add": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
@@ -409,10 +421,11 @@ impl Builtin {
         let Some(t) = t else {
             // Nothing known: leave typing to the target compiler.
             let params = self.params.iter().map(|_| Ty::Deferred).collect();
-            return Ok(Resolved {
-                params,
-                ret: Ty::Deferred,
-            });
+            let ret = match self.ret {
+                Pos::Tuple(ps) => Ty::Tuple(vec![Ty::Deferred; ps.len()]),
+                _ => Ty::Deferred,
+            };
+            return Ok(Resolved { params, ret });
         };
         if !self.classes.iter().any(|c| c.admits(&t)) {
             let want: Vec<_> = self.classes.iter().map(|c| c.describe()).collect();
@@ -445,6 +458,8 @@ impl Builtin {
                 _ => Ty::Deferred,
             },
             Pos::QuatOfT => scalar.scalar().map(Ty::Quat).unwrap_or(Ty::Deferred),
+            // Results only (below).
+            Pos::Tuple(_) => Ty::Deferred,
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
@@ -493,10 +508,11 @@ impl Builtin {
             };
             params.push(ty);
         }
-        Ok(Resolved {
-            params,
-            ret: want(&self.ret),
-        })
+        let ret = match self.ret {
+            Pos::Tuple(ps) => Ty::Tuple(ps.iter().map(&want).collect()),
+            p => want(&p),
+        };
+        Ok(Resolved { params, ret })
     }
 }
 

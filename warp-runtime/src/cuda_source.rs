@@ -92,7 +92,7 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         }
     }
     let mut headers = vec!["wp_core.h".to_string()];
-    for s in ["scalar", "vector", "linalg", "atomic", "print"] {
+    for s in ["scalar", "vector", "linalg", "svd", "atomic", "print"] {
         if sections.contains(&s) {
             headers.push(format!("wp_{s}.h"));
         }
