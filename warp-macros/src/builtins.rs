@@ -705,6 +705,30 @@ mod tests {
     }
 
     #[test]
+    fn decompositions_return_tuples() {
+        let m3 = Ty::Matrix(Scalar::F32, 3);
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let r = lookup("svd3").unwrap().resolve(&[k(m3.clone())]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![m3.clone(), v3.clone(), m3.clone()]));
+        let r = lookup("eig3").unwrap().resolve(&[k(m3.clone())]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![m3.clone(), v3]));
+        let r = lookup("qr3").unwrap().resolve(&[k(m3.clone())]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![m3.clone(), m3.clone()]));
+        let m2 = Ty::Matrix(Scalar::F64, 2);
+        let r = lookup("svd2").unwrap().resolve(&[k(m2.clone())]).unwrap();
+        assert_eq!(
+            r.ret,
+            Ty::Tuple(vec![m2.clone(), Ty::Vector(Scalar::F64, 2), m2.clone()])
+        );
+        assert!(lookup("svd3").unwrap().resolve(&[k(m2.clone())]).is_err());
+        assert!(lookup("svd2").unwrap().resolve(&[k(m3)]).is_err());
+        // Deferred argument: the tuple's arity is still known.
+        let r = lookup("svd3").unwrap().resolve(&[k(Ty::Deferred)]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![Ty::Deferred; 3]));
+        assert!(lookup_method("svd3").is_none(), "function syntax only");
+    }
+
+    #[test]
     fn method_aliases() {
         assert_eq!(lookup_method("powf").unwrap().name, "pow");
         assert_eq!(lookup_method("ln").unwrap().name, "log");

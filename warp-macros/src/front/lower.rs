@@ -2152,6 +2152,80 @@ mod tests {
     }
 
     #[test]
+    fn decompositions_destructure_into_members() {
+        let f = lower(parse_quote! {
+            fn k(a: Array<DMat3>, b: Array<Mat2>) {
+                let i = tid();
+                let (u, s, v) = svd3(a[i]);
+                let (q, _): (DMat3, DVec3) = wp::eig3(a[i]);
+                let (q2, r) = qr3(a[i]);
+                let (u2, s2, v2) = svd2(b[i]);
+            }
+        });
+        let m3 = Ty::Matrix(Scalar::F64, 3);
+        assert_eq!(find_var(&f, "u"), m3);
+        assert_eq!(find_var(&f, "s"), Ty::Vector(Scalar::F64, 3));
+        assert_eq!(find_var(&f, "v"), m3);
+        assert_eq!(find_var(&f, "q"), m3);
+        assert_eq!(find_var(&f, "r"), m3);
+        assert_eq!(find_var(&f, "s2"), Ty::Vector(Scalar::F32, 2));
+        // One tuple temporary per call, read through members "0", "1", "2".
+        let tuples: Vec<&Ty> = f
+            .vars
+            .iter()
+            .map(|v| &v.ty)
+            .filter(|t| matches!(t, Ty::Tuple(_)))
+            .collect();
+        assert_eq!(tuples.len(), 4);
+        assert_eq!(
+            tuples[0].to_string(),
+            "(DMat3, DVec3, DMat3)",
+            "the tuple type prints as Rust's"
+        );
+        let mut members = Vec::new();
+        walk_stmts(&f.body, &mut |st| {
+            if let StmtKind::Assign {
+                op: Op::Member(_, m),
+                ..
+            } = &st.kind
+            {
+                members.push(m.clone());
+            }
+        });
+        // `_` reads nothing.
+        assert_eq!(members, ["0", "1", "2", "0", "0", "1", "0", "1", "2"]);
+    }
+
+    #[test]
+    fn tuples_only_where_destructured() {
+        let e = errors(
+            parse_quote! {
+                fn k(a: Array<Mat3>) {
+                    let i = tid();
+                    let t = svd3(a[i]);
+                    let (x, y) = a[i];
+                    let (p, q) = svd3(a[i]);
+                    let m = transpose(qr3(a[i]));
+                }
+            },
+            FnKind::Kernel,
+        );
+        assert_eq!(e.len(), 4, "{e:?}");
+        assert!(e[0].contains("destructure it"), "{}", e[0]);
+        assert!(
+            e[1].contains("tuple patterns are only supported"),
+            "{}",
+            e[1]
+        );
+        assert!(
+            e[2].contains("binds 2 value(s), but the call returns 3"),
+            "{}",
+            e[2]
+        );
+        assert!(e[3].contains("`qr3` returns a tuple"), "{}", e[3]);
+    }
+
+    #[test]
     fn literal_rule() {
         let f = lower(parse_quote! {
             fn k(x: f64, v: Vec3, a: Array<f32>) {
