@@ -1103,7 +1103,7 @@ macro_rules! svd2_cases {
 }
 
 fn svd_cases(c: &mut Cases) {
-    let mut rng = Rng(0x5eed_0f_5bd3);
+    let mut rng = Rng(0x005e_ed0f_5bd3);
     svd3_cases!(c, &mut rng, Mat3, Vec3, f32);
     svd3_cases!(c, &mut rng, DMat3, DVec3, f64);
     svd2_cases!(c, &mut rng, Mat2, Vec2, f32);

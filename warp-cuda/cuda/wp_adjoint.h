@@ -15,6 +15,8 @@
 //                                                 tanh exp2 log2 log10 cbrt erf erfc erfinv
 //                                                 erfcinv round rint trunc frac step degrees
 //                                                 radians smoothstep
+//       adj_svd3 adj_svd2 adj_eig3 adj_qr3(a, adj_a, adj_ret)  adj_ret: the tuple_t of the
+//                                                 results' adjoints (forward recomputed)
 //       adj_cast(adj_from, adj_to)                template over the 13 scalar types
 //     for exactly the operand types the Rust functions take (the kernel language's operator
 //     combinations and the builtin table's signatures, with glam's meaning of each operator).
