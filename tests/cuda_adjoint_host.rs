@@ -725,6 +725,61 @@ fn transforms(s: &mut Suite) {
     xforms!(Transform: Vec3, Quat, Mat4, f32, DTransform: DVec3, DQuat, DMat4, f64);
 }
 
+/// The decompositions of wp_svd.h: `adj_<name>(a, adj_a, tuple_t{..})` on random and special
+/// matrices (the generator's: NaNs, infinities, zero and repeated lanes), and on diagonal
+/// matrices with repeated entries (the clamped `F` of the SVD and the tie rule of eig3).
+fn decomps(s: &mut Suite) {
+    macro_rules! mats {
+        ($($m:ident, $v:ident, $s:ident);*) => {$({
+            let (m, v) = (stringify!($m), stringify!($v));
+            let t3 = format!("wp::tuple_t<wp::{m}, wp::{v}, wp::{m}>");
+            let t2m = format!("wp::tuple_t<wp::{m}, wp::{m}>");
+            let t2v = format!("wp::tuple_t<wp::{m}, wp::{v}>");
+            let svd = s.sig(&format!("wp::adj_svd3(v0, a0, {t3}{{v1, v2, v3}})"), &[m, m, v, m], &[m], None);
+            let eig = s.sig(&format!("wp::adj_eig3(v0, a0, {t2v}{{v1, v2}})"), &[m, m, v], &[m], None);
+            let qr = s.sig(&format!("wp::adj_qr3(v0, a0, {t2m}{{v1, v2}})"), &[m, m, m], &[m], None);
+            let mut inputs: Vec<$m> = s.inputs1::<$m>();
+            for d in [[2.0, 2.0, 1.0], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0], [3.0, -1.0, 2.0]] {
+                inputs.push($m::from_diagonal($v::from_array(d)));
+            }
+            for a in inputs {
+                let sym = (a + a.transpose()) * 0.5;
+                let (mut aa, gu, gs, gv) = (s.g.adj::<$m>(), s.g.ret::<$m>(), s.g.ret::<$v>(), s.g.ret::<$m>());
+                let words = [a.bits(), gu.bits(), gs.bits(), gv.bits(), aa.bits()].concat();
+                ad::adj_svd3(a, &mut aa, (gu, gs, gv));
+                s.case(svd, &words, toks(&aa));
+                let mut aa = s.g.adj::<$m>();
+                let words = [sym.bits(), gu.bits(), gs.bits(), aa.bits()].concat();
+                ad::adj_eig3(sym, &mut aa, (gu, gs));
+                s.case(eig, &words, toks(&aa));
+                let mut aa = s.g.adj::<$m>();
+                let words = [a.bits(), gu.bits(), gv.bits(), aa.bits()].concat();
+                ad::adj_qr3(a, &mut aa, (gu, gv));
+                s.case(qr, &words, toks(&aa));
+            }
+        })*};
+    }
+    mats!(Mat3, Vec3, f32; DMat3, DVec3, f64);
+    macro_rules! mats2 {
+        ($($m:ident, $v:ident, $s:ident);*) => {$({
+            let (m, v) = (stringify!($m), stringify!($v));
+            let t3 = format!("wp::tuple_t<wp::{m}, wp::{v}, wp::{m}>");
+            let svd = s.sig(&format!("wp::adj_svd2(v0, a0, {t3}{{v1, v2, v3}})"), &[m, m, v, m], &[m], None);
+            let mut inputs: Vec<$m> = s.inputs1::<$m>();
+            for d in [[2.0, 2.0], [0.0, 0.0], [3.0, -1.0]] {
+                inputs.push($m::from_diagonal($v::from_array(d)));
+            }
+            for a in inputs {
+                let (mut aa, gu, gs, gv) = (s.g.adj::<$m>(), s.g.ret::<$m>(), s.g.ret::<$v>(), s.g.ret::<$m>());
+                let words = [a.bits(), gu.bits(), gs.bits(), gv.bits(), aa.bits()].concat();
+                ad::adj_svd2(a, &mut aa, (gu, gs, gv));
+                s.case(svd, &words, toks(&aa));
+            }
+        })*};
+    }
+    mats2!(Mat2, Vec2, f32; DMat2, DVec2, f64);
+}
+
 /// Integers: every adjoint is a no-op (the starting adjoints come back unchanged).
 fn integers(s: &mut Suite) {
     let n = s.n;
@@ -1255,6 +1310,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     linalg(&mut s);
     noise(&mut s);
     transforms(&mut s);
+    decomps(&mut s);
     integers(&mut s);
     casts(&mut s);
     zeros(&mut s);

@@ -196,6 +196,40 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = if t == t && t != u { 1.0 } else { 0.0 };
 }
 
+/// The decompositions: tuple results destructured (with `_` and an annotation), inside a loop
+/// that overwrites them, and every output written out.
+#[wp::kernel]
+fn decompositions(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let b = i * 9;
+    let a = Mat3::from_cols(
+        Vec3::new(x[b], x[b + 1], x[b + 2]),
+        Vec3::new(x[b + 3], x[b + 4], x[b + 5]),
+        Vec3::new(x[b + 6], x[b + 7], x[b + 8]),
+    );
+    let mut m = a;
+    let mut k = 0;
+    for _r in 0..2 {
+        let (u, s, v): (Mat3, Vec3, Mat3) = svd3(m);
+        m = u * Mat3::from_diagonal(s) * v.transpose() + Mat3::IDENTITY * 0.25;
+        out[(i, k)] = s.x + s.y * 2.0 + s.z * 4.0;
+        out[(i, k + 1)] = u.x_axis.x + u.y_axis.z + v.z_axis.y;
+        k += 2;
+    }
+    let (q, d) = eig3((a + a.transpose()) * 0.5);
+    out[(i, 4)] = d.x;
+    out[(i, 5)] = d.y;
+    out[(i, 6)] = d.z;
+    out[(i, 7)] = q.x_axis.y + q.z_axis.x;
+    let (q2, r) = qr3(a);
+    out[(i, 8)] = q2.y_axis.x + r.z_axis.z;
+    let (_, s2, v2) = svd2(Mat2::from_cols(
+        Vec2::new(a.x_axis.x, a.x_axis.y),
+        Vec2::new(a.y_axis.x, a.y_axis.y),
+    ));
+    out[(i, 9)] = s2.x + s2.y * 3.0 + v2.x_axis.y;
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -606,6 +640,25 @@ fn transforms_match_the_cpu_backend() {
     let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
     let host = run_on_host::<transforms>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
     wp::launch(transforms, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+#[test]
+fn decompositions_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 12;
+    let mut xs: Vec<f32> = (0..n * 9)
+        .map(|k| ((k * 37 % 23) as f32 - 11.0) * 0.173)
+        .collect();
+    xs[9..18].copy_from_slice(&[3.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 1.0]);
+    xs[18..27].fill(0.0);
+    xs[31] = f32::NAN;
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 10), &dev).unwrap();
+    let host = run_on_host::<decompositions>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(decompositions, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }

@@ -1114,6 +1114,106 @@ fn linalg_cases(c: &mut Cases, rng: &mut Rng) {
     linalg_quat_cases!(c, rng, DQuat, DVec3, DMat3, f64);
 }
 
+// ----- wp_svd.h: svd3, eig3, qr3, svd2 -----
+
+/// Matrices for the decompositions: random ones, and the edge cases the suite names
+/// (diagonal, repeated and zero singular values, rank one, reflections, tiny and huge scales
+/// (f32 `aᵀa` overflows at 1e20), NaN, infinity).
+macro_rules! svd3_cases {
+    ($c:expr, $rng:expr, $m:ident, $v:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($m);
+        let mut ms: Vec<$m> = (0..40)
+            .map(|_| $m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        let r = ms[0];
+        for d in [
+            [3.0, -1.0, 2.0],
+            [2.0, 2.0, 2.0],
+            [2.0, 2.0, 1.0],
+            [1.0, 1.0, -1.0],
+            [0.0, 0.0, 0.0],
+        ] {
+            ms.push($m::from_diagonal($v::from_array(d)));
+        }
+        ms.push($m::IDENTITY);
+        ms.push($m::from_cols(r.x_axis, r.x_axis * 2.0, r.z_axis));
+        ms.push($m::from_cols(r.x_axis, r.x_axis * -0.5, r.x_axis * 3.0));
+        ms.push(r * 1e-20);
+        ms.push(r * 1e20);
+        let mut nan = r.to_cols_array();
+        nan[4] = $s::NAN;
+        ms.push($m::from_cols_array(&nan));
+        let mut inf = r.to_cols_array();
+        inf[2] = $s::INFINITY;
+        ms.push($m::from_cols_array(&inf));
+        for &a in &ms {
+            let (u, s, v) = b::svd3(a);
+            c.push(
+                "svd3",
+                ty,
+                &[&a],
+                [toks(&u, Exact), toks(&s, Exact), toks(&v, Exact)].concat(),
+            );
+            let (q, r) = b::qr3(a);
+            c.push(
+                "qr3",
+                ty,
+                &[&a],
+                [toks(&q, Exact), toks(&r, Exact)].concat(),
+            );
+            // eig3 of the symmetric part, and of `a` itself (defined, if not meaningful).
+            for m in [(a + a.transpose()) * 0.5, a] {
+                let (q, d) = b::eig3(m);
+                c.push(
+                    "eig3",
+                    ty,
+                    &[&m],
+                    [toks(&q, Exact), toks(&d, Exact)].concat(),
+                );
+            }
+        }
+    }};
+}
+
+macro_rules! svd2_cases {
+    ($c:expr, $rng:expr, $m:ident, $v:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($m);
+        let mut ms: Vec<$m> = (0..40)
+            .map(|_| $m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        let r = ms[0];
+        for d in [[3.0, -1.0], [2.0, 2.0], [2.0, 0.0], [0.0, 0.0]] {
+            ms.push($m::from_diagonal($v::from_array(d)));
+        }
+        ms.push($m::from_cols(r.x_axis, r.x_axis * -3.0));
+        ms.push($m::from_cols_array(&[1.0, 1.0, 1.0, 1.0]));
+        ms.push($m::from_cols_array(&[1.0, -1.0, 1.0, 1.0]));
+        ms.push(r * 1e-20);
+        ms.push($m::from_cols_array(&[$s::NAN, 1.0, 2.0, 3.0]));
+        for &a in &ms {
+            let (u, s, v) = b::svd2(a);
+            c.push(
+                "svd2",
+                ty,
+                &[&a],
+                [toks(&u, Exact), toks(&s, Exact), toks(&v, Exact)].concat(),
+            );
+        }
+    }};
+}
+
+fn svd_cases(c: &mut Cases) {
+    let mut rng = Rng(0x005e_ed0f_5bd3);
+    svd3_cases!(c, &mut rng, Mat3, Vec3, f32);
+    svd3_cases!(c, &mut rng, DMat3, DVec3, f64);
+    svd2_cases!(c, &mut rng, Mat2, Vec2, f32);
+    svd2_cases!(c, &mut rng, DMat2, DVec2, f64);
+}
+
 // ----- casts: Rust `as` between every pair of scalar types -----
 
 // ----- wp_rand.h: the generator, the samplers, poisson, Perlin noise -----
@@ -2096,6 +2196,7 @@ fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
     quat_cases!(&mut c, &mut rng, DQuat, DVec3, f64);
     linalg_cases(&mut c, &mut rng);
     rand_cases(&mut c, &mut rng, device);
+    svd_cases(&mut c);
 
     let skipped = range_cases(&mut c);
     array_cases(&mut c);

@@ -31,6 +31,7 @@ backend_tests!(
     gradcheck_noise,
     rng_draws_have_zero_gradient,
     gradcheck_transforms,
+    gradcheck_decompositions,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -833,6 +834,7 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <crate::transforms::k_xform64 as wp::Kernel>::info(),
         <crate::transforms::k_xform32 as wp::Kernel>::info(),
         <crate::transforms::k_bodies as wp::Kernel>::info(),
+        <k_decomp_grad as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -1050,6 +1052,62 @@ fn gradcheck_transforms(dev: &wp::Device) {
     let out = zeros::<f64, 1>(13, dev).with_grad().unwrap();
     let report = wp::gradcheck(
         || wp::launch(k_xform_grad, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    assert!(report.max_rel_error < 1e-6, "{report:?}");
+}
+
+/// The decompositions by `wp::gradcheck` (f64), each output on its own and through a loop that
+/// overwrites a destructured result (the adjoint stack then holds tuples). The point is generic
+/// with well-separated singular values (about 3.2, 1.9, 0.8) and eigenvalues of the symmetric
+/// part (about 3.1, 1.5, 0.7), where the decompositions are smooth; eig3 is differentiated
+/// through a symmetric matrix, as its adjoint requires.
+#[wp::kernel]
+fn k_decomp_grad(x: Array<f64>, out: Array<f64>) {
+    let a = DMat3::from_cols(
+        DVec3::new(x[0], x[1], x[2]),
+        DVec3::new(x[3], x[4], x[5]),
+        DVec3::new(x[6], x[7], x[8]),
+    );
+    let p = DVec3::new(0.3, -0.7, 1.1);
+    let w = DVec3::new(-0.4, 0.2, 0.9);
+    let (u, s, v) = svd3(a);
+    out[0] = s.x;
+    out[1] = s.y;
+    out[2] = s.z;
+    out[3] = dot(u * p, w);
+    out[4] = dot(v * p, w);
+    let (q, d) = eig3((a + a.transpose()) * 0.5);
+    out[5] = d.x + d.y * 2.0 + d.z * 3.0;
+    out[6] = dot(q * p, w);
+    let (q2, r) = qr3(a);
+    out[7] = dot(q2 * p, w);
+    out[8] = dot(r * p, w);
+    let m2 = DMat2::from_cols(DVec2::new(x[0], x[1]), DVec2::new(x[3], x[4]));
+    let (u2, s2, v2) = svd2(m2);
+    out[9] = s2.x + s2.y * 0.5;
+    out[10] = dot(u2 * DVec2::new(0.3, -0.7), DVec2::new(0.2, 0.9));
+    out[11] = dot(v2 * DVec2::new(0.3, -0.7), DVec2::new(0.2, 0.9));
+    let mut m = a;
+    let mut acc: f64 = 0.0;
+    for _k in 0..2 {
+        let (uu, ss, vv) = svd3(m);
+        acc += dot(ss, p) + dot(uu * p, w);
+        m = uu * DMat3::from_diagonal(ss * 0.5) * vv.transpose() + a;
+    }
+    out[12] = acc;
+}
+
+fn gradcheck_decompositions(dev: &wp::Device) {
+    let xs = [2.0f64, 0.4, -0.3, 0.5, 1.6, 0.6, -0.2, 0.3, 1.1];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(13, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_decomp_grad, 1, (&x, &out), dev),
         &[&x],
         &[&out],
         wp::GradcheckOptions::for_type::<f64>(),

@@ -69,6 +69,7 @@ mod arrays;
 mod atomics;
 mod builtins;
 mod control;
+mod decomp;
 mod errors;
 mod funcs;
 mod generics;

@@ -33,8 +33,10 @@ pub enum Class {
     Atomic,
     /// Float square matrices (Mat2-4, DMat2-4).
     Matrix,
-    /// Mat3, DMat3 (quat_from_matrix).
+    /// Mat3, DMat3 (quat_from_matrix, svd3, eig3, qr3).
     Matrix3,
+    /// Mat2, DMat2 (svd2).
+    Matrix2,
     /// Vec3, DVec3 (skew, quat_from_axis_angle).
     FloatVector3,
     /// Quat, DQuat.
@@ -76,6 +78,7 @@ impl Class {
             (Class::Atomic, Ty::Vector(s, _)) => s.is_float(),
             (Class::Matrix, Ty::Matrix(..)) => true,
             (Class::Matrix3, Ty::Matrix(_, 3)) => true,
+            (Class::Matrix2, Ty::Matrix(_, 2)) => true,
             (Class::FloatVector3, Ty::Vector(s, 3)) => s.is_float(),
             (Class::Quaternion, Ty::Quat(_)) => true,
             (Class::AtomicInt, Ty::Scalar(s)) => {
@@ -105,6 +108,7 @@ impl Class {
             Class::Atomic => "i32, u32, i64, u64, f32, f64 or a float vector",
             Class::Matrix => "a matrix (Mat2-4, DMat2-4)",
             Class::Matrix3 => "a 3x3 matrix (Mat3, DMat3)",
+            Class::Matrix2 => "a 2x2 matrix (Mat2, DMat2)",
             Class::FloatVector3 => "a float 3-vector (Vec3, DVec3)",
             Class::Quaternion => "a quaternion (Quat, DQuat)",
             Class::AtomicInt => "i32, u32, i64 or u64",
@@ -148,6 +152,8 @@ pub enum Pos {
     Vec3OfT,
     /// The transform of `T`'s scalar (`transformation`, `transform_from_matrix`).
     XformOfT,
+    /// A tuple of these (results only: the decompositions, `svd3(a) -> (T, VecOfT, T)`).
+    Tuple(&'static [Pos]),
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -338,6 +344,12 @@ table! {
     "transform_inverse": XFORM, (T) -> T,                method = false, section = "transform", grad = Adjoint;
     "transform_to_matrix": XFORM, (T) -> MatOfT,         method = false, section = "transform", grad = Adjoint;
     "transform_from_matrix": &[Matrix4], (T) -> XformOfT, method = false, section = "transform", grad = Adjoint;
+    // Decompositions: tuples in the order of Warp's output arguments, only bound by a
+    // destructuring `let` (see `front::lower`).
+    "svd3":       &[Matrix3],   (T) -> Tuple(&[T, VecOfT, T]), method = false, section = "svd", grad = Adjoint;
+    "svd2":       &[Matrix2],   (T) -> Tuple(&[T, VecOfT, T]), method = false, section = "svd", grad = Adjoint;
+    "qr3":        &[Matrix3],   (T) -> Tuple(&[T, T]),         method = false, section = "svd", grad = Adjoint;
+    "eig3":       &[Matrix3],   (T) -> Tuple(&[T, VecOfT]),    method = false, section = "svd", grad = Adjoint;
     "atomic_add": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
     "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
@@ -509,10 +521,11 @@ impl Builtin {
         let Some(t) = t else {
             // Nothing known: leave typing to the target compiler.
             let params = self.params.iter().map(|_| Ty::Deferred).collect();
-            return Ok(Resolved {
-                params,
-                ret: Ty::Deferred,
-            });
+            let ret = match self.ret {
+                Pos::Tuple(ps) => Ty::Tuple(vec![Ty::Deferred; ps.len()]),
+                _ => Ty::Deferred,
+            };
+            return Ok(Resolved { params, ret });
         };
         if mentions_t && !self.classes.iter().any(|c| c.admits(&t)) {
             let want: Vec<_> = self.classes.iter().map(|c| c.describe()).collect();
@@ -558,6 +571,8 @@ impl Builtin {
                 .map(|s| Ty::Vector(s, 3))
                 .unwrap_or(Ty::Deferred),
             Pos::XformOfT => scalar.scalar().map(Ty::Transform).unwrap_or(Ty::Deferred),
+            // Results only (below).
+            Pos::Tuple(_) => Ty::Deferred,
         };
         let mut params = Vec::new();
         for (i, (pos, arg)) in self.params.iter().zip(args).enumerate() {
@@ -606,10 +621,11 @@ impl Builtin {
             };
             params.push(ty);
         }
-        Ok(Resolved {
-            params,
-            ret: want(&self.ret),
-        })
+        let ret = match self.ret {
+            Pos::Tuple(ps) => Ty::Tuple(ps.iter().map(&want).collect()),
+            p => want(&p),
+        };
+        Ok(Resolved { params, ret })
     }
 }
 
@@ -801,6 +817,30 @@ mod tests {
         assert!(add
             .resolve(&[k(bad), k(I32), k(Ty::Scalar(Scalar::I8))])
             .is_err());
+    }
+
+    #[test]
+    fn decompositions_return_tuples() {
+        let m3 = Ty::Matrix(Scalar::F32, 3);
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let r = lookup("svd3").unwrap().resolve(&[k(m3.clone())]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![m3.clone(), v3.clone(), m3.clone()]));
+        let r = lookup("eig3").unwrap().resolve(&[k(m3.clone())]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![m3.clone(), v3]));
+        let r = lookup("qr3").unwrap().resolve(&[k(m3.clone())]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![m3.clone(), m3.clone()]));
+        let m2 = Ty::Matrix(Scalar::F64, 2);
+        let r = lookup("svd2").unwrap().resolve(&[k(m2.clone())]).unwrap();
+        assert_eq!(
+            r.ret,
+            Ty::Tuple(vec![m2.clone(), Ty::Vector(Scalar::F64, 2), m2.clone()])
+        );
+        assert!(lookup("svd3").unwrap().resolve(&[k(m2.clone())]).is_err());
+        assert!(lookup("svd2").unwrap().resolve(&[k(m3)]).is_err());
+        // Deferred argument: the tuple's arity is still known.
+        let r = lookup("svd3").unwrap().resolve(&[k(Ty::Deferred)]).unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![Ty::Deferred; 3]));
+        assert!(lookup_method("svd3").is_none(), "function syntax only");
     }
 
     #[test]

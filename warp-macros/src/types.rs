@@ -100,6 +100,9 @@ pub enum Ty {
     Struct(String),
     /// The tuple `tid()` returns for 2-D to 4-D launches.
     TidTuple(u8),
+    /// The tuple a decomposition returns (`svd3`: `(Mat3, Vec3, Mat3)`); only ever bound by a
+    /// `let (u, s, v) = ..` pattern, which reads its elements as members `"0"`, `"1"`, ..
+    Tuple(Vec<Ty>),
     /// `()`.
     Unit,
     /// Not knowable from inside this function; typed by the target compiler.
@@ -215,6 +218,10 @@ impl fmt::Display for Ty {
             Ty::Array(t, n) => write!(f, "Array<{t}, {n}>"),
             Ty::Struct(name) => f.write_str(name),
             Ty::TidTuple(n) => write!(f, "({})", vec!["usize"; *n as usize].join(", ")),
+            Ty::Tuple(ts) => {
+                let ts: Vec<String> = ts.iter().map(|t| t.to_string()).collect();
+                write!(f, "({})", ts.join(", "))
+            }
             Ty::Unit => f.write_str("()"),
             Ty::Deferred => f.write_str("_"),
         }

@@ -106,7 +106,16 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         sections.push("transform");
     }
     let mut headers = vec!["wp_core.h".to_string()];
-    for s in ["scalar", "vector", "linalg", "transform", "atomic", "rand", "print"] {
+    for s in [
+        "scalar",
+        "vector",
+        "linalg",
+        "svd",
+        "transform",
+        "atomic",
+        "rand",
+        "print",
+    ] {
         if sections.contains(&s) {
             headers.push(format!("wp_{s}.h"));
         }

@@ -39,6 +39,7 @@ mod lanes;
 mod linalg;
 mod noise;
 mod ops;
+mod svd;
 #[cfg(test)]
 mod tests;
 mod transform;
@@ -48,6 +49,7 @@ pub use cast::*;
 pub use linalg::*;
 pub use noise::*;
 pub use ops::*;
+pub use svd::*;
 pub use transform::*;
 
 /// A type whose values have an adjoint of the same type.

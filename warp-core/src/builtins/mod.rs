@@ -14,6 +14,7 @@
 //! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
 //! * [`transform`]: rigid-transform builtins ([`transform_point`], [`transform_multiply`], ...).
+//! * [`svd`]: matrix decompositions returning tuples ([`svd3`], [`eig3`], [`qr3`], [`svd2`]).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 //! * [`rand`]: Warp's random number generator ([`rand_init`], [`randf`], [`randn`], the
 //!   samplers, [`poisson`]) and [`noise`](mod@noise): Perlin noise ([`noise()`], [`pnoise`]).
@@ -24,6 +25,7 @@ pub mod math;
 pub mod noise;
 pub mod rand;
 pub mod special;
+pub mod svd;
 pub mod transform;
 
 pub use atomic::*;
@@ -31,4 +33,5 @@ pub use linalg::*;
 pub use math::*;
 pub use noise::{noise, pnoise, NoiseArg};
 pub use rand::*;
+pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};
 pub use transform::*;

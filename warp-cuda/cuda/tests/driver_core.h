@@ -40,7 +40,8 @@ enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
   X(sample_unit_cube) X(sample_unit_sphere_surface) X(sample_unit_sphere)                    \
   X(sample_unit_hemisphere_surface) X(sample_unit_hemisphere) X(poisson) X(poisson_state)    \
   X(noise) X(pnoise) \
-  X(xinv) X(xpoint) X(xvector) X(x2m) X(m2x) X(xget)
+  X(xinv) X(xpoint) X(xvector) X(x2m) X(m2x) X(xget) \
+  X(svd3) X(eig3) X(qr3) X(svd2)
 
 #define ENUM_OP(o) OP_##o,
 enum op_id { OP_LIST(ENUM_OP) OP_COUNT };
@@ -632,6 +633,13 @@ DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
     }
     if constexpr (mat_traits<T>::N == 3) {
       if (op == OP_m2q) { T a = get<T>(r); put(o, wp::quat_from_matrix(a)); return; }
+      // wp_svd.h
+      if (op == OP_svd3) { T a = get<T>(r); auto t = wp::svd3(a); put(o, t.f0); put(o, t.f1); put(o, t.f2); return; }
+      if (op == OP_eig3) { T a = get<T>(r); auto t = wp::eig3(a); put(o, t.f0); put(o, t.f1); return; }
+      if (op == OP_qr3) { T a = get<T>(r); auto t = wp::qr3(a); put(o, t.f0); put(o, t.f1); return; }
+    }
+    if constexpr (mat_traits<T>::N == 2) {
+      if (op == OP_svd2) { T a = get<T>(r); auto t = wp::svd2(a); put(o, t.f0); put(o, t.f1); put(o, t.f2); return; }
     }
   }
   if constexpr (is_quat) {

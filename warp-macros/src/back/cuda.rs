@@ -85,8 +85,21 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
         }
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::Struct(name) => name.clone(),
+        Ty::Tuple(ts) => {
+            let ts: Option<Vec<String>> = ts.iter().map(cpp_type).collect();
+            format!("wp::tuple_t<{}>", ts?.join(", "))
+        }
         _ => return None,
     })
+}
+
+/// A member's C++ name: fields keep theirs; element `k` of a tuple (`wp::tuple_t`) is `f<k>`.
+pub(crate) fn cpp_member(m: &str) -> String {
+    if m.starts_with(|c: char| c.is_ascii_digit()) {
+        format!("f{m}")
+    } else {
+        m.to_string()
+    }
 }
 
 /// A float literal as C++ source of the given type, exactly (hex floats round-trip).
@@ -183,7 +196,7 @@ impl<'a> Emitter<'a> {
                 "@@R{}@@",
                 self.f.callees.iter().position(|p| p == &path)?
             )),
-            Op::Member(w, m) => Some(format!("decltype({}.{m})", decl(w)?)),
+            Op::Member(w, m) => Some(format!("decltype({}.{})", decl(w)?, cpp_member(&m))),
             Op::Binary(op, a, b) if op.is_comparison() => {
                 let _ = (a, b);
                 Some("bool".into())
@@ -676,7 +689,7 @@ impl<'a> Emitter<'a> {
                 self.var(*array),
                 self.index(index)
             ),
-            Op::Member(v, m) => format!("{}.{m}", self.var(*v)),
+            Op::Member(v, m) => format!("{}.{}", self.var(*v), cpp_member(m)),
             Op::Construct { ty: t, ctor, args } => {
                 let name = t.glam_name().ok_or("constructed types are glam types")?;
                 let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();

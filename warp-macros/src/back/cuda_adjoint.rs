@@ -789,6 +789,7 @@ impl<'a> Adj<'a> {
             }
             Op::Member(v, m) if self.diff(*v) => {
                 let a = self.adj(*v);
+                let m = super::cuda::cpp_member(m);
                 self.line(sp, &format!("wp::adj_accum({a}.{m}, __r);"));
             }
             Op::Construct { ty, ctor, args } => {

@@ -313,7 +313,7 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Member(v, m) => {
                 let x = self.var(*v);
-                let m = format_ident!("{}", m);
+                let m = member_tokens(m);
                 quote_spanned!(sp=> #x.#m)
             }
             Op::Construct { ty, ctor, args } => {
@@ -359,9 +359,23 @@ impl<'a> RustEmitter<'a> {
     }
 }
 
+/// A member's name: a field (`x`, `x_axis`) or a tuple index (`0`, of a decomposition's
+/// result).
+pub(crate) fn member_tokens(m: &str) -> TokenStream {
+    match m.parse::<usize>() {
+        Ok(k) => syn::Index::from(k).into_token_stream(),
+        Err(_) => format_ident!("{}", m).into_token_stream(),
+    }
+}
+
 /// The Rust type of a value, where the macro knows it.
 pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
     match t {
+        Ty::Tuple(ts) => {
+            let ts: Option<Vec<TokenStream>> = ts.iter().map(ty_tokens).collect();
+            let ts = ts?;
+            Some(quote!((#(#ts),*)))
+        }
         Ty::Scalar(s) => {
             let id = format_ident!("{}", s.name());
             Some(quote!(#id))

@@ -567,7 +567,7 @@ impl<'a> AdjEmitter<'a> {
                     return TokenStream::new();
                 }
                 let a = self.adj(*v);
-                let m = format_ident!("{}", m);
+                let m = super::rust::member_tokens(m);
                 quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(&mut #a.#m, __r);)
             }
             Op::Construct { ty, ctor, args } => {

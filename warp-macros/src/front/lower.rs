@@ -43,6 +43,7 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         ret: Ty::Unit,
         loops: 0,
         views: HashMap::new(),
+        tuple_result: false,
     };
     let sig = &item.sig;
     let unsupported = [
@@ -168,6 +169,9 @@ struct Lowerer {
     loops: usize,
     /// In-kernel views (`a.row(i)`, `a.view(lo..hi)`), resolved into the arrays they view.
     views: HashMap<VarId, views::ViewDef>,
+    /// Set by a destructuring `let` for the call it lowers: that call (and no other) may be a
+    /// builtin returning a tuple (`let (u, sigma, v) = svd3(a);`).
+    tuple_result: bool,
 }
 
 /// An assignable place: a local (with a member path) or an array element (with a member path).
@@ -532,20 +536,28 @@ impl Lowerer {
             return err(span, "`let ... else` is not supported in kernels");
         }
         let (pat, annot) = match &local.pat {
-            Pat::Type(pt) => (&*pt.pat, Some(parse_type(&pt.ty)?)),
+            Pat::Type(pt) => (&*pt.pat, Some(let_type(&pt.ty)?)),
             p => (p, None),
         };
-        // `let (i, j) = tid();`
         if let Pat::Tuple(tuple) = pat {
             if !is_tid_call(&init.expr) {
-                return err(
-                    pat.span(),
-                    "tuple patterns are only supported for `let (i, j) = tid();`",
-                );
+                return self.destructure(tuple, &init.expr, annot, span);
             }
+            // `let (i, j) = tid();`
             let n = tuple.elems.len();
             if !(2..=4).contains(&n) {
                 return err(pat.span(), "tid() destructures into 2 to 4 indices");
+            }
+            if let Some(a) = &annot {
+                if *a != Ty::Tuple(vec![USIZE; n]) {
+                    return err(
+                        local.pat.span(),
+                        format!(
+                            "mismatched types: `tid()` gives `{}`, not `{a}`",
+                            Ty::TidTuple(n as u8)
+                        ),
+                    );
+                }
             }
             self.use_tid(n as u8, init.expr.span())?;
             for (k, el) in tuple.elems.iter().enumerate() {
@@ -565,6 +577,60 @@ impl Lowerer {
             }
         }
         self.bind_pat(pat, value, span)
+    }
+
+    /// `let (u, sigma, v) = svd3(a);`: the call's tuple, then one member read per bound name.
+    fn destructure(
+        &mut self,
+        tuple: &syn::PatTuple,
+        init: &Expr,
+        annot: Option<Ty>,
+        span: Span,
+    ) -> R<()> {
+        let only = "tuple patterns are only supported for `let (i, j) = tid();` and the \
+                    decompositions (`let (u, sigma, v) = svd3(a);`, `let (q, d) = eig3(a);`, ..)";
+        if !matches!(strip(init), Expr::Call(_)) {
+            return err(tuple.span(), only);
+        }
+        self.tuple_result = true;
+        let value = self.expr(init, None);
+        self.tuple_result = false;
+        let value = value?;
+        let Ty::Tuple(tys) = self.ty(value) else {
+            return err(tuple.span(), only);
+        };
+        if tys.len() != tuple.elems.len() {
+            return err(
+                tuple.span(),
+                format!(
+                    "this pattern binds {} value(s), but the call returns {}: `{}`",
+                    tuple.elems.len(),
+                    tys.len(),
+                    self.ty(value)
+                ),
+            );
+        }
+        if let Some(a) = annot {
+            let ok = matches!(&a, Ty::Tuple(w) if w.len() == tys.len()
+                && w.iter().zip(&tys).all(|(w, t)| t.is_deferred() || w == t));
+            if !ok {
+                return err(
+                    init.span(),
+                    format!(
+                        "mismatched types: expected `{a}`, found `{}`",
+                        self.ty(value)
+                    ),
+                );
+            }
+        }
+        for (k, (el, ty)) in tuple.elems.iter().zip(tys).enumerate() {
+            if matches!(el, Pat::Wild(_)) {
+                continue;
+            }
+            let v = self.def(Op::Member(value, k.to_string()), ty, el.span());
+            self.bind_pat(el, v, span)?;
+        }
+        Ok(())
     }
 
     /// Binds a pattern (a name, `mut name` or `_`) to a value by copying it into a new variable.
@@ -1727,6 +1793,8 @@ impl Lowerer {
 
     fn call(&mut self, c: &syn::ExprCall, want: Option<&Ty>) -> R<VarId> {
         let span = c.span();
+        // Only this call may return a tuple, not the calls in its arguments.
+        let tuple_ok = std::mem::take(&mut self.tuple_result);
         let Expr::Path(fp) = strip(&c.func) else {
             return err(
                 c.func.span(),
@@ -1800,7 +1868,19 @@ impl Lowerer {
             }
             if let Some(b) = builtins::lookup_user(&last) {
                 let args: Vec<&Expr> = c.args.iter().collect();
-                return self.builtin_call(b, &args, want, span);
+                let v = self.builtin_call(b, &args, want, span)?;
+                if let (Ty::Tuple(_), false) = (self.ty(v), tuple_ok) {
+                    return err(
+                        span,
+                        format!(
+                            "`{}` returns a tuple `{}`: destructure it where it is called, `{}`",
+                            b.name,
+                            self.ty(v),
+                            tuple_hint(b.name)
+                        ),
+                    );
+                }
+                return Ok(v);
             }
         }
         // `Type::function(..)` of a type the language does not know.
@@ -2045,6 +2125,28 @@ fn lower_ctor_fn(name: &str) -> Option<Ty> {
     Some(Ty::Vector(scalar, n))
 }
 
+/// How to destructure a decomposition's tuple (for error messages).
+fn tuple_hint(name: &str) -> String {
+    let names = match name {
+        "eig3" => "(q, d)",
+        "qr3" => "(q, r)",
+        _ => "(u, sigma, v)",
+    };
+    format!("let {names} = {name}(a);")
+}
+
+/// The type annotation of a `let`: a kernel type, or a tuple of them (for a destructured
+/// decomposition).
+fn let_type(ty: &syn::Type) -> R<Ty> {
+    match ty {
+        syn::Type::Tuple(t) if !t.elems.is_empty() => {
+            Ok(Ty::Tuple(t.elems.iter().map(parse_type).collect::<R<_>>()?))
+        }
+        syn::Type::Paren(p) => let_type(&p.elem),
+        _ => parse_type(ty),
+    }
+}
+
 fn is_tid_call(e: &Expr) -> bool {
     match strip(e) {
         Expr::Call(c) => match strip(&c.func) {
@@ -2105,6 +2207,80 @@ mod tests {
             .unwrap()
             .ty
             .clone()
+    }
+
+    #[test]
+    fn decompositions_destructure_into_members() {
+        let f = lower(parse_quote! {
+            fn k(a: Array<DMat3>, b: Array<Mat2>) {
+                let i = tid();
+                let (u, s, v) = svd3(a[i]);
+                let (q, _): (DMat3, DVec3) = wp::eig3(a[i]);
+                let (q2, r) = qr3(a[i]);
+                let (u2, s2, v2) = svd2(b[i]);
+            }
+        });
+        let m3 = Ty::Matrix(Scalar::F64, 3);
+        assert_eq!(find_var(&f, "u"), m3);
+        assert_eq!(find_var(&f, "s"), Ty::Vector(Scalar::F64, 3));
+        assert_eq!(find_var(&f, "v"), m3);
+        assert_eq!(find_var(&f, "q"), m3);
+        assert_eq!(find_var(&f, "r"), m3);
+        assert_eq!(find_var(&f, "s2"), Ty::Vector(Scalar::F32, 2));
+        // One tuple temporary per call, read through members "0", "1", "2".
+        let tuples: Vec<&Ty> = f
+            .vars
+            .iter()
+            .map(|v| &v.ty)
+            .filter(|t| matches!(t, Ty::Tuple(_)))
+            .collect();
+        assert_eq!(tuples.len(), 4);
+        assert_eq!(
+            tuples[0].to_string(),
+            "(DMat3, DVec3, DMat3)",
+            "the tuple type prints as Rust's"
+        );
+        let mut members = Vec::new();
+        walk_stmts(&f.body, &mut |st| {
+            if let StmtKind::Assign {
+                op: Op::Member(_, m),
+                ..
+            } = &st.kind
+            {
+                members.push(m.clone());
+            }
+        });
+        // `_` reads nothing.
+        assert_eq!(members, ["0", "1", "2", "0", "0", "1", "0", "1", "2"]);
+    }
+
+    #[test]
+    fn tuples_only_where_destructured() {
+        let e = errors(
+            parse_quote! {
+                fn k(a: Array<Mat3>) {
+                    let i = tid();
+                    let t = svd3(a[i]);
+                    let (x, y) = a[i];
+                    let (p, q) = svd3(a[i]);
+                    let m = transpose(qr3(a[i]));
+                }
+            },
+            FnKind::Kernel,
+        );
+        assert_eq!(e.len(), 4, "{e:?}");
+        assert!(e[0].contains("destructure it"), "{}", e[0]);
+        assert!(
+            e[1].contains("tuple patterns are only supported"),
+            "{}",
+            e[1]
+        );
+        assert!(
+            e[2].contains("binds 2 value(s), but the call returns 3"),
+            "{}",
+            e[2]
+        );
+        assert!(e[3].contains("`qr3` returns a tuple"), "{}", e[3]);
     }
 
     #[test]
