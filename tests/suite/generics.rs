@@ -13,6 +13,7 @@ backend_tests!(
     two_type_parameters,
     generic_kernel_gradients,
     instances_are_named,
+    generic_transforms,
 );
 
 /// `y = a * x + y` in the array's precision.
@@ -237,4 +238,23 @@ fn instances_are_named(dev: &wp::Device) {
     let dst = zeros::<f32, 1>(1, dev);
     let err = wp::launch(convert, 2, (&src, &dst), dev).unwrap_err();
     assert!(err.to_string().contains("convert<f64, f32>"), "{err}");
+}
+
+/// `Transform<T>` names `Transform` or `DTransform`.
+#[wp::kernel]
+fn move_points<T: Float>(t: Array<Transform<T>>, p: Array<Vec3<T>>) {
+    let i = tid();
+    p[i] = t[i].transform_point(p[i]);
+}
+
+fn generic_transforms(dev: &wp::Device) {
+    let t64 = DTransform::new(DVec3::new(1.0, 2.0, 3.0), DQuat::IDENTITY);
+    let p64 = arr(&[DVec3::new(0.5, 0.25, -1.0)], dev);
+    wp::launch(move_points, 1, (&arr(&[t64], dev), &p64), dev).unwrap();
+    // An identity rotation and dyadic sums: exact.
+    assert_eq!(host(&p64), [DVec3::new(1.5, 2.25, 2.0)]);
+    let t32 = Transform::new(Vec3::new(1.0, 2.0, 3.0), Quat::IDENTITY);
+    let p32 = arr(&[Vec3::new(0.5, 0.25, -1.0)], dev);
+    wp::launch(move_points, 1, (&arr(&[t32], dev), &p32), dev).unwrap();
+    assert_eq!(host(&p32), [Vec3::new(1.5, 2.25, 2.0)]);
 }
