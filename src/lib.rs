@@ -103,12 +103,12 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, builtins, first_error, max_depth, ops, zero_like, AdStack,
-        ArrayView, DTransform, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
-        Transform,
+        ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView, Grid, KResult,
+        RangeProg, Transform,
     };
     pub use warp_runtime::{
-        ArgCtx, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg, KernelInfo,
-        Launchable, Result,
+        ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,
+        KernelInfo, Launchable, Result,
     };
 }
 

@@ -230,6 +230,27 @@ fn decompositions(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 9)] = s2.x + s2.y * 3.0 + v2.x_axis.y;
 }
 
+const GRAVITY: f32 = -9.81;
+const THIRD: f64 = 1.0 / 3.0;
+const N_STEPS: i32 = 3;
+const OFFSET: Vec3 = Vec3::new(0.5, -1.25, 2.0);
+mod physics {
+    pub const DRAG: f32 = 0.1;
+}
+
+/// Module-level consts: their values reach the CUDA source exactly (bit patterns).
+#[wp::kernel]
+fn consts(x: Array<f32>, v: Array<Vec3>, n: Array<i32>) {
+    let i = tid();
+    let mut acc = x[i];
+    for _ in 0..N_STEPS {
+        acc = acc * (1.0 - physics::DRAG) + GRAVITY;
+    }
+    x[i] = acc + (THIRD * x[i] as f64) as f32;
+    v[i] = v[i] * physics::DRAG + OFFSET;
+    n[i] = N_STEPS * i as i32;
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -662,4 +683,28 @@ fn decompositions_match_the_cpu_backend() {
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }
+}
+
+#[test]
+fn module_constants_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let x = wp::Array::from_slice(&[1.0f32, -0.3, 7.5, 1e-3], &dev).unwrap();
+    let v = wp::Array::from_slice(
+        &[Vec3::ONE, Vec3::new(0.1, 0.2, 0.3), Vec3::ZERO, -Vec3::ONE],
+        &dev,
+    )
+    .unwrap();
+    let n = wp::Array::<i32>::zeros(4, &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::Vec3s(&v), Arg::I32s(&n)];
+    let host = run_on_host::<consts>(&[4], &args);
+    wp::launch(consts, 4, (&x, &v, &n), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+    // The values are spelt as bit patterns, not rounded decimals.
+    let src = wp::cuda_source::assemble(&<consts as wp::Kernel>::INFO).text;
+    assert!(
+        src.contains(&format!("0x{:016x}", THIRD.to_bits())),
+        "{src}"
+    );
 }

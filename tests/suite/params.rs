@@ -2,7 +2,7 @@
 //! vectors, matrices and quaternions. (Arrays of 1-4 dimensions are in `arrays`, structs in
 //! `structs`.)
 
-use crate::{host, zeros};
+use crate::{arr, host, zeros};
 use warp_lang as wp;
 use wp::prelude::*;
 
@@ -14,7 +14,9 @@ backend_tests!(
     double_vector_params,
     int_vector_params,
     matrix_params,
-    quat_params
+    quat_params,
+    module_constants,
+    constants_in_funcs_and_gradients,
 );
 
 #[wp::kernel]
@@ -372,4 +374,88 @@ fn quat_params(dev: &wp::Device) {
     assert_eq!(host(&oq), vec![q, q * 2.0]);
     assert_eq!(host(&od), vec![d, d * 2.0]);
     assert_eq!(host(&parts), vec![0.1f32 as f64, 0.9f32 as f64, 0.5, 0.6]);
+}
+
+// ------------------------------------------------------------------ module-level constants
+
+const GRAVITY: f32 = -9.81;
+/// Not exact in binary: the GPU must see the very same f64 (its bits are passed).
+const THIRD: f64 = 1.0 / 3.0;
+const N_STEPS: i32 = 4;
+const MASK: u64 = 0xdead_beef_0000_0001;
+const OFFSET: Vec3 = Vec3::new(1.0, 2.0, 3.0);
+const NOT_A_NUMBER: f32 = f32::NAN;
+
+mod physics {
+    pub const DRAG: f32 = 0.25;
+}
+
+/// Module-level consts (Warp's `wp.constant`), by name and by path, of several types.
+#[wp::kernel]
+fn k_consts(x: Array<f32>, y: Array<f64>, v: Array<Vec3>, bits: Array<u64>) {
+    let i = tid();
+    let mut acc = x[i];
+    for _ in 0..N_STEPS {
+        acc += GRAVITY * physics::DRAG;
+    }
+    x[i] = acc;
+    y[i] = y[i] * THIRD;
+    v[i] = v[i] + OFFSET * 2.0;
+    bits[i] = (bits[i] ^ MASK) + (NOT_A_NUMBER != NOT_A_NUMBER) as u64;
+}
+
+fn module_constants(dev: &wp::Device) {
+    let x = arr(&[1.0f32, -2.0], dev);
+    let y = arr(&[3.0f64, 0.1], dev);
+    let v = arr(&[Vec3::ZERO, Vec3::ONE], dev);
+    let bits = arr(&[0u64, u64::MAX], dev);
+    wp::launch(k_consts, 2, (&x, &y, &v, &bits), dev).unwrap();
+    let step = GRAVITY * physics::DRAG;
+    // The same additions in the same order: exact on every backend.
+    let want: Vec<f32> = [1.0f32, -2.0]
+        .iter()
+        .map(|&x0| (0..N_STEPS).fold(x0, |a, _| a + step))
+        .collect();
+    assert_eq!(host(&x), want);
+    // One rounding of the same operands: exact.
+    assert_eq!(host(&y), [3.0 * THIRD, 0.1 * THIRD]);
+    assert_eq!(host(&v), [OFFSET * 2.0, Vec3::ONE + OFFSET * 2.0]);
+    assert_eq!(host(&bits), [MASK + 1, (u64::MAX ^ MASK) + 1]);
+}
+
+#[wp::func]
+fn weight(x: f64) -> f64 {
+    x * THIRD + physics::DRAG as f64
+}
+
+#[wp::kernel]
+fn k_const_loss(x: Array<f64>, out: Array<f64>) {
+    let i = tid();
+    out[i] = weight(x[i]) * x[i];
+}
+
+fn constants_in_funcs_and_gradients(dev: &wp::Device) {
+    let x = arr(&[2.0f64, -1.5], dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(2, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_const_loss, 2, (&x, &out), dev).unwrap();
+    }
+    tape.backward(&out).unwrap();
+    let d = physics::DRAG as f64;
+    for (k, x0) in [2.0f64, -1.5].iter().enumerate() {
+        // (x/3 + d) x: forward and d/dx = 2x/3 + d, a few roundings (FMA on CUDA): 4 ulp.
+        let f = (x0 * THIRD + d) * x0;
+        let g = 2.0 * x0 * THIRD + d;
+        assert!(
+            (host(&out)[k] - f).abs() <= 4.0 * f64::EPSILON * f.abs(),
+            "f({x0})"
+        );
+        let got = host(&x.grad().unwrap())[k];
+        assert!(
+            (got - g).abs() <= 4.0 * f64::EPSILON * g.abs(),
+            "grad({x0}) {got} vs {g}"
+        );
+    }
 }

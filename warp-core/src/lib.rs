@@ -24,7 +24,7 @@ pub use grad::{
 };
 pub use grid::Grid;
 pub use index::KernelIndex;
-pub use meta::{FuncInfo, StructDefs};
+pub use meta::{ConstLiteral, FuncInfo, StructDefs};
 pub use range::RangeProg;
 pub use transform::{DTransform, Transform};
 pub use view::ArrayView;

@@ -25,7 +25,13 @@ pub struct FuncInfo {
     pub cuda_adj: &'static str,
     /// Why the func has no CUDA adjoint.
     pub cuda_adj_error: Option<&'static str>,
+    /// The module-level `const`s it reads, in the order of its `@@K<k>@@` placeholders: each
+    /// gives the constant's value as a C++ expression (see `CudaConst` in the runtime).
+    pub consts: &'static [ConstLiteral],
 }
+
+/// The value of a module-level `const` a kernel or func reads, as a C++ expression.
+pub type ConstLiteral = fn() -> String;
 
 /// Adds a user struct's C++ definition to a list, after the definitions it depends on, each
 /// once (`CudaStruct::cuda_defs` in the runtime).

@@ -261,6 +261,7 @@ fn kernel_instance(
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(&f);
     let callees = &f.callees;
+    let consts = const_literals(&f);
     let struct_tys = struct_types(&f);
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
@@ -359,6 +360,7 @@ fn kernel_instance(
                         cuda_adjoint: #cuda_adjoint,
                         cuda_adjoint_stack: #cuda_adjoint_stack,
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
+                        consts: #consts,
                     };
                     type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
                     unsafe fn cpu_grads(
@@ -561,6 +563,23 @@ fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>, Literal) {
             Literal::string("void"),
         ),
     }
+}
+
+/// The values of the module-level consts a function reads, as C++ expressions for its
+/// `@@K<k>@@` placeholders: one small fn per const, spanned at the use, so that a const of a
+/// type without `CudaConst` is an error there.
+fn const_literals(f: &crate::ir::Function) -> TokenStream {
+    let fns = f.consts.iter().map(|p| {
+        quote_spanned! {p.span()=>
+            {
+                fn __wp_const() -> ::std::string::String {
+                    ::warp_lang::__private::CudaConst::cuda_literal(&#p)
+                }
+                __wp_const as ::warp_lang::__private::ConstLiteral
+            }
+        }
+    });
+    quote!(&[#(#fns),*])
 }
 
 /// The user struct types a function's parameters name (`S` and `Array<S, N>`), as written.
@@ -849,6 +868,7 @@ fn func_instance(
     let struct_tys = struct_types(&f);
     let name_str = Literal::string(&f.name);
     let callees = &f.callees;
+    let consts = const_literals(&f);
     let func_info = quote! {
         /// What the CUDA assembler needs to know about this func.
         #[doc(hidden)]
@@ -863,6 +883,7 @@ fn func_instance(
             structs: &[#(<#struct_tys as ::warp_lang::__private::CudaStruct>::cuda_defs),*],
             cuda_adj: #cuda_adj,
             cuda_adj_error: ::warp_lang::__private::first_error(&[#cuda_adj_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
+            consts: #consts,
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs

@@ -61,6 +61,9 @@ pub struct Function {
     pub tid_ndim: Option<u8>,
     /// User funcs called (paths as written), for dependency tracking.
     pub callees: Vec<syn::Path>,
+    /// The module-level consts the function reads, in the order of its `@@K<k>@@`
+    /// placeholders.
+    pub consts: Vec<syn::Path>,
 }
 
 pub type Block = Vec<Stmt>;
@@ -277,6 +280,10 @@ pub enum Op {
     Extent(VarId, u8),
     /// `array.len()` (usize).
     Len(VarId),
+    /// A module-level `const` (Warp's `wp.constant`), by the path written: its type is the
+    /// const's, which the macro cannot see (`Deferred`); the CUDA value comes from the const
+    /// itself at assembly (`Function::consts`, `@@K<k>@@`).
+    Const(syn::Path),
     /// The bounds check of an in-kernel view (`a.view(lo..hi)`, see `front/lower/views.rs`):
     /// `index` (any integer) as a usize, after checking `index < bound` (`<=` when
     /// `inclusive`); a failed check is an out-of-bounds fault of `array`'s parameter with the
@@ -322,7 +329,7 @@ impl Op {
                 f(*index);
                 f(*bound)
             }
-            Op::Lit(_) | Op::Tid(_) => {}
+            Op::Lit(_) | Op::Tid(_) | Op::Const(_) => {}
         }
     }
 }

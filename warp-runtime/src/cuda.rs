@@ -526,6 +526,7 @@ static UNKNOWN: KernelInfo = KernelInfo {
     cuda_adjoint: "",
     cuda_adjoint_stack: false,
     cuda_adjoint_error: None,
+    consts: &[],
 };
 
 /// Waits for every GPU used so far and reports the first recorded fault.

@@ -49,10 +49,19 @@ fn c_ident(name: &str) -> String {
         .collect()
 }
 
-fn fill(template: &str, self_name: &str, file: &str, callees: &[(String, &str)]) -> String {
+fn fill(
+    template: &str,
+    self_name: &str,
+    file: &str,
+    callees: &[(String, &str)],
+    consts: &[warp_core::ConstLiteral],
+) -> String {
     let mut s = template
         .replace("@@SELF@@", self_name)
         .replace("@@FILE@@", file);
+    for (k, value) in consts.iter().enumerate() {
+        s = s.replace(&format!("@@K{k}@@"), &format!("({})", value()));
+    }
     for (k, (name, ret)) in callees.iter().enumerate() {
         s = s
             .replace(&format!("@@F{k}@@"), name)
@@ -144,9 +153,9 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         let callees: Vec<(String, &str)> =
             f.callees.iter().map(|c| (name_of(c), c.cuda_ret)).collect();
         text.push('\n');
-        text.push_str(&fill(f.cuda, &name_of(f), f.file, &callees));
+        text.push_str(&fill(f.cuda, &name_of(f), f.file, &callees, f.consts));
         if adjoint {
-            text.push_str(&fill(f.cuda_adj, &name_of(f), f.file, &callees));
+            text.push_str(&fill(f.cuda_adj, &name_of(f), f.file, &callees, f.consts));
         }
     }
     // The names the templates' `@@SELF@@`/`@@ENTRY@@` stand for; the adjoint template appends
@@ -167,7 +176,8 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
     let entry = format!("{base_entry}{suffix}");
     let thread_fn = format!("{base_self}{suffix}");
     text.push_str(
-        &fill(template, &base_self, info.file, &callees).replace("@@ENTRY@@", &base_entry),
+        &fill(template, &base_self, info.file, &callees, info.consts)
+            .replace("@@ENTRY@@", &base_entry),
     );
     CudaSource {
         text,
@@ -192,6 +202,7 @@ mod tests {
         structs: &[],
         cuda_adj: "",
         cuda_adj_error: None,
+        consts: &[],
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -205,6 +216,7 @@ mod tests {
         structs: &[],
         cuda_adj: "",
         cuda_adj_error: None,
+        consts: &[],
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -217,6 +229,7 @@ mod tests {
         structs: &[],
         cuda_adj: "",
         cuda_adj_error: None,
+        consts: &[],
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];
@@ -239,6 +252,7 @@ mod tests {
             cuda_adjoint: "",
             cuda_adjoint_stack: false,
             cuda_adjoint_error: None,
+            consts: &[],
         };
         let src = assemble(&info);
         assert_eq!(src.headers, vec!["wp_core.h", "wp_scalar.h", "wp_vector.h"]);

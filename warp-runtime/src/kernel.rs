@@ -146,7 +146,66 @@ pub struct KernelInfo {
     pub cuda_adjoint_stack: bool,
     /// Why the kernel has no CUDA adjoint, beyond `adjoint_error`.
     pub cuda_adjoint_error: Option<&'static str>,
+    /// The module-level `const`s the kernel reads, in the order of its `@@K<k>@@` placeholders
+    /// (see [`CudaConst`]).
+    pub consts: &'static [warp_core::ConstLiteral],
 }
+
+/// A type whose module-level `const`s kernels may read (Warp's `wp.constant`): on the CPU the
+/// kernel reads the const itself; the CUDA source gets its value, written exactly as a C++
+/// expression, when the translation unit is assembled. Implemented for the scalars and the
+/// glam vectors.
+#[diagnostic::on_unimplemented(
+    message = "a kernel reads a `const` of type `{Self}`, which kernels cannot read yet",
+    note = "kernels read module-level consts of scalar and glam vector types; pass other values as parameters"
+)]
+pub trait CudaConst {
+    /// The value as a C++ expression of the matching `wp` type.
+    fn cuda_literal(&self) -> String;
+}
+
+impl CudaConst for bool {
+    fn cuda_literal(&self) -> String {
+        self.to_string()
+    }
+}
+
+macro_rules! int_consts {
+    ($($t:ident: $suffix:literal),*) => {$(
+        impl CudaConst for $t {
+            fn cuda_literal(&self) -> String {
+                format!(concat!("(wp::", stringify!($t), ")({}", $suffix, ")"), self)
+            }
+        }
+    )*};
+}
+int_consts!(i8: "", i16: "", i32: "", u8: "u", u16: "u", u32: "u", i64: "LL", u64: "ULL");
+
+impl CudaConst for f32 {
+    /// Exact: the bit pattern (NaN payloads and infinities included).
+    fn cuda_literal(&self) -> String {
+        format!("wp::f32_from_bits(0x{:08x}u)", self.to_bits())
+    }
+}
+
+impl CudaConst for f64 {
+    /// Exact: the bit pattern.
+    fn cuda_literal(&self) -> String {
+        format!("wp::f64_from_bits(0x{:016x}ull)", self.to_bits())
+    }
+}
+
+macro_rules! vec_consts {
+    ($($v:ident),*) => {$(
+        impl CudaConst for glam::$v {
+            fn cuda_literal(&self) -> String {
+                let lanes: Vec<String> = self.to_array().iter().map(CudaConst::cuda_literal).collect();
+                format!(concat!("wp::", stringify!($v), "_new({})"), lanes.join(", "))
+            }
+        }
+    )*};
+}
+vec_consts!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
 
 /// A `#[derive(Struct)]` struct's C++ definition, for CUDA kernels that take it.
 pub trait CudaStruct {

@@ -383,6 +383,7 @@ mod tests {
             cuda_adjoint: "",
             cuda_adjoint_stack: false,
             cuda_adjoint_error: None,
+            consts: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {
@@ -431,6 +432,7 @@ mod tests {
             cuda_adjoint: "",
             cuda_adjoint_stack: false,
             cuda_adjoint_error: None,
+            consts: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let data = ArgCtx {
@@ -487,6 +489,7 @@ mod tests {
             cuda_adjoint: "",
             cuda_adjoint_stack: false,
             cuda_adjoint_error: None,
+            consts: &[],
         };
         unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
             let ctx = ArgCtx {

@@ -42,7 +42,8 @@ pub use device::{
 };
 pub use error::{Error, Result};
 pub use kernel::{
-    ArgCtx, CudaArray, CudaStruct, GenericKernel, Kernel, KernelArg, KernelInfo, Launchable,
+    ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg, KernelInfo,
+    Launchable,
 };
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;

@@ -197,6 +197,10 @@ impl<'a> Emitter<'a> {
                 self.f.callees.iter().position(|p| p == &path)?
             )),
             Op::Member(w, m) => Some(format!("decltype({}.{})", decl(w)?, cpp_member(&m))),
+            Op::Const(p) => Some(format!(
+                "decltype(@@K{}@@)",
+                self.f.consts.iter().position(|c| c == &p)?
+            )),
             Op::Binary(op, a, b) if op.is_comparison() => {
                 let _ = (a, b);
                 Some("bool".into())
@@ -716,6 +720,14 @@ impl<'a> Emitter<'a> {
             Op::Tid(k) => format!("(wp::usize)__tid[{k}]"),
             Op::Extent(a, k) => format!("(wp::usize)wp::extent({}, {k})", self.var(*a)),
             Op::Len(a) => format!("(wp::usize)wp::len({})", self.var(*a)),
+            Op::Const(p) => format!(
+                "@@K{}@@",
+                self.f
+                    .consts
+                    .iter()
+                    .position(|c| c == p)
+                    .expect("a recorded const")
+            ),
             Op::ViewCheck {
                 array,
                 index,

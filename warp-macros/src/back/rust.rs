@@ -346,6 +346,7 @@ impl<'a> RustEmitter<'a> {
                 let a = self.var(*a);
                 quote_spanned!(sp=> #a.len())
             }
+            Op::Const(p) => quote_spanned!(sp=> #p),
             Op::ViewCheck {
                 array,
                 index,

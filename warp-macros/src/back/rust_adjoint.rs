@@ -626,6 +626,7 @@ impl<'a> AdjEmitter<'a> {
             | Op::Extent(..)
             | Op::Len(_)
             | Op::ViewCheck { .. }
+            | Op::Const(_)
             | Op::Func { .. } => TokenStream::new(),
         }
     }

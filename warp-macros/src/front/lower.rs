@@ -43,6 +43,7 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         ret: Ty::Unit,
         loops: 0,
         views: HashMap::new(),
+        consts: Vec::new(),
         tuple_result: false,
     };
     let sig = &item.sig;
@@ -152,6 +153,7 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         body,
         tid_ndim: cx.tid_ndim,
         callees: cx.callees,
+        consts: cx.consts,
     })
 }
 
@@ -169,6 +171,8 @@ struct Lowerer {
     loops: usize,
     /// In-kernel views (`a.row(i)`, `a.view(lo..hi)`), resolved into the arrays they view.
     views: HashMap<VarId, views::ViewDef>,
+    /// Module-level consts read (`Op::Const`), each once, in first-use order.
+    consts: Vec<syn::Path>,
     /// Set by a destructuring `let` for the call it lowers: that call (and no other) may be a
     /// builtin returning a tuple (`let (u, sigma, v) = svd3(a);`).
     tuple_result: bool,
@@ -1699,7 +1703,10 @@ impl Lowerer {
             if let Some(v) = self.lookup(&name) {
                 return Ok(v);
             }
-            return err(span, format!("cannot find `{name}` in this kernel: kernels see their parameters and locals (use a parameter for outside values)"));
+            if is_const_name(&name) {
+                return Ok(self.user_const(&p.path, span));
+            }
+            return err(span, format!("cannot find `{name}` in this kernel: kernels see their parameters, locals and module-level `const`s (SCREAMING_CASE; use a parameter for other outside values)"));
         }
         let segs: Vec<String> = p
             .path
@@ -1743,10 +1750,22 @@ impl Lowerer {
                 ));
             }
         }
+        if segs.last().is_some_and(|s| is_const_name(s)) {
+            return Ok(self.user_const(&p.path, span));
+        }
         err(
             span,
-            "paths to outside items are not supported in kernels: pass the value as a parameter",
+            "paths to outside items other than `const`s are not supported in kernels: pass the value as a parameter",
         )
+    }
+
+    /// A module-level `const` (Warp's `wp.constant`): its value on the CPU is the const
+    /// itself; the CUDA source gets it at assembly. Its type is the const's (`Deferred` here).
+    fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
+        if !self.consts.contains(path) {
+            self.consts.push(path.clone());
+        }
+        self.def(Op::Const(path.clone()), Ty::Deferred, span)
     }
 
     /// `a[i]`, `a[(i, j)]`: the array variable and one index variable per dimension.
@@ -2145,6 +2164,13 @@ fn let_type(ty: &syn::Type) -> R<Ty> {
         syn::Type::Paren(p) => let_type(&p.elem),
         _ => parse_type(ty),
     }
+}
+
+/// A `const`'s name by Rust's convention: SCREAMING_SNAKE_CASE, with a letter.
+fn is_const_name(s: &str) -> bool {
+    s.chars().any(|c| c.is_ascii_uppercase())
+        && s.chars()
+            .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
 }
 
 fn is_tid_call(e: &Expr) -> bool {
