@@ -16,6 +16,7 @@ backend_tests!(
     float_operators,
     vector_operators,
     int_vector_operators,
+    int_vector_bitwise,
     int_vector_wrapping,
     int_vector_division_by_zero,
     matrix_operators,
@@ -633,6 +634,84 @@ fn int_vector_operators(dev: &wp::Device) {
             &uout[i * 3..i * 3 + 3],
             [x + x, x * 5, x / 2],
             "UVec2 row {i}"
+        );
+    }
+}
+
+/// Bitwise operators and shifts on integer vectors, lane by lane (glam's meaning), with
+/// scalars splatted; shift amounts are taken modulo the bit width like scalars' (no panic).
+#[wp::kernel]
+fn k_ivec_bits(
+    a: Array<IVec3>,
+    b: Array<IVec3>,
+    u: Array<UVec4>,
+    out: Array<IVec3, 2>,
+    uout: Array<UVec4, 2>,
+) {
+    let i = tid();
+    let v = a[i];
+    let w = b[i];
+    out[(i, 0)] = v & w;
+    out[(i, 1)] = v | w;
+    out[(i, 2)] = v ^ w;
+    out[(i, 3)] = !v;
+    out[(i, 4)] = (v << 3) >> 1;
+    out[(i, 5)] = v & 6;
+    out[(i, 6)] = 12 ^ w;
+    let mut x = u[i];
+    x |= UVec4::splat(0x100);
+    x ^= u[i] << 33u32;
+    uout[(i, 0)] = x;
+    uout[(i, 1)] = !u[i] >> 28;
+}
+
+fn int_vector_bitwise(dev: &wp::Device) {
+    let a = [
+        ivec3(1, -2, 0x7fff_ffff),
+        ivec3(100, 7, -7),
+        ivec3(-9, 0, 5),
+    ];
+    let b = [ivec3(4, 5, -6), ivec3(3, -2, 2), ivec3(2, 1, -5)];
+    let u = [
+        uvec4(1, 2, 3, u32::MAX),
+        uvec4(100, 7, 0, 9),
+        uvec4(9, 0, 1 << 31, 6),
+    ];
+    let (out, uout) = (
+        zeros::<IVec3, 2>((3, 7), dev),
+        zeros::<UVec4, 2>((3, 2), dev),
+    );
+    wp::launch(
+        k_ivec_bits,
+        3,
+        (&arr(&a, dev), &arr(&b, dev), &arr(&u, dev), &out, &uout),
+        dev,
+    )
+    .unwrap();
+    let (out, uout) = (host(&out), host(&uout));
+    let wrap = |v: IVec3, f: fn(i32) -> i32| IVec3::from_array(v.to_array().map(f));
+    let wrapu = |v: UVec4, f: fn(u32) -> u32| UVec4::from_array(v.to_array().map(f));
+    for i in 0..3 {
+        let (v, w) = (a[i], b[i]);
+        assert_eq!(
+            &out[i * 7..i * 7 + 7],
+            [
+                v & w,
+                v | w,
+                v ^ w,
+                !v,
+                wrap(wrap(v, |x| x.wrapping_shl(3)), |x| x >> 1),
+                v & IVec3::splat(6),
+                IVec3::splat(12) ^ w,
+            ],
+            "IVec3 row {i}"
+        );
+        // `<< 33` on u32 lanes shifts by 33 mod 32 = 1.
+        let x = (u[i] | UVec4::splat(0x100)) ^ wrapu(u[i], |x| x.wrapping_shl(33));
+        assert_eq!(
+            &uout[i * 2..i * 2 + 2],
+            [x, wrapu(!u[i], |x| x >> 28)],
+            "UVec4 row {i}"
         );
     }
 }

@@ -647,7 +647,11 @@ WP_FVEC_OPS(DVec4, f64)
     return detail::vzip(a, b, [ctx](S x, S y) { return w_rem(x, y, ctx); });                    \
   }                                                                                             \
   WP_FN V w_shl(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shl(x, s); }); } \
-  WP_FN V w_shr(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shr(x, s); }); }
+  WP_FN V w_shr(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shr(x, s); }); } \
+  WP_FN V operator&(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x & y); }); } \
+  WP_FN V operator|(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x | y); }); } \
+  WP_FN V operator^(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x ^ y); }); } \
+  WP_FN V operator~(const V& a) { return detail::vmap(a, [](S x) { return (S)~x; }); }
 WP_IVEC_OPS(IVec2, i32)
 WP_IVEC_OPS(IVec3, i32)
 WP_IVEC_OPS(IVec4, i32)

@@ -281,12 +281,17 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             (Scalar(a), Scalar(b)) if a == b => Ok(BOOL),
             _ => bad(),
         },
+        // Integer vectors too (glam's operators), lane by lane, a scalar splatted.
         BinOp::BitAnd | BinOp::BitOr | BinOp::BitXor => match (l, r) {
             (Scalar(a), Scalar(b)) if a == b && !a.is_float() => Ok(l.clone()),
+            (Vector(a, n), Vector(b, m)) if a == b && n == m && !a.is_float() => Ok(l.clone()),
+            (Vector(a, _), Scalar(b)) if a == b && !a.is_float() => Ok(l.clone()),
+            (Scalar(a), Vector(b, _)) if a == b && !a.is_float() => Ok(r.clone()),
             _ => bad(),
         },
+        // A vector shifts every lane by one scalar amount.
         BinOp::Shl | BinOp::Shr => match (l, r) {
-            (Scalar(a), Scalar(b)) if a.is_int() && b.is_int() => Ok(l.clone()),
+            (Scalar(a) | Vector(a, _), Scalar(b)) if a.is_int() && b.is_int() => Ok(l.clone()),
             _ => bad(),
         },
         BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div | BinOp::Rem => match (l, r) {
@@ -1361,7 +1366,9 @@ impl Lowerer {
                 syn::UnOp::Not(_) => {
                     let v = self.expr(&u.expr, want)?;
                     let t = self.ty(v);
-                    if !(t.is_deferred() || matches!(t, Ty::Scalar(s) if !s.is_float())) {
+                    let int_or_bool =
+                        |t: &Ty| matches!(t, Ty::Scalar(s) | Ty::Vector(s, _) if !s.is_float());
+                    if !(t.is_deferred() || int_or_bool(&t)) {
                         return err(span, format!("cannot apply `!` to `{t}`"));
                     }
                     Ok(self.def(Op::Unary(UnOp::Not, v), t, span))
