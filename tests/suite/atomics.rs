@@ -14,6 +14,7 @@ backend_tests!(
     atomics_on_2d_arrays,
     backward_through_integer_flags,
     backward_refused_for_float_exch,
+    backward_refused_for_used_atomic_results,
 );
 
 /// Every thread adds one through a compare-and-swap loop (the classic lock-free update).
@@ -187,6 +188,34 @@ fn backward_refused_for_float_exch(dev: &wp::Device) {
     let err = tape.backward(&slot).unwrap_err().to_string();
     assert!(
         err.contains("k_float_exch") && err.contains("atomic_exch"),
+        "{err}"
+    );
+}
+
+/// A slot taken from a counter: the replay would not know which slot, so backward says so
+/// instead of sending every gradient to slot 0.
+#[wp::kernel]
+fn k_compact(x: Array<f32>, count: Array<i32>, out: Array<f32>) {
+    let i = tid();
+    if x[i] > 0.0 {
+        let slot = atomic_add(count, 0, 1);
+        out[slot] = x[i] * 2.0;
+    }
+}
+
+fn backward_refused_for_used_atomic_results(dev: &wp::Device) {
+    let x = arr(&[1.0f32, -1.0, 3.0], dev).with_grad().unwrap();
+    let count = zeros::<i32, 1>(1, dev);
+    let out = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_compact, 3, (&x, &count, &out), dev).unwrap();
+    }
+    assert_eq!(host(&count), [2]);
+    let err = tape.backward(&out).unwrap_err().to_string();
+    assert!(
+        err.contains("k_compact") && err.contains("atomic_add"),
         "{err}"
     );
 }

@@ -51,6 +51,12 @@ fn generic_kernel_runs_each_instance(dev: &wp::Device) {
     assert_eq!(host(&y)[0], 1.0 + 1e-10);
 }
 
+/// A generic func whose type parameter is in no parameter: callers name the instance.
+#[wp::func]
+fn half<T: Float>() -> T {
+    0.5
+}
+
 /// A generic func: called as `norm2::<T>(..)` from generic code.
 #[wp::func]
 fn norm2<T: Float>(v: Vec3<T>) -> T {
@@ -65,7 +71,11 @@ fn scaled_norm2<T: Float>(v: Vec3<T>, s: T) -> T {
 #[wp::kernel]
 fn norms<T: Float>(v: Array<Vec3<T>>, out: Array<T>) {
     let i = tid();
-    out[i] = scaled_norm2::<T>(v[i], 0.5) + norm2::<T>(Vec3::<T>::splat(1.0));
+    out[i] = scaled_norm2::<T>(v[i], half::<T>()) + norm2::<T>(Vec3::<T>::splat(1.0));
+    if i == 99 {
+        // `T` inside print arguments is substituted too (never printed: 3 threads).
+        println!("{} {}", out[i] as T, T::MAX);
+    }
 }
 
 fn generic_func_from_generic_kernel(dev: &wp::Device) {

@@ -385,6 +385,8 @@ const N_STEPS: i32 = 4;
 const MASK: u64 = 0xdead_beef_0000_0001;
 const OFFSET: Vec3 = Vec3::new(1.0, 2.0, 3.0);
 const NOT_A_NUMBER: f32 = f32::NAN;
+const LEN: usize = 2;
+const MOST_NEGATIVE: i64 = i64::MIN;
 
 mod physics {
     pub const DRAG: f32 = 0.25;
@@ -392,8 +394,13 @@ mod physics {
 
 /// Module-level consts (Warp's `wp.constant`), by name and by path, of several types.
 #[wp::kernel]
-fn k_consts(x: Array<f32>, y: Array<f64>, v: Array<Vec3>, bits: Array<u64>) {
+fn k_consts(x: Array<f32>, y: Array<f64>, v: Array<Vec3>, bits: Array<u64>, ints: Array<i64>) {
     let i = tid();
+    if i == 0 {
+        for k in 0..LEN {
+            ints[k] = MOST_NEGATIVE + k as i64;
+        }
+    }
     let mut acc = x[i];
     for _ in 0..N_STEPS {
         acc += GRAVITY * physics::DRAG;
@@ -409,7 +416,9 @@ fn module_constants(dev: &wp::Device) {
     let y = arr(&[3.0f64, 0.1], dev);
     let v = arr(&[Vec3::ZERO, Vec3::ONE], dev);
     let bits = arr(&[0u64, u64::MAX], dev);
-    wp::launch(k_consts, 2, (&x, &y, &v, &bits), dev).unwrap();
+    let ints = zeros::<i64, 1>(LEN, dev);
+    wp::launch(k_consts, 2, (&x, &y, &v, &bits, &ints), dev).unwrap();
+    assert_eq!(host(&ints), [i64::MIN, i64::MIN + 1]);
     let step = GRAVITY * physics::DRAG;
     // The same additions in the same order: exact on every backend.
     let want: Vec<f32> = [1.0f32, -2.0]

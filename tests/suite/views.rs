@@ -16,6 +16,7 @@ backend_tests!(
     gradients_through_views,
     indexed_views,
     indexed_gradients_and_faults,
+    row_index_is_taken_when_made,
 );
 
 #[wp::kernel]
@@ -282,4 +283,28 @@ fn indexed_gradients_and_faults(dev: &wp::Device) {
         .unwrap_err()
         .to_string();
     assert!(e.contains("`idx`"), "{e}");
+}
+
+/// A row keeps naming the row it was made at, whatever its index variable does later.
+#[wp::kernel]
+fn k_row_snapshot(a: Array<i32, 2>, out: Array<i32>) {
+    let mut k = 0;
+    let r = a.row(k);
+    let mut s = 0;
+    while k < 3 {
+        s += r[k];
+        k += 1;
+    }
+    out[0] = s;
+}
+
+fn row_index_is_taken_when_made(dev: &wp::Device) {
+    let a = wp::Array::from_slice(&[1, 2, 3, 10, 20, 30, 100, 200, 300], dev)
+        .unwrap()
+        .reshape::<2>([3, 3])
+        .unwrap();
+    let out = zeros::<i32, 1>(1, dev);
+    wp::launch(k_row_snapshot, 1, (&a, &out), dev).unwrap();
+    // Row 0: 1 + 2 + 3 (the diagonal would be 1 + 20 + 300).
+    assert_eq!(host(&out), [6]);
 }

@@ -139,11 +139,12 @@ pub fn loop_indexed_params(f: &Function, body: &Block, var: VarId) -> Vec<VarId>
     out
 }
 
-/// Why an adjoint of `f` cannot be generated because of an atomic without an adjoint
-/// (`atomic_cas`, `atomic_exch`, `atomic_and/or/xor`): its value is a float (the gradient it
-/// carries would be lost), or the old value it returns is used (the adjoint's replay does not
-/// redo atomics, so it would not have that value). Integer updates whose result is unused,
-/// the common case of flags and counters, are fine.
+/// Why an adjoint of `f` cannot be generated because of an atomic: one without an adjoint
+/// (`atomic_cas`, `atomic_exch`, `atomic_and/or/xor`) on float elements (the gradient it
+/// carries would be lost), or any atomic whose returned old value is used (the adjoint's
+/// replay does not redo atomics, so it would not have that value: `let slot =
+/// atomic_add(count, 0, 1); out[slot] = ..` would send every gradient to `out[0]`). Updates
+/// whose result is unused, the common case of accumulations, flags and counters, are fine.
 pub fn atomic_without_adjoint(f: &Function) -> Option<String> {
     let mut reads: Vec<VarId> = Vec::new();
     walk_stmts(&f.body, &mut |s| {
@@ -160,14 +161,13 @@ pub fn atomic_without_adjoint(f: &Function) -> Option<String> {
             ..
         } = &s.kind
         {
-            if builtin.grad != crate::builtins::Grad::AtomicNone {
+            if !builtin.is_atomic() {
                 return;
             }
-            let value_is_float = f
-                .ty(args[args.len() - 1])
-                .scalar()
-                .is_some_and(|s| s.is_float());
-            if value_is_float {
+            // The array's element type (a value's type may be one the macro cannot see).
+            let float_elements = matches!(f.ty(args[0]), crate::types::Ty::Array(e, _)
+                if e.scalar().is_some_and(|s| s.is_float()));
+            if builtin.grad == crate::builtins::Grad::AtomicNone && float_elements {
                 why = Some(format!(
                     "uses `{}` on floats, which has no adjoint (as in Warp)",
                     builtin.name

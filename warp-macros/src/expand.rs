@@ -684,7 +684,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             "custom gradients (`#[func(grad(..))]`) are not supported on generic funcs yet",
         ));
     }
-    errors.extend(generics::check_params_select(&item, &g));
+    // (No `check_params_select` here: callers name a func's instance, `f::<f32>(..)`.)
     let mut impls = TokenStream::new();
     let mut per_instance = Vec::new();
     for inst in generics::instances(&item, &g) {
@@ -709,10 +709,18 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         }
     }
     errors.extend(instance_errors(per_instance));
-    if !errors.is_empty() {
-        return failed(errors);
-    }
     let params: Vec<&syn::Ident> = g.params.iter().map(|(id, _)| id).collect();
+    if !errors.is_empty() {
+        // Keep the generic type, so that callers' `f::<f32>(..)` add no errors of their own.
+        let errs = errors_to_tokens(errors);
+        return quote! {
+            #errs
+            #[allow(non_camel_case_types)]
+            #vis struct #name<#(#params),*> {
+                _instance: ::core::marker::PhantomData<(#(#params,)*)>,
+            }
+        };
+    }
     let bound_check = generics::bound_check(&g);
     quote! {
         #(#doc_attrs)*

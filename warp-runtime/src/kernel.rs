@@ -171,15 +171,16 @@ impl CudaConst for bool {
 }
 
 macro_rules! int_consts {
-    ($($t:ident: $suffix:literal),*) => {$(
+    ($($t:ident),*) => {$(
         impl CudaConst for $t {
+            /// The bit pattern, so that `i64::MIN` is well-formed C++ too.
             fn cuda_literal(&self) -> String {
-                format!(concat!("(wp::", stringify!($t), ")({}", $suffix, ")"), self)
+                format!(concat!("(wp::", stringify!($t), ")0x{:x}ULL"), *self as u64)
             }
         }
     )*};
 }
-int_consts!(i8: "", i16: "", i32: "", u8: "u", u16: "u", u32: "u", i64: "LL", u64: "ULL");
+int_consts!(i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
 
 impl CudaConst for f32 {
     /// Exact: the bit pattern (NaN payloads and infinities included).

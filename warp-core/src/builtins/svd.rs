@@ -10,7 +10,7 @@
 //! # Algorithms and conventions
 //!
 //! * `eig3(a)` (symmetric `a`; only its lower triangle is read by the iteration): cyclic
-//!   Jacobi, a fixed number of sweeps (4 for f32, 8 for f64), each rotating the pairs
+//!   Jacobi, a fixed number of sweeps (5 for f32, where Warp has 4; 8 for f64), each rotating the pairs
 //!   (0,1), (1,2), (0,2) in turn by an *approximate* Givens angle (from the 2x2 block, with a
 //!   fixed π/4 rotation where the block's diagonal is too close for the approximation); the
 //!   rotations are accumulated as a quaternion, so `Q` is a rotation (`det Q = +1`) up to
@@ -74,7 +74,8 @@ pub trait DecompFloat:
     const TWO: Self;
     /// Warp's `_svd_config::SVD_EPSILON` and `QR_GIVENS_EPSILON`: 1e-6 (f32), 1e-12 (f64).
     const EPS: Self;
-    /// Jacobi sweeps: 4 (f32), 8 (f64), Warp's `JACOBI_ITERATIONS`.
+    /// Jacobi sweeps: 5 (f32; Warp's `JACOBI_ITERATIONS` is 4, which leaves about 1 random
+    /// matrix in 40 unconverged), 8 (f64, Warp's).
     const SWEEPS: usize;
     /// `3 + 2√2` (`4γ²` of McAdams et al.), from f64.
     const GAMMA: Self;

@@ -229,6 +229,19 @@ fn family_arg(args: &syn::PathArguments) -> Option<&'static str> {
 }
 
 impl VisitMut for Substitute {
+    /// `print!`/`println!` arguments are expressions too (`println!("{}", x as T)`): visited
+    /// when they parse as a comma-separated expression list, left alone otherwise.
+    fn visit_macro_mut(&mut self, mac: &mut syn::Macro) {
+        use syn::parse::Parser;
+        let parser = syn::punctuated::Punctuated::<syn::Expr, syn::Token![,]>::parse_terminated;
+        if let Ok(mut args) = parser.parse2(mac.tokens.clone()) {
+            for a in args.iter_mut() {
+                self.visit_expr_mut(a);
+            }
+            mac.tokens = quote::ToTokens::to_token_stream(&args);
+        }
+    }
+
     fn visit_path_mut(&mut self, path: &mut syn::Path) {
         // Children first: `Vec3<T>` becomes `Vec3<f64>`, then `DVec3`.
         syn::visit_mut::visit_path_mut(self, path);

@@ -263,5 +263,16 @@ mod tests {
                 "{name}: {k} draws here, not in warp-core's DRAWS"
             );
         }
+        // And no row there that is missing here: the tables have the same number of rows.
+        let block = core
+            .split("pub const DRAWS: &[(&str, u32)] = &[")
+            .nth(1)
+            .and_then(|rest| rest.split("];").next())
+            .expect("warp-core's DRAWS table");
+        assert_eq!(
+            block.matches("(\"").count(),
+            DRAWS.len(),
+            "rows in warp-core's DRAWS"
+        );
     }
 }

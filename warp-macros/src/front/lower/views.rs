@@ -73,6 +73,8 @@ impl Lowerer {
                 );
             }
             let i = self.index_value(arg)?;
+            // The index as it is now: `r` keeps naming this row if `i` changes later.
+            let i = self.def(Op::Copy(i), self.ty(i), span);
             let i = self.map_lead(&d, i, span);
             let mut prefix = d.prefix;
             prefix.push(i);
