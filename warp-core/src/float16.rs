@@ -128,6 +128,51 @@ impl FromF16 for f16 {
     }
 }
 
+/// `x as T` between any two numeric scalars of the kernel language, `f16` included, and from
+/// `bool` to the integers: what generated code calls where the macro cannot see the source
+/// type (a func's result), since `as` itself has no `f16`.
+pub trait AsScalar<T>: Copy {
+    /// `self as T` (Rust's meaning; through [`ToF16`]/[`FromF16`] where `f16` is involved).
+    fn as_scalar(self) -> T;
+}
+
+macro_rules! as_scalar {
+    (@row $f:ty; [$($t:ty),*]) => {$(
+        impl AsScalar<$t> for $f {
+            #[inline(always)]
+            fn as_scalar(self) -> $t {
+                self as $t
+            }
+        }
+    )*};
+    ($to:tt <- $($f:ty),*) => {$(
+        as_scalar!(@row $f; $to);
+        impl AsScalar<f16> for $f {
+            #[inline(always)]
+            fn as_scalar(self) -> f16 {
+                self.to_f16()
+            }
+        }
+        impl AsScalar<$f> for f16 {
+            #[inline(always)]
+            fn as_scalar(self) -> $f {
+                <$f as FromF16>::from_f16(self)
+            }
+        }
+    )*};
+}
+as_scalar!(
+    [i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64]
+    <- i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64
+);
+as_scalar!(@row bool; [i8, i16, i32, i64, isize, u8, u16, u32, u64, usize]);
+impl AsScalar<f16> for f16 {
+    #[inline(always)]
+    fn as_scalar(self) -> f16 {
+        self
+    }
+}
+
 impl crate::ops::FromLiteral for f16 {
     #[inline(always)]
     fn from_f64(v: f64) -> Self {
@@ -329,6 +374,11 @@ mod tests {
         assert_eq!(i64::from_f16(f16::NAN), 0);
         assert_eq!(f64::from_f16(f16::MIN_POSITIVE_SUBNORMAL), 2f64.powi(-24));
         assert_eq!(<f16 as crate::ops::FromLiteral>::from_f64(0.1).to_bits(), 0x2E66);
+        assert_eq!(AsScalar::<i32>::as_scalar(f16::from_f32(-7.5)), -7);
+        assert_eq!(AsScalar::<f16>::as_scalar(2049i32).to_f32(), 2048.0);
+        assert_eq!(AsScalar::<u8>::as_scalar(300i32), 44);
+        assert_eq!(AsScalar::<i64>::as_scalar(true), 1);
+        assert_eq!(AsScalar::<f64>::as_scalar(0.1f32), 0.1f32 as f64);
     }
 
     #[test]

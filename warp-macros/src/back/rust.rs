@@ -283,6 +283,9 @@ impl<'a> RustEmitter<'a> {
                     quote_spanned!(sp=> __wp::ops::ToF16::to_f16(#x))
                 } else if *from == Ty::Scalar(Scalar::F16) {
                     quote_spanned!(sp=> <#to as __wp::ops::FromF16>::from_f16(#x))
+                } else if from.is_deferred() {
+                    // A func's result may be an f16.
+                    quote_spanned!(sp=> __wp::ops::AsScalar::<#to>::as_scalar(#x))
                 } else {
                     quote_spanned!(sp=> (#x as #to))
                 }
