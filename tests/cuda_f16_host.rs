@@ -10,8 +10,8 @@
 //! midpoint, both signs, plus 200,000 pseudo-random f32 bit patterns; f64 -> f16 rounded once
 //! (the same points in f64, and points just off the ties that rounding through f32 would
 //! move onto them); `+ - * / %` and comparisons on 120,000 pairs; casts to and from integers;
-//! the scalar builtins; the adjoints of the operators, of several builtins and of casts; the
-//! host atomics. On a GPU the device conversions are PTX `cvt`, which the suite's CUDA
+//! the scalar builtins; the adjoints of the operators, of the scalar builtins and of casts
+//! (each step an f16 operation on both sides); the host atomics. On a GPU the device conversions are PTX `cvt`, which the suite's CUDA
 //! instances check (`tests/suite/f16.rs`). Skipped, saying so, without g++.
 
 use std::fmt::Write as _;
@@ -83,6 +83,22 @@ int main(int argc, char** argv) {
       adj_cast(gc, f64_from_bits(0x3fb999999999999aull));
       adj_cast(gc, 1.0f);
       std::printf("%x %x %x %x\n", hb(ga), hb(gb), hb(gc), f32_to_bits(af));
+    } else if (!std::strcmp(op, "adj2")) {
+      // One fresh adjoint per call (its start value y), printed in order.
+#define ONE(CALL) { f16 g = y; CALL; std::printf("%x ", hb(g)); }
+#define TWO(CALL) { f16 g = y, h = z; CALL; std::printf("%x %x ", hb(g), hb(h)); }
+      ONE(adj_exp(x, g, z)) ONE(adj_log(x, g, z)) ONE(adj_cos(x, g, z)) ONE(adj_tan(x, g, z))
+      TWO(adj_atan2(x, y, g, h, z)) ONE(adj_asin(x, g, z)) ONE(adj_acos(x, g, z))
+      ONE(adj_atan(x, g, z)) ONE(adj_sinh(x, g, z)) ONE(adj_cosh(x, g, z)) ONE(adj_exp2(x, g, z))
+      ONE(adj_log10(x, g, z)) ONE(adj_cbrt(x, g, z)) ONE(adj_erf(x, g, z)) ONE(adj_erfc(x, g, z))
+      ONE(adj_erfinv(x, g, z)) ONE(adj_erfcinv(x, g, z)) ONE(adj_frac(x, g, z))
+      ONE(adj_degrees(x, g, z)) ONE(adj_radians(x, g, z)) ONE(adj_neg(x, g, z))
+      TWO(adj_max(x, y, g, h, z)) TWO(adj_add(x, y, g, h, z)) TWO(adj_sub(x, y, g, h, z))
+      ONE(adj_atomic_extreme(x, z, g, y))
+      { f16 g = y, h = z, k = x; adj_smoothstep(y, z, x, g, h, k, y);
+        std::printf("%x %x %x\n", hb(g), hb(h), hb(k)); }
+#undef ONE
+#undef TWO
     } else if (!std::strcmp(op, "atomic")) {
       f16 cell[2] = {x, y};
       const f16 o1 = detail::atomic_add_p(&cell[1], z);
@@ -283,6 +299,55 @@ fn build() -> Cases {
         );
         c.add("adj", bits(x), bits(y), bits(z), want);
 
+        let mut w: Vec<String> = Vec::new();
+        let mut one = |f: &dyn Fn(&mut f16)| {
+            let mut g = y;
+            f(&mut g);
+            w.push(format!("{:x}", g.to_bits()));
+        };
+        one(&|g| adj::adj_exp(x, g, z));
+        one(&|g| adj::adj_log(x, g, z));
+        one(&|g| adj::adj_cos(x, g, z));
+        one(&|g| adj::adj_tan(x, g, z));
+        let (mut g, mut k) = (y, z);
+        adj::adj_atan2(x, y, &mut g, &mut k, z);
+        w.push(format!("{:x} {:x}", g.to_bits(), k.to_bits()));
+        let mut one = |f: &dyn Fn(&mut f16)| {
+            let mut g = y;
+            f(&mut g);
+            w.push(format!("{:x}", g.to_bits()));
+        };
+        one(&|g| adj::adj_asin(x, g, z));
+        one(&|g| adj::adj_acos(x, g, z));
+        one(&|g| adj::adj_atan(x, g, z));
+        one(&|g| adj::adj_sinh(x, g, z));
+        one(&|g| adj::adj_cosh(x, g, z));
+        one(&|g| adj::adj_exp2(x, g, z));
+        one(&|g| adj::adj_log10(x, g, z));
+        one(&|g| adj::adj_cbrt(x, g, z));
+        one(&|g| adj::adj_erf(x, g, z));
+        one(&|g| adj::adj_erfc(x, g, z));
+        one(&|g| adj::adj_erfinv(x, g, z));
+        one(&|g| adj::adj_erfcinv(x, g, z));
+        one(&|g| adj::adj_frac(x, g, z));
+        one(&|g| adj::adj_degrees(x, g, z));
+        one(&|g| adj::adj_radians(x, g, z));
+        one(&|g| adj::adj_neg(x, g, z));
+        type Bin = fn(f16, f16, &mut f16, &mut f16, f16);
+        let bins: [Bin; 3] = [adj::adj_max, adj::adj_add, adj::adj_sub];
+        for f in bins {
+            let (mut g, mut k) = (y, z);
+            f(x, y, &mut g, &mut k, z);
+            w.push(format!("{:x} {:x}", g.to_bits(), k.to_bits()));
+        }
+        let mut g = y;
+        warp_lang::__private::adj_atomic_extreme(x, z, &mut g, y);
+        w.push(format!("{:x}", g.to_bits()));
+        let (mut g, mut k, mut l) = (y, z, x);
+        adj::adj_smoothstep(y, z, x, &mut g, &mut k, &mut l, y);
+        w.push(format!("{:x} {:x} {:x}", g.to_bits(), k.to_bits(), l.to_bits()));
+        c.add("adj2", bits(x), bits(y), bits(z), w.join(" "));
+
         let mut cell = [x, y];
         let p = cell.as_mut_ptr();
         // SAFETY: a live local array, touched by this thread only.
@@ -334,7 +399,7 @@ fn same_result(case: &str, want: &str, got: &str) -> bool {
         return true;
     }
     let op = case.split(' ').next().unwrap_or("");
-    if !matches!(op, "arith" | "math" | "adj" | "atomic") {
+    if !matches!(op, "arith" | "math" | "adj" | "adj2" | "atomic") {
         return false;
     }
     let (w, g): (Vec<&str>, Vec<&str>) = (want.split(' ').collect(), got.split(' ').collect());
