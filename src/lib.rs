@@ -105,8 +105,8 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, ops, zero_like, AdStack,
-        ArrayView, DTransform, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
+        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, ops, zero_like,
+        AdStack, ArrayView, DTransform, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
         Transform,
     };
     pub use warp_runtime::{

@@ -259,7 +259,11 @@ fn half_precision(a: Array<f32>, d: Array<f32>, out: Array<f32, 2>) {
     out[(i, 9)] = (-x + f16::MAX * 0.5 + y) as f32;
     let big = (i as i32 * 9000) as f16;
     out[(i, 10)] = big as f32;
-    out[(i, 11)] = if x < y { floor(x * 3.0) as f32 } else { lerp(x, y, 0.25) as f32 };
+    out[(i, 11)] = if x < y {
+        floor(x * 3.0) as f32
+    } else {
+        lerp(x, y, 0.25) as f32
+    };
 }
 
 /// A host argument: how to declare it in C++, and how to print it back.
@@ -601,7 +605,16 @@ fn scalar_math_builtins_match_the_cpu_backend() {
 fn f16_matches_the_cpu_backend() {
     let dev = wp::cpu();
     let mut xs: Vec<f32> = (0..40).map(|k| k as f32 * 0.37 - 7.0).collect();
-    xs.extend([0.5, -2.5, 65504.0, 1e-7, -0.0, f32::INFINITY, f32::NAN, 70000.0]);
+    xs.extend([
+        0.5,
+        -2.5,
+        65504.0,
+        1e-7,
+        -0.0,
+        f32::INFINITY,
+        f32::NAN,
+        70000.0,
+    ]);
     let ds: Vec<f32> = xs.iter().rev().map(|x| x * 0.7 + 0.3).collect();
     let n = xs.len();
     let a = wp::Array::from_slice(&xs, &dev).unwrap();
@@ -616,7 +629,10 @@ fn f16_matches_the_cpu_backend() {
         for (k, (h, c)) in host.iter().zip(&cpu).enumerate() {
             // NaN payloads are each side's arithmetic's; every other result bit for bit.
             let nan = |s: &str| f32::from_bits(u32::from_str_radix(s, 16).unwrap()).is_nan();
-            assert!(h == c || (nan(h) && nan(c)), "element {k}: C++ {h}, CPU {c}");
+            assert!(
+                h == c || (nan(h) && nan(c)),
+                "element {k}: C++ {h}, CPU {c}"
+            );
         }
     }
 }

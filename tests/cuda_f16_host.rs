@@ -119,7 +119,8 @@ struct Cases {
 impl Cases {
     fn add(&mut self, op: &str, a: u64, b: u64, c: u64, want: String) {
         writeln!(self.text, "{op} {a:x} {b:x} {c:x}").unwrap();
-        self.wants.push((format!("{op} {a:#x} {b:#x} {c:#x}"), want));
+        self.wants
+            .push((format!("{op} {a:#x} {b:#x} {c:#x}"), want));
     }
 }
 
@@ -157,10 +158,28 @@ fn build() -> Cases {
     for h in 0..=0xFFFFu16 {
         let x = f16::from_bits(h);
         c.add("h2f", h as u64, 0, 0, format!("{:x}", x.to_f32().to_bits()));
-        c.add("h2d", h as u64, 0, 0, format!("{:x}", f64::from_f16(x).to_bits()));
-        c.add("h2i", h as u64, 0, 0, format!("{:x}", i32::from_f16(x) as u32));
+        c.add(
+            "h2d",
+            h as u64,
+            0,
+            0,
+            format!("{:x}", f64::from_f16(x).to_bits()),
+        );
+        c.add(
+            "h2i",
+            h as u64,
+            0,
+            0,
+            format!("{:x}", i32::from_f16(x) as u32),
+        );
         c.add("h2u8", h as u64, 0, 0, format!("{:x}", u8::from_f16(x)));
-        c.add("h2i64", h as u64, 0, 0, format!("{:x}", i64::from_f16(x) as u64));
+        c.add(
+            "h2i64",
+            h as u64,
+            0,
+            0,
+            format!("{:x}", i64::from_f16(x) as u64),
+        );
     }
     // f32 -> f16 and f64 -> f16: every value, midpoint (tie) and the neighbours of the tie.
     let mut f32s: Vec<f32> = Vec::new();
@@ -198,19 +217,44 @@ fn build() -> Cases {
         f32s.push(f32::from_bits(rng.next() as u32));
         f64s.push(f64::from_bits(rng.next()));
     }
-    f32s.extend([f32::INFINITY, f32::NEG_INFINITY, f32::NAN, -f32::NAN, 1e-40, -1e-45]);
+    f32s.extend([
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        -f32::NAN,
+        1e-40,
+        -1e-45,
+    ]);
     f64s.extend([f64::INFINITY, f64::NAN, 1e-320, -1e300, 65519.999, 65520.0]);
     for &x in &f32s {
-        c.add("f2h", x.to_bits() as u64, 0, 0, format!("{:x}", f16::from_f32(x).to_bits()));
+        c.add(
+            "f2h",
+            x.to_bits() as u64,
+            0,
+            0,
+            format!("{:x}", f16::from_f32(x).to_bits()),
+        );
     }
     for &x in &f64s {
-        c.add("d2h", x.to_bits(), 0, 0, format!("{:x}", x.to_f16().to_bits()));
+        c.add(
+            "d2h",
+            x.to_bits(),
+            0,
+            0,
+            format!("{:x}", x.to_f16().to_bits()),
+        );
     }
     // Integers -> f16.
     for k in 0..20_000u64 {
         let r = rng.next();
         let i = (r as i32) >> (k % 32);
-        c.add("i2h", i as u32 as u64, 0, 0, format!("{:x}", i.to_f16().to_bits()));
+        c.add(
+            "i2h",
+            i as u32 as u64,
+            0,
+            0,
+            format!("{:x}", i.to_f16().to_bits()),
+        );
         let u = r >> (k % 64);
         c.add("u2h", u, 0, 0, format!("{:x}", u.to_f16().to_bits()));
     }
@@ -345,7 +389,12 @@ fn build() -> Cases {
         w.push(format!("{:x}", g.to_bits()));
         let (mut g, mut k, mut l) = (y, z, x);
         adj::adj_smoothstep(y, z, x, &mut g, &mut k, &mut l, y);
-        w.push(format!("{:x} {:x} {:x}", g.to_bits(), k.to_bits(), l.to_bits()));
+        w.push(format!(
+            "{:x} {:x} {:x}",
+            g.to_bits(),
+            k.to_bits(),
+            l.to_bits()
+        ));
         c.add("adj2", bits(x), bits(y), bits(z), w.join(" "));
 
         let mut cell = [x, y];
@@ -369,7 +418,11 @@ fn build() -> Cases {
         c.add("atomic", bits(x), bits(y), bits(z), want);
     }
     // A few hand-picked cases the random ones may miss.
-    for (x, y) in [(h(65504.0), h(2.0)), (f16::from_bits(1), h(0.5)), (h(-0.0), h(0.0))] {
+    for (x, y) in [
+        (h(65504.0), h(2.0)),
+        (f16::from_bits(1), h(0.5)),
+        (h(-0.0), h(0.0)),
+    ] {
         let want = format!(
             "{:x} {:x} {:x} {:x} {:x} {:x} {:x}",
             bits(x + y),

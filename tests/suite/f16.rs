@@ -46,7 +46,11 @@ fn same(got: f16, want: f16, what: &str) {
 /// How many f16 values lie between `a` and `b` (0 for the same value; NaN to NaN is 0).
 fn ulps(a: f16, b: f16) -> u32 {
     if a.is_nan() || b.is_nan() {
-        return if a.is_nan() && b.is_nan() { 0 } else { u32::MAX };
+        return if a.is_nan() && b.is_nan() {
+            0
+        } else {
+            u32::MAX
+        };
     }
     // Map the sign-magnitude pattern to a monotonic integer.
     let key = |x: f16| {
@@ -63,7 +67,10 @@ fn ulps(a: f16, b: f16) -> u32 {
 /// A sample of f16 bit patterns: every 97th pattern (all exponents, both signs, subnormals,
 /// infinities and NaNs) and the special values.
 fn sample() -> Vec<f16> {
-    let mut v: Vec<f16> = (0u32..=0xFFFF).step_by(97).map(|b| f16::from_bits(b as u16)).collect();
+    let mut v: Vec<f16> = (0u32..=0xFFFF)
+        .step_by(97)
+        .map(|b| f16::from_bits(b as u16))
+        .collect();
     v.extend([
         f16::ZERO,
         f16::NEG_ZERO,
@@ -247,15 +254,25 @@ fn casts_have_rust_semantics(dev: &wp::Device) {
     let n = all.len();
     let a = arr(&all, dev);
     let (f, d) = (zeros::<f32, 1>(n, dev), zeros::<f64, 1>(n, dev));
-    let (i, u, l) = (zeros::<i32, 1>(n, dev), zeros::<u8, 1>(n, dev), zeros::<i64, 1>(n, dev));
+    let (i, u, l) = (
+        zeros::<i32, 1>(n, dev),
+        zeros::<u8, 1>(n, dev),
+        zeros::<i64, 1>(n, dev),
+    );
     wp::launch(k_from_f16, n, (&a, &f, &d, &i, &u, &l), dev).unwrap();
     let (f, d, i, u, l) = (host(&f), host(&d), host(&i), host(&u), host(&l));
     for k in 0..n {
         let x = all[k];
         let (wf, wd) = (x.to_f32(), x.to_f64());
         assert!(f[k] == wf || (wf.is_nan() && f[k].is_nan()), "{x} as f32");
-        assert!(f[k].to_bits() == wf.to_bits() || wf.is_nan(), "{x} as f32 (sign of zero)");
-        assert!(d[k].to_bits() == wd.to_bits() || (wd.is_nan() && d[k].is_nan()), "{x} as f64");
+        assert!(
+            f[k].to_bits() == wf.to_bits() || wf.is_nan(),
+            "{x} as f32 (sign of zero)"
+        );
+        assert!(
+            d[k].to_bits() == wd.to_bits() || (wd.is_nan() && d[k].is_nan()),
+            "{x} as f64"
+        );
         assert_eq!(i[k], wf as i32, "{x} as i32");
         assert_eq!(u[k], wf as u8, "{x} as u8");
         assert_eq!(l[k], wf as i64, "{x} as i64");
@@ -267,7 +284,11 @@ fn casts_have_rust_semantics(dev: &wp::Device) {
         let v = f16::from_bits(b).to_f32();
         let next = f16::from_bits(b + 1).to_f32();
         let mid = (v + next) / 2.0; // exact in f32
-        fs.extend([mid, f32::from_bits(mid.to_bits() - 1), f32::from_bits(mid.to_bits() + 1)]);
+        fs.extend([
+            mid,
+            f32::from_bits(mid.to_bits() - 1),
+            f32::from_bits(mid.to_bits() + 1),
+        ]);
         fs.extend([-mid, v]);
     }
     let mut s = 0x9E37_79B9u32;
@@ -277,7 +298,16 @@ fn casts_have_rust_semantics(dev: &wp::Device) {
         s ^= s << 5;
         fs.push(f32::from_bits(s));
     }
-    fs.extend([65519.0, 65520.0, 65536.0, 1e30, -1e30, f32::INFINITY, f32::NAN, 1e-10]);
+    fs.extend([
+        65519.0,
+        65520.0,
+        65536.0,
+        1e30,
+        -1e30,
+        f32::INFINITY,
+        f32::NAN,
+        1e-10,
+    ]);
     let n = fs.len();
     // f64 values: the f32 ones (exact in f64: half's single rounding is the reference) and the
     // points just off a tie that rounding through f32 would move onto it.
@@ -311,12 +341,25 @@ fn casts_have_rust_semantics(dev: &wp::Device) {
     for k in 0..n {
         same(got[0][k], h(fs[k]), &format!("{:e} as f16", fs[k]));
         if k < off_tie.len() {
-            assert_eq!(got[1][k].to_bits(), off_tie[k].1, "{:e} (f64) as f16", ds[k]);
+            assert_eq!(
+                got[1][k].to_bits(),
+                off_tie[k].1,
+                "{:e} (f64) as f16",
+                ds[k]
+            );
         } else {
             same(got[1][k], h(fs[k]), &format!("{:e} (f64) as f16", ds[k]));
         }
-        same(got[2][k], h(ns[k] as f32), &format!("{} (i32) as f16", ns[k]));
-        same(got[3][k], h(us[k] as f32), &format!("{} (u64) as f16", us[k]));
+        same(
+            got[2][k],
+            h(ns[k] as f32),
+            &format!("{} (i32) as f16", ns[k]),
+        );
+        same(
+            got[3][k],
+            h(us[k] as f32),
+            &format!("{} (u64) as f16", us[k]),
+        );
     }
 }
 
@@ -355,14 +398,9 @@ fn literals_round_once(dev: &wp::Device) {
         0x0001, // nearest the smallest subnormal 2^-24
         0x3C00, // 1 + 2^-11 is a tie: to even, 1
         0x3C01, // just above the tie: up
-        0x7BFF,
-        0x1400, // 2^-10
-        0x7C00,
-        0x4248, // pi
-        0x4248,
-        0x3E00,
-        0x4200,
-        0x4080, // 2.25
+        0x7BFF, 0x1400, // 2^-10
+        0x7C00, 0x4248, // pi
+        0x4248, 0x3E00, 0x4200, 0x4080, // 2.25
     ];
     assert_eq!(got, want);
 }
@@ -383,9 +421,9 @@ fn overflow_subnormals_nan(dev: &wp::Device) {
         (f16::MAX, h(-2.0), f16::NEG_INFINITY),
         (h(300.0), h(300.0), f16::INFINITY),
         (h(255.0), h(256.0), h(65280.0)),
-        (tiny, h(0.5), f16::ZERO),                     // the tie 2^-25 goes to even: 0
-        (tiny, h(1.5), f16::from_bits(2)),             // the tie 1.5 units goes to 2
-        (tiny, h(-0.25), f16::NEG_ZERO),               // underflow keeps the sign
+        (tiny, h(0.5), f16::ZERO),         // the tie 2^-25 goes to even: 0
+        (tiny, h(1.5), f16::from_bits(2)), // the tie 1.5 units goes to 2
+        (tiny, h(-0.25), f16::NEG_ZERO),   // underflow keeps the sign
         (f16::MIN_POSITIVE, h(0.5), f16::from_bits(0x200)), // normal to subnormal, exact
         (f16::NAN, h(1.0), f16::NAN),
         (f16::INFINITY, f16::ZERO, f16::NAN),
@@ -393,7 +431,13 @@ fn overflow_subnormals_nan(dev: &wp::Device) {
     ];
     let (a, b): (Vec<f16>, Vec<f16>) = cases.iter().map(|c| (c.0, c.1)).unzip();
     let out = zeros::<f16, 1>(cases.len(), dev);
-    wp::launch(k_edges, cases.len(), (&arr(&a, dev), &arr(&b, dev), &out), dev).unwrap();
+    wp::launch(
+        k_edges,
+        cases.len(),
+        (&arr(&a, dev), &arr(&b, dev), &out),
+        dev,
+    )
+    .unwrap();
     for (c, g) in cases.iter().zip(host(&out)) {
         same(g, c.2, &format!("{} * {}", c.0, c.1));
         same(g, c.0 * c.1, "half's product");
@@ -442,10 +486,14 @@ const MATH_EXACT: [bool; 27] = [
 ];
 
 /// The scalar math builtins on f16: the f32 builtin of the widened arguments rounded once
-/// (`half::f16::from_f32(f32 op)`), bit for bit on the CPU.
+/// (`half::f16::from_f32(f32 op)`), bit for bit on the CPU. (`max(..).min(..)`, not `clamp`,
+/// in the reference: the builtin's NaN rule gives the lower bound for a NaN input.)
+#[allow(clippy::manual_clamp)]
 fn builtins_round_the_f32_result_once(dev: &wp::Device) {
     let xs = sample();
-    let ys: Vec<f16> = (0..xs.len()).map(|k| xs[(k * 53 + 11) % xs.len()]).collect();
+    let ys: Vec<f16> = (0..xs.len())
+        .map(|k| xs[(k * 53 + 11) % xs.len()])
+        .collect();
     let n = xs.len();
     let out = zeros::<f16, 2>((n, 27), dev);
     wp::launch(k_math, n, (&arr(&xs, dev), &arr(&ys, dev), &out), dev).unwrap();
@@ -492,7 +540,10 @@ fn builtins_round_the_f32_result_once(dev: &wp::Device) {
             if dev.is_cpu() || MATH_EXACT[c] {
                 same(g, w, &format!("builtin {c} of {a:e}, {b:e}"));
             } else {
-                assert!(ulps(g, w) <= 1, "builtin {c} of {a:e}, {b:e}: got {g}, want {w}");
+                assert!(
+                    ulps(g, w) <= 1,
+                    "builtin {c} of {a:e}, {b:e}: got {g}, want {w}"
+                );
             }
         }
     }
@@ -668,7 +719,11 @@ fn gradcheck_f16(dev: &wp::Device) {
             }
         }
     }
-    assert_eq!(bad, xs.len(), "a doubled gradient must fail on the diagonal");
+    assert_eq!(
+        bad,
+        xs.len(),
+        "a doubled gradient must fail on the diagonal"
+    );
 }
 
 #[wp::kernel]

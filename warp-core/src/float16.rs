@@ -250,9 +250,9 @@ macro_rules! via_f32 {
 
 impl Float for f16 {
     via_f32!(
-        w_floor, w_ceil, w_sqrt, w_exp, w_log, w_sin, w_cos, w_tan, w_asin, w_acos, w_atan,
-        w_sinh, w_cosh, w_tanh, w_exp2, w_log2, w_log10, w_cbrt, w_erf, w_erfc, w_erfinv,
-        w_erfcinv, w_round, w_rint, w_trunc, w_degrees, w_radians
+        w_floor, w_ceil, w_sqrt, w_exp, w_log, w_sin, w_cos, w_tan, w_asin, w_acos, w_atan, w_sinh,
+        w_cosh, w_tanh, w_exp2, w_log2, w_log10, w_cbrt, w_erf, w_erfc, w_erfinv, w_erfcinv,
+        w_round, w_rint, w_trunc, w_degrees, w_radians
     );
     #[inline(always)]
     fn w_atan2(self, x: Self) -> Self {
@@ -326,7 +326,11 @@ mod tests {
             assert_eq!(f16_from_f64(mid).to_bits(), even, "tie above {b:#x}");
             let below = f64::from_bits(mid.to_bits() - 1);
             let above = f64::from_bits(mid.to_bits() + 1);
-            assert_eq!(f16_from_f64(below).to_bits(), b, "below the tie above {b:#x}");
+            assert_eq!(
+                f16_from_f64(below).to_bits(),
+                b,
+                "below the tie above {b:#x}"
+            );
             assert_eq!(f16_from_f64(above).to_bits(), (b + 1).min(0x7C00));
         }
         // Where `half::f16::from_f64` rounds twice: 1 + 2^-11 + 2^-40 is above the tie, but
@@ -356,7 +360,10 @@ mod tests {
             let x = f32::from_bits(s);
             let a = f16_from_f64(x as f64);
             let b = f16::from_f32(x);
-            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()), "{x:e}");
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "{x:e}"
+            );
         }
     }
 
@@ -373,7 +380,10 @@ mod tests {
         assert_eq!(i16::from_f16(f16::from_f32(-3.75)), -3);
         assert_eq!(i64::from_f16(f16::NAN), 0);
         assert_eq!(f64::from_f16(f16::MIN_POSITIVE_SUBNORMAL), 2f64.powi(-24));
-        assert_eq!(<f16 as crate::ops::FromLiteral>::from_f64(0.1).to_bits(), 0x2E66);
+        assert_eq!(
+            <f16 as crate::ops::FromLiteral>::from_f64(0.1).to_bits(),
+            0x2E66
+        );
         assert_eq!(AsScalar::<i32>::as_scalar(f16::from_f32(-7.5)), -7);
         assert_eq!(AsScalar::<f16>::as_scalar(2049i32).to_f32(), 2048.0);
         assert_eq!(AsScalar::<u8>::as_scalar(300i32), 44);
@@ -390,7 +400,10 @@ mod tests {
             let xf = x.to_f32();
             let same = |a: f16, e: f32| {
                 let e = h(e);
-                assert!(a.to_bits() == e.to_bits() || (a.is_nan() && e.is_nan()), "{b:#x}");
+                assert!(
+                    a.to_bits() == e.to_bits() || (a.is_nan() && e.is_nan()),
+                    "{b:#x}"
+                );
             };
             same(m::sqrt(x), xf.sqrt());
             same(m::exp(x), xf.exp());

@@ -112,8 +112,14 @@ mod tests {
 
     #[test]
     fn constants_are_the_f64_constants_rounded_once() {
-        assert_eq!(<f16 as AdjFloat>::LN_2, f16_from_f64(core::f64::consts::LN_2));
-        assert_eq!(<f16 as AdjFloat>::LN_10, f16_from_f64(core::f64::consts::LN_10));
+        assert_eq!(
+            <f16 as AdjFloat>::LN_2,
+            f16_from_f64(core::f64::consts::LN_2)
+        );
+        assert_eq!(
+            <f16 as AdjFloat>::LN_10,
+            f16_from_f64(core::f64::consts::LN_10)
+        );
         assert_eq!(
             <f16 as AdjFloat>::FRAC_2_SQRT_PI,
             f16_from_f64(core::f64::consts::FRAC_2_SQRT_PI)
@@ -137,7 +143,10 @@ mod tests {
         let (mut aa, mut ab) = (h(1.0), f16::ZERO);
         adj_add(a, b, &mut aa, &mut ab, g);
         adj_mul(a, b, &mut aa, &mut ab, g);
-        assert_eq!(aa, h(h(1.0 + g.to_f32()).to_f32() + h(g.to_f32() * 7.0).to_f32()));
+        assert_eq!(
+            aa,
+            h(h(1.0 + g.to_f32()).to_f32() + h(g.to_f32() * 7.0).to_f32())
+        );
         let mut ax = f16::ZERO;
         adj_sqrt(h(4.0), &mut ax, h(1.0));
         assert_eq!(ax, h(0.25));
