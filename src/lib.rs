@@ -62,6 +62,9 @@
 //! and in the docs of [`kernel`].
 
 pub use glam;
+/// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
+/// (see `warp_core::float16` for its arithmetic, casts and builtins).
+pub use warp_core::f16;
 pub use warp_core::{DTransform, Fault, FaultKind, Float, Transform};
 #[cfg(feature = "cuda")]
 pub use warp_cuda::clear_kernel_cache;
@@ -88,7 +91,7 @@ pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, St
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{func, kernel, Array, DTransform, Float, Struct, Transform};
+    pub use crate::{f16, func, kernel, Array, DTransform, Float, Struct, Transform};
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -102,9 +105,9 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, builtins, first_error, max_depth, ops, zero_like, AdStack,
-        ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView, Grid, KResult,
-        RangeProg, Transform,
+        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, ops, zero_like,
+        AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView, Grid,
+        KResult, RangeProg, Transform,
     };
     pub use warp_runtime::{
         ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,

@@ -251,6 +251,42 @@ fn consts(x: Array<f32>, v: Array<Vec3>, n: Array<i32>) {
     n[i] = N_STEPS * i as i32;
 }
 
+#[wp::func]
+fn f16_poly(x: f16, k: i32) -> f16 {
+    x * x * 0.5 - (k as f16) + 1.0
+}
+
+/// f16 (converted from and to the f32 arrays): operators, compound assignment, literals
+/// (rounded once, ties to even), casts from f32/f64/integers and to f32/i32, a func's f16
+/// parameters and result (cast where the macro cannot see its type), builtins.
+#[wp::kernel]
+fn half_precision(a: Array<f32>, d: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let x = a[i] as f16;
+    let y = (d[i] as f64) as f16;
+    let mut acc = x;
+    acc += 0.1;
+    acc *= y;
+    acc -= 1.00048828125;
+    out[(i, 0)] = (x + y) as f32;
+    out[(i, 1)] = (x * y - 3.0) as f32;
+    out[(i, 2)] = (x / y) as f32;
+    out[(i, 3)] = (x % y) as f32;
+    out[(i, 4)] = acc as f32;
+    out[(i, 5)] = sqrt(abs(x)) as f32;
+    out[(i, 6)] = max(x, y).min(2.5) as f32;
+    out[(i, 7)] = f16_poly(x, i as i32) as f32;
+    out[(i, 8)] = ((x * 1000.0) as i32) as f32;
+    out[(i, 9)] = (-x + f16::MAX * 0.5 + y) as f32;
+    let big = (i as i32 * 9000) as f16;
+    out[(i, 10)] = big as f32;
+    out[(i, 11)] = if x < y {
+        floor(x * 3.0) as f32
+    } else {
+        lerp(x, y, 0.25) as f32
+    };
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -583,6 +619,42 @@ fn scalar_math_builtins_match_the_cpu_backend() {
             host,
             cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out), Arg::I32s(&flags)])
         );
+    }
+}
+
+#[test]
+fn f16_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..40).map(|k| k as f32 * 0.37 - 7.0).collect();
+    xs.extend([
+        0.5,
+        -2.5,
+        65504.0,
+        1e-7,
+        -0.0,
+        f32::INFINITY,
+        f32::NAN,
+        70000.0,
+    ]);
+    let ds: Vec<f32> = xs.iter().rev().map(|x| x * 0.7 + 0.3).collect();
+    let n = xs.len();
+    let a = wp::Array::from_slice(&xs, &dev).unwrap();
+    let d = wp::Array::from_slice(&ds, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 12), &dev).unwrap();
+    let args = [Arg::F32s(&a), Arg::F32s(&d), Arg::F32Grid(&out)];
+    let host = run_on_host::<half_precision>(&[n], &args);
+    wp::launch(half_precision, n, (&a, &d, &out), &dev).unwrap();
+    if let Some(host) = host {
+        let cpu = cpu_results(&args);
+        assert_eq!(host.len(), cpu.len());
+        for (k, (h, c)) in host.iter().zip(&cpu).enumerate() {
+            // NaN payloads are each side's arithmetic's; every other result bit for bit.
+            let nan = |s: &str| f32::from_bits(u32::from_str_radix(s, 16).unwrap()).is_nan();
+            assert!(
+                h == c || (nan(h) && nan(c)),
+                "element {k}: C++ {h}, CPU {c}"
+            );
+        }
     }
 }
 

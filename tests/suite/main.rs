@@ -71,6 +71,7 @@ mod builtins;
 mod control;
 mod decomp;
 mod errors;
+mod f16;
 mod funcs;
 mod generics;
 mod grad;

@@ -26,7 +26,7 @@ macro_rules! extreme_float {
         }
     )*};
 }
-extreme_float!(f32, f64);
+extreme_float!(f32, f64, half::f16);
 
 macro_rules! extreme_vec {
     ($($t:ty => $n:expr),*) => {$(
@@ -115,6 +115,7 @@ macro_rules! grad_atomic {
 grad_atomic!(
     f32,
     f64,
+    half::f16,
     glam::Vec2,
     glam::Vec3,
     glam::Vec4,

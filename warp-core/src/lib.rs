@@ -9,6 +9,7 @@
 pub mod adjoint;
 pub mod builtins;
 pub mod fault;
+pub mod float16;
 pub mod grad;
 pub mod grid;
 pub mod index;
@@ -19,6 +20,7 @@ pub mod transform;
 pub mod view;
 
 pub use fault::{Fault, FaultKind, KResult};
+pub use float16::f16;
 pub use grad::{
     adj_atomic_extreme, first_error, zero_like, AdStack, AtomicExtreme, GradElement, GradView,
 };

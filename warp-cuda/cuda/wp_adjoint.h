@@ -118,6 +118,7 @@ namespace detail {
 template <typename F> WP_FN bool adj_isnan(F x) { return !(x == x); }
 WP_FN f32 adj_trunc(f32 x) { return ::truncf(x); }
 WP_FN f64 adj_trunc(f64 x) { return ::trunc(x); }
+WP_FN f16 adj_trunc(f16 x) { return f16_from_f32(::truncf(f16_to_f32(x))); }
 
 /// `min(a, b)` returned `a`: `a <= b`, or `b` alone is NaN, or both are NaN.
 template <typename F>
@@ -283,6 +284,7 @@ WP_ADJ_NOOP_IVEC(UVec4, u32)
   WP_FN void adj_neg(S, S& adj_a, S adj_ret) { adj_a -= adj_ret; }
 WP_ADJ_FSCALAR_OPS(f32)
 WP_ADJ_FSCALAR_OPS(f64)
+WP_ADJ_FSCALAR_OPS(f16)
 #undef WP_ADJ_FSCALAR_OPS
 
 // ----- float vectors: lane by lane, with a scalar on either side -----
@@ -454,6 +456,7 @@ WP_ADJ_NOOP_MINMAX(UVec4, const UVec4&)
                  detail::zip_vv(a, b, adj_a, adj_b, adj_ret, detail::l_max()))
 WP_ADJ_FMINMAX_S(f32)
 WP_ADJ_FMINMAX_S(f64)
+WP_ADJ_FMINMAX_S(f16)
 WP_ADJ_FMINMAX_V(Vec2)
 WP_ADJ_FMINMAX_V(Vec3)
 WP_ADJ_FMINMAX_V(Vec4)
@@ -485,6 +488,7 @@ WP_ADJ_NOOP_SIGNED(IVec4, const IVec4&)
   WP_FN void adj_ceil(S, S&, S) {}
 WP_ADJ_FSCALAR_SIGNED(f32)
 WP_ADJ_FSCALAR_SIGNED(f64)
+WP_ADJ_FSCALAR_SIGNED(f16)
 #undef WP_ADJ_FSCALAR_SIGNED
 #define WP_ADJ_FVEC_SIGNED(V)                                                              \
   WP_FN void adj_abs(const V& x, V& adj_x, const V& adj_ret) {                             \
@@ -532,6 +536,7 @@ WP_ADJ_FVEC_SIGNED(DVec4)
   }
 WP_ADJ_FSCALAR_FNS(f32)
 WP_ADJ_FSCALAR_FNS(f64)
+WP_ADJ_FSCALAR_FNS(f16)
 #undef WP_ADJ_FSCALAR_FNS
 
 // ----- more float scalar functions (warp-core/src/adjoint/builtins.rs, same order) -----
@@ -599,6 +604,10 @@ WP_ADJ_FSCALAR_MORE(f32, f32_from_bits(0x3f317218u), f32_from_bits(0x40135d8eu),
                     f32_from_bits(0x3f906ebbu), f32_from_bits(0x3f62dfc5u))
 WP_ADJ_FSCALAR_MORE(f64, f64_from_bits(0x3fe62e42fefa39efull), f64_from_bits(0x40026bb1bbb55516ull),
                     f64_from_bits(0x3ff20dd750429b6dull), f64_from_bits(0x3fec5bf891b4ef6bull))
+// f16: the f64 constants rounded once (warp-core/src/adjoint/float16.rs); every step of each
+// formula is an f16 operation, as on the CPU.
+WP_ADJ_FSCALAR_MORE(f16, f16_from_bits(0x398Cu), f16_from_bits(0x409Bu), f16_from_bits(0x3C83u),
+                    f16_from_bits(0x3B17u))
 #undef WP_ADJ_FSCALAR_MORE
 
 // step on integers: not differentiable.

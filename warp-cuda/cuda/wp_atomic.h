@@ -4,7 +4,8 @@
 //   atomic_exch, atomic_and / atomic_or / atomic_xor (integers), and
 //   atomic_cas (a, idx..., compare, value, ctx) -> old value (floats: bitwise compare)
 //
-// for arrays of i32, u32, i64, u64 (wrapping add/sub), f32, f64 (min/max with fmin/fmax
+// for arrays of i32, u32, i64, u64 (wrapping add/sub), f32, f64, f16 (add/sub/min/max only; f16:
+// a CAS loop on the containing 32-bit word) (min/max with fmin/fmax
 // semantics: a NaN operand loses) and float vectors (componentwise, x first, each component
 // atomic on its own; the vector as a whole is not updated atomically, as in Warp/CUDA).
 // The index is bounds-checked like `load`: out of bounds records OutOfBounds, touches no
@@ -82,6 +83,30 @@ WP_FN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { retu
 WP_FN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
 WP_FN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
 
+// ----- f16: a CAS loop on the aligned 32-bit word holding the element -----
+// (The other half of the word is written back unchanged; a concurrent change to it makes the
+// CAS fail and retry, so nothing is lost. The word never leaves the allocation's 256-byte
+// granularity.) Each new value is one f16 operation (through f32), as on the CPU.
+template <typename F>
+WP_FN f16 cas_loop_f16(f16* p, F f) {
+  const unsigned long long addr = (unsigned long long)p;
+  unsigned int* w = (unsigned int*)(addr & ~3ull);
+  const unsigned int shift = (addr & 2ull) != 0 ? 16u : 0u;  // little-endian
+  unsigned int old = *(volatile unsigned int*)w;
+  unsigned int assumed;
+  do {
+    assumed = old;
+    const u16 next = f(f16_from_bits((u16)(assumed >> shift))).bits;
+    const unsigned int word = (assumed & ~(0xFFFFu << shift)) | ((unsigned int)next << shift);
+    old = atomicCAS(w, assumed, word);
+  } while (old != assumed);
+  return f16_from_bits((u16)(old >> shift));
+}
+WP_FN f16 atomic_add_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return x + v; }); }
+WP_FN f16 atomic_sub_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return x - v; }); }
+WP_FN f16 atomic_min_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return wp::min(x, v); }); }
+WP_FN f16 atomic_max_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return wp::max(x, v); }); }
+
 // ----- compare-and-swap, exchange, bitwise (no adjoint) -----
 // Floats compare and swap bit patterns (as warp-core's AtomicSwapElement).
 WP_FN i32 atomic_cas_p(i32* p, i32 c, i32 v) { return atomicCAS(p, c, v); }
@@ -138,6 +163,7 @@ WP_HOST_RMW(u64)
   WP_FN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
 WP_HOST_RMW_F(f32)
 WP_HOST_RMW_F(f64)
+WP_HOST_RMW_F(f16)
 #undef WP_HOST_RMW_F
 #define WP_HOST_SWAP(T, BITS)                                                    \
   WP_FN T atomic_cas_p(T* p, T c, T v) {                                         \

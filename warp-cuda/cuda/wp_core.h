@@ -7,6 +7,7 @@
 //
 // Contents:
 //   * integer/float typedefs (i8..u64, isize = i64, usize = u64, f32, f64) and `num<T>` traits;
+//   * `f16` (half precision, the layout of `half::f16`): conversions, arithmetic through f32;
 //   * the glam types with glam 0.30's x86_64 layout (Vec4, Mat2, Mat4 and Quat are 16-byte
 //     aligned because glam stores them in SSE registers), constructors and constants as free
 //     functions (`Vec3_new`, `Vec3_splat`, `Vec3_ZERO()`, `Mat3_from_cols`, `Quat_IDENTITY()`...);
@@ -184,6 +185,174 @@ template <> WP_FN f64 float_max<f64>() { return f64_max(); }
 template <typename T> WP_FN T nan() { return float_nan<T>(); }
 template <typename T> WP_FN T inf() { return float_inf<T>(); }
 
+// ------------------------------------------------------------------------------------------
+// f16 (Warp's float16; warp-core/src/float16.rs, the `half` crate's f16)
+// ------------------------------------------------------------------------------------------
+//
+// `wp::f16` is its IEEE binary16 bit pattern (2 bytes, align 2: the layout of `half::f16`).
+// No cuda_fp16.h: this library is self-contained under NVRTC. Every operation converts to f32
+// exactly, computes in f32 and rounds to f16 once, to nearest even (as `half` does):
+//   * f32 -> f16: PTX `cvt.rn.f16.f32` on the device; on the host a transcription of
+//     `half`'s software conversion (`f32_to_f16_fallback`), equal to it bit for bit (NaNs
+//     included: quiet, sign and top payload bits kept; the device gives its canonical NaN);
+//   * f16 -> f32: PTX `cvt.f32.f16`; on the host `half`'s `f16_to_f32_fallback`;
+//   * f64 -> f16: rounded once, in software on both (warp_core::float16::f16_from_f64);
+//   * + - * / and comparisons through f32; unary `-` flips the sign bit (as `half`).
+// Since f32 has more than twice f16's precision plus two bits, + - * / and sqrt rounded twice
+// (to f32, then f16) are correctly rounded f16 operations: both backends agree bit for bit.
+
+namespace detail {
+/// Leading zeros of the low 16 bits of `x` (x < 2^16).
+WP_FN i32 clz16(u32 x) {
+  i32 n = 0;
+  for (u32 bit = 0x8000u; bit != 0 && (x & bit) == 0; bit >>= 1) ++n;
+  return n;
+}
+/// `half`'s f32_to_f16_fallback, transcribed: round to nearest even, overflow to infinity.
+WP_FN u16 f32_to_f16_soft(f32 value) {
+  const u32 x = f32_to_bits(value);
+  const u32 sign = x & 0x80000000u;
+  const u32 exp = x & 0x7F800000u;
+  const u32 man = x & 0x007FFFFFu;
+  if (exp == 0x7F800000u) {
+    const u32 nan_bit = man == 0 ? 0u : 0x0200u;
+    return (u16)((sign >> 16) | 0x7C00u | nan_bit | (man >> 13));
+  }
+  const u32 half_sign = sign >> 16;
+  const i32 half_exp = ((i32)(exp >> 23) - 127) + 15;
+  if (half_exp >= 0x1F) return (u16)(half_sign | 0x7C00u);
+  if (half_exp <= 0) {
+    if (14 - half_exp > 24) return (u16)half_sign;
+    const u32 m = man | 0x00800000u;
+    u32 half_man = m >> (14 - half_exp);
+    const u32 round_bit = 1u << (13 - half_exp);
+    if ((m & round_bit) != 0 && (m & (3u * round_bit - 1u)) != 0) half_man += 1;
+    return (u16)(half_sign | half_man);
+  }
+  const u32 he = (u32)half_exp << 10;
+  const u32 hm = man >> 13;
+  const u32 round_bit = 0x00001000u;
+  if ((man & round_bit) != 0 && (man & (3u * round_bit - 1u)) != 0)
+    return (u16)((half_sign | he | hm) + 1u);
+  return (u16)(half_sign | he | hm);
+}
+/// `half`'s f16_to_f32_fallback, transcribed: exact (NaNs made quiet).
+WP_FN f32 f16_to_f32_soft(u16 i) {
+  if ((i & 0x7FFFu) == 0) return f32_from_bits((u32)i << 16);
+  const u32 half_sign = i & 0x8000u;
+  const u32 half_exp = i & 0x7C00u;
+  const u32 half_man = i & 0x03FFu;
+  if (half_exp == 0x7C00u) {
+    if (half_man == 0) return f32_from_bits((half_sign << 16) | 0x7F800000u);
+    return f32_from_bits((half_sign << 16) | 0x7FC00000u | (half_man << 13));
+  }
+  const u32 sign = half_sign << 16;
+  if (half_exp == 0) {
+    const i32 e = clz16(half_man) - 6;
+    const u32 exp = (u32)(127 - 15 - e) << 23;
+    const u32 man = (half_man << (14 + e)) & 0x7FFFFFu;
+    return f32_from_bits(sign | exp | man);
+  }
+  const u32 exp = (u32)((((i32)half_exp >> 10) - 15) + 127) << 23;
+  return f32_from_bits(sign | exp | (half_man << 13));
+}
+}  // namespace detail
+
+/// f32 -> f16 bits, round to nearest even.
+WP_FN u16 f32_to_f16_bits(f32 x) {
+#if defined(__CUDACC__)
+  u16 r;
+  asm("cvt.rn.f16.f32 %0, %1;" : "=h"(r) : "f"(x));
+  return r;
+#else
+  return detail::f32_to_f16_soft(x);
+#endif
+}
+/// f16 bits -> f32, exact.
+WP_FN f32 f16_bits_to_f32(u16 b) {
+#if defined(__CUDACC__)
+  f32 r;
+  asm("cvt.f32.f16 %0, %1;" : "=f"(r) : "h"(b));
+  return r;
+#else
+  return detail::f16_to_f32_soft(b);
+#endif
+}
+/// f64 -> f16 bits, rounded once to nearest even (Rust's `x as f16`; not f64 -> f32 -> f16,
+/// which rounds twice): the value is scaled by a power of two to units of its f16 ulp,
+/// rounded to an integer (rint: ties to even) and scaled back, all exact in f64.
+WP_FN u16 f64_to_f16_bits(f64 x) {
+  const u64 bits = f64_to_bits(x);
+  const u16 sign = (u16)((bits >> 48) & 0x8000u);
+  const f64 a = f64_from_bits(bits & 0x7FFFFFFFFFFFFFFFull);
+  if (!(a == a)) return (u16)(sign | 0x7E00u | (u16)((bits >> 42) & 0x3FFu));
+  if (a >= 65520.0) return (u16)(sign | 0x7C00u);  // the tie above f16::MAX rounds up
+  const i32 e = (i32)((bits >> 52) & 0x7FFu) - 1023;
+  const i32 ulp = (e > -14 ? e : -14) - 10;
+  const f64 down = f64_from_bits((u64)(1023 - ulp) << 52);  // 2^-ulp
+  const f64 up = f64_from_bits((u64)(1023 + ulp) << 52);    // 2^ulp
+  const f64 r = ::rint(a * down) * up;                      // an f16 value (or 0)
+  return (u16)(sign | f32_to_f16_bits((f32)r));
+}
+
+struct f16;
+WP_FN f16 f16_from_bits(u16 b);
+
+/// Half precision: the bit pattern of `half::f16`. Conversions are explicit (`(f32)h`,
+/// `(f16)x`, `wp::cast<T>`), so no f16 operation silently becomes an f32 one.
+struct f16 {
+  u16 bits;
+  f16() = default;
+  explicit WP_FN f16(f32 x) : bits(f32_to_f16_bits(x)) {}
+  explicit WP_FN f16(f64 x) : bits(f64_to_f16_bits(x)) {}
+  explicit WP_FN f16(int x) : bits(f32_to_f16_bits((f32)x)) {}
+  explicit WP_FN operator f32() const { return f16_bits_to_f32(bits); }
+  explicit WP_FN operator f64() const { return (f64)f16_bits_to_f32(bits); }
+};
+static_assert(sizeof(f16) == 2 && alignof(f16) == 2, "f16 layout (half::f16)");
+
+WP_FN f16 f16_from_bits(u16 b) {
+  f16 h;
+  h.bits = b;
+  return h;
+}
+WP_FN f16 f16_from_f32(f32 x) { return f16_from_bits(f32_to_f16_bits(x)); }
+WP_FN f16 f16_from_f64(f64 x) { return f16_from_bits(f64_to_f16_bits(x)); }
+WP_FN f32 f16_to_f32(f16 h) { return f16_bits_to_f32(h.bits); }
+
+WP_FN f16 operator+(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) + f16_to_f32(b)); }
+WP_FN f16 operator-(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) - f16_to_f32(b)); }
+WP_FN f16 operator*(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) * f16_to_f32(b)); }
+WP_FN f16 operator/(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) / f16_to_f32(b)); }
+WP_FN f16 operator-(f16 a) { return f16_from_bits((u16)(a.bits ^ 0x8000u)); }
+WP_FN f16& operator+=(f16& a, f16 b) { return a = a + b; }
+WP_FN f16& operator-=(f16& a, f16 b) { return a = a - b; }
+WP_FN f16& operator*=(f16& a, f16 b) { return a = a * b; }
+WP_FN f16& operator/=(f16& a, f16 b) { return a = a / b; }
+WP_FN bool operator==(f16 a, f16 b) { return f16_to_f32(a) == f16_to_f32(b); }
+WP_FN bool operator!=(f16 a, f16 b) { return f16_to_f32(a) != f16_to_f32(b); }
+WP_FN bool operator<(f16 a, f16 b) { return f16_to_f32(a) < f16_to_f32(b); }
+WP_FN bool operator<=(f16 a, f16 b) { return f16_to_f32(a) <= f16_to_f32(b); }
+WP_FN bool operator>(f16 a, f16 b) { return f16_to_f32(a) > f16_to_f32(b); }
+WP_FN bool operator>=(f16 a, f16 b) { return f16_to_f32(a) >= f16_to_f32(b); }
+
+template <>
+struct num<f16> {
+  static constexpr bool is_int = false;
+  static constexpr bool is_float = true;
+  static constexpr bool is_signed = true;
+  static constexpr bool is_bool = false;
+  static constexpr int bits = 16;
+};
+template <> WP_FN f16 float_nan<f16>() { return f16_from_bits(0x7E00u); }
+template <> WP_FN f16 float_inf<f16>() { return f16_from_bits(0x7C00u); }
+template <> WP_FN f16 float_max<f16>() { return f16_from_bits(0x7BFFu); }
+
+namespace detail {
+template <typename A, typename B> struct same_type { static constexpr bool value = false; };
+template <typename A> struct same_type<A, A> { static constexpr bool value = true; };
+}  // namespace detail
+
 /// Like std::declval: only for unevaluated operands (`decltype(wp::declval<T>().x)`).
 #if defined(__CUDACC__)
 template <typename T> __device__ T declval();
@@ -289,7 +458,21 @@ WP_FN bool faulted(const ctx_t* ctx) { return ctx->raised != 0; }
 /// bool -> int is 0 or 1.
 template <typename To, typename From>
 WP_FN To cast(From x) {
-  if constexpr (num<From>::is_float && num<To>::is_int) {
+  if constexpr (detail::same_type<From, To>::value) {
+    return x;
+  } else if constexpr (detail::same_type<To, f16>::value) {
+    // To f16: f64 rounded once; f32 directly; integers through f32 (exact below 2^24, and
+    // infinite in f16 either way above).
+    if constexpr (detail::same_type<From, f64>::value) {
+      return f16_from_f64(x);
+    } else if constexpr (num<From>::is_bool) {
+      return f16_from_f32(x ? 1.0f : 0.0f);
+    } else {
+      return f16_from_f32((f32)x);
+    }
+  } else if constexpr (detail::same_type<From, f16>::value) {
+    return cast<To>(f16_to_f32(x));  // f16 -> f32 is exact; then Rust's rules from f32
+  } else if constexpr (num<From>::is_float && num<To>::is_int) {
     if (!(x == x)) return (To)0;
     if constexpr (num<To>::is_signed) {
       if (x <= (From)num<To>::lo) return num<To>::min_value;
@@ -374,6 +557,9 @@ WP_FN f32 frem(f32 a, f32 b) { return ::fmodf(a, b); }
 WP_FN f64 frem(f64 a, f64 b) { return ::fmod(a, b); }
 WP_FN f32 fmod(f32 a, f32 b) { return ::fmodf(a, b); }  // same as frem
 WP_FN f64 fmod(f64 a, f64 b) { return ::fmod(a, b); }
+// f16 `%`: fmod in f32 (exact), rounded to f16 (exact too), as `half`'s `%`.
+WP_FN f16 frem(f16 a, f16 b) { return f16_from_f32(::fmodf(f16_to_f32(a), f16_to_f32(b))); }
+WP_FN f16 fmod(f16 a, f16 b) { return frem(a, b); }
 
 namespace detail {
 // Scalar arithmetic of builtins (warp_core::builtins::Scalar): wrapping for ints, IEEE else.

@@ -31,6 +31,7 @@ WP_FN void print_value(f64 x) {
     printf("%g", x);
 }
 WP_FN void print_value(f32 x) { print_value((f64)x); }
+WP_FN void print_value(f16 x) { print_value((f64)f16_to_f32(x)); }
 
 namespace detail {
 template <typename V>

@@ -22,6 +22,8 @@
 // warp-core/src/builtins/special.rs (same operations in the same order, libm's exp/log/sqrt and
 // fma), which therefore matches the CPU backend bit for bit on the host.
 //
+// f16 (at the end): each builtin is the f32 one on the widened arguments, rounded once.
+//
 // Accuracy: floor, ceil and sqrt are exact on both backends. The transcendental functions
 // (exp, log, sin, cos, tan, atan2, pow, asin, acos, atan, sinh, cosh, tanh, exp2, log2,
 // log10, cbrt) call the platform's libm on the CPU (glibc, through Rust's std) and CUDA's
@@ -385,5 +387,66 @@ WP_VEC_LERP(DVec2, f64)
 WP_VEC_LERP(DVec3, f64)
 WP_VEC_LERP(DVec4, f64)
 #undef WP_VEC_LERP
+
+// ------------------------------------------------------------------------------------------
+// f16: every builtin is its f32 version on the widened arguments, rounded once to f16
+// (warp-core/src/float16.rs). Exact where the f32 builtin is (min max clamp abs sign floor
+// ceil sqrt round rint trunc frac step); the transcendental ones inherit the f32 functions'
+// few-ulp differences between platforms, which rounding to f16 mostly hides (one f16 ulp at
+// most).
+// ------------------------------------------------------------------------------------------
+
+#define WP_F16_1(NAME) \
+  WP_FN f16 NAME(f16 x) { return f16_from_f32(NAME(f16_to_f32(x))); }
+#define WP_F16_2(NAME) \
+  WP_FN f16 NAME(f16 x, f16 y) { return f16_from_f32(NAME(f16_to_f32(x), f16_to_f32(y))); }
+#define WP_F16_3(NAME)                                                                  \
+  WP_FN f16 NAME(f16 x, f16 y, f16 z) {                                                 \
+    return f16_from_f32(NAME(f16_to_f32(x), f16_to_f32(y), f16_to_f32(z)));             \
+  }
+WP_F16_2(min)
+WP_F16_2(max)
+WP_F16_3(clamp)
+WP_F16_1(abs)
+WP_F16_1(sign)
+WP_F16_1(floor)
+WP_F16_1(ceil)
+WP_F16_1(sqrt)
+WP_F16_1(exp)
+WP_F16_1(log)
+WP_F16_1(sin)
+WP_F16_1(cos)
+WP_F16_1(tan)
+WP_F16_2(atan2)
+WP_F16_2(pow)
+WP_F16_1(asin)
+WP_F16_1(acos)
+WP_F16_1(atan)
+WP_F16_1(sinh)
+WP_F16_1(cosh)
+WP_F16_1(tanh)
+WP_F16_1(exp2)
+WP_F16_1(log2)
+WP_F16_1(log10)
+WP_F16_1(cbrt)
+WP_F16_1(round)
+WP_F16_1(rint)
+WP_F16_1(trunc)
+WP_F16_1(frac)
+WP_F16_1(degrees)
+WP_F16_1(radians)
+WP_F16_1(erf)
+WP_F16_1(erfc)
+WP_F16_1(erfinv)
+WP_F16_1(erfcinv)
+WP_F16_3(smoothstep)
+WP_F16_3(lerp)
+#undef WP_F16_3
+#undef WP_F16_2
+#undef WP_F16_1
+WP_FN f16 step(f16 x) { return f16_from_f32(step(f16_to_f32(x))); }
+WP_FN bool isnan(f16 x) { return isnan(f16_to_f32(x)); }
+WP_FN bool isinf(f16 x) { return isinf(f16_to_f32(x)); }
+WP_FN bool isfinite(f16 x) { return isfinite(f16_to_f32(x)); }
 
 }  // namespace wp

@@ -24,10 +24,13 @@ pub enum Scalar {
     Usize,
     F32,
     F64,
+    /// Half precision (Warp's `float16`, the `half` crate's `f16`): every operation computes
+    /// in f32 and rounds once. No vectors, matrices or generic instances are made of it.
+    F16,
 }
 
 impl Scalar {
-    pub const ALL: [Scalar; 13] = [
+    pub const ALL: [Scalar; 14] = [
         Scalar::Bool,
         Scalar::I8,
         Scalar::I16,
@@ -41,6 +44,7 @@ impl Scalar {
         Scalar::Usize,
         Scalar::F32,
         Scalar::F64,
+        Scalar::F16,
     ];
 
     pub fn name(self) -> &'static str {
@@ -58,6 +62,7 @@ impl Scalar {
             Scalar::Usize => "usize",
             Scalar::F32 => "f32",
             Scalar::F64 => "f64",
+            Scalar::F16 => "f16",
         }
     }
 
@@ -66,7 +71,7 @@ impl Scalar {
     }
 
     pub fn is_float(self) -> bool {
-        matches!(self, Scalar::F32 | Scalar::F64)
+        matches!(self, Scalar::F32 | Scalar::F64 | Scalar::F16)
     }
 
     pub fn is_int(self) -> bool {
@@ -79,6 +84,36 @@ impl Scalar {
             Scalar::I8 | Scalar::I16 | Scalar::I32 | Scalar::I64 | Scalar::Isize
         )
     }
+}
+
+/// The bit pattern of `v` rounded to the nearest `f16`, ties to even (Rust's `v as f16`;
+/// the same rounding as `warp_core::float16::f16_from_f64`): how `f16` literals are emitted.
+pub fn f16_bits(v: f64) -> u16 {
+    let bits = v.to_bits();
+    let sign = ((bits >> 48) & 0x8000) as u16;
+    let a = v.abs();
+    if a.is_nan() {
+        return sign | 0x7E00 | ((bits >> 42) & 0x3FF) as u16;
+    }
+    if a >= 65520.0 {
+        return sign | 0x7C00;
+    }
+    let pow2 = |k: i32| f64::from_bits(((1023 + k) as u64) << 52);
+    let e = ((bits >> 52) & 0x7FF) as i32 - 1023;
+    let ulp = e.max(-14) - 10;
+    // `r` is an f16 value: subnormal (a multiple of 2^-24 below 2^-14) or normal.
+    let r = (a * pow2(-ulp)).round_ties_even() * pow2(ulp);
+    if r == 0.0 {
+        return sign;
+    }
+    let rb = r.to_bits();
+    let re = ((rb >> 52) & 0x7FF) as i32 - 1023;
+    let mag = if re < -14 {
+        (r * pow2(24)) as u16
+    } else {
+        (((re + 15) as u16) << 10) | ((rb >> 42) & 0x3FF) as u16
+    };
+    sign | mag
 }
 
 /// A kernel-language type.
@@ -262,6 +297,29 @@ mod tests {
         ] {
             assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
         }
+    }
+
+    #[test]
+    fn f16_literal_bits() {
+        assert_eq!(f16_bits(1.0), 0x3C00);
+        assert_eq!(f16_bits(-2.0), 0xC000);
+        assert_eq!(f16_bits(0.1), 0x2E66);
+        assert_eq!(f16_bits(65504.0), 0x7BFF);
+        assert_eq!(f16_bits(65519.0), 0x7BFF);
+        assert_eq!(f16_bits(65520.0), 0x7C00);
+        assert_eq!(f16_bits(1e10), 0x7C00);
+        assert_eq!(f16_bits(f64::NEG_INFINITY), 0xFC00);
+        assert_eq!(f16_bits(f64::NAN), 0x7E00);
+        assert_eq!(f16_bits(-0.0), 0x8000);
+        assert_eq!(f16_bits(2f64.powi(-24)), 0x0001);
+        assert_eq!(f16_bits(2f64.powi(-25)), 0x0000);
+        assert_eq!(f16_bits(3.0 * 2f64.powi(-25)), 0x0002);
+        assert_eq!(f16_bits(2f64.powi(-14)), 0x0400);
+        assert_eq!(f16_bits(1023.0 * 2f64.powi(-24)), 0x03FF);
+        assert_eq!(f16_bits(1.0 + 2f64.powi(-11)), 0x3C00); // tie to even
+        assert_eq!(f16_bits(1.0 + 3.0 * 2f64.powi(-11)), 0x3C02);
+        assert_eq!(f16_bits(1.0 + 2f64.powi(-11) + 2f64.powi(-40)), 0x3C01);
+        assert_eq!(f16_bits(std::f64::consts::PI), 0x4248);
     }
 
     #[test]

@@ -10,7 +10,7 @@ use crate::array::{Array, Element};
 use crate::error::{Error, Result};
 use crate::tape::{Seed, Tape};
 
-/// A float element type for gradient checks (f32, f64), with its default check settings.
+/// A float element type for gradient checks (f32, f64, f16), with its default check settings.
 pub trait CheckFloat: Seed {
     /// Converts to f64.
     fn to_f64(self) -> f64;
@@ -54,6 +54,27 @@ impl CheckFloat for f64 {
     };
 }
 
+impl CheckFloat for warp_core::f16 {
+    fn to_f64(self) -> f64 {
+        self.to_f64()
+    }
+    fn from_f64(v: f64) -> Self {
+        warp_core::float16::f16_from_f64(v)
+    }
+    // f16 has a unit roundoff of 2^-11 (4.9e-4) and a spacing of 2^-10 at 1. A step of 1/16
+    // is exact for |x| < 64 (x +- h needs no rounding), and keeps the rounding error of the
+    // quotient, two outputs each off by up to 2^-12 |f| over 2h = 1/8, near 4e-3 |f|, with a
+    // truncation error of h^2/6 |f'''| = 7e-4 |f'''|. The analytic side is f16 too: every
+    // step of an adjoint formula rounds (a few 2^-11 relative). So 5e-2 relative (2e-2
+    // absolute near zero) passes a right gradient of moderate curvature and still fails a
+    // wrong one by a factor or a sign.
+    const DEFAULTS: GradcheckOptions = GradcheckOptions {
+        eps: 0.0625,
+        atol: 2e-2,
+        rtol: 5e-2,
+    };
+}
+
 /// Step and tolerances of [`gradcheck`]: an entry passes when
 /// `|analytic - numeric| <= atol + rtol * |numeric|`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,7 +89,8 @@ pub struct GradcheckOptions {
 
 impl GradcheckOptions {
     /// The defaults for element type `T` (f32: eps 1e-3, atol 1e-3, rtol 1e-2; f64: eps
-    /// 1e-6, atol 1e-8, rtol 1e-6; the reasons are in the source).
+    /// 1e-6, atol 1e-8, rtol 1e-6; f16: eps 1/16, atol 2e-2, rtol 5e-2; the reasons are in
+    /// the source).
     pub fn for_type<T: CheckFloat>() -> Self {
         T::DEFAULTS
     }

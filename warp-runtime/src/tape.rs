@@ -101,6 +101,10 @@ impl Seed for f64 {
     const ONE: f64 = 1.0;
 }
 
+impl Seed for warp_core::f16 {
+    const ONE: warp_core::f16 = warp_core::f16::ONE;
+}
+
 impl Tape {
     /// An empty tape.
     pub fn new() -> Tape {

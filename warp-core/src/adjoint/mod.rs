@@ -35,6 +35,7 @@ use crate::builtins::math::Float;
 
 mod builtins;
 mod cast;
+mod float16;
 mod lanes;
 mod linalg;
 mod noise;

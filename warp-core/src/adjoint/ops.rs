@@ -6,7 +6,7 @@
 //!
 //! | operands                                      | operators           | adjoint            |
 //! |-----------------------------------------------|---------------------|--------------------|
-//! | `f32 op f32`, `f64 op f64`                    | `+ - * / %`         | scalar rules       |
+//! | `f32 op f32`, `f64 op f64`, `f16 op f16`      | `+ - * / %`         | scalar rules       |
 //! | float vector `op` same vector                 | `+ - * / %`         | lane by lane       |
 //! | float vector `op` its scalar, scalar `op` it  | `+ - * / %`         | lane by lane       |
 //! | matrix `op` same matrix                       | `+ - *`             | matrix rules       |
@@ -142,7 +142,8 @@ macro_rules! float_scalar_ops {
         }
     };
 }
-float_scalar_ops!(f32, f64);
+use half::f16;
+float_scalar_ops!(f32, f64, f16);
 
 // ------------------------------------------------------------------------------------------
 // Float vectors (componentwise; with a scalar on either side)

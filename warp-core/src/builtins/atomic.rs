@@ -6,8 +6,8 @@
 //!
 //! * Integers (`i32`, `u32`, `i64`, `u64`) use the std atomic types' `fetch_*` operations on
 //!   the element itself (`Atomic*::from_ptr`); `add`/`sub` wrap, as in CUDA.
-//! * Floats (`f32`, `f64`) use a compare-exchange loop on the bit pattern through
-//!   `AtomicU32`/`AtomicU64`. `min`/`max` use IEEE `fmin`/`fmax` semantics (a NaN operand
+//! * Floats (`f32`, `f64`, `f16`) use a compare-exchange loop on the bit pattern through
+//!   `AtomicU32`/`AtomicU64`/`AtomicU16`. `min`/`max` use IEEE `fmin`/`fmax` semantics (a NaN operand
 //!   loses to the other), the same as the [`min`](super::min)/[`max`](super::max) builtins.
 //!   `sub` is `add` of the negated value, which is the same IEEE result.
 //! * Float vectors (`Vec2/3/4`, `DVec2/3/4`) are updated componentwise, `x` first, each
@@ -24,7 +24,9 @@
 //! Bounds are checked by [`ArrayView::ptr_at`]; an out-of-bounds index returns its fault and
 //! touches no memory.
 
-use std::sync::atomic::{AtomicI32, AtomicI64, AtomicU32, AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicI32, AtomicI64, AtomicU16, AtomicU32, AtomicU64, Ordering::Relaxed};
+
+use half::f16;
 
 use glam::{DVec2, DVec3, DVec4, Vec2, Vec3, Vec4};
 
@@ -32,7 +34,7 @@ use crate::fault::KResult;
 use crate::index::KernelIndex;
 use crate::view::ArrayView;
 
-/// An element type the atomic builtins accept: `i32`, `u32`, `i64`, `u64`, `f32`, `f64`,
+/// An element type the atomic builtins accept: `i32`, `u32`, `i64`, `u64`, `f32`, `f64`, `f16`,
 /// `Vec2/3/4`, `DVec2/3/4`.
 ///
 /// Each operation stores the new value and returns the old one.
@@ -181,7 +183,7 @@ macro_rules! from_ptr {
     )*};
 }
 from_ptr!(i32 => AtomicI32, u32 => AtomicU32, i64 => AtomicI64, u64 => AtomicU64);
-from_ptr!(f32 => AtomicU32, f64 => AtomicU64);
+from_ptr!(f32 => AtomicU32, f64 => AtomicU64, f16 => AtomicU16);
 
 // ------------------------------------------------------------------------------------------
 // Floats: compare-exchange loop on the bit pattern.
@@ -238,7 +240,32 @@ macro_rules! float_bits {
         }
     )*};
 }
-float_bits!(f32 => AtomicU32, f64 => AtomicU64);
+float_bits!(f32 => AtomicU32, f64 => AtomicU64, f16 => AtomicU16);
+
+/// `f16`: a compare-exchange loop on the 16-bit pattern (`AtomicU16`), each new value one
+/// `f16` operation (computed in `f32`, rounded once), `min`/`max` the `f16` builtins.
+impl AtomicElement for f16 {
+    #[inline(always)]
+    unsafe fn atomic_add(p: *mut Self, v: Self) -> Self {
+        // SAFETY: as `atomic_rmw` requires, forwarded from the caller.
+        unsafe { float_rmw(p, |x: f16| x + v) }
+    }
+    #[inline(always)]
+    unsafe fn atomic_sub(p: *mut Self, v: Self) -> Self {
+        // SAFETY: as in `atomic_add`.
+        unsafe { float_rmw(p, |x: f16| x - v) }
+    }
+    #[inline(always)]
+    unsafe fn atomic_min(p: *mut Self, v: Self) -> Self {
+        // SAFETY: as in `atomic_add`.
+        unsafe { float_rmw(p, |x: f16| super::min(x, v)) }
+    }
+    #[inline(always)]
+    unsafe fn atomic_max(p: *mut Self, v: Self) -> Self {
+        // SAFETY: as in `atomic_add`.
+        unsafe { float_rmw(p, |x: f16| super::max(x, v)) }
+    }
+}
 
 /// `*p = f(*p)` atomically via compare-exchange on the bits; returns the old value.
 ///

@@ -104,6 +104,10 @@ pub(crate) fn cpp_member(m: &str) -> String {
 
 /// A float literal as C++ source of the given type, exactly (hex floats round-trip).
 fn float_lit(v: f64, s: Scalar) -> String {
+    if s == Scalar::F16 {
+        // The literal rounded once to f16, by its bit pattern (the Rust backend's too).
+        return format!("wp::f16_from_bits({:#06x})", crate::types::f16_bits(v));
+    }
     let ty = if s == Scalar::F32 {
         "wp::f32"
     } else {
@@ -896,6 +900,8 @@ mod tests {
         assert_eq!(float_lit(0.1, Scalar::F32), "0.1f");
         assert_eq!(float_lit(1e30, Scalar::F32), "1e30f");
         assert_eq!(float_lit(0.1, Scalar::F64), "0.1");
+        assert_eq!(float_lit(0.1, Scalar::F16), "wp::f16_from_bits(0x2e66)");
+        assert_eq!(float_lit(-1e9, Scalar::F16), "wp::f16_from_bits(0xfc00)");
         assert_eq!(int_lit(i32::MIN as i128, Scalar::I32), "(-2147483647 - 1)");
     }
 }

@@ -275,8 +275,20 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Cast(v, t) => {
                 let x = self.var(*v);
-                let t = ty_tokens(t).expect("casts are to scalars");
-                quote_spanned!(sp=> (#x as #t))
+                let from = self.f.ty(*v);
+                let to = ty_tokens(t).expect("casts are to scalars");
+                // `as` has no f16 (the `half` crate's type): its casts go through traits with
+                // `as`'s meaning (warp_core::float16).
+                if *t == Ty::Scalar(Scalar::F16) {
+                    quote_spanned!(sp=> __wp::ops::ToF16::to_f16(#x))
+                } else if *from == Ty::Scalar(Scalar::F16) {
+                    quote_spanned!(sp=> <#to as __wp::ops::FromF16>::from_f16(#x))
+                } else if from.is_deferred() {
+                    // A func's result may be an f16.
+                    quote_spanned!(sp=> __wp::ops::AsScalar::<#to>::as_scalar(#x))
+                } else {
+                    quote_spanned!(sp=> (#x as #to))
+                }
             }
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);
@@ -377,6 +389,8 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             let ts = ts?;
             Some(quote!((#(#ts),*)))
         }
+        // The `half` crate's type, by the facade's path (the user's `f16` may be any import).
+        Ty::Scalar(Scalar::F16) => Some(quote!(__wp::f16)),
         Ty::Scalar(s) => {
             let id = format_ident!("{}", s.name());
             Some(quote!(#id))
@@ -416,6 +430,11 @@ fn literal(l: &Lit, ty: &Ty) -> TokenStream {
         (Lit::Int(v), _) => {
             let lit = Literal::i128_unsuffixed(*v);
             quote!(#lit)
+        }
+        // f16: the literal rounded once to f16 (ties to even), by its bit pattern.
+        (Lit::Float(v), Ty::Scalar(Scalar::F16)) => {
+            let bits = Literal::u16_suffixed(crate::types::f16_bits(*v));
+            quote!(__wp::f16::from_bits(#bits))
         }
         (Lit::Float(v), Ty::Scalar(s)) if s.is_float() => {
             let t = format_ident!("{}", s.name());

@@ -385,6 +385,26 @@ fn path_constant(segments: &[String]) -> Option<(Scalar, f64, Option<i128>)> {
         ["consts", n] => *n,
         _ => return None,
     };
+    if s == Scalar::F16 {
+        // `half`'s constants (`f16::MAX`, `f16::PI`, ...); the value is rounded to f16 where
+        // it is emitted.
+        let v = match name {
+            "MAX" => 65504.0,
+            "MIN" => -65504.0,
+            "EPSILON" => 2f64.powi(-10),
+            "MIN_POSITIVE" => 2f64.powi(-14),
+            "MIN_POSITIVE_SUBNORMAL" => 2f64.powi(-24),
+            "ZERO" => 0.0,
+            "NEG_ZERO" => -0.0,
+            "ONE" => 1.0,
+            "NEG_ONE" => -1.0,
+            _ => {
+                return path_constant(&["f64".to_string(), name.to_string()])
+                    .map(|(_, v, _)| (s, v, None))
+            }
+        };
+        return Some((s, v, None));
+    }
     if s.is_float() {
         let f32 = s == Scalar::F32;
         let v = match name {
@@ -1689,6 +1709,7 @@ impl Lowerer {
                     },
                     "f32" => crate::types::F32,
                     "f64" => Ty::Scalar(Scalar::F64),
+                    "f16" => Ty::Scalar(Scalar::F16),
                     suf => return err(span, format!("unknown literal suffix `{suf}`")),
                 };
                 Ok(self.def(Op::Lit(Lit::Float(v)), ty, span))
