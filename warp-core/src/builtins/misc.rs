@@ -552,17 +552,27 @@ mod tests {
         let e = quat_to_rpy(q);
         assert!((e - DVec3::new(0.1, -0.2, 0.3)).length() < 1e-15, "{e}");
         let m = transform_compose(DVec3::new(1.0, 2.0, 3.0), q, DVec3::new(2.0, 0.5, 3.0));
-        let g = DMat4::from_scale_rotation_translation(DVec3::new(2.0, 0.5, 3.0), q, DVec3::new(1.0, 2.0, 3.0));
+        let g = DMat4::from_scale_rotation_translation(
+            DVec3::new(2.0, 0.5, 3.0),
+            q,
+            DVec3::new(1.0, 2.0, 3.0),
+        );
         assert_eq!(m, g);
         let (p, r, s) = transform_decompose(m);
         assert_eq!(p, DVec3::new(1.0, 2.0, 3.0));
         assert!((s - DVec3::new(2.0, 0.5, 3.0)).length() < 1e-14);
         assert!((r.dot(q).abs() - 1.0).abs() < 1e-14);
-        let t = quat_twist(DVec3::Z, DQuat::from_axis_angle(DVec3::Z, 0.7) * DQuat::from_axis_angle(DVec3::X, 0.2));
+        let t = quat_twist(
+            DVec3::Z,
+            DQuat::from_axis_angle(DVec3::Z, 0.7) * DQuat::from_axis_angle(DVec3::X, 0.2),
+        );
         assert!((quat_twist_angle(DVec3::Z, t) - 0.7).abs() < 1e-14);
         assert!((quat_twist_angle_signed(DVec3::NEG_Z, t) + 0.7).abs() < 1e-14);
         assert!(isnan(DQuat::from_xyzw(0.0, f64::NAN, 0.0, 1.0)));
-        assert!(!isfinite(Mat2::from_diagonal(Vec2::new(1.0, f32::INFINITY))));
+        assert!(!isfinite(Mat2::from_diagonal(Vec2::new(
+            1.0,
+            f32::INFINITY
+        ))));
     }
 
     use super::super::math::{isfinite, isnan};
