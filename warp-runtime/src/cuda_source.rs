@@ -112,6 +112,7 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         "linalg",
         "svd",
         "transform",
+        "misc",
         "atomic",
         "rand",
         "print",
