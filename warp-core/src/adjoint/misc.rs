@@ -61,7 +61,7 @@ impl AdjCopySign for f64 {}
 /// Adjoint of `copysign(x, y)`: `adj_x += g` when the sign bits agree, else `adj_x -= g`.
 #[inline(always)]
 pub fn adj_copysign<F: AdjCopySign>(x: F, y: F, adj_x: &mut F, _adj_y: &mut F, adj_ret: F) {
-    if x.w_copysign(F::ONE) == y.w_copysign(F::ONE) {
+    if F::ONE.w_copysign(x) == F::ONE.w_copysign(y) {
         *adj_x += adj_ret;
     } else {
         *adj_x -= adj_ret;
@@ -757,6 +757,9 @@ mod tests {
         let (mut ax, mut ay) = (0.0, 0.0);
         adj_copysign(2.0f64, -1.0, &mut ax, &mut ay, 1.5);
         assert_eq!((ax, ay), (-1.5, 0.0));
+        adj_copysign(-2.0f64, -1.0, &mut ax, &mut ay, 1.0);
+        adj_copysign(0.5f64, 3.0, &mut ax, &mut ay, 4.0);
+        assert_eq!((ax, ay), (3.5, 0.0));
         let mut am = DMat3::ZERO;
         adj_get_diag(DMat3::IDENTITY, &mut am, v);
         assert_eq!(am, DMat3::from_diagonal(v));
