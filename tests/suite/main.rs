@@ -75,6 +75,7 @@ mod funcs;
 mod generics;
 mod grad;
 mod launch;
+mod misc;
 mod params;
 mod rng;
 mod stability;
