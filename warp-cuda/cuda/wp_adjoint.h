@@ -17,6 +17,10 @@
 //                                                 radians smoothstep noise pnoise
 //       adj_svd3 adj_svd2 adj_eig3 adj_qr3(a, adj_a, adj_ret)  adj_ret: the tuple_t of the
 //                                                 results' adjoints (forward recomputed)
+//       adj_copysign adj_min_element adj_max_element adj_get_diag adj_norm_l1 adj_norm_l2
+//       adj_norm_huber adj_norm_pseudo_huber adj_smooth_normalize adj_quat_rpy adj_quat_to_rpy
+//       adj_quat_twist adj_quat_twist_angle(_signed) adj_transform_compose (section "misc")
+//       adj_quat_to_axis_angle adj_transform_decompose(x, adj_x, adj_ret)  adj_ret: the tuple_t
 //       adj_cast(adj_from, adj_to)                template over the 13 scalar types
 //     for exactly the operand types the Rust functions take (the kernel language's operator
 //     combinations and the builtin table's signatures, with glam's meaning of each operator).
