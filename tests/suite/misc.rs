@@ -101,11 +101,7 @@ fn vector_reductions(dev: &wp::Device) {
                 "row {k} col {j}: {g} vs {w}"
             );
         }
-        assert_eq!(
-            [uo[k * 4], uo[k * 4 + 1]],
-            [am as u32, ax as u32],
-            "row {k}"
-        );
+        assert_eq!([uo[k * 4], uo[k * 4 + 1]], [am, ax], "row {k}");
         let [imn, imx, iam, iax] = want_i[k];
         assert_eq!([io[k * 2], io[k * 2 + 1]], [imn, imx], "int row {k}");
         assert_eq!(
