@@ -1046,6 +1046,70 @@ mod tests {
     }
 
     #[test]
+    fn misc_rows() {
+        let (v3, d3) = (Ty::Vector(Scalar::F32, 3), Ty::Vector(Scalar::F64, 3));
+        let (q, dq) = (Ty::Quat(Scalar::F32), Ty::Quat(Scalar::F64));
+        let r = lookup("transform_compose")
+            .unwrap()
+            .resolve(&[k(d3.clone()), k(dq.clone()), k(d3.clone())])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Matrix(Scalar::F64, 4));
+        let r = lookup("transform_decompose")
+            .unwrap()
+            .resolve(&[k(Ty::Matrix(Scalar::F32, 4))])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![v3.clone(), q.clone(), v3.clone()]));
+        let r = lookup("quat_to_axis_angle")
+            .unwrap()
+            .resolve(&[k(dq)])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![d3, Ty::Scalar(Scalar::F64)]));
+        let r = lookup("quat_rpy")
+            .unwrap()
+            .resolve(&[
+                ArgTy::Literal { float: true },
+                ArgTy::Literal { float: true },
+                ArgTy::Literal { float: true },
+            ])
+            .unwrap();
+        assert_eq!(r.ret, q);
+        let iv = Ty::Vector(Scalar::I32, 4);
+        assert_eq!(
+            lookup_method("min_element")
+                .unwrap()
+                .resolve(&[k(iv.clone())])
+                .unwrap()
+                .ret,
+            I32
+        );
+        assert_eq!(
+            lookup("argmax").unwrap().resolve(&[k(iv)]).unwrap().ret,
+            Ty::Scalar(Scalar::U32)
+        );
+        assert!(lookup("get_diag")
+            .unwrap()
+            .resolve(&[k(v3.clone())])
+            .is_err());
+        let arr = Ty::Array(Box::new(Ty::Scalar(Scalar::I64)), 1);
+        let r = lookup("lower_bound")
+            .unwrap()
+            .resolve(&[k(arr), ArgTy::Literal { float: false }])
+            .unwrap();
+        assert_eq!(r.params[1], Ty::Scalar(Scalar::I64));
+        assert!(reads_array(lookup("lower_bound_range").unwrap()));
+        assert!(!reads_array(lookup("atomic_add").unwrap()));
+        assert!(lookup_user("lower_bound_range").is_none());
+        for name in ["isfinite", "isnan", "isinf"] {
+            let b = lookup(name).unwrap();
+            assert!(b.resolve(&[k(Ty::Matrix(Scalar::F64, 2))]).is_ok());
+            assert!(b.resolve(&[k(Ty::Quat(Scalar::F32))]).is_ok());
+        }
+        for (name, _) in DEFAULT_LAST {
+            assert_eq!(lookup(name).unwrap().params.len(), 2, "{name}");
+        }
+    }
+
+    #[test]
     fn classification_returns_bool() {
         let isnan = lookup("isnan").unwrap();
         assert_eq!(isnan.resolve(&[k(F32)]).unwrap().ret, crate::types::BOOL);
