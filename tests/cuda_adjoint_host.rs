@@ -255,7 +255,8 @@ fn toks<T: Val>(v: &T) -> Vec<Tok> {
 /// (and, for `erfinv`/`erfcinv`, the same transcribed algorithm), and they match exactly; against a GPU (CUDA's libdevice,
 /// documented to 1 to 4 ulp) they are compared within 8 ulps of `max(|want|, 8)`: the term
 /// added is at most `|want| + |starting adjoint|` in size, and starting adjoints are below 4.
-const LOOSE_ON_GPU: [&str; 18] = [
+const LOOSE_ON_GPU: [&str; 19] = [
+    "adj_quat_rpy",
     "adj_quat_from_axis_angle",
     "adj_quat_slerp",
     "adj_exp",
@@ -778,6 +779,79 @@ fn decomps(s: &mut Suite) {
         })*};
     }
     mats2!(Mat2, Vec2, f32; DMat2, DVec2, f64);
+}
+
+/// The builtins of wp_misc.h (warp-core adjoint/misc.rs): the generator's inputs (NaNs,
+/// infinities, zeros, ties), and for the norms' thresholds and the decomposition also
+/// inputs on both sides of their branches.
+fn misc(s: &mut Suite) {
+    bin::<f32, f32, f32>(s, "adj_copysign", ad::adj_copysign);
+    bin::<f64, f64, f64>(s, "adj_copysign", ad::adj_copysign);
+    macro_rules! vecs {
+        ($($v:ident: $s:ident),*) => {$(
+            un::<$v, $s>(s, "adj_min_element", ad::adj_min_element);
+            un::<$v, $s>(s, "adj_max_element", ad::adj_max_element);
+            un::<$v, $s>(s, "adj_norm_l1", ad::adj_norm_l1);
+            un::<$v, $s>(s, "adj_norm_l2", ad::adj_norm_l2);
+            bin::<$v, $s, $s>(s, "adj_norm_huber", ad::adj_norm_huber);
+            bin::<$v, $s, $s>(s, "adj_norm_pseudo_huber", ad::adj_norm_pseudo_huber);
+            bin::<$v, $s, $v>(s, "adj_smooth_normalize", ad::adj_smooth_normalize);
+        )*};
+    }
+    vecs!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64);
+    un::<IVec3, i32>(s, "adj_min_element", ad::adj_min_element);
+    un::<UVec4, u32>(s, "adj_max_element", ad::adj_max_element);
+    macro_rules! mats {
+        ($($m:ident: $v:ident),*) => {$(
+            un::<$m, $v>(s, "adj_get_diag", ad::adj_get_diag);
+        )*};
+    }
+    mats!(Mat2: Vec2, Mat3: Vec3, Mat4: Vec4, DMat2: DVec2, DMat3: DVec3, DMat4: DVec4);
+    macro_rules! quats {
+        ($($q:ident: $v:ident, $m4:ident, $s:ident),*) => {$({
+            tri::<$s, $s, $s, $q>(s, "adj_quat_rpy", ad::adj_quat_rpy::<$q>);
+            un::<$q, $v>(s, "adj_quat_to_rpy", ad::adj_quat_to_rpy::<$q>);
+            bin::<$v, $q, $q>(s, "adj_quat_twist", ad::adj_quat_twist::<$q>);
+            bin::<$v, $q, $s>(s, "adj_quat_twist_angle", ad::adj_quat_twist_angle::<$q>);
+            bin::<$v, $q, $s>(s, "adj_quat_twist_angle_signed", ad::adj_quat_twist_angle_signed::<$q>);
+            tri::<$v, $q, $v, $m4>(s, "adj_transform_compose", ad::adj_transform_compose::<$v>);
+            let (q, v, m4, sc) = (stringify!($q), stringify!($v), stringify!($m4), stringify!($s));
+            let aa = s.sig(
+                &format!("wp::adj_quat_to_axis_angle(v0, a0, wp::tuple_t<wp::{v}, wp::{sc}>{{v1, v2}})"),
+                &[q, v, sc],
+                &[q],
+                None,
+            );
+            for a in s.inputs1::<$q>() {
+                let (mut ag, gv, gs) = (s.g.adj::<$q>(), s.g.ret::<$v>(), s.g.ret::<$s>());
+                let words = [a.bits(), gv.bits(), gs.bits(), ag.bits()].concat();
+                ad::adj_quat_to_axis_angle(a, &mut ag, (gv, gs));
+                s.case(aa, &words, toks(&ag));
+            }
+            let dec = s.sig(
+                &format!("wp::adj_transform_decompose(v0, a0, wp::tuple_t<wp::{v}, wp::{q}, wp::{v}>{{v1, v2, v3}})"),
+                &[m4, v, q, v],
+                &[m4],
+                None,
+            );
+            let mut inputs: Vec<$m4> = s.inputs1::<$m4>();
+            for k in 0..s.n {
+                // Rigid motions with scales (one of them zero): both branches per column.
+                let g = &mut s.g;
+                let q = $q::from_xyzw(g.rand() as $s, g.rand() as $s, g.rand() as $s, g.rand() as $s).normalize();
+                let p = $v::new(g.rand() as $s, g.rand() as $s, g.rand() as $s);
+                let sc = $v::new(g.rand() as $s, if k % 4 == 0 { 0.0 } else { g.rand() as $s }, g.rand() as $s);
+                inputs.push(warp_lang::__private::builtins::transform_compose(p, q, sc));
+            }
+            for m in inputs {
+                let (mut am, gp, gq, gs) = (s.g.adj::<$m4>(), s.g.ret::<$v>(), s.g.ret::<$q>(), s.g.ret::<$v>());
+                let words = [m.bits(), gp.bits(), gq.bits(), gs.bits(), am.bits()].concat();
+                ad::adj_transform_decompose(m, &mut am, (gp, gq, gs));
+                s.case(dec, &words, toks(&am));
+            }
+        })*};
+    }
+    quats!(Quat: Vec3, Mat4, f32, DQuat: DVec3, DMat4, f64);
 }
 
 /// Integers: every adjoint is a no-op (the starting adjoints come back unchanged).
@@ -1311,6 +1385,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     noise(&mut s);
     transforms(&mut s);
     decomps(&mut s);
+    misc(&mut s);
     integers(&mut s);
     casts(&mut s);
     zeros(&mut s);

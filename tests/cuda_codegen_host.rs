@@ -287,6 +287,40 @@ fn half_precision(a: Array<f32>, d: Array<f32>, out: Array<f32, 2>) {
     };
 }
 
+/// The misc section: reductions and their overloads, copysign, nonzero, get_diag, norms
+/// (with the default delta), axis-angle (a tuple), roll-pitch-yaw, twists, compose and
+/// decompose (a tuple), classification of quaternions and matrices, `lower_bound` (both
+/// overloads, through the fault context) and `sample_cdf` (a draw reading an array).
+#[wp::kernel]
+fn misc_builtins(x: Array<f32>, cdf: Array<f32>, out: Array<f32, 2>, ints: Array<i32>) {
+    let i = tid();
+    let a = x[i];
+    let v = vec3(a, 1.0 - a, a * a - 2.0);
+    let q = normalize(Quat::from_xyzw(0.1 * a, 0.2, -0.3, 1.0 - a));
+    let (axis, angle) = quat_to_axis_angle(q);
+    let e = quat_to_rpy(q);
+    let r = quat_rpy(a, 0.5 * a, -a);
+    let m = transform_compose(v, q, vec3(2.0, 0.5 + a * a, 1.0));
+    let (p, q2, s) = transform_decompose(m);
+    out[(i, 0)] = min(v) + max(v) * 2.0 + v.min_element() * 4.0 + copysign(a, -1.0);
+    out[(i, 1)] = norm_l1(v) + norm_l2(v) + norm_huber(v, 0.8) + norm_pseudo_huber(v);
+    out[(i, 2)] = dot(smooth_normalize(v, 1.5), axis) + angle + nonzero(a);
+    out[(i, 3)] = e.x + e.y * 2.0 + e.z * 4.0 + dot(r, q);
+    out[(i, 4)] = dot(quat_twist(normalize(v), q), r)
+        + quat_twist_angle(axis, r)
+        + quat_twist_angle_signed(axis, q);
+    out[(i, 5)] = dot(get_diag(m), vec4(1.0, 2.0, 3.0, 4.0)) + dot(p + s, v) + dot(q2, q);
+    out[(i, 6)] = div_approx(a, 3.0)
+        + inverse_approx(Mat2::from_cols(vec2(a, 1.0), vec2(0.5, 2.0)))
+            .x_axis
+            .y;
+    ints[i * 3] =
+        argmin(v) as i32 + 4 * argmax(v) as i32 + 16 * (if isnan(m) || isinf(q) { 1 } else { 0 });
+    ints[i * 3 + 1] = lower_bound(cdf, a) + 8 * lower_bound(cdf, 1, 4, a * 0.5);
+    let mut st = rand_init(11, i as i32);
+    ints[i * 3 + 2] = sample_cdf(&mut st, cdf) + 8 * sample_cdf(&mut st, cdf);
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -779,4 +813,28 @@ fn module_constants_match_the_cpu_backend() {
         src.contains(&format!("0x{:016x}", THIRD.to_bits())),
         "{src}"
     );
+}
+
+#[test]
+fn misc_builtins_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..30).map(|k| k as f32 * 0.137 - 1.9).collect();
+    // No NaN input: NaN payload signs depend on operand order (tests/cuda_host_cpp.rs covers NaN).
+    xs.extend([0.0, -0.0, 1.0, 2.5]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let cdf = wp::Array::from_slice(&[0.1f32, 0.35, 0.35, 0.6, 0.9, 1.0], &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 7), &dev).unwrap();
+    let ints = wp::Array::<i32>::zeros(n * 3, &dev).unwrap();
+    let args = [
+        Arg::F32s(&x),
+        Arg::F32s(&cdf),
+        Arg::F32Grid(&out),
+        Arg::I32s(&ints),
+    ];
+    let host = run_on_host::<misc_builtins>(&[n], &args);
+    wp::launch(misc_builtins, n, (&x, &cdf, &out, &ints), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
 }

@@ -1114,6 +1114,268 @@ fn linalg_cases(c: &mut Cases, rng: &mut Rng) {
     linalg_quat_cases!(c, rng, DQuat, DVec3, DMat3, f64);
 }
 
+// ----- wp_misc.h: more vector, quaternion and transform builtins -----
+
+macro_rules! misc_vec_cases {
+    ($c:expr, $rng:expr, $v:ident, $s:ident, float) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let ty = stringify!($v);
+        let n = $v::ZERO.to_array().len();
+        let mut vs: Vec<$v> = (0..8)
+            .map(|_| $v::from_array(std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        vs.push($v::ZERO);
+        vs.push($v::splat(-0.0));
+        vs.push($v::splat($s::NAN));
+        vs.push($v::from_array(std::array::from_fn(|i| {
+            if i == 0 {
+                $s::NAN
+            } else {
+                (n - i) as $s
+            }
+        })));
+        vs.push($v::from_array(std::array::from_fn(|i| {
+            if i + 1 == n {
+                $s::INFINITY
+            } else {
+                -2.0
+            }
+        })));
+        vs.push($v::splat(1.5)); // ties
+        for &a in &vs {
+            misc_reduce_cases!(c, ty, a);
+            c.push("norm_l1", ty, &[&a], toks(&b::norm_l1(a), Exact));
+            c.push("norm_l2", ty, &[&a], toks(&b::norm_l2(a), Exact));
+            for d in [1.0, 0.25, 3.0, 0.0, -2.0] {
+                let d: $s = d;
+                c.push(
+                    "norm_huber",
+                    ty,
+                    &[&a, &d],
+                    toks(&b::norm_huber(a, d), Exact),
+                );
+                c.push(
+                    "norm_pseudo_huber",
+                    ty,
+                    &[&a, &d],
+                    toks(&b::norm_pseudo_huber(a, d), Exact),
+                );
+                c.push(
+                    "smooth_normalize",
+                    ty,
+                    &[&a, &d],
+                    toks(&b::smooth_normalize(a, d), Exact),
+                );
+            }
+        }
+    }};
+    ($c:expr, $v:ident, $s:ident, int) => {{
+        let c: &mut Cases = $c;
+        let ty = stringify!($v);
+        let n = $v::ZERO.to_array().len();
+        for k in 0..6 {
+            let a = $v::from_array(std::array::from_fn(|i| {
+                [7 as $s, 3, 3, 9, 0, $s::MAX, $s::MIN, 5][(i * 3 + k) % 8]
+            }));
+            misc_reduce_cases!(c, ty, a);
+        }
+        let _ = n;
+    }};
+}
+
+macro_rules! misc_reduce_cases {
+    ($c:expr, $ty:expr, $a:expr) => {{
+        let a = $a;
+        $c.push("min_element", $ty, &[&a], toks(&b::min_element(a), Exact));
+        $c.push("max_element", $ty, &[&a], toks(&b::max_element(a), Exact));
+        $c.push("argmin", $ty, &[&a], toks(&b::argmin(a), Exact));
+        $c.push("argmax", $ty, &[&a], toks(&b::argmax(a), Exact));
+    }};
+}
+
+macro_rules! misc_quat_cases {
+    ($c:expr, $rng:expr, $q:ident, $v:ident, $m:ident, $m4:ident, $s:ident) => {{
+        let c: &mut Cases = $c;
+        let rng: &mut Rng = $rng;
+        let tr = c.tr;
+        let ty = stringify!($q);
+        let (vty, mty, m4ty) = (stringify!($v), stringify!($m), stringify!($m4));
+        let mut qs: Vec<$q> = Vec::new();
+        for k in 0..10 {
+            let q = $q::from_xyzw(rng.f() as $s, rng.f() as $s, rng.f() as $s, rng.f() as $s);
+            qs.push(if k < 6 { q.normalize() } else { q });
+        }
+        qs.push($q::IDENTITY);
+        qs.push($q::from_xyzw(0.0, 0.0, 0.0, -1.0));
+        qs.push($q::from_xyzw(0.0, 0.0, 0.0, 0.0));
+        qs.push($q::from_xyzw(0.0, 1.0, 0.0, 0.0)); // 180 degrees: pitch's clamp
+        qs.push($q::from_xyzw(0.0, -0.0, $s::NAN, 1.0));
+        qs.push($q::from_xyzw($s::INFINITY, 0.0, 0.0, 1.0));
+        let axes: Vec<$v> = vec![
+            $v::X,
+            $v::new(0.0, 0.6, 0.8),
+            $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s).normalize(),
+            $v::ZERO,
+        ];
+        for &a in &qs {
+            let (axis, angle) = b::quat_to_axis_angle(a);
+            c.push(
+                "q2aa",
+                ty,
+                &[&a],
+                [toks(&axis, Exact), toks(&angle, tr)].concat(),
+            );
+            c.push("q2rpy", ty, &[&a], toks(&b::quat_to_rpy(a), tr));
+            c.push("isfinite", ty, &[&a], toks(&(b::isfinite(a) as u32), Exact));
+            c.push("isnan", ty, &[&a], toks(&(b::isnan(a) as u32), Exact));
+            c.push("isinf", ty, &[&a], toks(&(b::isinf(a) as u32), Exact));
+            for &x in &axes {
+                c.push("qtwist", vty, &[&x, &a], toks(&b::quat_twist(x, a), Exact));
+                c.push(
+                    "qtwista",
+                    vty,
+                    &[&x, &a],
+                    toks(&b::quat_twist_angle(x, a), tr),
+                );
+                c.push(
+                    "qtwistas",
+                    vty,
+                    &[&x, &a],
+                    toks(&b::quat_twist_angle_signed(x, a), tr),
+                );
+            }
+            let p = $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s);
+            for sc in [
+                $v::ONE,
+                $v::new(2.0, 0.5, 3.0),
+                $v::new(rng.f() as $s, rng.f() as $s, rng.f() as $s),
+                $v::new(0.0, 1.0, -1.0),
+            ] {
+                let m = b::transform_compose(p, a, sc);
+                c.push("xcompose", vty, &[&p, &a, &sc], toks(&m, Exact));
+                let (dp, dq, ds) = b::transform_decompose(m);
+                c.push(
+                    "xdecompose",
+                    m4ty,
+                    &[&m],
+                    [toks(&dp, Exact), toks(&dq, Exact), toks(&ds, Exact)].concat(),
+                );
+            }
+        }
+        for [r, p, y] in [
+            [0.0, 0.0, 0.0],
+            [0.1, -0.2, 0.3],
+            [3.0, 1.5, -2.5],
+            [rng.f(), rng.f(), rng.f()],
+        ] {
+            let (r, p, y) = (r as $s, p as $s, y as $s);
+            c.push(
+                "qrpy",
+                stringify!($s),
+                &[&r, &p, &y],
+                toks(&b::quat_rpy::<$q>(r, p, y), tr),
+            );
+        }
+        let mut ms: Vec<$m> = (0..6)
+            .map(|_| $m::from_cols_array(&std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        ms.push($m::IDENTITY);
+        let mut nan = ms[0].to_cols_array();
+        nan[3] = $s::NAN;
+        ms.push($m::from_cols_array(&nan));
+        let mut inf = ms[1].to_cols_array();
+        inf[0] = $s::NEG_INFINITY;
+        ms.push($m::from_cols_array(&inf));
+        for &m in &ms {
+            c.push("get_diag", mty, &[&m], toks(&b::get_diag(m), Exact));
+            c.push(
+                "isfinite",
+                mty,
+                &[&m],
+                toks(&(b::isfinite(m) as u32), Exact),
+            );
+            c.push("isnan", mty, &[&m], toks(&(b::isnan(m) as u32), Exact));
+            c.push("isinf", mty, &[&m], toks(&(b::isinf(m) as u32), Exact));
+        }
+        // General 4x4 matrices (shear, zero columns, NaN) through decompose.
+        let mut g4: Vec<$m4> = (0..4)
+            .map(|_| $m4::from_cols_array(&std::array::from_fn(|_| rng.f() as $s)))
+            .collect();
+        g4.push($m4::ZERO);
+        g4.push($m4::from_cols_array(&std::array::from_fn(|i| {
+            if i == 5 {
+                $s::NAN
+            } else {
+                i as $s
+            }
+        })));
+        for &m in &g4 {
+            c.push("get_diag", m4ty, &[&m], toks(&b::get_diag(m), Exact));
+            let (dp, dq, ds) = b::transform_decompose(m);
+            c.push(
+                "xdecompose",
+                m4ty,
+                &[&m],
+                [toks(&dp, Exact), toks(&dq, Exact), toks(&ds, Exact)].concat(),
+            );
+        }
+    }};
+}
+
+fn misc_cases(c: &mut Cases, rng: &mut Rng) {
+    for (x, y) in [
+        (3.0f32, -1.0f32),
+        (-3.0, 1.0),
+        (2.5, -0.0),
+        (-0.0, 0.0),
+        (f32::NAN, -1.0),
+        (1.0, f32::NAN),
+        (f32::INFINITY, -2.0),
+    ] {
+        c.push(
+            "copysign",
+            "f32",
+            &[&x, &y],
+            toks(&b::copysign(x, y), Exact),
+        );
+        let (x, y) = (x as f64, y as f64);
+        c.push(
+            "copysign",
+            "f64",
+            &[&x, &y],
+            toks(&b::copysign(x, y), Exact),
+        );
+    }
+    for x in [0.0f32, -0.0, 1.5, -2.0, f32::NAN, f32::INFINITY, 1e-45] {
+        c.push("nonzero", "f32", &[&x], toks(&b::nonzero(x), Exact));
+        let x = x as f64;
+        c.push("nonzero", "f64", &[&x], toks(&b::nonzero(x), Exact));
+    }
+    for x in [0i32, -3, i32::MIN] {
+        c.push("nonzero", "i32", &[&x], toks(&b::nonzero(x), Exact));
+    }
+    for x in [0u64, 7] {
+        c.push("nonzero", "u64", &[&x], toks(&b::nonzero(x), Exact));
+    }
+    misc_vec_cases!(c, rng, Vec2, f32, float);
+    misc_vec_cases!(c, rng, Vec3, f32, float);
+    misc_vec_cases!(c, rng, Vec4, f32, float);
+    misc_vec_cases!(c, rng, DVec2, f64, float);
+    misc_vec_cases!(c, rng, DVec3, f64, float);
+    misc_vec_cases!(c, rng, DVec4, f64, float);
+    misc_vec_cases!(c, IVec2, i32, int);
+    misc_vec_cases!(c, IVec3, i32, int);
+    misc_vec_cases!(c, IVec4, i32, int);
+    misc_vec_cases!(c, UVec2, u32, int);
+    misc_vec_cases!(c, UVec3, u32, int);
+    misc_vec_cases!(c, UVec4, u32, int);
+    misc_quat_cases!(c, rng, Quat, Vec3, Mat3, Mat4, f32);
+    misc_quat_cases!(c, rng, DQuat, DVec3, DMat3, DMat4, f64);
+    misc_quat_cases!(c, rng, Quat, Vec3, Mat2, Mat4, f32);
+    misc_quat_cases!(c, rng, DQuat, DVec3, DMat2, DMat4, f64);
+}
+
 // ----- wp_svd.h: svd3, eig3, qr3, svd2 -----
 
 /// Matrices for the decompositions: random ones, and the edge cases the suite names
@@ -2195,6 +2457,7 @@ fn build_cases(device: bool) -> (Cases, usize, Vec<String>) {
     quat_cases!(&mut c, &mut rng, Quat, Vec3, f32);
     quat_cases!(&mut c, &mut rng, DQuat, DVec3, f64);
     linalg_cases(&mut c, &mut rng);
+    misc_cases(&mut c, &mut rng);
     rand_cases(&mut c, &mut rng, device);
     svd_cases(&mut c);
 

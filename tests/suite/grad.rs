@@ -32,6 +32,7 @@ backend_tests!(
     rng_draws_have_zero_gradient,
     gradcheck_transforms,
     gradcheck_decompositions,
+    gradcheck_misc,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -835,6 +836,10 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <crate::transforms::k_xform32 as wp::Kernel>::info(),
         <crate::transforms::k_bodies as wp::Kernel>::info(),
         <k_decomp_grad as wp::Kernel>::info(),
+        <k_misc_grad as wp::Kernel>::info(),
+        <crate::misc::k_lower_bound as wp::Kernel>::info(),
+        <crate::misc::k_sample_cdf as wp::Kernel>::info(),
+        <crate::misc::k_quats as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -1108,6 +1113,58 @@ fn gradcheck_decompositions(dev: &wp::Device) {
     let out = zeros::<f64, 1>(13, dev).with_grad().unwrap();
     let report = wp::gradcheck(
         || wp::launch(k_decomp_grad, 1, (&x, &out), dev),
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    assert!(report.max_rel_error < 1e-6, "{report:?}");
+}
+
+/// The differentiable builtins of the "misc" section, one per output, by `wp::gradcheck`
+/// against central differences (f64, at generic points: away from the norms' thresholds,
+/// with distinct vector lanes, unit and non-unit quaternions, a rigid motion with scales).
+#[wp::kernel]
+fn k_misc_grad(x: Array<f64>, out: Array<f64>) {
+    let v = DVec3::new(x[0], x[1], x[2]);
+    let w = DVec3::new(x[3], x[4], x[5]);
+    let q = DQuat::from_xyzw(x[6], x[7], x[8], x[9]);
+    let probe = DVec3::new(0.3, -0.7, 1.1);
+    let pq = DQuat::from_xyzw(0.2, -0.4, 0.5, 0.7);
+    out[0] = copysign(x[0], x[1]) + x[2].copysign(-1.0);
+    out[1] = min(v) + 2.0 * max(v) + w.min_element();
+    out[2] = dot(get_diag(DMat3::from_cols(v, w, probe)), probe);
+    out[3] = norm_l1(v) + norm_l2(w);
+    out[4] = norm_huber(v, 0.5) + norm_huber(w, x[10]);
+    out[5] = norm_pseudo_huber(v, x[10]) + norm_pseudo_huber(w);
+    out[6] = dot(smooth_normalize(v, x[10]), probe);
+    let (axis, angle) = quat_to_axis_angle(q);
+    out[7] = dot(axis, probe) + angle;
+    out[8] = dot(quat_rpy(x[0], x[1], x[2]), pq);
+    out[9] = dot(quat_to_rpy(normalize(q)), probe);
+    out[10] = dot(quat_twist(normalize(w), q), pq);
+    out[11] = quat_twist_angle(normalize(w), q) + quat_twist_angle_signed(v, q);
+    let m = transform_compose(v, normalize(q), w);
+    out[12] = ddot(
+        m,
+        DMat4::from_cols(
+            DVec4::new(0.3, 0.1, -0.2, 0.5),
+            DVec4::new(-0.4, 0.7, 0.2, 0.1),
+            DVec4::new(0.6, -0.3, 0.9, -0.8),
+            DVec4::new(0.2, 0.4, -0.6, 1.0),
+        ),
+    );
+    let (p, r, s) = transform_decompose(m);
+    out[13] = dot(p, probe) + dot(r, pq) + dot(s, probe);
+}
+
+fn gradcheck_misc(dev: &wp::Device) {
+    let xs = [0.7f64, -0.4, 1.3, 0.5, 1.1, -0.8, 0.3, -0.2, 0.6, 0.7, 0.9];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(14, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_misc_grad, 1, (&x, &out), dev),
         &[&x],
         &[&out],
         wp::GradcheckOptions::for_type::<f64>(),

@@ -76,6 +76,7 @@ mod funcs;
 mod generics;
 mod grad;
 mod launch;
+mod misc;
 mod params;
 mod rng;
 mod stability;

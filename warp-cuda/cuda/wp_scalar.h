@@ -449,4 +449,32 @@ WP_FN bool isnan(f16 x) { return isnan(f16_to_f32(x)); }
 WP_FN bool isinf(f16 x) { return isinf(f16_to_f32(x)); }
 WP_FN bool isfinite(f16 x) { return isfinite(f16_to_f32(x)); }
 
+// ----- isfinite / isnan / isinf of quaternions and matrices (warp-core builtins::misc):
+// every lane finite, some lane NaN, some lane infinite (the vector rules over vec_traits) -----
+#define WP_LANES_CLASSIFY(T)                                                   \
+  WP_FN bool isfinite(const T& v) {                                            \
+    bool r = true;                                                             \
+    for (int i = 0; i < vec_traits<T>::N; ++i) r = r && isfinite(vec_traits<T>::get(v, i)); \
+    return r;                                                                  \
+  }                                                                            \
+  WP_FN bool isnan(const T& v) {                                               \
+    bool r = false;                                                            \
+    for (int i = 0; i < vec_traits<T>::N; ++i) r = r || isnan(vec_traits<T>::get(v, i)); \
+    return r;                                                                  \
+  }                                                                            \
+  WP_FN bool isinf(const T& v) {                                               \
+    bool r = false;                                                            \
+    for (int i = 0; i < vec_traits<T>::N; ++i) r = r || isinf(vec_traits<T>::get(v, i)); \
+    return r;                                                                  \
+  }
+WP_LANES_CLASSIFY(Quat)
+WP_LANES_CLASSIFY(DQuat)
+WP_LANES_CLASSIFY(Mat2)
+WP_LANES_CLASSIFY(Mat3)
+WP_LANES_CLASSIFY(Mat4)
+WP_LANES_CLASSIFY(DMat2)
+WP_LANES_CLASSIFY(DMat3)
+WP_LANES_CLASSIFY(DMat4)
+#undef WP_LANES_CLASSIFY
+
 }  // namespace wp

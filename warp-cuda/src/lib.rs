@@ -50,6 +50,7 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_linalg.h", include_str!("../cuda/wp_linalg.h")),
     ("wp_transform.h", include_str!("../cuda/wp_transform.h")),
     ("wp_svd.h", include_str!("../cuda/wp_svd.h")),
+    ("wp_misc.h", include_str!("../cuda/wp_misc.h")),
     ("wp_atomic.h", include_str!("../cuda/wp_atomic.h")),
     ("wp_rand.h", include_str!("../cuda/wp_rand.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),

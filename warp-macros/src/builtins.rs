@@ -156,6 +156,8 @@ pub enum Pos {
     XformOfT,
     /// A tuple of these (results only: the decompositions, `svd3(a) -> (T, VecOfT, T)`).
     Tuple(&'static [Pos]),
+    /// The 4x4 matrix of `T`'s scalar (`transform_compose`).
+    Mat4OfT,
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -222,7 +224,10 @@ use Pos::*;
 const NUM_OR_VEC: &[Class] = &[Number, FloatVector, IntVector];
 const SIGNED: &[Class] = &[SignedNumber, SignedVector];
 const FLOAT: &[Class] = &[Float];
-const FLOAT_OR_VEC: &[Class] = &[Float, FloatVector];
+/// `isfinite`, `isnan`, `isinf`: float scalars, vectors, quaternions, matrices.
+const CLASSIFY: &[Class] = &[Float, FloatVector, Quaternion, Matrix];
+/// Float and integer vectors (the one-vector reductions).
+const VECS: &[Class] = &[FloatVector, IntVector];
 const FVEC: &[Class] = &[FloatVector];
 const NUMBER: &[Class] = &[Number];
 const VEC_OR_QUAT: &[Class] = &[FloatVector, IntVector, Quaternion];
@@ -301,9 +306,9 @@ table! {
     "smoothstep": FLOAT,        (T, T, T) -> T,          method = false, section = "scalar", grad = Adjoint;
     "degrees":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
     "radians":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "isfinite":   FLOAT_OR_VEC, (T) -> Bool,             method = false, section = "scalar", grad = Zero;
-    "isnan":      FLOAT_OR_VEC, (T) -> Bool,             method = false, section = "scalar", grad = Zero;
-    "isinf":      FLOAT_OR_VEC, (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    "isfinite":   CLASSIFY,     (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    "isnan":      CLASSIFY,     (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    "isinf":      CLASSIFY,     (T) -> Bool,             method = false, section = "scalar", grad = Zero;
     // `mod(a, b)` (`r#mod` in Rust source, as `mod` is a keyword) is lowered to the `%`
     // operator: truncated remainder for integers (a fault on zero), C `fmod` for floats, and
     // `%`'s adjoint. Its `rust`/`cuda` names are never emitted.
@@ -385,6 +390,32 @@ table! {
     "poisson_state": NO_T,      (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
     "noise":      NOISE,        (U32, T) -> F32,         method = false, section = "rand",   grad = Adjoint;
     "pnoise":     NOISE,        (U32, T, IntOfT) -> F32, method = false, section = "rand",   grad = Adjoint;
+    // More vector, quaternion and transform builtins (warp-core `builtins::misc`, wp_misc.h).
+    // `min(v)`/`max(v)` of one vector are `min_element`/`max_element` (glam's names), and
+    // `lower_bound(a, lo, hi, v)` is `lower_bound_range` (overloads by arity, see
+    // `front::lower`); the norms' `delta` defaults to 1 as in Warp ([`DEFAULT_LAST`]).
+    "copysign":   FLOAT,        (T, T) -> T,             method = true,  section = "misc",   grad = Adjoint;
+    "nonzero":    NUMBER,       (T) -> T,                method = false, section = "misc",   grad = Zero;
+    "min_element": VECS,        (T) -> ScalarOfT,        method = true,  section = "misc",   grad = Adjoint;
+    "max_element": VECS,        (T) -> ScalarOfT,        method = true,  section = "misc",   grad = Adjoint;
+    "argmin":     VECS,         (T) -> U32,              method = false, section = "misc",   grad = Zero;
+    "argmax":     VECS,         (T) -> U32,              method = false, section = "misc",   grad = Zero;
+    "get_diag":   MAT,          (T) -> VecOfT,           method = false, section = "misc",   grad = Adjoint;
+    "norm_l1":    FVEC,         (T) -> ScalarOfT,        method = false, section = "misc",   grad = Adjoint;
+    "norm_l2":    FVEC,         (T) -> ScalarOfT,        method = false, section = "misc",   grad = Adjoint;
+    "norm_huber": FVEC,         (T, ScalarOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
+    "norm_pseudo_huber": FVEC,  (T, ScalarOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
+    "smooth_normalize": FVEC,   (T, ScalarOfT) -> T,     method = false, section = "misc",   grad = Adjoint;
+    "quat_to_axis_angle": QUAT, (T) -> Tuple(&[Vec3OfT, ScalarOfT]), method = false, section = "misc", grad = Adjoint;
+    "quat_rpy":   FLOAT,        (T, T, T) -> QuatOfT,    method = false, section = "misc",   grad = Adjoint;
+    "quat_to_rpy": QUAT,        (T) -> VecOfT,           method = false, section = "misc",   grad = Adjoint;
+    "quat_twist": FVEC3,        (T, QuatOfT) -> QuatOfT, method = false, section = "misc",   grad = Adjoint;
+    "quat_twist_angle": FVEC3,  (T, QuatOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
+    "quat_twist_angle_signed": FVEC3, (T, QuatOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
+    "transform_compose": FVEC3, (T, QuatOfT, T) -> Mat4OfT, method = false, section = "misc", grad = Adjoint;
+    "transform_decompose": &[Matrix4], (T) -> Tuple(&[Vec3OfT, QuatOfT, Vec3OfT]), method = false, section = "misc", grad = Adjoint;
+    "lower_bound": NUMBER,      (ArrayOfT, T) -> I32,    method = false, section = "misc",   grad = Zero;
+    "lower_bound_range": NUMBER, (ArrayOfT, I32, I32, T) -> I32, method = false, section = "misc", grad = Zero;
 }
 
 /// Rows that are pieces of other builtins (see the "rand" rows): not callable by name.
@@ -393,7 +424,23 @@ pub const INTERNAL: &[&str] = &[
     "rand_pcg",
     "randf_range",
     "poisson_state",
+    "lower_bound_range",
 ];
+
+/// Builtins with a defaulted last argument (Warp's keyword defaults), supplied when a call
+/// leaves it out: the norms' `delta = 1.0`.
+pub const DEFAULT_LAST: &[(&str, &str)] = &[
+    ("norm_huber", "1.0"),
+    ("norm_pseudo_huber", "1.0"),
+    ("smooth_normalize", "1.0"),
+];
+
+/// Whether a builtin takes an array among its values (not an atomic): its CPU function gets
+/// the view by reference and returns a `KResult` (its reads are checked), its CUDA function
+/// takes the fault context last (`lower_bound`).
+pub fn reads_array(b: &Builtin) -> bool {
+    !b.is_atomic() && b.params.contains(&Pos::ArrayOfT)
+}
 
 /// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,
 /// `x.ln()` is `log(x)`). Each alias has Rust's meaning exactly: `round_ties_even` is `rint`,
@@ -573,6 +620,10 @@ impl Builtin {
                 .map(|s| Ty::Vector(s, 3))
                 .unwrap_or(Ty::Deferred),
             Pos::XformOfT => scalar.scalar().map(Ty::Transform).unwrap_or(Ty::Deferred),
+            Pos::Mat4OfT => scalar
+                .scalar()
+                .map(|s| Ty::Matrix(s, 4))
+                .unwrap_or(Ty::Deferred),
             // Results only (below).
             Pos::Tuple(_) => Ty::Deferred,
         };
@@ -994,6 +1045,70 @@ mod tests {
                 .ret,
             Ty::Quat(Scalar::F64)
         );
+    }
+
+    #[test]
+    fn misc_rows() {
+        let (v3, d3) = (Ty::Vector(Scalar::F32, 3), Ty::Vector(Scalar::F64, 3));
+        let (q, dq) = (Ty::Quat(Scalar::F32), Ty::Quat(Scalar::F64));
+        let r = lookup("transform_compose")
+            .unwrap()
+            .resolve(&[k(d3.clone()), k(dq.clone()), k(d3.clone())])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Matrix(Scalar::F64, 4));
+        let r = lookup("transform_decompose")
+            .unwrap()
+            .resolve(&[k(Ty::Matrix(Scalar::F32, 4))])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![v3.clone(), q.clone(), v3.clone()]));
+        let r = lookup("quat_to_axis_angle")
+            .unwrap()
+            .resolve(&[k(dq)])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![d3, Ty::Scalar(Scalar::F64)]));
+        let r = lookup("quat_rpy")
+            .unwrap()
+            .resolve(&[
+                ArgTy::Literal { float: true },
+                ArgTy::Literal { float: true },
+                ArgTy::Literal { float: true },
+            ])
+            .unwrap();
+        assert_eq!(r.ret, q);
+        let iv = Ty::Vector(Scalar::I32, 4);
+        assert_eq!(
+            lookup_method("min_element")
+                .unwrap()
+                .resolve(&[k(iv.clone())])
+                .unwrap()
+                .ret,
+            I32
+        );
+        assert_eq!(
+            lookup("argmax").unwrap().resolve(&[k(iv)]).unwrap().ret,
+            Ty::Scalar(Scalar::U32)
+        );
+        assert!(lookup("get_diag")
+            .unwrap()
+            .resolve(&[k(v3.clone())])
+            .is_err());
+        let arr = Ty::Array(Box::new(Ty::Scalar(Scalar::I64)), 1);
+        let r = lookup("lower_bound")
+            .unwrap()
+            .resolve(&[k(arr), ArgTy::Literal { float: false }])
+            .unwrap();
+        assert_eq!(r.params[1], Ty::Scalar(Scalar::I64));
+        assert!(reads_array(lookup("lower_bound_range").unwrap()));
+        assert!(!reads_array(lookup("atomic_add").unwrap()));
+        assert!(lookup_user("lower_bound_range").is_none());
+        for name in ["isfinite", "isnan", "isinf"] {
+            let b = lookup(name).unwrap();
+            assert!(b.resolve(&[k(Ty::Matrix(Scalar::F64, 2))]).is_ok());
+            assert!(b.resolve(&[k(Ty::Quat(Scalar::F32))]).is_ok());
+        }
+        for (name, _) in DEFAULT_LAST {
+            assert_eq!(lookup(name).unwrap().params.len(), 2, "{name}");
+        }
     }
 
     #[test]

@@ -121,6 +121,7 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         "linalg",
         "svd",
         "transform",
+        "misc",
         "atomic",
         "rand",
         "print",

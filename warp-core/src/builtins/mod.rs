@@ -18,10 +18,13 @@
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 //! * [`rand`]: Warp's random number generator ([`rand_init`], [`randf`], [`randn`], the
 //!   samplers, [`poisson`]) and [`noise`](mod@noise): Perlin noise ([`noise()`], [`pnoise`]).
+//! * [`misc`]: more vector, quaternion and transform builtins ([`copysign`], [`argmin`],
+//!   [`quat_to_axis_angle`], [`transform_compose`], ...) and [`lower_bound`].
 
 pub mod atomic;
 pub mod linalg;
 pub mod math;
+pub mod misc;
 pub mod noise;
 pub mod rand;
 pub mod special;
@@ -31,6 +34,7 @@ pub mod transform;
 pub use atomic::*;
 pub use linalg::*;
 pub use math::*;
+pub use misc::*;
 pub use noise::{noise, pnoise, NoiseArg};
 pub use rand::*;
 pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};

@@ -41,7 +41,10 @@ enum type_id { TYPE_LIST(ENUM_T) T_COUNT };
   X(sample_unit_hemisphere_surface) X(sample_unit_hemisphere) X(poisson) X(poisson_state)    \
   X(noise) X(pnoise) \
   X(xinv) X(xpoint) X(xvector) X(x2m) X(m2x) X(xget) \
-  X(svd3) X(eig3) X(qr3) X(svd2)
+  X(svd3) X(eig3) X(qr3) X(svd2) \
+  X(copysign) X(nonzero) X(min_element) X(max_element) X(argmin) X(argmax) X(get_diag)      \
+  X(norm_l1) X(norm_l2) X(norm_huber) X(norm_pseudo_huber) X(smooth_normalize) X(q2aa)     \
+  X(qrpy) X(q2rpy) X(qtwist) X(qtwista) X(qtwistas) X(xcompose) X(xdecompose)
 
 #define ENUM_OP(o) OP_##o,
 enum op_id { OP_LIST(ENUM_OP) OP_COUNT };
@@ -738,6 +741,65 @@ DRV_FN void run(const case_t& c, reader& r, out_t& o, ctx_t* ctx) {
       case OP_pnoise: { u32 a = get<u32>(r); T x = get<T>(r); P p = get<P>(r); put(o, wp::pnoise(a, x, p)); return; }
       default: break;
     }
+  }
+  // wp_misc.h (and the quaternion/matrix classification of wp_scalar.h)
+  if constexpr (is_float) {
+    if (op == OP_copysign) { T a = get<T>(r), b = get<T>(r); put(o, wp::copysign(a, b)); return; }
+    if (op == OP_qrpy) {
+      T a = get<T>(r), b = get<T>(r), d = get<T>(r);
+      put(o, wp::quat_rpy(a, b, d));
+      return;
+    }
+  }
+  if constexpr (is_int || is_float) {
+    if (op == OP_nonzero) { T a = get<T>(r); put(o, wp::nonzero(a)); return; }
+  }
+  if constexpr (is_vec) {
+    switch (op) {
+      case OP_min_element: { T a = get<T>(r); put(o, wp::min_element(a)); return; }
+      case OP_max_element: { T a = get<T>(r); put(o, wp::max_element(a)); return; }
+      case OP_argmin: { T a = get<T>(r); put(o, wp::argmin(a)); return; }
+      case OP_argmax: { T a = get<T>(r); put(o, wp::argmax(a)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_fvec) {
+    switch (op) {
+      case OP_norm_l1: { T a = get<T>(r); put(o, wp::norm_l1(a)); return; }
+      case OP_norm_l2: { T a = get<T>(r); put(o, wp::norm_l2(a)); return; }
+      case OP_norm_huber: { T a = get<T>(r); S d = get<S>(r); put(o, wp::norm_huber(a, d)); return; }
+      case OP_norm_pseudo_huber: { T a = get<T>(r); S d = get<S>(r); put(o, wp::norm_pseudo_huber(a, d)); return; }
+      case OP_smooth_normalize: { T a = get<T>(r); S d = get<S>(r); put(o, wp::smooth_normalize(a, d)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_v3 && num<S>::is_float) {
+    typedef typename detail::remove_cvref<decltype(wp::quat_rpy(S{}, S{}, S{}))>::type Q;
+    switch (op) {
+      case OP_qtwist: { T a = get<T>(r); Q q = get<Q>(r); put(o, wp::quat_twist(a, q)); return; }
+      case OP_qtwista: { T a = get<T>(r); Q q = get<Q>(r); put(o, wp::quat_twist_angle(a, q)); return; }
+      case OP_qtwistas: { T a = get<T>(r); Q q = get<Q>(r); put(o, wp::quat_twist_angle_signed(a, q)); return; }
+      case OP_xcompose: { T p = get<T>(r); Q q = get<Q>(r); T s = get<T>(r); put(o, wp::transform_compose(p, q, s)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_mat || is_quat) {
+    switch (op) {
+      case OP_isfinite: { T a = get<T>(r); put(o, (u32)wp::isfinite(a)); return; }
+      case OP_isnan: { T a = get<T>(r); put(o, (u32)wp::isnan(a)); return; }
+      case OP_isinf: { T a = get<T>(r); put(o, (u32)wp::isinf(a)); return; }
+      default: break;
+    }
+  }
+  if constexpr (is_mat) {
+    if (op == OP_get_diag) { T a = get<T>(r); put(o, wp::get_diag(a)); return; }
+    if constexpr (mat_traits<T>::N == 4) {
+      if (op == OP_xdecompose) { T a = get<T>(r); auto t = wp::transform_decompose(a); put(o, t.f0); put(o, t.f1); put(o, t.f2); return; }
+    }
+  }
+  if constexpr (is_quat) {
+    if (op == OP_q2aa) { T a = get<T>(r); auto t = wp::quat_to_axis_angle(a); put(o, t.f0); put(o, t.f1); return; }
+    if (op == OP_q2rpy) { T a = get<T>(r); put(o, wp::quat_to_rpy(a)); return; }
   }
   if constexpr (is_int || is_float || is_fvec) {
     if (op == OP_atomic_add || op == OP_atomic_sub || op == OP_atomic_min || op == OP_atomic_max) {

@@ -216,7 +216,9 @@ impl<'a> Emitter<'a> {
                 decl(b)?
             )),
             Op::Unary(UnOp::Neg, a) => Some(format!("decltype(-{})", decl(a)?)),
-            Op::Builtin { builtin, args } if !builtin.is_atomic() => {
+            Op::Builtin { builtin, args }
+                if !builtin.is_atomic() && !crate::builtins::reads_array(builtin) =>
+            {
                 let args: Option<Vec<String>> = args.iter().map(|a| decl(*a)).collect();
                 Some(format!("decltype({}({}))", builtin.cuda, args?.join(", ")))
             }
@@ -666,6 +668,10 @@ impl<'a> Emitter<'a> {
                     let idx = self.index(&args[1..vals_at]);
                     let vals: Vec<String> = args[vals_at..].iter().map(|v| self.var(*v)).collect();
                     format!("{}({a}, {idx}, {}, __ctx)", builtin.cuda, vals.join(", "))
+                } else if crate::builtins::reads_array(builtin) {
+                    // `lower_bound(a, .., __ctx)`: checked reads of the array.
+                    let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                    format!("{}({}, __ctx)", builtin.cuda, args.join(", "))
                 } else {
                     let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                     format!("{}({})", builtin.cuda, args.join(", "))

@@ -1913,8 +1913,20 @@ impl Lowerer {
             if let Some(v) = self.rng_call(&last, c, want, span)? {
                 return Ok(v);
             }
+            if let Some(v) = self.builtin_alias(&last, c, want, span)? {
+                return Ok(v);
+            }
             if let Some(b) = builtins::lookup_user(&last) {
-                let args: Vec<&Expr> = c.args.iter().collect();
+                let mut args: Vec<&Expr> = c.args.iter().collect();
+                // Warp's keyword defaults (`norm_huber(v)` is `norm_huber(v, 1.0)`).
+                let default: Option<Expr> = builtins::DEFAULT_LAST
+                    .iter()
+                    .find(|(n, _)| *n == b.name)
+                    .filter(|_| args.len() + 1 == b.params.len())
+                    .map(|(_, lit)| syn::parse_str(lit).expect("a literal"));
+                if let Some(d) = &default {
+                    args.push(d);
+                }
                 let v = self.builtin_call(b, &args, want, span)?;
                 if let (Ty::Tuple(_), false) = (self.ty(v), tuple_ok) {
                     return err(
@@ -1968,6 +1980,57 @@ impl Lowerer {
             Ty::Deferred,
             span,
         ))
+    }
+
+    /// Warp's overloads by arity and its approximate operations, in terms of other rows:
+    /// `min(v)`/`max(v)` of one vector are `min_element`/`max_element`;
+    /// `lower_bound(a, lo, hi, v)` is `lower_bound_range`; `div_approx(a, b)` is `a / b` and
+    /// `inverse_approx(m)` is `inverse(m)` (exact on both backends: see the builtin
+    /// reference).
+    fn builtin_alias(
+        &mut self,
+        name: &str,
+        c: &syn::ExprCall,
+        want: Option<&Ty>,
+        span: Span,
+    ) -> R<Option<VarId>> {
+        let args: Vec<&Expr> = c.args.iter().collect();
+        let row = |n: &str| builtins::lookup(n).expect("in the table");
+        match (name, args.len()) {
+            ("min", 1) => self.builtin_call(row("min_element"), &args, want, span).map(Some),
+            ("max", 1) => self.builtin_call(row("max_element"), &args, want, span).map(Some),
+            ("lower_bound", 4) => self
+                .builtin_call(row("lower_bound_range"), &args, want, span)
+                .map(Some),
+            ("lower_bound", n) if n != 2 => err(
+                span,
+                format!("`lower_bound` takes an array and a value, or an array, a range and a value (`lower_bound(a, v)`, `lower_bound(a, lo, hi, v)`), found {n} argument(s)"),
+            ),
+            ("div_approx", 2) => {
+                let (a, b) = (args[0], args[1]);
+                let e: Expr = syn::parse_quote_spanned!(span=> (#a) / (#b));
+                let v = self.expr(&e, want)?;
+                match self.ty(v).scalar() {
+                    Some(s) if !s.is_float() => err(
+                        span,
+                        format!("`div_approx` divides floats, found `{}`", self.ty(v)),
+                    ),
+                    _ => Ok(Some(v)),
+                }
+            }
+            ("div_approx", n) => err(span, format!("`div_approx` takes 2 arguments, found {n}")),
+            ("inverse_approx", _) => {
+                let v = self.builtin_call(row("inverse"), &args, want, span)?;
+                match self.ty(v) {
+                    Ty::Matrix(..) | Ty::Deferred => Ok(Some(v)),
+                    t => err(
+                        span,
+                        format!("`inverse_approx` takes a matrix (Mat2-4, DMat2-4), found `{t}`"),
+                    ),
+                }
+            }
+            _ => Ok(None),
+        }
     }
 
     fn construct(&mut self, ty: Ty, ctor: &str, c: &syn::ExprCall, span: Span) -> R<VarId> {
@@ -2088,6 +2151,25 @@ impl Lowerer {
                 },
             }
         }
+        // A builtin reading an array (`lower_bound`): a 1-D array itself, not a view.
+        if builtins::reads_array(b) {
+            match self.ty(out[0]) {
+                Ty::Array(_, 1) if !self.is_view(out[0]) => {}
+                Ty::Array(_, 1) => {
+                    return err(
+                        args[0].span(),
+                        format!("`{}` searches an array, not a view: pass the array and a range, `lower_bound(a, lo, hi, value)`", b.name),
+                    )
+                }
+                Ty::Deferred => {}
+                t => {
+                    return err(
+                        args[0].span(),
+                        format!("`{}` searches a 1-D array, found `{t}`", b.name),
+                    )
+                }
+            }
+        }
         // An atomic on a view: on the viewed array, at the full index.
         if b.is_atomic() && self.is_view(out[0]) {
             let n_index = out.len() - 1 - b.atomic_values();
@@ -2177,6 +2259,8 @@ fn tuple_hint(name: &str) -> String {
     let names = match name {
         "eig3" => "(q, d)",
         "qr3" => "(q, r)",
+        "quat_to_axis_angle" => "(axis, angle)",
+        "transform_decompose" => "(p, q, s)",
         _ => "(u, sigma, v)",
     };
     format!("let {names} = {name}(a);")

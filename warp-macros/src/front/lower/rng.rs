@@ -93,6 +93,7 @@ impl Lowerer {
                     })
             }
             "poisson" => self.rng_draw(name, 0, &args, span).map(Some),
+            "sample_cdf" => self.rng_draw(name, 1, &args, span).map(Some),
             _ => match DRAWS.iter().find(|d| d.0 == name) {
                 Some(&(_, k)) => self.rng_draw(name, k, &args, span).map(Some),
                 None => Ok(None),
@@ -134,7 +135,12 @@ impl Lowerer {
             );
         }
         // Which extra arguments, of which types.
+        let cdf = [Ty::Array(Box::new(F32), 1)];
         let extra: &[Ty] = match (name, args.len() - 1) {
+            ("sample_cdf", 1) => &cdf,
+            ("sample_cdf", _) => {
+                return err(span, "`sample_cdf` takes the state and a cumulative distribution: `sample_cdf(&mut state, cdf)` with `cdf: Array<f32>`")
+            }
             ("randi", 0) | ("randu", 0) | ("randf", 0) => &[],
             ("randi", 2) => &[I32, I32],
             ("randu", 2) => &[U32, U32],
@@ -221,6 +227,25 @@ impl Lowerer {
                     r
                 };
                 (r, t)
+            }
+            ("sample_cdf", _) => {
+                // Warp's: `lower_bound(cdf, randf(state))`, one step.
+                if self.is_view(xs[0]) {
+                    return err(
+                        args[1].span(),
+                        "`sample_cdf` searches an array, not a view: pass the array",
+                    );
+                }
+                let u = call(self, "randf", vec![pre]);
+                let r = self.def(
+                    Op::Builtin {
+                        builtin: row("lower_bound"),
+                        args: vec![xs[0], u],
+                    },
+                    I32,
+                    span,
+                );
+                (r, pcg(self, pre))
             }
             ("poisson", _) => {
                 let r = call(self, "poisson", vec![pre, xs[0]]);
