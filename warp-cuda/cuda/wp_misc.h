@@ -22,8 +22,15 @@
 namespace wp {
 
 // ----- scalars -----
-WP_FN f32 copysign(f32 x, f32 y) { return ::copysignf(x, y); }
-WP_FN f64 copysign(f64 x, f64 y) { return ::copysign(x, y); }
+// On the sign bits, as IEEE and Rust define it: CUDA's copysign leaves a NaN's sign alone
+// (measured on sm_90), which would make the backends disagree on NaN inputs.
+WP_FN f32 copysign(f32 x, f32 y) {
+  return f32_from_bits((f32_to_bits(x) & 0x7fffffffu) | (f32_to_bits(y) & 0x80000000u));
+}
+WP_FN f64 copysign(f64 x, f64 y) {
+  return f64_from_bits((f64_to_bits(x) & 0x7fffffffffffffffull) |
+                       (f64_to_bits(y) & 0x8000000000000000ull));
+}
 
 template <typename T>
 WP_FN T nonzero(T x) {
