@@ -277,6 +277,13 @@ const LOOSE_ON_GPU: [&str; 19] = [
     "adj_acos",
 ];
 
+/// Adjoints whose GPU results amplify the forward function's error: `adj_erfinv`/`adj_erfcinv`
+/// multiply by `exp(r²)` with `r` the inverse error function's value, whose relative error
+/// becomes `2r²` times larger there (about 11 at `erfcinv(1e-3)`, 24 at `1e-6`). CUDA documents
+/// `erfinvf` within 2 ulp and `erfcinvf` within 4: so 128 ulp of the result's binade for these
+/// (measured on an H200: 39 ulp at `erfcinv(1e-3)` in f32), where 8 suffice elsewhere.
+const ILL_CONDITIONED_ON_GPU: [&str; 2] = ["adj_erfinv", "adj_erfcinv"];
+
 /// The adjoints compared within `LOOSE_ON_GPU`'s tolerance on the host too: Rust's `f32::cbrt`
 /// and `f64::cbrt` no longer call glibc but the standard library's own (correctly rounded)
 /// implementation, while C++'s `cbrt` is glibc's (within 1 ulp), so `cbrt(x)` itself may differ
@@ -285,8 +292,9 @@ const LOOSE_ON_GPU: [&str; 19] = [
 const LOOSE_ON_HOST: [&str; 1] = ["adj_cbrt"];
 
 /// Same bits (any NaN matches any NaN: payloads depend on operand order, which compilers may
-/// swap), or within the GPU tolerance above when `loose`.
-fn tok_matches(want: Tok, got: &str, loose: bool) -> bool {
+/// swap), or within `ulps` units of the result's binade (the GPU tolerances above) when
+/// `ulps > 0`.
+fn tok_matches(want: Tok, got: &str, ulps: f64) -> bool {
     let Ok(g) = u64::from_str_radix(got, 16) else {
         return false;
     };
@@ -296,9 +304,9 @@ fn tok_matches(want: Tok, got: &str, loose: bool) -> bool {
             if w.is_nan() || g.is_nan() {
                 return w.is_nan() && g.is_nan();
             }
-            if loose && w.is_finite() && g.is_finite() {
+            if ulps > 0.0 && w.is_finite() && g.is_finite() {
                 let scale = $t::from_bits(w.abs().max(8.0).to_bits() & $exp_mask);
-                return (w - g).abs() <= 8.0 * scale * $t::EPSILON;
+                return (w - g).abs() <= ulps as $t * scale * $t::EPSILON;
             }
             w.to_bits() == g.to_bits()
         }};
@@ -1413,10 +1421,16 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     for ((op, line, want), g) in s.cases.iter().zip(&got) {
         let name = &s.ops[*op].0;
         let listed = |list: &[&str]| list.iter().any(|f| name.starts_with(&format!("wp::{f} ")));
-        let loose = (gpu && listed(&LOOSE_ON_GPU)) || listed(&LOOSE_ON_HOST);
+        let ulps = if gpu && listed(&ILL_CONDITIONED_ON_GPU) {
+            128.0
+        } else if (gpu && listed(&LOOSE_ON_GPU)) || listed(&LOOSE_ON_HOST) {
+            8.0
+        } else {
+            0.0
+        };
         let gt: Vec<&str> = g.split_whitespace().collect();
         let ok =
-            gt.len() == want.len() && want.iter().zip(&gt).all(|(w, g)| tok_matches(*w, g, loose));
+            gt.len() == want.len() && want.iter().zip(&gt).all(|(w, g)| tok_matches(*w, g, ulps));
         if !ok {
             *by_op.entry(name).or_default() += 1;
             if failures.len() < 30 {

@@ -125,8 +125,11 @@ enum Tol {
     Exact,
     /// At most this many ulps apart (+0 and -0 are 0 apart).
     Ulps(u64),
+    /// At most this far apart: for results whose components share one scale (a quaternion's
+    /// norm), where a component near zero has ulps far finer than the result's error.
+    Abs(f64),
 }
-use Tol::{Exact, Ulps};
+use Tol::{Abs, Exact, Ulps};
 
 #[derive(Clone, Debug)]
 enum Tok {
@@ -232,6 +235,7 @@ fn tok_matches(want: &Tok, got: &str) -> bool {
             match tol {
                 Exact => w.to_bits() == g.to_bits(),
                 Ulps(n) => ulps32(w, g) <= n,
+                Abs(d) => (w as f64 - g as f64).abs() <= d,
             }
         }
         Tok::F64(w, tol) => {
@@ -242,6 +246,7 @@ fn tok_matches(want: &Tok, got: &str) -> bool {
             match tol {
                 Exact => w.to_bits() == g.to_bits(),
                 Ulps(n) => ulps64(w, g) <= n,
+                Abs(d) => (w - g).abs() <= d,
             }
         }
         Tok::Word(_) => unreachable!(),
@@ -937,13 +942,24 @@ macro_rules! linalg_quat_cases {
             );
             for &w in &qs {
                 c.push("dot", ty, &[&a, &w], toks(&b::dot(a, w), Exact));
+                // On a GPU, slerp's sin/acos differ by a few ulps, which reach every component
+                // at the scale of the quaternions' norms: 16 eps of that scale, normwise
+                // (measured on an H200: 42 of 1,200 cases beyond 4 ulps componentwise, all
+                // on components far below the norm).
+                let slerp_tol = match tr {
+                    Ulps(n) if n > 2 => {
+                        let scale = a.length().max(w.length()).max(1.0) as f64;
+                        Abs(16.0 * <$s>::EPSILON as f64 * scale)
+                    }
+                    other => other,
+                };
                 for t in [0.0, 0.25, 1.0] {
                     let t: $s = t;
                     c.push(
                         "slerp",
                         ty,
                         &[&a, &w, &t],
-                        toks(&b::quat_slerp(a, w, t), tr),
+                        toks(&b::quat_slerp(a, w, t), slerp_tol),
                     );
                 }
             }
