@@ -18,6 +18,7 @@ backend_tests!(
     lower_bound_and_sample_cdf,
     lower_bound_faults,
     approximate_operations,
+    block_dim_of_the_launch,
 );
 
 // ------------------------------------------------------------------------------------------
@@ -702,4 +703,23 @@ fn approximate_operations(dev: &wp::Device) {
             );
         }
     }
+}
+
+#[wp::kernel]
+fn k_block_dim(out: Array<i32>) {
+    let i = tid();
+    out[i] = block_dim();
+}
+
+/// `block_dim()`: the CUDA block size the launch used (`config::cuda_block_dim`); 1 on the CPU.
+fn block_dim_of_the_launch(dev: &wp::Device) {
+    let out = zeros::<i32, 1>(300, dev);
+    wp::launch(k_block_dim, 300, (&out,), dev).unwrap();
+    let want = if dev.is_cpu() {
+        1
+    } else {
+        wp::config::cuda_block_dim() as i32
+    };
+    assert!(want > 1 || dev.is_cpu());
+    assert_eq!(host(&out), vec![want; 300]);
 }

@@ -4,6 +4,7 @@
 //
 //   copysign(x, y)             f32, f64: x's magnitude with y's sign bit.
 //   nonzero(x)                 every integer and float scalar: x != 0 ? 1 : 0.
+//   block_dim()                threads per block of the launch (1 on the host, as on the CPU).
 //   min_element(v), max_element(v)   float and integer vectors: min/max folded from lane 0.
 //   argmin(v), argmax(v)       u32: the first strictly better non-NaN lane, from the first
 //                              non-NaN one; 0 when every lane is NaN.
@@ -32,6 +33,13 @@ WP_FN f64 copysign(f64 x, f64 y) {
                        (f64_to_bits(y) & 0x8000000000000000ull));
 }
 
+WP_FN i32 block_dim() {
+#if defined(__CUDA_ARCH__)
+  return (i32)blockDim.x;
+#else
+  return 1;
+#endif
+}
 template <typename T>
 WP_FN T nonzero(T x) {
   return x != (T)0 ? (T)1 : (T)0;

@@ -396,6 +396,7 @@ table! {
     // `front::lower`); the norms' `delta` defaults to 1 as in Warp ([`DEFAULT_LAST`]).
     "copysign":   FLOAT,        (T, T) -> T,             method = true,  section = "misc",   grad = Adjoint;
     "nonzero":    NUMBER,       (T) -> T,                method = false, section = "misc",   grad = Zero;
+    "block_dim":  NO_T,         () -> I32,               method = false, section = "misc",   grad = Zero;
     "min_element": VECS,        (T) -> ScalarOfT,        method = true,  section = "misc",   grad = Adjoint;
     "max_element": VECS,        (T) -> ScalarOfT,        method = true,  section = "misc",   grad = Adjoint;
     "argmin":     VECS,         (T) -> U32,              method = false, section = "misc",   grad = Zero;

@@ -126,6 +126,14 @@ pub fn copysign<F: CopySign>(x: F, y: F) -> F {
     x.w_copysign(y)
 }
 
+/// The number of threads per block of the launch: 1 on the CPU, where a launch has no blocks
+/// (Warp's CPU value too); the CUDA library returns `blockDim.x`
+/// (`config::cuda_block_dim`).
+#[inline(always)]
+pub fn block_dim() -> i32 {
+    1
+}
+
 /// `1` if `x != 0`, else `0` (NaN gives 1, `-0.0` gives 0).
 #[inline(always)]
 pub fn nonzero<T: Scalar>(x: T) -> T {
