@@ -1448,18 +1448,18 @@ WP_FN R adj_svd_rows(const R& u, const S* s, const R& v, const R& gu, const S* g
     namespace d = detail::svd;                                                                \
     d::rows3<S> u, v;                                                                         \
     S s[3];                                                                                   \
-    d::svd3_rows(d::to_rows3(a), u, s, v);                                                    \
+    d::svd3_rows(d::to_rows<3>(a), u, s, v);                                                    \
     const S gs[3] = {g.f1.x, g.f1.y, g.f1.z};                                                 \
     const d::rows3<S> total = d::adj_svd_rows<S, 3>(                                          \
-        u, s, v, d::to_rows3(g.f0), gs, d::to_rows3(g.f2), d::mul3<S>, d::mul3_tn<S>,         \
+        u, s, v, d::to_rows<3>(g.f0), gs, d::to_rows<3>(g.f2), d::mul3<S>, d::mul3_tn<S>,         \
         d::mul3_nt<S>);                                                                       \
-    adj_accum(adj_a, d::from_rows3<M>(total));                                                \
+    adj_accum(adj_a, d::from_rows<M>(total));                                                \
   }                                                                                           \
   WP_FN void adj_eig3(const M& a, M& adj_a, const tuple_t<M, V>& g) {                         \
     namespace d = detail::svd;                                                                \
     d::rows3<S> q;                                                                            \
     S e[3];                                                                                   \
-    d::eig3_rows(d::to_rows3(a), q, e);                                                       \
+    d::eig3_rows(d::to_rows<3>(a), q, e);                                                       \
     const S gd[3] = {g.f1.x, g.f1.y, g.f1.z};                                                 \
     const S one = (S)1, z = (S)0;                                                             \
     const S f01 = one / d::gap(e[1] - e[0]);                                                  \
@@ -1468,15 +1468,15 @@ WP_FN R adj_svd_rows(const R& u, const S* s, const R& v, const R& gu, const S* g
     const S f[3][3] = {{z, f01, f02}, {-f01, z, f12}, {-f02, -f12, z}};                       \
     const S dbar[3][3] = {{gd[0], z, z}, {z, gd[1], z}, {z, z, gd[2]}};                       \
     d::rows3<S> h, inner;                                                                     \
-    d::zip_rows(f, d::mul3_tn(q, d::to_rows3(g.f0)).m, h.m, d::mul_<S>);                      \
+    d::zip_rows(f, d::mul3_tn(q, d::to_rows<3>(g.f0)).m, h.m, d::mul_<S>);                      \
     d::zip_rows(dbar, h.m, inner.m, d::add_<S>);                                              \
-    adj_accum(adj_a, d::from_rows3<M>(d::mul3(q, d::mul3_nt(inner, q))));                     \
+    adj_accum(adj_a, d::from_rows<M>(d::mul3(q, d::mul3_nt(inner, q))));                     \
   }                                                                                           \
   WP_FN void adj_qr3(const M& a, M& adj_a, const tuple_t<M, M>& g) {                          \
     namespace d = detail::svd;                                                                \
     d::rows3<S> q, r;                                                                         \
-    d::qr_rows(d::to_rows3(a), q, r);                                                         \
-    const d::rows3<S> gq = d::to_rows3(g.f0), gr = d::to_rows3(g.f1);                         \
+    d::qr_rows(d::to_rows<3>(a), q, r);                                                         \
+    const d::rows3<S> gq = d::to_rows<3>(g.f0), gr = d::to_rows<3>(g.f1);                         \
     d::rows3<S> m, c, x, rt;                                                                  \
     d::zip_rows(d::mul3_nt(r, gr).m, d::mul3_tn(gq, q).m, m.m, d::sub_<S>);                   \
     for (int i = 0; i < 3; ++i)                                                               \
@@ -1485,8 +1485,8 @@ WP_FN R adj_svd_rows(const R& u, const S* s, const R& v, const R& gu, const S* g
         rt.m[i][j] = r.m[j][i];                                                               \
       }                                                                                       \
     d::zip_rows(gq.m, d::mul3(q, c).m, x.m, d::add_<S>);                                      \
-    const d::rows3<S> inv = d::to_rows3(inverse(d::from_rows3<M>(rt)));                       \
-    adj_accum(adj_a, d::from_rows3<M>(d::mul3(x, inv)));                                      \
+    const d::rows3<S> inv = d::to_rows<3>(inverse(d::from_rows<M>(rt)));                       \
+    adj_accum(adj_a, d::from_rows<M>(d::mul3(x, inv)));                                      \
   }
 WP_ADJ_SVD3(Mat3, Vec3, f32)
 WP_ADJ_SVD3(DMat3, DVec3, f64)
@@ -1497,12 +1497,12 @@ WP_ADJ_SVD3(DMat3, DVec3, f64)
     namespace d = detail::svd;                                                                \
     d::rows2<S> u, v;                                                                         \
     S s[2];                                                                                   \
-    d::svd2_rows(d::to_rows2(a), u, s, v);                                                    \
+    d::svd2_rows(d::to_rows<2>(a), u, s, v);                                                    \
     const S gs[2] = {g.f1.x, g.f1.y};                                                         \
     const d::rows2<S> total = d::adj_svd_rows<S, 2>(                                          \
-        u, s, v, d::to_rows2(g.f0), gs, d::to_rows2(g.f2), d::mul2<S>, d::mul2_tn<S>,         \
+        u, s, v, d::to_rows<2>(g.f0), gs, d::to_rows<2>(g.f2), d::mul2<S>, d::mul2_tn<S>,         \
         d::mul2_nt<S>);                                                                       \
-    adj_accum(adj_a, d::from_rows2<M>(total));                                                \
+    adj_accum(adj_a, d::from_rows<M>(total));                                                \
   }
 WP_ADJ_SVD2(Mat2, Vec2, f32)
 WP_ADJ_SVD2(DMat2, DVec2, f64)

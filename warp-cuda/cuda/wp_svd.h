@@ -54,41 +54,29 @@ template <typename S> WP_FN S cstar() { return (S)0.9238795325112867; }
 template <typename S> WP_FN S sstar() { return (S)0.3826834323650898; }
 template <typename S> WP_FN S sqrt1_2() { return (S)0.7071067811865476; }
 
-template <typename S>
-struct rows3 {
-  S m[3][3];
+/// A square matrix as rows (m[row][col]): the decompositions' working form.
+template <typename S, int N>
+struct rows {
+  S m[N][N];
 };
 template <typename S>
-struct rows2 {
-  S m[2][2];
-};
+using rows3 = rows<S, 3>;
+template <typename S>
+using rows2 = rows<S, 2>;
 
-template <typename M>
-WP_FN rows3<typename vec_traits<M>::scalar> to_rows3(const M& a) {
-  rows3<typename vec_traits<M>::scalar> r;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) r.m[i][j] = vec_traits<M>::get(a, j * 3 + i);
+/// A glam (column-major) matrix as rows, and back.
+template <int N, typename M>
+WP_FN rows<typename vec_traits<M>::scalar, N> to_rows(const M& a) {
+  rows<typename vec_traits<M>::scalar, N> r;
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < N; ++j) r.m[i][j] = vec_traits<M>::get(a, j * N + i);
   return r;
 }
-template <typename M>
-WP_FN M from_rows3(const rows3<typename vec_traits<M>::scalar>& r) {
+template <typename M, int N>
+WP_FN M from_rows(const rows<typename vec_traits<M>::scalar, N>& r) {
   M a;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) vec_traits<M>::at(a, j * 3 + i) = r.m[i][j];
-  return a;
-}
-template <typename M>
-WP_FN rows2<typename vec_traits<M>::scalar> to_rows2(const M& a) {
-  rows2<typename vec_traits<M>::scalar> r;
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) r.m[i][j] = vec_traits<M>::get(a, j * 2 + i);
-  return r;
-}
-template <typename M>
-WP_FN M from_rows2(const rows2<typename vec_traits<M>::scalar>& r) {
-  M a;
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) vec_traits<M>::at(a, j * 2 + i) = r.m[i][j];
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < N; ++j) vec_traits<M>::at(a, j * N + i) = r.m[i][j];
   return a;
 }
 
@@ -366,20 +354,20 @@ WP_FN void svd2_rows(const rows2<S>& a, rows2<S>& u, S* sigma, rows2<S>& v) {
   WP_FN tuple_t<M, V, M> svd3(const M& a) {                                                   \
     detail::svd::rows3<S> u, v;                                                               \
     S s[3];                                                                                   \
-    detail::svd::svd3_rows(detail::svd::to_rows3(a), u, s, v);                                \
-    return tuple_t<M, V, M>{detail::svd::from_rows3<M>(u), V##_new(s[0], s[1], s[2]),         \
-                            detail::svd::from_rows3<M>(v)};                                   \
+    detail::svd::svd3_rows(detail::svd::to_rows<3>(a), u, s, v);                                \
+    return tuple_t<M, V, M>{detail::svd::from_rows<M>(u), V##_new(s[0], s[1], s[2]),         \
+                            detail::svd::from_rows<M>(v)};                                   \
   }                                                                                           \
   WP_FN tuple_t<M, V> eig3(const M& a) {                                                      \
     detail::svd::rows3<S> q;                                                                  \
     S d[3];                                                                                   \
-    detail::svd::eig3_rows(detail::svd::to_rows3(a), q, d);                                   \
-    return tuple_t<M, V>{detail::svd::from_rows3<M>(q), V##_new(d[0], d[1], d[2])};           \
+    detail::svd::eig3_rows(detail::svd::to_rows<3>(a), q, d);                                   \
+    return tuple_t<M, V>{detail::svd::from_rows<M>(q), V##_new(d[0], d[1], d[2])};           \
   }                                                                                           \
   WP_FN tuple_t<M, M> qr3(const M& a) {                                                       \
     detail::svd::rows3<S> q, r;                                                               \
-    detail::svd::qr_rows(detail::svd::to_rows3(a), q, r);                                     \
-    return tuple_t<M, M>{detail::svd::from_rows3<M>(q), detail::svd::from_rows3<M>(r)};       \
+    detail::svd::qr_rows(detail::svd::to_rows<3>(a), q, r);                                     \
+    return tuple_t<M, M>{detail::svd::from_rows<M>(q), detail::svd::from_rows<M>(r)};       \
   }
 WP_SVD3_OPS(Mat3, Vec3, f32)
 WP_SVD3_OPS(DMat3, DVec3, f64)
@@ -389,9 +377,9 @@ WP_SVD3_OPS(DMat3, DVec3, f64)
   WP_FN tuple_t<M, V, M> svd2(const M& a) {                                                   \
     detail::svd::rows2<S> u, v;                                                               \
     S s[2];                                                                                   \
-    detail::svd::svd2_rows(detail::svd::to_rows2(a), u, s, v);                                \
-    return tuple_t<M, V, M>{detail::svd::from_rows2<M>(u), V##_new(s[0], s[1]),               \
-                            detail::svd::from_rows2<M>(v)};                                   \
+    detail::svd::svd2_rows(detail::svd::to_rows<2>(a), u, s, v);                                \
+    return tuple_t<M, V, M>{detail::svd::from_rows<M>(u), V##_new(s[0], s[1]),               \
+                            detail::svd::from_rows<M>(v)};                                   \
   }
 WP_SVD2_OPS(Mat2, Vec2, f32)
 WP_SVD2_OPS(DMat2, DVec2, f64)
