@@ -122,6 +122,33 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     out
 }
 
+/// `Ok((<T0 as KernelArg>::method(&__args.k0, &ArgCtx {..})?, ..))` over the parameters `ks`
+/// (inside `unsafe` blocks for the view conversions, whose contract the caller forwards).
+fn arg_conversions(
+    f: &crate::ir::Function,
+    kernel: &Literal,
+    method: &syn::Ident,
+    ks: &[usize],
+    unsafe_: bool,
+) -> TokenStream {
+    let calls = ks.iter().map(|&k| {
+        let p = &f.params[k];
+        let (t, idx, name) = (&p.syn_ty, syn::Index::from(k), Literal::string(&p.name));
+        let call = quote! {
+            <#t as __wp::KernelArg>::#method(
+                &__args.#idx,
+                &__wp::ArgCtx { kernel: #kernel, arg: #name, index: #k, device: __device },
+            )?
+        };
+        if unsafe_ {
+            quote!(unsafe { #call })
+        } else {
+            call
+        }
+    });
+    quote!(::core::result::Result::Ok(( #(#calls,)* )))
+}
+
 /// The errors of a generic function's instances: an error every instance has is reported
 /// once as it is; one that only some instances have names them (`in `k<f64>`: ..`), since it
 /// comes from what a type parameter became.
@@ -311,15 +338,19 @@ fn kernel_instance(
         .filter(|k| matches!(f.params[*k].ty, crate::types::Ty::Array(..)))
         .collect();
     let arr_tys: Vec<&syn::Type> = arr_k.iter().map(|k| &f.params[*k].syn_ty).collect();
-    let arr_idx: Vec<syn::Index> = arr_k.iter().map(|k| syn::Index::from(*k)).collect();
-    let arr_idx_usize: Vec<usize> = arr_k.clone();
-    let arr_names: Vec<Literal> = arr_k
-        .iter()
-        .map(|k| Literal::string(&f.params[*k].name))
-        .collect();
     let arr_pos: Vec<usize> = (0..arr_k.len()).collect();
     let arr_pos_idx: Vec<syn::Index> = (0..arr_k.len()).map(syn::Index::from).collect();
     let n_arrays = arr_k.len();
+    // The four conversions of the launch arguments (CPU views, CUDA arguments, and their
+    // gradients), each a tuple of one `KernelArg` call per parameter.
+    let all: Vec<usize> = (0..f.params.len()).collect();
+    let convert = |method: &str, ks: &[usize], unsafe_: bool| {
+        arg_conversions(&f, &name_str, &format_ident!("{}", method), ks, unsafe_)
+    };
+    let cpu_views = convert("cpu_view", &all, true);
+    let cuda_args = convert("cuda_arg", &all, false);
+    let grad_views = convert("grad_view", &all, true);
+    let cuda_grads = convert("cuda_grad", &arr_k, false);
     let grad_names: Vec<syn::Ident> = (0..f.params.len())
         .map(|k| quote::format_ident!("__grad{}", k))
         .collect();
@@ -368,24 +399,14 @@ fn kernel_instance(
                         __device: &__wp::Device,
                     ) -> __wp::Result<Self::CpuGrads> {
                         // SAFETY: forwarded contract: the views do not outlive `__args`.
-                        ::core::result::Result::Ok(( #( unsafe {
-                            <#tys as __wp::KernelArg>::grad_view(
-                                &__args.#idx,
-                                &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
-                            )?
-                        }, )* ))
+                        #grad_views
                     }
                     type CudaGrads = ( #( <#arr_tys as __wp::KernelArg>::CudaGrad, )* );
                     fn cuda_grads(
                         __args: &Self::Args<'_>,
                         __device: &__wp::Device,
                     ) -> __wp::Result<Self::CudaGrads> {
-                        ::core::result::Result::Ok(( #(
-                            <#arr_tys as __wp::KernelArg>::cuda_grad(
-                                &__args.#arr_idx,
-                                &__wp::ArgCtx { kernel: #name_str, arg: #arr_names, index: #arr_idx_usize, device: __device },
-                            )?,
-                        )* ))
+                        #cuda_grads
                     }
                     #[allow(unused_variables)]
                     fn cuda_grad_ptrs(
@@ -455,24 +476,14 @@ fn kernel_instance(
                         __device: &__wp::Device,
                     ) -> __wp::Result<Self::CpuParams> {
                         // SAFETY: forwarded contract: the views do not outlive `__args`.
-                        ::core::result::Result::Ok(( #( unsafe {
-                            <#tys as __wp::KernelArg>::cpu_view(
-                                &__args.#idx,
-                                &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
-                            )?
-                        }, )* ))
+                        #cpu_views
                     }
                     type CudaParams = ( #( <#tys as __wp::KernelArg>::CudaArg, )* );
                     fn cuda_params(
                         __args: &Self::Args<'_>,
                         __device: &__wp::Device,
                     ) -> __wp::Result<Self::CudaParams> {
-                        ::core::result::Result::Ok(( #(
-                            <#tys as __wp::KernelArg>::cuda_arg(
-                                &__args.#idx,
-                                &__wp::ArgCtx { kernel: #name_str, arg: #pnames, index: #idx_usize, device: __device },
-                            )?,
-                        )* ))
+                        #cuda_args
                     }
                     #[allow(unused_variables)]
                     fn cuda_param_ptrs(
