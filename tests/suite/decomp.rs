@@ -80,74 +80,58 @@ struct Decomp {
     qr: DMat3,
 }
 
-fn run64(ms: &[DMat3], dev: &wp::Device) -> Vec<Decomp> {
-    let n = ms.len();
-    let a = arr(ms, dev);
-    let (u, v, eq, qq, qr) = (
-        zeros::<DMat3, 1>(n, dev),
-        zeros::<DMat3, 1>(n, dev),
-        zeros::<DMat3, 1>(n, dev),
-        zeros::<DMat3, 1>(n, dev),
-        zeros::<DMat3, 1>(n, dev),
-    );
-    let (s, ed) = (zeros::<DVec3, 1>(n, dev), zeros::<DVec3, 1>(n, dev));
-    wp::launch(k_decomp, n, (&a, &u, &s, &v, &eq, &ed, &qq, &qr), dev).unwrap();
-    let (u, s, v, eq, ed, qq, qr) = (
-        host(&u),
-        host(&s),
-        host(&v),
-        host(&eq),
-        host(&ed),
-        host(&qq),
-        host(&qr),
-    );
-    (0..n)
-        .map(|i| Decomp {
-            u: u[i],
-            s: s[i],
-            v: v[i],
-            eq: eq[i],
-            ed: ed[i],
-            qq: qq[i],
-            qr: qr[i],
-        })
-        .collect()
+/// Runs `k_decomp` in one precision on `ms` (rounded to it) and brings the results back in f64.
+macro_rules! run_in {
+    ($name:ident, $m:ty, $v:ty, $to_m:expr, $m_back:expr, $v_back:expr) => {
+        fn $name(ms: &[DMat3], dev: &wp::Device) -> Vec<Decomp> {
+            let n = ms.len();
+            let ms: Vec<$m> = ms.iter().map($to_m).collect();
+            let a = arr(&ms, dev);
+            let mats = || zeros::<$m, 1>(n, dev);
+            let (u, v, eq, qq, qr) = (mats(), mats(), mats(), mats(), mats());
+            let (s, ed) = (zeros::<$v, 1>(n, dev), zeros::<$v, 1>(n, dev));
+            wp::launch(k_decomp, n, (&a, &u, &s, &v, &eq, &ed, &qq, &qr), dev).unwrap();
+            let back_m = |x: &wp::Array<$m>| host(x).into_iter().map($m_back).collect::<Vec<_>>();
+            let back_v = |x: &wp::Array<$v>| host(x).into_iter().map($v_back).collect::<Vec<_>>();
+            let (u, s, v, eq, ed, qq, qr) = (
+                back_m(&u),
+                back_v(&s),
+                back_m(&v),
+                back_m(&eq),
+                back_v(&ed),
+                back_m(&qq),
+                back_m(&qr),
+            );
+            (0..n)
+                .map(|i| Decomp {
+                    u: u[i],
+                    s: s[i],
+                    v: v[i],
+                    eq: eq[i],
+                    ed: ed[i],
+                    qq: qq[i],
+                    qr: qr[i],
+                })
+                .collect()
+        }
+    };
 }
-
-fn run32(ms: &[DMat3], dev: &wp::Device) -> Vec<Decomp> {
-    let n = ms.len();
-    let ms: Vec<Mat3> = ms.iter().map(|m| m.as_mat3()).collect();
-    let a = arr(&ms, dev);
-    let (u, v, eq, qq, qr) = (
-        zeros::<Mat3, 1>(n, dev),
-        zeros::<Mat3, 1>(n, dev),
-        zeros::<Mat3, 1>(n, dev),
-        zeros::<Mat3, 1>(n, dev),
-        zeros::<Mat3, 1>(n, dev),
-    );
-    let (s, ed) = (zeros::<Vec3, 1>(n, dev), zeros::<Vec3, 1>(n, dev));
-    wp::launch(k_decomp, n, (&a, &u, &s, &v, &eq, &ed, &qq, &qr), dev).unwrap();
-    let (u, s, v, eq, ed, qq, qr) = (
-        host(&u),
-        host(&s),
-        host(&v),
-        host(&eq),
-        host(&ed),
-        host(&qq),
-        host(&qr),
-    );
-    (0..n)
-        .map(|i| Decomp {
-            u: u[i].as_dmat3(),
-            s: s[i].as_dvec3(),
-            v: v[i].as_dmat3(),
-            eq: eq[i].as_dmat3(),
-            ed: ed[i].as_dvec3(),
-            qq: qq[i].as_dmat3(),
-            qr: qr[i].as_dmat3(),
-        })
-        .collect()
-}
+run_in!(
+    run64,
+    DMat3,
+    DVec3,
+    |m: &DMat3| *m,
+    |m: DMat3| m,
+    |v: DVec3| v
+);
+run_in!(
+    run32,
+    Mat3,
+    Vec3,
+    |m: &DMat3| m.as_mat3(),
+    |m: Mat3| m.as_dmat3(),
+    |v: Vec3| v.as_dvec3()
+);
 
 /// `24 * sweeps * eps` (see the module documentation).
 const TOL32: f64 = 24.0 * 5.0 * f32::EPSILON as f64;
