@@ -55,4 +55,48 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_rand.h", include_str!("../cuda/wp_rand.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
     ("wp_adjoint.h", include_str!("../cuda/wp_adjoint.h")),
+    (
+        "wp_adjoint_core.h",
+        include_str!("../cuda/wp_adjoint_core.h"),
+    ),
+    (
+        "wp_adjoint_builtins.h",
+        include_str!("../cuda/wp_adjoint_builtins.h"),
+    ),
+    (
+        "wp_adjoint_linalg.h",
+        include_str!("../cuda/wp_adjoint_linalg.h"),
+    ),
+    (
+        "wp_adjoint_transform.h",
+        include_str!("../cuda/wp_adjoint_transform.h"),
+    ),
+    ("wp_adjoint_svd.h", include_str!("../cuda/wp_adjoint_svd.h")),
+    (
+        "wp_adjoint_misc.h",
+        include_str!("../cuda/wp_adjoint_misc.h"),
+    ),
+    (
+        "wp_adjoint_rand.h",
+        include_str!("../cuda/wp_adjoint_rand.h"),
+    ),
 ];
+
+#[cfg(test)]
+mod header_tests {
+    /// Every library header on disk is embedded (NVRTC sees only what `HEADERS` hands it, so
+    /// a header that is on disk but not embedded would compile on the host and fail on a GPU).
+    #[test]
+    fn every_header_is_embedded() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/cuda");
+        for e in std::fs::read_dir(dir).unwrap() {
+            let name = e.unwrap().file_name().into_string().unwrap();
+            if name.ends_with(".h") && name != "wp.h" {
+                assert!(
+                    super::HEADERS.iter().any(|(n, _)| *n == name),
+                    "{name} is not in warp_cuda::HEADERS"
+                );
+            }
+        }
+    }
+}

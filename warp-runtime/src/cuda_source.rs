@@ -9,6 +9,38 @@
 use crate::kernel::KernelInfo;
 use warp_core::FuncInfo;
 
+/// The builtin-table sections, in include order: section `s` is `wp_<s>.h` (in
+/// `warp-cuda/cuda/`, embedded by `warp_cuda::HEADERS`).
+pub const SECTIONS: [&str; 9] = [
+    "scalar",
+    "vector",
+    "linalg",
+    "svd",
+    "transform",
+    "misc",
+    "atomic",
+    "rand",
+    "print",
+];
+
+/// The part of the adjoint library every adjoint unit includes: zero and accumulation, lanes,
+/// operators, casts, array gradients, the per-thread stack.
+pub const ADJOINT_CORE: &str = "wp_adjoint_core.h";
+
+/// The adjoint library's part for each section that has adjoints (`atomic` and `print` have
+/// none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
+/// NVRTC parses no more than they need. Each part includes its forward section and the parts
+/// it builds on; `wp_adjoint.h` includes them all (for host tests and hand-written code).
+pub const ADJOINT_PARTS: [(&str, &str); 7] = [
+    ("scalar", "wp_adjoint_builtins.h"),
+    ("vector", "wp_adjoint_builtins.h"),
+    ("linalg", "wp_adjoint_linalg.h"),
+    ("svd", "wp_adjoint_svd.h"),
+    ("transform", "wp_adjoint_transform.h"),
+    ("misc", "wp_adjoint_misc.h"),
+    ("rand", "wp_adjoint_rand.h"),
+];
+
 /// The assembled source of one kernel.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CudaSource {
@@ -115,23 +147,18 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         sections.push("transform");
     }
     let mut headers = vec!["wp_core.h".to_string()];
-    for s in [
-        "scalar",
-        "vector",
-        "linalg",
-        "svd",
-        "transform",
-        "misc",
-        "atomic",
-        "rand",
-        "print",
-    ] {
+    for s in SECTIONS {
         if sections.contains(&s) {
             headers.push(format!("wp_{s}.h"));
         }
     }
     if adjoint {
-        headers.push("wp_adjoint.h".to_string());
+        headers.push(ADJOINT_CORE.to_string());
+        for (s, part) in ADJOINT_PARTS {
+            if sections.contains(&s) && !headers.iter().any(|h| h == part) {
+                headers.push(part.to_string());
+            }
+        }
     }
     let mut text = format!(
         "// warp-lang kernel `{}` from {} ({})\n",
@@ -272,5 +299,38 @@ mod tests {
         assert!(t.contains("void wpk_k() {}"), "{t}");
         assert!(t.contains("#line 3 \"src/a.rs\""), "{t}");
         assert_eq!(src.entry, "wpk_k");
+        // The adjoint unit: the adjoint core and the parts of the sections used (the funcs'
+        // "scalar" and the kernel's "vector" share one part), nothing of linalg and beyond.
+        let adj = assemble_adjoint(&info);
+        assert_eq!(
+            adj.headers,
+            vec![
+                "wp_core.h",
+                "wp_scalar.h",
+                "wp_vector.h",
+                "wp_adjoint_core.h",
+                "wp_adjoint_builtins.h"
+            ]
+        );
+    }
+
+    /// Every header the assembler may name is a file of the CUDA library (which
+    /// `warp_cuda::HEADERS` embeds), and every section with adjoints has its part.
+    #[test]
+    fn named_headers_exist() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda/");
+        let mut names: Vec<String> = SECTIONS.iter().map(|s| format!("wp_{s}.h")).collect();
+        names.push(ADJOINT_CORE.into());
+        names.extend(ADJOINT_PARTS.iter().map(|(_, h)| h.to_string()));
+        for n in names {
+            assert!(std::path::Path::new(dir).join(&n).is_file(), "{n}");
+        }
+        for s in SECTIONS {
+            assert_eq!(
+                ADJOINT_PARTS.iter().any(|(p, _)| *p == s),
+                !matches!(s, "atomic" | "print"),
+                "{s}"
+            );
+        }
     }
 }
