@@ -11,7 +11,7 @@
 //! context is a value whose type the macro cannot see (a user func's result), the literal is
 //! left for the target compiler to type from that same operand.
 
-use crate::builtins::{self, ArgTy, Builtin, Pos};
+use crate::builtins::{self, ArgTy, Builtin, Emit, Pos};
 use crate::front::signature::parse_type;
 use crate::ir::*;
 use crate::types::{Scalar, Ty, BOOL, USIZE};
@@ -1872,15 +1872,7 @@ impl Lowerer {
             if let Some(ty) = Ty::from_glam_name(&segs[segs.len() - 2]) {
                 // glam constructors that are builtins: `Quat::from_axis_angle(axis, angle)`,
                 // `Mat3::from_quat(q)`.
-                let builtin = match (&ty, last.as_str()) {
-                    (Ty::Quat(_), "from_axis_angle") => Some("quat_from_axis_angle"),
-                    (Ty::Matrix(_, 3), "from_quat") => Some("quat_to_matrix"),
-                    (Ty::Transform(_), "new") => Some("transformation"),
-                    (Ty::Transform(_), "from_matrix") => Some("transform_from_matrix"),
-                    _ => None,
-                };
-                if let Some(name) = builtin {
-                    let b = builtins::lookup(name).expect("in the table");
+                if let Some(b) = builtins::lookup_ctor(&ty, &last) {
                     let args: Vec<&Expr> = c.args.iter().collect();
                     let v = self.builtin_call(b, &args, want, span)?;
                     let got = self.ty(v);
@@ -1910,6 +1902,11 @@ impl Lowerer {
             }
         }
         if prefix_ok {
+            // Warp's overloads by arity that are rows of their own (`min(v)`).
+            if let Some(b) = builtins::lookup_overload(&last, c.args.len()) {
+                let args: Vec<&Expr> = c.args.iter().collect();
+                return self.builtin_call(b, &args, want, span);
+            }
             if let Some(v) = self.rng_call(&last, c, want, span)? {
                 return Ok(v);
             }
@@ -1919,11 +1916,10 @@ impl Lowerer {
             if let Some(b) = builtins::lookup_user(&last) {
                 let mut args: Vec<&Expr> = c.args.iter().collect();
                 // Warp's keyword defaults (`norm_huber(v)` is `norm_huber(v, 1.0)`).
-                let default: Option<Expr> = builtins::DEFAULT_LAST
-                    .iter()
-                    .find(|(n, _)| *n == b.name)
+                let default: Option<Expr> = b
+                    .default_last
                     .filter(|_| args.len() + 1 == b.params.len())
-                    .map(|(_, lit)| syn::parse_str(lit).expect("a literal"));
+                    .map(|lit| syn::parse_str(lit).expect("a literal"));
                 if let Some(d) = &default {
                     args.push(d);
                 }
@@ -1935,7 +1931,7 @@ impl Lowerer {
                             "`{}` returns a tuple `{}`: destructure it where it is called, `{}`",
                             b.name,
                             self.ty(v),
-                            tuple_hint(b.name)
+                            tuple_hint(b)
                         ),
                     );
                 }
@@ -1982,11 +1978,9 @@ impl Lowerer {
         ))
     }
 
-    /// Warp's overloads by arity and its approximate operations, in terms of other rows:
-    /// `min(v)`/`max(v)` of one vector are `min_element`/`max_element`;
-    /// `lower_bound(a, lo, hi, v)` is `lower_bound_range`; `div_approx(a, b)` is `a / b` and
+    /// Warp's builtins that are other operations here: `div_approx(a, b)` is `a / b` and
     /// `inverse_approx(m)` is `inverse(m)` (exact on both backends: see the builtin
-    /// reference).
+    /// reference); and the arities of `lower_bound` that are no row.
     fn builtin_alias(
         &mut self,
         name: &str,
@@ -1997,11 +1991,6 @@ impl Lowerer {
         let args: Vec<&Expr> = c.args.iter().collect();
         let row = |n: &str| builtins::lookup(n).expect("in the table");
         match (name, args.len()) {
-            ("min", 1) => self.builtin_call(row("min_element"), &args, want, span).map(Some),
-            ("max", 1) => self.builtin_call(row("max_element"), &args, want, span).map(Some),
-            ("lower_bound", 4) => self
-                .builtin_call(row("lower_bound_range"), &args, want, span)
-                .map(Some),
             ("lower_bound", n) if n != 2 => err(
                 span,
                 format!("`lower_bound` takes an array and a value, or an array, a range and a value (`lower_bound(a, v)`, `lower_bound(a, lo, hi, v)`), found {n} argument(s)"),
@@ -2152,7 +2141,7 @@ impl Lowerer {
             }
         }
         // A builtin reading an array (`lower_bound`): a 1-D array itself, not a view.
-        if builtins::reads_array(b) {
+        if b.reads_array() {
             match self.ty(out[0]) {
                 Ty::Array(_, 1) if !self.is_view(out[0]) => {}
                 Ty::Array(_, 1) => {
@@ -2177,9 +2166,9 @@ impl Lowerer {
             let values = out[1 + n_index..].to_vec();
             out = std::iter::once(base).chain(index).chain(values).collect();
         }
-        if b.name == "mod" {
+        if let Emit::Operator(op) = b.emit {
             // Warp's `mod` is the `%` operator: the same faults, float semantics and adjoint.
-            return Ok(self.def(Op::Binary(BinOp::Rem, out[0], out[1]), resolved.ret, span));
+            return Ok(self.def(Op::Binary(op, out[0], out[1]), resolved.ret, span));
         }
         Ok(self.def(
             Op::Builtin {
@@ -2225,7 +2214,11 @@ impl Lowerer {
             .iter()
             .filter(|b| b.method)
             .map(|b| b.name)
-            .chain(builtins::METHOD_ALIASES.iter().map(|(a, _)| *a))
+            .chain(
+                builtins::BUILTINS
+                    .iter()
+                    .flat_map(|b| b.aliases.iter().copied()),
+            )
             .collect();
         err(
             m.method.span(),
@@ -2255,15 +2248,9 @@ fn lower_ctor_fn(name: &str) -> Option<Ty> {
 }
 
 /// How to destructure a decomposition's tuple (for error messages).
-fn tuple_hint(name: &str) -> String {
-    let names = match name {
-        "eig3" => "(q, d)",
-        "qr3" => "(q, r)",
-        "quat_to_axis_angle" => "(axis, angle)",
-        "transform_decompose" => "(p, q, s)",
-        _ => "(u, sigma, v)",
-    };
-    format!("let {names} = {name}(a);")
+fn tuple_hint(b: &Builtin) -> String {
+    let names = b.results.expect("a tuple result has its names");
+    format!("let {names} = {}(a);", b.name)
 }
 
 /// The type annotation of a `let`: a kernel type, or a tuple of them (for a destructured
