@@ -1369,3 +1369,6 @@ mod tests {
             .is_err());
     }
 }
+
+#[cfg(test)]
+mod doc;
