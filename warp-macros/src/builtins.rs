@@ -14,7 +14,7 @@
 //!
 //! Signature matching binds `T` from the first argument whose type is known and fixed by `T`
 //! (a `T` or `Array<T>` position); literal arguments are then typed from `T`, which is the
-//! one literal rule both backends share (see `front::lower`).
+//! one literal rule both backends share (see `front::lower::typing`).
 
 use crate::ir::BinOp;
 use crate::types::{Scalar, Ty};
@@ -546,7 +546,7 @@ table! {
     "transform_from_matrix": &[Matrix4], (T) -> XformOfT, "transform", Adjoint,
         ctor(Transform, "from_matrix");
     // Decompositions: tuples in the order of Warp's output arguments, only bound by a
-    // destructuring `let` (see `front::lower`).
+    // destructuring `let` (see `front::lower::statements`).
     "svd3":       &[Matrix3],     (T) -> Tuple(&[T, VecOfT, T]), "svd", Adjoint,
         results("(u, sigma, v)");
     "svd2":       &[Matrix2],     (T) -> Tuple(&[T, VecOfT, T]), "svd", Adjoint,

@@ -63,8 +63,8 @@ const CONSTRUCTS: &[&str] = &[
     "len",
     "view",
     "slice",
-    // Calls the front end lowers by name (`front::lower`): the thread index, print!, and
-    // Warp's builtins that are other operations here.
+    // Calls and macros the front end lowers by name (`front::lower`): the thread index,
+    // print!, and Warp's builtins that are other operations here.
     "tid",
     "print",
     "printf",
