@@ -1,15 +1,22 @@
-//! The builtin table: one declarative entry per builtin.
+//! The builtin table: one row per builtin, holding every fact about it.
 //!
-//! An entry gives the builtin's name, which types its type variable `T` may take, its
-//! signature in terms of `T`, whether method syntax is allowed (`v.dot(w)`), the Rust path of
-//! its CPU implementation (in `warp_core::builtins`), its CUDA C++ name, the section of the
-//! CUDA builtin library it needs, and how it is differentiated. Adding a builtin is one entry
-//! here plus the two implementations and their tests.
+//! A row gives the builtin's name, which types its type variable `T` may take, its signature
+//! in terms of `T`, the section of the CUDA builtin library it needs and how it is
+//! differentiated, then each fact in which it differs from the defaults: method syntax
+//! (`v.dot(w)`) and Rust's method aliases (`x.powf(y)`), glam's constructor spelling
+//! (`Quat::from_axis_angle`), Warp's overload by arity it is (`min(v)`), Warp's keyword
+//! default, how a random draw advances the generator state, the names of a tuple result,
+//! whether user code may name it, whether it is an extension of Warp's set, and whether it
+//! reaches the emitters as a call or as something else (`mod` is `%`). The CPU function is
+//! `warp_core::builtins::<name>`, the CUDA one `wp::<name>`. Adding a builtin is one row
+//! here plus the two implementations and their tests, and its line in docs/builtins.md, which
+//! a test holds to this table (`doc` below).
 //!
 //! Signature matching binds `T` from the first argument whose type is known and fixed by `T`
 //! (a `T` or `Array<T>` position); literal arguments are then typed from `T`, which is the
-//! one literal rule both backends share (see `front::lower`).
+//! one literal rule both backends share (see `front::lower::typing`).
 
+use crate::ir::BinOp;
 use crate::types::{Scalar, Ty};
 
 /// Which types the type variable `T` of a builtin may take.
@@ -177,7 +184,32 @@ pub enum Grad {
     AtomicNone,
 }
 
-/// One builtin.
+/// How a draw `name(&mut state, ..)` advances the generator state (`front::lower::rng`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Draw {
+    /// By this many generator steps (`rand_pcg`), one per uniform draw the builtin consumes.
+    /// warp-core's `builtins::rand::DRAWS` states the same counts for its functions; a test
+    /// in `front::lower::rng` holds the two together.
+    Steps(u32),
+    /// To the value of the named row at the state before the draw (`poisson_state`: Poisson
+    /// sampling consumes a variable number of draws).
+    NextState(&'static str),
+}
+
+/// How a call of a builtin reaches the emitters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Emit {
+    /// An `Op::Builtin`: the emitters call the row's `rust` and `cuda` functions.
+    Call,
+    /// The binary operator (`mod` is `%`: the same faults, float semantics and adjoint); the
+    /// row's `rust` and `cuda` names are never emitted.
+    Operator(BinOp),
+    /// Written out by the front end in other operations (`randi`: a `rand_pcg` step and
+    /// integer operators, see `front::lower::rng`); no function of that name exists.
+    Lowered,
+}
+
+/// One builtin: every fact about it is a field of its row in [`BUILTINS`].
 #[derive(Debug)]
 pub struct Builtin {
     pub name: &'static str,
@@ -187,6 +219,34 @@ pub struct Builtin {
     pub ret: Pos,
     /// Method syntax allowed: `x.sqrt()`, `v.dot(w)`.
     pub method: bool,
+    /// Rust method names that mean this builtin under another name (`x.powf(y)` is
+    /// `pow(x, y)`), callable whatever `method` says. Each has Rust's meaning exactly:
+    /// `round_ties_even` is `rint`, `fract` is `x - trunc(x)` like `frac`,
+    /// `to_degrees`/`to_radians` multiply by the same constants as `degrees`/`radians`.
+    /// (`signum` is not an alias of `sign`: Rust's gives NaN for NaN and -1 for -0.0, Warp's
+    /// `sign` +1 for both.)
+    pub aliases: &'static [&'static str],
+    /// glam's constructor spelling: `(class, f)` makes `Ty::f(..)`, for a type `Ty` of
+    /// `class`, this builtin (`Quat::from_axis_angle(axis, angle)`, `Transform::new(p, q)`).
+    pub ctor: Option<(Class, &'static str)>,
+    /// Warp's overload by arity that this row is: `(name, n)` means a call of `name` with
+    /// `n` arguments is this row (`min(v)` of one vector is `min_element`). That is also the
+    /// row's name in Warp ([`Builtin::warp_name`]).
+    pub overload: Option<(&'static str, usize)>,
+    /// A piece or an overload of another builtin (the RNG's `rand_pcg`, `lower_bound_range`):
+    /// user code cannot name it.
+    pub internal: bool,
+    /// Warp's keyword default of the last argument, as a literal the call gets when it leaves
+    /// that argument out (the norms' `delta = 1.0`).
+    pub default_last: Option<&'static str>,
+    /// A state-advancing draw (`randf(&mut state)`): how it advances the state.
+    pub draw: Option<Draw>,
+    /// The names of a tuple result's parts, in the order of Warp's output arguments, as a
+    /// destructuring pattern (`"(u, sigma, v)"`); error messages show it.
+    pub results: Option<&'static str>,
+    /// Not a Warp builtin: an extension of warp-lang's (docs/builtins.md lists it there).
+    pub extension: bool,
+    pub emit: Emit,
     /// Function in `warp_core::builtins`.
     pub rust: &'static str,
     /// Function in the CUDA builtin library (namespace `wp`).
@@ -196,6 +256,123 @@ pub struct Builtin {
     #[allow(dead_code)] // read by the CUDA emitter
     pub section: &'static str,
     pub grad: Grad,
+}
+
+/// The row builder: [`Builtin::row`] gives a row every default (a user-callable builtin in
+/// function syntax only, emitted as a call of the functions named after it), and each method
+/// below states one fact that differs; [`table!`] writes them after the row's signature.
+impl Builtin {
+    const fn row(
+        name: &'static str,
+        cuda: &'static str,
+        classes: &'static [Class],
+        params: &'static [Pos],
+        ret: Pos,
+        section: &'static str,
+        grad: Grad,
+    ) -> Builtin {
+        Builtin {
+            name,
+            classes,
+            params,
+            ret,
+            method: false,
+            aliases: &[],
+            ctor: None,
+            overload: None,
+            internal: false,
+            default_last: None,
+            draw: None,
+            results: None,
+            extension: false,
+            emit: Emit::Call,
+            rust: name,
+            cuda,
+            section,
+            grad,
+        }
+    }
+
+    const fn method(self) -> Builtin {
+        Builtin {
+            method: true,
+            ..self
+        }
+    }
+
+    const fn aliases(self, aliases: &'static [&'static str]) -> Builtin {
+        Builtin { aliases, ..self }
+    }
+
+    const fn ctor(self, class: Class, f: &'static str) -> Builtin {
+        Builtin {
+            ctor: Some((class, f)),
+            ..self
+        }
+    }
+
+    const fn overload(self, name: &'static str, arity: usize) -> Builtin {
+        Builtin {
+            overload: Some((name, arity)),
+            ..self
+        }
+    }
+
+    const fn internal(self) -> Builtin {
+        Builtin {
+            internal: true,
+            ..self
+        }
+    }
+
+    const fn default_last(self, literal: &'static str) -> Builtin {
+        Builtin {
+            default_last: Some(literal),
+            ..self
+        }
+    }
+
+    const fn draws(self, steps: u32) -> Builtin {
+        Builtin {
+            draw: Some(Draw::Steps(steps)),
+            ..self
+        }
+    }
+
+    const fn next_state(self, row: &'static str) -> Builtin {
+        Builtin {
+            draw: Some(Draw::NextState(row)),
+            ..self
+        }
+    }
+
+    const fn results(self, pattern: &'static str) -> Builtin {
+        Builtin {
+            results: Some(pattern),
+            ..self
+        }
+    }
+
+    const fn extension(self) -> Builtin {
+        Builtin {
+            extension: true,
+            ..self
+        }
+    }
+
+    const fn operator(self, op: BinOp) -> Builtin {
+        Builtin {
+            emit: Emit::Operator(op),
+            ..self
+        }
+    }
+
+    const fn lowered(self) -> Builtin {
+        Builtin {
+            emit: Emit::Lowered,
+            ..self
+        }
+    }
 }
 
 impl Builtin {
@@ -215,6 +392,24 @@ impl Builtin {
             .position(|p| *p == Pos::Index)
             .unwrap_or(self.params.len());
         self.params.len().saturating_sub(at + 1)
+    }
+
+    /// Whether the builtin takes an array among its values (not an atomic): its CPU function
+    /// gets the view by reference and returns a `KResult` (its reads are checked), its CUDA
+    /// function takes the fault context last (`lower_bound`). Read off the signature, so no
+    /// row can say otherwise.
+    pub fn reads_array(&self) -> bool {
+        !self.is_atomic() && self.params.contains(&Pos::ArrayOfT)
+    }
+
+    /// The builtin's name in Warp: its own, or that of the builtin it is an overload of
+    /// (`min_element` is Warp's `min` of one vector). None for an extension.
+    #[allow(dead_code)] // read by the docs/builtins.md check
+    pub fn warp_name(&self) -> Option<&'static str> {
+        if self.extension {
+            return None;
+        }
+        Some(self.overload.map_or(self.name, |(name, _)| name))
     }
 }
 
@@ -249,238 +444,213 @@ const F32: Pos = Fixed(Scalar::F32);
 const VEC2: Pos = FixedVec(Scalar::F32, 2);
 const VEC3: Pos = FixedVec(Scalar::F32, 3);
 
+/// The table's rows: `"name": classes, (params) -> result, "section", grad` and then the
+/// facts in which the row differs from [`Builtin::row`]'s defaults, each the name of a
+/// builder method with its arguments (`method`, `aliases(&["powf"])`, `draws(2)`, ...).
+/// The CPU function is `warp_core::builtins::<name>`, the CUDA one `wp::<name>`.
 macro_rules! table {
-    ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, method = $m:literal, section = $sec:literal, grad = $g:ident; )*) => {
+    ($( $name:literal : $classes:expr, ($($p:expr),*) -> $ret:expr, $sec:literal, $g:ident
+        $(, $fact:ident $(( $($arg:expr),* ))? )* ; )*) => {
         /// Every builtin.
         pub static BUILTINS: &[Builtin] = &[$(
-            Builtin {
-                name: $name,
-                classes: $classes,
-                params: &[$($p),*],
-                ret: $ret,
-                method: $m,
-                rust: $name,
-                cuda: concat!("wp::", $name),
-                section: $sec,
-                grad: Grad::$g,
-            },
+            Builtin::row($name, concat!("wp::", $name), $classes, &[$($p),*], $ret, $sec, Grad::$g)
+                $( .$fact( $( $($arg),* )? ) )*,
         )*];
     };
 }
 
 table! {
-    "min":        NUM_OR_VEC,   (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
-    "max":        NUM_OR_VEC,   (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
-    "abs":        SIGNED,       (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "sign":       SIGNED,       (T) -> T,                method = false, section = "scalar", grad = Zero;
-    "clamp":      NUM_OR_VEC,   (T, T, T) -> T,          method = true,  section = "scalar", grad = Adjoint;
-    "floor":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
-    "ceil":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
-    "sqrt":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "exp":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "log":        FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "sin":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "cos":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "tan":        FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "atan2":      FLOAT,        (T, T) -> T,             method = true,  section = "scalar", grad = Adjoint;
-    "pow":        FLOAT,        (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
-    "asin":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "acos":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "atan":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "sinh":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "cosh":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "tanh":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "exp2":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "log2":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "log10":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "cbrt":       FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Adjoint;
-    "erf":        FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "erfc":       FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "erfinv":     FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "erfcinv":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "round":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
-    "rint":       FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Zero;
-    "trunc":      FLOAT,        (T) -> T,                method = true,  section = "scalar", grad = Zero;
-    "frac":       FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "step":       NUMBER,       (T) -> T,                method = false, section = "scalar", grad = Zero;
-    "smoothstep": FLOAT,        (T, T, T) -> T,          method = false, section = "scalar", grad = Adjoint;
-    "degrees":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "radians":    FLOAT,        (T) -> T,                method = false, section = "scalar", grad = Adjoint;
-    "isfinite":   CLASSIFY,     (T) -> Bool,             method = false, section = "scalar", grad = Zero;
-    "isnan":      CLASSIFY,     (T) -> Bool,             method = false, section = "scalar", grad = Zero;
-    "isinf":      CLASSIFY,     (T) -> Bool,             method = false, section = "scalar", grad = Zero;
+    "min":        NUM_OR_VEC,     (T, T) -> T,              "scalar", Adjoint, method;
+    "max":        NUM_OR_VEC,     (T, T) -> T,              "scalar", Adjoint, method;
+    "abs":        SIGNED,         (T) -> T,                 "scalar", Adjoint, method;
+    "sign":       SIGNED,         (T) -> T,                 "scalar", Zero;
+    "clamp":      NUM_OR_VEC,     (T, T, T) -> T,           "scalar", Adjoint, method;
+    "floor":      FLOAT,          (T) -> T,                 "scalar", Zero, method;
+    "ceil":       FLOAT,          (T) -> T,                 "scalar", Zero, method;
+    "sqrt":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "exp":        FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "pow":        FLOAT,          (T, T) -> T,              "scalar", Adjoint, aliases(&["powf"]);
+    "log":        FLOAT,          (T) -> T,                 "scalar", Adjoint, aliases(&["ln"]);
+    "sin":        FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "cos":        FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "tan":        FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "atan2":      FLOAT,          (T, T) -> T,              "scalar", Adjoint, method;
+    "asin":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "acos":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "atan":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "sinh":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "cosh":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "tanh":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "exp2":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method, extension;
+    "log2":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "log10":      FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "cbrt":       FLOAT,          (T) -> T,                 "scalar", Adjoint, method;
+    "erf":        FLOAT,          (T) -> T,                 "scalar", Adjoint;
+    "erfc":       FLOAT,          (T) -> T,                 "scalar", Adjoint;
+    "erfinv":     FLOAT,          (T) -> T,                 "scalar", Adjoint;
+    "erfcinv":    FLOAT,          (T) -> T,                 "scalar", Adjoint;
+    "round":      FLOAT,          (T) -> T,                 "scalar", Zero, method;
+    "rint":       FLOAT,          (T) -> T, "scalar", Zero, aliases(&["round_ties_even"]);
+    "trunc":      FLOAT,          (T) -> T,                 "scalar", Zero, method;
+    "frac":       FLOAT,          (T) -> T,                 "scalar", Adjoint, aliases(&["fract"]);
+    "step":       NUMBER,         (T) -> T,                 "scalar", Zero;
+    "smoothstep": FLOAT,          (T, T, T) -> T,           "scalar", Adjoint;
+    "degrees":    FLOAT,          (T) -> T, "scalar", Adjoint, aliases(&["to_degrees"]);
+    "radians":    FLOAT,          (T) -> T, "scalar", Adjoint, aliases(&["to_radians"]);
+    "isfinite":   CLASSIFY,       (T) -> Bool,              "scalar", Zero, aliases(&["is_finite"]);
+    "isnan":      CLASSIFY,       (T) -> Bool,              "scalar", Zero, aliases(&["is_nan"]);
+    "isinf":      CLASSIFY,       (T) -> Bool, "scalar", Zero, aliases(&["is_infinite"]);
     // `mod(a, b)` (`r#mod` in Rust source, as `mod` is a keyword) is lowered to the `%`
     // operator: truncated remainder for integers (a fault on zero), C `fmod` for floats, and
-    // `%`'s adjoint. Its `rust`/`cuda` names are never emitted.
-    "mod":        NUMBER,       (T, T) -> T,             method = false, section = "scalar", grad = Adjoint;
+    // `%`'s adjoint.
+    "mod":        NUMBER,         (T, T) -> T,              "scalar", Adjoint, operator(BinOp::Rem);
     // lerp and inverse take transforms too (wp_transform.h: the emitter adds the section where
     // a value is a transform).
-    "lerp":       LERP,         (T, T, ScalarOfT) -> T,  method = true,  section = "scalar", grad = Adjoint;
+    "lerp":       LERP,           (T, T, ScalarOfT) -> T,   "scalar", Adjoint, method;
     // dot, length and normalize take quaternions too, whose versions are in "linalg" (which
     // includes "vector").
-    "dot":        VEC_OR_QUAT,  (T, T) -> ScalarOfT,     method = true,  section = "linalg", grad = Adjoint;
-    "cross":      &[Vector3],   (T, T) -> T,             method = true,  section = "vector", grad = Adjoint;
-    "length":     FVEC_OR_QUAT, (T) -> ScalarOfT,        method = true,  section = "linalg", grad = Adjoint;
-    "normalize":  FVEC_OR_QUAT, (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
-    "length_sq":  VEC_OR_QUAT,  (T) -> ScalarOfT,        method = false, section = "linalg", grad = Adjoint;
-    "outer":      FVEC,         (T, T) -> MatOfT,        method = false, section = "linalg", grad = Adjoint;
-    "diag":       FVEC,         (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
-    "cw_mul":     FVEC_OR_MAT,  (T, T) -> T,             method = false, section = "linalg", grad = Adjoint;
-    "cw_div":     FVEC_OR_MAT,  (T, T) -> T,             method = false, section = "linalg", grad = Adjoint;
-    "transpose":  MAT,          (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
-    "determinant": MAT,         (T) -> ScalarOfT,        method = true,  section = "linalg", grad = Adjoint;
-    "inverse":    MAT_QUAT_XFORM, (T) -> T,                method = true,  section = "linalg", grad = Adjoint;
-    "trace":      MAT,          (T) -> ScalarOfT,        method = false, section = "linalg", grad = Adjoint;
-    "ddot":       MAT,          (T, T) -> ScalarOfT,     method = false, section = "linalg", grad = Adjoint;
-    "skew":       FVEC3,        (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
-    "quat_from_axis_angle": FVEC3, (T, ScalarOfT) -> QuatOfT, method = false, section = "linalg", grad = Adjoint;
-    "quat_rotate": QUAT,        (T, VecOfT) -> VecOfT,   method = false, section = "linalg", grad = Adjoint;
-    "quat_rotate_inv": QUAT,    (T, VecOfT) -> VecOfT,   method = false, section = "linalg", grad = Adjoint;
-    "quat_inverse": QUAT,       (T) -> T,                method = false, section = "linalg", grad = Adjoint;
-    "quat_to_matrix": QUAT,     (T) -> MatOfT,           method = false, section = "linalg", grad = Adjoint;
-    "quat_from_matrix": &[Matrix3], (T) -> QuatOfT,      method = false, section = "linalg", grad = Adjoint;
-    "quat_slerp": QUAT,         (T, T, ScalarOfT) -> T,  method = false, section = "linalg", grad = Adjoint;
-    // Rigid transforms (wp_transform.h, warp-core builtins::transform). `Transform::new(p, q)`
-    // is `transformation`, `Transform::from_matrix(m)` is `transform_from_matrix`.
-    "transformation": FVEC3,    (T, QuatOfT) -> XformOfT, method = false, section = "transform", grad = Adjoint;
-    "transform_get_translation": XFORM, (T) -> Vec3OfT,  method = false, section = "transform", grad = Adjoint;
-    "transform_get_rotation": XFORM, (T) -> QuatOfT,     method = false, section = "transform", grad = Adjoint;
-    "transform_multiply": XFORM, (T, T) -> T,            method = false, section = "transform", grad = Adjoint;
-    "transform_point": XFORM_OR_MAT4, (T, Vec3OfT) -> Vec3OfT, method = true, section = "transform", grad = Adjoint;
-    "transform_vector": XFORM_OR_MAT4, (T, Vec3OfT) -> Vec3OfT, method = true, section = "transform", grad = Adjoint;
-    "transform_inverse": XFORM, (T) -> T,                method = false, section = "transform", grad = Adjoint;
-    "transform_to_matrix": XFORM, (T) -> MatOfT,         method = false, section = "transform", grad = Adjoint;
-    "transform_from_matrix": &[Matrix4], (T) -> XformOfT, method = false, section = "transform", grad = Adjoint;
+    "dot":        VEC_OR_QUAT,    (T, T) -> ScalarOfT,      "linalg", Adjoint, method;
+    "cross":      &[Vector3],     (T, T) -> T,              "vector", Adjoint, method;
+    "length":     FVEC_OR_QUAT,   (T) -> ScalarOfT,         "linalg", Adjoint, method;
+    "normalize":  FVEC_OR_QUAT,   (T) -> T,                 "linalg", Adjoint, method;
+    "length_sq":  VEC_OR_QUAT,    (T) -> ScalarOfT, "linalg", Adjoint, aliases(&["length_squared"]);
+    "outer":      FVEC,           (T, T) -> MatOfT,         "linalg", Adjoint;
+    "diag":       FVEC,           (T) -> MatOfT,            "linalg", Adjoint;
+    "cw_mul":     FVEC_OR_MAT,    (T, T) -> T,              "linalg", Adjoint;
+    "cw_div":     FVEC_OR_MAT,    (T, T) -> T,              "linalg", Adjoint;
+    "transpose":  MAT,            (T) -> T,                 "linalg", Adjoint, method;
+    "determinant": MAT, (T) -> ScalarOfT, "linalg", Adjoint, method;
+    "inverse":    MAT_QUAT_XFORM, (T) -> T,                 "linalg", Adjoint, method;
+    "trace":      MAT,            (T) -> ScalarOfT,         "linalg", Adjoint;
+    "ddot":       MAT,            (T, T) -> ScalarOfT,      "linalg", Adjoint;
+    "skew":       FVEC3,          (T) -> MatOfT,            "linalg", Adjoint;
+    "quat_from_axis_angle": FVEC3, (T, ScalarOfT) -> QuatOfT, "linalg", Adjoint,
+        ctor(Quaternion, "from_axis_angle");
+    "quat_rotate": QUAT, (T, VecOfT) -> VecOfT, "linalg", Adjoint;
+    "quat_rotate_inv": QUAT, (T, VecOfT) -> VecOfT, "linalg", Adjoint;
+    "quat_inverse": QUAT, (T) -> T, "linalg", Adjoint, aliases(&["conjugate"]);
+    "quat_to_matrix": QUAT, (T) -> MatOfT, "linalg", Adjoint, ctor(Matrix3, "from_quat");
+    "quat_from_matrix": &[Matrix3], (T) -> QuatOfT, "linalg", Adjoint;
+    "quat_slerp": QUAT,           (T, T, ScalarOfT) -> T,   "linalg", Adjoint;
+    // Rigid transforms (wp_transform.h, warp-core builtins::transform).
+    "transformation": FVEC3, (T, QuatOfT) -> XformOfT, "transform", Adjoint, ctor(Transform, "new");
+    "transform_get_translation": XFORM, (T) -> Vec3OfT, "transform", Adjoint;
+    "transform_get_rotation": XFORM, (T) -> QuatOfT, "transform", Adjoint;
+    "transform_multiply": XFORM, (T, T) -> T, "transform", Adjoint;
+    "transform_point": XFORM_OR_MAT4, (T, Vec3OfT) -> Vec3OfT, "transform", Adjoint,
+        method, aliases(&["transform_point3"]);
+    "transform_vector": XFORM_OR_MAT4, (T, Vec3OfT) -> Vec3OfT, "transform", Adjoint,
+        method, aliases(&["transform_vector3"]);
+    "transform_inverse": XFORM, (T) -> T, "transform", Adjoint;
+    "transform_to_matrix": XFORM, (T) -> MatOfT, "transform", Adjoint;
+    "transform_from_matrix": &[Matrix4], (T) -> XformOfT, "transform", Adjoint,
+        ctor(Transform, "from_matrix");
     // Decompositions: tuples in the order of Warp's output arguments, only bound by a
-    // destructuring `let` (see `front::lower`).
-    "svd3":       &[Matrix3],   (T) -> Tuple(&[T, VecOfT, T]), method = false, section = "svd", grad = Adjoint;
-    "svd2":       &[Matrix2],   (T) -> Tuple(&[T, VecOfT, T]), method = false, section = "svd", grad = Adjoint;
-    "qr3":        &[Matrix3],   (T) -> Tuple(&[T, T]),         method = false, section = "svd", grad = Adjoint;
-    "eig3":       &[Matrix3],   (T) -> Tuple(&[T, VecOfT]),    method = false, section = "svd", grad = Adjoint;
-    "atomic_add": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
-    "atomic_sub": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
-    "atomic_min": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
-    "atomic_max": &[Atomic],    (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = Atomic;
-    "atomic_cas": &[AtomicScalar], (ArrayOfT, Index, T, T) -> T, method = false, section = "atomic", grad = AtomicNone;
-    "atomic_exch": &[AtomicScalar], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
-    "atomic_and": &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
-    "atomic_or":  &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
-    "atomic_xor": &[AtomicInt], (ArrayOfT, Index, T) -> T, method = false, section = "atomic", grad = AtomicNone;
+    // destructuring `let` (see `front::lower::statements`).
+    "svd3":       &[Matrix3],     (T) -> Tuple(&[T, VecOfT, T]), "svd", Adjoint,
+        results("(u, sigma, v)");
+    "svd2":       &[Matrix2],     (T) -> Tuple(&[T, VecOfT, T]), "svd", Adjoint,
+        results("(u, sigma, v)");
+    "qr3":        &[Matrix3],     (T) -> Tuple(&[T, T]),    "svd", Adjoint, results("(q, r)");
+    "eig3":       &[Matrix3],     (T) -> Tuple(&[T, VecOfT]), "svd", Adjoint, results("(q, d)");
+    "atomic_add": &[Atomic],      (ArrayOfT, Index, T) -> T, "atomic", Atomic;
+    "atomic_sub": &[Atomic],      (ArrayOfT, Index, T) -> T, "atomic", Atomic;
+    "atomic_min": &[Atomic],      (ArrayOfT, Index, T) -> T, "atomic", Atomic;
+    "atomic_max": &[Atomic],      (ArrayOfT, Index, T) -> T, "atomic", Atomic;
+    "atomic_cas": &[AtomicScalar], (ArrayOfT, Index, T, T) -> T, "atomic", AtomicNone;
+    "atomic_exch": &[AtomicScalar], (ArrayOfT, Index, T) -> T, "atomic", AtomicNone;
+    "atomic_and": &[AtomicInt],   (ArrayOfT, Index, T) -> T, "atomic", AtomicNone;
+    "atomic_or":  &[AtomicInt],   (ArrayOfT, Index, T) -> T, "atomic", AtomicNone;
+    "atomic_xor": &[AtomicInt],   (ArrayOfT, Index, T) -> T, "atomic", AtomicNone;
     // Random numbers and Perlin noise (warp-core `builtins::{rand, noise}`, wp_rand.h). A draw
-    // `randf(&mut s, ..)` is not a call of one row: `front::lower::rng` lowers it into the row's pure
-    // function of the state before the draw and the write-back of the advanced state
-    // (`rand_pcg` once per uniform draw, `poisson_state` for `poisson`). Rows in `INTERNAL`
-    // are those pieces and overloads by arity; user code cannot name them.
-    "rand_init":  NO_T,         (I32) -> U32,            method = false, section = "rand",   grad = Zero;
-    "rand_init_offset": NO_T,   (I32, I32) -> U32,       method = false, section = "rand",   grad = Zero;
-    "rand_pcg":   NO_T,         (U32) -> U32,            method = false, section = "rand",   grad = Zero;
-    "randf":      NO_T,         (U32) -> F32,            method = false, section = "rand",   grad = Zero;
-    "randf_range": NO_T,        (U32, F32, F32) -> F32,  method = false, section = "rand",   grad = Zero;
-    "randn":      NO_T,         (U32) -> F32,            method = false, section = "rand",   grad = Zero;
-    "sample_triangle": NO_T,    (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
-    "sample_unit_ring": NO_T,   (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
-    "sample_unit_disk": NO_T,   (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
-    "sample_unit_square": NO_T, (U32) -> VEC2,           method = false, section = "rand",   grad = Zero;
-    "sample_unit_cube": NO_T,   (U32) -> VEC3,           method = false, section = "rand",   grad = Zero;
-    "sample_unit_sphere_surface": NO_T, (U32) -> VEC3,   method = false, section = "rand",   grad = Zero;
-    "sample_unit_sphere": NO_T, (U32) -> VEC3,           method = false, section = "rand",   grad = Zero;
-    "sample_unit_hemisphere_surface": NO_T, (U32) -> VEC3, method = false, section = "rand", grad = Zero;
-    "sample_unit_hemisphere": NO_T, (U32) -> VEC3,       method = false, section = "rand",   grad = Zero;
-    "poisson":    NO_T,         (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
-    "poisson_state": NO_T,      (U32, F32) -> U32,       method = false, section = "rand",   grad = Zero;
-    "noise":      NOISE,        (U32, T) -> F32,         method = false, section = "rand",   grad = Adjoint;
-    "pnoise":     NOISE,        (U32, T, IntOfT) -> F32, method = false, section = "rand",   grad = Adjoint;
+    // `randf(&mut s, ..)` is not a call of one row: `front::lower::rng` lowers it into the
+    // row's pure function of the state before the draw and the write-back of the advanced
+    // state (`draws(k)`: `rand_pcg` once per uniform draw; `next_state`: `poisson_state` for
+    // `poisson`); `randi`/`randu` are the advanced state itself, in integer operators. The
+    // internal rows are those pieces (`randf_range` is `randf` with a range) and overloads by
+    // arity; user code cannot name them.
+    "rand_init":  NO_T,           (I32) -> U32,             "rand", Zero;
+    "rand_init_offset": NO_T, (I32, I32) -> U32, "rand", Zero, overload("rand_init", 2), internal;
+    "rand_pcg":   NO_T,           (U32) -> U32,             "rand", Zero, internal;
+    "randi":      NO_T,           (U32) -> I32,             "rand", Zero, draws(1), lowered;
+    "randu":      NO_T,           (U32) -> U32,             "rand", Zero, draws(1), lowered;
+    "randf":      NO_T,           (U32) -> F32,             "rand", Zero, draws(1);
+    "randf_range": NO_T, (U32, F32, F32) -> F32, "rand", Zero, internal;
+    "randn":      NO_T,           (U32) -> F32,             "rand", Zero, draws(2);
+    "sample_triangle": NO_T, (U32) -> VEC2, "rand", Zero, draws(2);
+    "sample_unit_ring": NO_T, (U32) -> VEC2, "rand", Zero, draws(1);
+    "sample_unit_disk": NO_T, (U32) -> VEC2, "rand", Zero, draws(2);
+    "sample_unit_square": NO_T, (U32) -> VEC2, "rand", Zero, draws(2);
+    "sample_unit_cube": NO_T, (U32) -> VEC3, "rand", Zero, draws(3);
+    "sample_unit_sphere_surface": NO_T, (U32) -> VEC3, "rand", Zero, draws(2);
+    "sample_unit_sphere": NO_T, (U32) -> VEC3, "rand", Zero, draws(3);
+    "sample_unit_hemisphere_surface": NO_T, (U32) -> VEC3, "rand", Zero, draws(2);
+    "sample_unit_hemisphere": NO_T, (U32) -> VEC3, "rand", Zero, draws(3);
+    "poisson":    NO_T,           (U32, F32) -> U32, "rand", Zero, next_state("poisson_state");
+    "poisson_state": NO_T, (U32, F32) -> U32, "rand", Zero, internal;
+    "noise":      NOISE,          (U32, T) -> F32,          "rand", Adjoint;
+    "pnoise":     NOISE,          (U32, T, IntOfT) -> F32,  "rand", Adjoint;
     // More vector, quaternion and transform builtins (warp-core `builtins::misc`, wp_misc.h).
     // `min(v)`/`max(v)` of one vector are `min_element`/`max_element` (glam's names), and
-    // `lower_bound(a, lo, hi, v)` is `lower_bound_range` (overloads by arity, see
-    // `front::lower`); the norms' `delta` defaults to 1 as in Warp ([`DEFAULT_LAST`]).
-    "copysign":   FLOAT,        (T, T) -> T,             method = true,  section = "misc",   grad = Adjoint;
-    "nonzero":    NUMBER,       (T) -> T,                method = false, section = "misc",   grad = Zero;
-    "block_dim":  NO_T,         () -> I32,               method = false, section = "misc",   grad = Zero;
-    "min_element": VECS,        (T) -> ScalarOfT,        method = true,  section = "misc",   grad = Adjoint;
-    "max_element": VECS,        (T) -> ScalarOfT,        method = true,  section = "misc",   grad = Adjoint;
-    "argmin":     VECS,         (T) -> U32,              method = false, section = "misc",   grad = Zero;
-    "argmax":     VECS,         (T) -> U32,              method = false, section = "misc",   grad = Zero;
-    "get_diag":   MAT,          (T) -> VecOfT,           method = false, section = "misc",   grad = Adjoint;
-    "norm_l1":    FVEC,         (T) -> ScalarOfT,        method = false, section = "misc",   grad = Adjoint;
-    "norm_l2":    FVEC,         (T) -> ScalarOfT,        method = false, section = "misc",   grad = Adjoint;
-    "norm_huber": FVEC,         (T, ScalarOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
-    "norm_pseudo_huber": FVEC,  (T, ScalarOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
-    "smooth_normalize": FVEC,   (T, ScalarOfT) -> T,     method = false, section = "misc",   grad = Adjoint;
-    "quat_to_axis_angle": QUAT, (T) -> Tuple(&[Vec3OfT, ScalarOfT]), method = false, section = "misc", grad = Adjoint;
-    "quat_rpy":   FLOAT,        (T, T, T) -> QuatOfT,    method = false, section = "misc",   grad = Adjoint;
-    "quat_to_rpy": QUAT,        (T) -> VecOfT,           method = false, section = "misc",   grad = Adjoint;
-    "quat_twist": FVEC3,        (T, QuatOfT) -> QuatOfT, method = false, section = "misc",   grad = Adjoint;
-    "quat_twist_angle": FVEC3,  (T, QuatOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
-    "quat_twist_angle_signed": FVEC3, (T, QuatOfT) -> ScalarOfT, method = false, section = "misc", grad = Adjoint;
-    "transform_compose": FVEC3, (T, QuatOfT, T) -> Mat4OfT, method = false, section = "misc", grad = Adjoint;
-    "transform_decompose": &[Matrix4], (T) -> Tuple(&[Vec3OfT, QuatOfT, Vec3OfT]), method = false, section = "misc", grad = Adjoint;
-    "lower_bound": NUMBER,      (ArrayOfT, T) -> I32,    method = false, section = "misc",   grad = Zero;
-    "lower_bound_range": NUMBER, (ArrayOfT, I32, I32, T) -> I32, method = false, section = "misc", grad = Zero;
+    // `lower_bound(a, lo, hi, v)` is `lower_bound_range` (overloads by arity); the norms'
+    // `delta` defaults to 1 as in Warp.
+    "copysign":   FLOAT,          (T, T) -> T,              "misc", Adjoint, method;
+    "nonzero":    NUMBER,         (T) -> T,                 "misc", Zero;
+    "block_dim":  NO_T,           () -> I32,                "misc", Zero;
+    "min_element": VECS, (T) -> ScalarOfT, "misc", Adjoint, method, overload("min", 1);
+    "max_element": VECS, (T) -> ScalarOfT, "misc", Adjoint, method, overload("max", 1);
+    "argmin":     VECS,           (T) -> U32,               "misc", Zero;
+    "argmax":     VECS,           (T) -> U32,               "misc", Zero;
+    "get_diag":   MAT,            (T) -> VecOfT,            "misc", Adjoint;
+    "norm_l1":    FVEC,           (T) -> ScalarOfT,         "misc", Adjoint;
+    "norm_l2":    FVEC,           (T) -> ScalarOfT,         "misc", Adjoint;
+    "norm_huber": FVEC,           (T, ScalarOfT) -> ScalarOfT, "misc", Adjoint, default_last("1.0");
+    "norm_pseudo_huber": FVEC, (T, ScalarOfT) -> ScalarOfT, "misc", Adjoint, default_last("1.0");
+    "smooth_normalize": FVEC, (T, ScalarOfT) -> T, "misc", Adjoint, default_last("1.0");
+    "quat_to_axis_angle": QUAT, (T) -> Tuple(&[Vec3OfT, ScalarOfT]), "misc", Adjoint,
+        results("(axis, angle)");
+    "quat_rpy":   FLOAT,          (T, T, T) -> QuatOfT,     "misc", Adjoint;
+    "quat_to_rpy": QUAT, (T) -> VecOfT, "misc", Adjoint;
+    "quat_twist": FVEC3,          (T, QuatOfT) -> QuatOfT,  "misc", Adjoint;
+    "quat_twist_angle": FVEC3, (T, QuatOfT) -> ScalarOfT, "misc", Adjoint;
+    "quat_twist_angle_signed": FVEC3, (T, QuatOfT) -> ScalarOfT, "misc", Adjoint;
+    "transform_compose": FVEC3, (T, QuatOfT, T) -> Mat4OfT, "misc", Adjoint;
+    "transform_decompose": &[Matrix4], (T) -> Tuple(&[Vec3OfT, QuatOfT, Vec3OfT]), "misc", Adjoint,
+        results("(p, q, s)");
+    "lower_bound": NUMBER, (ArrayOfT, T) -> I32, "misc", Zero;
+    "lower_bound_range": NUMBER, (ArrayOfT, I32, I32, T) -> I32, "misc", Zero,
+        overload("lower_bound", 4), internal;
 }
-
-/// Rows that are pieces of other builtins (see the "rand" rows): not callable by name.
-pub const INTERNAL: &[&str] = &[
-    "rand_init_offset",
-    "rand_pcg",
-    "randf_range",
-    "poisson_state",
-    "lower_bound_range",
-];
-
-/// Builtins with a defaulted last argument (Warp's keyword defaults), supplied when a call
-/// leaves it out: the norms' `delta = 1.0`.
-pub const DEFAULT_LAST: &[(&str, &str)] = &[
-    ("norm_huber", "1.0"),
-    ("norm_pseudo_huber", "1.0"),
-    ("smooth_normalize", "1.0"),
-];
-
-/// Whether a builtin takes an array among its values (not an atomic): its CPU function gets
-/// the view by reference and returns a `KResult` (its reads are checked), its CUDA function
-/// takes the fault context last (`lower_bound`).
-pub fn reads_array(b: &Builtin) -> bool {
-    !b.is_atomic() && b.params.contains(&Pos::ArrayOfT)
-}
-
-/// Rust method names that mean a builtin under another name (`x.powf(y)` is `pow(x, y)`,
-/// `x.ln()` is `log(x)`). Each alias has Rust's meaning exactly: `round_ties_even` is `rint`,
-/// `fract` is `x - trunc(x)` like `frac`, `to_degrees`/`to_radians` multiply by the same
-/// constants as `degrees`/`radians`. (`signum` is not an alias of `sign`: Rust's gives NaN for
-/// NaN and -1 for -0.0, Warp's `sign` +1 for both.)
-pub const METHOD_ALIASES: &[(&str, &str)] = &[
-    ("powf", "pow"),
-    ("ln", "log"),
-    ("round_ties_even", "rint"),
-    ("fract", "frac"),
-    ("to_degrees", "degrees"),
-    ("to_radians", "radians"),
-    ("is_finite", "isfinite"),
-    ("is_nan", "isnan"),
-    ("is_infinite", "isinf"),
-    ("length_squared", "length_sq"),
-    ("conjugate", "quat_inverse"),
-    // glam's names of the 4x4-matrix overloads (`m.transform_point3(x)`).
-    ("transform_point3", "transform_point"),
-    ("transform_vector3", "transform_vector"),
-];
 
 /// Looks a builtin up by name (internal rows included).
 pub fn lookup(name: &str) -> Option<&'static Builtin> {
     BUILTINS.iter().find(|b| b.name == name)
 }
 
-/// Looks up a builtin that user code may call by name (not an [`INTERNAL`] row).
+/// Looks up a builtin that user code may call by name (not an internal row).
 pub fn lookup_user(name: &str) -> Option<&'static Builtin> {
-    lookup(name).filter(|b| !INTERNAL.contains(&b.name))
+    lookup(name).filter(|b| !b.internal)
 }
 
 /// Looks a builtin up by method name (aliases included).
 pub fn lookup_method(name: &str) -> Option<&'static Builtin> {
-    match METHOD_ALIASES.iter().find(|(a, _)| *a == name) {
-        Some((_, target)) => lookup(target),
+    match BUILTINS.iter().find(|b| b.aliases.contains(&name)) {
+        Some(b) => Some(b),
         None => lookup(name).filter(|b| b.method),
     }
+}
+
+/// The row a call of Warp's `name` with `arity` arguments is, where that overload is a row of
+/// its own (`min(v)` is `min_element`, `lower_bound(a, lo, hi, v)` is `lower_bound_range`).
+pub fn lookup_overload(name: &str, arity: usize) -> Option<&'static Builtin> {
+    BUILTINS.iter().find(|b| b.overload == Some((name, arity)))
+}
+
+/// The builtin that glam's constructor `ty::f(..)` is (`Quat::from_axis_angle`).
+pub fn lookup_ctor(ty: &Ty, f: &str) -> Option<&'static Builtin> {
+    BUILTINS
+        .iter()
+        .find(|b| matches!(b.ctor, Some((class, g)) if g == f && class.admits(ty)))
 }
 
 /// An argument as the matcher sees it.
@@ -708,6 +878,51 @@ mod tests {
                 .all(|p| matches!(p, Pos::Fixed(_) | Pos::FixedVec(..)));
             assert!(binds_t || all_fixed, "{} cannot bind T", b.name);
             assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);
+            // The facts beyond the signature agree with it and with the other rows.
+            for a in b.aliases {
+                assert!(
+                    lookup(a).is_none(),
+                    "{}: alias {a} is a builtin's name",
+                    b.name
+                );
+                assert_eq!(lookup_method(a).map(|m| m.name), Some(b.name), "{a}");
+            }
+            if let Some((name, arity)) = b.overload {
+                assert_eq!(b.params.len(), arity, "{}: overload's arity", b.name);
+                let base = lookup_user(name).expect("an overload of a builtin");
+                assert_ne!(base.params.len(), arity, "{}", b.name);
+                assert_eq!(lookup_overload(name, arity).map(|o| o.name), Some(b.name));
+            }
+            if let Some(lit) = b.default_last {
+                assert!(syn::parse_str::<syn::Lit>(lit).is_ok(), "{}: {lit}", b.name);
+            }
+            if let Some(draw) = b.draw {
+                assert_eq!(
+                    b.params.first(),
+                    Some(&Pos::Fixed(Scalar::U32)),
+                    "{}",
+                    b.name
+                );
+                if let Draw::NextState(row) = draw {
+                    let next = lookup(row).expect("the next-state row");
+                    assert!(next.internal && next.params == b.params, "{}", b.name);
+                }
+            }
+            match (b.ret, b.results) {
+                (Pos::Tuple(parts), Some(names)) => {
+                    assert_eq!(names.split(',').count(), parts.len(), "{}", b.name)
+                }
+                (Pos::Tuple(_), None) => panic!("{}: a tuple result needs its names", b.name),
+                (_, results) => assert!(results.is_none(), "{}", b.name),
+            }
+            if let Emit::Operator(_) = b.emit {
+                assert_eq!(b.params.len(), 2, "{}: a binary operator", b.name);
+            }
+            assert!(
+                !(b.internal && (b.method || !b.aliases.is_empty() || b.ctor.is_some())),
+                "{}: internal rows have no other spelling",
+                b.name
+            );
         }
         for name in [
             "min",
@@ -898,6 +1113,33 @@ mod tests {
     }
 
     #[test]
+    fn glam_constructors_and_overloads() {
+        let ctor = |ty: Ty, f: &str| lookup_ctor(&ty, f).map(|b| b.name);
+        assert_eq!(
+            ctor(Ty::Quat(Scalar::F64), "from_axis_angle"),
+            Some("quat_from_axis_angle")
+        );
+        assert_eq!(
+            ctor(Ty::Matrix(Scalar::F32, 3), "from_quat"),
+            Some("quat_to_matrix")
+        );
+        assert_eq!(ctor(Ty::Matrix(Scalar::F32, 4), "from_quat"), None);
+        assert_eq!(
+            ctor(Ty::Transform(Scalar::F32), "new"),
+            Some("transformation")
+        );
+        assert_eq!(ctor(Ty::Vector(Scalar::F32, 3), "new"), None);
+        assert_eq!(
+            lookup_overload("min", 1).map(|b| b.name),
+            Some("min_element")
+        );
+        assert!(lookup_overload("min", 2).is_none());
+        assert_eq!(lookup("min_element").unwrap().warp_name(), Some("min"));
+        assert_eq!(lookup("exp2").unwrap().warp_name(), None);
+        assert_eq!(lookup("sqrt").unwrap().warp_name(), Some("sqrt"));
+    }
+
+    #[test]
     fn method_aliases() {
         assert_eq!(lookup_method("powf").unwrap().name, "pow");
         assert_eq!(lookup_method("ln").unwrap().name, "log");
@@ -974,10 +1216,10 @@ mod tests {
             .unwrap_err()
             .contains("f32, Vec2, Vec3 or Vec4"));
         // Internal rows exist and are hidden from user code.
-        for name in INTERNAL {
-            assert!(lookup(name).is_some(), "{name}");
-            assert!(lookup_user(name).is_none(), "{name}");
+        for b in BUILTINS.iter().filter(|b| b.internal) {
+            assert!(lookup_user(b.name).is_none(), "{}", b.name);
         }
+        assert!(lookup_user("rand_pcg").is_none());
         assert!(lookup_user("randn").is_some());
     }
 
@@ -1099,16 +1341,16 @@ mod tests {
             .resolve(&[k(arr), ArgTy::Literal { float: false }])
             .unwrap();
         assert_eq!(r.params[1], Ty::Scalar(Scalar::I64));
-        assert!(reads_array(lookup("lower_bound_range").unwrap()));
-        assert!(!reads_array(lookup("atomic_add").unwrap()));
+        assert!(lookup("lower_bound_range").unwrap().reads_array());
+        assert!(!lookup("atomic_add").unwrap().reads_array());
         assert!(lookup_user("lower_bound_range").is_none());
         for name in ["isfinite", "isnan", "isinf"] {
             let b = lookup(name).unwrap();
             assert!(b.resolve(&[k(Ty::Matrix(Scalar::F64, 2))]).is_ok());
             assert!(b.resolve(&[k(Ty::Quat(Scalar::F32))]).is_ok());
         }
-        for (name, _) in DEFAULT_LAST {
-            assert_eq!(lookup(name).unwrap().params.len(), 2, "{name}");
+        for b in BUILTINS.iter().filter(|b| b.default_last.is_some()) {
+            assert_eq!(b.params.len(), 2, "{}", b.name);
         }
     }
 
@@ -1127,3 +1369,6 @@ mod tests {
             .is_err());
     }
 }
+
+#[cfg(test)]
+mod doc;

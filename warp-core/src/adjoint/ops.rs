@@ -2,7 +2,7 @@
 //!
 //! One trait per operator, implemented on the left operand's type with the right operand's
 //! type as parameter, for exactly the combinations the kernel language types (see
-//! `binary_result` in `warp-macros/src/front/lower.rs`), each with glam's meaning:
+//! `binary_result` in `warp-macros/src/front/lower/typing.rs`), each with glam's meaning:
 //!
 //! | operands                                      | operators           | adjoint            |
 //! |-----------------------------------------------|---------------------|--------------------|

@@ -28,9 +28,9 @@
 //! Every one of them is f32, as in Warp. All are non-differentiable (zero gradient).
 
 /// How many uniform draws (state steps) each state-advancing builtin consumes; `poisson`
-/// consumes a variable number (see [`poisson_state`]). The macro keeps its own copy of this
-/// table (`warp-macros/src/front/lower/rng.rs`); `tests` here check that the two agree with the
-/// functions.
+/// consumes a variable number (see [`poisson_state`]). The macro's builtin table states the
+/// same counts in its rows (`draws` in `warp-macros/src/builtins.rs`, which lowers the draws),
+/// and a test there compares the two; `tests` here check these against the functions.
 pub const DRAWS: &[(&str, u32)] = &[
     ("randi", 1),
     ("randu", 1),

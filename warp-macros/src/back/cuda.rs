@@ -216,9 +216,7 @@ impl<'a> Emitter<'a> {
                 decl(b)?
             )),
             Op::Unary(UnOp::Neg, a) => Some(format!("decltype(-{})", decl(a)?)),
-            Op::Builtin { builtin, args }
-                if !builtin.is_atomic() && !crate::builtins::reads_array(builtin) =>
-            {
+            Op::Builtin { builtin, args } if !builtin.is_atomic() && !builtin.reads_array() => {
                 let args: Option<Vec<String>> = args.iter().map(|a| decl(*a)).collect();
                 Some(format!("decltype({}({}))", builtin.cuda, args?.join(", ")))
             }
@@ -668,7 +666,7 @@ impl<'a> Emitter<'a> {
                     let idx = self.index(&args[1..vals_at]);
                     let vals: Vec<String> = args[vals_at..].iter().map(|v| self.var(*v)).collect();
                     format!("{}({a}, {idx}, {}, __ctx)", builtin.cuda, vals.join(", "))
-                } else if crate::builtins::reads_array(builtin) {
+                } else if builtin.reads_array() {
                     // `lower_bound(a, .., __ctx)`: checked reads of the array.
                     let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                     format!("{}({}, __ctx)", builtin.cuda, args.join(", "))

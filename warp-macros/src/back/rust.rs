@@ -301,7 +301,7 @@ impl<'a> RustEmitter<'a> {
                     let idx = self.index(&args[1..vals_at]);
                     let vals = args[vals_at..].iter().map(|v| self.var(*v));
                     quote_spanned!(sp=> __wp::builtins::#f(&#a, #idx, #(#vals),*)?)
-                } else if crate::builtins::reads_array(builtin) {
+                } else if builtin.reads_array() {
                     // `lower_bound(&a, ..)?`: checked reads of the array.
                     let args = args.iter().map(|v| {
                         let x = self.var(*v);

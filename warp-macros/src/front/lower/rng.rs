@@ -13,7 +13,7 @@
 //! ```
 //!
 //! where `randf(pre)` is the table row's pure function of the state *before* the draw and
-//! `rand_pcg` is applied once per uniform draw the builtin consumes ([`DRAWS`]). The adjoint's
+//! `rand_pcg` is applied once per uniform draw the builtin consumes (the row's `draws`). The adjoint's
 //! replay therefore recomputes the same draws (the state is an ordinary `u32` variable, pushed
 //! on the adjoint stack where loops overwrite it), and every draw has zero gradient.
 //! The state may be any assignable place of type `u32`: a `let mut` local, a field of one, or
@@ -22,24 +22,7 @@
 //! remainder-by-zero fault on both backends (Warp: undefined behaviour).
 
 use super::*;
-
-/// Uniform draws (generator steps) each fixed-count draw consumes; the mirror of
-/// `warp_core::builtins::rand::DRAWS` (the suite checks the two agree through the sequences).
-const DRAWS: &[(&str, u32)] = &[
-    ("randi", 1),
-    ("randu", 1),
-    ("randf", 1),
-    ("randn", 2),
-    ("sample_triangle", 2),
-    ("sample_unit_ring", 1),
-    ("sample_unit_disk", 2),
-    ("sample_unit_square", 2),
-    ("sample_unit_cube", 3),
-    ("sample_unit_sphere_surface", 2),
-    ("sample_unit_sphere", 3),
-    ("sample_unit_hemisphere_surface", 2),
-    ("sample_unit_hemisphere", 3),
-];
+use crate::builtins::Draw;
 
 const U32: Ty = Ty::Scalar(Scalar::U32);
 const I32: Ty = Ty::Scalar(Scalar::I32);
@@ -60,19 +43,14 @@ impl Lowerer {
     ) -> R<Option<VarId>> {
         let args: Vec<&Expr> = c.args.iter().collect();
         match name {
-            "rand_init" => {
-                let b = match args.len() {
-                    1 => row("rand_init"),
-                    2 => row("rand_init_offset"),
-                    n => {
-                        return err(
-                            span,
-                            format!("`rand_init` takes a seed and an optional offset (`rand_init(seed)`, `rand_init(seed, offset)`), found {n} argument(s)"),
-                        )
-                    }
-                };
-                self.builtin_call(b, &args, want, span).map(Some)
-            }
+            // `rand_init(seed, offset)` is the row `rand_init_offset` (an overload by arity).
+            "rand_init" => match args.len() {
+                1 => self.builtin_call(row("rand_init"), &args, want, span).map(Some),
+                n => err(
+                    span,
+                    format!("`rand_init` takes a seed and an optional offset (`rand_init(seed)`, `rand_init(seed, offset)`), found {n} argument(s)"),
+                ),
+            },
             "pnoise" if args.len() > 3 && args.len() <= 6 => {
                 // Warp's `pnoise(state, xy, px, py)`: the periods become one integer vector.
                 let ctor = format_ident(&format!("ivec{}", args.len() - 2), span);
@@ -92,18 +70,20 @@ impl Lowerer {
                         }
                     })
             }
-            "poisson" => self.rng_draw(name, 0, &args, span).map(Some),
-            "sample_cdf" => self.rng_draw(name, 1, &args, span).map(Some),
-            _ => match DRAWS.iter().find(|d| d.0 == name) {
-                Some(&(_, k)) => self.rng_draw(name, k, &args, span).map(Some),
+            // Not a row: its argument is an `Array<f32>`, which no signature position is.
+            // Warp's: `lower_bound(cdf, randf(state))`, one step.
+            "sample_cdf" => self
+                .rng_draw(name, Draw::Steps(1), &args, span)
+                .map(Some),
+            _ => match builtins::lookup(name).and_then(|b| b.draw) {
+                Some(draw) => self.rng_draw(name, draw, &args, span).map(Some),
                 None => Ok(None),
             },
         }
     }
 
-    /// A state-advancing draw; `steps` generator steps (0 for `poisson`, which writes back
-    /// its `poisson_state`).
-    fn rng_draw(&mut self, name: &str, steps: u32, args: &[&Expr], span: Span) -> R<VarId> {
+    /// A state-advancing draw, which advances the state as `draw` says.
+    fn rng_draw(&mut self, name: &str, draw: Draw, args: &[&Expr], span: Span) -> R<VarId> {
         let Some(first) = args.first() else {
             return err(
                 span,
@@ -181,16 +161,6 @@ impl Lowerer {
             xs.push(v);
         }
         let pre = self.read_place(&place, U32, span);
-        let pcg = |cx: &mut Self, s: VarId| {
-            cx.def(
-                Op::Builtin {
-                    builtin: row("rand_pcg"),
-                    args: vec![s],
-                },
-                U32,
-                span,
-            )
-        };
         let call = |cx: &mut Self, b: &str, args: Vec<VarId>| {
             let b = row(b);
             let ty = match b.ret {
@@ -200,9 +170,14 @@ impl Lowerer {
             };
             cx.def(Op::Builtin { builtin: b, args }, ty, span)
         };
+        // The state after the draw, a function of the state before it.
+        let advance = |cx: &mut Self| match draw {
+            Draw::Steps(k) => (0..k).fold(pre, |s, _| call(cx, "rand_pcg", vec![s])),
+            Draw::NextState(r) => call(cx, r, std::iter::once(pre).chain(xs.clone()).collect()),
+        };
         let (result, next) = match (name, xs.len()) {
             ("randi" | "randu", n) => {
-                let t = pcg(self, pre);
+                let t = advance(self);
                 let r = if n == 0 {
                     t
                 } else {
@@ -245,24 +220,19 @@ impl Lowerer {
                     I32,
                     span,
                 );
-                (r, pcg(self, pre))
+                (r, advance(self))
             }
             ("poisson", _) => {
                 let r = call(self, "poisson", vec![pre, xs[0]]);
-                let next = call(self, "poisson_state", vec![pre, xs[0]]);
-                (r, next)
+                (r, advance(self))
             }
             ("randf", 2) => {
                 let r = call(self, "randf_range", vec![pre, xs[0], xs[1]]);
-                (r, pcg(self, pre))
+                (r, advance(self))
             }
             _ => {
                 let r = call(self, name, vec![pre]);
-                let mut next = pre;
-                for _ in 0..steps {
-                    next = pcg(self, next);
-                }
-                (r, next)
+                (r, advance(self))
             }
         };
         self.write_place(place, next, span);
@@ -276,27 +246,33 @@ fn format_ident(name: &str, span: Span) -> syn::Ident {
 
 #[cfg(test)]
 mod tests {
-    use super::DRAWS;
+    use crate::builtins::{Draw, BUILTINS};
 
     #[test]
     fn draw_counts_match_warp_core() {
-        // The same table as warp-core's (this crate cannot depend on it): compare the text.
+        // warp-core states the same counts for its functions (this crate cannot depend on it):
+        // compare the text of its `DRAWS` with the table's `draws`.
         let core = include_str!("../../../../warp-core/src/builtins/rand.rs");
-        for (name, k) in DRAWS {
-            assert!(
-                core.contains(&format!("(\"{name}\", {k}),")),
-                "{name}: {k} draws here, not in warp-core's DRAWS"
-            );
-        }
-        // And no row there that is missing here: the tables have the same number of rows.
         let block = core
             .split("pub const DRAWS: &[(&str, u32)] = &[")
             .nth(1)
             .and_then(|rest| rest.split("];").next())
             .expect("warp-core's DRAWS table");
+        let mut rows = 0;
+        for b in BUILTINS {
+            if let Some(Draw::Steps(k)) = b.draw {
+                let name = b.name;
+                assert!(
+                    block.contains(&format!("(\"{name}\", {k}),")),
+                    "{name}: {k} draws in the table, not in warp-core's DRAWS"
+                );
+                rows += 1;
+            }
+        }
+        // And no row there that is missing here.
         assert_eq!(
             block.matches("(\"").count(),
-            DRAWS.len(),
+            rows,
             "rows in warp-core's DRAWS"
         );
     }

@@ -1,0 +1,450 @@
+//! Statements: blocks (errors gathered one per statement, so that many are reported at
+//! once), `let` and its patterns (a name, `let (i, j) = tid();`, a decomposition's tuple
+//! `let (u, sigma, v) = svd3(a);`), expression statements (`loop`, `break`, `continue` among
+//! them), `return`, and `print!`/`println!` with their format strings.
+
+use super::expressions::{is_compound_assign, map_binop};
+use super::*;
+
+/// The type annotation of a `let`: a kernel type, or a tuple of them (for a destructured
+/// decomposition).
+fn let_type(ty: &syn::Type) -> R<Ty> {
+    match ty {
+        syn::Type::Tuple(t) if !t.elems.is_empty() => {
+            Ok(Ty::Tuple(t.elems.iter().map(parse_type).collect::<R<_>>()?))
+        }
+        syn::Type::Paren(p) => let_type(&p.elem),
+        _ => parse_type(ty),
+    }
+}
+
+fn is_tid_call(e: &Expr) -> bool {
+    match strip(e) {
+        Expr::Call(c) => match strip(&c.func) {
+            Expr::Path(p) => {
+                p.path.segments.last().is_some_and(|s| s.ident == "tid") && c.args.is_empty()
+            }
+            _ => false,
+        },
+        _ => false,
+    }
+}
+
+/// Statement-like expressions (`if` without a value, loops) at the end of a block.
+fn is_block_like(e: &Expr) -> bool {
+    matches!(
+        e,
+        Expr::If(_)
+            | Expr::While(_)
+            | Expr::ForLoop(_)
+            | Expr::Loop(_)
+            | Expr::Block(_)
+            | Expr::Assign(_)
+            | Expr::Macro(_)
+            | Expr::Return(_)
+            | Expr::Break(_)
+            | Expr::Continue(_)
+    ) || matches!(e, Expr::Binary(b) if is_compound_assign(&b.op))
+}
+
+/// A block-like tail that yields a value when the context wants one (`if` with `else`, `{..}`).
+fn is_value_block(e: &Expr) -> bool {
+    matches!(e, Expr::If(i) if i.else_branch.is_some()) || matches!(e, Expr::Block(_))
+}
+
+impl Lowerer {
+    /// Lowers statements; returns the tail expression's value, if any. Errors inside single
+    /// statements are recorded and lowering goes on, so that many are reported at once.
+    pub(super) fn block_stmts(
+        &mut self,
+        stmts: &[syn::Stmt],
+        want: Option<&Ty>,
+        value: bool,
+    ) -> R<Option<VarId>> {
+        let mut tail = None;
+        for (i, st) in stmts.iter().enumerate() {
+            let last = i + 1 == stmts.len();
+            let r = match st {
+                syn::Stmt::Local(local) => self.local(local),
+                syn::Stmt::Item(item) => err(
+                    item.span(),
+                    "items (fn, struct, use, ...) cannot be declared inside kernels",
+                ),
+                syn::Stmt::Macro(m) => self.macro_stmt(&m.mac),
+                syn::Stmt::Expr(e, None)
+                    if last && (!is_block_like(e) || (value && is_value_block(e))) =>
+                {
+                    // A failed tail is the block's failure: report it once, through the caller.
+                    tail = Some(self.expr(e, want)?);
+                    Ok(())
+                }
+                syn::Stmt::Expr(e, _) => self.stmt_expr(e),
+            };
+            if let Err(e) = r {
+                self.errors.push(e);
+            }
+        }
+        Ok(tail)
+    }
+
+    fn local(&mut self, local: &syn::Local) -> R<()> {
+        let span = local.span();
+        let Some(init) = &local.init else {
+            return err(span, "`let` needs a value in kernels: `let x = ...;`");
+        };
+        if init.diverge.is_some() {
+            return err(span, "`let ... else` is not supported in kernels");
+        }
+        let (pat, annot) = match &local.pat {
+            Pat::Type(pt) => (&*pt.pat, Some(let_type(&pt.ty)?)),
+            p => (p, None),
+        };
+        if let Pat::Tuple(tuple) = pat {
+            if !is_tid_call(&init.expr) {
+                return self.destructure(tuple, &init.expr, annot, span);
+            }
+            // `let (i, j) = tid();`
+            let n = tuple.elems.len();
+            if !(2..=4).contains(&n) {
+                return err(pat.span(), "tid() destructures into 2 to 4 indices");
+            }
+            if let Some(a) = &annot {
+                if *a != Ty::Tuple(vec![USIZE; n]) {
+                    return err(
+                        local.pat.span(),
+                        format!(
+                            "mismatched types: `tid()` gives `{}`, not `{a}`",
+                            Ty::TidTuple(n as u8)
+                        ),
+                    );
+                }
+            }
+            self.use_tid(n as u8, init.expr.span())?;
+            for (k, el) in tuple.elems.iter().enumerate() {
+                let v = self.def(Op::Tid(k as u8), USIZE, el.span());
+                self.bind_pat(el, v, span)?;
+            }
+            return Ok(());
+        }
+        let value = self.expr(&init.expr, annot.as_ref())?;
+        if let Some(a) = &annot {
+            let vt = self.ty(value);
+            if !vt.is_deferred() && vt != *a {
+                return err(
+                    init.expr.span(),
+                    format!("mismatched types: expected `{a}`, found `{vt}`"),
+                );
+            }
+        }
+        self.bind_pat(pat, value, span)
+    }
+
+    /// `let (u, sigma, v) = svd3(a);`: the call's tuple, then one member read per bound name.
+    fn destructure(
+        &mut self,
+        tuple: &syn::PatTuple,
+        init: &Expr,
+        annot: Option<Ty>,
+        span: Span,
+    ) -> R<()> {
+        let only = "tuple patterns are only supported for `let (i, j) = tid();` and the \
+                    decompositions (`let (u, sigma, v) = svd3(a);`, `let (q, d) = eig3(a);`, ..)";
+        if !matches!(strip(init), Expr::Call(_)) {
+            return err(tuple.span(), only);
+        }
+        self.tuple_result = true;
+        let value = self.expr(init, None);
+        self.tuple_result = false;
+        let value = value?;
+        let Ty::Tuple(tys) = self.ty(value) else {
+            return err(tuple.span(), only);
+        };
+        if tys.len() != tuple.elems.len() {
+            return err(
+                tuple.span(),
+                format!(
+                    "this pattern binds {} value(s), but the call returns {}: `{}`",
+                    tuple.elems.len(),
+                    tys.len(),
+                    self.ty(value)
+                ),
+            );
+        }
+        if let Some(a) = annot {
+            let ok = matches!(&a, Ty::Tuple(w) if w.len() == tys.len()
+                && w.iter().zip(&tys).all(|(w, t)| t.is_deferred() || w == t));
+            if !ok {
+                return err(
+                    init.span(),
+                    format!(
+                        "mismatched types: expected `{a}`, found `{}`",
+                        self.ty(value)
+                    ),
+                );
+            }
+        }
+        for (k, (el, ty)) in tuple.elems.iter().zip(tys).enumerate() {
+            if matches!(el, Pat::Wild(_)) {
+                continue;
+            }
+            let v = self.def(Op::Member(value, k.to_string()), ty, el.span());
+            self.bind_pat(el, v, span)?;
+        }
+        Ok(())
+    }
+
+    /// Binds a pattern (a name, `mut name` or `_`) to a value by copying it into a new variable.
+    fn bind_pat(&mut self, pat: &Pat, value: VarId, span: Span) -> R<()> {
+        match pat {
+            Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() && self.is_view(value) => {
+                // A view is a name for part of an array, not a value: bind the name to it.
+                if pi.mutability.is_some() {
+                    return err(pi.span(), "views are immutable: `let v = a.row(i);`");
+                }
+                let name = pi.ident.to_string();
+                self.scopes.last_mut().expect("scope").insert(name, value);
+                Ok(())
+            }
+            Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() => {
+                let ty = self.ty(value);
+                let name = pi.ident.to_string();
+                let v = self.new_var(Some(name.clone()), ty, pi.mutability.is_some());
+                self.push(
+                    StmtKind::Assign {
+                        dst: v,
+                        op: Op::Copy(value),
+                        define: true,
+                    },
+                    span,
+                );
+                self.scopes.last_mut().expect("scope").insert(name, v);
+                Ok(())
+            }
+            Pat::Wild(_) => Ok(()),
+            Pat::Ident(pi) if pi.by_ref.is_some() => {
+                err(pi.span(), "`ref` bindings are not supported in kernels")
+            }
+            other => err(
+                other.span(),
+                "only plain names (and `let (i, j) = tid();`) can be bound in kernels",
+            ),
+        }
+    }
+
+    pub(super) fn use_tid(&mut self, n: u8, span: Span) -> R<()> {
+        if self.kind == FnKind::Func {
+            return err(
+                span,
+                "tid() is only available in kernels: pass the index to the func",
+            );
+        }
+        match self.tid_ndim {
+            Some(m) if m != n => err(
+                span,
+                format!("tid() is used with {m} and with {n} dimensions in one kernel"),
+            ),
+            _ => {
+                self.tid_ndim = Some(n);
+                Ok(())
+            }
+        }
+    }
+
+    /// An expression in statement position (its value, if any, is dropped).
+    pub(super) fn stmt_expr(&mut self, e: &Expr) -> R<()> {
+        let span = e.span();
+        match e {
+            Expr::Assign(a) => self.assign(&a.left, None, &a.right, span),
+            Expr::Binary(b) if is_compound_assign(&b.op) => {
+                let op = map_binop(&b.op).expect("compound op");
+                self.assign(&b.left, Some(op), &b.right, span)
+            }
+            Expr::If(i) => self.if_expr(i, false, None).map(|_| ()),
+            Expr::While(w) => self.while_loop(w),
+            Expr::ForLoop(f) => self.for_loop(f),
+            Expr::Loop(l) => {
+                if let Some(label) = &l.label {
+                    return err(label.span(), "loop labels are not supported in kernels");
+                }
+                let (body, _) = self.loop_body(|cx| cx.block_stmts(&l.body.stmts, None, false))?;
+                self.push(StmtKind::Loop { body }, span);
+                Ok(())
+            }
+            Expr::Block(b) => {
+                if b.label.is_some() {
+                    return err(span, "block labels are not supported in kernels");
+                }
+                let (block, _) = self.in_block(|cx| cx.block_stmts(&b.block.stmts, None, false))?;
+                self.blocks.last_mut().expect("block").extend(block);
+                Ok(())
+            }
+            Expr::Break(b) => {
+                if b.label.is_some() || b.expr.is_some() {
+                    return err(
+                        span,
+                        "`break` with a label or a value is not supported in kernels",
+                    );
+                }
+                if self.loops == 0 {
+                    return err(span, "`break` outside of a loop");
+                }
+                self.push(StmtKind::Break, span);
+                Ok(())
+            }
+            Expr::Continue(c) => {
+                if c.label.is_some() {
+                    return err(span, "`continue` with a label is not supported in kernels");
+                }
+                if self.loops == 0 {
+                    return err(span, "`continue` outside of a loop");
+                }
+                self.push(StmtKind::Continue, span);
+                Ok(())
+            }
+            Expr::Return(r) => self.ret_stmt(r),
+            Expr::Macro(m) => self.macro_stmt(&m.mac),
+            _ => {
+                self.expr(e, None)?;
+                Ok(())
+            }
+        }
+    }
+
+    fn ret_stmt(&mut self, r: &syn::ExprReturn) -> R<()> {
+        let span = r.span();
+        let value = match (&r.expr, self.kind) {
+            (Some(e), FnKind::Kernel) => {
+                return err(
+                    e.span(),
+                    "kernels return nothing: `return;` ends the thread",
+                )
+            }
+            (Some(e), FnKind::Func) => {
+                let ret = self.ret.clone();
+                let v = self.expr(e, Some(&ret))?;
+                let vt = self.ty(v);
+                if !vt.is_deferred() && !ret.is_deferred() && vt != ret {
+                    return err(
+                        e.span(),
+                        format!("mismatched types: the func returns `{ret}`, found `{vt}`"),
+                    );
+                }
+                Some(v)
+            }
+            (None, FnKind::Func) if !matches!(self.ret, Ty::Unit) => {
+                return err(
+                    span,
+                    format!("`return;` in a func returning `{}`", self.ret),
+                )
+            }
+            (None, _) => None,
+        };
+        self.push(StmtKind::Return { value }, span);
+        Ok(())
+    }
+
+    fn macro_stmt(&mut self, mac: &syn::Macro) -> R<()> {
+        let name = mac
+            .path
+            .segments
+            .last()
+            .map(|s| s.ident.to_string())
+            .unwrap_or_default();
+        let newline = match name.as_str() {
+            "println" => true,
+            "print" => false,
+            _ => {
+                return err(
+                    mac.path.span(),
+                    format!(
+                        "macro `{name}!` is not supported in kernels (print! and println! are)"
+                    ),
+                )
+            }
+        };
+        let args: syn::punctuated::Punctuated<Expr, syn::Token![,]> =
+            mac.parse_body_with(syn::punctuated::Punctuated::parse_terminated)?;
+        let mut it = args.iter();
+        let fmt = match it.next() {
+            None => String::new(),
+            Some(Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Str(s),
+                ..
+            })) => s.value(),
+            Some(other) => {
+                return err(
+                    other.span(),
+                    "the first argument of print! must be a format string",
+                )
+            }
+        };
+        let fmt_span = mac.tokens.span();
+        let mut values = Vec::new();
+        for a in it {
+            values.push(self.expr(a, None)?);
+        }
+        let pieces = self.parse_format(&fmt, &values, fmt_span)?;
+        self.push(StmtKind::Print { pieces, newline }, mac.span());
+        Ok(())
+    }
+
+    fn parse_format(&mut self, fmt: &str, values: &[VarId], span: Span) -> R<Vec<FmtPiece>> {
+        let mut pieces = Vec::new();
+        let mut text = String::new();
+        let mut next = 0;
+        let mut chars = fmt.chars().peekable();
+        while let Some(c) = chars.next() {
+            match c {
+                '{' if chars.peek() == Some(&'{') => {
+                    chars.next();
+                    text.push('{');
+                }
+                '}' if chars.peek() == Some(&'}') => {
+                    chars.next();
+                    text.push('}');
+                }
+                '{' => {
+                    let mut spec = String::new();
+                    for c in chars.by_ref() {
+                        if c == '}' {
+                            break;
+                        }
+                        spec.push(c);
+                    }
+                    let (name, debug) = match spec.split_once(':') {
+                        None => (spec.as_str(), false),
+                        Some((n, "?")) => (n, true),
+                        Some(_) => return err(span, format!("format spec `{{{spec}}}` is not supported in kernels: use {{}} or {{:?}}")),
+                    };
+                    let var = if name.is_empty() {
+                        let v = *values.get(next).ok_or_else(|| {
+                            syn::Error::new(span, "more {} placeholders than arguments")
+                        })?;
+                        next += 1;
+                        v
+                    } else {
+                        self.lookup(name).ok_or_else(|| {
+                            syn::Error::new(span, format!("no variable `{name}` to print"))
+                        })?
+                    };
+                    if !text.is_empty() {
+                        pieces.push(FmtPiece::Text(std::mem::take(&mut text)));
+                    }
+                    pieces.push(FmtPiece::Arg { var, debug });
+                }
+                '}' => return err(span, "unmatched `}` in format string (write `}}`)"),
+                c => text.push(c),
+            }
+        }
+        if next != values.len() {
+            return err(
+                span,
+                format!("{} arguments but {} placeholders", values.len(), next),
+            );
+        }
+        if !text.is_empty() {
+            pieces.push(FmtPiece::Text(text));
+        }
+        Ok(pieces)
+    }
+}

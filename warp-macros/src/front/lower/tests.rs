@@ -1,0 +1,311 @@
+//! Tests of lowering as a whole: kernels in, IR or errors out.
+
+use super::*;
+use crate::types::{F32, I32};
+use syn::parse_quote;
+
+fn lower(item: syn::ItemFn) -> Function {
+    lower_fn(&item, FnKind::Kernel)
+        .unwrap_or_else(|e| panic!("{:?}", e.iter().map(|e| e.to_string()).collect::<Vec<_>>()))
+}
+
+fn errors(item: syn::ItemFn, kind: FnKind) -> Vec<String> {
+    match lower_fn(&item, kind) {
+        Ok(_) => vec![],
+        Err(e) => e.iter().map(|e| e.to_string()).collect(),
+    }
+}
+
+fn find_var(f: &Function, name: &str) -> Ty {
+    f.vars
+        .iter()
+        .rev()
+        .find(|v| v.name.as_deref() == Some(name))
+        .unwrap()
+        .ty
+        .clone()
+}
+
+#[test]
+fn decompositions_destructure_into_members() {
+    let f = lower(parse_quote! {
+        fn k(a: Array<DMat3>, b: Array<Mat2>) {
+            let i = tid();
+            let (u, s, v) = svd3(a[i]);
+            let (q, _): (DMat3, DVec3) = wp::eig3(a[i]);
+            let (q2, r) = qr3(a[i]);
+            let (u2, s2, v2) = svd2(b[i]);
+        }
+    });
+    let m3 = Ty::Matrix(Scalar::F64, 3);
+    assert_eq!(find_var(&f, "u"), m3);
+    assert_eq!(find_var(&f, "s"), Ty::Vector(Scalar::F64, 3));
+    assert_eq!(find_var(&f, "v"), m3);
+    assert_eq!(find_var(&f, "q"), m3);
+    assert_eq!(find_var(&f, "r"), m3);
+    assert_eq!(find_var(&f, "s2"), Ty::Vector(Scalar::F32, 2));
+    // One tuple temporary per call, read through members "0", "1", "2".
+    let tuples: Vec<&Ty> = f
+        .vars
+        .iter()
+        .map(|v| &v.ty)
+        .filter(|t| matches!(t, Ty::Tuple(_)))
+        .collect();
+    assert_eq!(tuples.len(), 4);
+    assert_eq!(
+        tuples[0].to_string(),
+        "(DMat3, DVec3, DMat3)",
+        "the tuple type prints as Rust's"
+    );
+    let mut members = Vec::new();
+    walk_stmts(&f.body, &mut |st| {
+        if let StmtKind::Assign {
+            op: Op::Member(_, m),
+            ..
+        } = &st.kind
+        {
+            members.push(m.clone());
+        }
+    });
+    // `_` reads nothing.
+    assert_eq!(members, ["0", "1", "2", "0", "0", "1", "0", "1", "2"]);
+}
+
+#[test]
+fn tuples_only_where_destructured() {
+    let e = errors(
+        parse_quote! {
+            fn k(a: Array<Mat3>) {
+                let i = tid();
+                let t = svd3(a[i]);
+                let (x, y) = a[i];
+                let (p, q) = svd3(a[i]);
+                let m = transpose(qr3(a[i]));
+            }
+        },
+        FnKind::Kernel,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(e[0].contains("destructure it"), "{}", e[0]);
+    assert!(
+        e[1].contains("tuple patterns are only supported"),
+        "{}",
+        e[1]
+    );
+    assert!(
+        e[2].contains("binds 2 value(s), but the call returns 3"),
+        "{}",
+        e[2]
+    );
+    assert!(e[3].contains("`qr3` returns a tuple"), "{}", e[3]);
+}
+
+#[test]
+fn literal_rule() {
+    let f = lower(parse_quote! {
+        fn k(x: f64, v: Vec3, a: Array<f32>) {
+            let i = tid();
+            let a1 = 2.0 * x;      // f64 from x
+            let a2 = 2.0;          // no context: f32
+            let a3 = v * 0.5;      // f32 from Vec3's scalar
+            let a4 = 3;            // i32
+            let a5 = 2 * x;        // integer literal in a float context
+            let a6: f64 = 1.0;     // annotation
+            let a7 = a[i] + 1.0;   // element type
+            let a8 = if x > 0.0 { 1.0 } else { 2.0 };
+        }
+    });
+    assert_eq!(find_var(&f, "a1"), Ty::Scalar(Scalar::F64));
+    assert_eq!(find_var(&f, "a2"), F32);
+    assert_eq!(find_var(&f, "a3"), Ty::Vector(Scalar::F32, 3));
+    assert_eq!(find_var(&f, "a4"), I32);
+    assert_eq!(find_var(&f, "a5"), Ty::Scalar(Scalar::F64));
+    assert_eq!(find_var(&f, "a6"), Ty::Scalar(Scalar::F64));
+    assert_eq!(find_var(&f, "a7"), F32);
+    assert_eq!(find_var(&f, "a8"), F32);
+    assert_eq!(f.tid_ndim, Some(1));
+}
+
+#[test]
+fn deferred_values_leave_literals_to_the_target() {
+    let f = lower(parse_quote! {
+        fn k(x: f32) { let y = helper(x) * 2.0; }
+    });
+    assert_eq!(find_var(&f, "y"), Ty::Deferred);
+    assert_eq!(f.callees.len(), 1);
+}
+
+#[test]
+fn type_errors_are_gathered() {
+    let e = errors(
+        parse_quote! {
+            fn k(x: f32, y: f64, v: Vec3) {
+                let a = x + y;
+                let b = v.frobnicate();
+                let c = |q: f32| q;
+                let d = &x;
+            }
+        },
+        FnKind::Kernel,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(
+        e[0].contains("cannot apply `+` to `f32` and `f64`"),
+        "{}",
+        e[0]
+    );
+    assert!(e[1].contains("unknown method `frobnicate`"), "{}", e[1]);
+    assert!(e[2].contains("closures"), "{}", e[2]);
+    assert!(e[3].contains("references"), "{}", e[3]);
+}
+
+#[test]
+fn subset_errors() {
+    let cases: Vec<(syn::ItemFn, &str)> = vec![
+        (
+            parse_quote!(
+                fn k(a: Array<f32>) {
+                    let s = String::new();
+                }
+            ),
+            "heap type `String`",
+        ),
+        (
+            parse_quote!(
+                fn k(a: Vec<f32>) {}
+            ),
+            "heap type",
+        ),
+        (
+            parse_quote!(
+                fn k(a: &f32) {}
+            ),
+            "references",
+        ),
+        (
+            parse_quote!(
+                fn k(x: f32) {
+                    x = 1.0;
+                }
+            ),
+            "immutable",
+        ),
+        (
+            parse_quote!(
+                fn k(a: Array<f32, 2>) {
+                    let v = a[0];
+                }
+            ),
+            "2 dimension",
+        ),
+        (
+            parse_quote!(
+                fn k(x: f32) {
+                    break;
+                }
+            ),
+            "outside of a loop",
+        ),
+        (
+            parse_quote!(
+                fn k(x: i32) {
+                    match x {
+                        _ => {}
+                    }
+                }
+            ),
+            "match",
+        ),
+        (
+            parse_quote!(
+                fn k(x: f32) -> f32 {
+                    x
+                }
+            ),
+            "kernels return nothing",
+        ),
+        (
+            parse_quote!(
+                fn k(x: u8) {
+                    let y = x + 300;
+                }
+            ),
+            "out of range",
+        ),
+        (
+            parse_quote!(
+                fn k(x: i32) {
+                    let y = x + 1.5;
+                }
+            ),
+            "float literal",
+        ),
+    ];
+    for (item, want) in cases {
+        let e = errors(item.clone(), FnKind::Kernel);
+        assert!(
+            e.iter().any(|m| m.contains(want)),
+            "{} -> {e:?}",
+            quote::quote!(#item)
+        );
+    }
+    let e = errors(
+        parse_quote!(
+            fn f(x: f32) -> f32 {
+                f(x)
+            }
+        ),
+        FnKind::Func,
+    );
+    assert!(e[0].contains("recursion"), "{e:?}");
+}
+
+#[test]
+fn control_flow_lowers() {
+    let f = lower(parse_quote! {
+        fn k(a: Array<f32>, n: i32) {
+            let mut s = 0.0;
+            for j in (0..n).rev().step_by(2) { if j == 3 { continue; } s += 1.0; }
+            let mut k = 0;
+            while k < 10 && s > 0.0 { k += 1; if k > 5 { break; } }
+            loop { break; }
+            a[0] = s;
+        }
+    });
+    let mut fors = 0;
+    let mut loops = 0;
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::For { range, .. } => {
+            fors += 1;
+            assert!(matches!(
+                range.adapters.as_slice(),
+                [RangeAdapter::Rev, RangeAdapter::StepBy(_)]
+            ));
+        }
+        StmtKind::Loop { .. } => loops += 1,
+        _ => {}
+    });
+    assert_eq!((fors, loops), (1, 2));
+    assert_eq!(find_var(&f, "j"), I32);
+}
+
+#[test]
+fn tid_forms() {
+    let f = lower(parse_quote!(
+        fn k(a: Array<f32, 2>) {
+            let (i, j) = tid();
+            a[(i, j)] = 1.0;
+        }
+    ));
+    assert_eq!(f.tid_ndim, Some(2));
+    let e = errors(
+        parse_quote!(
+            fn k() {
+                let i = tid();
+                let (a, b) = tid();
+            }
+        ),
+        FnKind::Kernel,
+    );
+    assert!(e[0].contains("1 and with 2"), "{e:?}");
+}

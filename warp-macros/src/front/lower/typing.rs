@@ -1,0 +1,314 @@
+//! Typing: the type rules of the operators, the check that a condition is a `bool`, and the
+//! literal rule with the lowering of literals.
+//!
+//! # The literal rule (shared by both backends)
+//! An unsuffixed numeric literal takes its type from its context: the other operand of a
+//! binary operator (its scalar, for `2.0 * v`), the parameter it is passed to, the annotated
+//! `let` or the place it is assigned to, or the function's return type. An integer literal in
+//! a float context becomes a float of that type (`2 * x` is `2.0 * x`). With no context, an
+//! integer literal is `i32` and a float literal is `f32` (as in Warp; Rust would pick `f64`).
+//! The Rust emitter writes every literal with its suffix, and the CUDA emitter with its C++
+//! type, so a literal can never silently become a double on one backend only. Where the
+//! context is a value whose type the macro cannot see (a user func's result), the literal is
+//! left for the target compiler to type from that same operand.
+
+use super::*;
+
+/// Is `e` an unsuffixed numeric literal (possibly negated or parenthesised)? `Some(is_float)`.
+pub(super) fn flex_literal(e: &Expr) -> Option<bool> {
+    match e {
+        Expr::Lit(l) => match &l.lit {
+            syn::Lit::Int(i) if i.suffix().is_empty() => Some(false),
+            syn::Lit::Float(f) if f.suffix().is_empty() => Some(true),
+            _ => None,
+        },
+        Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => flex_literal(&u.expr),
+        Expr::Paren(p) => flex_literal(&p.expr),
+        Expr::Group(g) => flex_literal(&g.expr),
+        _ => None,
+    }
+}
+
+/// The value of an unsuffixed numeric literal (possibly negated or parenthesised).
+pub(super) fn flex_value(e: &Expr) -> Option<Lit> {
+    match e {
+        Expr::Lit(l) => match &l.lit {
+            syn::Lit::Int(i) if i.suffix().is_empty() => {
+                i.base10_parse::<i128>().ok().map(Lit::Int)
+            }
+            syn::Lit::Float(f) if f.suffix().is_empty() => {
+                f.base10_parse::<f64>().ok().map(Lit::Float)
+            }
+            _ => None,
+        },
+        Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => match flex_value(&u.expr)? {
+            Lit::Int(v) => Some(Lit::Int(-v)),
+            Lit::Float(v) => Some(Lit::Float(-v)),
+            b => Some(b),
+        },
+        Expr::Paren(p) => flex_value(&p.expr),
+        Expr::Group(g) => flex_value(&g.expr),
+        // `else { 0.5 }`
+        Expr::Block(b) if b.label.is_none() => match b.block.stmts.as_slice() {
+            [syn::Stmt::Expr(e, None)] => flex_value(e),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// The type a literal should take next to an operand of type `other` under `op`.
+fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
+    match op {
+        BinOp::Shl | BinOp::Shr => None,
+        _ => match other {
+            Ty::Scalar(_) => Some(other.clone()),
+            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => {
+                Some(Ty::Scalar(*s))
+            }
+            Ty::Deferred => Some(Ty::Deferred),
+            _ => None,
+        },
+    }
+}
+
+/// The result type of `l op r`, or why there is none.
+pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
+    use Ty::*;
+    let bad = || Err(format!("cannot apply `{}` to `{l}` and `{r}`", op.symbol()));
+    if l.is_deferred() || r.is_deferred() {
+        return Ok(if op.is_comparison() { BOOL } else { Deferred });
+    }
+    match op {
+        BinOp::Eq | BinOp::Ne => {
+            if l == r
+                && matches!(
+                    l,
+                    Scalar(_) | Vector(..) | Quat(_) | Matrix(..) | Transform(_)
+                )
+            {
+                Ok(BOOL)
+            } else {
+                bad()
+            }
+        }
+        BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => match (l, r) {
+            (Scalar(a), Scalar(b)) if a == b => Ok(BOOL),
+            _ => bad(),
+        },
+        // Integer vectors too (glam's operators), lane by lane, a scalar splatted.
+        BinOp::BitAnd | BinOp::BitOr | BinOp::BitXor => match (l, r) {
+            (Scalar(a), Scalar(b)) if a == b && !a.is_float() => Ok(l.clone()),
+            (Vector(a, n), Vector(b, m)) if a == b && n == m && !a.is_float() => Ok(l.clone()),
+            (Vector(a, _), Scalar(b)) if a == b && !a.is_float() => Ok(l.clone()),
+            (Scalar(a), Vector(b, _)) if a == b && !a.is_float() => Ok(r.clone()),
+            _ => bad(),
+        },
+        // A vector shifts every lane by one scalar amount.
+        BinOp::Shl | BinOp::Shr => match (l, r) {
+            (Scalar(a) | Vector(a, _), Scalar(b)) if a.is_int() && b.is_int() => Ok(l.clone()),
+            _ => bad(),
+        },
+        BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div | BinOp::Rem => match (l, r) {
+            (Scalar(a), Scalar(b)) if a == b && *a != crate::types::Scalar::Bool => Ok(l.clone()),
+            (Vector(a, n), Vector(b, m)) if a == b && n == m => Ok(l.clone()),
+            (Vector(a, _), Scalar(b)) if a == b => Ok(l.clone()),
+            (Scalar(a), Vector(b, _)) if a == b => Ok(r.clone()),
+            (Matrix(a, n), Matrix(b, m))
+                if a == b && n == m && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) =>
+            {
+                Ok(l.clone())
+            }
+            (Matrix(a, n), Vector(b, m)) if a == b && n == m && op == BinOp::Mul => Ok(r.clone()),
+            (Matrix(a, _), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
+                Ok(l.clone())
+            }
+            (Scalar(a), Matrix(b, _)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            (Quat(a), Quat(b)) if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) => {
+                Ok(l.clone())
+            }
+            (Quat(a), Vector(b, 3)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            (Quat(a), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
+                Ok(l.clone())
+            }
+            // Transforms: `*` composes (Warp's transform_multiply); `+`, `-` and `*` by a
+            // scalar are lane by lane (Warp's add, sub, mul overloads).
+            (Transform(a), Transform(b))
+                if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) =>
+            {
+                Ok(l.clone())
+            }
+            (Transform(a), Scalar(b)) if a == b && op == BinOp::Mul => Ok(l.clone()),
+            (Scalar(a), Transform(b)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            _ => bad(),
+        },
+    }
+}
+
+pub(super) fn int_range(s: Scalar) -> (i128, i128) {
+    match s {
+        Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
+        Scalar::I16 => (i16::MIN.into(), i16::MAX.into()),
+        Scalar::I32 => (i32::MIN.into(), i32::MAX.into()),
+        Scalar::I64 | Scalar::Isize => (i64::MIN.into(), i64::MAX.into()),
+        Scalar::U8 => (0, u8::MAX.into()),
+        Scalar::U16 => (0, u16::MAX.into()),
+        Scalar::U32 => (0, u32::MAX.into()),
+        _ => (0, u64::MAX.into()),
+    }
+}
+
+impl Lowerer {
+    pub(super) fn expect_bool(&self, v: VarId, span: Span) -> R<()> {
+        let t = self.ty(v);
+        if t.is_deferred() || t == BOOL {
+            Ok(())
+        } else {
+            err(span, format!("expected `bool`, found `{t}`"))
+        }
+    }
+
+    /// Lowers two operands, typing an unsuffixed literal on either side from the other.
+    pub(super) fn operand_pair(
+        &mut self,
+        l: &Expr,
+        r: &Expr,
+        want: Option<&Ty>,
+        op: BinOp,
+    ) -> R<(VarId, VarId)> {
+        let shift = matches!(op, BinOp::Shl | BinOp::Shr);
+        match (flex_literal(l).is_some(), flex_literal(r).is_some()) {
+            (true, false) => {
+                // Literals have no side effects, so lowering the right side first is safe.
+                let rv = self.expr(r, None)?;
+                let lv = if shift {
+                    self.expr(l, want)?
+                } else {
+                    self.literal_next_to(l, rv, op)?
+                };
+                Ok((lv, rv))
+            }
+            (false, true) => {
+                let lv = self.expr(l, want)?;
+                let rv = if shift {
+                    self.expr(r, None)?
+                } else {
+                    self.literal_next_to(r, lv, op)?
+                };
+                Ok((lv, rv))
+            }
+            (true, true) => {
+                let w = want.and_then(|w| literal_hint(w, op));
+                let lv = self.expr(l, w.as_ref())?;
+                let rv = if shift {
+                    self.expr(r, None)?
+                } else {
+                    self.expr(r, w.as_ref())?
+                };
+                Ok((lv, rv))
+            }
+            (false, false) => Ok((self.expr(l, None)?, self.expr(r, None)?)),
+        }
+    }
+
+    /// An unsuffixed literal `lit` that meets `other` under `op`: typed from `other`'s type, or,
+    /// when the macro cannot see that type, made "a literal of the type of `other`".
+    pub(super) fn literal_next_to(&mut self, lit: &Expr, other: VarId, op: BinOp) -> R<VarId> {
+        if self.ty(other).is_deferred() {
+            if let Some(value) = flex_value(lit) {
+                return Ok(self.def(Op::LitLike(value, other), Ty::Deferred, lit.span()));
+            }
+        }
+        let hint = literal_hint(&self.ty(other), op);
+        self.expr(lit, hint.as_ref())
+    }
+
+    pub(super) fn literal(
+        &mut self,
+        lit: &syn::Lit,
+        neg: bool,
+        want: Option<&Ty>,
+        span: Span,
+    ) -> R<VarId> {
+        let want_scalar = want.map(|w| match w {
+            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => Ty::Scalar(*s),
+            t => t.clone(),
+        });
+        match lit {
+            syn::Lit::Bool(b) => {
+                if neg {
+                    return err(span, "cannot negate a bool");
+                }
+                Ok(self.def(Op::Lit(Lit::Bool(b.value)), BOOL, span))
+            }
+            syn::Lit::Int(i) => {
+                let v: i128 = i
+                    .base10_parse::<u128>()
+                    .map_err(|_| syn::Error::new(span, "integer literal too large"))?
+                    as i128;
+                let v = if neg { -v } else { v };
+                let ty = match i.suffix() {
+                    "" => match want_scalar {
+                        Some(Ty::Scalar(s)) if s.is_float() => {
+                            return Ok(self.def(
+                                Op::Lit(Lit::Float(v as f64)),
+                                Ty::Scalar(s),
+                                span,
+                            ));
+                        }
+                        Some(Ty::Scalar(s)) if s.is_int() => Ty::Scalar(s),
+                        Some(Ty::Deferred) => Ty::Deferred,
+                        _ => crate::types::I32,
+                    },
+                    suf => match Scalar::from_name(suf) {
+                        Some(s) if s.is_float() => {
+                            return Ok(self.def(
+                                Op::Lit(Lit::Float(v as f64)),
+                                Ty::Scalar(s),
+                                span,
+                            ));
+                        }
+                        Some(s) if s.is_int() => Ty::Scalar(s),
+                        _ => return err(span, format!("unknown literal suffix `{suf}`")),
+                    },
+                };
+                if let Ty::Scalar(s) = ty {
+                    let (lo, hi) = int_range(s);
+                    if v < lo || v > hi {
+                        return err(span, format!("literal out of range for `{}`", s.name()));
+                    }
+                }
+                Ok(self.def(Op::Lit(Lit::Int(v)), ty, span))
+            }
+            syn::Lit::Float(f) => {
+                let v: f64 = f
+                    .base10_parse()
+                    .map_err(|_| syn::Error::new(span, "bad float literal"))?;
+                let v = if neg { -v } else { v };
+                let ty = match f.suffix() {
+                    "" => match want_scalar {
+                        Some(Ty::Scalar(s)) if s.is_float() => Ty::Scalar(s),
+                        Some(Ty::Scalar(s)) if s.is_int() => {
+                            return err(
+                                span,
+                                format!("float literal where `{}` is expected", s.name()),
+                            );
+                        }
+                        Some(Ty::Deferred) => Ty::Deferred,
+                        _ => crate::types::F32,
+                    },
+                    "f32" => crate::types::F32,
+                    "f64" => Ty::Scalar(Scalar::F64),
+                    "f16" => Ty::Scalar(Scalar::F16),
+                    suf => return err(span, format!("unknown literal suffix `{suf}`")),
+                };
+                Ok(self.def(Op::Lit(Lit::Float(v)), ty, span))
+            }
+            syn::Lit::Str(_) | syn::Lit::ByteStr(_) | syn::Lit::CStr(_) => err(
+                span,
+                "strings are not supported in kernels (except as print! formats)",
+            ),
+            _ => err(span, "this literal is not supported in kernels"),
+        }
+    }
+}
