@@ -795,35 +795,27 @@ fn func_instance(
     let mut replay_em = RustEmitter::new(&f);
     replay_em.replay = true;
     let replay_body = replay_em.block(&f.body);
-    // Custom gradients replace the generated adjoint: each named parameter's adjoint is what
-    // its gradient func returns for (params.., adjoint of the result).
-    let mut custom = None;
-    if !fattrs.grad.is_empty() {
-        let mut body = TokenStream::new();
-        for (param, gf) in &fattrs.grad {
-            let Some(k) = f.params.iter().position(|p| *param == p.name) else {
-                return Err(vec![syn::Error::new(
-                    param.span(),
-                    format!("`{param}` is not a parameter of this func"),
-                )]);
-            };
-            if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
-                return Err(vec![syn::Error::new(
-                    param.span(),
-                    "custom gradients are for value parameters; an array's gradient comes from the accesses",
-                )]);
-            }
-            let out = format_ident!("__adj_out{}", k);
-            let args = f.params.iter().map(|p| em.var(p.var));
-            body.extend(quote_spanned! {gf.span()=>
-                __wp::adjoint::Adjoint::adj_accum(#out, #gf::__wp_cpu(#(#args,)* __adj_ret)?);
-            });
+    // Custom gradients replace the generated adjoint (`middle::adjoint::custom`): each named
+    // parameter's adjoint is what its gradient func returns for (params.., adjoint of the
+    // result).
+    for (param, _) in &fattrs.grad {
+        let Some(k) = f.params.iter().position(|p| *param == p.name) else {
+            return Err(vec![syn::Error::new(
+                param.span(),
+                format!("`{param}` is not a parameter of this func"),
+            )]);
+        };
+        if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
+            return Err(vec![syn::Error::new(
+                param.span(),
+                "custom gradients are for value parameters; an array's gradient comes from the accesses",
+            )]);
         }
-        custom = Some(body);
     }
-    let generated = match custom {
-        Some(body) => Ok(body),
-        None => crate::back::rust_adjoint::emit(&f),
+    let generated = if fattrs.grad.is_empty() {
+        crate::back::rust_adjoint::emit(&f)
+    } else {
+        crate::back::rust_adjoint::emit_custom(&f, &fattrs.grad)
     };
     // The CUDA replay and adjoint templates (custom gradients: calls of the gradient funcs,
     // which are recorded as extra callees after the body's).

@@ -10,13 +10,13 @@
 
 use proc_macro::TokenStream;
 
-mod adjoint_prep;
 mod analysis;
 mod back;
 mod builtins;
 mod expand;
 mod front;
 mod ir;
+mod middle;
 mod types;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing
