@@ -1006,24 +1006,38 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
     def.push_str(" };");
     // Adjoint units (`WP_ADJOINT_UNIT`) also get the struct's adjoint helpers, field by field:
     // global overloads (found by argument-dependent lookup from the library's templates) and
-    // `wp::` ones (for the qualified calls of generated code).
-    let fields_named: Vec<String> = data
+    // `wp::` ones (for the qualified calls of generated code). Each field's helper is called
+    // qualified: a struct field's global one (its `wp::` forwarder would be a second,
+    // equally good candidate), the library's for the others.
+    let fields_named: Vec<(String, bool)> = data
         .fields
         .iter()
-        .filter_map(|f| f.ident.as_ref().map(|i| i.to_string()))
+        .filter_map(|f| {
+            let is_struct = matches!(
+                crate::front::signature::parse_type(&f.ty),
+                Ok(crate::types::Ty::Struct(_))
+            );
+            f.ident.as_ref().map(|i| (i.to_string(), is_struct))
+        })
         .collect();
     let accum: String = fields_named
         .iter()
-        .map(|f| format!(" adj_accum(a.{f}, v.{f});"))
+        .map(|(f, is_struct)| {
+            let ns = if *is_struct { "" } else { "wp" };
+            format!(" {ns}::adj_accum(a.{f}, v.{f});")
+        })
         .collect();
     let grad_add: String = fields_named
         .iter()
-        .map(|f| format!(" grad_add_p(&p->{f}, v.{f});"))
+        .map(|(f, is_struct)| {
+            let ns = if *is_struct { "" } else { "wp::detail" };
+            format!(" {ns}::grad_add_p(&p->{f}, v.{f});")
+        })
         .collect();
     def.push_str(&format!(
         "\n#ifdef WP_ADJOINT_UNIT\n\
-         WP_FN void adj_accum({name}& a, const {name}& v) {{ using wp::adj_accum;{accum} }}\n\
-         WP_FN void grad_add_p({name}* p, const {name}& v) {{ using wp::detail::grad_add_p;{grad_add} }}\n\
+         WP_FN void adj_accum({name}& a, const {name}& v) {{{accum} }}\n\
+         WP_FN void grad_add_p({name}* p, const {name}& v) {{{grad_add} }}\n\
          namespace wp {{\n\
          WP_FN void adj_accum(::{name}& a, const ::{name}& v) {{ ::adj_accum(a, v); }}\n\
          WP_FN ::{name} zero_like(const ::{name}&) {{ return ::{name}{{}}; }}\n\

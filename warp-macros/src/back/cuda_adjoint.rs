@@ -200,6 +200,18 @@ impl<'a> Printer<'a> {
         }
         ps.push("wp::ctx_t* __ctx".into());
         ps.push("wp::adstack_t* __stack".into());
+        if !kernel {
+            // The types of the value parameters' adjoints, for the temporaries of callers
+            // (an argument may have another type, such as a literal's `int` for a `usize`).
+            for (k, p) in self.f().params.iter().enumerate() {
+                if !self.is_array(p.var) {
+                    let t = cpp_type(&p.ty).ok_or("parameter type")?;
+                    self.e
+                        .out
+                        .push_str(&format!("typedef {t} @@SELF@@_adj_arg{k};\n"));
+                }
+            }
+        }
         self.e.out.push_str(&format!(
             "static WP_FN void @@SELF@@_adj({}) {{\n",
             ps.join(", ")
@@ -471,8 +483,10 @@ impl<'a> Printer<'a> {
                     match how {
                         FuncArgAdj::ArrayGrad => pass.push(self.adj(*a)),
                         FuncArgAdj::Temp => {
-                            let v = self.var(*a);
-                            self.line(sp, &format!("auto __g{j} = wp::zero_like({v});"));
+                            self.line(
+                                sp,
+                                &format!("auto __g{j} = wp::adj_zero<@@F{k}@@_adj_arg{j}>();"),
+                            );
                             pass.push(format!("__g{j}"));
                         }
                     }

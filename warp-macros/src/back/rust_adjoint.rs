@@ -10,7 +10,7 @@
 use super::rust::{member_tokens, ty_tokens, RustEmitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
-use proc_macro2::TokenStream;
+use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 
 /// Emits the adjoint body of kernel or func `f`, or why it cannot yet. In scope: the forward
@@ -88,7 +88,10 @@ impl Printer<'_> {
     }
 
     fn stmt(&self, s: &AStmt) -> Result<TokenStream, String> {
-        let sp = s.span;
+        // The user's location, but the macro's hygiene: the generated locals (`__stack`, `__r`,
+        // `__tid`) resolve where the macro declared them even when the user's tokens came from
+        // another expansion (a func call passed to a `macro_rules!` that writes the kernel).
+        let sp = Span::call_site().located_at(s.span);
         Ok(match &s.kind {
             AKind::Assign { dst, value } => {
                 let x = self.var(*dst);

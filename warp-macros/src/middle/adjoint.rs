@@ -162,8 +162,9 @@ pub enum AtomicKind {
 pub enum FuncArgAdj {
     /// An array: its gradient.
     ArrayGrad,
-    /// A value: a fresh temporary `__g<k>` (k: the argument's position), into which the func
-    /// accumulates the argument's adjoint.
+    /// A value: a fresh zero temporary `__g<k>` (k: the argument's position) of the func's
+    /// parameter type (which an argument's type may differ from: a literal's), into which the
+    /// func accumulates the argument's adjoint.
     Temp,
 }
 
