@@ -792,9 +792,10 @@ fn func_instance(
         .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
     // The replay (no stores, no atomics) and the adjoint, for kernels' adjoints.
-    let mut replay_em = RustEmitter::new(&f);
+    let replay_fn = crate::middle::adjoint::replay_of(&f);
+    let mut replay_em = RustEmitter::new(&replay_fn);
     replay_em.replay = true;
-    let replay_body = replay_em.block(&f.body);
+    let replay_body = replay_em.block(&replay_fn.body);
     // Custom gradients replace the generated adjoint (`middle::adjoint::custom`): each named
     // parameter's adjoint is what its gradient func returns for (params.., adjoint of the
     // result).
