@@ -304,7 +304,7 @@ pub enum AKind {
 
 /// Whether a value of this type carries a gradient (`Deferred`, unknown to the macro: yes; the
 /// adjoint functions are no-ops for integer types).
-pub fn differentiable(t: &Ty) -> bool {
+fn differentiable(t: &Ty) -> bool {
     match t {
         Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
         Ty::Matrix(..) | Ty::Quat(_) => true,
@@ -471,8 +471,14 @@ fn at(kind: AKind, span: Span) -> AStmt {
     AStmt { kind, span }
 }
 
-fn line(sp: Span) -> u32 {
-    sp.start().line as u32
+/// Pushes `var`'s value before the statement at `sp` overwrites it.
+fn push(var: VarId, sp: Span) -> AStmt {
+    let line = sp.start().line as u32;
+    at(AKind::Push { var, line }, sp)
+}
+
+fn pop(var: VarId, sp: Span) -> AStmt {
+    at(AKind::Pop { var }, sp)
 }
 
 /// Rejects what the reverse sweep does not handle.
@@ -621,13 +627,7 @@ impl Cx<'_> {
             match &s.kind {
                 StmtKind::Assign { dst, op, .. } => {
                     if self.overwritten[*dst] {
-                        out.push(at(
-                            AKind::Push {
-                                var: *dst,
-                                line: line(sp),
-                            },
-                            sp,
-                        ));
+                        out.push(push(*dst, sp));
                     }
                     out.push(at(
                         AKind::Assign {
@@ -638,13 +638,7 @@ impl Cx<'_> {
                     ));
                 }
                 StmtKind::SetMember { var, path, value } => {
-                    out.push(at(
-                        AKind::Push {
-                            var: *var,
-                            line: line(sp),
-                        },
-                        sp,
-                    ));
+                    out.push(push(*var, sp));
                     out.push(at(
                         AKind::SetMember {
                             var: *var,
@@ -666,29 +660,18 @@ impl Cx<'_> {
                 StmtKind::For { var, range, body } => {
                     let (exit, body) = split_exit(body);
                     // The variable's old value, then its value at this step.
-                    let mut b = vec![
-                        at(
-                            AKind::Push {
-                                var: *var,
-                                line: line(sp),
-                            },
-                            sp,
-                        ),
-                        at(
-                            AKind::StepVar {
-                                var: *var,
-                                end: range.end,
-                            },
-                            sp,
-                        ),
-                    ];
+                    let step = AKind::StepVar {
+                        var: *var,
+                        end: range.end,
+                    };
+                    let mut b = vec![push(*var, sp), at(step, sp)];
                     b.extend(self.forward(body, true));
                     out.push(at(
                         AKind::For {
                             range: range.clone(),
                             exit,
                             body: b,
-                            line: line(sp),
+                            line: sp.start().line as u32,
                         },
                         sp,
                     ));
@@ -699,7 +682,7 @@ impl Cx<'_> {
                         AKind::Loop {
                             exit,
                             body: self.forward(body, true),
-                            line: line(sp),
+                            line: sp.start().line as u32,
                         },
                         sp,
                     ));
@@ -754,7 +737,7 @@ impl Cx<'_> {
                         sp,
                     )];
                     self.accum(&mut b, *value, None, GradSrc::Seed, sp);
-                    b.push(at(AKind::Pop { var: *var }, sp));
+                    b.push(pop(*var, sp));
                     out.push(at(AKind::Scope(b), sp));
                 }
                 StmtKind::If { cond, then, els } => out.push(at(
@@ -770,7 +753,7 @@ impl Cx<'_> {
                     let mut b = self.reverse(body, true);
                     // A `for` restores its variable after each reversed iteration.
                     if let StmtKind::For { var, .. } = &s.kind {
-                        b.push(at(AKind::Pop { var: *var }, sp));
+                        b.push(pop(*var, sp));
                     }
                     out.push(at(AKind::RevLoop { body: b }, sp));
                 }
@@ -783,7 +766,7 @@ impl Cx<'_> {
     /// Reverse of `dst = op`: take `dst`'s adjoint, restore `dst`'s old value, accumulate the
     /// operands' adjoints.
     fn reverse_assign(&self, out: &mut Vec<AStmt>, dst: VarId, op: &Op, sp: Span) {
-        let restore = self.overwritten[dst].then(|| at(AKind::Pop { var: dst }, sp));
+        let restore = self.overwritten[dst].then(|| pop(dst, sp));
         if let Op::Func { path, args } = op {
             // The func's adjoint runs even when its result carries no gradient: it may have
             // read arrays.
@@ -976,5 +959,175 @@ fn split_exit(body: &[Stmt]) -> (Vec<VarId>, &[Stmt]) {
             ..
         }) => (flags.clone(), &body[1..]),
         _ => (Vec::new(), body),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use syn::parse_quote;
+
+    fn kernel(item: syn::ItemFn) -> Function {
+        crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap()
+    }
+
+    fn name(f: &Function, v: VarId) -> String {
+        f.vars[v].name.clone().unwrap_or_else(|| format!("t{v}"))
+    }
+
+    /// Every statement, depth first.
+    fn all(b: &[AStmt]) -> Vec<&AStmt> {
+        let mut out = Vec::new();
+        for s in b {
+            out.push(s);
+            match &s.kind {
+                AKind::If { then, els, .. } | AKind::RevIf { then, els, .. } => {
+                    out.extend(all(then));
+                    out.extend(all(els));
+                }
+                AKind::For { body, .. }
+                | AKind::Loop { body, .. }
+                | AKind::RevLoop { body }
+                | AKind::Scope(body) => out.extend(all(body)),
+                _ => {}
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn thread_owned_arrays_follow_the_policy() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, y: Array<f32>, z: Array<f32>, j: i32) {
+                let i = tid();
+                y[i] = x[i] * z[j];
+            }
+        });
+        let modes = |p: Policy| {
+            let a = build(&f, p).unwrap();
+            let mut accum = Vec::new();
+            let mut take = Vec::new();
+            let mut end = Vec::new();
+            for s in all(&a.body) {
+                match &s.kind {
+                    AKind::GradAccum { array, mode, .. } => accum.push((name(&a.f, *array), *mode)),
+                    AKind::Accum {
+                        from: GradSrc::Take { array, mode, .. },
+                        ..
+                    } => take.push((name(&a.f, *array), *mode)),
+                    AKind::FlushGathered { array } => {
+                        end.push(format!("flush {}", name(&a.f, *array)))
+                    }
+                    AKind::ClearOwn { array } => end.push(format!("clear {}", name(&a.f, *array))),
+                    _ => {}
+                }
+            }
+            accum.sort_by(|a, b| a.0.cmp(&b.0));
+            (accum, take, end, a.gathered.len())
+        };
+        // z is read at another index: atomic on every target.
+        let (accum, take, end, gathered) = modes(Policy::CPU);
+        assert_eq!(
+            accum,
+            vec![
+                ("x".into(), AccumMode::OwnWhenFast),
+                ("z".into(), AccumMode::Atomic)
+            ]
+        );
+        assert_eq!(take, vec![("y".into(), TakeMode::Take)]);
+        assert!(end.is_empty() && gathered == 0);
+        let (accum, take, end, gathered) = modes(Policy::CUDA);
+        assert_eq!(
+            accum,
+            vec![
+                ("x".into(), AccumMode::GatherWhenFast),
+                ("z".into(), AccumMode::Atomic)
+            ]
+        );
+        assert_eq!(take, vec![("y".into(), TakeMode::GetWhenFast)]);
+        assert_eq!(end, vec!["flush x", "clear y"]);
+        assert_eq!(gathered, 1);
+    }
+
+    #[test]
+    fn loops_push_restore_and_record() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f64>, out: Array<f64>) {
+                let mut p: f64 = 1.0;
+                for i in 0..N {
+                    for j in 0..i {
+                        if x[j] > 0.0 { p = p * x[j]; }
+                    }
+                }
+                out[0] = p;
+            }
+        });
+        let a = build(&f, Policy::CPU).unwrap();
+        assert!(a.uses_stack);
+        // The loop variables have the type of their bounds (the const's, for the outer one),
+        // and are declared after them.
+        let pos = |n: &str| a.decls.iter().position(|d| name(&a.f, d.var) == n).unwrap();
+        for (var, end) in [("i", None), ("j", Some("i"))] {
+            let d = &a.decls[pos(var)];
+            let Some(TypeOf::Var(e)) = &d.def else {
+                panic!("{var}: {:?}", d.def)
+            };
+            if let Some(end) = end {
+                assert_eq!(name(&a.f, *e), end);
+            }
+            assert!(a
+                .decls
+                .iter()
+                .position(|d| d.var == *e)
+                .is_none_or(|k| k < pos(var)));
+        }
+        // Each reversed `for` iteration ends by restoring its variable; the `if` inside the
+        // loops pops its recorded decision.
+        let stmts = all(&a.body);
+        let rev_loops: Vec<&Vec<AStmt>> = stmts
+            .iter()
+            .filter_map(|s| match &s.kind {
+                AKind::RevLoop { body } => Some(body),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(rev_loops.len(), 2);
+        for b in rev_loops {
+            assert!(matches!(b.last().map(|s| &s.kind), Some(AKind::Pop { .. })));
+        }
+        assert!(stmts
+            .iter()
+            .any(|s| matches!(&s.kind, AKind::If { record: true, .. })));
+        assert!(stmts
+            .iter()
+            .any(|s| matches!(&s.kind, AKind::RevIf { cond: None, .. })));
+    }
+
+    #[test]
+    fn atomics_replay_as_zero() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, sum: Array<f32>) {
+                let i = tid();
+                atomic_sub(sum, 0, x[i] * 2.0);
+            }
+        });
+        let a = build(&f, Policy::CUDA).unwrap();
+        let stmts = all(&a.body);
+        assert!(stmts.iter().any(|s| matches!(
+            &s.kind,
+            AKind::Assign {
+                value: Value::Zero { .. },
+                ..
+            }
+        )));
+        assert!(stmts.iter().any(|s| matches!(
+            &s.kind,
+            AKind::AtomicAdj {
+                kind: AtomicKind::Sub,
+                ..
+            }
+        )));
+        // Nothing is pushed: a kernel without loops or calls needs no stack.
+        assert!(!a.uses_stack);
     }
 }
