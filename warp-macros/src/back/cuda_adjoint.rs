@@ -640,3 +640,42 @@ fn member_path(path: &[String]) -> String {
         .collect::<Vec<_>>()
         .join(".")
 }
+
+#[cfg(test)]
+mod tests {
+    use syn::parse_quote;
+
+    /// Variables the macro cannot type (a loop over a const, a nested loop over that loop's
+    /// variable, a func's result) are declared with the type of their definitions.
+    #[test]
+    fn untyped_variables_are_declared_by_their_definitions() {
+        let item: syn::ItemFn = parse_quote! {
+            fn k(x: Array<f64>, out: Array<f64>) {
+                let mut p: f64 = 1.0;
+                for i in 0..N {
+                    for j in 0..i {
+                        p = p * x[j] * helper(x[j]);
+                    }
+                }
+                out[0] = p;
+            }
+        };
+        let f = crate::front::lower::lower_fn(&item, crate::ir::FnKind::Kernel).unwrap();
+        let src = super::emit(&f, "k.rs").unwrap().source;
+        let decl = |what: &str| {
+            src.lines()
+                .find(|l| l.trim_end().ends_with(&format!(" {what}{{}};")))
+                .unwrap_or_else(|| panic!("no declaration of {what}:\n{src}"))
+                .trim()
+                .to_string()
+        };
+        let end = decl("t4").replace(" t4{};", "");
+        assert!(end.contains("decltype(@@K0@@)"), "{end}");
+        assert_eq!(decl("i_6"), "decltype(t4) i_6{};");
+        assert_eq!(decl("j_8"), "decltype(i_6) j_8{};");
+        assert!(
+            decl("t12").contains("decltype(@@F0@@_replay(t11, __ctx))"),
+            "{src}"
+        );
+    }
+}
