@@ -347,7 +347,7 @@ fn is_positive(x: f32) -> bool {
 /// Kernels with a mutable parameter, funcs returning bool in conditions, and builtins on func
 /// results (whose type the macro cannot see).
 #[wp::kernel]
-fn k_mut_bool(a: Array<f32>, mut n: i32, out: Array<i32>, f: Array<f32>) {
+pub(crate) fn k_mut_bool(a: Array<f32>, mut n: i32, out: Array<i32>, f: Array<f32>) {
     let i = tid();
     n += bump(n, i as i32);
     if is_positive(a[i]) && n > 5 {
@@ -393,7 +393,7 @@ fn count_of(n: usize) -> usize {
 
 #[derive(Clone, Copy, wp::Struct)]
 #[repr(C)]
-struct Span64 {
+pub(crate) struct Span64 {
     scale: f64,
     n: i32,
     _pad: i32,
@@ -403,7 +403,7 @@ struct Span64 {
 /// beside them must take their type (f64 here, where the default would be f32), also as a
 /// func argument, as a range bound and as the other branch of an `if`.
 #[wp::kernel]
-fn k_untyped(s: Span64, x: f64, c: bool, out: Array<f64>, iv: IVec3, ov: Array<IVec3>) {
+pub(crate) fn k_untyped(s: Span64, x: f64, c: bool, out: Array<f64>, iv: IVec3, ov: Array<IVec3>) {
     out[0] = twice64(0.1); // literal argument typed by the func's signature (f64)
     out[1] = twice64(x) + 1; // integer literal beside an f64 result
     out[2] = s.scale * 2; // integer literal beside an f64 field

@@ -33,6 +33,10 @@ backend_tests!(
     gradcheck_transforms,
     gradcheck_decompositions,
     gradcheck_misc,
+    nested_dependent_loops,
+    nested_struct_field_gradient,
+    loops_in_funcs_gradient,
+    nested_exits_gradient,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -840,6 +844,18 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <crate::misc::k_lower_bound as wp::Kernel>::info(),
         <crate::misc::k_sample_cdf as wp::Kernel>::info(),
         <crate::misc::k_quats as wp::Kernel>::info(),
+        <k_triangle as wp::Kernel>::info(),
+        <k_triangle_const as wp::Kernel>::info(),
+        <k_triangle_func as wp::Kernel>::info(),
+        <k_links as wp::Kernel>::info(),
+        <k_func_loops as wp::Kernel>::info(),
+        <k_nested_exits as wp::Kernel>::info(),
+        // Kernels whose variables the macro cannot type (consts, struct fields and func results
+        // as loop bounds, `!` of a func's bool): their CUDA adjoints declare them by the type
+        // of their definitions.
+        <crate::funcs::k_mut_bool as wp::Kernel>::info(),
+        <crate::funcs::k_untyped as wp::Kernel>::info(),
+        <crate::params::k_consts as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -1172,4 +1188,773 @@ fn gradcheck_misc(dev: &wp::Device) {
     .unwrap();
     assert!(report.passed, "{:?}", report.worst);
     assert!(report.max_rel_error < 1e-6, "{report:?}");
+}
+
+/// The outer bound of `k_triangle_const`: a module const, whose type the kernel macro cannot
+/// see (the loop variables are then typed by the target compiler).
+const TRI_N: i32 = 4;
+
+/// `n` through a func: a result type the kernel macro cannot see either.
+#[wp::func]
+fn tri_bound(n: i32) -> i32 {
+    n
+}
+
+/// Nested dynamic loops whose inner bound is the outer loop's variable, carrying a product and
+/// a sum: p = prod_{i<n} prod_{j<i} x[j], s = sum_{i<n} sum_{j<i} i x[j], out[t] = p + (t + 1) s.
+/// One body, three outer bounds: a parameter, a const and a func's result (with the last two,
+/// only the target compiler knows the loop variables' types: the CUDA adjoint could not
+/// declare them).
+macro_rules! triangle_kernel {
+    ($name:ident, $n:ident => $bound:expr) => {
+        #[wp::kernel]
+        fn $name(x: Array<f64>, $n: i32, out: Array<f64>) {
+            let t = tid();
+            let mut p: f64 = 1.0;
+            let mut s: f64 = 0.0;
+            for i in 0..$bound {
+                for j in 0..i {
+                    p = p * x[j];
+                    s += x[j] * (i as f64);
+                }
+            }
+            out[t] = p + s * (t as f64 + 1.0);
+        }
+    };
+}
+
+triangle_kernel!(k_triangle, n => n);
+triangle_kernel!(k_triangle_const, n => TRI_N);
+triangle_kernel!(k_triangle_func, n => tri_bound(n));
+
+/// Closed form of the triangle kernels' gradient. x[j] appears n - 1 - j times in p, so
+/// dp/dx[j] = (n - 1 - j) x[j]^(n - 2 - j) prod_{k != j} x[k]^(n - 1 - k); ds/dx[j] =
+/// sum_{i=j+1}^{n-1} i; over `threads` threads, dx[j] = threads dp + threads (threads + 1) / 2 ds.
+///
+/// Compared exactly: the inputs are binary fractions of a few bits, so every product and sum
+/// here and in the adjoint is exactly representable in f64 and any correct evaluation order
+/// (or FMA contraction, on CUDA) gives the same bits.
+fn nested_dependent_loops(dev: &wp::Device) {
+    let xs = [1.5f64, -2.0, 0.5, 3.0, -0.25];
+    let n = TRI_N as usize;
+    let threads = 3usize;
+    let pow = |v: f64, e: i64| if e <= 0 { 1.0 } else { v.powi(e as i32) };
+    let want: Vec<f64> = (0..xs.len())
+        .map(|j| {
+            if j >= n {
+                return 0.0;
+            }
+            let e = (n - 1 - j) as i64;
+            let mut dp = e as f64 * pow(xs[j], e - 1);
+            for (k, x) in xs.iter().enumerate().take(n) {
+                if k != j {
+                    dp *= pow(*x, (n - 1 - k) as i64);
+                }
+            }
+            let ds: f64 = ((j + 1)..n).map(|i| i as f64).sum();
+            let t = threads as f64;
+            t * dp + t * (t + 1.0) / 2.0 * ds
+        })
+        .collect();
+    type Launch = fn(&wp::Array<f64>, &wp::Array<f64>, &wp::Device) -> wp::Result<()>;
+    let launches: [(&str, Launch); 3] = [
+        ("parameter bound", |x, out, dev| {
+            wp::launch(k_triangle, 3, (x, TRI_N, out), dev)
+        }),
+        ("const bound", |x, out, dev| {
+            wp::launch(k_triangle_const, 3, (x, 0, out), dev)
+        }),
+        ("func bound", |x, out, dev| {
+            wp::launch(k_triangle_func, 3, (x, TRI_N, out), dev)
+        }),
+    ];
+    for (what, launch) in launches {
+        let x = arr(&xs, dev).with_grad().unwrap();
+        let out = zeros::<f64, 1>(threads, dev).with_grad().unwrap();
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            launch(&x, &out, dev).unwrap();
+        }
+        // p = 1.5^3 (-2)^2 0.5 = 6.75; s = 1 x0 + 2 (x0 + x1) + 3 (x0 + x1 + x2) = 0.5.
+        let got = out.to_vec().unwrap();
+        assert_eq!(got, vec![7.25, 7.75, 8.25], "{what}");
+        assert!(backward_ok(dev, tape.backward(&out)));
+        assert_eq!(x.grad().unwrap().to_vec().unwrap(), want, "{what}");
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Joint {
+    axis: DVec3,
+    stiffness: f64,
+}
+
+/// A struct with a struct field.
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Link {
+    joint: Joint,
+    length: f64,
+}
+
+/// A struct with a nested struct field read in a differentiated kernel: whole (`links[i]`),
+/// through a copy of the inner struct, by a nested path (`l.joint.axis.z`), and written by a
+/// nested path inside a loop (the adjoint stack then holds the outer struct).
+/// out = s x^2 + (a.x x + a.y + 2 a.z) L + a.z, with s the stiffness, a the axis, L the length.
+#[wp::kernel]
+fn k_links(links: Array<Link>, x: Array<f64>, out: Array<f64>) {
+    let i = tid();
+    let mut l = links[i];
+    let j = l.joint;
+    for _k in 0..2 {
+        l.joint.stiffness = l.joint.stiffness * x[i];
+    }
+    out[i] =
+        l.joint.stiffness + dot(j.axis, DVec3::new(x[i], 1.0, 2.0)) * l.length + l.joint.axis.z;
+}
+
+/// The closed form: d/dx = 2 s x + a.x L, d/ds = x^2, d/da = (x L, L, 2 L + 1),
+/// d/dL = a.x x + a.y + 2 a.z. Exact (binary fractions of a few bits: see
+/// `nested_dependent_loops`).
+fn nested_struct_field_gradient(dev: &wp::Device) {
+    let links_h = [
+        Link {
+            joint: Joint {
+                axis: DVec3::new(0.5, -1.0, 2.0),
+                stiffness: 1.5,
+            },
+            length: 0.75,
+        },
+        Link {
+            joint: Joint {
+                axis: DVec3::new(-2.0, 0.25, 1.0),
+                stiffness: -0.5,
+            },
+            length: 3.0,
+        },
+    ];
+    let xs = [2.0f64, -0.5];
+    let links = arr(&links_h, dev).with_grad().unwrap();
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(2, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_links, 2, (&links, &x, &out), dev).unwrap();
+    }
+    assert!(backward_ok(dev, tape.backward(&out)));
+    let (gl, gx) = (
+        links.grad().unwrap().to_vec().unwrap(),
+        x.grad().unwrap().to_vec().unwrap(),
+    );
+    for (k, (l, &x)) in links_h.iter().zip(&xs).enumerate() {
+        let (a, s, len) = (l.joint.axis, l.joint.stiffness, l.length);
+        assert_eq!(gx[k], 2.0 * s * x + a.x * len, "d/dx, thread {k}");
+        let want = Link {
+            joint: Joint {
+                axis: DVec3::new(x * len, len, 2.0 * len + 1.0),
+                stiffness: x * x,
+            },
+            length: a.x * x + a.y + 2.0 * a.z,
+        };
+        assert_eq!(gl[k], want, "d/dlink, thread {k}");
+    }
+}
+
+/// Horner's scheme over a dynamic reversed range: sum_{k<n} x[k] t^k.
+#[wp::func]
+fn horner(x: Array<f64>, n: i32, t: f64) -> f64 {
+    let mut acc: f64 = 0.0;
+    for k in (0..n).rev() {
+        acc = acc * t + x[k];
+    }
+    acc
+}
+
+/// An early `return` from a loop: x[k] level for the first x[k] above `level`, else `level`.
+#[wp::func]
+fn first_over(x: Array<f64>, n: i32, level: f64) -> f64 {
+    for k in 0..n {
+        if x[k] > level {
+            return x[k] * level;
+        }
+    }
+    level
+}
+
+/// Nested loops, the inner one starting at the outer variable: sum_{a<=b<n} x[a] x[b].
+#[wp::func]
+fn pair_sum(x: Array<f64>, n: i32) -> f64 {
+    let mut s: f64 = 0.0;
+    for a in 0..n {
+        for b in a..n {
+            s += x[a] * x[b];
+        }
+    }
+    s
+}
+
+/// Funcs with loops, called from a loop of a differentiated kernel whose trip count depends on
+/// the thread.
+#[wp::kernel]
+fn k_func_loops(x: Array<f64>, ts: Array<f64>, n: i32, out: Array<f64>) {
+    let i = tid();
+    let t = ts[i];
+    let mut s: f64 = 0.0;
+    for r in 0..(i as i32 + 1) {
+        s += horner(x, n - r, t);
+    }
+    out[i] = s + first_over(x, n, t) + pair_sum(x, n) * t;
+}
+
+/// The closed form: for thread i with t = ts[i] and m = n - r, d horner(x, m, t)/dx[k] = t^k
+/// (k < m) and /dt = sum_{k<m} k x[k] t^(k-1); first_over gives `level` to the first x[k0]
+/// above it and x[k0] to `level` (1 when none is); d pair_sum/dx[k] = sum x + x[k]. Exact
+/// (binary fractions of a few bits: see `nested_dependent_loops`).
+fn loops_in_funcs_gradient(dev: &wp::Device) {
+    let xs = [0.5f64, -1.5, 2.0, 0.25];
+    let ts_h = [0.5f64, -1.5, 3.0];
+    let n = xs.len();
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let ts = arr(&ts_h, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(3, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_func_loops, 3, (&x, &ts, n as i32, &out), dev).unwrap();
+    }
+    assert!(backward_ok(dev, tape.backward(&out)));
+    let total: f64 = xs.iter().sum();
+    let pairs: f64 = (0..n)
+        .flat_map(|a| (a..n).map(move |b| (a, b)))
+        .map(|(a, b)| xs[a] * xs[b])
+        .sum();
+    let mut want_x = vec![0.0f64; n];
+    let mut want_t = vec![0.0f64; 3];
+    for (i, &t) in ts_h.iter().enumerate() {
+        for r in 0..=i {
+            for k in 0..n - r {
+                want_x[k] += t.powi(k as i32);
+                if k > 0 {
+                    want_t[i] += k as f64 * xs[k] * t.powi(k as i32 - 1);
+                }
+            }
+        }
+        match xs.iter().position(|&v| v > t) {
+            Some(k0) => {
+                want_x[k0] += t;
+                want_t[i] += xs[k0];
+            }
+            None => want_t[i] += 1.0,
+        }
+        for (k, w) in want_x.iter_mut().enumerate() {
+            *w += t * (total + xs[k]);
+        }
+        want_t[i] += pairs;
+    }
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), want_x);
+    assert_eq!(ts.grad().unwrap().to_vec().unwrap(), want_t);
+}
+
+/// Early exits in nested loops: `continue` in the outer `for`, `break` out of an inner `while`,
+/// and a `return` from inside the inner loop that writes its own result first; each thread's
+/// cap makes it leave at a different point.
+#[wp::kernel]
+fn k_nested_exits(x: Array<f64>, caps: Array<f64>, n: i32, out: Array<f64>) {
+    let t = tid();
+    let cap = caps[t];
+    let mut acc: f64 = 1.0;
+    for i in 0..n {
+        if i % 3 == 1 {
+            continue;
+        }
+        let mut j = 0;
+        while j < n {
+            if j > i {
+                break;
+            }
+            acc = acc * x[j] + x[i];
+            if acc > cap {
+                out[t] = acc * 2.0;
+                return;
+            }
+            j += 1;
+        }
+    }
+    out[t] = acc;
+}
+
+/// `k_nested_exits` in plain Rust, in forward mode: the value and its derivative with respect
+/// to every x[k].
+fn nested_exits_reference(x: &[f64], cap: f64) -> (f64, Vec<f64>) {
+    let n = x.len();
+    let unit = |k: usize| (0..n).map(move |m| if m == k { 1.0 } else { 0.0 });
+    let (mut acc, mut d) = (1.0f64, vec![0.0f64; n]);
+    for i in 0..n {
+        if i % 3 == 1 {
+            continue;
+        }
+        for j in 0..=i {
+            // acc = acc x[j] + x[i]
+            d = d
+                .iter()
+                .zip(unit(j).zip(unit(i)))
+                .map(|(dacc, (dj, di))| dacc * x[j] + acc * dj + di)
+                .collect();
+            acc = acc * x[j] + x[i];
+            if acc > cap {
+                return (acc * 2.0, d.iter().map(|g| g * 2.0).collect());
+            }
+        }
+    }
+    (acc, d)
+}
+
+/// Against the forward-mode reference, exactly (binary fractions of a few bits, and at most 8
+/// steps of `acc x + x`: every value stays exactly representable, see
+/// `nested_dependent_loops`). The caps: thread 0 never returns early, thread 1 returns in the
+/// third outer iteration, thread 2 at the first step.
+fn nested_exits_gradient(dev: &wp::Device) {
+    let xs = [1.5f64, -0.5, 2.0, 0.75, -1.25];
+    let caps_h = [1e9f64, 5.0, 0.5];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let caps = arr(&caps_h, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(3, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_nested_exits, 3, (&x, &caps, xs.len() as i32, &out), dev).unwrap();
+    }
+    let mut want_x = vec![0.0f64; xs.len()];
+    let mut want_out = Vec::new();
+    for &cap in &caps_h {
+        let (v, d) = nested_exits_reference(&xs, cap);
+        want_out.push(v);
+        for (w, g) in want_x.iter_mut().zip(d) {
+            *w += g;
+        }
+    }
+    // Thread 0 runs to the end (acc = 2.4375); thread 1 returns 2 x 6.5 at i = 2, j = 0;
+    // thread 2 returns 2 x 3 at i = 0, j = 0.
+    assert_eq!(want_out, vec![2.4375, 13.0, 6.0]);
+    assert_eq!(out.to_vec().unwrap(), want_out);
+    assert!(backward_ok(dev, tape.backward(&out)));
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), want_x);
+    assert_eq!(caps.grad().unwrap().to_vec().unwrap(), vec![0.0; 3]);
+}
+
+// ------------------------------------------------------------------------------------------
+// CUDA adjoints run on the host
+// ------------------------------------------------------------------------------------------
+
+/// A launch argument of [`run_adjoint_on_host`].
+enum HostArg {
+    /// A scalar parameter: its C++ type and value.
+    Scalar(&'static str, String),
+    /// An array parameter made of f64 words (f64 elements, or structs of f64 fields): its C++
+    /// element type, shape, words per element, values, and gradient before the adjoint runs.
+    Array {
+        elem: &'static str,
+        shape: Vec<usize>,
+        words: usize,
+        values: Vec<f64>,
+        grad: Vec<f64>,
+    },
+}
+
+impl HostArg {
+    fn i32(v: i32) -> Self {
+        HostArg::Scalar("wp::i32", v.to_string())
+    }
+
+    fn f64(v: f64) -> Self {
+        HostArg::Scalar("wp::f64", format!("bits64({:#018x}ULL)", v.to_bits()))
+    }
+
+    /// An array with a gradient, as it is now.
+    fn array<T: wp::Element + wp::__private::bytemuck::Pod, const N: usize>(
+        a: &wp::Array<T, N>,
+        elem: &'static str,
+    ) -> Self {
+        HostArg::Array {
+            elem,
+            shape: a.shape().to_vec(),
+            words: std::mem::size_of::<T>() / 8,
+            values: words(a),
+            grad: words(&a.grad().unwrap()),
+        }
+    }
+}
+
+/// The elements of an array of f64 words, as f64s.
+fn words<T: wp::Element + wp::__private::bytemuck::Pod, const N: usize>(
+    a: &wp::Array<T, N>,
+) -> Vec<f64> {
+    wp::__private::bytemuck::cast_slice::<T, f64>(&a.to_vec().unwrap()).to_vec()
+}
+
+/// Runs `info`'s CUDA adjoint unit as host C++ (g++, no FMA contraction) over a 1-D grid of
+/// `threads`, one thread after another with a fresh adjoint stack each, and returns the
+/// gradients of the array arguments afterwards (as f64 words, in parameter order); `None`
+/// without g++. Both variants of the thread function run, each on fresh data: the one a launch
+/// whose arrays cover the grid runs (`__FAST`: thread-owned gradients gathered in registers,
+/// clears deferred) and the checked one; they must agree.
+fn run_adjoint_on_host(
+    info: &wp::KernelInfo,
+    threads: usize,
+    args: &[HostArg],
+) -> Option<Vec<Vec<f64>>> {
+    use std::fmt::Write as _;
+    if std::process::Command::new("g++")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("SKIPPED run_adjoint_on_host: no g++");
+        return None;
+    }
+    let src = wp::cuda_source::assemble_adjoint(info);
+    let lit = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("bits64({:#018x}ULL)", x.to_bits()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let (mut decl, mut print) = (String::new(), String::new());
+    let (mut params, mut grads) = (Vec::new(), Vec::new());
+    for (k, a) in args.iter().enumerate() {
+        match a {
+            HostArg::Scalar(t, v) => writeln!(decl, "{t} p{k} = {v};").unwrap(),
+            HostArg::Array {
+                elem,
+                shape,
+                words,
+                values,
+                grad,
+            } => {
+                let n = shape.len();
+                let dims = shape.iter().map(|d| d.to_string()).collect::<Vec<_>>();
+                // Row-major byte strides.
+                let strides: Vec<String> = (0..n)
+                    .map(|d| (shape[d + 1..].iter().product::<usize>() * words * 8).to_string())
+                    .collect();
+                let (dims, strides) = (dims.join(", "), strides.join(", "));
+                for (name, data) in [("p", values), ("g", grad)] {
+                    writeln!(decl, "static wp::f64 {name}d{k}[] = {{{}}};", lit(data)).unwrap();
+                    writeln!(
+                        decl,
+                        "wp::array_t<{elem}, {n}> {name}{k} = {{({elem}*){name}d{k}, {{{dims}}}, {{{strides}}}, {k}, 0}};"
+                    )
+                    .unwrap();
+                }
+                writeln!(
+                    print,
+                    "for (int e = 0; e < {}; ++e) print_f64(gd{k}[e]);",
+                    grad.len()
+                )
+                .unwrap();
+                grads.push(format!("g{k}"));
+            }
+        }
+        params.push(format!("p{k}"));
+    }
+    params.extend(grads);
+    let program = format!(
+        "#include <cstring>\n#define WP_ADSTACK_BYTES 4096\n{text}\n\
+         static wp::f64 bits64(unsigned long long u) {{ wp::f64 x; memcpy(&x, &u, 8); return x; }}\n\
+         static void print_f64(wp::f64 x) {{ unsigned long long u; memcpy(&u, &x, 8); printf(\"%016llx\\n\", u); }}\n\
+         template <bool FAST> static int run() {{\n\
+         {decl}\n\
+         wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+         wp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::launch_t launch = {{{{{threads}, 1, 1, 1}}, {threads}, 1, FAST ? 1 : 0}};\n\
+         static char buf[WP_ADSTACK_BYTES];\n\
+         wp::adstack_t st = wp::adstack_new(buf, WP_ADSTACK_BYTES);\n\
+         for (wp::i64 flat = 0; flat < {threads}; ++flat) {{ st.top = 0; {thread}({params}, launch, flat, &ctx, &st); }}\n\
+         if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
+         {print}\n\
+         return 0;\n}}\n\
+         int main() {{ if (run<true>()) return 1; printf(\"--\\n\"); return run<false>(); }}\n",
+        text = src.text,
+        thread = src.thread_fn,
+        params = params.join(", "),
+    );
+    let dir = std::env::temp_dir().join(format!("wp-adj-run-{}-{}", info.name, std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (cpp, exe) = (dir.join("k.cpp"), dir.join("k"));
+    std::fs::write(&cpp, program).unwrap();
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let out = std::process::Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-fno-strict-aliasing",
+        ])
+        .args(["-Wno-unused", "-DWP_GENERAL_STRIDES", "-I", include])
+        .arg(&cpp)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "g++ failed on {}:\n{}",
+        cpp.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = std::process::Command::new(&exe).output().unwrap();
+    let text = String::from_utf8(run.stdout).unwrap();
+    assert!(
+        run.status.success(),
+        "{}: the adjoint faulted: {text}",
+        info.name
+    );
+    let (fast, checked) = text.split_once("--\n").expect("two runs");
+    assert_eq!(
+        fast, checked,
+        "{}: the __FAST and checked variants disagree",
+        info.name
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut lines = fast
+        .lines()
+        .map(|l| f64::from_bits(u64::from_str_radix(l, 16).unwrap()));
+    Some(
+        args.iter()
+            .filter_map(|a| match a {
+                HostArg::Array { grad, .. } => Some(lines.by_ref().take(grad.len()).collect()),
+                HostArg::Scalar(..) => None,
+            })
+            .collect(),
+    )
+}
+
+/// One launch of [`cuda_adjoints_run_on_the_host_like_the_cpu`].
+struct HostCase {
+    info: &'static wp::KernelInfo,
+    threads: usize,
+    /// The arguments as the adjoint starts (the output's gradient seeded).
+    host: Vec<HostArg>,
+    /// The CPU backend's gradients of the array arguments after its adjoint.
+    cpu: Vec<Vec<f64>>,
+}
+
+/// The CUDA adjoints of the kernels above, compiled from their generated CUDA with g++, run
+/// over the grid on the host and compared with the CPU backend's gradients, bit for bit (both
+/// sides do the same IEEE operations, without FMA contraction; the inputs are binary
+/// fractions, so even a different summation order would give the same bits). So CI without a
+/// GPU runs the CUDA adjoint of nested dependent loops (over a parameter, a const and a func's
+/// bound), nested struct fields, loops in funcs, early exits, custom gradients and the older
+/// loop, branch and func kernels.
+#[test]
+fn cuda_adjoints_run_on_the_host_like_the_cpu() {
+    let dev = wp::cpu();
+    let f64s = |v: &[f64]| arr(v, &dev).with_grad().unwrap();
+    let outs = |n: usize| zeros::<f64, 1>(n, &dev).with_grad().unwrap();
+    let xs = [1.5f64, -2.0, 0.5, 3.0, -0.25];
+    // (what, kernel, threads, arguments as the adjoint starts, the CPU's gradients after it).
+    let mut cases: Vec<HostCase> = Vec::new();
+    // Launches on the CPU under a tape, captures the arguments (the caller seeded the output's
+    // gradient), runs the CPU adjoint and captures the gradients.
+    macro_rules! case {
+        ($k:ident, $threads:expr, ($($arg:expr),*), [$($host:expr),*], [$($grad:expr),*]) => {{
+            let tape = wp::Tape::new();
+            {
+                let _rec = tape.record();
+                wp::launch($k, $threads, ($($arg,)*), &dev).unwrap();
+            }
+            let host = vec![$($host),*];
+            tape.backward_from_grads().unwrap();
+            cases.push(HostCase {
+                info: <$k as wp::Kernel>::info(),
+                threads: $threads,
+                host,
+                cpu: vec![$(words(&$grad.grad().unwrap())),*],
+            });
+        }};
+    }
+    // The three triangle kernels: parameter, const and func bounds (k_triangle_const ignores n).
+    for (k, n) in [(0, TRI_N), (1, 0), (2, TRI_N)] {
+        let (x, out) = (f64s(&xs), outs(3));
+        out.grad().unwrap().fill(1.0).unwrap();
+        let (hx, hn, hout) = (
+            HostArg::array(&x, "wp::f64"),
+            HostArg::i32(n),
+            HostArg::array(&out, "wp::f64"),
+        );
+        match k {
+            0 => case!(k_triangle, 3, (&x, n, &out), [hx, hn, hout], [x, out]),
+            1 => case!(k_triangle_const, 3, (&x, n, &out), [hx, hn, hout], [x, out]),
+            _ => case!(k_triangle_func, 3, (&x, n, &out), [hx, hn, hout], [x, out]),
+        }
+    }
+    {
+        let links_h = [
+            Link {
+                joint: Joint {
+                    axis: DVec3::new(0.5, -1.0, 2.0),
+                    stiffness: 1.5,
+                },
+                length: 0.75,
+            },
+            Link {
+                joint: Joint {
+                    axis: DVec3::new(-2.0, 0.25, 1.0),
+                    stiffness: -0.5,
+                },
+                length: 3.0,
+            },
+        ];
+        let links = arr(&links_h, &dev).with_grad().unwrap();
+        let (x, out) = (f64s(&[2.0, -0.5]), outs(2));
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_links,
+            2,
+            (&links, &x, &out),
+            [
+                HostArg::array(&links, "Link"),
+                HostArg::array(&x, "wp::f64"),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [links, x, out]
+        );
+    }
+    {
+        let (x, ts, out) = (
+            f64s(&[0.5, -1.5, 2.0, 0.25]),
+            f64s(&[0.5, -1.5, 3.0]),
+            outs(3),
+        );
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_func_loops,
+            3,
+            (&x, &ts, 4, &out),
+            [
+                HostArg::array(&x, "wp::f64"),
+                HostArg::array(&ts, "wp::f64"),
+                HostArg::i32(4),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [x, ts, out]
+        );
+    }
+    {
+        let (x, caps, out) = (
+            f64s(&[1.5, -0.5, 2.0, 0.75, -1.25]),
+            f64s(&[1e9, 5.0, 0.5]),
+            outs(3),
+        );
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_nested_exits,
+            3,
+            (&x, &caps, 5, &out),
+            [
+                HostArg::array(&x, "wp::f64"),
+                HostArg::array(&caps, "wp::f64"),
+                HostArg::i32(5),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [x, caps, out]
+        );
+    }
+    {
+        let (x, w, y) = (f64s(&[0.0, 4.0]), f64s(&[2.0, 2.0]), outs(2));
+        y.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_custom,
+            2,
+            (&x, &w, &y),
+            [
+                HostArg::array(&x, "wp::f64"),
+                HostArg::array(&w, "wp::f64"),
+                HostArg::array(&y, "wp::f64")
+            ],
+            [x, w, y]
+        );
+    }
+    {
+        let (x, y) = (f64s(&[1.5, -0.5, 2.0]), outs(3));
+        y.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_branches,
+            3,
+            (&x, &y),
+            [HostArg::array(&x, "wp::f64"), HostArg::array(&y, "wp::f64")],
+            [x, y]
+        );
+    }
+    {
+        let (x, y) = (f64s(&[0.75, 3.0, 6.0, -0.5]), outs(4));
+        y.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_jumps,
+            4,
+            (&x, &y),
+            [HostArg::array(&x, "wp::f64"), HostArg::array(&y, "wp::f64")],
+            [x, y]
+        );
+    }
+    {
+        let (x, out) = (f64s(&[0.5, -1.25, 2.0]), outs(3));
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_funcs,
+            3,
+            (&x, 0.75, &out),
+            [
+                HostArg::array(&x, "wp::f64"),
+                HostArg::f64(0.75),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [x, out]
+        );
+    }
+    {
+        let bodies_h = [
+            Body {
+                pos: DVec3::new(1.0, 2.0, 3.0),
+                scale: 0.5,
+            },
+            Body {
+                pos: DVec3::new(-1.0, 0.25, 0.0),
+                scale: 2.0,
+            },
+        ];
+        let bodies = arr(&bodies_h, &dev).with_grad().unwrap();
+        let m_h: Vec<f64> = (0..9).map(|k| 0.25 * k as f64 - 1.0).collect();
+        let m = wp::Array::from_slice_shape(&m_h, (3, 3), &dev)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        let out = outs(2);
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_struct_loops,
+            2,
+            (&bodies, &m, 3, &out),
+            [
+                HostArg::array(&bodies, "Body"),
+                HostArg::array(&m, "wp::f64"),
+                HostArg::i32(3),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [bodies, m, out]
+        );
+    }
+    for c in &cases {
+        let Some(got) = run_adjoint_on_host(c.info, c.threads, &c.host) else {
+            return;
+        };
+        assert_eq!(
+            got, c.cpu,
+            "{}: the CUDA adjoint on the host against the CPU backend",
+            c.info.name
+        );
+    }
 }

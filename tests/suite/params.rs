@@ -394,7 +394,13 @@ mod physics {
 
 /// Module-level consts (Warp's `wp.constant`), by name and by path, of several types.
 #[wp::kernel]
-fn k_consts(x: Array<f32>, y: Array<f64>, v: Array<Vec3>, bits: Array<u64>, ints: Array<i64>) {
+pub(crate) fn k_consts(
+    x: Array<f32>,
+    y: Array<f64>,
+    v: Array<Vec3>,
+    bits: Array<u64>,
+    ints: Array<i64>,
+) {
     let i = tid();
     if i == 0 {
         for k in 0..LEN {

@@ -792,38 +792,31 @@ fn func_instance(
         .map(|p| quote_spanned!(p.span()=> #p::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED));
     let cpu = format_ident!("__wp_cpu");
     // The replay (no stores, no atomics) and the adjoint, for kernels' adjoints.
-    let mut replay_em = RustEmitter::new(&f);
+    let replay_fn = crate::middle::adjoint::replay_of(&f);
+    let mut replay_em = RustEmitter::new(&replay_fn);
     replay_em.replay = true;
-    let replay_body = replay_em.block(&f.body);
-    // Custom gradients replace the generated adjoint: each named parameter's adjoint is what
-    // its gradient func returns for (params.., adjoint of the result).
-    let mut custom = None;
-    if !fattrs.grad.is_empty() {
-        let mut body = TokenStream::new();
-        for (param, gf) in &fattrs.grad {
-            let Some(k) = f.params.iter().position(|p| *param == p.name) else {
-                return Err(vec![syn::Error::new(
-                    param.span(),
-                    format!("`{param}` is not a parameter of this func"),
-                )]);
-            };
-            if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
-                return Err(vec![syn::Error::new(
-                    param.span(),
-                    "custom gradients are for value parameters; an array's gradient comes from the accesses",
-                )]);
-            }
-            let out = format_ident!("__adj_out{}", k);
-            let args = f.params.iter().map(|p| em.var(p.var));
-            body.extend(quote_spanned! {gf.span()=>
-                __wp::adjoint::Adjoint::adj_accum(#out, #gf::__wp_cpu(#(#args,)* __adj_ret)?);
-            });
+    let replay_body = replay_em.block(&replay_fn.body);
+    // Custom gradients replace the generated adjoint (`middle::adjoint::custom`): each named
+    // parameter's adjoint is what its gradient func returns for (params.., adjoint of the
+    // result).
+    for (param, _) in &fattrs.grad {
+        let Some(k) = f.params.iter().position(|p| *param == p.name) else {
+            return Err(vec![syn::Error::new(
+                param.span(),
+                format!("`{param}` is not a parameter of this func"),
+            )]);
+        };
+        if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
+            return Err(vec![syn::Error::new(
+                param.span(),
+                "custom gradients are for value parameters; an array's gradient comes from the accesses",
+            )]);
         }
-        custom = Some(body);
     }
-    let generated = match custom {
-        Some(body) => Ok(body),
-        None => crate::back::rust_adjoint::emit(&f),
+    let generated = if fattrs.grad.is_empty() {
+        crate::back::rust_adjoint::emit(&f)
+    } else {
+        crate::back::rust_adjoint::emit_custom(&f, &fattrs.grad)
     };
     // The CUDA replay and adjoint templates (custom gradients: calls of the gradient funcs,
     // which are recorded as extra callees after the body's).
@@ -1014,24 +1007,38 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
     def.push_str(" };");
     // Adjoint units (`WP_ADJOINT_UNIT`) also get the struct's adjoint helpers, field by field:
     // global overloads (found by argument-dependent lookup from the library's templates) and
-    // `wp::` ones (for the qualified calls of generated code).
-    let fields_named: Vec<String> = data
+    // `wp::` ones (for the qualified calls of generated code). Each field's helper is called
+    // qualified: a struct field's global one (its `wp::` forwarder would be a second,
+    // equally good candidate), the library's for the others.
+    let fields_named: Vec<(String, bool)> = data
         .fields
         .iter()
-        .filter_map(|f| f.ident.as_ref().map(|i| i.to_string()))
+        .filter_map(|f| {
+            let is_struct = matches!(
+                crate::front::signature::parse_type(&f.ty),
+                Ok(crate::types::Ty::Struct(_))
+            );
+            f.ident.as_ref().map(|i| (i.to_string(), is_struct))
+        })
         .collect();
     let accum: String = fields_named
         .iter()
-        .map(|f| format!(" adj_accum(a.{f}, v.{f});"))
+        .map(|(f, is_struct)| {
+            let ns = if *is_struct { "" } else { "wp" };
+            format!(" {ns}::adj_accum(a.{f}, v.{f});")
+        })
         .collect();
     let grad_add: String = fields_named
         .iter()
-        .map(|f| format!(" grad_add_p(&p->{f}, v.{f});"))
+        .map(|(f, is_struct)| {
+            let ns = if *is_struct { "" } else { "wp::detail" };
+            format!(" {ns}::grad_add_p(&p->{f}, v.{f});")
+        })
         .collect();
     def.push_str(&format!(
         "\n#ifdef WP_ADJOINT_UNIT\n\
-         WP_FN void adj_accum({name}& a, const {name}& v) {{ using wp::adj_accum;{accum} }}\n\
-         WP_FN void grad_add_p({name}* p, const {name}& v) {{ using wp::detail::grad_add_p;{grad_add} }}\n\
+         WP_FN void adj_accum({name}& a, const {name}& v) {{{accum} }}\n\
+         WP_FN void grad_add_p({name}* p, const {name}& v) {{{grad_add} }}\n\
          namespace wp {{\n\
          WP_FN void adj_accum(::{name}& a, const ::{name}& v) {{ ::adj_accum(a, v); }}\n\
          WP_FN ::{name} zero_like(const ::{name}&) {{ return ::{name}{{}}; }}\n\

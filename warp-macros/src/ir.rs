@@ -120,7 +120,7 @@ pub enum StmtKind {
         value: Option<VarId>,
     },
     /// Leaves the enclosing loop if any of `flags` is set. Made only by the adjoint's jump
-    /// removal (`adjoint_prep`), always as a loop body's first statement, where leaving
+    /// removal (`middle::adjoint_prep`), always as a loop body's first statement, where leaving
     /// happens before the iteration does anything.
     ExitIf {
         flags: Vec<VarId>,

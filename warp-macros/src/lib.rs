@@ -2,21 +2,22 @@
 //!
 //! Pipeline (see ARCHITECTURE.md): `front` parses the function with syn and lowers it to the
 //! IR in `ir`, checking the language subset and the type rules (`types`, `builtins`) and
-//! gathering every error with its span; `back` emits code from the IR. The IR, the type rules
-//! and the builtin table are plain modules with unit tests that need no macro expansion.
+//! gathering every error with its span; `middle` transforms the IR for reverse mode (the
+//! adjoint IR); `back` emits code from the IR and prints the adjoint IR. The IR, the type
+//! rules and the builtin table are plain modules with unit tests that need no macro expansion.
 //!
 //! Use these through the `warp-lang` facade (`#[wp::kernel]`), which re-exports them; the
 //! generated code refers to `::warp_lang::__private`.
 
 use proc_macro::TokenStream;
 
-mod adjoint_prep;
 mod analysis;
 mod back;
 mod builtins;
 mod expand;
 mod front;
 mod ir;
+mod middle;
 mod types;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing

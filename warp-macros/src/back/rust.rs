@@ -19,8 +19,8 @@ pub struct RustEmitter<'a> {
     pub f: &'a Function,
     /// Which thread-index component each variable holds (see `analysis::tid_components`).
     pub tid: Vec<Option<u8>>,
-    /// Emit the replay of the body for an adjoint: no stores, no atomics, funcs called through
-    /// their replay.
+    /// Emit expressions for an adjoint's replay (of a body `middle::adjoint` prepared): atomics
+    /// are not redone (zero) and funcs are called through their replay.
     pub replay: bool,
 }
 
@@ -81,7 +81,6 @@ impl<'a> RustEmitter<'a> {
                     None => quote_spanned!(sp=> let #m #v = #rhs;),
                 }
             }
-            StmtKind::Store { .. } | StmtKind::Print { .. } if self.replay => TokenStream::new(),
             StmtKind::Store {
                 array,
                 index,

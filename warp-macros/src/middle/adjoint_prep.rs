@@ -9,34 +9,11 @@
 //! - a loop whose body may jump starts each iteration with `ExitIf { flags }` (leave when a
 //!   `break` or `return` flag is set) and clears its `continue` flag.
 //!
-//! The result computes exactly what the original does; it is the input of the adjoint emitters,
-//! never of the forward ones.
+//! The result computes exactly what the original does; it is the input of the adjoint pass
+//! (`middle::adjoint`), never of the forward emitters.
 
 use crate::ir::*;
 use crate::types::{Ty, BOOL};
-
-/// Whether a value of this type carries a gradient (`Deferred`, unknown to the macro: yes; the
-/// adjoint functions are no-ops for integer types).
-pub fn differentiable(t: &Ty) -> bool {
-    match t {
-        Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
-        Ty::Matrix(..) | Ty::Quat(_) => true,
-        Ty::Array(..) | Ty::Unit => false,
-        _ => true,
-    }
-}
-
-/// A func's body without its final `return value` (its result, which the adjoint seeds with
-/// the caller's adjoint), and that value; a kernel's whole body and `None`.
-pub fn split_tail(f: &Function) -> (&[Stmt], Option<VarId>) {
-    match f.body.last() {
-        Some(Stmt {
-            kind: StmtKind::Return { value },
-            ..
-        }) if f.kind == FnKind::Func => (&f.body[..f.body.len() - 1], *value),
-        _ => (&f.body[..], None),
-    }
-}
 
 /// `f` with its jumps turned into flags (a copy; `f` itself is untouched).
 pub fn without_jumps(f: &Function) -> Function {

@@ -1,0 +1,10 @@
+//! The middle end: transforms from the lowered IR to what the back ends print.
+//!
+//! - `adjoint_prep`: `break`, `continue` and early `return` become flags (the adjoint's input);
+//! - `adjoint`: reverse mode as one pass, from a lowered function to its *adjoint IR*: the
+//!   forward replay, the adjoint stack's pushes and pops, the reverse sweep, and every decision
+//!   of how gradients flow. `back/rust_adjoint.rs` and `back/cuda_adjoint.rs` only print it,
+//!   so the CPU and CUDA gradients come from one scheme.
+
+pub mod adjoint;
+pub mod adjoint_prep;
