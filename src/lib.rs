@@ -57,6 +57,8 @@
 //!   `Array<Vec3>` does not compile.
 //! - Kernel threads never panic: an out-of-bounds index or an integer division by zero
 //!   returns an [`Error`] naming the kernel, the argument and the values.
+//! - [`HashGrid`] (Warp's hash grid) is a kernel parameter `grid: HashGrid`; kernels iterate
+//!   its neighbour candidates with `for j in hash_grid_query(grid, p, radius) { .. }`.
 //!
 //! The kernel language (types, the literal rule, builtins) is described in ARCHITECTURE.md
 //! and in the docs of [`kernel`].
@@ -83,15 +85,15 @@ pub use warp_runtime::{
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error,
-    GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, Launchable, Recording, Result,
-    Runtime, Seed, Tape,
+    GenericKernel, HashGrid, IntoShape, Kernel, KernelArg, KernelInfo, Launchable, Recording,
+    Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{f16, func, kernel, Array, DTransform, Float, Struct, Transform};
+    pub use crate::{f16, func, kernel, Array, DTransform, Float, HashGrid, Struct, Transform};
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -105,7 +107,8 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, ops, zero_like,
+        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, objects, ops,
+        zero_like,
         AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView, Grid,
         KResult, RangeProg, Transform,
     };

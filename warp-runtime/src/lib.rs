@@ -9,6 +9,7 @@
 //! - `stream` (with `cuda`): streams, events, `ScopedStream`, `launch_on`, and the ordering
 //!   rules between streams and array operations.
 //! - [`kernel`]: the traits that `#[kernel]` implements.
+//! - [`objects`]: kernel-visible host objects ([`HashGrid`]), passed as typed parameters.
 //! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
 //!
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
@@ -28,6 +29,7 @@ pub mod device;
 pub mod error;
 pub mod kernel;
 pub mod launch;
+pub mod objects;
 #[cfg(feature = "cuda")]
 pub mod pinned;
 #[cfg(feature = "cuda")]
@@ -48,6 +50,7 @@ pub use kernel::{
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
+pub use objects::HashGrid;
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
 #[cfg(feature = "cuda")]
