@@ -23,6 +23,8 @@ pub mod autograd;
 pub mod config;
 #[cfg(feature = "cuda")]
 pub mod cuda;
+// Moved under `cuda/` (where the rest of the CUDA backend follows); same public path.
+#[path = "cuda/source.rs"]
 pub mod cuda_source;
 pub mod device;
 pub mod error;
