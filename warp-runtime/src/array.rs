@@ -1024,6 +1024,8 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
 
     type CudaGrad = CudaArray<N>;
 
+    const HAS_CUDA_GRAD: bool = true;
+
     fn cuda_grad(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaGrad> {
         match arg.grad() {
             Some(g) => <Self as KernelArg>::cuda_arg(&&g, ctx),

@@ -11,7 +11,7 @@ use crate::config;
 use crate::cuda_source;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use crate::kernel::{Kernel, KernelInfo};
+use crate::kernel::{ArgsOf, Kernel, KernelInfo, KernelParams, MAX_PARAMS};
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -372,16 +372,13 @@ struct Ctx {
     pad: i32,
 }
 
-/// Most parameters a CUDA kernel can take (two slots go to the launch and the context).
-const MAX_PARAMS: usize = 62;
-
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
 /// thread's current stream for the GPU (`ScopedStream`), else on the default stream.
 ///
 /// `adjoint: Some(bytes)` launches the kernel's adjoint instead (with `bytes` of adjoint stack
 /// per thread): the arrays' gradients follow the parameters.
 pub(crate) fn launch<K: Kernel>(
-    args: &K::Args<'_>,
+    args: &ArgsOf<'_, K>,
     grid: &Grid,
     device: &Device,
     ordinal: usize,
@@ -389,12 +386,6 @@ pub(crate) fn launch<K: Kernel>(
     adjoint: Option<usize>,
 ) -> Result<()> {
     let info = K::info();
-    if info.params.len() > MAX_PARAMS {
-        return Err(Error::invalid(format!(
-            "kernel `{}` has more than {MAX_PARAMS} parameters",
-            info.name
-        )));
-    }
     if adjoint.is_some() {
         if let Some(reason) = info.cuda_adjoint_error {
             return Err(Error::NotDifferentiable {
@@ -404,18 +395,18 @@ pub(crate) fn launch<K: Kernel>(
         }
     }
     // Arguments first: a wrong device is reported before anything is compiled.
-    let mut params = K::cuda_params(args, device)?;
+    let mut params = K::Params::cuda_params(args, info, device)?;
     let mut grads = match adjoint {
-        Some(_) => Some(K::cuda_grads(args, device)?),
+        Some(_) => Some(K::Params::cuda_grads(args, info, device)?),
         None => None,
     };
-    let kernel = loaded(device, ordinal, info, K::arrays_contiguous(args), adjoint)?;
+    let kernel = loaded(device, ordinal, info, K::Params::contiguous(args), adjoint)?;
     let st = &kernel.st;
     let mut dims = LaunchDims {
         dims: grid.dims.map(|d| d as i64),
         total: grid.total as i64,
         ndim: grid.ndim as i32,
-        fast: K::tid_arrays_cover(args, grid) as i32,
+        fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
     };
     let base = st.fault.device_ptr();
     let mut ctx = Ctx {
@@ -424,12 +415,13 @@ pub(crate) fn launch<K: Kernel>(
         raised: 0,
         pad: 0,
     };
-    let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 * MAX_PARAMS + 2];
+    // The launch and the context, then the parameters and (adjoint) their gradients.
+    let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
     ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
     ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
-    let mut n = 2 + K::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+    let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
     if let Some(g) = grads.as_mut() {
-        n += K::cuda_grad_ptrs(g, &mut ptrs[n..]);
+        n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
     }
     let block = config::cuda_block_dim();
     let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
@@ -515,6 +507,7 @@ static UNKNOWN: KernelInfo = KernelInfo {
     module: "",
     params: &[],
     written: &[],
+    tid_indexed: &[],
     tid_ndim: None,
     same_shape: &[],
     file: "",

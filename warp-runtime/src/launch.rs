@@ -8,7 +8,7 @@
 use crate::config;
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
-use crate::kernel::{Kernel, Launchable};
+use crate::kernel::{ArgsOf, Kernel, KernelParams, Launchable};
 #[cfg(feature = "cuda")]
 use crate::stream::Stream;
 use rayon::prelude::*;
@@ -113,7 +113,7 @@ fn grid_of(kernel: &'static str, dim: Dim) -> Result<Grid> {
 }
 
 /// Checks the kernel's `tid()` arity and `same_shape` groups against the launch.
-fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
+fn check_shapes<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
     let info = &K::INFO;
     if let Some(k) = info.tid_ndim {
         if k != grid.ndim {
@@ -125,10 +125,10 @@ fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
         }
     }
     if info.same_shape.is_empty() {
-        // Skip `arg_shapes`, which allocates: launch cost matters.
+        // Skip `shapes`, which allocates: launch cost matters.
         return Ok(());
     }
-    let shapes = K::arg_shapes(args);
+    let shapes = K::Params::shapes(args);
     for group in info.same_shape {
         let mut names = Vec::with_capacity(group.len());
         let mut group_shapes = Vec::with_capacity(group.len());
@@ -182,7 +182,7 @@ fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
 pub fn launch<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, device: &Device) -> Result<()>
 where
     L: Launchable<A>,
-    L::Kernel: Kernel<Args<'a> = A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
     launch_with::<L::Kernel>(dim.into(), args, device, None)
@@ -199,7 +199,7 @@ where
 pub fn launch_on<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, stream: &Stream) -> Result<()>
 where
     L: Launchable<A>,
-    L::Kernel: Kernel<Args<'a> = A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
     launch_with::<L::Kernel>(dim.into(), args, stream.device(), Some(stream))
@@ -212,7 +212,7 @@ type StreamArg<'s> = Option<&'s std::convert::Infallible>;
 
 fn launch_with<K: Kernel>(
     dim: Dim,
-    args: K::Args<'_>,
+    args: ArgsOf<'_, K>,
     device: &Device,
     stream: StreamArg<'_>,
 ) -> Result<()> {
@@ -223,7 +223,7 @@ fn launch_with<K: Kernel>(
     let result = match device.kind() {
         DeviceKind::Cpu => {
             // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
-            let params = unsafe { K::cpu_params(&args, device)? };
+            let params = unsafe { K::Params::cpu_params(&args, K::info(), device)? };
             run_cpu::<K>(&params, &grid)
         }
         #[cfg(feature = "cuda")]
@@ -245,7 +245,7 @@ fn launch_with<K: Kernel>(
     result?;
     crate::tape::on_launch::<K>(&args, &grid, device);
     if config::verify_fp() {
-        K::verify_fp(&args)?;
+        K::Params::check_finite(&args, K::info())?;
     }
     Ok(())
 }
@@ -279,7 +279,7 @@ where
 }
 
 /// Runs every thread of `grid` on the CPU.
-fn run_cpu<K: Kernel>(params: &K::CpuParams, grid: &Grid) -> Result<()> {
+fn run_cpu<K: Kernel>(params: &crate::kernel::CpuParamsOf<K>, grid: &Grid) -> Result<()> {
     for_each_chunk(grid.total, |range| K::run_cpu(params, grid, range))
 }
 
@@ -296,67 +296,49 @@ mod tests {
     use super::*;
     use crate::array::Array;
     use crate::device::cpu;
-    use crate::kernel::{ArgCtx, KernelArg, KernelInfo};
+    use crate::kernel::{CpuGradsOf, CpuParamsOf, KernelInfo};
     use std::ops::Range;
 
-    /// The CUDA half of a hand-written test kernel that only runs on the CPU.
-    macro_rules! cpu_only {
-        ($owned:ty, |$a:ident| $own:expr, |$o:ident| $borrow:expr) => {
-            type CudaGrads = ();
-            fn cuda_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
-                Ok(())
-            }
-            fn cuda_grad_ptrs(_: &mut (), _: &mut [*mut std::ffi::c_void]) -> usize {
-                0
-            }
-            type CpuGrads = ();
-            unsafe fn cpu_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
-                Ok(())
-            }
-            type Owned = $owned;
-            fn own($a: &Self::Args<'_>) -> Self::Owned {
-                $own
-            }
-            fn borrow($o: &Self::Owned) -> Self::Args<'_> {
-                $borrow
-            }
-            fn zero_grads(_: &Self::Args<'_>) -> Result<()> {
-                Ok(())
-            }
-            fn verify_fp(_: &Self::Args<'_>) -> Result<()> {
-                Ok(())
+    use warp_core::{Fault, FaultKind};
+
+    /// The parts of a hand-written test kernel that `#[kernel]` would generate from the
+    /// signature: the facts (`name`, parameter names, `tid()` arity, `same_shape` groups) and
+    /// an adjoint that does nothing.
+    macro_rules! test_kernel {
+        ($name:literal, [$($param:literal),*], $tid:expr, $same_shape:expr) => {
+            const INFO: KernelInfo = KernelInfo {
+                name: $name,
+                module: module_path!(),
+                params: &[$($param),*],
+                written: &[],
+                tid_indexed: &[],
+                tid_ndim: Some($tid),
+                same_shape: $same_shape,
+                file: file!(),
+                cuda: "",
+                cuda_sections: &[],
+                callees: &[],
+                structs: &[],
+                adjoint_error: None,
+                cuda_adjoint: "",
+                cuda_adjoint_stack: false,
+                cuda_adjoint_error: None,
+                consts: &[],
+            };
+            fn info() -> &'static KernelInfo {
+                &Self::INFO
             }
             fn run_cpu_adjoint(
-                _: &Self::CpuParams,
-                _: &(),
+                _: &CpuParamsOf<Self>,
+                _: &CpuGradsOf<Self>,
                 _: &Grid,
-                _: std::ops::Range<usize>,
+                _: Range<usize>,
                 _: &mut warp_core::AdStack,
             ) -> KResult<()> {
                 Ok(())
             }
-            type CudaParams = ();
-            fn cuda_params(_: &Self::Args<'_>, device: &Device) -> Result<()> {
-                Err(Error::NoDevice {
-                    name: device.alias().into(),
-                    reason: "CPU-only test kernel".into(),
-                })
-            }
-            fn cuda_param_ptrs(_: &mut (), _: &mut [*mut std::ffi::c_void]) -> usize {
-                0
-            }
-            fn info() -> &'static KernelInfo {
-                &Self::INFO
-            }
-            fn tid_arrays_cover(_: &Self::Args<'_>, _: &Grid) -> bool {
-                false
-            }
-            fn arrays_contiguous(_: &Self::Args<'_>) -> bool {
-                false
-            }
         };
     }
-    use warp_core::{ArrayView, Fault, FaultKind};
 
     /// `out[tid] = tid`, written by hand the way `#[kernel]` would generate it.
     #[derive(Clone, Copy)]
@@ -364,41 +346,9 @@ mod tests {
     struct write_flat;
 
     impl Kernel for write_flat {
-        type Args<'a> = (&'a Array<u64>,);
-        type CpuParams = (ArrayView<u64, 1>,);
-        cpu_only!((Array<u64>,), |a| (a.0.clone(),), |o| (&o.0,));
-        const INFO: KernelInfo = KernelInfo {
-            name: "write_flat",
-            module: module_path!(),
-            params: &["out"],
-            written: &[],
-            tid_ndim: Some(1),
-            same_shape: &[&[0, usize::MAX]],
-            file: file!(),
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
-        };
-        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
-            let ctx = ArgCtx {
-                kernel: Self::INFO.name,
-                arg: "out",
-                index: 0,
-                device,
-            };
-            // SAFETY: forwarded contract.
-            Ok((unsafe { <Array<u64> as KernelArg>::cpu_view(&args.0, &ctx)? },))
-        }
-        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
-            vec![<Array<u64> as KernelArg>::shape(&args.0)]
-        }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+        type Params = (Array<u64>,);
+        test_kernel!("write_flat", ["out"], 1, &[&[0, usize::MAX]]);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
             for flat in range {
                 let [i] = grid.unflatten::<1>(flat);
                 params.0.store(i, i as u64)?;
@@ -413,48 +363,9 @@ mod tests {
     struct oob;
 
     impl Kernel for oob {
-        type Args<'a> = (&'a Array<f32>, f32);
-        cpu_only!((Array<f32>, f32), |a| (a.0.clone(), a.1), |o| (&o.0, o.1));
-        type CpuParams = (ArrayView<f32, 1>, f32);
-        const INFO: KernelInfo = KernelInfo {
-            name: "oob",
-            module: module_path!(),
-            params: &["data", "scale"],
-            written: &[],
-            tid_ndim: Some(1),
-            same_shape: &[],
-            file: file!(),
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
-        };
-        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
-            let data = ArgCtx {
-                kernel: Self::INFO.name,
-                arg: "data",
-                index: 0,
-                device,
-            };
-            let scale = ArgCtx {
-                arg: "scale",
-                ..data
-            };
-            Ok((
-                // SAFETY: forwarded contract.
-                unsafe { <Array<f32> as KernelArg>::cpu_view(&args.0, &data)? },
-                unsafe { <f32 as KernelArg>::cpu_view(&args.1, &scale)? },
-            ))
-        }
-        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
-            vec![<Array<f32> as KernelArg>::shape(&args.0), None]
-        }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+        type Params = (Array<f32>, f32);
+        test_kernel!("oob", ["data", "scale"], 1, &[]);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
             for flat in range {
                 let [i] = grid.unflatten::<1>(flat);
                 let v = params.0.load(i)?;
@@ -470,41 +381,9 @@ mod tests {
     struct write_2d;
 
     impl Kernel for write_2d {
-        type Args<'a> = (&'a Array<u64, 2>,);
-        cpu_only!((Array<u64, 2>,), |a| (a.0.clone(),), |o| (&o.0,));
-        type CpuParams = (ArrayView<u64, 2>,);
-        const INFO: KernelInfo = KernelInfo {
-            name: "write_2d",
-            module: module_path!(),
-            params: &["out"],
-            written: &[],
-            tid_ndim: Some(2),
-            same_shape: &[],
-            file: file!(),
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
-        };
-        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
-            let ctx = ArgCtx {
-                kernel: Self::INFO.name,
-                arg: "out",
-                index: 0,
-                device,
-            };
-            // SAFETY: forwarded contract.
-            Ok((unsafe { <Array<u64, 2> as KernelArg>::cpu_view(&args.0, &ctx)? },))
-        }
-        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
-            vec![<Array<u64, 2> as KernelArg>::shape(&args.0)]
-        }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+        type Params = (Array<u64, 2>,);
+        test_kernel!("write_2d", ["out"], 2, &[]);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
             for flat in range {
                 let [i, j] = grid.unflatten::<2>(flat);
                 params.0.store((i, j), flat as u64)?;
@@ -642,8 +521,8 @@ mod tests {
     fn cuda_launch_of_cpu_arrays_is_refused() {
         let dev = cpu();
         let out = Array::<u64>::zeros(4, &dev).unwrap();
-        // Without a GPU: CUDA is unavailable; with one: the array is on the wrong device (or,
-        // here, the hand-written kernel has no CUDA half). Never a launch.
+        // The arguments are checked before anything touches a GPU: the CPU array is on the
+        // wrong device (or, without the `cuda` feature, there is no CUDA). Never a launch.
         let err = launch(write_flat, 4, (&out,), &crate::device::Device::fake_cuda(0)).unwrap_err();
         assert!(err.to_string().contains("cuda:0"), "{err}");
         synchronize().unwrap();

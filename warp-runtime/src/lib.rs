@@ -30,6 +30,7 @@ pub mod device;
 pub mod error;
 pub mod kernel;
 pub mod launch;
+mod params;
 #[cfg(feature = "cuda")]
 pub mod pinned;
 #[cfg(feature = "cuda")]
@@ -45,7 +46,7 @@ pub use device::{
 pub use error::{Error, Result};
 pub use kernel::{
     ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg, KernelInfo,
-    Launchable,
+    KernelParams, Launchable,
 };
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;

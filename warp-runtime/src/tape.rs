@@ -11,7 +11,7 @@ use crate::array::{Array, Element};
 use crate::config;
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
-use crate::kernel::Kernel;
+use crate::kernel::{ArgsOf, Kernel, KernelParams};
 use std::cell::RefCell;
 use std::marker::PhantomData;
 use std::rc::{Rc, Weak};
@@ -199,19 +199,19 @@ impl Tape {
 }
 
 /// Records the launch of `K` on every tape recording on this thread.
-pub(crate) fn on_launch<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) {
+pub(crate) fn on_launch<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid, device: &Device) {
     RECORDING.with(|r| {
         let r = r.borrow();
         for inner in r.iter().filter_map(Weak::upgrade) {
-            let owned = Rc::new(K::own(args));
+            let owned = Rc::new(K::Params::own(args));
             let (o1, o2) = (owned.clone(), owned);
             let (grid, device) = (*grid, device.clone());
             inner.borrow_mut().records.push(Record {
                 name: K::INFO.name,
                 backward: Box::new(move |cap| {
-                    launch_adjoint::<K>(&K::borrow(&o1), &grid, &device, cap)
+                    launch_adjoint::<K>(&K::Params::borrow(&o1), &grid, &device, cap)
                 }),
-                zero: Box::new(move || K::zero_grads(&K::borrow(&o2))),
+                zero: Box::new(move || K::Params::zero_grads(&K::Params::borrow(&o2))),
             });
         }
     });
@@ -254,7 +254,7 @@ pub(crate) fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array
 
 /// Runs the adjoint of `K` over `grid`.
 fn launch_adjoint<K: Kernel>(
-    args: &K::Args<'_>,
+    args: &ArgsOf<'_, K>,
     grid: &Grid,
     device: &Device,
     cap: usize,
@@ -268,8 +268,8 @@ fn launch_adjoint<K: Kernel>(
     match device.kind() {
         DeviceKind::Cpu => {
             // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
-            let params = unsafe { K::cpu_params(args, device)? };
-            let grads = unsafe { K::cpu_grads(args, device)? };
+            let params = unsafe { K::Params::cpu_params(args, K::info(), device)? };
+            let grads = unsafe { K::Params::cpu_grads(args, K::info(), device)? };
             // One adjoint stack per chunk, reused (cleared) thread by thread.
             crate::launch::for_each_chunk(grid.total, |range| {
                 let mut stack = AdStack::new(cap, K::INFO.name);
