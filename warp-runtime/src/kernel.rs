@@ -237,7 +237,7 @@ pub trait CudaStruct {
     }
 }
 
-/// What [`launch`](crate::launch) accepts as a kernel with the arguments `A`: every
+/// What [`launch`](crate::launch()) accepts as a kernel with the arguments `A`: every
 /// [`Kernel`] (with its parameters' [`KernelParams::Args`]), and a generic kernel
 /// (`#[kernel] fn k<T: Float>(..)`), which has one instance per float type and picks the one
 /// whose parameter types the arguments have. Implemented by `#[kernel]`.

@@ -1,18 +1,19 @@
-//! Typed kernel launch and the CPU executor.
+//! Typed kernel launch.
 //!
 //! [`launch`] validates the launch dimensions and the kernel's declared shape constraints,
-//! converts the arguments into kernel-side views, and runs every thread of the grid. On the CPU
-//! the grid is cut into chunks run on the rayon pool; the loop is generic over the kernel so
-//! that `Kernel::run_cpu` is inlined into it and the per-thread cost is the kernel body alone.
+//! hands the launch to the device's backend (`dispatch.rs`), which converts the arguments into
+//! kernel-side parameters and runs every thread of the grid (the CPU: in chunks on the rayon
+//! pool; a GPU: queued on a stream), then records it on the recording tapes. Everything is
+//! generic over the kernel, so that its thread body is inlined into the backend's loop.
 
 use crate::config;
-use crate::device::{Device, DeviceKind};
+#[cfg(feature = "cuda")]
+use crate::cuda::stream::Stream;
+use crate::device::Device;
+use crate::dispatch;
 use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelParams, Launchable};
-#[cfg(feature = "cuda")]
-use crate::stream::Stream;
-use rayon::prelude::*;
-use warp_core::{Grid, KResult};
+use warp_core::Grid;
 
 /// Launch dimensions: 1 to 4 extents, like Warp's `dim=`.
 ///
@@ -185,7 +186,9 @@ where
     L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
-    launch_with::<L::Kernel>(dim.into(), args, device, None)
+    launch_with::<L::Kernel>(dim.into(), args, device, |args, grid| {
+        dispatch::launch::<L::Kernel>(device, args, grid)
+    })
 }
 
 /// Launches `kernel` on `stream` (a CUDA stream; see [`crate::stream`] for how streams are
@@ -202,47 +205,22 @@ where
     L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
-    launch_with::<L::Kernel>(dim.into(), args, stream.device(), Some(stream))
+    launch_with::<L::Kernel>(dim.into(), args, stream.device(), |args, grid| {
+        dispatch::launch_on::<L::Kernel>(stream, args, grid)
+    })
 }
 
-#[cfg(feature = "cuda")]
-type StreamArg<'s> = Option<&'s Stream>;
-#[cfg(not(feature = "cuda"))]
-type StreamArg<'s> = Option<&'s std::convert::Infallible>;
-
-fn launch_with<K: Kernel>(
+/// Checks a launch of `K` on `device`, has `run` run it (on the device's backend), then records
+/// it on the recording tapes and, in `verify_fp` mode, checks what it wrote.
+fn launch_with<'a, K: Kernel>(
     dim: Dim,
-    args: ArgsOf<'_, K>,
+    args: ArgsOf<'a, K>,
     device: &Device,
-    stream: StreamArg<'_>,
+    run: impl FnOnce(&ArgsOf<'a, K>, &Grid) -> Result<()>,
 ) -> Result<()> {
-    // The kernel value is a unit struct: its type says everything.
-    let _ = stream;
     let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
-    let result = match device.kind() {
-        DeviceKind::Cpu => {
-            // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
-            let params = unsafe { K::Params::cpu_params(&args, K::info(), device)? };
-            run_cpu::<K>(&params, &grid)
-        }
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { ordinal } => crate::cuda::launch::<K>(
-            &args,
-            &grid,
-            device,
-            ordinal,
-            stream.map(Stream::cuda_stream),
-            None,
-        ),
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda { .. } => Err(Error::NoDevice {
-            name: device.alias().to_string(),
-            reason: "this build of warp-lang has no CUDA support (the `cuda` feature is off)"
-                .to_string(),
-        }),
-    };
-    result?;
+    run(&args, &grid)?;
     crate::tape::on_launch::<K>(&args, &grid, device);
     if config::verify_fp() {
         K::Params::check_finite(&args, K::info())?;
@@ -250,45 +228,10 @@ fn launch_with<K: Kernel>(
     Ok(())
 }
 
-/// Threads per rayon task: at least `min_chunk`, and about four tasks per pool thread so that
-/// uneven progress balances out without drowning the work in task overhead.
-fn chunk_len(total: usize, min_chunk: usize, pool_threads: usize) -> usize {
-    min_chunk.max(1).max(total / (pool_threads.max(1) * 4))
-}
-
-/// Runs `run` over the flat thread indices `0..total` on the CPU: serially for small grids,
-/// in rayon chunks otherwise, stopping at the first fault. `run` is generic so that the
-/// kernel's thread loop is inlined into it (forward launches and adjoints share this).
-pub(crate) fn for_each_chunk<F>(total: usize, run: F) -> Result<()>
-where
-    F: Fn(std::ops::Range<usize>) -> KResult<()> + Sync,
-{
-    let min_chunk = config::cpu_min_chunk();
-    if total <= min_chunk {
-        // Waking the pool costs microseconds; a small launch is faster on this thread.
-        return run(0..total).map_err(Error::from);
-    }
-    let chunk = chunk_len(total, min_chunk, rayon::current_num_threads());
-    (0..total.div_ceil(chunk))
-        .into_par_iter()
-        .try_for_each(|c| {
-            let start = c * chunk;
-            run(start..(start + chunk).min(total))
-        })
-        .map_err(Error::from)
-}
-
-/// Runs every thread of `grid` on the CPU.
-fn run_cpu<K: Kernel>(params: &crate::kernel::CpuParamsOf<K>, grid: &Grid) -> Result<()> {
-    for_each_chunk(grid.total, |range| K::run_cpu(params, grid, range))
-}
-
 /// Waits for all outstanding work on every GPU used so far, and reports a fault that a kernel
 /// recorded there since the last check. CPU launches finish before [`launch`] returns.
 pub fn synchronize() -> Result<()> {
-    #[cfg(feature = "cuda")]
-    crate::cuda::synchronize_all()?;
-    Ok(())
+    dispatch::synchronize_all()
 }
 
 #[cfg(test)]
@@ -299,7 +242,7 @@ mod tests {
     use crate::kernel::{CpuGradsOf, CpuParamsOf, KernelInfo};
     use std::ops::Range;
 
-    use warp_core::{Fault, FaultKind};
+    use warp_core::{Fault, FaultKind, KResult};
 
     /// The parts of a hand-written test kernel that `#[kernel]` would generate from the
     /// signature: the facts (`name`, parameter names, `tid()` arity, `same_shape` groups) and
@@ -401,17 +344,6 @@ mod tests {
             let v = out.to_vec().unwrap();
             assert!(v.iter().enumerate().all(|(i, &x)| x == i as u64), "n = {n}");
         }
-    }
-
-    #[test]
-    fn chunking() {
-        assert_eq!(chunk_len(4097, 4096, 2), 4096);
-        assert_eq!(chunk_len(100_003, 4096, 2), 12_500);
-        assert_eq!(chunk_len(100_003, 4096, 64), 4096);
-        assert_eq!(chunk_len(3, 0, 0), 1);
-        assert_eq!(chunk_len(10, 0, 0), 2);
-        // The last chunk of 100_003 threads in chunks of 12_500 is partial and still covered.
-        assert_eq!(100_003usize.div_ceil(12_500), 9);
     }
 
     #[test]
