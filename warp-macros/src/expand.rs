@@ -229,7 +229,7 @@ fn kernel_instance(
     let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
     let fast_params = crate::analysis::tid_accessed_params(&f, &em.tid);
     let fast_arrays: Vec<syn::Ident> = fast_params.iter().map(|v| em.var(*v)).collect();
-    let fast_pos: Vec<usize> = fast_params
+    let tid_indexed: Vec<usize> = fast_params
         .iter()
         .map(|v| f.params.iter().position(|p| p.var == *v).expect("a param"))
         .collect();
@@ -330,7 +330,7 @@ fn kernel_instance(
                         tid_ndim: #tid,
                         same_shape: &[#(#groups),*],
                         written: &[#(#written),*],
-                        tid_indexed: &[#(#fast_pos),*],
+                        tid_indexed: &[#(#tid_indexed),*],
                         file: ::core::file!(),
                         cuda: #cuda_src,
                         cuda_sections: &[#(#cuda_sections),*],

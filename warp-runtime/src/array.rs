@@ -8,7 +8,6 @@
 //! [`ArrayView`]). The same holds for host-side calls such as
 //! [`Array::fill`] made from several threads at once on handles to the same memory.
 
-use crate::cpu::memory::HostBuffer;
 use crate::device::Device;
 use crate::dispatch::{self, Storage};
 use crate::error::{Error, Result};
@@ -741,7 +740,7 @@ impl<T: Element> Array<T, 1> {
         let len = data.len();
         checked_size::<T>(&[len])?;
         Ok(Array {
-            storage: Arc::new(Storage::Host(HostBuffer::from_vec(data)?)),
+            storage: Arc::new(Storage::host_from_vec(data)?),
             grad: None,
             byte_offset: 0,
             shape: [len],

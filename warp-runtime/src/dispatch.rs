@@ -136,6 +136,11 @@ macro_rules! with_buffer {
 }
 
 impl Storage {
+    /// Host memory that takes `data`'s allocation over, without a copy.
+    pub(crate) fn host_from_vec<T: bytemuck::Pod>(data: Vec<T>) -> Result<Storage> {
+        HostBuffer::from_vec(data).map(Storage::Host)
+    }
+
     /// The host memory, for arrays on the CPU (`None` for a device's).
     pub(crate) fn host(&self) -> Option<&HostBuffer> {
         match self {

@@ -161,3 +161,112 @@ tuple_params_upto!(
     A14 14, A15 15, A16 16, A17 17, A18 18, A19 19, A20 20, A21 21, A22 22, A23 23, A24 24,
     A25 25, A26 26, A27 27, A28 28, A29 29, A30 30, A31 31
 );
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::array::Array;
+    use crate::device::cpu;
+    use crate::error::Error;
+
+    /// `k(a: Array<f32>, s: f32, b: Array<f32, 2>)`, writing `b`, indexing `a` by `tid()`.
+    const INFO: KernelInfo = KernelInfo {
+        name: "k",
+        module: "m",
+        params: &["a", "s", "b"],
+        written: &[2],
+        tid_indexed: &[0],
+        tid_ndim: Some(1),
+        same_shape: &[],
+        file: "",
+        cuda: "",
+        cuda_sections: &[],
+        callees: &[],
+        structs: &[],
+        adjoint_error: None,
+        cuda_adjoint: "",
+        cuda_adjoint_stack: false,
+        cuda_adjoint_error: None,
+        consts: &[],
+    };
+    type P = (Array<f32>, f32, Array<f32, 2>);
+
+    #[test]
+    fn conversions_follow_the_elements() {
+        let dev = cpu();
+        let a = Array::<f32>::zeros(4, &dev).unwrap();
+        let b = Array::<f32, 2>::zeros((2, 3), &dev)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        let args = (&a, 2.5f32, &b);
+        assert_eq!(<P as KernelParams>::COUNT, 3);
+        assert_eq!(<() as KernelParams>::COUNT, 0);
+
+        // Every parameter is a launch parameter; only arrays pass a gradient.
+        let mut out = [std::ptr::null_mut::<c_void>(); 8];
+        let mut params = P::cuda_params(&args, &INFO, &dev).unwrap();
+        assert_eq!(P::cuda_param_ptrs(&mut params, &mut out), 3);
+        assert_eq!(out[1], (&mut params.1) as *mut f32 as *mut c_void);
+        assert_eq!(params.2.shape, [2, 3]);
+        assert_eq!(params.2.arg, 2);
+        let mut grads = P::cuda_grads(&args, &INFO, &dev).unwrap();
+        assert_eq!(P::cuda_grad_ptrs(&mut grads, &mut out), 2);
+        assert_eq!(out[1], (&mut grads.2) as *mut _ as *mut c_void);
+        assert_eq!(grads.0.data, 0, "`a` has no gradient");
+        assert_ne!(grads.2.data, 0);
+
+        // `cover` asks only the arrays it is given.
+        let grid = |n| Grid {
+            dims: [n, 1, 1, 1],
+            ndim: 1,
+            total: n,
+        };
+        assert!(P::cover(&args, INFO.tid_indexed, &grid(4)));
+        assert!(!P::cover(&args, INFO.tid_indexed, &grid(5)));
+        assert!(P::cover(&args, &[], &grid(5)));
+        assert!(P::contiguous(&args));
+        assert!(!P::contiguous(&(&a, 2.5, &b.transpose())));
+        assert_eq!(
+            P::shapes(&args),
+            vec![Some(vec![4]), None, Some(vec![2, 3])]
+        );
+
+        // `check_finite` reads the written arrays only.
+        a.fill(f32::NAN).unwrap();
+        P::check_finite(&args, &INFO).unwrap();
+        b.fill(f32::INFINITY).unwrap();
+        assert!(matches!(
+            P::check_finite(&args, &INFO),
+            Err(Error::NonFinite { arg: "b", .. })
+        ));
+
+        // What a tape keeps gives the same arguments back.
+        let owned = P::own(&args);
+        let back = P::borrow(&owned);
+        assert!(back.0.shares_storage_with(&a) && back.2.shares_storage_with(&b));
+        assert_eq!(back.1, 2.5);
+        b.grad().unwrap().fill(1.0).unwrap();
+        P::zero_grads(&back).unwrap();
+        assert_eq!(b.grad().unwrap().to_vec().unwrap(), vec![0.0; 6]);
+    }
+
+    #[test]
+    fn arguments_on_another_device_name_the_parameter() {
+        let a = Array::<f32>::zeros(4, &cpu()).unwrap();
+        let b = Array::<f32, 2>::zeros((2, 3), &cpu()).unwrap();
+        let gpu = crate::device::Device::fake_cuda(0);
+        let err = P::cuda_params(&(&a, 1.0, &b), &INFO, &gpu).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                Error::DeviceMismatch {
+                    kernel: "k",
+                    arg: "a",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+}
