@@ -83,8 +83,8 @@ pub use warp_runtime::{
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error,
-    GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, Launchable, Recording, Result,
-    Runtime, Seed, Tape,
+    GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable, Recording,
+    Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
@@ -109,9 +109,10 @@ pub mod __private {
         AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView, Grid,
         KResult, RangeProg, Transform,
     };
+    pub use warp_runtime::kernel::{CpuGradsOf, CpuParamsOf};
     pub use warp_runtime::{
         ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,
-        KernelInfo, Launchable, Result,
+        KernelInfo, KernelParams, Launchable, Result,
     };
 }
 

@@ -269,6 +269,7 @@ mod tests {
             module: "m",
             params: &[],
             written: &[],
+            tid_indexed: &[],
             tid_ndim: None,
             same_shape: &[],
             file: "src/k.rs",
