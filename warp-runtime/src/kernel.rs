@@ -166,6 +166,31 @@ pub struct KernelInfo {
     pub consts: &'static [warp_core::ConstLiteral],
 }
 
+impl KernelInfo {
+    /// A kernel with no parameters, no CUDA code and nothing to differentiate: the base of
+    /// hand-written infos (`KernelInfo { name: "k", ..KernelInfo::BLANK }`), for tests and for
+    /// the runtime's placeholder of an unknown kernel. The macro writes every field itself.
+    pub const BLANK: KernelInfo = KernelInfo {
+        name: "",
+        module: "",
+        params: &[],
+        written: &[],
+        tid_indexed: &[],
+        tid_ndim: None,
+        same_shape: &[],
+        file: "",
+        cuda: "",
+        cuda_sections: &[],
+        callees: &[],
+        structs: &[],
+        adjoint_error: None,
+        cuda_adjoint: "",
+        cuda_adjoint_stack: false,
+        cuda_adjoint_error: None,
+        consts: &[],
+    };
+}
+
 /// A type whose module-level `const`s kernels may read (Warp's `wp.constant`): on the CPU the
 /// kernel reads the const itself; the CUDA source gets its value, written exactly as a C++
 /// expression, when the translation unit is assembled. Implemented for the scalars and the

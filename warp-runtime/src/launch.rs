@@ -253,20 +253,10 @@ mod tests {
                 name: $name,
                 module: module_path!(),
                 params: &[$($param),*],
-                written: &[],
-                tid_indexed: &[],
                 tid_ndim: Some($tid),
                 same_shape: $same_shape,
                 file: file!(),
-                cuda: "",
-                cuda_sections: &[],
-                callees: &[],
-                structs: &[],
-                adjoint_error: None,
-                cuda_adjoint: "",
-                cuda_adjoint_stack: false,
-                cuda_adjoint_error: None,
-                consts: &[],
+                ..KernelInfo::BLANK
             };
             fn info() -> &'static KernelInfo {
                 &Self::INFO

@@ -177,17 +177,7 @@ mod tests {
         written: &[2],
         tid_indexed: &[0],
         tid_ndim: Some(1),
-        same_shape: &[],
-        file: "",
-        cuda: "",
-        cuda_sections: &[],
-        callees: &[],
-        structs: &[],
-        adjoint_error: None,
-        cuda_adjoint: "",
-        cuda_adjoint_stack: false,
-        cuda_adjoint_error: None,
-        consts: &[],
+        ..KernelInfo::BLANK
     };
     type P = (Array<f32>, f32, Array<f32, 2>);
 

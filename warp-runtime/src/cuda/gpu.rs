@@ -274,22 +274,7 @@ pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
 
 static UNKNOWN: KernelInfo = KernelInfo {
     name: "?",
-    module: "",
-    params: &[],
-    written: &[],
-    tid_indexed: &[],
-    tid_ndim: None,
-    same_shape: &[],
-    file: "",
-    cuda: "",
-    cuda_sections: &[],
-    callees: &[],
-    structs: &[],
-    adjoint_error: None,
-    cuda_adjoint: "",
-    cuda_adjoint_stack: false,
-    cuda_adjoint_error: None,
-    consts: &[],
+    ..KernelInfo::BLANK
 };
 
 /// Waits for every GPU used so far and reports the first recorded fault.
