@@ -1315,11 +1315,9 @@ fn k_links(links: Array<Link>, x: Array<f64>, out: Array<f64>) {
         l.joint.stiffness + dot(j.axis, DVec3::new(x[i], 1.0, 2.0)) * l.length + l.joint.axis.z;
 }
 
-/// The closed form: d/dx = 2 s x + a.x L, d/ds = x^2, d/da = (x L, L, 2 L + 1),
-/// d/dL = a.x x + a.y + 2 a.z. Exact (binary fractions of a few bits: see
-/// `nested_dependent_loops`).
-fn nested_struct_field_gradient(dev: &wp::Device) {
-    let links_h = [
+/// Two links whose values are binary fractions of a few bits (exact in any evaluation order).
+fn sample_links() -> [Link; 2] {
+    [
         Link {
             joint: Joint {
                 axis: DVec3::new(0.5, -1.0, 2.0),
@@ -1334,7 +1332,14 @@ fn nested_struct_field_gradient(dev: &wp::Device) {
             },
             length: 3.0,
         },
-    ];
+    ]
+}
+
+/// The closed form: d/dx = 2 s x + a.x L, d/ds = x^2, d/da = (x L, L, 2 L + 1),
+/// d/dL = a.x x + a.y + 2 a.z. Exact (binary fractions of a few bits: see
+/// `nested_dependent_loops`).
+fn nested_struct_field_gradient(dev: &wp::Device) {
+    let links_h = sample_links();
     let xs = [2.0f64, -0.5];
     let links = arr(&links_h, dev).with_grad().unwrap();
     let x = arr(&xs, dev).with_grad().unwrap();
@@ -1792,22 +1797,7 @@ fn cuda_adjoints_run_on_the_host_like_the_cpu() {
         }
     }
     {
-        let links_h = [
-            Link {
-                joint: Joint {
-                    axis: DVec3::new(0.5, -1.0, 2.0),
-                    stiffness: 1.5,
-                },
-                length: 0.75,
-            },
-            Link {
-                joint: Joint {
-                    axis: DVec3::new(-2.0, 0.25, 1.0),
-                    stiffness: -0.5,
-                },
-                length: 3.0,
-            },
-        ];
+        let links_h = sample_links();
         let links = arr(&links_h, &dev).with_grad().unwrap();
         let (x, out) = (f64s(&[2.0, -0.5]), outs(2));
         out.grad().unwrap().fill(1.0).unwrap();

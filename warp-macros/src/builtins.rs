@@ -16,7 +16,7 @@
 //! (a `T` or `Array<T>` position); literal arguments are then typed from `T`, which is the
 //! one literal rule both backends share (see `front::lower::typing`).
 
-use crate::ir::BinOp;
+use crate::operators::BinOp;
 use crate::types::{ObjectKind, Scalar, Ty};
 
 /// Which types the type variable `T` of a builtin may take.

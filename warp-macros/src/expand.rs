@@ -122,33 +122,6 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
     out
 }
 
-/// `Ok((<T0 as KernelArg>::method(&__args.k0, &ArgCtx {..})?, ..))` over the parameters `ks`
-/// (inside `unsafe` blocks for the view conversions, whose contract the caller forwards).
-fn arg_conversions(
-    f: &crate::ir::Function,
-    kernel: &Literal,
-    method: &syn::Ident,
-    ks: &[usize],
-    unsafe_: bool,
-) -> TokenStream {
-    let calls = ks.iter().map(|&k| {
-        let p = &f.params[k];
-        let (t, idx, name) = (&p.syn_ty, syn::Index::from(k), Literal::string(&p.name));
-        let call = quote! {
-            <#t as __wp::KernelArg>::#method(
-                &__args.#idx,
-                &__wp::ArgCtx { kernel: #kernel, arg: #name, index: #k, device: __device },
-            )?
-        };
-        if unsafe_ {
-            quote!(unsafe { #call })
-        } else {
-            call
-        }
-    });
-    quote!(::core::result::Result::Ok(( #(#calls,)* )))
-}
-
 /// The errors of a generic function's instances: an error every instance has is reported
 /// once as it is; one that only some instances have names them (`in `k<f64>`: ..`), since it
 /// comes from what a type parameter became.
@@ -241,9 +214,6 @@ fn kernel_instance(
     let name_str = Literal::string(&f.name);
     let tys: Vec<&syn::Type> = f.params.iter().map(|p| &p.syn_ty).collect();
     let pnames: Vec<Literal> = f.params.iter().map(|p| Literal::string(&p.name)).collect();
-    let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
-    let idx_usize: Vec<usize> = (0..f.params.len()).collect();
-    let n_params = f.params.len();
     let pvars: Vec<TokenStream> = f
         .params
         .iter()
@@ -259,12 +229,10 @@ fn kernel_instance(
     let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
     let fast_params = crate::analysis::tid_accessed_params(&f, &em.tid);
     let fast_arrays: Vec<syn::Ident> = fast_params.iter().map(|v| em.var(*v)).collect();
-    let fast_pos: Vec<usize> = fast_params
+    let tid_indexed: Vec<usize> = fast_params
         .iter()
         .map(|v| f.params.iter().position(|p| p.var == *v).expect("a param"))
         .collect();
-    let fast_idx: Vec<syn::Index> = fast_pos.iter().map(|k| syn::Index::from(*k)).collect();
-    let fast_tys: Vec<&syn::Type> = fast_pos.iter().map(|k| &f.params[*k].syn_ty).collect();
     let tid = match f.tid_ndim {
         Some(n) => {
             let n = n as usize;
@@ -278,12 +246,6 @@ fn kernel_instance(
     });
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
     let written = crate::analysis::written_params(&f);
-    let w_tys: Vec<&syn::Type> = written.iter().map(|k| &f.params[*k].syn_ty).collect();
-    let w_idx: Vec<syn::Index> = written.iter().map(|k| syn::Index::from(*k)).collect();
-    let w_names: Vec<Literal> = written
-        .iter()
-        .map(|k| Literal::string(&f.params[*k].name))
-        .collect();
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(&f);
@@ -333,29 +295,16 @@ fn kernel_instance(
             }
         })
         .collect();
-    // Array parameters (their gradients are the CUDA adjoint's extra parameters).
-    let arr_k: Vec<usize> = (0..f.params.len())
-        .filter(|k| matches!(f.params[*k].ty, crate::types::Ty::Array(..)))
-        .collect();
-    let arr_tys: Vec<&syn::Type> = arr_k.iter().map(|k| &f.params[*k].syn_ty).collect();
-    let arr_pos: Vec<usize> = (0..arr_k.len()).collect();
-    let arr_pos_idx: Vec<syn::Index> = (0..arr_k.len()).map(syn::Index::from).collect();
-    let n_arrays = arr_k.len();
-    // The four conversions of the launch arguments (CPU views, CUDA arguments, and their
-    // gradients), each a tuple of one `KernelArg` call per parameter.
-    let all: Vec<usize> = (0..f.params.len()).collect();
-    let convert = |method: &str, ks: &[usize], unsafe_: bool| {
-        arg_conversions(&f, &name_str, &format_ident!("{}", method), ks, unsafe_)
+    // The parameter list, spanned at the signature's parentheses: a list the runtime has no
+    // `KernelParams` for (more than `MAX_PARAMS` parameters) is reported there.
+    let params = quote_spanned! {item.sig.paren_token.span.join()=>
+        type Params = ( #(#tys,)* );
     };
-    let cpu_views = convert("cpu_view", &all, true);
-    let cuda_args = convert("cuda_arg", &all, false);
-    let grad_views = convert("grad_view", &all, true);
-    let cuda_grads = convert("cuda_grad", &arr_k, false);
     let grad_names: Vec<syn::Ident> = (0..f.params.len())
         .map(|k| quote::format_ident!("__grad{}", k))
         .collect();
 
-    // The launch arguments' type spelt out (what `Kernel::Args` normalises to): a generic
+    // The launch arguments' type spelt out (what `KernelParams::Args` normalises to): a generic
     // kernel's `Launchable` impls are told apart by these, and coherence does not normalise.
     let launch_args = f.params.iter().map(|p| {
         let t = &p.syn_ty;
@@ -374,8 +323,7 @@ fn kernel_instance(
                 use ::warp_lang::__private as __wp;
                 #callee_checks
                 impl __wp::Kernel for #name {
-                    type Args<'__a> = ( #( <#tys as __wp::KernelArg>::Arg<'__a>, )* );
-                    type CpuParams = ( #( <#tys as __wp::KernelArg>::CpuView, )* );
+                    #params
                     const INFO: __wp::KernelInfo = __wp::KernelInfo {
                         name: #name_str,
                         module: ::core::module_path!(),
@@ -383,6 +331,7 @@ fn kernel_instance(
                         tid_ndim: #tid,
                         same_shape: &[#(#groups),*],
                         written: &[#(#written),*],
+                        tid_indexed: &[#(#tid_indexed),*],
                         file: ::core::file!(),
                         cuda: #cuda_src,
                         cuda_sections: &[#(#cuda_sections),*],
@@ -394,49 +343,12 @@ fn kernel_instance(
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                         consts: #consts,
                     };
-                    type CpuGrads = ( #( <#tys as __wp::KernelArg>::GradView, )* );
-                    unsafe fn cpu_grads(
-                        __args: &Self::Args<'_>,
-                        __device: &__wp::Device,
-                    ) -> __wp::Result<Self::CpuGrads> {
-                        // SAFETY: forwarded contract: the views do not outlive `__args`.
-                        #grad_views
-                    }
-                    type CudaGrads = ( #( <#arr_tys as __wp::KernelArg>::CudaGrad, )* );
-                    fn cuda_grads(
-                        __args: &Self::Args<'_>,
-                        __device: &__wp::Device,
-                    ) -> __wp::Result<Self::CudaGrads> {
-                        #cuda_grads
-                    }
-                    #[allow(unused_variables)]
-                    fn cuda_grad_ptrs(
-                        __grads: &mut Self::CudaGrads,
-                        __out: &mut [*mut ::core::ffi::c_void],
-                    ) -> usize {
-                        #( __out[#arr_pos] = (&mut __grads.#arr_pos_idx) as *mut _ as *mut ::core::ffi::c_void; )*
-                        #n_arrays
-                    }
-                    type Owned = ( #( <#tys as __wp::KernelArg>::Owned, )* );
-                    #[allow(clippy::unused_unit)]
-                    fn own(__args: &Self::Args<'_>) -> Self::Owned {
-                        ( #( <#tys as __wp::KernelArg>::own(&__args.#idx), )* )
-                    }
-                    #[allow(clippy::unused_unit)]
-                    fn borrow(__owned: &Self::Owned) -> Self::Args<'_> {
-                        ( #( <#tys as __wp::KernelArg>::borrow(&__owned.#idx), )* )
-                    }
-                    fn verify_fp(__args: &Self::Args<'_>) -> __wp::Result<()> {
-                        #( <#w_tys as __wp::KernelArg>::check_finite(&__args.#w_idx, #name_str, #w_names)?; )*
-                        ::core::result::Result::Ok(())
-                    }
-                    fn zero_grads(__args: &Self::Args<'_>) -> __wp::Result<()> {
-                        #( <#tys as __wp::KernelArg>::zero_grad(&__args.#idx)?; )*
-                        ::core::result::Result::Ok(())
+                    fn info() -> &'static __wp::KernelInfo {
+                        &<Self as __wp::Kernel>::INFO
                     }
                     fn run_cpu_adjoint(
-                        __params: &Self::CpuParams,
-                        __grads: &Self::CpuGrads,
+                        __params: &__wp::CpuParamsOf<Self>,
+                        __grads: &__wp::CpuGradsOf<Self>,
                         __grid: &__wp::Grid,
                         __range: ::core::ops::Range<usize>,
                         __stack: &mut __wp::AdStack,
@@ -472,42 +384,8 @@ fn kernel_instance(
                         }
                         ::core::result::Result::Ok(())
                     }
-                    unsafe fn cpu_params(
-                        __args: &Self::Args<'_>,
-                        __device: &__wp::Device,
-                    ) -> __wp::Result<Self::CpuParams> {
-                        // SAFETY: forwarded contract: the views do not outlive `__args`.
-                        #cpu_views
-                    }
-                    type CudaParams = ( #( <#tys as __wp::KernelArg>::CudaArg, )* );
-                    fn cuda_params(
-                        __args: &Self::Args<'_>,
-                        __device: &__wp::Device,
-                    ) -> __wp::Result<Self::CudaParams> {
-                        #cuda_args
-                    }
-                    #[allow(unused_variables)]
-                    fn cuda_param_ptrs(
-                        __params: &mut Self::CudaParams,
-                        __out: &mut [*mut ::core::ffi::c_void],
-                    ) -> usize {
-                        #( __out[#idx_usize] = (&mut __params.#idx) as *mut _ as *mut ::core::ffi::c_void; )*
-                        #n_params
-                    }
-                    fn info() -> &'static __wp::KernelInfo {
-                        &<Self as __wp::Kernel>::INFO
-                    }
-                    fn tid_arrays_cover(__args: &Self::Args<'_>, __grid: &__wp::Grid) -> bool {
-                        true #( && <#fast_tys as __wp::KernelArg>::covers(&__args.#fast_idx, &__grid.dims) )*
-                    }
-                    fn arrays_contiguous(__args: &Self::Args<'_>) -> bool {
-                        true #( && <#tys as __wp::KernelArg>::contiguous(&__args.#idx) )*
-                    }
-                    fn arg_shapes(__args: &Self::Args<'_>) -> ::std::vec::Vec<::core::option::Option<::std::vec::Vec<usize>>> {
-                        ::std::vec![ #( <#tys as __wp::KernelArg>::shape(&__args.#idx) ),* ]
-                    }
                     fn run_cpu(
-                        __params: &Self::CpuParams,
+                        __params: &__wp::CpuParamsOf<Self>,
                         __grid: &__wp::Grid,
                         __range: ::core::ops::Range<usize>,
                     ) -> __wp::KResult<()> {

@@ -11,6 +11,7 @@
 //! the CUDA emitter) `#line` directives.
 
 use crate::builtins::Builtin;
+pub use crate::operators::{BinOp, UnOp};
 use crate::types::Ty;
 use proc_macro2::Span;
 
@@ -161,74 +162,6 @@ pub enum Lit {
     /// An integer literal; `ty` is its scalar type, or `Deferred`.
     Int(i128),
     Float(f64),
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum UnOp {
-    Neg,
-    Not,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BinOp {
-    Add,
-    Sub,
-    Mul,
-    Div,
-    Rem,
-    BitAnd,
-    BitOr,
-    BitXor,
-    Shl,
-    Shr,
-    Eq,
-    Ne,
-    Lt,
-    Le,
-    Gt,
-    Ge,
-}
-
-impl BinOp {
-    pub fn is_comparison(self) -> bool {
-        matches!(
-            self,
-            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
-        )
-    }
-    /// The name of the operator's adjoint in both adjoint libraries (`adj_add`, ..), for the
-    /// arithmetic operators (the others have no gradient).
-    pub fn adjoint_fn(self) -> Option<&'static str> {
-        Some(match self {
-            BinOp::Add => "adj_add",
-            BinOp::Sub => "adj_sub",
-            BinOp::Mul => "adj_mul",
-            BinOp::Div => "adj_div",
-            BinOp::Rem => "adj_rem",
-            _ => return None,
-        })
-    }
-
-    pub fn symbol(self) -> &'static str {
-        match self {
-            BinOp::Add => "+",
-            BinOp::Sub => "-",
-            BinOp::Mul => "*",
-            BinOp::Div => "/",
-            BinOp::Rem => "%",
-            BinOp::BitAnd => "&",
-            BinOp::BitOr => "|",
-            BinOp::BitXor => "^",
-            BinOp::Shl => "<<",
-            BinOp::Shr => ">>",
-            BinOp::Eq => "==",
-            BinOp::Ne => "!=",
-            BinOp::Lt => "<",
-            BinOp::Le => "<=",
-            BinOp::Gt => ">",
-            BinOp::Ge => ">=",
-        }
-    }
 }
 
 /// How a vector, matrix or quaternion value is built.

@@ -18,6 +18,7 @@ mod expand;
 mod front;
 mod ir;
 mod middle;
+mod operators;
 mod types;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing

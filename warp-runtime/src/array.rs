@@ -8,18 +8,17 @@
 //! [`ArrayView`]). The same holds for host-side calls such as
 //! [`Array::fill`] made from several threads at once on handles to the same memory.
 
-use crate::device::{Device, DeviceKind};
+use crate::device::Device;
+use crate::dispatch::{self, Storage};
 use crate::error::{Error, Result};
 use crate::kernel::{ArgCtx, CudaArray, KernelArg};
 use glam::{
     DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
     UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
 };
-use std::alloc::{self, Layout};
 use std::fmt;
 use std::marker::PhantomData;
 use std::ops::{Bound, RangeBounds};
-use std::ptr::NonNull;
 use std::sync::Arc;
 use warp_core::{f16, ArrayView, DTransform, Transform};
 
@@ -108,135 +107,10 @@ impl IntoShape<4> for (usize, usize, usize, usize) {
     }
 }
 
-/// Every host allocation is aligned at least this much: a cache line, which also satisfies
-/// every glam type, so that [`Array::reinterpret`] to a more-aligned type succeeds.
-const HOST_ALIGN: usize = 64;
-
-/// Host memory: one allocation, written through raw pointers only.
-///
-/// No Rust reference to the bytes is ever created for longer than one copy, so writes through
-/// `&Array` (kernels take arrays by shared reference) do not violate aliasing rules; the
-/// pointer itself is the interior mutability.
-pub(crate) struct HostBuffer {
-    ptr: NonNull<u8>,
-    bytes: usize,
-    layout: Layout,
-}
-
-// SAFETY: the buffer owns its allocation (nothing else frees it) and only hands out raw
-// pointers; concurrent access follows the documented CUDA-style contract of `Array`.
-unsafe impl Send for HostBuffer {}
-// SAFETY: as for `Send`.
-unsafe impl Sync for HostBuffer {}
-
-impl HostBuffer {
-    /// A zero-filled allocation of `bytes` bytes aligned to `align` (at least [`HOST_ALIGN`]).
-    fn zeroed(bytes: usize, align: usize) -> Result<HostBuffer> {
-        // Always allocate at least one byte: the allocator rejects zero sizes, and a real
-        // pointer keeps empty arrays free of special cases.
-        let layout = Layout::from_size_align(bytes.max(1), align.max(HOST_ALIGN))
-            .map_err(|_| Error::invalid(format!("an allocation of {bytes} bytes is too large")))?;
-        // SAFETY: the layout has a non-zero size.
-        let ptr = unsafe { alloc::alloc_zeroed(layout) };
-        let ptr = NonNull::new(ptr).unwrap_or_else(|| alloc::handle_alloc_error(layout));
-        Ok(HostBuffer { ptr, bytes, layout })
-    }
-
-    /// Takes ownership of a vector's memory without copying it.
-    fn from_vec<T: Element>(data: Vec<T>) -> Result<HostBuffer> {
-        let bytes = std::mem::size_of_val(data.as_slice());
-        if bytes == 0 {
-            // An empty or zero-sized vector owns no allocation to take over.
-            return HostBuffer::zeroed(0, std::mem::align_of::<T>());
-        }
-        let boxed = data.into_boxed_slice();
-        let layout = Layout::for_value(&*boxed);
-        let ptr = NonNull::from(Box::leak(boxed)).cast::<u8>();
-        Ok(HostBuffer { ptr, bytes, layout })
-    }
-}
-
-impl Drop for HostBuffer {
-    fn drop(&mut self) {
-        // SAFETY: `ptr` came from the global allocator with exactly `layout` (alloc_zeroed, or
-        // a boxed slice whose layout is `Layout::for_value`) and is freed only here.
-        unsafe { alloc::dealloc(self.ptr.as_ptr(), self.layout) };
-    }
-}
-
-/// The memory behind an array.
-pub(crate) enum Storage {
-    /// Memory in the host's address space.
-    Host(HostBuffer),
-    /// Memory on a GPU.
-    #[cfg(feature = "cuda")]
-    Cuda(warp_cuda::DeviceBuffer),
-}
-
-impl Storage {
-    fn host(&self) -> &HostBuffer {
-        match self {
-            Storage::Host(h) => h,
-            #[cfg(feature = "cuda")]
-            Storage::Cuda(_) => {
-                unreachable!("host access to device memory: callers check `device_buffer()` first")
-            }
-        }
-    }
-
-    /// Size of the storage in bytes.
-    fn bytes(&self) -> usize {
-        match self {
-            Storage::Host(h) => h.bytes,
-            #[cfg(feature = "cuda")]
-            Storage::Cuda(d) => d.len(),
-        }
-    }
-
-    /// The device buffer, for arrays on a GPU.
-    #[cfg(feature = "cuda")]
-    fn device(&self) -> Option<&warp_cuda::DeviceBuffer> {
-        match self {
-            Storage::Cuda(d) => Some(d),
-            Storage::Host(_) => None,
-        }
-    }
-}
-
-#[cfg(feature = "cuda")]
-impl Drop for Storage {
-    fn drop(&mut self) {
-        if let Storage::Cuda(buf) = self {
-            // The buffer's free is queued on the default stream: order it after the kernels
-            // of user streams that may still use the memory. A failure here means the
-            // context is broken, which the next fallible call reports.
-            let ordinal = buf.gpu().ordinal();
-            let _ = crate::cuda::join_ordinal(ordinal);
-        }
-    }
-}
-
 /// Allocates zeroed memory for `bytes` bytes of `T`s on `device`.
 fn alloc_zeroed<T: Element>(bytes: usize, device: &Device) -> Result<Arc<Storage>> {
-    match device.kind() {
-        DeviceKind::Cpu => Ok(Arc::new(Storage::Host(HostBuffer::zeroed(
-            bytes,
-            std::mem::align_of::<T>(),
-        )?))),
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { ordinal } => {
-            let gpu = crate::cuda::gpu(ordinal)?;
-            let buf = warp_cuda::DeviceBuffer::zeros(&gpu, bytes)
-                .map_err(|e| crate::cuda::err(device, e))?;
-            Ok(Arc::new(Storage::Cuda(buf)))
-        }
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda { .. } => Err(Error::NoDevice {
-            name: device.alias().to_string(),
-            reason: "this build of warp-lang has no CUDA support (the `cuda` feature is off)"
-                .to_string(),
-        }),
-    }
+    let storage = dispatch::alloc_zeroed(device, bytes, std::mem::align_of::<T>())?;
+    Ok(Arc::new(storage))
 }
 
 /// Row-major strides (in elements) for `shape`.
@@ -467,7 +341,7 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// that already has one keeps it.
     pub fn with_grad(mut self) -> Result<Self> {
         if self.grad.is_none() {
-            self.grad = Some(alloc_zeroed::<T>(self.storage.bytes(), &self.device)?);
+            self.grad = Some(alloc_zeroed::<T>(self.storage.len(), &self.device)?);
         }
         Ok(self)
     }
@@ -533,19 +407,13 @@ impl<T: Element, const N: usize> Array<T, N> {
         Arc::ptr_eq(&self.storage, &other.storage)
     }
 
-    /// Pointer to the element at index zero.
-    fn base_ptr(&self) -> *mut T {
-        debug_assert!(self.byte_offset <= self.storage.bytes());
+    /// Pointer to the element at index zero, for arrays in host memory (`None` on a GPU).
+    fn host_base(&self) -> Option<*mut T> {
+        let host = self.storage.host()?;
+        debug_assert!(self.byte_offset <= self.storage.len());
         // SAFETY: every constructor keeps `byte_offset` within the allocation (at most its
         // size, for an empty view at the end).
-        unsafe {
-            self.storage
-                .host()
-                .ptr
-                .as_ptr()
-                .add(self.byte_offset)
-                .cast::<T>()
-        }
+        Some(unsafe { host.ptr().add(self.byte_offset).cast::<T>() })
     }
 
     /// The element offsets of the array, row-major.
@@ -553,65 +421,52 @@ impl<T: Element, const N: usize> Array<T, N> {
         Offsets::new(self.shape, self.strides)
     }
 
-    /// The device buffer of an array on a GPU (`None` in host memory).
-    #[cfg(feature = "cuda")]
-    fn device_buffer(&self) -> Option<&warp_cuda::DeviceBuffer> {
-        self.storage.device()
+    /// The address of element zero as the device's kernels receive it.
+    pub(crate) fn device_address(&self) -> u64 {
+        self.storage.address() + self.byte_offset as u64
     }
 
-    #[cfg(not(feature = "cuda"))]
-    fn device_buffer(&self) -> Option<&std::convert::Infallible> {
-        None
+    /// The memory, byte offset and byte length of a contiguous array.
+    #[cfg(feature = "cuda")]
+    pub(crate) fn contiguous_range(&self) -> (&Storage, usize, usize) {
+        debug_assert!(self.is_contiguous());
+        (
+            &self.storage,
+            self.byte_offset,
+            self.len() * std::mem::size_of::<T>(),
+        )
     }
 
-    /// The device address of element zero, for kernel arguments.
-    #[cfg(feature = "cuda")]
-    pub(crate) fn device_ptr(&self) -> Option<u64> {
-        self.device_buffer()
-            .map(|b| b.device_ptr() + self.byte_offset as u64)
-    }
-
-    /// The device buffer, byte offset and byte length of a contiguous GPU array.
-    #[cfg(feature = "cuda")]
-    pub(crate) fn device_range(&self) -> (&warp_cuda::DeviceBuffer, usize, usize) {
-        let buf = self
-            .device_buffer()
-            .expect("a GPU array (checked by the caller)");
-        (buf, self.byte_offset, self.len() * std::mem::size_of::<T>())
-    }
-
-    /// The whole storage, copied to the host (device arrays only), for strided access.
-    #[cfg(feature = "cuda")]
-    fn download_storage(&self, buf: &warp_cuda::DeviceBuffer) -> Result<Vec<u8>> {
-        let mut bytes = vec![0u8; buf.len()];
-        buf.download(0, &mut bytes)
-            .map_err(|e| crate::cuda::err(&self.device, e))?;
+    /// The whole storage, copied to the host, for strided access to memory the host cannot
+    /// address.
+    fn read_storage(&self) -> Result<Vec<u8>> {
+        let mut bytes = vec![0u8; self.storage.len()];
+        self.storage.read(0, &mut bytes)?;
         Ok(bytes)
     }
 
     /// The elements in row-major order (honouring strides). On a GPU this synchronises the
     /// device's stream and reports a fault recorded by an earlier launch.
     pub fn to_vec(&self) -> Result<Vec<T>> {
-        #[cfg(feature = "cuda")]
-        if let Some(buf) = self.device_buffer() {
-            crate::cuda::check_faults(&self.device)?;
+        let Some(base) = self.host_base() else {
+            // Device memory: the kernels that may write it first (their faults are reported
+            // here), then a copy.
+            dispatch::synchronize(&self.device)?;
             let len = self.len();
             let size = std::mem::size_of::<T>();
             let mut out = vec![T::zeroed(); len];
             if self.is_contiguous() {
-                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
-                buf.download(self.byte_offset, bytes)
-                    .map_err(|e| crate::cuda::err(&self.device, e))?;
+                self.storage
+                    .read(self.byte_offset, bytemuck::cast_slice_mut(&mut out))?;
             } else {
-                let all = self.download_storage(buf)?;
+                let all = self.read_storage()?;
                 for (o, off) in out.iter_mut().zip(self.offsets()) {
                     let at = (self.byte_offset as isize + off * size as isize) as usize;
                     *o = bytemuck::pod_read_unaligned(&all[at..at + size]);
                 }
             }
             return Ok(out);
-        }
-        let base = self.base_ptr();
+        };
         if self.is_contiguous() {
             let len = self.len();
             let mut out = Vec::<T>::with_capacity(len);
@@ -632,18 +487,15 @@ impl<T: Element, const N: usize> Array<T, N> {
 
     /// Sets every element to `value`.
     pub fn fill(&self, value: T) -> Result<()> {
-        #[cfg(feature = "cuda")]
-        if let Some(buf) = self.device_buffer() {
-            crate::cuda::before_default_work(&self.device)?;
+        let Some(base) = self.host_base() else {
             if self.is_contiguous() {
                 let bytes = self.len() * std::mem::size_of::<T>();
-                return buf
-                    .fill_pattern(self.byte_offset, bytes, bytemuck::bytes_of(&value))
-                    .map_err(|e| crate::cuda::err(&self.device, e));
+                return self
+                    .storage
+                    .fill(self.byte_offset, bytes, bytemuck::bytes_of(&value));
             }
             return self.write_row_major(&vec![value; self.len()]);
-        }
-        let base = self.base_ptr();
+        };
         if self.is_contiguous() {
             for i in 0..self.len() {
                 // SAFETY: in bounds of a contiguous array (see `to_vec`).
@@ -669,40 +521,25 @@ impl<T: Element, const N: usize> Array<T, N> {
                 self.shape, src.shape
             )));
         }
-        #[cfg(feature = "cuda")]
-        if self.device_buffer().is_some() || src.device_buffer().is_some() {
-            let size = std::mem::size_of::<T>();
-            let bytes = self.len() * size;
-            let contiguous = self.is_contiguous() && src.is_contiguous();
-            let overlap = Arc::ptr_eq(&self.storage, &src.storage);
-            if let (Some(d), Some(s), true, false) = (
-                self.device_buffer(),
-                src.device_buffer(),
-                contiguous,
-                overlap,
-            ) {
-                crate::cuda::check_faults(&src.device)?;
-                crate::cuda::before_default_work(&self.device)?;
-                return d
-                    .copy_from_device(self.byte_offset, s, src.byte_offset, bytes)
-                    .map_err(|e| crate::cuda::err(&self.device, e));
-            }
-            // Host <-> device, strided or overlapping: through a host copy in row-major order.
+        let same_storage = Arc::ptr_eq(&self.storage, &src.storage);
+        if self.is_contiguous() && src.is_contiguous() && !same_storage {
+            // One copy of bytes, by the backends of the two memories. The kernels that may
+            // still write `src` first (a GPU's; their faults are reported here).
+            dispatch::synchronize(&src.device)?;
+            let bytes = self.len() * std::mem::size_of::<T>();
+            return self
+                .storage
+                .copy_from(self.byte_offset, &src.storage, src.byte_offset, bytes);
+        }
+        let (Some(dst_base), Some(src_base), false) =
+            (self.host_base(), src.host_base(), same_storage)
+        else {
+            // Device memory strided, or the two may overlap in any pattern: through a
+            // temporary in row-major order, so that every source element is read before any
+            // is overwritten.
             let tmp = src.to_vec()?;
             return self.write_row_major(&tmp);
-        }
-        if Arc::ptr_eq(&self.storage, &src.storage) {
-            // The two may overlap in any pattern: go through a temporary so that every source
-            // element is read before any is overwritten.
-            let tmp = src.to_vec()?;
-            return self.write_row_major(&tmp);
-        }
-        if self.is_contiguous() && src.is_contiguous() {
-            // SAFETY: both are `len` consecutive elements, in different allocations.
-            unsafe { std::ptr::copy_nonoverlapping(src.base_ptr(), self.base_ptr(), self.len()) };
-            return Ok(());
-        }
-        let (dst_base, src_base) = (self.base_ptr(), src.base_ptr());
+        };
         for (d, s) in self.offsets().zip(src.offsets()) {
             // SAFETY: offsets are in bounds of their own arrays, whose shapes are equal.
             unsafe { dst_base.offset(d).write(src_base.offset(s).read()) };
@@ -713,24 +550,20 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// Writes `data` (exactly `len` elements, row-major) into the array.
     fn write_row_major(&self, data: &[T]) -> Result<()> {
         debug_assert_eq!(data.len(), self.len());
-        #[cfg(feature = "cuda")]
-        if let Some(buf) = self.device_buffer() {
-            crate::cuda::before_default_work(&self.device)?;
-            let err = |e| crate::cuda::err(&self.device, e);
+        let Some(base) = self.host_base() else {
             if self.is_contiguous() {
-                return buf
-                    .upload(self.byte_offset, bytemuck::cast_slice(data))
-                    .map_err(err);
+                return self
+                    .storage
+                    .write(self.byte_offset, bytemuck::cast_slice(data));
             }
             let size = std::mem::size_of::<T>();
-            let mut all = self.download_storage(buf)?;
+            let mut all = self.read_storage()?;
             for (v, off) in data.iter().zip(self.offsets()) {
                 let at = (self.byte_offset as isize + off * size as isize) as usize;
                 all[at..at + size].copy_from_slice(bytemuck::bytes_of(v));
             }
-            return buf.upload(0, &all).map_err(err);
-        }
-        let base = self.base_ptr();
+            return self.storage.write(0, &all);
+        };
         for (off, &v) in self.offsets().zip(data) {
             // SAFETY: every offset produced for the shape and strides is in bounds.
             unsafe { base.offset(off).write(v) };
@@ -859,7 +692,7 @@ impl<T: Element, const N: usize> Array<T, N> {
         }
         let align = std::mem::align_of::<U>();
         // Alignments are powers of two.
-        if (self.base_ptr() as usize) & (align - 1) != 0 {
+        if self.device_address() & (align as u64 - 1) != 0 {
             return fail(format!("its start is not aligned to {align} bytes"));
         }
         let len = bytes / u;
@@ -876,17 +709,19 @@ impl<T: Element, const N: usize> Array<T, N> {
 
     /// The kernel-side view of this array, reporting faults under `kernel` and `arg`.
     pub(crate) fn cpu_view(&self, kernel: &'static str, arg: &'static str) -> ArrayView<T, N> {
-        debug_assert!(self.device.is_cpu());
+        let base = self
+            .host_base()
+            .expect("the arrays of a CPU launch are on the CPU (checked by the launch)");
         // SAFETY: every in-bounds index of the shape and strides addresses an element inside
         // the storage (an invariant of every constructor and view); the storage is kept alive
         // by `self`, which the launch borrows for as long as the view is used.
-        unsafe { ArrayView::new(self.base_ptr(), self.shape, self.strides, kernel, arg) }
+        unsafe { ArrayView::new(base, self.shape, self.strides, kernel, arg) }
     }
 
     /// The storage's size in bytes (for tests of the layout invariants).
     #[cfg(test)]
     fn storage_bytes(&self) -> usize {
-        self.storage.bytes()
+        self.storage.len()
     }
 }
 
@@ -898,22 +733,21 @@ impl<T: Element> Array<T, 1> {
 
     /// A 1-D array that takes over `data`'s memory (no copy on the CPU).
     pub fn from_vec(data: Vec<T>, device: &Device) -> Result<Self> {
-        match device.kind() {
-            DeviceKind::Cpu => {
-                let len = data.len();
-                checked_size::<T>(&[len])?;
-                Ok(Array {
-                    storage: Arc::new(Storage::Host(HostBuffer::from_vec(data)?)),
-                    grad: None,
-                    byte_offset: 0,
-                    shape: [len],
-                    strides: [1],
-                    device: device.clone(),
-                    _elem: PhantomData,
-                })
-            }
-            DeviceKind::Cuda { .. } => Self::from_slice(&data, device),
+        if !device.is_cpu() {
+            return Self::from_slice(&data, device);
         }
+        // Host memory: the array takes the vector's allocation over.
+        let len = data.len();
+        checked_size::<T>(&[len])?;
+        Ok(Array {
+            storage: Arc::new(Storage::host_from_vec(data)?),
+            grad: None,
+            byte_offset: 0,
+            shape: [len],
+            strides: [1],
+            device: device.clone(),
+            _elem: PhantomData,
+        })
     }
 }
 
@@ -941,16 +775,6 @@ impl<T: Element> Array<T, 2> {
     }
 }
 
-/// Copies `src` into `dst` (same shape); see [`Array::copy_from`]. A recording [`Tape`]
-/// records it: backward adds `dst`'s gradient into `src`'s and clears `dst`'s.
-///
-/// [`Tape`]: crate::Tape
-pub fn copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> Result<()> {
-    dst.copy_from(src)?;
-    crate::tape::on_copy(dst, src);
-    Ok(())
-}
-
 /// How many leading elements `Debug` prints.
 const DEBUG_ELEMENTS: usize = 8;
 
@@ -963,8 +787,7 @@ impl<T: Element + fmt::Debug, const N: usize> fmt::Debug for Array<T, N> {
             self.shape,
             self.device
         )?;
-        if self.device_buffer().is_none() {
-            let base = self.base_ptr();
+        if let Some(base) = self.host_base() {
             // SAFETY: every offset produced for the shape and strides is in bounds.
             let head: Vec<T> = self
                 .offsets()
@@ -1008,10 +831,7 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
 
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
         arg.check_device(ctx)?;
-        #[cfg(feature = "cuda")]
-        let data = arg.device_ptr().unwrap_or(0);
-        #[cfg(not(feature = "cuda"))]
-        let data = 0;
+        let data = arg.device_address();
         let size = std::mem::size_of::<T>() as i64;
         Ok(CudaArray {
             data,
@@ -1023,6 +843,8 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
     }
 
     type CudaGrad = CudaArray<N>;
+
+    const HAS_CUDA_GRAD: bool = true;
 
     fn cuda_grad(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaGrad> {
         match arg.grad() {
@@ -1183,7 +1005,10 @@ mod tests {
     #[test]
     fn allocations_are_aligned() {
         let a = Array::<u8>::zeros(3, &cpu()).unwrap();
-        assert_eq!(a.base_ptr() as usize % HOST_ALIGN, 0);
+        assert_eq!(
+            a.device_address() % crate::cpu::memory::HOST_ALIGN as u64,
+            0
+        );
     }
 
     #[test]
@@ -1210,7 +1035,7 @@ mod tests {
         assert_eq!(a.to_vec().unwrap(), vec![-3; 4]);
 
         let b = Array::<i64, 2>::from_slice_shape(&[1, 2, 3, 4], [2, 2], &dev).unwrap();
-        copy(&a, &b).unwrap();
+        a.copy_from(&b).unwrap();
         assert_eq!(a.to_vec().unwrap(), vec![1, 2, 3, 4]);
 
         // Strided source: the transpose.

@@ -12,7 +12,7 @@ use std::sync::{Arc, OnceLock};
 
 /// Why CUDA devices cannot be used by this build.
 #[cfg(not(feature = "cuda"))]
-const CUDA_UNAVAILABLE: &str =
+pub(crate) const CUDA_UNAVAILABLE: &str =
     "this build of warp-lang has no CUDA support (the `cuda` feature is off)";
 
 /// What kind of device a [`Device`] is.

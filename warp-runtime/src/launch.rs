@@ -1,18 +1,19 @@
-//! Typed kernel launch and the CPU executor.
+//! Typed kernel launch.
 //!
 //! [`launch`] validates the launch dimensions and the kernel's declared shape constraints,
-//! converts the arguments into kernel-side views, and runs every thread of the grid. On the CPU
-//! the grid is cut into chunks run on the rayon pool; the loop is generic over the kernel so
-//! that `Kernel::run_cpu` is inlined into it and the per-thread cost is the kernel body alone.
+//! hands the launch to the device's backend (`dispatch.rs`), which converts the arguments into
+//! kernel-side parameters and runs every thread of the grid (the CPU: in chunks on the rayon
+//! pool; a GPU: queued on a stream), then records it on the recording tapes. Everything is
+//! generic over the kernel, so that its thread body is inlined into the backend's loop.
 
 use crate::config;
-use crate::device::{Device, DeviceKind};
-use crate::error::{Error, Result};
-use crate::kernel::{Kernel, Launchable};
 #[cfg(feature = "cuda")]
-use crate::stream::Stream;
-use rayon::prelude::*;
-use warp_core::{Grid, KResult};
+use crate::cuda::stream::Stream;
+use crate::device::Device;
+use crate::dispatch;
+use crate::error::{Error, Result};
+use crate::kernel::{ArgsOf, Kernel, KernelParams, Launchable};
+use warp_core::Grid;
 
 /// Launch dimensions: 1 to 4 extents, like Warp's `dim=`.
 ///
@@ -113,7 +114,7 @@ fn grid_of(kernel: &'static str, dim: Dim) -> Result<Grid> {
 }
 
 /// Checks the kernel's `tid()` arity and `same_shape` groups against the launch.
-fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
+fn check_shapes<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
     let info = &K::INFO;
     if let Some(k) = info.tid_ndim {
         if k != grid.ndim {
@@ -125,10 +126,10 @@ fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
         }
     }
     if info.same_shape.is_empty() {
-        // Skip `arg_shapes`, which allocates: launch cost matters.
+        // Skip `shapes`, which allocates: launch cost matters.
         return Ok(());
     }
-    let shapes = K::arg_shapes(args);
+    let shapes = K::Params::shapes(args);
     for group in info.same_shape {
         let mut names = Vec::with_capacity(group.len());
         let mut group_shapes = Vec::with_capacity(group.len());
@@ -182,10 +183,12 @@ fn check_shapes<K: Kernel>(args: &K::Args<'_>, grid: &Grid) -> Result<()> {
 pub fn launch<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, device: &Device) -> Result<()>
 where
     L: Launchable<A>,
-    L::Kernel: Kernel<Args<'a> = A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
-    launch_with::<L::Kernel>(dim.into(), args, device, None)
+    launch_with::<L::Kernel>(dim.into(), args, device, |args, grid| {
+        dispatch::launch::<L::Kernel>(device, args, grid)
+    })
 }
 
 /// Launches `kernel` on `stream` (a CUDA stream; see [`crate::stream`] for how streams are
@@ -199,96 +202,36 @@ where
 pub fn launch_on<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, stream: &Stream) -> Result<()>
 where
     L: Launchable<A>,
-    L::Kernel: Kernel<Args<'a> = A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
-    launch_with::<L::Kernel>(dim.into(), args, stream.device(), Some(stream))
+    launch_with::<L::Kernel>(dim.into(), args, stream.device(), |args, grid| {
+        dispatch::launch_on::<L::Kernel>(stream, args, grid)
+    })
 }
 
-#[cfg(feature = "cuda")]
-type StreamArg<'s> = Option<&'s Stream>;
-#[cfg(not(feature = "cuda"))]
-type StreamArg<'s> = Option<&'s std::convert::Infallible>;
-
-fn launch_with<K: Kernel>(
+/// Checks a launch of `K` on `device`, has `run` run it (on the device's backend), then records
+/// it on the recording tapes and, in `verify_fp` mode, checks what it wrote.
+fn launch_with<'a, K: Kernel>(
     dim: Dim,
-    args: K::Args<'_>,
+    args: ArgsOf<'a, K>,
     device: &Device,
-    stream: StreamArg<'_>,
+    run: impl FnOnce(&ArgsOf<'a, K>, &Grid) -> Result<()>,
 ) -> Result<()> {
-    // The kernel value is a unit struct: its type says everything.
-    let _ = stream;
     let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
-    let result = match device.kind() {
-        DeviceKind::Cpu => {
-            // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
-            let params = unsafe { K::cpu_params(&args, device)? };
-            run_cpu::<K>(&params, &grid)
-        }
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { ordinal } => crate::cuda::launch::<K>(
-            &args,
-            &grid,
-            device,
-            ordinal,
-            stream.map(Stream::cuda_stream),
-            None,
-        ),
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda { .. } => Err(Error::NoDevice {
-            name: device.alias().to_string(),
-            reason: "this build of warp-lang has no CUDA support (the `cuda` feature is off)"
-                .to_string(),
-        }),
-    };
-    result?;
+    run(&args, &grid)?;
     crate::tape::on_launch::<K>(&args, &grid, device);
     if config::verify_fp() {
-        K::verify_fp(&args)?;
+        K::Params::check_finite(&args, K::info())?;
     }
     Ok(())
-}
-
-/// Threads per rayon task: at least `min_chunk`, and about four tasks per pool thread so that
-/// uneven progress balances out without drowning the work in task overhead.
-fn chunk_len(total: usize, min_chunk: usize, pool_threads: usize) -> usize {
-    min_chunk.max(1).max(total / (pool_threads.max(1) * 4))
-}
-
-/// Runs `run` over the flat thread indices `0..total` on the CPU: serially for small grids,
-/// in rayon chunks otherwise, stopping at the first fault. `run` is generic so that the
-/// kernel's thread loop is inlined into it (forward launches and adjoints share this).
-pub(crate) fn for_each_chunk<F>(total: usize, run: F) -> Result<()>
-where
-    F: Fn(std::ops::Range<usize>) -> KResult<()> + Sync,
-{
-    let min_chunk = config::cpu_min_chunk();
-    if total <= min_chunk {
-        // Waking the pool costs microseconds; a small launch is faster on this thread.
-        return run(0..total).map_err(Error::from);
-    }
-    let chunk = chunk_len(total, min_chunk, rayon::current_num_threads());
-    (0..total.div_ceil(chunk))
-        .into_par_iter()
-        .try_for_each(|c| {
-            let start = c * chunk;
-            run(start..(start + chunk).min(total))
-        })
-        .map_err(Error::from)
-}
-
-/// Runs every thread of `grid` on the CPU.
-fn run_cpu<K: Kernel>(params: &K::CpuParams, grid: &Grid) -> Result<()> {
-    for_each_chunk(grid.total, |range| K::run_cpu(params, grid, range))
 }
 
 /// Waits for all outstanding work on every GPU used so far, and reports a fault that a kernel
 /// recorded there since the last check. CPU launches finish before [`launch`] returns.
 pub fn synchronize() -> Result<()> {
-    #[cfg(feature = "cuda")]
-    crate::cuda::synchronize_all()?;
-    Ok(())
+    dispatch::synchronize_all()
 }
 
 #[cfg(test)]
@@ -296,67 +239,39 @@ mod tests {
     use super::*;
     use crate::array::Array;
     use crate::device::cpu;
-    use crate::kernel::{ArgCtx, KernelArg, KernelInfo};
+    use crate::kernel::{CpuGradsOf, CpuParamsOf, KernelInfo};
     use std::ops::Range;
 
-    /// The CUDA half of a hand-written test kernel that only runs on the CPU.
-    macro_rules! cpu_only {
-        ($owned:ty, |$a:ident| $own:expr, |$o:ident| $borrow:expr) => {
-            type CudaGrads = ();
-            fn cuda_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
-                Ok(())
-            }
-            fn cuda_grad_ptrs(_: &mut (), _: &mut [*mut std::ffi::c_void]) -> usize {
-                0
-            }
-            type CpuGrads = ();
-            unsafe fn cpu_grads(_: &Self::Args<'_>, _: &Device) -> Result<()> {
-                Ok(())
-            }
-            type Owned = $owned;
-            fn own($a: &Self::Args<'_>) -> Self::Owned {
-                $own
-            }
-            fn borrow($o: &Self::Owned) -> Self::Args<'_> {
-                $borrow
-            }
-            fn zero_grads(_: &Self::Args<'_>) -> Result<()> {
-                Ok(())
-            }
-            fn verify_fp(_: &Self::Args<'_>) -> Result<()> {
-                Ok(())
+    use warp_core::{Fault, FaultKind, KResult};
+
+    /// The parts of a hand-written test kernel that `#[kernel]` would generate from the
+    /// signature: the facts (`name`, parameter names, `tid()` arity, `same_shape` groups) and
+    /// an adjoint that does nothing.
+    macro_rules! test_kernel {
+        ($name:literal, [$($param:literal),*], $tid:expr, $same_shape:expr) => {
+            const INFO: KernelInfo = KernelInfo {
+                name: $name,
+                module: module_path!(),
+                params: &[$($param),*],
+                tid_ndim: Some($tid),
+                same_shape: $same_shape,
+                file: file!(),
+                ..KernelInfo::BLANK
+            };
+            fn info() -> &'static KernelInfo {
+                &Self::INFO
             }
             fn run_cpu_adjoint(
-                _: &Self::CpuParams,
-                _: &(),
+                _: &CpuParamsOf<Self>,
+                _: &CpuGradsOf<Self>,
                 _: &Grid,
-                _: std::ops::Range<usize>,
+                _: Range<usize>,
                 _: &mut warp_core::AdStack,
             ) -> KResult<()> {
                 Ok(())
             }
-            type CudaParams = ();
-            fn cuda_params(_: &Self::Args<'_>, device: &Device) -> Result<()> {
-                Err(Error::NoDevice {
-                    name: device.alias().into(),
-                    reason: "CPU-only test kernel".into(),
-                })
-            }
-            fn cuda_param_ptrs(_: &mut (), _: &mut [*mut std::ffi::c_void]) -> usize {
-                0
-            }
-            fn info() -> &'static KernelInfo {
-                &Self::INFO
-            }
-            fn tid_arrays_cover(_: &Self::Args<'_>, _: &Grid) -> bool {
-                false
-            }
-            fn arrays_contiguous(_: &Self::Args<'_>) -> bool {
-                false
-            }
         };
     }
-    use warp_core::{ArrayView, Fault, FaultKind};
 
     /// `out[tid] = tid`, written by hand the way `#[kernel]` would generate it.
     #[derive(Clone, Copy)]
@@ -364,41 +279,9 @@ mod tests {
     struct write_flat;
 
     impl Kernel for write_flat {
-        type Args<'a> = (&'a Array<u64>,);
-        type CpuParams = (ArrayView<u64, 1>,);
-        cpu_only!((Array<u64>,), |a| (a.0.clone(),), |o| (&o.0,));
-        const INFO: KernelInfo = KernelInfo {
-            name: "write_flat",
-            module: module_path!(),
-            params: &["out"],
-            written: &[],
-            tid_ndim: Some(1),
-            same_shape: &[&[0, usize::MAX]],
-            file: file!(),
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
-        };
-        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
-            let ctx = ArgCtx {
-                kernel: Self::INFO.name,
-                arg: "out",
-                index: 0,
-                device,
-            };
-            // SAFETY: forwarded contract.
-            Ok((unsafe { <Array<u64> as KernelArg>::cpu_view(&args.0, &ctx)? },))
-        }
-        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
-            vec![<Array<u64> as KernelArg>::shape(&args.0)]
-        }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+        type Params = (Array<u64>,);
+        test_kernel!("write_flat", ["out"], 1, &[&[0, usize::MAX]]);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
             for flat in range {
                 let [i] = grid.unflatten::<1>(flat);
                 params.0.store(i, i as u64)?;
@@ -413,48 +296,9 @@ mod tests {
     struct oob;
 
     impl Kernel for oob {
-        type Args<'a> = (&'a Array<f32>, f32);
-        cpu_only!((Array<f32>, f32), |a| (a.0.clone(), a.1), |o| (&o.0, o.1));
-        type CpuParams = (ArrayView<f32, 1>, f32);
-        const INFO: KernelInfo = KernelInfo {
-            name: "oob",
-            module: module_path!(),
-            params: &["data", "scale"],
-            written: &[],
-            tid_ndim: Some(1),
-            same_shape: &[],
-            file: file!(),
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
-        };
-        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
-            let data = ArgCtx {
-                kernel: Self::INFO.name,
-                arg: "data",
-                index: 0,
-                device,
-            };
-            let scale = ArgCtx {
-                arg: "scale",
-                ..data
-            };
-            Ok((
-                // SAFETY: forwarded contract.
-                unsafe { <Array<f32> as KernelArg>::cpu_view(&args.0, &data)? },
-                unsafe { <f32 as KernelArg>::cpu_view(&args.1, &scale)? },
-            ))
-        }
-        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
-            vec![<Array<f32> as KernelArg>::shape(&args.0), None]
-        }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+        type Params = (Array<f32>, f32);
+        test_kernel!("oob", ["data", "scale"], 1, &[]);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
             for flat in range {
                 let [i] = grid.unflatten::<1>(flat);
                 let v = params.0.load(i)?;
@@ -470,41 +314,9 @@ mod tests {
     struct write_2d;
 
     impl Kernel for write_2d {
-        type Args<'a> = (&'a Array<u64, 2>,);
-        cpu_only!((Array<u64, 2>,), |a| (a.0.clone(),), |o| (&o.0,));
-        type CpuParams = (ArrayView<u64, 2>,);
-        const INFO: KernelInfo = KernelInfo {
-            name: "write_2d",
-            module: module_path!(),
-            params: &["out"],
-            written: &[],
-            tid_ndim: Some(2),
-            same_shape: &[],
-            file: file!(),
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
-        };
-        unsafe fn cpu_params(args: &Self::Args<'_>, device: &Device) -> Result<Self::CpuParams> {
-            let ctx = ArgCtx {
-                kernel: Self::INFO.name,
-                arg: "out",
-                index: 0,
-                device,
-            };
-            // SAFETY: forwarded contract.
-            Ok((unsafe { <Array<u64, 2> as KernelArg>::cpu_view(&args.0, &ctx)? },))
-        }
-        fn arg_shapes(args: &Self::Args<'_>) -> Vec<Option<Vec<usize>>> {
-            vec![<Array<u64, 2> as KernelArg>::shape(&args.0)]
-        }
-        fn run_cpu(params: &Self::CpuParams, grid: &Grid, range: Range<usize>) -> KResult<()> {
+        type Params = (Array<u64, 2>,);
+        test_kernel!("write_2d", ["out"], 2, &[]);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
             for flat in range {
                 let [i, j] = grid.unflatten::<2>(flat);
                 params.0.store((i, j), flat as u64)?;
@@ -522,17 +334,6 @@ mod tests {
             let v = out.to_vec().unwrap();
             assert!(v.iter().enumerate().all(|(i, &x)| x == i as u64), "n = {n}");
         }
-    }
-
-    #[test]
-    fn chunking() {
-        assert_eq!(chunk_len(4097, 4096, 2), 4096);
-        assert_eq!(chunk_len(100_003, 4096, 2), 12_500);
-        assert_eq!(chunk_len(100_003, 4096, 64), 4096);
-        assert_eq!(chunk_len(3, 0, 0), 1);
-        assert_eq!(chunk_len(10, 0, 0), 2);
-        // The last chunk of 100_003 threads in chunks of 12_500 is partial and still covered.
-        assert_eq!(100_003usize.div_ceil(12_500), 9);
     }
 
     #[test]
@@ -642,8 +443,8 @@ mod tests {
     fn cuda_launch_of_cpu_arrays_is_refused() {
         let dev = cpu();
         let out = Array::<u64>::zeros(4, &dev).unwrap();
-        // Without a GPU: CUDA is unavailable; with one: the array is on the wrong device (or,
-        // here, the hand-written kernel has no CUDA half). Never a launch.
+        // The arguments are checked before anything touches a GPU: the CPU array is on the
+        // wrong device (or, without the `cuda` feature, there is no CUDA). Never a launch.
         let err = launch(write_flat, 4, (&out,), &crate::device::Device::fake_cuda(0)).unwrap_err();
         assert!(err.to_string().contains("cuda:0"), "{err}");
         synchronize().unwrap();

@@ -8,8 +8,12 @@
 //!   in rayon chunks, on a GPU through `cuda` (compiled at first launch).
 //! - `stream` (with `cuda`): streams, events, `ScopedStream`, `launch_on`, and the ordering
 //!   rules between streams and array operations.
-//! - [`kernel`]: the traits that `#[kernel]` implements.
+//! - [`kernel`]: the traits that `#[kernel]` implements (`params.rs`: the launch-argument
+//!   conversions, once for every tuple of parameter types).
 //! - [`objects`]: kernel-visible host objects ([`HashGrid`]), passed as typed parameters.
+//! - The backends: `cpu/` and [`cuda`], each implementing the crate-private `Backend` and
+//!   `Buffer` traits (`backend.rs`); `dispatch.rs` picks a device's backend and is the only
+//!   place that names them all.
 //! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
 //!
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
@@ -17,26 +21,31 @@
 
 #![warn(missing_docs)]
 
-#[cfg(feature = "cuda")]
-pub mod aot;
 pub mod array;
 pub mod autograd;
+mod backend;
 pub mod config;
-#[cfg(feature = "cuda")]
+mod cpu;
 pub mod cuda;
-pub mod cuda_source;
 pub mod device;
+mod dispatch;
 pub mod error;
 pub mod kernel;
 pub mod launch;
 pub mod objects;
-#[cfg(feature = "cuda")]
-pub mod pinned;
-#[cfg(feature = "cuda")]
-pub mod stream;
+mod params;
 pub mod tape;
 
-pub use array::{copy, Array, Element, IntoShape};
+// The CUDA backend's public modules, at the paths they had before they moved into `cuda/`.
+#[cfg(feature = "cuda")]
+pub use cuda::aot;
+#[cfg(feature = "cuda")]
+pub use cuda::pinned;
+pub use cuda::source as cuda_source;
+#[cfg(feature = "cuda")]
+pub use cuda::stream;
+
+pub use array::{Array, Element, IntoShape};
 pub use autograd::{gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;
 pub use device::{
@@ -45,7 +54,7 @@ pub use device::{
 pub use error::{Error, Result};
 pub use kernel::{
     ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg, KernelInfo,
-    Launchable,
+    KernelParams, Launchable,
 };
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
@@ -55,7 +64,7 @@ pub use objects::HashGrid;
 pub use pinned::PinnedVec;
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
-pub use tape::{Recording, Seed, Tape};
+pub use tape::{copy, Recording, Seed, Tape};
 
 /// What this process compiled at run time, one line per kernel variant, for scenes and
 /// benchmarks to print beside their results: the kernel, forward or adjoint, the contiguous

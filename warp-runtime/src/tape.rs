@@ -9,13 +9,14 @@
 
 use crate::array::{Array, Element};
 use crate::config;
-use crate::device::{Device, DeviceKind};
+use crate::device::Device;
+use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::kernel::Kernel;
+use crate::kernel::{ArgsOf, Kernel, KernelParams};
 use std::cell::RefCell;
 use std::marker::PhantomData;
 use std::rc::{Rc, Weak};
-use warp_core::{AdStack, Grid};
+use warp_core::Grid;
 
 type Thunk = Box<dyn Fn() -> Result<()>>;
 /// A step's backward, given the adjoint stack capacity in bytes.
@@ -199,27 +200,35 @@ impl Tape {
 }
 
 /// Records the launch of `K` on every tape recording on this thread.
-pub(crate) fn on_launch<K: Kernel>(args: &K::Args<'_>, grid: &Grid, device: &Device) {
+pub(crate) fn on_launch<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid, device: &Device) {
     RECORDING.with(|r| {
         let r = r.borrow();
         for inner in r.iter().filter_map(Weak::upgrade) {
-            let owned = Rc::new(K::own(args));
+            let owned = Rc::new(K::Params::own(args));
             let (o1, o2) = (owned.clone(), owned);
             let (grid, device) = (*grid, device.clone());
             inner.borrow_mut().records.push(Record {
                 name: K::INFO.name,
                 backward: Box::new(move |cap| {
-                    launch_adjoint::<K>(&K::borrow(&o1), &grid, &device, cap)
+                    dispatch::launch_adjoint::<K>(&device, &K::Params::borrow(&o1), &grid, cap)
                 }),
-                zero: Box::new(move || K::zero_grads(&K::borrow(&o2))),
+                zero: Box::new(move || K::Params::zero_grads(&K::Params::borrow(&o2))),
             });
         }
     });
 }
 
-/// Records `wp::copy(dst, src)` on every tape recording on this thread (when `dst` has a
+/// Copies `src` into `dst` (same shape); see [`Array::copy_from`]. A recording [`Tape`]
+/// records it: backward adds `dst`'s gradient into `src`'s and clears `dst`'s.
+pub fn copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> Result<()> {
+    dst.copy_from(src)?;
+    on_copy(dst, src);
+    Ok(())
+}
+
+/// Records `copy(dst, src)` on every tape recording on this thread (when `dst` has a
 /// gradient to hand back).
-pub(crate) fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) {
+fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) {
     if !dst.requires_grad() {
         return;
     }
@@ -250,40 +259,4 @@ pub(crate) fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array
             });
         }
     });
-}
-
-/// Runs the adjoint of `K` over `grid`.
-fn launch_adjoint<K: Kernel>(
-    args: &K::Args<'_>,
-    grid: &Grid,
-    device: &Device,
-    cap: usize,
-) -> Result<()> {
-    if let Some(reason) = K::INFO.adjoint_error {
-        return Err(Error::NotDifferentiable {
-            kernel: K::INFO.name,
-            reason: reason.to_string(),
-        });
-    }
-    match device.kind() {
-        DeviceKind::Cpu => {
-            // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
-            let params = unsafe { K::cpu_params(args, device)? };
-            let grads = unsafe { K::cpu_grads(args, device)? };
-            // One adjoint stack per chunk, reused (cleared) thread by thread.
-            crate::launch::for_each_chunk(grid.total, |range| {
-                let mut stack = AdStack::new(cap, K::INFO.name);
-                K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack)
-            })
-        }
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { ordinal } => {
-            crate::cuda::launch::<K>(args, grid, device, ordinal, None, Some(cap))
-        }
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda { .. } => Err(Error::NotDifferentiable {
-            kernel: K::INFO.name,
-            reason: "was launched on a GPU, and this build has no CUDA support".to_string(),
-        }),
-    }
 }

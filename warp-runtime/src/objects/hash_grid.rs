@@ -27,9 +27,10 @@ use crate::error::{Error, Result};
 use crate::kernel::{ArgCtx, KernelArg};
 
 /// A hash grid on one device: `HashGrid::new(dim_x, dim_y, dim_z, &device)`, then
-/// [`build`](HashGrid::build) from points before launching kernels that query it.
+/// [`build`](HashGrid::build) from points before launching kernels that query it (this
+/// example runs as a doc test of the `warp_lang` facade):
 ///
-/// ```
+/// ```ignore
 /// use warp_lang as wp;
 /// use wp::prelude::*;
 ///
@@ -481,10 +482,7 @@ impl KernelArg for HashGrid {
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
         let built = arg.launch_build(ctx)?;
         let b = &arg.buffers;
-        #[cfg(feature = "cuda")]
-        let ptr = |a: &Array<i32>| a.device_ptr().unwrap_or(0);
-        #[cfg(not(feature = "cuda"))]
-        let ptr = |_: &Array<i32>| 0u64;
+        let ptr = |a: &Array<i32>| a.device_address();
         Ok(CudaHashGrid {
             point_ids: ptr(&b.point_ids),
             cell_starts: ptr(&b.cell_starts),

@@ -23,7 +23,8 @@
 //! ```
 //! (a generic kernel's instances: `wp::aot::instances(my_kernels::axpy)`), and at start-up: `wp::aot::set_aot_dir(Some(env!("WARP_LANG_AOT_DIR_BUILT").into()))`.
 
-use crate::cuda_source;
+use super::options::with_compile_options;
+use super::source;
 use crate::error::{Error, Result};
 use crate::kernel::{GenericKernel, Kernel, KernelInfo};
 use std::path::{Path, PathBuf};
@@ -95,10 +96,10 @@ pub fn compile(
     let cache = KernelCache::new(dir);
     let mut out = Vec::new();
     for info in kernels {
-        let src = cuda_source::assemble(info);
+        let src = source::assemble(info);
         for &arch in archs {
             for contiguous in [true, false] {
-                let entry = crate::cuda::with_compile_options(contiguous, None, |opts| {
+                let entry = with_compile_options(contiguous, None, |opts| {
                     let compiled = warp_cuda::compile(&src.text, info.name, opts, arch)?;
                     let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
                     let path = cache.store(info.name, key, &compiled.cubin)?;

@@ -14,30 +14,11 @@
 //!
 //! Streams exist on CUDA devices only; CPU launches complete before `launch` returns.
 
+use super::gpu;
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
-use std::cell::RefCell;
 use std::marker::PhantomData;
 use std::sync::Arc;
-
-thread_local! {
-    /// The calling thread's current streams, innermost last: `(GPU ordinal, stream)`.
-    static CURRENT: RefCell<Vec<(usize, warp_cuda::Stream)>> = const { RefCell::new(Vec::new()) };
-}
-
-/// The calling thread's current stream for GPU `ordinal`, when a [`ScopedStream`] set one.
-pub(crate) fn current(ordinal: usize) -> Option<warp_cuda::Stream> {
-    CURRENT.with(|c| {
-        let c = c.borrow();
-        if c.is_empty() {
-            return None;
-        }
-        c.iter()
-            .rev()
-            .find(|(o, _)| *o == ordinal)
-            .map(|(_, s)| s.clone())
-    })
-}
 
 /// The GPU ordinal of `device`, or an error naming what needed a GPU.
 fn ordinal_of(device: &Device, what: &str) -> Result<usize> {
@@ -65,11 +46,8 @@ impl Stream {
     /// [`Error::InvalidArgument`] for the CPU; [`Error::Cuda`] when the driver fails.
     pub fn new(device: &Device) -> Result<Stream> {
         let ordinal = ordinal_of(device, "a stream")?;
-        let st = crate::cuda::state(device, ordinal)?;
-        let inner = st
-            .gpu
-            .new_stream()
-            .map_err(|e| crate::cuda::err(device, e))?;
+        let st = gpu::state(device, ordinal)?;
+        let inner = st.gpu.new_stream().map_err(|e| gpu::err(device, e))?;
         Ok(Stream {
             device: device.clone(),
             inner,
@@ -83,7 +61,7 @@ impl Stream {
 
     /// Whether this is the device's default stream (where array operations run).
     pub fn is_default(&self) -> bool {
-        crate::cuda::state(&self.device, self.inner.ordinal())
+        gpu::state(&self.device, self.inner.ordinal())
             .map(|st| st.gpu.default_stream().is(&self.inner))
             .unwrap_or(false)
     }
@@ -93,9 +71,9 @@ impl Stream {
     pub fn synchronize(&self) -> Result<()> {
         self.inner
             .synchronize()
-            .map_err(|e| crate::cuda::err(&self.device, e))?;
-        let st = crate::cuda::state(&self.device, self.inner.ordinal())?;
-        crate::cuda::read_fault(&st)
+            .map_err(|e| gpu::err(&self.device, e))?;
+        let st = gpu::state(&self.device, self.inner.ordinal())?;
+        gpu::read_fault(&st)
     }
 
     /// Makes work queued on this stream from now on wait for the work queued on `other` so
@@ -103,14 +81,14 @@ impl Stream {
     pub fn wait_stream(&self, other: &Stream) -> Result<()> {
         self.inner
             .wait_stream(&other.inner)
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 
     /// Makes work queued on this stream from now on wait for the work `event` captured.
     pub fn wait_event(&self, event: &Event) -> Result<()> {
         self.inner
             .wait_event(&event.inner)
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 
     /// Records a new timing event capturing the work queued on this stream so far.
@@ -133,12 +111,9 @@ impl Stream {
 /// [`Error::InvalidArgument`] for the CPU.
 pub fn get_stream(device: &Device) -> Result<Stream> {
     let ordinal = ordinal_of(device, "get_stream")?;
-    let inner = match current(ordinal) {
+    let inner = match gpu::current(ordinal) {
         Some(s) => s,
-        None => crate::cuda::state(device, ordinal)?
-            .gpu
-            .default_stream()
-            .clone(),
+        None => gpu::state(device, ordinal)?.gpu.default_stream().clone(),
     };
     Ok(Stream {
         device: device.clone(),
@@ -158,10 +133,10 @@ impl Event {
     /// ([`Event::elapsed_ms`]), at a small cost per record.
     pub fn new(device: &Device, timing: bool) -> Result<Event> {
         let ordinal = ordinal_of(device, "an event")?;
-        let inner = crate::cuda::state(device, ordinal)?
+        let inner = gpu::state(device, ordinal)?
             .gpu
             .new_event(timing)
-            .map_err(|e| crate::cuda::err(device, e))?;
+            .map_err(|e| gpu::err(device, e))?;
         Ok(Event {
             device: device.clone(),
             inner: Arc::new(inner),
@@ -178,21 +153,21 @@ impl Event {
         }
         self.inner
             .record(&stream.inner)
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 
     /// Waits until the captured work has finished.
     pub fn synchronize(&self) -> Result<()> {
         self.inner
             .synchronize()
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 
     /// Whether the captured work has finished (an event never recorded counts as finished).
     pub fn is_complete(&self) -> Result<bool> {
         self.inner
             .is_complete()
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 
     /// Milliseconds of GPU time from this event to `end` (both timing events, both recorded);
@@ -200,7 +175,7 @@ impl Event {
     pub fn elapsed_ms(&self, end: &Event) -> Result<f32> {
         self.inner
             .elapsed_ms(&end.inner)
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 
     /// The device the event belongs to.
@@ -227,7 +202,7 @@ impl ScopedStream {
         let ordinal = stream.inner.ordinal();
         let previous = get_stream(&stream.device)?;
         stream.wait_stream(&previous)?;
-        CURRENT.with(|c| c.borrow_mut().push((ordinal, stream.inner.clone())));
+        gpu::push_current(ordinal, stream.inner.clone());
         Ok(ScopedStream {
             ordinal,
             stream: stream.inner.clone(),
@@ -238,14 +213,6 @@ impl ScopedStream {
 
 impl Drop for ScopedStream {
     fn drop(&mut self) {
-        CURRENT.with(|c| {
-            let mut c = c.borrow_mut();
-            if let Some(k) = c
-                .iter()
-                .rposition(|(o, s)| *o == self.ordinal && s.is(&self.stream))
-            {
-                c.remove(k);
-            }
-        });
+        gpu::pop_current(self.ordinal, &self.stream);
     }
 }

@@ -6,6 +6,8 @@
 //! holds the `PinnedVec` mutably, and reading or writing its elements waits for the copies
 //! queued on it.
 
+use super::gpu;
+use super::memory::CudaBuffer;
 use crate::array::{Array, Element};
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
@@ -36,9 +38,8 @@ impl<T: Element> PinnedVec<T> {
         let bytes = len.checked_mul(std::mem::size_of::<T>()).ok_or_else(|| {
             Error::invalid(format!("{len} elements of {} overflow", T::TYPE_NAME))
         })?;
-        let gpu = crate::cuda::state(device, ordinal)?.gpu.clone();
-        let buf =
-            warp_cuda::PinnedBuffer::new(&gpu, bytes).map_err(|e| crate::cuda::err(device, e))?;
+        let gpu = gpu::state(device, ordinal)?.gpu.clone();
+        let buf = warp_cuda::PinnedBuffer::new(&gpu, bytes).map_err(|e| gpu::err(device, e))?;
         Ok(PinnedVec {
             buf,
             device: device.clone(),
@@ -83,14 +84,18 @@ impl<T: Element> PinnedVec<T> {
     pub fn synchronize(&self) -> Result<()> {
         self.buf
             .synchronize()
-            .map_err(|e| crate::cuda::err(&self.device, e))
+            .map_err(|e| gpu::err(&self.device, e))
     }
 }
 
 impl<T: Element, const N: usize> Array<T, N> {
     /// Checks that `self` (a contiguous array on `pinned`'s GPU) and `pinned` hold the same
-    /// number of elements; returns the array's GPU ordinal.
-    fn pinned_peer(&self, pinned: &PinnedVec<T>, what: &str) -> Result<usize> {
+    /// number of elements; returns the array's GPU ordinal, memory, byte offset and length.
+    fn pinned_peer(
+        &self,
+        pinned: &PinnedVec<T>,
+        what: &str,
+    ) -> Result<(usize, &CudaBuffer, usize, usize)> {
         let DeviceKind::Cuda { ordinal } = self.device().kind() else {
             return Err(Error::invalid(format!(
                 "{what}: the array is on \"{}\"; asynchronous copies are between pinned memory \
@@ -117,7 +122,11 @@ impl<T: Element, const N: usize> Array<T, N> {
                 }
             )));
         }
-        Ok(ordinal)
+        let (storage, offset, bytes) = self.contiguous_range();
+        let buf = storage
+            .cuda()
+            .expect("an array on a CUDA device lives in CUDA memory");
+        Ok((ordinal, buf, offset, bytes))
     }
 
     /// Queues a copy of `src` into this GPU array on the calling thread's current stream and
@@ -127,13 +136,13 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// [`Error::InvalidArgument`] when the array is not a contiguous array on `src`'s GPU with
     /// `src.len()` elements.
     pub fn copy_from_pinned_async(&self, src: &mut PinnedVec<T>) -> Result<()> {
-        let ordinal = self.pinned_peer(src, "copy_from_pinned_async")?;
-        let (buf, off, bytes) = self.device_range();
-        let st = crate::cuda::state(self.device(), ordinal)?;
+        let (ordinal, buf, off, bytes) = self.pinned_peer(src, "copy_from_pinned_async")?;
+        let buf = buf.device_buffer();
+        let st = gpu::state(self.device(), ordinal)?;
         st.queue(ordinal, None, |s| {
             src.buf
                 .copy_to_device_async(0, buf, off, bytes, s)
-                .map_err(|e| crate::cuda::err(self.device(), e))
+                .map_err(|e| gpu::err(self.device(), e))
         })
     }
 
@@ -143,13 +152,13 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// # Errors
     /// As [`copy_from_pinned_async`](Self::copy_from_pinned_async).
     pub fn copy_to_pinned_async(&self, dst: &mut PinnedVec<T>) -> Result<()> {
-        let ordinal = self.pinned_peer(dst, "copy_to_pinned_async")?;
-        let (buf, off, bytes) = self.device_range();
-        let st = crate::cuda::state(self.device(), ordinal)?;
+        let (ordinal, buf, off, bytes) = self.pinned_peer(dst, "copy_to_pinned_async")?;
+        let buf = buf.device_buffer();
+        let st = gpu::state(self.device(), ordinal)?;
         st.queue(ordinal, None, |s| {
             dst.buf
                 .copy_from_device_async(0, buf, off, bytes, s)
-                .map_err(|e| crate::cuda::err(self.device(), e))
+                .map_err(|e| gpu::err(self.device(), e))
         })
     }
 }

@@ -268,20 +268,11 @@ mod tests {
         let info = KernelInfo {
             name: "k",
             module: "m",
-            params: &[],
-            written: &[],
-            tid_ndim: None,
-            same_shape: &[],
             file: "src/k.rs",
             cuda: "static WP_FN void @@SELF@@(wp::ctx_t* __ctx) { @@F0@@(1.0f, __ctx); @@F1@@(2.0f, __ctx); }\nvoid @@ENTRY@@() {}\n",
             cuda_sections: &["vector"],
             callees: &KERNEL_CALLEES,
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
+            ..KernelInfo::BLANK
         };
         let src = assemble(&info);
         assert_eq!(src.headers, vec!["wp_core.h", "wp_scalar.h", "wp_vector.h"]);

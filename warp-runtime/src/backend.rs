@@ -1,0 +1,68 @@
+//! What a backend implements: the seam between the device-neutral runtime (launch validation,
+//! arrays, tapes) and the code that runs kernels and holds memory on one kind of device.
+//!
+//! A backend is a folder (`cpu/`, `cuda/`) with a type implementing [`Backend`] and a memory
+//! type implementing [`Buffer`]. `dispatch.rs` is the one place that names every backend: it
+//! picks the backend of a device, and its `Storage` holds any backend's memory. The runtime
+//! above calls `dispatch`, never a backend directly.
+//!
+//! The methods are generic over the kernel, and dispatch is a `match` on the device kind, so a
+//! launch is monomorphised down to the backend's own code: no `dyn`, no allocation.
+
+use crate::error::Result;
+use crate::kernel::{ArgsOf, Kernel};
+use warp_core::Grid;
+
+/// A backend, bound to one device for one operation (the value is a handle: the device and
+/// what the backend needs to find its state, built by `dispatch` for each call).
+pub(crate) trait Backend {
+    /// The memory of arrays on this backend's devices.
+    type Buffer: Buffer;
+
+    /// Runs a launch of `K` over `grid` (the CPU), or queues it (a GPU: on the calling
+    /// thread's current stream). The launch dims and shapes are already checked; the backend
+    /// converts the arguments, which checks their devices. (Launches on a named stream,
+    /// `launch_on`, are the CUDA backend's own: streams are a CUDA API.)
+    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()>;
+
+    /// Runs (or queues) the adjoint of a launch of `K`, accumulating into the arrays'
+    /// gradients, with `adstack_bytes` of adjoint stack per thread. `K` has an adjoint
+    /// (`KernelInfo::adjoint_error` is checked before).
+    fn launch_adjoint<K: Kernel>(
+        &self,
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        adstack_bytes: usize,
+    ) -> Result<()>;
+
+    /// `bytes` of zeroed memory aligned to at least `align`.
+    fn alloc_zeroed(&self, bytes: usize, align: usize) -> Result<Self::Buffer>;
+
+    /// Waits for the work queued on the device, then reports a fault that a kernel recorded
+    /// there since the last check (what `to_vec` does before reading).
+    fn synchronize(&self) -> Result<()>;
+
+    /// [`Backend::synchronize`] for every device of this backend used so far.
+    fn synchronize_all() -> Result<()>
+    where
+        Self: Sized;
+}
+
+/// A backend's memory, as array operations use it: bytes at offsets. Every operation is
+/// ordered after the kernels that may use the memory (on a GPU: after every stream's work;
+/// see `cuda/gpu.rs`) and has finished when it returns.
+pub(crate) trait Buffer: Send + Sync + Sized {
+    /// The size in bytes.
+    fn len(&self) -> usize;
+    /// The address of byte 0 as this backend's kernels receive it.
+    fn address(&self) -> u64;
+    /// Copies `out.len()` bytes from `offset` into `out`.
+    fn read(&self, offset: usize, out: &mut [u8]) -> Result<()>;
+    /// Copies `data` to `offset`.
+    fn write(&self, offset: usize, data: &[u8]) -> Result<()>;
+    /// Writes `pattern` over `bytes` bytes from `offset` (`bytes` is a multiple of its length).
+    fn fill(&self, offset: usize, bytes: usize, pattern: &[u8]) -> Result<()>;
+    /// Copies `bytes` bytes from `src` at `src_offset` to `offset` (callers pass another
+    /// buffer than `self`).
+    fn copy_from(&self, offset: usize, src: &Self, src_offset: usize, bytes: usize) -> Result<()>;
+}

@@ -1,0 +1,60 @@
+//! [`Cpu`]: the CPU backend as the runtime dispatches to it (`backend.rs`).
+
+use super::executor;
+use super::memory::HostBuffer;
+use crate::backend::Backend;
+use crate::device::Device;
+use crate::error::Result;
+use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use warp_core::{AdStack, Grid};
+
+/// The CPU as a backend, for one launch or array operation on `device`.
+pub(crate) struct Cpu<'d> {
+    device: &'d Device,
+}
+
+impl<'d> Cpu<'d> {
+    /// The backend of `device` (the CPU).
+    pub(crate) fn new(device: &'d Device) -> Self {
+        Cpu { device }
+    }
+}
+
+impl Backend for Cpu<'_> {
+    type Buffer = HostBuffer;
+
+    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
+        // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
+        let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
+        executor::for_each_chunk(grid.total, |range| K::run_cpu(&params, grid, range))
+    }
+
+    fn launch_adjoint<K: Kernel>(
+        &self,
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        adstack_bytes: usize,
+    ) -> Result<()> {
+        // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
+        let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
+        let grads = unsafe { K::Params::cpu_grads(args, K::info(), self.device)? };
+        // One adjoint stack per chunk, reused (cleared) thread by thread.
+        executor::for_each_chunk(grid.total, |range| {
+            let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
+            K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack)
+        })
+    }
+
+    fn alloc_zeroed(&self, bytes: usize, align: usize) -> Result<HostBuffer> {
+        HostBuffer::zeroed(bytes, align)
+    }
+
+    fn synchronize(&self) -> Result<()> {
+        // Launches have finished and reported their faults when `launch` returned.
+        Ok(())
+    }
+
+    fn synchronize_all() -> Result<()> {
+        Ok(())
+    }
+}

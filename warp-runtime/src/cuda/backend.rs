@@ -1,0 +1,76 @@
+//! [`Cuda`]: the CUDA backend as the runtime dispatches to it (`backend.rs`).
+
+use super::memory::CudaBuffer;
+use super::stream::Stream;
+use super::{gpu, launch};
+use crate::backend::Backend;
+use crate::device::Device;
+use crate::error::Result;
+use crate::kernel::{ArgsOf, Kernel};
+use warp_core::Grid;
+
+/// A CUDA GPU as a backend, for one launch or array operation on `device`.
+pub(crate) struct Cuda<'d> {
+    device: &'d Device,
+    ordinal: usize,
+}
+
+impl<'d> Cuda<'d> {
+    /// The backend of `device`, GPU `ordinal`.
+    pub(crate) fn new(device: &'d Device, ordinal: usize) -> Self {
+        Cuda { device, ordinal }
+    }
+
+    /// The backend of `stream`'s GPU.
+    pub(crate) fn of_stream(stream: &'d Stream) -> Self {
+        Cuda::new(stream.device(), stream.cuda_stream().ordinal())
+    }
+
+    /// [`Backend::launch`] on `stream` rather than on the calling thread's current stream.
+    pub(crate) fn launch_on<K: Kernel>(
+        &self,
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        stream: &Stream,
+    ) -> Result<()> {
+        let on = Some(stream.cuda_stream());
+        launch::launch::<K>(args, grid, self.device, self.ordinal, on, None)
+    }
+}
+
+impl Backend for Cuda<'_> {
+    type Buffer = CudaBuffer;
+
+    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
+        launch::launch::<K>(args, grid, self.device, self.ordinal, None, None)
+    }
+
+    fn launch_adjoint<K: Kernel>(
+        &self,
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        adstack_bytes: usize,
+    ) -> Result<()> {
+        launch::launch::<K>(
+            args,
+            grid,
+            self.device,
+            self.ordinal,
+            None,
+            Some(adstack_bytes),
+        )
+    }
+
+    fn alloc_zeroed(&self, bytes: usize, _align: usize) -> Result<CudaBuffer> {
+        // Device allocations are aligned to at least 256 bytes.
+        CudaBuffer::zeros(self.device, self.ordinal, bytes)
+    }
+
+    fn synchronize(&self) -> Result<()> {
+        gpu::synchronize(self.device, self.ordinal)
+    }
+
+    fn synchronize_all() -> Result<()> {
+        gpu::synchronize_all()
+    }
+}

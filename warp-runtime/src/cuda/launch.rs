@@ -1,0 +1,101 @@
+//! A kernel launch on a GPU: the parameter block and `cuLaunchKernel`, asynchronous on a
+//! stream.
+
+use super::gpu::{check_state, err};
+use super::module::loaded;
+use crate::config;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::{ArgsOf, Kernel, KernelParams, MAX_PARAMS};
+use std::ffi::c_void;
+use warp_core::Grid;
+
+/// `wp::launch_t`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct LaunchDims {
+    dims: [i64; 4],
+    total: i64,
+    ndim: i32,
+    fast: i32,
+}
+
+/// `wp::ctx_t`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct Ctx {
+    fault: u64,
+    fault_flag: u64,
+    raised: i32,
+    pad: i32,
+}
+
+/// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
+/// thread's current stream for the GPU (`ScopedStream`), else on the default stream.
+///
+/// `adjoint: Some(bytes)` launches the kernel's adjoint instead (with `bytes` of adjoint stack
+/// per thread): the arrays' gradients follow the parameters.
+pub(crate) fn launch<K: Kernel>(
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    device: &Device,
+    ordinal: usize,
+    stream: Option<&warp_cuda::Stream>,
+    adjoint: Option<usize>,
+) -> Result<()> {
+    let info = K::info();
+    if adjoint.is_some() {
+        if let Some(reason) = info.cuda_adjoint_error {
+            return Err(Error::NotDifferentiable {
+                kernel: info.name,
+                reason: reason.to_string(),
+            });
+        }
+    }
+    // Arguments first: a wrong device is reported before anything is compiled.
+    let mut params = K::Params::cuda_params(args, info, device)?;
+    let mut grads = match adjoint {
+        Some(_) => Some(K::Params::cuda_grads(args, info, device)?),
+        None => None,
+    };
+    let kernel = loaded(device, ordinal, info, K::Params::contiguous(args), adjoint)?;
+    let st = &kernel.st;
+    let mut dims = LaunchDims {
+        dims: grid.dims.map(|d| d as i64),
+        total: grid.total as i64,
+        ndim: grid.ndim as i32,
+        fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
+    };
+    let (fault, fault_flag) = st.fault_record();
+    let mut ctx = Ctx {
+        fault,
+        fault_flag,
+        raised: 0,
+        pad: 0,
+    };
+    // The launch and the context, then the parameters and (adjoint) their gradients.
+    let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
+    ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
+    ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
+    let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+    if let Some(g) = grads.as_mut() {
+        n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
+    }
+    let block = config::cuda_block_dim();
+    let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
+    st.set_last(info);
+    st.queue(ordinal, stream, |on| {
+        // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
+        // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type), alive
+        // until the call returns; cuLaunchKernel copies them.
+        unsafe {
+            st.gpu
+                .launch_raw(&kernel.function, on, blocks, block, 0, &mut ptrs[..n])
+                .map_err(|e| err(device, e))
+        }
+    })?;
+    if config::debug() {
+        check_state(st)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,82 @@
+//! GPU memory: what arrays on a GPU live in.
+
+use super::gpu::{self, join_ordinal};
+use crate::backend::Buffer;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use warp_cuda::{CudaError, DeviceBuffer};
+
+/// An allocation on one GPU. Every operation first orders itself after the user streams'
+/// kernels (the ordering model of `gpu.rs`), then runs on the GPU's default stream.
+pub(crate) struct CudaBuffer {
+    inner: DeviceBuffer,
+}
+
+impl CudaBuffer {
+    /// `bytes` of zeroed memory on GPU `ordinal` (`device`).
+    pub(crate) fn zeros(device: &Device, ordinal: usize, bytes: usize) -> Result<CudaBuffer> {
+        let g = gpu::gpu(ordinal)?;
+        let inner = DeviceBuffer::zeros(&g, bytes).map_err(|e| gpu::err(device, e))?;
+        Ok(CudaBuffer { inner })
+    }
+
+    /// The driver's buffer (for asynchronous copies with pinned memory).
+    pub(crate) fn device_buffer(&self) -> &DeviceBuffer {
+        &self.inner
+    }
+
+    fn ordinal(&self) -> usize {
+        self.inner.gpu().ordinal()
+    }
+
+    /// A driver error as a runtime error naming this buffer's GPU.
+    fn err(&self, e: CudaError) -> Error {
+        Error::Cuda {
+            device: format!("cuda:{}", self.ordinal()),
+            message: e.to_string(),
+        }
+    }
+}
+
+impl Buffer for CudaBuffer {
+    fn len(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn address(&self) -> u64 {
+        self.inner.device_ptr()
+    }
+
+    fn read(&self, offset: usize, out: &mut [u8]) -> Result<()> {
+        join_ordinal(self.ordinal())?;
+        self.inner.download(offset, out).map_err(|e| self.err(e))
+    }
+
+    fn write(&self, offset: usize, data: &[u8]) -> Result<()> {
+        join_ordinal(self.ordinal())?;
+        self.inner.upload(offset, data).map_err(|e| self.err(e))
+    }
+
+    fn fill(&self, offset: usize, bytes: usize, pattern: &[u8]) -> Result<()> {
+        join_ordinal(self.ordinal())?;
+        self.inner
+            .fill_pattern(offset, bytes, pattern)
+            .map_err(|e| self.err(e))
+    }
+
+    fn copy_from(&self, offset: usize, src: &Self, src_offset: usize, bytes: usize) -> Result<()> {
+        join_ordinal(self.ordinal())?;
+        self.inner
+            .copy_from_device(offset, &src.inner, src_offset, bytes)
+            .map_err(|e| self.err(e))
+    }
+}
+
+impl Drop for CudaBuffer {
+    fn drop(&mut self) {
+        // The buffer's free is queued on the default stream: order it after the kernels of
+        // user streams that may still use the memory. A failure here means the context is
+        // broken, which the next fallible call reports.
+        let _ = join_ordinal(self.ordinal());
+    }
+}

@@ -1,0 +1,42 @@
+//! The CUDA backend: kernels compiled from their CUDA C++ templates by NVRTC at first launch
+//! and launched asynchronously on a GPU's streams; arrays in GPU memory.
+//!
+//! - `source`: assembles a kernel's translation unit (also without the `cuda` feature: the
+//!   host tests compile generated units with g++).
+//! - `options`, `aot`, `module`: how a unit is compiled (NVRTC options), ahead-of-time cubins,
+//!   and the per-GPU cache of loaded kernels with what compiling them cost.
+//! - `gpu`: per-GPU state, the stream ordering model and the fault record.
+//! - `launch`: a launch's parameter block and `cuLaunchKernel`.
+//! - `memory`: GPU memory for arrays. `stream`, `pinned`: the public streams, events and
+//!   pinned host memory.
+//! - `backend`: `Cuda`, the backend (see the crate's `backend.rs`) that the runtime
+//!   dispatches to for `"cuda:N"`.
+
+pub mod source;
+
+#[cfg(feature = "cuda")]
+pub mod aot;
+#[cfg(feature = "cuda")]
+mod backend;
+#[cfg(feature = "cuda")]
+mod gpu;
+#[cfg(feature = "cuda")]
+mod launch;
+#[cfg(feature = "cuda")]
+pub(crate) mod memory;
+#[cfg(feature = "cuda")]
+mod module;
+#[cfg(feature = "cuda")]
+mod options;
+#[cfg(feature = "cuda")]
+pub mod pinned;
+#[cfg(feature = "cuda")]
+pub mod stream;
+
+#[cfg(feature = "cuda")]
+pub(crate) use module::format_compile_reports;
+#[cfg(feature = "cuda")]
+pub use module::{compile_reports, CompileReport};
+
+#[cfg(feature = "cuda")]
+pub(crate) use backend::Cuda;

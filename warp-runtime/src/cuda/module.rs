@@ -1,0 +1,214 @@
+//! Kernels compiled and loaded per GPU, and what compiling them cost.
+//!
+//! A kernel is compiled for a GPU at its first launch there: its translation unit is assembled
+//! (`source`), compiled by NVRTC to a cubin for that GPU's architecture (an ahead-of-time
+//! cubin first, then the disk cache, `warp_cuda::compile_cached`), loaded, and kept for the
+//! process.
+
+use super::gpu::{err, state, GpuState};
+use super::options::with_compile_options;
+use super::{aot, source};
+use crate::device::Device;
+use crate::error::Result;
+use crate::kernel::KernelInfo;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+use warp_cuda::{CacheOutcome, Function, Module};
+
+/// A kernel compiled and loaded for one GPU, with that GPU's state (one lookup per launch).
+pub(crate) struct Loaded {
+    pub(crate) st: Arc<GpuState>,
+    _module: Module,
+    pub(crate) function: Function,
+}
+
+/// What compiling a kernel cost, for reports.
+#[derive(Clone, Debug)]
+pub struct CompileReport {
+    /// The kernel.
+    pub kernel: &'static str,
+    /// `module_path!()` where the kernel is defined (two kernels may share a name).
+    pub module: &'static str,
+    /// The device it was compiled for.
+    pub device: String,
+    /// Whether this is the variant for launches whose arrays are all contiguous.
+    pub contiguous: bool,
+    /// Whether this is the kernel's adjoint (compiled when backward first ran on the GPU).
+    pub adjoint: bool,
+    /// Bytes of generated CUDA source (without the library headers).
+    pub source_bytes: usize,
+    /// NVRTC time (0 on a cache hit).
+    pub compile_ms: f64,
+    /// Whether the cubin came from the disk cache (or the ahead-of-time directory).
+    pub cache_hit: bool,
+    /// Whether it came from the ahead-of-time directory (`aot`).
+    pub aot: bool,
+    /// Time from the start of the first launch to a loaded module.
+    pub total_ms: f64,
+}
+
+fn reports() -> &'static Mutex<Vec<CompileReport>> {
+    static R: OnceLock<Mutex<Vec<CompileReport>>> = OnceLock::new();
+    R.get_or_init(Default::default)
+}
+
+/// What each kernel compiled so far in this process cost (per device, variant, and forward
+/// or adjoint).
+pub fn compile_reports() -> Vec<CompileReport> {
+    reports().lock().unwrap_or_else(|p| p.into_inner()).clone()
+}
+
+/// One line per report (see `compile_summary`).
+pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
+    use std::fmt::Write as _;
+    let mut s = format!(
+        "compiled at run time: {} kernel variant(s)\n",
+        reports.len()
+    );
+    for r in reports {
+        let source = if r.aot {
+            "ahead-of-time cubin".to_string()
+        } else if r.cache_hit {
+            "disk cache hit".to_string()
+        } else {
+            format!("NVRTC {:.1} ms", r.compile_ms)
+        };
+        // The path below the crate: `single::accelerations` beside `double::accelerations`.
+        let name = match r.module.split_once("::") {
+            Some((_, inner)) => format!("{inner}::{}", r.kernel),
+            None => r.kernel.to_string(),
+        };
+        let _ = writeln!(
+            s,
+            "  {name:<26} {:<7} {:<10} {:>6} bytes of CUDA, {source}, loaded in {:.1} ms on {}",
+            if r.adjoint { "adjoint" } else { "forward" },
+            if r.contiguous {
+                "contiguous"
+            } else {
+                "strided"
+            },
+            r.source_bytes,
+            r.total_ms,
+            r.device
+        );
+    }
+    s
+}
+
+/// The kernel `info` compiled for GPU `ordinal`; `contiguous` picks the variant for launches
+/// whose arrays are all contiguous (`WP_CONTIGUOUS`: strides known to the compiler). Each
+/// variant is compiled the first time a launch needs it.
+///
+/// `adjoint: Some(bytes)` picks the adjoint unit instead, with `bytes` of adjoint stack per
+/// thread (`WP_ADSTACK_BYTES`).
+pub(crate) fn loaded(
+    device: &Device,
+    ordinal: usize,
+    info: &'static KernelInfo,
+    contiguous: bool,
+    adjoint: Option<usize>,
+) -> Result<Arc<Loaded>> {
+    type Key = (usize, &'static str, &'static str, bool, Option<usize>);
+    static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
+    let key = (ordinal, info.module, info.name, contiguous, adjoint);
+    let cache = CACHE.get_or_init(Default::default);
+    if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+        return Ok(l.clone());
+    }
+    let st = state(device, ordinal)?;
+    let t0 = std::time::Instant::now();
+    let src = match adjoint {
+        Some(_) => source::assemble_adjoint(info),
+        None => source::assemble(info),
+    };
+    let arch = st.gpu.arch();
+    let stack_define = adjoint.map(|b| b.to_string());
+    let (compiled, outcome, aot) =
+        with_compile_options(contiguous, stack_define.as_deref(), |opts| {
+            // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
+            if let Some(cubin) = aot::lookup(&src.text, info.name, opts, arch) {
+                let c = warp_cuda::Compiled {
+                    cubin,
+                    log: String::new(),
+                    compile_ms: 0.0,
+                };
+                return Ok((c, CacheOutcome::Hit, true));
+            }
+            warp_cuda::compile_cached(&src.text, info.name, opts, arch).map(|(c, o)| (c, o, false))
+        })
+        .map_err(|e| err(device, e))?;
+    let module = st
+        .gpu
+        .load_module(&compiled.cubin)
+        .map_err(|e| err(device, e))?;
+    let function = module.function(&src.entry).map_err(|e| err(device, e))?;
+    reports()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .push(CompileReport {
+            kernel: info.name,
+            module: info.module,
+            device: device.alias().to_string(),
+            contiguous,
+            adjoint: adjoint.is_some(),
+            source_bytes: src.text.len(),
+            compile_ms: compiled.compile_ms,
+            cache_hit: matches!(outcome, CacheOutcome::Hit),
+            aot,
+            total_ms: t0.elapsed().as_secs_f64() * 1e3,
+        });
+    let l = Arc::new(Loaded {
+        st,
+        _module: module,
+        function,
+    });
+    cache
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .insert(key, l.clone());
+    Ok(l)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{format_compile_reports, CompileReport};
+
+    fn report(module: &'static str, adjoint: bool, cache_hit: bool) -> CompileReport {
+        CompileReport {
+            kernel: "accelerations",
+            module,
+            device: "cuda:0".into(),
+            contiguous: true,
+            adjoint,
+            source_bytes: 5730,
+            compile_ms: if cache_hit { 0.0 } else { 145.25 },
+            cache_hit,
+            aot: false,
+            total_ms: 156.3,
+        }
+    }
+
+    #[test]
+    fn summary_names_module_direction_and_source() {
+        let s = format_compile_reports(&[
+            report("nbody::single", false, false),
+            report("nbody::double", true, true),
+            report("top", false, true),
+        ]);
+        let lines: Vec<&str> = s.lines().collect();
+        assert_eq!(lines[0], "compiled at run time: 3 kernel variant(s)");
+        assert!(lines[1].contains("single::accelerations") && lines[1].contains("forward"));
+        assert!(
+            lines[1].contains("5730 bytes of CUDA, NVRTC 145.2 ms"),
+            "{}",
+            lines[1]
+        );
+        assert!(lines[2].contains("double::accelerations") && lines[2].contains("adjoint"));
+        assert!(lines[2].contains("disk cache hit"), "{}", lines[2]);
+        assert!(
+            lines[3].trim_start().starts_with("accelerations "),
+            "{}",
+            lines[3]
+        );
+    }
+}

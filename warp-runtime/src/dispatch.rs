@@ -1,0 +1,213 @@
+//! The backends of this build, and the one place that picks one: a device's kind names its
+//! backend (`with_backend!`), and an array's [`Storage`] is the memory of one of them.
+//!
+//! Everything above (launch, tapes, arrays) calls the functions here; nothing else names a
+//! backend. A new backend adds an arm to `with_backend!`, a variant to [`Storage`] with its
+//! arms, and its device kind to `device.rs` (see `backend.rs` for what it implements).
+
+use crate::backend::{Backend, Buffer};
+use crate::cpu::memory::HostBuffer;
+use crate::cpu::Cpu;
+#[cfg(feature = "cuda")]
+use crate::cuda::{memory::CudaBuffer, Cuda};
+use crate::device::{Device, DeviceKind};
+use crate::error::{Error, Result};
+use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use warp_core::Grid;
+
+/// Evaluates `$body` with `$b` bound to the backend of `$device`.
+macro_rules! with_backend {
+    ($device:expr, $b:ident => $body:expr) => {{
+        let device: &Device = $device;
+        match device.kind() {
+            DeviceKind::Cpu => {
+                let $b = Cpu::new(device);
+                $body
+            }
+            #[cfg(feature = "cuda")]
+            DeviceKind::Cuda { ordinal } => {
+                let $b = Cuda::new(device, ordinal);
+                $body
+            }
+            #[cfg(not(feature = "cuda"))]
+            DeviceKind::Cuda { .. } => Err(Error::NoDevice {
+                name: device.alias().to_string(),
+                reason: crate::device::CUDA_UNAVAILABLE.to_string(),
+            }),
+        }
+    }};
+}
+
+/// Runs (or queues) a launch of `K` on `device`; see [`Backend::launch`].
+#[inline]
+pub(crate) fn launch<K: Kernel>(device: &Device, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
+    names_every_param::<K>();
+    with_backend!(device, b => b.launch::<K>(args, grid))
+}
+
+/// Queues a launch of `K` on `stream`: streams are the CUDA backend's API.
+#[cfg(feature = "cuda")]
+pub(crate) fn launch_on<K: Kernel>(
+    stream: &crate::cuda::stream::Stream,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+) -> Result<()> {
+    names_every_param::<K>();
+    Cuda::of_stream(stream).launch_on::<K>(args, grid, stream)
+}
+
+/// Checks, at compile time, that `K`'s info names each parameter: the conversions name
+/// parameter `k` by `INFO.params[k]`.
+fn names_every_param<K: Kernel>() {
+    const {
+        assert!(
+            K::INFO.params.len() == <K::Params as KernelParams>::COUNT,
+            "KernelInfo::params must name every parameter of Kernel::Params"
+        )
+    };
+}
+
+/// Runs (or queues) the adjoint of a launch of `K` on `device`; see
+/// [`Backend::launch_adjoint`].
+pub(crate) fn launch_adjoint<K: Kernel>(
+    device: &Device,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adstack_bytes: usize,
+) -> Result<()> {
+    if let Some(reason) = K::INFO.adjoint_error {
+        return Err(Error::NotDifferentiable {
+            kernel: K::INFO.name,
+            reason: reason.to_string(),
+        });
+    }
+    with_backend!(device, b => b.launch_adjoint::<K>(args, grid, adstack_bytes))
+}
+
+/// `bytes` of zeroed memory on `device`, aligned to at least `align`.
+pub(crate) fn alloc_zeroed(device: &Device, bytes: usize, align: usize) -> Result<Storage> {
+    with_backend!(device, b => b.alloc_zeroed(bytes, align).map(Storage::from))
+}
+
+/// Waits for `device` and reports a fault recorded there since the last check.
+pub(crate) fn synchronize(device: &Device) -> Result<()> {
+    with_backend!(device, b => b.synchronize())
+}
+
+/// [`synchronize`] for every device used so far.
+pub(crate) fn synchronize_all() -> Result<()> {
+    Cpu::synchronize_all()?;
+    #[cfg(feature = "cuda")]
+    Cuda::synchronize_all()?;
+    Ok(())
+}
+
+/// The memory behind an array: one backend's [`Buffer`].
+pub(crate) enum Storage {
+    /// Host memory (the CPU backend's): host code and CPU kernels address it directly.
+    Host(HostBuffer),
+    /// Memory on a CUDA GPU.
+    #[cfg(feature = "cuda")]
+    Cuda(CudaBuffer),
+}
+
+impl From<HostBuffer> for Storage {
+    fn from(b: HostBuffer) -> Storage {
+        Storage::Host(b)
+    }
+}
+
+#[cfg(feature = "cuda")]
+impl From<CudaBuffer> for Storage {
+    fn from(b: CudaBuffer) -> Storage {
+        Storage::Cuda(b)
+    }
+}
+
+/// Evaluates `$body` with `$b` bound to the buffer in `$storage`, whichever backend's it is.
+macro_rules! with_buffer {
+    ($storage:expr, $b:ident => $body:expr) => {
+        match $storage {
+            Storage::Host($b) => $body,
+            #[cfg(feature = "cuda")]
+            Storage::Cuda($b) => $body,
+        }
+    };
+}
+
+impl Storage {
+    /// Host memory that takes `data`'s allocation over, without a copy.
+    pub(crate) fn host_from_vec<T: bytemuck::Pod>(data: Vec<T>) -> Result<Storage> {
+        HostBuffer::from_vec(data).map(Storage::Host)
+    }
+
+    /// The host memory, for arrays on the CPU (`None` for a device's).
+    pub(crate) fn host(&self) -> Option<&HostBuffer> {
+        match self {
+            Storage::Host(h) => Some(h),
+            #[cfg(feature = "cuda")]
+            Storage::Cuda(_) => None,
+        }
+    }
+
+    /// The CUDA memory, for arrays on a GPU.
+    #[cfg(feature = "cuda")]
+    pub(crate) fn cuda(&self) -> Option<&CudaBuffer> {
+        match self {
+            Storage::Cuda(b) => Some(b),
+            Storage::Host(_) => None,
+        }
+    }
+
+    /// See [`Buffer::len`].
+    pub(crate) fn len(&self) -> usize {
+        with_buffer!(self, b => b.len())
+    }
+
+    /// See [`Buffer::address`].
+    pub(crate) fn address(&self) -> u64 {
+        with_buffer!(self, b => b.address())
+    }
+
+    /// See [`Buffer::read`].
+    pub(crate) fn read(&self, offset: usize, out: &mut [u8]) -> Result<()> {
+        with_buffer!(self, b => b.read(offset, out))
+    }
+
+    /// See [`Buffer::write`].
+    pub(crate) fn write(&self, offset: usize, data: &[u8]) -> Result<()> {
+        with_buffer!(self, b => b.write(offset, data))
+    }
+
+    /// See [`Buffer::fill`].
+    pub(crate) fn fill(&self, offset: usize, bytes: usize, pattern: &[u8]) -> Result<()> {
+        with_buffer!(self, b => b.fill(offset, bytes, pattern))
+    }
+
+    /// Copies `bytes` bytes from `src` (another storage, of any backend) at `src_offset` to
+    /// `offset`.
+    pub(crate) fn copy_from(
+        &self,
+        offset: usize,
+        src: &Storage,
+        src_offset: usize,
+        bytes: usize,
+    ) -> Result<()> {
+        match (self, src) {
+            (Storage::Host(d), Storage::Host(s)) => d.copy_from(offset, s, src_offset, bytes),
+            #[cfg(feature = "cuda")]
+            (Storage::Cuda(d), Storage::Cuda(s)) => d.copy_from(offset, s, src_offset, bytes),
+            // Between a device and the host: the device's own copy from or to the host bytes.
+            // SAFETY (both): during a host-side operation no kernel runs on host memory, and
+            // the caller's array operation is the only one on these bytes (`Array`'s contract).
+            #[cfg(feature = "cuda")]
+            (Storage::Host(d), Storage::Cuda(s)) => {
+                s.read(src_offset, unsafe { d.bytes_mut(offset, bytes) })
+            }
+            #[cfg(feature = "cuda")]
+            (Storage::Cuda(d), Storage::Host(s)) => {
+                d.write(offset, unsafe { s.bytes(src_offset, bytes) })
+            }
+        }
+    }
+}
