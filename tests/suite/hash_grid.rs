@@ -427,25 +427,39 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     }
 }
 
-fn gradients_through_the_loop_body(dev: &wp::Device) {
-    // 12 points in a 1.2-wide cube, h = 0.6: each has several neighbours, some pairs outside
-    // h; a grid of 2 x 2 x 2 buckets (cells of 0.5) so that far points share buckets too.
+/// The energy test's data: 12 points in a 1.2-wide cube (as 3 f64s each, with a gradient),
+/// so that with h = 0.6 each has several neighbours and some pairs lie outside h; the output
+/// (with a gradient); a grid of 2 x 2 x 2 buckets (cells of 0.5, so far points share buckets)
+/// built from the positions.
+pub(crate) fn energy_case(dev: &wp::Device) -> (wp::Array<f64>, wp::Array<f64>, wp::HashGrid) {
     let mut rng = Rng(5);
     let pts: Vec<f64> = (0..36).map(|_| rng.range(-0.6, 0.6) as f64).collect();
-    let n = pts.len() / 3;
-    let h = 0.6f64;
     let x = arr(&pts, dev).with_grad().unwrap();
-    let out = zeros::<f64, 1>(n, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(pts.len() / 3, dev).with_grad().unwrap();
     let mut grid = wp::HashGrid::new(2, 2, 2, dev).unwrap();
+    build_from_f64(&mut grid, &x).unwrap();
+    (x, out, grid)
+}
+
+/// Builds `grid` from positions stored as 3 f64s each.
+fn build_from_f64(grid: &mut wp::HashGrid, x: &wp::Array<f64>) -> wp::Result<()> {
+    let v: Vec<Vec3> = x
+        .to_vec()?
+        .chunks(3)
+        .map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32))
+        .collect();
+    grid.build(&wp::Array::from_slice(&v, x.device())?, 0.5)
+}
+
+fn gradients_through_the_loop_body(dev: &wp::Device) {
+    let (x, out, mut grid) = energy_case(dev);
+    let pts = host(&x);
+    let n = out.len();
+    let h = 0.6f64;
     // The grid is rebuilt from the current positions at every evaluation (the nudged ones
     // too); the tape keeps the grid of the recorded launch (copy-on-write).
     let mut forward = || -> wp::Result<()> {
-        let v: Vec<Vec3> = x
-            .to_vec()?
-            .chunks(3)
-            .map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32))
-            .collect();
-        grid.build(&wp::Array::from_slice(&v, dev)?, 0.5)?;
+        build_from_f64(&mut grid, &x)?;
         wp::launch(k_energy, n, (&grid, &x, h, &out), dev)
     };
     let report = wp::gradcheck(
