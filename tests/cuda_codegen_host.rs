@@ -915,7 +915,11 @@ fn grid_points() -> Vec<Vec3> {
     let mut pts: Vec<Vec3> = (0..90)
         .map(|k| {
             let f = k as f32;
-            Vec3::new((f * 0.61).sin() * 2.5, (f * 0.23).cos() * 1.7 - 0.4, f * 0.031 - 1.3)
+            Vec3::new(
+                (f * 0.61).sin() * 2.5,
+                (f * 0.23).cos() * 1.7 - 0.4,
+                f * 0.031 - 1.3,
+            )
         })
         .collect();
     pts.push(pts[4]);
@@ -944,7 +948,10 @@ fn hash_grid_queries_match_the_cpu_backend() {
     wp::launch(hash_grid_queries, n, (&grid, &x, 0.9, &out, &ints), &dev).unwrap();
     // Some points have neighbours, some more than the `break` allows.
     let c: Vec<i32> = ints.to_vec().unwrap().iter().step_by(3).copied().collect();
-    assert!(c.iter().any(|c| *c == 0) && c.iter().any(|c| *c > 5), "{c:?}");
+    assert!(
+        c.iter().any(|c| *c == 0) && c.iter().any(|c| *c > 5),
+        "{c:?}"
+    );
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));
     }
@@ -962,7 +969,8 @@ fn hash_grid_device_build_steps_match_the_cpu_build() {
     let dev = wp::cpu();
     let pts = grid_points();
     let mut grid = wp::HashGrid::new(4, 3, 5, &dev).unwrap();
-    grid.build(&wp::Array::from_slice(&pts, &dev).unwrap(), 0.4).unwrap();
+    grid.build(&wp::Array::from_slice(&pts, &dev).unwrap(), 0.4)
+        .unwrap();
     let inv = 1.0 / 0.4f32;
     let items: Vec<String> = pts
         .iter()
@@ -1002,13 +1010,26 @@ fn hash_grid_device_build_steps_match_the_cpu_build() {
     std::fs::write(&cpp, program).unwrap();
     let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
     let out = Command::new("g++")
-        .args(["-std=c++17", "-O1", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-I", include])
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-I",
+            include,
+        ])
         .arg(&cpp)
         .arg("-o")
         .arg(&exe)
         .output()
         .unwrap();
-    assert!(out.status.success(), "g++: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "g++: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let run = Command::new(&exe).output().unwrap();
     assert!(run.status.success(), "a finite point was flagged");
     let text = String::from_utf8(run.stdout).unwrap();
@@ -1025,6 +1046,10 @@ fn hash_grid_device_build_steps_match_the_cpu_build() {
         .collect();
     let got: Vec<String> = lines.by_ref().take(60).map(str::to_string).collect();
     assert_eq!(got, want);
-    assert_eq!(lines.next(), Some("0 0"), "NaN and infinite points are flagged");
+    assert_eq!(
+        lines.next(),
+        Some("0 0"),
+        "NaN and infinite points are flagged"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1666,8 +1666,12 @@ fn run_adjoint_on_host(
                 // A trailing 0 in each buffer: C++ has no empty arrays.
                 for (name, data) in [("ids", ids), ("starts", starts), ("ends", ends)] {
                     let list: Vec<String> = data.iter().map(|x| x.to_string()).collect();
-                    writeln!(decl, "static wp::i32 {name}{k}[] = {{{}, 0}};", list.join(", "))
-                        .unwrap();
+                    writeln!(
+                        decl,
+                        "static wp::i32 {name}{k}[] = {{{}, 0}};",
+                        list.join(", ")
+                    )
+                    .unwrap();
                 }
                 writeln!(
                     decl,

@@ -233,7 +233,13 @@ fn run_neighbours(dev: &wp::Device, pts: &[Vec3], qs: &[Vec3], r: f32) -> (wp::H
     let n = qs.len();
     let nbrs = zeros::<i32, 2>([n, MAX_NBRS], dev);
     let (counts, cands) = (zeros::<i32, 1>(n, dev), zeros::<i32, 1>(n, dev));
-    wp::launch(k_neighbours, n, (&grid, &x, &q, r, &nbrs, &counts, &cands), dev).unwrap();
+    wp::launch(
+        k_neighbours,
+        n,
+        (&grid, &x, &q, r, &nbrs, &counts, &cands),
+        dev,
+    )
+    .unwrap();
     let flat = host(&nbrs);
     let counts = host(&counts);
     let nbrs = (0..n)
@@ -281,11 +287,20 @@ fn neighbours_match_brute_force(dev: &wp::Device) {
         // The same buffers, candidates and counts as the CPU backend.
         if !dev.is_cpu() {
             let (cpu_grid, cpu) = run_neighbours(&wp::cpu(), &pts, &qs, r);
-            assert_eq!(host(&grid.point_ids().unwrap()), host(&cpu_grid.point_ids().unwrap()));
+            assert_eq!(
+                host(&grid.point_ids().unwrap()),
+                host(&cpu_grid.point_ids().unwrap())
+            );
             let ((s, e), (cs, ce)) = (grid.cell_ranges().unwrap(), cpu_grid.cell_ranges().unwrap());
             assert_eq!((host(&s), host(&e)), (host(&cs), host(&ce)));
-            assert_eq!(found.cands, cpu.cands, "r {r}: candidate counts, CUDA vs CPU");
-            assert_eq!(found.counts, cpu.counts, "r {r}: neighbour counts, CUDA vs CPU");
+            assert_eq!(
+                found.cands, cpu.cands,
+                "r {r}: candidate counts, CUDA vs CPU"
+            );
+            assert_eq!(
+                found.counts, cpu.counts,
+                "r {r}: neighbour counts, CUDA vs CPU"
+            );
         }
     }
     // A negative or NaN radius yields nothing.
@@ -386,7 +401,11 @@ fn bad_input_is_an_error(dev: &wp::Device) {
         let t = e.to_string();
         assert!(t.contains(s), "`{s}` not in: {t}");
     };
-    for (d, name) in [([0, 4, 4], "dim_x"), ([4, 0, 4], "dim_y"), ([4, 4, 0], "dim_z")] {
+    for (d, name) in [
+        ([0, 4, 4], "dim_x"),
+        ([4, 0, 4], "dim_y"),
+        ([4, 4, 0], "dim_z"),
+    ] {
         has(&wp::HashGrid::new(d[0], d[1], d[2], dev).unwrap_err(), name);
     }
     let mut grid = wp::HashGrid::new(4, 4, 4, dev).unwrap();
@@ -414,7 +433,9 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     match other {
         Some(other) => {
             let mut there = wp::HashGrid::new(4, 4, 4, &other).unwrap();
-            there.build(&arr(&[Vec3::ZERO, Vec3::ONE], &other), 1.0).unwrap();
+            there
+                .build(&arr(&[Vec3::ZERO, Vec3::ONE], &other), 1.0)
+                .unwrap();
             match wp::launch(k_point_ids, 2, (&there, &ids), dev) {
                 Err(Error::DeviceMismatch { arg: "grid", .. }) => {}
                 r => panic!("a grid of another device: {r:?}"),
@@ -423,7 +444,9 @@ fn bad_input_is_an_error(dev: &wp::Device) {
             has(&e, "argument `points`");
             has(&e, other.alias());
         }
-        None => eprintln!("hash_grid::bad_input_is_an_error: one device only, other-device cases skipped"),
+        None => eprintln!(
+            "hash_grid::bad_input_is_an_error: one device only, other-device cases skipped"
+        ),
     }
 }
 
@@ -491,6 +514,10 @@ fn gradients_through_the_loop_body(dev: &wp::Device) {
             }
         }
         want *= 1.0 + 0.5 * i as f64;
-        assert!((e[i] - want).abs() <= 1e-12 * want.abs().max(1.0), "{i}: {} vs {want}", e[i]);
+        assert!(
+            (e[i] - want).abs() <= 1e-12 * want.abs().max(1.0),
+            "{i}: {} vs {want}",
+            e[i]
+        );
     }
 }

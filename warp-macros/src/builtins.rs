@@ -996,7 +996,11 @@ mod tests {
                     lookup(it.done).expect("done"),
                     lookup(it.item).expect("item"),
                 );
-                assert!(next.internal && done.internal && item.internal, "{}", b.name);
+                assert!(
+                    next.internal && done.internal && item.internal,
+                    "{}",
+                    b.name
+                );
                 assert_eq!(next.params, &[b.params[0], st], "{}", b.name);
                 assert_eq!(next.ret, st, "{}", b.name);
                 assert_eq!((done.params, done.ret), (&[st][..], BOOL), "{}", b.name);
@@ -1445,7 +1449,11 @@ mod tests {
         let v3 = Ty::Vector(Scalar::F32, 3);
         let q = lookup_user("hash_grid_query").unwrap();
         let r = q
-            .resolve(&[k(grid.clone()), k(v3.clone()), ArgTy::Literal { float: true }])
+            .resolve(&[
+                k(grid.clone()),
+                k(v3.clone()),
+                ArgTy::Literal { float: true },
+            ])
             .unwrap();
         assert_eq!(r.params, vec![grid.clone(), v3.clone(), F32]);
         assert_eq!(r.ret, state);
@@ -1466,7 +1474,11 @@ mod tests {
         }
         assert!(pid.resolve(&[k(grid.clone()), k(F32)]).is_err());
         assert!(pid.faults() && q.faults() && !lookup("hash_grid_query_done").unwrap().faults());
-        for step in ["hash_grid_query_next", "hash_grid_query_done", "hash_grid_query_point"] {
+        for step in [
+            "hash_grid_query_next",
+            "hash_grid_query_done",
+            "hash_grid_query_point",
+        ] {
             assert!(lookup_user(step).is_none(), "{step}");
         }
     }

@@ -309,7 +309,10 @@ fn kernel_instance(
     let launch_args = f.params.iter().map(|p| {
         let t = &p.syn_ty;
         // Arrays and host objects are passed by reference (`KernelArg::Arg<'a> = &'a T`).
-        if matches!(p.ty, crate::types::Ty::Array(..) | crate::types::Ty::Object(_)) {
+        if matches!(
+            p.ty,
+            crate::types::Ty::Array(..) | crate::types::Ty::Object(_)
+        ) {
             quote!(&'__a #t)
         } else {
             quote!(#t)

@@ -398,7 +398,9 @@ mod tests {
     fn object_rows() {
         for (i, r) in OBJECTS.iter().enumerate() {
             assert_eq!(r.kind.row().name, r.name);
-            assert!(OBJECTS[..i].iter().all(|o| o.kind != r.kind && o.name != r.name));
+            assert!(OBJECTS[..i]
+                .iter()
+                .all(|o| o.kind != r.kind && o.name != r.name));
             assert!(r.cuda.starts_with("wp::"), "{}", r.name);
         }
         assert_eq!(

@@ -146,7 +146,11 @@ pub fn cell_coord(x: f32, inv: f32) -> i32 {
 #[inline(always)]
 pub fn bucket(dims: [i32; 3], cell: [i64; 3]) -> i32 {
     let w = |c: i64, d: i32| c.rem_euclid(d as i64) as i32;
-    let (x, y, z) = (w(cell[0], dims[0]), w(cell[1], dims[1]), w(cell[2], dims[2]));
+    let (x, y, z) = (
+        w(cell[0], dims[0]),
+        w(cell[1], dims[1]),
+        w(cell[2], dims[2]),
+    );
     (z * dims[1] + y) * dims[0] + x
 }
 
@@ -351,7 +355,10 @@ mod tests {
         assert_eq!(bucket(d, [-1, 0, 0]), 2);
         assert_eq!(bucket(d, [0, -1, 0]), 3 * 3);
         assert_eq!(bucket(d, [0, 0, -1]), 4 * 4 * 3);
-        assert_eq!(bucket(d, [i32::MIN as i64, 0, 0]), (i32::MIN as i64).rem_euclid(3) as i32);
+        assert_eq!(
+            bucket(d, [i32::MIN as i64, 0, 0]),
+            (i32::MIN as i64).rem_euclid(3) as i32
+        );
         assert_eq!(bucket(d, [2, 3, 4]), 3 * 4 * 5 - 1);
         assert_eq!(cell_count([0, 1, 1]), None);
         assert_eq!(cell_count([65536, 65536, 1]), None);
@@ -381,14 +388,22 @@ mod tests {
                 let mut sorted = c.clone();
                 sorted.sort_unstable();
                 sorted.dedup();
-                assert_eq!(sorted.len(), c.len(), "a candidate twice (point {qi}, r {r})");
+                assert_eq!(
+                    sorted.len(),
+                    c.len(),
+                    "a candidate twice (point {qi}, r {r})"
+                );
                 for (j, x) in pts.iter().enumerate() {
                     if (*x - *p).length() <= r {
                         assert!(c.contains(&j), "point {j} missing around {qi}, r {r}");
                     }
                 }
                 if r == 40.0 {
-                    assert_eq!(c.len(), pts.len(), "a box wider than the grid visits it all");
+                    assert_eq!(
+                        c.len(),
+                        pts.len(),
+                        "a box wider than the grid visits it all"
+                    );
                 }
             }
         }
@@ -399,7 +414,11 @@ mod tests {
 
     #[test]
     fn point_ids_and_faults() {
-        let pts = [Vec3::new(5.0, 0.0, 0.0), Vec3::ZERO, Vec3::new(-5.0, 0.0, 0.0)];
+        let pts = [
+            Vec3::new(5.0, 0.0, 0.0),
+            Vec3::ZERO,
+            Vec3::new(-5.0, 0.0, 0.0),
+        ];
         let mut b = Built::new(&pts, [2, 1, 1], 1.0);
         let g = b.view();
         // Buckets: x = 5 -> 1, x = 0 -> 0, x = -5 -> 1: bucket 0 holds point 1, bucket 1

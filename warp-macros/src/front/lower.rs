@@ -120,7 +120,10 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
                 .push(syn::Error::new(t.span(), "funcs cannot return arrays")),
             Ok(Ty::Object(k)) => cx.errors.push(syn::Error::new(
                 t.span(),
-                format!("funcs cannot return a `{}`: objects are kernel parameters", k.row().name),
+                format!(
+                    "funcs cannot return a `{}`: objects are kernel parameters",
+                    k.row().name
+                ),
             )),
             Ok(ty) => cx.ret = ty,
             Err(e) => cx.errors.push(e),

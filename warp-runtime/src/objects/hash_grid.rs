@@ -123,7 +123,11 @@ impl HashGrid {
     pub fn new(dim_x: usize, dim_y: usize, dim_z: usize, device: &Device) -> Result<HashGrid> {
         for (name, d) in [("dim_x", dim_x), ("dim_y", dim_y), ("dim_z", dim_z)] {
             if d == 0 {
-                return Err(bad("HashGrid::new", name, "is 0: every dim must be at least 1"));
+                return Err(bad(
+                    "HashGrid::new",
+                    name,
+                    "is 0: every dim must be at least 1",
+                ));
             }
         }
         let too_many = || {
@@ -254,11 +258,19 @@ impl HashGrid {
     pub fn build(&mut self, points: &Array<Vec3>, radius: f32) -> Result<()> {
         const WHAT: &str = "HashGrid::build";
         if !(radius.is_finite() && radius > 0.0) {
-            return Err(bad(WHAT, "radius", format!("is {radius}: the cell width must be positive and finite")));
+            return Err(bad(
+                WHAT,
+                "radius",
+                format!("is {radius}: the cell width must be positive and finite"),
+            ));
         }
         let inv = 1.0 / radius;
         if !inv.is_finite() {
-            return Err(bad(WHAT, "radius", format!("is {radius}: too small, 1 / radius is not finite")));
+            return Err(bad(
+                WHAT,
+                "radius",
+                format!("is {radius}: too small, 1 / radius is not finite"),
+            ));
         }
         if points.device() != &self.device {
             return Err(bad(
@@ -530,7 +542,11 @@ mod tests {
     #[test]
     fn bad_input_is_an_error_naming_the_argument() {
         let dev = crate::cpu();
-        for (dims, name) in [([0, 1, 1], "dim_x"), ([1, 0, 1], "dim_y"), ([1, 1, 0], "dim_z")] {
+        for (dims, name) in [
+            ([0, 1, 1], "dim_x"),
+            ([1, 0, 1], "dim_y"),
+            ([1, 1, 0], "dim_z"),
+        ] {
             let e = HashGrid::new(dims[0], dims[1], dims[2], &dev).unwrap_err();
             assert!(e.to_string().contains(&format!("`{name}`")), "{e}");
         }
@@ -542,7 +558,10 @@ mod tests {
             let e = g.build(&x, r).unwrap_err();
             assert!(e.to_string().contains("argument `radius`"), "{r}: {e}");
         }
-        let bad_pts = pts(&dev, &[Vec3::ZERO, Vec3::new(0.0, f32::NAN, 0.0), Vec3::INFINITY]);
+        let bad_pts = pts(
+            &dev,
+            &[Vec3::ZERO, Vec3::new(0.0, f32::NAN, 0.0), Vec3::INFINITY],
+        );
         let e = g.build(&bad_pts, 1.0).unwrap_err();
         assert!(
             e.to_string().contains("argument `points`") && e.to_string().contains("index 1"),
@@ -558,7 +577,10 @@ mod tests {
         let dev = crate::cpu();
         let mut g = HashGrid::new(2, 1, 1, &dev).unwrap();
         assert!(!g.is_built() && g.point_ids().is_none());
-        let x = pts(&dev, &[Vec3::X * 5.0, Vec3::ZERO, Vec3::X * -5.0, Vec3::X * 0.5]);
+        let x = pts(
+            &dev,
+            &[Vec3::X * 5.0, Vec3::ZERO, Vec3::X * -5.0, Vec3::X * 0.5],
+        );
         g.reserve(100).unwrap();
         assert_eq!(g.capacity(), 100);
         g.build(&x, 1.0).unwrap();
@@ -574,7 +596,10 @@ mod tests {
         let kept = g.clone();
         g.build(&pts(&dev, &[Vec3::X]), 1.0).unwrap();
         assert_eq!(g.point_ids().unwrap().to_vec().unwrap(), vec![0]);
-        assert_eq!(kept.point_ids().unwrap().to_vec().unwrap(), vec![1, 3, 0, 2]);
+        assert_eq!(
+            kept.point_ids().unwrap().to_vec().unwrap(),
+            vec![1, 3, 0, 2]
+        );
         assert_eq!(kept.num_points(), Some(4));
         // The empty point set.
         g.build(&Array::zeros(0, &dev).unwrap(), 0.5).unwrap();

@@ -205,13 +205,24 @@ mod tests {
             .position(|v| v.ty == crate::types::Ty::Object(crate::types::ObjectKind::HashGridQuery))
             .unwrap();
         assert!(f.vars[q].mutable);
-        let j = f.vars.iter().find(|v| v.name.as_deref() == Some("j")).unwrap();
+        let j = f
+            .vars
+            .iter()
+            .find(|v| v.name.as_deref() == Some("j"))
+            .unwrap();
         assert_eq!(j.ty, crate::types::USIZE);
-        let Some(StmtKind::Loop { body }) = f.body.iter().map(|s| &s.kind).find(|k| matches!(k, StmtKind::Loop { .. })) else {
+        let Some(StmtKind::Loop { body }) = f
+            .body
+            .iter()
+            .map(|s| &s.kind)
+            .find(|k| matches!(k, StmtKind::Loop { .. }))
+        else {
             panic!("a loop")
         };
         assert!(matches!(body[1].kind, StmtKind::Assign { dst, define: false, .. } if dst == q));
-        assert!(matches!(&body[3].kind, StmtKind::If { then, .. } if matches!(then[0].kind, StmtKind::Break)));
+        assert!(
+            matches!(&body[3].kind, StmtKind::If { then, .. } if matches!(then[0].kind, StmtKind::Break))
+        );
         assert!(lookup("hash_grid_query_next").unwrap().internal);
     }
 
