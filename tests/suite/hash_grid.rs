@@ -178,7 +178,8 @@ fn queries(pts: &[Vec3], seed: u64) -> Vec<Vec3> {
 fn expected_candidates(pts: &[Vec3], p: Vec3, r: f32) -> usize {
     let dims = DIMS.map(|d| d as i32);
     let inv = 1.0 / CELL;
-    if !(r >= 0.0) {
+    // A negative or NaN radius: nothing.
+    if r.is_nan() || r < 0.0 {
         return 0;
     }
     let mut axes: Vec<Vec<i64>> = Vec::new();
