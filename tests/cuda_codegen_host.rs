@@ -948,10 +948,7 @@ fn hash_grid_queries_match_the_cpu_backend() {
     wp::launch(hash_grid_queries, n, (&grid, &x, 0.9, &out, &ints), &dev).unwrap();
     // Some points have neighbours, some more than the `break` allows.
     let c: Vec<i32> = ints.to_vec().unwrap().iter().step_by(3).copied().collect();
-    assert!(
-        c.contains(&0) && c.iter().any(|c| *c > 5),
-        "{c:?}"
-    );
+    assert!(c.contains(&0) && c.iter().any(|c| *c > 5), "{c:?}");
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));
     }

@@ -5,7 +5,9 @@
 //! q = hash_grid_query(grid, p, r)        the query row: the state before the first candidate
 //! loop {
 //!     q = hash_grid_query_next(grid, q)  a pure function of the object and the state,
-//!                                        written back (the RNG draws' shape, `rng.rs`)
+//!                                        written back (the RNG draws' shape, `rng.rs`),
+//!                                        directly: the adjoint pushes the state (40
+//!                                        bytes for the hash grid) once per iteration
 //!     d = hash_grid_query_done(q)
 //!     if d { break }
 //!     j = hash_grid_query_point(q)       the loop variable
@@ -61,7 +63,6 @@ impl Lowerer {
         // The state before the first candidate; the loop writes it back, so it is mutable.
         let q = self.builtin_call(row, &args, None, span)?;
         self.vars[q].mutable = true;
-        let state = self.ty(q);
         // The object the query reads (its first argument), which every step of `next` reads.
         let object = match self.blocks.last().and_then(|b| b.last()) {
             Some(Stmt {
@@ -88,18 +89,15 @@ impl Lowerer {
         };
         let pat_span = f.pat.span();
         let (body, _) = self.loop_body(|cx| {
-            let n = cx.def(
-                Op::Builtin {
-                    builtin: next,
-                    args: vec![object, q],
-                },
-                state.clone(),
-                span,
-            );
+            // Into the state itself, not through a temporary: the adjoint pushes what a loop
+            // overwrites, and a temporary would double the state's bytes per iteration.
             cx.push(
                 StmtKind::Assign {
                     dst: q,
-                    op: Op::Copy(n),
+                    op: Op::Builtin {
+                        builtin: next,
+                        args: vec![object, q],
+                    },
                     define: false,
                 },
                 span,
@@ -219,16 +217,27 @@ mod tests {
         else {
             panic!("a loop")
         };
-        assert!(matches!(body[1].kind, StmtKind::Assign { dst, define: false, .. } if dst == q));
+        // `q = next(grid, q)` into the state itself, then `done`, then the `if`.
+        assert!(matches!(
+            &body[0].kind,
+            StmtKind::Assign { dst, define: false, op: Op::Builtin { args, .. } }
+                if *dst == q && args[1] == q
+        ));
         assert!(
-            matches!(&body[3].kind, StmtKind::If { then, .. } if matches!(then[0].kind, StmtKind::Break))
+            matches!(&body[2].kind, StmtKind::If { then, .. } if matches!(then[0].kind, StmtKind::Break))
         );
         assert!(lookup("hash_grid_query_next").unwrap().internal);
     }
 
     #[test]
     fn query_misuse_is_reported() {
-        let cases: [(syn::ItemFn, &str); 4] = [
+        let cases: [(syn::ItemFn, &str); 5] = [
+            (
+                parse_quote! { fn k(grid: HashGrid) {
+                    println!("{:?}", grid);
+                } },
+                "cannot be printed",
+            ),
             (
                 parse_quote! { fn k(grid: HashGrid, x: Array<Vec3>) {
                     let q = hash_grid_query(grid, x[0], 1.0);
