@@ -1,73 +1,86 @@
 // wp_prim_emu.h: a CUDA block emulator for the host, so that the kernels of wp_primitives.h
 // compile with g++ and run on the CPU (tests/cuda_primitives_host.rs).
 //
-// Include it before wp_primitives.h. A launch of B blocks of T threads runs T host threads;
-// each runs the kernel for block 0, waits at a barrier, then block 1, and so on. So:
-//   * `__syncthreads` is a barrier of the T threads (a thread that skipped a barrier the others
-//     reached would deadlock; the barrier aborts after a timeout instead of hanging the test);
+// Include it before wp_primitives.h. Each CUDA thread of a block is a fiber (ucontext) with
+// its own stack; the blocks of a launch run one after another, on the calling thread:
+//   * `__syncthreads` switches back to the scheduler. When every thread of the block has
+//     reached it, the next phase starts; when some threads have finished the kernel while
+//     others wait at a barrier, that is a barrier divergence (undefined behaviour on a GPU)
+//     and the emulator aborts, naming the block;
+//   * between two barriers the threads run one at a time, in an order shuffled anew for every
+//     phase (a fixed seed, so runs repeat), so that a kernel that read what another thread
+//     writes in the same phase would see it sometimes before and sometimes after the write;
 //   * `__shared__` is `static` storage of the kernel function: shared by the threads of the
-//     block running now, and reused by the next block, as on a GPU (nothing carries over
-//     because every kernel writes its shared memory before reading it);
+//     block running now, and reused by the next block, as on a GPU (every kernel writes its
+//     shared memory before reading it);
 //   * blocks never run concurrently, so a kernel that waited for another block would hang:
 //     the primitives never do.
+// Not emulated: warps (the primitives use no warp-level operations), memory ordering between
+// blocks, and interleavings inside a phase.
 #pragma once
 
 #define WP_PRIM_EMULATOR 1
 
-#include <chrono>
-#include <condition_variable>
+#include <ucontext.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <map>
-#include <mutex>
 #include <string>
-#include <thread>
 #include <vector>
 
 namespace wp_emu {
 
-inline thread_local int tid = 0;
-inline thread_local long long bid = 0;
+/// The running thread's index and block (set by the scheduler before each switch).
+inline int tid = 0;
+inline long long bid = 0;
 
-/// A reusable barrier for a fixed number of threads.
-class Barrier {
- public:
-  void reset(int count) {
-    count_ = count;
-    waiting_ = 0;
-  }
-  void wait() {
-    std::unique_lock<std::mutex> lock(m_);
-    const unsigned long long gen = gen_;
-    if (++waiting_ == count_) {
-      waiting_ = 0;
-      ++gen_;
-      cv_.notify_all();
-      return;
-    }
-    if (!cv_.wait_for(lock, std::chrono::seconds(60), [&] { return gen != gen_; })) {
-      std::fprintf(stderr,
-                   "wp_prim_emu: __syncthreads timed out in block %lld (a thread of the block "
-                   "skipped a barrier the others reached)\n",
-                   bid);
-      std::abort();
-    }
-  }
+enum class state { running, waiting, done };
 
- private:
-  std::mutex m_;
-  std::condition_variable cv_;
-  int count_ = 1;
-  int waiting_ = 0;
-  unsigned long long gen_ = 0;
+struct fiber {
+  ucontext_t ctx;
+  std::vector<char> stack;
+  state st = state::running;
 };
 
-inline Barrier& barrier() {
-  static Barrier b;
-  return b;
+struct scheduler {
+  ucontext_t main;
+  std::vector<fiber> fibers;
+  void (*body)(const void*) = nullptr;
+  const void* args = nullptr;
+  unsigned long long rng = 0x9e3779b97f4a7c15ull;
+};
+
+inline scheduler& sched() {
+  static scheduler s;
+  return s;
 }
 
-inline void sync() { barrier().wait(); }
+/// `__syncthreads`: back to the scheduler until every thread of the block is here.
+inline void sync() {
+  scheduler& s = sched();
+  s.fibers[tid].st = state::waiting;
+  swapcontext(&s.fibers[tid].ctx, &s.main);
+}
+
+inline void fiber_entry() {
+  scheduler& s = sched();
+  s.body(s.args);
+  s.fibers[tid].st = state::done;
+  // Returning resumes `uc_link`, the scheduler.
+}
+
+/// Makes `f` start the kernel at its next switch. Out of line: `getcontext` returns twice,
+/// which would make the compiler distrust the scheduler's locals (-Wclobbered).
+__attribute__((noinline)) inline void start_fiber(fiber& f) {
+  f.stack.resize(256 * 1024);
+  f.st = state::running;
+  getcontext(&f.ctx);
+  f.ctx.uc_stack.ss_sp = f.stack.data();
+  f.ctx.uc_stack.ss_size = f.stack.size();
+  f.ctx.uc_link = &sched().main;
+  makecontext(&f.ctx, fiber_entry, 0);
+}
 
 /// Entry points by name (filled by WP_PRIM_REGISTER at static initialisation).
 inline std::map<std::string, void*>& registry() {
@@ -79,23 +92,60 @@ struct registrar {
   registrar(const char* name, void* fn) { registry()[name] = fn; }
 };
 
-/// Runs `blocks` blocks of `threads` threads of `fn(args)`, blocks one after another.
+template <typename Args>
+struct call {
+  static void run(const void* p) {
+    const call* c = static_cast<const call*>(p);
+    c->fn(*c->args);
+  }
+  void (*fn)(Args);
+  const Args* args;
+};
+
+/// Runs `blocks` blocks of `threads` threads of `fn(args)`.
 template <typename Args>
 void launch(void (*fn)(Args), long long blocks, int threads, const Args& args) {
-  barrier().reset(threads);
-  std::vector<std::thread> pool;
-  pool.reserve(threads);
-  for (int t = 0; t < threads; ++t) {
-    pool.emplace_back([=, &args] {
-      tid = t;
-      for (long long b = 0; b < blocks; ++b) {
-        bid = b;
-        fn(args);
-        sync();  // the block's shared memory is the next block's
+  scheduler& s = sched();
+  const call<Args> c{fn, &args};
+  s.body = &call<Args>::run;
+  s.args = &c;
+  s.fibers.resize(threads);
+  std::vector<int> order(threads);
+  for (long long b = 0; b < blocks; ++b) {
+    bid = b;
+    for (fiber& f : s.fibers) start_fiber(f);
+    for (long long phase = 0;; ++phase) {
+      // A new order for every phase (Fisher-Yates with an xorshift generator).
+      for (int t = 0; t < threads; ++t) order[t] = t;
+      for (int t = threads - 1; t > 0; --t) {
+        s.rng ^= s.rng << 13;
+        s.rng ^= s.rng >> 7;
+        s.rng ^= s.rng << 17;
+        const int k = (int)(s.rng % (unsigned long long)(t + 1));
+        const int tmp = order[t];
+        order[t] = order[k];
+        order[k] = tmp;
       }
-    });
+      for (int t : order) {
+        tid = t;
+        swapcontext(&s.main, &s.fibers[t].ctx);
+      }
+      int waiting = 0, done = 0;
+      for (const fiber& f : s.fibers) {
+        waiting += f.st == state::waiting;
+        done += f.st == state::done;
+      }
+      if (done == threads) break;
+      if (waiting != threads) {
+        std::fprintf(stderr,
+                     "wp_prim_emu: barrier divergence in block %lld, phase %lld: %d threads "
+                     "wait at __syncthreads, %d have left the kernel\n",
+                     b, phase, waiting, done);
+        std::abort();
+      }
+      for (fiber& f : s.fibers) f.st = state::running;
+    }
   }
-  for (auto& th : pool) th.join();
 }
 
 }  // namespace wp_emu
