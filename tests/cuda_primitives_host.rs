@@ -47,8 +47,9 @@ fn have_gpp() -> bool {
 
 /// The host executable of `module` compiled for `tile` (built once per process).
 fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
-    static BUILT: OnceLock<Mutex<HashMap<(String, u32, u32), Arc<Mutex<Option<Arc<std::path::PathBuf>>>>>>> =
-        OnceLock::new();
+    static BUILT: OnceLock<
+        Mutex<HashMap<(String, u32, u32), Arc<Mutex<Option<Arc<std::path::PathBuf>>>>>>,
+    > = OnceLock::new();
     let slot = BUILT
         .get_or_init(Default::default)
         .lock()
@@ -174,10 +175,7 @@ fn run(tile: Tile, cases: &[Case]) -> Vec<Ran> {
         }
         script += "check\nreset\n";
     }
-    let path = exe.with_file_name(format!(
-        "script_{:?}.txt",
-        std::thread::current().id()
-    ));
+    let path = exe.with_file_name(format!("script_{:?}.txt", std::thread::current().id()));
     std::fs::write(&path, script).unwrap();
     let out = Command::new(exe.as_path()).arg(&path).output().unwrap();
     assert!(
@@ -469,8 +467,16 @@ fn reductions_float_ignore_nan() {
 // ------------------------------------------------------------------------------------------
 
 /// The serial reference: a stable sort by the low `bits` bits of the keys' images.
-fn sort_reference<K: SortKey + bytemuck::Pod>(keys: &[K], values: &[u32], bits: u32) -> (Vec<K>, Vec<u32>) {
-    let mask = if bits == 32 { u32::MAX } else { (1 << bits) - 1 };
+fn sort_reference<K: SortKey + bytemuck::Pod>(
+    keys: &[K],
+    values: &[u32],
+    bits: u32,
+) -> (Vec<K>, Vec<u32>) {
+    let mask = if bits == 32 {
+        u32::MAX
+    } else {
+        (1 << bits) - 1
+    };
     let mut pairs: Vec<(K, u32)> = keys.iter().copied().zip(values.iter().copied()).collect();
     pairs.sort_by_key(|(k, _)| k.to_radix() & mask);
     pairs.into_iter().unzip()
@@ -537,8 +543,18 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
 #[test]
 fn sort_u32_with_duplicates_and_key_bits() {
     // Few distinct keys: long runs of equal keys test stability.
-    sort_cases::<u32>(TILE, &[32, 5, 9, 1], |r| (r.below(37) as u32) * 0x0101_0101, &[]);
-    sort_cases::<u32>(TILE, &[32], |r| r.next() as u32, &[vec![u32::MAX, 0, u32::MAX, 1]]);
+    sort_cases::<u32>(
+        TILE,
+        &[32, 5, 9, 1],
+        |r| (r.below(37) as u32) * 0x0101_0101,
+        &[],
+    );
+    sort_cases::<u32>(
+        TILE,
+        &[32],
+        |r| r.next() as u32,
+        &[vec![u32::MAX, 0, u32::MAX, 1]],
+    );
 }
 
 #[test]
@@ -620,12 +636,7 @@ fn compact_cases(word: u32, words: u32) {
                 };
                 users.splice(
                     0..0,
-                    [
-                        values.clone(),
-                        bytes(&flags),
-                        out0.clone(),
-                        bytes(&[-5i32]),
-                    ],
+                    [values.clone(), bytes(&flags), out0.clone(), bytes(&[-5i32])],
                 );
                 cases.push(Case {
                     plan: plan::compact(TILE, word, words, len),
@@ -640,7 +651,11 @@ fn compact_cases(word: u32, words: u32) {
                         kept += 1;
                     }
                 }
-                want.push((w, kept as i32, format!("n {n} count {count} density {density}")));
+                want.push((
+                    w,
+                    kept as i32,
+                    format!("n {n} count {count} density {density}"),
+                ));
             }
         }
     }
@@ -692,7 +707,11 @@ fn bad_device_counts_fault_and_write_nothing() {
             ],
         );
         assert_eq!(ran[0].fault, Some((1, 2, bad as i64, 301)));
-        assert_eq!(typed::<i32>(&ran[0].users[1]), out0, "scan wrote with count {bad}");
+        assert_eq!(
+            typed::<i32>(&ran[0].users[1]),
+            out0,
+            "scan wrote with count {bad}"
+        );
         assert_eq!(ran[1].fault, Some((1, 2, bad as i64, 301)));
         // A reduction of "nothing": the identity (the plan cannot skip writing `out`).
         assert_eq!(typed::<i32>(&ran[1].users[1]), vec![0]);

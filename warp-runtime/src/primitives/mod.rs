@@ -460,10 +460,10 @@ fn scan_impl<T: ScanElement>(
     ck.same_device(("input", dev), ("output", output.device()))?;
     ck.disjoint(("output", output), ("input", input), true)?;
     let (capacity, short) = shorter(("input", input.len()), ("output", output.len()));
-    let len = ck.count(count, capacity, short, dev)?;
-    if let Len::Device { count, .. } = len {
-        ck.disjoint(("output", output), ("count", count), false)?;
+    if let Count::Device(c) = count {
+        ck.disjoint(("output", output), ("count", c), false)?;
     }
+    let len = ck.count(count, capacity, short, dev)?;
     match dev.kind() {
         DeviceKind::Cpu => {
             cpu::scan(input, output, host_len(len), inclusive);
@@ -616,10 +616,10 @@ fn reduce_impl<T: ScanElement>(
         )));
     }
     ck.disjoint(("out", out), ("values", values), false)?;
-    let len = ck.count(count, values.len(), "values", dev)?;
-    if let Len::Device { count, .. } = len {
-        ck.disjoint(("out", out), ("count", count), false)?;
+    if let Count::Device(c) = count {
+        ck.disjoint(("out", out), ("count", c), false)?;
     }
+    let len = ck.count(count, values.len(), "values", dev)?;
     match dev.kind() {
         DeviceKind::Cpu => {
             cpu::reduce(values, out, host_len(len), op);
@@ -694,11 +694,12 @@ pub fn radix_sort_pairs<'c, K: SortKey, V: SortValue>(
     ck.disjoint(("values", values), ("keys", keys), false)?;
     let (capacity, short) = shorter(("keys", keys.len()), ("values", values.len()));
     ck.fits_i32(short, capacity)?;
-    let len = ck.count(count.into(), capacity, short, dev)?;
-    if let Len::Device { count, .. } = len {
-        ck.disjoint(("keys", keys), ("count", count), false)?;
-        ck.disjoint(("values", values), ("count", count), false)?;
+    let count = count.into();
+    if let Count::Device(c) = count {
+        ck.disjoint(("keys", keys), ("count", c), false)?;
+        ck.disjoint(("values", values), ("count", c), false)?;
     }
+    let len = ck.count(count, capacity, short, dev)?;
     match dev.kind() {
         DeviceKind::Cpu => {
             cpu::radix_sort_pairs(keys, values, host_len(len), bits);
@@ -813,11 +814,11 @@ fn compact_impl<T: Element>(
     let (cap, short) = shorter(("values", values.len()), ("flags", flags.len()));
     let (cap, short) = shorter((short, cap), ("out", out.len()));
     ck.fits_i32(short, cap)?;
-    let len = ck.count(count, cap, short, dev)?;
-    if let Len::Device { count, .. } = len {
-        ck.disjoint(("out", out), ("count", count), false)?;
-        ck.disjoint(("out_count", out_count), ("count", count), false)?;
+    if let Count::Device(c) = count {
+        ck.disjoint(("out", out), ("count", c), false)?;
+        ck.disjoint(("out_count", out_count), ("count", c), false)?;
     }
+    let len = ck.count(count, cap, short, dev)?;
     match dev.kind() {
         DeviceKind::Cpu => {
             cpu::compact(values, flags, out, out_count, host_len(len));
