@@ -750,3 +750,41 @@ fn bad_device_counts_fault_and_write_nothing() {
         assert_eq!(typed::<i32>(&ran[0].users[3]), vec![0]);
     }
 }
+
+// ------------------------------------------------------------------------------------------
+// NVRTC
+// ------------------------------------------------------------------------------------------
+
+/// Every module the runtime may build compiles with NVRTC for the GPUs of the benchmarks
+/// (sm_90: H100, H200) and an older one (sm_80: A100), with the runtime's options. Needs
+/// only libnvrtc, no GPU; skipped, saying so, without it.
+#[test]
+fn nvrtc_compiles_every_module() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED nvrtc_compiles_every_module: {e}");
+        return;
+    }
+    let mut modules: Vec<Module> = ["i32", "u32", "i64", "u64", "f32", "f64"]
+        .into_iter()
+        .map(Module::Scan)
+        .collect();
+    modules.extend(["u32", "i32", "f32"].into_iter().map(Module::Sort));
+    for word in [1, 2, 4, 8] {
+        for words in [1, 3] {
+            modules.push(Module::Compact { word, words });
+        }
+    }
+    for arch in [90, 80] {
+        for m in &modules {
+            let c = wp::primitives::compile_module(m, arch)
+                .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", m.name()));
+            assert!(!c.cubin.is_empty());
+            assert!(
+                !c.log.contains("warning"),
+                "{} for sm_{arch}: {}",
+                m.name(),
+                c.log
+            );
+        }
+    }
+}

@@ -49,6 +49,22 @@ fn headers() -> Vec<(&'static str, &'static str)> {
         .collect()
 }
 
+/// Calls `f` with the NVRTC options of every primitives module: the GPU tile's defines,
+/// the two headers, FMA contraction as `config::cuda_fmad` says (sums of products do not
+/// occur, so it changes nothing here but keeps one setting for all GPU code).
+pub(super) fn with_options<R>(f: impl FnOnce(&CompileOptions) -> R) -> R {
+    let defines = GPU_TILE.defines();
+    let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let headers = headers();
+    f(&CompileOptions {
+        fmad: config::cuda_fmad(),
+        line_info: true,
+        defines: &defines,
+        headers: &headers,
+        ..Default::default()
+    })
+}
+
 /// `module` compiled and loaded for GPU `ordinal` (once per process).
 fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded>> {
     type Cache = Mutex<HashMap<(usize, Module), Arc<Loaded>>>;
@@ -59,19 +75,10 @@ fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded
         return Ok(l.clone());
     }
     let st = crate::cuda::state(device, ordinal)?;
-    let defines = GPU_TILE.defines();
-    let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
-    let headers = headers();
-    let opts = CompileOptions {
-        fmad: config::cuda_fmad(),
-        line_info: true,
-        defines: &defines,
-        headers: &headers,
-        ..Default::default()
-    };
-    let (compiled, _) =
-        warp_cuda::compile_cached(&module.source(), &module.name(), &opts, st.gpu.arch())
-            .map_err(|e| crate::cuda::err(device, e))?;
+    let (compiled, _) = with_options(|opts| {
+        warp_cuda::compile_cached(&module.source(), &module.name(), opts, st.gpu.arch())
+    })
+    .map_err(|e| crate::cuda::err(device, e))?;
     let m = st
         .gpu
         .load_module(&compiled.cubin)

@@ -45,6 +45,15 @@ mod cuda;
 #[doc(hidden)]
 pub mod plan;
 
+/// Compiles a module of the primitives with NVRTC for `sm_{arch}`, with the options the
+/// runtime uses (no GPU needed, only libnvrtc): how the tests check that NVRTC accepts every
+/// module on machines without a GPU.
+#[cfg(feature = "cuda")]
+#[doc(hidden)]
+pub fn compile_module(module: &plan::Module, arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
+    cuda::with_options(|opts| warp_cuda::compile(&module.source(), &module.name(), opts, arch))
+}
+
 /// How many leading elements a primitive processes: a host value, or a 1-element `Array<i32>`
 /// on the arrays' device holding it (read where the work runs: no host synchronisation on a
 /// GPU). `usize` and `&Array<i32>` convert into it, so `array_scan_n(&a, &b, 10, true)` and
