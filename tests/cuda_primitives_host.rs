@@ -237,7 +237,7 @@ fn typed<T: bytemuck::Pod>(b: &[u8]) -> Vec<T> {
 
 /// Sizes around the tile boundaries, and one whose block totals need several spine tiles.
 fn sizes(tile: Tile) -> Vec<usize> {
-    let t = tile.len() as usize;
+    let t = tile.elements() as usize;
     vec![0, 1, 2, 7, t - 1, t, t + 1, 3 * t + 5, t * (t + 2) + 3]
 }
 

@@ -165,7 +165,7 @@ pub(super) fn run(
             Error::invalid(format!(
                 "{func}: {} blocks of {} elements are more than a grid holds",
                 s.blocks,
-                GPU_TILE.len()
+                GPU_TILE.elements()
             ))
         })?;
         let mut args = [0u64; 16];

@@ -19,13 +19,13 @@ pub struct Tile {
 
 impl Tile {
     /// Elements per block.
-    pub fn len(self) -> u64 {
+    pub fn elements(self) -> u64 {
         self.threads as u64 * self.items as u64
     }
 
     /// Blocks covering `n` elements; at least one, so that a device count is always checked.
     pub fn blocks(self, n: u64) -> u64 {
-        n.div_ceil(self.len()).max(1)
+        n.div_ceil(self.elements()).max(1)
     }
 
     /// The preprocessor definitions that compile the kernels for this shape.
