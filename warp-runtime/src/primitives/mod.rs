@@ -36,23 +36,45 @@
 //! Primitives are not recorded by a [`Tape`](crate::Tape): they have no adjoint.
 
 use crate::array::{Array, Element};
-use crate::device::{Device, DeviceKind};
+use crate::device::Device;
+use crate::dispatch;
 use crate::error::{Error, Result};
 
-mod cpu;
-#[cfg(feature = "cuda")]
-mod cuda;
+pub mod elements;
 #[doc(hidden)]
 pub mod plan;
 
-/// Compiles a module of the primitives with NVRTC for `sm_{arch}`, with the options the
-/// runtime uses (no GPU needed, only libnvrtc): how the tests check that NVRTC accepts every
-/// module on machines without a GPU.
+use elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
+
+/// An element type of [`array_scan`] and the reductions: `i32`, `u32`, `i64`, `u64`, `f32`,
+/// `f64`.
+///
+/// Integer sums wrap on overflow (as integer arithmetic does in kernels). Float sums are
+/// computed in blocks (a tree of partial sums), so they may differ from a serial sum in the
+/// last bits, and differ between the CPU and a GPU; each backend's result is deterministic.
+/// Float [`array_min`]/[`array_max`] ignore NaN as the `min`/`max` builtins do (with one NaN
+/// operand, the other one): the result is NaN-free unless every element is NaN, in which
+/// case it is the identity (+inf for min, -inf for max); which zero a minimum of -0.0 and
+/// +0.0 gives is unspecified.
+pub trait ScanElement: Element + ScanOps {}
+impl<T: Element + ScanOps> ScanElement for T {}
+
+/// A key type of [`radix_sort_pairs`]: `u32`, `i32` or `f32`.
+///
+/// Keys are sorted by a 32-bit unsigned image that preserves their order: `u32` as is, `i32`
+/// with the sign bit flipped (numeric order), `f32` in the order of [`f32::total_cmp`]:
+/// `-NaN < -inf < .. < -0.0 < +0.0 < .. < +inf < +NaN` (so -0.0 sorts before +0.0, and NaNs
+/// with the sign bit clear sort after +inf; NaNs of different payloads keep a fixed order).
+pub trait SortKey: Element + SortKeyOps {}
+impl<T: Element + SortKeyOps> SortKey for T {}
+
+/// A value type of [`radix_sort_pairs`]: `u32`, `i32` or `f32` (moved as 32-bit words).
+pub trait SortValue: Element + SortValueOps {}
+impl<T: Element + SortValueOps> SortValue for T {}
+
 #[cfg(feature = "cuda")]
 #[doc(hidden)]
-pub fn compile_module(module: &plan::Module, arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
-    cuda::with_options(|opts| warp_cuda::compile(&module.source(), &module.name(), opts, arch))
-}
+pub use crate::cuda::primitives::compile_module;
 
 /// How many leading elements a primitive processes: a host value, or a 1-element `Array<i32>`
 /// on the arrays' device holding it (read where the work runs: no host synchronisation on a
@@ -77,172 +99,6 @@ impl<'a> From<&'a Array<i32>> for Count<'a> {
         Count::Device(a)
     }
 }
-
-mod sealed {
-    pub trait Sealed {}
-}
-
-/// An element type of [`array_scan`] and the reductions: `i32`, `u32`, `i64`, `u64`, `f32`,
-/// `f64`.
-///
-/// Integer sums wrap on overflow (as integer arithmetic does in kernels). Float sums are
-/// computed in blocks (a tree of partial sums), so they may differ from a serial sum in the
-/// last bits, and differ between the CPU and a GPU; each backend's result is deterministic.
-/// Float [`array_min`]/[`array_max`] ignore NaN as the `min`/`max` builtins do (with one NaN
-/// operand, the other one): the result is NaN-free unless every element is NaN, in which
-/// case it is the identity (+inf for min, -inf for max); which zero a minimum of -0.0 and
-/// +0.0 gives is unspecified.
-pub trait ScanElement: Element + sealed::Sealed {
-    /// The type's name in the CUDA library (`wp::i32`, ...).
-    #[doc(hidden)]
-    const CUDA: &'static str;
-    /// 0.
-    #[doc(hidden)]
-    const ZERO: Self;
-    /// The identity of `min`: the largest value (+inf for floats).
-    #[doc(hidden)]
-    const MIN_IDENTITY: Self;
-    /// The identity of `max`: the smallest value (-inf for floats).
-    #[doc(hidden)]
-    const MAX_IDENTITY: Self;
-    /// `self + other`, wrapping for integers.
-    #[doc(hidden)]
-    fn add(self, other: Self) -> Self;
-    /// The smaller of the two; NaN loses (the GPU's `op_min`).
-    #[doc(hidden)]
-    fn min_of(self, other: Self) -> Self;
-    /// The larger of the two; NaN loses (the GPU's `op_max`).
-    #[doc(hidden)]
-    fn max_of(self, other: Self) -> Self;
-}
-
-macro_rules! scan_ints {
-    ($($t:ident),*) => {$(
-        impl sealed::Sealed for $t {}
-        impl ScanElement for $t {
-            const CUDA: &'static str = stringify!($t);
-            const ZERO: Self = 0;
-            const MIN_IDENTITY: Self = $t::MAX;
-            const MAX_IDENTITY: Self = $t::MIN;
-            #[inline(always)]
-            fn add(self, other: Self) -> Self {
-                self.wrapping_add(other)
-            }
-            #[inline(always)]
-            fn min_of(self, other: Self) -> Self {
-                if other < self { other } else { self }
-            }
-            #[inline(always)]
-            fn max_of(self, other: Self) -> Self {
-                if other > self { other } else { self }
-            }
-        }
-    )*};
-}
-scan_ints!(i32, u32, i64, u64);
-
-macro_rules! scan_floats {
-    ($($t:ident),*) => {$(
-        impl sealed::Sealed for $t {}
-        impl ScanElement for $t {
-            const CUDA: &'static str = stringify!($t);
-            const ZERO: Self = 0.0;
-            const MIN_IDENTITY: Self = $t::INFINITY;
-            const MAX_IDENTITY: Self = $t::NEG_INFINITY;
-            #[inline(always)]
-            fn add(self, other: Self) -> Self {
-                self + other
-            }
-            // The same expressions as `op_min`/`op_max` in wp_primitives.h, so that both
-            // backends treat NaN and signed zeros alike element by element.
-            #[inline(always)]
-            fn min_of(self, other: Self) -> Self {
-                if other < self || self.is_nan() { other } else { self }
-            }
-            #[inline(always)]
-            fn max_of(self, other: Self) -> Self {
-                if other > self || self.is_nan() { other } else { self }
-            }
-        }
-    )*};
-}
-scan_floats!(f32, f64);
-
-/// A key type of [`radix_sort_pairs`]: `u32`, `i32` or `f32`.
-///
-/// Keys are sorted by a 32-bit unsigned image that preserves their order: `u32` as is, `i32`
-/// with the sign bit flipped (numeric order), `f32` in the order of [`f32::total_cmp`]:
-/// `-NaN < -inf < .. < -0.0 < +0.0 < .. < +inf < +NaN` (so -0.0 sorts before +0.0, and NaNs
-/// with the sign bit clear sort after +inf; NaNs of different payloads keep a fixed order).
-pub trait SortKey: Element + sealed::Sealed {
-    /// The type's name in the CUDA library.
-    #[doc(hidden)]
-    const CUDA: &'static str;
-    /// Whether a sort may use fewer than 32 key bits (not for floats, whose low bits alone
-    /// have no order).
-    #[doc(hidden)]
-    const PARTIAL_BITS: bool;
-    /// The order-preserving unsigned image (`radix_key` in wp_primitives.h).
-    #[doc(hidden)]
-    fn to_radix(self) -> u32;
-    /// The key back from its image.
-    #[doc(hidden)]
-    fn from_radix(bits: u32) -> Self;
-}
-
-impl SortKey for u32 {
-    const CUDA: &'static str = "u32";
-    const PARTIAL_BITS: bool = true;
-    #[inline(always)]
-    fn to_radix(self) -> u32 {
-        self
-    }
-    #[inline(always)]
-    fn from_radix(bits: u32) -> Self {
-        bits
-    }
-}
-
-impl SortKey for i32 {
-    const CUDA: &'static str = "i32";
-    const PARTIAL_BITS: bool = true;
-    #[inline(always)]
-    fn to_radix(self) -> u32 {
-        (self as u32) ^ 0x8000_0000
-    }
-    #[inline(always)]
-    fn from_radix(bits: u32) -> Self {
-        (bits ^ 0x8000_0000) as i32
-    }
-}
-
-impl SortKey for f32 {
-    const CUDA: &'static str = "f32";
-    const PARTIAL_BITS: bool = false;
-    #[inline(always)]
-    fn to_radix(self) -> u32 {
-        let b = self.to_bits();
-        if b & 0x8000_0000 != 0 {
-            !b
-        } else {
-            b | 0x8000_0000
-        }
-    }
-    #[inline(always)]
-    fn from_radix(bits: u32) -> Self {
-        f32::from_bits(if bits & 0x8000_0000 != 0 {
-            bits & 0x7fff_ffff
-        } else {
-            !bits
-        })
-    }
-}
-
-/// A value type of [`radix_sort_pairs`]: `u32`, `i32` or `f32` (moved as 32-bit words).
-pub trait SortValue: Element + sealed::Sealed {}
-impl SortValue for u32 {}
-impl SortValue for i32 {}
-impl SortValue for f32 {}
 
 // ------------------------------------------------------------------------------------------
 // Checks shared by every primitive
@@ -296,7 +152,7 @@ impl Check {
         if !w.shares_storage_with(o) || w.is_empty() || o.is_empty() {
             return Ok(());
         }
-        let (ws, os) = (address(w), address(o));
+        let (ws, os) = (w.device_address() as usize, o.device_address() as usize);
         let we = ws + w.len() * std::mem::size_of::<T>();
         let oe = os + o.len() * std::mem::size_of::<U>();
         if we <= os || oe <= ws {
@@ -314,19 +170,20 @@ impl Check {
         Err(self.invalid(format!("`{wn}` and `{on}` {how}")))
     }
 
-    /// The count as the backend needs it. `capacity` is the most elements the arrays hold,
-    /// `short` names the array that limits it.
-    fn count<'a>(
+    /// The count as the backends take it. `capacity` is the most elements the arrays hold,
+    /// `limit` names the array that sets it. A device count's value is the backend's to
+    /// check (the CPU before writing anything, a GPU where its kernels read it).
+    fn count(
         &self,
-        count: Count<'a>,
+        count: Count<'_>,
         capacity: usize,
-        short: &str,
+        limit: &'static str,
         device: &Device,
-    ) -> Result<Len<'a>> {
+    ) -> Result<Extent> {
         match count {
-            Count::Host(n) if n <= capacity => Ok(Len::Host(n)),
+            Count::Host(n) if n <= capacity => Ok(Extent::Host(n)),
             Count::Host(n) => Err(self.invalid(format!(
-                "count {n} is larger than `{short}` ({capacity} elements)"
+                "count {n} is larger than `{limit}` ({capacity} elements)"
             ))),
             Count::Device(c) => {
                 self.same_device(("arrays", device), ("count", c.device()))?;
@@ -336,18 +193,11 @@ impl Check {
                         c.shape()
                     )));
                 }
-                if device.is_cpu() {
-                    // Read on the CPU now, before anything is written.
-                    let n = c.to_vec()?[0];
-                    if n < 0 || n as usize > capacity {
-                        return Err(self.invalid(format!(
-                            "the `count` array holds {n}, outside 0..={capacity} (`{short}` has \
-                             {capacity} elements)"
-                        )));
-                    }
-                    return Ok(Len::Host(n as usize));
-                }
-                Ok(Len::Device { count: c, capacity })
+                Ok(Extent::Device {
+                    count: c.device_address(),
+                    capacity,
+                    limit,
+                })
             }
         }
     }
@@ -360,38 +210,6 @@ impl Check {
         Err(self.invalid(format!(
             "`{name}` has {n} elements, more than the 2^31 - 1 this primitive counts"
         )))
-    }
-}
-
-/// A primitive's length after the checks: a host value, or a device count (GPU only).
-#[derive(Clone, Copy)]
-enum Len<'a> {
-    Host(usize),
-    // Only GPUs read counts on the device; without `cuda` this is never built.
-    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
-    Device {
-        count: &'a Array<i32>,
-        capacity: usize,
-    },
-}
-
-/// The address of element 0 (host or device), for overlap checks.
-fn address<T: Element>(a: &Array<T>) -> usize {
-    match a.device().kind() {
-        DeviceKind::Cpu => cpu::base_ptr(a) as usize,
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { .. } => a.device_ptr().unwrap_or(0) as usize,
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda { .. } => 0,
-    }
-}
-
-/// A host count (the CPU reads device counts before dispatch).
-fn host_len(len: Len<'_>) -> usize {
-    match len {
-        Len::Host(n) => n,
-        // `Check::count` resolves device counts on the CPU.
-        Len::Device { capacity, .. } => capacity,
     }
 }
 
@@ -473,17 +291,18 @@ fn scan_impl<T: ScanElement>(
         ck.disjoint(("output", output), ("count", c), false)?;
     }
     let len = ck.count(count, capacity, short, dev)?;
-    match dev.kind() {
-        DeviceKind::Cpu => {
-            cpu::scan(input, output, host_len(len), inclusive);
-            Ok(())
-        }
-        DeviceKind::Cuda { .. } => gpu_scan(ck, input, output, len, inclusive),
-    }
+    dispatch::scan::<T>(
+        dev,
+        ck.func,
+        input.device_address(),
+        output.device_address(),
+        len,
+        inclusive,
+    )
 }
 
 /// The smaller of two arrays' lengths and that array's name.
-fn shorter<'n>(a: (&'n str, usize), b: (&'n str, usize)) -> (usize, &'n str) {
+fn shorter(a: (&'static str, usize), b: (&'static str, usize)) -> (usize, &'static str) {
     if b.1 < a.1 {
         (b.1, b.0)
     } else {
@@ -629,13 +448,14 @@ fn reduce_impl<T: ScanElement>(
         ck.disjoint(("out", out), ("count", c), false)?;
     }
     let len = ck.count(count, values.len(), "values", dev)?;
-    match dev.kind() {
-        DeviceKind::Cpu => {
-            cpu::reduce(values, out, host_len(len), op);
-            Ok(())
-        }
-        DeviceKind::Cuda { .. } => gpu_reduce(&ck, values, out, len, op),
-    }
+    dispatch::reduce::<T>(
+        dev,
+        ck.func,
+        values.device_address(),
+        out.device_address(),
+        len,
+        op,
+    )
 }
 
 // ------------------------------------------------------------------------------------------
@@ -709,13 +529,14 @@ pub fn radix_sort_pairs<'c, K: SortKey, V: SortValue>(
         ck.disjoint(("values", values), ("count", c), false)?;
     }
     let len = ck.count(count, capacity, short, dev)?;
-    match dev.kind() {
-        DeviceKind::Cpu => {
-            cpu::radix_sort_pairs(keys, values, host_len(len), bits);
-            Ok(())
-        }
-        DeviceKind::Cuda { .. } => gpu_sort(&ck, keys, values, len, bits),
-    }
+    dispatch::radix_sort_pairs::<K, V>(
+        dev,
+        ck.func,
+        keys.device_address(),
+        values.device_address(),
+        len,
+        bits,
+    )
 }
 
 // ------------------------------------------------------------------------------------------
@@ -828,199 +649,17 @@ fn compact_impl<T: Element>(
         ck.disjoint(("out_count", out_count), ("count", c), false)?;
     }
     let len = ck.count(count, cap, short, dev)?;
-    match dev.kind() {
-        DeviceKind::Cpu => {
-            cpu::compact(values, flags, out, out_count, host_len(len));
-            Ok(())
-        }
-        DeviceKind::Cuda { .. } => gpu_compact(ck, values, flags, out, out_count, len),
-    }
-}
-
-// ------------------------------------------------------------------------------------------
-// GPU dispatch (the plans of `plan.rs`, run by `cuda.rs`)
-// ------------------------------------------------------------------------------------------
-
-#[cfg(feature = "cuda")]
-use self::gpu::{gpu_compact, gpu_reduce, gpu_scan, gpu_sort};
-
-#[cfg(not(feature = "cuda"))]
-use self::no_gpu::{gpu_compact, gpu_reduce, gpu_scan, gpu_sort};
-
-#[cfg(feature = "cuda")]
-mod gpu {
-    use super::plan::{self, ReduceOp, GPU_TILE};
-    use super::{cuda, Check, Len, ScanElement, SortKey, SortValue};
-    use crate::array::{Array, Element};
-    use crate::error::Result;
-
-    /// The device address of an array the checks placed on a GPU.
-    fn addr<T: Element>(a: &Array<T>) -> u64 {
-        a.device_ptr().unwrap_or(0)
-    }
-
-    /// The plan's length, the count array's address appended to `users` when on the device.
-    /// `arg` is the parameter index of `count` in the primitive's fault reports.
-    fn plan_len(len: Len<'_>, users: &mut Vec<u64>, arg: i64) -> plan::Len {
-        match len {
-            Len::Host(n) => plan::Len::Host(n as u64),
-            Len::Device { count, capacity } => {
-                users.push(addr(count));
-                plan::Len::Device {
-                    count: users.len() - 1,
-                    capacity: capacity as u64,
-                    arg,
-                }
-            }
-        }
-    }
-
-    pub(super) fn gpu_scan<T: ScanElement>(
-        ck: &Check,
-        input: &Array<T>,
-        output: &Array<T>,
-        len: Len<'_>,
-        inclusive: bool,
-    ) -> Result<()> {
-        let mut users = vec![addr(input), addr(output)];
-        let len = plan_len(len, &mut users, 2);
-        let size = std::mem::size_of::<T>() as u64;
-        let p = plan::scan(GPU_TILE, T::CUDA, size, len, inclusive);
-        cuda::run(
-            ck.func,
-            &["input", "output", "count"],
-            input.device(),
-            &p,
-            &users,
-        )
-    }
-
-    pub(super) fn gpu_reduce<T: ScanElement>(
-        ck: &Check,
-        values: &Array<T>,
-        out: &Array<T>,
-        len: Len<'_>,
-        op: ReduceOp,
-    ) -> Result<()> {
-        let mut users = vec![addr(values), addr(out)];
-        let len = plan_len(len, &mut users, 2);
-        let size = std::mem::size_of::<T>() as u64;
-        let p = plan::reduce(GPU_TILE, T::CUDA, size, op, len);
-        cuda::run(
-            ck.func,
-            &["values", "out", "count"],
-            values.device(),
-            &p,
-            &users,
-        )
-    }
-
-    pub(super) fn gpu_sort<K: SortKey, V: SortValue>(
-        ck: &Check,
-        keys: &Array<K>,
-        values: &Array<V>,
-        len: Len<'_>,
-        bits: u32,
-    ) -> Result<()> {
-        let mut users = vec![addr(keys), addr(values)];
-        let len = plan_len(len, &mut users, 2);
-        let p = plan::sort(GPU_TILE, K::CUDA, bits, len);
-        cuda::run(
-            ck.func,
-            &["keys", "values", "count"],
-            keys.device(),
-            &p,
-            &users,
-        )
-    }
-
-    pub(super) fn gpu_compact<T: Element>(
-        ck: &Check,
-        values: &Array<T>,
-        flags: &Array<i32>,
-        out: &Array<T>,
-        out_count: &Array<i32>,
-        len: Len<'_>,
-    ) -> Result<()> {
-        let mut users = vec![addr(values), addr(flags), addr(out), addr(out_count)];
-        let len = plan_len(len, &mut users, 4);
-        let (word, words) = blob_words::<T>();
-        let p = plan::compact(GPU_TILE, word, words, len);
-        cuda::run(
-            ck.func,
-            &["values", "flags", "out", "out_count", "count"],
-            values.device(),
-            &p,
-            &users,
-        )
-    }
-
-    /// How a GPU moves an element: `words` words of `word` bytes (the widest word that
-    /// divides the size and the alignment).
-    pub(super) fn blob_words<T: Element>() -> (u32, u32) {
-        let (size, align) = (std::mem::size_of::<T>(), std::mem::align_of::<T>());
-        let word = [8, 4, 2, 1]
-            .into_iter()
-            .find(|&w| size % w == 0 && align >= w)
-            .unwrap_or(1);
-        (word as u32, (size / word) as u32)
-    }
-}
-
-/// Without the `cuda` feature no array lives on a GPU (allocating one is an error), so these
-/// are never reached; they keep the dispatch above free of `cfg`s.
-#[cfg(not(feature = "cuda"))]
-mod no_gpu {
-    use super::{plan::ReduceOp, Check, Len};
-    use crate::array::{Array, Element};
-    use crate::error::{Error, Result};
-
-    fn none(ck: &Check) -> Error {
-        Error::NoDevice {
-            name: "cuda".into(),
-            reason: format!(
-                "{}: this build of warp-lang has no CUDA support (the `cuda` feature is off)",
-                ck.func
-            ),
-        }
-    }
-    pub(super) fn gpu_scan<T: Element>(
-        ck: &Check,
-        _: &Array<T>,
-        _: &Array<T>,
-        _: Len<'_>,
-        _: bool,
-    ) -> Result<()> {
-        Err(none(ck))
-    }
-    pub(super) fn gpu_reduce<T: Element>(
-        ck: &Check,
-        _: &Array<T>,
-        _: &Array<T>,
-        _: Len<'_>,
-        _: ReduceOp,
-    ) -> Result<()> {
-        Err(none(ck))
-    }
-    pub(super) fn gpu_sort<K: Element, V: Element>(
-        ck: &Check,
-        _: &Array<K>,
-        _: &Array<V>,
-        _: Len<'_>,
-        _: u32,
-    ) -> Result<()> {
-        Err(none(ck))
-    }
-    pub(super) fn gpu_compact<T: Element>(
-        ck: &Check,
-        _: &Array<T>,
-        _: &Array<i32>,
-        _: &Array<T>,
-        _: &Array<i32>,
-        _: Len<'_>,
-    ) -> Result<()> {
-        Err(none(ck))
-    }
+    dispatch::compact::<T>(
+        dev,
+        ck.func,
+        [
+            values.device_address(),
+            flags.device_address(),
+            out.device_address(),
+            out_count.device_address(),
+        ],
+        len,
+    )
 }
 
 #[cfg(test)]
@@ -1064,16 +703,5 @@ mod tests {
         assert_eq!(f64::NAN.max_of(-3.0), -3.0);
         assert!(f32::NAN.min_of(f32::NAN).is_nan());
         assert_eq!(i32::MAX.add(1), i32::MIN);
-    }
-
-    #[cfg(feature = "cuda")]
-    #[test]
-    fn blobs_use_the_widest_word() {
-        use glam::{DVec3, Vec3};
-        assert_eq!(gpu::blob_words::<u8>(), (1, 1));
-        assert_eq!(gpu::blob_words::<half::f16>(), (2, 1));
-        assert_eq!(gpu::blob_words::<Vec3>(), (4, 3));
-        assert_eq!(gpu::blob_words::<DVec3>(), (8, 3));
-        assert_eq!(gpu::blob_words::<f64>(), (8, 1));
     }
 }

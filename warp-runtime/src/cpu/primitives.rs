@@ -8,45 +8,65 @@
 //! knows where its elements of each digit go), and a parallel stable scatter; a pass whose
 //! digit is the same for every key is skipped.
 //!
-//! The callers (`mod.rs`) have checked every argument: arrays on the CPU, contiguous, long
+//! The callers (`primitives/mod.rs`) have checked every argument: arrays on the CPU, contiguous, long
 //! enough, and the arrays written overlap nothing they read (except an in-place scan, which
 //! is handled as such).
 
-use super::{plan::ReduceOp, ScanElement, SortKey, SortValue};
-use crate::array::{Array, Element};
+use crate::error::Result;
+use crate::primitives::elements::{bad_count, Extent, ScanOps, SortKeyOps, SortValueOps};
+use crate::primitives::plan::ReduceOp;
 use rayon::prelude::*;
 
 /// Elements per chunk of the chunked algorithms: large enough to amortise a rayon task,
 /// small enough to spread 10^6 elements over many cores.
-pub(super) const CHUNK: usize = 1 << 16;
+const CHUNK: usize = 1 << 16;
 
-/// The address of element 0 of a CPU array (dangling but aligned for an empty one).
-pub(super) fn base_ptr<T: Element>(a: &Array<T>) -> *mut T {
-    // The view's bounds check fails exactly for an empty array, which has no element 0.
-    a.cpu_view("primitive", "array")
-        .ptr_at(0usize)
-        .unwrap_or(std::ptr::NonNull::dangling().as_ptr())
+/// The number of elements: a host count, or the device count read now (host memory), checked
+/// before anything is written.
+fn elements(func: &str, len: Extent) -> Result<usize> {
+    match len {
+        Extent::Host(n) => Ok(n),
+        Extent::Device {
+            count,
+            capacity,
+            limit,
+        } => {
+            // SAFETY: `count` is the address of a live 1-element i32 array in host memory
+            // (checked by `primitives`); no kernel runs on host memory during this call.
+            let n = unsafe { (count as *const i32).read() };
+            if n < 0 || n as usize > capacity {
+                return Err(bad_count(func, n, capacity, limit));
+            }
+            Ok(n as usize)
+        }
+    }
 }
 
-/// The first `n` elements of a contiguous CPU array.
+/// The `n` elements of host memory at `addr`.
 ///
 /// # Safety
-/// `n <= a.len()`, and for as long as the slice lives no other reference to those elements
-/// is used to write them (the callers check that arrays read and written do not overlap;
-/// another thread writing the array meanwhile is the race `Array` documents).
-unsafe fn slice<T: Element>(a: &Array<T>, n: usize) -> &[T] {
-    // SAFETY: a contiguous array's first n elements are consecutive initialised `T`s.
-    unsafe { std::slice::from_raw_parts(base_ptr(a), n) }
+/// `addr` is the address of a contiguous array of at least `n` `T`s in host memory, and for as
+/// long as the slice lives no other reference to those elements is used to write them (the
+/// callers were checked not to overlap arrays read and written; another thread writing the
+/// array meanwhile is the race `Array` documents).
+unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
+    if n == 0 {
+        return &[];
+    }
+    // SAFETY: see above; the address is aligned for T (arrays' elements are).
+    unsafe { std::slice::from_raw_parts(addr as *const T, n) }
 }
 
 /// [`slice`], mutable.
 ///
 /// # Safety
 /// As [`slice`], and no other reference to these elements exists while it lives.
-#[allow(clippy::mut_from_ref)] // the array is a handle to interior-mutable memory
-unsafe fn slice_mut<T: Element>(a: &Array<T>, n: usize) -> &mut [T] {
+unsafe fn slice_mut<'a, T>(addr: u64, n: usize) -> &'a mut [T] {
+    if n == 0 {
+        return &mut [];
+    }
     // SAFETY: as for `slice`; exclusivity is the caller's promise.
-    unsafe { std::slice::from_raw_parts_mut(base_ptr(a), n) }
+    unsafe { std::slice::from_raw_parts_mut(addr as *mut T, n) }
 }
 
 // ------------------------------------------------------------------------------------------
@@ -54,7 +74,7 @@ unsafe fn slice_mut<T: Element>(a: &Array<T>, n: usize) -> &mut [T] {
 // ------------------------------------------------------------------------------------------
 
 /// Scans `src` into `dst` from `offset`.
-fn scan_serial<T: ScanElement>(src: &[T], dst: &mut [T], mut acc: T, inclusive: bool) {
+fn scan_serial<T: ScanOps>(src: &[T], dst: &mut [T], mut acc: T, inclusive: bool) {
     for (d, &x) in dst.iter_mut().zip(src) {
         if inclusive {
             acc = acc.add(x);
@@ -67,7 +87,7 @@ fn scan_serial<T: ScanElement>(src: &[T], dst: &mut [T], mut acc: T, inclusive: 
 }
 
 /// Scans `data` in place from `offset`.
-fn scan_serial_in_place<T: ScanElement>(data: &mut [T], mut acc: T, inclusive: bool) {
+fn scan_serial_in_place<T: ScanOps>(data: &mut [T], mut acc: T, inclusive: bool) {
     for d in data.iter_mut() {
         let x = *d;
         if inclusive {
@@ -80,12 +100,12 @@ fn scan_serial_in_place<T: ScanElement>(data: &mut [T], mut acc: T, inclusive: b
     }
 }
 
-fn sum_serial<T: ScanElement>(s: &[T]) -> T {
+fn sum_serial<T: ScanOps>(s: &[T]) -> T {
     s.iter().fold(T::ZERO, |a, &x| a.add(x))
 }
 
 /// The exclusive scan of the chunks' totals: each chunk's starting offset.
-fn chunk_offsets<T: ScanElement>(src: &[T]) -> Vec<T> {
+fn chunk_offsets<T: ScanOps>(src: &[T]) -> Vec<T> {
     let totals: Vec<T> = src.par_chunks(CHUNK).map(sum_serial).collect();
     let mut acc = T::ZERO;
     totals
@@ -98,34 +118,42 @@ fn chunk_offsets<T: ScanElement>(src: &[T]) -> Vec<T> {
         .collect()
 }
 
-/// `array_scan_n` on the CPU: the first `n` elements.
-pub(super) fn scan<T: ScanElement>(input: &Array<T>, output: &Array<T>, n: usize, inclusive: bool) {
+/// `array_scan_n` on the CPU.
+pub(super) fn scan<T: ScanOps>(
+    func: &str,
+    input: u64,
+    output: u64,
+    len: Extent,
+    inclusive: bool,
+) -> Result<()> {
+    let n = elements(func, len)?;
     if n == 0 {
-        return;
+        return Ok(());
     }
-    if base_ptr(input) == base_ptr(output) {
+    if input == output {
         // SAFETY: in place: one slice, the only reference to the elements during the scan.
-        let data = unsafe { slice_mut(output, n) };
+        let data = unsafe { slice_mut::<T>(output, n) };
         let offsets = chunk_offsets(data);
         data.par_chunks_mut(CHUNK)
             .zip(offsets)
             .for_each(|(c, o)| scan_serial_in_place(c, o, inclusive));
-        return;
+        return Ok(());
     }
-    // SAFETY: the checks made sure `output` does not overlap `input` (different memory).
-    let (src, dst) = unsafe { (slice(input, n), slice_mut(output, n)) };
+    // SAFETY: the checks made sure `output` does not overlap `input`.
+    let (src, dst) = unsafe { (slice::<T>(input, n), slice_mut::<T>(output, n)) };
     let offsets = chunk_offsets(src);
     dst.par_chunks_mut(CHUNK)
         .zip(src.par_chunks(CHUNK))
         .zip(offsets)
         .for_each(|((d, s), o)| scan_serial(s, d, o, inclusive));
+    Ok(())
 }
 
 // ------------------------------------------------------------------------------------------
 // Reductions
 // ------------------------------------------------------------------------------------------
 
-fn fold_op<T: ScanElement>(op: ReduceOp) -> (T, fn(T, T) -> T) {
+fn fold_op<T: ScanOps>(op: ReduceOp) -> (T, fn(T, T) -> T) {
     match op {
         ReduceOp::Sum => (T::ZERO, T::add),
         ReduceOp::Min => (T::MIN_IDENTITY, T::min_of),
@@ -134,7 +162,7 @@ fn fold_op<T: ScanElement>(op: ReduceOp) -> (T, fn(T, T) -> T) {
 }
 
 /// The reduction of `values` by `op` (chunked, so deterministic for floats).
-pub(super) fn reduce_slice<T: ScanElement>(values: &[T], op: ReduceOp) -> T {
+fn reduce_slice<T: ScanOps>(values: &[T], op: ReduceOp) -> T {
     let (id, f) = fold_op::<T>(op);
     let partials: Vec<T> = values
         .par_chunks(CHUNK)
@@ -144,11 +172,19 @@ pub(super) fn reduce_slice<T: ScanElement>(values: &[T], op: ReduceOp) -> T {
 }
 
 /// `array_sum_n` and friends on the CPU.
-pub(super) fn reduce<T: ScanElement>(values: &Array<T>, out: &Array<T>, n: usize, op: ReduceOp) {
-    // SAFETY: `out` does not overlap `values` (checked), and it is written after the read.
-    let r = reduce_slice(unsafe { slice(values, n) }, op);
-    let out = unsafe { slice_mut(out, 1) };
+pub(super) fn reduce<T: ScanOps>(
+    func: &str,
+    input: u64,
+    out: u64,
+    len: Extent,
+    op: ReduceOp,
+) -> Result<()> {
+    let n = elements(func, len)?;
+    // SAFETY: `out` does not overlap `input` (checked); it is written after the read.
+    let r = reduce_slice(unsafe { slice::<T>(input, n) }, op);
+    let out = unsafe { slice_mut::<T>(out, 1) };
     out[0] = r;
+    Ok(())
 }
 
 // ------------------------------------------------------------------------------------------
@@ -230,19 +266,21 @@ fn radix_pass(
     true
 }
 
-/// `radix_sort_pairs` on the CPU: the first `n` pairs, by the low `bits` bits of the keys'
+/// `radix_sort_pairs` on the CPU: the first pairs by the low `bits` bits of the keys'
 /// order-preserving images.
-pub(super) fn radix_sort_pairs<K: SortKey, V: SortValue>(
-    keys: &Array<K>,
-    values: &Array<V>,
-    n: usize,
+pub(super) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
+    func: &str,
+    keys: u64,
+    values: u64,
+    len: Extent,
     bits: u32,
-) {
+) -> Result<()> {
+    let n = elements(func, len)?;
     if n < 2 {
-        return;
+        return Ok(());
     }
     // SAFETY: keys and values do not overlap (checked); both hold at least n elements.
-    let (keys, values) = unsafe { (slice_mut(keys, n), slice_mut(values, n)) };
+    let (keys, values) = unsafe { (slice_mut::<K>(keys, n), slice_mut::<V>(values, n)) };
     // Sort the keys' images, in the keys' own memory (K and V are 4-byte Pod types).
     let k0: &mut [u32] = bytemuck::cast_slice_mut(keys);
     let v0: &mut [u32] = bytemuck::cast_slice_mut(values);
@@ -253,7 +291,7 @@ pub(super) fn radix_sort_pairs<K: SortKey, V: SortValue>(
     let chunk = n.div_ceil(rayon::current_num_threads() * 4).max(1 << 14);
     // Whether the current data is in (k1, v1) rather than the arrays.
     let mut in_scratch = false;
-    for (shift, mask) in super::plan::radix_passes(bits, CPU_RADIX_BITS) {
+    for (shift, mask) in crate::primitives::plan::radix_passes(bits, CPU_RADIX_BITS) {
         let moved = if in_scratch {
             radix_pass(&k1, &v1, k0, v0, shift, mask, chunk)
         } else {
@@ -271,6 +309,7 @@ pub(super) fn radix_sort_pairs<K: SortKey, V: SortValue>(
     }
     k0.par_iter_mut()
         .for_each(|k| *k = bytemuck::cast(K::from_radix(*k)));
+    Ok(())
 }
 
 // ------------------------------------------------------------------------------------------
@@ -279,11 +318,7 @@ pub(super) fn radix_sort_pairs<K: SortKey, V: SortValue>(
 
 /// Copies the kept elements of `values` (nonzero flag) to the front of `out`; returns how
 /// many. `out` holds at least `values.len()` elements.
-pub(super) fn compact_slices<T: Copy + Send + Sync>(
-    values: &[T],
-    flags: &[i32],
-    out: &mut [T],
-) -> usize {
+fn compact_slices<T: Copy + Send + Sync>(values: &[T], flags: &[i32], out: &mut [T]) -> usize {
     let counts: Vec<usize> = flags
         .par_chunks(CHUNK)
         .map(|c| c.iter().filter(|&&f| f != 0).count())
@@ -309,21 +344,28 @@ pub(super) fn compact_slices<T: Copy + Send + Sync>(
     total
 }
 
-/// `compact_n` on the CPU.
-pub(super) fn compact<T: Element>(
-    values: &Array<T>,
-    flags: &Array<i32>,
-    out: &Array<T>,
-    out_count: &Array<i32>,
-    n: usize,
-) {
+/// `compact_n` on the CPU: `arrays` are values, flags, out, out_count.
+pub(super) fn compact<T: bytemuck::Pod + Send + Sync>(
+    func: &str,
+    arrays: [u64; 4],
+    len: Extent,
+) -> Result<()> {
+    let n = elements(func, len)?;
+    let [values, flags, out, out_count] = arrays;
     // SAFETY: `out` and `out_count` overlap none of the other arrays (checked); every array
     // holds at least n elements (`out_count` one).
-    let (v, f, o) = unsafe { (slice(values, n), slice(flags, n), slice_mut(out, n)) };
+    let (v, f, o) = unsafe {
+        (
+            slice::<T>(values, n),
+            slice::<i32>(flags, n),
+            slice_mut::<T>(out, n),
+        )
+    };
     let kept = compact_slices(v, f, o);
     // n <= i32::MAX (checked), so the count fits.
-    let out_count = unsafe { slice_mut(out_count, 1) };
+    let out_count = unsafe { slice_mut::<i32>(out_count, 1) };
     out_count[0] = kept as i32;
+    Ok(())
 }
 
 #[cfg(test)]
