@@ -47,9 +47,10 @@ fn have_gpp() -> bool {
 
 /// The host executable of `module` compiled for `tile` (built once per process).
 fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
-    static BUILT: OnceLock<
-        Mutex<HashMap<(String, u32, u32), Arc<Mutex<Option<Arc<std::path::PathBuf>>>>>>,
-    > = OnceLock::new();
+    // One slot per (module, tile): the first test to need it compiles it, others wait.
+    type Slot = Arc<Mutex<Option<Arc<std::path::PathBuf>>>>;
+    type Built = Mutex<HashMap<(String, u32, u32), Slot>>;
+    static BUILT: OnceLock<Built> = OnceLock::new();
     let slot = BUILT
         .get_or_init(Default::default)
         .lock()

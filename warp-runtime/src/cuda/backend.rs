@@ -110,7 +110,7 @@ impl Backend for Cuda<'_> {
         len: Extent,
         key_bits: u32,
     ) -> Result<()> {
-        primitives::radix_sort_pairs::<K, V>(
+        primitives::radix_sort_pairs::<K>(
             self.device,
             self.ordinal,
             func,

@@ -15,7 +15,7 @@ use crate::config;
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
-use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
+use crate::primitives::elements::{Extent, ScanOps, SortKeyOps};
 use crate::primitives::plan::{self, Buf, Module, Plan, ReduceOp, Word, GPU_TILE};
 use std::collections::HashMap;
 use std::ffi::c_void;
@@ -262,8 +262,8 @@ pub(super) fn reduce<T: ScanOps>(
     )
 }
 
-/// `radix_sort_pairs` on a GPU.
-pub(super) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
+/// `radix_sort_pairs` on a GPU (values of every `SortValueOps` type move as 32-bit words).
+pub(super) fn radix_sort_pairs<K: SortKeyOps>(
     device: &Device,
     ordinal: usize,
     func: &'static str,
