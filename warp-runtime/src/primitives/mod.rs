@@ -7,7 +7,7 @@
 //! | [`array_scan`], [`array_scan_n`] | [`ScanElement`]: i32, u32, i64, u64, f32, f64 | inclusive or exclusive prefix sums |
 //! | [`array_sum`], [`array_min`], [`array_max`] (and `_n`) | [`ScanElement`] | one element |
 //! | [`radix_sort_pairs`] | keys [`SortKey`]: u32, i32, f32; values [`SortValue`]: u32, i32, f32 | both arrays, in place |
-//! | [`compact`], [`compact_n`] | any [`Element`](crate::Element), flags `i32` | the kept elements and their count |
+//! | [`compact`], [`compact_n`] | any [`Element`], flags `i32` | the kept elements and their count |
 //!
 //! # Lengths
 //! The plain functions work on whole arrays. The `_n` functions and [`radix_sort_pairs`] take
@@ -23,7 +23,8 @@
 //! before anything is written (an `Err`); on a GPU a count outside `0..=capacity` is a fault
 //! (`Error::Fault`, out of bounds on argument `count`, index `[count]`, shape
 //! `[capacity + 1]`), reported like a kernel's at the next synchronisation (at once in debug
-//! mode), and the primitive writes nothing.
+//! mode), and the primitive processes no element (a scan or sort writes nothing, a reduction
+//! writes its identity, a compaction a count of 0).
 //!
 //! # Devices and streams
 //! Everything runs on the arrays' device. On a GPU the kernels are queued on the calling
