@@ -78,6 +78,7 @@ mod grad;
 mod launch;
 mod misc;
 mod params;
+mod primitives;
 mod rng;
 mod stability;
 mod streams;
