@@ -105,6 +105,13 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+/// Parallel primitives: scan, reductions, radix sort, stream compaction (the functions are
+/// also at the crate root: `wp::array_scan`, ...).
+pub use warp_runtime::primitives;
+pub use warp_runtime::primitives::{
+    array_max, array_max_n, array_min, array_min_n, array_scan, array_scan_n, array_sum,
+    array_sum_n, compact, compact_n, radix_sort_pairs, Count,
+};
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };

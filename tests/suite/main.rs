@@ -79,6 +79,7 @@ mod hash_grid;
 mod launch;
 mod misc;
 mod params;
+mod primitives;
 mod rng;
 mod stability;
 mod streams;

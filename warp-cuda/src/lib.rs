@@ -55,6 +55,7 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_rand.h", include_str!("../cuda/wp_rand.h")),
     ("wp_hash_grid.h", include_str!("../cuda/wp_hash_grid.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
+    ("wp_primitives.h", include_str!("../cuda/wp_primitives.h")),
     ("wp_adjoint.h", include_str!("../cuda/wp_adjoint.h")),
     (
         "wp_adjoint_core.h",

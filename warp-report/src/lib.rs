@@ -271,7 +271,12 @@ pub fn sci(x: f64) -> String {
         // Four significant digits, trailing zeros dropped: 0.25, 1.01, 16.67.
         let digits = (3 - x.abs().log10().floor() as i32).max(0) as usize;
         let s = format!("{x:.digits$}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
+        // Trailing zeros are dropped only after a decimal point: 1279.96 prints as 1280.
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
     } else {
         format!("{x:.2e}")
     }
@@ -280,6 +285,16 @@ pub fn sci(x: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sci_keeps_the_zeros_of_whole_numbers() {
+        assert_eq!(sci(1279.96), "1280");
+        assert_eq!(sci(100.04), "100");
+        assert_eq!(sci(16.6667), "16.67");
+        assert_eq!(sci(0.25), "0.25");
+        assert_eq!(sci(1024.0), "1024");
+        assert_eq!(sci(2.5e-4), "2.50e-4");
+    }
 
     fn sample() -> Sweep {
         let mut s = Sweep::new("test sweep", "dt").with_extras(&["energy drift"]);

@@ -11,6 +11,8 @@
 
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel};
+use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
+use crate::primitives::plan::ReduceOp;
 use warp_core::Grid;
 
 /// A backend, bound to one device for one operation (the value is a handle: the device and
@@ -41,6 +43,50 @@ pub(crate) trait Backend {
     /// Waits for the work queued on the device, then reports a fault that a kernel recorded
     /// there since the last check (what `to_vec` does before reading).
     fn synchronize(&self) -> Result<()>;
+
+    /// The parallel primitives (`primitives/`). `func` is the public function (for messages
+    /// and fault reports); arrays are addresses as [`Buffer::address`] gives them (plus the
+    /// array's offset): `primitives` has checked that they are contiguous, on this device,
+    /// long enough for `len`'s capacity, and that the outputs overlap nothing else (`output`
+    /// may be `input`: a scan in place). A device count's value is the backend's to check.
+    /// Runs (the CPU) or queues (a GPU, on the calling thread's current stream).
+    fn scan<T: ScanOps>(
+        &self,
+        func: &'static str,
+        input: u64,
+        output: u64,
+        len: Extent,
+        inclusive: bool,
+    ) -> Result<()>;
+
+    /// The reduction `op` of `input`'s first `len` elements into the element at `out`.
+    fn reduce<T: ScanOps>(
+        &self,
+        func: &'static str,
+        input: u64,
+        out: u64,
+        len: Extent,
+        op: ReduceOp,
+    ) -> Result<()>;
+
+    /// Stable sort of the first `len` pairs by the low `key_bits` bits of the keys' images
+    /// (`SortKeyOps::to_radix`).
+    fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
+        &self,
+        func: &'static str,
+        keys: u64,
+        values: u64,
+        len: Extent,
+        key_bits: u32,
+    ) -> Result<()>;
+
+    /// Stream compaction of `T`s: `arrays` are values, flags (`i32`), out, out_count (`i32`).
+    fn compact<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        func: &'static str,
+        arrays: [u64; 4],
+        len: Extent,
+    ) -> Result<()>;
 
     /// [`Backend::synchronize`] for every device of this backend used so far.
     fn synchronize_all() -> Result<()>

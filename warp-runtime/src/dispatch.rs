@@ -13,6 +13,8 @@ use crate::cuda::{memory::CudaBuffer, Cuda};
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
+use crate::primitives::plan::ReduceOp;
 use warp_core::Grid;
 
 /// Evaluates `$body` with `$b` bound to the backend of `$device`.
@@ -82,6 +84,52 @@ pub(crate) fn launch_adjoint<K: Kernel>(
         });
     }
     with_backend!(device, b => b.launch_adjoint::<K>(args, grid, adstack_bytes))
+}
+
+/// A scan on `device`'s backend; see [`Backend::scan`].
+pub(crate) fn scan<T: ScanOps>(
+    device: &Device,
+    func: &'static str,
+    input: u64,
+    output: u64,
+    len: Extent,
+    inclusive: bool,
+) -> Result<()> {
+    with_backend!(device, b => b.scan::<T>(func, input, output, len, inclusive))
+}
+
+/// A reduction on `device`'s backend; see [`Backend::reduce`].
+pub(crate) fn reduce<T: ScanOps>(
+    device: &Device,
+    func: &'static str,
+    input: u64,
+    out: u64,
+    len: Extent,
+    op: ReduceOp,
+) -> Result<()> {
+    with_backend!(device, b => b.reduce::<T>(func, input, out, len, op))
+}
+
+/// A radix sort on `device`'s backend; see [`Backend::radix_sort_pairs`].
+pub(crate) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
+    device: &Device,
+    func: &'static str,
+    keys: u64,
+    values: u64,
+    len: Extent,
+    key_bits: u32,
+) -> Result<()> {
+    with_backend!(device, b => b.radix_sort_pairs::<K, V>(func, keys, values, len, key_bits))
+}
+
+/// A stream compaction on `device`'s backend; see [`Backend::compact`].
+pub(crate) fn compact<T: bytemuck::Pod + Send + Sync>(
+    device: &Device,
+    func: &'static str,
+    arrays: [u64; 4],
+    len: Extent,
+) -> Result<()> {
+    with_backend!(device, b => b.compact::<T>(func, arrays, len))
 }
 
 /// `bytes` of zeroed memory on `device`, aligned to at least `align`.

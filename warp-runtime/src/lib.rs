@@ -14,6 +14,7 @@
 //! - The backends: `cpu/` and [`cuda`], each implementing the crate-private `Backend` and
 //!   `Buffer` traits (`backend.rs`); `dispatch.rs` picks a device's backend and is the only
 //!   place that names them all.
+//! - [`primitives`]: scan, reductions, radix sort and stream compaction on arrays.
 //! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
 //!
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
@@ -34,6 +35,7 @@ pub mod kernel;
 pub mod launch;
 pub mod objects;
 mod params;
+pub mod primitives;
 pub mod tape;
 
 // The CUDA backend's public modules, at the paths they had before they moved into `cuda/`.
@@ -62,6 +64,10 @@ pub use launch::{launch, synchronize, Dim};
 pub use objects::HashGrid;
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
+pub use primitives::{
+    array_max, array_max_n, array_min, array_min_n, array_scan, array_scan_n, array_sum,
+    array_sum_n, compact, compact_n, radix_sort_pairs, Count,
+};
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
 pub use tape::{copy, Recording, Seed, Tape};

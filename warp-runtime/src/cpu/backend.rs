@@ -2,10 +2,13 @@
 
 use super::executor;
 use super::memory::HostBuffer;
+use super::primitives;
 use crate::backend::Backend;
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
+use crate::primitives::plan::ReduceOp;
 use warp_core::{AdStack, Grid};
 
 /// The CPU as a backend, for one launch or array operation on `device`.
@@ -52,6 +55,48 @@ impl Backend for Cpu<'_> {
     fn synchronize(&self) -> Result<()> {
         // Launches have finished and reported their faults when `launch` returned.
         Ok(())
+    }
+
+    fn scan<T: ScanOps>(
+        &self,
+        func: &'static str,
+        input: u64,
+        output: u64,
+        len: Extent,
+        inclusive: bool,
+    ) -> Result<()> {
+        primitives::scan::<T>(func, input, output, len, inclusive)
+    }
+
+    fn reduce<T: ScanOps>(
+        &self,
+        func: &'static str,
+        input: u64,
+        out: u64,
+        len: Extent,
+        op: ReduceOp,
+    ) -> Result<()> {
+        primitives::reduce::<T>(func, input, out, len, op)
+    }
+
+    fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
+        &self,
+        func: &'static str,
+        keys: u64,
+        values: u64,
+        len: Extent,
+        key_bits: u32,
+    ) -> Result<()> {
+        primitives::radix_sort_pairs::<K, V>(func, keys, values, len, key_bits)
+    }
+
+    fn compact<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        func: &'static str,
+        arrays: [u64; 4],
+        len: Extent,
+    ) -> Result<()> {
+        primitives::compact::<T>(func, arrays, len)
     }
 
     fn synchronize_all() -> Result<()> {

@@ -2,11 +2,13 @@
 
 use super::memory::CudaBuffer;
 use super::stream::Stream;
-use super::{gpu, launch};
+use super::{gpu, launch, primitives};
 use crate::backend::Backend;
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel};
+use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
+use crate::primitives::plan::ReduceOp;
 use warp_core::Grid;
 
 /// A CUDA GPU as a backend, for one launch or array operation on `device`.
@@ -68,6 +70,64 @@ impl Backend for Cuda<'_> {
 
     fn synchronize(&self) -> Result<()> {
         gpu::synchronize(self.device, self.ordinal)
+    }
+
+    fn scan<T: ScanOps>(
+        &self,
+        func: &'static str,
+        input: u64,
+        output: u64,
+        len: Extent,
+        inclusive: bool,
+    ) -> Result<()> {
+        primitives::scan::<T>(
+            self.device,
+            self.ordinal,
+            func,
+            input,
+            output,
+            len,
+            inclusive,
+        )
+    }
+
+    fn reduce<T: ScanOps>(
+        &self,
+        func: &'static str,
+        input: u64,
+        out: u64,
+        len: Extent,
+        op: ReduceOp,
+    ) -> Result<()> {
+        primitives::reduce::<T>(self.device, self.ordinal, func, input, out, len, op)
+    }
+
+    fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
+        &self,
+        func: &'static str,
+        keys: u64,
+        values: u64,
+        len: Extent,
+        key_bits: u32,
+    ) -> Result<()> {
+        primitives::radix_sort_pairs::<K>(
+            self.device,
+            self.ordinal,
+            func,
+            keys,
+            values,
+            len,
+            key_bits,
+        )
+    }
+
+    fn compact<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        func: &'static str,
+        arrays: [u64; 4],
+        len: Extent,
+    ) -> Result<()> {
+        primitives::compact::<T>(self.device, self.ordinal, func, arrays, len)
     }
 
     fn synchronize_all() -> Result<()> {

@@ -7,6 +7,7 @@
 //!   and the per-GPU cache of loaded kernels with what compiling them cost.
 //! - `gpu`: per-GPU state, the stream ordering model and the fault record.
 //! - `launch`: a launch's parameter block and `cuLaunchKernel`.
+//! - `primitives`: the launch plans of the parallel primitives (`wp_primitives.h`), run.
 //! - `memory`: GPU memory for arrays. `stream`, `pinned`: the public streams, events and
 //!   pinned host memory.
 //! - `backend`: `Cuda`, the backend (see the crate's `backend.rs`) that the runtime
@@ -30,6 +31,8 @@ mod module;
 mod options;
 #[cfg(feature = "cuda")]
 pub mod pinned;
+#[cfg(feature = "cuda")]
+pub(crate) mod primitives;
 #[cfg(feature = "cuda")]
 pub mod stream;
 

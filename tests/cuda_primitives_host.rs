@@ -1,0 +1,791 @@
+//! The CUDA primitives, checked without a GPU: the launch plans the runtime runs on a GPU
+//! (`wp::primitives::plan`) are run over the same kernel source (`wp_primitives.h`, one
+//! module as the runtime hands it to NVRTC), compiled with g++ under a block emulator
+//! (`warp-cuda/cuda/tests/wp_prim_emu.h`: a block's threads are host threads, `__syncthreads`
+//! a barrier, blocks one after another), and the results are compared with serial
+//! references.
+//!
+//! The kernels are compiled for small tiles (64 threads x 2 elements, and 16 x 3) so that
+//! small inputs already span many blocks and the one-block "spine" loops over several tiles
+//! of block totals. Scratch buffers start filled with 0xCD bytes, so a kernel that read
+//! scratch before writing it would show. What this cannot check is what only hardware does:
+//! NVRTC's acceptance of the source, warp scheduling and memory ordering on the GPU (the
+//! backend suite's `primitives` tests do that on a GPU).
+//!
+//! Skipped, saying so, without g++.
+
+use std::collections::HashMap;
+use std::process::Command;
+use std::sync::{Arc, Mutex, OnceLock};
+use warp_lang as wp;
+use wp::primitives::plan::{self, Len, Module, Plan, ReduceOp, Tile};
+use wp::primitives::SortKey;
+
+/// 64 threads, like the GPU's 256 an even power of two: the block scan's double buffer ends
+/// in the same half.
+const TILE: Tile = Tile {
+    threads: 64,
+    items: 2,
+};
+/// The smallest block the sort allows (one thread per digit) and a tile that is not a power
+/// of two.
+const ODD_TILE: Tile = Tile {
+    threads: 16,
+    items: 3,
+};
+
+fn have_gpp() -> bool {
+    static HAVE: OnceLock<bool> = OnceLock::new();
+    *HAVE.get_or_init(|| {
+        let ok = Command::new("g++").arg("--version").output().is_ok();
+        if !ok {
+            eprintln!("SKIPPED cuda_primitives_host: no g++ on this machine");
+        }
+        ok
+    })
+}
+
+/// The host executable of `module` compiled for `tile` (built once per process).
+fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
+    // One slot per (module, tile): the first test to need it compiles it, others wait.
+    type Slot = Arc<Mutex<Option<Arc<std::path::PathBuf>>>>;
+    type Built = Mutex<HashMap<(String, u32, u32), Slot>>;
+    static BUILT: OnceLock<Built> = OnceLock::new();
+    let slot = BUILT
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap()
+        .entry((module.name(), tile.threads, tile.items))
+        .or_default()
+        .clone();
+    let mut slot = slot.lock().unwrap();
+    if let Some(exe) = slot.as_ref() {
+        return exe.clone();
+    }
+    let dir = std::env::temp_dir().join(format!(
+        "wp_prims_{}_{}x{}_{}",
+        module.name(),
+        tile.threads,
+        tile.items,
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cpp = dir.join("module.cpp");
+    std::fs::write(
+        &cpp,
+        format!(
+            "#include \"wp_prim_emu.h\"\n{}#include \"wp_prim_driver.h\"\n",
+            module.source()
+        ),
+    )
+    .unwrap();
+    let cuda = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let exe = dir.join("module");
+    let defines: Vec<String> = tile
+        .defines()
+        .iter()
+        .map(|(k, v)| format!("-D{k}={v}"))
+        .collect();
+    let out = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-pthread",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+        ])
+        .args(&defines)
+        .args(["-I", cuda, "-I", &format!("{cuda}/tests")])
+        .arg(&cpp)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "g++ failed on {}:\n{}",
+        cpp.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let exe = Arc::new(exe);
+    *slot = Some(exe.clone());
+    exe
+}
+
+/// One run of a plan: the caller's buffers before, and after.
+struct Case {
+    plan: Plan,
+    users: Vec<Vec<u8>>,
+}
+
+struct Ran {
+    users: Vec<Vec<u8>>,
+    /// `(kind, arg, index[0], shape[0])` of a recorded fault.
+    fault: Option<(i32, i32, i64, i64)>,
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn unhex(s: &str) -> Vec<u8> {
+    (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+        .collect()
+}
+
+/// Runs the cases (all of one module) in one process of the host build.
+fn run(tile: Tile, cases: &[Case]) -> Vec<Ran> {
+    let module = &cases[0].plan.module;
+    assert!(cases.iter().all(|c| &c.plan.module == module));
+    let exe = executable(module, tile);
+    let mut script = String::new();
+    for c in cases {
+        let u = c.users.len();
+        for (k, data) in c.users.iter().enumerate() {
+            script += &format!("buf {k} {}\n", data.len());
+            if !data.is_empty() {
+                script += &format!("data {k} {}\n", hex(data));
+            }
+        }
+        for (k, &bytes) in c.plan.scratch.iter().enumerate() {
+            script += &format!("buf {} {bytes}\n", u + k);
+        }
+        for s in &c.plan.steps {
+            script += &format!("launch {} {}", s.entry, s.blocks);
+            let mut words: Vec<String> = s
+                .args
+                .iter()
+                .map(|w| match *w {
+                    plan::Word::Addr(plan::Buf::User(k), off) => format!("a{k}+{off}"),
+                    plan::Word::Addr(plan::Buf::Scratch(k), off) => format!("a{}+{off}", u + k),
+                    plan::Word::Null => "null".into(),
+                    plan::Word::Int(v) => format!("i{v}"),
+                    plan::Word::Fault => "fault".into(),
+                    plan::Word::FaultFlag => "flag".into(),
+                })
+                .collect();
+            words.resize(16, "i0".into());
+            script += &format!(" {}\n", words.join(" "));
+        }
+        for k in 0..u {
+            script += &format!("dump {k}\n");
+        }
+        script += "check\nreset\n";
+    }
+    let path = exe.with_file_name(format!("script_{:?}.txt", std::thread::current().id()));
+    std::fs::write(&path, script).unwrap();
+    let out = Command::new(exe.as_path()).arg(&path).output().unwrap();
+    assert!(
+        out.status.success(),
+        "host run of {} failed: {}",
+        module.name(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut lines = text.lines();
+    cases
+        .iter()
+        .map(|c| {
+            let users = (0..c.users.len())
+                .map(|k| {
+                    let l = lines.next().expect("a dump line");
+                    let mut parts = l.split(' ');
+                    assert_eq!(parts.next(), Some("dump"));
+                    assert_eq!(parts.next(), Some(k.to_string().as_str()));
+                    unhex(parts.next().unwrap_or(""))
+                })
+                .collect();
+            let l = lines.next().expect("a check line");
+            let fault = if l == "nofault" {
+                None
+            } else {
+                let v: Vec<i64> = l.split(' ').skip(1).map(|x| x.parse().unwrap()).collect();
+                Some((v[0] as i32, v[1] as i32, v[2], v[3]))
+            };
+            Ran { users, fault }
+        })
+        .collect()
+}
+
+/// A small deterministic generator (xorshift64*).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
+
+fn bytes<T: bytemuck::Pod>(v: &[T]) -> Vec<u8> {
+    bytemuck::cast_slice(v).to_vec()
+}
+
+fn typed<T: bytemuck::Pod>(b: &[u8]) -> Vec<T> {
+    b.chunks_exact(std::mem::size_of::<T>())
+        .map(bytemuck::pod_read_unaligned)
+        .collect()
+}
+
+/// Sizes around the tile boundaries, and one whose block totals need several spine tiles.
+fn sizes(tile: Tile) -> Vec<usize> {
+    let t = tile.elements() as usize;
+    vec![0, 1, 2, 7, t - 1, t, t + 1, 3 * t + 5, t * (t + 2) + 3]
+}
+
+// ------------------------------------------------------------------------------------------
+// Scan and reductions
+// ------------------------------------------------------------------------------------------
+
+/// What the scan and reduction tests need of an element type.
+trait Elem: bytemuck::Pod + PartialEq + std::fmt::Debug + wp::primitives::ScanElement {
+    /// Small integer-valued data (exact in any summation order) from a random word.
+    fn small(r: u64) -> Self;
+}
+macro_rules! elem {
+    ($($t:ty),*) => {$(
+        impl Elem for $t {
+            fn small(r: u64) -> Self {
+                (r % 200) as $t - 100 as $t
+            }
+        }
+    )*};
+}
+elem!(i32, i64, f32, f64);
+impl Elem for u32 {
+    // Large values, so that sums wrap.
+    fn small(r: u64) -> Self {
+        (r as u32) | 0x8000_0000
+    }
+}
+impl Elem for u64 {
+    fn small(r: u64) -> Self {
+        r | (1 << 63)
+    }
+}
+
+fn serial_scan<T: Elem>(x: &[T], inclusive: bool) -> Vec<T> {
+    let mut acc = T::ZERO;
+    x.iter()
+        .map(|&v| {
+            let before = acc;
+            acc = acc.add(v);
+            if inclusive {
+                acc
+            } else {
+                before
+            }
+        })
+        .collect()
+}
+
+fn scan_cases<T: Elem>(tile: Tile) {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ T::CUDA.len() as u64);
+    let size = std::mem::size_of::<T>() as u64;
+    let mut cases = Vec::new();
+    let mut want = Vec::new();
+    for &n in &sizes(tile) {
+        for inclusive in [false, true] {
+            let x: Vec<T> = (0..n).map(|_| T::small(rng.next())).collect();
+            let out0: Vec<T> = (0..n + 3).map(|_| T::small(rng.next())).collect();
+            // Host length, into a longer output (its tail stays).
+            cases.push(Case {
+                plan: plan::scan(tile, T::CUDA, size, Len::Host(n as u64), inclusive),
+                users: vec![bytes(&x), bytes(&out0)],
+            });
+            let mut w = out0.clone();
+            w[..n].copy_from_slice(&serial_scan(&x, inclusive));
+            want.push((w, format!("n {n} inclusive {inclusive}")));
+            // In place, with the count on the device (at most the capacity).
+            let count = rng.below(n as u64 + 1) as usize;
+            let len = Len::Device {
+                count: 2,
+                capacity: n as u64,
+                arg: 2,
+            };
+            cases.push(Case {
+                plan: plan::scan(tile, T::CUDA, size, len, inclusive),
+                users: vec![bytes(&x), bytes(&x), bytes(&[count as i32])],
+            });
+            let mut w = x.clone();
+            w[..count].copy_from_slice(&serial_scan(&x[..count], inclusive));
+            want.push((w, format!("in place, n {n}, device count {count}")));
+        }
+    }
+    let ran = run(tile, &cases);
+    for (k, (r, (w, what))) in ran.iter().zip(&want).enumerate() {
+        assert_eq!(r.fault, None, "{} {what}", T::CUDA);
+        // Case 2k writes user 1; case 2k+1 in place writes user 1 too (same data).
+        let got: Vec<T> = typed(&r.users[1]);
+        assert_eq!(&got, w, "{} scan, {what} (case {k})", T::CUDA);
+    }
+}
+
+#[test]
+fn scan_i32() {
+    scan_cases::<i32>(TILE);
+}
+#[test]
+fn scan_u32_wraps() {
+    scan_cases::<u32>(TILE);
+}
+#[test]
+fn scan_i64() {
+    scan_cases::<i64>(TILE);
+}
+#[test]
+fn scan_u64_wraps() {
+    scan_cases::<u64>(TILE);
+}
+#[test]
+fn scan_f32() {
+    scan_cases::<f32>(TILE);
+}
+#[test]
+fn scan_f64() {
+    scan_cases::<f64>(TILE);
+}
+#[test]
+fn scan_odd_tile() {
+    scan_cases::<i32>(ODD_TILE);
+}
+
+/// Float scans of fractional data: within the bound of any summation order,
+/// `|error| <= 2 k eps sum |x|` for the k-th prefix.
+#[test]
+fn scan_f32_fractional_within_rounding() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(7);
+    let n = 3000;
+    let x: Vec<f32> = (0..n)
+        .map(|_| (rng.below(2_000_001) as f32 - 1e6) * 1e-6)
+        .collect();
+    let ran = run(
+        TILE,
+        &[Case {
+            plan: plan::scan(TILE, "f32", 4, Len::Host(n as u64), true),
+            users: vec![bytes(&x), bytes(&vec![0f32; n])],
+        }],
+    );
+    let got: Vec<f32> = typed(&ran[0].users[1]);
+    let (mut acc, mut abs) = (0f64, 0f64);
+    for (k, (&g, &v)) in got.iter().zip(&x).enumerate() {
+        acc += v as f64;
+        abs += v.abs() as f64;
+        let bound = 2.0 * (k + 1) as f64 * f32::EPSILON as f64 * abs;
+        assert!((g as f64 - acc).abs() <= bound, "k {k}: {g} vs {acc}");
+    }
+}
+
+fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x1234_5678 ^ T::CUDA.len() as u64);
+    let size = std::mem::size_of::<T>() as u64;
+    let mut inputs: Vec<Vec<T>> = sizes(TILE)
+        .into_iter()
+        .map(|n| (0..n).map(|_| T::small(rng.next())).collect())
+        .collect();
+    inputs.extend(extra.iter().cloned());
+    let mut cases = Vec::new();
+    let mut want = Vec::new();
+    for x in &inputs {
+        for op in [ReduceOp::Sum, ReduceOp::Min, ReduceOp::Max] {
+            let (id, f): (T, fn(T, T) -> T) = match op {
+                ReduceOp::Sum => (T::ZERO, T::add),
+                ReduceOp::Min => (T::MIN_IDENTITY, T::min_of),
+                ReduceOp::Max => (T::MAX_IDENTITY, T::max_of),
+            };
+            cases.push(Case {
+                plan: plan::reduce(TILE, T::CUDA, size, op, Len::Host(x.len() as u64)),
+                users: vec![bytes(x), bytes(&[T::small(1)])],
+            });
+            want.push((x.iter().fold(id, |a, &v| f(a, v)), x.len(), op));
+            // The first half, counted on the device.
+            let count = x.len() / 2;
+            let len = Len::Device {
+                count: 2,
+                capacity: x.len() as u64,
+                arg: 2,
+            };
+            cases.push(Case {
+                plan: plan::reduce(TILE, T::CUDA, size, op, len),
+                users: vec![bytes(x), bytes(&[T::small(1)]), bytes(&[count as i32])],
+            });
+            want.push((x[..count].iter().fold(id, |a, &v| f(a, v)), count, op));
+        }
+    }
+    for (r, (w, n, op)) in run(TILE, &cases).iter().zip(&want) {
+        let got: Vec<T> = typed(&r.users[1]);
+        // Bit patterns: NaN-free results must match exactly, signed zeros included.
+        assert_eq!(
+            bytes(&got),
+            bytes(&[*w]),
+            "{} {op:?} of {n}: {got:?} vs {w:?}",
+            T::CUDA
+        );
+    }
+}
+
+#[test]
+fn reductions_int() {
+    reduce_cases::<i32>(&[vec![i32::MIN, i32::MAX, -1, 5]]);
+    reduce_cases::<u32>(&[]);
+    reduce_cases::<i64>(&[vec![i64::MIN, 3]]);
+    reduce_cases::<u64>(&[]);
+}
+
+#[test]
+fn reductions_float_ignore_nan() {
+    let nan = f32::NAN;
+    reduce_cases::<f32>(&[
+        vec![nan, 3.0, -2.0, nan, f32::INFINITY],
+        vec![nan; 300],
+        (0..500)
+            .map(|i| if i % 7 == 0 { nan } else { i as f32 })
+            .collect(),
+    ]);
+    reduce_cases::<f64>(&[vec![f64::NAN, -1e300, f64::NEG_INFINITY, 7.0]]);
+}
+
+// ------------------------------------------------------------------------------------------
+// Radix sort
+// ------------------------------------------------------------------------------------------
+
+/// The serial reference: a stable sort by the low `bits` bits of the keys' images.
+fn sort_reference<K: SortKey + bytemuck::Pod>(
+    keys: &[K],
+    values: &[u32],
+    bits: u32,
+) -> (Vec<K>, Vec<u32>) {
+    let mask = if bits == 32 {
+        u32::MAX
+    } else {
+        (1 << bits) - 1
+    };
+    let mut pairs: Vec<(K, u32)> = keys.iter().copied().zip(values.iter().copied()).collect();
+    pairs.sort_by_key(|(k, _)| k.to_radix() & mask);
+    pairs.into_iter().unzip()
+}
+
+fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
+    tile: Tile,
+    key_bits: &[u32],
+    gen: impl Fn(&mut Rng) -> K,
+    extra: &[Vec<K>],
+) {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0xdead_beef ^ K::CUDA.len() as u64);
+    let mut inputs: Vec<Vec<K>> = sizes(tile)
+        .into_iter()
+        .map(|n| (0..n).map(|_| gen(&mut rng)).collect())
+        .collect();
+    inputs.extend(extra.iter().cloned());
+    let mut cases = Vec::new();
+    let mut want = Vec::new();
+    for keys in &inputs {
+        let n = keys.len();
+        for &bits in key_bits {
+            // Values: the original positions, so stability shows.
+            let values: Vec<u32> = (0..n as u32).collect();
+            // Host count of all but the last few (the tail stays put).
+            let count = n - n.min(3);
+            cases.push(Case {
+                plan: plan::sort(tile, K::CUDA, bits, Len::Host(count as u64)),
+                users: vec![bytes(keys), bytes(&values)],
+            });
+            let (mut wk, mut wv) = sort_reference(&keys[..count], &values[..count], bits);
+            wk.extend_from_slice(&keys[count..]);
+            wv.extend_from_slice(&values[count..]);
+            want.push((wk, wv, format!("n {n} count {count} bits {bits}")));
+            // A count on the device.
+            let count = rng.below(n as u64 + 1) as usize;
+            let len = Len::Device {
+                count: 2,
+                capacity: n as u64,
+                arg: 2,
+            };
+            cases.push(Case {
+                plan: plan::sort(tile, K::CUDA, bits, len),
+                users: vec![bytes(keys), bytes(&values), bytes(&[count as i32])],
+            });
+            let (mut wk, mut wv) = sort_reference(&keys[..count], &values[..count], bits);
+            wk.extend_from_slice(&keys[count..]);
+            wv.extend_from_slice(&values[count..]);
+            want.push((wk, wv, format!("n {n} device count {count} bits {bits}")));
+        }
+    }
+    for (r, (wk, wv, what)) in run(tile, &cases).iter().zip(&want) {
+        assert_eq!(r.fault, None, "{what}");
+        let gk: Vec<K> = typed(&r.users[0]);
+        let gv: Vec<u32> = typed(&r.users[1]);
+        assert_eq!(bytes(&gk), bytes(wk), "{} keys, {what}: {gk:?}", K::CUDA);
+        assert_eq!(&gv, wv, "{} values, {what}", K::CUDA);
+    }
+}
+
+#[test]
+fn sort_u32_with_duplicates_and_key_bits() {
+    // Few distinct keys: long runs of equal keys test stability.
+    sort_cases::<u32>(
+        TILE,
+        &[32, 5, 9, 1],
+        |r| (r.below(37) as u32) * 0x0101_0101,
+        &[],
+    );
+    sort_cases::<u32>(
+        TILE,
+        &[32],
+        |r| r.next() as u32,
+        &[vec![u32::MAX, 0, u32::MAX, 1]],
+    );
+}
+
+#[test]
+fn sort_i32_negative() {
+    sort_cases::<i32>(
+        TILE,
+        &[32, 12],
+        |r| r.below(2001) as i32 - 1000,
+        &[vec![i32::MIN, i32::MAX, -1, 0, 1, i32::MIN, -1]],
+    );
+}
+
+#[test]
+fn sort_f32_total_order() {
+    let specials = vec![
+        f32::NAN,
+        -0.0,
+        0.0,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -f32::NAN,
+        1e-45,
+        -1e-45,
+        -0.0,
+        0.0,
+        3.5,
+        -3.5,
+        f32::MAX,
+        f32::MIN,
+    ];
+    sort_cases::<f32>(
+        TILE,
+        &[32],
+        |r| (r.below(41) as f32 - 20.0) * 0.25,
+        &[specials],
+    );
+}
+
+#[test]
+fn sort_odd_tile() {
+    sort_cases::<u32>(ODD_TILE, &[32, 7], |r| r.below(1000) as u32, &[]);
+}
+
+// ------------------------------------------------------------------------------------------
+// Compaction
+// ------------------------------------------------------------------------------------------
+
+fn compact_cases(word: u32, words: u32) {
+    if !have_gpp() {
+        return;
+    }
+    let size = (word * words) as usize;
+    let mut rng = Rng(0xc0ffee ^ size as u64);
+    let mut cases = Vec::new();
+    let mut want = Vec::new();
+    for &n in &sizes(TILE) {
+        for density in [0, 1, 2, 4] {
+            let values: Vec<u8> = (0..n * size).map(|_| rng.next() as u8).collect();
+            // density 0: keep nothing; 4: keep everything; else about 1/density... of them.
+            let flags: Vec<i32> = (0..n)
+                .map(|_| match density {
+                    0 => 0,
+                    4 => -7,
+                    d => (rng.below(d) == 0) as i32 * (rng.below(5) as i32 + 1),
+                })
+                .collect();
+            let out0: Vec<u8> = (0..(n + 2) * size).map(|_| rng.next() as u8).collect();
+            for device_count in [false, true] {
+                let (count, len, mut users) = if device_count {
+                    let c = rng.below(n as u64 + 1) as usize;
+                    let len = Len::Device {
+                        count: 4,
+                        capacity: n as u64,
+                        arg: 4,
+                    };
+                    (c, len, vec![bytes(&[c as i32])])
+                } else {
+                    (n, Len::Host(n as u64), vec![])
+                };
+                users.splice(
+                    0..0,
+                    [values.clone(), bytes(&flags), out0.clone(), bytes(&[-5i32])],
+                );
+                cases.push(Case {
+                    plan: plan::compact(TILE, word, words, len),
+                    users,
+                });
+                let mut w = out0.clone();
+                let mut kept = 0;
+                for i in 0..count {
+                    if flags[i] != 0 {
+                        w[kept * size..(kept + 1) * size]
+                            .copy_from_slice(&values[i * size..(i + 1) * size]);
+                        kept += 1;
+                    }
+                }
+                want.push((
+                    w,
+                    kept as i32,
+                    format!("n {n} count {count} density {density}"),
+                ));
+            }
+        }
+    }
+    for (r, (w, kept, what)) in run(TILE, &cases).iter().zip(&want) {
+        assert_eq!(r.fault, None, "{what}");
+        assert_eq!(typed::<i32>(&r.users[3]), vec![*kept], "count, {what}");
+        assert_eq!(&r.users[2], w, "{word}x{words} out, {what}");
+    }
+}
+
+#[test]
+fn compact_bytes_halves_vec3_dvec2() {
+    compact_cases(1, 1);
+    compact_cases(2, 1);
+    compact_cases(4, 3);
+    compact_cases(8, 2);
+}
+
+// ------------------------------------------------------------------------------------------
+// Device counts out of range
+// ------------------------------------------------------------------------------------------
+
+/// A device count outside 0..=capacity is one fault (OutOfBounds on the count argument,
+/// index [count], shape [capacity + 1]) and nothing is written.
+#[test]
+fn bad_device_counts_fault_and_write_nothing() {
+    if !have_gpp() {
+        return;
+    }
+    let x: Vec<i32> = (0..300).collect();
+    let out0 = vec![-1i32; 300];
+    for bad in [301, -1, i32::MAX] {
+        let len = Len::Device {
+            count: 2,
+            capacity: 300,
+            arg: 2,
+        };
+        let ran = run(
+            TILE,
+            &[
+                Case {
+                    plan: plan::scan(TILE, "i32", 4, len, true),
+                    users: vec![bytes(&x), bytes(&out0), bytes(&[bad])],
+                },
+                Case {
+                    plan: plan::reduce(TILE, "i32", 4, ReduceOp::Sum, len),
+                    users: vec![bytes(&x), bytes(&[-1i32]), bytes(&[bad])],
+                },
+            ],
+        );
+        assert_eq!(ran[0].fault, Some((1, 2, bad as i64, 301)));
+        assert_eq!(
+            typed::<i32>(&ran[0].users[1]),
+            out0,
+            "scan wrote with count {bad}"
+        );
+        assert_eq!(ran[1].fault, Some((1, 2, bad as i64, 301)));
+        // A reduction of "nothing": the identity (the plan cannot skip writing `out`).
+        assert_eq!(typed::<i32>(&ran[1].users[1]), vec![0]);
+
+        let keys: Vec<u32> = (0..300).rev().collect();
+        let ran = run(
+            TILE,
+            &[Case {
+                plan: plan::sort(TILE, "u32", 32, len),
+                users: vec![bytes(&keys), bytes(&x), bytes(&[bad])],
+            }],
+        );
+        assert_eq!(ran[0].fault, Some((1, 2, bad as i64, 301)));
+        assert_eq!(typed::<u32>(&ran[0].users[0]), keys, "sort moved keys");
+
+        let len = Len::Device {
+            count: 4,
+            capacity: 300,
+            arg: 4,
+        };
+        let ran = run(
+            TILE,
+            &[Case {
+                plan: plan::compact(TILE, 4, 1, len),
+                users: vec![
+                    bytes(&x),
+                    bytes(&vec![1i32; 300]),
+                    bytes(&out0),
+                    bytes(&[-3i32]),
+                    bytes(&[bad]),
+                ],
+            }],
+        );
+        assert_eq!(ran[0].fault, Some((1, 4, bad as i64, 301)));
+        assert_eq!(typed::<i32>(&ran[0].users[2]), out0, "compact wrote");
+        assert_eq!(typed::<i32>(&ran[0].users[3]), vec![0]);
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// NVRTC
+// ------------------------------------------------------------------------------------------
+
+/// Every module the runtime may build compiles with NVRTC for the GPUs of the benchmarks
+/// (sm_90: H100, H200) and an older one (sm_80: A100), with the runtime's options. Needs
+/// only libnvrtc, no GPU; skipped, saying so, without it.
+#[test]
+fn nvrtc_compiles_every_module() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED nvrtc_compiles_every_module: {e}");
+        return;
+    }
+    let mut modules: Vec<Module> = ["i32", "u32", "i64", "u64", "f32", "f64"]
+        .into_iter()
+        .map(Module::Scan)
+        .collect();
+    modules.extend(["u32", "i32", "f32"].into_iter().map(Module::Sort));
+    for word in [1, 2, 4, 8] {
+        for words in [1, 3] {
+            modules.push(Module::Compact { word, words });
+        }
+    }
+    for arch in [90, 80] {
+        for m in &modules {
+            let c = wp::primitives::compile_module(m, arch)
+                .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", m.name()));
+            assert!(!c.cubin.is_empty());
+            assert!(
+                !c.log.contains("warning"),
+                "{} for sm_{arch}: {}",
+                m.name(),
+                c.log
+            );
+        }
+    }
+}

@@ -1,0 +1,335 @@
+//! Runs the primitives' launch plans on a GPU.
+//!
+//! Each plan names one module of `wp_primitives.h` (scan of one element type, sort of one
+//! key type, compaction of one element size). A module is compiled by NVRTC through the
+//! kernel disk cache the first time a GPU needs it, loaded, and kept for the process, like a
+//! kernel. A plan's launches go on the calling thread's current stream (the ordering model of
+//! `gpu.rs`: after the array operations queued before; the scratch arrays are freed on the
+//! default stream after them), with no host synchronisation: counts stay on the device.
+
+use super::backend::Cuda;
+use super::gpu;
+use super::memory::CudaBuffer;
+use crate::backend::{Backend, Buffer};
+use crate::config;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::KernelInfo;
+use crate::primitives::elements::{Extent, ScanOps, SortKeyOps};
+use crate::primitives::plan::{self, Buf, Module, Plan, ReduceOp, Word, GPU_TILE};
+use std::collections::HashMap;
+use std::ffi::c_void;
+use std::sync::{Arc, Mutex, OnceLock};
+use warp_cuda::{CompileOptions, Function};
+
+/// A module loaded on one GPU, with the entries looked up so far.
+struct Loaded {
+    module: warp_cuda::Module,
+    functions: Mutex<HashMap<String, Function>>,
+}
+
+impl Loaded {
+    fn function(&self, device: &Device, name: &str) -> Result<Function> {
+        let mut fns = self.functions.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(f) = fns.get(name) {
+            return Ok(f.clone());
+        }
+        let f = self
+            .module
+            .function(name)
+            .map_err(|e| gpu::err(device, e))?;
+        fns.insert(name.to_string(), f.clone());
+        Ok(f)
+    }
+}
+
+/// The library headers a module needs (handing NVRTC the whole library would only cost
+/// compile time and cache-key hashing).
+fn headers() -> Vec<(&'static str, &'static str)> {
+    warp_cuda::HEADERS
+        .iter()
+        .copied()
+        .filter(|(name, _)| matches!(*name, "wp_core.h" | "wp_primitives.h"))
+        .collect()
+}
+
+/// Calls `f` with the NVRTC options of every primitives module: the GPU tile's defines,
+/// the two headers, FMA contraction as `config::cuda_fmad` says (sums of products do not
+/// occur, so it changes nothing here but keeps one setting for all GPU code).
+pub(crate) fn with_options<R>(f: impl FnOnce(&CompileOptions) -> R) -> R {
+    let defines = GPU_TILE.defines();
+    let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let headers = headers();
+    f(&CompileOptions {
+        fmad: config::cuda_fmad(),
+        line_info: true,
+        defines: &defines,
+        headers: &headers,
+        ..Default::default()
+    })
+}
+
+/// `module` compiled and loaded for GPU `ordinal` (once per process).
+fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded>> {
+    type Cache = Mutex<HashMap<(usize, Module), Arc<Loaded>>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    let key = (ordinal, module.clone());
+    if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+        return Ok(l.clone());
+    }
+    let st = gpu::state(device, ordinal)?;
+    let (compiled, _) = with_options(|opts| {
+        warp_cuda::compile_cached(&module.source(), &module.name(), opts, st.gpu.arch())
+    })
+    .map_err(|e| gpu::err(device, e))?;
+    let m = st
+        .gpu
+        .load_module(&compiled.cubin)
+        .map_err(|e| gpu::err(device, e))?;
+    let l = Arc::new(Loaded {
+        module: m,
+        functions: Mutex::new(HashMap::new()),
+    });
+    cache
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .insert(key, l.clone());
+    Ok(l)
+}
+
+/// The `KernelInfo` a primitive's faults are reported under (its name and parameter names):
+/// one per primitive function, made once.
+fn info(func: &'static str, params: &'static [&'static str]) -> &'static KernelInfo {
+    static INFOS: OnceLock<Mutex<HashMap<&'static str, &'static KernelInfo>>> = OnceLock::new();
+    let mut infos = INFOS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    infos.entry(func).or_insert_with(|| {
+        // A dozen primitives at most: leaked once each, like the macro's statics.
+        Box::leak(Box::new(KernelInfo {
+            name: func,
+            module: "warp_lang::primitives",
+            params,
+            written: &[],
+            tid_indexed: &[],
+            tid_ndim: None,
+            same_shape: &[],
+            file: "",
+            cuda: "",
+            cuda_sections: &[],
+            callees: &[],
+            structs: &[],
+            adjoint_error: None,
+            cuda_adjoint: "",
+            cuda_adjoint_stack: false,
+            cuda_adjoint_error: None,
+            consts: &[],
+        }))
+    })
+}
+
+/// Runs `plan` on GPU `ordinal` (`device`) for primitive `func` (whose parameters, for
+/// fault reports, are `params`); `users` are the device addresses of the caller's arrays in
+/// the plan's order.
+fn run(
+    device: &Device,
+    ordinal: usize,
+    func: &'static str,
+    params: &'static [&'static str],
+    plan: &Plan,
+    users: &[u64],
+) -> Result<()> {
+    let module = loaded(device, ordinal, &plan.module)?;
+    let st = gpu::state(device, ordinal)?;
+    // Scratch: GPU memory like arrays', so its allocation and its free follow the stream
+    // ordering model (allocated on the default stream, which the launches' stream waits for;
+    // freed there after the launches).
+    let backend = Cuda::new(device, ordinal);
+    let scratch = plan
+        .scratch
+        .iter()
+        .map(|&bytes| backend.alloc_zeroed(bytes as usize, 8))
+        .collect::<Result<Vec<CudaBuffer>>>()?;
+    st.set_last(info(func, params));
+    let (fault, flag) = st.fault_record();
+    let word = |w: &Word| -> u64 {
+        match *w {
+            Word::Addr(Buf::User(k), off) => users[k] + off,
+            Word::Addr(Buf::Scratch(k), off) => scratch[k].address() + off,
+            Word::Null => 0,
+            Word::Int(v) => v as u64,
+            Word::Fault => fault,
+            Word::FaultFlag => flag,
+        }
+    };
+    let mut launches = Vec::with_capacity(plan.steps.len());
+    for s in &plan.steps {
+        let blocks = u32::try_from(s.blocks).map_err(|_| {
+            Error::invalid(format!(
+                "{func}: {} blocks of {} elements are more than a grid holds",
+                s.blocks,
+                GPU_TILE.elements()
+            ))
+        })?;
+        let mut args = [0u64; 16];
+        for (a, w) in args.iter_mut().zip(&s.args) {
+            *a = word(w);
+        }
+        launches.push((module.function(device, &s.entry)?, blocks, args));
+    }
+    st.queue(ordinal, None, |stream| {
+        for (f, blocks, args) in &mut launches {
+            let mut params = [args.as_mut_ptr() as *mut c_void];
+            // SAFETY: every entry takes one `wp::prim::args_t` (16 u64 words) by value, which
+            // `params[0]` points at; the words are device addresses of live memory (the
+            // caller's arrays, checked to hold what the plan touches, and the scratch, freed
+            // only after these launches) and integers.
+            unsafe {
+                st.gpu
+                    .launch_raw(f, stream, *blocks, GPU_TILE.threads, 0, &mut params)
+                    .map_err(|e| gpu::err(device, e))?;
+            }
+        }
+        Ok(())
+    })?;
+    // The frees queue on the default stream after the launches (`CudaBuffer::drop`).
+    drop(scratch);
+    if config::debug() {
+        gpu::synchronize(device, ordinal)?;
+    }
+    Ok(())
+}
+
+/// The plan's length; a device count's address is appended to `users`. `arg` is the index
+/// of `count` in the primitive's parameters (named by its faults).
+fn plan_len(len: Extent, users: &mut Vec<u64>, arg: i64) -> plan::Len {
+    match len {
+        Extent::Host(n) => plan::Len::Host(n as u64),
+        Extent::Device {
+            count, capacity, ..
+        } => {
+            users.push(count);
+            plan::Len::Device {
+                count: users.len() - 1,
+                capacity: capacity as u64,
+                arg,
+            }
+        }
+    }
+}
+
+/// `array_scan_n` on a GPU.
+pub(super) fn scan<T: ScanOps>(
+    device: &Device,
+    ordinal: usize,
+    func: &'static str,
+    input: u64,
+    output: u64,
+    len: Extent,
+    inclusive: bool,
+) -> Result<()> {
+    let mut users = vec![input, output];
+    let len = plan_len(len, &mut users, 2);
+    let size = std::mem::size_of::<T>() as u64;
+    let p = plan::scan(GPU_TILE, T::CUDA, size, len, inclusive);
+    let params = &["input", "output", "count"];
+    run(device, ordinal, func, params, &p, &users)
+}
+
+/// `array_sum_n` and friends on a GPU.
+pub(super) fn reduce<T: ScanOps>(
+    device: &Device,
+    ordinal: usize,
+    func: &'static str,
+    input: u64,
+    out: u64,
+    len: Extent,
+    op: ReduceOp,
+) -> Result<()> {
+    let mut users = vec![input, out];
+    let len = plan_len(len, &mut users, 2);
+    let size = std::mem::size_of::<T>() as u64;
+    let p = plan::reduce(GPU_TILE, T::CUDA, size, op, len);
+    run(
+        device,
+        ordinal,
+        func,
+        &["values", "out", "count"],
+        &p,
+        &users,
+    )
+}
+
+/// `radix_sort_pairs` on a GPU (values of every `SortValueOps` type move as 32-bit words).
+pub(super) fn radix_sort_pairs<K: SortKeyOps>(
+    device: &Device,
+    ordinal: usize,
+    func: &'static str,
+    keys: u64,
+    values: u64,
+    len: Extent,
+    key_bits: u32,
+) -> Result<()> {
+    let mut users = vec![keys, values];
+    let len = plan_len(len, &mut users, 2);
+    let p = plan::sort(GPU_TILE, K::CUDA, key_bits, len);
+    run(
+        device,
+        ordinal,
+        func,
+        &["keys", "values", "count"],
+        &p,
+        &users,
+    )
+}
+
+/// `compact_n` on a GPU: `arrays` are values, flags, out, out_count.
+pub(super) fn compact<T: bytemuck::Pod>(
+    device: &Device,
+    ordinal: usize,
+    func: &'static str,
+    arrays: [u64; 4],
+    len: Extent,
+) -> Result<()> {
+    let mut users = arrays.to_vec();
+    let len = plan_len(len, &mut users, 4);
+    let (word, words) = blob_words::<T>();
+    let p = plan::compact(GPU_TILE, word, words, len);
+    let params = &["values", "flags", "out", "out_count", "count"];
+    run(device, ordinal, func, params, &p, &users)
+}
+
+/// How a GPU moves an element of compaction: `words` words of `word` bytes (the widest word
+/// that divides the element's size and alignment).
+fn blob_words<T>() -> (u32, u32) {
+    let (size, align) = (std::mem::size_of::<T>(), std::mem::align_of::<T>());
+    let word = [8, 4, 2, 1]
+        .into_iter()
+        .find(|&w| size % w == 0 && align >= w)
+        .unwrap_or(1);
+    (word as u32, (size / word) as u32)
+}
+
+/// Compiles a module of the primitives with NVRTC for `sm_{arch}`, with the options the
+/// runtime uses (no GPU needed, only libnvrtc): how the tests check that NVRTC accepts every
+/// module on machines without a GPU.
+pub fn compile_module(module: &Module, arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
+    with_options(|opts| warp_cuda::compile(&module.source(), &module.name(), opts, arch))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::blob_words;
+    use glam::{DVec3, Vec3};
+
+    #[test]
+    fn blobs_use_the_widest_word() {
+        assert_eq!(blob_words::<u8>(), (1, 1));
+        assert_eq!(blob_words::<warp_core::f16>(), (2, 1));
+        assert_eq!(blob_words::<Vec3>(), (4, 3));
+        assert_eq!(blob_words::<DVec3>(), (8, 3));
+        assert_eq!(blob_words::<f64>(), (8, 1));
+    }
+}

@@ -1,0 +1,510 @@
+//! Launch plans of the CUDA primitives: which kernels of `wp_primitives.h` run, in which
+//! order, over how many blocks, with which buffers.
+//!
+//! A plan is plain data computed from the sizes alone (never from array contents, which stay
+//! on the GPU). The CUDA executor (`cuda.rs`) runs it on a stream; the host test
+//! (`tests/cuda_primitives_host.rs`) runs the very same plan over the same kernel source
+//! compiled by g++ under a block emulator. So the orchestration tested on the host is the one
+//! the GPU runs, and only the NVRTC compile and the hardware are left to the GPU tests.
+
+/// The block shape the kernels are compiled for (`WP_PRIM_THREADS`, `WP_PRIM_ITEMS`): a block
+/// handles a tile of `threads * items` elements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tile {
+    /// Threads per block (a power of two, at least 16: one per radix digit).
+    pub threads: u32,
+    /// Consecutive elements per thread.
+    pub items: u32,
+}
+
+impl Tile {
+    /// Elements per block.
+    pub fn elements(self) -> u64 {
+        self.threads as u64 * self.items as u64
+    }
+
+    /// Blocks covering `n` elements; at least one, so that a device count is always checked.
+    pub fn blocks(self, n: u64) -> u64 {
+        n.div_ceil(self.elements()).max(1)
+    }
+
+    /// The preprocessor definitions that compile the kernels for this shape.
+    pub fn defines(self) -> [(&'static str, String); 2] {
+        [
+            ("WP_PRIM_THREADS", self.threads.to_string()),
+            ("WP_PRIM_ITEMS", self.items.to_string()),
+        ]
+    }
+}
+
+/// The shape the runtime compiles for GPUs: 256 threads of 8 elements (tiles of 2048).
+pub const GPU_TILE: Tile = Tile {
+    threads: 256,
+    items: 8,
+};
+
+/// Bits sorted per radix pass on the GPU (`RADIX_BITS` in `wp_primitives.h`).
+pub const RADIX_BITS: u32 = 4;
+const RADIX: u64 = 1 << RADIX_BITS;
+
+/// A buffer a plan uses: one of the caller's arrays (by position in the primitive's list) or
+/// scratch memory the executor allocates for the call.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Buf {
+    /// The caller's array number `k` (each primitive documents its order).
+    User(usize),
+    /// Scratch buffer number `k` of [`Plan::scratch`].
+    Scratch(usize),
+}
+
+/// One 64-bit word of a kernel's `args_t`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Word {
+    /// The address of a buffer (plus a byte offset).
+    Addr(Buf, u64),
+    /// A null pointer (no device count).
+    Null,
+    /// An integer.
+    Int(i64),
+    /// The address of the device's fault record (`wp::fault_t`).
+    Fault,
+    /// The address of the fault record's flag.
+    FaultFlag,
+}
+
+/// One kernel launch: `blocks` blocks of the tile's threads, no dynamic shared memory.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Step {
+    /// The entry point (`extern "C"` name).
+    pub entry: String,
+    /// Grid size.
+    pub blocks: u64,
+    /// The kernel's argument words (unused words are zero).
+    pub args: Vec<Word>,
+}
+
+/// Which module of `wp_primitives.h` a plan needs (each is compiled once per GPU and cached).
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Module {
+    /// Scan and reductions of one element type (its C++ name: `i32`, `f64`, ...).
+    Scan(&'static str),
+    /// Radix sort with one key type (`u32`, `i32`, `f32`).
+    Sort(&'static str),
+    /// Compaction of elements of `words` words of `word` bytes.
+    Compact {
+        /// Bytes per word: 1, 2, 4 or 8.
+        word: u32,
+        /// Words per element.
+        words: u32,
+    },
+}
+
+impl Module {
+    /// A name unique to the module (cache key and NVRTC program name).
+    pub fn name(&self) -> String {
+        match self {
+            Module::Scan(t) => format!("wp_prim_scan_{t}"),
+            Module::Sort(k) => format!("wp_prim_sort_{k}"),
+            Module::Compact { word, words } => format!("wp_prim_compact_{word}x{words}"),
+        }
+    }
+
+    /// The module's translation unit: the library header and the entry macro.
+    pub fn source(&self) -> String {
+        let entries = match self {
+            Module::Scan(t) => format!("WP_PRIM_SCAN_MODULE({t})"),
+            Module::Sort(k) => format!("WP_PRIM_SORT_MODULE({k})"),
+            Module::Compact { word, words } => {
+                let w = match word {
+                    1 => "u8",
+                    2 => "u16",
+                    4 => "u32",
+                    _ => "u64",
+                };
+                format!("WP_PRIM_COMPACT_MODULE({w}, {words})")
+            }
+        };
+        format!("#include \"wp_primitives.h\"\n{entries}\n")
+    }
+}
+
+/// A primitive's launches.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Plan {
+    /// The module holding every entry the steps name.
+    pub module: Module,
+    /// Sizes in bytes of the scratch buffers (`Buf::Scratch(k)`); their contents start
+    /// unspecified: every plan writes scratch before reading it.
+    pub scratch: Vec<u64>,
+    /// The launches, in stream order.
+    pub steps: Vec<Step>,
+}
+
+/// How a primitive's length is given: a host value, or a 1-element i32 array on the device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Len {
+    /// Exactly this many elements.
+    Host(u64),
+    /// Read on the device from the caller's array `count` (a `Buf::User`), at most
+    /// `capacity`; `arg` is the parameter index faults name.
+    Device {
+        /// The count array's position in the caller's list.
+        count: usize,
+        /// The most elements the arrays hold.
+        capacity: u64,
+        /// The parameter index of `count` in the primitive's fault reports.
+        arg: i64,
+    },
+}
+
+impl Len {
+    /// The most elements the kernels may touch (grid sizes follow from it).
+    fn capacity(self) -> u64 {
+        match self {
+            Len::Host(n) => n,
+            Len::Device { capacity, .. } => capacity,
+        }
+    }
+
+    /// The count word and capacity word of a kernel's arguments.
+    fn words(self) -> [Word; 2] {
+        match self {
+            Len::Host(n) => [Word::Null, Word::Int(n as i64)],
+            Len::Device {
+                count, capacity, ..
+            } => [Word::Addr(Buf::User(count), 0), Word::Int(capacity as i64)],
+        }
+    }
+
+    /// The words of a kernel that checks a device count: fault, flag, count's argument index,
+    /// and whether this kernel reports.
+    fn report_words(self, report: bool) -> [Word; 4] {
+        let arg = match self {
+            Len::Host(_) => 0,
+            Len::Device { arg, .. } => arg,
+        };
+        [
+            Word::Fault,
+            Word::FaultFlag,
+            Word::Int(arg),
+            Word::Int(report as i64),
+        ]
+    }
+}
+
+fn user(k: usize) -> Word {
+    Word::Addr(Buf::User(k), 0)
+}
+
+fn scratch(k: usize) -> Word {
+    Word::Addr(Buf::Scratch(k), 0)
+}
+
+fn step(entry: impl Into<String>, blocks: u64, args: impl IntoIterator<Item = Word>) -> Step {
+    Step {
+        entry: entry.into(),
+        blocks,
+        args: args.into_iter().collect(),
+    }
+}
+
+/// The entry names of the scan module for element type `t`, by operation.
+fn scan_entries(t: &str) -> ScanEntries {
+    let name = |what: &str| format!("wp_prim_{what}_{t}");
+    ScanEntries {
+        total: [name("total_sum"), name("total_min"), name("total_max")],
+        spine: [name("spine_sum"), name("spine_min"), name("spine_max")],
+        down: name("scan_down"),
+    }
+}
+
+struct ScanEntries {
+    total: [String; 3],
+    spine: [String; 3],
+    down: String,
+}
+
+/// A reduction's operator (index into the scan module's entries).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReduceOp {
+    /// Sum (wrapping for integers).
+    Sum = 0,
+    /// Minimum (NaN ignored).
+    Min = 1,
+    /// Maximum (NaN ignored).
+    Max = 2,
+}
+
+/// Scan of `T` (C++ name `t`, `size` bytes). Caller's arrays: 0 input, 1 output (may be the
+/// input), then the count array if any.
+pub fn scan(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -> Plan {
+    let e = scan_entries(t);
+    let nb = tile.blocks(len.capacity());
+    let [count, cap] = len.words();
+    let s = ReduceOp::Sum as usize;
+    Plan {
+        module: Module::Scan(t),
+        scratch: vec![nb * size],
+        steps: vec![
+            step(
+                e.total[s].clone(),
+                nb,
+                [user(0), count, cap, scratch(0)]
+                    .into_iter()
+                    .chain(len.report_words(true)),
+            ),
+            step(
+                e.spine[s].clone(),
+                1,
+                [scratch(0), Word::Int(nb as i64), Word::Int(1), Word::Null],
+            ),
+            step(
+                e.down.clone(),
+                nb,
+                [
+                    user(0),
+                    user(1),
+                    count,
+                    cap,
+                    scratch(0),
+                    Word::Int(inclusive as i64),
+                ],
+            ),
+        ],
+    }
+}
+
+/// Reduction of `T` into a 1-element array. Caller's arrays: 0 input, 1 out, then the count.
+pub fn reduce(tile: Tile, t: &'static str, size: u64, op: ReduceOp, len: Len) -> Plan {
+    let e = scan_entries(t);
+    let nb = tile.blocks(len.capacity());
+    let [count, cap] = len.words();
+    Plan {
+        module: Module::Scan(t),
+        scratch: vec![nb * size],
+        steps: vec![
+            step(
+                e.total[op as usize].clone(),
+                nb,
+                [user(0), count, cap, scratch(0)]
+                    .into_iter()
+                    .chain(len.report_words(true)),
+            ),
+            step(
+                e.spine[op as usize].clone(),
+                1,
+                [scratch(0), Word::Int(nb as i64), Word::Int(0), user(1)],
+            ),
+        ],
+    }
+}
+
+/// Compaction of elements of `words` words of `word` bytes. Caller's arrays: 0 values,
+/// 1 flags (i32), 2 out, 3 out_count (i32), then the count.
+pub fn compact(tile: Tile, word: u32, words: u32, len: Len) -> Plan {
+    let nb = tile.blocks(len.capacity());
+    let [count, cap] = len.words();
+    Plan {
+        module: Module::Compact { word, words },
+        scratch: vec![nb * 4],
+        steps: vec![
+            step(
+                "wp_prim_compact_count",
+                nb,
+                [user(1), count, cap, scratch(0)]
+                    .into_iter()
+                    .chain(len.report_words(true)),
+            ),
+            step(
+                "wp_prim_compact_spine",
+                1,
+                [scratch(0), Word::Int(nb as i64), Word::Int(1), user(3)],
+            ),
+            step(
+                "wp_prim_compact_down",
+                nb,
+                [user(0), user(1), user(2), count, cap, scratch(0)],
+            ),
+        ],
+    }
+}
+
+/// The radix passes of a sort of `key_bits` bits: (shift, mask) per pass.
+pub fn radix_passes(key_bits: u32, radix_bits: u32) -> Vec<(u32, u32)> {
+    (0..key_bits)
+        .step_by(radix_bits as usize)
+        .map(|shift| {
+            let bits = radix_bits.min(key_bits - shift);
+            (shift, (1u32 << bits) - 1)
+        })
+        .collect()
+}
+
+/// LSD radix sort of 32-bit keys (C++ type `k`: `u32`, `i32`, `f32`) with 32-bit values,
+/// `key_bits` (1 to 32) low bits of the ordered key. Caller's arrays: 0 keys, 1 values, then
+/// the count.
+///
+/// Scratch: 0 keys and 1 values of the other ping-pong side (capacity each), 2 the histogram
+/// (RADIX counts per block, digit-major), 3 the histogram scan's tile totals. After an odd
+/// number of passes the sorted pairs are in the scratch and a last step copies them back.
+pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
+    let cap = len.capacity();
+    let nb = tile.blocks(cap);
+    let hist_len = RADIX * nb;
+    let nb_hist = tile.blocks(hist_len);
+    let [count, capw] = len.words();
+    let hist_name = format!("wp_prim_sort_hist_{k}");
+    let scatter_name = format!("wp_prim_sort_scatter_{k}");
+    let mut steps = Vec::new();
+    let side = |s: usize| -> [Word; 2] {
+        if s == 0 {
+            [user(0), user(1)]
+        } else {
+            [scratch(0), scratch(1)]
+        }
+    };
+    let passes = radix_passes(key_bits, RADIX_BITS);
+    for (p, &(shift, mask)) in passes.iter().enumerate() {
+        let [src_k, src_v] = side(p % 2);
+        let [dst_k, dst_v] = side((p + 1) % 2);
+        steps.push(step(
+            hist_name.clone(),
+            nb,
+            [
+                src_k,
+                count,
+                capw,
+                Word::Int(shift as i64),
+                Word::Int(mask as i64),
+                scratch(2),
+                Word::Int(nb as i64),
+            ]
+            .into_iter()
+            .chain(len.report_words(p == 0)),
+        ));
+        // The exclusive scan of the histogram, in place: every (digit, block) its first slot.
+        steps.push(step(
+            "wp_prim_sort_total_u32",
+            nb_hist,
+            [
+                scratch(2),
+                Word::Null,
+                Word::Int(hist_len as i64),
+                scratch(3),
+            ]
+            .into_iter()
+            .chain(Len::Host(hist_len).report_words(false)),
+        ));
+        steps.push(step(
+            "wp_prim_sort_spine_u32",
+            1,
+            [
+                scratch(3),
+                Word::Int(nb_hist as i64),
+                Word::Int(1),
+                Word::Null,
+            ],
+        ));
+        steps.push(step(
+            "wp_prim_sort_scan_down_u32",
+            nb_hist,
+            [
+                scratch(2),
+                scratch(2),
+                Word::Null,
+                Word::Int(hist_len as i64),
+                scratch(3),
+                Word::Int(0),
+            ],
+        ));
+        steps.push(step(
+            scatter_name.clone(),
+            nb,
+            [
+                src_k,
+                src_v,
+                dst_k,
+                dst_v,
+                count,
+                capw,
+                Word::Int(shift as i64),
+                Word::Int(mask as i64),
+                scratch(2),
+                Word::Int(nb as i64),
+            ],
+        ));
+    }
+    if passes.len() % 2 == 1 {
+        steps.push(step(
+            "wp_prim_copy_pairs",
+            nb,
+            [scratch(0), scratch(1), user(0), user(1), count, capw],
+        ));
+    }
+    Plan {
+        module: Module::Sort(k),
+        scratch: vec![cap * 4, cap * 4, hist_len * 4, nb_hist * 4],
+        steps,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn passes_cover_the_key_bits() {
+        assert_eq!(radix_passes(32, 4).len(), 8);
+        assert_eq!(radix_passes(5, 4), vec![(0, 15), (4, 1)]);
+        assert_eq!(radix_passes(1, 4), vec![(0, 1)]);
+        assert_eq!(radix_passes(12, 8), vec![(0, 255), (8, 15)]);
+    }
+
+    #[test]
+    fn grids_and_scratch_follow_the_sizes() {
+        let t = GPU_TILE;
+        assert_eq!((t.blocks(0), t.blocks(2048), t.blocks(2049)), (1, 1, 2));
+        let p = scan(t, "f32", 4, Len::Host(5000), true);
+        assert_eq!(p.scratch, vec![3 * 4]);
+        assert_eq!(
+            p.steps
+                .iter()
+                .map(|s| (s.entry.as_str(), s.blocks))
+                .collect::<Vec<_>>(),
+            vec![
+                ("wp_prim_total_sum_f32", 3),
+                ("wp_prim_spine_sum_f32", 1),
+                ("wp_prim_scan_down_f32", 3)
+            ]
+        );
+        // 5 bits: two passes (even), no copy back; 9 bits: three passes and the copy.
+        let s = sort(t, "u32", 5, Len::Host(10));
+        assert_eq!(s.steps.len(), 10);
+        let s = sort(t, "u32", 9, Len::Host(10));
+        assert_eq!(s.steps.last().unwrap().entry, "wp_prim_copy_pairs");
+        // Only the first kernel reports a bad device count.
+        let len = Len::Device {
+            count: 2,
+            capacity: 100,
+            arg: 2,
+        };
+        let s = sort(t, "i32", 32, len);
+        let reports: Vec<_> = s
+            .steps
+            .iter()
+            .filter(|s| s.entry.starts_with("wp_prim_sort_hist"))
+            .map(|s| s.args[10])
+            .collect();
+        assert_eq!(reports[0], Word::Int(1));
+        assert!(reports[1..].iter().all(|w| *w == Word::Int(0)));
+    }
+
+    #[test]
+    fn module_sources_name_their_entries() {
+        assert_eq!(
+            Module::Compact { word: 4, words: 3 }.source(),
+            "#include \"wp_primitives.h\"\nWP_PRIM_COMPACT_MODULE(u32, 3)\n"
+        );
+        assert_eq!(Module::Scan("i64").name(), "wp_prim_scan_i64");
+    }
+}
