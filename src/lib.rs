@@ -105,6 +105,8 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+/// Kernel-visible host objects: [`HashGrid`] (also at the crate root and in the prelude).
+pub use warp_runtime::objects;
 /// Parallel primitives: scan, reductions, radix sort, stream compaction (the functions are
 /// also at the crate root: `wp::array_scan`, ...).
 pub use warp_runtime::primitives;

@@ -522,3 +522,20 @@ fn gradients_through_the_loop_body(dev: &wp::Device) {
         );
     }
 }
+
+/// NVRTC accepts the device build's kernels (`wp_hash_grid.h` with `WP_HASH_GRID_BUILD`) for
+/// sm_90 (H100, H200) and sm_80 (A100) with the runtime's options: needs libnvrtc, no GPU;
+/// skipped, saying so, without it.
+#[test]
+fn nvrtc_compiles_the_build_kernels() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED hash_grid::nvrtc_compiles_the_build_kernels: {e}");
+        return;
+    }
+    for arch in [90, 80] {
+        let c = wp::objects::compile_hash_grid_build(arch)
+            .unwrap_or_else(|e| panic!("the hash grid build for sm_{arch}: {e}"));
+        assert!(!c.cubin.is_empty());
+        assert!(!c.log.contains("warning"), "sm_{arch}: {}", c.log);
+    }
+}

@@ -12,7 +12,8 @@
 //   hash_grid_query_done(q)         whether the query ended
 //   hash_grid_query_point(q)        the current candidate (usize)
 //   hash_grid_point_id(g, i, ctx)   the i-th point in bucket order (usize), any integer i
-//   hash_grid_build_key, hash_grid_build_range   the per-thread steps of a device build
+//   hash_grid_build_key, hash_grid_build_range   the per-thread steps of a device build (and,
+//                                   with WP_HASH_GRID_BUILD, its kernels)
 //
 // Kernels never mutate a query through these functions: the macro lowers
 // `for j in hash_grid_query(g, p, r) { .. }` into `q = next(g, q)` written back each
@@ -179,11 +180,39 @@ WP_FN bool hash_grid_build_key(const i32* dims, f32 inv, Vec3 p, i32 i, i32* key
 }
 
 /// Sorted position k of n (keys sorted): the range of bucket keys[k] starts here if k is the
-/// first of its bucket, and ends after it if k is the last.
-WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* starts, i32* ends) {
+/// first of its bucket, and ends after it if k is the last. Keys are buckets by construction;
+/// one outside [0, buckets) is skipped, never written.
+WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* starts, i32* ends,
+                                 i32 buckets) {
   const i32 b = sorted_keys[k];
+  if (b < 0 || b >= buckets) return;
   if (k == 0 || sorted_keys[k - 1] != b) starts[b] = k;
   if (k == n - 1 || sorted_keys[k + 1] != b) ends[b] = k + 1;
 }
 
 }  // namespace wp
+
+// The device build's kernels (warp-runtime's cuda/objects.rs compiles this header with
+// WP_HASH_GRID_BUILD defined, once per GPU; kernels that only query a grid do not get them).
+// Grid-stride loops, one element per thread; nothing here can fault (every index is in range
+// by construction: n points, keys in [0, buckets)).
+#if defined(__CUDACC__) && defined(WP_HASH_GRID_BUILD)
+/// Points' buckets and indices; the smallest index of a non-finite point into *bad.
+extern "C" __global__ void wp_hash_grid_keys(const wp::Vec3* points, wp::i32 n, wp::i32 dim_x,
+                                             wp::i32 dim_y, wp::i32 dim_z, wp::f32 inv,
+                                             wp::i32* keys, wp::i32* values, wp::i32* bad) {
+  const wp::i32 dims[3] = {dim_x, dim_y, dim_z};
+  const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
+  for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride) {
+    if (!wp::hash_grid_build_key(dims, inv, points[i], (wp::i32)i, &keys[i], &values[i]))
+      atomicMin(bad, (wp::i32)i);
+  }
+}
+/// Bucket ranges from the sorted keys (starts and ends zeroed before).
+extern "C" __global__ void wp_hash_grid_ranges(const wp::i32* keys, wp::i32 n, wp::i32* starts,
+                                               wp::i32* ends, wp::i32 buckets) {
+  const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
+  for (wp::i64 k = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; k < n; k += stride)
+    wp::hash_grid_build_range(keys, n, (wp::i32)k, starts, ends, buckets);
+}
+#endif

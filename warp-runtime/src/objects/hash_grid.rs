@@ -5,9 +5,13 @@
 //! `warp_core::objects::hash_grid` for the cells, buckets and query, which the CUDA library
 //! mirrors).
 //!
-//! A build sorts the point indices by bucket (by index within a bucket) and records each
-//! bucket's range in that order. On the CPU it runs in rayon; for a CUDA grid it currently
-//! runs on the host too ([`HashGrid::build`] says why and what replaces it).
+//! A build is the same on every device, through the backend seam: a per-point step gives
+//! each point's bucket and index (`dispatch::hash_grid_keys`: rayon on the CPU, a kernel of
+//! `wp_hash_grid.h` on a GPU), the primitives' stable radix sort sorts the pairs by bucket
+//! (so by index within a bucket), and a per-position step records each bucket's range in
+//! that order (`dispatch::hash_grid_ranges`). The point indices are sorted in the grid's own
+//! buffer; the keys are a buffer of the grid too, so a reserved grid builds without
+//! allocating.
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps of a launch's grid) shares the
 //! buffers until one of them is built again, which then gets fresh buffers, so a recorded
@@ -17,14 +21,16 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use rayon::prelude::*;
-use warp_core::objects::hash_grid::{cell_count, point_bucket};
+use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
 use crate::array::Array;
-use crate::device::{Device, DeviceKind};
+use crate::backend::HashGridKeys;
+use crate::device::Device;
+use crate::dispatch;
 use crate::error::{Error, Result};
 use crate::kernel::{ArgCtx, KernelArg};
+use crate::primitives::radix_sort_pairs;
 
 /// A hash grid on one device: `HashGrid::new(dim_x, dim_y, dim_z, &device)`, then
 /// [`build`](HashGrid::build) from points before launching kernels that query it (this
@@ -60,8 +66,6 @@ pub struct HashGrid {
     buffers: Arc<Buffers>,
     /// What the last successful build made; `None` before it (and after a failed one).
     built: Option<Built>,
-    /// The CPU build's sort keys, kept for the next build (not shared by clones).
-    scratch: Vec<u64>,
 }
 
 /// The grid's buffers on its device.
@@ -71,6 +75,23 @@ struct Buffers {
     /// Each bucket's range `[start, end)` in `point_ids` (`start == end`: empty).
     cell_starts: Array<i32>,
     cell_ends: Array<i32>,
+    /// The build's sort keys (the points' buckets), as long as `point_ids`.
+    keys: Array<i32>,
+    /// The build's flag: the smallest index of a non-finite point (`i32::MAX`: none).
+    bad: Array<i32>,
+}
+
+impl Buffers {
+    /// Fresh buffers for `capacity` points and `cells` buckets on `device`.
+    fn new(capacity: usize, cells: usize, device: &Device) -> Result<Buffers> {
+        Ok(Buffers {
+            point_ids: Array::zeros(capacity, device)?,
+            cell_starts: Array::zeros(cells, device)?,
+            cell_ends: Array::zeros(cells, device)?,
+            keys: Array::zeros(capacity, device)?,
+            bad: Array::zeros(1, device)?,
+        })
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -88,7 +109,6 @@ impl Clone for HashGrid {
             device: self.device.clone(),
             buffers: Arc::clone(&self.buffers),
             built: self.built,
-            scratch: Vec::new(),
         }
     }
 }
@@ -148,17 +168,11 @@ impl HashGrid {
         };
         let dims = [x, y, z];
         let cells = cell_count(dims).ok_or_else(too_many)? as usize;
-        let buffers = Buffers {
-            point_ids: Array::zeros(0, device)?,
-            cell_starts: Array::zeros(cells, device)?,
-            cell_ends: Array::zeros(cells, device)?,
-        };
         Ok(HashGrid {
             dims,
             device: device.clone(),
-            buffers: Arc::new(buffers),
+            buffers: Arc::new(Buffers::new(0, cells, device)?),
             built: None,
-            scratch: Vec::new(),
         })
     }
 
@@ -226,16 +240,15 @@ impl HashGrid {
         let cap = self.capacity().max(num_points);
         match Arc::get_mut(&mut self.buffers) {
             Some(b) if b.point_ids.len() >= num_points => {}
-            Some(b) => b.point_ids = Array::zeros(cap, &self.device)?,
+            Some(b) => {
+                b.point_ids = Array::zeros(cap, &self.device)?;
+                b.keys = Array::zeros(cap, &self.device)?;
+            }
             None => {
                 // Shared with a clone: the clone keeps the old buffers, which are not written
                 // again.
                 let cells = self.buffers.cell_starts.len();
-                self.buffers = Arc::new(Buffers {
-                    point_ids: Array::zeros(cap, &self.device)?,
-                    cell_starts: Array::zeros(cells, &self.device)?,
-                    cell_ends: Array::zeros(cells, &self.device)?,
-                });
+                self.buffers = Arc::new(Buffers::new(cap, cells, &self.device)?);
                 // Fresh buffers hold no build.
                 self.built = None;
             }
@@ -246,7 +259,8 @@ impl HashGrid {
     /// Builds the grid from `points` with cells of width `radius` (Warp's `build(points,
     /// radius)`): the point indices sorted by bucket, each bucket's range recorded. Queries of
     /// any radius work on the result (a larger query radius visits more cells); a cell as wide
-    /// as the usual query radius visits the fewest points.
+    /// as the usual query radius visits the fewest points. On a GPU the build is queued like a
+    /// launch, except that it waits once for its check of the points (one flag read back).
     ///
     /// A failed build leaves the grid unbuilt (kernels refuse it until a build succeeds).
     ///
@@ -256,7 +270,6 @@ impl HashGrid {
     /// more than `i32::MAX` points, or with a NaN or infinite coordinate (the first such
     /// index); device errors.
     pub fn build(&mut self, points: &Array<Vec3>, radius: f32) -> Result<()> {
-        const WHAT: &str = "HashGrid::build";
         if !(radius.is_finite() && radius > 0.0) {
             return Err(bad(
                 WHAT,
@@ -286,10 +299,53 @@ impl HashGrid {
         let n = points.len();
         self.built = None;
         self.reserve(n)?;
-        match self.device.kind() {
-            DeviceKind::Cpu => self.build_cpu(points, inv)?,
-            DeviceKind::Cuda { .. } => self.build_cuda(points, inv)?,
+        // The steps read the points as a contiguous run.
+        let copy;
+        let points = if points.is_contiguous() {
+            points
+        } else {
+            copy = Array::zeros(n, &self.device)?;
+            copy.copy_from(points)?;
+            &copy
+        };
+        let b = self.own_buffers();
+        b.bad.fill(i32::MAX)?;
+        let step = HashGridKeys {
+            points: points.device_address(),
+            n,
+            dims: self.dims,
+            inv,
+            keys: b.keys.device_address(),
+            values: b.point_ids.device_address(),
+            bad: b.bad.device_address(),
+        };
+        dispatch::hash_grid_keys(&self.device, &step)?;
+        // Checked before anything of the build is sorted or written: a failed build touches
+        // only the keys and the unsorted indices (on a GPU, the one wait of a build).
+        let first_bad = b.bad.to_vec()?[0];
+        if first_bad != i32::MAX {
+            let i = first_bad as usize;
+            let p = points.view(i..i + 1)?.to_vec()?[0];
+            return Err(bad(
+                WHAT,
+                "points",
+                format!("has a non-finite point at index {i}: {p:?}"),
+            ));
         }
+        // Buckets lie in 0..cells: sorting by their low bits is sorting by them.
+        let cells = b.cell_starts.len();
+        let bits = (usize::BITS - (cells - 1).leading_zeros()).max(1);
+        radix_sort_pairs(&b.keys, &b.point_ids, n, Some(bits))?;
+        b.cell_starts.fill(0)?;
+        b.cell_ends.fill(0)?;
+        dispatch::hash_grid_ranges(
+            &self.device,
+            b.keys.device_address(),
+            n,
+            b.cell_starts.device_address(),
+            b.cell_ends.device_address(),
+            cells,
+        )?;
         self.built = Some(Built {
             num_points: n,
             cell_width: radius,
@@ -302,87 +358,6 @@ impl HashGrid {
     fn own_buffers(&self) -> &Buffers {
         debug_assert_eq!(Arc::strong_count(&self.buffers), 1);
         &self.buffers
-    }
-
-    /// The CPU build, in rayon: sort keys `bucket << 32 | index`, then the indices and each
-    /// bucket's range through checked views of the buffers.
-    fn build_cpu(&mut self, points: &Array<Vec3>, inv: f32) -> Result<()> {
-        let view = points.cpu_view(WHAT_BUILD, "points");
-        let n = points.len();
-        let mut keys = std::mem::take(&mut self.scratch);
-        let r = sort_keys(&mut keys, n, self.dims, inv, |i| view.load(i).ok());
-        let r = r.and_then(|()| {
-            let b = self.own_buffers();
-            let ids = b.point_ids.cpu_view(WHAT_BUILD, "point_ids");
-            let starts = b.cell_starts.cpu_view(WHAT_BUILD, "cell_starts");
-            let ends = b.cell_ends.cpu_view(WHAT_BUILD, "cell_ends");
-            let cells = b.cell_starts.len();
-            (0..cells)
-                .into_par_iter()
-                .try_for_each(|c| {
-                    starts.store(c, 0)?;
-                    ends.store(c, 0)
-                })
-                .map_err(Error::from)?;
-            keys.par_iter()
-                .enumerate()
-                .try_for_each(|(k, key)| -> warp_core::KResult<()> {
-                    ids.store(k, key_index(*key))?;
-                    let bucket = key_bucket(*key);
-                    if k == 0 || key_bucket(keys[k - 1]) != bucket {
-                        starts.store(bucket as usize, k as i32)?;
-                    }
-                    if k + 1 == n || key_bucket(keys[k + 1]) != bucket {
-                        ends.store(bucket as usize, k as i32 + 1)?;
-                    }
-                    Ok(())
-                })
-                .map_err(Error::from)
-        });
-        self.scratch = keys;
-        r
-    }
-
-    /// The build of a grid on a GPU.
-    ///
-    /// TEMPORARY (until branch `primitives` lands its radix sort of key/value pairs): the
-    /// points are downloaded, sorted on the host as the CPU build does, and the indices and
-    /// bucket ranges uploaded: correct, the same result as a device build, but it costs two
-    /// transfers and a host sort. The device build replaces this function only: one thread
-    /// per point computes `wp::hash_grid_build_key` (the bucket and index, flagging the first
-    /// non-finite point), the primitives' stable radix sort sorts the pairs by bucket, the
-    /// bucket tables are zeroed and one thread per sorted position runs
-    /// `wp::hash_grid_build_range` (wp_hash_grid.h).
-    fn build_cuda(&mut self, points: &Array<Vec3>, inv: f32) -> Result<()> {
-        let host = points.to_vec()?;
-        let n = host.len();
-        let mut keys = std::mem::take(&mut self.scratch);
-        let r = sort_keys(&mut keys, n, self.dims, inv, |i| host.get(i).copied());
-        let r = r.and_then(|()| {
-            let b = self.own_buffers();
-            let cells = b.cell_starts.len();
-            let ids: Vec<i32> = keys.iter().map(|k| key_index(*k)).collect();
-            let (mut starts, mut ends) = (vec![0i32; cells], vec![0i32; cells]);
-            for (k, key) in keys.iter().enumerate() {
-                let bucket = key_bucket(*key) as usize;
-                if k == 0 || key_bucket(keys[k - 1]) as usize != bucket {
-                    starts[bucket] = k as i32;
-                }
-                ends[bucket] = k as i32 + 1;
-            }
-            let upload = |dst: &Array<i32>, data: &[i32]| -> Result<()> {
-                if data.is_empty() {
-                    return Ok(());
-                }
-                dst.view(0..data.len())?
-                    .copy_from(&Array::from_slice(data, &self.device)?)
-            };
-            upload(&b.point_ids, &ids)?;
-            upload(&b.cell_starts, &starts)?;
-            upload(&b.cell_ends, &ends)
-        });
-        self.scratch = keys;
-        r
     }
 
     /// The build a launch of `ctx.kernel` may use: the grid on the launch device and built.
@@ -405,49 +380,8 @@ impl HashGrid {
     }
 }
 
-/// What the CPU build's checked views report faults under (a build that faults is a bug).
-const WHAT_BUILD: &str = "HashGrid::build";
-
-/// The index part of a sort key.
-fn key_index(key: u64) -> i32 {
-    (key & 0xffff_ffff) as i32
-}
-
-/// The bucket part of a sort key.
-fn key_bucket(key: u64) -> i32 {
-    (key >> 32) as i32
-}
-
-/// Fills `keys` with `bucket << 32 | index` for the `n` points `point(i)` and sorts them (in
-/// rayon): bucket order, index order within a bucket. A point that is not finite (or cannot be
-/// read) is an error naming the first such index.
-fn sort_keys(
-    keys: &mut Vec<u64>,
-    n: usize,
-    dims: [i32; 3],
-    inv: f32,
-    point: impl Fn(usize) -> Option<Vec3> + Sync,
-) -> Result<()> {
-    let finite = |i: usize| point(i).filter(|p| p.is_finite());
-    if let Some(i) = (0..n).into_par_iter().find_first(|i| finite(*i).is_none()) {
-        let shown = point(i).map_or("unreadable".to_string(), |p| format!("{p:?}"));
-        return Err(bad(
-            "HashGrid::build",
-            "points",
-            format!("has a non-finite point at index {i}: {shown}"),
-        ));
-    }
-    keys.clear();
-    (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let p = finite(i).unwrap_or(Vec3::ZERO);
-            ((point_bucket(dims, inv, p) as u64) << 32) | i as u64
-        })
-        .collect_into_vec(keys);
-    keys.par_sort_unstable();
-    Ok(())
-}
+/// What the build's messages name.
+const WHAT: &str = "HashGrid::build";
 
 /// A `HashGrid` kernel parameter as CUDA kernels receive it: `wp::hash_grid_t` in
 /// `warp-cuda/cuda/wp_hash_grid.h`, field for field (48 bytes).

@@ -8,3 +8,8 @@
 pub mod hash_grid;
 
 pub use hash_grid::{CudaHashGrid, HashGrid};
+
+/// Compiles the hash grid's build kernels with NVRTC (no GPU needed): for tests.
+#[cfg(feature = "cuda")]
+#[doc(hidden)]
+pub use crate::cuda::objects::compile_hash_grid_build;
