@@ -196,15 +196,16 @@ WP_PRIM_FN T block_exclusive_scan(T v, T* sh, T* total) {
 }
 
 /// Phase 1: the total of block b's tile of `load(i)` for i < n (the identity for a tile past
-/// n), written to `partials[b]`.
+/// n), written to `partials[b]`. Loads are striped (element k * THREADS + t of the tile for
+/// thread t): consecutive threads read consecutive elements, so every load is coalesced.
 template <typename T, typename Op, typename Load>
 WP_PRIM_FN void tile_total(Load load, i64 n, T* partials) {
   WP_PRIM_SHARED T sh[2 * THREADS];
   const i64 b = WP_PRIM_BID;
-  const i64 base = b * TILE + (i64)WP_PRIM_TID * ITEMS;
+  const i64 base = b * TILE + (i64)WP_PRIM_TID;
   T acc = Op::identity();
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
+    const i64 i = base + (i64)k * THREADS;
     if (i < n) acc = Op::apply(acc, load(i));
   }
   T total;
@@ -246,34 +247,50 @@ WP_PRIM_FN void spine(T* partials, i64 nb, bool write_prefix, T* total_out) {
 }
 
 /// Phase 3: block b rescans its tile from `prefixes[b]` (the exclusive scan of the tile
-/// totals) and hands `emit(i, value)` the inclusive or exclusive result of each i < n. An
-/// element is read and written by the same thread, so `emit` may overwrite the input.
+/// totals) and hands `emit(i, value)` the inclusive or exclusive result of each i < n. The
+/// tile goes through shared memory so that global loads and `emit` calls are striped
+/// (coalesced) while each thread scans ITEMS consecutive elements. Every load of the tile
+/// happens before the first barrier and every `emit` after the last, so `emit` may overwrite
+/// the input.
 template <typename T, typename Op, typename Load, typename Emit>
 WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool inclusive) {
   WP_PRIM_SHARED T sh[2 * THREADS];
+  WP_PRIM_SHARED T stile[TILE];
   const i64 b = WP_PRIM_BID;
   if (b * TILE >= n) return;  // the whole block leaves: no barrier is skipped by some only
-  const i64 base = b * TILE + (i64)WP_PRIM_TID * ITEMS;
+  const i32 t = WP_PRIM_TID;
+  const i64 tb = b * TILE;
+  const i64 tn = n - tb < TILE ? n - tb : TILE;
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) stile[li] = load(tb + li);
+  }
+  WP_PRIM_SYNC();
+  const i64 mine = (i64)t * ITEMS;
   T vals[ITEMS];
   T acc = Op::identity();
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    vals[k] = i < n ? load(i) : Op::identity();
+    vals[k] = mine + k < tn ? stile[mine + k] : Op::identity();
     acc = Op::apply(acc, vals[k]);
   }
   T total;
   const T excl = block_exclusive_scan<T, Op>(acc, sh, &total);
+  // Each thread rewrites only its own slots of `stile`, which only it has read.
   T run = Op::apply(prefixes[b], excl);
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    if (i >= n) break;
+    if (mine + k >= tn) break;
     if (inclusive) {
       run = Op::apply(run, vals[k]);
-      emit(i, run);
+      stile[mine + k] = run;
     } else {
-      emit(i, run);
+      stile[mine + k] = run;
       run = Op::apply(run, vals[k]);
     }
+  }
+  WP_PRIM_SYNC();
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) emit(tb + li, stile[li]);
   }
 }
 
