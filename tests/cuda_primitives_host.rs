@@ -444,7 +444,11 @@ fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
 
 #[test]
 fn reductions_int() {
-    reduce_cases::<i32>(&[vec![i32::MIN, i32::MAX, -1, 5]]);
+    // 70001 elements: more block totals (of 4 tiles each) than one spine tile holds.
+    reduce_cases::<i32>(&[
+        vec![i32::MIN, i32::MAX, -1, 5],
+        (0..70_001).map(|i| (i * 7919 % 1001) - 500).collect(),
+    ]);
     reduce_cases::<u32>(&[]);
     reduce_cases::<i64>(&[vec![i64::MIN, 3]]);
     reduce_cases::<u64>(&[]);

@@ -198,15 +198,28 @@ WP_PRIM_FN T block_exclusive_scan(T v, T* sh, T* total) {
 /// Phase 1: the total of block b's tile of `load(i)` for i < n (the identity for a tile past
 /// n), written to `partials[b]`. Loads are striped (element k * THREADS + t of the tile for
 /// thread t): consecutive threads read consecutive elements, so every load is coalesced.
+/// With `per` > 1, block b totals the `per` tiles from b * per (a reduction needs no
+/// per-tile totals, and fewer, fuller blocks spend less on the block scan).
 template <typename T, typename Op, typename Load>
-WP_PRIM_FN void tile_total(Load load, i64 n, T* partials) {
+WP_PRIM_FN void tile_total(Load load, i64 n, T* partials, i64 per = 1) {
   WP_PRIM_SHARED T sh[2 * THREADS];
   const i64 b = WP_PRIM_BID;
-  const i64 base = b * TILE + (i64)WP_PRIM_TID;
   T acc = Op::identity();
-  for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + (i64)k * THREADS;
-    if (i < n) acc = Op::apply(acc, load(i));
+  for (i64 j = 0; j < per; ++j) {
+    const i64 base = (b * per + j) * TILE + (i64)WP_PRIM_TID;
+    if (base - WP_PRIM_TID >= n) break;
+    // Two accumulators: half the dependent chain (their order is fixed: deterministic).
+    T acc0 = Op::identity(), acc1 = Op::identity();
+    for (i32 k = 0; k + 1 < ITEMS; k += 2) {
+      const i64 i = base + (i64)k * THREADS;
+      if (i < n) acc0 = Op::apply(acc0, load(i));
+      if (i + THREADS < n) acc1 = Op::apply(acc1, load(i + THREADS));
+    }
+    if (ITEMS % 2 == 1) {
+      const i64 i = base + (i64)(ITEMS - 1) * THREADS;
+      if (i < n) acc0 = Op::apply(acc0, load(i));
+    }
+    acc = Op::apply(acc, Op::apply(acc0, acc1));
   }
   T total;
   block_exclusive_scan<T, Op>(acc, sh, &total);
@@ -318,12 +331,13 @@ struct load_flag {
 
 /// args: 0 in (const T*), 1 count (const i32* or 0), 2 capacity, 3 partials (T*), 4 fault,
 /// 5 fault flag, 6 count's argument index (for the fault), 7 report (1: this kernel reports a
-/// bad count).
+/// bad count), 8 tiles per block (0 or 1: one).
 template <typename T, typename Op>
 WP_PRIM_FN void k_tile_total(const args_t& a) {
   const i64 n = resolve_count(ptr<const i32>(a, 1), int_arg(a, 2), ptr<fault_t>(a, 4),
                               ptr<u32>(a, 5), int_arg(a, 6), int_arg(a, 7) != 0);
-  tile_total<T, Op>(load_array<T>{ptr<const T>(a, 0)}, n, ptr<T>(a, 3));
+  const i64 per = int_arg(a, 8) > 1 ? int_arg(a, 8) : 1;
+  tile_total<T, Op>(load_array<T>{ptr<const T>(a, 0)}, n, ptr<T>(a, 3), per);
 }
 
 /// args: 0 partials (T*), 1 number of partials, 2 write the exclusive prefixes (0/1),

@@ -293,10 +293,15 @@ pub fn scan(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -
     }
 }
 
+/// Tiles a block of a reduction totals (`per` of `k_tile_total`).
+pub const REDUCE_TILES_PER_BLOCK: u64 = 4;
+
 /// Reduction of `T` into a 1-element array. Caller's arrays: 0 input, 1 out, then the count.
+/// Two launches: block totals of `REDUCE_TILES_PER_BLOCK` tiles each, then one block
+/// reducing them.
 pub fn reduce(tile: Tile, t: &'static str, size: u64, op: ReduceOp, len: Len) -> Plan {
     let e = scan_entries(t);
-    let nb = tile.blocks(len.capacity());
+    let nb = tile.blocks(len.capacity()).div_ceil(REDUCE_TILES_PER_BLOCK);
     let [count, cap] = len.words();
     Plan {
         module: Module::Scan(t),
@@ -307,7 +312,8 @@ pub fn reduce(tile: Tile, t: &'static str, size: u64, op: ReduceOp, len: Len) ->
                 nb,
                 [user(0), count, cap, scratch(0)]
                     .into_iter()
-                    .chain(len.report_words(true)),
+                    .chain(len.report_words(true))
+                    .chain([Word::Int(REDUCE_TILES_PER_BLOCK as i64)]),
             ),
             step(
                 e.spine[op as usize].clone(),
