@@ -384,7 +384,7 @@ pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
     let passes = radix_passes(key_bits, RADIX_BITS);
     let np = passes.len();
     // The ping-pong sides each pass reads and writes: 0 the caller's arrays, 1 B, 2 C.
-    let sides: Vec<usize> = if np % 2 == 0 || np == 1 {
+    let sides: Vec<usize> = if np.is_multiple_of(2) || np == 1 {
         (0..=np).map(|p| p % 2).collect()
     } else {
         (0..=np)
@@ -462,7 +462,7 @@ pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
         cap * 4,
         cap * 4,
     ];
-    if np % 2 == 1 && np > 1 {
+    if !np.is_multiple_of(2) && np > 1 {
         scratch_sizes.extend([cap * 4, cap * 4]);
     }
     Plan {
