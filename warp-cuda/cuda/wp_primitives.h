@@ -11,9 +11,10 @@
 // integers), so that every entry has the same C++ signature: the host tests run the very same
 // plans on the CPU by compiling this file with g++ under a block emulator
 // (warp-cuda/cuda/tests/wp_prim_emu.h), which finds entries by name through
-// `WP_PRIM_REGISTER`. For the same reason the kernels use only `__syncthreads` and shared
-// memory for cooperation inside a block (no warp shuffles, no atomics), and never wait for
-// another block: a block emulated on the host runs to completion before the next starts.
+// `WP_PRIM_REGISTER`. For the same reason the kernels use only `__syncthreads`, shared
+// memory and `atomicAdd` (WP_PRIM_ATOMIC_ADD) for cooperation (no warp shuffles); the one
+// kernel that waits for other blocks (the sort's look-back) waits only for tiles handed out
+// earlier by an atomic counter, which the emulator (blocks in order) has already finished.
 //
 // Algorithms (learned from the literature, written for this project):
 //   * Block scan: each thread reduces WP_PRIM_ITEMS consecutive elements serially, the block
@@ -24,12 +25,12 @@
 //     "spine"), (3) every block rescans its tile from its offset. A reduction stops after (2).
 //   * Compaction: the scan of the flags (nonzero = keep) gives each kept element its output
 //     position; the spine's total is the count.
-//   * Radix sort: LSD, 4 bits per pass, stable. Per pass: every block counts the digits of
-//     its tile, per thread (`counts[digit][thread]`), and scans those counts in digit-major
-//     order, which gives every element its rank among the tile's elements of the same digit
-//     (stable: thread t's elements come after those of threads < t, and each thread walks its
-//     elements in order); the tiles' digit counts (`hist[digit * blocks + block]`) are
-//     scanned by the device scan, which gives every (digit, block) its first output position.
+//   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
+//     once and counts the digits of every pass; then one kernel per pass: a block takes the
+//     next tile from an atomic counter, sorts it by the digit in shared memory (two stable
+//     4-bit counting passes: per-thread counts scanned digit-major), publishes its digit
+//     counts, and adds the counts of earlier tiles by decoupled look-back; each element goes
+//     to digit offset + earlier tiles' count + rank in the tile (runs written coalesced).
 //
 // Lengths: a kernel processes `n` elements where `n` is a host value (`capacity`), or read on
 // the device from a 1-element i32 array (`count`) so that no host synchronisation is needed.
