@@ -65,7 +65,7 @@ fn json_number(json: &str, key: &str) -> Option<f64> {
 }
 
 /// The object under `"n"` in the PyTorch side's `sizes`.
-fn size_section<'a>(json: &'a str, n: usize) -> Option<&'a str> {
+fn size_section(json: &str, n: usize) -> Option<&str> {
     let at = json.find(&format!("\"{n}\":"))?;
     let end = json[at..].find('}')? + at;
     Some(&json[at..end])

@@ -444,7 +444,11 @@ fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
 
 #[test]
 fn reductions_int() {
-    reduce_cases::<i32>(&[vec![i32::MIN, i32::MAX, -1, 5]]);
+    // 70001 elements: more block totals (of 4 tiles each) than one spine tile holds.
+    reduce_cases::<i32>(&[
+        vec![i32::MIN, i32::MAX, -1, 5],
+        (0..70_001).map(|i| (i * 7919 % 1001) - 500).collect(),
+    ]);
     reduce_cases::<u32>(&[]);
     reduce_cases::<i64>(&[vec![i64::MIN, 3]]);
     reduce_cases::<u64>(&[]);
@@ -558,6 +562,26 @@ fn sort_u32_with_duplicates_and_key_bits() {
     );
 }
 
+/// 8-bit passes with `key_bits` cutting them: 8 bits (one pass and the copy back), 16 (two),
+/// 21 (the hash grid's cell ids: three passes, user -> B -> C -> user), 24, 32 (four), with
+/// random high bits the sort must ignore; the histograms of every pass come from one upfront
+/// read, and 131 tiles make long look-back chains.
+#[test]
+fn sort_u32_passes_by_key_bits() {
+    sort_cases::<u32>(TILE, &[8, 16, 21, 24, 32], |r| r.next() as u32, &[]);
+    // Few distinct digits per pass: long runs inside tiles, most digits absent from a tile.
+    sort_cases::<u32>(
+        TILE,
+        &[21, 17],
+        |r| {
+            ((r.below(3) as u32) << 16)
+                | ((r.below(2) as u32) << 8)
+                | (r.next() as u32 & 0xFF00_0000)
+        },
+        &[],
+    );
+}
+
 #[test]
 fn sort_i32_negative() {
     sort_cases::<i32>(
@@ -596,7 +620,8 @@ fn sort_f32_total_order() {
 
 #[test]
 fn sort_odd_tile() {
-    sort_cases::<u32>(ODD_TILE, &[32, 7], |r| r.below(1000) as u32, &[]);
+    sort_cases::<u32>(ODD_TILE, &[32, 7, 21], |r| r.below(1000) as u32, &[]);
+    sort_cases::<f32>(ODD_TILE, &[32], |r| (r.below(41) as f32 - 20.0) * 0.25, &[]);
 }
 
 // ------------------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ backend_tests!(
     sort_i32_and_f32_keys,
     sort_key_bits,
     sort_counts,
+    workspace_reuse_across_sizes_types_and_streams,
     compact_types_and_counts,
     device_counts_chain_without_host_reads,
     bad_inputs_are_errors,
@@ -698,4 +699,61 @@ fn bad_device_counts(dev: &wp::Device) {
     let s = zeros::<i32, 1>(1, dev);
     wp::array_sum(&a, &s).unwrap();
     assert_eq!(host(&s), [10]);
+}
+
+/// The GPU keeps one scratch workspace per device, grown to the largest need: calls of
+/// different sizes (large, then small, then larger), key types, key bits and primitives use
+/// it one after another without synchronising, and on two user streams in turn (each waits
+/// for the workspace's last user). Results are read only at the end.
+fn workspace_reuse_across_sizes_types_and_streams(dev: &wp::Device) {
+    let mut rng = Rng(77);
+    let sizes = [70_001usize, 37, 5000, 150_000, 1];
+    let mut pending = Vec::new();
+    let streams = if dev.is_cuda() {
+        vec![wp::Stream::new(dev).unwrap(), wp::Stream::new(dev).unwrap()]
+    } else {
+        vec![]
+    };
+    for (c, &n) in sizes.iter().enumerate() {
+        let _scope = streams
+            .get(c % 2)
+            .map(|s| wp::ScopedStream::new(s).unwrap());
+        let ku: Vec<u32> = (0..n).map(|_| rng.next() as u32).collect();
+        let kf: Vec<f32> = (0..n)
+            .map(|_| (rng.below(41) as f32 - 20.0) * 0.25)
+            .collect();
+        let values: Vec<u32> = (0..n as u32).collect();
+        let (a, av) = (arr(&ku, dev), arr(&values, dev));
+        wp::radix_sort_pairs(&a, &av, n, Some(21)).unwrap();
+        let (b, bv) = (arr(&kf, dev), arr(&values, dev));
+        wp::radix_sort_pairs(&b, &bv, n, None).unwrap();
+        let x: Vec<i32> = (0..n).map(|_| rng.below(200) as i32 - 100).collect();
+        let (xa, prefix, total) = (
+            arr(&x, dev),
+            zeros::<i32, 1>(n, dev),
+            zeros::<i32, 1>(1, dev),
+        );
+        wp::array_scan(&xa, &prefix, true).unwrap();
+        wp::array_sum(&xa, &total).unwrap();
+        pending.push((ku, kf, values, x, a, av, b, bv, prefix, total));
+    }
+    for (ku, kf, values, x, a, av, b, bv, prefix, total) in pending {
+        let n = ku.len();
+        let (wk, wv) = sort_reference(&ku, &values, 21);
+        assert_eq!(host(&a), wk, "u32 keys, 21 bits, n {n}");
+        assert_eq!(host(&av), wv, "u32 values, n {n}");
+        let (wk, wv) = sort_reference(&kf, &values, 32);
+        assert_eq!(host(&b), wk, "f32 keys, n {n}");
+        assert_eq!(host(&bv), wv, "f32 values, n {n}");
+        let mut acc = 0i32;
+        let want: Vec<i32> = x
+            .iter()
+            .map(|&v| {
+                acc += v;
+                acc
+            })
+            .collect();
+        assert_eq!(host(&prefix), want, "scan, n {n}");
+        assert_eq!(host(&total), [acc], "sum, n {n}");
+    }
 }

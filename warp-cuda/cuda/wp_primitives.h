@@ -11,9 +11,10 @@
 // integers), so that every entry has the same C++ signature: the host tests run the very same
 // plans on the CPU by compiling this file with g++ under a block emulator
 // (warp-cuda/cuda/tests/wp_prim_emu.h), which finds entries by name through
-// `WP_PRIM_REGISTER`. For the same reason the kernels use only `__syncthreads` and shared
-// memory for cooperation inside a block (no warp shuffles, no atomics), and never wait for
-// another block: a block emulated on the host runs to completion before the next starts.
+// `WP_PRIM_REGISTER`. For the same reason the kernels use only `__syncthreads`, shared
+// memory and `atomicAdd` (WP_PRIM_ATOMIC_ADD) for cooperation (no warp shuffles); the one
+// kernel that waits for other blocks (the sort's look-back) waits only for tiles handed out
+// earlier by an atomic counter, which the emulator (blocks in order) has already finished.
 //
 // Algorithms (learned from the literature, written for this project):
 //   * Block scan: each thread reduces WP_PRIM_ITEMS consecutive elements serially, the block
@@ -24,12 +25,12 @@
 //     "spine"), (3) every block rescans its tile from its offset. A reduction stops after (2).
 //   * Compaction: the scan of the flags (nonzero = keep) gives each kept element its output
 //     position; the spine's total is the count.
-//   * Radix sort: LSD, 4 bits per pass, stable. Per pass: every block counts the digits of
-//     its tile, per thread (`counts[digit][thread]`), and scans those counts in digit-major
-//     order, which gives every element its rank among the tile's elements of the same digit
-//     (stable: thread t's elements come after those of threads < t, and each thread walks its
-//     elements in order); the tiles' digit counts (`hist[digit * blocks + block]`) are
-//     scanned by the device scan, which gives every (digit, block) its first output position.
+//   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
+//     once and counts the digits of every pass; then one kernel per pass: a block takes the
+//     next tile from an atomic counter, sorts it by the digit in shared memory (two stable
+//     4-bit counting passes: per-thread counts scanned digit-major), publishes its digit
+//     counts, and adds the counts of earlier tiles by decoupled look-back; each element goes
+//     to digit offset + earlier tiles' count + rank in the tile (runs written coalesced).
 //
 // Lengths: a kernel processes `n` elements where `n` is a host value (`capacity`), or read on
 // the device from a 1-element i32 array (`count`) so that no host synchronisation is needed.
@@ -55,6 +56,9 @@
 #define WP_PRIM_TID ((wp::i32)threadIdx.x)
 #define WP_PRIM_BID ((wp::i64)blockIdx.x)
 #define WP_PRIM_REGISTER(name)
+#define WP_PRIM_ATOMIC_ADD(p, v) atomicAdd((p), (v))
+// A look-back waits for a block that has started and will publish: keep polling.
+#define WP_PRIM_LOOKBACK_WAIT() ((void)0)
 #elif !defined(WP_PRIM_EMULATOR)
 #error "wp_primitives.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
 #endif
@@ -193,16 +197,30 @@ WP_PRIM_FN T block_exclusive_scan(T v, T* sh, T* total) {
 }
 
 /// Phase 1: the total of block b's tile of `load(i)` for i < n (the identity for a tile past
-/// n), written to `partials[b]`.
+/// n), written to `partials[b]`. Loads are striped (element k * THREADS + t of the tile for
+/// thread t): consecutive threads read consecutive elements, so every load is coalesced.
+/// With `per` > 1, block b totals the `per` tiles from b * per (a reduction needs no
+/// per-tile totals, and fewer, fuller blocks spend less on the block scan).
 template <typename T, typename Op, typename Load>
-WP_PRIM_FN void tile_total(Load load, i64 n, T* partials) {
+WP_PRIM_FN void tile_total(Load load, i64 n, T* partials, i64 per = 1) {
   WP_PRIM_SHARED T sh[2 * THREADS];
   const i64 b = WP_PRIM_BID;
-  const i64 base = b * TILE + (i64)WP_PRIM_TID * ITEMS;
   T acc = Op::identity();
-  for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    if (i < n) acc = Op::apply(acc, load(i));
+  for (i64 j = 0; j < per; ++j) {
+    const i64 base = (b * per + j) * TILE + (i64)WP_PRIM_TID;
+    if (base - WP_PRIM_TID >= n) break;
+    // Two accumulators: half the dependent chain (their order is fixed: deterministic).
+    T acc0 = Op::identity(), acc1 = Op::identity();
+    for (i32 k = 0; k + 1 < ITEMS; k += 2) {
+      const i64 i = base + (i64)k * THREADS;
+      if (i < n) acc0 = Op::apply(acc0, load(i));
+      if (i + THREADS < n) acc1 = Op::apply(acc1, load(i + THREADS));
+    }
+    if (ITEMS % 2 == 1) {
+      const i64 i = base + (i64)(ITEMS - 1) * THREADS;
+      if (i < n) acc0 = Op::apply(acc0, load(i));
+    }
+    acc = Op::apply(acc, Op::apply(acc0, acc1));
   }
   T total;
   block_exclusive_scan<T, Op>(acc, sh, &total);
@@ -243,34 +261,50 @@ WP_PRIM_FN void spine(T* partials, i64 nb, bool write_prefix, T* total_out) {
 }
 
 /// Phase 3: block b rescans its tile from `prefixes[b]` (the exclusive scan of the tile
-/// totals) and hands `emit(i, value)` the inclusive or exclusive result of each i < n. An
-/// element is read and written by the same thread, so `emit` may overwrite the input.
+/// totals) and hands `emit(i, value)` the inclusive or exclusive result of each i < n. The
+/// tile goes through shared memory so that global loads and `emit` calls are striped
+/// (coalesced) while each thread scans ITEMS consecutive elements. Every load of the tile
+/// happens before the first barrier and every `emit` after the last, so `emit` may overwrite
+/// the input.
 template <typename T, typename Op, typename Load, typename Emit>
 WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool inclusive) {
   WP_PRIM_SHARED T sh[2 * THREADS];
+  WP_PRIM_SHARED T stile[TILE];
   const i64 b = WP_PRIM_BID;
   if (b * TILE >= n) return;  // the whole block leaves: no barrier is skipped by some only
-  const i64 base = b * TILE + (i64)WP_PRIM_TID * ITEMS;
+  const i32 t = WP_PRIM_TID;
+  const i64 tb = b * TILE;
+  const i64 tn = n - tb < TILE ? n - tb : TILE;
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) stile[li] = load(tb + li);
+  }
+  WP_PRIM_SYNC();
+  const i64 mine = (i64)t * ITEMS;
   T vals[ITEMS];
   T acc = Op::identity();
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    vals[k] = i < n ? load(i) : Op::identity();
+    vals[k] = mine + k < tn ? stile[mine + k] : Op::identity();
     acc = Op::apply(acc, vals[k]);
   }
   T total;
   const T excl = block_exclusive_scan<T, Op>(acc, sh, &total);
+  // Each thread rewrites only its own slots of `stile`, which only it has read.
   T run = Op::apply(prefixes[b], excl);
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    if (i >= n) break;
+    if (mine + k >= tn) break;
     if (inclusive) {
       run = Op::apply(run, vals[k]);
-      emit(i, run);
+      stile[mine + k] = run;
     } else {
-      emit(i, run);
+      stile[mine + k] = run;
       run = Op::apply(run, vals[k]);
     }
+  }
+  WP_PRIM_SYNC();
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) emit(tb + li, stile[li]);
   }
 }
 
@@ -298,12 +332,13 @@ struct load_flag {
 
 /// args: 0 in (const T*), 1 count (const i32* or 0), 2 capacity, 3 partials (T*), 4 fault,
 /// 5 fault flag, 6 count's argument index (for the fault), 7 report (1: this kernel reports a
-/// bad count).
+/// bad count), 8 tiles per block (0 or 1: one).
 template <typename T, typename Op>
 WP_PRIM_FN void k_tile_total(const args_t& a) {
   const i64 n = resolve_count(ptr<const i32>(a, 1), int_arg(a, 2), ptr<fault_t>(a, 4),
                               ptr<u32>(a, 5), int_arg(a, 6), int_arg(a, 7) != 0);
-  tile_total<T, Op>(load_array<T>{ptr<const T>(a, 0)}, n, ptr<T>(a, 3));
+  const i64 per = int_arg(a, 8) > 1 ? int_arg(a, 8) : 1;
+  tile_total<T, Op>(load_array<T>{ptr<const T>(a, 0)}, n, ptr<T>(a, 3), per);
 }
 
 /// args: 0 partials (T*), 1 number of partials, 2 write the exclusive prefixes (0/1),
@@ -384,25 +419,51 @@ struct radix_key<f32> {
   static WP_PRIM_FN u32 bits(u32 k) { return (k & 0x80000000u) ? ~k : (k | 0x80000000u); }
 };
 
-/// The digit counts of block b's tile, scanned: afterwards `counts[d * THREADS + t]` is the
-/// number of the tile's elements with a digit below d plus those with digit d held by threads
-/// below t (each thread holds ITEMS consecutive elements). Returns the tile's element count.
-/// Keys are the raw 32-bit patterns; `K` says how to order them.
+/// Bits of the key sorted per pass of the GPU sort (onesweep), and its digits.
+constexpr i32 SORT_BITS = 8;
+constexpr i32 SORT_RADIX = 1 << SORT_BITS;
+/// At most this many passes (32-bit keys).
+constexpr i32 SORT_MAX_PASSES = 4;
+/// Tiles of keys one block of the histogram kernel counts.
+constexpr i32 SORT_HIST_TILES = 8;
+/// Look-back status words: (flag << 32) | count, flag 0 not yet published, 1 the tile's own
+/// count (aggregate), 2 the count of this tile and every tile before it (inclusive).
+constexpr u64 STATUS_AGGREGATE = 1ull << 32;
+constexpr u64 STATUS_INCLUSIVE = 2ull << 32;
+
+static_assert(SORT_RADIX % THREADS == 0 || THREADS % SORT_RADIX == 0,
+              "threads and sort digits divide one another");
+static_assert(TILE <= 65536, "a sort tile's local indices fit in 16 bits");
+
+/// A 64-bit word another block may be writing: read once, never cached in a register.
+WP_PRIM_FN u64 load_status(const u64* p) { return *(const volatile u64*)p; }
+WP_PRIM_FN void store_status(u64* p, u64 v) { *(volatile u64*)p = v; }
+
+/// The key's digit of a pass: `mask` (at most 255) of its ordered image shifted right.
 template <typename K>
-WP_PRIM_FN u32 tile_digit_ranks(const u32* keys, i64 n, i32 shift, u32 mask, u32* counts,
-                                u32* sh) {
+WP_PRIM_FN u32 sort_digit(u32 key, i32 shift, u32 mask) {
+  return (radix_key<K>::bits(key) >> shift) & mask;
+}
+
+/// One stable 4-bit counting pass over the tile held in registers (thread t holds the tile's
+/// elements t * ITEMS + k, k < ITEMS, of which those below `tn` are real): ranks them by
+/// `(digit >> sub) & 15` (`digit` of the pass) and writes key and index to their rank in
+/// `skeys` / `sidx`. Thread t's elements come after those of threads < t with the same nibble
+/// and keep their order, so the pass is stable. Synchronises; the registers may be read from
+/// `skeys` (the shared arrays are written only after every thread has passed a barrier).
+template <typename K>
+WP_PRIM_FN void nibble_pass(const u32* kr, const u16* ir, i64 tn, i32 shift, u32 mask, i32 sub,
+                            u32* skeys, u16* sidx, u32* counts, u32* sh) {
   const i32 t = WP_PRIM_TID;
-  const i64 base = WP_PRIM_BID * TILE + (i64)t * ITEMS;
   for (i32 d = 0; d < RADIX; ++d) counts[d * THREADS + t] = 0;
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    if (i < n) {
-      const u32 d = (radix_key<K>::bits(keys[i]) >> shift) & mask;
-      counts[d * THREADS + t] += 1;  // thread t's own column: no other thread writes it
+    if ((i64)t * ITEMS + k < tn) {
+      const u32 nib = (sort_digit<K>(kr[k], shift, mask) >> sub) & (RADIX - 1);
+      counts[nib * THREADS + t] += 1;  // thread t's own column
     }
   }
   WP_PRIM_SYNC();
-  // Digit-major order, RADIX consecutive entries per thread (RADIX * THREADS in all).
+  // Digit-major order, RADIX consecutive entries per thread.
   u32* mine = counts + (i64)t * RADIX;
   u32 sum = 0;
   u32 vals[RADIX];
@@ -417,69 +478,192 @@ WP_PRIM_FN u32 tile_digit_ranks(const u32* keys, i64 n, i32 shift, u32 mask, u32
     run += vals[k];
   }
   WP_PRIM_SYNC();
-  return total;
+  for (i32 k = 0; k < ITEMS; ++k) {
+    if ((i64)t * ITEMS + k < tn) {
+      const u32 nib = (sort_digit<K>(kr[k], shift, mask) >> sub) & (RADIX - 1);
+      const u32 pos = counts[nib * THREADS + t]++;
+      skeys[pos] = kr[k];
+      sidx[pos] = ir[k];
+    }
+  }
+  WP_PRIM_SYNC();
 }
 
-/// args: 0 keys (const u32*), 1 count, 2 capacity, 3 shift, 4 mask, 5 hist (u32*, RADIX *
-/// blocks, digit-major), 6 number of blocks, 7 fault, 8 fault flag, 9 count's argument index,
-/// 10 report.
+/// args: 0 count, 1 capacity, 2 hist (u32*, SORT_MAX_PASSES * SORT_RADIX), 3 tile counters
+/// (u32*, SORT_MAX_PASSES), 4 fault, 5 fault flag, 6 count's argument index, 7 report.
+/// One block: zeroes the histograms and the tile counters (and reports a bad count).
+WP_PRIM_FN void k_sort_init(const args_t& a) {
+  resolve_count(ptr<const i32>(a, 0), int_arg(a, 1), ptr<fault_t>(a, 4), ptr<u32>(a, 5),
+                int_arg(a, 6), int_arg(a, 7) != 0);
+  u32* hist = ptr<u32>(a, 2);
+  u32* counters = ptr<u32>(a, 3);
+  for (i32 i = WP_PRIM_TID; i < SORT_MAX_PASSES * SORT_RADIX; i += THREADS) hist[i] = 0;
+  if (WP_PRIM_TID < SORT_MAX_PASSES) counters[WP_PRIM_TID] = 0;
+}
+
+/// args: 0 keys (const u32*), 1 count, 2 capacity, 3 hist (u32*, zeroed), 4 passes, 5 key
+/// bits, 6 status (u64*, passes * tiles * SORT_RADIX), 7 number of tiles.
+/// Block h counts the digits of every pass of the keys of tiles h * SORT_HIST_TILES ..
+/// (one read of the keys for all passes, per-block counts in shared memory, then one global
+/// atomic add per digit) and zeroes those tiles' look-back status words of every pass.
 template <typename K>
-WP_PRIM_FN void k_sort_hist(const args_t& a) {
-  WP_PRIM_SHARED u32 counts[RADIX * THREADS];
-  WP_PRIM_SHARED u32 sh[2 * THREADS];
-  const i64 n = resolve_count(ptr<const i32>(a, 1), int_arg(a, 2), ptr<fault_t>(a, 7),
-                              ptr<u32>(a, 8), int_arg(a, 9), int_arg(a, 10) != 0);
-  u32* hist = ptr<u32>(a, 5);
-  const i64 nb = int_arg(a, 6);
-  const i64 b = WP_PRIM_BID;
+WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
+  WP_PRIM_SHARED u32 counts[SORT_MAX_PASSES * SORT_RADIX];
+  const i64 n = resolve_count(ptr<const i32>(a, 1), int_arg(a, 2), nullptr, nullptr, 0, false);
+  const u32* keys = ptr<const u32>(a, 0);
+  u32* hist = ptr<u32>(a, 3);
+  const i32 passes = (i32)int_arg(a, 4);
+  const i32 key_bits = (i32)int_arg(a, 5);
+  u64* status = ptr<u64>(a, 6);
+  const i64 tiles = int_arg(a, 7);
   const i32 t = WP_PRIM_TID;
-  if (b * TILE >= n) {
-    if (t < RADIX) hist[t * nb + b] = 0;
-    return;
+  const i64 first = WP_PRIM_BID * SORT_HIST_TILES;
+  const i64 last = first + SORT_HIST_TILES < tiles ? first + SORT_HIST_TILES : tiles;
+  for (i32 p = 0; p < passes; ++p) {
+    u64* s = status + (p * tiles + first) * SORT_RADIX;
+    for (i64 i = t; i < (last - first) * SORT_RADIX; i += THREADS) s[i] = 0;
   }
-  const u32 total = tile_digit_ranks<K>(ptr<const u32>(a, 0), n, (i32)int_arg(a, 3),
-                                        (u32)int_arg(a, 4), counts, sh);
-  if (t < RADIX) {
-    const u32 end = t + 1 < RADIX ? counts[(t + 1) * THREADS] : total;
-    hist[t * nb + b] = end - counts[t * THREADS];
+  for (i32 i = t; i < SORT_MAX_PASSES * SORT_RADIX; i += THREADS) counts[i] = 0;
+  WP_PRIM_SYNC();
+  const i64 end = last * TILE < n ? last * TILE : n;
+  for (i64 i = first * TILE + t; i < end; i += THREADS) {
+    const u32 bits = radix_key<K>::bits(keys[i]);
+    for (i32 p = 0; p < passes; ++p) {
+      const i32 shift = p * SORT_BITS;
+      const i32 width = key_bits - shift < SORT_BITS ? key_bits - shift : SORT_BITS;
+      const u32 d = (bits >> shift) & ((1u << width) - 1);
+      WP_PRIM_ATOMIC_ADD(&counts[p * SORT_RADIX + d], 1u);
+    }
+  }
+  WP_PRIM_SYNC();
+  for (i32 i = t; i < passes * SORT_RADIX; i += THREADS) {
+    if (counts[i] != 0) WP_PRIM_ATOMIC_ADD(&hist[i], counts[i]);
   }
 }
 
-/// args: 0 keys in (const u32*), 1 values in (const u32*), 2 keys out (u32*), 3 values out
-/// (u32*), 4 count, 5 capacity, 6 shift, 7 mask, 8 offsets (const u32*: the exclusive scan
-/// of the histogram, digit-major), 9 number of blocks.
+/// One pass of the onesweep sort. args: 0 keys in (const u32*), 1 values in (const u32*),
+/// 2 keys out (u32*), 3 values out (u32*), 4 count, 5 capacity, 6 shift, 7 mask (at most
+/// 255), 8 the pass's histogram (const u32*, SORT_RADIX digit counts of all keys), 9 the
+/// pass's status words (u64*, tiles * SORT_RADIX, zeroed), 10 the pass's tile counter
+/// (u32*, zeroed), 11 number of tiles.
+///
+/// A block takes the next tile (an atomic counter, so every tile before it belongs to a block
+/// that has started: waiting for them cannot deadlock), sorts it by the digit in shared memory
+/// (two stable 4-bit passes), publishes its digit counts, adds up those of the tiles before
+/// it (decoupled look-back: a tile that has published its inclusive count ends the walk), and
+/// writes each element to digit offset + tiles before + rank in the tile. Runs of one digit
+/// are consecutive in the output, so writes are coalesced by runs.
 template <typename K>
-WP_PRIM_FN void k_sort_scatter(const args_t& a) {
+WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
   WP_PRIM_SHARED u32 counts[RADIX * THREADS];
   WP_PRIM_SHARED u32 sh[2 * THREADS];
-  WP_PRIM_SHARED u32 dst_base[RADIX];
+  WP_PRIM_SHARED u32 skeys[TILE];
+  WP_PRIM_SHARED u16 sidx[TILE];
+  WP_PRIM_SHARED u32 dstart[SORT_RADIX];
+  WP_PRIM_SHARED u32 dend[SORT_RADIX];
+  WP_PRIM_SHARED u32 dbase[SORT_RADIX];
+  WP_PRIM_SHARED i64 tile_sh;
   const i64 n = resolve_count(ptr<const i32>(a, 4), int_arg(a, 5), nullptr, nullptr, 0, false);
-  const i64 b = WP_PRIM_BID;
-  if (b * TILE >= n) return;
-  const i32 t = WP_PRIM_TID;
   const u32* keys = ptr<const u32>(a, 0);
   const u32* values = ptr<const u32>(a, 1);
   u32* keys_out = ptr<u32>(a, 2);
   u32* values_out = ptr<u32>(a, 3);
   const i32 shift = (i32)int_arg(a, 6);
   const u32 mask = (u32)int_arg(a, 7);
-  const u32* offsets = ptr<const u32>(a, 8);
-  const i64 nb = int_arg(a, 9);
-  tile_digit_ranks<K>(keys, n, shift, mask, counts, sh);
-  // Element with digit d and tile rank r goes to offsets[d][b] + r - (tile's first rank of d).
-  // Read column 0 before thread 0 starts bumping it below.
-  if (t < RADIX) dst_base[t] = offsets[t * nb + b] - counts[t * THREADS];
+  const u32* hist = ptr<const u32>(a, 8);
+  u64* status = ptr<u64>(a, 9);
+  u32* counter = ptr<u32>(a, 10);
+  const i32 t = WP_PRIM_TID;
+  if (t == 0) tile_sh = (i64)WP_PRIM_ATOMIC_ADD(counter, 1u);
   WP_PRIM_SYNC();
-  const i64 base = b * TILE + (i64)t * ITEMS;
+  const i64 tile = tile_sh;
+  const i64 tb = tile * TILE;
+  if (tb >= n) return;  // the whole block: tiles past n are nobody's predecessors
+  const i64 tn = n - tb < TILE ? n - tb : TILE;
+  // The digits' global offsets: the exclusive scan of the pass's histogram.
+  {
+    constexpr i32 PER = SORT_RADIX >= THREADS ? SORT_RADIX / THREADS : 1;
+    u32 v[PER];
+    u32 sum = 0;
+    for (i32 k = 0; k < PER; ++k) {
+      const i32 d = t * PER + k;
+      v[k] = d < SORT_RADIX ? hist[d] : 0;
+      sum += v[k];
+    }
+    u32 total;
+    u32 run = block_exclusive_scan<u32, op_sum<u32>>(sum, sh, &total);
+    for (i32 k = 0; k < PER; ++k) {
+      const i32 d = t * PER + k;
+      if (d < SORT_RADIX) dbase[d] = run;
+      run += v[k];
+    }
+  }
+  // Coalesced load of the keys, then each thread takes ITEMS consecutive ones.
   for (i32 k = 0; k < ITEMS; ++k) {
-    const i64 i = base + k;
-    if (i >= n) break;
-    const u32 key = keys[i];
-    const u32 d = (radix_key<K>::bits(key) >> shift) & mask;
-    const u32 dst = dst_base[d] + counts[d * THREADS + t];
-    counts[d * THREADS + t] += 1;
+    const i64 i = t + (i64)k * THREADS;
+    if (i < tn) skeys[i] = keys[tb + i];
+  }
+  for (i32 d = t; d < SORT_RADIX; d += THREADS) {
+    dstart[d] = 0;
+    dend[d] = 0;
+  }
+  WP_PRIM_SYNC();
+  u32 kr[ITEMS];
+  u16 ir[ITEMS];
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = (i64)t * ITEMS + k;
+    kr[k] = li < tn ? skeys[li] : 0u;
+    ir[k] = (u16)li;
+  }
+  // Every thread holds its keys: the shared tile may be rewritten after nibble_pass's barrier.
+  nibble_pass<K>(kr, ir, tn, shift, mask, 0, skeys, sidx, counts, sh);
+  if (mask > (u32)(RADIX - 1)) {
+    for (i32 k = 0; k < ITEMS; ++k) {
+      const i64 li = (i64)t * ITEMS + k;
+      kr[k] = li < tn ? skeys[li] : 0u;
+      ir[k] = li < tn ? sidx[li] : (u16)0;
+    }
+    nibble_pass<K>(kr, ir, tn, shift, mask, RADIX_BITS, skeys, sidx, counts, sh);
+  }
+  // The tile is sorted by digit: find where each digit's run starts and ends.
+  for (i64 i = t; i < tn; i += THREADS) {
+    const u32 d = sort_digit<K>(skeys[i], shift, mask);
+    if (i == 0 || sort_digit<K>(skeys[i - 1], shift, mask) != d) dstart[d] = (u32)i;
+    if (i == tn - 1 || sort_digit<K>(skeys[i + 1], shift, mask) != d) dend[d] = (u32)(i + 1);
+  }
+  WP_PRIM_SYNC();
+  // Decoupled look-back, one digit per thread: publish this tile's count, add the counts of
+  // the tiles before until one has published its inclusive count, publish the inclusive.
+  for (i32 d = t; d < SORT_RADIX; d += THREADS) {
+    const u32 cnt = dend[d] - dstart[d];
+    u64* mine = status + tile * SORT_RADIX + d;
+    if (tile == 0) {
+      store_status(mine, STATUS_INCLUSIVE | cnt);
+      dbase[d] = dbase[d] - dstart[d];
+      continue;
+    }
+    store_status(mine, STATUS_AGGREGATE | cnt);
+    u32 excl = 0;
+    for (i64 k = tile - 1; k >= 0; --k) {
+      const u64* other = status + k * SORT_RADIX + d;
+      u64 s = load_status(other);
+      while ((s >> 32) == 0) {
+        WP_PRIM_LOOKBACK_WAIT();
+        s = load_status(other);
+      }
+      excl += (u32)s;
+      if ((s >> 32) == (STATUS_INCLUSIVE >> 32)) break;
+    }
+    store_status(mine, STATUS_INCLUSIVE | (u32)(excl + cnt));
+    dbase[d] = dbase[d] + excl - dstart[d];
+  }
+  WP_PRIM_SYNC();
+  // Scatter in tile order: consecutive threads, consecutive positions of one digit's run.
+  for (i64 i = t; i < tn; i += THREADS) {
+    const u32 key = skeys[i];
+    const u32 dst = dbase[sort_digit<K>(key, shift, mask)] + (u32)i;
     keys_out[dst] = key;
-    values_out[dst] = values[i];
+    values_out[dst] = values[tb + sidx[i]];
   }
 }
 
@@ -519,14 +703,13 @@ WP_PRIM_FN void k_copy_pairs(const args_t& a) {
   WP_PRIM_DEFINE(wp_prim_spine_max_##T, (wp::prim::k_spine<wp::T, wp::prim::op_max<wp::T>>))      \
   WP_PRIM_DEFINE(wp_prim_scan_down_##T, (wp::prim::k_scan_down<wp::T>))
 
-/// Radix sort with keys K (u32, i32 or f32): `wp_prim_sort_hist_K`, `wp_prim_sort_scatter_K`,
-/// plus what every sort needs: the u32 scan of the histogram and `wp_prim_copy_pairs`.
-#define WP_PRIM_SORT_MODULE(K)                                              \
-  WP_PRIM_DEFINE(wp_prim_sort_hist_##K, (wp::prim::k_sort_hist<wp::K>))       \
-  WP_PRIM_DEFINE(wp_prim_sort_scatter_##K, (wp::prim::k_sort_scatter<wp::K>)) \
-  WP_PRIM_DEFINE(wp_prim_sort_total_u32, (wp::prim::k_tile_total<wp::u32, wp::prim::op_sum<wp::u32>>)) \
-  WP_PRIM_DEFINE(wp_prim_sort_spine_u32, (wp::prim::k_spine<wp::u32, wp::prim::op_sum<wp::u32>>))      \
-  WP_PRIM_DEFINE(wp_prim_sort_scan_down_u32, (wp::prim::k_scan_down<wp::u32>))                         \
+/// Radix sort with keys K (u32, i32 or f32): `wp_prim_sort_upsweep_K`,
+/// `wp_prim_sort_onesweep_K`, plus what every sort needs: `wp_prim_sort_init` and
+/// `wp_prim_copy_pairs`.
+#define WP_PRIM_SORT_MODULE(K)                                                    \
+  WP_PRIM_DEFINE(wp_prim_sort_init, wp::prim::k_sort_init)                        \
+  WP_PRIM_DEFINE(wp_prim_sort_upsweep_##K, (wp::prim::k_sort_upsweep<wp::K>))     \
+  WP_PRIM_DEFINE(wp_prim_sort_onesweep_##K, (wp::prim::k_sort_onesweep<wp::K>))   \
   WP_PRIM_DEFINE(wp_prim_copy_pairs, wp::prim::k_copy_pairs)
 
 /// Compaction of elements of `W` words of type `Word` (u8, u16, u32 or u64):

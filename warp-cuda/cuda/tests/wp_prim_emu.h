@@ -15,6 +15,11 @@
 //     shared memory before reading it);
 //   * blocks never run concurrently, so a kernel that waited for another block would hang:
 //     the primitives never do.
+//   * `atomicAdd` is a plain read-modify-write: threads never run at the same time, so it is
+//     exact (and returns the old value, as on a GPU);
+//   * a decoupled look-back that finds a predecessor's status unpublished aborts: blocks run
+//     in order (tile counters hand out tiles in launch order), so every tile before has been
+//     finished and an unpublished status is a bug that would hang a GPU.
 // Not emulated: warps (the primitives use no warp-level operations), memory ordering between
 // blocks, and interleavings inside a phase.
 #pragma once
@@ -148,6 +153,21 @@ void launch(void (*fn)(Args), long long blocks, int threads, const Args& args) {
   }
 }
 
+template <typename T>
+T atomic_add(T* p, T v) {
+  const T old = *p;
+  *p = (T)(old + v);
+  return old;
+}
+
+[[noreturn]] inline void lookback_stuck() {
+  std::fprintf(stderr,
+               "wp_prim_emu: block %lld waits in a look-back for a tile that every earlier "
+               "block has left unpublished\n",
+               bid);
+  std::abort();
+}
+
 }  // namespace wp_emu
 
 #define WP_PRIM_FN inline
@@ -156,5 +176,7 @@ void launch(void (*fn)(Args), long long blocks, int threads, const Args& args) {
 #define WP_PRIM_SYNC() ::wp_emu::sync()
 #define WP_PRIM_TID ((wp::i32)::wp_emu::tid)
 #define WP_PRIM_BID ((wp::i64)::wp_emu::bid)
+#define WP_PRIM_ATOMIC_ADD(p, v) ::wp_emu::atomic_add((p), (v))
+#define WP_PRIM_LOOKBACK_WAIT() ::wp_emu::lookback_stuck()
 #define WP_PRIM_REGISTER(name) \
   static ::wp_emu::registrar wp_emu_registrar_##name(#name, reinterpret_cast<void*>(&name));

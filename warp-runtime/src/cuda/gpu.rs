@@ -91,11 +91,23 @@ pub(crate) struct GpuState {
     last: Mutex<Option<&'static KernelInfo>>,
     pending: Mutex<Vec<warp_cuda::Stream>>,
     has_pending: AtomicBool,
+    /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls.
+    pub(crate) workspace: Mutex<Workspace>,
+}
+
+/// Scratch memory the primitives reuse from call to call: one buffer per GPU that grows to
+/// the largest need seen, and the stream of its last use. A primitive holds the lock while it
+/// queues its launches; a launch on another stream than the last user's first waits for that
+/// stream, so uses of the workspace are ordered like those of an array.
+#[derive(Default)]
+pub(crate) struct Workspace {
+    pub(crate) buffer: Option<DeviceBuffer>,
+    pub(crate) last: Option<warp_cuda::Stream>,
 }
 
 impl GpuState {
     /// Makes the default stream wait for the user streams with work queued since it last did.
-    fn join_pending(&self) -> Result<()> {
+    pub(crate) fn join_pending(&self) -> Result<()> {
         if !self.has_pending.load(Ordering::Acquire) {
             return Ok(());
         }
@@ -199,6 +211,7 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
         last: Mutex::new(None),
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
+        workspace: Mutex::new(Workspace::default()),
     });
     map.insert(ordinal, s.clone());
     Ok(s)

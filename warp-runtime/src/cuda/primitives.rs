@@ -7,16 +7,13 @@
 //! `gpu.rs`: after the array operations queued before; the scratch arrays are freed on the
 //! default stream after them), with no host synchronisation: counts stay on the device.
 
-use super::backend::Cuda;
 use super::gpu;
-use super::memory::CudaBuffer;
-use crate::backend::{Backend, Buffer};
 use crate::config;
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps};
-use crate::primitives::plan::{self, Buf, Module, Plan, ReduceOp, Word, GPU_TILE};
+use crate::primitives::plan::{self, gpu_tile, Buf, Module, Plan, ReduceOp, Word, GPU_TILE};
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -53,11 +50,11 @@ fn headers() -> Vec<(&'static str, &'static str)> {
         .collect()
 }
 
-/// Calls `f` with the NVRTC options of every primitives module: the GPU tile's defines,
+/// Calls `f` with the NVRTC options of primitives module `module`: its GPU tile's defines,
 /// the two headers, FMA contraction as `config::cuda_fmad` says (sums of products do not
 /// occur, so it changes nothing here but keeps one setting for all GPU code).
-pub(crate) fn with_options<R>(f: impl FnOnce(&CompileOptions) -> R) -> R {
-    let defines = GPU_TILE.defines();
+pub(crate) fn with_options<R>(module: &Module, f: impl FnOnce(&CompileOptions) -> R) -> R {
+    let defines = gpu_tile(module).defines();
     let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
     let headers = headers();
     f(&CompileOptions {
@@ -79,7 +76,7 @@ fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded
         return Ok(l.clone());
     }
     let st = gpu::state(device, ordinal)?;
-    let (compiled, _) = with_options(|opts| {
+    let (compiled, _) = with_options(module, |opts| {
         warp_cuda::compile_cached(&module.source(), &module.name(), opts, st.gpu.arch())
     })
     .map_err(|e| gpu::err(device, e))?;
@@ -143,34 +140,43 @@ fn run(
 ) -> Result<()> {
     let module = loaded(device, ordinal, &plan.module)?;
     let st = gpu::state(device, ordinal)?;
-    // Scratch: GPU memory like arrays', so its allocation and its free follow the stream
-    // ordering model (allocated on the default stream, which the launches' stream waits for;
-    // freed there after the launches).
-    let backend = Cuda::new(device, ordinal);
-    let scratch = plan
-        .scratch
-        .iter()
-        .map(|&bytes| backend.alloc_zeroed(bytes as usize, 8))
-        .collect::<Result<Vec<CudaBuffer>>>()?;
+    // Scratch: slices of the GPU's workspace, which grows to the largest need and is kept
+    // (no allocation per call). Its lock is held until the launches are queued.
+    let (offsets, need) = scratch_layout(&plan.scratch);
+    let mut ws = st.workspace.lock().unwrap_or_else(|p| p.into_inner());
+    if ws.buffer.as_ref().is_none_or(|b| b.len() < need) {
+        let old = ws.buffer.as_ref().map_or(0, |b| b.len());
+        // The old buffer's free is queued on the default stream: after its last user.
+        st.join_pending()?;
+        ws.buffer = None;
+        let bytes = need.max(old + old / 2);
+        let buf =
+            warp_cuda::DeviceBuffer::alloc(&st.gpu, bytes).map_err(|e| gpu::err(device, e))?;
+        ws.buffer = Some(buf);
+        // Allocated on the default stream, which every user stream waits for before a launch.
+        ws.last = None;
+    }
+    let base = ws.buffer.as_ref().map_or(0, |b| b.device_ptr());
     st.set_last(info(func, params));
     let (fault, flag) = st.fault_record();
     let word = |w: &Word| -> u64 {
         match *w {
             Word::Addr(Buf::User(k), off) => users[k] + off,
-            Word::Addr(Buf::Scratch(k), off) => scratch[k].address() + off,
+            Word::Addr(Buf::Scratch(k), off) => base + offsets[k] + off,
             Word::Null => 0,
             Word::Int(v) => v as u64,
             Word::Fault => fault,
             Word::FaultFlag => flag,
         }
     };
+    let tile = gpu_tile(&plan.module);
     let mut launches = Vec::with_capacity(plan.steps.len());
     for s in &plan.steps {
         let blocks = u32::try_from(s.blocks).map_err(|_| {
             Error::invalid(format!(
                 "{func}: {} blocks of {} elements are more than a grid holds",
                 s.blocks,
-                GPU_TILE.elements()
+                tile.elements()
             ))
         })?;
         let mut args = [0u64; 16];
@@ -180,6 +186,11 @@ fn run(
         launches.push((module.function(device, &s.entry)?, blocks, args));
     }
     st.queue(ordinal, None, |stream| {
+        // The workspace's last user may be another stream: wait for its work first.
+        if let Some(last) = ws.last.as_ref().filter(|l| !l.is(stream)) {
+            stream.wait_stream(last).map_err(|e| gpu::err(device, e))?;
+        }
+        ws.last = Some(stream.clone());
         for (f, blocks, args) in &mut launches {
             let mut params = [args.as_mut_ptr() as *mut c_void];
             // SAFETY: every entry takes one `wp::prim::args_t` (16 u64 words) by value, which
@@ -188,18 +199,29 @@ fn run(
             // only after these launches) and integers.
             unsafe {
                 st.gpu
-                    .launch_raw(f, stream, *blocks, GPU_TILE.threads, 0, &mut params)
+                    .launch_raw(f, stream, *blocks, tile.threads, 0, &mut params)
                     .map_err(|e| gpu::err(device, e))?;
             }
         }
         Ok(())
     })?;
-    // The frees queue on the default stream after the launches (`CudaBuffer::drop`).
-    drop(scratch);
+    drop(ws);
     if config::debug() {
         gpu::synchronize(device, ordinal)?;
     }
     Ok(())
+}
+
+/// Byte offsets of a plan's scratch buffers in the workspace (each 256-byte aligned), and
+/// the bytes they need in all.
+fn scratch_layout(sizes: &[u64]) -> (Vec<u64>, usize) {
+    let mut offsets = Vec::with_capacity(sizes.len());
+    let mut end = 0u64;
+    for &bytes in sizes {
+        offsets.push(end);
+        end += bytes.next_multiple_of(256);
+    }
+    (offsets, end as usize)
 }
 
 /// The plan's length; a device count's address is appended to `users`. `arg` is the index
@@ -274,7 +296,7 @@ pub(super) fn radix_sort_pairs<K: SortKeyOps>(
 ) -> Result<()> {
     let mut users = vec![keys, values];
     let len = plan_len(len, &mut users, 2);
-    let p = plan::sort(GPU_TILE, K::CUDA, key_bits, len);
+    let p = plan::sort(plan::GPU_SORT_TILE, K::CUDA, key_bits, len);
     run(
         device,
         ordinal,
@@ -316,12 +338,14 @@ fn blob_words<T>() -> (u32, u32) {
 /// runtime uses (no GPU needed, only libnvrtc): how the tests check that NVRTC accepts every
 /// module on machines without a GPU.
 pub fn compile_module(module: &Module, arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
-    with_options(|opts| warp_cuda::compile(&module.source(), &module.name(), opts, arch))
+    with_options(module, |opts| {
+        warp_cuda::compile(&module.source(), &module.name(), opts, arch)
+    })
 }
 
 #[cfg(test)]
 mod tests {
-    use super::blob_words;
+    use super::{blob_words, scratch_layout};
     use glam::{DVec3, Vec3};
 
     #[test]
@@ -331,5 +355,14 @@ mod tests {
         assert_eq!(blob_words::<Vec3>(), (4, 3));
         assert_eq!(blob_words::<DVec3>(), (8, 3));
         assert_eq!(blob_words::<f64>(), (8, 1));
+    }
+
+    #[test]
+    fn scratch_slices_are_aligned_and_disjoint() {
+        assert_eq!(scratch_layout(&[]), (vec![], 0));
+        assert_eq!(
+            scratch_layout(&[4, 0, 300, 8]),
+            (vec![0, 256, 256, 768], 1024)
+        );
     }
 }

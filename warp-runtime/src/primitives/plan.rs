@@ -43,9 +43,28 @@ pub const GPU_TILE: Tile = Tile {
     items: 8,
 };
 
-/// Bits sorted per radix pass on the GPU (`RADIX_BITS` in `wp_primitives.h`).
-pub const RADIX_BITS: u32 = 4;
+/// The shape of the sort module on GPUs: 256 threads of 16 keys (tiles of 4096, so that a
+/// tile holds about 16 keys of each of the 256 digits and writes go out in runs).
+pub const GPU_SORT_TILE: Tile = Tile {
+    threads: 256,
+    items: 16,
+};
+
+/// The tile a module is compiled for on GPUs.
+pub fn gpu_tile(module: &Module) -> Tile {
+    match module {
+        Module::Sort(_) => GPU_SORT_TILE,
+        _ => GPU_TILE,
+    }
+}
+
+/// Bits sorted per radix pass on the GPU (`SORT_BITS` in `wp_primitives.h`).
+pub const RADIX_BITS: u32 = 8;
 const RADIX: u64 = 1 << RADIX_BITS;
+/// Most passes of a sort (32-bit keys), `SORT_MAX_PASSES`.
+const MAX_PASSES: u64 = 4;
+/// Tiles counted per block of the upfront histogram (`SORT_HIST_TILES`).
+const HIST_TILES: u64 = 8;
 
 /// A buffer a plan uses: one of the caller's arrays (by position in the primitive's list) or
 /// scratch memory the executor allocates for the call.
@@ -274,10 +293,15 @@ pub fn scan(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -
     }
 }
 
+/// Tiles a block of a reduction totals (`per` of `k_tile_total`).
+pub const REDUCE_TILES_PER_BLOCK: u64 = 4;
+
 /// Reduction of `T` into a 1-element array. Caller's arrays: 0 input, 1 out, then the count.
+/// Two launches: block totals of `REDUCE_TILES_PER_BLOCK` tiles each, then one block
+/// reducing them.
 pub fn reduce(tile: Tile, t: &'static str, size: u64, op: ReduceOp, len: Len) -> Plan {
     let e = scan_entries(t);
-    let nb = tile.blocks(len.capacity());
+    let nb = tile.blocks(len.capacity()).div_ceil(REDUCE_TILES_PER_BLOCK);
     let [count, cap] = len.words();
     Plan {
         module: Module::Scan(t),
@@ -288,7 +312,8 @@ pub fn reduce(tile: Tile, t: &'static str, size: u64, op: ReduceOp, len: Len) ->
                 nb,
                 [user(0), count, cap, scratch(0)]
                     .into_iter()
-                    .chain(len.report_words(true)),
+                    .chain(len.report_words(true))
+                    .chain([Word::Int(REDUCE_TILES_PER_BLOCK as i64)]),
             ),
             step(
                 e.spine[op as usize].clone(),
@@ -341,84 +366,71 @@ pub fn radix_passes(key_bits: u32, radix_bits: u32) -> Vec<(u32, u32)> {
 }
 
 /// LSD radix sort of 32-bit keys (C++ type `k`: `u32`, `i32`, `f32`) with 32-bit values,
-/// `key_bits` (1 to 32) low bits of the ordered key. Caller's arrays: 0 keys, 1 values, then
-/// the count.
+/// `key_bits` (1 to 32) low bits of the ordered key, 8 bits per pass (`ceil(key_bits / 8)`
+/// passes). Caller's arrays: 0 keys, 1 values, then the count.
 ///
-/// Scratch: 0 keys and 1 values of the other ping-pong side (capacity each), 2 the histogram
-/// (RADIX counts per block, digit-major), 3 the histogram scan's tile totals. After an odd
-/// number of passes the sorted pairs are in the scratch and a last step copies them back.
+/// Steps: `wp_prim_sort_init` (one block: zeroes the histograms and tile counters, reports a
+/// bad count), `wp_prim_sort_upsweep_K` (one read of the keys: the digit counts of every pass,
+/// and zeroed look-back status words), then one `wp_prim_sort_onesweep_K` per pass.
+///
+/// Scratch: 0 the histograms (u32, 4 x 256), 1 the tile counters (u32, 4), 2 the look-back
+/// status words (u64, passes x tiles x 256), 3 keys and 4 values of ping-pong side B, and for
+/// an odd number of passes (3) 5 keys and 6 values of side C, so that the passes go
+/// user -> B -> C -> user and no copy is needed. A single pass ends in B and copies back.
 pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
     let cap = len.capacity();
     let nb = tile.blocks(cap);
-    let hist_len = RADIX * nb;
-    let nb_hist = tile.blocks(hist_len);
     let [count, capw] = len.words();
-    let hist_name = format!("wp_prim_sort_hist_{k}");
-    let scatter_name = format!("wp_prim_sort_scatter_{k}");
-    let mut steps = Vec::new();
+    let passes = radix_passes(key_bits, RADIX_BITS);
+    let np = passes.len();
+    // The ping-pong sides each pass reads and writes: 0 the caller's arrays, 1 B, 2 C.
+    let sides: Vec<usize> = if np.is_multiple_of(2) || np == 1 {
+        (0..=np).map(|p| p % 2).collect()
+    } else {
+        (0..=np)
+            .map(|p| match p {
+                0 => 0,
+                p if p == np => 0,
+                p => 2 - p % 2,
+            })
+            .collect()
+    };
     let side = |s: usize| -> [Word; 2] {
-        if s == 0 {
-            [user(0), user(1)]
-        } else {
-            [scratch(0), scratch(1)]
+        match s {
+            0 => [user(0), user(1)],
+            1 => [scratch(3), scratch(4)],
+            _ => [scratch(5), scratch(6)],
         }
     };
-    let passes = radix_passes(key_bits, RADIX_BITS);
-    for (p, &(shift, mask)) in passes.iter().enumerate() {
-        let [src_k, src_v] = side(p % 2);
-        let [dst_k, dst_v] = side((p + 1) % 2);
-        steps.push(step(
-            hist_name.clone(),
-            nb,
+    let status_pass = nb * RADIX * 8;
+    let mut steps = vec![
+        step(
+            "wp_prim_sort_init",
+            1,
+            [count, capw, scratch(0), scratch(1)]
+                .into_iter()
+                .chain(len.report_words(true)),
+        ),
+        step(
+            format!("wp_prim_sort_upsweep_{k}"),
+            nb.div_ceil(HIST_TILES),
             [
-                src_k,
+                user(0),
                 count,
                 capw,
-                Word::Int(shift as i64),
-                Word::Int(mask as i64),
+                scratch(0),
+                Word::Int(np as i64),
+                Word::Int(key_bits as i64),
                 scratch(2),
                 Word::Int(nb as i64),
-            ]
-            .into_iter()
-            .chain(len.report_words(p == 0)),
-        ));
-        // The exclusive scan of the histogram, in place: every (digit, block) its first slot.
-        steps.push(step(
-            "wp_prim_sort_total_u32",
-            nb_hist,
-            [
-                scratch(2),
-                Word::Null,
-                Word::Int(hist_len as i64),
-                scratch(3),
-            ]
-            .into_iter()
-            .chain(Len::Host(hist_len).report_words(false)),
-        ));
-        steps.push(step(
-            "wp_prim_sort_spine_u32",
-            1,
-            [
-                scratch(3),
-                Word::Int(nb_hist as i64),
-                Word::Int(1),
-                Word::Null,
             ],
-        ));
+        ),
+    ];
+    for (p, &(shift, mask)) in passes.iter().enumerate() {
+        let [src_k, src_v] = side(sides[p]);
+        let [dst_k, dst_v] = side(if np == 1 { 1 } else { sides[p + 1] });
         steps.push(step(
-            "wp_prim_sort_scan_down_u32",
-            nb_hist,
-            [
-                scratch(2),
-                scratch(2),
-                Word::Null,
-                Word::Int(hist_len as i64),
-                scratch(3),
-                Word::Int(0),
-            ],
-        ));
-        steps.push(step(
-            scatter_name.clone(),
+            format!("wp_prim_sort_onesweep_{k}"),
             nb,
             [
                 src_k,
@@ -429,21 +441,33 @@ pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
                 capw,
                 Word::Int(shift as i64),
                 Word::Int(mask as i64),
-                scratch(2),
+                Word::Addr(Buf::Scratch(0), p as u64 * RADIX * 4),
+                Word::Addr(Buf::Scratch(2), p as u64 * status_pass),
+                Word::Addr(Buf::Scratch(1), p as u64 * 4),
                 Word::Int(nb as i64),
             ],
         ));
     }
-    if passes.len() % 2 == 1 {
+    if np == 1 {
         steps.push(step(
             "wp_prim_copy_pairs",
-            nb,
-            [scratch(0), scratch(1), user(0), user(1), count, capw],
+            tile.blocks(cap),
+            [scratch(3), scratch(4), user(0), user(1), count, capw],
         ));
+    }
+    let mut scratch_sizes = vec![
+        MAX_PASSES * RADIX * 4,
+        MAX_PASSES * 4,
+        np as u64 * status_pass,
+        cap * 4,
+        cap * 4,
+    ];
+    if !np.is_multiple_of(2) && np > 1 {
+        scratch_sizes.extend([cap * 4, cap * 4]);
     }
     Plan {
         module: Module::Sort(k),
-        scratch: vec![cap * 4, cap * 4, hist_len * 4, nb_hist * 4],
+        scratch: scratch_sizes,
         steps,
     }
 }
@@ -458,6 +482,8 @@ mod tests {
         assert_eq!(radix_passes(5, 4), vec![(0, 15), (4, 1)]);
         assert_eq!(radix_passes(1, 4), vec![(0, 1)]);
         assert_eq!(radix_passes(12, 8), vec![(0, 255), (8, 15)]);
+        assert_eq!(radix_passes(21, RADIX_BITS).len(), 3);
+        assert_eq!(radix_passes(32, RADIX_BITS).len(), 4);
     }
 
     #[test]
@@ -477,11 +503,36 @@ mod tests {
                 ("wp_prim_scan_down_f32", 3)
             ]
         );
-        // 5 bits: two passes (even), no copy back; 9 bits: three passes and the copy.
+        // init, upsweep, one onesweep per 8 bits; a single pass copies back; three passes go
+        // user -> B -> C -> user.
+        let entries = |s: &Plan| s.steps.iter().map(|s| s.entry.clone()).collect::<Vec<_>>();
         let s = sort(t, "u32", 5, Len::Host(10));
-        assert_eq!(s.steps.len(), 10);
-        let s = sort(t, "u32", 9, Len::Host(10));
-        assert_eq!(s.steps.last().unwrap().entry, "wp_prim_copy_pairs");
+        assert_eq!(
+            entries(&s),
+            [
+                "wp_prim_sort_init",
+                "wp_prim_sort_upsweep_u32",
+                "wp_prim_sort_onesweep_u32",
+                "wp_prim_copy_pairs"
+            ]
+        );
+        assert_eq!(sort(t, "u32", 16, Len::Host(10)).steps.len(), 4);
+        assert_eq!(sort(t, "u32", 32, Len::Host(10)).steps.len(), 6);
+        let s = sort(t, "u32", 21, Len::Host(10));
+        assert_eq!(s.steps.len(), 5);
+        assert_eq!(s.scratch.len(), 7);
+        let hops: Vec<_> = s.steps[2..]
+            .iter()
+            .map(|s| (s.args[0], s.args[2]))
+            .collect();
+        assert_eq!(
+            hops,
+            vec![
+                (user(0), scratch(3)),
+                (scratch(3), scratch(5)),
+                (scratch(5), user(0))
+            ]
+        );
         // Only the first kernel reports a bad device count.
         let len = Len::Device {
             count: 2,
@@ -489,14 +540,11 @@ mod tests {
             arg: 2,
         };
         let s = sort(t, "i32", 32, len);
-        let reports: Vec<_> = s
+        assert_eq!(s.steps[0].args[7], Word::Int(1));
+        assert!(s
             .steps
             .iter()
-            .filter(|s| s.entry.starts_with("wp_prim_sort_hist"))
-            .map(|s| s.args[10])
-            .collect();
-        assert_eq!(reports[0], Word::Int(1));
-        assert!(reports[1..].iter().all(|w| *w == Word::Int(0)));
+            .all(|s| !s.args.contains(&Word::Fault) || s.entry == "wp_prim_sort_init"));
     }
 
     #[test]
