@@ -225,7 +225,8 @@ impl HashGrid {
     }
 
     /// Makes room for builds of up to `num_points` points without allocating (Warp's
-    /// `reserve`). A grid shared with a clone (a tape's) gets buffers of its own here.
+    /// `reserve`). A grid shared with a clone (a tape's) gets buffers of its own here (the
+    /// copy of copy-on-write). A build the grid holds stays valid.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] when `num_points` exceeds `i32::MAX`; allocation errors.
@@ -238,19 +239,29 @@ impl HashGrid {
             ));
         }
         let cap = self.capacity().max(num_points);
+        // The points of the build to carry over (none when called by `build`, which is about
+        // to overwrite them).
+        let kept = self.built.map_or(0, |b| b.num_points);
         match Arc::get_mut(&mut self.buffers) {
             Some(b) if b.point_ids.len() >= num_points => {}
             Some(b) => {
-                b.point_ids = Array::zeros(cap, &self.device)?;
+                let ids = Array::zeros(cap, &self.device)?;
+                copy_prefix(&ids, &b.point_ids, kept)?;
+                b.point_ids = ids;
                 b.keys = Array::zeros(cap, &self.device)?;
             }
             None => {
                 // Shared with a clone: the clone keeps the old buffers, which are not written
                 // again.
-                let cells = self.buffers.cell_starts.len();
-                self.buffers = Arc::new(Buffers::new(cap, cells, &self.device)?);
-                // Fresh buffers hold no build.
-                self.built = None;
+                let old = &self.buffers;
+                let cells = old.cell_starts.len();
+                let fresh = Buffers::new(cap, cells, &self.device)?;
+                if self.built.is_some() {
+                    copy_prefix(&fresh.point_ids, &old.point_ids, kept)?;
+                    copy_prefix(&fresh.cell_starts, &old.cell_starts, cells)?;
+                    copy_prefix(&fresh.cell_ends, &old.cell_ends, cells)?;
+                }
+                self.buffers = Arc::new(fresh);
             }
         }
         Ok(())
@@ -382,6 +393,14 @@ impl HashGrid {
 
 /// What the build's messages name.
 const WHAT: &str = "HashGrid::build";
+
+/// Copies the first `n` elements of `src` into `dst`.
+fn copy_prefix(dst: &Array<i32>, src: &Array<i32>, n: usize) -> Result<()> {
+    if n == 0 {
+        return Ok(());
+    }
+    dst.view(0..n)?.copy_from(&src.view(0..n)?)
+}
 
 /// A `HashGrid` kernel parameter as CUDA kernels receive it: `wp::hash_grid_t` in
 /// `warp-cuda/cuda/wp_hash_grid.h`, field for field (48 bytes).
@@ -526,6 +545,15 @@ mod tests {
             (s.to_vec().unwrap(), e.to_vec().unwrap()),
             (vec![0, 2], vec![2, 4])
         );
+        // Reserving more keeps the build, shared or not.
+        g.reserve(200).unwrap();
+        assert_eq!(g.point_ids().unwrap().to_vec().unwrap(), vec![1, 3, 0, 2]);
+        let shared = g.clone();
+        g.reserve(300).unwrap();
+        assert_eq!(g.capacity(), 300);
+        assert_eq!(g.point_ids().unwrap().to_vec().unwrap(), vec![1, 3, 0, 2]);
+        assert_eq!(g.cell_ranges().unwrap().1.to_vec().unwrap(), vec![2, 4]);
+        assert_eq!(shared.capacity(), 200);
         // A clone keeps its build when the original is built again.
         let kept = g.clone();
         g.build(&pts(&dev, &[Vec3::X]), 1.0).unwrap();
