@@ -57,6 +57,34 @@
 //!   `Array<Vec3>` does not compile.
 //! - Kernel threads never panic: an out-of-bounds index or an integer division by zero
 //!   returns an [`Error`] naming the kernel, the argument and the values.
+//! - [`HashGrid`] (Warp's hash grid) is a kernel parameter `grid: HashGrid`; kernels iterate
+//!   its neighbour candidates with `for j in hash_grid_query(grid, p, radius) { .. }` and
+//!   test the distance themselves:
+//!
+//! ```
+//! use warp_lang as wp;
+//! use wp::prelude::*;
+//!
+//! #[wp::kernel]
+//! fn count_neighbours(grid: HashGrid, x: Array<Vec3>, r: f32, counts: Array<i32>) {
+//!     let i = tid();
+//!     let mut n = 0;
+//!     for j in hash_grid_query(grid, x[i], r) {
+//!         if j != i && length(x[j] - x[i]) <= r {
+//!             n += 1;
+//!         }
+//!     }
+//!     counts[i] = n;
+//! }
+//!
+//! let dev = wp::cpu();
+//! let x = wp::Array::from_slice(&[Vec3::ZERO, Vec3::X * 0.5, Vec3::X * 3.0], &dev).unwrap();
+//! let counts = wp::Array::<i32>::zeros(3, &dev).unwrap();
+//! let mut grid = wp::HashGrid::new(8, 8, 8, &dev).unwrap();
+//! grid.build(&x, 1.0).unwrap();
+//! wp::launch(count_neighbours, 3, (&grid, &x, 1.0, &counts), &dev).unwrap();
+//! assert_eq!(counts.to_vec().unwrap(), vec![1, 1, 0]);
+//! ```
 //!
 //! The kernel language (types, the literal rule, builtins) is described in ARCHITECTURE.md
 //! and in the docs of [`kernel`].
@@ -77,6 +105,8 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+/// Kernel-visible host objects: [`HashGrid`] (also at the crate root and in the prelude).
+pub use warp_runtime::objects;
 /// Parallel primitives: scan, reductions, radix sort, stream compaction (the functions are
 /// also at the crate root: `wp::array_scan`, ...).
 pub use warp_runtime::primitives;
@@ -90,15 +120,15 @@ pub use warp_runtime::{
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error,
-    GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable, Recording,
-    Result, Runtime, Seed, Tape,
+    GenericKernel, HashGrid, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable,
+    Recording, Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{f16, func, kernel, Array, DTransform, Float, Struct, Transform};
+    pub use crate::{f16, func, kernel, Array, DTransform, Float, HashGrid, Struct, Transform};
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -112,9 +142,9 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, ops, zero_like,
-        AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView, Grid,
-        KResult, RangeProg, Transform,
+        adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, objects, ops,
+        zero_like, AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView,
+        Grid, KResult, RangeProg, Transform,
     };
     pub use warp_runtime::kernel::{CpuGradsOf, CpuParamsOf};
     pub use warp_runtime::{

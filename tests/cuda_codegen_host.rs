@@ -321,6 +321,51 @@ fn misc_builtins(x: Array<f32>, cdf: Array<f32>, out: Array<f32, 2>, ints: Array
     ints[i * 3 + 2] = sample_cdf(&mut st, cdf) + 8 * sample_cdf(&mut st, cdf);
 }
 
+/// The nearest other point within `r` of `p` (through a func: a query in a func), or -1.
+#[wp::func]
+fn nearest_other(grid: HashGrid, x: Array<Vec3>, p: Vec3, r: f32, me: usize) -> i32 {
+    let mut best = -1;
+    let mut bd = r;
+    for j in hash_grid_query(grid, p, r) {
+        let d = length(x[j] - p);
+        if j != me && d <= bd {
+            best = j as i32;
+            bd = d;
+        }
+    }
+    best
+}
+
+/// The hash grid's query in a kernel and a func: `hash_grid_point_id`, `continue`, `break`,
+/// and a float sum over the candidates in their order (so the order must be the CPU's).
+#[wp::kernel]
+fn hash_grid_queries(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<f32>, ints: Array<i32>) {
+    let t = tid();
+    let i = hash_grid_point_id(grid, t);
+    let p = x[i];
+    let mut s = 0.0;
+    let mut c = 0;
+    let mut m = 0;
+    for j in hash_grid_query(grid, p, r) {
+        m += 1;
+        if j == i {
+            continue;
+        }
+        let d = length(x[j] - p);
+        if d <= r {
+            s += (r - d) * (j as f32 + 1.0);
+            c += 1;
+        }
+        if c > 5 {
+            break;
+        }
+    }
+    out[i] = s;
+    ints[3 * i] = c;
+    ints[3 * i + 1] = m;
+    ints[3 * i + 2] = nearest_other(grid, x, p, r * 0.5, i);
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -329,6 +374,8 @@ enum Arg<'a> {
     I32s(&'a wp::Array<i32>),
     Vec3s(&'a wp::Array<Vec3>),
     F32Grid(&'a wp::Array<f32, 2>),
+    /// A built CPU hash grid, passed as the `wp::hash_grid_t` over copies of its buffers.
+    HashGrid(&'a wp::HashGrid),
 }
 
 fn f32_bits(x: f32) -> String {
@@ -412,6 +459,29 @@ fn cpp_args(args: &[Arg]) -> (String, String) {
                 )
                 .unwrap();
             }
+            Arg::HashGrid(g) => {
+                // A trailing 0 in each buffer: C++ has no empty arrays.
+                let ints = |a: &wp::Array<i32>| {
+                    let mut v: Vec<String> =
+                        a.to_vec().unwrap().iter().map(|x| x.to_string()).collect();
+                    v.push("0".into());
+                    v.join(", ")
+                };
+                let ids = g.point_ids().unwrap();
+                let (starts, ends) = g.cell_ranges().unwrap();
+                for (name, a) in [("ids", &ids), ("starts", &starts), ("ends", &ends)] {
+                    writeln!(decl, "static wp::i32 {name}{k}[] = {{{}}};", ints(a)).unwrap();
+                }
+                let [dx, dy, dz] = g.dims();
+                let inv = 1.0 / g.cell_width().unwrap();
+                writeln!(
+                    decl,
+                    "wp::hash_grid_t p{k} = {{ids{k}, starts{k}, ends{k}, {{{dx}, {dy}, {dz}}}, {}, bits_f32({}), {k}}};",
+                    ids.len(),
+                    f32_bits(inv)
+                )
+                .unwrap();
+            }
             Arg::F32Grid(a) => {
                 let d = a.to_vec().unwrap();
                 let [r, c] = a.shape();
@@ -454,7 +524,7 @@ fn cpu_results(args: &[Arg]) -> Vec<String> {
                     .collect(),
             )),
             Arg::I32s(a) => out.extend(a.to_vec().unwrap().into_iter().map(|x| x.to_string())),
-            Arg::F32(_) | Arg::Vec3(_) => {}
+            Arg::F32(_) | Arg::Vec3(_) | Arg::HashGrid(_) => {}
         }
     }
     out
@@ -837,4 +907,146 @@ fn misc_builtins_match_the_cpu_backend() {
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));
     }
+}
+
+/// The points of the hash grid tests: a cloud reaching outside the grid's nominal extent
+/// (negative too), with duplicates.
+fn grid_points() -> Vec<Vec3> {
+    let mut pts: Vec<Vec3> = (0..90)
+        .map(|k| {
+            let f = k as f32;
+            Vec3::new(
+                (f * 0.61).sin() * 2.5,
+                (f * 0.23).cos() * 1.7 - 0.4,
+                f * 0.031 - 1.3,
+            )
+        })
+        .collect();
+    pts.push(pts[4]);
+    pts.push(Vec3::new(-40.0, 17.5, 3.25));
+    pts
+}
+
+#[test]
+fn hash_grid_queries_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let pts = grid_points();
+    let n = pts.len();
+    let x = wp::Array::from_slice(&pts, &dev).unwrap();
+    let mut grid = wp::HashGrid::new(4, 3, 5, &dev).unwrap();
+    grid.build(&x, 0.4).unwrap();
+    let out = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let ints = wp::Array::<i32>::zeros(3 * n, &dev).unwrap();
+    let args = [
+        Arg::HashGrid(&grid),
+        Arg::Vec3s(&x),
+        Arg::F32(0.9),
+        Arg::F32s(&out),
+        Arg::I32s(&ints),
+    ];
+    let host = run_on_host::<hash_grid_queries>(&[n], &args);
+    wp::launch(hash_grid_queries, n, (&grid, &x, 0.9, &out, &ints), &dev).unwrap();
+    // Some points have neighbours, some more than the `break` allows.
+    let c: Vec<i32> = ints.to_vec().unwrap().iter().step_by(3).copied().collect();
+    assert!(c.contains(&0) && c.iter().any(|c| *c > 5), "{c:?}");
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+}
+
+/// The device build's per-thread steps (`wp::hash_grid_build_key`, a stable sort of the pairs
+/// as the primitives' radix sort will do, `wp::hash_grid_build_range`) give the CPU build's
+/// buffers, and flag a non-finite point.
+#[test]
+fn hash_grid_device_build_steps_match_the_cpu_build() {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED hash_grid_device_build_steps_match_the_cpu_build: no g++");
+        return;
+    }
+    let dev = wp::cpu();
+    let pts = grid_points();
+    let mut grid = wp::HashGrid::new(4, 3, 5, &dev).unwrap();
+    grid.build(&wp::Array::from_slice(&pts, &dev).unwrap(), 0.4)
+        .unwrap();
+    let inv = 1.0 / 0.4f32;
+    let items: Vec<String> = pts
+        .iter()
+        .map(|p| {
+            let b = |x: f32| format!("bits_f32({})", f32_bits(x));
+            format!("wp::Vec3_new({}, {}, {})", b(p.x), b(p.y), b(p.z))
+        })
+        .collect();
+    let n = pts.len();
+    let program = format!(
+        "#include <cstring>\n#include <algorithm>\n#include <vector>\n#include \"wp_hash_grid.h\"\n\
+         static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+         int main() {{\n\
+           const wp::i32 dims[3] = {{4, 3, 5}};\n\
+           const wp::f32 inv = bits_f32({inv});\n\
+           wp::Vec3 pts[] = {{{items}}};\n\
+           std::vector<std::pair<wp::i32, wp::i32>> kv({n});\n\
+           for (int i = 0; i < {n}; ++i) if (!wp::hash_grid_build_key(dims, inv, pts[i], i, &kv[i].first, &kv[i].second)) return 1;\n\
+           std::stable_sort(kv.begin(), kv.end(), [](auto a, auto b) {{ return a.first < b.first; }});\n\
+           std::vector<wp::i32> keys({n}), starts(60, 0), ends(60, 0);\n\
+           for (int k = 0; k < {n}; ++k) keys[k] = kv[k].first;\n\
+           for (int k = 0; k < {n}; ++k) wp::hash_grid_build_range(keys.data(), {n}, k, starts.data(), ends.data(), 60);\n\
+           for (auto& p : kv) printf(\"%d\\n\", p.second);\n\
+           for (int c = 0; c < 60; ++c) printf(\"%d %d\\n\", starts[c], ends[c]);\n\
+           wp::i32 key, value;\n\
+           const bool nan_ok = wp::hash_grid_build_key(dims, inv, wp::Vec3_new(0.0f, bits_f32(0x7fc00000u), 1.0f), 0, &key, &value);\n\
+           const bool inf_ok = wp::hash_grid_build_key(dims, inv, wp::Vec3_new(bits_f32(0xff800000u), 0.0f, 1.0f), 0, &key, &value);\n\
+           printf(\"%d %d\\n\", (int)nan_ok, (int)inf_ok);\n\
+           return 0;\n\
+         }}\n",
+        inv = f32_bits(inv),
+        items = items.join(", "),
+    );
+    let dir = std::env::temp_dir().join(format!("wp_hash_grid_build_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (cpp, exe) = (dir.join("b.cpp"), dir.join("b"));
+    std::fs::write(&cpp, program).unwrap();
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let out = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-I",
+            include,
+        ])
+        .arg(&cpp)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "g++: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = Command::new(&exe).output().unwrap();
+    assert!(run.status.success(), "a finite point was flagged");
+    let text = String::from_utf8(run.stdout).unwrap();
+    let mut lines = text.lines();
+    let ids: Vec<i32> = lines.by_ref().take(n).map(|l| l.parse().unwrap()).collect();
+    assert_eq!(ids, grid.point_ids().unwrap().to_vec().unwrap());
+    let (s, e) = grid.cell_ranges().unwrap();
+    let want: Vec<String> = s
+        .to_vec()
+        .unwrap()
+        .iter()
+        .zip(e.to_vec().unwrap())
+        .map(|(s, e)| format!("{s} {e}"))
+        .collect();
+    let got: Vec<String> = lines.by_ref().take(60).map(str::to_string).collect();
+    assert_eq!(got, want);
+    assert_eq!(
+        lines.next(),
+        Some("0 0"),
+        "NaN and infinite points are flagged"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -6,6 +6,7 @@
 //! the same arithmetic as the closed form up to a few roundings; f32 with 1e-6 (a few ulps of
 //! the f32 unit roundoff 6e-8 over the ~10 operations involved).
 
+use crate::hash_grid::k_energy;
 use crate::{arr, zeros};
 use warp_lang as wp;
 use wp::prelude::*;
@@ -856,6 +857,8 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <crate::funcs::k_mut_bool as wp::Kernel>::info(),
         <crate::funcs::k_untyped as wp::Kernel>::info(),
         <crate::params::k_consts as wp::Kernel>::info(),
+        // A hash grid query loop in a func.
+        <k_energy as wp::Kernel>::info(),
     ];
     let dir = std::env::temp_dir().join(format!("wp-adj-host-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -1555,9 +1558,18 @@ fn nested_exits_gradient(dev: &wp::Device) {
 // ------------------------------------------------------------------------------------------
 
 /// A launch argument of [`run_adjoint_on_host`].
-enum HostArg {
+pub(crate) enum HostArg {
     /// A scalar parameter: its C++ type and value.
     Scalar(&'static str, String),
+    /// A built hash grid: its buffers, dims and `1 / cell width`, declared as the
+    /// `wp::hash_grid_t` over copies of them.
+    HashGrid {
+        ids: Vec<i32>,
+        starts: Vec<i32>,
+        ends: Vec<i32>,
+        dims: [usize; 3],
+        inv: f32,
+    },
     /// An array parameter made of f64 words (f64 elements, or structs of f64 fields): its C++
     /// element type, shape, words per element, values, and gradient before the adjoint runs.
     Array {
@@ -1570,16 +1582,28 @@ enum HostArg {
 }
 
 impl HostArg {
+    /// A built CPU grid, as it is now.
+    pub(crate) fn hash_grid(g: &wp::HashGrid) -> Self {
+        let (starts, ends) = g.cell_ranges().unwrap();
+        HostArg::HashGrid {
+            ids: g.point_ids().unwrap().to_vec().unwrap(),
+            starts: starts.to_vec().unwrap(),
+            ends: ends.to_vec().unwrap(),
+            dims: g.dims(),
+            inv: 1.0 / g.cell_width().unwrap(),
+        }
+    }
+
     fn i32(v: i32) -> Self {
         HostArg::Scalar("wp::i32", v.to_string())
     }
 
-    fn f64(v: f64) -> Self {
+    pub(crate) fn f64(v: f64) -> Self {
         HostArg::Scalar("wp::f64", format!("bits64({:#018x}ULL)", v.to_bits()))
     }
 
     /// An array with a gradient, as it is now.
-    fn array<T: wp::Element + wp::__private::bytemuck::Pod, const N: usize>(
+    pub(crate) fn array<T: wp::Element + wp::__private::bytemuck::Pod, const N: usize>(
         a: &wp::Array<T, N>,
         elem: &'static str,
     ) -> Self {
@@ -1632,6 +1656,34 @@ fn run_adjoint_on_host(
     for (k, a) in args.iter().enumerate() {
         match a {
             HostArg::Scalar(t, v) => writeln!(decl, "{t} p{k} = {v};").unwrap(),
+            HostArg::HashGrid {
+                ids,
+                starts,
+                ends,
+                dims,
+                inv,
+            } => {
+                // A trailing 0 in each buffer: C++ has no empty arrays.
+                for (name, data) in [("ids", ids), ("starts", starts), ("ends", ends)] {
+                    let list: Vec<String> = data.iter().map(|x| x.to_string()).collect();
+                    writeln!(
+                        decl,
+                        "static wp::i32 {name}{k}[] = {{{}, 0}};",
+                        list.join(", ")
+                    )
+                    .unwrap();
+                }
+                writeln!(
+                    decl,
+                    "wp::hash_grid_t p{k} = {{ids{k}, starts{k}, ends{k}, {{{}, {}, {}}}, {}, bits32({:#010x}u), {k}}};",
+                    dims[0],
+                    dims[1],
+                    dims[2],
+                    ids.len(),
+                    inv.to_bits()
+                )
+                .unwrap();
+            }
             HostArg::Array {
                 elem,
                 shape,
@@ -1669,6 +1721,7 @@ fn run_adjoint_on_host(
     let program = format!(
         "#include <cstring>\n#define WP_ADSTACK_BYTES 4096\n{text}\n\
          static wp::f64 bits64(unsigned long long u) {{ wp::f64 x; memcpy(&x, &u, 8); return x; }}\n\
+         static wp::f32 bits32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
          static void print_f64(wp::f64 x) {{ unsigned long long u; memcpy(&u, &x, 8); printf(\"%016llx\\n\", u); }}\n\
          template <bool FAST> static int run() {{\n\
          {decl}\n\
@@ -1731,7 +1784,7 @@ fn run_adjoint_on_host(
         args.iter()
             .filter_map(|a| match a {
                 HostArg::Array { grad, .. } => Some(lines.by_ref().take(grad.len()).collect()),
-                HostArg::Scalar(..) => None,
+                HostArg::Scalar(..) | HostArg::HashGrid { .. } => None,
             })
             .collect(),
     )
@@ -1935,6 +1988,25 @@ fn cuda_adjoints_run_on_the_host_like_the_cpu() {
                 HostArg::array(&out, "wp::f64")
             ],
             [bodies, m, out]
+        );
+    }
+    {
+        // A hash grid query in a func, its body reading the neighbours' positions.
+        let (x, out, grid) = crate::hash_grid::energy_case(&dev);
+        let n = out.len();
+        out.grad().unwrap().fill(1.0).unwrap();
+        let hg = HostArg::hash_grid(&grid);
+        case!(
+            k_energy,
+            n,
+            (&grid, &x, 0.6, &out),
+            [
+                hg,
+                HostArg::array(&x, "wp::f64"),
+                HostArg::f64(0.6),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [x, out]
         );
     }
     for c in &cases {

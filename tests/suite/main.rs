@@ -75,6 +75,7 @@ mod f16;
 mod funcs;
 mod generics;
 mod grad;
+mod hash_grid;
 mod launch;
 mod misc;
 mod params;

@@ -4,7 +4,8 @@
 //! [`ArrayView`] (what an `Array` argument becomes inside a kernel), [`Fault`] (what a kernel
 //! thread reports instead of panicking), index conversion, integer arithmetic with CUDA's
 //! wrapping semantics, range loops as arithmetic progressions, the builtin functions and CPU
-//! atomics. Nothing here allocates or talks to a device: that is `warp-runtime`'s job.
+//! atomics, and the kernel-side views of host objects ([`objects`]: the hash grid). Nothing
+//! here allocates or talks to a device: that is `warp-runtime`'s job.
 
 pub mod adjoint;
 pub mod builtins;
@@ -14,6 +15,7 @@ pub mod grad;
 pub mod grid;
 pub mod index;
 pub mod meta;
+pub mod objects;
 pub mod ops;
 pub mod range;
 pub mod transform;

@@ -34,6 +34,17 @@ template <typename T>
 struct adj_is_float {
   static constexpr bool value = num<typename adj_scalar_of<T>::type>::is_float;
 };
+/// Whether T is a kernel object or a query state (`hash_grid_t`, `hash_grid_query_t`: a
+/// `wp_object_tag` member type): no gradient; its zero is the value-initialised object, what
+/// an adjoint declares for a func's object argument (warp_core's `Adjoint` for the views).
+template <typename T, typename = void>
+struct adj_is_object {
+  static constexpr bool value = false;
+};
+template <typename T>
+struct adj_is_object<T, typename T::wp_object_tag> {
+  static constexpr bool value = true;
+};
 }  // namespace detail
 
 /// The zero adjoint of T: 0, 0.0, false, the zero vector or matrix, the quaternion (0, 0, 0, 0).
@@ -41,6 +52,8 @@ template <typename T>
 WP_FN T adj_zero() {
   if constexpr (detail::adj_is_scalar<T>::value) {
     return (T)0;
+  } else if constexpr (detail::adj_is_object<T>::value) {
+    return T{};
   } else {
     typedef typename vec_traits<T>::scalar S;
     T r;
@@ -62,7 +75,12 @@ WP_FN T zero_like(const T&) {
 /// types, whose adjoint is always zero.
 template <typename T>
 WP_FN void adj_accum(T& a, const typename identity<T>::type& v) {
-  if constexpr (detail::adj_is_float<T>::value) a += v;
+  if constexpr (detail::adj_is_object<T>::value) {
+    (void)a;
+    (void)v;
+  } else if constexpr (detail::adj_is_float<T>::value) {
+    a += v;
+  }
 }
 
 // ------------------------------------------------------------------------------------------

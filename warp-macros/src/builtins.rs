@@ -17,7 +17,7 @@
 //! one literal rule both backends share (see `front::lower::typing`).
 
 use crate::operators::BinOp;
-use crate::types::{Scalar, Ty};
+use crate::types::{ObjectKind, Scalar, Ty};
 
 /// Which types the type variable `T` of a builtin may take.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -165,6 +165,32 @@ pub enum Pos {
     Tuple(&'static [Pos]),
     /// The 4x4 matrix of `T`'s scalar (`transform_compose`).
     Mat4OfT,
+    /// A host object or a query state of that kind, whatever `T` is (`hash_grid_query`'s
+    /// grid).
+    Object(ObjectKind),
+}
+
+impl Pos {
+    /// Whether the position's type does not depend on `T`.
+    pub fn fixed(&self) -> bool {
+        matches!(
+            self,
+            Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index | Pos::Object(_)
+        )
+    }
+}
+
+/// How a `for` loop iterates a query row's result (`for j in hash_grid_query(grid, p, r)`,
+/// lowered by `front::lower::query`): the rows of its steps, each a pure function, every one
+/// internal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Iterate {
+    /// `(object, state) -> state`: the state at the next candidate, or at the end.
+    pub next: &'static str,
+    /// `(state) -> bool`: whether the state is at the end.
+    pub done: &'static str,
+    /// `(state) -> item`: the candidate the loop variable takes.
+    pub item: &'static str,
 }
 
 /// How a builtin is differentiated (used by the adjoint transform).
@@ -246,6 +272,9 @@ pub struct Builtin {
     pub results: Option<&'static str>,
     /// Not a Warp builtin: an extension of warp-lang's (docs/builtins.md lists it there).
     pub extension: bool,
+    /// A query that only a `for` loop iterates (`for j in hash_grid_query(..)`), by these
+    /// steps; user code cannot bind its result otherwise.
+    pub iterate: Option<Iterate>,
     pub emit: Emit,
     /// Function in `warp_core::builtins`.
     pub rust: &'static str,
@@ -285,6 +314,7 @@ impl Builtin {
             draw: None,
             results: None,
             extension: false,
+            iterate: None,
             emit: Emit::Call,
             rust: name,
             cuda,
@@ -360,6 +390,13 @@ impl Builtin {
         }
     }
 
+    const fn iterate(self, next: &'static str, done: &'static str, item: &'static str) -> Builtin {
+        Builtin {
+            iterate: Some(Iterate { next, done, item }),
+            ..self
+        }
+    }
+
     const fn operator(self, op: BinOp) -> Builtin {
         Builtin {
             emit: Emit::Operator(op),
@@ -400,6 +437,22 @@ impl Builtin {
     /// row can say otherwise.
     pub fn reads_array(&self) -> bool {
         !self.is_atomic() && self.params.contains(&Pos::ArrayOfT)
+    }
+
+    /// Whether the builtin takes a host object (`hash_grid_query(grid, ..)`): like
+    /// [`Builtin::reads_array`], its CPU function returns a `KResult` (the object's buffers are
+    /// read through checked views) and its CUDA function takes the fault context last; the
+    /// object is passed by value (a view). Read off the signature.
+    pub fn reads_object(&self) -> bool {
+        self.params
+            .iter()
+            .any(|p| matches!(p, Pos::Object(k) if k.row().param))
+    }
+
+    /// Whether a call may fault ([`Builtin::reads_array`] or [`Builtin::reads_object`]): the
+    /// CPU call is followed by `?`, the CUDA call takes `__ctx`.
+    pub fn faults(&self) -> bool {
+        self.reads_array() || self.reads_object()
     }
 
     /// The builtin's name in Warp: its own, or that of the builtin it is an overload of
@@ -443,6 +496,10 @@ const I32: Pos = Fixed(Scalar::I32);
 const F32: Pos = Fixed(Scalar::F32);
 const VEC2: Pos = FixedVec(Scalar::F32, 2);
 const VEC3: Pos = FixedVec(Scalar::F32, 3);
+const USIZE: Pos = Fixed(Scalar::Usize);
+const BOOL: Pos = Fixed(Scalar::Bool);
+const GRID: Pos = Object(ObjectKind::HashGrid);
+const GRID_QUERY: Pos = Object(ObjectKind::HashGridQuery);
 
 /// The table's rows: `"name": classes, (params) -> result, "section", grad` and then the
 /// facts in which the row differs from [`Builtin::row`]'s defaults, each the name of a
@@ -620,6 +677,18 @@ table! {
     "lower_bound": NUMBER, (ArrayOfT, T) -> I32, "misc", Zero;
     "lower_bound_range": NUMBER, (ArrayOfT, I32, I32, T) -> I32, "misc", Zero,
         overload("lower_bound", 4), internal;
+    // Warp's hash grid (warp-core `objects::hash_grid`, wp_hash_grid.h). A query is iterated
+    // where it is made, `for j in hash_grid_query(grid, p, r) { .. }`, which
+    // `front::lower::query` lowers to the query's state and its steps (Warp's
+    // `hash_grid_query_next` is the loop): `next` is a pure function of the grid and the state,
+    // written back to the state each iteration, so the adjoint replays the loop like any other
+    // and the body's reads get their gradients. Indices are `usize` (Warp's `int`).
+    "hash_grid_query": NO_T, (GRID, VEC3, F32) -> GRID_QUERY, "hash_grid", Zero,
+        iterate("hash_grid_query_next", "hash_grid_query_done", "hash_grid_query_point");
+    "hash_grid_query_next": NO_T, (GRID, GRID_QUERY) -> GRID_QUERY, "hash_grid", Zero, internal;
+    "hash_grid_query_done": NO_T, (GRID_QUERY) -> BOOL, "hash_grid", Zero, internal;
+    "hash_grid_query_point": NO_T, (GRID_QUERY) -> USIZE, "hash_grid", Zero, internal;
+    "hash_grid_point_id": NO_T, (GRID, Index) -> USIZE, "hash_grid", Zero;
 }
 
 /// Looks a builtin up by name (internal rows included).
@@ -727,12 +796,7 @@ impl Builtin {
                 });
             }
         }
-        let mentions_t = self.params.iter().chain([&self.ret]).any(|p| {
-            !matches!(
-                p,
-                Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index
-            )
-        });
+        let mentions_t = self.params.iter().chain([&self.ret]).any(|p| !p.fixed());
         let t = match t {
             // Every position fixed: nothing to bind (the classes are empty).
             None if !mentions_t => Some(Ty::Deferred),
@@ -795,6 +859,7 @@ impl Builtin {
                 .scalar()
                 .map(|s| Ty::Matrix(s, 4))
                 .unwrap_or(Ty::Deferred),
+            Pos::Object(k) => Ty::Object(*k),
             // Results only (below).
             Pos::Tuple(_) => Ty::Deferred,
         };
@@ -871,11 +936,7 @@ mod tests {
                 b.name
             );
             let binds_t = b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT);
-            let all_fixed = b
-                .params
-                .iter()
-                .chain([&b.ret])
-                .all(|p| matches!(p, Pos::Fixed(_) | Pos::FixedVec(..)));
+            let all_fixed = b.params.iter().chain([&b.ret]).all(Pos::fixed);
             assert!(binds_t || all_fixed, "{} cannot bind T", b.name);
             assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);
             // The facts beyond the signature agree with it and with the other rows.
@@ -923,6 +984,33 @@ mod tests {
                 "{}: internal rows have no other spelling",
                 b.name
             );
+            if let Some(it) = b.iterate {
+                // The steps: internal rows of the query's state, `next` taking the object the
+                // query takes first.
+                let Pos::Object(state) = b.ret else {
+                    panic!("{}: a query returns its state", b.name)
+                };
+                let st = Pos::Object(state);
+                let (next, done, item) = (
+                    lookup(it.next).expect("next"),
+                    lookup(it.done).expect("done"),
+                    lookup(it.item).expect("item"),
+                );
+                assert!(
+                    next.internal && done.internal && item.internal,
+                    "{}",
+                    b.name
+                );
+                assert_eq!(next.params, &[b.params[0], st], "{}", b.name);
+                assert_eq!(next.ret, st, "{}", b.name);
+                assert_eq!((done.params, done.ret), (&[st][..], BOOL), "{}", b.name);
+                assert_eq!(item.params, &[st], "{}", b.name);
+                assert!(b.reads_object() && next.reads_object(), "{}", b.name);
+            }
+            // A query state is made by its query and consumed by its steps only.
+            if b.ret == GRID_QUERY {
+                assert!(b.iterate.is_some() || b.internal, "{}", b.name);
+            }
         }
         for name in [
             "min",
@@ -1351,6 +1439,47 @@ mod tests {
         }
         for b in BUILTINS.iter().filter(|b| b.default_last.is_some()) {
             assert_eq!(b.params.len(), 2, "{}", b.name);
+        }
+    }
+
+    #[test]
+    fn hash_grid_rows() {
+        let grid = Ty::Object(ObjectKind::HashGrid);
+        let state = Ty::Object(ObjectKind::HashGridQuery);
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let q = lookup_user("hash_grid_query").unwrap();
+        let r = q
+            .resolve(&[
+                k(grid.clone()),
+                k(v3.clone()),
+                ArgTy::Literal { float: true },
+            ])
+            .unwrap();
+        assert_eq!(r.params, vec![grid.clone(), v3.clone(), F32]);
+        assert_eq!(r.ret, state);
+        // A wrong object or point type is a mismatch naming the types.
+        let e = q
+            .resolve(&[k(Ty::Array(Box::new(v3.clone()), 1)), k(v3.clone()), k(F32)])
+            .unwrap_err();
+        assert!(e.contains("expected `HashGrid`"), "{e}");
+        assert!(q
+            .resolve(&[k(grid.clone()), k(Ty::Vector(Scalar::F64, 3)), k(F32)])
+            .is_err());
+        // point_id takes any integer index.
+        let pid = lookup_user("hash_grid_point_id").unwrap();
+        for t in [I32, Ty::Scalar(Scalar::Usize), Ty::Scalar(Scalar::U64)] {
+            let r = pid.resolve(&[k(grid.clone()), k(t.clone())]).unwrap();
+            assert_eq!(r.params[1], t);
+            assert_eq!(r.ret, Ty::Scalar(Scalar::Usize));
+        }
+        assert!(pid.resolve(&[k(grid.clone()), k(F32)]).is_err());
+        assert!(pid.faults() && q.faults() && !lookup("hash_grid_query_done").unwrap().faults());
+        for step in [
+            "hash_grid_query_next",
+            "hash_grid_query_done",
+            "hash_grid_query_point",
+        ] {
+            assert!(lookup_user(step).is_none(), "{step}");
         }
     }
 

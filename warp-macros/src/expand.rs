@@ -308,7 +308,11 @@ fn kernel_instance(
     // kernel's `Launchable` impls are told apart by these, and coherence does not normalise.
     let launch_args = f.params.iter().map(|p| {
         let t = &p.syn_ty;
-        if matches!(p.ty, crate::types::Ty::Array(..)) {
+        // Arrays and host objects are passed by reference (`KernelArg::Arg<'a> = &'a T`).
+        if matches!(
+            p.ty,
+            crate::types::Ty::Array(..) | crate::types::Ty::Object(_)
+        ) {
             quote!(&'__a #t)
         } else {
             quote!(#t)
@@ -868,6 +872,14 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             errors.push(syn::Error::new(
                 t.span(),
                 "arrays cannot be struct fields yet: pass them as kernel parameters",
+            ));
+        } else if let Ok(crate::types::Ty::Object(k)) = crate::front::signature::parse_type(t) {
+            errors.push(syn::Error::new(
+                t.span(),
+                format!(
+                    "a `{}` cannot be a struct field: pass it as a kernel parameter",
+                    k.row().name
+                ),
             ));
         }
     }

@@ -116,6 +116,74 @@ pub fn f16_bits(v: f64) -> u16 {
     sign | mag
 }
 
+/// The kinds of kernel-visible host object (Warp's hash grid; later its BVH, mesh, volume),
+/// and the values their queries carry between steps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ObjectKind {
+    /// `HashGrid`: a kernel parameter (the runtime's host type); its CPU view is
+    /// `warp_core::objects::HashGridView`, its CUDA type `wp::hash_grid_t`.
+    HashGrid,
+    /// The state of a neighbour query, made and advanced only by the loop
+    /// `for j in hash_grid_query(..)` lowers to; users never name it.
+    HashGridQuery,
+}
+
+/// One row per object kind: every fact the front end and the emitters need about it.
+#[derive(Debug)]
+pub struct ObjectRow {
+    pub kind: ObjectKind,
+    /// The type's name in kernel signatures and messages.
+    pub name: &'static str,
+    /// Whether a kernel or func parameter may have this type (the host object itself; a
+    /// query state is only ever a local).
+    pub param: bool,
+    /// The Rust type of a value of this kind inside generated CPU code, under the facade's
+    /// `__private` (`objects::HashGridView`).
+    pub rust: &'static str,
+    /// The C++ type (`wp::hash_grid_t`).
+    pub cuda: &'static str,
+    /// The CUDA library section that defines the type and its builtins (`wp_<section>.h`).
+    pub section: &'static str,
+}
+
+/// The object kinds' rows.
+pub static OBJECTS: &[ObjectRow] = &[
+    ObjectRow {
+        kind: ObjectKind::HashGrid,
+        name: "HashGrid",
+        param: true,
+        rust: "HashGridView",
+        cuda: "wp::hash_grid_t",
+        section: "hash_grid",
+    },
+    ObjectRow {
+        kind: ObjectKind::HashGridQuery,
+        name: "HashGridQuery",
+        param: false,
+        rust: "HashGridQuery",
+        cuda: "wp::hash_grid_query_t",
+        section: "hash_grid",
+    },
+];
+
+impl ObjectKind {
+    /// This kind's row.
+    pub fn row(self) -> &'static ObjectRow {
+        OBJECTS
+            .iter()
+            .find(|r| r.kind == self)
+            .expect("every object kind has a row")
+    }
+
+    /// The object a parameter type names (`HashGrid`), if any.
+    pub fn param_named(name: &str) -> Option<ObjectKind> {
+        OBJECTS
+            .iter()
+            .find(|r| r.param && r.name == name)
+            .map(|r| r.kind)
+    }
+}
+
 /// A kernel-language type.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub enum Ty {
@@ -138,6 +206,9 @@ pub enum Ty {
     /// The tuple a decomposition returns (`svd3`: `(Mat3, Vec3, Mat3)`); only ever bound by a
     /// `let (u, s, v) = ..` pattern, which reads its elements as members `"0"`, `"1"`, ..
     Tuple(Vec<Ty>),
+    /// A host object a kernel takes as a parameter (`HashGrid`), or the state of one of its
+    /// queries; kernels see objects only through builtin rows.
+    Object(ObjectKind),
     /// `()`.
     Unit,
     /// Not knowable from inside this function; typed by the target compiler.
@@ -257,6 +328,7 @@ impl fmt::Display for Ty {
                 let ts: Vec<String> = ts.iter().map(|t| t.to_string()).collect();
                 write!(f, "({})", ts.join(", "))
             }
+            Ty::Object(k) => f.write_str(k.row().name),
             Ty::Unit => f.write_str("()"),
             Ty::Deferred => f.write_str("_"),
         }
@@ -320,6 +392,24 @@ mod tests {
         assert_eq!(f16_bits(1.0 + 3.0 * 2f64.powi(-11)), 0x3C02);
         assert_eq!(f16_bits(1.0 + 2f64.powi(-11) + 2f64.powi(-40)), 0x3C01);
         assert_eq!(f16_bits(std::f64::consts::PI), 0x4248);
+    }
+
+    #[test]
+    fn object_rows() {
+        for (i, r) in OBJECTS.iter().enumerate() {
+            assert_eq!(r.kind.row().name, r.name);
+            assert!(OBJECTS[..i]
+                .iter()
+                .all(|o| o.kind != r.kind && o.name != r.name));
+            assert!(r.cuda.starts_with("wp::"), "{}", r.name);
+        }
+        assert_eq!(
+            ObjectKind::param_named("HashGrid"),
+            Some(ObjectKind::HashGrid)
+        );
+        // A query state is no parameter type.
+        assert_eq!(ObjectKind::param_named("HashGridQuery"), None);
+        assert_eq!(Ty::Object(ObjectKind::HashGrid).to_string(), "HashGrid");
     }
 
     #[test]

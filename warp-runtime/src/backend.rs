@@ -88,10 +88,44 @@ pub(crate) trait Backend {
         len: Extent,
     ) -> Result<()>;
 
+    /// The hash grid build's per-point step (`objects/hash_grid.rs`; see [`HashGridKeys`]).
+    /// Runs (the CPU) or queues (a GPU, on the calling thread's current stream).
+    fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()>;
+
+    /// The hash grid build's per-position step, after the pairs were sorted by key: each
+    /// bucket's range `[start, end)` in sorted order, from the `n` sorted `i32` keys at `keys`
+    /// into the `i32`s at `starts` and `ends` (`buckets` each, zeroed by the caller; a bucket
+    /// no key names stays empty). Runs or queues as [`Backend::hash_grid_keys`].
+    fn hash_grid_ranges(
+        &self,
+        keys: u64,
+        n: usize,
+        starts: u64,
+        ends: u64,
+        buckets: usize,
+    ) -> Result<()>;
+
     /// [`Backend::synchronize`] for every device of this backend used so far.
     fn synchronize_all() -> Result<()>
     where
         Self: Sized;
+}
+
+/// The arguments of [`Backend::hash_grid_keys`]: for each of the `n` points (contiguous
+/// `Vec3`s at `points`), its bucket (`warp_core::objects::hash_grid::point_bucket`, the CUDA
+/// library's `hash_grid_build_key`) into the `i32` at `keys[i]` and its index `i` into
+/// `values[i]`; the smallest index of a point with a NaN or infinite coordinate into the `i32`
+/// at `bad` (atomically lowered; left alone when every point is finite). Addresses as
+/// [`Buffer::address`] gives them; `objects/hash_grid.rs` checked the sizes and devices.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HashGridKeys {
+    pub points: u64,
+    pub n: usize,
+    pub dims: [i32; 3],
+    pub inv: f32,
+    pub keys: u64,
+    pub values: u64,
+    pub bad: u64,
 }
 
 /// A backend's memory, as array operations use it: bytes at offsets. Every operation is

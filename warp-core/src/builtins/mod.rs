@@ -20,6 +20,10 @@
 //!   samplers, [`poisson`]) and [`noise`](mod@noise): Perlin noise ([`noise()`], [`pnoise`]).
 //! * [`misc`]: more vector, quaternion and transform builtins ([`copysign`], [`argmin`],
 //!   [`quat_to_axis_angle`], [`transform_compose`], ...) and [`lower_bound`].
+//! * the hash grid's queries (section "hash_grid"), which live with its view in
+//!   [`objects::hash_grid`](crate::objects::hash_grid) and are re-exported here
+//!   ([`hash_grid_query`], [`hash_grid_point_id`], and the steps a `for` over a query is
+//!   lowered into).
 
 pub mod atomic;
 pub mod linalg;
@@ -39,3 +43,8 @@ pub use noise::{noise, pnoise, NoiseArg};
 pub use rand::*;
 pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};
 pub use transform::*;
+
+pub use crate::objects::hash_grid::{
+    hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,
+    hash_grid_query_point,
+};

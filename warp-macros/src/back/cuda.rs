@@ -34,9 +34,15 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     let mut e = Emitter::new(f, file);
     e.function()?;
     // Transform values need wp_transform.h even where no transform builtin is called (`inverse`
-    // and `lerp` are in other sections).
+    // and `lerp` are in other sections); an object's type needs its section even in a kernel
+    // that only passes it on to a func.
     if f.vars.iter().any(|v| matches!(v.ty, Ty::Transform(_))) {
         e.section("transform");
+    }
+    for v in &f.vars {
+        if let Ty::Object(k) = v.ty {
+            e.section(k.row().section);
+        }
     }
     let ret = if matches!(f.ret, Ty::Unit) {
         "void".into()
@@ -85,6 +91,7 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
         }
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::Struct(name) => name.clone(),
+        Ty::Object(k) => k.row().cuda.into(),
         Ty::Tuple(ts) => {
             let ts: Option<Vec<String>> = ts.iter().map(cpp_type).collect();
             format!("wp::tuple_t<{}>", ts?.join(", "))
@@ -216,7 +223,7 @@ impl<'a> Emitter<'a> {
                 decl(b)?
             )),
             Op::Unary(UnOp::Neg, a) => Some(format!("decltype(-{})", decl(a)?)),
-            Op::Builtin { builtin, args } if !builtin.is_atomic() && !builtin.reads_array() => {
+            Op::Builtin { builtin, args } if !builtin.is_atomic() && !builtin.faults() => {
                 let args: Option<Vec<String>> = args.iter().map(|a| decl(*a)).collect();
                 Some(format!("decltype({}({}))", builtin.cuda, args?.join(", ")))
             }
@@ -666,8 +673,9 @@ impl<'a> Emitter<'a> {
                     let idx = self.index(&args[1..vals_at]);
                     let vals: Vec<String> = args[vals_at..].iter().map(|v| self.var(*v)).collect();
                     format!("{}({a}, {idx}, {}, __ctx)", builtin.cuda, vals.join(", "))
-                } else if builtin.reads_array() {
-                    // `lower_bound(a, .., __ctx)`: checked reads of the array.
+                } else if builtin.faults() {
+                    // `lower_bound(a, .., __ctx)`, `hash_grid_query(grid, .., __ctx)`: checked
+                    // reads of the array or of the object's buffers.
                     let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
                     format!("{}({}, __ctx)", builtin.cuda, args.join(", "))
                 } else {

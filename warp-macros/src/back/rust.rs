@@ -300,8 +300,9 @@ impl<'a> RustEmitter<'a> {
                     let idx = self.index(&args[1..vals_at]);
                     let vals = args[vals_at..].iter().map(|v| self.var(*v));
                     quote_spanned!(sp=> __wp::builtins::#f(&#a, #idx, #(#vals),*)?)
-                } else if builtin.reads_array() {
-                    // `lower_bound(&a, ..)?`: checked reads of the array.
+                } else if builtin.faults() {
+                    // `lower_bound(&a, ..)?`, `hash_grid_query(grid, ..)?`: checked reads of
+                    // the array (by reference) or of the object's buffers (its view is Copy).
                     let args = args.iter().map(|v| {
                         let x = self.var(*v);
                         if matches!(self.f.ty(*v), crate::types::Ty::Array(..)) {
@@ -413,6 +414,11 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
         Ty::Transform(_) => {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::#id))
+        }
+        // An object's view or a query state (warp-core's `objects`).
+        Ty::Object(k) => {
+            let id = format_ident!("{}", k.row().rust);
+            Some(quote!(__wp::objects::#id))
         }
         _ => None,
     }

@@ -71,6 +71,8 @@ const CONSTRUCTS: &[&str] = &[
     "sample_cdf",
     "div_approx",
     "inverse_approx",
+    // A `for` loop over a query (`front::lower::query`) is Warp's `*_query_next` loop.
+    "hash_grid_query_next",
 ];
 
 const BLESS: &str = "WARP_LANG_BLESS";
@@ -234,6 +236,7 @@ fn pos(p: &Pos) -> String {
         Pos::XformOfT => "Transform(S)".into(),
         Pos::Mat4OfT => "Mat4(S)".into(),
         Pos::Tuple(ps) => format!("({})", ps.iter().map(pos).collect::<Vec<_>>().join(", ")),
+        Pos::Object(k) => k.row().name.into(),
     }
 }
 
@@ -292,6 +295,14 @@ fn spellings(b: &Builtin) -> Vec<String> {
     }
     if let Emit::Operator(op) = b.emit {
         out.push(format!("`a {} b`", op.symbol()));
+    }
+    if let Some(it) = b.iterate {
+        let item = super::lookup(it.item).expect("the item row");
+        out.push(format!(
+            "only as `for j in {}(..)`, `j: {}`",
+            b.name,
+            pos(&item.ret)
+        ));
     }
     match b.draw {
         Some(Draw::Steps(k)) => {

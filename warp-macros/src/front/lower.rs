@@ -14,6 +14,7 @@
 //! - `views`: in-kernel views, rewritten into accesses of the viewed array.
 //! - `rng`: the random draws that advance a state in place; `rand_init`'s and `pnoise`'s
 //!   overloads by arity.
+//! - `query`: `for j in hash_grid_query(..)`, a loop over a host object's query.
 
 use crate::builtins::{self, ArgTy, Builtin, Emit, Pos};
 use crate::front::signature::parse_type;
@@ -28,6 +29,7 @@ mod calls;
 mod control;
 mod expressions;
 mod places;
+mod query;
 mod rng;
 mod statements;
 mod typing;
@@ -116,6 +118,13 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
             Ok(Ty::Array(..)) => cx
                 .errors
                 .push(syn::Error::new(t.span(), "funcs cannot return arrays")),
+            Ok(Ty::Object(k)) => cx.errors.push(syn::Error::new(
+                t.span(),
+                format!(
+                    "funcs cannot return a `{}`: objects are kernel parameters",
+                    k.row().name
+                ),
+            )),
             Ok(ty) => cx.ret = ty,
             Err(e) => cx.errors.push(e),
         }

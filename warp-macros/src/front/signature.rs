@@ -1,6 +1,6 @@
 //! Kernel and func signatures: parameter types and the return type.
 
-use crate::types::{Scalar, Ty};
+use crate::types::{ObjectKind, Scalar, Ty};
 use syn::spanned::Spanned;
 use syn::{GenericArgument, PathArguments, Type};
 
@@ -16,6 +16,17 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             }
             if let Some(t) = Ty::from_glam_name(&name) {
                 return Ok(t);
+            }
+            // Host objects (`HashGrid`): the runtime's type of that name, which the prelude
+            // exports; kernels see its view.
+            if let Some(k) = ObjectKind::param_named(&name) {
+                if !matches!(last.arguments, PathArguments::None) {
+                    return Err(syn::Error::new(
+                        ty.span(),
+                        format!("`{name}` takes no type arguments"),
+                    ));
+                }
+                return Ok(Ty::Object(k));
             }
             match name.as_str() {
                 "Array" => parse_array(last, ty),
@@ -72,6 +83,12 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         return Err(syn::Error::new(
             whole.span(),
             format!("`{elem}` cannot be an array element (bool arrays: use u8)"),
+        ));
+    }
+    if let Ty::Object(_) = elem {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("`{elem}` cannot be an array element: pass each one as a parameter"),
         ));
     }
     let ndim = match it.next() {
@@ -150,6 +167,10 @@ mod tests {
             parse_type(&parse_quote!(Params)).unwrap(),
             Ty::Struct("Params".into())
         );
+        assert_eq!(
+            parse_type(&parse_quote!(wp::HashGrid)).unwrap(),
+            Ty::Object(ObjectKind::HashGrid)
+        );
         for bad in [
             quote::quote!(&f32),
             quote::quote!(String),
@@ -158,6 +179,8 @@ mod tests {
             quote::quote!(Array<f32, 5>),
             quote::quote!(Array<bool>),
             quote::quote!(Option<f32>),
+            quote::quote!(Array<HashGrid>),
+            quote::quote!(HashGrid<f32>),
         ] {
             let t: Type = syn::parse2(bad.clone()).unwrap();
             assert!(parse_type(&t).is_err(), "{bad}");

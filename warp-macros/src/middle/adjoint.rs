@@ -308,7 +308,8 @@ fn differentiable(t: &Ty) -> bool {
     match t {
         Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
         Ty::Matrix(..) | Ty::Quat(_) => true,
-        Ty::Array(..) | Ty::Unit => false,
+        // Objects and query states: indices and buffers, no gradient.
+        Ty::Array(..) | Ty::Object(_) | Ty::Unit => false,
         _ => true,
     }
 }

@@ -2,8 +2,8 @@
 
 use super::executor;
 use super::memory::HostBuffer;
-use super::primitives;
-use crate::backend::Backend;
+use super::{objects, primitives};
+use crate::backend::{Backend, HashGridKeys};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
@@ -97,6 +97,21 @@ impl Backend for Cpu<'_> {
         len: Extent,
     ) -> Result<()> {
         primitives::compact::<T>(func, arrays, len)
+    }
+
+    fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()> {
+        objects::hash_grid_keys(step)
+    }
+
+    fn hash_grid_ranges(
+        &self,
+        keys: u64,
+        n: usize,
+        starts: u64,
+        ends: u64,
+        buckets: usize,
+    ) -> Result<()> {
+        objects::hash_grid_ranges(keys, n, starts, ends, buckets)
     }
 
     fn synchronize_all() -> Result<()> {

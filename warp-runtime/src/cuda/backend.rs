@@ -2,8 +2,8 @@
 
 use super::memory::CudaBuffer;
 use super::stream::Stream;
-use super::{gpu, launch, primitives};
-use crate::backend::Backend;
+use super::{gpu, launch, objects, primitives};
+use crate::backend::{Backend, HashGridKeys};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel};
@@ -128,6 +128,21 @@ impl Backend for Cuda<'_> {
         len: Extent,
     ) -> Result<()> {
         primitives::compact::<T>(self.device, self.ordinal, func, arrays, len)
+    }
+
+    fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()> {
+        objects::hash_grid_keys(self.device, self.ordinal, step)
+    }
+
+    fn hash_grid_ranges(
+        &self,
+        keys: u64,
+        n: usize,
+        starts: u64,
+        ends: u64,
+        buckets: usize,
+    ) -> Result<()> {
+        objects::hash_grid_ranges(self.device, self.ordinal, keys, n, starts, ends, buckets)
     }
 
     fn synchronize_all() -> Result<()> {

@@ -8,6 +8,7 @@
 //! - `gpu`: per-GPU state, the stream ordering model and the fault record.
 //! - `launch`: a launch's parameter block and `cuLaunchKernel`.
 //! - `primitives`: the launch plans of the parallel primitives (`wp_primitives.h`), run.
+//! - `objects`: the build kernels of host objects (the hash grid's, `wp_hash_grid.h`).
 //! - `memory`: GPU memory for arrays. `stream`, `pinned`: the public streams, events and
 //!   pinned host memory.
 //! - `backend`: `Cuda`, the backend (see the crate's `backend.rs`) that the runtime
@@ -27,6 +28,8 @@ mod launch;
 pub(crate) mod memory;
 #[cfg(feature = "cuda")]
 mod module;
+#[cfg(feature = "cuda")]
+pub(crate) mod objects;
 #[cfg(feature = "cuda")]
 mod options;
 #[cfg(feature = "cuda")]

@@ -11,7 +11,7 @@ use warp_core::FuncInfo;
 
 /// The builtin-table sections, in include order: section `s` is `wp_<s>.h` (in
 /// `warp-cuda/cuda/`, embedded by `warp_cuda::HEADERS`).
-pub const SECTIONS: [&str; 9] = [
+pub const SECTIONS: [&str; 10] = [
     "scalar",
     "vector",
     "linalg",
@@ -20,6 +20,7 @@ pub const SECTIONS: [&str; 9] = [
     "misc",
     "atomic",
     "rand",
+    "hash_grid",
     "print",
 ];
 
@@ -27,8 +28,8 @@ pub const SECTIONS: [&str; 9] = [
 /// operators, casts, array gradients, the per-thread stack.
 pub const ADJOINT_CORE: &str = "wp_adjoint_core.h";
 
-/// The adjoint library's part for each section that has adjoints (`atomic` and `print` have
-/// none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
+/// The adjoint library's part for each section that has adjoints (`atomic`, `hash_grid` and
+/// `print` have none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
 /// NVRTC parses no more than they need. Each part includes its forward section and the parts
 /// it builds on; `wp_adjoint.h` includes them all (for host tests and hand-written code).
 pub const ADJOINT_PARTS: [(&str, &str); 7] = [
@@ -319,7 +320,7 @@ mod tests {
         for s in SECTIONS {
             assert_eq!(
                 ADJOINT_PARTS.iter().any(|(p, _)| *p == s),
-                !matches!(s, "atomic" | "print"),
+                !matches!(s, "atomic" | "hash_grid" | "print"),
                 "{s}"
             );
         }

@@ -119,6 +119,15 @@ impl Lowerer {
                     args.push(d);
                 }
                 let v = self.builtin_call(b, &args, want, span)?;
+                if b.iterate.is_some() {
+                    return err(
+                        span,
+                        format!(
+                            "a `{0}` is iterated where it is made: `for j in {0}(..) {{ .. }}` (Warp's `{0}_next` loop)",
+                            b.name
+                        ),
+                    );
+                }
                 if let (Ty::Tuple(_), false) = (self.ty(v), tuple_ok) {
                     return err(
                         span,

@@ -1,6 +1,6 @@
 //! Control flow: `if` as a statement and as a value (a variable both branches assign),
 //! `while` (a `loop` that breaks on the negated condition), `for` over integer ranges with
-//! `.rev()` and `.step_by(k)`, the loop depth that `break` and `continue` are checked against,
+//! `.rev()` and `.step_by(k)` (and over host objects' queries, `query.rs`), the loop depth that `break` and `continue` are checked against,
 //! and the short-circuit `&&` and `||` (an `if` around the right operand).
 
 use super::typing::flex_value;
@@ -45,6 +45,10 @@ impl Lowerer {
     pub(super) fn for_loop(&mut self, f: &syn::ExprForLoop) -> R<()> {
         if f.label.is_some() {
             return err(f.span(), "loop labels are not supported in kernels");
+        }
+        // A loop over a host object's query (`query.rs`).
+        if let Some((call, row)) = Self::query_call(&f.expr) {
+            return self.query_loop(f, call, row);
         }
         // Peel `.rev()` / `.step_by(k)` adapters, outermost last.
         let mut adapters_rev: Vec<(&str, Option<&Expr>, Span)> = Vec::new();

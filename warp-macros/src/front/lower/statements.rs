@@ -427,6 +427,12 @@ impl Lowerer {
                             syn::Error::new(span, format!("no variable `{name}` to print"))
                         })?
                     };
+                    if let Ty::Object(k) = self.ty(var) {
+                        return err(
+                            span,
+                            format!("a `{}` cannot be printed in kernels", k.row().name),
+                        );
+                    }
                     if !text.is_empty() {
                         pieces.push(FmtPiece::Text(std::mem::take(&mut text)));
                     }

@@ -1,0 +1,15 @@
+//! Kernel-side views of host objects (Warp's hash grid; later its BVH, mesh and volume).
+//!
+//! A host object (`warp_runtime::HashGrid`) owns its buffers on one device; a kernel thread
+//! sees it through a `Copy` view made of [`ArrayView`](crate::ArrayView)s and sizes, which
+//! owns nothing and checks every access (a bad index is a [`Fault`](crate::Fault) naming the
+//! kernel and the parameter, never undefined behaviour). Queries are plain functions; an
+//! iterating query is a small `Copy` state and a pure `next(view, state) -> state`, which the
+//! kernel macro lowers `for j in query(..)` into, so the adjoint replays it like any other
+//! value. The CUDA library mirrors each view and query step by step (`wp_<object>.h`).
+//!
+//! - [`hash_grid`]: Warp's hash grid: points bucketed into a wrapping uniform grid of cells.
+
+pub mod hash_grid;
+
+pub use hash_grid::{HashGridQuery, HashGridView};

@@ -1,0 +1,218 @@
+// wp_hash_grid.h: section "hash_grid" of the builtin table: NVIDIA Warp's hash grid, the CUDA
+// mirror of warp-core/src/objects/hash_grid.rs (read that for the definitions: cells are
+// floor(x / h) as i32, wrapped into dim_x x dim_y x dim_z buckets by the Euclidean remainder;
+// a query visits the buckets of the cells overlapping p +- r, x fastest, at most dim cells per
+// axis). Every step below is the Rust one in the same order, so both backends visit the same
+// candidates in the same order.
+//
+//   hash_grid_t                     a HashGrid kernel parameter (warp_runtime's CudaHashGrid)
+//   hash_grid_query_t               a query's state (warp_core's HashGridQuery)
+//   hash_grid_query(g, p, r, ctx)   the state before the first candidate
+//   hash_grid_query_next(g, q, ctx) the state at the next candidate, or at the end
+//   hash_grid_query_done(q)         whether the query ended
+//   hash_grid_query_point(q)        the current candidate (usize)
+//   hash_grid_point_id(g, i, ctx)   the i-th point in bucket order (usize), any integer i
+//   hash_grid_build_key, hash_grid_build_range   the per-thread steps of a device build (and,
+//                                   with WP_HASH_GRID_BUILD, its kernels)
+//
+// Kernels never mutate a query through these functions: the macro lowers
+// `for j in hash_grid_query(g, p, r) { .. }` into `q = next(g, q)` written back each
+// iteration (see warp-macros/src/front/lower/query.rs).
+//
+// Every buffer read is a checked `load` reporting the grid's parameter: a bad point_id index
+// is an out-of-bounds fault; a query ends after at most dim_x * dim_y * dim_z buckets whatever
+// the buffers hold (after a fault the thread goes on with zero values, as everywhere on the
+// GPU, and still ends).
+#pragma once
+#include "wp_core.h"
+
+namespace wp {
+
+/// A built hash grid (48 bytes, align 8), field for field warp_runtime's `CudaHashGrid`:
+///   0 point_ids (the point indices in bucket order), 8 cell_starts, 16 cell_ends (one per
+///   bucket), 24 dims[3], 36 num_points, 40 cell_width_inv, 44 arg (the parameter's index,
+///   for faults).
+struct hash_grid_t {
+  const i32* point_ids;
+  const i32* cell_starts;
+  const i32* cell_ends;
+  i32 dims[3];
+  i32 num_points;
+  f32 cell_width_inv;
+  i32 arg;
+  /// Marks a kernel object for the adjoint library (zero value, no gradient).
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(hash_grid_t) == 48 && alignof(hash_grid_t) == 8, "hash_grid_t layout");
+
+/// A query's state (40 bytes, warp_core's HashGridQuery): the box's first cell and its size
+/// per axis, the current cell's position in the box (-1 before the first), the range left in
+/// the current bucket, and the current candidate (-1 before the first and at the end).
+struct hash_grid_query_t {
+  i32 lo[3];
+  i32 span[3];
+  i32 cell;
+  i32 next;
+  i32 end;
+  i32 point;
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(hash_grid_query_t) == 40, "hash_grid_query_t layout");
+
+namespace detail {
+/// floor(x * inv) as i32, Rust's `as` (saturating, NaN to 0).
+WP_FN i32 hash_grid_cell(f32 x, f32 inv) { return cast<i32>(::floorf(x * inv)); }
+/// The Euclidean remainder of c by d > 0.
+WP_FN i32 hash_grid_wrap(i64 c, i32 d) {
+  i64 r = c % (i64)d;
+  if (r < 0) r += (i64)d;
+  return (i32)r;
+}
+/// A checked view of one of the grid's buffers, reporting the grid's parameter.
+WP_FN array_t<i32, 1> hash_grid_buffer(const i32* p, i64 n, i32 arg) {
+  array_t<i32, 1> a;
+  a.data = const_cast<i32*>(p);
+  a.shape[0] = n;
+  a.strides[0] = (i64)sizeof(i32);
+  a.arg = arg;
+  a.pad = 0;
+  return a;
+}
+WP_FN i64 hash_grid_buckets(const hash_grid_t& g) {
+  return (i64)g.dims[0] * (i64)g.dims[1] * (i64)g.dims[2];
+}
+}  // namespace detail
+
+/// The bucket of cell (x, y, z): each wrapped into [0, dim), then (z * dim_y + y) * dim_x + x.
+WP_FN i32 hash_grid_bucket(const i32* dims, i64 x, i64 y, i64 z) {
+  const i32 bx = detail::hash_grid_wrap(x, dims[0]);
+  const i32 by = detail::hash_grid_wrap(y, dims[1]);
+  const i32 bz = detail::hash_grid_wrap(z, dims[2]);
+  return (bz * dims[1] + by) * dims[0] + bx;
+}
+
+/// The bucket of point p (what a build sorts by).
+WP_FN i32 hash_grid_point_bucket(const i32* dims, f32 inv, Vec3 p) {
+  return hash_grid_bucket(dims, (i64)detail::hash_grid_cell(p.x, inv),
+                          (i64)detail::hash_grid_cell(p.y, inv),
+                          (i64)detail::hash_grid_cell(p.z, inv));
+}
+
+WP_FN hash_grid_query_t hash_grid_query(const hash_grid_t& grid, Vec3 p, f32 radius, ctx_t* ctx) {
+  (void)ctx;
+  hash_grid_query_t q{};
+  q.cell = -1;
+  q.point = -1;
+  // A negative or NaN radius: no cell (span 0 on every axis).
+  if (radius >= 0.0f) {
+    const f32 xs[3] = {p.x, p.y, p.z};
+    for (int a = 0; a < 3; ++a) {
+      const i32 lo = detail::hash_grid_cell(xs[a] - radius, grid.cell_width_inv);
+      const i32 hi = detail::hash_grid_cell(xs[a] + radius, grid.cell_width_inv);
+      i64 span = (i64)hi - (i64)lo + 1;
+      if (span < 0) span = 0;
+      if (span > (i64)grid.dims[a]) span = (i64)grid.dims[a];
+      q.lo[a] = lo;
+      q.span[a] = (i32)span;
+    }
+  }
+  return q;
+}
+
+WP_FN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_query_t q,
+                                             ctx_t* ctx) {
+  const i32 cells = q.span[0] * q.span[1] * q.span[2];
+  const array_t<i32, 1> ids =
+      detail::hash_grid_buffer(grid.point_ids, (i64)grid.num_points, grid.arg);
+  const i64 buckets = detail::hash_grid_buckets(grid);
+  const array_t<i32, 1> starts = detail::hash_grid_buffer(grid.cell_starts, buckets, grid.arg);
+  const array_t<i32, 1> ends = detail::hash_grid_buffer(grid.cell_ends, buckets, grid.arg);
+  for (;;) {
+    if (q.next < q.end) {
+      q.point = load(ids, (i64)q.next, ctx);
+      q.next += 1;
+      return q;
+    }
+    if (q.cell >= cells - 1) {
+      q.cell = cells;
+      q.next = 0;
+      q.end = 0;
+      q.point = -1;
+      return q;
+    }
+    q.cell += 1;
+    const i32 ox = q.cell % q.span[0], rest = q.cell / q.span[0];
+    const i32 oy = rest % q.span[1], oz = rest / q.span[1];
+    const i32 b = hash_grid_bucket(grid.dims, (i64)q.lo[0] + (i64)ox, (i64)q.lo[1] + (i64)oy,
+                                   (i64)q.lo[2] + (i64)oz);
+    q.next = load(starts, (i64)b, ctx);
+    const i32 e = load(ends, (i64)b, ctx);
+    // Bounded by the point count, whatever the buffer holds.
+    q.end = e < grid.num_points ? e : grid.num_points;
+  }
+}
+
+WP_FN bool hash_grid_query_done(hash_grid_query_t q) { return q.point < 0; }
+
+WP_FN usize hash_grid_query_point(hash_grid_query_t q) { return (usize)(i64)q.point; }
+
+template <typename I>
+WP_FN usize hash_grid_point_id(const hash_grid_t& grid, I i, ctx_t* ctx) {
+  const array_t<i32, 1> ids =
+      detail::hash_grid_buffer(grid.point_ids, (i64)grid.num_points, grid.arg);
+  return (usize)(i64)load(ids, (i64)i, ctx);
+}
+
+// ------------------------------------------------------------------------------------------
+// The device build: one thread per point computes its bucket (the key) with its index (the
+// value); a stable sort of the pairs by key gives the point indices in bucket order; one thread
+// per sorted position then marks where its bucket's range starts and ends (starts and ends
+// zeroed first, so empty buckets have start == end). The same result as warp-runtime's CPU
+// build, which sorts (bucket, index) pairs.
+// ------------------------------------------------------------------------------------------
+
+/// Point i's bucket and index, and whether the point is finite (a build refuses NaN and
+/// infinite points: the caller records the first such index).
+WP_FN bool hash_grid_build_key(const i32* dims, f32 inv, Vec3 p, i32 i, i32* key, i32* value) {
+  *key = hash_grid_point_bucket(dims, inv, p);
+  *value = i;
+  return p.x - p.x == 0.0f && p.y - p.y == 0.0f && p.z - p.z == 0.0f;
+}
+
+/// Sorted position k of n (keys sorted): the range of bucket keys[k] starts here if k is the
+/// first of its bucket, and ends after it if k is the last. Keys are buckets by construction;
+/// one outside [0, buckets) is skipped, never written.
+WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* starts, i32* ends,
+                                 i32 buckets) {
+  const i32 b = sorted_keys[k];
+  if (b < 0 || b >= buckets) return;
+  if (k == 0 || sorted_keys[k - 1] != b) starts[b] = k;
+  if (k == n - 1 || sorted_keys[k + 1] != b) ends[b] = k + 1;
+}
+
+}  // namespace wp
+
+// The device build's kernels (warp-runtime's cuda/objects.rs compiles this header with
+// WP_HASH_GRID_BUILD defined, once per GPU; kernels that only query a grid do not get them).
+// Grid-stride loops, one element per thread; nothing here can fault (every index is in range
+// by construction: n points, keys in [0, buckets)).
+#if defined(__CUDACC__) && defined(WP_HASH_GRID_BUILD)
+/// Points' buckets and indices; the smallest index of a non-finite point into *bad.
+extern "C" __global__ void wp_hash_grid_keys(const wp::Vec3* points, wp::i32 n, wp::i32 dim_x,
+                                             wp::i32 dim_y, wp::i32 dim_z, wp::f32 inv,
+                                             wp::i32* keys, wp::i32* values, wp::i32* bad) {
+  const wp::i32 dims[3] = {dim_x, dim_y, dim_z};
+  const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
+  for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride) {
+    if (!wp::hash_grid_build_key(dims, inv, points[i], (wp::i32)i, &keys[i], &values[i]))
+      atomicMin(bad, (wp::i32)i);
+  }
+}
+/// Bucket ranges from the sorted keys (starts and ends zeroed before).
+extern "C" __global__ void wp_hash_grid_ranges(const wp::i32* keys, wp::i32 n, wp::i32* starts,
+                                               wp::i32* ends, wp::i32 buckets) {
+  const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
+  for (wp::i64 k = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; k < n; k += stride)
+    wp::hash_grid_build_range(keys, n, (wp::i32)k, starts, ends, buckets);
+}
+#endif
