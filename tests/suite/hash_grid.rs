@@ -6,7 +6,7 @@
 //! the empty point set; `hash_grid_point_id`; `break`/`continue`; queries in `#[func]`s; bad
 //! input (errors naming the argument, faults naming the grid); CPU and CUDA giving the same
 //! buffers, candidates and counts; gradients through what the loop body reads (gradcheck of a
-//! neighbour-sum energy).
+//! neighbour-sum energy), and a tape replaying against the grid its launch ran with.
 
 use std::collections::HashSet;
 
@@ -23,6 +23,7 @@ backend_tests!(
     jumps_and_funcs,
     bad_input_is_an_error,
     gradients_through_the_loop_body,
+    tape_keeps_the_grid_it_ran_with,
 );
 
 // ------------------------------------------------------------------------------------------
@@ -521,6 +522,32 @@ fn gradients_through_the_loop_body(dev: &wp::Device) {
             e[i]
         );
     }
+}
+
+/// A tape replays a launch against the grid the launch ran with, even after the grid was
+/// rebuilt (copy-on-write): the gradient is the same as without the rebuild.
+fn tape_keeps_the_grid_it_ran_with(dev: &wp::Device) {
+    let grads = |rebuild: bool| {
+        let (x, out, mut grid) = energy_case(dev);
+        let n = out.len();
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            wp::launch(k_energy, n, (&grid, &x, 0.6, &out), dev).unwrap();
+        }
+        if rebuild {
+            // Every point far from every other: a replay on this grid would find no pair.
+            let far: Vec<Vec3> = (0..n).map(|k| Vec3::splat(100.0 * k as f32)).collect();
+            grid.build(&arr(&far, dev), 0.5).unwrap();
+            assert_eq!(grid.num_points(), Some(n));
+        }
+        out.grad().unwrap().fill(1.0).unwrap();
+        tape.backward_from_grads().unwrap();
+        host(&x.grad().unwrap())
+    };
+    let (kept, plain) = (grads(true), grads(false));
+    assert!(plain.iter().any(|g| *g != 0.0));
+    assert_eq!(kept, plain);
 }
 
 /// NVRTC accepts the device build's kernels (`wp_hash_grid.h` with `WP_HASH_GRID_BUILD`) for
