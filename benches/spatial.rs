@@ -8,6 +8,14 @@
 //! PYTHONPATH=/root/warp-lang .gpu/bin/spatial-*
 //! ```
 //!
+//! Hash grid (Warp: `benches/py/warp_hash_grid.py`, Warp 1.19's `HashGrid` on the same GPU):
+//! 1M points uniform in a 10^3 box, a 128^3 grid, radius 0.2: the build, and a count of the
+//! neighbours within the radius with a thread per point in point order and in the grid's cell
+//! order; the counts are checked against the CPU backend's, point for point. On the CPU: 100K
+//! points at the same density, against Warp's single-threaded CPU figures in
+//! shared/DESIGN.md (measured on the same kind of GPU machine's CPU; Warp's CPU compiler is
+//! not in the bundle, so they cannot be timed in this run).
+//!
 //! Primitives (PyTorch: torch.sort with stable=True and a gather of the values, torch.cumsum,
 //! torch.sum): a stable key/value radix sort (i32 and f32 keys), inclusive scans and a sum, at
 //! 1M and 16M elements. Each figure is a median of timed repetitions after a warm-up
@@ -17,6 +25,36 @@
 use std::process::Command;
 use std::time::Instant;
 use warp_lang as wp;
+use wp::prelude::*;
+
+/// Neighbours of each point within `r`, a thread per point in point order.
+#[wp::kernel]
+fn count_point_order(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<i32>) {
+    let i = tid();
+    let p = x[i];
+    let mut c = 0;
+    for j in hash_grid_query(grid, p, r) {
+        if length(p - x[j]) <= r {
+            c += 1;
+        }
+    }
+    out[i] = c;
+}
+
+/// The same count, threads in the grid's cell order (neighbouring threads, neighbouring
+/// points: the order Warp's examples use).
+#[wp::kernel]
+fn count_cell_order(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<i32>) {
+    let i = hash_grid_point_id(grid, tid());
+    let p = x[i];
+    let mut c = 0;
+    for j in hash_grid_query(grid, p, r) {
+        if length(p - x[j]) <= r {
+            c += 1;
+        }
+    }
+    out[i] = c;
+}
 
 const REPS: usize = 15;
 
@@ -88,7 +126,114 @@ fn main() -> wp::Result<()> {
         }
     };
     println!("spatial bench on {dev}");
+    hash_grid(&dev)?;
     primitives(&dev)
+}
+
+/// `n` points uniform in a cube of side `side` (a fixed xorshift sequence).
+fn uniform_points(n: usize, side: f32, seed: u64) -> Vec<Vec3> {
+    let mut s = seed;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    (0..n)
+        .map(|_| Vec3::new(next(), next(), next()) * side)
+        .collect()
+}
+
+fn hash_grid(dev: &wp::Device) -> wp::Result<()> {
+    let (n, side, r) = (1_000_000usize, 10.0f32, 0.2f32);
+    let warp = python_side("benches/py/warp_hash_grid.py", &[n.to_string()]);
+    match &warp {
+        Ok(_) => println!("Warp side: ran in this process's run"),
+        Err(e) => println!("Warp side not run: {e}"),
+    }
+    let theirs = |k: &str| warp.as_ref().ok().and_then(|t| json_number(t, k));
+    let pts = uniform_points(n, side, 0x9e37_79b9);
+    let x = wp::Array::from_slice(&pts, dev)?;
+    let out = wp::Array::<i32>::zeros(n, dev)?;
+    let mut grid = wp::HashGrid::new(128, 128, 128, dev)?;
+    let build = median_ms(|| grid.build(&x, r))?;
+    let point = median_ms(|| wp::launch(count_point_order, n, (&grid, &x, r, &out), dev))?;
+    let counts = out.to_vec()?;
+    let cell = median_ms(|| wp::launch(count_cell_order, n, (&grid, &x, r, &out), dev))?;
+    assert_eq!(
+        out.to_vec()?,
+        counts,
+        "cell order and point order counts differ"
+    );
+    // The CPU backend's counts, point for point.
+    let cpu = wp::get_device("cpu")?;
+    let xc = wp::Array::from_slice(&pts, &cpu)?;
+    let oc = wp::Array::<i32>::zeros(n, &cpu)?;
+    let mut gc = wp::HashGrid::new(128, 128, 128, &cpu)?;
+    gc.build(&xc, r)?;
+    wp::launch(count_point_order, n, (&gc, &xc, r, &oc), &cpu)?;
+    // Equal except at pairs whose distance rounds across r differently: NVRTC contracts the
+    // distance's products into FMAs (wp::config::set_cuda_fmad(false) makes them equal).
+    let cpu_counts = oc.to_vec()?;
+    let differ = cpu_counts
+        .iter()
+        .zip(&counts)
+        .filter(|(a, b)| a != b)
+        .count();
+    let worst = cpu_counts
+        .iter()
+        .zip(&counts)
+        .map(|(a, b)| (a - b).abs())
+        .max()
+        .unwrap_or(0);
+    assert!(
+        differ * 10_000 <= n && worst <= 2,
+        "GPU and CPU neighbour counts differ at {differ} points (by up to {worst})"
+    );
+    let mean = counts.iter().map(|&c| c as f64).sum::<f64>() / n as f64;
+    // Expected: 4/3 pi r^3 times the density, less what the box's faces cut off, plus the
+    // point itself.
+    println!(
+        "hash grid, {n} points in a {side}^3 box, r = {r}: mean neighbours {mean:.2} (Warp's \
+         points: {}); the CPU backend's counts differ at {differ} points, by at most {worst} \
+         (borderline distances: FMA contraction on the GPU)",
+        theirs("mean_neighbours_point_order").map_or("-".into(), |m| format!("{m:.2}"))
+    );
+    println!(
+        "{:<28} {build:7.3} ms   {}",
+        "build",
+        ratio(build, theirs("build_ms"))
+    );
+    println!(
+        "{:<28} {point:7.3} ms   {}",
+        "count, point order",
+        ratio(point, theirs("query_point_order_ms"))
+    );
+    println!(
+        "{:<28} {cell:7.3} ms   {}",
+        "count, cell order",
+        ratio(cell, theirs("query_cell_order_ms"))
+    );
+    // The CPU backend at the same density, against Warp's single-threaded CPU figures.
+    let (nc, sc) = (100_000usize, side * 0.1f32.cbrt());
+    let pc = uniform_points(nc, sc, 0x5851_f42d);
+    let xc = wp::Array::from_slice(&pc, &cpu)?;
+    let oc = wp::Array::<i32>::zeros(nc, &cpu)?;
+    let mut gc = wp::HashGrid::new(128, 128, 128, &cpu)?;
+    let b = median_ms(|| gc.build(&xc, r))?;
+    let q = median_ms(|| wp::launch(count_point_order, nc, (&gc, &xc, r, &oc), &cpu))?;
+    println!(
+        "CPU ({} threads), {nc} points: build {b:.2} ms, count {q:.2} ms; Warp 1.19 single-threaded \
+         CPU (DESIGN.md, H100 machine): 4.66 / 201 ms, speed-up {:.1}x / {:.1}x (goal >= 10x)",
+        rayon_threads(),
+        4.66 / b,
+        201.0 / q
+    );
+    Ok(())
+}
+
+fn rayon_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 fn primitives(dev: &wp::Device) -> wp::Result<()> {

@@ -113,7 +113,16 @@ void launch(void (*fn)(Args), long long blocks, int threads, const Args& args) {
   scheduler& s = sched();
   const call<Args> c{fn, &args};
   s.body = &call<Args>::run;
+  // The scheduler keeps the address of `c` only while this launch runs (every fiber finishes
+  // before it returns); newer g++ flags the store anyway (-Wdangling-pointer).
+#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdangling-pointer"
+#endif
   s.args = &c;
+#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
+#pragma GCC diagnostic pop
+#endif
   s.fibers.resize(threads);
   std::vector<int> order(threads);
   for (long long b = 0; b < blocks; ++b) {
