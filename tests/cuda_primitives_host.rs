@@ -246,47 +246,9 @@ fn sizes(tile: Tile) -> Vec<usize> {
 // Scan and reductions
 // ------------------------------------------------------------------------------------------
 
-/// What the scan and reduction tests need of an element type.
-trait Elem: bytemuck::Pod + PartialEq + std::fmt::Debug + wp::primitives::ScanElement {
-    /// Small integer-valued data (exact in any summation order) from a random word.
-    fn small(r: u64) -> Self;
-}
-macro_rules! elem {
-    ($($t:ty),*) => {$(
-        impl Elem for $t {
-            fn small(r: u64) -> Self {
-                (r % 200) as $t - 100 as $t
-            }
-        }
-    )*};
-}
-elem!(i32, i64, f32, f64);
-impl Elem for u32 {
-    // Large values, so that sums wrap.
-    fn small(r: u64) -> Self {
-        (r as u32) | 0x8000_0000
-    }
-}
-impl Elem for u64 {
-    fn small(r: u64) -> Self {
-        r | (1 << 63)
-    }
-}
-
-fn serial_scan<T: Elem>(x: &[T], inclusive: bool) -> Vec<T> {
-    let mut acc = T::ZERO;
-    x.iter()
-        .map(|&v| {
-            let before = acc;
-            acc = acc.add(v);
-            if inclusive {
-                acc
-            } else {
-                before
-            }
-        })
-        .collect()
-}
+#[path = "common/primitives_data.rs"]
+mod primitives_data;
+use primitives_data::{serial_scan, Elem};
 
 fn scan_cases<T: Elem>(tile: Tile) {
     if !have_gpp() {

@@ -10,7 +10,7 @@
 
 use crate::{arr, host, zeros};
 use warp_lang as wp;
-use wp::primitives::{ScanElement, SortKey};
+use wp::primitives::SortKey;
 use wp::Error;
 
 backend_tests!(
@@ -48,46 +48,9 @@ impl Rng {
 /// Sizes: empty, tiny, around a GPU tile (2048), and past a CPU chunk (65536).
 const SIZES: [usize; 8] = [0, 1, 2, 37, 2047, 2049, 5000, 70001];
 
-/// An element type of the scan tests: small integer-valued data from a random word.
-trait Elem: ScanElement + PartialEq + std::fmt::Debug {
-    fn small(r: u64) -> Self;
-}
-macro_rules! elem {
-    ($($t:ty),*) => {$(
-        impl Elem for $t {
-            fn small(r: u64) -> Self {
-                (r % 200) as $t - 100 as $t
-            }
-        }
-    )*};
-}
-elem!(i32, i64, f32, f64);
-impl Elem for u32 {
-    // Values with the top bit set: sums wrap.
-    fn small(r: u64) -> Self {
-        (r as u32) | 0x8000_0000
-    }
-}
-impl Elem for u64 {
-    fn small(r: u64) -> Self {
-        r | (1 << 63)
-    }
-}
-
-fn serial_scan<T: Elem>(x: &[T], inclusive: bool) -> Vec<T> {
-    let mut acc = T::ZERO;
-    x.iter()
-        .map(|&v| {
-            let before = acc;
-            acc = acc.add(v);
-            if inclusive {
-                acc
-            } else {
-                before
-            }
-        })
-        .collect()
-}
+#[path = "../common/primitives_data.rs"]
+mod primitives_data;
+use primitives_data::{serial_scan, Elem};
 
 fn scan_type<T: Elem>(dev: &wp::Device) {
     let mut rng = Rng(11 + T::CUDA.len() as u64);

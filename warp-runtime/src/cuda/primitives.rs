@@ -109,20 +109,7 @@ fn info(func: &'static str, params: &'static [&'static str]) -> &'static KernelI
             name: func,
             module: "warp_lang::primitives",
             params,
-            written: &[],
-            tid_indexed: &[],
-            tid_ndim: None,
-            same_shape: &[],
-            file: "",
-            cuda: "",
-            cuda_sections: &[],
-            callees: &[],
-            structs: &[],
-            adjoint_error: None,
-            cuda_adjoint: "",
-            cuda_adjoint_stack: false,
-            cuda_adjoint_error: None,
-            consts: &[],
+            ..KernelInfo::BLANK
         }))
     })
 }
