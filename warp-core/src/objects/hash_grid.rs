@@ -205,7 +205,9 @@ pub fn hash_grid_query(grid: HashGridView, p: Vec3, radius: f32) -> KResult<Hash
 
 /// The query advanced to its next candidate, or to its end (then [`hash_grid_query_done`]).
 /// Once done it stays done.
-#[inline]
+// Inlined into the query loop so that the state stays in registers (called, it round-trips
+// through memory at every candidate: a quarter of a CPU query's time, measured with perf).
+#[inline(always)]
 pub fn hash_grid_query_next(grid: HashGridView, mut q: HashGridQuery) -> KResult<HashGridQuery> {
     // At most the grid's bucket count (each span is at most its dim): no overflow.
     let cells = q.span[0] * q.span[1] * q.span[2];
