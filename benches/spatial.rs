@@ -130,17 +130,28 @@ fn main() -> wp::Result<()> {
     primitives(&dev)
 }
 
-/// `n` points uniform in a cube of side `side` (a fixed xorshift sequence).
+/// A fixed xorshift sequence: the same inputs on every run.
+struct XorShift(u64);
+
+impl XorShift {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+
+    /// Uniform in [0, 1), 24 bits.
+    fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// `n` points uniform in a cube of side `side`.
 fn uniform_points(n: usize, side: f32, seed: u64) -> Vec<Vec3> {
-    let mut s = seed;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut r = XorShift(seed);
     (0..n)
-        .map(|_| Vec3::new(next(), next(), next()) * side)
+        .map(|_| Vec3::new(r.unit(), r.unit(), r.unit()) * side)
         .collect()
 }
 
@@ -254,20 +265,11 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
     for n in sizes {
         let section = torch.as_ref().ok().and_then(|t| size_section(t, n));
         let theirs = |k: &str| section.and_then(|s| json_number(s, k));
-        // Keys: a fixed pseudo-random sequence (the same on every run).
-        let mut s = 0x2545_f491u64;
-        let mut next = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
-        let ki: Vec<i32> = (0..n).map(|_| (next() >> 33) as i32).collect();
-        let kf: Vec<f32> = (0..n)
-            .map(|_| (next() >> 40) as f32 / (1u64 << 24) as f32)
-            .collect();
+        let mut r = XorShift(0x2545_f491);
+        let ki: Vec<i32> = (0..n).map(|_| (r.next() >> 33) as i32).collect();
+        let kf: Vec<f32> = (0..n).map(|_| r.unit()).collect();
         let vals: Vec<i32> = (0..n as i32).collect();
-        let small: Vec<i32> = (0..n).map(|_| (next() % 100) as i32).collect();
+        let small: Vec<i32> = (0..n).map(|_| (r.next() % 100) as i32).collect();
 
         let ms = sort_case(&ki, &vals, dev, &cpu)?;
         println!(
