@@ -248,7 +248,7 @@ fn sizes(tile: Tile) -> Vec<usize> {
 
 #[path = "common/primitives_data.rs"]
 mod primitives_data;
-use primitives_data::{serial_scan, Elem};
+use primitives_data::{serial_scan, Elem, F32_SPECIALS};
 
 fn scan_cases<T: Elem>(tile: Tile) {
     if !have_gpp() {
@@ -556,22 +556,7 @@ fn sort_i32_negative() {
 
 #[test]
 fn sort_f32_total_order() {
-    let specials = vec![
-        f32::NAN,
-        -0.0,
-        0.0,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        -f32::NAN,
-        1e-45,
-        -1e-45,
-        -0.0,
-        0.0,
-        3.5,
-        -3.5,
-        f32::MAX,
-        f32::MIN,
-    ];
+    let specials = F32_SPECIALS.to_vec();
     sort_cases::<f32>(
         TILE,
         &[32],

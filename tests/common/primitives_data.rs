@@ -46,3 +46,22 @@ pub fn serial_scan<T: Elem>(x: &[T], inclusive: bool) -> Vec<T> {
         })
         .collect()
 }
+
+/// Float keys every sort test includes: NaNs of both signs, signed zeros (twice, for
+/// stability), infinities, denormals and the extremes.
+pub const F32_SPECIALS: [f32; 14] = [
+    f32::NAN,
+    -0.0,
+    0.0,
+    f32::INFINITY,
+    f32::NEG_INFINITY,
+    -f32::NAN,
+    1e-45,
+    -1e-45,
+    -0.0,
+    0.0,
+    3.5,
+    -3.5,
+    f32::MAX,
+    f32::MIN,
+];

@@ -50,7 +50,7 @@ const SIZES: [usize; 8] = [0, 1, 2, 37, 2047, 2049, 5000, 70001];
 
 #[path = "../common/primitives_data.rs"]
 mod primitives_data;
-use primitives_data::{serial_scan, Elem};
+use primitives_data::{serial_scan, Elem, F32_SPECIALS};
 
 fn scan_type<T: Elem>(dev: &wp::Device) {
     let mut rng = Rng(11 + T::CUDA.len() as u64);
@@ -282,22 +282,7 @@ fn sort_i32_and_f32_keys(dev: &wp::Device) {
         "i32 extremes",
     );
     // The float order is f32::total_cmp's: -NaN < -inf < .. < -0.0 < +0.0 < .. < inf < NaN.
-    let specials = [
-        f32::NAN,
-        -0.0,
-        0.0,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        -f32::NAN,
-        1e-45,
-        -1e-45,
-        -0.0,
-        0.0,
-        3.5,
-        -3.5,
-        f32::MAX,
-        f32::MIN,
-    ];
+    let specials = F32_SPECIALS;
     check_sort(dev, &specials, None, "f32 specials");
     let (k, v) = (arr(&specials, dev), arr(&[0u32; 14], dev));
     wp::radix_sort_pairs(&k, &v, 14, None).unwrap();
