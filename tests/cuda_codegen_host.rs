@@ -989,7 +989,7 @@ fn hash_grid_device_build_steps_match_the_cpu_build() {
            std::stable_sort(kv.begin(), kv.end(), [](auto a, auto b) {{ return a.first < b.first; }});\n\
            std::vector<wp::i32> keys({n}), starts(60, 0), ends(60, 0);\n\
            for (int k = 0; k < {n}; ++k) keys[k] = kv[k].first;\n\
-           for (int k = 0; k < {n}; ++k) wp::hash_grid_build_range(keys.data(), {n}, k, starts.data(), ends.data(), 60);\n\
+           for (int k = 0; k < {n}; ++k) wp::hash_grid_build_range(keys.data(), {n}, k, starts.data(), ends.data(), 60, false);\n\
            for (auto& p : kv) printf(\"%d\\n\", p.second);\n\
            for (int c = 0; c < 60; ++c) printf(\"%d %d\\n\", starts[c], ends[c]);\n\
            wp::i32 key, value;\n\

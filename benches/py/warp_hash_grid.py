@@ -3,8 +3,10 @@ same device call, with the same workload, so the Rust bench can print ratios.
 
 1M points uniform in a 10^3 box, a 128^3 grid, radius 0.2: the grid build, and a count of
 the neighbours within the radius, a thread per point in point order and in the grid's cell
-order (hash_grid_point_id). Medians of timed repetitions after a warm-up (compilation
-excluded). Prints one JSON object on its last line.
+order (hash_grid_point_id). Then Warp's (single-threaded) CPU backend at the same density
+with 100K points in a box of side 10 * 0.1^(1/3): build and point-order count. Medians of
+timed repetitions after a warm-up (compilation excluded). Prints one JSON object on its last
+line.
 
 Run on the GPU machine with Warp unpacked by ../shared/tools/warp-bundle:
     PYTHONPATH=/root/warp-lang python3 benches/py/warp_hash_grid.py [N]
@@ -72,6 +74,25 @@ point = median_ms(lambda: wp.launch(count_point_order, N, inputs=[grid.id, point
 mean_point = float(counts.numpy().mean())
 cell = median_ms(lambda: wp.launch(count_cell_order, N, inputs=[grid.id, points, RADIUS, counts]))
 mean_cell = float(counts.numpy().mean())
+# Warp's CPU backend at the same density (fewer repetitions: a count takes ~0.2 s). Skipped
+# where Warp has no CPU compiler (warp-bundle leaves warp-clang out): the Rust side then quotes
+# DESIGN.md's figures.
+cpu = {}
+try:
+    NC = N // 10
+    cpu_points = wp.array(rng.random((NC, 3), dtype=np.float32) * (10.0 * 0.1 ** (1.0 / 3.0)),
+                          dtype=wp.vec3, device="cpu")
+    cpu_counts = wp.zeros(NC, dtype=int, device="cpu")
+    cpu_grid = wp.HashGrid(DIM, DIM, DIM, device="cpu")
+    REPS = 5
+    cpu["cpu_build_ms"] = median_ms(lambda: cpu_grid.build(cpu_points, RADIUS))
+    cpu["cpu_query_point_order_ms"] = median_ms(lambda: wp.launch(
+        count_point_order, NC, inputs=[cpu_grid.id, cpu_points, RADIUS, cpu_counts], device="cpu"))
+    cpu["cpu_n"] = NC
+    cpu["cpu_mean_neighbours"] = float(cpu_counts.numpy().mean())
+except Exception as e:  # noqa: BLE001 (any failure of the optional part)
+    print(f"Warp CPU side skipped: {e}", file=sys.stderr)
+
 print(json.dumps({
     "warp": wp.config.version,
     "n": N,
@@ -80,4 +101,5 @@ print(json.dumps({
     "query_cell_order_ms": cell,
     "mean_neighbours_point_order": mean_point,
     "mean_neighbours_cell_order": mean_cell,
+    **cpu,
 }))

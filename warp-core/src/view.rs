@@ -155,6 +155,19 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
         Ok(())
     }
 
+    /// The strides, in elements, one per dimension.
+    #[inline(always)]
+    pub fn strides(&self) -> [isize; N] {
+        self.strides
+    }
+
+    /// The address of element 0 (never dereferenced here; see [`ArrayView::new`] for what
+    /// the indices in bounds address).
+    #[inline(always)]
+    pub fn as_ptr(&self) -> *mut T {
+        self.ptr
+    }
+
     /// The kernel and argument names this view reports faults under.
     pub fn names(&self) -> (&'static str, &'static str) {
         (self.kernel, self.arg)

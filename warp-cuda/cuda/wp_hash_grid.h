@@ -19,9 +19,9 @@
 // `for j in hash_grid_query(g, p, r) { .. }` into `q = next(g, q)` written back each
 // iteration (see warp-macros/src/front/lower/query.rs).
 //
-// Every buffer read is a checked `load` reporting the grid's parameter: a bad point_id index
-// is an out-of-bounds fault; a query ends after at most dim_x * dim_y * dim_z buckets whatever
-// the buffers hold (after a fault the thread goes on with zero values, as everywhere on the
+// Every point read is a checked `load` reporting the grid's parameter: a bad point_id index
+// is an out-of-bounds fault; bucket indices are below the bucket count by construction, and a
+// query ends after at most dim_x * dim_y * dim_z buckets whatever the buffers hold (after a fault the thread goes on with zero values, as everywhere on the
 // GPU, and still ends).
 #pragma once
 #include "wp_core.h"
@@ -45,25 +45,29 @@ struct hash_grid_t {
 };
 static_assert(sizeof(hash_grid_t) == 48 && alignof(hash_grid_t) == 8, "hash_grid_t layout");
 
-/// A query's state (40 bytes, warp_core's HashGridQuery): the box's first cell and its size
-/// per axis, the current cell's position in the box (-1 before the first), the range left in
-/// the current bucket, and the current candidate (-1 before the first and at the end).
+/// A query's state (48 bytes, warp_core's HashGridQuery): the box's first cell per axis
+/// (wrapped into [0, dim)) and its size per axis (all 0 for an empty query), the current cell's
+/// offsets in the box (x fastest; at[0] = -1 before the first cell; done once at[2] reaches
+/// span[2]), the range left in the current bucket, and the current candidate (-1 before the
+/// first and at the end). Counters, not a cell index: no division per cell.
 struct hash_grid_query_t {
   i32 lo[3];
   i32 span[3];
-  i32 cell;
+  i32 at[3];
   i32 next;
   i32 end;
   i32 point;
   typedef void wp_object_tag;
 };
-static_assert(sizeof(hash_grid_query_t) == 40, "hash_grid_query_t layout");
+static_assert(sizeof(hash_grid_query_t) == 48, "hash_grid_query_t layout");
 
 namespace detail {
 /// floor(x * inv) as i32, Rust's `as` (saturating, NaN to 0).
 WP_FN i32 hash_grid_cell(f32 x, f32 inv) { return cast<i32>(::floorf(x * inv)); }
-/// The Euclidean remainder of c by d > 0.
+/// The Euclidean remainder of c by d > 0, without dividing when c is in [0, d) already (a
+/// 64-bit remainder is a long software sequence on a GPU).
 WP_FN i32 hash_grid_wrap(i64 c, i32 d) {
+  if ((u64)c < (u64)d) return (i32)c;
   i64 r = c % (i64)d;
   if (r < 0) r += (i64)d;
   return (i32)r;
@@ -77,9 +81,6 @@ WP_FN array_t<i32, 1> hash_grid_buffer(const i32* p, i64 n, i32 arg) {
   a.arg = arg;
   a.pad = 0;
   return a;
-}
-WP_FN i64 hash_grid_buckets(const hash_grid_t& g) {
-  return (i64)g.dims[0] * (i64)g.dims[1] * (i64)g.dims[2];
 }
 }  // namespace detail
 
@@ -101,7 +102,7 @@ WP_FN i32 hash_grid_point_bucket(const i32* dims, f32 inv, Vec3 p) {
 WP_FN hash_grid_query_t hash_grid_query(const hash_grid_t& grid, Vec3 p, f32 radius, ctx_t* ctx) {
   (void)ctx;
   hash_grid_query_t q{};
-  q.cell = -1;
+  q.at[0] = -1;
   q.point = -1;
   // A negative or NaN radius: no cell (span 0 on every axis).
   if (radius >= 0.0f) {
@@ -110,44 +111,63 @@ WP_FN hash_grid_query_t hash_grid_query(const hash_grid_t& grid, Vec3 p, f32 rad
       const i32 lo = detail::hash_grid_cell(xs[a] - radius, grid.cell_width_inv);
       const i32 hi = detail::hash_grid_cell(xs[a] + radius, grid.cell_width_inv);
       i64 span = (i64)hi - (i64)lo + 1;
-      if (span < 0) span = 0;
+      if (span < 1) span = 1;
       if (span > (i64)grid.dims[a]) span = (i64)grid.dims[a];
-      q.lo[a] = lo;
+      q.lo[a] = detail::hash_grid_wrap((i64)lo, grid.dims[a]);
       q.span[a] = (i32)span;
     }
   }
   return q;
 }
 
+namespace detail {
+/// The bucket of the query's current cell: first cell plus offset, each below the dim, so one
+/// subtraction wraps their sum (as u32, which holds twice any i32).
+WP_FN i32 hash_grid_query_bucket(const i32* dims, const hash_grid_query_t& q) {
+  i32 c[3];
+  for (int a = 0; a < 3; ++a) {
+    const u32 s = (u32)q.lo[a] + (u32)q.at[a];
+    c[a] = (i32)(s >= (u32)dims[a] ? s - (u32)dims[a] : s);
+  }
+  return (c[2] * dims[1] + c[1]) * dims[0] + c[0];
+}
+}  // namespace detail
+
 WP_FN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_query_t q,
                                              ctx_t* ctx) {
-  const i32 cells = q.span[0] * q.span[1] * q.span[2];
   const array_t<i32, 1> ids =
       detail::hash_grid_buffer(grid.point_ids, (i64)grid.num_points, grid.arg);
-  const i64 buckets = detail::hash_grid_buckets(grid);
-  const array_t<i32, 1> starts = detail::hash_grid_buffer(grid.cell_starts, buckets, grid.arg);
-  const array_t<i32, 1> ends = detail::hash_grid_buffer(grid.cell_ends, buckets, grid.arg);
   for (;;) {
     if (q.next < q.end) {
       q.point = load(ids, (i64)q.next, ctx);
       q.next += 1;
       return q;
     }
-    if (q.cell >= cells - 1) {
-      q.cell = cells;
+    // The next cell of the box, x fastest (an empty box has span[2] == 0: done at once).
+    if (q.at[2] < q.span[2]) {
+      q.at[0] += 1;
+      if (q.at[0] >= q.span[0]) {
+        q.at[0] = 0;
+        q.at[1] += 1;
+        if (q.at[1] >= q.span[1]) {
+          q.at[1] = 0;
+          q.at[2] += 1;
+        }
+      }
+    }
+    if (q.at[2] >= q.span[2]) {
       q.next = 0;
       q.end = 0;
       q.point = -1;
       return q;
     }
-    q.cell += 1;
-    const i32 ox = q.cell % q.span[0], rest = q.cell / q.span[0];
-    const i32 oy = rest % q.span[1], oz = rest / q.span[1];
-    const i32 b = hash_grid_bucket(grid.dims, (i64)q.lo[0] + (i64)ox, (i64)q.lo[1] + (i64)oy,
-                                   (i64)q.lo[2] + (i64)oz);
-    q.next = load(starts, (i64)b, ctx);
-    const i32 e = load(ends, (i64)b, ctx);
-    // Bounded by the point count, whatever the buffer holds.
+    // Every bucket index is below the bucket count, which both range buffers hold (the runtime
+    // allocates them so): no check needed.
+    const i32 b = detail::hash_grid_query_bucket(grid.dims, q);
+    q.next = grid.cell_starts[b];
+    const i32 e = grid.cell_ends[b];
+    // Bounded by the point count, whatever the buffer holds (a start below 0 faults at the
+    // point read).
     q.end = e < grid.num_points ? e : grid.num_points;
   }
 }
@@ -180,14 +200,15 @@ WP_FN bool hash_grid_build_key(const i32* dims, f32 inv, Vec3 p, i32 i, i32* key
 }
 
 /// Sorted position k of n (keys sorted): the range of bucket keys[k] starts here if k is the
-/// first of its bucket, and ends after it if k is the last. Keys are buckets by construction;
-/// one outside [0, buckets) is skipped, never written.
+/// first of its bucket, and ends after it if k is the last; with `clear`, the same entries are
+/// zeroed instead (undoing a build from its keys). Keys are buckets by construction; one
+/// outside [0, buckets) is skipped, never written.
 WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* starts, i32* ends,
-                                 i32 buckets) {
+                                 i32 buckets, bool clear) {
   const i32 b = sorted_keys[k];
   if (b < 0 || b >= buckets) return;
-  if (k == 0 || sorted_keys[k - 1] != b) starts[b] = k;
-  if (k == n - 1 || sorted_keys[k + 1] != b) ends[b] = k + 1;
+  if (k == 0 || sorted_keys[k - 1] != b) starts[b] = clear ? 0 : k;
+  if (k == n - 1 || sorted_keys[k + 1] != b) ends[b] = clear ? 0 : k + 1;
 }
 
 }  // namespace wp
@@ -208,11 +229,12 @@ extern "C" __global__ void wp_hash_grid_keys(const wp::Vec3* points, wp::i32 n, 
       atomicMin(bad, (wp::i32)i);
   }
 }
-/// Bucket ranges from the sorted keys (starts and ends zeroed before).
+/// Bucket ranges from the sorted keys (starts and ends zeroed before), or with `clear` != 0
+/// their zeroing.
 extern "C" __global__ void wp_hash_grid_ranges(const wp::i32* keys, wp::i32 n, wp::i32* starts,
-                                               wp::i32* ends, wp::i32 buckets) {
+                                               wp::i32* ends, wp::i32 buckets, wp::i32 clear) {
   const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
   for (wp::i64 k = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; k < n; k += stride)
-    wp::hash_grid_build_range(keys, n, (wp::i32)k, starts, ends, buckets);
+    wp::hash_grid_build_range(keys, n, (wp::i32)k, starts, ends, buckets, clear != 0);
 }
 #endif

@@ -92,18 +92,9 @@ pub(crate) trait Backend {
     /// Runs (the CPU) or queues (a GPU, on the calling thread's current stream).
     fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()>;
 
-    /// The hash grid build's per-position step, after the pairs were sorted by key: each
-    /// bucket's range `[start, end)` in sorted order, from the `n` sorted `i32` keys at `keys`
-    /// into the `i32`s at `starts` and `ends` (`buckets` each, zeroed by the caller; a bucket
-    /// no key names stays empty). Runs or queues as [`Backend::hash_grid_keys`].
-    fn hash_grid_ranges(
-        &self,
-        keys: u64,
-        n: usize,
-        starts: u64,
-        ends: u64,
-        buckets: usize,
-    ) -> Result<()>;
+    /// The hash grid build's per-position step over sorted keys (see [`HashGridRanges`]).
+    /// Runs or queues as [`Backend::hash_grid_keys`].
+    fn hash_grid_ranges(&self, step: &HashGridRanges) -> Result<()>;
 
     /// [`Backend::synchronize`] for every device of this backend used so far.
     fn synchronize_all() -> Result<()>
@@ -126,6 +117,22 @@ pub(crate) struct HashGridKeys {
     pub keys: u64,
     pub values: u64,
     pub bad: u64,
+}
+
+/// The arguments of [`Backend::hash_grid_ranges`]: from the `n` sorted `i32` keys at `keys`,
+/// each named bucket's range `[start, end)` in sorted order into the `i32`s at `starts` and
+/// `ends` (`buckets` each; a bucket no key names is left alone, so the caller zeroed them).
+/// With `clear`, zeros instead of positions: the same writes, undoing a build from its keys
+/// (cheaper than zeroing every bucket when the points are few). Keys outside `0..buckets` are
+/// skipped. Addresses as for [`HashGridKeys`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HashGridRanges {
+    pub keys: u64,
+    pub n: usize,
+    pub starts: u64,
+    pub ends: u64,
+    pub buckets: usize,
+    pub clear: bool,
 }
 
 /// A backend's memory, as array operations use it: bytes at offsets. Every operation is

@@ -5,7 +5,7 @@
 //! backend. A new backend adds an arm to `with_backend!`, a variant to [`Storage`] with its
 //! arms, and its device kind to `device.rs` (see `backend.rs` for what it implements).
 
-use crate::backend::{Backend, Buffer, HashGridKeys};
+use crate::backend::{Backend, Buffer, HashGridKeys, HashGridRanges};
 use crate::cpu::memory::HostBuffer;
 use crate::cpu::Cpu;
 #[cfg(feature = "cuda")]
@@ -130,15 +130,8 @@ pub(crate) fn hash_grid_keys(device: &Device, step: &HashGridKeys) -> Result<()>
 
 /// The hash grid build's per-position step on `device`'s backend; see
 /// [`Backend::hash_grid_ranges`].
-pub(crate) fn hash_grid_ranges(
-    device: &Device,
-    keys: u64,
-    n: usize,
-    starts: u64,
-    ends: u64,
-    buckets: usize,
-) -> Result<()> {
-    with_backend!(device, b => b.hash_grid_ranges(keys, n, starts, ends, buckets))
+pub(crate) fn hash_grid_ranges(device: &Device, step: &HashGridRanges) -> Result<()> {
+    with_backend!(device, b => b.hash_grid_ranges(step))
 }
 
 /// A stream compaction on `device`'s backend; see [`Backend::compact`].

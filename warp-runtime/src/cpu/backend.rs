@@ -3,7 +3,7 @@
 use super::executor;
 use super::memory::HostBuffer;
 use super::{objects, primitives};
-use crate::backend::{Backend, HashGridKeys};
+use crate::backend::{Backend, HashGridKeys, HashGridRanges};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
@@ -103,15 +103,8 @@ impl Backend for Cpu<'_> {
         objects::hash_grid_keys(step)
     }
 
-    fn hash_grid_ranges(
-        &self,
-        keys: u64,
-        n: usize,
-        starts: u64,
-        ends: u64,
-        buckets: usize,
-    ) -> Result<()> {
-        objects::hash_grid_ranges(keys, n, starts, ends, buckets)
+    fn hash_grid_ranges(&self, step: &HashGridRanges) -> Result<()> {
+        objects::hash_grid_ranges(step)
     }
 
     fn synchronize_all() -> Result<()> {

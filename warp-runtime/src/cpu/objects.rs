@@ -3,7 +3,7 @@
 //! (`objects/hash_grid.rs`) orders them around the primitives' radix sort; CUDA runs the same
 //! steps as kernels of `wp_hash_grid.h`.
 
-use crate::backend::HashGridKeys;
+use crate::backend::{HashGridKeys, HashGridRanges};
 use crate::error::Result;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -56,20 +56,16 @@ pub(super) fn hash_grid_keys(s: &HashGridKeys) -> Result<()> {
 }
 
 /// [`Backend::hash_grid_ranges`](crate::backend::Backend::hash_grid_ranges) on the CPU.
-pub(super) fn hash_grid_ranges(
-    keys: u64,
-    n: usize,
-    starts: u64,
-    ends: u64,
-    buckets: usize,
-) -> Result<()> {
+pub(super) fn hash_grid_ranges(s: &HashGridRanges) -> Result<()> {
+    let n = s.n;
     if n == 0 {
         return Ok(());
     }
     // SAFETY: `n` sorted keys in a host array the build owns.
-    let keys = unsafe { std::slice::from_raw_parts(keys as *const i32, n) };
-    let (starts, ends) = (Shared(starts as *mut i32), Shared(ends as *mut i32));
-    (0..n).into_par_iter().for_each(|k| {
+    let keys = unsafe { std::slice::from_raw_parts(s.keys as *const i32, n) };
+    let (starts, ends) = (Shared(s.starts as *mut i32), Shared(s.ends as *mut i32));
+    let (buckets, clear) = (s.buckets, s.clear);
+    (0..n).into_par_iter().with_min_len(4096).for_each(|k| {
         let b = keys[k];
         // Keys are buckets by construction; one out of range is skipped, never written.
         if b < 0 || b as usize >= buckets {
@@ -80,10 +76,13 @@ pub(super) fn hash_grid_ranges(
         // write one element.
         unsafe {
             if k == 0 || keys[k - 1] != b {
-                starts.at(b as usize).write(k as i32);
+                starts
+                    .at(b as usize)
+                    .write(if clear { 0 } else { k as i32 });
             }
             if k + 1 == n || keys[k + 1] != b {
-                ends.at(b as usize).write(k as i32 + 1);
+                ends.at(b as usize)
+                    .write(if clear { 0 } else { k as i32 + 1 });
             }
         }
     });

@@ -213,8 +213,23 @@ pub(super) fn reduce<T: ScanOps>(
 // Radix sort
 // ------------------------------------------------------------------------------------------
 
-/// Bits per CPU radix pass (256 counters per chunk fit in L1).
-const CPU_RADIX_BITS: u32 = 8;
+/// The most bits per CPU radix pass: 2048 counters per chunk (8 KiB) still fit in L1, and
+/// fewer passes mean fewer trips through memory (a 21-bit hash grid key sorts in two passes
+/// instead of three).
+const CPU_RADIX_MAX_BITS: u32 = 11;
+
+/// The CPU passes of a `bits`-bit sort: as few as [`CPU_RADIX_MAX_BITS`] allows, their digits
+/// as even as possible (21 bits: 11 + 10).
+fn cpu_radix_passes(bits: u32) -> Vec<(u32, u32)> {
+    let passes = bits.div_ceil(CPU_RADIX_MAX_BITS).max(1);
+    crate::primitives::plan::radix_passes(bits, bits.div_ceil(passes).max(1))
+}
+
+/// The sort's ping-pong buffers, kept between sorts (a sort of n pairs would otherwise
+/// allocate, and fault in, 8n fresh bytes every call). A sort takes them out of the lock, so
+/// concurrent sorts never wait: the second one allocates its own.
+static SORT_SCRATCH: std::sync::Mutex<(Vec<u32>, Vec<u32>)> =
+    std::sync::Mutex::new((Vec::new(), Vec::new()));
 
 /// A pointer that rayon tasks may share: each task writes a disjoint set of its elements.
 #[derive(Clone, Copy)]
@@ -237,17 +252,18 @@ fn radix_pass(
 ) -> bool {
     let n = src_k.len();
     let digit = |k: u32| ((k >> shift) & mask) as usize;
-    let hists: Vec<[u32; 256]> = src_k
+    let radix = mask as usize + 1;
+    let hists: Vec<Vec<u32>> = src_k
         .par_chunks(chunk)
         .map(|c| {
-            let mut h = [0u32; 256];
+            let mut h = vec![0u32; radix];
             for &k in c {
                 h[digit(k)] += 1;
             }
             h
         })
         .collect();
-    let mut totals = [0usize; 256];
+    let mut totals = vec![0usize; radix];
     for h in &hists {
         for (t, &c) in totals.iter_mut().zip(h) {
             *t += c as usize;
@@ -257,9 +273,9 @@ fn radix_pass(
         return false;
     }
     // Digit-major: all of digit 0 (chunk by chunk, in order), then digit 1, ...
-    let mut offsets = vec![[0u32; 256]; hists.len()];
+    let mut offsets = vec![vec![0u32; radix]; hists.len()];
     let mut run = 0u32;
-    for d in 0..256 {
+    for d in 0..radix {
         for (o, h) in offsets.iter_mut().zip(&hists) {
             o[d] = run;
             run += h[d];
@@ -308,26 +324,34 @@ pub(super) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
     let v0: &mut [u32] = bytemuck::cast_slice_mut(values);
     k0.par_iter_mut()
         .for_each(|k| *k = K::to_radix(bytemuck::cast(*k)));
-    let mut k1 = vec![0u32; n];
-    let mut v1 = vec![0u32; n];
+    let (mut k1, mut v1) =
+        std::mem::take(&mut *SORT_SCRATCH.lock().unwrap_or_else(|p| p.into_inner()));
+    k1.resize(n.max(k1.len()), 0);
+    v1.resize(n.max(v1.len()), 0);
+    let (ks, vs) = (&mut k1[..n], &mut v1[..n]);
     let chunk = n.div_ceil(rayon::current_num_threads() * 4).max(1 << 14);
-    // Whether the current data is in (k1, v1) rather than the arrays.
+    // Whether the current data is in (ks, vs) rather than the arrays.
     let mut in_scratch = false;
-    for (shift, mask) in crate::primitives::plan::radix_passes(bits, CPU_RADIX_BITS) {
+    for (shift, mask) in cpu_radix_passes(bits) {
         let moved = if in_scratch {
-            radix_pass(&k1, &v1, k0, v0, shift, mask, chunk)
+            radix_pass(ks, vs, k0, v0, shift, mask, chunk)
         } else {
-            radix_pass(k0, v0, &mut k1, &mut v1, shift, mask, chunk)
+            radix_pass(k0, v0, ks, vs, shift, mask, chunk)
         };
         in_scratch ^= moved;
     }
     if in_scratch {
         k0.par_chunks_mut(CHUNK)
-            .zip(k1.par_chunks(CHUNK))
+            .zip(ks.par_chunks(CHUNK))
             .for_each(|(d, s)| d.copy_from_slice(s));
         v0.par_chunks_mut(CHUNK)
-            .zip(v1.par_chunks(CHUNK))
+            .zip(vs.par_chunks(CHUNK))
             .for_each(|(d, s)| d.copy_from_slice(s));
+    }
+    // Kept for the next sort, unless a concurrent sort left larger buffers meanwhile.
+    let mut kept = SORT_SCRATCH.lock().unwrap_or_else(|p| p.into_inner());
+    if kept.0.len() < k1.len() {
+        *kept = (k1, v1);
     }
     k0.par_iter_mut()
         .for_each(|k| *k = bytemuck::cast(K::from_radix(*k)));

@@ -3,7 +3,7 @@
 use super::memory::CudaBuffer;
 use super::stream::Stream;
 use super::{gpu, launch, objects, primitives};
-use crate::backend::{Backend, HashGridKeys};
+use crate::backend::{Backend, HashGridKeys, HashGridRanges};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel};
@@ -134,15 +134,8 @@ impl Backend for Cuda<'_> {
         objects::hash_grid_keys(self.device, self.ordinal, step)
     }
 
-    fn hash_grid_ranges(
-        &self,
-        keys: u64,
-        n: usize,
-        starts: u64,
-        ends: u64,
-        buckets: usize,
-    ) -> Result<()> {
-        objects::hash_grid_ranges(self.device, self.ordinal, keys, n, starts, ends, buckets)
+    fn hash_grid_ranges(&self, step: &HashGridRanges) -> Result<()> {
+        objects::hash_grid_ranges(self.device, self.ordinal, step)
     }
 
     fn synchronize_all() -> Result<()> {

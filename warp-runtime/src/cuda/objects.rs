@@ -6,7 +6,7 @@
 //! without host synchronisation.
 
 use super::gpu;
-use crate::backend::HashGridKeys;
+use crate::backend::{HashGridKeys, HashGridRanges};
 use crate::config;
 use crate::device::Device;
 use crate::error::Result;
@@ -137,26 +137,19 @@ pub(super) fn hash_grid_keys(device: &Device, ordinal: usize, s: &HashGridKeys) 
 }
 
 /// [`Backend::hash_grid_ranges`](crate::backend::Backend::hash_grid_ranges) on a GPU.
-pub(super) fn hash_grid_ranges(
-    device: &Device,
-    ordinal: usize,
-    keys: u64,
-    n: usize,
-    starts: u64,
-    ends: u64,
-    buckets: usize,
-) -> Result<()> {
+pub(super) fn hash_grid_ranges(device: &Device, ordinal: usize, s: &HashGridRanges) -> Result<()> {
     let k = kernels(device, ordinal)?;
-    let (mut keys, mut n32, mut starts, mut ends) = (keys, n as i32, starts, ends);
-    let mut buckets = buckets as i32;
+    let (mut keys, mut n, mut starts, mut ends) = (s.keys, s.n as i32, s.starts, s.ends);
+    let (mut buckets, mut clear) = (s.buckets as i32, s.clear as i32);
     let mut params = [
         ptr(&mut keys),
-        ptr(&mut n32),
+        ptr(&mut n),
         ptr(&mut starts),
         ptr(&mut ends),
         ptr(&mut buckets),
+        ptr(&mut clear),
     ];
-    queue(device, ordinal, &k.ranges, n, &mut params)
+    queue(device, ordinal, &k.ranges, s.n, &mut params)
 }
 
 /// A kernel parameter as `cuLaunchKernel` takes it: the address of its value.

@@ -9,7 +9,9 @@
 //! each point's bucket and index (`dispatch::hash_grid_keys`: rayon on the CPU, a kernel of
 //! `wp_hash_grid.h` on a GPU), the primitives' stable radix sort sorts the pairs by bucket
 //! (so by index within a bucket), and a per-position step records each bucket's range in
-//! that order (`dispatch::hash_grid_ranges`). The point indices are sorted in the grid's own
+//! that order (`dispatch::hash_grid_ranges`), after the last build's ranges were zeroed (from
+//! its keys when they are few against the buckets: a small build on a large grid does not pay
+//! for zeroing every bucket). The point indices are sorted in the grid's own
 //! buffer; the keys are a buffer of the grid too, so a reserved grid builds without
 //! allocating.
 //!
@@ -25,7 +27,7 @@ use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
 use crate::array::Array;
-use crate::backend::HashGridKeys;
+use crate::backend::{HashGridKeys, HashGridRanges};
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
@@ -66,6 +68,10 @@ pub struct HashGrid {
     buffers: Arc<Buffers>,
     /// What the last successful build made; `None` before it (and after a failed one).
     built: Option<Built>,
+    /// How the bucket ranges may be zeroed before the next build: `Some(m)` when every
+    /// nonzero entry was written from the first `m` keys (then clearing those entries is
+    /// enough), `None` when unknown (zero them all).
+    ranges_from_keys: Option<usize>,
 }
 
 /// The grid's buffers on its device.
@@ -109,6 +115,7 @@ impl Clone for HashGrid {
             device: self.device.clone(),
             buffers: Arc::clone(&self.buffers),
             built: self.built,
+            ranges_from_keys: self.ranges_from_keys,
         }
     }
 }
@@ -173,6 +180,7 @@ impl HashGrid {
             device: device.clone(),
             buffers: Arc::new(Buffers::new(0, cells, device)?),
             built: None,
+            ranges_from_keys: Some(0),
         })
     }
 
@@ -249,6 +257,8 @@ impl HashGrid {
                 copy_prefix(&ids, &b.point_ids, kept)?;
                 b.point_ids = ids;
                 b.keys = Array::zeros(cap, &self.device)?;
+                // The keys that wrote the ranges are gone.
+                self.ranges_from_keys = None;
             }
             None => {
                 // Shared with a clone: the clone keeps the old buffers, which are not written
@@ -262,6 +272,7 @@ impl HashGrid {
                     copy_prefix(&fresh.cell_ends, &old.cell_ends, cells)?;
                 }
                 self.buffers = Arc::new(fresh);
+                self.ranges_from_keys = None;
             }
         }
         Ok(())
@@ -271,7 +282,8 @@ impl HashGrid {
     /// radius)`): the point indices sorted by bucket, each bucket's range recorded. Queries of
     /// any radius work on the result (a larger query radius visits more cells); a cell as wide
     /// as the usual query radius visits the fewest points. On a GPU the build is queued like a
-    /// launch, except that it waits once for its check of the points (one flag read back).
+    /// launch, except that it waits once, after its last step, for its check of the points
+    /// (one flag read back).
     ///
     /// A failed build leaves the grid unbuilt (kernels refuse it until a build succeeds).
     ///
@@ -319,7 +331,30 @@ impl HashGrid {
             copy.copy_from(points)?;
             &copy
         };
+        let cells = self.buffers.cell_starts.len();
+        // Zero the ranges of the last build: from its keys (still in `keys`) when they are few
+        // against the buckets, else every entry (a fill, the fastest way to zero them all).
+        // Unknown until the new ranges are written.
+        let clear_from = self.ranges_from_keys.take();
         let b = self.own_buffers();
+        match clear_from {
+            Some(0) => {}
+            Some(m) if m <= cells / 8 => dispatch::hash_grid_ranges(
+                &self.device,
+                &HashGridRanges {
+                    keys: b.keys.device_address(),
+                    n: m,
+                    starts: b.cell_starts.device_address(),
+                    ends: b.cell_ends.device_address(),
+                    buckets: cells,
+                    clear: true,
+                },
+            )?,
+            _ => {
+                b.cell_starts.fill(0)?;
+                b.cell_ends.fill(0)?;
+            }
+        }
         b.bad.fill(i32::MAX)?;
         let step = HashGridKeys {
             points: points.device_address(),
@@ -331,9 +366,25 @@ impl HashGrid {
             bad: b.bad.device_address(),
         };
         dispatch::hash_grid_keys(&self.device, &step)?;
-        // Checked before anything of the build is sorted or written: a failed build touches
-        // only the keys and the unsorted indices (on a GPU, the one wait of a build).
+        // Buckets lie in 0..cells: sorting by their low bits is sorting by them.
+        let bits = (usize::BITS - (cells - 1).leading_zeros()).max(1);
+        radix_sort_pairs(&b.keys, &b.point_ids, n, Some(bits))?;
+        dispatch::hash_grid_ranges(
+            &self.device,
+            &HashGridRanges {
+                keys: b.keys.device_address(),
+                n,
+                starts: b.cell_starts.device_address(),
+                ends: b.cell_ends.device_address(),
+                buckets: cells,
+                clear: false,
+            },
+        )?;
+        // The points' check, read back once everything is queued (on a GPU, the one wait of a
+        // build, after its last step: no idle gap between the steps). A build of a non-finite
+        // point is complete and consistent, only refused.
         let first_bad = b.bad.to_vec()?[0];
+        self.ranges_from_keys = Some(n);
         if first_bad != i32::MAX {
             let i = first_bad as usize;
             let p = points.view(i..i + 1)?.to_vec()?[0];
@@ -343,20 +394,6 @@ impl HashGrid {
                 format!("has a non-finite point at index {i}: {p:?}"),
             ));
         }
-        // Buckets lie in 0..cells: sorting by their low bits is sorting by them.
-        let cells = b.cell_starts.len();
-        let bits = (usize::BITS - (cells - 1).leading_zeros()).max(1);
-        radix_sort_pairs(&b.keys, &b.point_ids, n, Some(bits))?;
-        b.cell_starts.fill(0)?;
-        b.cell_ends.fill(0)?;
-        dispatch::hash_grid_ranges(
-            &self.device,
-            b.keys.device_address(),
-            n,
-            b.cell_starts.device_address(),
-            b.cell_ends.device_address(),
-            cells,
-        )?;
         self.built = Some(Built {
             num_points: n,
             cell_width: radius,
