@@ -550,7 +550,8 @@ fn tape_keeps_the_grid_it_ran_with(dev: &wp::Device) {
     assert_eq!(kept, plain);
 }
 
-/// NVRTC accepts the device build's kernels (`wp_hash_grid.h` with `WP_HASH_GRID_BUILD`) for
+/// NVRTC accepts every host object's build library (the hash grid's: `wp_hash_grid.h` with
+/// `WP_HASH_GRID_BUILD`) for
 /// sm_90 (H100, H200) and sm_80 (A100) with the runtime's options: needs libnvrtc, no GPU;
 /// skipped, saying so, without it.
 #[test]
@@ -559,10 +560,18 @@ fn nvrtc_compiles_the_build_kernels() {
         eprintln!("SKIPPED hash_grid::nvrtc_compiles_the_build_kernels: {e}");
         return;
     }
-    for arch in [90, 80] {
-        let c = wp::objects::compile_hash_grid_build(arch)
-            .unwrap_or_else(|e| panic!("the hash grid build for sm_{arch}: {e}"));
-        assert!(!c.cubin.is_empty());
-        assert!(!c.log.contains("warning"), "sm_{arch}: {}", c.log);
+    assert!(!wp::objects::BUILD_LIBRARIES.is_empty());
+    for lib in wp::objects::BUILD_LIBRARIES {
+        for arch in [90, 80] {
+            let c = wp::objects::compile_library(lib, arch)
+                .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.name));
+            assert!(!c.cubin.is_empty());
+            assert!(
+                !c.log.contains("warning"),
+                "{} sm_{arch}: {}",
+                lib.name,
+                c.log
+            );
+        }
     }
 }

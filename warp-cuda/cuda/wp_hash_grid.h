@@ -139,7 +139,8 @@ WP_FN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_
       detail::hash_grid_buffer(grid.point_ids, (i64)grid.num_points, grid.arg);
   for (;;) {
     if (q.next < q.end) {
-      q.point = load(ids, (i64)q.next, ctx);
+      // 0 <= next < end <= num_points: checked when the bucket was entered below.
+      q.point = grid.point_ids[q.next];
       q.next += 1;
       return q;
     }
@@ -166,9 +167,14 @@ WP_FN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_
     const i32 b = detail::hash_grid_query_bucket(grid.dims, q);
     q.next = grid.cell_starts[b];
     const i32 e = grid.cell_ends[b];
-    // Bounded by the point count, whatever the buffer holds (a start below 0 faults at the
-    // point read).
+    // Bounded by the point count, whatever the buffer holds: a query never runs longer than
+    // its buckets' points, and reads no point outside them.
     q.end = e < grid.num_points ? e : grid.num_points;
+    if (q.next < 0 && q.next < q.end) {
+      // A corrupt start: the out-of-bounds fault of the grid's points; the bucket is skipped.
+      (void)load(ids, (i64)q.next, ctx);
+      q.next = q.end;
+    }
   }
 }
 
@@ -213,28 +219,58 @@ WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* star
 
 }  // namespace wp
 
-// The device build's kernels (warp-runtime's cuda/objects.rs compiles this header with
-// WP_HASH_GRID_BUILD defined, once per GPU; kernels that only query a grid do not get them).
-// Grid-stride loops, one element per thread; nothing here can fault (every index is in range
-// by construction: n points, keys in [0, buckets)).
+// The device build's kernels (warp-runtime's objects/hash_grid_steps.rs runs them through the
+// generic object-step launcher, which compiles this header with WP_HASH_GRID_BUILD defined once
+// per GPU; kernels that only query a grid do not get them). Each takes one record, laid out as
+// the Rust step's `#[repr(C)]` struct (both sides assert the size). Grid-stride loops, one
+// element per thread; nothing here can fault (every index is in range by construction: n
+// points, keys in [0, buckets)).
+#if defined(WP_HASH_GRID_BUILD)
+namespace wp {
+/// HashGridKeys: points (Vec3*), n, dims, inv, keys (i32*), values (i32*), bad (i32*).
+struct hash_grid_keys_t {
+  u64 points;
+  u64 n;
+  i32 dims[3];
+  f32 inv;
+  u64 keys;
+  u64 values;
+  u64 bad;
+};
+static_assert(sizeof(hash_grid_keys_t) == 56, "hash_grid_keys_t layout");
+/// HashGridRanges: keys (sorted i32*), starts, ends (i32*, buckets each), n, buckets, clear.
+struct hash_grid_ranges_t {
+  u64 keys;
+  u64 starts;
+  u64 ends;
+  i32 n;
+  i32 buckets;
+  i32 clear;
+  i32 pad;
+};
+static_assert(sizeof(hash_grid_ranges_t) == 40, "hash_grid_ranges_t layout");
+}  // namespace wp
+#endif
+
 #if defined(__CUDACC__) && defined(WP_HASH_GRID_BUILD)
 /// Points' buckets and indices; the smallest index of a non-finite point into *bad.
-extern "C" __global__ void wp_hash_grid_keys(const wp::Vec3* points, wp::i32 n, wp::i32 dim_x,
-                                             wp::i32 dim_y, wp::i32 dim_z, wp::f32 inv,
-                                             wp::i32* keys, wp::i32* values, wp::i32* bad) {
-  const wp::i32 dims[3] = {dim_x, dim_y, dim_z};
+extern "C" __global__ void wp_hash_grid_keys(wp::hash_grid_keys_t s) {
+  const wp::Vec3* points = (const wp::Vec3*)s.points;
+  wp::i32* keys = (wp::i32*)s.keys;
+  wp::i32* values = (wp::i32*)s.values;
   const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
-  for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride) {
-    if (!wp::hash_grid_build_key(dims, inv, points[i], (wp::i32)i, &keys[i], &values[i]))
-      atomicMin(bad, (wp::i32)i);
+  for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < (wp::i64)s.n;
+       i += stride) {
+    if (!wp::hash_grid_build_key(s.dims, s.inv, points[i], (wp::i32)i, &keys[i], &values[i]))
+      atomicMin((wp::i32*)s.bad, (wp::i32)i);
   }
 }
 /// Bucket ranges from the sorted keys (starts and ends zeroed before), or with `clear` != 0
 /// their zeroing.
-extern "C" __global__ void wp_hash_grid_ranges(const wp::i32* keys, wp::i32 n, wp::i32* starts,
-                                               wp::i32* ends, wp::i32 buckets, wp::i32 clear) {
+extern "C" __global__ void wp_hash_grid_ranges(wp::hash_grid_ranges_t s) {
   const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
-  for (wp::i64 k = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; k < n; k += stride)
-    wp::hash_grid_build_range(keys, n, (wp::i32)k, starts, ends, buckets, clear != 0);
+  for (wp::i64 k = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; k < s.n; k += stride)
+    wp::hash_grid_build_range((const wp::i32*)s.keys, s.n, (wp::i32)k, (wp::i32*)s.starts,
+                              (wp::i32*)s.ends, s.buckets, s.clear != 0);
 }
 #endif

@@ -88,13 +88,9 @@ pub(crate) trait Backend {
         len: Extent,
     ) -> Result<()>;
 
-    /// The hash grid build's per-point step (`objects/hash_grid.rs`; see [`HashGridKeys`]).
-    /// Runs (the CPU) or queues (a GPU, on the calling thread's current stream).
-    fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()>;
-
-    /// The hash grid build's per-position step over sorted keys (see [`HashGridRanges`]).
-    /// Runs or queues as [`Backend::hash_grid_keys`].
-    fn hash_grid_ranges(&self, step: &HashGridRanges) -> Result<()>;
+    /// Runs (the CPU: [`ObjectStep::run_cpu`]) or queues (a GPU: the step's kernel, on the
+    /// calling thread's current stream) one step of a host object's build.
+    fn object_step<S: ObjectStep>(&self, step: &S) -> Result<()>;
 
     /// [`Backend::synchronize`] for every device of this backend used so far.
     fn synchronize_all() -> Result<()>
@@ -102,39 +98,40 @@ pub(crate) trait Backend {
         Self: Sized;
 }
 
-/// The arguments of [`Backend::hash_grid_keys`]: for each of the `n` points (contiguous
-/// `Vec3`s at `points`), its bucket (`warp_core::objects::hash_grid::point_bucket`, the CUDA
-/// library's `hash_grid_build_key`) into the `i32` at `keys[i]` and its index `i` into
-/// `values[i]`; the smallest index of a point with a NaN or infinite coordinate into the `i32`
-/// at `bad` (atomically lowered; left alone when every point is finite). Addresses as
-/// [`Buffer::address`] gives them; `objects/hash_grid.rs` checked the sizes and devices.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct HashGridKeys {
-    pub points: u64,
-    pub n: usize,
-    pub dims: [i32; 3],
-    pub inv: f32,
-    pub keys: u64,
-    pub values: u64,
-    pub bad: u64,
+/// A data-parallel step of a host object's build (the hash grid's keys and ranges): a record
+/// of arguments, run over `0..len()` by a Rust function on the CPU and by a kernel of the
+/// object's CUDA build library on a GPU. Objects define their steps next to themselves
+/// (`objects/`); a backend only knows how to run one, so a new object adds no backend method.
+///
+/// # Safety
+/// `Self` is `#[repr(C)]` and laid out exactly as the C++ struct that [`ObjectStep::KERNEL`]
+/// takes by value (both sides assert the size); the device addresses it holds are of live
+/// memory on the step's device, sized for what the step reads and writes (the object checked
+/// them).
+pub(crate) unsafe trait ObjectStep: Copy + Send + Sync {
+    /// The CUDA build library holding the kernel.
+    const LIBRARY: &'static ObjectLibrary;
+    /// The kernel: `extern "C" __global__ void KERNEL(Record r)`, a grid-stride loop over
+    /// `0..len()`.
+    const KERNEL: &'static str;
+    /// Elements (threads) of the step.
+    fn len(&self) -> usize;
+    /// The step on the CPU (rayon), on host memory.
+    fn run_cpu(&self) -> Result<()>;
 }
 
-/// The arguments of [`Backend::hash_grid_ranges`]: from the `n` sorted `i32` keys at `keys`,
-/// each named bucket's range `[start, end)` in sorted order into the `i32`s at `starts` and
-/// `ends` (`buckets` each; a bucket no key names is left alone, so the caller zeroed them).
-/// With `clear`, zeros instead of positions: the same writes, undoing a build from its keys
-/// (cheaper than zeroing every bucket when the points are few). Keys outside `0..buckets` are
-/// skipped. Addresses as for [`HashGridKeys`].
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct HashGridRanges {
-    pub keys: u64,
-    pub n: usize,
-    pub starts: u64,
-    pub ends: u64,
-    pub buckets: usize,
-    pub clear: bool,
+/// A host object's CUDA build library: a translation unit of its header with the build
+/// kernels enabled, compiled by NVRTC through the kernel disk cache the first time a GPU runs
+/// one of its steps, and kept loaded for the process.
+#[derive(Debug)]
+pub struct ObjectLibrary {
+    /// The program's name (also its cache key).
+    pub name: &'static str,
+    /// The translation unit (`#define WP_HASH_GRID_BUILD 1` and the header's `#include`).
+    pub source: &'static str,
+    /// The library headers it includes (names in `warp_cuda::HEADERS`).
+    pub headers: &'static [&'static str],
 }
-
 /// A backend's memory, as array operations use it: bytes at offsets. Every operation is
 /// ordered after the kernels that may use the memory (on a GPU: after every stream's work;
 /// see `cuda/gpu.rs`) and has finished when it returns.

@@ -63,8 +63,9 @@ pub fn quiet() -> bool {
 /// Sets the smallest number of threads one rayon task of a CPU launch runs.
 ///
 /// A launch of at most this many threads runs serially on the calling thread, so tiny launches
-/// do not pay for waking the pool; larger launches are cut into chunks of at least this size so
-/// that the per-task overhead stays small next to the work. Zero is treated as one.
+/// do not pay for waking the pool; larger launches are cut into about eight tasks per pool
+/// thread, of at least an eighth of this size, so that uneven work balances out while the
+/// per-task overhead stays small next to the work. Zero is treated as one.
 pub fn set_cpu_min_chunk(threads: usize) {
     CPU_MIN_CHUNK.store(threads.max(1), Ordering::Relaxed);
 }

@@ -5,7 +5,7 @@
 //! backend. A new backend adds an arm to `with_backend!`, a variant to [`Storage`] with its
 //! arms, and its device kind to `device.rs` (see `backend.rs` for what it implements).
 
-use crate::backend::{Backend, Buffer, HashGridKeys, HashGridRanges};
+use crate::backend::{Backend, Buffer, ObjectStep};
 use crate::cpu::memory::HostBuffer;
 use crate::cpu::Cpu;
 #[cfg(feature = "cuda")]
@@ -122,16 +122,10 @@ pub(crate) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
     with_backend!(device, b => b.radix_sort_pairs::<K, V>(func, keys, values, len, key_bits))
 }
 
-/// The hash grid build's per-point step on `device`'s backend; see
-/// [`Backend::hash_grid_keys`].
-pub(crate) fn hash_grid_keys(device: &Device, step: &HashGridKeys) -> Result<()> {
-    with_backend!(device, b => b.hash_grid_keys(step))
-}
-
-/// The hash grid build's per-position step on `device`'s backend; see
-/// [`Backend::hash_grid_ranges`].
-pub(crate) fn hash_grid_ranges(device: &Device, step: &HashGridRanges) -> Result<()> {
-    with_backend!(device, b => b.hash_grid_ranges(step))
+/// Runs or queues a step of a host object's build on `device`'s backend; see
+/// [`Backend::object_step`].
+pub(crate) fn object_step<S: ObjectStep>(device: &Device, step: &S) -> Result<()> {
+    with_backend!(device, b => b.object_step(step))
 }
 
 /// A stream compaction on `device`'s backend; see [`Backend::compact`].

@@ -275,7 +275,9 @@ pub fn hash_grid_query(grid: HashGridView, p: Vec3, radius: f32) -> KResult<Hash
 pub fn hash_grid_query_next(grid: HashGridView, mut q: HashGridQuery) -> KResult<HashGridQuery> {
     loop {
         if q.next < q.end {
-            q.point = grid.point_ids.load(q.next)?;
+            // SAFETY: `0 <= next < end <= point count`: checked when the bucket was entered
+            // below (states are made and changed only by these functions).
+            q.point = unsafe { grid.point_ids.load_unchecked(q.next as usize) };
             q.next += 1;
             return Ok(q);
         }
@@ -301,8 +303,12 @@ pub fn hash_grid_query_next(grid: HashGridView, mut q: HashGridQuery) -> KResult
         let (start, end) = grid.bucket_range(b);
         q.next = start;
         // Bounded by the point count, whatever the buffer holds: a query never runs longer
-        // than its buckets' points (a start below 0 faults at the point read).
+        // than its buckets' points, and reads no point outside them.
         q.end = end.min(grid.point_ids.len() as i32);
+        if q.next < 0 && q.next < q.end {
+            // A corrupt start: the out-of-bounds fault of the grid's points.
+            grid.point_ids.load(q.next)?;
+        }
     }
 }
 

@@ -2,8 +2,8 @@
 
 use super::executor;
 use super::memory::HostBuffer;
-use super::{objects, primitives};
-use crate::backend::{Backend, HashGridKeys, HashGridRanges};
+use super::primitives;
+use crate::backend::{Backend, ObjectStep};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
@@ -99,12 +99,8 @@ impl Backend for Cpu<'_> {
         primitives::compact::<T>(func, arrays, len)
     }
 
-    fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()> {
-        objects::hash_grid_keys(step)
-    }
-
-    fn hash_grid_ranges(&self, step: &HashGridRanges) -> Result<()> {
-        objects::hash_grid_ranges(step)
+    fn object_step<S: ObjectStep>(&self, step: &S) -> Result<()> {
+        step.run_cpu()
     }
 
     fn synchronize_all() -> Result<()> {

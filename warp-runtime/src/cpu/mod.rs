@@ -1,13 +1,12 @@
 //! The CPU backend: kernels are Rust code built by cargo, run over the grid in chunks on the
 //! rayon pool (`executor`); arrays live in host memory (`memory`). A CPU launch has finished
 //! when `launch` returns, so there is nothing to wait for and no fault record to read.
-//! `primitives`: scan, reductions, radix sort and compaction with rayon. `objects`: the
-//! per-element steps of host objects' builds (the hash grid's), with rayon.
+//! `primitives`: scan, reductions, radix sort and compaction with rayon. Host objects' build
+//! steps bring their own CPU code (`ObjectStep::run_cpu`, next to each object).
 
 mod backend;
 mod executor;
 pub(crate) mod memory;
-mod objects;
 mod primitives;
 
 pub(crate) use backend::Cpu;

@@ -329,7 +329,8 @@ pub(super) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
     k1.resize(n.max(k1.len()), 0);
     v1.resize(n.max(v1.len()), 0);
     let (ks, vs) = (&mut k1[..n], &mut v1[..n]);
-    let chunk = n.div_ceil(rayon::current_num_threads() * 4).max(1 << 14);
+    // About four chunks per thread, of at least 4096 pairs (a 2048-counter histogram each).
+    let chunk = n.div_ceil(rayon::current_num_threads() * 4).max(1 << 12);
     // Whether the current data is in (ks, vs) rather than the arrays.
     let mut in_scratch = false;
     for (shift, mask) in cpu_radix_passes(bits) {

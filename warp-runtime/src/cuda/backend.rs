@@ -3,7 +3,7 @@
 use super::memory::CudaBuffer;
 use super::stream::Stream;
 use super::{gpu, launch, objects, primitives};
-use crate::backend::{Backend, HashGridKeys, HashGridRanges};
+use crate::backend::{Backend, ObjectStep};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel};
@@ -130,12 +130,8 @@ impl Backend for Cuda<'_> {
         primitives::compact::<T>(self.device, self.ordinal, func, arrays, len)
     }
 
-    fn hash_grid_keys(&self, step: &HashGridKeys) -> Result<()> {
-        objects::hash_grid_keys(self.device, self.ordinal, step)
-    }
-
-    fn hash_grid_ranges(&self, step: &HashGridRanges) -> Result<()> {
-        objects::hash_grid_ranges(self.device, self.ordinal, step)
+    fn object_step<S: ObjectStep>(&self, step: &S) -> Result<()> {
+        objects::object_step(self.device, self.ordinal, step)
     }
 
     fn synchronize_all() -> Result<()> {

@@ -1,12 +1,12 @@
-//! The per-element steps of host objects' builds on a GPU: the hash grid's kernels
-//! (`wp_hash_grid_keys`, `wp_hash_grid_ranges` in `wp_hash_grid.h`, compiled with
-//! `WP_HASH_GRID_BUILD` defined). The module is compiled by NVRTC through the kernel disk
-//! cache the first time a GPU builds a grid, loaded, and kept for the process; its launches go
-//! on the calling thread's current stream, as a kernel's do (the ordering model of `gpu.rs`),
-//! without host synchronisation.
+//! Host objects' build steps on a GPU ([`ObjectStep`]): each object's build library (its
+//! header with the build kernels enabled, e.g. `wp_hash_grid.h` with `WP_HASH_GRID_BUILD`) is
+//! compiled by NVRTC through the kernel disk cache the first time a GPU runs one of its steps,
+//! loaded, and kept for the process with its functions; a step's launch goes on the calling
+//! thread's current stream, as a kernel's does (the ordering model of `gpu.rs`), without host
+//! synchronisation. Nothing here names an object: the step says which library and kernel.
 
 use super::gpu;
-use crate::backend::{HashGridKeys, HashGridRanges};
+use crate::backend::{ObjectLibrary, ObjectStep};
 use crate::config;
 use crate::device::Device;
 use crate::error::Result;
@@ -15,28 +15,22 @@ use std::ffi::c_void;
 use std::sync::{Arc, Mutex, OnceLock};
 use warp_cuda::{CompileOptions, Function};
 
-/// The build module's source: the header with its kernels.
-const SOURCE: &str = "#define WP_HASH_GRID_BUILD 1\n#include \"wp_hash_grid.h\"\n";
-
 /// Threads per block of the build kernels (grid-stride loops: any count of blocks works).
 const THREADS: u32 = 256;
 
-/// The build kernels, loaded on one GPU.
-struct Kernels {
-    // Keeps the functions' module loaded.
-    _module: warp_cuda::Module,
-    keys: Function,
-    ranges: Function,
+/// A build library loaded on one GPU, with the functions looked up so far.
+struct Loaded {
+    module: warp_cuda::Module,
+    functions: Mutex<HashMap<&'static str, Function>>,
 }
 
-/// Compiles the module with the runtime's options: the two headers it includes, FMA
-/// contraction as `config::cuda_fmad` says (the key step multiplies once, before a `floor`:
-/// nothing to contract, but one setting for all GPU code).
-fn with_options<R>(f: impl FnOnce(&CompileOptions) -> R) -> R {
+/// Compiles with the runtime's options: the library's headers, FMA contraction as
+/// `config::cuda_fmad` says (one setting for all GPU code).
+fn with_options<R>(lib: &ObjectLibrary, f: impl FnOnce(&CompileOptions) -> R) -> R {
     let headers: Vec<(&str, &str)> = warp_cuda::HEADERS
         .iter()
         .copied()
-        .filter(|(name, _)| matches!(*name, "wp_core.h" | "wp_hash_grid.h"))
+        .filter(|(name, _)| lib.headers.contains(name))
         .collect();
     f(&CompileOptions {
         fmad: config::cuda_fmad(),
@@ -46,66 +40,80 @@ fn with_options<R>(f: impl FnOnce(&CompileOptions) -> R) -> R {
     })
 }
 
-/// Compiles the build module for `sm_{arch}` (no GPU needed, only libnvrtc): how the tests
-/// check that NVRTC accepts it on machines without a GPU.
-pub fn compile_hash_grid_build(arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
-    with_options(|opts| warp_cuda::compile(SOURCE, "wp_hash_grid_build", opts, arch))
+/// Compiles `lib` for `sm_{arch}` (no GPU needed, only libnvrtc): how the tests check that
+/// NVRTC accepts every build library on machines without a GPU.
+pub fn compile_library(lib: &ObjectLibrary, arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
+    with_options(lib, |opts| {
+        warp_cuda::compile(lib.source, lib.name, opts, arch)
+    })
 }
 
-/// The build kernels on GPU `ordinal` (`device`), compiled and loaded once per process.
-fn kernels(device: &Device, ordinal: usize) -> Result<Arc<Kernels>> {
-    static CACHE: OnceLock<Mutex<HashMap<usize, Arc<Kernels>>>> = OnceLock::new();
+/// `lib` on GPU `ordinal` (`device`), compiled and loaded once per process.
+fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Result<Arc<Loaded>> {
+    type Cache = Mutex<HashMap<(usize, &'static str), Arc<Loaded>>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
     let cache = CACHE.get_or_init(Default::default);
-    if let Some(k) = cache
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .get(&ordinal)
-    {
-        return Ok(k.clone());
+    let key = (ordinal, lib.name);
+    if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+        return Ok(l.clone());
     }
     let st = gpu::state(device, ordinal)?;
-    let (compiled, _) = with_options(|opts| {
-        warp_cuda::compile_cached(SOURCE, "wp_hash_grid_build", opts, st.gpu.arch())
+    let (compiled, _) = with_options(lib, |opts| {
+        warp_cuda::compile_cached(lib.source, lib.name, opts, st.gpu.arch())
     })
     .map_err(|e| gpu::err(device, e))?;
     let module = st
         .gpu
         .load_module(&compiled.cubin)
         .map_err(|e| gpu::err(device, e))?;
-    let f = |name: &str| module.function(name).map_err(|e| gpu::err(device, e));
-    let k = Arc::new(Kernels {
-        keys: f("wp_hash_grid_keys")?,
-        ranges: f("wp_hash_grid_ranges")?,
-        _module: module,
+    let l = Arc::new(Loaded {
+        module,
+        functions: Mutex::new(HashMap::new()),
     });
-    cache
+    // A racing first use loaded it too: keep the first, drop this one.
+    Ok(cache
         .lock()
         .unwrap_or_else(|p| p.into_inner())
-        .insert(ordinal, k.clone());
-    Ok(k)
+        .entry(key)
+        .or_insert(l)
+        .clone())
 }
 
-/// Queues `f` over `n` elements with `params` (pointers to each kernel argument, in order).
-fn queue(
-    device: &Device,
-    ordinal: usize,
-    f: &Function,
-    n: usize,
-    params: &mut [*mut c_void],
-) -> Result<()> {
+/// [`Backend::object_step`](crate::backend::Backend::object_step) on a GPU: queues the step's
+/// kernel over `step.len()` elements with the record as its one argument.
+pub(super) fn object_step<S: ObjectStep>(device: &Device, ordinal: usize, step: &S) -> Result<()> {
+    let n = step.len();
     if n == 0 {
         return Ok(());
     }
+    let lib = loaded(device, ordinal, S::LIBRARY)?;
+    let f = {
+        let mut fns = lib.functions.lock().unwrap_or_else(|p| p.into_inner());
+        match fns.get(S::KERNEL) {
+            Some(f) => f.clone(),
+            None => {
+                let f = lib
+                    .module
+                    .function(S::KERNEL)
+                    .map_err(|e| gpu::err(device, e))?;
+                fns.insert(S::KERNEL, f.clone());
+                f
+            }
+        }
+    };
     let st = gpu::state(device, ordinal)?;
     // At most 2^16 blocks: the kernels loop over the rest.
     let blocks = n.div_ceil(THREADS as usize).min(1 << 16) as u32;
+    let mut record = *step;
+    let mut params = [&mut record as *mut S as *mut c_void];
     st.queue(ordinal, None, |stream| {
-        // SAFETY: `params` points at one value per kernel parameter, of its type (the callers
-        // below list them in the kernels' order); the addresses among them are of live device
-        // memory holding what the kernels touch (the build checked the sizes).
+        // SAFETY: the kernel takes one parameter, the C++ struct `S` is laid out as
+        // (`ObjectStep`'s contract), and `params` points at a copy of the record that lives
+        // until the launch is queued (the driver copies parameters at launch); the addresses
+        // in it are of live device memory sized as the step needs (the object checked them).
         unsafe {
             st.gpu
-                .launch_raw(f, stream, blocks, THREADS, 0, params)
+                .launch_raw(&f, stream, blocks, THREADS, 0, &mut params)
                 .map_err(|e| gpu::err(device, e))
         }
     })?;
@@ -113,46 +121,4 @@ fn queue(
         gpu::synchronize(device, ordinal)?;
     }
     Ok(())
-}
-
-/// [`Backend::hash_grid_keys`](crate::backend::Backend::hash_grid_keys) on a GPU.
-pub(super) fn hash_grid_keys(device: &Device, ordinal: usize, s: &HashGridKeys) -> Result<()> {
-    let k = kernels(device, ordinal)?;
-    let (mut points, mut n) = (s.points, s.n as i32);
-    let [mut dx, mut dy, mut dz] = s.dims;
-    let mut inv = s.inv;
-    let (mut keys, mut values, mut bad) = (s.keys, s.values, s.bad);
-    let mut params = [
-        ptr(&mut points),
-        ptr(&mut n),
-        ptr(&mut dx),
-        ptr(&mut dy),
-        ptr(&mut dz),
-        ptr(&mut inv),
-        ptr(&mut keys),
-        ptr(&mut values),
-        ptr(&mut bad),
-    ];
-    queue(device, ordinal, &k.keys, s.n, &mut params)
-}
-
-/// [`Backend::hash_grid_ranges`](crate::backend::Backend::hash_grid_ranges) on a GPU.
-pub(super) fn hash_grid_ranges(device: &Device, ordinal: usize, s: &HashGridRanges) -> Result<()> {
-    let k = kernels(device, ordinal)?;
-    let (mut keys, mut n, mut starts, mut ends) = (s.keys, s.n as i32, s.starts, s.ends);
-    let (mut buckets, mut clear) = (s.buckets as i32, s.clear as i32);
-    let mut params = [
-        ptr(&mut keys),
-        ptr(&mut n),
-        ptr(&mut starts),
-        ptr(&mut ends),
-        ptr(&mut buckets),
-        ptr(&mut clear),
-    ];
-    queue(device, ordinal, &k.ranges, s.n, &mut params)
-}
-
-/// A kernel parameter as `cuLaunchKernel` takes it: the address of its value.
-fn ptr<T>(x: &mut T) -> *mut c_void {
-    x as *mut T as *mut c_void
 }

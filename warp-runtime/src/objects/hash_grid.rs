@@ -6,10 +6,10 @@
 //! mirrors).
 //!
 //! A build is the same on every device, through the backend seam: a per-point step gives
-//! each point's bucket and index (`dispatch::hash_grid_keys`: rayon on the CPU, a kernel of
-//! `wp_hash_grid.h` on a GPU), the primitives' stable radix sort sorts the pairs by bucket
-//! (so by index within a bucket), and a per-position step records each bucket's range in
-//! that order (`dispatch::hash_grid_ranges`), after the last build's ranges were zeroed (from
+//! each point's bucket and index (`HashGridKeys` in `hash_grid_steps.rs`: rayon on the CPU, a
+//! kernel of `wp_hash_grid.h` on a GPU, run by `dispatch::object_step`), the primitives'
+//! stable radix sort sorts the pairs by bucket (so by index within a bucket), and a
+//! per-position step records each bucket's range in that order (`HashGridRanges`), after the last build's ranges were zeroed (from
 //! its keys when they are few against the buckets: a small build on a large grid does not pay
 //! for zeroing every bucket). The point indices are sorted in the grid's own
 //! buffer; the keys are a buffer of the grid too, so a reserved grid builds without
@@ -26,8 +26,8 @@ use glam::Vec3;
 use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
+use super::hash_grid_steps::{HashGridKeys, HashGridRanges};
 use crate::array::Array;
-use crate::backend::{HashGridKeys, HashGridRanges};
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
@@ -339,15 +339,16 @@ impl HashGrid {
         let b = self.own_buffers();
         match clear_from {
             Some(0) => {}
-            Some(m) if m <= cells / 8 => dispatch::hash_grid_ranges(
+            Some(m) if m <= cells / 8 => dispatch::object_step(
                 &self.device,
                 &HashGridRanges {
                     keys: b.keys.device_address(),
-                    n: m,
                     starts: b.cell_starts.device_address(),
                     ends: b.cell_ends.device_address(),
-                    buckets: cells,
-                    clear: true,
+                    n: m as i32,
+                    buckets: cells as i32,
+                    clear: 1,
+                    pad: 0,
                 },
             )?,
             _ => {
@@ -358,26 +359,27 @@ impl HashGrid {
         b.bad.fill(i32::MAX)?;
         let step = HashGridKeys {
             points: points.device_address(),
-            n,
+            n: n as u64,
             dims: self.dims,
             inv,
             keys: b.keys.device_address(),
             values: b.point_ids.device_address(),
             bad: b.bad.device_address(),
         };
-        dispatch::hash_grid_keys(&self.device, &step)?;
+        dispatch::object_step(&self.device, &step)?;
         // Buckets lie in 0..cells: sorting by their low bits is sorting by them.
         let bits = (usize::BITS - (cells - 1).leading_zeros()).max(1);
         radix_sort_pairs(&b.keys, &b.point_ids, n, Some(bits))?;
-        dispatch::hash_grid_ranges(
+        dispatch::object_step(
             &self.device,
             &HashGridRanges {
                 keys: b.keys.device_address(),
-                n,
                 starts: b.cell_starts.device_address(),
                 ends: b.cell_ends.device_address(),
-                buckets: cells,
-                clear: false,
+                n: n as i32,
+                buckets: cells as i32,
+                clear: 0,
+                pad: 0,
             },
         )?;
         // The points' check, read back once everything is queued (on a GPU, the one wait of a

@@ -6,10 +6,17 @@
 //! - [`hash_grid`]: [`HashGrid`], Warp's hash grid for neighbour queries.
 
 pub mod hash_grid;
+mod hash_grid_steps;
 
+pub use crate::backend::ObjectLibrary;
 pub use hash_grid::{CudaHashGrid, HashGrid};
 
-/// Compiles the hash grid's build kernels with NVRTC (no GPU needed): for tests.
+/// Every host object's CUDA build library (each compiled the first time a GPU runs one of
+/// its steps).
+pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[&hash_grid_steps::LIBRARY];
+
+/// Compiles a build library with NVRTC for `sm_{arch}` with the runtime's options (no GPU
+/// needed): how the tests check that NVRTC accepts each on machines without a GPU.
 #[cfg(feature = "cuda")]
 #[doc(hidden)]
-pub use crate::cuda::objects::compile_hash_grid_build;
+pub use crate::cuda::objects::compile_library;
