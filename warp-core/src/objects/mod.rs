@@ -9,7 +9,9 @@
 //! value. The CUDA library mirrors each view and query step by step (`wp_<object>.h`).
 //!
 //! - [`hash_grid`]: Warp's hash grid: points bucketed into a wrapping uniform grid of cells.
+//! - [`geometry`]: the triangle, ray and box tests the BVH and mesh queries are made of.
 
+pub mod geometry;
 pub mod hash_grid;
 
 pub use hash_grid::{HashGridQuery, HashGridView};
