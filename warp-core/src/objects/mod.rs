@@ -10,8 +10,12 @@
 //!
 //! - [`hash_grid`]: Warp's hash grid: points bucketed into a wrapping uniform grid of cells.
 //! - [`geometry`]: the triangle, ray and box tests the BVH and mesh queries are made of.
+//! - [`bvh`]: Warp's BVH over boxes: the node layout every builder produces, the box and ray
+//!   queries.
 
+pub mod bvh;
 pub mod geometry;
 pub mod hash_grid;
 
+pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};
