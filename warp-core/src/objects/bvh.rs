@@ -273,15 +273,21 @@ impl BvhTree {
         (self.kernel, self.arg)
     }
 
+    /// Replaces the names faults carry.
+    pub fn set_names(&mut self, kernel: &'static str, arg: &'static str) {
+        self.kernel = kernel;
+        self.arg = arg;
+    }
+
     /// An out-of-bounds fault of this tree's parameter: `index` against a buffer of `len`.
     #[cold]
     #[inline(never)]
-    pub fn fault(&self, index: i64, len: usize) -> Box<Fault> {
+    pub fn fault(&self, index: i128, len: usize) -> Box<Fault> {
         Fault::new(
             self.kernel,
             FaultKind::OutOfBounds {
                 arg: self.arg,
-                index: vec![index as i128],
+                index: vec![index],
                 shape: vec![len],
             },
         )
@@ -294,7 +300,7 @@ impl BvhTree {
             // SAFETY: in bounds (from_raw's contract).
             Ok(unsafe { self.nodes.add(i as usize).read() })
         } else {
-            Err(self.fault(i as i64, self.num_nodes as usize))
+            Err(self.fault(i as i128, self.num_nodes as usize))
         }
     }
 
@@ -305,7 +311,7 @@ impl BvhTree {
             // SAFETY: in bounds (from_raw's contract).
             Ok(unsafe { self.parents.add(i as usize).read() })
         } else {
-            Err(self.fault(i as i64, self.num_nodes as usize))
+            Err(self.fault(i as i128, self.num_nodes as usize))
         }
     }
 
@@ -314,14 +320,14 @@ impl BvhTree {
     #[inline(always)]
     pub fn prim(&self, k: i32) -> KResult<i32> {
         if (k as u32) >= self.num_prims as u32 {
-            return Err(self.fault(k as i64, self.num_prims as usize));
+            return Err(self.fault(k as i128, self.num_prims as usize));
         }
         // SAFETY: in bounds (from_raw's contract).
         let id = unsafe { self.prim_ids.add(k as usize).read() };
         if (id as u32) < self.num_prims as u32 {
             Ok(id)
         } else {
-            Err(self.fault(id as i64, self.num_prims as usize))
+            Err(self.fault(id as i128, self.num_prims as usize))
         }
     }
 
@@ -330,7 +336,7 @@ impl BvhTree {
     fn leaf_range(&self, n: &BvhNode) -> KResult<(i32, i32)> {
         let (start, end) = n.leaf_range();
         if end > self.num_prims {
-            return Err(self.fault(end as i64 - 1, self.num_prims as usize));
+            return Err(self.fault(end as i128 - 1, self.num_prims as usize));
         }
         // start >= 0 always (the complement of a negative left); an empty range is fine.
         Ok((start, end))
