@@ -5,6 +5,7 @@
 //!
 //! - [`hash_grid`]: [`HashGrid`], Warp's hash grid for neighbour queries.
 
+pub mod bvh_build;
 pub mod hash_grid;
 
 pub use hash_grid::{CudaHashGrid, HashGrid};
