@@ -47,6 +47,10 @@
 //! traversal takes at most `2 * nodes + 2` moves, which a well-formed tree never needs, and
 //! ends there; it also ends where a parent link does not lead back to its child.
 
+// `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
+// rejecting branch, on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 

@@ -23,6 +23,10 @@
 //! Every accepting comparison is written so that NaN fails it: a NaN input never makes a hit
 //! or an overlap. Results computed from NaN inputs are otherwise unspecified (never a panic).
 
+// `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
+// rejecting branch, on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::Vec3;
 
 /// The sliver threshold: a triangle whose `|(b - a) x (c - a)|` is below this fraction of the

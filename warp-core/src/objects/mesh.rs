@@ -57,6 +57,10 @@
 //! [`super::bvh`]): a corrupt mesh is a fault naming its kernel parameter, never undefined
 //! behaviour; traversals are bounded.
 
+// `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
+// rejecting branch, on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::Vec3;
 
 use super::bvh::{walk_ordered, BvhTree, OrderedSearch, Walk};

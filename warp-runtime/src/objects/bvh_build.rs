@@ -487,6 +487,16 @@ struct NodesPtr(*mut BvhNode);
 unsafe impl Send for NodesPtr {}
 unsafe impl Sync for NodesPtr {}
 
+impl NodesPtr {
+    /// The address of node `i` of `len` (a method, so closures capture the `Sync` wrapper
+    /// rather than its raw pointer field).
+    fn at(&self, i: usize, len: usize) -> *mut BvhNode {
+        assert!(i < len, "bvh refit: node {i} of {len}");
+        // SAFETY: in bounds of the nodes slice refit holds mutably for its whole run.
+        unsafe { self.0.add(i) }
+    }
+}
+
 /// Recomputes every node's box from the primitive boxes, bottom-up, keeping the tree's shape
 /// (after the primitives moved). Works on any tree in the layout, whatever its numbering: each
 /// leaf's box is the union of its primitives' boxes, computed in parallel; then each leaf's
@@ -510,13 +520,9 @@ pub fn refit(
     let ptr = NodesPtr(nodes.as_mut_ptr());
     let len = nodes.len();
     leaves.par_iter().for_each(|&leaf| {
-        let ptr = ptr;
-        let node_at = |i: usize| {
-            assert!(i < len, "bvh refit: node {i} of {len}");
-            // SAFETY: in bounds; this node is written only by this thread (its leaf, or the
-            // second arrival), and read after its writer's release (below).
-            unsafe { ptr.0.add(i) }
-        };
+        // Each node is written only by one thread (its leaf's, or the second to arrive),
+        // and read only after its writer's release (below).
+        let node_at = |i: usize| ptr.at(i, len);
         // SAFETY: each leaf is visited by exactly one thread.
         let n = unsafe { &mut *node_at(leaf) };
         let (start, end) = n.leaf_range();
