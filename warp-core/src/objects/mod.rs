@@ -9,7 +9,17 @@
 //! value. The CUDA library mirrors each view and query step by step (`wp_<object>.h`).
 //!
 //! - [`hash_grid`]: Warp's hash grid: points bucketed into a wrapping uniform grid of cells.
+//! - [`geometry`]: the triangle, ray and box tests the BVH and mesh queries are made of.
+//! - [`bvh`]: Warp's BVH over boxes: the node layout every builder produces, the box and ray
+//!   queries.
+//! - [`mesh`]: Warp's triangle mesh: closest and furthest points, signed; ray hits; faces in a
+//!   box; evaluation at barycentrics.
 
+pub mod bvh;
+pub mod geometry;
 pub mod hash_grid;
+pub mod mesh;
 
+pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};
+pub use mesh::{MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView};

@@ -5,6 +5,7 @@
 //!
 //! - [`hash_grid`]: [`HashGrid`], Warp's hash grid for neighbour queries.
 
+pub mod bvh_build;
 pub mod hash_grid;
 mod hash_grid_steps;
 

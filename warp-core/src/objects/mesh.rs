@@ -1,0 +1,1430 @@
+//! Warp's triangle mesh, kernel side: [`MeshView`] (what a `Mesh` kernel parameter is on the
+//! CPU) and its queries: closest point (signed or not), furthest point, closest ray hit,
+//! the triangles overlapping a box (iterating), and evaluation at barycentrics.
+//!
+//! A mesh is `points` (and optionally per-point `velocities`), `indices` (three per
+//! triangle, into `points`) and a BVH over its triangles in the layout of [`super::bvh`]
+//! (whose primitives are the triangles: a primitive id is a face index).
+//!
+//! # Conventions (Warp's, so ported kernels give the same numbers)
+//!
+//! - A face `f` has vertices `p0, p1, p2 = points[indices[3f]], points[indices[3f + 1]],
+//!   points[indices[3f + 2]]`; its normal is `normalize((p1 - p0) x (p2 - p0))`.
+//! - Barycentrics `(u, v)` name the point `u * p0 + v * p1 + (1 - u - v) * p2`
+//!   ([`mesh_eval_position`]).
+//! - `mesh_query_point*` report a point only when one lies **strictly** within `max_dist`
+//!   (`result` false otherwise, the other fields then meaningless); the furthest point query
+//!   only when one lies strictly beyond `min_dist`; `mesh_query_ray` only a hit with
+//!   `0 <= t < max_t`.
+//! - `sign` is `-1` inside, `+1` outside.
+//!
+//! # The sign of `mesh_query_point`
+//!
+//! The angle-weighted pseudonormal of the closest feature (Bærentzen and Aanæs, *Signed
+//! distance computation using the angle weighted pseudonormal*, 2005): the point is outside
+//! when `n . (p - c) > 0`, with `c` the closest point and `n` the face normal when `c` is
+//! inside a face, the sum of the unit normals of the faces sharing the edge when it is on an
+//! edge, and the sum of those of the faces around the vertex weighted by their angles there
+//! when it is a vertex. The faces sharing an edge or a vertex are found by a second, tiny box
+//! query and matched by exact equality of positions (so welded and unwelded meshes alike).
+//! For a closed, consistently oriented mesh this is exact: it gives the same answer as the
+//! winding number wherever the closest feature is determined (away from the medial axis by
+//! more than rounding). Unlike ray casting (Warp's `mesh_query_point` votes with three
+//! axis-aligned rays) it needs no watertightness and no epsilon, and on an **open** mesh (a
+//! plane patch, a single triangle) it still means something: the side of the surface near the
+//! closest point (below a patch whose normals point up is inside). A point exactly on the
+//! surface, or whose closest normal sum is perpendicular to `p - c` (in the plane of an open
+//! boundary), is inside (`-1`), as in Warp's `mesh_query_point_sign_normal`. Degenerate faces
+//! (slivers, see [`SLIVER_RATIO`]) contribute no normal.
+//!
+//! Differences from Warp, all deliberate: degenerate triangles still count for distances
+//! (Warp skips slivers; here their edges are found, which are real surface); `max_dist <= 0`
+//! finds nothing (Warp squares it, so `-1` acts as `1`); the furthest point's gradient is zero
+//! (it is a vertex; Warp applies the closest point's); `mesh_query_ray`'s `sign` is `±1`
+//! (Warp's is the unnormalised determinant, of the same sign).
+//!
+//! # Scale
+//!
+//! Distances are compared squared, which in f32 overflows beyond about 1e19 and underflows
+//! below 1e-19. Each point query therefore measures in units of a power of two chosen from the
+//! root box's extent around the query point (exact, and the same for every candidate), so
+//! meshes at 1e30 or 1e-30 are queried as at 1. The geometric predicates scale themselves
+//! ([`super::geometry`]).
+//!
+//! # Safety
+//!
+//! Every index read from the buffers is checked (a face, a vertex index, and the tree's, see
+//! [`super::bvh`]): a corrupt mesh is a fault naming its kernel parameter, never undefined
+//! behaviour; traversals are bounded.
+
+// `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
+// rejecting branch, on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use glam::Vec3;
+
+use super::bvh::{walk_ordered, BvhTree, OrderedSearch, Walk};
+use super::geometry::{
+    aabb_distance_sq, aabb_overlap, closest_point_triangle, intersect_ray_aabb,
+    intersect_ray_triangle, pow2_scale, ray_inv_dir, TriFeature, TriangleClosestPoint,
+    SLIVER_RATIO,
+};
+use crate::{ArrayView, KResult, KernelIndex};
+
+/// A built mesh as a kernel thread sees it: the BVH over its triangles, the points, the
+/// optional velocities, the indices. `Copy`, owns nothing; 96 bytes (small on purpose: query
+/// steps take it by value, see `HashGridView`).
+#[derive(Clone, Copy, Debug)]
+pub struct MeshView {
+    tree: BvhTree,
+    points: *const Vec3,
+    /// Null when the mesh has no velocities.
+    velocities: *const Vec3,
+    indices: *const i32,
+    num_points: i32,
+}
+
+#[cfg(target_pointer_width = "64")]
+const _: () = assert!(std::mem::size_of::<MeshView>() == 96);
+
+// SAFETY: read-only pointers into buffers the runtime keeps alive for the whole launch.
+unsafe impl Send for MeshView {}
+unsafe impl Sync for MeshView {}
+
+fn contiguous<T: Copy>(v: &ArrayView<T, 1>, what: &str) -> *const T {
+    if v.is_empty() {
+        return std::ptr::NonNull::<T>::dangling().as_ptr();
+    }
+    let p0 = v.ptr_at(0usize).expect("in bounds");
+    if v.len() >= 2 {
+        let p1 = v.ptr_at(1usize).expect("in bounds");
+        assert!(
+            p1 as usize == p0 as usize + std::mem::size_of::<T>(),
+            "{what}: the buffer must be contiguous"
+        );
+    }
+    p0
+}
+
+impl MeshView {
+    /// A view of a mesh: the BVH over its triangles (one primitive per triangle), its points,
+    /// optional velocities (one per point) and indices (three per triangle).
+    ///
+    /// Faults carry the names of `points` (the tree's are replaced: the mesh is one kernel
+    /// parameter).
+    ///
+    /// # Panics
+    /// When a buffer is not contiguous or the lengths disagree (host-side checks).
+    pub fn new(
+        mut tree: BvhTree,
+        points: ArrayView<Vec3, 1>,
+        velocities: Option<ArrayView<Vec3, 1>>,
+        indices: ArrayView<i32, 1>,
+    ) -> Self {
+        assert!(
+            indices.len() == 3 * tree.num_prims(),
+            "mesh: {} indices for a tree of {} triangles",
+            indices.len(),
+            tree.num_prims()
+        );
+        assert!(points.len() <= i32::MAX as usize);
+        let (kernel, arg) = points.names();
+        tree.set_names(kernel, arg);
+        let velocities = match velocities {
+            Some(v) => {
+                assert_eq!(v.len(), points.len(), "mesh: one velocity per point");
+                contiguous(&v, "mesh velocities")
+            }
+            None => std::ptr::null(),
+        };
+        MeshView {
+            tree,
+            points: contiguous(&points, "mesh points"),
+            velocities,
+            indices: contiguous(&indices, "mesh indices"),
+            num_points: points.len() as i32,
+        }
+    }
+
+    /// A view over raw buffers (`velocities` null for none).
+    ///
+    /// # Safety
+    /// `points` (and `velocities` unless null) must address `num_points` valid elements and
+    /// `indices` `3 * tree.num_prims()`, alive and unchanged while the view is used.
+    pub unsafe fn from_raw(
+        tree: BvhTree,
+        points: *const Vec3,
+        velocities: *const Vec3,
+        num_points: i32,
+        indices: *const i32,
+    ) -> Self {
+        assert!(num_points >= 0);
+        MeshView {
+            tree,
+            points,
+            velocities,
+            indices,
+            num_points,
+        }
+    }
+
+    /// The empty mesh: what an adjoint's placeholder for a mesh value holds; queries find
+    /// nothing and face reads fault.
+    pub fn empty() -> Self {
+        MeshView {
+            tree: BvhTree::empty("mesh", "mesh"),
+            points: std::ptr::NonNull::dangling().as_ptr(),
+            velocities: std::ptr::null(),
+            indices: std::ptr::NonNull::dangling().as_ptr(),
+            num_points: 0,
+        }
+    }
+
+    /// The BVH over the triangles.
+    pub fn tree(&self) -> &BvhTree {
+        &self.tree
+    }
+
+    /// Triangles in the mesh.
+    pub fn num_faces(&self) -> usize {
+        self.tree.num_prims()
+    }
+
+    /// Points in the mesh.
+    pub fn num_points(&self) -> usize {
+        self.num_points as usize
+    }
+
+    /// Whether the mesh has velocities.
+    pub fn has_velocities(&self) -> bool {
+        !self.velocities.is_null()
+    }
+
+    /// The vertex indices of face `f`, each checked against the points; a fault when `f` is
+    /// not a face or an index is not a point.
+    #[inline(always)]
+    fn face_indices<I: KernelIndex<1>>(&self, f: I) -> KResult<[usize; 3]> {
+        let [fu] = f.to_usize();
+        if fu >= self.tree.num_prims() {
+            return Err(self.tree.fault(f.components()[0], self.tree.num_prims()));
+        }
+        let mut out = [0usize; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            // SAFETY: 3 * f + k < 3 * faces, which `new` checked `indices` holds.
+            let i = unsafe { self.indices.add(3 * fu + k).read() };
+            if (i as u32) >= self.num_points as u32 {
+                return Err(self.tree.fault(i as i128, self.num_points as usize));
+            }
+            *o = i as usize;
+        }
+        Ok(out)
+    }
+
+    /// The three vertices of face `f` (checked as [`MeshView::face_indices`]).
+    #[inline(always)]
+    fn triangle<I: KernelIndex<1>>(&self, f: I) -> KResult<[Vec3; 3]> {
+        let ix = self.face_indices(f)?;
+        // SAFETY: checked point indices.
+        Ok(ix.map(|i| unsafe { self.points.add(i).read() }))
+    }
+
+    /// The three vertex velocities of face `f`, or `None` without velocities.
+    #[inline(always)]
+    fn triangle_velocities<I: KernelIndex<1>>(&self, f: I) -> KResult<Option<[Vec3; 3]>> {
+        let ix = self.face_indices(f)?;
+        if self.velocities.is_null() {
+            return Ok(None);
+        }
+        // SAFETY: checked point indices; velocities hold one per point.
+        Ok(Some(ix.map(|i| unsafe { self.velocities.add(i).read() })))
+    }
+
+    /// The power of two in which a point query around `p` measures (module docs): the root
+    /// box's farthest extent from `p` brought into `[1, 2)`; 1 for an empty or non-finite box.
+    #[inline(always)]
+    fn measure_scale(&self, p: Vec3) -> KResult<f32> {
+        let root = self.tree.node(0)?;
+        let m = (root.lower() - p).abs().max((root.upper() - p).abs());
+        Ok(pow2_scale(m.max_element()))
+    }
+}
+
+/// The result of a closest or furthest point query (Warp's `mesh_query_point_t`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
+pub struct MeshQueryPoint {
+    /// Whether a point was found (within `max_dist`, or beyond `min_dist`).
+    pub result: bool,
+    /// `-1` inside, `+1` outside (`mesh_query_point`); 0 from the unsigned queries.
+    pub sign: f32,
+    /// The face of the point.
+    pub face: i32,
+    /// The weight of the face's first vertex.
+    pub u: f32,
+    /// The weight of its second vertex (the third's is `1 - u - v`).
+    pub v: f32,
+}
+
+/// The result of a ray query (Warp's `mesh_query_ray_t`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
+pub struct MeshQueryRay {
+    /// Whether the ray hits the mesh at some `0 <= t < max_t`.
+    pub result: bool,
+    /// `+1` when the ray hits the face's front (`dir . normal < 0`), `-1` its back.
+    pub sign: f32,
+    /// The face hit first.
+    pub face: i32,
+    /// The hit's ray parameter: the point is `start + t * dir`.
+    pub t: f32,
+    /// The weight of the face's first vertex at the hit.
+    pub u: f32,
+    /// The weight of its second vertex.
+    pub v: f32,
+    /// The face's unit normal (zero for a degenerate face).
+    pub normal: Vec3,
+}
+
+/// The closest-point search: squared distances in units of `1 / s`.
+struct Closest<'a> {
+    mesh: &'a MeshView,
+    p: Vec3,
+    s: f32,
+    best: f32,
+    face: i32,
+    bary: TriangleClosestPoint,
+    tri: [Vec3; 3],
+}
+
+impl OrderedSearch for Closest<'_> {
+    #[inline(always)]
+    fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
+        aabb_distance_sq(self.p * self.s, lower * self.s, upper * self.s)
+    }
+    #[inline(always)]
+    fn bound(&self) -> f32 {
+        self.best
+    }
+    #[inline(always)]
+    fn visit(&mut self, id: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.triangle(id)?;
+        let r = closest_point_triangle(a, b, c, self.p);
+        let d = ((r.position(a, b, c) - self.p) * self.s).length_squared();
+        if d < self.best {
+            self.best = d;
+            self.face = id;
+            self.bary = r;
+            self.tri = [a, b, c];
+        }
+        Ok(())
+    }
+}
+
+/// The closest point search, or `None` (with the scale it measured in).
+#[inline(always)]
+fn closest(mesh: &MeshView, p: Vec3, max_dist: f32) -> KResult<Option<Closest<'_>>> {
+    if !(max_dist > 0.0) {
+        return Ok(None);
+    }
+    let s = mesh.measure_scale(p)?;
+    let bound = max_dist * s;
+    let mut c = Closest {
+        mesh,
+        p,
+        s,
+        best: bound * bound,
+        face: -1,
+        bary: TriangleClosestPoint::default(),
+        tri: [Vec3::ZERO; 3],
+    };
+    walk_ordered(&mesh.tree, &mut c)?;
+    Ok((c.face >= 0).then_some(c))
+}
+
+/// The closest point of the mesh to `point` lying strictly within `max_dist`, without a sign
+/// (`sign` 0; Warp's `mesh_query_point_no_sign`). Ties go to the face visited first.
+#[inline]
+pub fn mesh_query_point_no_sign(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+) -> KResult<MeshQueryPoint> {
+    Ok(match closest(&mesh, point, max_dist)? {
+        Some(c) => MeshQueryPoint {
+            result: true,
+            sign: 0.0,
+            face: c.face,
+            u: c.bary.u,
+            v: c.bary.v,
+        },
+        None => MeshQueryPoint::default(),
+    })
+}
+
+/// The closest point of the mesh to `point` lying strictly within `max_dist`, with the sign
+/// of `point` (`-1` inside, `+1` outside) by the angle-weighted pseudonormal of the closest
+/// feature: exact for closed meshes, meaningful for open ones (module docs).
+#[inline]
+pub fn mesh_query_point(mesh: MeshView, point: Vec3, max_dist: f32) -> KResult<MeshQueryPoint> {
+    let Some(c) = closest(&mesh, point, max_dist)? else {
+        return Ok(MeshQueryPoint::default());
+    };
+    let [a, b, cc] = c.tri;
+    let n = match c.bary.feature {
+        TriFeature::Face => unit_normal(a, b, cc),
+        TriFeature::EdgeAB => edge_normal(&mesh, a, b)?,
+        TriFeature::EdgeBC => edge_normal(&mesh, b, cc)?,
+        TriFeature::EdgeCA => edge_normal(&mesh, cc, a)?,
+        TriFeature::VertexA => vertex_normal(&mesh, a)?,
+        TriFeature::VertexB => vertex_normal(&mesh, b)?,
+        TriFeature::VertexC => vertex_normal(&mesh, cc)?,
+    };
+    let away = (point - c.bary.position(a, b, cc)) * c.s;
+    Ok(MeshQueryPoint {
+        result: true,
+        sign: if n.dot(away) > 0.0 { 1.0 } else { -1.0 },
+        face: c.face,
+        u: c.bary.u,
+        v: c.bary.v,
+    })
+}
+
+/// The unit normal of a triangle, computed at a power-of-two scale (any magnitude); zero for
+/// a sliver (below [`SLIVER_RATIO`]), whose normal is rounding noise.
+#[inline(always)]
+fn unit_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (e1, e2) = (b - a, c - a);
+    let s = pow2_scale(e1.abs().max(e2.abs()).max_element());
+    let (e1, e2) = (e1 * s, e2 * s);
+    let n = e1.cross(e2);
+    let sum = e1.length_squared() + e2.length_squared() + (e2 - e1).length_squared();
+    if n.length() > SLIVER_RATIO * sum {
+        n.normalize()
+    } else {
+        Vec3::ZERO
+    }
+}
+
+/// The faces around the box `[lo, hi]` (a vertex's point box or an edge's box), each passed
+/// to `f` with its vertices: a box query whose primitive test does the work.
+#[inline(always)]
+fn for_faces_touching(
+    mesh: &MeshView,
+    lo: Vec3,
+    hi: Vec3,
+    mut f: impl FnMut([Vec3; 3]),
+) -> KResult<()> {
+    let w = Walk::start().next(
+        &mesh.tree,
+        |l, u| aabb_overlap(l, u, lo, hi),
+        |id| {
+            f(mesh.triangle(id)?);
+            Ok(false)
+        },
+    )?;
+    debug_assert!(w.done());
+    Ok(())
+}
+
+/// The pseudonormal of the edge `x y`: the sum of the unit normals of the faces having both
+/// as vertices (by position).
+fn edge_normal(mesh: &MeshView, x: Vec3, y: Vec3) -> KResult<Vec3> {
+    let mut n = Vec3::ZERO;
+    for_faces_touching(mesh, x.min(y), x.max(y), |t| {
+        if t.contains(&x) && t.contains(&y) {
+            n += unit_normal(t[0], t[1], t[2]);
+        }
+    })?;
+    Ok(n)
+}
+
+/// The pseudonormal of the vertex at `x`: the sum of the unit normals of the faces having it
+/// as a vertex (by position), each weighted by the face's angle there.
+fn vertex_normal(mesh: &MeshView, x: Vec3) -> KResult<Vec3> {
+    let mut n = Vec3::ZERO;
+    for_faces_touching(mesh, x, x, |t| {
+        let Some(k) = t.iter().position(|q| *q == x) else {
+            return;
+        };
+        let (e1, e2) = (t[(k + 1) % 3] - x, t[(k + 2) % 3] - x);
+        let s = pow2_scale(e1.abs().max(e2.abs()).max_element());
+        let (e1, e2) = (e1 * s, e2 * s);
+        let angle = e1.cross(e2).length().atan2(e1.dot(e2));
+        n += unit_normal(t[0], t[1], t[2]) * angle;
+    })?;
+    Ok(n)
+}
+
+/// The furthest-point search: squared distances in units of `1 / s`, negated (the walk
+/// minimises).
+struct Furthest<'a> {
+    mesh: &'a MeshView,
+    p: Vec3,
+    s: f32,
+    best: f32,
+    face: i32,
+    uv: (f32, f32),
+}
+
+impl OrderedSearch for Furthest<'_> {
+    #[inline(always)]
+    fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
+        let (p, lo, hi) = (self.p * self.s, lower * self.s, upper * self.s);
+        // Inverted (empty) boxes hold nothing.
+        if !(lo.cmple(hi).all()) {
+            return f32::INFINITY;
+        }
+        -(p - lo).abs().max((p - hi).abs()).length_squared()
+    }
+    #[inline(always)]
+    fn bound(&self) -> f32 {
+        -self.best
+    }
+    #[inline(always)]
+    fn visit(&mut self, id: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.triangle(id)?;
+        let d = |q: Vec3| ((q - self.p) * self.s).length_squared();
+        let (da, db, dc) = (d(a), d(b), d(c));
+        // Warp's choice among the vertices (ties to the later vertex).
+        let (dist, uv) = if da > db && da > dc {
+            (da, (1.0, 0.0))
+        } else if db > dc {
+            (db, (0.0, 1.0))
+        } else {
+            (dc, (0.0, 0.0))
+        };
+        if dist > self.best {
+            self.best = dist;
+            self.face = id;
+            self.uv = uv;
+        }
+        Ok(())
+    }
+}
+
+/// The furthest point of the mesh from `point`, lying strictly beyond `min_dist` (Warp's
+/// `mesh_query_furthest_point_no_sign`): always a vertex, reported as a face and
+/// barycentrics `(1, 0)`, `(0, 1)` or `(0, 0)`; `sign` 0. A `min_dist` below 0 counts as 0;
+/// NaN finds nothing.
+#[inline]
+pub fn mesh_query_furthest_point_no_sign(
+    mesh: MeshView,
+    point: Vec3,
+    min_dist: f32,
+) -> KResult<MeshQueryPoint> {
+    if min_dist.is_nan() {
+        return Ok(MeshQueryPoint::default());
+    }
+    let s = mesh.measure_scale(point)?;
+    let m = min_dist.max(0.0) * s;
+    let mut f = Furthest {
+        mesh: &mesh,
+        p: point,
+        s,
+        best: m * m,
+        face: -1,
+        uv: (0.0, 0.0),
+    };
+    walk_ordered(&mesh.tree, &mut f)?;
+    Ok(if f.face >= 0 {
+        MeshQueryPoint {
+            result: true,
+            sign: 0.0,
+            face: f.face,
+            u: f.uv.0,
+            v: f.uv.1,
+        }
+    } else {
+        MeshQueryPoint::default()
+    })
+}
+
+/// The closest-hit search along a ray.
+struct ClosestHit<'a> {
+    mesh: &'a MeshView,
+    start: Vec3,
+    dir: Vec3,
+    inv_dir: Vec3,
+    best: MeshQueryRay,
+    max_t: f32,
+}
+
+impl OrderedSearch for ClosestHit<'_> {
+    #[inline(always)]
+    fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
+        intersect_ray_aabb(self.start, self.inv_dir, lower, upper).unwrap_or(f32::INFINITY)
+    }
+    #[inline(always)]
+    fn bound(&self) -> f32 {
+        if self.best.result {
+            self.best.t
+        } else {
+            self.max_t
+        }
+    }
+    #[inline(always)]
+    fn visit(&mut self, id: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.triangle(id)?;
+        let h = intersect_ray_triangle(self.start, self.dir, a, b, c);
+        if h.result && h.t < self.bound() {
+            self.best = MeshQueryRay {
+                result: true,
+                sign: h.sign,
+                face: id,
+                t: h.t,
+                u: h.u,
+                v: h.v,
+                normal: Vec3::ZERO,
+            };
+        }
+        Ok(())
+    }
+}
+
+/// The first hit of the ray `start + t * dir` with the mesh at `0 <= t < max_t` (Warp's
+/// `mesh_query_ray`), by the watertight ray-triangle test ([`intersect_ray_triangle`]: a ray
+/// through a shared edge hits one of its faces, a ray parallel to a face never hits it). Ties
+/// at equal `t` (a shared edge) go to the face visited first.
+#[inline]
+pub fn mesh_query_ray(mesh: MeshView, start: Vec3, dir: Vec3, max_t: f32) -> KResult<MeshQueryRay> {
+    let mut h = ClosestHit {
+        mesh: &mesh,
+        start,
+        dir,
+        inv_dir: ray_inv_dir(dir),
+        best: MeshQueryRay::default(),
+        max_t,
+    };
+    walk_ordered(&mesh.tree, &mut h)?;
+    let mut r = h.best;
+    if r.result {
+        let [a, b, c] = mesh.triangle(r.face)?;
+        r.normal = face_normal(a, b, c);
+    }
+    Ok(r)
+}
+
+/// `normalize((b - a) x (c - a))` at a power-of-two scale; zero when the cross product is
+/// zero (a degenerate face).
+#[inline(always)]
+fn face_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (e1, e2) = (b - a, c - a);
+    let s = pow2_scale(e1.abs().max(e2.abs()).max_element());
+    (e1 * s).cross(e2 * s).normalize_or_zero()
+}
+
+/// The state of a box query over a mesh's triangles ([`mesh_query_aabb`]): the box and a
+/// [`Walk`]. 44 bytes (Warp's `mesh_query_aabb_t` carries the whole mesh and a 32-entry
+/// stack).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
+pub struct MeshQueryAabb {
+    lower: Vec3,
+    upper: Vec3,
+    walk: Walk,
+}
+
+const _: () = assert!(std::mem::size_of::<MeshQueryAabb>() == 44);
+
+/// Starts a query for the faces whose bounding boxes overlap `[lower, upper]` (touching
+/// counts; Warp's `mesh_query_aabb`): advance it with [`mesh_query_aabb_next`]. Each such face
+/// is yielded once, in no particular order. The test is on the triangle's box, as Warp's: a
+/// face can be yielded without the triangle itself meeting the box.
+#[inline(always)]
+pub fn mesh_query_aabb(_mesh: MeshView, lower: Vec3, upper: Vec3) -> KResult<MeshQueryAabb> {
+    Ok(MeshQueryAabb {
+        lower,
+        upper,
+        walk: Walk::start(),
+    })
+}
+
+/// The mesh box query advanced to its next face, or to its end (then
+/// [`mesh_query_aabb_done`]). Once done it stays done.
+#[inline(always)]
+pub fn mesh_query_aabb_next(mesh: MeshView, mut q: MeshQueryAabb) -> KResult<MeshQueryAabb> {
+    let (lo, hi) = (q.lower, q.upper);
+    q.walk = q.walk.next(
+        &mesh.tree,
+        |l, u| aabb_overlap(l, u, lo, hi),
+        |id| {
+            let [a, b, c] = mesh.triangle(id)?;
+            Ok(aabb_overlap(a.min(b).min(c), a.max(b).max(c), lo, hi))
+        },
+    )?;
+    Ok(q)
+}
+
+/// Whether the mesh box query has no more faces.
+#[inline(always)]
+pub fn mesh_query_aabb_done(q: MeshQueryAabb) -> bool {
+    q.walk.done()
+}
+
+/// The mesh box query's current face.
+#[inline(always)]
+pub fn mesh_query_aabb_item(q: MeshQueryAabb) -> i32 {
+    q.walk.item()
+}
+
+/// The point of face `face` at barycentrics `(u, v)`: `u * p0 + v * p1 + (1 - u - v) * p2`
+/// (Warp's `mesh_eval_position`); a fault when `face` is not a face.
+#[inline(always)]
+pub fn mesh_eval_position<I: KernelIndex<1>>(
+    mesh: MeshView,
+    face: I,
+    u: f32,
+    v: f32,
+) -> KResult<Vec3> {
+    let [a, b, c] = mesh.triangle(face)?;
+    Ok(a * u + b * v + c * (1.0 - u - v))
+}
+
+/// The velocity of face `face` at barycentrics `(u, v)`, interpolated like
+/// [`mesh_eval_position`] (Warp's `mesh_eval_velocity`); zero for a mesh without velocities;
+/// a fault when `face` is not a face.
+#[inline(always)]
+pub fn mesh_eval_velocity<I: KernelIndex<1>>(
+    mesh: MeshView,
+    face: I,
+    u: f32,
+    v: f32,
+) -> KResult<Vec3> {
+    Ok(match mesh.triangle_velocities(face)? {
+        Some([a, b, c]) => a * u + b * v + c * (1.0 - u - v),
+        None => Vec3::ZERO,
+    })
+}
+
+/// The unit normal of face `face`, `normalize((p1 - p0) x (p2 - p0))` (Warp's
+/// `mesh_eval_face_normal`); zero for a degenerate face; a fault when `face` is not a face.
+#[inline(always)]
+pub fn mesh_eval_face_normal<I: KernelIndex<1>>(mesh: MeshView, face: I) -> KResult<Vec3> {
+    let [a, b, c] = mesh.triangle(face)?;
+    Ok(face_normal(a, b, c))
+}
+
+/// Adjoint of [`mesh_eval_position`] with respect to the barycentrics: `adj_u += (p0 - p2) .
+/// adj_ret`, `adj_v += (p1 - p2) . adj_ret` (Warp's, which also leaves the points without a
+/// gradient). The mesh and the face get none.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn adj_mesh_eval_position<I: KernelIndex<1>>(
+    mesh: MeshView,
+    face: I,
+    _u: f32,
+    _v: f32,
+    _adj_mesh: &mut MeshView,
+    _adj_face: &mut I,
+    adj_u: &mut f32,
+    adj_v: &mut f32,
+    adj_ret: Vec3,
+) -> KResult<()> {
+    let [a, b, c] = mesh.triangle(face)?;
+    *adj_u += (a - c).dot(adj_ret);
+    *adj_v += (b - c).dot(adj_ret);
+    Ok(())
+}
+
+/// Adjoint of [`mesh_eval_velocity`] with respect to the barycentrics, as
+/// [`adj_mesh_eval_position`] with the velocities (nothing without velocities).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn adj_mesh_eval_velocity<I: KernelIndex<1>>(
+    mesh: MeshView,
+    face: I,
+    _u: f32,
+    _v: f32,
+    _adj_mesh: &mut MeshView,
+    _adj_face: &mut I,
+    adj_u: &mut f32,
+    adj_v: &mut f32,
+    adj_ret: Vec3,
+) -> KResult<()> {
+    if let Some([a, b, c]) = mesh.triangle_velocities(face)? {
+        *adj_u += (a - c).dot(adj_ret);
+        *adj_v += (b - c).dot(adj_ret);
+    }
+    Ok(())
+}
+
+/// The gradient of a found closest point's `(u, v)` with respect to the query point, applied
+/// to `adj_ret` (Warp's `adj_mesh_query_point_no_sign`: through the closest point of the face
+/// the forward query finds, recomputed here).
+fn adj_closest(c: &Closest<'_>, adj_point: &mut Vec3, adj_ret: MeshQueryPoint) {
+    let [a, b, cc] = c.tri;
+    let g = TriangleClosestPoint {
+        u: adj_ret.u,
+        v: adj_ret.v,
+        w: 0.0,
+        feature: TriFeature::Face,
+    };
+    let mut unused = [Vec3::ZERO; 3];
+    let [x, y, z] = &mut unused;
+    super::geometry::adj_closest_point_triangle(a, b, cc, c.p, x, y, z, adj_point, g);
+}
+
+/// Adjoint of [`mesh_query_point_no_sign`] with respect to the query point: the barycentrics'
+/// gradient (zero when the closest point is a vertex, along the edge on an edge, the
+/// projection onto the face inside it). `sign`, `face`, `result` and `max_dist` have none.
+#[inline]
+pub fn adj_mesh_query_point_no_sign(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    _adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    _adj_max_dist: &mut f32,
+    adj_ret: MeshQueryPoint,
+) -> KResult<()> {
+    if let Some(c) = closest(&mesh, point, max_dist)? {
+        adj_closest(&c, adj_point, adj_ret);
+    }
+    Ok(())
+}
+
+/// Adjoint of [`mesh_query_point`] with respect to the query point, as
+/// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
+#[inline]
+pub fn adj_mesh_query_point(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: MeshQueryPoint,
+) -> KResult<()> {
+    adj_mesh_query_point_no_sign(
+        mesh,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        adj_ret,
+    )
+}
+
+/// Adjoint of [`mesh_query_furthest_point_no_sign`]: nothing (the furthest point is a vertex,
+/// whose barycentrics do not move with the query point).
+#[inline]
+pub fn adj_mesh_query_furthest_point_no_sign(
+    _mesh: MeshView,
+    _point: Vec3,
+    _min_dist: f32,
+    _adj_mesh: &mut MeshView,
+    _adj_point: &mut Vec3,
+    _adj_min_dist: &mut f32,
+    _adj_ret: MeshQueryPoint,
+) -> KResult<()> {
+    Ok(())
+}
+
+/// Mesh values carry no gradient; the adjoint's placeholder for one is the empty mesh.
+impl crate::adjoint::Adjoint for MeshView {
+    fn adj_zero() -> Self {
+        MeshView::empty()
+    }
+    fn adj_accum(&mut self, _: Self) {}
+}
+
+/// Query states carry no gradient (what depends on them, the faces, are indices).
+impl crate::adjoint::Adjoint for MeshQueryAabb {
+    fn adj_zero() -> Self {
+        MeshQueryAabb::default()
+    }
+    fn adj_accum(&mut self, _: Self) {}
+}
+
+/// Accumulates the float fields (`sign`, `u`, `v`); `result` and `face` have none.
+impl crate::adjoint::Adjoint for MeshQueryPoint {
+    fn adj_zero() -> Self {
+        MeshQueryPoint::default()
+    }
+    fn adj_accum(&mut self, o: Self) {
+        self.sign += o.sign;
+        self.u += o.u;
+        self.v += o.v;
+    }
+}
+
+/// Accumulates the float fields (`sign`, `t`, `u`, `v`, `normal`); `result` and `face` have
+/// none.
+impl crate::adjoint::Adjoint for MeshQueryRay {
+    fn adj_zero() -> Self {
+        MeshQueryRay::default()
+    }
+    fn adj_accum(&mut self, o: Self) {
+        self.sign += o.sign;
+        self.t += o.t;
+        self.u += o.u;
+        self.v += o.v;
+        self.normal += o.normal;
+    }
+}
+
+/// Accumulates `u`, `v`, `w`; the feature has none.
+impl crate::adjoint::Adjoint for TriangleClosestPoint {
+    fn adj_zero() -> Self {
+        TriangleClosestPoint::default()
+    }
+    fn adj_accum(&mut self, o: Self) {
+        self.u += o.u;
+        self.v += o.v;
+        self.w += o.w;
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::super::bvh::tests::Built;
+    use super::super::geometry::tests::Rng;
+    use super::*;
+
+    /// A mesh and a tree over its triangles' boxes.
+    pub(crate) struct TestMesh {
+        pub points: Vec<Vec3>,
+        pub velocities: Vec<Vec3>,
+        pub indices: Vec<i32>,
+        pub built: Built,
+    }
+
+    impl TestMesh {
+        pub fn new(points: Vec<Vec3>, indices: Vec<i32>, leaf: usize) -> TestMesh {
+            let (mut lo, mut hi) = (Vec::new(), Vec::new());
+            for t in indices.chunks(3) {
+                let [a, b, c] = [0, 1, 2].map(|k| points[t[k] as usize]);
+                lo.push(a.min(b).min(c));
+                hi.push(a.max(b).max(c));
+            }
+            let velocities = points
+                .iter()
+                .map(|p| Vec3::new(p.y, -p.x, 2.0 * p.z))
+                .collect();
+            TestMesh {
+                points,
+                velocities,
+                indices,
+                built: Built::new(&lo, &hi, leaf),
+            }
+        }
+
+        pub fn view(&mut self) -> MeshView {
+            let tree = self.built.tree();
+            let v = |d: &mut Vec<Vec3>| unsafe {
+                ArrayView::new(d.as_mut_ptr(), [d.len()], [1], "k", "mesh")
+            };
+            let ix = unsafe {
+                ArrayView::new(
+                    self.indices.as_mut_ptr(),
+                    [self.indices.len()],
+                    [1],
+                    "k",
+                    "mesh",
+                )
+            };
+            let vel = v(&mut self.velocities);
+            MeshView::new(tree, v(&mut self.points), Some(vel), ix)
+        }
+
+        fn tri(&self, f: usize) -> [Vec3; 3] {
+            [0, 1, 2].map(|k| self.points[self.indices[3 * f + k] as usize])
+        }
+    }
+
+    /// A UV sphere of radius `r`: `rings` latitude bands, `segs` longitude segments, welded,
+    /// outward-facing.
+    pub(crate) fn sphere(r: f32, rings: usize, segs: usize) -> (Vec<Vec3>, Vec<i32>) {
+        let mut pts = vec![Vec3::new(0.0, 0.0, r)];
+        for i in 1..rings {
+            let th = std::f32::consts::PI * i as f32 / rings as f32;
+            for j in 0..segs {
+                let ph = 2.0 * std::f32::consts::PI * j as f32 / segs as f32;
+                pts.push(Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * r);
+            }
+        }
+        pts.push(Vec3::new(0.0, 0.0, -r));
+        let south = pts.len() as i32 - 1;
+        let at = |i: usize, j: usize| (1 + (i - 1) * segs + j % segs) as i32;
+        let mut ix = Vec::new();
+        for j in 0..segs {
+            ix.extend([0, at(1, j), at(1, j + 1)]);
+            ix.extend([south, at(rings - 1, j + 1), at(rings - 1, j)]);
+        }
+        for i in 1..rings - 1 {
+            for j in 0..segs {
+                ix.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                ix.extend([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        (pts, ix)
+    }
+
+    /// A torus around z: major radius `big`, minor `small`, outward-facing.
+    pub(crate) fn torus(big: f32, small: f32, n: usize, m: usize) -> (Vec<Vec3>, Vec<i32>) {
+        let mut pts = Vec::new();
+        for i in 0..n {
+            let a = 2.0 * std::f32::consts::PI * i as f32 / n as f32;
+            for j in 0..m {
+                let b = 2.0 * std::f32::consts::PI * j as f32 / m as f32;
+                let rr = big + small * b.cos();
+                pts.push(Vec3::new(rr * a.cos(), rr * a.sin(), small * b.sin()));
+            }
+        }
+        let at = |i: usize, j: usize| ((i % n) * m + j % m) as i32;
+        let mut ix = Vec::new();
+        for i in 0..n {
+            for j in 0..m {
+                ix.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                ix.extend([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        (pts, ix)
+    }
+
+    /// A `k x k` patch of the plane z = 0 over `[-1, 1]^2`, normals +z.
+    pub(crate) fn patch(k: usize) -> (Vec<Vec3>, Vec<i32>) {
+        let mut pts = Vec::new();
+        for i in 0..=k {
+            for j in 0..=k {
+                pts.push(Vec3::new(
+                    -1.0 + 2.0 * j as f32 / k as f32,
+                    -1.0 + 2.0 * i as f32 / k as f32,
+                    0.0,
+                ));
+            }
+        }
+        let at = |i: usize, j: usize| (i * (k + 1) + j) as i32;
+        let mut ix = Vec::new();
+        for i in 0..k {
+            for j in 0..k {
+                ix.extend([at(i, j), at(i, j + 1), at(i + 1, j + 1)]);
+                ix.extend([at(i, j), at(i + 1, j + 1), at(i + 1, j)]);
+            }
+        }
+        (pts, ix)
+    }
+
+    fn signed_volume(pts: &[Vec3], ix: &[i32]) -> f32 {
+        ix.chunks(3)
+            .map(|t| pts[t[0] as usize].dot(pts[t[1] as usize].cross(pts[t[2] as usize])) / 6.0)
+            .sum()
+    }
+
+    fn soup(rng: &mut Rng, n: usize) -> (Vec<Vec3>, Vec<i32>) {
+        let mut pts = Vec::new();
+        let mut ix = Vec::new();
+        for f in 0..n {
+            let c = rng.v(-5.0, 5.0);
+            for _ in 0..3 {
+                pts.push(c + rng.v(-1.0, 1.0));
+            }
+            ix.extend([3 * f as i32, 3 * f as i32 + 1, 3 * f as i32 + 2]);
+        }
+        // Some degenerate faces: a repeated vertex, a collinear one.
+        if n > 4 {
+            pts[4] = pts[3];
+            pts[8] = pts[6] + (pts[7] - pts[6]) * 0.25;
+        }
+        (pts, ix)
+    }
+
+    /// Brute-force closest distance (f64 of the f32 closest points).
+    fn brute_closest(m: &TestMesh, p: Vec3) -> f64 {
+        (0..m.indices.len() / 3)
+            .map(|f| {
+                let [a, b, c] = m.tri(f);
+                (closest_point_triangle(a, b, c, p)
+                    .position(a, b, c)
+                    .as_dvec3()
+                    - p.as_dvec3())
+                .length()
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Tolerance: the same per-triangle closest points as the brute force, so distances
+    /// agree up to the tie-breaking among faces within rounding: `1e-6` of the scene scale.
+    #[test]
+    fn closest_and_furthest_match_brute_force() {
+        let mut rng = Rng(21);
+        for (n, leaf) in [(1usize, 1usize), (5, 2), (200, 1), (500, 4)] {
+            let (pts, ix) = soup(&mut rng, n);
+            let mut m = TestMesh::new(pts, ix, leaf);
+            let v = m.view();
+            for _ in 0..300 {
+                let p = rng.v(-8.0, 8.0);
+                let want = brute_closest(&m, p);
+                for max_dist in [f32::MAX, 3.0, 0.5] {
+                    let r = mesh_query_point_no_sign(v, p, max_dist).unwrap();
+                    if want < max_dist as f64 - 1e-5 {
+                        assert!(r.result, "{p} within {max_dist}: {want}");
+                    } else if want > max_dist as f64 + 1e-5 {
+                        assert!(!r.result, "{p} beyond {max_dist}: {want}");
+                    }
+                    if r.result {
+                        let q = mesh_eval_position(v, r.face, r.u, r.v).unwrap();
+                        let got = (q.as_dvec3() - p.as_dvec3()).length();
+                        assert!((got - want).abs() <= 1e-5, "{got} vs {want}");
+                        assert_eq!(r.sign, 0.0);
+                    }
+                }
+                // Furthest: a vertex at the largest distance.
+                let far = m
+                    .points
+                    .iter()
+                    .map(|q| (q.as_dvec3() - p.as_dvec3()).length())
+                    .fold(0.0, f64::max);
+                let r = mesh_query_furthest_point_no_sign(v, p, 0.0).unwrap();
+                assert!(r.result);
+                let q = mesh_eval_position(v, r.face, r.u, r.v).unwrap();
+                assert!(((q.as_dvec3() - p.as_dvec3()).length() - far).abs() <= 1e-5);
+                assert!([(1.0, 0.0), (0.0, 1.0), (0.0, 0.0)].contains(&(r.u, r.v)));
+                assert!(
+                    !mesh_query_furthest_point_no_sign(v, p, far as f32 * 1.001)
+                        .unwrap()
+                        .result
+                );
+            }
+            // Nothing within a non-positive or NaN distance.
+            for d in [0.0, -1.0, f32::NAN] {
+                assert!(!mesh_query_point_no_sign(v, Vec3::ZERO, d).unwrap().result);
+                assert!(!mesh_query_point(v, Vec3::ZERO, d).unwrap().result);
+            }
+        }
+    }
+
+    #[test]
+    fn ray_and_aabb_match_brute_force() {
+        let mut rng = Rng(8);
+        for (n, leaf) in [(1usize, 1usize), (300, 1), (700, 4)] {
+            let (pts, ix) = soup(&mut rng, n);
+            let mut m = TestMesh::new(pts, ix, leaf);
+            let v = m.view();
+            let mut hits = 0;
+            for _ in 0..400 {
+                let o = rng.v(-8.0, 8.0);
+                let mut d = rng.v(-1.0, 1.0);
+                if rng.below(4) == 0 {
+                    d[rng.below(3)] = 0.0;
+                }
+                let max_t = if rng.below(2) == 0 {
+                    f32::MAX
+                } else {
+                    rng.f(0.0, 10.0)
+                };
+                let want = (0..n)
+                    .filter_map(|f| {
+                        let [a, b, c] = m.tri(f);
+                        let h = intersect_ray_triangle(o, d, a, b, c);
+                        (h.result && h.t < max_t).then_some((h.t, f))
+                    })
+                    .min_by(|x, y| x.0.total_cmp(&y.0));
+                let r = mesh_query_ray(v, o, d, max_t).unwrap();
+                assert_eq!(r.result, want.is_some());
+                if let Some((t, f)) = want {
+                    hits += 1;
+                    assert_eq!(r.t, t);
+                    let [a, b, c] = m.tri(r.face as usize);
+                    let h = intersect_ray_triangle(o, d, a, b, c);
+                    assert!(h.result && h.t == t, "face {} vs {f}", r.face);
+                    assert_eq!((r.u, r.v, r.sign), (h.u, h.v, h.sign));
+                    assert!((r.normal - face_normal(a, b, c)).length() == 0.0);
+                    let q = mesh_eval_position(v, r.face, r.u, r.v).unwrap();
+                    assert!((q - (o + d * r.t)).length() <= 1e-4 * (1.0 + (o + d * r.t).length()));
+                }
+                // Box query against brute force.
+                let (c, h) = (rng.v(-6.0, 6.0), rng.v(0.0, 2.0));
+                let mut q = mesh_query_aabb(v, c - h, c + h).unwrap();
+                let mut got = Vec::new();
+                loop {
+                    q = mesh_query_aabb_next(v, q).unwrap();
+                    if mesh_query_aabb_done(q) {
+                        break;
+                    }
+                    got.push(mesh_query_aabb_item(q));
+                }
+                got.sort_unstable();
+                let want: Vec<i32> = (0..n as i32)
+                    .filter(|f| {
+                        let [a, b, cc] = m.tri(*f as usize);
+                        aabb_overlap(a.min(b).min(cc), a.max(b).max(cc), c - h, c + h)
+                    })
+                    .collect();
+                assert_eq!(got, want);
+            }
+            if n > 1 {
+                assert!(hits > 20, "{hits}");
+            }
+        }
+    }
+
+    /// The signed query on closed meshes against the analytic solids. The mesh is a faceted
+    /// approximation (chord error below 2% of the radius for these resolutions), so points
+    /// within 5% of the analytic surface are skipped; the others must all be classified right.
+    #[test]
+    fn sign_on_closed_meshes() {
+        let mut rng = Rng(1);
+        let (pts, ix) = sphere(1.0, 24, 48);
+        assert!(signed_volume(&pts, &ix) > 0.0);
+        for k in [1.0f32, 1e30, 1e-30] {
+            let scaled: Vec<Vec3> = pts.iter().map(|p| *p * k).collect();
+            let mut m = TestMesh::new(scaled, ix.clone(), 2);
+            let v = m.view();
+            let mut n = 0;
+            for _ in 0..3000 {
+                let p = rng.v(-2.0, 2.0);
+                let r = p.length();
+                if (r - 1.0).abs() < 0.05 {
+                    continue;
+                }
+                let q = mesh_query_point(v, p * k, f32::MAX).unwrap();
+                assert!(q.result);
+                assert_eq!(q.sign, if r < 1.0 { -1.0 } else { 1.0 }, "{p} at scale {k}");
+                // The distance, in units of k.
+                let d = (mesh_eval_position(v, q.face, q.u, q.v).unwrap() / k - p).length();
+                assert!((d - (r - 1.0).abs()).abs() < 0.02, "{d} at {p}");
+                n += 1;
+            }
+            assert!(n > 2000);
+        }
+        let (pts, ix) = torus(1.0, 0.4, 64, 32);
+        assert!(signed_volume(&pts, &ix) > 0.0);
+        let mut m = TestMesh::new(pts, ix, 4);
+        let v = m.view();
+        for _ in 0..5000 {
+            let p = rng.v(-1.6, 1.6);
+            let f = ((p.x * p.x + p.y * p.y).sqrt() - 1.0).hypot(p.z) - 0.4;
+            if f.abs() < 0.02 {
+                continue;
+            }
+            let q = mesh_query_point(v, p, f32::MAX).unwrap();
+            assert_eq!(q.sign, if f < 0.0 { -1.0 } else { 1.0 }, "{p}");
+        }
+    }
+
+    /// Points whose closest feature is a vertex or an edge (outside a convex corner, inside a
+    /// concave one): the pseudonormal decides, where the nearest face alone would not.
+    #[test]
+    fn sign_at_vertices_and_edges() {
+        // A unit cube (outward), points off its corners and edges.
+        let pts: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let mut ix = Vec::new();
+        for q in quads {
+            ix.extend([q[0], q[1], q[2], q[0], q[2], q[3]]);
+        }
+        assert!(signed_volume(&pts, &ix) > 0.0);
+        let mut m = TestMesh::new(pts.clone(), ix, 1);
+        let v = m.view();
+        let mut rng = Rng(17);
+        for _ in 0..3000 {
+            let p = rng.v(-0.5, 1.5);
+            let inside = p.cmpgt(Vec3::ZERO).all() && p.cmplt(Vec3::ONE).all();
+            let q = mesh_query_point(v, p, f32::MAX).unwrap();
+            if p.min_element().abs() > 1e-3 && (p - Vec3::ONE).max_element().abs() > 1e-3 {
+                assert_eq!(q.sign, if inside { -1.0 } else { 1.0 }, "{p}");
+            }
+        }
+        // Exactly on vertices, edges and faces: distance 0, inside.
+        for p in [
+            Vec3::ZERO,
+            Vec3::ONE,
+            Vec3::new(0.5, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.3),
+            Vec3::new(0.5, 0.5, 0.0),
+        ] {
+            let q = mesh_query_point(v, p, 1.0).unwrap();
+            assert!(q.result && q.sign == -1.0, "{p}");
+            assert!((mesh_eval_position(v, q.face, q.u, q.v).unwrap() - p).length() < 1e-6);
+            let q = mesh_query_point_no_sign(v, p, 1e-3).unwrap();
+            assert!(q.result, "{p}");
+        }
+    }
+
+    /// Open meshes: a single triangle and a plane patch (normals +z): the side of the surface.
+    #[test]
+    fn sign_on_open_meshes() {
+        let mut rng = Rng(23);
+        let (pts, ix) = patch(6);
+        let mut m = TestMesh::new(pts, ix, 2);
+        let mut t = TestMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![0, 1, 2], 1);
+        for v in [m.view(), t.view()] {
+            for _ in 0..3000 {
+                let p = rng.v(-2.0, 2.0);
+                if p.z.abs() < 1e-4 {
+                    continue;
+                }
+                let q = mesh_query_point(v, p, f32::MAX).unwrap();
+                assert!(q.result);
+                assert_eq!(q.sign, if p.z < 0.0 { -1.0 } else { 1.0 }, "{p}");
+            }
+        }
+    }
+
+    #[test]
+    fn empty_mesh_and_faults() {
+        let mut m = TestMesh::new(Vec::new(), Vec::new(), 1);
+        for v in [m.view(), MeshView::empty()] {
+            assert!(!mesh_query_point(v, Vec3::ZERO, f32::MAX).unwrap().result);
+            assert!(
+                !mesh_query_point_no_sign(v, Vec3::ZERO, f32::MAX)
+                    .unwrap()
+                    .result
+            );
+            assert!(
+                !mesh_query_furthest_point_no_sign(v, Vec3::ZERO, 0.0)
+                    .unwrap()
+                    .result
+            );
+            assert!(
+                !mesh_query_ray(v, Vec3::ZERO, Vec3::X, f32::MAX)
+                    .unwrap()
+                    .result
+            );
+            let inf = Vec3::splat(f32::INFINITY);
+            let q = mesh_query_aabb_next(v, mesh_query_aabb(v, -inf, inf).unwrap()).unwrap();
+            assert!(mesh_query_aabb_done(q));
+            assert!(mesh_eval_position(v, 0, 0.3, 0.3).is_err());
+        }
+        // Bad face and vertex indices fault, naming the parameter.
+        let (pts, ix) = sphere(1.0, 4, 6);
+        let mut m = TestMesh::new(pts, ix, 1);
+        let v = m.view();
+        let e = mesh_eval_position(v, v.num_faces(), 0.3, 0.3).unwrap_err();
+        assert!(e.to_string().contains("argument `mesh`"), "{e}");
+        assert!(mesh_eval_face_normal(v, -1i32).is_err());
+        m.indices[4] = 1000;
+        let v = m.view();
+        assert!(mesh_eval_velocity(v, 1, 0.0, 0.0).is_err());
+        assert!(mesh_query_point_no_sign(v, Vec3::ZERO, f32::MAX).is_err());
+    }
+
+    #[test]
+    fn eval_and_normals() {
+        let (pts, ix) = sphere(2.0, 6, 8);
+        let mut m = TestMesh::new(pts, ix, 1);
+        let v = m.view();
+        for f in 0..v.num_faces() {
+            let [a, b, c] = m.tri(f);
+            let p = mesh_eval_position(v, f, 0.2, 0.3).unwrap();
+            assert!((p - (a * 0.2 + b * 0.3 + c * 0.5)).length() < 1e-6);
+            let vel = mesh_eval_velocity(v, f, 0.2, 0.3).unwrap();
+            let w = |q: Vec3| Vec3::new(q.y, -q.x, 2.0 * q.z);
+            assert!((vel - (w(a) * 0.2 + w(b) * 0.3 + w(c) * 0.5)).length() < 1e-5);
+            let n = mesh_eval_face_normal(v, f).unwrap();
+            assert!(
+                (n.length() - 1.0).abs() < 1e-6 && n.dot((a + b + c) / 3.0) > 0.0,
+                "outward"
+            );
+        }
+        // Without velocities: zero.
+        let mut m2 = TestMesh::new(m.points.clone(), m.indices.clone(), 1);
+        let tree = m2.built.tree();
+        let pv =
+            unsafe { ArrayView::new(m2.points.as_mut_ptr(), [m2.points.len()], [1], "k", "mesh") };
+        let iv = unsafe {
+            ArrayView::new(
+                m2.indices.as_mut_ptr(),
+                [m2.indices.len()],
+                [1],
+                "k",
+                "mesh",
+            )
+        };
+        let v2 = MeshView::new(tree, pv, None, iv);
+        assert_eq!(mesh_eval_velocity(v2, 0, 0.2, 0.3).unwrap(), Vec3::ZERO);
+        // A degenerate face's normal is zero.
+        let mut d = TestMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0], vec![0, 1, 2], 1);
+        assert_eq!(mesh_eval_face_normal(d.view(), 0).unwrap(), Vec3::ZERO);
+    }
+
+    /// Gradchecks of the barycentric adjoints: `mesh_eval_*` is linear in `(u, v)`, so the
+    /// central difference with `h = 0.01` is exact up to f32 rounding of positions of
+    /// magnitude ~2: about `2 * 2^-24 * 2 / 0.02 ≈ 1e-5`; tolerance `1e-4`. For the closest
+    /// point query, the barycentrics are affine in the point within a feature's region (the
+    /// same face found on both sides; other points skipped): same tolerance.
+    #[test]
+    fn gradchecks() {
+        let (pts, ix) = sphere(2.0, 6, 8);
+        let mut m = TestMesh::new(pts, ix, 2);
+        let v = m.view();
+        let mut rng = Rng(77);
+        let h = 0.01f32;
+        for f in 0..v.num_faces() as i32 {
+            let (u, w) = (rng.f(0.0, 0.5), rng.f(0.0, 0.5));
+            let g = rng.v(-1.0, 1.0);
+            for vel in [false, true] {
+                let eval = |u: f32, w: f32| {
+                    if vel {
+                        mesh_eval_velocity(v, f, u, w).unwrap()
+                    } else {
+                        mesh_eval_position(v, f, u, w).unwrap()
+                    }
+                };
+                let nu = (eval(u + h, w) - eval(u - h, w)).dot(g) / (2.0 * h);
+                let nv = (eval(u, w + h) - eval(u, w - h)).dot(g) / (2.0 * h);
+                let (mut au, mut av) = (0.0, 0.0);
+                let (mut am, mut af) = (MeshView::empty(), 0i32);
+                if vel {
+                    adj_mesh_eval_velocity(v, f, u, w, &mut am, &mut af, &mut au, &mut av, g)
+                        .unwrap();
+                } else {
+                    adj_mesh_eval_position(v, f, u, w, &mut am, &mut af, &mut au, &mut av, g)
+                        .unwrap();
+                }
+                assert!((nu - au).abs() <= 1e-4 * au.abs().max(1.0), "{nu} {au}");
+                assert!((nv - av).abs() <= 1e-4 * av.abs().max(1.0), "{nv} {av}");
+            }
+        }
+        let mut checked = 0;
+        for _ in 0..2000 {
+            let p = rng.v(-3.0, 3.0);
+            let g = MeshQueryPoint {
+                u: rng.f(-1.0, 1.0),
+                v: rng.f(-1.0, 1.0),
+                ..Default::default()
+            };
+            let q0 = mesh_query_point_no_sign(v, p, f32::MAX).unwrap();
+            let mut num = Vec3::ZERO;
+            let mut same = true;
+            for k in 0..3 {
+                let mut e = Vec3::ZERO;
+                e[k] = h;
+                let (qp, qm) = (
+                    mesh_query_point_no_sign(v, p + e, f32::MAX).unwrap(),
+                    mesh_query_point_no_sign(v, p - e, f32::MAX).unwrap(),
+                );
+                let [a, b, c] = m.tri(q0.face as usize);
+                let feat = |x: Vec3| closest_point_triangle(a, b, c, x).feature;
+                same &= qp.face == q0.face
+                    && qm.face == q0.face
+                    && feat(p + e) == feat(p)
+                    && feat(p - e) == feat(p);
+                num[k] = (g.u * (qp.u - qm.u) + g.v * (qp.v - qm.v)) / (2.0 * h);
+            }
+            if !same {
+                continue;
+            }
+            let mut adj = Vec3::ZERO;
+            let (mut am, mut ad) = (MeshView::empty(), 0.0);
+            adj_mesh_query_point(v, p, f32::MAX, &mut am, &mut adj, &mut ad, g).unwrap();
+            assert!(
+                (num - adj).abs().max_element() <= 1e-4 * adj.abs().max_element().max(1.0),
+                "{num} {adj}"
+            );
+            checked += 1;
+        }
+        assert!(checked > 500, "{checked}");
+    }
+}
