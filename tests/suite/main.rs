@@ -77,6 +77,7 @@ mod generics;
 mod grad;
 mod hash_grid;
 mod launch;
+mod lbvh;
 mod misc;
 mod params;
 mod primitives;

@@ -54,6 +54,7 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_atomic.h", include_str!("../cuda/wp_atomic.h")),
     ("wp_rand.h", include_str!("../cuda/wp_rand.h")),
     ("wp_hash_grid.h", include_str!("../cuda/wp_hash_grid.h")),
+    ("wp_bvh_build.h", include_str!("../cuda/wp_bvh_build.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
     ("wp_primitives.h", include_str!("../cuda/wp_primitives.h")),
     ("wp_adjoint.h", include_str!("../cuda/wp_adjoint.h")),

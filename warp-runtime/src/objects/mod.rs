@@ -8,13 +8,15 @@
 pub mod bvh_build;
 pub mod hash_grid;
 mod hash_grid_steps;
+#[doc(hidden)]
+pub mod lbvh;
 
 pub use crate::backend::ObjectLibrary;
 pub use hash_grid::{CudaHashGrid, HashGrid};
 
 /// Every host object's CUDA build library (each compiled the first time a GPU runs one of
 /// its steps).
-pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[&hash_grid_steps::LIBRARY];
+pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[&hash_grid_steps::LIBRARY, &lbvh::LIBRARY];
 
 /// Compiles a build library with NVRTC for `sm_{arch}` with the runtime's options (no GPU
 /// needed): how the tests check that NVRTC accepts each on machines without a GPU.

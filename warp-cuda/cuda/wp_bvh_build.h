@@ -1,0 +1,264 @@
+// wp_bvh_build.h: the GPU build of a BVH (a linear BVH over Morton codes, Karras 2012) and its
+// refit, as the build steps of warp-runtime's objects/lbvh.rs, which runs the same steps on
+// the CPU with rayon: both produce the same tree, bit for bit (the steps below are exact or
+// written as the Rust ones are).
+//
+// The tree is in the layout of warp-core/src/objects/bvh.rs (read its module docs): nodes of
+// 32 bytes {lower xyz, left, upper xyz, right}, the root at node 0, a leaf `left = ~start`
+// holding prim_ids[start, right), an internal node's children by index, `parents` with -1 at
+// the root. For n >= 2 primitives: internal node k is node k (k < n - 1, so the root is
+// internal node 0), the leaf of sorted primitive k is node n - 1 + k with one primitive; for
+// n = 1 the root is that leaf (node 0). The runtime writes the empty tree (n = 0) itself.
+//
+// Steps (one kernel each, grid-stride over the count in the record):
+//   wp_lbvh_bounds     the centroids' bounding box, by atomic min/max of order-preserving u32
+//                      images of the coordinates (exact, so any order gives the same box)
+//   wp_lbvh_morton     each primitive's 30-bit Morton code (10 bits per axis of its centroid in
+//                      that box) and its index: the pairs the primitives' stable radix sort
+//                      orders (equal codes stay in index order)
+//   wp_lbvh_hierarchy  Karras's construction over the sorted codes, with the index breaking
+//                      ties (so duplicate codes still give a binary tree): every internal
+//                      node's children and their parent links, every leaf's range and
+//                      primitive
+//   wp_lbvh_refit      each leaf's box, then up the parent links: the second thread to reach a
+//                      node (an atomic counter per node, zeroed before) writes its box as the
+//                      union of its children's (fminf/fmaxf: exact and order-free)
+//
+// Only compiled with WP_BVH_BUILD (the runtime's BVH build library); kernels that query a BVH
+// never include this file.
+#pragma once
+#include "wp_core.h"
+
+#if defined(WP_BVH_BUILD)
+namespace wp {
+
+/// A node as the build writes it (the layout above; warp_core's BvhNode).
+struct lbvh_node_t {
+  f32 lower[3];
+  i32 left;
+  f32 upper[3];
+  i32 right;
+};
+static_assert(sizeof(lbvh_node_t) == 32, "lbvh_node_t layout");
+
+/// LbvhBounds: lowers, uppers (Vec3*, n each), n, bounds (u32*, 6: the min images of x, y, z
+/// then the max images).
+struct lbvh_bounds_t {
+  u64 lowers;
+  u64 uppers;
+  u64 bounds;
+  i64 n;
+};
+static_assert(sizeof(lbvh_bounds_t) == 32, "lbvh_bounds_t layout");
+
+/// LbvhMorton: lowers, uppers (n each), bounds (as above, final), keys and values (u32*, n).
+struct lbvh_morton_t {
+  u64 lowers;
+  u64 uppers;
+  u64 bounds;
+  u64 keys;
+  u64 values;
+  i64 n;
+};
+static_assert(sizeof(lbvh_morton_t) == 48, "lbvh_morton_t layout");
+
+/// LbvhHierarchy: the sorted keys and values (n each), nodes (2n - 1), parents (2n - 1),
+/// prim_ids (n).
+struct lbvh_hierarchy_t {
+  u64 keys;
+  u64 values;
+  u64 nodes;
+  u64 parents;
+  u64 prim_ids;
+  i64 n;
+};
+static_assert(sizeof(lbvh_hierarchy_t) == 48, "lbvh_hierarchy_t layout");
+
+/// LbvhRefit: lowers, uppers (per primitive), nodes, parents, prim_ids, counters (i32*, one per
+/// internal node, zeroed), n.
+struct lbvh_refit_t {
+  u64 lowers;
+  u64 uppers;
+  u64 nodes;
+  u64 parents;
+  u64 prim_ids;
+  u64 counters;
+  i64 n;
+};
+static_assert(sizeof(lbvh_refit_t) == 56, "lbvh_refit_t layout");
+
+/// The order-preserving u32 image of an f32 (negative values reversed below positive ones).
+WP_FN u32 lbvh_ordered(f32 x) {
+  const u32 u = f32_to_bits(x);
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+WP_FN f32 lbvh_unordered(u32 u) {
+  return f32_from_bits((u & 0x80000000u) ? (u & 0x7fffffffu) : ~u);
+}
+
+/// The centroid's coordinate: the midpoint of the box's extent.
+WP_FN f32 lbvh_centre(f32 lo, f32 hi) { return 0.5f * (lo + hi); }
+
+/// 10 bits of `x` in [lo, hi]: floor((x - lo) / (hi - lo) * 1024) clamped to 0..1023 (0 for an
+/// empty extent).
+WP_FN u32 lbvh_quantize(f32 x, f32 lo, f32 hi) {
+  const f32 ext = hi - lo;
+  if (!(ext > 0.0f)) return 0u;
+  const f32 t = (x - lo) / ext * 1024.0f;
+  if (!(t > 0.0f)) return 0u;
+  if (t >= 1023.0f) return 1023u;
+  return (u32)t;
+}
+
+/// The 10 bits of `v` spread to every third bit.
+WP_FN u32 lbvh_spread(u32 v) {
+  v = (v | (v << 16)) & 0x030000FFu;
+  v = (v | (v << 8)) & 0x0300F00Fu;
+  v = (v | (v << 4)) & 0x030C30C3u;
+  v = (v | (v << 2)) & 0x09249249u;
+  return v;
+}
+
+/// The Morton code of primitive i's centroid in the box `b` (6 ordered images, as wp_lbvh_bounds
+/// leaves them): x in the highest of each triple of bits.
+WP_FN u32 lbvh_code(const Vec3& lo, const Vec3& hi, const u32* b) {
+  const f32 c[3] = {lbvh_centre(lo.x, hi.x), lbvh_centre(lo.y, hi.y), lbvh_centre(lo.z, hi.z)};
+  u32 code = 0;
+  for (int a = 0; a < 3; ++a) {
+    const u32 q = lbvh_quantize(c[a], lbvh_unordered(b[a]), lbvh_unordered(b[3 + a]));
+    code |= lbvh_spread(q) << (2 - a);
+  }
+  return code;
+}
+
+/// The length of the common prefix of the (code, index) keys of sorted positions i and j, or
+/// -1 when j is outside [0, n).
+WP_FN i32 lbvh_delta(const u32* keys, i64 n, i64 i, i64 j) {
+  if (j < 0 || j >= n) return -1;
+  const u64 a = ((u64)keys[i] << 32) | (u64)i;
+  const u64 b = ((u64)keys[j] << 32) | (u64)j;
+  // i != j, so the xor is nonzero.
+#if defined(__CUDACC__)
+  return __clzll((long long)(a ^ b));
+#else
+  return __builtin_clzll(a ^ b);
+#endif
+}
+
+/// Internal node i of n - 1: its range of sorted positions [first, last] and its split (the
+/// last position of its left child), by Karras's binary searches.
+WP_FN void lbvh_internal(const u32* keys, i64 n, i64 i, i64* first, i64* last, i64* split) {
+  const i32 d = lbvh_delta(keys, n, i, i + 1) > lbvh_delta(keys, n, i, i - 1) ? 1 : -1;
+  const i32 dmin = lbvh_delta(keys, n, i, i - d);
+  i64 lmax = 2;
+  while (lbvh_delta(keys, n, i, i + lmax * d) > dmin) lmax *= 2;
+  i64 l = 0;
+  for (i64 t = lmax / 2; t >= 1; t /= 2)
+    if (lbvh_delta(keys, n, i, i + (l + t) * d) > dmin) l += t;
+  const i64 j = i + l * d;
+  const i32 dnode = lbvh_delta(keys, n, i, j);
+  i64 s = 0;
+  for (i64 t = (l + 1) / 2;; t = (t + 1) / 2) {
+    if (lbvh_delta(keys, n, i, i + (s + t) * d) > dnode) s += t;
+    if (t == 1) break;
+  }
+  *split = i + s * d + (d < 0 ? -1 : 0);
+  *first = i < j ? i : j;
+  *last = i < j ? j : i;
+}
+
+/// Step k of the hierarchy: internal node k (k < n - 1) and the leaf of sorted position k.
+WP_FN void lbvh_hierarchy_step(const u32* keys, const u32* values, i64 n, i64 k,
+                               lbvh_node_t* nodes, i32* parents, i32* prim_ids) {
+  const i64 leaf = n - 1 + k;
+  nodes[leaf].left = ~(i32)k;
+  nodes[leaf].right = (i32)(k + 1);
+  prim_ids[k] = (i32)values[k];
+  if (k == 0) parents[0] = -1;
+  if (k < n - 1) {
+    i64 first, last, split;
+    lbvh_internal(keys, n, k, &first, &last, &split);
+    const i64 left = split == first ? n - 1 + split : split;
+    const i64 right = split + 1 == last ? n - 1 + split + 1 : split + 1;
+    nodes[k].left = (i32)left;
+    nodes[k].right = (i32)right;
+    parents[left] = (i32)k;
+    parents[right] = (i32)k;
+  }
+}
+
+}  // namespace wp
+#endif
+
+#if defined(__CUDACC__) && defined(WP_BVH_BUILD)
+#define WP_LBVH_LOOP(i, n)                                                                 \
+  for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < (n);               \
+       i += (wp::i64)blockDim.x * gridDim.x)
+
+extern "C" __global__ void wp_lbvh_bounds(wp::lbvh_bounds_t s) {
+  const wp::Vec3* lo = (const wp::Vec3*)s.lowers;
+  const wp::Vec3* hi = (const wp::Vec3*)s.uppers;
+  wp::u32* b = (wp::u32*)s.bounds;
+  WP_LBVH_LOOP(i, s.n) {
+    const wp::f32 c[3] = {wp::lbvh_centre(lo[i].x, hi[i].x), wp::lbvh_centre(lo[i].y, hi[i].y),
+                          wp::lbvh_centre(lo[i].z, hi[i].z)};
+    for (int a = 0; a < 3; ++a) {
+      const wp::u32 u = wp::lbvh_ordered(c[a]);
+      atomicMin(&b[a], u);
+      atomicMax(&b[3 + a], u);
+    }
+  }
+}
+
+extern "C" __global__ void wp_lbvh_morton(wp::lbvh_morton_t s) {
+  const wp::Vec3* lo = (const wp::Vec3*)s.lowers;
+  const wp::Vec3* hi = (const wp::Vec3*)s.uppers;
+  WP_LBVH_LOOP(i, s.n) {
+    ((wp::u32*)s.keys)[i] = wp::lbvh_code(lo[i], hi[i], (const wp::u32*)s.bounds);
+    ((wp::u32*)s.values)[i] = (wp::u32)i;
+  }
+}
+
+extern "C" __global__ void wp_lbvh_hierarchy(wp::lbvh_hierarchy_t s) {
+  WP_LBVH_LOOP(k, s.n) {
+    wp::lbvh_hierarchy_step((const wp::u32*)s.keys, (const wp::u32*)s.values, s.n, k,
+                            (wp::lbvh_node_t*)s.nodes, (wp::i32*)s.parents,
+                            (wp::i32*)s.prim_ids);
+  }
+}
+
+extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
+  const wp::Vec3* lo = (const wp::Vec3*)s.lowers;
+  const wp::Vec3* hi = (const wp::Vec3*)s.uppers;
+  wp::lbvh_node_t* nodes = (wp::lbvh_node_t*)s.nodes;
+  const wp::i32* parents = (const wp::i32*)s.parents;
+  const wp::i32* prim_ids = (const wp::i32*)s.prim_ids;
+  wp::i32* counters = (wp::i32*)s.counters;
+  WP_LBVH_LOOP(k, s.n) {
+    const wp::i64 leaf = s.n - 1 + k;
+    const wp::i32 p = prim_ids[k];
+    nodes[leaf].lower[0] = lo[p].x;
+    nodes[leaf].lower[1] = lo[p].y;
+    nodes[leaf].lower[2] = lo[p].z;
+    nodes[leaf].upper[0] = hi[p].x;
+    nodes[leaf].upper[1] = hi[p].y;
+    nodes[leaf].upper[2] = hi[p].z;
+    wp::i32 c = parents[leaf];
+    while (c >= 0) {
+      // Publish this subtree's boxes before arriving; the second arrival reads both children.
+      __threadfence();
+      if (atomicAdd(&counters[c], 1) == 0) break;
+      __threadfence();
+      volatile wp::lbvh_node_t* node = &nodes[c];
+      const volatile wp::lbvh_node_t* l = &nodes[node->left];
+      const volatile wp::lbvh_node_t* r = &nodes[node->right];
+      for (int a = 0; a < 3; ++a) {
+        node->lower[a] = fminf(l->lower[a], r->lower[a]);
+        node->upper[a] = fmaxf(l->upper[a], r->upper[a]);
+      }
+      c = parents[c];
+    }
+  }
+}
+#undef WP_LBVH_LOOP
+#endif
