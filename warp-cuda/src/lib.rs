@@ -55,6 +55,9 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_rand.h", include_str!("../cuda/wp_rand.h")),
     ("wp_hash_grid.h", include_str!("../cuda/wp_hash_grid.h")),
     ("wp_bvh_build.h", include_str!("../cuda/wp_bvh_build.h")),
+    ("wp_geometry.h", include_str!("../cuda/wp_geometry.h")),
+    ("wp_bvh.h", include_str!("../cuda/wp_bvh.h")),
+    ("wp_mesh.h", include_str!("../cuda/wp_mesh.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
     ("wp_primitives.h", include_str!("../cuda/wp_primitives.h")),
     ("wp_adjoint.h", include_str!("../cuda/wp_adjoint.h")),
@@ -82,6 +85,14 @@ pub const HEADERS: &[(&str, &str)] = &[
     (
         "wp_adjoint_rand.h",
         include_str!("../cuda/wp_adjoint_rand.h"),
+    ),
+    (
+        "wp_adjoint_geometry.h",
+        include_str!("../cuda/wp_adjoint_geometry.h"),
+    ),
+    (
+        "wp_adjoint_mesh.h",
+        include_str!("../cuda/wp_adjoint_mesh.h"),
     ),
 ];
 

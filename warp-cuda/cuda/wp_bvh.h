@@ -1,0 +1,417 @@
+// wp_bvh.h: section "bvh" of the builtin table: NVIDIA Warp's BVH queries, the CUDA mirror of
+// warp-core/src/objects/bvh.rs (read that for the node layout, the stackless traversal by
+// parent links, the move budget and the corrupt-tree rules). Every step below is the Rust one
+// in the same order: both backends visit the same nodes and yield the same primitives in the
+// same order, fault on the same read with the same index, and end at the same move.
+//
+//   bvh_node_t                              BvhNode (32 bytes: lower, left, upper, right)
+//   bvh_tree_t                              the tree part of a bvh_t / mesh_t (BvhTree)
+//   bvh_t                                   a Bvh kernel parameter (warp_runtime's CudaBvh)
+//   bvh_walk_t                              Walk: a left-first traversal's position (20 bytes)
+//   bvh_query_aabb_t, bvh_query_ray_t       BvhQueryAabb, BvhQueryRay (44 bytes each)
+//   bvh_query_aabb(b, lo, hi, ctx)          the state before the first primitive
+//   bvh_query_aabb_next(b, q, ctx)          the state at the next primitive, or at the end
+//   bvh_query_aabb_done(q), bvh_query_aabb_item(q)    whether it ended; the primitive (i32)
+//   bvh_query_ray(b, start, dir, ctx), bvh_query_ray_next/_done/_item   the same for a ray
+//   detail::bvh_walk_next, detail::bvh_walk_ordered   the traversals (the mesh's too)
+//
+// Faults: every read whose index comes from buffer contents is checked and reported as an
+// out-of-bounds fault of the tree's parameter (`arg`), with Rust's index and shape: a node
+// or parent link outside [0, num_nodes), a prim_ids position or id outside [0, num_prims),
+// a leaf end past num_prims (index end - 1). After a fault a function returns at once (the
+// CPU's `?`); the caller checks ctx->raised. No query runs longer than 2 * num_nodes + 2
+// moves, whatever the buffers hold.
+//
+// Kernel-argument layout (all little-endian, align 8; the runtime's #[repr(C)] mirror must
+// match byte for byte; device addresses as u64 on the Rust side):
+//
+//   bvh_t, 56 bytes:
+//      0 nodes      (const bvh_node_t*, num_nodes entries; the root is node 0)
+//      8 parents    (const i32*, num_nodes entries; -1 at the root)
+//     16 prim_ids   (const i32*, num_prims entries)
+//     24 num_nodes  (i32, >= 1: the empty tree is one empty leaf)
+//     28 num_prims  (i32)
+//     32 arg        (i32: the kernel parameter's index, for faults)
+//     36 pad        (i32, 0)
+//     40 lowers     (const Vec3*, num_prims entries: the primitives' boxes)
+//     48 uppers     (const Vec3*, num_prims entries)
+//   (bytes 0..40 are a bvh_tree_t, which mesh_t starts with too.)
+#pragma once
+#include "wp_geometry.h"
+
+namespace wp {
+
+/// BvhNode: an internal node has left, right >= 0 (its children); a leaf has left < 0 and holds
+/// prim_ids[~left .. right].
+struct bvh_node_t {
+  f32 lower[3];
+  i32 left;
+  f32 upper[3];
+  i32 right;
+};
+static_assert(sizeof(bvh_node_t) == 32, "bvh_node_t layout");
+
+/// The tree every query reads (bytes 0..40 of bvh_t and mesh_t, see the top).
+struct bvh_tree_t {
+  const bvh_node_t* nodes;
+  const i32* parents;
+  const i32* prim_ids;
+  i32 num_nodes;
+  i32 num_prims;
+  i32 arg;
+  i32 pad;
+};
+static_assert(sizeof(bvh_tree_t) == 40 && alignof(bvh_tree_t) == 8, "bvh_tree_t layout");
+
+/// A Bvh kernel parameter (56 bytes, see the top).
+struct bvh_t {
+  bvh_tree_t tree;
+  const Vec3* lowers;
+  const Vec3* uppers;
+  /// Marks a kernel object for the adjoint library (zero value, no gradient).
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(bvh_t) == 56 && alignof(bvh_t) == 8, "bvh_t layout");
+
+/// Walk (20 bytes): the current leaf (-2 before the root, -1 once done), the next position in
+/// prim_ids and the leaf's end, the current primitive (-1 before the first and once done), and
+/// the moves taken.
+struct bvh_walk_t {
+  i32 node;
+  i32 next;
+  i32 end;
+  i32 item;
+  u32 steps;
+};
+static_assert(sizeof(bvh_walk_t) == 20, "bvh_walk_t layout");
+
+/// BvhQueryAabb (44 bytes): 0 lower, 12 upper, 24 walk.
+struct bvh_query_aabb_t {
+  Vec3 lower;
+  Vec3 upper;
+  bvh_walk_t walk;
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(bvh_query_aabb_t) == 44, "bvh_query_aabb_t layout");
+
+/// BvhQueryRay (44 bytes): 0 start, 12 inv_dir (1 / dir), 24 walk.
+struct bvh_query_ray_t {
+  Vec3 start;
+  Vec3 inv_dir;
+  bvh_walk_t walk;
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(bvh_query_ray_t) == 44, "bvh_query_ray_t layout");
+
+namespace detail {
+
+#define WP_BVH_WALK_START (-2)
+#define WP_BVH_WALK_END (-1)
+
+WP_FN bvh_walk_t bvh_walk_start() {
+  bvh_walk_t w;
+  w.node = WP_BVH_WALK_START;
+  w.next = 0;
+  w.end = 0;
+  w.item = -1;
+  w.steps = 0u;
+  return w;
+}
+
+/// The out-of-bounds fault of the tree's parameter: `index` against a buffer of `len`.
+WP_FN void bvh_fault(const bvh_tree_t& t, i64 index, i64 len, ctx_t* ctx) {
+  raise(ctx, FAULT_OUT_OF_BOUNDS, t.arg, 1, &index, &len);
+}
+
+WP_FN Vec3 bvh_node_lower(const bvh_node_t& n) { return Vec3_new(n.lower[0], n.lower[1], n.lower[2]); }
+WP_FN Vec3 bvh_node_upper(const bvh_node_t& n) { return Vec3_new(n.upper[0], n.upper[1], n.upper[2]); }
+
+/// Node i, or a fault (and a zero node) when i is outside the nodes.
+WP_FN bvh_node_t bvh_node(const bvh_tree_t& t, i32 i, ctx_t* ctx) {
+  if ((u32)i < (u32)t.num_nodes) return t.nodes[i];
+  bvh_fault(t, (i64)i, (i64)t.num_nodes, ctx);
+  return bvh_node_t{};
+}
+
+/// The parent of node i, or a fault.
+WP_FN i32 bvh_parent(const bvh_tree_t& t, i32 i, ctx_t* ctx) {
+  if ((u32)i < (u32)t.num_nodes) return t.parents[i];
+  bvh_fault(t, (i64)i, (i64)t.num_nodes, ctx);
+  return 0;
+}
+
+/// The primitive at position k of prim_ids, or a fault when k, or the id read, is outside
+/// [0, num_prims).
+WP_FN i32 bvh_prim(const bvh_tree_t& t, i32 k, ctx_t* ctx) {
+  if ((u32)k >= (u32)t.num_prims) {
+    bvh_fault(t, (i64)k, (i64)t.num_prims, ctx);
+    return 0;
+  }
+  const i32 id = t.prim_ids[k];
+  if ((u32)id < (u32)t.num_prims) return id;
+  bvh_fault(t, (i64)id, (i64)t.num_prims, ctx);
+  return 0;
+}
+
+/// A leaf's range [~left, right), its end checked against prim_ids.
+WP_FN void bvh_leaf_range(const bvh_tree_t& t, const bvh_node_t& n, i32* start, i32* end,
+                          ctx_t* ctx) {
+  *start = ~n.left;
+  *end = n.right;
+  if (n.right > t.num_prims) bvh_fault(t, (i64)n.right - 1, (i64)t.num_prims, ctx);
+}
+
+/// The move budget: 2 * num_nodes + 2, at most u32::MAX.
+WP_FN u32 bvh_max_steps(const bvh_tree_t& t) {
+  const i64 m = 2 * (i64)t.num_nodes + 2;
+  return m < (i64)0xffffffffu ? (u32)m : 0xffffffffu;
+}
+
+/// BvhTree::climb: from finished node c to the right child of the nearest ancestor reached
+/// from its left child. Returns whether there is one (*out); false at the end (the root
+/// finished, the budget spent, a parent link that does not lead back) and on a fault.
+WP_FN bool bvh_climb(const bvh_tree_t& t, i32 c, u32* steps, i32* out, ctx_t* ctx) {
+  for (;;) {
+    *steps += 1u;
+    if (*steps > bvh_max_steps(t)) return false;
+    const i32 p = bvh_parent(t, c, ctx);
+    if (faulted(ctx)) return false;
+    if (p < 0) return false;
+    const bvh_node_t pn = bvh_node(t, p, ctx);
+    if (faulted(ctx)) return false;
+    if (pn.left < 0) return false;
+    if (pn.left == c && pn.right != c) {
+      *out = pn.right;
+      return true;
+    }
+    if (pn.right != c) return false;
+    c = p;
+  }
+}
+
+/// Walk::next: advances w to the next primitive `prim_test(id, ctx)` accepts, in a leaf whose
+/// box and whose ancestors' boxes `node_test(lower, upper)` accepts; or to the end. Once done
+/// it stays done. On a fault it returns with ctx->raised set.
+template <typename NodeTest, typename PrimTest>
+WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_test,
+                               PrimTest prim_test, ctx_t* ctx) {
+  for (;;) {
+    while (w.next < w.end) {
+      const i32 id = bvh_prim(t, w.next, ctx);
+      if (faulted(ctx)) return w;
+      w.next += 1;
+      const bool ok = prim_test(id, ctx);
+      if (faulted(ctx)) return w;
+      if (ok) {
+        w.item = id;
+        return w;
+      }
+    }
+    bool has;
+    i32 n = 0;
+    if (w.node == WP_BVH_WALK_START) {
+      has = true;
+      n = 0;
+    } else if (w.node == WP_BVH_WALK_END) {
+      has = false;
+    } else {
+      has = bvh_climb(t, w.node, &w.steps, &n, ctx);
+      if (faulted(ctx)) return w;
+    }
+    // Down from n to the next accepted leaf, climbing past rejected subtrees.
+    for (;;) {
+      if (!has) {
+        w.node = WP_BVH_WALK_END;
+        w.next = 0;
+        w.end = 0;
+        w.item = -1;
+        return w;
+      }
+      w.steps += 1u;
+      if (w.steps > bvh_max_steps(t)) {
+        has = false;
+        continue;
+      }
+      const bvh_node_t node = bvh_node(t, n, ctx);
+      if (faulted(ctx)) return w;
+      if (!node_test(bvh_node_lower(node), bvh_node_upper(node))) {
+        const i32 i = n;
+        has = bvh_climb(t, i, &w.steps, &n, ctx);
+        if (faulted(ctx)) return w;
+      } else if (node.left < 0) {
+        i32 start, end;
+        bvh_leaf_range(t, node, &start, &end, ctx);
+        if (faulted(ctx)) return w;
+        w.node = n;
+        w.next = start;
+        w.end = end;
+        break;
+      } else {
+        n = node.left;
+      }
+    }
+  }
+}
+
+/// A NaN key as +inf (keys totally ordered).
+WP_FN f32 bvh_key(f32 k) { return k < f32_inf() ? k : f32_inf(); }
+
+/// ordered_children: the children of internal node n nearest first (ties to the left), with
+/// their keys. S: node_key(lower, upper) -> f32, bound() -> f32, visit(id, ctx).
+template <typename S>
+WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_t& n, i32* a,
+                                f32* ka, i32* b, f32* kb, ctx_t* ctx) {
+  const bvh_node_t l = bvh_node(t, n.left, ctx);
+  if (faulted(ctx)) return;
+  const bvh_node_t r = bvh_node(t, n.right, ctx);
+  if (faulted(ctx)) return;
+  const f32 kl = bvh_key(s.node_key(bvh_node_lower(l), bvh_node_upper(l)));
+  const f32 kr = bvh_key(s.node_key(bvh_node_lower(r), bvh_node_upper(r)));
+  if (kr < kl) {
+    *a = n.right; *ka = kr; *b = n.left; *kb = kl;
+  } else {
+    *a = n.left; *ka = kl; *b = n.right; *kb = kr;
+  }
+}
+
+/// walk_ordered: visits the leaves nearest first, skipping every box whose key is not below
+/// the search's current bound; the farther child's order is recomputed on the way up. At most
+/// 2 * num_nodes + 2 moves.
+template <typename S>
+WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
+  const bvh_node_t root = bvh_node(t, 0, ctx);
+  if (faulted(ctx)) return;
+  if (!(bvh_key(s.node_key(bvh_node_lower(root), bvh_node_upper(root))) < s.bound())) return;
+  const u32 max = bvh_max_steps(t);
+  u32 steps = 0u;
+  i32 cur = 0;
+  for (;;) {  // 'down
+    steps += 1u;
+    if (steps > max) return;
+    const bvh_node_t node = bvh_node(t, cur, ctx);
+    if (faulted(ctx)) return;
+    bool descended = false;
+    if (node.left < 0) {
+      i32 start, end;
+      bvh_leaf_range(t, node, &start, &end, ctx);
+      if (faulted(ctx)) return;
+      for (i32 k = start; k < end; ++k) {
+        const i32 id = bvh_prim(t, k, ctx);
+        if (faulted(ctx)) return;
+        s.visit(id, ctx);
+        if (faulted(ctx)) return;
+      }
+    } else {
+      i32 a = 0, b = 0;
+      f32 ka = 0.0f, kb = 0.0f;
+      bvh_ordered_children(t, s, node, &a, &ka, &b, &kb, ctx);
+      if (faulted(ctx)) return;
+      if (ka < s.bound()) {
+        cur = a;
+        descended = true;
+      } else if (kb < s.bound()) {
+        cur = b;
+        descended = true;
+      }
+    }
+    if (descended) continue;
+    // cur is finished: climb to the next subtree to enter.
+    i32 c = cur;
+    for (;;) {
+      steps += 1u;
+      if (steps > max) return;
+      const i32 p = bvh_parent(t, c, ctx);
+      if (faulted(ctx)) return;
+      if (p < 0) return;
+      const bvh_node_t pn = bvh_node(t, p, ctx);
+      if (faulted(ctx)) return;
+      if (pn.left < 0) return;
+      i32 a = 0, b = 0;
+      f32 ka = 0.0f, kb = 0.0f;
+      bvh_ordered_children(t, s, pn, &a, &ka, &b, &kb, ctx);
+      if (faulted(ctx)) return;
+      if (c == a && b != a) {
+        const bvh_node_t bn = bvh_node(t, b, ctx);
+        if (faulted(ctx)) return;
+        if (bvh_key(s.node_key(bvh_node_lower(bn), bvh_node_upper(bn))) < s.bound()) {
+          cur = b;
+          descended = true;
+          break;
+        }
+      } else if (c != b) {
+        return;  // a parent link that does not lead back: corrupt
+      }
+      c = p;
+    }
+    (void)descended;
+  }
+}
+
+}  // namespace detail
+
+// ------------------------------------------------------------------------------------------
+// Box query
+// ------------------------------------------------------------------------------------------
+
+/// Starts a query for the primitives whose boxes overlap [lower, upper] (touching counts).
+WP_FN bvh_query_aabb_t bvh_query_aabb(const bvh_t& bvh, Vec3 lower, Vec3 upper, ctx_t* ctx) {
+  (void)bvh;
+  (void)ctx;
+  bvh_query_aabb_t q;
+  q.lower = lower;
+  q.upper = upper;
+  q.walk = detail::bvh_walk_start();
+  return q;
+}
+
+WP_FN bvh_query_aabb_t bvh_query_aabb_next(const bvh_t& bvh, bvh_query_aabb_t q, ctx_t* ctx) {
+  const Vec3 lo = q.lower, hi = q.upper;
+  q.walk = detail::bvh_walk_next(
+      q.walk, bvh.tree, [lo, hi](Vec3 l, Vec3 u) { return aabb_overlap(l, u, lo, hi); },
+      [&bvh, lo, hi](i32 id, ctx_t*) {
+        return aabb_overlap(bvh.lowers[id], bvh.uppers[id], lo, hi);
+      },
+      ctx);
+  return q;
+}
+
+WP_FN bool bvh_query_aabb_done(bvh_query_aabb_t q) { return q.walk.item < 0; }
+
+WP_FN i32 bvh_query_aabb_item(bvh_query_aabb_t q) { return q.walk.item; }
+
+// ------------------------------------------------------------------------------------------
+// Ray query
+// ------------------------------------------------------------------------------------------
+
+/// Starts a query for the primitives whose boxes the ray start + t * dir, t >= 0, meets.
+WP_FN bvh_query_ray_t bvh_query_ray(const bvh_t& bvh, Vec3 start, Vec3 dir, ctx_t* ctx) {
+  (void)bvh;
+  (void)ctx;
+  bvh_query_ray_t q;
+  q.start = start;
+  q.inv_dir = ray_inv_dir(dir);
+  q.walk = detail::bvh_walk_start();
+  return q;
+}
+
+WP_FN bvh_query_ray_t bvh_query_ray_next(const bvh_t& bvh, bvh_query_ray_t q, ctx_t* ctx) {
+  const Vec3 o = q.start, inv = q.inv_dir;
+  q.walk = detail::bvh_walk_next(
+      q.walk, bvh.tree,
+      [o, inv](Vec3 l, Vec3 u) {
+        f32 t;
+        return intersect_ray_aabb(o, inv, l, u, &t);
+      },
+      [&bvh, o, inv](i32 id, ctx_t*) {
+        f32 t;
+        return intersect_ray_aabb(o, inv, bvh.lowers[id], bvh.uppers[id], &t);
+      },
+      ctx);
+  return q;
+}
+
+WP_FN bool bvh_query_ray_done(bvh_query_ray_t q) { return q.walk.item < 0; }
+
+WP_FN i32 bvh_query_ray_item(bvh_query_ray_t q) { return q.walk.item; }
+
+}  // namespace wp

@@ -1,0 +1,514 @@
+// wp_mesh.h: section "mesh" of the builtin table: NVIDIA Warp's mesh queries, the CUDA mirror
+// of warp-core/src/objects/mesh.rs (read that for the conventions: barycentrics (u, v) name
+// u * p0 + v * p1 + (1 - u - v) * p2, point queries report a point strictly within max_dist,
+// sign -1 inside by the angle-weighted pseudonormal, distances measured in a power-of-two
+// unit chosen from the root box). Every step is the Rust one in the same order, over the same
+// traversals (wp_bvh.h), so both backends visit the same faces in the same order.
+//
+//   mesh_t                                       a Mesh kernel parameter (warp_runtime's CudaMesh)
+//   mesh_query_point_t                           MeshQueryPoint (result, sign, face, u, v)
+//   mesh_query_ray_t                             MeshQueryRay (result, sign, face, t, u, v, normal)
+//   mesh_query_aabb_t                            MeshQueryAabb (44 bytes)
+//   mesh_query_point(m, p, max_dist, ctx)        closest point with the inside/outside sign
+//   mesh_query_point_no_sign(m, p, max_dist, ctx)
+//   mesh_query_furthest_point_no_sign(m, p, min_dist, ctx)
+//   mesh_query_ray(m, start, dir, max_t, ctx)    first hit at 0 <= t < max_t (watertight)
+//   mesh_query_aabb(m, lo, hi, ctx), mesh_query_aabb_next(m, q, ctx), _done(q), _item(q)
+//   mesh_eval_position(m, face, u, v, ctx), mesh_eval_velocity(..), mesh_eval_face_normal(m, face, ctx)
+//                                                face: any integer type
+//
+// The adjoints are in wp_adjoint_mesh.h.
+//
+// Faults: as wp_bvh.h, reported with the mesh's parameter (`tree.arg`); in addition a face
+// outside [0, num_faces) (index: the face; shape: num_faces) and a vertex index outside
+// [0, num_points) (index: the vertex index; shape: num_points), the three vertex indices of a
+// face checked in order.
+//
+// Floating point: bit-exact with the CPU except vertex pseudonormals (mesh_query_point when
+// the closest point is a vertex), whose angle weights call atan2f: glibc's on the CPU, CUDA's
+// (2 ulp) on a GPU. Only the sign depends on them, and only where the weighted normal is
+// perpendicular to the offset within those last bits.
+//
+// Kernel-argument layout (align 8; warp_runtime's #[repr(C)] CudaMesh must match):
+//
+//   mesh_t, 72 bytes:
+//      0 nodes      (const bvh_node_t*)     -+
+//      8 parents    (const i32*)             |  a bvh_tree_t over the triangles (see wp_bvh.h):
+//     16 prim_ids   (const i32*)             |  primitive ids are face indices;
+//     24 num_nodes  (i32, >= 1)              |  num_prims is the number of faces
+//     28 num_prims  (i32: faces)             |
+//     32 arg        (i32: the parameter)     |
+//     36 pad        (i32, 0)                -+
+//     40 points     (const Vec3*, num_points entries)
+//     48 velocities (const Vec3*, num_points entries; null (0) for a mesh without velocities)
+//     56 indices    (const i32*, 3 * num_prims entries)
+//     64 num_points (i32)
+//     68 pad        (i32, 0)
+#pragma once
+#include "wp_bvh.h"
+
+namespace wp {
+
+/// A Mesh kernel parameter (72 bytes, see the top).
+struct mesh_t {
+  bvh_tree_t tree;
+  const Vec3* points;
+  const Vec3* velocities;
+  const i32* indices;
+  i32 num_points;
+  i32 pad;
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(mesh_t) == 72 && alignof(mesh_t) == 8, "mesh_t layout");
+
+/// MeshQueryPoint (20 bytes): 0 result (bool), 4 sign, 8 face, 12 u, 16 v.
+struct mesh_query_point_t {
+  bool result;
+  f32 sign;
+  i32 face;
+  f32 u;
+  f32 v;
+};
+static_assert(sizeof(mesh_query_point_t) == 20, "mesh_query_point_t layout");
+
+/// MeshQueryRay (36 bytes): 0 result (bool), 4 sign, 8 face, 12 t, 16 u, 20 v, 24 normal.
+struct mesh_query_ray_t {
+  bool result;
+  f32 sign;
+  i32 face;
+  f32 t;
+  f32 u;
+  f32 v;
+  Vec3 normal;
+};
+static_assert(sizeof(mesh_query_ray_t) == 36, "mesh_query_ray_t layout");
+
+/// MeshQueryAabb (44 bytes): 0 lower, 12 upper, 24 walk.
+struct mesh_query_aabb_t {
+  Vec3 lower;
+  Vec3 upper;
+  bvh_walk_t walk;
+  typedef void wp_object_tag;
+};
+static_assert(sizeof(mesh_query_aabb_t) == 44, "mesh_query_aabb_t layout");
+
+namespace detail {
+
+WP_FN mesh_query_point_t mesh_point_none() {
+  mesh_query_point_t r;
+  r.result = false;
+  r.sign = 0.0f;
+  r.face = 0;
+  r.u = 0.0f;
+  r.v = 0.0f;
+  return r;
+}
+
+WP_FN mesh_query_ray_t mesh_ray_none() {
+  mesh_query_ray_t r;
+  r.result = false;
+  r.sign = 0.0f;
+  r.face = 0;
+  r.t = 0.0f;
+  r.u = 0.0f;
+  r.v = 0.0f;
+  r.normal = Vec3_ZERO();
+  return r;
+}
+
+/// MeshView::face_indices: the vertex indices of face f, each checked against the points.
+WP_FN void mesh_face_indices(const mesh_t& m, i64 f, i32* ix, ctx_t* ctx) {
+  if ((u64)f >= (u64)(i64)m.tree.num_prims) {
+    bvh_fault(m.tree, f, (i64)m.tree.num_prims, ctx);
+    return;
+  }
+  for (int k = 0; k < 3; ++k) {
+    const i32 i = m.indices[3 * f + k];
+    if ((u32)i >= (u32)m.num_points) {
+      bvh_fault(m.tree, (i64)i, (i64)m.num_points, ctx);
+      return;
+    }
+    ix[k] = i;
+  }
+}
+
+/// MeshView::triangle: the three vertices of face f (checked).
+WP_FN void mesh_triangle(const mesh_t& m, i64 f, Vec3* t, ctx_t* ctx) {
+  i32 ix[3];
+  mesh_face_indices(m, f, ix, ctx);
+  if (faulted(ctx)) return;
+  for (int k = 0; k < 3; ++k) t[k] = m.points[ix[k]];
+}
+
+/// MeshView::measure_scale: the root box's farthest extent from p, as a power of two.
+WP_FN f32 mesh_measure_scale(const mesh_t& m, Vec3 p, ctx_t* ctx) {
+  const bvh_node_t root = bvh_node(m.tree, 0, ctx);
+  if (faulted(ctx)) return 1.0f;
+  const Vec3 e = g_vmax(g_abs(bvh_node_lower(root) - p), g_abs(bvh_node_upper(root) - p));
+  return pow2_scale(g_max_elem(e));
+}
+
+/// unit_normal: the unit normal at a power-of-two scale, zero for a sliver.
+WP_FN Vec3 mesh_unit_normal(Vec3 a, Vec3 b, Vec3 c) {
+  Vec3 e1 = b - a, e2 = c - a;
+  const f32 s = pow2_scale(g_max_elem(g_vmax(g_abs(e1), g_abs(e2))));
+  e1 = e1 * s;
+  e2 = e2 * s;
+  const Vec3 n = g_cross(e1, e2);
+  const f32 sum = (g_len_sq(e1) + g_len_sq(e2)) + g_len_sq(e2 - e1);
+  if (g_len(n) > WP_SLIVER_RATIO * sum) return n * (1.0f / g_len(n));  // glam's normalize
+  return Vec3_ZERO();
+}
+
+/// face_normal: normalize_or_zero of the scaled cross product.
+WP_FN Vec3 mesh_face_normal(Vec3 a, Vec3 b, Vec3 c) {
+  const Vec3 e1 = b - a, e2 = c - a;
+  const f32 s = pow2_scale(g_max_elem(g_vmax(g_abs(e1), g_abs(e2))));
+  const Vec3 n = g_cross(e1 * s, e2 * s);
+  const f32 rcp = 1.0f / g_len(n);
+  if (g_finite(rcp) && rcp > 0.0f) return n * rcp;
+  return Vec3_ZERO();
+}
+
+/// for_faces_touching: f(triangle) for every face in a leaf whose boxes overlap [lo, hi] (one
+/// walk whose primitive test does the work and accepts nothing).
+template <typename F>
+WP_FN void mesh_for_faces_touching(const mesh_t& m, Vec3 lo, Vec3 hi, F f, ctx_t* ctx) {
+  (void)bvh_walk_next(
+      bvh_walk_start(), m.tree, [lo, hi](Vec3 l, Vec3 u) { return aabb_overlap(l, u, lo, hi); },
+      [&m, &f](i32 id, ctx_t* c) {
+        Vec3 t[3];
+        mesh_triangle(m, (i64)id, t, c);
+        if (!faulted(c)) f(t);
+        return false;
+      },
+      ctx);
+}
+
+WP_FN bool mesh_tri_contains(const Vec3* t, const Vec3& x) {
+  return g_eq(t[0], x) || g_eq(t[1], x) || g_eq(t[2], x);
+}
+
+/// edge_normal: the sum of the unit normals of the faces having both x and y as vertices.
+WP_FN Vec3 mesh_edge_normal(const mesh_t& m, Vec3 x, Vec3 y, ctx_t* ctx) {
+  Vec3 n = Vec3_ZERO();
+  mesh_for_faces_touching(
+      m, g_vmin(x, y), g_vmax(x, y),
+      [&n, x, y](const Vec3* t) {
+        if (mesh_tri_contains(t, x) && mesh_tri_contains(t, y))
+          n = n + mesh_unit_normal(t[0], t[1], t[2]);
+      },
+      ctx);
+  return n;
+}
+
+/// vertex_normal: the angle-weighted sum of the unit normals of the faces around x.
+WP_FN Vec3 mesh_vertex_normal(const mesh_t& m, Vec3 x, ctx_t* ctx) {
+  Vec3 n = Vec3_ZERO();
+  mesh_for_faces_touching(
+      m, x, x,
+      [&n, x](const Vec3* t) {
+        int k = 0;
+        while (k < 3 && !g_eq(t[k], x)) ++k;
+        if (k == 3) return;
+        Vec3 e1 = t[(k + 1) % 3] - x, e2 = t[(k + 2) % 3] - x;
+        const f32 s = pow2_scale(g_max_elem(g_vmax(g_abs(e1), g_abs(e2))));
+        e1 = e1 * s;
+        e2 = e2 * s;
+        const f32 angle = ::atan2f(g_len(g_cross(e1, e2)), g_dot(e1, e2));
+        n = n + mesh_unit_normal(t[0], t[1], t[2]) * angle;
+      },
+      ctx);
+  return n;
+}
+
+/// The closest-point search (Closest): squared distances in units of 1 / s.
+struct mesh_closest_t {
+  const mesh_t* mesh;
+  Vec3 p;
+  f32 s;
+  f32 best;
+  i32 face;
+  triangle_closest_point_t bary;
+  Vec3 tri[3];
+  WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
+    return aabb_distance_sq(p * s, lower * s, upper * s);
+  }
+  WP_FN f32 bound() const { return best; }
+  WP_FN void visit(i32 id, ctx_t* ctx) {
+    Vec3 t[3];
+    mesh_triangle(*mesh, (i64)id, t, ctx);
+    if (faulted(ctx)) return;
+    const triangle_closest_point_t r = closest_point_triangle(t[0], t[1], t[2], p);
+    const f32 d = g_len_sq((triangle_closest_point_position(r, t[0], t[1], t[2]) - p) * s);
+    if (d < best) {
+      best = d;
+      face = id;
+      bary = r;
+      tri[0] = t[0];
+      tri[1] = t[1];
+      tri[2] = t[2];
+    }
+  }
+};
+
+/// closest(): the search run; false (None) when nothing lies within max_dist or on a fault.
+WP_FN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c, ctx_t* ctx) {
+  if (!(max_dist > 0.0f)) return false;
+  const f32 s = mesh_measure_scale(m, p, ctx);
+  if (faulted(ctx)) return false;
+  const f32 bound = max_dist * s;
+  c->mesh = &m;
+  c->p = p;
+  c->s = s;
+  c->best = bound * bound;
+  c->face = -1;
+  c->bary = tri_cp(0.0f, 0.0f, 0.0f, TRI_FEATURE_FACE);
+  c->tri[0] = c->tri[1] = c->tri[2] = Vec3_ZERO();
+  bvh_walk_ordered(m.tree, *c, ctx);
+  if (faulted(ctx)) return false;
+  return c->face >= 0;
+}
+
+/// The furthest-point search (Furthest): negated squared distances (the walk minimises).
+struct mesh_furthest_t {
+  const mesh_t* mesh;
+  Vec3 p;
+  f32 s;
+  f32 best;
+  i32 face;
+  f32 u, v;
+  WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
+    const Vec3 ps = p * s, lo = lower * s, hi = upper * s;
+    if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z)) return f32_inf();
+    return -g_len_sq(g_vmax(g_abs(ps - lo), g_abs(ps - hi)));
+  }
+  WP_FN f32 bound() const { return -best; }
+  WP_FN void visit(i32 id, ctx_t* ctx) {
+    Vec3 t[3];
+    mesh_triangle(*mesh, (i64)id, t, ctx);
+    if (faulted(ctx)) return;
+    const f32 da = g_len_sq((t[0] - p) * s), db = g_len_sq((t[1] - p) * s),
+              dc = g_len_sq((t[2] - p) * s);
+    f32 dist, uu, vv;
+    if (da > db && da > dc) {
+      dist = da; uu = 1.0f; vv = 0.0f;
+    } else if (db > dc) {
+      dist = db; uu = 0.0f; vv = 1.0f;
+    } else {
+      dist = dc; uu = 0.0f; vv = 0.0f;
+    }
+    if (dist > best) {
+      best = dist;
+      face = id;
+      u = uu;
+      v = vv;
+    }
+  }
+};
+
+/// The closest-hit search along a ray (ClosestHit).
+struct mesh_closest_hit_t {
+  const mesh_t* mesh;
+  Vec3 start;
+  Vec3 dir;
+  Vec3 inv_dir;
+  mesh_query_ray_t best;
+  f32 max_t;
+  WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
+    f32 t;
+    return intersect_ray_aabb(start, inv_dir, lower, upper, &t) ? t : f32_inf();
+  }
+  WP_FN f32 bound() const { return best.result ? best.t : max_t; }
+  WP_FN void visit(i32 id, ctx_t* ctx) {
+    Vec3 t[3];
+    mesh_triangle(*mesh, (i64)id, t, ctx);
+    if (faulted(ctx)) return;
+    const ray_triangle_hit_t h = intersect_ray_triangle(start, dir, t[0], t[1], t[2]);
+    if (h.result && h.t < bound()) {
+      best.result = true;
+      best.sign = h.sign;
+      best.face = id;
+      best.t = h.t;
+      best.u = h.u;
+      best.v = h.v;
+      best.normal = Vec3_ZERO();
+    }
+  }
+};
+
+}  // namespace detail
+
+// ------------------------------------------------------------------------------------------
+// Point queries
+// ------------------------------------------------------------------------------------------
+
+/// The closest point strictly within max_dist, without a sign (sign 0).
+WP_FN mesh_query_point_t mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                                  ctx_t* ctx) {
+  detail::mesh_closest_t c;
+  if (!detail::mesh_closest(mesh, point, max_dist, &c, ctx)) return detail::mesh_point_none();
+  mesh_query_point_t r;
+  r.result = true;
+  r.sign = 0.0f;
+  r.face = c.face;
+  r.u = c.bary.u;
+  r.v = c.bary.v;
+  return r;
+}
+
+/// The closest point strictly within max_dist, with the sign of the point (-1 inside) by the
+/// angle-weighted pseudonormal of the closest feature.
+WP_FN mesh_query_point_t mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                          ctx_t* ctx) {
+  using namespace detail;
+  mesh_closest_t c;
+  if (!mesh_closest(mesh, point, max_dist, &c, ctx)) return mesh_point_none();
+  const Vec3 a = c.tri[0], b = c.tri[1], cc = c.tri[2];
+  Vec3 n;
+  switch (c.bary.feature) {
+    case TRI_FEATURE_FACE: n = mesh_unit_normal(a, b, cc); break;
+    case TRI_FEATURE_EDGE_AB: n = mesh_edge_normal(mesh, a, b, ctx); break;
+    case TRI_FEATURE_EDGE_BC: n = mesh_edge_normal(mesh, b, cc, ctx); break;
+    case TRI_FEATURE_EDGE_CA: n = mesh_edge_normal(mesh, cc, a, ctx); break;
+    case TRI_FEATURE_VERTEX_A: n = mesh_vertex_normal(mesh, a, ctx); break;
+    case TRI_FEATURE_VERTEX_B: n = mesh_vertex_normal(mesh, b, ctx); break;
+    default: n = mesh_vertex_normal(mesh, cc, ctx); break;
+  }
+  if (faulted(ctx)) return mesh_point_none();
+  const Vec3 away = (point - triangle_closest_point_position(c.bary, a, b, cc)) * c.s;
+  mesh_query_point_t r;
+  r.result = true;
+  r.sign = g_dot(n, away) > 0.0f ? 1.0f : -1.0f;
+  r.face = c.face;
+  r.u = c.bary.u;
+  r.v = c.bary.v;
+  return r;
+}
+
+/// The furthest point strictly beyond min_dist (a vertex: barycentrics (1, 0), (0, 1) or
+/// (0, 0)); min_dist below 0 counts as 0, NaN finds nothing.
+WP_FN mesh_query_point_t mesh_query_furthest_point_no_sign(const mesh_t& mesh, Vec3 point,
+                                                           f32 min_dist, ctx_t* ctx) {
+  using namespace detail;
+  if (min_dist != min_dist) return mesh_point_none();
+  const f32 s = mesh_measure_scale(mesh, point, ctx);
+  if (faulted(ctx)) return mesh_point_none();
+  const f32 m = ::fmaxf(min_dist, 0.0f) * s;
+  mesh_furthest_t f;
+  f.mesh = &mesh;
+  f.p = point;
+  f.s = s;
+  f.best = m * m;
+  f.face = -1;
+  f.u = 0.0f;
+  f.v = 0.0f;
+  bvh_walk_ordered(mesh.tree, f, ctx);
+  if (faulted(ctx) || f.face < 0) return mesh_point_none();
+  mesh_query_point_t r;
+  r.result = true;
+  r.sign = 0.0f;
+  r.face = f.face;
+  r.u = f.u;
+  r.v = f.v;
+  return r;
+}
+
+// ------------------------------------------------------------------------------------------
+// Ray query
+// ------------------------------------------------------------------------------------------
+
+/// The first hit of start + t * dir with the mesh at 0 <= t < max_t (ties at equal t to the
+/// face visited first).
+WP_FN mesh_query_ray_t mesh_query_ray(const mesh_t& mesh, Vec3 start, Vec3 dir, f32 max_t,
+                                      ctx_t* ctx) {
+  using namespace detail;
+  mesh_closest_hit_t h;
+  h.mesh = &mesh;
+  h.start = start;
+  h.dir = dir;
+  h.inv_dir = ray_inv_dir(dir);
+  h.best = mesh_ray_none();
+  h.max_t = max_t;
+  bvh_walk_ordered(mesh.tree, h, ctx);
+  if (faulted(ctx)) return mesh_ray_none();
+  mesh_query_ray_t r = h.best;
+  if (r.result) {
+    Vec3 t[3];
+    mesh_triangle(mesh, (i64)r.face, t, ctx);
+    if (faulted(ctx)) return mesh_ray_none();
+    r.normal = mesh_face_normal(t[0], t[1], t[2]);
+  }
+  return r;
+}
+
+// ------------------------------------------------------------------------------------------
+// Box query (over the faces' bounding boxes)
+// ------------------------------------------------------------------------------------------
+
+WP_FN mesh_query_aabb_t mesh_query_aabb(const mesh_t& mesh, Vec3 lower, Vec3 upper, ctx_t* ctx) {
+  (void)mesh;
+  (void)ctx;
+  mesh_query_aabb_t q;
+  q.lower = lower;
+  q.upper = upper;
+  q.walk = detail::bvh_walk_start();
+  return q;
+}
+
+WP_FN mesh_query_aabb_t mesh_query_aabb_next(const mesh_t& mesh, mesh_query_aabb_t q,
+                                             ctx_t* ctx) {
+  const Vec3 lo = q.lower, hi = q.upper;
+  q.walk = detail::bvh_walk_next(
+      q.walk, mesh.tree, [lo, hi](Vec3 l, Vec3 u) { return aabb_overlap(l, u, lo, hi); },
+      [&mesh, lo, hi](i32 id, ctx_t* c) {
+        using namespace detail;
+        Vec3 t[3];
+        mesh_triangle(mesh, (i64)id, t, c);
+        if (faulted(c)) return false;
+        return aabb_overlap(g_vmin(g_vmin(t[0], t[1]), t[2]), g_vmax(g_vmax(t[0], t[1]), t[2]),
+                            lo, hi);
+      },
+      ctx);
+  return q;
+}
+
+WP_FN bool mesh_query_aabb_done(mesh_query_aabb_t q) { return q.walk.item < 0; }
+
+WP_FN i32 mesh_query_aabb_item(mesh_query_aabb_t q) { return q.walk.item; }
+
+// ------------------------------------------------------------------------------------------
+// Evaluation at barycentrics
+// ------------------------------------------------------------------------------------------
+
+/// u * p0 + v * p1 + (1 - u - v) * p2 of face `face` (any integer type); a fault when it is not
+/// a face.
+template <typename I>
+WP_FN Vec3 mesh_eval_position(const mesh_t& mesh, I face, f32 u, f32 v, ctx_t* ctx) {
+  Vec3 t[3];
+  detail::mesh_triangle(mesh, (i64)face, t, ctx);
+  if (faulted(ctx)) return Vec3_ZERO();
+  return (t[0] * u + t[1] * v) + t[2] * ((1.0f - u) - v);
+}
+
+/// The velocity of face `face` at (u, v), interpolated as the position; zero without
+/// velocities (the face is checked all the same).
+template <typename I>
+WP_FN Vec3 mesh_eval_velocity(const mesh_t& mesh, I face, f32 u, f32 v, ctx_t* ctx) {
+  i32 ix[3];
+  detail::mesh_face_indices(mesh, (i64)face, ix, ctx);
+  if (faulted(ctx) || mesh.velocities == nullptr) return Vec3_ZERO();
+  const Vec3 a = mesh.velocities[ix[0]], b = mesh.velocities[ix[1]], c = mesh.velocities[ix[2]];
+  return (a * u + b * v) + c * ((1.0f - u) - v);
+}
+
+/// The unit normal of face `face` (zero for a degenerate face).
+template <typename I>
+WP_FN Vec3 mesh_eval_face_normal(const mesh_t& mesh, I face, ctx_t* ctx) {
+  Vec3 t[3];
+  detail::mesh_triangle(mesh, (i64)face, t, ctx);
+  if (faulted(ctx)) return Vec3_ZERO();
+  return detail::mesh_face_normal(t[0], t[1], t[2]);
+}
+
+}  // namespace wp
