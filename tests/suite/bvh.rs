@@ -25,13 +25,7 @@ backend_tests!(
 
 /// For query box `i`: the boxes found (in `found[i]`, as many as fit) and their count.
 #[wp::kernel]
-fn k_aabb(
-    bvh: Bvh,
-    qlo: Array<Vec3>,
-    qhi: Array<Vec3>,
-    found: Array<i32, 2>,
-    counts: Array<i32>,
-) {
+fn k_aabb(bvh: Bvh, qlo: Array<Vec3>, qhi: Array<Vec3>, found: Array<i32, 2>, counts: Array<i32>) {
     let i = tid();
     let mut c = 0;
     for j in bvh_query_aabb(bvh, qlo[i], qhi[i]) {
@@ -45,13 +39,7 @@ fn k_aabb(
 
 /// For ray `i`: the boxes it meets and their count.
 #[wp::kernel]
-fn k_ray(
-    bvh: Bvh,
-    start: Array<Vec3>,
-    dir: Array<Vec3>,
-    found: Array<i32, 2>,
-    counts: Array<i32>,
-) {
+fn k_ray(bvh: Bvh, start: Array<Vec3>, dir: Array<Vec3>, found: Array<i32, 2>, counts: Array<i32>) {
     let i = tid();
     let mut c = 0;
     for j in bvh_query_ray(bvh, start[i], dir[i]) {
@@ -154,7 +142,10 @@ where
     (0..n)
         .map(|i| {
             let k = counts[i] as usize;
-            assert!(k <= SLOTS, "query {i}: {k} hits, more than the test's slots");
+            assert!(
+                k <= SLOTS,
+                "query {i}: {k} hits, more than the test's slots"
+            );
             let mut v = flat[i * SLOTS..i * SLOTS + k].to_vec();
             v.sort_unstable();
             v
@@ -257,7 +248,11 @@ fn queries_match_brute_force(dev: &wp::Device) {
     if !dev.is_cpu() {
         let cpu = wp::cpu();
         let b = wp::Bvh::new(&arr(&lo, &cpu), &arr(&hi, &cpu)).unwrap();
-        assert_eq!(b.tree_host(), bvh.tree_host(), "the same tree on every device");
+        assert_eq!(
+            b.tree_host(),
+            bvh.tree_host(),
+            "the same tree on every device"
+        );
     }
 }
 
@@ -334,7 +329,10 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     let inf = arr(&[Vec3::NEG_INFINITY, Vec3::ZERO], dev);
     has(&wp::Bvh::new(&inf, &two).unwrap_err(), "argument `lowers`");
     // A refit re-reads the boxes and refuses non-finite ones, keeping its tree.
-    let (l, u) = (arr(&[Vec3::ZERO, Vec3::ONE], dev), arr(&[Vec3::ONE, Vec3::splat(2.0)], dev));
+    let (l, u) = (
+        arr(&[Vec3::ZERO, Vec3::ONE], dev),
+        arr(&[Vec3::ONE, Vec3::splat(2.0)], dev),
+    );
     let mut bvh = wp::Bvh::new(&l, &u).unwrap();
     let tree = bvh.tree_host();
     l.copy_from(&nan).unwrap();
@@ -358,6 +356,8 @@ fn bad_input_is_an_error(dev: &wp::Device) {
                 r => panic!("a BVH of another device: {r:?}"),
             }
         }
-        None => eprintln!("bvh::bad_input_is_an_error: one device only, other-device cases skipped"),
+        None => {
+            eprintln!("bvh::bad_input_is_an_error: one device only, other-device cases skipped")
+        }
     }
 }

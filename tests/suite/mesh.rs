@@ -242,7 +242,11 @@ fn meshes() -> Vec<(&'static str, HostMesh, fn(Vec3) -> Option<f32>)> {
     }
     vec![
         ("sphere", sphere(1.0, 12, 16).with_degenerates(), in_sphere),
-        ("torus", torus(1.0, 0.4, 24, 12).with_degenerates(), in_torus),
+        (
+            "torus",
+            torus(1.0, 0.4, 24, 12).with_degenerates(),
+            in_torus,
+        ),
     ]
 }
 
@@ -295,7 +299,11 @@ fn closest_points_match_brute_force(dev: &wp::Device) {
                     continue;
                 }
                 let expect = want < max_d;
-                assert_eq!(found[i] == 1, expect, "{name} {i} at {p}: {want} vs {max_d}");
+                assert_eq!(
+                    found[i] == 1,
+                    expect,
+                    "{name} {i} at {p}: {want} vs {max_d}"
+                );
                 assert_eq!(f2[i], found[i], "{name} {i}: no_sign");
                 if !expect {
                     continue;
@@ -322,7 +330,13 @@ fn furthest_points_match_brute_force(dev: &wp::Device) {
         let qs = query_points(&m, 3);
         let n = qs.len();
         let (found, fp) = (zeros::<i32, 1>(n, dev), zeros::<Vec3, 1>(n, dev));
-        wp::launch(k_furthest, n, (&mesh, &arr(&qs, dev), 0.0, &found, &fp), dev).unwrap();
+        wp::launch(
+            k_furthest,
+            n,
+            (&mesh, &arr(&qs, dev), 0.0, &found, &fp),
+            dev,
+        )
+        .unwrap();
         let (found, fp) = (host(&found), host(&fp));
         for (i, p) in qs.iter().enumerate() {
             let want = m
@@ -339,8 +353,13 @@ fn furthest_points_match_brute_force(dev: &wp::Device) {
         }
         // Nothing lies beyond the furthest point.
         let (found, fp) = (zeros::<i32, 1>(1, dev), zeros::<Vec3, 1>(1, dev));
-        wp::launch(k_furthest, 1, (&mesh, &arr(&[Vec3::ZERO], dev), 5.0, &found, &fp), dev)
-            .unwrap();
+        wp::launch(
+            k_furthest,
+            1,
+            (&mesh, &arr(&[Vec3::ZERO], dev), 5.0, &found, &fp),
+            dev,
+        )
+        .unwrap();
         assert_eq!(host(&found), vec![0], "{name}");
     }
 }
@@ -416,7 +435,11 @@ fn rays_match_brute_force(dev: &wp::Device) {
                         ts[i]
                     );
                     let p = s[i] + d[i] * ts[i];
-                    assert!((hit[i] - p).length() <= 1e-4, "{name} ray {i}: {} vs {p}", hit[i]);
+                    assert!(
+                        (hit[i] - p).length() <= 1e-4,
+                        "{name} ray {i}: {} vs {p}",
+                        hit[i]
+                    );
                 }
             }
         }
@@ -446,7 +469,12 @@ fn rays_parallel_to_faces_miss(dev: &wp::Device) {
         Vec3::new(0.5, 0.5, 1.0),
         Vec3::new(2.0, 2.0, -1.0),
     ];
-    let d = [Vec3::X, Vec3::new(1.0, 1.0, 0.0), -Vec3::Z, Vec3::new(0.1, 0.0, 1.0)];
+    let d = [
+        Vec3::X,
+        Vec3::new(1.0, 1.0, 0.0),
+        -Vec3::Z,
+        Vec3::new(0.1, 0.0, 1.0),
+    ];
     let (found, ts, _) = run_rays(&mesh, &s, &d, 1e6, dev);
     assert_eq!(found, vec![0, 0, 1, 1], "in-plane rays never hit");
     assert_eq!(&ts[2..], &[1.0, 1.0]);
@@ -465,8 +493,13 @@ fn box_queries_match_brute_force(dev: &wp::Device) {
         let n = lo.len();
         const SLOTS: usize = 400;
         let (faces, counts) = (zeros::<i32, 2>([n, SLOTS], dev), zeros::<i32, 1>(n, dev));
-        wp::launch(k_aabb, n, (&mesh, &arr(&lo, dev), &arr(&hi, dev), &faces, &counts), dev)
-            .unwrap();
+        wp::launch(
+            k_aabb,
+            n,
+            (&mesh, &arr(&lo, dev), &arr(&hi, dev), &faces, &counts),
+            dev,
+        )
+        .unwrap();
         let (flat, counts) = (host(&faces), host(&counts));
         for i in 0..n {
             let k = counts[i] as usize;
@@ -488,7 +521,11 @@ fn box_queries_match_brute_force(dev: &wp::Device) {
 
 fn evaluation_at_barycentrics(dev: &wp::Device) {
     let m = sphere(2.0, 6, 8).with_degenerates();
-    let vel: Vec<Vec3> = m.points.iter().map(|p| Vec3::new(p.y, -p.x, 2.0 * p.z)).collect();
+    let vel: Vec<Vec3> = m
+        .points
+        .iter()
+        .map(|p| Vec3::new(p.y, -p.x, 2.0 * p.z))
+        .collect();
     let mesh = wp::Mesh::new(
         &arr(&m.points, dev),
         &arr(&m.indices, dev),
@@ -497,7 +534,9 @@ fn evaluation_at_barycentrics(dev: &wp::Device) {
     .unwrap();
     let n = m.faces();
     let mut rng = Rng(2);
-    let uv: Vec<Vec2> = (0..n).map(|_| Vec2::new(rng.f() * 0.5, rng.f() * 0.5)).collect();
+    let uv: Vec<Vec2> = (0..n)
+        .map(|_| Vec2::new(rng.f() * 0.5, rng.f() * 0.5))
+        .collect();
     let (pos, v, nrm) = (
         zeros::<Vec3, 1>(n, dev),
         zeros::<Vec3, 1>(n, dev),
@@ -511,9 +550,16 @@ fn evaluation_at_barycentrics(dev: &wp::Device) {
         let interp = |x: [Vec3; 3]| x[0] * u + x[1] * w + x[2] * (1.0 - u - w);
         let [a, b, c] = ix.map(|i| m.points[i]);
         assert!((pos[f] - interp([a, b, c])).length() <= 1e-5, "face {f}");
-        assert!((v[f] - interp(ix.map(|i| vel[i]))).length() <= 1e-5, "face {f}");
+        assert!(
+            (v[f] - interp(ix.map(|i| vel[i]))).length() <= 1e-5,
+            "face {f}"
+        );
         let want = (b - a).cross(c - a).normalize_or_zero();
-        assert!((nrm[f] - want).length() <= 1e-5, "face {f}: {} vs {want}", nrm[f]);
+        assert!(
+            (nrm[f] - want).length() <= 1e-5,
+            "face {f}: {} vs {want}",
+            nrm[f]
+        );
     }
     // The degenerate faces' normal is zero.
     assert_eq!(nrm[n - 1], Vec3::ZERO);
@@ -530,7 +576,11 @@ fn empty_mesh_finds_nothing(dev: &wp::Device) {
     let mesh = wp::Mesh::new(&arr::<Vec3>(&[], dev), &arr::<i32>(&[], dev), None).unwrap();
     assert_eq!((mesh.num_faces(), mesh.num_points()), (0, 0));
     let q = arr(&[Vec3::ZERO, Vec3::splat(5.0)], dev);
-    let (found, cp, sign) = (zeros::<i32, 1>(2, dev), zeros::<Vec3, 1>(2, dev), zeros(2, dev));
+    let (found, cp, sign) = (
+        zeros::<i32, 1>(2, dev),
+        zeros::<Vec3, 1>(2, dev),
+        zeros(2, dev),
+    );
     wp::launch(k_closest, 2, (&mesh, &q, 1e9, &found, &cp, &sign), dev).unwrap();
     assert_eq!(host(&found), vec![0, 0]);
     wp::launch(k_furthest, 2, (&mesh, &q, 0.0, &found, &cp), dev).unwrap();
@@ -558,8 +608,18 @@ fn deform_then_refit_then_query(dev: &wp::Device) {
     assert_eq!(moved.points[5], m.points[5] * s + d);
     let qs: Vec<Vec3> = query_points(&m, 9).iter().map(|p| *p * s + d).collect();
     let n = qs.len();
-    let (found, cp, sign) = (zeros::<i32, 1>(n, dev), zeros::<Vec3, 1>(n, dev), zeros(n, dev));
-    wp::launch(k_closest, n, (&mesh, &arr(&qs, dev), 100.0, &found, &cp, &sign), dev).unwrap();
+    let (found, cp, sign) = (
+        zeros::<i32, 1>(n, dev),
+        zeros::<Vec3, 1>(n, dev),
+        zeros(n, dev),
+    );
+    wp::launch(
+        k_closest,
+        n,
+        (&mesh, &arr(&qs, dev), 100.0, &found, &cp, &sign),
+        dev,
+    )
+    .unwrap();
     let (found, cp) = (host(&found), host(&cp));
     for (i, p) in qs.iter().enumerate() {
         let want = moved.distance(*p);
@@ -638,7 +698,11 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     has(&e, "argument `points`");
     has(&e, "built with 3");
     let q = arr(&[Vec3::ZERO], dev);
-    let (found, cp, sign) = (zeros::<i32, 1>(1, dev), zeros::<Vec3, 1>(1, dev), zeros(1, dev));
+    let (found, cp, sign) = (
+        zeros::<i32, 1>(1, dev),
+        zeros::<Vec3, 1>(1, dev),
+        zeros(1, dev),
+    );
     let e = wp::launch(k_closest, 1, (&mesh, &q, 1.0, &found, &cp, &sign), dev).unwrap_err();
     has(&e, "argument `mesh`");
     let other = if dev.is_cpu() {

@@ -1503,7 +1503,11 @@ mod tests {
         ] {
             let q = lookup_user(name).unwrap();
             let r = q
-                .resolve(&[k(mesh.clone()), k(v3.clone()), ArgTy::Literal { float: true }])
+                .resolve(&[
+                    k(mesh.clone()),
+                    k(v3.clone()),
+                    ArgTy::Literal { float: true },
+                ])
                 .unwrap();
             assert_eq!(r.params, vec![mesh.clone(), v3.clone(), F32], "{name}");
             assert_eq!(
@@ -1529,7 +1533,9 @@ mod tests {
         // Faces of any integer type.
         let ev = lookup_user("mesh_eval_position").unwrap();
         for t in [I32, Ty::Scalar(Scalar::Usize)] {
-            let r = ev.resolve(&[k(mesh.clone()), k(t.clone()), k(F32), k(F32)]).unwrap();
+            let r = ev
+                .resolve(&[k(mesh.clone()), k(t.clone()), k(F32), k(F32)])
+                .unwrap();
             assert_eq!((r.params[1].clone(), r.ret), (t, v3.clone()));
         }
         // The loops' items are i32.

@@ -51,9 +51,7 @@ pub(crate) const MAX_PRIMS: usize = (i32::MAX / 2) as usize;
 
 /// The index and value of the first non-finite vector of `v`.
 pub(crate) fn first_non_finite(v: &[Vec3]) -> Option<(usize, Vec3)> {
-    v.iter()
-        .position(|p| !p.is_finite())
-        .map(|i| (i, v[i]))
+    v.iter().position(|p| !p.is_finite()).map(|i| (i, v[i]))
 }
 
 /// Checks that `a` (argument `arg` of `what`) is on `device`.
@@ -205,8 +203,8 @@ impl Tree {
     }
 }
 
-/// A BVH over boxes on one device (Warp's `wp.Bvh(lowers, uppers)`; this example runs as a
-/// doc test of the `warp_lang` facade):
+/// A BVH over boxes on one device (Warp's `wp.Bvh(lowers, uppers)`; the suite
+/// `tests/suite/bvh.rs` runs kernels like this one):
 ///
 /// ```ignore
 /// use warp_lang as wp;
@@ -465,6 +463,9 @@ mod tests {
         )
         .unwrap_err();
         let t = err.to_string();
-        assert!(t.contains("argument `lowers`") && t.contains("index 1"), "{t}");
+        assert!(
+            t.contains("argument `lowers`") && t.contains("index 1"),
+            "{t}"
+        );
     }
 }

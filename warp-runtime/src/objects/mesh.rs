@@ -29,8 +29,8 @@ use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::{ArgCtx, KernelArg};
 
-/// A triangle mesh on one device (Warp's `wp.Mesh(points, indices, velocities)`; this example
-/// runs as a doc test of the `warp_lang` facade):
+/// A triangle mesh on one device (Warp's `wp.Mesh(points, indices, velocities)`; the suite
+/// `tests/suite/mesh.rs` runs kernels like this one):
 ///
 /// ```ignore
 /// use warp_lang as wp;
@@ -180,10 +180,7 @@ impl Mesh {
             return Err(bad(
                 WHAT,
                 "indices",
-                format!(
-                    "has {} triangles, more than {MAX_PRIMS}",
-                    indices.len() / 3
-                ),
+                format!("has {} triangles, more than {MAX_PRIMS}", indices.len() / 3),
             ));
         }
         let ix = indices.to_vec()?;
@@ -235,7 +232,13 @@ impl Mesh {
     /// [`Error::InvalidArgument`] naming `points` when it is on another device than the mesh
     /// or not contiguous.
     pub fn set_points(&mut self, points: &Array<Vec3>) -> Result<()> {
-        same_device("Mesh::set_points", "points", points, &self.device, "the mesh")?;
+        same_device(
+            "Mesh::set_points",
+            "points",
+            points,
+            &self.device,
+            "the mesh",
+        )?;
         contiguous("Mesh::set_points", "points", points)?;
         self.points = points.clone();
         Ok(())
@@ -406,7 +409,10 @@ mod tests {
         );
         let mut m = Mesh::new(&p, &ix(&[0, 1, 2]), None).unwrap();
         m.set_points(&pts(&[Vec3::ZERO])).unwrap();
-        has(m.refit().unwrap_err(), &["argument `points`", "built with 3"]);
+        has(
+            m.refit().unwrap_err(),
+            &["argument `points`", "built with 3"],
+        );
         let e = Mesh::new(&pts(&[]), &ix(&[]), None).unwrap();
         assert_eq!((e.num_faces(), e.num_points()), (0, 0));
     }
