@@ -231,7 +231,10 @@ fn torus(big: f32, small: f32, n: usize, m: usize) -> HostMesh {
 
 /// The test meshes with a classifier for points clearly inside (-1) or outside (+1) (None:
 /// too close to the surface to say from the smooth shape).
-fn meshes() -> Vec<(&'static str, HostMesh, fn(Vec3) -> Option<f32>)> {
+/// Whether a point is clearly inside (-1) or outside (+1) a test mesh's smooth shape.
+type Inside = fn(Vec3) -> Option<f32>;
+
+fn meshes() -> Vec<(&'static str, HostMesh, Inside)> {
     fn in_sphere(p: Vec3) -> Option<f32> {
         let l = p.length();
         (l < 0.8).then_some(-1.0).or((l > 1.05).then_some(1.0))

@@ -166,7 +166,7 @@ impl Mesh {
                 format!("has {n} points, more than i32::MAX (indices are i32, as in Warp)"),
             ));
         }
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(bad(
                 WHAT,
                 "indices",
