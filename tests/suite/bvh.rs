@@ -39,7 +39,13 @@ fn k_aabb(bvh: Bvh, qlo: Array<Vec3>, qhi: Array<Vec3>, found: Array<i32, 2>, co
 
 /// For ray `i`: the boxes it meets and their count.
 #[wp::kernel]
-fn k_ray(bvh: Bvh, start: Array<Vec3>, dir: Array<Vec3>, found: Array<i32, 2>, counts: Array<i32>) {
+pub(crate) fn k_ray(
+    bvh: Bvh,
+    start: Array<Vec3>,
+    dir: Array<Vec3>,
+    found: Array<i32, 2>,
+    counts: Array<i32>,
+) {
     let i = tid();
     let mut c = 0;
     for j in bvh_query_ray(bvh, start[i], dir[i]) {

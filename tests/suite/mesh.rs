@@ -734,3 +734,42 @@ fn bad_input_is_an_error(dev: &wp::Device) {
         }
     }
 }
+
+/// The CUDA translation units of the mesh and BVH kernels name what `wp_geometry.h`,
+/// `wp_bvh.h` and `wp_mesh.h` (and their adjoint parts) must provide: the object types, the
+/// queries taking the fault context last, the tuple results, the adjoints with `__ctx`. Checks
+/// the generated text only (no header needed); `WP_PRINT_SOURCES=1` prints it.
+#[test]
+fn cuda_sources_name_the_library_functions() {
+    let fwd = wp::cuda_source::assemble(&<k_closest as wp::Kernel>::INFO).text;
+    let adj = wp::cuda_source::assemble_adjoint(&<k_energy as wp::Kernel>::INFO).text;
+    let bvh = wp::cuda_source::assemble(&<crate::bvh::k_ray as wp::Kernel>::INFO).text;
+    let ray = wp::cuda_source::assemble(&<k_ray as wp::Kernel>::INFO).text;
+    if std::env::var("WP_PRINT_SOURCES").is_ok() {
+        println!("{fwd}\n----\n{adj}\n----\n{bvh}\n----\n{ray}");
+    }
+    for (src, want) in [
+        (&fwd, "#include \"wp_mesh.h\""),
+        (&fwd, "wp::mesh_t"),
+        (
+            &fwd,
+            "wp::tuple_t<bool, wp::f32, wp::i32, wp::f32, wp::f32>",
+        ),
+        (&fwd, "wp::mesh_query_point("),
+        (&fwd, "wp::mesh_eval_position("),
+        (&adj, "#include \"wp_adjoint_mesh.h\""),
+        (&adj, "wp::adj_mesh_query_point_no_sign("),
+        (&adj, "wp::adj_mesh_eval_position("),
+        (&bvh, "#include \"wp_bvh.h\""),
+        (&bvh, "wp::bvh_query_ray_t"),
+        (&bvh, "wp::bvh_query_ray_next("),
+        (&bvh, "wp::bvh_query_ray_done("),
+        (&bvh, "wp::bvh_query_ray_item("),
+        (
+            &ray,
+            "wp::tuple_t<bool, wp::f32, wp::i32, wp::f32, wp::f32, wp::f32, wp::Vec3>",
+        ),
+    ] {
+        assert!(src.contains(want), "`{want}` not in:\n{src}");
+    }
+}
