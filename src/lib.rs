@@ -105,7 +105,8 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
-/// Kernel-visible host objects: [`HashGrid`] (also at the crate root and in the prelude).
+/// Kernel-visible host objects: [`HashGrid`], [`Bvh`], [`Mesh`] (also at the crate root and in
+/// the prelude).
 pub use warp_runtime::objects;
 /// Parallel primitives: scan, reductions, radix sort, stream compaction (the functions are
 /// also at the crate root: `wp::array_scan`, ...).
@@ -119,16 +120,18 @@ pub use warp_runtime::{
 };
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, launch, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error,
+    init, launch, synchronize, ArgCtx, Array, Bvh, Device, DeviceKind, Dim, Element, Error,
     GenericKernel, HashGrid, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable,
-    Recording, Result, Runtime, Seed, Tape,
+    Mesh, Recording, Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{f16, func, kernel, Array, DTransform, Float, HashGrid, Struct, Transform};
+    pub use crate::{
+        f16, func, kernel, Array, Bvh, DTransform, Float, HashGrid, Mesh, Struct, Transform,
+    };
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,

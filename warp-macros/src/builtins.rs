@@ -173,10 +173,12 @@ pub enum Pos {
 impl Pos {
     /// Whether the position's type does not depend on `T`.
     pub fn fixed(&self) -> bool {
-        matches!(
-            self,
-            Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index | Pos::Object(_)
-        )
+        match self {
+            Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index | Pos::Object(_) => true,
+            // A tuple of fixed types (the mesh queries' results).
+            Pos::Tuple(ps) => ps.iter().all(Pos::fixed),
+            _ => false,
+        }
     }
 }
 
@@ -500,6 +502,15 @@ const USIZE: Pos = Fixed(Scalar::Usize);
 const BOOL: Pos = Fixed(Scalar::Bool);
 const GRID: Pos = Object(ObjectKind::HashGrid);
 const GRID_QUERY: Pos = Object(ObjectKind::HashGridQuery);
+const BVH: Pos = Object(ObjectKind::Bvh);
+const BVH_AABB: Pos = Object(ObjectKind::BvhQueryAabb);
+const BVH_RAY: Pos = Object(ObjectKind::BvhQueryRay);
+const MESH: Pos = Object(ObjectKind::Mesh);
+const MESH_AABB: Pos = Object(ObjectKind::MeshQueryAabb);
+/// A point query's result: `(result, sign, face, u, v)` (Warp's `mesh_query_point_t`).
+const POINT_RESULT: Pos = Tuple(&[BOOL, F32, I32, F32, F32]);
+/// A ray query's result: `(result, sign, face, t, u, v, normal)` (Warp's `mesh_query_ray_t`).
+const RAY_RESULT: Pos = Tuple(&[BOOL, F32, I32, F32, F32, F32, VEC3]);
 
 /// The table's rows: `"name": classes, (params) -> result, "section", grad` and then the
 /// facts in which the row differs from [`Builtin::row`]'s defaults, each the name of a
@@ -689,6 +700,42 @@ table! {
     "hash_grid_query_done": NO_T, (GRID_QUERY) -> BOOL, "hash_grid", Zero, internal;
     "hash_grid_query_point": NO_T, (GRID_QUERY) -> USIZE, "hash_grid", Zero, internal;
     "hash_grid_point_id": NO_T, (GRID, Index) -> USIZE, "hash_grid", Zero;
+    // Warp's BVH and mesh (warp-core `objects::{bvh, mesh}` through `builtins::geometry`;
+    // wp_bvh.h, wp_mesh.h). The iterating queries are `for` loops as the hash grid's; their
+    // items, like every primitive and face index here, are `i32` (Warp's `int`). Results Warp
+    // returns as a struct are tuples in its field order, bound by a destructuring `let`. The
+    // point queries' adjoints give the query point's gradient through `u`, `v`; the
+    // evaluations' give `u`'s and `v`'s; the objects get none.
+    "bvh_query_aabb": NO_T, (BVH, VEC3, VEC3) -> BVH_AABB, "bvh", Zero,
+        iterate("bvh_query_aabb_next", "bvh_query_aabb_done", "bvh_query_aabb_item");
+    "bvh_query_aabb_next": NO_T, (BVH, BVH_AABB) -> BVH_AABB, "bvh", Zero, internal;
+    "bvh_query_aabb_done": NO_T, (BVH_AABB) -> BOOL, "bvh", Zero, internal;
+    "bvh_query_aabb_item": NO_T, (BVH_AABB) -> I32, "bvh", Zero, internal;
+    "bvh_query_ray": NO_T, (BVH, VEC3, VEC3) -> BVH_RAY, "bvh", Zero,
+        iterate("bvh_query_ray_next", "bvh_query_ray_done", "bvh_query_ray_item");
+    "bvh_query_ray_next": NO_T, (BVH, BVH_RAY) -> BVH_RAY, "bvh", Zero, internal;
+    "bvh_query_ray_done": NO_T, (BVH_RAY) -> BOOL, "bvh", Zero, internal;
+    "bvh_query_ray_item": NO_T, (BVH_RAY) -> I32, "bvh", Zero, internal;
+    "mesh_query_aabb": NO_T, (MESH, VEC3, VEC3) -> MESH_AABB, "mesh", Zero,
+        iterate("mesh_query_aabb_next", "mesh_query_aabb_done", "mesh_query_aabb_item");
+    "mesh_query_aabb_next": NO_T, (MESH, MESH_AABB) -> MESH_AABB, "mesh", Zero, internal;
+    "mesh_query_aabb_done": NO_T, (MESH_AABB) -> BOOL, "mesh", Zero, internal;
+    "mesh_query_aabb_item": NO_T, (MESH_AABB) -> I32, "mesh", Zero, internal;
+    "mesh_query_point": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
+        results("(result, sign, face, u, v)");
+    "mesh_query_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
+        results("(result, sign, face, u, v)");
+    "mesh_query_furthest_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Zero,
+        results("(result, sign, face, u, v)");
+    "mesh_query_ray": NO_T, (MESH, VEC3, VEC3, F32) -> RAY_RESULT, "mesh", Zero,
+        results("(result, sign, face, t, u, v, normal)");
+    "mesh_eval_position": NO_T, (MESH, Index, F32, F32) -> VEC3, "mesh", Adjoint;
+    "mesh_eval_velocity": NO_T, (MESH, Index, F32, F32) -> VEC3, "mesh", Adjoint;
+    "mesh_eval_face_normal": NO_T, (MESH, Index) -> VEC3, "mesh", Zero;
+    // Triangle geometry (warp-core `objects::geometry`, wp_geometry.h): no object needed.
+    "closest_point_triangle": NO_T, (VEC3, VEC3, VEC3, VEC3) -> VEC3, "geometry", Adjoint,
+        extension;
+    "intersect_tri_tri": NO_T, (VEC3, VEC3, VEC3, VEC3, VEC3, VEC3) -> BOOL, "geometry", Zero;
 }
 
 /// Looks a builtin up by name (internal rows included).
@@ -1008,7 +1055,7 @@ mod tests {
                 assert!(b.reads_object() && next.reads_object(), "{}", b.name);
             }
             // A query state is made by its query and consumed by its steps only.
-            if b.ret == GRID_QUERY {
+            if [GRID_QUERY, BVH_AABB, BVH_RAY, MESH_AABB].contains(&b.ret) {
                 assert!(b.iterate.is_some() || b.internal, "{}", b.name);
             }
         }
@@ -1440,6 +1487,73 @@ mod tests {
         for b in BUILTINS.iter().filter(|b| b.default_last.is_some()) {
             assert_eq!(b.params.len(), 2, "{}", b.name);
         }
+    }
+
+    #[test]
+    fn bvh_and_mesh_rows() {
+        let mesh = Ty::Object(ObjectKind::Mesh);
+        let bvh = Ty::Object(ObjectKind::Bvh);
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let b = Ty::Scalar(Scalar::Bool);
+        // The point queries' tuples, whatever the literal.
+        for name in [
+            "mesh_query_point",
+            "mesh_query_point_no_sign",
+            "mesh_query_furthest_point_no_sign",
+        ] {
+            let q = lookup_user(name).unwrap();
+            let r = q
+                .resolve(&[
+                    k(mesh.clone()),
+                    k(v3.clone()),
+                    ArgTy::Literal { float: true },
+                ])
+                .unwrap();
+            assert_eq!(r.params, vec![mesh.clone(), v3.clone(), F32], "{name}");
+            assert_eq!(
+                r.ret,
+                Ty::Tuple(vec![b.clone(), F32, I32, F32, F32]),
+                "{name}"
+            );
+            assert!(q.faults(), "{name}");
+            // A BVH is not a mesh.
+            let e = q
+                .resolve(&[k(bvh.clone()), k(v3.clone()), k(F32)])
+                .unwrap_err();
+            assert!(e.contains("expected `Mesh`"), "{e}");
+        }
+        let r = lookup_user("mesh_query_ray")
+            .unwrap()
+            .resolve(&[k(mesh.clone()), k(v3.clone()), k(v3.clone()), k(F32)])
+            .unwrap();
+        assert_eq!(
+            r.ret,
+            Ty::Tuple(vec![b.clone(), F32, I32, F32, F32, F32, v3.clone()])
+        );
+        // Faces of any integer type.
+        let ev = lookup_user("mesh_eval_position").unwrap();
+        for t in [I32, Ty::Scalar(Scalar::Usize)] {
+            let r = ev
+                .resolve(&[k(mesh.clone()), k(t.clone()), k(F32), k(F32)])
+                .unwrap();
+            assert_eq!((r.params[1].clone(), r.ret), (t, v3.clone()));
+        }
+        // The loops' items are i32.
+        for (q, item) in [
+            ("bvh_query_aabb", "bvh_query_aabb_item"),
+            ("bvh_query_ray", "bvh_query_ray_item"),
+            ("mesh_query_aabb", "mesh_query_aabb_item"),
+        ] {
+            assert_eq!(lookup_user(q).unwrap().iterate.unwrap().item, item);
+            assert_eq!(lookup(item).unwrap().ret, Pos::Fixed(Scalar::I32));
+            assert!(lookup_user(item).is_none());
+        }
+        let r = lookup_user("closest_point_triangle")
+            .unwrap()
+            .resolve(&[k(v3.clone()), k(v3.clone()), k(v3.clone()), k(v3.clone())])
+            .unwrap();
+        assert_eq!(r.ret, v3);
+        assert!(!lookup("closest_point_triangle").unwrap().faults());
     }
 
     #[test]

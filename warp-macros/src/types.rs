@@ -116,7 +116,7 @@ pub fn f16_bits(v: f64) -> u16 {
     sign | mag
 }
 
-/// The kinds of kernel-visible host object (Warp's hash grid; later its BVH, mesh, volume),
+/// The kinds of kernel-visible host object (Warp's hash grid, BVH and mesh; later its volume),
 /// and the values their queries carry between steps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ObjectKind {
@@ -126,6 +126,18 @@ pub enum ObjectKind {
     /// The state of a neighbour query, made and advanced only by the loop
     /// `for j in hash_grid_query(..)` lowers to; users never name it.
     HashGridQuery,
+    /// `Bvh`: a kernel parameter; its CPU view is `warp_core::objects::BvhView`, its CUDA type
+    /// `wp::bvh_t`.
+    Bvh,
+    /// The state of a box query over a BVH (`for i in bvh_query_aabb(..)`).
+    BvhQueryAabb,
+    /// The state of a ray query over a BVH (`for i in bvh_query_ray(..)`).
+    BvhQueryRay,
+    /// `Mesh`: a kernel parameter; its CPU view is `warp_core::objects::MeshView`, its CUDA
+    /// type `wp::mesh_t`.
+    Mesh,
+    /// The state of a box query over a mesh's faces (`for f in mesh_query_aabb(..)`).
+    MeshQueryAabb,
 }
 
 /// One row per object kind: every fact the front end and the emitters need about it.
@@ -163,6 +175,46 @@ pub static OBJECTS: &[ObjectRow] = &[
         rust: "HashGridQuery",
         cuda: "wp::hash_grid_query_t",
         section: "hash_grid",
+    },
+    ObjectRow {
+        kind: ObjectKind::Bvh,
+        name: "Bvh",
+        param: true,
+        rust: "BvhView",
+        cuda: "wp::bvh_t",
+        section: "bvh",
+    },
+    ObjectRow {
+        kind: ObjectKind::BvhQueryAabb,
+        name: "BvhQueryAabb",
+        param: false,
+        rust: "BvhQueryAabb",
+        cuda: "wp::bvh_query_aabb_t",
+        section: "bvh",
+    },
+    ObjectRow {
+        kind: ObjectKind::BvhQueryRay,
+        name: "BvhQueryRay",
+        param: false,
+        rust: "BvhQueryRay",
+        cuda: "wp::bvh_query_ray_t",
+        section: "bvh",
+    },
+    ObjectRow {
+        kind: ObjectKind::Mesh,
+        name: "Mesh",
+        param: true,
+        rust: "MeshView",
+        cuda: "wp::mesh_t",
+        section: "mesh",
+    },
+    ObjectRow {
+        kind: ObjectKind::MeshQueryAabb,
+        name: "MeshQueryAabb",
+        param: false,
+        rust: "MeshQueryAabb",
+        cuda: "wp::mesh_query_aabb_t",
+        section: "mesh",
     },
 ];
 

@@ -10,7 +10,7 @@
 //!   rules between streams and array operations.
 //! - [`kernel`]: the traits that `#[kernel]` implements (`params.rs`: the launch-argument
 //!   conversions, once for every tuple of parameter types).
-//! - [`objects`]: kernel-visible host objects ([`HashGrid`]), passed as typed parameters.
+//! - [`objects`]: kernel-visible host objects ([`HashGrid`], [`Bvh`], [`Mesh`]), passed as typed parameters.
 //! - The backends: `cpu/` and [`cuda`], each implementing the crate-private `Backend` and
 //!   `Buffer` traits (`backend.rs`); `dispatch.rs` picks a device's backend and is the only
 //!   place that names them all.
@@ -61,7 +61,7 @@ pub use kernel::{
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
-pub use objects::HashGrid;
+pub use objects::{Bvh, HashGrid, Mesh};
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
 pub use primitives::{

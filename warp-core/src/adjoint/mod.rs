@@ -36,6 +36,7 @@ use crate::builtins::math::Float;
 mod builtins;
 mod cast;
 mod float16;
+mod geometry;
 mod lanes;
 mod linalg;
 mod misc;
@@ -48,6 +49,7 @@ mod transform;
 
 pub use builtins::*;
 pub use cast::*;
+pub use geometry::*;
 pub use linalg::*;
 pub use misc::*;
 pub use noise::*;

@@ -24,8 +24,12 @@
 //!   [`objects::hash_grid`](crate::objects::hash_grid) and are re-exported here
 //!   ([`hash_grid_query`], [`hash_grid_point_id`], and the steps a `for` over a query is
 //!   lowered into).
+//! * [`geometry`]: the BVH's and the mesh's queries (sections "bvh", "mesh", "geometry"),
+//!   adapters over [`objects::bvh`](crate::objects::bvh) and
+//!   [`objects::mesh`](crate::objects::mesh) (tuple results, `i32` indices).
 
 pub mod atomic;
+pub mod geometry;
 pub mod linalg;
 pub mod math;
 pub mod misc;
@@ -36,6 +40,13 @@ pub mod svd;
 pub mod transform;
 
 pub use atomic::*;
+pub use geometry::{
+    bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,
+    bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, closest_point_triangle,
+    intersect_tri_tri, mesh_eval_face_normal, mesh_eval_position, mesh_eval_velocity,
+    mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item, mesh_query_aabb_next,
+    mesh_query_furthest_point_no_sign, mesh_query_point, mesh_query_point_no_sign, mesh_query_ray,
+};
 pub use linalg::*;
 pub use math::*;
 pub use misc::*;

@@ -458,15 +458,26 @@ impl<'a> Printer<'a> {
                 let g = self.grad(from)?;
                 self.line(sp, &format!("wp::adj_accum({a}, {g});"));
             }
-            AKind::AdjCall { func, inputs } => {
+            AKind::AdjCall {
+                func,
+                inputs,
+                faults,
+            } => {
                 let xs: Vec<String> = inputs.iter().map(|v| self.var(*v)).collect();
                 for (k, x) in xs.iter().enumerate() {
                     self.line(sp, &format!("auto __g{k} = wp::zero_like({x});"));
                 }
                 let gs: Vec<String> = (0..inputs.len()).map(|k| format!("__g{k}")).collect();
+                // An adjoint that reads an object's buffers (`adj_mesh_query_point`) takes the
+                // fault context last, as its forward call does.
+                let ctx = if *faults { ", __ctx" } else { "" };
                 self.line(
                     sp,
-                    &format!("wp::{func}({}, {}, __r);", xs.join(", "), gs.join(", ")),
+                    &format!(
+                        "wp::{func}({}, {}, __r{ctx});",
+                        xs.join(", "),
+                        gs.join(", ")
+                    ),
                 );
             }
             AKind::AdjCast { from } => {

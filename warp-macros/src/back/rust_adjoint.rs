@@ -214,13 +214,20 @@ impl Printer<'_> {
                     None => quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(&mut #a, #g);),
                 }
             }
-            AKind::AdjCall { func, inputs } => {
+            AKind::AdjCall {
+                func,
+                inputs,
+                faults,
+            } => {
                 let f = format_ident!("{}", func);
                 let xs: Vec<_> = inputs.iter().map(|v| self.var(*v)).collect();
                 let gs: Vec<_> = (0..inputs.len()).map(temp).collect();
+                // An adjoint that reads an object's buffers (`adj_mesh_query_point`) returns a
+                // `KResult`, as its forward call does.
+                let q = if *faults { quote!(?) } else { quote!() };
                 quote_spanned!(sp=>
                     #(let mut #gs = __wp::zero_like(&#xs);)*
-                    __wp::adjoint::#f(#(#xs,)* #(&mut #gs,)* __r);
+                    __wp::adjoint::#f(#(#xs,)* #(&mut #gs,)* __r)#q;
                 )
             }
             AKind::AdjCast { from } => {

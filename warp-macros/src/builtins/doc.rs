@@ -73,6 +73,8 @@ const CONSTRUCTS: &[&str] = &[
     "inverse_approx",
     // A `for` loop over a query (`front::lower::query`) is Warp's `*_query_next` loop.
     "hash_grid_query_next",
+    "bvh_query_next",
+    "mesh_query_aabb_next",
 ];
 
 const BLESS: &str = "WARP_LANG_BLESS";

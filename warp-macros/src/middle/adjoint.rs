@@ -259,7 +259,14 @@ pub enum AKind {
         from: GradSrc,
     },
     /// `__g<k> = 0` like each input, then `adj_<func>(inputs.., __g0.., __r)`.
-    AdjCall { func: String, inputs: Vec<VarId> },
+    AdjCall {
+        func: String,
+        inputs: Vec<VarId>,
+        /// The adjoint reads an array or an object's buffers (a builtin that `faults()`, like
+        /// `mesh_query_point`): the CPU call returns a `KResult` (followed by `?`), the CUDA
+        /// call takes `__ctx` last.
+        faults: bool,
+    },
     /// `__g0 = 0` like `from`, then `adj_cast(__g0, __r)`.
     AdjCast { from: VarId },
     /// The reverse of a user func's call `path(args..)` with seed `__r`: temporaries for the
@@ -826,10 +833,23 @@ impl Cx<'_> {
 
     /// `adj_<func>(inputs.., __g.., __r)`, then each temporary into its input's adjoint.
     fn call(&self, out: &mut Vec<AStmt>, func: String, inputs: &[VarId], sp: Span) {
+        self.call_faulting(out, func, inputs, false, sp)
+    }
+
+    /// [`Self::call`], of an adjoint that may fault (`faults`: see [`AKind::AdjCall`]).
+    fn call_faulting(
+        &self,
+        out: &mut Vec<AStmt>,
+        func: String,
+        inputs: &[VarId],
+        faults: bool,
+        sp: Span,
+    ) {
         out.push(at(
             AKind::AdjCall {
                 func,
                 inputs: inputs.to_vec(),
+                faults,
             },
             sp,
         ));
@@ -859,7 +879,13 @@ impl Cx<'_> {
                 // AtomicNone: only integer updates whose result is unused get here
                 // (`analysis::atomic_without_adjoint`): nothing to propagate.
                 Grad::Zero | Grad::AtomicNone => {}
-                Grad::Adjoint => self.call(&mut out, format!("adj_{}", builtin.name), args, sp),
+                Grad::Adjoint => self.call_faulting(
+                    &mut out,
+                    format!("adj_{}", builtin.name),
+                    args,
+                    builtin.faults(),
+                    sp,
+                ),
                 Grad::Atomic => {
                     // atomic_<op>(a, idx.., v): the value's adjoint comes from the gradient at idx.
                     let value = args[args.len() - 1];

@@ -11,7 +11,7 @@ use warp_core::FuncInfo;
 
 /// The builtin-table sections, in include order: section `s` is `wp_<s>.h` (in
 /// `warp-cuda/cuda/`, embedded by `warp_cuda::HEADERS`).
-pub const SECTIONS: [&str; 10] = [
+pub const SECTIONS: [&str; 13] = [
     "scalar",
     "vector",
     "linalg",
@@ -21,6 +21,9 @@ pub const SECTIONS: [&str; 10] = [
     "atomic",
     "rand",
     "hash_grid",
+    "geometry",
+    "bvh",
+    "mesh",
     "print",
 ];
 
@@ -28,11 +31,11 @@ pub const SECTIONS: [&str; 10] = [
 /// operators, casts, array gradients, the per-thread stack.
 pub const ADJOINT_CORE: &str = "wp_adjoint_core.h";
 
-/// The adjoint library's part for each section that has adjoints (`atomic`, `hash_grid` and
-/// `print` have none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
+/// The adjoint library's part for each section that has adjoints (`atomic`, `hash_grid`,
+/// `bvh` and `print` have none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
 /// NVRTC parses no more than they need. Each part includes its forward section and the parts
 /// it builds on; `wp_adjoint.h` includes them all (for host tests and hand-written code).
-pub const ADJOINT_PARTS: [(&str, &str); 7] = [
+pub const ADJOINT_PARTS: [(&str, &str); 9] = [
     ("scalar", "wp_adjoint_builtins.h"),
     ("vector", "wp_adjoint_builtins.h"),
     ("linalg", "wp_adjoint_linalg.h"),
@@ -40,6 +43,8 @@ pub const ADJOINT_PARTS: [(&str, &str); 7] = [
     ("transform", "wp_adjoint_transform.h"),
     ("misc", "wp_adjoint_misc.h"),
     ("rand", "wp_adjoint_rand.h"),
+    ("geometry", "wp_adjoint_geometry.h"),
+    ("mesh", "wp_adjoint_mesh.h"),
 ];
 
 /// The assembled source of one kernel.
@@ -320,7 +325,7 @@ mod tests {
         for s in SECTIONS {
             assert_eq!(
                 ADJOINT_PARTS.iter().any(|(p, _)| *p == s),
-                !matches!(s, "atomic" | "hash_grid" | "print"),
+                !matches!(s, "atomic" | "hash_grid" | "bvh" | "print"),
                 "{s}"
             );
         }

@@ -4,15 +4,24 @@
 //! object").
 //!
 //! - [`hash_grid`]: [`HashGrid`], Warp's hash grid for neighbour queries.
+//! - [`bvh`]: [`Bvh`], Warp's BVH over boxes (box and ray queries).
+//! - [`mesh`]: [`Mesh`], Warp's triangle mesh (closest point, ray, box queries).
+//! - [`geometry_abi`]: the CUDA parameter layouts of both ([`CudaBvh`], [`CudaMesh`]).
 
+pub mod bvh;
 pub mod bvh_build;
+pub mod geometry_abi;
 pub mod hash_grid;
 mod hash_grid_steps;
 #[doc(hidden)]
 pub mod lbvh;
+pub mod mesh;
 
 pub use crate::backend::ObjectLibrary;
+pub use bvh::Bvh;
+pub use geometry_abi::{CudaBvh, CudaBvhTree, CudaMesh};
 pub use hash_grid::{CudaHashGrid, HashGrid};
+pub use mesh::Mesh;
 
 /// Every host object's CUDA build library (each compiled the first time a GPU runs one of
 /// its steps).

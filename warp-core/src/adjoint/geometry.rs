@@ -1,0 +1,174 @@
+//! Adjoints of the BVH and mesh builtins ([`crate::builtins::geometry`]), each through the
+//! object's own adjoint in [`crate::objects::mesh`] or [`crate::objects::geometry`]:
+//!
+//! * `mesh_query_point`, `mesh_query_point_no_sign`: the query point's adjoint through the
+//!   barycentrics `u`, `v` of the closest point (zero at a vertex, along the edge on an edge,
+//!   the projection onto the face inside it); `result`, `sign` and `face` have none, nor do
+//!   the mesh and `max_dist`.
+//! * `mesh_query_furthest_point_no_sign`: none (the furthest point is a vertex).
+//! * `mesh_eval_position`, `mesh_eval_velocity`: `u` and `v`'s (the points and velocities get
+//!   none, as in Warp).
+//! * `closest_point_triangle`: the query point's, through `(u, v, w)` (the vertices get none).
+//!
+//! Like the forward queries these read the mesh's buffers, so they return a `KResult` (a fault
+//! naming the mesh's parameter) and the adjoint code calls them with `?`.
+
+use glam::Vec3;
+
+use super::Adjoint;
+use crate::builtins::geometry::{point_struct, PointResult};
+use crate::objects::geometry::{self, TriFeature, TriangleClosestPoint};
+use crate::objects::{mesh, MeshView};
+use crate::{KResult, KernelIndex};
+
+/// Adjoint of `mesh_query_point` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
+}
+
+/// Adjoint of `mesh_query_point_no_sign` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point_no_sign(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point_no_sign(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
+}
+
+/// Adjoint of `mesh_eval_position` with respect to `u` and `v`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn adj_mesh_eval_position<I: KernelIndex<1>>(
+    m: MeshView,
+    face: I,
+    u: f32,
+    v: f32,
+    adj_mesh: &mut MeshView,
+    adj_face: &mut I,
+    adj_u: &mut f32,
+    adj_v: &mut f32,
+    adj_ret: Vec3,
+) -> KResult<()> {
+    mesh::adj_mesh_eval_position(m, face, u, v, adj_mesh, adj_face, adj_u, adj_v, adj_ret)
+}
+
+/// Adjoint of `mesh_eval_velocity` with respect to `u` and `v`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn adj_mesh_eval_velocity<I: KernelIndex<1>>(
+    m: MeshView,
+    face: I,
+    u: f32,
+    v: f32,
+    adj_mesh: &mut MeshView,
+    adj_face: &mut I,
+    adj_u: &mut f32,
+    adj_v: &mut f32,
+    adj_ret: Vec3,
+) -> KResult<()> {
+    mesh::adj_mesh_eval_velocity(m, face, u, v, adj_mesh, adj_face, adj_u, adj_v, adj_ret)
+}
+
+/// Adjoint of `closest_point_triangle` with respect to the query point `p` (the vertices get
+/// none).
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn adj_closest_point_triangle(
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+    p: Vec3,
+    adj_a: &mut Vec3,
+    adj_b: &mut Vec3,
+    adj_c: &mut Vec3,
+    adj_p: &mut Vec3,
+    adj_ret: Vec3,
+) {
+    let g = TriangleClosestPoint {
+        u: adj_ret.x,
+        v: adj_ret.y,
+        w: adj_ret.z,
+        feature: TriFeature::Face,
+    };
+    geometry::adj_closest_point_triangle(a, b, c, p, adj_a, adj_b, adj_c, adj_p, g);
+}
+
+// A point query's result (`(result, sign, face, u, v)`) and a ray query's
+// (`(result, sign, face, t, u, v, normal)`) have the tuple of their elements' adjoints.
+impl<A: Adjoint, B: Adjoint, C: Adjoint, D: Adjoint, E: Adjoint> Adjoint for (A, B, C, D, E) {
+    #[inline(always)]
+    fn adj_zero() -> Self {
+        (
+            A::adj_zero(),
+            B::adj_zero(),
+            C::adj_zero(),
+            D::adj_zero(),
+            E::adj_zero(),
+        )
+    }
+    #[inline(always)]
+    fn adj_accum(&mut self, v: Self) {
+        self.0.adj_accum(v.0);
+        self.1.adj_accum(v.1);
+        self.2.adj_accum(v.2);
+        self.3.adj_accum(v.3);
+        self.4.adj_accum(v.4);
+    }
+}
+
+impl<A: Adjoint, B: Adjoint, C: Adjoint, D: Adjoint, E: Adjoint, F: Adjoint, G: Adjoint> Adjoint
+    for (A, B, C, D, E, F, G)
+{
+    #[inline(always)]
+    fn adj_zero() -> Self {
+        (
+            A::adj_zero(),
+            B::adj_zero(),
+            C::adj_zero(),
+            D::adj_zero(),
+            E::adj_zero(),
+            F::adj_zero(),
+            G::adj_zero(),
+        )
+    }
+    #[inline(always)]
+    fn adj_accum(&mut self, v: Self) {
+        self.0.adj_accum(v.0);
+        self.1.adj_accum(v.1);
+        self.2.adj_accum(v.2);
+        self.3.adj_accum(v.3);
+        self.4.adj_accum(v.4);
+        self.5.adj_accum(v.5);
+        self.6.adj_accum(v.6);
+    }
+}

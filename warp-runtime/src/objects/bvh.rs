@@ -1,0 +1,471 @@
+//! [`Bvh`]: Warp's bounding volume hierarchy over boxes. `Bvh::new(&lowers, &uppers)` builds a
+//! tree over the boxes `[lowers[i], uppers[i]]` on the arrays' device; kernels take it as a
+//! parameter `bvh: Bvh` and iterate `for i in bvh_query_aabb(bvh, lo, hi)` or
+//! `for i in bvh_query_ray(bvh, start, dir)` over the boxes that overlap (see
+//! `warp_core::objects::bvh` for the node layout and the stackless traversal, which the CUDA
+//! library mirrors).
+//!
+//! The BVH keeps the user's `lowers` and `uppers` arrays (handles sharing their memory, as
+//! Warp's `bvh.lowers`): a kernel may move the boxes, then [`Bvh::refit`] recomputes the
+//! tree's boxes from them, keeping its shape.
+//!
+//! # Where the tree is built
+//!
+//! Every device builds on the host, with the binned SAH builder of
+//! [`bvh_build`](super::bvh_build): on a GPU the boxes are copied to the host, the tree built
+//! there and its three buffers uploaded; a refit likewise (the boxes down, the nodes up). This
+//! is the interim path: a GPU LBVH build and refit (kernels of `wp_bvh.h`, through
+//! `dispatch::object_step` like the hash grid's) is a separate task and changes nothing here
+//! but the two build functions of [`Tree`]. The host keeps a copy of the tree, so a GPU refit
+//! reads back only the boxes.
+//!
+//! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps of a launch's BVH) shares the
+//! tree; a refit gives the refit BVH a new node buffer, so a recorded launch replays in
+//! backward against the tree it ran with. (The boxes themselves are the user's arrays, which a
+//! replay reads as they are then, like any array argument.)
+
+use std::sync::Arc;
+
+use glam::{Vec3, Vec4};
+use warp_core::objects::bvh::{BvhNode, BvhTree};
+use warp_core::objects::BvhView;
+use warp_core::ArrayView;
+
+use super::bvh_build::{build_sah, refit as refit_nodes, BuiltBvh};
+use super::geometry_abi::{CudaBvh, CudaBvhTree};
+use crate::array::Array;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::{ArgCtx, KernelArg};
+
+/// An `InvalidArgument` from `what` (`"Bvh::new"`) about its argument `arg`.
+pub(crate) fn bad(what: &str, arg: &str, why: impl std::fmt::Display) -> Error {
+    Error::InvalidArgument {
+        what: format!("{what}: argument `{arg}` {why}"),
+    }
+}
+
+/// The most primitives a tree takes (the builder's limit: node indices are `i32`, and a tree
+/// has up to `2n - 1` nodes).
+pub(crate) const MAX_PRIMS: usize = (i32::MAX / 2) as usize;
+
+/// The index and value of the first non-finite vector of `v`.
+pub(crate) fn first_non_finite(v: &[Vec3]) -> Option<(usize, Vec3)> {
+    v.iter().position(|p| !p.is_finite()).map(|i| (i, v[i]))
+}
+
+/// Checks that `a` (argument `arg` of `what`) is on `device`.
+pub(crate) fn same_device<T: crate::array::Element>(
+    what: &str,
+    arg: &str,
+    a: &Array<T>,
+    device: &Device,
+    other: &str,
+) -> Result<()> {
+    if a.device() == device {
+        return Ok(());
+    }
+    Err(bad(
+        what,
+        arg,
+        format!(
+            "is on device \"{}\" but `{other}` is on \"{}\": all arrays of one object must be \
+             on one device",
+            a.device().alias(),
+            device.alias()
+        ),
+    ))
+}
+
+/// Checks that `a` is contiguous (kernels read the object's arrays as plain runs).
+pub(crate) fn contiguous<T: crate::array::Element>(
+    what: &str,
+    arg: &str,
+    a: &Array<T>,
+) -> Result<()> {
+    if a.is_contiguous() {
+        return Ok(());
+    }
+    Err(bad(
+        what,
+        arg,
+        "is not contiguous (a strided view): pass a contiguous array, which the object keeps \
+         and kernels read directly",
+    ))
+}
+
+/// A built tree on one device, and its host copy.
+///
+/// The host copy serves the interim build path (module docs): a refit updates the host nodes
+/// and uploads them, reading back only the primitive boxes. `parents` and `prim_ids` never
+/// change after a build, so refit trees share them.
+pub(crate) struct Tree {
+    /// The nodes on the device, two `Vec4`s (32 bytes, 16-aligned) per `BvhNode`.
+    nodes: Array<Vec4>,
+    parents: Array<i32>,
+    prim_ids: Array<i32>,
+    host_nodes: Vec<BvhNode>,
+    host_parents: Arc<Vec<i32>>,
+    host_prim_ids: Arc<Vec<i32>>,
+}
+
+/// The nodes as the device buffer holds them.
+fn node_words(nodes: &[BvhNode]) -> &[Vec4] {
+    bytemuck::cast_slice(nodes)
+}
+
+impl Tree {
+    /// A tree over the boxes `[lowers[i], uppers[i]]` (validated by the caller: equal lengths,
+    /// finite, at most [`MAX_PRIMS`]), uploaded to `device`.
+    pub(crate) fn build(lowers: &[Vec3], uppers: &[Vec3], device: &Device) -> Result<Tree> {
+        let BuiltBvh {
+            nodes,
+            parents,
+            prim_ids,
+        } = build_sah(lowers, uppers);
+        Ok(Tree {
+            nodes: Array::from_slice(node_words(&nodes), device)?,
+            parents: Array::from_slice(&parents, device)?,
+            prim_ids: Array::from_slice(&prim_ids, device)?,
+            host_nodes: nodes,
+            host_parents: Arc::new(parents),
+            host_prim_ids: Arc::new(prim_ids),
+        })
+    }
+
+    /// This tree's shape with its boxes recomputed from the primitive boxes (as many as when
+    /// built): a new node buffer, the parents and primitive ids shared.
+    pub(crate) fn refit(&self, lowers: &[Vec3], uppers: &[Vec3]) -> Result<Tree> {
+        debug_assert_eq!(lowers.len(), self.host_prim_ids.len());
+        let mut nodes = self.host_nodes.clone();
+        if self.host_prim_ids.is_empty() {
+            // The empty tree keeps its inverted box.
+            nodes = vec![BvhNode::EMPTY];
+        } else {
+            refit_nodes(
+                &mut nodes,
+                &self.host_parents,
+                &self.host_prim_ids,
+                lowers,
+                uppers,
+            );
+        }
+        Ok(Tree {
+            nodes: Array::from_slice(node_words(&nodes), self.nodes.device())?,
+            parents: self.parents.clone(),
+            prim_ids: self.prim_ids.clone(),
+            host_nodes: nodes,
+            host_parents: Arc::clone(&self.host_parents),
+            host_prim_ids: Arc::clone(&self.host_prim_ids),
+        })
+    }
+
+    /// Primitives in the tree.
+    pub(crate) fn num_prims(&self) -> usize {
+        self.host_prim_ids.len()
+    }
+
+    /// The host copy: nodes, parents, primitive ids.
+    pub(crate) fn host(&self) -> (&[BvhNode], &[i32], &[i32]) {
+        (&self.host_nodes, &self.host_parents, &self.host_prim_ids)
+    }
+
+    /// The CPU kernels' view of the tree; faults carry `ctx`'s names.
+    ///
+    /// # Safety
+    /// As [`KernelArg::cpu_view`]: the tree (its arrays) must outlive the view's use.
+    pub(crate) unsafe fn cpu_tree(&self, ctx: &ArgCtx<'_>) -> BvhTree {
+        let words = self.nodes.cpu_view(ctx.kernel, ctx.arg);
+        let n = self.host_nodes.len();
+        let p0 = words
+            .ptr_at(0usize)
+            .expect("a tree has at least one node")
+            .cast::<BvhNode>();
+        // SAFETY: the node buffer holds `n` nodes as `2n` contiguous, 16-aligned `Vec4`s (a
+        // `BvhNode` is 32 bytes of plain data, align 4).
+        let nodes = unsafe { ArrayView::new(p0, [n], [1], ctx.kernel, ctx.arg) };
+        BvhTree::new(
+            nodes,
+            self.parents.cpu_view(ctx.kernel, ctx.arg),
+            self.prim_ids.cpu_view(ctx.kernel, ctx.arg),
+        )
+    }
+
+    /// The CUDA kernels' view of the tree.
+    pub(crate) fn cuda_tree(&self) -> CudaBvhTree {
+        CudaBvhTree {
+            nodes: self.nodes.device_address(),
+            parents: self.parents.device_address(),
+            prim_ids: self.prim_ids.device_address(),
+            num_nodes: self.host_nodes.len() as i32,
+            num_prims: self.host_prim_ids.len() as i32,
+        }
+    }
+}
+
+/// A BVH over boxes on one device (Warp's `wp.Bvh(lowers, uppers)`; the suite
+/// `tests/suite/bvh.rs` runs kernels like this one):
+///
+/// ```ignore
+/// use warp_lang as wp;
+/// use wp::prelude::*;
+///
+/// #[wp::kernel]
+/// fn count_hits(bvh: Bvh, lo: Array<Vec3>, hi: Array<Vec3>, counts: Array<i32>) {
+///     let i = tid();
+///     let mut n = 0;
+///     for _j in bvh_query_aabb(bvh, lo[i], hi[i]) {
+///         n += 1;
+///     }
+///     counts[i] = n;
+/// }
+///
+/// let dev = wp::cpu();
+/// let lowers = wp::Array::from_slice(&[Vec3::ZERO, Vec3::splat(2.0)], &dev).unwrap();
+/// let uppers = wp::Array::from_slice(&[Vec3::ONE, Vec3::splat(3.0)], &dev).unwrap();
+/// let bvh = wp::Bvh::new(&lowers, &uppers).unwrap();
+/// let counts = wp::Array::<i32>::zeros(1, &dev).unwrap();
+/// let q = wp::Array::from_slice(&[Vec3::splat(0.5)], &dev).unwrap();
+/// let r = wp::Array::from_slice(&[Vec3::splat(2.5)], &dev).unwrap();
+/// wp::launch(count_hits, 1, (&bvh, &q, &r, &counts), &dev).unwrap();
+/// assert_eq!(counts.to_vec().unwrap(), vec![2]);
+/// ```
+#[derive(Clone)]
+pub struct Bvh {
+    device: Device,
+    lowers: Array<Vec3>,
+    uppers: Array<Vec3>,
+    tree: Arc<Tree>,
+}
+
+impl std::fmt::Debug for Bvh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bvh")
+            .field("device", &self.device.alias())
+            .field("num_prims", &self.tree.num_prims())
+            .field("num_nodes", &self.tree.host_nodes.len())
+            .finish()
+    }
+}
+
+/// Reads and validates a BVH's boxes: equal lengths, finite, not too many.
+fn read_boxes(what: &str, lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<[Vec<Vec3>; 2]> {
+    if lowers.len() != uppers.len() {
+        return Err(bad(
+            what,
+            "uppers",
+            format!(
+                "has {} boxes but `lowers` has {}: one upper corner per lower corner",
+                uppers.len(),
+                lowers.len()
+            ),
+        ));
+    }
+    if lowers.len() > MAX_PRIMS {
+        return Err(bad(
+            what,
+            "lowers",
+            format!("has {} boxes, more than {MAX_PRIMS}", lowers.len()),
+        ));
+    }
+    let (lo, hi) = (lowers.to_vec()?, uppers.to_vec()?);
+    for (name, v) in [("lowers", &lo), ("uppers", &hi)] {
+        if let Some((i, p)) = first_non_finite(v) {
+            return Err(bad(
+                what,
+                name,
+                format!("has a non-finite corner at index {i}: {p:?}"),
+            ));
+        }
+    }
+    Ok([lo, hi])
+}
+
+impl Bvh {
+    /// Builds a BVH over the boxes `[lowers[i], uppers[i]]` on the arrays' device (Warp's
+    /// `wp.Bvh(lowers, uppers)`). The BVH keeps both arrays (sharing their memory): queries
+    /// read the boxes from them, and [`refit`](Bvh::refit) re-reads them. No box gives the
+    /// empty tree, whose queries find nothing. A box with a lower corner above its upper one
+    /// is never found (as in Warp).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming the argument: `lowers` and `uppers` of different
+    /// lengths or on different devices, either not contiguous, a NaN or infinite corner (the
+    /// first such index and value), more than `i32::MAX / 2` boxes; device errors.
+    pub fn new(lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<Bvh> {
+        const WHAT: &str = "Bvh::new";
+        let device = lowers.device().clone();
+        same_device(WHAT, "uppers", uppers, &device, "lowers")?;
+        contiguous(WHAT, "lowers", lowers)?;
+        contiguous(WHAT, "uppers", uppers)?;
+        let [lo, hi] = read_boxes(WHAT, lowers, uppers)?;
+        let tree = Tree::build(&lo, &hi, &device)?;
+        Ok(Bvh {
+            device,
+            lowers: lowers.clone(),
+            uppers: uppers.clone(),
+            tree: Arc::new(tree),
+        })
+    }
+
+    /// Recomputes the tree's boxes from the current `lowers` and `uppers` (after a kernel or
+    /// the host moved the boxes), keeping the tree's shape (Warp's `refit`): fast, but queries
+    /// slow down when the boxes moved far from where they were built (then build a new `Bvh`).
+    /// A failed refit leaves the BVH as it was.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `lowers` or `uppers` when a corner is NaN or
+    /// infinite; device errors.
+    pub fn refit(&mut self) -> Result<()> {
+        let [lo, hi] = read_boxes("Bvh::refit", &self.lowers, &self.uppers)?;
+        self.tree = Arc::new(self.tree.refit(&lo, &hi)?);
+        Ok(())
+    }
+
+    /// The device the BVH lives on (the device of the launches that take it).
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The boxes' lower corners: the user's array, shared.
+    pub fn lowers(&self) -> &Array<Vec3> {
+        &self.lowers
+    }
+
+    /// The boxes' upper corners: the user's array, shared.
+    pub fn uppers(&self) -> &Array<Vec3> {
+        &self.uppers
+    }
+
+    /// The number of boxes.
+    pub fn num_prims(&self) -> usize {
+        self.tree.num_prims()
+    }
+
+    /// The number of nodes of the tree.
+    pub fn num_nodes(&self) -> usize {
+        self.tree.host_nodes.len()
+    }
+
+    /// The tree as built (the host copy): nodes, parent links and primitive ids in the layout
+    /// of `warp_core::objects::bvh`, for inspection and tests.
+    pub fn tree_host(&self) -> (Vec<BvhNode>, Vec<i32>, Vec<i32>) {
+        let (n, p, i) = self.tree.host();
+        (n.to_vec(), p.to_vec(), i.to_vec())
+    }
+
+    fn check_device(&self, ctx: &ArgCtx<'_>) -> Result<()> {
+        if &self.device != ctx.device {
+            return Err(Error::DeviceMismatch {
+                kernel: ctx.kernel,
+                arg: ctx.arg,
+                expected: ctx.device.alias().to_string(),
+                found: self.device.alias().to_string(),
+            });
+        }
+        Ok(())
+    }
+}
+
+impl KernelArg for Bvh {
+    type Arg<'a> = &'a Bvh;
+    type CpuView = BvhView;
+
+    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
+        arg.check_device(ctx)?;
+        // SAFETY: the launch borrows the BVH (its tree and arrays) for the view's whole use.
+        let tree = unsafe { arg.tree.cpu_tree(ctx) };
+        Ok(BvhView::new(
+            tree,
+            arg.lowers.cpu_view(ctx.kernel, ctx.arg),
+            arg.uppers.cpu_view(ctx.kernel, ctx.arg),
+        ))
+    }
+
+    type CudaArg = CudaBvh;
+
+    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
+        arg.check_device(ctx)?;
+        Ok(CudaBvh {
+            tree: arg.tree.cuda_tree(),
+            lowers: arg.lowers.device_address(),
+            uppers: arg.uppers.device_address(),
+            arg: ctx.index as i32,
+            pad: 0,
+        })
+    }
+
+    // A BVH carries no gradient.
+    type GradView = ();
+
+    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    type CudaGrad = ();
+
+    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    /// A clone sharing the tree: the tape replays against the tree as it was.
+    type Owned = Bvh;
+
+    fn own(arg: &Self::Arg<'_>) -> Bvh {
+        (*arg).clone()
+    }
+
+    fn borrow(owned: &Bvh) -> &Bvh {
+        owned
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::bvh_build::check_layout;
+    use super::*;
+
+    fn arr(v: &[Vec3]) -> Array<Vec3> {
+        Array::from_slice(v, &crate::cpu()).unwrap()
+    }
+
+    #[test]
+    fn builds_refits_and_copies_on_write() {
+        let lo: Vec<Vec3> = (0..50).map(|i| Vec3::splat(i as f32)).collect();
+        let hi: Vec<Vec3> = lo.iter().map(|p| *p + 0.5).collect();
+        let (l, u) = (arr(&lo), arr(&hi));
+        let mut bvh = Bvh::new(&l, &u).unwrap();
+        assert_eq!(bvh.num_prims(), 50);
+        let (n, p, ids) = bvh.tree_host();
+        check_layout(&n, &p, &ids, &lo, &hi).unwrap();
+        let kept = bvh.clone();
+        let moved: Vec<Vec3> = lo.iter().map(|p| *p + 100.0).collect();
+        l.copy_from(&arr(&moved)).unwrap();
+        let moved_hi: Vec<Vec3> = moved.iter().map(|p| *p + 0.5).collect();
+        u.copy_from(&arr(&moved_hi)).unwrap();
+        bvh.refit().unwrap();
+        let (n2, p2, ids2) = bvh.tree_host();
+        check_layout(&n2, &p2, &ids2, &moved, &moved_hi).unwrap();
+        assert_eq!((p2, ids2), (p, ids), "a refit keeps the shape");
+        assert_eq!(kept.tree_host().0, n, "the clone keeps its tree");
+        assert_eq!(n2[0].lower, [100.0; 3]);
+    }
+
+    #[test]
+    fn empty_and_bad_input() {
+        let e = Bvh::new(&arr(&[]), &arr(&[])).unwrap();
+        assert_eq!((e.num_prims(), e.num_nodes()), (0, 1));
+        let err = Bvh::new(&arr(&[Vec3::ZERO]), &arr(&[])).unwrap_err();
+        assert!(err.to_string().contains("argument `uppers`"), "{err}");
+        let err = Bvh::new(
+            &arr(&[Vec3::ZERO, Vec3::new(0.0, f32::NAN, 0.0)]),
+            &arr(&[Vec3::ONE, Vec3::ONE]),
+        )
+        .unwrap_err();
+        let t = err.to_string();
+        assert!(
+            t.contains("argument `lowers`") && t.contains("index 1"),
+            "{t}"
+        );
+    }
+}

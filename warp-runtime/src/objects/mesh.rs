@@ -1,0 +1,419 @@
+//! [`Mesh`]: Warp's triangle mesh. `Mesh::new(&points, &indices, velocities)` builds a BVH
+//! over the triangles `points[indices[3f..3f + 3]]` on the arrays' device; kernels take it as a
+//! parameter `mesh: Mesh` and call the mesh queries (`mesh_query_point`, `mesh_query_ray`,
+//! `for f in mesh_query_aabb(mesh, lo, hi)`, `mesh_eval_position`, ...; see
+//! `warp_core::objects::mesh` for their meaning, which the CUDA library mirrors).
+//!
+//! The mesh keeps the user's `points` (and `velocities`) arrays, sharing their memory, as
+//! Warp's `mesh.points`: a kernel may deform the mesh by writing [`Mesh::points`], then
+//! [`Mesh::refit`] recomputes the tree's boxes. The indices are copied (the mesh validated
+//! them against the points; a later change could not be).
+//!
+//! The build and the refit run on the host for every device, as for [`Bvh`](super::Bvh) (see
+//! its module docs: the interim path until the GPU LBVH build exists): on a GPU the points
+//! are read back, the tree built or refit on the host and uploaded.
+//!
+//! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit gives
+//! the refit mesh a new node buffer, so a recorded launch replays against the tree it ran
+//! with.
+
+use std::sync::Arc;
+
+use glam::Vec3;
+use warp_core::objects::MeshView;
+
+use super::bvh::{bad, contiguous, first_non_finite, same_device, Tree, MAX_PRIMS};
+use super::geometry_abi::CudaMesh;
+use crate::array::Array;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::{ArgCtx, KernelArg};
+
+/// A triangle mesh on one device (Warp's `wp.Mesh(points, indices, velocities)`; the suite
+/// `tests/suite/mesh.rs` runs kernels like this one):
+///
+/// ```ignore
+/// use warp_lang as wp;
+/// use wp::prelude::*;
+///
+/// #[wp::kernel]
+/// fn closest(mesh: Mesh, q: Array<Vec3>, out: Array<Vec3>) {
+///     let i = tid();
+///     let (found, _sign, face, u, v) = mesh_query_point_no_sign(mesh, q[i], 10.0);
+///     if found {
+///         out[i] = mesh_eval_position(mesh, face, u, v);
+///     }
+/// }
+///
+/// let dev = wp::cpu();
+/// let points = wp::Array::from_slice(&[Vec3::ZERO, Vec3::X, Vec3::Y], &dev).unwrap();
+/// let indices = wp::Array::from_slice(&[0, 1, 2], &dev).unwrap();
+/// let mesh = wp::Mesh::new(&points, &indices, None).unwrap();
+/// let q = wp::Array::from_slice(&[Vec3::new(0.25, 0.25, 1.0)], &dev).unwrap();
+/// let out = wp::Array::<Vec3>::zeros(1, &dev).unwrap();
+/// wp::launch(closest, 1, (&mesh, &q, &out), &dev).unwrap();
+/// assert_eq!(out.to_vec().unwrap(), vec![Vec3::new(0.25, 0.25, 0.0)]);
+/// ```
+#[derive(Clone)]
+pub struct Mesh {
+    device: Device,
+    points: Array<Vec3>,
+    velocities: Option<Array<Vec3>>,
+    /// The mesh's own copy of the indices, on its device.
+    indices: Array<i32>,
+    /// The same, on the host (the triangles' boxes at a refit).
+    host_indices: Arc<Vec<i32>>,
+    /// The point count the indices were validated against (the build's).
+    num_points: usize,
+    tree: Arc<Tree>,
+}
+
+impl std::fmt::Debug for Mesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Mesh")
+            .field("device", &self.device.alias())
+            .field("num_points", &self.num_points)
+            .field("num_faces", &self.num_faces())
+            .field("velocities", &self.velocities.is_some())
+            .finish()
+    }
+}
+
+/// The triangles' boxes.
+fn triangle_boxes(points: &[Vec3], indices: &[i32]) -> (Vec<Vec3>, Vec<Vec3>) {
+    indices
+        .chunks_exact(3)
+        .map(|t| {
+            let [a, b, c] = [0, 1, 2].map(|k| points[t[k] as usize]);
+            (a.min(b).min(c), a.max(b).max(c))
+        })
+        .unzip()
+}
+
+/// Reads the points back and checks them: as many as `n`, all finite.
+fn read_points(what: &str, points: &Array<Vec3>, n: usize) -> Result<Vec<Vec3>> {
+    if points.len() != n {
+        return Err(bad(
+            what,
+            "points",
+            format!(
+                "has {} points but the mesh was built with {n}: its indices were checked \
+                 against those (build a new Mesh for a new point count)",
+                points.len()
+            ),
+        ));
+    }
+    let p = points.to_vec()?;
+    if let Some((i, v)) = first_non_finite(&p) {
+        return Err(bad(
+            what,
+            "points",
+            format!("has a non-finite point at index {i}: {v:?}"),
+        ));
+    }
+    Ok(p)
+}
+
+/// Checks `velocities` against `points`: device, contiguity, one per point.
+fn check_velocities(what: &str, v: &Array<Vec3>, points: &Array<Vec3>) -> Result<()> {
+    same_device(what, "velocities", v, points.device(), "points")?;
+    contiguous(what, "velocities", v)?;
+    if v.len() != points.len() {
+        return Err(bad(
+            what,
+            "velocities",
+            format!(
+                "has {} velocities for {} points: one per point",
+                v.len(),
+                points.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+impl Mesh {
+    /// Builds a mesh of the triangles `indices[3f], indices[3f + 1], indices[3f + 2]` (indices
+    /// into `points`) on the arrays' device, with optional per-point `velocities` (Warp's
+    /// `wp.Mesh(points, indices, velocities)`). The mesh keeps `points` and `velocities`
+    /// (sharing their memory: [`points`](Mesh::points)) and a copy of the indices. No
+    /// triangle gives the empty mesh, whose queries find nothing. Degenerate triangles are
+    /// allowed (see `warp_core::objects::mesh` for how queries treat them).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming the argument: `indices` whose length is not a
+    /// multiple of 3, or with an index outside `0..points.len()` (the first such position and
+    /// value); `points` with a NaN or infinite coordinate (the first such index); `velocities`
+    /// not one per point; arrays on different devices or not contiguous; more than
+    /// `i32::MAX / 2` triangles or `i32::MAX` points; device errors.
+    pub fn new(
+        points: &Array<Vec3>,
+        indices: &Array<i32>,
+        velocities: Option<&Array<Vec3>>,
+    ) -> Result<Mesh> {
+        const WHAT: &str = "Mesh::new";
+        let device = points.device().clone();
+        same_device(WHAT, "indices", indices, &device, "points")?;
+        contiguous(WHAT, "points", points)?;
+        if let Some(v) = velocities {
+            check_velocities(WHAT, v, points)?;
+        }
+        let n = points.len();
+        if n > i32::MAX as usize {
+            return Err(bad(
+                WHAT,
+                "points",
+                format!("has {n} points, more than i32::MAX (indices are i32, as in Warp)"),
+            ));
+        }
+        if !indices.len().is_multiple_of(3) {
+            return Err(bad(
+                WHAT,
+                "indices",
+                format!(
+                    "has {} entries, not a multiple of 3 (three vertex indices per triangle)",
+                    indices.len()
+                ),
+            ));
+        }
+        if indices.len() / 3 > MAX_PRIMS {
+            return Err(bad(
+                WHAT,
+                "indices",
+                format!("has {} triangles, more than {MAX_PRIMS}", indices.len() / 3),
+            ));
+        }
+        let ix = indices.to_vec()?;
+        if let Some(k) = ix.iter().position(|i| *i < 0 || *i as usize >= n) {
+            return Err(bad(
+                WHAT,
+                "indices",
+                format!(
+                    "has {} at position {k} (triangle {}), outside the {n} points",
+                    ix[k],
+                    k / 3
+                ),
+            ));
+        }
+        let p = read_points(WHAT, points, n)?;
+        let (lo, hi) = triangle_boxes(&p, &ix);
+        let tree = Tree::build(&lo, &hi, &device)?;
+        Ok(Mesh {
+            indices: Array::from_slice(&ix, &device)?,
+            device,
+            points: points.clone(),
+            velocities: velocities.cloned(),
+            host_indices: Arc::new(ix),
+            num_points: n,
+            tree: Arc::new(tree),
+        })
+    }
+
+    /// Recomputes the tree's boxes from the current points (after a kernel or the host moved
+    /// them), keeping the tree's shape (Warp's `refit`). A failed refit leaves the mesh as it
+    /// was.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `points` when a point is NaN or infinite, or when
+    /// the points array (replaced by [`set_points`](Mesh::set_points)) has another length than
+    /// the one the mesh was built with; device errors.
+    pub fn refit(&mut self) -> Result<()> {
+        let p = read_points("Mesh::refit", &self.points, self.num_points)?;
+        let (lo, hi) = triangle_boxes(&p, &self.host_indices);
+        self.tree = Arc::new(self.tree.refit(&lo, &hi)?);
+        Ok(())
+    }
+
+    /// Replaces the points array (Warp's `mesh.points = a`), for a [`refit`](Mesh::refit)
+    /// from it. The new array must have as many points as the mesh was built with: `refit`
+    /// and launches refuse it otherwise (the indices were checked against that count).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `points` when it is on another device than the mesh
+    /// or not contiguous.
+    pub fn set_points(&mut self, points: &Array<Vec3>) -> Result<()> {
+        same_device(
+            "Mesh::set_points",
+            "points",
+            points,
+            &self.device,
+            "the mesh",
+        )?;
+        contiguous("Mesh::set_points", "points", points)?;
+        self.points = points.clone();
+        Ok(())
+    }
+
+    /// The points: the user's array, shared (writing it deforms the mesh; call
+    /// [`refit`](Mesh::refit) before querying the deformed mesh).
+    pub fn points(&self) -> &Array<Vec3> {
+        &self.points
+    }
+
+    /// The velocities, if any: the user's array, shared.
+    pub fn velocities(&self) -> Option<&Array<Vec3>> {
+        self.velocities.as_ref()
+    }
+
+    /// The mesh's copy of the vertex indices, three per face.
+    pub fn indices(&self) -> &Array<i32> {
+        &self.indices
+    }
+
+    /// The device the mesh lives on (the device of the launches that take it).
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The number of triangles.
+    pub fn num_faces(&self) -> usize {
+        self.tree.num_prims()
+    }
+
+    /// The number of points the mesh was built with.
+    pub fn num_points(&self) -> usize {
+        self.num_points
+    }
+
+    /// The tree over the triangles as built or last refit (the host copy): nodes, parent links
+    /// and face ids in the layout of `warp_core::objects::bvh`, for inspection and tests.
+    pub fn tree_host(&self) -> (Vec<warp_core::objects::BvhNode>, Vec<i32>, Vec<i32>) {
+        let (n, p, i) = self.tree.host();
+        (n.to_vec(), p.to_vec(), i.to_vec())
+    }
+
+    /// The checks of a launch: the launch device, and the points as many as built with.
+    fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
+        if &self.device != ctx.device {
+            return Err(Error::DeviceMismatch {
+                kernel: ctx.kernel,
+                arg: ctx.arg,
+                expected: ctx.device.alias().to_string(),
+                found: self.device.alias().to_string(),
+            });
+        }
+        if self.points.len() != self.num_points {
+            return Err(Error::InvalidArgument {
+                what: format!(
+                    "kernel `{}`: argument `{}`: the Mesh's points array has {} points but the \
+                     mesh was built with {}",
+                    ctx.kernel,
+                    ctx.arg,
+                    self.points.len(),
+                    self.num_points
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+impl KernelArg for Mesh {
+    type Arg<'a> = &'a Mesh;
+    type CpuView = MeshView;
+
+    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
+        arg.check_launch(ctx)?;
+        // SAFETY: the launch borrows the mesh (its tree and arrays) for the view's whole use.
+        let tree = unsafe { arg.tree.cpu_tree(ctx) };
+        Ok(MeshView::new(
+            tree,
+            arg.points.cpu_view(ctx.kernel, ctx.arg),
+            arg.velocities
+                .as_ref()
+                .map(|v| v.cpu_view(ctx.kernel, ctx.arg)),
+            arg.indices.cpu_view(ctx.kernel, ctx.arg),
+        ))
+    }
+
+    type CudaArg = CudaMesh;
+
+    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
+        arg.check_launch(ctx)?;
+        Ok(CudaMesh {
+            tree: arg.tree.cuda_tree(),
+            points: arg.points.device_address(),
+            velocities: arg.velocities.as_ref().map_or(0, |v| v.device_address()),
+            indices: arg.indices.device_address(),
+            num_points: arg.num_points as i32,
+            arg: ctx.index as i32,
+        })
+    }
+
+    // A mesh carries no gradient (Warp's mesh queries give none to the points either).
+    type GradView = ();
+
+    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    type CudaGrad = ();
+
+    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    /// A clone sharing the tree: the tape replays against the tree as it was.
+    type Owned = Mesh;
+
+    fn own(arg: &Self::Arg<'_>) -> Mesh {
+        (*arg).clone()
+    }
+
+    fn borrow(owned: &Mesh) -> &Mesh {
+        owned
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pts(v: &[Vec3]) -> Array<Vec3> {
+        Array::from_slice(v, &crate::cpu()).unwrap()
+    }
+
+    fn ix(v: &[i32]) -> Array<i32> {
+        Array::from_slice(v, &crate::cpu()).unwrap()
+    }
+
+    #[test]
+    fn bad_input_names_the_argument() {
+        let p = pts(&[Vec3::ZERO, Vec3::X, Vec3::Y]);
+        let has = |e: Error, s: &[&str]| {
+            let t = e.to_string();
+            for s in s {
+                assert!(t.contains(s), "`{s}` not in {t}");
+            }
+        };
+        has(
+            Mesh::new(&p, &ix(&[0, 1]), None).unwrap_err(),
+            &["argument `indices`", "multiple of 3"],
+        );
+        has(
+            Mesh::new(&p, &ix(&[0, 1, 3]), None).unwrap_err(),
+            &["argument `indices`", "3 at position 2"],
+        );
+        has(
+            Mesh::new(&p, &ix(&[0, -1, 2]), None).unwrap_err(),
+            &["argument `indices`", "-1 at position 1"],
+        );
+        let nan = pts(&[Vec3::ZERO, Vec3::X, Vec3::new(0.0, f32::INFINITY, 0.0)]);
+        has(
+            Mesh::new(&nan, &ix(&[0, 1, 2]), None).unwrap_err(),
+            &["argument `points`", "index 2"],
+        );
+        has(
+            Mesh::new(&p, &ix(&[0, 1, 2]), Some(&pts(&[Vec3::ZERO]))).unwrap_err(),
+            &["argument `velocities`", "1 velocities for 3 points"],
+        );
+        let mut m = Mesh::new(&p, &ix(&[0, 1, 2]), None).unwrap();
+        m.set_points(&pts(&[Vec3::ZERO])).unwrap();
+        has(
+            m.refit().unwrap_err(),
+            &["argument `points`", "built with 3"],
+        );
+        let e = Mesh::new(&pts(&[]), &ix(&[]), None).unwrap();
+        assert_eq!((e.num_faces(), e.num_points()), (0, 0));
+    }
+}
