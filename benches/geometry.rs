@@ -95,7 +95,10 @@ fn main() -> wp::Result<()> {
     }
     let theirs = |k: &str| warp.as_ref().ok().and_then(|t| json_number(t, k));
     let row = |what: &str, ours: f64, key: &str, error: String| {
-        println!("{what:<34} {ours:8.3} ms {}   {error}", ratio(ours, theirs(key)));
+        println!(
+            "{what:<34} {ours:8.3} ms {}   {error}",
+            ratio(ours, theirs(key))
+        );
     };
 
     let torus = meshes::torus(500, 200, 1.0, 0.4);
@@ -114,7 +117,13 @@ fn main() -> wp::Result<()> {
     // Query points, and the reference on a subset.
     let mut r = XorShift(0x243f_6a88);
     let qs: Vec<Vec3> = (0..n)
-        .map(|_| Vec3::new(r.unit() * 4.0 - 2.0, r.unit() * 4.0 - 2.0, r.unit() * 2.0 - 1.0))
+        .map(|_| {
+            Vec3::new(
+                r.unit() * 4.0 - 2.0,
+                r.unit() * 4.0 - 2.0,
+                r.unit() * 2.0 - 1.0,
+            )
+        })
         .collect();
     let q = wp::Array::from_slice(&qs, &dev)?;
     let out = wp::Array::<f32>::zeros(n, &dev)?;
@@ -217,7 +226,12 @@ fn main() -> wp::Result<()> {
         wp::Array::from_slice(&hi, &dev)?,
     );
     let bvh_build = median_ms(|| wp::Bvh::new(&l, &h).map(drop))?;
-    row("bvh build, 1M boxes", bvh_build, "bvh_build_ms", String::new());
+    row(
+        "bvh build, 1M boxes",
+        bvh_build,
+        "bvh_build_ms",
+        String::new(),
+    );
     let mut bvh = wp::Bvh::new(&l, &h)?;
     let bvh_refit = median_ms(|| bvh.refit())?;
     row("bvh refit", bvh_refit, "bvh_refit_ms", String::new());

@@ -83,7 +83,12 @@ pub fn sphere(nlat: usize, nlon: usize, r: f32) -> TriMesh {
     }
     for i in 1..nlat - 1 {
         for j in 0..nlon {
-            let (a, b, c, d) = (ring(i, j), ring(i + 1, j), ring(i + 1, j + 1), ring(i, j + 1));
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+                ring(i, j + 1),
+            );
             indices.extend_from_slice(&[a, b, c, a, c, d]);
         }
     }

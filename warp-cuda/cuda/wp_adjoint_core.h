@@ -477,6 +477,78 @@ WP_GRAD_FNS(4, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2 WP_COMMA i64 i3, i0, i1, i
 // Adjoint kernels: unit results, the per-thread stack, thread-owned gradients, atomic winners
 // ------------------------------------------------------------------------------------------
 
+/// Tuples (`tuple_t`, wp_core.h): zero and accumulation element by element, for 2 to 7
+/// elements.
+template <typename A, typename B>
+WP_FN tuple_t<A, B> zero_like(const tuple_t<A, B>& t) {
+  return tuple_t<A, B>{zero_like(t.f0), zero_like(t.f1)};
+}
+template <typename A, typename B>
+WP_FN void adj_accum(tuple_t<A, B>& a, const tuple_t<A, B>& v) {
+  adj_accum(a.f0, v.f0);
+  adj_accum(a.f1, v.f1);
+}
+template <typename A, typename B, typename C>
+WP_FN tuple_t<A, B, C> zero_like(const tuple_t<A, B, C>& t) {
+  return tuple_t<A, B, C>{zero_like(t.f0), zero_like(t.f1), zero_like(t.f2)};
+}
+template <typename A, typename B, typename C>
+WP_FN void adj_accum(tuple_t<A, B, C>& a, const tuple_t<A, B, C>& v) {
+  adj_accum(a.f0, v.f0);
+  adj_accum(a.f1, v.f1);
+  adj_accum(a.f2, v.f2);
+}
+template <typename A, typename B, typename C, typename D>
+WP_FN tuple_t<A, B, C, D> zero_like(const tuple_t<A, B, C, D>& t) {
+  return tuple_t<A, B, C, D>{zero_like(t.f0), zero_like(t.f1), zero_like(t.f2), zero_like(t.f3)};
+}
+template <typename A, typename B, typename C, typename D>
+WP_FN void adj_accum(tuple_t<A, B, C, D>& a, const tuple_t<A, B, C, D>& v) {
+  adj_accum(a.f0, v.f0);
+  adj_accum(a.f1, v.f1);
+  adj_accum(a.f2, v.f2);
+  adj_accum(a.f3, v.f3);
+}
+template <typename A, typename B, typename C, typename D, typename E>
+WP_FN tuple_t<A, B, C, D, E> zero_like(const tuple_t<A, B, C, D, E>& t) {
+  return tuple_t<A, B, C, D, E>{zero_like(t.f0), zero_like(t.f1), zero_like(t.f2), zero_like(t.f3), zero_like(t.f4)};
+}
+template <typename A, typename B, typename C, typename D, typename E>
+WP_FN void adj_accum(tuple_t<A, B, C, D, E>& a, const tuple_t<A, B, C, D, E>& v) {
+  adj_accum(a.f0, v.f0);
+  adj_accum(a.f1, v.f1);
+  adj_accum(a.f2, v.f2);
+  adj_accum(a.f3, v.f3);
+  adj_accum(a.f4, v.f4);
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F>
+WP_FN tuple_t<A, B, C, D, E, F> zero_like(const tuple_t<A, B, C, D, E, F>& t) {
+  return tuple_t<A, B, C, D, E, F>{zero_like(t.f0), zero_like(t.f1), zero_like(t.f2), zero_like(t.f3), zero_like(t.f4), zero_like(t.f5)};
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F>
+WP_FN void adj_accum(tuple_t<A, B, C, D, E, F>& a, const tuple_t<A, B, C, D, E, F>& v) {
+  adj_accum(a.f0, v.f0);
+  adj_accum(a.f1, v.f1);
+  adj_accum(a.f2, v.f2);
+  adj_accum(a.f3, v.f3);
+  adj_accum(a.f4, v.f4);
+  adj_accum(a.f5, v.f5);
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F, typename G>
+WP_FN tuple_t<A, B, C, D, E, F, G> zero_like(const tuple_t<A, B, C, D, E, F, G>& t) {
+  return tuple_t<A, B, C, D, E, F, G>{zero_like(t.f0), zero_like(t.f1), zero_like(t.f2), zero_like(t.f3), zero_like(t.f4), zero_like(t.f5), zero_like(t.f6)};
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F, typename G>
+WP_FN void adj_accum(tuple_t<A, B, C, D, E, F, G>& a, const tuple_t<A, B, C, D, E, F, G>& v) {
+  adj_accum(a.f0, v.f0);
+  adj_accum(a.f1, v.f1);
+  adj_accum(a.f2, v.f2);
+  adj_accum(a.f3, v.f3);
+  adj_accum(a.f4, v.f4);
+  adj_accum(a.f5, v.f5);
+  adj_accum(a.f6, v.f6);
+}
+
 /// A unit func's result (carries no gradient).
 struct unit_t {};
 WP_FN unit_t zero_like(const unit_t&) { return unit_t{}; }

@@ -100,4 +100,12 @@ WP_FN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_
   adj_p = adj_p + ((rows[0] * adj_ret.u + rows[1] * adj_ret.v) + rows[2] * adj_ret.w);
 }
 
+/// The kernel language's `closest_point_triangle` returns the barycentrics as a Vec3 (the
+/// struct's conversion): its adjoint arrives as one.
+WP_FN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_a, Vec3& adj_b,
+                                      Vec3& adj_c, Vec3& adj_p, Vec3 adj_ret) {
+  adj_closest_point_triangle(a, b, c, p, adj_a, adj_b, adj_c, adj_p,
+                             triangle_closest_point_t{adj_ret.x, adj_ret.y, adj_ret.z, 0});
+}
+
 }  // namespace wp

@@ -97,4 +97,27 @@ WP_FN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, me
 WP_FN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
                                                  const mesh_query_point_t&, ctx_t*) {}
 
+// The kernel language binds the point queries' results as tuples (mesh_query_point_t's
+// conversion): their adjoints arrive as tuples and go on as the struct.
+typedef tuple_t<bool, f32, i32, f32, f32> mesh_query_point_tuple_t;
+namespace detail {
+WP_FN mesh_query_point_t mesh_query_point_of(const mesh_query_point_tuple_t& t) {
+  return mesh_query_point_t{t.f0, t.f1, t.f2, t.f3, t.f4};
+}
+}  // namespace detail
+WP_FN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, mesh_t& adj_mesh,
+                                Vec3& adj_point, f32& adj_max_dist,
+                                const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
+  adj_mesh_query_point(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
+                       detail::mesh_query_point_of(adj_ret), ctx);
+}
+WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                        mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
+                                        const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
+  adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
+                               detail::mesh_query_point_of(adj_ret), ctx);
+}
+WP_FN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
+                                                 const mesh_query_point_tuple_t&, ctx_t*) {}
+
 }  // namespace wp

@@ -14,25 +14,7 @@ namespace wp {
 // adj_eig3, adj_qr3 (Warp's formulas; products on rows, left to right, as on the CPU)
 // ------------------------------------------------------------------------------------------
 
-template <typename A, typename B, typename C>
-WP_FN tuple_t<A, B, C> zero_like(const tuple_t<A, B, C>& t) {
-  return tuple_t<A, B, C>{zero_like(t.f0), zero_like(t.f1), zero_like(t.f2)};
-}
-template <typename A, typename B>
-WP_FN tuple_t<A, B> zero_like(const tuple_t<A, B>& t) {
-  return tuple_t<A, B>{zero_like(t.f0), zero_like(t.f1)};
-}
-template <typename A, typename B, typename C>
-WP_FN void adj_accum(tuple_t<A, B, C>& a, const tuple_t<A, B, C>& v) {
-  adj_accum(a.f0, v.f0);
-  adj_accum(a.f1, v.f1);
-  adj_accum(a.f2, v.f2);
-}
-template <typename A, typename B>
-WP_FN void adj_accum(tuple_t<A, B>& a, const tuple_t<A, B>& v) {
-  adj_accum(a.f0, v.f0);
-  adj_accum(a.f1, v.f1);
-}
+// Tuples' zero and accumulation: wp_adjoint_core.h.
 
 namespace detail {
 namespace svd {

@@ -360,6 +360,57 @@ template <typename T> __device__ T declval();
 template <typename T> T declval();
 #endif
 
+/// Rust's tuples `(A, B, ..)` of 2 to 7 elements, members `f0`, `f1`, ..: what a builtin
+/// returning a tuple returns (a decomposition's factors, a mesh query's result), bound by the
+/// kernel's `let (a, b, ..) = ..`.
+template <typename... T>
+struct tuple_t;
+template <typename A, typename B>
+struct tuple_t<A, B> {
+  A f0;
+  B f1;
+};
+template <typename A, typename B, typename C>
+struct tuple_t<A, B, C> {
+  A f0;
+  B f1;
+  C f2;
+};
+template <typename A, typename B, typename C, typename D>
+struct tuple_t<A, B, C, D> {
+  A f0;
+  B f1;
+  C f2;
+  D f3;
+};
+template <typename A, typename B, typename C, typename D, typename E>
+struct tuple_t<A, B, C, D, E> {
+  A f0;
+  B f1;
+  C f2;
+  D f3;
+  E f4;
+};
+template <typename A, typename B, typename C, typename D, typename E, typename F>
+struct tuple_t<A, B, C, D, E, F> {
+  A f0;
+  B f1;
+  C f2;
+  D f3;
+  E f4;
+  F f5;
+};
+template <typename A, typename B, typename C, typename D, typename E, typename F, typename G>
+struct tuple_t<A, B, C, D, E, F, G> {
+  A f0;
+  B f1;
+  C f2;
+  D f3;
+  E f4;
+  F f5;
+  G f6;
+};
+
 /// The type T itself, in a non-deduced context (the value parameter of store and atomics is
 /// converted to the array's element type instead of taking part in deduction).
 template <typename T> struct identity { typedef T type; };

@@ -104,6 +104,8 @@ struct triangle_closest_point_t {
   f32 v;
   f32 w;
   i32 feature;
+  /// The kernel language's `closest_point_triangle`: the barycentrics (u, v, w).
+  WP_FN operator Vec3() const { return Vec3_new(u, v, w); }
 };
 static_assert(sizeof(triangle_closest_point_t) == 16, "triangle_closest_point_t layout");
 

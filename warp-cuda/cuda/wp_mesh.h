@@ -68,6 +68,8 @@ struct mesh_query_point_t {
   i32 face;
   f32 u;
   f32 v;
+  /// The kernel language's result: `let (result, sign, face, u, v) = mesh_query_point(..)`.
+  WP_FN operator tuple_t<bool, f32, i32, f32, f32>() const { return {result, sign, face, u, v}; }
 };
 static_assert(sizeof(mesh_query_point_t) == 20, "mesh_query_point_t layout");
 
@@ -80,6 +82,10 @@ struct mesh_query_ray_t {
   f32 u;
   f32 v;
   Vec3 normal;
+  /// The kernel language's result: `let (result, sign, face, t, u, v, normal) = ..`.
+  WP_FN operator tuple_t<bool, f32, i32, f32, f32, f32, Vec3>() const {
+    return {result, sign, face, t, u, v, normal};
+  }
 };
 static_assert(sizeof(mesh_query_ray_t) == 36, "mesh_query_ray_t layout");
 

@@ -20,18 +20,7 @@
 
 namespace wp {
 
-/// Rust's `(A, B, C)` and `(A, B)`: the result of a decomposition.
-template <typename A, typename B, typename C = void>
-struct tuple_t {
-  A f0;
-  B f1;
-  C f2;
-};
-template <typename A, typename B>
-struct tuple_t<A, B, void> {
-  A f0;
-  B f1;
-};
+// The decompositions return `tuple_t` (wp_core.h).
 
 namespace detail {
 namespace svd {

@@ -191,14 +191,16 @@ impl Tree {
         )
     }
 
-    /// The CUDA kernels' view of the tree.
-    pub(crate) fn cuda_tree(&self) -> CudaBvhTree {
+    /// The CUDA kernels' view of the tree, for the kernel parameter at index `arg`.
+    pub(crate) fn cuda_tree(&self, arg: usize) -> CudaBvhTree {
         CudaBvhTree {
             nodes: self.nodes.device_address(),
             parents: self.parents.device_address(),
             prim_ids: self.prim_ids.device_address(),
             num_nodes: self.host_nodes.len() as i32,
             num_prims: self.host_prim_ids.len() as i32,
+            arg: arg as i32,
+            pad: 0,
         }
     }
 }
@@ -387,11 +389,9 @@ impl KernelArg for Bvh {
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
         arg.check_device(ctx)?;
         Ok(CudaBvh {
-            tree: arg.tree.cuda_tree(),
+            tree: arg.tree.cuda_tree(ctx.index),
             lowers: arg.lowers.device_address(),
             uppers: arg.uppers.device_address(),
-            arg: ctx.index as i32,
-            pad: 0,
         })
     }
 

@@ -2,18 +2,17 @@
 //! `Mesh` kernel parameter is when a CUDA kernel receives it (`wp::bvh_t`, `wp::mesh_t` in
 //! `warp-cuda/cuda/wp_bvh.h` and `wp_mesh.h`).
 //!
-//! Each is a field-for-field mirror of the CPU view of warp-core (`BvhView`, `MeshView`, in
-//! their field order), with device addresses as `u64`, counts as `i32`, and the kernel
-//! parameter's index `arg` (reported in out-of-bounds faults, as `CudaHashGrid` does) where the
-//! CPU view carries the kernel's and parameter's names. The shared part, the tree
-//! ([`CudaBvhTree`], the mirror of `BvhTree`), comes first in both, so device code can read
-//! the tree of either through the same `wp::bvh_tree_t` prefix.
+//! The shared part, the tree ([`CudaBvhTree`], `wp::bvh_tree_t`, with the kernel parameter's
+//! index `arg` reported in out-of-bounds faults, as `CudaHashGrid` does), comes first in both,
+//! so device code reads the tree of either through the same prefix. Device addresses are
+//! `u64`, counts `i32`. The headers assert the same sizes (`tests/cuda_geometry_host.rs`
+//! checks the C++ offsets).
 //!
 //! The tree's buffers are in the layout of `warp_core::objects::bvh` (32-byte nodes, root at
 //! node 0, `parents` with -1 at the root, `prim_ids` grouped by leaf). Byte offsets (each
 //! asserted below, with the sizes):
 //!
-//! `CudaBvhTree`, 32 bytes:
+//! `CudaBvhTree` (`wp::bvh_tree_t`), 40 bytes:
 //!
 //! | offset | field | type |
 //! |---|---|---|
@@ -22,27 +21,27 @@
 //! | 16 | `prim_ids` | `u64` (`num_prims` `i32`) |
 //! | 24 | `num_nodes` | `i32` (at least 1) |
 //! | 28 | `num_prims` | `i32` |
+//! | 32 | `arg` | `i32` (the kernel parameter's index) |
+//! | 36 | `pad` | `i32` (0) |
 //!
 //! `CudaBvh` (`wp::bvh_t`), 56 bytes, 8-aligned:
 //!
 //! | offset | field | type |
 //! |---|---|---|
 //! | 0 | `tree` | `CudaBvhTree` |
-//! | 32 | `lowers` | `u64` (`num_prims` `vec3`, 12 bytes each) |
-//! | 40 | `uppers` | `u64` (`num_prims` `vec3`) |
-//! | 48 | `arg` | `i32` |
-//! | 52 | `pad` | `i32` (0) |
+//! | 40 | `lowers` | `u64` (`num_prims` `vec3`, 12 bytes each) |
+//! | 48 | `uppers` | `u64` (`num_prims` `vec3`) |
 //!
-//! `CudaMesh` (`wp::mesh_t`), 64 bytes, 8-aligned:
+//! `CudaMesh` (`wp::mesh_t`), 72 bytes, 8-aligned:
 //!
 //! | offset | field | type |
 //! |---|---|---|
 //! | 0 | `tree` | `CudaBvhTree` (one primitive per triangle) |
-//! | 32 | `points` | `u64` (`num_points` `vec3`) |
-//! | 40 | `velocities` | `u64` (`num_points` `vec3`, or 0 when the mesh has none) |
-//! | 48 | `indices` | `u64` (`3 * num_prims` `i32`) |
-//! | 56 | `num_points` | `i32` |
-//! | 60 | `arg` | `i32` |
+//! | 40 | `points` | `u64` (`num_points` `vec3`) |
+//! | 48 | `velocities` | `u64` (`num_points` `vec3`, or 0 when the mesh has none) |
+//! | 56 | `indices` | `u64` (`3 * num_prims` `i32`) |
+//! | 64 | `num_points` | `i32` |
+//! | 68 | `pad` | `i32` (0) |
 
 use std::mem::{offset_of, size_of};
 
@@ -61,10 +60,13 @@ pub struct CudaBvhTree {
     pub num_nodes: i32,
     /// Primitives in the tree.
     pub num_prims: i32,
+    /// The kernel parameter's index (reported in out-of-bounds faults).
+    pub arg: i32,
+    /// Padding to 8 bytes (0).
+    pub pad: i32,
 }
 
-/// A `Bvh` kernel parameter as CUDA kernels receive it (`wp::bvh_t`): the mirror of
-/// warp-core's `BvhView` (module docs: 56 bytes).
+/// A `Bvh` kernel parameter as CUDA kernels receive it (`wp::bvh_t`; module docs: 56 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CudaBvh {
@@ -74,14 +76,10 @@ pub struct CudaBvh {
     pub lowers: u64,
     /// Device address of the primitives' upper corners (the user's `uppers`).
     pub uppers: u64,
-    /// The kernel parameter's index (reported in out-of-bounds faults).
-    pub arg: i32,
-    /// Padding to 8 bytes (0).
-    pub pad: i32,
 }
 
-/// A `Mesh` kernel parameter as CUDA kernels receive it (`wp::mesh_t`): the mirror of
-/// warp-core's `MeshView` (module docs: 64 bytes).
+/// A `Mesh` kernel parameter as CUDA kernels receive it (`wp::mesh_t`; module docs: 72
+/// bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CudaMesh {
@@ -95,30 +93,26 @@ pub struct CudaMesh {
     pub indices: u64,
     /// Points in the mesh.
     pub num_points: i32,
-    /// The kernel parameter's index (reported in out-of-bounds faults).
-    pub arg: i32,
+    /// Padding to 8 bytes (0).
+    pub pad: i32,
 }
 
 const _: () = {
-    assert!(size_of::<CudaBvhTree>() == 32);
+    assert!(size_of::<CudaBvhTree>() == 40);
     assert!(offset_of!(CudaBvhTree, nodes) == 0);
     assert!(offset_of!(CudaBvhTree, parents) == 8);
     assert!(offset_of!(CudaBvhTree, prim_ids) == 16);
     assert!(offset_of!(CudaBvhTree, num_nodes) == 24);
     assert!(offset_of!(CudaBvhTree, num_prims) == 28);
+    assert!(offset_of!(CudaBvhTree, arg) == 32);
 
     assert!(size_of::<CudaBvh>() == 56);
-    assert!(offset_of!(CudaBvh, tree) == 0);
-    assert!(offset_of!(CudaBvh, lowers) == 32);
-    assert!(offset_of!(CudaBvh, uppers) == 40);
-    assert!(offset_of!(CudaBvh, arg) == 48);
-    assert!(offset_of!(CudaBvh, pad) == 52);
+    assert!(offset_of!(CudaBvh, lowers) == 40);
+    assert!(offset_of!(CudaBvh, uppers) == 48);
 
-    assert!(size_of::<CudaMesh>() == 64);
-    assert!(offset_of!(CudaMesh, tree) == 0);
-    assert!(offset_of!(CudaMesh, points) == 32);
-    assert!(offset_of!(CudaMesh, velocities) == 40);
-    assert!(offset_of!(CudaMesh, indices) == 48);
-    assert!(offset_of!(CudaMesh, num_points) == 56);
-    assert!(offset_of!(CudaMesh, arg) == 60);
+    assert!(size_of::<CudaMesh>() == 72);
+    assert!(offset_of!(CudaMesh, points) == 40);
+    assert!(offset_of!(CudaMesh, velocities) == 48);
+    assert!(offset_of!(CudaMesh, indices) == 56);
+    assert!(offset_of!(CudaMesh, num_points) == 64);
 };

@@ -331,12 +331,12 @@ impl KernelArg for Mesh {
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
         arg.check_launch(ctx)?;
         Ok(CudaMesh {
-            tree: arg.tree.cuda_tree(),
+            tree: arg.tree.cuda_tree(ctx.index),
             points: arg.points.device_address(),
             velocities: arg.velocities.as_ref().map_or(0, |v| v.device_address()),
             indices: arg.indices.device_address(),
             num_points: arg.num_points as i32,
-            arg: ctx.index as i32,
+            pad: 0,
         })
     }
 
