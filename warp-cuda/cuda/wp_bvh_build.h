@@ -87,6 +87,26 @@ struct lbvh_refit_t {
 };
 static_assert(sizeof(lbvh_refit_t) == 56, "lbvh_refit_t layout");
 
+/// LbvhFinite: the smallest index of a non-finite vector of `n` (Vec3*) into *bad (i32,
+/// atomically lowered; left alone when all are finite).
+struct lbvh_finite_t {
+  u64 values;
+  u64 bad;
+  i64 n;
+};
+static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
+
+/// LbvhTriangleBoxes: each of the `n` triangles' box (points, indices: 3 per triangle, checked
+/// on the host) into lowers and uppers.
+struct lbvh_triangle_boxes_t {
+  u64 points;
+  u64 indices;
+  u64 lowers;
+  u64 uppers;
+  i64 n;
+};
+static_assert(sizeof(lbvh_triangle_boxes_t) == 40, "lbvh_triangle_boxes_t layout");
+
 /// The order-preserving u32 image of an f32 (negative values reversed below positive ones).
 WP_FN u32 lbvh_ordered(f32 x) {
   const u32 u = f32_to_bits(x);
@@ -258,6 +278,29 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
       }
       c = parents[c];
     }
+  }
+}
+extern "C" __global__ void wp_lbvh_finite(wp::lbvh_finite_t s) {
+  const wp::Vec3* v = (const wp::Vec3*)s.values;
+  WP_LBVH_LOOP(i, s.n) {
+    // x - x is 0 exactly when x is finite.
+    if (!(v[i].x - v[i].x == 0.0f && v[i].y - v[i].y == 0.0f && v[i].z - v[i].z == 0.0f))
+      atomicMin((wp::i32*)s.bad, (wp::i32)i);
+  }
+}
+
+extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
+  const wp::Vec3* p = (const wp::Vec3*)s.points;
+  const wp::i32* ix = (const wp::i32*)s.indices;
+  wp::Vec3* lo = (wp::Vec3*)s.lowers;
+  wp::Vec3* hi = (wp::Vec3*)s.uppers;
+  WP_LBVH_LOOP(f, s.n) {
+    const wp::Vec3 a = p[ix[3 * f]], b = p[ix[3 * f + 1]], c = p[ix[3 * f + 2]];
+    // Finite points (checked): fminf/fmaxf are the CPU's f32::min/max.
+    lo[f] = wp::Vec3_new(fminf(fminf(a.x, b.x), c.x), fminf(fminf(a.y, b.y), c.y),
+                         fminf(fminf(a.z, b.z), c.z));
+    hi[f] = wp::Vec3_new(fmaxf(fmaxf(a.x, b.x), c.x), fmaxf(fmaxf(a.y, b.y), c.y),
+                         fmaxf(fmaxf(a.z, b.z), c.z));
   }
 }
 #undef WP_LBVH_LOOP

@@ -33,6 +33,7 @@ use warp_core::ArrayView;
 
 use super::bvh_build::{build_sah, refit as refit_nodes, BuiltBvh};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
+use super::lbvh::{self, Lbvh, LbvhTree};
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
@@ -94,19 +95,28 @@ pub(crate) fn contiguous<T: crate::array::Element>(
     ))
 }
 
-/// A built tree on one device, and its host copy.
+/// A built tree on one device.
 ///
-/// The host copy serves the interim build path (module docs): a refit updates the host nodes
-/// and uploads them, reading back only the primitive boxes. `parents` and `prim_ids` never
-/// change after a build, so refit trees share them.
+/// Built where its device is: on the CPU by the binned SAH builder (better trees, and the CPU
+/// has the cores for it), which keeps a host copy that a refit starts from; on a GPU as a
+/// linear BVH by the kernels of `wp_bvh_build.h` (`lbvh.rs`), which never leaves the GPU.
+/// `parents` and `prim_ids` never change after a build, so refit trees share them.
 pub(crate) struct Tree {
     /// The nodes on the device, two `Vec4`s (32 bytes, 16-aligned) per `BvhNode`.
     nodes: Array<Vec4>,
     parents: Array<i32>,
     prim_ids: Array<i32>,
-    host_nodes: Vec<BvhNode>,
-    host_parents: Arc<Vec<i32>>,
-    host_prim_ids: Arc<Vec<i32>>,
+    num_nodes: usize,
+    num_prims: usize,
+    /// The host copy of a tree built on the host (`None` for a GPU-built tree).
+    host: Option<HostTree>,
+}
+
+/// The host copy of a host-built tree.
+struct HostTree {
+    nodes: Vec<BvhNode>,
+    parents: Arc<Vec<i32>>,
+    prim_ids: Arc<Vec<i32>>,
 }
 
 /// The nodes as the device buffer holds them.
@@ -116,8 +126,8 @@ fn node_words(nodes: &[BvhNode]) -> &[Vec4] {
 
 impl Tree {
     /// A tree over the boxes `[lowers[i], uppers[i]]` (validated by the caller: equal lengths,
-    /// finite, at most [`MAX_PRIMS`]), uploaded to `device`.
-    pub(crate) fn build(lowers: &[Vec3], uppers: &[Vec3], device: &Device) -> Result<Tree> {
+    /// finite, at most [`MAX_PRIMS`]), built on the host and uploaded to `device`.
+    pub(crate) fn build_on_host(lowers: &[Vec3], uppers: &[Vec3], device: &Device) -> Result<Tree> {
         let BuiltBvh {
             nodes,
             parents,
@@ -127,47 +137,127 @@ impl Tree {
             nodes: Array::from_slice(node_words(&nodes), device)?,
             parents: Array::from_slice(&parents, device)?,
             prim_ids: Array::from_slice(&prim_ids, device)?,
-            host_nodes: nodes,
-            host_parents: Arc::new(parents),
-            host_prim_ids: Arc::new(prim_ids),
+            num_nodes: nodes.len(),
+            num_prims: prim_ids.len(),
+            host: Some(HostTree {
+                nodes,
+                parents: Arc::new(parents),
+                prim_ids: Arc::new(prim_ids),
+            }),
         })
     }
 
-    /// This tree's shape with its boxes recomputed from the primitive boxes (as many as when
-    /// built): a new node buffer, the parents and primitive ids shared.
-    pub(crate) fn refit(&self, lowers: &[Vec3], uppers: &[Vec3]) -> Result<Tree> {
-        debug_assert_eq!(lowers.len(), self.host_prim_ids.len());
-        let mut nodes = self.host_nodes.clone();
-        if self.host_prim_ids.is_empty() {
+    /// A linear BVH over the boxes (contiguous, equal lengths, at most [`MAX_PRIMS`]: checked
+    /// by the caller; non-finite corners give a tree that the caller refuses), built on their
+    /// device without leaving it (queued: nothing waits).
+    pub(crate) fn build_on_device(lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<Tree> {
+        let device = lowers.device();
+        let n = lowers.len();
+        let count = lbvh::node_count(n);
+        let tree = Tree {
+            nodes: Array::zeros(2 * count, device)?,
+            parents: Array::zeros(count, device)?,
+            prim_ids: Array::zeros(n, device)?,
+            num_nodes: count,
+            num_prims: n,
+            host: None,
+        };
+        Lbvh::new(device)?.build(
+            lowers,
+            uppers,
+            &tree.lbvh_buffers(&tree.nodes.reinterpret()?),
+        )?;
+        Ok(tree)
+    }
+
+    /// The buffers as the LBVH builder takes them (`nodes`: this tree's or a refit's).
+    fn lbvh_buffers<'a>(&'a self, nodes: &'a Array<i32>) -> LbvhTree<'a> {
+        LbvhTree {
+            nodes,
+            parents: &self.parents,
+            prim_ids: &self.prim_ids,
+        }
+    }
+
+    /// This host-built tree's shape with its boxes recomputed on the host from the primitive
+    /// boxes (as many as when built): a new node buffer, the parents and primitive ids
+    /// shared.
+    pub(crate) fn refit_on_host(&self, lowers: &[Vec3], uppers: &[Vec3]) -> Result<Tree> {
+        let host = self
+            .host
+            .as_ref()
+            .expect("a tree built on the host refits there");
+        debug_assert_eq!(lowers.len(), self.num_prims);
+        let mut nodes = host.nodes.clone();
+        if self.num_prims == 0 {
             // The empty tree keeps its inverted box.
             nodes = vec![BvhNode::EMPTY];
         } else {
-            refit_nodes(
-                &mut nodes,
-                &self.host_parents,
-                &self.host_prim_ids,
-                lowers,
-                uppers,
-            );
+            refit_nodes(&mut nodes, &host.parents, &host.prim_ids, lowers, uppers);
         }
         Ok(Tree {
             nodes: Array::from_slice(node_words(&nodes), self.nodes.device())?,
             parents: self.parents.clone(),
             prim_ids: self.prim_ids.clone(),
-            host_nodes: nodes,
-            host_parents: Arc::clone(&self.host_parents),
-            host_prim_ids: Arc::clone(&self.host_prim_ids),
+            num_nodes: self.num_nodes,
+            num_prims: self.num_prims,
+            host: Some(HostTree {
+                nodes,
+                parents: Arc::clone(&host.parents),
+                prim_ids: Arc::clone(&host.prim_ids),
+            }),
+        })
+    }
+
+    /// This device-built tree's shape with its boxes recomputed on its device from the
+    /// primitive boxes (as many as when built; queued): a new node buffer, the parents and
+    /// primitive ids shared.
+    pub(crate) fn refit_on_device(
+        &self,
+        lowers: &Array<Vec3>,
+        uppers: &Array<Vec3>,
+    ) -> Result<Tree> {
+        debug_assert!(self.host.is_none() && lowers.len() == self.num_prims);
+        let nodes = Array::<Vec4>::zeros(self.nodes.len(), self.nodes.device())?;
+        nodes.copy_from(&self.nodes)?;
+        if self.num_prims > 0 {
+            Lbvh::new(nodes.device())?.refit(
+                lowers,
+                uppers,
+                &self.lbvh_buffers(&nodes.reinterpret()?),
+            )?;
+        }
+        Ok(Tree {
+            nodes,
+            parents: self.parents.clone(),
+            prim_ids: self.prim_ids.clone(),
+            num_nodes: self.num_nodes,
+            num_prims: self.num_prims,
+            host: None,
         })
     }
 
     /// Primitives in the tree.
     pub(crate) fn num_prims(&self) -> usize {
-        self.host_prim_ids.len()
+        self.num_prims
     }
 
-    /// The host copy: nodes, parents, primitive ids.
-    pub(crate) fn host(&self) -> (&[BvhNode], &[i32], &[i32]) {
-        (&self.host_nodes, &self.host_parents, &self.host_prim_ids)
+    /// Nodes in the tree.
+    pub(crate) fn num_nodes(&self) -> usize {
+        self.num_nodes
+    }
+
+    /// The tree on the host: nodes, parents, primitive ids (a GPU-built tree is read back).
+    pub(crate) fn host(&self) -> Result<(Vec<BvhNode>, Vec<i32>, Vec<i32>)> {
+        if let Some(h) = &self.host {
+            return Ok((h.nodes.clone(), h.parents.to_vec(), h.prim_ids.to_vec()));
+        }
+        let words = self.nodes.to_vec()?;
+        Ok((
+            bytemuck::cast_slice(&words).to_vec(),
+            self.parents.to_vec()?,
+            self.prim_ids.to_vec()?,
+        ))
     }
 
     /// The CPU kernels' view of the tree; faults carry `ctx`'s names.
@@ -176,7 +266,7 @@ impl Tree {
     /// As [`KernelArg::cpu_view`]: the tree (its arrays) must outlive the view's use.
     pub(crate) unsafe fn cpu_tree(&self, ctx: &ArgCtx<'_>) -> BvhTree {
         let words = self.nodes.cpu_view(ctx.kernel, ctx.arg);
-        let n = self.host_nodes.len();
+        let n = self.num_nodes;
         let p0 = words
             .ptr_at(0usize)
             .expect("a tree has at least one node")
@@ -197,8 +287,8 @@ impl Tree {
             nodes: self.nodes.device_address(),
             parents: self.parents.device_address(),
             prim_ids: self.prim_ids.device_address(),
-            num_nodes: self.host_nodes.len() as i32,
-            num_prims: self.host_prim_ids.len() as i32,
+            num_nodes: self.num_nodes as i32,
+            num_prims: self.num_prims as i32,
             arg: arg as i32,
             pad: 0,
         }
@@ -245,13 +335,53 @@ impl std::fmt::Debug for Bvh {
         f.debug_struct("Bvh")
             .field("device", &self.device.alias())
             .field("num_prims", &self.tree.num_prims())
-            .field("num_nodes", &self.tree.host_nodes.len())
+            .field("num_nodes", &self.tree.num_nodes())
             .finish()
     }
 }
 
 /// Reads and validates a BVH's boxes: equal lengths, finite, not too many.
 fn read_boxes(what: &str, lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<[Vec<Vec3>; 2]> {
+    check_box_counts(what, lowers, uppers)?;
+    let (lo, hi) = (lowers.to_vec()?, uppers.to_vec()?);
+    for (name, v) in [("lowers", &lo), ("uppers", &hi)] {
+        if let Some((i, p)) = first_non_finite(v) {
+            return Err(bad(
+                what,
+                name,
+                format!("has a non-finite corner at index {i}: {p:?}"),
+            ));
+        }
+    }
+    Ok([lo, hi])
+}
+
+/// Checks, on their device, that `arrays` (each named) hold no NaN or infinite coordinate:
+/// the check is queued after what is queued already (a build), and its flags read back once.
+pub(crate) fn check_finite_on_device(what: &str, arrays: &[(&str, &Array<Vec3>)]) -> Result<()> {
+    let Some((_, first)) = arrays.first() else {
+        return Ok(());
+    };
+    let flags = Array::from_slice(&vec![i32::MAX; arrays.len()], first.device())?;
+    for (k, (_, a)) in arrays.iter().enumerate() {
+        lbvh::check_finite(a, flags.device_address() + 4 * k as u64)?;
+    }
+    for ((name, a), i) in arrays.iter().zip(flags.to_vec()?) {
+        if i != i32::MAX {
+            let i = i as usize;
+            let p = a.view(i..i + 1)?.to_vec()?[0];
+            return Err(bad(
+                what,
+                name,
+                format!("has a non-finite value at index {i}: {p:?}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks a BVH's box counts: equal, not too many.
+fn check_box_counts(what: &str, lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<()> {
     if lowers.len() != uppers.len() {
         return Err(bad(
             what,
@@ -270,17 +400,7 @@ fn read_boxes(what: &str, lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<
             format!("has {} boxes, more than {MAX_PRIMS}", lowers.len()),
         ));
     }
-    let (lo, hi) = (lowers.to_vec()?, uppers.to_vec()?);
-    for (name, v) in [("lowers", &lo), ("uppers", &hi)] {
-        if let Some((i, p)) = first_non_finite(v) {
-            return Err(bad(
-                what,
-                name,
-                format!("has a non-finite corner at index {i}: {p:?}"),
-            ));
-        }
-    }
-    Ok([lo, hi])
+    Ok(())
 }
 
 impl Bvh {
@@ -300,8 +420,15 @@ impl Bvh {
         same_device(WHAT, "uppers", uppers, &device, "lowers")?;
         contiguous(WHAT, "lowers", lowers)?;
         contiguous(WHAT, "uppers", uppers)?;
-        let [lo, hi] = read_boxes(WHAT, lowers, uppers)?;
-        let tree = Tree::build(&lo, &hi, &device)?;
+        let tree = if device.is_cpu() {
+            let [lo, hi] = read_boxes(WHAT, lowers, uppers)?;
+            Tree::build_on_host(&lo, &hi, &device)?
+        } else {
+            check_box_counts(WHAT, lowers, uppers)?;
+            let tree = Tree::build_on_device(lowers, uppers)?;
+            check_finite_on_device(WHAT, &[("lowers", lowers), ("uppers", uppers)])?;
+            tree
+        };
         Ok(Bvh {
             device,
             lowers: lowers.clone(),
@@ -319,8 +446,18 @@ impl Bvh {
     /// [`Error::InvalidArgument`] naming `lowers` or `uppers` when a corner is NaN or
     /// infinite; device errors.
     pub fn refit(&mut self) -> Result<()> {
-        let [lo, hi] = read_boxes("Bvh::refit", &self.lowers, &self.uppers)?;
-        self.tree = Arc::new(self.tree.refit(&lo, &hi)?);
+        const WHAT: &str = "Bvh::refit";
+        let (lowers, uppers) = (&self.lowers, &self.uppers);
+        let tree = if self.device.is_cpu() {
+            let [lo, hi] = read_boxes(WHAT, lowers, uppers)?;
+            self.tree.refit_on_host(&lo, &hi)?
+        } else {
+            check_box_counts(WHAT, lowers, uppers)?;
+            let tree = self.tree.refit_on_device(lowers, uppers)?;
+            check_finite_on_device(WHAT, &[("lowers", lowers), ("uppers", uppers)])?;
+            tree
+        };
+        self.tree = Arc::new(tree);
         Ok(())
     }
 
@@ -346,14 +483,16 @@ impl Bvh {
 
     /// The number of nodes of the tree.
     pub fn num_nodes(&self) -> usize {
-        self.tree.host_nodes.len()
+        self.tree.num_nodes()
     }
 
-    /// The tree as built (the host copy): nodes, parent links and primitive ids in the layout
-    /// of `warp_core::objects::bvh`, for inspection and tests.
-    pub fn tree_host(&self) -> (Vec<BvhNode>, Vec<i32>, Vec<i32>) {
-        let (n, p, i) = self.tree.host();
-        (n.to_vec(), p.to_vec(), i.to_vec())
+    /// The tree on the host: nodes, parent links and primitive ids in the layout of
+    /// `warp_core::objects::bvh`, for inspection and tests (a GPU's tree is read back).
+    ///
+    /// # Errors
+    /// Device errors of the read-back.
+    pub fn tree_host(&self) -> Result<(Vec<BvhNode>, Vec<i32>, Vec<i32>)> {
+        self.tree.host()
     }
 
     fn check_device(&self, ctx: &ArgCtx<'_>) -> Result<()> {
@@ -436,7 +575,7 @@ mod tests {
         let (l, u) = (arr(&lo), arr(&hi));
         let mut bvh = Bvh::new(&l, &u).unwrap();
         assert_eq!(bvh.num_prims(), 50);
-        let (n, p, ids) = bvh.tree_host();
+        let (n, p, ids) = bvh.tree_host().unwrap();
         check_layout(&n, &p, &ids, &lo, &hi).unwrap();
         let kept = bvh.clone();
         let moved: Vec<Vec3> = lo.iter().map(|p| *p + 100.0).collect();
@@ -444,10 +583,10 @@ mod tests {
         let moved_hi: Vec<Vec3> = moved.iter().map(|p| *p + 0.5).collect();
         u.copy_from(&arr(&moved_hi)).unwrap();
         bvh.refit().unwrap();
-        let (n2, p2, ids2) = bvh.tree_host();
+        let (n2, p2, ids2) = bvh.tree_host().unwrap();
         check_layout(&n2, &p2, &ids2, &moved, &moved_hi).unwrap();
         assert_eq!((p2, ids2), (p, ids), "a refit keeps the shape");
-        assert_eq!(kept.tree_host().0, n, "the clone keeps its tree");
+        assert_eq!(kept.tree_host().unwrap().0, n, "the clone keeps its tree");
         assert_eq!(n2[0].lower, [100.0; 3]);
     }
 

@@ -198,6 +198,116 @@ pub fn build_for_tests(
     ))
 }
 
+/// Queues a check of `values` (contiguous `Vec3`s) for NaN and infinite coordinates: the
+/// smallest such index lowers the `i32` at `bad` (left alone when all are finite).
+pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
+    dispatch::object_step(
+        values.device(),
+        &LbvhFinite {
+            values: values.device_address(),
+            bad,
+            n: values.len() as i64,
+        },
+    )
+}
+
+/// Queues the boxes of the `lowers.len()` triangles of `points` and `indices` (three each,
+/// in range: checked by the caller) into `lowers` and `uppers`.
+pub(crate) fn triangle_boxes(
+    points: &Array<Vec3>,
+    indices: &Array<i32>,
+    lowers: &Array<Vec3>,
+    uppers: &Array<Vec3>,
+) -> Result<()> {
+    dispatch::object_step(
+        points.device(),
+        &LbvhTriangleBoxes {
+            points: points.device_address(),
+            indices: indices.device_address(),
+            lowers: lowers.device_address(),
+            uppers: uppers.device_address(),
+            n: lowers.len() as i64,
+        },
+    )
+}
+
+/// `wp::lbvh_finite_t`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+struct LbvhFinite {
+    values: u64,
+    bad: u64,
+    n: i64,
+}
+const _: () = assert!(std::mem::size_of::<LbvhFinite>() == 24);
+
+/// `wp::lbvh_triangle_boxes_t`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+struct LbvhTriangleBoxes {
+    points: u64,
+    indices: u64,
+    lowers: u64,
+    uppers: u64,
+    n: i64,
+}
+const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 40);
+
+unsafe impl ObjectStep for LbvhFinite {
+    const LIBRARY: &'static ObjectLibrary = &LIBRARY;
+    const KERNEL: &'static str = "wp_lbvh_finite";
+    fn len(&self) -> usize {
+        self.n as usize
+    }
+    fn run_cpu(&self) -> Result<()> {
+        // SAFETY: `n` vectors and one i32 the caller owns (an i32 is sized and aligned as an
+        // AtomicI32).
+        let (v, bad) = unsafe {
+            (
+                std::slice::from_raw_parts(self.values as *const Vec3, self.len()),
+                &*(self.bad as *const std::sync::atomic::AtomicI32),
+            )
+        };
+        if let Some(i) = v.par_iter().position_first(|p| !p.is_finite()) {
+            bad.fetch_min(i as i32, std::sync::atomic::Ordering::Relaxed);
+        }
+        Ok(())
+    }
+}
+
+unsafe impl ObjectStep for LbvhTriangleBoxes {
+    const LIBRARY: &'static ObjectLibrary = &LIBRARY;
+    const KERNEL: &'static str = "wp_lbvh_triangle_boxes";
+    fn len(&self) -> usize {
+        self.n as usize
+    }
+    fn run_cpu(&self) -> Result<()> {
+        let n = self.len();
+        // SAFETY: `3n` in-range indices into the points, `n` boxes the caller owns.
+        let (ix, lo, hi) = unsafe {
+            (
+                std::slice::from_raw_parts(self.indices as *const i32, 3 * n),
+                std::slice::from_raw_parts_mut(self.lowers as *mut Vec3, n),
+                std::slice::from_raw_parts_mut(self.uppers as *mut Vec3, n),
+            )
+        };
+        let p = self.points as usize;
+        lo.par_iter_mut()
+            .zip(hi.par_iter_mut())
+            .enumerate()
+            .for_each(|(f, (l, h))| {
+                // SAFETY: indices checked in range by the caller.
+                let [a, b, c] =
+                    [0, 1, 2].map(|k| unsafe { *(p as *const Vec3).add(ix[3 * f + k] as usize) });
+                let min = |x: f32, y: f32, z: f32| x.min(y).min(z);
+                let max = |x: f32, y: f32, z: f32| x.max(y).max(z);
+                *l = Vec3::new(min(a.x, b.x, c.x), min(a.y, b.y, c.y), min(a.z, b.z, c.z));
+                *h = Vec3::new(max(a.x, b.x, c.x), max(a.y, b.y, c.y), max(a.z, b.z, c.z));
+            });
+        Ok(())
+    }
+}
+
 /// `wp::lbvh_bounds_t`: the centroids' box into `bounds` (6 order-preserving images).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]

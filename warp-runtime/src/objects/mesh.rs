@@ -9,9 +9,10 @@
 //! [`Mesh::refit`] recomputes the tree's boxes. The indices are copied (the mesh validated
 //! them against the points; a later change could not be).
 //!
-//! The build and the refit run on the host for every device, as for [`Bvh`](super::Bvh) (see
-//! its module docs: the interim path until the GPU LBVH build exists): on a GPU the points
-//! are read back, the tree built or refit on the host and uploaded.
+//! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
+//! SAH builder over the triangles' boxes; on a GPU the triangles' boxes, the points' check and
+//! a linear BVH are kernels (`lbvh.rs`), and only the check's flag is read back. The indices
+//! are checked on the host once, at `new`.
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit gives
 //! the refit mesh a new node buffer, so a recorded launch replays against the tree it ran
@@ -22,8 +23,11 @@ use std::sync::Arc;
 use glam::Vec3;
 use warp_core::objects::MeshView;
 
-use super::bvh::{bad, contiguous, first_non_finite, same_device, Tree, MAX_PRIMS};
+use super::bvh::{
+    bad, check_finite_on_device, contiguous, first_non_finite, same_device, Tree, MAX_PRIMS,
+};
 use super::geometry_abi::CudaMesh;
+use super::lbvh;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
@@ -90,8 +94,34 @@ fn triangle_boxes(points: &[Vec3], indices: &[i32]) -> (Vec<Vec3>, Vec<Vec3>) {
         .unzip()
 }
 
+/// The triangles' boxes on the mesh's device (a GPU's: queued, nothing read back).
+fn device_triangle_boxes(
+    points: &Array<Vec3>,
+    indices: &Array<i32>,
+) -> Result<(Array<Vec3>, Array<Vec3>)> {
+    let faces = indices.len() / 3;
+    let lo = Array::zeros(faces, points.device())?;
+    let hi = Array::zeros(faces, points.device())?;
+    lbvh::triangle_boxes(points, indices, &lo, &hi)?;
+    Ok((lo, hi))
+}
+
 /// Reads the points back and checks them: as many as `n`, all finite.
 fn read_points(what: &str, points: &Array<Vec3>, n: usize) -> Result<Vec<Vec3>> {
+    check_point_count(what, points, n)?;
+    let p = points.to_vec()?;
+    if let Some((i, v)) = first_non_finite(&p) {
+        return Err(bad(
+            what,
+            "points",
+            format!("has a non-finite point at index {i}: {v:?}"),
+        ));
+    }
+    Ok(p)
+}
+
+/// Checks that the points are as many as the mesh was built with (`n`).
+fn check_point_count(what: &str, points: &Array<Vec3>, n: usize) -> Result<()> {
     if points.len() != n {
         return Err(bad(
             what,
@@ -103,15 +133,7 @@ fn read_points(what: &str, points: &Array<Vec3>, n: usize) -> Result<Vec<Vec3>> 
             ),
         ));
     }
-    let p = points.to_vec()?;
-    if let Some((i, v)) = first_non_finite(&p) {
-        return Err(bad(
-            what,
-            "points",
-            format!("has a non-finite point at index {i}: {v:?}"),
-        ));
-    }
-    Ok(p)
+    Ok(())
 }
 
 /// Checks `velocities` against `points`: device, contiguity, one per point.
@@ -195,11 +217,19 @@ impl Mesh {
                 ),
             ));
         }
-        let p = read_points(WHAT, points, n)?;
-        let (lo, hi) = triangle_boxes(&p, &ix);
-        let tree = Tree::build(&lo, &hi, &device)?;
+        let dev_indices = Array::from_slice(&ix, &device)?;
+        let tree = if device.is_cpu() {
+            let p = read_points(WHAT, points, n)?;
+            let (lo, hi) = triangle_boxes(&p, &ix);
+            Tree::build_on_host(&lo, &hi, &device)?
+        } else {
+            let (lo, hi) = device_triangle_boxes(points, &dev_indices)?;
+            let tree = Tree::build_on_device(&lo, &hi)?;
+            check_finite_on_device(WHAT, &[("points", points)])?;
+            tree
+        };
         Ok(Mesh {
-            indices: Array::from_slice(&ix, &device)?,
+            indices: dev_indices,
             device,
             points: points.clone(),
             velocities: velocities.cloned(),
@@ -218,9 +248,19 @@ impl Mesh {
     /// the points array (replaced by [`set_points`](Mesh::set_points)) has another length than
     /// the one the mesh was built with; device errors.
     pub fn refit(&mut self) -> Result<()> {
-        let p = read_points("Mesh::refit", &self.points, self.num_points)?;
-        let (lo, hi) = triangle_boxes(&p, &self.host_indices);
-        self.tree = Arc::new(self.tree.refit(&lo, &hi)?);
+        const WHAT: &str = "Mesh::refit";
+        let tree = if self.device.is_cpu() {
+            let p = read_points(WHAT, &self.points, self.num_points)?;
+            let (lo, hi) = triangle_boxes(&p, &self.host_indices);
+            self.tree.refit_on_host(&lo, &hi)?
+        } else {
+            check_point_count(WHAT, &self.points, self.num_points)?;
+            let (lo, hi) = device_triangle_boxes(&self.points, &self.indices)?;
+            let tree = self.tree.refit_on_device(&lo, &hi)?;
+            check_finite_on_device(WHAT, &[("points", &self.points)])?;
+            tree
+        };
+        self.tree = Arc::new(tree);
         Ok(())
     }
 
@@ -275,11 +315,14 @@ impl Mesh {
         self.num_points
     }
 
-    /// The tree over the triangles as built or last refit (the host copy): nodes, parent links
-    /// and face ids in the layout of `warp_core::objects::bvh`, for inspection and tests.
-    pub fn tree_host(&self) -> (Vec<warp_core::objects::BvhNode>, Vec<i32>, Vec<i32>) {
-        let (n, p, i) = self.tree.host();
-        (n.to_vec(), p.to_vec(), i.to_vec())
+    /// The tree over the triangles as built or last refit: nodes, parent links and face ids
+    /// in the layout of `warp_core::objects::bvh`, for inspection and tests (a GPU's tree is
+    /// read back).
+    ///
+    /// # Errors
+    /// Device errors of the read-back.
+    pub fn tree_host(&self) -> Result<(Vec<warp_core::objects::BvhNode>, Vec<i32>, Vec<i32>)> {
+        self.tree.host()
     }
 
     /// The checks of a launch: the launch device, and the points as many as built with.
