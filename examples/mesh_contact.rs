@@ -9,8 +9,9 @@
 //!    step's push-out, relative to the radius;
 //! 2. the moving terrain: the largest penetration against dt, whether any particle ended up
 //!    under the surface (the contact's failure mode at large dt: tunnelling through), and the
-//!    time per step with the refit;
-//! the largest stable dt is where particles stay above the surface.
+//!    time per step with the refit.
+//!
+//! The largest stable dt is where particles stay above the surface.
 //!
 //! `cargo run --release --example mesh_contact [-- --device cpu|cuda:0 --n 20000]`
 

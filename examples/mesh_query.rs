@@ -43,6 +43,9 @@ fn project(mesh: Mesh, q: Array<Vec3>, max_dist: f32, closest: Array<Vec3>, dist
     }
 }
 
+/// A closed-form signed distance.
+type Sdf = Box<dyn Fn(DVec3) -> f64>;
+
 /// `n` points uniform in the box `[lo, hi]`.
 fn points(n: usize, lo: Vec3, hi: Vec3, seed: u64) -> Vec<Vec3> {
     let mut r = common::Rng(seed);
@@ -125,7 +128,7 @@ fn main() -> wp::Result<()> {
     .with_extras(&["build ms", "wrong signs"]);
     println!("\n2. signed distance against the closed-form SDF, over the tessellation");
     for k in [1usize, 2, 4, 8, 16, 32] {
-        let cases: [(&str, meshes::TriMesh, Box<dyn Fn(DVec3) -> f64>); 2] = [
+        let cases: [(&str, meshes::TriMesh, Sdf); 2] = [
             (
                 "torus",
                 meshes::torus(25 * k, 10 * k, 1.0, 0.4),
