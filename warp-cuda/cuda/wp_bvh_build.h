@@ -96,16 +96,19 @@ struct lbvh_finite_t {
 };
 static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
 
-/// LbvhTriangleBoxes: each of the `n` triangles' box (points, indices: 3 per triangle, checked
-/// on the host) into lowers and uppers.
+/// LbvhTriangleBoxes: each of the `n` triangles' box (points: `num_points`, indices: 3 per
+/// triangle) into lowers and uppers; the smallest position of an index outside the points
+/// into *bad (i32, atomically lowered), whose triangle gets an empty box and reads no point.
 struct lbvh_triangle_boxes_t {
   u64 points;
   u64 indices;
   u64 lowers;
   u64 uppers;
+  u64 bad;
   i64 n;
+  i64 num_points;
 };
-static_assert(sizeof(lbvh_triangle_boxes_t) == 40, "lbvh_triangle_boxes_t layout");
+static_assert(sizeof(lbvh_triangle_boxes_t) == 56, "lbvh_triangle_boxes_t layout");
 
 /// The order-preserving u32 image of an f32 (negative values reversed below positive ones).
 WP_FN u32 lbvh_ordered(f32 x) {
@@ -295,6 +298,19 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
   wp::Vec3* lo = (wp::Vec3*)s.lowers;
   wp::Vec3* hi = (wp::Vec3*)s.uppers;
   WP_LBVH_LOOP(f, s.n) {
+    bool in_range = true;
+    for (int k = 0; k < 3; ++k) {
+      const wp::i32 v = ix[3 * f + k];
+      if (v < 0 || (wp::i64)v >= s.num_points) {
+        atomicMin((wp::i32*)s.bad, (wp::i32)(3 * f + k));
+        in_range = false;
+      }
+    }
+    if (!in_range) {
+      lo[f] = wp::Vec3_new(0.0f, 0.0f, 0.0f);
+      hi[f] = lo[f];
+      continue;
+    }
     const wp::Vec3 a = p[ix[3 * f]], b = p[ix[3 * f + 1]], c = p[ix[3 * f + 2]];
     // Finite points (checked): fminf/fmaxf are the CPU's f32::min/max.
     lo[f] = wp::Vec3_new(fminf(fminf(a.x, b.x), c.x), fminf(fminf(a.y, b.y), c.y),

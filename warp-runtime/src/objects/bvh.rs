@@ -154,10 +154,11 @@ impl Tree {
         let device = lowers.device();
         let n = lowers.len();
         let count = lbvh::node_count(n);
+        // The build writes every node, parent and id: no zeroing.
         let tree = Tree {
-            nodes: Array::zeros(2 * count, device)?,
-            parents: Array::zeros(count, device)?,
-            prim_ids: Array::zeros(n, device)?,
+            nodes: Array::empty(2 * count, device)?,
+            parents: Array::empty(count, device)?,
+            prim_ids: Array::empty(n, device)?,
             num_nodes: count,
             num_prims: n,
             host: None,
@@ -218,7 +219,7 @@ impl Tree {
         uppers: &Array<Vec3>,
     ) -> Result<Tree> {
         debug_assert!(self.host.is_none() && lowers.len() == self.num_prims);
-        let nodes = Array::<Vec4>::zeros(self.nodes.len(), self.nodes.device())?;
+        let nodes = Array::<Vec4>::empty(self.nodes.len(), self.nodes.device())?;
         nodes.copy_from(&self.nodes)?;
         if self.num_prims > 0 {
             Lbvh::new(nodes.device())?.refit(

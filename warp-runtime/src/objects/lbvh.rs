@@ -51,8 +51,6 @@ pub(crate) struct Lbvh {
     values: Array<u32>,
     counters: Array<i32>,
     bounds: Array<u32>,
-    /// The bounds' start: empty (min images at their largest, max images at their smallest).
-    bounds_init: Array<u32>,
 }
 
 impl Lbvh {
@@ -60,11 +58,10 @@ impl Lbvh {
     pub(crate) fn new(device: &Device) -> Result<Lbvh> {
         Ok(Lbvh {
             device: device.clone(),
-            keys: Array::zeros(0, device)?,
-            values: Array::zeros(0, device)?,
-            counters: Array::zeros(0, device)?,
-            bounds: Array::zeros(6, device)?,
-            bounds_init: Array::from_slice(&[u32::MAX, u32::MAX, u32::MAX, 0, 0, 0], device)?,
+            keys: Array::empty(0, device)?,
+            values: Array::empty(0, device)?,
+            counters: Array::empty(0, device)?,
+            bounds: Array::empty(6, device)?,
         })
     }
 
@@ -87,12 +84,16 @@ impl Lbvh {
                 .view(0..1)?
                 .copy_from(&Array::from_slice(&[-1], &self.device)?);
         }
+        // Every element is written before it is read (keys and values by the codes' step,
+        // counters zeroed by the refit): no zeroing here.
         if self.keys.len() < n {
-            self.keys = Array::zeros(n, &self.device)?;
-            self.values = Array::zeros(n, &self.device)?;
-            self.counters = Array::zeros(n, &self.device)?;
+            self.keys = Array::empty(n, &self.device)?;
+            self.values = Array::empty(n, &self.device)?;
+            self.counters = Array::empty(n, &self.device)?;
         }
-        self.bounds.copy_from(&self.bounds_init)?;
+        // The empty box: min images at their largest, max images at their smallest.
+        self.bounds.view(0..3)?.fill(u32::MAX)?;
+        self.bounds.view(3..6)?.fill(0)?;
         let (lo, hi) = (lowers.device_address(), uppers.device_address());
         dispatch::object_step(
             &self.device,
@@ -142,7 +143,7 @@ impl Lbvh {
             return Ok(());
         }
         if self.counters.len() < n {
-            self.counters = Array::zeros(n, &self.device)?;
+            self.counters = Array::empty(n, &self.device)?;
         }
         self.counters.view(0..n)?.fill(0)?;
         dispatch::object_step(
@@ -211,13 +212,15 @@ pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
     )
 }
 
-/// Queues the boxes of the `lowers.len()` triangles of `points` and `indices` (three each,
-/// in range: checked by the caller) into `lowers` and `uppers`.
+/// Queues the boxes of the `lowers.len()` triangles of `points` and `indices` (three each)
+/// into `lowers` and `uppers`; the smallest position of an index outside the points lowers
+/// the `i32` at `bad` (that triangle reads no point and gets an empty box).
 pub(crate) fn triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
     lowers: &Array<Vec3>,
     uppers: &Array<Vec3>,
+    bad: u64,
 ) -> Result<()> {
     dispatch::object_step(
         points.device(),
@@ -226,7 +229,9 @@ pub(crate) fn triangle_boxes(
             indices: indices.device_address(),
             lowers: lowers.device_address(),
             uppers: uppers.device_address(),
+            bad,
             n: lowers.len() as i64,
+            num_points: points.len() as i64,
         },
     )
 }
@@ -249,9 +254,11 @@ struct LbvhTriangleBoxes {
     indices: u64,
     lowers: u64,
     uppers: u64,
+    bad: u64,
     n: i64,
+    num_points: i64,
 }
-const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 40);
+const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 56);
 
 unsafe impl ObjectStep for LbvhFinite {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
@@ -283,22 +290,31 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
     }
     fn run_cpu(&self) -> Result<()> {
         let n = self.len();
-        // SAFETY: `3n` in-range indices into the points, `n` boxes the caller owns.
-        let (ix, lo, hi) = unsafe {
+        // SAFETY: `num_points` points, `3n` indices, `n` boxes and one i32 the caller owns (an
+        // i32 is sized and aligned as an AtomicI32).
+        let (points, ix, lo, hi, bad) = unsafe {
             (
+                std::slice::from_raw_parts(self.points as *const Vec3, self.num_points as usize),
                 std::slice::from_raw_parts(self.indices as *const i32, 3 * n),
                 std::slice::from_raw_parts_mut(self.lowers as *mut Vec3, n),
                 std::slice::from_raw_parts_mut(self.uppers as *mut Vec3, n),
+                &*(self.bad as *const std::sync::atomic::AtomicI32),
             )
         };
-        let p = self.points as usize;
         lo.par_iter_mut()
             .zip(hi.par_iter_mut())
             .enumerate()
             .for_each(|(f, (l, h))| {
-                // SAFETY: indices checked in range by the caller.
-                let [a, b, c] =
-                    [0, 1, 2].map(|k| unsafe { *(p as *const Vec3).add(ix[3 * f + k] as usize) });
+                let corner = |k: usize| points.get(usize::try_from(ix[3 * f + k]).ok()?).copied();
+                let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
+                    for k in 0..3 {
+                        if corner(k).is_none() {
+                            bad.fetch_min((3 * f + k) as i32, std::sync::atomic::Ordering::Relaxed);
+                        }
+                    }
+                    (*l, *h) = (Vec3::ZERO, Vec3::ZERO);
+                    return;
+                };
                 let min = |x: f32, y: f32, z: f32| x.min(y).min(z);
                 let max = |x: f32, y: f32, z: f32| x.max(y).max(z);
                 *l = Vec3::new(min(a.x, b.x, c.x), min(a.y, b.y, c.y), min(a.z, b.z, c.z));

@@ -11,8 +11,9 @@
 //!
 //! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
 //! SAH builder over the triangles' boxes; on a GPU the triangles' boxes, the points' check and
-//! a linear BVH are kernels (`lbvh.rs`), and only the check's flag is read back. The indices
-//! are checked on the host once, at `new`.
+//! a linear BVH are kernels (`lbvh.rs`), and only the checks' flags are read back. The indices
+//! are checked once, at `new` (on a GPU by the triangles' boxes step, which reads no point
+//! through a bad index).
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit gives
 //! the refit mesh a new node buffer, so a recorded launch replays against the tree it ran
@@ -65,7 +66,7 @@ pub struct Mesh {
     velocities: Option<Array<Vec3>>,
     /// The mesh's own copy of the indices, on its device.
     indices: Array<i32>,
-    /// The same, on the host (the triangles' boxes at a refit).
+    /// The same on the host, for a CPU mesh's refit (empty on a GPU, which refits there).
     host_indices: Arc<Vec<i32>>,
     /// The point count the indices were validated against (the build's).
     num_points: usize,
@@ -94,16 +95,39 @@ fn triangle_boxes(points: &[Vec3], indices: &[i32]) -> (Vec<Vec3>, Vec<Vec3>) {
         .unzip()
 }
 
-/// The triangles' boxes on the mesh's device (a GPU's: queued, nothing read back).
+/// The triangles' boxes on the mesh's device (a GPU's: queued, nothing read back); the
+/// first position of an index outside the points lowers the `i32` at `bad`.
 fn device_triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
+    bad: u64,
 ) -> Result<(Array<Vec3>, Array<Vec3>)> {
     let faces = indices.len() / 3;
-    let lo = Array::zeros(faces, points.device())?;
-    let hi = Array::zeros(faces, points.device())?;
-    lbvh::triangle_boxes(points, indices, &lo, &hi)?;
+    // Written whole by the boxes' step.
+    let lo = Array::empty(faces, points.device())?;
+    let hi = Array::empty(faces, points.device())?;
+    lbvh::triangle_boxes(points, indices, &lo, &hi, bad)?;
     Ok((lo, hi))
+}
+
+/// The error of an index `v` at position `k` outside the `n` points.
+fn bad_index(what: &str, k: usize, v: i32, n: usize) -> Error {
+    bad(
+        what,
+        "indices",
+        format!(
+            "has {v} at position {k} (triangle {}), outside the {n} points",
+            k / 3
+        ),
+    )
+}
+
+/// Checks host indices against `n` points.
+fn check_indices(what: &str, ix: &[i32], n: usize) -> Result<()> {
+    match ix.iter().position(|i| *i < 0 || *i as usize >= n) {
+        Some(k) => Err(bad_index(what, k, ix[k], n)),
+        None => Ok(()),
+    }
 }
 
 /// Reads the points back and checks them: as many as `n`, all finite.
@@ -205,35 +229,46 @@ impl Mesh {
                 format!("has {} triangles, more than {MAX_PRIMS}", indices.len() / 3),
             ));
         }
-        let ix = indices.to_vec()?;
-        if let Some(k) = ix.iter().position(|i| *i < 0 || *i as usize >= n) {
-            return Err(bad(
-                WHAT,
-                "indices",
-                format!(
-                    "has {} at position {k} (triangle {}), outside the {n} points",
-                    ix[k],
-                    k / 3
-                ),
-            ));
-        }
-        let dev_indices = Array::from_slice(&ix, &device)?;
-        let tree = if device.is_cpu() {
+        let (dev_indices, host_indices, tree) = if device.is_cpu() {
+            let ix = indices.to_vec()?;
+            check_indices(WHAT, &ix, n)?;
             let p = read_points(WHAT, points, n)?;
             let (lo, hi) = triangle_boxes(&p, &ix);
-            Tree::build_on_host(&lo, &hi, &device)?
+            let tree = Tree::build_on_host(&lo, &hi, &device)?;
+            (Array::from_slice(&ix, &device)?, ix, tree)
         } else {
-            let (lo, hi) = device_triangle_boxes(points, &dev_indices)?;
+            // Everything on the device: the indices are checked by the triangles' boxes, the
+            // points by a check step, and only the two flags come back (after the build).
+            let own = Array::empty(indices.len(), &device)?;
+            own.copy_from(indices)?;
+            let flags = Array::from_slice(&[i32::MAX, i32::MAX], &device)?;
+            let (lo, hi) = device_triangle_boxes(points, &own, flags.device_address())?;
             let tree = Tree::build_on_device(&lo, &hi)?;
-            check_finite_on_device(WHAT, &[("points", points)])?;
-            tree
+            lbvh::check_finite(points, flags.device_address() + 4)?;
+            let f = flags.to_vec()?;
+            if f[0] != i32::MAX {
+                let k = f[0] as usize;
+                let v = indices.view(k..k + 1)?.to_vec()?[0];
+                return Err(bad_index(WHAT, k, v, n));
+            }
+            if f[1] != i32::MAX {
+                let i = f[1] as usize;
+                let p = points.view(i..i + 1)?.to_vec()?[0];
+                return Err(bad(
+                    WHAT,
+                    "points",
+                    format!("has a non-finite point at index {i}: {p:?}"),
+                ));
+            }
+            // A GPU mesh refits on the device: no host copy of the indices is needed.
+            (own, Vec::new(), tree)
         };
         Ok(Mesh {
             indices: dev_indices,
+            host_indices: Arc::new(host_indices),
             device,
             points: points.clone(),
             velocities: velocities.cloned(),
-            host_indices: Arc::new(ix),
             num_points: n,
             tree: Arc::new(tree),
         })
@@ -255,7 +290,10 @@ impl Mesh {
             self.tree.refit_on_host(&lo, &hi)?
         } else {
             check_point_count(WHAT, &self.points, self.num_points)?;
-            let (lo, hi) = device_triangle_boxes(&self.points, &self.indices)?;
+            // The indices were checked at `new`: the flag is not read.
+            let unused = Array::from_slice(&[i32::MAX], &self.device)?;
+            let (lo, hi) =
+                device_triangle_boxes(&self.points, &self.indices, unused.device_address())?;
             let tree = self.tree.refit_on_device(&lo, &hi)?;
             check_finite_on_device(WHAT, &[("points", &self.points)])?;
             tree
