@@ -110,6 +110,8 @@ pub(crate) struct Tree {
     num_prims: usize,
     /// The host copy of a tree built on the host (`None` for a GPU-built tree).
     host: Option<HostTree>,
+    /// A device-built tree's refit scratch, kept between refits.
+    scratch: std::sync::Mutex<Option<Lbvh>>,
 }
 
 /// The host copy of a host-built tree.
@@ -144,6 +146,7 @@ impl Tree {
                 parents: Arc::new(parents),
                 prim_ids: Arc::new(prim_ids),
             }),
+            scratch: Default::default(),
         })
     }
 
@@ -162,6 +165,7 @@ impl Tree {
             num_nodes: count,
             num_prims: n,
             host: None,
+            scratch: Default::default(),
         };
         Lbvh::new(device)?.build(
             lowers,
@@ -207,35 +211,52 @@ impl Tree {
                 parents: Arc::clone(&host.parents),
                 prim_ids: Arc::clone(&host.prim_ids),
             }),
+            scratch: Default::default(),
         })
     }
 
-    /// This device-built tree's shape with its boxes recomputed on its device from the
-    /// primitive boxes (as many as when built; queued): a new node buffer, the parents and
-    /// primitive ids shared.
+    /// This device-built tree's boxes recomputed on its device from the primitive boxes (as
+    /// many as when built; queued): in place when `tree` is not shared (no tape holds a clone:
+    /// nothing else can see the change), else into a new node buffer, the parents and
+    /// primitive ids shared. The scratch of the refit is kept for the next.
     pub(crate) fn refit_on_device(
-        &self,
+        tree: &mut Arc<Tree>,
         lowers: &Array<Vec3>,
         uppers: &Array<Vec3>,
-    ) -> Result<Tree> {
-        debug_assert!(self.host.is_none() && lowers.len() == self.num_prims);
-        let nodes = Array::<Vec4>::empty(self.nodes.len(), self.nodes.device())?;
-        nodes.copy_from(&self.nodes)?;
-        if self.num_prims > 0 {
-            Lbvh::new(nodes.device())?.refit(
-                lowers,
-                uppers,
-                &self.lbvh_buffers(&nodes.reinterpret()?),
-            )?;
+    ) -> Result<()> {
+        debug_assert!(tree.host.is_none() && lowers.len() == tree.num_prims);
+        if tree.num_prims == 0 {
+            return Ok(());
         }
-        Ok(Tree {
-            nodes,
-            parents: self.parents.clone(),
-            prim_ids: self.prim_ids.clone(),
-            num_nodes: self.num_nodes,
-            num_prims: self.num_prims,
-            host: None,
-        })
+        let device = tree.nodes.device().clone();
+        let scratch = tree
+            .scratch
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        let mut lbvh = match scratch {
+            Some(l) => l,
+            None => Lbvh::new(&device)?,
+        };
+        let result = if let Some(t) = Arc::get_mut(tree) {
+            lbvh.refit(lowers, uppers, &t.lbvh_buffers(&t.nodes.reinterpret()?))
+        } else {
+            let nodes = Array::<Vec4>::empty(tree.nodes.len(), &device)?;
+            nodes.copy_from(&tree.nodes)?;
+            lbvh.refit(lowers, uppers, &tree.lbvh_buffers(&nodes.reinterpret()?))?;
+            *tree = Arc::new(Tree {
+                nodes,
+                parents: tree.parents.clone(),
+                prim_ids: tree.prim_ids.clone(),
+                num_nodes: tree.num_nodes,
+                num_prims: tree.num_prims,
+                host: None,
+                scratch: Default::default(),
+            });
+            Ok(())
+        };
+        *tree.scratch.lock().unwrap_or_else(|p| p.into_inner()) = Some(lbvh);
+        result
     }
 
     /// Primitives in the tree.
@@ -453,10 +474,11 @@ impl Bvh {
             let [lo, hi] = read_boxes(WHAT, lowers, uppers)?;
             self.tree.refit_on_host(&lo, &hi)?
         } else {
+            // Checked before the refit, which may write the tree in place: a failed refit
+            // leaves the BVH as it was.
             check_box_counts(WHAT, lowers, uppers)?;
-            let tree = self.tree.refit_on_device(lowers, uppers)?;
             check_finite_on_device(WHAT, &[("lowers", lowers), ("uppers", uppers)])?;
-            tree
+            return Tree::refit_on_device(&mut self.tree, lowers, uppers);
         };
         self.tree = Arc::new(tree);
         Ok(())

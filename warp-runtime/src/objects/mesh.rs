@@ -289,14 +289,15 @@ impl Mesh {
             let (lo, hi) = triangle_boxes(&p, &self.host_indices);
             self.tree.refit_on_host(&lo, &hi)?
         } else {
+            // Checked before the refit, which may write the tree in place: a failed refit
+            // leaves the mesh as it was.
             check_point_count(WHAT, &self.points, self.num_points)?;
+            check_finite_on_device(WHAT, &[("points", &self.points)])?;
             // The indices were checked at `new`: the flag is not read.
             let unused = Array::from_slice(&[i32::MAX], &self.device)?;
             let (lo, hi) =
                 device_triangle_boxes(&self.points, &self.indices, unused.device_address())?;
-            let tree = self.tree.refit_on_device(&lo, &hi)?;
-            check_finite_on_device(WHAT, &[("points", &self.points)])?;
-            tree
+            return Tree::refit_on_device(&mut self.tree, &lo, &hi);
         };
         self.tree = Arc::new(tree);
         Ok(())
