@@ -98,7 +98,8 @@ static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
 
 /// LbvhTriangleBoxes: each of the `n` triangles' box (points: `num_points`, indices: 3 per
 /// triangle) into lowers and uppers; the smallest position of an index outside the points
-/// into *bad (i32, atomically lowered), whose triangle gets an empty box and reads no point.
+/// into *bad (i32, atomically lowered; `bad` 0: not recorded, for indices checked before),
+/// whose triangle gets an empty box and reads no point.
 struct lbvh_triangle_boxes_t {
   u64 points;
   u64 indices;
@@ -302,7 +303,7 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
     for (int k = 0; k < 3; ++k) {
       const wp::i32 v = ix[3 * f + k];
       if (v < 0 || (wp::i64)v >= s.num_points) {
-        atomicMin((wp::i32*)s.bad, (wp::i32)(3 * f + k));
+        if (s.bad != 0) atomicMin((wp::i32*)s.bad, (wp::i32)(3 * f + k));
         in_range = false;
       }
     }

@@ -214,7 +214,8 @@ pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
 
 /// Queues the boxes of the `lowers.len()` triangles of `points` and `indices` (three each)
 /// into `lowers` and `uppers`; the smallest position of an index outside the points lowers
-/// the `i32` at `bad` (that triangle reads no point and gets an empty box).
+/// the `i32` at `bad` (0: not recorded, for indices checked before); that triangle reads no
+/// point and gets an empty box.
 pub(crate) fn triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
@@ -290,15 +291,15 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
     }
     fn run_cpu(&self) -> Result<()> {
         let n = self.len();
-        // SAFETY: `num_points` points, `3n` indices, `n` boxes and one i32 the caller owns (an
-        // i32 is sized and aligned as an AtomicI32).
+        // SAFETY: `num_points` points, `3n` indices, `n` boxes and, unless `bad` is 0, one i32
+        // the caller owns (an i32 is sized and aligned as an AtomicI32).
         let (points, ix, lo, hi, bad) = unsafe {
             (
                 std::slice::from_raw_parts(self.points as *const Vec3, self.num_points as usize),
                 std::slice::from_raw_parts(self.indices as *const i32, 3 * n),
                 std::slice::from_raw_parts_mut(self.lowers as *mut Vec3, n),
                 std::slice::from_raw_parts_mut(self.uppers as *mut Vec3, n),
-                &*(self.bad as *const std::sync::atomic::AtomicI32),
+                (self.bad as *const std::sync::atomic::AtomicI32).as_ref(),
             )
         };
         lo.par_iter_mut()
@@ -308,7 +309,7 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
                 let corner = |k: usize| points.get(usize::try_from(ix[3 * f + k]).ok()?).copied();
                 let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
                     for k in 0..3 {
-                        if corner(k).is_none() {
+                        if let (None, Some(bad)) = (corner(k), bad) {
                             bad.fetch_min((3 * f + k) as i32, std::sync::atomic::Ordering::Relaxed);
                         }
                     }

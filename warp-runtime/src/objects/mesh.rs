@@ -96,7 +96,7 @@ fn triangle_boxes(points: &[Vec3], indices: &[i32]) -> (Vec<Vec3>, Vec<Vec3>) {
 }
 
 /// The triangles' boxes on the mesh's device (a GPU's: queued, nothing read back); the
-/// first position of an index outside the points lowers the `i32` at `bad`.
+/// first position of an index outside the points lowers the `i32` at `bad` (0: not recorded).
 fn device_triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
@@ -293,10 +293,8 @@ impl Mesh {
             // leaves the mesh as it was.
             check_point_count(WHAT, &self.points, self.num_points)?;
             check_finite_on_device(WHAT, &[("points", &self.points)])?;
-            // The indices were checked at `new`: the flag is not read.
-            let unused = Array::from_slice(&[i32::MAX], &self.device)?;
-            let (lo, hi) =
-                device_triangle_boxes(&self.points, &self.indices, unused.device_address())?;
+            // The indices were checked at `new`: nothing to record (no flag to allocate).
+            let (lo, hi) = device_triangle_boxes(&self.points, &self.indices, 0)?;
             return Tree::refit_on_device(&mut self.tree, &lo, &hi);
         };
         self.tree = Arc::new(tree);
