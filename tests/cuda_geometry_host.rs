@@ -869,28 +869,7 @@ fn bvh_cases(c: &mut Cases) {
     let n = 1500;
     let lo: Vec<Vec3> = (0..n).map(|i| Vec3::splat(i as f32)).collect();
     let hi: Vec<Vec3> = lo.iter().map(|x| *x + 0.5).collect();
-    let (mut nodes, mut parents) = (Vec::new(), Vec::new());
-    for k in 0..n {
-        if k + 1 < n {
-            nodes.push(BvhNode::internal(
-                lo[k],
-                hi[n - 1],
-                2 * k as i32 + 1,
-                2 * k as i32 + 2,
-            ));
-            nodes.push(BvhNode::leaf(lo[k], hi[k], k as i32, k as i32 + 1));
-            parents.push(if k == 0 { -1 } else { 2 * k as i32 - 2 });
-            parents.push(2 * k as i32);
-        } else {
-            nodes.push(BvhNode::leaf(lo[k], hi[k], k as i32, k as i32 + 1));
-            parents.push(2 * k as i32 - 2);
-        }
-    }
-    let deep = Tree {
-        nodes,
-        parents,
-        prim_ids: (0..n as i32).collect(),
-    };
+    let deep = caterpillar(&lo, &hi);
     bvh_load(c, &deep, &lo, &hi);
     bvh_queries(c, bvh_view(&deep, &lo, &hi), &mut rng, 30, 1500.0);
 
@@ -938,6 +917,39 @@ fn bvh_cases(c: &mut Cases) {
         c.label = format!("corrupt bvh {k}");
         bvh_load(c, t, &lo, &hi);
         bvh_queries(c, bvh_view(t, &lo, &hi), &mut rng, 6, 10.0);
+    }
+}
+
+/// A caterpillar over the boxes, deeper than any fixed stack: node 2k is internal with
+/// children 2k+1 (the leaf of box k) and 2k+2 (the rest); the last node is a leaf.
+fn caterpillar(lo: &[Vec3], hi: &[Vec3]) -> Tree {
+    let n = lo.len();
+    let (mut rest_lo, mut rest_hi) = (lo.to_vec(), hi.to_vec());
+    for k in (0..n.saturating_sub(1)).rev() {
+        rest_lo[k] = rest_lo[k].min(rest_lo[k + 1]);
+        rest_hi[k] = rest_hi[k].max(rest_hi[k + 1]);
+    }
+    let (mut nodes, mut parents) = (Vec::new(), Vec::new());
+    for k in 0..n {
+        if k + 1 < n {
+            nodes.push(BvhNode::internal(
+                rest_lo[k],
+                rest_hi[k],
+                2 * k as i32 + 1,
+                2 * k as i32 + 2,
+            ));
+            nodes.push(BvhNode::leaf(lo[k], hi[k], k as i32, k as i32 + 1));
+            parents.push(if k == 0 { -1 } else { 2 * k as i32 - 2 });
+            parents.push(2 * k as i32);
+        } else {
+            nodes.push(BvhNode::leaf(lo[k], hi[k], k as i32, k as i32 + 1));
+            parents.push(2 * k as i32 - 2);
+        }
+    }
+    Tree {
+        nodes,
+        parents,
+        prim_ids: (0..n as i32).collect(),
     }
 }
 
@@ -1129,12 +1141,11 @@ fn mesh_queries(c: &mut Cases, m: &Mesh, rng: &mut Rng, n: usize, scale: f32) {
             // Near a vertex, off in any direction: the vertex pseudonormal decides the sign
             // where the offset is nearly tangent.
             3 | 4 if npts > 0 => m.points[rng.below(npts)] + rng.v(-0.05, 0.05) * scale,
-            2 if nfaces > 0 => {
+            2 if nfaces > 0 && npts > 0 => {
                 let f = rng.below(nfaces);
-                let (a, b) = (
-                    m.points[m.indices[3 * f] as usize],
-                    m.points[m.indices[3 * f + 1] as usize],
-                );
+                // Clamped: a corrupt mesh's indices may be out of range.
+                let at = |k: usize| m.points[(m.indices[k].max(0) as usize).min(npts - 1)];
+                let (a, b) = (at(3 * f), at(3 * f + 1));
                 (a + (b - a) * 0.5) * rng.f(0.8, 1.2)
             }
             _ => rng.v(-1.5, 1.5) * scale,
@@ -1312,6 +1323,29 @@ fn mesh_cases(c: &mut Cases) {
         Mesh::new(Vec::new(), Vec::new(), true),
         1.0,
     ));
+    // A strip of 120 triangles along the diagonal under a caterpillar tree: the ordered
+    // walks' stack overflows and the dropped entries are found by climbing.
+    let mut p = Vec::new();
+    for k in 0..120 {
+        let a = Vec3::splat(k as f32 * 0.02 - 1.2);
+        p.extend([
+            a,
+            a + Vec3::new(0.015, 0.0, 0.0),
+            a + Vec3::new(0.0, 0.015, 0.005),
+        ]);
+    }
+    let ix: Vec<i32> = (0..p.len() as i32).collect();
+    let mut deep = Mesh::new(p, ix, false);
+    let (lo, hi): (Vec<Vec3>, Vec<Vec3>) = deep
+        .indices
+        .chunks(3)
+        .map(|t| {
+            let [a, b, cc] = [0, 1, 2].map(|k| deep.points[t[k] as usize]);
+            (a.min(b).min(cc), a.max(b).max(cc))
+        })
+        .unzip();
+    deep.tree = caterpillar(&lo, &hi);
+    meshes.push(("deep strip".into(), deep, 1.3));
     for (name, m, scale) in &meshes {
         c.label = format!("mesh {name}");
         m.load(c);

@@ -128,7 +128,20 @@ WP_FN Vec3 bvh_node_upper(const bvh_node_t& n) { return Vec3_new(n.upper[0], n.u
 
 /// Node i, or a fault (and a zero node) when i is outside the nodes.
 WP_FN bvh_node_t bvh_node(const bvh_tree_t& t, i32 i, ctx_t* ctx) {
-  if ((u32)i < (u32)t.num_nodes) return t.nodes[i];
+  if ((u32)i < (u32)t.num_nodes) {
+#if defined(__CUDACC__)
+    // Two 16-byte read-only loads (the runtime allocates nodes 16-byte aligned) instead of
+    // eight 4-byte ones: the traversals are bound by these loads.
+    const float4* q = reinterpret_cast<const float4*>(t.nodes + i);
+    const float4 lo = __ldg(q), hi = __ldg(q + 1);
+    bvh_node_t n;
+    n.lower[0] = lo.x; n.lower[1] = lo.y; n.lower[2] = lo.z; n.left = __float_as_int(lo.w);
+    n.upper[0] = hi.x; n.upper[1] = hi.y; n.upper[2] = hi.z; n.right = __float_as_int(hi.w);
+    return n;
+#else
+    return t.nodes[i];
+#endif
+  }
   bvh_fault(t, (i64)i, (i64)t.num_nodes, ctx);
   return bvh_node_t{};
 }
@@ -274,9 +287,14 @@ WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_
   }
 }
 
+/// ORDERED_STACK: the entries of walk_ordered's ring of farther children.
+#define WP_BVH_ORDERED_STACK 32
+
 /// walk_ordered: visits the leaves nearest first, skipping every box whose key is not below
-/// the search's current bound; the farther child's order is recomputed on the way up. At most
-/// 2 * num_nodes + 2 moves.
+/// the search's current bound (which never rises). The farther child, when it passes too, is
+/// pushed on a ring of WP_BVH_ORDERED_STACK entries with its key and popped when the nearer
+/// subtree is finished; entries the ring dropped (a deeper tree) are found by climbing the
+/// parent links. At most 2 * num_nodes + 2 moves.
 template <typename S>
 WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
   const bvh_node_t root = bvh_node(t, 0, ctx);
@@ -284,6 +302,10 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
   if (!(bvh_key(s.node_key(bvh_node_lower(root), bvh_node_upper(root))) < s.bound())) return;
   const u32 max = bvh_max_steps(t);
   u32 steps = 0u;
+  i32 stack_node[WP_BVH_ORDERED_STACK];
+  f32 stack_key[WP_BVH_ORDERED_STACK];
+  u32 held = 0u, head = 0u;
+  bool dropped = false;
   i32 cur = 0;
   for (;;) {  // 'down
     steps += 1u;
@@ -307,6 +329,13 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       bvh_ordered_children(t, s, node, &a, &ka, &b, &kb, ctx);
       if (faulted(ctx)) return;
       if (ka < s.bound()) {
+        if (kb < s.bound()) {
+          stack_node[head] = b;
+          stack_key[head] = kb;
+          head = (head + 1u) % WP_BVH_ORDERED_STACK;
+          dropped = dropped || held == WP_BVH_ORDERED_STACK;
+          held = held < WP_BVH_ORDERED_STACK ? held + 1u : held;
+        }
         cur = a;
         descended = true;
       } else if (kb < s.bound()) {
@@ -315,7 +344,19 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       }
     }
     if (descended) continue;
-    // cur is finished: climb to the next subtree to enter.
+    // cur is finished: the next entry still below the bound.
+    while (held > 0u) {
+      head = (head + WP_BVH_ORDERED_STACK - 1u) % WP_BVH_ORDERED_STACK;
+      held -= 1u;
+      if (stack_key[head] < s.bound()) {
+        cur = stack_node[head];
+        descended = true;
+        break;
+      }
+    }
+    if (descended) continue;
+    if (!dropped) return;
+    // Entries were dropped: climb to the next subtree to enter.
     i32 c = cur;
     for (;;) {
       steps += 1u;
@@ -331,9 +372,7 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       bvh_ordered_children(t, s, pn, &a, &ka, &b, &kb, ctx);
       if (faulted(ctx)) return;
       if (c == a && b != a) {
-        const bvh_node_t bn = bvh_node(t, b, ctx);
-        if (faulted(ctx)) return;
-        if (bvh_key(s.node_key(bvh_node_lower(bn), bvh_node_upper(bn))) < s.bound()) {
+        if (kb < s.bound()) {
           cur = b;
           descended = true;
           break;

@@ -176,19 +176,35 @@ WP_FN Vec3 mesh_face_normal(Vec3 a, Vec3 b, Vec3 c) {
   return Vec3_ZERO();
 }
 
-/// for_faces_touching: f(triangle) for every face in a leaf whose boxes overlap [lo, hi] (one
-/// walk whose primitive test does the work and accepts nothing).
+/// The search of for_faces_touching (Touching): key 0 for a box overlapping [lo, hi], +inf
+/// otherwise, bound 1: every overlapping box entered, left first, every face of its leaves
+/// visited.
+template <typename F>
+struct mesh_touching_t {
+  const mesh_t* mesh;
+  Vec3 lo, hi;
+  F* f;
+  WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
+    return aabb_overlap(lower, upper, lo, hi) ? 0.0f : f32_inf();
+  }
+  WP_FN f32 bound() const { return 1.0f; }
+  WP_FN void visit(i32 id, ctx_t* ctx) {
+    Vec3 t[3];
+    mesh_triangle(*mesh, (i64)id, t, ctx);
+    if (!faulted(ctx)) (*f)(t);
+  }
+};
+
+/// for_faces_touching: f(triangle) for every face in a leaf whose boxes overlap [lo, hi] (an
+/// ordered walk, for its stack).
 template <typename F>
 WP_FN void mesh_for_faces_touching(const mesh_t& m, Vec3 lo, Vec3 hi, F f, ctx_t* ctx) {
-  (void)bvh_walk_next(
-      bvh_walk_start(), m.tree, [lo, hi](Vec3 l, Vec3 u) { return aabb_overlap(l, u, lo, hi); },
-      [&m, &f](i32 id, ctx_t* c) {
-        Vec3 t[3];
-        mesh_triangle(m, (i64)id, t, c);
-        if (!faulted(c)) f(t);
-        return false;
-      },
-      ctx);
+  mesh_touching_t<F> s;
+  s.mesh = &m;
+  s.lo = lo;
+  s.hi = hi;
+  s.f = &f;
+  bvh_walk_ordered(m.tree, s, ctx);
 }
 
 WP_FN bool mesh_tri_contains(const Vec3* t, const Vec3& x) {

@@ -19,24 +19,28 @@
 //! - `prim_ids: [i32]`, `n` entries: the primitive indices (into the user's arrays) grouped
 //!   by leaf, a permutation of `0..n`.
 //! - `parents: [i32]`, one per node: the parent's index, **-1 for the root**. Refit walks it
-//!   bottom-up, and every traversal here walks it up instead of keeping a stack (below).
+//!   bottom-up, and the traversals walk it up instead of keeping a stack (below).
 //!
 //! The **empty tree** (no primitive) is one leaf with the empty range (`left = !0 = -1`,
 //! `right = 0`) and the inverted box `lower = +inf`, `upper = -inf`, which no box test
 //! accepts; `prim_ids` is empty and `parents = [-1]`. A tree over one primitive is one leaf.
 //!
-//! # Traversal: stackless, by parent links
+//! # Traversal: by parent links, with a bounded stack where the state is local
 //!
 //! Warp keeps a 32-entry stack of node indices in every query state (silently wrong when a
-//! deep tree overflows it). Here a traversal keeps no stack: it goes down to the left child
-//! first, and when a subtree is finished it climbs the `parents` links until it arrives from
-//! a left child, then goes to that node's right child. A query state is then a position in
-//! the tree, so it stays small ([`BvhQueryAabb`]: 44 bytes, pushed on the adjoint stack at
-//! every loop iteration), there is no overflow case at all, and any depth a builder produces
-//! (an LBVH over duplicate Morton codes included) is fine. The price is re-reading a parent
-//! node on the way up, which stays in cache. Queries that want the nearest child first
-//! (closest point, closest hit) order children by a key, and recompute the same order on the
-//! way up ([`walk_ordered`]).
+//! deep tree overflows it). Here the iterating queries ([`bvh_query_aabb`], a mesh's box
+//! query) keep no stack: they go down to the left child first, and when a subtree is
+//! finished they climb the `parents` links until they arrive from a left child, then go to
+//! that node's right child. Their state is then a position in the tree, so it stays small
+//! ([`BvhQueryAabb`]: 44 bytes, pushed on the adjoint stack at every loop iteration), and
+//! any depth a builder produces (an LBVH over duplicate Morton codes included) is fine.
+//!
+//! The searches that run to completion inside one call (closest point, closest hit, the
+//! faces around a vertex) order children by a key and keep the farther children on a local
+//! ring of [`ORDERED_STACK`] entries ([`walk_ordered`]): a pop instead of a climb that
+//! re-reads and re-orders every parent, which made those queries several times slower. A
+//! tree deeper than the ring loses its oldest entries, and the walk finds them by the same
+//! climb, so there is no overflow case either.
 //!
 //! # Corrupt trees
 //!
@@ -680,7 +684,8 @@ pub(crate) trait OrderedSearch {
     /// A lower bound of the cost of any primitive inside the box (NaN counts as +inf: never
     /// entered).
     fn node_key(&self, lower: Vec3, upper: Vec3) -> f32;
-    /// The best cost so far: a box is entered only when its key is strictly below it.
+    /// The best cost so far: a box is entered only when its key is strictly below it. It
+    /// never rises during a walk (the walk relies on it: see [`walk_ordered`]).
     fn bound(&self) -> f32;
     /// Tests primitive `id` (lowering the bound when it improves on it).
     fn visit(&mut self, id: i32) -> KResult<()>;
@@ -714,12 +719,22 @@ fn ordered_children<S: OrderedSearch>(
     })
 }
 
+/// Entries of [`walk_ordered`]'s stack of farther children (a ring: when a traversal goes
+/// deeper than this, the oldest entries, those nearest the root, are dropped and found again
+/// by climbing the parent links).
+pub(crate) const ORDERED_STACK: usize = 32;
+
 /// Visits the leaves of `tree` nearest first, skipping every box whose key is not below the
-/// search's current bound: the traversal of Warp's closest-point and closest-hit queries,
-/// without a stack. Going down, the nearer child is entered first (the farther one if only
-/// it passes); climbing back from the nearer child, the farther one is tried against the
-/// bound as it then stands; the order is recomputed from the same boxes and query on the way
-/// up, so it is the same. At most `2 * nodes + 2` moves, as every traversal (module docs).
+/// search's current bound: the traversal of Warp's closest-point and closest-hit queries.
+/// Going down, the nearer child is entered first and the farther one, when it passes too, is
+/// pushed with its key; a finished subtree pops the next entry and enters it when its key is
+/// still below the bound as it then stands ([`OrderedSearch::bound`] never rises, so an entry
+/// that failed when pushed would fail when popped). The stack is a ring of
+/// [`ORDERED_STACK`] entries; entries dropped from it when a tree is deeper are found again
+/// by the stackless climb: from the finished node up the parent links to the nearest
+/// ancestor left from its nearer child, whose farther child is tested then. Both orders are
+/// the same, depth first and nearest child first. At most `2 * nodes + 2` moves (a descent
+/// or a climb step), as every traversal (module docs).
 pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResult<()> {
     let root = tree.node(0)?;
     if !(key_of(s, &root) < s.bound()) {
@@ -727,6 +742,10 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
     }
     let max = tree.max_steps();
     let mut steps = 0u32;
+    let mut stack = [(0i32, 0f32); ORDERED_STACK];
+    let mut held = 0usize; // entries in the ring
+    let mut head = 0usize; // where the next push goes
+    let mut dropped = false;
     let mut cur = 0i32;
     'down: loop {
         steps += 1;
@@ -742,6 +761,12 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
         } else {
             let [(a, ka), (b, kb)] = ordered_children(tree, s, &node)?;
             if ka < s.bound() {
+                if kb < s.bound() {
+                    stack[head] = (b, kb);
+                    head = (head + 1) % ORDERED_STACK;
+                    dropped |= held == ORDERED_STACK;
+                    held = (held + 1).min(ORDERED_STACK);
+                }
                 cur = a;
                 continue 'down;
             }
@@ -750,7 +775,20 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
                 continue 'down;
             }
         }
-        // `cur` is finished: climb to the next subtree to enter.
+        // `cur` is finished: the next entry still below the bound.
+        while held > 0 {
+            head = (head + ORDERED_STACK - 1) % ORDERED_STACK;
+            held -= 1;
+            let (n, k) = stack[head];
+            if k < s.bound() {
+                cur = n;
+                continue 'down;
+            }
+        }
+        if !dropped {
+            return Ok(());
+        }
+        // Entries were dropped: climb to the next subtree to enter.
         let mut c = cur;
         loop {
             steps += 1;
@@ -765,10 +803,9 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
             if pn.is_leaf() {
                 return Ok(());
             }
-            let [(a, _), (b, _)] = ordered_children(tree, s, &pn)?;
+            let [(a, _), (b, kb)] = ordered_children(tree, s, &pn)?;
             if c == a && b != a {
-                // Re-read the farther child's key against the bound as it now stands.
-                if key_of(s, &tree.node(b)?) < s.bound() {
+                if kb < s.bound() {
                     cur = b;
                     continue 'down;
                 }
@@ -1036,14 +1073,12 @@ pub(crate) mod tests {
         }
     }
 
-    /// A deep, degenerate tree (a caterpillar of 2000 levels, deeper than any fixed stack):
-    /// the stackless walk still finds everything.
-    #[test]
-    fn deep_tree() {
-        let n = 2000;
+    /// A deep, degenerate tree (a caterpillar of `n` levels, deeper than any fixed stack):
+    /// node 2k is internal with children 2k+1 (the leaf of primitive k, box [k, k + 0.5]) and
+    /// 2k+2; the last node is a leaf.
+    fn caterpillar(n: usize) -> Built {
         let lo: Vec<Vec3> = (0..n).map(|i| Vec3::splat(i as f32)).collect();
         let hi: Vec<Vec3> = lo.iter().map(|x| *x + 0.5).collect();
-        // Node 2k is internal with children 2k+1 (leaf of prim k) and 2k+2; the last is a leaf.
         let mut nodes = Vec::new();
         let mut parents = Vec::new();
         for k in 0..n {
@@ -1058,13 +1093,20 @@ pub(crate) mod tests {
                 parents.push(2 * k as i32 - 2);
             }
         }
-        let mut b = Built {
+        Built {
             nodes,
             parents,
             prim_ids: (0..n as i32).collect(),
             lowers: lo,
             uppers: hi,
-        };
+        }
+    }
+
+    /// The stackless walk still finds everything in a tree of 2000 levels.
+    #[test]
+    fn deep_tree() {
+        let n = 2000;
+        let mut b = caterpillar(n);
         let v = b.view();
         let inf = Vec3::splat(f32::INFINITY);
         assert_eq!(aabb_items(v, -inf, inf), (0..n as i32).collect::<Vec<_>>());
@@ -1073,6 +1115,102 @@ pub(crate) mod tests {
             vec![1500]
         );
         assert_eq!(ray_items(v, Vec3::splat(-1.0), Vec3::ONE).len(), n);
+    }
+
+    /// A search recording its visits: keys are squared distances from `p`; with `prune` the
+    /// bound is the best primitive distance so far (a closest-point search), without it the
+    /// bound stays at `f32::MAX` and every box is entered.
+    struct Recorder<'a> {
+        b: &'a Built,
+        p: Vec3,
+        prune: bool,
+        best: f32,
+        seen: Vec<i32>,
+    }
+
+    impl OrderedSearch for Recorder<'_> {
+        fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
+            super::super::geometry::aabb_distance_sq(self.p, lower, upper)
+        }
+        fn bound(&self) -> f32 {
+            self.best
+        }
+        fn visit(&mut self, id: i32) -> KResult<()> {
+            self.seen.push(id);
+            let (lo, hi) = (self.b.lowers[id as usize], self.b.uppers[id as usize]);
+            let d = self.node_key(lo, hi);
+            if self.prune && d < self.best {
+                self.best = d;
+            }
+            Ok(())
+        }
+    }
+
+    /// The order [`walk_ordered`] must produce, by recursion: nearest child first (ties to
+    /// the left), each child entered when its key is below the bound as it stands then.
+    fn reference_walk(b: &Built, r: &mut Recorder, i: i32) {
+        let n = b.nodes[i as usize];
+        if n.is_leaf() {
+            let (start, end) = n.leaf_range();
+            for k in start..end {
+                r.visit(b.prim_ids[k as usize]).unwrap();
+            }
+            return;
+        }
+        let key = |c: i32| r.node_key(b.nodes[c as usize].lower(), b.nodes[c as usize].upper());
+        let (kl, kr) = (key(n.left), key(n.right));
+        let order = if kr < kl {
+            [(n.right, kr), (n.left, kl)]
+        } else {
+            [(n.left, kl), (n.right, kr)]
+        };
+        for (c, k) in order {
+            if k < r.bound() {
+                reference_walk(b, r, c);
+            }
+        }
+    }
+
+    /// The ordered walk against the recursion, on balanced trees and on caterpillars far
+    /// deeper than its ring (every entry dropped and found again by climbing): the same
+    /// visits in the same order, with and without pruning.
+    #[test]
+    fn ordered_walk_matches_recursion_at_any_depth() {
+        let mut rng = Rng(11);
+        let (lo, hi) = random_boxes(&mut rng, 500, 10.0, 1.0);
+        let mut trees = vec![Built::new(&lo, &hi, 1), Built::new(&lo, &hi, 4)];
+        trees.push(caterpillar(200));
+        trees.push(caterpillar(ORDERED_STACK + 1));
+        trees.push(caterpillar(ORDERED_STACK + 2));
+        for mut b in trees {
+            let tree = *b.view().tree();
+            let n = b.lowers.len() as f32;
+            let mut points: Vec<Vec3> = (0..40).map(|_| rng.v(-12.0, 12.0)).collect();
+            points.extend([
+                Vec3::splat(-50.0),
+                Vec3::splat(n + 50.0),
+                Vec3::splat(n * 0.5),
+            ]);
+            for p in points {
+                for prune in [false, true] {
+                    let fresh = || Recorder {
+                        b: &b,
+                        p,
+                        prune,
+                        best: f32::MAX,
+                        seen: Vec::new(),
+                    };
+                    let mut got = fresh();
+                    walk_ordered(&tree, &mut got).unwrap();
+                    let mut want = fresh();
+                    reference_walk(&b, &mut want, 0);
+                    assert_eq!(got.seen, want.seen, "p {p}, prune {prune}");
+                    if !prune {
+                        assert_eq!(got.seen.len(), b.lowers.len());
+                    }
+                }
+            }
+        }
     }
 
     #[test]

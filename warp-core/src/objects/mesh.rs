@@ -406,24 +406,46 @@ fn unit_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
 }
 
 /// The faces around the box `[lo, hi]` (a vertex's point box or an edge's box), each passed
-/// to `f` with its vertices: a box query whose primitive test does the work.
+/// to `f` with its vertices, left first: an ordered walk ([`Touching`]) rather than a box
+/// query.s [`Walk`], for its stack.
 #[inline(always)]
 fn for_faces_touching(
     mesh: &MeshView,
     lo: Vec3,
     hi: Vec3,
-    mut f: impl FnMut([Vec3; 3]),
+    f: impl FnMut([Vec3; 3]),
 ) -> KResult<()> {
-    let w = Walk::start().next(
-        &mesh.tree,
-        |l, u| aabb_overlap(l, u, lo, hi),
-        |id| {
-            f(mesh.triangle(id)?);
-            Ok(false)
-        },
-    )?;
-    debug_assert!(w.done());
-    Ok(())
+    walk_ordered(&mesh.tree, &mut Touching { mesh, lo, hi, f })
+}
+
+/// The search of [`for_faces_touching`]: a box overlapping `[lo, hi]` has key 0, any other
+/// +inf, and the bound stays 1, so every overlapping box is entered, the left child first
+/// (ties go left), and every face of an entered leaf is visited.
+struct Touching<'a, F> {
+    mesh: &'a MeshView,
+    lo: Vec3,
+    hi: Vec3,
+    f: F,
+}
+
+impl<F: FnMut([Vec3; 3])> OrderedSearch for Touching<'_, F> {
+    #[inline(always)]
+    fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
+        if aabb_overlap(lower, upper, self.lo, self.hi) {
+            0.0
+        } else {
+            f32::INFINITY
+        }
+    }
+    #[inline(always)]
+    fn bound(&self) -> f32 {
+        1.0
+    }
+    #[inline(always)]
+    fn visit(&mut self, id: i32) -> KResult<()> {
+        (self.f)(self.mesh.triangle(id)?);
+        Ok(())
+    }
 }
 
 /// The pseudonormal of the edge `x y`: the sum of the unit normals of the faces having both

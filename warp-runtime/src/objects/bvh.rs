@@ -305,6 +305,8 @@ impl Tree {
 
     /// The CUDA kernels' view of the tree, for the kernel parameter at index `arg`.
     pub(crate) fn cuda_tree(&self, arg: usize) -> CudaBvhTree {
+        // wp_bvh.h loads a node as two 16-byte words.
+        debug_assert_eq!(self.nodes.device_address() % 16, 0);
         CudaBvhTree {
             nodes: self.nodes.device_address(),
             parents: self.parents.device_address(),
