@@ -254,8 +254,13 @@ fn queries_match_brute_force(dev: &wp::Device) {
     if !dev.is_cpu() {
         // A GPU builds a linear BVH: the CPU's run of the same steps gives the same tree.
         let cpu = wp::cpu();
-        let (lbvh, parents, ids) =
-            wp::objects::lbvh::build_for_tests(&arr(&lo, &cpu), &arr(&hi, &cpu), None).unwrap();
+        let (lbvh, parents, ids) = wp::objects::lbvh::build_for_tests(
+            &arr(&lo, &cpu),
+            &arr(&hi, &cpu),
+            wp::objects::lbvh::BVH_LEAF_SIZE,
+            None,
+        )
+        .unwrap();
         let (nodes, p, i) = bvh.tree_host().unwrap();
         let words: &[[i32; 8]] = wp::cast_slice(&nodes);
         assert!(

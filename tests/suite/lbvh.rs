@@ -40,24 +40,33 @@ fn build(
     dev: &wp::Device,
     lo: &[Vec3],
     hi: &[Vec3],
+    leaf: usize,
     moved: Option<(&[Vec3], &[Vec3])>,
 ) -> wp::objects::lbvh::HostTree {
     let a = |v: &[Vec3]| wp::Array::from_slice(v, dev).unwrap();
     let (l, h) = (a(lo), a(hi));
     let m = moved.map(|(ml, mh)| (a(ml), a(mh)));
-    wp::objects::lbvh::build_for_tests(&l, &h, m.as_ref().map(|(x, y)| (x, y))).unwrap()
+    wp::objects::lbvh::build_for_tests(&l, &h, leaf, m.as_ref().map(|(x, y)| (x, y))).unwrap()
 }
+
+/// The leaf sizes of a `Bvh`'s and of a `Mesh`'s trees.
+const LEAF_SIZES: [usize; 2] = [
+    wp::objects::lbvh::BVH_LEAF_SIZE,
+    wp::objects::lbvh::MESH_LEAF_SIZE,
+];
 
 fn the_tree_is_the_cpus(dev: &wp::Device) {
     let cpu = wp::cpu();
     for n in [0usize, 1, 2, 3, 64, 1000, 100_000] {
         let (lo, hi) = boxes(n, 0x9e37_79b9 ^ n as u64);
-        let here = build(dev, &lo, &hi, None);
-        let there = build(&cpu, &lo, &hi, None);
-        assert!(
-            here == there,
-            "n = {n}: the {dev} tree differs from the CPU's"
-        );
+        for leaf in LEAF_SIZES {
+            let here = build(dev, &lo, &hi, leaf, None);
+            let there = build(&cpu, &lo, &hi, leaf, None);
+            assert!(
+                here == there,
+                "n = {n}, leaf size {leaf}: the {dev} tree differs from the CPU's"
+            );
+        }
     }
 }
 
@@ -73,10 +82,19 @@ fn refit_is_the_cpus(dev: &wp::Device) {
             .collect()
     };
     let (ml, mh) = (shift(&lo), shift(&hi));
-    let here = build(dev, &lo, &hi, Some((&ml, &mh)));
-    let there = build(&cpu, &lo, &hi, Some((&ml, &mh)));
-    assert!(here == there, "the refit {dev} tree differs from the CPU's");
-    let fresh = build(&cpu, &lo, &hi, None);
-    assert_eq!(here.1, fresh.1, "a refit changed the shape");
-    assert!(here.0 != fresh.0, "a refit changed no box");
+    for leaf in LEAF_SIZES {
+        let here = build(dev, &lo, &hi, leaf, Some((&ml, &mh)));
+        let there = build(&cpu, &lo, &hi, leaf, Some((&ml, &mh)));
+        assert!(
+            here == there,
+            "leaf size {leaf}: the refit {dev} tree differs from the CPU's"
+        );
+        let fresh = build(&cpu, &lo, &hi, leaf, None);
+        assert_eq!(here.1, fresh.1, "a refit changed the shape");
+        assert!(here.0 != fresh.0, "a refit changed no box");
+        // Every box the refit wrote contains what is under it, leaves of several boxes too.
+        let nodes: &[warp_core::objects::bvh::BvhNode] = wp::cast_slice(&here.0);
+        wp::objects::bvh_build::check_layout(nodes, &here.1, &here.2, &ml, &mh)
+            .unwrap_or_else(|e| panic!("leaf size {leaf}: the refit tree: {e}"));
+    }
 }

@@ -19,10 +19,12 @@
 //   wp_lbvh_hierarchy  Karras's construction over the sorted codes, with the index breaking
 //                      ties (so duplicate codes still give a binary tree): every internal
 //                      node's children and their parent links, every leaf's range and
-//                      primitive
+//                      primitive; an internal node over at most leaf_size primitives is
+//                      written as a leaf of their range (the nodes under it stay, unreached)
 //   wp_lbvh_refit      each leaf's box, then up the parent links: the second thread to reach a
 //                      node (an atomic counter per node, zeroed before) writes its box as the
-//                      union of its children's (fminf/fmaxf: exact and order-free)
+//                      union of its children's, or of its primitives' for an internal node
+//                      the hierarchy made a leaf (fminf/fmaxf: exact and order-free)
 //
 // Only compiled with WP_BVH_BUILD (the runtime's BVH build library); kernels that query a BVH
 // never include this file.
@@ -63,7 +65,8 @@ struct lbvh_morton_t {
 static_assert(sizeof(lbvh_morton_t) == 48, "lbvh_morton_t layout");
 
 /// LbvhHierarchy: the sorted keys and values (n each), nodes (2n - 1), parents (2n - 1),
-/// prim_ids (n).
+/// prim_ids (n), n, leaf_size (>= 1: an internal node over at most this many primitives is
+/// written as a leaf).
 struct lbvh_hierarchy_t {
   u64 keys;
   u64 values;
@@ -71,8 +74,9 @@ struct lbvh_hierarchy_t {
   u64 parents;
   u64 prim_ids;
   i64 n;
+  i64 leaf_size;
 };
-static_assert(sizeof(lbvh_hierarchy_t) == 48, "lbvh_hierarchy_t layout");
+static_assert(sizeof(lbvh_hierarchy_t) == 56, "lbvh_hierarchy_t layout");
 
 /// LbvhRefit: lowers, uppers (per primitive), nodes, parents, prim_ids, counters (i32*, one per
 /// internal node, zeroed), n.
@@ -191,9 +195,11 @@ WP_FN void lbvh_internal(const u32* keys, i64 n, i64 i, i64* first, i64* last, i
   *last = i < j ? j : i;
 }
 
-/// Step k of the hierarchy: internal node k (k < n - 1) and the leaf of sorted position k.
+/// Step k of the hierarchy: internal node k (k < n - 1) and the leaf of sorted position k. An
+/// internal node over at most leaf_size positions becomes a leaf of them; its children keep
+/// their parent links (the refit climbs through them) but no traversal reaches them.
 WP_FN void lbvh_hierarchy_step(const u32* keys, const u32* values, i64 n, i64 k,
-                               lbvh_node_t* nodes, i32* parents, i32* prim_ids) {
+                               i64 leaf_size, lbvh_node_t* nodes, i32* parents, i32* prim_ids) {
   const i64 leaf = n - 1 + k;
   nodes[leaf].left = ~(i32)k;
   nodes[leaf].right = (i32)(k + 1);
@@ -204,8 +210,13 @@ WP_FN void lbvh_hierarchy_step(const u32* keys, const u32* values, i64 n, i64 k,
     lbvh_internal(keys, n, k, &first, &last, &split);
     const i64 left = split == first ? n - 1 + split : split;
     const i64 right = split + 1 == last ? n - 1 + split + 1 : split + 1;
-    nodes[k].left = (i32)left;
-    nodes[k].right = (i32)right;
+    if (last - first + 1 <= leaf_size) {
+      nodes[k].left = ~(i32)first;
+      nodes[k].right = (i32)(last + 1);
+    } else {
+      nodes[k].left = (i32)left;
+      nodes[k].right = (i32)right;
+    }
     parents[left] = (i32)k;
     parents[right] = (i32)k;
   }
@@ -246,7 +257,7 @@ extern "C" __global__ void wp_lbvh_morton(wp::lbvh_morton_t s) {
 extern "C" __global__ void wp_lbvh_hierarchy(wp::lbvh_hierarchy_t s) {
   WP_LBVH_LOOP(k, s.n) {
     wp::lbvh_hierarchy_step((const wp::u32*)s.keys, (const wp::u32*)s.values, s.n, k,
-                            (wp::lbvh_node_t*)s.nodes, (wp::i32*)s.parents,
+                            s.leaf_size, (wp::lbvh_node_t*)s.nodes, (wp::i32*)s.parents,
                             (wp::i32*)s.prim_ids);
   }
 }
@@ -274,11 +285,24 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
       if (atomicAdd(&counters[c], 1) == 0) break;
       __threadfence();
       volatile wp::lbvh_node_t* node = &nodes[c];
-      const volatile wp::lbvh_node_t* l = &nodes[node->left];
-      const volatile wp::lbvh_node_t* r = &nodes[node->right];
-      for (int a = 0; a < 3; ++a) {
-        node->lower[a] = fminf(l->lower[a], r->lower[a]);
-        node->upper[a] = fmaxf(l->upper[a], r->upper[a]);
+      const wp::i32 left = node->left, right = node->right;
+      if (left < 0) {
+        // A leaf over several primitives (leaf_size > 1): the union of their boxes.
+        wp::Vec3 bl = lo[prim_ids[~left]], bu = hi[prim_ids[~left]];
+        for (wp::i32 j = ~left + 1; j < right; ++j) {
+          const wp::i32 q = prim_ids[j];
+          bl = wp::Vec3_new(fminf(bl.x, lo[q].x), fminf(bl.y, lo[q].y), fminf(bl.z, lo[q].z));
+          bu = wp::Vec3_new(fmaxf(bu.x, hi[q].x), fmaxf(bu.y, hi[q].y), fmaxf(bu.z, hi[q].z));
+        }
+        node->lower[0] = bl.x; node->lower[1] = bl.y; node->lower[2] = bl.z;
+        node->upper[0] = bu.x; node->upper[1] = bu.y; node->upper[2] = bu.z;
+      } else {
+        const volatile wp::lbvh_node_t* l = &nodes[left];
+        const volatile wp::lbvh_node_t* r = &nodes[right];
+        for (int a = 0; a < 3; ++a) {
+          node->lower[a] = fminf(l->lower[a], r->lower[a]);
+          node->upper[a] = fmaxf(l->upper[a], r->upper[a]);
+        }
       }
       c = parents[c];
     }

@@ -151,9 +151,14 @@ impl Tree {
     }
 
     /// A linear BVH over the boxes (contiguous, equal lengths, at most [`MAX_PRIMS`]: checked
-    /// by the caller; non-finite corners give a tree that the caller refuses), built on their
-    /// device without leaving it (queued: nothing waits).
-    pub(crate) fn build_on_device(lowers: &Array<Vec3>, uppers: &Array<Vec3>) -> Result<Tree> {
+    /// by the caller; non-finite corners give a tree that the caller refuses), with leaves of
+    /// up to `leaf_size` boxes, built on their device without leaving it (queued: nothing
+    /// waits).
+    pub(crate) fn build_on_device(
+        lowers: &Array<Vec3>,
+        uppers: &Array<Vec3>,
+        leaf_size: usize,
+    ) -> Result<Tree> {
         let device = lowers.device();
         let n = lowers.len();
         let count = lbvh::node_count(n);
@@ -171,6 +176,7 @@ impl Tree {
             lowers,
             uppers,
             &tree.lbvh_buffers(&tree.nodes.reinterpret()?),
+            leaf_size,
         )?;
         Ok(tree)
     }
@@ -449,7 +455,7 @@ impl Bvh {
             Tree::build_on_host(&lo, &hi, &device)?
         } else {
             check_box_counts(WHAT, lowers, uppers)?;
-            let tree = Tree::build_on_device(lowers, uppers)?;
+            let tree = Tree::build_on_device(lowers, uppers, lbvh::BVH_LEAF_SIZE)?;
             check_finite_on_device(WHAT, &[("lowers", lowers), ("uppers", uppers)])?;
             tree
         };

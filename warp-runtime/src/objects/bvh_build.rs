@@ -513,23 +513,42 @@ pub fn refit(
     lowers: &[Vec3],
     uppers: &[Vec3],
 ) {
+    let leaves: Vec<usize> = (0..nodes.len()).filter(|i| nodes[*i].is_leaf()).collect();
+    refit_from(nodes, parents, prim_ids, lowers, uppers, leaves);
+}
+
+/// [`refit`] with its climbs starting from the leaves `starts` (each once). A leaf reached by
+/// climbing (a linear BVH's internal node made a leaf, whose children are still linked up to
+/// it: see `lbvh.rs`) gets the union of its primitives' boxes when the second child arrives.
+pub fn refit_from(
+    nodes: &mut [BvhNode],
+    parents: &[i32],
+    prim_ids: &[i32],
+    lowers: &[Vec3],
+    uppers: &[Vec3],
+    starts: impl IntoParallelIterator<Item = usize>,
+) {
     assert_eq!(nodes.len(), parents.len());
     assert_eq!(lowers.len(), uppers.len());
     let arrivals: Vec<AtomicU32> = (0..nodes.len()).map(|_| AtomicU32::new(0)).collect();
-    let leaves: Vec<usize> = (0..nodes.len()).filter(|i| nodes[*i].is_leaf()).collect();
     let ptr = NodesPtr(nodes.as_mut_ptr());
     let len = nodes.len();
-    leaves.par_iter().for_each(|&leaf| {
-        // Each node is written only by one thread (its leaf's, or the second to arrive),
-        // and read only after its writer's release (below).
-        let node_at = |i: usize| ptr.at(i, len);
-        // SAFETY: each leaf is visited by exactly one thread.
-        let n = unsafe { &mut *node_at(leaf) };
+    let prims_box = |n: &BvhNode| {
         let (start, end) = n.leaf_range();
         let mut b = Aabb::EMPTY;
         for &id in &prim_ids[start as usize..end as usize] {
             b.grow(lowers[id as usize], uppers[id as usize]);
         }
+        b
+    };
+    starts.into_par_iter().for_each(|leaf| {
+        // Each node is written only by one thread (its leaf's, or the second to arrive),
+        // and read only after its writer's release (below).
+        let node_at = |i: usize| ptr.at(i, len);
+        // SAFETY: each start is visited by exactly one thread (the caller's list).
+        let n = unsafe { &mut *node_at(leaf) };
+        assert!(n.is_leaf(), "bvh refit: start {leaf} is not a leaf");
+        let b = prims_box(n);
         n.lower = b.lo.to_array();
         n.upper = b.hi.to_array();
         let mut c = leaf;
@@ -547,18 +566,21 @@ pub fn refit(
             }
             // SAFETY: only the second arrival writes node p; both children are final.
             let pn = unsafe { &mut *node_at(p) };
-            assert!(!pn.is_leaf(), "bvh refit: node {c}'s parent {p} is a leaf");
-            let (l, r) = unsafe { (*node_at(pn.left as usize), *node_at(pn.right as usize)) };
-            let b = Aabb::union(
-                Aabb {
-                    lo: l.lower(),
-                    hi: l.upper(),
-                },
-                Aabb {
-                    lo: r.lower(),
-                    hi: r.upper(),
-                },
-            );
+            let b = if pn.is_leaf() {
+                prims_box(pn)
+            } else {
+                let (l, r) = unsafe { (*node_at(pn.left as usize), *node_at(pn.right as usize)) };
+                Aabb::union(
+                    Aabb {
+                        lo: l.lower(),
+                        hi: l.upper(),
+                    },
+                    Aabb {
+                        lo: r.lower(),
+                        hi: r.upper(),
+                    },
+                )
+            };
             pn.lower = b.lo.to_array();
             pn.upper = b.hi.to_array();
             c = p;
@@ -567,8 +589,8 @@ pub fn refit(
 }
 
 /// Checks a tree against the layout (for builders' tests, the GPU LBVH's included): the root
-/// is node 0 with parent -1; every node is reached once from the root; children's parent
-/// links lead back; leaf ranges are in order and cover `prim_ids`, a permutation of
+/// is node 0 with parent -1; every node is reached once from the root, or lies under a leaf
+/// (a linear BVH's subtree made one leaf, unreached); children's parent links lead back; leaf ranges are in order and cover `prim_ids`, a permutation of
 /// `0..prims`; every box contains its children's (and a leaf's its primitives') exactly.
 /// Returns the tree's depth (the root alone is depth 1), or what is wrong.
 pub fn check_layout(
@@ -629,8 +651,22 @@ pub fn check_layout(
             }
         }
     }
-    if let Some(i) = seen.iter().position(|s| !s) {
-        return Err(format!("node {i} unreachable"));
+    for i in (0..nodes.len()).filter(|i| !seen[*i]) {
+        // Up the parent links to the first node reached: it must be a leaf.
+        let mut c = i;
+        for _ in 0..nodes.len() {
+            let p = parents[c];
+            if p < 0 || p as usize >= nodes.len() {
+                return Err(format!("node {i} unreachable (parent {p})"));
+            }
+            c = p as usize;
+            if seen[c] {
+                break;
+            }
+        }
+        if !(seen[c] && nodes[c].is_leaf()) {
+            return Err(format!("node {i} unreachable, not under a leaf"));
+        }
     }
     if let Some(k) = covered.iter().position(|c| *c != 1) {
         return Err(format!("prim_ids[{k}] in {} leaves", covered[k]));

@@ -31,6 +31,15 @@ pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary {
     headers: &["wp_core.h", "wp_bvh_build.h"],
 };
 
+/// The leaf size of a `Bvh`'s linear BVH: one box per leaf, as Warp's `wp.Bvh` (its box and
+/// ray queries test each box anyway, so a larger leaf only adds tests).
+pub const BVH_LEAF_SIZE: usize = 1;
+
+/// The leaf size of a `Mesh`'s linear BVH: up to 4 triangles per leaf, as Warp's meshes. A
+/// closest-point query then tests a few triangles in place of the two child boxes and the
+/// stack traffic of each of the 3 levels the leaf replaces.
+pub const MESH_LEAF_SIZE: usize = 4;
+
 /// Nodes of a tree over `n` primitives.
 pub(crate) fn node_count(n: usize) -> usize {
     (2 * n).saturating_sub(1).max(1)
@@ -66,12 +75,14 @@ impl Lbvh {
     }
 
     /// Builds the tree of the `n = lowers.len()` boxes into `tree` (buffers sized for `n`,
-    /// checked by the caller, as are the boxes: finite, `lowers.len() == uppers.len()`).
+    /// checked by the caller, as are the boxes: finite, `lowers.len() == uppers.len()`), every
+    /// subtree over at most `leaf_size` primitives (at least 1) made one leaf.
     pub(crate) fn build(
         &mut self,
         lowers: &Array<Vec3>,
         uppers: &Array<Vec3>,
         tree: &LbvhTree<'_>,
+        leaf_size: usize,
     ) -> Result<()> {
         let n = lowers.len();
         if n == 0 {
@@ -125,6 +136,7 @@ impl Lbvh {
                 parents: tree.parents.device_address(),
                 prim_ids: tree.prim_ids.device_address(),
                 n: n as i64,
+                leaf_size: leaf_size.max(1) as i64,
             },
         )?;
         self.refit(lowers, uppers, tree)
@@ -171,6 +183,7 @@ pub type HostTree = (Vec<[i32; 8]>, Vec<i32>, Vec<i32>);
 pub fn build_for_tests(
     lowers: &Array<Vec3>,
     uppers: &Array<Vec3>,
+    leaf_size: usize,
     moved: Option<(&Array<Vec3>, &Array<Vec3>)>,
 ) -> Result<HostTree> {
     let dev = lowers.device().clone();
@@ -184,7 +197,7 @@ pub fn build_for_tests(
         prim_ids: &prim_ids,
     };
     let mut b = Lbvh::new(&dev)?;
-    b.build(lowers, uppers, &tree)?;
+    b.build(lowers, uppers, &tree, leaf_size)?;
     if let Some((lo, hi)) = moved {
         b.refit(lo, hi, &tree)?;
     }
@@ -359,8 +372,9 @@ struct LbvhHierarchy {
     parents: u64,
     prim_ids: u64,
     n: i64,
+    leaf_size: i64,
 }
-const _: () = assert!(std::mem::size_of::<LbvhHierarchy>() == 48);
+const _: () = assert!(std::mem::size_of::<LbvhHierarchy>() == 56);
 
 /// `wp::lbvh_refit_t`: the boxes, bottom-up.
 #[repr(C)]
@@ -626,8 +640,14 @@ unsafe impl ObjectStep for LbvhHierarchy {
                         split + 1
                     };
                     let node = &mut *nodes.at(k);
-                    node.left = left as i32;
-                    node.right = right as i32;
+                    if last - first < self.leaf_size {
+                        // A subtree over at most leaf_size primitives: one leaf.
+                        node.left = !(first as i32);
+                        node.right = last as i32 + 1;
+                    } else {
+                        node.left = left as i32;
+                        node.right = right as i32;
+                    }
                     parents.at(left as usize).write(k as i32);
                     parents.at(right as usize).write(k as i32);
                 }
@@ -657,8 +677,11 @@ unsafe impl ObjectStep for LbvhRefit {
                 std::slice::from_raw_parts(self.uppers as *const Vec3, n),
             )
         };
-        // The same unions as the kernel's (min/max: exact and order-free), in any order.
-        bvh_build::refit(nodes, parents, ids, lo, hi);
+        // The kernel's climb from every primitive's leaf (a leaf over several primitives is
+        // one the hierarchy made from an internal node: reached by climbing), with the same
+        // unions (min/max: exact and order-free), in any order.
+        let first_leaf = n - 1;
+        bvh_build::refit_from(nodes, parents, ids, lo, hi, first_leaf..first_leaf + n);
         Ok(())
     }
 }
@@ -690,7 +713,7 @@ mod tests {
         (lo, hi)
     }
 
-    fn build_on_cpu(lo: &[Vec3], hi: &[Vec3]) -> (Vec<BvhNode>, Vec<i32>, Vec<i32>) {
+    fn build_on_cpu(lo: &[Vec3], hi: &[Vec3], leaf: usize) -> (Vec<BvhNode>, Vec<i32>, Vec<i32>) {
         let dev = crate::device::get_device("cpu").unwrap();
         let n = lo.len();
         let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
@@ -706,7 +729,7 @@ mod tests {
             parents: &parents,
             prim_ids: &ids,
         };
-        b.build(&l, &h, &tree).unwrap();
+        b.build(&l, &h, &tree, leaf).unwrap();
         let words = nodes.to_vec().unwrap();
         (
             bytemuck::cast_slice(&words).to_vec(),
@@ -727,14 +750,42 @@ mod tests {
             (5000, true),
         ] {
             let (lo, hi) = boxes(n, 0x1234_5678 + n as u64, dup);
-            let (nodes, parents, ids) = build_on_cpu(&lo, &hi);
-            let depth = bvh_build::check_layout(&nodes, &parents, &ids, &lo, &hi)
-                .unwrap_or_else(|e| panic!("n = {n}: {e}"));
-            // A Morton tree of random boxes is shallow (about 2 log2 n at most here).
-            assert!(
-                depth <= 2 * (usize::BITS - n.leading_zeros()) as usize + 2,
-                "n = {n}: depth {depth}"
-            );
+            for leaf in [BVH_LEAF_SIZE, 2, MESH_LEAF_SIZE] {
+                let (nodes, parents, ids) = build_on_cpu(&lo, &hi, leaf);
+                let depth = bvh_build::check_layout(&nodes, &parents, &ids, &lo, &hi)
+                    .unwrap_or_else(|e| panic!("n = {n}, leaf {leaf}: {e}"));
+                // A Morton tree of random boxes is shallow (about 2 log2 n at most here).
+                assert!(
+                    depth <= 2 * (usize::BITS - n.leading_zeros()) as usize + 2,
+                    "n = {n}: depth {depth}"
+                );
+                // Every reached leaf holds at most `leaf` primitives, and an internal node
+                // more (else it would have been made a leaf).
+                let mut work = vec![0usize];
+                while let Some(i) = work.pop() {
+                    let node = nodes[i];
+                    let count = |i: usize| -> usize {
+                        let mut stack = vec![i];
+                        let mut c = 0;
+                        while let Some(j) = stack.pop() {
+                            let m = nodes[j];
+                            if m.is_leaf() {
+                                let (s, e) = m.leaf_range();
+                                c += (e - s) as usize;
+                            } else {
+                                stack.extend([m.left as usize, m.right as usize]);
+                            }
+                        }
+                        c
+                    };
+                    if node.is_leaf() {
+                        assert!(count(i) <= leaf.max(1), "n = {n}, leaf {leaf}: node {i}");
+                    } else {
+                        assert!(count(i) > leaf, "n = {n}, leaf {leaf}: node {i}");
+                        work.extend([node.left as usize, node.right as usize]);
+                    }
+                }
+            }
         }
     }
 
@@ -743,8 +794,10 @@ mod tests {
         // Every box the same: every code equal; the index breaks the ties.
         let lo = vec![Vec3::ONE; 64];
         let hi = vec![Vec3::splat(2.0); 64];
-        let (nodes, parents, ids) = build_on_cpu(&lo, &hi);
-        bvh_build::check_layout(&nodes, &parents, &ids, &lo, &hi).unwrap();
+        for leaf in [BVH_LEAF_SIZE, MESH_LEAF_SIZE] {
+            let (nodes, parents, ids) = build_on_cpu(&lo, &hi, leaf);
+            bvh_build::check_layout(&nodes, &parents, &ids, &lo, &hi).unwrap();
+        }
     }
 
     #[test]

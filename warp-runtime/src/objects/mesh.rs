@@ -243,7 +243,7 @@ impl Mesh {
             own.copy_from(indices)?;
             let flags = Array::from_slice(&[i32::MAX, i32::MAX], &device)?;
             let (lo, hi) = device_triangle_boxes(points, &own, flags.device_address())?;
-            let tree = Tree::build_on_device(&lo, &hi)?;
+            let tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE)?;
             lbvh::check_finite(points, flags.device_address() + 4)?;
             let f = flags.to_vec()?;
             if f[0] != i32::MAX {
