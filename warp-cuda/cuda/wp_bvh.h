@@ -270,10 +270,11 @@ WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_
 WP_FN f32 bvh_key(f32 k) { return k < f32_inf() ? k : f32_inf(); }
 
 /// ordered_children: the children of internal node n nearest first (ties to the left), with
-/// their keys. S: node_key(lower, upper) -> f32, bound() -> f32, visit(id, ctx).
+/// their keys and nodes. S: node_key(lower, upper) -> f32, bound() -> f32, visit(id, ctx).
 template <typename S>
 WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_t& n, i32* a,
-                                f32* ka, i32* b, f32* kb, ctx_t* ctx) {
+                                f32* ka, bvh_node_t* an, i32* b, f32* kb, bvh_node_t* bn,
+                                ctx_t* ctx) {
   const bvh_node_t l = bvh_node(t, n.left, ctx);
   if (faulted(ctx)) return;
   const bvh_node_t r = bvh_node(t, n.right, ctx);
@@ -281,9 +282,9 @@ WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_
   const f32 kl = bvh_key(s.node_key(bvh_node_lower(l), bvh_node_upper(l)));
   const f32 kr = bvh_key(s.node_key(bvh_node_lower(r), bvh_node_upper(r)));
   if (kr < kl) {
-    *a = n.right; *ka = kr; *b = n.left; *kb = kl;
+    *a = n.right; *ka = kr; *an = r; *b = n.left; *kb = kl; *bn = l;
   } else {
-    *a = n.left; *ka = kl; *b = n.right; *kb = kr;
+    *a = n.left; *ka = kl; *an = l; *b = n.right; *kb = kr; *bn = r;
   }
 }
 
@@ -297,21 +298,20 @@ WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_
 /// parent links. At most 2 * num_nodes + 2 moves.
 template <typename S>
 WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
-  const bvh_node_t root = bvh_node(t, 0, ctx);
+  bvh_node_t node = bvh_node(t, 0, ctx);
   if (faulted(ctx)) return;
-  if (!(bvh_key(s.node_key(bvh_node_lower(root), bvh_node_upper(root))) < s.bound())) return;
+  if (!(bvh_key(s.node_key(bvh_node_lower(node), bvh_node_upper(node))) < s.bound())) return;
   const u32 max = bvh_max_steps(t);
   u32 steps = 0u;
   i32 stack_node[WP_BVH_ORDERED_STACK];
   f32 stack_key[WP_BVH_ORDERED_STACK];
   u32 held = 0u, head = 0u;
   bool dropped = false;
+  // node is node cur: a child entered goes on with the node read to order it.
   i32 cur = 0;
   for (;;) {  // 'down
     steps += 1u;
     if (steps > max) return;
-    const bvh_node_t node = bvh_node(t, cur, ctx);
-    if (faulted(ctx)) return;
     bool descended = false;
     if (node.left < 0) {
       i32 start, end;
@@ -326,7 +326,8 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
     } else {
       i32 a = 0, b = 0;
       f32 ka = 0.0f, kb = 0.0f;
-      bvh_ordered_children(t, s, node, &a, &ka, &b, &kb, ctx);
+      bvh_node_t an{}, bn{};
+      bvh_ordered_children(t, s, node, &a, &ka, &an, &b, &kb, &bn, ctx);
       if (faulted(ctx)) return;
       if (ka < s.bound()) {
         if (kb < s.bound()) {
@@ -337,9 +338,11 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
           held = held < WP_BVH_ORDERED_STACK ? held + 1u : held;
         }
         cur = a;
+        node = an;
         descended = true;
       } else if (kb < s.bound()) {
         cur = b;
+        node = bn;
         descended = true;
       }
     }
@@ -350,6 +353,8 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       held -= 1u;
       if (stack_key[head] < s.bound()) {
         cur = stack_node[head];
+        node = bvh_node(t, cur, ctx);
+        if (faulted(ctx)) return;
         descended = true;
         break;
       }
@@ -369,11 +374,13 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       if (pn.left < 0) return;
       i32 a = 0, b = 0;
       f32 ka = 0.0f, kb = 0.0f;
-      bvh_ordered_children(t, s, pn, &a, &ka, &b, &kb, ctx);
+      bvh_node_t an{}, bn{};
+      bvh_ordered_children(t, s, pn, &a, &ka, &an, &b, &kb, &bn, ctx);
       if (faulted(ctx)) return;
       if (c == a && b != a) {
         if (kb < s.bound()) {
           cur = b;
+          node = bn;
           descended = true;
           break;
         }

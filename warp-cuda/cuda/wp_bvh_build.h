@@ -234,13 +234,29 @@ extern "C" __global__ void wp_lbvh_bounds(wp::lbvh_bounds_t s) {
   const wp::Vec3* lo = (const wp::Vec3*)s.lowers;
   const wp::Vec3* hi = (const wp::Vec3*)s.uppers;
   wp::u32* b = (wp::u32*)s.bounds;
+  // Each thread's box, then each warp's (shuffles), then one atomic per warp and word: an
+  // atomic per primitive serialises on the 6 words.
+  wp::u32 acc[6] = {0xffffffffu, 0xffffffffu, 0xffffffffu, 0u, 0u, 0u};
   WP_LBVH_LOOP(i, s.n) {
     const wp::f32 c[3] = {wp::lbvh_centre(lo[i].x, hi[i].x), wp::lbvh_centre(lo[i].y, hi[i].y),
                           wp::lbvh_centre(lo[i].z, hi[i].z)};
     for (int a = 0; a < 3; ++a) {
       const wp::u32 u = wp::lbvh_ordered(c[a]);
-      atomicMin(&b[a], u);
-      atomicMax(&b[3 + a], u);
+      acc[a] = umin(acc[a], u);
+      acc[3 + a] = umax(acc[3 + a], u);
+    }
+  }
+  // Every lane of the warp gets here (no early exit; blocks are whole warps).
+  for (int off = 16; off > 0; off >>= 1) {
+    for (int a = 0; a < 3; ++a) {
+      acc[a] = umin(acc[a], __shfl_xor_sync(0xffffffffu, acc[a], off));
+      acc[3 + a] = umax(acc[3 + a], __shfl_xor_sync(0xffffffffu, acc[3 + a], off));
+    }
+  }
+  if ((threadIdx.x & 31u) == 0u) {
+    for (int a = 0; a < 3; ++a) {
+      if (acc[a] != 0xffffffffu) atomicMin(&b[a], acc[a]);
+      if (acc[3 + a] != 0u) atomicMax(&b[3 + a], acc[3 + a]);
     }
   }
 }
@@ -265,45 +281,46 @@ extern "C" __global__ void wp_lbvh_hierarchy(wp::lbvh_hierarchy_t s) {
 extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
   const wp::Vec3* lo = (const wp::Vec3*)s.lowers;
   const wp::Vec3* hi = (const wp::Vec3*)s.uppers;
-  wp::lbvh_node_t* nodes = (wp::lbvh_node_t*)s.nodes;
+  // A node as two 16-byte words: {lower xyz, left} and {upper xyz, right}. Nodes other threads
+  // wrote are read through L2 (__ldcg: L1 is not coherent), whole words at a time.
+  float4* nodes = (float4*)s.nodes;
   const wp::i32* parents = (const wp::i32*)s.parents;
   const wp::i32* prim_ids = (const wp::i32*)s.prim_ids;
   wp::i32* counters = (wp::i32*)s.counters;
   WP_LBVH_LOOP(k, s.n) {
     const wp::i64 leaf = s.n - 1 + k;
     const wp::i32 p = prim_ids[k];
-    nodes[leaf].lower[0] = lo[p].x;
-    nodes[leaf].lower[1] = lo[p].y;
-    nodes[leaf].lower[2] = lo[p].z;
-    nodes[leaf].upper[0] = hi[p].x;
-    nodes[leaf].upper[1] = hi[p].y;
-    nodes[leaf].upper[2] = hi[p].z;
+    // The leaf of sorted position k holds [k, k + 1) (the hierarchy wrote the same).
+    __stcg(&nodes[2 * leaf], make_float4(lo[p].x, lo[p].y, lo[p].z, __int_as_float(~(wp::i32)k)));
+    __stcg(&nodes[2 * leaf + 1],
+           make_float4(hi[p].x, hi[p].y, hi[p].z, __int_as_float((wp::i32)k + 1)));
     wp::i32 c = parents[leaf];
     while (c >= 0) {
       // Publish this subtree's boxes before arriving; the second arrival reads both children.
       __threadfence();
       if (atomicAdd(&counters[c], 1) == 0) break;
       __threadfence();
-      volatile wp::lbvh_node_t* node = &nodes[c];
-      const wp::i32 left = node->left, right = node->right;
+      const float4 a = __ldcg(&nodes[2 * c]), b = __ldcg(&nodes[2 * c + 1]);
+      const wp::i32 left = __float_as_int(a.w), right = __float_as_int(b.w);
+      float3 bl, bu;
       if (left < 0) {
         // A leaf over several primitives (leaf_size > 1): the union of their boxes.
-        wp::Vec3 bl = lo[prim_ids[~left]], bu = hi[prim_ids[~left]];
+        wp::i32 q = prim_ids[~left];
+        bl = make_float3(lo[q].x, lo[q].y, lo[q].z);
+        bu = make_float3(hi[q].x, hi[q].y, hi[q].z);
         for (wp::i32 j = ~left + 1; j < right; ++j) {
-          const wp::i32 q = prim_ids[j];
-          bl = wp::Vec3_new(fminf(bl.x, lo[q].x), fminf(bl.y, lo[q].y), fminf(bl.z, lo[q].z));
-          bu = wp::Vec3_new(fmaxf(bu.x, hi[q].x), fmaxf(bu.y, hi[q].y), fmaxf(bu.z, hi[q].z));
+          q = prim_ids[j];
+          bl = make_float3(fminf(bl.x, lo[q].x), fminf(bl.y, lo[q].y), fminf(bl.z, lo[q].z));
+          bu = make_float3(fmaxf(bu.x, hi[q].x), fmaxf(bu.y, hi[q].y), fmaxf(bu.z, hi[q].z));
         }
-        node->lower[0] = bl.x; node->lower[1] = bl.y; node->lower[2] = bl.z;
-        node->upper[0] = bu.x; node->upper[1] = bu.y; node->upper[2] = bu.z;
       } else {
-        const volatile wp::lbvh_node_t* l = &nodes[left];
-        const volatile wp::lbvh_node_t* r = &nodes[right];
-        for (int a = 0; a < 3; ++a) {
-          node->lower[a] = fminf(l->lower[a], r->lower[a]);
-          node->upper[a] = fmaxf(l->upper[a], r->upper[a]);
-        }
+        const float4 l0 = __ldcg(&nodes[2 * left]), l1 = __ldcg(&nodes[2 * left + 1]);
+        const float4 r0 = __ldcg(&nodes[2 * right]), r1 = __ldcg(&nodes[2 * right + 1]);
+        bl = make_float3(fminf(l0.x, r0.x), fminf(l0.y, r0.y), fminf(l0.z, r0.z));
+        bu = make_float3(fmaxf(l1.x, r1.x), fmaxf(l1.y, r1.y), fmaxf(l1.z, r1.z));
       }
+      __stcg(&nodes[2 * c], make_float4(bl.x, bl.y, bl.z, a.w));
+      __stcg(&nodes[2 * c + 1], make_float4(bu.x, bu.y, bu.z, b.w));
       c = parents[c];
     }
   }

@@ -702,20 +702,20 @@ fn key_of<S: OrderedSearch>(s: &S, n: &BvhNode) -> f32 {
     }
 }
 
-/// The children of internal node `n` nearest first (by key; ties to the left child), with
-/// their keys.
+/// The children of internal node `n` nearest first (by key; ties to the left child): each as
+/// its index, key and node.
 #[inline(always)]
 fn ordered_children<S: OrderedSearch>(
     tree: &BvhTree,
     s: &S,
     n: &BvhNode,
-) -> KResult<[(i32, f32); 2]> {
+) -> KResult<[(i32, f32, BvhNode); 2]> {
     let (l, r) = (tree.node(n.left)?, tree.node(n.right)?);
     let (kl, kr) = (key_of(s, &l), key_of(s, &r));
     Ok(if kr < kl {
-        [(n.right, kr), (n.left, kl)]
+        [(n.right, kr, r), (n.left, kl, l)]
     } else {
-        [(n.left, kl), (n.right, kr)]
+        [(n.left, kl, l), (n.right, kr, r)]
     })
 }
 
@@ -736,8 +736,8 @@ pub(crate) const ORDERED_STACK: usize = 32;
 /// the same, depth first and nearest child first. At most `2 * nodes + 2` moves (a descent
 /// or a climb step), as every traversal (module docs).
 pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResult<()> {
-    let root = tree.node(0)?;
-    if !(key_of(s, &root) < s.bound()) {
+    let mut node = tree.node(0)?;
+    if !(key_of(s, &node) < s.bound()) {
         return Ok(());
     }
     let max = tree.max_steps();
@@ -746,20 +746,20 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
     let mut held = 0usize; // entries in the ring
     let mut head = 0usize; // where the next push goes
     let mut dropped = false;
+    // `node` is node `cur`: a child entered goes on with the node read to order it.
     let mut cur = 0i32;
     'down: loop {
         steps += 1;
         if steps > max {
             return Ok(());
         }
-        let node = tree.node(cur)?;
         if node.is_leaf() {
             let (start, end) = tree.leaf_range(&node)?;
             for k in start..end {
                 s.visit(tree.prim(k)?)?;
             }
         } else {
-            let [(a, ka), (b, kb)] = ordered_children(tree, s, &node)?;
+            let [(a, ka, an), (b, kb, bn)] = ordered_children(tree, s, &node)?;
             if ka < s.bound() {
                 if kb < s.bound() {
                     stack[head] = (b, kb);
@@ -767,11 +767,11 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
                     dropped |= held == ORDERED_STACK;
                     held = (held + 1).min(ORDERED_STACK);
                 }
-                cur = a;
+                (cur, node) = (a, an);
                 continue 'down;
             }
             if kb < s.bound() {
-                cur = b;
+                (cur, node) = (b, bn);
                 continue 'down;
             }
         }
@@ -781,7 +781,7 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
             held -= 1;
             let (n, k) = stack[head];
             if k < s.bound() {
-                cur = n;
+                (cur, node) = (n, tree.node(n)?);
                 continue 'down;
             }
         }
@@ -803,10 +803,10 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
             if pn.is_leaf() {
                 return Ok(());
             }
-            let [(a, _), (b, kb)] = ordered_children(tree, s, &pn)?;
+            let [(a, _, _), (b, kb, bn)] = ordered_children(tree, s, &pn)?;
             if c == a && b != a {
                 if kb < s.bound() {
-                    cur = b;
+                    (cur, node) = (b, bn);
                     continue 'down;
                 }
             } else if c != b {
