@@ -42,7 +42,7 @@ WP_FN void closest_point_triangle_jacobian(Vec3 a, Vec3 b, Vec3 c, Vec3 p, i32 f
   Vec3 ab = b - a, ac = c - a;
   const Vec3 ap = p - a;
   const Vec3 vs[3] = {ab, ac, ap};
-  const f32 s = pow2_scale(g_max_abs(vs, 3));
+  const f32 s = pow2_scale(g_max_abs(vs));
   ab = ab * s;
   ac = ac * s;
   const auto edge = [s](Vec3 d) {

@@ -253,7 +253,19 @@ extern "C" __global__ void wp_lbvh_bounds(wp::lbvh_bounds_t s) {
       acc[3 + a] = umax(acc[3 + a], __shfl_xor_sync(0xffffffffu, acc[3 + a], off));
     }
   }
-  if ((threadIdx.x & 31u) == 0u) {
+  // Then the block's (one atomic per block and word: same-address atomics serialise in L2).
+  __shared__ wp::u32 warps[32][6];
+  const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x >> 5;
+  if (lane == 0u)
+    for (int a = 0; a < 6; ++a) warps[warp][a] = acc[a];
+  __syncthreads();
+  if (threadIdx.x == 0u) {
+    for (unsigned w = 1; w < (blockDim.x + 31u) >> 5; ++w) {
+      for (int a = 0; a < 3; ++a) {
+        acc[a] = umin(acc[a], warps[w][a]);
+        acc[3 + a] = umax(acc[3 + a], warps[w][3 + a]);
+      }
+    }
     for (int a = 0; a < 3; ++a) {
       if (acc[a] != 0xffffffffu) atomicMin(&b[a], acc[a]);
       if (acc[3 + a] != 0u) atomicMax(&b[3 + a], acc[3 + a]);

@@ -2,8 +2,10 @@
 // warp-core/src/objects/geometry.rs (read that for the definitions, the barycentric convention
 // `u * a + v * b + w * c`, the power-of-two scaling and the NaN rules). Every function takes the
 // Rust steps in the Rust order, with glam's evaluation order for each vector operation, so that
-// with no FMA contraction (NVRTC `--fmad=false`; g++ `-ffp-contract=off`) both backends return
-// the same bits.
+// with no FMA contraction (NVRTC `--fmad=false`, which the runtime passes when
+// `config::set_cuda_fmad(false)`; g++ `-ffp-contract=off`) both backends return the same bits.
+// With contraction (the runtime's default, as nvcc's and Warp's) results differ from the CPU's
+// in the last bits.
 //
 //   SLIVER_RATIO, pow2_scale(m)                     the sliver threshold, the exact rescaling
 //   TRI_FEATURE_*                                   TriFeature (i32: Face 0, VertexA..C 1..3,
@@ -67,9 +69,16 @@ WP_FN bool g_is_inf(f32 x) { return (f32_to_bits(x) & 0x7fffffffu) == 0x7f800000
 /// glam's `==` (per component; -0 == +0, NaN != NaN).
 WP_FN bool g_eq(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
 /// geometry.rs's max_abs: `m = m.max(v.abs().max_element())` over the vectors, from 0.
-WP_FN f32 g_max_abs(const Vec3* vs, int n) {
+/// The largest |component| of the vectors. The size is a template parameter and the loop is
+/// unrolled, so the array stays in registers: a loop over a runtime count put it in local
+/// memory (stores per call) where the inliner gave up unrolling, as in the signed mesh query.
+template <int N>
+WP_FN f32 g_max_abs(const Vec3 (&vs)[N]) {
   f32 m = 0.0f;
-  for (int i = 0; i < n; ++i) m = ::fmaxf(m, g_max_elem(g_abs(vs[i])));
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+  for (int i = 0; i < N; ++i) m = ::fmaxf(m, g_max_elem(g_abs(vs[i])));
   return m;
 }
 }  // namespace detail
@@ -182,7 +191,7 @@ WP_FN triangle_closest_point_t closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Ve
   using namespace detail;
   Vec3 ab = b - a, ac = c - a, ap = p - a;
   const Vec3 vs[3] = {ab, ac, ap};
-  const f32 s = pow2_scale(g_max_abs(vs, 3));
+  const f32 s = pow2_scale(g_max_abs(vs));
   ab = ab * s;
   ac = ac * s;
   ap = ap * s;
@@ -260,7 +269,7 @@ WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Ve
 
   Vec3 aa = a - start, bb = b - start, cc = c - start;
   const Vec3 vs[3] = {aa, bb, cc};
-  const f32 s = pow2_scale(g_max_abs(vs, 3));
+  const f32 s = pow2_scale(g_max_abs(vs));
   aa = aa * s;
   bb = bb * s;
   cc = cc * s;
@@ -534,7 +543,7 @@ WP_FN bool intersect_tri_tri(Vec3 v0, Vec3 v1, Vec3 v2, Vec3 u0, Vec3 u1, Vec3 u
   Vec3 a[3] = {v0 - o, v1 - o, v2 - o};
   Vec3 b[3] = {u0 - o, u1 - o, u2 - o};
   const Vec3 all[6] = {a[0], a[1], a[2], b[0], b[1], b[2]};
-  const f32 s = pow2_scale(g_max_abs(all, 6));
+  const f32 s = pow2_scale(g_max_abs(all));
   for (int k = 0; k < 3; ++k) {
     a[k] = a[k] * s;
     b[k] = b[k] * s;

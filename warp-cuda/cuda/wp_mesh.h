@@ -24,7 +24,8 @@
 // [0, num_points) (index: the vertex index; shape: num_points), the three vertex indices of a
 // face checked in order.
 //
-// Floating point: bit-exact with the CPU except vertex pseudonormals (mesh_query_point when
+// Floating point (compiled without FMA contraction, see wp_geometry.h; with it, within
+// rounding): bit-exact with the CPU except vertex pseudonormals (mesh_query_point when
 // the closest point is a vertex), whose angle weights call atan2f: glibc's on the CPU, CUDA's
 // (2 ulp) on a GPU. Only the sign depends on them, and only where the weighted normal is
 // perpendicular to the offset within those last bits.
@@ -230,10 +231,13 @@ WP_FN Vec3 mesh_vertex_normal(const mesh_t& m, Vec3 x, ctx_t* ctx) {
   mesh_for_faces_touching(
       m, x, x,
       [&n, x](const Vec3* t) {
-        int k = 0;
-        while (k < 3 && !g_eq(t[k], x)) ++k;
-        if (k == 3) return;
-        Vec3 e1 = t[(k + 1) % 3] - x, e2 = t[(k + 2) % 3] - x;
+        // The vertex at x and the two after it, selected without indexing t by a runtime
+        // value (which would put t in local memory).
+        const bool k0 = g_eq(t[0], x), k1 = !k0 && g_eq(t[1], x), k2 = !k0 && !k1 && g_eq(t[2], x);
+        if (!(k0 || k1 || k2)) return;
+        const Vec3 next = k0 ? t[1] : (k1 ? t[2] : t[0]);
+        const Vec3 after = k0 ? t[2] : (k1 ? t[0] : t[1]);
+        Vec3 e1 = next - x, e2 = after - x;
         const f32 s = pow2_scale(g_max_elem(g_vmax(g_abs(e1), g_abs(e2))));
         e1 = e1 * s;
         e2 = e2 * s;
