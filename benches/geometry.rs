@@ -11,9 +11,7 @@
 //! - Mesh: a torus (R = 1, r = 0.4) on a 500 x 200 grid, 200K triangles: build and refit.
 //! - 1M query points uniform in [-2, 2]^2 x [-1, 1]: `mesh_query_point` (signed) and
 //!   `mesh_query_point_no_sign` with max_dist 10; the distance of 2000 of them against brute
-//!   force in f64, and the sign against the torus's closed-form SDF. The unsigned query again
-//!   compiled without FMA contraction (`wp::config::set_cuda_fmad(false)`: the CPU's bits), to
-//!   show what bit-exactness costs.
+//!   force in f64, and the sign against the torus's closed-form SDF.
 //! - 1M rays from the radius-3 sphere aimed at random points of the torus's box:
 //!   `mesh_query_ray`; 500 of them against a brute-force ray cast.
 //! - A Bvh of 1M boxes (centres uniform in 10^3, half extents U[0.025, 0.075]): build, refit,
@@ -46,19 +44,6 @@ fn query_point(mesh: Mesh, pts: Array<Vec3>, out: Array<f32>) {
 
 #[wp::kernel]
 fn query_point_no_sign(mesh: Mesh, pts: Array<Vec3>, out: Array<f32>) {
-    let i = tid();
-    let p = pts[i];
-    let (found, _sign, face, u, v) = mesh_query_point_no_sign(mesh, p, 10.0);
-    let mut d = 0.0;
-    if found {
-        d = length(p - mesh_eval_position(mesh, face, u, v));
-    }
-    out[i] = d;
-}
-
-/// `query_point_no_sign` again, compiled with `--fmad=false`: the CPU's arithmetic bit for bit.
-#[wp::kernel]
-fn query_point_no_sign_exact(mesh: Mesh, pts: Array<Vec3>, out: Array<f32>) {
     let i = tid();
     let p = pts[i];
     let (found, _sign, face, u, v) = mesh_query_point_no_sign(mesh, p, 10.0);
@@ -181,22 +166,6 @@ fn main() -> wp::Result<()> {
             theirs("mean_distance").map_or("-".into(), |m| format!("{m:.4}"))
         ),
     );
-
-    if !dev.is_cpu() {
-        // Kernels keep the setting they were compiled with: compile the exact one now.
-        wp::config::set_cuda_fmad(false);
-        let compiled = wp::launch(query_point_no_sign_exact, n, (&mesh, &q, &out), &dev);
-        wp::config::set_cuda_fmad(true);
-        compiled?;
-        let exact =
-            median_ms(|| wp::launch(query_point_no_sign_exact, n, (&mesh, &q, &out), &dev))?;
-        let same = out.to_vec()? == d;
-        println!(
-            "  the same, no FMA contraction     {exact:8.3} ms   (bit-exact with the CPU's \
-             arithmetic; distances {} the default's)",
-            if same { "equal to" } else { "differ from" }
-        );
-    }
 
     // Rays from the radius-3 sphere towards the torus's box.
     let mut starts = Vec::with_capacity(n);

@@ -2,10 +2,8 @@
 // warp-core/src/objects/geometry.rs (read that for the definitions, the barycentric convention
 // `u * a + v * b + w * c`, the power-of-two scaling and the NaN rules). Every function takes the
 // Rust steps in the Rust order, with glam's evaluation order for each vector operation, so that
-// with no FMA contraction (NVRTC `--fmad=false`, which the runtime passes when
-// `config::set_cuda_fmad(false)`; g++ `-ffp-contract=off`) both backends return the same bits.
-// With contraction (the runtime's default, as nvcc's and Warp's) results differ from the CPU's
-// in the last bits.
+// with no FMA contraction (NVRTC `--fmad=false`, which the runtime always passes for a unit
+// including a geometry header; g++ `-ffp-contract=off`) both backends return the same bits.
 //
 //   SLIVER_RATIO, pow2_scale(m)                     the sliver threshold, the exact rescaling
 //   TRI_FEATURE_*                                   TriFeature (i32: Face 0, VertexA..C 1..3,

@@ -24,8 +24,7 @@
 // [0, num_points) (index: the vertex index; shape: num_points), the three vertex indices of a
 // face checked in order.
 //
-// Floating point (compiled without FMA contraction, see wp_geometry.h; with it, within
-// rounding): bit-exact with the CPU except vertex pseudonormals (mesh_query_point when
+// Floating point: bit-exact with the CPU except vertex pseudonormals (mesh_query_point when
 // the closest point is a vertex), whose angle weights call atan2f: glibc's on the CPU, CUDA's
 // (2 ulp) on a GPU. Only the sign depends on them, and only where the weighted normal is
 // perpendicular to the offset within those last bits.

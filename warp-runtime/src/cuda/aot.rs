@@ -23,7 +23,7 @@
 //! ```
 //! (a generic kernel's instances: `wp::aot::instances(my_kernels::axpy)`), and at start-up: `wp::aot::set_aot_dir(Some(env!("WARP_LANG_AOT_DIR_BUILT").into()))`.
 
-use super::options::with_compile_options;
+use super::options::{needs_exact, with_compile_options};
 use super::source;
 use crate::error::{Error, Result};
 use crate::kernel::{GenericKernel, Kernel, KernelInfo};
@@ -99,7 +99,8 @@ pub fn compile(
         let src = source::assemble(info);
         for &arch in archs {
             for contiguous in [true, false] {
-                let entry = with_compile_options(contiguous, None, |opts| {
+                let exact = needs_exact(&src.headers);
+                let entry = with_compile_options(contiguous, None, exact, |opts| {
                     let compiled = warp_cuda::compile(&src.text, info.name, opts, arch)?;
                     let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
                     let path = cache.store(info.name, key, &compiled.cubin)?;

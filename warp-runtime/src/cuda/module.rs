@@ -6,7 +6,7 @@
 //! process.
 
 use super::gpu::{err, state, GpuState};
-use super::options::with_compile_options;
+use super::options::{needs_exact, with_compile_options};
 use super::{aot, source};
 use crate::device::Device;
 use crate::error::Result;
@@ -123,8 +123,11 @@ pub(crate) fn loaded(
     };
     let arch = st.gpu.arch();
     let stack_define = adjoint.map(|b| b.to_string());
-    let (compiled, outcome, aot) =
-        with_compile_options(contiguous, stack_define.as_deref(), |opts| {
+    let (compiled, outcome, aot) = with_compile_options(
+        contiguous,
+        stack_define.as_deref(),
+        needs_exact(&src.headers),
+        |opts| {
             // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
             if let Some(cubin) = aot::lookup(&src.text, info.name, opts, arch) {
                 let c = warp_cuda::Compiled {
@@ -135,8 +138,9 @@ pub(crate) fn loaded(
                 return Ok((c, CacheOutcome::Hit, true));
             }
             warp_cuda::compile_cached(&src.text, info.name, opts, arch).map(|(c, o)| (c, o, false))
-        })
-        .map_err(|e| err(device, e))?;
+        },
+    )
+    .map_err(|e| err(device, e))?;
     let module = st
         .gpu
         .load_module(&compiled.cubin)
