@@ -247,9 +247,6 @@ WP_FN Vec3 mesh_vertex_normal(const mesh_t& m, Vec3 x, ctx_t* ctx) {
   return n;
 }
 
-/// PRETEST_MARGIN: a triangle whose box is farther than the best by this factor is skipped.
-#define WP_MESH_PRETEST_MARGIN (1.0f + 1.0f / 1024.0f)
-
 /// The closest-point search (Closest): squared distances in units of 1 / s.
 struct mesh_closest_t {
   const mesh_t* mesh;
@@ -267,10 +264,6 @@ struct mesh_closest_t {
     Vec3 t[3];
     mesh_triangle(*mesh, (i64)id, t, ctx);
     if (faulted(ctx)) return;
-    // The triangle's box first (Closest::visit): skipped when farther than the best by more
-    // than any rounding.
-    const f32 key = node_key(g_vmin(g_vmin(t[0], t[1]), t[2]), g_vmax(g_vmax(t[0], t[1]), t[2]));
-    if (key > best * WP_MESH_PRETEST_MARGIN) return;
     const triangle_closest_point_t r = closest_point_triangle(t[0], t[1], t[2], p);
     const f32 d = g_len_sq((triangle_closest_point_position(r, t[0], t[1], t[2]) - p) * s);
     if (d < best) {
@@ -356,11 +349,6 @@ struct mesh_closest_hit_t {
     Vec3 t[3];
     mesh_triangle(*mesh, (i64)id, t, ctx);
     if (faulted(ctx)) return;
-    // A ray that misses the triangle's box misses the triangle (ClosestHit::visit).
-    f32 tb;
-    if (!intersect_ray_aabb(start, inv_dir, g_vmin(g_vmin(t[0], t[1]), t[2]),
-                            g_vmax(g_vmax(t[0], t[1]), t[2]), &tb))
-      return;
     const ray_triangle_hit_t h = intersect_ray_triangle(start, dir, t[0], t[1], t[2]);
     if (h.result && h.t < bound()) {
       best.result = true;

@@ -286,12 +286,6 @@ pub struct MeshQueryRay {
 }
 
 /// The closest-point search: squared distances in units of `1 / s`.
-/// The closest-point search's pre-test margin: a triangle is skipped when its box's squared
-/// distance exceeds the best by this factor (1 + 2^-10, far above the few ulps by which the
-/// box's and the triangle's distances can round apart, so a skipped triangle could not have
-/// won: the result is the one without the pre-test).
-const PRETEST_MARGIN: f32 = 1.0 + 1.0 / 1024.0;
-
 struct Closest<'a> {
     mesh: &'a MeshView,
     p: Vec3,
@@ -314,13 +308,6 @@ impl OrderedSearch for Closest<'_> {
     #[inline(always)]
     fn visit(&mut self, id: i32) -> KResult<()> {
         let [a, b, c] = self.mesh.triangle(id)?;
-        // The triangle's box first, a lower bound of its distance: a triangle whose box is
-        // farther than the best by more than any rounding (PRETEST_MARGIN) cannot win, and
-        // most of a leaf's triangles are (the closest point costs several times the box).
-        let key = self.node_key(a.min(b).min(c), a.max(b).max(c));
-        if key > self.best * PRETEST_MARGIN {
-            return Ok(());
-        }
         let r = closest_point_triangle(a, b, c, self.p);
         let d = ((r.position(a, b, c) - self.p) * self.s).length_squared();
         if d < self.best {
@@ -600,13 +587,6 @@ impl OrderedSearch for ClosestHit<'_> {
     #[inline(always)]
     fn visit(&mut self, id: i32) -> KResult<()> {
         let [a, b, c] = self.mesh.triangle(id)?;
-        // A ray that misses the triangle's box misses the triangle (the box test is the one
-        // the tree's leaves pass, so it is no less exact there): the box test is a fraction
-        // of the watertight test's cost.
-        if intersect_ray_aabb(self.start, self.inv_dir, a.min(b).min(c), a.max(b).max(c)).is_none()
-        {
-            return Ok(());
-        }
         let h = intersect_ray_triangle(self.start, self.dir, a, b, c);
         if h.result && h.t < self.bound() {
             self.best = MeshQueryRay {
