@@ -5,7 +5,7 @@
 //! (rays parallel to faces included), faces in a box, evaluation at barycentrics (positions,
 //! velocities, normals); the empty mesh; a kernel deforming `mesh.points()`, then `refit`,
 //! then queries; a gradcheck through `mesh_query_point_no_sign` + `mesh_eval_position`; bad
-//! input (errors naming the argument).
+//! input (errors naming the argument); an OBJ file read and queried against its closed form.
 
 use crate::bvh::Rng;
 use crate::{arr, host, zeros};
@@ -25,6 +25,7 @@ backend_tests!(
     deform_then_refit_then_query,
     gradients_through_the_closest_point,
     bad_input_is_an_error,
+    obj_files_load_and_query,
 );
 
 // ------------------------------------------------------------------------------------------
@@ -733,6 +734,86 @@ fn bad_input_is_an_error(dev: &wp::Device) {
             eprintln!("mesh::bad_input_is_an_error: one device only, other-device cases skipped")
         }
     }
+}
+
+// ------------------------------------------------------------------------------------------
+// OBJ files
+// ------------------------------------------------------------------------------------------
+
+/// The cube [-1, 1]^3 as OBJ text: quads (the reader triangulates them), outward facing, in
+/// two objects, the second naming its vertices by negative (relative) indices; a comment, a
+/// texture coordinate and a normal the reader skips.
+const CUBE_OBJ: &str = "\
+# the cube [-1, 1]^3
+o first
+v -1 -1 -1
+v 1 -1 -1
+v 1 1 -1
+v -1 1 -1
+v -1 -1 1
+v 1 -1 1
+v 1 1 1
+v -1 1 1
+vt 0.5 0.5
+vn 0 0 1
+f 1 4 3 2
+f 5 6 7 8
+f 1 2 6 5
+o second
+f -5 -1 -2 -6
+f -8 -4 -1 -5
+f -7 -6 -2 -3
+";
+
+/// The cube's signed distance (closed form).
+fn cube_sdf(p: Vec3) -> f32 {
+    let q = p.abs() - Vec3::ONE;
+    q.max(Vec3::ZERO).length() + q.max_element().min(0.0)
+}
+
+/// An OBJ file read (from text and from a file), built into a mesh on the device, and
+/// queried: the signed distance against the cube's closed form; unreadable and malformed
+/// files are errors naming what is wrong.
+fn obj_files_load_and_query(dev: &wp::Device) {
+    let obj = wp::objects::ObjMesh::parse(CUBE_OBJ).unwrap();
+    assert_eq!(obj.triangles(), 12, "6 quads, 2 triangles each");
+    assert!(obj.points.iter().all(|p| p.abs() == Vec3::ONE));
+    let path = std::env::temp_dir().join(format!("wp_cube_{}.obj", std::process::id()));
+    std::fs::write(&path, CUBE_OBJ).unwrap();
+    let loaded = wp::objects::ObjMesh::load(&path);
+    std::fs::remove_file(&path).ok();
+    assert_eq!(loaded.unwrap(), obj);
+
+    let mesh = obj.to_mesh(dev).unwrap();
+    let mut rng = Rng(29);
+    let qs: Vec<Vec3> = (0..500).map(|_| rng.vec(-3.0, 3.0)).collect();
+    let n = qs.len();
+    let (found, cp, sign) = (
+        zeros::<i32, 1>(n, dev),
+        zeros::<Vec3, 1>(n, dev),
+        zeros::<f32, 1>(n, dev),
+    );
+    let q = arr(&qs, dev);
+    wp::launch(k_closest, n, (&mesh, &q, 10.0f32, &found, &cp, &sign), dev).unwrap();
+    let (found, cp, sign) = (host(&found), host(&cp), host(&sign));
+    for (i, p) in qs.iter().enumerate() {
+        let want = cube_sdf(*p);
+        assert_eq!(found[i], 1, "{i} at {p}");
+        // f32 distances of O(1): a few ulps of the coordinates, as the other mesh tests.
+        let got = (cp[i] - *p).length();
+        assert!(
+            (got - want.abs()).abs() <= tol(dev) * (1.0 + want.abs()),
+            "{i} at {p}: distance {got}, closed form {want}"
+        );
+        if want.abs() > 1e-3 {
+            assert_eq!(sign[i], want.signum(), "{i} at {p}: sign");
+        }
+    }
+
+    let e = wp::objects::ObjMesh::load("/nonexistent/mesh.obj").unwrap_err();
+    assert!(e.to_string().contains("/nonexistent/mesh.obj"), "{e}");
+    let e = wp::objects::ObjMesh::parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").unwrap_err();
+    assert!(e.to_string().contains("ObjMesh::parse"), "{e}");
 }
 
 /// The CUDA translation units of the mesh and BVH kernels name what `wp_geometry.h`,

@@ -7,6 +7,7 @@
 //! - [`bvh`]: [`Bvh`], Warp's BVH over boxes (box and ray queries).
 //! - [`mesh`]: [`Mesh`], Warp's triangle mesh (closest point, ray, box queries).
 //! - [`geometry_abi`]: the CUDA parameter layouts of both ([`CudaBvh`], [`CudaMesh`]).
+//! - `obj` (cargo feature `obj`): `ObjMesh`, a triangle mesh read from a Wavefront OBJ file.
 
 pub mod bvh;
 pub mod bvh_build;
@@ -16,12 +17,16 @@ mod hash_grid_steps;
 #[doc(hidden)]
 pub mod lbvh;
 pub mod mesh;
+#[cfg(feature = "obj")]
+pub mod obj;
 
 pub use crate::backend::ObjectLibrary;
 pub use bvh::Bvh;
 pub use geometry_abi::{CudaBvh, CudaBvhTree, CudaMesh};
 pub use hash_grid::{CudaHashGrid, HashGrid};
 pub use mesh::Mesh;
+#[cfg(feature = "obj")]
+pub use obj::ObjMesh;
 
 /// Every host object's CUDA build library (each compiled the first time a GPU runs one of
 /// its steps).
