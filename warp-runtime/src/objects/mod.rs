@@ -17,6 +17,8 @@ mod hash_grid_steps;
 #[doc(hidden)]
 pub mod lbvh;
 pub mod mesh;
+#[doc(hidden)]
+pub mod nvdb;
 #[cfg(feature = "obj")]
 pub mod obj;
 
