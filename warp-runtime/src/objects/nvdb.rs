@@ -2,7 +2,7 @@
 //! grid buffers read on the host, checked (headers, sizes, every offset a lookup follows, the
 //! CRC32 checksum), their metadata and index-to-world transform, and the value of a voxel by
 //! its index coordinate. The sparse-volume host object will sit on this layer; for now it
-//! reads what NanoVDB tools and Warp write (uncompressed files only).
+//! reads what NanoVDB tools and Warp write (uncompressed or ZIP-compressed; not BLOSC).
 //!
 //! Every read is bounds-checked against the buffer: a truncated or corrupted grid is an
 //! `Err`, never a panic or an out-of-bounds read.
@@ -468,11 +468,12 @@ impl Layout {
     }
 }
 
-/// The grids of an `.nvdb` file's bytes, every segment's (uncompressed files only).
+/// The grids of an `.nvdb` file's bytes, every segment's (uncompressed or ZIP; not BLOSC).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`]: a short or unknown header, a major version other than 32, a
-/// compressed codec, metadata or a payload past the end, a payload whose size is not the
+/// BLOSC or unknown codec, a ZIP stream that does not inflate to the grid's size, metadata
+/// or a payload past the end, a payload whose size is not the
 /// grid's, a grid that fails [`NvdbGrid::from_bytes`].
 pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
     const WHAT: &str = "NanoVDB file";
@@ -502,11 +503,11 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
         let count = u16_at(bytes, at + 12, WHAT)? as usize;
         let codec = u16_at(bytes, at + 14, WHAT)?;
         match codec {
-            0 => {}
-            1 | 2 => {
+            0 | 1 => {}
+            2 => {
                 return Err(bad(
                     WHAT,
-                    "compressed (ZIP or BLOSC): only uncompressed files are read",
+                    "BLOSC-compressed: only uncompressed and ZIP files are read",
                 ))
             }
             c => return Err(bad(WHAT, format!("unknown codec {c}"))),
@@ -516,7 +517,7 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
         for _ in 0..count {
             let grid_size = u64_at(bytes, at, WHAT)?;
             let file_size = u64_at(bytes, at + 8, WHAT)?;
-            if grid_size != file_size {
+            if codec == 0 && grid_size != file_size {
                 return Err(bad(
                     WHAT,
                     format!("a grid of {grid_size} bytes stored in {file_size}"),
@@ -530,19 +531,48 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
             sizes.push(grid_size as usize);
         }
         for size in sizes {
-            let end = at
-                .checked_add(size)
+            // ZIP: the stream's length (u64), then one zlib stream of the grid. (Upstream counts
+            // the length word in the metadata's fileSize, Warp does not: neither is read.)
+            let (start, stored) = if codec == 1 {
+                let n = u64_at(bytes, at, WHAT)?;
+                (at + 8, usize::try_from(n).unwrap_or(usize::MAX))
+            } else {
+                (at, size)
+            };
+            let end = start
+                .checked_add(stored)
                 .filter(|e| *e <= bytes.len())
                 .ok_or_else(|| {
                     bad(
                         WHAT,
                         format!(
-                            "a grid of {size} bytes at {at} is past the end ({})",
+                            "a grid of {stored} bytes at {start} is past the end ({})",
                             bytes.len()
                         ),
                     )
                 })?;
-            grids.push(NvdbGrid::from_bytes(bytes[at..end].to_vec())?);
+            let grid = if codec == 1 {
+                let g = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(
+                    &bytes[start..end],
+                    size,
+                )
+                .map_err(|e| {
+                    bad(
+                        WHAT,
+                        format!("a ZIP stream at {start} does not inflate: {e:?}"),
+                    )
+                })?;
+                if g.len() != size {
+                    return Err(bad(
+                        WHAT,
+                        format!("a ZIP stream inflates to {} bytes, not {size}", g.len()),
+                    ));
+                }
+                g
+            } else {
+                bytes[start..end].to_vec()
+            };
+            grids.push(NvdbGrid::from_bytes(grid)?);
             at = end;
         }
     }
@@ -580,14 +610,28 @@ mod tests {
     /// d = np.sqrt((i - 9.5) ** 2 + (j - 9.5) ** 2 + (k - 9.5) ** 2) - 6.0
     /// v = wp.Volume.load_from_numpy(d.astype(np.float32), min_world=(-1.0, 2.0, 0.5),
     ///                               voxel_size=0.25, bg_value=7.5, device="cpu")
-    /// v.save_to_nvdb("warp_sphere_f32.nvdb")
+    /// v.save_to_nvdb("warp_sphere_f32_zip.nvdb", codec="zip")
     /// ```
-    fn warp_sphere() -> Vec<u8> {
+    fn warp_sphere_zip() -> Vec<u8> {
         std::fs::read(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../tests/data/warp_sphere_f32.nvdb"
+            "/../tests/data/warp_sphere_f32_zip.nvdb"
         ))
         .expect("the fixture")
+    }
+
+    /// The same file as Warp writes it uncompressed (`codec="none"`, its default): the ZIP
+    /// file's header and metadata with codec 0 and fileSize = gridSize, then the grid.
+    fn warp_sphere() -> Vec<u8> {
+        let zip = warp_sphere_zip();
+        let grid = read_nvdb(&zip).unwrap().remove(0);
+        let name = u32::from_le_bytes(zip[16 + 136..16 + 140].try_into().unwrap()) as usize;
+        let mut out = zip[..FILE_HEADER + FILE_META + name].to_vec();
+        out[14..16].copy_from_slice(&0u16.to_le_bytes());
+        out[16 + 8..16 + 16].copy_from_slice(&(grid.as_bytes().len() as u64).to_le_bytes());
+        out[16 + 168..16 + 170].copy_from_slice(&0u16.to_le_bytes());
+        out.extend_from_slice(grid.as_bytes());
+        out
     }
 
     /// The fixture's value at `ijk`: the array's inside it (the same f64 arithmetic, then
@@ -609,6 +653,7 @@ mod tests {
     #[test]
     fn reads_a_file_warp_wrote() {
         let grids = read_nvdb(&warp_sphere()).unwrap();
+        assert_eq!(grids, read_nvdb(&warp_sphere_zip()).unwrap());
         assert_eq!(grids.len(), 1);
         let g = &grids[0];
         assert_eq!(g.grid_type(), GridType::Float);
@@ -672,8 +717,14 @@ mod tests {
         b[..8].copy_from_slice(&MAGIC_0.swap_bytes().to_le_bytes());
         assert!(msg(read_nvdb(&b)).contains("byte order"));
         let mut b = file.clone();
-        b[14] = 1;
-        assert!(msg(read_nvdb(&b)).contains("compressed"));
+        b[14] = 2;
+        assert!(msg(read_nvdb(&b)).contains("BLOSC"));
+        let zip = warp_sphere_zip();
+        assert!(msg(read_nvdb(&zip[..zip.len() - 9])).contains("past the end"));
+        let mut b = zip.clone();
+        let last = b.len() - 20;
+        b[last] ^= 0x55;
+        assert!(msg(read_nvdb(&b)).contains("ZIP stream"));
         let mut b = file.clone();
         b[8..12].copy_from_slice(&(31u32 << 21).to_le_bytes());
         assert!(msg(read_nvdb(&b)).contains("only 32"));
