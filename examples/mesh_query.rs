@@ -176,8 +176,8 @@ fn main() -> wp::Result<()> {
     });
     let obj = wp::objects::ObjMesh::load(&path)?;
     let m = meshes::TriMesh {
-        points: obj.points.clone(),
-        indices: obj.indices.clone(),
+        points: obj.points,
+        indices: obj.indices,
     };
     let (lo, hi) = m
         .points
@@ -201,8 +201,8 @@ fn main() -> wp::Result<()> {
         "\n3. projection of {n} points onto {path} ({} points, {} triangles) on {dev}: query \
          {query:.2} ms, build {build:.2} ms; distance error against brute force (f64, {} \
          points): {}",
-        obj.points.len(),
-        obj.triangles(),
+        m.points.len(),
+        m.triangles(),
         check.len(),
         warp_report::sci(worst),
     );

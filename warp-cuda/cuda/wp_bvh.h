@@ -1,9 +1,9 @@
 // wp_bvh.h: section "bvh" of the builtin table: NVIDIA Warp's BVH queries, the CUDA mirror of
 // warp-core/src/objects/bvh.rs (read that for the node layout, the stackless traversal by
 // parent links of the box and ray loops, the ordered walk's 32-entry ring with the climb as
-// its overflow path, the move budget and the corrupt-tree rules). Every step below is the Rust one
-// in the same order: both backends visit the same nodes and yield the same primitives in the
-// same order, fault on the same read with the same index, and end at the same move.
+// its overflow path, the move budget and the corrupt-tree rules). Every step below is the Rust
+// one in the same order: both backends visit the same nodes and yield the same primitives in
+// the same order, fault on the same read with the same index, and end at the same move.
 //
 //   bvh_node_t                              BvhNode (32 bytes: lower, left, upper, right)
 //   bvh_tree_t                              the tree part of a bvh_t / mesh_t (BvhTree)

@@ -66,10 +66,9 @@ WP_FN bool g_finite3(const Vec3& v) { return g_finite(v.x) && g_finite(v.y) && g
 WP_FN bool g_is_inf(f32 x) { return (f32_to_bits(x) & 0x7fffffffu) == 0x7f800000u; }
 /// glam's `==` (per component; -0 == +0, NaN != NaN).
 WP_FN bool g_eq(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
-/// geometry.rs's max_abs: `m = m.max(v.abs().max_element())` over the vectors, from 0.
-/// The largest |component| of the vectors. The size is a template parameter and the loop is
-/// unrolled, so the array stays in registers: a loop over a runtime count put it in local
-/// memory (stores per call) where the inliner gave up unrolling, as in the signed mesh query.
+/// geometry.rs's max_abs: `m = m.max(v.abs().max_element())` over the vectors, from 0. The
+/// size is a template parameter and the loop unrolled, so the array stays in registers (over a
+/// runtime count it went to local memory, a store per call, in the signed mesh query).
 template <int N>
 WP_FN f32 g_max_abs(const Vec3 (&vs)[N]) {
   f32 m = 0.0f;

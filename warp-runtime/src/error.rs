@@ -126,6 +126,12 @@ impl Error {
     pub(crate) fn invalid(what: impl Into<String>) -> Self {
         Error::InvalidArgument { what: what.into() }
     }
+
+    /// [`Error::invalid`] as "`what`: `why`" (the call or object, then what is wrong).
+    #[cold]
+    pub(crate) fn invalid_in(what: &str, why: impl fmt::Display) -> Self {
+        Self::invalid(format!("{what}: {why}"))
+    }
 }
 
 impl fmt::Display for Error {

@@ -590,8 +590,9 @@ pub fn refit_from(
 
 /// Checks a tree against the layout (for builders' tests, the GPU LBVH's included): the root
 /// is node 0 with parent -1; every node is reached once from the root, or lies under a leaf
-/// (a linear BVH's subtree made one leaf, unreached); children's parent links lead back; leaf ranges are in order and cover `prim_ids`, a permutation of
-/// `0..prims`; every box contains its children's (and a leaf's its primitives') exactly.
+/// (a linear BVH's subtree made one leaf, unreached); children's parent links lead back; leaf
+/// ranges are in order and cover `prim_ids`, a permutation of `0..prims`; every box contains
+/// its children's (and a leaf's its primitives') exactly.
 /// Returns the tree's depth (the root alone is depth 1), or what is wrong.
 pub fn check_layout(
     nodes: &[BvhNode],

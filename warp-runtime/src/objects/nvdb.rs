@@ -81,42 +81,27 @@ impl std::fmt::Debug for NvdbGrid {
     }
 }
 
-fn bad(what: &str, why: impl std::fmt::Display) -> Error {
-    Error::InvalidArgument {
-        what: format!("{what}: {why}"),
-    }
-}
-
 /// Little-endian reads, checked against the slice.
 fn read<const N: usize>(b: &[u8], off: usize, what: &str) -> Result<[u8; N]> {
     off.checked_add(N)
         .and_then(|end| b.get(off..end))
         .map(|s| s.try_into().expect("N bytes"))
         .ok_or_else(|| {
-            bad(
+            Error::invalid_in(
                 what,
                 format!("a read of {N} bytes at {off} is past its end ({})", b.len()),
             )
         })
 }
-fn u16_at(b: &[u8], off: usize, what: &str) -> Result<u16> {
-    read::<2>(b, off, what).map(u16::from_le_bytes)
+/// `name(b, off, what)`: the little-endian `ty` at `off`, checked (as [`read`]).
+macro_rules! le_reader {
+    ($($name:ident: $ty:ty),* $(,)?) => {$(
+        fn $name(b: &[u8], off: usize, what: &str) -> Result<$ty> {
+            read(b, off, what).map(<$ty>::from_le_bytes)
+        }
+    )*};
 }
-fn u32_at(b: &[u8], off: usize, what: &str) -> Result<u32> {
-    read::<4>(b, off, what).map(u32::from_le_bytes)
-}
-fn u64_at(b: &[u8], off: usize, what: &str) -> Result<u64> {
-    read::<8>(b, off, what).map(u64::from_le_bytes)
-}
-fn i64_at(b: &[u8], off: usize, what: &str) -> Result<i64> {
-    read::<8>(b, off, what).map(i64::from_le_bytes)
-}
-fn f32_at(b: &[u8], off: usize, what: &str) -> Result<f32> {
-    read::<4>(b, off, what).map(f32::from_le_bytes)
-}
-fn f64_at(b: &[u8], off: usize, what: &str) -> Result<f64> {
-    read::<8>(b, off, what).map(f64::from_le_bytes)
-}
+le_reader!(u16_at: u16, u32_at: u32, u64_at: u64, i64_at: i64, f32_at: f32, f64_at: f64);
 
 /// `base + rel` as a position in the buffer, or an error (a corrupt offset).
 fn offset(base: usize, rel: i64, what: &str) -> Result<usize> {
@@ -124,7 +109,9 @@ fn offset(base: usize, rel: i64, what: &str) -> Result<usize> {
         .checked_add(rel)
         .filter(|p| *p >= 0)
         .map(|p| p as usize)
-        .ok_or_else(|| bad(what, format!("offset {rel} from {base} leaves the buffer")))
+        .ok_or_else(|| {
+            Error::invalid_in(what, format!("offset {rel} from {base} leaves the buffer"))
+        })
 }
 
 /// CRC-32/IEEE (reflected polynomial 0xEDB88320, initial and final xor all ones), as zlib's.
@@ -165,7 +152,7 @@ impl NvdbGrid {
         const WHAT: &str = "NanoVDB grid";
         let b = &bytes[..];
         if b.len() < GRID_DATA + TREE_DATA {
-            return Err(bad(
+            return Err(Error::invalid_in(
                 WHAT,
                 format!(
                     "{} bytes, shorter than its headers ({})",
@@ -176,11 +163,14 @@ impl NvdbGrid {
         }
         let magic = u64_at(b, 0, WHAT)?;
         if magic != MAGIC_GRID && magic != MAGIC_0 {
-            return Err(bad(WHAT, format!("magic {magic:#018x} is not NanoVDB's")));
+            return Err(Error::invalid_in(
+                WHAT,
+                format!("magic {magic:#018x} is not NanoVDB's"),
+            ));
         }
         let version = u32_at(b, 16, WHAT)?;
         if version_major(version) != 32 {
-            return Err(bad(
+            return Err(Error::invalid_in(
                 WHAT,
                 format!(
                     "version {} (major), only 32 is read",
@@ -190,7 +180,10 @@ impl NvdbGrid {
         }
         let size = u64_at(b, 32, WHAT)?;
         if size != b.len() as u64 {
-            return Err(bad(WHAT, format!("says {size} bytes, has {}", b.len())));
+            return Err(Error::invalid_in(
+                WHAT,
+                format!("says {size} bytes, has {}", b.len()),
+            ));
         }
         let g = NvdbGrid { bytes };
         g.root()?;
@@ -263,7 +256,7 @@ impl NvdbGrid {
         };
         let range = |lo: usize, hi: usize| {
             b.get(lo..hi)
-                .ok_or_else(|| bad(WHAT, format!("range {lo}..{hi} past the end")))
+                .ok_or_else(|| Error::invalid_in(WHAT, format!("range {lo}..{hi} past the end")))
         };
         if version > VERSION_32_6_0 {
             let mid = GRID_DATA + TREE_DATA;
@@ -289,15 +282,15 @@ impl NvdbGrid {
             let upper = node_offset(2)?;
             let head = crc32(range(16, upper)?);
             // Every node over its full size: the uppers, the lowers, the leaves.
-            let (up_size, lo_size, leaf_size) = self.node_sizes()?;
+            let l = self.layout()?;
             // TreeData's node counts: leaf @32, lower @36, upper @40.
             let count = |off: usize| u32_at(b, GRID_DATA + off, WHAT).map(|c| c as usize);
             let (n_leaf, n_lo, n_up) = (count(32)?, count(36)?, count(40)?);
             let mut crcs = Vec::new();
             for (first, count, size) in [
-                (node_offset(2)?, n_up, up_size),
-                (node_offset(1)?, n_lo, lo_size),
-                (node_offset(0)?, n_leaf, leaf_size),
+                (upper, n_up, l.up_size),
+                (node_offset(1)?, n_lo, l.lo_size),
+                (node_offset(0)?, n_leaf, l.leaf_size),
             ] {
                 for k in 0..count {
                     let start = first + k * size;
@@ -308,16 +301,10 @@ impl NvdbGrid {
         }
     }
 
-    /// Upper, lower and leaf node sizes of this grid's value type.
-    fn node_sizes(&self) -> Result<(usize, usize, usize)> {
-        let l = self.layout()?;
-        Ok((l.up_size, l.lo_size, l.leaf_size))
-    }
-
     /// The per-type layout (docs/nanovdb.md, section 2).
     fn layout(&self) -> Result<Layout> {
         Layout::of(self.grid_type()).ok_or_else(|| {
-            bad(
+            Error::invalid_in(
                 "NanoVDB grid",
                 format!("value type {:?} is not read", self.grid_type()),
             )
@@ -329,7 +316,7 @@ impl NvdbGrid {
         const WHAT: &str = "NanoVDB tree";
         let root = offset(GRID_DATA, i64_at(&self.bytes, GRID_DATA + 24, WHAT)?, WHAT)?;
         if root.checked_add(28).is_none_or(|e| e > self.bytes.len()) {
-            return Err(bad(
+            return Err(Error::invalid_in(
                 WHAT,
                 format!("root at {root} is past the end ({})", self.bytes.len()),
             ));
@@ -352,7 +339,7 @@ impl NvdbGrid {
     pub fn value_f32(&self, ijk: [i32; 3]) -> Result<f32> {
         const WHAT: &str = "NanoVDB lookup";
         if self.grid_type() != GridType::Float {
-            return Err(bad(
+            return Err(Error::invalid_in(
                 WHAT,
                 format!("value_f32 of a {:?} grid", self.grid_type()),
             ));
@@ -483,16 +470,16 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
         let magic = u64_at(bytes, at, WHAT)?;
         if magic != MAGIC_0 && magic != MAGIC_FILE {
             if magic.swap_bytes() == MAGIC_0 || magic.swap_bytes() == MAGIC_FILE {
-                return Err(bad(WHAT, "written with the other byte order"));
+                return Err(Error::invalid_in(WHAT, "written with the other byte order"));
             }
-            return Err(bad(
+            return Err(Error::invalid_in(
                 WHAT,
                 format!("magic {magic:#018x} at {at} is not NanoVDB's"),
             ));
         }
         let version = u32_at(bytes, at + 8, WHAT)?;
         if version_major(version) != 32 {
-            return Err(bad(
+            return Err(Error::invalid_in(
                 WHAT,
                 format!(
                     "version {} (major), only 32 is read",
@@ -505,12 +492,12 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
         match codec {
             0 | 1 => {}
             2 => {
-                return Err(bad(
+                return Err(Error::invalid_in(
                     WHAT,
                     "BLOSC-compressed: only uncompressed and ZIP files are read",
                 ))
             }
-            c => return Err(bad(WHAT, format!("unknown codec {c}"))),
+            c => return Err(Error::invalid_in(WHAT, format!("unknown codec {c}"))),
         }
         at += FILE_HEADER;
         let mut sizes = Vec::with_capacity(count);
@@ -518,7 +505,7 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
             let grid_size = u64_at(bytes, at, WHAT)?;
             let file_size = u64_at(bytes, at + 8, WHAT)?;
             if codec == 0 && grid_size != file_size {
-                return Err(bad(
+                return Err(Error::invalid_in(
                     WHAT,
                     format!("a grid of {grid_size} bytes stored in {file_size}"),
                 ));
@@ -527,7 +514,7 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
             at = at
                 .checked_add(FILE_META + name)
                 .filter(|e| *e <= bytes.len())
-                .ok_or_else(|| bad(WHAT, "grid metadata past the end"))?;
+                .ok_or_else(|| Error::invalid_in(WHAT, "grid metadata past the end"))?;
             sizes.push(grid_size as usize);
         }
         for size in sizes {
@@ -543,7 +530,7 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
                 .checked_add(stored)
                 .filter(|e| *e <= bytes.len())
                 .ok_or_else(|| {
-                    bad(
+                    Error::invalid_in(
                         WHAT,
                         format!(
                             "a grid of {stored} bytes at {start} is past the end ({})",
@@ -557,13 +544,13 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
                     size,
                 )
                 .map_err(|e| {
-                    bad(
+                    Error::invalid_in(
                         WHAT,
                         format!("a ZIP stream at {start} does not inflate: {e:?}"),
                     )
                 })?;
                 if g.len() != size {
-                    return Err(bad(
+                    return Err(Error::invalid_in(
                         WHAT,
                         format!("a ZIP stream inflates to {} bytes, not {size}", g.len()),
                     ));
@@ -585,7 +572,7 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
 /// As [`read_nvdb`], and an unreadable file, each naming the path.
 pub fn load_nvdb(path: impl AsRef<Path>) -> Result<Vec<NvdbGrid>> {
     let path = path.as_ref();
-    let named = |why: String| bad(&format!("load_nvdb(\"{}\")", path.display()), why);
+    let named = |why: String| Error::invalid_in(&format!("load_nvdb(\"{}\")", path.display()), why);
     let bytes = std::fs::read(path).map_err(|e| named(e.to_string()))?;
     read_nvdb(&bytes).map_err(|e| match e {
         Error::InvalidArgument { what } => named(what),

@@ -37,7 +37,7 @@ impl ObjMesh {
     pub fn load(path: impl AsRef<Path>) -> Result<ObjMesh> {
         let path = path.as_ref();
         let what = format!("ObjMesh::load(\"{}\")", path.display());
-        let file = std::fs::File::open(path).map_err(|e| bad(&what, e))?;
+        let file = std::fs::File::open(path).map_err(|e| Error::invalid_in(&what, e))?;
         Self::read(&mut std::io::BufReader::new(file), &what)
     }
 
@@ -59,7 +59,7 @@ impl ObjMesh {
         // Materials are not needed: every material library resolves to none.
         let (models, _materials) =
             tobj::load_obj_buf(reader, &options, |_| Ok((Vec::new(), Default::default())))
-                .map_err(|e| bad(what, e))?;
+                .map_err(|e| Error::invalid_in(what, e))?;
         let mut out = ObjMesh::default();
         for model in models {
             let m = model.mesh;
@@ -70,7 +70,7 @@ impl ObjMesh {
                     .map(|p| Vec3::new(p[0], p[1], p[2])),
             );
             if out.points.len() > i32::MAX as usize {
-                return Err(bad(
+                return Err(Error::invalid_in(
                     what,
                     format!("{} vertices: more than i32 indexes", out.points.len()),
                 ));
@@ -78,7 +78,7 @@ impl ObjMesh {
             let count = m.positions.len() / 3;
             for &i in &m.indices {
                 if i as usize >= count {
-                    return Err(bad(
+                    return Err(Error::invalid_in(
                         what,
                         format!(
                             "object `{}`: a face names vertex {i} of {count}",
@@ -107,11 +107,5 @@ impl ObjMesh {
             &Array::from_slice(&self.indices, device)?,
             None,
         )
-    }
-}
-
-fn bad(what: &str, why: impl std::fmt::Display) -> Error {
-    Error::InvalidArgument {
-        what: format!("{what}: {why}"),
     }
 }
