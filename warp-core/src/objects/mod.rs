@@ -19,6 +19,7 @@ pub mod bvh;
 pub mod geometry;
 pub mod hash_grid;
 pub mod mesh;
+pub mod nanovdb;
 
 pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};
