@@ -161,6 +161,20 @@ pub fn atomic_without_adjoint(f: &Function) -> Option<String> {
             ..
         } = &s.kind
         {
+            if builtin.grad == crate::builtins::Grad::Effect {
+                // A store into an object: the stored value's gradient would be lost.
+                let float_value = f
+                    .ty(args[args.len() - 1])
+                    .scalar()
+                    .is_some_and(|s| s.is_float());
+                if float_value {
+                    why = Some(format!(
+                        "stores a float with `{}`, which has no adjoint yet",
+                        builtin.name
+                    ));
+                }
+                return;
+            }
             if !builtin.is_atomic() {
                 return;
             }

@@ -59,6 +59,10 @@ pub enum Class {
     Transform,
     /// Mat4, DMat4 (the matrix overloads of transform_point, transform_vector).
     Matrix4,
+    /// The values a `Volume<T>` holds: f32, f64, i32, Vec3, DVec3 (lookups, stores).
+    VolumeValue,
+    /// The values a volume interpolates: f32, f64, Vec3, DVec3 (sampling).
+    VolumeFloat,
 }
 
 impl Class {
@@ -101,6 +105,10 @@ impl Class {
             (Class::Noise, Ty::Vector(Scalar::F32, _)) => true,
             (Class::Transform, Ty::Transform(_)) => true,
             (Class::Matrix4, Ty::Matrix(_, 4)) => true,
+            (Class::VolumeValue, t) => crate::types::VolumeElem::of(t).is_some(),
+            (Class::VolumeFloat, t) => {
+                crate::types::VolumeElem::of(t).is_some() && *t != Ty::Scalar(Scalar::I32)
+            }
             _ => false,
         }
     }
@@ -125,6 +133,8 @@ impl Class {
             Class::Noise => "f32, Vec2, Vec3 or Vec4",
             Class::Transform => "a transform (Transform, DTransform)",
             Class::Matrix4 => "a 4x4 matrix (Mat4, DMat4)",
+            Class::VolumeValue => "a volume value (f32, f64, i32, Vec3, DVec3)",
+            Class::VolumeFloat => "a float volume value (f32, f64, Vec3, DVec3)",
         }
     }
 }
@@ -168,13 +178,28 @@ pub enum Pos {
     /// A host object or a query state of that kind, whatever `T` is (`hash_grid_query`'s
     /// grid).
     Object(ObjectKind),
+    /// A `Volume<T>`: binds `T` to the volume's value type (`volume_sample(v, ..) -> T`).
+    VolumeOfT,
+    /// A `Volume` of any element, index grids included (the transforms, the index reads).
+    AnyVolume,
+    /// The gradient of a `T` sample: `Vec3` of `T`'s scalar for a scalar, the 3x3 matrix of
+    /// its scalar (row `c`: component `c`'s gradient) for a 3-vector.
+    VolumeGradOfT,
+    /// `()`: the builtin is a statement (`volume_store`).
+    Unit,
 }
 
 impl Pos {
     /// Whether the position's type does not depend on `T`.
     pub fn fixed(&self) -> bool {
         match self {
-            Pos::Fixed(_) | Pos::FixedVec(..) | Pos::Bool | Pos::Index | Pos::Object(_) => true,
+            Pos::Fixed(_)
+            | Pos::FixedVec(..)
+            | Pos::Bool
+            | Pos::Index
+            | Pos::Object(_)
+            | Pos::AnyVolume
+            | Pos::Unit => true,
             // A tuple of fixed types (the mesh queries' results).
             Pos::Tuple(ps) => ps.iter().all(Pos::fixed),
             _ => false,
@@ -205,6 +230,10 @@ pub enum Grad {
     Zero,
     /// Atomics: special rules in the adjoint transform.
     Atomic,
+    /// A write into an object (`volume_store`): not replayed by the adjoint, and backward
+    /// through a kernel that makes one is refused (the stored value's gradient would be lost;
+    /// see `analysis::atomic_without_adjoint`).
+    Effect,
     /// Atomics without an adjoint (cas, exch, and, or, xor; Warp has none either): not
     /// replayed, and backward through a kernel is refused where one would lose a gradient or
     /// where the replay would need the old value it returned (see
@@ -446,9 +475,10 @@ impl Builtin {
     /// read through checked views) and its CUDA function takes the fault context last; the
     /// object is passed by value (a view). Read off the signature.
     pub fn reads_object(&self) -> bool {
-        self.params
-            .iter()
-            .any(|p| matches!(p, Pos::Object(k) if k.row().param))
+        self.params.iter().any(|p| {
+            matches!(p, Pos::Object(k) if k.row().param)
+                || matches!(p, Pos::VolumeOfT | Pos::AnyVolume)
+        })
     }
 
     /// Whether a call may fault ([`Builtin::reads_array`] or [`Builtin::reads_object`]): the
@@ -507,6 +537,8 @@ const BVH_AABB: Pos = Object(ObjectKind::BvhQueryAabb);
 const BVH_RAY: Pos = Object(ObjectKind::BvhQueryRay);
 const MESH: Pos = Object(ObjectKind::Mesh);
 const MESH_AABB: Pos = Object(ObjectKind::MeshQueryAabb);
+const VOL_VALUE: &[Class] = &[Class::VolumeValue];
+const VOL_FLOAT: &[Class] = &[Class::VolumeFloat];
 /// A point query's result: `(result, sign, face, u, v)` (Warp's `mesh_query_point_t`).
 const POINT_RESULT: Pos = Tuple(&[BOOL, F32, I32, F32, F32]);
 /// A ray query's result: `(result, sign, face, t, u, v, normal)` (Warp's `mesh_query_ray_t`).
@@ -736,6 +768,27 @@ table! {
     "closest_point_triangle": NO_T, (VEC3, VEC3, VEC3, VEC3) -> VEC3, "geometry", Adjoint,
         extension;
     "intersect_tri_tri": NO_T, (VEC3, VEC3, VEC3, VEC3, VEC3, VEC3) -> BOOL, "geometry", Zero;
+    // Warp's sparse volumes (warp-core `objects::volume` through `builtins::volume`;
+    // wp_volume.h). The volume is a typed parameter, `Volume<T>`, so the value type is checked
+    // at compile time where Warp checks it at run time (its `volume_sample_f/v/i` and `dtype=`
+    // are one row here, typed by the volume). Modes: `VOLUME_CLOSEST` (0), `VOLUME_LINEAR`.
+    // Positions are in index space (the transforms map world points there); a NaN or infinite
+    // coordinate faults. Gradients flow to the sample position (LINEAR) and, for a volume
+    // made with a gradient grid, into the stored values read.
+    "volume_sample": VOL_FLOAT, (VolumeOfT, VEC3, I32) -> T, "volume", Adjoint;
+    "volume_sample_grad": VOL_FLOAT, (VolumeOfT, VEC3, I32) -> Tuple(&[T, VolumeGradOfT]),
+        "volume", Adjoint, results("(value, grad)");
+    "volume_lookup": VOL_VALUE, (VolumeOfT, I32, I32, I32) -> T, "volume", Adjoint;
+    "volume_store": VOL_VALUE, (VolumeOfT, I32, I32, I32, T) -> Unit, "volume", Effect;
+    "volume_index_to_world": NO_T, (AnyVolume, VEC3) -> VEC3, "volume", Adjoint;
+    "volume_world_to_index": NO_T, (AnyVolume, VEC3) -> VEC3, "volume", Adjoint;
+    "volume_index_to_world_dir": NO_T, (AnyVolume, VEC3) -> VEC3, "volume", Adjoint;
+    "volume_world_to_index_dir": NO_T, (AnyVolume, VEC3) -> VEC3, "volume", Adjoint;
+    "volume_sample_index": VOL_FLOAT, (AnyVolume, VEC3, I32, ArrayOfT, T) -> T, "volume",
+        Adjoint;
+    "volume_sample_grad_index": VOL_FLOAT, (AnyVolume, VEC3, I32, ArrayOfT, T)
+        -> Tuple(&[T, VolumeGradOfT]), "volume", Adjoint, results("(value, grad)");
+    "volume_lookup_index": NO_T, (AnyVolume, I32, I32, I32) -> I32, "volume", Zero;
 }
 
 /// Looks a builtin up by name (internal rows included).
@@ -815,6 +868,25 @@ impl Builtin {
                 (Pos::ArrayOfT, ArgTy::Known(ty)) if !ty.is_deferred() => {
                     return Err(format!(
                         "`{}` expects an array as its first argument, found `{ty}`",
+                        self.name
+                    ))
+                }
+                (Pos::VolumeOfT, ArgTy::Known(Ty::Object(ObjectKind::Volume(e)))) => match e.ty() {
+                    Some(v) if t.is_none() => t = Some(v),
+                    Some(_) => {}
+                    None => {
+                        return Err(format!(
+                            "`{}` reads the values of a `Volume<T>`; a \
+                                 `Volume<VoxelIndex>` holds indices: use `volume_sample_index`",
+                            self.name
+                        ))
+                    }
+                },
+                (Pos::VolumeOfT | Pos::AnyVolume, ArgTy::Known(ty))
+                    if !ty.is_deferred() && !matches!(ty, Ty::Object(ObjectKind::Volume(_))) =>
+                {
+                    return Err(format!(
+                        "`{}` expects a `Volume<T>` as its first argument, found `{ty}`",
                         self.name
                     ))
                 }
@@ -907,6 +979,17 @@ impl Builtin {
                 .map(|s| Ty::Matrix(s, 4))
                 .unwrap_or(Ty::Deferred),
             Pos::Object(k) => Ty::Object(*k),
+            Pos::VolumeOfT => crate::types::VolumeElem::of(&t)
+                .map(|e| Ty::Object(ObjectKind::Volume(e)))
+                .unwrap_or(Ty::Deferred),
+            // Any element: the argument's own type (checked above).
+            Pos::AnyVolume => Ty::Deferred,
+            Pos::VolumeGradOfT => match &t {
+                Ty::Scalar(s) => Ty::Vector(*s, 3),
+                Ty::Vector(s, 3) => Ty::Matrix(*s, 3),
+                _ => Ty::Deferred,
+            },
+            Pos::Unit => Ty::Unit,
             // Results only (below).
             Pos::Tuple(_) => Ty::Deferred,
         };
@@ -933,6 +1016,7 @@ impl Builtin {
                     ));
                 }
                 ArgTy::Known(_) if *pos == Pos::ArrayOfT => {}
+                ArgTy::Known(_) if *pos == Pos::AnyVolume => {}
                 ArgTy::Known(ty) if *ty != w => {
                     return Err(format!(
                         "mismatched types in `{}`: argument {} is `{ty}`, expected `{w}`",
@@ -952,7 +1036,7 @@ impl Builtin {
                 _ => {}
             }
             let ty = match (arg, pos) {
-                (ArgTy::Known(ty), Pos::Index) => ty.clone(),
+                (ArgTy::Known(ty), Pos::Index | Pos::AnyVolume) => ty.clone(),
                 _ => w,
             };
             params.push(ty);
@@ -982,7 +1066,9 @@ mod tests {
                 "duplicate {}",
                 b.name
             );
-            let binds_t = b.params.contains(&Pos::T) || b.params.contains(&Pos::ArrayOfT);
+            let binds_t = b.params.contains(&Pos::T)
+                || b.params.contains(&Pos::ArrayOfT)
+                || b.params.contains(&Pos::VolumeOfT);
             let all_fixed = b.params.iter().chain([&b.ret]).all(Pos::fixed);
             assert!(binds_t || all_fixed, "{} cannot bind T", b.name);
             assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);
@@ -1487,6 +1573,73 @@ mod tests {
         for b in BUILTINS.iter().filter(|b| b.default_last.is_some()) {
             assert_eq!(b.params.len(), 2, "{}", b.name);
         }
+    }
+
+    #[test]
+    fn volume_rows_take_their_type_from_the_volume() {
+        use crate::types::VolumeElem;
+        let vol = |e| k(Ty::Object(ObjectKind::Volume(e)));
+        let v3 = Ty::Vector(Scalar::F32, 3);
+        let sample = lookup_user("volume_sample").unwrap();
+        let r = sample
+            .resolve(&[vol(VolumeElem::Vec3), k(v3.clone()), k(I32)])
+            .unwrap();
+        assert_eq!(r.ret, v3);
+        assert!(sample.faults());
+        let r = sample
+            .resolve(&[vol(VolumeElem::F64), k(v3.clone()), k(I32)])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Scalar(Scalar::F64));
+        // Integer grids are looked up, not interpolated; index grids hold no values.
+        let e = sample
+            .resolve(&[vol(VolumeElem::I32), k(v3.clone()), k(I32)])
+            .unwrap_err();
+        assert!(e.contains("is not defined for `i32`"), "{e}");
+        let e = sample
+            .resolve(&[vol(VolumeElem::Index), k(v3.clone()), k(I32)])
+            .unwrap_err();
+        assert!(e.contains("volume_sample_index"), "{e}");
+        let e = sample
+            .resolve(&[k(F32), k(v3.clone()), k(I32)])
+            .unwrap_err();
+        assert!(e.contains("expects a `Volume<T>`"), "{e}");
+        let grad = lookup_user("volume_sample_grad").unwrap();
+        let r = grad
+            .resolve(&[vol(VolumeElem::Vec3), k(v3.clone()), k(I32)])
+            .unwrap();
+        assert_eq!(
+            r.ret,
+            Ty::Tuple(vec![v3.clone(), Ty::Matrix(Scalar::F32, 3)])
+        );
+        let r = grad
+            .resolve(&[vol(VolumeElem::F32), k(v3.clone()), k(I32)])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Tuple(vec![F32, v3.clone()]));
+        let store = lookup_user("volume_store").unwrap();
+        let r = store
+            .resolve(&[vol(VolumeElem::I32), k(I32), k(I32), k(I32), k(I32)])
+            .unwrap();
+        assert_eq!(r.ret, Ty::Unit);
+        let e = store
+            .resolve(&[vol(VolumeElem::F32), k(I32), k(I32), k(I32), k(v3.clone())])
+            .unwrap_err();
+        assert!(e.contains("mismatched types"), "{e}");
+        // The index reads take any volume and type `T` from the data array.
+        let index = lookup_user("volume_sample_index").unwrap();
+        let arr = k(Ty::Array(Box::new(v3.clone()), 1));
+        let r = index
+            .resolve(&[
+                vol(VolumeElem::Index),
+                k(v3.clone()),
+                k(I32),
+                arr,
+                k(v3.clone()),
+            ])
+            .unwrap();
+        assert_eq!(r.ret, v3);
+        assert!(index.reads_array() && index.faults());
+        let w = lookup_user("volume_world_to_index").unwrap();
+        assert!(w.resolve(&[vol(VolumeElem::Index), k(v3.clone())]).is_ok());
     }
 
     #[test]

@@ -138,6 +138,69 @@ pub enum ObjectKind {
     Mesh,
     /// The state of a box query over a mesh's faces (`for f in mesh_query_aabb(..)`).
     MeshQueryAabb,
+    /// `Volume<T>`: a kernel parameter, a NanoVDB grid of `T` values (or of voxel indices);
+    /// its CPU view is `warp_core::objects::VolumeView<T>`, its CUDA type `wp::volume_t<T>`.
+    /// The element is part of the type, so a grid of one type where another is declared does
+    /// not compile (the runtime's `Volume<T>` is the launch argument's type).
+    Volume(VolumeElem),
+}
+
+/// What a `Volume<T>` holds: the value types a kernel can sample, or voxel indices (Warp's
+/// index grids, read through `volume_sample_index` and its kin).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VolumeElem {
+    F32,
+    F64,
+    I32,
+    Vec3,
+    DVec3,
+    /// `Volume<VoxelIndex>`: an index grid.
+    Index,
+}
+
+impl VolumeElem {
+    /// Every element, in the order messages list them.
+    pub const ALL: [VolumeElem; 6] = [
+        VolumeElem::F32,
+        VolumeElem::F64,
+        VolumeElem::I32,
+        VolumeElem::Vec3,
+        VolumeElem::DVec3,
+        VolumeElem::Index,
+    ];
+
+    /// The value type (`None` for an index grid, which has none).
+    pub fn ty(self) -> Option<Ty> {
+        Some(match self {
+            VolumeElem::F32 => Ty::Scalar(Scalar::F32),
+            VolumeElem::F64 => Ty::Scalar(Scalar::F64),
+            VolumeElem::I32 => Ty::Scalar(Scalar::I32),
+            VolumeElem::Vec3 => Ty::Vector(Scalar::F32, 3),
+            VolumeElem::DVec3 => Ty::Vector(Scalar::F64, 3),
+            VolumeElem::Index => return None,
+        })
+    }
+
+    /// The element of a value type.
+    pub fn of(t: &Ty) -> Option<VolumeElem> {
+        VolumeElem::ALL
+            .into_iter()
+            .find(|e| e.ty().as_ref() == Some(t))
+    }
+
+    /// The type argument as written (`f32`, `Vec3`, `VoxelIndex`).
+    pub fn name(self) -> String {
+        self.ty()
+            .map_or_else(|| "VoxelIndex".into(), |t| t.to_string())
+    }
+
+    /// The C++ element type of `wp::volume_t<..>` (an index grid's is `wp::voxel_index_t`).
+    pub fn cuda(self) -> String {
+        match self.ty() {
+            Some(t) => crate::back::cuda::cpp_type(&t).expect("a value type has a C++ name"),
+            None => "wp::voxel_index_t".into(),
+        }
+    }
 }
 
 /// One row per object kind: every fact the front end and the emitters need about it.
@@ -216,23 +279,43 @@ pub static OBJECTS: &[ObjectRow] = &[
         cuda: "wp::mesh_query_aabb_t",
         section: "mesh",
     },
+    // One row for every element: `Volume<T>`'s generic argument is added where the type is
+    // written (`ObjectKind::rust_args`, `cpp_type`).
+    ObjectRow {
+        kind: ObjectKind::Volume(VolumeElem::F32),
+        name: "Volume",
+        param: true,
+        rust: "VolumeView",
+        cuda: "wp::volume_t",
+        section: "volume",
+    },
 ];
 
 impl ObjectKind {
     /// This kind's row.
     pub fn row(self) -> &'static ObjectRow {
+        // Kinds that differ only in their element (`Volume<f32>`, `Volume<Vec3>`) share a row.
         OBJECTS
             .iter()
-            .find(|r| r.kind == self)
+            .find(|r| std::mem::discriminant(&r.kind) == std::mem::discriminant(&self))
             .expect("every object kind has a row")
     }
 
-    /// The object a parameter type names (`HashGrid`), if any.
+    /// The object a parameter type names (`HashGrid`), if any, for the types that take no
+    /// type argument (`Volume<T>` is parsed by `front::signature`).
     pub fn param_named(name: &str) -> Option<ObjectKind> {
         OBJECTS
             .iter()
-            .find(|r| r.param && r.name == name)
+            .find(|r| r.param && r.name == name && !matches!(r.kind, ObjectKind::Volume(_)))
             .map(|r| r.kind)
+    }
+
+    /// The view's or C++ type's generic argument, where the kind has one (`Volume<T>`'s `T`).
+    pub fn elem(self) -> Option<VolumeElem> {
+        match self {
+            ObjectKind::Volume(e) => Some(e),
+            _ => None,
+        }
     }
 }
 
@@ -380,6 +463,7 @@ impl fmt::Display for Ty {
                 let ts: Vec<String> = ts.iter().map(|t| t.to_string()).collect();
                 write!(f, "({})", ts.join(", "))
             }
+            Ty::Object(ObjectKind::Volume(e)) => write!(f, "Volume<{}>", e.name()),
             Ty::Object(k) => f.write_str(k.row().name),
             Ty::Unit => f.write_str("()"),
             Ty::Deferred => f.write_str("_"),
@@ -462,6 +546,16 @@ mod tests {
         // A query state is no parameter type.
         assert_eq!(ObjectKind::param_named("HashGridQuery"), None);
         assert_eq!(Ty::Object(ObjectKind::HashGrid).to_string(), "HashGrid");
+        // `Volume` takes its element: no plain-name parameter type.
+        assert_eq!(ObjectKind::param_named("Volume"), None);
+        let v3 = ObjectKind::Volume(VolumeElem::Vec3);
+        assert_eq!(v3.row().name, "Volume");
+        assert_eq!(Ty::Object(v3).to_string(), "Volume<Vec3>");
+        for e in VolumeElem::ALL {
+            if let Some(t) = e.ty() {
+                assert_eq!(VolumeElem::of(&t), Some(e));
+            }
+        }
     }
 
     #[test]

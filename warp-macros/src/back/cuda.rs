@@ -91,7 +91,10 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
         }
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::Struct(name) => name.clone(),
-        Ty::Object(k) => k.row().cuda.into(),
+        Ty::Object(k) => match k.elem() {
+            Some(e) => format!("{}<{}>", k.row().cuda, e.cuda()),
+            None => k.row().cuda.into(),
+        },
         Ty::Tuple(ts) => {
             let ts: Option<Vec<String>> = ts.iter().map(cpp_type).collect();
             format!("wp::tuple_t<{}>", ts?.join(", "))
@@ -409,6 +412,18 @@ impl<'a> Emitter<'a> {
             } if !self.used[*dst] => {
                 let call = self.op(op, *dst)?;
                 self.line(sp, &format!("{call};"));
+            }
+            // A builtin that is a statement (`volume_store`): the call alone; not redone in an
+            // adjoint's replay (the forward launch did it).
+            StmtKind::Assign {
+                dst,
+                op: op @ Op::Builtin { builtin, .. },
+                ..
+            } if matches!(self.f.ty(*dst), Ty::Unit) => {
+                if !(self.replay && builtin.grad == crate::builtins::Grad::Effect) {
+                    let call = self.op(op, *dst)?;
+                    self.line(sp, &format!("{call};"));
+                }
             }
             StmtKind::Assign { dst, op, define } => {
                 let rhs = self.op(op, *dst)?;

@@ -291,7 +291,10 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);
-                if builtin.is_atomic() && self.replay {
+                if builtin.grad == crate::builtins::Grad::Effect && self.replay {
+                    // A store into an object: the forward launch did it.
+                    quote_spanned!(sp=> ())
+                } else if builtin.is_atomic() && self.replay {
                     // Not replayed: the forward launch did it.
                     quote_spanned!(sp=> __wp::adjoint::zero())
                 } else if builtin.is_atomic() {
@@ -418,7 +421,17 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
         // An object's view or a query state (warp-core's `objects`).
         Ty::Object(k) => {
             let id = format_ident!("{}", k.row().rust);
-            Some(quote!(__wp::objects::#id))
+            match k.elem() {
+                // `VolumeView<T>`: the element is part of the view's type.
+                Some(e) => {
+                    let t = match e.ty() {
+                        Some(t) => ty_tokens(&t)?,
+                        None => quote!(__wp::objects::VoxelIndex),
+                    };
+                    Some(quote!(__wp::objects::#id<#t>))
+                }
+                None => Some(quote!(__wp::objects::#id)),
+            }
         }
         _ => None,
     }

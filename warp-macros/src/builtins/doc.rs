@@ -75,6 +75,17 @@ const CONSTRUCTS: &[&str] = &[
     "hash_grid_query_next",
     "bvh_query_next",
     "mesh_query_aabb_next",
+    // The volume rows typed by the parameter's `Volume<T>` are Warp's per-type spellings.
+    "volume_sample_f",
+    "volume_sample_v",
+    "volume_sample_i",
+    "volume_sample_grad_f",
+    "volume_lookup_f",
+    "volume_lookup_v",
+    "volume_lookup_i",
+    "volume_store_f",
+    "volume_store_v",
+    "volume_store_i",
 ];
 
 const BLESS: &str = "WARP_LANG_BLESS";
@@ -239,6 +250,10 @@ fn pos(p: &Pos) -> String {
         Pos::Mat4OfT => "Mat4(S)".into(),
         Pos::Tuple(ps) => format!("({})", ps.iter().map(pos).collect::<Vec<_>>().join(", ")),
         Pos::Object(k) => k.row().name.into(),
+        Pos::VolumeOfT => "Volume<T>".into(),
+        Pos::AnyVolume => "Volume<_>".into(),
+        Pos::VolumeGradOfT => "Grad(T)".into(),
+        Pos::Unit => "()".into(),
     }
 }
 
@@ -335,6 +350,7 @@ fn builtin_table() -> String {
             Grad::Zero => "zero",
             Grad::Atomic => "atomic",
             Grad::AtomicNone => "none",
+            Grad::Effect => "none (a store)",
         };
         t += &format!(
             "| {name} | `{}` | {} | {} | {grad} |\n",

@@ -1,6 +1,6 @@
 //! Kernel and func signatures: parameter types and the return type.
 
-use crate::types::{ObjectKind, Scalar, Ty};
+use crate::types::{ObjectKind, Scalar, Ty, VolumeElem};
 use syn::spanned::Spanned;
 use syn::{GenericArgument, PathArguments, Type};
 
@@ -30,6 +30,7 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             }
             match name.as_str() {
                 "Array" => parse_array(last, ty),
+                "Volume" => parse_volume(last, ty),
                 "String" | "Vec" | "Box" | "Rc" | "Arc" | "HashMap" | "BTreeMap" | "VecDeque" => Err(syn::Error::new(
                     ty.span(),
                     format!("heap type `{name}` is not supported in kernels: use Array<T> arguments"),
@@ -115,6 +116,43 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     Ok(Ty::Array(Box::new(elem), ndim))
 }
 
+/// `Volume<T>`: a NanoVDB grid of one of the value types, or `Volume<VoxelIndex>`.
+fn parse_volume(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
+    let elems = || {
+        let names: Vec<String> = VolumeElem::ALL.iter().map(|e| e.name()).collect();
+        names.join(", ")
+    };
+    let PathArguments::AngleBracketed(args) = &seg.arguments else {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!(
+                "Volume needs its value type: Volume<f32> (one of {})",
+                elems()
+            ),
+        ));
+    };
+    let mut it = args.args.iter();
+    let (Some(GenericArgument::Type(t)), None) = (it.next(), it.next()) else {
+        return Err(syn::Error::new(
+            whole.span(),
+            "Volume takes one type argument: Volume<f32>",
+        ));
+    };
+    let is_index = matches!(t, Type::Path(p) if p.path.segments.last().is_some_and(|s| s.ident == "VoxelIndex"));
+    let elem = if is_index {
+        Some(VolumeElem::Index)
+    } else {
+        parse_type(t).ok().and_then(|t| VolumeElem::of(&t))
+    };
+    match elem {
+        Some(e) => Ok(Ty::Object(ObjectKind::Volume(e))),
+        None => Err(syn::Error::new(
+            t.span(),
+            format!("a Volume holds one of {}", elems()),
+        )),
+    }
+}
+
 fn const_usize(arg: &GenericArgument) -> Option<usize> {
     let expr = match arg {
         GenericArgument::Const(e) => e,
@@ -171,6 +209,14 @@ mod tests {
             parse_type(&parse_quote!(wp::HashGrid)).unwrap(),
             Ty::Object(ObjectKind::HashGrid)
         );
+        assert_eq!(
+            parse_type(&parse_quote!(Volume<glam::Vec3>)).unwrap(),
+            Ty::Object(ObjectKind::Volume(VolumeElem::Vec3))
+        );
+        assert_eq!(
+            parse_type(&parse_quote!(wp::Volume<wp::VoxelIndex>)).unwrap(),
+            Ty::Object(ObjectKind::Volume(VolumeElem::Index))
+        );
         for bad in [
             quote::quote!(&f32),
             quote::quote!(String),
@@ -181,6 +227,10 @@ mod tests {
             quote::quote!(Option<f32>),
             quote::quote!(Array<HashGrid>),
             quote::quote!(HashGrid<f32>),
+            quote::quote!(Volume),
+            quote::quote!(Volume<u8>),
+            quote::quote!(Volume<f32, f32>),
+            quote::quote!(Array<Volume<f32>>),
         ] {
             let t: Type = syn::parse2(bad.clone()).unwrap();
             assert!(parse_type(&t).is_err(), "{bad}");

@@ -878,7 +878,7 @@ impl Cx<'_> {
             Op::Builtin { builtin, args } => match builtin.grad {
                 // AtomicNone: only integer updates whose result is unused get here
                 // (`analysis::atomic_without_adjoint`): nothing to propagate.
-                Grad::Zero | Grad::AtomicNone => {}
+                Grad::Zero | Grad::AtomicNone | Grad::Effect => {}
                 Grad::Adjoint => self.call_faulting(
                     &mut out,
                     format!("adj_{}", builtin.name),

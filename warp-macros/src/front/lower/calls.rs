@@ -346,19 +346,31 @@ impl Lowerer {
         }
         // A builtin reading an array (`lower_bound`): a 1-D array itself, not a view.
         if b.reads_array() {
-            match self.ty(out[0]) {
-                Ty::Array(_, 1) if !self.is_view(out[0]) => {}
+            let at = b
+                .params
+                .iter()
+                .position(|p| *p == Pos::ArrayOfT)
+                .expect("reads_array: an array position");
+            match self.ty(out[at]) {
+                Ty::Array(_, 1) if !self.is_view(out[at]) => {}
                 Ty::Array(_, 1) => {
                     return err(
-                        args[0].span(),
-                        format!("`{}` searches an array, not a view: pass the array and a range, `lower_bound(a, lo, hi, value)`", b.name),
+                        args[at].span(),
+                        if b.name.starts_with("lower_bound") {
+                            format!("`{}` searches an array, not a view: pass the array and a range, `lower_bound(a, lo, hi, value)`", b.name)
+                        } else {
+                            format!(
+                                "`{}` reads an array, not a view: pass the array itself",
+                                b.name
+                            )
+                        },
                     )
                 }
                 Ty::Deferred => {}
                 t => {
                     return err(
-                        args[0].span(),
-                        format!("`{}` searches a 1-D array, found `{t}`", b.name),
+                        args[at].span(),
+                        format!("`{}` reads a 1-D array, found `{t}`", b.name),
                     )
                 }
             }
