@@ -1,0 +1,586 @@
+//! [`Volume`]: Warp's sparse volume, a NanoVDB grid on one device. Load one from an `.nvdb`
+//! file ([`Volume::load`]), make one from a dense array ([`Volume::from_dense`]) or allocate
+//! its leaves from tiles or voxels ([`Volume::allocate_by_tiles`],
+//! [`Volume::allocate_by_voxels`]), pass it to kernels as `vol: Volume<T>` and sample it
+//! there (`volume_sample`, `volume_lookup`, `volume_store`, the transforms).
+//!
+//! The grid's bytes are the NanoVDB layout itself (warp-core `objects::nanovdb`), kept as
+//! 64-bit words so that every value is aligned for the kernels' atomic reads; nothing reaches
+//! a kernel that `nanovdb::validate` has not accepted, which is what lets the kernel-side
+//! lookups skip bounds checks. The value type is the Rust type parameter: a `Volume<f32>`
+//! holds a Float grid, and loading a file of another type is an `Err` naming both.
+//!
+//! Gradients: [`Volume::with_grad`] adds a gradient grid, a copy of the grid with every value
+//! zeroed; the adjoints of `volume_sample`, `volume_sample_grad` and `volume_lookup` add into
+//! it at the byte offsets the forward pass read (leaf values, tile values, the background),
+//! and [`Volume::grad_volume`] reads it back as a volume of the same topology.
+
+use std::marker::PhantomData;
+use std::path::Path;
+
+use glam::{DVec3, IVec3, Vec3};
+use warp_core::objects::nanovdb::{self, BuildKind, GridInfo, GridType, Map};
+use warp_core::objects::volume::{VolumeValue, VolumeView, VoxelIndex};
+
+use super::nvdb::{self, Codec, NvdbGrid};
+use crate::array::Array;
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::{ArgCtx, KernelArg};
+
+/// Warp's volume sampling modes (`wp.Volume.CLOSEST`): the nearest voxel.
+pub const VOLUME_CLOSEST: i32 = 0;
+/// Warp's `wp.Volume.LINEAR`: trilinear interpolation of the 8 voxels around the position.
+pub const VOLUME_LINEAR: i32 = 1;
+
+/// What a [`Volume`] can hold: the value types kernels sample (`f32`, `f64`, `i32`, `Vec3`,
+/// `DVec3`) and [`VoxelIndex`] (an index grid). Sealed.
+pub trait VolumeElement: sealed::Sealed + Copy + Send + Sync + 'static {
+    /// The grid types a volume of this element accepts.
+    const GRID_TYPES: &'static [GridType];
+    /// The element's name in messages (`f32`, `Vec3`, `VoxelIndex`).
+    const NAME: &'static str;
+}
+
+mod sealed {
+    pub trait Sealed {}
+}
+
+macro_rules! elements {
+    ($($t:ty => $name:literal, [$($g:ident),*];)*) => {$(
+        impl sealed::Sealed for $t {}
+        impl VolumeElement for $t {
+            const GRID_TYPES: &'static [GridType] = &[$(GridType::$g),*];
+            const NAME: &'static str = $name;
+        }
+    )*};
+}
+elements! {
+    f32 => "f32", [Float];
+    f64 => "f64", [Double];
+    i32 => "i32", [Int32];
+    Vec3 => "Vec3", [Vec3f];
+    DVec3 => "DVec3", [Vec3d];
+    VoxelIndex => "VoxelIndex", [Index, OnIndex];
+}
+
+/// A sparse volume on one device (Warp's `wp.Volume`): a NanoVDB grid of `T` values, or of
+/// voxel indices for `Volume<VoxelIndex>`.
+///
+/// ```ignore
+/// use warp_lang as wp;
+/// use wp::prelude::*;
+///
+/// #[wp::kernel]
+/// fn sample(vol: Volume<f32>, points: Array<Vec3>, out: Array<f32>) {
+///     let i = tid();
+///     let uvw = volume_world_to_index(vol, points[i]);
+///     out[i] = volume_sample(vol, uvw, VOLUME_LINEAR);
+/// }
+/// ```
+pub struct Volume<T: VolumeElement> {
+    device: Device,
+    /// The grid's bytes as words (a grid's size is a multiple of 32 bytes).
+    words: Array<u64>,
+    /// The gradient grid: the grid with its values zeroed, then accumulated into by adjoints.
+    grad: Option<Array<u64>>,
+    info: GridInfo,
+    /// TreeData's active voxel count.
+    voxel_count: u64,
+    _t: PhantomData<fn() -> T>,
+}
+
+impl<T: VolumeElement> Clone for Volume<T> {
+    fn clone(&self) -> Self {
+        Volume {
+            device: self.device.clone(),
+            words: self.words.clone(),
+            grad: self.grad.clone(),
+            info: self.info,
+            voxel_count: self.voxel_count,
+            _t: PhantomData,
+        }
+    }
+}
+
+impl<T: VolumeElement> std::fmt::Debug for Volume<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Volume")
+            .field("element", &T::NAME)
+            .field("device", &self.device.alias())
+            .field("grid_type", &self.info.grid_type)
+            .field("bytes", &self.info.size)
+            .field("leaves", &self.info.leaf_count)
+            .field("grad", &self.grad.is_some())
+            .finish()
+    }
+}
+
+/// The grid's bytes as little-endian words.
+fn to_words(bytes: &[u8]) -> Vec<u64> {
+    bytes
+        .chunks(8)
+        .map(|c| {
+            let mut w = [0u8; 8];
+            w[..c.len()].copy_from_slice(c);
+            u64::from_le_bytes(w)
+        })
+        .collect()
+}
+
+/// Words back to bytes.
+fn to_bytes(words: &[u64]) -> Vec<u8> {
+    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+/// Zeroes every value a lookup can return (the background, value tiles, internal table
+/// entries without a child, leaf values), leaving the structure: the gradient grid's start.
+fn zero_values(bytes: &mut [u8], info: &GridInfo) {
+    let l = info.layout;
+    let vs = l.value_size;
+    let mut zero = |at: usize| bytes[at..at + vs].fill(0);
+    let root = info.root as usize;
+    zero(root + l.background);
+    let read_i64 = |b: &[u8], at: usize| i64::from_le_bytes(b[at..at + 8].try_into().expect("8"));
+    for t in 0..info.tile_count as usize {
+        let tile = root + l.root_size + t * l.tile_size;
+        if read_i64(bytes, tile + 8) == 0 {
+            bytes[tile + l.tile_value..tile + l.tile_value + vs].fill(0);
+        }
+    }
+    let internal = |bytes: &mut [u8], first: u64, count: u32, size, table, mask, entries| {
+        for n in 0..count as usize {
+            let node = first as usize + n * size;
+            for e in 0..entries {
+                let word = u64::from_le_bytes(
+                    bytes[node + mask + 8 * (e >> 6)..node + mask + 8 * (e >> 6) + 8]
+                        .try_into()
+                        .expect("8"),
+                );
+                if word >> (e & 63) & 1 == 0 {
+                    let at = node + table + e * l.stride;
+                    bytes[at..at + vs].fill(0);
+                }
+            }
+        }
+    };
+    internal(
+        bytes,
+        info.first_upper,
+        info.upper_count,
+        l.up_size,
+        l.up_table,
+        nanovdb::UPPER_CHILD_MASK,
+        1 << (3 * nanovdb::UPPER_LOG2),
+    );
+    internal(
+        bytes,
+        info.first_lower,
+        info.lower_count,
+        l.lo_size,
+        l.lo_table,
+        nanovdb::LOWER_CHILD_MASK,
+        1 << (3 * nanovdb::LOWER_LOG2),
+    );
+    for n in 0..info.leaf_count as usize {
+        let values = info.first_leaf as usize + n * l.leaf_size + l.leaf_table;
+        bytes[values..values + 512 * vs].fill(0);
+    }
+}
+
+impl<T: VolumeElement> Volume<T> {
+    /// A volume over a NanoVDB grid buffer (one grid, as [`Volume::grid_bytes`] gives it), on
+    /// `device`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`]: the buffer fails NanoVDB's structural checks (truncated,
+    /// corrupt offsets, an unknown layout), or holds another value type than `T`.
+    pub fn from_grid_bytes(bytes: &[u8], device: &Device) -> Result<Self> {
+        let what = format!("Volume<{}>", T::NAME);
+        let info = nanovdb::validate(bytes).map_err(|e| Error::invalid_in(&what, e))?;
+        if !T::GRID_TYPES.contains(&info.grid_type) {
+            return Err(Error::invalid_in(
+                &what,
+                format!(
+                    "the grid holds {:?} values, not {}: open it as a Volume of its type",
+                    info.grid_type,
+                    T::NAME
+                ),
+            ));
+        }
+        if bytes.len() as u64 != info.size {
+            return Err(Error::invalid_in(
+                &what,
+                format!(
+                    "{} bytes for a grid of {} (one grid per volume)",
+                    bytes.len(),
+                    info.size
+                ),
+            ));
+        }
+        let words = Array::from_vec(to_words(bytes), device)?;
+        let at = nanovdb::GRID_DATA + 56;
+        let voxel_count = u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+        Ok(Volume {
+            device: device.clone(),
+            words,
+            grad: None,
+            info,
+            voxel_count,
+            _t: PhantomData,
+        })
+    }
+
+    /// The first grid of an `.nvdb` file (Warp's `Volume.load_from_nvdb`), on `device`.
+    ///
+    /// # Errors
+    /// As [`nvdb::load_nvdb`] (an unreadable, truncated, corrupt or BLOSC-compressed file) and
+    /// [`Volume::from_grid_bytes`] (another value type), each naming the path.
+    pub fn load(path: impl AsRef<Path>, device: &Device) -> Result<Self> {
+        let path = path.as_ref();
+        let grids = nvdb::load_nvdb(path)?;
+        let Some(g) = grids.first() else {
+            return Err(Error::invalid_in(
+                &format!("Volume::load(\"{}\")", path.display()),
+                "the file holds no grid",
+            ));
+        };
+        Self::from_grid_bytes(g.as_bytes(), device).map_err(|e| match e {
+            Error::InvalidArgument { what } => Error::InvalidArgument {
+                what: format!("Volume::load(\"{}\"): {what}", path.display()),
+            },
+            e => e,
+        })
+    }
+
+    /// Writes the grid to an `.nvdb` file (Warp's `Volume.save_to_nvdb`), uncompressed or
+    /// ZIP-compressed.
+    ///
+    /// # Errors
+    /// Device errors of the read-back; an unwritable path.
+    pub fn save(&self, path: impl AsRef<Path>, codec: Codec) -> Result<()> {
+        let grid = NvdbGrid::from_bytes(self.grid_bytes()?)?;
+        nvdb::save_nvdb(path, &[&grid], codec)
+    }
+
+    /// The grid buffer (read back from the device).
+    ///
+    /// # Errors
+    /// Device errors.
+    pub fn grid_bytes(&self) -> Result<Vec<u8>> {
+        let mut b = to_bytes(&self.words.to_vec()?);
+        b.truncate(self.info.size as usize);
+        Ok(b)
+    }
+
+    /// What the grid's headers say (its type, size, nodes), as validated.
+    pub fn info(&self) -> &GridInfo {
+        &self.info
+    }
+
+    /// The active voxels (NanoVDB's TreeData count: every voxel of the leaves for grids
+    /// allocated by tiles, the given voxels for [`Volume::allocate_by_voxels`]).
+    pub fn voxel_count(&self) -> u64 {
+        self.voxel_count
+    }
+
+    /// The device the volume lives on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The index-to-world transform.
+    ///
+    /// # Errors
+    /// Device errors of the read-back.
+    pub fn transform(&self) -> Result<Map> {
+        Ok(nanovdb::read_map(&self.grid_bytes()?))
+    }
+
+    /// The voxel size (NanoVDB's: the rows' sums of the transform's matrix).
+    ///
+    /// # Errors
+    /// Device errors of the read-back.
+    pub fn voxel_size(&self) -> Result<[f64; 3]> {
+        let m = self.transform()?.mat;
+        Ok(m.map(|r| r[0] + r[1] + r[2]))
+    }
+
+    /// Adds a gradient grid (zeroed): kernels' adjoints then accumulate the gradients of the
+    /// values they read into it.
+    ///
+    /// # Errors
+    /// An index grid (its values live in a separate array); device errors.
+    pub fn with_grad(mut self) -> Result<Self> {
+        if self.info.grid_type.is_index() {
+            return Err(Error::invalid_in(
+                "Volume::with_grad",
+                "an index grid holds no values: give the value array a gradient instead",
+            ));
+        }
+        let mut b = self.grid_bytes()?;
+        zero_values(&mut b, &self.info);
+        self.grad = Some(Array::from_vec(to_words(&b), &self.device)?);
+        Ok(self)
+    }
+
+    /// Whether the volume has a gradient grid.
+    pub fn requires_grad(&self) -> bool {
+        self.grad.is_some()
+    }
+
+    /// The gradient grid as a volume of the same topology (a copy, read back), if any.
+    ///
+    /// # Errors
+    /// Device errors.
+    pub fn grad_volume(&self) -> Result<Option<Volume<T>>> {
+        let Some(g) = &self.grad else {
+            return Ok(None);
+        };
+        let mut b = to_bytes(&g.to_vec()?);
+        b.truncate(self.info.size as usize);
+        Volume::from_grid_bytes(&b, &self.device).map(Some)
+    }
+
+    /// Zeroes the gradient grid's values (nothing without one).
+    ///
+    /// # Errors
+    /// Device errors.
+    pub fn zero_grad(&self) -> Result<()> {
+        if let Some(g) = &self.grad {
+            let mut b = self.grid_bytes()?;
+            zero_values(&mut b, &self.info);
+            g.copy_from(&Array::from_vec(to_words(&b), &self.device)?)?;
+        }
+        Ok(())
+    }
+
+    /// Allocation's common end: a built buffer to a volume.
+    fn built(bytes: Result<Vec<u8>, String>, what: &str, device: &Device) -> Result<Self> {
+        let bytes = bytes.map_err(|e| Error::invalid_in(what, e))?;
+        Self::from_grid_bytes(&bytes, device)
+    }
+
+    /// The checks of a launch: the device.
+    fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
+        if &self.device != ctx.device {
+            return Err(Error::DeviceMismatch {
+                kernel: ctx.kernel,
+                arg: ctx.arg,
+                expected: ctx.device.alias().to_string(),
+                found: self.device.alias().to_string(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The kernel view over the volume's device memory.
+    fn view(&self) -> VolumeView<T> {
+        let grad = self.grad.as_ref().map_or(0, |g| g.device_address());
+        // SAFETY: `info` is what `validate` returned for these very bytes (the buffer is the
+        // grid, unchanged in structure: kernels only write values), which is the view's
+        // contract; the addresses are of this volume's live buffers on its device.
+        unsafe { VolumeView::from_info(&self.info, self.words.device_address(), grad) }
+    }
+}
+
+/// The tiles' or voxels' coordinates as `[i32; 3]`.
+fn coords(v: &[IVec3]) -> Vec<[i32; 3]> {
+    v.iter().map(|p| p.to_array()).collect()
+}
+
+/// World points to the index coordinates of their voxels, as Warp's allocation rounds them
+/// (`floor(x + 0.5)` of the index-space position).
+///
+/// # Errors
+/// A non-finite point, or one whose index lies outside `i32`, naming its position.
+pub fn world_to_voxels(points: &[Vec3], map: &Map, what: &str) -> Result<Vec<IVec3>> {
+    let inv = nanovdb::invert_map(map).map_err(|e| Error::invalid_in(what, e))?;
+    points
+        .iter()
+        .enumerate()
+        .map(|(n, p)| {
+            let d = DVec3::new(
+                p.x as f64 - map.translation[0],
+                p.y as f64 - map.translation[1],
+                p.z as f64 - map.translation[2],
+            );
+            let ijk = [0, 1, 2].map(|r| {
+                (inv[r][0] * d.x + inv[r][1] * d.y + inv[r][2] * d.z + 0.5).floor()
+            });
+            if ijk.iter().all(|x| x.is_finite() && x.abs() < 2f64.powi(31)) {
+                Ok(IVec3::new(ijk[0] as i32, ijk[1] as i32, ijk[2] as i32))
+            } else {
+                Err(Error::invalid_in(
+                    what,
+                    format!("point {n} ({p}) has no voxel (index {ijk:?})"),
+                ))
+            }
+        })
+        .collect()
+}
+
+impl<T: VolumeElement + VolumeValue> Volume<T> {
+    /// A value grid whose leaves cover the given tiles (Warp's `Volume.allocate_by_tiles`
+    /// with a background value): each entry names the 8x8x8 leaf holding that voxel, every
+    /// voxel of those leaves is active and holds `background`, as does everything outside.
+    ///
+    /// # Errors
+    /// No tiles; a singular or non-finite transform; device errors.
+    pub fn allocate_by_tiles(
+        tiles: &[IVec3],
+        background: T,
+        map: &Map,
+        device: &Device,
+    ) -> Result<Self> {
+        let bg = background.to_le_bytes_vec();
+        let kind = BuildKind::Value {
+            grid_type: T::GRID_TYPES[0],
+            background: &bg,
+        };
+        let bytes = nanovdb::build_from_tiles(kind, &coords(tiles), map);
+        Self::built(bytes, "Volume::allocate_by_tiles", device)
+    }
+
+    /// A value grid from a dense array (Warp's `Volume.load_from_numpy`): `values` in C
+    /// order over `dims = [nx, ny, nz]` (value `(i * ny + j) * nz + k` at voxel `(i, j, k)`),
+    /// leaves allocated over the whole box, `background` outside it.
+    ///
+    /// # Errors
+    /// `values.len()` not the product of `dims`, an empty box, or a box beyond the `i32`
+    /// index range; a singular transform; device errors.
+    pub fn from_dense(
+        values: &[T],
+        dims: [usize; 3],
+        background: T,
+        map: &Map,
+        device: &Device,
+    ) -> Result<Self> {
+        const WHAT: &str = "Volume::from_dense";
+        let n = dims.iter().try_fold(1usize, |a, d| a.checked_mul(*d));
+        if n != Some(values.len()) || values.is_empty() {
+            return Err(Error::invalid_in(
+                WHAT,
+                format!(
+                    "{} values for a box of {dims:?} (and the box must not be empty)",
+                    values.len()
+                ),
+            ));
+        }
+        if dims.iter().any(|d| *d > i32::MAX as usize) {
+            return Err(Error::invalid_in(WHAT, format!("a box of {dims:?} voxels")));
+        }
+        let leaves = dims.map(|d| d.div_ceil(8));
+        let mut tiles = Vec::with_capacity(leaves.iter().product());
+        for a in 0..leaves[0] {
+            for b in 0..leaves[1] {
+                for c in 0..leaves[2] {
+                    tiles.push([8 * a as i32, 8 * b as i32, 8 * c as i32]);
+                }
+            }
+        }
+        let bg = background.to_le_bytes_vec();
+        let kind = BuildKind::Value {
+            grid_type: T::GRID_TYPES[0],
+            background: &bg,
+        };
+        let bytes = nanovdb::build_from_tiles(kind, &tiles, map)
+            .map_err(|e| Error::invalid_in(WHAT, e))?;
+        let info = nanovdb::validate(&bytes).map_err(|e| Error::invalid_in(WHAT, e))?;
+        // The values, written on the host through the kernels' own store.
+        let mut words = to_words(&bytes);
+        // SAFETY: `info` validated these bytes; `words` outlives the view and nothing else
+        // touches it meanwhile.
+        let view = unsafe { VolumeView::<T>::from_info(&info, words.as_mut_ptr() as u64, 0) };
+        let [_, ny, nz] = dims;
+        for (n, v) in values.iter().enumerate() {
+            let (i, j, k) = (n / (ny * nz), n / nz % ny, n % nz);
+            warp_core::objects::volume::volume_store(view, i as i32, j as i32, k as i32, *v)
+                .map_err(|f| Error::invalid_in(WHAT, f))?;
+        }
+        Self::from_grid_bytes(&to_bytes(&words), device)
+    }
+}
+
+impl Volume<VoxelIndex> {
+    /// An index grid over the given tiles (Warp's `Volume.allocate_by_tiles` without a
+    /// background): every voxel of the named leaves gets an index, `leaf * 512 + voxel + 1`.
+    ///
+    /// # Errors
+    /// No tiles; a singular or non-finite transform; device errors.
+    pub fn allocate_index_by_tiles(tiles: &[IVec3], map: &Map, device: &Device) -> Result<Self> {
+        let bytes = nanovdb::build_from_tiles(BuildKind::Index, &coords(tiles), map);
+        Self::built(bytes, "Volume::allocate_index_by_tiles", device)
+    }
+
+    /// An index grid over exactly the given voxels (Warp's `Volume.allocate_by_voxels`, an
+    /// OnIndex grid): active voxels are numbered 1.. in leaf order, everything else is 0.
+    ///
+    /// # Errors
+    /// No voxels; a singular or non-finite transform; device errors.
+    pub fn allocate_by_voxels(voxels: &[IVec3], map: &Map, device: &Device) -> Result<Self> {
+        let bytes = nanovdb::build_from_voxels(&coords(voxels), map);
+        Self::built(bytes, "Volume::allocate_by_voxels", device)
+    }
+
+    /// [`Volume::allocate_by_voxels`] of the voxels holding world points (Warp's
+    /// `allocate_by_voxels` of world positions: each point's voxel is the rounded index-space
+    /// position), on the points' device.
+    ///
+    /// # Errors
+    /// A non-finite point or one outside the `i32` index range (naming it); no points; a
+    /// singular transform; device errors.
+    pub fn allocate_by_points(points: &Array<Vec3>, map: &Map) -> Result<Self> {
+        const WHAT: &str = "Volume::allocate_by_points";
+        let voxels = world_to_voxels(&points.to_vec()?, map, WHAT)?;
+        let bytes = nanovdb::build_from_voxels(&coords(&voxels), map);
+        Self::built(bytes, WHAT, points.device())
+    }
+}
+
+impl<T: VolumeElement> KernelArg for Volume<T> {
+    type Arg<'a> = &'a Volume<T>;
+    type CpuView = VolumeView<T>;
+
+    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
+        arg.check_launch(ctx)?;
+        Ok(arg.view())
+    }
+
+    /// The same record on a GPU: `wp::volume_t<T>` is laid out as `VolumeView<T>`.
+    type CudaArg = VolumeView<T>;
+
+    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
+        arg.check_launch(ctx)?;
+        Ok(arg.view())
+    }
+
+    // The gradient grid travels in the view itself (the adjoints add into it at the offsets
+    // they read), so there is no separate gradient argument.
+    type GradView = ();
+
+    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    type CudaGrad = ();
+
+    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    /// A clone sharing the buffers.
+    type Owned = Volume<T>;
+
+    fn own(arg: &Self::Arg<'_>) -> Volume<T> {
+        (*arg).clone()
+    }
+
+    fn borrow(owned: &Volume<T>) -> &Volume<T> {
+        owned
+    }
+
+    fn zero_grad(arg: &Self::Arg<'_>) -> Result<()> {
+        arg.zero_grad()
+    }
+}
