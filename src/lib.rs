@@ -105,8 +105,8 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
-/// Kernel-visible host objects: [`HashGrid`], [`Bvh`], [`Mesh`] (also at the crate root and in
-/// the prelude).
+/// Kernel-visible host objects: [`HashGrid`], [`Bvh`], [`Mesh`], [`Volume`] (also at the crate
+/// root and in the prelude).
 pub use warp_runtime::objects;
 /// Parallel primitives: scan, reductions, radix sort, stream compaction (the functions are
 /// also at the crate root: `wp::array_scan`, ...).
@@ -122,7 +122,8 @@ pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, launch, synchronize, ArgCtx, Array, Bvh, Device, DeviceKind, Dim, Element, Error,
     GenericKernel, HashGrid, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable,
-    Mesh, Recording, Result, Runtime, Seed, Tape,
+    Mesh, Recording, Result, Runtime, Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST,
+    VOLUME_LINEAR,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
@@ -131,6 +132,7 @@ pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, St
 pub mod prelude {
     pub use crate::{
         f16, func, kernel, Array, Bvh, DTransform, Float, HashGrid, Mesh, Struct, Transform,
+        Volume, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
     };
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,

@@ -89,6 +89,7 @@ mod streams;
 mod structs;
 mod transforms;
 mod views;
+mod volume;
 
 /// A 1-D array holding `data` on `dev`.
 fn arr<T: wp::Element>(data: &[T], dev: &wp::Device) -> wp::Array<T> {

@@ -46,6 +46,16 @@ impl HostBuffer {
             // An empty or zero-sized vector owns no allocation to take over.
             return HostBuffer::zeroed(0, std::mem::align_of::<T>());
         }
+        if data.as_ptr() as usize % HOST_ALIGN != 0 {
+            // The allocator gave the vector less than every host buffer's alignment (what
+            // `reinterpret` and the volumes' views rely on): copy it into one that has it.
+            let b = HostBuffer::zeroed(bytes, std::mem::align_of::<T>())?;
+            // SAFETY: `b` is a fresh allocation of `bytes` bytes; the source is the vector's.
+            unsafe {
+                std::ptr::copy_nonoverlapping(data.as_ptr().cast::<u8>(), b.ptr(), bytes);
+            }
+            return Ok(b);
+        }
         let boxed = data.into_boxed_slice();
         let layout = Layout::for_value(&*boxed);
         let ptr = NonNull::from(Box::leak(boxed)).cast::<u8>();

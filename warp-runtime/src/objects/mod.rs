@@ -8,6 +8,7 @@
 //! - [`mesh`]: [`Mesh`], Warp's triangle mesh (closest point, ray, box queries).
 //! - [`geometry_abi`]: the CUDA parameter layouts of both ([`CudaBvh`], [`CudaMesh`]).
 //! - `obj` (cargo feature `obj`): `ObjMesh`, a triangle mesh read from a Wavefront OBJ file.
+//! - [`volume`]: [`Volume`], Warp's sparse volume (a NanoVDB grid), on the `nvdb` file layer.
 
 pub mod bvh;
 pub mod bvh_build;
@@ -21,12 +22,14 @@ pub mod mesh;
 pub mod nvdb;
 #[cfg(feature = "obj")]
 pub mod obj;
+pub mod volume;
 
 pub use crate::backend::ObjectLibrary;
 pub use bvh::Bvh;
 pub use geometry_abi::{CudaBvh, CudaBvhTree, CudaMesh};
 pub use hash_grid::{CudaHashGrid, HashGrid};
 pub use mesh::Mesh;
+pub use volume::{Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 #[cfg(feature = "obj")]
 pub use obj::ObjMesh;
 

@@ -20,7 +20,7 @@ use std::path::Path;
 
 use glam::{DVec3, IVec3, Vec3};
 use warp_core::objects::nanovdb::{self, BuildKind, GridInfo, GridType, Map};
-use warp_core::objects::volume::{VolumeValue, VolumeView, VoxelIndex};
+use warp_core::objects::volume::{VolumeGrid, VolumeValue, VolumeView, VoxelIndex};
 
 use super::nvdb::{self, Codec, NvdbGrid};
 use crate::array::Array;
@@ -33,35 +33,39 @@ pub const VOLUME_CLOSEST: i32 = 0;
 /// Warp's `wp.Volume.LINEAR`: trilinear interpolation of the 8 voxels around the position.
 pub const VOLUME_LINEAR: i32 = 1;
 
-/// What a [`Volume`] can hold: the value types kernels sample (`f32`, `f64`, `i32`, `Vec3`,
-/// `DVec3`) and [`VoxelIndex`] (an index grid). Sealed.
-pub trait VolumeElement: sealed::Sealed + Copy + Send + Sync + 'static {
-    /// The grid types a volume of this element accepts.
-    const GRID_TYPES: &'static [GridType];
-    /// The element's name in messages (`f32`, `Vec3`, `VoxelIndex`).
-    const NAME: &'static str;
+/// The element's name in messages (`f32`, `Vec3`, `VoxelIndex`).
+fn elem_name<T: VolumeGrid>() -> &'static str {
+    let n = std::any::type_name::<T>();
+    n.rsplit("::").next().unwrap_or(n)
 }
 
-mod sealed {
-    pub trait Sealed {}
+/// 32-byte aligned words: what kernel views need of a host copy of a grid.
+#[repr(C, align(32))]
+#[derive(Clone, Copy, Default)]
+struct Block([u64; 4]);
+
+/// A grid's bytes in 32-byte aligned blocks (a grid's size is a multiple of 32).
+fn to_blocks(bytes: &[u8]) -> Vec<Block> {
+    bytes
+        .chunks(32)
+        .map(|c| {
+            let mut b = Block::default();
+            for (k, w) in c.chunks(8).enumerate() {
+                let mut x = [0u8; 8];
+                x[..w.len()].copy_from_slice(w);
+                b.0[k] = u64::from_le_bytes(x);
+            }
+            b
+        })
+        .collect()
 }
 
-macro_rules! elements {
-    ($($t:ty => $name:literal, [$($g:ident),*];)*) => {$(
-        impl sealed::Sealed for $t {}
-        impl VolumeElement for $t {
-            const GRID_TYPES: &'static [GridType] = &[$(GridType::$g),*];
-            const NAME: &'static str = $name;
-        }
-    )*};
-}
-elements! {
-    f32 => "f32", [Float];
-    f64 => "f64", [Double];
-    i32 => "i32", [Int32];
-    Vec3 => "Vec3", [Vec3f];
-    DVec3 => "DVec3", [Vec3d];
-    VoxelIndex => "VoxelIndex", [Index, OnIndex];
+/// `v`'s bytes as the grid stores them.
+fn value_bytes<T: VolumeValue>(v: T) -> Vec<u8> {
+    let mut b = Block::default();
+    // SAFETY: the block is 32 bytes, aligned, and ours; every value type fits (24 bytes at most).
+    unsafe { T::store(b.0.as_mut_ptr().cast::<u8>(), v) };
+    to_bytes(&b.0)[..T::SIZE as usize].to_vec()
 }
 
 /// A sparse volume on one device (Warp's `wp.Volume`): a NanoVDB grid of `T` values, or of
@@ -78,7 +82,7 @@ elements! {
 ///     out[i] = volume_sample(vol, uvw, VOLUME_LINEAR);
 /// }
 /// ```
-pub struct Volume<T: VolumeElement> {
+pub struct Volume<T: VolumeGrid> {
     device: Device,
     /// The grid's bytes as words (a grid's size is a multiple of 32 bytes).
     words: Array<u64>,
@@ -90,7 +94,7 @@ pub struct Volume<T: VolumeElement> {
     _t: PhantomData<fn() -> T>,
 }
 
-impl<T: VolumeElement> Clone for Volume<T> {
+impl<T: VolumeGrid> Clone for Volume<T> {
     fn clone(&self) -> Self {
         Volume {
             device: self.device.clone(),
@@ -103,10 +107,10 @@ impl<T: VolumeElement> Clone for Volume<T> {
     }
 }
 
-impl<T: VolumeElement> std::fmt::Debug for Volume<T> {
+impl<T: VolumeGrid> std::fmt::Debug for Volume<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Volume")
-            .field("element", &T::NAME)
+            .field("element", &elem_name::<T>())
             .field("device", &self.device.alias())
             .field("grid_type", &self.info.grid_type)
             .field("bytes", &self.info.size)
@@ -188,7 +192,7 @@ fn zero_values(bytes: &mut [u8], info: &GridInfo) {
     }
 }
 
-impl<T: VolumeElement> Volume<T> {
+impl<T: VolumeGrid> Volume<T> {
     /// A volume over a NanoVDB grid buffer (one grid, as [`Volume::grid_bytes`] gives it), on
     /// `device`.
     ///
@@ -196,15 +200,15 @@ impl<T: VolumeElement> Volume<T> {
     /// [`Error::InvalidArgument`]: the buffer fails NanoVDB's structural checks (truncated,
     /// corrupt offsets, an unknown layout), or holds another value type than `T`.
     pub fn from_grid_bytes(bytes: &[u8], device: &Device) -> Result<Self> {
-        let what = format!("Volume<{}>", T::NAME);
+        let what = format!("Volume<{}>", elem_name::<T>());
         let info = nanovdb::validate(bytes).map_err(|e| Error::invalid_in(&what, e))?;
-        if !T::GRID_TYPES.contains(&info.grid_type) {
+        if !T::GRID_TYPES.contains(&info.grid_type.code()) {
             return Err(Error::invalid_in(
                 &what,
                 format!(
                     "the grid holds {:?} values, not {}: open it as a Volume of its type",
                     info.grid_type,
-                    T::NAME
+                    elem_name::<T>()
                 ),
             ));
         }
@@ -218,7 +222,7 @@ impl<T: VolumeElement> Volume<T> {
                 ),
             ));
         }
-        let words = Array::from_vec(to_words(bytes), device)?;
+        let words = Array::from_slice(&to_words(bytes), device)?;
         let at = nanovdb::GRID_DATA + 56;
         let voxel_count = u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
         Ok(Volume {
@@ -294,7 +298,7 @@ impl<T: VolumeElement> Volume<T> {
     /// # Errors
     /// Device errors of the read-back.
     pub fn transform(&self) -> Result<Map> {
-        Ok(nanovdb::read_map(&self.grid_bytes()?))
+        nanovdb::read_map(&self.grid_bytes()?).map_err(|e| Error::invalid_in("Volume::transform", e))
     }
 
     /// The voxel size (NanoVDB's: the rows' sums of the transform's matrix).
@@ -320,7 +324,7 @@ impl<T: VolumeElement> Volume<T> {
         }
         let mut b = self.grid_bytes()?;
         zero_values(&mut b, &self.info);
-        self.grad = Some(Array::from_vec(to_words(&b), &self.device)?);
+        self.grad = Some(Array::from_slice(&to_words(&b), &self.device)?);
         Ok(self)
     }
 
@@ -350,13 +354,17 @@ impl<T: VolumeElement> Volume<T> {
         if let Some(g) = &self.grad {
             let mut b = self.grid_bytes()?;
             zero_values(&mut b, &self.info);
-            g.copy_from(&Array::from_vec(to_words(&b), &self.device)?)?;
+            g.copy_from(&Array::from_slice(&to_words(&b), &self.device)?)?;
         }
         Ok(())
     }
 
     /// Allocation's common end: a built buffer to a volume.
-    fn built(bytes: Result<Vec<u8>, String>, what: &str, device: &Device) -> Result<Self> {
+    fn built(
+        bytes: std::result::Result<Vec<u8>, String>,
+        what: &str,
+        device: &Device,
+    ) -> Result<Self> {
         let bytes = bytes.map_err(|e| Error::invalid_in(what, e))?;
         Self::from_grid_bytes(&bytes, device)
     }
@@ -375,12 +383,13 @@ impl<T: VolumeElement> Volume<T> {
     }
 
     /// The kernel view over the volume's device memory.
-    fn view(&self) -> VolumeView<T> {
+    fn view(&self, kernel: &'static str) -> VolumeView<T> {
         let grad = self.grad.as_ref().map_or(0, |g| g.device_address());
         // SAFETY: `info` is what `validate` returned for these very bytes (the buffer is the
         // grid, unchanged in structure: kernels only write values), which is the view's
         // contract; the addresses are of this volume's live buffers on its device.
         unsafe { VolumeView::from_info(&self.info, self.words.device_address(), grad) }
+            .with_kernel_name(kernel)
     }
 }
 
@@ -395,7 +404,7 @@ fn coords(v: &[IVec3]) -> Vec<[i32; 3]> {
 /// # Errors
 /// A non-finite point, or one whose index lies outside `i32`, naming its position.
 pub fn world_to_voxels(points: &[Vec3], map: &Map, what: &str) -> Result<Vec<IVec3>> {
-    let inv = nanovdb::invert_map(map).map_err(|e| Error::invalid_in(what, e))?;
+    let inv = map.inverse().map_err(|e| Error::invalid_in(what, e))?;
     points
         .iter()
         .enumerate()
@@ -420,7 +429,7 @@ pub fn world_to_voxels(points: &[Vec3], map: &Map, what: &str) -> Result<Vec<IVe
         .collect()
 }
 
-impl<T: VolumeElement + VolumeValue> Volume<T> {
+impl<T: VolumeValue> Volume<T> {
     /// A value grid whose leaves cover the given tiles (Warp's `Volume.allocate_by_tiles`
     /// with a background value): each entry names the 8x8x8 leaf holding that voxel, every
     /// voxel of those leaves is active and holds `background`, as does everything outside.
@@ -433,9 +442,9 @@ impl<T: VolumeElement + VolumeValue> Volume<T> {
         map: &Map,
         device: &Device,
     ) -> Result<Self> {
-        let bg = background.to_le_bytes_vec();
+        let bg = value_bytes(background);
         let kind = BuildKind::Value {
-            grid_type: T::GRID_TYPES[0],
+            grid_type: GridType::from_code(T::GRID_TYPES[0]),
             background: &bg,
         };
         let bytes = nanovdb::build_from_tiles(kind, &coords(tiles), map);
@@ -479,25 +488,26 @@ impl<T: VolumeElement + VolumeValue> Volume<T> {
                 }
             }
         }
-        let bg = background.to_le_bytes_vec();
+        let bg = value_bytes(background);
         let kind = BuildKind::Value {
-            grid_type: T::GRID_TYPES[0],
+            grid_type: GridType::from_code(T::GRID_TYPES[0]),
             background: &bg,
         };
         let bytes = nanovdb::build_from_tiles(kind, &tiles, map)
             .map_err(|e| Error::invalid_in(WHAT, e))?;
         let info = nanovdb::validate(&bytes).map_err(|e| Error::invalid_in(WHAT, e))?;
         // The values, written on the host through the kernels' own store.
-        let mut words = to_words(&bytes);
-        // SAFETY: `info` validated these bytes; `words` outlives the view and nothing else
-        // touches it meanwhile.
-        let view = unsafe { VolumeView::<T>::from_info(&info, words.as_mut_ptr() as u64, 0) };
+        let mut blocks = to_blocks(&bytes);
+        // SAFETY: `info` validated these bytes, copied into 32-byte aligned blocks that
+        // outlive the view; nothing else touches them meanwhile.
+        let view = unsafe { VolumeView::<T>::from_info(&info, blocks.as_mut_ptr() as u64, 0) };
         let [_, ny, nz] = dims;
         for (n, v) in values.iter().enumerate() {
             let (i, j, k) = (n / (ny * nz), n / nz % ny, n % nz);
             warp_core::objects::volume::volume_store(view, i as i32, j as i32, k as i32, *v)
                 .map_err(|f| Error::invalid_in(WHAT, f))?;
         }
+        let words: Vec<u64> = blocks.iter().flat_map(|b| b.0).collect();
         Self::from_grid_bytes(&to_bytes(&words), device)
     }
 }
@@ -538,13 +548,13 @@ impl Volume<VoxelIndex> {
     }
 }
 
-impl<T: VolumeElement> KernelArg for Volume<T> {
+impl<T: VolumeGrid> KernelArg for Volume<T> {
     type Arg<'a> = &'a Volume<T>;
     type CpuView = VolumeView<T>;
 
     unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
         arg.check_launch(ctx)?;
-        Ok(arg.view())
+        Ok(arg.view(ctx.kernel))
     }
 
     /// The same record on a GPU: `wp::volume_t<T>` is laid out as `VolumeView<T>`.
@@ -552,7 +562,7 @@ impl<T: VolumeElement> KernelArg for Volume<T> {
 
     fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
         arg.check_launch(ctx)?;
-        Ok(arg.view())
+        Ok(arg.view(ctx.kernel))
     }
 
     // The gradient grid travels in the view itself (the adjoints add into it at the offsets
