@@ -124,6 +124,7 @@ pub use warp_runtime::{
     GenericKernel, HashGrid, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable,
     Mesh, Recording, Result, Runtime, Seed, Tape,
 };
+pub use warp_runtime::MarchingCubes;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 

@@ -62,6 +62,7 @@ pub use kernel::{
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
 pub use objects::{Bvh, HashGrid, Mesh};
+pub use objects::MarchingCubes;
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
 pub use primitives::{
