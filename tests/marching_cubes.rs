@@ -78,10 +78,16 @@ fn closed_euler(nverts: usize, idx: &[i32]) -> Result<i64, String> {
             return Err(format!("directed edge {a} -> {b} occurs {n} times"));
         }
         if directed.get(&(b, a)) != Some(&1) {
-            return Err(format!("edge {a} -> {b} has no twin {b} -> {a}: a hole or a flip"));
+            return Err(format!(
+                "edge {a} -> {b} has no twin {b} -> {a}: a hole or a flip"
+            ));
         }
     }
-    let (v, e, f) = (nverts as i64, (directed.len() / 2) as i64, (idx.len() / 3) as i64);
+    let (v, e, f) = (
+        nverts as i64,
+        (directed.len() / 2) as i64,
+        (idx.len() / 3) as i64,
+    );
     Ok(v - e + f)
 }
 
@@ -169,7 +175,10 @@ fn render_tables() -> String {
     s.push_str("};\n");
     s.push_str("WP_MC_TABLE static const u8 mc_edge_offsets[12][4] = {\n");
     for e in MarchingCubes::EDGE_GRID_OFFSETS {
-        s.push_str(&format!("    {{{}, {}, {}, {}}},\n", e[0], e[1], e[2], e[3]));
+        s.push_str(&format!(
+            "    {{{}, {}, {}, {}}},\n",
+            e[0], e[1], e[2], e[3]
+        ));
     }
     s.push_str("};\n");
     s
@@ -242,7 +251,11 @@ fn tables_are_consistent() {
         let mut crossed = 0u16;
         for &e in tris {
             let [a, b] = MarchingCubes::EDGE_TO_CORNERS[e as usize];
-            assert_ne!((c >> a) & 1, (c >> b) & 1, "case {c} uses uncrossed edge {e}");
+            assert_ne!(
+                (c >> a) & 1,
+                (c >> b) & 1,
+                "case {c} uses uncrossed edge {e}"
+            );
             crossed |= 1 << e;
         }
         // Every crossed edge of the case has its vertex in a triangle.
@@ -294,7 +307,10 @@ fn sphere_is_close_closed_and_outward() {
     eprintln!("sphere volume {vol:.3} against {exact:.3}");
     assert!(vol > 0.0, "inward normals: volume {vol}");
     let d = 3.0 / (8.0 * (r - 2.0)) + tol;
-    assert!((vol - exact).abs() < 3.0 * d / r * exact, "{vol} against {exact}");
+    assert!(
+        (vol - exact).abs() < 3.0 * d / r * exact,
+        "{vol} against {exact}"
+    );
     // Every triangle's normal points away from the centre (a local check of orientation).
     for t in idx.chunks_exact(3) {
         let [a, b, cc] = [0, 1, 2].map(|k| verts[t[k] as usize]);
@@ -333,7 +349,10 @@ fn torus_is_close_closed_and_outward() {
     eprintln!("torus volume {vol:.3} against {exact:.3}");
     let d = 3.0 / 8.0 * (1.0f64 / (small - 2.0)).max(1.0 / (big - small - 2.0)) + tol;
     assert!(vol > 0.0, "inward normals: volume {vol}");
-    assert!((vol - exact).abs() < 2.0 * d / small * exact, "{vol} against {exact}");
+    assert!(
+        (vol - exact).abs() < 2.0 * d / small * exact,
+        "{vol} against {exact}"
+    );
 }
 
 /// Planes: `x_a - 3.3` along each axis gives vertices all with exactly the same coordinate
@@ -354,12 +373,19 @@ fn planes_are_exactly_planar() {
         let x0 = verts[0][a];
         assert!((x0 - 3.3).abs() < 1e-6, "{x0}");
         for v in &verts {
-            assert_eq!(v[a].to_bits(), x0.to_bits(), "axis {a}: {v:?} off the plane");
+            assert_eq!(
+                v[a].to_bits(),
+                x0.to_bits(),
+                "axis {a}: {v:?} off the plane"
+            );
         }
         for t in idx.chunks_exact(3) {
             let [p, q, r] = [0, 1, 2].map(|k| verts[t[k] as usize]);
             let n = (q - p).cross(r - p);
-            assert!(n[a] > 0.0 && n[b] == 0.0 && n[c] == 0.0, "axis {a}: normal {n:?}");
+            assert!(
+                n[a] > 0.0 && n[b] == 0.0 && n[c] == 0.0,
+                "axis {a}: normal {n:?}"
+            );
         }
     }
     let g = Vec3::new(1.0, 2.0, -1.5);
@@ -408,7 +434,10 @@ fn every_two_cell_configuration_is_closed() {
                 panic!("axis {axis}, corners {bits:012b}: {e}");
             }
             if bits == (1 << 12) - 1 {
-                assert!(verts.is_empty() && idx.is_empty(), "all outside: no surface");
+                assert!(
+                    verts.is_empty() && idx.is_empty(),
+                    "all outside: no surface"
+                );
             }
         }
     }
@@ -531,7 +560,11 @@ fn matches_warp_1_19() {
         for a in 0..3 {
             let w = f32::from_bits(want_verts[3 * n + a]);
             let ulps = (v[a].to_bits() as i64 - w.to_bits() as i64).abs();
-            assert!(ulps <= 1, "vertex {n} coordinate {a}: {} against Warp's {w}", v[a]);
+            assert!(
+                ulps <= 1,
+                "vertex {n} coordinate {a}: {} against Warp's {w}",
+                v[a]
+            );
         }
     }
 }
@@ -561,10 +594,14 @@ fn bounds_map_the_grid() {
     let delta = (hi - lo) / Vec3::new(11.0, 9.0, 8.0);
     for (p, m) in plain.iter().zip(&mapped) {
         let want = lo + *p * delta;
-        assert!((want - *m).abs().max_element() < 1e-5, "{m:?} against {want:?}");
+        assert!(
+            (want - *m).abs().max_element() < 1e-5,
+            "{m:?} against {want:?}"
+        );
     }
     // Only `upper` set: the origin stays at lower = 0.
-    mc.set_bounds(None, Some(Vec3::new(22.0, 18.0, 16.0))).unwrap();
+    mc.set_bounds(None, Some(Vec3::new(22.0, 18.0, 16.0)))
+        .unwrap();
     mc.surface(&field, 0.0).unwrap();
     for (p, m) in plain.iter().zip(mc.verts().to_vec().unwrap()) {
         assert!((*p * 2.0 - m).abs().max_element() < 1e-5);
@@ -669,7 +706,10 @@ fn bad_input_is_an_error() {
     let dev = wp::cpu();
     for (dims, name) in [([1, 4, 4], "nx"), ([4, 0, 4], "ny"), ([4, 4, 1], "nz")] {
         let e = err(MarchingCubes::new(dims[0], dims[1], dims[2], &dev));
-        assert!(e.contains(&format!("`{name}`")) && e.contains("at least 2"), "{e}");
+        assert!(
+            e.contains(&format!("`{name}`")) && e.contains("at least 2"),
+            "{e}"
+        );
     }
     let e = err(MarchingCubes::new(1 << 20, 1 << 20, 2, &dev));
     assert!(e.contains("nx * ny * nz"), "{e}");
@@ -688,7 +728,7 @@ fn bad_input_is_an_error() {
     let values = grid([4, 5, 6], sphere([1.5, 2.0, 2.5], 1.2));
     let field = wp::Array::from_slice_shape(&values, (4, 5, 6), &dev).unwrap();
     mc.surface(&field, 0.0).unwrap();
-    assert!(mc.verts().len() > 0);
+    assert!(!mc.verts().is_empty());
     for t in [f32::NAN, f32::INFINITY] {
         let e = err(mc.surface(&field, t));
         assert!(e.contains("`threshold`"), "{e}");
@@ -718,7 +758,7 @@ fn bad_input_is_an_error() {
     }
     // The object still works after errors.
     mc.surface(&field, 0.0).unwrap();
-    assert!(mc.verts().len() > 0);
+    assert!(!mc.verts().is_empty());
 
     let e = err(mc.set_bounds(Some(Vec3::new(0.0, f32::NAN, 0.0)), None));
     assert!(e.contains("`lower`"), "{e}");
@@ -932,12 +972,18 @@ fn cpp_steps_match_the_cpu_bit_for_bit() {
         let (verts, idx) = case_mesh(&wp::cpu(), case);
         assert!(!idx.is_empty(), "case {k} has no surface");
         let want = mesh_text(&verts, &idx);
-        assert!(
-            got == want,
-            "case {k}: the C++ steps differ from the CPU (first lines: {:?} against {:?})",
-            got.lines().take(3).collect::<Vec<_>>(),
-            want.lines().take(3).collect::<Vec<_>>()
-        );
+        if got != want {
+            let (g, w): (Vec<&str>, Vec<&str>) = (got.lines().collect(), want.lines().collect());
+            let at = (0..g.len().max(w.len()))
+                .find(|&i| g.get(i) != w.get(i))
+                .unwrap_or(0);
+            panic!(
+                "case {k}: the C++ steps differ from the CPU at line {at} (line 0 is the counts, \
+                 then one per vertex, then one per triangle): C++ {:?}, Rust {:?}",
+                g.get(at),
+                w.get(at)
+            );
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -949,7 +995,9 @@ fn cpu_and_gpu_meshes_are_identical() {
     let gpu = match wp::get_device("cuda:0") {
         Ok(d) => d,
         Err(e) => {
-            eprintln!("SKIPPED marching_cubes::cpu_and_gpu_meshes_are_identical: no CUDA device ({e})");
+            eprintln!(
+                "SKIPPED marching_cubes::cpu_and_gpu_meshes_are_identical: no CUDA device ({e})"
+            );
             return;
         }
     };
@@ -964,9 +1012,30 @@ fn cpu_and_gpu_meshes_are_identical() {
     }
     // Errors on the GPU too: a NaN names its node.
     let mut v = grid([5, 5, 5], sphere([2.0, 2.0, 2.0], 1.5));
-    v[(1 * 5 + 2) * 5 + 3] = f32::NAN;
+    v[(5 + 2) * 5 + 3] = f32::NAN; // node [1, 2, 3]
     let field = wp::Array::from_slice_shape(&v, (5, 5, 5), &gpu).unwrap();
     let mut mc = MarchingCubes::new(5, 5, 5, &gpu).unwrap();
     let e = err(mc.surface(&field, 0.0));
     assert!(e.contains("NaN") && e.contains("[1, 2, 3]"), "{e}");
+}
+
+/// NVRTC accepts the marching cubes build library (`wp_marching_cubes.h` with its kernels) for
+/// sm_90 (H100, H200) and sm_80 (A100) with the runtime's options, without warnings: needs
+/// libnvrtc, no GPU; skipped, saying so, without it.
+#[test]
+fn nvrtc_compiles_the_kernels() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED marching_cubes::nvrtc_compiles_the_kernels: {e}");
+        return;
+    }
+    let lib = wp::objects::BUILD_LIBRARIES
+        .iter()
+        .find(|l| l.name == "wp_marching_cubes")
+        .expect("the marching cubes library is listed");
+    for arch in [90, 80] {
+        let c = wp::objects::compile_library(lib, arch)
+            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.name));
+        assert!(!c.cubin.is_empty());
+        assert!(!c.log.contains("warning"), "sm_{arch}: {}", c.log);
+    }
 }

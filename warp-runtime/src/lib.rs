@@ -61,8 +61,8 @@ pub use kernel::{
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
-pub use objects::{Bvh, HashGrid, Mesh};
 pub use objects::MarchingCubes;
+pub use objects::{Bvh, HashGrid, Mesh};
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
 pub use primitives::{

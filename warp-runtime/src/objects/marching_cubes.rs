@@ -402,7 +402,7 @@ const _: () = {
     let mut c = 0;
     while c < 256 {
         let n = CASE_TO_TRI_RANGE[c + 1] - CASE_TO_TRI_RANGE[c];
-        assert!(n % 3 == 0 && n as usize <= 3 * MAX_TRIS_PER_CELL);
+        assert!(n.is_multiple_of(3) && n as usize <= 3 * MAX_TRIS_PER_CELL);
         c += 1;
     }
 };
@@ -661,7 +661,8 @@ fn emit_node(
             let v1 = f[n + stride[a]];
             // Only overflow (both differences infinite) can make t NaN or leave [0, 1]; NaN -> 0.
             let mut t = (s.threshold - v0) / (v1 - v0);
-            if !(t > 0.0) {
+            // `!(t > 0)` in C++: NaN and -0 become +0.
+            if t.is_nan() || t <= 0.0 {
                 t = 0.0;
             } else if t > 1.0 {
                 t = 1.0;
