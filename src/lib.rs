@@ -115,6 +115,7 @@ pub use warp_runtime::primitives::{
     array_max, array_max_n, array_min, array_min_n, array_scan, array_scan_n, array_sum,
     array_sum_n, compact, compact_n, radix_sort_pairs, Count,
 };
+pub use warp_runtime::MarchingCubes;
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };

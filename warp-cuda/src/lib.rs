@@ -54,6 +54,10 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_atomic.h", include_str!("../cuda/wp_atomic.h")),
     ("wp_rand.h", include_str!("../cuda/wp_rand.h")),
     ("wp_hash_grid.h", include_str!("../cuda/wp_hash_grid.h")),
+    (
+        "wp_marching_cubes.h",
+        include_str!("../cuda/wp_marching_cubes.h"),
+    ),
     ("wp_bvh_build.h", include_str!("../cuda/wp_bvh_build.h")),
     ("wp_geometry.h", include_str!("../cuda/wp_geometry.h")),
     ("wp_bvh.h", include_str!("../cuda/wp_bvh.h")),

@@ -61,7 +61,7 @@ pub use kernel::{
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
-pub use objects::{Bvh, HashGrid, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
+pub use objects::{Bvh, HashGrid, MarchingCubes, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 pub use warp_core::objects::nanovdb::Map as VolumeMap;
 pub use warp_core::objects::VoxelIndex;
 #[cfg(feature = "cuda")]

@@ -1879,7 +1879,7 @@ mod tests {
         let g = value_grid(&tiles, BG, &unit(), false, f);
         let v = g.view::<f32>();
         let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
-        let mut check = |uvw: Vec3| {
+        let check = |uvw: Vec3| {
             let got = volume_sample(v, uvw, LINEAR).unwrap() as f64;
             let want = f64f(uvw.to_array().map(|x| x as f64));
             let b = uvw.to_array().map(|x| x.floor() as i32);
@@ -2116,7 +2116,8 @@ mod tests {
         }
         // CLOSEST and lookup: adj_ret lands on the one voxel.
         let p = Vec3::new(2.4, 3.5, 4.6);
-        adj_volume_sample(v, p, CLOSEST, &mut adj_v, &mut Vec3::ZERO, &mut 0, 2.0).unwrap();
+        let mut sink = Vec3::ZERO;
+        adj_volume_sample(v, p, CLOSEST, &mut adj_v, &mut sink, &mut 0, 2.0).unwrap();
         adj_volume_lookup(v, 2, 4, 5, &mut adj_v, &mut 0, &mut 0, &mut 0, 0.5).unwrap();
         assert_eq!(g.grad_at::<f32>(v.locate([2, 4, 5]).offset), 2.5);
     }
@@ -2131,9 +2132,10 @@ mod tests {
             for _ in 0..8 {
                 s.spawn(move || {
                     let mut adj_v = VolumeView::<f32>::empty();
+                    let mut sink = Vec3::ZERO;
                     for _ in 0..1000 {
                         let p = Vec3::new(2.5, 3.5, 4.5);
-                        adj_volume_sample(v, p, LINEAR, &mut adj_v, &mut Vec3::ZERO, &mut 0, 1.0)
+                        adj_volume_sample(v, p, LINEAR, &mut adj_v, &mut sink, &mut 0, 1.0)
                             .unwrap();
                     }
                 });
@@ -2150,10 +2152,11 @@ mod tests {
         let tiles = box_tiles([0, 0, 0], [15, 15, 15]);
         let g = value_grid(&tiles, BG, &unit(), false, |_| 0.0);
         let v = g.view::<f32>();
+        let tiles = &tiles;
         std::thread::scope(|s| {
             for t in 0..4 {
                 s.spawn(move || {
-                    for_voxels(&tiles, |p| {
+                    for_voxels(tiles, |p| {
                         if (p[0] + p[1] + p[2]) % 4 == t {
                             volume_store(v, p[0], p[1], p[2], hash(p)).unwrap();
                         }
@@ -2296,7 +2299,8 @@ mod tests {
                 );
                 assert!((adj[k] as f64 - fd).abs() < 1e-3, "{k}: {} vs {fd}", adj[k]);
             }
-            assert_eq!(adj, Vec3::new(1.0, 8.0, 100.0 / 3.0));
+            // invMatF = [[1, -2, 0], [0, 1, 0], [0, 0, f32(1/3)]].
+            assert_eq!(adj, Vec3::new(1.0, 8.0, 100.0 * (1.0f64 / 3.0) as f32));
         }
         for k in 0..3 {
             let mut adj = Vec3::ZERO;
@@ -2599,6 +2603,7 @@ mod tests {
         let (_, grad) = volume_sample_grad(v, p, LINEAR).unwrap();
         assert_eq!(grad, DMat3::from_diagonal(DVec3::new(1.0, 2.0, -1.0)));
         let mut adj = Vec3::ZERO;
+        let mut av = VolumeView::empty();
         adj_volume_sample(v, p, LINEAR, &mut av, &mut adj, &mut 0, DVec3::ONE).unwrap();
         assert_eq!(adj, Vec3::new(1.0, 2.0, -1.0));
         volume_store(v, 0, 0, 0, DVec3::splat(9.0)).unwrap();
@@ -2639,6 +2644,133 @@ mod tests {
             volume_sample(VolumeView::<DVec3>::empty(), Vec3::ONE, LINEAR).unwrap(),
             DVec3::ZERO
         );
+    }
+
+    /// The module docs' LINEAR formulas written out directly for a scalar grid, in `S`:
+    /// `(value, gradient, position adjoint of sample_grad for (s, ag))`.
+    fn spec_linear<S: VolumeSample<Scalar = S> + VolumeScalar>(
+        v: VolumeView<S>,
+        uvw: Vec3,
+        s: S,
+        ag: [S; 3],
+    ) -> (S, [S; 3], [f32; 3]) {
+        let b = [uvw.x.floor(), uvw.y.floor(), uvw.z.floor()];
+        let f = [uvw.x - b[0], uvw.y - b[1], uvw.z - b[2]];
+        let (wx, wy, wz) = ([1.0 - f[0], f[0]], [1.0 - f[1], f[1]], [1.0 - f[2], f[2]]);
+        let mut val = S::zero();
+        let mut grad = [S::zero(); 3];
+        let mut adj = [0.0f32; 3];
+        for c in 0..8 {
+            let o = [(c >> 2) & 1, (c >> 1) & 1, c & 1];
+            let sg = o.map(|x| if x == 1 { 1.0f32 } else { -1.0 });
+            let x: S = v.value_at(v.locate([0, 1, 2].map(|a| b[a] as i32 + o[a] as i32)));
+            let w = S::from_f32((wx[o[0]] * wy[o[1]]) * wz[o[2]]);
+            let gw = [
+                (sg[0] * wy[o[1]]) * wz[o[2]],
+                (sg[1] * wx[o[0]]) * wz[o[2]],
+                (sg[2] * wx[o[0]]) * wy[o[1]],
+            ]
+            .map(S::from_f32);
+            let h = [
+                (sg[0] * sg[1]) * wz[o[2]],
+                (sg[0] * sg[2]) * wy[o[1]],
+                (sg[1] * sg[2]) * wx[o[0]],
+            ]
+            .map(S::from_f32);
+            val = val + w * x;
+            for a in 0..3 {
+                grad[a] = grad[a] + x * gw[a];
+            }
+            let d = x * s;
+            let r = [x * ag[0], x * ag[1], x * ag[2]];
+            let hv = [
+                r[1] * h[0] + r[2] * h[1],
+                r[0] * h[0] + r[2] * h[2],
+                r[0] * h[1] + r[1] * h[2],
+            ];
+            for a in 0..3 {
+                adj[a] = adj[a] + (d * gw[a]).to_f32();
+                adj[a] = adj[a] + hv[a].to_f32();
+            }
+        }
+        (val, grad, adj)
+    }
+
+    #[test]
+    fn linear_follows_the_documented_order_bit_for_bit() {
+        // Values with full mantissas, so any change of the order of operations shows in the
+        // last bits (the CUDA mirror must match these bit for bit).
+        let f = |p: [i32; 3]| hash(p) / 7.0 + 0.1;
+        let tiles = box_tiles([-8, -8, -8], [7, 7, 7]);
+        let g32 = value_grid(&tiles, BG, &unit(), false, f);
+        let g64 = value_grid(&tiles, BG as f64 / 3.0, &unit(), false, |p| {
+            f(p) as f64 / 3.0
+        });
+        let (v32, v64) = (g32.view::<f32>(), g64.view::<f64>());
+        let mut rng = Rng(1234);
+        let mut av32 = VolumeView::empty();
+        let mut av64 = VolumeView::empty();
+        for _ in 0..2000 {
+            let p = Vec3::new(rng.f32(-9.0, 8.0), rng.f32(-9.0, 8.0), rng.f32(-9.0, 8.0));
+            let (s, ag) = (
+                rng.f32(-2.0, 2.0),
+                [rng.f32(-2.0, 2.0), rng.f32(-2.0, 2.0), rng.f32(-2.0, 2.0)],
+            );
+            let (val, grad, adj) = spec_linear(v32, p, s, ag);
+            assert_eq!(
+                volume_sample(v32, p, LINEAR).unwrap().to_bits(),
+                val.to_bits()
+            );
+            let (gv, gg) = volume_sample_grad(v32, p, LINEAR).unwrap();
+            assert_eq!(
+                (gv.to_bits(), gg.to_array().map(f32::to_bits)),
+                (val.to_bits(), grad.map(f32::to_bits))
+            );
+            let mut got = Vec3::ZERO;
+            adj_volume_sample_grad(
+                v32,
+                p,
+                LINEAR,
+                &mut av32,
+                &mut got,
+                &mut 0,
+                (s, Vec3::from(ag)),
+            )
+            .unwrap();
+            assert_eq!(
+                got.to_array().map(f32::to_bits),
+                adj.map(f32::to_bits),
+                "{p}"
+            );
+
+            let ag64 = ag.map(|x| x as f64);
+            let (val, grad, adj) = spec_linear(v64, p, s as f64, ag64);
+            assert_eq!(
+                volume_sample(v64, p, LINEAR).unwrap().to_bits(),
+                val.to_bits()
+            );
+            let (gv, gg) = volume_sample_grad(v64, p, LINEAR).unwrap();
+            assert_eq!(
+                (gv.to_bits(), gg.to_array().map(f64::to_bits)),
+                (val.to_bits(), grad.map(f64::to_bits))
+            );
+            let mut got = Vec3::ZERO;
+            adj_volume_sample_grad(
+                v64,
+                p,
+                LINEAR,
+                &mut av64,
+                &mut got,
+                &mut 0,
+                (s as f64, DVec3::from(ag64)),
+            )
+            .unwrap();
+            assert_eq!(
+                got.to_array().map(f32::to_bits),
+                adj.map(f32::to_bits),
+                "{p}"
+            );
+        }
     }
 
     #[test]

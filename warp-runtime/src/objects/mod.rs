@@ -6,6 +6,8 @@
 //! - [`hash_grid`]: [`HashGrid`], Warp's hash grid for neighbour queries.
 //! - [`bvh`]: [`Bvh`], Warp's BVH over boxes (box and ray queries).
 //! - [`mesh`]: [`Mesh`], Warp's triangle mesh (closest point, ray, box queries).
+//! - [`marching_cubes`]: [`MarchingCubes`], Warp's marching cubes (a field's isosurface as a
+//!   triangle mesh).
 //! - [`geometry_abi`]: the CUDA parameter layouts of both ([`CudaBvh`], [`CudaMesh`]).
 //! - `obj` (cargo feature `obj`): `ObjMesh`, a triangle mesh read from a Wavefront OBJ file.
 //! - [`volume`]: [`Volume`], Warp's sparse volume (a NanoVDB grid), on the `nvdb` file layer.
@@ -17,6 +19,7 @@ pub mod hash_grid;
 mod hash_grid_steps;
 #[doc(hidden)]
 pub mod lbvh;
+pub mod marching_cubes;
 pub mod mesh;
 #[doc(hidden)]
 pub mod nvdb;
@@ -28,6 +31,7 @@ pub use crate::backend::ObjectLibrary;
 pub use bvh::Bvh;
 pub use geometry_abi::{CudaBvh, CudaBvhTree, CudaMesh};
 pub use hash_grid::{CudaHashGrid, HashGrid};
+pub use marching_cubes::MarchingCubes;
 pub use mesh::Mesh;
 pub use volume::{Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 #[cfg(feature = "obj")]
@@ -35,7 +39,11 @@ pub use obj::ObjMesh;
 
 /// Every host object's CUDA build library (each compiled the first time a GPU runs one of
 /// its steps).
-pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[&hash_grid_steps::LIBRARY, &lbvh::LIBRARY];
+pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[
+    &hash_grid_steps::LIBRARY,
+    &lbvh::LIBRARY,
+    &marching_cubes::LIBRARY,
+];
 
 /// Compiles a build library with NVRTC for `sm_{arch}` with the runtime's options (no GPU
 /// needed): how the tests check that NVRTC accepts each on machines without a GPU.
