@@ -41,7 +41,9 @@ fn torus_sdf(p: Vec3) -> f32 {
 fn fill_tiles(vol: Volume<f32>, tiles: Array<IVec3>) {
     let (t, v) = tid();
     let o = tiles[t];
-    let (i, j, k) = (o.x + (v / 64) as i32, o.y + (v / 8 % 8) as i32, o.z + (v % 8) as i32);
+    let i = o.x + (v / 64) as i32;
+    let j = o.y + (v / 8 % 8) as i32;
+    let k = o.z + (v % 8) as i32;
     let p = volume_index_to_world(vol, vec3(i as f32, j as f32, k as f32));
     volume_store(vol, i, j, k, torus_sdf(p));
 }
@@ -119,7 +121,9 @@ fn main() -> wp::Result<()> {
             ratio(ours, theirs(key))
         );
     };
-    println!("                                   warp-lang  Warp 1.19, ratio warp-lang / Warp   error");
+    println!(
+        "                                   warp-lang  Warp 1.19, ratio warp-lang / Warp   error"
+    );
 
     // The sparse SDF.
     let tiles_h = band_tiles();

@@ -62,7 +62,9 @@ fn k_sample_grad(vol: Volume<f32>, uvw: Array<Vec3>, out: Array<f32>, grad: Arra
 fn k_store_tiles(vol: Volume<f32>, tiles: Array<IVec3>) {
     let (t, v) = tid();
     let o = tiles[t];
-    let (i, j, k) = (o.x + (v / 64) as i32, o.y + (v / 8 % 8) as i32, o.z + (v % 8) as i32);
+    let i = o.x + (v / 64) as i32;
+    let j = o.y + (v / 8 % 8) as i32;
+    let k = o.z + (v % 8) as i32;
     volume_store(vol, i, j, k, (i + 100 * j + 10000 * k) as f32);
 }
 
@@ -81,7 +83,13 @@ fn k_store(vol: Volume<f32>, ijk: Array<IVec3>, value: f32) {
 }
 
 #[wp::kernel]
-fn k_transforms(vol: Volume<f32>, p: Array<Vec3>, w: Array<Vec3>, back: Array<Vec3>, d: Array<Vec3>) {
+fn k_transforms(
+    vol: Volume<f32>,
+    p: Array<Vec3>,
+    w: Array<Vec3>,
+    back: Array<Vec3>,
+    d: Array<Vec3>,
+) {
     let i = tid();
     w[i] = volume_index_to_world(vol, p[i]);
     back[i] = volume_world_to_index(vol, w[i]);
@@ -89,7 +97,13 @@ fn k_transforms(vol: Volume<f32>, p: Array<Vec3>, w: Array<Vec3>, back: Array<Ve
 }
 
 #[wp::kernel]
-fn k_index(vol: Volume<VoxelIndex>, ijk: Array<IVec3>, data: Array<f32>, idx: Array<i32>, val: Array<f32>) {
+fn k_index(
+    vol: Volume<VoxelIndex>,
+    ijk: Array<IVec3>,
+    data: Array<f32>,
+    idx: Array<i32>,
+    val: Array<f32>,
+) {
     let i = tid();
     let c = ijk[i];
     idx[i] = volume_lookup_index(vol, c.x, c.y, c.z);
@@ -171,13 +185,22 @@ fn trilinear(p: Vec3) -> f64 {
 }
 
 /// Runs `f` on the CPU too and compares bit for bit (on a GPU; nothing on the CPU).
-fn same_on_cpu<T: PartialEq + std::fmt::Debug>(dev: &wp::Device, got: &[T], f: impl Fn(&wp::Device) -> Vec<T>) {
+fn same_on_cpu<T: PartialEq + std::fmt::Debug>(
+    dev: &wp::Device,
+    got: &[T],
+    f: impl Fn(&wp::Device) -> Vec<T>,
+) {
     if dev.is_cpu() {
         return;
     }
     let cpu = f(&wp::cpu());
     let diff = got.iter().zip(&cpu).position(|(a, b)| a != b);
-    assert!(diff.is_none(), "CPU and GPU differ at {diff:?}: {:?} vs {:?}", got.get(diff.unwrap_or(0)), cpu.get(diff.unwrap_or(0)));
+    assert!(
+        diff.is_none(),
+        "CPU and GPU differ at {diff:?}: {:?} vs {:?}",
+        got.get(diff.unwrap_or(0)),
+        cpu.get(diff.unwrap_or(0))
+    );
 }
 
 // ------------------------------------------------------------------------------------------
@@ -220,11 +243,17 @@ fn dense_samples_match_the_reference(dev: &wp::Device) {
         // LINEAR: eight f32 products of values up to ~6 summed: a few ulp of 8 (2e-6), far
         // below the 1e-2 differences a wrong corner or weight makes.
         let want = trilinear(*p);
-        assert!((lin[k] as f64 - want).abs() <= 2e-5, "linear at {p}: {} vs {want}", lin[k]);
+        assert!(
+            (lin[k] as f64 - want).abs() <= 2e-5,
+            "linear at {p}: {} vs {want}",
+            lin[k]
+        );
     }
-    same_on_cpu(dev, &lin.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), |d| {
-        run(d).1.iter().map(|x| x.to_bits()).collect()
-    });
+    same_on_cpu(
+        dev,
+        &lin.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        |d| run(d).1.iter().map(|x| x.to_bits()).collect(),
+    );
 }
 
 fn tiles_store_and_lookup_across_nodes(dev: &wp::Device) {
@@ -285,7 +314,11 @@ fn vector_and_double_grids(dev: &wp::Device) {
         for j in 0..n[1] {
             for k in 0..n[2] {
                 let (a, b, c) = (i as f32, j as f32, k as f32);
-                v3.push(Vec3::new(a + 2.0 * b + 3.0 * c, 4.0 * a + 5.0 * b + 6.0 * c, 7.0 * a + 8.0 * b + 9.0 * c));
+                v3.push(Vec3::new(
+                    a + 2.0 * b + 3.0 * c,
+                    4.0 * a + 5.0 * b + 6.0 * c,
+                    7.0 * a + 8.0 * b + 9.0 * c,
+                ));
                 v64.push(field(i as f64, j as f64, k as f64));
             }
         }
@@ -295,7 +328,13 @@ fn vector_and_double_grids(dev: &wp::Device) {
     let vol64 = wp::Volume::from_dense(&v64, n, 0.0f64, &map, dev).unwrap();
     let mut r = Rng(99);
     let pts: Vec<Vec3> = (0..500)
-        .map(|_| Vec3::new(r.unit() * 10.0 + 0.2, r.unit() * 7.0 + 0.2, r.unit() * 8.0 + 0.2))
+        .map(|_| {
+            Vec3::new(
+                r.unit() * 10.0 + 0.2,
+                r.unit() * 7.0 + 0.2,
+                r.unit() * 8.0 + 0.2,
+            )
+        })
         .collect();
     let p = arr(&pts, dev);
     let out = zeros::<Vec3, 1>(pts.len(), dev);
@@ -307,22 +346,37 @@ fn vector_and_double_grids(dev: &wp::Device) {
     let m = Mat3::from_cols_array_2d(&[[1.0, 4.0, 7.0], [2.0, 5.0, 8.0], [3.0, 6.0, 9.0]]);
     for (k, q) in pts.iter().enumerate() {
         // A linear field: exact up to f32 rounding of sums near 200 (1e-4).
-        assert!((o[k] - m * *q).abs().max_element() <= 1e-4, "vec3 at {q}: {}", o[k]);
+        assert!(
+            (o[k] - m * *q).abs().max_element() <= 1e-4,
+            "vec3 at {q}: {}",
+            o[k]
+        );
         // Row c of the gradient is component c's: the matrix itself (column a = d/du_a).
-        assert!((g[k] - m).abs_diff_eq(Mat3::ZERO, 1e-4), "grad at {q}: {}", g[k]);
-        // f64 values and weights (the position is f32, exact in f64): 1e-12.
+        assert!(
+            (g[k] - m).abs_diff_eq(Mat3::ZERO, 1e-4),
+            "grad at {q}: {}",
+            g[k]
+        );
+        // f64 values, but the weights come from the f32 position in f32 (Warp's rule): each
+        // weight within 1e-7 relative, values below 10: 2e-6.
         let want = {
             let b = q.to_array().map(|x| x.floor() as f64);
             let f = [0, 1, 2].map(|a| q[a] as f64 - b[a]);
             let mut s = 0.0;
             for c in 0..8 {
                 let o = [(c >> 2) & 1, (c >> 1) & 1, c & 1];
-                let w: f64 = (0..3).map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] }).product();
+                let w: f64 = (0..3)
+                    .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+                    .product();
                 s += w * field(b[0] + o[0] as f64, b[1] + o[1] as f64, b[2] + o[2] as f64);
             }
             s
         };
-        assert!((o64[k] - want).abs() <= 1e-12, "f64 at {q}: {} vs {want}", o64[k]);
+        assert!(
+            (o64[k] - want).abs() <= 2e-6,
+            "f64 at {q}: {} vs {want}",
+            o64[k]
+        );
     }
 }
 
@@ -337,7 +391,8 @@ fn sample_gradient_matches_warps_check(dev: &wp::Device) {
             }
         }
     }
-    let vol = wp::Volume::from_dense(&v, n, 0.0f32, &VolumeMap::uniform(1.0, [0.0; 3]), dev).unwrap();
+    let vol =
+        wp::Volume::from_dense(&v, n, 0.0f32, &VolumeMap::uniform(1.0, [0.0; 3]), dev).unwrap();
     let p = arr(&[Vec3::new(1.5, 2.0, 3.0)], dev);
     let (out, grad) = (zeros::<f32, 1>(1, dev), zeros::<Vec3, 1>(1, dev));
     wp::launch(k_sample_grad, 1, (&vol, &p, &out, &grad), dev).unwrap();
@@ -355,7 +410,11 @@ fn transforms_follow_the_map(dev: &wp::Device) {
     assert_eq!(vol.voxel_size().unwrap(), [3.0, 1.0, 3.0]);
     let pts = [Vec3::new(1.0, 2.0, 3.0), Vec3::new(-0.5, 0.25, 7.0)];
     let p = arr(&pts, dev);
-    let (w, back, d) = (zeros::<Vec3, 1>(2, dev), zeros::<Vec3, 1>(2, dev), zeros::<Vec3, 1>(2, dev));
+    let (w, back, d) = (
+        zeros::<Vec3, 1>(2, dev),
+        zeros::<Vec3, 1>(2, dev),
+        zeros::<Vec3, 1>(2, dev),
+    );
     wp::launch(k_transforms, 2, (&vol, &p, &w, &back, &d), dev).unwrap();
     let (w, back, d) = (host(&w), host(&back), host(&d));
     for (k, q) in pts.iter().enumerate() {
@@ -363,7 +422,11 @@ fn transforms_follow_the_map(dev: &wp::Device) {
         // Small integers and halves: the f32 map is exact here.
         assert_eq!(w[k], want);
         // Through the stored f32 inverse: a few ulp.
-        assert!((back[k] - *q).abs().max_element() <= 1e-5, "{} vs {q}", back[k]);
+        assert!(
+            (back[k] - *q).abs().max_element() <= 1e-5,
+            "{} vs {q}",
+            back[k]
+        );
         assert!((d[k] - *q).abs().max_element() <= 1e-5, "{} vs {q}", d[k]);
     }
 }
@@ -389,7 +452,11 @@ fn index_grids_number_their_voxels(dev: &wp::Device) {
     let extra: Vec<IVec3> = voxels
         .iter()
         .map(|v| *v + IVec3::new(0, 0, 1))
-        .filter(|v| voxels.binary_search_by_key(&v.to_array(), |x| x.to_array()).is_err())
+        .filter(|v| {
+            voxels
+                .binary_search_by_key(&v.to_array(), |x| x.to_array())
+                .is_err()
+        })
         .collect();
     q.extend(&extra);
     let data: Vec<f32> = (0..voxels.len()).map(|k| 2.0 * k as f32).collect();
@@ -399,7 +466,11 @@ fn index_grids_number_their_voxels(dev: &wp::Device) {
     let (idx, val) = (host(&idx), host(&val));
     let mut seen: Vec<i32> = idx[..voxels.len()].to_vec();
     seen.sort();
-    assert_eq!(seen, (0..voxels.len() as i32).collect::<Vec<_>>(), "each voxel its own index");
+    assert_eq!(
+        seen,
+        (0..voxels.len() as i32).collect::<Vec<_>>(),
+        "each voxel its own index"
+    );
     for k in 0..voxels.len() {
         assert_eq!(val[k], data[idx[k] as usize]);
     }
@@ -419,17 +490,35 @@ fn position_gradients_pass_gradcheck(dev: &wp::Device) {
         }
     }
     let n = x.len() / 3;
-    let x = arr(&x, dev).reinterpret::<Vec3>().unwrap().with_grad().unwrap();
+    // gradcheck perturbs scalar arrays: the positions as a flat f32 array, viewed as Vec3s
+    // by the kernel's launch.
+    let x = arr(&x, dev).with_grad().unwrap();
     let out = zeros::<f32, 1>(n, dev).with_grad().unwrap();
-    let mut forward = || wp::launch(k_sample, n, (&vol, &x, VOLUME_LINEAR, &out), dev);
-    let report = wp::gradcheck(&mut forward, &[&x], &[&out], wp::GradcheckOptions::for_type::<f32>()).unwrap();
+    let mut forward = || {
+        let p = x.reinterpret::<Vec3>()?;
+        wp::launch(k_sample, n, (&vol, &p, VOLUME_LINEAR, &out), dev)
+    };
+    let report = wp::gradcheck(
+        &mut forward,
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f32>(),
+    )
+    .unwrap();
     assert!(report.passed, "{:?}", report.worst);
 }
 
 fn value_gradients_reach_the_gradient_grid(dev: &wp::Device) {
     let vol = dense_volume(dev).with_grad().unwrap();
-    let pts = [Vec3::new(1.25, 2.5, 3.75), Vec3::new(1.5, 2.25, 3.0), Vec3::new(30.0, 0.0, 0.0)];
-    let w = [2.0f32, -1.0, 5.0];
+    // Two points inside the leaves; one in the lower node's unallocated part (its table
+    // entry's value is read); one outside every node (the root background is read).
+    let pts = [
+        Vec3::new(1.25, 2.5, 3.75),
+        Vec3::new(1.5, 2.25, 3.0),
+        Vec3::new(30.0, 0.0, 0.0),
+        Vec3::new(5000.5, 0.0, 0.0),
+    ];
+    let w = [2.0f32, -1.0, 5.0, 3.0];
     let (p, wa) = (arr(&pts, dev), arr(&w, dev));
     let out = zeros::<f32, 1>(pts.len(), dev).with_grad().unwrap();
     let tape = wp::Tape::new();
@@ -445,12 +534,19 @@ fn value_gradients_reach_the_gradient_grid(dev: &wp::Device) {
         let f = [0, 1, 2].map(|a| q[a] as f64 - b[a] as f64);
         for c in 0..8 {
             let o = [(c >> 2) & 1, (c >> 1) & 1, c & 1];
-            let wt: f64 = (0..3).map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] }).product();
-            *want.entry([b[0] + o[0], b[1] + o[1], b[2] + o[2]]).or_default() += wi as f64 * wt;
+            let wt: f64 = (0..3)
+                .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+                .product();
+            *want
+                .entry([b[0] + o[0], b[1] + o[1], b[2] + o[2]])
+                .or_default() += wi as f64 * wt;
         }
     }
     let g = vol.grad_volume().unwrap().expect("a gradient grid");
-    let mut ijk: Vec<IVec3> = want.keys().map(|c| IVec3::new(c[0] as i32, c[1] as i32, c[2] as i32)).collect();
+    let mut ijk: Vec<IVec3> = want
+        .keys()
+        .map(|c| IVec3::new(c[0] as i32, c[1] as i32, c[2] as i32))
+        .collect();
     ijk.sort_by_key(|v| v.to_array());
     let c = arr(&ijk, dev);
     let out = zeros::<f32, 1>(ijk.len(), dev);
@@ -458,13 +554,18 @@ fn value_gradients_reach_the_gradient_grid(dev: &wp::Device) {
     for (k, v) in host(&out).iter().enumerate() {
         let e = want[&[ijk[k].x as i64, ijk[k].y as i64, ijk[k].z as i64]];
         // f32 weights and atomic sums of two terms: 1e-6.
-        assert!((*v as f64 - e).abs() <= 1e-6, "grad at {}: {v} vs {e}", ijk[k]);
+        assert!(
+            (*v as f64 - e).abs() <= 1e-6,
+            "grad at {}: {v} vs {e}",
+            ijk[k]
+        );
     }
-    // The third point is outside the allocation: its gradient goes to the background.
-    let bg = arr(&[IVec3::new(1000, 1000, 1000)], dev);
-    let out = zeros::<f32, 1>(1, dev);
-    wp::launch(k_lookup, 1, (&g, &bg, &out), dev).unwrap();
-    assert_eq!(host(&out), vec![5.0]);
+    // The third point's eight corners share one lower-node table entry; the fourth's are
+    // the root background: each gets its weight, whole.
+    let bg = arr(&[IVec3::new(30, 0, 0), IVec3::new(9000, 9000, 9000)], dev);
+    let out = zeros::<f32, 1>(2, dev);
+    wp::launch(k_lookup, 2, (&g, &bg, &out), dev).unwrap();
+    assert_eq!(host(&out), vec![5.0, 3.0]);
     vol.zero_grad().unwrap();
     let g = vol.grad_volume().unwrap().unwrap();
     let out = zeros::<f32, 1>(ijk.len(), dev);
@@ -473,46 +574,83 @@ fn value_gradients_reach_the_gradient_grid(dev: &wp::Device) {
 }
 
 fn files_round_trip_and_warp_files_load(dev: &wp::Device) {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/warp_sphere_f32_zip.nvdb");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/warp_sphere_f32_zip.nvdb"
+    );
     let vol = wp::Volume::<f32>::load(path, dev).unwrap();
     let grid = &wp::objects::nvdb::load_nvdb(path).unwrap()[0];
-    let ijk: Vec<IVec3> = (0..400).map(|k| IVec3::new(k % 23 - 2, k / 23 % 23 - 2, k % 7 * 3)).collect();
+    let ijk: Vec<IVec3> = (0..400)
+        .map(|k| IVec3::new(k % 23 - 2, k / 23 % 23 - 2, k % 7 * 3))
+        .collect();
     let c = arr(&ijk, dev);
     let out = zeros::<f32, 1>(ijk.len(), dev);
     wp::launch(k_lookup, ijk.len(), (&vol, &c, &out), dev).unwrap();
     for (k, v) in host(&out).iter().enumerate() {
-        assert_eq!(*v, grid.value_f32(ijk[k].to_array()).unwrap(), "at {}", ijk[k]);
+        assert_eq!(
+            *v,
+            grid.value_f32(ijk[k].to_array()).unwrap(),
+            "at {}",
+            ijk[k]
+        );
     }
     let e = wp::Volume::<Vec3>::load(path, dev).unwrap_err().to_string();
     assert!(e.contains("Float") && e.contains("Vec3"), "{e}");
-    let dir = std::env::temp_dir().join(format!("warp_lang_volume_{}_{}", std::process::id(), dev.alias().replace(':', "_")));
+    let dir = std::env::temp_dir().join(format!(
+        "warp_lang_volume_{}_{}",
+        std::process::id(),
+        dev.alias().replace(':', "_")
+    ));
     std::fs::create_dir_all(&dir).unwrap();
-    for codec in [wp::objects::nvdb::Codec::None, wp::objects::nvdb::Codec::Zip] {
+    for codec in [
+        wp::objects::nvdb::Codec::None,
+        wp::objects::nvdb::Codec::Zip,
+    ] {
         let f = dir.join(format!("{codec:?}.nvdb"));
         vol.save(&f, codec).unwrap();
         let again = wp::Volume::<f32>::load(&f, dev).unwrap();
-        assert_eq!(again.grid_bytes().unwrap(), vol.grid_bytes().unwrap(), "{codec:?}");
+        assert_eq!(
+            again.grid_bytes().unwrap(),
+            vol.grid_bytes().unwrap(),
+            "{codec:?}"
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }
 
 fn bad_input_is_an_error(dev: &wp::Device) {
     let vol = dense_volume(dev);
-    for bad in [Vec3::new(f32::NAN, 1.0, 1.0), Vec3::new(1.0, f32::INFINITY, 1.0)] {
+    for bad in [
+        Vec3::new(f32::NAN, 1.0, 1.0),
+        Vec3::new(1.0, f32::INFINITY, 1.0),
+    ] {
         let p = arr(&[Vec3::ONE, bad], dev);
         let out = zeros::<f32, 1>(2, dev);
-        let e = wp::launch(k_sample, 2, (&vol, &p, VOLUME_LINEAR, &out), dev).unwrap_err().to_string();
-        assert!(e.contains("k_sample") && e.contains("volume sample position"), "{e}");
+        let e = wp::launch(k_sample, 2, (&vol, &p, VOLUME_LINEAR, &out), dev)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("k_sample") && e.contains("volume sample position"),
+            "{e}"
+        );
     }
     // Huge finite positions read the background.
-    let p = arr(&[Vec3::new(3e9, 0.0, 0.0), Vec3::new(-1e30, 1e30, 0.0)], dev);
+    let p = arr(
+        &[Vec3::new(3e9, 0.0, 0.0), Vec3::new(-1e30, 1e30, 0.0)],
+        dev,
+    );
     let out = zeros::<f32, 1>(2, dev);
     wp::launch(k_sample, 2, (&vol, &p, VOLUME_LINEAR, &out), dev).unwrap();
     assert_eq!(host(&out), vec![BG, BG]);
     let map = VolumeMap::uniform(1.0, [0.0; 3]);
-    let e = wp::Volume::from_dense(&[1.0f32; 5], [2, 2, 2], 0.0, &map, dev).unwrap_err().to_string();
+    let e = wp::Volume::from_dense(&[1.0f32; 5], [2, 2, 2], 0.0, &map, dev)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("5 values"), "{e}");
-    let singular = VolumeMap { mat: [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]], translation: [0.0; 3] };
+    let singular = VolumeMap {
+        mat: [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+        translation: [0.0; 3],
+    };
     assert!(wp::Volume::allocate_by_tiles(&[IVec3::ZERO], 0.0f32, &singular, dev).is_err());
     assert!(wp::Volume::allocate_by_tiles(&[], 0.0f32, &map, dev).is_err());
     // Truncated and corrupted grids.
@@ -521,9 +659,13 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     let mut bad = bytes.clone();
     bad[636] = 99; // the grid type
     assert!(wp::Volume::<f32>::from_grid_bytes(&bad, dev).is_err());
-    let e = wp::Volume::<f64>::from_grid_bytes(&bytes, dev).unwrap_err().to_string();
+    let e = wp::Volume::<f64>::from_grid_bytes(&bytes, dev)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("f64"), "{e}");
-    let missing = wp::Volume::<f32>::load("/nonexistent/x.nvdb", dev).unwrap_err().to_string();
+    let missing = wp::Volume::<f32>::load("/nonexistent/x.nvdb", dev)
+        .unwrap_err()
+        .to_string();
     assert!(missing.contains("/nonexistent/x.nvdb"), "{missing}");
     // A volume on another device than the launch's.
     if !dev.is_cpu() {

@@ -62,8 +62,6 @@ pub use kernel::{
 pub use launch::launch_on;
 pub use launch::{launch, synchronize, Dim};
 pub use objects::{Bvh, HashGrid, MarchingCubes, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
-pub use warp_core::objects::nanovdb::Map as VolumeMap;
-pub use warp_core::objects::VoxelIndex;
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
 pub use primitives::{
@@ -73,6 +71,8 @@ pub use primitives::{
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
 pub use tape::{copy, Recording, Seed, Tape};
+pub use warp_core::objects::nanovdb::Map as VolumeMap;
+pub use warp_core::objects::VoxelIndex;
 
 /// What this process compiled at run time, one line per kernel variant, for scenes and
 /// benchmarks to print beside their results: the kernel, forward or adjoint, the contiguous

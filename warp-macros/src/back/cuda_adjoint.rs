@@ -464,10 +464,17 @@ impl<'a> Printer<'a> {
                 faults,
             } => {
                 let xs: Vec<String> = inputs.iter().map(|v| self.var(*v)).collect();
-                for (k, x) in xs.iter().enumerate() {
-                    self.line(sp, &format!("auto __g{k} = wp::zero_like({x});"));
+                // An array input's adjoint is the array's gradient; the others' zeroed
+                // temporaries.
+                let mut gs = Vec::new();
+                for (k, (x, v)) in xs.iter().zip(inputs).enumerate() {
+                    if matches!(self.f().ty(*v), crate::types::Ty::Array(..)) {
+                        gs.push(self.adj(*v));
+                    } else {
+                        self.line(sp, &format!("auto __g{k} = wp::zero_like({x});"));
+                        gs.push(format!("__g{k}"));
+                    }
                 }
-                let gs: Vec<String> = (0..inputs.len()).map(|k| format!("__g{k}")).collect();
                 // An adjoint that reads an object's buffers (`adj_mesh_query_point`) takes the
                 // fault context last, as its forward call does.
                 let ctx = if *faults { ", __ctx" } else { "" };

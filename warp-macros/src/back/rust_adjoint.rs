@@ -220,14 +220,33 @@ impl Printer<'_> {
                 faults,
             } => {
                 let f = format_ident!("{}", func);
-                let xs: Vec<_> = inputs.iter().map(|v| self.var(*v)).collect();
-                let gs: Vec<_> = (0..inputs.len()).map(temp).collect();
+                // An array input (`volume_sample_index`'s data) is passed by reference, and its
+                // adjoint is the array's gradient view; every other input's a zeroed temporary.
+                let is_array = |v: VarId| matches!(self.f().ty(v), crate::types::Ty::Array(..));
+                let mut temps = TokenStream::new();
+                let mut xs = Vec::new();
+                let mut gs = Vec::new();
+                for (k, v) in inputs.iter().enumerate() {
+                    let x = self.var(*v);
+                    if is_array(*v) {
+                        // A copy of the view (it accumulates through shared memory).
+                        let (a, g) = (self.adj(*v), temp(k));
+                        temps.extend(quote_spanned!(sp=> let mut #g = #a;));
+                        xs.push(quote!(&#x));
+                        gs.push(quote!(&mut #g));
+                    } else {
+                        let g = temp(k);
+                        temps.extend(quote_spanned!(sp=> let mut #g = __wp::zero_like(&#x);));
+                        xs.push(quote!(#x));
+                        gs.push(quote!(&mut #g));
+                    }
+                }
                 // An adjoint that reads an object's buffers (`adj_mesh_query_point`) returns a
                 // `KResult`, as its forward call does.
                 let q = if *faults { quote!(?) } else { quote!() };
                 quote_spanned!(sp=>
-                    #(let mut #gs = __wp::zero_like(&#xs);)*
-                    __wp::adjoint::#f(#(#xs,)* #(&mut #gs,)* __r)#q;
+                    #temps
+                    __wp::adjoint::#f(#(#xs,)* #(#gs,)* __r)#q;
                 )
             }
             AKind::AdjCast { from } => {

@@ -33,9 +33,9 @@ pub use geometry_abi::{CudaBvh, CudaBvhTree, CudaMesh};
 pub use hash_grid::{CudaHashGrid, HashGrid};
 pub use marching_cubes::MarchingCubes;
 pub use mesh::Mesh;
-pub use volume::{Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 #[cfg(feature = "obj")]
 pub use obj::ObjMesh;
+pub use volume::{Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 
 /// Every host object's CUDA build library (each compiled the first time a GPU runs one of
 /// its steps).

@@ -298,7 +298,8 @@ impl<T: VolumeGrid> Volume<T> {
     /// # Errors
     /// Device errors of the read-back.
     pub fn transform(&self) -> Result<Map> {
-        nanovdb::read_map(&self.grid_bytes()?).map_err(|e| Error::invalid_in("Volume::transform", e))
+        nanovdb::read_map(&self.grid_bytes()?)
+            .map_err(|e| Error::invalid_in("Volume::transform", e))
     }
 
     /// The voxel size (NanoVDB's: the rows' sums of the transform's matrix).
@@ -393,6 +394,17 @@ impl<T: VolumeGrid> Volume<T> {
     }
 }
 
+/// Warp's refusal of an empty allocation (the builder itself would make an empty grid).
+fn not_empty<T>(v: &[T], what: &str, arg: &str) -> Result<()> {
+    if v.is_empty() {
+        return Err(Error::invalid_in(
+            what,
+            format!("`{arg}` is empty: a volume needs at least one leaf"),
+        ));
+    }
+    Ok(())
+}
+
 /// The tiles' or voxels' coordinates as `[i32; 3]`.
 fn coords(v: &[IVec3]) -> Vec<[i32; 3]> {
     v.iter().map(|p| p.to_array()).collect()
@@ -414,9 +426,8 @@ pub fn world_to_voxels(points: &[Vec3], map: &Map, what: &str) -> Result<Vec<IVe
                 p.y as f64 - map.translation[1],
                 p.z as f64 - map.translation[2],
             );
-            let ijk = [0, 1, 2].map(|r| {
-                (inv[r][0] * d.x + inv[r][1] * d.y + inv[r][2] * d.z + 0.5).floor()
-            });
+            let ijk = [0, 1, 2]
+                .map(|r| (inv[r][0] * d.x + inv[r][1] * d.y + inv[r][2] * d.z + 0.5).floor());
             if ijk.iter().all(|x| x.is_finite() && x.abs() < 2f64.powi(31)) {
                 Ok(IVec3::new(ijk[0] as i32, ijk[1] as i32, ijk[2] as i32))
             } else {
@@ -442,6 +453,7 @@ impl<T: VolumeValue> Volume<T> {
         map: &Map,
         device: &Device,
     ) -> Result<Self> {
+        not_empty(tiles, "Volume::allocate_by_tiles", "tiles")?;
         let bg = value_bytes(background);
         let kind = BuildKind::Value {
             grid_type: GridType::from_code(T::GRID_TYPES[0]),
@@ -493,8 +505,8 @@ impl<T: VolumeValue> Volume<T> {
             grid_type: GridType::from_code(T::GRID_TYPES[0]),
             background: &bg,
         };
-        let bytes = nanovdb::build_from_tiles(kind, &tiles, map)
-            .map_err(|e| Error::invalid_in(WHAT, e))?;
+        let bytes =
+            nanovdb::build_from_tiles(kind, &tiles, map).map_err(|e| Error::invalid_in(WHAT, e))?;
         let info = nanovdb::validate(&bytes).map_err(|e| Error::invalid_in(WHAT, e))?;
         // The values, written on the host through the kernels' own store.
         let mut blocks = to_blocks(&bytes);
@@ -519,6 +531,7 @@ impl Volume<VoxelIndex> {
     /// # Errors
     /// No tiles; a singular or non-finite transform; device errors.
     pub fn allocate_index_by_tiles(tiles: &[IVec3], map: &Map, device: &Device) -> Result<Self> {
+        not_empty(tiles, "Volume::allocate_index_by_tiles", "tiles")?;
         let bytes = nanovdb::build_from_tiles(BuildKind::Index, &coords(tiles), map);
         Self::built(bytes, "Volume::allocate_index_by_tiles", device)
     }
@@ -529,6 +542,7 @@ impl Volume<VoxelIndex> {
     /// # Errors
     /// No voxels; a singular or non-finite transform; device errors.
     pub fn allocate_by_voxels(voxels: &[IVec3], map: &Map, device: &Device) -> Result<Self> {
+        not_empty(voxels, "Volume::allocate_by_voxels", "voxels")?;
         let bytes = nanovdb::build_from_voxels(&coords(voxels), map);
         Self::built(bytes, "Volume::allocate_by_voxels", device)
     }
@@ -543,6 +557,7 @@ impl Volume<VoxelIndex> {
     pub fn allocate_by_points(points: &Array<Vec3>, map: &Map) -> Result<Self> {
         const WHAT: &str = "Volume::allocate_by_points";
         let voxels = world_to_voxels(&points.to_vec()?, map, WHAT)?;
+        not_empty(&voxels, WHAT, "points")?;
         let bytes = nanovdb::build_from_voxels(&coords(&voxels), map);
         Self::built(bytes, WHAT, points.device())
     }
