@@ -20,7 +20,7 @@
 //!   `p_a * (1 - t) + p_b * t` along the edge's axis; its other two coordinates are the
 //!   edge's exactly (Warp interpolates all three, which can move them by an ulp).
 //!
-//! A surface is three steps, the same on every device through the [`ObjectStep`] seam (rayon
+//! A surface is three steps, the same on every device through the `ObjectStep` seam (rayon
 //! on the CPU, the kernels of `warp-cuda/cuda/wp_marching_cubes.h` on a GPU, written step for
 //! step alike so that both give the same mesh bit for bit): (1) per node, which of its three
 //! grid edges the surface crosses, the case of the cell at the node, its vertex and triangle
