@@ -170,6 +170,14 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::DivisionByZero => (2, -1, 0, vec![], vec![]),
         FaultKind::BadStep { step } => (3, -1, 1, vec![*step], vec![]),
         FaultKind::AdStackOverflow { .. } => unreachable!("forward library calls never push"),
+        // The coordinates' f64 bit patterns (wp_core.h's FAULT_NON_FINITE record).
+        FaultKind::NonFinite { values, .. } => (
+            5,
+            -1,
+            values.len() as i64,
+            values.iter().map(|v| v.to_bits() as i64).collect(),
+            vec![],
+        ),
     };
     for v in [kind, arg, ndim] {
         t.push(Tok::Int(v as u64));
