@@ -112,6 +112,12 @@ fn k_index(
 }
 
 #[wp::kernel]
+fn k_index_linear(vol: Volume<VoxelIndex>, uvw: Array<Vec3>, data: Array<f32>, out: Array<f32>) {
+    let i = tid();
+    out[i] = volume_sample_index(vol, uvw[i], VOLUME_LINEAR, data, 0.5);
+}
+
+#[wp::kernel]
 fn k_weighted(vol: Volume<f32>, uvw: Array<Vec3>, w: Array<f32>, out: Array<f32>) {
     let i = tid();
     out[i] = volume_sample(vol, uvw[i], VOLUME_LINEAR) * w[i];
@@ -477,6 +483,25 @@ fn index_grids_number_their_voxels(dev: &wp::Device) {
     for k in voxels.len()..q.len() {
         assert_eq!((idx[k], val[k]), (-1, -1.0), "at {}", q[k]);
     }
+    // Gradients into the data array through trilinear index reads, against central
+    // differences: points between listed voxels and their neighbours.
+    let pts: Vec<Vec3> = voxels
+        .iter()
+        .take(60)
+        .map(|v| v.as_vec3() + Vec3::new(0.3, 0.6, 0.45))
+        .collect();
+    let p = arr(&pts, dev);
+    let d = arr(&data, dev).with_grad().unwrap();
+    let out = zeros::<f32, 1>(pts.len(), dev).with_grad().unwrap();
+    let mut forward = || wp::launch(k_index_linear, pts.len(), (&vol, &p, &d, &out), dev);
+    let report = wp::gradcheck(
+        &mut forward,
+        &[&d],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f32>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
 }
 
 fn position_gradients_pass_gradcheck(dev: &wp::Device) {

@@ -6,7 +6,8 @@
 //!   the byte offset each value was read from).
 //! * `volume_lookup`: the value's, into the gradient grid.
 //! * the four transforms: `Mᵀ adj` (resp. `M⁻ᵀ adj`), for positions and directions.
-//! * `volume_sample_index`, `volume_sample_grad_index`: the position's only (for now).
+//! * `volume_sample_index`, `volume_sample_grad_index`: the position's, and the values' into
+//!   the data array's gradient (the background's where a voxel has no index).
 //!
 //! `volume_store` and `volume_lookup_index` have no adjoint (Warp: zero gradient).
 

@@ -286,7 +286,7 @@ impl VolumeScalar for f64 {
 /// A value type that can be interpolated: `f32`, `f64`, `Vec3`, `DVec3`. The methods are the
 /// elementary steps of the module's sampling formulas, each in the order its documentation
 /// gives (the CUDA mirror follows them). Sealed.
-pub trait VolumeSample: VolumeValue + Adjoint {
+pub trait VolumeSample: VolumeValue + Adjoint + crate::grad::GradElement {
     /// The scalar precision of the arithmetic (`f32` or `f64`).
     type Scalar: VolumeScalar;
     /// The gradient with respect to the index-space position: `Vec3`/`DVec3` for scalars,
@@ -1036,6 +1036,25 @@ fn index_value<G: VolumeGrid, T: VolumeSample>(
     }
 }
 
+/// The adjoint of [`index_value`]: `a` into the data's gradient at the voxel's index, or into
+/// the background's adjoint where the voxel has none (Warp's rule, CLOSEST included).
+fn index_value_adj<G: VolumeGrid, T: VolumeSample>(
+    v: &VolumeView<G>,
+    at: VoxelAddress,
+    ijk: [i32; 3],
+    adj_data: &GradView<T, 1>,
+    adj_bg: &mut T,
+    a: T,
+) -> KResult<()> {
+    let idx = v.voxel_index(at, ijk);
+    if idx > 0 {
+        adj_data.accumulate(idx - 1, a)
+    } else {
+        adj_bg.adj_accum(a);
+        Ok(())
+    }
+}
+
 /// The LINEAR sum and gradient over values given by `read` (module docs).
 #[inline(always)]
 fn linear<G: VolumeGrid, T: VolumeSample>(
@@ -1068,7 +1087,7 @@ fn linear<G: VolumeGrid, T: VolumeSample>(
 }
 
 /// The position adjoint of LINEAR over values given by `read` (module docs), and the value
-/// adjoint of each tap handed to `value_adj(address, adjoint)`.
+/// adjoint of each tap handed to `value_adj(address, ijk, adjoint)`.
 #[inline(always)]
 fn adj_linear<G: VolumeGrid, T: VolumeSample>(
     v: &VolumeView<G>,
@@ -1076,7 +1095,7 @@ fn adj_linear<G: VolumeGrid, T: VolumeSample>(
     adj_ret: T,
     adj_grad: Option<T::Grad>,
     mut read: impl FnMut(VoxelAddress, [i32; 3]) -> KResult<T>,
-    mut value_adj: impl FnMut(VoxelAddress, T),
+    mut value_adj: impl FnMut(VoxelAddress, [i32; 3], T) -> KResult<()>,
 ) -> KResult<Vec3> {
     let mut g = [0.0f32; 3];
     let mut err = None;
@@ -1110,7 +1129,9 @@ fn adj_linear<G: VolumeGrid, T: VolumeSample>(
             }
             a = T::add(a, T::grad_mul_vec(ag, gw));
         }
-        value_adj(at, a);
+        if let Err(e) = value_adj(at, ijk, a) {
+            err = Some(e);
+        }
     });
     match err {
         Some(e) => Err(e),
@@ -1320,7 +1341,10 @@ pub fn adj_volume_sample<T: VolumeSample>(
         adj_ret,
         None,
         |at, _| Ok(v.value_at(at)),
-        |at, a| v.grad_add_at(at, a),
+        |at, _, a| {
+            v.grad_add_at(at, a);
+            Ok(())
+        },
     )?;
     *adj_uvw += g;
     Ok(())
@@ -1350,7 +1374,10 @@ pub fn adj_volume_sample_grad<T: VolumeSample>(
         adj_ret.0,
         Some(adj_ret.1),
         |at, _| Ok(v.value_at(at)),
-        |at, a| v.grad_add_at(at, a),
+        |at, _, a| {
+            v.grad_add_at(at, a);
+            Ok(())
+        },
     )?;
     *adj_uvw += g;
     Ok(())
@@ -1429,9 +1456,9 @@ pub fn adj_volume_world_to_index_dir<G: VolumeGrid>(
     adj_volume_world_to_index(v, xyz, adj_v, adj_xyz, adj_ret)
 }
 
-/// Adjoint of [`volume_sample_index`] with respect to the position (LINEAR; CLOSEST gives
-/// zero). The data's and the background's adjoints are not propagated yet (`adj_data` and
-/// `adj_bg` are left unchanged).
+/// Adjoint of [`volume_sample_index`]: the position's (LINEAR; CLOSEST gives zero), and each
+/// tap's weight times `adj_ret` into the data's gradient at its index, or into `adj_bg` where
+/// the voxel has none (Warp's rule; CLOSEST's one tap with weight 1).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub fn adj_volume_sample_index<G: VolumeGrid, T: VolumeSample>(
@@ -1443,13 +1470,14 @@ pub fn adj_volume_sample_index<G: VolumeGrid, T: VolumeSample>(
     _adj_v: &mut VolumeView<G>,
     adj_uvw: &mut Vec3,
     _adj_mode: &mut i32,
-    _adj_data: &mut GradView<T, 1>,
-    _adj_bg: &mut T,
+    adj_data: &mut GradView<T, 1>,
+    adj_bg: &mut T,
     adj_ret: T,
 ) -> KResult<()> {
     v.check_position(uvw)?;
     if mode == CLOSEST {
-        return Ok(());
+        let (at, ijk) = closest_tap(&v, uvw);
+        return index_value_adj(&v, at, ijk, adj_data, adj_bg, adj_ret);
     }
     let g = adj_linear(
         &v,
@@ -1457,15 +1485,15 @@ pub fn adj_volume_sample_index<G: VolumeGrid, T: VolumeSample>(
         adj_ret,
         None,
         |at, ijk| index_value(&v, at, ijk, data, bg),
-        |_, _| {},
+        |at, ijk, a| index_value_adj(&v, at, ijk, adj_data, adj_bg, a),
     )?;
     *adj_uvw += g;
     Ok(())
 }
 
-/// Adjoint of [`volume_sample_grad_index`] with respect to the position (LINEAR, with the
-/// second-derivative term; CLOSEST gives zero). As [`adj_volume_sample_index`], the data and
-/// the background get nothing yet.
+/// Adjoint of [`volume_sample_grad_index`]: the position's (LINEAR, with the
+/// second-derivative term; CLOSEST gives zero) and, as [`adj_volume_sample_index`], the data's
+/// and the background's (each tap's value adjoint, the gradient term included).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub fn adj_volume_sample_grad_index<G: VolumeGrid, T: VolumeSample>(
@@ -1477,13 +1505,14 @@ pub fn adj_volume_sample_grad_index<G: VolumeGrid, T: VolumeSample>(
     _adj_v: &mut VolumeView<G>,
     adj_uvw: &mut Vec3,
     _adj_mode: &mut i32,
-    _adj_data: &mut GradView<T, 1>,
-    _adj_bg: &mut T,
+    adj_data: &mut GradView<T, 1>,
+    adj_bg: &mut T,
     adj_ret: (T, T::Grad),
 ) -> KResult<()> {
     v.check_position(uvw)?;
     if mode == CLOSEST {
-        return Ok(());
+        let (at, ijk) = closest_tap(&v, uvw);
+        return index_value_adj(&v, at, ijk, adj_data, adj_bg, adj_ret.0);
     }
     let g = adj_linear(
         &v,
@@ -1491,7 +1520,7 @@ pub fn adj_volume_sample_grad_index<G: VolumeGrid, T: VolumeSample>(
         adj_ret.0,
         Some(adj_ret.1),
         |at, ijk| index_value(&v, at, ijk, data, bg),
-        |_, _| {},
+        |at, ijk, a| index_value_adj(&v, at, ijk, adj_data, adj_bg, a),
     )?;
     *adj_uvw += g;
     Ok(())
@@ -2456,7 +2485,32 @@ mod tests {
                     (adj[a] as f64 - fd).abs() <= 64.0 * f32::EPSILON as f64 * 700.0 / 0.25 * 4.0
                 );
             }
-            assert_eq!(gbg, 0.0, "no background gradient yet");
+        }
+        // Value adjoints: every tap's weight lands on its voxel's data entry or on the
+        // background, so with a seed of 1 they sum to 1 (Warp's check); CLOSEST puts the whole
+        // seed on one of them.
+        for mode in [LINEAR, CLOSEST] {
+            for _ in 0..200 {
+                let p = Vec3::new(
+                    rng.f32(-22.0, 22.0),
+                    rng.f32(-22.0, 22.0),
+                    rng.f32(-5.0, 5.0),
+                );
+                let mut gdata = vec![0.0f32; data.len()];
+                let mut gd = GradView::new(array(&mut gdata));
+                let (mut adj, mut gbg) = (Vec3::ZERO, 0.0f32);
+                adj_volume_sample_index(
+                    v, p, mode, &av, BG, &mut avv, &mut adj, &mut 0, &mut gd, &mut gbg, 1.0,
+                )
+                .unwrap();
+                let total: f64 = gdata.iter().map(|x| *x as f64).sum::<f64>() + gbg as f64;
+                // Eight f32 weights, each within an ulp of its product: 1e-6.
+                assert!((total - 1.0).abs() <= 1e-6, "{mode}: {total} at {p}");
+                if mode == CLOSEST {
+                    let ones = gdata.iter().filter(|x| **x == 1.0).count() + (gbg == 1.0) as usize;
+                    assert_eq!(ones, 1, "at {p}");
+                }
+            }
         }
     }
 
