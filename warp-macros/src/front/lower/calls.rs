@@ -370,7 +370,15 @@ impl Lowerer {
                 t => {
                     return err(
                         args[at].span(),
-                        format!("`{}` reads a 1-D array, found `{t}`", b.name),
+                        format!(
+                            "`{}` {} a 1-D array, found `{t}`",
+                            b.name,
+                            if b.name.starts_with("lower_bound") {
+                                "searches"
+                            } else {
+                                "reads"
+                            }
+                        ),
                     )
                 }
             }
