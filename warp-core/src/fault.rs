@@ -45,6 +45,14 @@ pub enum FaultKind {
         /// The capacity in bytes.
         capacity: usize,
     },
+    /// A float input that must be finite was NaN or infinite (a volume sample position:
+    /// Warp's result there is undefined, and CPU and GPU would disagree).
+    NonFinite {
+        /// What the values are (`"volume sample position"`).
+        what: &'static str,
+        /// The values as given (every component, finite or not).
+        values: Vec<f64>,
+    },
 }
 
 impl Fault {
@@ -76,6 +84,11 @@ impl fmt::Display for Fault {
             FaultKind::BadStep { step } => write!(
                 f,
                 "kernel `{}`: step_by({step}) in a range loop: the step must be positive",
+                self.kernel
+            ),
+            FaultKind::NonFinite { what, values } => write!(
+                f,
+                "kernel `{}`: {what} {values:?} is not finite (NaN or infinite)",
                 self.kernel
             ),
         }

@@ -46,6 +46,7 @@ mod svd;
 #[cfg(test)]
 mod tests;
 mod transform;
+mod volume;
 
 pub use builtins::*;
 pub use cast::*;
@@ -56,6 +57,7 @@ pub use noise::*;
 pub use ops::*;
 pub use svd::*;
 pub use transform::*;
+pub use volume::*;
 
 /// A type whose values have an adjoint of the same type.
 ///

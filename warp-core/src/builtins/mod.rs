@@ -27,6 +27,10 @@
 //! * [`geometry`]: the BVH's and the mesh's queries (sections "bvh", "mesh", "geometry"),
 //!   adapters over [`objects::bvh`](crate::objects::bvh) and
 //!   [`objects::mesh`](crate::objects::mesh) (tuple results, `i32` indices).
+//! * [`volume`](mod@volume): the sparse volume's builtins (section "volume"), which live with
+//!   [`VolumeView`](crate::objects::VolumeView) in [`objects::volume`](crate::objects::volume)
+//!   ([`volume_sample`], [`volume_lookup`], [`volume_store`], the transforms, the index
+//!   variants).
 
 pub mod atomic;
 pub mod geometry;
@@ -38,6 +42,7 @@ pub mod rand;
 pub mod special;
 pub mod svd;
 pub mod transform;
+pub mod volume;
 
 pub use atomic::*;
 pub use geometry::{
@@ -54,6 +59,7 @@ pub use noise::{noise, pnoise, NoiseArg};
 pub use rand::*;
 pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};
 pub use transform::*;
+pub use volume::*;
 
 pub use crate::objects::hash_grid::{
     hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,

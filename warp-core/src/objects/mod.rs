@@ -14,13 +14,20 @@
 //!   queries.
 //! - [`mesh`]: Warp's triangle mesh: closest and furthest points, signed; ray hits; faces in a
 //!   box; evaluation at barycentrics.
+//! - [`nanovdb`]: the NanoVDB format facts (grid types, per-type layout, root key, map), the
+//!   validator and the CPU grid builder.
+//! - [`volume`]: Warp's sparse volumes (NanoVDB grids): lookups, sampling, stores,
+//!   transforms, index variants and their adjoints. Unlike the views above, a
+//!   [`VolumeView`] reads a grid that `nanovdb::validate` proved well formed, without checks.
 
 pub mod bvh;
 pub mod geometry;
 pub mod hash_grid;
 pub mod mesh;
 pub mod nanovdb;
+pub mod volume;
 
 pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};
 pub use mesh::{MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView};
+pub use volume::{VolumeGrid, VolumeSample, VolumeValue, VolumeView, VoxelIndex};
