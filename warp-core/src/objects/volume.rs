@@ -77,7 +77,6 @@
 //! The grid type of a view always matches `T` (the runtime checks that before it makes one),
 //! so Warp's "wrong type gives 0" case cannot arise here.
 
-// Floats are compared with `!(..)` on purpose nowhere; integer casts below are checked by hand.
 use core::marker::PhantomData;
 use std::cell::UnsafeCell;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::Relaxed};
@@ -584,7 +583,8 @@ impl<T: VolumeGrid> VolumeView<T> {
     ///   of the twin).
     pub unsafe fn from_info(info: &GridInfo, data: u64, grad: u64) -> Self {
         debug_assert!(T::GRID_TYPES.contains(&info.grid_type.code()));
-        debug_assert!(data % 32 == 0 && grad % 32 == 0);
+        debug_assert!(data.is_multiple_of(32) && grad.is_multiple_of(32));
+        debug_assert!(info.root + info.layout.root_size as u64 <= u32::MAX as u64);
         Self::from_layout(
             info.grid_type,
             &info.layout,
@@ -1094,7 +1094,7 @@ fn adj_linear<G: VolumeGrid, T: VolumeSample>(
         let gw: [T::Scalar; 3] = widen(c.gw);
         let d = T::dot(x, adj_ret);
         for a in 0..3 {
-            g[a] = g[a] + (d * gw[a]).to_f32();
+            g[a] += (d * gw[a]).to_f32();
         }
         let mut a = T::scale(T::Scalar::from_f32(c.w), adj_ret);
         if let Some(ag) = adj_grad {
@@ -1106,7 +1106,7 @@ fn adj_linear<G: VolumeGrid, T: VolumeSample>(
                 r[0] * hxz + r[1] * hyz,
             ];
             for a in 0..3 {
-                g[a] = g[a] + h[a].to_f32();
+                g[a] += h[a].to_f32();
             }
             a = T::add(a, T::grad_mul_vec(ag, gw));
         }
@@ -2166,7 +2166,7 @@ mod tests {
                 });
             }
         });
-        for_voxels(&tiles, |p| {
+        for_voxels(tiles, |p| {
             assert_eq!(volume_lookup(v, p[0], p[1], p[2]).unwrap(), hash(p))
         });
     }
@@ -2558,8 +2558,8 @@ mod tests {
                         0.25,
                     )
                 });
-                for c in 0..3 {
-                    assert!((gr.col(k)[c] as f64 - fdv[c]).abs() <= 2e-3);
+                for (c, fd) in fdv.into_iter().enumerate() {
+                    assert!((gr.col(k)[c] as f64 - fd).abs() <= 2e-3);
                 }
             }
         }
@@ -2689,8 +2689,8 @@ mod tests {
                 r[0] * h[1] + r[1] * h[2],
             ];
             for a in 0..3 {
-                adj[a] = adj[a] + (d * gw[a]).to_f32();
-                adj[a] = adj[a] + hv[a].to_f32();
+                adj[a] += (d * gw[a]).to_f32();
+                adj[a] += hv[a].to_f32();
             }
         }
         (val, grad, adj)
@@ -2795,7 +2795,7 @@ mod tests {
             };
             let a = (r >> 8) as usize % 3;
             p[a] += if r >> 16 & 1 == 0 { step } else { -step };
-            if r % 997 == 0 {
+            if r.is_multiple_of(997) {
                 p = [rng.i32(-30, 140), rng.i32(-30, 140), rng.i32(-30, 30)];
             }
             assert_eq!(v.locate_cached(p, &mut acc), v.locate(p), "{p:?}");
