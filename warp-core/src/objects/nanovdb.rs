@@ -505,7 +505,8 @@ pub struct GridInfo {
     pub root: u64,
     /// Tiles in the root table.
     pub tile_count: u32,
-    /// The first upper node, lower node, leaf.
+    /// The first upper node, lower node, leaf. An empty level's is where it would start:
+    /// the end of the level before it (the root's tiles for the uppers).
     pub first_upper: u64,
     /// See `first_upper`.
     pub first_lower: u64,
@@ -960,8 +961,8 @@ pub fn build_from_tiles(kind: BuildKind, tiles: &[[i32; 3]], map: &Map) -> Resul
             if background.len() != layout.value_size {
                 return Err(format!(
                     "a {grid_type:?} background has {} bytes, not {}",
-                    layout.value_size,
-                    background.len()
+                    background.len(),
+                    layout.value_size
                 ));
             }
             (grid_type, Some(background))
@@ -1733,7 +1734,7 @@ mod tests {
             background: bg,
         };
         assert!(
-            err(vec3(&[0; 8]), &map).contains("12"),
+            err(vec3(&[0; 8]), &map).contains("has 8 bytes, not 12"),
             "{}",
             err(vec3(&[0; 8]), &map)
         );
