@@ -22,7 +22,10 @@
 //! near and beyond the i32 range (the background rule), and with NaN and infinite
 //! coordinates (the NonFinite fault); the index variants also with value arrays too short
 //! (the array's OutOfBounds fault). Adjoints compare the position's adjoint and every word
-//! the gradient twin receives. Stores compare the whole grid's digest after each store.
+//! the gradient twin receives (`adj_volume_lookup` on the i32 grid gets a zero adjoint, the
+//! only one an integer has). Stores compare the whole grid's digest after each store. The
+//! test also counts the LINEAR taps that end at each level and the faults of each kind, and
+//! fails when a kind is barely reached.
 //!
 //! A second test checks that NVRTC accepts the headers (every function instantiated in a
 //! kernel) for sm_90 and sm_80 with `--fmad=false`; skipped, saying so, without libnvrtc.
@@ -954,13 +957,7 @@ impl Cases {
         ] {
             line += &r.unwrap().pr();
         }
-        let adjs: [fn(
-            VolumeView<T>,
-            Vec3,
-            &mut VolumeView<T>,
-            &mut Vec3,
-            Vec3,
-        ) -> warp_core::KResult<()>; 4] = [
+        let adjs: [TransformAdjoint<T>; 4] = [
             adj_volume_index_to_world,
             adj_volume_world_to_index,
             adj_volume_index_to_world_dir,
@@ -1056,6 +1053,10 @@ impl Cases {
         self.expect(line);
     }
 }
+
+/// The signature of the transforms' adjoints.
+type TransformAdjoint<T> =
+    fn(VolumeView<T>, Vec3, &mut VolumeView<T>, &mut Vec3, Vec3) -> warp_core::KResult<()>;
 
 /// The value arrays of the index variants on the Rust side (aligned, one per kind).
 #[derive(Default)]

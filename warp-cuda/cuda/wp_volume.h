@@ -32,7 +32,11 @@
 // the read-only data cache (`__ldg`). Values may be written by volume_store in the same
 // kernel, so they are read with plain loads, unless the translation unit defines
 // WP_VOLUME_NO_STORE (for a kernel that calls no volume_store): then through `__ldg` as well.
-// Host builds read and write with memcpy.
+// Host builds read and write with memcpy. Measured once (H100, nvcc -O3 -fmad=false, 1M
+// LINEAR samples of a sphere SDF band in 256^3, 7942 leaves): 55 us for points spread over
+// the box and 77 us near the surface, against 50 and 81 us for PNanoVDB's read-accessor
+// sampler (Warp 1.19's), with bit-identical results; WP_VOLUME_NO_STORE changed nothing
+// measurable there, and hoisting the i64 range tests out of the taps made it slower.
 //
 // Floating point: bit for bit the CPU's with no FMA contraction (NVRTC `--fmad=false`):
 // floorf, roundf and the additions and multiplications below are exact or correctly rounded
