@@ -425,13 +425,17 @@ enum fault_kind : i32 {
   FAULT_OUT_OF_BOUNDS = 1,
   FAULT_DIVISION_BY_ZERO = 2,
   FAULT_BAD_STEP = 3,
+  // 4 is FAULT_ADSTACK_OVERFLOW (wp_adjoint_core.h).
+  FAULT_NON_FINITE = 5,
 };
 
 /// The first fault of a launch, filled by the first faulting thread (80 bytes, align 8):
 ///   0 kind (i32), 4 arg (i32: the kernel parameter index for OutOfBounds, else -1),
 ///   8 index[4] (i64), 40 shape[4] (i64), 72 ndim (i32), 76 pad (i32).
 /// OutOfBounds: index/shape hold `ndim` entries. DivisionByZero: ndim 0. BadStep: ndim 1,
-/// index[0] is the step, shape all 0. Unused entries are 0.
+/// index[0] is the step, shape all 0. NonFinite (a NaN or infinite volume sample position,
+/// warp_core::FaultKind::NonFinite): ndim 3, index[0..3] are the coordinates' f64 bit
+/// patterns (x, y, z), shape all 0. Unused entries are 0.
 struct fault_t {
   i32 kind;
   i32 arg;

@@ -62,6 +62,7 @@ pub const HEADERS: &[(&str, &str)] = &[
     ("wp_geometry.h", include_str!("../cuda/wp_geometry.h")),
     ("wp_bvh.h", include_str!("../cuda/wp_bvh.h")),
     ("wp_mesh.h", include_str!("../cuda/wp_mesh.h")),
+    ("wp_volume.h", include_str!("../cuda/wp_volume.h")),
     ("wp_print.h", include_str!("../cuda/wp_print.h")),
     ("wp_primitives.h", include_str!("../cuda/wp_primitives.h")),
     ("wp_adjoint.h", include_str!("../cuda/wp_adjoint.h")),
@@ -97,6 +98,10 @@ pub const HEADERS: &[(&str, &str)] = &[
     (
         "wp_adjoint_mesh.h",
         include_str!("../cuda/wp_adjoint_mesh.h"),
+    ),
+    (
+        "wp_adjoint_volume.h",
+        include_str!("../cuda/wp_adjoint_volume.h"),
     ),
 ];
 

@@ -277,6 +277,13 @@ pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
             shape: (0..ndim).map(|k| i64_at(40 + 8 * k) as usize).collect(),
         },
         2 => FaultKind::DivisionByZero,
+        // wp_core.h FAULT_NON_FINITE: the sample position's coordinates as f64 bit patterns.
+        5 => FaultKind::NonFinite {
+            what: "volume sample position",
+            values: (0..ndim)
+                .map(|k| f64::from_bits(i64_at(8 + 8 * k) as u64))
+                .collect(),
+        },
         _ => FaultKind::BadStep { step: i64_at(8) },
     };
     Err(Error::Fault(Fault {
