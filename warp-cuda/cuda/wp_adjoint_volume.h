@@ -18,8 +18,9 @@
 //   adj_volume_index_to_world / _dir(v, uvw, adj_v, adj_uvw, adj_ret, ctx): adj_uvw += M^T adj_ret;
 //   adj_volume_world_to_index / _dir: adj_xyz += M^-T adj_ret (the f32 map copies).
 //   adj_volume_sample_index / adj_volume_sample_grad_index(v, uvw, mode, data, bg, adj_v,
-//       adj_uvw, adj_mode, adj_data, adj_bg, adj_ret, ctx): the position's adjoint only
-//       (LINEAR); adj_data (the data's gradient array) and adj_bg are left unchanged.
+//       adj_uvw, adj_mode, adj_data, adj_bg, adj_ret, ctx): the position's adjoint (LINEAR),
+//       and each tap's value adjoint into adj_data (the data's gradient array) at its index,
+//       or into adj_bg where the voxel has none (CLOSEST: its one tap, weight 1).
 //   volume_store and volume_lookup_index have no adjoint (Grad::Zero).
 //
 // The twin's adds go through wp_atomic.h's helpers: one atomicAdd per float component on
@@ -109,16 +110,29 @@ WP_FN DVec3 vol_grad_mul_vec(const DMat3& g, const f64* gw) {
   return vol_mat_mul_vec<DVec3>(g, gw);
 }
 
-/// The value adjoints of the index variants: not propagated yet.
-struct vol_no_value_adj_t {
-  template <typename T>
-  WP_FN void operator()(vol_addr_t, const T&) const {}
-};
 /// The value adjoints of the plain builtins: into the twin.
 template <typename T>
 struct vol_twin_adj_t {
   const volume_t<T>* v;
-  WP_FN void operator()(vol_addr_t at, const T& a) const { vol_grad_add_at(*v, at, a); }
+  WP_FN void operator()(vol_addr_t at, const i32*, const T& a, ctx_t*) const {
+    vol_grad_add_at(*v, at, a);
+  }
+};
+/// The value adjoints of the index variants (warp-core's `index_value_adj`): into the data's
+/// gradient at the voxel's index, or into the background's adjoint where it has none.
+template <typename G, typename T>
+struct vol_index_adj_t {
+  const volume_t<G>* v;
+  const array_t<T, 1>* adj_data;
+  T* adj_bg;
+  WP_FN void operator()(vol_addr_t at, const i32* ijk, const T& a, ctx_t* ctx) const {
+    const u64 idx = vol_voxel_index(*v, at, ijk[0], ijk[1], ijk[2]);
+    if (idx > 0) {
+      grad_accum(*adj_data, (i64)(idx - 1u), a, ctx);
+    } else {
+      adj_accum(*adj_bg, a);
+    }
+  }
 };
 
 /// adj_linear: the position adjoint of LINEAR over the values `read` gives (a local f32 sum
@@ -153,7 +167,8 @@ WP_FN bool vol_adj_linear(const volume_t<G>& v, Vec3 uvw, const T& adj_ret,
       for (int a = 0; a < 3; ++a) g[a] = g[a] + (f32)h[a];
       va = vol_add(va, vol_grad_mul_vec(*adj_grad, gw));
     }
-    value_adj(at, va);
+    value_adj(at, ijk, va, ctx);
+    if (faulted(ctx)) return false;
   }
   return true;
 }
@@ -253,14 +268,17 @@ WP_FN void adj_volume_sample_index(const volume_t<G>& v, Vec3 uvw, i32 mode,
   using namespace detail;
   (void)adj_v;
   (void)adj_mode;
-  (void)adj_data;
-  (void)adj_bg;
   if (!vol_check_position(uvw, ctx)) return;
-  if (mode == VOLUME_CLOSEST) return;
+  const vol_index_adj_t<G, T> value_adj{&v, &adj_data, &adj_bg};
+  if (mode == VOLUME_CLOSEST) {
+    i32 ijk[3];
+    const vol_addr_t at = vol_closest_tap(v, uvw, ijk);
+    value_adj(at, ijk, adj_ret, ctx);
+    return;
+  }
   f32 g[3];
   if (vol_adj_linear<false, G, T>(v, uvw, adj_ret, (const typename vol_value<T>::G*)nullptr,
-                                  vol_index_reader_t<G, T>{&v, &data, &bg}, vol_no_value_adj_t{},
-                                  g, ctx))
+                                  vol_index_reader_t<G, T>{&v, &data, &bg}, value_adj, g, ctx))
     vol_uvw_add(adj_uvw, g);
 }
 
@@ -273,14 +291,17 @@ WP_FN void adj_volume_sample_grad_index(
   using namespace detail;
   (void)adj_v;
   (void)adj_mode;
-  (void)adj_data;
-  (void)adj_bg;
   if (!vol_check_position(uvw, ctx)) return;
-  if (mode == VOLUME_CLOSEST) return;
+  const vol_index_adj_t<G, T> value_adj{&v, &adj_data, &adj_bg};
+  if (mode == VOLUME_CLOSEST) {
+    i32 ijk[3];
+    const vol_addr_t at = vol_closest_tap(v, uvw, ijk);
+    value_adj(at, ijk, adj_ret.f0, ctx);
+    return;
+  }
   f32 g[3];
   if (vol_adj_linear<true, G, T>(v, uvw, adj_ret.f0, &adj_ret.f1,
-                                 vol_index_reader_t<G, T>{&v, &data, &bg}, vol_no_value_adj_t{},
-                                 g, ctx))
+                                 vol_index_reader_t<G, T>{&v, &data, &bg}, value_adj, g, ctx))
     vol_uvw_add(adj_uvw, g);
 }
 

@@ -194,11 +194,11 @@ impl VolumeElem {
             .map_or_else(|| "VoxelIndex".into(), |t| t.to_string())
     }
 
-    /// The C++ element type of `wp::volume_t<..>` (an index grid's is `wp::voxel_index_t`).
+    /// The C++ element type of `wp::volume_t<..>` (an index grid's is `wp::VoxelIndex`).
     pub fn cuda(self) -> String {
         match self.ty() {
             Some(t) => crate::back::cuda::cpp_type(&t).expect("a value type has a C++ name"),
-            None => "wp::voxel_index_t".into(),
+            None => "wp::VoxelIndex".into(),
         }
     }
 }

@@ -164,7 +164,7 @@ pub trait VolumeValue: VolumeGrid {
 }
 
 macro_rules! scalar_value {
-    ($t:ty, $code:expr, $atomic:ty, $bits:ty) => {
+    ($t:ty, $code:expr, $atomic:ty, $bits:ty, gradient: $grad:literal) => {
         impl VolumeGrid for $t {
             const GRID_TYPES: &'static [u32] = &[$code];
         }
@@ -188,21 +188,19 @@ macro_rules! scalar_value {
             }
             #[inline(always)]
             unsafe fn grad_add(p: *mut u8, v: Self) {
-                scalar_value!(@grad $t, p, v);
+                // Integers have no gradient: nothing (a `ty` fragment cannot be matched
+                // against `i32` in a macro arm, hence the flag).
+                if $grad {
+                    // SAFETY: the trait's contract; the float add is a CAS loop on the bits.
+                    unsafe { <$t as AtomicElement>::atomic_add(p.cast::<$t>(), v) };
+                }
             }
         }
     };
-    (@grad i32, $p:ident, $v:ident) => {
-        let _ = ($p, $v);
-    };
-    (@grad $t:ty, $p:ident, $v:ident) => {
-        // SAFETY: the trait's contract; the float add is a CAS loop on the bits.
-        unsafe { <$t as AtomicElement>::atomic_add($p.cast::<$t>(), $v) };
-    };
 }
-scalar_value!(f32, 1, AtomicU32, u32);
-scalar_value!(f64, 2, AtomicU64, u64);
-scalar_value!(i32, 4, AtomicU32, u32);
+scalar_value!(f32, 1, AtomicU32, u32, gradient: true);
+scalar_value!(f64, 2, AtomicU64, u64, gradient: true);
+scalar_value!(i32, 4, AtomicU32, u32, gradient: false);
 
 macro_rules! vector_value {
     ($v:ty, $s:ty, $code:expr) => {

@@ -35,7 +35,7 @@ pub const ADJOINT_CORE: &str = "wp_adjoint_core.h";
 /// `bvh` and `print` have none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
 /// NVRTC parses no more than they need. Each part includes its forward section and the parts
 /// it builds on; `wp_adjoint.h` includes them all (for host tests and hand-written code).
-pub const ADJOINT_PARTS: [(&str, &str); 9] = [
+pub const ADJOINT_PARTS: [(&str, &str); 10] = [
     ("scalar", "wp_adjoint_builtins.h"),
     ("vector", "wp_adjoint_builtins.h"),
     ("linalg", "wp_adjoint_linalg.h"),
@@ -45,6 +45,7 @@ pub const ADJOINT_PARTS: [(&str, &str); 9] = [
     ("rand", "wp_adjoint_rand.h"),
     ("geometry", "wp_adjoint_geometry.h"),
     ("mesh", "wp_adjoint_mesh.h"),
+    ("volume", "wp_adjoint_volume.h"),
 ];
 
 /// The assembled source of one kernel.
