@@ -11,7 +11,7 @@ use warp_core::FuncInfo;
 
 /// The builtin-table sections, in include order: section `s` is `wp_<s>.h` (in
 /// `warp-cuda/cuda/`, embedded by `warp_cuda::HEADERS`).
-pub const SECTIONS: [&str; 13] = [
+pub const SECTIONS: [&str; 14] = [
     "scalar",
     "vector",
     "linalg",
@@ -24,6 +24,7 @@ pub const SECTIONS: [&str; 13] = [
     "geometry",
     "bvh",
     "mesh",
+    "volume",
     "print",
 ];
 
@@ -329,6 +330,10 @@ mod tests {
                 !matches!(s, "atomic" | "hash_grid" | "bvh" | "print"),
                 "{s}"
             );
+        }
+        // A section with an adjoint part is a section the assembler includes.
+        for (p, _) in ADJOINT_PARTS {
+            assert!(SECTIONS.contains(&p), "{p} has an adjoint part but is not in SECTIONS");
         }
     }
 }
