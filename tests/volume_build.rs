@@ -51,7 +51,21 @@ impl Rng {
 /// sides of 0, a few far away (several uppers), the ends of the i32 range, and duplicates.
 fn coords(r: &mut Rng, n: usize) -> Vec<IVec3> {
     const EDGES: [i32; 16] = [
-        0, -1, 7, -8, -9, 127, 128, -128, -129, 4095, 4096, -4096, -4097, 20000, i32::MIN,
+        0,
+        -1,
+        7,
+        -8,
+        -9,
+        127,
+        128,
+        -128,
+        -129,
+        4095,
+        4096,
+        -4096,
+        -4097,
+        20000,
+        i32::MIN,
         i32::MAX,
     ];
     let mut v: Vec<IVec3> = Vec::with_capacity(n);
@@ -88,7 +102,11 @@ fn coord_sets() -> Vec<Vec<IVec3>> {
     let mut sets = vec![
         vec![IVec3::ZERO],
         vec![IVec3::new(-1, -1, -1)],
-        vec![IVec3::new(8, 3, -9), IVec3::new(8, 3, -9), IVec3::new(15, 0, -16)],
+        vec![
+            IVec3::new(8, 3, -9),
+            IVec3::new(8, 3, -9),
+            IVec3::new(15, 0, -16),
+        ],
         vec![IVec3::splat(i32::MIN), IVec3::splat(i32::MAX)],
     ];
     for n in [7, 60, 3000] {
@@ -156,23 +174,24 @@ impl Bg for i32 {
 impl Bg for Vec3 {
     const GRID_TYPE: GridType = GridType::Vec3f;
     fn bytes(&self) -> Vec<u8> {
-        self.to_array().iter().flat_map(|x| x.to_le_bytes()).collect()
+        self.to_array()
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect()
     }
 }
 impl Bg for DVec3 {
     const GRID_TYPE: GridType = GridType::Vec3d;
     fn bytes(&self) -> Vec<u8> {
-        self.to_array().iter().flat_map(|x| x.to_le_bytes()).collect()
+        self.to_array()
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect()
     }
 }
 
 /// A value grid of `T` over `tiles`, built by `Volume` on `dev`, and by the CPU builder.
-fn value_case<T: Bg>(
-    tiles: &[IVec3],
-    bg: T,
-    map: &Map,
-    dev: &wp::Device,
-) -> (Vec<u8>, Vec<u8>) {
+fn value_case<T: Bg>(tiles: &[IVec3], bg: T, map: &Map, dev: &wp::Device) -> (Vec<u8>, Vec<u8>) {
     let got = wp::Volume::allocate_by_tiles(tiles, bg, map, dev)
         .unwrap()
         .grid_bytes()
@@ -195,7 +214,10 @@ fn every_kind_matches(dev: &wp::Device) {
                 ("f64", value_case(set, -2.25f64, map, dev)),
                 ("i32", value_case(set, -3i32, map, dev)),
                 ("Vec3", value_case(set, Vec3::new(1.0, -2.0, 0.5), map, dev)),
-                ("DVec3", value_case(set, DVec3::new(0.25, 4.0, -8.0), map, dev)),
+                (
+                    "DVec3",
+                    value_case(set, DVec3::new(0.25, 4.0, -8.0), map, dev),
+                ),
             ];
             for (k, (got, want)) in &cases {
                 assert_same(got, want, &what(k));
@@ -333,7 +355,11 @@ fn strided_points_are_copied() {
         .step_by(2)
         .map(|p| warp_voxel(*p, &map))
         .collect();
-    assert_same(&got, &nanovdb::build_from_voxels(&voxels, &map).unwrap(), "strided");
+    assert_same(
+        &got,
+        &nanovdb::build_from_voxels(&voxels, &map).unwrap(),
+        "strided",
+    );
 }
 
 // ------------------------------------------------------------------------------------------
@@ -515,7 +541,10 @@ fn case_words(c: &CppCase) -> Vec<u32> {
         head[l_root + 12 + 4 * k..][..4].copy_from_slice(&i32::MIN.to_le_bytes());
     }
     w.push((head.len() / 4) as u32);
-    w.extend(head.chunks_exact(4).map(|b| u32::from_le_bytes(b.try_into().unwrap())));
+    w.extend(
+        head.chunks_exact(4)
+            .map(|b| u32::from_le_bytes(b.try_into().unwrap())),
+    );
     match &c.world {
         Some(p) => {
             w.push(p.len() as u32);
@@ -641,14 +670,31 @@ fn cpp_steps_write_the_cpu_grids() {
         String::from_utf8_lossy(&out.stderr)
     );
     for (k, case) in cpp_cases().iter().enumerate() {
-        let (input, output) = (dir.join(format!("case{k}.bin")), dir.join(format!("grid{k}.bin")));
-        let bytes: Vec<u8> = case_words(case).iter().flat_map(|w| w.to_le_bytes()).collect();
+        let (input, output) = (
+            dir.join(format!("case{k}.bin")),
+            dir.join(format!("grid{k}.bin")),
+        );
+        let bytes: Vec<u8> = case_words(case)
+            .iter()
+            .flat_map(|w| w.to_le_bytes())
+            .collect();
         std::fs::write(&input, bytes).unwrap();
-        let run = Command::new(&exe).arg(&input).arg(&output).output().unwrap();
+        let run = Command::new(&exe)
+            .arg(&input)
+            .arg(&output)
+            .output()
+            .unwrap();
         let said = String::from_utf8_lossy(&run.stdout);
-        assert!(run.status.success() && said.starts_with("ok"), "case {k}: {said}");
+        assert!(
+            run.status.success() && said.starts_with("ok"),
+            "case {k}: {said}"
+        );
         let got = std::fs::read(&output).unwrap();
-        assert_same(&got, &case.want, &format!("C++ case {k} ({:?})", case.grid_type));
+        assert_same(
+            &got,
+            &case.want,
+            &format!("C++ case {k} ({:?})", case.grid_type),
+        );
     }
     // A bad world point: the driver names the first, as the runtime does.
     let mut bad = cpp_cases().pop().unwrap();
@@ -656,9 +702,16 @@ fn cpp_steps_write_the_cpu_grids() {
     pts[9].y = f32::NAN;
     pts[4].z = 3e12;
     let input = dir.join("bad.bin");
-    let bytes: Vec<u8> = case_words(&bad).iter().flat_map(|w| w.to_le_bytes()).collect();
+    let bytes: Vec<u8> = case_words(&bad)
+        .iter()
+        .flat_map(|w| w.to_le_bytes())
+        .collect();
     std::fs::write(&input, bytes).unwrap();
-    let run = Command::new(&exe).arg(&input).arg(dir.join("bad.grid")).output().unwrap();
+    let run = Command::new(&exe)
+        .arg(&input)
+        .arg(dir.join("bad.grid"))
+        .output()
+        .unwrap();
     assert_eq!(String::from_utf8_lossy(&run.stdout), "bad 4\n");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -258,7 +258,8 @@ unsafe fn or64(addr: u64, bits: u64) {
 #[inline(always)]
 unsafe fn union_into(into: u64, from: [i32; 6]) {
     for k in 0..3 {
-        AtomicI32::from_ptr((into + 4 * k as u64) as *mut i32).fetch_min(from[k], Ordering::Relaxed);
+        AtomicI32::from_ptr((into + 4 * k as u64) as *mut i32)
+            .fetch_min(from[k], Ordering::Relaxed);
         AtomicI32::from_ptr((into + 12 + 4 * k as u64) as *mut i32)
             .fetch_max(from[3 + k], Ordering::Relaxed);
     }
@@ -273,7 +274,7 @@ unsafe fn ijk_at(s: &VolumeBuildIjk, i: u64) -> bool {
     let d = [p[0] - s.t[0], p[1] - s.t[1], p[2] - s.t[2]];
     let mut ok = true;
     let mut v = [0i32; 3];
-    for r in 0..3 {
+    for (r, out) in v.iter_mut().enumerate() {
         let m = &s.inv[3 * r..3 * r + 3];
         // NanoVDB's matMult (fmaf(x, m0, fmaf(y, m1, z * m2))), then Vec3::round: floor(x +
         // 0.5) with a double 0.5 (exact for every f32).
@@ -281,7 +282,7 @@ unsafe fn ijk_at(s: &VolumeBuildIjk, i: u64) -> bool {
         let f = (x as f64 + 0.5).floor();
         // False for NaN too.
         let inside = (-2147483648.0..=2147483647.0).contains(&f);
-        v[r] = if inside { f as i32 } else { 0 };
+        *out = if inside { f as i32 } else { 0 };
         ok &= inside;
     }
     if !ok {
@@ -297,8 +298,8 @@ fn key_word(c: [i32; 3], word: u32, voxel_bits: u32) -> u32 {
     let hi = (((u[0] ^ 0x8000_0000) >> 12) as u64) << 40
         | (((u[1] ^ 0x8000_0000) >> 12) as u64) << 20
         | ((u[2] ^ 0x8000_0000) >> 12) as u64;
-    let us = ((((u[0] & 4095) >> 7) << 10) | (((u[1] & 4095) >> 7) << 5) | ((u[2] & 4095) >> 7))
-        as u64;
+    let us =
+        ((((u[0] & 4095) >> 7) << 10) | (((u[1] & 4095) >> 7) << 5) | ((u[2] & 4095) >> 7)) as u64;
     let ls = ((((u[0] & 127) >> 3) << 8) | (((u[1] & 127) >> 3) << 4) | ((u[2] & 127) >> 3)) as u64;
     let vs = if voxel_bits != 0 {
         (((u[0] & 7) << 6) | ((u[1] & 7) << 3) | (u[2] & 7)) as u64
@@ -325,7 +326,8 @@ unsafe fn flags_at(s: &VolumeBuildFlags, i: u64) {
     if i > 0 {
         let q = get::<[i32; 3]>(s.ijk + 12 * get::<u32>(s.perm + 4 * (i - 1)) as u64);
         // The highest differing bit of any coordinate says which levels change.
-        let d = (c[0] as u32 ^ q[0] as u32) | (c[1] as u32 ^ q[1] as u32) | (c[2] as u32 ^ q[2] as u32);
+        let d =
+            (c[0] as u32 ^ q[0] as u32) | (c[1] as u32 ^ q[1] as u32) | (c[2] as u32 ^ q[2] as u32);
         up = (d > 4095) as u64;
         lo = (d > 127) as u64;
         lf = (d > 7) as u64;
@@ -363,7 +365,10 @@ fn slot(c: [i32; 3], log2: u32, child_bits: u32) -> u64 {
 /// # Safety
 /// `addr` is a node start in the grid, its bbox written by this task alone.
 unsafe fn empty_box(addr: u64) {
-    put(addr, [i32::MAX, i32::MAX, i32::MAX, i32::MIN, i32::MIN, i32::MIN]);
+    put(
+        addr,
+        [i32::MAX, i32::MAX, i32::MAX, i32::MIN, i32::MIN, i32::MIN],
+    );
 }
 
 /// `vb_link_at` at sorted position `i`.
@@ -377,7 +382,10 @@ unsafe fn link_at(s: &VolumeBuildLink, i: u64) {
     let a = get::<u64>(s.scan_a + 8 * i);
     let b = get::<u64>(s.scan_b + 8 * i);
     let (pa, pb) = if i > 0 {
-        (get::<u64>(s.scan_a + 8 * (i - 1)), get::<u64>(s.scan_b + 8 * (i - 1)))
+        (
+            get::<u64>(s.scan_a + 8 * (i - 1)),
+            get::<u64>(s.scan_b + 8 * (i - 1)),
+        )
     } else {
         (0, 0)
     };
@@ -389,20 +397,35 @@ unsafe fn link_at(s: &VolumeBuildLink, i: u64) {
     if a >> 32 != pa >> 32 {
         let tile = s.grid + s.tiles + uid * s.tile_size as u64;
         put(tile + root::TILE_KEY as u64, nanovdb::root_key(c));
-        put(tile + root::TILE_CHILD as u64, (upper - (s.grid + s.root)) as i64);
+        put(
+            tile + root::TILE_CHILD as u64,
+            (upper - (s.grid + s.root)) as i64,
+        );
         empty_box(upper);
     }
     if a & M32 != pa & M32 {
         let sl = slot(c, 5, 7);
-        or64(upper + UPPER_CHILD_MASK as u64 + 8 * (sl >> 6), 1 << (sl & 63));
-        put(upper + s.up_table as u64 + sl * s.stride as u64, (lower - upper) as i64);
+        or64(
+            upper + UPPER_CHILD_MASK as u64 + 8 * (sl >> 6),
+            1 << (sl & 63),
+        );
+        put(
+            upper + s.up_table as u64 + sl * s.stride as u64,
+            (lower - upper) as i64,
+        );
         empty_box(lower);
         put(s.lower_upper + 4 * lid, uid as u32);
     }
     if b >> 32 != pb >> 32 {
         let sl = slot(c, 4, 3);
-        or64(lower + LOWER_CHILD_MASK as u64 + 8 * (sl >> 6), 1 << (sl & 63));
-        put(lower + s.lo_table as u64 + sl * s.stride as u64, (leaf - lower) as i64);
+        or64(
+            lower + LOWER_CHILD_MASK as u64 + 8 * (sl >> 6),
+            1 << (sl & 63),
+        );
+        put(
+            lower + s.lo_table as u64 + sl * s.stride as u64,
+            (leaf - lower) as i64,
+        );
         put(leaf, c.map(|x| x & !7));
         put(leaf + LEAF_BBOX_DIF as u64, 2u32 << 24);
         if s.kind == KIND_ON_INDEX {
@@ -417,7 +440,10 @@ unsafe fn link_at(s: &VolumeBuildLink, i: u64) {
     }
     if s.kind == KIND_ON_INDEX {
         let sl = slot(c, 3, 0);
-        or64(leaf + LEAF_VALUE_MASK as u64 + 8 * (sl >> 6), 1 << (sl & 63));
+        or64(
+            leaf + LEAF_VALUE_MASK as u64 + 8 * (sl >> 6),
+            1 << (sl & 63),
+        );
     }
 }
 
@@ -444,7 +470,14 @@ unsafe fn leaf_box_at(s: &VolumeBuildLeafBox, f: u64) {
     );
     let zs = (0..8).fold(0u64, |a, y| a | ((any >> (8 * y)) & 0xff));
     let (z0, z1) = (zs.trailing_zeros() as i32, 63 - zs.leading_zeros() as i32);
-    let bx = [o[0] + x0, o[1] + y0, o[2] + z0, o[0] + x1, o[1] + y1, o[2] + z1];
+    let bx = [
+        o[0] + x0,
+        o[1] + y0,
+        o[2] + z0,
+        o[0] + x1,
+        o[1] + y1,
+        o[2] + z1,
+    ];
     put(leaf, [bx[0], bx[1], bx[2]]);
     let dif = (x1 - x0) as u32 | ((y1 - y0) as u32) << 8 | ((z1 - z0) as u32) << 16;
     put(leaf + LEAF_BBOX_DIF as u64, dif | 2 << 24);
@@ -769,9 +802,16 @@ fn headers(
     put_bytes(&mut h, grid::COUNT, &1u32.to_le_bytes());
     put_bytes(&mut h, grid::SIZE, &at.size.to_le_bytes());
     nanovdb::write_map(&mut h, map)?;
-    for (k, x) in [f64::MAX, f64::MAX, f64::MAX, -f64::MAX, -f64::MAX, -f64::MAX]
-        .iter()
-        .enumerate()
+    for (k, x) in [
+        f64::MAX,
+        f64::MAX,
+        f64::MAX,
+        -f64::MAX,
+        -f64::MAX,
+        -f64::MAX,
+    ]
+    .iter()
+    .enumerate()
     {
         put_bytes(&mut h, grid::WORLD_BBOX + 8 * k, &x.to_le_bytes());
     }
@@ -786,23 +826,46 @@ fn headers(
     if grid_type.is_index() {
         put_bytes(&mut h, grid::DATA1, &(voxel_count + 1).to_le_bytes());
     }
-    for (k, off) in [at.leaf, at.lower, at.upper, at.root].into_iter().enumerate() {
+    for (k, off) in [at.leaf, at.lower, at.upper, at.root]
+        .into_iter()
+        .enumerate()
+    {
         let rel = off - GRID_DATA as u64;
-        put_bytes(&mut h, GRID_DATA + tree::NODE_OFFSET + 8 * k, &rel.to_le_bytes());
+        put_bytes(
+            &mut h,
+            GRID_DATA + tree::NODE_OFFSET + 8 * k,
+            &rel.to_le_bytes(),
+        );
     }
     for (k, n) in [c.leaves, c.lowers, c.uppers].into_iter().enumerate() {
         let n = n as u32;
-        put_bytes(&mut h, GRID_DATA + tree::NODE_COUNT + 4 * k, &n.to_le_bytes());
-        put_bytes(&mut h, GRID_DATA + tree::TILE_COUNT + 4 * k, &n.to_le_bytes());
+        put_bytes(
+            &mut h,
+            GRID_DATA + tree::NODE_COUNT + 4 * k,
+            &n.to_le_bytes(),
+        );
+        put_bytes(
+            &mut h,
+            GRID_DATA + tree::TILE_COUNT + 4 * k,
+            &n.to_le_bytes(),
+        );
     }
-    put_bytes(&mut h, GRID_DATA + tree::VOXEL_COUNT, &voxel_count.to_le_bytes());
+    put_bytes(
+        &mut h,
+        GRID_DATA + tree::VOXEL_COUNT,
+        &voxel_count.to_le_bytes(),
+    );
     let r = at.root as usize;
     let empty: Vec<u8> = [i32::MAX, i32::MAX, i32::MAX, i32::MIN, i32::MIN, i32::MIN]
         .iter()
         .flat_map(|x| x.to_le_bytes())
         .collect();
     put_bytes(&mut h, r + root::BBOX, &empty);
-    put_bytes(&mut h, r + root::TABLE_SIZE, &(c.uppers as u32).to_le_bytes());
+    put_bytes(
+        &mut h,
+        r + root::TABLE_SIZE,
+        &(c.uppers as u32).to_le_bytes(),
+    );
     if let Some(bg) = background {
         put_bytes(&mut h, r + l.background, bg);
     }
@@ -835,12 +898,7 @@ fn contiguous<T: crate::array::Element>(a: &Array<T>) -> Result<Array<T>> {
 /// the wrong size, a map without an inverse, more than `i32::MAX` points, a world point
 /// without a voxel (NaN, infinite, or outside the `i32` index range: the first such point,
 /// by index), a grid too large; device errors.
-pub(crate) fn build(
-    kind: GridKind,
-    input: BuildInput,
-    map: &Map,
-    what: &str,
-) -> Result<BuiltGrid> {
+pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) -> Result<BuiltGrid> {
     let (grid_type, background, link_kind) = match kind {
         GridKind::Value {
             grid_type,
@@ -852,16 +910,27 @@ pub(crate) fn build(
     let l = Layout::of(grid_type)
         .filter(|_| background.is_none() || !grid_type.is_index())
         .ok_or_else(|| {
-            Error::invalid_in(what, format!("{grid_type:?} is not a grid type the builder makes"))
+            Error::invalid_in(
+                what,
+                format!("{grid_type:?} is not a grid type the builder makes"),
+            )
         })?;
     if let Some(bg) = background.filter(|b| b.len() != l.value_size) {
         return Err(Error::invalid_in(
             what,
-            format!("a {grid_type:?} background has {} bytes, not {}", bg.len(), l.value_size),
+            format!(
+                "a {grid_type:?} background has {} bytes, not {}",
+                bg.len(),
+                l.value_size
+            ),
         ));
     }
     let inv = map.inverse().map_err(|e| Error::invalid_in(what, e))?;
-    let voxel_bits = if link_kind == KIND_ON_INDEX { VOXEL_BITS } else { 0 };
+    let voxel_bits = if link_kind == KIND_ON_INDEX {
+        VOXEL_BITS
+    } else {
+        0
+    };
     let (dev, n) = match input {
         BuildInput::Coords(a) => (a.device().clone(), a.len()),
         BuildInput::World(a) => (a.device().clone(), a.len()),
@@ -971,7 +1040,8 @@ pub(crate) fn build(
     }
     // Every count is positive and nested by construction; anything else is a broken step.
     let c = counts;
-    if n > 0 && !(1 <= c.uppers && c.uppers <= c.lowers && c.lowers <= c.leaves && c.leaves <= n as u64)
+    if n > 0
+        && !(1 <= c.uppers && c.uppers <= c.lowers && c.lowers <= c.leaves && c.leaves <= n as u64)
     {
         return Err(Error::invalid(format!(
             "{what}: internal error: the build counted {c:?} nodes for {n} points"
@@ -1022,7 +1092,11 @@ pub(crate) fn build(
     // the whole grid back, which is what this builder exists to avoid: there the steps are
     // trusted (they are the same steps, and the tests compare the two devices byte for byte).
     if dev.is_cpu() {
-        let bytes: Vec<u8> = words.to_vec()?.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let bytes: Vec<u8> = words
+            .to_vec()?
+            .iter()
+            .flat_map(|w| w.to_le_bytes())
+            .collect();
         let checked = nanovdb::validate(&bytes)
             .map_err(|e| Error::invalid(format!("{what}: internal error: {e}")))?;
         if checked != info {
@@ -1062,9 +1136,27 @@ fn link(
             words[k] = u32::from_le_bytes(w.try_into().expect("4 bytes"));
         }
         let levels = [
-            (at.upper + l.up_table as u64, c.uppers, l.up_size, 15, l.stride),
-            (at.lower + l.lo_table as u64, c.lowers, l.lo_size, 12, l.stride),
-            (at.leaf + l.leaf_table as u64, c.leaves, l.leaf_size, 9, l.value_size),
+            (
+                at.upper + l.up_table as u64,
+                c.uppers,
+                l.up_size,
+                15,
+                l.stride,
+            ),
+            (
+                at.lower + l.lo_table as u64,
+                c.lowers,
+                l.lo_size,
+                12,
+                l.stride,
+            ),
+            (
+                at.leaf + l.leaf_table as u64,
+                c.leaves,
+                l.leaf_size,
+                9,
+                l.value_size,
+            ),
         ];
         for (first, nodes, node_size, log2, stride) in levels {
             dispatch::object_step(
