@@ -108,6 +108,18 @@ fn coord_sets() -> Vec<Vec<IVec3>> {
             IVec3::new(15, 0, -16),
         ],
         vec![IVec3::splat(i32::MIN), IVec3::splat(i32::MAX)],
+        // One leaf (a sort key of no bits for tiles, 9 for voxels); one lower.
+        vec![
+            IVec3::new(1, 2, 3),
+            IVec3::new(1, 2, 3),
+            IVec3::new(4, 5, 6),
+            IVec3::new(0, 0, 7),
+        ],
+        vec![
+            IVec3::new(-128, 0, 5),
+            IVec3::new(-1, 127, -3),
+            IVec3::new(-64, 64, 0),
+        ],
     ];
     for n in [7, 60, 3000] {
         sets.push(coords(&mut r, n));
@@ -368,9 +380,10 @@ fn strided_points_are_copied() {
 
 /// The C++ driver: reads a case (u32 words: kind, whether the points are world positions, the
 /// layout, the background's words, the f32 inverse and translation, the f64 map, the headers'
-/// bytes, the points), runs the header's steps serially in the build's order (a stable sort
-/// per key word and serial inclusive scans in place of the runtime's primitives; the headers
-/// as the host writes them), and writes the grid to the output file (or prints `bad <i>`).
+/// bytes, the points), runs the header's steps serially in the build's order (the key layout
+/// from the bbox with the header's `vb_key_layout`, a stable sort per key word and serial
+/// inclusive scans in place of the runtime's primitives; the headers as the host writes them),
+/// and writes the grid to the output file (or prints `bad <i>`).
 const DRIVER: &str = r#"
 #include <algorithm>
 #include <cstdio>
@@ -423,10 +436,17 @@ int main(int argc, char** argv) {
   } else {
     memcpy(ijk.data(), pts.data(), 12 * n);
   }
-  const u32 vb = kind == vb_kind_on_index ? 9 : 0;
+  const u32 voxels = kind == vb_kind_on_index ? 1 : 0;
+  i32 box[6] = {2147483647, 2147483647, 2147483647, -2147483647 - 1, -2147483647 - 1, -2147483647 - 1};
+  vb_bounds_t bounds{(u64)ijk.data(), (u64)box, n};
+  for (u64 i = 0; i < n; ++i) vb_bounds_add(bounds, i, box);
+  u32 lo[12], bits[12];
+  const u32 total = vb_key_layout(box, voxels, lo, bits);
   std::vector<u32> keys(n), perm(n);
-  for (u32 word_k = 0; word_k < 3; ++word_k) {
-    vb_keys_t k{(u64)ijk.data(), (u64)perm.data(), (u64)keys.data(), n, word_k, vb};
+  for (u32 word_k = 0; word_k < (total + 31) / 32 || word_k == 0; ++word_k) {
+    vb_keys_t k{(u64)ijk.data(), (u64)perm.data(), (u64)keys.data(), n, word_k, 0, {}, {}};
+    memcpy(k.lo, lo, sizeof lo);
+    memcpy(k.bits, bits, sizeof bits);
     for (u64 i = 0; i < n; ++i) vb_keys_at(k, i);
     std::vector<std::pair<u32, u32>> pairs(n);
     for (u64 i = 0; i < n; ++i) pairs[i] = {keys[i], perm[i]};
@@ -436,7 +456,7 @@ int main(int argc, char** argv) {
   }
   std::vector<i32> sorted(3 * n);
   std::vector<u64> sa(n), sb(n);
-  vb_flags_t fl{(u64)ijk.data(), (u64)perm.data(), (u64)sorted.data(), (u64)sa.data(), (u64)sb.data(), n, vb, 0};
+  vb_flags_t fl{(u64)ijk.data(), (u64)perm.data(), (u64)sorted.data(), (u64)sa.data(), (u64)sb.data(), n, voxels, 0};
   for (u64 i = 0; i < n; ++i) vb_flags_at(fl, i);
   for (u64 i = 1; i < n; ++i) { sa[i] += sa[i - 1]; sb[i] += sb[i - 1]; }
   i32 counts[4];

@@ -12,18 +12,25 @@
 // Coordinates: a point's voxel is ijk (i32 x 3). Its upper node is ijk >> 12 (4096^3 voxels),
 // its lower node ijk >> 7 (128^3), its leaf ijk >> 3 (8^3). Node order (Warp's): uppers by their
 // signed origins (x, then y, then z), lowers by (upper, slot in the upper), leaves by (lower,
-// slot in the lower). That is the order of the 87-bit composite key
-//   X(20) Y(20) Z(20) | upper slot (15) | lower slot (12) [| leaf slot (9), voxel grids]
-// with X = (x + 2^31) >> 12 etc., which the build sorts as three 32-bit words, least
-// significant first, with the runtime's stable radix sort of (word, point index) pairs (an LSD
-// sort of the whole key). After the sort, equal nodes are runs; flags at the run starts,
-// scanned, number the nodes.
+// slot in the lower). That is the lexicographic order of 12 fields,
+//   X Y Z (20 bits each: (x + 2^31) >> 12) | upper slot x y z (5 bits each: (x >> 7) & 31)
+//   | lower slot x y z (4: (x >> 3) & 15) [| leaf slot x y z (3: x & 7), voxel grids only]
+// (87 or 96 bits). The build compacts that key with the points' index bbox (read back once,
+// before the sort): a field that cannot vary gets no bits, the others their range's bits from
+// their minimum (a slot field spans its whole range unless the coarser fields of its axis are
+// constant). The order is unchanged, and typical inputs fit one 32-bit word, where the full key
+// needs three. The words (least significant first) go through the runtime's stable radix sort
+// of (word, point index) pairs: an LSD sort of the whole key. After the sort, equal nodes are
+// runs; flags at the run starts, scanned, number the nodes.
 //
 // Steps (one kernel each, grid-stride loops over the record's count):
 //   wp_vb_ijk      (world points only) ijk = floor(invMatF * (p - vecF) + 0.5): f32 with
 //                  Warp's fmaf order, then the +0.5 and floor in f64 (exact). A NaN, infinite
 //                  or out-of-i32 result stores 0 and lowers *bad to the point's index.
-//   wp_vb_keys     one 32-bit word of each point's composite key (word 0: with perm = identity;
+//   wp_vb_bounds   the index bbox of the voxels (per-block reduction, then atomic min/max);
+//                  (the host reads it back with *bad and lays out the compact key:
+//                  vb_key_layout)
+//   wp_vb_keys     one 32-bit word of each point's compact key (word 0: with perm = identity;
 //                  words 1 and 2: of the point perm[i], the order of the previous sorts).
 //   (the runtime's stable radix sort of (keys, perm), once per word)
 //   wp_vb_flags    per sorted position i: sorted[i] = ijk[perm[i]], and whether it starts a new
@@ -34,7 +41,7 @@
 //    each count being at most the point count < 2^31; so position i's upper id is
 //    (scan_a[i] >> 32) - 1, its lower id (scan_a[i] & 0xffffffff) - 1, ...)
 //   wp_vb_totals   one thread: the four counts (uppers, lowers, leaves, voxels) into counts[0..4],
-//                  the one buffer the host reads back (counts[4] is the ijk step's *bad).
+//                  which the host reads back (the build's second and last wait).
 //   (the host allocates the zeroed grid and writes GridData, TreeData and RootData: the
 //    header, the map, the counts, the root's empty bbox and background)
 //   wp_vb_fill     value grids: the background into every table entry of a level (uppers,
@@ -133,20 +140,32 @@ struct vb_ijk_t {
 };
 static_assert(sizeof(vb_ijk_t) == 80, "vb_ijk_t layout");
 
-/// VolumeBuildKeys (40 bytes): ijk, perm (u32, one per point), keys (u32, one per point), n,
-/// word (0, 1, 2), voxel_bits (9: voxel grids, 0: tile grids).
+/// VolumeBuildBounds (24 bytes): ijk, bounds (i32 x 6: min xyz, max xyz; atomically
+/// narrowed), n.
+struct vb_bounds_t {
+  u64 ijk;
+  u64 bounds;
+  u64 n;
+};
+static_assert(sizeof(vb_bounds_t) == 24, "vb_bounds_t layout");
+
+/// VolumeBuildKeys (136 bytes): ijk, perm (u32, one per point), keys (u32, one per point), n,
+/// word (0, 1, 2), pad, and the compact key's layout (vb_key_layout): each field's minimum and
+/// bits.
 struct vb_keys_t {
   u64 ijk;
   u64 perm;
   u64 keys;
   u64 n;
   u32 word;
-  u32 voxel_bits;
+  u32 pad;
+  u32 lo[12];
+  u32 bits[12];
 };
-static_assert(sizeof(vb_keys_t) == 40, "vb_keys_t layout");
+static_assert(sizeof(vb_keys_t) == 136, "vb_keys_t layout");
 
 /// VolumeBuildFlags (56 bytes): ijk, perm (sorted), sorted (i32 x 3 out), scan_a, scan_b (u64
-/// out), n, voxel_bits, pad.
+/// out), n, voxels (nonzero: a voxel grid, whose distinct voxels are counted), pad.
 struct vb_flags_t {
   u64 ijk;
   u64 perm;
@@ -154,7 +173,7 @@ struct vb_flags_t {
   u64 scan_a;
   u64 scan_b;
   u64 n;
-  u32 voxel_bits;
+  u32 voxels;
   u32 pad;
 };
 static_assert(sizeof(vb_flags_t) == 56, "vb_flags_t layout");
@@ -278,19 +297,65 @@ WP_FN bool vb_ijk_at(const vb_ijk_t& s, u64 i) {
   return ok;
 }
 
-/// Word `word` (0 least significant) of the composite key of voxel (x, y, z).
-WP_FN u32 vb_key_word(i32 x, i32 y, i32 z, u32 word, u32 voxel_bits) {
-  const u32 ux = (u32)x, uy = (u32)y, uz = (u32)z;
-  const u64 hi = ((u64)((ux ^ 0x80000000u) >> 12) << 40) | ((u64)((uy ^ 0x80000000u) >> 12) << 20) |
-                 (u64)((uz ^ 0x80000000u) >> 12);
-  const u64 us = (u64)((((ux & 4095u) >> 7) << 10) | (((uy & 4095u) >> 7) << 5) | ((uz & 4095u) >> 7));
-  const u64 ls = (u64)((((ux & 127u) >> 3) << 8) | (((uy & 127u) >> 3) << 4) | ((uz & 127u) >> 3));
-  const u64 vs = voxel_bits ? (u64)(((ux & 7u) << 6) | ((uy & 7u) << 3) | (uz & 7u)) : 0;
-  const u32 s = 27 + voxel_bits;
-  const u64 low = (hi << s) | (us << (12 + voxel_bits)) | (ls << voxel_bits) | vs;
+/// Field `level` (0 upper origin, 1 upper slot, 2 lower slot, 3 leaf slot) of coordinate v.
+WP_FN u32 vb_field(i32 v, u32 level) {
+  const u32 u = (u32)v;
+  if (level == 0) return (u ^ 0x80000000u) >> 12;
+  if (level == 1) return (u >> 7) & 31u;
+  if (level == 2) return (u >> 3) & 15u;
+  return u & 7u;
+}
+
+/// The compact key's layout for voxels in the index bbox `b` (min xyz, max xyz): field f (level
+/// f / 3, axis f % 3, most significant first) is stored as its value minus lo[f] in bits[f]
+/// bits. A level-0 field ranges over the fields of the bbox's corners (the field is monotone);
+/// a slot field over the corners' slots when the coarser level of its axis is the same at both
+/// corners, else over every slot. `leaf_slots` 0 leaves the leaf slots out (tile grids).
+/// Returns the total bits (at most 96).
+WP_FN u32 vb_key_layout(const i32* b, u32 leaf_slots, u32* lo, u32* bits) {
+  const u32 full[4] = {0xfffffu, 31u, 15u, 7u};
+  const i32 parent_shift[4] = {0, 12, 7, 3};
+  u32 total = 0;
+  for (u32 f = 0; f < 12; ++f) {
+    const u32 level = f / 3, axis = f % 3;
+    const i32 mn = b[axis], mx = b[3 + axis];
+    u32 l = 0, h = full[level];
+    if (level == 0 || (mn >> parent_shift[level]) == (mx >> parent_shift[level])) {
+      l = vb_field(mn, level);
+      h = vb_field(mx, level);
+    }
+    if (level == 3 && !leaf_slots) h = l = 0;
+    u32 n = 0;
+    while (n < 32 && ((h - l) >> n) != 0) ++n;
+    lo[f] = l;
+    bits[f] = n;
+    total += n;
+  }
+  return total;
+}
+
+/// Word `word` (0 least significant) of voxel c's compact key.
+WP_FN u32 vb_key_word(const i32* c, u32 word, const u32* lo, const u32* bits) {
+  u64 hi = 0, low = 0;
+  for (u32 f = 0; f < 12; ++f) {
+    const u32 b = bits[f];
+    if (b == 0) continue;
+    const u64 v = (u64)(vb_field(c[f % 3], f / 3) - lo[f]);
+    hi = (hi << b) | (low >> (64 - b));
+    low = (low << b) | v;
+  }
   if (word == 0) return (u32)low;
   if (word == 1) return (u32)(low >> 32);
-  return (u32)(hi >> (64 - s));
+  return (u32)hi;
+}
+
+/// The bounds step's element: point i's voxel into the running box `acc`.
+WP_FN void vb_bounds_add(const vb_bounds_t& s, u64 i, i32* acc) {
+  const i32* c = (const i32*)s.ijk + 3 * i;
+  for (i32 a = 0; a < 3; ++a) {
+    if (c[a] < acc[a]) acc[a] = c[a];
+    if (c[a] > acc[3 + a]) acc[3 + a] = c[a];
+  }
 }
 
 /// The keys step at point i.
@@ -302,7 +367,7 @@ WP_FN void vb_keys_at(const vb_keys_t& s, u64 i) {
   else
     p = perm[i];
   const i32* c = (const i32*)s.ijk + 3 * p;
-  ((u32*)s.keys)[i] = vb_key_word(c[0], c[1], c[2], s.word, s.voxel_bits);
+  ((u32*)s.keys)[i] = vb_key_word(c, s.word, s.lo, s.bits);
 }
 
 /// The flags step at sorted position i.
@@ -324,7 +389,7 @@ WP_FN void vb_flags_at(const vb_flags_t& s, u64 i) {
     lf = d > 7u;
     vx = d != 0u;
   }
-  if (!s.voxel_bits) vx = 0;
+  if (!s.voxels) vx = 0;
   ((u64*)s.scan_a)[i] = (up << 32) | lo;
   ((u64*)s.scan_b)[i] = (lf << 32) | vx;
 }
@@ -511,6 +576,36 @@ extern "C" __global__ void wp_vb_ijk(wp::vb_ijk_t s) {
   WP_VB_LOOP(i, s.n) {
     // Only a bad point reaches the atomic (off the hot path).
     if (!wp::vb_ijk_at(s, i)) atomicMin((wp::i32*)s.bad, (wp::i32)i);
+  }
+}
+extern "C" __global__ void wp_vb_bounds(wp::vb_bounds_t s) {
+  // Each thread's box, then its warp's (shuffles), then its block's (shared memory), then one
+  // atomic per block and word: an atomic per point would serialise on the 6 words.
+  __shared__ wp::i32 part[6][32];
+  wp::i32 acc[6] = {2147483647, 2147483647, 2147483647, -2147483647 - 1, -2147483647 - 1,
+                    -2147483647 - 1};
+  WP_VB_LOOP(i, s.n) wp::vb_bounds_add(s, i, acc);
+  for (int o = 16; o > 0; o >>= 1) {
+    for (int k = 0; k < 6; ++k) {
+      const wp::i32 v = __shfl_xor_sync(0xffffffffu, acc[k], o);
+      acc[k] = k < 3 ? min(acc[k], v) : max(acc[k], v);
+    }
+  }
+  const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x >> 5;
+  if (lane == 0)
+    for (int k = 0; k < 6; ++k) part[k][warp] = acc[k];
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    const unsigned warps = (blockDim.x + 31u) >> 5;
+    wp::i32* b = (wp::i32*)s.bounds;
+    for (int k = 0; k < 6; ++k) {
+      wp::i32 r = part[k][0];
+      for (unsigned w = 1; w < warps; ++w) r = k < 3 ? min(r, part[k][w]) : max(r, part[k][w]);
+      if (k < 3)
+        atomicMin(&b[k], r);
+      else
+        atomicMax(&b[k], r);
+    }
   }
 }
 extern "C" __global__ void wp_vb_keys(wp::vb_keys_t s) {

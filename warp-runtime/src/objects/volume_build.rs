@@ -14,13 +14,18 @@
 //! 1. world points only: each point's voxel, `floor(invMatF * (p - vecF) + 0.5)` as Warp's
 //!    builder computes it (f32 with NanoVDB's `fmaf` order, the rounding in f64), the first
 //!    point without one (NaN, infinite, outside `i32`) recorded on the device;
-//! 2. three rounds of: one 32-bit word of each point's composite key (upper origin, upper slot,
-//!    lower slot, and for voxel grids the leaf slot: 87 or 96 bits, least significant word
-//!    first), then the primitives' stable radix sort of (word, point index): an LSD sort of the
-//!    whole key, so equal nodes end up as runs in Warp's node order;
-//! 3. per sorted point, whether it starts a new upper, lower, leaf, voxel (two packed u64 flags),
-//!    then the primitives' inclusive scans of both: every point's node ids;
-//! 4. one thread copies the four totals beside the bad-point flag: the one read-back;
+//! 2. the voxels' index bbox, read back with the bad-point flag (the first of two waits): it
+//!    compacts the sort key. Warp's order is the lexicographic order of the upper origin, the
+//!    upper slot, the lower slot and for voxel grids the leaf slot (87 or 96 bits); a field
+//!    that the bbox says cannot vary gets no bits, the others only their range's, so that
+//!    typical inputs sort one 32-bit word (3 or 4 radix passes) where the whole key takes
+//!    three (12). That is most of a GPU build's time: it is worth the extra wait;
+//! 3. one to three rounds of: one 32-bit word of each point's compact key (least significant
+//!    first), then the primitives' stable radix sort of (word, point index): an LSD sort of
+//!    the whole key, so equal nodes end up as runs in Warp's node order;
+//! 4. per sorted point, whether it starts a new upper, lower, leaf, voxel (two packed u64 flags),
+//!    then the primitives' inclusive scans of both: every point's node ids; one thread copies
+//!    the four totals, which the host reads back (the second wait);
 //! 5. the host allocates the zeroed grid and writes GridData, TreeData and RootData (it knows
 //!    every count now: `nanovdb::write_map` writes the map);
 //! 6. value grids: the background into every table entry and leaf value;
@@ -59,10 +64,6 @@ const KIND_VALUE: u32 = 0;
 const KIND_INDEX: u32 = 1;
 const KIND_ON_INDEX: u32 = 2;
 
-/// The leaf slot's bits in the composite key of voxel grids (tile grids leave it out: any voxel
-/// of a leaf names the leaf).
-const VOXEL_BITS: u32 = 9;
-
 /// `i32::MAX` in the bad-point slot: every point has a voxel.
 const NO_BAD_POINT: i32 = i32::MAX;
 
@@ -85,9 +86,21 @@ struct VolumeBuildIjk {
 }
 const _: () = assert!(std::mem::size_of::<VolumeBuildIjk>() == 80);
 
-/// Step 2, per point `i`: word `word` of its composite key into `keys[i]` (`u32`); word 0 reads
-/// point `i` and sets `perm[i] = i`, words 1 and 2 read point `perm[i]` (the order so far).
-/// `wp::vb_keys_t` (40 bytes).
+/// Step 2, over the `n` voxels at `ijk`: their index bbox, atomically narrowed into the 6 `i32`s
+/// at `bounds` (min xyz, max xyz; the caller sets them to the empty box). `wp::vb_bounds_t`
+/// (24 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+struct VolumeBuildBounds {
+    ijk: u64,
+    bounds: u64,
+    n: u64,
+}
+const _: () = assert!(std::mem::size_of::<VolumeBuildBounds>() == 24);
+
+/// Step 3, per point `i`: word `word` of its compact key (the layout `lo`, `bits` of
+/// [`key_layout`]) into `keys[i]` (`u32`); word 0 reads point `i` and sets `perm[i] = i`,
+/// words 1 and 2 read point `perm[i]` (the order so far). `wp::vb_keys_t` (136 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 struct VolumeBuildKeys {
@@ -96,13 +109,15 @@ struct VolumeBuildKeys {
     keys: u64,
     n: u64,
     word: u32,
-    voxel_bits: u32,
+    pad: u32,
+    lo: [u32; 12],
+    bits: [u32; 12],
 }
-const _: () = assert!(std::mem::size_of::<VolumeBuildKeys>() == 40);
+const _: () = assert!(std::mem::size_of::<VolumeBuildKeys>() == 136);
 
-/// Step 3, per sorted position `i`: `sorted[i] = ijk[perm[i]]`, and the packed run-start flags
-/// `scan_a[i] = upper << 32 | lower`, `scan_b[i] = leaf << 32 | voxel` (`u64`s, scanned after).
-/// `wp::vb_flags_t` (56 bytes).
+/// Step 4, per sorted position `i`: `sorted[i] = ijk[perm[i]]`, and the packed run-start flags
+/// `scan_a[i] = upper << 32 | lower`, `scan_b[i] = leaf << 32 | voxel` (`u64`s, scanned after;
+/// the voxel flag only when `voxels` is nonzero). `wp::vb_flags_t` (56 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 struct VolumeBuildFlags {
@@ -112,7 +127,7 @@ struct VolumeBuildFlags {
     scan_a: u64,
     scan_b: u64,
     n: u64,
-    voxel_bits: u32,
+    voxels: u32,
     pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<VolumeBuildFlags>() == 56);
@@ -292,26 +307,63 @@ unsafe fn ijk_at(s: &VolumeBuildIjk, i: u64) -> bool {
     ok
 }
 
-/// `vb_key_word`: word `word` (0 least significant) of voxel `c`'s composite key.
-fn key_word(c: [i32; 3], word: u32, voxel_bits: u32) -> u32 {
-    let u = c.map(|x| x as u32);
-    let hi = (((u[0] ^ 0x8000_0000) >> 12) as u64) << 40
-        | (((u[1] ^ 0x8000_0000) >> 12) as u64) << 20
-        | ((u[2] ^ 0x8000_0000) >> 12) as u64;
-    let us =
-        ((((u[0] & 4095) >> 7) << 10) | (((u[1] & 4095) >> 7) << 5) | ((u[2] & 4095) >> 7)) as u64;
-    let ls = ((((u[0] & 127) >> 3) << 8) | (((u[1] & 127) >> 3) << 4) | ((u[2] & 127) >> 3)) as u64;
-    let vs = if voxel_bits != 0 {
-        (((u[0] & 7) << 6) | ((u[1] & 7) << 3) | (u[2] & 7)) as u64
-    } else {
-        0
-    };
-    let s = 27 + voxel_bits;
-    let low = (hi << s) | (us << (12 + voxel_bits)) | (ls << voxel_bits) | vs;
+/// `vb_field`: field `level` (0 upper origin, 1 upper slot, 2 lower slot, 3 leaf slot) of
+/// coordinate `v`.
+fn field(v: i32, level: usize) -> u32 {
+    let u = v as u32;
+    match level {
+        0 => (u ^ 0x8000_0000) >> 12,
+        1 => (u >> 7) & 31,
+        2 => (u >> 3) & 15,
+        _ => u & 7,
+    }
+}
+
+/// `vb_key_layout`: the compact key's layout for voxels in the index bbox `b` (min xyz, max
+/// xyz): field `f` (level `f / 3`, axis `f % 3`, most significant first) is stored as its value
+/// minus `lo[f]` in `bits[f]` bits. An upper origin ranges over the fields of the bbox's
+/// corners (the field is monotone); a slot over the corners' slots when the coarser level of
+/// its axis is the same at both corners, else over every slot; `leaf_slots` false leaves the
+/// leaf slots out (tile grids). Returns `(lo, bits, total bits)` (at most 96). Any such layout
+/// keeps the key's order, so the grid does not depend on it.
+fn key_layout(b: [i32; 6], leaf_slots: bool) -> ([u32; 12], [u32; 12], u32) {
+    const FULL: [u32; 4] = [0xf_ffff, 31, 15, 7];
+    const PARENT_SHIFT: [u32; 4] = [0, 12, 7, 3];
+    let (mut lo, mut bits, mut total) = ([0u32; 12], [0u32; 12], 0);
+    for f in 0..12 {
+        let (level, axis) = (f / 3, f % 3);
+        let (mn, mx) = (b[axis], b[3 + axis]);
+        let sh = PARENT_SHIFT[level];
+        let (mut l, mut h) = (0, FULL[level]);
+        if level == 0 || mn >> sh == mx >> sh {
+            (l, h) = (field(mn, level), field(mx, level));
+        }
+        if level == 3 && !leaf_slots {
+            (l, h) = (0, 0);
+        }
+        lo[f] = l;
+        bits[f] = 32 - (h - l).leading_zeros();
+        total += bits[f];
+    }
+    (lo, bits, total)
+}
+
+/// `vb_key_word`: word `word` (0 least significant) of voxel `c`'s compact key.
+fn key_word(c: [i32; 3], word: u32, lo: &[u32; 12], bits: &[u32; 12]) -> u32 {
+    let (mut hi, mut low) = (0u64, 0u64);
+    for f in 0..12 {
+        let b = bits[f];
+        if b == 0 {
+            continue;
+        }
+        let v = (field(c[f % 3], f / 3) - lo[f]) as u64;
+        hi = (hi << b) | (low >> (64 - b));
+        low = (low << b) | v;
+    }
     match word {
         0 => low as u32,
         1 => (low >> 32) as u32,
-        _ => (hi >> (64 - s)) as u32,
+        _ => hi as u32,
     }
 }
 
@@ -333,7 +385,7 @@ unsafe fn flags_at(s: &VolumeBuildFlags, i: u64) {
         lf = (d > 7) as u64;
         vx = (d != 0) as u64;
     }
-    if s.voxel_bits == 0 {
+    if s.voxels == 0 {
         vx = 0;
     }
     put(s.scan_a + 8 * i, (up << 32) | lo);
@@ -566,6 +618,47 @@ unsafe impl ObjectStep for VolumeBuildIjk {
     }
 }
 
+unsafe impl ObjectStep for VolumeBuildBounds {
+    const LIBRARY: &'static ObjectLibrary = &LIBRARY;
+    const KERNEL: &'static str = "wp_vb_bounds";
+    fn len(&self) -> usize {
+        self.n as usize
+    }
+    fn run_cpu(&self) -> Result<()> {
+        const EMPTY: [i32; 6] = [i32::MAX, i32::MAX, i32::MAX, i32::MIN, i32::MIN, i32::MIN];
+        let b = (0..self.n as usize)
+            .into_par_iter()
+            .with_min_len(4096)
+            .fold(
+                || EMPTY,
+                |mut acc, i| {
+                    // SAFETY: see the impl's comment; voxel `i` is read only.
+                    let c = unsafe { get::<[i32; 3]>(self.ijk + 12 * i as u64) };
+                    for a in 0..3 {
+                        acc[a] = acc[a].min(c[a]);
+                        acc[3 + a] = acc[3 + a].max(c[a]);
+                    }
+                    acc
+                },
+            )
+            .reduce(
+                || EMPTY,
+                |x, y| {
+                    std::array::from_fn(|k| {
+                        if k < 3 {
+                            x[k].min(y[k])
+                        } else {
+                            x[k].max(y[k])
+                        }
+                    })
+                },
+            );
+        // SAFETY: 6 aligned i32s of the build's own array, touched by nothing else meanwhile.
+        unsafe { union_into(self.bounds, b) };
+        Ok(())
+    }
+}
+
 unsafe impl ObjectStep for VolumeBuildKeys {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
     const KERNEL: &'static str = "wp_vb_keys";
@@ -583,7 +676,10 @@ unsafe impl ObjectStep for VolumeBuildKeys {
                     get::<u32>(self.perm + 4 * i) as u64
                 };
                 let c = get::<[i32; 3]>(self.ijk + 12 * p);
-                put(self.keys + 4 * i, key_word(c, self.word, self.voxel_bits));
+                put(
+                    self.keys + 4 * i,
+                    key_word(c, self.word, &self.lo, &self.bits),
+                );
             }
         });
         Ok(())
@@ -926,11 +1022,6 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
         ));
     }
     let inv = map.inverse().map_err(|e| Error::invalid_in(what, e))?;
-    let voxel_bits = if link_kind == KIND_ON_INDEX {
-        VOXEL_BITS
-    } else {
-        0
-    };
     let (dev, n) = match input {
         BuildInput::Coords(a) => (a.device().clone(), a.len()),
         BuildInput::World(a) => (a.device().clone(), a.len()),
@@ -941,8 +1032,13 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
             format!("{n} points: at most i32::MAX ({}) are allowed", i32::MAX),
         ));
     }
-    // counts: uppers, lowers, leaves, voxels, then the first point without a voxel.
-    let counts_dev = Array::from_slice(&[0, 0, 0, 0, NO_BAD_POINT, 0, 0, 0], &dev)?;
+    // The build's small state, read back twice: the voxels' bbox (empty), the first point
+    // without a voxel, a pad, then the four node counts.
+    const EMPTY: [i32; 6] = [i32::MAX, i32::MAX, i32::MAX, i32::MIN, i32::MIN, i32::MIN];
+    let mut init = [0i32; 12];
+    init[..6].copy_from_slice(&EMPTY);
+    init[6] = NO_BAD_POINT;
+    let state = Array::from_slice(&init, &dev)?;
     let (ijk, world_points) = match input {
         BuildInput::Coords(a) => (contiguous(a)?, None),
         BuildInput::World(p) => {
@@ -954,7 +1050,7 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
                 &VolumeBuildIjk {
                     points: points.device_address(),
                     ijk: ijk.device_address(),
-                    bad: counts_dev.device_address() + 16,
+                    bad: state.device_address() + 24,
                     n: n as u64,
                     inv: f32s(&inv),
                     t: map.translation.map(|x| x as f32),
@@ -967,9 +1063,37 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
     let mut scratch = None;
     let mut counts = Counts::default();
     if n > 0 {
+        dispatch::object_step(
+            &dev,
+            &VolumeBuildBounds {
+                ijk: ijk.device_address(),
+                bounds: state.device_address(),
+                n: n as u64,
+            },
+        )?;
+        // The first wait: the bbox lays out the sort key (and a bad point ends the build).
+        let head = state.view(0..7)?.to_vec()?;
+        if head[6] != NO_BAD_POINT {
+            let b = head[6] as usize;
+            let p = match &world_points {
+                Some(points) => points.view(b..b + 1)?.to_vec()?[0],
+                None => Vec3::NAN,
+            };
+            return Err(Error::invalid_in(
+                what,
+                format!(
+                    "point {b} ({p}) has no voxel: its index-space position is NaN, infinite \
+                     or outside the i32 range (the first such point)"
+                ),
+            ));
+        }
+        let bbox: [i32; 6] = std::array::from_fn(|k| head[k]);
+        let (lo, bits, total) = key_layout(bbox, link_kind == KIND_ON_INDEX);
         let keys = Array::<u32>::empty(n, &dev)?;
         let perm = Array::<u32>::empty(n, &dev)?;
-        for word in 0..3 {
+        // Word 0 also sets the identity permutation, so it runs even for a key of no bits
+        // (every point in one leaf, or one voxel).
+        for word in 0..total.div_ceil(32).max(1) {
             dispatch::object_step(
                 &dev,
                 &VolumeBuildKeys {
@@ -978,12 +1102,15 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
                     keys: keys.device_address(),
                     n: n as u64,
                     word,
-                    voxel_bits,
+                    pad: 0,
+                    lo,
+                    bits,
                 },
             )?;
-            // The top word holds the key's last 23 (tiles) or 32 (voxels) bits.
-            let bits = if word == 2 { 23 + voxel_bits } else { 32 };
-            radix_sort_pairs(&keys, &perm, n, Some(bits))?;
+            let word_bits = (total - 32 * word).min(32);
+            if word_bits > 0 {
+                radix_sort_pairs(&keys, &perm, n, Some(word_bits))?;
+            }
         }
         let sorted = Array::<IVec3>::empty(n, &dev)?;
         let scan_a = Array::<u64>::empty(n, &dev)?;
@@ -997,7 +1124,7 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
                 scan_a: scan_a.device_address(),
                 scan_b: scan_b.device_address(),
                 n: n as u64,
-                voxel_bits,
+                voxels: (link_kind == KIND_ON_INDEX) as u32,
                 pad: 0,
             },
         )?;
@@ -1008,29 +1135,13 @@ pub(crate) fn build(kind: GridKind, input: BuildInput, map: &Map, what: &str) ->
             &VolumeBuildTotals {
                 scan_a: scan_a.device_address(),
                 scan_b: scan_b.device_address(),
-                counts: counts_dev.device_address(),
+                counts: state.device_address() + 32,
                 n: n as u64,
             },
         )?;
         scratch = Some((sorted, scan_a, scan_b));
-    }
-    // The one wait of a build.
-    let read = counts_dev.to_vec()?;
-    if read[4] != NO_BAD_POINT {
-        let b = read[4] as usize;
-        let p = match &world_points {
-            Some(points) => points.view(b..b + 1)?.to_vec()?[0],
-            None => Vec3::NAN,
-        };
-        return Err(Error::invalid_in(
-            what,
-            format!(
-                "point {b} ({p}) has no voxel: its index-space position is NaN, infinite or \
-                 outside the i32 range (the first such point)"
-            ),
-        ));
-    }
-    if n > 0 {
+        // The second wait: the node counts size the grid.
+        let read = state.view(8..12)?.to_vec()?;
         counts = Counts {
             uppers: read[0] as u64,
             lowers: read[1] as u64,
