@@ -2,8 +2,9 @@
 //! `allocate_index_by_tiles`, `allocate_by_voxels` and `allocate_by_points`, the same on every
 //! device through the [`ObjectStep`] seam (rayon here, the kernels of
 //! `warp-cuda/cuda/wp_volume_build.h` on a GPU, written step for step alike). A GPU build never
-//! copies the points to the host: the host reads back four node counts (and a bad-point flag)
-//! once, sizes the grid, writes its headers, and queues the rest.
+//! copies the points to the host: the host reads back two small records (the voxels' bbox with
+//! a bad-point flag, which lays out the sort key; then the four node counts, which size the
+//! grid), writes the grid's headers, and queues the rest.
 //!
 //! The grid is byte for byte the one warp-core's CPU builder makes from the same voxels
 //! ([`nanovdb::build_from_tiles`], [`nanovdb::build_from_voxels`]), which is laid out as Warp
@@ -830,7 +831,7 @@ pub(crate) struct BuiltGrid {
     pub voxel_count: u64,
 }
 
-/// The node counts the one read-back gives.
+/// The node counts the second read-back gives.
 #[derive(Clone, Copy, Debug, Default)]
 struct Counts {
     uppers: u64,
