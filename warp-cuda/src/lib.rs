@@ -59,6 +59,10 @@ pub const HEADERS: &[(&str, &str)] = &[
         include_str!("../cuda/wp_marching_cubes.h"),
     ),
     ("wp_bvh_build.h", include_str!("../cuda/wp_bvh_build.h")),
+    (
+        "wp_volume_build.h",
+        include_str!("../cuda/wp_volume_build.h"),
+    ),
     ("wp_geometry.h", include_str!("../cuda/wp_geometry.h")),
     ("wp_bvh.h", include_str!("../cuda/wp_bvh.h")),
     ("wp_mesh.h", include_str!("../cuda/wp_mesh.h")),

@@ -10,7 +10,8 @@
 //!   triangle mesh).
 //! - [`geometry_abi`]: the CUDA parameter layouts of both ([`CudaBvh`], [`CudaMesh`]).
 //! - `obj` (cargo feature `obj`): `ObjMesh`, a triangle mesh read from a Wavefront OBJ file.
-//! - [`volume`]: [`Volume`], Warp's sparse volume (a NanoVDB grid), on the `nvdb` file layer.
+//! - [`volume`]: [`Volume`], Warp's sparse volume (a NanoVDB grid), on the `nvdb` file layer;
+//!   `volume_build` builds its grids from tiles, voxels or points on their device.
 
 pub mod bvh;
 pub mod bvh_build;
@@ -26,6 +27,7 @@ pub mod nvdb;
 #[cfg(feature = "obj")]
 pub mod obj;
 pub mod volume;
+mod volume_build;
 
 pub use crate::backend::ObjectLibrary;
 pub use bvh::Bvh;
@@ -43,6 +45,7 @@ pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[
     &hash_grid_steps::LIBRARY,
     &lbvh::LIBRARY,
     &marching_cubes::LIBRARY,
+    &volume_build::LIBRARY,
 ];
 
 /// Compiles a build library with NVRTC for `sm_{arch}` with the runtime's options (no GPU

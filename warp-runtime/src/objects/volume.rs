@@ -360,16 +360,6 @@ impl<T: VolumeGrid> Volume<T> {
         Ok(())
     }
 
-    /// Allocation's common end: a built buffer to a volume.
-    fn built(
-        bytes: std::result::Result<Vec<u8>, String>,
-        what: &str,
-        device: &Device,
-    ) -> Result<Self> {
-        let bytes = bytes.map_err(|e| Error::invalid_in(what, e))?;
-        Self::from_grid_bytes(&bytes, device)
-    }
-
     /// The checks of a launch: the device.
     fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
         if &self.device != ctx.device {
@@ -403,11 +393,6 @@ fn not_empty<T>(v: &[T], what: &str, arg: &str) -> Result<()> {
         ));
     }
     Ok(())
-}
-
-/// The tiles' or voxels' coordinates as `[i32; 3]`.
-fn coords(v: &[IVec3]) -> Vec<[i32; 3]> {
-    v.iter().map(|p| p.to_array()).collect()
 }
 
 /// World points to the index coordinates of their voxels, as Warp's allocation rounds them
@@ -453,14 +438,25 @@ impl<T: VolumeValue> Volume<T> {
         map: &Map,
         device: &Device,
     ) -> Result<Self> {
-        not_empty(tiles, "Volume::allocate_by_tiles", "tiles")?;
+        const WHAT: &str = "Volume::allocate_by_tiles";
+        not_empty(tiles, WHAT, "tiles")?;
         let bg = value_bytes(background);
-        let kind = BuildKind::Value {
+        let kind = super::volume_build::GridKind::Value {
             grid_type: GridType::from_code(T::GRID_TYPES[0]),
             background: &bg,
         };
-        let bytes = nanovdb::build_from_tiles(kind, &coords(tiles), map);
-        Self::built(bytes, "Volume::allocate_by_tiles", device)
+        // Built on the device from the tiles (uploaded once): no grid crosses to the host.
+        let tiles = Array::from_slice(tiles, device)?;
+        let input = super::volume_build::BuildInput::Coords(&tiles);
+        let b = super::volume_build::build(kind, input, map, WHAT)?;
+        Ok(Volume {
+            device: device.clone(),
+            words: b.words,
+            grad: None,
+            info: b.info,
+            voxel_count: b.voxel_count,
+            _t: PhantomData,
+        })
     }
 
     /// A value grid from a dense array (Warp's `Volume.load_from_numpy`): `values` in C
@@ -531,9 +527,19 @@ impl Volume<VoxelIndex> {
     /// # Errors
     /// No tiles; a singular or non-finite transform; device errors.
     pub fn allocate_index_by_tiles(tiles: &[IVec3], map: &Map, device: &Device) -> Result<Self> {
-        not_empty(tiles, "Volume::allocate_index_by_tiles", "tiles")?;
-        let bytes = nanovdb::build_from_tiles(BuildKind::Index, &coords(tiles), map);
-        Self::built(bytes, "Volume::allocate_index_by_tiles", device)
+        const WHAT: &str = "Volume::allocate_index_by_tiles";
+        not_empty(tiles, WHAT, "tiles")?;
+        let tiles = Array::from_slice(tiles, device)?;
+        let input = super::volume_build::BuildInput::Coords(&tiles);
+        let b = super::volume_build::build(super::volume_build::GridKind::Index, input, map, WHAT)?;
+        Ok(Volume {
+            device: device.clone(),
+            words: b.words,
+            grad: None,
+            info: b.info,
+            voxel_count: b.voxel_count,
+            _t: PhantomData,
+        })
     }
 
     /// An index grid over exactly the given voxels (Warp's `Volume.allocate_by_voxels`, an
@@ -542,9 +548,20 @@ impl Volume<VoxelIndex> {
     /// # Errors
     /// No voxels; a singular or non-finite transform; device errors.
     pub fn allocate_by_voxels(voxels: &[IVec3], map: &Map, device: &Device) -> Result<Self> {
-        not_empty(voxels, "Volume::allocate_by_voxels", "voxels")?;
-        let bytes = nanovdb::build_from_voxels(&coords(voxels), map);
-        Self::built(bytes, "Volume::allocate_by_voxels", device)
+        const WHAT: &str = "Volume::allocate_by_voxels";
+        not_empty(voxels, WHAT, "voxels")?;
+        let voxels = Array::from_slice(voxels, device)?;
+        let input = super::volume_build::BuildInput::Coords(&voxels);
+        let kind = super::volume_build::GridKind::OnIndex;
+        let b = super::volume_build::build(kind, input, map, WHAT)?;
+        Ok(Volume {
+            device: device.clone(),
+            words: b.words,
+            grad: None,
+            info: b.info,
+            voxel_count: b.voxel_count,
+            _t: PhantomData,
+        })
     }
 
     /// [`Volume::allocate_by_voxels`] of the voxels holding world points (Warp's
@@ -556,10 +573,25 @@ impl Volume<VoxelIndex> {
     /// singular transform; device errors.
     pub fn allocate_by_points(points: &Array<Vec3>, map: &Map) -> Result<Self> {
         const WHAT: &str = "Volume::allocate_by_points";
-        let voxels = world_to_voxels(&points.to_vec()?, map, WHAT)?;
-        not_empty(&voxels, WHAT, "points")?;
-        let bytes = nanovdb::build_from_voxels(&coords(&voxels), map);
-        Self::built(bytes, WHAT, points.device())
+        if points.is_empty() {
+            return Err(Error::invalid_in(
+                WHAT,
+                "`points` is empty: a volume needs at least one leaf",
+            ));
+        }
+        // Each point's voxel is computed where the points are (Warp's f32 rounding), and the
+        // grid built there: the points never cross to the host.
+        let input = super::volume_build::BuildInput::World(points);
+        let kind = super::volume_build::GridKind::OnIndex;
+        let b = super::volume_build::build(kind, input, map, WHAT)?;
+        Ok(Volume {
+            device: points.device().clone(),
+            words: b.words,
+            grad: None,
+            info: b.info,
+            voxel_count: b.voxel_count,
+            _t: PhantomData,
+        })
     }
 }
 
