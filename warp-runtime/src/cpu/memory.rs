@@ -46,7 +46,7 @@ impl HostBuffer {
             // An empty or zero-sized vector owns no allocation to take over.
             return HostBuffer::zeroed(0, std::mem::align_of::<T>());
         }
-        if data.as_ptr() as usize % HOST_ALIGN != 0 {
+        if !(data.as_ptr() as usize).is_multiple_of(HOST_ALIGN) {
             // The allocator gave the vector less than every host buffer's alignment (what
             // `reinterpret` and the volumes' views rely on): copy it into one that has it.
             let b = HostBuffer::zeroed(bytes, std::mem::align_of::<T>())?;

@@ -333,7 +333,10 @@ mod tests {
         }
         // A section with an adjoint part is a section the assembler includes.
         for (p, _) in ADJOINT_PARTS {
-            assert!(SECTIONS.contains(&p), "{p} has an adjoint part but is not in SECTIONS");
+            assert!(
+                SECTIONS.contains(&p),
+                "{p} has an adjoint part but is not in SECTIONS"
+            );
         }
     }
 }

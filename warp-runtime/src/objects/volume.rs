@@ -18,7 +18,7 @@
 use std::marker::PhantomData;
 use std::path::Path;
 
-use glam::{DVec3, IVec3, Vec3};
+use glam::{IVec3, Vec3};
 use warp_core::objects::nanovdb::{self, BuildKind, GridInfo, GridType, Map};
 use warp_core::objects::volume::{VolumeGrid, VolumeValue, VolumeView, VoxelIndex};
 
@@ -393,36 +393,6 @@ fn not_empty<T>(v: &[T], what: &str, arg: &str) -> Result<()> {
         ));
     }
     Ok(())
-}
-
-/// World points to the index coordinates of their voxels, as Warp's allocation rounds them
-/// (`floor(x + 0.5)` of the index-space position).
-///
-/// # Errors
-/// A non-finite point, or one whose index lies outside `i32`, naming its position.
-pub fn world_to_voxels(points: &[Vec3], map: &Map, what: &str) -> Result<Vec<IVec3>> {
-    let inv = map.inverse().map_err(|e| Error::invalid_in(what, e))?;
-    points
-        .iter()
-        .enumerate()
-        .map(|(n, p)| {
-            let d = DVec3::new(
-                p.x as f64 - map.translation[0],
-                p.y as f64 - map.translation[1],
-                p.z as f64 - map.translation[2],
-            );
-            let ijk = [0, 1, 2]
-                .map(|r| (inv[r][0] * d.x + inv[r][1] * d.y + inv[r][2] * d.z + 0.5).floor());
-            if ijk.iter().all(|x| x.is_finite() && x.abs() < 2f64.powi(31)) {
-                Ok(IVec3::new(ijk[0] as i32, ijk[1] as i32, ijk[2] as i32))
-            } else {
-                Err(Error::invalid_in(
-                    what,
-                    format!("point {n} ({p}) has no voxel (index {ijk:?})"),
-                ))
-            }
-        })
-        .collect()
 }
 
 impl<T: VolumeValue> Volume<T> {
