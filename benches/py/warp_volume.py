@@ -19,6 +19,7 @@ Run on the GPU machine with Warp unpacked by ../shared/tools/warp-bundle:
 """
 
 import json
+import os
 import statistics
 import sys
 import time
@@ -142,5 +143,38 @@ except TypeError:
 result["mc_ms"] = median_ms(lambda: mc.surface(field, 0.0))
 result["mc_triangles"] = int(len(mc.indices) // 3)
 result["mc_vertices"] = int(len(mc.verts))
+
+# A fixture for tests/suite/volume.rs: a small sphere SDF allocated and filled by Warp on the
+# GPU (16^3 voxels of 1/8 from -1, radius 0.6, background 0.5), saved by Warp with ZIP, and
+# Warp's own trilinear samples of it at 500 seeded points, written where the device call
+# collects files ($OUT).
+if os.environ.get("OUT"):
+
+    @wp.kernel
+    def fill_sphere(vol: wp.uint64):
+        i, j, k = wp.tid()
+        p = wp.volume_index_to_world(vol, wp.vec3(float(i), float(j), float(k)))
+        wp.volume_store_f(vol, i, j, k, wp.length(p) - 0.6)
+
+    small = wp.Volume.allocate_by_tiles(
+        wp.array(np.array([[a, b, c] for a in (0, 8) for b in (0, 8) for c in (0, 8)], dtype=np.int32), dtype=wp.vec3i),
+        voxel_size=0.125,
+        bg_value=0.5,
+        translation=(-1.0, -1.0, -1.0),
+    )
+    wp.launch(fill_sphere, dim=(16, 16, 16), inputs=[small.id])
+    small.save_to_nvdb(os.path.join(os.environ["OUT"], "warp_gpu_sphere_zip.nvdb"), codec="zip")
+    q = np.random.default_rng(9).uniform(-1.5, 17.5, size=(500, 3)).astype(np.float32)
+    qs = wp.array(q, dtype=wp.vec3)
+    vals = wp.zeros(500, dtype=float)
+
+    @wp.kernel
+    def sample_index(vol: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+        i = wp.tid()
+        out[i] = wp.volume_sample_f(vol, pts[i], wp.Volume.LINEAR)
+
+    wp.launch(sample_index, dim=500, inputs=[small.id, qs, vals])
+    with open(os.path.join(os.environ["OUT"], "warp_gpu_sphere_samples.json"), "w") as f:
+        json.dump({"uvw": q.tolist(), "linear": vals.numpy().tolist()}, f)
 
 print(json.dumps(result))

@@ -634,11 +634,26 @@ fn files_round_trip_and_warp_files_load(dev: &wp::Device) {
         let f = dir.join(format!("{codec:?}.nvdb"));
         vol.save(&f, codec).unwrap();
         let again = wp::Volume::<f32>::load(&f, dev).unwrap();
+        // The same grid but for the checksum save stores (bytes 8..16; Warp's has none).
+        let (a, b) = (again.grid_bytes().unwrap(), vol.grid_bytes().unwrap());
+        assert_eq!((&a[..8], &a[16..]), (&b[..8], &b[16..]), "{codec:?}");
+        // Saved again: the same file, bit for bit.
+        let f2 = dir.join(format!("{codec:?}-2.nvdb"));
+        again.save(&f2, codec).unwrap();
         assert_eq!(
-            again.grid_bytes().unwrap(),
-            vol.grid_bytes().unwrap(),
+            std::fs::read(&f).unwrap(),
+            std::fs::read(&f2).unwrap(),
             "{codec:?}"
         );
+        // A flipped value byte: the checksum catches it.
+        if codec == wp::objects::nvdb::Codec::None {
+            let mut bytes = std::fs::read(&f).unwrap();
+            let n = bytes.len();
+            bytes[n - 100] ^= 1;
+            std::fs::write(&f2, &bytes).unwrap();
+            let e = wp::Volume::<f32>::load(&f2, dev).unwrap_err().to_string();
+            assert!(e.contains("checksum"), "{e}");
+        }
     }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -238,17 +238,23 @@ impl<T: VolumeGrid> Volume<T> {
     /// The first grid of an `.nvdb` file (Warp's `Volume.load_from_nvdb`), on `device`.
     ///
     /// # Errors
-    /// As [`nvdb::load_nvdb`] (an unreadable, truncated, corrupt or BLOSC-compressed file) and
-    /// [`Volume::from_grid_bytes`] (another value type), each naming the path.
+    /// As [`nvdb::load_nvdb`] (an unreadable, truncated, corrupt or BLOSC-compressed file), a
+    /// stored checksum that does not match, and [`Volume::from_grid_bytes`] (another value
+    /// type), each naming the path.
     pub fn load(path: impl AsRef<Path>, device: &Device) -> Result<Self> {
         let path = path.as_ref();
         let grids = nvdb::load_nvdb(path)?;
+        let what = format!("Volume::load(\"{}\")", path.display());
         let Some(g) = grids.first() else {
-            return Err(Error::invalid_in(
-                &format!("Volume::load(\"{}\")", path.display()),
-                "the file holds no grid",
-            ));
+            return Err(Error::invalid_in(&what, "the file holds no grid"));
         };
+        // A stored checksum must match (Warp's own grids store none, which is accepted).
+        if g.checksum_matches()? == Some(false) {
+            return Err(Error::invalid_in(
+                &what,
+                "the grid's checksum does not match its bytes: the file is corrupt",
+            ));
+        }
         Self::from_grid_bytes(g.as_bytes(), device).map_err(|e| match e {
             Error::InvalidArgument { what } => Error::InvalidArgument {
                 what: format!("Volume::load(\"{}\"): {what}", path.display()),
@@ -258,12 +264,13 @@ impl<T: VolumeGrid> Volume<T> {
     }
 
     /// Writes the grid to an `.nvdb` file (Warp's `Volume.save_to_nvdb`), uncompressed or
-    /// ZIP-compressed.
+    /// ZIP-compressed, with NanoVDB's checksum of its current bytes (Warp writes none).
     ///
     /// # Errors
     /// Device errors of the read-back; an unwritable path.
     pub fn save(&self, path: impl AsRef<Path>, codec: Codec) -> Result<()> {
-        let grid = NvdbGrid::from_bytes(self.grid_bytes()?)?;
+        // With its checksum (the values may have changed since the grid was made).
+        let grid = NvdbGrid::from_bytes(self.grid_bytes()?)?.with_checksum();
         nvdb::save_nvdb(path, &[&grid], codec)
     }
 
