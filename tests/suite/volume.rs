@@ -22,6 +22,7 @@ backend_tests!(
     position_gradients_pass_gradcheck,
     value_gradients_reach_the_gradient_grid,
     files_round_trip_and_warp_files_load,
+    a_file_warp_wrote_on_a_gpu_samples_the_same,
     bad_input_is_an_error,
 );
 
@@ -656,6 +657,39 @@ fn files_round_trip_and_warp_files_load(dev: &wp::Device) {
         }
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `tests/data/warp_gpu_sphere_zip.nvdb` and `warp_gpu_sphere_samples.txt`, written by NVIDIA
+/// Warp 1.19 on an H100 (`benches/py/warp_volume.py` with `OUT` set, from the bench run of
+/// `cargo bench --bench volume`): a sphere SDF (radius 0.6, voxel 1/8 from -1, background
+/// 0.5) allocated by tiles and filled by a Warp kernel on the GPU, saved with ZIP; then
+/// Warp's own `volume_sample_f(.., LINEAR)` at 500 index-space points, one `u v w value` per
+/// line. Warp's GPU code contracts multiplies and adds into FMAs, ours does not: the samples
+/// agree to a few f32 ulp of values below 1.5, so 1e-6.
+fn a_file_warp_wrote_on_a_gpu_samples_the_same(dev: &wp::Device) {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/");
+    let vol = wp::Volume::<f32>::load(format!("{dir}warp_gpu_sphere_zip.nvdb"), dev).unwrap();
+    let text = std::fs::read_to_string(format!("{dir}warp_gpu_sphere_samples.txt")).unwrap();
+    let rows: Vec<[f32; 4]> = text
+        .lines()
+        .map(|l| {
+            let v: Vec<f32> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2], v[3]]
+        })
+        .collect();
+    assert_eq!(rows.len(), 500);
+    let pts: Vec<Vec3> = rows.iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect();
+    let p = arr(&pts, dev);
+    let out = zeros::<f32, 1>(pts.len(), dev);
+    wp::launch(k_sample, pts.len(), (&vol, &p, VOLUME_LINEAR, &out), dev).unwrap();
+    for (k, v) in host(&out).iter().enumerate() {
+        assert!(
+            (v - rows[k][3]).abs() <= 1e-6,
+            "at {}: {v} vs Warp's {}",
+            pts[k],
+            rows[k][3]
+        );
+    }
 }
 
 fn bad_input_is_an_error(dev: &wp::Device) {
