@@ -89,7 +89,7 @@ WP_FN void max32(u64 addr, i32 v) { atomicMax((int*)addr, v); }
 WP_FN i32 popc64(u64 x) { return __popcll(x); }
 WP_FN i32 ctz64(u64 x) { return __ffsll((long long)x) - 1; }
 WP_FN i32 clz64(u64 x) { return __clzll((long long)x); }
-WP_FN f32 fma(f32 a, f32 b, f32 c) { return __fmaf_rn(a, b, c); }
+WP_FN f32 fma_rn(f32 a, f32 b, f32 c) { return __fmaf_rn(a, b, c); }
 WP_FN f32 mul(f32 a, f32 b) { return __fmul_rn(a, b); }
 WP_FN f32 sub(f32 a, f32 b) { return __fsub_rn(a, b); }
 WP_FN f64 dmul(f64 a, f64 b) { return __dmul_rn(a, b); }
@@ -112,7 +112,7 @@ WP_FN void max32(u64 addr, i32 v) {
 WP_FN i32 popc64(u64 x) { return __builtin_popcountll(x); }
 WP_FN i32 ctz64(u64 x) { return __builtin_ctzll(x); }
 WP_FN i32 clz64(u64 x) { return __builtin_clzll(x); }
-WP_FN f32 fma(f32 a, f32 b, f32 c) { return std::fma(a, b, c); }
+WP_FN f32 fma_rn(f32 a, f32 b, f32 c) { return std::fma(a, b, c); }
 WP_FN f32 mul(f32 a, f32 b) { return a * b; }
 WP_FN f32 sub(f32 a, f32 b) { return a - b; }
 WP_FN f64 dmul(f64 a, f64 b) { return a * b; }
@@ -125,7 +125,7 @@ WP_FN f64 dfloor(f64 x) { return std::floor(x); }
 template <typename T>
 WP_FN void put(u64 addr, T v) { *(T*)addr = v; }
 template <typename T>
-WP_FN T get(u64 addr) { return *(const T*)addr; }
+WP_FN T load_at(u64 addr) { return *(const T*)addr; }
 }  // namespace vb_detail
 
 /// VolumeBuildIjk (80 bytes): points (f32 x 3 each), ijk (i32 x 3 each), bad (i32, one), n,
@@ -283,7 +283,7 @@ WP_FN bool vb_ijk_at(const vb_ijk_t& s, u64 i) {
     const f32* m = s.inv + 3 * r;
     // NanoVDB's matMult: fmaf(x, m0, fmaf(y, m1, z * m2)); then Vec3::round: floor(x + 0.5)
     // with 0.5 a double (exact for every f32).
-    const f32 x = vb_detail::fma(d0, m[0], vb_detail::fma(d1, m[1], vb_detail::mul(d2, m[2])));
+    const f32 x = vb_detail::fma_rn(d0, m[0], vb_detail::fma_rn(d1, m[1], vb_detail::mul(d2, m[2])));
     const f64 f = vb_detail::dfloor((f64)x + 0.5);
     // False for NaN too.
     const bool in = f >= -2147483648.0 && f <= 2147483647.0;
@@ -498,7 +498,7 @@ WP_FN void vb_leaf_box_at(const vb_leaf_box_t& s, u64 f) {
   u64 any = 0;
   i32 x0 = -1, x1 = -1;
   for (i32 w = 0; w < 8; ++w) {
-    words[w] = get<u64>(leaf + vb_leaf_value_mask + 8 * w);
+    words[w] = load_at<u64>(leaf + vb_leaf_value_mask + 8 * w);
     any |= words[w];
     if (words[w] != 0) {
       if (x0 < 0) x0 = w;

@@ -193,14 +193,6 @@ impl VolumeElem {
         self.ty()
             .map_or_else(|| "VoxelIndex".into(), |t| t.to_string())
     }
-
-    /// The C++ element type of `wp::volume_t<..>` (an index grid's is `wp::VoxelIndex`).
-    pub fn cuda(self) -> String {
-        match self.ty() {
-            Some(t) => crate::back::cuda::cpp_type(&t).expect("a value type has a C++ name"),
-            None => "wp::VoxelIndex".into(),
-        }
-    }
 }
 
 /// One row per object kind: every fact the front end and the emitters need about it.
@@ -280,7 +272,7 @@ pub static OBJECTS: &[ObjectRow] = &[
         section: "mesh",
     },
     // One row for every element: `Volume<T>`'s generic argument is added where the type is
-    // written (`ObjectKind::rust_args`, `cpp_type`).
+    // written (`back::rust::ty_tokens`, `back::cuda::cpp_type`).
     ObjectRow {
         kind: ObjectKind::Volume(VolumeElem::F32),
         name: "Volume",

@@ -91,8 +91,15 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
         }
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::Struct(name) => name.clone(),
+        // `wp::volume_t<T>`: the element a value type, or an index grid's `wp::VoxelIndex`.
         Ty::Object(k) => match k.elem() {
-            Some(e) => format!("{}<{}>", k.row().cuda, e.cuda()),
+            Some(e) => {
+                let elem = match e.ty() {
+                    Some(t) => cpp_type(&t)?,
+                    None => "wp::VoxelIndex".into(),
+                };
+                format!("{}<{elem}>", k.row().cuda)
+            }
             None => k.row().cuda.into(),
         },
         Ty::Tuple(ts) => {
