@@ -121,10 +121,10 @@ pub use warp_runtime::{
 };
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, launch, synchronize, ArgCtx, Array, Bvh, Device, DeviceKind, Dim, Element, Error,
-    GenericKernel, HashGrid, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launchable,
-    Mesh, Recording, Result, Runtime, Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST,
-    VOLUME_LINEAR,
+    init, kernel_info, launch, load, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,
+    DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape, Kernel, KernelArg,
+    KernelInfo, KernelParams, Launchable, Mesh, Recording, Result, Runtime, Seed, Tape, Volume,
+    VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};

@@ -15,7 +15,56 @@ backend_tests!(
     no_parameters,
     print_from_kernel,
     ahead_of_time_compile,
+    load_compiles_before_the_first_launch,
 );
+
+/// Compiled only through `load_compiles_before_the_first_launch`.
+#[wp::kernel]
+fn k_loaded(a: Array<f32>, b: Array<f32>) {
+    let i = tid();
+    b[i] = a[i] * a[i];
+}
+
+/// Compiled only through `load_compiles_before_the_first_launch`, with its adjoint.
+#[wp::kernel]
+fn k_loaded_adj(a: Array<f32>, b: Array<f32>) {
+    let i = tid();
+    b[i] = sin(a[i]);
+}
+
+/// `wp::load` compiles the kernels' forward variants (and `load_with_adjoints` their
+/// adjoints) before any launch: on a GPU the compile report lists them before they ran, and
+/// the launches and backward that follow use them (no second entry); on the CPU it is a no-op.
+fn load_compiles_before_the_first_launch(dev: &wp::Device) {
+    let entries = |name: &str, direction: &str| {
+        wp::compile_summary()
+            .lines()
+            .filter(|l| l.contains(name) && l.contains(direction))
+            .count()
+    };
+    wp::load(&[wp::kernel_info(k_loaded)], dev).unwrap();
+    wp::load_with_adjoints(&[wp::kernel_info(k_loaded_adj)], dev).unwrap();
+    let expect = usize::from(!dev.is_cpu());
+    assert_eq!(entries("k_loaded ", "forward"), expect);
+    assert_eq!(entries("k_loaded_adj ", "forward"), expect);
+    assert_eq!(entries("k_loaded_adj ", "adjoint"), expect);
+    let a = arr(&[1.0f32, 2.0, 3.0], dev).with_grad().unwrap();
+    let b = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+    wp::launch(k_loaded, 3, (&a, &b), dev).unwrap();
+    assert_eq!(host(&b), vec![1.0, 4.0, 9.0]);
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_loaded_adj, 3, (&a, &b), dev).unwrap();
+    }
+    tape.backward(&b).unwrap();
+    // Loaded once: the launches and the backward found the loaded variants.
+    assert_eq!(entries("k_loaded ", "forward"), expect);
+    assert_eq!(entries("k_loaded_adj ", "adjoint"), expect);
+    // Loading again is a lookup.
+    wp::load(&[wp::kernel_info(k_loaded)], dev).unwrap();
+    assert_eq!(entries("k_loaded ", "forward"), expect);
+}
 
 /// Launched only by `ahead_of_time_compile`, so that its first launch is the one measured.
 #[wp::kernel]

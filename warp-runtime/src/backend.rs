@@ -10,7 +10,7 @@
 //! launch is monomorphised down to the backend's own code: no `dyn`, no allocation.
 
 use crate::error::Result;
-use crate::kernel::{ArgsOf, Kernel};
+use crate::kernel::{ArgsOf, Kernel, KernelInfo};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
 use warp_core::Grid;
@@ -87,6 +87,12 @@ pub(crate) trait Backend {
         arrays: [u64; 4],
         len: Extent,
     ) -> Result<()>;
+
+    /// Makes `kernels` ready to launch before their first launch: a backend that compiles at
+    /// run time compiles and loads them now, all at once (in parallel where it can), each
+    /// kernel's variant for contiguous arrays and, with `adjoint: Some(bytes)`, its adjoint
+    /// with `bytes` of stack per thread. The CPU's kernels are compiled by cargo: nothing.
+    fn prepare(&self, kernels: &[&'static KernelInfo], adjoint: Option<usize>) -> Result<()>;
 
     /// Runs (the CPU: [`ObjectStep::run_cpu`]) or queues (a GPU: the step's kernel, on the
     /// calling thread's current stream) one step of a host object's build.

@@ -40,6 +40,15 @@ macro_rules! with_backend {
     }};
 }
 
+/// Makes `kernels` ready on `device`; see [`Backend::prepare`].
+pub(crate) fn prepare(
+    device: &Device,
+    kernels: &[&'static crate::kernel::KernelInfo],
+    adjoint: Option<usize>,
+) -> Result<()> {
+    with_backend!(device, b => b.prepare(kernels, adjoint))
+}
+
 /// Runs (or queues) a launch of `K` on `device`; see [`Backend::launch`].
 #[inline]
 pub(crate) fn launch<K: Kernel>(device: &Device, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {

@@ -33,6 +33,13 @@ pub struct ArgCtx<'d> {
     pub device: &'d Device,
 }
 
+/// The static description of a kernel, by the kernel itself: `wp::kernel_info(integrate)`
+/// (for [`crate::load`] and the ahead-of-time compiler).
+pub fn kernel_info<K: Kernel>(kernel: K) -> &'static KernelInfo {
+    let _ = kernel;
+    K::info()
+}
+
 /// A type that may appear as a kernel parameter.
 pub trait KernelArg: 'static {
     /// What the host passes at launch.

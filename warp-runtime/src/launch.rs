@@ -12,7 +12,7 @@ use crate::cuda::stream::Stream;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::kernel::{ArgsOf, Kernel, KernelParams, Launchable};
+use crate::kernel::{ArgsOf, Kernel, KernelInfo, KernelParams, Launchable};
 use warp_core::Grid;
 
 /// Launch dimensions: 1 to 4 extents, like Warp's `dim=`.
@@ -159,6 +159,39 @@ fn check_shapes<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Compiles `kernels` for `device` now rather than at their first launches, all of them at
+/// once (Warp's `wp.load_module`): on a GPU every kernel's variant for contiguous arrays is
+/// compiled by NVRTC in parallel on the CPU's threads (or read from the disk cache) and
+/// loaded, so a program that knows its kernels pays the longest compile instead of their
+/// sum before its first result. On the CPU, nothing: cargo compiled the kernels.
+///
+/// ```
+/// # use warp_lang as wp;
+/// # use wp::prelude::*;
+/// #[wp::kernel]
+/// fn scale(x: Array<f32>, s: f32) {
+///     let i = tid();
+///     x[i] *= s;
+/// }
+/// let dev = wp::get_preferred_device();
+/// wp::load(&[wp::kernel_info(scale)], &dev).unwrap();
+/// ```
+///
+/// # Errors
+/// A kernel that does not compile ([`Error::Cuda`] with NVRTC's log); [`Error::NoDevice`].
+pub fn load(kernels: &[&'static KernelInfo], device: &Device) -> Result<()> {
+    dispatch::prepare(device, kernels, None)
+}
+
+/// [`load`], and each kernel's adjoint too (with the adjoint stack
+/// [`config::adstack_bytes`] sets), for programs that will run backward.
+///
+/// # Errors
+/// As [`load`].
+pub fn load_with_adjoints(kernels: &[&'static KernelInfo], device: &Device) -> Result<()> {
+    dispatch::prepare(device, kernels, Some(config::adstack_bytes()))
 }
 
 /// Launches `kernel` over `dim` threads with `args` on `device`.

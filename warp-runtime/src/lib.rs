@@ -55,12 +55,12 @@ pub use device::{
 };
 pub use error::{Error, Result};
 pub use kernel::{
-    ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg, KernelInfo,
-    KernelParams, Launchable,
+    kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg,
+    KernelInfo, KernelParams, Launchable,
 };
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
-pub use launch::{launch, synchronize, Dim};
+pub use launch::{launch, load, load_with_adjoints, synchronize, Dim};
 pub use objects::{Bvh, HashGrid, MarchingCubes, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;

@@ -6,7 +6,7 @@ use super::primitives;
 use crate::backend::{Backend, ObjectStep};
 use crate::device::Device;
 use crate::error::Result;
-use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use crate::kernel::{ArgsOf, Kernel, KernelInfo, KernelParams};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
 use warp_core::{AdStack, Grid};
@@ -101,6 +101,10 @@ impl Backend for Cpu<'_> {
 
     fn object_step<S: ObjectStep>(&self, step: &S) -> Result<()> {
         step.run_cpu()
+    }
+
+    fn prepare(&self, _kernels: &[&'static KernelInfo], _adjoint: Option<usize>) -> Result<()> {
+        Ok(())
     }
 
     fn synchronize_all() -> Result<()> {

@@ -52,8 +52,7 @@ pub fn aot_dir() -> Option<PathBuf> {
 
 /// The static description of a kernel, for [`compile`]: `wp::aot::kernel(integrate)`.
 pub fn kernel<K: Kernel>(kernel: K) -> &'static KernelInfo {
-    let _ = kernel;
-    K::info()
+    crate::kernel::kernel_info(kernel)
 }
 
 /// The static descriptions of every instance of a generic kernel, for [`compile`]:

@@ -6,7 +6,7 @@ use super::{gpu, launch, objects, primitives};
 use crate::backend::{Backend, ObjectStep};
 use crate::device::Device;
 use crate::error::Result;
-use crate::kernel::{ArgsOf, Kernel};
+use crate::kernel::{ArgsOf, Kernel, KernelInfo};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
 use warp_core::Grid;
@@ -132,6 +132,10 @@ impl Backend for Cuda<'_> {
 
     fn object_step<S: ObjectStep>(&self, step: &S) -> Result<()> {
         objects::object_step(self.device, self.ordinal, step)
+    }
+
+    fn prepare(&self, kernels: &[&'static KernelInfo], adjoint: Option<usize>) -> Result<()> {
+        super::module::prepare(self.device, self.ordinal, kernels, adjoint)
     }
 
     fn synchronize_all() -> Result<()> {

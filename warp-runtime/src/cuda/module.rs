@@ -173,6 +173,28 @@ pub(crate) fn loaded(
     Ok(l)
 }
 
+/// Compiles and loads `kernels` for GPU `ordinal` now, every one at once on the rayon pool
+/// (NVRTC is thread-safe; each variant is the one `loaded` keeps, so their first launches
+/// find them): the contiguous forward variant of each, and with `adjoint: Some(bytes)` the
+/// adjoint with that stack. A kernel already loaded costs a map lookup.
+pub(crate) fn prepare(
+    device: &Device,
+    ordinal: usize,
+    kernels: &[&'static KernelInfo],
+    adjoint: Option<usize>,
+) -> Result<()> {
+    use rayon::prelude::*;
+    let mut work: Vec<(&'static KernelInfo, Option<usize>)> =
+        kernels.iter().map(|k| (*k, None)).collect();
+    if adjoint.is_some() {
+        work.extend(kernels.iter().map(|k| (*k, adjoint)));
+    }
+    // One task per variant: a compile is hundreds of milliseconds, so no chunking.
+    work.par_iter()
+        .with_max_len(1)
+        .try_for_each(|(info, adj)| loaded(device, ordinal, info, true, *adj).map(drop))
+}
+
 #[cfg(test)]
 mod tests {
     use super::{format_compile_reports, CompileReport};
