@@ -7,8 +7,8 @@
 //! cargo run --release --example autodiff -- [--n 1000000] [--steps 100] [--device cpu|cuda:0] [--load]
 //! ```
 //! Runs on the GPU when there is one. `--load` compiles the three kernels and their adjoints
-//! up front, in parallel (`wp::load_with_adjoints`), instead of one by one at first launch;
-//! the time to the first result is printed either way (cold: with an empty kernel cache).
+//! up front (`wp::load_with_adjoints`) instead of one by one at first launch; the time to the
+//! first result is printed either way (cold: with an empty kernel cache).
 
 #[path = "common/seed_ad.rs"]
 mod seed_ad;

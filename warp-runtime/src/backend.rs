@@ -89,7 +89,7 @@ pub(crate) trait Backend {
     ) -> Result<()>;
 
     /// Makes `kernels` ready to launch before their first launch: a backend that compiles at
-    /// run time compiles and loads them now, all at once (in parallel where it can), each
+    /// run time compiles and loads them now, each
     /// kernel's variant for contiguous arrays and, with `adjoint: Some(bytes)`, its adjoint
     /// with `bytes` of stack per thread. The CPU's kernels are compiled by cargo: nothing.
     fn prepare(&self, kernels: &[&'static KernelInfo], adjoint: Option<usize>) -> Result<()>;

@@ -173,10 +173,11 @@ pub(crate) fn loaded(
     Ok(l)
 }
 
-/// Compiles and loads `kernels` for GPU `ordinal` now, every one at once on the rayon pool
-/// (NVRTC is thread-safe; each variant is the one `loaded` keeps, so their first launches
-/// find them): the contiguous forward variant of each, and with `adjoint: Some(bytes)` the
-/// adjoint with that stack. A kernel already loaded costs a map lookup.
+/// Compiles and loads `kernels` for GPU `ordinal` now (each variant the one `loaded` keeps,
+/// so their first launches find them): the contiguous forward variant of each, and with
+/// `adjoint: Some(bytes)` the adjoint with that stack. They go to the rayon pool together
+/// (NVRTC is thread-safe), though NVRTC measured one compile at a time in a process (see
+/// `crate::load`). A kernel already loaded costs a map lookup.
 pub(crate) fn prepare(
     device: &Device,
     ordinal: usize,
