@@ -171,9 +171,8 @@ fn check_shapes<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
 /// example took 1.36-1.44 s together against 1.37-2.4 s one after another, so this does not
 /// shorten a cold start; the disk cache and `wp::aot` do.
 ///
-/// ```
-/// # use warp_lang as wp;
-/// # use wp::prelude::*;
+/// ```ignore
+/// // (tests/suite/launch.rs runs this on both backends)
 /// #[wp::kernel]
 /// fn scale(x: Array<f32>, s: f32) {
 ///     let i = tid();
