@@ -46,6 +46,9 @@ use warp_core::objects::mesh::{
 use warp_core::{Fault, FaultKind, KResult};
 use warp_runtime::objects::bvh_build::{build_sah, check_layout};
 
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
 /// The fault argument index the driver gives its objects, and the name Rust faults carry.
 const ARG: i32 = 7;
 const ARG_NAME: &str = "geom";
@@ -1401,13 +1404,9 @@ fn layout_case(c: &mut Cases) {
     ));
 }
 
-fn gpp() -> bool {
-    Command::new("g++").arg("--version").output().is_ok()
-}
-
 #[test]
 fn cuda_geometry_bvh_mesh_match_warp_core_bit_for_bit() {
-    if !gpp() {
+    if !host_cpp::gpp() {
         eprintln!("SKIPPED cuda_geometry_bvh_mesh_match_warp_core_bit_for_bit: no g++");
         return;
     }
@@ -1417,35 +1416,10 @@ fn cuda_geometry_bvh_mesh_match_warp_core_bit_for_bit() {
     bvh_cases(&mut c);
     mesh_cases(&mut c);
 
-    let dir = std::env::temp_dir().join(format!("wp_cuda_geometry_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let (cpp, exe, input) = (dir.join("g.cpp"), dir.join("g"), dir.join("cases.bin"));
-    std::fs::write(&cpp, DRIVER).unwrap();
+    let (dir, exe) = host_cpp::compile_driver("cuda_geometry", DRIVER, &[]);
+    let input = dir.join("cases.bin");
     let bytes: Vec<u8> = c.words.iter().flat_map(|w| w.to_le_bytes()).collect();
     std::fs::write(&input, bytes).unwrap();
-    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-Wdouble-promotion",
-            "-I",
-            include,
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "g++: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let run = Command::new(&exe).arg(&input).output().unwrap();
     assert!(
         run.status.success(),

@@ -50,6 +50,9 @@ use warp_core::objects::nanovdb::{
 use warp_core::objects::{VolumeGrid, VolumeSample, VolumeValue, VolumeView, VoxelIndex};
 use warp_core::{ArrayView, Fault, FaultKind, GradView};
 
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
 /// The fault argument index the driver gives its value arrays, and the name Rust faults
 /// carry.
 const DATA_ARG: i32 = 3;
@@ -1442,46 +1445,17 @@ fn all_cases() -> Cases {
     c
 }
 
-fn gpp() -> bool {
-    Command::new("g++").arg("--version").output().is_ok()
-}
-
 #[test]
 fn cuda_volume_matches_warp_core_bit_for_bit() {
-    if !gpp() {
+    if !host_cpp::gpp() {
         eprintln!("SKIPPED cuda_volume_matches_warp_core_bit_for_bit: no g++");
         return;
     }
     let c = all_cases();
-    let dir = std::env::temp_dir().join(format!("wp_cuda_volume_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let (cpp, exe, input) = (dir.join("v.cpp"), dir.join("v"), dir.join("cases.bin"));
-    std::fs::write(&cpp, DRIVER).unwrap();
+    let (dir, exe) = host_cpp::compile_driver("cuda_volume", DRIVER, &[]);
+    let input = dir.join("cases.bin");
     let bytes: Vec<u8> = c.words.iter().flat_map(|w| w.to_le_bytes()).collect();
     std::fs::write(&input, bytes).unwrap();
-    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-Wdouble-promotion",
-            "-I",
-            include,
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "g++: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let run = Command::new(&exe).arg(&input).output().unwrap();
     assert!(
         run.status.success(),

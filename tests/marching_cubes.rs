@@ -15,6 +15,9 @@ use warp_lang as wp;
 use wp::prelude::*;
 use wp::MarchingCubes;
 
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
 // ------------------------------------------------------------------------------------------
 // Helpers
 // ------------------------------------------------------------------------------------------
@@ -906,47 +909,17 @@ int main(int argc, char** argv) {
 }
 "#;
 
-fn gpp() -> bool {
-    Command::new("g++").arg("--version").output().is_ok()
-}
-
 /// The header compiles as host C++ (g++, warnings as errors, no FMA contraction), and its
 /// steps, run over every node in order, give the CPU backend's mesh bit for bit on every test
 /// case (closed-form fields, bounds, ties at the threshold, values near f32's limits).
 #[test]
 fn cpp_steps_match_the_cpu_bit_for_bit() {
-    if !gpp() {
+    if !host_cpp::gpp() {
         eprintln!("SKIPPED marching_cubes::cpp_steps_match_the_cpu_bit_for_bit: no g++");
         return;
     }
-    let dir = std::env::temp_dir().join(format!("wp_marching_cubes_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let (cpp, exe) = (dir.join("mc.cpp"), dir.join("mc"));
-    std::fs::write(&cpp, DRIVER).unwrap();
-    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-Wdouble-promotion",
-            "-DWP_MARCHING_CUBES_BUILD=1",
-            "-I",
-            include,
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "g++: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (dir, exe) =
+        host_cpp::compile_driver("marching_cubes", DRIVER, &["WP_MARCHING_CUBES_BUILD"]);
     for (k, case) in cases().iter().enumerate() {
         let (dims, values, t, bounds) = case;
         let (lo, hi) = bounds.unwrap_or((

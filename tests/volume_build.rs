@@ -24,6 +24,9 @@ use warp_lang as wp;
 use wp::glam::{DVec3, IVec3, Vec3};
 use wp::VoxelIndex;
 
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
 // ------------------------------------------------------------------------------------------
 // Inputs
 // ------------------------------------------------------------------------------------------
@@ -501,10 +504,6 @@ int main(int argc, char** argv) {
 }
 "#;
 
-fn gpp() -> bool {
-    Command::new("g++").arg("--version").output().is_ok()
-}
-
 /// One case for the driver: the grid the CPU backend built (whose headers the driver starts
 /// from, with the two bboxes the steps compute reset), its kind, its inputs.
 struct CppCase {
@@ -657,38 +656,11 @@ fn cpp_cases() -> Vec<CppCase> {
 /// steps, run serially in the build's order, write the CPU backend's grids byte for byte.
 #[test]
 fn cpp_steps_write_the_cpu_grids() {
-    if !gpp() {
+    if !host_cpp::gpp() {
         eprintln!("SKIPPED volume_build::cpp_steps_write_the_cpu_grids: no g++");
         return;
     }
-    let dir = std::env::temp_dir().join(format!("wp_volume_build_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let (cpp, exe) = (dir.join("vb.cpp"), dir.join("vb"));
-    std::fs::write(&cpp, DRIVER).unwrap();
-    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-Wdouble-promotion",
-            "-DWP_VOLUME_BUILD=1",
-            "-I",
-            include,
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "g++: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (dir, exe) = host_cpp::compile_driver("volume_build", DRIVER, &["WP_VOLUME_BUILD"]);
     for (k, case) in cpp_cases().iter().enumerate() {
         let (input, output) = (
             dir.join(format!("case{k}.bin")),
