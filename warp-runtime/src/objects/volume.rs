@@ -39,25 +39,18 @@ fn elem_name<T: VolumeGrid>() -> &'static str {
     n.rsplit("::").next().unwrap_or(n)
 }
 
-/// 32-byte aligned words: what kernel views need of a host copy of a grid.
+/// 32-byte aligned bytes: what kernel views need of a host copy of a grid.
 #[repr(C, align(32))]
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 struct Block([u64; 4]);
 
-/// A grid's bytes in 32-byte aligned blocks (a grid's size is a multiple of 32).
-fn to_blocks(bytes: &[u8]) -> Vec<Block> {
-    bytes
-        .chunks(32)
-        .map(|c| {
-            let mut b = Block::default();
-            for (k, w) in c.chunks(8).enumerate() {
-                let mut x = [0u8; 8];
-                x[..w.len()].copy_from_slice(w);
-                b.0[k] = u64::from_le_bytes(x);
-            }
-            b
-        })
-        .collect()
+/// A copy of `bytes` in 32-byte aligned memory (zero-padded to a whole block; a grid's size
+/// is a multiple of 32). Hosts are little-endian, as NanoVDB's bytes: copies are the values.
+fn aligned<W: bytemuck::Pod + Default>(bytes: &[u8]) -> Vec<W> {
+    let n = bytes.len().div_ceil(std::mem::size_of::<W>());
+    let mut w = vec![W::default(); n];
+    bytemuck::cast_slice_mut::<W, u8>(&mut w)[..bytes.len()].copy_from_slice(bytes);
+    w
 }
 
 /// `v`'s bytes as the grid stores them.
@@ -65,7 +58,7 @@ fn value_bytes<T: VolumeValue>(v: T) -> Vec<u8> {
     let mut b = Block::default();
     // SAFETY: the block is 32 bytes, aligned, and ours; every value type fits (24 bytes at most).
     unsafe { T::store(b.0.as_mut_ptr().cast::<u8>(), v) };
-    to_bytes(&b.0)[..T::SIZE as usize].to_vec()
+    bytemuck::bytes_of(&b)[..T::SIZE as usize].to_vec()
 }
 
 /// A sparse volume on one device (Warp's `wp.Volume`): a NanoVDB grid of `T` values, or of
@@ -120,21 +113,9 @@ impl<T: VolumeGrid> std::fmt::Debug for Volume<T> {
     }
 }
 
-/// The grid's bytes as little-endian words.
-fn to_words(bytes: &[u8]) -> Vec<u64> {
-    bytes
-        .chunks(8)
-        .map(|c| {
-            let mut w = [0u8; 8];
-            w[..c.len()].copy_from_slice(c);
-            u64::from_le_bytes(w)
-        })
-        .collect()
-}
-
 /// Words back to bytes.
 fn to_bytes(words: &[u64]) -> Vec<u8> {
-    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+    bytemuck::cast_slice(words).to_vec()
 }
 
 /// Zeroes every value a lookup can return (the background, value tiles, internal table
@@ -222,7 +203,7 @@ impl<T: VolumeGrid> Volume<T> {
                 ),
             ));
         }
-        let words = Array::from_slice(&to_words(bytes), device)?;
+        let words = Array::from_slice(&aligned::<u64>(bytes), device)?;
         let at = nanovdb::GRID_DATA + 56;
         let voxel_count = u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
         Ok(Volume {
@@ -332,7 +313,7 @@ impl<T: VolumeGrid> Volume<T> {
         }
         let mut b = self.grid_bytes()?;
         zero_values(&mut b, &self.info);
-        self.grad = Some(Array::from_slice(&to_words(&b), &self.device)?);
+        self.grad = Some(Array::from_slice(&aligned::<u64>(&b), &self.device)?);
         Ok(self)
     }
 
@@ -362,7 +343,7 @@ impl<T: VolumeGrid> Volume<T> {
         if let Some(g) = &self.grad {
             let mut b = self.grid_bytes()?;
             zero_values(&mut b, &self.info);
-            g.copy_from(&Array::from_slice(&to_words(&b), &self.device)?)?;
+            g.copy_from(&Array::from_slice(&aligned::<u64>(&b), &self.device)?)?;
         }
         Ok(())
     }
@@ -482,7 +463,7 @@ impl<T: VolumeValue> Volume<T> {
             nanovdb::build_from_tiles(kind, &tiles, map).map_err(|e| Error::invalid_in(WHAT, e))?;
         let info = nanovdb::validate(&bytes).map_err(|e| Error::invalid_in(WHAT, e))?;
         // The values, written on the host through the kernels' own store.
-        let mut blocks = to_blocks(&bytes);
+        let mut blocks = aligned::<Block>(&bytes);
         // SAFETY: `info` validated these bytes, copied into 32-byte aligned blocks that
         // outlive the view; nothing else touches them meanwhile.
         let view = unsafe { VolumeView::<T>::from_info(&info, blocks.as_mut_ptr() as u64, 0) };
@@ -492,8 +473,7 @@ impl<T: VolumeValue> Volume<T> {
             warp_core::objects::volume::volume_store(view, i as i32, j as i32, k as i32, *v)
                 .map_err(|f| Error::invalid_in(WHAT, f))?;
         }
-        let words: Vec<u64> = blocks.iter().flat_map(|b| b.0).collect();
-        Self::from_grid_bytes(&to_bytes(&words), device)
+        Self::from_grid_bytes(bytemuck::cast_slice(&blocks), device)
     }
 }
 
