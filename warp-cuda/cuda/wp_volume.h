@@ -58,7 +58,7 @@ enum { VOLUME_CLOSEST = 0, VOLUME_LINEAR = 1 };
 /// A Volume<T> kernel parameter (104 bytes, align 8), field for field warp-core's
 /// #[repr(C)] VolumeView<T>. Offsets are bytes from the grid's start (`data`).
 ///     0 data         address of grid byte 0 (32-byte aligned)
-///     8 grad         address of the gradient twin (the grid's structure, values zeroed), 0 = none
+///     8 grad         address of the gradient twin (the grid's size, values at its offsets), 0 = none
 ///    16 size         grid bytes
 ///    24 first_leaf   leaf 0
 ///    32 name         CPU only (the kernel name for faults); unused here

@@ -19,10 +19,11 @@
 //! Values are read and written through relaxed atomics of the value's width
 //! (`AtomicU32`/`AtomicU64`, a vector component by component), so concurrent
 //! [`volume_store`]s and reads are not data races (a relaxed load compiles to a plain load).
-//! The gradient grid ([`VolumeView::grad`], when non-zero) is a byte copy of the grid with its
-//! values zeroed: every value location (leaf value, internal table value, root tile value,
-//! root background) has a twin at the same byte offset, and the adjoints add into the twin of
-//! each location they read with an atomic add (a compare-exchange loop on the bits).
+//! The gradient grid ([`VolumeView::grad`], when non-zero) is a buffer of the grid's size:
+//! every value location (leaf value, internal table value, root tile value, root background)
+//! has a twin at the same byte offset, and the adjoints add into the twin of each location
+//! they read with an atomic add (a compare-exchange loop on the bits). Nothing reads its
+//! other bytes (the walk is the grid's), so it starts as zeros.
 //!
 //! # Sampling, exactly (the CUDA mirror reproduces every step)
 //!
@@ -430,7 +431,7 @@ vector_sample!(DVec3, f64, DMat3);
 /// | offset | field | type | meaning |
 /// |---|---|---|---|
 /// | 0 | `data` | u64 | address of grid byte 0 (32-byte aligned) |
-/// | 8 | `grad` | u64 | address of the gradient grid (same layout, values zeroed), 0 = none |
+/// | 8 | `grad` | u64 | address of the gradient twin (the grid's size, values at the grid's offsets), 0 = none |
 /// | 16 | `size` | u64 | grid bytes (GridData's gridSize) |
 /// | 24 | `first_leaf` | u64 | byte offset of leaf 0 from `data` |
 /// | 32 | `name` | u64 | CPU only: address of the kernel name's bytes, for faults (0 = none; the device ignores it) |
@@ -576,9 +577,9 @@ impl<T: VolumeGrid> VolumeView<T> {
     /// - `data` is 32-byte aligned, and those bytes stay alive, writable, and structurally
     ///   unchanged (only values may change, through the builtins) while any copy of the view
     ///   is used.
-    /// - `grad` is 0, or the address of `info.size` bytes with the same properties that are a
-    ///   copy of the grid's structure (every value location of the grid is a value location
-    ///   of the twin).
+    /// - `grad` is 0, or the 32-byte aligned address of `info.size` writable bytes that stay
+    ///   alive while any copy of the view is used (the adjoints add at the grid's value
+    ///   offsets; nothing else reads or writes them).
     pub unsafe fn from_info(info: &GridInfo, data: u64, grad: u64) -> Self {
         debug_assert!(T::GRID_TYPES.contains(&info.grid_type.code()));
         debug_assert!(data.is_multiple_of(32) && grad.is_multiple_of(32));
@@ -921,8 +922,8 @@ impl<T: VolumeValue> VolumeView<T> {
     #[inline(always)]
     fn grad_add_at(&self, at: VoxelAddress, v: T) {
         if self.grad != 0 {
-            // SAFETY: the twin has the grid's structure (`from_info`), so `at` is a value
-            // location in it too.
+            // SAFETY: the twin has the grid's size (`from_info`) and `at` is a value location
+            // of the grid, so the value's bytes lie inside the twin.
             unsafe { T::grad_add((self.grad + at.offset) as *mut u8, v) }
         }
     }

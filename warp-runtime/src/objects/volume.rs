@@ -10,8 +10,8 @@
 //! lookups skip bounds checks. The value type is the Rust type parameter: a `Volume<f32>`
 //! holds a Float grid, and loading a file of another type is an `Err` naming both.
 //!
-//! Gradients: [`Volume::with_grad`] adds a gradient grid, a copy of the grid with every value
-//! zeroed; the adjoints of `volume_sample`, `volume_sample_grad` and `volume_lookup` add into
+//! Gradients: [`Volume::with_grad`] adds a gradient grid, zeros of the grid's size; the
+//! adjoints of `volume_sample`, `volume_sample_grad` and `volume_lookup` add into
 //! it at the byte offsets the forward pass read (leaf values, tile values, the background),
 //! and [`Volume::grad_volume`] reads it back as a volume of the same topology.
 
@@ -79,7 +79,7 @@ pub struct Volume<T: VolumeGrid> {
     device: Device,
     /// The grid's bytes as words (a grid's size is a multiple of 32 bytes).
     words: Array<u64>,
-    /// The gradient grid: the grid with its values zeroed, then accumulated into by adjoints.
+    /// The gradient: the grid's size in zeros, accumulated into by adjoints at value offsets.
     grad: Option<Array<u64>>,
     info: GridInfo,
     /// TreeData's active voxel count.
@@ -118,58 +118,52 @@ fn to_bytes(words: &[u64]) -> Vec<u8> {
     bytemuck::cast_slice(words).to_vec()
 }
 
-/// Zeroes every value a lookup can return (the background, value tiles, internal table
-/// entries without a child, leaf values), leaving the structure: the gradient grid's start.
-fn zero_values(bytes: &mut [u8], info: &GridInfo) {
+/// Every place a lookup can read a value from (the background, value tiles, internal table
+/// entries without a child, leaf values), as byte ranges of the grid, handed to `f`.
+fn for_each_value(bytes: &[u8], info: &GridInfo, mut f: impl FnMut(std::ops::Range<usize>)) {
     let l = info.layout;
     let vs = l.value_size;
-    let mut zero = |at: usize| bytes[at..at + vs].fill(0);
+    let word = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
     let root = info.root as usize;
-    zero(root + l.background);
-    let read_i64 = |b: &[u8], at: usize| i64::from_le_bytes(b[at..at + 8].try_into().expect("8"));
+    f(root + l.background..root + l.background + vs);
     for t in 0..info.tile_count as usize {
         let tile = root + l.root_size + t * l.tile_size;
-        if read_i64(bytes, tile + 8) == 0 {
-            bytes[tile + l.tile_value..tile + l.tile_value + vs].fill(0);
+        if word(tile + 8) == 0 {
+            f(tile + l.tile_value..tile + l.tile_value + vs);
         }
     }
-    let internal = |bytes: &mut [u8], first: u64, count: u32, size, table, mask, entries| {
+    let internal = [
+        (
+            info.first_upper,
+            info.upper_count,
+            l.up_size,
+            l.up_table,
+            nanovdb::UPPER_CHILD_MASK,
+            nanovdb::UPPER_LOG2,
+        ),
+        (
+            info.first_lower,
+            info.lower_count,
+            l.lo_size,
+            l.lo_table,
+            nanovdb::LOWER_CHILD_MASK,
+            nanovdb::LOWER_LOG2,
+        ),
+    ];
+    for (first, count, size, table, mask, log2) in internal {
         for n in 0..count as usize {
             let node = first as usize + n * size;
-            for e in 0..entries {
-                let word = u64::from_le_bytes(
-                    bytes[node + mask + 8 * (e >> 6)..node + mask + 8 * (e >> 6) + 8]
-                        .try_into()
-                        .expect("8"),
-                );
-                if word >> (e & 63) & 1 == 0 {
+            for e in 0..1usize << (3 * log2) {
+                if word(node + mask + 8 * (e >> 6)) >> (e & 63) & 1 == 0 {
                     let at = node + table + e * l.stride;
-                    bytes[at..at + vs].fill(0);
+                    f(at..at + vs);
                 }
             }
         }
-    };
-    internal(
-        bytes,
-        info.first_upper,
-        info.upper_count,
-        l.up_size,
-        l.up_table,
-        nanovdb::UPPER_CHILD_MASK,
-        1 << (3 * nanovdb::UPPER_LOG2),
-    );
-    internal(
-        bytes,
-        info.first_lower,
-        info.lower_count,
-        l.lo_size,
-        l.lo_table,
-        nanovdb::LOWER_CHILD_MASK,
-        1 << (3 * nanovdb::LOWER_LOG2),
-    );
+    }
     for n in 0..info.leaf_count as usize {
         let values = info.first_leaf as usize + n * l.leaf_size + l.leaf_table;
-        bytes[values..values + 512 * vs].fill(0);
+        f(values..values + 512 * vs);
     }
 }
 
@@ -299,8 +293,9 @@ impl<T: VolumeGrid> Volume<T> {
         Ok(m.map(|r| r[0] + r[1] + r[2]))
     }
 
-    /// Adds a gradient grid (zeroed): kernels' adjoints then accumulate the gradients of the
-    /// values they read into it.
+    /// Adds a gradient grid: kernels' adjoints then accumulate the gradients of the values
+    /// they read into it, at the byte offsets they read them from (its other bytes are never
+    /// touched, so it starts as zeros and is read back through the grid's structure).
     ///
     /// # Errors
     /// An index grid (its values live in a separate array); device errors.
@@ -311,9 +306,7 @@ impl<T: VolumeGrid> Volume<T> {
                 "an index grid holds no values: give the value array a gradient instead",
             ));
         }
-        let mut b = self.grid_bytes()?;
-        zero_values(&mut b, &self.info);
-        self.grad = Some(Array::from_slice(&aligned::<u64>(&b), &self.device)?);
+        self.grad = Some(Array::zeros(self.words.len(), &self.device)?);
         Ok(self)
     }
 
@@ -322,7 +315,8 @@ impl<T: VolumeGrid> Volume<T> {
         self.grad.is_some()
     }
 
-    /// The gradient grid as a volume of the same topology (a copy, read back), if any.
+    /// The gradient as a volume of the same topology (a copy, read back: the grid's structure
+    /// with the gradient's values), if the volume has one.
     ///
     /// # Errors
     /// Device errors.
@@ -330,22 +324,24 @@ impl<T: VolumeGrid> Volume<T> {
         let Some(g) = &self.grad else {
             return Ok(None);
         };
-        let mut b = to_bytes(&g.to_vec()?);
-        b.truncate(self.info.size as usize);
+        let grad = to_bytes(&g.to_vec()?);
+        let grid = self.grid_bytes()?;
+        let mut b = grid.clone();
+        for_each_value(&grid, &self.info, |r| {
+            b[r.clone()].copy_from_slice(&grad[r])
+        });
         Volume::from_grid_bytes(&b, &self.device).map(Some)
     }
 
-    /// Zeroes the gradient grid's values (nothing without one).
+    /// Zeroes the gradient (nothing without one), on the device.
     ///
     /// # Errors
     /// Device errors.
     pub fn zero_grad(&self) -> Result<()> {
-        if let Some(g) = &self.grad {
-            let mut b = self.grid_bytes()?;
-            zero_values(&mut b, &self.info);
-            g.copy_from(&Array::from_slice(&aligned::<u64>(&b), &self.device)?)?;
+        match &self.grad {
+            Some(g) => g.fill(0),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// The checks of a launch: the device.
