@@ -119,6 +119,9 @@ pub use warp_runtime::MarchingCubes;
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };
+/// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
+pub use warp_runtime::graph;
+pub use warp_runtime::{capture, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, kernel_info, launch, load, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,

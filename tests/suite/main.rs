@@ -76,6 +76,7 @@ mod f16;
 mod funcs;
 mod generics;
 mod grad;
+mod graph;
 mod hash_grid;
 mod launch;
 mod lbvh;

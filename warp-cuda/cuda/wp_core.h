@@ -431,7 +431,8 @@ enum fault_kind : i32 {
 
 /// The first fault of a launch, filled by the first faulting thread (80 bytes, align 8):
 ///   0 kind (i32), 4 arg (i32: the kernel parameter index for OutOfBounds, else -1),
-///   8 index[4] (i64), 40 shape[4] (i64), 72 ndim (i32), 76 pad (i32).
+///   8 index[4] (i64), 40 shape[4] (i64), 72 ndim (i32), 76 kernel (i32: the faulting launch's
+///   kernel id, copied from ctx_t::kernel; 0 when the launcher set none).
 /// OutOfBounds: index/shape hold `ndim` entries. DivisionByZero: ndim 0. BadStep: ndim 1,
 /// index[0] is the step, shape all 0. NonFinite (a NaN or infinite volume sample position,
 /// warp_core::FaultKind::NonFinite): ndim 3, index[0..3] are the coordinates' f64 bit
@@ -442,13 +443,15 @@ struct fault_t {
   i64 index[4];
   i64 shape[4];
   i32 ndim;
-  i32 pad;
+  i32 kernel;
 };
 static_assert(sizeof(fault_t) == 80 && alignof(fault_t) == 8, "fault_t layout");
 
 /// Per-thread fault context (24 bytes, align 8):
 ///   0 fault (fault_t*, device memory), 8 fault_flag (u32*, device memory, 0 = no fault yet),
-///   16 raised (i32: set to 1 by `raise` in this thread; starts at 0), 20 pad.
+///   16 raised (i32: set to 1 by `raise` in this thread; starts at 0), 20 kernel (i32: an id
+///   the host gives each loaded kernel, copied into the fault record so that a fault names its
+///   kernel even when launches of several kernels are in flight, as in a replayed graph).
 /// A kernel builds one per thread (`ctx_make(fault, flag)`) and passes its address down; after
 /// any call that may fault, generated code checks `ctx->raised` and returns (the CPU's `?`).
 /// `fault` and `fault_flag` may be null: faults then only set `raised`.
@@ -456,7 +459,7 @@ struct ctx_t {
   fault_t* fault;
   u32* fault_flag;
   i32 raised;
-  i32 pad;
+  i32 kernel;
 };
 static_assert(sizeof(ctx_t) == 24 && alignof(ctx_t) == 8, "ctx_t layout");
 
@@ -465,7 +468,7 @@ WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
   c.fault = fault;
   c.fault_flag = fault_flag;
   c.raised = 0;
-  c.pad = 0;
+  c.kernel = 0;
   return c;
 }
 
@@ -491,7 +494,7 @@ WP_FN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* in
   f->kind = kind;
   f->arg = arg;
   f->ndim = ndim;
-  f->pad = 0;
+  f->kernel = ctx->kernel;
   for (int k = 0; k < 4; ++k) {
     f->index[k] = (index != nullptr && k < ndim) ? index[k] : 0;
     f->shape[k] = (shape != nullptr && k < ndim) ? shape[k] : 0;

@@ -11,7 +11,8 @@
 //! - [`memory`]: [`DeviceBuffer`] (untyped, stream-ordered), [`PinnedBuffer`];
 //! - [`compile`](mod@compile): NVRTC to cubin ([`compile()`], [`CompileOptions`], [`nvrtc_version`]);
 //! - [`cache`]: the on-disk kernel cache ([`compile_cached`], [`KernelCache`]);
-//! - [`launch`]: [`Module`], [`Function`], [`Gpu::launch_raw`].
+//! - [`launch`]: [`Module`], [`Function`], [`Gpu::launch_raw`];
+//! - [`graph`]: stream capture ([`Stream::begin_capture`]) and replay ([`Graph`]).
 //!
 //! The CUDA C++ builtin library (the `.cuh` sections named in the builtin table) lives in
 //! `cuda/` and is embedded by the code generator.
@@ -22,6 +23,7 @@ pub mod cache;
 pub mod compile;
 pub mod device;
 pub mod error;
+pub mod graph;
 pub mod launch;
 pub mod memory;
 
@@ -35,6 +37,7 @@ pub use cache::{
 pub use compile::{compile, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled};
 pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_VERSION};
 pub use error::{CudaError, Result};
+pub use graph::Graph;
 pub use launch::{Function, Module};
 pub use memory::{DeviceBuffer, PinnedBuffer};
 

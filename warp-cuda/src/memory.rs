@@ -240,11 +240,7 @@ impl DeviceBuffer {
         }
         let stream = self.stream();
         if same_device {
-            self.gpu.bind()?;
-            // SAFETY: both ranges checked and live; ordered on the shared default stream.
-            unsafe { sys::cuMemcpyDtoDAsync_v2(dst, sp, bytes, stream.cu_stream()) }
-                .result()
-                .map_err(|e| self.op_err(e, "cuMemcpyDtoDAsync", bytes))
+            self.copy_within_device(stream, dst, sp, bytes)
         } else {
             stream.wait_stream(src.stream())?;
             self.gpu.bind()?;
@@ -274,6 +270,49 @@ impl DeviceBuffer {
         }
     }
 
+    /// [`copy_from_device`](Self::copy_from_device) queued on `stream` (a stream of this
+    /// buffer's device, ordered by the caller), for buffers of one device: what a graph
+    /// capture records as a copy node.
+    pub fn copy_from_device_on(
+        &self,
+        stream: &Stream,
+        dst_off: usize,
+        src: &DeviceBuffer,
+        src_off: usize,
+        bytes: usize,
+    ) -> Result<()> {
+        check_range(dst_off, bytes, self.bytes, "copy_from_device (destination)")?;
+        check_range(src_off, bytes, src.bytes, "copy_from_device (source)")?;
+        let (ordinal, src_ordinal) = (self.gpu.ordinal(), src.gpu.ordinal());
+        if stream.ordinal() != ordinal || src_ordinal != ordinal {
+            return Err(CudaError::InvalidArgument(format!(
+                "copy_from_device_on: a copy from cuda:{src_ordinal} to cuda:{ordinal} on a \
+                 stream of cuda:{} (only copies within the stream's device)",
+                stream.ordinal()
+            )));
+        }
+        if bytes == 0 {
+            return Ok(());
+        }
+        let dst = self.ptr + dst_off as u64;
+        let sp = src.ptr + src_off as u64;
+        if dst < sp + bytes as u64 && sp < dst + bytes as u64 {
+            return Err(CudaError::InvalidArgument(format!(
+                "copy_from_device: overlapping ranges ({bytes} bytes from {sp:#x} to {dst:#x})"
+            )));
+        }
+        self.copy_within_device(stream, dst, sp, bytes)
+    }
+
+    /// `cuMemcpyDtoDAsync` of checked, disjoint ranges of this device on `stream`.
+    fn copy_within_device(&self, stream: &Stream, dst: u64, src: u64, bytes: usize) -> Result<()> {
+        self.gpu.bind()?;
+        // SAFETY: the caller checked both ranges (live buffers of this device, disjoint).
+        unsafe { sys::cuMemcpyDtoDAsync_v2(dst, src, bytes, stream.cu_stream()) }
+            .result()
+            .map_err(|e| self.op_err(e, "cuMemcpyDtoDAsync", bytes))
+    }
+
     /// Fills `bytes` bytes at `offset` with `pattern` repeated (`bytes` must be a multiple of
     /// the pattern's length), queued on the default stream.
     ///
@@ -281,6 +320,28 @@ impl DeviceBuffer {
     /// for the element size); other patterns upload one host chunk of the repeated pattern and
     /// double it with device-to-device copies, so the host never builds the whole range.
     pub fn fill_pattern(&self, offset: usize, bytes: usize, pattern: &[u8]) -> Result<()> {
+        self.fill_pattern_on(self.stream(), offset, bytes, pattern)
+    }
+
+    /// [`fill_pattern`](Self::fill_pattern) queued on `stream` (a stream of this buffer's
+    /// device; ordering it is the caller's job). On a stream other than the default one,
+    /// patterns that no single memset covers are written by one pitched memset per element
+    /// of the pattern (`cuMemsetD2D*Async`, the pattern's length as the pitch) instead of an
+    /// upload: nothing is read from host memory, so the fill can be captured into a graph.
+    pub fn fill_pattern_on(
+        &self,
+        stream: &Stream,
+        offset: usize,
+        bytes: usize,
+        pattern: &[u8],
+    ) -> Result<()> {
+        if stream.ordinal() != self.gpu.ordinal() {
+            return Err(CudaError::InvalidArgument(format!(
+                "fill_pattern: a buffer of cuda:{} filled on a stream of cuda:{}",
+                self.gpu.ordinal(),
+                stream.ordinal()
+            )));
+        }
         let p = pattern.len();
         if p == 0 {
             return Err(CudaError::InvalidArgument(
@@ -301,7 +362,7 @@ impl DeviceBuffer {
         let pattern = &pattern[..minimal_period(pattern)];
         let p = pattern.len();
         let dst = self.ptr + offset as u64;
-        let cu_stream = self.stream().cu_stream();
+        let cu_stream = stream.cu_stream();
         let aligned = |n: u64| dst % n == 0;
         if p == 1 || (p == 2 && aligned(2)) || (p == 4 && aligned(4)) {
             self.gpu.bind()?;
@@ -332,6 +393,9 @@ impl DeviceBuffer {
             };
             return r.result().map_err(|e| self.op_err(e, call, bytes));
         }
+        if !stream.is(self.stream()) {
+            return self.fill_columns(stream, dst, bytes, pattern);
+        }
         // General pattern: one chunk of whole patterns from the host, then doubling copies.
         let chunk_len = bytes.min((FILL_CHUNK / p).max(1) * p);
         let chunk: Vec<u8> = pattern.iter().copied().cycle().take(chunk_len).collect();
@@ -343,6 +407,46 @@ impl DeviceBuffer {
             // both start on a pattern boundary since `filled` is a multiple of `p`.
             self.copy_from_device(offset + filled, self, offset, n)?;
             filled += n;
+        }
+        Ok(())
+    }
+
+    /// Fills `bytes` at device address `dst` with `pattern` (its minimal period) on `stream`
+    /// by pitched memsets: the pattern is cut into elements of the widest size (4, 2 or 1
+    /// bytes) that divides its length and `dst`'s alignment, and element `k` of every
+    /// repetition is set by one `cuMemsetD2D*Async` whose rows are the repetitions.
+    fn fill_columns(&self, stream: &Stream, dst: u64, bytes: usize, pattern: &[u8]) -> Result<()> {
+        let p = pattern.len();
+        let e = [4usize, 2, 1]
+            .into_iter()
+            .find(|&e| p % e == 0 && dst % e as u64 == 0)
+            .unwrap_or(1);
+        let rows = bytes / p;
+        self.gpu.bind()?;
+        for (k, word) in pattern.chunks_exact(e).enumerate() {
+            let at = dst + (k * e) as u64;
+            // SAFETY: rows * p bytes from dst were range-checked by the caller; each memset
+            // writes element k (e bytes) of each of the `rows` repetitions, aligned for `e`.
+            let (call, r) = unsafe {
+                match e {
+                    4 => {
+                        let v = u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
+                        let r = sys::cuMemsetD2D32Async(at, p, v, 1, rows, stream.cu_stream());
+                        ("cuMemsetD2D32Async", r)
+                    }
+                    2 => {
+                        let v = u16::from_le_bytes([word[0], word[1]]);
+                        let r = sys::cuMemsetD2D16Async(at, p, v, 1, rows, stream.cu_stream());
+                        ("cuMemsetD2D16Async", r)
+                    }
+                    _ => {
+                        let r =
+                            sys::cuMemsetD2D8Async(at, p, word[0], 1, rows, stream.cu_stream());
+                        ("cuMemsetD2D8Async", r)
+                    }
+                }
+            };
+            r.result().map_err(|err| self.op_err(err, call, bytes))?;
         }
         Ok(())
     }

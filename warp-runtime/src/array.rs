@@ -11,6 +11,7 @@
 use crate::device::Device;
 use crate::dispatch::{self, Storage};
 use crate::error::{Error, Result};
+use crate::graph::{self, Captured};
 use crate::kernel::{ArgCtx, CudaArray, KernelArg};
 use glam::{
     DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -448,6 +449,7 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// The elements in row-major order (honouring strides). On a GPU this synchronises the
     /// device's stream and reports a fault recorded by an earlier launch.
     pub fn to_vec(&self) -> Result<Vec<T>> {
+        graph::refuse(Some(&self.device), "a read-back (to_vec)")?;
         let Some(base) = self.host_base() else {
             // Device memory: the kernels that may write it first (their faults are reported
             // here), then a copy.
@@ -487,6 +489,18 @@ impl<T: Element, const N: usize> Array<T, N> {
 
     /// Sets every element to `value`.
     pub fn fill(&self, value: T) -> Result<()> {
+        if graph::capturing() {
+            let (keep, array) = (self.clone(), self.clone());
+            let captured = graph::on_array_op(
+                &[&self.device],
+                "a fill",
+                move || Box::new(keep),
+                move || Box::new(move || array.fill(value)),
+            )?;
+            if let Captured::Recorded = captured {
+                return Ok(());
+            }
+        }
         let Some(base) = self.host_base() else {
             if self.is_contiguous() {
                 let bytes = self.len() * std::mem::size_of::<T>();
@@ -522,6 +536,38 @@ impl<T: Element, const N: usize> Array<T, N> {
             )));
         }
         let same_storage = Arc::ptr_eq(&self.storage, &src.storage);
+        if graph::capturing() {
+            let keep = (self.clone(), src.clone());
+            let (dst, from) = (self.clone(), src.clone());
+            match graph::on_array_op(
+                &[&self.device, &src.device],
+                "a copy",
+                move || Box::new(keep),
+                move || Box::new(move || dst.copy_from(&from)),
+            )? {
+                Captured::Recorded => return Ok(()),
+                Captured::OnGpu if self.is_contiguous() && src.is_contiguous() && !same_storage => {
+                    let bytes = self.len() * std::mem::size_of::<T>();
+                    return self.storage.copy_from(
+                        self.byte_offset,
+                        &src.storage,
+                        src.byte_offset,
+                        bytes,
+                    );
+                }
+                Captured::OnGpu => {
+                    return Err(Error::Capture {
+                        what: format!(
+                            "a copy between strided or overlapping arrays on \"{}\" goes \
+                             through the host, which a graph cannot replay (copy contiguous \
+                             arrays, or launch a copy kernel)",
+                            self.device
+                        ),
+                    })
+                }
+                Captured::No => {}
+            }
+        }
         if self.is_contiguous() && src.is_contiguous() && !same_storage {
             // One copy of bytes, by the backends of the two memories. The kernels that may
             // still write `src` first (a GPU's; their faults are reported here).
@@ -736,7 +782,9 @@ impl<T: Element> Array<T, 1> {
         if !device.is_cpu() {
             return Self::from_slice(&data, device);
         }
-        // Host memory: the array takes the vector's allocation over.
+        // Host memory: the array takes the vector's allocation over (an allocation as far as
+        // a capture is concerned: refused on every backend alike).
+        graph::refuse(Some(device), "an allocation")?;
         let len = data.len();
         checked_size::<T>(&[len])?;
         Ok(Array {

@@ -98,6 +98,13 @@ pub enum Error {
         /// or a device without adjoint support yet).
         reason: String,
     },
+    /// An operation that a graph capture cannot record was called inside one (an allocation,
+    /// a read-back, a kernel not compiled before the capture, a nested capture, work on
+    /// another device), or a graph was launched where it cannot run.
+    Capture {
+        /// What was refused and what to do instead.
+        what: String,
+    },
     /// A host-side API was called with unusable arguments (lengths that do not match a shape,
     /// a view range out of bounds, an impossible reinterpretation, ...).
     InvalidArgument {
@@ -185,6 +192,7 @@ impl fmt::Display for Error {
             Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
             Error::Cuda { device, message } => write!(f, "CUDA error on \"{device}\": {message}"),
             Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
+            Error::Capture { what } => write!(f, "graph capture: {what}"),
             Error::NonFinite {
                 kernel,
                 arg,

@@ -15,6 +15,8 @@
 //!   `Buffer` traits (`backend.rs`); `dispatch.rs` picks a device's backend and is the only
 //!   place that names them all.
 //! - [`primitives`]: scan, reductions, radix sort and stream compaction on arrays.
+//! - [`graph`]: work recorded once and replayed ([`capture`], [`Graph`]): CUDA graphs on a
+//!   GPU, the list of recorded operations on the CPU.
 //! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
 //!
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
@@ -31,6 +33,7 @@ pub mod cuda;
 pub mod device;
 mod dispatch;
 pub mod error;
+pub mod graph;
 pub mod kernel;
 pub mod launch;
 pub mod objects;
@@ -54,6 +57,7 @@ pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };
 pub use error::{Error, Result};
+pub use graph::{capture, CaptureOn, Graph, ScopedCapture};
 pub use kernel::{
     kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg,
     KernelInfo, KernelParams, Launchable,

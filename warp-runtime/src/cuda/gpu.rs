@@ -47,6 +47,50 @@ const FAULT_BYTES: usize = FAULT_RECORD_BYTES + 8;
 thread_local! {
     /// The calling thread's current streams, innermost last: `(GPU ordinal, stream)`.
     static CURRENT: RefCell<Vec<(usize, warp_cuda::Stream)>> = const { RefCell::new(Vec::new()) };
+    /// The stream this thread is capturing into a graph, with its GPU (`cuda/capture.rs`).
+    static CAPTURING: RefCell<Option<(usize, warp_cuda::Stream)>> = const { RefCell::new(None) };
+}
+
+/// The stream the calling thread is capturing on GPU `ordinal`, if it is: every operation of
+/// this thread on that GPU (launches, fills, copies) is queued there, and nothing else.
+pub(crate) fn capture_stream(ordinal: usize) -> Option<warp_cuda::Stream> {
+    CAPTURING.with(|c| match &*c.borrow() {
+        Some((o, s)) if *o == ordinal => Some(s.clone()),
+        _ => None,
+    })
+}
+
+/// Sets (or clears) the calling thread's capture stream.
+pub(crate) fn set_capture_stream(capture: Option<(usize, warp_cuda::Stream)>) {
+    CAPTURING.with(|c| *c.borrow_mut() = capture);
+}
+
+/// An [`Error::Capture`] for `what` when the calling thread is capturing on GPU `ordinal`:
+/// what cannot be recorded into a graph (a read-back, an upload, an allocation) is refused
+/// rather than run at capture time or left to break the capture.
+pub(crate) fn refuse_in_capture(ordinal: usize, what: &str) -> Result<()> {
+    if capture_stream(ordinal).is_some() {
+        return Err(Error::Capture {
+            what: format!(
+                "{what} on cuda:{ordinal} cannot be recorded into a graph (do it before or \
+                 after the capture)"
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Gives `info` a kernel id for fault records (`wp::ctx_t::kernel`): ids start at 1, and 0
+/// means "not set". A kernel loaded several times (variants, GPUs) has several ids.
+pub(crate) fn kernel_id(info: &'static KernelInfo) -> i32 {
+    let mut ids = kernel_ids().lock().unwrap_or_else(|p| p.into_inner());
+    ids.push(info);
+    i32::try_from(ids.len()).unwrap_or(0)
+}
+
+fn kernel_ids() -> &'static Mutex<Vec<&'static KernelInfo>> {
+    static IDS: OnceLock<Mutex<Vec<&'static KernelInfo>>> = OnceLock::new();
+    IDS.get_or_init(Default::default)
 }
 
 /// The calling thread's current stream for GPU `ordinal`, when a `ScopedStream` set one.
@@ -130,6 +174,19 @@ impl GpuState {
         stream: Option<&warp_cuda::Stream>,
         enqueue: impl FnOnce(&warp_cuda::Stream) -> Result<()>,
     ) -> Result<()> {
+        if let Some(capture) = capture_stream(ordinal) {
+            // A capture records this thread's work on its own stream, with no joins: the
+            // graph is ordered against the default stream when it is launched.
+            if stream.is_some_and(|s| !s.is(&capture)) {
+                return Err(Error::Capture {
+                    what: format!(
+                        "work queued on another stream of cuda:{ordinal} than the capturing \
+                         one (launch_on a stream inside a capture records nothing)"
+                    ),
+                });
+            }
+            return enqueue(&capture);
+        }
         let default = self.gpu.default_stream();
         let scoped;
         let user = match stream {
@@ -229,6 +286,7 @@ fn states() -> Vec<Arc<GpuState>> {
 
 /// Waits for GPU `ordinal` (`device`) and reports a fault recorded since the last check.
 pub(crate) fn synchronize(device: &Device, ordinal: usize) -> Result<()> {
+    refuse_in_capture(ordinal, "a synchronisation")?;
     check_state(&*state(device, ordinal)?)
 }
 
@@ -261,11 +319,17 @@ pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
     let i32_at = |o: usize| i32::from_le_bytes(rec[o..o + 4].try_into().expect("4 bytes"));
     let i64_at = |o: usize| i64::from_le_bytes(rec[o..o + 8].try_into().expect("8 bytes"));
     let (kind, arg, ndim) = (i32_at(0), i32_at(4), i32_at(72).clamp(0, 4) as usize);
-    let info = st
-        .last
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .unwrap_or(&UNKNOWN);
+    // The kernel id the faulting launch carried (`wp::ctx_t::kernel`), else the kernel
+    // launched last (the primitives' kernels set no id).
+    let by_id = usize::try_from(i32_at(76) - 1)
+        .ok()
+        .and_then(|k| kernel_ids().lock().unwrap_or_else(|p| p.into_inner()).get(k).copied());
+    let info = by_id.unwrap_or_else(|| {
+        st.last
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .unwrap_or(&UNKNOWN)
+    });
     let kind = match kind {
         4 => FaultKind::AdStackOverflow {
             line: i64_at(8) as u32,
@@ -299,6 +363,9 @@ static UNKNOWN: KernelInfo = KernelInfo {
 
 /// Waits for every GPU used so far and reports the first recorded fault.
 pub(crate) fn synchronize_all() -> Result<()> {
+    if let Some((ordinal, _)) = CAPTURING.with(|c| c.borrow().clone()) {
+        refuse_in_capture(ordinal, "a synchronisation")?;
+    }
     for st in states() {
         check_state(&st)?;
     }

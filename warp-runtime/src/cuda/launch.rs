@@ -27,7 +27,7 @@ struct Ctx {
     fault: u64,
     fault_flag: u64,
     raised: i32,
-    pad: i32,
+    kernel: i32,
 }
 
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
@@ -71,7 +71,7 @@ pub(crate) fn launch<K: Kernel>(
         fault,
         fault_flag,
         raised: 0,
-        pad: 0,
+        kernel: kernel.id,
     };
     // The launch and the context, then the parameters and (adjoint) their gradients.
     let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
@@ -94,7 +94,8 @@ pub(crate) fn launch<K: Kernel>(
                 .map_err(|e| err(device, e))
         }
     })?;
-    if config::debug() {
+    // (Inside a capture nothing has run yet: there is nothing to check.)
+    if config::debug() && super::gpu::capture_stream(ordinal).is_none() {
         check_state(st)?;
     }
     Ok(())

@@ -15,6 +15,7 @@ pub(crate) struct CudaBuffer {
 impl CudaBuffer {
     /// `bytes` of zeroed memory on GPU `ordinal` (`device`).
     pub(crate) fn zeros(device: &Device, ordinal: usize, bytes: usize) -> Result<CudaBuffer> {
+        gpu::refuse_in_capture(ordinal, "an allocation")?;
         let g = gpu::gpu(ordinal)?;
         let inner = DeviceBuffer::zeros(&g, bytes).map_err(|e| gpu::err(device, e))?;
         Ok(CudaBuffer { inner })
@@ -48,16 +49,24 @@ impl Buffer for CudaBuffer {
     }
 
     fn read(&self, offset: usize, out: &mut [u8]) -> Result<()> {
+        gpu::refuse_in_capture(self.ordinal(), "a read-back to the host")?;
         join_ordinal(self.ordinal())?;
         self.inner.download(offset, out).map_err(|e| self.err(e))
     }
 
     fn write(&self, offset: usize, data: &[u8]) -> Result<()> {
+        gpu::refuse_in_capture(self.ordinal(), "an upload from host memory")?;
         join_ordinal(self.ordinal())?;
         self.inner.upload(offset, data).map_err(|e| self.err(e))
     }
 
     fn fill(&self, offset: usize, bytes: usize, pattern: &[u8]) -> Result<()> {
+        if let Some(capture) = gpu::capture_stream(self.ordinal()) {
+            return self
+                .inner
+                .fill_pattern_on(&capture, offset, bytes, pattern)
+                .map_err(|e| self.err(e));
+        }
         join_ordinal(self.ordinal())?;
         self.inner
             .fill_pattern(offset, bytes, pattern)
@@ -65,6 +74,12 @@ impl Buffer for CudaBuffer {
     }
 
     fn copy_from(&self, offset: usize, src: &Self, src_offset: usize, bytes: usize) -> Result<()> {
+        if let Some(capture) = gpu::capture_stream(self.ordinal()) {
+            return self
+                .inner
+                .copy_from_device_on(&capture, offset, &src.inner, src_offset, bytes)
+                .map_err(|e| self.err(e));
+        }
         join_ordinal(self.ordinal())?;
         self.inner
             .copy_from_device(offset, &src.inner, src_offset, bytes)

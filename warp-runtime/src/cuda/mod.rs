@@ -9,6 +9,7 @@
 //! - `launch`: a launch's parameter block and `cuLaunchKernel`.
 //! - `primitives`: the launch plans of the parallel primitives (`wp_primitives.h`), run.
 //! - `objects`: the build kernels of host objects (the hash grid's, `wp_hash_grid.h`).
+//! - `capture`: graph capture on a GPU (the thread's capture stream) and graph replay.
 //! - `memory`: GPU memory for arrays. `stream`, `pinned`: the public streams, events and
 //!   pinned host memory.
 //! - `backend`: `Cuda`, the backend (see the crate's `backend.rs`) that the runtime
@@ -20,6 +21,8 @@ pub mod source;
 pub mod aot;
 #[cfg(feature = "cuda")]
 mod backend;
+#[cfg(feature = "cuda")]
+pub(crate) mod capture;
 #[cfg(feature = "cuda")]
 mod gpu;
 #[cfg(feature = "cuda")]

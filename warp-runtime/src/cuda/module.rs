@@ -20,6 +20,8 @@ pub(crate) struct Loaded {
     pub(crate) st: Arc<GpuState>,
     _module: Module,
     pub(crate) function: Function,
+    /// What its launches put in `wp::ctx_t::kernel`, so that a fault names this kernel.
+    pub(crate) id: i32,
 }
 
 /// What compiling a kernel cost, for reports.
@@ -115,6 +117,23 @@ pub(crate) fn loaded(
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
+    // Loading a module inside a stream capture would break it; wp::load compiles before.
+    super::gpu::refuse_in_capture(
+        ordinal,
+        &format!(
+            "compiling kernel `{}` ({}, {}) at its first launch: load it before capturing with \
+             wp::load{}(&[wp::kernel_info({})], &device)",
+            info.name,
+            if adjoint.is_some() { "adjoint" } else { "forward" },
+            if contiguous {
+                "contiguous arrays"
+            } else {
+                "strided arrays: launch it once before capturing"
+            },
+            if adjoint.is_some() { "_with_adjoints" } else { "" },
+            info.name
+        ),
+    )?;
     let st = state(device, ordinal)?;
     let t0 = std::time::Instant::now();
     let src = match adjoint {
@@ -165,6 +184,7 @@ pub(crate) fn loaded(
         st,
         _module: module,
         function,
+        id: super::gpu::kernel_id(info),
     });
     cache
         .lock()

@@ -137,6 +137,8 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// `src.len()` elements.
     pub fn copy_from_pinned_async(&self, src: &mut PinnedVec<T>) -> Result<()> {
         let (ordinal, buf, off, bytes) = self.pinned_peer(src, "copy_from_pinned_async")?;
+        // The pinned buffer tracks its copies with events, which a graph cannot replay.
+        gpu::refuse_in_capture(ordinal, "copy_from_pinned_async")?;
         let buf = buf.device_buffer();
         let st = gpu::state(self.device(), ordinal)?;
         st.queue(ordinal, None, |s| {
@@ -153,6 +155,8 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// As [`copy_from_pinned_async`](Self::copy_from_pinned_async).
     pub fn copy_to_pinned_async(&self, dst: &mut PinnedVec<T>) -> Result<()> {
         let (ordinal, buf, off, bytes) = self.pinned_peer(dst, "copy_to_pinned_async")?;
+        // The pinned buffer tracks its copies with events, which a graph cannot replay.
+        gpu::refuse_in_capture(ordinal, "copy_to_pinned_async")?;
         let buf = buf.device_buffer();
         let st = gpu::state(self.device(), ordinal)?;
         st.queue(ordinal, None, |s| {

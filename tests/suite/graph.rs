@@ -1,0 +1,309 @@
+//! Graphs (`wp::capture`, `ScopedCapture`, `Graph`): a replay gives what the same launches
+//! give plainly, on every backend; what a capture cannot record is an `Error::Capture` at
+//! the call that tried (and the device works normally afterwards); a graph keeps its arrays;
+//! tapes record captured launches, and a backward pass can be captured too.
+
+use crate::{arr, zeros};
+use warp_lang as wp;
+use wp::prelude::*;
+
+backend_tests!(
+    replay_matches_plain_launches,
+    graph_keeps_its_arrays,
+    what_a_capture_refuses,
+    compiling_inside_a_capture_is_refused,
+    captured_forward_and_backward,
+    capture_on_a_stream,
+);
+
+/// One substep of a damped oscillator, in two kernels, as a scene's loop would be.
+#[wp::kernel]
+fn g_velocity(x: Array<f32>, v: Array<f32>, k: f32, dt: f32) {
+    let i = tid();
+    v[i] = v[i] * 0.999 - k * x[i] * dt;
+}
+
+#[wp::kernel]
+fn g_position(x: Array<f32>, v: Array<f32>, dt: f32) {
+    let i = tid();
+    x[i] += v[i] * dt;
+}
+
+/// `out[i] += a[i]`.
+#[wp::kernel]
+fn g_accumulate(a: Array<f32>, out: Array<f32>) {
+    let i = tid();
+    out[i] += a[i];
+}
+
+/// `loss[0] += x[i]^2` (for the tape test).
+#[wp::kernel]
+fn g_square_sum(x: Array<f32>, loss: Array<f32>) {
+    let i = tid();
+    atomic_add(loss, 0, x[i] * x[i]);
+}
+
+/// Launched only by `compiling_inside_a_capture_is_refused`, so that it is not loaded before.
+#[wp::kernel]
+fn g_first_in_capture(a: Array<f32>) {
+    let i = tid();
+    a[i] = a[i] + 1.0;
+}
+
+/// On a GPU nothing compiles inside a capture: the kernels the tests capture, loaded first.
+fn load_all(dev: &wp::Device) {
+    wp::load(
+        &[
+            wp::kernel_info(g_velocity),
+            wp::kernel_info(g_position),
+            wp::kernel_info(g_accumulate),
+        ],
+        dev,
+    )
+    .unwrap();
+    wp::load_with_adjoints(&[wp::kernel_info(g_square_sum)], dev).unwrap();
+}
+
+fn initial(n: usize) -> Vec<f32> {
+    (0..n).map(|i| ((i * 37) % 101) as f32 / 101.0 - 0.5).collect()
+}
+
+/// 50 replays of a 10-substep graph (20 launches, a fill and a copy) against the same 500
+/// substeps launched plainly: bit for bit (the same kernels on the same device, in the same
+/// order, compute the same floats).
+fn replay_matches_plain_launches(dev: &wp::Device) {
+    load_all(dev);
+    let n = 10_000;
+    let (k, dt) = (40.0f32, 1e-3f32);
+    let run_plain = |x: &wp::Array<f32>, v: &wp::Array<f32>, trace: &wp::Array<f32>| {
+        for _ in 0..50 {
+            trace.fill(0.0).unwrap();
+            for _ in 0..10 {
+                wp::launch(g_velocity, n, (v, x, k, dt), dev).unwrap();
+                wp::launch(g_position, n, (x, v, dt), dev).unwrap();
+            }
+            wp::launch(g_accumulate, n, (x, trace), dev).unwrap();
+        }
+    };
+    let (x0, v0) = (arr(&initial(n), dev), zeros::<f32, 1>(n, dev));
+    let trace0 = zeros::<f32, 1>(n, dev);
+    run_plain(&x0, &v0, &trace0);
+
+    let (x1, v1) = (arr(&initial(n), dev), zeros::<f32, 1>(n, dev));
+    let trace1 = zeros::<f32, 1>(n, dev);
+    let last_x = zeros::<f32, 1>(n, dev);
+    let graph = wp::capture(dev, || {
+        trace1.fill(0.0)?;
+        for _ in 0..10 {
+            wp::launch(g_velocity, n, (&v1, &x1, k, dt), dev)?;
+            wp::launch(g_position, n, (&x1, &v1, dt), dev)?;
+        }
+        wp::launch(g_accumulate, n, (&x1, &trace1), dev)?;
+        last_x.copy_from(&x1)
+    })
+    .unwrap();
+    assert_eq!(graph.launches(), 21);
+    assert!(graph.node_count() >= 23, "{graph:?}");
+    assert_eq!(graph.device(), dev);
+    // Nothing ran at capture.
+    assert_eq!(x1.to_vec().unwrap(), initial(n));
+    for _ in 0..50 {
+        graph.launch().unwrap();
+    }
+    assert_eq!(x1.to_vec().unwrap(), x0.to_vec().unwrap());
+    assert_eq!(v1.to_vec().unwrap(), v0.to_vec().unwrap());
+    assert_eq!(trace1.to_vec().unwrap(), trace0.to_vec().unwrap());
+    assert_eq!(last_x.to_vec().unwrap(), x0.to_vec().unwrap());
+}
+
+/// The graph holds the arrays its work uses: dropped by their owner after the capture, a
+/// scratch array is still there at every replay (never a replay into freed memory).
+fn graph_keeps_its_arrays(dev: &wp::Device) {
+    load_all(dev);
+    let n = 4096;
+    let out = zeros::<f32, 1>(n, dev);
+    let graph = {
+        let scratch = zeros::<f32, 1>(n, dev);
+        let ones = arr(&vec![1.0f32; n], dev);
+        wp::capture(dev, || {
+            scratch.fill(2.0)?;
+            wp::launch(g_accumulate, n, (&ones, &scratch), dev)?;
+            wp::launch(g_accumulate, n, (&scratch, &out), dev)
+        })
+        .unwrap()
+        // `scratch` and `ones` are dropped here.
+    };
+    // Allocations of the same size now must not land on the graph's memory.
+    let decoys: Vec<_> = (0..4).map(|_| arr(&vec![-7.0f32; n], dev)).collect();
+    for _ in 0..3 {
+        graph.launch().unwrap();
+    }
+    // Exact: small integers.
+    assert!(out.to_vec().unwrap().iter().all(|&x| x == 9.0));
+    for d in &decoys {
+        assert!(d.to_vec().unwrap().iter().all(|&x| x == -7.0));
+    }
+    drop(graph);
+    assert!(out.to_vec().unwrap().iter().all(|&x| x == 9.0));
+}
+
+/// Asserts that `r` is an `Error::Capture` whose message contains `needle`.
+#[track_caller]
+fn assert_refused<T: std::fmt::Debug>(r: wp::Result<T>, needle: &str) {
+    match r {
+        Err(e @ wp::Error::Capture { .. }) => {
+            let s = e.to_string();
+            assert!(s.contains(needle), "{s:?} lacks {needle:?}");
+        }
+        other => panic!("expected Error::Capture ({needle}), got {other:?}"),
+    }
+}
+
+/// Each operation a graph cannot replay is refused where it is called, the same on every
+/// backend; the refusal ends nothing by itself, and after the capture is dropped the device
+/// works as before.
+fn what_a_capture_refuses(dev: &wp::Device) {
+    load_all(dev);
+    let n = 256;
+    let a = arr(&vec![1.0f32; n], dev);
+    let b = zeros::<f32, 1>(n, dev);
+    let sum = zeros::<f32, 1>(1, dev);
+    let graph = {
+        let scope = wp::ScopedCapture::new(dev).unwrap();
+        assert_refused(wp::Array::<f32>::zeros(n, dev), "an allocation");
+        assert_refused(wp::Array::from_vec(vec![1.0f32; 4], dev), "an allocation");
+        assert_refused(a.to_vec(), "read-back");
+        assert_refused(a.check_finite("a"), "read-back");
+        assert_refused(wp::synchronize(), "synchronisation");
+        assert_refused(wp::array_sum(&a, &sum), "a reduction");
+        assert_refused(wp::ScopedCapture::new(dev), "a capture inside a capture");
+        assert_refused(wp::capture(dev, || Ok(())), "a capture inside a capture");
+        if dev.is_cuda() {
+            // Work on another device than the capture's.
+            let host = wp::Array::<f32>::zeros(n, &wp::cpu()).unwrap();
+            assert_refused(
+                wp::launch(g_accumulate, n, (&host, &host), &wp::cpu()),
+                "inside a capture on \"cuda:0\"",
+            );
+            assert_refused(b.copy_from(&host), "inside a capture on \"cuda:0\"");
+            assert_refused(
+                b.transpose().copy_from(&a.transpose()),
+                "strided or overlapping",
+            );
+            // Another stream than the capturing one.
+            let s = wp::Stream::new(dev).unwrap();
+            assert_refused(
+                wp::launch_on(g_accumulate, n, (&a, &b), &s),
+                "another stream",
+            );
+        }
+        // After all those refusals the capture still records.
+        wp::launch(g_accumulate, n, (&a, &b), dev).unwrap();
+        scope.finish().unwrap()
+    };
+    assert_eq!(graph.launches(), 1);
+    // A graph launched inside a capture.
+    {
+        let _scope = wp::ScopedCapture::new(dev).unwrap();
+        assert_refused(graph.launch(), "inside a capture");
+        // Dropped without finish: the capture is discarded.
+    }
+    graph.launch().unwrap();
+    graph.launch().unwrap();
+    assert!(b.to_vec().unwrap().iter().all(|&x| x == 2.0));
+    // A failing body discards its capture; plain work goes on.
+    let e = wp::capture(dev, || {
+        wp::launch(g_accumulate, n, (&a, &b), dev)?;
+        a.to_vec().map(drop)
+    });
+    assert_refused(e, "read-back");
+    wp::launch(g_accumulate, n, (&a, &b), dev).unwrap();
+    assert!(b.to_vec().unwrap().iter().all(|&x| x == 3.0));
+}
+
+/// On a GPU a kernel compiles at its first launch, which cannot happen inside a capture: the
+/// launch is refused with the `wp::load` call that fixes it, and after that call the same
+/// capture works. On the CPU nothing compiles at run time: the capture records it.
+fn compiling_inside_a_capture_is_refused(dev: &wp::Device) {
+    let n = 64;
+    let a = zeros::<f32, 1>(n, dev);
+    let body = || wp::launch(g_first_in_capture, n, (&a,), dev);
+    if dev.is_cuda() {
+        assert_refused(
+            wp::capture(dev, body),
+            "wp::load(&[wp::kernel_info(g_first_in_capture)], &device)",
+        );
+        wp::load(&[wp::kernel_info(g_first_in_capture)], dev).unwrap();
+    }
+    let graph = wp::capture(dev, body).unwrap();
+    graph.launch().unwrap();
+    graph.launch().unwrap();
+    assert!(a.to_vec().unwrap().iter().all(|&x| x == 2.0));
+}
+
+/// A tape recording during a capture records the captured launches; its backward, run
+/// plainly after replays or captured into a graph of its own, gives the plain gradient.
+fn captured_forward_and_backward(dev: &wp::Device) {
+    load_all(dev);
+    let xs: Vec<f32> = (0..1000).map(|i| (i % 17) as f32 * 0.25 - 2.0).collect();
+    let n = xs.len();
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let loss = zeros::<f32, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    let forward = {
+        let _rec = tape.record();
+        wp::capture(dev, || {
+            loss.fill(0.0)?;
+            wp::launch(g_square_sum, n, (&x, &loss), dev)
+        })
+        .unwrap()
+    };
+    assert_eq!(tape.steps(), vec!["g_square_sum"]);
+    forward.launch().unwrap();
+    tape.backward(&loss).unwrap();
+    let want: Vec<f32> = xs.iter().map(|v| 2.0 * v).collect();
+    // Exact: 2x of a multiple of 0.25 is exact, and each element's gradient has one term.
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), want);
+    // Sum of squares of multiples of 0.25 below 16: exact in f32 in any order (< 2^24/16).
+    let sum: f32 = xs.iter().map(|v| v * v).sum();
+    assert_eq!(loss.to_vec().unwrap(), vec![sum]);
+    // The backward pass as a graph: zero the gradients, seed, adjoints.
+    let backward = wp::capture(dev, || {
+        tape.zero()?;
+        tape.backward(&loss)
+    })
+    .unwrap();
+    assert_eq!(backward.launches(), 1);
+    for _ in 0..3 {
+        forward.launch().unwrap();
+        backward.launch().unwrap();
+    }
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), want);
+}
+
+/// On a GPU a capture can record a given stream and the graph replay on any stream of its
+/// device; on the CPU there are no streams.
+fn capture_on_a_stream(dev: &wp::Device) {
+    if dev.is_cpu() {
+        assert!(wp::Stream::new(dev).is_err());
+        return;
+    }
+    load_all(dev);
+    let n = 1 << 16;
+    let a = arr(&vec![1.0f32; n], dev);
+    let out = zeros::<f32, 1>(n, dev);
+    let s = wp::Stream::new(dev).unwrap();
+    let graph = wp::capture(&s, || wp::launch(g_accumulate, n, (&a, &out), dev)).unwrap();
+    let other = wp::Stream::new(dev).unwrap();
+    graph.launch_on(&other).unwrap();
+    // Replays on two streams are ordered like launches: by the streams.
+    s.wait_stream(&other).unwrap();
+    graph.launch_on(&s).unwrap();
+    // And a plain replay after both (the default stream waits for the user streams).
+    graph.launch().unwrap();
+    // Exact: small integers.
+    assert!(out.to_vec().unwrap().iter().all(|&x| x == 3.0));
+    // The default stream cannot capture.
+    let default = wp::get_stream(dev).unwrap();
+    assert_refused(wp::ScopedCapture::new(&default), "default stream");
+}

@@ -1,0 +1,474 @@
+//! Graphs: work recorded once and replayed with one call ([`capture`], [`ScopedCapture`],
+//! [`Graph`]), Warp's `wp.capture_begin`/`capture_end`/`capture_launch`.
+//!
+//! While a thread captures on a device, its kernel launches (forward and adjoint, so a tape's
+//! backward pass can be captured too) and its array fills and copies on that device are
+//! recorded instead of run; [`Graph::launch`] replays them in order. On a GPU the recording is
+//! a CUDA graph (stream capture: a replay is one `cuGraphLaunch`); on the CPU it is the list
+//! of recorded operations, run one after the other. The rules are the same on both, so code
+//! written for one runs on the other:
+//! - what cannot be replayed is an [`Error::Capture`] at the call inside the capture: an
+//!   allocation, an upload or a read-back (`to_vec`, `check_finite`), a synchronisation, the
+//!   primitives and object builds (they read sizes back), work on another device, a capture
+//!   inside a capture, and on a GPU a kernel compiled at its first launch (load kernels
+//!   before with [`crate::load`]);
+//! - the graph holds what the recorded work uses (array handles, host objects), so a replay
+//!   never touches freed memory: arrays dropped by their owner after the capture stay
+//!   allocated until the graph is dropped;
+//! - values (scalars, structs, launch dims) are those of the capture; to change them between
+//!   replays, keep them in arrays (or capture again);
+//! - only the capturing thread's work is recorded (other threads run as usual).
+//!
+//! A tape recording during a capture records the captured launches (once); its backward can
+//! run plainly or be captured into a graph of its own.
+
+use crate::device::{Device, DeviceKind};
+use crate::error::{Error, Result};
+use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use std::any::Any;
+use std::cell::{Cell, RefCell};
+use std::marker::PhantomData;
+use warp_core::Grid;
+
+#[cfg(feature = "cuda")]
+use crate::cuda::capture::{self as cuda_capture, CudaCapture};
+#[cfg(feature = "cuda")]
+use crate::cuda::stream::Stream;
+
+/// One recorded CPU operation.
+type Op = Box<dyn Fn() -> Result<()> + Send>;
+
+/// What is kept alive for a graph's replays (launch arguments' owned copies, arrays).
+type Keep = Box<dyn Any + Send>;
+
+/// The calling thread's capture.
+struct Active {
+    device: Device,
+    /// The CPU recording: the operations of the graph, then one list per open conditional
+    /// body (innermost last).
+    frames: Vec<Vec<Op>>,
+    keep: Vec<Keep>,
+    launches: usize,
+    #[cfg(feature = "cuda")]
+    cuda: Option<CudaCapture>,
+}
+
+thread_local! {
+    static ACTIVE: RefCell<Option<Active>> = const { RefCell::new(None) };
+    /// Whether `ACTIVE` is set: one load on the launch path when nothing is captured.
+    static CAPTURING: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether the calling thread is capturing.
+#[inline]
+pub(crate) fn capturing() -> bool {
+    CAPTURING.with(Cell::get)
+}
+
+/// What a capture does with an operation.
+pub(crate) enum Captured {
+    /// Nothing is captured on this thread: run it.
+    No,
+    /// Recorded for the CPU graph: do not run it now.
+    Recorded,
+    /// A GPU capture: run it (the backend queues it on the capture stream).
+    OnGpu,
+}
+
+/// The device the calling thread captures on, or an error when `device` is another one.
+fn check_device(active: &Active, device: &Device, what: &str) -> Result<()> {
+    if *device != active.device {
+        return Err(Error::Capture {
+            what: format!(
+                "{what} on \"{device}\" inside a capture on \"{}\" (a graph replays the work of \
+                 one device)",
+                active.device
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Records a launch of `K` (its adjoint with `adjoint: Some(stack bytes)`) on the calling
+/// thread's capture, if any: on the CPU as an operation of the graph, on a GPU by keeping the
+/// arguments alive for the graph (the backend queues the launch on the capture stream).
+pub(crate) fn on_launch<K: Kernel>(
+    device: &Device,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adjoint: Option<usize>,
+) -> Result<Captured> {
+    if !capturing() {
+        return Ok(Captured::No);
+    }
+    ACTIVE.with(|a| {
+        let mut a = a.borrow_mut();
+        let Some(active) = a.as_mut() else {
+            return Ok(Captured::No);
+        };
+        let what = format!("a launch of kernel `{}`", K::INFO.name);
+        check_device(active, device, &what)?;
+        active.launches += 1;
+        let owned = K::Params::own(args);
+        if matches!(device.kind(), DeviceKind::Cpu) {
+            let (grid, device) = (*grid, device.clone());
+            let op: Op = Box::new(move || {
+                let args = K::Params::borrow(&owned);
+                match adjoint {
+                    None => crate::dispatch::launch::<K>(&device, &args, &grid),
+                    Some(bytes) => crate::dispatch::launch_adjoint::<K>(&device, &args, &grid, bytes),
+                }
+            });
+            push_op(active, op);
+            return Ok(Captured::Recorded);
+        }
+        active.keep.push(Box::new(owned));
+        Ok(Captured::OnGpu)
+    })
+}
+
+/// The innermost open frame gets `op`.
+fn push_op(active: &mut Active, op: Op) {
+    active
+        .frames
+        .last_mut()
+        .expect("a capture has at least its graph's frame")
+        .push(op);
+}
+
+/// An array operation (`what`, on arrays of `devices`) inside the calling thread's capture:
+/// on the CPU recorded as `op()`, on a GPU run (the backend queues it on the capture stream),
+/// and refused when it involves another device than the capture's. `keep` is what the
+/// operation uses (kept alive for a GPU graph).
+pub(crate) fn on_array_op(
+    devices: &[&Device],
+    what: &str,
+    keep: impl FnOnce() -> Keep,
+    op: impl FnOnce() -> Op,
+) -> Result<Captured> {
+    if !capturing() {
+        return Ok(Captured::No);
+    }
+    ACTIVE.with(|a| {
+        let mut a = a.borrow_mut();
+        let Some(active) = a.as_mut() else {
+            return Ok(Captured::No);
+        };
+        for d in devices {
+            check_device(active, d, what)?;
+        }
+        if matches!(active.device.kind(), DeviceKind::Cpu) {
+            push_op(active, op());
+            Ok(Captured::Recorded)
+        } else {
+            active.keep.push(keep());
+            Ok(Captured::OnGpu)
+        }
+    })
+}
+
+/// An [`Error::Capture`] when the calling thread is capturing and `what` (an operation on
+/// `device`, or on any device with `None`) cannot be recorded: the same refusals on every
+/// backend.
+pub(crate) fn refuse(device: Option<&Device>, what: &str) -> Result<()> {
+    if !capturing() {
+        return Ok(());
+    }
+    ACTIVE.with(|a| match &*a.borrow() {
+        Some(active) if device.is_none_or(|d| *d == active.device) => Err(Error::Capture {
+            what: format!(
+                "{what} on \"{}\" cannot be recorded into a graph (do it before or after the \
+                 capture)",
+                active.device
+            ),
+        }),
+        _ => Ok(()),
+    })
+}
+
+/// Where a capture records: a device (on a GPU, a stream of the capture's own, or the
+/// thread's current stream set by a `ScopedStream`), or a given CUDA stream.
+#[derive(Clone, Debug)]
+pub enum CaptureOn {
+    /// Capture on a device.
+    Device(Device),
+    /// Capture on this CUDA stream (not the device's default stream).
+    #[cfg(feature = "cuda")]
+    Stream(Stream),
+}
+
+impl From<&Device> for CaptureOn {
+    fn from(d: &Device) -> CaptureOn {
+        CaptureOn::Device(d.clone())
+    }
+}
+
+#[cfg(feature = "cuda")]
+impl From<&Stream> for CaptureOn {
+    fn from(s: &Stream) -> CaptureOn {
+        CaptureOn::Stream(s.clone())
+    }
+}
+
+/// A capture in progress on the calling thread (Warp's `wp.ScopedCapture`): from
+/// [`ScopedCapture::new`] to [`ScopedCapture::finish`], the thread's work on the device is
+/// recorded into the graph that `finish` returns. Dropped without `finish` (an early return
+/// on an error), the capture ends and what it recorded is discarded. Not `Send`: the capture
+/// belongs to its thread.
+#[derive(Debug)]
+pub struct ScopedCapture {
+    finished: bool,
+    _not_send: PhantomData<*const ()>,
+}
+
+impl ScopedCapture {
+    /// Starts capturing on `on` (`&device` or, on a GPU, `&stream`).
+    ///
+    /// # Errors
+    /// [`Error::Capture`] inside another capture, or on a GPU's default stream;
+    /// [`Error::Cuda`] when the driver refuses.
+    pub fn new(on: impl Into<CaptureOn>) -> Result<ScopedCapture> {
+        if capturing() {
+            let device = ACTIVE.with(|a| a.borrow().as_ref().map(|a| a.device.clone()));
+            return Err(Error::Capture {
+                what: format!(
+                    "a capture inside a capture (the thread is capturing on \"{}\"); nest the \
+                     work in the outer capture instead",
+                    device.map(|d| d.to_string()).unwrap_or_default()
+                ),
+            });
+        }
+        let on = on.into();
+        let device = match &on {
+            CaptureOn::Device(d) => d.clone(),
+            #[cfg(feature = "cuda")]
+            CaptureOn::Stream(s) => s.device().clone(),
+        };
+        #[cfg(feature = "cuda")]
+        let cuda = match device.kind() {
+            DeviceKind::Cpu => None,
+            DeviceKind::Cuda { ordinal } => {
+                let stream = match &on {
+                    CaptureOn::Stream(s) => Some(s),
+                    CaptureOn::Device(_) => None,
+                };
+                Some(cuda_capture::begin(&device, ordinal, stream)?)
+            }
+        };
+        #[cfg(not(feature = "cuda"))]
+        if let DeviceKind::Cuda { .. } = device.kind() {
+            return Err(Error::NoDevice {
+                name: device.alias().to_string(),
+                reason: crate::device::CUDA_UNAVAILABLE.to_string(),
+            });
+        }
+        ACTIVE.with(|a| {
+            *a.borrow_mut() = Some(Active {
+                device,
+                frames: vec![Vec::new()],
+                keep: Vec::new(),
+                launches: 0,
+                #[cfg(feature = "cuda")]
+                cuda,
+            })
+        });
+        CAPTURING.with(|c| c.set(true));
+        Ok(ScopedCapture {
+            finished: false,
+            _not_send: PhantomData,
+        })
+    }
+
+    /// Ends the capture and returns its graph.
+    ///
+    /// # Errors
+    /// [`Error::Capture`] when a conditional body is still open; [`Error::Cuda`] when the
+    /// driver cannot instantiate the graph.
+    pub fn finish(mut self) -> Result<Graph> {
+        self.finished = true;
+        let active = take_active();
+        let Some(mut active) = active else {
+            return Err(Error::Capture {
+                what: "the capture was already ended".into(),
+            });
+        };
+        #[cfg(feature = "cuda")]
+        let cuda = active.cuda.take();
+        if active.frames.len() != 1 {
+            #[cfg(feature = "cuda")]
+            if let Some(c) = cuda {
+                c.abort();
+            }
+            return Err(Error::Capture {
+                what: "a conditional body is still open at the end of the capture".into(),
+            });
+        }
+        let ops = active.frames.swap_remove(0);
+        #[cfg(feature = "cuda")]
+        let body = match cuda {
+            Some(c) => Body::Cuda(c.end()?),
+            None => Body::Cpu(ops),
+        };
+        #[cfg(not(feature = "cuda"))]
+        let body = Body::Cpu(ops);
+        Ok(Graph {
+            device: active.device,
+            body,
+            launches: active.launches,
+            _keep: active.keep,
+        })
+    }
+}
+
+/// Clears the calling thread's capture and returns it.
+fn take_active() -> Option<Active> {
+    CAPTURING.with(|c| c.set(false));
+    ACTIVE.with(|a| a.borrow_mut().take())
+}
+
+impl Drop for ScopedCapture {
+    fn drop(&mut self) {
+        if self.finished {
+            return;
+        }
+        #[cfg(feature = "cuda")]
+        if let Some(c) = take_active().and_then(|mut a| a.cuda.take()) {
+            c.abort();
+        }
+        #[cfg(not(feature = "cuda"))]
+        drop(take_active());
+    }
+}
+
+/// Records what `body` does on `on` (`&device`, or on a GPU `&stream`) into a [`Graph`]:
+/// `wp::capture(&dev, || { wp::launch(..)?; wp::launch(..)?; Ok(()) })?`. When `body` fails,
+/// the capture is discarded and its error returned. See the [module docs](self) for what a
+/// capture records and refuses.
+///
+/// ```ignore
+/// // (tests/suite/graph.rs runs this on every backend)
+/// wp::load(&[wp::kernel_info(integrate)], &dev)?; // a GPU compiles nothing inside a capture
+/// let graph = wp::capture(&dev, || {
+///     for _ in 0..substeps {
+///         wp::launch(integrate, n, (&x, &v, dt), &dev)?;
+///     }
+///     Ok(())
+/// })?;
+/// for _frame in 0..frames {
+///     graph.launch()?;
+/// }
+/// ```
+///
+/// # Errors
+/// As [`ScopedCapture::new`] and [`ScopedCapture::finish`], and `body`'s.
+pub fn capture(on: impl Into<CaptureOn>, body: impl FnOnce() -> Result<()>) -> Result<Graph> {
+    let scope = ScopedCapture::new(on)?;
+    body()?;
+    scope.finish()
+}
+
+/// What a graph replays.
+enum Body {
+    Cpu(Vec<Op>),
+    #[cfg(feature = "cuda")]
+    Cuda(warp_cuda::Graph),
+}
+
+/// Recorded work, replayed by [`Graph::launch`] (Warp's `wp.Graph` and `wp.capture_launch`).
+pub struct Graph {
+    device: Device,
+    body: Body,
+    launches: usize,
+    /// What the recorded work uses, alive for as long as the graph can be replayed.
+    _keep: Vec<Keep>,
+}
+
+impl std::fmt::Debug for Graph {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Graph")
+            .field("device", &self.device)
+            .field("launches", &self.launches)
+            .field("nodes", &self.node_count())
+            .finish()
+    }
+}
+
+impl Graph {
+    /// Replays the graph. On a GPU it is queued on the calling thread's current stream
+    /// (a `ScopedStream`'s, else the default stream), ordered after array operations made
+    /// before and before those made after, like a launch; faults are reported by the next
+    /// synchronisation. On the CPU the recorded operations run in order before this returns.
+    ///
+    /// # Errors
+    /// [`Error::Capture`] inside a capture; a fault or error of a recorded operation (CPU);
+    /// [`Error::Cuda`] (GPU).
+    pub fn launch(&self) -> Result<()> {
+        self.launch_inner(
+            #[cfg(feature = "cuda")]
+            None,
+        )
+    }
+
+    /// Replays the graph on `stream` (a stream of the graph's GPU).
+    ///
+    /// # Errors
+    /// [`Error::Capture`] for a CPU graph, a stream of another device, or inside a capture.
+    #[cfg(feature = "cuda")]
+    pub fn launch_on(&self, stream: &Stream) -> Result<()> {
+        self.launch_inner(Some(stream))
+    }
+
+    fn launch_inner(&self, #[cfg(feature = "cuda")] stream: Option<&Stream>) -> Result<()> {
+        if capturing() {
+            return Err(Error::Capture {
+                what: "a graph launched inside a capture (capture its work in the outer \
+                       capture instead)"
+                    .into(),
+            });
+        }
+        match &self.body {
+            Body::Cpu(ops) => {
+                #[cfg(feature = "cuda")]
+                if let Some(s) = stream {
+                    return Err(Error::Capture {
+                        what: format!(
+                            "a graph captured on \"{}\" launched on a stream of \"{}\"",
+                            self.device,
+                            s.device()
+                        ),
+                    });
+                }
+                run_ops(ops)
+            }
+            #[cfg(feature = "cuda")]
+            Body::Cuda(g) => cuda_capture::launch(g, &self.device, stream),
+        }
+    }
+
+    /// The device the graph runs on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// How many kernel launches were recorded (forward and adjoint).
+    pub fn launches(&self) -> usize {
+        self.launches
+    }
+
+    /// The graph's size: CUDA graph nodes (kernels, memsets, copies, conditionals) on a GPU,
+    /// recorded operations on the CPU.
+    pub fn node_count(&self) -> usize {
+        match &self.body {
+            Body::Cpu(ops) => ops.len(),
+            #[cfg(feature = "cuda")]
+            Body::Cuda(g) => g.node_count(),
+        }
+    }
+}
+
+fn run_ops(ops: &[Op]) -> Result<()> {
+    for op in ops {
+        op()?;
+    }
+    Ok(())
+}
