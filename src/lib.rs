@@ -124,7 +124,7 @@ pub use warp_runtime::graph;
 pub use warp_runtime::{capture, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, kernel_info, launch, load, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,
+    init, kernel_info, launch, load, Launch, OwnedArgsOf, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,
     DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape, Kernel, KernelArg,
     KernelInfo, KernelParams, Launchable, Mesh, Recording, Result, Runtime, Seed, Tape, Volume,
     VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,

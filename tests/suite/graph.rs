@@ -1,7 +1,8 @@
 //! Graphs (`wp::capture`, `ScopedCapture`, `Graph`): a replay gives what the same launches
 //! give plainly, on every backend; what a capture cannot record is an `Error::Capture` at
 //! the call that tried (and the device works normally afterwards); a graph keeps its arrays;
-//! tapes record captured launches, and a backward pass can be captured too.
+//! tapes record captured launches, and a backward pass can be captured too. Launch objects
+//! (`wp::Launch`) give what plain launches give, and check changed arguments again.
 
 use crate::{arr, zeros};
 use warp_lang as wp;
@@ -14,6 +15,7 @@ backend_tests!(
     compiling_inside_a_capture_is_refused,
     captured_forward_and_backward,
     capture_on_a_stream,
+    launch_objects_match_plain_launches,
 );
 
 /// One substep of a damped oscillator, in two kernels, as a scene's loop would be.
@@ -306,4 +308,71 @@ fn capture_on_a_stream(dev: &wp::Device) {
     // The default stream cannot capture.
     let default = wp::get_stream(dev).unwrap();
     assert_refused(wp::ScopedCapture::new(&default), "default stream");
+}
+
+/// A launch object bound once and launched again gives what plain launches give; values and
+/// arrays changed through `args_mut` are used (and checked again) at the next launch; a
+/// recording tape records its launches.
+fn launch_objects_match_plain_launches(dev: &wp::Device) {
+    load_all(dev);
+    let n = 5000;
+    let (k, dt) = (40.0f32, 1e-3f32);
+    let (x0, v0) = (arr(&initial(n), dev), zeros::<f32, 1>(n, dev));
+    let (x1, v1) = (arr(&initial(n), dev), zeros::<f32, 1>(n, dev));
+    let mut vel = wp::Launch::new(g_velocity, n, (&v1, &x1, k, dt), dev).unwrap();
+    let mut pos = wp::Launch::new(g_position, n, (&x1, &v1, dt), dev).unwrap();
+    assert_eq!(vel.dim().as_slice(), &[n]);
+    for step in 0..100 {
+        let dt_now = if step < 50 { dt } else { 0.5 * dt };
+        if step == 50 {
+            vel.args_mut().3 = dt_now;
+            pos.args_mut().2 = dt_now;
+        }
+        wp::launch(g_velocity, n, (&v0, &x0, k, dt_now), dev).unwrap();
+        wp::launch(g_position, n, (&x0, &v0, dt_now), dev).unwrap();
+        vel.launch().unwrap();
+        pos.launch().unwrap();
+    }
+    // Bit for bit: the same kernels with the same values.
+    assert_eq!(x1.to_vec().unwrap(), x0.to_vec().unwrap());
+    assert_eq!(v1.to_vec().unwrap(), v0.to_vec().unwrap());
+    // An array swapped in: used by the next launch.
+    let out = zeros::<f32, 1>(n, dev);
+    let ones = arr(&vec![1.0f32; n], dev);
+    let mut acc = wp::Launch::new(g_accumulate, n, (&ones, &out), dev).unwrap();
+    acc.launch().unwrap();
+    let other = zeros::<f32, 1>(n, dev);
+    acc.args_mut().1 = other.clone();
+    acc.launch().unwrap();
+    acc.launch().unwrap();
+    assert!(out.to_vec().unwrap().iter().all(|&x| x == 1.0));
+    assert!(other.to_vec().unwrap().iter().all(|&x| x == 2.0));
+    // A dim the arrays do not cover: checked again, an error naming the kernel.
+    acc.set_dim(n + 1);
+    let e = acc.launch().unwrap_err().to_string();
+    assert!(e.contains("g_accumulate"), "{e}");
+    // (A faulting launch stops at its fault; threads before it may have run.)
+    other.fill(2.0).unwrap();
+    acc.set_dim(n);
+    // A CPU array bound to a GPU launch: refused at the next launch.
+    if dev.is_cuda() {
+        acc.args_mut().1 = wp::Array::<f32>::zeros(n, &wp::cpu()).unwrap();
+        let e = acc.launch().unwrap_err();
+        assert!(matches!(e, wp::Error::DeviceMismatch { .. }), "{e}");
+        acc.args_mut().1 = other.clone();
+    }
+    acc.launch().unwrap();
+    assert!(other.to_vec().unwrap().iter().all(|&x| x == 3.0));
+    // Recorded on a tape like a plain launch.
+    let x = arr(&[1.0f32, -2.0, 3.0], dev).with_grad().unwrap();
+    let loss = zeros::<f32, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    let mut sq = wp::Launch::new(g_square_sum, 3, (&x, &loss), dev).unwrap();
+    {
+        let _rec = tape.record();
+        sq.launch().unwrap();
+    }
+    tape.backward(&loss).unwrap();
+    assert_eq!(loss.to_vec().unwrap(), vec![14.0]);
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, -4.0, 6.0]);
 }

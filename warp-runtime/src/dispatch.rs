@@ -73,6 +73,52 @@ pub(crate) fn launch_on<K: Kernel>(
     Cuda::of_stream(stream).launch_on::<K>(args, grid, stream)
 }
 
+/// A launch of `K` made ready to be queued again and again (a launch object's): on a GPU the
+/// loaded kernel, the launch dims and the fault context; the CPU keeps nothing.
+pub(crate) enum Prepared<K: Kernel> {
+    Cpu,
+    #[cfg(feature = "cuda")]
+    Cuda(crate::cuda::launch::Prepared<K>),
+}
+
+/// Makes a launch of `K` with `args` over `grid` on `device` ready (compiling the kernel on
+/// a GPU); see [`launch_prepared`].
+pub(crate) fn prepare_launch<K: Kernel>(
+    device: &Device,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+) -> Result<Prepared<K>> {
+    names_every_param::<K>();
+    match device.kind() {
+        DeviceKind::Cpu => Ok(Prepared::Cpu),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda { ordinal } => {
+            crate::cuda::launch::Prepared::new(args, grid, device, ordinal, None).map(Prepared::Cuda)
+        }
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda { .. } => Err(Error::NoDevice {
+            name: device.alias().to_string(),
+            reason: crate::device::CUDA_UNAVAILABLE.to_string(),
+        }),
+    }
+}
+
+/// Runs (or queues, on `stream` when given) a prepared launch with `args`: the arguments it
+/// was prepared with, or others of the same devices, shapes and contiguity.
+pub(crate) fn launch_prepared<K: Kernel>(
+    device: &Device,
+    prepared: &Prepared<K>,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    #[cfg(feature = "cuda")] stream: Option<&crate::cuda::stream::Stream>,
+) -> Result<()> {
+    match prepared {
+        Prepared::Cpu => Cpu::new(device).launch::<K>(args, grid),
+        #[cfg(feature = "cuda")]
+        Prepared::Cuda(p) => p.enqueue(args, device, stream.map(|s| s.cuda_stream())),
+    }
+}
+
 /// Checks, at compile time, that `K`'s info names each parameter: the conversions name
 /// parameter `k` by `INFO.params[k]`.
 fn names_every_param<K: Kernel>() {

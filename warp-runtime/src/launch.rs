@@ -246,6 +246,166 @@ where
     })
 }
 
+/// The owned launch arguments of kernel `K` (array handles and values), as a [`Launch`]
+/// holds them: for `fn k(x: Array<f32>, dt: f32)`, `(Array<f32>, f32)`.
+pub type OwnedArgsOf<K> = <<K as Kernel>::Params as KernelParams>::Owned;
+
+/// A launch with its arguments bound once and queued again with one call (Warp's
+/// `wp.Launch`, `record_cmd=True`), for host loops that cannot be captured into a
+/// [`Graph`](crate::Graph).
+///
+/// [`Launch::new`] checks the launch as [`launch`] does and, on a GPU, compiles the kernel;
+/// [`Launch::launch`] then skips the checks, the argument typing and the kernel lookup: it
+/// converts the bound arguments and queues the kernel. To change an argument between launches,
+/// assign it through [`Launch::args_mut`] (the next launch checks the arguments again) or keep
+/// it in an array the kernel reads.
+///
+/// ```ignore
+/// // (tests/suite/graph.rs runs this on every backend)
+/// let mut step = wp::Launch::new(integrate, n, (&x, &v, dt), &dev)?;
+/// for frame in 0..frames {
+///     step.args_mut().2 = dt_of(frame); // a value: rechecked at the next launch
+///     step.launch()?;
+/// }
+/// ```
+///
+/// A launch object records on a recording [`Tape`](crate::Tape) like a plain launch, and
+/// inside a capture it is captured like one.
+pub struct Launch<K: Kernel> {
+    device: Device,
+    dim: Dim,
+    grid: Grid,
+    args: OwnedArgsOf<K>,
+    /// `None` after [`Launch::args_mut`] or [`Launch::set_dim`]: checked again at the next
+    /// launch.
+    prepared: Option<dispatch::Prepared<K>>,
+}
+
+impl<K: Kernel> std::fmt::Debug for Launch<K> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Launch")
+            .field("kernel", &K::INFO.name)
+            .field("dim", &self.dim)
+            .field("device", &self.device)
+            .finish()
+    }
+}
+
+impl<K: Kernel> Launch<K> {
+    /// Binds a launch of `kernel` over `dim` with `args` on `device`, checked as [`launch`]
+    /// checks it; on a GPU the kernel is compiled (or found) now.
+    ///
+    /// # Errors
+    /// As [`launch`].
+    pub fn new<'a, L, A>(kernel: L, dim: impl Into<Dim>, args: A, device: &Device) -> Result<Self>
+    where
+        L: Launchable<A, Kernel = K>,
+        K: Kernel<Params: KernelParams<Args<'a> = A>>,
+    {
+        let _ = kernel;
+        let dim = dim.into();
+        let grid = grid_of(K::INFO.name, dim)?;
+        check_shapes::<K>(&args, &grid)?;
+        let prepared = dispatch::prepare_launch::<K>(device, &args, &grid)?;
+        Ok(Launch {
+            device: device.clone(),
+            dim,
+            grid,
+            args: K::Params::own(&args),
+            prepared: Some(prepared),
+        })
+    }
+
+    /// The bound arguments.
+    pub fn args(&self) -> &OwnedArgsOf<K> {
+        &self.args
+    }
+
+    /// The bound arguments, to change some: `step.args_mut().1 = 0.5`. The next launch
+    /// checks them again (devices, shapes, contiguity).
+    pub fn args_mut(&mut self) -> &mut OwnedArgsOf<K> {
+        self.prepared = None;
+        &mut self.args
+    }
+
+    /// Changes the launch dimensions (checked at the next launch).
+    pub fn set_dim(&mut self, dim: impl Into<Dim>) {
+        self.dim = dim.into();
+        self.prepared = None;
+    }
+
+    /// The launch dimensions.
+    pub fn dim(&self) -> Dim {
+        self.dim
+    }
+
+    /// The device.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// Launches with the bound arguments, as [`launch`] would (on a GPU, queued on the calling
+    /// thread's current stream).
+    ///
+    /// # Errors
+    /// As [`launch`]; the checks run again only after [`Launch::args_mut`] or
+    /// [`Launch::set_dim`].
+    pub fn launch(&mut self) -> Result<()> {
+        self.launch_inner(
+            #[cfg(feature = "cuda")]
+            None,
+        )
+    }
+
+    /// [`Launch::launch`] on `stream` (a CUDA stream of the launch's device).
+    ///
+    /// # Errors
+    /// As [`launch_on`].
+    #[cfg(feature = "cuda")]
+    pub fn launch_on(&mut self, stream: &Stream) -> Result<()> {
+        if stream.device() != &self.device {
+            return Err(Error::invalid(format!(
+                "kernel `{}`: a launch object bound to \"{}\" launched on a stream of \"{}\"",
+                K::INFO.name,
+                self.device,
+                stream.device()
+            )));
+        }
+        self.launch_inner(Some(stream))
+    }
+
+    fn launch_inner(&mut self, #[cfg(feature = "cuda")] stream: Option<&Stream>) -> Result<()> {
+        let args = K::Params::borrow(&self.args);
+        if self.prepared.is_none() {
+            self.grid = grid_of(K::INFO.name, self.dim)?;
+            check_shapes::<K>(&args, &self.grid)?;
+            self.prepared = Some(dispatch::prepare_launch::<K>(&self.device, &args, &self.grid)?);
+        }
+        let device = &self.device;
+        if crate::graph::capturing() || config::verify_fp() {
+            // What a plain launch does around the backend's: a capture's record, the check.
+            return launch_with::<K>(self.dim, args, device, |args, grid| {
+                #[cfg(feature = "cuda")]
+                if let Some(s) = stream {
+                    return dispatch::launch_on::<K>(s, args, grid);
+                }
+                dispatch::launch::<K>(device, args, grid)
+            });
+        }
+        let prepared = self.prepared.as_ref().expect("prepared above");
+        dispatch::launch_prepared::<K>(
+            device,
+            prepared,
+            &args,
+            &self.grid,
+            #[cfg(feature = "cuda")]
+            stream,
+        )?;
+        crate::tape::on_launch::<K>(&args, &self.grid, device);
+        Ok(())
+    }
+}
+
 /// Checks a launch of `K` on `device`, has `run` run it (on the device's backend), then records
 /// it on the recording tapes and, in `verify_fp` mode, checks what it wrote.
 fn launch_with<'a, K: Kernel>(

@@ -64,7 +64,7 @@ pub use kernel::{
 };
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
-pub use launch::{launch, load, load_with_adjoints, synchronize, Dim};
+pub use launch::{launch, load, load_with_adjoints, synchronize, Dim, Launch, OwnedArgsOf};
 pub use objects::{Bvh, HashGrid, MarchingCubes, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;

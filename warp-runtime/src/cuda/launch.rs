@@ -2,12 +2,14 @@
 //! stream.
 
 use super::gpu::{check_state, err};
-use super::module::loaded;
+use super::module::{loaded, Loaded};
 use crate::config;
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelParams, MAX_PARAMS};
 use std::ffi::c_void;
+use std::marker::PhantomData;
+use std::sync::Arc;
 use warp_core::Grid;
 
 /// `wp::launch_t`.
@@ -43,60 +45,144 @@ pub(crate) fn launch<K: Kernel>(
     stream: Option<&warp_cuda::Stream>,
     adjoint: Option<usize>,
 ) -> Result<()> {
-    let info = K::info();
-    if adjoint.is_some() {
-        if let Some(reason) = info.cuda_adjoint_error {
-            return Err(Error::NotDifferentiable {
-                kernel: info.name,
-                reason: reason.to_string(),
-            });
+    let (prepared, params, grads) = Prepared::<K>::with_params(args, grid, device, ordinal, adjoint)?;
+    prepared.enqueue_converted(params, grads, device, stream)
+}
+
+type CudaParamsOf<K> = <<K as Kernel>::Params as KernelParams>::CudaParams;
+type CudaGradsOf<K> = <<K as Kernel>::Params as KernelParams>::CudaGrads;
+
+/// A launch of `K` made ready once (the loaded kernel, the launch dims, the fault context)
+/// and queued any number of times with its arguments converted again each time (a launch
+/// object's arguments are array handles whose memory a host object may have replaced since).
+pub(crate) struct Prepared<K: Kernel> {
+    kernel: Arc<Loaded>,
+    dims: LaunchDims,
+    ctx: Ctx,
+    blocks: u32,
+    block: u32,
+    ordinal: usize,
+    adjoint: bool,
+    _kernel: PhantomData<K>,
+}
+
+impl<K: Kernel> Prepared<K> {
+    /// Checks what a launch of `K` with `args` over `grid` needs (adjoint support, the
+    /// arguments' devices) and compiles or finds the kernel.
+    pub(crate) fn new(
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        device: &Device,
+        ordinal: usize,
+        adjoint: Option<usize>,
+    ) -> Result<Self> {
+        Self::with_params(args, grid, device, ordinal, adjoint).map(|(p, _, _)| p)
+    }
+
+    /// [`Prepared::new`], and the arguments converted on the way.
+    fn with_params(
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        device: &Device,
+        ordinal: usize,
+        adjoint: Option<usize>,
+    ) -> Result<(Self, CudaParamsOf<K>, Option<CudaGradsOf<K>>)> {
+        let info = K::info();
+        if adjoint.is_some() {
+            if let Some(reason) = info.cuda_adjoint_error {
+                return Err(Error::NotDifferentiable {
+                    kernel: info.name,
+                    reason: reason.to_string(),
+                });
+            }
         }
+        // Arguments first: a wrong device is reported before anything is compiled.
+        let params = K::Params::cuda_params(args, info, device)?;
+        let grads = match adjoint {
+            Some(_) => Some(K::Params::cuda_grads(args, info, device)?),
+            None => None,
+        };
+        let kernel = loaded(device, ordinal, info, K::Params::contiguous(args), adjoint)?;
+        let (fault, fault_flag) = kernel.st.fault_record();
+        let ctx = Ctx {
+            fault,
+            fault_flag,
+            raised: 0,
+            kernel: kernel.id,
+        };
+        let dims = LaunchDims {
+            dims: grid.dims.map(|d| d as i64),
+            total: grid.total as i64,
+            ndim: grid.ndim as i32,
+            fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
+        };
+        let block = config::cuda_block_dim();
+        let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
+        let prepared = Prepared {
+            kernel,
+            dims,
+            ctx,
+            blocks,
+            block,
+            ordinal,
+            adjoint: adjoint.is_some(),
+            _kernel: PhantomData,
+        };
+        Ok((prepared, params, grads))
     }
-    // Arguments first: a wrong device is reported before anything is compiled.
-    let mut params = K::Params::cuda_params(args, info, device)?;
-    let mut grads = match adjoint {
-        Some(_) => Some(K::Params::cuda_grads(args, info, device)?),
-        None => None,
-    };
-    let kernel = loaded(device, ordinal, info, K::Params::contiguous(args), adjoint)?;
-    let st = &kernel.st;
-    let mut dims = LaunchDims {
-        dims: grid.dims.map(|d| d as i64),
-        total: grid.total as i64,
-        ndim: grid.ndim as i32,
-        fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
-    };
-    let (fault, fault_flag) = st.fault_record();
-    let mut ctx = Ctx {
-        fault,
-        fault_flag,
-        raised: 0,
-        kernel: kernel.id,
-    };
-    // The launch and the context, then the parameters and (adjoint) their gradients.
-    let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
-    ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
-    ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
-    let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
-    if let Some(g) = grads.as_mut() {
-        n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
+
+    /// Queues the launch with `args` (the arguments it was prepared with, or ones of the same
+    /// shapes, contiguity and devices) in the ordering model of `gpu.rs`.
+    pub(crate) fn enqueue(
+        &self,
+        args: &ArgsOf<'_, K>,
+        device: &Device,
+        stream: Option<&warp_cuda::Stream>,
+    ) -> Result<()> {
+        let info = K::info();
+        let params = K::Params::cuda_params(args, info, device)?;
+        let grads = match self.adjoint {
+            true => Some(K::Params::cuda_grads(args, info, device)?),
+            false => None,
+        };
+        self.enqueue_converted(params, grads, device, stream)
     }
-    let block = config::cuda_block_dim();
-    let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
-    st.set_last(info);
-    st.queue(ordinal, stream, |on| {
-        // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
-        // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type), alive
-        // until the call returns; cuLaunchKernel copies them.
-        unsafe {
-            st.gpu
-                .launch_raw(&kernel.function, on, blocks, block, 0, &mut ptrs[..n])
-                .map_err(|e| err(device, e))
+
+    /// Queues the launch with arguments already converted.
+    fn enqueue_converted(
+        &self,
+        mut params: CudaParamsOf<K>,
+        mut grads: Option<CudaGradsOf<K>>,
+        device: &Device,
+        stream: Option<&warp_cuda::Stream>,
+    ) -> Result<()> {
+        let info = K::info();
+        let (mut dims, mut ctx) = (self.dims, self.ctx);
+        // The launch and the context, then the parameters and (adjoint) their gradients.
+        let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
+        ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
+        ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
+        let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+        if let Some(g) = grads.as_mut() {
+            n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
         }
-    })?;
-    // (Inside a capture nothing has run yet: there is nothing to check.)
-    if config::debug() && super::gpu::capture_stream(ordinal).is_none() {
-        check_state(st)?;
+        let (kernel, ordinal) = (&self.kernel, self.ordinal);
+        let st = &kernel.st;
+        st.set_last(info);
+        st.queue(ordinal, stream, |on| {
+            // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
+            // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type),
+            // alive until the call returns; cuLaunchKernel copies them.
+            unsafe {
+                st.gpu
+                    .launch_raw(&kernel.function, on, self.blocks, self.block, 0, &mut ptrs[..n])
+                    .map_err(|e| err(device, e))
+            }
+        })?;
+        // (Inside a capture nothing has run yet: there is nothing to check.)
+        if config::debug() && super::gpu::capture_stream(ordinal).is_none() {
+            check_state(st)?;
+        }
+        Ok(())
     }
-    Ok(())
 }

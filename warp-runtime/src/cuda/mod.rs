@@ -26,7 +26,7 @@ pub(crate) mod capture;
 #[cfg(feature = "cuda")]
 mod gpu;
 #[cfg(feature = "cuda")]
-mod launch;
+pub(crate) mod launch;
 #[cfg(feature = "cuda")]
 pub(crate) mod memory;
 #[cfg(feature = "cuda")]
