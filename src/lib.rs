@@ -121,7 +121,7 @@ pub use warp_runtime::{
 };
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
 pub use warp_runtime::graph;
-pub use warp_runtime::{capture, CaptureOn, Graph, ScopedCapture};
+pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, kernel_info, launch, load, Launch, OwnedArgsOf, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,

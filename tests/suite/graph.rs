@@ -16,6 +16,8 @@ backend_tests!(
     captured_forward_and_backward,
     capture_on_a_stream,
     launch_objects_match_plain_launches,
+    conditional_loops_agree_with_the_host_loop,
+    conditional_branches,
 );
 
 /// One substep of a damped oscillator, in two kernels, as a scene's loop would be.
@@ -52,6 +54,28 @@ fn g_first_in_capture(a: Array<f32>) {
     a[i] = a[i] + 1.0;
 }
 
+/// `x *= 0.5` (a relaxation step of the conditional-loop tests).
+#[wp::kernel]
+fn g_halve(x: Array<f32>) {
+    let i = tid();
+    x[i] = x[i] * 0.5;
+}
+
+/// One thread: `flag = x[0] > tol`, and counts the iterations.
+#[wp::kernel]
+fn g_check(x: Array<f32>, tol: f32, flag: Array<i32>, iterations: Array<i32>) {
+    let _i = tid();
+    flag[0] = if x[0] > tol { 1 } else { 0 };
+    iterations[0] += 1;
+}
+
+/// `a[i] += v`.
+#[wp::kernel]
+fn g_add(a: Array<f32>, v: f32) {
+    let i = tid();
+    a[i] += v;
+}
+
 /// On a GPU nothing compiles inside a capture: the kernels the tests capture, loaded first.
 fn load_all(dev: &wp::Device) {
     wp::load(
@@ -59,6 +83,9 @@ fn load_all(dev: &wp::Device) {
             wp::kernel_info(g_velocity),
             wp::kernel_info(g_position),
             wp::kernel_info(g_accumulate),
+            wp::kernel_info(g_halve),
+            wp::kernel_info(g_check),
+            wp::kernel_info(g_add),
         ],
         dev,
     )
@@ -375,4 +402,97 @@ fn launch_objects_match_plain_launches(dev: &wp::Device) {
     tape.backward(&loss).unwrap();
     assert_eq!(loss.to_vec().unwrap(), vec![14.0]);
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, -4.0, 6.0]);
+}
+
+/// `capture_while` halving until the first element is at most 1: the host loop (outside a
+/// capture) and the captured loop (a CUDA `while` node on a GPU, a recorded loop on the CPU)
+/// run the same iterations and end with the same values, replay after replay; a flag that
+/// starts at zero runs no iteration.
+fn conditional_loops_agree_with_the_host_loop(dev: &wp::Device) {
+    load_all(dev);
+    let n = 1000;
+    let (x, flag, iterations) = (
+        zeros::<f32, 1>(n, dev),
+        zeros::<i32, 1>(1, dev),
+        zeros::<i32, 1>(1, dev),
+    );
+    let body = || -> wp::Result<()> {
+        wp::launch(g_halve, n, (&x,), dev)?;
+        wp::launch(g_check, 1, (&x, 1.0f32, &flag, &iterations), dev)
+    };
+    let reset = |start: f32, go: i32| -> wp::Result<()> {
+        x.fill(start)?;
+        flag.fill(go)?;
+        iterations.fill(0)
+    };
+    // The host loop: 1000 / 2^10 < 1 after 10 halvings (exact powers of two).
+    reset(1000.0, 1).unwrap();
+    wp::capture_while(&flag, body).unwrap();
+    assert_eq!(iterations.to_vec().unwrap(), vec![10]);
+    assert!(x.to_vec().unwrap().iter().all(|&v| v == 1000.0 / 1024.0));
+    // Captured, the reset inside the graph.
+    let graph = wp::capture(dev, || {
+        reset(1000.0, 1)?;
+        wp::capture_while(&flag, body)
+    })
+    .unwrap();
+    for _ in 0..3 {
+        graph.launch().unwrap();
+        assert_eq!(iterations.to_vec().unwrap(), vec![10]);
+        assert!(x.to_vec().unwrap().iter().all(|&v| v == 1000.0 / 1024.0));
+    }
+    // The flag decides at run time: a graph whose reset leaves it at zero, and one whose
+    // start value needs another count of iterations (set outside the graph).
+    let no_loop = wp::capture(dev, || {
+        reset(1000.0, 0)?;
+        wp::capture_while(&flag, body)
+    })
+    .unwrap();
+    no_loop.launch().unwrap();
+    assert_eq!(iterations.to_vec().unwrap(), vec![0]);
+    assert!(x.to_vec().unwrap().iter().all(|&v| v == 1000.0));
+    let looping = wp::capture(dev, || wp::capture_while(&flag, body)).unwrap();
+    reset(64.0, 1).unwrap();
+    looping.launch().unwrap();
+    // 64 / 2^6 = 1 is not > 1: six iterations.
+    assert_eq!(iterations.to_vec().unwrap(), vec![6]);
+    assert!(x.to_vec().unwrap().iter().all(|&v| v == 1.0));
+    // An empty condition array is refused.
+    let empty = zeros::<i32, 1>(4, dev).view(2..2).unwrap();
+    let e = wp::capture_while(&empty, || Ok(())).unwrap_err().to_string();
+    assert!(e.contains("empty"), "{e}");
+}
+
+/// `capture_if` takes the branch the flag names when the graph runs, with one read of the
+/// flag for both branches (the true branch clearing it does not run the false one too).
+fn conditional_branches(dev: &wp::Device) {
+    load_all(dev);
+    let n = 64;
+    let (a, flag) = (zeros::<f32, 1>(n, dev), zeros::<i32, 1>(1, dev));
+    let graph = wp::capture(dev, || {
+        wp::capture_if(
+            &flag,
+            || {
+                wp::launch(g_add, n, (&a, 1.0f32), dev)?;
+                flag.fill(0)
+            },
+            || wp::launch(g_add, n, (&a, 100.0f32), dev),
+        )
+    })
+    .unwrap();
+    flag.fill(1).unwrap();
+    graph.launch().unwrap();
+    assert!(a.to_vec().unwrap().iter().all(|&v| v == 1.0));
+    assert_eq!(flag.to_vec().unwrap(), vec![0]);
+    graph.launch().unwrap();
+    assert!(a.to_vec().unwrap().iter().all(|&v| v == 101.0));
+    // Outside a capture the same call branches on the host.
+    flag.fill(1).unwrap();
+    wp::capture_if(
+        &flag,
+        || wp::launch(g_add, n, (&a, 1.0f32), dev),
+        || wp::launch(g_add, n, (&a, 100.0f32), dev),
+    )
+    .unwrap();
+    assert!(a.to_vec().unwrap().iter().all(|&v| v == 102.0));
 }

@@ -266,6 +266,44 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
     })
 }
 
+/// Environment variable naming `libcudadevrt.a`, for device code that calls the device runtime
+/// (graph conditionals); wins over the search of [`cudadevrt_path`].
+pub const CUDADEVRT_ENV: &str = "WARP_LANG_CUDADEVRT";
+
+/// Where the CUDA toolkit's static device runtime `libcudadevrt.a` is: `WARP_LANG_CUDADEVRT`,
+/// else under `CUDA_PATH`, `CUDA_HOME`, `/usr/local/cuda` and `/usr/local/cuda-*` (newest
+/// first), in `lib64`, `targets/{x86_64,sbsa}-linux/lib` or `lib`. `None` when there is none
+/// (a machine with a driver but no toolkit).
+pub fn cudadevrt_path() -> Option<std::path::PathBuf> {
+    use std::path::PathBuf;
+    if let Some(p) = std::env::var_os(CUDADEVRT_ENV).filter(|v| !v.is_empty()) {
+        return Some(PathBuf::from(p)).filter(|p| p.is_file());
+    }
+    let mut roots: Vec<PathBuf> = ["CUDA_PATH", "CUDA_HOME"]
+        .iter()
+        .filter_map(|v| std::env::var_os(v).filter(|v| !v.is_empty()).map(PathBuf::from))
+        .collect();
+    roots.push(PathBuf::from("/usr/local/cuda"));
+    let mut versioned: Vec<PathBuf> = std::fs::read_dir("/usr/local")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("cuda-"))
+        })
+        .collect();
+    versioned.sort();
+    roots.extend(versioned.into_iter().rev());
+    let subdirs = ["lib64", "targets/x86_64-linux/lib", "targets/sbsa-linux/lib", "lib"];
+    roots
+        .iter()
+        .flat_map(|r| subdirs.iter().map(move |d| r.join(d).join("libcudadevrt.a")))
+        .find(|p| p.is_file())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

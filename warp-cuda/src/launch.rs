@@ -175,6 +175,64 @@ impl Gpu {
         })
     }
 
+    /// Links relocatable device code (`cubin`, compiled with `-rdc=true`) with the static
+    /// device library at `library` (`libcudadevrt.a`, for device-runtime calls such as
+    /// `cudaGraphSetConditional`) by the driver's JIT linker, and loads the result.
+    pub fn load_linked(self: &Arc<Self>, cubin: &[u8], library: &std::path::Path) -> Result<Module> {
+        let ordinal = self.ordinal();
+        let op = |what: &str| format!("{what} (linking with {}) on cuda:{ordinal}", library.display());
+        let lib = std::ffi::CString::new(library.as_os_str().as_encoded_bytes()).map_err(|_| {
+            CudaError::InvalidArgument(format!("a library path with a NUL: {}", library.display()))
+        })?;
+        self.bind()?;
+        let mut state: sys::CUlinkState = std::ptr::null_mut();
+        // SAFETY: out-parameter call with no options.
+        unsafe {
+            sys::cuLinkCreate_v2(0, std::ptr::null_mut(), std::ptr::null_mut(), &mut state)
+        }
+        .result()
+        .map_err(|e| CudaError::driver(e, op("cuLinkCreate")))?;
+        let linked = (|| {
+            // SAFETY: `cubin` is alive for the call (the linker copies it); `lib` is a valid C
+            // string; `state` is the link state created above.
+            unsafe {
+                sys::cuLinkAddData_v2(
+                    state,
+                    sys::CUjitInputType::CU_JIT_INPUT_CUBIN,
+                    cubin.as_ptr() as *mut c_void,
+                    cubin.len(),
+                    c"wp_rdc".as_ptr(),
+                    0,
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                )
+                .result()
+                .map_err(|e| CudaError::driver(e, op("cuLinkAddData")))?;
+                sys::cuLinkAddFile_v2(
+                    state,
+                    sys::CUjitInputType::CU_JIT_INPUT_LIBRARY,
+                    lib.as_ptr(),
+                    0,
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                )
+                .result()
+                .map_err(|e| CudaError::driver(e, op("cuLinkAddFile")))?;
+                let (mut out, mut size): (*mut c_void, usize) = (std::ptr::null_mut(), 0);
+                sys::cuLinkComplete(state, &mut out, &mut size)
+                    .result()
+                    .map_err(|e| CudaError::driver(e, op("cuLinkComplete")))?;
+                // The image belongs to the link state: copy it before destroying the state.
+                Ok(std::slice::from_raw_parts(out as *const u8, size).to_vec())
+            }
+        })();
+        // SAFETY: destroyed once, after the image was copied.
+        unsafe {
+            let _ = sys::cuLinkDestroy(state);
+        }
+        self.load_module(&linked?)
+    }
+
     /// Launches `func` with a 1-D grid of `grid_dim` blocks of `block_dim` threads on `stream`
     /// (`cuLaunchKernel`). A zero `grid_dim` launches nothing and returns `Ok`.
     ///

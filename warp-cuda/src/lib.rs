@@ -34,10 +34,13 @@ pub use cache::{
     aot_key, cache_dir, cache_key, clear_kernel_cache, compile_cached, set_cache_dir, CacheLookup,
     CacheOutcome, KernelCache, CACHE_DIR_ENV,
 };
-pub use compile::{compile, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled};
+pub use compile::{
+    compile, cudadevrt_path, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled,
+    CUDADEVRT_ENV,
+};
 pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_VERSION};
 pub use error::{CudaError, Result};
-pub use graph::Graph;
+pub use graph::{Conditional, Graph, CONDITIONAL_DRIVER_VERSION};
 pub use launch::{Function, Module};
 pub use memory::{DeviceBuffer, PinnedBuffer};
 

@@ -367,6 +367,168 @@ pub fn capture(on: impl Into<CaptureOn>, body: impl FnOnce() -> Result<()>) -> R
     scope.finish()
 }
 
+/// Runs `body` while element 0 of `cond` is non-zero, checked before each iteration (Warp's
+/// `wp.capture_while`): the adaptive loop of a solver that runs until a kernel clears a flag.
+///
+/// Inside a capture the loop is recorded with its condition, evaluated when the graph runs:
+/// on a GPU as a CUDA conditional node (a `while` node whose body graph ends by reading the
+/// flag again; needs a CUDA 12.4 driver and the toolkit's `libcudadevrt.a`), on the CPU as a
+/// loop over the recorded body. Outside a capture it is a host loop that reads the flag back
+/// before each iteration. `body` is called once when captured, once per iteration otherwise.
+///
+/// ```ignore
+/// // (tests/suite/graph.rs runs this on every backend)
+/// let graph = wp::capture(&dev, || {
+///     wp::launch(reset, 1, (&flag,), &dev)?;        // flag = 1
+///     wp::capture_while(&flag, || {
+///         wp::launch(relax, n, (&x, &residual), &dev)?;
+///         wp::launch(check, 1, (&residual, tol, &flag), &dev) // flag = residual > tol
+///     })
+/// })?;
+/// graph.launch()?;
+/// ```
+///
+/// # Errors
+/// [`Error::Capture`] when `cond` is empty or on another device than the capture's, or (on a
+/// GPU) when conditional nodes are not available; `body`'s errors.
+pub fn capture_while(
+    cond: &crate::Array<i32>,
+    mut body: impl FnMut() -> Result<()>,
+) -> Result<()> {
+    check_condition(cond, "capture_while")?;
+    if !capturing() {
+        while first(cond)? != 0 {
+            body()?;
+        }
+        return Ok(());
+    }
+    conditional(cond, ConditionalKind::While, &mut body, None)
+}
+
+/// Runs `on_true` when element 0 of `cond` is non-zero and `on_false` otherwise (Warp's
+/// `wp.capture_if`); inside a capture the branch is decided when the graph runs (CUDA
+/// conditional nodes on a GPU, as for [`capture_while`]; both bodies are recorded, each once).
+///
+/// # Errors
+/// As [`capture_while`].
+pub fn capture_if(
+    cond: &crate::Array<i32>,
+    mut on_true: impl FnMut() -> Result<()>,
+    mut on_false: impl FnMut() -> Result<()>,
+) -> Result<()> {
+    check_condition(cond, "capture_if")?;
+    if !capturing() {
+        return if first(cond)? != 0 {
+            on_true()
+        } else {
+            on_false()
+        };
+    }
+    conditional(cond, ConditionalKind::If, &mut on_true, Some(&mut on_false))
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ConditionalKind {
+    If,
+    While,
+}
+
+fn check_condition(cond: &crate::Array<i32>, what: &str) -> Result<()> {
+    if cond.is_empty() {
+        return Err(Error::Capture {
+            what: format!("{what}: the condition array is empty (its element 0 is the flag)"),
+        });
+    }
+    Ok(())
+}
+
+/// Element 0 of `cond`, read back.
+fn first(cond: &crate::Array<i32>) -> Result<i32> {
+    Ok(cond.view(..1)?.to_vec()?[0])
+}
+
+/// A conditional inside the calling thread's capture: on the CPU the bodies recorded into
+/// frames of their own and replayed by one operation that reads the flag; on a GPU conditional
+/// nodes.
+fn conditional(
+    cond: &crate::Array<i32>,
+    kind: ConditionalKind,
+    then: &mut dyn FnMut() -> Result<()>,
+    otherwise: Option<&mut dyn FnMut() -> Result<()>>,
+) -> Result<()> {
+    let what = match kind {
+        ConditionalKind::If => "capture_if",
+        ConditionalKind::While => "capture_while",
+    };
+    let device = ACTIVE.with(|a| -> Result<Device> {
+        let mut a = a.borrow_mut();
+        let active = a.as_mut().expect("capturing");
+        check_device(active, cond.device(), what)?;
+        active.keep.push(Box::new(cond.clone()));
+        Ok(active.device.clone())
+    })?;
+    match device.kind() {
+        DeviceKind::Cpu => {
+            let then_ops = record_frame(then)?;
+            let else_ops = match otherwise {
+                Some(body) => record_frame(body)?,
+                None => Vec::new(),
+            };
+            let cond = cond.clone();
+            let op: Op = match kind {
+                ConditionalKind::While => Box::new(move || {
+                    while first(&cond)? != 0 {
+                        run_ops(&then_ops)?;
+                    }
+                    Ok(())
+                }),
+                ConditionalKind::If => Box::new(move || {
+                    if first(&cond)? != 0 {
+                        run_ops(&then_ops)
+                    } else {
+                        run_ops(&else_ops)
+                    }
+                }),
+            };
+            ACTIVE.with(|a| push_op(a.borrow_mut().as_mut().expect("capturing"), op));
+            Ok(())
+        }
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda { ordinal } => {
+            let kind = match kind {
+                ConditionalKind::If => warp_cuda::Conditional::If,
+                ConditionalKind::While => warp_cuda::Conditional::While,
+            };
+            cuda_capture::conditional(
+                &device,
+                ordinal,
+                kind,
+                cond.device_address(),
+                then,
+                otherwise,
+            )
+        }
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda { .. } => unreachable!("no CUDA capture without the cuda feature"),
+    }
+}
+
+/// Runs `body` with a new frame open on the calling thread's CPU capture, and returns what it
+/// recorded there.
+fn record_frame(body: &mut dyn FnMut() -> Result<()>) -> Result<Vec<Op>> {
+    ACTIVE.with(|a| a.borrow_mut().as_mut().expect("capturing").frames.push(Vec::new()));
+    let ran = body();
+    let ops = ACTIVE.with(|a| {
+        a.borrow_mut()
+            .as_mut()
+            .expect("capturing")
+            .frames
+            .pop()
+            .expect("the frame pushed above")
+    });
+    ran.map(|()| ops)
+}
+
 /// What a graph replays.
 enum Body {
     Cpu(Vec<Op>),

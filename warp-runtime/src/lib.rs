@@ -57,7 +57,7 @@ pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };
 pub use error::{Error, Result};
-pub use graph::{capture, CaptureOn, Graph, ScopedCapture};
+pub use graph::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use kernel::{
     kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg,
     KernelInfo, KernelParams, Launchable,

@@ -51,6 +51,10 @@ pub(crate) fn begin(device: &Device, ordinal: usize, stream: Option<&Stream>) ->
             _ => st.gpu.new_stream().map_err(|e| err(device, e))?,
         },
     };
+    // Conditional nodes need their kernel loaded before the capture (nothing loads inside).
+    if warp_cuda::driver_version().is_some_and(|v| v >= warp_cuda::CONDITIONAL_DRIVER_VERSION) {
+        load_setter(&st, device, ordinal);
+    }
     stream.begin_capture().map_err(|e| err(device, e))?;
     gpu::set_capture_stream(Some((ordinal, stream.clone())));
     Ok(CudaCapture {
@@ -98,4 +102,166 @@ pub(crate) fn launch(
     st.queue(ordinal, stream.map(Stream::cuda_stream), |on| {
         graph.launch(on).map_err(|e| err(device, e))
     })
+}
+
+/// The kernel that sets conditional handles from a flag in device memory: `then` to whether
+/// `*cond` is non-zero and, with `has_else`, `otherwise` to the opposite. One kernel node
+/// before a conditional node (and at the end of a `while` body) evaluates the condition on the
+/// device. `cudaGraphSetConditional` is in the device runtime, so this unit is compiled as
+/// relocatable code and linked with the toolkit's `libcudadevrt.a`.
+const SET_CONDITIONAL: &str = r#"
+extern "C" __device__ void cudaGraphSetConditional(unsigned long long handle, unsigned int value);
+extern "C" __global__ void wp_set_conditional(unsigned long long then, unsigned long long otherwise,
+                                              int has_else, const int* cond) {
+    unsigned int c = (*cond != 0) ? 1u : 0u;
+    cudaGraphSetConditional(then, c);
+    if (has_else) cudaGraphSetConditional(otherwise, 1u - c);
+}
+"#;
+
+/// The condition kernel, loaded for one GPU.
+struct Setter {
+    _module: warp_cuda::Module,
+    function: warp_cuda::Function,
+}
+
+type Setters = std::sync::Mutex<std::collections::HashMap<usize, Result<Arc<Setter>>>>;
+
+fn setters() -> &'static Setters {
+    static S: std::sync::OnceLock<Setters> = std::sync::OnceLock::new();
+    S.get_or_init(Default::default)
+}
+
+/// Compiles and links the condition kernel for GPU `ordinal` once per process (outside any
+/// capture: `begin` calls this before capturing, so that a conditional inside the capture
+/// loads nothing). The outcome, success or why not, is kept.
+fn load_setter(st: &GpuState, device: &Device, ordinal: usize) {
+    let mut map = setters().lock().unwrap_or_else(|p| p.into_inner());
+    if map.contains_key(&ordinal) {
+        return;
+    }
+    let loaded = (|| {
+        let Some(library) = warp_cuda::cudadevrt_path() else {
+            return Err(Error::Capture {
+                what: format!(
+                    "capture_while and capture_if on \"{device}\" need the CUDA toolkit's \
+                     libcudadevrt.a (for cudaGraphSetConditional), found neither through {} nor \
+                     under CUDA_PATH, CUDA_HOME or /usr/local/cuda*",
+                    warp_cuda::CUDADEVRT_ENV
+                ),
+            });
+        };
+        let opts = warp_cuda::CompileOptions {
+            extra_options: &["-rdc=true"],
+            ..Default::default()
+        };
+        let (compiled, _) = warp_cuda::compile_cached(
+            SET_CONDITIONAL,
+            "wp_set_conditional",
+            &opts,
+            st.gpu.arch(),
+        )
+        .map_err(|e| err(device, e))?;
+        let module = st
+            .gpu
+            .load_linked(&compiled.cubin, &library)
+            .map_err(|e| err(device, e))?;
+        let function = module
+            .function("wp_set_conditional")
+            .map_err(|e| err(device, e))?;
+        Ok(Arc::new(Setter {
+            _module: module,
+            function,
+        }))
+    })();
+    map.insert(ordinal, loaded);
+}
+
+/// Queues the condition kernel on `stream`.
+fn set_conditional(
+    st: &GpuState,
+    device: &Device,
+    setter: &Setter,
+    stream: &warp_cuda::Stream,
+    (then, otherwise): (u64, Option<u64>),
+    cond: u64,
+) -> Result<()> {
+    let (mut then, mut otherwise, mut has_else, mut cond) =
+        (then, otherwise.unwrap_or(0), otherwise.is_some() as i32, cond);
+    let mut args = [
+        (&mut then) as *mut u64 as *mut std::ffi::c_void,
+        (&mut otherwise) as *mut u64 as *mut std::ffi::c_void,
+        (&mut has_else) as *mut i32 as *mut std::ffi::c_void,
+        (&mut cond) as *mut u64 as *mut std::ffi::c_void,
+    ];
+    // SAFETY: the arguments match wp_set_conditional's parameters (two u64 handles, an int, a
+    // pointer to an int that the caller keeps alive for the graph's replays).
+    unsafe {
+        st.gpu
+            .launch_raw(&setter.function, stream, 1, 1, 0, &mut args)
+            .map_err(|e| err(device, e))
+    }
+}
+
+/// Inside the calling thread's capture on GPU `ordinal`: conditional nodes on the `i32` at
+/// device address `cond`, evaluated on the device when the graph runs. `While` runs `bodies.0`
+/// while the flag is non-zero (the flag is read again after each iteration); `If` runs
+/// `bodies.0` when it is non-zero and `bodies.1` (if any) when it is zero, both decided by
+/// one read before either runs.
+pub(crate) fn conditional(
+    device: &Device,
+    ordinal: usize,
+    kind: warp_cuda::Conditional,
+    cond: u64,
+    then: &mut dyn FnMut() -> Result<()>,
+    otherwise: Option<&mut dyn FnMut() -> Result<()>>,
+) -> Result<()> {
+    let st = state(device, ordinal)?;
+    let Some(outer) = gpu::capture_stream(ordinal) else {
+        return Err(Error::Capture {
+            what: format!("a conditional outside a capture on \"{device}\""),
+        });
+    };
+    let setter = match setters()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .get(&ordinal)
+    {
+        Some(Ok(s)) => s.clone(),
+        Some(Err(e)) => return Err(e.clone()),
+        None => {
+            return Err(Error::Capture {
+                what: format!("the condition kernel of \"{device}\" was not loaded"),
+            })
+        }
+    };
+    let gpu_err = |e| err(device, e);
+    let then_handle = outer.conditional_handle(&st.gpu).map_err(gpu_err)?;
+    let else_handle = match otherwise {
+        Some(_) => Some(outer.conditional_handle(&st.gpu).map_err(gpu_err)?),
+        None => None,
+    };
+    set_conditional(&st, device, &setter, &outer, (then_handle, else_handle), cond)?;
+    let capture_body = |handle: u64, body: &mut dyn FnMut() -> Result<()>| -> Result<()> {
+        let body_stream = st.gpu.new_stream().map_err(gpu_err)?;
+        outer
+            .add_conditional(&st.gpu, handle, kind, &body_stream)
+            .map_err(gpu_err)?;
+        gpu::set_capture_stream(Some((ordinal, body_stream.clone())));
+        let ran = body().and_then(|()| match kind {
+            // A while body ends by evaluating the flag again.
+            warp_cuda::Conditional::While => {
+                set_conditional(&st, device, &setter, &body_stream, (handle, None), cond)
+            }
+            warp_cuda::Conditional::If => Ok(()),
+        });
+        let ended = body_stream.end_body_capture().map_err(gpu_err);
+        gpu::set_capture_stream(Some((ordinal, outer.clone())));
+        ran.and(ended)
+    };
+    capture_body(then_handle, then)?;
+    if let (Some(h), Some(body)) = (else_handle, otherwise) {
+        capture_body(h, body)?;
+    }
+    Ok(())
 }

@@ -1,0 +1,385 @@
+//! GPU benchmark of the host side of step loops: a 10-kernel substep run 1000 times, launched
+//! plainly, through launch objects (`wp::Launch`), as replays of a captured graph, and as one
+//! graph of all 10,000 launches; beside the same loop of hand-written CUDA launched raw
+//! (`cuLaunchKernel` through `warp_cuda`) and as a raw graph, and beside NVIDIA Warp 1.19
+//! (`benches/py/warp_graph.py`: `wp.launch`, `wp.Launch`, `wp.capture_launch`) in the same
+//! run. Every mode's result is compared with the plain launches' (bit for bit) and with the
+//! closed form of the oscillator it integrates.
+//!
+//! ```text
+//! cargo bench --bench graph                    # needs a CUDA device; SKIPPED otherwise
+//! # on the GPU machine, with Warp unpacked by ../shared/tools/warp-bundle:
+//! PYTHONPATH=/root/warp-lang .gpu/bin/graph-*
+//! ```
+//!
+//! The substep: five pairs of `v -= k x dt; x += v dt` (symplectic Euler of x'' = -k x) over
+//! 1024 oscillators, so that every kernel is tiny and the loop measures launch costs. "host"
+//! is the time until the launching loop returns (what the CPU spends queueing), "total" until
+//! the GPU has finished; both per kernel launched.
+
+use std::ffi::c_void;
+use std::time::Instant;
+use warp_lang as wp;
+use wp::prelude::*;
+
+mod common;
+use common::{json_number, python_side};
+
+const N: usize = 1024;
+const SUBSTEPS: usize = 1000;
+const PAIRS: usize = 5;
+const KERNELS: usize = SUBSTEPS * 2 * PAIRS;
+const K: f32 = 40.0;
+const DT: f32 = 1e-4;
+const REPS: usize = 7;
+
+#[wp::kernel]
+fn velocity(x: Array<f32>, v: Array<f32>, k: f32, dt: f32) {
+    let i = tid();
+    v[i] = v[i] - k * x[i] * dt;
+}
+
+#[wp::kernel]
+fn position(x: Array<f32>, v: Array<f32>, dt: f32) {
+    let i = tid();
+    x[i] = x[i] + v[i] * dt;
+}
+
+/// One thread: counts down, and keeps the loop's flag set while the count is positive.
+#[wp::kernel]
+fn count_down(counter: Array<i32>, flag: Array<i32>) {
+    let _i = tid();
+    let c = counter[0] - 1;
+    counter[0] = c;
+    flag[0] = if c > 0 { 1 } else { 0 };
+}
+
+const HAND: &str = r#"
+extern "C" __global__ void hand_velocity(const float* x, float* v, float k, float dt, int n) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) v[i] = v[i] - k * x[i] * dt;
+}
+extern "C" __global__ void hand_position(float* x, const float* v, float dt, int n) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) x[i] = x[i] + v[i] * dt;
+}
+"#;
+
+fn x0() -> Vec<f32> {
+    (0..N).map(|i| 0.5 + (i % 7) as f32 * 0.1).collect()
+}
+
+/// Median of `REPS` runs of `f` after one warm-up: (host ms, total ms).
+fn timed(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<(f64, f64)> {
+    f()?;
+    wp::synchronize()?;
+    let (mut host, mut total) = (Vec::new(), Vec::new());
+    for _ in 0..REPS {
+        wp::synchronize()?;
+        let t = Instant::now();
+        f()?;
+        host.push(t.elapsed().as_secs_f64() * 1e3);
+        wp::synchronize()?;
+        total.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let med = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Ok((med(host), med(total)))
+}
+
+/// Microseconds per kernel of `ms` spent on `KERNELS` launches.
+fn per_kernel(ms: f64) -> f64 {
+    ms * 1e3 / KERNELS as f64
+}
+
+/// The largest distance of the oscillators from the closed form x0 cos(sqrt(k) t) after
+/// `steps` steps (symplectic Euler's error is O(dt)).
+fn closed_form_error(x: &[f32], steps: usize) -> f64 {
+    let t = steps as f64 * DT as f64;
+    let w = (K as f64).sqrt();
+    x.iter()
+        .zip(x0())
+        .map(|(&a, b)| (a as f64 - b as f64 * (w * t).cos()).abs())
+        .fold(0.0, f64::max)
+}
+
+struct Row {
+    name: &'static str,
+    host_us: f64,
+    total_us: f64,
+    max_diff: f64,
+    error: f64,
+    warp_us: Option<f64>,
+}
+
+fn main() -> wp::Result<()> {
+    wp::config::set_quiet(true);
+    let dev = match wp::get_device("cuda:0") {
+        Ok(d) => d,
+        Err(e) => {
+            println!("graph bench SKIPPED: no CUDA device ({e})");
+            return Ok(());
+        }
+    };
+    let warp = python_side("benches/py/warp_graph.py", &[]);
+    let warp_us = |key: &str| warp.as_ref().ok().and_then(|j| json_number(j, key));
+    wp::load(
+        &[
+            wp::kernel_info(velocity),
+            wp::kernel_info(position),
+            wp::kernel_info(count_down),
+        ],
+        &dev,
+    )?;
+    let x = wp::Array::from_slice(&x0(), &dev)?;
+    let v = wp::Array::<f32>::zeros(N, &dev)?;
+    let reset = || -> wp::Result<()> {
+        x.copy_from(&wp::Array::from_slice(&x0(), &wp::cpu())?)?;
+        v.fill(0.0)
+    };
+    let substep = || -> wp::Result<()> {
+        for _ in 0..PAIRS {
+            wp::launch(velocity, N, (&x, &v, K, DT), &dev)?;
+            wp::launch(position, N, (&x, &v, DT), &dev)?;
+        }
+        Ok(())
+    };
+    // Each mode runs the loop from the start (REPS + 1 times); the result compared is the
+    // state after one loop of the mode, against one plain loop.
+    let one_loop_result = |run: &mut dyn FnMut() -> wp::Result<()>| -> wp::Result<Vec<f32>> {
+        reset()?;
+        run()?;
+        x.to_vec()
+    };
+    let mut rows = Vec::new();
+    let mut plain_loop = || -> wp::Result<()> {
+        for _ in 0..SUBSTEPS {
+            substep()?;
+        }
+        Ok(())
+    };
+    let reference = one_loop_result(&mut plain_loop)?;
+    let steps = SUBSTEPS * PAIRS;
+    let mut record = |name, (host, total): (f64, f64), result: Vec<f32>, warp: Option<f64>| {
+        let max_diff = result
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .fold(0.0, f64::max);
+        rows.push(Row {
+            name,
+            host_us: per_kernel(host),
+            total_us: per_kernel(total),
+            max_diff,
+            error: closed_form_error(&result, steps),
+            warp_us: warp,
+        });
+    };
+
+    // Plain launches.
+    let t = timed(&mut plain_loop)?;
+    let r = one_loop_result(&mut plain_loop)?;
+    record("plain wp::launch", t, r, warp_us("plain_us"));
+
+    // Launch objects: one per kernel of a pair, launched five times a substep.
+    let mut vel = wp::Launch::new(velocity, N, (&x, &v, K, DT), &dev)?;
+    let mut pos = wp::Launch::new(position, N, (&x, &v, DT), &dev)?;
+    let mut objects = || -> wp::Result<()> {
+        for _ in 0..SUBSTEPS * PAIRS {
+            vel.launch()?;
+            pos.launch()?;
+        }
+        Ok(())
+    };
+    let t = timed(&mut objects)?;
+    let r = one_loop_result(&mut objects)?;
+    record("launch objects (wp::Launch)", t, r, warp_us("launch_object_us"));
+
+    // One substep captured, replayed 1000 times.
+    let tc = Instant::now();
+    let one = wp::capture(&dev, substep)?;
+    let capture_one_ms = tc.elapsed().as_secs_f64() * 1e3;
+    let mut replays = || -> wp::Result<()> {
+        for _ in 0..SUBSTEPS {
+            one.launch()?;
+        }
+        Ok(())
+    };
+    let t = timed(&mut replays)?;
+    let r = one_loop_result(&mut replays)?;
+    record("graph of a substep x 1000", t, r, warp_us("graph_substep_us"));
+
+    // All 10,000 launches in one graph.
+    let tc = Instant::now();
+    let all = wp::capture(&dev, || {
+        for _ in 0..SUBSTEPS {
+            substep()?;
+        }
+        Ok(())
+    })?;
+    let capture_all_ms = tc.elapsed().as_secs_f64() * 1e3;
+    let mut whole = || all.launch();
+    let t = timed(&mut whole)?;
+    let r = one_loop_result(&mut whole)?;
+    record("one graph of 10,000 launches", t, r, warp_us("graph_all_us"));
+
+    // An adaptive loop on the device: capture_while over the substep and a count-down kernel
+    // (11 kernels an iteration), the count and the flag set inside the graph.
+    let (counter, flag) = (wp::Array::<i32>::zeros(1, &dev)?, wp::Array::<i32>::zeros(1, &dev)?);
+    let looped = wp::capture(&dev, || {
+        counter.fill(SUBSTEPS as i32)?;
+        flag.fill(1)?;
+        wp::capture_while(&flag, || {
+            substep()?;
+            wp::launch(count_down, 1, (&counter, &flag), &dev)
+        })
+    });
+    match looped {
+        Ok(looped) => {
+            let mut run = || looped.launch();
+            let (host, total) = timed(&mut run)?;
+            let r = one_loop_result(&mut run)?;
+            // Per kernel of the 11 an iteration runs.
+            let scale = KERNELS as f64 / (SUBSTEPS * (2 * PAIRS + 1)) as f64;
+            record(
+                "capture_while (device loop), 11/iter",
+                (host * scale, total * scale),
+                r,
+                warp_us("capture_while_us"),
+            );
+        }
+        Err(e) => println!("capture_while: not run ({e})"),
+    }
+
+    // Hand-written CUDA, raw launches and a raw graph, on buffers of their own.
+    let hand = Hand::new();
+    let hx = warp_cuda::DeviceBuffer::from_bytes(&hand.gpu, bytemuck::cast_slice(&x0()))
+        .expect("upload");
+    let hv = warp_cuda::DeviceBuffer::zeros(&hand.gpu, 4 * N).expect("alloc");
+    let (xp, vp) = (hx.device_ptr(), hv.device_ptr());
+    let raw_loop = |stream: &warp_cuda::Stream| -> wp::Result<()> {
+        for _ in 0..SUBSTEPS * PAIRS {
+            hand.velocity(stream, xp, vp);
+            hand.position(stream, xp, vp);
+        }
+        Ok(())
+    };
+    let raw_result = |run: &mut dyn FnMut() -> wp::Result<()>| -> wp::Result<Vec<f32>> {
+        hx.upload(0, bytemuck::cast_slice(&x0())).expect("upload");
+        hv.fill_pattern(0, 4 * N, &[0]).expect("fill");
+        run()?;
+        wp::synchronize()?;
+        Ok(bytemuck::cast_slice(&hx.to_vec().expect("download")).to_vec())
+    };
+    let default = hand.gpu.default_stream().clone();
+    let t = timed(|| raw_loop(&default))?;
+    let r = raw_result(&mut || raw_loop(&default))?;
+    record("hand-written CUDA, raw launches", t, r, None);
+    let capture_stream = hand.gpu.new_stream().expect("stream");
+    capture_stream.begin_capture().expect("capture");
+    raw_loop(&capture_stream)?;
+    let raw_graph = capture_stream.end_capture(&hand.gpu).expect("graph");
+    let mut raw_replay = || -> wp::Result<()> {
+        raw_graph.launch(&default).expect("graph launch");
+        Ok(())
+    };
+    let t = timed(&mut raw_replay)?;
+    let r = raw_result(&mut raw_replay)?;
+    record("hand-written CUDA, one raw graph", t, r, None);
+
+    println!(
+        "host side of a step loop on \"{}\": {SUBSTEPS} substeps x {} kernels over {N} \
+         oscillators (k = {K}, dt = {DT}), microseconds per kernel, medians of {REPS}",
+        dev.name(),
+        2 * PAIRS
+    );
+    println!(
+        "{:<34} {:>9} {:>9} {:>13} {:>11} {:>13}",
+        "mode", "host us", "total us", "vs plain", "closed form", "Warp 1.19 us"
+    );
+    for r in &rows {
+        let warp = match r.warp_us {
+            Some(w) => format!("{w:8.2} ({:.2}x)", r.total_us / w),
+            None => "-".into(),
+        };
+        println!(
+            "{:<34} {:>9.3} {:>9.3} {:>13} {:>11.2e} {:>13}",
+            r.name,
+            r.host_us,
+            r.total_us,
+            if r.max_diff == 0.0 {
+                "bit for bit".to_string()
+            } else {
+                format!("{:.1e}", r.max_diff)
+            },
+            r.error,
+            warp
+        );
+    }
+    println!(
+        "capture: {capture_one_ms:.2} ms for 10 launches, {capture_all_ms:.1} ms for {KERNELS} \
+         (graph nodes {})",
+        all.node_count()
+    );
+    match &warp {
+        Ok(j) => println!("Warp 1.19 (same run): {j}"),
+        Err(e) => println!("Warp 1.19: not run ({e})"),
+    }
+    println!(
+        "(Warp's 'total' per kernel is beside ours; the DESIGN goal is <= 1 us per kernel in a \
+         graph, Warp's figure 1.28 us)"
+    );
+    Ok(())
+}
+
+/// The hand-written kernels, launched through `warp_cuda` directly.
+struct Hand {
+    gpu: std::sync::Arc<warp_cuda::Gpu>,
+    _module: warp_cuda::Module,
+    velocity: warp_cuda::Function,
+    position: warp_cuda::Function,
+}
+
+impl Hand {
+    fn new() -> Hand {
+        let gpu = warp_cuda::Gpu::open(0).expect("gpu");
+        let compiled =
+            warp_cuda::compile(HAND, "hand", &Default::default(), gpu.arch()).expect("nvrtc");
+        let module = gpu.load_module(&compiled.cubin).expect("load");
+        Hand {
+            velocity: module.function("hand_velocity").expect("function"),
+            position: module.function("hand_position").expect("function"),
+            gpu,
+            _module: module,
+        }
+    }
+
+    fn velocity(&self, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
+        let (mut k, mut dt, mut n) = (K, DT, N as i32);
+        let mut args: [*mut c_void; 5] = [ptr(&mut x), ptr(&mut v), ptr(&mut k), ptr(&mut dt), ptr(&mut n)];
+        self.launch(&self.velocity, stream, &mut args);
+    }
+
+    fn position(&self, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
+        let (mut dt, mut n) = (DT, N as i32);
+        let mut args: [*mut c_void; 4] = [ptr(&mut x), ptr(&mut v), ptr(&mut dt), ptr(&mut n)];
+        self.launch(&self.position, stream, &mut args);
+    }
+
+    fn launch(&self, f: &warp_cuda::Function, stream: &warp_cuda::Stream, args: &mut [*mut c_void]) {
+        let blocks = N.div_ceil(256) as u32;
+        // SAFETY: `args` point at values laid out as the kernel's parameters; the arrays
+        // outlive the launches (the bench synchronises before dropping them).
+        unsafe {
+            self.gpu
+                .launch_raw(f, stream, blocks, 256, 0, args)
+                .expect("launch")
+        };
+    }
+}
+
+fn ptr<T>(v: &mut T) -> *mut c_void {
+    v as *mut T as *mut c_void
+}
