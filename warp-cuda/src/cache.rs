@@ -191,6 +191,18 @@ pub enum CacheLookup {
     Damaged,
 }
 
+/// Where the cubin of a cached compile is: the key it is stored under and its file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CacheEntry {
+    /// The key ([`cache_key`], under the NVRTC version that served or compiled it): the 32 hex
+    /// digits of the entry's file name. A change to the source (a kernel's body), the options
+    /// or the versions gives a new key, so a new entry; the old one stays, unused.
+    pub key: u128,
+    /// The entry's file ([`KernelCache::path_for`]); `None` when a freshly compiled cubin could
+    /// not be written (the compile still succeeds: see [`KernelCache::compile_cached`]).
+    pub path: Option<PathBuf>,
+}
+
 /// A kernel cache in one directory.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct KernelCache {
@@ -394,38 +406,50 @@ impl KernelCache {
         opts: &CompileOptions,
         arch: u32,
     ) -> Result<(Compiled, CacheOutcome)> {
+        self.compile_cached_entry(source, name, opts, arch)
+            .map(|(compiled, outcome, _)| (compiled, outcome))
+    }
+
+    /// [`compile_cached`](Self::compile_cached), also saying which entry served or now holds
+    /// the cubin (for reports: the key and the file).
+    pub fn compile_cached_entry(
+        &self,
+        source: &str,
+        name: &str,
+        opts: &CompileOptions,
+        arch: u32,
+    ) -> Result<(Compiled, CacheOutcome, CacheEntry)> {
+        let hit = |cubin: Vec<u8>, key: u128| {
+            let compiled = Compiled {
+                cubin,
+                log: String::new(),
+                compile_ms: 0.0,
+            };
+            let entry = CacheEntry {
+                key,
+                path: Some(self.path_for(name, key)),
+            };
+            (compiled, CacheOutcome::Hit, entry)
+        };
         if let Some(stamped) = self.read_stamp() {
             let key = cache_key(source, name, opts, arch, stamped);
             if let CacheLookup::Hit(cubin) = self.load(name, key) {
-                let compiled = Compiled {
-                    cubin,
-                    log: String::new(),
-                    compile_ms: 0.0,
-                };
-                return Ok((compiled, CacheOutcome::Hit));
+                return Ok(hit(cubin, key));
             }
         }
         let version = nvrtc_version()?;
         let key = cache_key(source, name, opts, arch, version);
         let outcome = match self.load(name, key) {
-            CacheLookup::Hit(cubin) => {
-                return Ok((
-                    Compiled {
-                        cubin,
-                        log: String::new(),
-                        compile_ms: 0.0,
-                    },
-                    CacheOutcome::Hit,
-                ))
-            }
+            CacheLookup::Hit(cubin) => return Ok(hit(cubin, key)),
             CacheLookup::Absent => CacheOutcome::Miss,
             CacheLookup::Damaged => CacheOutcome::Rebuilt,
         };
         let compiled = compile(source, name, opts, arch)?;
-        if self.store(name, key, &compiled.cubin).is_ok() {
+        let path = self.store(name, key, &compiled.cubin).ok();
+        if path.is_some() {
             self.write_stamp(version);
         }
-        Ok((compiled, outcome))
+        Ok((compiled, outcome, CacheEntry { key, path }))
     }
 }
 
@@ -677,6 +701,15 @@ pub(crate) mod tests {
             (compiled.cubin.as_slice(), outcome),
             (&b"cubin bytes"[..], CacheOutcome::Hit)
         );
+        // The entry that served it: the stamped version's key and its file.
+        let (_, _, entry) = c.compile_cached_entry("src", "k", &opts, 90).unwrap();
+        assert_eq!(
+            entry,
+            CacheEntry {
+                key,
+                path: Some(c.path_for("k", key))
+            }
+        );
         // Another source under the stamp misses and goes to NVRTC (an error where there is
         // none, never a wrong cubin).
         if nvrtc_version().is_err() {
@@ -686,6 +719,33 @@ pub(crate) mod tests {
             fs::write(c.stamp_path(), bad).unwrap();
             assert_eq!(c.read_stamp(), None, "{bad:?}");
         }
+    }
+
+    /// A compile (a miss) reports the key it was stored under and the file; the next call
+    /// hits that entry and reports the same. Needs NVRTC (not a GPU); skipped without it.
+    #[test]
+    fn compiled_entry_names_key_and_file() {
+        let archs = match crate::compile::nvrtc_supported_archs() {
+            Ok(a) if !a.is_empty() => a,
+            other => {
+                eprintln!("SKIPPED compiled_entry_names_key_and_file: no NVRTC ({other:?})");
+                return;
+            }
+        };
+        let arch = *archs.last().expect("not empty");
+        let t = TempDir::new("entry");
+        let c = KernelCache::new(&t.0);
+        let opts = CompileOptions::default();
+        let src = "extern \"C\" __global__ void k(float* a) { a[threadIdx.x] += 1.0f; }";
+        let (_, outcome, entry) = c.compile_cached_entry(src, "k", &opts, arch).unwrap();
+        let key = cache_key(src, "k", &opts, arch, nvrtc_version().unwrap());
+        assert_eq!(outcome, CacheOutcome::Miss);
+        assert_eq!(entry.key, key);
+        let path = entry.path.clone().expect("written");
+        assert_eq!(path, c.path_for("k", key));
+        assert!(path.is_file());
+        let (_, outcome, again) = c.compile_cached_entry(src, "k", &opts, arch).unwrap();
+        assert_eq!((outcome, again), (CacheOutcome::Hit, entry));
     }
 
     #[test]

@@ -2,8 +2,8 @@
 //!
 //! A kernel is compiled for a GPU at its first launch there: its translation unit is assembled
 //! (`source`), compiled by NVRTC to a cubin for that GPU's architecture (an ahead-of-time
-//! cubin first, then the disk cache, `warp_cuda::compile_cached`), loaded, and kept for the
-//! process.
+//! cubin first, then the disk cache, `KernelCache::compile_cached_entry`), loaded, and kept
+//! for the process.
 
 use super::gpu::{err, state, GpuState};
 use super::options::{needs_exact, with_compile_options};
@@ -12,8 +12,10 @@ use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::KernelInfo;
 use std::collections::HashMap;
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
-use warp_cuda::{CacheOutcome, Function, Module};
+use warp_cuda::cache::CacheEntry;
+use warp_cuda::{CacheOutcome, Function, KernelCache, Module};
 
 /// A kernel compiled and loaded for one GPU, with that GPU's state (one lookup per launch).
 pub(crate) struct Loaded {
@@ -47,6 +49,17 @@ pub struct CompileReport {
     pub aot: bool,
     /// Time from the start of the first launch to a loaded module.
     pub total_ms: f64,
+    /// The key the cubin is stored under: a 128-bit hash of the generated source (with its
+    /// `#line` directives, so the kernel's file and lines count), the NVRTC options, the
+    /// headers, the architecture, this crate's version and (in the kernel cache, not for an
+    /// ahead-of-time cubin) the NVRTC version. Printed as 32 hex digits it is the end of the
+    /// entry's file name, `<kernel>-<key>.cubin`. A kernel whose body changes gets a new key,
+    /// so it is compiled again.
+    pub cache_key: u128,
+    /// The cubin's file: the kernel cache entry (read on a hit, written after a compile;
+    /// `warp_cuda::cache_dir()`), or the ahead-of-time entry when `aot` is set. `None` when a
+    /// compiled cubin could not be written to the cache (the kernel still runs).
+    pub cache_entry: Option<PathBuf>,
 }
 
 fn reports() -> &'static Mutex<Vec<CompileReport>> {
@@ -142,7 +155,7 @@ pub(crate) fn loaded(
     };
     let arch = st.gpu.arch();
     let stack_define = adjoint.map(|b| b.to_string());
-    let (compiled, outcome, aot) = with_compile_options(
+    let (compiled, outcome, aot, entry) = with_compile_options(
         contiguous,
         stack_define.as_deref(),
         needs_exact(&src.headers),
@@ -154,9 +167,14 @@ pub(crate) fn loaded(
                     log: String::new(),
                     compile_ms: 0.0,
                 };
-                return Ok((c, CacheOutcome::Hit, true));
+                // The entry `aot::lookup` read (its key hashed again, only on this path).
+                let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
+                let path = aot::aot_dir().map(|d| KernelCache::new(d).path_for(info.name, key));
+                return Ok((c, CacheOutcome::Hit, true, CacheEntry { key, path }));
             }
-            warp_cuda::compile_cached(&src.text, info.name, opts, arch).map(|(c, o)| (c, o, false))
+            KernelCache::current()
+                .compile_cached_entry(&src.text, info.name, opts, arch)
+                .map(|(c, o, e)| (c, o, false, e))
         },
     )
     .map_err(|e| err(device, e))?;
@@ -179,6 +197,8 @@ pub(crate) fn loaded(
             cache_hit: matches!(outcome, CacheOutcome::Hit),
             aot,
             total_ms: t0.elapsed().as_secs_f64() * 1e3,
+            cache_key: entry.key,
+            cache_entry: entry.path,
         });
     let l = Arc::new(Loaded {
         st,
@@ -232,6 +252,8 @@ mod tests {
             cache_hit,
             aot: false,
             total_ms: 156.3,
+            cache_key: 0x1234,
+            cache_entry: None,
         }
     }
 
