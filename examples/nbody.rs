@@ -152,7 +152,7 @@ fn momentum(v: &[DVec3], m: &[f64]) -> (DVec3, f64) {
 
 /// One leapfrog run in f32 or f64; returns the final positions and velocities in f64.
 macro_rules! run_in {
-    ($s:ty, $vt:ty, $to:ident, $from:ident, $dev:expr, $x:expr, $v:expr, $m:expr, $dt:expr, $steps:expr, $comp:expr) => {{
+    ($s:ty, $vt:ty, $to:ident, $from:ident, $dev:expr, $x:expr, $v:expr, $m:expr, $dt:expr, $steps:expr, $comp:expr, $graph:expr) => {{
         let dev = $dev;
         let n = $x.len();
         let x = wp::Array::from_vec($x.iter().map(|p| p.$to()).collect(), dev)?;
@@ -171,15 +171,20 @@ macro_rules! run_in {
         wp::synchronize()?;
         let t = Instant::now();
         let mut blew_up = None;
-        for s in 1..=$steps {
-            wp::launch(kick_drift, n, (&x, &v, &a, &xc, &vc, dt, $comp), dev)?;
-            wp::launch(accelerations, n, (&x, &m, &a, eps2, $comp), dev)?;
-            wp::launch(kick, n, (&v, &a, &vc, dt, $comp), dev)?;
-            if s % 512 == 0 {
-                if let Err(e) = v.check_finite("v") {
-                    blew_up = Some(format!("step {s}: {e}"));
-                    break;
-                }
+        // With `--graph`, each 512 steps are a replay of a captured graph.
+        let mut stepper = common::Stepper::new($graph, 512);
+        let mut s = 0u64;
+        while s < $steps {
+            let k = (stepper.len() as u64).min($steps - s);
+            stepper.advance(dev, k as usize, &mut || {
+                wp::launch(kick_drift, n, (&x, &v, &a, &xc, &vc, dt, $comp), dev)?;
+                wp::launch(accelerations, n, (&x, &m, &a, eps2, $comp), dev)?;
+                wp::launch(kick, n, (&v, &a, &vc, dt, $comp), dev)
+            })?;
+            s += k;
+            if let Err(e) = v.check_finite("v") {
+                blew_up = Some(format!("by step {s}: {e}"));
+                break;
             }
         }
         wp::synchronize()?;
@@ -193,8 +198,9 @@ macro_rules! run_in {
 
 fn main() -> wp::Result<()> {
     common::check_args(
-        &["--n", "--t-end", "--halvings"],
-        "nbody [--device cpu|cuda:N] [--n 256] [--t-end 2] [--halvings 5] [--plot-dir DIR]",
+        &["--n", "--t-end", "--halvings", "--graph"],
+        "nbody [--device cpu|cuda:N] [--n 256] [--t-end 2] [--halvings 5] [--graph] \
+         [--plot-dir DIR]",
     );
     let dev = common::device()?;
     let gpu = dev.is_cuda();
@@ -219,8 +225,21 @@ fn main() -> wp::Result<()> {
         "dt",
     )
     .with_extras(&["momentum drift"])
-    .progress((variants.len() * dts.len()) as u64);
-    for (name, double, compensated) in variants {
+    .progress((variants.len() * dts.len() * common::graph_modes().len()) as u64);
+    let variants: Vec<(String, bool, bool, bool)> = variants
+        .into_iter()
+        .flat_map(|(name, double, comp)| {
+            common::graph_modes().iter().map(move |&graph| {
+                let name = if graph {
+                    format!("{name} graph")
+                } else {
+                    name.to_string()
+                };
+                (name, double, comp, graph)
+            })
+        })
+        .collect();
+    for (name, double, compensated, graph) in variants.iter().cloned() {
         for &dt in &dts {
             let steps = (t_end / dt).round() as u64;
             let (x, v, seconds, blew_up) = if double {
@@ -235,7 +254,8 @@ fn main() -> wp::Result<()> {
                     m,
                     dt,
                     steps,
-                    compensated
+                    compensated,
+                    graph
                 )
             } else {
                 run_in!(
@@ -249,7 +269,8 @@ fn main() -> wp::Result<()> {
                     m,
                     dt,
                     steps,
-                    compensated
+                    compensated,
+                    graph
                 )
             };
             let run = match blew_up {
@@ -260,7 +281,7 @@ fn main() -> wp::Result<()> {
                     Run::stable(steps, error, seconds).extra(p.length() / scale)
                 }
             };
-            sweep.record(name, dt, run);
+            sweep.record(&name, dt, run);
         }
     }
     common::finish(&sweep, "nbody");

@@ -14,7 +14,9 @@
 //! Then it sweeps dt over the same time span on `--sweep-n` particles (100,000; 0 skips it),
 //! in f32 and in f64, printing error against the closed form next to run time and writing
 //! the plot `<--plot-dir or target/report>/particles.svg`: the error falls as O(dt) until
-//! f32 rounding takes over.
+//! f32 rounding takes over. With `--graph` the sweep also runs each series as replays of a
+//! captured 25-step graph (series "f32 graph", "f64 graph": the same errors, the launch costs
+//! of a graph).
 
 mod common;
 
@@ -61,8 +63,11 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
         format!("particles: linear drag with gravity, semi-implicit Euler, {n} particles on {dev}"),
         "dt",
     )
-    .progress(2 * counts.len() as u64);
-    for double in [false, true] {
+    .progress((2 * common::graph_modes().len() * counts.len()) as u64);
+    for (double, graph) in [false, true]
+        .into_iter()
+        .flat_map(|d| common::graph_modes().iter().map(move |&g| (d, g)))
+    {
         // Warm-up on one particle (compiles on a GPU), outside the timing.
         if double {
             let w = wp::Array::<DVec3>::zeros(1, dev)?;
@@ -75,31 +80,36 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
         for &steps in &counts {
             let dt = t_end / steps as f64;
             wp::synchronize()?;
-            // Timed: the steps, from uploaded start state to finished last step.
+            // Timed: the steps, from uploaded start state to finished last step (with
+            // `--graph`, including the capture of a 25-step graph).
+            let mut stepper = common::Stepper::new(graph, 25);
+            let mut run = |step: &mut dyn FnMut() -> wp::Result<()>| -> wp::Result<f64> {
+                wp::synchronize()?;
+                let t = Instant::now();
+                let mut s = 0;
+                while s < steps as usize {
+                    let k = stepper.len().min(steps as usize - s);
+                    stepper.advance(dev, k, step)?;
+                    s += k;
+                }
+                wp::synchronize()?;
+                Ok(t.elapsed().as_secs_f64())
+            };
             let (xs, seconds): (Vec<DVec3>, f64) = if double {
                 let x = wp::Array::from_vec(x0.iter().map(|p| p.as_dvec3()).collect(), dev)?;
                 let v = wp::Array::from_vec(v0.iter().map(|p| p.as_dvec3()).collect(), dev)?;
                 let gravity = DVec3::new(0.0, 0.0, -g);
-                wp::synchronize()?;
-                let t = Instant::now();
-                for _ in 0..steps {
-                    wp::launch(integrate_f64, n, (&x, &v, b, mass, gravity, dt), dev)?;
-                }
-                wp::synchronize()?;
-                let seconds = t.elapsed().as_secs_f64();
+                let seconds = run(&mut || {
+                    wp::launch(integrate_f64, n, (&x, &v, b, mass, gravity, dt), dev)
+                })?;
                 (x.to_vec()?, seconds)
             } else {
                 let x = wp::Array::from_slice(x0, dev)?;
                 let v = wp::Array::from_slice(v0, dev)?;
                 let gravity = Vec3::new(0.0, 0.0, -g as f32);
                 let (b, mass, dt) = (b as f32, mass as f32, dt as f32);
-                wp::synchronize()?;
-                let t = Instant::now();
-                for _ in 0..steps {
-                    wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), dev)?;
-                }
-                wp::synchronize()?;
-                let seconds = t.elapsed().as_secs_f64();
+                let seconds =
+                    run(&mut || wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), dev))?;
                 let xs = x.to_vec()?.iter().map(|p| p.as_dvec3()).collect();
                 (xs, seconds)
             };
@@ -111,7 +121,12 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
                     error = error.max((xs[i][c] - want).abs());
                 }
             }
-            let series = if double { "f64" } else { "f32" };
+            let series = match (double, graph) {
+                (false, false) => "f32",
+                (false, true) => "f32 graph",
+                (true, false) => "f64",
+                (true, true) => "f64 graph",
+            };
             sweep.record(series, dt, Run::stable(steps, error, seconds));
         }
     }
@@ -121,8 +136,8 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
 
 fn main() -> wp::Result<()> {
     common::check_args(
-        &["--n", "--steps", "--sweep-n"],
-        "particles [--n COUNT] [--steps STEPS] [--sweep-n COUNT (0: no sweep)] \
+        &["--n", "--steps", "--sweep-n", "--graph"],
+        "particles [--n COUNT] [--steps STEPS] [--sweep-n COUNT (0: no sweep)] [--graph] \
          [--device cpu|cuda:N] [--plot-dir DIR]",
     );
     let n: usize = common::parsed("--n", 10_000_000);

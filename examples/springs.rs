@@ -34,6 +34,7 @@ fn run(
     dt: f64,
     t_end: f64,
     reference: &[glam::DVec3],
+    graph: bool,
 ) -> wp::Result<Run> {
     let steps = (t_end / dt).round() as u64;
     let mut state = Chains::new(chains, dev)?;
@@ -45,15 +46,21 @@ fn run(
         &vec![glam::DVec3::ZERO; springs::PARTICLES],
         k,
     );
+    // With `--graph`, each 256 steps are a replay of a captured graph (an even count: Euler
+    // swaps two arrays each step).
+    let mut stepper = common::Stepper::new(graph, 256);
     let t = Instant::now();
-    for s in 1..=steps {
-        state.step(solver, k as f32, dt as f32, dev)?;
+    let mut s = 0u64;
+    while s < steps {
+        let n = (stepper.len() as u64).min(steps - s);
+        stepper.advance(dev, n as usize, &mut || {
+            state.step(solver, k as f32, dt as f32, dev)
+        })?;
+        s += n;
         // The divergence guard: stop at the first NaN or infinity and say where.
-        if s % 256 == 0 || s == steps {
-            if let Err(e) = state.x.check_finite("x") {
-                let secs = t.elapsed().as_secs_f64();
-                return Ok(Run::unstable(s, secs, format!("step {s}: {e}")));
-            }
+        if let Err(e) = state.x.check_finite("x") {
+            let secs = t.elapsed().as_secs_f64();
+            return Ok(Run::unstable(s, secs, format!("by step {s}: {e}")));
         }
     }
     wp::synchronize()?;
@@ -85,9 +92,10 @@ fn main() -> wp::Result<()> {
             "--substeps",
             "--iterations",
             "--halvings",
+            "--graph",
         ],
         "springs [--device cpu|cuda:N] [--chains N] [--t-end 0.5] [--substeps 10] \
-         [--iterations 1] [--halvings 8] [--plot-dir DIR]",
+         [--iterations 1] [--halvings 8] [--graph] [--plot-dir DIR]",
     );
     let dev = common::device()?;
     let gpu = dev.is_cuda();
@@ -142,13 +150,13 @@ fn main() -> wp::Result<()> {
             "dt",
         )
         .with_extras(&["energy drift"])
-        .progress((steps.len() * solvers.len()) as u64);
+        .progress((steps.len() * solvers.len() * common::graph_modes().len()) as u64);
         for (name, solver) in solvers {
             for &dt in &steps {
                 let row = sweep.record(
                     name,
                     dt,
-                    run(&dev, chains, solver, k, dt, t_end, &reference)?,
+                    run(&dev, chains, solver, k, dt, t_end, &reference, false)?,
                 );
                 if dt == steps[0] {
                     drift_at_60hz.insert(
@@ -158,6 +166,14 @@ fn main() -> wp::Result<()> {
                 }
             }
             largest.insert((ki, name), sweep.largest_stable(name));
+            // `--graph`: the same runs as replays of captured graphs, a series of their own.
+            if common::graph_modes().len() > 1 {
+                let graph_name = format!("{name} graph");
+                for &dt in &steps {
+                    let r = run(&dev, chains, solver, k, dt, t_end, &reference, true)?;
+                    sweep.record(&graph_name, dt, r);
+                }
+            }
         }
         common::finish(&sweep, &format!("springs_k{}", sci(k)));
     }

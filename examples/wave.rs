@@ -45,8 +45,8 @@ fn first_step(u0: Array<f32>, u1: Array<f32>, r2: f32) {
 
 fn main() -> wp::Result<()> {
     common::check_args(
-        &["--n"],
-        "wave [--n 1024] [--device cpu|cuda:N] [--plot-dir DIR]",
+        &["--n", "--graph"],
+        "wave [--n 1024] [--graph] [--device cpu|cuda:N] [--plot-dir DIR]",
     );
     let dev = common::device()?;
     let n: usize = common::parsed("--n", 1024);
@@ -61,11 +61,18 @@ fn main() -> wp::Result<()> {
         format!("1-D wave equation, leapfrog f32, on {dev}"),
         "r = c dt/dx",
     )
-    .progress((ratios.len() * grids.len()) as u64);
+    .progress((ratios.len() * grids.len() * common::graph_modes().len()) as u64);
     for n in grids {
-        for r in ratios {
-            let run = run(&dev, n, c, r, t_end)?;
-            sweep.record(&format!("{n} points"), r, run);
+        for &graph in common::graph_modes() {
+            for r in ratios {
+                let run = run(&dev, n, c, r, t_end, graph)?;
+                let series = if graph {
+                    format!("{n} points graph")
+                } else {
+                    format!("{n} points")
+                };
+                sweep.record(&series, r, run);
+            }
         }
     }
     common::finish(&sweep, "wave");
@@ -75,7 +82,9 @@ fn main() -> wp::Result<()> {
 
 /// Runs the scheme at Courant number `r` on `n` points until `t_end`; the error is the max
 /// difference from the analytic standing wave at the time reached.
-fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64) -> wp::Result<Run> {
+/// With `graph`, each 192 steps (a multiple of the three arrays' rotation) are a replay of a
+/// captured graph.
+fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64, graph: bool) -> wp::Result<Run> {
     let dx = 1.0 / (n - 1) as f64;
     let x: Vec<f64> = (0..n).map(|i| i as f64 * dx).collect();
     let u0: Vec<f32> = x.iter().map(|&x| (PI * x).sin() as f32).collect();
@@ -91,18 +100,23 @@ fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64) -> wp::Result<Run
     wp::synchronize()?;
     let t = Instant::now();
     wp::launch(first_step, n, (&a, &b, r2), dev)?;
-    for s in 1..steps {
-        wp::launch(leapfrog, n, (&a, &b, &next, r2), dev)?;
-        (a, b, next) = (b, next, a);
+    let mut stepper = common::Stepper::new(graph, 192);
+    let mut s = 1;
+    while s < steps {
+        let k = stepper.len().min(steps - s);
+        stepper.advance(dev, k, &mut || {
+            wp::launch(leapfrog, n, (&a, &b, &next, r2), dev)?;
+            (a, b, next) = (b.clone(), next.clone(), a.clone());
+            Ok(())
+        })?;
+        s += k;
         // The divergence guard: a NaN or infinity stops the run and says where.
-        if s % 64 == 0 {
-            if let Err(e) = b.check_finite("u") {
-                return Ok(Run::unstable(
-                    s as u64,
-                    t.elapsed().as_secs_f64(),
-                    format!("step {s}: {e}"),
-                ));
-            }
+        if let Err(e) = b.check_finite("u") {
+            return Ok(Run::unstable(
+                s as u64,
+                t.elapsed().as_secs_f64(),
+                format!("by step {s}: {e}"),
+            ));
         }
     }
     wp::synchronize()?;

@@ -20,6 +20,11 @@ pub fn check_args(known: &[&str], usage: &str) {
             println!("usage: {usage}");
             std::process::exit(0);
         }
+        // `--graph` (in `known` where a scene has it) takes no value.
+        if a == "--graph" && known.contains(&a) {
+            k += 1;
+            continue;
+        }
         if !(known.contains(&a) || a == "--device" || a == "--plot-dir") {
             eprintln!("unknown argument {a}\nusage: {usage}");
             std::process::exit(2);
@@ -109,5 +114,68 @@ impl Rng {
         let u = 1.0 - self.next_f64(); // (0, 1]: the log is finite
         let w = self.next_f64();
         (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * w).cos()
+    }
+}
+
+/// The scenes' `--graph`: the timed runs once with plain launches and once as replays of
+/// captured graphs (`wp::capture`), as two series of the sweep (`"<series> graph"`); the same
+/// kernels in the same order, so the errors agree and the times show the speed-up.
+pub fn graph_modes() -> &'static [bool] {
+    if flag("--graph") {
+        &[false, true]
+    } else {
+        &[false]
+    }
+}
+
+/// A scene's step loop advanced in chunks of `len` steps. With `graph`, a chunk of exactly
+/// `len` steps is one replay of a graph that captured `len` calls of the step (captured at the
+/// first such chunk, so the step's kernels are loaded before: the scenes warm up first); other
+/// chunks, and every chunk without `graph`, are launched plainly. A step that swaps arrays
+/// must leave them as it found them after `len` steps (the scenes pick `len` a multiple of
+/// the swap's period).
+pub struct Stepper {
+    graph: bool,
+    len: usize,
+    captured: Option<wp::Graph>,
+}
+
+impl Stepper {
+    pub fn new(graph: bool, len: usize) -> Stepper {
+        Stepper {
+            graph,
+            len,
+            captured: None,
+        }
+    }
+
+    /// The chunk length.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Runs `n` steps of `step` on `dev`.
+    pub fn advance(
+        &mut self,
+        dev: &wp::Device,
+        n: usize,
+        step: &mut dyn FnMut() -> wp::Result<()>,
+    ) -> wp::Result<()> {
+        if self.graph && n == self.len {
+            if self.captured.is_none() {
+                let graph = wp::capture(dev, || {
+                    for _ in 0..n {
+                        step()?;
+                    }
+                    Ok(())
+                })?;
+                self.captured = Some(graph);
+            }
+            return self.captured.as_ref().expect("captured above").launch();
+        }
+        for _ in 0..n {
+            step()?;
+        }
+        Ok(())
     }
 }
