@@ -89,6 +89,25 @@ fn timed(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<(f64, f64)> {
     Ok((med(host), med(total)))
 }
 
+/// Host microseconds per launch when the GPU keeps up: 200 launches of `launch` from an idle
+/// GPU (fewer than the driver queues, so the host never waits for the GPU), median of 15.
+fn host_cost(mut launch: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
+    const LAUNCHES: usize = 200;
+    let mut t = Vec::new();
+    for _ in 0..16 {
+        wp::synchronize()?;
+        let s = Instant::now();
+        for _ in 0..LAUNCHES {
+            launch()?;
+        }
+        t.push(s.elapsed().as_secs_f64() * 1e6 / LAUNCHES as f64);
+    }
+    wp::synchronize()?;
+    t.remove(0);
+    t.sort_by(f64::total_cmp);
+    Ok(t[t.len() / 2])
+}
+
 /// Microseconds per kernel of `ms` spent on `KERNELS` launches.
 fn per_kernel(ms: f64) -> f64 {
     ms * 1e3 / KERNELS as f64
@@ -197,6 +216,9 @@ fn main() -> wp::Result<()> {
     let r = one_loop_result(&mut objects)?;
     record("launch objects (wp::Launch)", t, r, warp_us("launch_object_us"));
 
+    let host_plain = host_cost(|| wp::launch(velocity, N, (&x, &v, K, DT), &dev))?;
+    let host_object = host_cost(|| vel.launch())?;
+
     // One substep captured, replayed 1000 times.
     let tc = Instant::now();
     let one = wp::capture(&dev, substep)?;
@@ -274,6 +296,10 @@ fn main() -> wp::Result<()> {
         Ok(bytemuck::cast_slice(&hx.to_vec().expect("download")).to_vec())
     };
     let default = hand.gpu.default_stream().clone();
+    let host_raw = host_cost(|| {
+        hand.velocity(&default, xp, vp);
+        Ok(())
+    })?;
     let t = timed(|| raw_loop(&default))?;
     let r = raw_result(&mut || raw_loop(&default))?;
     record("hand-written CUDA, raw launches", t, r, None);
@@ -318,6 +344,14 @@ fn main() -> wp::Result<()> {
             warp
         );
     }
+    let warp_host = |key: &str| warp_us(key).map_or("-".to_string(), |w| format!("{w:.2} us"));
+    println!(
+        "host cost per launch of one tiny kernel, 200 launches from an idle GPU: plain \
+         {host_plain:.2} us, launch object {host_object:.2} us, hand-written raw launch \
+         {host_raw:.2} us; Warp 1.19 plain {}, wp.Launch {}",
+        warp_host("host_plain_us"),
+        warp_host("host_launch_object_us")
+    );
     println!(
         "capture: {capture_one_ms:.2} ms for 10 launches, {capture_all_ms:.1} ms for {KERNELS} \
          (graph nodes {})",

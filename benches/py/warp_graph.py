@@ -9,7 +9,8 @@ loop until the GPU has finished (wp.synchronize), medians of 7 after a warm-up:
 - graph of a substep: one captured substep replayed 1000 times with wp.capture_launch;
 - one graph: all 10,000 launches captured, replayed once;
 - capture_while: the substep and a counter kernel in a wp.capture_while body, looping until
-  the counter reaches zero (11 kernels an iteration, counted as such).
+  the counter reaches zero (11 kernels an iteration, counted as such);
+- host cost per launch: 200 launches of one kernel from an idle GPU, plain and wp.Launch.
 One JSON object on the last line.
 
 Run on the GPU machine with Warp unpacked by ../shared/tools/warp-bundle:
@@ -99,6 +100,23 @@ def objects():
 
 
 out["launch_object_us"] = timed(objects)
+
+
+def host_cost(launch):
+    # Host microseconds per launch when the GPU keeps up: 200 launches from an idle GPU.
+    ts = []
+    for _ in range(16):
+        wp.synchronize()
+        t = time.perf_counter()
+        for _ in range(200):
+            launch()
+        ts.append((time.perf_counter() - t) * 1e6 / 200)
+    wp.synchronize()
+    return statistics.median(ts[1:])
+
+
+out["host_plain_us"] = host_cost(lambda: wp.launch(velocity, N, inputs=[x, v, K, DT], device=dev))
+out["host_launch_object_us"] = host_cost(vel.launch)
 
 with wp.ScopedCapture(device=dev) as cap:
     substep()

@@ -197,6 +197,7 @@ fn what_a_capture_refuses(dev: &wp::Device) {
     let a = arr(&vec![1.0f32; n], dev);
     let b = zeros::<f32, 1>(n, dev);
     let sum = zeros::<f32, 1>(1, dev);
+    let (m, m2) = (zeros::<f32, 2>((4, 8), dev), zeros::<f32, 2>((4, 8), dev));
     let graph = {
         let scope = wp::ScopedCapture::new(dev).unwrap();
         assert_refused(wp::Array::<f32>::zeros(n, dev), "an allocation");
@@ -216,7 +217,7 @@ fn what_a_capture_refuses(dev: &wp::Device) {
             );
             assert_refused(b.copy_from(&host), "inside a capture on \"cuda:0\"");
             assert_refused(
-                b.transpose().copy_from(&a.transpose()),
+                m.transpose().copy_from(&m2.transpose()),
                 "strided or overlapping",
             );
             // Another stream than the capturing one.

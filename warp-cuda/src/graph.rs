@@ -212,7 +212,6 @@ impl Stream {
         check_conditional_driver(self.ordinal())?;
         let ordinal = self.ordinal();
         let (graph, mut deps) = self.capture_info()?;
-        let mut body_graph: [sys::CUgraph; 1] = [std::ptr::null_mut()];
         // SAFETY: a zeroed parameter block is the documented starting point; the conditional
         // member is then filled in full.
         let mut params: sys::CUgraphNodeParams = unsafe { std::mem::zeroed() };
@@ -224,7 +223,8 @@ impl Stream {
                 Conditional::While => sys::CUgraphConditionalNodeType::CU_GRAPH_COND_TYPE_WHILE,
             },
             size: 1,
-            phGraph_out: body_graph.as_mut_ptr(),
+            // An output: the driver points it at the node's own array of body graphs.
+            phGraph_out: std::ptr::null_mut(),
             ctx: gpu.cu_ctx(),
         };
         let mut node: sys::CUgraphNode = std::ptr::null_mut();
@@ -241,6 +241,21 @@ impl Stream {
         }
         .result()
         .map_err(|e| CudaError::driver(e, format!("cuGraphAddNode (conditional) on cuda:{ordinal}")))?;
+        // SAFETY: after a successful cuGraphAddNode the driver's array holds `size` (1) body
+        // graphs, valid for the node's lifetime.
+        let body_graph = unsafe {
+            let out = params.__bindgen_anon_1.conditional.phGraph_out;
+            if out.is_null() {
+                std::ptr::null_mut()
+            } else {
+                *out
+            }
+        };
+        if body_graph.is_null() {
+            return Err(CudaError::InvalidArgument(format!(
+                "cuGraphAddNode (conditional) on cuda:{ordinal} returned no body graph"
+            )));
+        }
         deps.clear();
         deps.push(node);
         // SAFETY: one node of the capturing graph, replacing the stream's dependencies.
@@ -263,7 +278,7 @@ impl Stream {
         unsafe {
             sys::cuStreamBeginCaptureToGraph(
                 body.cu_stream(),
-                body_graph[0],
+                body_graph,
                 std::ptr::null(),
                 std::ptr::null(),
                 0,

@@ -177,8 +177,9 @@ impl Gpu {
 
     /// Links relocatable device code (`cubin`, compiled with `-rdc=true`) with the static
     /// device library at `library` (`libcudadevrt.a`, for device-runtime calls such as
-    /// `cudaGraphSetConditional`) by the driver's JIT linker, and loads the result.
-    pub fn load_linked(self: &Arc<Self>, cubin: &[u8], library: &std::path::Path) -> Result<Module> {
+    /// `cudaGraphSetConditional`) by the driver's JIT linker; returns the linked cubin, for
+    /// [`Gpu::load_module`] (and a cache).
+    pub fn link_with_library(&self, cubin: &[u8], library: &std::path::Path) -> Result<Vec<u8>> {
         let ordinal = self.ordinal();
         let op = |what: &str| format!("{what} (linking with {}) on cuda:{ordinal}", library.display());
         let lib = std::ffi::CString::new(library.as_os_str().as_encoded_bytes()).map_err(|_| {
@@ -230,7 +231,7 @@ impl Gpu {
         unsafe {
             let _ = sys::cuLinkDestroy(state);
         }
-        self.load_module(&linked?)
+        linked
     }
 
     /// Launches `func` with a 1-D grid of `grid_dim` blocks of `block_dim` threads on `stream`

@@ -155,17 +155,34 @@ fn load_setter(st: &GpuState, device: &Device, ordinal: usize) {
             extra_options: &["-rdc=true"],
             ..Default::default()
         };
-        let (compiled, _) = warp_cuda::compile_cached(
-            SET_CONDITIONAL,
-            "wp_set_conditional",
-            &opts,
-            st.gpu.arch(),
-        )
-        .map_err(|e| err(device, e))?;
-        let module = st
-            .gpu
-            .load_linked(&compiled.cubin, &library)
-            .map_err(|e| err(device, e))?;
+        // The linked image is cached under a key naming the library file as well (its path,
+        // size and modification time): a warm start neither compiles nor links.
+        let meta = std::fs::metadata(&library).ok();
+        let identity = format!(
+            "{SET_CONDITIONAL}\n// linked with {} ({} bytes, modified {:?})",
+            library.display(),
+            meta.as_ref().map_or(0, |m| m.len()),
+            meta.and_then(|m| m.modified().ok())
+        );
+        let (name, arch) = ("wp_set_conditional_linked", st.gpu.arch());
+        let key = warp_cuda::aot_key(&identity, name, &opts, arch);
+        let cache = warp_cuda::KernelCache::current();
+        let image = match cache.load(name, key) {
+            warp_cuda::CacheLookup::Hit(image) => image,
+            _ => {
+                let (compiled, _) =
+                    warp_cuda::compile_cached(SET_CONDITIONAL, "wp_set_conditional", &opts, arch)
+                        .map_err(|e| err(device, e))?;
+                let image = st
+                    .gpu
+                    .link_with_library(&compiled.cubin, &library)
+                    .map_err(|e| err(device, e))?;
+                // A cache that cannot be written only costs the next start a link.
+                let _ = cache.store(name, key, &image);
+                image
+            }
+        };
+        let module = st.gpu.load_module(&image).map_err(|e| err(device, e))?;
         let function = module
             .function("wp_set_conditional")
             .map_err(|e| err(device, e))?;
