@@ -214,7 +214,12 @@ fn main() -> wp::Result<()> {
     };
     let t = timed(&mut objects)?;
     let r = one_loop_result(&mut objects)?;
-    record("launch objects (wp::Launch)", t, r, warp_us("launch_object_us"));
+    record(
+        "launch objects (wp::Launch)",
+        t,
+        r,
+        warp_us("launch_object_us"),
+    );
 
     let host_plain = host_cost(|| wp::launch(velocity, N, (&x, &v, K, DT), &dev))?;
     let host_object = host_cost(|| vel.launch())?;
@@ -231,7 +236,12 @@ fn main() -> wp::Result<()> {
     };
     let t = timed(&mut replays)?;
     let r = one_loop_result(&mut replays)?;
-    record("graph of a substep x 1000", t, r, warp_us("graph_substep_us"));
+    record(
+        "graph of a substep x 1000",
+        t,
+        r,
+        warp_us("graph_substep_us"),
+    );
 
     // All 10,000 launches in one graph.
     let tc = Instant::now();
@@ -245,11 +255,19 @@ fn main() -> wp::Result<()> {
     let mut whole = || all.launch();
     let t = timed(&mut whole)?;
     let r = one_loop_result(&mut whole)?;
-    record("one graph of 10,000 launches", t, r, warp_us("graph_all_us"));
+    record(
+        "one graph of 10,000 launches",
+        t,
+        r,
+        warp_us("graph_all_us"),
+    );
 
     // An adaptive loop on the device: capture_while over the substep and a count-down kernel
     // (11 kernels an iteration), the count and the flag set inside the graph.
-    let (counter, flag) = (wp::Array::<i32>::zeros(1, &dev)?, wp::Array::<i32>::zeros(1, &dev)?);
+    let (counter, flag) = (
+        wp::Array::<i32>::zeros(1, &dev)?,
+        wp::Array::<i32>::zeros(1, &dev)?,
+    );
     let looped = wp::capture(&dev, || {
         counter.fill(SUBSTEPS as i32)?;
         flag.fill(1)?;
@@ -392,7 +410,13 @@ impl Hand {
 
     fn velocity(&self, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
         let (mut k, mut dt, mut n) = (K, DT, N as i32);
-        let mut args: [*mut c_void; 5] = [ptr(&mut x), ptr(&mut v), ptr(&mut k), ptr(&mut dt), ptr(&mut n)];
+        let mut args: [*mut c_void; 5] = [
+            ptr(&mut x),
+            ptr(&mut v),
+            ptr(&mut k),
+            ptr(&mut dt),
+            ptr(&mut n),
+        ];
         self.launch(&self.velocity, stream, &mut args);
     }
 
@@ -402,7 +426,12 @@ impl Hand {
         self.launch(&self.position, stream, &mut args);
     }
 
-    fn launch(&self, f: &warp_cuda::Function, stream: &warp_cuda::Stream, args: &mut [*mut c_void]) {
+    fn launch(
+        &self,
+        f: &warp_cuda::Function,
+        stream: &warp_cuda::Stream,
+        args: &mut [*mut c_void],
+    ) {
         let blocks = N.div_ceil(256) as u32;
         // SAFETY: `args` point at values laid out as the kernel's parameters; the arrays
         // outlive the launches (the bench synchronises before dropping them).

@@ -99,9 +99,8 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
                 let x = wp::Array::from_vec(x0.iter().map(|p| p.as_dvec3()).collect(), dev)?;
                 let v = wp::Array::from_vec(v0.iter().map(|p| p.as_dvec3()).collect(), dev)?;
                 let gravity = DVec3::new(0.0, 0.0, -g);
-                let seconds = run(&mut || {
-                    wp::launch(integrate_f64, n, (&x, &v, b, mass, gravity, dt), dev)
-                })?;
+                let seconds =
+                    run(&mut || wp::launch(integrate_f64, n, (&x, &v, b, mass, gravity, dt), dev))?;
                 (x.to_vec()?, seconds)
             } else {
                 let x = wp::Array::from_slice(x0, dev)?;

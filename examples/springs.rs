@@ -25,16 +25,16 @@ use springs::{Chains, Solver};
 use warp_lang as wp;
 use warp_report::{sci, Run, Sweep, Table};
 
-/// Runs `solver` at stiffness `k` and step `dt` until `t_end` and measures it against `reference`.
+/// Runs `solver` at stiffness `k` and step `dt` until `t_end` and measures it against `reference`
+/// (with `graph`, each 256 steps as a replay of a captured graph).
 fn run(
     dev: &wp::Device,
     chains: usize,
-    solver: Solver,
+    (solver, graph): (Solver, bool),
     k: f64,
     dt: f64,
     t_end: f64,
     reference: &[glam::DVec3],
-    graph: bool,
 ) -> wp::Result<Run> {
     let steps = (t_end / dt).round() as u64;
     let mut state = Chains::new(chains, dev)?;
@@ -156,7 +156,7 @@ fn main() -> wp::Result<()> {
                 let row = sweep.record(
                     name,
                     dt,
-                    run(&dev, chains, solver, k, dt, t_end, &reference, false)?,
+                    run(&dev, chains, (solver, false), k, dt, t_end, &reference)?,
                 );
                 if dt == steps[0] {
                     drift_at_60hz.insert(
@@ -170,7 +170,7 @@ fn main() -> wp::Result<()> {
             if common::graph_modes().len() > 1 {
                 let graph_name = format!("{name} graph");
                 for &dt in &steps {
-                    let r = run(&dev, chains, solver, k, dt, t_end, &reference, true)?;
+                    let r = run(&dev, chains, (solver, true), k, dt, t_end, &reference)?;
                     sweep.record(&graph_name, dt, r);
                 }
             }

@@ -105,6 +105,8 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+/// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
+pub use warp_runtime::graph;
 /// Kernel-visible host objects: [`HashGrid`], [`Bvh`], [`Mesh`], [`Volume`] (also at the crate
 /// root and in the prelude).
 pub use warp_runtime::objects;
@@ -119,15 +121,13 @@ pub use warp_runtime::MarchingCubes;
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };
-/// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
-pub use warp_runtime::graph;
 pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, kernel_info, launch, load, Launch, OwnedArgsOf, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,
+    init, kernel_info, launch, load, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,
     DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape, Kernel, KernelArg,
-    KernelInfo, KernelParams, Launchable, Mesh, Recording, Result, Runtime, Seed, Tape, Volume,
-    VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
+    KernelInfo, KernelParams, Launch, Launchable, Mesh, OwnedArgsOf, Recording, Result, Runtime,
+    Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};

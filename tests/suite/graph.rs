@@ -94,7 +94,9 @@ fn load_all(dev: &wp::Device) {
 }
 
 fn initial(n: usize) -> Vec<f32> {
-    (0..n).map(|i| ((i * 37) % 101) as f32 / 101.0 - 0.5).collect()
+    (0..n)
+        .map(|i| ((i * 37) % 101) as f32 / 101.0 - 0.5)
+        .collect()
 }
 
 /// 50 replays of a 10-substep graph (20 launches, a fill and a copy) against the same 500
@@ -460,7 +462,9 @@ fn conditional_loops_agree_with_the_host_loop(dev: &wp::Device) {
     assert!(x.to_vec().unwrap().iter().all(|&v| v == 1.0));
     // An empty condition array is refused.
     let empty = zeros::<i32, 1>(4, dev).view(2..2).unwrap();
-    let e = wp::capture_while(&empty, || Ok(())).unwrap_err().to_string();
+    let e = wp::capture_while(&empty, || Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("empty"), "{e}");
 }
 

@@ -281,7 +281,11 @@ pub fn cudadevrt_path() -> Option<std::path::PathBuf> {
     }
     let mut roots: Vec<PathBuf> = ["CUDA_PATH", "CUDA_HOME"]
         .iter()
-        .filter_map(|v| std::env::var_os(v).filter(|v| !v.is_empty()).map(PathBuf::from))
+        .filter_map(|v| {
+            std::env::var_os(v)
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+        })
         .collect();
     roots.push(PathBuf::from("/usr/local/cuda"));
     let mut versioned: Vec<PathBuf> = std::fs::read_dir("/usr/local")
@@ -297,10 +301,19 @@ pub fn cudadevrt_path() -> Option<std::path::PathBuf> {
         .collect();
     versioned.sort();
     roots.extend(versioned.into_iter().rev());
-    let subdirs = ["lib64", "targets/x86_64-linux/lib", "targets/sbsa-linux/lib", "lib"];
+    let subdirs = [
+        "lib64",
+        "targets/x86_64-linux/lib",
+        "targets/sbsa-linux/lib",
+        "lib",
+    ];
     roots
         .iter()
-        .flat_map(|r| subdirs.iter().map(move |d| r.join(d).join("libcudadevrt.a")))
+        .flat_map(|r| {
+            subdirs
+                .iter()
+                .map(move |d| r.join(d).join("libcudadevrt.a"))
+        })
         .find(|p| p.is_file())
 }
 

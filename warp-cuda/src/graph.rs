@@ -57,7 +57,10 @@ impl Stream {
         }
         .result()
         .map_err(|e| {
-            CudaError::driver(e, format!("cuStreamBeginCapture on cuda:{}", self.ordinal()))
+            CudaError::driver(
+                e,
+                format!("cuStreamBeginCapture on cuda:{}", self.ordinal()),
+            )
         })
     }
 
@@ -163,7 +166,10 @@ impl Stream {
         }
         .result()
         .map_err(|e| {
-            CudaError::driver(e, format!("cuStreamGetCaptureInfo on cuda:{}", self.ordinal()))
+            CudaError::driver(
+                e,
+                format!("cuStreamGetCaptureInfo on cuda:{}", self.ordinal()),
+            )
         })?;
         if status != sys::CUstreamCaptureStatus::CU_STREAM_CAPTURE_STATUS_ACTIVE {
             return Err(CudaError::InvalidArgument(format!(
@@ -240,7 +246,9 @@ impl Stream {
             )
         }
         .result()
-        .map_err(|e| CudaError::driver(e, format!("cuGraphAddNode (conditional) on cuda:{ordinal}")))?;
+        .map_err(|e| {
+            CudaError::driver(e, format!("cuGraphAddNode (conditional) on cuda:{ordinal}"))
+        })?;
         // SAFETY: after a successful cuGraphAddNode the driver's array holds `size` (1) body
         // graphs, valid for the node's lifetime.
         let body_graph = unsafe {
@@ -271,7 +279,10 @@ impl Stream {
         }
         .result()
         .map_err(|e| {
-            CudaError::driver(e, format!("cuStreamUpdateCaptureDependencies on cuda:{ordinal}"))
+            CudaError::driver(
+                e,
+                format!("cuStreamUpdateCaptureDependencies on cuda:{ordinal}"),
+            )
         })?;
         body.bind()?;
         // SAFETY: the body graph the driver made for the node; no dependencies.
@@ -300,7 +311,10 @@ impl Stream {
             .map_err(|e| {
                 CudaError::driver(
                     e,
-                    format!("cuStreamEndCapture (conditional body) on cuda:{}", self.ordinal()),
+                    format!(
+                        "cuStreamEndCapture (conditional body) on cuda:{}",
+                        self.ordinal()
+                    ),
                 )
             })
     }
@@ -311,12 +325,14 @@ impl Stream {
 fn check_conditional_driver(ordinal: usize) -> Result<()> {
     match crate::device::driver_version() {
         Some(v) if v >= CONDITIONAL_DRIVER_VERSION => Ok(()),
-        v => Err(CudaError::NotAvailable(format!(
+        v => {
+            Err(CudaError::NotAvailable(format!(
             "conditional graph nodes on cuda:{ordinal} need a CUDA {}.{} driver, this one is {}",
             CONDITIONAL_DRIVER_VERSION / 1000,
             CONDITIONAL_DRIVER_VERSION % 1000 / 10,
             v.map_or("unknown".to_string(), |v| format!("{}.{}", v / 1000, v % 1000 / 10))
-        ))),
+        )))
+        }
     }
 }
 

@@ -181,18 +181,21 @@ impl Gpu {
     /// [`Gpu::load_module`] (and a cache).
     pub fn link_with_library(&self, cubin: &[u8], library: &std::path::Path) -> Result<Vec<u8>> {
         let ordinal = self.ordinal();
-        let op = |what: &str| format!("{what} (linking with {}) on cuda:{ordinal}", library.display());
+        let op = |what: &str| {
+            format!(
+                "{what} (linking with {}) on cuda:{ordinal}",
+                library.display()
+            )
+        };
         let lib = std::ffi::CString::new(library.as_os_str().as_encoded_bytes()).map_err(|_| {
             CudaError::InvalidArgument(format!("a library path with a NUL: {}", library.display()))
         })?;
         self.bind()?;
         let mut state: sys::CUlinkState = std::ptr::null_mut();
         // SAFETY: out-parameter call with no options.
-        unsafe {
-            sys::cuLinkCreate_v2(0, std::ptr::null_mut(), std::ptr::null_mut(), &mut state)
-        }
-        .result()
-        .map_err(|e| CudaError::driver(e, op("cuLinkCreate")))?;
+        unsafe { sys::cuLinkCreate_v2(0, std::ptr::null_mut(), std::ptr::null_mut(), &mut state) }
+            .result()
+            .map_err(|e| CudaError::driver(e, op("cuLinkCreate")))?;
         let linked = (|| {
             // SAFETY: `cubin` is alive for the call (the linker copies it); `lib` is a valid C
             // string; `state` is the link state created above.

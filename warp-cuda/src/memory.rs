@@ -440,8 +440,7 @@ impl DeviceBuffer {
                         ("cuMemsetD2D16Async", r)
                     }
                     _ => {
-                        let r =
-                            sys::cuMemsetD2D8Async(at, p, word[0], 1, rows, stream.cu_stream());
+                        let r = sys::cuMemsetD2D8Async(at, p, word[0], 1, rows, stream.cu_stream());
                         ("cuMemsetD2D8Async", r)
                     }
                 }

@@ -8,10 +8,10 @@
 //! [`ArrayView`]). The same holds for host-side calls such as
 //! [`Array::fill`] made from several threads at once on handles to the same memory.
 
+use crate::capturing::{self, Captured};
 use crate::device::Device;
 use crate::dispatch::{self, Storage};
 use crate::error::{Error, Result};
-use crate::graph::{self, Captured};
 use crate::kernel::{ArgCtx, CudaArray, KernelArg};
 use glam::{
     DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -449,7 +449,7 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// The elements in row-major order (honouring strides). On a GPU this synchronises the
     /// device's stream and reports a fault recorded by an earlier launch.
     pub fn to_vec(&self) -> Result<Vec<T>> {
-        graph::refuse(Some(&self.device), "a read-back (to_vec)")?;
+        capturing::refuse(Some(&self.device), "a read-back (to_vec)")?;
         let Some(base) = self.host_base() else {
             // Device memory: the kernels that may write it first (their faults are reported
             // here), then a copy.
@@ -489,9 +489,9 @@ impl<T: Element, const N: usize> Array<T, N> {
 
     /// Sets every element to `value`.
     pub fn fill(&self, value: T) -> Result<()> {
-        if graph::capturing() {
+        if capturing::capturing() {
             let (keep, array) = (self.clone(), self.clone());
-            let captured = graph::on_array_op(
+            let captured = capturing::on_array_op(
                 &[&self.device],
                 "a fill",
                 move || Box::new(keep),
@@ -536,10 +536,10 @@ impl<T: Element, const N: usize> Array<T, N> {
             )));
         }
         let same_storage = Arc::ptr_eq(&self.storage, &src.storage);
-        if graph::capturing() {
+        if capturing::capturing() {
             let keep = (self.clone(), src.clone());
             let (dst, from) = (self.clone(), src.clone());
-            match graph::on_array_op(
+            match capturing::on_array_op(
                 &[&self.device, &src.device],
                 "a copy",
                 move || Box::new(keep),
@@ -784,7 +784,7 @@ impl<T: Element> Array<T, 1> {
         }
         // Host memory: the array takes the vector's allocation over (an allocation as far as
         // a capture is concerned: refused on every backend alike).
-        graph::refuse(Some(device), "an allocation")?;
+        capturing::refuse(Some(device), "an allocation")?;
         let len = data.len();
         checked_size::<T>(&[len])?;
         Ok(Array {

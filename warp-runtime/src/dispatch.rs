@@ -6,13 +6,13 @@
 //! arms, and its device kind to `device.rs` (see `backend.rs` for what it implements).
 
 use crate::backend::{Backend, Buffer, ObjectStep};
+use crate::capturing;
 use crate::cpu::memory::HostBuffer;
 use crate::cpu::Cpu;
 #[cfg(feature = "cuda")]
 use crate::cuda::{memory::CudaBuffer, Cuda};
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
-use crate::graph::{self, Captured};
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
@@ -54,9 +54,6 @@ pub(crate) fn prepare(
 #[inline]
 pub(crate) fn launch<K: Kernel>(device: &Device, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
     names_every_param::<K>();
-    if let Captured::Recorded = graph::on_launch::<K>(device, args, grid, None)? {
-        return Ok(());
-    }
     with_backend!(device, b => b.launch::<K>(args, grid))
 }
 
@@ -68,8 +65,6 @@ pub(crate) fn launch_on<K: Kernel>(
     grid: &Grid,
 ) -> Result<()> {
     names_every_param::<K>();
-    // (A GPU capture only runs launches: the backend checks the stream.)
-    graph::on_launch::<K>(stream.device(), args, grid, None)?;
     Cuda::of_stream(stream).launch_on::<K>(args, grid, stream)
 }
 
@@ -93,7 +88,8 @@ pub(crate) fn prepare_launch<K: Kernel>(
         DeviceKind::Cpu => Ok(Prepared::Cpu),
         #[cfg(feature = "cuda")]
         DeviceKind::Cuda { ordinal } => {
-            crate::cuda::launch::Prepared::new(args, grid, device, ordinal, None).map(Prepared::Cuda)
+            crate::cuda::launch::Prepared::new(args, grid, device, ordinal, None)
+                .map(Prepared::Cuda)
         }
         #[cfg(not(feature = "cuda"))]
         DeviceKind::Cuda { .. } => Err(Error::NoDevice {
@@ -144,9 +140,6 @@ pub(crate) fn launch_adjoint<K: Kernel>(
             reason: reason.to_string(),
         });
     }
-    if let Captured::Recorded = graph::on_launch::<K>(device, args, grid, Some(adstack_bytes))? {
-        return Ok(());
-    }
     with_backend!(device, b => b.launch_adjoint::<K>(args, grid, adstack_bytes))
 }
 
@@ -159,7 +152,7 @@ pub(crate) fn scan<T: ScanOps>(
     len: Extent,
     inclusive: bool,
 ) -> Result<()> {
-    graph::refuse(Some(device), "a scan")?;
+    capturing::refuse(Some(device), "a scan")?;
     with_backend!(device, b => b.scan::<T>(func, input, output, len, inclusive))
 }
 
@@ -172,7 +165,7 @@ pub(crate) fn reduce<T: ScanOps>(
     len: Extent,
     op: ReduceOp,
 ) -> Result<()> {
-    graph::refuse(Some(device), "a reduction")?;
+    capturing::refuse(Some(device), "a reduction")?;
     with_backend!(device, b => b.reduce::<T>(func, input, out, len, op))
 }
 
@@ -185,14 +178,14 @@ pub(crate) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
     len: Extent,
     key_bits: u32,
 ) -> Result<()> {
-    graph::refuse(Some(device), "a radix sort")?;
+    capturing::refuse(Some(device), "a radix sort")?;
     with_backend!(device, b => b.radix_sort_pairs::<K, V>(func, keys, values, len, key_bits))
 }
 
 /// Runs or queues a step of a host object's build on `device`'s backend; see
 /// [`Backend::object_step`].
 pub(crate) fn object_step<S: ObjectStep>(device: &Device, step: &S) -> Result<()> {
-    graph::refuse(Some(device), "a host object's build")?;
+    capturing::refuse(Some(device), "a host object's build")?;
     with_backend!(device, b => b.object_step(step))
 }
 
@@ -203,25 +196,25 @@ pub(crate) fn compact<T: bytemuck::Pod + Send + Sync>(
     arrays: [u64; 4],
     len: Extent,
 ) -> Result<()> {
-    graph::refuse(Some(device), "a compaction")?;
+    capturing::refuse(Some(device), "a compaction")?;
     with_backend!(device, b => b.compact::<T>(func, arrays, len))
 }
 
 /// `bytes` of zeroed memory on `device`, aligned to at least `align`.
 pub(crate) fn alloc_zeroed(device: &Device, bytes: usize, align: usize) -> Result<Storage> {
-    graph::refuse(Some(device), "an allocation")?;
+    capturing::refuse(Some(device), "an allocation")?;
     with_backend!(device, b => b.alloc_zeroed(bytes, align).map(Storage::from))
 }
 
 /// Waits for `device` and reports a fault recorded there since the last check.
 pub(crate) fn synchronize(device: &Device) -> Result<()> {
-    graph::refuse(Some(device), "a synchronisation")?;
+    capturing::refuse(Some(device), "a synchronisation")?;
     with_backend!(device, b => b.synchronize())
 }
 
 /// [`synchronize`] for every device used so far.
 pub(crate) fn synchronize_all() -> Result<()> {
-    graph::refuse(None, "a synchronisation")?;
+    capturing::refuse(None, "a synchronisation")?;
     Cpu::synchronize_all()?;
     #[cfg(feature = "cuda")]
     Cuda::synchronize_all()?;

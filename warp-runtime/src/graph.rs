@@ -22,72 +22,20 @@
 //! A tape recording during a capture records the captured launches (once); its backward can
 //! run plainly or be captured into a graph of its own.
 
+use crate::capturing::{
+    self, capturing, check_device, push_op, record_frame, take_active, Active, Captured, Op,
+};
 use crate::device::{Device, DeviceKind};
+use crate::dispatch;
 use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
-use std::any::Any;
-use std::cell::{Cell, RefCell};
 use std::marker::PhantomData;
 use warp_core::Grid;
 
 #[cfg(feature = "cuda")]
-use crate::cuda::capture::{self as cuda_capture, CudaCapture};
+use crate::cuda::capture as cuda_capture;
 #[cfg(feature = "cuda")]
 use crate::cuda::stream::Stream;
-
-/// One recorded CPU operation.
-type Op = Box<dyn Fn() -> Result<()> + Send>;
-
-/// What is kept alive for a graph's replays (launch arguments' owned copies, arrays).
-type Keep = Box<dyn Any + Send>;
-
-/// The calling thread's capture.
-struct Active {
-    device: Device,
-    /// The CPU recording: the operations of the graph, then one list per open conditional
-    /// body (innermost last).
-    frames: Vec<Vec<Op>>,
-    keep: Vec<Keep>,
-    launches: usize,
-    #[cfg(feature = "cuda")]
-    cuda: Option<CudaCapture>,
-}
-
-thread_local! {
-    static ACTIVE: RefCell<Option<Active>> = const { RefCell::new(None) };
-    /// Whether `ACTIVE` is set: one load on the launch path when nothing is captured.
-    static CAPTURING: Cell<bool> = const { Cell::new(false) };
-}
-
-/// Whether the calling thread is capturing.
-#[inline]
-pub(crate) fn capturing() -> bool {
-    CAPTURING.with(Cell::get)
-}
-
-/// What a capture does with an operation.
-pub(crate) enum Captured {
-    /// Nothing is captured on this thread: run it.
-    No,
-    /// Recorded for the CPU graph: do not run it now.
-    Recorded,
-    /// A GPU capture: run it (the backend queues it on the capture stream).
-    OnGpu,
-}
-
-/// The device the calling thread captures on, or an error when `device` is another one.
-fn check_device(active: &Active, device: &Device, what: &str) -> Result<()> {
-    if *device != active.device {
-        return Err(Error::Capture {
-            what: format!(
-                "{what} on \"{device}\" inside a capture on \"{}\" (a graph replays the work of \
-                 one device)",
-                active.device
-            ),
-        });
-    }
-    Ok(())
-}
 
 /// Records a launch of `K` (its adjoint with `adjoint: Some(stack bytes)`) on the calling
 /// thread's capture, if any: on the CPU as an operation of the graph, on a GPU by keeping the
@@ -98,14 +46,7 @@ pub(crate) fn on_launch<K: Kernel>(
     grid: &Grid,
     adjoint: Option<usize>,
 ) -> Result<Captured> {
-    if !capturing() {
-        return Ok(Captured::No);
-    }
-    ACTIVE.with(|a| {
-        let mut a = a.borrow_mut();
-        let Some(active) = a.as_mut() else {
-            return Ok(Captured::No);
-        };
+    let recorded = capturing::with_active(|active| {
         let what = format!("a launch of kernel `{}`", K::INFO.name);
         check_device(active, device, &what)?;
         active.launches += 1;
@@ -115,8 +56,8 @@ pub(crate) fn on_launch<K: Kernel>(
             let op: Op = Box::new(move || {
                 let args = K::Params::borrow(&owned);
                 match adjoint {
-                    None => crate::dispatch::launch::<K>(&device, &args, &grid),
-                    Some(bytes) => crate::dispatch::launch_adjoint::<K>(&device, &args, &grid, bytes),
+                    None => dispatch::launch::<K>(&device, &args, &grid),
+                    Some(bytes) => dispatch::launch_adjoint::<K>(&device, &args, &grid, bytes),
                 }
             });
             push_op(active, op);
@@ -124,66 +65,22 @@ pub(crate) fn on_launch<K: Kernel>(
         }
         active.keep.push(Box::new(owned));
         Ok(Captured::OnGpu)
-    })
+    });
+    recorded.unwrap_or(Ok(Captured::No))
 }
 
-/// The innermost open frame gets `op`.
-fn push_op(active: &mut Active, op: Op) {
-    active
-        .frames
-        .last_mut()
-        .expect("a capture has at least its graph's frame")
-        .push(op);
-}
-
-/// An array operation (`what`, on arrays of `devices`) inside the calling thread's capture:
-/// on the CPU recorded as `op()`, on a GPU run (the backend queues it on the capture stream),
-/// and refused when it involves another device than the capture's. `keep` is what the
-/// operation uses (kept alive for a GPU graph).
-pub(crate) fn on_array_op(
-    devices: &[&Device],
-    what: &str,
-    keep: impl FnOnce() -> Keep,
-    op: impl FnOnce() -> Op,
-) -> Result<Captured> {
-    if !capturing() {
-        return Ok(Captured::No);
-    }
-    ACTIVE.with(|a| {
-        let mut a = a.borrow_mut();
-        let Some(active) = a.as_mut() else {
-            return Ok(Captured::No);
-        };
-        for d in devices {
-            check_device(active, d, what)?;
-        }
-        if matches!(active.device.kind(), DeviceKind::Cpu) {
-            push_op(active, op());
-            Ok(Captured::Recorded)
-        } else {
-            active.keep.push(keep());
-            Ok(Captured::OnGpu)
-        }
-    })
-}
-
-/// An [`Error::Capture`] when the calling thread is capturing and `what` (an operation on
-/// `device`, or on any device with `None`) cannot be recorded: the same refusals on every
-/// backend.
-pub(crate) fn refuse(device: Option<&Device>, what: &str) -> Result<()> {
-    if !capturing() {
+/// The adjoint of a launch of `K`, as a tape's backward runs it: recorded when the calling
+/// thread captures (a captured backward pass), else run.
+pub(crate) fn launch_adjoint<K: Kernel>(
+    device: &Device,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adstack_bytes: usize,
+) -> Result<()> {
+    if let Captured::Recorded = on_launch::<K>(device, args, grid, Some(adstack_bytes))? {
         return Ok(());
     }
-    ACTIVE.with(|a| match &*a.borrow() {
-        Some(active) if device.is_none_or(|d| *d == active.device) => Err(Error::Capture {
-            what: format!(
-                "{what} on \"{}\" cannot be recorded into a graph (do it before or after the \
-                 capture)",
-                active.device
-            ),
-        }),
-        _ => Ok(()),
-    })
+    dispatch::launch_adjoint::<K>(device, args, grid, adstack_bytes)
 }
 
 /// Where a capture records: a device (on a GPU, a stream of the capture's own, or the
@@ -229,7 +126,7 @@ impl ScopedCapture {
     /// [`Error::Cuda`] when the driver refuses.
     pub fn new(on: impl Into<CaptureOn>) -> Result<ScopedCapture> {
         if capturing() {
-            let device = ACTIVE.with(|a| a.borrow().as_ref().map(|a| a.device.clone()));
+            let device = capturing::with_active(|a| a.device.clone());
             return Err(Error::Capture {
                 what: format!(
                     "a capture inside a capture (the thread is capturing on \"{}\"); nest the \
@@ -262,17 +159,14 @@ impl ScopedCapture {
                 reason: crate::device::CUDA_UNAVAILABLE.to_string(),
             });
         }
-        ACTIVE.with(|a| {
-            *a.borrow_mut() = Some(Active {
-                device,
-                frames: vec![Vec::new()],
-                keep: Vec::new(),
-                launches: 0,
-                #[cfg(feature = "cuda")]
-                cuda,
-            })
+        capturing::start(Active {
+            device,
+            frames: vec![Vec::new()],
+            keep: Vec::new(),
+            launches: 0,
+            #[cfg(feature = "cuda")]
+            cuda,
         });
-        CAPTURING.with(|c| c.set(true));
         Ok(ScopedCapture {
             finished: false,
             _not_send: PhantomData,
@@ -318,12 +212,6 @@ impl ScopedCapture {
             _keep: active.keep,
         })
     }
-}
-
-/// Clears the calling thread's capture and returns it.
-fn take_active() -> Option<Active> {
-    CAPTURING.with(|c| c.set(false));
-    ACTIVE.with(|a| a.borrow_mut().take())
 }
 
 impl Drop for ScopedCapture {
@@ -391,10 +279,7 @@ pub fn capture(on: impl Into<CaptureOn>, body: impl FnOnce() -> Result<()>) -> R
 /// # Errors
 /// [`Error::Capture`] when `cond` is empty or on another device than the capture's, or (on a
 /// GPU) when conditional nodes are not available; `body`'s errors.
-pub fn capture_while(
-    cond: &crate::Array<i32>,
-    mut body: impl FnMut() -> Result<()>,
-) -> Result<()> {
+pub fn capture_while(cond: &crate::Array<i32>, mut body: impl FnMut() -> Result<()>) -> Result<()> {
     check_condition(cond, "capture_while")?;
     if !capturing() {
         while first(cond)? != 0 {
@@ -460,13 +345,12 @@ fn conditional(
         ConditionalKind::If => "capture_if",
         ConditionalKind::While => "capture_while",
     };
-    let device = ACTIVE.with(|a| -> Result<Device> {
-        let mut a = a.borrow_mut();
-        let active = a.as_mut().expect("capturing");
+    let device = capturing::with_active(|active| -> Result<Device> {
         check_device(active, cond.device(), what)?;
         active.keep.push(Box::new(cond.clone()));
         Ok(active.device.clone())
-    })?;
+    })
+    .expect("called while capturing")?;
     match device.kind() {
         DeviceKind::Cpu => {
             let then_ops = record_frame(then)?;
@@ -490,7 +374,7 @@ fn conditional(
                     }
                 }),
             };
-            ACTIVE.with(|a| push_op(a.borrow_mut().as_mut().expect("capturing"), op));
+            capturing::with_active(|active| push_op(active, op));
             Ok(())
         }
         #[cfg(feature = "cuda")]
@@ -513,22 +397,6 @@ fn conditional(
     }
 }
 
-/// Runs `body` with a new frame open on the calling thread's CPU capture, and returns what it
-/// recorded there.
-fn record_frame(body: &mut dyn FnMut() -> Result<()>) -> Result<Vec<Op>> {
-    ACTIVE.with(|a| a.borrow_mut().as_mut().expect("capturing").frames.push(Vec::new()));
-    let ran = body();
-    let ops = ACTIVE.with(|a| {
-        a.borrow_mut()
-            .as_mut()
-            .expect("capturing")
-            .frames
-            .pop()
-            .expect("the frame pushed above")
-    });
-    ran.map(|()| ops)
-}
-
 /// What a graph replays.
 enum Body {
     Cpu(Vec<Op>),
@@ -542,7 +410,7 @@ pub struct Graph {
     body: Body,
     launches: usize,
     /// What the recorded work uses, alive for as long as the graph can be replayed.
-    _keep: Vec<Keep>,
+    _keep: Vec<capturing::Keep>,
 }
 
 impl std::fmt::Debug for Graph {

@@ -6,6 +6,7 @@
 //! pool; a GPU: queued on a stream), then records it on the recording tapes. Everything is
 //! generic over the kernel, so that its thread body is inlined into the backend's loop.
 
+use crate::capturing::Captured;
 use crate::config;
 #[cfg(feature = "cuda")]
 use crate::cuda::stream::Stream;
@@ -379,10 +380,14 @@ impl<K: Kernel> Launch<K> {
         if self.prepared.is_none() {
             self.grid = grid_of(K::INFO.name, self.dim)?;
             check_shapes::<K>(&args, &self.grid)?;
-            self.prepared = Some(dispatch::prepare_launch::<K>(&self.device, &args, &self.grid)?);
+            self.prepared = Some(dispatch::prepare_launch::<K>(
+                &self.device,
+                &args,
+                &self.grid,
+            )?);
         }
         let device = &self.device;
-        if crate::graph::capturing() || config::verify_fp() {
+        if crate::capturing::capturing() || config::verify_fp() {
             // What a plain launch does around the backend's: a capture's record, the check.
             return launch_with::<K>(self.dim, args, device, |args, grid| {
                 #[cfg(feature = "cuda")]
@@ -416,10 +421,15 @@ fn launch_with<'a, K: Kernel>(
 ) -> Result<()> {
     let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
-    run(&args, &grid)?;
+    // A capture records the launch (CPU: instead of running it; GPU: keeping its arguments
+    // for the graph, the backend queueing it on the capture stream).
+    match crate::graph::on_launch::<K>(device, &args, &grid, None)? {
+        Captured::Recorded => {}
+        Captured::No | Captured::OnGpu => run(&args, &grid)?,
+    }
     crate::tape::on_launch::<K>(&args, &grid, device);
     // (Inside a capture the launch has not run: there is nothing to check yet.)
-    if config::verify_fp() && !crate::graph::capturing() {
+    if config::verify_fp() && !crate::capturing::capturing() {
         K::Params::check_finite(&args, K::info())?;
     }
     Ok(())

@@ -27,6 +27,7 @@
 pub mod array;
 pub mod autograd;
 mod backend;
+mod capturing;
 pub mod config;
 mod cpu;
 pub mod cuda;

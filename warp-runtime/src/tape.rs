@@ -10,7 +10,6 @@
 use crate::array::{Array, Element};
 use crate::config;
 use crate::device::Device;
-use crate::dispatch;
 use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
 use std::cell::RefCell;
@@ -210,7 +209,7 @@ pub(crate) fn on_launch<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid, device: &D
             inner.borrow_mut().records.push(Record {
                 name: K::INFO.name,
                 backward: Box::new(move |cap| {
-                    dispatch::launch_adjoint::<K>(&device, &K::Params::borrow(&o1), &grid, cap)
+                    crate::graph::launch_adjoint::<K>(&device, &K::Params::borrow(&o1), &grid, cap)
                 }),
                 zero: Box::new(move || K::Params::zero_grads(&K::Params::borrow(&o2))),
             });

@@ -24,7 +24,11 @@ pub(crate) struct CudaCapture {
 /// Starts capturing the calling thread's work on GPU `ordinal` (`device`): on `stream` when
 /// given (a stream the caller made, not the default one), else on the thread's current stream
 /// when a `ScopedStream` set one, else on a new stream.
-pub(crate) fn begin(device: &Device, ordinal: usize, stream: Option<&Stream>) -> Result<CudaCapture> {
+pub(crate) fn begin(
+    device: &Device,
+    ordinal: usize,
+    stream: Option<&Stream>,
+) -> Result<CudaCapture> {
     let st = state(device, ordinal)?;
     let stream = match stream {
         Some(s) => {
@@ -203,8 +207,12 @@ fn set_conditional(
     (then, otherwise): (u64, Option<u64>),
     cond: u64,
 ) -> Result<()> {
-    let (mut then, mut otherwise, mut has_else, mut cond) =
-        (then, otherwise.unwrap_or(0), otherwise.is_some() as i32, cond);
+    let (mut then, mut otherwise, mut has_else, mut cond) = (
+        then,
+        otherwise.unwrap_or(0),
+        otherwise.is_some() as i32,
+        cond,
+    );
     let mut args = [
         (&mut then) as *mut u64 as *mut std::ffi::c_void,
         (&mut otherwise) as *mut u64 as *mut std::ffi::c_void,
@@ -258,7 +266,14 @@ pub(crate) fn conditional(
         Some(_) => Some(outer.conditional_handle(&st.gpu).map_err(gpu_err)?),
         None => None,
     };
-    set_conditional(&st, device, &setter, &outer, (then_handle, else_handle), cond)?;
+    set_conditional(
+        &st,
+        device,
+        &setter,
+        &outer,
+        (then_handle, else_handle),
+        cond,
+    )?;
     let capture_body = |handle: u64, body: &mut dyn FnMut() -> Result<()>| -> Result<()> {
         let body_stream = st.gpu.new_stream().map_err(gpu_err)?;
         outer

@@ -321,9 +321,13 @@ pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
     let (kind, arg, ndim) = (i32_at(0), i32_at(4), i32_at(72).clamp(0, 4) as usize);
     // The kernel id the faulting launch carried (`wp::ctx_t::kernel`), else the kernel
     // launched last (the primitives' kernels set no id).
-    let by_id = usize::try_from(i32_at(76) - 1)
-        .ok()
-        .and_then(|k| kernel_ids().lock().unwrap_or_else(|p| p.into_inner()).get(k).copied());
+    let by_id = usize::try_from(i32_at(76) - 1).ok().and_then(|k| {
+        kernel_ids()
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(k)
+            .copied()
+    });
     let info = by_id.unwrap_or_else(|| {
         st.last
             .lock()

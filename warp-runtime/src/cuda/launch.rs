@@ -45,7 +45,8 @@ pub(crate) fn launch<K: Kernel>(
     stream: Option<&warp_cuda::Stream>,
     adjoint: Option<usize>,
 ) -> Result<()> {
-    let (prepared, params, grads) = Prepared::<K>::with_params(args, grid, device, ordinal, adjoint)?;
+    let (prepared, params, grads) =
+        Prepared::<K>::with_params(args, grid, device, ordinal, adjoint)?;
     prepared.enqueue_converted(params, grads, device, stream)
 }
 
@@ -175,7 +176,14 @@ impl<K: Kernel> Prepared<K> {
             // alive until the call returns; cuLaunchKernel copies them.
             unsafe {
                 st.gpu
-                    .launch_raw(&kernel.function, on, self.blocks, self.block, 0, &mut ptrs[..n])
+                    .launch_raw(
+                        &kernel.function,
+                        on,
+                        self.blocks,
+                        self.block,
+                        0,
+                        &mut ptrs[..n],
+                    )
                     .map_err(|e| err(device, e))
             }
         })?;

@@ -137,13 +137,21 @@ pub(crate) fn loaded(
             "compiling kernel `{}` ({}, {}) at its first launch: load it before capturing with \
              wp::load{}(&[wp::kernel_info({})], &device)",
             info.name,
-            if adjoint.is_some() { "adjoint" } else { "forward" },
+            if adjoint.is_some() {
+                "adjoint"
+            } else {
+                "forward"
+            },
             if contiguous {
                 "contiguous arrays"
             } else {
                 "strided arrays: launch it once before capturing"
             },
-            if adjoint.is_some() { "_with_adjoints" } else { "" },
+            if adjoint.is_some() {
+                "_with_adjoints"
+            } else {
+                ""
+            },
             info.name
         ),
     )?;
