@@ -49,9 +49,9 @@ pub(crate) fn on_launch<K: Kernel>(
     let recorded = capturing::with_active(|active| {
         let what = format!("a launch of kernel `{}`", K::INFO.name);
         check_device(active, device, &what)?;
-        active.launches += 1;
         let owned = K::Params::own(args);
         if matches!(device.kind(), DeviceKind::Cpu) {
+            active.launches += 1;
             let (grid, device) = (*grid, device.clone());
             let op: Op = Box::new(move || {
                 let args = K::Params::borrow(&owned);
@@ -63,10 +63,17 @@ pub(crate) fn on_launch<K: Kernel>(
             push_op(active, op);
             return Ok(Captured::Recorded);
         }
+        // (Counted by `launched` once the backend has queued it.)
         active.keep.push(Box::new(owned));
         Ok(Captured::OnGpu)
     });
     recorded.unwrap_or(Ok(Captured::No))
+}
+
+/// Counts a launch the backend queued on the capture stream (after [`on_launch`] said
+/// `OnGpu`): a launch the backend refused is not part of the graph.
+pub(crate) fn launched() {
+    capturing::with_active(|active| active.launches += 1);
 }
 
 /// The adjoint of a launch of `K`, as a tape's backward runs it: recorded when the calling
@@ -77,10 +84,15 @@ pub(crate) fn launch_adjoint<K: Kernel>(
     grid: &Grid,
     adstack_bytes: usize,
 ) -> Result<()> {
-    if let Captured::Recorded = on_launch::<K>(device, args, grid, Some(adstack_bytes))? {
-        return Ok(());
+    match on_launch::<K>(device, args, grid, Some(adstack_bytes))? {
+        Captured::Recorded => Ok(()),
+        Captured::OnGpu => {
+            dispatch::launch_adjoint::<K>(device, args, grid, adstack_bytes)?;
+            launched();
+            Ok(())
+        }
+        Captured::No => dispatch::launch_adjoint::<K>(device, args, grid, adstack_bytes),
     }
-    dispatch::launch_adjoint::<K>(device, args, grid, adstack_bytes)
 }
 
 /// Where a capture records: a device (on a GPU, a stream of the capture's own, or the

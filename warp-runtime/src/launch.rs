@@ -425,7 +425,11 @@ fn launch_with<'a, K: Kernel>(
     // for the graph, the backend queueing it on the capture stream).
     match crate::graph::on_launch::<K>(device, &args, &grid, None)? {
         Captured::Recorded => {}
-        Captured::No | Captured::OnGpu => run(&args, &grid)?,
+        Captured::OnGpu => {
+            run(&args, &grid)?;
+            crate::graph::launched();
+        }
+        Captured::No => run(&args, &grid)?,
     }
     crate::tape::on_launch::<K>(&args, &grid, device);
     // (Inside a capture the launch has not run: there is nothing to check yet.)
