@@ -71,6 +71,8 @@ pub struct AotEntry {
     pub arch: u32,
     /// Whether this is the variant for launches whose arrays are all contiguous.
     pub contiguous: bool,
+    /// Whether this is the kernel's adjoint.
+    pub adjoint: bool,
     /// Where it was written.
     pub path: PathBuf,
     /// NVRTC time.
@@ -88,18 +90,74 @@ pub fn compile(
     archs: &[u32],
     dir: &Path,
 ) -> Result<Vec<AotEntry>> {
+    compile_units(kernels, archs, dir, false)
+}
+
+/// [`compile`], and each kernel's adjoint too (both variants, with the adjoint stack
+/// [`config::adstack_bytes`](crate::config::adstack_bytes) sets, which must be the same when
+/// the program runs backward), for programs that differentiate: their first backward pass then
+/// compiles nothing either.
+///
+/// # Errors
+/// As [`compile`].
+pub fn compile_with_adjoints(
+    kernels: &[&'static KernelInfo],
+    archs: &[u32],
+    dir: &Path,
+) -> Result<Vec<AotEntry>> {
+    compile_units(kernels, archs, dir, true)
+}
+
+/// The architectures a build script compiles for: `WARP_LANG_AOT_ARCHS` (a comma-separated
+/// list such as `90,80`) when set, else [`DEFAULT_ARCHS`].
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for a list that does not parse.
+pub fn archs_from_env() -> Result<Vec<u32>> {
+    match std::env::var(ARCHS_ENV) {
+        Ok(v) if !v.trim().is_empty() => v
+            .split(',')
+            .map(|a| {
+                let a = a.trim().trim_start_matches("sm_");
+                a.parse::<u32>()
+                    .map_err(|e| Error::invalid(format!("{ARCHS_ENV}: \"{a}\": {e}")))
+            })
+            .collect(),
+        _ => Ok(DEFAULT_ARCHS.to_vec()),
+    }
+}
+
+/// Environment variable naming the architectures [`archs_from_env`] returns.
+pub const ARCHS_ENV: &str = "WARP_LANG_AOT_ARCHS";
+
+/// The architectures compiled for when `WARP_LANG_AOT_ARCHS` is not set: Turing (75), Ampere
+/// (80, 86), Ada (89) and Hopper (90), which CUDA 13's NVRTC all supports. A cubin runs only
+/// on its own architecture; a GPU without an entry falls back to NVRTC at first launch.
+pub const DEFAULT_ARCHS: &[u32] = &[75, 80, 86, 89, 90];
+
+fn compile_units(
+    kernels: &[&'static KernelInfo],
+    archs: &[u32],
+    dir: &Path,
+    adjoints: bool,
+) -> Result<Vec<AotEntry>> {
     let err = |e: warp_cuda::CudaError| Error::Cuda {
         device: "nvrtc".into(),
         message: e.to_string(),
     };
     let cache = KernelCache::new(dir);
     let mut out = Vec::new();
-    for info in kernels {
-        let src = source::assemble(info);
+    let stack = crate::config::adstack_bytes().to_string();
+    let units = kernels.iter().flat_map(|info| {
+        let forward = Some((*info, source::assemble(info), None));
+        let adjoint = adjoints.then(|| (*info, source::assemble_adjoint(info), Some(stack.as_str())));
+        forward.into_iter().chain(adjoint)
+    });
+    for (info, src, stack_define) in units {
         for &arch in archs {
             for contiguous in [true, false] {
                 let exact = needs_exact(&src.headers);
-                let entry = with_compile_options(contiguous, None, exact, |opts| {
+                let entry = with_compile_options(contiguous, stack_define, exact, |opts| {
                     let compiled = warp_cuda::compile(&src.text, info.name, opts, arch)?;
                     let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
                     let path = cache.store(info.name, key, &compiled.cubin)?;
@@ -107,6 +165,7 @@ pub fn compile(
                         kernel: info.name,
                         arch,
                         contiguous,
+                        adjoint: stack_define.is_some(),
                         path,
                         compile_ms: compiled.compile_ms,
                     })
