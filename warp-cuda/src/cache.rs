@@ -17,7 +17,7 @@ use std::fs;
 use std::io::{ErrorKind, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::RwLock;
+use std::sync::{OnceLock, RwLock};
 
 use crate::compile::{compile, nvrtc_version, CompileOptions, Compiled};
 use crate::error::{CudaError, Result};
@@ -106,11 +106,32 @@ fn hash_inputs(mut h: Fnv128, source: &str, name: &str, opts: &CompileOptions, a
         h.field(a.as_bytes());
     }
     h.field(&(opts.headers.len() as u64).to_le_bytes());
-    for (hname, hsrc) in opts.headers {
-        h.field(hname.as_bytes());
-        h.field(hsrc.as_bytes());
+    for header in opts.headers {
+        h.field(&header_digest(header).to_le_bytes());
     }
     h.finish()
+}
+
+/// The digest of one in-memory header (its name and text). The library's own headers
+/// ([`crate::HEADERS`], half a megabyte that every kernel passes to NVRTC) are hashed once per
+/// process: a key is then computed in microseconds, which is what a first launch from the
+/// disk cache or an ahead-of-time directory spends on it. Other headers are hashed each time.
+fn header_digest(header: &(&str, &str)) -> u128 {
+    let hash = |(name, text): &(&str, &str)| {
+        let mut h = Fnv128::new();
+        h.field(name.as_bytes());
+        h.field(text.as_bytes());
+        h.finish()
+    };
+    static LIBRARY: OnceLock<Vec<u128>> = OnceLock::new();
+    // The same static text (same address and length) as a library header: its digest.
+    match crate::HEADERS
+        .iter()
+        .position(|(n, t)| std::ptr::eq(*n, header.0) && std::ptr::eq(*t, header.1))
+    {
+        Some(k) => LIBRARY.get_or_init(|| crate::HEADERS.iter().map(hash).collect())[k],
+        None => hash(header),
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -466,6 +487,24 @@ pub fn compile_cached(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// A library header's digest, computed once per process, is the digest of its text: a
+    /// copy of the same name and text (another address) gives the same key, and a changed
+    /// text another.
+    #[test]
+    fn library_header_digests_are_their_texts() {
+        let (name, text) = crate::HEADERS[0];
+        let copy = (name.to_string(), text.to_string());
+        assert_eq!(
+            header_digest(&crate::HEADERS[0]),
+            header_digest(&(copy.0.as_str(), copy.1.as_str()))
+        );
+        let changed = format!("{text} ");
+        assert_ne!(
+            header_digest(&crate::HEADERS[0]),
+            header_digest(&(name, changed.as_str()))
+        );
+    }
 
     /// A fresh directory under the temp dir, removed on drop.
     pub(crate) struct TempDir(pub PathBuf);

@@ -178,18 +178,19 @@ fn compile_units(
     Ok(out)
 }
 
-/// The ahead-of-time cubin for this compile, when an AOT directory is set and holds a sound
-/// entry for it.
+/// The ahead-of-time cubin for this compile, with its key and file, when an AOT directory is
+/// set and holds a sound entry for it.
 pub(crate) fn lookup(
     source: &str,
     name: &str,
     opts: &CompileOptions,
     arch: u32,
-) -> Option<Vec<u8>> {
+) -> Option<(Vec<u8>, u128, PathBuf)> {
     let dir = aot_dir()?;
     let key = warp_cuda::aot_key(source, name, opts, arch);
-    match KernelCache::new(dir).load(name, key) {
-        CacheLookup::Hit(cubin) => Some(cubin),
+    let cache = KernelCache::new(dir);
+    match cache.load(name, key) {
+        CacheLookup::Hit(cubin) => Some((cubin, key, cache.path_for(name, key))),
         CacheLookup::Absent | CacheLookup::Damaged => None,
     }
 }

@@ -169,16 +169,17 @@ pub(crate) fn loaded(
         needs_exact(&src.headers),
         |opts| {
             // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
-            if let Some(cubin) = aot::lookup(&src.text, info.name, opts, arch) {
+            if let Some((cubin, key, path)) = aot::lookup(&src.text, info.name, opts, arch) {
                 let c = warp_cuda::Compiled {
                     cubin,
                     log: String::new(),
                     compile_ms: 0.0,
                 };
-                // The entry `aot::lookup` read (its key hashed again, only on this path).
-                let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
-                let path = aot::aot_dir().map(|d| KernelCache::new(d).path_for(info.name, key));
-                return Ok((c, CacheOutcome::Hit, true, CacheEntry { key, path }));
+                let entry = CacheEntry {
+                    key,
+                    path: Some(path),
+                };
+                return Ok((c, CacheOutcome::Hit, true, entry));
             }
             KernelCache::current()
                 .compile_cached_entry(&src.text, info.name, opts, arch)
