@@ -25,6 +25,10 @@ use wp::prelude::*;
 mod common;
 use common::{json_number, python_side};
 
+/// The springs scene's chain and its kernels.
+#[path = "../examples/common/springs.rs"]
+mod springs;
+
 const N: usize = 1024;
 const SUBSTEPS: usize = 1000;
 const PAIRS: usize = 5;
@@ -333,6 +337,65 @@ fn main() -> wp::Result<()> {
     let r = raw_result(&mut raw_replay)?;
     record("hand-written CUDA, one raw graph", t, r, None);
 
+    // A scene's loop end to end: the springs scene's chains (semi-implicit Euler, a kernel a
+    // step over 4096 chains of 21 particles), 512 steps plainly and as two replays of a
+    // 256-step graph, k = 1000 N/m, dt = 1/960 s; the graph's result against the plain one's
+    // and against the f64 RK4 reference of chain 0.
+    let (k_chain, dt_chain, steps_chain) = (1000.0f32, 1.0f32 / 960.0, 512usize);
+    let solver = springs::Solver::Euler;
+    let reference = springs::reference(k_chain as f64, steps_chain as f64 * dt_chain as f64, 1e-5);
+    wp::load(&[wp::kernel_info(springs::euler_step)], &dev)?;
+    let run_chains = |graph: bool| -> wp::Result<(f64, Vec<glam::DVec3>)> {
+        let mut chains = springs::Chains::new(4096, &dev)?;
+        let mut captured = None;
+        if graph {
+            let g = wp::capture(&dev, || {
+                for _ in 0..256 {
+                    chains.step(solver, k_chain, dt_chain, &dev)?;
+                }
+                Ok(())
+            })?;
+            captured = Some(g);
+        } else {
+            chains.step(solver, k_chain, dt_chain, &dev)?; // compiles; a fresh state follows
+            chains = springs::Chains::new(4096, &dev)?;
+        }
+        wp::synchronize()?;
+        let t = Instant::now();
+        match &captured {
+            Some(g) => {
+                for _ in 0..steps_chain / 256 {
+                    g.launch()?;
+                }
+            }
+            None => {
+                for _ in 0..steps_chain {
+                    chains.step(solver, k_chain, dt_chain, &dev)?;
+                }
+            }
+        }
+        wp::synchronize()?;
+        Ok((t.elapsed().as_secs_f64() * 1e3, chains.first()?.0))
+    };
+    let (plain_ms, plain_x) = run_chains(false)?;
+    let (graph_ms, graph_x) = run_chains(true)?;
+    let diff = plain_x
+        .iter()
+        .zip(&graph_x)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    let err = graph_x
+        .iter()
+        .zip(&reference)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+
+    println!(
+        "springs scene, 4096 chains, {steps_chain} Euler steps: plain {plain_ms:.2} ms, graph \
+         {graph_ms:.2} ms ({:.2}x); |graph - plain| = {diff:.1e} m, error against the f64 RK4 \
+         reference {err:.2e} m",
+        plain_ms / graph_ms
+    );
     println!(
         "host side of a step loop on \"{}\": {SUBSTEPS} substeps x {} kernels over {N} \
          oscillators (k = {K}, dt = {DT}), microseconds per kernel, medians of {REPS}",

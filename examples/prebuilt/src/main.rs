@@ -52,12 +52,17 @@ fn main() -> wp::Result<()> {
     let (f, df) = (y.to_vec()?[0], x.grad().expect("with_grad").to_vec()?[0]);
     let first_ms = start.elapsed().as_secs_f64() * 1e3;
     let (want_f, want_df) = closed_form(0.5);
-    println!("first result after {first_ms:.1} ms (from the start of main) on \"{dev}\"");
-    println!(
-        "f(0.5) = {f:.12} (error {:.1e}), f'(0.5) = {df:.12} (error {:.1e})",
+    let (err_f, err_df) = (
         (f - want_f).abs() / want_f.abs(),
-        (df - want_df).abs() / want_df.abs()
+        (df - want_df).abs() / want_df.abs(),
     );
+    println!("first result after {first_ms:.1} ms (from the start of main) on \"{dev}\"");
+    println!("f(0.5) = {f:.12} (error {err_f:.1e}), f'(0.5) = {df:.12} (error {err_df:.1e})");
+    // f64 throughout: a relative error above 1e-12 (a few thousand ulps) is a wrong kernel.
+    if err_f > 1e-12 || err_df > 1e-12 {
+        eprintln!("the result disagrees with the closed form");
+        std::process::exit(1);
+    }
     let reports = wp::compile_reports();
     let load_ms: f64 = 0.0 + reports.iter().map(|r| r.total_ms).sum::<f64>();
     println!(

@@ -150,7 +150,8 @@ fn compile_units(
     let stack = crate::config::adstack_bytes().to_string();
     let units = kernels.iter().flat_map(|info| {
         let forward = Some((*info, source::assemble(info), None));
-        let adjoint = adjoints.then(|| (*info, source::assemble_adjoint(info), Some(stack.as_str())));
+        let adjoint =
+            adjoints.then(|| (*info, source::assemble_adjoint(info), Some(stack.as_str())));
         forward.into_iter().chain(adjoint)
     });
     for (info, src, stack_define) in units {
