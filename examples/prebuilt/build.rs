@@ -18,6 +18,8 @@ fn main() {
         Ok(a) => a,
         Err(e) => panic!("{e}"),
     };
+    // A fresh directory: entries of kernels since changed would only take space.
+    let _ = std::fs::remove_dir_all(&dir);
     match wp::aot::compile_with_adjoints(&kernels::all(), &archs, &dir) {
         Ok(entries) => {
             let ms: f64 = entries.iter().map(|e| e.compile_ms).sum();
