@@ -105,6 +105,8 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+pub mod optim;
+
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
 pub use warp_runtime::graph;
 /// Kernel-visible host objects: [`HashGrid`], [`Bvh`], [`Mesh`], [`Volume`] (also at the crate

@@ -82,6 +82,7 @@ mod launch;
 mod lbvh;
 mod mesh;
 mod misc;
+mod optim;
 mod params;
 mod primitives;
 mod rng;
