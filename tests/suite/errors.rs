@@ -20,6 +20,7 @@ backend_tests!(
     same_shape_arrays,
     same_shape_dim,
     usable_after_fault,
+    tape_misuse,
 );
 
 /// The fault of a failed launch, or a panic naming what came instead.
@@ -408,4 +409,53 @@ fn usable_after_fault(dev: &wp::Device) {
     assert!(wp::launch(k_oob_read, 4, (&a, &out), dev).is_err());
     wp::launch(k_oob_read, 3, (&a, &out), dev).unwrap();
     assert_eq!(&host(&out)[..3], [2.0, 3.0, 4.0]);
+}
+
+#[wp::kernel]
+fn tape_square(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    y[i] = x[i] * x[i];
+}
+
+/// Misusing a tape is an `Err`, never a panic: backward while the tape records, backward from
+/// an array without a gradient, and a `record_func` step that launches into (or records on)
+/// the tape it is replayed from; the tape still works afterwards.
+fn tape_misuse(dev: &wp::Device) {
+    let x = wp::Array::from_slice(&[1.0f32, 2.0], dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let y = wp::Array::<f32>::zeros(2, dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let tape = std::rc::Rc::new(wp::Tape::new());
+    {
+        let _rec = tape.record();
+        wp::launch(tape_square, 2, (&x, &y), dev).unwrap();
+        let e = tape.backward(&y).unwrap_err().to_string();
+        assert!(e.contains("while it is recording"), "{e}");
+    }
+    let plain = wp::Array::<f32>::zeros(2, dev).unwrap();
+    let e = tape.backward(&plain).unwrap_err().to_string();
+    assert!(e.contains("no gradient"), "{e}");
+    // A step that records on its own tape while that tape runs backward.
+    let (t2, x2, y2, d2) = (tape.clone(), x.clone(), y.clone(), dev.clone());
+    tape.record_func(move || {
+        let _rec = t2.record();
+        wp::launch(tape_square, 2, (&x2, &y2), &d2)
+    })
+    .unwrap();
+    let e = tape.backward(&y).unwrap_err().to_string();
+    assert!(e.contains("runs backward"), "{e}");
+    // The tape is not broken: without the bad step, backward works.
+    let fresh = wp::Tape::new();
+    x.zero_grad().unwrap();
+    {
+        let _rec = fresh.record();
+        wp::launch(tape_square, 2, (&x, &y), dev).unwrap();
+    }
+    fresh.backward(&y).unwrap();
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, 4.0]);
+    assert_eq!(tape.steps(), vec!["tape_square", "custom"]);
 }

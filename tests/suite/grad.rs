@@ -202,7 +202,8 @@ fn copy_and_custom_steps(dev: &wp::Device) {
         tape.record_func(move || {
             o.borrow_mut().push("custom");
             Ok(())
-        });
+        })
+        .unwrap();
         wp::launch(k_poly, 3, (&x2, &y), dev).unwrap();
         wp::launch(k_sum, 3, (&y, &loss), dev).unwrap();
     }

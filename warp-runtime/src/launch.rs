@@ -406,7 +406,7 @@ impl<K: Kernel> Launch<K> {
             #[cfg(feature = "cuda")]
             stream,
         )?;
-        crate::tape::on_launch::<K>(&args, &self.grid, device);
+        crate::tape::on_launch::<K>(&args, &self.grid, device)?;
         Ok(())
     }
 }
@@ -431,7 +431,7 @@ fn launch_with<'a, K: Kernel>(
         }
         Captured::No => run(&args, &grid)?,
     }
-    crate::tape::on_launch::<K>(&args, &grid, device);
+    crate::tape::on_launch::<K>(&args, &grid, device)?;
     // (Inside a capture the launch has not run: there is nothing to check yet.)
     if config::verify_fp() && !crate::capturing::capturing() {
         K::Params::check_finite(&args, K::info())?;

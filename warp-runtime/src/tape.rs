@@ -144,6 +144,7 @@ impl Tape {
     /// for a kernel without an adjoint; [`Error::Fault`] from an adjoint thread (including
     /// an adjoint stack overflow, naming the kernel and line).
     pub fn backward<T: Seed, const N: usize>(&self, loss: &Array<T, N>) -> Result<()> {
+        self.not_recording()?;
         let Some(g) = loss.grad() else {
             return Err(Error::invalid(
                 "backward: the loss has no gradient (create it with .with_grad())",
@@ -156,10 +157,26 @@ impl Tape {
     /// Runs the recorded adjoints in reverse order with the output gradients the caller has
     /// already set (for several outputs, or seeds other than one).
     pub fn backward_from_grads(&self) -> Result<()> {
-        let inner = self.inner.borrow();
+        self.not_recording()?;
+        let inner = self
+            .inner
+            .try_borrow()
+            .map_err(|_| running_backward("backward"))?;
         let cap = inner.adstack_bytes.unwrap_or_else(config::adstack_bytes);
         for r in inner.records.iter().rev() {
             (r.backward)(cap)?;
+        }
+        Ok(())
+    }
+
+    /// An error when this tape is recording on this thread: its backward would run while
+    /// launches still go onto it.
+    fn not_recording(&self) -> Result<()> {
+        let me = Rc::downgrade(&self.inner);
+        if RECORDING.with(|r| r.borrow().iter().any(|w| w.ptr_eq(&me))) {
+            return Err(Error::invalid(
+                "backward on a tape while it is recording (drop its Recording guard first)",
+            ));
         }
         Ok(())
     }
@@ -172,7 +189,11 @@ impl Tape {
 
     /// Zeroes the gradients of every array the recorded launches took.
     pub fn zero(&self) -> Result<()> {
-        for r in &self.inner.borrow().records {
+        let inner = self
+            .inner
+            .try_borrow()
+            .map_err(|_| running_backward("zero"))?;
+        for r in &inner.records {
             (r.zero)()?;
         }
         Ok(())
@@ -185,28 +206,51 @@ impl Tape {
 
     /// Records a host-side step: `backward` runs at its place in the reverse order (for
     /// gradients of work done outside kernels, such as a host-side copy).
-    pub fn record_func(&self, backward: impl Fn() -> Result<()> + 'static) {
-        self.push(Record {
-            name: "custom",
-            backward: Box::new(move |_| backward()),
-            zero: Box::new(|| Ok(())),
-        });
-    }
-
-    fn push(&self, r: Record) {
-        self.inner.borrow_mut().records.push(r);
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when called from a step of this tape's own backward.
+    pub fn record_func(&self, backward: impl Fn() -> Result<()> + 'static) -> Result<()> {
+        self.inner
+            .try_borrow_mut()
+            .map_err(|_| running_backward("record_func"))?
+            .records
+            .push(Record {
+                name: "custom",
+                backward: Box::new(move |_| backward()),
+                zero: Box::new(|| Ok(())),
+            });
+        Ok(())
     }
 }
 
+/// The error of recording onto a tape whose backward is running (a `record_func` step that
+/// records on its own tape).
+#[cold]
+fn running_backward(what: &str) -> Error {
+    Error::invalid(format!(
+        "{what} on a tape that runs backward (a record_func step recording on its own tape)"
+    ))
+}
+
 /// Records the launch of `K` on every tape recording on this thread.
-pub(crate) fn on_launch<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid, device: &Device) {
+///
+/// # Errors
+/// When one of them is running its backward pass (the launch came from one of its steps).
+pub(crate) fn on_launch<K: Kernel>(
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    device: &Device,
+) -> Result<()> {
     RECORDING.with(|r| {
         let r = r.borrow();
         for inner in r.iter().filter_map(Weak::upgrade) {
+            let mut records = inner
+                .try_borrow_mut()
+                .map_err(|_| running_backward(&format!("a launch of kernel `{}`", K::INFO.name)))?;
             let owned = Rc::new(K::Params::own(args));
             let (o1, o2) = (owned.clone(), owned);
             let (grid, device) = (*grid, device.clone());
-            inner.borrow_mut().records.push(Record {
+            records.records.push(Record {
                 name: K::INFO.name,
                 backward: Box::new(move |cap| {
                     crate::graph::launch_adjoint::<K>(&device, &K::Params::borrow(&o1), &grid, cap)
@@ -214,28 +258,31 @@ pub(crate) fn on_launch<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid, device: &D
                 zero: Box::new(move || K::Params::zero_grads(&K::Params::borrow(&o2))),
             });
         }
-    });
+        Ok(())
+    })
 }
 
 /// Copies `src` into `dst` (same shape); see [`Array::copy_from`]. A recording [`Tape`]
 /// records it: backward adds `dst`'s gradient into `src`'s and clears `dst`'s.
 pub fn copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> Result<()> {
     dst.copy_from(src)?;
-    on_copy(dst, src);
-    Ok(())
+    on_copy(dst, src)
 }
 
 /// Records `copy(dst, src)` on every tape recording on this thread (when `dst` has a
 /// gradient to hand back).
-fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) {
+fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> Result<()> {
     if !dst.requires_grad() {
-        return;
+        return Ok(());
     }
     RECORDING.with(|r| {
         for inner in r.borrow().iter().filter_map(Weak::upgrade) {
+            let mut records = inner
+                .try_borrow_mut()
+                .map_err(|_| running_backward("a copy"))?;
             let (d, s) = (dst.clone(), src.clone());
             let (d2, s2) = (dst.clone(), src.clone());
-            inner.borrow_mut().records.push(Record {
+            records.records.push(Record {
                 name: "copy",
                 backward: Box::new(move |_| {
                     let Some(dg) = d.grad() else { return Ok(()) };
@@ -257,5 +304,6 @@ fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) {
                 }),
             });
         }
-    });
+        Ok(())
+    })
 }
