@@ -94,8 +94,10 @@ pub use glam;
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::f16;
 pub use warp_core::{DTransform, Fault, FaultKind, Float, Transform};
+/// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`) and
+/// emptying it.
 #[cfg(feature = "cuda")]
-pub use warp_cuda::clear_kernel_cache;
+pub use warp_cuda::{cache_dir, clear_kernel_cache, set_cache_dir};
 pub use warp_macros::{func, kernel, Struct};
 /// Work-precision sweeps: tables, SVG plots and progress (the `report` feature).
 #[cfg(feature = "report")]
