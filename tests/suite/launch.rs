@@ -15,6 +15,7 @@ backend_tests!(
     no_parameters,
     print_from_kernel,
     ahead_of_time_compile,
+    ahead_of_time_adjoints,
     load_compiles_before_the_first_launch,
 );
 
@@ -126,6 +127,123 @@ fn ahead_of_time_compile(dev: &wp::Device) {
     );
     // Nothing was compiled, so nothing went to the (empty) kernel cache.
     assert!(!empty_cache.exists() || std::fs::read_dir(&empty_cache).unwrap().next().is_none());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Launched and differentiated only by `ahead_of_time_adjoints`.
+#[wp::kernel]
+fn k_aot_adj(a: Array<f32>, b: Array<f32>) {
+    let i = tid();
+    b[i] = sin(a[i]) * a[i];
+}
+
+/// `wp::aot::compile_with_adjoints` writes the adjoint units too (both variants, the default
+/// adjoint stack), and `wp::aot::verify` finds every entry the runtime will look for (needs
+/// NVRTC, not a GPU: on the CPU backend this is the whole test). On a GPU, with the directory
+/// set and an empty kernel cache, the forward launch and the first backward pass load their
+/// cubins from it: nothing is compiled.
+fn ahead_of_time_adjoints(dev: &wp::Device) {
+    let dir = std::env::temp_dir().join(format!(
+        "wp-aot-adj-{}-{}",
+        dev.alias().replace(':', ""),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let arch = match dev.kind() {
+        wp::DeviceKind::Cuda { ordinal } => warp_cuda::Gpu::open(ordinal).unwrap().arch(),
+        wp::DeviceKind::Cpu => 90,
+    };
+    let kernels = [wp::aot::kernel(k_aot_adj)];
+    let before = wp::aot::verify(&kernels, &[arch], &dir, true);
+    assert_eq!(before.len(), 4);
+    assert!(before.iter().all(|c| !c.found), "{before:?}");
+    let built = match wp::aot::compile_with_adjoints(&kernels, &[arch], &dir) {
+        Ok(b) => b,
+        Err(e) => {
+            assert!(e.to_string().contains("nvrtc"), "{e}");
+            assert!(
+                warp_cuda::nvrtc_version().is_err(),
+                "NVRTC is there, yet: {e}"
+            );
+            eprintln!("SKIPPED ahead_of_time_adjoints on {dev}: no NVRTC ({e})");
+            return;
+        }
+    };
+    // Forward and adjoint, each contiguous and strided.
+    assert_eq!(built.len(), 4);
+    for (adjoint, contiguous) in [(false, true), (false, false), (true, true), (true, false)] {
+        assert_eq!(
+            built
+                .iter()
+                .filter(|b| b.adjoint == adjoint && b.contiguous == contiguous)
+                .count(),
+            1,
+            "{built:?}"
+        );
+    }
+    assert!(built.iter().all(|b| b.path.is_file() && b.arch == arch));
+    // The runtime's keys find them: the paths `verify` computes are the files written.
+    let after = wp::aot::verify(&kernels, &[arch], &dir, true);
+    assert!(after.iter().all(|c| c.found), "{after:?}");
+    let mut written: Vec<_> = built.iter().map(|b| b.path.clone()).collect();
+    let mut looked: Vec<_> = after.iter().map(|c| c.path.clone()).collect();
+    written.sort();
+    looked.sort();
+    assert_eq!(written, looked);
+    // Another architecture's entries are not there.
+    assert!(wp::aot::verify(&kernels, &[arch + 1], &dir, true)
+        .iter()
+        .all(|c| !c.found));
+    // An unknown architecture is refused before anything is compiled.
+    let e = wp::aot::compile(&kernels, &[42], &dir.join("none")).unwrap_err();
+    assert!(e.to_string().contains("sm_42"), "{e}");
+    assert!(!dir.join("none").exists());
+    if dev.is_cpu() {
+        let _ = std::fs::remove_dir_all(&dir);
+        return;
+    }
+    let empty_cache = dir.join("empty-cache");
+    warp_cuda::set_cache_dir(Some(empty_cache.clone()));
+    wp::aot::set_aot_dir(Some(dir.clone()));
+    let run = || -> wp::Result<(Vec<f32>, Vec<f32>)> {
+        let a = arr(&[0.5f32, 1.0, 2.0], dev).with_grad()?;
+        let b = zeros::<f32, 1>(3, dev).with_grad()?;
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            wp::launch(k_aot_adj, 3, (&a, &b), dev)?;
+        }
+        tape.backward(&b)?;
+        Ok((b.to_vec()?, a.grad().expect("with_grad").to_vec()?))
+    };
+    let r = run();
+    wp::aot::set_aot_dir(None);
+    warp_cuda::set_cache_dir(None);
+    let (b, g) = r.unwrap();
+    for (k, x) in [0.5f32, 1.0, 2.0].into_iter().enumerate() {
+        assert!((b[k] - x.sin() * x).abs() < 1e-6, "{b:?}");
+        assert!((g[k] - (x.cos() * x + x.sin())).abs() < 1e-5, "{g:?}");
+    }
+    let reports: Vec<_> = wp::compile_reports()
+        .into_iter()
+        .filter(|r| r.kernel == "k_aot_adj")
+        .collect();
+    assert_eq!(reports.len(), 2, "{reports:?}");
+    assert!(reports.iter().any(|r| r.adjoint));
+    for r in &reports {
+        assert!(r.aot && r.cache_hit && r.compile_ms == 0.0, "{r:?}");
+        assert!(
+            r.cache_entry.as_ref().is_some_and(|p| p.starts_with(&dir)),
+            "{r:?}"
+        );
+    }
+    // Nothing of this kernel went to the (empty) kernel cache.
+    let compiled_here = std::fs::read_dir(&empty_cache)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|e| e.file_name().to_string_lossy().starts_with("k_aot_adj-"));
+    assert!(!compiled_here);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

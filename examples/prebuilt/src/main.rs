@@ -1,75 +1,144 @@
-//! Build-time compilation, end to end: `build.rs` compiled this crate's kernels to cubins;
-//! the binary points the runtime at them (`wp::aot::set_aot_dir`) and its first result
-//! compiles nothing. It prints the time from the start of `main` to the first result (the
-//! value and derivative of the autodiff example's seed function, against the closed form)
-//! and what loading the kernels cost.
+//! Build-time compilation, end to end: `build.rs` compiled this crate's kernels (the autodiff
+//! example's, forward and adjoint, both launch variants) to cubins; the binary points the
+//! runtime at them (`wp::aot::set_aot_dir`) and runs the autodiff example's computation
+//! without NVRTC: the seed function's value and derivative (the first result, against the
+//! closed form), then the particle program's gradient.
 //!
 //! ```text
-//! WARP_LANG_AOT_ARCHS=90 cargo run --release --manifest-path examples/prebuilt/Cargo.toml
+//! WARP_LANG_AOT_ARCHS=90 cargo run --release --manifest-path examples/prebuilt/Cargo.toml -- [--n 1000000] [--steps 100]
 //! ```
 //!
-//! `--no-aot` ignores the cubins (a cold or warm start through NVRTC and the kernel cache,
-//! for comparison). A shipped binary carries the cubin directory beside it as
-//! `prebuilt-cubins/` (or anywhere, named by `WARP_LANG_AOT_DIR`, which wins); without one it
-//! uses the build's output directory.
+//! It prints the time from the start of `main` to the first result, the machine-readable
+//! `cold_start ...` line (`benches/cold_start.rs` reads it: what loading the kernels cost, and
+//! how many came from the cubins, the kernel cache or NVRTC) and the compile summary.
+//!
+//! - `--no-aot` ignores the cubins: a cold or warm start through NVRTC and the kernel cache,
+//!   for comparison.
+//! - `--check` only says whether the cubin directory holds every entry the launches will
+//!   look for (forward and adjoint, both variants, each built architecture: the keys computed
+//!   as the runtime computes them), without a GPU; it fails when the build compiled cubins
+//!   and some are missing.
+//! - `--first-result-only` stops after the first result.
+//!
+//! A shipped binary carries the cubin directory beside it as `prebuilt-cubins/` (or anywhere,
+//! named by `WARP_LANG_AOT_DIR`, which wins); without one it uses the build's output directory.
+//! On a GPU none of the built architectures serves (the same major version, equal or lower
+//! minor), the kernels are compiled at first launch as usual.
 
 mod kernels;
 
+use kernels::seed_ad;
+use std::path::PathBuf;
 use std::time::Instant;
 use warp_lang as wp;
 
-fn closed_form(x: f64) -> (f64, f64) {
-    let s = (1.0 - x * x).sqrt();
-    let f = (x * x).sin() * x.ln() + x * x * x / s;
-    let df = 2.0 * x * (x * x).cos() * x.ln()
-        + (x * x).sin() / x
-        + (3.0 * x * x * s + x * x * x * x / s) / (1.0 - x * x);
-    (f, df)
+fn arg(name: &str, default: usize) -> usize {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|k| args.get(k + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
 }
 
-fn main() -> wp::Result<()> {
-    let start = Instant::now();
-    if !std::env::args().any(|a| a == "--no-aot") {
-        // A `prebuilt-cubins` directory beside the binary (where a shipped binary carries
-        // them), else the build's own output directory.
-        let beside = std::env::current_exe()
-            .ok()
-            .and_then(|p| p.parent().map(|d| d.join("prebuilt-cubins")))
-            .filter(|d| d.is_dir());
-        let built = std::path::PathBuf::from(env!("PREBUILT_AOT_DIR"));
-        wp::aot::set_aot_dir(Some(beside.unwrap_or(built)));
-    }
-    wp::config::set_quiet(true);
-    let dev = wp::get_preferred_device();
-    let x = wp::Array::from_slice(&[0.5f64], &dev)?.with_grad()?;
-    let y = wp::Array::<f64>::zeros(1, &dev)?.with_grad()?;
-    let tape = wp::Tape::new();
-    {
-        let _rec = tape.record();
-        wp::launch(kernels::seed, 1, (&x, &y), &dev)?;
-    }
-    tape.backward(&y)?;
-    let (f, df) = (y.to_vec()?[0], x.grad().expect("with_grad").to_vec()?[0]);
-    let first_ms = start.elapsed().as_secs_f64() * 1e3;
-    let (want_f, want_df) = closed_form(0.5);
-    let (err_f, err_df) = (
-        (f - want_f).abs() / want_f.abs(),
-        (df - want_df).abs() / want_df.abs(),
+/// The cubin directory: `prebuilt-cubins` beside the binary (where a shipped binary carries
+/// it), else the build's output directory.
+fn cubin_dir() -> PathBuf {
+    std::env::current_exe()
+        .ok()
+        .and_then(|p| p.parent().map(|d| d.join("prebuilt-cubins")))
+        .filter(|d| d.is_dir())
+        .unwrap_or_else(|| PathBuf::from(env!("PREBUILT_AOT_DIR")))
+}
+
+/// `--check`: whether the directory holds every entry, for each built architecture.
+fn check() -> std::process::ExitCode {
+    let dir = wp::aot::aot_dir().unwrap_or_else(cubin_dir);
+    let archs: Vec<u32> = env!("PREBUILT_AOT_ARCHS")
+        .split(',')
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let checks = wp::aot::verify(&kernels::all(), &archs, &dir, true);
+    let found = checks.iter().filter(|c| c.found).count();
+    println!(
+        "{found} of {} ahead-of-time entries found in {} (sm_{archs:?}; the build {} them)",
+        checks.len(),
+        dir.display(),
+        if env!("PREBUILT_AOT_BUILT") == "1" {
+            "compiled"
+        } else {
+            "did not compile"
+        }
     );
-    println!("first result after {first_ms:.1} ms (from the start of main) on \"{dev}\"");
-    println!("f(0.5) = {f:.12} (error {err_f:.1e}), f'(0.5) = {df:.12} (error {err_df:.1e})");
+    let built = env!("PREBUILT_AOT_BUILT") == "1";
+    // (Without NVRTC at build time every entry is missing: nothing to list.)
+    for c in checks.iter().filter(|c| built && !c.found).take(12) {
+        println!(
+            "  missing: {} {} {} sm_{}: {}",
+            c.kernel,
+            if c.adjoint { "adjoint" } else { "forward" },
+            if c.contiguous {
+                "contiguous"
+            } else {
+                "strided"
+            },
+            c.arch,
+            c.path.display()
+        );
+    }
+    if built && found < checks.len() {
+        std::process::ExitCode::FAILURE
+    } else {
+        std::process::ExitCode::SUCCESS
+    }
+}
+
+fn main() -> wp::Result<std::process::ExitCode> {
+    let start = Instant::now();
+    let args: Vec<String> = std::env::args().collect();
+    if args.iter().any(|a| a == "--check") {
+        return Ok(check());
+    }
+    if !args.iter().any(|a| a == "--no-aot") {
+        wp::aot::set_aot_dir(Some(cubin_dir()));
+    }
+    wp::init();
+    let dev = match args.iter().position(|a| a == "--device") {
+        Some(k) => wp::get_device(args.get(k + 1).map(String::as_str).unwrap_or("cpu"))?,
+        None => wp::get_preferred_device(),
+    };
+
+    // 1. The seed function: the first result.
+    let (f, df) = seed_ad::first_result(&dev)?;
+    let line = seed_ad::cold_start_line(start, &dev);
+    println!(
+        "first result after {:.1} ms (from the start of main) on \"{dev}\"",
+        start.elapsed().as_secs_f64() * 1e3
+    );
+    println!("{line}");
+    let (want_f, want_df) = seed_ad::seed_closed_form(0.5);
+    let (err_f, err_df) = (
+        ((f - want_f) / want_f).abs(),
+        ((df - want_df) / want_df).abs(),
+    );
+    println!(
+        "f(0.5) = {f:.12} (relative error {err_f:.1e}), f'(0.5) = {df:.12} (relative error \
+         {err_df:.1e})"
+    );
     // f64 throughout: a relative error above 1e-12 (a few thousand ulps) is a wrong kernel.
     if err_f > 1e-12 || err_df > 1e-12 {
         eprintln!("the result disagrees with the closed form");
-        std::process::exit(1);
+        return Ok(std::process::ExitCode::FAILURE);
     }
-    let reports = wp::compile_reports();
-    let load_ms: f64 = 0.0 + reports.iter().map(|r| r.total_ms).sum::<f64>();
     println!(
-        "kernel loading: {load_ms:.2} ms for {} variant(s) (ahead-of-time dir {})",
-        reports.len(),
-        wp::aot::aot_dir().map_or("none".into(), |d| d.display().to_string())
+        "ahead-of-time directory: {}",
+        wp::aot::aot_dir().map_or("none (--no-aot)".into(), |d| d.display().to_string())
     );
+
+    // 2. Gradients through the particle program.
+    if !args.iter().any(|a| a == "--first-result-only") {
+        seed_ad::particle_gradients(arg("--n", 1_000_000), arg("--steps", 100), &dev)?;
+    }
     print!("{}", wp::compile_summary());
-    Ok(())
+    Ok(std::process::ExitCode::SUCCESS)
 }

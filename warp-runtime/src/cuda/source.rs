@@ -168,10 +168,15 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
             }
         }
     }
-    let mut text = format!(
-        "// warp-lang kernel `{}` from {} ({})\n",
-        info.name, info.module, info.file
-    );
+    // The module path below the crate: a unit's text (so its cache and ahead-of-time keys)
+    // must not depend on which crate compiled the kernel's Rust definition, because a build
+    // script that includes a crate's kernel file (`examples/prebuilt`) compiles it as
+    // `build_script_build::kernels` where the binary has `<crate>::kernels`.
+    let path = match info.module.split_once("::") {
+        Some((_, below)) => format!("{below}::{}", info.name),
+        None => info.name.to_string(),
+    };
+    let mut text = format!("// warp-lang kernel `{path}` ({})\n", info.file);
     if adjoint {
         // User structs add their adjoint helpers (see `derive(Struct)`).
         text.push_str("#define WP_ADJOINT_UNIT 1\n");
@@ -311,6 +316,31 @@ mod tests {
                 "wp_adjoint_builtins.h"
             ]
         );
+    }
+
+    /// The unit does not depend on the crate that compiled the kernel (a build script that
+    /// includes the kernel's file names it `build_script_build::...`), only on the module below
+    /// it, the file and the templates.
+    #[test]
+    fn unit_text_does_not_name_the_crate() {
+        let info = |module| KernelInfo {
+            name: "k",
+            module,
+            file: "src/kernels.rs",
+            cuda: "static WP_FN void @@SELF@@(wp::ctx_t* __ctx) {}\nvoid @@ENTRY@@() {}\n",
+            ..KernelInfo::BLANK
+        };
+        let (bin, build) = (info("my_app::kernels"), info("build_script_build::kernels"));
+        assert_eq!(assemble(&bin), assemble(&build));
+        assert_eq!(assemble_adjoint(&bin), assemble_adjoint(&build));
+        assert!(assemble(&bin)
+            .text
+            .starts_with("// warp-lang kernel `kernels::k` (src/kernels.rs)\n"));
+        assert_ne!(assemble(&bin), assemble(&info("my_app::other")));
+        // A kernel at the crate's root.
+        assert!(assemble(&info("my_app"))
+            .text
+            .starts_with("// warp-lang kernel `k` (src/kernels.rs)\n"));
     }
 
     /// Every header the assembler may name is a file of the CUDA library (which
