@@ -165,31 +165,141 @@ impl Flat {
 /// A learning-rate schedule: the rate for step `t` (1 for the first step).
 type Schedule = Box<dyn FnMut(u64) -> f64>;
 
+/// What every optimizer keeps: its parameters (with `states` state arrays each), the fixed
+/// learning rate or a schedule, and the step count.
+struct Params {
+    flats: Vec<Flat>,
+    states: usize,
+    who: &'static str,
+    lr: f64,
+    schedule: Option<Schedule>,
+    t: u64,
+}
+
+impl Params {
+    fn new(who: &'static str, states: usize, lr: f64) -> Params {
+        Params {
+            flats: Vec::new(),
+            states,
+            who,
+            lr,
+            schedule: None,
+            t: 0,
+        }
+    }
+
+    /// Counts a step and returns it (from 1) with its learning rate.
+    fn next_step(&mut self) -> (u64, f64) {
+        self.t += 1;
+        let lr = match &mut self.schedule {
+            Some(s) => s(self.t),
+            None => self.lr,
+        };
+        (self.t, lr)
+    }
+}
+
+/// A step of any optimizer, for code that picks one at run time (`Box<dyn Optimizer>`).
+pub trait Optimizer {
+    /// One update of every parameter from its gradient.
+    ///
+    /// # Errors
+    /// A launch's error (a fault, a device error).
+    fn step(&mut self) -> Result<()>;
+
+    /// Zeroes every parameter's gradient.
+    ///
+    /// # Errors
+    /// A device error.
+    fn zero_grad(&self) -> Result<()>;
+}
+
+/// The methods every optimizer has, over its `params: Params`.
+macro_rules! optimizer_methods {
+    ($opt:ident) => {
+        impl $opt {
+            /// A learning-rate schedule: step `t` (from 1) uses `schedule(t)` instead of the
+            /// fixed rate.
+            pub fn schedule(mut self, schedule: impl FnMut(u64) -> f64 + 'static) -> $opt {
+                self.params.schedule = Some(Box::new(schedule));
+                self
+            }
+
+            /// Adds a parameter array (contiguous, with a gradient; see [`OptimElement`]).
+            ///
+            /// # Errors
+            /// [`Error::InvalidArgument`] for an array without a gradient or not contiguous.
+            pub fn add<T: OptimElement, const N: usize>(
+                &mut self,
+                param: &Array<T, N>,
+            ) -> Result<()> {
+                let flat = Flat::of(param, self.params.states, self.params.who)?;
+                self.params.flats.push(flat);
+                Ok(())
+            }
+
+            /// Sets the fixed learning rate.
+            pub fn set_lr(&mut self, lr: f64) {
+                self.params.lr = lr;
+            }
+
+            /// Steps taken so far.
+            pub fn steps(&self) -> u64 {
+                self.params.t
+            }
+
+            /// Zeroes every parameter's gradient.
+            ///
+            /// # Errors
+            /// A device error.
+            pub fn zero_grad(&self) -> Result<()> {
+                self.params.flats.iter().try_for_each(Flat::zero_grad)
+            }
+
+            /// Forgets the optimizer's state (moments, momentum buffers) and the step count;
+            /// the parameters are left as they are.
+            ///
+            /// # Errors
+            /// A device error.
+            pub fn reset(&mut self) -> Result<()> {
+                self.params.t = 0;
+                self.params.flats.iter().try_for_each(Flat::zero_states)
+            }
+        }
+
+        impl Optimizer for $opt {
+            fn step(&mut self) -> Result<()> {
+                $opt::step(self)
+            }
+
+            fn zero_grad(&self) -> Result<()> {
+                $opt::zero_grad(self)
+            }
+        }
+    };
+}
+
 /// Adam (Kingma and Ba), as Warp's `warp.optim.Adam`: per component,
 /// `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`,
 /// `p -= lr (m / (1 - b1^t)) / (sqrt(v / (1 - b2^t)) + eps)`.
 pub struct Adam {
-    params: Vec<Flat>,
-    lr: f64,
+    params: Params,
     beta1: f64,
     beta2: f64,
     eps: f64,
-    t: u64,
-    schedule: Option<Schedule>,
 }
+
+optimizer_methods!(Adam);
 
 impl Adam {
     /// An Adam optimizer with learning rate `lr` and Warp's defaults: betas (0.9, 0.999),
     /// eps 1e-8.
     pub fn new(lr: f64) -> Adam {
         Adam {
-            params: Vec::new(),
-            lr,
+            params: Params::new("Adam", 2, lr),
             beta1: 0.9,
             beta2: 0.999,
             eps: 1e-8,
-            t: 0,
-            schedule: None,
         }
     }
 
@@ -205,46 +315,17 @@ impl Adam {
         self
     }
 
-    /// A learning-rate schedule: step `t` (from 1) uses `schedule(t)` instead of the fixed rate.
-    pub fn schedule(mut self, schedule: impl FnMut(u64) -> f64 + 'static) -> Adam {
-        self.schedule = Some(Box::new(schedule));
-        self
-    }
-
-    /// Adds a parameter array (contiguous, with a gradient; see [`OptimElement`]).
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] for an array without a gradient or not contiguous.
-    pub fn add<T: OptimElement, const N: usize>(&mut self, param: &Array<T, N>) -> Result<()> {
-        self.params.push(Flat::of(param, 2, "Adam")?);
-        Ok(())
-    }
-
-    /// Sets the fixed learning rate.
-    pub fn set_lr(&mut self, lr: f64) {
-        self.lr = lr;
-    }
-
-    /// Steps taken so far.
-    pub fn steps(&self) -> u64 {
-        self.t
-    }
-
     /// One update of every parameter from its gradient (one kernel per parameter array).
     ///
     /// # Errors
     /// A launch's error (a fault, a device error).
     pub fn step(&mut self) -> Result<()> {
-        self.t += 1;
-        let lr = match &mut self.schedule {
-            Some(s) => s(self.t),
-            None => self.lr,
-        };
-        let t = self.t as i32;
+        let (t, lr) = self.params.next_step();
+        let t = t as i32;
         let c1 = 1.0 / (1.0 - self.beta1.powi(t));
         let c2 = 1.0 / (1.0 - self.beta2.powi(t));
         let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
-        for p in &self.params {
+        for p in &self.params.flats {
             match p {
                 Flat::F32(x, g, s) => {
                     let f = |v: f64| v as f32;
@@ -270,23 +351,6 @@ impl Adam {
         }
         Ok(())
     }
-
-    /// Zeroes every parameter's gradient.
-    ///
-    /// # Errors
-    /// A device error.
-    pub fn zero_grad(&self) -> Result<()> {
-        self.params.iter().try_for_each(Flat::zero_grad)
-    }
-
-    /// Forgets the moments and the step count (the parameters are left as they are).
-    ///
-    /// # Errors
-    /// A device error.
-    pub fn reset(&mut self) -> Result<()> {
-        self.t = 0;
-        self.params.iter().try_for_each(Flat::zero_states)
-    }
 }
 
 /// Stochastic gradient descent, as Warp's `warp.optim.SGD` (and PyTorch's): per component,
@@ -294,28 +358,24 @@ impl Adam {
 /// `b = momentum b + (1 - dampening) g` after, then `g = b` (or `g += momentum b` with
 /// Nesterov); `p -= lr g`.
 pub struct Sgd {
-    params: Vec<Flat>,
-    lr: f64,
+    params: Params,
     momentum: f64,
     dampening: f64,
     weight_decay: f64,
     nesterov: bool,
-    t: u64,
-    schedule: Option<Schedule>,
 }
+
+optimizer_methods!(Sgd);
 
 impl Sgd {
     /// Plain SGD with learning rate `lr` (no momentum, dampening or weight decay).
     pub fn new(lr: f64) -> Sgd {
         Sgd {
-            params: Vec::new(),
-            lr,
+            params: Params::new("Sgd", 1, lr),
             momentum: 0.0,
             dampening: 0.0,
             weight_decay: 0.0,
             nesterov: false,
-            t: 0,
-            schedule: None,
         }
     }
 
@@ -343,44 +403,15 @@ impl Sgd {
         self
     }
 
-    /// A learning-rate schedule: step `t` (from 1) uses `schedule(t)`.
-    pub fn schedule(mut self, schedule: impl FnMut(u64) -> f64 + 'static) -> Sgd {
-        self.schedule = Some(Box::new(schedule));
-        self
-    }
-
-    /// Adds a parameter array (contiguous, with a gradient; see [`OptimElement`]).
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] for an array without a gradient or not contiguous.
-    pub fn add<T: OptimElement, const N: usize>(&mut self, param: &Array<T, N>) -> Result<()> {
-        self.params.push(Flat::of(param, 1, "Sgd")?);
-        Ok(())
-    }
-
-    /// Sets the fixed learning rate.
-    pub fn set_lr(&mut self, lr: f64) {
-        self.lr = lr;
-    }
-
-    /// Steps taken so far.
-    pub fn steps(&self) -> u64 {
-        self.t
-    }
-
     /// One update of every parameter from its gradient (one kernel per parameter array).
     ///
     /// # Errors
     /// A launch's error (a fault, a device error).
     pub fn step(&mut self) -> Result<()> {
-        self.t += 1;
-        let lr = match &mut self.schedule {
-            Some(s) => s(self.t),
-            None => self.lr,
-        };
+        let (t, lr) = self.params.next_step();
         let (mu, damp, wd) = (self.momentum, self.dampening, self.weight_decay);
-        let (nesterov, first) = (self.nesterov as i32, (self.t == 1) as i32);
-        for p in &self.params {
+        let (nesterov, first) = (self.nesterov as i32, (t == 1) as i32);
+        for p in &self.params.flats {
             match p {
                 Flat::F32(x, g, s) => {
                     let f = |v: f64| v as f32;
@@ -394,22 +425,5 @@ impl Sgd {
             }
         }
         Ok(())
-    }
-
-    /// Zeroes every parameter's gradient.
-    ///
-    /// # Errors
-    /// A device error.
-    pub fn zero_grad(&self) -> Result<()> {
-        self.params.iter().try_for_each(Flat::zero_grad)
-    }
-
-    /// Forgets the momentum buffers and the step count.
-    ///
-    /// # Errors
-    /// A device error.
-    pub fn reset(&mut self) -> Result<()> {
-        self.t = 0;
-        self.params.iter().try_for_each(Flat::zero_states)
     }
 }

@@ -67,6 +67,33 @@ fn load_compiles_before_the_first_launch(dev: &wp::Device) {
     assert_eq!(entries("k_loaded ", "forward"), expect);
 }
 
+/// A fresh ahead-of-time directory for a test (`name`) on `dev`, and the architecture to
+/// compile for: the GPU's, or 90 on the CPU backend (where only the compile is tested).
+fn aot_target(dev: &wp::Device, name: &str) -> (std::path::PathBuf, u32) {
+    let dir = std::env::temp_dir().join(format!(
+        "wp-{name}-{}-{}",
+        dev.alias().replace(':', ""),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let arch = match dev.kind() {
+        wp::DeviceKind::Cuda { ordinal } => warp_cuda::Gpu::open(ordinal).unwrap().arch(),
+        wp::DeviceKind::Cpu => 90,
+    };
+    (dir, arch)
+}
+
+/// An ahead-of-time compile failed: only acceptable without NVRTC (CI), which the error must
+/// say; the test then says it skipped.
+fn skipped_without_nvrtc(e: wp::Error, test: &str, dev: &wp::Device) {
+    assert!(e.to_string().contains("nvrtc"), "{e}");
+    assert!(
+        warp_cuda::nvrtc_version().is_err(),
+        "NVRTC is there, yet: {e}"
+    );
+    eprintln!("SKIPPED {test} on {dev}: no NVRTC ({e})");
+}
+
 /// Launched only by `ahead_of_time_compile`, so that its first launch is the one measured.
 #[wp::kernel]
 fn k_aot(a: Array<f32>, s: f32) {
@@ -78,28 +105,10 @@ fn k_aot(a: Array<f32>, s: f32) {
 /// the directory set, the first launch loads the cubin from it instead of compiling, even with
 /// an empty kernel cache.
 fn ahead_of_time_compile(dev: &wp::Device) {
-    let dir = std::env::temp_dir().join(format!(
-        "wp-aot-{}-{}",
-        dev.alias().replace(':', ""),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    let arch = match dev.kind() {
-        wp::DeviceKind::Cuda { ordinal } => warp_cuda::Gpu::open(ordinal).unwrap().arch(),
-        wp::DeviceKind::Cpu => 90,
-    };
+    let (dir, arch) = aot_target(dev, "aot");
     let built = match wp::aot::compile(&[wp::aot::kernel(k_aot)], &[arch], &dir) {
         Ok(b) => b,
-        Err(e) => {
-            // No NVRTC on this machine (CI): the error says what is missing.
-            assert!(e.to_string().contains("nvrtc"), "{e}");
-            assert!(
-                warp_cuda::nvrtc_version().is_err(),
-                "NVRTC is there, yet: {e}"
-            );
-            eprintln!("SKIPPED ahead_of_time_compile on {dev}: no NVRTC ({e})");
-            return;
-        }
+        Err(e) => return skipped_without_nvrtc(e, "ahead_of_time_compile", dev),
     };
     assert_eq!(built.len(), 2);
     assert!(built.iter().all(|b| b.path.is_file() && b.arch == arch));
@@ -143,31 +152,14 @@ fn k_aot_adj(a: Array<f32>, b: Array<f32>) {
 /// set and an empty kernel cache, the forward launch and the first backward pass load their
 /// cubins from it: nothing is compiled.
 fn ahead_of_time_adjoints(dev: &wp::Device) {
-    let dir = std::env::temp_dir().join(format!(
-        "wp-aot-adj-{}-{}",
-        dev.alias().replace(':', ""),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    let arch = match dev.kind() {
-        wp::DeviceKind::Cuda { ordinal } => warp_cuda::Gpu::open(ordinal).unwrap().arch(),
-        wp::DeviceKind::Cpu => 90,
-    };
+    let (dir, arch) = aot_target(dev, "aot-adj");
     let kernels = [wp::aot::kernel(k_aot_adj)];
     let before = wp::aot::verify(&kernels, &[arch], &dir, true);
     assert_eq!(before.len(), 4);
     assert!(before.iter().all(|c| !c.found), "{before:?}");
     let built = match wp::aot::compile_with_adjoints(&kernels, &[arch], &dir) {
         Ok(b) => b,
-        Err(e) => {
-            assert!(e.to_string().contains("nvrtc"), "{e}");
-            assert!(
-                warp_cuda::nvrtc_version().is_err(),
-                "NVRTC is there, yet: {e}"
-            );
-            eprintln!("SKIPPED ahead_of_time_adjoints on {dev}: no NVRTC ({e})");
-            return;
-        }
+        Err(e) => return skipped_without_nvrtc(e, "ahead_of_time_adjoints", dev),
     };
     // Forward and adjoint, each contiguous and strided.
     assert_eq!(built.len(), 4);

@@ -4,7 +4,7 @@
 
 use crate::{arr, zeros};
 use warp_lang as wp;
-use wp::optim::{Adam, Sgd};
+use wp::optim::{Adam, Optimizer, Sgd};
 use wp::prelude::*;
 
 backend_tests!(
@@ -89,7 +89,6 @@ fn quadratic_bowl_converges(dev: &wp::Device) {
         .map(|i| Vec3::new(i as f32 * 0.01, -0.5, (i as f32).cos()))
         .collect();
     let (t1, t3) = (arr(&targets, dev), arr(&vtargets, dev));
-    type Opt = Box<dyn FnMut() -> wp::Result<()>>;
     let cases: [(&str, usize, f32); 3] = [
         ("sgd", 100, 1e-5),
         ("nesterov", 100, 1e-5),
@@ -99,35 +98,25 @@ fn quadratic_bowl_converges(dev: &wp::Device) {
         let x = zeros::<f32, 1>(n, dev).with_grad().unwrap();
         let v = zeros::<Vec3, 1>(n, dev).with_grad().unwrap();
         let loss = zeros::<f32, 1>(1, dev).with_grad().unwrap();
-        let (mut step, mut zero): (Opt, Opt) = match name {
+        let mut opt: Box<dyn Optimizer> = match name {
             "adam" => {
                 let mut o = Adam::new(0.02);
                 o.add(&x).unwrap();
                 o.add(&v).unwrap();
-                let o = std::rc::Rc::new(std::cell::RefCell::new(o));
-                let o2 = o.clone();
-                (
-                    Box::new(move || o.borrow_mut().step()),
-                    Box::new(move || o2.borrow().zero_grad()),
-                )
+                Box::new(o)
             }
             _ => {
-                let mut o = Sgd::new(0.1).momentum(if name == "nesterov" { 0.5 } else { 0.0 });
-                if name == "nesterov" {
-                    o = o.nesterov(true);
-                }
+                let nesterov = name == "nesterov";
+                let mut o = Sgd::new(0.1)
+                    .momentum(if nesterov { 0.5 } else { 0.0 })
+                    .nesterov(nesterov);
                 o.add(&x).unwrap();
                 o.add(&v).unwrap();
-                let o = std::rc::Rc::new(std::cell::RefCell::new(o));
-                let o2 = o.clone();
-                (
-                    Box::new(move || o.borrow_mut().step()),
-                    Box::new(move || o2.borrow().zero_grad()),
-                )
+                Box::new(o)
             }
         };
         for _ in 0..steps {
-            zero().unwrap();
+            opt.zero_grad().unwrap();
             loss.fill(0.0).unwrap();
             let tape = wp::Tape::new();
             {
@@ -136,7 +125,7 @@ fn quadratic_bowl_converges(dev: &wp::Device) {
                 wp::launch(bowl_vec3, n, (&v, &t3, &loss), dev).unwrap();
             }
             tape.backward(&loss).unwrap();
-            step().unwrap();
+            opt.step().unwrap();
         }
         let xs = x.to_vec().unwrap();
         let vs = v.to_vec().unwrap();

@@ -536,6 +536,8 @@ impl<T: Element, const N: usize> Array<T, N> {
             )));
         }
         let same_storage = Arc::ptr_eq(&self.storage, &src.storage);
+        let one_copy = self.is_contiguous() && src.is_contiguous() && !same_storage;
+        let mut in_gpu_capture = false;
         if capturing::capturing() {
             let keep = (self.clone(), src.clone());
             let (dst, from) = (self.clone(), src.clone());
@@ -546,16 +548,7 @@ impl<T: Element, const N: usize> Array<T, N> {
                 move || Box::new(move || dst.copy_from(&from)),
             )? {
                 Captured::Recorded => return Ok(()),
-                Captured::OnGpu if self.is_contiguous() && src.is_contiguous() && !same_storage => {
-                    let bytes = self.len() * std::mem::size_of::<T>();
-                    return self.storage.copy_from(
-                        self.byte_offset,
-                        &src.storage,
-                        src.byte_offset,
-                        bytes,
-                    );
-                }
-                Captured::OnGpu => {
+                Captured::OnGpu if !one_copy => {
                     return Err(Error::Capture {
                         what: format!(
                             "a copy between strided or overlapping arrays on \"{}\" goes \
@@ -565,13 +558,17 @@ impl<T: Element, const N: usize> Array<T, N> {
                         ),
                     })
                 }
+                Captured::OnGpu => in_gpu_capture = true,
                 Captured::No => {}
             }
         }
-        if self.is_contiguous() && src.is_contiguous() && !same_storage {
+        if one_copy {
             // One copy of bytes, by the backends of the two memories. The kernels that may
-            // still write `src` first (a GPU's; their faults are reported here).
-            dispatch::synchronize(&src.device)?;
+            // still write `src` first (a GPU's; their faults are reported here); inside a GPU
+            // capture the copy is queued after the captured kernels on the capture stream.
+            if !in_gpu_capture {
+                dispatch::synchronize(&src.device)?;
+            }
             let bytes = self.len() * std::mem::size_of::<T>();
             return self
                 .storage
