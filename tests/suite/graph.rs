@@ -200,6 +200,8 @@ fn what_a_capture_refuses(dev: &wp::Device) {
     let b = zeros::<f32, 1>(n, dev);
     let sum = zeros::<f32, 1>(1, dev);
     let (m, m2) = (zeros::<f32, 2>((4, 8), dev), zeros::<f32, 2>((4, 8), dev));
+    // A condition flag on another device than a GPU capture's.
+    let host_flag = wp::Array::<i32>::zeros(1, &wp::cpu()).unwrap();
     let graph = {
         let scope = wp::ScopedCapture::new(dev).unwrap();
         assert_refused(wp::Array::<f32>::zeros(n, dev), "an allocation");
@@ -218,6 +220,10 @@ fn what_a_capture_refuses(dev: &wp::Device) {
                 "inside a capture on \"cuda:0\"",
             );
             assert_refused(b.copy_from(&host), "inside a capture on \"cuda:0\"");
+            assert_refused(
+                wp::capture_while(&host_flag, || Ok(())),
+                "inside a capture on \"cuda:0\"",
+            );
             assert_refused(
                 m.transpose().copy_from(&m2.transpose()),
                 "strided or overlapping",
