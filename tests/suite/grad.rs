@@ -38,6 +38,7 @@ backend_tests!(
     nested_struct_field_gradient,
     loops_in_funcs_gradient,
     nested_exits_gradient,
+    store_semantics,
 );
 
 #[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
@@ -776,6 +777,52 @@ fn jumps_gradient(dev: &wp::Device) {
         .collect();
     // Exact: binary fractions.
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), want);
+}
+
+#[wp::kernel]
+fn k_add_in_place(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    y[i] += 2.0 * x[i];
+}
+
+/// The semantics README's "Backward semantics" states: a plain store hands its element's
+/// gradient to the stored value and clears it (so an intermediate's gradient is zero after
+/// backward and a second backward from the same seed adds exactly the first's gradients to
+/// the leaves, not a compounded amount); `y[i] += v` is a read, an add and a store (not an
+/// atomic): its backward gives `v` the gradient at `i` and leaves `y`'s gradient at `i` as it
+/// was, which is what `y_new = y_old + v` means. All values are small integers: exact.
+fn store_semantics(dev: &wp::Device) {
+    let x = arr(&[1.0f32, 2.0], dev).with_grad().unwrap();
+    let y = zeros::<f32, 1>(2, dev).with_grad().unwrap();
+    let loss = zeros::<f32, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_poly, 2, (&x, &y), dev).unwrap();
+        wp::launch(k_sum, 2, (&y, &loss), dev).unwrap();
+    }
+    if !backward_ok(dev, tape.backward(&loss)) {
+        return;
+    }
+    // dy/dx = 2x + 3; the store in k_poly took y's gradient and cleared it.
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![5.0, 7.0]);
+    assert_eq!(y.grad().unwrap().to_vec().unwrap(), vec![0.0, 0.0]);
+    tape.backward(&loss).unwrap();
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![10.0, 14.0]);
+    assert_eq!(y.grad().unwrap().to_vec().unwrap(), vec![0.0, 0.0]);
+
+    // y[i] += 2 x[i], seeded directly on y: x gets 2 * seed, y keeps its seed.
+    let x = arr(&[1.0f32, 2.0], dev).with_grad().unwrap();
+    let y = arr(&[10.0f32, 20.0], dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_add_in_place, 2, (&x, &y), dev).unwrap();
+    }
+    assert_eq!(y.to_vec().unwrap(), vec![12.0, 24.0]);
+    tape.backward(&y).unwrap();
+    assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, 2.0]);
+    assert_eq!(y.grad().unwrap().to_vec().unwrap(), vec![1.0, 1.0]);
 }
 
 /// Gradients accumulate across backward calls; zero() clears them; reset() forgets.
