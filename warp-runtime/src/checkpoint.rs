@@ -223,6 +223,7 @@ impl Splitter {
 
     /// The least number of forward steps that reversing `n` steps takes with `c` free slots
     /// (state 0 of the interval kept elsewhere).
+    #[cfg(test)]
     pub(crate) fn cost(&self, n: usize, c: usize) -> u64 {
         match &self.table {
             Some((cost, _)) => cost[n * (self.c_max + 1) + c],
