@@ -748,51 +748,61 @@ impl<'a, S: CheckpointState> Checkpointed<'a, S> {
         }
         let target = 1 - self.grad_buf;
         let k = to - from;
-        // The working state where k steps from working state s end.
-        let lands = |s: usize| if k % 2 == 1 { 1 - s } else { s };
-        if k == 0 && self.vals[target] == Some(to) {
+        if k == 0 {
+            // A load: the state to reverse from, into the working state without the live
+            // gradient (recording needs its gradient).
+            if self.vals[target] == Some(to) {
+                return Ok(());
+            }
+            let Loc::Slot(slot) = src else {
+                return Err(internal("a load of a state that is not a snapshot"));
+            };
+            let Some(Some(snap)) = self.slots.get(slot) else {
+                return Err(internal("a load of a snapshot never stored"));
+            };
+            self.work[target].copy_values_from(snap)?;
+            self.vals[target] = Some(to);
             return Ok(());
         }
-        let held = (0..2).find(|&s| {
-            self.vals[s] == Some(from) && k > 0 && (!backward || lands(s) == target)
-        });
+        // The working state where k steps from working state s end.
+        let lands = |s: usize| if k % 2 == 1 { 1 - s } else { s };
+        let held =
+            (0..2).find(|&s| self.vals[s] == Some(from) && (!backward || lands(s) == target));
         let pass = if backward { "recomputation" } else { "forward" };
-        let mut cur = match (held, src) {
-            (Some(s), _) => Some(s),
-            (None, Loc::Initial) => None,
-            (None, Loc::Slot(slot)) => {
-                let start = if k % 2 == 1 { 1 - target } else { target };
-                let Some(Some(snap)) = self.slots.get(slot) else {
-                    return Err(internal("an advance from a snapshot never stored"));
+        // The first step: on from a working state, else straight from the initial state or the
+        // snapshot (no copy) into the working state where k steps end in `target`.
+        let mut cur = match held {
+            Some(s) => {
+                let (a, b) = pair(&self.work, s);
+                run_step(&mut self.step, from, a, b, pass)?;
+                1 - s
+            }
+            None => {
+                let first = if !backward || k % 2 == 1 {
+                    target
+                } else {
+                    1 - target
                 };
-                self.work[start].copy_values_from(snap)?;
-                self.vals[start] = Some(from);
-                Some(start)
+                let source = match src {
+                    Loc::Initial => self.s0,
+                    Loc::Slot(slot) => match self.slots.get(slot) {
+                        Some(Some(snap)) => snap,
+                        _ => return Err(internal("an advance from a snapshot never stored")),
+                    },
+                };
+                run_step(&mut self.step, from, source, &self.work[first], pass)?;
+                first
             }
         };
-        for t in from..to {
-            let dst = match cur {
-                Some(s) => {
-                    let (a, b) = pair(&self.work, s);
-                    run_step(&mut self.step, t, a, b, pass)?;
-                    1 - s
-                }
-                None => {
-                    // From the initial state: the first write where k steps end in `target`.
-                    let first = if !backward || k % 2 == 1 {
-                        target
-                    } else {
-                        1 - target
-                    };
-                    run_step(&mut self.step, t, self.s0, &self.work[first], pass)?;
-                    first
-                }
-            };
-            self.vals[dst] = Some(t + 1);
-            cur = Some(dst);
-            if backward {
-                self.recomputed += 1;
-            }
+        self.vals[cur] = Some(from + 1);
+        for t in from + 1..to {
+            let (a, b) = pair(&self.work, cur);
+            run_step(&mut self.step, t, a, b, pass)?;
+            cur = 1 - cur;
+            self.vals[cur] = Some(t + 1);
+        }
+        if backward {
+            self.recomputed += k as u64;
         }
         Ok(())
     }
