@@ -125,7 +125,6 @@ pub use warp_runtime::MarchingCubes;
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };
-pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
@@ -136,6 +135,7 @@ pub use warp_runtime::{
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
+pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {

@@ -45,9 +45,7 @@ fn initial(n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
 
 /// The components' bits, for bit-for-bit comparisons.
 fn bits(v: &[Vec3]) -> Vec<[u32; 3]> {
-    v.iter()
-        .map(|p| p.to_array().map(f32::to_bits))
-        .collect()
+    v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
 }
 
 fn grad_of<T: wp::Element>(a: &wp::Array<T>) -> Vec<T> {
@@ -82,7 +80,11 @@ fn full_tape(
         }
         tape.backward(&loss).unwrap();
     }
-    (grad_of(&xs[0]), grad_of(&vs[0]), xs[steps].to_vec().unwrap())
+    (
+        grad_of(&xs[0]),
+        grad_of(&vs[0]),
+        xs[steps].to_vec().unwrap(),
+    )
 }
 
 /// The seed program through a checkpointed rollout with `budget` snapshots, run `passes`
@@ -336,8 +338,16 @@ fn running_loss_matches_full_tape(dev: &wp::Device) {
         let what = format!("budget {budget}");
         crate::assert_close_f32(got_loss, want_loss, 2.5e-4, &format!("{what}: loss"));
         assert_eq!(grad_of(&closs), vec![1.0], "{what}: the seed");
-        assert_eq!(bits(&grad_of(&s0.0)), bits(&grad_of(&xs[0])), "{what}: dL/dx0");
-        assert_eq!(bits(&grad_of(&s0.1)), bits(&grad_of(&vs[0])), "{what}: dL/dv0");
+        assert_eq!(
+            bits(&grad_of(&s0.0)),
+            bits(&grad_of(&xs[0])),
+            "{what}: dL/dx0"
+        );
+        assert_eq!(
+            bits(&grad_of(&s0.1)),
+            bits(&grad_of(&vs[0])),
+            "{what}: dL/dv0"
+        );
     }
 }
 
@@ -421,7 +431,11 @@ fn errors_and_misuse(dev: &wp::Device) {
         roll.forward().unwrap();
         roll.backward().unwrap();
     }
-    assert_eq!(outer.len(), 0, "the passes' launches stay off the caller's tape");
+    assert_eq!(
+        outer.len(),
+        0,
+        "the passes' launches stay off the caller's tape"
+    );
     let e = roll.backward().unwrap_err().to_string();
     assert!(e.contains("a second time"), "{e}");
     let loss = zeros::<f32, 1>(1, dev);
@@ -465,7 +479,17 @@ fn errors_and_misuse(dev: &wp::Device) {
     roll.forward().unwrap();
     fail.set(true);
     let e = roll.backward().unwrap_err();
-    assert!(matches!(e, Error::Step { step: 2, pass: "backward", .. }), "{e:?}");
+    assert!(
+        matches!(
+            e,
+            Error::Step {
+                step: 2,
+                pass: "backward",
+                ..
+            }
+        ),
+        "{e:?}"
+    );
     let msg = e.to_string();
     assert!(
         msg.contains("step 2 of a checkpointed rollout (backward pass)")
@@ -491,7 +515,10 @@ fn report_of_a_thousand_steps(dev: &wp::Device) {
     assert_eq!(r.states_held, 3 + r.snapshots);
     assert_eq!(r.states_with_grads, 3);
     assert_eq!(r.bytes_held, state * (r.states_held + 3));
-    assert_eq!((r.full_tape_states, r.full_tape_bytes), (1001, 2 * 1001 * state));
+    assert_eq!(
+        (r.full_tape_states, r.full_tape_bytes),
+        (1001, 2 * 1001 * state)
+    );
     assert!(r.recomputed_steps <= 3 * 1000, "{r:?}");
     let text = r.to_string();
     assert!(

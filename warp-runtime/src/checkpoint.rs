@@ -317,7 +317,11 @@ pub(crate) fn plan(steps: usize, budget: usize, splitter: &Splitter) -> Plan {
             actions.push(Action::Reverse { t: a });
         } else if free == 0 {
             for t in (a..b).rev() {
-                actions.push(Action::Advance { from: a, to: t, src });
+                actions.push(Action::Advance {
+                    from: a,
+                    to: t,
+                    src,
+                });
                 advance_steps += (t - a) as u64;
                 actions.push(Action::Reverse { t });
             }
@@ -328,15 +332,14 @@ pub(crate) fn plan(steps: usize, budget: usize, splitter: &Splitter) -> Plan {
             let slot = free_slots.pop().unwrap_or(budget);
             in_use += 1;
             peak = peak.max(in_use);
-            actions.push(Action::Advance { from: a, to: m, src });
-            advance_steps += (m - a) as u64;
-            actions.push(Action::Store { t: m, slot });
-            tasks.push(Task::Reverse {
-                a,
-                b: m,
-                free,
+            actions.push(Action::Advance {
+                from: a,
+                to: m,
                 src,
             });
+            advance_steps += (m - a) as u64;
+            actions.push(Action::Store { t: m, slot });
+            tasks.push(Task::Reverse { a, b: m, free, src });
             tasks.push(Task::Free(slot));
             tasks.push(Task::Reverse {
                 a: m,
@@ -902,9 +905,9 @@ mod tests {
         }
         let table = Splitter::new(150, 10, true);
         assert!(table.table.is_some());
-        for n in 1..=150 {
-            for c in 0..=10 {
-                assert_eq!(table.cost(n, c), cost[n][c]);
+        for (n, row) in cost.iter().enumerate() {
+            for (c, &want) in row.iter().enumerate() {
+                assert_eq!(table.cost(n, c), want);
             }
         }
     }
