@@ -453,10 +453,12 @@ impl fmt::Display for CheckpointReport {
 enum Phase {
     /// No forward pass yet.
     Fresh,
-    /// After a forward pass: the final state is in the working state `final_buf`.
+    /// After a forward pass: the final state is in the working state `grad_buf`.
     Forwarded,
-    /// After a backward pass, or a pass that failed.
+    /// After a backward pass.
     Spent,
+    /// During a pass, and after one that failed.
+    Broken,
 }
 
 /// The step function: `(t, from, to)` launches the work computing state `t + 1` into `to` from
@@ -622,7 +624,7 @@ impl<'a, S: CheckpointState> Checkpointed<'a, S> {
     /// [`Error::Step`] naming the step whose function failed; allocation and copy errors.
     pub fn forward(&mut self) -> Result<&S> {
         let _paused = pause_recording();
-        self.phase = Phase::Spent;
+        self.phase = Phase::Broken;
         for w in &self.work {
             w.zero_grads()?;
         }
@@ -670,7 +672,8 @@ impl<'a, S: CheckpointState> Checkpointed<'a, S> {
     /// step function reads accumulate theirs. Tapes recording on this thread are paused.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] before a forward pass, or a second time after one;
+    /// [`Error::InvalidArgument`] before a forward pass, a second time after one, or after a
+    /// failed pass;
     /// [`Error::Step`] naming the step whose function failed; an adjoint's error.
     pub fn backward(&mut self) -> Result<()> {
         match self.phase {
@@ -685,15 +688,22 @@ impl<'a, S: CheckpointState> Checkpointed<'a, S> {
                      (the working states no longer hold the rollout; run forward again)",
                 ))
             }
+            Phase::Broken => {
+                return Err(Error::invalid(
+                    "Checkpointed::backward after a failed forward or backward pass (run \
+                     forward again)",
+                ))
+            }
             Phase::Forwarded => {}
         }
-        self.phase = Phase::Spent;
+        self.phase = Phase::Broken;
         let _paused = pause_recording();
         self.recomputed = 0;
         for k in self.plan.prefix..self.plan.actions.len() {
             let action = self.plan.actions[k];
             self.run(action, true)?;
         }
+        self.phase = Phase::Spent;
         Ok(())
     }
 
