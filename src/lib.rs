@@ -135,6 +135,7 @@ pub use warp_runtime::{
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
+pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {

@@ -69,6 +69,7 @@ mod arrays;
 mod atomics;
 mod builtins;
 mod bvh;
+mod checkpoint;
 mod control;
 mod decomp;
 mod errors;

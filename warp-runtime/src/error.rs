@@ -111,6 +111,16 @@ pub enum Error {
         /// What was wrong, with the values involved.
         what: String,
     },
+    /// The step function of a checkpointed rollout ([`Checkpointed`](crate::Checkpointed))
+    /// failed; `source` is its error.
+    Step {
+        /// The step `t` (the step from state `t` to state `t + 1`).
+        step: usize,
+        /// The pass that ran it: "forward", "recomputation" or "backward".
+        pass: &'static str,
+        /// The step function's error.
+        source: Box<Error>,
+    },
 }
 
 impl From<Box<Fault>> for Error {
@@ -192,6 +202,10 @@ impl fmt::Display for Error {
             Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
             Error::Cuda { device, message } => write!(f, "CUDA error on \"{device}\": {message}"),
             Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
+            Error::Step { step, pass, source } => write!(
+                f,
+                "step {step} of a checkpointed rollout ({pass} pass): {source}"
+            ),
             Error::Capture { what } => write!(f, "graph capture: {what}"),
             Error::NonFinite {
                 kernel,
@@ -222,6 +236,7 @@ impl std::error::Error for Error {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             Error::Fault(fault) => Some(fault),
+            Error::Step { source, .. } => Some(source.as_ref()),
             _ => None,
         }
     }

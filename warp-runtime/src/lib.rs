@@ -28,6 +28,7 @@ pub mod array;
 pub mod autograd;
 mod backend;
 mod capturing;
+pub mod checkpoint;
 pub mod config;
 mod cpu;
 pub mod cuda;
@@ -54,6 +55,7 @@ pub use cuda::stream;
 pub use array::{Array, Element, IntoShape};
 pub use autograd::{gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;
+pub use checkpoint::{CheckpointReport, CheckpointState, Checkpointed};
 pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };

@@ -87,6 +87,30 @@ impl Drop for Recording<'_> {
     }
 }
 
+/// While alive, launches on this thread are recorded on no tape; the tapes that were recording
+/// when it was made resume when it drops (tapes started meanwhile stay innermost). For work
+/// that manages its own tapes, such as a checkpointed rollout's recomputation.
+pub(crate) struct Paused {
+    saved: Vec<Weak<RefCell<TapeInner>>>,
+}
+
+/// Pauses the tapes recording on this thread (see [`Paused`]).
+pub(crate) fn pause_recording() -> Paused {
+    Paused {
+        saved: RECORDING.with(|r| std::mem::take(&mut *r.borrow_mut())),
+    }
+}
+
+impl Drop for Paused {
+    fn drop(&mut self) {
+        RECORDING.with(|r| {
+            let mut r = r.borrow_mut();
+            let newer = std::mem::replace(&mut *r, std::mem::take(&mut self.saved));
+            r.extend(newer);
+        });
+    }
+}
+
 /// A gradient seed: the value `backward` writes into the loss's gradient.
 pub trait Seed: Element {
     /// One.
