@@ -123,7 +123,6 @@ pub use warp_runtime::primitives::{
 };
 pub use warp_runtime::MarchingCubes;
 // Forward mode (the `forward-mode` feature): Jacobian- and Hessian-vector products.
-pub use warp_runtime::{hvp, jvp, Forward};
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };
@@ -137,6 +136,7 @@ pub use warp_runtime::{
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
+pub use warp_runtime::{hvp, jvp, Forward};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {

@@ -1105,12 +1105,19 @@ fn tangent_kernel_matches_the_cpu_backend() {
         assert_eq!(host, cpu_results(&args));
         // The tangent kernel's adjoint (reverse over forward, `wp::hvp`) is valid C++ too.
         let src = wp::cuda_source::assemble_adjoint(&<Tangent as Kernel>::INFO);
-        let dir = std::env::temp_dir().join(format!("wp_codegen_tangent_adj_{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("wp_codegen_tangent_adj_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let cpp = dir.join("adj.cpp");
         std::fs::write(&cpp, format!("#include <cstring>\n{}", src.text)).unwrap();
         let out = Command::new("g++")
-            .args(["-std=c++17", "-fsyntax-only", "-Wno-unused", "-DWP_GENERAL_STRIDES", "-I"])
+            .args([
+                "-std=c++17",
+                "-fsyntax-only",
+                "-Wno-unused",
+                "-DWP_GENERAL_STRIDES",
+                "-I",
+            ])
             .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"))
             .arg(&cpp)
             .output()

@@ -123,7 +123,9 @@ fn k_vec(x: Array<f32>, out: Array<f32>) {
 }
 
 fn jvp_vectors_f32(dev: &wp::Device) {
-    let xs: Vec<f32> = (0..12).map(|k| 0.3 + 0.17 * k as f32 - 0.02 * (k * k) as f32).collect();
+    let xs: Vec<f32> = (0..12)
+        .map(|k| 0.3 + 0.17 * k as f32 - 0.02 * (k * k) as f32)
+        .collect();
     let vs: Vec<f32> = (0..12).map(|k| ((k * 7 % 5) as f32 - 2.0) * 0.5).collect();
     let x = arr(&xs, dev).with_grad().unwrap();
     let out = zeros::<f32, 1>(4, dev).with_grad().unwrap();
@@ -277,7 +279,14 @@ fn jvp_atomic_loss_and_tape(dev: &wp::Device) {
     let tape = wp::Tape::new();
     {
         let _rec = tape.record();
-        wp::jvp(k_energy, 4, (&x, &w, &loss), (&x_dot, &w_dot, &loss_dot), dev).unwrap();
+        wp::jvp(
+            k_energy,
+            4,
+            (&x, &w, &loss),
+            (&x_dot, &w_dot, &loss_dot),
+            dev,
+        )
+        .unwrap();
     }
     assert_eq!(tape.len(), 1);
     let got = host(&loss_dot)[0];
@@ -295,13 +304,25 @@ fn jvp_atomic_loss_and_tape(dev: &wp::Device) {
         let wp_: Vec<f64> = ws.iter().zip(&vw).map(|(a, b)| a + s * b).collect();
         energy_host(&xp, &wp_)
     };
-    close("jvp vs central differences", &[got], &[(f(h) - f(-h)) / (2.0 * h)], 1e-7, 1e-9);
+    close(
+        "jvp vs central differences",
+        &[got],
+        &[(f(h) - f(-h)) / (2.0 * h)],
+        1e-7,
+        1e-9,
+    );
     // Backward through the recorded tangent launch from the loss (not its tangent) gives the
     // ordinary gradient: the primal part of the tangent kernel is the kernel.
     x.zero_grad().unwrap();
     w.zero_grad().unwrap();
     tape.backward(&loss).unwrap();
-    close("gradient through the tangent launch", &host(&x.grad().unwrap()), &j[0][..4], 1e-12, 1e-14);
+    close(
+        "gradient through the tangent launch",
+        &host(&x.grad().unwrap()),
+        &j[0][..4],
+        1e-12,
+        1e-14,
+    );
 }
 
 // ---- hvp ----
@@ -328,8 +349,19 @@ fn hvp_scalar_energy(dev: &wp::Device) {
     let w = arr(&ws, dev);
     let loss = zeros::<f64, 1>(1, dev);
     let v = arr(&vs, dev).with_grad().unwrap();
-    let (w_dot, loss_dot) = (zeros::<f64, 1>(4, dev), zeros::<f64, 1>(1, dev).with_grad().unwrap());
-    wp::hvp(k_energy, 4, (&x, &w, &loss), (&v, &w_dot, &loss_dot), &loss_dot, dev).unwrap();
+    let (w_dot, loss_dot) = (
+        zeros::<f64, 1>(4, dev),
+        zeros::<f64, 1>(1, dev).with_grad().unwrap(),
+    );
+    wp::hvp(
+        k_energy,
+        4,
+        (&x, &w, &loss),
+        (&v, &w_dot, &loss_dot),
+        &loss_dot,
+        dev,
+    )
+    .unwrap();
     let hv = host(&x.grad().unwrap());
 
     let h = 1e-5;
@@ -339,20 +371,33 @@ fn hvp_scalar_energy(dev: &wp::Device) {
     };
     let (p, m) = (shifted(h), shifted(-h));
     let fd: Vec<f64> = p.iter().zip(&m).map(|(a, b)| (a - b) / (2.0 * h)).collect();
-    close("hvp vs central differences of the gradient", &hv, &fd, 1e-6, 1e-8);
+    close(
+        "hvp vs central differences of the gradient",
+        &hv,
+        &fd,
+        1e-6,
+        1e-8,
+    );
     // The Hessian is diagonal here: closed form d2/dt2 (w t^2 sin t + cos(t w)).
     let closed: Vec<f64> = xs
         .iter()
         .zip(&ws)
         .zip(&vs)
         .map(|((t, w), v)| {
-            let d2 = w * (2.0 * t.sin() + 4.0 * t * t.cos() - t * t * t.sin()) - w * w * (t * w).cos();
+            let d2 =
+                w * (2.0 * t.sin() + 4.0 * t * t.cos() - t * t * t.sin()) - w * w * (t * w).cos();
             d2 * v
         })
         .collect();
     close("hvp vs closed form", &hv, &closed, 1e-12, 1e-13);
     // The direction's gradient is the loss's gradient.
-    close("v.grad vs gradient", &host(&v.grad().unwrap()), &energy_grad(&xs, &ws, dev), 1e-12, 1e-14);
+    close(
+        "v.grad vs gradient",
+        &host(&v.grad().unwrap()),
+        &energy_grad(&xs, &ws, dev),
+        1e-12,
+        1e-14,
+    );
 }
 
 /// A chain of springs between consecutive points: `k (|p_{i+1} - p_i| - rest)^2`.
@@ -361,7 +406,11 @@ fn k_springs(p: Array<DVec3>, k: f64, rest: f64, loss: Array<f64>) {
     let i = tid();
     let d = p[i + 1] - p[i];
     let stretch = d.length() - rest;
-    atomic_add(loss, 0, k * stretch * stretch + 0.1 * d.dot(DVec3::new(1.0, 0.0, 0.0)).sin());
+    atomic_add(
+        loss,
+        0,
+        k * stretch * stretch + 0.1 * d.dot(DVec3::new(1.0, 0.0, 0.0)).sin(),
+    );
 }
 
 fn springs_grad(ps: &[DVec3], dev: &wp::Device) -> Vec<f64> {
@@ -381,7 +430,13 @@ fn springs_grad(ps: &[DVec3], dev: &wp::Device) -> Vec<f64> {
 
 fn hvp_springs_vectors(dev: &wp::Device) {
     let ps: Vec<DVec3> = (0..5)
-        .map(|i| DVec3::new(i as f64 * 0.9, (i as f64 * 1.3).sin(), 0.2 * (i * i) as f64 - 0.5))
+        .map(|i| {
+            DVec3::new(
+                i as f64 * 0.9,
+                (i as f64 * 1.3).sin(),
+                0.2 * (i * i) as f64 - 0.5,
+            )
+        })
         .collect();
     let vs: Vec<DVec3> = (0..5)
         .map(|i| DVec3::new(1.0 - 0.3 * i as f64, 0.5, (i as f64).cos()))
@@ -391,8 +446,15 @@ fn hvp_springs_vectors(dev: &wp::Device) {
     let loss = zeros::<f64, 1>(1, dev);
     let loss_dot = zeros::<f64, 1>(1, dev).with_grad().unwrap();
     // The scalars' tangents: k and rest held fixed (0).
-    wp::hvp(k_springs, 4, (&p, 3.0, 0.8, &loss), (&v, 0.0, 0.0, &loss_dot), &loss_dot, dev)
-        .unwrap();
+    wp::hvp(
+        k_springs,
+        4,
+        (&p, 3.0, 0.8, &loss),
+        (&v, 0.0, 0.0, &loss_dot),
+        &loss_dot,
+        dev,
+    )
+    .unwrap();
     let hv: Vec<f64> = host(&p.grad().unwrap())
         .iter()
         .flat_map(|g| g.to_array())
@@ -404,10 +466,19 @@ fn hvp_springs_vectors(dev: &wp::Device) {
     };
     let (a, b) = (shifted(h), shifted(-h));
     let fd: Vec<f64> = a.iter().zip(&b).map(|(a, b)| (a - b) / (2.0 * h)).collect();
-    close("hvp vs central differences of the gradient", &hv, &fd, 1e-6, 1e-8);
+    close(
+        "hvp vs central differences of the gradient",
+        &hv,
+        &fd,
+        1e-6,
+        1e-8,
+    );
     close(
         "v.grad vs gradient",
-        &host(&v.grad().unwrap()).iter().flat_map(|g| g.to_array()).collect::<Vec<_>>(),
+        &host(&v.grad().unwrap())
+            .iter()
+            .flat_map(|g| g.to_array())
+            .collect::<Vec<_>>(),
         &springs_grad(&ps, dev),
         1e-12,
         1e-14,
@@ -446,15 +517,36 @@ fn jvp_refuses_what_it_cannot_differentiate(dev: &wp::Device) {
     let out = zeros::<Vec3, 1>(1, dev);
     let err = wp::jvp(k_quat, 1, (&q, &v, &out), (&q, &v, &out), dev).unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err, Error::NoTangent { kernel: "k_quat", .. }), "{msg}");
-    assert!(msg.contains("`quat_rotate`") && msg.contains("line"), "{msg}");
+    assert!(
+        matches!(
+            err,
+            Error::NoTangent {
+                kernel: "k_quat",
+                ..
+            }
+        ),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("`quat_rotate`") && msg.contains("line"),
+        "{msg}"
+    );
     // Nothing ran.
     assert_eq!(host(&out), vec![Vec3::ZERO]);
 
     let (x, o) = (arr(&[1.0f32], dev), zeros::<f32, 1>(1, dev));
     let err = wp::jvp(k_calls_func, 1, (&x, &o), (&x, &o), dev).unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err, Error::NoTangent { kernel: "k_calls_func", .. }), "{msg}");
+    assert!(
+        matches!(
+            err,
+            Error::NoTangent {
+                kernel: "k_calls_func",
+                ..
+            }
+        ),
+        "{msg}"
+    );
     assert!(msg.contains("func `twice`"), "{msg}");
 
     let (x_dot, o_dot) = (arr(&[2.0f32], dev), zeros::<f32, 1>(1, dev));

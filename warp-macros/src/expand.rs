@@ -210,20 +210,24 @@ fn kernel_instance(
     };
 
     let paren = item.sig.paren_token.span.join();
-    let (launch_args, primal) = kernel_impl(&f, ident, &groups, opts.disable_backward, paren);
+    let (launch_args, primal) =
+        kernel_impl(&f, ident, &groups, opts.disable_backward, paren, false);
     let forward = forward_impl(&f, ident, &item.vis, &groups, opts.disable_backward, paren);
     Ok((launch_args, quote!(#primal #forward)))
 }
 
 /// The `Kernel` impl of the lowered kernel `f` for the unit struct `ident` (the launch
 /// arguments' type, and the impl): `groups` are its `same_shape` groups as parameter indices.
+/// A `hidden` kernel (a tangent kernel) is left out of rustc's suggestions of kernels.
 fn kernel_impl(
     f: &crate::ir::Function,
     ident: &syn::Ident,
     groups: &[Vec<usize>],
     disable_backward: bool,
     paren: proc_macro2::Span,
+    hidden: bool,
 ) -> (TokenStream, TokenStream) {
+    let hide = hidden.then(|| quote!(#[diagnostic::do_not_recommend]));
     let em = RustEmitter::new(&f);
     let name = ident;
     let name_str = Literal::string(&f.name);
@@ -340,6 +344,7 @@ fn kernel_impl(
             const _: () = {
                 use ::warp_lang::__private as __wp;
                 #callee_checks
+                #hide
                 impl __wp::Kernel for #name {
                     #params
                     const INFO: __wp::KernelInfo = __wp::KernelInfo {
@@ -454,16 +459,17 @@ fn forward_impl(
     paren: proc_macro2::Span,
 ) -> TokenStream {
     let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
-    let tangent = if cfg!(feature = "forward-mode") {
-        crate::middle::tangent::build(f)
-    } else {
-        Err("was compiled without forward mode (enable the `forward-mode` feature of warp-lang)"
+    let tangent =
+        if cfg!(feature = "forward-mode") {
+            crate::middle::tangent::build(f)
+        } else {
+            Err("was compiled without forward mode (enable the `forward-mode` feature of warp-lang)"
             .to_string())
-    };
+        };
     match tangent {
         Ok(g) => {
             let t = format_ident!("__wp_jvp_{}", ident);
-            let (_, tangent) = kernel_impl(&g, &t, groups, disable_backward, paren);
+            let (_, tangent) = kernel_impl(&g, &t, groups, disable_backward, paren, true);
             quote! {
                 const _: () = {
                     #[doc(hidden)]

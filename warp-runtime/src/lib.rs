@@ -52,9 +52,7 @@ pub use cuda::source as cuda_source;
 pub use cuda::stream;
 
 pub use array::{Array, Element, IntoShape};
-pub use autograd::{
-    gradcheck, hvp, jacobian, jacobian_fd, jvp, GradcheckOptions, GradcheckReport,
-};
+pub use autograd::{gradcheck, hvp, jacobian, jacobian_fd, jvp, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;
 pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,

@@ -95,7 +95,10 @@ pub fn build(f: &Function) -> Result<Function, String> {
         let var = &f.vars[v];
         let is_param = f.params.iter().any(|p| p.var == v);
         if tx.active[v] && var.mutable && !is_param {
-            let name = var.name.as_ref().map(|n| format!("{}_dot", n.trim_start_matches("r#")));
+            let name = var
+                .name
+                .as_ref()
+                .map(|n| format!("{}_dot", n.trim_start_matches("r#")));
             tx.dot[v] = Some(tx.new_var(name, var.ty.clone(), true));
         }
     }
@@ -152,7 +155,10 @@ fn activity(f: &Function) -> Vec<bool> {
                 _ => return,
             };
             let t = &f.vars[dst].ty;
-            if reads_active && !active[dst] && (tangent_type(t) || tangent_array(t) || untracked_float(t)) {
+            if reads_active
+                && !active[dst]
+                && (tangent_type(t) || tangent_array(t) || untracked_float(t))
+            {
                 active[dst] = true;
                 changed = true;
             }
@@ -309,7 +315,12 @@ impl Tx {
     }
 
     /// `f(t, other..)` for a builtin linear in its first argument, or nothing.
-    fn lin1(&mut self, name: &str, t: Option<VarId>, rest: &[VarId]) -> Result<Option<VarId>, String> {
+    fn lin1(
+        &mut self,
+        name: &str,
+        t: Option<VarId>,
+        rest: &[VarId],
+    ) -> Result<Option<VarId>, String> {
         let Some(t) = t else { return Ok(None) };
         let mut args = vec![t];
         args.extend_from_slice(rest);
@@ -317,7 +328,14 @@ impl Tx {
     }
 
     /// `f(a, t) + f(t_a, b)` for a builtin linear in each argument (dot, cross, outer, ..).
-    fn bilinear(&mut self, name: &str, a: VarId, b: VarId, da: Option<VarId>, db: Option<VarId>) -> Result<Option<VarId>, String> {
+    fn bilinear(
+        &mut self,
+        name: &str,
+        a: VarId,
+        b: VarId,
+        da: Option<VarId>,
+        db: Option<VarId>,
+    ) -> Result<Option<VarId>, String> {
         let l = match da {
             Some(da) => Some(self.call(name, &[da, b])?),
             None => None,
@@ -355,7 +373,11 @@ impl Tx {
                     self.push(StmtKind::Declare { var: t });
                 }
             }
-            StmtKind::Store { array, index, value } => {
+            StmtKind::Store {
+                array,
+                index,
+                value,
+            } => {
                 self.out.push(s.clone());
                 if let Some(ta) = self.dot[*array] {
                     let tv = match self.dot[*value] {
@@ -483,7 +505,9 @@ impl Tx {
                 self.binary(*b, *l, *r, dl, dr, d)?
             }
             Op::Cast(v, to) => match (self.dot[*v], to) {
-                (Some(t), Ty::Scalar(s)) if s.is_float() => Some(self.tmp(to.clone(), Op::Cast(t, to.clone()))),
+                (Some(t), Ty::Scalar(s)) if s.is_float() => {
+                    Some(self.tmp(to.clone(), Op::Cast(t, to.clone())))
+                }
                 _ => None,
             },
             Op::Builtin { builtin, args } => {
@@ -581,7 +605,9 @@ impl Tx {
                 self.sub(l, r)
             }
             // fmod: a - trunc(a / b) b, so a' - trunc(a / b) b' (float scalars).
-            BinOp::Rem if matches!(self.ty(a), Ty::Scalar(_)) && matches!(self.ty(b), Ty::Scalar(_)) => {
+            BinOp::Rem
+                if matches!(self.ty(a), Ty::Scalar(_)) && matches!(self.ty(b), Ty::Scalar(_)) =>
+            {
                 let r = match db {
                     Some(db) => {
                         let q = self.bin(BinOp::Div, a, b)?;
@@ -592,7 +618,10 @@ impl Tx {
                 };
                 self.sub(da, r)
             }
-            _ => Err(self.unsupported(&format!("applies `{}` to differentiated values", op.symbol()))),
+            _ => Err(self.unsupported(&format!(
+                "applies `{}` to differentiated values",
+                op.symbol()
+            ))),
         }
     }
 
@@ -635,7 +664,11 @@ impl Tx {
             }
             "log" => self.div_r(da, a)?,
             "log2" | "log10" => {
-                let c = if name == "log2" { std::f64::consts::LN_2 } else { std::f64::consts::LN_10 };
+                let c = if name == "log2" {
+                    std::f64::consts::LN_2
+                } else {
+                    std::f64::consts::LN_10
+                };
                 let c = self.lit(a, c);
                 let den = self.bin(BinOp::Mul, a, c)?;
                 self.div_r(da, den)?
@@ -824,15 +857,28 @@ impl Tx {
                 *targs.last_mut().expect("a value") = tv;
                 let ty = self.ty(d);
                 let builtin = builtins::lookup(name).expect("atomics are builtins");
-                Some(self.tmp(ty, Op::Builtin { builtin, args: targs }))
+                Some(self.tmp(
+                    ty,
+                    Op::Builtin {
+                        builtin,
+                        args: targs,
+                    },
+                ))
             }
-            other => return Err(self.unsupported(&format!("calls `{other}` on differentiated values"))),
+            other => {
+                return Err(self.unsupported(&format!("calls `{other}` on differentiated values")))
+            }
         })
     }
 
     /// `min`, `max` and `clamp`: by the primal's decisions (the operand returned carries its
     /// tangent, ties as the adjoint breaks them), lane by lane for vectors.
-    fn lifted(&mut self, name: &str, args: &[VarId], dargs: &[Option<VarId>]) -> Result<Option<VarId>, String> {
+    fn lifted(
+        &mut self,
+        name: &str,
+        args: &[VarId],
+        dargs: &[Option<VarId>],
+    ) -> Result<Option<VarId>, String> {
         let ty = self.ty(args[0]);
         let Ty::Vector(s, n) = ty else {
             return self.select(name, args, dargs);
@@ -864,11 +910,26 @@ impl Tx {
     /// The scalar rule of [`Tx::lifted`], with `step(x)` (1 where `x < 0`) as the weight of
     /// the operand not returned on a tie: `min(a, b)' = a' + step(b - a) (b' - a')`,
     /// `max(a, b)' = a' + step(a - b) (b' - a')`, `clamp(x, lo, hi) = min(max(x, lo), hi)`.
-    fn select(&mut self, name: &str, args: &[VarId], dargs: &[Option<VarId>]) -> Result<Option<VarId>, String> {
-        let pick = |tx: &mut Self, min: bool, a: VarId, b: VarId, da: Option<VarId>, db: Option<VarId>| -> Result<Option<VarId>, String> {
+    fn select(
+        &mut self,
+        name: &str,
+        args: &[VarId],
+        dargs: &[Option<VarId>],
+    ) -> Result<Option<VarId>, String> {
+        let pick = |tx: &mut Self,
+                    min: bool,
+                    a: VarId,
+                    b: VarId,
+                    da: Option<VarId>,
+                    db: Option<VarId>|
+         -> Result<Option<VarId>, String> {
             let diff = tx.sub(db, da)?;
             let Some(diff) = diff else { return Ok(da) };
-            let x = if min { tx.bin(BinOp::Sub, b, a)? } else { tx.bin(BinOp::Sub, a, b)? };
+            let x = if min {
+                tx.bin(BinOp::Sub, b, a)?
+            } else {
+                tx.bin(BinOp::Sub, a, b)?
+            };
             let w = tx.call("step", &[x])?;
             let r = tx.bin(BinOp::Mul, w, diff)?;
             tx.add(da, Some(r))
@@ -882,5 +943,118 @@ impl Tx {
                 pick(self, true, m, args[2], dm, dargs[2])
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use syn::parse_quote;
+
+    fn kernel(item: syn::ItemFn) -> Function {
+        crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap()
+    }
+
+    /// The tangent kernel's statements that write a variable named `name`.
+    fn writes_of(g: &Function, name: &str) -> usize {
+        let mut n = 0;
+        walk_stmts(&g.body, &mut |s| {
+            if let StmtKind::Assign { dst, .. } = &s.kind {
+                if g.vars[*dst].name.as_deref() == Some(name) {
+                    n += 1;
+                }
+            }
+        });
+        n
+    }
+
+    #[test]
+    fn tangent_parameters_follow_the_parameters() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, n: i32, s: f32, y: Array<f32>) {
+                let i = tid();
+                y[i] = x[i] * s + (n as f32);
+            }
+        });
+        let g = build(&f).unwrap();
+        let names: Vec<&str> = g.params.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["x", "n", "s", "y", "x_dot", "n_dot", "s_dot", "y_dot"]
+        );
+        assert_eq!(g.name, "k_jvp");
+        // One store into y and one into its tangent.
+        let mut stores = Vec::new();
+        walk_stmts(&g.body, &mut |s| {
+            if let StmtKind::Store { array, .. } = &s.kind {
+                stores.push(g.vars[*array].name.clone().unwrap());
+            }
+        });
+        assert_eq!(stores, ["y", "y_dot"]);
+    }
+
+    #[test]
+    fn mutable_accumulators_get_one_tangent_variable() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f64>, n: i32, y: Array<f64>) {
+                let i = tid();
+                let mut acc: f64 = 1.0;
+                let mut count = 0;
+                for _k in 0..n {
+                    acc = acc * x[i];
+                    count += 1;
+                }
+                y[i] = acc + (count as f64);
+            }
+        });
+        let g = build(&f).unwrap();
+        // Defined once, assigned in the loop; the integer counter has no tangent.
+        assert_eq!(writes_of(&g, "acc_dot"), 2);
+        assert_eq!(writes_of(&g, "count_dot"), 0);
+    }
+
+    #[test]
+    fn refusals_name_the_construct_and_the_line() {
+        let f = kernel(parse_quote! {
+            fn k(q: Array<Quat>, v: Array<Vec3>, out: Array<Vec3>) {
+                let i = tid();
+                out[i] = quat_rotate(q[i], v[i]);
+            }
+        });
+        let why = build(&f).unwrap_err();
+        assert!(
+            why.starts_with("calls `quat_rotate` on differentiated values (line"),
+            "{why}"
+        );
+
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>) {
+                atomic_max(x, 0, 1.0);
+            }
+        });
+        assert!(build(&f).unwrap_err().contains("`atomic_max`"));
+
+        // Integer atomics and zero-gradient builtins are fine.
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, c: Array<i32>) {
+                let i = tid();
+                atomic_max(c, 0, 1);
+                x[i] = x[i].floor() + x[i].sin();
+            }
+        });
+        build(&f).unwrap();
+    }
+
+    #[test]
+    fn too_many_parameters_for_the_tangent_kernel() {
+        let params: Vec<syn::FnArg> = (0..17)
+            .map(|k| {
+                let id = quote::format_ident!("p{}", k);
+                parse_quote!(#id: f32)
+            })
+            .collect();
+        let f = kernel(parse_quote! { fn k(#(#params),*) {} });
+        let why = build(&f).unwrap_err();
+        assert!(why.contains("would take 34"), "{why}");
     }
 }
