@@ -1047,7 +1047,7 @@ mod tests {
 
     #[test]
     fn too_many_parameters_for_the_tangent_kernel() {
-        let params: Vec<syn::FnArg> = (0..17)
+        let params: Vec<syn::FnArg> = (0..17usize)
             .map(|k| {
                 let id = quote::format_ident!("p{}", k);
                 parse_quote!(#id: f32)
