@@ -228,7 +228,7 @@ fn kernel_impl(
     hidden: bool,
 ) -> (TokenStream, TokenStream) {
     let hide = hidden.then(|| quote!(#[diagnostic::do_not_recommend]));
-    let em = RustEmitter::new(&f);
+    let em = RustEmitter::new(f);
     let name = ident;
     let name_str = Literal::string(&f.name);
     let tys: Vec<&syn::Type> = f.params.iter().map(|p| &p.syn_ty).collect();
@@ -246,7 +246,7 @@ fn kernel_impl(
         })
         .collect();
     let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
-    let fast_params = crate::analysis::tid_accessed_params(&f, &em.tid);
+    let fast_params = crate::analysis::tid_accessed_params(f, &em.tid);
     let fast_arrays: Vec<syn::Ident> = fast_params.iter().map(|v| em.var(*v)).collect();
     let tid_indexed: Vec<usize> = fast_params
         .iter()
@@ -264,19 +264,19 @@ fn kernel_impl(
         quote!(let __tid: [usize; #n] = __grid.unflatten::<#n>(__flat);)
     });
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
-    let written = crate::analysis::written_params(&f);
+    let written = crate::analysis::written_params(f);
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
-    let (cuda_src, cuda_sections, _) = cuda_template(&f);
+    let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
-    let consts = const_literals(&f);
-    let struct_tys = struct_types(&f);
+    let consts = const_literals(f);
+    let struct_tys = struct_types(f);
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
     let adjoint = if disable_backward {
         Err("was declared with #[kernel(enable_backward = false)]".to_string())
     } else {
-        crate::back::rust_adjoint::emit(&f)
+        crate::back::rust_adjoint::emit(f)
     };
     let (adjoint_body, adjoint_error) = match adjoint {
         Ok(body) => (body, quote!(::core::option::Option::None)),
@@ -286,7 +286,7 @@ fn kernel_impl(
         }
     };
     let (cuda_adjoint, cuda_adjoint_stack, cuda_adjoint_error) =
-        match crate::back::cuda_adjoint::emit(&f, "@@FILE@@") {
+        match crate::back::cuda_adjoint::emit(f, "@@FILE@@") {
             Ok(a) => (
                 Literal::string(&a.source),
                 a.uses_stack,
