@@ -481,7 +481,7 @@ fn forward_impl(
                         type Tangent = #t;
                         const TANGENT_ERROR: ::core::option::Option<&'static str> =
                             ::core::option::Option::None;
-                        #[allow(unused_variables)]
+                        #[allow(unused_variables, clippy::unused_unit)]
                         fn join<'__a>(
                             args: ::warp_lang::__private::ArgsOf<'__a, Self>,
                             tangents: ::warp_lang::__private::ArgsOf<'__a, Self>,
