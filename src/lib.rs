@@ -122,6 +122,7 @@ pub use warp_runtime::primitives::{
     array_sum_n, compact, compact_n, radix_sort_pairs, Count,
 };
 pub use warp_runtime::MarchingCubes;
+// Forward mode (the `forward-mode` feature): Jacobian- and Hessian-vector products.
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
 };
@@ -136,6 +137,7 @@ pub use warp_runtime::{
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
 pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
+pub use warp_runtime::{hvp, jvp, Forward};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
@@ -160,7 +162,7 @@ pub mod __private {
         zero_like, AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView,
         Grid, KResult, RangeProg, Transform,
     };
-    pub use warp_runtime::kernel::{CpuGradsOf, CpuParamsOf};
+    pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
     pub use warp_runtime::{
         ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,
         KernelInfo, KernelParams, Launchable, Result,

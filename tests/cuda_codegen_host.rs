@@ -1050,3 +1050,83 @@ fn hash_grid_device_build_steps_match_the_cpu_build() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Forward mode: a kernel whose tangent kernel uses the scalar and vector rules.
+#[wp::kernel]
+fn tangent_rules(x: Array<f32>, v: Array<Vec3>, out: Array<f32>) {
+    let i = tid();
+    let t = x[i];
+    let a = v[i];
+    let b = Vec3::new(t, t * t, 1.0);
+    let c = a.cross(b).normalize() * a.length();
+    let s = t.sin() * t.exp() + (t * t + 1.0).sqrt() / (2.0 + t.cos()) + t.atan2(1.5);
+    let m = t.max(0.2).min(0.8) + t.clamp(-0.5, 0.5) + t.abs() + t.tanh();
+    out[i] = s + m + c.dot(a) + (t * t + 0.5).ln() + (t * t + 0.1).powf(1.3);
+    v[i] = c + a * t;
+}
+
+#[test]
+fn tangent_kernel_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 20;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.13 - 1.21).collect();
+    let vs: Vec<Vec3> = (0..n)
+        .map(|k| Vec3::new(0.5 + k as f32 * 0.1, -0.3, 1.0 - k as f32 * 0.05))
+        .collect();
+    let x_dots: Vec<f32> = (0..n).map(|k| 1.0 - k as f32 * 0.07).collect();
+    let v_dots: Vec<Vec3> = (0..n)
+        .map(|k| Vec3::new(0.2, k as f32 * 0.03, -0.5))
+        .collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let v = wp::Array::from_slice(&vs, &dev).unwrap();
+    let out = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let x_dot = wp::Array::from_slice(&x_dots, &dev).unwrap();
+    let v_dot = wp::Array::from_slice(&v_dots, &dev).unwrap();
+    let out_dot = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let args = [
+        Arg::F32s(&x),
+        Arg::Vec3s(&v),
+        Arg::F32s(&out),
+        Arg::F32s(&x_dot),
+        Arg::Vec3s(&v_dot),
+        Arg::F32s(&out_dot),
+    ];
+    type Tangent = <tangent_rules as wp::Forward>::Tangent;
+    let host = run_on_host::<Tangent>(&[n], &args);
+    wp::jvp(
+        tangent_rules,
+        n,
+        (&x, &v, &out),
+        (&x_dot, &v_dot, &out_dot),
+        &dev,
+    )
+    .unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+        // The tangent kernel's adjoint (reverse over forward, `wp::hvp`) is valid C++ too.
+        let src = wp::cuda_source::assemble_adjoint(&<Tangent as Kernel>::INFO);
+        let dir =
+            std::env::temp_dir().join(format!("wp_codegen_tangent_adj_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cpp = dir.join("adj.cpp");
+        std::fs::write(&cpp, format!("#include <cstring>\n{}", src.text)).unwrap();
+        let out = Command::new("g++")
+            .args([
+                "-std=c++17",
+                "-fsyntax-only",
+                "-Wno-unused",
+                "-DWP_GENERAL_STRIDES",
+                "-I",
+            ])
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"))
+            .arg(&cpp)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "g++ failed on the tangent's adjoint {}:\n{}",
+            cpp.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

@@ -209,7 +209,26 @@ fn kernel_instance(
         return Err(errors);
     };
 
-    let em = RustEmitter::new(&f);
+    let paren = item.sig.paren_token.span.join();
+    let (launch_args, primal) =
+        kernel_impl(&f, ident, &groups, opts.disable_backward, paren, false);
+    let forward = forward_impl(&f, ident, &item.vis, &groups, opts.disable_backward, paren);
+    Ok((launch_args, quote!(#primal #forward)))
+}
+
+/// The `Kernel` impl of the lowered kernel `f` for the unit struct `ident` (the launch
+/// arguments' type, and the impl): `groups` are its `same_shape` groups as parameter indices.
+/// A `hidden` kernel (a tangent kernel) is left out of rustc's suggestions of kernels.
+fn kernel_impl(
+    f: &crate::ir::Function,
+    ident: &syn::Ident,
+    groups: &[Vec<usize>],
+    disable_backward: bool,
+    paren: proc_macro2::Span,
+    hidden: bool,
+) -> (TokenStream, TokenStream) {
+    let hide = hidden.then(|| quote!(#[diagnostic::do_not_recommend]));
+    let em = RustEmitter::new(f);
     let name = ident;
     let name_str = Literal::string(&f.name);
     let tys: Vec<&syn::Type> = f.params.iter().map(|p| &p.syn_ty).collect();
@@ -227,7 +246,7 @@ fn kernel_instance(
         })
         .collect();
     let pnames_plain: Vec<syn::Ident> = f.params.iter().map(|p| em.var(p.var)).collect();
-    let fast_params = crate::analysis::tid_accessed_params(&f, &em.tid);
+    let fast_params = crate::analysis::tid_accessed_params(f, &em.tid);
     let fast_arrays: Vec<syn::Ident> = fast_params.iter().map(|v| em.var(*v)).collect();
     let tid_indexed: Vec<usize> = fast_params
         .iter()
@@ -245,19 +264,19 @@ fn kernel_instance(
         quote!(let __tid: [usize; #n] = __grid.unflatten::<#n>(__flat);)
     });
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
-    let written = crate::analysis::written_params(&f);
+    let written = crate::analysis::written_params(f);
     let body = em.block(&f.body);
     let callee_checks = callee_depths(&f.callees);
-    let (cuda_src, cuda_sections, _) = cuda_template(&f);
+    let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
-    let consts = const_literals(&f);
-    let struct_tys = struct_types(&f);
+    let consts = const_literals(f);
+    let struct_tys = struct_types(f);
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
-    let adjoint = if opts.disable_backward {
+    let adjoint = if disable_backward {
         Err("was declared with #[kernel(enable_backward = false)]".to_string())
     } else {
-        crate::back::rust_adjoint::emit(&f)
+        crate::back::rust_adjoint::emit(f)
     };
     let (adjoint_body, adjoint_error) = match adjoint {
         Ok(body) => (body, quote!(::core::option::Option::None)),
@@ -267,7 +286,7 @@ fn kernel_instance(
         }
     };
     let (cuda_adjoint, cuda_adjoint_stack, cuda_adjoint_error) =
-        match crate::back::cuda_adjoint::emit(&f, "@@FILE@@") {
+        match crate::back::cuda_adjoint::emit(f, "@@FILE@@") {
             Ok(a) => (
                 Literal::string(&a.source),
                 a.uses_stack,
@@ -297,7 +316,7 @@ fn kernel_instance(
         .collect();
     // The parameter list, spanned at the signature's parentheses: a list the runtime has no
     // `KernelParams` for (more than `MAX_PARAMS` parameters) is reported there.
-    let params = quote_spanned! {item.sig.paren_token.span.join()=>
+    let params = quote_spanned! {paren=>
         type Params = ( #(#tys,)* );
     };
     let grad_names: Vec<syn::Ident> = (0..f.params.len())
@@ -319,12 +338,13 @@ fn kernel_instance(
         }
     });
     let launch_args = quote!(( #(#launch_args,)* ));
-    Ok((
+    (
         launch_args,
         quote! {
             const _: () = {
                 use ::warp_lang::__private as __wp;
                 #callee_checks
+                #hide
                 impl __wp::Kernel for #name {
                     #params
                     const INFO: __wp::KernelInfo = __wp::KernelInfo {
@@ -424,7 +444,71 @@ fn kernel_instance(
                 }
             };
         },
-    ))
+    )
+}
+
+/// The kernel's `Forward` impl: its tangent kernel (`middle::tangent`), emitted as a hidden
+/// kernel of its own (forward code, adjoint, CUDA templates: the reverse-over-forward of
+/// `wp::hvp` is that kernel's backward), or why there is none, which `wp::jvp` reports.
+fn forward_impl(
+    f: &crate::ir::Function,
+    ident: &syn::Ident,
+    vis: &syn::Visibility,
+    groups: &[Vec<usize>],
+    disable_backward: bool,
+    paren: proc_macro2::Span,
+) -> TokenStream {
+    let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
+    let tangent =
+        if cfg!(feature = "forward-mode") {
+            crate::middle::tangent::build(f)
+        } else {
+            Err("was compiled without forward mode (enable the `forward-mode` feature of warp-lang)"
+            .to_string())
+        };
+    match tangent {
+        Ok(g) => {
+            let t = format_ident!("__wp_jvp_{}", ident);
+            let (_, tangent) = kernel_impl(&g, &t, groups, disable_backward, paren, true);
+            quote! {
+                const _: () = {
+                    #[doc(hidden)]
+                    #[allow(non_camel_case_types)]
+                    #[derive(Clone, Copy, Debug, Default)]
+                    #vis struct #t;
+                    #tangent
+                    impl ::warp_lang::__private::Forward for #ident {
+                        type Tangent = #t;
+                        const TANGENT_ERROR: ::core::option::Option<&'static str> =
+                            ::core::option::Option::None;
+                        #[allow(unused_variables, clippy::unused_unit)]
+                        fn join<'__a>(
+                            args: ::warp_lang::__private::ArgsOf<'__a, Self>,
+                            tangents: ::warp_lang::__private::ArgsOf<'__a, Self>,
+                        ) -> ::warp_lang::__private::ArgsOf<'__a, #t> {
+                            ( #(args.#idx,)* #(tangents.#idx,)* )
+                        }
+                    }
+                };
+            }
+        }
+        Err(why) => {
+            let why = Literal::string(&why);
+            quote! {
+                impl ::warp_lang::__private::Forward for #ident {
+                    type Tangent = Self;
+                    const TANGENT_ERROR: ::core::option::Option<&'static str> =
+                        ::core::option::Option::Some(#why);
+                    fn join<'__a>(
+                        args: ::warp_lang::__private::ArgsOf<'__a, Self>,
+                        _tangents: ::warp_lang::__private::ArgsOf<'__a, Self>,
+                    ) -> ::warp_lang::__private::ArgsOf<'__a, Self> {
+                        args
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// With `WARP_LANG_DUMP=1` (or the kernel's name) in the environment at build time, prints the

@@ -1,5 +1,7 @@
 //! Gradient checks: the Jacobian from a [`Tape`], the same by central differences, and a
-//! comparison of the two (Warp's `wp.autograd.jacobian`, `jacobian_fd`, `gradcheck`).
+//! comparison of the two (Warp's `wp.autograd.jacobian`, `jacobian_fd`, `gradcheck`); and
+//! forward mode: Jacobian-vector products through a kernel's tangent kernel ([`jvp`]) and
+//! Hessian-vector products by forward over reverse ([`hvp`]).
 //!
 //! The computation is a closure that runs the forward launches; it is called once under a
 //! tape and then twice per input element with that element nudged. Outputs are zeroed before
@@ -7,7 +9,10 @@
 //! time. Inputs and outputs are 1-D float arrays with gradients (`with_grad`).
 
 use crate::array::{Array, Element};
+use crate::device::Device;
 use crate::error::{Error, Result};
+use crate::kernel::{ArgsOf, Forward, Kernel, KernelParams, Launchable};
+use crate::launch::Dim;
 use crate::tape::{Seed, Tape};
 
 /// A float element type for gradient checks (f32, f64, f16), with its default check settings.
@@ -270,4 +275,139 @@ pub fn gradcheck<T: CheckFloat>(
         }
     }
     Ok(report)
+}
+
+/// Forward mode: launches the tangent kernel of `kernel` (see [`Forward`]) over `dim` with the
+/// launch arguments `args` and their tangents `tangents` (a tuple of the same types: an array
+/// of the same shape for each array, a value for each value), on `device`.
+///
+/// The kernel runs as [`launch`](crate::launch()) would run it, and every float it writes
+/// (stores, `atomic_add`/`atomic_sub`) gets its tangent, the directional derivative along the
+/// input tangents, written at the same place of the tangent array: for `y = f(x)`, the
+/// tangent array of `y` receives the Jacobian-vector product `J v` where `v` is the tangent
+/// array of `x` (JAX's `jvp(f, primals, tangents)`). Output tangents are written or
+/// accumulated as the outputs are, so clear those that the kernel accumulates into, as for the
+/// outputs themselves. Integer, bool, struct and object parameters are held constant: their
+/// tangents must be passed (the same value does) but are never read.
+///
+/// On a recording [`Tape`] the launch is recorded like any other; its backward sends
+/// gradients to the primal and tangent arrays alike (see [`hvp`]).
+///
+/// Forward mode covers the arithmetic operators, casts between floats, vector, matrix and
+/// quaternion construction and members, array loads, stores and `atomic_add`/`atomic_sub`,
+/// control flow, random draws (constant), and these builtins: `sqrt cbrt exp exp2 log log2
+/// log10 sin cos tan asin acos atan atan2 sinh cosh tanh pow erf erfc degrees radians frac abs
+/// min max clamp lerp dot cross outer ddot cw_mul cw_div transpose trace diag skew get_diag
+/// length norm_l2 length_sq normalize inverse determinant`, plus every builtin whose
+/// derivative is zero (`floor`, `sign`, `step`, ..).
+///
+/// ```ignore
+/// // (tests/suite/jvp.rs runs this on every backend)
+/// wp::jvp(energy, n, (&x, &e), (&x_dot, &e_dot), &dev)?; // e_dot = J_e(x) x_dot
+/// ```
+///
+/// # Errors
+/// [`Error::NoTangent`] when the kernel has a construct forward mode does not differentiate
+/// (its name and line) or was built without the `forward-mode` feature of warp-lang;
+/// [`Error::ShapeMismatch`] when a tangent array's shape differs from its array's; then
+/// every error of [`launch`](crate::launch()).
+pub fn jvp<'a, L, A>(
+    kernel: L,
+    dim: impl Into<Dim>,
+    args: A,
+    tangents: A,
+    device: &Device,
+) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Forward + Kernel<Params: KernelParams<Args<'a> = A>>,
+{
+    let _ = kernel;
+    let joined = tangent_args::<L::Kernel>(args, tangents)?;
+    crate::launch::launch(
+        <L::Kernel as Forward>::Tangent::default(),
+        dim,
+        joined,
+        device,
+    )
+}
+
+/// The tangent kernel's arguments, after checking that there is a tangent kernel and that each
+/// tangent array has its array's shape.
+fn tangent_args<'a, K: Forward>(
+    args: ArgsOf<'a, K>,
+    tangents: ArgsOf<'a, K>,
+) -> Result<ArgsOf<'a, K::Tangent>> {
+    if let Some(reason) = K::TANGENT_ERROR {
+        return Err(Error::NoTangent {
+            kernel: K::INFO.name,
+            reason,
+        });
+    }
+    let shapes = <K::Params as KernelParams>::shapes(&args);
+    let tshapes = <K::Params as KernelParams>::shapes(&tangents);
+    for (k, (s, t)) in shapes.into_iter().zip(tshapes).enumerate() {
+        if let (Some(s), Some(t)) = (s, t) {
+            if s != t {
+                let name = K::INFO.params[k];
+                return Err(Error::ShapeMismatch {
+                    kernel: K::INFO.name,
+                    args: vec![name.to_string(), format!("{name}_dot")],
+                    shapes: vec![s, t],
+                });
+            }
+        }
+    }
+    Ok(K::join(args, tangents))
+}
+
+/// A Hessian-vector product by forward over reverse: for a kernel that computes a scalar
+/// loss `L(x)` into `output` (an array of one element; with more, `L` is the sum of its
+/// elements), leaves `H v` in the gradients of the array arguments `args` (`x.grad()`), where
+/// `H` is the Hessian of `L` with respect to every float input and `v` the direction in
+/// `tangents` (as for [`jvp`]), and `∇L` in the gradients of the tangent arrays.
+///
+/// It records [`jvp`] on a fresh [`Tape`], so the tangent of the loss, in `output`'s tangent
+/// array (the one in `tangents` at `output`'s place, passed as `output_tangent`), is
+/// `∇L · v`; then runs backward from it: the gradient of `∇L · v` with respect to `x` is
+/// `H v`. The gradients of `args` and `tangents` are cleared first; the arrays whose Hessian
+/// rows are wanted need gradients (`with_grad()`), and so does `output_tangent`. As with
+/// [`jvp`], clear `output` and `output_tangent` first if the kernel accumulates into them.
+///
+/// ```ignore
+/// // (tests/suite/jvp.rs runs this on every backend)
+/// loss.zero()?; loss_dot.zero()?;
+/// wp::hvp(energy, n, (&x, &loss), (&v, &loss_dot), &loss_dot, &dev)?;
+/// let hv = x.grad().unwrap().to_vec()?;
+/// ```
+///
+/// # Errors
+/// As [`jvp`], and as [`Tape::backward`] (kernels without an adjoint; `output_tangent`
+/// without a gradient).
+pub fn hvp<'a, L, A, T: Seed, const N: usize>(
+    kernel: L,
+    dim: impl Into<Dim>,
+    args: A,
+    tangents: A,
+    output_tangent: &Array<T, N>,
+    device: &Device,
+) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Forward + Kernel<Params: KernelParams<Args<'a> = A>>,
+    A: Copy,
+{
+    if output_tangent.grad().is_none() {
+        return Err(Error::invalid(
+            "hvp: the output tangent has no gradient (create it with .with_grad())",
+        ));
+    }
+    <<L::Kernel as Kernel>::Params as KernelParams>::zero_grads(&args)?;
+    <<L::Kernel as Kernel>::Params as KernelParams>::zero_grads(&tangents)?;
+    let tape = Tape::new();
+    {
+        let _rec = tape.record();
+        jvp(kernel, dim, args, tangents, device)?;
+    }
+    tape.backward(output_tangent)
 }

@@ -98,6 +98,15 @@ pub enum Error {
         /// or a device without adjoint support yet).
         reason: String,
     },
+    /// Forward mode ([`jvp`](crate::autograd::jvp), [`hvp`](crate::autograd::hvp)) through a
+    /// kernel that has no tangent kernel.
+    NoTangent {
+        /// The kernel.
+        kernel: &'static str,
+        /// Why: the construct forward mode does not differentiate and its line, or a build
+        /// without the `forward-mode` feature.
+        reason: &'static str,
+    },
     /// An operation that a graph capture cannot record was called inside one (an allocation,
     /// a read-back, a kernel not compiled before the capture, a nested capture, work on
     /// another device), or a graph was launched where it cannot run.
@@ -226,6 +235,12 @@ impl fmt::Display for Error {
                 write!(
                     f,
                     "cannot run backward through kernel `{kernel}`: it {reason}"
+                )
+            }
+            Error::NoTangent { kernel, reason } => {
+                write!(
+                    f,
+                    "cannot differentiate kernel `{kernel}` in forward mode: it {reason}"
                 )
             }
         }

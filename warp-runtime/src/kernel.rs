@@ -325,6 +325,23 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     ) -> KResult<()>;
 }
 
+/// Forward mode of a kernel: its *tangent kernel*, which `#[kernel]` makes from the same IR
+/// (`warp-macros/src/middle/tangent.rs`). The tangent kernel takes the kernel's parameters
+/// followed by one tangent per parameter, of the same type, and computes the kernel's results
+/// together with their tangents (directional derivatives) in the tangent arrays. It is an
+/// ordinary kernel: it launches on every backend, records on a [`Tape`](crate::Tape), and its
+/// backward is the reverse-over-forward that gives Hessian-vector products. Implemented by
+/// `#[kernel]`; used by [`jvp`](crate::autograd::jvp) and [`hvp`](crate::autograd::hvp).
+pub trait Forward: Kernel {
+    /// The tangent kernel (`Self` where there is none: see [`Forward::TANGENT_ERROR`]).
+    type Tangent: Kernel + Default;
+    /// Why the kernel has no tangent kernel (a construct forward mode does not differentiate,
+    /// with its line, or a build without the `forward-mode` feature); `None` when it has one.
+    const TANGENT_ERROR: Option<&'static str>;
+    /// The tangent kernel's arguments: `args`, then `tangents`.
+    fn join<'a>(args: ArgsOf<'a, Self>, tangents: ArgsOf<'a, Self>) -> ArgsOf<'a, Self::Tangent>;
+}
+
 /// The host-side launch arguments of kernel `K`: `(&'a Array<Vec3>, f32)`.
 pub type ArgsOf<'a, K> = <<K as Kernel>::Params as KernelParams>::Args<'a>;
 /// What the threads of kernel `K` see of its parameters on the CPU.

@@ -53,7 +53,7 @@ pub use cuda::source as cuda_source;
 pub use cuda::stream;
 
 pub use array::{Array, Element, IntoShape};
-pub use autograd::{gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport};
+pub use autograd::{gradcheck, hvp, jacobian, jacobian_fd, jvp, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;
 pub use checkpoint::{CheckpointReport, CheckpointState, Checkpointed};
 pub use device::{
@@ -62,8 +62,8 @@ pub use device::{
 pub use error::{Error, Result};
 pub use graph::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use kernel::{
-    kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, GenericKernel, Kernel, KernelArg,
-    KernelInfo, KernelParams, Launchable,
+    kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, Forward, GenericKernel, Kernel,
+    KernelArg, KernelInfo, KernelParams, Launchable,
 };
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;

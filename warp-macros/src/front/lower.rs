@@ -32,7 +32,7 @@ mod places;
 mod query;
 mod rng;
 mod statements;
-mod typing;
+pub(crate) mod typing;
 mod views;
 
 type R<T> = syn::Result<T>;

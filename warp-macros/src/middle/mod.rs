@@ -4,7 +4,10 @@
 //! - `adjoint`: reverse mode as one pass, from a lowered function to its *adjoint IR*: the
 //!   forward replay, the adjoint stack's pushes and pops, the reverse sweep, and every decision
 //!   of how gradients flow. `back/rust_adjoint.rs` and `back/cuda_adjoint.rs` only print it,
-//!   so the CPU and CUDA gradients come from one scheme.
+//!   so the CPU and CUDA gradients come from one scheme;
+//! - `tangent`: forward mode as one pass, from a lowered kernel to its *tangent kernel*, an
+//!   ordinary kernel IR the back ends emit and the adjoint pass differentiates again.
 
 pub mod adjoint;
 pub mod adjoint_prep;
+pub mod tangent;
