@@ -302,12 +302,14 @@ cloth!(Cloth64, f64, DVec3);
 /// rounding of the difference (about eps |L| / h, grown over the steps) takes over. So the
 /// check takes Richardson's extrapolation of two central differences,
 /// (4 D(h/2) - D(h)) / 3, which cancels the h^2 term, with h = H_FD. Errors are relative to
-/// each derivative but at least SCALE_FLOOR of the largest probed one (the held corner's and
-/// the sideways derivatives are about 0, where only rounding is left); measured worst:
-/// 2e-6 on the 16 x 16 cloth, 3e-5 on the 32 x 32 one; TOL_FD leaves a margin over that.
+/// each derivative but at least SCALE_FLOOR of the largest probed one: the held corner's and
+/// the sideways derivatives are 1e-3 to 1e-4 of the vertical ones, where the difference's
+/// rounding (about 3e-12 absolute on the 64 x 64 cloth) is all that is left. Measured worst:
+/// 2e-6 on the 16 x 16 cloth, 3e-5 on the 32 x 32 one, 2e-5 on the 64 x 64 one; TOL_FD
+/// leaves a margin over that.
 const H_FD: f64 = 1e-4;
 const TOL_FD: f64 = 1e-4;
-const SCALE_FLOOR: f64 = 1e-3;
+const SCALE_FLOOR: f64 = 1e-2;
 
 fn main() -> wp::Result<()> {
     common::check_args(
