@@ -29,9 +29,9 @@
 //! (TOI) loss. Table, plot `<plot-dir>/bounce.svg`, and a verdict line: the exit status is 1
 //! when the TOI gradient disagrees with central differences or the TOI run does not converge.
 
-mod common;
 #[path = "common/bounce.rs"]
 mod bounce;
+mod common;
 
 use bounce::{Balls, Contact, Setup};
 use warp_lang as wp;

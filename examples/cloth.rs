@@ -202,7 +202,11 @@ macro_rules! cloth {
         impl $name {
             fn new(setup: Setup, dev: &wp::Device) -> wp::Result<$name> {
                 let n = setup.n;
-                let start: Vec<$v> = setup.start().iter().map(|p| <$v>::from(p.to_array().map(|c| c as $s))).collect();
+                let start: Vec<$v> = setup
+                    .start()
+                    .iter()
+                    .map(|p| <$v>::from(p.to_array().map(|c| c as $s)))
+                    .collect();
                 let mut xs = vec![wp::Array::from_slice_shape(&start, (n, n), dev)?.with_grad()?];
                 let mut vs = vec![wp::Array::<$v, 2>::zeros((n, n), dev)?.with_grad()?];
                 for _ in 0..setup.steps {
@@ -285,7 +289,10 @@ macro_rules! cloth {
 
             /// Sets the initial velocities.
             fn set_v0(&self, v: &[DVec3], dev: &wp::Device) -> wp::Result<()> {
-                let v: Vec<$v> = v.iter().map(|p| <$v>::from(p.to_array().map(|c| c as $s))).collect();
+                let v: Vec<$v> = v
+                    .iter()
+                    .map(|p| <$v>::from(p.to_array().map(|c| c as $s)))
+                    .collect();
                 let n = self.setup.n;
                 self.vs[0].copy_from(&wp::Array::from_slice_shape(&v, (n, n), dev)?)
             }
@@ -313,7 +320,15 @@ const SCALE_FLOOR: f64 = 1e-2;
 
 fn main() -> wp::Result<()> {
     common::check_args(
-        &["--n", "--t-end", "--iterations", "--lr", "--momentum", "--tol", "--offset"],
+        &[
+            "--n",
+            "--t-end",
+            "--iterations",
+            "--lr",
+            "--momentum",
+            "--tol",
+            "--offset",
+        ],
         "cloth [--device cpu|cuda:N] [--n 16] [--t-end 0.3] [--iterations 200] [--lr 0.5] \
          [--momentum 0] [--tol 1e-3] [--offset 0,0.1,0.05] [--plot-dir DIR]",
     );
@@ -327,7 +342,10 @@ fn main() -> wp::Result<()> {
     let offset = match common::arg("--offset") {
         None => DVec3::new(0.0, 0.1, 0.05),
         Some(text) => {
-            let c: Vec<f64> = text.split(',').filter_map(|c| c.trim().parse().ok()).collect();
+            let c: Vec<f64> = text
+                .split(',')
+                .filter_map(|c| c.trim().parse().ok())
+                .collect();
             if c.len() != 3 {
                 eprintln!("--offset {text}: want three numbers, x,y,z (metres)");
                 std::process::exit(2);

@@ -155,7 +155,12 @@ pub struct Balls {
 
 impl Balls {
     /// `balls` balls launched at `v0[b]`, aiming at `target[b]`.
-    pub fn new(setup: Setup, v0: &[DVec2], target: &[DVec2], dev: &wp::Device) -> wp::Result<Balls> {
+    pub fn new(
+        setup: Setup,
+        v0: &[DVec2],
+        target: &[DVec2],
+        dev: &wp::Device,
+    ) -> wp::Result<Balls> {
         let n = v0.len();
         if target.len() != n {
             return Err(wp::Error::InvalidArgument {
@@ -236,7 +241,12 @@ impl Balls {
     }
 
     /// Each ball's loss at launch velocities `v0` (forward only; `vs[0]` is restored after).
-    pub fn losses_at(&self, contact: Contact, v0: &[DVec2], dev: &wp::Device) -> wp::Result<Vec<f64>> {
+    pub fn losses_at(
+        &self,
+        contact: Contact,
+        v0: &[DVec2],
+        dev: &wp::Device,
+    ) -> wp::Result<Vec<f64>> {
         let keep = self.vs[0].to_vec()?;
         self.vs[0].copy_from(&wp::Array::from_slice(v0, dev)?)?;
         self.forward(contact, dev)?;

@@ -78,7 +78,9 @@ pub fn device() -> wp::Result<wp::Device> {
 pub fn finish(sweep: &Sweep, name: &str) {
     sweep.finish();
     println!("\n{}", sweep.table());
-    write_plot(name, |path| sweep.write_svg(path).map_err(|e| e.to_string()));
+    write_plot(name, |path| {
+        sweep.write_svg(path).map_err(|e| e.to_string())
+    });
 }
 
 /// Writes a plot through `write` to `<--plot-dir or target/report>/<name>.svg` (creating the

@@ -86,7 +86,8 @@ impl Curves {
             .iter()
             .flat_map(|(_, p)| p.iter())
             .filter(|p| ok(p.1) && p.0.is_finite());
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, 0.0f64);
+        let (mut x0, mut x1, mut y0, mut y1) =
+            (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, 0.0f64);
         let mut any = false;
         for &(x, y) in all {
             any = true;
@@ -162,7 +163,12 @@ impl fmt::Display for Curves {
         writeln!(f, "{}", self.title)?;
         for (name, pts) in &self.lines {
             if let Some((it, v)) = pts.last() {
-                writeln!(f, "  {name}: {} = {} at iteration {it}", self.value, crate::sci(*v))?;
+                writeln!(
+                    f,
+                    "  {name}: {} = {} at iteration {it}",
+                    self.value,
+                    crate::sci(*v)
+                )?;
             }
         }
         Ok(())
