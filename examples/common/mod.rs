@@ -78,14 +78,104 @@ pub fn device() -> wp::Result<wp::Device> {
 pub fn finish(sweep: &Sweep, name: &str) {
     sweep.finish();
     println!("\n{}", sweep.table());
+    write_plot(name, |path| {
+        sweep.write_svg(path).map_err(|e| e.to_string())
+    });
+}
+
+/// Writes a plot through `write` to `<--plot-dir or target/report>/<name>.svg` (creating the
+/// folder) and prints where, or why not.
+pub fn write_plot(name: &str, write: impl FnOnce(&std::path::Path) -> Result<(), String>) {
     let dir = PathBuf::from(arg("--plot-dir").unwrap_or_else(|| "target/report".into()));
     let path = dir.join(format!("{name}.svg"));
     match std::fs::create_dir_all(&dir)
         .map_err(|e| e.to_string())
-        .and_then(|()| sweep.write_svg(&path).map_err(|e| e.to_string()))
+        .and_then(|()| write(&path))
     {
         Ok(()) => println!("plot: {}", path.display()),
         Err(e) => println!("plot not written: {e}"),
+    }
+}
+
+/// The log of an optimisation: every iteration goes into the curves (the plot); every
+/// `every`-th, the first and the last also into the printed table, with the elapsed time since
+/// the log started, the mean time per iteration so far and the gradient's norm.
+pub struct OptLog {
+    table: warp_report::Table,
+    pub curves: warp_report::Curves,
+    start: std::time::Instant,
+    every: usize,
+}
+
+impl OptLog {
+    /// A log whose table has the columns series, iteration, `value`, |grad|, the `extra`
+    /// columns, elapsed (s) and ms/iteration.
+    pub fn new(title: &str, value: &str, extra: &[&str], every: usize) -> OptLog {
+        let mut headers = vec!["series", "iteration", value, "|grad|"];
+        headers.extend_from_slice(extra);
+        headers.extend_from_slice(&["elapsed (s)", "ms/iter"]);
+        OptLog {
+            table: warp_report::Table::new(headers),
+            curves: warp_report::Curves::new(title, value),
+            start: std::time::Instant::now(),
+            every: every.max(1),
+        }
+    }
+
+    /// Restarts the clock (for a second series timed from its own start).
+    pub fn restart_clock(&mut self) {
+        self.start = std::time::Instant::now();
+    }
+
+    /// Records iteration `it` (counted from 1) of `series`; `last` forces a table row.
+    pub fn record(
+        &mut self,
+        series: &str,
+        it: usize,
+        value: f64,
+        grad_norm: f64,
+        extra: &[String],
+        last: bool,
+    ) {
+        self.curves.push(series, it as f64, value);
+        if it == 1 || it % self.every == 0 || last {
+            let secs = self.start.elapsed().as_secs_f64();
+            let mut row = vec![
+                series.to_string(),
+                it.to_string(),
+                warp_report::sci(value),
+                warp_report::sci(grad_norm),
+            ];
+            row.extend(extra.iter().cloned());
+            row.push(format!("{secs:.3}"));
+            row.push(format!("{:.2}", secs * 1e3 / it as f64));
+            self.table.push(row);
+        }
+    }
+
+    /// Prints the table and writes the plot `<plot dir>/<name>.svg`.
+    pub fn finish(&self, name: &str) {
+        println!("\n{}\n\n{}", self.curves.title(), self.table);
+        write_plot(name, |path| {
+            self.curves.write_svg(path).map_err(|e| e.to_string())
+        });
+    }
+}
+
+/// |a - b| / |b|, or |a - b| where |b| < `floor` (a component whose true value is about 0).
+pub fn rel_err(a: f64, b: f64, floor: f64) -> f64 {
+    (a - b).abs() / b.abs().max(floor)
+}
+
+/// Prints the scene's verdict line and exits with status 1 when it did not converge (so a CI
+/// or GPU run can trust the exit status).
+pub fn verdict(scene: &str, converged: bool, criterion: &str) {
+    println!(
+        "\n{scene}: converged: {} ({criterion})",
+        if converged { "yes" } else { "NO" }
+    );
+    if !converged {
+        std::process::exit(1);
     }
 }
 

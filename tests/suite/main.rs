@@ -88,6 +88,7 @@ mod optim;
 mod params;
 mod primitives;
 mod rng;
+mod scenes;
 mod stability;
 mod streams;
 mod structs;

@@ -7,6 +7,9 @@
 //! writes the same as a log-log plot of error against run time, one line per series
 //! ([`Sweep::write_svg`]). Long sweeps show a progress bar on a terminal ([`Sweep::progress`]).
 //!
+//! [`Curves`] plots an optimiser's loss (or any value) against iteration, for the
+//! differentiable scenes.
+//!
 //! This crate knows nothing about kernels or devices: a scene measures its own run, and
 //! says what "error" and "stable" mean for it. It is optional: `warp-lang` re-exports it as
 //! `wp::report` behind the `report` feature, so that simulations that do not report pull in
@@ -28,9 +31,11 @@
 use std::fmt;
 use std::path::Path;
 
+mod curves;
 mod plot;
 mod table;
 
+pub use curves::Curves;
 pub use plot::PlotError;
 pub use table::Table;
 

@@ -9,7 +9,7 @@ use crate::{sci, Sweep};
 
 /// Why a plot could not be written.
 #[derive(Debug)]
-pub struct PlotError(String);
+pub struct PlotError(pub(crate) String);
 
 impl fmt::Display for PlotError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
