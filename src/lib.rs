@@ -136,8 +136,8 @@ pub use warp_runtime::{
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
-pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 pub use warp_runtime::{hvp, jvp, Forward};
+pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
