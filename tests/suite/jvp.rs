@@ -29,6 +29,7 @@ backend_tests!(
     hvp_scalar_energy,
     hvp_springs_vectors,
     jvp_refuses_what_it_cannot_differentiate,
+    jvp_normalize_at_zero,
 );
 
 /// `a` close to `b`: `|a - b| <= atol + rtol |b|`, with a message naming `what` and the index.
@@ -151,6 +152,42 @@ fn jvp_vectors_f32(dev: &wp::Device) {
         .map(|(a, b)| (a - b) / (2.0 * h as f64))
         .collect();
     close("jvp vs central differences", &got, &fd, 1e-3, 1e-3);
+}
+
+#[wp::kernel]
+fn k_normalize(x: Array<DVec3>, y: Array<DVec3>) {
+    let i = tid();
+    y[i] = x[i].normalize() * 2.0;
+}
+
+/// normalize of the zero vector is zero, and so are its derivatives, in forward mode as in
+/// reverse mode (not NaN); elsewhere the tangent is (v - n (n . v)) / |x|. Exact at zero;
+/// 1e-14 relative elsewhere (a few f64 roundings).
+fn jvp_normalize_at_zero(dev: &wp::Device) {
+    let xs = [DVec3::ZERO, DVec3::new(3.0, 0.0, 4.0)];
+    let vs = [DVec3::new(1.0, -2.0, 0.5), DVec3::new(0.0, 1.0, 0.0)];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let y = zeros::<DVec3, 1>(2, dev).with_grad().unwrap();
+    let (v, y_dot) = (arr(&vs, dev), zeros::<DVec3, 1>(2, dev));
+    wp::jvp(k_normalize, 2, (&x, &y), (&v, &y_dot), dev).unwrap();
+    let got = host(&y_dot);
+    assert_eq!(got[0], DVec3::ZERO, "the tangent at the zero vector");
+    // At (3, 0, 4): n = (0.6, 0, 0.8), v = (0, 1, 0) is orthogonal to n, so 2 v / 5.
+    let want = DVec3::new(0.0, 0.4, 0.0);
+    assert!(
+        (got[1] - want).length() <= 1e-14,
+        "{:?} against {want:?}",
+        got[1]
+    );
+    // Reverse mode agrees at zero.
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_normalize, 2, (&x, &y), dev).unwrap();
+    }
+    y.grad().unwrap().fill(DVec3::ONE).unwrap();
+    tape.backward_from_grads().unwrap();
+    assert_eq!(host(&x.grad().unwrap())[0], DVec3::ZERO);
 }
 
 /// A loop carrying a value that it reads and overwrites (`acc = acc * t + ..`), a break on an

@@ -805,14 +805,22 @@ impl Tx {
                 let t = self.lin1("dot", da, &[a])?;
                 self.add(t, t)?
             }
-            // normalize(a)' = (a' - n (n . a')) / |a|
+            // normalize(a)' = (a' - n (n . a')) / |a|, and zero at a = 0 (where normalize
+            // gives zero, and so does reverse mode): the division is by
+            // |a| + (1 - nonzero(|a|)) and the quotient is scaled by nonzero(|a|), both exact
+            // where |a| != 0.
             "normalize" if matches!(self.ty(a), Ty::Vector(..)) => {
                 let Some(da) = da else { return Ok(None) };
                 let nd = self.call("dot", &[d, da])?;
                 let p = self.bin(BinOp::Mul, d, nd)?;
                 let num = self.bin(BinOp::Sub, da, p)?;
                 let l = self.call("length", &[a])?;
-                Some(self.bin(BinOp::Div, num, l)?)
+                let nz = self.call("nonzero", &[l])?;
+                let one = self.lit(l, 1.0);
+                let gap = self.bin(BinOp::Sub, one, nz)?;
+                let den = self.bin(BinOp::Add, l, gap)?;
+                let q = self.bin(BinOp::Div, num, den)?;
+                Some(self.bin(BinOp::Mul, q, nz)?)
             }
             // inverse(A)' = -A^-1 A' A^-1
             "inverse" if matches!(self.ty(a), Ty::Matrix(..)) => {
