@@ -116,9 +116,12 @@ pub(crate) trait Backend {
 /// them).
 pub(crate) unsafe trait ObjectStep: Copy + Send + Sync {
     /// The CUDA build library holding the kernel.
+    // Read only by the CUDA backend: a build without `cuda` runs steps on the CPU alone.
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
     const LIBRARY: &'static ObjectLibrary;
     /// The kernel: `extern "C" __global__ void KERNEL(Record r)`, a grid-stride loop over
     /// `0..len()`.
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
     const KERNEL: &'static str;
     /// Elements (threads) of the step.
     fn len(&self) -> usize;

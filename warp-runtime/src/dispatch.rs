@@ -69,9 +69,10 @@ pub(crate) fn launch_on<K: Kernel>(
 }
 
 /// A launch of `K` made ready to be queued again and again (a launch object's): on a GPU the
-/// loaded kernel, the launch dims and the fault context; the CPU keeps nothing.
+/// loaded kernel, the launch dims and the fault context; the CPU keeps nothing (the marker
+/// only ties the variant to `K`, which a build without `cuda` would otherwise leave unused).
 pub(crate) enum Prepared<K: Kernel> {
-    Cpu,
+    Cpu(std::marker::PhantomData<fn() -> K>),
     #[cfg(feature = "cuda")]
     Cuda(crate::cuda::launch::Prepared<K>),
 }
@@ -80,12 +81,13 @@ pub(crate) enum Prepared<K: Kernel> {
 /// a GPU); see [`launch_prepared`].
 pub(crate) fn prepare_launch<K: Kernel>(
     device: &Device,
-    args: &ArgsOf<'_, K>,
-    grid: &Grid,
+    // The CPU keeps nothing: only a GPU's preparation reads the arguments and the grid.
+    #[cfg_attr(not(feature = "cuda"), allow(unused_variables))] args: &ArgsOf<'_, K>,
+    #[cfg_attr(not(feature = "cuda"), allow(unused_variables))] grid: &Grid,
 ) -> Result<Prepared<K>> {
     names_every_param::<K>();
     match device.kind() {
-        DeviceKind::Cpu => Ok(Prepared::Cpu),
+        DeviceKind::Cpu => Ok(Prepared::Cpu(std::marker::PhantomData)),
         #[cfg(feature = "cuda")]
         DeviceKind::Cuda { ordinal } => {
             crate::cuda::launch::Prepared::new(args, grid, device, ordinal, None)
@@ -109,7 +111,7 @@ pub(crate) fn launch_prepared<K: Kernel>(
     #[cfg(feature = "cuda")] stream: Option<&crate::cuda::stream::Stream>,
 ) -> Result<()> {
     match prepared {
-        Prepared::Cpu => Cpu::new(device).launch::<K>(args, grid),
+        Prepared::Cpu(_) => Cpu::new(device).launch::<K>(args, grid),
         #[cfg(feature = "cuda")]
         Prepared::Cuda(p) => p.enqueue(args, device, stream.map(|s| s.cuda_stream())),
     }
