@@ -51,7 +51,7 @@
 //! ```
 //!
 //! - `#[kernel]` turns a function into a kernel launched over a 1-D to 4-D grid with
-//!   [`launch`]; `#[func]` makes a function callable from kernels; `#[derive(Struct)]` makes a
+//!   [`launch()`]; `#[func]` makes a function callable from kernels; `#[derive(Struct)]` makes a
 //!   `#[repr(C)]` struct a kernel argument and array element.
 //! - Kernel arguments are checked at compile time: an `Array<f32>` where the kernel takes
 //!   `Array<Vec3>` does not compile.
@@ -86,8 +86,12 @@
 //! assert_eq!(counts.to_vec().unwrap(), vec![1, 1, 0]);
 //! ```
 //!
-//! The kernel language (types, the literal rule, builtins) is described in ARCHITECTURE.md
-//! and in the docs of [`kernel`].
+//! The kernel language (types, the literal rule, builtins) is described in [`docs::language`]
+//! (ARCHITECTURE.md), its builtins in [`docs::builtins`], and the macros in the docs of
+//! [`kernel`].
+
+// docs.rs (`--cfg docsrs`, nightly): label feature-gated items with the feature they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 
 pub use glam;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
@@ -107,6 +111,7 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+pub mod docs;
 pub mod optim;
 
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).

@@ -1,6 +1,6 @@
 //! `f16` (Warp's `float16`): the half-precision scalar of the kernel language.
 //!
-//! The type is the [`half`] crate's [`f16`] (IEEE binary16: 1 sign bit, 5 exponent bits, 10
+//! The type is the [`half`] crate's [`f16`](struct@half::f16) (IEEE binary16: 1 sign bit, 5 exponent bits, 10
 //! mantissa bits; largest finite value 65504, smallest subnormal 2^-24). Its rules:
 //!
 //! * **Arithmetic** `+ - * / %`: each operation converts both operands to `f32` exactly,

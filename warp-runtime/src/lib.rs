@@ -22,6 +22,9 @@
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
 //! zero becomes an [`Error::Fault`] naming the kernel, the argument and the values.
 
+// docs.rs (`--cfg docsrs`, nightly): label feature-gated items with the feature they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
+
 #![warn(missing_docs)]
 
 pub mod array;

@@ -18,7 +18,7 @@
 //! * `degrees`/`radians` multiply by `180/π` and `π/180` rounded to the type, exactly Rust's
 //!   `to_degrees`/`to_radians` (Warp's f32 versions multiply in double);
 //! * `isfinite`, `isnan`, `isinf` of a vector: all components finite, any NaN, any infinite;
-//! * `erf`, `erfc`, `erfinv`, `erfcinv` are implemented here ([`special`](super::special));
+//! * `erf`, `erfc`, `erfinv`, `erfcinv` are implemented here ([`special`]);
 //! * vector `dot` sums the component products left to right (`x`, then `y`, ...), never in
 //!   the SIMD order `glam` may use, so that results do not depend on the vector's backing.
 //!
@@ -335,7 +335,7 @@ pub fn cbrt<F: Float>(x: F) -> F {
     x.w_cbrt()
 }
 
-/// Error function (see [`special`](super::special) for the accuracy).
+/// Error function (see [`special`] for the accuracy).
 #[inline(always)]
 pub fn erf<F: Float>(x: F) -> F {
     x.w_erf()

@@ -37,7 +37,7 @@
 //!
 //! The searches that run to completion inside one call (closest point, closest hit, the
 //! faces around a vertex) order children by a key and keep the farther children on a local
-//! ring of [`ORDERED_STACK`] entries ([`walk_ordered`]): a pop instead of a climb that
+//! ring of `ORDERED_STACK` entries (`walk_ordered`): a pop instead of a climb that
 //! re-reads and re-orders every parent, which made those queries several times slower. A
 //! tree deeper than the ring loses its oldest entries, and the walk finds them by the same
 //! climb, so there is no overflow case either.

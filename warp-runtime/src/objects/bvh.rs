@@ -16,7 +16,7 @@
 //! there and its three buffers uploaded; a refit likewise (the boxes down, the nodes up). This
 //! is the interim path: a GPU LBVH build and refit (kernels of `wp_bvh.h`, through
 //! `dispatch::object_step` like the hash grid's) is a separate task and changes nothing here
-//! but the two build functions of [`Tree`]. The host keeps a copy of the tree, so a GPU refit
+//! but the two build functions of `Tree`. The host keeps a copy of the tree, so a GPU refit
 //! reads back only the boxes.
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps of a launch's BVH) shares the

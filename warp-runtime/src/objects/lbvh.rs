@@ -1,5 +1,5 @@
 //! A linear BVH build (Karras 2012) and its refit, the same on every device through the
-//! [`ObjectStep`] seam: the centroids' box, a 30-bit Morton code per primitive, the
+//! `ObjectStep` seam: the centroids' box, a 30-bit Morton code per primitive, the
 //! primitives' stable radix sort of (code, index), Karras's hierarchy over the sorted codes
 //! (the index breaking ties), and a bottom-up refit. On a GPU the steps are the kernels of
 //! `wp_bvh_build.h` (its header comment states the numbering and each step); here they are
