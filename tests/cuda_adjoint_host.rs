@@ -197,7 +197,7 @@ impl Gen {
     /// that are special 3 times in 8 and random otherwise.
     fn val<T: Val>(&mut self) -> T {
         let r = self.next();
-        if r % 8 == 0 {
+        if r.is_multiple_of(8) {
             return splat(SPECIAL[(r >> 8) as usize % SPECIAL.len()]);
         }
         let w: Vec<u64> = (0..T::LANES)
@@ -221,7 +221,7 @@ impl Gen {
     }
     /// An `adj_ret`: random lanes, one in 8 an input-like value (zeros, NaN, infinities).
     fn ret<T: Val>(&mut self) -> T {
-        if self.next() % 8 == 0 {
+        if self.next().is_multiple_of(8) {
             self.val()
         } else {
             self.adj()

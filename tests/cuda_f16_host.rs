@@ -141,7 +141,7 @@ impl Rng {
 /// A pseudo-random f16: a quarter of them any bit pattern, the rest moderate values (|x| < 8).
 fn pick(rng: &mut Rng) -> f16 {
     let r = rng.next();
-    if r % 4 == 0 {
+    if r.is_multiple_of(4) {
         f16::from_bits((r >> 8) as u16)
     } else {
         f16::from_f32(((r >> 16) as u32 as f32 / u32::MAX as f32 - 0.5) * 16.0)

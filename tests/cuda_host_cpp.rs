@@ -1630,7 +1630,7 @@ fn rand_cases(c: &mut Cases, rng: &mut Rng, device: bool) {
     ];
     let pos = |rng: &mut Rng| -> f32 {
         let r = rng.next();
-        if r % 8 == 0 {
+        if r.is_multiple_of(8) {
             special[(r >> 8) as usize % special.len()]
         } else {
             (rng.f() * 4.0) as f32

@@ -54,7 +54,7 @@ fn surface(
 /// `b -> a` also occurring exactly once (so every edge has two triangles, which traverse it in
 /// opposite directions).
 fn closed_euler(nverts: usize, idx: &[i32]) -> Result<i64, String> {
-    if idx.len() % 3 != 0 {
+    if !idx.len().is_multiple_of(3) {
         return Err(format!("{} indices", idx.len()));
     }
     let mut used = vec![false; nverts];

@@ -138,7 +138,7 @@ impl OptLog {
         last: bool,
     ) {
         self.curves.push(series, it as f64, value);
-        if it == 1 || it % self.every == 0 || last {
+        if it == 1 || it.is_multiple_of(self.every) || last {
             let secs = self.start.elapsed().as_secs_f64();
             let mut row = vec![
                 series.to_string(),

@@ -124,6 +124,7 @@ impl From<&Stream> for CaptureOn {
 /// recorded into the graph that `finish` returns. Dropped without `finish` (an early return
 /// on an error), the capture ends and what it recorded is discarded. Not `Send`: the capture
 /// belongs to its thread.
+#[must_use = "dropping a `ScopedCapture` ends the capture and discards what it recorded: keep it and call `finish` for the graph"]
 #[derive(Debug)]
 pub struct ScopedCapture {
     finished: bool,

@@ -24,7 +24,6 @@
 
 // docs.rs (`--cfg docsrs`, nightly): label feature-gated items with the feature they need.
 #![cfg_attr(docsrs, feature(doc_cfg))]
-
 #![warn(missing_docs)]
 
 pub mod array;

@@ -71,6 +71,7 @@ pub struct Tape {
 }
 
 /// While alive, launches on this thread are recorded on the tape (see [`Tape::record`]).
+#[must_use = "the tape records only while the `Recording` is alive: bind it (`let _rec = tape.record();`), not `let _ =`, which drops it at once"]
 pub struct Recording<'t> {
     inner: Weak<RefCell<TapeInner>>,
     _tape: PhantomData<&'t Tape>,
@@ -90,6 +91,7 @@ impl Drop for Recording<'_> {
 /// While alive, launches on this thread are recorded on no tape; the tapes that were recording
 /// when it was made resume when it drops (tapes started meanwhile stay innermost). For work
 /// that manages its own tapes, such as a checkpointed rollout's recomputation.
+#[must_use = "the tapes resume when `Paused` drops: bind it for the span to run unrecorded"]
 pub(crate) struct Paused {
     saved: Vec<Weak<RefCell<TapeInner>>>,
 }

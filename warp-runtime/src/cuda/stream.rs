@@ -189,6 +189,7 @@ impl Event {
 /// for the previously current stream, so work queued before the scope is ordered before work
 /// inside it. Scopes nest; dropping one restores the previous stream. Not `Send`: a scope
 /// belongs to the thread that opened it.
+#[must_use = "the stream is current only while the `ScopedStream` is alive: bind it (`let _scope = ...`), not `let _ =`, which restores the previous stream at once"]
 #[derive(Debug)]
 pub struct ScopedStream {
     ordinal: usize,
