@@ -67,6 +67,8 @@ pub struct DeviceBuffer {
     ptr: u64,
     bytes: usize,
     gpu: Arc<Gpu>,
+    /// False for memory wrapped by [`DeviceBuffer::from_raw`]: not freed on drop.
+    owned: bool,
 }
 
 impl std::fmt::Debug for DeviceBuffer {
@@ -90,6 +92,7 @@ impl DeviceBuffer {
                 ptr: 0,
                 bytes: 0,
                 gpu: gpu.clone(),
+                owned: true,
             });
         }
         gpu.bind()?;
@@ -113,7 +116,23 @@ impl DeviceBuffer {
             ptr,
             bytes,
             gpu: gpu.clone(),
+            owned: true,
         })
+    }
+
+    /// Wraps `bytes` bytes of device memory at `ptr` that something else allocated (another
+    /// library, CUDA IPC): the buffer uses it like its own but never frees it.
+    ///
+    /// # Safety
+    /// `ptr..ptr + bytes` must be device memory addressable in `gpu`'s context and stay
+    /// allocated for as long as the buffer (and any copy of its pointer) is used.
+    pub unsafe fn from_raw(gpu: &Arc<Gpu>, ptr: u64, bytes: usize) -> Self {
+        DeviceBuffer {
+            ptr,
+            bytes,
+            gpu: gpu.clone(),
+            owned: false,
+        }
     }
 
     /// Allocates `bytes` bytes set to zero (the memset is queued, not waited for).
@@ -465,7 +484,7 @@ impl DeviceBuffer {
 
 impl Drop for DeviceBuffer {
     fn drop(&mut self) {
-        if self.bytes == 0 {
+        if self.bytes == 0 || !self.owned {
             return;
         }
         // Errors cannot be returned from drop; a failing free means the context is already
