@@ -15,6 +15,7 @@ backend_tests!(
     wrap_errors,
     ndarray_views,
     from_ndarray,
+    external_stream,
 );
 
 #[wp::kernel]
@@ -259,4 +260,47 @@ fn from_ndarray(dev: &wp::Device) {
     let v = ndarray::Array1::from_vec(vec![glam::Vec3::X, glam::Vec3::Y]);
     let w = wp::Array::<glam::Vec3, 1>::from_ndarray(v, dev).unwrap();
     assert_eq!(w.to_vec().unwrap(), [glam::Vec3::X, glam::Vec3::Y]);
+}
+
+/// A stream created elsewhere (here: a stream of this crate, by its raw `CUstream`, as another
+/// library would hand one over) takes launches; its owner drops with the last wrapper.
+fn external_stream(dev: &wp::Device) {
+    if dev.is_cpu() {
+        // SAFETY: refused before the pointer is used.
+        let e = unsafe { wp::Stream::from_raw(std::ptr::NonNull::dangling().as_ptr(), dev, ()) }
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs a CUDA device"), "{e}");
+        return;
+    }
+    // SAFETY: refused before use.
+    let e = unsafe { wp::Stream::from_raw(std::ptr::null_mut(), dev, ()) }
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cu_stream is null"), "{e}");
+    let other = wp::Stream::new(dev).unwrap();
+    let raw = other.cuda_stream().cu_stream().cast::<std::ffi::c_void>();
+    let token = Arc::new(());
+    // SAFETY: a stream of `dev`'s context, kept alive by `other` (in the owner).
+    let s = unsafe { wp::Stream::from_raw(raw, dev, (other, Arc::clone(&token))) }.unwrap();
+    assert!(!s.is_default());
+    let a = wp::Array::<f32>::full(1024, 1.0, dev).unwrap();
+    wp::launch_on(k_add_index, 1024, (&a,), &s).unwrap();
+    s.synchronize().unwrap();
+    // Exact: 1 + i for i < 1024 in f32.
+    assert_eq!(
+        a.to_vec().unwrap(),
+        (0..1024).map(|i| 1.0 + i as f32).collect::<Vec<_>>()
+    );
+    let clone = s.clone();
+    drop(s);
+    assert_eq!(Arc::strong_count(&token), 2);
+    drop(clone);
+    // The crate's ordering bookkeeping held the stream until the next operation on the
+    // default stream: the read-back above, which released it.
+    assert_eq!(
+        Arc::strong_count(&token),
+        1,
+        "dropped with the last wrapper"
+    );
 }
