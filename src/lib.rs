@@ -102,11 +102,14 @@ pub use warp_macros::{func, kernel, Struct};
 /// Work-precision sweeps: tables, SVG plots and progress (the `report` feature).
 #[cfg(feature = "report")]
 pub use warp_report as report;
-#[cfg(feature = "cuda")]
 pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+#[cfg(feature = "cuda")]
+/// The trailing axes that vector and matrix elements have in `Array::as_ndarray_components`.
+#[cfg(feature = "ndarray")]
+pub use warp_runtime::NdComponents;
 pub mod optim;
 
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).

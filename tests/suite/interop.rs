@@ -16,6 +16,7 @@ backend_tests!(
     ndarray_views,
     from_ndarray,
     external_stream,
+    ndarray_components,
 );
 
 #[wp::kernel]
@@ -303,4 +304,44 @@ fn external_stream(dev: &wp::Device) {
         1,
         "dropped with the last wrapper"
     );
+}
+
+/// Vector and matrix elements as trailing axes, as NumPy has them in Warp: `[.., 3]` for
+/// `Vec3`, `[.., row, column]` for matrices (glam stores columns: the strides say so).
+fn ndarray_components(dev: &wp::Device) {
+    use glam::{Mat2, Vec2, Vec3};
+    let values: Vec<Vec3> = (0..4)
+        .map(|k| Vec3::new(k as f32, 10.0, 100.0 * k as f32))
+        .collect();
+    let mut a = wp::Array::<Vec3, 2>::from_slice_shape(&values, (2, 2), dev).unwrap();
+    if !dev.is_cpu() {
+        let e = a.as_ndarray_components().unwrap_err().to_string();
+        assert!(e.contains("not the CPU"), "{e}");
+        return;
+    }
+    {
+        let v = a.as_ndarray_components().unwrap();
+        assert_eq!(v.shape(), [2, 2, 3]);
+        assert_eq!(v.strides(), [6, 3, 1]);
+        assert_eq!(v[[1, 1, 2]], 300.0);
+        assert_eq!(v[[1, 0, 0]], 2.0);
+    }
+    a.as_ndarray_components_mut().unwrap()[[0, 1, 1]] = -5.0;
+    assert_eq!(a.to_vec().unwrap()[1], Vec3::new(1.0, -5.0, 100.0));
+    // A transposed array of vectors keeps its strides (in scalars).
+    let mut t = a.transpose();
+    drop(a);
+    let v = t.as_ndarray_components().unwrap();
+    assert_eq!(v.strides(), [3, 6, 1]);
+    assert_eq!(v[[1, 0, 1]], -5.0);
+    // Matrices: [k, row, column].
+    let m = Mat2::from_cols(Vec2::new(1.0, 2.0), Vec2::new(3.0, 4.0));
+    let mut b = wp::Array::<Mat2>::from_slice(&[m, m * 2.0], dev).unwrap();
+    let v = b.as_ndarray_components().unwrap();
+    assert_eq!(v.shape(), [2, 2, 2]);
+    assert_eq!(v[[0, 0, 1]], 3.0, "row 0, column 1");
+    assert_eq!(v[[1, 1, 0]], 4.0, "row 1, column 0 of 2m");
+    // Scalars have no trailing axis.
+    let mut c = wp::Array::<f32>::from_slice(&[1.0, 2.0], dev).unwrap();
+    assert_eq!(c.as_ndarray_components().unwrap().shape(), [2]);
 }

@@ -24,6 +24,8 @@ use std::sync::Arc;
 use warp_core::{f16, ArrayView, DTransform, Transform};
 
 mod interop;
+#[cfg(feature = "ndarray")]
+pub use interop::NdComponents;
 
 /// A type that can be stored in an [`Array`].
 ///

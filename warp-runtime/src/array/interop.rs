@@ -237,12 +237,157 @@ impl<T: Element, const N: usize> Array<T, N> {
 }
 
 #[cfg(feature = "ndarray")]
+pub use nd::NdComponents;
+
+#[cfg(feature = "ndarray")]
 mod nd {
     use super::super::{Array, Element};
     use crate::device::Device;
     use crate::error::{Error, Result};
-    use ndarray::{ArrayBase, ArrayView, ArrayViewMut, Data, Dim, Dimension, ShapeBuilder};
+    use ndarray::{
+        ArrayBase, ArrayView, ArrayViewD, ArrayViewMut, ArrayViewMutD, Data, Dim, Dimension, IxDyn,
+        ShapeBuilder,
+    };
     use std::sync::Arc;
+
+    /// An element type as NumPy sees it in Warp: scalars of type `Scalar` on trailing axes of
+    /// shape `SHAPE` (none for a scalar, `[K]` for a vector or quaternion, `[rows, columns]`
+    /// for a matrix), at element strides `STRIDES` within one element.
+    pub trait NdComponents: Element {
+        /// The scalar type of the components.
+        type Scalar: Element;
+        /// The extents of the trailing axes.
+        const SHAPE: &'static [usize];
+        /// The strides of the trailing axes, in scalars.
+        const STRIDES: &'static [isize];
+    }
+
+    macro_rules! nd_scalars {
+        ($($t:ty),*) => {$(
+            impl NdComponents for $t {
+                type Scalar = $t;
+                const SHAPE: &'static [usize] = &[];
+                const STRIDES: &'static [isize] = &[];
+            }
+        )*};
+    }
+    nd_scalars!(
+        i8,
+        i16,
+        i32,
+        i64,
+        u8,
+        u16,
+        u32,
+        u64,
+        f32,
+        f64,
+        warp_core::f16
+    );
+
+    macro_rules! nd_vectors {
+        ($($t:ty => $s:ty, $k:literal);* $(;)?) => {$(
+            impl NdComponents for $t {
+                type Scalar = $s;
+                const SHAPE: &'static [usize] = &[$k];
+                const STRIDES: &'static [isize] = &[1];
+            }
+        )*};
+    }
+    nd_vectors!(
+        glam::Vec2 => f32, 2; glam::Vec3 => f32, 3; glam::Vec4 => f32, 4;
+        glam::DVec2 => f64, 2; glam::DVec3 => f64, 3; glam::DVec4 => f64, 4;
+        glam::IVec2 => i32, 2; glam::IVec3 => i32, 3; glam::IVec4 => i32, 4;
+        glam::UVec2 => u32, 2; glam::UVec3 => u32, 3; glam::UVec4 => u32, 4;
+        glam::Quat => f32, 4; glam::DQuat => f64, 4;
+    );
+
+    // glam stores matrices by column: entry (row i, column j) is scalar j * K + i, so the
+    // trailing axes [i, j] have strides [1, K] (a row-major index, as Warp's NumPy view).
+    macro_rules! nd_matrices {
+        ($($t:ty => $s:ty, $k:literal);* $(;)?) => {$(
+            impl NdComponents for $t {
+                type Scalar = $s;
+                const SHAPE: &'static [usize] = &[$k, $k];
+                const STRIDES: &'static [isize] = &[1, $k];
+            }
+        )*};
+    }
+    nd_matrices!(
+        glam::Mat2 => f32, 2; glam::Mat3 => f32, 3; glam::Mat4 => f32, 4;
+        glam::DMat2 => f64, 2; glam::DMat3 => f64, 3; glam::DMat4 => f64, 4;
+    );
+
+    impl<T: NdComponents, const N: usize> Array<T, N> {
+        /// The shape and strides (in scalars) with the trailing component axes.
+        fn component_layout(&self) -> (IxDyn, IxDyn) {
+            let k = (std::mem::size_of::<T>() / std::mem::size_of::<T::Scalar>()) as isize;
+            let shape: Vec<usize> = self.shape.iter().chain(T::SHAPE).copied().collect();
+            let strides: Vec<usize> = self
+                .strides
+                .iter()
+                .map(|s| s * k)
+                .chain(T::STRIDES.iter().copied())
+                .map(|s| s as usize)
+                .collect();
+            (IxDyn(&shape), IxDyn(&strides))
+        }
+
+        /// A zero-copy `ndarray` view of a CPU array's scalars, with a trailing axis per
+        /// component axis of the element type as NumPy has them in Warp: an
+        /// `Array<Vec3, 2>` of shape `[a, b]` is viewed with shape `[a, b, 3]`, an
+        /// `Array<Mat3>` of length `n` as `[n, 3, 3]` indexed `[k, row, column]`.
+        ///
+        /// # Errors
+        /// As [`as_ndarray`](Self::as_ndarray).
+        pub fn as_ndarray_components(&mut self) -> Result<ArrayViewD<'_, T::Scalar>> {
+            if self.shared() {
+                return Err(Self::shared_error("as_ndarray_components"));
+            }
+            let ptr = self.component_ptr("as_ndarray_components")?;
+            let (shape, strides) = self.component_layout();
+            // SAFETY: the scalars of every element in bounds (an invariant of every array),
+            // kept alive by `self`; no other handle, `self` borrowed exclusively.
+            Ok(unsafe { ArrayView::from_shape_ptr(shape.strides(strides), ptr.cast_const()) })
+        }
+
+        /// The mutable form of [`as_ndarray_components`](Self::as_ndarray_components).
+        ///
+        /// # Errors
+        /// As [`as_ndarray`](Self::as_ndarray).
+        pub fn as_ndarray_components_mut(&mut self) -> Result<ArrayViewMutD<'_, T::Scalar>> {
+            if self.shared() {
+                return Err(Self::shared_error("as_ndarray_components_mut"));
+            }
+            let ptr = self.component_ptr("as_ndarray_components_mut")?;
+            let (shape, strides) = self.component_layout();
+            // SAFETY: as in `as_ndarray_components`; the view is the only access.
+            Ok(unsafe { ArrayViewMut::from_shape_ptr(shape.strides(strides), ptr) })
+        }
+
+        fn component_ptr(&self, what: &str) -> Result<*mut T::Scalar> {
+            self.host_base().map(|p| p.cast()).ok_or_else(|| {
+                Error::invalid(format!(
+                    "{what}: the array is on \"{}\", not the CPU (copy it with to_vec first)",
+                    self.device
+                ))
+            })
+        }
+    }
+
+    impl<T: Element, const N: usize> Array<T, N> {
+        /// Whether another handle (a clone, a view) shares this array's memory.
+        fn shared(&self) -> bool {
+            Arc::strong_count(&self.storage) > 1
+        }
+
+        fn shared_error(what: &str) -> Error {
+            Error::invalid(format!(
+                "{what}: the array's memory is shared with a clone or view (which could write \
+                 it while the view lives); drop them, or use the unsafe as_ndarray_unchecked"
+            ))
+        }
+    }
 
     impl<T: Element, const N: usize> Array<T, N>
     where
@@ -265,11 +410,6 @@ mod nd {
                 .slice_mut()
                 .copy_from_slice(&self.strides.map(|s| s as usize));
             Ok((dim, strides, ptr))
-        }
-
-        /// Whether another handle (a clone, a view) shares this array's memory.
-        fn shared(&self) -> bool {
-            Arc::strong_count(&self.storage) > 1
         }
 
         /// A zero-copy `ndarray` view of a CPU array, with its shape and strides (element
@@ -320,13 +460,6 @@ mod nd {
             // SAFETY: in bounds and alive as in `as_ndarray_mut`; no writer (the caller's
             // contract).
             Ok(unsafe { ArrayView::from_shape_ptr(dim.strides(strides), ptr.cast_const()) })
-        }
-
-        fn shared_error(what: &str) -> Error {
-            Error::invalid(format!(
-                "{what}: the array's memory is shared with a clone or view (which could write \
-                 it while the view lives); drop them, or use the unsafe as_ndarray_unchecked"
-            ))
         }
 
         /// An array that takes an owned `ndarray` array over without a copy on the CPU (any
