@@ -145,7 +145,7 @@ fn strided_and_negative_wraps(dev: &wp::Device) {
 fn wrap_errors(dev: &wp::Device) {
     let (ptr, owner, _read) = external(dev, &[0.0; 8]);
     let owner = Arc::new(owner);
-    let err = |r: wp::Result<wp::Array<f32, 2>>| r.err().expect("an error").to_string();
+    let err = |r: wp::Result<wp::Array<f32, 2>>| r.expect_err("an error").to_string();
     // SAFETY (all): every call is refused before the memory is used.
     unsafe {
         let e = err(wrap(dev, ptr + 2, [2, 2], None, owner.clone()));

@@ -207,7 +207,7 @@ impl<T: Element, const N: usize> Array<T, N> {
                 "{what}: ptr is null for a shape of {len} elements"
             )));
         }
-        if ptr % align != 0 {
+        if !ptr.is_multiple_of(align) {
             return Err(Error::invalid(format!(
                 "{what}: ptr {ptr:#x} is not aligned to {align} bytes, the alignment of {}",
                 T::TYPE_NAME
