@@ -90,6 +90,11 @@
 //! and in the docs of [`kernel`].
 
 pub use glam;
+#[cfg(feature = "cuda")]
+/// nalgebra, whose `From` conversions to and from glam (the element types of arrays) the
+/// `nalgebra` feature turns on.
+#[cfg(feature = "nalgebra")]
+pub use nalgebra;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::f16;
@@ -106,7 +111,6 @@ pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
-#[cfg(feature = "cuda")]
 /// The trailing axes that vector and matrix elements have in `Array::as_ndarray_components`.
 #[cfg(feature = "ndarray")]
 pub use warp_runtime::NdComponents;

@@ -17,6 +17,7 @@ backend_tests!(
     from_ndarray,
     external_stream,
     ndarray_components,
+    nalgebra_conversions,
 );
 
 #[wp::kernel]
@@ -344,4 +345,19 @@ fn ndarray_components(dev: &wp::Device) {
     // Scalars have no trailing axis.
     let mut c = wp::Array::<f32>::from_slice(&[1.0, 2.0], dev).unwrap();
     assert_eq!(c.as_ndarray_components().unwrap().shape(), [2]);
+}
+
+/// nalgebra's glam conversions (the `nalgebra` feature) on array contents: exact, they move
+/// the same f32 values.
+fn nalgebra_conversions(dev: &wp::Device) {
+    let p = nalgebra::Vector3::new(1.0f32, 2.0, 3.0);
+    let m = nalgebra::Matrix3::new(1.0f32, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0);
+    let a = wp::Array::<glam::Vec3>::from_slice(&[p.into()], dev).unwrap();
+    let b = wp::Array::<glam::Mat3>::from_slice(&[m.into()], dev).unwrap();
+    let back: nalgebra::Vector3<f32> = a.to_vec().unwrap()[0].into();
+    let mb: nalgebra::Matrix3<f32> = b.to_vec().unwrap()[0].into();
+    assert_eq!(back, p);
+    assert_eq!(mb, m);
+    // Row 0, column 1 of nalgebra's matrix is glam's column 1, row 0.
+    assert_eq!(b.to_vec().unwrap()[0].col(1).x, 2.0);
 }
