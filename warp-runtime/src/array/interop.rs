@@ -215,13 +215,13 @@ impl<T: Element, const N: usize> Array<T, N> {
         }
         let base = ptr
             .checked_sub(byte_offset as u64)
+            .filter(|&b| b != 0)
             .ok_or_else(|| {
                 Error::invalid(format!(
-                    "{what}: the negative byte_strides {byte_strides:?} reach below address 0 \
-                     from ptr {ptr:#x}"
+                    "{what}: the negative byte_strides {byte_strides:?} reach address 0 or \
+                     below from ptr {ptr:#x}"
                 ))
-            })?
-            .max(align);
+            })?;
         // SAFETY: the caller's contract covers the span (lowest to highest element).
         let storage = unsafe { Storage::external(device, base, bytes, owner)? };
         Ok(Array {

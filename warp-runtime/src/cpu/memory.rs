@@ -6,7 +6,9 @@ use std::alloc::{self, Layout};
 use std::ptr::NonNull;
 
 /// Every host allocation is aligned at least this much: a cache line, which also satisfies
-/// every glam type, so that `Array::reinterpret` to a more-aligned type succeeds.
+/// every glam type, so that `Array::reinterpret` to a more-aligned type succeeds. (External
+/// memory, [`HostBuffer::external`], is aligned for its element type only; `reinterpret`
+/// checks the alignment it needs.)
 pub(crate) const HOST_ALIGN: usize = 64;
 
 /// Host memory: one allocation, written through raw pointers only.
