@@ -94,6 +94,10 @@
 #![cfg_attr(docsrs, feature(doc_cfg))]
 
 pub use glam;
+/// nalgebra, whose `From` conversions to and from glam (the element types of arrays) the
+/// `nalgebra` feature turns on.
+#[cfg(feature = "nalgebra")]
+pub use nalgebra;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::f16;
@@ -106,12 +110,14 @@ pub use warp_macros::{func, kernel, Struct};
 /// Work-precision sweeps: tables, SVG plots and progress (the `report` feature).
 #[cfg(feature = "report")]
 pub use warp_report as report;
-#[cfg(feature = "cuda")]
 pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
 pub mod docs;
+/// The trailing axes that vector and matrix elements have in `Array::as_ndarray_components`.
+#[cfg(feature = "ndarray")]
+pub use warp_runtime::NdComponents;
 pub mod optim;
 
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).

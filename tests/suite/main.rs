@@ -79,6 +79,7 @@ mod generics;
 mod grad;
 mod graph;
 mod hash_grid;
+mod interop;
 mod jvp;
 mod launch;
 mod lbvh;

@@ -264,7 +264,11 @@ impl Gpu {
         let gpu = Arc::new(Gpu {
             info: info.clone(),
             ctx,
-            stream: Stream { inner: cu, ordinal },
+            stream: Stream {
+                inner: cu,
+                ordinal,
+                _owner: None,
+            },
             async_alloc,
         });
         gpus[ordinal] = Some(gpu.clone());
@@ -313,7 +317,29 @@ impl Gpu {
         Ok(Stream {
             inner,
             ordinal: self.ordinal(),
+            _owner: None,
         })
+    }
+
+    /// Wraps a stream that another library created (PyTorch's, another CUDA crate's) in
+    /// this device's context; it is never destroyed here, and `owner` (what keeps it alive)
+    /// is held by every clone of the wrapper.
+    ///
+    /// # Safety
+    /// `cu_stream` must be a valid stream of this device's primary context and stay alive
+    /// while `owner` lives (or forever, without one).
+    pub unsafe fn wrap_stream(
+        &self,
+        cu_stream: sys::CUstream,
+        owner: Option<Arc<dyn std::any::Any + Send + Sync>>,
+    ) -> Stream {
+        // SAFETY: the caller's contract.
+        let inner = unsafe { self.ctx.wrap_borrowed_stream(cu_stream) };
+        Stream {
+            inner,
+            ordinal: self.ordinal(),
+            _owner: owner,
+        }
     }
 
     /// Creates an event; `timing: true` lets it be used with [`Event::elapsed_ms`] (timing
@@ -365,6 +391,8 @@ impl Gpu {
 pub struct Stream {
     inner: Arc<CudaStream>,
     ordinal: usize,
+    /// What keeps a wrapped external stream alive ([`Gpu::wrap_stream`]).
+    _owner: Option<Arc<dyn std::any::Any + Send + Sync>>,
 }
 
 impl Stream {

@@ -25,9 +25,6 @@ pub mod device;
 pub mod error;
 pub mod graph;
 pub mod launch;
-// `n % d == 0` there predates the 1.88 MSRV that made `is_multiple_of` the lint's suggestion;
-// memory.rs is being edited on another branch, so it changes over after that lands.
-#[allow(clippy::manual_is_multiple_of)]
 pub mod memory;
 
 #[cfg(test)]

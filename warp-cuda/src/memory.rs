@@ -49,7 +49,7 @@ fn is_page_locked(ptr: *const u8) -> bool {
 fn minimal_period(pattern: &[u8]) -> usize {
     let n = pattern.len();
     (1..n)
-        .filter(|d| n % d == 0)
+        .filter(|d| n.is_multiple_of(*d))
         .find(|&d| (d..n).all(|i| pattern[i] == pattern[i - d]))
         .unwrap_or(n)
 }
@@ -67,6 +67,8 @@ pub struct DeviceBuffer {
     ptr: u64,
     bytes: usize,
     gpu: Arc<Gpu>,
+    /// False for memory wrapped by [`DeviceBuffer::from_raw`]: not freed on drop.
+    owned: bool,
 }
 
 impl std::fmt::Debug for DeviceBuffer {
@@ -90,6 +92,7 @@ impl DeviceBuffer {
                 ptr: 0,
                 bytes: 0,
                 gpu: gpu.clone(),
+                owned: true,
             });
         }
         gpu.bind()?;
@@ -113,7 +116,23 @@ impl DeviceBuffer {
             ptr,
             bytes,
             gpu: gpu.clone(),
+            owned: true,
         })
+    }
+
+    /// Wraps `bytes` bytes of device memory at `ptr` that something else allocated (another
+    /// library, CUDA IPC): the buffer uses it like its own but never frees it.
+    ///
+    /// # Safety
+    /// `ptr..ptr + bytes` must be device memory addressable in `gpu`'s context and stay
+    /// allocated for as long as the buffer (and any copy of its pointer) is used.
+    pub unsafe fn from_raw(gpu: &Arc<Gpu>, ptr: u64, bytes: usize) -> Self {
+        DeviceBuffer {
+            ptr,
+            bytes,
+            gpu: gpu.clone(),
+            owned: false,
+        }
     }
 
     /// Allocates `bytes` bytes set to zero (the memset is queued, not waited for).
@@ -348,7 +367,7 @@ impl DeviceBuffer {
                 "fill_pattern: empty pattern".into(),
             ));
         }
-        if bytes % p != 0 {
+        if !bytes.is_multiple_of(p) {
             return Err(CudaError::InvalidArgument(format!(
                 "fill_pattern: {bytes} bytes is not a multiple of the {p}-byte pattern"
             )));
@@ -363,7 +382,7 @@ impl DeviceBuffer {
         let p = pattern.len();
         let dst = self.ptr + offset as u64;
         let cu_stream = stream.cu_stream();
-        let aligned = |n: u64| dst % n == 0;
+        let aligned = |n: u64| dst.is_multiple_of(n);
         if p == 1 || (p == 2 && aligned(2)) || (p == 4 && aligned(4)) {
             self.gpu.bind()?;
             // SAFETY: range checked, pointer live and aligned for the element size, queued on
@@ -419,7 +438,7 @@ impl DeviceBuffer {
         let p = pattern.len();
         let e = [4usize, 2, 1]
             .into_iter()
-            .find(|&e| p % e == 0 && dst % e as u64 == 0)
+            .find(|&e| p.is_multiple_of(e) && dst.is_multiple_of(e as u64))
             .unwrap_or(1);
         let rows = bytes / p;
         self.gpu.bind()?;
@@ -465,7 +484,7 @@ impl DeviceBuffer {
 
 impl Drop for DeviceBuffer {
     fn drop(&mut self) {
-        if self.bytes == 0 {
+        if self.bytes == 0 || !self.owned {
             return;
         }
         // Errors cannot be returned from drop; a failing free means the context is already

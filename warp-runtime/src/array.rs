@@ -23,6 +23,10 @@ use std::ops::{Bound, RangeBounds};
 use std::sync::Arc;
 use warp_core::{f16, ArrayView, DTransform, Transform};
 
+mod interop;
+#[cfg(feature = "ndarray")]
+pub use interop::NdComponents;
+
 /// A type that can be stored in an [`Array`].
 ///
 /// `Pod` is what makes zero-filled memory, byte copies between host and device and

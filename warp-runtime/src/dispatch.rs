@@ -262,6 +262,41 @@ impl Storage {
         HostBuffer::from_vec(data).map(Storage::Host)
     }
 
+    /// External memory of `bytes` bytes at `address` on `device`, not freed by the storage;
+    /// `owner` drops with it (on a GPU once the work queued there has finished).
+    ///
+    /// # Safety
+    /// The memory must be valid on `device` (host memory for the CPU, device memory of that
+    /// GPU's context) for reads and writes of `bytes` bytes for as long as `owner` lives.
+    pub(crate) unsafe fn external(
+        device: &Device,
+        address: u64,
+        bytes: usize,
+        owner: Box<dyn std::any::Any + Send + Sync>,
+    ) -> Result<Storage> {
+        match device.kind() {
+            DeviceKind::Cpu => {
+                let ptr = std::ptr::NonNull::new(address as usize as *mut u8)
+                    .ok_or_else(|| Error::invalid("external memory at address 0"))?;
+                // SAFETY: the caller's contract.
+                Ok(Storage::Host(unsafe {
+                    HostBuffer::external(ptr, bytes, Some(owner))
+                }))
+            }
+            #[cfg(feature = "cuda")]
+            DeviceKind::Cuda { ordinal } => {
+                // SAFETY: the caller's contract.
+                unsafe { CudaBuffer::external(ordinal, address, bytes, Some(owner)) }
+                    .map(Storage::Cuda)
+            }
+            #[cfg(not(feature = "cuda"))]
+            DeviceKind::Cuda { .. } => Err(Error::NoDevice {
+                name: device.alias().to_string(),
+                reason: crate::device::CUDA_UNAVAILABLE.to_string(),
+            }),
+        }
+    }
+
     /// The host memory, for arrays on the CPU (`None` for a device's).
     pub(crate) fn host(&self) -> Option<&HostBuffer> {
         match self {

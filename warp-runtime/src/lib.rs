@@ -54,6 +54,8 @@ pub use cuda::source as cuda_source;
 #[cfg(feature = "cuda")]
 pub use cuda::stream;
 
+#[cfg(feature = "ndarray")]
+pub use array::NdComponents;
 pub use array::{Array, Element, IntoShape};
 pub use autograd::{gradcheck, hvp, jacobian, jacobian_fd, jvp, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;

@@ -6,7 +6,9 @@ use std::alloc::{self, Layout};
 use std::ptr::NonNull;
 
 /// Every host allocation is aligned at least this much: a cache line, which also satisfies
-/// every glam type, so that `Array::reinterpret` to a more-aligned type succeeds.
+/// every glam type, so that `Array::reinterpret` to a more-aligned type succeeds. (External
+/// memory, [`HostBuffer::external`], is aligned for its element type only; `reinterpret`
+/// checks the alignment it needs.)
 pub(crate) const HOST_ALIGN: usize = 64;
 
 /// Host memory: one allocation, written through raw pointers only.
@@ -17,11 +19,14 @@ pub(crate) const HOST_ALIGN: usize = 64;
 pub(crate) struct HostBuffer {
     ptr: NonNull<u8>,
     bytes: usize,
-    layout: Layout,
+    /// The layout the global allocator gave, or `None` for external memory (not freed here).
+    layout: Option<Layout>,
+    /// What keeps external memory alive: dropped with the buffer, after the last use.
+    _owner: Option<Box<dyn std::any::Any + Send + Sync>>,
 }
 
-// SAFETY: the buffer owns its allocation (nothing else frees it) and only hands out raw
-// pointers; concurrent access follows the documented CUDA-style contract of `Array`.
+// SAFETY: the buffer owns its allocation (nothing else frees it), or external memory whose
+// owner it keeps (`Send + Sync`), and only hands out raw pointers; concurrent access follows the documented CUDA-style contract of `Array`.
 unsafe impl Send for HostBuffer {}
 // SAFETY: as for `Send`.
 unsafe impl Sync for HostBuffer {}
@@ -36,7 +41,32 @@ impl HostBuffer {
         // SAFETY: the layout has a non-zero size.
         let ptr = unsafe { alloc::alloc_zeroed(layout) };
         let ptr = NonNull::new(ptr).unwrap_or_else(|| alloc::handle_alloc_error(layout));
-        Ok(HostBuffer { ptr, bytes, layout })
+        Ok(HostBuffer {
+            ptr,
+            bytes,
+            layout: Some(layout),
+            _owner: None,
+        })
+    }
+
+    /// External memory: `bytes` bytes at `ptr`, not freed by the buffer; `owner` is dropped
+    /// with it.
+    ///
+    /// # Safety
+    /// `ptr..ptr + bytes` must be valid for reads and writes for as long as `owner` lives
+    /// (or forever, without one), and nothing else may access it while an array operation or
+    /// kernel does, except as `Array`'s concurrency contract allows.
+    pub(crate) unsafe fn external(
+        ptr: NonNull<u8>,
+        bytes: usize,
+        owner: Option<Box<dyn std::any::Any + Send + Sync>>,
+    ) -> HostBuffer {
+        HostBuffer {
+            ptr,
+            bytes,
+            layout: None,
+            _owner: owner,
+        }
     }
 
     /// Takes ownership of a vector's memory without copying it.
@@ -59,7 +89,12 @@ impl HostBuffer {
         let boxed = data.into_boxed_slice();
         let layout = Layout::for_value(&*boxed);
         let ptr = NonNull::from(Box::leak(boxed)).cast::<u8>();
-        Ok(HostBuffer { ptr, bytes, layout })
+        Ok(HostBuffer {
+            ptr,
+            bytes,
+            layout: Some(layout),
+            _owner: None,
+        })
     }
 
     /// The address of byte 0.
@@ -92,9 +127,12 @@ impl HostBuffer {
 
 impl Drop for HostBuffer {
     fn drop(&mut self) {
-        // SAFETY: `ptr` came from the global allocator with exactly `layout` (alloc_zeroed, or
-        // a boxed slice whose layout is `Layout::for_value`) and is freed only here.
-        unsafe { alloc::dealloc(self.ptr.as_ptr(), self.layout) };
+        // External memory is its owner's to free (the owner drops after this, as a field).
+        if let Some(layout) = self.layout {
+            // SAFETY: `ptr` came from the global allocator with exactly `layout` (alloc_zeroed,
+            // or a boxed slice whose layout is `Layout::for_value`) and is freed only here.
+            unsafe { alloc::dealloc(self.ptr.as_ptr(), layout) };
+        }
     }
 }
 

@@ -10,6 +10,9 @@ use warp_cuda::{CudaError, DeviceBuffer};
 /// kernels (the ordering model of `gpu.rs`), then runs on the GPU's default stream.
 pub(crate) struct CudaBuffer {
     inner: DeviceBuffer,
+    /// What keeps external memory alive ([`CudaBuffer::external`]): dropped after the GPU has
+    /// finished the work queued on it.
+    owner: Option<Box<dyn std::any::Any + Send + Sync>>,
 }
 
 impl CudaBuffer {
@@ -18,7 +21,25 @@ impl CudaBuffer {
         gpu::refuse_in_capture(ordinal, "an allocation")?;
         let g = gpu::gpu(ordinal)?;
         let inner = DeviceBuffer::zeros(&g, bytes).map_err(|e| gpu::err(device, e))?;
-        Ok(CudaBuffer { inner })
+        Ok(CudaBuffer { inner, owner: None })
+    }
+
+    /// External device memory: `bytes` bytes at `ptr` on GPU `ordinal`, not freed here;
+    /// `owner` is dropped with the buffer, once the work queued on the memory has finished.
+    ///
+    /// # Safety
+    /// As [`DeviceBuffer::from_raw`]: device memory of that GPU's context, allocated for as
+    /// long as `owner` lives (or forever, without one).
+    pub(crate) unsafe fn external(
+        ordinal: usize,
+        ptr: u64,
+        bytes: usize,
+        owner: Option<Box<dyn std::any::Any + Send + Sync>>,
+    ) -> Result<CudaBuffer> {
+        let g = gpu::gpu(ordinal)?;
+        // SAFETY: the caller's contract.
+        let inner = unsafe { DeviceBuffer::from_raw(&g, ptr, bytes) };
+        Ok(CudaBuffer { inner, owner })
     }
 
     /// The driver's buffer (for asynchronous copies with pinned memory).
@@ -93,5 +114,11 @@ impl Drop for CudaBuffer {
         // user streams that may still use the memory. A failure here means the context is
         // broken, which the next fallible call reports.
         let _ = join_ordinal(self.ordinal());
+        if let Some(owner) = self.owner.take() {
+            // External memory: its owner may free it as soon as it drops, so first wait for
+            // every kernel and copy queued on it (the default stream now follows them all).
+            let _ = self.inner.gpu().default_stream().synchronize();
+            drop(owner);
+        }
     }
 }

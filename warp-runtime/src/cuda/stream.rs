@@ -54,6 +54,45 @@ impl Stream {
         })
     }
 
+    /// Wraps a CUDA stream that another library created (a `CUstream`, as PyTorch's
+    /// `torch.cuda.current_stream().cuda_stream` or another CUDA crate gives it), so that
+    /// [`launch_on`](crate::launch_on) and [`ScopedStream`] queue this crate's work on it.
+    /// The stream is never destroyed here; `owner` (what keeps it alive, or `()`) is held by
+    /// every clone of the wrapper and dropped with the last one.
+    ///
+    /// The ordering model of this module applies: array operations wait for the work this
+    /// crate queued on the stream. Work the other library queues on it is ordered by the
+    /// stream itself; work it queues elsewhere is the caller's to order.
+    ///
+    /// # Safety
+    /// `cu_stream` must be a valid stream of `device`'s primary context (the runtime API's
+    /// context: what PyTorch and CUDA runtime code use) and stay alive while `owner` lives
+    /// (or forever, for an `owner` that does not destroy it).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for the CPU or a null stream (the legacy default stream is
+    /// not wrapped: use [`get_stream`]); [`Error::Cuda`] when the device cannot start.
+    pub unsafe fn from_raw(
+        cu_stream: *mut std::ffi::c_void,
+        device: &Device,
+        owner: impl Send + Sync + 'static,
+    ) -> Result<Stream> {
+        let ordinal = ordinal_of(device, "Stream::from_raw")?;
+        if cu_stream.is_null() {
+            return Err(Error::invalid(
+                "Stream::from_raw: cu_stream is null (the legacy default stream); use \
+                 get_stream for the device's default stream",
+            ));
+        }
+        let st = gpu::state(device, ordinal)?;
+        // SAFETY: the caller's contract.
+        let inner = unsafe { st.gpu.wrap_stream(cu_stream.cast(), Some(Arc::new(owner))) };
+        Ok(Stream {
+            device: device.clone(),
+            inner,
+        })
+    }
+
     /// The device the stream belongs to.
     pub fn device(&self) -> &Device {
         &self.device

@@ -1,0 +1,514 @@
+//! Raw interop: the addresses of arrays, and arrays over memory that something else allocated
+//! (another library's host or device buffer), kept alive by an owner the array holds.
+//! With the `ndarray` feature, zero-copy `ndarray` views of CPU arrays and arrays from
+//! `ndarray` arrays.
+
+use super::{checked_size, row_major, Array, Element};
+use crate::capturing;
+use crate::device::Device;
+use crate::dispatch::Storage;
+use crate::error::{Error, Result};
+use std::marker::PhantomData;
+use std::sync::Arc;
+
+/// The storage span of a strided layout: the byte offset of element zero from the lowest
+/// byte the layout addresses, and the number of bytes from there to the end of the highest
+/// element. `byte_strides` are checked to be whole elements; the result fits `isize`.
+fn strided_span<T, const N: usize>(
+    what: &str,
+    shape: [usize; N],
+    byte_strides: [isize; N],
+) -> Result<([isize; N], usize, usize)> {
+    let size = std::mem::size_of::<T>() as isize;
+    let mut strides = [0isize; N];
+    for d in 0..N {
+        if byte_strides[d] % size != 0 {
+            return Err(Error::invalid(format!(
+                "{what}: byte_strides[{d}] = {} is not a multiple of {size}, the size of the \
+                 element type (byte_strides are {byte_strides:?})",
+                byte_strides[d]
+            )));
+        }
+        strides[d] = byte_strides[d] / size;
+    }
+    if shape.contains(&0) {
+        return Ok((strides, 0, 0));
+    }
+    // Element offsets of the lowest and highest elements, relative to element zero; in i128,
+    // where no extent times stride overflows.
+    let (mut lo, mut hi) = (0i128, 0i128);
+    for d in 0..N {
+        let reach = strides[d] as i128 * (shape[d] as i128 - 1);
+        if reach < 0 {
+            lo += reach;
+        } else {
+            hi += reach;
+        }
+    }
+    let bytes = (hi - lo + 1) * size as i128;
+    if bytes > isize::MAX as i128 {
+        return Err(Error::invalid(format!(
+            "{what}: shape {shape:?} with byte_strides {byte_strides:?} spans {bytes} bytes, \
+             more than an address space"
+        )));
+    }
+    Ok((strides, (-lo * size as i128) as usize, bytes as usize))
+}
+
+impl<T: Element, const N: usize> Array<T, N> {
+    /// The strides in bytes, one per dimension (NumPy's convention; [`strides`](Self::strides)
+    /// counts elements).
+    pub fn byte_strides(&self) -> [isize; N] {
+        self.strides.map(|s| s * std::mem::size_of::<T>() as isize)
+    }
+
+    /// The address of element zero on the array's device: a host address for a CPU array, a
+    /// `CUdeviceptr` for a GPU array (what `__cuda_array_interface__` and DLPack exchange).
+    /// The address is valid while the array, a clone or a view of its memory lives.
+    pub fn device_ptr(&self) -> u64 {
+        self.device_address()
+    }
+
+    /// A pointer to element zero of a CPU array, for reading (with [`strides`](Self::strides)
+    /// in elements). Valid while the array, a clone or a view of its memory lives; reading
+    /// through it races with kernels and host-side calls that write the array meanwhile.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an array on a GPU (see [`device_ptr`](Self::device_ptr)).
+    pub fn as_ptr(&self) -> Result<*const T> {
+        self.as_mut_ptr().map(|p| p as *const T)
+    }
+
+    /// A pointer to element zero of a CPU array, for reading and writing; as
+    /// [`as_ptr`](Self::as_ptr). (Arrays have interior mutability: kernels write them through
+    /// shared references too.)
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an array on a GPU.
+    pub fn as_mut_ptr(&self) -> Result<*mut T> {
+        self.host_base().ok_or_else(|| {
+            Error::invalid(format!(
+                "as_ptr: the array is on \"{}\", not the CPU; use device_ptr for the address of \
+                 device memory",
+                self.device
+            ))
+        })
+    }
+
+    /// An array over host memory that something else allocated, without a copy: element
+    /// `[i0, .., iN-1]` is at `ptr + Σ i_d · byte_strides[d]` bytes (row-major contiguous when
+    /// `byte_strides` is `None`; strides may be negative). `owner` is kept by the array (and
+    /// shared by its clones and views) and dropped when the last of them drops; pass what
+    /// frees the memory (a `Vec`, an `Arc` of another library's buffer) or `()`.
+    ///
+    /// # Safety
+    /// - every element the shape and strides address lies in one allocation that is valid
+    ///   for reads and writes of `T` until `owner` drops (or forever, for an `owner` that
+    ///   does not free it);
+    /// - nothing else reads the memory while a kernel or host-side call writes it, or writes
+    ///   it while they read it (the array's own concurrency contract applies to its handles);
+    /// - a layout whose elements overlap (a zero stride) is only read by kernels, never
+    ///   written by more than one thread at a time.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming the argument: `device` is not the CPU, `ptr` is null
+    /// (for a non-empty shape) or not aligned for `T`, a byte stride is not a multiple of the
+    /// size of `T`, or the layout is too large.
+    pub unsafe fn from_host_ptr(
+        ptr: *mut T,
+        shape: impl super::IntoShape<N>,
+        byte_strides: Option<[isize; N]>,
+        device: &Device,
+        owner: impl Send + Sync + 'static,
+    ) -> Result<Self> {
+        if !device.is_cpu() {
+            return Err(Error::invalid(format!(
+                "from_host_ptr: device \"{device}\" is not the CPU (wrap device memory with \
+                 from_device_ptr)"
+            )));
+        }
+        // SAFETY: the caller's contract.
+        unsafe {
+            Self::from_external(
+                "from_host_ptr",
+                ptr as usize as u64,
+                shape.into_shape(),
+                byte_strides,
+                device,
+                Box::new(owner),
+            )
+        }
+    }
+
+    /// An array over device memory that something else allocated (another CUDA library's
+    /// buffer, `__cuda_array_interface__`'s `data`), without a copy; as
+    /// [`from_host_ptr`](Self::from_host_ptr), with `ptr` a `CUdeviceptr` of `device`'s
+    /// context. When the array drops, the GPU first finishes the work queued on it, then
+    /// `owner` drops.
+    ///
+    /// # Safety
+    /// As [`from_host_ptr`](Self::from_host_ptr), for device memory of `device` (allocated
+    /// in its primary context, or accessible from it: managed or peer memory).
+    /// Work that another library queues on the memory on its own streams is not ordered
+    /// with this crate's: synchronize between them.
+    ///
+    /// # Errors
+    /// As [`from_host_ptr`](Self::from_host_ptr), with `device` not a GPU.
+    pub unsafe fn from_device_ptr(
+        ptr: u64,
+        shape: impl super::IntoShape<N>,
+        byte_strides: Option<[isize; N]>,
+        device: &Device,
+        owner: impl Send + Sync + 'static,
+    ) -> Result<Self> {
+        if device.is_cpu() {
+            return Err(Error::invalid(
+                "from_device_ptr: device \"cpu\" is not a GPU (wrap host memory with \
+                 from_host_ptr)",
+            ));
+        }
+        // SAFETY: the caller's contract.
+        unsafe {
+            Self::from_external(
+                "from_device_ptr",
+                ptr,
+                shape.into_shape(),
+                byte_strides,
+                device,
+                Box::new(owner),
+            )
+        }
+    }
+
+    /// See [`from_host_ptr`](Self::from_host_ptr) and
+    /// [`from_device_ptr`](Self::from_device_ptr).
+    unsafe fn from_external(
+        what: &str,
+        ptr: u64,
+        shape: [usize; N],
+        byte_strides: Option<[isize; N]>,
+        device: &Device,
+        owner: Box<dyn std::any::Any + Send + Sync>,
+    ) -> Result<Self> {
+        let () = Self::VALID_NDIM;
+        capturing::refuse(Some(device), "wrapping external memory")?;
+        let (len, _) = checked_size::<T>(&shape)?;
+        let size = std::mem::size_of::<T>() as isize;
+        let byte_strides = byte_strides.unwrap_or_else(|| row_major(&shape).map(|s| s * size));
+        let (strides, byte_offset, bytes) = strided_span::<T, N>(what, shape, byte_strides)?;
+        let align = std::mem::align_of::<T>() as u64;
+        let mut ptr = ptr;
+        if len == 0 && ptr == 0 {
+            // Nothing is ever read: any aligned, non-null address stands for it.
+            ptr = align;
+        }
+        if ptr == 0 {
+            return Err(Error::invalid(format!(
+                "{what}: ptr is null for a shape of {len} elements"
+            )));
+        }
+        if !ptr.is_multiple_of(align) {
+            return Err(Error::invalid(format!(
+                "{what}: ptr {ptr:#x} is not aligned to {align} bytes, the alignment of {}",
+                T::TYPE_NAME
+            )));
+        }
+        let base = ptr
+            .checked_sub(byte_offset as u64)
+            .filter(|&b| b != 0)
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "{what}: the negative byte_strides {byte_strides:?} reach address 0 or \
+                     below from ptr {ptr:#x}"
+                ))
+            })?;
+        // SAFETY: the caller's contract covers the span (lowest to highest element).
+        let storage = unsafe { Storage::external(device, base, bytes, owner)? };
+        Ok(Array {
+            storage: Arc::new(storage),
+            grad: None,
+            byte_offset: (ptr - base) as usize,
+            shape,
+            strides,
+            device: device.clone(),
+            _elem: PhantomData,
+        })
+    }
+}
+
+#[cfg(feature = "ndarray")]
+pub use nd::NdComponents;
+
+#[cfg(feature = "ndarray")]
+mod nd {
+    use super::super::{Array, Element};
+    use crate::device::Device;
+    use crate::error::{Error, Result};
+    use ndarray::{
+        ArrayBase, ArrayView, ArrayViewD, ArrayViewMut, ArrayViewMutD, Data, Dim, Dimension, IxDyn,
+        ShapeBuilder,
+    };
+    use std::sync::Arc;
+
+    /// An element type as NumPy sees it in Warp: scalars of type `Scalar` on trailing axes of
+    /// shape `SHAPE` (none for a scalar, `[K]` for a vector or quaternion, `[rows, columns]`
+    /// for a matrix), at element strides `STRIDES` within one element.
+    pub trait NdComponents: Element {
+        /// The scalar type of the components.
+        type Scalar: Element;
+        /// The extents of the trailing axes.
+        const SHAPE: &'static [usize];
+        /// The strides of the trailing axes, in scalars.
+        const STRIDES: &'static [isize];
+    }
+
+    macro_rules! nd_scalars {
+        ($($t:ty),*) => {$(
+            impl NdComponents for $t {
+                type Scalar = $t;
+                const SHAPE: &'static [usize] = &[];
+                const STRIDES: &'static [isize] = &[];
+            }
+        )*};
+    }
+    nd_scalars!(
+        i8,
+        i16,
+        i32,
+        i64,
+        u8,
+        u16,
+        u32,
+        u64,
+        f32,
+        f64,
+        warp_core::f16
+    );
+
+    macro_rules! nd_vectors {
+        ($($t:ty => $s:ty, $k:literal);* $(;)?) => {$(
+            impl NdComponents for $t {
+                type Scalar = $s;
+                const SHAPE: &'static [usize] = &[$k];
+                const STRIDES: &'static [isize] = &[1];
+            }
+        )*};
+    }
+    nd_vectors!(
+        glam::Vec2 => f32, 2; glam::Vec3 => f32, 3; glam::Vec4 => f32, 4;
+        glam::DVec2 => f64, 2; glam::DVec3 => f64, 3; glam::DVec4 => f64, 4;
+        glam::IVec2 => i32, 2; glam::IVec3 => i32, 3; glam::IVec4 => i32, 4;
+        glam::UVec2 => u32, 2; glam::UVec3 => u32, 3; glam::UVec4 => u32, 4;
+        glam::Quat => f32, 4; glam::DQuat => f64, 4;
+    );
+
+    // glam stores matrices by column: entry (row i, column j) is scalar j * K + i, so the
+    // trailing axes [i, j] have strides [1, K] (a row-major index, as Warp's NumPy view).
+    macro_rules! nd_matrices {
+        ($($t:ty => $s:ty, $k:literal);* $(;)?) => {$(
+            impl NdComponents for $t {
+                type Scalar = $s;
+                const SHAPE: &'static [usize] = &[$k, $k];
+                const STRIDES: &'static [isize] = &[1, $k];
+            }
+        )*};
+    }
+    nd_matrices!(
+        glam::Mat2 => f32, 2; glam::Mat3 => f32, 3; glam::Mat4 => f32, 4;
+        glam::DMat2 => f64, 2; glam::DMat3 => f64, 3; glam::DMat4 => f64, 4;
+    );
+
+    impl<T: NdComponents, const N: usize> Array<T, N> {
+        /// The shape and strides (in scalars) with the trailing component axes.
+        fn component_layout(&self) -> (IxDyn, IxDyn) {
+            let k = (std::mem::size_of::<T>() / std::mem::size_of::<T::Scalar>()) as isize;
+            let shape: Vec<usize> = self.shape.iter().chain(T::SHAPE).copied().collect();
+            let strides: Vec<usize> = self
+                .strides
+                .iter()
+                .map(|s| s * k)
+                .chain(T::STRIDES.iter().copied())
+                .map(|s| s as usize)
+                .collect();
+            (IxDyn(&shape), IxDyn(&strides))
+        }
+
+        /// A zero-copy `ndarray` view of a CPU array's scalars, with a trailing axis per
+        /// component axis of the element type as NumPy has them in Warp: an
+        /// `Array<Vec3, 2>` of shape `[a, b]` is viewed with shape `[a, b, 3]`, an
+        /// `Array<Mat3>` of length `n` as `[n, 3, 3]` indexed `[k, row, column]`.
+        ///
+        /// # Errors
+        /// As [`as_ndarray`](Self::as_ndarray).
+        pub fn as_ndarray_components(&mut self) -> Result<ArrayViewD<'_, T::Scalar>> {
+            if self.shared() {
+                return Err(Self::shared_error("as_ndarray_components"));
+            }
+            let ptr = self.component_ptr("as_ndarray_components")?;
+            let (shape, strides) = self.component_layout();
+            // SAFETY: the scalars of every element in bounds (an invariant of every array),
+            // kept alive by `self`; no other handle, `self` borrowed exclusively.
+            Ok(unsafe { ArrayView::from_shape_ptr(shape.strides(strides), ptr.cast_const()) })
+        }
+
+        /// The mutable form of [`as_ndarray_components`](Self::as_ndarray_components).
+        ///
+        /// # Errors
+        /// As [`as_ndarray`](Self::as_ndarray).
+        pub fn as_ndarray_components_mut(&mut self) -> Result<ArrayViewMutD<'_, T::Scalar>> {
+            if self.shared() {
+                return Err(Self::shared_error("as_ndarray_components_mut"));
+            }
+            let ptr = self.component_ptr("as_ndarray_components_mut")?;
+            let (shape, strides) = self.component_layout();
+            // SAFETY: as in `as_ndarray_components`; the view is the only access.
+            Ok(unsafe { ArrayViewMut::from_shape_ptr(shape.strides(strides), ptr) })
+        }
+
+        fn component_ptr(&self, what: &str) -> Result<*mut T::Scalar> {
+            self.host_base().map(|p| p.cast()).ok_or_else(|| {
+                Error::invalid(format!(
+                    "{what}: the array is on \"{}\", not the CPU (copy it with to_vec first)",
+                    self.device
+                ))
+            })
+        }
+    }
+
+    impl<T: Element, const N: usize> Array<T, N> {
+        /// Whether another handle (a clone, a view) shares this array's memory.
+        fn shared(&self) -> bool {
+            Arc::strong_count(&self.storage) > 1
+        }
+
+        fn shared_error(what: &str) -> Error {
+            Error::invalid(format!(
+                "{what}: the array's memory is shared with a clone or view (which could write \
+                 it while the view lives); drop them, or use the unsafe as_ndarray_unchecked"
+            ))
+        }
+    }
+
+    impl<T: Element, const N: usize> Array<T, N>
+    where
+        Dim<[usize; N]>: Dimension,
+    {
+        /// The shape and strides as ndarray takes them, and element zero's address, for a
+        /// CPU array.
+        #[allow(clippy::type_complexity)]
+        fn nd_parts(&self, what: &str) -> Result<(Dim<[usize; N]>, Dim<[usize; N]>, *mut T)> {
+            let ptr = self.host_base().ok_or_else(|| {
+                Error::invalid(format!(
+                    "{what}: the array is on \"{}\", not the CPU (copy it with to_vec first)",
+                    self.device
+                ))
+            })?;
+            // ndarray takes negative strides as their two's complement in `usize`.
+            let (mut dim, mut strides) = (Dim::<[usize; N]>::zeros(N), Dim::<[usize; N]>::zeros(N));
+            dim.slice_mut().copy_from_slice(&self.shape);
+            strides
+                .slice_mut()
+                .copy_from_slice(&self.strides.map(|s| s as usize));
+            Ok((dim, strides, ptr))
+        }
+
+        /// A zero-copy `ndarray` view of a CPU array, with its shape and strides (element
+        /// types as they are: an `Array<Vec3>` gives a view of `Vec3`s).
+        ///
+        /// It takes `&mut self` and refuses an array whose memory another handle shares, so
+        /// that nothing (a kernel, a host-side call through a clone) writes the memory while
+        /// the view lives; [`as_ndarray_unchecked`](Self::as_ndarray_unchecked) lifts that.
+        ///
+        /// # Errors
+        /// [`Error::InvalidArgument`] for an array on a GPU, or one whose memory a clone or
+        /// view shares.
+        pub fn as_ndarray(&mut self) -> Result<ArrayView<'_, T, Dim<[usize; N]>>> {
+            if self.shared() {
+                return Err(Self::shared_error("as_ndarray"));
+            }
+            // SAFETY: no other handle exists and `self` is borrowed exclusively for the
+            // view's lifetime, so nothing writes the memory meanwhile.
+            unsafe { self.as_ndarray_unchecked() }
+        }
+
+        /// A zero-copy mutable `ndarray` view of a CPU array; as
+        /// [`as_ndarray`](Self::as_ndarray).
+        ///
+        /// # Errors
+        /// As [`as_ndarray`](Self::as_ndarray).
+        pub fn as_ndarray_mut(&mut self) -> Result<ArrayViewMut<'_, T, Dim<[usize; N]>>> {
+            if self.shared() {
+                return Err(Self::shared_error("as_ndarray_mut"));
+            }
+            let (dim, strides, ptr) = self.nd_parts("as_ndarray_mut")?;
+            // SAFETY: every index of the shape and strides addresses an element of the
+            // storage (an invariant of every array), which `self` keeps alive; no other handle
+            // exists and `self` is borrowed exclusively, so the view is the only access.
+            Ok(unsafe { ArrayViewMut::from_shape_ptr(dim.strides(strides), ptr) })
+        }
+
+        /// A zero-copy `ndarray` view of a CPU array whose memory other handles may share.
+        ///
+        /// # Safety
+        /// Nothing may write the array's memory while the view lives: no kernel launch or
+        /// host-side call (`fill`, `copy_from`, ..) on this array or a clone or view of it.
+        ///
+        /// # Errors
+        /// [`Error::InvalidArgument`] for an array on a GPU.
+        pub unsafe fn as_ndarray_unchecked(&self) -> Result<ArrayView<'_, T, Dim<[usize; N]>>> {
+            let (dim, strides, ptr) = self.nd_parts("as_ndarray")?;
+            // SAFETY: in bounds and alive as in `as_ndarray_mut`; no writer (the caller's
+            // contract).
+            Ok(unsafe { ArrayView::from_shape_ptr(dim.strides(strides), ptr.cast_const()) })
+        }
+
+        /// An array that takes an owned `ndarray` array over without a copy on the CPU (any
+        /// layout ndarray has, negative strides included): the ndarray array becomes the
+        /// memory's owner and drops with the last handle. On a GPU: a copy.
+        ///
+        /// # Errors
+        /// [`Error::InvalidArgument`] for a layout the array cannot address.
+        pub fn from_ndarray(
+            a: ndarray::Array<T, Dim<[usize; N]>>,
+            device: &Device,
+        ) -> Result<Self> {
+            if !device.is_cpu() {
+                return Self::from_ndarray_copy(&a, device);
+            }
+            let mut shape = [0usize; N];
+            shape.copy_from_slice(a.shape());
+            let mut byte_strides = [0isize; N];
+            let size = std::mem::size_of::<T>() as isize;
+            for (d, s) in a.strides().iter().enumerate() {
+                byte_strides[d] = s * size;
+            }
+            let mut a = a;
+            let ptr = a.as_mut_ptr();
+            // SAFETY: the shape and strides are the ndarray array's own, so they address its
+            // allocation, which the array keeps as the owner (moving an ndarray array does not
+            // move its elements); the owner is moved into the array, so nothing else
+            // accesses the memory.
+            unsafe { Self::from_host_ptr(ptr, shape, Some(byte_strides), device, a) }
+        }
+
+        /// An array holding a copy of any `ndarray` array or view (of any layout), on any
+        /// device; row-major contiguous.
+        ///
+        /// # Errors
+        /// As [`from_slice_shape`](Self::from_slice_shape).
+        pub fn from_ndarray_copy<S: Data<Elem = T>>(
+            a: &ArrayBase<S, Dim<[usize; N]>>,
+            device: &Device,
+        ) -> Result<Self> {
+            let mut shape = [0usize; N];
+            shape.copy_from_slice(a.shape());
+            match a.as_slice() {
+                Some(s) => Self::from_slice_shape(s, shape, device),
+                None => {
+                    let data: Vec<T> = a.iter().copied().collect();
+                    Self::from_slice_shape(&data, shape, device)
+                }
+            }
+        }
+    }
+}
