@@ -110,6 +110,7 @@ pub use warp_macros::{func, kernel, Struct};
 /// Work-precision sweeps: tables, SVG plots and progress (the `report` feature).
 #[cfg(feature = "report")]
 pub use warp_report as report;
+#[cfg(feature = "cuda")]
 pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
