@@ -19,26 +19,19 @@ mod common;
 #[path = "common/seed_ad.rs"]
 mod seed_ad;
 
-use seed_ad::{step, sum_sq};
+use seed_ad::{
+    seed_closed_form_errors, seed_start, step, sum_sq, SEED_B as B, SEED_DT as DT,
+    SEED_GRAVITY as GRAVITY, SEED_MASS as MASS,
+};
 use std::time::Instant;
 use warp_lang as wp;
 use wp::prelude::*;
-
-const B: f32 = 0.05;
-const MASS: f32 = 0.1;
-const DT: f32 = 0.01;
-const GRAVITY: Vec3 = Vec3::new(0.0, 0.0, -9.81);
 
 type State = (wp::Array<Vec3>, wp::Array<Vec3>);
 
 /// The seed program's initial state (as `particle_gradients` makes it), with gradients.
 fn initial(n: usize, dev: &wp::Device) -> wp::Result<State> {
-    let x0: Vec<Vec3> = (0..n)
-        .map(|i| Vec3::new((i % 100) as f32 * 0.01, (i % 7) as f32 * 0.1, 1.0))
-        .collect();
-    let v0: Vec<Vec3> = (0..n)
-        .map(|i| Vec3::new(1.0, (i % 3) as f32 - 1.0, 0.0))
-        .collect();
+    let (x0, v0) = seed_start(n);
     Ok((
         wp::Array::from_slice(&x0, dev)?.with_grad()?,
         wp::Array::from_slice(&v0, dev)?.with_grad()?,
@@ -149,26 +142,6 @@ fn full_tape(n: usize, steps: usize, dev: &wp::Device) -> wp::Result<(Vec<Vec3>,
     ))
 }
 
-/// The largest relative errors of dL/dx0 and dL/dv0 against 2 x_T and 2 c x_T (as
-/// `particle_gradients` measures them).
-fn closed_form_errors(run: &Run, steps: usize) -> (f64, f64) {
-    let r = 1.0 - (B * DT / MASS) as f64;
-    let c: f64 = DT as f64 * (1..=steps).map(|k| r.powi(k as i32)).sum::<f64>();
-    let (mut ex, mut ev) = (0.0f64, 0.0f64);
-    for k in 0..run.x_t.len() {
-        let xt = run.x_t[k].as_dvec3();
-        ex = ex.max(
-            (run.gx[k].as_dvec3() - 2.0 * xt).abs().max_element()
-                / (2.0 * xt).abs().max_element().max(1.0),
-        );
-        ev = ev.max(
-            (run.gv[k].as_dvec3() - 2.0 * c * xt).abs().max_element()
-                / (2.0 * c * xt).abs().max_element().max(1.0),
-        );
-    }
-    (ex, ev)
-}
-
 /// The largest absolute difference of two gradients, and whether they are the same bits.
 fn max_diff(a: &[Vec3], b: &[Vec3]) -> (f32, bool) {
     let d = a
@@ -267,7 +240,7 @@ fn main() -> wp::Result<()> {
             if dev.is_cpu() { "" } else { " on the GPU" }
         );
     }
-    let (ex, ev) = closed_form_errors(&run, steps);
+    let (ex, ev) = seed_closed_form_errors(&run.x_t, &run.gx, &run.gv, steps);
     println!("  max relative error of dL/dx0 vs 2 x_T:   {ex:.2e}");
     println!("  max relative error of dL/dv0 vs 2 c x_T: {ev:.2e}");
     Ok(())

@@ -97,19 +97,52 @@ pub fn sum_sq(x: Array<Vec3>, loss: Array<f32>) {
     atomic_add(loss, 0, dot(x[i], x[i]));
 }
 
+/// The seed program's drag (kg/s), mass (kg), step (s) and gravity, shared by its scenes.
+pub const SEED_B: f32 = 0.05;
+pub const SEED_MASS: f32 = 0.1;
+pub const SEED_DT: f32 = 0.01;
+pub const SEED_GRAVITY: Vec3 = Vec3::new(0.0, 0.0, -9.81);
+
+/// The seed program's initial positions and velocities for `n` particles.
+pub fn seed_start(n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
+    let x0 = (0..n)
+        .map(|i| Vec3::new((i % 100) as f32 * 0.01, (i % 7) as f32 * 0.1, 1.0))
+        .collect();
+    let v0 = (0..n)
+        .map(|i| Vec3::new(1.0, (i % 3) as f32 - 1.0, 0.0))
+        .collect();
+    (x0, v0)
+}
+
+/// The largest relative errors of dL/dx0 (`gx`) and dL/dv0 (`gv`) against their closed forms
+/// 2 x_T and 2 c x_T, for L = sum |x_T|^2 after `steps` steps of the seed program with its
+/// constants: r = 1 - b dt / m, c = dt (r + r^2 + ... + r^T).
+pub fn seed_closed_form_errors(x_t: &[Vec3], gx: &[Vec3], gv: &[Vec3], steps: usize) -> (f64, f64) {
+    let r = 1.0 - (SEED_B * SEED_DT / SEED_MASS) as f64;
+    let c: f64 = SEED_DT as f64 * (1..=steps).map(|k| r.powi(k as i32)).sum::<f64>();
+    let (mut ex, mut ev) = (0.0f64, 0.0f64);
+    for k in 0..x_t.len() {
+        let xt = x_t[k].as_dvec3();
+        ex = ex.max(
+            (gx[k].as_dvec3() - 2.0 * xt).abs().max_element()
+                / (2.0 * xt).abs().max_element().max(1.0),
+        );
+        ev = ev.max(
+            (gv[k].as_dvec3() - 2.0 * c * xt).abs().max_element()
+                / (2.0 * c * xt).abs().max_element().max(1.0),
+        );
+    }
+    (ex, ev)
+}
+
 /// The gradient of the seed program's final positions for `n` particles over `steps` steps:
 /// dL/dx0 = 2 x_T and dL/dv0 = 2 c x_T for L = sum |x_T|^2, with r = 1 - b dt / m and
 /// c = dt (r + r^2 + ... + r^T). Runs once to warm up (on a GPU: compiles or loads `step`,
 /// `sum_sq` and their adjoints), then times a forward and a backward pass and prints both
 /// with the largest relative errors against the closed forms.
 pub fn particle_gradients(n: usize, steps: usize, dev: &wp::Device) -> wp::Result<()> {
-    let (b, mass, g_z, dt) = (0.05f32, 0.1f32, -9.81f32, 0.01f32);
-    let x0: Vec<Vec3> = (0..n)
-        .map(|i| Vec3::new((i % 100) as f32 * 0.01, (i % 7) as f32 * 0.1, 1.0))
-        .collect();
-    let v0: Vec<Vec3> = (0..n)
-        .map(|i| Vec3::new(1.0, (i % 3) as f32 - 1.0, 0.0))
-        .collect();
+    let (b, mass, dt) = (SEED_B, SEED_MASS, SEED_DT);
+    let (x0, v0) = seed_start(n);
     let mut xs = vec![wp::Array::from_slice(&x0, dev)?.with_grad()?];
     let mut vs = vec![wp::Array::from_slice(&v0, dev)?.with_grad()?];
     for _ in 0..steps {
@@ -148,7 +181,7 @@ pub fn particle_gradients(n: usize, steps: usize, dev: &wp::Device) -> wp::Resul
                 &vs[s + 1],
                 b,
                 mass,
-                Vec3::new(0.0, 0.0, g_z),
+                SEED_GRAVITY,
                 dt,
             );
             wp::launch(step, n, args, dev)?;
@@ -162,25 +195,11 @@ pub fn particle_gradients(n: usize, steps: usize, dev: &wp::Device) -> wp::Resul
     wp::synchronize()?;
     let bwd = t.elapsed().as_secs_f64() * 1e3;
     // Closed forms, in f64 from the f32 final positions.
-    let r = 1.0 - (b * dt / mass) as f64;
-    let c: f64 = dt as f64 * (1..=steps).map(|k| r.powi(k as i32)).sum::<f64>();
-    let x_t = xs[steps].to_vec()?;
     let (gx, gv) = (
         xs[0].grad().expect("with_grad").to_vec()?,
         vs[0].grad().expect("with_grad").to_vec()?,
     );
-    let (mut ex, mut ev) = (0.0f64, 0.0f64);
-    for k in 0..n {
-        let xt = x_t[k].as_dvec3();
-        ex = ex.max(
-            (gx[k].as_dvec3() - 2.0 * xt).abs().max_element()
-                / (2.0 * xt).abs().max_element().max(1.0),
-        );
-        ev = ev.max(
-            (gv[k].as_dvec3() - 2.0 * c * xt).abs().max_element()
-                / (2.0 * c * xt).abs().max_element().max(1.0),
-        );
-    }
+    let (ex, ev) = seed_closed_form_errors(&xs[steps].to_vec()?, &gx, &gv, steps);
     println!(
         "particles {n} x {steps} steps on \"{dev}\": forward {fwd:.1} ms, backward {bwd:.1} ms \
          (ratio {:.2})",
