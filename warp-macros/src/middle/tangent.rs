@@ -225,6 +225,14 @@ impl Tx {
         }
     }
 
+    /// The tangent `t`, or zero of `like`'s type where there is none (a constant value).
+    fn or_zero(&mut self, t: Option<VarId>, like: VarId) -> Result<VarId, String> {
+        match t {
+            Some(t) => Ok(t),
+            None => self.zero(like),
+        }
+    }
+
     /// Zero of `like`'s type.
     fn zero(&mut self, like: VarId) -> Result<VarId, String> {
         let ty = self.ty(like);
@@ -380,10 +388,7 @@ impl Tx {
             } => {
                 self.out.push(s.clone());
                 if let Some(ta) = self.dot[*array] {
-                    let tv = match self.dot[*value] {
-                        Some(t) => t,
-                        None => self.zero(*value)?,
-                    };
+                    let tv = self.or_zero(self.dot[*value], *value)?;
                     self.push(StmtKind::Store {
                         array: ta,
                         index: index.clone(),
@@ -394,10 +399,7 @@ impl Tx {
             StmtKind::SetMember { var, path, value } => {
                 self.out.push(s.clone());
                 if let Some(t) = self.dot[*var] {
-                    let tv = match self.dot[*value] {
-                        Some(t) => t,
-                        None => self.zero(*value)?,
-                    };
+                    let tv = self.or_zero(self.dot[*value], *value)?;
                     self.push(StmtKind::SetMember {
                         var: t,
                         path: path.clone(),
@@ -472,10 +474,7 @@ impl Tx {
         }
         if mutable {
             let td = self.dot[dst].expect("active mutable variables have a tangent");
-            let value = match t {
-                Some(t) => t,
-                None => self.zero(dst)?,
-            };
+            let value = self.or_zero(t, dst)?;
             self.push(StmtKind::Assign {
                 dst: td,
                 op: Op::Copy(value),
@@ -557,10 +556,7 @@ impl Tx {
                 _ => {
                     let mut targs = Vec::new();
                     for v in args {
-                        targs.push(match self.dot[*v] {
-                            Some(t) => t,
-                            None => self.zero(*v)?,
-                        });
+                        targs.push(self.or_zero(self.dot[*v], *v)?);
                     }
                     Some(self.tmp(
                         ty.clone(),
@@ -856,10 +852,7 @@ impl Tx {
             "atomic_add" | "atomic_sub" => {
                 let Some(ta) = da else { return Ok(None) };
                 let value = *args.last().expect("an atomic has a value");
-                let tv = match dargs[args.len() - 1] {
-                    Some(t) => t,
-                    None => self.zero(value)?,
-                };
+                let tv = self.or_zero(dargs[args.len() - 1], value)?;
                 let mut targs = args.to_vec();
                 targs[0] = ta;
                 *targs.last_mut().expect("a value") = tv;
@@ -899,10 +892,8 @@ impl Tx {
                 la.push(self.tmp(Ty::Scalar(s), Op::Member(*v, lane.to_string())));
                 lda.push(t.map(|t| self.tmp(Ty::Scalar(s), Op::Member(t, lane.to_string()))));
             }
-            let t = match self.select(name, &la, &lda)? {
-                Some(t) => t,
-                None => self.zero(la[0])?,
-            };
+            let t = self.select(name, &la, &lda)?;
+            let t = self.or_zero(t, la[0])?;
             lanes.push(t);
         }
         Ok(Some(self.tmp(
