@@ -116,10 +116,21 @@ pub use warp_runtime::aot;
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
 pub mod docs;
-/// The trailing axes that vector and matrix elements have in `Array::as_ndarray_components`.
-#[cfg(feature = "ndarray")]
+/// The trailing axes that vector and matrix elements have in `Array::as_ndarray_components`
+/// and in DLPack tensors.
 pub use warp_runtime::NdComponents;
 pub mod optim;
+/// DLPack, the tensor exchange format: the `dlpark` crate, whose `Managed` tensors
+/// [`Array::to_dlpack`] makes and [`Array::from_dlpack`] takes (the `dlpack` feature).
+#[cfg(feature = "dlpack")]
+pub use warp_runtime::dlpack;
+/// Python extension modules: PyTorch, JAX, CuPy and NumPy tensors in and out without a copy
+/// (the `python` feature).
+#[cfg(feature = "python")]
+pub use warp_runtime::python;
+/// The scalar types that DLPack exchanges (the `dlpack` feature).
+#[cfg(feature = "dlpack")]
+pub use warp_runtime::DlpackScalar;
 
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
 pub use warp_runtime::graph;

@@ -72,6 +72,7 @@ mod bvh;
 mod checkpoint;
 mod control;
 mod decomp;
+mod dlpack;
 mod errors;
 mod f16;
 mod funcs;

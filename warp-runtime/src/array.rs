@@ -23,9 +23,15 @@ use std::ops::{Bound, RangeBounds};
 use std::sync::Arc;
 use warp_core::{f16, ArrayView, DTransform, Transform};
 
+mod components;
+#[cfg(feature = "dlpack")]
+mod dlpack;
 mod interop;
-#[cfg(feature = "ndarray")]
-pub use interop::NdComponents;
+pub use components::NdComponents;
+#[cfg(feature = "dlpack")]
+pub use dlpack::DlpackScalar;
+#[cfg(feature = "python")]
+pub(crate) use dlpack::{device_of as device_of_dlpack, dlpack_device};
 
 /// A type that can be stored in an [`Array`].
 ///

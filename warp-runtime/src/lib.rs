@@ -54,8 +54,11 @@ pub use cuda::source as cuda_source;
 #[cfg(feature = "cuda")]
 pub use cuda::stream;
 
-#[cfg(feature = "ndarray")]
+#[cfg(feature = "dlpack")]
+pub use array::DlpackScalar;
 pub use array::NdComponents;
+#[cfg(feature = "python")]
+pub mod python;
 pub use array::{Array, Element, IntoShape};
 pub use autograd::{gradcheck, hvp, jacobian, jacobian_fd, jvp, GradcheckOptions, GradcheckReport};
 pub use bytemuck::cast_slice;
@@ -63,6 +66,9 @@ pub use checkpoint::{CheckpointReport, CheckpointState, Checkpointed};
 pub use device::{
     cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, Runtime,
 };
+/// The DLPack crate (`dlpark`) that [`Array::to_dlpack`] and [`Array::from_dlpack`] speak.
+#[cfg(feature = "dlpack")]
+pub use dlpark as dlpack;
 pub use error::{Error, Result};
 pub use graph::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use kernel::{

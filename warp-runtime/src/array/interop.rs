@@ -237,11 +237,8 @@ impl<T: Element, const N: usize> Array<T, N> {
 }
 
 #[cfg(feature = "ndarray")]
-pub use nd::NdComponents;
-
-#[cfg(feature = "ndarray")]
 mod nd {
-    use super::super::{Array, Element};
+    use super::super::{Array, Element, NdComponents};
     use crate::device::Device;
     use crate::error::{Error, Result};
     use ndarray::{
@@ -250,86 +247,12 @@ mod nd {
     };
     use std::sync::Arc;
 
-    /// An element type as NumPy sees it in Warp: scalars of type `Scalar` on trailing axes of
-    /// shape `SHAPE` (none for a scalar, `[K]` for a vector or quaternion, `[rows, columns]`
-    /// for a matrix), at element strides `STRIDES` within one element.
-    pub trait NdComponents: Element {
-        /// The scalar type of the components.
-        type Scalar: Element;
-        /// The extents of the trailing axes.
-        const SHAPE: &'static [usize];
-        /// The strides of the trailing axes, in scalars.
-        const STRIDES: &'static [isize];
-    }
-
-    macro_rules! nd_scalars {
-        ($($t:ty),*) => {$(
-            impl NdComponents for $t {
-                type Scalar = $t;
-                const SHAPE: &'static [usize] = &[];
-                const STRIDES: &'static [isize] = &[];
-            }
-        )*};
-    }
-    nd_scalars!(
-        i8,
-        i16,
-        i32,
-        i64,
-        u8,
-        u16,
-        u32,
-        u64,
-        f32,
-        f64,
-        warp_core::f16
-    );
-
-    macro_rules! nd_vectors {
-        ($($t:ty => $s:ty, $k:literal);* $(;)?) => {$(
-            impl NdComponents for $t {
-                type Scalar = $s;
-                const SHAPE: &'static [usize] = &[$k];
-                const STRIDES: &'static [isize] = &[1];
-            }
-        )*};
-    }
-    nd_vectors!(
-        glam::Vec2 => f32, 2; glam::Vec3 => f32, 3; glam::Vec4 => f32, 4;
-        glam::DVec2 => f64, 2; glam::DVec3 => f64, 3; glam::DVec4 => f64, 4;
-        glam::IVec2 => i32, 2; glam::IVec3 => i32, 3; glam::IVec4 => i32, 4;
-        glam::UVec2 => u32, 2; glam::UVec3 => u32, 3; glam::UVec4 => u32, 4;
-        glam::Quat => f32, 4; glam::DQuat => f64, 4;
-    );
-
-    // glam stores matrices by column: entry (row i, column j) is scalar j * K + i, so the
-    // trailing axes [i, j] have strides [1, K] (a row-major index, as Warp's NumPy view).
-    macro_rules! nd_matrices {
-        ($($t:ty => $s:ty, $k:literal);* $(;)?) => {$(
-            impl NdComponents for $t {
-                type Scalar = $s;
-                const SHAPE: &'static [usize] = &[$k, $k];
-                const STRIDES: &'static [isize] = &[1, $k];
-            }
-        )*};
-    }
-    nd_matrices!(
-        glam::Mat2 => f32, 2; glam::Mat3 => f32, 3; glam::Mat4 => f32, 4;
-        glam::DMat2 => f64, 2; glam::DMat3 => f64, 3; glam::DMat4 => f64, 4;
-    );
-
     impl<T: NdComponents, const N: usize> Array<T, N> {
         /// The shape and strides (in scalars) with the trailing component axes.
         fn component_layout(&self) -> (IxDyn, IxDyn) {
-            let k = (std::mem::size_of::<T>() / std::mem::size_of::<T::Scalar>()) as isize;
-            let shape: Vec<usize> = self.shape.iter().chain(T::SHAPE).copied().collect();
-            let strides: Vec<usize> = self
-                .strides
-                .iter()
-                .map(|s| s * k)
-                .chain(T::STRIDES.iter().copied())
-                .map(|s| s as usize)
-                .collect();
+            let (shape, strides) = self.component_shape_strides();
+            // ndarray takes strides as `usize` and reads them as `isize` (two's complement).
+            let strides: Vec<usize> = strides.into_iter().map(|s| s as usize).collect();
             (IxDyn(&shape), IxDyn(&strides))
         }
 
