@@ -91,7 +91,7 @@ unsafe impl DlpackStream for ConsumerStream {
         #[cfg(feature = "cuda")]
         if let Some(ours) = &self.stream {
             // SAFETY: the producer's live stream of this device (the caller's contract).
-            let theirs = unsafe { wrap_stream(producer, ours.device())? };
+            let theirs = unsafe { stream_from_handle(producer as usize, ours.device())? };
             ours.wait_stream(&theirs)?;
             return Ok(true);
         }
@@ -100,21 +100,27 @@ unsafe impl DlpackStream for ConsumerStream {
     }
 }
 
-/// Wraps another library's stream handle, the legacy (`1`) and per-thread (`2`) default
-/// streams included (they are valid handles to the driver).
+/// Another library's CUDA stream as a [`Stream`](crate::stream::Stream) of `device`, for
+/// [`ScopedStream`](crate::stream::ScopedStream) and [`launch_on`](crate::launch_on): a
+/// handle as Python gives it (`torch.cuda.current_stream().cuda_stream`, CuPy's
+/// `Stream.ptr`), where `0` is the legacy default stream (as are DLPack's `1`, and `2` the
+/// per-thread default stream: valid handles to the driver). Launching on the caller's stream
+/// orders this crate's work with the framework's both ways, without blocking the host.
 ///
 /// # Safety
-/// `raw` is a live stream of `device`'s primary context, or one of the two sentinels.
+/// `handle` is a live stream of `device`'s primary context (the runtime API's context, the one
+/// PyTorch and CuPy use) while the returned stream and its clones are used, or `0`, `1`, `2`.
+///
+/// # Errors
+/// `ValueError` for the CPU; `RuntimeError` when the device cannot start.
 #[cfg(feature = "cuda")]
-unsafe fn wrap_stream(raw: *mut c_void, device: &Device) -> PyResult<crate::stream::Stream> {
-    // The null handle is the legacy default stream, as DLPack's `1`.
-    let raw = if raw.is_null() {
-        1usize as *mut c_void
-    } else {
-        raw
-    };
+pub unsafe fn stream_from_handle(
+    handle: usize,
+    device: &Device,
+) -> PyResult<crate::stream::Stream> {
+    let raw = if handle == 0 { 1 } else { handle };
     // SAFETY: the caller's contract; nothing is destroyed when the wrapper drops.
-    Ok(unsafe { crate::stream::Stream::from_raw(raw, device, ())? })
+    Ok(unsafe { crate::stream::Stream::from_raw(raw as *mut c_void, device, ())? })
 }
 
 /// An array over a Python object's memory, without a copy: a PyTorch, JAX or CuPy tensor on
@@ -239,7 +245,7 @@ impl DlpackExporter for DlpackArray {
             let ours = crate::stream::get_stream(device)?;
             if raw != ours.cuda_stream().cu_stream() as usize {
                 // SAFETY: the consumer's stream of this device, by the protocol.
-                let theirs = unsafe { wrap_stream(raw as *mut c_void, device)? };
+                let theirs = unsafe { stream_from_handle(raw, device)? };
                 theirs.wait_stream(&ours)?;
             }
         }
