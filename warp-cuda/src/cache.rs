@@ -326,7 +326,7 @@ impl KernelCache {
         let path = self.path_for(name, key);
         fs::create_dir_all(&self.dir).map_err(|e| {
             CudaError::io(
-                &e,
+                e,
                 format!("creating cache directory {}", self.dir.display()),
             )
         })?;
@@ -341,7 +341,7 @@ impl KernelCache {
         };
         write().map_err(|e| {
             let _ = fs::remove_file(&tmp);
-            CudaError::io(&e, format!("writing cache entry {}", path.display()))
+            CudaError::io(e, format!("writing cache entry {}", path.display()))
         })?;
         Ok(path)
     }
@@ -354,7 +354,7 @@ impl KernelCache {
             Err(e) if e.kind() == ErrorKind::NotFound => return Ok(0),
             Err(e) => {
                 return Err(CudaError::io(
-                    &e,
+                    e,
                     format!("listing cache directory {}", self.dir.display()),
                 ))
             }
@@ -372,7 +372,7 @@ impl KernelCache {
                     Err(e) if e.kind() == ErrorKind::NotFound => {}
                     Err(e) => {
                         return Err(CudaError::io(
-                            &e,
+                            e,
                             format!("removing {}", entry.path().display()),
                         ))
                     }
