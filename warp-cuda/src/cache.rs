@@ -455,21 +455,53 @@ impl KernelCache {
         if let Some(stamped) = self.read_stamp() {
             let key = cache_key(source, name, opts, arch, stamped);
             if let CacheLookup::Hit(cubin) = self.load(name, key) {
+                log::debug!(
+                    "kernel cache hit: {name} (sm_{arch}, NVRTC {}.{} by the stamp) from {}",
+                    stamped.0,
+                    stamped.1,
+                    self.path_for(name, key).display()
+                );
                 return Ok(hit(cubin, key));
             }
         }
         let version = nvrtc_version()?;
         let key = cache_key(source, name, opts, arch, version);
+        let path = self.path_for(name, key);
         let outcome = match self.load(name, key) {
-            CacheLookup::Hit(cubin) => return Ok(hit(cubin, key)),
-            CacheLookup::Absent => CacheOutcome::Miss,
-            CacheLookup::Damaged => CacheOutcome::Rebuilt,
+            CacheLookup::Hit(cubin) => {
+                log::debug!(
+                    "kernel cache hit: {name} (sm_{arch}) from {}",
+                    path.display()
+                );
+                return Ok(hit(cubin, key));
+            }
+            CacheLookup::Absent => {
+                log::debug!(
+                    "kernel cache miss: {name} (sm_{arch}): no {}",
+                    path.display()
+                );
+                CacheOutcome::Miss
+            }
+            CacheLookup::Damaged => {
+                log::warn!(
+                    "kernel cache entry {} is damaged: compiling {name} (sm_{arch}) again",
+                    path.display()
+                );
+                CacheOutcome::Rebuilt
+            }
         };
         let compiled = compile(source, name, opts, arch)?;
-        let path = self.store(name, key, &compiled.cubin).ok();
-        if path.is_some() {
-            self.write_stamp(version);
-        }
+        let path = match self.store(name, key, &compiled.cubin) {
+            Ok(path) => {
+                self.write_stamp(version);
+                Some(path)
+            }
+            Err(e) => {
+                // Handled: the kernel still runs, only the next process compiles it again.
+                log::warn!("kernel cache: {e} (the compiled {name} is used but not kept)");
+                None
+            }
+        };
         Ok((compiled, outcome, CacheEntry { key, path }))
     }
 }

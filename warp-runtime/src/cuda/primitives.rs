@@ -84,6 +84,7 @@ fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded
         .gpu
         .load_module(&compiled.cubin)
         .map_err(|e| gpu::err(device, e))?;
+    log::info!("loaded the primitives module {} on {device}", module.name());
     let l = Arc::new(Loaded {
         module: m,
         functions: Mutex::new(HashMap::new()),
