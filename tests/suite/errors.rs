@@ -21,6 +21,7 @@ backend_tests!(
     same_shape_dim,
     usable_after_fault,
     tape_misuse,
+    out_of_memory_then_usable,
 );
 
 /// The fault of a failed launch, or a panic naming what came instead.
@@ -458,4 +459,76 @@ fn tape_misuse(dev: &wp::Device) {
     fresh.backward(&y).unwrap();
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![2.0, 4.0]);
     assert_eq!(tape.steps(), vec!["tape_square", "custom"]);
+}
+
+/// More bytes than `dev` has: 2^62 on the CPU (4 EiB: past any machine's address space, so
+/// the allocator returns null even where the kernel overcommits memory), twice the GPU's
+/// memory on a GPU.
+fn impossible_bytes(dev: &wp::Device) -> usize {
+    match dev.kind() {
+        wp::DeviceKind::Cuda { ordinal } => {
+            let gpus = warp_cuda::probe().expect("a CUDA device to probe");
+            2 * gpus[ordinal].total_memory as usize
+        }
+        _ => 1 << 62,
+    }
+}
+
+/// An allocation the device cannot give is `Error::OutOfMemory` naming the device and the
+/// size (on the CPU too: an `Err`, not the allocator's abort); on a GPU the driver's error is
+/// its source. Arrays made before it are intact, and the device still allocates and
+/// launches afterwards.
+fn out_of_memory_then_usable(dev: &wp::Device) {
+    let before = arr(&[1.0f32, 2.0, 3.0, 4.0], dev);
+    let bytes = impossible_bytes(dev);
+    let err = wp::Array::<f32>::zeros(bytes / 4, dev).unwrap_err();
+    let Error::OutOfMemory {
+        device, bytes: b, ..
+    } = &err
+    else {
+        panic!("expected OutOfMemory, got {err:?}");
+    };
+    assert_eq!((device.as_str(), *b), (dev.alias(), bytes), "{err}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("out of memory") && msg.contains(&bytes.to_string()),
+        "{msg}"
+    );
+    let source = std::error::Error::source(&err);
+    if dev.is_cuda() {
+        let cuda = source
+            .and_then(|s| s.downcast_ref::<warp_cuda::CudaError>())
+            .unwrap_or_else(|| panic!("the driver's error as the source of {err:?}"));
+        assert!(cuda.is_out_of_memory(), "{cuda}");
+    } else {
+        assert!(source.is_none(), "{source:?}");
+    }
+    // The device still works: the old array, a new one, a launch.
+    let out = zeros::<f32, 1>(4, dev);
+    wp::launch(k_oob_read, 3, (&before, &out), dev).unwrap();
+    assert_eq!(&host(&out)[..3], [2.0, 3.0, 4.0]);
+}
+
+/// A shape whose byte count overflows `usize` is `InvalidArgument` (no allocation is asked
+/// for), and one past `isize::MAX` bytes (representable, but more than any Rust allocation
+/// may be) is `OutOfMemory`; neither aborts.
+#[test]
+fn impossible_cpu_allocations_are_errors() {
+    let cpu = wp::cpu();
+    let e = wp::Array::<f32, 2>::zeros((usize::MAX / 2, 4), &cpu).unwrap_err();
+    assert!(
+        matches!(&e, Error::InvalidArgument { what } if what.contains("too large")),
+        "{e:?}"
+    );
+    let e = wp::Array::<u8>::zeros(1 << 63, &cpu).unwrap_err();
+    assert!(
+        matches!(&e, Error::OutOfMemory { device, bytes, .. } if device == "cpu" && *bytes == 1 << 63),
+        "{e:?}"
+    );
+    // The host allocator itself refusing (2^62 bytes is below isize::MAX).
+    let e = wp::Array::<f32>::zeros(1 << 60, &cpu).unwrap_err();
+    assert!(
+        matches!(&e, Error::OutOfMemory { bytes, .. } if *bytes == 1 << 62),
+        "{e:?}"
+    );
 }

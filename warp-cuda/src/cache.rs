@@ -326,7 +326,7 @@ impl KernelCache {
         let path = self.path_for(name, key);
         fs::create_dir_all(&self.dir).map_err(|e| {
             CudaError::io(
-                &e,
+                e,
                 format!("creating cache directory {}", self.dir.display()),
             )
         })?;
@@ -341,7 +341,7 @@ impl KernelCache {
         };
         write().map_err(|e| {
             let _ = fs::remove_file(&tmp);
-            CudaError::io(&e, format!("writing cache entry {}", path.display()))
+            CudaError::io(e, format!("writing cache entry {}", path.display()))
         })?;
         Ok(path)
     }
@@ -354,7 +354,7 @@ impl KernelCache {
             Err(e) if e.kind() == ErrorKind::NotFound => return Ok(0),
             Err(e) => {
                 return Err(CudaError::io(
-                    &e,
+                    e,
                     format!("listing cache directory {}", self.dir.display()),
                 ))
             }
@@ -372,7 +372,7 @@ impl KernelCache {
                     Err(e) if e.kind() == ErrorKind::NotFound => {}
                     Err(e) => {
                         return Err(CudaError::io(
-                            &e,
+                            e,
                             format!("removing {}", entry.path().display()),
                         ))
                     }
@@ -455,21 +455,53 @@ impl KernelCache {
         if let Some(stamped) = self.read_stamp() {
             let key = cache_key(source, name, opts, arch, stamped);
             if let CacheLookup::Hit(cubin) = self.load(name, key) {
+                log::debug!(
+                    "kernel cache hit: {name} (sm_{arch}, NVRTC {}.{} by the stamp) from {}",
+                    stamped.0,
+                    stamped.1,
+                    self.path_for(name, key).display()
+                );
                 return Ok(hit(cubin, key));
             }
         }
         let version = nvrtc_version()?;
         let key = cache_key(source, name, opts, arch, version);
+        let path = self.path_for(name, key);
         let outcome = match self.load(name, key) {
-            CacheLookup::Hit(cubin) => return Ok(hit(cubin, key)),
-            CacheLookup::Absent => CacheOutcome::Miss,
-            CacheLookup::Damaged => CacheOutcome::Rebuilt,
+            CacheLookup::Hit(cubin) => {
+                log::debug!(
+                    "kernel cache hit: {name} (sm_{arch}) from {}",
+                    path.display()
+                );
+                return Ok(hit(cubin, key));
+            }
+            CacheLookup::Absent => {
+                log::debug!(
+                    "kernel cache miss: {name} (sm_{arch}): no {}",
+                    path.display()
+                );
+                CacheOutcome::Miss
+            }
+            CacheLookup::Damaged => {
+                log::warn!(
+                    "kernel cache entry {} is damaged: compiling {name} (sm_{arch}) again",
+                    path.display()
+                );
+                CacheOutcome::Rebuilt
+            }
         };
         let compiled = compile(source, name, opts, arch)?;
-        let path = self.store(name, key, &compiled.cubin).ok();
-        if path.is_some() {
-            self.write_stamp(version);
-        }
+        let path = match self.store(name, key, &compiled.cubin) {
+            Ok(path) => {
+                self.write_stamp(version);
+                Some(path)
+            }
+            Err(e) => {
+                // Handled: the kernel still runs, only the next process compiles it again.
+                log::warn!("kernel cache: {e} (the compiled {name} is used but not kept)");
+                None
+            }
+        };
         Ok((compiled, outcome, CacheEntry { key, path }))
     }
 }

@@ -92,6 +92,7 @@ fn nvrtc_state() -> &'static std::result::Result<(i32, i32), String> {
     NVRTC.get_or_init(|| {
         // SAFETY: only tries Library::new on cudarc's candidate names.
         if !unsafe { sys::is_culib_present() } {
+            log::info!("NVRTC not available: libnvrtc.so not found");
             return Err(
                 "libnvrtc.so not found (CUDA toolkit runtime libraries not installed, \
                         or not on the library search path)"
@@ -105,14 +106,20 @@ fn nvrtc_state() -> &'static std::result::Result<(i32, i32), String> {
                 .result()
                 .map(|_| (major, minor))
         }));
-        match r {
+        let state = match r {
             Ok(Ok(v)) => Ok(v),
             Ok(Err(e)) => Err(format!("nvrtcVersion failed: {e}")),
             Err(p) => Err(format!(
                 "libnvrtc could not be used: {}",
                 panic_message(p.as_ref())
             )),
+        };
+        match &state {
+            Ok((major, minor)) => log::debug!("loaded NVRTC {major}.{minor}"),
+            // A library present but unusable is worth a warning.
+            Err(why) => log::warn!("NVRTC cannot be used: {why}"),
         }
+        state
     })
 }
 
@@ -252,6 +259,7 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
         return Err(CudaError::Nvrtc {
             op: format!("nvrtcGetCUBIN({name})"),
             message: format!("NVRTC produced no cubin for sm_{arch} (is it a real architecture?)"),
+            source: None,
         });
     }
     let mut cubin = vec![0u8; size];
@@ -259,10 +267,18 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
         .result()
         .map_err(|e| CudaError::nvrtc(e, format!("nvrtcGetCUBIN({name}, sm_{arch})")))?;
     drop(prog);
+    let compile_ms = start.elapsed().as_secs_f64() * 1e3;
+    log::info!(
+        "NVRTC compiled {name} for sm_{arch} in {compile_ms:.1} ms ({} bytes of cubin)",
+        cubin.len()
+    );
+    if !log.trim().is_empty() {
+        log::debug!("NVRTC log of {name} (sm_{arch}):\n{}", log.trim_end());
+    }
     Ok(Compiled {
         cubin,
         log,
-        compile_ms: start.elapsed().as_secs_f64() * 1e3,
+        compile_ms,
     })
 }
 

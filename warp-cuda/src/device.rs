@@ -73,21 +73,55 @@ pub fn probe() -> std::result::Result<Vec<GpuInfo>, String> {
 
 pub(crate) fn probe_ref() -> &'static std::result::Result<Vec<GpuInfo>, String> {
     PROBE.get_or_init(|| {
-        if !driver_library_present() {
-            return Err(
-                "libcuda.so not found (no NVIDIA driver installed, or it is not on \
-                        the library search path)"
-                    .to_string(),
-            );
-        }
-        match catch_unwind(AssertUnwindSafe(probe_devices)) {
-            Ok(r) => r,
-            Err(payload) => Err(format!(
-                "the CUDA driver library could not be used: {}",
-                panic_message(payload.as_ref())
-            )),
-        }
+        let found = if !driver_library_present() {
+            Err(NO_DRIVER.to_string())
+        } else {
+            match catch_unwind(AssertUnwindSafe(probe_devices)) {
+                Ok(r) => r,
+                Err(payload) => Err(format!(
+                    "the CUDA driver library could not be used: {}",
+                    panic_message(payload.as_ref())
+                )),
+            }
+        };
+        log_probe(&found);
+        found
     })
+}
+
+/// The probe's answer when there is no driver library at all.
+const NO_DRIVER: &str = "libcuda.so not found (no NVIDIA driver installed, or it is not on \
+                         the library search path)";
+
+/// Says once what [`probe`] found: each GPU at info level; no driver or no device (an
+/// ordinary machine) at info; a driver that is there but cannot be used (too old, a stub,
+/// mismatched, failing) as a warning, since someone probably meant to use it.
+fn log_probe(found: &std::result::Result<Vec<GpuInfo>, String>) {
+    match found {
+        Ok(gpus) => {
+            let driver = DRIVER_VERSION.get().copied().unwrap_or(0);
+            log::info!(
+                "CUDA driver {}.{}: {} device(s)",
+                driver / 1000,
+                (driver % 1000) / 10,
+                gpus.len()
+            );
+            for g in gpus {
+                log::info!(
+                    "{}: {} (sm_{}, {} SMs, {:.1} GiB)",
+                    g.alias(),
+                    g.name,
+                    g.arch(),
+                    g.multiprocessor_count,
+                    g.total_memory as f64 / (1u64 << 30) as f64
+                );
+            }
+        }
+        Err(reason) if reason == NO_DRIVER || reason == "no CUDA device" => {
+            log::info!("CUDA not available: {reason}")
+        }
+        Err(reason) => log::warn!("CUDA not available: {reason}"),
+    }
 }
 
 /// The driver's CUDA version (e.g. 13000 for CUDA 13.0), once [`probe`] got that far.
@@ -272,6 +306,10 @@ impl Gpu {
             async_alloc,
         });
         gpus[ordinal] = Some(gpu.clone());
+        log::debug!(
+            "opened cuda:{ordinal} (primary context, stream-ordered allocation: {})",
+            if async_alloc { "yes" } else { "no" }
+        );
         Ok(gpu)
     }
 

@@ -5,7 +5,7 @@
 //! a launch is not actionable. The operation text is built only on the error path, so the
 //! success path of hot calls (launch, copies) allocates nothing.
 
-use std::fmt;
+use std::sync::Arc;
 
 use cudarc::driver::result::DriverError;
 use cudarc::nvrtc::result::NvrtcError;
@@ -14,31 +14,46 @@ use cudarc::nvrtc::result::NvrtcError;
 pub type Result<T> = std::result::Result<T, CudaError>;
 
 /// An error from the CUDA driver, NVRTC, the kernel cache, or a rejected argument.
-#[derive(Debug, Clone, PartialEq, Eq)]
+///
+/// The errors of cudarc and of the file system are kept as the [`source`] of the variants
+/// that wrap them; the message itself already names the operation and the driver's
+/// description, so printing only the top error loses nothing.
+///
+/// [`source`]: std::error::Error::source
+#[derive(Debug, Clone, thiserror::Error)]
 #[non_exhaustive]
 pub enum CudaError {
     /// CUDA cannot be used on this machine (no driver library, no device, driver too old,
     /// no NVRTC library). The string is the reason, e.g. "libcuda.so not found".
+    #[error("CUDA is not available: {0}")]
     NotAvailable(String),
     /// A driver API call failed.
+    #[error("{op}: {message} ({name})")]
     Driver {
         /// What was being done, e.g. "cuMemAllocAsync of 48000000 bytes on cuda:0".
         op: String,
-        /// The raw `CUresult` value.
-        code: u32,
         /// The `CUresult` name, e.g. "CUDA_ERROR_OUT_OF_MEMORY".
         name: String,
         /// The driver's description, e.g. "out of memory".
         message: String,
+        /// cudarc's error (the raw `CUresult`).
+        #[source]
+        source: DriverError,
     },
     /// An NVRTC call other than the compilation itself failed.
+    #[error("{op}: {message}")]
     Nvrtc {
         /// What was being done.
         op: String,
         /// NVRTC's description of the failure.
         message: String,
+        /// cudarc's error (the raw `nvrtcResult`); `None` where NVRTC reported success but
+        /// its result was unusable (an empty cubin).
+        #[source]
+        source: Option<NvrtcError>,
     },
     /// NVRTC rejected the source; `log` is NVRTC's full log (errors with line numbers).
+    #[error("NVRTC failed to compile {name} for sm_{arch}:\n{log}")]
     Compile {
         /// The program name given to `compile`.
         name: String,
@@ -48,23 +63,83 @@ pub enum CudaError {
         log: String,
     },
     /// An argument was rejected before reaching CUDA (out-of-range offset, wrong device, ...).
+    #[error("invalid argument: {0}")]
     InvalidArgument(String),
     /// A file-system operation of the kernel cache failed.
+    #[error("{op}: {source}")]
     Io {
         /// What was being done, with the path.
         op: String,
-        /// The I/O error kind.
-        kind: std::io::ErrorKind,
-        /// The I/O error message.
-        message: String,
+        /// The I/O error, shared because `std::io::Error` is not `Clone`; as the error's
+        /// `source` it downcasts to `Arc<std::io::Error>`.
+        #[source]
+        source: Arc<std::io::Error>,
     },
 }
+
+/// Equality compares what the variants say; two I/O errors are equal when their kinds and
+/// messages are (`std::io::Error` has no equality of its own).
+impl PartialEq for CudaError {
+    fn eq(&self, other: &Self) -> bool {
+        use CudaError::*;
+        match (self, other) {
+            (NotAvailable(a), NotAvailable(b)) => a == b,
+            (
+                Driver {
+                    op: o1,
+                    name: n1,
+                    message: m1,
+                    source: s1,
+                },
+                Driver {
+                    op: o2,
+                    name: n2,
+                    message: m2,
+                    source: s2,
+                },
+            ) => o1 == o2 && n1 == n2 && m1 == m2 && s1 == s2,
+            (
+                Nvrtc {
+                    op: o1,
+                    message: m1,
+                    source: s1,
+                },
+                Nvrtc {
+                    op: o2,
+                    message: m2,
+                    source: s2,
+                },
+            ) => o1 == o2 && m1 == m2 && s1 == s2,
+            (
+                Compile {
+                    name: n1,
+                    arch: a1,
+                    log: l1,
+                },
+                Compile {
+                    name: n2,
+                    arch: a2,
+                    log: l2,
+                },
+            ) => n1 == n2 && a1 == a2 && l1 == l2,
+            (InvalidArgument(a), InvalidArgument(b)) => a == b,
+            (Io { op: o1, source: s1 }, Io { op: o2, source: s2 }) => {
+                o1 == o2 && s1.kind() == s2.kind() && s1.to_string() == s2.to_string()
+            }
+            _ => false,
+        }
+    }
+}
+
+impl Eq for CudaError {}
 
 impl CudaError {
     /// Wraps a driver error with a description of the operation.
     pub(crate) fn driver(err: DriverError, op: impl Into<String>) -> Self {
         // `error_name`/`error_string` call back into libcuda; a `DriverError` exists only if
-        // the library was loaded, so these calls are safe to make here.
+        // the library was loaded, so these calls are safe to make here. They are made now,
+        // not when the error is displayed, so that a message never depends on the library
+        // still being usable.
         let name = err
             .error_name()
             .map(|s| s.to_string_lossy().into_owned())
@@ -75,9 +150,9 @@ impl CudaError {
             .unwrap_or_else(|_| name.clone());
         CudaError::Driver {
             op: op.into(),
-            code: err.0 as u32,
             name,
             message,
+            source: err,
         }
     }
 
@@ -96,49 +171,34 @@ impl CudaError {
         CudaError::Nvrtc {
             op: op.into(),
             message,
+            source: Some(err),
         }
     }
 
-    pub(crate) fn io(err: &std::io::Error, op: impl Into<String>) -> Self {
+    pub(crate) fn io(err: std::io::Error, op: impl Into<String>) -> Self {
         CudaError::Io {
             op: op.into(),
-            kind: err.kind(),
-            message: err.to_string(),
+            source: Arc::new(err),
         }
     }
 
     /// The raw `CUresult` code, for driver errors.
     pub fn driver_code(&self) -> Option<u32> {
         match self {
-            CudaError::Driver { code, .. } => Some(*code),
+            CudaError::Driver { source, .. } => Some(source.0 as u32),
             _ => None,
         }
     }
 
     /// True for `CUDA_ERROR_OUT_OF_MEMORY` (2).
     pub fn is_out_of_memory(&self) -> bool {
-        self.driver_code() == Some(2)
+        matches!(
+            self,
+            CudaError::Driver { source, .. }
+                if source.0 == cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY
+        )
     }
 }
-
-impl fmt::Display for CudaError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            CudaError::NotAvailable(reason) => write!(f, "CUDA is not available: {reason}"),
-            CudaError::Driver {
-                op, name, message, ..
-            } => write!(f, "{op}: {message} ({name})"),
-            CudaError::Nvrtc { op, message } => write!(f, "{op}: {message}"),
-            CudaError::Compile { name, arch, log } => {
-                write!(f, "NVRTC failed to compile {name} for sm_{arch}:\n{log}")
-            }
-            CudaError::InvalidArgument(msg) => write!(f, "invalid argument: {msg}"),
-            CudaError::Io { op, message, .. } => write!(f, "{op}: {message}"),
-        }
-    }
-}
-
-impl std::error::Error for CudaError {}
 
 #[cfg(test)]
 mod tests {
@@ -146,17 +206,27 @@ mod tests {
 
     #[test]
     fn display_says_what_and_why() {
+        // Built by hand: `CudaError::driver` would ask libcuda for the name, and CI has none.
         let e = CudaError::Driver {
             op: "cuMemAllocAsync of 48000000 bytes on cuda:0".into(),
-            code: 2,
             name: "CUDA_ERROR_OUT_OF_MEMORY".into(),
             message: "out of memory".into(),
+            source: DriverError(cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY),
         };
         assert_eq!(
             e.to_string(),
             "cuMemAllocAsync of 48000000 bytes on cuda:0: out of memory (CUDA_ERROR_OUT_OF_MEMORY)"
         );
         assert!(e.is_out_of_memory());
+        assert_eq!(e.driver_code(), Some(2));
+        // The driver's error is the source, not a string.
+        let source = std::error::Error::source(&e).expect("a source");
+        assert_eq!(
+            source.downcast_ref::<DriverError>(),
+            Some(&DriverError(
+                cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY
+            ))
+        );
         let c = CudaError::Compile {
             name: "k.cu".into(),
             arch: 90,
@@ -166,5 +236,31 @@ mod tests {
         assert!(CudaError::NotAvailable("no CUDA device".into())
             .to_string()
             .contains("no CUDA device"));
+    }
+}
+
+#[cfg(test)]
+mod io_tests {
+    use super::*;
+
+    #[test]
+    fn io_error_is_the_source_and_compares_by_kind_and_message() {
+        let e = CudaError::io(
+            std::io::Error::new(std::io::ErrorKind::PermissionDenied, "denied"),
+            "writing cache entry /x",
+        );
+        assert_eq!(e.to_string(), "writing cache entry /x: denied");
+        let source = std::error::Error::source(&e).expect("a source");
+        // The source is the `Arc` (it is an error itself, forwarding to the `io::Error`).
+        let io = source
+            .downcast_ref::<Arc<std::io::Error>>()
+            .expect("an Arc<io::Error>");
+        assert_eq!(io.kind(), std::io::ErrorKind::PermissionDenied);
+        assert_eq!(e.clone(), e);
+        let other = CudaError::io(
+            std::io::Error::new(std::io::ErrorKind::NotFound, "denied"),
+            "writing cache entry /x",
+        );
+        assert_ne!(e, other);
     }
 }

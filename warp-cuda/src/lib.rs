@@ -14,6 +14,11 @@
 //! - [`launch`]: [`Module`], [`Function`], [`Gpu::launch_raw`];
 //! - [`graph`]: stream capture ([`Stream::begin_capture`]) and replay ([`Graph`]).
 //!
+//! Diagnostics go to the `log` facade, with the module as target: `warp_cuda::device` (what
+//! the probe found, or why not), `warp_cuda::compile` (each NVRTC compile and its time),
+//! `warp_cuda::cache` (hits and misses at debug level, damaged or unwritable entries as
+//! warnings). warp-runtime's `config` module lists every target and level.
+//!
 //! The CUDA C++ builtin library (the `.cuh` sections named in the builtin table) lives in
 //! `cuda/` and is embedded by the code generator.
 

@@ -97,7 +97,7 @@ impl Curves {
             y1 = y1.max(y);
         }
         if !any {
-            return Err(PlotError(format!(
+            return Err(PlotError::new(format!(
                 "nothing to plot for \"{}\": no point with a positive, finite value",
                 self.title
             )));
@@ -106,18 +106,16 @@ impl Curves {
             x1 = x0 + 1.0;
         }
         let (y0, y1) = (y0 / 2.0, y1 * 2.0);
-        let err = |e: DrawingAreaErrorKind<std::io::Error>| {
-            PlotError(format!("writing {}: {e}", path.display()))
-        };
+        let err = crate::plot::drawing::<std::io::Error>(path);
         let root = SVGBackend::new(path, (860, 600)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
+        root.fill(&WHITE).map_err(&err)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(&self.title, ("sans-serif", 20))
             .margin(16)
             .x_label_area_size(48)
             .y_label_area_size(72)
             .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
-            .map_err(err)?;
+            .map_err(&err)?;
         chart
             .configure_mesh()
             .x_desc("iteration")
@@ -125,7 +123,7 @@ impl Curves {
             .x_label_formatter(&|x| format!("{x:.0}"))
             .y_label_formatter(&|y| format!("{y:.0e}"))
             .draw()
-            .map_err(err)?;
+            .map_err(&err)?;
         for (k, (name, pts)) in self.lines.iter().enumerate() {
             let color = Palette99::pick(k).to_rgba();
             let xy: Vec<(f64, f64)> = pts
@@ -139,7 +137,7 @@ impl Curves {
             };
             chart
                 .draw_series(LineSeries::new(xy, color.stroke_width(2)))
-                .map_err(err)?
+                .map_err(&err)?
                 .label(label)
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
@@ -151,8 +149,8 @@ impl Curves {
             .border_style(BLACK)
             .position(SeriesLabelPosition::UpperRight)
             .draw()
-            .map_err(err)?;
-        root.present().map_err(err)?;
+            .map_err(&err)?;
+        root.present().map_err(&err)?;
         Ok(())
     }
 }

@@ -1,28 +1,40 @@
 //! The work-precision plot: log-log error against run time, one line per series.
 
-use std::fmt;
 use std::path::Path;
 
 use plotters::prelude::*;
 
 use crate::{sci, Sweep};
 
-/// Why a plot could not be written.
-#[derive(Debug)]
-pub struct PlotError(pub(crate) String);
+/// Why a plot could not be written: nothing to plot, or the SVG file could not be written
+/// (then plotters' error is the [`source`](std::error::Error::source)).
+#[derive(Debug, thiserror::Error)]
+#[error("{message}")]
+pub struct PlotError {
+    message: String,
+    #[source]
+    source: Option<Box<dyn std::error::Error + Send + Sync + 'static>>,
+}
 
-impl fmt::Display for PlotError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
+impl PlotError {
+    /// A failure with nothing below it.
+    pub(crate) fn new(message: String) -> Self {
+        PlotError {
+            message,
+            source: None,
+        }
     }
 }
 
-impl std::error::Error for PlotError {}
-
-fn drawing<E: std::error::Error + Send + Sync>(
+/// plotters' error while drawing into `path`, as a [`PlotError`] naming the path (and
+/// repeating plotters' message, so that printing only the top error loses nothing).
+pub(crate) fn drawing<E: std::error::Error + Send + Sync + 'static>(
     path: &Path,
 ) -> impl Fn(DrawingAreaErrorKind<E>) -> PlotError + '_ {
-    move |e| PlotError(format!("writing {}: {e}", path.display()))
+    move |e| PlotError {
+        message: format!("writing {}: {e}", path.display()),
+        source: Some(Box::new(e)),
+    }
 }
 
 /// Bounds of a log axis around positive values, padded by a factor on each side.
@@ -39,7 +51,7 @@ pub(crate) fn write_svg(sweep: &Sweep, path: &Path) -> Result<(), PlotError> {
         |r: &&crate::Row| r.run.stability.is_stable() && r.run.error > 0.0 && r.run.seconds > 0.0;
     let points: Vec<&crate::Row> = sweep.rows().iter().filter(plottable).collect();
     if points.is_empty() {
-        return Err(PlotError(format!(
+        return Err(PlotError::new(format!(
             "nothing to plot for \"{}\": no stable run with a positive error and run time",
             sweep.title()
         )));

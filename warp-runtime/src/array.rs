@@ -124,6 +124,17 @@ fn alloc_zeroed<T: Element>(bytes: usize, device: &Device) -> Result<Arc<Storage
     Ok(Arc::new(storage))
 }
 
+/// `len` copies of `value` in a new host vector: the read-backs' and uploads' staging, whose
+/// allocation failure is an [`Error::OutOfMemory`] on `"cpu"` rather than an abort (a GPU
+/// array can be larger than the host's free memory).
+fn host_vec<T: Clone>(len: usize, value: T) -> Result<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len)
+        .map_err(|_| Error::out_of_memory("cpu", len.saturating_mul(std::mem::size_of::<T>())))?;
+    v.resize(len, value);
+    Ok(v)
+}
+
 /// Row-major strides (in elements) for `shape`.
 fn row_major<const N: usize>(shape: &[usize; N]) -> [isize; N] {
     let mut strides = [0isize; N];
@@ -136,14 +147,29 @@ fn row_major<const N: usize>(shape: &[usize; N]) -> [isize; N] {
     strides
 }
 
-/// The number of elements of `shape` and their size in bytes, or an error on overflow.
+/// The number of elements of `shape` and their size in bytes, or an error on overflow or
+/// past `isize::MAX` bytes (which the stride arithmetic assumes no array reaches).
 fn checked_size<T>(shape: &[usize]) -> Result<(usize, usize)> {
-    let too_big = || {
-        Error::invalid(format!(
-            "an array of shape {shape:?} and element size {} is too large",
-            std::mem::size_of::<T>()
-        ))
-    };
+    let (len, bytes) = byte_size::<T>(shape)?;
+    if bytes > isize::MAX as usize {
+        return Err(too_large::<T>(shape));
+    }
+    Ok((len, bytes))
+}
+
+/// [`Error::InvalidArgument`]: `shape` of `T`s has too many bytes.
+#[cold]
+fn too_large<T>(shape: &[usize]) -> Error {
+    Error::invalid(format!(
+        "an array of shape {shape:?} and element size {} is too large",
+        std::mem::size_of::<T>()
+    ))
+}
+
+/// The number of elements of `shape` and their size in bytes, or an error when either does
+/// not fit in `usize` (or `T` is zero-sized).
+fn byte_size<T>(shape: &[usize]) -> Result<(usize, usize)> {
+    let too_big = || too_large::<T>(shape);
     if std::mem::size_of::<T>() == 0 {
         // Zero-sized elements would let the element count exceed `isize::MAX`, which the
         // stride arithmetic assumes it never does; they carry no data anyway.
@@ -158,9 +184,6 @@ fn checked_size<T>(shape: &[usize]) -> Result<(usize, usize)> {
     let bytes = len
         .checked_mul(std::mem::size_of::<T>())
         .ok_or_else(too_big)?;
-    if bytes > isize::MAX as usize {
-        return Err(too_big());
-    }
     Ok((len, bytes))
 }
 
@@ -250,9 +273,16 @@ impl<T: Element, const N: usize> Array<T, N> {
     const VALID_NDIM: () = assert!(N >= 1 && N <= 4, "an Array has 1 to 4 dimensions");
 
     /// A new contiguous array over fresh zeroed storage.
+    ///
+    /// A shape whose byte count does not fit in `usize` is an [`Error::InvalidArgument`] (no
+    /// allocation can be asked for); a representable size that the device cannot give, past
+    /// `isize::MAX` included, is [`Error::OutOfMemory`].
     fn alloc(shape: [usize; N], device: &Device) -> Result<Self> {
         let () = Self::VALID_NDIM;
-        let (_, bytes) = checked_size::<T>(&shape)?;
+        let (_, bytes) = byte_size::<T>(&shape)?;
+        if bytes > isize::MAX as usize {
+            return Err(Error::out_of_memory(device.alias(), bytes));
+        }
         Ok(Array {
             storage: alloc_zeroed::<T>(bytes, device)?,
             grad: None,
@@ -265,6 +295,11 @@ impl<T: Element, const N: usize> Array<T, N> {
     }
 
     /// An array of zeros. A zero extent is allowed and gives an empty array.
+    ///
+    /// # Errors
+    /// [`Error::OutOfMemory`] when the device cannot allocate the array (on the CPU too: the
+    /// allocator's failure is an `Err`, not an abort); [`Error::InvalidArgument`] when the
+    /// shape's byte count does not fit in `usize`; [`Error::Capture`] inside a graph capture.
     pub fn zeros(shape: impl IntoShape<N>, device: &Device) -> Result<Self> {
         Self::alloc(shape.into_shape(), device)
     }
@@ -451,7 +486,7 @@ impl<T: Element, const N: usize> Array<T, N> {
     /// The whole storage, copied to the host, for strided access to memory the host cannot
     /// address.
     fn read_storage(&self) -> Result<Vec<u8>> {
-        let mut bytes = vec![0u8; self.storage.len()];
+        let mut bytes = host_vec(self.storage.len(), 0u8)?;
         self.storage.read(0, &mut bytes)?;
         Ok(bytes)
     }
@@ -466,7 +501,7 @@ impl<T: Element, const N: usize> Array<T, N> {
             dispatch::synchronize(&self.device)?;
             let len = self.len();
             let size = std::mem::size_of::<T>();
-            let mut out = vec![T::zeroed(); len];
+            let mut out = host_vec(len, T::zeroed())?;
             if self.is_contiguous() {
                 self.storage
                     .read(self.byte_offset, bytemuck::cast_slice_mut(&mut out))?;
@@ -481,7 +516,10 @@ impl<T: Element, const N: usize> Array<T, N> {
         };
         if self.is_contiguous() {
             let len = self.len();
-            let mut out = Vec::<T>::with_capacity(len);
+            let mut out = Vec::<T>::new();
+            // The array's own bytes: the product cannot overflow.
+            out.try_reserve_exact(len)
+                .map_err(|_| Error::out_of_memory("cpu", len * std::mem::size_of::<T>()))?;
             // SAFETY: a contiguous array's elements are `len` consecutive `T`s from `base`;
             // the destination has capacity `len` and is a distinct allocation.
             unsafe {
@@ -518,7 +556,7 @@ impl<T: Element, const N: usize> Array<T, N> {
                     .storage
                     .fill(self.byte_offset, bytes, bytemuck::bytes_of(&value));
             }
-            return self.write_row_major(&vec![value; self.len()]);
+            return self.write_row_major(&host_vec(self.len(), value)?);
         };
         if self.is_contiguous() {
             for i in 0..self.len() {

@@ -2,6 +2,33 @@
 //!
 //! Each setting is an atomic so that it can be read on every launch without a lock and changed
 //! from any thread. Changes apply to launches that start afterwards.
+//!
+//! # Logging
+//!
+//! Diagnostics go to the [`log`](https://docs.rs/log) facade: the application picks where they
+//! go (any `log` implementation, `env_logger` say, with `RUST_LOG=warp_cuda=debug`), and
+//! without a logger they cost one atomic load. Targets are the modules that emit them:
+//!
+//! | target | level | what |
+//! |---|---|---|
+//! | `warp_runtime::device` | info | the [`init`](crate::init) banner (also printed to stdout unless [`quiet`]); the preferred device, first asked, and why not a GPU when it is the CPU |
+//! | `warp_runtime::device` | debug | each device found |
+//! | `warp_cuda::device` | info | the CUDA driver version and each GPU (name, `sm_XX`, SMs, memory), or why CUDA is not available when there is no driver or no device |
+//! | `warp_cuda::device` | warn | a driver that is there but cannot be used (too old, the toolkit's stub, a version mismatch, `cuInit` failing) |
+//! | `warp_cuda::device` | debug | a GPU opened (its context and stream) |
+//! | `warp_cuda::compile` | info | each NVRTC compile: program, `sm_XX`, milliseconds, cubin size; no NVRTC library |
+//! | `warp_cuda::compile` | warn | an NVRTC library that cannot be used |
+//! | `warp_cuda::compile` | debug | the NVRTC version loaded; NVRTC's log of a successful compile (warnings) |
+//! | `warp_cuda::cache` | debug | kernel (disk) cache hits and misses, with the entry's file |
+//! | `warp_cuda::cache` | warn | a damaged entry (compiled again) or one that cannot be written (the kernel still runs) |
+//! | `warp_runtime::cuda::module` | info | a kernel loaded on a GPU at its first launch (forward or adjoint, contiguous or strided) in how many milliseconds, and from where: ahead-of-time cubin, kernel cache, or NVRTC with its time |
+//! | `warp_runtime::cuda::module` | debug | a module cache miss (a kernel's first launch on a GPU) |
+//! | `warp_runtime::cuda::module` | trace | a module cache hit (every GPU launch that is not a [`Launch`](crate::Launch) object; formatted only when trace is enabled for the target) |
+//! | `warp_runtime::cuda::objects`, `::primitives` | info | a build or primitives library loaded on a GPU |
+//!
+//! CPU launches log nothing, and nothing on a launch path formats a message unless its
+//! record is enabled. Errors that are returned are not logged as well: they are the caller's
+//! to report.
 
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 

@@ -175,10 +175,15 @@ fn runtime() -> &'static Runtime {
         let mut devices = vec![Device::new(DeviceKind::Cpu, cpu_model_name())];
         let (gpus, cuda_status) = cuda_devices();
         devices.extend(gpus);
-        Runtime {
+        let rt = Runtime {
             devices,
             cuda_status,
+        };
+        // (Why there is no GPU, if none, warp-cuda's probe has said.)
+        for d in &rt.devices {
+            log::debug!("device \"{}\": {}", d.alias(), d.name());
         }
+        rt
     })
 }
 
@@ -212,14 +217,17 @@ fn cuda_devices() -> (Vec<Device>, String) {
 /// Initialises the runtime and prints the device list once, like Warp's `wp.init()`.
 ///
 /// Idempotent: later calls return the same runtime and print nothing. The banner is not
-/// printed when [`config::quiet`] is set (`WARP_QUIET=1`). Calling `init` is optional: the
+/// printed when [`config::quiet`] is set (`WARP_QUIET=1`); it goes to the `log` facade at
+/// info level either way (target `warp_runtime::device`). Calling `init` is optional: the
 /// other functions initialise the runtime on demand, silently.
 pub fn init() -> &'static Runtime {
     static PRINTED: OnceLock<()> = OnceLock::new();
     let rt = runtime();
     PRINTED.get_or_init(|| {
+        let banner = rt.banner();
+        log::info!("{banner}");
         if !config::quiet() {
-            println!("{}", rt.banner());
+            println!("{banner}");
         }
     });
     rt
@@ -236,13 +244,31 @@ pub fn devices() -> Vec<Device> {
 }
 
 /// The device Warp would pick by default: the first GPU, else the CPU.
+///
+/// The first call says which at info level, and why not a GPU when it falls back to the CPU.
 pub fn get_preferred_device() -> Device {
+    static SAID: std::sync::Once = std::sync::Once::new();
     let rt = runtime();
-    rt.devices
+    let device = rt
+        .devices
         .iter()
         .find(|d| d.is_cuda())
-        .unwrap_or(&rt.devices[0])
-        .clone()
+        .unwrap_or(&rt.devices[0]);
+    SAID.call_once(|| {
+        if device.is_cpu() {
+            log::info!(
+                "preferred device: \"cpu\" (no CUDA device: {})",
+                rt.cuda_status
+            );
+        } else {
+            log::info!(
+                "preferred device: \"{}\" ({})",
+                device.alias(),
+                device.name()
+            );
+        }
+    });
+    device.clone()
 }
 
 /// The device named by `alias`: `"cpu"`, `"cuda"` (the first GPU) or `"cuda:N"`.

@@ -11,13 +11,25 @@ use warp_core::Fault;
 pub type Result<T> = std::result::Result<T, Error>;
 
 /// What can go wrong on the host side of warp-lang.
-#[derive(Clone, Debug, PartialEq)]
+///
+/// An error that wraps a lower-level one keeps it as its
+/// [`source`](std::error::Error::source) ([`Error::Cuda`]'s driver or NVRTC error,
+/// [`Error::OutOfMemory`]'s on a GPU, [`Error::Step`]'s step error, [`Error::Fault`]'s
+/// fault); the message repeats what the source says, so printing only the top error loses
+/// nothing.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
     /// A kernel thread faulted (out-of-bounds index, integer division by zero, zero step). The
     /// launch stopped at the first fault it saw.
-    Fault(Fault),
+    // The fault already names the kernel, argument, index and shape.
+    #[error("{0}")]
+    Fault(#[source] Fault),
     /// An array argument lives on another device than the one the launch runs on.
+    #[error(
+        "kernel `{kernel}`: argument `{arg}` is on device \"{found}\" but the launch is on \
+         device \"{expected}\""
+    )]
     DeviceMismatch {
         /// The kernel being launched.
         kernel: &'static str,
@@ -29,6 +41,7 @@ pub enum Error {
         found: String,
     },
     /// The launch dimensions are not usable.
+    #[error("kernel `{kernel}`: invalid launch dim {dim:?}: {reason}")]
     InvalidDim {
         /// The kernel being launched.
         kernel: &'static str,
@@ -38,6 +51,10 @@ pub enum Error {
         reason: String,
     },
     /// The kernel destructures `tid()` into a different number of dimensions than the launch has.
+    #[error(
+        "kernel `{kernel}`: tid() is destructured into {tid_ndim} dimension(s) but the kernel \
+         was launched with {launch_ndim} dimension(s)"
+    )]
     TidMismatch {
         /// The kernel being launched.
         kernel: &'static str,
@@ -47,6 +64,10 @@ pub enum Error {
         launch_ndim: usize,
     },
     /// Arguments declared with `same_shape` have different shapes.
+    #[error(
+        "kernel `{kernel}`: arguments declared same_shape differ in shape: {}",
+        ShapeList(args, shapes)
+    )]
     ShapeMismatch {
         /// The kernel being launched.
         kernel: &'static str,
@@ -55,15 +76,40 @@ pub enum Error {
         /// Their shapes, in the same order.
         shapes: Vec<Vec<usize>>,
     },
-    /// A device is unknown or not available in this build.
-    /// The CUDA driver or NVRTC reported an error (allocation, copy, compilation, launch).
+    /// The CUDA driver or NVRTC reported an error (copy, compilation, launch, an allocation
+    /// failing for another reason than memory). Only with the `cuda` feature: without it
+    /// nothing reaches CUDA.
+    #[cfg(feature = "cuda")]
+    #[error("CUDA error on \"{device}\": {source}")]
     Cuda {
-        /// The device.
+        /// The device (`"nvrtc"` for ahead-of-time compilation, which has none).
         device: String,
         /// What failed and why (an NVRTC error includes the compiler's log).
-        message: String,
+        #[source]
+        source: warp_cuda::CudaError,
+    },
+    /// A device could not allocate `bytes` bytes: the host allocator returned nothing, or the
+    /// CUDA driver said `CUDA_ERROR_OUT_OF_MEMORY`. The device is still usable (smaller
+    /// allocations may succeed, and earlier arrays are intact).
+    ///
+    /// A size that does not even fit in `usize` (a shape whose byte count overflows) is an
+    /// [`Error::InvalidArgument`] instead: no allocation was attempted.
+    #[error("out of memory on \"{device}\": {bytes} bytes could not be allocated")]
+    #[non_exhaustive]
+    OutOfMemory {
+        /// The device's alias.
+        device: String,
+        /// The size of the allocation that failed.
+        bytes: usize,
+        /// On a GPU, the driver's error (it names the allocation call); `None` on the CPU,
+        /// whose allocator gives no reason, and for a size past `isize::MAX` bytes, which no
+        /// device is asked for.
+        #[cfg(feature = "cuda")]
+        #[source]
+        source: Option<warp_cuda::CudaError>,
     },
     /// No such device, or it cannot be used.
+    #[error("no device \"{name}\": {reason}")]
     NoDevice {
         /// The alias that was asked for.
         name: String,
@@ -71,6 +117,7 @@ pub enum Error {
         reason: String,
     },
     /// A launch in `config::set_verify_fp` mode left a NaN or an infinity in an array.
+    #[error("kernel `{kernel}` wrote a non-finite value to `{arg}` at index {index:?}: {value}")]
     NonFinite {
         /// The kernel.
         kernel: &'static str,
@@ -82,6 +129,7 @@ pub enum Error {
         value: String,
     },
     /// [`Array::check_finite`](crate::Array::check_finite) found a NaN or an infinity.
+    #[error("{what} diverged: non-finite value at index {index:?}: {value}")]
     Diverged {
         /// What was checked (the caller's words).
         what: String,
@@ -91,6 +139,7 @@ pub enum Error {
         value: String,
     },
     /// Backward through a kernel that has no adjoint.
+    #[error("cannot run backward through kernel `{kernel}`: it {reason}")]
     NotDifferentiable {
         /// The kernel.
         kernel: &'static str,
@@ -100,6 +149,7 @@ pub enum Error {
     },
     /// Forward mode ([`jvp`](crate::autograd::jvp), [`hvp`](crate::autograd::hvp)) through a
     /// kernel that has no tangent kernel.
+    #[error("cannot differentiate kernel `{kernel}` in forward mode: it {reason}")]
     NoTangent {
         /// The kernel.
         kernel: &'static str,
@@ -110,18 +160,21 @@ pub enum Error {
     /// An operation that a graph capture cannot record was called inside one (an allocation,
     /// a read-back, a kernel not compiled before the capture, a nested capture, work on
     /// another device), or a graph was launched where it cannot run.
+    #[error("graph capture: {what}")]
     Capture {
         /// What was refused and what to do instead.
         what: String,
     },
     /// A host-side API was called with unusable arguments (lengths that do not match a shape,
     /// a view range out of bounds, an impossible reinterpretation, ...).
+    #[error("invalid argument: {what}")]
     InvalidArgument {
         /// What was wrong, with the values involved.
         what: String,
     },
     /// The step function of a checkpointed rollout ([`Checkpointed`](crate::Checkpointed))
     /// failed; `source` is its error.
+    #[error("step {step} of a checkpointed rollout ({pass} pass): {source}")]
     Step {
         /// The step `t` (the step from state `t` to state `t + 1`).
         step: usize,
@@ -158,102 +211,62 @@ impl Error {
     pub(crate) fn invalid_in(what: &str, why: impl fmt::Display) -> Self {
         Self::invalid(format!("{what}: {why}"))
     }
-}
 
-impl fmt::Display for Error {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            // The fault already names the kernel, argument, index and shape.
-            Error::Fault(fault) => write!(f, "{fault}"),
-            Error::DeviceMismatch {
-                kernel,
-                arg,
-                expected,
-                found,
-            } => write!(
-                f,
-                "kernel `{kernel}`: argument `{arg}` is on device \"{found}\" but the launch is \
-                 on device \"{expected}\""
-            ),
-            Error::InvalidDim {
-                kernel,
-                dim,
-                reason,
-            } => {
-                write!(f, "kernel `{kernel}`: invalid launch dim {dim:?}: {reason}")
+    /// [`Error::Cuda`]: `source` on `device`.
+    #[cfg(feature = "cuda")]
+    #[cold]
+    pub(crate) fn cuda(device: impl Into<String>, source: warp_cuda::CudaError) -> Self {
+        Error::Cuda {
+            device: device.into(),
+            source,
+        }
+    }
+
+    /// [`Error::OutOfMemory`] with no source: the host allocator's (it gives no reason), or a
+    /// size past what any device can address.
+    #[cold]
+    pub(crate) fn out_of_memory(device: impl Into<String>, bytes: usize) -> Self {
+        Error::OutOfMemory {
+            device: device.into(),
+            bytes,
+            #[cfg(feature = "cuda")]
+            source: None,
+        }
+    }
+
+    /// A failed GPU allocation of `bytes` bytes: [`Error::OutOfMemory`] when the driver says
+    /// so (keeping its error as the source), [`Error::Cuda`] otherwise.
+    #[cfg(feature = "cuda")]
+    #[cold]
+    pub(crate) fn cuda_alloc(
+        device: impl Into<String>,
+        bytes: usize,
+        source: warp_cuda::CudaError,
+    ) -> Self {
+        if source.is_out_of_memory() {
+            Error::OutOfMemory {
+                device: device.into(),
+                bytes,
+                source: Some(source),
             }
-            Error::TidMismatch {
-                kernel,
-                tid_ndim,
-                launch_ndim,
-            } => write!(
-                f,
-                "kernel `{kernel}`: tid() is destructured into {tid_ndim} dimension(s) but the \
-                 kernel was launched with {launch_ndim} dimension(s)"
-            ),
-            Error::ShapeMismatch {
-                kernel,
-                args,
-                shapes,
-            } => {
-                write!(
-                    f,
-                    "kernel `{kernel}`: arguments declared same_shape differ in shape: "
-                )?;
-                for (i, (arg, shape)) in args.iter().zip(shapes).enumerate() {
-                    if i > 0 {
-                        write!(f, ", ")?;
-                    }
-                    write!(f, "`{arg}` has shape {shape:?}")?;
-                }
-                Ok(())
-            }
-            Error::NoDevice { name, reason } => write!(f, "no device \"{name}\": {reason}"),
-            Error::Cuda { device, message } => write!(f, "CUDA error on \"{device}\": {message}"),
-            Error::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
-            Error::Step { step, pass, source } => write!(
-                f,
-                "step {step} of a checkpointed rollout ({pass} pass): {source}"
-            ),
-            Error::Capture { what } => write!(f, "graph capture: {what}"),
-            Error::NonFinite {
-                kernel,
-                arg,
-                index,
-                value,
-            } => write!(
-                f,
-                "kernel `{kernel}` wrote a non-finite value to `{arg}` at index {index:?}: {value}"
-            ),
-            Error::Diverged { what, index, value } => {
-                write!(
-                    f,
-                    "{what} diverged: non-finite value at index {index:?}: {value}"
-                )
-            }
-            Error::NotDifferentiable { kernel, reason } => {
-                write!(
-                    f,
-                    "cannot run backward through kernel `{kernel}`: it {reason}"
-                )
-            }
-            Error::NoTangent { kernel, reason } => {
-                write!(
-                    f,
-                    "cannot differentiate kernel `{kernel}` in forward mode: it {reason}"
-                )
-            }
+        } else {
+            Error::cuda(device, source)
         }
     }
 }
 
-impl std::error::Error for Error {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            Error::Fault(fault) => Some(fault),
-            Error::Step { source, .. } => Some(source.as_ref()),
-            _ => None,
+/// `same_shape`'s arguments and their shapes, as [`Error::ShapeMismatch`] lists them.
+struct ShapeList<'a>(&'a [String], &'a [Vec<usize>]);
+
+impl fmt::Display for ShapeList<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, (arg, shape)) in self.0.iter().zip(self.1).enumerate() {
+            if i > 0 {
+                write!(f, ", ")?;
+            }
+            write!(f, "`{arg}` has shape {shape:?}")?;
         }
+        Ok(())
     }
 }
 

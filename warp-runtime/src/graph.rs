@@ -418,6 +418,7 @@ enum Body {
 }
 
 /// Recorded work, replayed by [`Graph::launch`] (Warp's `wp.Graph` and `wp.capture_launch`).
+#[must_use = "a capture records its work without running it: the work runs when the `Graph` is launched"]
 pub struct Graph {
     device: Device,
     body: Body,

@@ -272,6 +272,7 @@ pub type OwnedArgsOf<K> = <<K as Kernel>::Params as KernelParams>::Owned;
 ///
 /// A launch object records on a recording [`Tape`](crate::Tape) like a plain launch, and
 /// inside a capture it is captured like one.
+#[must_use = "a `Launch` runs nothing until `launch()` is called on it"]
 pub struct Launch<K: Kernel> {
     device: Device,
     dim: Dim,

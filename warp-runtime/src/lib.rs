@@ -17,7 +17,8 @@
 //! - [`primitives`]: scan, reductions, radix sort and stream compaction on arrays.
 //! - [`graph`]: work recorded once and replayed ([`capture`], [`Graph`]): CUDA graphs on a
 //!   GPU, the list of recorded operations on the CPU.
-//! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size).
+//! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size), and what
+//!   warp-lang sends to the `log` facade ([targets and levels](config#logging)).
 //!
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
 //! zero becomes an [`Error::Fault`] naming the kernel, the argument and the values.

@@ -33,14 +33,21 @@ unsafe impl Sync for HostBuffer {}
 
 impl HostBuffer {
     /// A zero-filled allocation of `bytes` bytes aligned to `align` (at least [`HOST_ALIGN`]).
+    ///
+    /// # Errors
+    /// [`Error::OutOfMemory`] (device `"cpu"`) when the allocator returns nothing or the size
+    /// is more than any Rust allocation may be (`isize::MAX` rounded up to the alignment):
+    /// an `Err`, never the allocator's abort, so that a program can free memory or try a
+    /// smaller size.
     pub(crate) fn zeroed(bytes: usize, align: usize) -> Result<HostBuffer> {
         // Always allocate at least one byte: the allocator rejects zero sizes, and a real
-        // pointer keeps empty arrays free of special cases.
+        // pointer keeps empty arrays free of special cases. `align` is an element type's
+        // alignment (a power of two), so the layout fails only for a size past `isize::MAX`.
         let layout = Layout::from_size_align(bytes.max(1), align.max(HOST_ALIGN))
-            .map_err(|_| Error::invalid(format!("an allocation of {bytes} bytes is too large")))?;
+            .map_err(|_| Error::out_of_memory("cpu", bytes))?;
         // SAFETY: the layout has a non-zero size.
         let ptr = unsafe { alloc::alloc_zeroed(layout) };
-        let ptr = NonNull::new(ptr).unwrap_or_else(|| alloc::handle_alloc_error(layout));
+        let ptr = NonNull::new(ptr).ok_or_else(|| Error::out_of_memory("cpu", bytes))?;
         Ok(HostBuffer {
             ptr,
             bytes,

@@ -215,10 +215,7 @@ fn compile_units(
     dir: &Path,
     adjoints: bool,
 ) -> Result<Vec<AotEntry>> {
-    let err = |e: warp_cuda::CudaError| Error::Cuda {
-        device: "nvrtc".into(),
-        message: e.to_string(),
-    };
+    let err = |e: warp_cuda::CudaError| Error::cuda("nvrtc", e);
     // Say which architectures this NVRTC lacks before compiling anything.
     let supported = warp_cuda::nvrtc_supported_archs().map_err(err)?;
     let unsupported: Vec<String> = archs
@@ -228,14 +225,14 @@ fn compile_units(
         .collect();
     if !unsupported.is_empty() {
         let (major, minor) = warp_cuda::nvrtc_version().map_err(err)?;
-        return Err(Error::Cuda {
-            device: "nvrtc".into(),
-            message: format!(
+        return Err(Error::cuda(
+            "nvrtc",
+            warp_cuda::CudaError::InvalidArgument(format!(
                 "NVRTC {major}.{minor} cannot compile for {} (it supports {supported:?}; \
                  {ARCHS_ENV} names the architectures)",
                 unsupported.join(", ")
-            ),
-        });
+            )),
+        ));
     }
     let cache = KernelCache::new(dir);
     // One after the other: NVRTC compiles one program at a time in a process (measured with

@@ -182,7 +182,9 @@ fn load_setter(st: &GpuState, device: &Device, ordinal: usize) {
                     .link_with_library(&compiled.cubin, &library)
                     .map_err(|e| err(device, e))?;
                 // A cache that cannot be written only costs the next start a link.
-                let _ = cache.store(name, key, &image);
+                if let Err(e) = cache.store(name, key, &image) {
+                    log::warn!("kernel cache: {e} (the linked condition kernel is not kept)");
+                }
                 image
             }
         };

@@ -26,18 +26,12 @@ use warp_cuda::{CudaError, DeviceBuffer, Gpu};
 
 /// A CUDA error on `device` as a runtime error.
 pub(crate) fn err(device: &Device, e: CudaError) -> Error {
-    Error::Cuda {
-        device: device.alias().to_string(),
-        message: e.to_string(),
-    }
+    Error::cuda(device.alias(), e)
 }
 
 /// The opened GPU `ordinal`.
 pub(crate) fn gpu(ordinal: usize) -> Result<Arc<Gpu>> {
-    Gpu::open(ordinal).map_err(|e| Error::Cuda {
-        device: format!("cuda:{ordinal}"),
-        message: e.to_string(),
-    })
+    Gpu::open(ordinal).map_err(|e| Error::cuda(format!("cuda:{ordinal}"), e))
 }
 
 /// `wp::fault_t` (80 bytes) followed by the `u32` flag the first faulting thread sets.

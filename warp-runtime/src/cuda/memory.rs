@@ -20,7 +20,8 @@ impl CudaBuffer {
     pub(crate) fn zeros(device: &Device, ordinal: usize, bytes: usize) -> Result<CudaBuffer> {
         gpu::refuse_in_capture(ordinal, "an allocation")?;
         let g = gpu::gpu(ordinal)?;
-        let inner = DeviceBuffer::zeros(&g, bytes).map_err(|e| gpu::err(device, e))?;
+        let inner = DeviceBuffer::zeros(&g, bytes)
+            .map_err(|e| Error::cuda_alloc(device.alias(), bytes, e))?;
         Ok(CudaBuffer { inner, owner: None })
     }
 
@@ -53,10 +54,7 @@ impl CudaBuffer {
 
     /// A driver error as a runtime error naming this buffer's GPU.
     fn err(&self, e: CudaError) -> Error {
-        Error::Cuda {
-            device: format!("cuda:{}", self.ordinal()),
-            message: e.to_string(),
-        }
+        Error::cuda(format!("cuda:{}", self.ordinal()), e)
     }
 }
 

@@ -128,8 +128,26 @@ pub(crate) fn loaded(
     let key = (ordinal, info.module, info.name, contiguous, adjoint);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+        // Every launch that is not a launch object comes here: nothing is formatted unless a
+        // logger asked for trace records of this target.
+        if log::log_enabled!(log::Level::Trace) {
+            log::trace!(
+                "module cache hit: {}::{} on {device} ({}, {})",
+                info.module,
+                info.name,
+                variant_name(adjoint),
+                layout_name(contiguous)
+            );
+        }
         return Ok(l.clone());
     }
+    log::debug!(
+        "module cache miss: {}::{} on {device} ({}, {}): loading it",
+        info.module,
+        info.name,
+        variant_name(adjoint),
+        layout_name(contiguous)
+    );
     // Loading a module inside a stream capture would break it; wp::load compiles before.
     super::gpu::refuse_in_capture(
         ordinal,
@@ -192,6 +210,21 @@ pub(crate) fn loaded(
         .load_module(&compiled.cubin)
         .map_err(|e| err(device, e))?;
     let function = module.function(&src.entry).map_err(|e| err(device, e))?;
+    let total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    log::info!(
+        "loaded kernel {}::{} ({}, {}) on {device} in {total_ms:.1} ms: {}",
+        info.module,
+        info.name,
+        variant_name(adjoint),
+        layout_name(contiguous),
+        if aot {
+            "ahead-of-time cubin".to_string()
+        } else if matches!(outcome, CacheOutcome::Hit) {
+            "kernel cache hit".to_string()
+        } else {
+            format!("NVRTC {:.1} ms", compiled.compile_ms)
+        }
+    );
     reports()
         .lock()
         .unwrap_or_else(|p| p.into_inner())
@@ -205,7 +238,7 @@ pub(crate) fn loaded(
             compile_ms: compiled.compile_ms,
             cache_hit: matches!(outcome, CacheOutcome::Hit),
             aot,
-            total_ms: t0.elapsed().as_secs_f64() * 1e3,
+            total_ms,
             cache_key: entry.key,
             cache_entry: entry.path,
         });
@@ -220,6 +253,24 @@ pub(crate) fn loaded(
         .unwrap_or_else(|p| p.into_inner())
         .insert(key, l.clone());
     Ok(l)
+}
+
+/// "forward" or "adjoint", for log records.
+fn variant_name(adjoint: Option<usize>) -> &'static str {
+    if adjoint.is_some() {
+        "adjoint"
+    } else {
+        "forward"
+    }
+}
+
+/// "contiguous" or "strided" (the `WP_CONTIGUOUS` variant or not), for log records.
+fn layout_name(contiguous: bool) -> &'static str {
+    if contiguous {
+        "contiguous"
+    } else {
+        "strided"
+    }
 }
 
 /// Compiles and loads `kernels` for GPU `ordinal` now (each variant the one `loaded` keeps,

@@ -66,6 +66,7 @@ fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Resul
         .gpu
         .load_module(&compiled.cubin)
         .map_err(|e| gpu::err(device, e))?;
+    log::info!("loaded the build library {} on {device}", lib.name);
     let l = Arc::new(Loaded {
         module,
         functions: Mutex::new(HashMap::new()),

@@ -27,8 +27,9 @@ impl<T: Element> PinnedVec<T> {
     /// `len` zeros in page-locked memory, for copies with the GPU `device`.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] when `device` is the CPU; [`Error::Cuda`] when the driver
-    /// cannot allocate.
+    /// [`Error::InvalidArgument`] when `device` is the CPU; [`Error::OutOfMemory`] (naming
+    /// `device`, the driver's error as its source) when there is not enough page-locked
+    /// memory; [`Error::Cuda`] when the driver fails otherwise.
     pub fn zeros(len: usize, device: &Device) -> Result<Self> {
         let DeviceKind::Cuda { ordinal } = device.kind() else {
             return Err(Error::invalid(format!(
@@ -39,7 +40,8 @@ impl<T: Element> PinnedVec<T> {
             Error::invalid(format!("{len} elements of {} overflow", T::TYPE_NAME))
         })?;
         let gpu = gpu::state(device, ordinal)?.gpu.clone();
-        let buf = warp_cuda::PinnedBuffer::new(&gpu, bytes).map_err(|e| gpu::err(device, e))?;
+        let buf = warp_cuda::PinnedBuffer::new(&gpu, bytes)
+            .map_err(|e| Error::cuda_alloc(device.alias(), bytes, e))?;
         Ok(PinnedVec {
             buf,
             device: device.clone(),

@@ -84,6 +84,7 @@ fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded
         .gpu
         .load_module(&compiled.cubin)
         .map_err(|e| gpu::err(device, e))?;
+    log::info!("loaded the primitives module {} on {device}", module.name());
     let l = Arc::new(Loaded {
         module: m,
         functions: Mutex::new(HashMap::new()),
@@ -137,8 +138,8 @@ fn run(
         st.join_pending()?;
         ws.buffer = None;
         let bytes = need.max(old + old / 2);
-        let buf =
-            warp_cuda::DeviceBuffer::alloc(&st.gpu, bytes).map_err(|e| gpu::err(device, e))?;
+        let buf = warp_cuda::DeviceBuffer::alloc(&st.gpu, bytes)
+            .map_err(|e| Error::cuda_alloc(device.alias(), bytes, e))?;
         ws.buffer = Some(buf);
         // Allocated on the default stream, which every user stream waits for before a launch.
         ws.last = None;

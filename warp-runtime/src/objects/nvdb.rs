@@ -237,6 +237,7 @@ impl NvdbGrid {
     /// The grid with its checksum computed and stored (head and tail CRC32s, as its version
     /// lays them out: [`NvdbGrid::checksum`]), so [`NvdbGrid::checksum_matches`] gives
     /// `Some(true)`. The checksum covers no byte of its own field, and nothing else changes.
+    #[must_use = "`with_checksum` consumes the grid and returns it with the checksum"]
     pub fn with_checksum(mut self) -> NvdbGrid {
         let (head, tail) = self.crcs();
         let stored = head as u64 | (tail as u64) << 32;
