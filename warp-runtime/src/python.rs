@@ -22,7 +22,7 @@ use dlpark::python::{
     DlpackExporter, DlpackStream, ExportRequest, ImportRequest, ImportedDlpack, StreamArg,
 };
 use dlpark::{DlpackFlags, Managed};
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use std::ffi::c_void;
 
@@ -36,6 +36,7 @@ impl From<Error> for PyErr {
             | Error::DeviceMismatch { .. }
             | Error::ShapeMismatch { .. }
             | Error::InvalidDim { .. } => PyValueError::new_err(message),
+            Error::OutOfMemory { .. } => PyMemoryError::new_err(message),
             _ => PyRuntimeError::new_err(message),
         }
     }
