@@ -34,6 +34,7 @@ mod bounce;
 mod common;
 
 use bounce::{Balls, Contact, Setup};
+use clap::Parser;
 use warp_lang as wp;
 use warp_report::{sci, Table};
 use wp::prelude::*;
@@ -118,17 +119,31 @@ fn optimise(
     Ok((iterations, max_miss(balls, dev)?))
 }
 
+/// Differentiating through a contact: balls bounce once on the floor, and Adam with the
+/// time-of-impact gradient finds the launch velocities that put each at its target.
+#[derive(Parser)]
+struct Cli {
+    /// Balls, each with its own target [default: 4096 on a GPU, 64 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    balls: Option<usize>,
+    /// Most Adam iterations
+    #[arg(long, default_value_t = 400, value_parser = common::num::<usize>)]
+    iterations: usize,
+    /// Adam's learning rate
+    #[arg(long, default_value_t = 0.05)]
+    lr: f64,
+    /// Converged when every ball is within this distance of its target (m)
+    #[arg(long, default_value_t = 1e-3)]
+    tol: f64,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--balls", "--iterations", "--lr", "--tol"],
-        "bounce [--device cpu|cuda:N] [--balls N] [--iterations 400] [--lr 0.05] [--tol 1e-3] \
-         [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--balls", if dev.is_cuda() { 4096 } else { 64 });
-    let iterations: usize = common::parsed("--iterations", 400);
-    let lr: f64 = common::parsed("--lr", 0.05);
-    let tol: f64 = common::parsed("--tol", 1e-3);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.balls.unwrap_or(if dev.is_cuda() { 4096 } else { 64 });
+    let (iterations, lr, tol) = (cli.iterations, cli.lr, cli.tol);
     if n == 0 {
         eprintln!("--balls must be at least 1");
         std::process::exit(2);

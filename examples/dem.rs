@@ -20,6 +20,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -205,22 +206,37 @@ impl Scene {
     }
 }
 
+/// A cohesive granular material (DEM): restitution, energy drift and the stability limit of
+/// its contact model, then a pile settling in a box.
+#[derive(Parser)]
+struct Cli {
+    /// Particles settling in the box [default: 110592 on a GPU, 8000 on the CPU]
+    #[arg(long, value_name = "PARTICLES", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// Frames of the settling run, or of Warp's configuration with `--preset warp` [default:
+    /// 60; 100 with `--preset warp`]
+    #[arg(long, value_parser = common::num::<usize>)]
+    frames: Option<usize>,
+    /// `warp`: only Warp's example_dem configuration, timed
+    #[arg(long, value_parser = ["warp"])]
+    preset: Option<String>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--frames", "--preset"],
-        "dem [--n PARTICLES] [--frames 60] [--preset warp] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
-    if common::arg("--preset").as_deref() == Some("warp") {
-        return warp_preset(&dev);
+    if cli.preset.as_deref() == Some("warp") {
+        return warp_preset(&dev, cli.frames.unwrap_or(100));
     }
     println!("DEM on \"{dev}\": linear spring-dashpot contacts, cohesion, Coulomb friction");
     restitution(&dev)?;
     energy_drift(&dev)?;
     stability_limit(&dev)?;
-    let n: usize = common::parsed("--n", if gpu { 110_592 } else { 8_000 });
-    let frames: usize = common::parsed("--frames", 60);
+    let n = cli.n.unwrap_or(if gpu { 110_592 } else { 8_000 });
+    let frames = cli.frames.unwrap_or(60);
     settle(&dev, n, frames)?;
     common::print_compiled();
     Ok(())
@@ -626,7 +642,7 @@ fn max_overlap(x: &[Vec3], radius: f32) -> f64 {
 /// Differences: the ground here has the particles' friction (Warp's: k_t 100, mu 0.5, and a
 /// cohesion of 0.02), and damping acts on separation too (Warp's only on approach); the
 /// arithmetic per pair is the same.
-fn warp_preset(dev: &wp::Device) -> wp::Result<()> {
+fn warp_preset(dev: &wp::Device, frames: usize) -> wp::Result<()> {
     let m = Material {
         radius: 0.1,
         mass: 1.0 / 64.0,
@@ -655,7 +671,6 @@ fn warp_preset(dev: &wp::Device) -> wp::Result<()> {
         }
     }
     let v0 = vec![Vec3::new(0.0, 0.0, 15.0); x0.len()];
-    let frames: usize = common::parsed("--frames", 100);
     let (frame_dt, substeps) = (1.0f32 / 60.0, 64usize);
     let dt = frame_dt / substeps as f32;
     let mut s = Scene::new(m, &x0, &v0, 128, 5.0 * m.radius, substeps, dev)?;

@@ -13,6 +13,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -98,14 +99,30 @@ fn signed_volume(p: &[Vec3], ix: &[i32]) -> f64 {
         .sum()
 }
 
+/// Marching cubes of a torus: the extracted surface's distance from the true one as the grid
+/// is refined.
+#[derive(Parser)]
+struct Cli {
+    /// The finest grid's samples per side [default: 257 on a GPU, 129 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    max_res: Option<usize>,
+    /// Points sampled on the surfaces to measure the error
+    #[arg(
+        long,
+        value_name = "POINTS",
+        default_value = "100_000",
+        value_parser = common::num::<usize>
+    )]
+    n: usize,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--max-res", "--n"],
-        "marching_cubes [--max-res N] [--n POINTS] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let max_res: usize = common::parsed("--max-res", if dev.is_cpu() { 129 } else { 257 });
-    let n: usize = common::parsed("--n", 100_000);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let max_res = cli.max_res.unwrap_or(if dev.is_cpu() { 129 } else { 257 });
+    let n = cli.n;
     println!("marching cubes of a torus (R = {MAJOR}, r = {MINOR}) in [-1, 1]^3, on {dev}");
     let (surf_h, q_h) = samples(n);
     let surf = wp::Array::from_slice(&surf_h, &dev)?;

@@ -17,6 +17,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -209,13 +210,21 @@ fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result
     })
 }
 
+/// Particles falling onto a deforming triangle-mesh terrain: energy drift and penetration
+/// against dt, on a still and on a moving terrain.
+#[derive(Parser)]
+struct Cli {
+    /// Particles [default: 50000 on a GPU, 5000 on the CPU]
+    #[arg(long, value_name = "PARTICLES", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n"],
-        "mesh_contact [--n PARTICLES] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", if dev.is_cpu() { 5_000 } else { 50_000 });
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.n.unwrap_or(if dev.is_cpu() { 5_000 } else { 50_000 });
     println!("{n} particles (radius {RADIUS}) on a 32K-triangle terrain, 1 s, on {dev}");
 
     let mut still = Sweep::new(

@@ -23,6 +23,7 @@ mod common;
 #[path = "common/meshes.rs"]
 mod meshes;
 
+use clap::Parser;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -91,13 +92,26 @@ fn run(
     Ok((build, query, closest.to_vec()?, dist.to_vec()?))
 }
 
+/// Points projected onto triangle meshes: against brute force, signed distances against
+/// closed forms, and a mesh read from an OBJ file.
+#[derive(Parser)]
+struct Cli {
+    /// Query points [default: 1000000 on a GPU, 200000 on the CPU]
+    #[arg(long, value_name = "POINTS", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// The OBJ file of the last part [default: examples/assets/torus_knot.obj]
+    #[arg(long, value_name = "PATH")]
+    obj: Option<String>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--obj"],
-        "mesh_query [--n POINTS] [--obj PATH] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", if dev.is_cpu() { 200_000 } else { 1_000_000 });
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli
+        .n
+        .unwrap_or(if dev.is_cpu() { 200_000 } else { 1_000_000 });
     let box_lo = Vec3::new(-2.0, -2.0, -1.0);
     let box_hi = Vec3::new(2.0, 2.0, 1.0);
     let qs = points(n, box_lo, box_hi, 1);
@@ -167,7 +181,7 @@ fn main() -> wp::Result<()> {
     common::finish(&sweep, "mesh_query_sdf");
 
     // 3. A mesh from an OBJ file.
-    let path = common::arg("--obj").unwrap_or_else(|| {
+    let path = cli.obj.unwrap_or_else(|| {
         concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/examples/assets/torus_knot.obj"

@@ -21,6 +21,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -196,17 +197,32 @@ macro_rules! run_in {
     }};
 }
 
+/// Gravitational n-body by leapfrog: energy and momentum drift, f32 against f64, Kahan
+/// against plain accumulation.
+#[derive(Parser)]
+struct Cli {
+    /// Bodies [default: 4096 on a GPU, 256 on the CPU]
+    #[arg(long, value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// Simulated time
+    #[arg(long, default_value_t = 2.0)]
+    t_end: f64,
+    /// Halvings of the time step in the sweep
+    #[arg(long, default_value_t = 5, value_parser = common::num::<u32>)]
+    halvings: u32,
+    /// Also run each series as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--t-end", "--halvings", "--graph"],
-        "nbody [--device cpu|cuda:N] [--n 256] [--t-end 2] [--halvings 5] [--graph] \
-         [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.is_cuda();
-    let n: usize = common::parsed("--n", if gpu { 4096 } else { 256 });
-    let t_end: f64 = common::parsed("--t-end", 2.0);
-    let halvings: u32 = common::parsed("--halvings", 5);
+    let n = cli.n.unwrap_or(if gpu { 4096 } else { 256 });
+    let (t_end, halvings) = (cli.t_end, cli.halvings);
     let (x0, v0, m) = start(n);
     let e0 = energy(&x0, &v0, &m);
     println!(
@@ -225,11 +241,11 @@ fn main() -> wp::Result<()> {
         "dt",
     )
     .with_extras(&["momentum drift"])
-    .progress((variants.len() * dts.len() * common::graph_modes().len()) as u64);
+    .progress((variants.len() * dts.len() * common::graph_modes(cli.graph).len()) as u64);
     let variants: Vec<(String, bool, bool, bool)> = variants
         .into_iter()
         .flat_map(|(name, double, comp)| {
-            common::graph_modes().iter().map(move |&graph| {
+            common::graph_modes(cli.graph).iter().map(move |&graph| {
                 let name = if graph {
                     format!("{name} graph")
                 } else {

@@ -21,6 +21,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -250,14 +251,22 @@ impl Sph {
     }
 }
 
+/// Weakly compressible SPH: a hydrostatic column's pressure against rho0 g depth, and a dam
+/// break's compression and stability limit against dt.
+#[derive(Parser)]
+struct Cli {
+    /// Particle spacing (m) [default: 0.015 on a GPU, 0.03 on the CPU]
+    #[arg(long)]
+    dx: Option<f32>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--dx"],
-        "sph [--dx 0.015 (GPU) / 0.03 (CPU)] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
-    let dx: f32 = common::parsed("--dx", if gpu { 0.015 } else { 0.03 });
+    let dx = cli.dx.unwrap_or(if gpu { 0.015 } else { 0.03 });
     println!("SPH (WCSPH, cubic spline, dynamic wall particles) on \"{dev}\"");
     hydrostatic(&dev, dx)?;
     dam_break(&dev, dx)?;

@@ -18,6 +18,7 @@ mod common;
 #[path = "common/springs.rs"]
 mod springs;
 
+use clap::Parser;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -84,26 +85,39 @@ fn run(
     })
 }
 
+/// A hanging mass-spring chain, stiffness 1e2 to 1e7 N/m: semi-implicit Euler against
+/// XPBD, each against an f64 Runge-Kutta reference.
+#[derive(Parser)]
+struct Cli {
+    /// Chains simulated side by side [default: 4096 on a GPU, 16 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    chains: Option<usize>,
+    /// Simulated time (s)
+    #[arg(long, default_value_t = 0.5)]
+    t_end: f64,
+    /// XPBD substeps per step
+    #[arg(long, default_value_t = 10, value_parser = common::num::<i32>)]
+    substeps: i32,
+    /// XPBD constraint iterations per substep
+    #[arg(long, default_value_t = 1, value_parser = common::num::<i32>)]
+    iterations: i32,
+    /// Halvings of the step from 1/60 s
+    #[arg(long, default_value_t = 8, value_parser = common::num::<u32>)]
+    halvings: u32,
+    /// Also run each series as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &[
-            "--chains",
-            "--t-end",
-            "--substeps",
-            "--iterations",
-            "--halvings",
-            "--graph",
-        ],
-        "springs [--device cpu|cuda:N] [--chains N] [--t-end 0.5] [--substeps 10] \
-         [--iterations 1] [--halvings 8] [--graph] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.is_cuda();
-    let chains: usize = common::parsed("--chains", if gpu { 4096 } else { 16 });
-    let t_end: f64 = common::parsed("--t-end", 0.5);
-    let substeps: i32 = common::parsed("--substeps", 10);
-    let iterations: i32 = common::parsed("--iterations", 1);
-    let halvings: u32 = common::parsed("--halvings", 8);
+    let chains = cli.chains.unwrap_or(if gpu { 4096 } else { 16 });
+    let (t_end, substeps, iterations, halvings) =
+        (cli.t_end, cli.substeps, cli.iterations, cli.halvings);
     let stiffnesses = [1e2, 1e3, 1e4, 1e5, 1e6, 1e7];
     let solvers = [
         ("semi-implicit Euler", Solver::Euler),
@@ -150,7 +164,7 @@ fn main() -> wp::Result<()> {
             "dt",
         )
         .with_extras(&["energy drift"])
-        .progress((steps.len() * solvers.len() * common::graph_modes().len()) as u64);
+        .progress((steps.len() * solvers.len() * common::graph_modes(cli.graph).len()) as u64);
         for (name, solver) in solvers {
             for &dt in &steps {
                 let row = sweep.record(
@@ -167,7 +181,7 @@ fn main() -> wp::Result<()> {
             }
             largest.insert((ki, name), sweep.largest_stable(name));
             // `--graph`: the same runs as replays of captured graphs, a series of their own.
-            if common::graph_modes().len() > 1 {
+            if common::graph_modes(cli.graph).len() > 1 {
                 let graph_name = format!("{name} graph");
                 for &dt in &steps {
                     let r = run(&dev, chains, (solver, true), k, dt, t_end, &reference)?;

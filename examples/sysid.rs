@@ -28,6 +28,7 @@
 
 mod common;
 
+use clap::Parser;
 use warp_lang as wp;
 use warp_report::{sci, Table};
 use wp::prelude::*;
@@ -203,18 +204,36 @@ impl Rig {
 const H_FD: f64 = 1e-5;
 const TOL_FD: f64 = 1e-6;
 
+/// System identification on the seed program: the drag coefficient and the mass recovered
+/// from an observed trajectory by gradient descent through the simulation.
+#[derive(Parser)]
+struct Cli {
+    /// Particles observed [default: 4096 on a GPU, 16 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    particles: Option<usize>,
+    /// Steps of the observed trajectory
+    #[arg(long, default_value_t = 200, value_parser = common::num::<usize>)]
+    steps: usize,
+    /// Most gradient-descent iterations
+    #[arg(long, default_value_t = 2000, value_parser = common::num::<usize>)]
+    iterations: usize,
+    /// The learning rate
+    #[arg(long, default_value_t = 0.05)]
+    lr: f64,
+    /// Converged when both parameters are within this relative error of the truth
+    #[arg(long, default_value_t = 1e-3)]
+    tol: f64,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--particles", "--steps", "--iterations", "--lr", "--tol"],
-        "sysid [--device cpu|cuda:N] [--particles N] [--steps 200] [--iterations 2000] \
-         [--lr 0.05] [--tol 1e-3] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let particles: usize = common::parsed("--particles", if dev.is_cuda() { 4096 } else { 16 });
-    let steps: usize = common::parsed("--steps", 200);
-    let iterations: usize = common::parsed("--iterations", 2000);
-    let lr: f64 = common::parsed("--lr", 0.05);
-    let tol: f64 = common::parsed("--tol", 1e-3);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let particles = cli
+        .particles
+        .unwrap_or(if dev.is_cuda() { 4096 } else { 16 });
+    let (steps, iterations, lr, tol) = (cli.steps, cli.iterations, cli.lr, cli.tol);
     if particles == 0 || steps == 0 {
         eprintln!("--particles and --steps must be at least 1");
         std::process::exit(2);

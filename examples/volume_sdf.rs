@@ -14,6 +14,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -177,14 +178,27 @@ fn drop_particles(
     Ok((pen.to_vec()?[0] as f64 / RADIUS as f64, ms, finite))
 }
 
+/// Particles colliding with a torus's signed distance field in a sparse volume: sampling
+/// error and penetration against the voxel size.
+#[derive(Parser)]
+struct Cli {
+    /// Points near the surface [default: 1000000 on a GPU, 200000 on the CPU]
+    #[arg(long, value_name = "POINTS", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// The finest grid's voxels per side [default: 257 on a GPU, 129 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    max_res: Option<usize>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--max-res"],
-        "volume_sdf [--n POINTS] [--max-res N] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", if dev.is_cpu() { 200_000 } else { 1_000_000 });
-    let max_res: usize = common::parsed("--max-res", if dev.is_cpu() { 129 } else { 257 });
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli
+        .n
+        .unwrap_or(if dev.is_cpu() { 200_000 } else { 1_000_000 });
+    let max_res = cli.max_res.unwrap_or(if dev.is_cpu() { 129 } else { 257 });
     println!(
         "torus SDF (R = {MAJOR}, r = {MINOR}) in a Volume<f32> over [-1, 1]^3; {n} points \
          within {BAND} of the surface; on {dev}"

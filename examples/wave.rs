@@ -13,6 +13,7 @@
 
 mod common;
 
+use clap::Parser;
 use std::f64::consts::PI;
 use std::time::Instant;
 use warp_lang as wp;
@@ -43,13 +44,23 @@ fn first_step(u0: Array<f32>, u1: Array<f32>, r2: f32) {
     }
 }
 
+/// The 1-D wave equation by leapfrog against the analytic standing wave.
+#[derive(Parser)]
+struct Cli {
+    /// Grid points of the finest grid
+    #[arg(long, default_value_t = 1024, value_parser = common::num::<usize>)]
+    n: usize,
+    /// Also run each series as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--graph"],
-        "wave [--n 1024] [--graph] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", 1024);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.n;
     let (c, t_end) = (1.0f64, 1.0f64);
     println!(
         "wave equation on \"{dev}\", c = {c}, until t = {t_end}, grids of {} and {n} points",
@@ -61,9 +72,9 @@ fn main() -> wp::Result<()> {
         format!("1-D wave equation, leapfrog f32, on {dev}"),
         "r = c dt/dx",
     )
-    .progress((ratios.len() * grids.len() * common::graph_modes().len()) as u64);
+    .progress((ratios.len() * grids.len() * common::graph_modes(cli.graph).len()) as u64);
     for n in grids {
-        for &graph in common::graph_modes() {
+        for &graph in common::graph_modes(cli.graph) {
             for r in ratios {
                 let run = run(&dev, n, c, r, t_end, graph)?;
                 let series = if graph {
