@@ -42,6 +42,7 @@ mod common;
 
 use clap::Parser;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Points, TriMesh};
 use warp_report::{sci, Table};
 use wp::prelude::*;
 
@@ -716,6 +717,50 @@ fn main() -> wp::Result<()> {
         sci(miss),
         vmax
     );
+    // The frame: the trajectory from the kept initial velocities, the cloth at its start, half
+    // way and at T, the centre of mass at T and the target.
+    c64.set_v0(&field.velocities(&v_start, &kept), &dev)?;
+    let (com, _) = c64.forward(target, &dev)?;
+    let steps = c64.setup.steps;
+    let grid: Vec<[usize; 3]> = (0..n - 1)
+        .flat_map(|r| (0..n - 1).map(move |c| (r, c)))
+        .flat_map(|(r, c)| {
+            let at = |r: usize, c: usize| r * n + c;
+            [
+                [at(r, c), at(r, c + 1), at(r + 1, c + 1)],
+                [at(r, c), at(r + 1, c + 1), at(r + 1, c)],
+            ]
+        })
+        .collect();
+    let cloth_at = |k: usize| -> wp::Result<Vec<[f64; 3]>> {
+        Ok(c64.xs[k].to_vec()?.iter().map(|&p| common::p3(p)).collect())
+    };
+    let (start, middle, end) = (cloth_at(0)?, cloth_at(steps / 2)?, cloth_at(steps)?);
+    let all: Vec<[f64; 3]> = [&start[..], &middle[..], &end[..]].concat();
+    let (lo, hi) = common::bounds(&all);
+    let frame = Frame::new(
+        format!("cloth: {n} x {n} particles thrown to the target (t = 0, T/2, T = {t_end} s)"),
+        common::camera(lo, hi, [1.4, 0.5, 1.0], [0.0, 1.0, 0.0]),
+    )
+    .note(format!(
+        "held at two corners; wireframes: t = 0 and T/2; the centre of mass at T (black) is \
+         {} m from the target (red)",
+        sci((com - target).length())
+    ))
+    .mesh(
+        TriMesh::new(start, grid.clone())
+            .wireframe()
+            .colour([170, 170, 170]),
+    )
+    .mesh(
+        TriMesh::new(middle, grid.clone())
+            .wireframe()
+            .colour([110, 140, 200]),
+    )
+    .mesh(TriMesh::new(end, grid).colour([220, 120, 90]))
+    .points(Points::new([common::p3(com)], 0.02).colour([20, 20, 20]))
+    .points(Points::new([common::p3(target)], 0.02).colour([200, 30, 30]));
+    common::write_frame("cloth", &frame);
     common::print_compiled();
     let converged = miss < tol;
     common::verdict(

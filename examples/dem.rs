@@ -24,6 +24,7 @@ use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{Run, Sweep, Table};
 use wp::prelude::*;
 
@@ -593,6 +594,24 @@ fn settle(dev: &wp::Device, n: usize, frames: usize) -> wp::Result<()> {
         }
     }
     common::finish(&sweep, "dem_settle");
+    let x = s.x.to_vec()?;
+    let pos: Vec<[f64; 3]> = x.iter().map(|&p| common::p3(p)).collect();
+    let (w, top) = (half_width as f64, common::bounds(&pos).1[1].max(0.0));
+    let (lo, hi) = ([-w, 0.0, -w], [w, top, w]);
+    let frame = Frame::new(
+        format!(
+            "dem: {n} particles after {frames} frames ({:.2} s)",
+            frames as f32 * frame_dt
+        ),
+        common::camera(lo, hi, [1.0, 0.9, 1.6], [0.0, 1.0, 0.0]),
+    )
+    .note("cohesive spring-dashpot contacts with Coulomb friction, in a box; colour: height")
+    .lines(Lines::bounding_box(lo, hi))
+    .points(
+        Points::new(pos.iter().copied(), m.radius as f64)
+            .values("height (m)", pos.iter().map(|p| p[1])),
+    );
+    common::write_frame("dem", &frame);
     println!(
         "settling: {:.2} ms per frame ({} substeps, a grid build each) on \"{dev}\"",
         elapsed * 1e3 / frames as f64,

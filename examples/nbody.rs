@@ -26,6 +26,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -255,6 +256,8 @@ fn main() -> wp::Result<()> {
             })
         })
         .collect();
+    // The frame: the last run's bodies at t_end (f64 Kahan at the smallest dt).
+    let mut last = None;
     for (name, double, compensated, graph) in variants.iter().cloned() {
         for &dt in &dts {
             let steps = (t_end / dt).round() as u64;
@@ -298,9 +301,30 @@ fn main() -> wp::Result<()> {
                 }
             };
             sweep.record(&name, dt, run);
+            last = Some((name.clone(), dt, x, v));
         }
     }
     common::finish(&sweep, "nbody");
+    if let Some((name, dt, x, v)) = last {
+        // The bodies within 3 of the centre of mass (at rest at the origin): a few escaped
+        // ones would shrink the cluster to a dot.
+        let r = 3.0;
+        let near: Vec<usize> = (0..x.len()).filter(|&i| x[i].length() < r).collect();
+        let frame = Frame::new(
+            format!("n-body: {n} bodies at t = {t_end} ({name}, dt = {dt})"),
+            common::camera([-r; 3], [r; 3], [1.0, 0.6, 1.4], [0.0, 1.0, 0.0]),
+        )
+        .note(format!(
+            "softening {SOFTENING}, started in a unit ball near virial equilibrium; {} within \
+             {r} of the centre of mass drawn; colour: speed",
+            near.len()
+        ))
+        .points(
+            Points::new(near.iter().map(|&i| common::p3(x[i])), 0.02)
+                .values("speed", near.iter().map(|&i| v[i].length())),
+        );
+        common::write_frame("nbody", &frame);
+    }
     common::print_compiled();
     Ok(())
 }

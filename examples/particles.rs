@@ -23,6 +23,7 @@ mod common;
 use clap::Parser;
 use std::time::Instant;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -242,6 +243,20 @@ fn main() -> wp::Result<()> {
         "  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))"
     );
     println!("  max |x - exact discrete solution, f64| = {err_discrete:.3e} m (f32 rounding)");
+    let vs = v.to_vec()?;
+    let pos: Vec<[f64; 3]> = xs.iter().map(|&p| common::p3(p)).collect();
+    let (lo, hi) = common::bounds(&pos);
+    let frame = Frame::new(
+        format!("particles: {n} particles after {steps} steps (t = {t:.2} s)"),
+        common::camera(lo, hi, [1.0, -1.6, 0.8], [0.0, 0.0, 1.0]),
+    )
+    .note("gravity along -z, linear drag; colour: speed")
+    .lines(Lines::bounding_box(lo, hi))
+    .points(
+        Points::new(pos, 0.004 * common::diagonal(lo, hi))
+            .values("speed (m/s)", vs.iter().map(|v| v.length() as f64)),
+    );
+    common::write_frame("particles", &frame);
     if sweep_n > 0 {
         sweep(&dev, sweep_n.min(n), &x0, &v0, t, cli.graph)?;
     }

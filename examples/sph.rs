@@ -25,6 +25,7 @@ use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -363,6 +364,7 @@ fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
 /// the particle count.
 fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
     let (size, water) = (Vec3::new(1.2, 0.6, 0.4), Vec3::new(0.4, 0.4, 0.4));
+    let water_block = water;
     let t_end = 0.5f32;
     println!("\n2. dam break: a {water} m block in a {size} m tank, {t_end} s");
     let mut sweep = Sweep::new(
@@ -371,6 +373,8 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
     )
     .with_extras(&["particles", "front x (m)"]);
     let cfls = [0.1f32, 0.2, 0.4, 0.8, 1.6, 3.2];
+    // The frame: the water at t_end of the last stable run (finest spacing, largest CFL).
+    let mut shown: Option<(Vec<Vec3>, Vec<f32>, f32, f32)> = None;
     for (k, spacing) in [(2.0f32, dx * 2.0), (1.0, dx)] {
         let (x0, fluid) = layout(size, water, spacing);
         for &cfl in &cfls {
@@ -409,7 +413,13 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
             let run = match why {
                 Some(w) => Run::unstable(steps as u64, seconds, w),
                 None => {
-                    let x = s.x.to_vec()?;
+                    let (x, v) = (s.x.to_vec()?, s.v.to_vec()?);
+                    let speed: Vec<f32> = v
+                        .iter()
+                        .zip(&fluid)
+                        .filter(|(_, &f)| f != 0)
+                        .map(|(v, _)| v.length())
+                        .collect();
                     let water: Vec<Vec3> = x
                         .iter()
                         .zip(&fluid)
@@ -427,9 +437,12 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
                             || p.y < -spacing
                     });
                     match left.count() {
-                        0 => Run::stable(steps as u64, worst, seconds)
-                            .extra(s.n_fluid as f64)
-                            .extra(front as f64),
+                        0 => {
+                            shown = Some((water.clone(), speed, spacing, cfl));
+                            Run::stable(steps as u64, worst, seconds)
+                                .extra(s.n_fluid as f64)
+                                .extra(front as f64)
+                        }
                         k => Run::unstable(
                             steps as u64,
                             seconds,
@@ -442,5 +455,25 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
         }
     }
     common::finish(&sweep, "sph_dam_break");
+    if let Some((water, speed, spacing, cfl)) = shown {
+        let (lo, hi) = ([0.0; 3], common::p3(size));
+        let frame = Frame::new(
+            format!(
+                "sph: dam break at t = {t_end} s, {} fluid particles (dx = {spacing} m, CFL {cfl})",
+                water.len()
+            ),
+            common::camera(lo, hi, [0.7, 1.0, 1.8], [0.0, 1.0, 0.0]),
+        )
+        .note(format!(
+            "a {water_size} m block released in a {size} m tank (walls not drawn); colour: speed",
+            water_size = water_block
+        ))
+        .lines(Lines::bounding_box(lo, hi))
+        .points(
+            Points::new(water.iter().map(|&p| common::p3(p)), 0.5 * spacing as f64)
+                .values("speed (m/s)", speed.iter().map(|&v| v as f64)),
+        );
+        common::write_frame("sph", &frame);
+    }
     Ok(())
 }

@@ -24,6 +24,7 @@ use std::time::Instant;
 
 use springs::{Chains, Solver};
 use warp_lang as wp;
+use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Run, Sweep, Table};
 
 /// Runs `solver` at stiffness `k` and step `dt` until `t_end` and measures it against `reference`
@@ -140,6 +141,13 @@ fn main() -> wp::Result<()> {
 
     let mut largest: HashMap<(usize, &str), Option<f64>> = HashMap::new();
     let mut drift_at_60hz: HashMap<(usize, &str), f64> = HashMap::new();
+    // The frame: each stiffness's reference chain at t_end.
+    let mut frame = Frame::new(
+        format!("springs: the chain at t = {t_end} s for each stiffness (RK4 reference)"),
+        Camera::orthographic([0.0, 0.0, 1.0], [0.0; 3], [0.0, 1.0, 0.0]),
+    )
+    .note("released at rest along +x, pinned at the origin; colour: log10 k (N/m)");
+    let (mut beads, mut bead_k) = (Vec::new(), Vec::new());
     for (ki, &k) in stiffnesses.iter().enumerate() {
         // The reference: RK4 in f64 at a step resolving the fastest spring mode 20 times
         // over; its own error is estimated against a run at twice that step.
@@ -147,6 +155,10 @@ fn main() -> wp::Result<()> {
         let t = Instant::now();
         let reference = springs::reference(k, t_end, dt_ref);
         let coarse = springs::reference(k, t_end, 2.0 * dt_ref);
+        let chain: Vec<[f64; 3]> = reference.iter().map(|&p| common::p3(p)).collect();
+        frame = frame.lines(Lines::polyline(&chain));
+        bead_k.extend(chain.iter().map(|_| k.log10()));
+        beads.extend(chain);
         let ref_err = reference
             .iter()
             .zip(&coarse)
@@ -191,6 +203,9 @@ fn main() -> wp::Result<()> {
         }
         common::finish(&sweep, &format!("springs_k{}", sci(k)));
     }
+
+    let frame = frame.points(Points::new(beads, 0.012).values("log10 k", bead_k));
+    common::write_frame("springs", &frame);
 
     println!("\nlargest stable dt on the grid 1/60 s / 2^j (j = 0..{halvings}), and energy drift at 1/60 s");
     let mut t = Table::new([

@@ -30,6 +30,7 @@ mod common;
 
 use clap::Parser;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{sci, Table};
 use wp::prelude::*;
 
@@ -346,6 +347,43 @@ fn main() -> wp::Result<()> {
         t[1].exp(),
         sci(em)
     );
+    // The frame: up to 8 particles' observed trajectories (lines) and those of the recovered
+    // parameters (dots, every 5th step), which should lie on them.
+    let shown = particles.min(8);
+    let observed = obs.to_vec()?;
+    rig.run(&theta, true, None, &dev)?;
+    let fitted = rig.x.to_vec()?;
+    let track = |all: &[DVec3], p: usize| -> Vec<[f64; 3]> {
+        (0..=steps)
+            .map(|s| common::p3(all[s * particles + p]))
+            .collect()
+    };
+    let tracks: Vec<Vec<[f64; 3]>> = (0..shown).map(|p| track(&observed, p)).collect();
+    let (lo, hi) = common::bounds(&tracks.concat());
+    let mut frame = Frame::new(
+        format!(
+            "sysid: {shown} of {particles} observed trajectories and the fit (b = {:.4}, m = {:.4})",
+            t[0].exp(),
+            t[1].exp()
+        ),
+        common::camera(lo, hi, [0.8, 0.5, 1.4], [0.0, 1.0, 0.0]),
+    )
+    .note("gravity, drag and a known push; lines: observed; dots: recovered parameters, every 5th step, colour: time (s)");
+    for tr in &tracks {
+        frame = frame.lines(Lines::polyline(tr).colour([150, 150, 150]).width(1.0));
+    }
+    let dots: Vec<(usize, usize)> = (0..shown)
+        .flat_map(|p| (0..=steps).step_by(5).map(move |s| (p, s)))
+        .collect();
+    let frame = frame.points(
+        Points::new(
+            dots.iter()
+                .map(|&(p, s)| common::p3(fitted[s * particles + p])),
+            0.006 * common::diagonal(lo, hi),
+        )
+        .values("time (s)", dots.iter().map(|&(_, s)| s as f64 * DT)),
+    );
+    common::write_frame("sysid", &frame);
     common::print_compiled();
     let converged = eb < tol && em < tol;
     common::verdict(

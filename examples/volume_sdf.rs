@@ -18,6 +18,7 @@ use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, Points, TriMesh};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -154,7 +155,7 @@ fn drop_particles(
     vol: &wp::Volume<f32>,
     n: usize,
     dt: f32,
-) -> wp::Result<(f64, f64, bool)> {
+) -> wp::Result<(f64, f64, bool, Vec<Vec3>)> {
     let x0: Vec<Vec3> = band_points(4 * n, 7)
         .into_iter()
         .filter(|p| {
@@ -174,8 +175,9 @@ fn drop_particles(
     }
     wp::synchronize()?;
     let ms = t0.elapsed().as_secs_f64() * 1e3 / steps as f64;
-    let finite = x.to_vec()?.iter().all(|p| p.is_finite());
-    Ok((pen.to_vec()?[0] as f64 / RADIUS as f64, ms, finite))
+    let end = x.to_vec()?;
+    let finite = end.iter().all(|p| p.is_finite());
+    Ok((pen.to_vec()?[0] as f64 / RADIUS as f64, ms, finite, end))
 }
 
 /// Particles colliding with a torus's signed distance field in a sparse volume: sampling
@@ -224,6 +226,7 @@ fn main() -> wp::Result<()> {
         "voxel size",
     )
     .with_extras(&["ms per step"]);
+    let mut last = None;
     let mut res = 17;
     while res <= max_res {
         let h = 2.0 / (res - 1) as f64;
@@ -249,7 +252,8 @@ fn main() -> wp::Result<()> {
                 .extra(build_ms),
         );
         let parts = if dev.is_cpu() { 20_000 } else { 200_000 };
-        let (pen, ms, ok) = drop_particles(&dev, &vol, parts, 1e-3)?;
+        let (pen, ms, ok, end) = drop_particles(&dev, &vol, parts, 1e-3)?;
+        last = Some((res, end));
         let steps = 500u64;
         let run = if ok {
             Run::stable(steps, pen.max(0.0), ms * steps as f64 / 1e3)
@@ -261,6 +265,46 @@ fn main() -> wp::Result<()> {
     }
     common::finish(&acc, "volume_sdf_accuracy");
     common::finish(&contact, "volume_sdf_contact");
+    if let Some((res, end)) = last {
+        // The exact torus as a coarse parametric mesh (48 x 16 quads), and the particles
+        // resting on the volume's version of it.
+        let (nu, nv) = (48usize, 16usize);
+        let mut pts = Vec::new();
+        for i in 0..nu {
+            for j in 0..nv {
+                let (u, v) = (
+                    std::f64::consts::TAU * i as f64 / nu as f64,
+                    std::f64::consts::TAU * j as f64 / nv as f64,
+                );
+                let ring = MAJOR as f64 + MINOR as f64 * v.cos();
+                pts.push([ring * u.cos(), MINOR as f64 * v.sin(), ring * u.sin()]);
+            }
+        }
+        let at = |i: usize, j: usize| (i % nu) * nv + j % nv;
+        let tris: Vec<[usize; 3]> = (0..nu)
+            .flat_map(|i| (0..nv).map(move |j| (i, j)))
+            .flat_map(|(i, j)| {
+                [
+                    [at(i, j), at(i + 1, j), at(i + 1, j + 1)],
+                    [at(i, j), at(i + 1, j + 1), at(i, j + 1)],
+                ]
+            })
+            .collect();
+        let frame = Frame::new(
+            format!(
+                "volume_sdf: {} particles dropped around a torus SDF sampled at {res}^3, at 0.5 s",
+                end.len()
+            ),
+            common::camera([-1.0; 3], [1.0; 3], [0.2, 1.0, 1.1], [0.0, 1.0, 0.0]),
+        )
+        .note("the exact torus as a mesh; contacts push out along volume_sample_grad, those off the top fall; colour: height")
+        .mesh(TriMesh::new(pts, tris).colour([200, 200, 200]).closed())
+        .points(
+            Points::new(end.iter().map(|&p| common::p3(p)), RADIUS as f64)
+                .values("height", end.iter().map(|p| p.y as f64)),
+        );
+        common::write_frame("volume_sdf", &frame);
+    }
     common::print_compiled();
     Ok(())
 }

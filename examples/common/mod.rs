@@ -72,6 +72,63 @@ pub fn write_plot(name: &str, write: impl FnOnce(&std::path::Path) -> Result<(),
     }
 }
 
+/// Writes the scene's last frame to `<--plot-dir or target/report>/<name>_frame.svg` and
+/// prints where, or why not.
+pub fn write_frame(name: &str, frame: &warp_report::frame::Frame) {
+    let path = plot_dir().join(format!("{name}_frame.svg"));
+    match std::fs::create_dir_all(plot_dir())
+        .map_err(|e| e.to_string())
+        .and_then(|()| frame.write_svg(&path).map_err(|e| e.to_string()))
+    {
+        Ok(()) => println!("frame: {}", path.display()),
+        Err(e) => println!("frame not written: {e}"),
+    }
+}
+
+/// A position for the frame renderer (which works in f64 arrays).
+pub fn p3(v: impl Into<glam::DVec3>) -> [f64; 3] {
+    v.into().to_array()
+}
+
+/// A perspective camera looking at the middle of the box `lo`..`hi` from the direction
+/// `from` (towards the eye), 2.5 box diagonals away, `up` up; the frame zooms to fit.
+pub fn camera(
+    lo: [f64; 3],
+    hi: [f64; 3],
+    from: [f64; 3],
+    up: [f64; 3],
+) -> warp_report::frame::Camera {
+    let (lo, hi, from) = (
+        glam::DVec3::from(lo),
+        glam::DVec3::from(hi),
+        glam::DVec3::from(from),
+    );
+    let centre = (lo + hi) / 2.0;
+    let eye = centre + from.normalize_or(glam::DVec3::Z) * 2.5 * (hi - lo).length().max(1e-9);
+    warp_report::frame::Camera::perspective(eye.to_array(), centre.to_array(), up)
+}
+
+/// The smallest box holding `points` (a unit box at the origin for none).
+pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    if points.is_empty() {
+        return ([-0.5; 3], [0.5; 3]);
+    }
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
+
+/// The length of the box's diagonal.
+pub fn diagonal(lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (glam::DVec3::from(hi) - glam::DVec3::from(lo)).length()
+}
+
 /// The log of an optimisation: every iteration goes into the curves (the plot); every
 /// `every`-th, the first and the last also into the printed table, with the elapsed time since
 /// the log started, the mean time per iteration so far and the gradient's norm.
