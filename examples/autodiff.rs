@@ -12,31 +12,39 @@
 //! machine-readable `cold_start ...` line that `benches/cold_start.rs` reads. The same
 //! computation with its kernels compiled at `cargo build`: `examples/prebuilt`.
 
+#[path = "common/cli.rs"]
+mod cli;
 #[path = "common/seed_ad.rs"]
 mod seed_ad;
 
+use clap::Parser;
 use seed_ad::{seed, step, sum_sq};
 use std::time::Instant;
 use warp_lang as wp;
 
-fn arg(name: &str, default: usize) -> usize {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|k| args.get(k + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+/// Reverse-mode AD of the seed function against its closed-form derivative, then the
+/// gradient of the particle program's loss with respect to the start state.
+#[derive(Parser)]
+struct Cli {
+    /// Particles in the gradient run
+    #[arg(long, default_value = "1_000_000", value_parser = cli::num::<usize>)]
+    n: usize,
+    /// Steps in the gradient run
+    #[arg(long, default_value_t = 100, value_parser = cli::num::<usize>)]
+    steps: usize,
+    /// Compile the kernels and their adjoints up front (`wp::load_with_adjoints`) instead of
+    /// at first launch
+    #[arg(long)]
+    load: bool,
+    #[command(flatten)]
+    device: cli::DeviceArg,
 }
 
 fn main() -> wp::Result<()> {
     let start = Instant::now();
-    wp::init();
-    let args: Vec<String> = std::env::args().collect();
-    let dev = match args.iter().position(|a| a == "--device") {
-        Some(k) => wp::get_device(args.get(k + 1).map(String::as_str).unwrap_or("cpu"))?,
-        None => wp::get_preferred_device(),
-    };
-    if args.iter().any(|a| a == "--load") {
+    let cli = Cli::parse();
+    let dev = cli.device.get()?;
+    if cli.load {
         let kernels = [
             wp::kernel_info(seed),
             wp::kernel_info(step),
@@ -61,7 +69,7 @@ fn main() -> wp::Result<()> {
     );
 
     // 2. Gradients through the particle program.
-    seed_ad::particle_gradients(arg("--n", 1_000_000), arg("--steps", 100), &dev)?;
+    seed_ad::particle_gradients(cli.n, cli.steps, &dev)?;
     // On a GPU: the forward kernels and, because backward ran, their adjoints.
     print!("{}", wp::compile_summary());
     Ok(())

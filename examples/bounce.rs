@@ -34,7 +34,9 @@ mod bounce;
 mod common;
 
 use bounce::{Balls, Contact, Setup};
+use clap::Parser;
 use warp_lang as wp;
+use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Table};
 use wp::prelude::*;
 
@@ -118,17 +120,31 @@ fn optimise(
     Ok((iterations, max_miss(balls, dev)?))
 }
 
+/// Differentiating through a contact: balls bounce once on the floor, and Adam with the
+/// time-of-impact gradient finds the launch velocities that put each at its target.
+#[derive(Parser)]
+struct Cli {
+    /// Balls, each with its own target [default: 4096 on a GPU, 64 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    balls: Option<usize>,
+    /// Most Adam iterations
+    #[arg(long, default_value_t = 400, value_parser = common::num::<usize>)]
+    iterations: usize,
+    /// Adam's learning rate
+    #[arg(long, default_value_t = 0.05)]
+    lr: f64,
+    /// Converged when every ball is within this distance of its target (m)
+    #[arg(long, default_value_t = 1e-3)]
+    tol: f64,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--balls", "--iterations", "--lr", "--tol"],
-        "bounce [--device cpu|cuda:N] [--balls N] [--iterations 400] [--lr 0.05] [--tol 1e-3] \
-         [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--balls", if dev.is_cuda() { 4096 } else { 64 });
-    let iterations: usize = common::parsed("--iterations", 400);
-    let lr: f64 = common::parsed("--lr", 0.05);
-    let tol: f64 = common::parsed("--tol", 1e-3);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.balls.unwrap_or(if dev.is_cuda() { 4096 } else { 64 });
+    let (iterations, lr, tol) = (cli.iterations, cli.lr, cli.tol);
     if n == 0 {
         eprintln!("--balls must be at least 1");
         std::process::exit(2);
@@ -278,6 +294,44 @@ fn main() -> wp::Result<()> {
         sci(naive_miss),
         sci(naive_own)
     );
+    // The frame: the TOI solution's trajectories (up to 12 balls), the floor and the targets.
+    balls.vs[0].copy_from(&wp::Array::from_slice(&v_toi, &dev)?)?;
+    balls.forward(Contact::Toi, &dev)?;
+    let shown = n.min(12);
+    let at = |p: DVec2| [p.x, p.y, 0.0];
+    let mut paths = vec![Vec::new(); shown];
+    for x in &balls.xs {
+        for (b, p) in x.to_vec()?.iter().take(shown).enumerate() {
+            paths[b].push(at(*p));
+        }
+    }
+    let targets = balls.target.to_vec()?;
+    let ends: Vec<[f64; 3]> = paths.iter().filter_map(|p| p.last().copied()).collect();
+    let all: Vec<[f64; 3]> = paths.iter().flatten().copied().collect();
+    let (lo, hi) = common::bounds(&all);
+    let mut frame = Frame::new(
+        format!(
+            "bounce: {shown} of {n} balls launched with the TOI gradient's velocities, {} s",
+            setup.steps as f64 * setup.dt
+        ),
+        Camera::orthographic([0.0, 0.0, 1.0], [0.0; 3], [0.0, 1.0, 0.0]),
+    )
+    .size(800, 480)
+    .note("the floor y = 0 (restitution 0.8); pale discs: the targets; red dots: where the balls are at T")
+    .lines(Lines::new([[[lo[0] - 0.1, 0.0, 0.0], [hi[0] + 0.1, 0.0, 0.0]]]).width(2.0));
+    for path in &paths {
+        frame = frame.lines(Lines::polyline(path).colour([90, 120, 180]).width(1.0));
+    }
+    let frame = frame
+        .points(
+            Points::new(
+                targets.iter().take(shown).map(|&p| at(p)),
+                1.6 * setup.radius,
+            )
+            .colour([235, 200, 200]),
+        )
+        .points(Points::new(ends, setup.radius).colour([200, 40, 40]));
+    common::write_frame("bounce", &frame);
     common::print_compiled();
     common::verdict(
         "bounce",

@@ -19,6 +19,7 @@ mod common;
 #[path = "common/seed_ad.rs"]
 mod seed_ad;
 
+use clap::Parser;
 use seed_ad::{
     seed_closed_form_errors, seed_start, step, sum_sq, SEED_B as B, SEED_DT as DT,
     SEED_GRAVITY as GRAVITY, SEED_MASS as MASS,
@@ -156,25 +157,35 @@ fn max_diff(a: &[Vec3], b: &[Vec3]) -> (f32, bool) {
     (d, same)
 }
 
+/// The seed program's gradient through a checkpointed tape: memory against recomputation,
+/// and the gradient against a full tape's.
+#[derive(Parser)]
+struct Cli {
+    /// Particles in the checkpointed runs
+    #[arg(long, value_name = "N", default_value = "1_000_000", value_parser = common::num::<usize>)]
+    particles: usize,
+    /// Steps in the checkpointed runs
+    #[arg(long, value_name = "T", default_value_t = 1000, value_parser = common::num::<usize>)]
+    steps: usize,
+    /// Snapshots the checkpointed tape keeps [default: `Checkpointed::sqrt_budget`, about
+    /// the square root of the steps]
+    #[arg(long, value_name = "K", value_parser = common::num::<usize>)]
+    snapshots: Option<usize>,
+    /// Particles in the comparison with a full tape (0: no comparison)
+    #[arg(long, value_name = "N", default_value = "10_000", value_parser = common::num::<usize>)]
+    compare_particles: usize,
+    /// Steps in the comparison with a full tape
+    #[arg(long, value_name = "T", default_value_t = 1000, value_parser = common::num::<usize>)]
+    compare_steps: usize,
+    #[command(flatten)]
+    device: common::DeviceArg,
+}
+
 fn main() -> wp::Result<()> {
-    let usage = "checkpoint [--device cpu|cuda:0] [--particles N] [--steps T] [--snapshots K] \
-                 [--compare-particles N] [--compare-steps T]";
-    common::check_args(
-        &[
-            "--particles",
-            "--steps",
-            "--snapshots",
-            "--compare-particles",
-            "--compare-steps",
-        ],
-        usage,
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--particles", 1_000_000);
-    let steps: usize = common::parsed("--steps", 1000);
-    let snapshots = common::arg("--snapshots").map(|_| common::parsed("--snapshots", 0usize));
-    let cn: usize = common::parsed("--compare-particles", 10_000);
-    let csteps: usize = common::parsed("--compare-steps", 1000);
+    let cli = Cli::parse();
+    let dev = cli.device.get()?;
+    let (n, steps, snapshots) = (cli.particles, cli.steps, cli.snapshots);
+    let (cn, csteps) = (cli.compare_particles, cli.compare_steps);
 
     // Warm-up: loads `step`, `sum_sq` and their adjoints (compiles them on a GPU).
     checkpointed(16, 4, Some(1), &dev)?;

@@ -40,7 +40,9 @@
 
 mod common;
 
+use clap::Parser;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Points, TriMesh};
 use warp_report::{sci, Table};
 use wp::prelude::*;
 
@@ -456,45 +458,57 @@ fn gauss_newton(v: &[DVec3], r: DVec3, rows: &[Vec<DVec3>; 3], alpha: f64) -> Ve
         .collect()
 }
 
+/// A cloth held at two corners: Gauss-Newton finds the initial velocities that bring its
+/// centre of mass to a target.
+#[derive(Parser)]
+struct Cli {
+    /// Particles per side of the cloth [default: 64 on a GPU, 16 on the CPU]
+    #[arg(long, value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// Simulated time (s)
+    #[arg(long, default_value_t = 0.3)]
+    t_end: f64,
+    /// Most Gauss-Newton iterations
+    #[arg(long, default_value_t = 30, value_parser = common::num::<usize>)]
+    iterations: usize,
+    /// The initial velocities: a bilinear field over k x k control nodes (1: one velocity
+    /// for the whole cloth; 0: every particle's own)
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = common::num::<usize>)]
+    field: usize,
+    /// Converged when the centre of mass is within this distance of the target (m)
+    #[arg(long, default_value_t = 1e-3)]
+    tol: f64,
+    /// The target: the centre of mass the cloth reaches from rest, moved by x,y,z (m)
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0.1,0.05", value_parser = parse_offset)]
+    offset: DVec3,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
+/// `--offset x,y,z`: three numbers (metres).
+fn parse_offset(text: &str) -> Result<DVec3, String> {
+    let c: Vec<f64> = text
+        .split(',')
+        .map(|c| c.trim().parse::<f64>().map_err(|e| e.to_string()))
+        .collect::<Result<_, _>>()?;
+    match c[..] {
+        [x, y, z] => Ok(DVec3::new(x, y, z)),
+        _ => Err("want three numbers, x,y,z (metres)".into()),
+    }
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &[
-            "--n",
-            "--t-end",
-            "--iterations",
-            "--tol",
-            "--offset",
-            "--field",
-        ],
-        "cloth [--device cpu|cuda:N] [--n 16] [--t-end 0.3] [--iterations 30] \
-         [--field 4] [--tol 1e-3] [--offset 0,0.1,0.05] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", if dev.is_cuda() { 64 } else { 16 });
-    let t_end: f64 = common::parsed("--t-end", 0.3);
-    let iterations: usize = common::parsed("--iterations", 30);
-    let field_k: usize = common::parsed("--field", 4);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.n.unwrap_or(if dev.is_cuda() { 64 } else { 16 });
+    let (t_end, iterations, field_k) = (cli.t_end, cli.iterations, cli.field);
     let field_nodes = Field { n, k: field_k }.nodes();
     let field_what = match field_k {
         0 => "every particle's own".to_string(),
         1 => "one for the whole cloth".to_string(),
         k => format!("a bilinear field over {k} x {k} control nodes"),
     };
-    let tol: f64 = common::parsed("--tol", 1e-3);
-    let offset = match common::arg("--offset") {
-        None => DVec3::new(0.0, 0.1, 0.05),
-        Some(text) => {
-            let c: Vec<f64> = text
-                .split(',')
-                .filter_map(|c| c.trim().parse().ok())
-                .collect();
-            if c.len() != 3 {
-                eprintln!("--offset {text}: want three numbers, x,y,z (metres)");
-                std::process::exit(2);
-            }
-            DVec3::new(c[0], c[1], c[2])
-        }
-    };
+    let (tol, offset) = (cli.tol, cli.offset);
     if n < 3 || t_end <= 0.0 || field_k > n {
         eprintln!("--n must be at least 3, --t-end positive and --field at most --n");
         std::process::exit(2);
@@ -703,6 +717,50 @@ fn main() -> wp::Result<()> {
         sci(miss),
         vmax
     );
+    // The frame: the trajectory from the kept initial velocities, the cloth at its start, half
+    // way and at T, the centre of mass at T and the target.
+    c64.set_v0(&field.velocities(&v_start, &kept), &dev)?;
+    let (com, _) = c64.forward(target, &dev)?;
+    let steps = c64.setup.steps;
+    let grid: Vec<[usize; 3]> = (0..n - 1)
+        .flat_map(|r| (0..n - 1).map(move |c| (r, c)))
+        .flat_map(|(r, c)| {
+            let at = |r: usize, c: usize| r * n + c;
+            [
+                [at(r, c), at(r, c + 1), at(r + 1, c + 1)],
+                [at(r, c), at(r + 1, c + 1), at(r + 1, c)],
+            ]
+        })
+        .collect();
+    let cloth_at = |k: usize| -> wp::Result<Vec<[f64; 3]>> {
+        Ok(c64.xs[k].to_vec()?.iter().map(|&p| common::p3(p)).collect())
+    };
+    let (start, middle, end) = (cloth_at(0)?, cloth_at(steps / 2)?, cloth_at(steps)?);
+    let all: Vec<[f64; 3]> = [&start[..], &middle[..], &end[..]].concat();
+    let (lo, hi) = common::bounds(&all);
+    let frame = Frame::new(
+        format!("cloth: {n} x {n} particles thrown to the target (t = 0, T/2, T = {t_end} s)"),
+        common::camera(lo, hi, [1.4, 0.5, 1.0], [0.0, 1.0, 0.0]),
+    )
+    .note(format!(
+        "held at two corners; wireframes: t = 0 and T/2; the centre of mass at T (black) is \
+         {} m from the target (red)",
+        sci((com - target).length())
+    ))
+    .mesh(
+        TriMesh::new(start, grid.clone())
+            .wireframe()
+            .colour([170, 170, 170]),
+    )
+    .mesh(
+        TriMesh::new(middle, grid.clone())
+            .wireframe()
+            .colour([110, 140, 200]),
+    )
+    .mesh(TriMesh::new(end, grid).colour([220, 120, 90]))
+    .points(Points::new([common::p3(com)], 0.02).colour([20, 20, 20]))
+    .points(Points::new([common::p3(target)], 0.02).colour([200, 30, 30]));
+    common::write_frame("cloth", &frame);
     common::print_compiled();
     let converged = miss < tol;
     common::verdict(

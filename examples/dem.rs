@@ -20,9 +20,11 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{Run, Sweep, Table};
 use wp::prelude::*;
 
@@ -205,22 +207,37 @@ impl Scene {
     }
 }
 
+/// A cohesive granular material (DEM): restitution, energy drift and the stability limit of
+/// its contact model, then a pile settling in a box.
+#[derive(Parser)]
+struct Cli {
+    /// Particles settling in the box [default: 110592 on a GPU, 8000 on the CPU]
+    #[arg(long, value_name = "PARTICLES", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// Frames of the settling run, or of Warp's configuration with `--preset warp` [default:
+    /// 60; 100 with `--preset warp`]
+    #[arg(long, value_parser = common::num::<usize>)]
+    frames: Option<usize>,
+    /// `warp`: only Warp's example_dem configuration, timed
+    #[arg(long, value_parser = ["warp"])]
+    preset: Option<String>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--frames", "--preset"],
-        "dem [--n PARTICLES] [--frames 60] [--preset warp] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
-    if common::arg("--preset").as_deref() == Some("warp") {
-        return warp_preset(&dev);
+    if cli.preset.as_deref() == Some("warp") {
+        return warp_preset(&dev, cli.frames.unwrap_or(100));
     }
     println!("DEM on \"{dev}\": linear spring-dashpot contacts, cohesion, Coulomb friction");
     restitution(&dev)?;
     energy_drift(&dev)?;
     stability_limit(&dev)?;
-    let n: usize = common::parsed("--n", if gpu { 110_592 } else { 8_000 });
-    let frames: usize = common::parsed("--frames", 60);
+    let n = cli.n.unwrap_or(if gpu { 110_592 } else { 8_000 });
+    let frames = cli.frames.unwrap_or(60);
     settle(&dev, n, frames)?;
     common::print_compiled();
     Ok(())
@@ -577,6 +594,24 @@ fn settle(dev: &wp::Device, n: usize, frames: usize) -> wp::Result<()> {
         }
     }
     common::finish(&sweep, "dem_settle");
+    let x = s.x.to_vec()?;
+    let pos: Vec<[f64; 3]> = x.iter().map(|&p| common::p3(p)).collect();
+    let (w, top) = (half_width as f64, common::bounds(&pos).1[1].max(0.0));
+    let (lo, hi) = ([-w, 0.0, -w], [w, top, w]);
+    let frame = Frame::new(
+        format!(
+            "dem: {n} particles after {frames} frames ({:.2} s)",
+            frames as f32 * frame_dt
+        ),
+        common::camera(lo, hi, [1.0, 0.9, 1.6], [0.0, 1.0, 0.0]),
+    )
+    .note("cohesive spring-dashpot contacts with Coulomb friction, in a box; colour: height")
+    .lines(Lines::bounding_box(lo, hi))
+    .points(
+        Points::new(pos.iter().copied(), m.radius as f64)
+            .values("height (m)", pos.iter().map(|p| p[1])),
+    );
+    common::write_frame("dem", &frame);
     println!(
         "settling: {:.2} ms per frame ({} substeps, a grid build each) on \"{dev}\"",
         elapsed * 1e3 / frames as f64,
@@ -626,7 +661,7 @@ fn max_overlap(x: &[Vec3], radius: f32) -> f64 {
 /// Differences: the ground here has the particles' friction (Warp's: k_t 100, mu 0.5, and a
 /// cohesion of 0.02), and damping acts on separation too (Warp's only on approach); the
 /// arithmetic per pair is the same.
-fn warp_preset(dev: &wp::Device) -> wp::Result<()> {
+fn warp_preset(dev: &wp::Device, frames: usize) -> wp::Result<()> {
     let m = Material {
         radius: 0.1,
         mass: 1.0 / 64.0,
@@ -655,7 +690,6 @@ fn warp_preset(dev: &wp::Device) -> wp::Result<()> {
         }
     }
     let v0 = vec![Vec3::new(0.0, 0.0, 15.0); x0.len()];
-    let frames: usize = common::parsed("--frames", 100);
     let (frame_dt, substeps) = (1.0f32 / 60.0, 64usize);
     let dt = frame_dt / substeps as f32;
     let mut s = Scene::new(m, &x0, &v0, 128, 5.0 * m.radius, substeps, dev)?;

@@ -43,20 +43,32 @@ mod fd;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use clap::Parser;
 use fd::{Order, Real};
 use warp_lang as wp;
 use warp_report::{sci, Run, Sweep, Table};
 
+/// Warp's kernel-cache walkthrough: derivatives of sin(2 pi x) by forward and central
+/// differences, in f32 and f64, their error as the grid is refined, and what each kernel's
+/// first launch did (compiled, cache hit or ahead-of-time cubin).
+#[derive(Parser)]
+struct Cli {
+    /// The kernel cache's directory on a GPU [default: target/finite_difference_cache]
+    #[arg(long, value_name = "DIR")]
+    cache_dir: Option<PathBuf>,
+    /// The largest grid
+    #[arg(long, value_name = "N", default_value = "4194304", value_parser = common::num::<usize>)]
+    n_max: usize,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n-max", "--cache-dir"],
-        "finite_difference [--cache-dir DIR] [--n-max 4194304] [--device cpu|cuda:N] \
-         [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n_max: usize = common::parsed("--n-max", 1 << 22);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n_max = cli.n_max;
     // The cache directory is set before the first launch (the first compile reads it).
-    let cache_dir = cache_setup(&dev);
+    let cache_dir = cache_setup(&dev, cli.cache_dir);
     let sizes: Vec<usize> = (0..)
         .map(|k| 64usize << (2 * k))
         .take_while(|&n| n <= n_max.max(64))
@@ -98,15 +110,17 @@ fn main() -> wp::Result<()> {
 
 /// On a CUDA device, points the kernel cache at `--cache-dir` (or the default) and returns
 /// the directory in effect; on the CPU, `None`.
-fn cache_setup(dev: &wp::Device) -> Option<PathBuf> {
-    let asked = common::arg("--cache-dir");
+fn cache_setup(dev: &wp::Device, asked: Option<PathBuf>) -> Option<PathBuf> {
     if dev.is_cpu() {
         if let Some(d) = asked {
-            println!("--cache-dir {d}: not used on the CPU (no kernel cache there)");
+            println!(
+                "--cache-dir {}: not used on the CPU (no kernel cache there)",
+                d.display()
+            );
         }
         return None;
     }
-    let asked = PathBuf::from(asked.unwrap_or_else(|| "target/finite_difference_cache".into()));
+    let asked = asked.unwrap_or_else(|| "target/finite_difference_cache".into());
     warp_cuda::set_cache_dir(Some(asked.clone()));
     let dir = warp_cuda::cache_dir();
     if dir != asked {

@@ -13,9 +13,11 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, TriMesh};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -98,14 +100,30 @@ fn signed_volume(p: &[Vec3], ix: &[i32]) -> f64 {
         .sum()
 }
 
+/// Marching cubes of a torus: the extracted surface's distance from the true one as the grid
+/// is refined.
+#[derive(Parser)]
+struct Cli {
+    /// The finest grid's samples per side [default: 257 on a GPU, 129 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    max_res: Option<usize>,
+    /// Points sampled on the surfaces to measure the error
+    #[arg(
+        long,
+        value_name = "POINTS",
+        default_value = "100_000",
+        value_parser = common::num::<usize>
+    )]
+    n: usize,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--max-res", "--n"],
-        "marching_cubes [--max-res N] [--n POINTS] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let max_res: usize = common::parsed("--max-res", if dev.is_cpu() { 129 } else { 257 });
-    let n: usize = common::parsed("--n", 100_000);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let max_res = cli.max_res.unwrap_or(if dev.is_cpu() { 129 } else { 257 });
+    let n = cli.n;
     println!("marching cubes of a torus (R = {MAJOR}, r = {MINOR}) in [-1, 1]^3, on {dev}");
     let (surf_h, q_h) = samples(n);
     let surf = wp::Array::from_slice(&surf_h, &dev)?;
@@ -125,6 +143,9 @@ fn main() -> wp::Result<()> {
         "mesh build ms",
         "max |signed query - sdf|",
     ]);
+    // The frame: the extraction on the 33^3 grid (about 5K triangles: a small file that
+    // still shows the faceting).
+    let mut shown = None;
     let mut res = 17;
     while res <= max_res {
         let h = 2.0 / (res - 1) as f32;
@@ -153,6 +174,9 @@ fn main() -> wp::Result<()> {
         let signed = serr.to_vec()?.iter().fold(0f32, |m, x| m.max(*x)) as f64;
         let (p, ix) = (verts.to_vec()?, indices.to_vec()?);
         let vol_err = (signed_volume(&p, &ix) - exact_volume).abs() / exact_volume;
+        if res == 33 || shown.is_none() {
+            shown = Some((res, p.clone(), ix.clone()));
+        }
         let hd = v_err.max(s_err) / h as f64;
         let run = if hd.is_finite() {
             Run::stable(res as u64, hd, extract_ms / 1e3)
@@ -173,6 +197,28 @@ fn main() -> wp::Result<()> {
         res = 2 * res - 1;
     }
     common::finish(&sweep, "marching_cubes");
+    if let Some((res, p, ix)) = shown {
+        let tris: Vec<[usize; 3]> = ix
+            .chunks(3)
+            .map(|t| [t[0] as usize, t[1] as usize, t[2] as usize])
+            .collect();
+        let frame = Frame::new(
+            format!(
+                "marching_cubes: the torus's zero level set on a {res}^3 grid, {} triangles",
+                tris.len()
+            ),
+            common::camera([-1.0; 3], [1.0; 3], [0.3, 1.0, 1.2], [0.0, 1.0, 0.0]),
+        )
+        .note(format!(
+            "R = {MAJOR}, r = {MINOR}, flat shaded (faces turned away not drawn)"
+        ))
+        .mesh(
+            TriMesh::new(p.iter().map(|&v| common::p3(v)), tris)
+                .colour([120, 170, 210])
+                .closed(),
+        );
+        common::write_frame("marching_cubes", &frame);
+    }
     common::print_compiled();
     Ok(())
 }

@@ -17,9 +17,11 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, Points, TriMesh};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -89,6 +91,9 @@ fn step(mesh: Mesh, x: Array<Vec3>, v: Array<Vec3>, dt: f32, e: f32, pen: Array<
     v[i] = vi;
 }
 
+/// The terrain's quads per side.
+const TERRAIN: usize = 128;
+
 /// A terrain of `k x k` quads over [-1, 1]^2 at z = 0 (two triangles each, normals up).
 fn terrain(k: usize) -> (Vec<Vec3>, Vec<i32>) {
     let mut p = Vec::new();
@@ -147,11 +152,15 @@ struct Outcome {
     below: usize,
     ms_per_step: f64,
     finite: bool,
+    /// The end state, for the frame: positions, velocities, the terrain's points.
+    x: Vec<Vec3>,
+    v: Vec<Vec3>,
+    terrain: Vec<Vec3>,
 }
 
 /// Runs 1 s with step `dt`: the terrain moving (`amp` > 0) or still, restitution `e`.
 fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result<Outcome> {
-    let (rest_h, ix) = terrain(128);
+    let (rest_h, ix) = terrain(TERRAIN);
     let rest = wp::Array::from_slice(&rest_h, dev)?;
     let pts = wp::Array::from_slice(&rest_h, dev)?;
     let vel = wp::Array::<Vec3>::zeros(rest_h.len(), dev)?;
@@ -206,16 +215,27 @@ fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result
         below,
         ms_per_step,
         finite,
+        x: xs,
+        v: vs,
+        terrain: pts.to_vec()?,
     })
 }
 
+/// Particles falling onto a deforming triangle-mesh terrain: energy drift and penetration
+/// against dt, on a still and on a moving terrain.
+#[derive(Parser)]
+struct Cli {
+    /// Particles [default: 50000 on a GPU, 5000 on the CPU]
+    #[arg(long, value_name = "PARTICLES", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n"],
-        "mesh_contact [--n PARTICLES] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", if dev.is_cpu() { 5_000 } else { 50_000 });
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.n.unwrap_or(if dev.is_cpu() { 5_000 } else { 50_000 });
     println!("{n} particles (radius {RADIUS}) on a 32K-triangle terrain, 1 s, on {dev}");
 
     let mut still = Sweep::new(
@@ -230,6 +250,7 @@ fn main() -> wp::Result<()> {
     .with_extras(&["ms per step", "under the surface"]);
     // A few steps first: the kernels compile (on a GPU) before anything is timed.
     simulate(&dev, 16, 0.25, 0.08, 0.0)?;
+    let mut last = None;
     for dt in [4e-3f32, 2e-3, 1e-3, 5e-4, 2.5e-4] {
         let steps = (1.0 / dt).round() as u64;
         let o = simulate(&dev, n, dt, 0.0, 1.0)?;
@@ -262,9 +283,40 @@ fn main() -> wp::Result<()> {
             dt as f64,
             run.extra(o.ms_per_step).extra(o.below as f64),
         );
+        last = Some((dt, o));
     }
     common::finish(&still, "mesh_contact_still");
     common::finish(&moving, "mesh_contact_moving");
+    if let Some((dt, o)) = last {
+        // The terrain at every 8th point of its grid (512 of its 32K triangles): enough for
+        // its smooth waves at the picture's scale, and the file stays small.
+        let (k, every) = (TERRAIN / 8, 8);
+        let at = |i: usize, j: usize| j * (k + 1) + i;
+        let mut pts = Vec::new();
+        for j in 0..=k {
+            for i in 0..=k {
+                pts.push(common::p3(o.terrain[j * every * (TERRAIN + 1) + i * every]));
+            }
+        }
+        let mut tris = Vec::new();
+        for j in 0..k {
+            for i in 0..k {
+                tris.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                tris.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        let pos: Vec<[f64; 3]> = o.x.iter().map(|&p| common::p3(p)).collect();
+        let frame = Frame::new(
+            format!("mesh_contact: {n} particles on the moving terrain at t = 1 s (dt = {dt})"),
+            common::camera([-1.0, -1.0, -0.1], [1.0, 1.0, 0.6], [0.9, -1.6, 1.1], [0.0, 0.0, 1.0]),
+        )
+        .note("the terrain (drawn at 1/64 of its triangles) is deformed and refit every step; colour: speed")
+        .mesh(TriMesh::new(pts, tris).colour([190, 180, 160]))
+        .points(
+            Points::new(pos, RADIUS as f64).values("speed (m/s)", o.v.iter().map(|v| v.length() as f64)),
+        );
+        common::write_frame("mesh_contact", &frame);
+    }
     common::print_compiled();
     Ok(())
 }

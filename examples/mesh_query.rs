@@ -23,10 +23,12 @@ mod common;
 #[path = "common/meshes.rs"]
 mod meshes;
 
+use clap::Parser;
 use std::time::Instant;
 
 use glam::DVec3;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points, TriMesh};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -91,13 +93,26 @@ fn run(
     Ok((build, query, closest.to_vec()?, dist.to_vec()?))
 }
 
+/// Points projected onto triangle meshes: against brute force, signed distances against
+/// closed forms, and a mesh read from an OBJ file.
+#[derive(Parser)]
+struct Cli {
+    /// Query points [default: 1000000 on a GPU, 200000 on the CPU]
+    #[arg(long, value_name = "POINTS", value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// The OBJ file of the last part [default: examples/assets/torus_knot.obj]
+    #[arg(long, value_name = "PATH")]
+    obj: Option<String>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--obj"],
-        "mesh_query [--n POINTS] [--obj PATH] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", if dev.is_cpu() { 200_000 } else { 1_000_000 });
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli
+        .n
+        .unwrap_or(if dev.is_cpu() { 200_000 } else { 1_000_000 });
     let box_lo = Vec3::new(-2.0, -2.0, -1.0);
     let box_hi = Vec3::new(2.0, 2.0, 1.0);
     let qs = points(n, box_lo, box_hi, 1);
@@ -167,7 +182,7 @@ fn main() -> wp::Result<()> {
     common::finish(&sweep, "mesh_query_sdf");
 
     // 3. A mesh from an OBJ file.
-    let path = common::arg("--obj").unwrap_or_else(|| {
+    let path = cli.obj.unwrap_or_else(|| {
         concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/examples/assets/torus_knot.obj"
@@ -192,7 +207,7 @@ fn main() -> wp::Result<()> {
         .map(|p| lo - pad + (*p - box_lo) / box_size * (hi - lo + 2.0 * pad))
         .collect();
     let q3 = wp::Array::from_slice(&qs3, &dev)?;
-    let (build, query, _, dist) = run(&m, &q3, &dev)?;
+    let (build, query, closest3, dist) = run(&m, &q3, &dev)?;
     let worst = check
         .iter()
         .map(|&k| (dist[k].abs() as f64 - meshes::brute_distance(&m, qs3[k].as_dvec3())).abs())
@@ -206,6 +221,48 @@ fn main() -> wp::Result<()> {
         check.len(),
         warp_report::sci(worst),
     );
+    // The frame: the mesh, and 300 of the query points joined to their closest points.
+    let shown: Vec<usize> = (0..n).step_by(n.div_ceil(300).max(1)).collect();
+    let name = std::path::Path::new(&path)
+        .file_name()
+        .map_or(path.clone(), |f| f.to_string_lossy().into_owned());
+    let (lo, hi) = (common::p3(lo - pad), common::p3(hi + pad));
+    let frame = Frame::new(
+        format!("mesh_query: {} points projected onto {name}", shown.len()),
+        common::camera(lo, hi, [0.4, 0.5, 1.0], [0.0, 1.0, 0.0]),
+    )
+    .note(format!(
+        "{} triangles (mesh_query_point); lines to the closest points; colour: distance",
+        m.triangles()
+    ))
+    .mesh(
+        TriMesh::new(
+            m.points.iter().map(|&p| common::p3(p)),
+            m.indices
+                .chunks(3)
+                .map(|t| [t[0] as usize, t[1] as usize, t[2] as usize])
+                .collect(),
+        )
+        .colour([214, 170, 120])
+        .closed(),
+    )
+    .lines(
+        Lines::new(
+            shown
+                .iter()
+                .map(|&k| [common::p3(qs3[k]), common::p3(closest3[k])]),
+        )
+        .colour([120, 120, 120])
+        .width(0.6),
+    )
+    .points(
+        Points::new(
+            shown.iter().map(|&k| common::p3(qs3[k])),
+            0.004 * common::diagonal(lo, hi),
+        )
+        .values("distance", shown.iter().map(|&k| dist[k].abs() as f64)),
+    );
+    common::write_frame("mesh_query", &frame);
     common::print_compiled();
     Ok(())
 }

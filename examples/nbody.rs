@@ -21,10 +21,12 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use glam::DVec3;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -196,17 +198,32 @@ macro_rules! run_in {
     }};
 }
 
+/// Gravitational n-body by leapfrog: energy and momentum drift, f32 against f64, Kahan
+/// against plain accumulation.
+#[derive(Parser)]
+struct Cli {
+    /// Bodies [default: 4096 on a GPU, 256 on the CPU]
+    #[arg(long, value_parser = common::num::<usize>)]
+    n: Option<usize>,
+    /// Simulated time
+    #[arg(long, default_value_t = 2.0)]
+    t_end: f64,
+    /// Halvings of the time step in the sweep
+    #[arg(long, default_value_t = 5, value_parser = common::num::<u32>)]
+    halvings: u32,
+    /// Also run each series as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--t-end", "--halvings", "--graph"],
-        "nbody [--device cpu|cuda:N] [--n 256] [--t-end 2] [--halvings 5] [--graph] \
-         [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.is_cuda();
-    let n: usize = common::parsed("--n", if gpu { 4096 } else { 256 });
-    let t_end: f64 = common::parsed("--t-end", 2.0);
-    let halvings: u32 = common::parsed("--halvings", 5);
+    let n = cli.n.unwrap_or(if gpu { 4096 } else { 256 });
+    let (t_end, halvings) = (cli.t_end, cli.halvings);
     let (x0, v0, m) = start(n);
     let e0 = energy(&x0, &v0, &m);
     println!(
@@ -225,11 +242,11 @@ fn main() -> wp::Result<()> {
         "dt",
     )
     .with_extras(&["momentum drift"])
-    .progress((variants.len() * dts.len() * common::graph_modes().len()) as u64);
+    .progress((variants.len() * dts.len() * common::graph_modes(cli.graph).len()) as u64);
     let variants: Vec<(String, bool, bool, bool)> = variants
         .into_iter()
         .flat_map(|(name, double, comp)| {
-            common::graph_modes().iter().map(move |&graph| {
+            common::graph_modes(cli.graph).iter().map(move |&graph| {
                 let name = if graph {
                     format!("{name} graph")
                 } else {
@@ -239,6 +256,8 @@ fn main() -> wp::Result<()> {
             })
         })
         .collect();
+    // The frame: the last run's bodies at t_end (f64 Kahan at the smallest dt).
+    let mut last = None;
     for (name, double, compensated, graph) in variants.iter().cloned() {
         for &dt in &dts {
             let steps = (t_end / dt).round() as u64;
@@ -282,9 +301,30 @@ fn main() -> wp::Result<()> {
                 }
             };
             sweep.record(&name, dt, run);
+            last = Some((name.clone(), dt, x, v));
         }
     }
     common::finish(&sweep, "nbody");
+    if let Some((name, dt, x, v)) = last {
+        // The bodies within 3 of the centre of mass (at rest at the origin): a few escaped
+        // ones would shrink the cluster to a dot.
+        let r = 3.0;
+        let near: Vec<usize> = (0..x.len()).filter(|&i| x[i].length() < r).collect();
+        let frame = Frame::new(
+            format!("n-body: {n} bodies at t = {t_end} ({name}, dt = {dt})"),
+            common::camera([-r; 3], [r; 3], [1.0, 0.6, 1.4], [0.0, 1.0, 0.0]),
+        )
+        .note(format!(
+            "softening {SOFTENING}, started in a unit ball near virial equilibrium; {} within \
+             {r} of the centre of mass drawn; colour: speed",
+            near.len()
+        ))
+        .points(
+            Points::new(near.iter().map(|&i| common::p3(x[i])), 0.02)
+                .values("speed", near.iter().map(|&i| v[i].length())),
+        );
+        common::write_frame("nbody", &frame);
+    }
     common::print_compiled();
     Ok(())
 }

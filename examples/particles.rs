@@ -20,8 +20,10 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -55,7 +57,14 @@ fn integrate_f64(x: Array<DVec3>, v: Array<DVec3>, b: f64, mass: f64, gravity: D
 
 /// The dt sweep: `n` particles from the same start until the same end time `t_end`, in f32
 /// and in f64; the error is the max distance from the closed form.
-fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp::Result<()> {
+fn sweep(
+    dev: &wp::Device,
+    n: usize,
+    x0: &[Vec3],
+    v0: &[Vec3],
+    t_end: f64,
+    graph: bool,
+) -> wp::Result<()> {
     let (mass, b, g) = (0.1f64, 0.05f64, 9.81f64);
     let (x0, v0) = (&x0[..n], &v0[..n]);
     let counts = [25u64, 50, 100, 200, 400, 800, 1600];
@@ -63,10 +72,10 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
         format!("particles: linear drag with gravity, semi-implicit Euler, {n} particles on {dev}"),
         "dt",
     )
-    .progress((2 * common::graph_modes().len() * counts.len()) as u64);
+    .progress((2 * common::graph_modes(graph).len() * counts.len()) as u64);
     for (double, graph) in [false, true]
         .into_iter()
-        .flat_map(|d| common::graph_modes().iter().map(move |&g| (d, g)))
+        .flat_map(|d| common::graph_modes(graph).iter().map(move |&g| (d, g)))
     {
         // Warm-up on one particle (compiles on a GPU), outside the timing.
         if double {
@@ -133,16 +142,40 @@ fn sweep(dev: &wp::Device, n: usize, x0: &[Vec3], v0: &[Vec3], t_end: f64) -> wp
     Ok(())
 }
 
+/// The seed program: particles under gravity with linear drag (semi-implicit Euler), its
+/// errors against the closed form and the exact discrete solution, and a dt sweep.
+#[derive(Parser)]
+struct Cli {
+    /// Particles in the timed run
+    #[arg(
+        long,
+        value_name = "COUNT",
+        default_value = "10_000_000",
+        value_parser = common::num::<usize>
+    )]
+    n: usize,
+    /// Steps in the timed run
+    #[arg(long, default_value_t = 100, value_parser = common::num::<usize>)]
+    steps: usize,
+    /// Particles in the dt sweep (0: no sweep)
+    #[arg(
+        long,
+        value_name = "COUNT",
+        default_value = "100_000",
+        value_parser = common::num::<usize>
+    )]
+    sweep_n: usize,
+    /// Also run each series of the sweep as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--steps", "--sweep-n", "--graph"],
-        "particles [--n COUNT] [--steps STEPS] [--sweep-n COUNT (0: no sweep)] [--graph] \
-         [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let n: usize = common::parsed("--n", 10_000_000);
-    let steps: usize = common::parsed("--steps", 100);
-    let sweep_n: usize = common::parsed("--sweep-n", 100_000);
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let (n, steps, sweep_n) = (cli.n, cli.steps, cli.sweep_n);
+    let dev = cli.scene.init()?;
 
     // The seed's constants.
     let mass = 0.1f32; // kg
@@ -210,8 +243,22 @@ fn main() -> wp::Result<()> {
         "  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))"
     );
     println!("  max |x - exact discrete solution, f64| = {err_discrete:.3e} m (f32 rounding)");
+    let vs = v.to_vec()?;
+    let pos: Vec<[f64; 3]> = xs.iter().map(|&p| common::p3(p)).collect();
+    let (lo, hi) = common::bounds(&pos);
+    let frame = Frame::new(
+        format!("particles: {n} particles after {steps} steps (t = {t:.2} s)"),
+        common::camera(lo, hi, [1.0, -1.6, 0.8], [0.0, 0.0, 1.0]),
+    )
+    .note("gravity along -z, linear drag; colour: speed")
+    .lines(Lines::bounding_box(lo, hi))
+    .points(
+        Points::new(pos, 0.004 * common::diagonal(lo, hi))
+            .values("speed (m/s)", vs.iter().map(|v| v.length() as f64)),
+    );
+    common::write_frame("particles", &frame);
     if sweep_n > 0 {
-        sweep(&dev, sweep_n.min(n), &x0, &v0, t)?;
+        sweep(&dev, sweep_n.min(n), &x0, &v0, t, cli.graph)?;
     }
     common::print_compiled();
     Ok(())

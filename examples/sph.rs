@@ -21,9 +21,11 @@
 
 mod common;
 
+use clap::Parser;
 use std::time::Instant;
 
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -250,14 +252,22 @@ impl Sph {
     }
 }
 
+/// Weakly compressible SPH: a hydrostatic column's pressure against rho0 g depth, and a dam
+/// break's compression and stability limit against dt.
+#[derive(Parser)]
+struct Cli {
+    /// Particle spacing (m) [default: 0.015 on a GPU, 0.03 on the CPU]
+    #[arg(long)]
+    dx: Option<f32>,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--dx"],
-        "sph [--dx 0.015 (GPU) / 0.03 (CPU)] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
-    let dx: f32 = common::parsed("--dx", if gpu { 0.015 } else { 0.03 });
+    let dx = cli.dx.unwrap_or(if gpu { 0.015 } else { 0.03 });
     println!("SPH (WCSPH, cubic spline, dynamic wall particles) on \"{dev}\"");
     hydrostatic(&dev, dx)?;
     dam_break(&dev, dx)?;
@@ -354,6 +364,7 @@ fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
 /// the particle count.
 fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
     let (size, water) = (Vec3::new(1.2, 0.6, 0.4), Vec3::new(0.4, 0.4, 0.4));
+    let water_block = water;
     let t_end = 0.5f32;
     println!("\n2. dam break: a {water} m block in a {size} m tank, {t_end} s");
     let mut sweep = Sweep::new(
@@ -362,6 +373,8 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
     )
     .with_extras(&["particles", "front x (m)"]);
     let cfls = [0.1f32, 0.2, 0.4, 0.8, 1.6, 3.2];
+    // The frame: the water at t_end of the last stable run (finest spacing, largest CFL).
+    let mut shown: Option<(Vec<Vec3>, Vec<f32>, f32, f32)> = None;
     for (k, spacing) in [(2.0f32, dx * 2.0), (1.0, dx)] {
         let (x0, fluid) = layout(size, water, spacing);
         for &cfl in &cfls {
@@ -400,7 +413,13 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
             let run = match why {
                 Some(w) => Run::unstable(steps as u64, seconds, w),
                 None => {
-                    let x = s.x.to_vec()?;
+                    let (x, v) = (s.x.to_vec()?, s.v.to_vec()?);
+                    let speed: Vec<f32> = v
+                        .iter()
+                        .zip(&fluid)
+                        .filter(|(_, &f)| f != 0)
+                        .map(|(v, _)| v.length())
+                        .collect();
                     let water: Vec<Vec3> = x
                         .iter()
                         .zip(&fluid)
@@ -418,9 +437,12 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
                             || p.y < -spacing
                     });
                     match left.count() {
-                        0 => Run::stable(steps as u64, worst, seconds)
-                            .extra(s.n_fluid as f64)
-                            .extra(front as f64),
+                        0 => {
+                            shown = Some((water.clone(), speed, spacing, cfl));
+                            Run::stable(steps as u64, worst, seconds)
+                                .extra(s.n_fluid as f64)
+                                .extra(front as f64)
+                        }
                         k => Run::unstable(
                             steps as u64,
                             seconds,
@@ -433,5 +455,25 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
         }
     }
     common::finish(&sweep, "sph_dam_break");
+    if let Some((water, speed, spacing, cfl)) = shown {
+        let (lo, hi) = ([0.0; 3], common::p3(size));
+        let frame = Frame::new(
+            format!(
+                "sph: dam break at t = {t_end} s, {} fluid particles (dx = {spacing} m, CFL {cfl})",
+                water.len()
+            ),
+            common::camera(lo, hi, [0.7, 1.0, 1.8], [0.0, 1.0, 0.0]),
+        )
+        .note(format!(
+            "a {water_size} m block released in a {size} m tank (walls not drawn); colour: speed",
+            water_size = water_block
+        ))
+        .lines(Lines::bounding_box(lo, hi))
+        .points(
+            Points::new(water.iter().map(|&p| common::p3(p)), 0.5 * spacing as f64)
+                .values("speed (m/s)", speed.iter().map(|&v| v as f64)),
+        );
+        common::write_frame("sph", &frame);
+    }
     Ok(())
 }

@@ -18,11 +18,13 @@ mod common;
 #[path = "common/springs.rs"]
 mod springs;
 
+use clap::Parser;
 use std::collections::HashMap;
 use std::time::Instant;
 
 use springs::{Chains, Solver};
 use warp_lang as wp;
+use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Run, Sweep, Table};
 
 /// Runs `solver` at stiffness `k` and step `dt` until `t_end` and measures it against `reference`
@@ -84,26 +86,39 @@ fn run(
     })
 }
 
+/// A hanging mass-spring chain, stiffness 1e2 to 1e7 N/m: semi-implicit Euler against
+/// XPBD, each against an f64 Runge-Kutta reference.
+#[derive(Parser)]
+struct Cli {
+    /// Chains simulated side by side [default: 4096 on a GPU, 16 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    chains: Option<usize>,
+    /// Simulated time (s)
+    #[arg(long, default_value_t = 0.5)]
+    t_end: f64,
+    /// XPBD substeps per step
+    #[arg(long, default_value_t = 10, value_parser = common::num::<i32>)]
+    substeps: i32,
+    /// XPBD constraint iterations per substep
+    #[arg(long, default_value_t = 1, value_parser = common::num::<i32>)]
+    iterations: i32,
+    /// Halvings of the step from 1/60 s
+    #[arg(long, default_value_t = 8, value_parser = common::num::<u32>)]
+    halvings: u32,
+    /// Also run each series as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &[
-            "--chains",
-            "--t-end",
-            "--substeps",
-            "--iterations",
-            "--halvings",
-            "--graph",
-        ],
-        "springs [--device cpu|cuda:N] [--chains N] [--t-end 0.5] [--substeps 10] \
-         [--iterations 1] [--halvings 8] [--graph] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
     let gpu = dev.is_cuda();
-    let chains: usize = common::parsed("--chains", if gpu { 4096 } else { 16 });
-    let t_end: f64 = common::parsed("--t-end", 0.5);
-    let substeps: i32 = common::parsed("--substeps", 10);
-    let iterations: i32 = common::parsed("--iterations", 1);
-    let halvings: u32 = common::parsed("--halvings", 8);
+    let chains = cli.chains.unwrap_or(if gpu { 4096 } else { 16 });
+    let (t_end, substeps, iterations, halvings) =
+        (cli.t_end, cli.substeps, cli.iterations, cli.halvings);
     let stiffnesses = [1e2, 1e3, 1e4, 1e5, 1e6, 1e7];
     let solvers = [
         ("semi-implicit Euler", Solver::Euler),
@@ -126,6 +141,13 @@ fn main() -> wp::Result<()> {
 
     let mut largest: HashMap<(usize, &str), Option<f64>> = HashMap::new();
     let mut drift_at_60hz: HashMap<(usize, &str), f64> = HashMap::new();
+    // The frame: each stiffness's reference chain at t_end.
+    let mut frame = Frame::new(
+        format!("springs: the chain at t = {t_end} s for each stiffness (RK4 reference)"),
+        Camera::orthographic([0.0, 0.0, 1.0], [0.0; 3], [0.0, 1.0, 0.0]),
+    )
+    .note("released at rest along +x, pinned at the origin; colour: log10 k (N/m)");
+    let (mut beads, mut bead_k) = (Vec::new(), Vec::new());
     for (ki, &k) in stiffnesses.iter().enumerate() {
         // The reference: RK4 in f64 at a step resolving the fastest spring mode 20 times
         // over; its own error is estimated against a run at twice that step.
@@ -133,6 +155,10 @@ fn main() -> wp::Result<()> {
         let t = Instant::now();
         let reference = springs::reference(k, t_end, dt_ref);
         let coarse = springs::reference(k, t_end, 2.0 * dt_ref);
+        let chain: Vec<[f64; 3]> = reference.iter().map(|&p| common::p3(p)).collect();
+        frame = frame.lines(Lines::polyline(&chain));
+        bead_k.extend(chain.iter().map(|_| k.log10()));
+        beads.extend(chain);
         let ref_err = reference
             .iter()
             .zip(&coarse)
@@ -150,7 +176,7 @@ fn main() -> wp::Result<()> {
             "dt",
         )
         .with_extras(&["energy drift"])
-        .progress((steps.len() * solvers.len() * common::graph_modes().len()) as u64);
+        .progress((steps.len() * solvers.len() * common::graph_modes(cli.graph).len()) as u64);
         for (name, solver) in solvers {
             for &dt in &steps {
                 let row = sweep.record(
@@ -167,7 +193,7 @@ fn main() -> wp::Result<()> {
             }
             largest.insert((ki, name), sweep.largest_stable(name));
             // `--graph`: the same runs as replays of captured graphs, a series of their own.
-            if common::graph_modes().len() > 1 {
+            if common::graph_modes(cli.graph).len() > 1 {
                 let graph_name = format!("{name} graph");
                 for &dt in &steps {
                     let r = run(&dev, chains, (solver, true), k, dt, t_end, &reference)?;
@@ -177,6 +203,9 @@ fn main() -> wp::Result<()> {
         }
         common::finish(&sweep, &format!("springs_k{}", sci(k)));
     }
+
+    let frame = frame.points(Points::new(beads, 0.012).values("log10 k", bead_k));
+    common::write_frame("springs", &frame);
 
     println!("\nlargest stable dt on the grid 1/60 s / 2^j (j = 0..{halvings}), and energy drift at 1/60 s");
     let mut t = Table::new([

@@ -28,7 +28,9 @@
 
 mod common;
 
+use clap::Parser;
 use warp_lang as wp;
+use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{sci, Table};
 use wp::prelude::*;
 
@@ -203,18 +205,36 @@ impl Rig {
 const H_FD: f64 = 1e-5;
 const TOL_FD: f64 = 1e-6;
 
+/// System identification on the seed program: the drag coefficient and the mass recovered
+/// from an observed trajectory by gradient descent through the simulation.
+#[derive(Parser)]
+struct Cli {
+    /// Particles observed [default: 4096 on a GPU, 16 on the CPU]
+    #[arg(long, value_name = "N", value_parser = common::num::<usize>)]
+    particles: Option<usize>,
+    /// Steps of the observed trajectory
+    #[arg(long, default_value_t = 200, value_parser = common::num::<usize>)]
+    steps: usize,
+    /// Most gradient-descent iterations
+    #[arg(long, default_value_t = 2000, value_parser = common::num::<usize>)]
+    iterations: usize,
+    /// The learning rate
+    #[arg(long, default_value_t = 0.05)]
+    lr: f64,
+    /// Converged when both parameters are within this relative error of the truth
+    #[arg(long, default_value_t = 1e-3)]
+    tol: f64,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--particles", "--steps", "--iterations", "--lr", "--tol"],
-        "sysid [--device cpu|cuda:N] [--particles N] [--steps 200] [--iterations 2000] \
-         [--lr 0.05] [--tol 1e-3] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let particles: usize = common::parsed("--particles", if dev.is_cuda() { 4096 } else { 16 });
-    let steps: usize = common::parsed("--steps", 200);
-    let iterations: usize = common::parsed("--iterations", 2000);
-    let lr: f64 = common::parsed("--lr", 0.05);
-    let tol: f64 = common::parsed("--tol", 1e-3);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let particles = cli
+        .particles
+        .unwrap_or(if dev.is_cuda() { 4096 } else { 16 });
+    let (steps, iterations, lr, tol) = (cli.steps, cli.iterations, cli.lr, cli.tol);
     if particles == 0 || steps == 0 {
         eprintln!("--particles and --steps must be at least 1");
         std::process::exit(2);
@@ -327,6 +347,43 @@ fn main() -> wp::Result<()> {
         t[1].exp(),
         sci(em)
     );
+    // The frame: up to 8 particles' observed trajectories (lines) and those of the recovered
+    // parameters (dots, every 5th step), which should lie on them.
+    let shown = particles.min(8);
+    let observed = obs.to_vec()?;
+    rig.run(&theta, true, None, &dev)?;
+    let fitted = rig.x.to_vec()?;
+    let track = |all: &[DVec3], p: usize| -> Vec<[f64; 3]> {
+        (0..=steps)
+            .map(|s| common::p3(all[s * particles + p]))
+            .collect()
+    };
+    let tracks: Vec<Vec<[f64; 3]>> = (0..shown).map(|p| track(&observed, p)).collect();
+    let (lo, hi) = common::bounds(&tracks.concat());
+    let mut frame = Frame::new(
+        format!(
+            "sysid: {shown} of {particles} observed trajectories and the fit (b = {:.4}, m = {:.4})",
+            t[0].exp(),
+            t[1].exp()
+        ),
+        common::camera(lo, hi, [0.8, 0.5, 1.4], [0.0, 1.0, 0.0]),
+    )
+    .note("gravity, drag and a known push; lines: observed; dots: recovered parameters, every 5th step, colour: time (s)");
+    for tr in &tracks {
+        frame = frame.lines(Lines::polyline(tr).colour([150, 150, 150]).width(1.0));
+    }
+    let dots: Vec<(usize, usize)> = (0..shown)
+        .flat_map(|p| (0..=steps).step_by(5).map(move |s| (p, s)))
+        .collect();
+    let frame = frame.points(
+        Points::new(
+            dots.iter()
+                .map(|&(p, s)| common::p3(fitted[s * particles + p])),
+            0.006 * common::diagonal(lo, hi),
+        )
+        .values("time (s)", dots.iter().map(|&(_, s)| s as f64 * DT)),
+    );
+    common::write_frame("sysid", &frame);
     common::print_compiled();
     let converged = eb < tol && em < tol;
     common::verdict(

@@ -13,9 +13,11 @@
 
 mod common;
 
+use clap::Parser;
 use std::f64::consts::PI;
 use std::time::Instant;
 use warp_lang as wp;
+use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{Run, Sweep};
 use wp::prelude::*;
 
@@ -43,13 +45,23 @@ fn first_step(u0: Array<f32>, u1: Array<f32>, r2: f32) {
     }
 }
 
+/// The 1-D wave equation by leapfrog against the analytic standing wave.
+#[derive(Parser)]
+struct Cli {
+    /// Grid points of the finest grid
+    #[arg(long, default_value_t = 1024, value_parser = common::num::<usize>)]
+    n: usize,
+    /// Also run each series as replays of a captured graph
+    #[arg(long)]
+    graph: bool,
+    #[command(flatten)]
+    scene: common::SceneArgs,
+}
+
 fn main() -> wp::Result<()> {
-    common::check_args(
-        &["--n", "--graph"],
-        "wave [--n 1024] [--graph] [--device cpu|cuda:N] [--plot-dir DIR]",
-    );
-    let dev = common::device()?;
-    let n: usize = common::parsed("--n", 1024);
+    let cli = Cli::parse();
+    let dev = cli.scene.init()?;
+    let n = cli.n;
     let (c, t_end) = (1.0f64, 1.0f64);
     println!(
         "wave equation on \"{dev}\", c = {c}, until t = {t_end}, grids of {} and {n} points",
@@ -61,11 +73,17 @@ fn main() -> wp::Result<()> {
         format!("1-D wave equation, leapfrog f32, on {dev}"),
         "r = c dt/dx",
     )
-    .progress((ratios.len() * grids.len() * common::graph_modes().len()) as u64);
+    .progress((ratios.len() * grids.len() * common::graph_modes(cli.graph).len()) as u64);
+    // The frame: the coarse grid's string at t_end at r = 0.9 (stable) and r = 1.01 (past
+    // the CFL limit), against the exact standing wave.
+    let mut shown: Vec<(f64, Vec<f32>)> = Vec::new();
     for n in grids {
-        for &graph in common::graph_modes() {
+        for &graph in common::graph_modes(cli.graph) {
             for r in ratios {
-                let run = run(&dev, n, c, r, t_end, graph)?;
+                let (run, u) = run(&dev, n, c, r, t_end, graph)?;
+                if n == grids[0] && !graph && (r == 0.9 || r == 1.01) {
+                    shown.push((r, u));
+                }
                 let series = if graph {
                     format!("{n} points graph")
                 } else {
@@ -76,15 +94,48 @@ fn main() -> wp::Result<()> {
         }
     }
     common::finish(&sweep, "wave");
+    let m = grids[0];
+    let dx = 1.0 / (m - 1) as f64;
+    let exact: Vec<[f64; 3]> = (0..=200)
+        .map(|i| {
+            let x = i as f64 / 200.0;
+            [x, (PI * x).sin() * (PI * c * t_end).cos(), 0.0]
+        })
+        .collect();
+    let mut frame = Frame::new(
+        format!("wave: the string at t = {t_end} on {m} points (f32 leapfrog)"),
+        Camera::orthographic([0.5, 0.0, 1.0], [0.5, 0.0, 0.0], [0.0, 1.0, 0.0]),
+    )
+    .size(800, 420)
+    .note("line: the exact standing wave sin(pi x) cos(pi c t); dots: the scheme, colour: r = c dt/dx")
+    .lines(Lines::polyline(&exact).colour([120, 120, 120]).width(2.0));
+    let (mut dots, mut dot_r) = (Vec::new(), Vec::new());
+    for (r, u) in &shown {
+        // Past the CFL limit the string can have grown without bound: clamp to the picture.
+        for (i, &v) in u.iter().enumerate().step_by(2) {
+            dots.push([i as f64 * dx, (v as f64).clamp(-1.5, 1.5), 0.0]);
+            dot_r.push(*r);
+        }
+    }
+    frame = frame.points(Points::new(dots, 0.006).values("r", dot_r));
+    common::write_frame("wave", &frame);
     common::print_compiled();
     Ok(())
 }
 
 /// Runs the scheme at Courant number `r` on `n` points until `t_end`; the error is the max
-/// difference from the analytic standing wave at the time reached.
+/// difference from the analytic standing wave at the time reached. Also returns the string
+/// at the end (nothing for a run the divergence guard stopped).
 /// With `graph`, each 192 steps (a multiple of the three arrays' rotation) are a replay of a
 /// captured graph.
-fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64, graph: bool) -> wp::Result<Run> {
+fn run(
+    dev: &wp::Device,
+    n: usize,
+    c: f64,
+    r: f64,
+    t_end: f64,
+    graph: bool,
+) -> wp::Result<(Run, Vec<f32>)> {
     let dx = 1.0 / (n - 1) as f64;
     let x: Vec<f64> = (0..n).map(|i| i as f64 * dx).collect();
     let u0: Vec<f32> = x.iter().map(|&x| (PI * x).sin() as f32).collect();
@@ -112,11 +163,12 @@ fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64, graph: bool) -> w
         s += k;
         // The divergence guard: a NaN or infinity stops the run and says where.
         if let Err(e) = b.check_finite("u") {
-            return Ok(Run::unstable(
+            let run = Run::unstable(
                 s as u64,
                 t.elapsed().as_secs_f64(),
                 format!("by step {s}: {e}"),
-            ));
+            );
+            return Ok((run, Vec::new()));
         }
     }
     wp::synchronize()?;
@@ -129,9 +181,10 @@ fn run(dev: &wp::Device, n: usize, c: f64, r: f64, t_end: f64, graph: bool) -> w
         .map(|(&x, &v)| (v as f64 - (PI * x).sin() * (PI * c * t_reached).cos()).abs())
         .fold(0.0f64, f64::max);
     // Growth the guard has not caught yet (finite but far above the wave's amplitude 1).
-    Ok(if err.is_finite() && err < 1.0 {
+    let run = if err.is_finite() && err < 1.0 {
         Run::stable(steps as u64, err, seconds)
     } else {
         Run::unstable(steps as u64, seconds, format!("error {err:.1e} at the end"))
-    })
+    };
+    Ok((run, u))
 }

@@ -1,76 +1,51 @@
-//! What the scenes share: arguments, the device, and printing a sweep with its plot and
+//! What the scenes share: their common options, the device, and printing a sweep with its plot and
 //! what was compiled.
 
 #![allow(dead_code)] // each example uses its own subset
 
 use std::path::PathBuf;
+use std::sync::OnceLock;
 
 use warp_lang as wp;
 use warp_report::Sweep;
 
-/// Checks the command line against the scene's options (each `--name VALUE`): prints
-/// `usage` for `-h`/`--help`, and stops with a message on an unknown option or a missing value.
-/// `--device` and `--plot-dir` are known to every scene.
-pub fn check_args(known: &[&str], usage: &str) {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut k = 0;
-    while k < args.len() {
-        let a = args[k].as_str();
-        if a == "-h" || a == "--help" {
-            println!("usage: {usage}");
-            std::process::exit(0);
-        }
-        // `--graph` (in `known` where a scene has it) takes no value.
-        if a == "--graph" && known.contains(&a) {
-            k += 1;
-            continue;
-        }
-        if !(known.contains(&a) || a == "--device" || a == "--plot-dir") {
-            eprintln!("unknown argument {a}\nusage: {usage}");
-            std::process::exit(2);
-        }
-        if k + 1 == args.len() {
-            eprintln!("{a} needs a value");
-            std::process::exit(2);
-        }
-        k += 2;
+pub mod cli;
+
+#[allow(unused_imports)] // a scene without integer options has no use for `num`
+pub use cli::{num, DeviceArg};
+
+/// Where plots go unless `--plot-dir` says otherwise (`target/report`, beside the build).
+pub const DEFAULT_PLOT_DIR: &str = "target/report";
+
+/// The output folder the scene's command line named (set once by `SceneArgs::init`).
+static PLOT_DIR: OnceLock<PathBuf> = OnceLock::new();
+
+/// The options every scene has; each scene's own `#[derive(Parser)]` struct flattens them.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SceneArgs {
+    #[command(flatten)]
+    pub device: DeviceArg,
+    /// Folder for the scene's plots (SVG), created if missing
+    #[arg(long, value_name = "DIR", default_value = DEFAULT_PLOT_DIR)]
+    pub plot_dir: PathBuf,
+}
+
+impl SceneArgs {
+    /// Records the output folder for `finish`, `write_plot` and `OptLog::finish`, initialises
+    /// warp-lang and returns the device (`--device`, else the preferred one).
+    pub fn init(&self) -> wp::Result<wp::Device> {
+        // A second call keeps the first folder (a scene parses its command line once).
+        let _ = PLOT_DIR.set(self.plot_dir.clone());
+        self.device.get()
     }
 }
 
-/// The value after `--name` on the command line, if given.
-pub fn arg(name: &str) -> Option<String> {
-    let args: Vec<String> = std::env::args().collect();
-    let k = args.iter().position(|a| a == name)?;
-    args.get(k + 1).cloned()
-}
-
-/// Whether `--name` is on the command line.
-pub fn flag(name: &str) -> bool {
-    std::env::args().any(|a| a == name)
-}
-
-/// `--name VALUE` parsed, or `default`; a value that does not parse stops the scene with a
-/// message naming the argument.
-pub fn parsed<T: std::str::FromStr>(name: &str, default: T) -> T
-where
-    T::Err: std::fmt::Display,
-{
-    match arg(name) {
-        None => default,
-        Some(v) => v.replace('_', "").parse().unwrap_or_else(|e| {
-            eprintln!("{name} {v}: {e}");
-            std::process::exit(2)
-        }),
-    }
-}
-
-/// `--device NAME`, else the preferred device (the first GPU, or the CPU without one).
-pub fn device() -> wp::Result<wp::Device> {
-    wp::init();
-    match arg("--device") {
-        Some(d) => wp::get_device(&d),
-        None => Ok(wp::get_preferred_device()),
-    }
+/// The folder plots are written to: `--plot-dir`, else `target/report`.
+pub fn plot_dir() -> PathBuf {
+    PLOT_DIR
+        .get()
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_PLOT_DIR))
 }
 
 /// Prints the sweep's table, writes its plot to `<--plot-dir or target/report>/<name>.svg`,
@@ -86,7 +61,7 @@ pub fn finish(sweep: &Sweep, name: &str) {
 /// Writes a plot through `write` to `<--plot-dir or target/report>/<name>.svg` (creating the
 /// folder) and prints where, or why not.
 pub fn write_plot(name: &str, write: impl FnOnce(&std::path::Path) -> Result<(), String>) {
-    let dir = PathBuf::from(arg("--plot-dir").unwrap_or_else(|| "target/report".into()));
+    let dir = plot_dir();
     let path = dir.join(format!("{name}.svg"));
     match std::fs::create_dir_all(&dir)
         .map_err(|e| e.to_string())
@@ -95,6 +70,63 @@ pub fn write_plot(name: &str, write: impl FnOnce(&std::path::Path) -> Result<(),
         Ok(()) => println!("plot: {}", path.display()),
         Err(e) => println!("plot not written: {e}"),
     }
+}
+
+/// Writes the scene's last frame to `<--plot-dir or target/report>/<name>_frame.svg` and
+/// prints where, or why not.
+pub fn write_frame(name: &str, frame: &warp_report::frame::Frame) {
+    let path = plot_dir().join(format!("{name}_frame.svg"));
+    match std::fs::create_dir_all(plot_dir())
+        .map_err(|e| e.to_string())
+        .and_then(|()| frame.write_svg(&path).map_err(|e| e.to_string()))
+    {
+        Ok(()) => println!("frame: {}", path.display()),
+        Err(e) => println!("frame not written: {e}"),
+    }
+}
+
+/// A position for the frame renderer (which works in f64 arrays).
+pub fn p3(v: impl Into<glam::DVec3>) -> [f64; 3] {
+    v.into().to_array()
+}
+
+/// A perspective camera looking at the middle of the box `lo`..`hi` from the direction
+/// `from` (towards the eye), 2.5 box diagonals away, `up` up; the frame zooms to fit.
+pub fn camera(
+    lo: [f64; 3],
+    hi: [f64; 3],
+    from: [f64; 3],
+    up: [f64; 3],
+) -> warp_report::frame::Camera {
+    let (lo, hi, from) = (
+        glam::DVec3::from(lo),
+        glam::DVec3::from(hi),
+        glam::DVec3::from(from),
+    );
+    let centre = (lo + hi) / 2.0;
+    let eye = centre + from.normalize_or(glam::DVec3::Z) * 2.5 * (hi - lo).length().max(1e-9);
+    warp_report::frame::Camera::perspective(eye.to_array(), centre.to_array(), up)
+}
+
+/// The smallest box holding `points` (a unit box at the origin for none).
+pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    if points.is_empty() {
+        return ([-0.5; 3], [0.5; 3]);
+    }
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
+
+/// The length of the box's diagonal.
+pub fn diagonal(lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (glam::DVec3::from(hi) - glam::DVec3::from(lo)).length()
 }
 
 /// The log of an optimisation: every iteration goes into the curves (the plot); every
@@ -210,8 +242,8 @@ impl Rng {
 /// The scenes' `--graph`: the timed runs once with plain launches and once as replays of
 /// captured graphs (`wp::capture`), as two series of the sweep (`"<series> graph"`); the same
 /// kernels in the same order, so the errors agree and the times show the speed-up.
-pub fn graph_modes() -> &'static [bool] {
-    if flag("--graph") {
+pub fn graph_modes(graph: bool) -> &'static [bool] {
+    if graph {
         &[false, true]
     } else {
         &[false]

@@ -10,6 +10,9 @@
 //! [`Curves`] plots an optimiser's loss (or any value) against iteration, for the
 //! differentiable scenes.
 //!
+//! [`frame::Frame`] draws a still picture of a scene (particles, lines and triangle meshes
+//! seen by a camera) into an SVG, for a README or a report.
+//!
 //! This crate knows nothing about kernels or devices: a scene measures its own run, and
 //! says what "error" and "stable" mean for it. It is optional: `warp-lang` re-exports it as
 //! `wp::report` behind the `report` feature, so that simulations that do not report pull in
@@ -32,6 +35,7 @@ use std::fmt;
 use std::path::Path;
 
 mod curves;
+pub mod frame;
 mod plot;
 mod table;
 

@@ -25,20 +25,38 @@
 //! On a GPU none of the built architectures serves (the same major version, equal or lower
 //! minor), the kernels are compiled at first launch as usual.
 
+#[path = "../../common/cli.rs"]
+mod cli;
 mod kernels;
 
+use clap::Parser;
 use kernels::seed_ad;
 use std::path::PathBuf;
 use std::time::Instant;
 use warp_lang as wp;
 
-fn arg(name: &str, default: usize) -> usize {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|k| args.get(k + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+/// The autodiff example's computation with its kernels compiled to cubins at `cargo build`:
+/// the first result (the seed function and its derivative), then the particle gradient.
+#[derive(Parser)]
+struct Cli {
+    /// Particles in the gradient run
+    #[arg(long, default_value = "1_000_000", value_parser = cli::num::<usize>)]
+    n: usize,
+    /// Steps in the gradient run
+    #[arg(long, default_value_t = 100, value_parser = cli::num::<usize>)]
+    steps: usize,
+    /// Ignore the cubins: a cold or warm start through NVRTC and the kernel cache
+    #[arg(long)]
+    no_aot: bool,
+    /// Only say whether the cubin directory holds every entry the launches will look for
+    /// (no GPU needed); fails when the build compiled cubins and some are missing
+    #[arg(long)]
+    check: bool,
+    /// Stop after the first result
+    #[arg(long)]
+    first_result_only: bool,
+    #[command(flatten)]
+    device: cli::DeviceArg,
 }
 
 /// The cubin directory: `prebuilt-cubins` beside the binary (where a shipped binary carries
@@ -95,18 +113,14 @@ fn check() -> std::process::ExitCode {
 
 fn main() -> wp::Result<std::process::ExitCode> {
     let start = Instant::now();
-    let args: Vec<String> = std::env::args().collect();
-    if args.iter().any(|a| a == "--check") {
+    let cli = Cli::parse();
+    if cli.check {
         return Ok(check());
     }
-    if !args.iter().any(|a| a == "--no-aot") {
+    if !cli.no_aot {
         wp::aot::set_aot_dir(Some(cubin_dir()));
     }
-    wp::init();
-    let dev = match args.iter().position(|a| a == "--device") {
-        Some(k) => wp::get_device(args.get(k + 1).map(String::as_str).unwrap_or("cpu"))?,
-        None => wp::get_preferred_device(),
-    };
+    let dev = cli.device.get()?;
 
     // 1. The seed function: the first result.
     let (f, df) = seed_ad::first_result(&dev)?;
@@ -136,8 +150,8 @@ fn main() -> wp::Result<std::process::ExitCode> {
     );
 
     // 2. Gradients through the particle program.
-    if !args.iter().any(|a| a == "--first-result-only") {
-        seed_ad::particle_gradients(arg("--n", 1_000_000), arg("--steps", 100), &dev)?;
+    if !cli.first_result_only {
+        seed_ad::particle_gradients(cli.n, cli.steps, &dev)?;
     }
     print!("{}", wp::compile_summary());
     Ok(std::process::ExitCode::SUCCESS)
