@@ -83,7 +83,7 @@ impl Camera {
     /// The camera's frame: right, up and forward unit vectors, or why there is none.
     fn basis(&self) -> Result<[V3; 3], PlotError> {
         let bad = || {
-            PlotError(format!(
+            PlotError::new(format!(
                 "camera: eye {:?}, target {:?} and up {:?} do not give a view (eye at the \
                  target, or up along the view)",
                 self.eye, self.target, self.up
@@ -389,7 +389,8 @@ impl Frame {
     /// Writes the SVG to `path`.
     pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
         let svg = self.to_svg()?;
-        std::fs::write(path, svg).map_err(|e| PlotError(format!("writing {}: {e}", path.display())))
+        std::fs::write(path, svg)
+            .map_err(|e| PlotError::caused_by(format!("writing {}: {e}", path.display()), e))
     }
 
     /// The SVG text: an error names what cannot be drawn (a degenerate camera, values that do
@@ -419,7 +420,7 @@ impl Frame {
         for (k, set) in self.points.iter().enumerate() {
             if let Some((label, values)) = &set.values {
                 if values.len() != set.positions.len() {
-                    return Err(PlotError(format!(
+                    return Err(PlotError::new(format!(
                         "points {k}: {} values of \"{label}\" for {} positions",
                         values.len(),
                         set.positions.len()
@@ -433,7 +434,7 @@ impl Frame {
                 .iter()
                 .find(|t| t.iter().any(|&i| i >= mesh.points.len()))
             {
-                return Err(PlotError(format!(
+                return Err(PlotError::new(format!(
                     "mesh {k}: triangle {t:?} indexes past its {} points",
                     mesh.points.len()
                 )));

@@ -24,6 +24,17 @@ impl PlotError {
             source: None,
         }
     }
+
+    /// A failure caused by `source` (kept as the error's source).
+    pub(crate) fn caused_by(
+        message: String,
+        source: impl std::error::Error + Send + Sync + 'static,
+    ) -> Self {
+        PlotError {
+            message,
+            source: Some(Box::new(source)),
+        }
+    }
 }
 
 /// plotters' error while drawing into `path`, as a [`PlotError`] naming the path (and
