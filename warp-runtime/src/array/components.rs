@@ -1,7 +1,7 @@
 //! The element types as array libraries see them: a scalar type and trailing axes (NumPy's
 //! view of Warp's vector and matrix arrays), shared by the ndarray views and DLPack.
 
-use super::{Array, Element};
+use super::Element;
 
 /// An element type as NumPy sees it in Warp: scalars of type `Scalar` on trailing axes of
 /// shape `SHAPE` (none for a scalar, `[K]` for a vector or quaternion, `[rows, columns]`
@@ -71,7 +71,9 @@ nd_matrices!(
     glam::DMat2 => f64, 2; glam::DMat3 => f64, 3; glam::DMat4 => f64, 4;
 );
 
-impl<T: NdComponents, const N: usize> Array<T, N> {
+// The layouts the ndarray views and DLPack share.
+#[cfg(any(feature = "ndarray", feature = "dlpack"))]
+impl<T: NdComponents, const N: usize> super::Array<T, N> {
     /// The number of scalars in one element.
     pub(crate) fn components_per_element() -> usize {
         std::mem::size_of::<T>() / std::mem::size_of::<T::Scalar>()
