@@ -156,12 +156,10 @@ fn frame(xs: &[Vec3], vs: &[Vec3], stride: usize, steps: usize, t: f64) -> Frame
     )
     .note("gravity along -z, linear drag; colour: speed")
     .lines(Lines::bounding_box(lo, hi))
-    .points(
-        Points::new(pos, 0.004 * common::diagonal(lo, hi)).values(
-            "speed (m/s)",
-            vs.iter().step_by(stride).map(|v| v.length() as f64),
-        ),
-    )
+    .points(Points::new(pos, 0.004 * common::diagonal(lo, hi)).values(
+        "speed (m/s)",
+        vs.iter().step_by(stride).map(|v| v.length() as f64),
+    ))
 }
 
 /// The seed program: particles under gravity with linear drag (semi-implicit Euler), its

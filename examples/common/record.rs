@@ -31,10 +31,12 @@ pub fn parse_rrd_path(text: &str) -> Result<PathBuf, String> {
     if cfg!(feature = "rerun") {
         Ok(PathBuf::from(text))
     } else {
-        Err("this build has no rerun support: build the example with `--features rerun` \
+        Err(
+            "this build has no rerun support: build the example with `--features rerun` \
              (for instance `cargo run --release --features rerun --example <scene> -- \
              --rerun <file.rrd>`)"
-            .to_string())
+                .to_string(),
+        )
     }
 }
 
@@ -324,20 +326,14 @@ mod imp {
                 }
             }
         }
-        let normals = normals.into_iter().map(|v| {
-            f32s(
-                glam::DVec3::from(v)
-                    .normalize_or(glam::DVec3::Z)
-                    .to_array(),
-            )
-        });
+        let normals = normals
+            .into_iter()
+            .map(|v| f32s(glam::DVec3::from(v).normalize_or(glam::DVec3::Z).to_array()));
         let [r, g, b] = m.rgb();
-        Ok(
-            rerun::Mesh3D::new(m.points().iter().map(|&p| f32s(p)))
-                .with_triangle_indices(m.triangles().iter().map(|t| t.map(|i| i as u32)))
-                .with_vertex_normals(normals)
-                .with_albedo_factor(rerun::datatypes::Rgba32::from_rgb(r, g, b)),
-        )
+        Ok(rerun::Mesh3D::new(m.points().iter().map(|&p| f32s(p)))
+            .with_triangle_indices(m.triangles().iter().map(|t| t.map(|i| i as u32)))
+            .with_vertex_normals(normals)
+            .with_albedo_factor(rerun::datatypes::Rgba32::from_rgb(r, g, b)))
     }
 
     /// A wireframe mesh: each edge once, as a two-point strip.

@@ -145,7 +145,9 @@ impl Points {
 
     /// The scalar that colours the particles, with its label, if one does.
     pub fn scalar(&self) -> Option<(&str, &[f64])> {
-        self.values.as_ref().map(|(l, v)| (l.as_str(), v.as_slice()))
+        self.values
+            .as_ref()
+            .map(|(l, v)| (l.as_str(), v.as_slice()))
     }
 
     /// The smallest and largest finite value of the colouring scalar ((0, 0) if none is
@@ -505,7 +507,8 @@ impl Frame {
     /// Writes the SVG to `path`.
     pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
         let svg = self.to_svg()?;
-        std::fs::write(path, svg).map_err(|e| PlotError::new(format!("writing {}: {e}", path.display())))
+        std::fs::write(path, svg)
+            .map_err(|e| PlotError::new(format!("writing {}: {e}", path.display())))
     }
 
     /// The SVG text: an error names what cannot be drawn (a degenerate camera, values that do
