@@ -44,6 +44,25 @@ impl SceneArgs {
         self.device.get()
     }
 
+    /// For a scene whose only picture is its last frame: `--rerun` records that one frame (at
+    /// step 0, time 0).
+    pub fn record_last(&self, scene: &str, frame: &warp_report::frame::Frame) {
+        let mut rec = self.recorder(scene);
+        if rec.is_on() {
+            rec.frame(0, 0.0, frame);
+            rec.finish();
+        }
+    }
+
+    /// For a scene that draws no frame: `--rerun` is refused (exit status 2) rather than
+    /// ignored.
+    pub fn no_recording(&self, scene: &str) {
+        if self.rerun.is_some() {
+            eprintln!("error: --rerun: {scene} draws no frame (it prints tables and plots)");
+            std::process::exit(2);
+        }
+    }
+
     /// The recording `--rerun` asked for (one that records nothing without it). A file that
     /// cannot be created ends the scene with a message and exit status 1, before it runs.
     pub fn recorder(&self, scene: &str) -> record::Recorder {
