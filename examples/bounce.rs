@@ -332,6 +332,7 @@ fn main() -> wp::Result<()> {
         )
         .points(Points::new(ends, setup.radius).colour([200, 40, 40]));
     common::write_frame("bounce", &frame);
+    cli.scene.record_last("bounce", &frame);
     common::print_compiled();
     common::verdict(
         "bounce",

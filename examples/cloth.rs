@@ -757,10 +757,28 @@ fn main() -> wp::Result<()> {
             .wireframe()
             .colour([110, 140, 200]),
     )
-    .mesh(TriMesh::new(end, grid).colour([220, 120, 90]))
+    .mesh(TriMesh::new(end, grid.clone()).colour([220, 120, 90]))
     .points(Points::new([common::p3(com)], 0.02).colour([20, 20, 20]))
     .points(Points::new([common::p3(target)], 0.02).colour([200, 30, 30]));
     common::write_frame("cloth", &frame);
+    let mut rec = cli.scene.recorder("cloth");
+    if rec.is_on() {
+        // The recording: the same trajectory (every step is on the tape), about 100 frames of
+        // it, the cloth shaded with the target beside it.
+        let every = common::record::every(steps);
+        for k in (0..=steps).filter(|&k| k % every == 0 || k == steps) {
+            let t = k as f64 * c64.setup.dt;
+            let frame = Frame::new(
+                format!("cloth: {n} x {n} particles thrown to the target, t = {t:.3} s"),
+                common::camera(lo, hi, [1.4, 0.5, 1.0], [0.0, 1.0, 0.0]),
+            )
+            .note("held at two corners; the target of the centre of mass at T (red)")
+            .mesh(TriMesh::new(cloth_at(k)?, grid.clone()).colour([220, 120, 90]))
+            .points(Points::new([common::p3(target)], 0.02).colour([200, 30, 30]));
+            rec.frame(k, t, &frame);
+        }
+        rec.finish();
+    }
     common::print_compiled();
     let converged = miss < tol;
     common::verdict(

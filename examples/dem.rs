@@ -230,7 +230,7 @@ fn main() -> wp::Result<()> {
     let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
     if cli.preset.as_deref() == Some("warp") {
-        return warp_preset(&dev, cli.frames.unwrap_or(100));
+        return warp_preset(&dev, cli.frames.unwrap_or(100), &cli.scene);
     }
     println!("DEM on \"{dev}\": linear spring-dashpot contacts, cohesion, Coulomb friction");
     restitution(&dev)?;
@@ -238,7 +238,7 @@ fn main() -> wp::Result<()> {
     stability_limit(&dev)?;
     let n = cli.n.unwrap_or(if gpu { 110_592 } else { 8_000 });
     let frames = cli.frames.unwrap_or(60);
-    settle(&dev, n, frames)?;
+    settle(&dev, n, frames, &cli.scene)?;
     common::print_compiled();
     Ok(())
 }
@@ -496,7 +496,7 @@ fn stability_limit(dev: &wp::Device) -> wp::Result<()> {
 
 /// The cohesive pile settling into a box: ms per frame (128 substeps, a grid build each), and
 /// the largest overlap relative to the radius at the end of each reported frame.
-fn settle(dev: &wp::Device, n: usize, frames: usize) -> wp::Result<()> {
+fn settle(dev: &wp::Device, n: usize, frames: usize, args: &common::SceneArgs) -> wp::Result<()> {
     let m = Material {
         radius: 0.01,
         mass: 1e-3,
@@ -559,11 +559,26 @@ fn settle(dev: &wp::Device, n: usize, frames: usize) -> wp::Result<()> {
     )
     .with_extras(&["ms per frame"]);
     let mut elapsed = 0.0f64;
+    // With `--rerun`, every frame of the run (its natural cadence), outside the timing.
+    let mut rec = args.recorder("dem");
+    let stride = common::record::stride(n);
+    let picture = |x: &[Vec3], fr: usize| {
+        let t = fr as f64 * frame_dt as f64;
+        let title = format!("dem: {n} particles after {fr} frames ({t:.2} s)");
+        pile_frame(x, stride, m.radius as f64, half_width as f64, title)
+    };
+    if rec.is_on() {
+        rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
+    }
     for fr in 0..frames {
         let t = Instant::now();
         s.frame(substeps, dt)?;
         wp::synchronize()?;
         elapsed += t.elapsed().as_secs_f64();
+        if rec.is_on() {
+            let sim_t = (fr + 1) as f64 * frame_dt as f64;
+            rec.frame(fr + 1, sim_t, &picture(&s.x.to_vec()?, fr + 1));
+        }
         if (fr + 1) % (frames / 6).max(1) == 0 || fr + 1 == frames {
             let x = s.x.to_vec()?;
             let fastest =
@@ -594,23 +609,13 @@ fn settle(dev: &wp::Device, n: usize, frames: usize) -> wp::Result<()> {
         }
     }
     common::finish(&sweep, "dem_settle");
-    let x = s.x.to_vec()?;
-    let pos: Vec<[f64; 3]> = x.iter().map(|&p| common::p3(p)).collect();
-    let (w, top) = (half_width as f64, common::bounds(&pos).1[1].max(0.0));
-    let (lo, hi) = ([-w, 0.0, -w], [w, top, w]);
-    let frame = Frame::new(
-        format!(
-            "dem: {n} particles after {frames} frames ({:.2} s)",
-            frames as f32 * frame_dt
-        ),
-        common::camera(lo, hi, [1.0, 0.9, 1.6], [0.0, 1.0, 0.0]),
-    )
-    .note("cohesive spring-dashpot contacts with Coulomb friction, in a box; colour: height")
-    .lines(Lines::bounding_box(lo, hi))
-    .points(
-        Points::new(pos.iter().copied(), m.radius as f64)
-            .values("height (m)", pos.iter().map(|p| p[1])),
+    rec.finish();
+    let title = format!(
+        "dem: {n} particles after {frames} frames ({:.2} s)",
+        frames as f32 * frame_dt
     );
+    let x = s.x.to_vec()?;
+    let frame = pile_frame(&x, 1, m.radius as f64, half_width as f64, title);
     common::write_frame("dem", &frame);
     println!(
         "settling: {:.2} ms per frame ({} substeps, a grid build each) on \"{dev}\"",
@@ -618,6 +623,21 @@ fn settle(dev: &wp::Device, n: usize, frames: usize) -> wp::Result<()> {
         substeps
     );
     Ok(())
+}
+
+/// The pile (one particle in `stride`) in its box of half-width `w`, up to its top, coloured
+/// by height.
+fn pile_frame(x: &[Vec3], stride: usize, radius: f64, w: f64, title: String) -> Frame {
+    let pos: Vec<[f64; 3]> = x.iter().step_by(stride).map(|&p| common::p3(p)).collect();
+    let top = common::bounds(&pos).1[1].max(0.0);
+    let (lo, hi) = ([-w, 0.0, -w], [w, top, w]);
+    Frame::new(
+        title,
+        common::camera(lo, hi, [1.0, 0.9, 1.6], [0.0, 1.0, 0.0]),
+    )
+    .note("cohesive spring-dashpot contacts with Coulomb friction, in a box; colour: height")
+    .lines(Lines::bounding_box(lo, hi))
+    .points(Points::new(pos.iter().copied(), radius).values("height (m)", pos.iter().map(|p| p[1])))
 }
 
 /// The largest overlap of two particles, on the host through a coarse hash of the points
@@ -661,7 +681,7 @@ fn max_overlap(x: &[Vec3], radius: f32) -> f64 {
 /// Differences: the ground here has the particles' friction (Warp's: k_t 100, mu 0.5, and a
 /// cohesion of 0.02), and damping acts on separation too (Warp's only on approach); the
 /// arithmetic per pair is the same.
-fn warp_preset(dev: &wp::Device, frames: usize) -> wp::Result<()> {
+fn warp_preset(dev: &wp::Device, frames: usize, args: &common::SceneArgs) -> wp::Result<()> {
     let m = Material {
         radius: 0.1,
         mass: 1.0 / 64.0,
@@ -695,12 +715,47 @@ fn warp_preset(dev: &wp::Device, frames: usize) -> wp::Result<()> {
     let mut s = Scene::new(m, &x0, &v0, 128, 5.0 * m.radius, substeps, dev)?;
     s.frame(1, dt)?;
     wp::synchronize()?;
-    let t = Instant::now();
-    for _ in 0..frames {
+    // With `--rerun`, every frame, the clock stopped while one is recorded.
+    let mut rec = args.recorder("dem");
+    let stride = common::record::stride(x0.len());
+    let picture = |x: &[Vec3], fr: usize| {
+        let pos: Vec<[f64; 3]> = x.iter().step_by(stride).map(|&p| common::p3(p)).collect();
+        let (lo, hi) = common::bounds(&pos);
+        let t = fr as f64 * frame_dt as f64;
+        Frame::new(
+            format!(
+                "dem (Warp's example_dem): {} particles, frame {fr} ({t:.2} s)",
+                x.len()
+            ),
+            common::camera(lo, hi, [1.0, 0.9, 1.6], [0.0, 1.0, 0.0]),
+        )
+        .points(
+            Points::new(pos.iter().copied(), m.radius as f64)
+                .values("height (m)", pos.iter().map(|p| p[1])),
+        )
+    };
+    if rec.is_on() {
+        rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
+    }
+    let mut elapsed = 0.0;
+    let mut t = Instant::now();
+    for fr in 1..=frames {
         s.frame(substeps, dt)?;
+        if rec.is_on() {
+            wp::synchronize()?;
+            elapsed += t.elapsed().as_secs_f64();
+            rec.frame(
+                fr,
+                fr as f64 * frame_dt as f64,
+                &picture(&s.x.to_vec()?, fr),
+            );
+            t = Instant::now();
+        }
     }
     wp::synchronize()?;
-    let ms = t.elapsed().as_secs_f64() * 1e3 / frames as f64;
+    elapsed += t.elapsed().as_secs_f64();
+    rec.finish();
+    let ms = elapsed * 1e3 / frames as f64;
     let x = s.x.to_vec()?;
     let finite = x.iter().all(|p| p.is_finite());
     println!(

@@ -65,6 +65,7 @@ struct Cli {
 
 fn main() -> wp::Result<()> {
     let cli = Cli::parse();
+    cli.scene.no_recording("finite_difference");
     let dev = cli.scene.init()?;
     let n_max = cli.n_max;
     // The cache directory is set before the first launch (the first compile reads it).

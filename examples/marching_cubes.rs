@@ -218,6 +218,7 @@ fn main() -> wp::Result<()> {
                 .closed(),
         );
         common::write_frame("marching_cubes", &frame);
+        cli.scene.record_last("marching_cubes", &frame);
     }
     common::print_compiled();
     Ok(())

@@ -159,7 +159,16 @@ struct Outcome {
 }
 
 /// Runs 1 s with step `dt`: the terrain moving (`amp` > 0) or still, restitution `e`.
-fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result<Outcome> {
+///
+/// With a recorder, about 100 frames of the run go to it (the step time then includes them).
+fn simulate(
+    dev: &wp::Device,
+    n: usize,
+    dt: f32,
+    amp: f32,
+    e: f32,
+    mut rec: Option<&mut common::record::Recorder>,
+) -> wp::Result<Outcome> {
     let (rest_h, ix) = terrain(TERRAIN);
     let rest = wp::Array::from_slice(&rest_h, dev)?;
     let pts = wp::Array::from_slice(&rest_h, dev)?;
@@ -179,6 +188,20 @@ fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result
     let pen = wp::Array::<f32>::zeros(1, dev)?;
     let e0 = energy(&x0, &vec![Vec3::ZERO; n]);
     let steps = (1.0 / dt).round() as usize;
+    let every = common::record::every(steps);
+    let stride = common::record::stride(n);
+    let snap = |rec: &mut common::record::Recorder, s: usize| -> wp::Result<()> {
+        let t = s as f64 * dt as f64;
+        let title = format!(
+            "mesh_contact: {n} particles on the moving terrain at t = {t:.3} s (dt = {dt})"
+        );
+        let frame = contact_frame(&x.to_vec()?, &v.to_vec()?, &pts.to_vec()?, stride, title);
+        rec.frame(s, t, &frame);
+        Ok(())
+    };
+    if let Some(rec) = rec.as_deref_mut() {
+        snap(rec, 0)?;
+    }
     wp::synchronize()?;
     let t0 = Instant::now();
     for s in 0..steps {
@@ -193,6 +216,11 @@ fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result
             mesh.refit()?;
         }
         wp::launch(step, n, (&mesh, &x, &v, dt, e, &pen), dev)?;
+        if let Some(rec) = rec.as_deref_mut() {
+            if (s + 1) % every == 0 || s + 1 == steps {
+                snap(rec, s + 1)?;
+            }
+        }
     }
     wp::synchronize()?;
     let ms_per_step = t0.elapsed().as_secs_f64() * 1e3 / steps as f64;
@@ -219,6 +247,46 @@ fn simulate(dev: &wp::Device, n: usize, dt: f32, amp: f32, e: f32) -> wp::Result
         v: vs,
         terrain: pts.to_vec()?,
     })
+}
+
+/// The particles (one in `stride`) on the terrain, drawn at every 8th point of its grid (512
+/// of its 32K triangles: enough for its smooth waves at the picture's scale, and the SVG stays
+/// small), coloured by speed.
+fn contact_frame(x: &[Vec3], v: &[Vec3], terrain: &[Vec3], stride: usize, title: String) -> Frame {
+    let (k, every) = (TERRAIN / 8, 8);
+    let at = |i: usize, j: usize| j * (k + 1) + i;
+    let mut pts = Vec::new();
+    for j in 0..=k {
+        for i in 0..=k {
+            pts.push(common::p3(terrain[j * every * (TERRAIN + 1) + i * every]));
+        }
+    }
+    let mut tris = Vec::new();
+    for j in 0..k {
+        for i in 0..k {
+            tris.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            tris.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    let pos: Vec<[f64; 3]> = x.iter().step_by(stride).map(|&p| common::p3(p)).collect();
+    Frame::new(
+        title,
+        common::camera(
+            [-1.0, -1.0, -0.1],
+            [1.0, 1.0, 0.6],
+            [0.9, -1.6, 1.1],
+            [0.0, 0.0, 1.0],
+        ),
+    )
+    .note(
+        "the terrain (drawn at 1/64 of its triangles) is deformed and refit every step; \
+         colour: speed",
+    )
+    .mesh(TriMesh::new(pts, tris).colour([190, 180, 160]))
+    .points(Points::new(pos, RADIUS as f64).values(
+        "speed (m/s)",
+        v.iter().step_by(stride).map(|v| v.length() as f64),
+    ))
 }
 
 /// Particles falling onto a deforming triangle-mesh terrain: energy drift and penetration
@@ -249,11 +317,11 @@ fn main() -> wp::Result<()> {
     )
     .with_extras(&["ms per step", "under the surface"]);
     // A few steps first: the kernels compile (on a GPU) before anything is timed.
-    simulate(&dev, 16, 0.25, 0.08, 0.0)?;
+    simulate(&dev, 16, 0.25, 0.08, 0.0, None)?;
     let mut last = None;
     for dt in [4e-3f32, 2e-3, 1e-3, 5e-4, 2.5e-4] {
         let steps = (1.0 / dt).round() as u64;
-        let o = simulate(&dev, n, dt, 0.0, 1.0)?;
+        let o = simulate(&dev, n, dt, 0.0, 1.0, None)?;
         let run = if o.finite {
             Run::stable(steps, o.drift, o.ms_per_step * steps as f64 / 1e3)
         } else {
@@ -268,7 +336,7 @@ fn main() -> wp::Result<()> {
             dt as f64,
             run.extra(o.penetration).extra(o.below as f64),
         );
-        let o = simulate(&dev, n, dt, 0.08, 0.0)?;
+        let o = simulate(&dev, n, dt, 0.08, 0.0, None)?;
         let run = if o.finite && o.below == 0 {
             Run::stable(steps, o.penetration, o.ms_per_step * steps as f64 / 1e3)
         } else {
@@ -288,34 +356,18 @@ fn main() -> wp::Result<()> {
     common::finish(&still, "mesh_contact_still");
     common::finish(&moving, "mesh_contact_moving");
     if let Some((dt, o)) = last {
-        // The terrain at every 8th point of its grid (512 of its 32K triangles): enough for
-        // its smooth waves at the picture's scale, and the file stays small.
-        let (k, every) = (TERRAIN / 8, 8);
-        let at = |i: usize, j: usize| j * (k + 1) + i;
-        let mut pts = Vec::new();
-        for j in 0..=k {
-            for i in 0..=k {
-                pts.push(common::p3(o.terrain[j * every * (TERRAIN + 1) + i * every]));
-            }
-        }
-        let mut tris = Vec::new();
-        for j in 0..k {
-            for i in 0..k {
-                tris.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                tris.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        let pos: Vec<[f64; 3]> = o.x.iter().map(|&p| common::p3(p)).collect();
-        let frame = Frame::new(
-            format!("mesh_contact: {n} particles on the moving terrain at t = 1 s (dt = {dt})"),
-            common::camera([-1.0, -1.0, -0.1], [1.0, 1.0, 0.6], [0.9, -1.6, 1.1], [0.0, 0.0, 1.0]),
-        )
-        .note("the terrain (drawn at 1/64 of its triangles) is deformed and refit every step; colour: speed")
-        .mesh(TriMesh::new(pts, tris).colour([190, 180, 160]))
-        .points(
-            Points::new(pos, RADIUS as f64).values("speed (m/s)", o.v.iter().map(|v| v.length() as f64)),
+        let title =
+            format!("mesh_contact: {n} particles on the moving terrain at t = 1 s (dt = {dt})");
+        common::write_frame(
+            "mesh_contact",
+            &contact_frame(&o.x, &o.v, &o.terrain, 1, title),
         );
-        common::write_frame("mesh_contact", &frame);
+        let mut rec = cli.scene.recorder("mesh_contact");
+        if rec.is_on() {
+            // The recording: the frame's run (moving terrain, the smallest dt) once more.
+            simulate(&dev, n, dt, 0.08, 0.0, Some(&mut rec))?;
+            rec.finish();
+        }
     }
     common::print_compiled();
     Ok(())

@@ -263,6 +263,7 @@ fn main() -> wp::Result<()> {
         .values("distance", shown.iter().map(|&k| dist[k].abs() as f64)),
     );
     common::write_frame("mesh_query", &frame);
+    cli.scene.record_last("mesh_query", &frame);
     common::print_compiled();
     Ok(())
 }

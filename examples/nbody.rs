@@ -198,6 +198,67 @@ macro_rules! run_in {
     }};
 }
 
+/// The bodies within 3 of the centre of mass (at rest at the origin; a few escaped ones would
+/// shrink the cluster to a dot), coloured by speed.
+fn bodies_frame(x: &[DVec3], v: &[DVec3], title: String) -> Frame {
+    let r = 3.0;
+    let near: Vec<usize> = (0..x.len()).filter(|&i| x[i].length() < r).collect();
+    Frame::new(
+        title,
+        common::camera([-r; 3], [r; 3], [1.0, 0.6, 1.4], [0.0, 1.0, 0.0]),
+    )
+    .note(format!(
+        "softening {SOFTENING}, started in a unit ball near virial equilibrium; {} within \
+         {r} of the centre of mass drawn; colour: speed",
+        near.len()
+    ))
+    .points(
+        Points::new(near.iter().map(|&i| common::p3(x[i])), 0.02)
+            .values("speed", near.iter().map(|&i| v[i].length())),
+    )
+}
+
+/// `--rerun`: a leapfrog run in f64 with Kahan sums from the start state, `steps` steps of
+/// `dt`, a frame every `record::every(steps)` steps.
+fn record(
+    dev: &wp::Device,
+    x0: &[DVec3],
+    v0: &[DVec3],
+    m: &[f64],
+    dt: f64,
+    steps: usize,
+    rec: &mut common::record::Recorder,
+) -> wp::Result<()> {
+    let n = x0.len();
+    let x = wp::Array::from_slice(x0, dev)?;
+    let v = wp::Array::from_slice(v0, dev)?;
+    let m = wp::Array::from_slice(m, dev)?;
+    let a = wp::Array::<DVec3>::zeros(n, dev)?;
+    let (xc, vc) = (
+        wp::Array::<DVec3>::zeros(n, dev)?,
+        wp::Array::<DVec3>::zeros(n, dev)?,
+    );
+    let eps2 = SOFTENING * SOFTENING;
+    let every = common::record::every(steps);
+    let mut snap = |step: usize| -> wp::Result<()> {
+        let t = step as f64 * dt;
+        let title = format!("n-body: {n} bodies at t = {t:.3} (f64 Kahan, dt = {dt})");
+        rec.frame(step, t, &bodies_frame(&x.to_vec()?, &v.to_vec()?, title));
+        Ok(())
+    };
+    wp::launch(accelerations, n, (&x, &m, &a, eps2, true), dev)?;
+    snap(0)?;
+    for step in 1..=steps {
+        wp::launch(kick_drift, n, (&x, &v, &a, &xc, &vc, dt, true), dev)?;
+        wp::launch(accelerations, n, (&x, &m, &a, eps2, true), dev)?;
+        wp::launch(kick, n, (&v, &a, &vc, dt, true), dev)?;
+        if step % every == 0 || step == steps {
+            snap(step)?;
+        }
+    }
+    Ok(())
+}
+
 /// Gravitational n-body by leapfrog: energy and momentum drift, f32 against f64, Kahan
 /// against plain accumulation.
 #[derive(Parser)]
@@ -306,24 +367,24 @@ fn main() -> wp::Result<()> {
     }
     common::finish(&sweep, "nbody");
     if let Some((name, dt, x, v)) = last {
-        // The bodies within 3 of the centre of mass (at rest at the origin): a few escaped
-        // ones would shrink the cluster to a dot.
-        let r = 3.0;
-        let near: Vec<usize> = (0..x.len()).filter(|&i| x[i].length() < r).collect();
-        let frame = Frame::new(
-            format!("n-body: {n} bodies at t = {t_end} ({name}, dt = {dt})"),
-            common::camera([-r; 3], [r; 3], [1.0, 0.6, 1.4], [0.0, 1.0, 0.0]),
-        )
-        .note(format!(
-            "softening {SOFTENING}, started in a unit ball near virial equilibrium; {} within \
-             {r} of the centre of mass drawn; colour: speed",
-            near.len()
-        ))
-        .points(
-            Points::new(near.iter().map(|&i| common::p3(x[i])), 0.02)
-                .values("speed", near.iter().map(|&i| v[i].length())),
-        );
-        common::write_frame("nbody", &frame);
+        let title = format!("n-body: {n} bodies at t = {t_end} ({name}, dt = {dt})");
+        common::write_frame("nbody", &bodies_frame(&x, &v, title));
+    }
+    let mut rec = cli.scene.recorder("nbody");
+    if rec.is_on() {
+        // The recording: one more run of the frame's variant (f64 Kahan at the smallest dt),
+        // about 100 frames of it.
+        let dt = dts.last().copied().unwrap_or(0.01);
+        record(
+            &dev,
+            &x0,
+            &v0,
+            &m,
+            dt,
+            (t_end / dt).round() as usize,
+            &mut rec,
+        )?;
+        rec.finish();
     }
     common::print_compiled();
     Ok(())

@@ -142,6 +142,26 @@ fn sweep(
     Ok(())
 }
 
+/// The particles (one in `stride`) after `steps` steps, at time `t`, coloured by speed, in
+/// their bounding box.
+fn frame(xs: &[Vec3], vs: &[Vec3], stride: usize, steps: usize, t: f64) -> Frame {
+    let pos: Vec<[f64; 3]> = xs.iter().step_by(stride).map(|&p| common::p3(p)).collect();
+    let (lo, hi) = common::bounds(&pos);
+    Frame::new(
+        format!(
+            "particles: {} particles after {steps} steps (t = {t:.2} s)",
+            xs.len()
+        ),
+        common::camera(lo, hi, [1.0, -1.6, 0.8], [0.0, 0.0, 1.0]),
+    )
+    .note("gravity along -z, linear drag; colour: speed")
+    .lines(Lines::bounding_box(lo, hi))
+    .points(Points::new(pos, 0.004 * common::diagonal(lo, hi)).values(
+        "speed (m/s)",
+        vs.iter().step_by(stride).map(|v| v.length() as f64),
+    ))
+}
+
 /// The seed program: particles under gravity with linear drag (semi-implicit Euler), its
 /// errors against the closed form and the exact discrete solution, and a dt sweep.
 #[derive(Parser)]
@@ -198,12 +218,32 @@ fn main() -> wp::Result<()> {
     wp::launch(integrate, 1, (&xw, &vw, b, mass, gravity, dt), &dev)?;
     wp::synchronize()?;
 
-    let t0 = Instant::now();
-    for _ in 0..steps {
+    // With `--rerun`, a frame every `every` steps; the clock stops while one is recorded.
+    let mut rec = cli.scene.recorder("particles");
+    let every = common::record::every(steps);
+    let stride = common::record::stride(n);
+    let record = |rec: &mut common::record::Recorder, step: usize| -> wp::Result<()> {
+        let t = dt as f64 * step as f64;
+        rec.frame(step, t, &frame(&x.to_vec()?, &v.to_vec()?, stride, step, t));
+        Ok(())
+    };
+    if rec.is_on() {
+        record(&mut rec, 0)?;
+    }
+    let mut elapsed = std::time::Duration::ZERO;
+    let mut t0 = Instant::now();
+    for step in 1..=steps {
         wp::launch(integrate, n, (&x, &v, b, mass, gravity, dt), &dev)?;
+        if rec.is_on() && (step % every == 0 || step == steps) {
+            wp::synchronize()?;
+            elapsed += t0.elapsed();
+            record(&mut rec, step)?;
+            t0 = Instant::now();
+        }
     }
     wp::synchronize()?;
-    let elapsed = t0.elapsed();
+    elapsed += t0.elapsed();
+    rec.finish();
     let xs = x.to_vec()?;
 
     // Errors, in f64.
@@ -243,20 +283,7 @@ fn main() -> wp::Result<()> {
         "  max |x - closed form of the ODE|       = {err_ode:.3e} m (time discretisation, O(dt))"
     );
     println!("  max |x - exact discrete solution, f64| = {err_discrete:.3e} m (f32 rounding)");
-    let vs = v.to_vec()?;
-    let pos: Vec<[f64; 3]> = xs.iter().map(|&p| common::p3(p)).collect();
-    let (lo, hi) = common::bounds(&pos);
-    let frame = Frame::new(
-        format!("particles: {n} particles after {steps} steps (t = {t:.2} s)"),
-        common::camera(lo, hi, [1.0, -1.6, 0.8], [0.0, 0.0, 1.0]),
-    )
-    .note("gravity along -z, linear drag; colour: speed")
-    .lines(Lines::bounding_box(lo, hi))
-    .points(
-        Points::new(pos, 0.004 * common::diagonal(lo, hi))
-            .values("speed (m/s)", vs.iter().map(|v| v.length() as f64)),
-    );
-    common::write_frame("particles", &frame);
+    common::write_frame("particles", &frame(&xs, &v.to_vec()?, 1, steps, t));
     if sweep_n > 0 {
         sweep(&dev, sweep_n.min(n), &x0, &v0, t, cli.graph)?;
     }

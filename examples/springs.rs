@@ -206,6 +206,7 @@ fn main() -> wp::Result<()> {
 
     let frame = frame.points(Points::new(beads, 0.012).values("log10 k", bead_k));
     common::write_frame("springs", &frame);
+    cli.scene.record_last("springs", &frame);
 
     println!("\nlargest stable dt on the grid 1/60 s / 2^j (j = 0..{halvings}), and energy drift at 1/60 s");
     let mut t = Table::new([

@@ -384,6 +384,7 @@ fn main() -> wp::Result<()> {
         .values("time (s)", dots.iter().map(|&(_, s)| s as f64 * DT)),
     );
     common::write_frame("sysid", &frame);
+    cli.scene.record_last("sysid", &frame);
     common::print_compiled();
     let converged = eb < tol && em < tol;
     common::verdict(

@@ -150,11 +150,15 @@ fn time_samples(
 
 /// Particles in the band above the torus, falling for 0.5 s with step `dt`: the deepest
 /// penetration (exact SDF) over the run relative to the radius, and ms per step.
+///
+/// With a recorder (and the volume's resolution, for the title), about 100 frames of the run
+/// go to it (the step time then includes them).
 fn drop_particles(
     dev: &wp::Device,
     vol: &wp::Volume<f32>,
     n: usize,
     dt: f32,
+    mut rec: Option<(&mut common::record::Recorder, usize)>,
 ) -> wp::Result<(f64, f64, bool, Vec<Vec3>)> {
     let x0: Vec<Vec3> = band_points(4 * n, 7)
         .into_iter()
@@ -168,10 +172,31 @@ fn drop_particles(
     let v = wp::Array::<Vec3>::zeros(x0.len(), dev)?;
     let pen = wp::Array::<f32>::full(1, -1.0, dev)?;
     let steps = (0.5 / dt).round() as usize;
+    let (every, stride) = (
+        common::record::every(steps),
+        common::record::stride(x0.len()),
+    );
+    let snap = |rec: &mut common::record::Recorder, res: usize, s: usize| -> wp::Result<()> {
+        let t = s as f64 * dt as f64;
+        let title = format!(
+            "volume_sdf: {} particles dropped around a torus SDF sampled at {res}^3, at {t:.3} s",
+            x0.len()
+        );
+        rec.frame(s, t, &torus_frame(&x.to_vec()?, stride, title));
+        Ok(())
+    };
+    if let Some((rec, res)) = rec.as_mut() {
+        snap(rec, *res, 0)?;
+    }
     wp::synchronize()?;
     let t0 = Instant::now();
-    for _ in 0..steps {
+    for s in 1..=steps {
         wp::launch(step, x0.len(), (vol, &x, &v, dt, 0.5f32, &pen), dev)?;
+        if let Some((rec, res)) = rec.as_mut() {
+            if s % every == 0 || s == steps {
+                snap(rec, *res, s)?;
+            }
+        }
     }
     wp::synchronize()?;
     let ms = t0.elapsed().as_secs_f64() * 1e3 / steps as f64;
@@ -227,6 +252,7 @@ fn main() -> wp::Result<()> {
     )
     .with_extras(&["ms per step"]);
     let mut last = None;
+    let mut rec = cli.scene.recorder("volume_sdf");
     let mut res = 17;
     while res <= max_res {
         let h = 2.0 / (res - 1) as f64;
@@ -252,7 +278,13 @@ fn main() -> wp::Result<()> {
                 .extra(build_ms),
         );
         let parts = if dev.is_cpu() { 20_000 } else { 200_000 };
-        let (pen, ms, ok, end) = drop_particles(&dev, &vol, parts, 1e-3)?;
+        let (pen, ms, ok, end) = drop_particles(&dev, &vol, parts, 1e-3, None)?;
+        if 2 * res - 1 > max_res && rec.is_on() {
+            // The recording: the finest volume's run once more, outside the timing.
+            drop_particles(&dev, &vol, parts, 1e-3, Some((&mut rec, res)))?;
+            rec.finish();
+            rec = common::record::Recorder::off();
+        }
         last = Some((res, end));
         let steps = 500u64;
         let run = if ok {
@@ -266,45 +298,50 @@ fn main() -> wp::Result<()> {
     common::finish(&acc, "volume_sdf_accuracy");
     common::finish(&contact, "volume_sdf_contact");
     if let Some((res, end)) = last {
-        // The exact torus as a coarse parametric mesh (48 x 16 quads), and the particles
-        // resting on the volume's version of it.
-        let (nu, nv) = (48usize, 16usize);
-        let mut pts = Vec::new();
-        for i in 0..nu {
-            for j in 0..nv {
-                let (u, v) = (
-                    std::f64::consts::TAU * i as f64 / nu as f64,
-                    std::f64::consts::TAU * j as f64 / nv as f64,
-                );
-                let ring = MAJOR as f64 + MINOR as f64 * v.cos();
-                pts.push([ring * u.cos(), MINOR as f64 * v.sin(), ring * u.sin()]);
-            }
-        }
-        let at = |i: usize, j: usize| (i % nu) * nv + j % nv;
-        let tris: Vec<[usize; 3]> = (0..nu)
-            .flat_map(|i| (0..nv).map(move |j| (i, j)))
-            .flat_map(|(i, j)| {
-                [
-                    [at(i, j), at(i + 1, j), at(i + 1, j + 1)],
-                    [at(i, j), at(i + 1, j + 1), at(i, j + 1)],
-                ]
-            })
-            .collect();
-        let frame = Frame::new(
-            format!(
-                "volume_sdf: {} particles dropped around a torus SDF sampled at {res}^3, at 0.5 s",
-                end.len()
-            ),
-            common::camera([-1.0; 3], [1.0; 3], [0.2, 1.0, 1.1], [0.0, 1.0, 0.0]),
-        )
-        .note("the exact torus as a mesh; contacts push out along volume_sample_grad, those off the top fall; colour: height")
-        .mesh(TriMesh::new(pts, tris).colour([200, 200, 200]).closed())
-        .points(
-            Points::new(end.iter().map(|&p| common::p3(p)), RADIUS as f64)
-                .values("height", end.iter().map(|p| p.y as f64)),
+        let title = format!(
+            "volume_sdf: {} particles dropped around a torus SDF sampled at {res}^3, at 0.5 s",
+            end.len()
         );
-        common::write_frame("volume_sdf", &frame);
+        common::write_frame("volume_sdf", &torus_frame(&end, 1, title));
     }
     common::print_compiled();
     Ok(())
+}
+
+/// The exact torus as a coarse parametric mesh (48 x 16 quads), and the particles (one in
+/// `stride`) on the volume's version of it, coloured by height.
+fn torus_frame(x: &[Vec3], stride: usize, title: String) -> Frame {
+    let (nu, nv) = (48usize, 16usize);
+    let mut pts = Vec::new();
+    for i in 0..nu {
+        for j in 0..nv {
+            let (u, v) = (
+                std::f64::consts::TAU * i as f64 / nu as f64,
+                std::f64::consts::TAU * j as f64 / nv as f64,
+            );
+            let ring = MAJOR as f64 + MINOR as f64 * v.cos();
+            pts.push([ring * u.cos(), MINOR as f64 * v.sin(), ring * u.sin()]);
+        }
+    }
+    let at = |i: usize, j: usize| (i % nu) * nv + j % nv;
+    let tris: Vec<[usize; 3]> = (0..nu)
+        .flat_map(|i| (0..nv).map(move |j| (i, j)))
+        .flat_map(|(i, j)| {
+            [
+                [at(i, j), at(i + 1, j), at(i + 1, j + 1)],
+                [at(i, j), at(i + 1, j + 1), at(i, j + 1)],
+            ]
+        })
+        .collect();
+    let end: Vec<Vec3> = x.iter().step_by(stride).copied().collect();
+    Frame::new(
+        title,
+        common::camera([-1.0; 3], [1.0; 3], [0.2, 1.0, 1.1], [0.0, 1.0, 0.0]),
+    )
+    .note("the exact torus as a mesh; contacts push out along volume_sample_grad, those off the top fall; colour: height")
+    .mesh(TriMesh::new(pts, tris).colour([200, 200, 200]).closed())
+    .points(
+        Points::new(end.iter().map(|&p| common::p3(p)), RADIUS as f64)
+            .values("height", end.iter().map(|p| p.y as f64)),
+    )
 }

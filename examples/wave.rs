@@ -119,6 +119,7 @@ fn main() -> wp::Result<()> {
     }
     frame = frame.points(Points::new(dots, 0.006).values("r", dot_r));
     common::write_frame("wave", &frame);
+    cli.scene.record_last("wave", &frame);
     common::print_compiled();
     Ok(())
 }

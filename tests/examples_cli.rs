@@ -55,6 +55,137 @@ fn sources_modified(name: &str, bin_dir: &Path) -> Option<SystemTime> {
     Some(newest)
 }
 
+/// The example's binary, or None (printing SKIPPED and why) when it is missing or older than
+/// its sources.
+fn fresh_binary(name: &str, dir: &Path) -> Option<PathBuf> {
+    let bin = dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    let Some(built) = modified(&bin) else {
+        eprintln!(
+            "SKIPPED examples_cli {name}: {} not built (cargo test builds the examples; \
+             `--test examples_cli` alone does not)",
+            bin.display()
+        );
+        return None;
+    };
+    if sources_modified(name, dir).is_some_and(|src| src > built) {
+        eprintln!(
+            "SKIPPED examples_cli {name}: {} is older than its sources",
+            bin.display()
+        );
+        return None;
+    }
+    Some(bin)
+}
+
+/// A fresh folder under the target directory for one test's files.
+fn scratch(test: &str) -> PathBuf {
+    let dir = examples_dir().join(format!("{test}-scratch"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create the scratch folder");
+    dir
+}
+
+/// particles with `--rerun <file>` on the CPU, small: 1000 particles, 20 steps, no sweep.
+fn run_particles_recording(bin: &Path, dir: &Path, rrd: &Path) -> std::process::Output {
+    Command::new(bin)
+        .args([
+            "--device",
+            "cpu",
+            "--n",
+            "1000",
+            "--steps",
+            "20",
+            "--sweep-n",
+            "0",
+        ])
+        .arg("--plot-dir")
+        .arg(dir)
+        .arg("--rerun")
+        .arg(rrd)
+        .output()
+        .expect("run particles --rerun")
+}
+
+/// Without the `rerun` feature, `--rerun` is refused (exit status 2) with the way to get it,
+/// before anything runs: no file appears.
+#[cfg(not(feature = "rerun"))]
+#[test]
+fn rerun_option_without_the_feature_is_refused() {
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("particles", &dir) else {
+        return;
+    };
+    let scratch = scratch("rerun_refused");
+    let rrd = scratch.join("particles.rrd");
+    let out = run_particles_recording(&bin, &scratch, &rrd);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--rerun") && err.contains("--features rerun"),
+        "the error does not say how to get --rerun:\n{err}"
+    );
+    assert!(!rrd.exists(), "{} was written", rrd.display());
+}
+
+/// With the `rerun` feature: particles records its 20 steps (a frame a step: 21 frames with
+/// the start) and the file reads back through rerun's own decoder, every frame of the
+/// particles and their box present on the `frame` timeline.
+#[cfg(feature = "rerun")]
+#[test]
+fn rerun_recording_reads_back_with_every_frame() {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    use std::collections::{BTreeMap, BTreeSet};
+
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("particles", &dir) else {
+        return;
+    };
+    let scratch = scratch("rerun_recording");
+    let rrd = scratch.join("particles.rrd");
+    let out = run_particles_recording(&bin, &scratch, &rrd);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "particles --rerun: {:?}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("(21 frames"), "{stdout}");
+    let size = std::fs::metadata(&rrd).map(|m| m.len()).unwrap_or(0);
+    assert!(size > 0, "{} is missing or empty", rrd.display());
+
+    // Entity path -> the `frame` indices its chunks hold.
+    let mut frames: BTreeMap<String, BTreeSet<i64>> = BTreeMap::new();
+    let file = std::fs::File::open(&rrd).expect("open the recording");
+    for msg in DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
+        let msg = msg.unwrap_or_else(|e| panic!("decoding {}: {e}", rrd.display()));
+        if let LogMsg::ArrowMsg(_, arrow) = msg {
+            let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk");
+            let indices = frames.entry(chunk.entity_path().to_string()).or_default();
+            for (name, column) in chunk.timelines() {
+                if name.as_str() == "frame" {
+                    indices.extend(column.times_raw().iter().copied());
+                }
+            }
+        }
+    }
+    let all: BTreeSet<i64> = (0..=20).collect();
+    for entity in [
+        "/particles/points/0",
+        "/particles/lines/0",
+        "/particles/caption",
+    ] {
+        assert_eq!(
+            frames.get(entity),
+            Some(&all),
+            "{entity}'s frames in {} (entities: {:?})",
+            rrd.display(),
+            frames.keys().collect::<Vec<_>>()
+        );
+    }
+}
+
 #[test]
 fn every_example_has_help_and_refuses_unknown_options() {
     let names = example_names();
@@ -62,22 +193,9 @@ fn every_example_has_help_and_refuses_unknown_options() {
     let dir = examples_dir();
     let mut checked = Vec::new();
     for name in &names {
-        let bin = dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
-        let Some(built) = modified(&bin) else {
-            eprintln!(
-                "SKIPPED examples_cli {name}: {} not built (cargo test builds the examples; \
-                 `--test examples_cli` alone does not)",
-                bin.display()
-            );
+        let Some(bin) = fresh_binary(name, &dir) else {
             continue;
         };
-        if sources_modified(name, &dir).is_some_and(|src| src > built) {
-            eprintln!(
-                "SKIPPED examples_cli {name}: {} is older than its sources",
-                bin.display()
-            );
-            continue;
-        }
 
         let help = Command::new(&bin)
             .arg("--help")

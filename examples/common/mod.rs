@@ -10,6 +10,7 @@ use warp_lang as wp;
 use warp_report::Sweep;
 
 pub mod cli;
+pub mod record;
 
 #[allow(unused_imports)] // a scene without integer options has no use for `num`
 pub use cli::{num, DeviceArg};
@@ -28,6 +29,10 @@ pub struct SceneArgs {
     /// Folder for the scene's plots (SVG), created if missing
     #[arg(long, value_name = "DIR", default_value = DEFAULT_PLOT_DIR)]
     pub plot_dir: PathBuf,
+    /// Record the run's particles and meshes, every few steps, into this rerun file (view it
+    /// with `rerun FILE.rrd`); needs the examples built with `--features rerun`
+    #[arg(long, value_name = "FILE.rrd", value_parser = record::parse_rrd_path)]
+    pub rerun: Option<PathBuf>,
 }
 
 impl SceneArgs {
@@ -37,6 +42,34 @@ impl SceneArgs {
         // A second call keeps the first folder (a scene parses its command line once).
         let _ = PLOT_DIR.set(self.plot_dir.clone());
         self.device.get()
+    }
+
+    /// For a scene whose only picture is its last frame: `--rerun` records that one frame (at
+    /// step 0, time 0).
+    pub fn record_last(&self, scene: &str, frame: &warp_report::frame::Frame) {
+        let mut rec = self.recorder(scene);
+        if rec.is_on() {
+            rec.frame(0, 0.0, frame);
+            rec.finish();
+        }
+    }
+
+    /// For a scene that draws no frame: `--rerun` is refused (exit status 2) rather than
+    /// ignored.
+    pub fn no_recording(&self, scene: &str) {
+        if self.rerun.is_some() {
+            eprintln!("error: --rerun: {scene} draws no frame (it prints tables and plots)");
+            std::process::exit(2);
+        }
+    }
+
+    /// The recording `--rerun` asked for (one that records nothing without it). A file that
+    /// cannot be created ends the scene with a message and exit status 1, before it runs.
+    pub fn recorder(&self, scene: &str) -> record::Recorder {
+        record::Recorder::new(scene, self.rerun.as_deref()).unwrap_or_else(|e| {
+            eprintln!("{scene}: --rerun: {e}");
+            std::process::exit(1);
+        })
     }
 }
 

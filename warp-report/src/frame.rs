@@ -127,6 +127,54 @@ impl Points {
         self.values = Some((label.to_string(), values.into_iter().collect()));
         self
     }
+
+    /// The particles' positions.
+    pub fn positions(&self) -> &[V3] {
+        &self.positions
+    }
+
+    /// The particles' radius, in world units.
+    pub fn radius(&self) -> f64 {
+        self.radius
+    }
+
+    /// The set's one colour (the particles' colour when no values colour them).
+    pub fn rgb(&self) -> Rgb {
+        self.colour
+    }
+
+    /// The scalar that colours the particles, with its label, if one does.
+    pub fn scalar(&self) -> Option<(&str, &[f64])> {
+        self.values
+            .as_ref()
+            .map(|(l, v)| (l.as_str(), v.as_slice()))
+    }
+
+    /// The smallest and largest finite value of the colouring scalar ((0, 0) if none is
+    /// finite), or None without one.
+    pub fn value_range(&self) -> Option<(f64, f64)> {
+        let (_, v) = self.values.as_ref()?;
+        let (lo, hi) = v
+            .iter()
+            .filter(|x| x.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
+        Some(if lo <= hi { (lo, hi) } else { (0.0, 0.0) })
+    }
+
+    /// The colour particle `i` is drawn in: its value on the colour scale between the set's
+    /// smallest and largest value (`range`, from `value_range`), else the set's colour.
+    pub fn colour_of(&self, i: usize, range: Option<(f64, f64)>) -> Rgb {
+        match (&self.values, range) {
+            (Some((_, v)), Some((lo, hi))) => scale_colour(if hi > lo {
+                (v.get(i).copied().unwrap_or(lo) - lo) / (hi - lo)
+            } else {
+                0.5
+            }),
+            _ => self.colour,
+        }
+    }
 }
 
 /// How a triangle mesh is drawn.
@@ -177,6 +225,31 @@ impl TriMesh {
     pub fn closed(mut self) -> TriMesh {
         self.closed = true;
         self
+    }
+
+    /// The mesh's points.
+    pub fn points(&self) -> &[V3] {
+        &self.points
+    }
+
+    /// The triangles, as indices into `points`.
+    pub fn triangles(&self) -> &[[usize; 3]] {
+        &self.triangles
+    }
+
+    /// Shaded faces or wireframe.
+    pub fn style(&self) -> MeshStyle {
+        self.style
+    }
+
+    /// The mesh's colour.
+    pub fn rgb(&self) -> Rgb {
+        self.colour
+    }
+
+    /// Whether the mesh was marked closed (watertight).
+    pub fn is_closed(&self) -> bool {
+        self.closed
     }
 }
 
@@ -230,6 +303,21 @@ impl Lines {
     pub fn width(mut self, width: f64) -> Lines {
         self.width = width;
         self
+    }
+
+    /// The segments, each a pair of end points.
+    pub fn segments(&self) -> &[[V3; 2]] {
+        &self.segments
+    }
+
+    /// The lines' colour.
+    pub fn rgb(&self) -> Rgb {
+        self.colour
+    }
+
+    /// The lines' width in pixels.
+    pub fn pixel_width(&self) -> f64 {
+        self.width
     }
 }
 
@@ -386,6 +474,36 @@ impl Frame {
         self
     }
 
+    /// The title.
+    pub fn title(&self) -> &str {
+        &self.title
+    }
+
+    /// The lines of text under the title.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The particle sets, in the order they were added.
+    pub fn point_sets(&self) -> &[Points] {
+        &self.points
+    }
+
+    /// The triangle meshes, in the order they were added.
+    pub fn meshes(&self) -> &[TriMesh] {
+        &self.meshes
+    }
+
+    /// The line sets, in the order they were added.
+    pub fn line_sets(&self) -> &[Lines] {
+        &self.lines
+    }
+
     /// Writes the SVG to `path`.
     pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
         let svg = self.to_svg()?;
@@ -462,27 +580,13 @@ impl Frame {
         let mut items: Vec<Item> = Vec::new();
         let mut legends: Vec<(String, f64, f64)> = Vec::new();
         for set in &self.points {
-            let range = set.values.as_ref().map(|(label, v)| {
-                let (lo, hi) = v
-                    .iter()
-                    .filter(|x| x.is_finite())
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
-                        (lo.min(x), hi.max(x))
-                    });
-                let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
-                legends.push((label.clone(), lo, hi));
-                (lo, hi)
-            });
+            let range = set.value_range();
+            if let (Some((label, _)), Some((lo, hi))) = (set.scalar(), range) {
+                legends.push((label.to_string(), lo, hi));
+            }
             for (i, &p) in set.positions.iter().enumerate().step_by(stride) {
                 let Some(c) = view(p) else { continue };
-                let colour = match (&set.values, range) {
-                    (Some((_, v)), Some((lo, hi))) => scale_colour(if hi > lo {
-                        (v[i] - lo) / (hi - lo)
-                    } else {
-                        0.5
-                    }),
-                    _ => set.colour,
-                };
+                let colour = set.colour_of(i, range);
                 items.push(Item::Circle {
                     c,
                     r: set.radius,
