@@ -5,12 +5,27 @@
 //! source, program name, NVRTC options, in-memory headers, architecture, NVRTC version and
 //! this crate's version.
 //!
-//! Entries are `<kernel name>-<32 hex digits>.cubin`: the magic `WPCUBIN1`, the payload
-//! length (u64 LE), an FNV-1a 64 checksum of the payload (u64 LE), then the payload. A damaged
-//! or truncated entry (a crash mid-write on a file system without ordered rename, a full disk,
-//! a stray edit) is never trusted: it counts as a miss and is rebuilt. Writes go to a unique
-//! temporary file in the same directory and are renamed into place, so concurrent processes
-//! never see a partial entry.
+//! Entries are `<kernel name>-<32 hex digits>.cubin`: the magic `WPCUBIN2`, the payload
+//! length (u64 LE), a 32-byte MAC, then the payload. The MAC is BLAKE3 in keyed mode over the
+//! entry's file name, the length and the payload, under a 32-byte key drawn from the OS's
+//! random number generator on the first store and kept in the file `key` of the cache
+//! directory (created exclusively, mode 0600). An entry whose MAC does not verify (truncated
+//! or damaged by a crash, a full disk or a stray edit; planted by someone without the key;
+//! copied from another cache or renamed from another entry; of the older `WPCUBIN1` format)
+//! is never trusted: it counts as damaged, with a warning, and is rebuilt and replaced. Without
+//! a key file every entry counts as absent. Writes go to a
+//! temporary file in the same directory, named with 64 random bits and created exclusively and
+//! owner-only (a symlink or file planted at the name fails the write instead of redirecting
+//! it), and are renamed into place, so concurrent processes never see a partial entry.
+//!
+//! Trust model. The cache directory is `WARP_LANG_CACHE_DIR`, else [`set_cache_dir`]'s, else
+//! `<platform cache dir>/warp-lang/<version>` (the `dirs` crate), else
+//! `<temp dir>/warp-lang-<uid>/<version>`. Directories are created owner-only (0700); on Unix
+//! the cache directory (and, for the two default layouts, its `warp-lang` parent) is used only
+//! when owned by this user or root and writable by neither group nor others. Otherwise a
+//! warning names the directory and the reason, nothing is read from or written to it, and
+//! kernels are compiled in memory (a cubin is code the GPU runs with the user's rights: an
+//! entry someone else could plant must never be loaded). Off Unix no owner check is made.
 
 use std::ffi::OsString;
 use std::fs;
@@ -26,23 +41,18 @@ use crate::error::{CudaError, Result};
 pub const CACHE_DIR_ENV: &str = "WARP_LANG_CACHE_DIR";
 
 const CRATE_VERSION: &str = env!("CARGO_PKG_VERSION");
-const MAGIC: &[u8; 8] = b"WPCUBIN1";
-const HEADER_LEN: usize = 24;
+const MAGIC: &[u8; 8] = b"WPCUBIN2";
+const MAC_LEN: usize = 32;
+const HEADER_LEN: usize = 16 + MAC_LEN;
+/// The file of the entries' MAC key, in the cache directory.
+const KEY_FILE: &str = "key";
 
 // ---------------------------------------------------------------------------------------------
-// Hashing (no dependencies: FNV-1a, 64 and 128 bits)
+// Hashing: FNV-1a 128 for the cache key, which names an entry and needs no secrecy (the
+// entries themselves are authenticated with a keyed BLAKE3, see `mac`)
 
-const FNV64_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-const FNV64_PRIME: u64 = 0x0000_0100_0000_01b3;
 const FNV128_OFFSET: u128 = 0x6c62_272e_07bb_0142_62b8_2175_6295_c58d;
 const FNV128_PRIME: u128 = 0x0000_0000_0100_0000_0000_0000_0000_013b;
-
-/// FNV-1a 64 of `bytes` (the entry checksum).
-pub(crate) fn fnv1a_64(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(FNV64_OFFSET, |h, &b| {
-        (h ^ b as u64).wrapping_mul(FNV64_PRIME)
-    })
-}
 
 /// Incremental FNV-1a 128 (the cache key).
 #[derive(Clone)]
@@ -146,40 +156,126 @@ pub fn set_cache_dir(dir: Option<PathBuf>) {
 }
 
 /// Picks the directory: the env variable, else the override, else
-/// `$XDG_CACHE_HOME/warp-lang/<version>`, else `$HOME/.cache/warp-lang/<version>`, else
-/// `<temp dir>/warp-lang/<version>`. Empty variables count as unset; a relative
-/// `XDG_CACHE_HOME` is ignored (the XDG spec says so).
+/// `<platform cache dir>/warp-lang/<version>` (`platform` is [`dirs::cache_dir`]:
+/// `$XDG_CACHE_HOME` or `~/.cache` on Linux, `~/Library/Caches` on macOS, `%LOCALAPPDATA%` on
+/// Windows), else `<temp dir>/warp-lang-<uid>/<version>`: a directory per user, so that a
+/// shared temp directory never gives two users the same cache (and one planted by another
+/// user is refused by the trust check, see [`KernelCache`]). Empty variables count as unset.
+///
+/// Also returns the directory whose trust the default layouts hinge on besides the cache
+/// directory itself: its `warp-lang` (or `warp-lang-<uid>`) parent, whose owner could swap
+/// the version directory under it. `None` for a directory named by the variable or the
+/// override (only that directory is checked).
 fn resolve_cache_dir(
     env: Option<OsString>,
     over: Option<PathBuf>,
-    xdg: Option<OsString>,
-    home: Option<OsString>,
+    platform: Option<PathBuf>,
     temp: PathBuf,
-) -> PathBuf {
-    let nonempty = |v: Option<OsString>| v.filter(|s| !s.is_empty());
-    if let Some(dir) = nonempty(env) {
-        return PathBuf::from(dir);
+    uid: u32,
+) -> (PathBuf, Option<PathBuf>) {
+    if let Some(dir) = env.filter(|s| !s.is_empty()) {
+        return (PathBuf::from(dir), None);
     }
     if let Some(dir) = over {
-        return dir;
+        return (dir, None);
     }
-    let base = nonempty(xdg)
-        .map(PathBuf::from)
-        .filter(|p| p.is_absolute())
-        .or_else(|| nonempty(home).map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or(temp);
-    base.join("warp-lang").join(CRATE_VERSION)
+    let parent = match platform.filter(|p| p.is_absolute()) {
+        Some(base) => base.join("warp-lang"),
+        None => temp.join(format!("warp-lang-{uid}")),
+    };
+    (parent.join(CRATE_VERSION), Some(parent))
+}
+
+/// The effective user id (the owner a trusted cache directory must have); 0 off Unix, where
+/// no owner check is made.
+fn current_uid() -> u32 {
+    #[cfg(unix)]
+    {
+        // SAFETY: geteuid takes no arguments, cannot fail and touches no memory of ours.
+        unsafe { libc::geteuid() }
+    }
+    #[cfg(not(unix))]
+    {
+        0
+    }
+}
+
+fn current_cache() -> KernelCache {
+    let (dir, parent) = resolve_cache_dir(
+        std::env::var_os(CACHE_DIR_ENV),
+        OVERRIDE.read().unwrap_or_else(|e| e.into_inner()).clone(),
+        dirs::cache_dir(),
+        std::env::temp_dir(),
+        current_uid(),
+    );
+    let mut cache = KernelCache::new(dir);
+    cache.checked.extend(parent);
+    cache
 }
 
 /// The kernel cache directory now in effect (see [`set_cache_dir`]).
 pub fn cache_dir() -> PathBuf {
-    resolve_cache_dir(
-        std::env::var_os(CACHE_DIR_ENV),
-        OVERRIDE.read().unwrap_or_else(|e| e.into_inner()).clone(),
-        std::env::var_os("XDG_CACHE_HOME"),
-        std::env::var_os("HOME"),
-        std::env::temp_dir(),
-    )
+    current_cache().dir
+}
+
+// ---------------------------------------------------------------------------------------------
+// Trust in a directory
+
+/// Why a directory owned by `owner` with mode `mode` must not hold the cache of the user
+/// `me`, or `None` when it may. Trusted: owned by this user or by root (root can replace
+/// anything anyway; an installed ahead-of-time directory is often root's), and writable by
+/// neither group nor others: anyone else who could write there could plant an entry, or swap
+/// an entry's file, or a temporary file's name, between our check and our use.
+#[cfg_attr(not(unix), allow(dead_code))] // only Unix has owners and modes to check
+pub(crate) fn distrust_reason(owner: u32, mode: u32, me: u32) -> Option<String> {
+    if owner != me && owner != 0 {
+        return Some(format!(
+            "it is owned by uid {owner}, neither this user (uid {me}) nor root"
+        ));
+    }
+    let writers = match (mode & 0o020 != 0, mode & 0o002 != 0) {
+        (true, true) => "its group and others",
+        (true, false) => "its group",
+        (false, true) => "others",
+        (false, false) => return None,
+    };
+    Some(format!(
+        "it is writable by {writers} (mode {:03o}; `chmod go-w` it, or remove it and let it \
+         be created owner-only)",
+        mode & 0o7777
+    ))
+}
+
+/// Checks an existing directory: `Err` with the reason when it must not be used.
+fn check_dir(dir: &Path) -> std::io::Result<()> {
+    let meta = fs::metadata(dir)?;
+    if !meta.is_dir() {
+        return Err(std::io::Error::new(
+            ErrorKind::InvalidInput,
+            "it is not a directory",
+        ));
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let Some(why) = distrust_reason(meta.uid(), meta.mode(), current_uid()) {
+            return Err(std::io::Error::new(ErrorKind::PermissionDenied, why));
+        }
+    }
+    Ok(())
+}
+
+/// Logs, once per directory and process, why a cache directory is not used.
+fn warn_distrusted(dir: &Path, why: &std::io::Error) {
+    static WARNED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let mut warned = WARNED.lock().unwrap_or_else(|e| e.into_inner());
+    if !warned.iter().any(|d| d == dir) {
+        warned.push(dir.to_path_buf());
+        log::warn!(
+            "kernel cache directory {} is not used: {why}; kernels are compiled in memory",
+            dir.display()
+        );
+    }
 }
 
 /// Removes every cache entry (and stray temporary file) from the current cache directory.
@@ -225,9 +321,22 @@ pub struct CacheEntry {
 }
 
 /// A kernel cache in one directory.
+///
+/// The directory is created owner-only (mode 0700) and, on Unix, used only when it is owned
+/// by this user (or root) and writable by neither group nor others; otherwise nothing is
+/// read from it or written to it ([`load`](Self::load) finds nothing, [`store`](Self::store)
+/// fails saying why, a warning is logged once) and kernels are compiled in memory.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct KernelCache {
     dir: PathBuf,
+    /// The directories that must pass [`check_dir`]: `dir`, and for the default layouts its
+    /// `warp-lang` parent (first: checked from the outside in).
+    checked: Vec<PathBuf>,
+}
+
+/// The file name of an entry.
+fn entry_name(name: &str, key: u128) -> String {
+    format!("{}-{key:032x}.cubin", sanitize(name))
 }
 
 /// Keeps file names portable and short: `[A-Za-z0-9_.-]`, at most 64 characters.
@@ -251,54 +360,139 @@ fn sanitize(name: &str) -> String {
     }
 }
 
-fn encode(payload: &[u8]) -> Vec<u8> {
+/// The MAC of an entry: keyed BLAKE3 over its file name (so that an entry renamed to another
+/// kernel's or key's name fails), its length and its payload.
+fn mac(key: &[u8; 32], file_name: &str, payload: &[u8]) -> [u8; MAC_LEN] {
+    let mut h = blake3::Hasher::new_keyed(key);
+    h.update(b"warp-lang kernel cache entry v2\0");
+    h.update(&(file_name.len() as u64).to_le_bytes());
+    h.update(file_name.as_bytes());
+    h.update(&(payload.len() as u64).to_le_bytes());
+    h.update(payload);
+    *h.finalize().as_bytes()
+}
+
+fn encode(key: &[u8; 32], file_name: &str, payload: &[u8]) -> Vec<u8> {
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-    out.extend_from_slice(&fnv1a_64(payload).to_le_bytes());
+    out.extend_from_slice(&mac(key, file_name, payload));
     out.extend_from_slice(payload);
     out
 }
 
 /// Verifies an entry and returns its payload.
-fn decode(mut file: Vec<u8>) -> Option<Vec<u8>> {
+fn decode(key: &[u8; 32], file_name: &str, mut file: Vec<u8>) -> Option<Vec<u8>> {
     if file.len() < HEADER_LEN || &file[..8] != MAGIC {
         return None;
     }
     let len = u64::from_le_bytes(file[8..16].try_into().ok()?);
-    let sum = u64::from_le_bytes(file[16..24].try_into().ok()?);
-    if len != (file.len() - HEADER_LEN) as u64 || fnv1a_64(&file[HEADER_LEN..]) != sum {
+    if len != (file.len() - HEADER_LEN) as u64 {
+        return None;
+    }
+    let stored = blake3::Hash::from_bytes(file[16..HEADER_LEN].try_into().ok()?);
+    // blake3::Hash compares in constant time.
+    if stored != blake3::Hash::from_bytes(mac(key, file_name, &file[HEADER_LEN..])) {
         return None;
     }
     file.drain(..HEADER_LEN);
     Some(file)
 }
 
-/// A name for a temporary file no other writer (thread or process) will pick.
+/// Creates `path` for writing, failing if anything (a file, or a symlink planted to redirect
+/// the write) is already there; owner-only on Unix.
+fn create_exclusive(path: &Path) -> std::io::Result<fs::File> {
+    let mut options = fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    options.open(path)
+}
+
+/// A name for a temporary file no other writer (thread or process) will pick, and no one
+/// can predict: the process id (to tell stray files apart), then 64 random bits. Were the
+/// random source to fail, a counter and the clock still keep names unique; the exclusive
+/// create ([`create_exclusive`]) is what makes a guessed name harmless.
 fn unique_suffix() -> String {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let local = 0u8;
-    let mut h = Fnv128::new();
-    h.write(&nanos.to_le_bytes());
-    h.write(&n.to_le_bytes());
-    h.write(&(&local as *const u8 as usize).to_le_bytes());
-    format!("{}.{:016x}", std::process::id(), h.finish() as u64)
+    let mut random = [0u8; 8];
+    if getrandom::fill(&mut random).is_err() {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        let mut h = Fnv128::new();
+        h.write(&nanos.to_le_bytes());
+        h.write(&COUNTER.fetch_add(1, Ordering::Relaxed).to_le_bytes());
+        random = (h.finish() as u64).to_le_bytes();
+    }
+    format!("{}.{:016x}", std::process::id(), u64::from_le_bytes(random))
+}
+
+/// Writes `bytes` to `path` atomically: into `<path>.tmp.<unique suffix>`, created exclusively
+/// (so a symlink or file planted at that name makes the write fail instead of being followed
+/// or reused), then renamed over `path` (a rename replaces a symlink at `path`, never writes
+/// through it). The temporary file is removed on failure, but only one this call created.
+fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut tmp_name = path.file_name().map(OsString::from).unwrap_or_default();
+    tmp_name.push(format!(".tmp.{}", unique_suffix()));
+    let tmp = path.with_file_name(tmp_name);
+    let mut file = create_exclusive(&tmp)?;
+    let written = file.write_all(bytes).and_then(|()| {
+        drop(file);
+        fs::rename(&tmp, path)
+    });
+    if written.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    written
 }
 
 impl KernelCache {
     /// A cache in `dir` (created on first store).
     pub fn new(dir: impl Into<PathBuf>) -> Self {
-        KernelCache { dir: dir.into() }
+        let dir = dir.into();
+        KernelCache {
+            checked: vec![dir.clone()],
+            dir,
+        }
     }
 
     /// The cache in [`cache_dir`].
     pub fn current() -> Self {
-        Self::new(cache_dir())
+        current_cache()
+    }
+
+    /// Whether the directory (and, for the default layouts, its `warp-lang` parent) may be
+    /// used: `Err` saying why not (also logged once). A missing directory is `NotFound`.
+    fn trusted(&self) -> std::io::Result<()> {
+        for dir in self.checked.iter().rev() {
+            if let Err(e) = check_dir(dir) {
+                if e.kind() != ErrorKind::NotFound {
+                    warn_distrusted(dir, &e);
+                }
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// Creates the directory (and missing parents) owner-only, then checks it.
+    fn open_for_writing(&self) -> Result<()> {
+        let mut builder = fs::DirBuilder::new();
+        builder.recursive(true);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::DirBuilderExt;
+            builder.mode(0o700);
+        }
+        builder
+            .create(&self.dir)
+            .and_then(|()| self.trusted())
+            .map_err(|e| CudaError::io(e, format!("using cache directory {}", self.dir.display())))
     }
 
     /// The directory.
@@ -308,14 +502,58 @@ impl KernelCache {
 
     /// The entry path for a kernel name and key.
     pub fn path_for(&self, name: &str, key: u128) -> PathBuf {
-        self.dir
-            .join(format!("{}-{key:032x}.cubin", sanitize(name)))
+        self.dir.join(entry_name(name, key))
+    }
+
+    /// The MAC key of this cache, if its file is there and sound.
+    fn read_mac_key(&self) -> std::io::Result<[u8; 32]> {
+        let path = self.dir.join(KEY_FILE);
+        let bytes = fs::read(&path)?;
+        bytes.try_into().map_err(|b: Vec<u8>| {
+            std::io::Error::new(
+                ErrorKind::InvalidData,
+                format!("{} holds {} bytes, not 32", path.display(), b.len()),
+            )
+        })
+    }
+
+    /// The MAC key of this cache, made on first use: 32 random bytes written to a temporary
+    /// file created exclusively, then hard-linked to `key` (a link never replaces a file, so of
+    /// two processes making one at once, the second reads the first one's, whole).
+    fn mac_key(&self) -> Result<[u8; 32]> {
+        let path = self.dir.join(KEY_FILE);
+        let io = |e: std::io::Error| CudaError::io(e, format!("cache key {}", path.display()));
+        match self.read_mac_key() {
+            Ok(key) => return Ok(key),
+            Err(e) if e.kind() == ErrorKind::NotFound => {}
+            Err(e) => return Err(io(e)),
+        }
+        let mut key = [0u8; 32];
+        getrandom::fill(&mut key).map_err(|e| io(std::io::Error::other(e.to_string())))?;
+        let tmp = self.dir.join(format!("{KEY_FILE}.tmp.{}", unique_suffix()));
+        let made = create_exclusive(&tmp)
+            .and_then(|mut f| f.write_all(&key))
+            .and_then(|()| fs::hard_link(&tmp, &path));
+        let _ = fs::remove_file(&tmp);
+        match made {
+            Ok(()) => Ok(key),
+            Err(e) if e.kind() == ErrorKind::AlreadyExists => self.read_mac_key().map_err(io),
+            Err(e) => Err(io(e)),
+        }
     }
 
     /// Reads and verifies an entry.
     pub fn load(&self, name: &str, key: u128) -> CacheLookup {
+        if self.trusted().is_err() {
+            return CacheLookup::Absent;
+        }
+        // No key yet: nothing here was stored by this cache (or the key was removed).
+        let Ok(mac_key) = self.read_mac_key() else {
+            return CacheLookup::Absent;
+        };
         match fs::read(self.path_for(name, key)) {
-            Ok(bytes) => decode(bytes).map_or(CacheLookup::Damaged, CacheLookup::Hit),
+            Ok(bytes) => decode(&mac_key, &entry_name(name, key), bytes)
+                .map_or(CacheLookup::Damaged, CacheLookup::Hit),
             Err(e) if e.kind() == ErrorKind::NotFound => CacheLookup::Absent,
             Err(_) => CacheLookup::Damaged,
         }
@@ -324,25 +562,10 @@ impl KernelCache {
     /// Writes an entry atomically (temporary file + rename) and returns its path.
     pub fn store(&self, name: &str, key: u128, payload: &[u8]) -> Result<PathBuf> {
         let path = self.path_for(name, key);
-        fs::create_dir_all(&self.dir).map_err(|e| {
-            CudaError::io(
-                e,
-                format!("creating cache directory {}", self.dir.display()),
-            )
-        })?;
-        let mut tmp_name = path.file_name().map(OsString::from).unwrap_or_default();
-        tmp_name.push(format!(".tmp.{}", unique_suffix()));
-        let tmp = self.dir.join(tmp_name);
-        let write = || -> std::io::Result<()> {
-            let mut f = fs::File::create(&tmp)?;
-            f.write_all(&encode(payload))?;
-            drop(f);
-            fs::rename(&tmp, &path)
-        };
-        write().map_err(|e| {
-            let _ = fs::remove_file(&tmp);
-            CudaError::io(e, format!("writing cache entry {}", path.display()))
-        })?;
+        self.open_for_writing()?;
+        let mac_key = self.mac_key()?;
+        write_atomically(&path, &encode(&mac_key, &entry_name(name, key), payload))
+            .map_err(|e| CudaError::io(e, format!("writing cache entry {}", path.display())))?;
         Ok(path)
     }
 
@@ -365,6 +588,7 @@ impl KernelCache {
             let name = name.to_string_lossy();
             if name.ends_with(".cubin")
                 || name.contains(".cubin.tmp.")
+                || name.starts_with("key.tmp.")
                 || name.starts_with("nvrtc-version")
             {
                 match fs::remove_file(entry.path()) {
@@ -400,13 +624,8 @@ impl KernelCache {
         if self.read_stamp() == Some(version) {
             return;
         }
-        let tmp = self
-            .dir
-            .join(format!("nvrtc-version.tmp.{}", unique_suffix()));
         let text = format!("{}.{}\n", version.0, version.1);
-        if fs::write(&tmp, text).is_err() || fs::rename(&tmp, self.stamp_path()).is_err() {
-            let _ = fs::remove_file(&tmp);
-        }
+        let _ = write_atomically(&self.stamp_path(), text.as_bytes());
     }
 
     /// Returns the cubin for this compile from the cache, or compiles and stores it.
@@ -484,12 +703,29 @@ impl KernelCache {
             }
             CacheLookup::Damaged => {
                 log::warn!(
-                    "kernel cache entry {} is damaged: compiling {name} (sm_{arch}) again",
+                    "kernel cache entry {} fails verification (damaged, truncated, of an older \
+                     format, or not written by this cache): compiling {name} (sm_{arch}) again \
+                     and replacing it",
                     path.display()
                 );
                 CacheOutcome::Rebuilt
             }
         };
+        let (compiled, entry) = self.compile_and_store(source, name, opts, arch, version)?;
+        Ok((compiled, outcome, entry))
+    }
+
+    /// Compiles with NVRTC `version` and stores the cubin under its key; a store that fails is
+    /// logged, and the cubin still returned.
+    fn compile_and_store(
+        &self,
+        source: &str,
+        name: &str,
+        opts: &CompileOptions,
+        arch: u32,
+        version: (i32, i32),
+    ) -> Result<(Compiled, CacheEntry)> {
+        let key = cache_key(source, name, opts, arch, version);
         let compiled = compile(source, name, opts, arch)?;
         let path = match self.store(name, key, &compiled.cubin) {
             Ok(path) => {
@@ -502,7 +738,32 @@ impl KernelCache {
                 None
             }
         };
-        Ok((compiled, outcome, CacheEntry { key, path }))
+        Ok((compiled, CacheEntry { key, path }))
+    }
+
+    /// Compiles again, with NVRTC, a kernel whose cached cubin the driver refused to load
+    /// (`cuModuleLoadData` failed: a cubin the MAC vouches for can still be unusable, say one
+    /// written by a buggy toolkit, or for a driver since downgraded), and stores the new cubin
+    /// in place of the old. `bad` is the entry that failed; it is removed first when it lies in
+    /// this cache's directory (an ahead-of-time file elsewhere is left alone), so that a failed
+    /// compile or store does not leave it to fail again. The compile is under the NVRTC loaded
+    /// now, whatever the stamp says.
+    pub fn recompile_entry(
+        &self,
+        source: &str,
+        name: &str,
+        opts: &CompileOptions,
+        arch: u32,
+        bad: Option<&Path>,
+    ) -> Result<(Compiled, CacheEntry)> {
+        if let Some(bad) = bad.filter(|p| p.parent() == Some(self.dir.as_path())) {
+            match fs::remove_file(bad) {
+                Ok(()) => log::debug!("kernel cache: removed {}", bad.display()),
+                Err(e) if e.kind() == ErrorKind::NotFound => {}
+                Err(e) => log::warn!("kernel cache: cannot remove {}: {e}", bad.display()),
+            }
+        }
+        self.compile_and_store(source, name, opts, arch, nvrtc_version()?)
     }
 }
 
@@ -566,9 +827,6 @@ pub(crate) mod tests {
 
     #[test]
     fn fnv_reference_values() {
-        assert_eq!(fnv1a_64(b""), 0xcbf29ce484222325);
-        assert_eq!(fnv1a_64(b"a"), 0xaf63dc4c8601ec8c);
-        assert_eq!(fnv1a_64(b"foobar"), 0x85944171f73967e8);
         let h = |s: &[u8]| {
             let mut f = Fnv128::new();
             f.write(s);
@@ -694,11 +952,16 @@ pub(crate) mod tests {
         let path = c.store("k", key, &payload).unwrap();
         assert_eq!(path, c.path_for("k", key));
         assert_eq!(c.load("k", key), CacheLookup::Hit(payload.clone()));
-        assert_eq!(files(c.dir()), ["k-123456789abcdef0123456789abcdef0.cubin"]);
-        // Overwrite keeps one file and no temporaries.
+        assert_eq!(
+            files(c.dir()),
+            ["k-123456789abcdef0123456789abcdef0.cubin", "key"]
+        );
+        // Overwrite keeps one entry, the same key and no temporaries.
+        let mac_key = fs::read(c.dir().join(KEY_FILE)).unwrap();
         c.store("k", key, &payload[..10]).unwrap();
         assert_eq!(c.load("k", key), CacheLookup::Hit(payload[..10].to_vec()));
-        assert_eq!(files(c.dir()).len(), 1);
+        assert_eq!(files(c.dir()).len(), 2);
+        assert_eq!(fs::read(c.dir().join(KEY_FILE)).unwrap(), mac_key);
         // Empty payloads are valid entries.
         c.store("e", 1, &[]).unwrap();
         assert_eq!(c.load("e", 1), CacheLookup::Hit(vec![]));
@@ -741,6 +1004,85 @@ pub(crate) mod tests {
         assert_eq!(c.load("k", 7), CacheLookup::Hit(payload));
     }
 
+    /// The key: 32 bytes, owner-only, made once and reused.
+    #[test]
+    fn mac_key_is_private_and_stable() {
+        let t = TempDir::new("key");
+        let c = KernelCache::new(&t.0);
+        c.store("a", 1, b"x").unwrap();
+        let path = t.0.join(KEY_FILE);
+        let key = fs::read(&path).unwrap();
+        assert_eq!(key.len(), 32);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            assert_eq!(
+                fs::metadata(&path).unwrap().permissions().mode() & 0o777,
+                0o600
+            );
+        }
+        c.store("b", 2, b"y").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), key);
+        // Another cache has another key.
+        let t2 = TempDir::new("key2");
+        KernelCache::new(&t2.0).store("a", 1, b"x").unwrap();
+        assert_ne!(fs::read(t2.0.join(KEY_FILE)).unwrap(), key);
+    }
+
+    /// Planted entries are never served: one of the old format with a correct FNV checksum,
+    /// one of the new format whose MAC is made under another key (all a planter without the
+    /// key can do), one copied from another cache, and a sound entry renamed to another
+    /// kernel's file. A key file removed makes every entry absent (then rebuilt).
+    #[test]
+    fn planted_entries_are_not_used() {
+        let t = TempDir::new("planted");
+        let c = KernelCache::new(&t.0);
+        c.store("other", 9, b"real").unwrap();
+        let path = c.path_for("k", 7);
+
+        // WPCUBIN1: magic, length, FNV-1a 64 of the payload, payload.
+        let payload = b"evil cubin";
+        let fnv = payload.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+            (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+        });
+        let mut old = b"WPCUBIN1".to_vec();
+        old.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        old.extend_from_slice(&fnv.to_le_bytes());
+        old.extend_from_slice(payload);
+        fs::write(&path, &old).unwrap();
+        assert_eq!(c.load("k", 7), CacheLookup::Damaged);
+
+        // The new format under a guessed key.
+        fs::write(&path, encode(&[0u8; 32], &entry_name("k", 7), payload)).unwrap();
+        assert_eq!(c.load("k", 7), CacheLookup::Damaged);
+
+        // A sound entry of another cache.
+        let t2 = TempDir::new("planted2");
+        let c2 = KernelCache::new(&t2.0);
+        fs::copy(c2.store("k", 7, payload).unwrap(), &path).unwrap();
+        assert_eq!(c.load("k", 7), CacheLookup::Damaged);
+
+        // A sound entry of this cache, under another name.
+        fs::copy(c.path_for("other", 9), &path).unwrap();
+        assert_eq!(c.load("k", 7), CacheLookup::Damaged);
+        assert_eq!(c.load("other", 9), CacheLookup::Hit(b"real".to_vec()));
+
+        // A compile replaces it (stamp of a version without NVRTC: the planted entry sits
+        // where the stamp's key points, and must not be served).
+        let opts = CompileOptions::default();
+        let key = cache_key("src", "k", &opts, 90, (99, 7));
+        fs::write(c.path_for("k", key), &old).unwrap();
+        c.write_stamp((99, 7));
+        if let Ok((compiled, outcome)) = c.compile_cached("src", "k", &opts, 90) {
+            assert_ne!(outcome, CacheOutcome::Hit);
+            assert_ne!(compiled.cubin, payload);
+        }
+
+        // No key: nothing here is trusted.
+        fs::remove_file(t.0.join(KEY_FILE)).unwrap();
+        assert_eq!(c.load("other", 9), CacheLookup::Absent);
+    }
+
     #[test]
     fn clear_removes_only_cache_files() {
         let t = TempDir::new("clear");
@@ -751,7 +1093,8 @@ pub(crate) mod tests {
         fs::write(t.0.join("notes.txt"), b"keep").unwrap();
         c.write_stamp((13, 0));
         assert_eq!(c.clear().unwrap(), 4);
-        assert_eq!(files(&t.0), ["notes.txt"]);
+        // The MAC key stays: entries stored later are still verified by it.
+        assert_eq!(files(&t.0), ["key", "notes.txt"]);
         assert_eq!(KernelCache::new(t.0.join("missing")).clear().unwrap(), 0);
     }
 
@@ -819,6 +1162,31 @@ pub(crate) mod tests {
         assert_eq!((outcome, again), (CacheOutcome::Hit, entry));
     }
 
+    /// The entry a module load refused is removed before the recompile (which, without
+    /// NVRTC, fails here: the entry is gone all the same); a file outside the cache (an
+    /// ahead-of-time cubin) is never removed.
+    #[test]
+    fn recompile_removes_only_its_own_entry() {
+        let t = TempDir::new("recompile");
+        let c = KernelCache::new(t.0.join("cache"));
+        let bad = c.store("k", 1, b"unloadable").unwrap();
+        let outside = t.0.join("k-1.cubin");
+        fs::write(&outside, b"aot").unwrap();
+        let opts = CompileOptions::default();
+        let src = "extern \"C\" __global__ void k() {}";
+        let fresh = c.recompile_entry(src, "k", &opts, 90, Some(&outside));
+        assert!(outside.is_file());
+        let again = c.recompile_entry(src, "k", &opts, 90, Some(&bad));
+        assert!(!bad.exists());
+        if let (Ok((compiled, entry)), Ok(_)) = (again, fresh) {
+            assert!(!compiled.cubin.is_empty());
+            assert_eq!(
+                c.load("k", entry.key),
+                CacheLookup::Hit(compiled.cubin.clone())
+            );
+        }
+    }
+
     #[test]
     fn names_are_sanitized() {
         assert_eq!(sanitize("add1.cu"), "add1.cu");
@@ -833,38 +1201,128 @@ pub(crate) mod tests {
         let v = CRATE_VERSION;
         let tmp = PathBuf::from("/tmp");
         let os = |s: &str| Some(OsString::from(s));
+        let plat = || Some(PathBuf::from("/home/u/.cache"));
         assert_eq!(
-            resolve_cache_dir(
-                os("/env"),
-                Some("/over".into()),
-                os("/xdg"),
-                os("/home/u"),
-                tmp.clone()
-            ),
-            PathBuf::from("/env")
+            resolve_cache_dir(os("/env"), Some("/over".into()), plat(), tmp.clone(), 7),
+            (PathBuf::from("/env"), None)
         );
         assert_eq!(
-            resolve_cache_dir(
-                os(""),
-                Some("/over".into()),
-                os("/xdg"),
-                os("/home/u"),
-                tmp.clone()
-            ),
-            PathBuf::from("/over")
+            resolve_cache_dir(os(""), Some("/over".into()), plat(), tmp.clone(), 7),
+            (PathBuf::from("/over"), None)
         );
         assert_eq!(
-            resolve_cache_dir(None, None, os("/xdg"), os("/home/u"), tmp.clone()),
-            PathBuf::from(format!("/xdg/warp-lang/{v}"))
+            resolve_cache_dir(None, None, plat(), tmp.clone(), 7),
+            (
+                PathBuf::from(format!("/home/u/.cache/warp-lang/{v}")),
+                Some(PathBuf::from("/home/u/.cache/warp-lang"))
+            )
         );
-        assert_eq!(
-            resolve_cache_dir(None, None, os("rel"), os("/home/u"), tmp.clone()),
-            PathBuf::from(format!("/home/u/.cache/warp-lang/{v}"))
+        // No platform directory (no HOME): a directory per user under the temp dir.
+        for platform in [None, Some(PathBuf::from("relative"))] {
+            assert_eq!(
+                resolve_cache_dir(None, None, platform, tmp.clone(), 1234),
+                (
+                    PathBuf::from(format!("/tmp/warp-lang-1234/{v}")),
+                    Some(PathBuf::from("/tmp/warp-lang-1234"))
+                )
+            );
+        }
+    }
+
+    /// The ownership and mode rules, as a pure function: these tests run as root here, and a
+    /// directory owned by another user cannot be made without being root.
+    #[test]
+    fn trust_rules() {
+        let me = 1000;
+        assert_eq!(distrust_reason(me, 0o40700, me), None);
+        assert_eq!(distrust_reason(me, 0o40755, me), None);
+        assert_eq!(distrust_reason(0, 0o40755, me), None, "root's is trusted");
+        assert_eq!(distrust_reason(0, 0o40700, 0), None);
+        let other = distrust_reason(1001, 0o40700, me).expect("another user's");
+        assert!(
+            other.contains("uid 1001") && other.contains("uid 1000"),
+            "{other}"
         );
-        assert_eq!(
-            resolve_cache_dir(None, None, None, None, tmp.clone()),
-            PathBuf::from(format!("/tmp/warp-lang/{v}"))
-        );
+        for (mode, who) in [
+            (0o40777, "its group and others"),
+            (0o40770, "its group"),
+            (0o40702, "others"),
+            (0o41777, "its group and others"),
+        ] {
+            let why = distrust_reason(me, mode, me).expect("writable by others");
+            assert!(why.contains(who) && why.contains(&format!("{:03o}", mode & 0o7777)));
+        }
+        // Both wrong: the owner is reported.
+        assert!(distrust_reason(1001, 0o40777, me)
+            .unwrap()
+            .contains("owned by"));
+    }
+
+    /// A new cache directory (and its missing parents) is created owner-only.
+    #[cfg(unix)]
+    #[test]
+    fn directories_are_created_owner_only() {
+        use std::os::unix::fs::PermissionsExt;
+        let t = TempDir::new("mode");
+        let c = KernelCache::new(t.0.join("a").join("b"));
+        c.store("k", 1, b"x").unwrap();
+        for d in [t.0.join("a"), t.0.join("a").join("b")] {
+            let mode = fs::metadata(&d).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode, 0o700, "{}", d.display());
+        }
+    }
+
+    /// A world- or group-writable directory is refused: an entry planted there is not read
+    /// (the lookup finds nothing, so the kernel is compiled in memory), and a store fails
+    /// naming the directory and the reason.
+    #[cfg(unix)]
+    #[test]
+    fn writable_by_others_is_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        for mode in [0o777, 0o770, 0o1777] {
+            let t = TempDir::new("writable");
+            let c = KernelCache::new(&t.0);
+            c.store("k", 1, b"planted").unwrap();
+            fs::set_permissions(&t.0, fs::Permissions::from_mode(mode)).unwrap();
+            assert_eq!(c.load("k", 1), CacheLookup::Absent, "mode {mode:o}");
+            let e = c.store("k", 2, b"x").unwrap_err().to_string();
+            assert!(
+                e.contains(&t.0.display().to_string()) && e.contains("writable by"),
+                "{e}"
+            );
+            // compile_cached never reads it either: with the stamp's version the entry
+            // would otherwise be a hit without NVRTC.
+            let opts = CompileOptions::default();
+            let key = cache_key("src", "k", &opts, 90, (99, 7));
+            fs::set_permissions(&t.0, fs::Permissions::from_mode(0o700)).unwrap();
+            c.store("k", key, b"planted").unwrap();
+            c.write_stamp((99, 7));
+            fs::set_permissions(&t.0, fs::Permissions::from_mode(mode)).unwrap();
+            // Without NVRTC (or as "src" is no CUDA) this is an error: compiled, not read.
+            if let Ok((compiled, outcome)) = c.compile_cached("src", "k", &opts, 90) {
+                assert_ne!(outcome, CacheOutcome::Hit);
+                assert_ne!(compiled.cubin, b"planted");
+            }
+        }
+    }
+
+    /// For the default layouts the `warp-lang-<uid>` parent is checked too: whoever can
+    /// write it could swap the version directory below it (the planted-directory case of a
+    /// shared temp dir).
+    #[cfg(unix)]
+    #[test]
+    fn planted_parent_is_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let t = TempDir::new("parent");
+        let (dir, parent) = resolve_cache_dir(None, None, None, t.0.clone(), current_uid());
+        let mut c = KernelCache::new(dir);
+        c.checked.extend(parent.clone());
+        c.store("k", 1, b"x").unwrap();
+        assert_eq!(c.load("k", 1), CacheLookup::Hit(b"x".to_vec()));
+        let parent = parent.unwrap();
+        fs::set_permissions(&parent, fs::Permissions::from_mode(0o777)).unwrap();
+        assert_eq!(c.load("k", 1), CacheLookup::Absent);
+        assert!(c.store("k", 1, b"x").is_err());
     }
 
     #[test]
@@ -873,5 +1331,43 @@ pub(crate) mod tests {
         let b = unique_suffix();
         assert_ne!(a, b);
         assert!(a.starts_with(&std::process::id().to_string()));
+    }
+
+    /// A symlink (or any file) planted at a temporary file's name makes the exclusive create
+    /// fail: the link's target is neither written nor truncated, and the failed write does not
+    /// remove what it did not create. (The real names end in 64 random bits, so this plants at
+    /// the name directly.)
+    #[cfg(unix)]
+    #[test]
+    fn symlink_at_temp_name_is_not_followed() {
+        let t = TempDir::new("symlink");
+        let victim = t.0.join("victim");
+        fs::write(&victim, b"precious").unwrap();
+        let tmp = t.0.join("k-1.cubin.tmp.1.0123456789abcdef");
+        std::os::unix::fs::symlink(&victim, &tmp).unwrap();
+        let e = create_exclusive(&tmp).unwrap_err();
+        assert_eq!(e.kind(), ErrorKind::AlreadyExists);
+        fs::write(t.0.join("plain"), b"x").unwrap();
+        assert_eq!(
+            create_exclusive(&t.0.join("plain")).unwrap_err().kind(),
+            ErrorKind::AlreadyExists
+        );
+        assert_eq!(fs::read(&victim).unwrap(), b"precious");
+        assert!(fs::symlink_metadata(&tmp).unwrap().file_type().is_symlink());
+        // Temporaries are created owner-only.
+        use std::os::unix::fs::PermissionsExt;
+        let fresh = t.0.join("fresh");
+        drop(create_exclusive(&fresh).unwrap());
+        assert_eq!(
+            fs::metadata(&fresh).unwrap().permissions().mode() & 0o777,
+            0o600
+        );
+        // An entry whose final name is a symlink: the rename replaces the link, the target
+        // is untouched.
+        let c = KernelCache::new(&t.0);
+        std::os::unix::fs::symlink(&victim, c.path_for("k", 1)).unwrap();
+        c.store("k", 1, b"cubin").unwrap();
+        assert_eq!(fs::read(&victim).unwrap(), b"precious");
+        assert_eq!(c.load("k", 1), CacheLookup::Hit(b"cubin".to_vec()));
     }
 }

@@ -8,7 +8,10 @@
 //! [`set_aot_dir`] or `WARP_LANG_AOT_DIR`, a first launch looks there before the kernel
 //! cache and before NVRTC. Entries are keyed by the generated source, the compile options
 //! (including `config::cuda_fmad`, which must be the same at both times) and the architecture;
-//! one that is missing or damaged falls back to the ordinary path. [`compile_with_adjoints`]
+//! one that is missing or damaged falls back to the ordinary path. Entries are authenticated
+//! as the kernel cache's (see `warp_cuda::cache`): ship the directory whole, its `key` file
+//! included, or every entry counts as missing; the directory must be owned by the user who
+//! runs the program (or root) and not writable by group or others. [`compile_with_adjoints`]
 //! also compiles the adjoint units (for programs that run backward), and [`verify`] says,
 //! without a GPU, whether a directory holds every entry a program will look for.
 //!

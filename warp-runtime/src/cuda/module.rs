@@ -205,10 +205,43 @@ pub(crate) fn loaded(
         },
     )
     .map_err(|e| err(device, e))?;
-    let module = st
-        .gpu
-        .load_module(&compiled.cubin)
-        .map_err(|e| err(device, e))?;
+    // A cubin from the disk cache or an ahead-of-time directory that the driver refuses is
+    // compiled again (and the cache entry replaced; an ahead-of-time file is left alone) before
+    // giving up: a second refusal is the error.
+    let (module, compiled, outcome, aot, entry) = match st.gpu.load_module(&compiled.cubin) {
+        Ok(module) => (module, compiled, outcome, aot, entry),
+        Err(e) if outcome == CacheOutcome::Hit => {
+            log::warn!(
+                "{} cubin {} of kernel {}::{} ({}, {}) failed to load on {device}: {e}; \
+                 compiling it again",
+                if aot { "ahead-of-time" } else { "cached" },
+                entry
+                    .path
+                    .as_deref()
+                    .map_or("(no file)".into(), |p| p.display().to_string()),
+                info.module,
+                info.name,
+                variant_name(adjoint),
+                layout_name(contiguous)
+            );
+            let bad = if aot { None } else { entry.path.as_deref() };
+            let (fresh, fresh_entry) = with_compile_options(
+                contiguous,
+                stack_define.as_deref(),
+                needs_exact(&src.headers),
+                |opts| {
+                    KernelCache::current().recompile_entry(&src.text, info.name, opts, arch, bad)
+                },
+            )
+            .map_err(|e| err(device, e))?;
+            let module = st
+                .gpu
+                .load_module(&fresh.cubin)
+                .map_err(|e| err(device, e))?;
+            (module, fresh, CacheOutcome::Rebuilt, false, fresh_entry)
+        }
+        Err(e) => return Err(err(device, e)),
+    };
     let function = module.function(&src.entry).map_err(|e| err(device, e))?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     log::info!(
