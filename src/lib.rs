@@ -101,7 +101,7 @@ pub use nalgebra;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::f16;
-pub use warp_core::{DTransform, Fault, FaultKind, Float, Transform};
+pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`) and
 /// emptying it.
 #[cfg(feature = "cuda")]
@@ -152,10 +152,10 @@ pub use warp_runtime::{
 pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, kernel_info, launch, load, load_with_adjoints, synchronize, ArgCtx, Array, Bvh, Device,
-    DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape, Kernel, KernelArg,
-    KernelInfo, KernelParams, Launch, Launchable, Mesh, OwnedArgsOf, Recording, Result, Runtime,
-    Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
+    init, kernel_info, last_launch_id, launch, load, load_with_adjoints, synchronize, ArgCtx,
+    Array, Bvh, Device, DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape,
+    Kernel, KernelArg, KernelInfo, KernelParams, Launch, Launchable, Mesh, OwnedArgsOf, Recording,
+    Result, Runtime, Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};

@@ -24,13 +24,24 @@ backend_tests!(
     out_of_memory_then_usable,
 );
 
-/// The fault of a failed launch, or a panic naming what came instead.
+/// The fault of a failed launch, or a panic naming what came instead. The fault must name the
+/// launch that raised it (the calling thread's latest: debug mode reports a GPU's fault at the
+/// launch, as the CPU does); it is returned without it, and its message without the launch's
+/// " (launch #N)", so that the tests compare the rest exactly.
 #[track_caller]
 fn fault_of(r: wp::Result<()>) -> (Fault, String) {
     match r {
         Err(e @ Error::Fault(_)) => {
             let msg = e.to_string();
-            let Error::Fault(f) = e else { unreachable!() };
+            let Error::Fault(mut f) = e else {
+                unreachable!()
+            };
+            let launch = f.launch.take().expect("a fault names its launch");
+            assert_eq!(Some(launch), wp::last_launch_id(), "{msg}");
+            let msg = msg
+                .strip_suffix(&format!(" ({launch})"))
+                .unwrap_or_else(|| panic!("`{msg}` ends with ({launch})"))
+                .to_string();
             (f, msg)
         }
         other => panic!("expected a kernel fault, got {other:?}"),
@@ -54,7 +65,8 @@ fn out_of_bounds_read(dev: &wp::Device) {
                 arg: "a",
                 index: vec![4],
                 shape: vec![4]
-            }
+            },
+            launch: None,
         }
     );
     assert_eq!(
@@ -240,7 +252,8 @@ fn integer_division_by_zero(dev: &wp::Device) {
         f,
         Fault {
             kernel: "k_div",
-            kind: FaultKind::DivisionByZero
+            kind: FaultKind::DivisionByZero,
+            launch: None,
         }
     );
     assert_eq!(msg, "kernel `k_div`: integer division by zero");
@@ -255,7 +268,8 @@ fn integer_division_by_zero(dev: &wp::Device) {
         f,
         Fault {
             kernel: "k_rem",
-            kind: FaultKind::DivisionByZero
+            kind: FaultKind::DivisionByZero,
+            launch: None,
         }
     );
     let a = arr(&[10i64, 20], dev);
@@ -288,7 +302,8 @@ fn zero_step(dev: &wp::Device) {
         f,
         Fault {
             kernel: "k_zero_step",
-            kind: FaultKind::BadStep { step: 0 }
+            kind: FaultKind::BadStep { step: 0 },
+            launch: None,
         }
     );
     assert_eq!(

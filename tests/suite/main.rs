@@ -38,9 +38,10 @@ macro_rules! backend_tests {
                 fn $name() {
                     match ::warp_lang::get_device("cuda:0") {
                         Ok(dev) => {
-                            // One test at a time on the GPU: a fault is recorded per device and
-                            // must be reported to the test that caused it. Debug mode makes
-                            // each launch report its own faults (as on the CPU).
+                            // One test at a time on the GPU: some exhaust its memory
+                            // (`out_of_memory_then_usable`) or time it. (Faults need no lock:
+                            // each thread has its own fault record.) Debug mode makes each
+                            // launch report its own faults (as on the CPU).
                             let _gpu = crate::gpu_lock();
                             ::warp_lang::config::set_debug(true);
                             super::$name(&dev)

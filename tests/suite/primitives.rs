@@ -626,12 +626,14 @@ fn bad_device_counts(dev: &wp::Device) {
                 )
             );
         } else {
-            // The suite runs GPU tests in debug mode: the fault comes back from the call.
+            // The suite runs GPU tests in debug mode: the fault comes back from the call, and
+            // names the primitive's launch.
+            let launch = wp::last_launch_id().expect("the primitive is a launch");
             assert_eq!(
                 err(r),
                 format!(
                     "kernel `array_scan_n`: index [{bad}] is out of bounds for argument \
-                     `count` of shape [5]"
+                     `count` of shape [5] ({launch})"
                 )
             );
         }

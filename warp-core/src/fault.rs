@@ -16,6 +16,22 @@ pub struct Fault {
     pub kernel: &'static str,
     /// What went wrong.
     pub kind: FaultKind,
+    /// The launch that faulted, when the runtime knows it (it sets it on every fault it
+    /// reports; a fault made by generated code starts without one).
+    pub launch: Option<LaunchId>,
+}
+
+/// The identity of one kernel launch: launches are numbered from 1 in the order the process
+/// makes them, on every device (`warp_runtime::last_launch_id` gives the calling thread's
+/// latest). A launch recorded into a graph keeps the number it was given at capture time on
+/// every replay.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct LaunchId(pub u64);
+
+impl fmt::Display for LaunchId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "launch #{}", self.0)
+    }
 }
 
 /// The kinds of kernel fault.
@@ -59,12 +75,33 @@ impl Fault {
     /// A new boxed fault.
     #[cold]
     pub fn new(kernel: &'static str, kind: FaultKind) -> Box<Fault> {
-        Box::new(Fault { kernel, kind })
+        Box::new(Fault {
+            kernel,
+            kind,
+            launch: None,
+        })
+    }
+
+    /// The fault, naming `launch` as the launch that raised it.
+    pub fn in_launch(mut self, launch: LaunchId) -> Fault {
+        self.launch = Some(launch);
+        self
     }
 }
 
 impl fmt::Display for Fault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.fmt_what(f)?;
+        match self.launch {
+            Some(launch) => write!(f, " ({launch})"),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Fault {
+    /// The message without the launch.
+    fn fmt_what(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.kind {
             FaultKind::OutOfBounds { arg, index, shape } => write!(
                 f,

@@ -21,7 +21,7 @@ pub mod range;
 pub mod transform;
 pub mod view;
 
-pub use fault::{Fault, FaultKind, KResult};
+pub use fault::{Fault, FaultKind, KResult, LaunchId};
 pub use float16::f16;
 pub use grad::{
     adj_atomic_extreme, first_error, zero_like, AdStack, AtomicExtreme, GradElement, GradView,

@@ -429,10 +429,12 @@ enum fault_kind : i32 {
   FAULT_NON_FINITE = 5,
 };
 
-/// The first fault of a launch, filled by the first faulting thread (80 bytes, align 8):
+/// The first fault of the launches that share a record, filled by the first faulting thread
+/// (88 bytes, align 8):
 ///   0 kind (i32), 4 arg (i32: the kernel parameter index for OutOfBounds, else -1),
 ///   8 index[4] (i64), 40 shape[4] (i64), 72 ndim (i32), 76 kernel (i32: the faulting launch's
-///   kernel id, copied from ctx_t::kernel; 0 when the launcher set none).
+///   kernel id, copied from ctx_t::kernel; 0 when the launcher set none), 80 launch (u64: the
+///   faulting launch's number, copied from ctx_t::launch; 0 when the launcher set none).
 /// OutOfBounds: index/shape hold `ndim` entries. DivisionByZero: ndim 0. BadStep: ndim 1,
 /// index[0] is the step, shape all 0. NonFinite (a NaN or infinite volume sample position,
 /// warp_core::FaultKind::NonFinite): ndim 3, index[0..3] are the coordinates' f64 bit
@@ -444,14 +446,16 @@ struct fault_t {
   i64 shape[4];
   i32 ndim;
   i32 kernel;
+  u64 launch;
 };
-static_assert(sizeof(fault_t) == 80 && alignof(fault_t) == 8, "fault_t layout");
+static_assert(sizeof(fault_t) == 88 && alignof(fault_t) == 8, "fault_t layout");
 
-/// Per-thread fault context (24 bytes, align 8):
+/// Per-thread fault context (32 bytes, align 8):
 ///   0 fault (fault_t*, device memory), 8 fault_flag (u32*, device memory, 0 = no fault yet),
 ///   16 raised (i32: set to 1 by `raise` in this thread; starts at 0), 20 kernel (i32: an id
 ///   the host gives each loaded kernel, copied into the fault record so that a fault names its
-///   kernel even when launches of several kernels are in flight, as in a replayed graph).
+///   kernel even when launches of several kernels are in flight, as in a replayed graph),
+///   24 launch (u64: the launch's number, copied into the fault record likewise).
 /// A kernel builds one per thread (`ctx_make(fault, flag)`) and passes its address down; after
 /// any call that may fault, generated code checks `ctx->raised` and returns (the CPU's `?`).
 /// `fault` and `fault_flag` may be null: faults then only set `raised`.
@@ -460,8 +464,9 @@ struct ctx_t {
   u32* fault_flag;
   i32 raised;
   i32 kernel;
+  u64 launch;
 };
-static_assert(sizeof(ctx_t) == 24 && alignof(ctx_t) == 8, "ctx_t layout");
+static_assert(sizeof(ctx_t) == 32 && alignof(ctx_t) == 8, "ctx_t layout");
 
 WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
   ctx_t c;
@@ -469,6 +474,7 @@ WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
   c.fault_flag = fault_flag;
   c.raised = 0;
   c.kernel = 0;
+  c.launch = 0;
   return c;
 }
 
@@ -495,6 +501,7 @@ WP_FN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* in
   f->arg = arg;
   f->ndim = ndim;
   f->kernel = ctx->kernel;
+  f->launch = ctx->launch;
   for (int k = 0; k < 4; ++k) {
     f->index[k] = (index != nullptr && k < ndim) ? index[k] : 0;
     f->shape[k] = (shape != nullptr && k < ndim) ? shape[k] : 0;

@@ -13,7 +13,7 @@ use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelInfo};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
-use warp_core::Grid;
+use warp_core::{Grid, LaunchId};
 
 /// A backend, bound to one device for one operation (the value is a handle: the device and
 /// what the backend needs to find its state, built by `dispatch` for each call).
@@ -24,8 +24,10 @@ pub(crate) trait Backend {
     /// Runs a launch of `K` over `grid` (the CPU), or queues it (a GPU: on the calling
     /// thread's current stream). The launch dims and shapes are already checked; the backend
     /// converts the arguments, which checks their devices. (Launches on a named stream,
-    /// `launch_on`, are the CUDA backend's own: streams are a CUDA API.)
-    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()>;
+    /// `launch_on`, are the CUDA backend's own: streams are a CUDA API.) `launch` is the
+    /// launch's number: a fault the backend reports later names it (the CPU's faults come
+    /// back from the launch itself, and `dispatch` names the launch in them).
+    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid, launch: LaunchId) -> Result<()>;
 
     /// Runs (or queues) the adjoint of a launch of `K`, accumulating into the arrays'
     /// gradients, with `adstack_bytes` of adjoint stack per thread. `K` has an adjoint
@@ -35,6 +37,7 @@ pub(crate) trait Backend {
         args: &ArgsOf<'_, K>,
         grid: &Grid,
         adstack_bytes: usize,
+        launch: LaunchId,
     ) -> Result<()>;
 
     /// `bytes` of zeroed memory aligned to at least `align`.

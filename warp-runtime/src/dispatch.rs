@@ -14,6 +14,7 @@ use crate::cuda::{memory::CudaBuffer, Cuda};
 use crate::device::{Device, DeviceKind};
 use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelParams};
+use crate::launch_id;
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
 use warp_core::Grid;
@@ -54,7 +55,8 @@ pub(crate) fn prepare(
 #[inline]
 pub(crate) fn launch<K: Kernel>(device: &Device, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
     names_every_param::<K>();
-    with_backend!(device, b => b.launch::<K>(args, grid))
+    let id = launch_id::next();
+    with_backend!(device, b => b.launch::<K>(args, grid, id)).map_err(|e| e.in_launch(id))
 }
 
 /// Queues a launch of `K` on `stream`: streams are the CUDA backend's API.
@@ -65,7 +67,10 @@ pub(crate) fn launch_on<K: Kernel>(
     grid: &Grid,
 ) -> Result<()> {
     names_every_param::<K>();
-    Cuda::of_stream(stream).launch_on::<K>(args, grid, stream)
+    let id = launch_id::next();
+    Cuda::of_stream(stream)
+        .launch_on::<K>(args, grid, stream, id)
+        .map_err(|e| e.in_launch(id))
 }
 
 /// A launch of `K` made ready to be queued again and again (a launch object's): on a GPU the
@@ -110,11 +115,13 @@ pub(crate) fn launch_prepared<K: Kernel>(
     grid: &Grid,
     #[cfg(feature = "cuda")] stream: Option<&crate::cuda::stream::Stream>,
 ) -> Result<()> {
+    let id = launch_id::next();
     match prepared {
-        Prepared::Cpu(_) => Cpu::new(device).launch::<K>(args, grid),
+        Prepared::Cpu(_) => Cpu::new(device).launch::<K>(args, grid, id),
         #[cfg(feature = "cuda")]
-        Prepared::Cuda(p) => p.enqueue(args, device, stream.map(|s| s.cuda_stream())),
+        Prepared::Cuda(p) => p.enqueue(args, device, stream.map(|s| s.cuda_stream()), id),
     }
+    .map_err(|e| e.in_launch(id))
 }
 
 /// Checks, at compile time, that `K`'s info names each parameter: the conversions name
@@ -142,7 +149,9 @@ pub(crate) fn launch_adjoint<K: Kernel>(
             reason: reason.to_string(),
         });
     }
-    with_backend!(device, b => b.launch_adjoint::<K>(args, grid, adstack_bytes))
+    let id = launch_id::next();
+    with_backend!(device, b => b.launch_adjoint::<K>(args, grid, adstack_bytes, id))
+        .map_err(|e| e.in_launch(id))
 }
 
 /// A scan on `device`'s backend; see [`Backend::scan`].

@@ -185,6 +185,17 @@ pub enum Error {
     },
 }
 
+impl Error {
+    /// The error, with a fault that does not name its launch yet naming `launch` (the CPU's
+    /// faults come back from the launch that raised them).
+    pub(crate) fn in_launch(self, launch: warp_core::LaunchId) -> Error {
+        match self {
+            Error::Fault(f) if f.launch.is_none() => Error::Fault(f.in_launch(launch)),
+            e => e,
+        }
+    }
+}
+
 impl From<Box<Fault>> for Error {
     #[cold]
     fn from(fault: Box<Fault>) -> Self {

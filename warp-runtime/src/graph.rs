@@ -414,7 +414,7 @@ fn conditional(
 enum Body {
     Cpu(Vec<Op>),
     #[cfg(feature = "cuda")]
-    Cuda(warp_cuda::Graph),
+    Cuda(cuda_capture::CudaGraph),
 }
 
 /// Recorded work, replayed by [`Graph::launch`] (Warp's `wp.Graph` and `wp.capture_launch`).

@@ -555,6 +555,8 @@ mod tests {
         for n in [10usize, 50_000] {
             let data = Array::<f32>::full(n, 1.0, &dev).unwrap();
             let err = launch(oob, n + 1, (&data, 2.0), &dev).unwrap_err();
+            // The fault names the launch: the calling thread's latest.
+            let id = crate::last_launch_id().expect("a launch was made");
             assert_eq!(
                 err,
                 Error::Fault(Fault {
@@ -564,12 +566,14 @@ mod tests {
                         index: vec![n as i128],
                         shape: vec![n]
                     },
+                    launch: Some(id),
                 })
             );
             assert_eq!(
                 err.to_string(),
                 format!(
-                    "kernel `oob`: index [{n}] is out of bounds for argument `data` of shape [{n}]"
+                    "kernel `oob`: index [{n}] is out of bounds for argument `data` of shape \
+                     [{n}] ({id})"
                 )
             );
         }

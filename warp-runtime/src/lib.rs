@@ -41,6 +41,7 @@ pub mod error;
 pub mod graph;
 pub mod kernel;
 pub mod launch;
+mod launch_id;
 pub mod objects;
 mod params;
 pub mod primitives;
@@ -79,6 +80,7 @@ pub use kernel::{
 #[cfg(feature = "cuda")]
 pub use launch::launch_on;
 pub use launch::{launch, load, load_with_adjoints, synchronize, Dim, Launch, OwnedArgsOf};
+pub use launch_id::{last_launch_id, LaunchId};
 pub use objects::{Bvh, HashGrid, MarchingCubes, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;

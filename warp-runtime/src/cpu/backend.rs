@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelInfo, KernelParams};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
-use warp_core::{AdStack, Grid};
+use warp_core::{AdStack, Grid, LaunchId};
 
 /// The CPU as a backend, for one launch or array operation on `device`.
 pub(crate) struct Cpu<'d> {
@@ -26,7 +26,7 @@ impl<'d> Cpu<'d> {
 impl Backend for Cpu<'_> {
     type Buffer = HostBuffer;
 
-    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
+    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid, _: LaunchId) -> Result<()> {
         // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
         executor::for_each_chunk(grid.total, |range| K::run_cpu(&params, grid, range))
@@ -37,6 +37,7 @@ impl Backend for Cpu<'_> {
         args: &ArgsOf<'_, K>,
         grid: &Grid,
         adstack_bytes: usize,
+        _: LaunchId,
     ) -> Result<()> {
         // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };

@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelInfo};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
-use warp_core::Grid;
+use warp_core::{Grid, LaunchId};
 
 /// A CUDA GPU as a backend, for one launch or array operation on `device`.
 pub(crate) struct Cuda<'d> {
@@ -34,17 +34,18 @@ impl<'d> Cuda<'d> {
         args: &ArgsOf<'_, K>,
         grid: &Grid,
         stream: &Stream,
+        id: LaunchId,
     ) -> Result<()> {
         let on = Some(stream.cuda_stream());
-        launch::launch::<K>(args, grid, self.device, self.ordinal, on, None)
+        launch::launch::<K>(args, grid, self.device, self.ordinal, on, None, id)
     }
 }
 
 impl Backend for Cuda<'_> {
     type Buffer = CudaBuffer;
 
-    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
-        launch::launch::<K>(args, grid, self.device, self.ordinal, None, None)
+    fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid, id: LaunchId) -> Result<()> {
+        launch::launch::<K>(args, grid, self.device, self.ordinal, None, None, id)
     }
 
     fn launch_adjoint<K: Kernel>(
@@ -52,6 +53,7 @@ impl Backend for Cuda<'_> {
         args: &ArgsOf<'_, K>,
         grid: &Grid,
         adstack_bytes: usize,
+        id: LaunchId,
     ) -> Result<()> {
         launch::launch::<K>(
             args,
@@ -60,6 +62,7 @@ impl Backend for Cuda<'_> {
             self.ordinal,
             None,
             Some(adstack_bytes),
+            id,
         )
     }
 

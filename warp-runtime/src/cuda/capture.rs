@@ -8,6 +8,7 @@
 //! queued like a launch, in the ordering model of `gpu.rs`: after the default stream's work
 //! (arrays written before), and the default stream waits for it before its next operation.
 
+use super::fault::{self, FaultRecord};
 use super::gpu::{self, err, state, GpuState};
 use super::stream::Stream;
 use crate::device::Device;
@@ -19,6 +20,20 @@ pub(crate) struct CudaCapture {
     st: Arc<GpuState>,
     device: Device,
     stream: warp_cuda::Stream,
+    faults: Arc<FaultRecord>,
+}
+
+/// A captured graph, with the fault record its launches write into (`fault.rs`).
+pub(crate) struct CudaGraph {
+    graph: warp_cuda::Graph,
+    faults: Arc<FaultRecord>,
+}
+
+impl CudaGraph {
+    /// The number of nodes in the graph.
+    pub(crate) fn node_count(&self) -> usize {
+        self.graph.node_count()
+    }
 }
 
 /// Starts capturing the calling thread's work on GPU `ordinal` (`device`): on `stream` when
@@ -59,38 +74,48 @@ pub(crate) fn begin(
     if warp_cuda::driver_version().is_some_and(|v| v >= warp_cuda::CONDITIONAL_DRIVER_VERSION) {
         load_setter(&st, device, ordinal);
     }
-    stream.begin_capture().map_err(|e| err(device, e))?;
+    // Made before the capture starts (an allocation cannot be captured).
+    let faults = fault::begin_capture(&st, ordinal)?;
+    if let Err(e) = stream.begin_capture() {
+        fault::end_capture();
+        return Err(err(device, e));
+    }
     gpu::set_capture_stream(Some((ordinal, stream.clone())));
     Ok(CudaCapture {
         st,
         device: device.clone(),
         stream,
+        faults,
     })
 }
 
 impl CudaCapture {
     /// Ends the capture and instantiates the graph.
-    pub(crate) fn end(self) -> Result<warp_cuda::Graph> {
+    pub(crate) fn end(self) -> Result<CudaGraph> {
         gpu::set_capture_stream(None);
-        self.stream
+        fault::end_capture();
+        let graph = self
+            .stream
             .end_capture(&self.st.gpu)
-            .map_err(|e| err(&self.device, e))
+            .map_err(|e| err(&self.device, e))?;
+        Ok(CudaGraph {
+            graph,
+            faults: self.faults,
+        })
     }
 
     /// Ends the capture and drops what it recorded (the capture failed or was abandoned).
     pub(crate) fn abort(self) {
         gpu::set_capture_stream(None);
+        fault::end_capture();
         let _ = self.stream.end_capture(&self.st.gpu);
     }
 }
 
 /// Queues a replay of `graph` on `stream` when given, else on the calling thread's current
 /// stream for its GPU, else on the default stream (the ordering model of `gpu.rs`).
-pub(crate) fn launch(
-    graph: &warp_cuda::Graph,
-    device: &Device,
-    stream: Option<&Stream>,
-) -> Result<()> {
+pub(crate) fn launch(graph: &CudaGraph, device: &Device, stream: Option<&Stream>) -> Result<()> {
+    let CudaGraph { graph, faults } = graph;
     let ordinal = graph.ordinal();
     if let Some(s) = stream {
         if s.device() != device {
@@ -105,7 +130,10 @@ pub(crate) fn launch(
     let st = state(device, ordinal)?;
     st.queue(ordinal, stream.map(Stream::cuda_stream), |on| {
         graph.launch(on).map_err(|e| err(device, e))
-    })
+    })?;
+    // This thread's next synchronisation reads the faults of the replay.
+    fault::replayed(ordinal, faults);
+    Ok(())
 }
 
 /// The kernel that sets conditional handles from a flag in device memory: `then` to whether

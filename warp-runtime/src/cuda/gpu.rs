@@ -1,5 +1,4 @@
-//! Per-GPU state: the opened GPU, the stream ordering model, and the fault record that
-//! kernels fill and synchronisations read.
+//! Per-GPU state: the opened GPU and the stream ordering model (fault records: `fault.rs`).
 //!
 //! # The ordering model
 //! Array operations (allocation, copies, fills, frees) and launches without a stream run on
@@ -10,18 +9,18 @@
 //! streams may overlap.
 //!
 //! # Faults
-//! Threads record faults (out-of-bounds index, integer division by zero, bad step, adjoint
-//! stack overflow) in a per-GPU record; it is read after each launch in debug mode, and
-//! otherwise at the next synchronisation (`synchronize`, `to_vec`).
+//! Kernel threads record faults (out-of-bounds index, integer division by zero, bad step,
+//! adjoint stack overflow) in their launching thread's record (`fault.rs`); a thread reads its
+//! record after each launch in debug mode, and otherwise at its next synchronisation
+//! (`synchronize`, `to_vec`).
 
+use super::fault::{self, SpareRecords};
 use crate::device::Device;
 use crate::error::{Error, Result};
-use crate::kernel::KernelInfo;
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
-use warp_core::{Fault, FaultKind};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use warp_cuda::{CudaError, DeviceBuffer, Gpu};
 
 /// A CUDA error on `device` as a runtime error.
@@ -33,10 +32,6 @@ pub(crate) fn err(device: &Device, e: CudaError) -> Error {
 pub(crate) fn gpu(ordinal: usize) -> Result<Arc<Gpu>> {
     Gpu::open(ordinal).map_err(|e| Error::cuda(format!("cuda:{ordinal}"), e))
 }
-
-/// `wp::fault_t` (80 bytes) followed by the `u32` flag the first faulting thread sets.
-pub(crate) const FAULT_RECORD_BYTES: usize = 80;
-const FAULT_BYTES: usize = FAULT_RECORD_BYTES + 8;
 
 thread_local! {
     /// The calling thread's current streams, innermost last: `(GPU ordinal, stream)`.
@@ -74,19 +69,6 @@ pub(crate) fn refuse_in_capture(ordinal: usize, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// Gives `info` a kernel id for fault records (`wp::ctx_t::kernel`): ids start at 1, and 0
-/// means "not set". A kernel loaded several times (variants, GPUs) has several ids.
-pub(crate) fn kernel_id(info: &'static KernelInfo) -> i32 {
-    let mut ids = kernel_ids().lock().unwrap_or_else(|p| p.into_inner());
-    ids.push(info);
-    i32::try_from(ids.len()).unwrap_or(0)
-}
-
-fn kernel_ids() -> &'static Mutex<Vec<&'static KernelInfo>> {
-    static IDS: OnceLock<Mutex<Vec<&'static KernelInfo>>> = OnceLock::new();
-    IDS.get_or_init(Default::default)
-}
-
 /// The calling thread's current stream for GPU `ordinal`, when a `ScopedStream` set one.
 pub(crate) fn current(ordinal: usize) -> Option<warp_cuda::Stream> {
     CURRENT.with(|c| {
@@ -116,17 +98,17 @@ pub(crate) fn pop_current(ordinal: usize, stream: &warp_cuda::Stream) {
     });
 }
 
-/// Per-GPU state: the fault record, the last kernel launched (named in fault reports), and
-/// the user streams with work queued since the default stream last waited for them.
+/// Per-GPU state: the user streams with work queued since the default stream last waited for
+/// them, the fault records of threads that have ended, and the primitives' workspace.
 ///
 /// The ordering model is the module's (`pending` holds the user streams the default stream
 /// has yet to wait for).
 pub(crate) struct GpuState {
     device: Device,
+    ordinal: usize,
     pub(crate) gpu: Arc<Gpu>,
-    fault: DeviceBuffer,
-    /// The kernel launched last (what a fault report names).
-    last: Mutex<Option<&'static KernelInfo>>,
+    /// Fault records whose threads have ended (`fault.rs`).
+    spare_records: Mutex<SpareRecords>,
     pending: Mutex<Vec<warp_cuda::Stream>>,
     has_pending: AtomicBool,
     /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls.
@@ -206,15 +188,14 @@ impl GpuState {
         }
     }
 
-    /// The device addresses of the fault record and of its flag, for a launch's `wp::ctx_t`.
-    pub(crate) fn fault_record(&self) -> (u64, u64) {
-        let base = self.fault.device_ptr();
-        (base, base + FAULT_RECORD_BYTES as u64)
+    /// The GPU's device.
+    pub(crate) fn device(&self) -> &Device {
+        &self.device
     }
 
-    /// Records that `info` is the kernel launched last (the one a fault report will name).
-    pub(crate) fn set_last(&self, info: &'static KernelInfo) {
-        *self.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(info);
+    /// The fault records of threads that have ended.
+    pub(crate) fn spare_records(&self) -> MutexGuard<'_, SpareRecords> {
+        self.spare_records.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Records that `stream` (a user stream) has work the default stream must wait for.
@@ -253,13 +234,11 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
     if let Some(s) = map.get(&ordinal) {
         return Ok(s.clone());
     }
-    let g = gpu(ordinal)?;
-    let fault = DeviceBuffer::zeros(&g, FAULT_BYTES).map_err(|e| err(device, e))?;
     let s = Arc::new(GpuState {
         device: device.clone(),
-        gpu: g,
-        fault,
-        last: Mutex::new(None),
+        ordinal,
+        gpu: gpu(ordinal)?,
+        spare_records: Mutex::default(),
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
         workspace: Mutex::new(Workspace::default()),
@@ -284,80 +263,21 @@ pub(crate) fn synchronize(device: &Device, ordinal: usize) -> Result<()> {
     check_state(&*state(device, ordinal)?)
 }
 
-/// Waits for every stream of the GPU, then reports a fault recorded since the last check.
+/// Waits for every stream of the GPU, then reports a fault that a launch of the calling
+/// thread (or a graph it replayed) recorded since its last check.
 pub(crate) fn check_state(st: &GpuState) -> Result<()> {
     st.gpu.synchronize().map_err(|e| err(&st.device, e))?;
     // Every stream is idle: nothing is pending any more.
     st.pending.lock().unwrap_or_else(|p| p.into_inner()).clear();
     st.has_pending.store(false, Ordering::Release);
-    read_fault(st)
+    fault::check(st, st.ordinal, true)
 }
 
-/// Reports (and clears) the fault recorded on the GPU, if any, without waiting for the
-/// GPU's other work (the read waits for the default stream only).
+/// Reports (and clears) a fault that a launch of the calling thread recorded, without waiting
+/// for the GPU's other work (the read waits for the default stream only).
 pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
-    let device = &st.device;
-    let mut rec = [0u8; FAULT_BYTES];
-    st.fault.download(0, &mut rec).map_err(|e| err(device, e))?;
-    let flag = u32::from_le_bytes(
-        rec[FAULT_RECORD_BYTES..FAULT_RECORD_BYTES + 4]
-            .try_into()
-            .expect("4 bytes"),
-    );
-    if flag == 0 {
-        return Ok(());
-    }
-    st.fault
-        .upload(0, &[0u8; FAULT_BYTES])
-        .map_err(|e| err(device, e))?;
-    let i32_at = |o: usize| i32::from_le_bytes(rec[o..o + 4].try_into().expect("4 bytes"));
-    let i64_at = |o: usize| i64::from_le_bytes(rec[o..o + 8].try_into().expect("8 bytes"));
-    let (kind, arg, ndim) = (i32_at(0), i32_at(4), i32_at(72).clamp(0, 4) as usize);
-    // The kernel id the faulting launch carried (`wp::ctx_t::kernel`), else the kernel
-    // launched last (the primitives' kernels set no id).
-    let by_id = usize::try_from(i32_at(76) - 1).ok().and_then(|k| {
-        kernel_ids()
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(k)
-            .copied()
-    });
-    let info = by_id.unwrap_or_else(|| {
-        st.last
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .unwrap_or(&UNKNOWN)
-    });
-    let kind = match kind {
-        4 => FaultKind::AdStackOverflow {
-            line: i64_at(8) as u32,
-            capacity: i64_at(40) as usize,
-        },
-        1 => FaultKind::OutOfBounds {
-            arg: info.params.get(arg as usize).copied().unwrap_or("?"),
-            index: (0..ndim).map(|k| i64_at(8 + 8 * k) as i128).collect(),
-            shape: (0..ndim).map(|k| i64_at(40 + 8 * k) as usize).collect(),
-        },
-        2 => FaultKind::DivisionByZero,
-        // wp_core.h FAULT_NON_FINITE: the sample position's coordinates as f64 bit patterns.
-        5 => FaultKind::NonFinite {
-            what: "volume sample position",
-            values: (0..ndim)
-                .map(|k| f64::from_bits(i64_at(8 + 8 * k) as u64))
-                .collect(),
-        },
-        _ => FaultKind::BadStep { step: i64_at(8) },
-    };
-    Err(Error::Fault(Fault {
-        kernel: info.name,
-        kind,
-    }))
+    fault::check(st, st.ordinal, false)
 }
-
-static UNKNOWN: KernelInfo = KernelInfo {
-    name: "?",
-    ..KernelInfo::BLANK
-};
 
 /// Waits for every GPU used so far and reports the first recorded fault.
 pub(crate) fn synchronize_all() -> Result<()> {

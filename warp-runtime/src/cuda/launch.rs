@@ -1,6 +1,7 @@
 //! A kernel launch on a GPU: the parameter block and `cuLaunchKernel`, asynchronous on a
 //! stream.
 
+use super::fault;
 use super::gpu::{check_state, err};
 use super::module::{loaded, Loaded};
 use crate::config;
@@ -10,7 +11,7 @@ use crate::kernel::{ArgsOf, Kernel, KernelParams, MAX_PARAMS};
 use std::ffi::c_void;
 use std::marker::PhantomData;
 use std::sync::Arc;
-use warp_core::Grid;
+use warp_core::{Grid, LaunchId};
 
 /// `wp::launch_t`.
 #[repr(C)]
@@ -30,7 +31,9 @@ struct Ctx {
     fault_flag: u64,
     raised: i32,
     kernel: i32,
+    launch: u64,
 }
+const _: () = assert!(std::mem::size_of::<Ctx>() == 32, "wp::ctx_t is 32 bytes");
 
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
 /// thread's current stream for the GPU (`ScopedStream`), else on the default stream.
@@ -44,10 +47,11 @@ pub(crate) fn launch<K: Kernel>(
     ordinal: usize,
     stream: Option<&warp_cuda::Stream>,
     adjoint: Option<usize>,
+    id: LaunchId,
 ) -> Result<()> {
     let (prepared, params, grads) =
         Prepared::<K>::with_params(args, grid, device, ordinal, adjoint)?;
-    prepared.enqueue_converted(params, grads, device, stream)
+    prepared.enqueue_converted(params, grads, device, stream, id)
 }
 
 type CudaParamsOf<K> = <<K as Kernel>::Params as KernelParams>::CudaParams;
@@ -104,12 +108,13 @@ impl<K: Kernel> Prepared<K> {
             None => None,
         };
         let kernel = loaded(device, ordinal, info, K::Params::contiguous(args), adjoint)?;
-        let (fault, fault_flag) = kernel.st.fault_record();
+        // The fault record and the launch number are each launch's (`enqueue_converted`).
         let ctx = Ctx {
-            fault,
-            fault_flag,
+            fault: 0,
+            fault_flag: 0,
             raised: 0,
             kernel: kernel.id,
+            launch: 0,
         };
         let dims = LaunchDims {
             dims: grid.dims.map(|d| d as i64),
@@ -139,6 +144,7 @@ impl<K: Kernel> Prepared<K> {
         args: &ArgsOf<'_, K>,
         device: &Device,
         stream: Option<&warp_cuda::Stream>,
+        id: LaunchId,
     ) -> Result<()> {
         let info = K::info();
         let params = K::Params::cuda_params(args, info, device)?;
@@ -146,7 +152,7 @@ impl<K: Kernel> Prepared<K> {
             true => Some(K::Params::cuda_grads(args, info, device)?),
             false => None,
         };
-        self.enqueue_converted(params, grads, device, stream)
+        self.enqueue_converted(params, grads, device, stream, id)
     }
 
     /// Queues the launch with arguments already converted.
@@ -156,9 +162,14 @@ impl<K: Kernel> Prepared<K> {
         mut grads: Option<CudaGradsOf<K>>,
         device: &Device,
         stream: Option<&warp_cuda::Stream>,
+        id: LaunchId,
     ) -> Result<()> {
-        let info = K::info();
         let (mut dims, mut ctx) = (self.dims, self.ctx);
+        let (kernel, ordinal) = (&self.kernel, self.ordinal);
+        let st = &kernel.st;
+        // Faults go to the launching thread's record (the capture's inside a capture).
+        (ctx.fault, ctx.fault_flag) = fault::with_record(st, ordinal, |r| r.addresses())?;
+        ctx.launch = id.0;
         // The launch and the context, then the parameters and (adjoint) their gradients.
         let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
         ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
@@ -167,9 +178,6 @@ impl<K: Kernel> Prepared<K> {
         if let Some(g) = grads.as_mut() {
             n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
         }
-        let (kernel, ordinal) = (&self.kernel, self.ordinal);
-        let st = &kernel.st;
-        st.set_last(info);
         st.queue(ordinal, stream, |on| {
             // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
             // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type),

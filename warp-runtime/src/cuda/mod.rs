@@ -24,6 +24,8 @@ mod backend;
 #[cfg(feature = "cuda")]
 pub(crate) mod capture;
 #[cfg(feature = "cuda")]
+mod fault;
+#[cfg(feature = "cuda")]
 mod gpu;
 #[cfg(feature = "cuda")]
 pub(crate) mod launch;

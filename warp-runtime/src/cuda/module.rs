@@ -279,7 +279,7 @@ pub(crate) fn loaded(
         st,
         _module: module,
         function,
-        id: super::gpu::kernel_id(info),
+        id: super::fault::kernel_id(info),
     });
     cache
         .lock()

@@ -7,6 +7,7 @@
 //! `gpu.rs`: after the array operations queued before; the scratch arrays are freed on the
 //! default stream after them), with no host synchronisation: counts stay on the device.
 
+use super::fault;
 use super::gpu;
 use crate::config;
 use crate::device::Device;
@@ -145,8 +146,13 @@ fn run(
         ws.last = None;
     }
     let base = ws.buffer.as_ref().map_or(0, |b| b.device_ptr());
-    st.set_last(info(func, params));
-    let (fault, flag) = st.fault_record();
+    // A primitive is one launch, however many kernels it queues; its kernels carry no id, so
+    // its record notes it as the launch a fault without one comes from.
+    let launch = crate::launch_id::next();
+    let (fault, flag) = fault::with_record(&st, ordinal, |r| {
+        r.set_primitive(info(func, params), launch);
+        r.addresses()
+    })?;
     let word = |w: &Word| -> u64 {
         match *w {
             Word::Addr(Buf::User(k), off) => users[k] + off,

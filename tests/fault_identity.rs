@@ -1,0 +1,253 @@
+//! Faults name the kernel and the launch that raised them, and reach the thread that made the
+//! launch: on the CPU at the launch itself, on a GPU at that thread's next synchronisation,
+//! even when other launches (of other kernels, or by other threads) came in between.
+//!
+//! A test binary of its own: debug mode (process-wide) is off here, so that a GPU fault is
+//! reported by a later synchronisation rather than by the launch (the suite runs GPU tests in
+//! debug mode). Every test runs on the CPU and on `cuda:0`, or prints SKIPPED without one; the
+//! tests run in parallel threads of this process, which is part of what they check: each
+//! thread receives its own faults only.
+
+use std::sync::Barrier;
+use warp_lang as wp;
+use wp::prelude::*;
+use wp::{Error, Fault, FaultKind, LaunchId};
+
+/// Reads `a[i + off]` into `out[i]`: out of bounds for `off` past the end.
+#[wp::kernel]
+fn k_reads_past(a: Array<f32>, off: usize, out: Array<f32>) {
+    let i = tid();
+    out[i] = a[i + off];
+}
+
+/// Doubles `x`: a launch of another kernel, with other parameter names.
+#[wp::kernel]
+fn k_double(x: Array<f32>) {
+    let i = tid();
+    x[i] = x[i] * 2.0;
+}
+
+/// Runs `test` on the CPU and on the first GPU (or says it skipped).
+fn on_every_backend(name: &str, test: impl Fn(&wp::Device)) {
+    wp::config::set_debug(false);
+    test(&wp::cpu());
+    match wp::get_device("cuda:0") {
+        Ok(gpu) => test(&gpu),
+        Err(e) => eprintln!("SKIPPED fault_identity::{name} on cuda:0: no CUDA device ({e})"),
+    }
+}
+
+/// The out-of-bounds fault `k_reads_past` raises reading index `index` of its 4 elements in
+/// launch `launch`.
+fn read_past(index: i128, launch: LaunchId) -> Fault {
+    Fault {
+        kernel: "k_reads_past",
+        kind: FaultKind::OutOfBounds {
+            arg: "a",
+            index: vec![index],
+            shape: vec![4],
+        },
+        launch: Some(launch),
+    }
+}
+
+/// The fault in `r`, or a panic naming what came instead; its message must name the launch.
+#[track_caller]
+fn fault(r: wp::Result<()>) -> Fault {
+    match r {
+        Err(Error::Fault(f)) => {
+            let launch = f.launch.expect("a reported fault names its launch");
+            let msg = Error::Fault(f.clone()).to_string();
+            assert!(msg.ends_with(&format!(" ({launch})")), "{msg}");
+            f
+        }
+        other => panic!("expected a kernel fault, got {other:?}"),
+    }
+}
+
+/// Launches `k_reads_past` reading `a[off]`, returning its launch number and what the launch
+/// returned.
+fn fault_launch(a: &Array<f32>, off: usize, dev: &wp::Device) -> (LaunchId, wp::Result<()>) {
+    let out = Array::<f32>::zeros(1, dev).unwrap();
+    let r = wp::launch(k_reads_past, 1, (a, off, &out), dev);
+    (wp::last_launch_id().expect("a launch was made"), r)
+}
+
+/// Kernel A faults, kernel B launches, then a synchronisation: the fault names A, A's
+/// argument and A's launch, not B.
+#[test]
+fn fault_then_other_launch_then_sync() {
+    on_every_backend("fault_then_other_launch_then_sync", |dev| {
+        let a = Array::<f32>::zeros(4, dev).unwrap();
+        let x = Array::full(8, 1.5f32, dev).unwrap();
+        let (id_a, r) = fault_launch(&a, 10, dev);
+        let reported = if dev.is_cpu() {
+            // The CPU reports at the launch; the later launch and synchronisation are clean.
+            let f = fault(r);
+            wp::launch(k_double, 8, (&x,), dev).unwrap();
+            wp::synchronize().unwrap();
+            f
+        } else {
+            r.unwrap();
+            wp::launch(k_double, 8, (&x,), dev).unwrap();
+            let id_b = wp::last_launch_id().unwrap();
+            assert!(id_b > id_a, "launch numbers grow: {id_a} then {id_b}");
+            fault(wp::synchronize())
+        };
+        assert_eq!(reported, read_past(10, id_a));
+        // Reported once, and the launch after the faulting one ran.
+        wp::synchronize().unwrap();
+        assert_eq!(x.to_vec().unwrap(), vec![3.0; 8]);
+    });
+}
+
+/// Four threads on one device at once, three of them faulting at an index of their own in
+/// each round: each receives its own fault (its index, its launch) at its synchronisation, and
+/// the fourth receives none.
+#[test]
+fn threads_faulting_on_one_device_each_receive_their_own() {
+    on_every_backend(
+        "threads_faulting_on_one_device_each_receive_their_own",
+        |dev| {
+            const THREADS: usize = 4;
+            let barrier = Barrier::new(THREADS);
+            std::thread::scope(|s| {
+                for t in 0..THREADS {
+                    let barrier = &barrier;
+                    s.spawn(move || {
+                        let a = Array::<f32>::zeros(4, dev).unwrap();
+                        let x = Array::full(64, 1.0f32, dev).unwrap();
+                        for round in 0..20usize {
+                            // Everyone launches at about the same time.
+                            barrier.wait();
+                            let faults = t + 1 < THREADS;
+                            let off = if faults { 100 + 10 * t + round } else { 0 };
+                            let (id, r) = fault_launch(&a, off, dev);
+                            if dev.is_cpu() && faults {
+                                assert_eq!(fault(r), read_past(off as i128, id));
+                            } else {
+                                r.unwrap();
+                            }
+                            wp::launch(k_double, 64, (&x,), dev).unwrap();
+                            barrier.wait();
+                            let synced = wp::synchronize();
+                            if faults && dev.is_cuda() {
+                                assert_eq!(fault(synced), read_past(off as i128, id), "thread {t}");
+                            } else {
+                                synced.unwrap_or_else(|e| panic!("thread {t} round {round}: {e}"));
+                            }
+                        }
+                        assert_eq!(x.to_vec().unwrap(), vec![2f32.powi(20); 64]);
+                    });
+                }
+            });
+        },
+    );
+}
+
+/// A graph captured on one thread and replayed on another: the replaying thread receives the
+/// fault (on a GPU naming the launch as captured; on the CPU the replay's own launch), the
+/// capturing thread none.
+#[test]
+fn graph_fault_reaches_the_replaying_thread() {
+    on_every_backend("graph_fault_reaches_the_replaying_thread", |dev| {
+        let a = Array::<f32>::zeros(4, dev).unwrap();
+        let out = Array::<f32>::zeros(1, dev).unwrap();
+        let graph =
+            wp::capture(dev, || wp::launch(k_reads_past, 1, (&a, 7usize, &out), dev)).unwrap();
+        // A GPU numbers the captured launch (the CPU records it, to launch at each replay).
+        let captured = wp::last_launch_id();
+        let graph = std::thread::scope(|s| {
+            s.spawn(move || {
+                let r = graph.launch();
+                let f = if dev.is_cpu() {
+                    // The CPU replays the recorded launch, a new launch of its own.
+                    let f = fault(r);
+                    assert_eq!(f.launch, wp::last_launch_id());
+                    f
+                } else {
+                    r.unwrap();
+                    let f = fault(wp::synchronize());
+                    assert!(captured.is_some());
+                    assert_eq!(f.launch, captured);
+                    f
+                };
+                assert_eq!(f.kernel, "k_reads_past");
+                assert_eq!(
+                    f.kind,
+                    FaultKind::OutOfBounds {
+                        arg: "a",
+                        index: vec![7],
+                        shape: vec![4]
+                    }
+                );
+                wp::synchronize().unwrap();
+                graph
+            })
+            .join()
+            .unwrap()
+        });
+        // Nothing for the capturing thread.
+        wp::synchronize().unwrap();
+        drop(graph);
+    });
+}
+
+/// A thread that faults and ends without synchronising: its fault is not handed to another
+/// thread (it is logged), and a new thread taking over its record starts clean.
+#[test]
+fn an_ended_threads_fault_goes_to_no_other_thread() {
+    on_every_backend("an_ended_threads_fault_goes_to_no_other_thread", |dev| {
+        let a = Array::<f32>::zeros(4, dev).unwrap();
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let (id, r) = fault_launch(&a, 40, dev);
+                if dev.is_cpu() {
+                    assert_eq!(fault(r), read_past(40, id));
+                }
+            });
+        });
+        wp::synchronize().unwrap();
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let x = Array::full(4, 1.0f32, dev).unwrap();
+                wp::launch(k_double, 4, (&x,), dev).unwrap();
+                wp::synchronize().unwrap();
+                assert_eq!(x.to_vec().unwrap(), vec![2.0; 4]);
+            });
+        });
+    });
+}
+
+/// A parallel primitive's fault (a device count out of range, only a GPU's fault: the CPU
+/// checks the count before running) names the primitive and its launch after a later launch.
+#[test]
+fn primitive_fault_names_the_primitive_launch() {
+    on_every_backend("primitive_fault_names_the_primitive_launch", |dev| {
+        let input = Array::from_slice(&[1i32, 2, 3, 4], dev).unwrap();
+        let output = Array::<i32>::zeros(4, dev).unwrap();
+        let count = Array::from_slice(&[9i32], dev).unwrap();
+        let r = wp::array_scan_n(&input, &output, &count, true);
+        if dev.is_cpu() {
+            assert!(matches!(r, Err(Error::InvalidArgument { .. })), "{r:?}");
+            return;
+        }
+        r.unwrap();
+        let id = wp::last_launch_id().unwrap();
+        let x = Array::full(4, 1.0f32, dev).unwrap();
+        wp::launch(k_double, 4, (&x,), dev).unwrap();
+        let f = fault(wp::synchronize());
+        assert_eq!(
+            f,
+            Fault {
+                kernel: "array_scan_n",
+                kind: FaultKind::OutOfBounds {
+                    arg: "count",
+                    index: vec![9],
+                    shape: vec![5]
+                },
+                launch: Some(id),
+            }
+        );
+    });
+}

@@ -1,0 +1,325 @@
+//! Fault records on a GPU: the device memory kernel threads write their first fault into, and
+//! how a fault reaches the host thread whose launch raised it.
+//!
+//! Every host thread has a record of its own on each GPU it launches on, so that two threads
+//! launching on one GPU never receive each other's faults, and one thread's faulting launch
+//! is not lost behind another thread's. A launch writes into its launching thread's record
+//! (`wp::ctx_t` carries the record's address, the kernel's id and the launch's number); a
+//! synchronisation reads and clears the calling thread's record. A graph has a record of its
+//! own, made when its capture began: a thread that replays a graph also reads the graph's
+//! record at its next synchronisation.
+//!
+//! A record outlives its thread: when the thread ends it goes back to its GPU's spare list
+//! (a kernel still running may write into it; device memory is never freed under it) and the
+//! next new thread takes it over. A fault found there that a launch older than the takeover
+//! raised belongs to the thread that ended: it is logged at error level, not reported to the
+//! new owner.
+
+use super::gpu::{err, GpuState};
+use crate::device::Device;
+use crate::error::{Error, Result};
+use crate::kernel::KernelInfo;
+use crate::launch_id;
+use std::cell::RefCell;
+use std::sync::{Arc, Mutex, OnceLock};
+use warp_core::{Fault, FaultKind, LaunchId};
+use warp_cuda::DeviceBuffer;
+
+/// `wp::fault_t` (88 bytes, `wp_core.h`) followed by the `u32` flag the first faulting thread
+/// sets (and padding to 8 bytes).
+const RECORD_BYTES: usize = 88;
+const BYTES: usize = RECORD_BYTES + 8;
+
+/// One fault record in device memory, with what the host knows about its launches.
+pub(crate) struct FaultRecord {
+    buffer: DeviceBuffer,
+    host: Mutex<HostSide>,
+}
+
+/// What the host keeps beside a record.
+struct HostSide {
+    /// Launches numbered below this were made by an earlier owner of the record (a thread
+    /// that has ended).
+    since: u64,
+    /// The primitive the owner queued last, with its launch: the primitives' kernels write no
+    /// kernel id or launch number (`wp_primitives.h` builds a bare context), so a fault
+    /// without them is the last primitive's.
+    primitive: Option<(&'static KernelInfo, LaunchId)>,
+}
+
+impl FaultRecord {
+    /// A new, clear record on `st`'s GPU.
+    fn new(st: &GpuState) -> Result<Arc<FaultRecord>> {
+        let buffer = DeviceBuffer::zeros(&st.gpu, BYTES).map_err(|e| err(st.device(), e))?;
+        Ok(Arc::new(FaultRecord {
+            buffer,
+            host: Mutex::new(HostSide {
+                since: launch_id::watermark(),
+                primitive: None,
+            }),
+        }))
+    }
+
+    /// The device addresses of the record and of its flag, for a launch's `wp::ctx_t`.
+    pub(crate) fn addresses(&self) -> (u64, u64) {
+        let base = self.buffer.device_ptr();
+        (base, base + RECORD_BYTES as u64)
+    }
+
+    /// Notes that `info`, a primitive, was queued as `launch` with this record.
+    pub(crate) fn set_primitive(&self, info: &'static KernelInfo, launch: LaunchId) {
+        self.lock().primitive = Some((info, launch));
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HostSide> {
+        self.host.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Reads the record (waiting for the default stream only) and, when a fault is there,
+    /// clears it and returns it. A fault of a launch made by an earlier owner is logged and
+    /// not returned.
+    fn take(&self, device: &Device) -> Result<Option<Fault>> {
+        // Held from the read to the clear: two threads reading one record (a graph replayed
+        // from both) get its fault once.
+        let host = self.lock();
+        let mut rec = [0u8; BYTES];
+        self.buffer
+            .download(0, &mut rec)
+            .map_err(|e| err(device, e))?;
+        let flag = u32::from_le_bytes(rec[RECORD_BYTES..RECORD_BYTES + 4].try_into().unwrap());
+        if flag == 0 {
+            return Ok(None);
+        }
+        self.buffer
+            .upload(0, &[0u8; BYTES])
+            .map_err(|e| err(device, e))?;
+        let fault = decode(&rec, host.primitive);
+        match fault.launch {
+            Some(LaunchId(n)) if n < host.since => {
+                log::error!(
+                    "{fault} on {device}: raised by a launch from a thread that ended without \
+                     synchronising (found when another thread reused its fault record)"
+                );
+                Ok(None)
+            }
+            _ => Ok(Some(fault)),
+        }
+    }
+}
+
+/// The fault a record holds (`rec`: `wp::fault_t`, then the flag); `primitive` names a fault
+/// that carries no kernel id.
+fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>) -> Fault {
+    let i32_at = |o: usize| i32::from_le_bytes(rec[o..o + 4].try_into().expect("4 bytes"));
+    let i64_at = |o: usize| i64::from_le_bytes(rec[o..o + 8].try_into().expect("8 bytes"));
+    let (kind, arg, ndim) = (i32_at(0), i32_at(4), i32_at(72).clamp(0, 4) as usize);
+    let by_id = usize::try_from(i32_at(76) - 1).ok().and_then(|k| {
+        kernel_ids()
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(k)
+            .copied()
+    });
+    let (info, launch) = match (by_id, i64_at(80) as u64) {
+        (Some(info), 0) => (info, None),
+        (Some(info), n) => (info, Some(LaunchId(n))),
+        (None, _) => match primitive {
+            Some((info, launch)) => (info, Some(launch)),
+            None => (&UNKNOWN, None),
+        },
+    };
+    let kind = match kind {
+        4 => FaultKind::AdStackOverflow {
+            line: i64_at(8) as u32,
+            capacity: i64_at(40) as usize,
+        },
+        1 => FaultKind::OutOfBounds {
+            arg: info.params.get(arg as usize).copied().unwrap_or("?"),
+            index: (0..ndim).map(|k| i64_at(8 + 8 * k) as i128).collect(),
+            shape: (0..ndim).map(|k| i64_at(40 + 8 * k) as usize).collect(),
+        },
+        2 => FaultKind::DivisionByZero,
+        // wp_core.h FAULT_NON_FINITE: the sample position's coordinates as f64 bit patterns.
+        5 => FaultKind::NonFinite {
+            what: "volume sample position",
+            values: (0..ndim)
+                .map(|k| f64::from_bits(i64_at(8 + 8 * k) as u64))
+                .collect(),
+        },
+        _ => FaultKind::BadStep { step: i64_at(8) },
+    };
+    Fault {
+        kernel: info.name,
+        kind,
+        launch,
+    }
+}
+
+static UNKNOWN: KernelInfo = KernelInfo {
+    name: "?",
+    ..KernelInfo::BLANK
+};
+
+/// Gives `info` a kernel id for fault records (`wp::ctx_t::kernel`): ids start at 1, and 0
+/// means "not set". A kernel loaded several times (variants, GPUs) has several ids.
+pub(crate) fn kernel_id(info: &'static KernelInfo) -> i32 {
+    let mut ids = kernel_ids().lock().unwrap_or_else(|p| p.into_inner());
+    ids.push(info);
+    i32::try_from(ids.len()).unwrap_or(0)
+}
+
+fn kernel_ids() -> &'static Mutex<Vec<&'static KernelInfo>> {
+    static IDS: OnceLock<Mutex<Vec<&'static KernelInfo>>> = OnceLock::new();
+    IDS.get_or_init(Default::default)
+}
+
+/// The calling thread's records, one per GPU, and the graph records it must read at its next
+/// synchronisation.
+#[derive(Default)]
+struct ThreadRecords {
+    own: Vec<(usize, Arc<GpuState>, Arc<FaultRecord>)>,
+    /// Records of graphs this thread replayed since its last full synchronisation of the GPU.
+    graphs: Vec<(usize, Arc<FaultRecord>)>,
+    /// The record of the graph this thread is capturing, with its GPU: launches inside the
+    /// capture write there.
+    capture: Option<(usize, Arc<FaultRecord>)>,
+}
+
+impl Drop for ThreadRecords {
+    fn drop(&mut self) {
+        // The thread has ended: its records go back to their GPUs for the next new thread.
+        for (_, st, rec) in self.own.drain(..) {
+            st.spare_records().ended.push(rec);
+        }
+    }
+}
+
+/// A GPU's records whose threads have ended.
+#[derive(Default)]
+pub(crate) struct SpareRecords {
+    /// Not read since their thread ended: they may hold its last fault.
+    ended: Vec<Arc<FaultRecord>>,
+    /// Read (and cleared) while the GPU was idle: nothing writes them any more.
+    clean: Vec<Arc<FaultRecord>>,
+}
+
+thread_local! {
+    static RECORDS: RefCell<ThreadRecords> = RefCell::default();
+}
+
+/// The record a launch of the calling thread on GPU `ordinal` (`st`) writes: the capture's
+/// inside a capture, else the thread's own (taken from the spare list, or made, at the
+/// thread's first launch there).
+pub(crate) fn with_record<R>(
+    st: &Arc<GpuState>,
+    ordinal: usize,
+    f: impl FnOnce(&FaultRecord) -> R,
+) -> Result<R> {
+    let records = RECORDS.try_with(|r| {
+        let mut r = r.borrow_mut();
+        if let Some((o, rec)) = &r.capture {
+            if *o == ordinal {
+                return Ok(f(rec));
+            }
+        }
+        if let Some((_, _, rec)) = r.own.iter().find(|(o, _, _)| *o == ordinal) {
+            return Ok(f(rec));
+        }
+        let spare = {
+            let mut spare = st.spare_records();
+            spare.clean.pop().or_else(|| spare.ended.pop())
+        };
+        let rec = match spare {
+            Some(rec) => {
+                // Faults of launches numbered from here on are the new owner's.
+                rec.lock().since = launch_id::watermark();
+                rec
+            }
+            None => FaultRecord::new(st)?,
+        };
+        let out = f(&rec);
+        r.own.push((ordinal, st.clone(), rec));
+        Ok(out)
+    });
+    records.unwrap_or_else(|_| {
+        Err(Error::invalid(format!(
+            "a launch on {} while its thread is ending (its fault record is gone)",
+            st.device()
+        )))
+    })
+}
+
+/// Starts a graph's record for the calling thread's capture on GPU `ordinal`: launches in
+/// the capture write into it. Returns the record (the graph keeps it).
+pub(crate) fn begin_capture(st: &GpuState, ordinal: usize) -> Result<Arc<FaultRecord>> {
+    let rec = FaultRecord::new(st)?;
+    // Launch numbers are fixed at capture: every replay's fault names the captured launch.
+    rec.lock().since = 0;
+    RECORDS.with(|r| r.borrow_mut().capture = Some((ordinal, rec.clone())));
+    Ok(rec)
+}
+
+/// Ends the calling thread's capture: its launches write into the thread's record again.
+pub(crate) fn end_capture() {
+    RECORDS.with(|r| r.borrow_mut().capture = None);
+}
+
+/// Notes that the calling thread replayed a graph whose record is `rec` on GPU `ordinal`:
+/// the thread's next synchronisation there reads it.
+pub(crate) fn replayed(ordinal: usize, rec: &Arc<FaultRecord>) {
+    RECORDS.with(|r| {
+        let mut r = r.borrow_mut();
+        if !r
+            .graphs
+            .iter()
+            .any(|(o, g)| *o == ordinal && Arc::ptr_eq(g, rec))
+        {
+            r.graphs.push((ordinal, rec.clone()));
+        }
+    });
+}
+
+/// Reports (and clears) a fault that a launch of the calling thread on GPU `ordinal` recorded,
+/// or a graph it replayed there, without waiting for other work than the default stream's.
+/// `idle`: every stream of the GPU has finished (a full synchronisation), so the replayed
+/// graphs need not be read again.
+pub(crate) fn check(st: &GpuState, ordinal: usize, idle: bool) -> Result<()> {
+    let (own, graphs) = RECORDS.with(|r| {
+        let r = r.borrow();
+        let own = r
+            .own
+            .iter()
+            .find(|(o, _, _)| *o == ordinal)
+            .map(|(_, _, rec)| rec.clone());
+        let graphs: Vec<_> = r
+            .graphs
+            .iter()
+            .filter(|(o, _)| *o == ordinal)
+            .map(|(_, g)| g.clone())
+            .collect();
+        (own, graphs)
+    });
+    for rec in own.iter().chain(&graphs) {
+        // One fault per check: the others stay in their records for the next.
+        if let Some(fault) = rec.take(st.device())? {
+            return Err(Error::Fault(fault));
+        }
+    }
+    if idle {
+        RECORDS.with(|r| r.borrow_mut().graphs.retain(|(o, _)| *o != ordinal));
+        // Records of threads that have ended: their last faults are logged, never lost.
+        let ended = std::mem::take(&mut st.spare_records().ended);
+        for rec in ended {
+            let fault = rec.take(st.device());
+            st.spare_records().clean.push(rec);
+            if let Some(fault) = fault? {
+                log::error!(
+                    "{fault} on {}: raised by a launch from a thread that ended without \
+                     synchronising",
+                    st.device()
+                );
+            }
+        }
+    }
+    Ok(())
+}
