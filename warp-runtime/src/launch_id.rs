@@ -24,12 +24,6 @@ pub(crate) fn next() -> LaunchId {
     LaunchId(id)
 }
 
-/// The number the next launch will get: every launch numbered below it has been made.
-#[cfg(feature = "cuda")]
-pub(crate) fn watermark() -> u64 {
-    NEXT.load(Ordering::Relaxed)
-}
-
 /// The number of the calling thread's latest kernel launch (forward or backward, on any
 /// device) or GPU primitive, or `None` before its first: the number a
 /// [`Fault`](warp_core::Fault) names as its `launch` when that launch faults. Log it beside a

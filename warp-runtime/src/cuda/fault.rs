@@ -19,7 +19,6 @@ use super::gpu::{err, GpuState};
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
-use crate::launch_id;
 use std::cell::RefCell;
 use std::sync::{Arc, Mutex, OnceLock};
 use warp_core::{Fault, FaultKind, LaunchId};
@@ -53,8 +52,9 @@ impl FaultRecord {
         let buffer = DeviceBuffer::zeros(&st.gpu, BYTES).map_err(|e| err(st.device(), e))?;
         Ok(Arc::new(FaultRecord {
             buffer,
+            // A new record has had no earlier owner.
             host: Mutex::new(HostSide {
-                since: launch_id::watermark(),
+                since: 0,
                 primitive: None,
             }),
         }))
@@ -207,12 +207,13 @@ thread_local! {
     static RECORDS: RefCell<ThreadRecords> = RefCell::default();
 }
 
-/// The record a launch of the calling thread on GPU `ordinal` (`st`) writes: the capture's
-/// inside a capture, else the thread's own (taken from the spare list, or made, at the
-/// thread's first launch there).
+/// The record that `launch`, made by the calling thread on GPU `ordinal` (`st`), writes: the
+/// capture's inside a capture, else the thread's own (taken from the spare list, or made, at
+/// the thread's first launch there).
 pub(crate) fn with_record<R>(
     st: &Arc<GpuState>,
     ordinal: usize,
+    launch: LaunchId,
     f: impl FnOnce(&FaultRecord) -> R,
 ) -> Result<R> {
     let records = RECORDS.try_with(|r| {
@@ -231,8 +232,9 @@ pub(crate) fn with_record<R>(
         };
         let rec = match spare {
             Some(rec) => {
-                // Faults of launches numbered from here on are the new owner's.
-                rec.lock().since = launch_id::watermark();
+                // Faults of this launch and later ones are the new owner's (launch numbers
+                // grow: the earlier owner's launches all have smaller ones).
+                rec.lock().since = launch.0;
                 rec
             }
             None => FaultRecord::new(st)?,
@@ -252,9 +254,9 @@ pub(crate) fn with_record<R>(
 /// Starts a graph's record for the calling thread's capture on GPU `ordinal`: launches in
 /// the capture write into it. Returns the record (the graph keeps it).
 pub(crate) fn begin_capture(st: &GpuState, ordinal: usize) -> Result<Arc<FaultRecord>> {
+    // Its faults all belong to the graph (launch numbers are fixed at capture: every replay's
+    // fault names the captured launch).
     let rec = FaultRecord::new(st)?;
-    // Launch numbers are fixed at capture: every replay's fault names the captured launch.
-    rec.lock().since = 0;
     RECORDS.with(|r| r.borrow_mut().capture = Some((ordinal, rec.clone())));
     Ok(rec)
 }
