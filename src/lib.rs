@@ -154,8 +154,9 @@ pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, kernel_info, last_launch_id, launch, load, load_with_adjoints, synchronize, ArgCtx,
     Array, Bvh, Device, DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape,
-    Kernel, KernelArg, KernelInfo, KernelParams, Launch, Launchable, Mesh, OwnedArgsOf, Recording,
-    Result, Runtime, Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
+    Kernel, KernelArg, KernelInfo, KernelParams, Launch, Launchable, MemoryInfo, Mesh, OwnedArgsOf,
+    Recording, Result, Runtime, Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST,
+    VOLUME_LINEAR,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};

@@ -103,6 +103,45 @@ impl Device {
     pub fn is_cuda(&self) -> bool {
         matches!(self.kind, DeviceKind::Cuda { .. })
     }
+
+    /// Free and total memory of a GPU as the driver reports them (`cuMemGetInfo`); `None` for
+    /// the CPU, whose memory is the operating system's to report.
+    ///
+    /// The figure is the whole device's: other processes' allocations count, and so does
+    /// memory that this crate's arrays freed but the stream-ordered pool keeps for reuse (a
+    /// GPU opened by this crate never hands freed memory back to the driver, so `free` falls
+    /// to the program's high-water mark and stays there). Opens the GPU (its context) if no
+    /// array or launch has yet.
+    ///
+    /// # Errors
+    /// [`Error::Cuda`] when the GPU cannot be opened or the query fails; [`Error::NoDevice`]
+    /// for a GPU in a build without the `cuda` feature (no such device can be obtained).
+    pub fn memory_info(&self) -> Result<Option<MemoryInfo>> {
+        match self.kind {
+            DeviceKind::Cpu => Ok(None),
+            #[cfg(feature = "cuda")]
+            DeviceKind::Cuda { ordinal } => {
+                let gpu =
+                    warp_cuda::Gpu::open(ordinal).map_err(|e| Error::cuda(self.alias(), e))?;
+                let (free, total) = gpu.mem_info().map_err(|e| Error::cuda(self.alias(), e))?;
+                Ok(Some(MemoryInfo { free, total }))
+            }
+            #[cfg(not(feature = "cuda"))]
+            DeviceKind::Cuda { .. } => Err(Error::NoDevice {
+                name: self.alias().to_string(),
+                reason: CUDA_UNAVAILABLE.to_string(),
+            }),
+        }
+    }
+}
+
+/// A GPU's free and total memory in bytes ([`Device::memory_info`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MemoryInfo {
+    /// Bytes the driver could still allocate on the device.
+    pub free: usize,
+    /// The device's memory.
+    pub total: usize,
 }
 
 impl fmt::Display for Device {
@@ -342,6 +381,8 @@ mod tests {
             all.get(1).cloned().unwrap_or(d.clone())
         );
         assert_ne!(d, Device::fake_cuda(0));
+        // The CPU's memory is the operating system's to report.
+        assert_eq!(d.memory_info().unwrap(), None);
     }
 
     #[test]
