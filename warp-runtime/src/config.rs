@@ -156,6 +156,10 @@ thread_local! {
 /// happens. Atomic builtins are not recorded; reads are not checked; GPU launches ignore the
 /// setting. ARCHITECTURE.md ("Concurrency and data races") says what is and is not covered.
 ///
+/// Every kernel launch is checked (`launch`, `Launch` objects, a tape's backward, forward
+/// mode), by the setting of the thread that runs it (for a captured CPU graph, the thread
+/// that replays it); the library's own parallel primitives and object builds are not.
+///
 /// Costs, only while on: eight bytes of shadow memory per element of every array argument
 /// of a launch (allocated zeroed per launch, touched only where written), a
 /// compare-exchange per store, one call per kernel thread instead of per chunk, and no
