@@ -170,6 +170,7 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::DivisionByZero => (2, -1, 0, vec![], vec![]),
         FaultKind::BadStep { step } => (3, -1, 1, vec![*step], vec![]),
         FaultKind::AdStackOverflow { .. } => unreachable!("forward library calls never push"),
+        FaultKind::WriteRace { .. } => unreachable!("only the CPU race check reports races"),
         // The coordinates' f64 bit patterns (wp_core.h's FAULT_NON_FINITE record).
         FaultKind::NonFinite { values, .. } => (
             5,

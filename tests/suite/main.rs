@@ -90,6 +90,7 @@ mod misc;
 mod optim;
 mod params;
 mod primitives;
+mod race;
 mod rng;
 mod scenes;
 mod stability;

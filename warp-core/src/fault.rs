@@ -69,6 +69,19 @@ pub enum FaultKind {
         /// The values as given (every component, finite or not).
         values: Vec<f64>,
     },
+    /// Two threads of one CPU launch wrote the same array element without an atomic: a data
+    /// race (undefined behaviour in Rust's memory model, as in CUDA's). Reported only with
+    /// the runtime's race check on (`wp::config::set_race_check`), at the second write, which
+    /// does not happen.
+    WriteRace {
+        /// The kernel parameter the second write went through.
+        arg: &'static str,
+        /// The element's index in that array, one entry per dimension.
+        index: Vec<i128>,
+        /// The flat launch indices (row-major over the launch dimensions) of the thread that
+        /// wrote first and of the thread that wrote again.
+        threads: (usize, usize),
+    },
 }
 
 impl Fault {
@@ -126,6 +139,17 @@ impl Fault {
             FaultKind::NonFinite { what, values } => write!(
                 f,
                 "kernel `{}`: {what} {values:?} is not finite (NaN or infinite)",
+                self.kernel
+            ),
+            FaultKind::WriteRace {
+                arg,
+                index,
+                threads: (a, b),
+            } => write!(
+                f,
+                "kernel `{}`: threads {a} and {b} (flat launch indices) both wrote element \
+                 {index:?} of argument `{arg}` in one launch without an atomic (a data race); \
+                 use an atomic_* builtin, or give each thread its own element",
                 self.kernel
             ),
         }

@@ -2,6 +2,9 @@
 
 use crate::fault::{Fault, FaultKind, KResult};
 use crate::index::KernelIndex;
+use std::cell::Cell;
+use std::ptr::NonNull;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// A strided view of array memory, handed to each kernel thread.
 ///
@@ -10,8 +13,11 @@ use crate::index::KernelIndex;
 /// [`Fault`] naming the kernel and argument; out-of-bounds memory is never touched.
 ///
 /// Concurrency contract (the same as CUDA's and Warp's): two threads of one launch that write
-/// the same element without an atomic race, and the value left behind is one of the written
-/// values only by luck. Use the `atomic_*` builtins for shared accumulation.
+/// the same element without an atomic race, which is undefined behaviour in Rust's memory
+/// model (the value left behind is one of the written values only by luck). Use the
+/// `atomic_*` builtins for shared accumulation. During a launch with the runtime's race check
+/// on, [`ArrayView::store`] reports such a write as a [`FaultKind::WriteRace`] before it
+/// happens (see [`WriteLog`]).
 pub struct ArrayView<T, const N: usize> {
     ptr: *mut T,
     shape: [usize; N],
@@ -35,6 +41,8 @@ unsafe impl<T: Sync, const N: usize> Sync for ArrayView<T, N> {}
 impl<T: Copy, const N: usize> ArrayView<T, N> {
     /// A view over memory the caller keeps alive and valid for `shape` and `strides`.
     ///
+    /// Made inside [`with_write_log`], the view registers the memory it reaches with that log.
+    ///
     /// # Safety
     /// Every in-bounds index must address a valid, aligned `T` inside one live allocation
     /// for as long as the view (or a copy of it) is used.
@@ -45,6 +53,13 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
         kernel: &'static str,
         arg: &'static str,
     ) -> Self {
+        if logging() {
+            if let Some((log, _)) = CURRENT_LOG.with(Cell::get) {
+                // SAFETY: `with_write_log` installs a log only while its borrow lasts.
+                let log = unsafe { log.as_ref() };
+                log.register(ptr as usize, std::mem::size_of::<T>(), &shape, &strides);
+            }
+        }
         ArrayView {
             ptr,
             shape,
@@ -147,12 +162,43 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     }
 
     /// Writes the element at `idx`.
+    ///
+    /// Inside a logged kernel thread (the runtime's race check, [`with_write_log`]) the
+    /// element is claimed for that thread first; an element another thread of the launch
+    /// wrote is a [`FaultKind::WriteRace`] fault, and this write does not happen.
     #[inline(always)]
     pub fn store<I: KernelIndex<N>>(&self, idx: I, value: T) -> KResult<()> {
         let p = self.ptr_at(idx)?;
+        if logging() {
+            self.log_write(p, idx)?;
+        }
         // SAFETY: in bounds and aligned (see `new`).
         unsafe { p.write(value) };
         Ok(())
+    }
+
+    /// Claims the element at `p` (index `idx`) for the calling kernel thread in the thread's
+    /// write log, if it has one.
+    #[cold]
+    #[inline(never)]
+    fn log_write<I: KernelIndex<N>>(&self, p: *mut T, idx: I) -> KResult<()> {
+        let Some((log, thread)) = CURRENT_LOG.with(Cell::get) else {
+            // Another launch is logged; this one is not.
+            return Ok(());
+        };
+        // SAFETY: `with_write_log` installs a log only while its borrow lasts.
+        let log = unsafe { log.as_ref() };
+        match log.record(p as usize, std::mem::size_of::<T>(), thread) {
+            Ok(()) => Ok(()),
+            Err(first) => Err(Fault::new(
+                self.kernel,
+                FaultKind::WriteRace {
+                    arg: self.arg,
+                    index: idx.components().to_vec(),
+                    threads: (first, thread),
+                },
+            )),
+        }
     }
 
     /// The strides, in elements, one per dimension.
@@ -209,9 +255,185 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     }
 
     /// True when the view covers `dims` (one extent per dimension): every index drawn from
-    /// the launch grid is then in bounds.
+    /// the launch grid is then in bounds. Generated code skips the per-thread checks of
+    /// thread-indexed accesses only when this holds, so inside a logged kernel thread (the
+    /// race check) it says false: every store of a checked launch then goes through
+    /// [`ArrayView::store`], which logs it, whatever its index.
     #[inline(always)]
     pub fn covers(&self, dims: &[usize; 4]) -> bool {
-        (0..N).all(|d| self.shape[d] >= dims[d])
+        (0..N).all(|d| self.shape[d] >= dims[d]) && !(logging() && logged_here())
+    }
+}
+
+/// Where one launch's views log their writes, for the runtime's write-race check
+/// (`wp::config::set_race_check`). The runtime implements it; views call it.
+///
+/// Views do not carry the log (that would make every view, and every object view holding
+/// one, larger, for launches without the check). Instead [`with_write_log`] installs it on
+/// the calling thread for one kernel thread (or while views are made), and a process-wide
+/// count of launches with a log ([`WriteLogActive`]) lets a store skip looking for it with
+/// one load and a never-taken branch when no launch anywhere is checked.
+pub trait WriteLog: Sync {
+    /// A view was made for the launch: elements of `elem` bytes at byte address `base` plus
+    /// `(index . strides) * elem`, for every index below `shape` (strides in elements,
+    /// possibly negative or zero).
+    fn register(&self, base: usize, elem: usize, shape: &[usize], strides: &[isize]);
+
+    /// Kernel thread `thread` (a flat launch index) writes `bytes` bytes at `addr`, inside
+    /// a registered view. `Err(first)`: thread `first` wrote some of them earlier in the
+    /// launch.
+    fn record(&self, addr: usize, bytes: usize, thread: usize) -> Result<(), usize>;
+}
+
+/// How many launches with a write log are running now, in the whole process.
+static ACTIVE_LOGS: AtomicUsize = AtomicUsize::new(0);
+
+/// True while some launch, on any thread, has a write log ([`WriteLogActive`]).
+#[inline(always)]
+fn logging() -> bool {
+    ACTIVE_LOGS.load(Ordering::Relaxed) != 0
+}
+
+thread_local! {
+    /// The log installed on this thread by [`with_write_log`], and the kernel thread running.
+    static CURRENT_LOG: Cell<Option<(NonNull<dyn WriteLog>, usize)>> = const { Cell::new(None) };
+}
+
+/// Whether this thread has a log installed.
+#[cold]
+fn logged_here() -> bool {
+    CURRENT_LOG.with(Cell::get).is_some()
+}
+
+/// Counts a launch with a write log as running while it lives: views look for logs only
+/// while one does. The runtime holds one from before it makes a checked launch's views until
+/// the launch has returned.
+#[must_use = "views look for write logs only while the guard lives"]
+#[derive(Debug)]
+pub struct WriteLogActive(());
+
+impl WriteLogActive {
+    /// Counts one more launch with a write log.
+    pub fn new() -> Self {
+        // Relaxed: the threads of the launch are started (by the pool's queue, which
+        // synchronises) after this, so they see it.
+        ACTIVE_LOGS.fetch_add(1, Ordering::Relaxed);
+        WriteLogActive(())
+    }
+}
+
+impl Default for WriteLogActive {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for WriteLogActive {
+    fn drop(&mut self) {
+        ACTIVE_LOGS.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// Runs `f` with `log` installed on this thread, as the log of kernel thread `thread`: every
+/// [`ArrayView`] made in `f` registers its memory with `log`, and every
+/// [`ArrayView::store`] in `f` is logged as a write of `thread`. Only takes effect while a
+/// [`WriteLogActive`] lives. The previous installation is restored afterwards, even if `f`
+/// unwinds.
+///
+/// # Safety
+/// The views registered with `log`, and every copy of them, must not be used after `log` is
+/// gone (the runtime makes them for one launch and drops them when it returns).
+#[inline]
+pub unsafe fn with_write_log<L: WriteLog + 'static, R>(
+    log: &L,
+    thread: usize,
+    f: impl FnOnce() -> R,
+) -> R {
+    /// Puts the previous installation back.
+    struct Restore(Option<(NonNull<dyn WriteLog>, usize)>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            CURRENT_LOG.with(|c| c.set(self.0));
+        }
+    }
+    let log: &(dyn WriteLog + 'static) = log;
+    let _restore = Restore(CURRENT_LOG.with(|c| c.replace(Some((NonNull::from(log), thread)))));
+    f()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+
+    /// A log that claims each address for the first thread that writes it.
+    #[derive(Default)]
+    struct Claims {
+        registered: Mutex<Vec<(usize, usize, Vec<usize>)>>,
+        owners: Mutex<Vec<(usize, usize)>>,
+    }
+
+    impl WriteLog for Claims {
+        fn register(&self, base: usize, elem: usize, shape: &[usize], _: &[isize]) {
+            self.registered
+                .lock()
+                .unwrap()
+                .push((base, elem, shape.to_vec()));
+        }
+        fn record(&self, addr: usize, _: usize, thread: usize) -> Result<(), usize> {
+            let mut owners = self.owners.lock().unwrap();
+            match owners.iter().find(|(a, _)| *a == addr) {
+                Some(&(_, t)) if t != thread => Err(t),
+                Some(_) => Ok(()),
+                None => {
+                    owners.push((addr, thread));
+                    Ok(())
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn stores_are_logged_only_where_a_log_is_installed() {
+        let mut data = [0i32; 4];
+        let log = Claims::default();
+        let _active = WriteLogActive::new();
+        // SAFETY: `data` outlives the view; the view is used only while `log` lives.
+        let v = unsafe {
+            with_write_log(&log, 0, || {
+                ArrayView::new(data.as_mut_ptr(), [4], [1], "k", "a")
+            })
+        };
+        assert_eq!(
+            log.registered.lock().unwrap().as_slice(),
+            [(data.as_ptr() as usize, 4, vec![4])]
+        );
+        // Outside any kernel thread's installation: written, not logged, fast path allowed.
+        v.store(1usize, 5).unwrap();
+        assert!(log.owners.lock().unwrap().is_empty());
+        assert!(v.covers(&[4, 1, 1, 1]));
+        // SAFETY: as above.
+        let second = unsafe {
+            with_write_log(&log, 3, || {
+                // Thread 3: every store goes through the checked, logged path.
+                assert!(!v.covers(&[4, 1, 1, 1]));
+                v.store(2usize, 7).unwrap();
+                v.store(2usize, 8).unwrap();
+                with_write_log(&log, 4, || v.store(2usize, 9))
+            })
+        };
+        let fault = second.unwrap_err();
+        assert_eq!(
+            fault.kind,
+            FaultKind::WriteRace {
+                arg: "a",
+                index: vec![2],
+                threads: (3, 4)
+            }
+        );
+        assert_eq!(fault.kernel, "k");
+        // The racing write did not happen; the installation ended with the call.
+        assert_eq!(data[2], 8);
+        assert!(!logged_here());
     }
 }

@@ -68,21 +68,27 @@ pub fn set_quiet(on: bool) {
 /// Defaults to false, unless the environment variable `WARP_QUIET` is `1` (or `true`) when this
 /// is first read and [`set_quiet`] has not been called.
 pub fn quiet() -> bool {
-    match QUIET.load(Ordering::Relaxed) {
+    env_flag(&QUIET, "WARP_QUIET")
+}
+
+/// A tri-state switch (0: not decided, 1: false, 2: true) whose default is the environment
+/// variable `var` (`1` or `true`) when first read: a setter called earlier wins.
+fn env_flag(flag: &AtomicU8, var: &str) -> bool {
+    match flag.load(Ordering::Relaxed) {
         1 => false,
         2 => true,
         _ => {
-            let env = std::env::var("WARP_QUIET")
+            let env = std::env::var(var)
                 .map(|v| matches!(v.trim(), "1" | "true" | "TRUE" | "True"))
                 .unwrap_or(false);
-            // Only fill in the default: a concurrent `set_quiet` must not be overwritten.
-            let _ = QUIET.compare_exchange(
+            // Only fill in the default: a concurrent setter must not be overwritten.
+            let _ = flag.compare_exchange(
                 0,
                 if env { 2 } else { 1 },
                 Ordering::Relaxed,
                 Ordering::Relaxed,
             );
-            QUIET.load(Ordering::Relaxed) == 2
+            flag.load(Ordering::Relaxed) == 2
         }
     }
 }
@@ -131,6 +137,95 @@ pub fn verify_fp() -> bool {
     VERIFY_FP_HERE
         .with(|c| c.get())
         .unwrap_or_else(|| VERIFY_FP.load(Ordering::Relaxed))
+}
+
+// Tri-state as `QUIET`: the environment's `WARP_RACE_CHECK` unless `set_race_check` came first.
+static RACE_CHECK: AtomicU8 = AtomicU8::new(0);
+
+thread_local! {
+    static RACE_CHECK_HERE: std::cell::Cell<Option<bool>> = const { std::cell::Cell::new(None) };
+}
+
+/// Turns the write-race check of CPU launches on or off for the whole process.
+///
+/// With the check on, every non-atomic array store of a CPU launch (forward or adjoint)
+/// records which kernel thread wrote the element; a second thread of the same launch writing
+/// the same element is a data race (undefined behaviour in Rust's memory model) and the
+/// launch returns [`Error::Fault`] with [`FaultKind::WriteRace`], naming the kernel, the
+/// argument, the index and both threads' flat launch indices, before the second write
+/// happens. Atomic builtins are not recorded; reads are not checked; GPU launches ignore the
+/// setting. ARCHITECTURE.md ("Concurrency and data races") says what is and is not covered.
+///
+/// Every kernel launch is checked (`launch`, `Launch` objects, a tape's backward, forward
+/// mode), by the setting of the thread that runs it (for a captured CPU graph, the thread
+/// that replays it); the library's own parallel primitives and object builds are not.
+///
+/// Costs, only while on: eight bytes of shadow memory per element of every array argument
+/// of a launch (allocated zeroed per launch, touched only where written), a
+/// compare-exchange per store, one call per kernel thread instead of per chunk, and no
+/// skipped bounds checks (thread-indexed accesses are checked like any other): about 25
+/// times slower on the CPU particle benchmark (1M threads, two stores each). While a
+/// checked launch runs, stores of unchecked launches on other threads look up a
+/// thread-local as well. Off (the default), a store costs one load of a process-wide count,
+/// and the particle benchmark is unchanged.
+///
+/// The default is off, unless the environment variable `WARP_RACE_CHECK` is `1` (or `true`)
+/// when this is first read and `set_race_check` has not been called.
+///
+/// [`Error::Fault`]: crate::Error::Fault
+/// [`FaultKind::WriteRace`]: warp_core::FaultKind::WriteRace
+pub fn set_race_check(on: bool) {
+    RACE_CHECK.store(if on { 2 } else { 1 }, Ordering::Relaxed);
+}
+
+/// Overrides [`set_race_check`] for launches made on the calling thread (`None`: follow the
+/// process-wide setting). See [`ScopedRaceCheck`] for a guard that restores it.
+pub fn set_race_check_for_thread(on: Option<bool>) {
+    RACE_CHECK_HERE.with(|c| c.set(on));
+}
+
+/// Whether CPU launches made on this thread check for write races (see [`set_race_check`]).
+pub fn race_check() -> bool {
+    RACE_CHECK_HERE
+        .with(|c| c.get())
+        .unwrap_or_else(|| env_flag(&RACE_CHECK, "WARP_RACE_CHECK"))
+}
+
+/// The race check set for launches on the calling thread while this guard lives
+/// ([`set_race_check_for_thread`]); dropping it puts back the thread's previous override.
+/// Other threads, tests running in parallel among them, are not affected.
+///
+/// ```
+/// use warp_runtime::config;
+/// {
+///     let _check = config::ScopedRaceCheck::new(true);
+///     assert!(config::race_check());
+///     // launches here report write races
+/// }
+/// ```
+#[must_use = "the override ends when the guard is dropped"]
+#[derive(Debug)]
+pub struct ScopedRaceCheck {
+    previous: Option<bool>,
+    /// The override belongs to the thread that made the guard.
+    _not_send: std::marker::PhantomData<*const ()>,
+}
+
+impl ScopedRaceCheck {
+    /// Turns the check on (or off) for this thread until the guard is dropped.
+    pub fn new(on: bool) -> Self {
+        let previous = RACE_CHECK_HERE.with(|c| c.replace(Some(on)));
+        ScopedRaceCheck {
+            previous,
+            _not_send: std::marker::PhantomData,
+        }
+    }
+}
+
+impl Drop for ScopedRaceCheck {
+    fn drop(&mut self) {
+        RACE_CHECK_HERE.with(|c| c.set(self.previous));
+    }
 }
 
 static ADSTACK_BYTES: AtomicUsize = AtomicUsize::new(DEFAULT_ADSTACK_BYTES);
@@ -195,6 +290,22 @@ mod tests {
         set_quiet(false);
         assert!(!quiet());
         set_quiet(true);
+    }
+
+    #[test]
+    fn scoped_race_check_restores_the_thread_override() {
+        set_race_check_for_thread(Some(false));
+        {
+            let _on = ScopedRaceCheck::new(true);
+            assert!(race_check());
+            {
+                let _off = ScopedRaceCheck::new(false);
+                assert!(!race_check());
+            }
+            assert!(race_check());
+        }
+        assert!(!race_check());
+        set_race_check_for_thread(None);
     }
 
     #[test]

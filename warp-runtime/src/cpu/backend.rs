@@ -3,12 +3,15 @@
 use super::executor;
 use super::memory::HostBuffer;
 use super::primitives;
+use super::race;
 use crate::backend::{Backend, ObjectStep};
+use crate::config;
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelInfo, KernelParams};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
+use warp_core::view::{with_write_log, WriteLogActive};
 use warp_core::{AdStack, Grid, LaunchId};
 
 /// The CPU as a backend, for one launch or array operation on `device`.
@@ -23,10 +26,65 @@ impl<'d> Cpu<'d> {
     }
 }
 
+impl Cpu<'_> {
+    /// `launch` with the write-race check (`config::set_race_check`): the views are made
+    /// with a write log installed, so that they register their memory with it and log their
+    /// stores; the threads run one per call, each telling the log who it is (`race.rs`).
+    #[cold]
+    fn launch_race_checked<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
+        let _active = WriteLogActive::new();
+        let log = race::WriteLog::new();
+        // SAFETY: `args` stays borrowed, and `log` alive, until the run below ends; the
+        // views are dropped with this frame, before `log`.
+        let params = unsafe {
+            with_write_log(&log, 0, || {
+                K::Params::cpu_params(args, K::info(), self.device)
+            })?
+        };
+        log.seal()?;
+        executor::for_each_chunk(grid.total, |range| {
+            race::each_thread(&log, range, |t| K::run_cpu(&params, grid, t))
+        })
+    }
+
+    /// `launch_adjoint` with the write-race check, as [`Cpu::launch_race_checked`]: gradient
+    /// views log their plain writes too (the adjoint of a write clears the gradient it takes),
+    /// while gradient accumulation is atomic and not logged.
+    #[cold]
+    fn launch_adjoint_race_checked<K: Kernel>(
+        &self,
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        adstack_bytes: usize,
+    ) -> Result<()> {
+        let _active = WriteLogActive::new();
+        let log = race::WriteLog::new();
+        // SAFETY: as in `launch_race_checked`.
+        let (params, grads) = unsafe {
+            with_write_log(&log, 0, || -> Result<_> {
+                Ok((
+                    K::Params::cpu_params(args, K::info(), self.device)?,
+                    K::Params::cpu_grads(args, K::info(), self.device)?,
+                ))
+            })?
+        };
+        log.seal()?;
+        executor::for_each_chunk(grid.total, |range| {
+            let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
+            race::each_thread(&log, range, |t| {
+                K::run_cpu_adjoint(&params, &grads, grid, t, &mut stack)
+            })
+        })
+    }
+}
+
 impl Backend for Cpu<'_> {
     type Buffer = HostBuffer;
 
     fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid, _: LaunchId) -> Result<()> {
+        if config::race_check() {
+            return self.launch_race_checked::<K>(args, grid);
+        }
         // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
         executor::for_each_chunk(grid.total, |range| K::run_cpu(&params, grid, range))
@@ -39,6 +97,9 @@ impl Backend for Cpu<'_> {
         adstack_bytes: usize,
         _: LaunchId,
     ) -> Result<()> {
+        if config::race_check() {
+            return self.launch_adjoint_race_checked::<K>(args, grid, adstack_bytes);
+        }
         // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
         let grads = unsafe { K::Params::cpu_grads(args, K::info(), self.device)? };

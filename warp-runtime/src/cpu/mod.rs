@@ -2,11 +2,13 @@
 //! rayon pool (`executor`); arrays live in host memory (`memory`). A CPU launch has finished
 //! when `launch` returns, so there is nothing to wait for and no fault record to read.
 //! `primitives`: scan, reductions, radix sort and compaction with rayon. Host objects' build
-//! steps bring their own CPU code (`ObjectStep::run_cpu`, next to each object).
+//! steps bring their own CPU code (`ObjectStep::run_cpu`, next to each object). `race`: the
+//! write-race check of launches (`config::set_race_check`).
 
 mod backend;
 mod executor;
 pub(crate) mod memory;
 mod primitives;
+mod race;
 
 pub(crate) use backend::Cpu;
