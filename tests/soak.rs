@@ -5,7 +5,8 @@
 //!   and float atomics of integer values, so that every order of the additions gives the same
 //!   exact sum) and into arrays of their own (each checked exactly against its closed form),
 //!   each thread with its own `Tape` (a two-kernel forward, backward, the gradient checked
-//!   exactly). On a GPU each thread also uses a stream of its own, by `launch_on` and by
+//!   exactly) reading one parameter array shared by all, whose gradient must receive every
+//!   backward pass's update. On a GPU each thread also uses a stream of its own, by `launch_on` and by
 //!   `ScopedStream`, next to the default stream.
 //! - `alloc_cycles_*`: 10,000 allocate/free cycles of 1 element to 4 MiB in five element
 //!   types (every page written by a kernel, a tape every tenth cycle), with the live heap
@@ -324,11 +325,12 @@ fn k_own(x: Array<f32>, y: Array<i64>, t: i32) {
     y[i] += i as i64 * (t as i64 + 1);
 }
 
-/// `y[i] = c x[i]^2`: the first step of each thread's taped forward.
+/// `y[i] = c x[i]^2 + p[i]`: the first step of each thread's taped forward. `x` is the
+/// thread's own, `p` is shared by every thread (a parameter array several tapes read).
 #[wp::kernel]
-fn k_square(x: Array<f32>, y: Array<f32>, c: f32) {
+fn k_square(x: Array<f32>, p: Array<f32>, y: Array<f32>, c: f32) {
     let i = tid();
-    y[i] = c * x[i] * x[i];
+    y[i] = c * x[i] * x[i] + p[i];
 }
 
 /// `loss = sum y`: the second step.
@@ -368,6 +370,7 @@ fn stress_thread(
     rounds: usize,
     dev: &wp::Device,
     shared: (&wp::Array<i32>, &wp::Array<f64>, &wp::Array<f32>),
+    param: &wp::Array<f32>,
 ) -> wp::Result<()> {
     let (hist, sum64, sum32) = shared;
     let x = wp::Array::<f32>::zeros(N_POOL, dev)?;
@@ -405,10 +408,11 @@ fn stress_thread(
         }
 
         // A tape of this thread's: it must record this thread's two launches and nothing of
-        // the 15 others launching meanwhile. It differentiates arrays of this thread's own:
-        // an array read at the thread index is "thread owned" and its adjoint accumulates
-        // into the gradient without atomics, so backward passes running at once on several
-        // host threads (or streams) that read one shared array race on its gradient.
+        // the 15 others launching meanwhile. It differentiates an array of this thread's own
+        // (`xs`) and the shared `param`: both are read at the thread index ("thread owned"
+        // within one launch), and the 16 backward passes running at once (on the CPU, each
+        // on its own host thread; on a GPU, on several streams) all accumulate into
+        // `param`'s gradient. Every update must count: checked by the caller.
         let xs = wp::Array::from_slice(&input, dev)?.with_grad()?;
         let ys = wp::Array::<f32>::zeros(N_TAPE, dev)?.with_grad()?;
         let loss = wp::Array::<f32>::zeros(1, dev)?.with_grad()?;
@@ -417,11 +421,11 @@ fn stress_thread(
             let _rec = tape.record();
             match (&stream, queue) {
                 (Some(s), Queue::On) => {
-                    wp::launch_on(k_square, N_TAPE, (&xs, &ys, c), s)?;
+                    wp::launch_on(k_square, N_TAPE, (&xs, param, &ys, c), s)?;
                     wp::launch_on(k_sum, N_TAPE, (&ys, &loss), s)?;
                 }
                 _ => {
-                    wp::launch(k_square, N_TAPE, (&xs, &ys, c), dev)?;
+                    wp::launch(k_square, N_TAPE, (&xs, param, &ys, c), dev)?;
                     wp::launch(k_sum, N_TAPE, (&ys, &loss), dev)?;
                 }
             }
@@ -475,12 +479,16 @@ fn stress(dev: &wp::Device, rounds: usize, name: &str) {
     let hist = wp::Array::<i32>::zeros(BINS, dev).unwrap();
     let sum64 = wp::Array::<f64>::zeros(SLOTS, dev).unwrap();
     let sum32 = wp::Array::<f32>::zeros(SLOTS, dev).unwrap();
+    let param = wp::Array::<f32>::zeros(N_TAPE, dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
     let start = Instant::now();
     std::thread::scope(|s| {
         let handles: Vec<_> = (0..THREADS)
             .map(|t| {
-                let (hist, sum64, sum32) = (&hist, &sum64, &sum32);
-                s.spawn(move || stress_thread(t, rounds, dev, (hist, sum64, sum32)))
+                let (hist, sum64, sum32, param) = (&hist, &sum64, &sum32, &param);
+                s.spawn(move || stress_thread(t, rounds, dev, (hist, sum64, sum32), param))
             })
             .collect();
         for (t, h) in handles.into_iter().enumerate() {
@@ -514,6 +522,24 @@ fn stress(dev: &wp::Device, rounds: usize, name: &str) {
     );
     assert_eq!(sum64.to_vec().unwrap(), want64, "{name}: shared f64 sums");
     assert_eq!(sum32.to_vec().unwrap(), want32, "{name}: shared f32 sums");
+    // Every backward pass adds d loss / d p[i] = 1 to the shared parameter's gradient: an
+    // integer count below 2^24, exact in f32 in any order. A lost update (a non-atomic
+    // accumulation racing with another thread's) leaves an element short.
+    let want_param = (THREADS * rounds) as f32;
+    let grad = param.grad().expect("with_grad").to_vec().unwrap();
+    let short: Vec<(usize, f32)> = grad
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|&(_, g)| g != want_param)
+        .collect();
+    assert!(
+        short.is_empty(),
+        "{name}: the shared parameter's gradient lost updates at {} of {N_TAPE} elements \
+         (want {want_param} each; first: {:?})",
+        short.len(),
+        &short[..short.len().min(5)]
+    );
     let launches = THREADS * rounds * 4;
     println!(
         "{name}: {THREADS} threads x {rounds} rounds on \"{dev}\": {launches} launches \
@@ -643,11 +669,12 @@ fn tape_cycle(dev: &wp::Device, t: usize) -> wp::Result<()> {
     let c = (t % 16 + 1) as f32;
     let x = wp::Array::from_slice(&input, dev)?.with_grad()?;
     let y = wp::Array::<f32>::zeros(N_TAPE, dev)?.with_grad()?;
+    let p = wp::Array::<f32>::zeros(N_TAPE, dev)?;
     let loss = wp::Array::<f32>::zeros(1, dev)?.with_grad()?;
     let tape = wp::Tape::new();
     {
         let _rec = tape.record();
-        wp::launch(k_square, N_TAPE, (&x, &y, c), dev)?;
+        wp::launch(k_square, N_TAPE, (&x, &p, &y, c), dev)?;
         wp::launch(k_sum, N_TAPE, (&y, &loss), dev)?;
     }
     tape.backward(&loss)?;

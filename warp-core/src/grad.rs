@@ -197,11 +197,17 @@ impl<T: Copy + GradElement, const N: usize> GradView<T, N> {
         Ok(())
     }
 
-    /// `grad[idx] += v` without an atomic, for an element no other thread of the launch
-    /// touches.
+    /// `grad[idx] += v` without an atomic and without a bounds check, for an element no
+    /// other thread touches while the call runs.
+    ///
+    /// Generated adjoints use it for a thread-owned read (an array read at the thread index,
+    /// in a launch whose arrays cover the grid): no other thread of the launch touches the
+    /// element, and the CPU executor takes this path only while no other adjoint launch runs
+    /// in the process (warp-runtime's `cpu/shared_grads.rs`), since a concurrent one may
+    /// accumulate into the same gradient (two tapes reading one parameter array).
     ///
     /// # Safety
-    /// `idx` must be in bounds, and no other thread may access `grad[idx]` during the launch.
+    /// `idx` must be in bounds, and no other thread may access `grad[idx]` during the call.
     #[inline(always)]
     pub unsafe fn accumulate_own<I: KernelIndex<N>>(&self, idx: I, v: T)
     where
@@ -210,9 +216,10 @@ impl<T: Copy + GradElement, const N: usize> GradView<T, N> {
         if let Some(view) = &self.view {
             // SAFETY: forwarded contract.
             unsafe {
-                let mut g = view.load_unchecked(idx);
+                let p = view.ptr_unchecked(idx);
+                let mut g = p.read();
                 g.adj_accum(v);
-                view.store_unchecked(idx, g);
+                p.write(g);
             }
         }
     }

@@ -233,6 +233,16 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
         off
     }
 
+    /// The address of the element at `idx`, without a bounds check.
+    ///
+    /// # Safety
+    /// `idx` must be in bounds (then the pointer is live and aligned by `new`'s contract).
+    #[inline(always)]
+    pub unsafe fn ptr_unchecked<I: KernelIndex<N>>(&self, idx: I) -> *mut T {
+        // SAFETY: in bounds by the caller's contract, so the offset stays inside the allocation.
+        unsafe { self.ptr.offset(self.offset_unchecked(idx)) }
+    }
+
     /// Reads the element at `idx` without a bounds check.
     ///
     /// # Safety

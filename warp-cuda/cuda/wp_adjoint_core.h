@@ -618,13 +618,16 @@ WP_FN T adstack_pop(adstack_t* s) {
   return v;
 }
 
-/// `g[idx] += v` without atomics and without a bounds check: only for an element no other
-/// thread touches, at an index known to be in bounds (thread-index accesses of a launch whose
-/// arrays cover the grid).
+/// `g[idx] += v` without a bounds check: only at an index known to be in bounds (thread-index
+/// accesses of a launch whose arrays cover the grid). No other thread of this launch touches
+/// the element, but a launch on another stream may (two tapes' backward passes sharing a
+/// parameter array), so the add is atomic per float component like `grad_accum`'s: on the
+/// device an uncontended atomicAdd without a used result is a fire-and-forget reduction,
+/// about as fast as a plain add.
 template <typename T, int N>
 WP_FN void grad_accum_own_idx(const array_t<T, N>& g, const i64* idx, const T& v) {
   if (g.data == nullptr) return;
-  adj_accum(*detail::elem_ptr_unchecked_idx(g, idx), v);
+  detail::grad_add_p(detail::elem_ptr_unchecked_idx(g, idx), v);
 }
 template <typename T>
 WP_FN void grad_accum_own(const array_t<T, 1>& g, i64 i0, const typename identity<T>::type& v) {

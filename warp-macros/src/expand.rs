@@ -375,6 +375,7 @@ fn kernel_impl(
                         __grid: &__wp::Grid,
                         __range: ::core::ops::Range<usize>,
                         __stack: &mut __wp::AdStack,
+                        __shared_grads: bool,
                     ) -> __wp::KResult<()> {
                         #[inline(always)]
                         #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
@@ -393,8 +394,9 @@ fn kernel_impl(
                         let ( #(#grad_names,)* ) = *__grads;
                         let __grid = *__grid;
                         // As in `run_cpu`: thread-index accesses skip their checks when the arrays
-                        // cover the grid (and their gradients skip atomics where that is safe).
-                        if true #( && #fast_arrays.covers(&__grid.dims) )* {
+                        // cover the grid, and their gradients skip atomics, unless another adjoint
+                        // launch may share them (warp-runtime's cpu/shared_grads.rs).
+                        if !__shared_grads #( && #fast_arrays.covers(&__grid.dims) )* {
                             for __flat in __range {
                                 __stack.clear();
                                 __adj_thread::<true>( #(#pnames_plain,)* #(#grad_names,)* &__grid, __flat, __stack)?;

@@ -315,13 +315,16 @@ pub trait Kernel: Copy + Send + Sync + 'static {
     fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()>;
     /// Runs the adjoint of threads `range` of `grid` on the CPU: each thread replays its
     /// forward computation and accumulates gradients into the arrays' grads. `stack` is the
-    /// per-thread adjoint stack (cleared for each thread).
+    /// per-thread adjoint stack (cleared for each thread). `shared_grads`: another adjoint
+    /// launch may be accumulating into the same gradients meanwhile, so every update must be
+    /// atomic (the plain adds of thread-owned elements are off).
     fn run_cpu_adjoint(
         params: &CpuParamsOf<Self>,
         grads: &CpuGradsOf<Self>,
         grid: &Grid,
         range: Range<usize>,
         stack: &mut AdStack,
+        shared_grads: bool,
     ) -> KResult<()>;
 }
 

@@ -479,6 +479,7 @@ mod tests {
                 _: &Grid,
                 _: Range<usize>,
                 _: &mut warp_core::AdStack,
+                _: bool,
             ) -> KResult<()> {
                 Ok(())
             }

@@ -305,7 +305,8 @@ impl Printer<'_> {
                 match mode {
                     AccumMode::Atomic => quote_spanned!(sp=> #g.accumulate(#idx, __r)?;),
                     // SAFETY (of the generated code): under __FAST the array covers the grid,
-                    // so the index is in bounds, and only this thread touches the element.
+                    // so the index is in bounds, only this thread touches the element, and no
+                    // other adjoint launch runs (the runtime turns __FAST off otherwise).
                     AccumMode::OwnWhenFast => quote_spanned!(sp=>
                         if __FAST { unsafe { #g.accumulate_own(#idx, __r) } } else { #g.accumulate(#idx, __r)?; }
                     ),

@@ -131,7 +131,9 @@ pub struct AStmt {
 pub enum AccumMode {
     /// Atomically (any array, and every array when the launch is not `__FAST`).
     Atomic,
-    /// Under `__FAST`, a plain unchecked add into the element the thread owns.
+    /// Under `__FAST`, an unchecked add into the element the thread owns: plain on the CPU
+    /// (which turns `__FAST` off while another adjoint launch runs), atomic on a GPU (where
+    /// launches on other streams may share the gradient).
     OwnWhenFast,
     /// Under `__FAST`, into the array's register (`__acc_<array>`), flushed at the end.
     GatherWhenFast,

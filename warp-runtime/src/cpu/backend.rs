@@ -4,6 +4,7 @@ use super::executor;
 use super::memory::HostBuffer;
 use super::primitives;
 use super::race;
+use super::shared_grads::{self, AdjointLaunch};
 use crate::backend::{Backend, ObjectStep};
 use crate::config;
 use crate::device::Device;
@@ -69,10 +70,13 @@ impl Cpu<'_> {
             })?
         };
         log.seal()?;
+        let launch = AdjointLaunch::begin();
         executor::for_each_chunk(grid.total, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
-            race::each_thread(&log, range, |t| {
-                K::run_cpu_adjoint(&params, &grads, grid, t, &mut stack)
+            shared_grads::chunk(&launch, |shared| {
+                race::each_thread(&log, range, |t| {
+                    K::run_cpu_adjoint(&params, &grads, grid, t, &mut stack, shared)
+                })
             })
         })
     }
@@ -103,10 +107,14 @@ impl Backend for Cpu<'_> {
         // SAFETY: `args` (and so every array and gradient) stays borrowed for the run.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
         let grads = unsafe { K::Params::cpu_grads(args, K::info(), self.device)? };
-        // One adjoint stack per chunk, reused (cleared) thread by thread.
+        // One adjoint stack per chunk, reused (cleared) thread by thread. Each chunk learns
+        // whether another adjoint launch may share its gradients (`shared_grads`).
+        let launch = AdjointLaunch::begin();
         executor::for_each_chunk(grid.total, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
-            K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack)
+            shared_grads::chunk(&launch, |shared| {
+                K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack, shared)
+            })
         })
     }
 

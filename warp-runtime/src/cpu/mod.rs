@@ -3,12 +3,14 @@
 //! when `launch` returns, so there is nothing to wait for and no fault record to read.
 //! `primitives`: scan, reductions, radix sort and compaction with rayon. Host objects' build
 //! steps bring their own CPU code (`ObjectStep::run_cpu`, next to each object). `race`: the
-//! write-race check of launches (`config::set_race_check`).
+//! write-race check of launches (`config::set_race_check`). `shared_grads`: when adjoint
+//! launches running at once make gradient updates atomic.
 
 mod backend;
 mod executor;
 pub(crate) mod memory;
 mod primitives;
 mod race;
+mod shared_grads;
 
 pub(crate) use backend::Cpu;
