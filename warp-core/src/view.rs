@@ -76,9 +76,17 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     }
 
     /// Number of elements.
+    ///
+    /// Zero when an extent is zero, whatever the others (`[usize::MAX, 2, 0]` is empty, and
+    /// its product taken left to right would overflow first); otherwise the product,
+    /// saturating at `usize::MAX` (only a view of overlapping elements, with zero strides,
+    /// can have more elements than bytes).
     #[inline(always)]
     pub fn len(&self) -> usize {
-        self.shape.iter().product()
+        if self.shape.contains(&0) {
+            return 0;
+        }
+        self.shape.iter().fold(1usize, |n, &e| n.saturating_mul(e))
     }
 
     /// True when the view holds no element.
@@ -375,6 +383,24 @@ pub unsafe fn with_write_log<L: WriteLog + 'static, R>(
 mod tests {
     use super::*;
     use std::sync::Mutex;
+
+    /// `len` multiplied the extents left to right: `[usize::MAX, 2, 0]` (empty, so valid over
+    /// any pointer) overflowed before reaching the zero (a panic in debug builds).
+    #[test]
+    fn len_of_empty_and_overlapping_views() {
+        let mut x = 0u8;
+        let p: *mut u8 = &mut x;
+        // SAFETY: the first two shapes address nothing; the last addresses `x` only (zero
+        // strides: every index is element zero).
+        let empty = unsafe { ArrayView::new(p, [usize::MAX, 2, 0], [0, 0, 0], "k", "a") };
+        assert_eq!(empty.len(), 0);
+        assert!(empty.is_empty());
+        let empty = unsafe { ArrayView::new(p, [0, usize::MAX], [1, 1], "k", "a") };
+        assert_eq!(empty.len(), 0);
+        let overlapping = unsafe { ArrayView::new(p, [usize::MAX, 3], [0, 0], "k", "a") };
+        assert_eq!(overlapping.len(), usize::MAX, "saturates");
+        assert_eq!(overlapping.load((5usize, 2usize)).unwrap(), 0);
+    }
 
     /// A log that claims each address for the first thread that writes it.
     #[derive(Default)]

@@ -19,6 +19,8 @@ mod front;
 mod ir;
 mod middle;
 mod operators;
+#[cfg(test)]
+mod proptests;
 mod types;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing

@@ -141,7 +141,8 @@ fn row_major<const N: usize>(shape: &[usize; N]) -> [isize; N] {
     let mut s = 1isize;
     for d in (0..N).rev() {
         strides[d] = s;
-        // Cannot overflow: the element count was checked against the allocation size.
+        // Cannot overflow: every stride divides the product of the non-zero extents, which
+        // `byte_size` checked against `isize::MAX` bytes (empty shapes too).
         s = s.wrapping_mul(shape[d] as isize);
     }
     strides
@@ -168,6 +169,12 @@ fn too_large<T>(shape: &[usize]) -> Error {
 
 /// The number of elements of `shape` and their size in bytes, or an error when either does
 /// not fit in `usize` (or `T` is zero-sized).
+///
+/// An empty shape is held to the same rule by its non-zero extents (NumPy's): `[0, 2^62, 4]`
+/// of `f32`s is refused as too large although it holds nothing, because its row-major strides
+/// in bytes (`2^64` for the first dimension) and the offsets of its views would overflow
+/// `isize`. Every array's non-zero extents therefore multiply to at most `isize::MAX` bytes,
+/// which the stride and offset arithmetic of views, transposes and launches relies on.
 fn byte_size<T>(shape: &[usize]) -> Result<(usize, usize)> {
     let too_big = || too_large::<T>(shape);
     if std::mem::size_of::<T>() == 0 {
@@ -177,14 +184,19 @@ fn byte_size<T>(shape: &[usize]) -> Result<(usize, usize)> {
             "arrays of zero-sized element types are not supported",
         ));
     }
-    let len = shape
+    let size = std::mem::size_of::<T>();
+    let nonzero_bytes = shape
         .iter()
-        .try_fold(1usize, |acc, &e| acc.checked_mul(e))
+        .filter(|&&e| e != 0)
+        .try_fold(size, |acc, &e| acc.checked_mul(e))
         .ok_or_else(too_big)?;
-    let bytes = len
-        .checked_mul(std::mem::size_of::<T>())
-        .ok_or_else(too_big)?;
-    Ok((len, bytes))
+    if shape.contains(&0) {
+        if nonzero_bytes > isize::MAX as usize {
+            return Err(too_big());
+        }
+        return Ok((0, 0));
+    }
+    Ok((nonzero_bytes / size, nonzero_bytes))
 }
 
 /// Element offsets of an `N`-dimensional strided layout, in row-major order (the last index
@@ -693,16 +705,23 @@ impl<T: Element, const N: usize> Array<T, N> {
         let mut shape = self.shape;
         shape[0] = end - start;
         Ok(Array {
-            byte_offset: self.offset_of_first(start),
+            byte_offset: self.offset_of_first(start, &shape),
             shape,
             ..self.clone()
         })
     }
 
-    /// The byte offset of index `i` along the first dimension (`i <= shape[0]`).
-    fn offset_of_first(&self, i: usize) -> usize {
-        // A view at the very end of an array (`i == shape[0]`) is empty and points one past
-        // the last row; that is still within (or at the end of) the allocation.
+    /// The byte offset of a view starting at index `i` along the first dimension, whose
+    /// shape is `shape`.
+    fn offset_of_first(&self, i: usize, shape: &[usize]) -> usize {
+        if shape.contains(&0) {
+            // An empty view addresses nothing: it keeps this array's offset, which is inside
+            // (or at the end of) the allocation. Row `i`'s offset need not be: one row past
+            // the end with a negative stride lies before the allocation, and in an empty
+            // array (a transpose of `[0, n]`) row `i` may lie past its end.
+            return self.byte_offset;
+        }
+        // Row `i` holds an element, which lies inside the allocation.
         let delta = i as isize * self.strides[0] * std::mem::size_of::<T>() as isize;
         (self.byte_offset as isize + delta) as usize
     }
@@ -859,7 +878,7 @@ impl<T: Element> Array<T, 2> {
         Ok(Array {
             storage: Arc::clone(&self.storage),
             grad: self.grad.clone(),
-            byte_offset: self.offset_of_first(i),
+            byte_offset: self.offset_of_first(i, &[self.shape[1]]),
             shape: [self.shape[1]],
             strides: [self.strides[1]],
             device: self.device.clone(),

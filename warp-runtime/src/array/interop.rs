@@ -195,7 +195,13 @@ impl<T: Element, const N: usize> Array<T, N> {
         let (len, _) = checked_size::<T>(&shape)?;
         let size = std::mem::size_of::<T>() as isize;
         let byte_strides = byte_strides.unwrap_or_else(|| row_major(&shape).map(|s| s * size));
-        let (strides, byte_offset, bytes) = strided_span::<T, N>(what, shape, byte_strides)?;
+        let (mut strides, byte_offset, bytes) = strided_span::<T, N>(what, shape, byte_strides)?;
+        if len == 0 {
+            // Nothing is addressed: row-major strides (valid for the shape, by
+            // `checked_size`) rather than the caller's, whose products with the extents of
+            // the other dimensions (in views and transposes) could overflow.
+            strides = row_major(&shape);
+        }
         let align = std::mem::align_of::<T>() as u64;
         let mut ptr = ptr;
         if len == 0 && ptr == 0 {

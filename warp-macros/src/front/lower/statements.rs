@@ -71,6 +71,9 @@ impl Lowerer {
                     "items (fn, struct, use, ...) cannot be declared inside kernels",
                 ),
                 syn::Stmt::Macro(m) => self.macro_stmt(&m.mac),
+                // A lone `;` (syn's empty verbatim expression): Rust's empty statement, which
+                // does nothing.
+                syn::Stmt::Expr(Expr::Verbatim(t), Some(_)) if t.is_empty() => Ok(()),
                 syn::Stmt::Expr(e, None)
                     if last && (!is_block_like(e) || (value && is_value_block(e))) =>
                 {

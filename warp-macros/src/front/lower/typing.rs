@@ -36,9 +36,12 @@ pub(super) fn flex_value(e: &Expr) -> Option<Lit> {
             syn::Lit::Int(i) if i.suffix().is_empty() => {
                 i.base10_parse::<i128>().ok().map(Lit::Int)
             }
-            syn::Lit::Float(f) if f.suffix().is_empty() => {
-                f.base10_parse::<f64>().ok().map(Lit::Float)
-            }
+            // Not a value past f64's range (`1e309`): `literal` reports that one.
+            syn::Lit::Float(f) if f.suffix().is_empty() => f
+                .base10_parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .map(Lit::Float),
             _ => None,
         },
         Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => match flex_value(&u.expr)? {
@@ -145,6 +148,30 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
     }
 }
 
+/// Whether the literal value `v` stays finite once rounded to the float type `s`. As Rust's
+/// `overflowing_literals` (deny by default) rejects `1e39_f32`, so does the kernel language:
+/// the value would otherwise become an infinity on one backend and an error on the other.
+pub(super) fn float_literal_fits(v: f64, s: Scalar) -> bool {
+    match s {
+        // The largest f16 is 65504; from 65520 on, rounding to nearest gives infinity.
+        Scalar::F16 => v.abs() < 65520.0,
+        Scalar::F32 => (v as f32).is_finite(),
+        _ => v.is_finite(),
+    }
+}
+
+/// The error for a literal whose value does not fit its float type.
+fn float_out_of_range(span: Span, s: Scalar) -> syn::Error {
+    syn::Error::new(
+        span,
+        format!(
+            "literal out of range for `{0}`: it rounds to infinity (use `{0}::INFINITY` for an \
+             infinity, `{0}::MAX` for the largest value)",
+            s.name()
+        ),
+    )
+}
+
 pub(super) fn int_range(s: Scalar) -> (i128, i128) {
     match s {
         Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
@@ -242,32 +269,29 @@ impl Lowerer {
                 Ok(self.def(Op::Lit(Lit::Bool(b.value)), BOOL, span))
             }
             syn::Lit::Int(i) => {
-                let v: i128 = i
+                // Beyond i128 (a `u128` past `i128::MAX`) no type of the language holds it,
+                // negated or not; a plain `as i128` would wrap it to a small value.
+                let v = i
                     .base10_parse::<u128>()
-                    .map_err(|_| syn::Error::new(span, "integer literal too large"))?
-                    as i128;
+                    .ok()
+                    .and_then(|v| i128::try_from(v).ok())
+                    .ok_or_else(|| syn::Error::new(span, "integer literal too large"))?;
                 let v = if neg { -v } else { v };
+                let float = |this: &mut Self, s: Scalar| {
+                    if !float_literal_fits(v as f64, s) {
+                        return Err(float_out_of_range(span, s));
+                    }
+                    Ok(this.def(Op::Lit(Lit::Float(v as f64)), Ty::Scalar(s), span))
+                };
                 let ty = match i.suffix() {
                     "" => match want_scalar {
-                        Some(Ty::Scalar(s)) if s.is_float() => {
-                            return Ok(self.def(
-                                Op::Lit(Lit::Float(v as f64)),
-                                Ty::Scalar(s),
-                                span,
-                            ));
-                        }
+                        Some(Ty::Scalar(s)) if s.is_float() => return float(self, s),
                         Some(Ty::Scalar(s)) if s.is_int() => Ty::Scalar(s),
                         Some(Ty::Deferred) => Ty::Deferred,
                         _ => crate::types::I32,
                     },
                     suf => match Scalar::from_name(suf) {
-                        Some(s) if s.is_float() => {
-                            return Ok(self.def(
-                                Op::Lit(Lit::Float(v as f64)),
-                                Ty::Scalar(s),
-                                span,
-                            ));
-                        }
+                        Some(s) if s.is_float() => return float(self, s),
                         Some(s) if s.is_int() => Ty::Scalar(s),
                         _ => return err(span, format!("unknown literal suffix `{suf}`")),
                     },
@@ -302,6 +326,14 @@ impl Lowerer {
                     "f16" => Ty::Scalar(Scalar::F16),
                     suf => return err(span, format!("unknown literal suffix `{suf}`")),
                 };
+                // A deferred type is some float the target compiler picks: f64 at least.
+                let s = match &ty {
+                    Ty::Scalar(s) => *s,
+                    _ => Scalar::F64,
+                };
+                if !float_literal_fits(v, s) {
+                    return Err(float_out_of_range(span, s));
+                }
                 Ok(self.def(Op::Lit(Lit::Float(v)), ty, span))
             }
             syn::Lit::Str(_) | syn::Lit::ByteStr(_) | syn::Lit::CStr(_) => err(
