@@ -31,13 +31,21 @@ fn check_range(offset: usize, len: usize, size: usize, what: &str) -> Result<()>
 /// Whether `ptr` lies in page-locked (pinned or registered) host memory. An async copy from
 /// pinned memory really is asynchronous, unlike one from pageable memory, which returns only
 /// once the data is staged.
+///
+/// `cuPointerGetAttributes` (plural) rather than `cuPointerGetAttribute`: for memory the driver
+/// does not know (pageable host memory, the common case) the singular form fails with
+/// `CUDA_ERROR_INVALID_VALUE`, which compute-sanitizer reports as an API error on every copy,
+/// while the plural form succeeds and leaves the memory type 0.
 fn is_page_locked(ptr: *const u8) -> bool {
     let mut kind: u32 = 0;
-    // SAFETY: MEMORY_TYPE writes one unsigned int; pageable memory yields an error, no state.
+    let mut attribute = sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_MEMORY_TYPE;
+    let mut data = [&mut kind as *mut u32 as *mut c_void];
+    // SAFETY: one attribute, MEMORY_TYPE, which writes one unsigned int through `data[0]`.
     let r = unsafe {
-        sys::cuPointerGetAttribute(
-            &mut kind as *mut u32 as *mut c_void,
-            sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_MEMORY_TYPE,
+        sys::cuPointerGetAttributes(
+            1,
+            &mut attribute,
+            data.as_mut_ptr(),
             ptr as sys::CUdeviceptr,
         )
     };
