@@ -382,18 +382,15 @@ macro_rules! quat_impl {
             }
         }
         impl FloatVec for $q {
+            // Rescaled where the squares would overflow or underflow (see `norm`); the
+            // identity where the length is not positive.
             #[inline(always)]
             fn w_length(self) -> $s {
-                self.w_dot(self).w_sqrt()
+                super::norm::length(self)
             }
             #[inline(always)]
             fn w_normalize(self) -> Self {
-                let l = self.w_length();
-                if l > 0.0 {
-                    $q::from_xyzw(self.x / l, self.y / l, self.z / l, self.w / l)
-                } else {
-                    $q::IDENTITY
-                }
+                super::norm::normalize(self)
             }
         }
         impl Inverse for $q {
