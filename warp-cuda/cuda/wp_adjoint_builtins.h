@@ -239,25 +239,24 @@ WP_ADJ_NOOP_STEP(u64)
       T::at(adj_b, i) += adj_ret * T::get(a, i);                                                  \
     }                                                                                             \
   }                                                                                               \
-  /* length: adj_v[i] += w[i] * (g / l) when l > 0, with (w, l, k) = (v, |v|, 1) or the */      \
-  /* rescaled vector where the squares over/underflow (detail::norm_parts, wp_vector.h). */      \
+  /* length: adj_v[i] += w[i] * (g / l) when l > 0, for the rescaled w = k v, l = |w| */        \
+  /* (detail::norm_scaled, wp_vector.h). */                                                     \
   WP_FN void adj_length(const V& v, V& adj_v, S adj_ret) {                                        \
     typedef vec_traits<V> T;                                                                      \
     V w;                                                                                          \
-    S l, k;                                                                                       \
-    detail::norm_parts(v, [](const V& a) { return wp::dot(a, a); }, w, l, k);                     \
+    S l, k, inv;                                                                                    \
+    detail::norm_scaled(v, [](const V& a) { return wp::dot(a, a); }, w, l, k, inv);                \
     if (l > (S)0) {                                                                               \
       const S gl = adj_ret / l;                                                                   \
       for (int i = 0; i < T::N; ++i) T::at(adj_v, i) += T::get(w, i) * gl;                        \
     }                                                                                             \
   }                                                                                               \
-  /* normalize: n = w / l, d = dot(n, g); adj_v[i] += ((g[i] - n[i] * d) / l) * k when l > 0 */  \
-  /* (k = 1 on the fast path: multiplying by it changes nothing). */                             \
+  /* normalize: n = w / l, d = dot(n, g); adj_v[i] += ((g[i] - n[i] * d) / l) * k when l > 0. */ \
   WP_FN void adj_normalize(const V& v, V& adj_v, const V& adj_ret) {                              \
     typedef vec_traits<V> T;                                                                      \
     V w;                                                                                          \
-    S l, k;                                                                                       \
-    detail::norm_parts(v, [](const V& a) { return wp::dot(a, a); }, w, l, k);                     \
+    S l, k, inv;                                                                                    \
+    detail::norm_scaled(v, [](const V& a) { return wp::dot(a, a); }, w, l, k, inv);                \
     if (l > (S)0) {                                                                               \
       V n;                                                                                        \
       for (int i = 0; i < T::N; ++i) T::at(n, i) = T::get(w, i) / l;                              \

@@ -137,11 +137,11 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
       vec_traits<Q>::at(adj_b, i) += g * vec_traits<Q>::get(a, i);                               \
     }                                                                                            \
   }                                                                                              \
-  /* length, normalize: the vector rules, rescaled likewise (detail::norm_parts). */           \
+  /* length, normalize: the vector rules, rescaled likewise (detail::norm_scaled). */           \
   WP_FN void adj_length(const Q& v, Q& adj_v, S g) {                                             \
     Q w;                                                                                         \
-    S l, k;                                                                                      \
-    detail::norm_parts(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k);               \
+    S l, k, inv;                                                                                   \
+    detail::norm_scaled(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv);          \
     if (l > (S)0) {                                                                              \
       const S gl = g / l;                                                                        \
       for (int i = 0; i < 4; ++i) vec_traits<Q>::at(adj_v, i) += vec_traits<Q>::get(w, i) * gl;  \
@@ -149,8 +149,8 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
   }                                                                                              \
   WP_FN void adj_normalize(const Q& v, Q& adj_v, const Q& g) {                                   \
     Q w;                                                                                         \
-    S l, k;                                                                                      \
-    detail::norm_parts(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k);               \
+    S l, k, inv;                                                                                   \
+    detail::norm_scaled(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv);          \
     if (l > (S)0) {                                                                              \
       const Q n = Q##_from_xyzw(w.x / l, w.y / l, w.z / l, w.w / l);                             \
       const S d = detail::qdot(n, g);                                                            \
