@@ -511,7 +511,13 @@ fn extreme_vals<T: Val>(g: &mut Gen) -> Vec<T> {
     }
     lanes
         .iter()
-        .map(|l| T::from_bits(&l.iter().map(|&x| lane_bits(T::FLOAT, x)).collect::<Vec<_>>()))
+        .map(|l| {
+            T::from_bits(
+                &l.iter()
+                    .map(|&x| lane_bits(T::FLOAT, x))
+                    .collect::<Vec<_>>(),
+            )
+        })
         .collect()
 }
 

@@ -565,12 +565,16 @@ fn pow2(e: i32) -> f64 {
 fn extreme_lanes(rng: &mut Rng, f32_range: bool, n: usize) -> Vec<Vec<f64>> {
     let (exps, max): (&[i32], f64) = if f32_range {
         (
-            &[-149, -140, -127, -126, -110, -101, -80, -64, 62, 64, 100, 126, 127],
+            &[
+                -149, -140, -127, -126, -110, -101, -80, -64, 62, 64, 100, 126, 127,
+            ],
             f32::MAX as f64,
         )
     } else {
         (
-            &[-1074, -1060, -1023, -1022, -1001, -700, -520, 510, 520, 900, 1022, 1023],
+            &[
+                -1074, -1060, -1023, -1022, -1001, -700, -520, 510, 520, 900, 1022, 1023,
+            ],
             f64::MAX,
         )
     };
@@ -600,7 +604,11 @@ fn extreme_lanes(rng: &mut Rng, f32_range: bool, n: usize) -> Vec<Vec<f64>> {
         [-pow2(-149), pow2(-149), -pow2(-149), pow2(-149)],
         [0.0, -0.0, 0.0, -0.0],
     ];
-    out.extend(specials.iter().map(|l| l[..n].iter().map(|&x| round(x)).collect()));
+    out.extend(
+        specials
+            .iter()
+            .map(|l| l[..n].iter().map(|&x| round(x)).collect()),
+    );
     out
 }
 

@@ -20,7 +20,8 @@
 //!   give infinities and NaNs for a singular matrix;
 //! * quaternion `dot`, `length`, `length_sq`: lanes `x, y, z, w` left to right (as vectors,
 //!   not glam's SIMD order); `normalize(q)` is `q / length(q)` lane by lane, or the identity
-//!   quaternion when the length is not positive (Warp's rule; glam gives NaN);
+//!   quaternion when the length is not positive (Warp's rule; glam gives NaN); `length` and
+//!   `normalize` scale by a power of two first, as the vectors' do (`builtins/norm.rs`);
 //! * `inverse(q)` and `quat_inverse(q)`: the conjugate `(-x, -y, -z, w)` (Warp and glam: exact
 //!   for unit quaternions, no normalization);
 //! * `quat_rotate(q, v)` is glam's `q * v`, `quat_rotate_inv(q, v)` is `conjugate(q) * v`: for

@@ -7,6 +7,9 @@
 //! * `sign(x)` is `-1` if `x < 0`, else `+1` (so `sign(0) = sign(-0.0) = sign(NaN) = 1`);
 //! * `clamp(x, lo, hi)` is `min(max(x, lo), hi)` and never panics, even when `lo > hi`;
 //! * `normalize` of a zero-length vector is the zero vector, never NaN;
+//! * `length` and `normalize` scale the vector by the power of two of its largest component
+//!   first, so that they stay accurate where the squares would overflow or underflow
+//!   (`builtins/norm.rs`);
 //! * `lerp(a, b, t)` is `a * (1 - t) + b * t`;
 //! * `asin`/`acos` clamp their argument to `[-1, 1]` first (Warp's rule, so a dot product
 //!   rounded to `1.0000001` still has an angle); NaN stays NaN;

@@ -80,7 +80,10 @@ impl NormScalar for f64 {
         let m = if m > lo { m } else { lo };
         let m = if m < hi { m } else { hi };
         let eb = m.to_bits() & 0x7ff0_0000_0000_0000;
-        (f64::from_bits(0x7fe0_0000_0000_0000 - eb), f64::from_bits(eb))
+        (
+            f64::from_bits(0x7fe0_0000_0000_0000 - eb),
+            f64::from_bits(eb),
+        )
     }
 }
 
