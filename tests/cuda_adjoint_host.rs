@@ -456,6 +456,83 @@ fn un<A: Val, R: Val>(s: &mut Suite, name: &str, f: fn(A, &mut A, R)) {
     }
 }
 
+/// `adj_<name>(a, adj_a, adj_ret)` over `inputs` (and the usual starting adjoints and
+/// `adj_ret`s).
+fn un_over<A: Val, R: Val>(s: &mut Suite, name: &str, f: fn(A, &mut A, R), inputs: &[A]) {
+    let op = s.sig(&call(name), &[A::TY], &[A::TY], Some(R::TY));
+    for &a in inputs {
+        let (mut aa, g) = (s.g.adj::<A>(), s.g.ret::<R>());
+        let words = [a.bits(), aa.bits(), g.bits()].concat();
+        f(a, &mut aa, g);
+        s.case(op, &words, toks(&aa));
+    }
+}
+
+/// Float vectors or quaternions of `T` whose squared norm overflows or underflows (the
+/// rescaled norms' slow path): random lanes at magnitudes `2^e` from the smallest subnormal
+/// to the top binade, one lane dominating the others, and huge or tiny lanes with zeros,
+/// infinities and NaN.
+fn extreme_vals<T: Val>(g: &mut Gen) -> Vec<T> {
+    let f32_lanes = T::FLOAT == 32;
+    let exps: &[i32] = if f32_lanes {
+        &[-149, -135, -127, -126, -105, -70, 64, 100, 127]
+    } else {
+        &[-1074, -1050, -1022, -1005, -600, 520, 1000, 1023]
+    };
+    // 2^e without intermediate over- or underflow.
+    let p2 = |e: i32| 2f64.powi(e / 2) * 2f64.powi(e - e / 2);
+    let max = if f32_lanes { f32::MAX as f64 } else { f64::MAX };
+    let mut lanes: Vec<Vec<f64>> = Vec::new();
+    for &e in exps {
+        for _ in 0..3 {
+            // [-1, 1) times 2^e: finite even in the top binade.
+            lanes.push(
+                (0..T::LANES)
+                    .map(|_| ((g.next() >> 11) as f64 / (1u64 << 52) as f64 - 1.0) * p2(e))
+                    .collect(),
+            );
+        }
+        lanes.push(
+            (0..T::LANES)
+                .map(|i| p2(e) * [1.0, -p2(-30), p2(-60), 0.5][i % 4])
+                .collect(),
+        );
+    }
+    for l in [
+        [max, max, max, max],
+        [max, -max * 0.5, 0.0, 1.0],
+        [p2(-120), -0.0, f64::NAN, 0.0],
+        [max, f64::INFINITY, 0.0, 0.0],
+        [p2(-140), f64::NEG_INFINITY, 1.0, 0.0],
+        [-p2(-149), p2(-149), -p2(-149), p2(-149)],
+        [0.0, -0.0, 0.0, -0.0],
+    ] {
+        lanes.push(l[..T::LANES].to_vec());
+    }
+    lanes
+        .iter()
+        .map(|l| {
+            T::from_bits(
+                &l.iter()
+                    .map(|&x| lane_bits(T::FLOAT, x))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect()
+}
+
+/// `adj_length` and `adj_normalize` on their rescaled slow path.
+fn extreme_norms(s: &mut Suite) {
+    macro_rules! each {
+        ($($v:ident: $s:ident),*) => {$(
+            let xs = extreme_vals::<$v>(&mut s.g);
+            un_over::<$v, $s>(s, "adj_length", ad::adj_length, &xs);
+            un_over::<$v, $v>(s, "adj_normalize", ad::adj_normalize, &xs);
+        )*};
+    }
+    each!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64, Quat: f32, DQuat: f64);
+}
+
 /// `adj_<name>(a, b, adj_a, adj_b, adj_ret)`.
 fn bin<A: Val, B: Val, R: Val>(s: &mut Suite, name: &str, f: fn(A, B, &mut A, &mut B, R)) {
     let op = s.sig(&call(name), &[A::TY, B::TY], &[A::TY, B::TY], Some(R::TY));
@@ -1388,6 +1465,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     };
     float_scalars(&mut s);
     float_vectors(&mut s);
+    extreme_norms(&mut s);
     matrices_and_quats(&mut s);
     linalg(&mut s);
     noise(&mut s);

@@ -534,12 +534,82 @@ macro_rules! fvec_cases {
         for &s in &ss {
             c.push("splat", ty, &[&s], toks(&$v::splat(s), Exact));
         }
+        // The rescaled norms' slow path (huge, tiny and subnormal components), bit for bit.
+        for l in extreme_lanes(rng, std::mem::size_of::<$s>() == 4, $n) {
+            let x = $v::from_array(std::array::from_fn(|i| l[i] as $s));
+            c.push("length", ty, &[&x], toks(&b::length(x), Exact));
+            c.push("normalize", ty, &[&x], toks(&b::normalize(x), Exact));
+        }
         let consts: Vec<(u64, $v)> = fvec_consts!($v, $n);
         for (id, v) in consts {
             c.push("konst", ty, &[&id], toks(&v, Exact));
         }
         lit_cases::<$v>(c);
     }};
+}
+
+/// An exact power of two, `2^e`, for `e` in -1074..=1023 (no intermediate over- or
+/// underflow).
+fn pow2(e: i32) -> f64 {
+    if e < -1000 {
+        2f64.powi(e + 100) * 2f64.powi(-100)
+    } else {
+        2f64.powi(e)
+    }
+}
+
+/// Lanes (as f64, each exactly representable in the target type) of `n`-vectors whose
+/// squared norm overflows or underflows: random lanes at magnitudes from the smallest
+/// subnormal to the largest finite value of f32 (`f32_range`) or f64, lanes of very different
+/// magnitudes, and zeros, infinities and NaN among huge and tiny lanes.
+fn extreme_lanes(rng: &mut Rng, f32_range: bool, n: usize) -> Vec<Vec<f64>> {
+    let (exps, max): (&[i32], f64) = if f32_range {
+        (
+            &[
+                -149, -140, -127, -126, -110, -101, -80, -64, 62, 64, 100, 126, 127,
+            ],
+            f32::MAX as f64,
+        )
+    } else {
+        (
+            &[
+                -1074, -1060, -1023, -1022, -1001, -700, -520, 510, 520, 900, 1022, 1023,
+            ],
+            f64::MAX,
+        )
+    };
+    let round = |x: f64| if f32_range { x as f32 as f64 } else { x };
+    let mut out = Vec::new();
+    for &e in exps {
+        let s = pow2(e);
+        for _ in 0..3 {
+            // rng.f() / 4 is in [-1, 1): at most 2^e in magnitude, so 2^127 stays finite.
+            out.push((0..n).map(|_| round(rng.f() / 4.0 * s)).collect());
+        }
+        // One lane dominating, the others 2^-30 and 2^-60 of it.
+        out.push(
+            (0..n)
+                .map(|i| round(s * [1.0, -pow2(-30), pow2(-60), 0.5][i]))
+                .collect(),
+        );
+    }
+    let specials: [[f64; 4]; 9] = [
+        [max, max, max, max],
+        [max, -max * 0.5, 0.0, 1.0],
+        [pow2(-120), -0.0, f64::NAN, 0.0],
+        [max, f64::INFINITY, 0.0, 0.0],
+        [pow2(-140), f64::NEG_INFINITY, 1.0, 0.0],
+        [max, f64::NAN, 0.0, 0.0],
+        [pow2(-149), 0.0, 0.0, 0.0],
+        [-pow2(-149), pow2(-149), -pow2(-149), pow2(-149)],
+        [0.0, -0.0, 0.0, -0.0],
+    ];
+    out.extend(
+        specials
+            .iter()
+            .map(|l| l[..n].iter().map(|&x| round(x)).collect()),
+    );
+    out
 }
 
 macro_rules! cross_case {
@@ -937,6 +1007,12 @@ macro_rules! linalg_quat_cases {
             .collect();
         let vty = stringify!($v);
         let mty = stringify!($m);
+        // The rescaled norms' slow path, bit for bit.
+        for l in extreme_lanes(rng, std::mem::size_of::<$s>() == 4, 4) {
+            let a = $q::from_xyzw(l[0] as $s, l[1] as $s, l[2] as $s, l[3] as $s);
+            c.push("length", ty, &[&a], toks(&b::length(a), Exact));
+            c.push("normalize", ty, &[&a], toks(&b::normalize(a), Exact));
+        }
         for &a in &qs {
             c.push("length_sq", ty, &[&a], toks(&b::length_sq(a), Exact));
             c.push("length", ty, &[&a], toks(&b::length(a), Exact));

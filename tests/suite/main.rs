@@ -75,6 +75,7 @@ mod control;
 mod decomp;
 mod dlpack;
 mod errors;
+mod extreme;
 mod f16;
 mod funcs;
 mod generics;

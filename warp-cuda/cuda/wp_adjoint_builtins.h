@@ -239,25 +239,30 @@ WP_ADJ_NOOP_STEP(u64)
       T::at(adj_b, i) += adj_ret * T::get(a, i);                                                  \
     }                                                                                             \
   }                                                                                               \
-  /* length: adj_v[i] += v[i] * (g / l) when l > 0. */                                            \
+  /* length: adj_v[i] += w[i] * (g / l) when l > 0, for the rescaled w = k v, l = |w| */        \
+  /* (detail::norm_scaled, wp_vector.h). */                                                     \
   WP_FN void adj_length(const V& v, V& adj_v, S adj_ret) {                                        \
     typedef vec_traits<V> T;                                                                      \
-    const S l = wp::length(v);                                                                    \
+    V w;                                                                                          \
+    S l, k, inv;                                                                                    \
+    detail::norm_scaled(v, [](const V& a) { return wp::dot(a, a); }, w, l, k, inv);                \
     if (l > (S)0) {                                                                               \
       const S gl = adj_ret / l;                                                                   \
-      for (int i = 0; i < T::N; ++i) T::at(adj_v, i) += T::get(v, i) * gl;                        \
+      for (int i = 0; i < T::N; ++i) T::at(adj_v, i) += T::get(w, i) * gl;                        \
     }                                                                                             \
   }                                                                                               \
-  /* normalize: n = v / l, d = dot(n, g); adj_v[i] += (g[i] - n[i] * d) / l when l > 0. */        \
+  /* normalize: n = w / l, d = dot(n, g); adj_v[i] += ((g[i] - n[i] * d) / l) * k when l > 0. */ \
   WP_FN void adj_normalize(const V& v, V& adj_v, const V& adj_ret) {                              \
     typedef vec_traits<V> T;                                                                      \
-    const S l = wp::length(v);                                                                    \
+    V w;                                                                                          \
+    S l, k, inv;                                                                                    \
+    detail::norm_scaled(v, [](const V& a) { return wp::dot(a, a); }, w, l, k, inv);                \
     if (l > (S)0) {                                                                               \
       V n;                                                                                        \
-      for (int i = 0; i < T::N; ++i) T::at(n, i) = T::get(v, i) / l;                              \
+      for (int i = 0; i < T::N; ++i) T::at(n, i) = T::get(w, i) / l;                              \
       const S d = wp::dot(n, adj_ret);                                                            \
       for (int i = 0; i < T::N; ++i)                                                              \
-        T::at(adj_v, i) += (T::get(adj_ret, i) - T::get(n, i) * d) / l;                           \
+        T::at(adj_v, i) += ((T::get(adj_ret, i) - T::get(n, i) * d) / l) * k;                    \
     }                                                                                             \
   }
 WP_ADJ_FVEC_FNS(Vec2, f32)

@@ -137,20 +137,26 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
       vec_traits<Q>::at(adj_b, i) += g * vec_traits<Q>::get(a, i);                               \
     }                                                                                            \
   }                                                                                              \
+  /* length, normalize: the vector rules, rescaled likewise (detail::norm_scaled). */           \
   WP_FN void adj_length(const Q& v, Q& adj_v, S g) {                                             \
-    const S l = wp::length(v);                                                                   \
+    Q w;                                                                                         \
+    S l, k, inv;                                                                                   \
+    detail::norm_scaled(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv);          \
     if (l > (S)0) {                                                                              \
       const S gl = g / l;                                                                        \
-      for (int i = 0; i < 4; ++i) vec_traits<Q>::at(adj_v, i) += vec_traits<Q>::get(v, i) * gl;  \
+      for (int i = 0; i < 4; ++i) vec_traits<Q>::at(adj_v, i) += vec_traits<Q>::get(w, i) * gl;  \
     }                                                                                            \
   }                                                                                              \
   WP_FN void adj_normalize(const Q& v, Q& adj_v, const Q& g) {                                   \
-    const S l = wp::length(v);                                                                   \
+    Q w;                                                                                         \
+    S l, k, inv;                                                                                   \
+    detail::norm_scaled(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv);          \
     if (l > (S)0) {                                                                              \
-      const Q n = Q##_from_xyzw(v.x / l, v.y / l, v.z / l, v.w / l);                             \
+      const Q n = Q##_from_xyzw(w.x / l, w.y / l, w.z / l, w.w / l);                             \
       const S d = detail::qdot(n, g);                                                            \
       for (int i = 0; i < 4; ++i)                                                                \
-        vec_traits<Q>::at(adj_v, i) += (vec_traits<Q>::get(g, i) - vec_traits<Q>::get(n, i) * d) / l; \
+        vec_traits<Q>::at(adj_v, i) +=                                                           \
+            ((vec_traits<Q>::get(g, i) - vec_traits<Q>::get(n, i) * d) / l) * k;                 \
     }                                                                                            \
   }                                                                                              \
   WP_FN void adj_quat_inverse(const Q&, Q& adj_q, const Q& g) {                                  \

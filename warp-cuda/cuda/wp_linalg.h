@@ -14,7 +14,8 @@
 //   trace(m), ddot(a, b)    left to right (ddot over the lanes in column-major order).
 //   skew(v)                 Vec3/DVec3: columns (0, z, -y), (-z, 0, x), (y, -x, 0).
 //   dot, length, normalize  quaternions: left to right; normalize gives the identity when the
-//                           length is not positive.
+//                           length is not positive; length and normalize rescaled by a
+//                           power of two as the vectors' are (wp_vector.h).
 //   quat_from_axis_angle, quat_rotate (q * v), quat_rotate_inv (conjugate(q) * v),
 //   quat_inverse, quat_to_matrix (glam's Mat3::from_quat), quat_from_matrix (glam's
 //   Quat::from_mat3), quat_slerp (Warp's axis-angle definition).
@@ -274,10 +275,18 @@ WP_FN Mat4 inverse(const Mat4& m) {
 #define WP_LINALG_QUAT(Q, V3, M3, S)                                                    \
   WP_FN S dot(const Q& a, const Q& b) { return detail::qdot(a, b); }                    \
   WP_FN S length_sq(const Q& q) { return detail::qdot(q, q); }                          \
-  WP_FN S length(const Q& q) { return sqrt(detail::qdot(q, q)); }                       \
+  /* length, normalize: rescaled by a power of two (wp_vector.h). */                   \
+  WP_FN S length(const Q& q) {                                                          \
+    Q w;                                                                                \
+    S l, k, inv;                                                                        \
+    detail::norm_scaled(q, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv); \
+    return l * inv;                                                                     \
+  }                                                                                     \
   WP_FN Q normalize(const Q& q) {                                                       \
-    const S l = length(q);                                                              \
-    if (l > (S)0) return Q##_from_xyzw(q.x / l, q.y / l, q.z / l, q.w / l);             \
+    Q w;                                                                                \
+    S l, k, inv;                                                                        \
+    detail::norm_scaled(q, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv); \
+    if (l > (S)0) return Q##_from_xyzw(w.x / l, w.y / l, w.z / l, w.w / l);             \
     return Q##_IDENTITY();                                                              \
   }                                                                                     \
   WP_FN Q quat_inverse(const Q& q) { return Q##_from_xyzw(-q.x, -q.y, -q.z, q.w); }     \

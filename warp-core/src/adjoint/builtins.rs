@@ -511,6 +511,8 @@ pub trait AdjFloatVec: FloatVec<Scalar: AdjFloat> + Adjoint {
 
 /// Adjoint of `length(v) = sqrt(dot(v, v))`: with `l = length(v)`, per component
 /// `adj_v[i] += v[i] * (g / l)` when `l > 0`; nothing at the zero vector (zero gradient).
+/// Where `dot(v, v)` would overflow or underflow, `v` and `l` are first scaled by the same
+/// exact power of two (the ratio `v / l` is unchanged), as the forward is.
 #[inline(always)]
 pub fn adj_length<V: AdjFloatVec>(v: V, adj_v: &mut V, adj_ret: V::Scalar) {
     V::adj_length(v, adj_v, adj_ret)
@@ -519,7 +521,9 @@ pub fn adj_length<V: AdjFloatVec>(v: V, adj_v: &mut V, adj_ret: V::Scalar) {
 /// Adjoint of `normalize(v)`: with `l = length(v)`, `n[i] = v[i] / l` (the forward result)
 /// and `d = dot(n, g)` (left to right), per component `adj_v[i] += (g[i] - n[i] * d) / l`
 /// when `l > 0` (the projection of `g` orthogonal to `n`, over `l`); nothing at the zero
-/// vector, where the forward returns the zero vector (zero gradient).
+/// vector, where the forward returns the zero vector (zero gradient). Where `dot(v, v)` would
+/// overflow or underflow, `n` and `1 / l` come from `v` scaled by an exact power of two `k`:
+/// `adj_v[i] += ((g[i] - n[i] * d) / |k v|) * k`.
 #[inline(always)]
 pub fn adj_normalize<V: AdjFloatVec>(v: V, adj_v: &mut V, adj_ret: V) {
     V::adj_normalize(v, adj_v, adj_ret)
@@ -576,32 +580,15 @@ macro_rules! fvec_ops {
             }
         }
         impl AdjFloatVec for $v {
+            // Rescaled like the forward where the squares would overflow or underflow
+            // (`builtins::norm`).
             #[inline(always)]
             fn adj_length(v: $v, adj_v: &mut $v, adj_ret: $s) {
-                let l = v.w_length();
-                if l > 0.0 {
-                    let gl = adj_ret / l;
-                    let v = v.to_array();
-                    let mut a = adj_v.to_array();
-                    for (a, x) in a.iter_mut().zip(v) {
-                        *a += x * gl;
-                    }
-                    *adj_v = $v::from_array(a);
-                }
+                crate::builtins::norm::adj_length(v, adj_v, adj_ret)
             }
             #[inline(always)]
             fn adj_normalize(v: $v, adj_v: &mut $v, adj_ret: $v) {
-                let l = v.w_length();
-                if l > 0.0 {
-                    let n = v.to_array().map(|x| x / l);
-                    let d = $v::from_array(n).w_dot(adj_ret);
-                    let g = adj_ret.to_array();
-                    let mut a = adj_v.to_array();
-                    for (i, a) in a.iter_mut().enumerate() {
-                        *a += (g[i] - n[i] * d) / l;
-                    }
-                    *adj_v = $v::from_array(a);
-                }
+                crate::builtins::norm::adj_normalize(v, adj_v, adj_ret)
             }
         }
     )*};

@@ -480,32 +480,14 @@ macro_rules! quat_adj {
             }
         }
         impl AdjFloatVec for $q {
+            // The vector rules, rescaled likewise (`builtins::norm`).
             #[inline(always)]
             fn adj_length(v: $q, adj_v: &mut $q, g: $s) {
-                let l = v.w_length();
-                if l > 0.0 {
-                    let gl = g / l;
-                    let v = v.to_array();
-                    let mut a = adj_v.to_array();
-                    for (a, x) in a.iter_mut().zip(v) {
-                        *a += x * gl;
-                    }
-                    *adj_v = $q::from_array(a);
-                }
+                crate::builtins::norm::adj_length(v, adj_v, g)
             }
             #[inline(always)]
             fn adj_normalize(v: $q, adj_v: &mut $q, g: $q) {
-                let l = v.w_length();
-                if l > 0.0 {
-                    let n = v.to_array().map(|x| x / l);
-                    let d = $q::from_array(n).w_dot(g);
-                    let g = g.to_array();
-                    let mut a = adj_v.to_array();
-                    for (i, a) in a.iter_mut().enumerate() {
-                        *a += (g[i] - n[i] * d) / l;
-                    }
-                    *adj_v = $q::from_array(a);
-                }
+                crate::builtins::norm::adj_normalize(v, adj_v, g)
             }
         }
         impl AdjInverse for $q {

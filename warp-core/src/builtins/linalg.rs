@@ -20,7 +20,8 @@
 //!   give infinities and NaNs for a singular matrix;
 //! * quaternion `dot`, `length`, `length_sq`: lanes `x, y, z, w` left to right (as vectors,
 //!   not glam's SIMD order); `normalize(q)` is `q / length(q)` lane by lane, or the identity
-//!   quaternion when the length is not positive (Warp's rule; glam gives NaN);
+//!   quaternion when the length is not positive (Warp's rule; glam gives NaN); `length` and
+//!   `normalize` scale by a power of two first, as the vectors' do (`builtins/norm.rs`);
 //! * `inverse(q)` and `quat_inverse(q)`: the conjugate `(-x, -y, -z, w)` (Warp and glam: exact
 //!   for unit quaternions, no normalization);
 //! * `quat_rotate(q, v)` is glam's `q * v`, `quat_rotate_inv(q, v)` is `conjugate(q) * v`: for
@@ -382,18 +383,15 @@ macro_rules! quat_impl {
             }
         }
         impl FloatVec for $q {
+            // Rescaled where the squares would overflow or underflow (see `norm`); the
+            // identity where the length is not positive.
             #[inline(always)]
             fn w_length(self) -> $s {
-                self.w_dot(self).w_sqrt()
+                super::norm::length(self)
             }
             #[inline(always)]
             fn w_normalize(self) -> Self {
-                let l = self.w_length();
-                if l > 0.0 {
-                    $q::from_xyzw(self.x / l, self.y / l, self.z / l, self.w / l)
-                } else {
-                    $q::IDENTITY
-                }
+                super::norm::normalize(self)
             }
         }
         impl Inverse for $q {

@@ -7,6 +7,9 @@
 //! * `sign(x)` is `-1` if `x < 0`, else `+1` (so `sign(0) = sign(-0.0) = sign(NaN) = 1`);
 //! * `clamp(x, lo, hi)` is `min(max(x, lo), hi)` and never panics, even when `lo > hi`;
 //! * `normalize` of a zero-length vector is the zero vector, never NaN;
+//! * `length` and `normalize` scale the vector by the power of two of its largest component
+//!   first, so that they stay accurate where the squares would overflow or underflow
+//!   (`builtins/norm.rs`);
 //! * `lerp(a, b, t)` is `a * (1 - t) + b * t`;
 //! * `asin`/`acos` clamp their argument to `[-1, 1]` first (Warp's rule, so a dot product
 //!   rounded to `1.0000001` still has an angle); NaN stays NaN;
@@ -664,14 +667,14 @@ macro_rules! vec_float {
             }
         }
         impl FloatVec for $v {
+            // Rescaled where the squares would overflow or underflow (see `norm`).
             #[inline(always)]
             fn w_length(self) -> $s {
-                self.w_dot(self).w_sqrt()
+                super::norm::length(self)
             }
             #[inline(always)]
             fn w_normalize(self) -> Self {
-                let l = self.w_length();
-                if l > 0.0 { self.lane_map(|x| x / l) } else { $v::ZERO }
+                super::norm::normalize(self)
             }
         }
     )*};
@@ -944,8 +947,17 @@ mod tests {
         let v = Vec4::new(1.0, 2.0, 3.0, 4.0);
         let l = (1.0f32 + 4.0 + 9.0 + 16.0).sqrt();
         assert_eq!(normalize(v), Vec4::new(1.0 / l, 2.0 / l, 3.0 / l, 4.0 / l));
-        // The length overflows to inf, so the components divide to 0 (as in CUDA).
-        assert_eq!(normalize(Vec2::new(f32::MAX, 0.0)), Vec2::ZERO);
+        // The squared norm overflows (and underflows) here; the rescaled path still gives
+        // the exact results (see `norm`).
+        assert_eq!(normalize(Vec2::new(f32::MAX, 0.0)), Vec2::X);
+        assert_eq!(length(Vec2::new(f32::MAX, 0.0)), f32::MAX);
+        assert_eq!(normalize(Vec3::new(0.0, -1e-40, 0.0)), Vec3::NEG_Y);
+        assert_eq!(length(Vec2::new(3e-30, 4e-30)), 5e-30);
+        let p = 2f64.powi(600);
+        assert_eq!(length(DVec2::new(3.0 * p, -4.0 * p)), 5.0 * p);
+        // An infinite component: the plain formula's IEEE results.
+        assert_eq!(length(Vec2::new(f32::INFINITY, 1.0)), f32::INFINITY);
+        assert!(length(Vec2::new(f32::INFINITY, f32::NAN)).is_nan());
 
         assert_eq!(cross(Vec3::X, Vec3::Y), Vec3::Z);
         assert_eq!(cross(DVec3::Y, DVec3::X), -DVec3::Z);

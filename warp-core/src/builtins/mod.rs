@@ -38,6 +38,7 @@ pub mod linalg;
 pub mod math;
 pub mod misc;
 pub mod noise;
+pub(crate) mod norm;
 pub mod rand;
 pub mod special;
 pub mod svd;
