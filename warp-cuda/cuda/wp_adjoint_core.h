@@ -627,7 +627,10 @@ WP_FN T adstack_pop(adstack_t* s) {
 template <typename T, int N>
 WP_FN void grad_accum_own_idx(const array_t<T, N>& g, const i64* idx, const T& v) {
   if (g.data == nullptr) return;
-  detail::grad_add_p(detail::elem_ptr_unchecked_idx(g, idx), v);
+  // Unqualified, as in `grad_accum_idx`: a user struct's `grad_add_p` (made with the struct's
+  // definition, in the global namespace) is found by argument-dependent lookup.
+  using detail::grad_add_p;
+  grad_add_p(detail::elem_ptr_unchecked_idx(g, idx), v);
 }
 template <typename T>
 WP_FN void grad_accum_own(const array_t<T, 1>& g, i64 i0, const typename identity<T>::type& v) {
