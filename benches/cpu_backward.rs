@@ -15,8 +15,11 @@
 
 use criterion::{black_box, Criterion};
 use rayon::prelude::*;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use warp_lang as wp;
+
+mod common;
+use common::median;
 use wp::prelude::*;
 
 const N: usize = 4_000_000;
@@ -44,18 +47,6 @@ fn hand_adjoint(x: &[f32], gx: &mut [f32], gp: &mut [f32], gy: &mut [f32]) {
             *gx += t;
             *gp += g;
         });
-}
-
-fn median(runs: usize, mut f: impl FnMut()) -> Duration {
-    let mut t: Vec<Duration> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    t[runs / 2]
 }
 
 fn main() {

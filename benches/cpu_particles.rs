@@ -12,8 +12,11 @@
 
 use criterion::{black_box, Criterion};
 use rayon::prelude::*;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use warp_lang as wp;
+
+mod common;
+use common::median;
 use wp::prelude::*;
 
 const N: usize = 1_000_000;
@@ -78,19 +81,6 @@ fn start() -> (Vec<Vec3>, Vec<Vec3>) {
         .map(|i| Vec3::new(0.1, -((i % 7) as f32) * 0.01, 0.2))
         .collect();
     (x, v)
-}
-
-/// Median of `runs` timings of `f`.
-fn median(runs: usize, mut f: impl FnMut()) -> Duration {
-    let mut t: Vec<Duration> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    t[runs / 2]
 }
 
 fn main() {

@@ -1,10 +1,10 @@
-//! What the GPU benchmarks share: timing, the Python sides (Warp's, PyTorch's) run in the same
+//! What the benchmarks share: timing, the Python sides (Warp's, PyTorch's) run in the same
 //! process's run, and fixed random inputs.
 
 #![allow(dead_code)] // each bench takes its own subset
 
 use std::process::Command;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use warp_lang as wp;
@@ -24,6 +24,19 @@ pub fn median_ms(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
     }
     t.sort_by(f64::total_cmp);
     Ok(t[REPS / 2])
+}
+
+/// Median of `runs` timings of `f` (a CPU call: nothing to synchronise).
+pub fn median(runs: usize, mut f: impl FnMut()) -> Duration {
+    let mut t: Vec<Duration> = (0..runs)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed()
+        })
+        .collect();
+    t.sort();
+    t[runs / 2]
 }
 
 /// Runs `script` with `args` under `python3`; its last line parsed as JSON, or why not.

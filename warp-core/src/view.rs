@@ -259,7 +259,7 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     #[inline(always)]
     pub unsafe fn load_unchecked<I: KernelIndex<N>>(&self, idx: I) -> T {
         // SAFETY: in bounds by the caller's contract, aligned and live by `new`'s.
-        unsafe { self.ptr.offset(self.offset_unchecked(idx)).read() }
+        unsafe { self.ptr_unchecked(idx).read() }
     }
 
     /// Writes the element at `idx` without a bounds check.
@@ -269,7 +269,7 @@ impl<T: Copy, const N: usize> ArrayView<T, N> {
     #[inline(always)]
     pub unsafe fn store_unchecked<I: KernelIndex<N>>(&self, idx: I, value: T) {
         // SAFETY: in bounds by the caller's contract, aligned and live by `new`'s.
-        unsafe { self.ptr.offset(self.offset_unchecked(idx)).write(value) }
+        unsafe { self.ptr_unchecked(idx).write(value) }
     }
 
     /// True when the view covers `dims` (one extent per dimension): every index drawn from
