@@ -112,6 +112,9 @@ pub use warp_macros::{func, kernel, Struct};
 pub use warp_report as report;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::aot;
+/// Several GPUs: NCCL collectives on arrays (`Communicator`, `group`), peer access.
+#[cfg(feature = "cuda")]
+pub use warp_runtime::distributed;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;

@@ -165,6 +165,9 @@ fn graph_fault_reaches_the_replaying_thread() {
     on_every_backend("graph_fault_reaches_the_replaying_thread", |dev| {
         let a = Array::<f32>::zeros(4, dev).unwrap();
         let out = Array::<f32>::zeros(1, dev).unwrap();
+        // Nothing compiles inside a capture: load the kernel first (whether another test of
+        // this binary has launched it already depends on the threads' order).
+        wp::load(&[wp::kernel_info(k_reads_past)], dev).unwrap();
         let graph =
             wp::capture(dev, || wp::launch(k_reads_past, 1, (&a, 7usize, &out), dev)).unwrap();
         // A GPU numbers the captured launch (the CPU records it, to launch at each replay).

@@ -3,8 +3,9 @@
 //!
 //! Each test is a plain function `fn name(dev: &wp::Device)`. A module lists its tests once,
 //! in `backend_tests!(..)`, which instantiates every one of them for every backend:
-//! `module::cpu_backend::name` runs it on the CPU, `module::cuda_backend::name` on `cuda:0`,
-//! or prints `SKIPPED` when there is no CUDA device.
+//! `module::cpu_backend::name` runs it on the CPU, `module::cuda_backend::name` on `cuda:0`
+//! (or the GPU named by `WARP_TEST_CUDA_DEVICE`, e.g. `cuda:1`, to run the whole suite on
+//! another GPU of a multi-GPU machine), or prints `SKIPPED` when there is no such device.
 //!
 //! Numeric comparisons are exact wherever the operation is exact or deterministic. On the CPU
 //! a kernel runs exactly the Rust arithmetic the host reference runs (rustc never contracts
@@ -29,14 +30,14 @@ macro_rules! backend_tests {
             )*
         }
 
-        /// The module's tests on the first CUDA device; each prints that it skipped when there
-        /// is none.
+        /// The module's tests on the first CUDA device (or `WARP_TEST_CUDA_DEVICE`); each prints
+        /// that it skipped when there is none.
         mod cuda_backend {
             $(
                 #[test]
                 $(#[$attr])*
                 fn $name() {
-                    match ::warp_lang::get_device("cuda:0") {
+                    match ::warp_lang::get_device(&crate::test_gpu()) {
                         Ok(dev) => {
                             // One test at a time on the GPU: some exhaust its memory
                             // (`out_of_memory_then_usable`) or time it. (Faults need no lock:
@@ -56,6 +57,11 @@ macro_rules! backend_tests {
             )*
         }
     };
+}
+
+/// The GPU the CUDA instances run on: `WARP_TEST_CUDA_DEVICE`, else `cuda:0`.
+fn test_gpu() -> String {
+    std::env::var("WARP_TEST_CUDA_DEVICE").unwrap_or_else(|_| "cuda:0".to_string())
 }
 
 /// Serialises the CUDA instances of the tests (see `backend_tests!`).

@@ -421,6 +421,74 @@ impl Gpu {
     pub(crate) fn cu_ctx(&self) -> sys::CUcontext {
         self.ctx.cu_ctx()
     }
+
+    /// Whether this GPU can read and write `peer`'s memory directly (over NVLink or PCIe),
+    /// which [`enable_peer_access`](Self::enable_peer_access) then turns on. False for the
+    /// same GPU.
+    pub fn can_access_peer(&self, peer: &Gpu) -> Result<bool> {
+        if self.ordinal() == peer.ordinal() {
+            return Ok(false);
+        }
+        let mut can: std::ffi::c_int = 0;
+        // SAFETY: valid device handles and out pointer.
+        unsafe { sys::cuDeviceCanAccessPeer(&mut can, self.ctx.cu_device(), peer.ctx.cu_device()) }
+            .result()
+            .map_err(|e| {
+                CudaError::driver(
+                    e,
+                    format!(
+                        "cuDeviceCanAccessPeer (cuda:{} to cuda:{})",
+                        self.ordinal(),
+                        peer.ordinal()
+                    ),
+                )
+            })?;
+        Ok(can != 0)
+    }
+
+    /// Lets kernels and copies on this GPU access `peer`'s memory directly, where the
+    /// hardware allows; returns whether access is on. Without it, copies between the two are
+    /// staged through host memory by the driver (correct, slower). Idempotent.
+    pub fn enable_peer_access(&self, peer: &Gpu) -> Result<bool> {
+        if !self.can_access_peer(peer)? {
+            return Ok(false);
+        }
+        self.bind()?;
+        // SAFETY: the peer's live primary context; flags must be 0.
+        match unsafe { sys::cuCtxEnablePeerAccess(peer.cu_ctx(), 0) } {
+            sys::CUresult::CUDA_SUCCESS
+            | sys::CUresult::CUDA_ERROR_PEER_ACCESS_ALREADY_ENABLED => Ok(true),
+            e => Err(CudaError::driver(
+                cudarc::driver::DriverError(e),
+                format!(
+                    "cuCtxEnablePeerAccess (cuda:{} to cuda:{})",
+                    self.ordinal(),
+                    peer.ordinal()
+                ),
+            )),
+        }
+    }
+
+    /// Turns direct access to `peer`'s memory off again; returns whether it had been on.
+    pub fn disable_peer_access(&self, peer: &Gpu) -> Result<bool> {
+        if self.ordinal() == peer.ordinal() {
+            return Ok(false);
+        }
+        self.bind()?;
+        // SAFETY: the peer's live primary context.
+        match unsafe { sys::cuCtxDisablePeerAccess(peer.cu_ctx()) } {
+            sys::CUresult::CUDA_SUCCESS => Ok(true),
+            sys::CUresult::CUDA_ERROR_PEER_ACCESS_NOT_ENABLED => Ok(false),
+            e => Err(CudaError::driver(
+                cudarc::driver::DriverError(e),
+                format!(
+                    "cuCtxDisablePeerAccess (cuda:{} to cuda:{})",
+                    self.ordinal(),
+                    peer.ordinal()
+                ),
+            )),
+        }
+    }
 }
 
 /// A CUDA stream on one device. Cloning is cheap (shared handle); the stream is destroyed when
@@ -439,6 +507,21 @@ impl Stream {
         self.inner.synchronize().map_err(|e| {
             CudaError::driver(e, format!("cuStreamSynchronize on cuda:{}", self.ordinal))
         })
+    }
+
+    /// Whether all work queued on this stream has finished (`cuStreamQuery`), without
+    /// blocking: what a wait with a timeout polls.
+    pub fn query(&self) -> Result<bool> {
+        self.bind()?;
+        // SAFETY: a live stream of the bound context.
+        match unsafe { sys::cuStreamQuery(self.cu_stream()) } {
+            sys::CUresult::CUDA_SUCCESS => Ok(true),
+            sys::CUresult::CUDA_ERROR_NOT_READY => Ok(false),
+            e => Err(CudaError::driver(
+                cudarc::driver::DriverError(e),
+                format!("cuStreamQuery on cuda:{}", self.ordinal),
+            )),
+        }
     }
 
     /// Makes future work on this stream wait for `event`'s recorded work (any device).

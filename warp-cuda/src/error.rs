@@ -65,6 +65,25 @@ pub enum CudaError {
     /// An argument was rejected before reaching CUDA (out-of-range offset, wrong device, ...).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// An NCCL call failed (`warp_cuda::nccl`).
+    #[error("{op}: {message}")]
+    Nccl {
+        /// What was being done, e.g. "ncclAllReduce (Sum) of 1024 F32 on rank 1".
+        op: String,
+        /// The `ncclResult_t` code.
+        code: i32,
+        /// NCCL's description and its last error text.
+        message: String,
+    },
+    /// A wait for other ranks or another process passed its timeout; what was waited for has
+    /// been aborted.
+    #[error("{op}: timed out after {waited:.1?}")]
+    Timeout {
+        /// What was waited for.
+        op: String,
+        /// How long it waited.
+        waited: std::time::Duration,
+    },
     /// A file-system operation of the kernel cache failed.
     #[error("{op}: {source}")]
     Io {
@@ -123,6 +142,21 @@ impl PartialEq for CudaError {
                 },
             ) => n1 == n2 && a1 == a2 && l1 == l2,
             (InvalidArgument(a), InvalidArgument(b)) => a == b,
+            (
+                Nccl {
+                    op: o1,
+                    code: c1,
+                    message: m1,
+                },
+                Nccl {
+                    op: o2,
+                    code: c2,
+                    message: m2,
+                },
+            ) => o1 == o2 && c1 == c2 && m1 == m2,
+            (Timeout { op: o1, waited: w1 }, Timeout { op: o2, waited: w2 }) => {
+                o1 == o2 && w1 == w2
+            }
             (Io { op: o1, source: s1 }, Io { op: o2, source: s2 }) => {
                 o1 == o2 && s1.kind() == s2.kind() && s1.to_string() == s2.to_string()
             }

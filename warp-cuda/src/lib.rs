@@ -12,6 +12,7 @@
 //! - [`compile`](mod@compile): NVRTC to cubin ([`compile()`], [`CompileOptions`], [`nvrtc_version`]);
 //! - [`cache`]: the on-disk kernel cache ([`compile_cached`], [`KernelCache`]);
 //! - [`launch`]: [`Module`], [`Function`], [`Gpu::launch_raw`];
+//! - [`nccl`]: NCCL communicators and collectives, loaded at run time ([`nccl::Comm`]);
 //! - [`graph`]: stream capture ([`Stream::begin_capture`]) and replay ([`Graph`]).
 //!
 //! Diagnostics go to the `log` facade, with the module as target: `warp_cuda::device` (what
@@ -31,6 +32,7 @@ pub mod error;
 pub mod graph;
 pub mod launch;
 pub mod memory;
+pub mod nccl;
 
 #[cfg(test)]
 mod gpu_tests;

@@ -51,6 +51,8 @@ pub mod tape;
 #[cfg(feature = "cuda")]
 pub use cuda::aot;
 #[cfg(feature = "cuda")]
+pub use cuda::distributed;
+#[cfg(feature = "cuda")]
 pub use cuda::pinned;
 pub use cuda::source as cuda_source;
 #[cfg(feature = "cuda")]

@@ -10,6 +10,7 @@
 //! - `primitives`: the launch plans of the parallel primitives (`wp_primitives.h`), run.
 //! - `objects`: the build kernels of host objects (the hash grid's, `wp_hash_grid.h`).
 //! - `capture`: graph capture on a GPU (the thread's capture stream) and graph replay.
+//! - `distributed`: several GPUs: NCCL communicators and collectives on arrays, peer access.
 //! - `memory`: GPU memory for arrays. `stream`, `pinned`: the public streams, events and
 //!   pinned host memory.
 //! - `backend`: `Cuda`, the backend (see the crate's `backend.rs`) that the runtime
@@ -23,6 +24,8 @@ pub mod aot;
 mod backend;
 #[cfg(feature = "cuda")]
 pub(crate) mod capture;
+#[cfg(feature = "cuda")]
+pub mod distributed;
 #[cfg(feature = "cuda")]
 mod fault;
 #[cfg(feature = "cuda")]
