@@ -2,7 +2,7 @@
 //! a hanging membrane of mass points joined by springs, its rows divided among the GPUs.
 //!
 //! ```text
-//! cargo run --release --example multi_gpu_membrane -- [--gpus 4] [--rows 4096] [--cols 4096]
+//! cargo run --release --example multi_gpu_membrane -- [--gpus 4] [--rows 8192] [--cols 8192]
 //!     [--steps 200]
 //! ```
 //! The membrane: `rows x cols` particles 1 cm apart, each joined to its four neighbours by a
@@ -93,10 +93,10 @@ struct Args {
     #[arg(long, value_parser = common::cli::num::<usize>)]
     gpus: Option<usize>,
     /// Rows of the membrane in the strong-scaling runs, and per GPU in the weak-scaling runs.
-    #[arg(long, default_value = "4096", value_parser = common::cli::num::<usize>)]
+    #[arg(long, default_value = "8192", value_parser = common::cli::num::<usize>)]
     rows: usize,
     /// Columns of the membrane.
-    #[arg(long, default_value = "4096", value_parser = common::cli::num::<usize>)]
+    #[arg(long, default_value = "8192", value_parser = common::cli::num::<usize>)]
     cols: usize,
     /// Steps per run (the first 10 are not timed).
     #[arg(long, default_value = "200", value_parser = common::cli::num::<usize>)]
@@ -152,8 +152,7 @@ fn run_band(
             membrane_step,
             (band, cols),
             (
-                &x, &v, &x2, &v2, first, rows, cols, K, SPACING, MASS,
-                DAMPING, DT,
+                &x, &v, &x2, &v2, first, rows, cols, K, SPACING, MASS, DAMPING, DT,
             ),
             &dev,
         )?;
@@ -202,7 +201,11 @@ fn run(gpus: &[wp::Device], g: usize, rows: usize, args: &Args) -> wp::Result<Ve
             .map(|r| {
                 let comms = comms.clone();
                 s.spawn(move || {
-                    let band = if r == g - 1 { rows - per * (g - 1) } else { per };
+                    let band = if r == g - 1 {
+                        rows - per * (g - 1)
+                    } else {
+                        per
+                    };
                     run_band(&comms[r], r * per, band, rows, args.cols, args.steps)
                 })
             })

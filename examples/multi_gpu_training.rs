@@ -97,7 +97,8 @@ struct RankRun {
 /// Start point and wind of environment `i` (the same whatever the split: a hash of `i`).
 fn environment(i: usize) -> (Vec3, Vec3) {
     let h = |k: u64| {
-        let mut z = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ k.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        let mut z =
+            (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ k.wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 31)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ((z >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
     };
@@ -138,10 +139,20 @@ fn rank_run(
         {
             let _rec = tape.record();
             for s in 0..steps {
-                wp::launch(env_step, count, (&x, &v, &wind, &u, DRAG, DT, s as i32), &dev)?;
+                wp::launch(
+                    env_step,
+                    count,
+                    (&x, &v, &wind, &u, DRAG, DT, s as i32),
+                    &dev,
+                )?;
             }
             loss.fill(0.0)?;
-            wp::launch(final_distance, count, (&x, steps as i32, scale, &loss), &dev)?;
+            wp::launch(
+                final_distance,
+                count,
+                (&x, steps as i32, scale, &loss),
+                &dev,
+            )?;
         }
         tape.backward(&loss)?;
         comm.synchronize()?;
@@ -181,7 +192,11 @@ fn run(gpus: &[wp::Device], g: usize, total: usize, args: &Args) -> wp::Result<V
             .map(|r| {
                 let comms = comms.clone();
                 s.spawn(move || {
-                    let count = if r == g - 1 { total - per * (g - 1) } else { per };
+                    let count = if r == g - 1 {
+                        total - per * (g - 1)
+                    } else {
+                        per
+                    };
                     rank_run(&comms[r], r * per, count, total, args)
                 })
             })
@@ -223,17 +238,32 @@ fn real_main(args: &Args) -> wp::Result<()> {
         args.envs,
         args.steps,
         args.iterations,
-        all[..max].iter().map(|d| d.name().to_string()).collect::<Vec<_>>().join(", "),
+        all[..max]
+            .iter()
+            .map(|d| d.name().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
         wp::distributed::nccl_version()?
     );
     // Strong scaling, with the loss curves.
-    let mut strong = Table::new(["GPUs", "ms / iteration", "speed-up", "efficiency", "communication", "final loss", "max rel. loss diff vs 1 GPU"]);
+    let mut strong = Table::new([
+        "GPUs",
+        "ms / iteration",
+        "speed-up",
+        "efficiency",
+        "communication",
+        "final loss",
+        "max rel. loss diff vs 1 GPU",
+    ]);
     let mut base: Option<(Vec<f32>, f64)> = None;
     let mut worst_diff = 0.0f64;
     for &g in &counts {
         let runs = run(&all, g, args.envs, args)?;
         let t = runs.iter().map(|r| r.per_iteration).fold(0.0, f64::max);
-        let c = runs.iter().map(|r| r.communication / r.per_iteration).fold(0.0, f64::max);
+        let c = runs
+            .iter()
+            .map(|r| r.communication / r.per_iteration)
+            .fold(0.0, f64::max);
         let losses = &runs[0].losses;
         // Every rank holds the same reduced loss.
         for r in &runs[1..] {
@@ -256,7 +286,8 @@ fn real_main(args: &Args) -> wp::Result<()> {
             sci(diff),
         ]);
         if g == *counts.last().unwrap() {
-            let mut curve_table = Table::new(["iteration", "loss, 1 GPU", &format!("loss, {g} GPUs")]);
+            let mut curve_table =
+                Table::new(["iteration", "loss, 1 GPU", &format!("loss, {g} GPUs")]);
             for (k, (a, b)) in base.as_ref().unwrap().0.iter().zip(losses).enumerate() {
                 if k % (args.iterations / 10).max(1) == 0 || k + 1 == losses.len() {
                     curve_table.push([k.to_string(), sci(*a as f64), sci(*b as f64)]);
@@ -265,14 +296,26 @@ fn real_main(args: &Args) -> wp::Result<()> {
             println!("\nLoss curves\n\n{curve_table}");
         }
     }
-    println!("\nStrong scaling: {} environments in all\n\n{strong}", args.envs);
+    println!(
+        "\nStrong scaling: {} environments in all\n\n{strong}",
+        args.envs
+    );
     // Weak scaling.
-    let mut weak = Table::new(["GPUs", "environments", "ms / iteration", "efficiency", "communication"]);
+    let mut weak = Table::new([
+        "GPUs",
+        "environments",
+        "ms / iteration",
+        "efficiency",
+        "communication",
+    ]);
     let mut t1 = None;
     for &g in &counts {
         let runs = run(&all, g, args.envs * g, args)?;
         let t = runs.iter().map(|r| r.per_iteration).fold(0.0, f64::max);
-        let c = runs.iter().map(|r| r.communication / r.per_iteration).fold(0.0, f64::max);
+        let c = runs
+            .iter()
+            .map(|r| r.communication / r.per_iteration)
+            .fold(0.0, f64::max);
         let t1 = *t1.get_or_insert(t);
         weak.push([
             g.to_string(),
@@ -282,7 +325,10 @@ fn real_main(args: &Args) -> wp::Result<()> {
             format!("{:.1}%", 100.0 * c),
         ]);
     }
-    println!("\nWeak scaling: {} environments per GPU\n\n{weak}", args.envs);
+    println!(
+        "\nWeak scaling: {} environments per GPU\n\n{weak}",
+        args.envs
+    );
     let ok = worst_diff <= 1e-4;
     println!(
         "\n{}: the loss curves on 1 and {} GPUs differ by at most {} relative (tolerance 1e-4: \

@@ -112,12 +112,12 @@ pub use warp_macros::{func, kernel, Struct};
 pub use warp_report as report;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::aot;
-/// Several GPUs: NCCL collectives on arrays (`Communicator`, `group`), peer access.
-#[cfg(feature = "cuda")]
-pub use warp_runtime::distributed;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
 pub use warp_runtime::cuda_source;
+/// Several GPUs: NCCL collectives on arrays (`Communicator`, `group`), peer access.
+#[cfg(feature = "cuda")]
+pub use warp_runtime::distributed;
 pub mod docs;
 /// The trailing axes that vector and matrix elements have in `Array::as_ndarray_components`
 /// and in DLPack tensors.

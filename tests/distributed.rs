@@ -166,7 +166,10 @@ fn all_reduce_every_op<T: Val>(comms: &[Communicator], n: usize) {
         for (r, c) in comms.iter().enumerate() {
             c.synchronize().unwrap();
             let got = recvs[r].to_vec().unwrap();
-            let what = format!("all_reduce {op:?} of {} on rank {r}", std::any::type_name::<T>());
+            let what = format!(
+                "all_reduce {op:?} of {} on rank {r}",
+                std::any::type_name::<T>()
+            );
             if T::EPS > 0.0 && op == ReduceOp::Avg {
                 let exact = |i: usize| {
                     (0..world).map(|q| input(op, i, q)).sum::<i64>() as f64 / world as f64
@@ -209,12 +212,21 @@ fn scatter_gather_broadcast<T: Val>(comms: &[Communicator], block: usize) {
         let want: Vec<T> = (0..block)
             .map(|i| T::of(reduced(ReduceOp::Sum, r * block + i, world)))
             .collect();
-        assert_eq!(recvs[r].to_vec().unwrap(), want, "reduce_scatter on rank {r}");
+        assert_eq!(
+            recvs[r].to_vec().unwrap(),
+            want,
+            "reduce_scatter on rank {r}"
+        );
     }
     // All-gather: every rank gets every rank's block, in rank order.
     let value = |r: usize, i: usize| T::of(((r * 31 + i * 7) % 100) as i64);
     let parts: Vec<wp::Array<T>> = (0..world)
-        .map(|r| on(&comms[r], &(0..block).map(|i| value(r, i)).collect::<Vec<_>>()))
+        .map(|r| {
+            on(
+                &comms[r],
+                &(0..block).map(|i| value(r, i)).collect::<Vec<_>>(),
+            )
+        })
         .collect();
     let gathered: Vec<wp::Array<T>> = comms
         .iter()
@@ -232,12 +244,21 @@ fn scatter_gather_broadcast<T: Val>(comms: &[Communicator], block: usize) {
         .collect();
     for (r, c) in comms.iter().enumerate() {
         c.synchronize().unwrap();
-        assert_eq!(gathered[r].to_vec().unwrap(), want, "all_gather on rank {r}");
+        assert_eq!(
+            gathered[r].to_vec().unwrap(),
+            want,
+            "all_gather on rank {r}"
+        );
     }
     // Broadcast from the last rank, in place.
     let root = world - 1;
     let arrays: Vec<wp::Array<T>> = (0..world)
-        .map(|r| on(&comms[r], &(0..block).map(|i| value(r, i)).collect::<Vec<_>>()))
+        .map(|r| {
+            on(
+                &comms[r],
+                &(0..block).map(|i| value(r, i)).collect::<Vec<_>>(),
+            )
+        })
         .collect();
     group(|| {
         for (r, c) in comms.iter().enumerate() {
@@ -307,9 +328,7 @@ fn vectors_and_matrices_reduce_component_wise() {
         .iter()
         .enumerate()
         .map(|(r, c)| {
-            let d: Vec<Vec3> = (0..n)
-                .map(|i| Vec3::new(i as f32, r as f32, 1.0))
-                .collect();
+            let d: Vec<Vec3> = (0..n).map(|i| Vec3::new(i as f32, r as f32, 1.0)).collect();
             wp::Array::from_slice(&d, c.device()).unwrap()
         })
         .collect();
@@ -435,20 +454,35 @@ fn bad_arguments_are_errors() {
     let a = wp::Array::<f32>::zeros(8, c.device()).unwrap();
     // An array on the CPU.
     let host = wp::Array::<f32>::zeros(8, &wp::cpu()).unwrap();
-    let e = c.all_reduce(&host, &a, ReduceOp::Sum).unwrap_err().to_string();
-    assert!(e.contains("all_reduce on rank 0") && e.contains("\"cpu\""), "{e}");
+    let e = c
+        .all_reduce(&host, &a, ReduceOp::Sum)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("all_reduce on rank 0") && e.contains("\"cpu\""),
+        "{e}"
+    );
     // Lengths that do not fit.
     let b = wp::Array::<f32>::zeros(9, c.device()).unwrap();
     let e = c.all_reduce(&a, &b, ReduceOp::Sum).unwrap_err().to_string();
     assert!(e.contains("send has 8 elements and recv 9"), "{e}");
     let e = c.all_gather(&a, &a).unwrap_err().to_string();
-    assert!(e.contains(&format!("recv = world ({world}) × send")) || world == 1, "{e}");
-    let e = c.reduce_scatter(&a, &b, ReduceOp::Sum).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("recv = world ({world}) × send")) || world == 1,
+        "{e}"
+    );
+    let e = c
+        .reduce_scatter(&a, &b, ReduceOp::Sum)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("reduce_scatter"), "{e}");
     // A non-contiguous view.
     let m = wp::Array::<f32, 2>::zeros([4, 4], c.device()).unwrap();
     let t = m.transpose();
-    let e = c.all_reduce_in_place(&t, ReduceOp::Sum).unwrap_err().to_string();
+    let e = c
+        .all_reduce_in_place(&t, ReduceOp::Sum)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("not contiguous"), "{e}");
     // Roots and peers outside the world.
     let e = c.broadcast(&a, world).unwrap_err().to_string();
@@ -520,6 +554,15 @@ fn mismatched_ranks_in_a_group_are_errors_not_hangs() {
             && e.contains("rank 1 posts 0 matching recv from rank 0 of 8 F32"),
         "{e}"
     );
+    // An array of the other GPU.
+    let e = comms[0]
+        .all_reduce_in_place(&a1, ReduceOp::Sum)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("all_reduce on rank 0") && e.contains("is on \"cuda:1\""),
+        "{e}"
+    );
     // Still usable: a matching pair.
     a0.fill(2.0).unwrap();
     group(|| {
@@ -545,10 +588,18 @@ fn a_missing_rank_times_out() {
         .unwrap_err()
         .to_string();
     let waited = start.elapsed();
-    assert!(e.contains("ncclCommInitRank (rank 0 of 2") && e.contains("timed out"), "{e}");
-    assert!(waited < Duration::from_secs(30), "returned after {waited:?}");
+    assert!(
+        e.contains("ncclCommInitRank (rank 0 of 2") && e.contains("timed out"),
+        "{e}"
+    );
+    assert!(
+        waited < Duration::from_secs(30),
+        "returned after {waited:?}"
+    );
     // A rank outside the world.
-    let e = Communicator::new(&gpus[0], 2, 2, &id).unwrap_err().to_string();
+    let e = Communicator::new(&gpus[0], 2, 2, &id)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("rank 2 of a world of 2"), "{e}");
     // Unique ids round-trip through hex; malformed text is an error.
     assert_eq!(
@@ -565,7 +616,10 @@ fn unique_id_text_form() {
     let id = UniqueId::from_bytes(std::array::from_fn(|i| (i * 37) as u8));
     let hex = id.to_hex();
     assert_eq!(hex.len(), 256);
-    assert_eq!(UniqueId::from_hex(&format!(" {hex}\n")).unwrap().to_bytes(), id.to_bytes());
+    assert_eq!(
+        UniqueId::from_hex(&format!(" {hex}\n")).unwrap().to_bytes(),
+        id.to_bytes()
+    );
     for bad in ["", "zz", &hex[..254], &format!("{}g", &hex[..255])] {
         assert!(UniqueId::from_hex(bad).is_err(), "{bad:?} accepted");
     }
@@ -711,7 +765,10 @@ fn multi_gpu_basics() {
         .collect();
     for (k, a) in arrays.iter().enumerate() {
         let got = a.to_vec().unwrap();
-        assert!(got.iter().zip(&data).all(|(g, d)| *g == d * (k + 1) as f32), "cuda:{k}");
+        assert!(
+            got.iter().zip(&data).all(|(g, d)| *g == d * (k + 1) as f32),
+            "cuda:{k}"
+        );
     }
     for (i, a) in gpus.iter().enumerate() {
         for (j, b) in gpus.iter().enumerate() {
@@ -748,7 +805,15 @@ fn multi_gpu_basics() {
     s1.wait_event(&ev).unwrap();
     wp::launch_on(d_scale, n, (&y, 2.0f32), &s1).unwrap();
     s1.synchronize().unwrap();
-    assert!(ev.is_complete().unwrap(), "cuda:1's stream finished before cuda:0's event");
+    assert!(
+        ev.is_complete().unwrap(),
+        "cuda:1's stream finished before cuda:0's event"
+    );
     wp::synchronize().unwrap();
-    assert!(y.to_vec().unwrap().iter().zip(&data).all(|(g, d)| *g == d * 2.0));
+    assert!(y
+        .to_vec()
+        .unwrap()
+        .iter()
+        .zip(&data)
+        .all(|(g, d)| *g == d * 2.0));
 }

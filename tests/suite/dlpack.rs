@@ -32,10 +32,9 @@ fn k_copy_2d(src: Array<f32, 2>, dst: Array<f32, 2>) {
 }
 
 fn dl_device(dev: &wp::Device) -> DLDevice {
-    if dev.is_cpu() {
-        DLDevice::CPU
-    } else {
-        DLDevice::cuda(0)
+    match dev.kind() {
+        wp::DeviceKind::Cpu => DLDevice::CPU,
+        wp::DeviceKind::Cuda { ordinal } => DLDevice::cuda(ordinal as i32),
     }
 }
 

@@ -5,7 +5,7 @@
 //   atomic_cas (a, idx..., compare, value, ctx) -> old value (floats: bitwise compare)
 //
 // for arrays of i32, u32, i64, u64 (wrapping add/sub), f32, f64, f16 (add/sub/min/max only; f16:
-// a CAS loop on the containing 32-bit word) (min/max with fmin/fmax
+// a 16-bit CAS loop) (min/max with fmin/fmax
 // semantics: a NaN operand loses) and float vectors (componentwise, x first, each component
 // atomic on its own; the vector as a whole is not updated atomically, as in Warp/CUDA).
 // The index is bounds-checked like `load`: out of bounds records OutOfBounds, touches no
@@ -83,12 +83,26 @@ WP_FN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { retu
 WP_FN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
 WP_FN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
 
-// ----- f16: a CAS loop on the aligned 32-bit word holding the element -----
-// (The other half of the word is written back unchanged; a concurrent change to it makes the
-// CAS fail and retry, so nothing is lost. The word never leaves the allocation's 256-byte
-// granularity.) Each new value is one f16 operation (through f32), as on the CPU.
+// ----- f16: a CAS loop on the element's 16 bits -----
+// sm_70 and newer (every architecture CUDA 13's NVRTC targets) have a 16-bit atomicCAS.
+// Older ones CAS the aligned 32-bit word holding the element, writing the other half back
+// unchanged (a concurrent change to it fails the CAS and retries); that reads 2 bytes past a
+// last element at the end of an allocation (inside the allocation granularity, but
+// compute-sanitizer's memcheck reports it, and an external array's neighbour may lie there),
+// so it is kept only where there is nothing else. Each new value is one f16 operation
+// (through f32), as on the CPU.
 template <typename F>
 WP_FN f16 cas_loop_f16(f16* p, F f) {
+#if !defined(__CUDA_ARCH__) || __CUDA_ARCH__ >= 700
+  unsigned short* h = (unsigned short*)p;
+  unsigned short old = *(volatile unsigned short*)h;
+  unsigned short assumed;
+  do {
+    assumed = old;
+    old = atomicCAS(h, assumed, (unsigned short)f(f16_from_bits((u16)assumed)).bits);
+  } while (old != assumed);
+  return f16_from_bits((u16)old);
+#else
   const unsigned long long addr = (unsigned long long)p;
   unsigned int* w = (unsigned int*)(addr & ~3ull);
   const unsigned int shift = (addr & 2ull) != 0 ? 16u : 0u;  // little-endian
@@ -101,6 +115,7 @@ WP_FN f16 cas_loop_f16(f16* p, F f) {
     old = atomicCAS(w, assumed, word);
   } while (old != assumed);
   return f16_from_bits((u16)(old >> shift));
+#endif
 }
 WP_FN f16 atomic_add_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return x + v; }); }
 WP_FN f16 atomic_sub_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return x - v; }); }

@@ -456,8 +456,9 @@ impl Gpu {
         self.bind()?;
         // SAFETY: the peer's live primary context; flags must be 0.
         match unsafe { sys::cuCtxEnablePeerAccess(peer.cu_ctx(), 0) } {
-            sys::CUresult::CUDA_SUCCESS
-            | sys::CUresult::CUDA_ERROR_PEER_ACCESS_ALREADY_ENABLED => Ok(true),
+            sys::CUresult::CUDA_SUCCESS | sys::CUresult::CUDA_ERROR_PEER_ACCESS_ALREADY_ENABLED => {
+                Ok(true)
+            }
             e => Err(CudaError::driver(
                 cudarc::driver::DriverError(e),
                 format!(

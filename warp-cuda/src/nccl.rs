@@ -213,8 +213,14 @@ struct Api {
         NcclComm,
         *mut c_void,
     ) -> NcclResult,
-    send: unsafe extern "C" fn(*const c_void, usize, c_int, c_int, NcclComm, *mut c_void)
-        -> NcclResult,
+    send: unsafe extern "C" fn(
+        *const c_void,
+        usize,
+        c_int,
+        c_int,
+        NcclComm,
+        *mut c_void,
+    ) -> NcclResult,
     recv:
         unsafe extern "C" fn(*mut c_void, usize, c_int, c_int, NcclComm, *mut c_void) -> NcclResult,
     group_start: unsafe extern "C" fn() -> NcclResult,
@@ -251,8 +257,9 @@ fn resolve(lib: libloading::Library, path: &str) -> std::result::Result<Api, Str
     macro_rules! sym {
         ($name:literal) => {
             // SAFETY: the symbol is NCCL's, with the C signature of the field it fills.
-            *unsafe { lib.get(concat!($name, "\0").as_bytes()) }
-                .map_err(|e| format!("{path} lacks {} ({e}); NCCL 2.17 or newer is needed", $name))?
+            *unsafe { lib.get(concat!($name, "\0").as_bytes()) }.map_err(|e| {
+                format!("{path} lacks {} ({e}); NCCL 2.17 or newer is needed", $name)
+            })?
         };
     }
     Ok(Api {
@@ -464,6 +471,27 @@ impl std::fmt::Debug for Comm {
     }
 }
 
+/// How a wait polls: yields the CPU for the first polls (an operation that is about to be
+/// ready should not cost a sleep's latency: a step's halo exchange waits here), then sleeps
+/// with a doubling pause up to 1 ms.
+#[derive(Default)]
+struct Backoff {
+    polls: u32,
+    pause: Duration,
+}
+
+impl Backoff {
+    fn pause(&mut self) {
+        self.polls += 1;
+        if self.polls < 1000 {
+            std::thread::yield_now();
+            return;
+        }
+        self.pause = (self.pause * 2).clamp(Duration::from_micros(10), Duration::from_millis(1));
+        std::thread::sleep(self.pause);
+    }
+}
+
 fn nanos(d: Duration) -> u64 {
     u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
 }
@@ -502,7 +530,12 @@ impl Comm {
         let code = unsafe {
             (api.comm_init_rank_config)(&mut raw, world as c_int, id.0, rank as c_int, &mut config)
         };
-        let op = || format!("ncclCommInitRank (rank {rank} of {world} on cuda:{})", gpu.ordinal());
+        let op = || {
+            format!(
+                "ncclCommInitRank (rank {rank} of {world} on cuda:{})",
+                gpu.ordinal()
+            )
+        };
         if code != NCCL_SUCCESS && code != NCCL_IN_PROGRESS {
             let err = nccl_error(api, code, None, op());
             if !raw.is_null() {
@@ -559,7 +592,10 @@ impl Comm {
                 )
             };
             if let Err(e) = check(api, code, None, || {
-                format!("ncclCommInitRank (rank {rank} of {world} on cuda:{})", gpu.ordinal())
+                format!(
+                    "ncclCommInitRank (rank {rank} of {world} on cuda:{})",
+                    gpu.ordinal()
+                )
             }) {
                 first_err.get_or_insert(e);
             }
@@ -689,7 +725,7 @@ impl Comm {
     fn wait_ready(&self, op: impl Fn() -> String) -> Result<()> {
         let api = self.live(&op)?;
         let start = Instant::now();
-        let mut pause = Duration::from_micros(1);
+        let mut backoff = Backoff::default();
         loop {
             if self.async_state(api, &op)? {
                 return Ok(());
@@ -701,8 +737,7 @@ impl Comm {
                     waited: start.elapsed(),
                 });
             }
-            std::thread::sleep(pause);
-            pause = (pause * 2).min(Duration::from_millis(1));
+            backoff.pause();
         }
     }
 
@@ -754,7 +789,12 @@ impl Comm {
         op: ReduceOp,
         stream: &Stream,
     ) -> Result<()> {
-        let what = || format!("ncclAllReduce ({op:?}) of {count} {dtype:?} on rank {}", self.rank);
+        let what = || {
+            format!(
+                "ncclAllReduce ({op:?}) of {count} {dtype:?} on rank {}",
+                self.rank
+            )
+        };
         self.issue(stream, &what, |api, comm, s| {
             // SAFETY: the caller's contract.
             unsafe {
@@ -821,7 +861,10 @@ impl Comm {
         stream: &Stream,
     ) -> Result<()> {
         let what = || {
-            format!("ncclAllGather of {send_count} {dtype:?} per rank on rank {}", self.rank)
+            format!(
+                "ncclAllGather of {send_count} {dtype:?} per rank on rank {}",
+                self.rank
+            )
         };
         self.issue(stream, &what, |api, comm, s| {
             // SAFETY: the caller's contract.
@@ -906,7 +949,12 @@ impl Comm {
         peer: usize,
         stream: &Stream,
     ) -> Result<()> {
-        let what = || format!("ncclSend of {count} {dtype:?} from rank {} to {peer}", self.rank);
+        let what = || {
+            format!(
+                "ncclSend of {count} {dtype:?} from rank {} to {peer}",
+                self.rank
+            )
+        };
         self.check_peer(peer, &what)?;
         self.issue(stream, &what, |api, comm, s| {
             // SAFETY: the caller's contract.
@@ -935,7 +983,12 @@ impl Comm {
         peer: usize,
         stream: &Stream,
     ) -> Result<()> {
-        let what = || format!("ncclRecv of {count} {dtype:?} on rank {} from {peer}", self.rank);
+        let what = || {
+            format!(
+                "ncclRecv of {count} {dtype:?} on rank {} from {peer}",
+                self.rank
+            )
+        };
         self.check_peer(peer, &what)?;
         self.issue(stream, &what, |api, comm, s| {
             // SAFETY: the caller's contract.
@@ -971,7 +1024,7 @@ impl Comm {
         let api = self.live(&what)?;
         self.check_stream(stream, &what)?;
         let start = Instant::now();
-        let mut pause = Duration::from_micros(1);
+        let mut backoff = Backoff::default();
         loop {
             if stream.query()? {
                 return Ok(());
@@ -984,8 +1037,7 @@ impl Comm {
                     waited: start.elapsed(),
                 });
             }
-            std::thread::sleep(pause);
-            pause = (pause * 2).min(Duration::from_millis(1));
+            backoff.pause();
         }
     }
 }
@@ -1007,9 +1059,11 @@ impl Drop for Comm {
         let raw = Raw(self.raw);
         let gpu = self.gpu.clone();
         let timeout = self.timeout();
+        teardowns::started();
         let spawned = std::thread::Builder::new()
             .name("warp-nccl-teardown".into())
             .spawn(move || {
+                let _done = teardowns::Done;
                 let raw = raw;
                 let _ = gpu.bind();
                 // SAFETY: a live communicator that nothing else uses any more.
@@ -1040,11 +1094,85 @@ impl Drop for Comm {
                 }
             });
         if spawned.is_err() {
+            teardowns::finished();
             // No thread to be had: abort, which is local.
             // SAFETY: a live communicator, freed once.
             unsafe { (api.comm_abort)(self.raw) };
         }
     }
+}
+
+/// The teardown threads still running. The process must not exit under them (NCCL's and
+/// CUDA's own exit handlers would free what they are using: a crash at exit), so the first
+/// teardown registers an exit handler that waits for them, for at most 30 s.
+mod teardowns {
+    use std::sync::{Condvar, Mutex, Once};
+    use std::time::{Duration, Instant};
+
+    static RUNNING: Mutex<usize> = Mutex::new(0);
+    static CHANGED: Condvar = Condvar::new();
+
+    pub(super) fn started() {
+        static REGISTER: Once = Once::new();
+        REGISTER.call_once(|| {
+            #[cfg(unix)]
+            // SAFETY: registers a plain `extern "C" fn()`; handlers registered after NCCL and
+            // the driver were loaded run before theirs.
+            unsafe {
+                libc::atexit(wait_at_exit);
+            }
+        });
+        *RUNNING.lock().unwrap_or_else(|p| p.into_inner()) += 1;
+    }
+
+    pub(super) fn finished() {
+        let mut n = RUNNING.lock().unwrap_or_else(|p| p.into_inner());
+        *n = n.saturating_sub(1);
+        CHANGED.notify_all();
+    }
+
+    /// Marks its thread's teardown finished when dropped (also if the thread panics).
+    pub(super) struct Done;
+
+    impl Drop for Done {
+        fn drop(&mut self) {
+            finished();
+        }
+    }
+
+    /// Waits until no teardown runs, at most `limit`; returns whether none does.
+    pub(super) fn wait(limit: Duration) -> bool {
+        let deadline = Instant::now() + limit;
+        let mut n = RUNNING.lock().unwrap_or_else(|p| p.into_inner());
+        while *n > 0 {
+            let now = Instant::now();
+            if now >= deadline {
+                return false;
+            }
+            n = CHANGED
+                .wait_timeout(n, deadline - now)
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
+        }
+        true
+    }
+
+    #[cfg(unix)]
+    extern "C" fn wait_at_exit() {
+        if !wait(Duration::from_secs(30)) {
+            log::warn!(
+                target: "warp_cuda::nccl",
+                "exiting with NCCL communicators still being torn down (a peer is gone?)"
+            );
+        }
+    }
+}
+
+/// Waits (at most `limit`) until the communicators dropped so far are torn down; returns
+/// whether they are. A dropped communicator is finalized and destroyed on a thread of its
+/// own (see [`Comm`]); the process also waits for them at exit.
+pub fn wait_for_teardowns(limit: Duration) -> bool {
+    teardowns::wait(limit)
 }
 
 thread_local! {

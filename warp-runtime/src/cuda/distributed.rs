@@ -526,9 +526,15 @@ impl Communicator {
     /// # Errors
     /// [`Error::Cuda`] with a timeout or NCCL's error.
     pub fn synchronize(&self) -> Result<()> {
-        let last = self.0.last.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        let last = self
+            .0
+            .last
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
         if let Some(stream) = last {
-            self.0.comm
+            self.0
+                .comm
                 .synchronize(&stream)
                 .map_err(|e| Error::cuda(self.0.device.alias(), e))?;
         }
@@ -683,12 +689,10 @@ fn decode(v: &[i64]) -> String {
         4 => format!("send to rank {}", v[1]),
         _ => format!("recv from rank {}", v[1]),
     };
-    let dtype = [
-        "I8", "U8", "I32", "U32", "I64", "U64", "F16", "F32", "F64",
-    ]
-    .get(v[2] as usize)
-    .copied()
-    .unwrap_or("?");
+    let dtype = ["I8", "U8", "I32", "U32", "I64", "U64", "F16", "F32", "F64"]
+        .get(v[2] as usize)
+        .copied()
+        .unwrap_or("?");
     format!("{what} of {} {dtype} per rank", v[3])
 }
 
@@ -774,7 +778,8 @@ fn check_group(ops: &[(Communicator, Call, Issue)]) -> Result<()> {
         }
     }
     for clique in cliques {
-        let in_clique = |c: &Communicator| c.0.clique.as_ref().is_some_and(|k| Arc::ptr_eq(k, clique));
+        let in_clique =
+            |c: &Communicator| c.0.clique.as_ref().is_some_and(|k| Arc::ptr_eq(k, clique));
         let world = ops
             .iter()
             .find(|(c, ..)| in_clique(c))
@@ -877,14 +882,13 @@ pub fn set_peer_access(a: &Device, b: &Device, on: bool) -> Result<bool> {
     r.map_err(|e| Error::cuda(a.alias(), e))
 }
 
-fn gpus(
-    a: &Device,
-    b: &Device,
-    what: &str,
-) -> Result<(Arc<warp_cuda::Gpu>, Arc<warp_cuda::Gpu>)> {
+fn gpus(a: &Device, b: &Device, what: &str) -> Result<(Arc<warp_cuda::Gpu>, Arc<warp_cuda::Gpu>)> {
     let oa = ordinal(a, what)?;
     let ob = ordinal(b, what)?;
-    Ok((gpu::state(a, oa)?.gpu.clone(), gpu::state(b, ob)?.gpu.clone()))
+    Ok((
+        gpu::state(a, oa)?.gpu.clone(),
+        gpu::state(b, ob)?.gpu.clone(),
+    ))
 }
 
 /// Whether NCCL can be loaded on this machine (see `warp_cuda::nccl` for where it is looked
