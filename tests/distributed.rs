@@ -103,7 +103,7 @@ impl Val for wp::f16 {
 /// ranks fits i8); 1 or 2 for products.
 fn input(op: ReduceOp, i: usize, r: usize) -> i64 {
     match op {
-        ReduceOp::Prod => 1 + ((i + r) % 3 == 0) as i64,
+        ReduceOp::Prod => 1 + (i + r).is_multiple_of(3) as i64,
         _ => ((i * 7 + r * 3) % 10) as i64,
     }
 }
