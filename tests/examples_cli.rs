@@ -207,9 +207,15 @@ fn every_example_has_help_and_refuses_unknown_options() {
             "{name} --help: {:?}\n{out}",
             help.status
         );
+        // The multi-GPU examples pick their devices by count (`--gpus`), the others by name.
+        let device_option = if name.starts_with("multi_gpu_") {
+            "--gpus <GPUS>"
+        } else {
+            "--device <NAME>"
+        };
         assert!(
-            out.contains("Usage:") && out.contains("--device <NAME>"),
-            "{name} --help does not list its usage and --device:\n{out}"
+            out.contains("Usage:") && out.contains(device_option),
+            "{name} --help does not list its usage and {device_option}:\n{out}"
         );
         // The struct's doc comment is the first line of the help: every example says what it does.
         assert!(
