@@ -170,12 +170,12 @@ pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
     pub use crate::{f16, func, kernel, Array, DTransform, Float, Struct, Transform};
-    pub use warp_runtime::objects::prelude::*;
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
         UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
     };
+    pub use warp_runtime::objects::prelude::*;
 }
 
 /// Names that generated code refers to. Not part of the public API.

@@ -70,4 +70,3 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
 pub fn __object_rows(callback: TokenStream) -> TokenStream {
     types::object_rows_callback(callback.into()).into()
 }
-

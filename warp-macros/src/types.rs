@@ -547,7 +547,10 @@ mod tests {
         let v3 = ObjectKind::Volume(VolumeElem::Vec3);
         assert_eq!(v3.row().name, "Volume");
         assert_eq!(v3.elem(), Some(VolumeElem::Vec3));
-        assert_eq!(v3.with_elem(VolumeElem::Index).elem(), Some(VolumeElem::Index));
+        assert_eq!(
+            v3.with_elem(VolumeElem::Index).elem(),
+            Some(VolumeElem::Index)
+        );
         assert_eq!(ObjectKind::Bvh.with_elem(VolumeElem::F64), ObjectKind::Bvh);
         assert_eq!(ObjectKind::Bvh.elem(), None);
         assert_eq!(Ty::Object(v3).to_string(), "Volume<Vec3>");

@@ -34,10 +34,10 @@ use warp_core::ArrayView;
 use super::bvh_build::{build_sah, refit as refit_nodes, BuiltBvh};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
 use super::lbvh::{self, Lbvh, LbvhTree};
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use super::HostObject;
 use crate::kernel::ArgCtx;
 
 /// An `InvalidArgument` from `what` (`"Bvh::new"`) about its argument `arg`.

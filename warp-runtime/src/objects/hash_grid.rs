@@ -27,11 +27,11 @@ use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
 use super::hash_grid_steps::{HashGridKeys, HashGridRanges};
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
-use super::HostObject;
 use crate::kernel::ArgCtx;
 use crate::primitives::radix_sort_pairs;
 

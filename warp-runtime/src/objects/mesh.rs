@@ -29,10 +29,10 @@ use super::bvh::{
 };
 use super::geometry_abi::CudaMesh;
 use super::lbvh;
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use super::HostObject;
 use crate::kernel::ArgCtx;
 
 /// A triangle mesh on one device (Warp's `wp.Mesh(points, indices, velocities)`; the suite

@@ -23,10 +23,10 @@ use warp_core::objects::nanovdb::{self, BuildKind, GridInfo, GridType, Map};
 use warp_core::objects::volume::{VolumeGrid, VolumeValue, VolumeView, VoxelIndex};
 
 use super::nvdb::{self, Codec, NvdbGrid};
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use super::HostObject;
 use crate::kernel::ArgCtx;
 
 /// Warp's volume sampling modes (`wp.Volume.CLOSEST`): the nearest voxel.
