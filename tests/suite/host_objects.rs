@@ -24,24 +24,24 @@ fn adjoint<T: Adjoint>() -> &'static str {
     std::any::type_name::<T>()
 }
 
-/// One row's compile-time checks; returns the row's `(name, C++ type, section)`.
+/// One row's compile-time checks; returns the row's `(name, C++ type, section, param)`.
 macro_rules! row {
     ($name:ident, param, plain, $rust:ident, $cuda:literal, $section:literal) => {{
         let _: PhantomData<wp::$name> = PhantomData::<wp::prelude::$name>;
         host_object::<wp::$name, wp::__private::objects::$rust>();
         adjoint::<wp::__private::objects::$rust>();
-        (stringify!($name), $cuda, $section)
+        (stringify!($name), $cuda, $section, true)
     }};
     // A type generic over its element: checked at one element (the others are the same impl).
     ($name:ident, param, elem, $rust:ident, $cuda:literal, $section:literal) => {{
         let _: PhantomData<wp::$name<f32>> = PhantomData::<wp::prelude::$name<f32>>;
         host_object::<wp::$name<f32>, wp::__private::objects::$rust<f32>>();
         adjoint::<wp::__private::objects::$rust<f32>>();
-        (stringify!($name), $cuda, $section)
+        (stringify!($name), $cuda, $section, true)
     }};
     ($name:ident, state, plain, $rust:ident, $cuda:literal, $section:literal) => {{
         adjoint::<wp::__private::objects::$rust>();
-        (stringify!($name), $cuda, $section)
+        (stringify!($name), $cuda, $section, false)
     }};
 }
 
@@ -52,22 +52,26 @@ macro_rules! rows {
 }
 
 /// Every row of the kernel macro's object table, checked at compile time by `row!`.
-fn object_rows() -> Vec<(&'static str, &'static str, &'static str)> {
+fn object_rows() -> Vec<(&'static str, &'static str, &'static str, bool)> {
     wp::__private::__object_rows!(rows)
 }
 
+/// The checks are `row!`'s, at compile time; this holds the table to having rows of both
+/// roles, each named once (a table `row!` saw nothing of would pass vacuously).
 #[test]
 fn every_object_row_has_its_pieces() {
     let rows = object_rows();
-    for name in ["HashGrid", "HashGridQuery", "Bvh", "Mesh", "Volume"] {
-        assert!(rows.iter().any(|r| r.0 == name), "{name} has no row");
+    let params = rows.iter().filter(|r| r.3).count();
+    assert!(params > 0 && params < rows.len(), "{rows:?}");
+    for (i, r) in rows.iter().enumerate() {
+        assert!(rows[..i].iter().all(|o| o.0 != r.0), "{} twice", r.0);
     }
 }
 
 #[cfg(feature = "cuda")]
 #[test]
 fn every_object_row_has_its_cpp_type() {
-    for (name, cuda, section) in object_rows() {
+    for (name, cuda, section, _) in object_rows() {
         let header = format!("wp_{section}.h");
         let text = header_text(&header)
             .unwrap_or_else(|| panic!("{name}: section `{section}` has no header {header}"));

@@ -46,6 +46,16 @@ pub mod mesh;
 pub mod nanovdb;
 pub mod volume;
 
+/// The builtins that live with their object's view, which [`builtins`](crate::builtins)
+/// re-exports whole (generated code calls `builtins::NAME`): an object whose builtins are
+/// written in its own module lists them here, and edits no other list.
+pub mod builtins {
+    pub use super::hash_grid::{
+        hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,
+        hash_grid_query_point,
+    };
+}
+
 pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};
 pub use mesh::{MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView};
