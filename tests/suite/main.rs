@@ -88,6 +88,7 @@ mod generics;
 mod grad;
 mod graph;
 mod hash_grid;
+mod host_objects;
 mod interop;
 mod jvp;
 mod launch;

@@ -59,3 +59,14 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 pub fn derive_struct(item: TokenStream) -> TokenStream {
     expand::derive_struct(item.into()).into()
 }
+
+/// Calls the macro named by its input with every row of the object table, one
+/// `(Name, param|state, elem|plain, RustView, "wp::cpp_t", "section")` per kind: how the
+/// suite's `host_objects` test holds each row to its `HostObject` impl, its adjoint
+/// placeholder and its C++ header, so that the host-object recipe cannot drift from the
+/// table. Not part of the API.
+#[doc(hidden)]
+#[proc_macro]
+pub fn __object_rows(callback: TokenStream) -> TokenStream {
+    types::object_rows_callback(callback.into()).into()
+}

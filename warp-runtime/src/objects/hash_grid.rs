@@ -27,11 +27,12 @@ use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
 use super::hash_grid_steps::{HashGridKeys, HashGridRanges};
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::kernel::{ArgCtx, KernelArg};
+use crate::kernel::ArgCtx;
 use crate::primitives::radix_sort_pairs;
 
 /// A hash grid on one device: `HashGrid::new(dim_x, dim_y, dim_z, &device)`, then
@@ -410,16 +411,9 @@ impl HashGrid {
         &self.buffers
     }
 
-    /// The build a launch of `ctx.kernel` may use: the grid on the launch device and built.
+    /// The build a launch of `ctx.kernel` may use (the launch device is checked by the
+    /// [`HostObject`] seam before).
     fn launch_build(&self, ctx: &ArgCtx<'_>) -> Result<Built> {
-        if &self.device != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: self.device.alias().to_string(),
-            });
-        }
         self.built.ok_or_else(|| Error::InvalidArgument {
             what: format!(
                 "kernel `{}`: argument `{}`: the HashGrid was never built (or its last build \
@@ -464,62 +458,40 @@ pub struct CudaHashGrid {
 
 const _: () = assert!(std::mem::size_of::<CudaHashGrid>() == 48);
 
-impl KernelArg for HashGrid {
-    type Arg<'a> = &'a HashGrid;
-    type CpuView = HashGridView;
+impl HostObject for HashGrid {
+    type View = HashGridView;
+    type Cuda = CudaHashGrid;
 
-    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
-        let built = arg.launch_build(ctx)?;
-        let b = &arg.buffers;
+    fn device(&self) -> &Device {
+        &self.device
+    }
+
+    unsafe fn cpu_view(&self, ctx: &ArgCtx<'_>) -> Result<HashGridView> {
+        let built = self.launch_build(ctx)?;
+        let b = &self.buffers;
         let ids = b.point_ids.view(0..built.num_points)?;
         Ok(HashGridView::new(
             ids.cpu_view(ctx.kernel, ctx.arg),
             b.cell_starts.cpu_view(ctx.kernel, ctx.arg),
             b.cell_ends.cpu_view(ctx.kernel, ctx.arg),
-            arg.dims,
+            self.dims,
             built.cell_width_inv,
         ))
     }
 
-    type CudaArg = CudaHashGrid;
-
-    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
-        let built = arg.launch_build(ctx)?;
-        let b = &arg.buffers;
+    fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaHashGrid> {
+        let built = self.launch_build(ctx)?;
+        let b = &self.buffers;
         let ptr = |a: &Array<i32>| a.device_address();
         Ok(CudaHashGrid {
             point_ids: ptr(&b.point_ids),
             cell_starts: ptr(&b.cell_starts),
             cell_ends: ptr(&b.cell_ends),
-            dims: arg.dims,
+            dims: self.dims,
             num_points: built.num_points as i32,
             cell_width_inv: built.cell_width_inv,
             arg: ctx.index as i32,
         })
-    }
-
-    // A grid carries no gradient.
-    type GradView = ();
-
-    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    type CudaGrad = ();
-
-    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    /// A clone sharing the buffers: the tape replays against the grid as it was.
-    type Owned = HashGrid;
-
-    fn own(arg: &Self::Arg<'_>) -> HashGrid {
-        (*arg).clone()
-    }
-
-    fn borrow(owned: &HashGrid) -> &HashGrid {
-        owned
     }
 }
 
