@@ -1,0 +1,1032 @@
+//! ARCHITECTURE.md's invariants that a test can check, checked against the workspace's source
+//! text: no import cycles between the files of a crate, warp-runtime's layers, the workspace's
+//! crate graph, the size limit of the compiler's files, where warp-core allocates, and the parts
+//! of the builtin and host-object recipes that the sources show.
+//!
+//! Nothing here builds or runs the crates: the sources are read as text by a small Rust lexer
+//! and an item-level reader (modules, `use` trees, paths in code, item names), which is all a
+//! file-level import graph needs. Paths resolve the way rustc resolves them, through `use`
+//! bindings and glob imports to the file that *defines* the name, so a re-export
+//! (`pub use child::X` in a `mod.rs`) is no import of its own: the file that uses `X` depends on
+//! the file that defines it. Test code (`#[cfg(test)]` items and the files they declare) is left
+//! out: a test module importing its parent is no cycle.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+// -------------------------------------------------------------------------------------------
+// The workspace
+// -------------------------------------------------------------------------------------------
+
+/// The crates whose modules are read: (package name, crate root relative to the workspace).
+const CRATES: &[(&str, &str)] = &[
+    ("warp-core", "warp-core/src/lib.rs"),
+    ("warp-macros", "warp-macros/src/lib.rs"),
+    ("warp-runtime", "warp-runtime/src/lib.rs"),
+    ("warp-cuda", "warp-cuda/src/lib.rs"),
+    ("warp-report", "warp-report/src/lib.rs"),
+    ("warp-lang", "src/lib.rs"),
+];
+
+fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn read_rel(rel: &str) -> Option<String> {
+    std::fs::read_to_string(workspace().join(rel)).ok()
+}
+
+fn read_required(rel: &str) -> String {
+    read_rel(rel).unwrap_or_else(|| panic!("cannot read {rel} (relative to the workspace)"))
+}
+
+/// Every file under `dir` (relative to the workspace) whose name ends with `ext`, as workspace
+/// paths with `/` separators, sorted.
+fn files_under(dir: &str, ext: &str) -> Vec<String> {
+    fn walk(abs: &Path, rel: &str, ext: &str, out: &mut Vec<String>) {
+        let Ok(entries) = std::fs::read_dir(abs) else {
+            return;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let rel = format!("{rel}/{name}");
+            let path = e.path();
+            if path.is_dir() {
+                walk(&path, &rel, ext, out);
+            } else if name.ends_with(ext) {
+                out.push(rel);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(&workspace().join(dir), dir, ext, &mut out);
+    out.sort();
+    out
+}
+
+fn load_crate(root: &str) -> Crate {
+    Crate::load(root, &read_rel)
+}
+
+// -------------------------------------------------------------------------------------------
+// A Rust lexer: tokens without comments; string and char literals as one token each
+// -------------------------------------------------------------------------------------------
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Ident,
+    Punct,
+    Lit,
+    Lifetime,
+}
+
+#[derive(Clone, Debug)]
+struct Tok {
+    kind: Kind,
+    text: String,
+    line: usize,
+}
+
+impl Tok {
+    fn is(&self, s: &str) -> bool {
+        self.kind != Kind::Lit && self.text == s
+    }
+    fn ident(&self) -> bool {
+        self.kind == Kind::Ident
+    }
+    /// The value of a plain string literal (`"wp::foo"` -> `wp::foo`), escapes left as written.
+    fn str_value(&self) -> Option<&str> {
+        (self.kind == Kind::Lit)
+            .then(|| self.text.strip_prefix('"')?.strip_suffix('"'))
+            .flatten()
+    }
+}
+
+fn is_ident_start(c: char) -> bool {
+    c == '_' || c.is_alphabetic()
+}
+
+fn is_ident_char(c: char) -> bool {
+    c == '_' || c.is_alphanumeric()
+}
+
+fn lex(src: &str) -> Vec<Tok> {
+    let c: Vec<char> = src.chars().collect();
+    let n = c.len();
+    let at = |i: usize| c.get(i).copied().unwrap_or('\0');
+    let mut out = Vec::new();
+    let mut line = 1;
+    let mut i = 0;
+    while i < n {
+        let ch = c[i];
+        let start = i;
+        let start_line = line;
+        if ch == '\n' {
+            line += 1;
+            i += 1;
+            continue;
+        }
+        if ch.is_whitespace() {
+            i += 1;
+            continue;
+        }
+        if ch == '/' && at(i + 1) == '/' {
+            while i < n && c[i] != '\n' {
+                i += 1;
+            }
+            continue;
+        }
+        if ch == '/' && at(i + 1) == '*' {
+            let mut depth = 0;
+            while i < n {
+                if c[i] == '/' && at(i + 1) == '*' {
+                    depth += 1;
+                    i += 2;
+                } else if c[i] == '*' && at(i + 1) == '/' {
+                    depth -= 1;
+                    i += 2;
+                    if depth == 0 {
+                        break;
+                    }
+                } else {
+                    if c[i] == '\n' {
+                        line += 1;
+                    }
+                    i += 1;
+                }
+            }
+            continue;
+        }
+        // Raw strings: r"..", r#".."#, br"..", cr"..".
+        let mut j = i;
+        if matches!(ch, 'b' | 'c') && at(i + 1) == 'r' {
+            j += 1;
+        }
+        if at(j) == 'r' && (at(j + 1) == '"' || (at(j + 1) == '#' && matches!(at(j + 2), '#' | '"')))
+        {
+            let mut hashes = 0;
+            j += 1;
+            while at(j) == '#' {
+                hashes += 1;
+                j += 1;
+            }
+            j += 1; // the opening quote
+            loop {
+                if j >= n {
+                    break;
+                }
+                if c[j] == '"' && (0..hashes).all(|h| at(j + 1 + h) == '#') {
+                    j += 1 + hashes;
+                    break;
+                }
+                if c[j] == '\n' {
+                    line += 1;
+                }
+                j += 1;
+            }
+            let text: String = c[start..j.min(n)].iter().collect();
+            out.push(Tok { kind: Kind::Lit, text, line: start_line });
+            i = j;
+            continue;
+        }
+        // Strings and byte strings: "..", b"..", c"..".
+        let q = if matches!(ch, 'b' | 'c') && at(i + 1) == '"' { i + 1 } else { i };
+        if at(q) == '"' {
+            let mut j = q + 1;
+            while j < n && c[j] != '"' {
+                if c[j] == '\\' {
+                    j += 1;
+                }
+                if at(j) == '\n' {
+                    line += 1;
+                }
+                j += 1;
+            }
+            let text: String = c[q..(j + 1).min(n)].iter().collect();
+            out.push(Tok { kind: Kind::Lit, text, line: start_line });
+            i = j + 1;
+            continue;
+        }
+        // Chars, byte chars and lifetimes.
+        let q = if ch == 'b' && at(i + 1) == '\'' { i + 1 } else { i };
+        if at(q) == '\'' {
+            if at(q + 1) == '\\' {
+                let mut j = q + 2;
+                while j < n && c[j] != '\'' {
+                    j += 1;
+                }
+                out.push(Tok { kind: Kind::Lit, text: "'c'".into(), line });
+                i = j + 1;
+            } else if at(q + 2) == '\'' {
+                out.push(Tok { kind: Kind::Lit, text: "'c'".into(), line });
+                i = q + 3;
+            } else {
+                let mut j = q + 1;
+                while j < n && is_ident_char(c[j]) {
+                    j += 1;
+                }
+                let text: String = c[q..j].iter().collect();
+                out.push(Tok { kind: Kind::Lifetime, text, line });
+                i = j;
+            }
+            continue;
+        }
+        // Raw identifiers and identifiers.
+        if ch == 'r' && at(i + 1) == '#' && is_ident_start(at(i + 2)) {
+            let mut j = i + 2;
+            while j < n && is_ident_char(c[j]) {
+                j += 1;
+            }
+            let text: String = c[i + 2..j].iter().collect();
+            out.push(Tok { kind: Kind::Ident, text, line });
+            i = j;
+            continue;
+        }
+        if is_ident_start(ch) {
+            let mut j = i;
+            while j < n && is_ident_char(c[j]) {
+                j += 1;
+            }
+            let text: String = c[i..j].iter().collect();
+            out.push(Tok { kind: Kind::Ident, text, line });
+            i = j;
+            continue;
+        }
+        if ch.is_ascii_digit() {
+            let mut j = i;
+            loop {
+                if j < n && is_ident_char(c[j]) {
+                    j += 1;
+                } else if at(j) == '.' && at(j + 1).is_ascii_digit() {
+                    j += 1;
+                } else if matches!(at(j), '+' | '-')
+                    && matches!(at(j - 1), 'e' | 'E')
+                    && !c[i..j].contains(&'x')
+                {
+                    j += 1;
+                } else {
+                    break;
+                }
+            }
+            let text: String = c[i..j].iter().collect();
+            out.push(Tok { kind: Kind::Lit, text, line });
+            i = j;
+            continue;
+        }
+        if ch == ':' && at(i + 1) == ':' {
+            out.push(Tok { kind: Kind::Punct, text: "::".into(), line });
+            i += 2;
+            continue;
+        }
+        out.push(Tok { kind: Kind::Punct, text: ch.to_string(), line });
+        i += 1;
+    }
+    out
+}
+
+/// The index of the bracket that closes the one at `open` (`(`, `[` or `{`).
+fn matching(t: &[Tok], open: usize) -> usize {
+    let mut depth = 0usize;
+    for (k, tok) in t.iter().enumerate().skip(open) {
+        if tok.kind != Kind::Punct {
+            continue;
+        }
+        match tok.text.as_str() {
+            "(" | "[" | "{" => depth += 1,
+            ")" | "]" | "}" => {
+                depth -= 1;
+                if depth == 0 {
+                    return k;
+                }
+            }
+            _ => {}
+        }
+    }
+    t.len()
+}
+
+/// The end (exclusive) of the item starting at `i`: after its `;` or its closing `}` (and a
+/// `;` right after it), whichever comes first at the item's own level.
+fn item_end(t: &[Tok], i: usize, end: usize) -> usize {
+    let mut depth = 0usize;
+    let mut k = i;
+    while k < end {
+        if t[k].kind == Kind::Punct {
+            match t[k].text.as_str() {
+                "(" | "[" | "{" => depth += 1,
+                ")" | "]" => depth = depth.saturating_sub(1),
+                "}" => {
+                    depth = depth.saturating_sub(1);
+                    if depth == 0 {
+                        return if k + 1 < end && t[k + 1].is(";") { k + 2 } else { k + 1 };
+                    }
+                }
+                ";" if depth == 0 => return k + 1,
+                _ => {}
+            }
+        }
+        k += 1;
+    }
+    end
+}
+
+/// Whether an attribute's tokens (inside `#[..]`) make its item test-only: `cfg(test)`,
+/// `cfg(all(test, ..))`, `test`.
+fn is_test_attr(attr: &[Tok]) -> bool {
+    match attr.first() {
+        Some(a) if a.is("test") => attr.len() == 1,
+        Some(a) if a.is("cfg") => {
+            attr.iter().any(|t| t.is("test")) && !attr.iter().any(|t| t.is("not") || t.is("any"))
+        }
+        _ => false,
+    }
+}
+
+// -------------------------------------------------------------------------------------------
+// A crate's modules, the paths they name, and their resolution to files
+// -------------------------------------------------------------------------------------------
+
+#[derive(Default, Debug)]
+struct Module {
+    parent: Option<usize>,
+    /// The file the module's text is in (workspace-relative).
+    file: String,
+    children: BTreeMap<String, usize>,
+    /// Names of items defined in the module (fn, struct, enum, trait, type, const, static,
+    /// macro_rules, union).
+    defs: BTreeSet<String>,
+    /// `use` bindings: name -> the paths it stands for (cfg alternatives may give several),
+    /// as written in this module.
+    bindings: BTreeMap<String, Vec<Vec<String>>>,
+    /// Glob imports (`use a::b::*`), as written in this module.
+    globs: Vec<Vec<String>>,
+}
+
+/// A path a module names: in a `use` or in code. `reexport`: a `pub use` binding, which is an
+/// import of its file only if the file's own code names it.
+#[derive(Debug)]
+struct Reference {
+    module: usize,
+    segs: Vec<String>,
+    line: usize,
+    reexport: bool,
+}
+
+/// What a path leads to: a module, or an item defined in a module.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Found {
+    Module(usize),
+    Item(usize),
+}
+
+/// A source file as read: its tokens, and the token ranges that are test-only.
+struct SourceFile {
+    toks: Vec<Tok>,
+    /// Token ranges `[a, b)` of `#[cfg(test)]` items (left out of every check).
+    test_ranges: Vec<(usize, usize)>,
+    /// Identifiers its non-test code names outside `use` items.
+    code_idents: BTreeSet<String>,
+}
+
+struct Crate {
+    modules: Vec<Module>,
+    refs: Vec<Reference>,
+    files: BTreeMap<String, SourceFile>,
+    /// Files declared only by `#[cfg(test)] mod x;`: test code.
+    test_files: BTreeSet<String>,
+    /// `mod x;` declarations whose file is missing (the reader would miss code).
+    missing: Vec<String>,
+}
+
+/// One leaf of a `use` tree: the full path, the name it binds (None for `_`), whether a glob.
+struct UseLeaf {
+    segs: Vec<String>,
+    binding: Option<String>,
+    glob: bool,
+}
+
+fn use_tree(t: &[Tok], a: usize, b: usize, prefix: &[String], out: &mut Vec<UseLeaf>) {
+    let mut segs = prefix.to_vec();
+    let mut k = a;
+    if k < b && t[k].is("::") {
+        segs.push(String::new()); // an extern path: `use ::std::..`
+        k += 1;
+    }
+    while k < b {
+        let tok = &t[k];
+        if tok.is("{") {
+            let close = matching(t, k).min(b);
+            let mut s = k + 1;
+            let mut depth = 0;
+            for e in k + 1..=close {
+                let at_end = e == close;
+                if !at_end && (t[e].is("{") || t[e].is("(")) {
+                    depth += 1;
+                } else if !at_end && (t[e].is("}") || t[e].is(")")) {
+                    depth -= 1;
+                }
+                if at_end || (depth == 0 && t[e].is(",")) {
+                    if s < e {
+                        use_tree(t, s, e, &segs, out);
+                    }
+                    s = e + 1;
+                }
+            }
+            return;
+        }
+        if tok.is("*") {
+            out.push(UseLeaf { segs, binding: None, glob: true });
+            return;
+        }
+        if tok.ident() && tok.text != "as" {
+            segs.push(tok.text.clone());
+            k += 1;
+            if k < b && t[k].is("::") {
+                k += 1;
+                continue;
+            }
+            let mut binding = Some(tok.text.clone());
+            if k + 1 < b && t[k].is("as") {
+                binding = (t[k + 1].text != "_").then(|| t[k + 1].text.clone());
+            }
+            if segs.last().map(String::as_str) == Some("self") {
+                segs.pop();
+                if binding.as_deref() == Some("self") {
+                    binding = segs.last().cloned();
+                }
+            }
+            out.push(UseLeaf { segs, binding, glob: false });
+            return;
+        }
+        k += 1;
+    }
+}
+
+const ITEM_KEYWORDS: &[&str] = &["fn", "struct", "enum", "union", "trait", "type", "const", "static"];
+const QUALIFIERS: &[&str] = &["unsafe", "async", "extern", "default", "auto", "const"];
+
+impl Crate {
+    /// Reads the crate whose root file is `root`, following `mod` declarations through `read`.
+    fn load(root: &str, read: &dyn Fn(&str) -> Option<String>) -> Crate {
+        let mut c = Crate {
+            modules: vec![Module { file: root.to_string(), ..Module::default() }],
+            refs: Vec::new(),
+            files: BTreeMap::new(),
+            test_files: BTreeSet::new(),
+            missing: Vec::new(),
+        };
+        let dir = root.rsplit_once('/').map_or("", |(d, _)| d).to_string();
+        c.load_file(root, 0, &dir, read);
+        c
+    }
+
+    fn load_file(&mut self, file: &str, m: usize, dir: &str, read: &dyn Fn(&str) -> Option<String>) {
+        let Some(text) = read(file) else {
+            self.missing.push(file.to_string());
+            return;
+        };
+        let toks = lex(&text);
+        self.files.insert(
+            file.to_string(),
+            SourceFile { toks: Vec::new(), test_ranges: Vec::new(), code_idents: BTreeSet::new() },
+        );
+        let mut pending = Vec::new();
+        let n = toks.len();
+        self.items(&toks, 0, n, m, dir, file, &mut pending, read);
+        self.files.get_mut(file).unwrap().toks = toks;
+        for (child, child_file, child_dir) in pending {
+            self.load_file(&child_file, child, &child_dir, read);
+        }
+    }
+
+    fn new_module(&mut self, parent: usize, name: &str, file: &str) -> usize {
+        let id = self.modules.len();
+        self.modules.push(Module { parent: Some(parent), file: file.to_string(), ..Module::default() });
+        self.modules[parent].children.insert(name.to_string(), id);
+        id
+    }
+
+    /// Reads the items of module `m` in tokens `[i, end)`. `dir` is where its child modules'
+    /// files are; files to read are queued on `pending`.
+    #[allow(clippy::too_many_arguments)]
+    fn items(
+        &mut self,
+        t: &[Tok],
+        mut i: usize,
+        end: usize,
+        m: usize,
+        dir: &str,
+        file: &str,
+        pending: &mut Vec<(usize, String, String)>,
+        read: &dyn Fn(&str) -> Option<String>,
+    ) {
+        while i < end {
+            let item_start = i;
+            let mut test_only = false;
+            let mut path_attr = None;
+            while i + 1 < end && t[i].is("#") {
+                let inner = t[i + 1].is("!");
+                let open = if inner { i + 2 } else { i + 1 };
+                if open >= end || !t[open].is("[") {
+                    break;
+                }
+                let close = matching(t, open);
+                let attr = &t[open + 1..close];
+                if is_test_attr(attr) {
+                    if inner {
+                        // `#![cfg(test)]`: the whole module is test code.
+                        self.files.get_mut(file).unwrap().test_ranges.push((i, end));
+                        return;
+                    }
+                    test_only = true;
+                }
+                if attr.len() == 3 && attr[0].is("path") && attr[1].is("=") {
+                    path_attr = attr[2].str_value().map(str::to_string);
+                }
+                i = close + 1;
+            }
+            if i >= end {
+                break;
+            }
+            let stop = item_end(t, i, end);
+            let mut j = i;
+            let mut public = false;
+            if t[j].is("pub") {
+                public = true;
+                j += 1;
+                if j < end && t[j].is("(") {
+                    j = matching(t, j) + 1;
+                }
+            }
+            if test_only {
+                self.files.get_mut(file).unwrap().test_ranges.push((item_start, stop));
+                if t[j].is("mod") && t[j + 2].is(";") {
+                    let name = &t[j + 1].text;
+                    let f = path_attr.map_or_else(
+                        || child_file(dir, name, read),
+                        |p| format!("{}/{p}", file.rsplit_once('/').map_or("", |(d, _)| d)),
+                    );
+                    self.test_files.insert(f);
+                    self.test_files.insert(format!("{dir}/{name}/"));
+                }
+                i = stop;
+                continue;
+            }
+            match t[j].text.as_str() {
+                "use" if t[j].kind == Kind::Ident => {
+                    let mut leaves = Vec::new();
+                    use_tree(t, j + 1, stop - 1, &[], &mut leaves);
+                    for leaf in leaves {
+                        if leaf.glob {
+                            self.modules[m].globs.push(leaf.segs.clone());
+                        } else if let Some(b) = &leaf.binding {
+                            self.modules[m].bindings.entry(b.clone()).or_default().push(leaf.segs.clone());
+                        }
+                        // A public glob (`pub use math::*`) only hands names on: the files that
+                        // use them import the files that define them.
+                        if !(public && leaf.glob) {
+                            self.refs.push(Reference {
+                                module: m,
+                                segs: leaf.segs,
+                                line: t[j].line,
+                                reexport: public,
+                            });
+                        }
+                    }
+                }
+                "mod" if t[j + 1].ident() => {
+                    let name = t[j + 1].text.clone();
+                    if t[j + 2].is(";") {
+                        let f = match path_attr {
+                            Some(p) => format!("{}/{p}", file.rsplit_once('/').map_or("", |(d, _)| d)),
+                            None => child_file(dir, &name, read),
+                        };
+                        let child_dir = match f.strip_suffix("/mod.rs") {
+                            Some(d) => d.to_string(),
+                            None => format!("{dir}/{name}"),
+                        };
+                        let child = self.new_module(m, &name, &f);
+                        pending.push((child, f, child_dir));
+                    } else if t[j + 2].is("{") {
+                        let close = matching(t, j + 2);
+                        let child = self.new_module(m, &name, file);
+                        self.items(t, j + 3, close, child, &format!("{dir}/{name}"), file, pending, read);
+                    }
+                }
+                "macro_rules" if t[j + 1].is("!") => {
+                    self.modules[m].defs.insert(t[j + 2].text.clone());
+                    self.scan_code(t, j + 3, stop, m, file);
+                }
+                "extern" if t[j + 1].is("crate") => {}
+                _ => {
+                    let mut k = j;
+                    while k < stop
+                        && (QUALIFIERS.contains(&t[k].text.as_str()) && !t[k + 1].ident()
+                            || QUALIFIERS.contains(&t[k].text.as_str())
+                                && ITEM_KEYWORDS.contains(&t[k + 1].text.as_str())
+                            || t[k].kind == Kind::Lit)
+                    {
+                        k += 1;
+                    }
+                    if ITEM_KEYWORDS.contains(&t[k].text.as_str()) && t[k].kind == Kind::Ident {
+                        let mut name = k + 1;
+                        if t[name].is("mut") {
+                            name += 1;
+                        }
+                        if t[name].ident() {
+                            self.modules[m].defs.insert(t[name].text.clone());
+                        }
+                    } else if t[k].ident() && t[k + 1].is("!") {
+                        // An item-level macro call (`thread_local!`, a table): the items it
+                        // spells out by name are this module's.
+                        for w in t[k..stop].windows(2) {
+                            if ITEM_KEYWORDS.contains(&w[0].text.as_str()) && w[1].ident() {
+                                self.modules[m].defs.insert(w[1].text.clone());
+                            }
+                        }
+                    }
+                    self.scan_code(t, j, stop, m, file);
+                }
+            }
+            i = stop;
+        }
+    }
+
+    /// Records the paths that code in `[a, b)` names (and the `use` items inside function
+    /// bodies), and the identifiers it names.
+    fn scan_code(&mut self, t: &[Tok], a: usize, b: usize, m: usize, file: &str) {
+        let mut k = a;
+        while k < b {
+            let tok = &t[k];
+            if tok.is("#") && k + 1 < b && t[k + 1].is("[") {
+                let close = matching(t, k + 1);
+                if is_test_attr(&t[k + 2..close]) {
+                    // A test-only statement or nested item: skip it.
+                    let stop = item_end(t, close + 1, b);
+                    self.files.get_mut(file).unwrap().test_ranges.push((k, stop));
+                    k = stop;
+                    continue;
+                }
+                k = close + 1;
+                continue;
+            }
+            if tok.is("use")
+                && tok.kind == Kind::Ident
+                && k > a
+                && (t[k - 1].is(";") || t[k - 1].is("{") || t[k - 1].is("}"))
+            {
+                let stop = item_end(t, k, b);
+                let mut leaves = Vec::new();
+                use_tree(t, k + 1, stop - 1, &[], &mut leaves);
+                for leaf in leaves {
+                    self.refs.push(Reference { module: m, segs: leaf.segs, line: tok.line, reexport: false });
+                }
+                k = stop;
+                continue;
+            }
+            if tok.ident() {
+                self.files.get_mut(file).unwrap().code_idents.insert(tok.text.clone());
+                let after_sep = k > 0 && (t[k - 1].is("::") || t[k - 1].is("."));
+                if !after_sep && k + 2 < b && t[k + 1].is("::") && t[k + 2].ident() {
+                    let mut segs = vec![tok.text.clone()];
+                    let mut e = k + 1;
+                    while e + 1 < b && t[e].is("::") && t[e + 1].ident() {
+                        segs.push(t[e + 1].text.clone());
+                        e += 2;
+                    }
+                    self.refs.push(Reference { module: m, segs, line: tok.line, reexport: false });
+                    for s in &t[k..e] {
+                        if s.ident() {
+                            self.files.get_mut(file).unwrap().code_idents.insert(s.text.clone());
+                        }
+                    }
+                    k = e;
+                    continue;
+                }
+            }
+            k += 1;
+        }
+    }
+
+    /// What `segs`, written in module `m`, names in this crate (None: another crate, a local
+    /// name, or something this reader does not see).
+    fn resolve(&self, m: usize, segs: &[String], depth: u32) -> Option<Found> {
+        if depth > 24 || segs.is_empty() {
+            return None;
+        }
+        match segs[0].as_str() {
+            "" => None,
+            "crate" => self.walk(0, &segs[1..], depth),
+            "self" => self.walk(m, &segs[1..], depth),
+            "super" => self.walk(self.modules[m].parent?, &segs[1..], depth),
+            _ => self.walk(m, segs, depth),
+        }
+    }
+
+    fn walk(&self, cur: usize, rest: &[String], depth: u32) -> Option<Found> {
+        if depth > 24 {
+            return None;
+        }
+        let Some(s) = rest.first() else {
+            return Some(Found::Module(cur));
+        };
+        let module = &self.modules[cur];
+        match s.as_str() {
+            "super" => return self.walk(module.parent?, &rest[1..], depth),
+            "self" => return self.walk(cur, &rest[1..], depth),
+            _ => {}
+        }
+        if let Some(&child) = module.children.get(s) {
+            return self.walk(child, &rest[1..], depth);
+        }
+        if module.defs.contains(s) {
+            return Some(Found::Item(cur));
+        }
+        if let Some(targets) = module.bindings.get(s) {
+            for target in targets {
+                // A binding to itself (`use glam::Vec3` seen from a path `Vec3::X`) is another
+                // crate's name.
+                if target.len() == 1 && target[0] == *s {
+                    continue;
+                }
+                let mut path = target.clone();
+                path.extend_from_slice(&rest[1..]);
+                if let Some(f) = self.resolve(cur, &path, depth + 1) {
+                    return Some(f);
+                }
+            }
+        }
+        for glob in &module.globs {
+            if let Some(Found::Module(g)) = self.resolve(cur, glob, depth + 1) {
+                if g != cur {
+                    if let Some(f) = self.walk(g, rest, depth + 1) {
+                        return Some(f);
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// The files of the modules that enclose `file`'s modules (its parent's file, and so on
+    /// up to the crate root).
+    fn ancestor_files(&self, file: &str) -> BTreeSet<&str> {
+        let mut out = BTreeSet::new();
+        for m in self.modules.iter().filter(|m| m.file == file) {
+            let mut p = m.parent;
+            while let Some(id) = p {
+                if self.modules[id].file != file {
+                    out.insert(self.modules[id].file.as_str());
+                }
+                p = self.modules[id].parent;
+            }
+        }
+        out
+    }
+
+    /// The import graph whose cycles count: `edges` without the arrows from a module up to a
+    /// module that encloses it. A child module is part of its parent (it sees the parent's
+    /// private items, and a parent split over child files, `impl Lowerer` in `lower/calls.rs`,
+    /// uses them by design), so a parent and its child naming each other is no circle; such
+    /// an arrow is one that runs back up (`up_arrows`), as `farm-studio look` draws it.
+    fn import_graph(&self) -> BTreeMap<(String, String), BTreeSet<String>> {
+        let mut edges = self.edges();
+        edges.retain(|(a, b), _| !self.ancestor_files(a).contains(b.as_str()));
+        edges
+    }
+
+    /// The arrows from a module to a module that encloses it (`use super::*`, `crate::X` for an
+    /// `X` of lib.rs).
+    fn up_arrows(&self) -> BTreeMap<(String, String), BTreeSet<String>> {
+        let mut edges = self.edges();
+        edges.retain(|(a, b), _| self.ancestor_files(a).contains(b.as_str()));
+        edges
+    }
+
+    fn file_of(&self, f: Found) -> &str {
+        match f {
+            Found::Module(m) | Found::Item(m) => &self.modules[m].file,
+        }
+    }
+
+    /// The file-level import graph: (from, to) -> the names `from` takes from `to`, with lines.
+    fn edges(&self) -> BTreeMap<(String, String), BTreeSet<String>> {
+        let mut out: BTreeMap<(String, String), BTreeSet<String>> = BTreeMap::new();
+        for r in &self.refs {
+            let from = &self.modules[r.module].file;
+            if r.reexport {
+                let name = r.segs.last().cloned().unwrap_or_default();
+                let used = self.files.get(from).is_some_and(|f| f.code_idents.contains(&name));
+                if !used {
+                    continue;
+                }
+            }
+            let Some(found) = self.resolve(r.module, &r.segs, 0) else {
+                continue;
+            };
+            let to = self.file_of(found);
+            if to == from {
+                continue;
+            }
+            let name = match found {
+                Found::Module(_) => r.segs.last().cloned().unwrap_or_default(),
+                Found::Item(m) => {
+                    // The segment that names the item (`Foo` of `x::Foo::new`).
+                    let defs = &self.modules[m].defs;
+                    r.segs.iter().rev().find(|s| defs.contains(*s)).cloned().unwrap_or_default()
+                }
+            };
+            let name = if name == "self" || name.is_empty() {
+                r.segs.iter().rev().find(|s| *s != "self").cloned().unwrap_or_default()
+            } else {
+                name
+            };
+            out.entry((from.clone(), to.to_string()))
+                .or_default()
+                .insert(format!("{name} (line {})", r.line));
+        }
+        out
+    }
+}
+
+/// The file of child module `name` of a module whose children live in `dir`: `dir/name.rs`,
+/// else `dir/name/mod.rs`.
+fn child_file(dir: &str, name: &str, read: &dyn Fn(&str) -> Option<String>) -> String {
+    let flat = format!("{dir}/{name}.rs");
+    let nested = format!("{dir}/{name}/mod.rs");
+    if read(&flat).is_none() && read(&nested).is_some() {
+        nested
+    } else {
+        flat
+    }
+}
+
+/// Strongly connected components of more than one node (Tarjan).
+fn cycles(edges: &BTreeMap<(String, String), BTreeSet<String>>) -> Vec<Vec<String>> {
+    let mut nodes: BTreeSet<&str> = BTreeSet::new();
+    let mut adj: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
+    for (a, b) in edges.keys() {
+        nodes.insert(a);
+        nodes.insert(b);
+        adj.entry(a).or_default().push(b);
+    }
+    struct State<'a> {
+        index: BTreeMap<&'a str, usize>,
+        low: BTreeMap<&'a str, usize>,
+        on_stack: BTreeSet<&'a str>,
+        stack: Vec<&'a str>,
+        next: usize,
+        out: Vec<Vec<String>>,
+    }
+    fn visit<'a>(v: &'a str, adj: &BTreeMap<&'a str, Vec<&'a str>>, s: &mut State<'a>) {
+        s.index.insert(v, s.next);
+        s.low.insert(v, s.next);
+        s.next += 1;
+        s.stack.push(v);
+        s.on_stack.insert(v);
+        for &w in adj.get(v).map(Vec::as_slice).unwrap_or(&[]) {
+            if !s.index.contains_key(w) {
+                visit(w, adj, s);
+                let lw = s.low[w];
+                let lv = s.low.get_mut(v).unwrap();
+                *lv = (*lv).min(lw);
+            } else if s.on_stack.contains(w) {
+                let iw = s.index[w];
+                let lv = s.low.get_mut(v).unwrap();
+                *lv = (*lv).min(iw);
+            }
+        }
+        if s.low[v] == s.index[v] {
+            let mut comp = Vec::new();
+            while let Some(w) = s.stack.pop() {
+                s.on_stack.remove(w);
+                comp.push(w.to_string());
+                if w == v {
+                    break;
+                }
+            }
+            if comp.len() > 1 {
+                comp.sort();
+                s.out.push(comp);
+            }
+        }
+    }
+    let mut s = State {
+        index: BTreeMap::new(),
+        low: BTreeMap::new(),
+        on_stack: BTreeSet::new(),
+        stack: Vec::new(),
+        next: 0,
+        out: Vec::new(),
+    };
+    for v in nodes {
+        if !s.index.contains_key(v) {
+            visit(v, &adj, &mut s);
+        }
+    }
+    s.out.sort();
+    s.out
+}
+
+/// Each cycle of `edges`, with the names that tie it (empty: no cycle).
+fn describe_cycles(edges: &BTreeMap<(String, String), BTreeSet<String>>) -> String {
+    let mut msg = String::new();
+    for comp in cycles(edges) {
+        let _ = writeln!(msg, "cycle of {} files: {}", comp.len(), comp.join(", "));
+        for ((a, b), names) in edges {
+            if comp.contains(a) && comp.contains(b) {
+                let names: Vec<&str> = names.iter().map(String::as_str).collect();
+                let _ = writeln!(msg, "  {a} -> {b}: {}", names.join(", "));
+            }
+        }
+    }
+    msg
+}
+
+// -------------------------------------------------------------------------------------------
+// 1. No import cycles
+// -------------------------------------------------------------------------------------------
+
+/// ARCHITECTURE.md: "There are no import cycles". Between the files of each crate (the crates
+/// themselves cannot form one: cargo refuses it), a file that imports another (a `use`, or a
+/// path in code that resolves to an item the other file defines) never reaches itself again.
+#[test]
+fn no_import_cycles_between_files() {
+    let mut report = String::new();
+    for (name, root) in CRATES {
+        let c = load_crate(root);
+        let cycles = describe_cycles(&c.import_graph());
+        if !cycles.is_empty() {
+            let _ = write!(report, "{name}:\n{cycles}");
+        }
+    }
+    assert!(report.is_empty(), "import cycles (file -> file: the names it takes, where):\n{report}");
+}
+
+/// Every `.rs` file under a crate's `src/` is read by these checks: a module of the crate, or
+/// test code that a `#[cfg(test)] mod` declares. A file the reader misses would escape them.
+#[test]
+fn every_source_file_is_a_module_these_checks_read() {
+    let mut unread = Vec::new();
+    for (_, root) in CRATES {
+        let c = load_crate(root);
+        assert!(c.missing.is_empty(), "{root}: `mod` declarations without a file: {:?}", c.missing);
+        let src = root.strip_suffix("/lib.rs").unwrap();
+        for f in files_under(src, ".rs") {
+            let is_test = c.test_files.iter().any(|t| f == *t || (t.ends_with('/') && f.starts_with(t.as_str())));
+            if !c.files.contains_key(&f) && !is_test {
+                unread.push(f);
+            }
+        }
+    }
+    assert!(unread.is_empty(), "source files no module declares: {unread:?}");
+}
+
+/// The reader itself: re-exports are transparent, test modules and their imports are no
+/// edges, and a cycle through `super::` paths in code is found with the names that tie it.
+#[test]
+fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
+    let files: BTreeMap<&str, &str> = BTreeMap::from([
+        (
+            "x/lib.rs",
+            "mod a; mod b; pub mod faces; mod split; pub use a::A;
+             // `use crate::b::B;` in a comment is no import
+             fn f() -> &'static str { \"crate::b::g()\" }",
+        ),
+        ("x/a.rs", "pub struct A; pub fn h() { super::b::g(); }"),
+        (
+            "x/b.rs",
+            "use crate::A; pub fn g() {}
+             #[cfg(test)] mod tests { use super::*; use crate::a::h; }",
+        ),
+        // A parent that only re-exports its children, and children that use a sibling through
+        // the parent's re-export: no cycle with the parent.
+        ("x/faces/mod.rs", "mod p; mod q; pub use p::P; pub use q::Q;"),
+        ("x/faces/p.rs", "pub struct P;"),
+        ("x/faces/q.rs", "use super::P; pub struct Q(P);"),
+        // A parent split over a child file that uses the parent's items: no cycle either.
+        ("x/split.rs", "mod part; pub struct S(part::Part);"),
+        ("x/split/part.rs", "use super::*; pub struct Part; impl S { fn f() {} }"),
+    ]);
+    let read = |f: &str| files.get(f).map(|s| s.to_string());
+    let c = Crate::load("x/lib.rs", &read);
+    let edges = c.import_graph();
+    let keys: Vec<(&str, &str)> = edges.keys().map(|(a, b)| (a.as_str(), b.as_str())).collect();
+    assert_eq!(
+        keys,
+        [
+            ("x/a.rs", "x/b.rs"),
+            ("x/b.rs", "x/a.rs"),
+            ("x/faces/q.rs", "x/faces/p.rs"),
+            ("x/split.rs", "x/split/part.rs")
+        ]
+    );
+    let up: Vec<(String, String)> = c.up_arrows().into_keys().collect();
+    assert_eq!(up, [("x/split/part.rs".to_string(), "x/split.rs".to_string())]);
+    let report = describe_cycles(&edges);
+    assert!(report.contains("cycle of 2 files: x/a.rs, x/b.rs"), "{report}");
+    assert!(report.contains("x/a.rs -> x/b.rs: g (line 1)"), "{report}");
+    assert!(report.contains("x/b.rs -> x/a.rs: A (line 1)"), "{report}");
+    assert_eq!(cycles(&edges).len(), 1, "{report}");
+}
