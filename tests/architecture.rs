@@ -1030,3 +1030,233 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
     assert!(report.contains("x/b.rs -> x/a.rs: A (line 1)"), "{report}");
     assert_eq!(cycles(&edges).len(), 1, "{report}");
 }
+
+// -------------------------------------------------------------------------------------------
+// 4. Where warp-core allocates
+// -------------------------------------------------------------------------------------------
+
+/// Types whose values own heap memory.
+const ALLOCATING_TYPES: &[&str] = &[
+    "Vec", "String", "Box", "Rc", "Arc", "HashMap", "HashSet", "BTreeMap", "BTreeSet", "VecDeque",
+    "BinaryHeap", "LinkedList", "Cow", "CString", "OsString", "PathBuf",
+];
+/// Macros that allocate.
+const ALLOCATING_MACROS: &[&str] = &["vec", "format"];
+/// Methods that return an owned, allocated value.
+const ALLOCATING_METHODS: &[&str] =
+    &["to_vec", "to_string", "to_owned", "collect", "into_boxed_slice", "into_owned"];
+
+/// One allocating construct in non-test code: file, line, the construct, the enclosing fn
+/// (`ITEM_LEVEL` outside any: a type, a field), and whether that fn is `#[cold]`.
+#[derive(Debug)]
+struct Allocation {
+    file: String,
+    line: usize,
+    what: String,
+    function: String,
+    cold: bool,
+}
+
+/// The "function" of a construct outside every function body: a type alias, a field.
+const ITEM_LEVEL: &str = "(item level)";
+
+/// The names of the attributes on the item whose keyword (`fn`) is at `k`.
+fn attributes_before(t: &[Tok], mut k: usize) -> Vec<String> {
+    let mut out = Vec::new();
+    // Back over the qualifiers and visibility: `pub(crate) const unsafe fn`.
+    while k > 0 {
+        let p = &t[k - 1];
+        if p.ident() && ["pub", "const", "unsafe", "async", "extern", "crate", "super"].contains(&p.text.as_str())
+            || p.kind == Kind::Lit
+            || p.is("(")
+            || p.is(")")
+        {
+            k -= 1;
+        } else {
+            break;
+        }
+    }
+    // Back over `#[..]` groups.
+    while k > 1 && t[k - 1].is("]") {
+        let mut depth = 0;
+        let mut open = k - 1;
+        loop {
+            if t[open].is("]") {
+                depth += 1;
+            } else if t[open].is("[") {
+                depth -= 1;
+                if depth == 0 {
+                    break;
+                }
+            }
+            if open == 0 {
+                return out;
+            }
+            open -= 1;
+        }
+        if open == 0 || !t[open - 1].is("#") {
+            break;
+        }
+        out.push(t[open + 1].text.clone());
+        k = open - 1;
+    }
+    out
+}
+
+/// The allocating constructs of a crate's non-test code.
+fn allocations(c: &Crate) -> Vec<Allocation> {
+    let mut out = Vec::new();
+    for (file, src) in &c.files {
+        let t = &src.toks;
+        let in_test = |k: usize| src.test_ranges.iter().any(|&(a, b)| a <= k && k < b);
+        // The functions, innermost last: (name, body start, body end).
+        let mut fns: Vec<(String, usize, usize, bool)> = Vec::new();
+        for k in 0..t.len().saturating_sub(1) {
+            if t[k].is("fn") && t[k + 1].ident() {
+                let mut b = k + 2;
+                while b < t.len() && !t[b].is("{") && !t[b].is(";") {
+                    if t[b].is("(") || t[b].is("[") {
+                        b = matching(t, b);
+                    }
+                    b += 1;
+                }
+                if b < t.len() && t[b].is("{") {
+                    let cold = attributes_before(t, k).iter().any(|a| a == "cold");
+                    fns.push((t[k + 1].text.clone(), k, matching(t, b), cold));
+                }
+            }
+        }
+        for k in 0..t.len() {
+            if in_test(k) || t[k].kind != Kind::Ident {
+                continue;
+            }
+            let word = t[k].text.as_str();
+            let prev = |s: &str| k > 0 && t[k - 1].is(s);
+            let next = |s: &str| t.get(k + 1).is_some_and(|n| n.is(s));
+            let what = if ALLOCATING_TYPES.contains(&word) && !prev(".") {
+                word.to_string()
+            } else if ALLOCATING_MACROS.contains(&word) && next("!") {
+                format!("{word}!")
+            } else if ALLOCATING_METHODS.contains(&word) && prev(".") {
+                format!(".{word}()")
+            } else if word == "alloc" && (next("::") || prev("::")) {
+                "alloc::".to_string()
+            } else {
+                continue;
+            };
+            let (function, cold) = fns
+                .iter()
+                .filter(|(_, a, b, _)| *a <= k && k <= *b)
+                .max_by_key(|(_, a, _, _)| *a)
+                .map_or((ITEM_LEVEL.to_string(), false), |(n, _, _, c)| (n.clone(), *c));
+            out.push(Allocation { file: file.clone(), line: t[k].line, what, function, cold });
+        }
+    }
+    out
+}
+
+/// Why a part of warp-core may allocate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Why {
+    /// Kernel-side code reporting a fault: a `Box<Fault>` with its index and values, built in
+    /// a `#[cold]` function (which the test checks), so that the path taken by every access
+    /// that does not fault allocates nothing.
+    Fault,
+    /// Host code: it runs outside kernels (a validator, a builder, a constructor the runtime
+    /// calls once per launch chunk).
+    Host,
+}
+
+/// The parts of warp-core that allocate, each with its reason: a file and its functions
+/// (`"*"`: every function of the file; `ITEM_LEVEL`: its types and fields). Every other
+/// non-test source of warp-core contains no allocating construct (`ALLOCATING_TYPES`,
+/// `ALLOCATING_MACROS`, `ALLOCATING_METHODS`, `alloc::`).
+const WARP_CORE_ALLOCATES: &[(&str, &[&str], Why, &str)] = &[
+    (
+        "warp-core/src/fault.rs",
+        &[ITEM_LEVEL, "new"],
+        Why::Fault,
+        "`KResult<T> = Result<T, Box<Fault>>`: a fault is boxed so that `Ok` stays one word, and \
+         `FaultKind` holds the index, shape and values it names as `Vec`s; `Fault::new` boxes it",
+    ),
+    (
+        "warp-core/src/view.rs",
+        &["out_of_bounds", "view_out_of_bounds", "log_write"],
+        Why::Fault,
+        "an array access's faults (out of bounds, a view's bound, a write race) copy the index and \
+         shape into the fault",
+    ),
+    (
+        "warp-core/src/objects/bvh.rs",
+        &["fault"],
+        Why::Fault,
+        "an out-of-bounds node or primitive index of a BVH",
+    ),
+    (
+        "warp-core/src/objects/volume.rs",
+        &["non_finite"],
+        Why::Fault,
+        "a NaN or infinite volume sample position, with its values",
+    ),
+    (
+        "warp-core/src/grad.rs",
+        &[ITEM_LEVEL, "new"],
+        Why::Host,
+        "`AdStack`'s buffer: the CPU backend makes one stack per launch chunk (`AdStack::new`, \
+         with its whole capacity); a kernel thread's pushes never grow it (past the capacity a \
+         push is a fault)",
+    ),
+    (
+        "warp-core/src/meta.rs",
+        &[ITEM_LEVEL],
+        Why::Host,
+        "`ConstLiteral` (`fn() -> String`) and `StructDefs` (`fn(&mut Vec<..>)`): signatures of \
+         the host functions the CUDA source assembler calls, which the macro generates",
+    ),
+    (
+        "warp-core/src/objects/nanovdb.rs",
+        &["*"],
+        Why::Host,
+        "the NanoVDB format's host code: the validator and the map's accessors (errors as \
+         `String`) and the CPU builders `build_from_tiles`/`build_from_voxels` (a grid as \
+         `Vec<u8>`), kept with the format facts so that they have one home",
+    ),
+];
+
+/// ARCHITECTURE.md: warp-core allocates only where `WARP_CORE_ALLOCATES` says, and why; its
+/// fault constructors are `#[cold]`; and no entry of the list is stale.
+#[test]
+fn warp_core_allocates_only_where_listed() {
+    let c = load_crate("warp-core/src/lib.rs");
+    let found = allocations(&c);
+    let allowed = |a: &Allocation| {
+        WARP_CORE_ALLOCATES
+            .iter()
+            .find(|(f, fns, _, _)| *f == a.file && (fns.contains(&"*") || fns.contains(&a.function.as_str())))
+    };
+    let mut problems = Vec::new();
+    for a in &found {
+        match allowed(a) {
+            None => problems.push(format!(
+                "{}:{}: {} in `{}`: warp-core allocates here, which WARP_CORE_ALLOCATES does not list",
+                a.file, a.line, a.what, a.function
+            )),
+            Some((_, _, Why::Fault, _)) if a.function != ITEM_LEVEL && !a.cold => problems.push(format!(
+                "{}:{}: {} in `{}`: a fault constructor that allocates must be #[cold]",
+                a.file, a.line, a.what, a.function
+            )),
+            Some(_) => {}
+        }
+    }
+    for (file, fns, _, _) in WARP_CORE_ALLOCATES {
+        for f in *fns {
+            if !found.iter().any(|a| a.file == *file && (*f == "*" || a.function == *f)) {
+                problems.push(format!(
+                    "WARP_CORE_ALLOCATES lists `{f}` in {file}, which allocates nothing (any more): \
+                     remove it"
+                ));
+            }
+        }
+    }
+    assert!(problems.is_empty(), "warp-core's allocation rule:\n{}", problems.join("\n"));
+}
