@@ -1032,6 +1032,240 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
 }
 
 // -------------------------------------------------------------------------------------------
+// 2. Layers: warp-runtime's files, and the workspace's crates
+// -------------------------------------------------------------------------------------------
+
+/// warp-runtime's layers, top first (ARCHITECTURE.md: "Imports run one way, each layer
+/// importing only layers to its right"): (rank, name, files). A file is a path under
+/// `warp-runtime/src/`, a folder ends in `/`, and the longest match places a file. A file
+/// imports files of its own row or of a higher rank; two rows of one rank (the backends)
+/// import neither each other. `lib.rs`, the crate's face (its re-exports), is in no row: a
+/// file that imports an item of lib.rs climbs above every layer.
+const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
+    (0, "entry points", &["launch.rs", "autograd.rs", "checkpoint.rs", "python.rs"]),
+    (1, "tape", &["tape.rs"]),
+    (2, "graph", &["graph.rs"]),
+    // `objects/` sits beside `array`: it imports `array`, `primitives` and `dispatch`.
+    (3, "arrays and what is made of them", &["array.rs", "array/", "objects/", "primitives/mod.rs"]),
+    (4, "dispatch", &["dispatch.rs"]),
+    (5, "capturing", &["capturing.rs"]),
+    (6, "the CPU backend", &["cpu/"]),
+    (6, "the CUDA backend", &["cuda/"]),
+    // The primitives' leaves are what the `Backend` trait's primitives take.
+    (7, "the backend seam", &["backend.rs", "params.rs", "primitives/elements.rs", "primitives/plan.rs"]),
+    (8, "kernel", &["kernel.rs"]),
+    (9, "device", &["device.rs", "launch_id.rs"]),
+    (10, "leaves", &["error.rs", "config.rs"]),
+];
+
+/// The imports that climb a layer on purpose (ARCHITECTURE.md states each): (file, the files it
+/// may import above its layer, why).
+const RUNTIME_LAYER_EXCEPTIONS: &[(&str, &[&str], &str)] = &[
+    (
+        "cuda/pinned.rs",
+        &["array.rs", "array/"],
+        "PinnedVec's asynchronous copies are methods of `Array` on the array's `Storage`",
+    ),
+    ("cuda/distributed.rs", &["array.rs", "array/"], "collectives take `Array`s"),
+];
+
+const RUNTIME_SRC: &str = "warp-runtime/src/";
+
+/// The backends' folders ("Only `dispatch.rs` names every backend").
+const RUNTIME_BACKENDS: &[&str] = &["cpu/", "cuda/"];
+
+/// Whether `file` is `pattern`, or lies under it where `pattern` is a folder (ends in `/`).
+fn path_matches(file: &str, pattern: &str) -> bool {
+    if pattern.ends_with('/') {
+        file.starts_with(pattern)
+    } else {
+        file == pattern
+    }
+}
+
+/// The row of `RUNTIME_LAYERS` that places a warp-runtime file (a path under `RUNTIME_SRC`).
+fn runtime_layer(file: &str) -> Option<usize> {
+    RUNTIME_LAYERS
+        .iter()
+        .enumerate()
+        .filter_map(|(row, (_, _, files))| {
+            files.iter().filter(|p| path_matches(file, p)).map(|p| (p.len(), row)).max()
+        })
+        .max()
+        .map(|(_, row)| row)
+}
+
+/// ARCHITECTURE.md's layers of warp-runtime: every import goes down (or stays in its row),
+/// but for the stated exceptions; a backend's folder depends on `backend.rs` and below, never
+/// on dispatch, array, tape or launch; and only `dispatch.rs` names every backend.
+#[test]
+fn warp_runtime_imports_follow_its_layers() {
+    let c = load_crate("warp-runtime/src/lib.rs");
+    let mut problems = Vec::new();
+    for file in c.files.keys() {
+        let f = file.strip_prefix(RUNTIME_SRC).unwrap();
+        if f != "lib.rs" && runtime_layer(f).is_none() {
+            problems.push(format!("{file} is in no layer: place it in RUNTIME_LAYERS"));
+        }
+    }
+    let mut backends_named: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
+    let edges = c.edges();
+    for ((from, to), names) in &edges {
+        let (a, b) = (from.strip_prefix(RUNTIME_SRC).unwrap(), to.strip_prefix(RUNTIME_SRC).unwrap());
+        if a == "lib.rs" {
+            continue;
+        }
+        let (Some(ra), rb) = (runtime_layer(a), runtime_layer(b)) else {
+            continue;
+        };
+        if let Some(backend) = RUNTIME_BACKENDS.iter().find(|p| path_matches(b, p)) {
+            if !path_matches(a, backend) {
+                backends_named.entry(a).or_default().insert(backend);
+            }
+        }
+        let climbs = match rb {
+            None => true, // lib.rs
+            Some(rb) => {
+                let (rank_a, rank_b) = (RUNTIME_LAYERS[ra].0, RUNTIME_LAYERS[rb].0);
+                rank_b < rank_a || (rank_b == rank_a && ra != rb)
+            }
+        };
+        let excepted = RUNTIME_LAYER_EXCEPTIONS.iter().any(|(f, to, _)| {
+            *f == a && to.iter().any(|p| path_matches(b, p))
+        });
+        if climbs && !excepted {
+            let names: Vec<&str> = names.iter().map(String::as_str).collect();
+            problems.push(format!(
+                "{a} ({}) imports {b} ({}): {}",
+                RUNTIME_LAYERS[ra].1,
+                rb.map_or("the crate's face", |rb| RUNTIME_LAYERS[rb].1),
+                names.join(", ")
+            ));
+        }
+    }
+    for (file, rows) in backends_named {
+        if rows.len() > 1 && file != "dispatch.rs" {
+            problems.push(format!("{file} names more than one backend: only dispatch.rs does"));
+        }
+    }
+    for (f, to, _) in RUNTIME_LAYER_EXCEPTIONS {
+        let used = edges.keys().any(|(a, b)| {
+            a.strip_prefix(RUNTIME_SRC) == Some(*f)
+                && to.iter().any(|p| b.strip_prefix(RUNTIME_SRC).is_some_and(|b| path_matches(b, p)))
+        });
+        if !used {
+            problems.push(format!("RUNTIME_LAYER_EXCEPTIONS lets {f} import {to:?}, which it no longer does: remove it"));
+        }
+    }
+    assert!(problems.is_empty(), "warp-runtime's layers (ARCHITECTURE.md):\n{}", problems.join("\n"));
+}
+
+/// The workspace's crate graph (every dependency table of each Cargo.toml: normal, dev, build,
+/// per target): (crate, its manifest, the workspace crates it depends on). warp-core and
+/// warp-cuda stand alone (warp-core is the kernel-side vocabulary, warp-cuda the driver
+/// layer); warp-macros depends on no workspace crate (the code it generates names
+/// `::warp_lang::__private`, which the user's crate resolves); warp-report stands alone;
+/// warp-runtime sits on warp-core and warp-cuda, never on the compiler; the facade on all.
+const CRATE_DEPS: &[(&str, &str, &[&str])] = &[
+    ("warp-core", "warp-core/Cargo.toml", &[]),
+    ("warp-cuda", "warp-cuda/Cargo.toml", &[]),
+    ("warp-macros", "warp-macros/Cargo.toml", &[]),
+    ("warp-report", "warp-report/Cargo.toml", &[]),
+    ("warp-runtime", "warp-runtime/Cargo.toml", &["warp-core", "warp-cuda"]),
+    (
+        "warp-lang",
+        "Cargo.toml",
+        &["warp-core", "warp-cuda", "warp-macros", "warp-report", "warp-runtime"],
+    ),
+];
+
+/// The packages a manifest depends on, over all its dependency tables.
+fn manifest_deps(toml: &str) -> BTreeSet<String> {
+    let mut out = BTreeSet::new();
+    let mut in_deps = false;
+    for line in toml.lines() {
+        let line = line.split('#').next().unwrap().trim();
+        if line.starts_with('[') {
+            let header = line.trim_matches(|c| c == '[' || c == ']');
+            // `[dependencies]`, `[dev-dependencies]`, `[target.'cfg(unix)'.dependencies]`, and
+            // `[dependencies.foo]` (one dependency per table).
+            let (table, name) = match header.rsplit_once("dependencies") {
+                Some((_, rest)) => (true, rest.trim_start_matches('.')),
+                None => (false, ""),
+            };
+            in_deps = table && name.is_empty();
+            if table && !name.is_empty() {
+                out.insert(name.trim_matches('"').to_string());
+            }
+            continue;
+        }
+        if in_deps {
+            if let Some(key) = line.split(['=', '.']).next() {
+                let key = key.trim().trim_matches('"');
+                if !key.is_empty() {
+                    out.insert(key.to_string());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The workspace's crates depend on each other as `CRATE_DEPS` says (one way: no crate below
+/// depends on one above it), and `CRATE_DEPS` names every member.
+#[test]
+fn workspace_crates_form_the_intended_dag() {
+    let names: BTreeSet<&str> = CRATE_DEPS.iter().map(|(n, _, _)| *n).collect();
+    let root = read_required("Cargo.toml");
+    let members = root
+        .split("members")
+        .nth(1)
+        .and_then(|s| s.split(']').next())
+        .expect("a workspace members list");
+    for m in members.split(',').map(|m| m.trim().trim_matches(|c| c == '[' || c == '=' || c == ' ' || c == '"')) {
+        if !m.is_empty() {
+            assert!(names.contains(m), "workspace member {m} is not in CRATE_DEPS: state what it may depend on");
+        }
+    }
+    let mut problems = Vec::new();
+    for (name, manifest, want) in CRATE_DEPS {
+        let got: BTreeSet<String> =
+            manifest_deps(&read_required(manifest)).into_iter().filter(|d| names.contains(d.as_str())).collect();
+        let want: BTreeSet<String> = want.iter().map(|s| s.to_string()).collect();
+        if got != want {
+            problems.push(format!("{name} depends on {got:?}; the architecture says {want:?}"));
+        }
+    }
+    // The intended graph itself has no cycle.
+    let edges: BTreeMap<(String, String), BTreeSet<String>> = CRATE_DEPS
+        .iter()
+        .flat_map(|(n, _, deps)| deps.iter().map(move |d| ((n.to_string(), d.to_string()), BTreeSet::new())))
+        .collect();
+    assert!(cycles(&edges).is_empty(), "CRATE_DEPS has a cycle");
+    assert!(problems.is_empty(), "the workspace's crate graph:\n{}", problems.join("\n"));
+}
+
+// -------------------------------------------------------------------------------------------
+// 3. File sizes
+// -------------------------------------------------------------------------------------------
+
+/// The most lines a warp-macros source file may have (issue 30: the builtin table had grown
+/// to 1,770): past it, a file holds more than one concept.
+const MACROS_MAX_LINES: usize = 1300;
+
+#[test]
+fn no_warp_macros_source_file_is_over_1300_lines() {
+    let long: Vec<String> = files_under("warp-macros/src", ".rs")
+        .into_iter()
+        .filter_map(|f| {
+            let n = read_required(&f).lines().count();
+            (n > MACROS_MAX_LINES).then(|| format!("{f}: {n} lines"))
+        })
+        .collect();
+    assert!(long.is_empty(), "warp-macros files over {MACROS_MAX_LINES} lines:\n{}", long.join("\n"));
+}
+
+// -------------------------------------------------------------------------------------------
 // 4. Where warp-core allocates
 // -------------------------------------------------------------------------------------------
 
