@@ -639,10 +639,21 @@ impl Crate {
                         }
                     } else if t[k].ident() && t[k + 1].is("!") {
                         // An item-level macro call (`thread_local!`, a table): the items it
-                        // spells out by name are this module's.
+                        // spells out by name are this module's ...
                         for w in t[k..stop].windows(2) {
                             if ITEM_KEYWORDS.contains(&w[0].text.as_str()) && w[1].ident() {
                                 self.modules[m].defs.insert(w[1].text.clone());
+                            }
+                        }
+                        // ... and so are the functions a macro of this file makes under names
+                        // its call passes (`fn $name` in `atomic_bits_fn!(atomic_and: ..)`).
+                        if defines_fn_by_argument(t, &t[k].text) {
+                            for w in t[k + 2..stop].windows(3) {
+                                let head = w[0].is("(") || w[0].is(",") || w[0].is("[") || w[0].is("{");
+                                let tail = [":", ",", ")", "]", "}", ";"].iter().any(|p| w[2].is(p));
+                                if head && tail && w[1].ident() && w[1].text.chars().all(|c| c == '_' || c.is_ascii_lowercase() || c.is_ascii_digit()) {
+                                    self.modules[m].defs.insert(w[1].text.clone());
+                                }
                             }
                         }
                     }
@@ -712,19 +723,30 @@ impl Crate {
     /// What `segs`, written in module `m`, names in this crate (None: another crate, a local
     /// name, or something this reader does not see).
     fn resolve(&self, m: usize, segs: &[String], depth: u32) -> Option<Found> {
+        self.resolve_ns(m, segs, depth, false)
+    }
+
+    /// `resolve`, the last segment looked up as an item where `value` (see `walk_ns`).
+    fn resolve_ns(&self, m: usize, segs: &[String], depth: u32, value: bool) -> Option<Found> {
         if depth > 24 || segs.is_empty() {
             return None;
         }
         match segs[0].as_str() {
             "" => None,
-            "crate" => self.walk(0, &segs[1..], depth),
-            "self" => self.walk(m, &segs[1..], depth),
-            "super" => self.walk(self.modules[m].parent?, &segs[1..], depth),
-            _ => self.walk(m, segs, depth),
+            "crate" => self.walk_ns(0, &segs[1..], depth, value),
+            "self" => self.walk_ns(m, &segs[1..], depth, value),
+            "super" => self.walk_ns(self.modules[m].parent?, &segs[1..], depth, value),
+            _ => self.walk_ns(m, segs, depth, value),
         }
     }
 
     fn walk(&self, cur: usize, rest: &[String], depth: u32) -> Option<Found> {
+        self.walk_ns(cur, rest, depth, false)
+    }
+
+    /// `walk`; with `value`, the last segment is looked up as an item, not a module (Rust's
+    /// namespaces: `builtins::noise` is both the module `noise` and the function it re-exports).
+    fn walk_ns(&self, cur: usize, rest: &[String], depth: u32, value: bool) -> Option<Found> {
         if depth > 24 {
             return None;
         }
@@ -738,7 +760,9 @@ impl Crate {
             _ => {}
         }
         if let Some(&child) = module.children.get(s) {
-            return self.walk(child, &rest[1..], depth);
+            if !(value && rest.len() == 1) {
+                return self.walk_ns(child, &rest[1..], depth, value);
+            }
         }
         if module.defs.contains(s) {
             return Some(Found::Item(cur));
@@ -752,7 +776,7 @@ impl Crate {
                 }
                 let mut path = target.clone();
                 path.extend_from_slice(&rest[1..]);
-                if let Some(f) = self.resolve(cur, &path, depth + 1) {
+                if let Some(f) = self.resolve_ns(cur, &path, depth + 1, value) {
                     return Some(f);
                 }
             }
@@ -760,7 +784,7 @@ impl Crate {
         for glob in &module.globs {
             if let Some(Found::Module(g)) = self.resolve(cur, glob, depth + 1) {
                 if g != cur {
-                    if let Some(f) = self.walk(g, rest, depth + 1) {
+                    if let Some(f) = self.walk_ns(g, rest, depth + 1, value) {
                         return Some(f);
                     }
                 }
@@ -860,6 +884,17 @@ fn child_file(dir: &str, name: &str, read: &dyn Fn(&str) -> Option<String>) -> S
     } else {
         flat
     }
+}
+
+/// Whether the file's `macro_rules! name` makes a function named by one of its arguments
+/// (`fn $name`).
+fn defines_fn_by_argument(t: &[Tok], name: &str) -> bool {
+    (0..t.len().saturating_sub(3)).any(|k| {
+        t[k].is("macro_rules") && t[k + 1].is("!") && t[k + 2].is(name) && {
+            let close = matching(t, k + 3);
+            t[k + 3..close].windows(2).any(|w| w[0].is("fn") && w[1].is("$"))
+        }
+    })
 }
 
 /// Strongly connected components of more than one node (Tarjan).
@@ -1493,4 +1528,182 @@ fn warp_core_allocates_only_where_listed() {
         }
     }
     assert!(problems.is_empty(), "warp-core's allocation rule:\n{}", problems.join("\n"));
+}
+
+// -------------------------------------------------------------------------------------------
+// 5. The recipes: a builtin, a host object
+// -------------------------------------------------------------------------------------------
+//
+// Where today's tables are. Other work moves them (one row per CUDA library section, the
+// builtin table split, host objects behind one derive): these constants and the readers
+// below them are the lines to adapt.
+
+/// The builtin table: the item-level invocations of this macro under warp-macros/src (each
+/// row `"name": classes, (params) -> result, "section", Grad, facts..;`).
+const BUILTIN_TABLE_MACRO: &str = "table";
+/// The CUDA library's sections (`SECTIONS`: section `s` is `wp_<s>.h`) and each section's
+/// adjoint part (`ADJOINT_PARTS`: (section, header) pairs).
+const SECTIONS_FILE: &str = "warp-runtime/src/cuda/source.rs";
+/// The host objects' kinds (`OBJECTS`: `ObjectRow { kind, name, param, rust, cuda, section }`).
+const OBJECTS_FILE: &str = "warp-macros/src/types.rs";
+/// The CUDA builtin library's headers.
+const CUDA_LIBRARY: &str = "warp-cuda/cuda";
+
+/// A row of the builtin table, as far as the recipe needs it.
+#[derive(Debug)]
+struct BuiltinRow {
+    name: String,
+    section: String,
+    grad: String,
+    /// The names of the builder facts that follow (`method`, `aliases`, `operator`, ..).
+    facts: Vec<String>,
+    at: String,
+}
+
+fn builtin_rows() -> Vec<BuiltinRow> {
+    let mut rows = Vec::new();
+    for file in files_under("warp-macros/src", ".rs") {
+        let t = lex(&read_required(&file));
+        for k in 0..t.len().saturating_sub(2) {
+            let item_level = k == 0 || t[k - 1].is("}") || t[k - 1].is(";") || t[k - 1].is("]");
+            if !(t[k].is(BUILTIN_TABLE_MACRO) && t[k + 1].is("!") && t[k + 2].is("{") && item_level) {
+                continue;
+            }
+            let close = matching(&t, k + 2);
+            let mut a = k + 3;
+            while a < close {
+                let end = (a..close).find(|&e| t[e].is(";")).unwrap_or(close);
+                let row = &t[a..end];
+                let name = row.first().and_then(Tok::str_value);
+                let arrow = row.windows(2).position(|w| w[0].is("-") && w[1].is(">"));
+                if let (Some(name), Some(arrow)) = (name, arrow) {
+                    let mut depth = 0i32;
+                    let mut top = Vec::new(); // the row's tokens outside brackets, after `->`
+                    for tok in &row[arrow + 2..] {
+                        match tok.text.as_str() {
+                            "(" | "[" if tok.kind == Kind::Punct => depth += 1,
+                            ")" | "]" if tok.kind == Kind::Punct => depth -= 1,
+                            _ if depth == 0 => top.push(tok),
+                            _ => {}
+                        }
+                    }
+                    let sec = top.iter().position(|t| t.kind == Kind::Lit);
+                    if let Some(sec) = sec {
+                        let rest: Vec<&&Tok> = top[sec + 1..].iter().filter(|t| t.ident()).collect();
+                        rows.push(BuiltinRow {
+                            name: name.to_string(),
+                            section: top[sec].str_value().unwrap_or_default().to_string(),
+                            grad: rest.first().map(|t| t.text.clone()).unwrap_or_default(),
+                            facts: rest.iter().skip(1).map(|t| t.text.clone()).collect(),
+                            at: format!("{file}:{}", row[0].line),
+                        });
+                    }
+                }
+                a = end + 1;
+            }
+        }
+    }
+    rows
+}
+
+/// The string literals of the initializer of `const NAME` / `static NAME` in `file`.
+fn const_strings(file: &str, name: &str) -> Vec<String> {
+    let t = lex(&read_required(file));
+    let Some(k) = (1..t.len()).find(|&k| t[k].is(name) && (t[k - 1].is("const") || t[k - 1].is("static"))) else {
+        panic!("{file} defines no const {name}");
+    };
+    let eq = (k..t.len()).find(|&e| t[e].is("=")).unwrap();
+    let end = item_end(&t, eq, t.len());
+    t[eq..end].iter().filter_map(Tok::str_value).map(str::to_string).collect()
+}
+
+/// A CUDA library header and every library header it includes, transitively, as one text.
+fn cuda_closure(header: &str) -> String {
+    let mut seen = BTreeSet::new();
+    let mut todo = vec![header.to_string()];
+    let mut text = String::new();
+    while let Some(h) = todo.pop() {
+        if !seen.insert(h.clone()) {
+            continue;
+        }
+        let Some(src) = read_rel(&format!("{CUDA_LIBRARY}/{h}")) else {
+            continue;
+        };
+        for line in src.lines() {
+            if let Some(inc) = line.trim().strip_prefix("#include \"") {
+                todo.push(inc.trim_end_matches('"').to_string());
+            }
+        }
+        text.push_str(&src);
+        text.push('\n');
+    }
+    text
+}
+
+/// Whether C++ `text` names `ident` (as a whole identifier).
+fn cpp_names(text: &str, ident: &str) -> bool {
+    text.match_indices(ident).any(|(i, _)| {
+        let before = text[..i].chars().next_back();
+        let after = text[i + ident.len()..].chars().next();
+        !before.is_some_and(is_ident_char) && !after.is_some_and(is_ident_char)
+    })
+}
+
+/// The builtin recipe (ARCHITECTURE.md, "A new builtin"), the parts the sources show: every row's
+/// section is a section of the CUDA library with its header; the CPU function is
+/// `warp_core::builtins::<name>` and the CUDA one `wp::<name>` in its section (or what that
+/// includes); a row differentiated by `adj_<name>` (`Grad::Adjoint`) has its section's adjoint
+/// part, `warp_core::adjoint::adj_<name>` and `adj_<name>` in that part. Rows the front end
+/// writes out (`lowered`) or emits as an operator (`operator`) have no functions of their own.
+#[test]
+fn builtin_rows_follow_the_recipe() {
+    let rows = builtin_rows();
+    assert!(rows.len() > 100, "read {} builtin rows: has the table moved? (BUILTIN_TABLE_MACRO)", rows.len());
+    let sections = const_strings(SECTIONS_FILE, "SECTIONS");
+    let parts: BTreeMap<String, String> = const_strings(SECTIONS_FILE, "ADJOINT_PARTS")
+        .chunks(2)
+        .map(|p| (p[0].clone(), p[1].clone()))
+        .collect();
+    let core = load_crate("warp-core/src/lib.rs");
+    let in_core = |module: &str, name: &str| {
+        let path: Vec<String> = ["crate", module, name].iter().map(|s| s.to_string()).collect();
+        matches!(core.resolve_ns(0, &path, 0, true), Some(Found::Item(_)))
+    };
+    let mut problems = Vec::new();
+    for r in &rows {
+        let header = format!("wp_{}.h", r.section);
+        if !sections.contains(&r.section) {
+            problems.push(format!("{}: `{}`'s section \"{}\" is not in SECTIONS", r.at, r.name, r.section));
+        }
+        if read_rel(&format!("{CUDA_LIBRARY}/{header}")).is_none() {
+            problems.push(format!("{}: `{}`'s section has no {CUDA_LIBRARY}/{header}", r.at, r.name));
+        }
+        if r.facts.iter().any(|f| f == "lowered" || f == "operator") {
+            continue;
+        }
+        if !in_core("builtins", &r.name) {
+            problems.push(format!("{}: no CPU function warp_core::builtins::{}", r.at, r.name));
+        }
+        if !cpp_names(&cuda_closure(&header), &r.name) {
+            problems.push(format!("{}: no CUDA function wp::{} in {header} or what it includes", r.at, r.name));
+        }
+        if r.grad != "Adjoint" {
+            continue;
+        }
+        let adj = format!("adj_{}", r.name);
+        if !in_core("adjoint", &adj) {
+            problems.push(format!("{}: `{}` is differentiated by adj_ but warp_core::adjoint::{adj} is missing", r.at, r.name));
+        }
+        match parts.get(&r.section) {
+            None => problems.push(format!(
+                "{}: `{}` has an adjoint but its section \"{}\" has no adjoint part (ADJOINT_PARTS)",
+                r.at, r.name, r.section
+            )),
+            Some(part) if !cpp_names(&cuda_closure(part), &adj) => {
+                problems.push(format!("{}: no CUDA adjoint wp::{adj} in {part} or what it includes", r.at))
+            }
+            Some(_) => {}
+        }
+    }
+    assert!(problems.is_empty(), "the builtin recipe:\n{}", problems.join("\n"));
 }
