@@ -1707,3 +1707,168 @@ fn builtin_rows_follow_the_recipe() {
     }
     assert!(problems.is_empty(), "the builtin recipe:\n{}", problems.join("\n"));
 }
+
+/// A row of `OBJECTS`: (kind's name, whether a kernel parameter, warp-core's view or state
+/// type, the C++ type, the section), with where it is.
+#[derive(Debug)]
+struct ObjectRow {
+    name: String,
+    param: bool,
+    rust: String,
+    cuda: String,
+    section: String,
+    at: String,
+}
+
+fn object_rows() -> Vec<ObjectRow> {
+    let t = lex(&read_required(OBJECTS_FILE));
+    let mut rows = Vec::new();
+    for k in 0..t.len().saturating_sub(1) {
+        if !(t[k].is("ObjectRow") && t[k + 1].is("{")) || t.get(k.wrapping_sub(1)).is_some_and(|p| p.is("struct")) {
+            continue;
+        }
+        let close = matching(&t, k + 1);
+        let field = |name: &str| {
+            (k + 2..close)
+                .find(|&f| t[f].is(name) && t[f + 1].is(":"))
+                .map(|f| t[f + 2].str_value().map_or_else(|| t[f + 2].text.clone(), str::to_string))
+                .unwrap_or_default()
+        };
+        if field("name").is_empty() {
+            continue; // not a row: `-> &'static ObjectRow {`
+        }
+        rows.push(ObjectRow {
+            name: field("name"),
+            param: field("param") == "true",
+            rust: field("rust"),
+            cuda: field("cuda"),
+            section: field("section"),
+            at: format!("{OBJECTS_FILE}:{}", t[k].line),
+        });
+    }
+    rows
+}
+
+/// The types a crate's non-test code implements `trait_name` for (`impl<..> Trait<..> for
+/// Type<..>`, the type's last path segment).
+fn impls_of(c: &Crate, trait_name: &str) -> BTreeSet<String> {
+    let mut out = BTreeSet::new();
+    for src in c.files.values() {
+        let t = &src.toks;
+        let in_test = |k: usize| src.test_ranges.iter().any(|&(a, b)| a <= k && k < b);
+        for f in 1..t.len().saturating_sub(1) {
+            if !t[f].is("for") || in_test(f) {
+                continue;
+            }
+            // The trait: the identifier before `for`, past its generic arguments.
+            let mut b = f - 1;
+            if t[b].is(">") {
+                let mut depth = 0;
+                while b > 0 {
+                    if t[b].is(">") {
+                        depth += 1;
+                    } else if t[b].is("<") {
+                        depth -= 1;
+                        if depth == 0 {
+                            break;
+                        }
+                    }
+                    b -= 1;
+                }
+                b = b.saturating_sub(1);
+            }
+            if !t[b].is(trait_name) {
+                continue;
+            }
+            let is_impl = (0..b).rev().take_while(|&k| !t[k].is("{") && !t[k].is(";") && !t[k].is("}")).any(|k| t[k].is("impl"));
+            if !is_impl {
+                continue;
+            }
+            // The type: the last segment of the path after `for`.
+            let mut e = f + 1;
+            let mut ty = None;
+            while e < t.len() && !t[e].is("<") && !t[e].is("{") && !t[e].is("where") {
+                if t[e].ident() && !["mut", "dyn", "crate", "self", "super"].contains(&t[e].text.as_str()) {
+                    ty = Some(t[e].text.clone());
+                }
+                e += 1;
+            }
+            out.extend(ty);
+        }
+    }
+    out
+}
+
+/// The host-object recipe (ARCHITECTURE.md, "A new kernel-visible host object"), the parts the
+/// sources show, for every kind of `OBJECTS` (objects and their query states): its section is
+/// a section of the CUDA library, whose header (or what it includes) defines its C++ type; its
+/// view or state is `warp_core::objects::<rust>` with an `Adjoint` impl (a zero placeholder);
+/// and for a kind a kernel takes as a parameter: the host type
+/// `warp_runtime::objects::<name>` implementing `KernelArg`, builtin rows of its section (a
+/// kernel sees it only through them), and its suite tests `tests/suite/<name>.rs`.
+#[test]
+fn host_objects_follow_the_recipe() {
+    let rows = object_rows();
+    assert!(rows.len() >= 4, "read {} OBJECTS rows: has the table moved? (OBJECTS_FILE)", rows.len());
+    let sections = const_strings(SECTIONS_FILE, "SECTIONS");
+    let builtin_sections: BTreeSet<String> = builtin_rows().into_iter().map(|r| r.section).collect();
+    let core = load_crate("warp-core/src/lib.rs");
+    let runtime = load_crate("warp-runtime/src/lib.rs");
+    let core_adjoint = impls_of(&core, "Adjoint");
+    // ADAPT: where the `KernelArg` plumbing comes from one derive or trait, read that instead.
+    let kernel_args = impls_of(&runtime, "KernelArg");
+    let item = |c: &Crate, path: &[&str]| {
+        let path: Vec<String> = path.iter().map(|s| s.to_string()).collect();
+        matches!(c.resolve(0, &path, 0), Some(Found::Item(_)))
+    };
+    let mut problems = Vec::new();
+    for r in &rows {
+        let header = format!("wp_{}.h", r.section);
+        if !sections.contains(&r.section) {
+            problems.push(format!("{}: {}'s section \"{}\" is not in SECTIONS", r.at, r.name, r.section));
+        }
+        let cpp = cuda_closure(&header);
+        if cpp.is_empty() {
+            problems.push(format!("{}: {} has no header {CUDA_LIBRARY}/{header}", r.at, r.name));
+        }
+        let cpp_type = r.cuda.trim_start_matches("wp::");
+        if !cpp.contains(&format!("struct {cpp_type}")) {
+            problems.push(format!("{}: {header} (or what it includes) defines no `struct {cpp_type}`", r.at));
+        }
+        if !item(&core, &["crate", "objects", &r.rust]) {
+            problems.push(format!("{}: no warp_core::objects::{}", r.at, r.rust));
+        }
+        if !core_adjoint.contains(&r.rust) {
+            problems.push(format!("{}: warp-core has no `Adjoint` impl for {}", r.at, r.rust));
+        }
+        if !r.param {
+            continue;
+        }
+        if !item(&runtime, &["crate", "objects", &r.name]) {
+            problems.push(format!("{}: no host type warp_runtime::objects::{}", r.at, r.name));
+        }
+        if !kernel_args.contains(&r.name) {
+            problems.push(format!("{}: warp-runtime has no `KernelArg` impl for {}", r.at, r.name));
+        }
+        if !builtin_sections.contains(&r.section) {
+            problems.push(format!("{}: no builtin row of section \"{}\" takes {}", r.at, r.section, r.name));
+        }
+        let suite = format!("tests/suite/{}.rs", snake_case(&r.name));
+        if read_rel(&suite).is_none() {
+            problems.push(format!("{}: {} has no suite tests {suite}", r.at, r.name));
+        }
+    }
+    assert!(problems.is_empty(), "the host-object recipe:\n{}", problems.join("\n"));
+}
+
+/// `HashGrid` -> `hash_grid`.
+fn snake_case(name: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in name.chars().enumerate() {
+        if c.is_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.extend(c.to_lowercase());
+    }
+    out
+}
