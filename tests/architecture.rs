@@ -163,7 +163,8 @@ fn lex(src: &str) -> Vec<Tok> {
         if matches!(ch, 'b' | 'c') && at(i + 1) == 'r' {
             j += 1;
         }
-        if at(j) == 'r' && (at(j + 1) == '"' || (at(j + 1) == '#' && matches!(at(j + 2), '#' | '"')))
+        if at(j) == 'r'
+            && (at(j + 1) == '"' || (at(j + 1) == '#' && matches!(at(j + 2), '#' | '"')))
         {
             let mut hashes = 0;
             j += 1;
@@ -186,12 +187,20 @@ fn lex(src: &str) -> Vec<Tok> {
                 j += 1;
             }
             let text: String = c[start..j.min(n)].iter().collect();
-            out.push(Tok { kind: Kind::Lit, text, line: start_line });
+            out.push(Tok {
+                kind: Kind::Lit,
+                text,
+                line: start_line,
+            });
             i = j;
             continue;
         }
         // Strings and byte strings: "..", b"..", c"..".
-        let q = if matches!(ch, 'b' | 'c') && at(i + 1) == '"' { i + 1 } else { i };
+        let q = if matches!(ch, 'b' | 'c') && at(i + 1) == '"' {
+            i + 1
+        } else {
+            i
+        };
         if at(q) == '"' {
             let mut j = q + 1;
             while j < n && c[j] != '"' {
@@ -204,22 +213,38 @@ fn lex(src: &str) -> Vec<Tok> {
                 j += 1;
             }
             let text: String = c[q..(j + 1).min(n)].iter().collect();
-            out.push(Tok { kind: Kind::Lit, text, line: start_line });
+            out.push(Tok {
+                kind: Kind::Lit,
+                text,
+                line: start_line,
+            });
             i = j + 1;
             continue;
         }
         // Chars, byte chars and lifetimes.
-        let q = if ch == 'b' && at(i + 1) == '\'' { i + 1 } else { i };
+        let q = if ch == 'b' && at(i + 1) == '\'' {
+            i + 1
+        } else {
+            i
+        };
         if at(q) == '\'' {
             if at(q + 1) == '\\' {
                 let mut j = q + 2;
                 while j < n && c[j] != '\'' {
                     j += 1;
                 }
-                out.push(Tok { kind: Kind::Lit, text: "'c'".into(), line });
+                out.push(Tok {
+                    kind: Kind::Lit,
+                    text: "'c'".into(),
+                    line,
+                });
                 i = j + 1;
             } else if at(q + 2) == '\'' {
-                out.push(Tok { kind: Kind::Lit, text: "'c'".into(), line });
+                out.push(Tok {
+                    kind: Kind::Lit,
+                    text: "'c'".into(),
+                    line,
+                });
                 i = q + 3;
             } else {
                 let mut j = q + 1;
@@ -227,7 +252,11 @@ fn lex(src: &str) -> Vec<Tok> {
                     j += 1;
                 }
                 let text: String = c[q..j].iter().collect();
-                out.push(Tok { kind: Kind::Lifetime, text, line });
+                out.push(Tok {
+                    kind: Kind::Lifetime,
+                    text,
+                    line,
+                });
                 i = j;
             }
             continue;
@@ -239,7 +268,11 @@ fn lex(src: &str) -> Vec<Tok> {
                 j += 1;
             }
             let text: String = c[i + 2..j].iter().collect();
-            out.push(Tok { kind: Kind::Ident, text, line });
+            out.push(Tok {
+                kind: Kind::Ident,
+                text,
+                line,
+            });
             i = j;
             continue;
         }
@@ -249,37 +282,52 @@ fn lex(src: &str) -> Vec<Tok> {
                 j += 1;
             }
             let text: String = c[i..j].iter().collect();
-            out.push(Tok { kind: Kind::Ident, text, line });
+            out.push(Tok {
+                kind: Kind::Ident,
+                text,
+                line,
+            });
             i = j;
             continue;
         }
         if ch.is_ascii_digit() {
             let mut j = i;
+            // Digits, suffixes, a fraction (`1.5`, not the range `0..n` or a field `t.0`), and
+            // an exponent's sign (`1e-3`, not in hex).
             loop {
-                if j < n && is_ident_char(c[j]) {
-                    j += 1;
-                } else if at(j) == '.' && at(j + 1).is_ascii_digit() {
-                    j += 1;
-                } else if matches!(at(j), '+' | '-')
+                let fraction = at(j) == '.' && at(j + 1).is_ascii_digit();
+                let exponent = matches!(at(j), '+' | '-')
                     && matches!(at(j - 1), 'e' | 'E')
-                    && !c[i..j].contains(&'x')
-                {
+                    && !c[i..j].contains(&'x');
+                if (j < n && is_ident_char(c[j])) || fraction || exponent {
                     j += 1;
                 } else {
                     break;
                 }
             }
             let text: String = c[i..j].iter().collect();
-            out.push(Tok { kind: Kind::Lit, text, line });
+            out.push(Tok {
+                kind: Kind::Lit,
+                text,
+                line,
+            });
             i = j;
             continue;
         }
         if ch == ':' && at(i + 1) == ':' {
-            out.push(Tok { kind: Kind::Punct, text: "::".into(), line });
+            out.push(Tok {
+                kind: Kind::Punct,
+                text: "::".into(),
+                line,
+            });
             i += 2;
             continue;
         }
-        out.push(Tok { kind: Kind::Punct, text: ch.to_string(), line });
+        out.push(Tok {
+            kind: Kind::Punct,
+            text: ch.to_string(),
+            line,
+        });
         i += 1;
     }
     out
@@ -319,7 +367,11 @@ fn item_end(t: &[Tok], i: usize, end: usize) -> usize {
                 "}" => {
                     depth = depth.saturating_sub(1);
                     if depth == 0 {
-                        return if k + 1 < end && t[k + 1].is(";") { k + 2 } else { k + 1 };
+                        return if k + 1 < end && t[k + 1].is(";") {
+                            k + 2
+                        } else {
+                            k + 1
+                        };
                     }
                 }
                 ";" if depth == 0 => return k + 1,
@@ -436,7 +488,11 @@ fn use_tree(t: &[Tok], a: usize, b: usize, prefix: &[String], out: &mut Vec<UseL
             return;
         }
         if tok.is("*") {
-            out.push(UseLeaf { segs, binding: None, glob: true });
+            out.push(UseLeaf {
+                segs,
+                binding: None,
+                glob: true,
+            });
             return;
         }
         if tok.ident() && tok.text != "as" {
@@ -456,21 +512,30 @@ fn use_tree(t: &[Tok], a: usize, b: usize, prefix: &[String], out: &mut Vec<UseL
                     binding = segs.last().cloned();
                 }
             }
-            out.push(UseLeaf { segs, binding, glob: false });
+            out.push(UseLeaf {
+                segs,
+                binding,
+                glob: false,
+            });
             return;
         }
         k += 1;
     }
 }
 
-const ITEM_KEYWORDS: &[&str] = &["fn", "struct", "enum", "union", "trait", "type", "const", "static"];
+const ITEM_KEYWORDS: &[&str] = &[
+    "fn", "struct", "enum", "union", "trait", "type", "const", "static",
+];
 const QUALIFIERS: &[&str] = &["unsafe", "async", "extern", "default", "auto", "const"];
 
 impl Crate {
     /// Reads the crate whose root file is `root`, following `mod` declarations through `read`.
     fn load(root: &str, read: &dyn Fn(&str) -> Option<String>) -> Crate {
         let mut c = Crate {
-            modules: vec![Module { file: root.to_string(), ..Module::default() }],
+            modules: vec![Module {
+                file: root.to_string(),
+                ..Module::default()
+            }],
             refs: Vec::new(),
             files: BTreeMap::new(),
             test_files: BTreeSet::new(),
@@ -481,7 +546,13 @@ impl Crate {
         c
     }
 
-    fn load_file(&mut self, file: &str, m: usize, dir: &str, read: &dyn Fn(&str) -> Option<String>) {
+    fn load_file(
+        &mut self,
+        file: &str,
+        m: usize,
+        dir: &str,
+        read: &dyn Fn(&str) -> Option<String>,
+    ) {
         let Some(text) = read(file) else {
             self.missing.push(file.to_string());
             return;
@@ -489,7 +560,11 @@ impl Crate {
         let toks = lex(&text);
         self.files.insert(
             file.to_string(),
-            SourceFile { toks: Vec::new(), test_ranges: Vec::new(), code_idents: BTreeSet::new() },
+            SourceFile {
+                toks: Vec::new(),
+                test_ranges: Vec::new(),
+                code_idents: BTreeSet::new(),
+            },
         );
         let mut pending = Vec::new();
         let n = toks.len();
@@ -502,7 +577,11 @@ impl Crate {
 
     fn new_module(&mut self, parent: usize, name: &str, file: &str) -> usize {
         let id = self.modules.len();
-        self.modules.push(Module { parent: Some(parent), file: file.to_string(), ..Module::default() });
+        self.modules.push(Module {
+            parent: Some(parent),
+            file: file.to_string(),
+            ..Module::default()
+        });
         self.modules[parent].children.insert(name.to_string(), id);
         id
     }
@@ -560,7 +639,11 @@ impl Crate {
                 }
             }
             if test_only {
-                self.files.get_mut(file).unwrap().test_ranges.push((item_start, stop));
+                self.files
+                    .get_mut(file)
+                    .unwrap()
+                    .test_ranges
+                    .push((item_start, stop));
                 if t[j].is("mod") && t[j + 2].is(";") {
                     let name = &t[j + 1].text;
                     let f = path_attr.map_or_else(
@@ -581,7 +664,11 @@ impl Crate {
                         if leaf.glob {
                             self.modules[m].globs.push(leaf.segs.clone());
                         } else if let Some(b) = &leaf.binding {
-                            self.modules[m].bindings.entry(b.clone()).or_default().push(leaf.segs.clone());
+                            self.modules[m]
+                                .bindings
+                                .entry(b.clone())
+                                .or_default()
+                                .push(leaf.segs.clone());
                         }
                         // A public glob (`pub use math::*`) only hands names on: the files that
                         // use them import the files that define them.
@@ -599,7 +686,9 @@ impl Crate {
                     let name = t[j + 1].text.clone();
                     if t[j + 2].is(";") {
                         let f = match path_attr {
-                            Some(p) => format!("{}/{p}", file.rsplit_once('/').map_or("", |(d, _)| d)),
+                            Some(p) => {
+                                format!("{}/{p}", file.rsplit_once('/').map_or("", |(d, _)| d))
+                            }
                             None => child_file(dir, &name, read),
                         };
                         let child_dir = match f.strip_suffix("/mod.rs") {
@@ -611,7 +700,16 @@ impl Crate {
                     } else if t[j + 2].is("{") {
                         let close = matching(t, j + 2);
                         let child = self.new_module(m, &name, file);
-                        self.items(t, j + 3, close, child, &format!("{dir}/{name}"), file, pending, read);
+                        self.items(
+                            t,
+                            j + 3,
+                            close,
+                            child,
+                            &format!("{dir}/{name}"),
+                            file,
+                            pending,
+                            read,
+                        );
                     }
                 }
                 "macro_rules" if t[j + 1].is("!") => {
@@ -649,9 +747,17 @@ impl Crate {
                         // its call passes (`fn $name` in `atomic_bits_fn!(atomic_and: ..)`).
                         if defines_fn_by_argument(t, &t[k].text) {
                             for w in t[k + 2..stop].windows(3) {
-                                let head = w[0].is("(") || w[0].is(",") || w[0].is("[") || w[0].is("{");
-                                let tail = [":", ",", ")", "]", "}", ";"].iter().any(|p| w[2].is(p));
-                                if head && tail && w[1].ident() && w[1].text.chars().all(|c| c == '_' || c.is_ascii_lowercase() || c.is_ascii_digit()) {
+                                let head =
+                                    w[0].is("(") || w[0].is(",") || w[0].is("[") || w[0].is("{");
+                                let tail =
+                                    [":", ",", ")", "]", "}", ";"].iter().any(|p| w[2].is(p));
+                                if head
+                                    && tail
+                                    && w[1].ident()
+                                    && w[1].text.chars().all(|c| {
+                                        c == '_' || c.is_ascii_lowercase() || c.is_ascii_digit()
+                                    })
+                                {
                                     self.modules[m].defs.insert(w[1].text.clone());
                                 }
                             }
@@ -675,7 +781,11 @@ impl Crate {
                 if is_test_attr(&t[k + 2..close]) {
                     // A test-only statement or nested item: skip it.
                     let stop = item_end(t, close + 1, b);
-                    self.files.get_mut(file).unwrap().test_ranges.push((k, stop));
+                    self.files
+                        .get_mut(file)
+                        .unwrap()
+                        .test_ranges
+                        .push((k, stop));
                     k = stop;
                     continue;
                 }
@@ -691,13 +801,22 @@ impl Crate {
                 let mut leaves = Vec::new();
                 use_tree(t, k + 1, stop - 1, &[], &mut leaves);
                 for leaf in leaves {
-                    self.refs.push(Reference { module: m, segs: leaf.segs, line: tok.line, reexport: false });
+                    self.refs.push(Reference {
+                        module: m,
+                        segs: leaf.segs,
+                        line: tok.line,
+                        reexport: false,
+                    });
                 }
                 k = stop;
                 continue;
             }
             if tok.ident() {
-                self.files.get_mut(file).unwrap().code_idents.insert(tok.text.clone());
+                self.files
+                    .get_mut(file)
+                    .unwrap()
+                    .code_idents
+                    .insert(tok.text.clone());
                 let after_sep = k > 0 && (t[k - 1].is("::") || t[k - 1].is("."));
                 if !after_sep && k + 2 < b && t[k + 1].is("::") && t[k + 2].ident() {
                     let mut segs = vec![tok.text.clone()];
@@ -706,10 +825,19 @@ impl Crate {
                         segs.push(t[e + 1].text.clone());
                         e += 2;
                     }
-                    self.refs.push(Reference { module: m, segs, line: tok.line, reexport: false });
+                    self.refs.push(Reference {
+                        module: m,
+                        segs,
+                        line: tok.line,
+                        reexport: false,
+                    });
                     for s in &t[k..e] {
                         if s.ident() {
-                            self.files.get_mut(file).unwrap().code_idents.insert(s.text.clone());
+                            self.files
+                                .get_mut(file)
+                                .unwrap()
+                                .code_idents
+                                .insert(s.text.clone());
                         }
                     }
                     k = e;
@@ -841,7 +969,10 @@ impl Crate {
             let from = &self.modules[r.module].file;
             if r.reexport {
                 let name = r.segs.last().cloned().unwrap_or_default();
-                let used = self.files.get(from).is_some_and(|f| f.code_idents.contains(&name));
+                let used = self
+                    .files
+                    .get(from)
+                    .is_some_and(|f| f.code_idents.contains(&name));
                 if !used {
                     continue;
                 }
@@ -858,11 +989,21 @@ impl Crate {
                 Found::Item(m) => {
                     // The segment that names the item (`Foo` of `x::Foo::new`).
                     let defs = &self.modules[m].defs;
-                    r.segs.iter().rev().find(|s| defs.contains(*s)).cloned().unwrap_or_default()
+                    r.segs
+                        .iter()
+                        .rev()
+                        .find(|s| defs.contains(*s))
+                        .cloned()
+                        .unwrap_or_default()
                 }
             };
             let name = if name == "self" || name.is_empty() {
-                r.segs.iter().rev().find(|s| *s != "self").cloned().unwrap_or_default()
+                r.segs
+                    .iter()
+                    .rev()
+                    .find(|s| *s != "self")
+                    .cloned()
+                    .unwrap_or_default()
             } else {
                 name
             };
@@ -892,7 +1033,9 @@ fn defines_fn_by_argument(t: &[Tok], name: &str) -> bool {
     (0..t.len().saturating_sub(3)).any(|k| {
         t[k].is("macro_rules") && t[k + 1].is("!") && t[k + 2].is(name) && {
             let close = matching(t, k + 3);
-            t[k + 3..close].windows(2).any(|w| w[0].is("fn") && w[1].is("$"))
+            t[k + 3..close]
+                .windows(2)
+                .any(|w| w[0].is("fn") && w[1].is("$"))
         }
     })
 }
@@ -996,7 +1139,10 @@ fn no_import_cycles_between_files() {
             let _ = write!(report, "{name}:\n{cycles}");
         }
     }
-    assert!(report.is_empty(), "import cycles (file -> file: the names it takes, where):\n{report}");
+    assert!(
+        report.is_empty(),
+        "import cycles (file -> file: the names it takes, where):\n{report}"
+    );
 }
 
 /// Every `.rs` file under a crate's `src/` is read by these checks: a module of the crate, or
@@ -1006,16 +1152,26 @@ fn every_source_file_is_a_module_these_checks_read() {
     let mut unread = Vec::new();
     for (_, root) in CRATES {
         let c = load_crate(root);
-        assert!(c.missing.is_empty(), "{root}: `mod` declarations without a file: {:?}", c.missing);
+        assert!(
+            c.missing.is_empty(),
+            "{root}: `mod` declarations without a file: {:?}",
+            c.missing
+        );
         let src = root.strip_suffix("/lib.rs").unwrap();
         for f in files_under(src, ".rs") {
-            let is_test = c.test_files.iter().any(|t| f == *t || (t.ends_with('/') && f.starts_with(t.as_str())));
+            let is_test = c
+                .test_files
+                .iter()
+                .any(|t| f == *t || (t.ends_with('/') && f.starts_with(t.as_str())));
             if !c.files.contains_key(&f) && !is_test {
                 unread.push(f);
             }
         }
     }
-    assert!(unread.is_empty(), "source files no module declares: {unread:?}");
+    assert!(
+        unread.is_empty(),
+        "source files no module declares: {unread:?}"
+    );
 }
 
 /// The reader itself: re-exports are transparent, test modules and their imports are no
@@ -1037,17 +1193,26 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
         ),
         // A parent that only re-exports its children, and children that use a sibling through
         // the parent's re-export: no cycle with the parent.
-        ("x/faces/mod.rs", "mod p; mod q; pub use p::P; pub use q::Q;"),
+        (
+            "x/faces/mod.rs",
+            "mod p; mod q; pub use p::P; pub use q::Q;",
+        ),
         ("x/faces/p.rs", "pub struct P;"),
         ("x/faces/q.rs", "use super::P; pub struct Q(P);"),
         // A parent split over a child file that uses the parent's items: no cycle either.
         ("x/split.rs", "mod part; pub struct S(part::Part);"),
-        ("x/split/part.rs", "use super::*; pub struct Part; impl S { fn f() {} }"),
+        (
+            "x/split/part.rs",
+            "use super::*; pub struct Part; impl S { fn f() {} }",
+        ),
     ]);
     let read = |f: &str| files.get(f).map(|s| s.to_string());
     let c = Crate::load("x/lib.rs", &read);
     let edges = c.import_graph();
-    let keys: Vec<(&str, &str)> = edges.keys().map(|(a, b)| (a.as_str(), b.as_str())).collect();
+    let keys: Vec<(&str, &str)> = edges
+        .keys()
+        .map(|(a, b)| (a.as_str(), b.as_str()))
+        .collect();
     assert_eq!(
         keys,
         [
@@ -1058,9 +1223,15 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
         ]
     );
     let up: Vec<(String, String)> = c.up_arrows().into_keys().collect();
-    assert_eq!(up, [("x/split/part.rs".to_string(), "x/split.rs".to_string())]);
+    assert_eq!(
+        up,
+        [("x/split/part.rs".to_string(), "x/split.rs".to_string())]
+    );
     let report = describe_cycles(&edges);
-    assert!(report.contains("cycle of 2 files: x/a.rs, x/b.rs"), "{report}");
+    assert!(
+        report.contains("cycle of 2 files: x/a.rs, x/b.rs"),
+        "{report}"
+    );
     assert!(report.contains("x/a.rs -> x/b.rs: g (line 1)"), "{report}");
     assert!(report.contains("x/b.rs -> x/a.rs: A (line 1)"), "{report}");
     assert_eq!(cycles(&edges).len(), 1, "{report}");
@@ -1077,17 +1248,34 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
 /// import neither each other. `lib.rs`, the crate's face (its re-exports), is in no row: a
 /// file that imports an item of lib.rs climbs above every layer.
 const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
-    (0, "entry points", &["launch.rs", "autograd.rs", "checkpoint.rs", "python.rs"]),
+    (
+        0,
+        "entry points",
+        &["launch.rs", "autograd.rs", "checkpoint.rs", "python.rs"],
+    ),
     (1, "tape", &["tape.rs"]),
     (2, "graph", &["graph.rs"]),
     // `objects/` sits beside `array`: it imports `array`, `primitives` and `dispatch`.
-    (3, "arrays and what is made of them", &["array.rs", "array/", "objects/", "primitives/mod.rs"]),
+    (
+        3,
+        "arrays and what is made of them",
+        &["array.rs", "array/", "objects/", "primitives/mod.rs"],
+    ),
     (4, "dispatch", &["dispatch.rs"]),
     (5, "capturing", &["capturing.rs"]),
     (6, "the CPU backend", &["cpu/"]),
     (6, "the CUDA backend", &["cuda/"]),
     // The primitives' leaves are what the `Backend` trait's primitives take.
-    (7, "the backend seam", &["backend.rs", "params.rs", "primitives/elements.rs", "primitives/plan.rs"]),
+    (
+        7,
+        "the backend seam",
+        &[
+            "backend.rs",
+            "params.rs",
+            "primitives/elements.rs",
+            "primitives/plan.rs",
+        ],
+    ),
     (8, "kernel", &["kernel.rs"]),
     (9, "device", &["device.rs", "launch_id.rs"]),
     (10, "leaves", &["error.rs", "config.rs"]),
@@ -1101,7 +1289,11 @@ const RUNTIME_LAYER_EXCEPTIONS: &[(&str, &[&str], &str)] = &[
         &["array.rs", "array/"],
         "PinnedVec's asynchronous copies are methods of `Array` on the array's `Storage`",
     ),
-    ("cuda/distributed.rs", &["array.rs", "array/"], "collectives take `Array`s"),
+    (
+        "cuda/distributed.rs",
+        &["array.rs", "array/"],
+        "collectives take `Array`s",
+    ),
 ];
 
 const RUNTIME_SRC: &str = "warp-runtime/src/";
@@ -1124,7 +1316,11 @@ fn runtime_layer(file: &str) -> Option<usize> {
         .iter()
         .enumerate()
         .filter_map(|(row, (_, _, files))| {
-            files.iter().filter(|p| path_matches(file, p)).map(|p| (p.len(), row)).max()
+            files
+                .iter()
+                .filter(|p| path_matches(file, p))
+                .map(|p| (p.len(), row))
+                .max()
         })
         .max()
         .map(|(_, row)| row)
@@ -1146,7 +1342,10 @@ fn warp_runtime_imports_follow_its_layers() {
     let mut backends_named: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
     let edges = c.edges();
     for ((from, to), names) in &edges {
-        let (a, b) = (from.strip_prefix(RUNTIME_SRC).unwrap(), to.strip_prefix(RUNTIME_SRC).unwrap());
+        let (a, b) = (
+            from.strip_prefix(RUNTIME_SRC).unwrap(),
+            to.strip_prefix(RUNTIME_SRC).unwrap(),
+        );
         if a == "lib.rs" {
             continue;
         }
@@ -1165,9 +1364,9 @@ fn warp_runtime_imports_follow_its_layers() {
                 rank_b < rank_a || (rank_b == rank_a && ra != rb)
             }
         };
-        let excepted = RUNTIME_LAYER_EXCEPTIONS.iter().any(|(f, to, _)| {
-            *f == a && to.iter().any(|p| path_matches(b, p))
-        });
+        let excepted = RUNTIME_LAYER_EXCEPTIONS
+            .iter()
+            .any(|(f, to, _)| *f == a && to.iter().any(|p| path_matches(b, p)));
         if climbs && !excepted {
             let names: Vec<&str> = names.iter().map(String::as_str).collect();
             problems.push(format!(
@@ -1180,19 +1379,28 @@ fn warp_runtime_imports_follow_its_layers() {
     }
     for (file, rows) in backends_named {
         if rows.len() > 1 && file != "dispatch.rs" {
-            problems.push(format!("{file} names more than one backend: only dispatch.rs does"));
+            problems.push(format!(
+                "{file} names more than one backend: only dispatch.rs does"
+            ));
         }
     }
     for (f, to, _) in RUNTIME_LAYER_EXCEPTIONS {
         let used = edges.keys().any(|(a, b)| {
             a.strip_prefix(RUNTIME_SRC) == Some(*f)
-                && to.iter().any(|p| b.strip_prefix(RUNTIME_SRC).is_some_and(|b| path_matches(b, p)))
+                && to.iter().any(|p| {
+                    b.strip_prefix(RUNTIME_SRC)
+                        .is_some_and(|b| path_matches(b, p))
+                })
         });
         if !used {
             problems.push(format!("RUNTIME_LAYER_EXCEPTIONS lets {f} import {to:?}, which it no longer does: remove it"));
         }
     }
-    assert!(problems.is_empty(), "warp-runtime's layers (ARCHITECTURE.md):\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "warp-runtime's layers (ARCHITECTURE.md):\n{}",
+        problems.join("\n")
+    );
 }
 
 /// The workspace's crate graph (every dependency table of each Cargo.toml: normal, dev, build,
@@ -1206,11 +1414,21 @@ const CRATE_DEPS: &[(&str, &str, &[&str])] = &[
     ("warp-cuda", "warp-cuda/Cargo.toml", &[]),
     ("warp-macros", "warp-macros/Cargo.toml", &[]),
     ("warp-report", "warp-report/Cargo.toml", &[]),
-    ("warp-runtime", "warp-runtime/Cargo.toml", &["warp-core", "warp-cuda"]),
+    (
+        "warp-runtime",
+        "warp-runtime/Cargo.toml",
+        &["warp-core", "warp-cuda"],
+    ),
     (
         "warp-lang",
         "Cargo.toml",
-        &["warp-core", "warp-cuda", "warp-macros", "warp-report", "warp-runtime"],
+        &[
+            "warp-core",
+            "warp-cuda",
+            "warp-macros",
+            "warp-report",
+            "warp-runtime",
+        ],
     ),
 ];
 
@@ -1257,27 +1475,44 @@ fn workspace_crates_form_the_intended_dag() {
         .nth(1)
         .and_then(|s| s.split(']').next())
         .expect("a workspace members list");
-    for m in members.split(',').map(|m| m.trim().trim_matches(|c| c == '[' || c == '=' || c == ' ' || c == '"')) {
+    for m in members.split(',').map(|m| {
+        m.trim()
+            .trim_matches(|c| c == '[' || c == '=' || c == ' ' || c == '"')
+    }) {
         if !m.is_empty() {
-            assert!(names.contains(m), "workspace member {m} is not in CRATE_DEPS: state what it may depend on");
+            assert!(
+                names.contains(m),
+                "workspace member {m} is not in CRATE_DEPS: state what it may depend on"
+            );
         }
     }
     let mut problems = Vec::new();
     for (name, manifest, want) in CRATE_DEPS {
-        let got: BTreeSet<String> =
-            manifest_deps(&read_required(manifest)).into_iter().filter(|d| names.contains(d.as_str())).collect();
+        let got: BTreeSet<String> = manifest_deps(&read_required(manifest))
+            .into_iter()
+            .filter(|d| names.contains(d.as_str()))
+            .collect();
         let want: BTreeSet<String> = want.iter().map(|s| s.to_string()).collect();
         if got != want {
-            problems.push(format!("{name} depends on {got:?}; the architecture says {want:?}"));
+            problems.push(format!(
+                "{name} depends on {got:?}; the architecture says {want:?}"
+            ));
         }
     }
     // The intended graph itself has no cycle.
     let edges: BTreeMap<(String, String), BTreeSet<String>> = CRATE_DEPS
         .iter()
-        .flat_map(|(n, _, deps)| deps.iter().map(move |d| ((n.to_string(), d.to_string()), BTreeSet::new())))
+        .flat_map(|(n, _, deps)| {
+            deps.iter()
+                .map(move |d| ((n.to_string(), d.to_string()), BTreeSet::new()))
+        })
         .collect();
     assert!(cycles(&edges).is_empty(), "CRATE_DEPS has a cycle");
-    assert!(problems.is_empty(), "the workspace's crate graph:\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "the workspace's crate graph:\n{}",
+        problems.join("\n")
+    );
 }
 
 // -------------------------------------------------------------------------------------------
@@ -1297,7 +1532,11 @@ fn no_warp_macros_source_file_is_over_1300_lines() {
             (n > MACROS_MAX_LINES).then(|| format!("{f}: {n} lines"))
         })
         .collect();
-    assert!(long.is_empty(), "warp-macros files over {MACROS_MAX_LINES} lines:\n{}", long.join("\n"));
+    assert!(
+        long.is_empty(),
+        "warp-macros files over {MACROS_MAX_LINES} lines:\n{}",
+        long.join("\n")
+    );
 }
 
 // -------------------------------------------------------------------------------------------
@@ -1306,14 +1545,34 @@ fn no_warp_macros_source_file_is_over_1300_lines() {
 
 /// Types whose values own heap memory.
 const ALLOCATING_TYPES: &[&str] = &[
-    "Vec", "String", "Box", "Rc", "Arc", "HashMap", "HashSet", "BTreeMap", "BTreeSet", "VecDeque",
-    "BinaryHeap", "LinkedList", "Cow", "CString", "OsString", "PathBuf",
+    "Vec",
+    "String",
+    "Box",
+    "Rc",
+    "Arc",
+    "HashMap",
+    "HashSet",
+    "BTreeMap",
+    "BTreeSet",
+    "VecDeque",
+    "BinaryHeap",
+    "LinkedList",
+    "Cow",
+    "CString",
+    "OsString",
+    "PathBuf",
 ];
 /// Macros that allocate.
 const ALLOCATING_MACROS: &[&str] = &["vec", "format"];
 /// Methods that return an owned, allocated value.
-const ALLOCATING_METHODS: &[&str] =
-    &["to_vec", "to_string", "to_owned", "collect", "into_boxed_slice", "into_owned"];
+const ALLOCATING_METHODS: &[&str] = &[
+    "to_vec",
+    "to_string",
+    "to_owned",
+    "collect",
+    "into_boxed_slice",
+    "into_owned",
+];
 
 /// One allocating construct in non-test code: file, line, the construct, the enclosing fn
 /// (`ITEM_LEVEL` outside any: a type, a field), and whether that fn is `#[cold]`.
@@ -1335,7 +1594,11 @@ fn attributes_before(t: &[Tok], mut k: usize) -> Vec<String> {
     // Back over the qualifiers and visibility: `pub(crate) const unsafe fn`.
     while k > 0 {
         let p = &t[k - 1];
-        if p.ident() && ["pub", "const", "unsafe", "async", "extern", "crate", "super"].contains(&p.text.as_str())
+        if p.ident()
+            && [
+                "pub", "const", "unsafe", "async", "extern", "crate", "super",
+            ]
+            .contains(&p.text.as_str())
             || p.kind == Kind::Lit
             || p.is("(")
             || p.is(")")
@@ -1417,11 +1680,49 @@ fn allocations(c: &Crate) -> Vec<Allocation> {
                 .iter()
                 .filter(|(_, a, b, _)| *a <= k && k <= *b)
                 .max_by_key(|(_, a, _, _)| *a)
-                .map_or((ITEM_LEVEL.to_string(), false), |(n, _, _, c)| (n.clone(), *c));
-            out.push(Allocation { file: file.clone(), line: t[k].line, what, function, cold });
+                .map_or((ITEM_LEVEL.to_string(), false), |(n, _, _, c)| {
+                    (n.clone(), *c)
+                });
+            out.push(Allocation {
+                file: file.clone(),
+                line: t[k].line,
+                what,
+                function,
+                cold,
+            });
         }
     }
     out
+}
+
+/// The allocation scanner itself: it finds each construct with its function and whether that
+/// is `#[cold]`, and leaves test code, comments and strings alone.
+#[test]
+fn the_allocation_scanner_finds_constructs_outside_tests() {
+    let src = "pub fn fine(x: &[u8]) -> usize { x.len() } // a Vec in a comment
+        #[cold]
+        #[inline(never)]
+        pub(crate) fn fault() -> Box<u8> { Box::new(0) }
+        fn hot(x: &[u8]) -> usize { let s = \"vec![in a string]\"; x.to_vec().len() + s.len() }
+        #[cfg(test)] mod tests { fn t() { let v: Vec<u8> = vec![]; } }
+        pub struct S { names: String }";
+    let read = |f: &str| (f == "y/lib.rs").then(|| src.to_string());
+    let c = Crate::load("y/lib.rs", &read);
+    let found: Vec<(String, String, bool)> = allocations(&c)
+        .into_iter()
+        .map(|a| (a.function, a.what, a.cold))
+        .collect();
+    let want = [
+        ("fault", "Box", true),
+        ("fault", "Box", true),
+        ("hot", ".to_vec()", false),
+        (ITEM_LEVEL, "String", false),
+    ];
+    let want: Vec<(String, String, bool)> = want
+        .iter()
+        .map(|(f, w, c)| (f.to_string(), w.to_string(), *c))
+        .collect();
+    assert_eq!(found, want);
 }
 
 /// Why a part of warp-core may allocate.
@@ -1499,9 +1800,9 @@ fn warp_core_allocates_only_where_listed() {
     let c = load_crate("warp-core/src/lib.rs");
     let found = allocations(&c);
     let allowed = |a: &Allocation| {
-        WARP_CORE_ALLOCATES
-            .iter()
-            .find(|(f, fns, _, _)| *f == a.file && (fns.contains(&"*") || fns.contains(&a.function.as_str())))
+        WARP_CORE_ALLOCATES.iter().find(|(f, fns, _, _)| {
+            *f == a.file && (fns.contains(&"*") || fns.contains(&a.function.as_str()))
+        })
     };
     let mut problems = Vec::new();
     for a in &found {
@@ -1519,7 +1820,10 @@ fn warp_core_allocates_only_where_listed() {
     }
     for (file, fns, _, _) in WARP_CORE_ALLOCATES {
         for f in *fns {
-            if !found.iter().any(|a| a.file == *file && (*f == "*" || a.function == *f)) {
+            if !found
+                .iter()
+                .any(|a| a.file == *file && (*f == "*" || a.function == *f))
+            {
                 problems.push(format!(
                     "WARP_CORE_ALLOCATES lists `{f}` in {file}, which allocates nothing (any more): \
                      remove it"
@@ -1527,7 +1831,11 @@ fn warp_core_allocates_only_where_listed() {
             }
         }
     }
-    assert!(problems.is_empty(), "warp-core's allocation rule:\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "warp-core's allocation rule:\n{}",
+        problems.join("\n")
+    );
 }
 
 // -------------------------------------------------------------------------------------------
@@ -1566,7 +1874,8 @@ fn builtin_rows() -> Vec<BuiltinRow> {
         let t = lex(&read_required(&file));
         for k in 0..t.len().saturating_sub(2) {
             let item_level = k == 0 || t[k - 1].is("}") || t[k - 1].is(";") || t[k - 1].is("]");
-            if !(t[k].is(BUILTIN_TABLE_MACRO) && t[k + 1].is("!") && t[k + 2].is("{") && item_level) {
+            if !(t[k].is(BUILTIN_TABLE_MACRO) && t[k + 1].is("!") && t[k + 2].is("{") && item_level)
+            {
                 continue;
             }
             let close = matching(&t, k + 2);
@@ -1589,7 +1898,8 @@ fn builtin_rows() -> Vec<BuiltinRow> {
                     }
                     let sec = top.iter().position(|t| t.kind == Kind::Lit);
                     if let Some(sec) = sec {
-                        let rest: Vec<&&Tok> = top[sec + 1..].iter().filter(|t| t.ident()).collect();
+                        let rest: Vec<&&Tok> =
+                            top[sec + 1..].iter().filter(|t| t.ident()).collect();
                         rows.push(BuiltinRow {
                             name: name.to_string(),
                             section: top[sec].str_value().unwrap_or_default().to_string(),
@@ -1609,12 +1919,18 @@ fn builtin_rows() -> Vec<BuiltinRow> {
 /// The string literals of the initializer of `const NAME` / `static NAME` in `file`.
 fn const_strings(file: &str, name: &str) -> Vec<String> {
     let t = lex(&read_required(file));
-    let Some(k) = (1..t.len()).find(|&k| t[k].is(name) && (t[k - 1].is("const") || t[k - 1].is("static"))) else {
+    let Some(k) =
+        (1..t.len()).find(|&k| t[k].is(name) && (t[k - 1].is("const") || t[k - 1].is("static")))
+    else {
         panic!("{file} defines no const {name}");
     };
     let eq = (k..t.len()).find(|&e| t[e].is("=")).unwrap();
     let end = item_end(&t, eq, t.len());
-    t[eq..end].iter().filter_map(Tok::str_value).map(str::to_string).collect()
+    t[eq..end]
+        .iter()
+        .filter_map(Tok::str_value)
+        .map(str::to_string)
+        .collect()
 }
 
 /// A CUDA library header and every library header it includes, transitively, as one text.
@@ -1640,13 +1956,28 @@ fn cuda_closure(header: &str) -> String {
     text
 }
 
+/// Where C++ `text` names `ident` (as a whole identifier): the byte offsets.
+fn cpp_uses(text: &str, ident: &str) -> Vec<usize> {
+    text.match_indices(ident)
+        .filter(|(i, _)| {
+            let before = text[..*i].chars().next_back();
+            let after = text[i + ident.len()..].chars().next();
+            !before.is_some_and(is_ident_char) && !after.is_some_and(is_ident_char)
+        })
+        .map(|(i, _)| i)
+        .collect()
+}
+
 /// Whether C++ `text` names `ident` (as a whole identifier).
 fn cpp_names(text: &str, ident: &str) -> bool {
-    text.match_indices(ident).any(|(i, _)| {
-        let before = text[..i].chars().next_back();
-        let after = text[i + ident.len()..].chars().next();
-        !before.is_some_and(is_ident_char) && !after.is_some_and(is_ident_char)
-    })
+    !cpp_uses(text, ident).is_empty()
+}
+
+/// Whether C++ `text` defines `struct name` (a definition or a declaration).
+fn cpp_defines_struct(text: &str, name: &str) -> bool {
+    cpp_uses(text, name)
+        .into_iter()
+        .any(|i| text[..i].trim_end().ends_with("struct"))
 }
 
 /// The builtin recipe (ARCHITECTURE.md, "A new builtin"), the parts the sources show: every row's
@@ -1658,7 +1989,11 @@ fn cpp_names(text: &str, ident: &str) -> bool {
 #[test]
 fn builtin_rows_follow_the_recipe() {
     let rows = builtin_rows();
-    assert!(rows.len() > 100, "read {} builtin rows: has the table moved? (BUILTIN_TABLE_MACRO)", rows.len());
+    assert!(
+        rows.len() > 100,
+        "read {} builtin rows: has the table moved? (BUILTIN_TABLE_MACRO)",
+        rows.len()
+    );
     let sections = const_strings(SECTIONS_FILE, "SECTIONS");
     let parts: BTreeMap<String, String> = const_strings(SECTIONS_FILE, "ADJOINT_PARTS")
         .chunks(2)
@@ -1666,33 +2001,51 @@ fn builtin_rows_follow_the_recipe() {
         .collect();
     let core = load_crate("warp-core/src/lib.rs");
     let in_core = |module: &str, name: &str| {
-        let path: Vec<String> = ["crate", module, name].iter().map(|s| s.to_string()).collect();
+        let path: Vec<String> = ["crate", module, name]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         matches!(core.resolve_ns(0, &path, 0, true), Some(Found::Item(_)))
     };
     let mut problems = Vec::new();
     for r in &rows {
         let header = format!("wp_{}.h", r.section);
         if !sections.contains(&r.section) {
-            problems.push(format!("{}: `{}`'s section \"{}\" is not in SECTIONS", r.at, r.name, r.section));
+            problems.push(format!(
+                "{}: `{}`'s section \"{}\" is not in SECTIONS",
+                r.at, r.name, r.section
+            ));
         }
         if read_rel(&format!("{CUDA_LIBRARY}/{header}")).is_none() {
-            problems.push(format!("{}: `{}`'s section has no {CUDA_LIBRARY}/{header}", r.at, r.name));
+            problems.push(format!(
+                "{}: `{}`'s section has no {CUDA_LIBRARY}/{header}",
+                r.at, r.name
+            ));
         }
         if r.facts.iter().any(|f| f == "lowered" || f == "operator") {
             continue;
         }
         if !in_core("builtins", &r.name) {
-            problems.push(format!("{}: no CPU function warp_core::builtins::{}", r.at, r.name));
+            problems.push(format!(
+                "{}: no CPU function warp_core::builtins::{}",
+                r.at, r.name
+            ));
         }
         if !cpp_names(&cuda_closure(&header), &r.name) {
-            problems.push(format!("{}: no CUDA function wp::{} in {header} or what it includes", r.at, r.name));
+            problems.push(format!(
+                "{}: no CUDA function wp::{} in {header} or what it includes",
+                r.at, r.name
+            ));
         }
         if r.grad != "Adjoint" {
             continue;
         }
         let adj = format!("adj_{}", r.name);
         if !in_core("adjoint", &adj) {
-            problems.push(format!("{}: `{}` is differentiated by adj_ but warp_core::adjoint::{adj} is missing", r.at, r.name));
+            problems.push(format!(
+                "{}: `{}` is differentiated by adj_ but warp_core::adjoint::{adj} is missing",
+                r.at, r.name
+            ));
         }
         match parts.get(&r.section) {
             None => problems.push(format!(
@@ -1705,7 +2058,11 @@ fn builtin_rows_follow_the_recipe() {
             Some(_) => {}
         }
     }
-    assert!(problems.is_empty(), "the builtin recipe:\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "the builtin recipe:\n{}",
+        problems.join("\n")
+    );
 }
 
 /// A row of `OBJECTS`: (kind's name, whether a kernel parameter, warp-core's view or state
@@ -1724,14 +2081,20 @@ fn object_rows() -> Vec<ObjectRow> {
     let t = lex(&read_required(OBJECTS_FILE));
     let mut rows = Vec::new();
     for k in 0..t.len().saturating_sub(1) {
-        if !(t[k].is("ObjectRow") && t[k + 1].is("{")) || t.get(k.wrapping_sub(1)).is_some_and(|p| p.is("struct")) {
+        if !(t[k].is("ObjectRow") && t[k + 1].is("{"))
+            || t.get(k.wrapping_sub(1)).is_some_and(|p| p.is("struct"))
+        {
             continue;
         }
         let close = matching(&t, k + 1);
         let field = |name: &str| {
             (k + 2..close)
                 .find(|&f| t[f].is(name) && t[f + 1].is(":"))
-                .map(|f| t[f + 2].str_value().map_or_else(|| t[f + 2].text.clone(), str::to_string))
+                .map(|f| {
+                    t[f + 2]
+                        .str_value()
+                        .map_or_else(|| t[f + 2].text.clone(), str::to_string)
+                })
                 .unwrap_or_default()
         };
         if field("name").is_empty() {
@@ -1780,7 +2143,10 @@ fn impls_of(c: &Crate, trait_name: &str) -> BTreeSet<String> {
             if !t[b].is(trait_name) {
                 continue;
             }
-            let is_impl = (0..b).rev().take_while(|&k| !t[k].is("{") && !t[k].is(";") && !t[k].is("}")).any(|k| t[k].is("impl"));
+            let is_impl = (0..b)
+                .rev()
+                .take_while(|&k| !t[k].is("{") && !t[k].is(";") && !t[k].is("}"))
+                .any(|k| t[k].is("impl"));
             if !is_impl {
                 continue;
             }
@@ -1788,7 +2154,9 @@ fn impls_of(c: &Crate, trait_name: &str) -> BTreeSet<String> {
             let mut e = f + 1;
             let mut ty = None;
             while e < t.len() && !t[e].is("<") && !t[e].is("{") && !t[e].is("where") {
-                if t[e].ident() && !["mut", "dyn", "crate", "self", "super"].contains(&t[e].text.as_str()) {
+                if t[e].ident()
+                    && !["mut", "dyn", "crate", "self", "super"].contains(&t[e].text.as_str())
+                {
                     ty = Some(t[e].text.clone());
                 }
                 e += 1;
@@ -1809,9 +2177,14 @@ fn impls_of(c: &Crate, trait_name: &str) -> BTreeSet<String> {
 #[test]
 fn host_objects_follow_the_recipe() {
     let rows = object_rows();
-    assert!(rows.len() >= 4, "read {} OBJECTS rows: has the table moved? (OBJECTS_FILE)", rows.len());
+    assert!(
+        rows.len() >= 4,
+        "read {} OBJECTS rows: has the table moved? (OBJECTS_FILE)",
+        rows.len()
+    );
     let sections = const_strings(SECTIONS_FILE, "SECTIONS");
-    let builtin_sections: BTreeSet<String> = builtin_rows().into_iter().map(|r| r.section).collect();
+    let builtin_sections: BTreeSet<String> =
+        builtin_rows().into_iter().map(|r| r.section).collect();
     let core = load_crate("warp-core/src/lib.rs");
     let runtime = load_crate("warp-runtime/src/lib.rs");
     let core_adjoint = impls_of(&core, "Adjoint");
@@ -1825,40 +2198,65 @@ fn host_objects_follow_the_recipe() {
     for r in &rows {
         let header = format!("wp_{}.h", r.section);
         if !sections.contains(&r.section) {
-            problems.push(format!("{}: {}'s section \"{}\" is not in SECTIONS", r.at, r.name, r.section));
+            problems.push(format!(
+                "{}: {}'s section \"{}\" is not in SECTIONS",
+                r.at, r.name, r.section
+            ));
         }
         let cpp = cuda_closure(&header);
         if cpp.is_empty() {
-            problems.push(format!("{}: {} has no header {CUDA_LIBRARY}/{header}", r.at, r.name));
+            problems.push(format!(
+                "{}: {} has no header {CUDA_LIBRARY}/{header}",
+                r.at, r.name
+            ));
         }
         let cpp_type = r.cuda.trim_start_matches("wp::");
-        if !cpp.contains(&format!("struct {cpp_type}")) {
-            problems.push(format!("{}: {header} (or what it includes) defines no `struct {cpp_type}`", r.at));
+        if !cpp_defines_struct(&cpp, cpp_type) {
+            problems.push(format!(
+                "{}: {header} (or what it includes) defines no `struct {cpp_type}`",
+                r.at
+            ));
         }
         if !item(&core, &["crate", "objects", &r.rust]) {
             problems.push(format!("{}: no warp_core::objects::{}", r.at, r.rust));
         }
         if !core_adjoint.contains(&r.rust) {
-            problems.push(format!("{}: warp-core has no `Adjoint` impl for {}", r.at, r.rust));
+            problems.push(format!(
+                "{}: warp-core has no `Adjoint` impl for {}",
+                r.at, r.rust
+            ));
         }
         if !r.param {
             continue;
         }
         if !item(&runtime, &["crate", "objects", &r.name]) {
-            problems.push(format!("{}: no host type warp_runtime::objects::{}", r.at, r.name));
+            problems.push(format!(
+                "{}: no host type warp_runtime::objects::{}",
+                r.at, r.name
+            ));
         }
         if !kernel_args.contains(&r.name) {
-            problems.push(format!("{}: warp-runtime has no `KernelArg` impl for {}", r.at, r.name));
+            problems.push(format!(
+                "{}: warp-runtime has no `KernelArg` impl for {}",
+                r.at, r.name
+            ));
         }
         if !builtin_sections.contains(&r.section) {
-            problems.push(format!("{}: no builtin row of section \"{}\" takes {}", r.at, r.section, r.name));
+            problems.push(format!(
+                "{}: no builtin row of section \"{}\" takes {}",
+                r.at, r.section, r.name
+            ));
         }
         let suite = format!("tests/suite/{}.rs", snake_case(&r.name));
         if read_rel(&suite).is_none() {
             problems.push(format!("{}: {} has no suite tests {suite}", r.at, r.name));
         }
     }
-    assert!(problems.is_empty(), "the host-object recipe:\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "the host-object recipe:\n{}",
+        problems.join("\n")
+    );
 }
 
 /// `HashGrid` -> `hash_grid`.
