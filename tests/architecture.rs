@@ -1358,7 +1358,8 @@ fn warp_runtime_imports_follow_its_layers() {
             }
         }
         let climbs = match rb {
-            None => true, // lib.rs
+            // lib.rs climbs above every layer; a file in no layer is reported as such above.
+            None => b == "lib.rs",
             Some(rb) => {
                 let (rank_a, rank_b) = (RUNTIME_LAYERS[ra].0, RUNTIME_LAYERS[rb].0);
                 rank_b < rank_a || (rank_b == rank_a && ra != rb)
@@ -1403,8 +1404,8 @@ fn warp_runtime_imports_follow_its_layers() {
     );
 }
 
-/// The workspace's crate graph (every dependency table of each Cargo.toml: normal, dev, build,
-/// per target): (crate, its manifest, the workspace crates it depends on). warp-core and
+/// The workspace's crate graph (the library's dependency tables of each Cargo.toml: normal,
+/// build, per target): (crate, its manifest, the workspace crates it depends on). warp-core and
 /// warp-cuda stand alone (warp-core is the kernel-side vocabulary, warp-cuda the driver
 /// layer); warp-macros depends on no workspace crate (the code it generates names
 /// `::warp_lang::__private`, which the user's crate resolves); warp-report stands alone;
@@ -1432,7 +1433,9 @@ const CRATE_DEPS: &[(&str, &str, &[&str])] = &[
     ),
 ];
 
-/// The packages a manifest depends on, over all its dependency tables.
+/// The packages a manifest's library depends on: every dependency table but
+/// `[dev-dependencies]` (tests and examples may use any crate; a dev-dependency adds nothing to
+/// the library's graph).
 fn manifest_deps(toml: &str) -> BTreeSet<String> {
     let mut out = BTreeSet::new();
     let mut in_deps = false;
@@ -1443,6 +1446,7 @@ fn manifest_deps(toml: &str) -> BTreeSet<String> {
             // `[dependencies]`, `[dev-dependencies]`, `[target.'cfg(unix)'.dependencies]`, and
             // `[dependencies.foo]` (one dependency per table).
             let (table, name) = match header.rsplit_once("dependencies") {
+                Some((before, _)) if before.ends_with("dev-") => (false, ""),
                 Some((_, rest)) => (true, rest.trim_start_matches('.')),
                 None => (false, ""),
             };
@@ -1846,14 +1850,22 @@ fn warp_core_allocates_only_where_listed() {
 // builtin table split, host objects behind one derive): these constants and the readers
 // below them are the lines to adapt.
 
-/// The builtin table: the item-level invocations of this macro under warp-macros/src (each
-/// row `"name": classes, (params) -> result, "section", Grad, facts..;`).
-const BUILTIN_TABLE_MACRO: &str = "table";
+/// The builtin table: the invocations, anywhere under warp-macros/src, of the macros whose
+/// definition makes rows with `Builtin::row` (today `table!` in builtins.rs; each row
+/// `"name": classes, (params) -> result, "section", Grad, facts..;`).
+const BUILTIN_ROW_CONSTRUCTOR: [&str; 2] = ["Builtin", "row"];
 /// The CUDA library's sections (`SECTIONS`: section `s` is `wp_<s>.h`) and each section's
 /// adjoint part (`ADJOINT_PARTS`: (section, header) pairs).
 const SECTIONS_FILE: &str = "warp-runtime/src/cuda/source.rs";
+/// Or one row per section, `kernel!(..)` for the sections kernels include (see
+/// `cuda_sections`).
+const SECTION_ROWS_FILE: &str = "warp-cuda/src/library.rs";
+const SECTION_ROW_MACRO: &str = "kernel";
 /// The host objects' kinds (`OBJECTS`: `ObjectRow { kind, name, param, rust, cuda, section }`).
 const OBJECTS_FILE: &str = "warp-macros/src/types.rs";
+/// Or, in that file, a macro with one row per kind (`Name: param|state, "View", "wp::t",
+/// "section";`).
+const OBJECT_ROWS_MACRO: &str = "object_kinds";
 /// The CUDA builtin library's headers.
 const CUDA_LIBRARY: &str = "warp-cuda/cuda";
 
@@ -1869,16 +1881,41 @@ struct BuiltinRow {
 }
 
 fn builtin_rows() -> Vec<BuiltinRow> {
+    let sources: Vec<(String, Vec<Tok>)> = files_under("warp-macros/src", ".rs")
+        .into_iter()
+        .map(|f| {
+            let t = lex(&read_required(&f));
+            (f, t)
+        })
+        .collect();
+    // The table's macros: `macro_rules! NAME { .. Builtin::row(..) .. }`.
+    let mut table_macros = BTreeSet::new();
+    for (_, t) in &sources {
+        for k in 0..t.len().saturating_sub(3) {
+            if t[k].is("macro_rules") && t[k + 1].is("!") && t[k + 3].is("{") {
+                let body = &t[k + 3..matching(t, k + 3)];
+                let [ty, f] = BUILTIN_ROW_CONSTRUCTOR;
+                if body
+                    .windows(3)
+                    .any(|w| w[0].is(ty) && w[1].is("::") && w[2].is(f))
+                {
+                    table_macros.insert(t[k + 2].text.clone());
+                }
+            }
+        }
+    }
     let mut rows = Vec::new();
-    for file in files_under("warp-macros/src", ".rs") {
-        let t = lex(&read_required(&file));
+    for (file, t) in &sources {
+        let (file, t) = (file.clone(), t.as_slice());
         for k in 0..t.len().saturating_sub(2) {
-            let item_level = k == 0 || t[k - 1].is("}") || t[k - 1].is(";") || t[k - 1].is("]");
-            if !(t[k].is(BUILTIN_TABLE_MACRO) && t[k + 1].is("!") && t[k + 2].is("{") && item_level)
-            {
+            let invocation = table_macros.contains(&t[k].text)
+                && t[k + 1].is("!")
+                && t[k + 2].is("{")
+                && !(k > 0 && t[k - 1].is("!"));
+            if !invocation {
                 continue;
             }
-            let close = matching(&t, k + 2);
+            let close = matching(t, k + 2);
             let mut a = k + 3;
             while a < close {
                 let end = (a..close).find(|&e| t[e].is(";")).unwrap_or(close);
@@ -1933,9 +1970,40 @@ fn const_strings(file: &str, name: &str) -> Vec<String> {
         .collect()
 }
 
-/// The CUDA library's sections, each with its adjoint part's header where it has one.
-/// ADAPT: read the section rows where they move (one row per section).
+/// The CUDA library's sections, each with its adjoint part's header where it has one: from
+/// `SECTIONS`/`ADJOINT_PARTS` in `SECTIONS_FILE`, or, where the sections are rows of their own
+/// (`SECTION_ROWS_FILE`: `kernel!("name", Some(header!("wp_adjoint_x.h")) | Some(CONST) | None,
+/// ..)`), from the rows that kernels include.
 fn cuda_sections() -> BTreeMap<String, Option<String>> {
+    if let Some(text) = read_rel(SECTION_ROWS_FILE) {
+        let t = lex(&text);
+        let header_of = |k: usize| -> Option<String> {
+            // `header!("x")`, or a const holding one.
+            if t[k].is("header") {
+                return t[k + 3].str_value().map(str::to_string);
+            }
+            let c = (1..t.len()).find(|&c| t[c].is(&t[k].text) && t[c - 1].is("const"))?;
+            let h = (c..t.len()).find(|&h| t[h].is("header"))?;
+            t[h + 3].str_value().map(str::to_string)
+        };
+        let mut out = BTreeMap::new();
+        for k in 0..t.len().saturating_sub(3) {
+            if t[k].is(SECTION_ROW_MACRO)
+                && t[k + 1].is("!")
+                && t[k + 2].is("(")
+                && !t[k - 1].is("!")
+            {
+                let Some(name) = t[k + 3].str_value() else {
+                    continue;
+                };
+                let part = (t[k + 5].is("Some")).then(|| header_of(k + 7)).flatten();
+                out.insert(name.to_string(), part);
+            }
+        }
+        if !out.is_empty() {
+            return out;
+        }
+    }
     let mut out: BTreeMap<String, Option<String>> = const_strings(SECTIONS_FILE, "SECTIONS")
         .into_iter()
         .map(|s| (s, None))
@@ -2006,7 +2074,7 @@ fn builtin_rows_follow_the_recipe() {
     let rows = builtin_rows();
     assert!(
         rows.len() > 100,
-        "read {} builtin rows: has the table moved? (BUILTIN_TABLE_MACRO)",
+        "read {} builtin rows: has the table moved? (BUILTIN_ROW_CONSTRUCTOR)",
         rows.len()
     );
     let sections = cuda_sections();
@@ -2091,34 +2159,54 @@ struct ObjectRow {
 fn object_rows() -> Vec<ObjectRow> {
     let t = lex(&read_required(OBJECTS_FILE));
     let mut rows = Vec::new();
-    for k in 0..t.len().saturating_sub(1) {
-        if !(t[k].is("ObjectRow") && t[k + 1].is("{"))
-            || t.get(k.wrapping_sub(1)).is_some_and(|p| p.is("struct"))
-        {
-            continue;
+    for k in 1..t.len().saturating_sub(2) {
+        // Today: `ObjectRow { kind, name: "HashGrid", param: true, rust, cuda, section }`.
+        if t[k].is("ObjectRow") && t[k + 1].is("{") && !t[k - 1].is("struct") {
+            let close = matching(&t, k + 1);
+            let field = |name: &str| {
+                (k + 2..close)
+                    .find(|&f| t[f].is(name) && t[f + 1].is(":"))
+                    .map(|f| {
+                        t[f + 2]
+                            .str_value()
+                            .map_or_else(|| t[f + 2].text.clone(), str::to_string)
+                    })
+                    .unwrap_or_default()
+            };
+            if field("name").starts_with(|c: char| c.is_ascii_uppercase()) {
+                rows.push(ObjectRow {
+                    name: field("name"),
+                    param: field("param") == "true",
+                    rust: field("rust"),
+                    cuda: field("cuda"),
+                    section: field("section"),
+                    at: format!("{OBJECTS_FILE}:{}", t[k].line),
+                });
+            }
         }
-        let close = matching(&t, k + 1);
-        let field = |name: &str| {
-            (k + 2..close)
-                .find(|&f| t[f].is(name) && t[f + 1].is(":"))
-                .map(|f| {
-                    t[f + 2]
-                        .str_value()
-                        .map_or_else(|| t[f + 2].text.clone(), str::to_string)
-                })
-                .unwrap_or_default()
-        };
-        if field("name").is_empty() {
-            continue; // not a row: `-> &'static ObjectRow {`
+        // One row per kind in a macro (`object_kinds! { HashGrid: param, "HashGridView",
+        // "wp::hash_grid_t", "hash_grid"; .. }`): the kind, its role, three strings.
+        if t[k].is(OBJECT_ROWS_MACRO) && t[k + 1].is("!") && t[k + 2].is("{") && !t[k - 1].is("!") {
+            let close = matching(&t, k + 2);
+            let mut a = k + 3;
+            while a < close {
+                let end = (a..close).find(|&e| t[e].is(";")).unwrap_or(close);
+                let row = &t[a..end];
+                let strings: Vec<&str> = row.iter().filter_map(Tok::str_value).collect();
+                let colon = row.iter().position(|x| x.is(":"));
+                if let (Some(c), [rust, cuda, section]) = (colon, strings.as_slice()) {
+                    rows.push(ObjectRow {
+                        name: row[0].text.clone(), // `Volume(VolumeElem): ..`: the kind
+                        param: row[c + 1].is("param"),
+                        rust: rust.to_string(),
+                        cuda: cuda.to_string(),
+                        section: section.to_string(),
+                        at: format!("{OBJECTS_FILE}:{}", row[0].line),
+                    });
+                }
+                a = end + 1;
+            }
         }
-        rows.push(ObjectRow {
-            name: field("name"),
-            param: field("param") == "true",
-            rust: field("rust"),
-            cuda: field("cuda"),
-            section: field("section"),
-            at: format!("{OBJECTS_FILE}:{}", t[k].line),
-        });
     }
     rows
 }
@@ -2175,6 +2263,45 @@ fn impls_of(c: &Crate, trait_name: &str) -> BTreeSet<String> {
             out.extend(ty);
         }
     }
+    // Impls a macro of the crate writes for the types its calls name (`no_gradient!(HashGridView
+    // = ..)` over `impl Adjoint for $t`): a type at the head of an argument.
+    let mut makers = BTreeSet::new();
+    for src in c.files.values() {
+        let t = &src.toks;
+        for k in 0..t.len().saturating_sub(3) {
+            if t[k].is("macro_rules") && t[k + 1].is("!") && t[k + 3].is("{") {
+                let body = &t[k + 3..matching(t, k + 3)];
+                let writes = body
+                    .windows(3)
+                    .any(|w| w[0].is(trait_name) && w[1].is("for") && w[2].is("$"));
+                if writes {
+                    makers.insert(t[k + 2].text.clone());
+                }
+            }
+        }
+    }
+    for src in c.files.values() {
+        let t = &src.toks;
+        let in_test = |k: usize| src.test_ranges.iter().any(|&(a, b)| a <= k && k < b);
+        for k in 1..t.len().saturating_sub(2) {
+            if !(makers.contains(&t[k].text) && t[k + 1].is("!") && !t[k - 1].is("!")) || in_test(k)
+            {
+                continue;
+            }
+            let close = matching(t, k + 2);
+            for w in t[k + 2..close].windows(3) {
+                let head = w[0].is("(") || w[0].is(",") || w[0].is("]") || w[0].is("{");
+                let tail = w[2].is("=") || w[2].is("<") || w[2].is(",") || w[2].is(")");
+                if head
+                    && tail
+                    && w[1].ident()
+                    && w[1].text.starts_with(|c: char| c.is_ascii_uppercase())
+                {
+                    out.insert(w[1].text.clone());
+                }
+            }
+        }
+    }
     out
 }
 
@@ -2199,8 +2326,11 @@ fn host_objects_follow_the_recipe() {
     let core = load_crate("warp-core/src/lib.rs");
     let runtime = load_crate("warp-runtime/src/lib.rs");
     let core_adjoint = impls_of(&core, "Adjoint");
-    // ADAPT: where the `KernelArg` plumbing comes from one derive or trait, read that instead.
-    let kernel_args = impls_of(&runtime, "KernelArg");
+    // `KernelArg` directly, or through the host-object seam whose blanket impl gives it.
+    let kernel_args: BTreeSet<String> = ["KernelArg", "HostObject"]
+        .iter()
+        .flat_map(|t| impls_of(&runtime, t))
+        .collect();
     let item = |c: &Crate, path: &[&str]| {
         let path: Vec<String> = path.iter().map(|s| s.to_string()).collect();
         matches!(c.resolve(0, &path, 0), Some(Found::Item(_)))
@@ -2248,7 +2378,7 @@ fn host_objects_follow_the_recipe() {
         }
         if !kernel_args.contains(&r.name) {
             problems.push(format!(
-                "{}: warp-runtime has no `KernelArg` impl for {}",
+                "{}: warp-runtime has no `KernelArg` (or `HostObject`) impl for {}",
                 r.at, r.name
             ));
         }
