@@ -186,8 +186,8 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, objects, ops,
-        zero_like, AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView,
-        Grid, KResult, RangeProg, Transform,
+        zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo, GradElement,
+        GradView, Grid, KResult, RangeProg, Transform,
     };
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
     pub use warp_runtime::{
