@@ -23,6 +23,7 @@
 use crate::ir::*;
 use crate::types::Ty;
 use proc_macro2::Span;
+use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 
 /// The uniformity facts of a function.
@@ -258,10 +259,15 @@ impl Analysis<'_> {
     /// Marks the innermost loop divergent (a `break` or `continue` only some threads take).
     fn diverge_loop(&mut self, cause: Span) {
         if let Some((l, _)) = self.loops.last() {
-            if !self.divergent_loops.contains_key(l) {
-                self.divergent_loops.insert(*l, cause);
-                self.changed = true;
-            }
+            self.mark_loop(*l, cause);
+        }
+    }
+
+    /// Marks loop `l` divergent because of `cause` (if it is not yet).
+    fn mark_loop(&mut self, l: *const Stmt, cause: Span) {
+        if let Entry::Vacant(e) = self.divergent_loops.entry(l) {
+            e.insert(cause);
+            self.changed = true;
         }
     }
 
@@ -332,10 +338,7 @@ impl Analysis<'_> {
                         // everything after, run without them.
                         let loops: Vec<*const Stmt> = self.loops.iter().map(|(l, _)| *l).collect();
                         for l in loops {
-                            if !self.divergent_loops.contains_key(&l) {
-                                self.divergent_loops.insert(l, s.span);
-                                self.changed = true;
-                            }
+                            self.mark_loop(l, s.span);
                         }
                         if self.exited.is_none() {
                             self.exited = Some(s.span);

@@ -52,11 +52,11 @@ impl Checker<'_, '_> {
                 StmtKind::Assign {
                     dst, define: true, ..
                 }
-                | StmtKind::Declare { var: dst } => {
-                    if !self.defined[*dst] {
-                        self.defined[*dst] = true;
-                        introduced.push(*dst);
-                    }
+                | StmtKind::Declare { var: dst }
+                    if !self.defined[*dst] =>
+                {
+                    self.defined[*dst] = true;
+                    introduced.push(*dst);
                 }
                 StmtKind::Assign {
                     dst, define: false, ..

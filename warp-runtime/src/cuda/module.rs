@@ -177,7 +177,7 @@ pub(crate) fn loaded(
     )?;
     let st = state(device, ordinal)?;
     let arch = st.gpu.arch();
-    check_capabilities(info, &device.alias(), arch)?;
+    check_capabilities(info, device.alias(), arch)?;
     let t0 = std::time::Instant::now();
     let src = match adjoint {
         Some(_) => source::assemble_adjoint(info),
