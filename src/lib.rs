@@ -100,6 +100,7 @@ pub use glam;
 pub use nalgebra;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
+pub use warp_core::capability;
 pub use warp_core::f16;
 pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`) and
@@ -185,8 +186,8 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, objects, ops,
-        zero_like, AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView,
-        Grid, KResult, RangeProg, Transform,
+        zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo, GradElement,
+        GradView, Grid, KResult, RangeProg, Transform,
     };
     pub use warp_macros::__object_rows;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};

@@ -9,6 +9,7 @@
 
 pub mod adjoint;
 pub mod builtins;
+pub mod capability;
 pub mod fault;
 pub mod float16;
 pub mod grad;
@@ -21,6 +22,7 @@ pub mod range;
 pub mod transform;
 pub mod view;
 
+pub use capability::Capability;
 pub use fault::{Fault, FaultKind, KResult, LaunchId};
 pub use float16::f16;
 pub use grad::{

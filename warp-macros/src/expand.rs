@@ -166,63 +166,41 @@ fn kernel_instance(
     ident: &syn::Ident,
     display: Option<String>,
 ) -> Result<(TokenStream, TokenStream), Vec<syn::Error>> {
-    let mut errors = Vec::new();
-    let f = match lower::lower_fn(item, FnKind::Kernel) {
-        Ok(mut f) => {
-            if let Some(d) = display {
-                f.name = d;
-            }
-            Some(f)
-        }
-        Err(e) => {
-            errors.extend(e);
-            None
-        }
-    };
-    // same_shape groups as parameter indices (usize::MAX = the launch dim).
-    let mut groups = Vec::new();
-    if let Some(f) = &f {
-        for g in &opts.same_shape {
-            let mut idx = Vec::new();
-            for name in g {
-                if name == "dim" {
-                    idx.push(usize::MAX);
-                } else if let Some(i) = f.params.iter().position(|p| name == &p.name) {
-                    if !matches!(f.params[i].ty, crate::types::Ty::Array(..)) {
-                        errors.push(syn::Error::new(
-                            name.span(),
-                            format!("`{name}` is not an array parameter"),
-                        ));
-                    }
-                    idx.push(i);
-                } else {
-                    errors.push(syn::Error::new(
-                        name.span(),
-                        format!("no parameter named `{name}`"),
-                    ));
-                }
-            }
-            groups.push(idx);
-        }
+    let mut f = lower::lower_fn(item, FnKind::Kernel)?;
+    if let Some(d) = display {
+        f.name = d;
     }
-    let (Some(f), true) = (f, errors.is_empty()) else {
-        return Err(errors);
-    };
+    let valid = crate::valid::validate(
+        &f,
+        crate::valid::Options::Kernel {
+            same_shape: &opts.same_shape,
+        },
+    )?;
+    let groups = valid.same_shape;
 
     let paren = item.sig.paren_token.span.join();
-    let (launch_args, primal) =
-        kernel_impl(&f, ident, &groups, opts.disable_backward, paren, false);
+    let (launch_args, primal) = kernel_impl(
+        &f,
+        ident,
+        &groups,
+        &valid.requires,
+        opts.disable_backward,
+        paren,
+        false,
+    );
     let forward = forward_impl(&f, ident, &item.vis, &groups, opts.disable_backward, paren);
     Ok((launch_args, quote!(#primal #forward)))
 }
 
 /// The `Kernel` impl of the lowered kernel `f` for the unit struct `ident` (the launch
-/// arguments' type, and the impl): `groups` are its `same_shape` groups as parameter indices.
+/// arguments' type, and the impl): `groups` are its `same_shape` groups as parameter indices,
+/// `requires` the target capabilities its code needs (both from the validator).
 /// A `hidden` kernel (a tangent kernel) is left out of rustc's suggestions of kernels.
 fn kernel_impl(
     f: &crate::ir::Function,
     ident: &syn::Ident,
     groups: &[Vec<usize>],
+    requires: &[crate::valid::Capability],
     disable_backward: bool,
     paren: proc_macro2::Span,
     hidden: bool,
@@ -270,6 +248,7 @@ fn kernel_impl(
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
     let consts = const_literals(f);
+    let requires = requires.iter().map(|c| c.tokens());
     let struct_tys = struct_types(f);
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
@@ -365,6 +344,7 @@ fn kernel_impl(
                         cuda_adjoint_stack: #cuda_adjoint_stack,
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                         consts: #consts,
+                        requires: &[#(#requires),*],
                     };
                     fn info() -> &'static __wp::KernelInfo {
                         &<Self as __wp::Kernel>::INFO
@@ -471,7 +451,9 @@ fn forward_impl(
     match tangent {
         Ok(g) => {
             let t = format_ident!("__wp_jvp_{}", ident);
-            let (_, tangent) = kernel_impl(&g, &t, groups, disable_backward, paren, true);
+            let requires = crate::valid::required_capabilities(&g);
+            let (_, tangent) =
+                kernel_impl(&g, &t, groups, &requires, disable_backward, paren, true);
             quote! {
                 const _: () = {
                     #[doc(hidden)]
@@ -722,15 +704,11 @@ fn func_instance(
     fattrs: &attrs::FuncAttrs,
     display: Option<String>,
 ) -> Result<TokenStream, Vec<syn::Error>> {
-    let f = match lower::lower_fn(item, FnKind::Func) {
-        Ok(mut f) => {
-            if let Some(d) = display {
-                f.name = d;
-            }
-            f
-        }
-        Err(e) => return Err(e),
-    };
+    let mut f = lower::lower_fn(item, FnKind::Func)?;
+    if let Some(d) = display {
+        f.name = d;
+    }
+    let valid = crate::valid::validate(&f, crate::valid::Options::Func { grad: &fattrs.grad })?;
     let vis = &item.vis;
     let name = &item.sig.ident;
     let em = RustEmitter::new(&f);
@@ -766,21 +744,7 @@ fn func_instance(
     let replay_body = replay_em.block(&replay_fn.body);
     // Custom gradients replace the generated adjoint (`middle::adjoint::custom`): each named
     // parameter's adjoint is what its gradient func returns for (params.., adjoint of the
-    // result).
-    for (param, _) in &fattrs.grad {
-        let Some(k) = f.params.iter().position(|p| *param == p.name) else {
-            return Err(vec![syn::Error::new(
-                param.span(),
-                format!("`{param}` is not a parameter of this func"),
-            )]);
-        };
-        if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
-            return Err(vec![syn::Error::new(
-                param.span(),
-                "custom gradients are for value parameters; an array's gradient comes from the accesses",
-            )]);
-        }
-    }
+    // result); the validator checked that they name value parameters.
     let generated = if fattrs.grad.is_empty() {
         crate::back::rust_adjoint::emit(&f)
     } else {
@@ -849,6 +813,7 @@ fn func_instance(
     let name_str = Literal::string(&f.name);
     let callees = &f.callees;
     let consts = const_literals(&f);
+    let requires = valid.requires.iter().map(|c| c.tokens());
     let func_info = quote! {
         /// What the CUDA assembler needs to know about this func.
         #[doc(hidden)]
@@ -864,6 +829,7 @@ fn func_instance(
             cuda_adj: #cuda_adj,
             cuda_adj_error: ::warp_lang::__private::first_error(&[#cuda_adj_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
             consts: #consts,
+            requires: &[#(#requires),*],
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs

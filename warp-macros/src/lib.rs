@@ -2,8 +2,11 @@
 //!
 //! Pipeline (see ARCHITECTURE.md): `front` parses the function with syn and lowers it to the
 //! IR in `ir`, checking the language subset and the type rules (`types`, `builtins`) and
-//! gathering every error with its span; `middle` transforms the IR for reverse mode (the
-//! adjoint IR); `back` emits code from the IR and prints the adjoint IR. The IR, the type
+//! gathering every error with its span; `valid` checks the lowered function as a whole (what
+//! no single expression decides: definitions before uses, uniform control flow around
+//! cooperative calls, the options against the signature) and says which target capabilities
+//! it needs; `middle` transforms the IR for reverse mode (the adjoint IR); `back` emits code
+//! from the IR and prints the adjoint IR. The IR, the type
 //! rules and the builtin table are plain modules with unit tests that need no macro expansion.
 //!
 //! Use these through the `warp-lang` facade (`#[wp::kernel]`), which re-exports them; the
@@ -22,6 +25,7 @@ mod operators;
 #[cfg(test)]
 mod proptests;
 mod types;
+mod valid;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing
 /// `warp_lang::Kernel`, launched with `wp::launch(name, dim, (args..), &device)`.

@@ -173,6 +173,10 @@ pub struct KernelInfo {
     /// The module-level `const`s the kernel reads, in the order of its `@@K<k>@@` placeholders
     /// (see [`CudaConst`]).
     pub consts: &'static [warp_core::ConstLiteral],
+    /// The capabilities its code (forward and adjoint) needs beyond the core language, by the
+    /// macros' validator (`warp_core::capability`; the funcs it calls list theirs): loading it
+    /// on a GPU that lacks one is an error naming the kernel and the capability.
+    pub requires: &'static [warp_core::Capability],
 }
 
 impl KernelInfo {
@@ -197,6 +201,7 @@ impl KernelInfo {
         cuda_adjoint_stack: false,
         cuda_adjoint_error: None,
         consts: &[],
+        requires: &[],
     };
 }
 

@@ -244,6 +244,7 @@ mod tests {
         cuda_adj: "",
         cuda_adj_error: None,
         consts: &[],
+        requires: &[],
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -258,6 +259,7 @@ mod tests {
         cuda_adj: "",
         cuda_adj_error: None,
         consts: &[],
+        requires: &[],
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -271,6 +273,7 @@ mod tests {
         cuda_adj: "",
         cuda_adj_error: None,
         consts: &[],
+        requires: &[],
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];
