@@ -22,6 +22,7 @@ mod front;
 mod ir;
 mod middle;
 mod operators;
+mod paths;
 #[cfg(test)]
 mod proptests;
 mod types;

@@ -31,7 +31,8 @@ impl Capability {
     /// The path of warp-core's variant, as generated code names it.
     pub fn tokens(self) -> TokenStream {
         let v = format_ident!("{}", format!("{self:?}"));
-        quote!(::warp_lang::__private::Capability::#v)
+        let wp = crate::paths::private();
+        quote!(#wp::Capability::#v)
     }
 }
 
