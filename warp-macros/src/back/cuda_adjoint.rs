@@ -32,7 +32,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
         FnKind::Func => func_replay(f, file)?,
         FnKind::Kernel => String::new(),
     };
-    let text = Printer::new(&adj, file, &adj.f.callees).function()?;
+    let text = Printer::new(&adj, file).function()?;
     Ok(CudaAdjoint {
         source: format!("{replay}{text}"),
         uses_stack: adj.uses_stack,
@@ -40,8 +40,8 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
 }
 
 /// The CUDA replay and adjoint of a func with custom gradients `grads` (parameter, gradient
-/// func): the adjoint calls the gradient funcs, which are appended to `callees` (their
-/// `@@F<k>@@` indices follow the body's callees).
+/// func): the adjoint calls the gradient funcs, which `middle::adjoint::custom` appends to
+/// the callees (their `@@F<k>@@` indices follow the body's); `callees` becomes that list.
 pub fn emit_custom(
     f: &Function,
     file: &str,
@@ -49,56 +49,33 @@ pub fn emit_custom(
     callees: &mut Vec<syn::Path>,
 ) -> Result<String, String> {
     let adj = custom(f, grads)?;
-    for (_, gf) in grads {
-        if !callees.contains(gf) {
-            callees.push(gf.clone());
-        }
-    }
+    callees.clone_from(&adj.f.callees);
     let replay = func_replay(f, file)?;
-    let text = Printer::new(&adj, file, callees).function()?;
+    let text = Printer::new(&adj, file).function()?;
     Ok(format!("{replay}{text}"))
 }
 
-/// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, atomics
-/// not redone, funcs called through their replays.
+/// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, printed by
+/// the forward emitter in replay mode (atomics not redone, funcs called through their
+/// replays, a unit func returning `wp::unit_t`).
 fn func_replay(f: &Function, file: &str) -> Result<String, String> {
     let stripped = replay_of(f);
     let mut r = Emitter::new(&stripped, file);
     r.replay = true;
-    let text = r.function_text()?;
-    if matches!(f.ret, Ty::Unit) {
-        // A unit func's replay returns `wp::unit_t`, so that callers can assign its result
-        // like any other (the declared variable is a `wp::unit_t`).
-        let text = text
-            .replacen(
-                "static WP_FN void @@SELF@@(",
-                "static WP_FN wp::unit_t @@SELF@@_replay(",
-                1,
-            )
-            .replace("return;", "return wp::unit_t{};");
-        let body_end = text.rfind('}').ok_or("replay text")?;
-        return Ok(format!(
-            "{}    return wp::unit_t{{}};\n{}",
-            &text[..body_end],
-            &text[body_end..]
-        ));
-    }
-    Ok(text.replacen("@@SELF@@(", "@@SELF@@_replay(", 1))
+    r.function_text()
 }
 
 struct Printer<'a> {
     e: Emitter<'a>,
     adj: &'a Adjoint,
-    /// The callees by `@@F<k>@@` index (a custom adjoint's gradient funcs follow the body's).
-    callees: &'a [syn::Path],
 }
 
 impl<'a> Printer<'a> {
-    fn new(adj: &'a Adjoint, file: &str, callees: &'a [syn::Path]) -> Self {
+    fn new(adj: &'a Adjoint, file: &str) -> Self {
         let mut e = Emitter::new(&adj.f, file);
         // User funcs are called through their replays.
         e.replay = true;
-        Printer { e, adj, callees }
+        Printer { e, adj }
     }
 
     fn f(&self) -> &'a Function {
@@ -112,12 +89,6 @@ impl<'a> Printer<'a> {
     }
     fn line(&mut self, sp: proc_macro2::Span, text: impl AsRef<str>) {
         self.e.line(sp, text.as_ref());
-    }
-    fn callee(&self, path: &syn::Path) -> Result<usize, String> {
-        self.callees
-            .iter()
-            .position(|p| p == path)
-            .ok_or_else(|| "callee not recorded".to_string())
     }
     fn ty(&self, v: VarId) -> Result<String, String> {
         cpp_type(self.f().ty(v)).ok_or_else(|| format!("`{}` has no CUDA type", self.var(v)))
@@ -217,12 +188,6 @@ impl<'a> Printer<'a> {
             let (a, x) = (self.adj(v), self.var(v));
             let _ = writeln!(self.e.out, "    auto {a} = wp::zero_like({x});");
         }
-        for &arr in &adj.gathered {
-            if let Ty::Array(elem, _) = self.f().ty(arr) {
-                let (t, v) = (cpp_type(elem).ok_or("element type")?, self.var(arr));
-                let _ = writeln!(self.e.out, "    {t} __acc_{v}{{}};");
-            }
-        }
         self.block(&adj.body)?;
         self.e.out.push_str("}\n");
         if kernel {
@@ -296,30 +261,33 @@ impl<'a> Printer<'a> {
                     self.var(*var)
                 )
             }
-            AKind::For {
+            AKind::Loop {
                 range,
                 exit,
                 body,
                 line,
             } => {
-                let (s0, e0) = (self.var(range.start), self.var(range.end));
                 self.line(sp, "{");
                 self.e.indent += 1;
-                let incl = range.inclusive;
-                self.line(sp, format!("wp::range_t __r = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {incl});"));
-                for a in &range.adapters {
-                    let text = match a {
-                        RangeAdapter::Rev => "__r = wp::range_rev(__r);".to_string(),
-                        RangeAdapter::StepBy(k) => {
-                            let k = self.var(*k);
-                            format!("__r = wp::range_step_by(__r, (wp::i64)({k}), __ctx);")
-                        }
-                    };
-                    self.line(sp, text);
+                if let Some(range) = range {
+                    self.range(range, sp);
                 }
                 self.line(sp, "wp::i64 __count = 0;");
-                self.line(sp, "for (wp::i64 __n = 0; __n < __r.count; ++__n) {");
-                self.counted(sp, exit, body)?;
+                self.line(
+                    sp,
+                    match range {
+                        Some(_) => "for (wp::i64 __n = 0; __n < __r.count; ++__n) {",
+                        None => "for (;;) {",
+                    },
+                );
+                self.e.indent += 1;
+                if !exit.is_empty() {
+                    let fs: Vec<String> = exit.iter().map(|v| self.var(*v)).collect();
+                    self.line(sp, format!("if ({}) break;", fs.join(" || ")));
+                }
+                self.block(body)?;
+                self.line(sp, "++__count;");
+                self.e.indent -= 1;
                 self.line(sp, "}");
                 self.line(
                     sp,
@@ -327,11 +295,6 @@ impl<'a> Printer<'a> {
                 );
                 self.e.indent -= 1;
                 "}".into()
-            }
-            AKind::Loop { exit, body, line } => {
-                self.line(sp, "{ wp::i64 __count = 0; for (;;) {");
-                self.counted(sp, exit, body)?;
-                format!("}} wp::adstack_push(__stack, __count, {line}, __ctx); }}")
             }
             AKind::StepVar { var, .. } => {
                 let v = self.var(*var);
@@ -366,7 +329,6 @@ impl<'a> Printer<'a> {
             AKind::Accum { to, from } => {
                 let to = match to {
                     AdjOf::Var { var, path } => format!("{}{}", self.adj(*var), member_path(path)),
-                    AdjOf::Gathered(a) => format!("__acc_{}", self.var(*a)),
                     AdjOf::Out(k) => format!("__adj_out{k}"),
                 };
                 format!("wp::adj_accum({to}, {});", self.grad(from)?)
@@ -374,8 +336,7 @@ impl<'a> Printer<'a> {
             AKind::ZeroTemp { k, like } => match like {
                 TempLike::Var(v) => format!("auto __g{k} = wp::zero_like({});", self.var(*v)),
                 TempLike::Param { func, k: j, .. } => {
-                    let f = self.callee(func)?;
-                    format!("auto __g{k} = wp::adj_zero<@@F{f}@@_adj_arg{j}>();")
+                    format!("auto __g{k} = wp::adj_zero<@@F{func}@@_adj_arg{j}>();")
                 }
             },
             AKind::AdjCall {
@@ -398,15 +359,14 @@ impl<'a> Printer<'a> {
                 format!("wp::{func}({});", args.join(", "))
             }
             AKind::FuncAdj {
-                path,
+                func,
                 values,
                 grads,
             } => {
-                let k = self.callee(path)?;
                 let mut args: Vec<String> = values.iter().map(|v| self.var(*v)).collect();
                 args.extend(grads.iter().map(|g| self.grad_arg(g)));
                 args.extend(["__r", "__ctx", "__stack"].map(String::from));
-                format!("@@F{k}@@_adj({});", args.join(", "))
+                format!("@@F{func}@@_adj({});", args.join(", "))
             }
             AKind::GradAccum {
                 array,
@@ -441,23 +401,23 @@ impl<'a> Printer<'a> {
         Ok(())
     }
 
-    /// The body of a counted loop (`AKind::For`, `AKind::Loop`): the exit check, the
-    /// statements, the count.
-    fn counted(
-        &mut self,
-        sp: proc_macro2::Span,
-        exit: &[VarId],
-        body: &[AStmt],
-    ) -> Result<(), String> {
-        self.e.indent += 1;
-        if !exit.is_empty() {
-            let fs: Vec<String> = exit.iter().map(|v| self.var(*v)).collect();
-            self.line(sp, format!("if ({}) break;", fs.join(" || ")));
+    /// `__r`, the progression of a `for`.
+    fn range(&mut self, range: &RangeSpec, sp: proc_macro2::Span) {
+        let (s0, e0, incl) = (self.var(range.start), self.var(range.end), range.inclusive);
+        self.line(
+            sp,
+            format!("wp::range_t __r = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {incl});"),
+        );
+        for a in &range.adapters {
+            let text = match a {
+                RangeAdapter::Rev => "__r = wp::range_rev(__r);".to_string(),
+                RangeAdapter::StepBy(k) => {
+                    let k = self.var(*k);
+                    format!("__r = wp::range_step_by(__r, (wp::i64)({k}), __ctx);")
+                }
+            };
+            self.line(sp, text);
         }
-        self.block(body)?;
-        self.line(sp, "++__count;");
-        self.e.indent -= 1;
-        Ok(())
     }
 
     /// An index: its variables, or the thread index, one component per dimension.
@@ -508,11 +468,9 @@ impl<'a> Printer<'a> {
                 let (a, idx, v) = (self.adj(*array), self.index(index), self.var(*like));
                 format!("wp::grad_{f}({a}, {idx}, wp::zero_like({v}), __ctx)")
             }
-            GradSrc::Gathered(a) => format!("__acc_{}", self.var(*a)),
             GradSrc::Custom { func, args } => {
-                let j = self.callee(func)?;
                 let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
-                format!("@@F{j}@@({}, __adj_ret, __ctx)", args.join(", "))
+                format!("@@F{func}@@({}, __adj_ret, __ctx)", args.join(", "))
             }
         })
     }

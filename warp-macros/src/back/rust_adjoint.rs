@@ -50,15 +50,18 @@ impl Printer<'_> {
         self.fwd.var(v)
     }
 
+    fn callee(&self, k: Callee) -> Result<&syn::Path, String> {
+        self.f()
+            .callees
+            .get(k)
+            .ok_or_else(|| "internal: no such callee".into())
+    }
+
     fn adj(&self, v: VarId) -> syn::Ident {
         format_ident!("adj_{}", self.var(v))
     }
 
-    fn gather(&self, v: VarId) -> syn::Ident {
-        format_ident!("__acc_{}", self.var(v))
-    }
-
-    /// The variables, their adjoints and the gathering registers, zero.
+    /// The variables and their adjoints, zero.
     fn declarations(&self) -> TokenStream {
         let mut out = TokenStream::new();
         for d in &self.adj.decls {
@@ -71,10 +74,6 @@ impl Printer<'_> {
         for &v in &self.adj.adjs {
             let (x, a) = (self.var(v), self.adj(v));
             out.extend(quote!(let mut #a = __wp::zero_like(&#x);));
-        }
-        for &a in &self.adj.gathered {
-            let acc = self.gather(a);
-            out.extend(quote!(let mut #acc = __wp::adjoint::zero();));
         }
         out
     }
@@ -106,33 +105,22 @@ impl Printer<'_> {
                 let x = self.var(*var);
                 quote_spanned!(sp=> __stack.push(#x, #line)?;)
             }
-            AKind::For {
+            AKind::Loop {
                 range,
                 exit,
                 body,
                 line,
             } => {
-                let range = self.range(range);
                 let (exit, body) = (self.exit(exit), self.block(body)?);
+                let (range, head) = match range {
+                    Some(r) => (self.range(r), quote!(for __n in 0..__range.count)),
+                    None => (quote!(()), quote!(loop)),
+                };
                 quote_spanned! {sp=>
                     {
                         let __range = #range;
                         let mut __count: i64 = 0;
-                        for __n in 0..__range.count {
-                            #exit
-                            #body
-                            __count += 1;
-                        }
-                        __stack.push(__count, #line)?;
-                    }
-                }
-            }
-            AKind::Loop { exit, body, line } => {
-                let (exit, body) = (self.exit(exit), self.block(body)?);
-                quote_spanned! {sp=>
-                    {
-                        let mut __count: i64 = 0;
-                        loop {
+                        #head {
                             #exit
                             #body
                             __count += 1;
@@ -183,10 +171,6 @@ impl Printer<'_> {
                         let (a, path) = (self.adj(*var), members(path));
                         quote!(&mut #a #path)
                     }
-                    AdjOf::Gathered(a) => {
-                        let acc = self.gather(*a);
-                        quote!(&mut #acc)
-                    }
                     AdjOf::Out(k) => format_ident!("__adj_out{}", k).into_token_stream(),
                 };
                 let g = self.grad(from)?;
@@ -227,10 +211,11 @@ impl Printer<'_> {
                 quote_spanned!(sp=> __wp::adjoint::#f(#(#xs,)* #(#gs,)* __r)#q;)
             }
             AKind::FuncAdj {
-                path,
+                func,
                 values,
                 grads,
             } => {
+                let path = self.callee(*func)?;
                 let xs = values.iter().map(|v| self.var(*v));
                 let gs = grads.iter().map(|g| self.grad_arg(g));
                 quote_spanned!(sp=> #path::__wp_adj(#(#xs,)* #(#gs,)* __r, __stack)?;)
@@ -357,10 +342,9 @@ impl Printer<'_> {
                 };
                 quote!(#a.#f(#idx, __wp::zero_like(&#v))?)
             }
-            GradSrc::Gathered(a) => self.gather(*a).into_token_stream(),
             GradSrc::Custom { func, args } => {
-                let args = args.iter().map(|v| self.var(*v));
-                quote!(#func::__wp_cpu(#(#args,)* __adj_ret)?)
+                let (path, args) = (self.callee(*func)?, args.iter().map(|v| self.var(*v)));
+                quote!(#path::__wp_cpu(#(#args,)* __adj_ret)?)
             }
         })
     }

@@ -5,7 +5,7 @@
 //! `back/cuda_adjoint.rs` map each one to their target's syntax and decide nothing. The
 //! generated names it implies are fixed: `adj_<var>` (a variable's adjoint, or an array's
 //! gradient), `__r` (the seed of the innermost [`AKind::Scope`]), `__g<k>` (a temporary),
-//! `__acc_<array>` (a gathering register), `__adj_ret` and `__adj_out<k>` (a func's adjoint
+//! `__adj_ret` and `__adj_out<k>` (a func's adjoint
 //! of its result and of its value parameter `k`), `__FAST` (the launch's thread-owned arrays
 //! cover the grid) and `__tid` (the thread index).
 
@@ -13,10 +13,16 @@ use crate::ir::{Function, Op, RangeSpec, VarId};
 use crate::types::Ty;
 use proc_macro2::Span;
 
+/// A user func the adjoint calls: its index in [`Adjoint::f`]'s `callees` (CUDA's
+/// `@@F<k>@@`).
+pub type Callee = usize;
+
 /// The adjoint of one kernel or func.
 pub struct Adjoint {
     /// The function after jump removal, with the variables the pass added (recorded branch
-    /// decisions, values read for an atomic's adjoint): what the statements refer to.
+    /// decisions, values read for an atomic's adjoint, the elements whose adjoints gather a
+    /// thread-owned array's gradient) and, for custom gradients, the gradient funcs appended
+    /// to its callees: what the statements refer to.
     pub f: Function,
     /// Every variable to declare at the top (not the parameters, not arrays), in the order of
     /// first definition.
@@ -24,9 +30,6 @@ pub struct Adjoint {
     /// The variables with an adjoint (`adj_<var>`, declared zero after `decls`), parameters
     /// included.
     pub adjs: Vec<VarId>,
-    /// Arrays whose gradient contributions gather in a register (`__acc_<array>`, declared
-    /// zero with `adjs`).
-    pub gathered: Vec<VarId>,
     /// What the adjoint takes after the forward parameters, in order.
     pub grad_params: Vec<GradParam>,
     /// The forward replay, the seed of a func's result, the reverse sweep, then what happens
@@ -106,8 +109,6 @@ pub enum Index {
 pub enum AdjOf {
     /// `adj_<var>`, or a member of it (`path`, outermost first; empty: the whole).
     Var { var: VarId, path: Vec<String> },
-    /// The gathering register `__acc_<array>`.
-    Gathered(VarId),
     /// A func's `__adj_out<k>`.
     Out(usize),
 }
@@ -148,10 +149,8 @@ pub enum GradSrc {
         index: Index,
         like: VarId,
     },
-    /// The gathering register `__acc_<array>`.
-    Gathered(VarId),
     /// A custom gradient: `func(args.., __adj_ret)`, a user func (its CPU body on the CPU).
-    Custom { func: syn::Path, args: Vec<VarId> },
+    Custom { func: Callee, args: Vec<VarId> },
 }
 
 /// A value passed to a library adjoint.
@@ -180,7 +179,7 @@ pub enum TempLike {
     /// The type of parameter `k` of user func `func` (a temporary for its adjoint, which an
     /// argument's type may differ from: a literal's), which `arg` is passed as.
     Param {
-        func: syn::Path,
+        func: Callee,
         k: usize,
         arg: VarId,
     },
@@ -199,23 +198,18 @@ pub enum AKind {
     },
     /// Pushes `var`'s current value (`line`: the user's line, for the overflow fault).
     Push { var: VarId, line: u32 },
-    /// A loop over `range` that counts its iterations (`__count`) and pushes the count after
-    /// the loop. Each iteration first leaves if any of `exit` is set (before it does anything,
-    /// so a left iteration is not counted), then runs `body`, which sets the loop's variable
+    /// A loop that counts its iterations (`__count`) and pushes the count after the loop: over
+    /// `range` (a `for`), or until it leaves (a `loop`: a flag in `exit`). Each iteration
+    /// first leaves if any of `exit` is set (before it does anything, so a left iteration is
+    /// not counted), then runs `body`, which for a `for` sets the loop's variable
     /// ([`AKind::StepVar`]).
-    For {
-        range: RangeSpec,
-        exit: Vec<VarId>,
-        body: Vec<AStmt>,
-        line: u32,
-    },
-    /// The `loop` counterpart of `For`.
     Loop {
+        range: Option<RangeSpec>,
         exit: Vec<VarId>,
         body: Vec<AStmt>,
         line: u32,
     },
-    /// `var =` the enclosing `For`'s progression at this iteration (of `end`'s type when the
+    /// `var =` the enclosing loop's progression over its range at this iteration (of `end`'s type when the
     /// target cannot spell `var`'s).
     StepVar { var: VarId, end: VarId },
 
@@ -249,15 +243,17 @@ pub enum AKind {
         /// `mesh_query_point`), so it may fault, as its forward call may.
         faults: bool,
     },
-    /// The adjoint of user func `path` at `values` with seed `__r`, accumulating into `grads`
+    /// The adjoint of user func `func` at `values` with seed `__r`, accumulating into `grads`
     /// (one per argument), which replays and reverses the func's body on the same stack.
     FuncAdj {
-        path: syn::Path,
+        func: Callee,
         values: Vec<VarId>,
         grads: Vec<GradArg>,
     },
-    /// `from` into `array`'s gradient at `index`: atomically and checked, or (`own`) as the
-    /// element's only user, without atomics or bounds checks (only under [`Cond::Fast`]).
+    /// `from` into `array`'s gradient at `index`: atomically and checked, or (`own`, only
+    /// under [`Cond::Fast`]) as the element's only user in this launch, without a bounds check
+    /// (and on the CPU, where no other adjoint launch runs under `__FAST`, without atomics; a
+    /// GPU launch on another stream may share the gradient, so CUDA's add stays atomic).
     GradAccum {
         array: VarId,
         index: Index,

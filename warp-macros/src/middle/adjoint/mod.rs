@@ -58,8 +58,8 @@ use proc_macro2::Span;
 /// gradient loads, which measured 5x faster on the particle adjoint.
 #[derive(Clone, Copy, Debug)]
 pub struct Policy {
-    /// A read-only thread-owned array's gradient is gathered in a register (`__acc_<array>`)
-    /// and added once at the end of the thread.
+    /// A read-only thread-owned array's gradient is gathered in a register and added once at
+    /// the end of the thread.
     pub gather_read_only: bool,
     /// A write-only thread-owned array's gradient is read where a write is reversed and
     /// cleared once at the end of the thread.
@@ -67,9 +67,7 @@ pub struct Policy {
 }
 
 impl Policy {
-    /// The CPU: gradients of thread-owned arrays accumulate in place, without atomics (the
-    /// CPU executor turns `__FAST` off while another adjoint launch runs; on a GPU, launches
-    /// on other streams may share a gradient, so an owned update there is still atomic).
+    /// The CPU: gradients of thread-owned arrays accumulate in place.
     pub const CPU: Policy = Policy {
         gather_read_only: false,
         defer_write_only_clear: false,
@@ -134,34 +132,31 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
     });
     // Read-only thread-owned arrays: every access is at the thread's own index, and no store
     // needs the gradient handed over in between.
-    let gathered: Vec<VarId> = if kernel && policy.gather_read_only {
-        own.iter()
-            .copied()
-            .filter(|a| !stored.contains(a))
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let gathered = |a: &VarId| kernel && policy.gather_read_only && !stored.contains(a);
+    let gathered: Vec<VarId> = own.iter().copied().filter(gathered).collect();
     // Write-only thread-owned arrays: no read adds to the gradient a write hands over.
-    let deferred_clear: Vec<VarId> = if kernel && policy.defer_write_only_clear {
-        own.iter()
-            .copied()
-            .filter(|a| !loaded.contains(a))
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let deferred = |a: &VarId| kernel && policy.defer_write_only_clear && !loaded.contains(a);
+    let deferred_clear: Vec<VarId> = own.iter().copied().filter(deferred).collect();
     let (body, tail) = split_tail(&g);
     replay::check(body)?;
     let mut cx = Cx {
         f: &g,
         tid,
         own,
-        gathered: gathered.clone(),
+        registers: Vec::new(),
         deferred_clear: deferred_clear.clone(),
         overwritten: replay::overwritten_vars(&g),
         fresh: Vec::new(),
+        error: None,
     };
+    // A gathered array's register is the adjoint of a variable of the pass, of its element
+    // type, that stands for the thread's element.
+    for &array in &gathered {
+        if let Ty::Array(elem, _) = g.ty(array) {
+            let reg = cx.fresh((**elem).clone(), None);
+            cx.registers.push((array, reg));
+        }
+    }
     let mut out = cx.forward(body, false);
     let end = Span::call_site();
     if let Some(v) = tail {
@@ -169,19 +164,24 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
         cx.accum(&mut out, v, Vec::new(), GradSrc::AdjRet, end);
     }
     out.extend(cx.reverse(body, false));
-    // Once at the end of the thread, under `__FAST`: the gathered gradients go to the elements
-    // the thread owns, and the gradients its deferred writes read are cleared.
+    // Once at the end of the thread, under `__FAST`: the registers go to the elements the
+    // thread owns, and the gradients its deferred writes read are cleared.
     let fast = |then: AKind| at(if_fast(vec![at(then, end)], Vec::new()), end);
-    for &array in &gathered {
-        let index = cx.thread_index(array)?;
-        let from = GradSrc::Gathered(array);
-        let own = true;
-        out.push(fast(AKind::GradAccum {
-            array,
-            index,
-            from,
-            own,
-        }));
+    for &(array, reg) in &cx.registers {
+        let (index, own) = (cx.thread_index(array)?, true);
+        if cx.diff(reg) {
+            let from = GradSrc::Adj {
+                var: reg,
+                path: vec![],
+            };
+            let accum = AKind::GradAccum {
+                array,
+                index,
+                from,
+                own,
+            };
+            out.push(fast(accum));
+        }
     }
     for &array in &deferred_clear {
         let index = cx.thread_index(array)?;
@@ -191,31 +191,31 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
     for gp in &grad_params {
         if let GradParam::Out { k, var } = *gp {
             if cx.diff(var) {
-                let from = GradSrc::Adj { var, path: vec![] };
-                out.push(at(
-                    AKind::Accum {
-                        to: AdjOf::Out(k),
-                        from,
-                    },
-                    end,
-                ));
+                let (to, from) = (AdjOf::Out(k), GradSrc::Adj { var, path: vec![] });
+                out.push(at(AKind::Accum { to, from }, end));
             }
         }
     }
-    let adjs = (0..g.vars.len()).filter(|v| cx.diff(*v)).collect();
+    if let Some(why) = cx.error.take() {
+        return Err(why);
+    }
+    let regs = cx.registers.iter().map(|r| r.1);
+    let adjs = (0..g.vars.len())
+        .chain(regs)
+        .filter(|v| cx.diff(*v))
+        .collect();
     let fresh = std::mem::take(&mut cx.fresh);
     let mut decls = replay::declarations(&g);
     for (var, def) in fresh {
         decls.push(Decl {
             var: g.vars.len(),
-            def: Some(def),
+            def,
         });
         g.vars.push(var);
     }
     Ok(Adjoint {
         decls,
         adjs,
-        gathered,
         grad_params,
         uses_stack: !g.callees.is_empty() || replay::pushes(&out),
         body: out,
@@ -227,6 +227,7 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
 /// parameter's adjoint is what its gradient func returns for (params.., adjoint of the
 /// result); the body is not differentiated.
 pub fn custom(f: &Function, grads: &[(syn::Ident, syn::Path)]) -> Result<Adjoint, String> {
+    let mut g = f.clone();
     let mut body = Vec::new();
     let args: Vec<VarId> = f.params.iter().map(|p| p.var).collect();
     for (param, func) in grads {
@@ -235,8 +236,12 @@ pub fn custom(f: &Function, grads: &[(syn::Ident, syn::Path)]) -> Result<Adjoint
             .iter()
             .position(|p| *param == p.name)
             .ok_or_else(|| format!("`{param}` is not a parameter of this func"))?;
+        if !g.callees.contains(func) {
+            g.callees.push(func.clone());
+        }
+        let callee = g.callees.iter().position(|p| p == func);
         let from = GradSrc::Custom {
-            func: func.clone(),
+            func: callee.ok_or("internal: a gradient func missing from the callees")?,
             args: args.clone(),
         };
         let sp = syn::spanned::Spanned::span(func);
@@ -249,12 +254,12 @@ pub fn custom(f: &Function, grads: &[(syn::Ident, syn::Path)]) -> Result<Adjoint
         ));
     }
     Ok(Adjoint {
-        f: f.clone(),
+        f: g,
         decls: Vec::new(),
         adjs: Vec::new(),
-        gathered: Vec::new(),
         grad_params: grad_params(f),
         body,
+        // The gradient funcs run forward; the body's callees are the ones whose adjoints push.
         uses_stack: !f.callees.is_empty(),
     })
 }
@@ -295,17 +300,25 @@ struct Cx<'a> {
     tid: Vec<Option<u8>>,
     /// Array parameters accessed only at the thread index.
     own: Vec<VarId>,
-    gathered: Vec<VarId>,
+    /// Each gathered array (`Policy::gather_read_only`) and the variable whose adjoint is its
+    /// register.
+    registers: Vec<(VarId, VarId)>,
     deferred_clear: Vec<VarId>,
     overwritten: Vec<bool>,
     /// Variables the pass adds (numbered after `f`'s), with the definitions of their types.
-    fresh: Vec<(Var, TypeOf)>,
+    fresh: Vec<(Var, Option<TypeOf>)>,
+    /// Why the adjoint cannot be built, found on the way.
+    error: Option<String>,
 }
 
 impl Cx<'_> {
     /// Whether `v` has an adjoint variable.
     fn diff(&self, v: VarId) -> bool {
-        v < self.f.vars.len() && differentiable(self.f.ty(v))
+        let n = self.f.vars.len();
+        differentiable(match self.fresh.get(v.wrapping_sub(n)) {
+            Some((var, _)) if v >= n => &var.ty,
+            _ => self.f.ty(v),
+        })
     }
 
     fn is_array(&self, v: VarId) -> bool {
@@ -313,7 +326,7 @@ impl Cx<'_> {
     }
 
     /// A new variable of type `ty`, declared with the rest (`def`: its first definition).
-    fn fresh(&mut self, ty: Ty, def: TypeOf) -> VarId {
+    fn fresh(&mut self, ty: Ty, def: Option<TypeOf>) -> VarId {
         let id = self.f.vars.len() + self.fresh.len();
         let var = Var {
             name: None,
@@ -322,6 +335,15 @@ impl Cx<'_> {
         };
         self.fresh.push((var, def));
         id
+    }
+
+    /// The index of user func `path` in the callees.
+    fn callee(&mut self, path: &syn::Path) -> Callee {
+        let k = self.f.callees.iter().position(|p| p == path);
+        if k.is_none() {
+            self.error = Some("internal: a called func missing from the callees".into());
+        }
+        k.unwrap_or(0)
     }
 
     /// The index of the element of `array` the thread owns.

@@ -35,7 +35,7 @@ impl Cx<'_> {
                     // The decision, taken before the branches may change `cond`, is pushed
                     // after both (after their own pushes, so that the sweep pops it first).
                     let copy = Value::Op(Op::Copy(*cond));
-                    let c = self.fresh(BOOL, TypeOf::Value(copy.clone()));
+                    let c = self.fresh(BOOL, Some(TypeOf::Value(copy.clone())));
                     out.push(at(
                         AKind::Assign {
                             dst: c,
@@ -59,9 +59,9 @@ impl Cx<'_> {
                     let (var, end) = (*var, range.end);
                     let mut b = vec![push(var, sp), at(AKind::StepVar { var, end }, sp)];
                     b.extend(self.forward(body, true));
-                    let (range, line) = (range.clone(), line(sp));
+                    let (range, line) = (Some(range.clone()), line(sp));
                     out.push(at(
-                        AKind::For {
+                        AKind::Loop {
                             range,
                             exit,
                             body: b,
@@ -72,8 +72,16 @@ impl Cx<'_> {
                 }
                 StmtKind::Loop { body } => {
                     let (exit, body) = split_exit(body);
-                    let (body, line) = (self.forward(body, true), line(sp));
-                    out.push(at(AKind::Loop { exit, body, line }, sp));
+                    let (range, body, line) = (None, self.forward(body, true), line(sp));
+                    out.push(at(
+                        AKind::Loop {
+                            range,
+                            exit,
+                            body,
+                            line,
+                        },
+                        sp,
+                    ));
                 }
                 // Stores and prints are not redone; declarations are at the top; jumps were
                 // removed (`check`).
@@ -211,7 +219,7 @@ pub(super) fn declarations(f: &Function) -> Vec<Decl> {
 /// Whether the statements push anything.
 pub(super) fn pushes(b: &[AStmt]) -> bool {
     b.iter().any(|s| match &s.kind {
-        AKind::Push { .. } | AKind::For { .. } | AKind::Loop { .. } => true,
+        AKind::Push { .. } | AKind::Loop { .. } => true,
         AKind::If { then, els, .. } => pushes(then) || pushes(els),
         AKind::Scope(b) => pushes(b),
         _ => false,

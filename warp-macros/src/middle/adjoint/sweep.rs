@@ -92,6 +92,7 @@ impl Cx<'_> {
     fn reverse_assign(&mut self, out: &mut Vec<AStmt>, dst: VarId, op: &Op, sp: Span) {
         let restore = self.overwritten[dst].then(|| pop(dst, sp));
         if let Op::Func { path, args } = op {
+            let func = self.callee(path);
             // The func's adjoint runs even when its result carries no gradient: it may have
             // read arrays.
             let mut b = if self.diff(dst) {
@@ -106,19 +107,15 @@ impl Cx<'_> {
                 if self.is_array(arg) {
                     grads.push(GradArg::ArrayGrad(arg));
                 } else {
-                    let like = TempLike::Param {
-                        func: path.clone(),
-                        k,
-                        arg,
-                    };
+                    let like = TempLike::Param { func, k, arg };
                     b.push(at(AKind::ZeroTemp { k, like }, sp));
                     grads.push(GradArg::Temp(k));
                 }
             }
-            let (path, values) = (path.clone(), args.clone());
+            let values = args.clone();
             b.push(at(
                 AKind::FuncAdj {
-                    path,
+                    func,
                     values,
                     grads,
                 },
@@ -214,7 +211,7 @@ impl Cx<'_> {
                     return;
                 };
                 let load = Value::Op(Op::Load { array, index });
-                let cur = self.fresh(*elem, TypeOf::Value(load.clone()));
+                let cur = self.fresh(*elem, Some(TypeOf::Value(load.clone())));
                 b.push(at(
                     AKind::Assign {
                         dst: cur,
@@ -328,11 +325,10 @@ impl Cx<'_> {
             own,
         };
         let tid_access = self.tid_access(array, index);
-        if self.gathered.contains(&array) && tid_access {
-            let gather = AKind::Accum {
-                to: AdjOf::Gathered(array),
-                from: GradSrc::Seed,
-            };
+        let reg = self.registers.iter().find(|r| r.0 == array);
+        if let Some(&(_, var)) = reg.filter(|_| tid_access) {
+            let (to, from) = (AdjOf::Var { var, path: vec![] }, GradSrc::Seed);
+            let gather = AKind::Accum { to, from };
             if_fast(vec![at(gather, sp)], vec![at(accum(false), sp)])
         } else if self.own.contains(&array) && tid_access {
             if_fast(vec![at(accum(true), sp)], vec![at(accum(false), sp)])

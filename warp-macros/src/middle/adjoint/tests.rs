@@ -18,10 +18,9 @@ fn blocks(b: &[AStmt]) -> Vec<&[AStmt]> {
                 out.extend(blocks(then));
                 out.extend(blocks(els));
             }
-            AKind::For { body, .. }
-            | AKind::Loop { body, .. }
-            | AKind::RevLoop { body }
-            | AKind::Scope(body) => out.extend(blocks(body)),
+            AKind::Loop { body, .. } | AKind::RevLoop { body } | AKind::Scope(body) => {
+                out.extend(blocks(body))
+            }
             _ => {}
         }
     }
@@ -34,38 +33,40 @@ fn all(b: &[AStmt]) -> Vec<&AStmt> {
 }
 
 /// How the adjoint touches array gradients, one line per statement (`fast`/`slow`: in the
-/// branch of an `if __FAST`), sorted.
-fn gradient_updates(a: &Adjoint) -> Vec<String> {
-    fn walk(a: &Adjoint, b: &[AStmt], ctx: &str, out: &mut Vec<String>) {
+/// branch of an `if __FAST`; `reg`: the adjoint of a variable the pass added, numbered from
+/// `first_new`), sorted.
+fn gradient_updates(a: &Adjoint, first_new: VarId) -> Vec<String> {
+    fn walk(a: &Adjoint, first_new: VarId, b: &[AStmt], ctx: &str, out: &mut Vec<String>) {
+        let n = |v: &VarId| name(&a.f, *v);
+        let adj = |g: &GradSrc| match g {
+            GradSrc::Adj { var, .. } if *var >= first_new => "reg".to_string(),
+            GradSrc::Seed => "seed".into(),
+            g => format!("{g:?}"),
+        };
         for s in b {
-            let n = |v: &VarId| name(&a.f, *v);
             match &s.kind {
                 AKind::If { cond, then, els } => {
                     let (t, e) = match cond {
                         Cond::Fast => ("fast ", "slow "),
                         _ => (ctx, ctx),
                     };
-                    walk(a, then, t, out);
-                    walk(a, els, e, out);
+                    walk(a, first_new, then, t, out);
+                    walk(a, first_new, els, e, out);
                 }
-                AKind::For { body, .. }
-                | AKind::Loop { body, .. }
-                | AKind::RevLoop { body }
-                | AKind::Scope(body) => walk(a, body, ctx, out),
+                AKind::Loop { body, .. } | AKind::RevLoop { body } | AKind::Scope(body) => {
+                    walk(a, first_new, body, ctx, out)
+                }
                 AKind::GradAccum {
                     array, from, own, ..
                 } => {
                     let how = if *own { "own" } else { "atomic" };
-                    let reg = matches!(from, GradSrc::Gathered(_));
-                    out.push(format!(
-                        "{ctx}{how} {}{}",
-                        n(array),
-                        ["", " <- reg"][reg as usize]
-                    ));
+                    out.push(format!("{ctx}{how} {} += {}", n(array), adj(from)));
                 }
                 AKind::GradClearOwn { array, .. } => out.push(format!("{ctx}clear {}", n(array))),
                 AKind::Accum { to, from } => match (to, from) {
-                    (AdjOf::Gathered(x), _) => out.push(format!("{ctx}gather {}", n(x))),
+                    (AdjOf::Var { var, .. }, g) if *var >= first_new => {
+                        out.push(format!("{ctx}reg += {}", adj(g)))
+                    }
                     (_, GradSrc::Take { array, .. }) => out.push(format!("{ctx}take {}", n(array))),
                     (_, GradSrc::Get { array, .. }) => out.push(format!("{ctx}get {}", n(array))),
                     _ => {}
@@ -75,7 +76,7 @@ fn gradient_updates(a: &Adjoint) -> Vec<String> {
         }
     }
     let mut out = Vec::new();
-    walk(a, &a.body, "", &mut out);
+    walk(a, first_new, &a.body, "", &mut out);
     out.sort();
     out
 }
@@ -88,26 +89,33 @@ fn thread_owned_arrays_follow_the_policy() {
             y[i] = x[i] * z[j];
         }
     });
+    let first_new = f.vars.len();
     // z is read at another index: atomic on every target. The CPU updates x's gradient as
     // its only user under __FAST, and takes y's.
     let a = build(&f, Policy::CPU).unwrap();
-    let expect = ["atomic z", "fast own x", "slow atomic x", "take y"];
-    assert_eq!(gradient_updates(&a), expect);
-    assert!(a.gathered.is_empty());
-    // CUDA gathers x's in a register, flushed at the end, and only reads y's, cleared at the
-    // end.
+    let expect = [
+        "atomic z += seed",
+        "fast own x += seed",
+        "slow atomic x += seed",
+        "take y",
+    ];
+    assert_eq!(gradient_updates(&a, first_new), expect);
+    assert_eq!(a.f.vars.len(), first_new);
+    // CUDA gathers x's in a register (the adjoint of a variable of the pass), added at the
+    // end, and only reads y's, cleared at the end.
     let a = build(&f, Policy::CUDA).unwrap();
     let expect = [
-        "atomic z",
+        "atomic z += seed",
         "fast clear y",
-        "fast gather x",
         "fast get y",
-        "fast own x <- reg",
-        "slow atomic x",
+        "fast own x += reg",
+        "fast reg += seed",
+        "slow atomic x += seed",
         "slow take y",
     ];
-    assert_eq!(gradient_updates(&a), expect);
-    assert_eq!(a.gathered.len(), 1);
+    assert_eq!(gradient_updates(&a, first_new), expect);
+    assert_eq!(a.f.vars.len(), first_new + 1);
+    assert!(a.adjs.contains(&first_new));
 }
 
 #[test]
