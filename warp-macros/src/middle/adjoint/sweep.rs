@@ -208,6 +208,7 @@ impl Cx<'_> {
             // holds after the launch.
             _ => {
                 let Ty::Array(elem, _) = self.f.ty(array).clone() else {
+                    self.error = Some("internal: an atomic update of no array".into());
                     return;
                 };
                 let load = Value::Op(Op::Load { array, index });
