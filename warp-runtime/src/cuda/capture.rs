@@ -75,7 +75,7 @@ pub(crate) fn begin(
         load_setter(&st, device, ordinal);
     }
     // Made before the capture starts (an allocation cannot be captured).
-    let faults = fault::begin_capture(&st, ordinal)?;
+    let faults = fault::begin_capture(&st.faults, ordinal)?;
     if let Err(e) = stream.begin_capture() {
         fault::end_capture();
         return Err(err(device, e));

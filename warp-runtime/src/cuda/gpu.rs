@@ -1,4 +1,5 @@
-//! Per-GPU state: the opened GPU and the stream ordering model (fault records: `fault.rs`).
+//! Per-GPU state: the opened GPU and the stream ordering model (fault records: `fault.rs`,
+//! which imports nothing from here).
 //!
 //! # The ordering model
 //! Array operations (allocation, copies, fills, frees) and launches without a stream run on
@@ -14,13 +15,13 @@
 //! record after each launch in debug mode, and otherwise at its next synchronisation
 //! (`synchronize`, `to_vec`).
 
-use super::fault::{self, SpareRecords};
+use super::fault::{self, RecordPool};
 use crate::device::Device;
 use crate::error::{Error, Result};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use warp_cuda::{CudaError, DeviceBuffer, Gpu};
 
 /// A CUDA error on `device` as a runtime error.
@@ -99,7 +100,7 @@ pub(crate) fn pop_current(ordinal: usize, stream: &warp_cuda::Stream) {
 }
 
 /// Per-GPU state: the user streams with work queued since the default stream last waited for
-/// them, the fault records of threads that have ended, and the primitives' workspace.
+/// them, the fault records, and the primitives' workspace.
 ///
 /// The ordering model is the module's (`pending` holds the user streams the default stream
 /// has yet to wait for).
@@ -107,8 +108,8 @@ pub(crate) struct GpuState {
     device: Device,
     ordinal: usize,
     pub(crate) gpu: Arc<Gpu>,
-    /// Fault records whose threads have ended (`fault.rs`).
-    spare_records: Mutex<SpareRecords>,
+    /// The GPU's fault records (`fault.rs`).
+    pub(crate) faults: Arc<RecordPool>,
     pending: Mutex<Vec<warp_cuda::Stream>>,
     has_pending: AtomicBool,
     /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls.
@@ -188,16 +189,6 @@ impl GpuState {
         }
     }
 
-    /// The GPU's device.
-    pub(crate) fn device(&self) -> &Device {
-        &self.device
-    }
-
-    /// The fault records of threads that have ended.
-    pub(crate) fn spare_records(&self) -> MutexGuard<'_, SpareRecords> {
-        self.spare_records.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
     /// Records that `stream` (a user stream) has work the default stream must wait for.
     fn mark_pending(&self, stream: &warp_cuda::Stream) {
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
@@ -234,11 +225,12 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
     if let Some(s) = map.get(&ordinal) {
         return Ok(s.clone());
     }
+    let gpu = gpu(ordinal)?;
     let s = Arc::new(GpuState {
         device: device.clone(),
         ordinal,
-        gpu: gpu(ordinal)?,
-        spare_records: Mutex::default(),
+        faults: RecordPool::new(gpu.clone(), device.clone()),
+        gpu,
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
         workspace: Mutex::new(Workspace::default()),
@@ -270,13 +262,13 @@ pub(crate) fn check_state(st: &GpuState) -> Result<()> {
     // Every stream is idle: nothing is pending any more.
     st.pending.lock().unwrap_or_else(|p| p.into_inner()).clear();
     st.has_pending.store(false, Ordering::Release);
-    fault::check(st, st.ordinal, true)
+    fault::check(&st.faults, st.ordinal, true)
 }
 
 /// Reports (and clears) a fault that a launch of the calling thread recorded, without waiting
 /// for the GPU's other work (the read waits for the default stream only).
 pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
-    fault::check(st, st.ordinal, false)
+    fault::check(&st.faults, st.ordinal, false)
 }
 
 /// Waits for every GPU used so far and reports the first recorded fault.

@@ -149,7 +149,7 @@ fn run(
     // A primitive is one launch, however many kernels it queues; its kernels carry no id, so
     // its record notes it as the launch a fault without one comes from.
     let launch = crate::launch_id::next();
-    let (fault, flag) = fault::with_record(&st, ordinal, launch, |r| {
+    let (fault, flag) = fault::with_record(&st.faults, ordinal, launch, |r| {
         r.set_primitive(info(func, params), launch);
         r.addresses()
     })?;
