@@ -21,7 +21,7 @@ use crate::error::{Error, Result};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use warp_cuda::{CudaError, DeviceBuffer, Gpu};
 
 /// A CUDA error on `device` as a runtime error.
@@ -112,18 +112,58 @@ pub(crate) struct GpuState {
     pub(crate) faults: Arc<RecordPool>,
     pending: Mutex<Vec<warp_cuda::Stream>>,
     has_pending: AtomicBool,
-    /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls.
-    pub(crate) workspace: Mutex<Workspace>,
+    /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls: the
+    /// largest needed so far.
+    pub(crate) workspace: Mutex<Option<Arc<Scratch>>>,
 }
 
-/// Scratch memory the primitives reuse from call to call: one buffer per GPU that grows to
-/// the largest need seen, and the stream of its last use. A primitive holds the lock while it
-/// queues its launches; a launch on another stream than the last user's first waits for that
-/// stream, so uses of the workspace are ordered like those of an array.
-#[derive(Default)]
-pub(crate) struct Workspace {
-    pub(crate) buffer: Option<DeviceBuffer>,
-    pub(crate) last: Option<warp_cuda::Stream>,
+/// Scratch memory the primitives reuse from call to call (the GPU's workspace), with the
+/// stream of its last use. A use first waits for the last user's stream when it is another
+/// one, and becomes the last user: uses of the scratch are ordered like those of an array.
+/// A graph that recorded primitives holds the scratch they use and orders each replay the same
+/// way (`capture.rs`), so the workspace growing later frees nothing a graph still uses.
+pub(crate) struct Scratch {
+    pub(crate) buffer: DeviceBuffer,
+    last: Mutex<Option<warp_cuda::Stream>>,
+}
+
+impl Scratch {
+    /// Scratch memory of `buffer`, not used yet.
+    pub(crate) fn new(buffer: DeviceBuffer) -> Arc<Scratch> {
+        Arc::new(Scratch {
+            buffer,
+            last: Mutex::new(None),
+        })
+    }
+
+    /// The stream of the last use, locked: hold it while queueing a use, which then sets it
+    /// ([`Scratch::order`]).
+    pub(crate) fn last(&self) -> MutexGuard<'_, Option<warp_cuda::Stream>> {
+        self.last.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// Orders a use of scratch memory on `stream` after its last use (`last`, locked) and makes
+/// `stream` the last user.
+pub(crate) fn order_scratch(
+    device: &Device,
+    last: &mut Option<warp_cuda::Stream>,
+    stream: &warp_cuda::Stream,
+) -> Result<()> {
+    if let Some(l) = last.as_ref().filter(|l| !l.is(stream)) {
+        stream.wait_stream(l).map_err(|e| err(device, e))?;
+    }
+    *last = Some(stream.clone());
+    Ok(())
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        // The free is queued on the default stream: after every user stream's work (a replay
+        // of the last graph that held it, say). A failure means a broken context, which the
+        // next fallible call reports.
+        let _ = join_ordinal(self.buffer.gpu().ordinal());
+    }
 }
 
 impl GpuState {
@@ -233,7 +273,7 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
         gpu,
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
-        workspace: Mutex::new(Workspace::default()),
+        workspace: Mutex::new(None),
     });
     map.insert(ordinal, s.clone());
     Ok(s)
