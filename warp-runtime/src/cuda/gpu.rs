@@ -137,7 +137,7 @@ impl Scratch {
     }
 
     /// The stream of the last use, locked: hold it while queueing a use, which then sets it
-    /// ([`Scratch::order`]).
+    /// ([`order_scratch`]).
     pub(crate) fn last(&self) -> MutexGuard<'_, Option<warp_cuda::Stream>> {
         self.last.lock().unwrap_or_else(|p| p.into_inner())
     }
