@@ -105,7 +105,9 @@ impl Prims {
         // Few distinct keys: the sort's stability shows in the values.
         let keys: Vec<u32> = (0..n).map(|_| rng.next() % 97).collect();
         let vals: Vec<i32> = (0..n as i32).collect();
-        let flags: Vec<i32> = (0..n).map(|_| rng.next().is_multiple_of(3) as i32).collect();
+        let flags: Vec<i32> = (0..n)
+            .map(|_| rng.next().is_multiple_of(3) as i32)
+            .collect();
         self.a.copy_from(&arr(&a, dev)).unwrap();
         self.ints.copy_from(&arr(&ints, dev)).unwrap();
         self.keys.copy_from(&arr(&keys, dev)).unwrap();
