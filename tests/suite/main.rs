@@ -87,6 +87,7 @@ mod funcs;
 mod generics;
 mod grad;
 mod graph;
+mod graph_builds;
 mod hash_grid;
 mod host_objects;
 mod interop;

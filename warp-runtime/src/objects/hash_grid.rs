@@ -29,6 +29,7 @@ use warp_core::objects::HashGridView;
 use super::hash_grid_steps::{HashGridKeys, HashGridRanges};
 use super::HostObject;
 use crate::array::Array;
+use crate::capturing::{self, Keep};
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
@@ -288,11 +289,22 @@ impl HashGrid {
     ///
     /// A failed build leaves the grid unbuilt (kernels refuse it until a build succeeds).
     ///
+    /// Inside a [capture](crate::capture) the build is recorded like a launch (the same on
+    /// every backend): each replay rebuilds the grid from the contents of `points` at that
+    /// time (as many points as now; launches recorded after it take the grid as built). It
+    /// must allocate nothing there: [`reserve`](HashGrid::reserve) room for the points before
+    /// capturing, pass contiguous points, and build a grid once per capture (a launch recorded
+    /// after a build holds the grid's buffers). On a GPU, build once before capturing (the
+    /// first build loads its kernels and sizes the sort's scratch memory). The check of the
+    /// points is a read-back, which a graph cannot replay: a recorded build does not report
+    /// a non-finite point (it buckets it, consistently; check the points before capturing).
+    ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the argument: `radius` not positive and finite (or so
     /// small that `1 / radius` is infinite); `points` on another device than the grid, with
     /// more than `i32::MAX` points, or with a NaN or infinite coordinate (the first such
-    /// index); device errors.
+    /// index); [`Error::Capture`] for a build inside a capture that would allocate (see
+    /// above); device errors.
     pub fn build(&mut self, points: &Array<Vec3>, radius: f32) -> Result<()> {
         if !(radius.is_finite() && radius > 0.0) {
             return Err(bad(
@@ -322,6 +334,19 @@ impl HashGrid {
         }
         let n = points.len();
         self.built = None;
+        // Inside a capture the build is recorded: it must find its buffers (nothing is
+        // allocated there), and what the last replay left is unknown at each replay.
+        let in_capture = capturing::capturing();
+        if in_capture && (Arc::strong_count(&self.buffers) > 1 || self.capacity() < n) {
+            return Err(Error::Capture {
+                what: format!(
+                    "{WHAT} of {n} points inside a capture needs buffers of the grid's own for \
+                     them, which it would allocate: call `reserve({n})` on the grid before \
+                     capturing, and build it once per capture (a launch recorded after a build \
+                     holds the grid's buffers)"
+                ),
+            });
+        }
         self.reserve(n)?;
         // The steps read the points as a contiguous run.
         let copy;
@@ -335,12 +360,20 @@ impl HashGrid {
         let cells = self.buffers.cell_starts.len();
         // Zero the ranges of the last build: from its keys (still in `keys`) when they are few
         // against the buckets, else every entry (a fill, the fastest way to zero them all).
-        // Unknown until the new ranges are written.
-        let clear_from = self.ranges_from_keys.take();
+        // Unknown until the new ranges are written; always every entry in a graph, whose
+        // replays may follow any build.
+        let clear_from = self.ranges_from_keys.take().filter(|_| !in_capture);
         let b = self.own_buffers();
+        // What the steps' addresses point into, kept by a graph that records them.
+        let uses = || -> Keep {
+            Box::new((
+                points.clone(),
+                [&b.keys, &b.point_ids, &b.cell_starts, &b.cell_ends, &b.bad].map(Array::clone),
+            ))
+        };
         match clear_from {
             Some(0) => {}
-            Some(m) if m <= cells / 8 => dispatch::object_step(
+            Some(m) if m <= cells / 8 => dispatch::object_step_keeping(
                 &self.device,
                 &HashGridRanges {
                     keys: b.keys.device_address(),
@@ -351,6 +384,7 @@ impl HashGrid {
                     clear: 1,
                     pad: 0,
                 },
+                uses,
             )?,
             _ => {
                 b.cell_starts.fill(0)?;
@@ -367,11 +401,11 @@ impl HashGrid {
             values: b.point_ids.device_address(),
             bad: b.bad.device_address(),
         };
-        dispatch::object_step(&self.device, &step)?;
+        dispatch::object_step_keeping(&self.device, &step, uses)?;
         // Buckets lie in 0..cells: sorting by their low bits is sorting by them.
         let bits = (usize::BITS - (cells - 1).leading_zeros()).max(1);
         radix_sort_pairs(&b.keys, &b.point_ids, n, Some(bits))?;
-        dispatch::object_step(
+        dispatch::object_step_keeping(
             &self.device,
             &HashGridRanges {
                 keys: b.keys.device_address(),
@@ -382,7 +416,19 @@ impl HashGrid {
                 clear: 0,
                 pad: 0,
             },
+            uses,
         )?;
+        let built = Built {
+            num_points: n,
+            cell_width: radius,
+            cell_width_inv: inv,
+        };
+        if in_capture {
+            // Recorded: the points' check is a read-back, which a graph cannot replay (see
+            // above). The launches recorded next take the grid as built.
+            self.built = Some(built);
+            return Ok(());
+        }
         // The points' check, read back once everything is queued (on a GPU, the one wait of a
         // build, after its last step: no idle gap between the steps). A build of a non-finite
         // point is complete and consistent, only refused.
@@ -397,11 +443,7 @@ impl HashGrid {
                 format!("has a non-finite point at index {i}: {p:?}"),
             ));
         }
-        self.built = Some(Built {
-            num_points: n,
-            cell_width: radius,
-            cell_width_inv: inv,
-        });
+        self.built = Some(built);
         Ok(())
     }
 
