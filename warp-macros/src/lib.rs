@@ -21,6 +21,8 @@ mod middle;
 mod operators;
 #[cfg(test)]
 mod proptests;
+#[cfg(test)]
+mod test_support;
 mod types;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing

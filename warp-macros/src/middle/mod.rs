@@ -7,6 +7,10 @@
 //!   so the CPU and CUDA gradients come from one scheme;
 //! - `tangent`: forward mode as one pass, from a lowered kernel to its *tangent kernel*, an
 //!   ordinary kernel IR the back ends emit and the adjoint pass differentiates again.
+//!
+//! The middle end takes the IR and the facts it needs from the leaf modules (`ir`, `types`,
+//! `operators` with the operators' type rule, `builtins` with each builtin's signature and
+//! derivative rules); it imports nothing from the front end, which only produces its input.
 
 pub mod adjoint;
 pub mod adjoint_prep;
