@@ -1,12 +1,12 @@
 //! The forward-mode rule of a row: how the tangent of a builtin's result follows from its
-//! arguments and their tangents, stated beside the row's adjoint rule (its [`Grad`]), so that
-//! a builtin's derivative rules for both modes are facts of its row. `middle::tangent` reads
-//! them; a row with a gradient and no rule says so (`no_tangent`), and a unit test below holds
-//! every such row to stating one or the other.
+//! arguments and their tangents, stated beside the row's adjoint rule (its
+//! [`Grad`](super::Grad)), so that a builtin's derivative rules for both modes are facts of its
+//! row. `middle::tangent` reads them; a row with a gradient and no rule says so (`no_tangent`),
+//! and a unit test below holds every such row to stating one or the other.
 //!
 //! Most rules are a [`Dx`]: a small expression in the primal arguments (`A0`..), the result
 //! (`OUT`) and the arguments' tangents (`D0`..), linear in the tangents, which the pass writes
-//! out as IR operations (`sin`: `cos(a) a'`, `Rule(Mul(&Call("cos", &[A0]), &D0))`). A few are
+//! out as IR operations (`sin`: `cos(a) a'`, written `chain(&Call("cos", &[A0]))`). A few are
 //! shapes the pass implements once for every row of that shape: choosing an operand by the
 //! primal's decision (`min`, `max`, `clamp`), and the same atomic on the tangent array.
 
@@ -217,7 +217,10 @@ mod tests {
                 (_, _, Some(Tangent::NoRule)) => {}
             }
         }
-        assert!(matches!(lookup("sin").unwrap().tangent, Some(Tangent::Rule(_))));
+        assert!(matches!(
+            lookup("sin").unwrap().tangent,
+            Some(Tangent::Rule(_))
+        ));
         assert_eq!(lookup("erfinv").unwrap().tangent, Some(Tangent::NoRule));
     }
 

@@ -617,7 +617,9 @@ impl Tx {
         match &b.tangent {
             Some(Tangent::Rule(dx)) => self.expand(&mut site, dx),
             Some(Tangent::RuleFor(classes, dx))
-                if classes.iter().any(|c| c.admits(&self.ty(args[0]))) =>
+                if args
+                    .first()
+                    .is_some_and(|a| classes.iter().any(|c| c.admits(&self.ty(*a)))) =>
             {
                 self.expand(&mut site, dx)
             }

@@ -38,9 +38,11 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "mesh_query_aabb_next": NO_T, (MESH, MESH_AABB) -> MESH_AABB, "mesh", Zero, internal;
     "mesh_query_aabb_done": NO_T, (MESH_AABB) -> BOOL, "mesh", Zero, internal;
     "mesh_query_aabb_item": NO_T, (MESH_AABB) -> I32, "mesh", Zero, internal;
-    "mesh_query_point": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint, no_tangent,
+    "mesh_query_point": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
+        no_tangent,
         results("(result, sign, face, u, v)");
-    "mesh_query_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint, no_tangent,
+    "mesh_query_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
+        no_tangent,
         results("(result, sign, face, u, v)");
     "mesh_query_furthest_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Zero,
         results("(result, sign, face, u, v)");
@@ -50,7 +52,8 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "mesh_eval_velocity": NO_T, (MESH, Index, F32, F32) -> VEC3, "mesh", Adjoint, no_tangent;
     "mesh_eval_face_normal": NO_T, (MESH, Index) -> VEC3, "mesh", Zero;
     // Triangle geometry (warp-core `objects::geometry`, wp_geometry.h): no object needed.
-    "closest_point_triangle": NO_T, (VEC3, VEC3, VEC3, VEC3) -> VEC3, "geometry", Adjoint, no_tangent,
+    "closest_point_triangle": NO_T, (VEC3, VEC3, VEC3, VEC3) -> VEC3, "geometry", Adjoint,
+        no_tangent,
         extension;
     "intersect_tri_tri": NO_T, (VEC3, VEC3, VEC3, VEC3, VEC3, VEC3) -> BOOL, "geometry", Zero;
 };

@@ -20,9 +20,12 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "norm_l1":    FVEC,           (T) -> ScalarOfT,         "misc", Adjoint, no_tangent;
     "norm_l2":    FVEC,           (T) -> ScalarOfT,         "misc", Adjoint,
         tangent(linalg::LENGTH);
-    "norm_huber": FVEC,           (T, ScalarOfT) -> ScalarOfT, "misc", Adjoint, no_tangent, default_last("1.0");
-    "norm_pseudo_huber": FVEC, (T, ScalarOfT) -> ScalarOfT, "misc", Adjoint, no_tangent, default_last("1.0");
-    "smooth_normalize": FVEC, (T, ScalarOfT) -> T, "misc", Adjoint, no_tangent, default_last("1.0");
+    "norm_huber": FVEC,           (T, ScalarOfT) -> ScalarOfT, "misc", Adjoint,
+        no_tangent, default_last("1.0");
+    "norm_pseudo_huber": FVEC, (T, ScalarOfT) -> ScalarOfT, "misc", Adjoint,
+        no_tangent, default_last("1.0");
+    "smooth_normalize": FVEC, (T, ScalarOfT) -> T, "misc", Adjoint,
+        no_tangent, default_last("1.0");
     "quat_to_axis_angle": QUAT, (T) -> Tuple(&[Vec3OfT, ScalarOfT]), "misc", Adjoint, no_tangent,
         results("(axis, angle)");
     "quat_rpy":   FLOAT,          (T, T, T) -> QuatOfT,     "misc", Adjoint, no_tangent;
@@ -31,7 +34,8 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "quat_twist_angle": FVEC3, (T, QuatOfT) -> ScalarOfT, "misc", Adjoint, no_tangent;
     "quat_twist_angle_signed": FVEC3, (T, QuatOfT) -> ScalarOfT, "misc", Adjoint, no_tangent;
     "transform_compose": FVEC3, (T, QuatOfT, T) -> Mat4OfT, "misc", Adjoint, no_tangent;
-    "transform_decompose": &[Matrix4], (T) -> Tuple(&[Vec3OfT, QuatOfT, Vec3OfT]), "misc", Adjoint, no_tangent,
+    "transform_decompose": &[Matrix4], (T) -> Tuple(&[Vec3OfT, QuatOfT, Vec3OfT]), "misc", Adjoint,
+        no_tangent,
         results("(p, q, s)");
     "lower_bound": NUMBER, (ArrayOfT, T) -> I32, "misc", Zero;
     "lower_bound_range": NUMBER, (ArrayOfT, I32, I32, T) -> I32, "misc", Zero,

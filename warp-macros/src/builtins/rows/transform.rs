@@ -5,7 +5,8 @@ use super::*;
 /// The rigid transforms.
 pub(super) const ROWS: &[Builtin] = rows! {
     // Rigid transforms (wp_transform.h, warp-core builtins::transform).
-    "transformation": FVEC3, (T, QuatOfT) -> XformOfT, "transform", Adjoint, no_tangent, ctor(Transform, "new");
+    "transformation": FVEC3, (T, QuatOfT) -> XformOfT, "transform", Adjoint,
+        no_tangent, ctor(Transform, "new");
     "transform_get_translation": XFORM, (T) -> Vec3OfT, "transform", Adjoint, no_tangent;
     "transform_get_rotation": XFORM, (T) -> QuatOfT, "transform", Adjoint, no_tangent;
     "transform_multiply": XFORM, (T, T) -> T, "transform", Adjoint, no_tangent;
