@@ -10,7 +10,8 @@
 //!
 //! The middle end takes the IR and the facts it needs from the leaf modules (`ir`, `types`,
 //! `operators` with the operators' type rule, `builtins` with each builtin's signature and
-//! derivative rules); it imports nothing from the front end, which only produces its input.
+//! derivative rules), and nothing from the lowering that produces its input: a type rule both
+//! need lives in a leaf. (Its tests lower their kernels through `crate::test_support`.)
 
 pub mod adjoint;
 pub mod adjoint_prep;
