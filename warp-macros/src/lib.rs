@@ -25,6 +25,8 @@ mod operators;
 mod paths;
 #[cfg(test)]
 mod proptests;
+#[cfg(test)]
+mod test_support;
 mod types;
 mod valid;
 

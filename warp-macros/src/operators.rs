@@ -1,5 +1,9 @@
-//! The language's operators. A leaf module: the IR's statements and the builtin table (whose
-//! `mod` row is emitted as `%`) both name them, and neither should import the other for it.
+//! The language's operators and their type rule. A leaf module (it names only the types): the
+//! IR's statements and the builtin table (whose `mod` row is emitted as `%`) both name them,
+//! and the front end (lowering user code) and the middle end (writing tangent operations) both
+//! type operations with [`binary_result`], and none should import another for it.
+
+use crate::types::{Ty, BOOL};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum UnOp {
@@ -66,5 +70,79 @@ impl BinOp {
             BinOp::Gt => ">",
             BinOp::Ge => ">=",
         }
+    }
+}
+
+/// The result type of `l op r`, or why there is none.
+pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
+    use crate::types::Scalar;
+    use Ty::*;
+    let bad = || Err(format!("cannot apply `{}` to `{l}` and `{r}`", op.symbol()));
+    if l.is_deferred() || r.is_deferred() {
+        return Ok(if op.is_comparison() { BOOL } else { Deferred });
+    }
+    match op {
+        BinOp::Eq | BinOp::Ne => {
+            if l == r
+                && matches!(
+                    l,
+                    Scalar(_) | Vector(..) | Quat(_) | Matrix(..) | Transform(_)
+                )
+            {
+                Ok(BOOL)
+            } else {
+                bad()
+            }
+        }
+        BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => match (l, r) {
+            (Scalar(a), Scalar(b)) if a == b => Ok(BOOL),
+            _ => bad(),
+        },
+        // Integer vectors too (glam's operators), lane by lane, a scalar splatted.
+        BinOp::BitAnd | BinOp::BitOr | BinOp::BitXor => match (l, r) {
+            (Scalar(a), Scalar(b)) if a == b && !a.is_float() => Ok(l.clone()),
+            (Vector(a, n), Vector(b, m)) if a == b && n == m && !a.is_float() => Ok(l.clone()),
+            (Vector(a, _), Scalar(b)) if a == b && !a.is_float() => Ok(l.clone()),
+            (Scalar(a), Vector(b, _)) if a == b && !a.is_float() => Ok(r.clone()),
+            _ => bad(),
+        },
+        // A vector shifts every lane by one scalar amount.
+        BinOp::Shl | BinOp::Shr => match (l, r) {
+            (Scalar(a) | Vector(a, _), Scalar(b)) if a.is_int() && b.is_int() => Ok(l.clone()),
+            _ => bad(),
+        },
+        BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div | BinOp::Rem => match (l, r) {
+            (Scalar(a), Scalar(b)) if a == b && *a != Scalar::Bool => Ok(l.clone()),
+            (Vector(a, n), Vector(b, m)) if a == b && n == m => Ok(l.clone()),
+            (Vector(a, _), Scalar(b)) if a == b => Ok(l.clone()),
+            (Scalar(a), Vector(b, _)) if a == b => Ok(r.clone()),
+            (Matrix(a, n), Matrix(b, m))
+                if a == b && n == m && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) =>
+            {
+                Ok(l.clone())
+            }
+            (Matrix(a, n), Vector(b, m)) if a == b && n == m && op == BinOp::Mul => Ok(r.clone()),
+            (Matrix(a, _), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
+                Ok(l.clone())
+            }
+            (Scalar(a), Matrix(b, _)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            (Quat(a), Quat(b)) if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) => {
+                Ok(l.clone())
+            }
+            (Quat(a), Vector(b, 3)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            (Quat(a), Scalar(b)) if a == b && matches!(op, BinOp::Mul | BinOp::Div) => {
+                Ok(l.clone())
+            }
+            // Transforms: `*` composes (Warp's transform_multiply); `+`, `-` and `*` by a
+            // scalar are lane by lane (Warp's add, sub, mul overloads).
+            (Transform(a), Transform(b))
+                if a == b && matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul) =>
+            {
+                Ok(l.clone())
+            }
+            (Transform(a), Scalar(b)) if a == b && op == BinOp::Mul => Ok(l.clone()),
+            (Scalar(a), Transform(b)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            _ => bad(),
+        },
     }
 }

@@ -29,8 +29,9 @@
 
 /// How many uniform draws (state steps) each state-advancing builtin consumes; `poisson`
 /// consumes a variable number (see [`poisson_state`]). The macro's builtin table states the
-/// same counts in its rows (`draws` in `warp-macros/src/builtins.rs`, which lowers the draws),
-/// and a test there compares the two; `tests` here check these against the functions.
+/// same counts in its rows (`draws` in `warp-macros/src/builtins/rows/rand.rs`; the macro
+/// lowers the draws), and a test there compares the two; `tests` here check these against the
+/// functions.
 pub const DRAWS: &[(&str, u32)] = &[
     ("randi", 1),
     ("randu", 1),

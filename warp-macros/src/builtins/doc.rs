@@ -6,7 +6,7 @@
 //! `WARP_LANG_BLESS=1` a stale one fails the test; with it the test rewrites it.
 //! Checked, in both directions: the names in the group tables against the table's rows.
 
-use super::{Builtin, Draw, Emit, Grad, Pos, BUILTINS};
+use super::{Builtin, Draw, Emit, Grad, Pos, Tangent, BUILTINS};
 use crate::types::{Scalar, Ty};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -333,8 +333,10 @@ fn spellings(b: &Builtin) -> Vec<String> {
 }
 
 fn builtin_table() -> String {
-    let mut t =
-        String::from("| builtin | signature | `T` is | also | gradient |\n|---|---|---|---|---|\n");
+    let mut t = String::from(concat!(
+        "| builtin | signature | `T` is | also | gradient | forward mode |\n",
+        "|---|---|---|---|---|---|\n",
+    ));
     // The rows user code reaches: by their names, or as an overload by arity of another.
     for b in BUILTINS
         .iter()
@@ -353,7 +355,7 @@ fn builtin_table() -> String {
             Grad::Effect => "none (a store)",
         };
         t += &format!(
-            "| {name} | `{}` | {} | {} | {grad} |\n",
+            "| {name} | `{}` | {} | {} | {grad} | {} |\n",
             signature(b),
             if classes.is_empty() {
                 "-".to_string()
@@ -361,9 +363,24 @@ fn builtin_table() -> String {
                 classes.join("; ")
             },
             spellings(b).join("; "),
+            forward(b),
         );
     }
     t
+}
+
+/// The forward-mode column: whether `wp::jvp` differentiates a call (the row's [`Tangent`]).
+fn forward(b: &Builtin) -> String {
+    match (b.grad, b.emit, b.tangent) {
+        (Grad::Zero, ..) => "zero".into(),
+        (_, Emit::Operator(op), _) => format!("as `{}`", op.symbol()),
+        (_, _, Some(Tangent::Rule(_) | Tangent::Select(_) | Tangent::Atomic)) => "yes".into(),
+        (_, _, Some(Tangent::RuleFor(classes, _))) => {
+            let of: Vec<&str> = classes.iter().map(|c| c.describe()).collect();
+            format!("for {}", of.join("; "))
+        }
+        (_, _, Some(Tangent::NoRule) | None) => "not yet".into(),
+    }
 }
 
 /// Replaces what stands between the markers of generated region `name`.

@@ -7,6 +7,11 @@
 //!   so the CPU and CUDA gradients come from one scheme;
 //! - `tangent`: forward mode as one pass, from a lowered kernel to its *tangent kernel*, an
 //!   ordinary kernel IR the back ends emit and the adjoint pass differentiates again.
+//!
+//! The middle end takes the IR and the facts it needs from the leaf modules (`ir`, `types`,
+//! `operators` with the operators' type rule, `builtins` with each builtin's signature and
+//! derivative rules), and nothing from the lowering that produces its input: a type rule both
+//! need lives in a leaf. (Its tests lower their kernels through `crate::test_support`.)
 
 pub mod adjoint;
 pub mod adjoint_prep;

@@ -20,14 +20,18 @@
 //! by a fixpoint over the body) gets a mutable tangent variable, assigned wherever the variable
 //! is (with zero where the value assigned is constant).
 //!
-//! The derivative rules are one table, [`Tx::builtin`] (builtins) with [`Tx::binary`]
-//! (operators). What it does not cover (a builtin without a rule, a user func given a
-//! differentiated argument, transforms, min/max atomics on differentiated arrays) is an error
-//! naming the construct and its line; the macro stores it in the kernel's `Forward` impl and
+//! A builtin's derivative rule is a fact of its row in the builtin table, beside its adjoint
+//! rule ([`Tangent`]: an expression in the arguments, the result and the arguments' tangents,
+//! which [`Tx::expand`] writes out as operations, or a shape written once here: the selections
+//! of `min`/`max`/`clamp`, the atomics); the operators' rules are [`Tx::binary`]'s. What they
+//! do not cover (a builtin whose row has no rule, a user func given a differentiated argument,
+//! transforms, min/max atomics on differentiated arrays) is an error naming the construct and
+//! its line; the macro stores it in the kernel's `Forward` impl and
 //! `wp::jvp` returns it at the first use, so the user's crate still compiles.
 
-use crate::builtins::{self, ArgTy, Grad};
+use crate::builtins::{self, ArgTy, Builtin, Dx, Grad, Pick, Tangent};
 use crate::ir::*;
+use crate::operators::binary_result;
 use crate::types::Ty;
 use proc_macro2::Span;
 
@@ -268,7 +272,7 @@ impl Tx {
     }
 
     fn bin(&mut self, op: BinOp, a: VarId, b: VarId) -> Result<VarId, String> {
-        let ty = crate::front::lower::typing::binary_result(op, &self.ty(a), &self.ty(b))?;
+        let ty = binary_result(op, &self.ty(a), &self.ty(b))?;
         Ok(self.tmp(ty, Op::Binary(op, a, b)))
     }
 
@@ -279,7 +283,13 @@ impl Tx {
 
     /// A call of builtin `name`, typed by its signature.
     fn call(&mut self, name: &str, args: &[VarId]) -> Result<VarId, String> {
-        let b = builtins::lookup(name).expect("a rule names a builtin of the table");
+        let b = builtins::lookup(name)
+            .ok_or_else(|| format!("names `{name}`, which is not a builtin (a rule's mistake)"))?;
+        self.call_row(b, args)
+    }
+
+    /// A call of the builtin `b`, typed by its signature.
+    fn call_row(&mut self, b: &'static Builtin, args: &[VarId]) -> Result<VarId, String> {
         let tys: Vec<ArgTy> = args.iter().map(|v| ArgTy::Known(self.ty(*v))).collect();
         let ret = b.resolve(&tys)?.ret;
         Ok(self.tmp(
@@ -320,39 +330,6 @@ impl Tx {
     /// `t / a`.
     fn div_r(&mut self, t: Option<VarId>, a: VarId) -> Result<Option<VarId>, String> {
         t.map(|t| self.bin(BinOp::Div, t, a)).transpose()
-    }
-
-    /// `f(t, other..)` for a builtin linear in its first argument, or nothing.
-    fn lin1(
-        &mut self,
-        name: &str,
-        t: Option<VarId>,
-        rest: &[VarId],
-    ) -> Result<Option<VarId>, String> {
-        let Some(t) = t else { return Ok(None) };
-        let mut args = vec![t];
-        args.extend_from_slice(rest);
-        Some(self.call(name, &args)).transpose()
-    }
-
-    /// `f(a, t) + f(t_a, b)` for a builtin linear in each argument (dot, cross, outer, ..).
-    fn bilinear(
-        &mut self,
-        name: &str,
-        a: VarId,
-        b: VarId,
-        da: Option<VarId>,
-        db: Option<VarId>,
-    ) -> Result<Option<VarId>, String> {
-        let l = match da {
-            Some(da) => Some(self.call(name, &[da, b])?),
-            None => None,
-        };
-        let r = match db {
-            Some(db) => Some(self.call(name, &[a, db])?),
-            None => None,
-        };
-        self.add(l, r)
     }
 
     fn unsupported(&self, what: &str) -> String {
@@ -514,7 +491,7 @@ impl Tx {
                 if builtin.grad == Grad::Zero || dargs.iter().all(Option::is_none) {
                     return Ok(None);
                 }
-                self.builtin(builtin.name, args, &dargs, d)?
+                self.builtin(builtin, args, &dargs, d)?
             }
             Op::Func { path, args } => {
                 if args.iter().any(|v| self.active[*v]) {
@@ -621,268 +598,169 @@ impl Tx {
         }
     }
 
-    /// The builtins' rules: `args` the primal arguments, `dargs` their tangents (at least one
-    /// given), `d` the primal result.
+    /// A builtin's rule, its row's [`Tangent`]: `args` the primal arguments, `dargs` their
+    /// tangents (at least one given), `d` the primal result.
     fn builtin(
         &mut self,
-        name: &str,
+        b: &'static Builtin,
         args: &[VarId],
         dargs: &[Option<VarId>],
         d: VarId,
     ) -> Result<Option<VarId>, String> {
-        let a = args[0];
-        let da = dargs[0];
-        let b = args.get(1).copied();
-        let db = dargs.get(1).copied().flatten();
-        // For a unary function: `f'(a) a'` (the scale first).
-        macro_rules! chain {
-            ($scale:expr) => {{
-                let s: VarId = $scale;
-                self.mul_l(s, da)?
-            }};
+        let mut site = Site {
+            builtin: b,
+            args,
+            dargs,
+            out: d,
+            done: Vec::new(),
+        };
+        match &b.tangent {
+            Some(Tangent::Rule(dx)) => self.expand(&mut site, dx),
+            Some(Tangent::RuleFor(classes, dx))
+                if args
+                    .first()
+                    .is_some_and(|a| classes.iter().any(|c| c.admits(&self.ty(*a)))) =>
+            {
+                self.expand(&mut site, dx)
+            }
+            Some(Tangent::Select(pick)) => self.lifted(*pick, args, dargs),
+            Some(Tangent::Atomic) => self.atomic(b, args, dargs, d),
+            Some(Tangent::RuleFor(..) | Tangent::NoRule) | None => {
+                Err(self.unsupported(&format!("calls `{}` on differentiated values", b.name)))
+            }
         }
-        Ok(match name {
-            "sqrt" => {
-                let two_d = self.bin(BinOp::Add, d, d)?;
-                self.div_r(da, two_d)?
-            }
-            "cbrt" => {
-                let dd = self.bin(BinOp::Mul, d, d)?;
-                let three = self.lit(d, 3.0);
-                let den = self.bin(BinOp::Mul, three, dd)?;
-                self.div_r(da, den)?
-            }
-            "exp" => chain!(d),
-            "exp2" => {
-                let ln2 = self.lit(d, std::f64::consts::LN_2);
-                let s = self.bin(BinOp::Mul, d, ln2)?;
-                chain!(s)
-            }
-            "log" => self.div_r(da, a)?,
-            "log2" | "log10" => {
-                let c = if name == "log2" {
-                    std::f64::consts::LN_2
-                } else {
-                    std::f64::consts::LN_10
-                };
-                let c = self.lit(a, c);
-                let den = self.bin(BinOp::Mul, a, c)?;
-                self.div_r(da, den)?
-            }
-            "sin" => {
-                let c = self.call("cos", &[a])?;
-                chain!(c)
-            }
-            "cos" => {
-                let s = self.call("sin", &[a])?;
-                let t = self.mul_l(s, da)?;
-                t.map(|t| self.neg(t))
-            }
-            "tan" => {
-                let one = self.lit(d, 1.0);
-                let dd = self.bin(BinOp::Mul, d, d)?;
-                let s = self.bin(BinOp::Add, one, dd)?;
-                chain!(s)
-            }
-            "asin" | "acos" => {
-                let one = self.lit(a, 1.0);
-                let aa = self.bin(BinOp::Mul, a, a)?;
-                let r = self.bin(BinOp::Sub, one, aa)?;
-                let r = self.call("sqrt", &[r])?;
-                let t = self.div_r(da, r)?;
-                if name == "acos" {
-                    t.map(|t| self.neg(t))
-                } else {
-                    t
-                }
-            }
-            "atan" => {
-                let one = self.lit(a, 1.0);
-                let aa = self.bin(BinOp::Mul, a, a)?;
-                let den = self.bin(BinOp::Add, one, aa)?;
-                self.div_r(da, den)?
-            }
-            "sinh" => {
-                let c = self.call("cosh", &[a])?;
-                chain!(c)
-            }
-            "cosh" => {
-                let s = self.call("sinh", &[a])?;
-                chain!(s)
-            }
-            "tanh" => {
-                let one = self.lit(d, 1.0);
-                let dd = self.bin(BinOp::Mul, d, d)?;
-                let s = self.bin(BinOp::Sub, one, dd)?;
-                chain!(s)
-            }
-            // atan2(y, x)' = (x y' - y x') / (x^2 + y^2)
-            "atan2" => {
-                let (y, x) = (a, b.expect("atan2 has two arguments"));
-                let l = self.mul_l(x, da)?;
-                let r = self.mul_l(y, db)?;
-                let num = self.sub(l, r)?;
-                let xx = self.bin(BinOp::Mul, x, x)?;
-                let yy = self.bin(BinOp::Mul, y, y)?;
-                let den = self.bin(BinOp::Add, xx, yy)?;
-                self.div_r(num, den)?
-            }
-            // pow(a, b)' = b a^(b-1) a' + a^b ln(a) b' (the second term only where b varies).
-            "pow" => {
-                let b = b.expect("pow has two arguments");
-                let l = match da {
-                    Some(da) => {
-                        let one = self.lit(b, 1.0);
-                        let bm1 = self.bin(BinOp::Sub, b, one)?;
-                        let p = self.call("pow", &[a, bm1])?;
-                        let s = self.bin(BinOp::Mul, b, p)?;
-                        Some(self.bin(BinOp::Mul, s, da)?)
-                    }
-                    None => None,
-                };
-                let r = match db {
-                    Some(db) => {
-                        let ln = self.call("log", &[a])?;
-                        let s = self.bin(BinOp::Mul, d, ln)?;
-                        Some(self.bin(BinOp::Mul, s, db)?)
-                    }
-                    None => None,
-                };
+    }
+
+    /// The operations that compute a rule's expression at a call site, or `None` where its
+    /// tangents are absent (see [`Dx`]).
+    fn expand(&mut self, site: &mut Site, dx: &'static Dx) -> Result<Option<VarId>, String> {
+        let dargs = site.dargs;
+        let given = |i: usize| dargs.get(i).copied().flatten().is_some();
+        if dx.present(&given) == Some(false) {
+            return Ok(None);
+        }
+        if let Some((_, v)) = site.done.iter().find(|(e, _)| *e == dx) {
+            return Ok(*v);
+        }
+        let malformed = || {
+            format!(
+                "has a call of `{}`, whose forward-mode rule is malformed (a bug of warp-lang)",
+                site.builtin.name
+            )
+        };
+        let v = match dx {
+            Dx::Arg(i) => Some(*site.args.get(*i).ok_or_else(malformed)?),
+            Dx::Out => Some(site.out),
+            Dx::Dot(i) => site.dargs.get(*i).copied().flatten(),
+            Dx::Const(_) => return Err(malformed()),
+            Dx::Neg(x) => self.expand(site, x)?.map(|t| self.neg(t)),
+            Dx::Add(l, r) => {
+                let (l, r) = self.operands(site, l, r)?;
                 self.add(l, r)?
             }
-            "erf" | "erfc" => {
-                let aa = self.bin(BinOp::Mul, a, a)?;
-                let naa = self.neg(aa);
-                let e = self.call("exp", &[naa])?;
-                let c = self.lit(a, std::f64::consts::FRAC_2_SQRT_PI);
-                let s = self.bin(BinOp::Mul, c, e)?;
-                let t = chain!(s);
-                if name == "erfc" {
-                    t.map(|t| self.neg(t))
-                } else {
-                    t
-                }
-            }
-            "degrees" | "radians" => {
-                let c = if name == "degrees" {
-                    180.0 / std::f64::consts::PI
-                } else {
-                    std::f64::consts::PI / 180.0
-                };
-                let c = self.lit(a, c);
-                chain!(c)
-            }
-            "frac" => da,
-            "abs" => {
-                let s = self.call("sign", &[a])?;
-                chain!(s)
-            }
-            "min" | "max" | "clamp" => self.lifted(name, args, dargs)?,
-            "dot" | "cross" | "outer" | "ddot" | "cw_mul" => {
-                self.bilinear(name, a, b.expect("two arguments"), da, db)?
-            }
-            "cw_div" => {
-                let b = b.expect("two arguments");
-                let l = self.lin1("cw_div", da, &[b])?;
-                let q = self.lin1("cw_div", db, &[b])?;
-                let r = match q {
-                    Some(q) => Some(self.call("cw_mul", &[d, q])?),
-                    None => None,
-                };
+            Dx::Sub(l, r) => {
+                let (l, r) = self.operands(site, l, r)?;
                 self.sub(l, r)?
             }
-            "transpose" | "trace" | "diag" | "skew" | "get_diag" => self.lin1(name, da, &[])?,
-            // |a|' = (a / |a|) . a' (zero at a = 0, where normalize gives zero).
-            "length" | "norm_l2" => {
-                let n = self.call("normalize", &[a])?;
-                self.lin1("dot", da, &[n])?
-            }
-            "length_sq" => {
-                let t = self.lin1("dot", da, &[a])?;
-                self.add(t, t)?
-            }
-            // normalize(a)' = (a' - n (n . a')) / |a|, and zero at a = 0 (where normalize
-            // gives zero, and so does reverse mode): the division is by
-            // |a| + (1 - nonzero(|a|)) and the quotient is scaled by nonzero(|a|), both exact
-            // where |a| != 0.
-            "normalize" if matches!(self.ty(a), Ty::Vector(..)) => {
-                let Some(da) = da else { return Ok(None) };
-                let nd = self.call("dot", &[d, da])?;
-                let p = self.bin(BinOp::Mul, d, nd)?;
-                let num = self.bin(BinOp::Sub, da, p)?;
-                let l = self.call("length", &[a])?;
-                let nz = self.call("nonzero", &[l])?;
-                let one = self.lit(l, 1.0);
-                let gap = self.bin(BinOp::Sub, one, nz)?;
-                let den = self.bin(BinOp::Add, l, gap)?;
-                let q = self.bin(BinOp::Div, num, den)?;
-                Some(self.bin(BinOp::Mul, q, nz)?)
-            }
-            // inverse(A)' = -A^-1 A' A^-1
-            "inverse" if matches!(self.ty(a), Ty::Matrix(..)) => {
-                let Some(da) = da else { return Ok(None) };
-                let l = self.bin(BinOp::Mul, d, da)?;
-                let p = self.bin(BinOp::Mul, l, d)?;
-                Some(self.neg(p))
-            }
-            // det(A)' = det(A) tr(A^-1 A')
-            "determinant" => {
-                let Some(da) = da else { return Ok(None) };
-                let inv = self.call("inverse", &[a])?;
-                let p = self.bin(BinOp::Mul, inv, da)?;
-                let tr = self.call("trace", &[p])?;
-                Some(self.bin(BinOp::Mul, d, tr)?)
-            }
-            // lerp(a, b, t) = a + t (b - a)
-            "lerp" if tangent_type(&self.ty(a)) => {
-                let (b, t) = (b.expect("three arguments"), args[2]);
-                let dt = dargs[2];
-                let diff = self.sub(db, da)?;
-                let l = self.mul_l(t, diff)?;
-                let l = self.add(da, l)?;
-                let r = match dt {
-                    Some(dt) => {
-                        let bma = self.bin(BinOp::Sub, b, a)?;
-                        Some(self.bin(BinOp::Mul, bma, dt)?)
-                    }
-                    None => None,
+            Dx::Mul(l, r) | Dx::Div(l, r) => {
+                let op = if matches!(dx, Dx::Mul(..)) {
+                    BinOp::Mul
+                } else {
+                    BinOp::Div
                 };
-                self.add(l, r)?
+                match self.operands(site, l, r)? {
+                    (Some(l), Some(r)) => Some(self.bin(op, l, r)?),
+                    _ => None,
+                }
             }
-            "atomic_add" | "atomic_sub" => {
-                let Some(ta) = da else { return Ok(None) };
-                let value = *args.last().expect("an atomic has a value");
-                let tv = self.or_zero(dargs[args.len() - 1], value)?;
-                let mut targs = args.to_vec();
-                targs[0] = ta;
-                *targs.last_mut().expect("a value") = tv;
-                let ty = self.ty(d);
-                let builtin = builtins::lookup(name).expect("atomics are builtins");
-                Some(self.tmp(
-                    ty,
-                    Op::Builtin {
-                        builtin,
-                        args: targs,
-                    },
-                ))
+            Dx::Call(name, args) => {
+                let b = builtins::lookup(name).ok_or_else(malformed)?;
+                self.expand_call(site, b, args)?
             }
-            other => {
-                return Err(self.unsupported(&format!("calls `{other}` on differentiated values")))
+            Dx::This(args) => {
+                let b = site.builtin;
+                self.expand_call(site, b, args)?
             }
+        };
+        site.done.push((dx, v));
+        Ok(v)
+    }
+
+    /// The operands of a binary operation of a rule: a constant is typed by the operand it
+    /// meets (the literal rule), which is computed first.
+    fn operands(
+        &mut self,
+        site: &mut Site,
+        l: &'static Dx,
+        r: &'static Dx,
+    ) -> Result<(Option<VarId>, Option<VarId>), String> {
+        Ok(match (l, r) {
+            (Dx::Const(c), r) => {
+                let r = self.expand(site, r)?;
+                (r.map(|r| self.lit(r, *c)), r)
+            }
+            (l, Dx::Const(c)) => {
+                let l = self.expand(site, l)?;
+                (l, l.map(|l| self.lit(l, *c)))
+            }
+            (l, r) => (self.expand(site, l)?, self.expand(site, r)?),
         })
     }
 
-    /// `min`, `max` and `clamp`: by the primal's decisions (the operand returned carries its
+    /// A call in a rule, or `None` where its tangent argument is absent.
+    fn expand_call(
+        &mut self,
+        site: &mut Site,
+        b: &'static Builtin,
+        args: &'static [Dx],
+    ) -> Result<Option<VarId>, String> {
+        let mut vals = Vec::with_capacity(args.len());
+        for a in args {
+            match self.expand(site, a)? {
+                Some(v) => vals.push(v),
+                None => return Ok(None),
+            }
+        }
+        Some(self.call_row(b, &vals)).transpose()
+    }
+
+    /// [`Tangent::Atomic`]: the same atomic on the tangent array with the value's tangent
+    /// (an array without tangents: nothing).
+    fn atomic(
+        &mut self,
+        b: &'static Builtin,
+        args: &[VarId],
+        dargs: &[Option<VarId>],
+        d: VarId,
+    ) -> Result<Option<VarId>, String> {
+        let (Some(ta), Some(&value)) = (dargs[0], args.last()) else {
+            return Ok(None);
+        };
+        let tv = self.or_zero(dargs[args.len() - 1], value)?;
+        let mut targs = args.to_vec();
+        targs[0] = ta;
+        targs[args.len() - 1] = tv;
+        let ty = self.ty(d);
+        Ok(Some(self.tmp(
+            ty,
+            Op::Builtin {
+                builtin: b,
+                args: targs,
+            },
+        )))
+    }
+
+    /// [`Tangent::Select`]: by the primal's decisions (the operand returned carries its
     /// tangent, ties as the adjoint breaks them), lane by lane for vectors.
     fn lifted(
         &mut self,
-        name: &str,
+        pick: Pick,
         args: &[VarId],
         dargs: &[Option<VarId>],
     ) -> Result<Option<VarId>, String> {
         let ty = self.ty(args[0]);
         let Ty::Vector(s, n) = ty else {
-            return self.select(name, args, dargs);
+            return self.select(pick, args, dargs);
         };
         let mut lanes = Vec::new();
         for lane in &LANES[..n as usize] {
@@ -892,7 +770,7 @@ impl Tx {
                 la.push(self.tmp(Ty::Scalar(s), Op::Member(*v, lane.to_string())));
                 lda.push(t.map(|t| self.tmp(Ty::Scalar(s), Op::Member(t, lane.to_string()))));
             }
-            let t = self.select(name, &la, &lda)?;
+            let t = self.select(pick, &la, &lda)?;
             let t = self.or_zero(t, la[0])?;
             lanes.push(t);
         }
@@ -911,16 +789,16 @@ impl Tx {
     /// `max(a, b)' = a' + step(a - b) (b' - a')`, `clamp(x, lo, hi) = min(max(x, lo), hi)`.
     fn select(
         &mut self,
-        name: &str,
+        pick: Pick,
         args: &[VarId],
         dargs: &[Option<VarId>],
     ) -> Result<Option<VarId>, String> {
-        let pick = |tx: &mut Self,
-                    min: bool,
-                    a: VarId,
-                    b: VarId,
-                    da: Option<VarId>,
-                    db: Option<VarId>|
+        let choose = |tx: &mut Self,
+                      min: bool,
+                      a: VarId,
+                      b: VarId,
+                      da: Option<VarId>,
+                      db: Option<VarId>|
          -> Result<Option<VarId>, String> {
             let diff = tx.sub(db, da)?;
             let Some(diff) = diff else { return Ok(da) };
@@ -933,26 +811,33 @@ impl Tx {
             let r = tx.bin(BinOp::Mul, w, diff)?;
             tx.add(da, Some(r))
         };
-        match name {
-            "min" => pick(self, true, args[0], args[1], dargs[0], dargs[1]),
-            "max" => pick(self, false, args[0], args[1], dargs[0], dargs[1]),
-            _ => {
+        match pick {
+            Pick::Min => choose(self, true, args[0], args[1], dargs[0], dargs[1]),
+            Pick::Max => choose(self, false, args[0], args[1], dargs[0], dargs[1]),
+            Pick::Clamp => {
                 let m = self.call("max", &[args[0], args[1]])?;
-                let dm = pick(self, false, args[0], args[1], dargs[0], dargs[1])?;
-                pick(self, true, m, args[2], dm, dargs[2])
+                let dm = choose(self, false, args[0], args[1], dargs[0], dargs[1])?;
+                choose(self, true, m, args[2], dm, dargs[2])
             }
         }
     }
 }
 
+/// A call whose rule [`Tx::expand`] writes out: the row, the primal arguments, their
+/// tangents and result, and the rule's subexpressions already computed (each once).
+struct Site<'a> {
+    builtin: &'static Builtin,
+    args: &'a [VarId],
+    dargs: &'a [Option<VarId>],
+    out: VarId,
+    done: Vec<(&'static Dx, Option<VarId>)>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::kernel;
     use syn::parse_quote;
-
-    fn kernel(item: syn::ItemFn) -> Function {
-        crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap()
-    }
 
     /// The tangent kernel's statements that write a variable named `name`.
     fn writes_of(g: &Function, name: &str) -> usize {

@@ -3,8 +3,9 @@
 //! module-level `const`s), and the refusal, with its reason, of each expression outside the
 //! language.
 
-use super::typing::{binary_result, int_range};
+use super::typing::int_range;
 use super::*;
+use crate::operators::binary_result;
 
 pub(super) fn map_binop(op: &syn::BinOp) -> Option<BinOp> {
     use syn::BinOp as B;

@@ -3,8 +3,9 @@
 //! element loads, sets and stores the element), the types of members, and array indexing
 //! with one index variable per dimension.
 
-use super::typing::{binary_result, flex_literal};
+use super::typing::flex_literal;
 use super::*;
+use crate::operators::binary_result;
 
 /// An assignable place: a local (with a member path) or an array element (with a member path).
 pub(super) enum Place {

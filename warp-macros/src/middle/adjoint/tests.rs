@@ -1,9 +1,7 @@
 use super::*;
 use syn::parse_quote;
 
-fn kernel(item: syn::ItemFn) -> Function {
-    crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap()
-}
+use crate::test_support::kernel;
 
 fn name(f: &Function, v: VarId) -> String {
     f.vars[v].name.clone().unwrap_or_else(|| format!("t{v}"))
