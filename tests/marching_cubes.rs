@@ -1001,13 +1001,12 @@ fn nvrtc_compiles_the_kernels() {
         eprintln!("SKIPPED marching_cubes::nvrtc_compiles_the_kernels: {e}");
         return;
     }
-    let lib = wp::objects::BUILD_LIBRARIES
-        .iter()
-        .find(|l| l.name == "wp_marching_cubes")
+    let lib = wp::objects::build_libraries()
+        .find(|l| l.section() == "marching_cubes")
         .expect("the marching cubes library is listed");
     for arch in [90, 80] {
-        let c = wp::objects::compile_library(lib, arch)
-            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.name));
+        let c = wp::objects::compile_library(&lib, arch)
+            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.section()));
         assert!(!c.cubin.is_empty());
         assert!(!c.log.contains("warning"), "sm_{arch}: {}", c.log);
     }

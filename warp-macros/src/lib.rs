@@ -17,6 +17,8 @@ mod builtins;
 mod expand;
 mod front;
 mod ir;
+#[cfg(test)]
+mod library_sections;
 mod middle;
 mod operators;
 #[cfg(test)]

@@ -54,6 +54,7 @@ pub use cuda::aot;
 pub use cuda::distributed;
 #[cfg(feature = "cuda")]
 pub use cuda::pinned;
+#[cfg(feature = "cuda")]
 pub use cuda::source as cuda_source;
 #[cfg(feature = "cuda")]
 pub use cuda::stream;

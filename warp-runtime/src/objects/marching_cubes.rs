@@ -412,11 +412,7 @@ const _: () = {
 // ------------------------------------------------------------------------------------------
 
 /// The marching cubes build library: `wp_marching_cubes.h` with its kernels enabled.
-pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary {
-    name: "wp_marching_cubes",
-    source: "#define WP_MARCHING_CUBES_BUILD 1\n#include \"wp_marching_cubes.h\"\n",
-    headers: &["wp_core.h", "wp_marching_cubes.h"],
-};
+pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary::of("marching_cubes");
 
 /// Step 1, per node `n` of the `dims` grid (field values `f32`, row-major, z fastest): which of
 /// its three grid edges the surface crosses (bits 0..2 of the edge mask: the endpoints on

@@ -54,11 +54,7 @@ use crate::error::{Error, Result};
 use crate::primitives::{array_scan, radix_sort_pairs};
 
 /// The volume build library: `wp_volume_build.h` with its kernels enabled.
-pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary {
-    name: "wp_volume_build",
-    source: "#define WP_VOLUME_BUILD 1\n#include \"wp_volume_build.h\"\n",
-    headers: &["wp_core.h", "wp_volume_build.h"],
-};
+pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary::of("volume_build");
 
 /// The kinds of grid the link step builds (`wp::vb_kind_*`).
 const KIND_VALUE: u32 = 0;
