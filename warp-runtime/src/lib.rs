@@ -33,6 +33,7 @@ mod backend;
 mod capturing;
 pub mod checkpoint;
 pub mod config;
+mod cpp_table;
 mod cpu;
 pub mod cuda;
 pub mod device;
