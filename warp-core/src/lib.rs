@@ -9,6 +9,8 @@
 
 pub mod adjoint;
 pub mod builtins;
+#[cfg(test)]
+mod cuda_constants;
 pub mod fault;
 pub mod float16;
 pub mod grad;

@@ -2,8 +2,9 @@
 //! time, so that each table is written once (in the header, which NVRTC and the host tests'
 //! g++ read as it is) and the Rust side cannot drift from it.
 //!
-//! [`array`] is a `const fn`: used in a constant, a table that is missing from the header or
-//! has another count than the Rust type says fails the build.
+//! [`array`] and [`integer`] are `const fn`s: used in a constant, a table or a constant that
+//! is missing from the header, or a table of another count than the Rust type says, fails the
+//! build.
 
 /// The `N` integers of the initializer of the C array `name` in `header`
 /// (`... name[257] = { 0, 0, 3, ... };`), in order, nested braces flattened (`[12][4]`), `//`
@@ -15,7 +16,7 @@
 /// `N`: at compile time where it is evaluated as a constant (how it is used).
 pub(crate) const fn array<const N: usize>(header: &str, name: &str) -> [u32; N] {
     let text = header.as_bytes();
-    let mut i = find_declaration(text, name.as_bytes());
+    let mut i = find_declaration(text, name.as_bytes(), b'[');
     // `name[..]...` then `= {`.
     while i < text.len() && text[i] != b'=' {
         i += 1;
@@ -67,6 +68,28 @@ pub(crate) const fn array<const N: usize>(header: &str, name: &str) -> [u32; N] 
     out
 }
 
+/// The value of the C++ integer constant `name` in `header` (`constexpr i32 name = 8;`, an
+/// enumerator `name = 8,`): decimal, non-negative, optionally with a `u` suffix.
+///
+/// # Panics
+/// Where `name` is not followed by `=` and such an integer: at compile time where it is
+/// evaluated as a constant (how it is used).
+pub(crate) const fn integer(header: &str, name: &str) -> u32 {
+    let text = header.as_bytes();
+    let mut i = find_declaration(text, name.as_bytes(), b'=');
+    i = skip_space(text, i + 1);
+    assert!(
+        i < text.len() && text[i].is_ascii_digit(),
+        "the constant's value is not an integer"
+    );
+    let mut v: u32 = 0;
+    while i < text.len() && text[i].is_ascii_digit() {
+        v = v * 10 + (text[i] - b'0') as u32;
+        i += 1;
+    }
+    v
+}
+
 /// `a`, each value narrowed to `u16`.
 ///
 /// # Panics
@@ -103,9 +126,9 @@ pub(crate) const fn to_u8<const N: usize>(a: [u32; N]) -> [u8; N] {
     out
 }
 
-/// The index just after the declaration of `name` (the name followed by `[`, outside
-/// comments).
-const fn find_declaration(text: &[u8], name: &[u8]) -> usize {
+/// The index of `next` after the declaration of `name`: the name as a whole word, outside
+/// comments, followed by `next` (`[` for an array, `=` for a constant; spaces between).
+const fn find_declaration(text: &[u8], name: &[u8], next: u8) -> usize {
     let mut i = 0;
     while i < text.len() {
         let j = skip_space(text, i);
@@ -113,16 +136,15 @@ const fn find_declaration(text: &[u8], name: &[u8]) -> usize {
             i = j;
             continue;
         }
-        if starts_with_at(text, i, name)
-            && i + name.len() < text.len()
-            && text[i + name.len()] == b'['
-            && (i == 0 || !is_ident(text[i - 1]))
-        {
-            return i + name.len();
+        if starts_with_at(text, i, name) && (i == 0 || !is_ident(text[i - 1])) {
+            let after = skip_space(text, i + name.len());
+            if after < text.len() && text[after] == next {
+                return after;
+            }
         }
         i += 1;
     }
-    panic!("the header declares no array of this name")
+    panic!("the header declares nothing of this name")
 }
 
 /// The first index at or after `i` that is neither white space nor in a comment.
@@ -172,6 +194,7 @@ mod tests {
 
     const HEADER: &str = "// t[3] = {9, 9, 9}; in a comment\n\
         static const u8 not_t[2] = {7, 7};\n\
+        constexpr i32 K = 8; enum { E = 12u, };\n\
         static const u16 t[2][3] = { // rows\n  {1, 2u, 3}, /* a comment */\n  {40, 5, 600},\n};\n";
 
     #[test]
@@ -181,6 +204,14 @@ mod tests {
         assert_eq!(array::<2>(HEADER, "not_t"), [7, 7]);
         assert_eq!(to_u16(T), [1, 2, 3, 40, 5, 600]);
         assert_eq!(to_u8([1, 255]), [1, 255]);
+        const K: u32 = integer(HEADER, "K");
+        assert_eq!((K, integer(HEADER, "E")), (8, 12));
+    }
+
+    #[test]
+    #[should_panic(expected = "nothing of this name")]
+    fn an_array_is_no_integer() {
+        integer(HEADER, "not_t");
     }
 
     #[test]
@@ -196,7 +227,7 @@ mod tests {
     }
 
     #[test]
-    #[should_panic(expected = "no array of this name")]
+    #[should_panic(expected = "nothing of this name")]
     fn a_missing_table_fails() {
         array::<1>(HEADER, "u");
     }
