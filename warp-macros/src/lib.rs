@@ -18,6 +18,7 @@ mod expand;
 mod front;
 mod ir;
 #[cfg(test)]
+#[path = "tests/library_sections.rs"]
 mod library_sections;
 mod middle;
 mod operators;

@@ -14,7 +14,7 @@ use std::collections::BTreeSet;
 
 /// The section names that `back/cuda.rs` passes to `Emitter::section` as string literals.
 fn emitter_literals() -> Vec<&'static str> {
-    let text = include_str!("back/cuda.rs");
+    let text = include_str!("../back/cuda.rs");
     text.match_indices(".section(\"")
         .map(|(i, m)| {
             let rest = &text[i + m.len()..];
