@@ -100,6 +100,7 @@ pub use glam;
 pub use nalgebra;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
+pub use warp_core::capability;
 pub use warp_core::f16;
 pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`) and
@@ -148,7 +149,9 @@ pub use warp_runtime::primitives::{
     array_max, array_max_n, array_min, array_min_n, array_scan, array_scan_n, array_sum,
     array_sum_n, compact, compact_n, radix_sort_pairs, Count,
 };
-pub use warp_runtime::MarchingCubes;
+// The host objects' types and constants (HashGrid, Bvh, Mesh, Volume, MarchingCubes, ..),
+// listed once in `objects::exports`.
+pub use warp_runtime::objects::exports::*;
 // Forward mode (the `forward-mode` feature): Jacobian- and Hessian-vector products.
 pub use warp_runtime::{
     autograd, gradcheck, jacobian, jacobian_fd, GradcheckOptions, GradcheckReport,
@@ -157,10 +160,9 @@ pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, Sco
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
     init, kernel_info, last_launch_id, launch, load, load_with_adjoints, synchronize, ArgCtx,
-    Array, Bvh, Device, DeviceKind, Dim, Element, Error, GenericKernel, HashGrid, IntoShape,
-    Kernel, KernelArg, KernelInfo, KernelParams, Launch, Launchable, MemoryInfo, Mesh, OwnedArgsOf,
-    Recording, Result, Runtime, Seed, Tape, Volume, VolumeMap, VoxelIndex, VOLUME_CLOSEST,
-    VOLUME_LINEAR,
+    Array, Device, DeviceKind, Dim, Element, Error, GenericKernel, IntoShape, Kernel, KernelArg,
+    KernelInfo, KernelParams, Launch, Launchable, MemoryInfo, OwnedArgsOf, Recording, Result,
+    Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
@@ -169,15 +171,13 @@ pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{
-        f16, func, kernel, Array, Bvh, DTransform, Float, HashGrid, Mesh, Struct, Transform,
-        Volume, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR,
-    };
+    pub use crate::{f16, func, kernel, Array, DTransform, Float, Struct, Transform};
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
         UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
     };
+    pub use warp_runtime::objects::prelude::*;
 }
 
 /// Names that generated code refers to. Not part of the public API.
@@ -187,9 +187,10 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, builtins, f16, first_error, max_depth, objects, ops,
-        zero_like, AdStack, ArrayView, ConstLiteral, DTransform, FuncInfo, GradElement, GradView,
-        Grid, KResult, RangeProg, Transform,
+        zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo, GradElement,
+        GradView, Grid, KResult, RangeProg, Transform,
     };
+    pub use warp_macros::__object_rows;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
     pub use warp_runtime::{
         ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,

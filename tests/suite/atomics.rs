@@ -15,6 +15,7 @@ backend_tests!(
     backward_through_integer_flags,
     backward_refused_for_float_exch,
     backward_refused_for_used_atomic_results,
+    capabilities_are_recorded_and_loaded,
 );
 
 /// Every thread adds one through a compare-and-swap loop (the classic lock-free update).
@@ -218,4 +219,43 @@ fn backward_refused_for_used_atomic_results(dev: &wp::Device) {
         err.contains("k_compact") && err.contains("atomic_add"),
         "{err}"
     );
+}
+
+#[wp::func]
+fn add_f64(s: Array<f64>, v: f64) {
+    atomic_add(s, 0, v);
+}
+
+#[wp::kernel]
+fn k_sum_f64(a: Array<f64>, s: Array<f64>) {
+    let i = tid();
+    add_f64(s, a[i]);
+    atomic_sub(s, 1, a[i]);
+}
+
+/// The validator records what a kernel's code needs of its target (the capability table,
+/// `wp::capability`): 64-bit integer bitwise atomics, f64 atomic adds (here through a func,
+/// which records its own and the runtime adds to its callers' at load). Loading checks them
+/// against the GPU's architecture: each of these GPUs has them, so the kernels run, exactly.
+fn capabilities_are_recorded_and_loaded(dev: &wp::Device) {
+    use wp::capability::{first_missing, Capability, Target};
+    assert_eq!(
+        wp::kernel_info(k_bits).requires,
+        [Capability::AtomicMinMaxBits64]
+    );
+    assert!(wp::kernel_info(k_cas_count).requires.is_empty());
+    // The kernel's own `atomic_sub` on f64 (the func's add is the func's to record).
+    assert_eq!(
+        wp::kernel_info(k_sum_f64).requires,
+        [Capability::AtomicAddF64]
+    );
+    assert!(first_missing(&[Capability::AtomicMinMaxBits64], Target::Cuda { arch: 35 }).is_some());
+    assert!(first_missing(&[Capability::AtomicMinMaxBits64], Target::Cpu).is_none());
+    let n = 1000;
+    let a = wp::Array::from_vec((0..n).map(|i| i as f64).collect(), dev).unwrap();
+    let s = zeros::<f64, 1>(2, dev);
+    wp::launch(k_sum_f64, n, (&a, &s), dev).unwrap();
+    // Sums of integers below 2^53 are exact in any order.
+    let want = (n * (n - 1) / 2) as f64;
+    assert_eq!(host(&s), [want, -want]);
 }

@@ -9,6 +9,7 @@
 
 pub mod adjoint;
 pub mod builtins;
+pub mod capability;
 #[cfg(test)]
 mod cuda_constants;
 pub mod fault;
@@ -23,11 +24,11 @@ pub mod range;
 pub mod transform;
 pub mod view;
 
+pub use adjoint::{adj_atomic_extreme, AtomicExtreme};
+pub use capability::Capability;
 pub use fault::{Fault, FaultKind, KResult, LaunchId};
 pub use float16::f16;
-pub use grad::{
-    adj_atomic_extreme, first_error, zero_like, AdStack, AtomicExtreme, GradElement, GradView,
-};
+pub use grad::{first_error, zero_like, AdStack, GradElement, GradView};
 pub use grid::Grid;
 pub use index::KernelIndex;
 pub use meta::{ConstLiteral, FuncInfo, StructDefs};

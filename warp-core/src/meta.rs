@@ -28,6 +28,9 @@ pub struct FuncInfo {
     /// The module-level `const`s it reads, in the order of its `@@K<k>@@` placeholders: each
     /// gives the constant's value as a C++ expression (see `CudaConst` in the runtime).
     pub consts: &'static [ConstLiteral],
+    /// The capabilities its code (and its adjoint's) needs beyond the core language, by the
+    /// macros' validator: a kernel calling it needs them too (see [`crate::capability`]).
+    pub requires: &'static [crate::Capability],
 }
 
 /// The value of a module-level `const` a kernel or func reads, as a C++ expression.

@@ -316,6 +316,10 @@ pub struct Builtin {
     #[allow(dead_code)] // read by the CUDA emitter
     pub section: &'static str,
     pub grad: Grad,
+    /// Block-cooperative (a tile operation): every thread of the block must make the call
+    /// together, so it must not be under control flow that depends on the thread (the
+    /// validator's uniformity rule, `valid::uniformity`).
+    pub cooperative: bool,
 }
 
 /// The row builder: [`Builtin::row`] gives a row every default (a user-callable builtin in
@@ -351,6 +355,16 @@ impl Builtin {
             cuda,
             section,
             grad,
+            cooperative: false,
+        }
+    }
+
+    /// The tile rows will set it; until then only the validator's tests do.
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub(crate) const fn cooperative(self) -> Builtin {
+        Builtin {
+            cooperative: true,
+            ..self
         }
     }
 

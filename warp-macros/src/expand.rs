@@ -13,6 +13,7 @@ fn errors_to_tokens(errors: Vec<syn::Error>) -> TokenStream {
 
 /// `#[kernel]`.
 pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
+    let wp = crate::paths::private();
     let item: syn::ItemFn = match syn::parse2(item) {
         Ok(i) => i,
         Err(e) => return e.to_compile_error(),
@@ -108,12 +109,12 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         #bound_check
         #bodies
         const _: () = {
-            #( impl<'__a> ::warp_lang::__private::Launchable<#inst_args> for #name {
+            #( impl<'__a> #wp::Launchable<#inst_args> for #name {
                 type Kernel = #inst_idents;
             } )*
-            impl ::warp_lang::__private::GenericKernel for #name {
-                fn instances() -> ::std::vec::Vec<&'static ::warp_lang::__private::KernelInfo> {
-                    ::std::vec![ #( <#inst_idents as ::warp_lang::__private::Kernel>::info() ),* ]
+            impl #wp::GenericKernel for #name {
+                fn instances() -> ::std::vec::Vec<&'static #wp::KernelInfo> {
+                    ::std::vec![ #( <#inst_idents as #wp::Kernel>::info() ),* ]
                 }
             }
         };
@@ -166,67 +167,46 @@ fn kernel_instance(
     ident: &syn::Ident,
     display: Option<String>,
 ) -> Result<(TokenStream, TokenStream), Vec<syn::Error>> {
-    let mut errors = Vec::new();
-    let f = match lower::lower_fn(item, FnKind::Kernel) {
-        Ok(mut f) => {
-            if let Some(d) = display {
-                f.name = d;
-            }
-            Some(f)
-        }
-        Err(e) => {
-            errors.extend(e);
-            None
-        }
-    };
-    // same_shape groups as parameter indices (usize::MAX = the launch dim).
-    let mut groups = Vec::new();
-    if let Some(f) = &f {
-        for g in &opts.same_shape {
-            let mut idx = Vec::new();
-            for name in g {
-                if name == "dim" {
-                    idx.push(usize::MAX);
-                } else if let Some(i) = f.params.iter().position(|p| name == &p.name) {
-                    if !matches!(f.params[i].ty, crate::types::Ty::Array(..)) {
-                        errors.push(syn::Error::new(
-                            name.span(),
-                            format!("`{name}` is not an array parameter"),
-                        ));
-                    }
-                    idx.push(i);
-                } else {
-                    errors.push(syn::Error::new(
-                        name.span(),
-                        format!("no parameter named `{name}`"),
-                    ));
-                }
-            }
-            groups.push(idx);
-        }
+    let mut f = lower::lower_fn(item, FnKind::Kernel)?;
+    if let Some(d) = display {
+        f.name = d;
     }
-    let (Some(f), true) = (f, errors.is_empty()) else {
-        return Err(errors);
-    };
+    let valid = crate::valid::validate(
+        &f,
+        crate::valid::Options::Kernel {
+            same_shape: &opts.same_shape,
+        },
+    )?;
+    let groups = valid.same_shape;
 
     let paren = item.sig.paren_token.span.join();
-    let (launch_args, primal) =
-        kernel_impl(&f, ident, &groups, opts.disable_backward, paren, false);
+    let (launch_args, primal) = kernel_impl(
+        &f,
+        ident,
+        &groups,
+        &valid.requires,
+        opts.disable_backward,
+        paren,
+        false,
+    );
     let forward = forward_impl(&f, ident, &item.vis, &groups, opts.disable_backward, paren);
     Ok((launch_args, quote!(#primal #forward)))
 }
 
 /// The `Kernel` impl of the lowered kernel `f` for the unit struct `ident` (the launch
-/// arguments' type, and the impl): `groups` are its `same_shape` groups as parameter indices.
+/// arguments' type, and the impl): `groups` are its `same_shape` groups as parameter indices,
+/// `requires` the target capabilities its code needs (both from the validator).
 /// A `hidden` kernel (a tangent kernel) is left out of rustc's suggestions of kernels.
 fn kernel_impl(
     f: &crate::ir::Function,
     ident: &syn::Ident,
     groups: &[Vec<usize>],
+    requires: &[crate::valid::Capability],
     disable_backward: bool,
     paren: proc_macro2::Span,
     hidden: bool,
 ) -> (TokenStream, TokenStream) {
+    let wp = crate::paths::private();
     let hide = hidden.then(|| quote!(#[diagnostic::do_not_recommend]));
     let em = RustEmitter::new(f);
     let name = ident;
@@ -270,6 +250,7 @@ fn kernel_impl(
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
     let consts = const_literals(f);
+    let requires = requires.iter().map(|c| c.tokens());
     let struct_tys = struct_types(f);
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
@@ -342,7 +323,7 @@ fn kernel_impl(
         launch_args,
         quote! {
             const _: () = {
-                use ::warp_lang::__private as __wp;
+                use #wp as __wp;
                 #callee_checks
                 #hide
                 impl __wp::Kernel for #name {
@@ -365,6 +346,7 @@ fn kernel_impl(
                         cuda_adjoint_stack: #cuda_adjoint_stack,
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                         consts: #consts,
+                        requires: &[#(#requires),*],
                     };
                     fn info() -> &'static __wp::KernelInfo {
                         &<Self as __wp::Kernel>::INFO
@@ -460,6 +442,7 @@ fn forward_impl(
     disable_backward: bool,
     paren: proc_macro2::Span,
 ) -> TokenStream {
+    let wp = crate::paths::private();
     let idx: Vec<syn::Index> = (0..f.params.len()).map(syn::Index::from).collect();
     let tangent =
         if cfg!(feature = "forward-mode") {
@@ -471,7 +454,9 @@ fn forward_impl(
     match tangent {
         Ok(g) => {
             let t = format_ident!("__wp_jvp_{}", ident);
-            let (_, tangent) = kernel_impl(&g, &t, groups, disable_backward, paren, true);
+            let requires = crate::valid::required_capabilities(&g);
+            let (_, tangent) =
+                kernel_impl(&g, &t, groups, &requires, disable_backward, paren, true);
             quote! {
                 const _: () = {
                     #[doc(hidden)]
@@ -479,15 +464,15 @@ fn forward_impl(
                     #[derive(Clone, Copy, Debug, Default)]
                     #vis struct #t;
                     #tangent
-                    impl ::warp_lang::__private::Forward for #ident {
+                    impl #wp::Forward for #ident {
                         type Tangent = #t;
                         const TANGENT_ERROR: ::core::option::Option<&'static str> =
                             ::core::option::Option::None;
                         #[allow(unused_variables, clippy::unused_unit)]
                         fn join<'__a>(
-                            args: ::warp_lang::__private::ArgsOf<'__a, Self>,
-                            tangents: ::warp_lang::__private::ArgsOf<'__a, Self>,
-                        ) -> ::warp_lang::__private::ArgsOf<'__a, #t> {
+                            args: #wp::ArgsOf<'__a, Self>,
+                            tangents: #wp::ArgsOf<'__a, Self>,
+                        ) -> #wp::ArgsOf<'__a, #t> {
                             ( #(args.#idx,)* #(tangents.#idx,)* )
                         }
                     }
@@ -497,14 +482,14 @@ fn forward_impl(
         Err(why) => {
             let why = Literal::string(&why);
             quote! {
-                impl ::warp_lang::__private::Forward for #ident {
+                impl #wp::Forward for #ident {
                     type Tangent = Self;
                     const TANGENT_ERROR: ::core::option::Option<&'static str> =
                         ::core::option::Option::Some(#why);
                     fn join<'__a>(
-                        args: ::warp_lang::__private::ArgsOf<'__a, Self>,
-                        _tangents: ::warp_lang::__private::ArgsOf<'__a, Self>,
-                    ) -> ::warp_lang::__private::ArgsOf<'__a, Self> {
+                        args: #wp::ArgsOf<'__a, Self>,
+                        _tangents: #wp::ArgsOf<'__a, Self>,
+                    ) -> #wp::ArgsOf<'__a, Self> {
                         args
                     }
                 }
@@ -548,13 +533,14 @@ fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>, Literal) {
 /// `@@K<k>@@` placeholders: one small fn per const, spanned at the use, so that a const of a
 /// type without `CudaConst` is an error there.
 fn const_literals(f: &crate::ir::Function) -> TokenStream {
+    let wp = crate::paths::private();
     let fns = f.consts.iter().map(|p| {
         quote_spanned! {p.span()=>
             {
                 fn __wp_const() -> ::std::string::String {
-                    ::warp_lang::__private::CudaConst::cuda_literal(&#p)
+                    #wp::CudaConst::cuda_literal(&#p)
                 }
-                __wp_const as ::warp_lang::__private::ConstLiteral
+                __wp_const as #wp::ConstLiteral
             }
         }
     });
@@ -722,15 +708,12 @@ fn func_instance(
     fattrs: &attrs::FuncAttrs,
     display: Option<String>,
 ) -> Result<TokenStream, Vec<syn::Error>> {
-    let f = match lower::lower_fn(item, FnKind::Func) {
-        Ok(mut f) => {
-            if let Some(d) = display {
-                f.name = d;
-            }
-            f
-        }
-        Err(e) => return Err(e),
-    };
+    let wp = crate::paths::private();
+    let mut f = lower::lower_fn(item, FnKind::Func)?;
+    if let Some(d) = display {
+        f.name = d;
+    }
+    let valid = crate::valid::validate(&f, crate::valid::Options::Func { grad: &fattrs.grad })?;
     let vis = &item.vis;
     let name = &item.sig.ident;
     let em = RustEmitter::new(&f);
@@ -742,7 +725,7 @@ fn func_instance(
             quote!()
         };
         let t = &p.syn_ty;
-        quote!(#m #v: <#t as ::warp_lang::__private::KernelArg>::CpuView)
+        quote!(#m #v: <#t as #wp::KernelArg>::CpuView)
     });
     let ret = match &f.ret_syn {
         Some(t) => quote!(#t),
@@ -766,21 +749,7 @@ fn func_instance(
     let replay_body = replay_em.block(&replay_fn.body);
     // Custom gradients replace the generated adjoint (`middle::adjoint::custom`): each named
     // parameter's adjoint is what its gradient func returns for (params.., adjoint of the
-    // result).
-    for (param, _) in &fattrs.grad {
-        let Some(k) = f.params.iter().position(|p| *param == p.name) else {
-            return Err(vec![syn::Error::new(
-                param.span(),
-                format!("`{param}` is not a parameter of this func"),
-            )]);
-        };
-        if matches!(f.params[k].ty, crate::types::Ty::Array(..)) {
-            return Err(vec![syn::Error::new(
-                param.span(),
-                "custom gradients are for value parameters; an array's gradient comes from the accesses",
-            )]);
-        }
-    }
+    // result); the validator checked that they name value parameters.
     let generated = if fattrs.grad.is_empty() {
         crate::back::rust_adjoint::emit(&f)
     } else {
@@ -826,7 +795,7 @@ fn func_instance(
         .map(|p| {
             let v = em.var(p.var);
             let t = &p.syn_ty;
-            quote!(mut #v: <#t as ::warp_lang::__private::KernelArg>::CpuView)
+            quote!(mut #v: <#t as #wp::KernelArg>::CpuView)
         })
         .collect();
     let adj_params: Vec<TokenStream> = f
@@ -837,10 +806,10 @@ fn func_instance(
             let t = &p.syn_ty;
             if matches!(p.ty, crate::types::Ty::Array(..)) {
                 let a = format_ident!("adj_{}", em.var(p.var));
-                quote!(#a: <#t as ::warp_lang::__private::KernelArg>::GradView)
+                quote!(#a: <#t as #wp::KernelArg>::GradView)
             } else {
                 let o = format_ident!("__adj_out{}", k);
-                quote!(#o: &mut <#t as ::warp_lang::__private::KernelArg>::CpuView)
+                quote!(#o: &mut <#t as #wp::KernelArg>::CpuView)
             }
         })
         .collect();
@@ -849,10 +818,11 @@ fn func_instance(
     let name_str = Literal::string(&f.name);
     let callees = &f.callees;
     let consts = const_literals(&f);
+    let requires = valid.requires.iter().map(|c| c.tokens());
     let func_info = quote! {
         /// What the CUDA assembler needs to know about this func.
         #[doc(hidden)]
-        #vis const __WP_FUNC: ::warp_lang::__private::FuncInfo = ::warp_lang::__private::FuncInfo {
+        #vis const __WP_FUNC: #wp::FuncInfo = #wp::FuncInfo {
             name: #name_str,
             module: ::core::module_path!(),
             file: ::core::file!(),
@@ -860,10 +830,11 @@ fn func_instance(
             cuda_ret: #cuda_ret,
             sections: &[#(#cuda_sections),*],
             callees: &[#(&#all_callees::__WP_FUNC),*],
-            structs: &[#(<#struct_tys as ::warp_lang::__private::CudaStruct>::cuda_defs),*],
+            structs: &[#(<#struct_tys as #wp::CudaStruct>::cuda_defs),*],
             cuda_adj: #cuda_adj,
-            cuda_adj_error: ::warp_lang::__private::first_error(&[#cuda_adj_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
+            cuda_adj_error: #wp::first_error(&[#cuda_adj_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
             consts: #consts,
+            requires: &[#(#requires),*],
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
@@ -872,7 +843,7 @@ fn func_instance(
         /// Longest chain of funcs below this one (a cycle fails to compile).
         #[doc(hidden)]
         #vis const __WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED: usize =
-            1 + ::warp_lang::__private::max_depth(&[#(#depths),*]);
+            1 + #wp::max_depth(&[#(#depths),*]);
     };
     Ok(quote! {
             #depth_const
@@ -881,8 +852,8 @@ fn func_instance(
             #[doc(hidden)]
             #[inline(always)]
             #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-            #vis fn #cpu(#(#params),*) -> ::warp_lang::__private::KResult<#ret> {
-                use ::warp_lang::__private as __wp;
+            #vis fn #cpu(#(#params),*) -> #wp::KResult<#ret> {
+                use #wp as __wp;
                 #body
                 #tail
             }
@@ -894,8 +865,8 @@ fn func_instance(
             #[doc(hidden)]
             #[inline(always)]
             #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-            #vis fn __wp_replay(#(#replay_params),*) -> ::warp_lang::__private::KResult<#ret> {
-                use ::warp_lang::__private as __wp;
+            #vis fn __wp_replay(#(#replay_params),*) -> #wp::KResult<#ret> {
+                use #wp as __wp;
                 const __FAST: bool = false;
                 #replay_body
                 #tail
@@ -908,9 +879,9 @@ fn func_instance(
                 #(#replay_params,)*
                 #(#adj_params,)*
                 __adj_ret: #ret,
-                __stack: &mut ::warp_lang::__private::AdStack,
-            ) -> ::warp_lang::__private::KResult<()> {
-                use ::warp_lang::__private as __wp;
+                __stack: &mut #wp::AdStack,
+            ) -> #wp::KResult<()> {
+                use #wp as __wp;
                 const __FAST: bool = false;
                 #adj_body
                 ::core::result::Result::Ok(())
@@ -920,6 +891,7 @@ fn func_instance(
 
 /// `#[derive(Struct)]`.
 pub fn derive_struct(item: TokenStream) -> TokenStream {
+    let wp = crate::paths::private();
     let input: syn::DeriveInput = match syn::parse2(item) {
         Ok(i) => i,
         Err(e) => return e.to_compile_error(),
@@ -1048,7 +1020,7 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
         .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
     quote! {
         const _: () = {
-            use ::warp_lang::__private as __wp;
+            use #wp as __wp;
             const fn __assert_pod<T: __wp::bytemuck::Pod>() {}
             const _: () = { #(#field_asserts)* };
             // No padding: the byte image of the struct is exactly its fields.

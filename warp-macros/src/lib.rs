@@ -2,8 +2,11 @@
 //!
 //! Pipeline (see ARCHITECTURE.md): `front` parses the function with syn and lowers it to the
 //! IR in `ir`, checking the language subset and the type rules (`types`, `builtins`) and
-//! gathering every error with its span; `middle` transforms the IR for reverse mode (the
-//! adjoint IR); `back` emits code from the IR and prints the adjoint IR. The IR, the type
+//! gathering every error with its span; `valid` checks the lowered function as a whole (what
+//! no single expression decides: definitions before uses, uniform control flow around
+//! cooperative calls, the options against the signature) and says which target capabilities
+//! it needs; `middle` transforms the IR for reverse mode (the adjoint IR); `back` emits code
+//! from the IR and prints the adjoint IR. The IR, the type
 //! rules and the builtin table are plain modules with unit tests that need no macro expansion.
 //!
 //! Use these through the `warp-lang` facade (`#[wp::kernel]`), which re-exports them; the
@@ -22,9 +25,11 @@ mod ir;
 mod library_sections;
 mod middle;
 mod operators;
+mod paths;
 #[cfg(test)]
 mod proptests;
 mod types;
+mod valid;
 
 /// Turns a Rust function into a kernel: a unit struct of the same name implementing
 /// `warp_lang::Kernel`, launched with `wp::launch(name, dim, (args..), &device)`.
@@ -61,4 +66,15 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 #[proc_macro_derive(Struct)]
 pub fn derive_struct(item: TokenStream) -> TokenStream {
     expand::derive_struct(item.into()).into()
+}
+
+/// Calls the macro named by its input with every row of the object table, one
+/// `(Name, param|state, elem|plain, RustView, "wp::cpp_t", "section")` per kind: how the
+/// suite's `host_objects` test holds each row to its `HostObject` impl, its adjoint
+/// placeholder and its C++ header, so that the host-object recipe cannot drift from the
+/// table. Not part of the API.
+#[doc(hidden)]
+#[proc_macro]
+pub fn __object_rows(callback: TokenStream) -> TokenStream {
+    types::object_rows_callback(callback.into()).into()
 }

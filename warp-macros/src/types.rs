@@ -116,33 +116,91 @@ pub fn f16_bits(v: f64) -> u16 {
     sign | mag
 }
 
-/// The kinds of kernel-visible host object (Warp's hash grid, BVH and mesh; later its volume),
-/// and the values their queries carry between steps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum ObjectKind {
+/// Declares the object kinds: one row per kind makes both the [`ObjectKind`] variant and its
+/// [`ObjectRow`] in [`OBJECTS`], and the element plumbing of a kind generic over its element
+/// (`Volume(VolumeElem)`). A row reads
+/// `Kind: param|state, "RustView", "wp::cpp_t", "section";` (see [`ObjectRow`]).
+macro_rules! object_kinds {
+    ($(
+        $(#[doc = $doc:literal])*
+        $kind:ident $(($elem:ident))?: $role:ident, $rust:literal, $cuda:literal, $section:literal;
+    )*) => {
+        /// The kinds of kernel-visible host object (Warp's hash grid, BVH, mesh and volume),
+        /// and the values their queries carry between steps: one row each in [`OBJECTS`].
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum ObjectKind {
+            $( $(#[doc = $doc])* $kind $(($elem))?, )*
+        }
+
+        /// The object kinds' rows (a kind generic over its element has one row, made with
+        /// [`VolumeElem::ROW`]).
+        pub static OBJECTS: &[ObjectRow] = &[$(
+            ObjectRow {
+                kind: ObjectKind::$kind $(($elem::ROW))?,
+                name: stringify!($kind),
+                param: object_kinds!(@param $role),
+                elem: object_kinds!(@elem $($elem)?),
+                rust: $rust,
+                cuda: $cuda,
+                section: $section,
+            },
+        )*];
+
+        impl ObjectKind {
+            /// The view's or C++ type's generic argument, where the kind has one
+            /// (`Volume<T>`'s `T`).
+            pub fn elem(self) -> Option<VolumeElem> {
+                match self {
+                    $( object_kinds!(@pat e $kind $($elem)?) => object_kinds!(@get e $($elem)?), )*
+                }
+            }
+
+            /// This kind with element `e` (itself for kinds without one).
+            pub fn with_elem(self, e: VolumeElem) -> ObjectKind {
+                let _ = e;
+                match self {
+                    $( object_kinds!(@pat _old $kind $($elem)?) => object_kinds!(@set e $kind $($elem)?), )*
+                }
+            }
+        }
+    };
+    (@param param) => { true };
+    (@param state) => { false };
+    (@elem) => { false };
+    (@elem $e:ident) => { true };
+    // The element plumbing: `$x` is the binding, named by the caller (macro hygiene).
+    (@pat $x:ident $kind:ident) => { ObjectKind::$kind };
+    (@pat $x:ident $kind:ident $elem:ident) => { ObjectKind::$kind($x) };
+    (@get $x:ident) => { None };
+    (@get $x:ident $elem:ident) => { Some($x) };
+    (@set $x:ident $kind:ident) => { ObjectKind::$kind };
+    (@set $x:ident $kind:ident $elem:ident) => { ObjectKind::$kind($x) };
+}
+
+object_kinds! {
     /// `HashGrid`: a kernel parameter (the runtime's host type); its CPU view is
     /// `warp_core::objects::HashGridView`, its CUDA type `wp::hash_grid_t`.
-    HashGrid,
+    HashGrid: param, "HashGridView", "wp::hash_grid_t", "hash_grid";
     /// The state of a neighbour query, made and advanced only by the loop
     /// `for j in hash_grid_query(..)` lowers to; users never name it.
-    HashGridQuery,
+    HashGridQuery: state, "HashGridQuery", "wp::hash_grid_query_t", "hash_grid";
     /// `Bvh`: a kernel parameter; its CPU view is `warp_core::objects::BvhView`, its CUDA type
     /// `wp::bvh_t`.
-    Bvh,
+    Bvh: param, "BvhView", "wp::bvh_t", "bvh";
     /// The state of a box query over a BVH (`for i in bvh_query_aabb(..)`).
-    BvhQueryAabb,
+    BvhQueryAabb: state, "BvhQueryAabb", "wp::bvh_query_aabb_t", "bvh";
     /// The state of a ray query over a BVH (`for i in bvh_query_ray(..)`).
-    BvhQueryRay,
+    BvhQueryRay: state, "BvhQueryRay", "wp::bvh_query_ray_t", "bvh";
     /// `Mesh`: a kernel parameter; its CPU view is `warp_core::objects::MeshView`, its CUDA
     /// type `wp::mesh_t`.
-    Mesh,
+    Mesh: param, "MeshView", "wp::mesh_t", "mesh";
     /// The state of a box query over a mesh's faces (`for f in mesh_query_aabb(..)`).
-    MeshQueryAabb,
+    MeshQueryAabb: state, "MeshQueryAabb", "wp::mesh_query_aabb_t", "mesh";
     /// `Volume<T>`: a kernel parameter, a NanoVDB grid of `T` values (or of voxel indices);
     /// its CPU view is `warp_core::objects::VolumeView<T>`, its CUDA type `wp::volume_t<T>`.
     /// The element is part of the type, so a grid of one type where another is declared does
     /// not compile (the runtime's `Volume<T>` is the launch argument's type).
-    Volume(VolumeElem),
+    Volume(VolumeElem): param, "VolumeView", "wp::volume_t", "volume";
 }
 
 /// What a `Volume<T>` holds: the value types a kernel can sample, or voxel indices (Warp's
@@ -159,6 +217,9 @@ pub enum VolumeElem {
 }
 
 impl VolumeElem {
+    /// The element of the row `Volume(VolumeElem)` is written with (its kinds share the row).
+    pub const ROW: VolumeElem = VolumeElem::F32;
+
     /// Every element, in the order messages list them.
     pub const ALL: [VolumeElem; 6] = [
         VolumeElem::F32,
@@ -195,93 +256,28 @@ impl VolumeElem {
     }
 }
 
-/// One row per object kind: every fact the front end and the emitters need about it.
+/// One row per object kind: every fact the front end and the emitters need about it
+/// (written by `object_kinds!`).
 #[derive(Debug)]
 pub struct ObjectRow {
     pub kind: ObjectKind,
-    /// The type's name in kernel signatures and messages.
+    /// The type's name in kernel signatures and messages: the kind's own name.
     pub name: &'static str,
-    /// Whether a kernel or func parameter may have this type (the host object itself; a
-    /// query state is only ever a local).
+    /// Whether a kernel or func parameter may have this type (`param`: the host object itself,
+    /// a type the runtime implements `HostObject` for; `state`: a query state, only ever a
+    /// local).
     pub param: bool,
+    /// Whether the type takes its element as a type argument (`Volume<f32>`): the element is
+    /// then part of the kind, the view's and the C++ type's generic argument.
+    pub elem: bool,
     /// The Rust type of a value of this kind inside generated CPU code, under the facade's
-    /// `__private` (`objects::HashGridView`).
+    /// `__private::objects` (warp-core's `objects`): the object's view, or the state itself.
     pub rust: &'static str,
     /// The C++ type (`wp::hash_grid_t`).
     pub cuda: &'static str,
     /// The CUDA library section that defines the type and its builtins (`wp_<section>.h`).
     pub section: &'static str,
 }
-
-/// The object kinds' rows.
-pub static OBJECTS: &[ObjectRow] = &[
-    ObjectRow {
-        kind: ObjectKind::HashGrid,
-        name: "HashGrid",
-        param: true,
-        rust: "HashGridView",
-        cuda: "wp::hash_grid_t",
-        section: "hash_grid",
-    },
-    ObjectRow {
-        kind: ObjectKind::HashGridQuery,
-        name: "HashGridQuery",
-        param: false,
-        rust: "HashGridQuery",
-        cuda: "wp::hash_grid_query_t",
-        section: "hash_grid",
-    },
-    ObjectRow {
-        kind: ObjectKind::Bvh,
-        name: "Bvh",
-        param: true,
-        rust: "BvhView",
-        cuda: "wp::bvh_t",
-        section: "bvh",
-    },
-    ObjectRow {
-        kind: ObjectKind::BvhQueryAabb,
-        name: "BvhQueryAabb",
-        param: false,
-        rust: "BvhQueryAabb",
-        cuda: "wp::bvh_query_aabb_t",
-        section: "bvh",
-    },
-    ObjectRow {
-        kind: ObjectKind::BvhQueryRay,
-        name: "BvhQueryRay",
-        param: false,
-        rust: "BvhQueryRay",
-        cuda: "wp::bvh_query_ray_t",
-        section: "bvh",
-    },
-    ObjectRow {
-        kind: ObjectKind::Mesh,
-        name: "Mesh",
-        param: true,
-        rust: "MeshView",
-        cuda: "wp::mesh_t",
-        section: "mesh",
-    },
-    ObjectRow {
-        kind: ObjectKind::MeshQueryAabb,
-        name: "MeshQueryAabb",
-        param: false,
-        rust: "MeshQueryAabb",
-        cuda: "wp::mesh_query_aabb_t",
-        section: "mesh",
-    },
-    // One row for every element: `Volume<T>`'s generic argument is added where the type is
-    // written (`back::rust::ty_tokens`, `back::cuda::cpp_type`).
-    ObjectRow {
-        kind: ObjectKind::Volume(VolumeElem::F32),
-        name: "Volume",
-        param: true,
-        rust: "VolumeView",
-        cuda: "wp::volume_t",
-        section: "volume",
-    },
-];
 
 impl ObjectKind {
     /// This kind's row.
@@ -292,23 +288,27 @@ impl ObjectKind {
             .find(|r| std::mem::discriminant(&r.kind) == std::mem::discriminant(&self))
             .expect("every object kind has a row")
     }
+}
 
-    /// The object a parameter type names (`HashGrid`), if any, for the types that take no
-    /// type argument (`Volume<T>` is parsed by `front::signature`).
-    pub fn param_named(name: &str) -> Option<ObjectKind> {
-        OBJECTS
-            .iter()
-            .find(|r| r.param && r.name == name && !matches!(r.kind, ObjectKind::Volume(_)))
-            .map(|r| r.kind)
+impl ObjectRow {
+    /// The row of the object a parameter type names (`HashGrid`, `Volume`), if any.
+    pub fn param_named(name: &str) -> Option<&'static ObjectRow> {
+        OBJECTS.iter().find(|r| r.param && r.name == name)
     }
+}
 
-    /// The view's or C++ type's generic argument, where the kind has one (`Volume<T>`'s `T`).
-    pub fn elem(self) -> Option<VolumeElem> {
-        match self {
-            ObjectKind::Volume(e) => Some(e),
-            _ => None,
-        }
-    }
+/// `callback! { (Name, param|state, elem|plain, RustView, "wp::cpp_t", "section") .. }` for
+/// every row of [`OBJECTS`] (the `__object_rows!` macro's expansion).
+pub fn object_rows_callback(callback: proc_macro2::TokenStream) -> proc_macro2::TokenStream {
+    let rows = OBJECTS.iter().map(|r| {
+        let name = quote::format_ident!("{}", r.name);
+        let role = quote::format_ident!("{}", if r.param { "param" } else { "state" });
+        let elem = quote::format_ident!("{}", if r.elem { "elem" } else { "plain" });
+        let rust = quote::format_ident!("{}", r.rust);
+        let (cuda, section) = (r.cuda, r.section);
+        quote::quote!((#name, #role, #elem, #rust, #cuda, #section))
+    });
+    quote::quote!(#callback! { #(#rows)* })
 }
 
 /// A kernel-language type.
@@ -530,18 +530,29 @@ mod tests {
                 .iter()
                 .all(|o| o.kind != r.kind && o.name != r.name));
             assert!(r.cuda.starts_with("wp::"), "{}", r.name);
+            // Only a parameter type takes an element; a state is a local the macro types.
+            assert!(r.param || !r.elem, "{}", r.name);
+            assert_eq!(r.elem, r.kind.elem().is_some(), "{}", r.name);
         }
-        assert_eq!(
-            ObjectKind::param_named("HashGrid"),
-            Some(ObjectKind::HashGrid)
-        );
+        let named = |n| ObjectRow::param_named(n).map(|r| (r.kind, r.elem));
+        assert_eq!(named("HashGrid"), Some((ObjectKind::HashGrid, false)));
         // A query state is no parameter type.
-        assert_eq!(ObjectKind::param_named("HashGridQuery"), None);
+        assert_eq!(named("HashGridQuery"), None);
         assert_eq!(Ty::Object(ObjectKind::HashGrid).to_string(), "HashGrid");
-        // `Volume` takes its element: no plain-name parameter type.
-        assert_eq!(ObjectKind::param_named("Volume"), None);
+        // `Volume` takes its element.
+        assert_eq!(
+            named("Volume"),
+            Some((ObjectKind::Volume(VolumeElem::ROW), true))
+        );
         let v3 = ObjectKind::Volume(VolumeElem::Vec3);
         assert_eq!(v3.row().name, "Volume");
+        assert_eq!(v3.elem(), Some(VolumeElem::Vec3));
+        assert_eq!(
+            v3.with_elem(VolumeElem::Index).elem(),
+            Some(VolumeElem::Index)
+        );
+        assert_eq!(ObjectKind::Bvh.with_elem(VolumeElem::F64), ObjectKind::Bvh);
+        assert_eq!(ObjectKind::Bvh.elem(), None);
         assert_eq!(Ty::Object(v3).to_string(), "Volume<Vec3>");
         for e in VolumeElem::ALL {
             if let Some(t) = e.ty() {

@@ -8,7 +8,8 @@
 //! [`ArrayView`]). The same holds for host-side calls such as
 //! [`Array::fill`] made from several threads at once on handles to the same memory.
 
-use crate::capturing::{self, Captured};
+use crate::backend::Record;
+use crate::capturing;
 use crate::device::Device;
 use crate::dispatch::{self, Storage};
 use crate::error::{Error, Result};
@@ -551,13 +552,13 @@ impl<T: Element, const N: usize> Array<T, N> {
     pub fn fill(&self, value: T) -> Result<()> {
         if capturing::capturing() {
             let (keep, array) = (self.clone(), self.clone());
-            let captured = capturing::on_array_op(
+            let captured = dispatch::on_array_op(
                 &[&self.device],
                 "a fill",
                 move || Box::new(keep),
                 move || Box::new(move || array.fill(value)),
             )?;
-            if let Captured::Recorded = captured {
+            if captured == Some(Record::Recorded) {
                 return Ok(());
             }
         }
@@ -601,14 +602,14 @@ impl<T: Element, const N: usize> Array<T, N> {
         if capturing::capturing() {
             let keep = (self.clone(), src.clone());
             let (dst, from) = (self.clone(), src.clone());
-            match capturing::on_array_op(
+            match dispatch::on_array_op(
                 &[&self.device, &src.device],
                 "a copy",
                 move || Box::new(keep),
                 move || Box::new(move || dst.copy_from(&from)),
             )? {
-                Captured::Recorded => return Ok(()),
-                Captured::OnGpu if !one_copy => {
+                Some(Record::Recorded) => return Ok(()),
+                Some(Record::Enqueue) if !one_copy => {
                     return Err(Error::Capture {
                         what: format!(
                             "a copy between strided or overlapping arrays on \"{}\" goes \
@@ -618,8 +619,8 @@ impl<T: Element, const N: usize> Array<T, N> {
                         ),
                     })
                 }
-                Captured::OnGpu => in_gpu_capture = true,
-                Captured::No => {}
+                Some(Record::Enqueue) => in_gpu_capture = true,
+                None => {}
             }
         }
         if one_copy {

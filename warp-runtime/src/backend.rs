@@ -8,6 +8,16 @@
 //!
 //! The methods are generic over the kernel, and dispatch is a `match` on the device kind, so a
 //! launch is monomorphised down to the backend's own code: no `dyn`, no allocation.
+//!
+//! # Capture
+//! Graph capture (`graph.rs`) goes through the seam too. A backend says what recording means
+//! ([`Backend::begin_capture`] to [`Backend::end_capture`], and [`Backend::record`] for each
+//! operation its thread enqueues meanwhile): the CPU keeps each operation as an [`Op`] to run
+//! at every replay; a GPU has the operation queue its work on the capture stream as usual. So
+//! every operation that a backend enqueues without a host read-back (launches, adjoint
+//! launches, fills and copies, the primitives, host objects' build steps) can be recorded;
+//! `capturing.rs` keeps the rules that are the same on every backend (one device per capture,
+//! what the graph keeps alive, what is refused).
 
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelInfo};
@@ -15,11 +25,37 @@ use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
 use warp_core::{Grid, LaunchId};
 
+/// One operation recorded into a CPU graph, run again at each replay (it owns what it uses).
+pub(crate) type Op = Box<dyn Fn() -> Result<()> + Send>;
+
+/// What becomes of an operation enqueued while the calling thread captures
+/// ([`Backend::record`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Record {
+    /// The backend recorded the operation (the CPU): it runs at each replay, not now.
+    Recorded,
+    /// The caller runs it now, and the backend queues its work into the capture (a GPU: on
+    /// the capture stream, where nothing runs until a replay).
+    Enqueue,
+}
+
+/// A conditional of a capture (`capture_if`, `capture_while`), decided when the graph runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Conditional {
+    /// The first body when the flag is non-zero, else the second.
+    If,
+    /// The body while the flag is non-zero, read before each iteration.
+    While,
+}
+
 /// A backend, bound to one device for one operation (the value is a handle: the device and
 /// what the backend needs to find its state, built by `dispatch` for each call).
 pub(crate) trait Backend {
     /// The memory of arrays on this backend's devices.
     type Buffer: Buffer;
+
+    /// What a finished capture replays (`graph.rs`'s `Graph` holds it).
+    type Graph: Send;
 
     /// Runs a launch of `K` over `grid` (the CPU), or queues it (a GPU: on the calling
     /// thread's current stream). The launch dims and shapes are already checked; the backend
@@ -52,7 +88,10 @@ pub(crate) trait Backend {
     /// array's offset): `primitives` has checked that they are contiguous, on this device,
     /// long enough for `len`'s capacity, and that the outputs overlap nothing else (`output`
     /// may be `input`: a scan in place). A device count's value is the backend's to check.
-    /// Runs (the CPU) or queues (a GPU, on the calling thread's current stream).
+    /// Runs (the CPU) or queues (a GPU, on the calling thread's current stream). Nothing is
+    /// read back, so a primitive can be recorded; on a GPU inside a capture, its module must
+    /// be loaded and its scratch memory large enough already (the same call made once
+    /// before: nothing is allocated or compiled inside a capture).
     fn scan<T: ScanOps>(
         &self,
         func: &'static str,
@@ -98,13 +137,48 @@ pub(crate) trait Backend {
     fn prepare(&self, kernels: &[&'static KernelInfo], adjoint: Option<usize>) -> Result<()>;
 
     /// Runs (the CPU: [`ObjectStep::run_cpu`]) or queues (a GPU: the step's kernel, on the
-    /// calling thread's current stream) one step of a host object's build.
+    /// calling thread's current stream) one step of a host object's build. On a GPU inside a
+    /// capture, the step's build library must be loaded already (a step run once before).
     fn object_step<S: ObjectStep>(&self, step: &S) -> Result<()>;
 
     /// [`Backend::synchronize`] for every device of this backend used so far.
     fn synchronize_all() -> Result<()>
     where
         Self: Sized;
+
+    /// Starts capturing the calling thread's work on this device (`capturing.rs` has checked
+    /// that the thread is not capturing already). Until [`Backend::end_capture`] or
+    /// [`Backend::abort_capture`], each operation the thread enqueues here is first offered to
+    /// [`Backend::record`]. (A capture on a given CUDA stream is the CUDA backend's own.)
+    fn begin_capture(&self) -> Result<()>;
+
+    /// Ends the calling thread's capture on this device and returns what it recorded.
+    fn end_capture(&self) -> Result<Self::Graph>;
+
+    /// Ends the calling thread's capture on this device and drops what it recorded.
+    fn abort_capture(&self);
+
+    /// An operation enqueued on this device while the calling thread captures (its device
+    /// checked, what it uses kept by the caller): the backend records `op()`, which does the
+    /// operation again at each replay (the CPU), or says to run it now, its work going into
+    /// the capture (a GPU).
+    fn record(&self, op: impl FnOnce() -> Op) -> Record;
+
+    /// A conditional inside the calling thread's capture on the `i32` flag at `cond` (an
+    /// address on this device, kept alive by the caller for the graph's replays): `then`
+    /// (and `otherwise`, for `If`) are called once each to record their bodies, and the flag
+    /// is read when the graph runs.
+    fn capture_conditional(
+        &self,
+        kind: Conditional,
+        cond: u64,
+        then: &mut dyn FnMut() -> Result<()>,
+        otherwise: Option<&mut dyn FnMut() -> Result<()>>,
+    ) -> Result<()>;
+
+    /// Replays `graph` (captured on this device): runs it (the CPU) or queues it on the
+    /// calling thread's current stream (a GPU).
+    fn replay(&self, graph: &Self::Graph) -> Result<()>;
 }
 
 /// A data-parallel step of a host object's build (the hash grid's keys and ranges): a record

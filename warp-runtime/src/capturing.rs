@@ -1,31 +1,36 @@
-//! The calling thread's capture (`graph.rs`'s state), below `dispatch` and `array` so that
-//! both can ask it what to do with an operation: record it (the CPU), let the backend queue it
-//! on the capture stream (a GPU), or refuse it ([`refuse`]), the same on every backend.
+//! The calling thread's capture (`graph.rs`'s state): the rules that are the same on every
+//! backend, below `dispatch` and `array` so that both can apply them to an operation before
+//! the backend records it (`backend.rs`, [`Backend::record`](crate::backend::Backend::record)):
+//! a capture is of one device ([`check_device`]), the graph keeps alive what the recorded work
+//! uses ([`keep`]), and what cannot be replayed is refused ([`refuse`]).
 
-use crate::device::{Device, DeviceKind};
+use crate::device::Device;
 use crate::error::{Error, Result};
 use std::any::Any;
 use std::cell::{Cell, RefCell};
 
-#[cfg(feature = "cuda")]
-use crate::cuda::capture::CudaCapture;
-
-/// One recorded CPU operation.
-pub(crate) type Op = Box<dyn Fn() -> Result<()> + Send>;
-
 /// What is kept alive for a graph's replays (launch arguments' owned copies, arrays).
 pub(crate) type Keep = Box<dyn Any + Send>;
 
-/// The calling thread's capture.
+/// The calling thread's capture, as every backend has it (what recording means is the
+/// backend's, which holds its own state from `begin_capture` to `end_capture`).
 pub(crate) struct Active {
     pub(crate) device: Device,
-    /// The CPU recording: the operations of the graph, then one list per open conditional
-    /// body (innermost last).
-    pub(crate) frames: Vec<Vec<Op>>,
+    /// What the recorded work uses (see [`keep`]).
     pub(crate) keep: Vec<Keep>,
+    /// Kernel launches recorded (forward and adjoint).
     pub(crate) launches: usize,
-    #[cfg(feature = "cuda")]
-    pub(crate) cuda: Option<CudaCapture>,
+}
+
+impl Active {
+    /// A capture on `device` that has recorded nothing yet.
+    pub(crate) fn new(device: Device) -> Active {
+        Active {
+            device,
+            keep: Vec::new(),
+            launches: 0,
+        }
+    }
 }
 
 thread_local! {
@@ -40,73 +45,44 @@ pub(crate) fn capturing() -> bool {
     CAPTURING.with(Cell::get)
 }
 
-/// What a capture does with an operation.
-pub(crate) enum Captured {
-    /// Nothing is captured on this thread: run it.
-    No,
-    /// Recorded for the CPU graph: do not run it now.
-    Recorded,
-    /// A GPU capture: run it (the backend queues it on the capture stream).
-    OnGpu,
+/// The device the calling thread captures on, if it captures.
+pub(crate) fn device() -> Option<Device> {
+    with_active(|a| a.device.clone())
 }
 
-/// The device the calling thread captures on, or an error when `device` is another one.
-pub(crate) fn check_device(active: &Active, device: &Device, what: &str) -> Result<()> {
-    if *device != active.device {
-        return Err(Error::Capture {
+/// An error when the calling thread captures on another device than `device`, for the
+/// operation `what()` (formatted only then): a graph replays the work of one device.
+pub(crate) fn check_device(device: &Device, what: &dyn Fn() -> String) -> Result<()> {
+    with_active(|active| {
+        if *device == active.device {
+            return Ok(());
+        }
+        Err(Error::Capture {
             what: format!(
-                "{what} on \"{device}\" inside a capture on \"{}\" (a graph replays the work of \
+                "{} on \"{device}\" inside a capture on \"{}\" (a graph replays the work of \
                  one device)",
+                what(),
                 active.device
             ),
-        });
-    }
-    Ok(())
-}
-
-/// The innermost open frame gets `op`.
-pub(crate) fn push_op(active: &mut Active, op: Op) {
-    active
-        .frames
-        .last_mut()
-        .expect("a capture has at least its graph's frame")
-        .push(op);
-}
-
-/// An array operation (`what`, on arrays of `devices`) inside the calling thread's capture:
-/// on the CPU recorded as `op()`, on a GPU run (the backend queues it on the capture stream),
-/// and refused when it involves another device than the capture's. `keep` is what the
-/// operation uses (kept alive for a GPU graph).
-pub(crate) fn on_array_op(
-    devices: &[&Device],
-    what: &str,
-    keep: impl FnOnce() -> Keep,
-    op: impl FnOnce() -> Op,
-) -> Result<Captured> {
-    if !capturing() {
-        return Ok(Captured::No);
-    }
-    ACTIVE.with(|a| {
-        let mut a = a.borrow_mut();
-        let Some(active) = a.as_mut() else {
-            return Ok(Captured::No);
-        };
-        for d in devices {
-            check_device(active, d, what)?;
-        }
-        if matches!(active.device.kind(), DeviceKind::Cpu) {
-            push_op(active, op());
-            Ok(Captured::Recorded)
-        } else {
-            active.keep.push(keep());
-            Ok(Captured::OnGpu)
-        }
+        })
     })
+    .unwrap_or(Ok(()))
+}
+
+/// Keeps `uses` (what an operation recorded into the calling thread's capture touches) alive
+/// for as long as the graph, so that a replay never touches freed memory.
+pub(crate) fn keep(uses: Keep) {
+    with_active(|a| a.keep.push(uses));
+}
+
+/// Counts a kernel launch recorded into the calling thread's capture.
+pub(crate) fn launched() {
+    with_active(|a| a.launches += 1);
 }
 
 /// An [`Error::Capture`] when the calling thread is capturing and `what` (an operation on
-/// `device`, or on any device with `None`) cannot be recorded: the same refusals on every
-/// backend.
+/// `device`, or on any device with `None`) cannot be recorded: an allocation, an upload, a
+/// read-back, a synchronisation. The same refusals on every backend.
 pub(crate) fn refuse(device: Option<&Device>, what: &str) -> Result<()> {
     if !capturing() {
         return Ok(());
@@ -129,7 +105,7 @@ pub(crate) fn take_active() -> Option<Active> {
     ACTIVE.with(|a| a.borrow_mut().take())
 }
 
-/// Makes `active` the calling thread's capture.
+/// Makes `active` the calling thread's capture (its backend has begun capturing).
 pub(crate) fn start(active: Active) {
     ACTIVE.with(|a| *a.borrow_mut() = Some(active));
     CAPTURING.with(|c| c.set(true));
@@ -141,26 +117,4 @@ pub(crate) fn with_active<R>(f: impl FnOnce(&mut Active) -> R) -> Option<R> {
         return None;
     }
     ACTIVE.with(|a| a.borrow_mut().as_mut().map(f))
-}
-
-/// Runs `body` with a new frame open on the calling thread's CPU capture, and returns what it
-/// recorded there.
-pub(crate) fn record_frame(body: &mut dyn FnMut() -> Result<()>) -> Result<Vec<Op>> {
-    ACTIVE.with(|a| {
-        a.borrow_mut()
-            .as_mut()
-            .expect("capturing")
-            .frames
-            .push(Vec::new())
-    });
-    let ran = body();
-    let ops = ACTIVE.with(|a| {
-        a.borrow_mut()
-            .as_mut()
-            .expect("capturing")
-            .frames
-            .pop()
-            .expect("the frame pushed above")
-    });
-    ran.map(|()| ops)
 }

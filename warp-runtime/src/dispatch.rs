@@ -1,14 +1,22 @@
 //! The backends of this build, and the one place that picks one: a device's kind names its
 //! backend (`with_backend!`), and an array's [`Storage`] is the memory of one of them.
 //!
-//! Everything above (launch, tapes, arrays) calls the functions here; nothing else names a
-//! backend. A new backend adds an arm to `with_backend!`, a variant to [`Storage`] with its
-//! arms, and its device kind to `device.rs` (see `backend.rs` for what it implements).
+//! Everything above (launch, tapes, arrays, graphs) calls the functions here; nothing else
+//! names a backend. A new backend adds an arm to `with_backend!`, a variant to [`Storage`] and
+//! to [`Replay`] with their arms, and its device kind to `device.rs` (see `backend.rs` for
+//! what it implements).
+//!
+//! Every operation a backend enqueues passes here, so this is where a capture meets it: the
+//! capture's rules (`capturing.rs`: its device, what the graph keeps), then the backend's
+//! [`Backend::record`] (the CPU records the operation, a GPU queues it into the capture).
 
-use crate::backend::{Backend, Buffer, ObjectStep};
-use crate::capturing;
+use crate::backend::{Backend, Buffer, Conditional, ObjectStep, Op, Record};
+use crate::capturing::{self, Keep};
+use crate::cpu::capture::CpuGraph;
 use crate::cpu::memory::HostBuffer;
 use crate::cpu::Cpu;
+#[cfg(feature = "cuda")]
+use crate::cuda::capture::CudaGraph;
 #[cfg(feature = "cuda")]
 use crate::cuda::{memory::CudaBuffer, Cuda};
 use crate::device::{Device, DeviceKind};
@@ -17,7 +25,7 @@ use crate::kernel::{ArgsOf, Kernel, KernelParams};
 use crate::launch_id;
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
-use warp_core::Grid;
+use warp_core::{Grid, LaunchId};
 
 /// Evaluates `$body` with `$b` bound to the backend of `$device`.
 macro_rules! with_backend {
@@ -51,15 +59,64 @@ pub(crate) fn prepare(
     with_backend!(device, b => b.prepare(kernels, adjoint))
 }
 
-/// Runs (or queues) a launch of `K` on `device`; see [`Backend::launch`].
+/// Runs (or queues) a launch of `K` on `device`; see [`Backend::launch`]. Inside a capture,
+/// recorded ([`captured_launch`]).
 #[inline]
 pub(crate) fn launch<K: Kernel>(device: &Device, args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
     names_every_param::<K>();
+    if capturing::capturing() {
+        return captured_launch::<K>(device, args, grid, None);
+    }
     let id = launch_id::next();
-    with_backend!(device, b => b.launch::<K>(args, grid, id)).map_err(|e| e.in_launch(id))
+    run_launch::<K>(device, args, grid, None, id)
 }
 
-/// Queues a launch of `K` on `stream`: streams are the CUDA backend's API.
+/// The launch of `K` (its adjoint with `adjoint: Some(stack bytes)`) numbered `id`, on
+/// `device`'s backend.
+fn run_launch<K: Kernel>(
+    device: &Device,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adjoint: Option<usize>,
+    id: LaunchId,
+) -> Result<()> {
+    with_backend!(device, b => match adjoint {
+        None => b.launch::<K>(args, grid, id),
+        Some(bytes) => b.launch_adjoint::<K>(args, grid, bytes, id),
+    })
+    .map_err(|e| e.in_launch(id))
+}
+
+/// A launch of `K` (or its adjoint) inside the calling thread's capture: on the capture's
+/// device only; the backend records it (the CPU: an operation owning the arguments, which
+/// replays the launch under the number it has now, as a GPU graph's launches keep theirs) or
+/// queues it into the capture (a GPU: the graph keeps the arguments).
+#[cold]
+fn captured_launch<K: Kernel>(
+    device: &Device,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adjoint: Option<usize>,
+) -> Result<()> {
+    capturing::check_device(device, &|| format!("a launch of kernel `{}`", K::INFO.name))?;
+    let id = launch_id::next();
+    let record = with_backend!(device, b => Ok::<_, Error>(b.record(|| {
+        let owned = K::Params::own(args);
+        let (grid, device) = (*grid, device.clone());
+        Box::new(move || {
+            run_launch::<K>(&device, &K::Params::borrow(&owned), &grid, adjoint, id)
+        })
+    })))?;
+    if record == Record::Enqueue {
+        run_launch::<K>(device, args, grid, adjoint, id)?;
+        capturing::keep(Box::new(K::Params::own(args)));
+    }
+    capturing::launched();
+    Ok(())
+}
+
+/// Queues a launch of `K` on `stream`: streams are the CUDA backend's API. Inside a capture,
+/// only on the capture stream (`GpuState::queue` refuses another), with the arguments kept.
 #[cfg(feature = "cuda")]
 pub(crate) fn launch_on<K: Kernel>(
     stream: &crate::cuda::stream::Stream,
@@ -67,10 +124,21 @@ pub(crate) fn launch_on<K: Kernel>(
     grid: &Grid,
 ) -> Result<()> {
     names_every_param::<K>();
+    let capturing = capturing::capturing();
+    if capturing {
+        capturing::check_device(stream.device(), &|| {
+            format!("a launch of kernel `{}`", K::INFO.name)
+        })?;
+    }
     let id = launch_id::next();
     Cuda::of_stream(stream)
         .launch_on::<K>(args, grid, stream, id)
-        .map_err(|e| e.in_launch(id))
+        .map_err(|e| e.in_launch(id))?;
+    if capturing {
+        capturing::keep(Box::new(K::Params::own(args)));
+        capturing::launched();
+    }
+    Ok(())
 }
 
 /// A launch of `K` made ready to be queued again and again (a launch object's): on a GPU the
@@ -149,12 +217,70 @@ pub(crate) fn launch_adjoint<K: Kernel>(
             reason: reason.to_string(),
         });
     }
+    if capturing::capturing() {
+        // A captured backward pass.
+        return captured_launch::<K>(device, args, grid, Some(adstack_bytes));
+    }
     let id = launch_id::next();
-    with_backend!(device, b => b.launch_adjoint::<K>(args, grid, adstack_bytes, id))
-        .map_err(|e| e.in_launch(id))
+    run_launch::<K>(device, args, grid, Some(adstack_bytes), id)
 }
 
-/// A scan on `device`'s backend; see [`Backend::scan`].
+/// An operation (`what`) that `run` enqueues on `device`'s backend, using the memory of
+/// `uses()` by address: run now, or inside the calling thread's capture recorded (on the
+/// capture's device only), with `uses()` kept for the graph's replays.
+fn enqueue(
+    device: &Device,
+    what: &str,
+    uses: impl FnOnce() -> Keep,
+    run: impl Fn(&Device) -> Result<()> + Send + 'static,
+) -> Result<()> {
+    if !capturing::capturing() {
+        return run(device);
+    }
+    capturing::check_device(device, &|| what.to_string())?;
+    let uses = uses();
+    let mut parts = Some((uses, run));
+    let record = with_backend!(device, b => Ok::<_, Error>(b.record(|| {
+        let (uses, run) = parts.take().expect("recorded once");
+        let device = device.clone();
+        Box::new(move || {
+            // (The operation owns what it uses: alive as long as the graph.)
+            let _uses = &uses;
+            run(&device)
+        })
+    })))?;
+    if let (Record::Enqueue, Some((uses, run))) = (record, parts) {
+        run(device)?;
+        capturing::keep(uses);
+    }
+    Ok(())
+}
+
+/// An operation on arrays of `devices` (`what`: a fill, a copy) inside the calling thread's
+/// capture, if any (`None` otherwise): on the capture's device only, `uses()` kept for the
+/// graph. `Recorded`: the backend recorded `op()`, which does it again at each replay (the
+/// CPU); `Enqueue`: the caller does it now, its work going into the capture (a GPU).
+pub(crate) fn on_array_op(
+    devices: &[&Device],
+    what: &str,
+    uses: impl FnOnce() -> Keep,
+    op: impl FnOnce() -> Op,
+) -> Result<Option<Record>> {
+    let Some(device) = capturing::device() else {
+        return Ok(None);
+    };
+    for d in devices {
+        capturing::check_device(d, &|| what.to_string())?;
+    }
+    let record = with_backend!(&device, b => Ok::<_, Error>(b.record(op)))?;
+    if record == Record::Enqueue {
+        capturing::keep(uses());
+    }
+    Ok(Some(record))
+}
+
+/// A scan on `device`'s backend; see [`Backend::scan`]. `uses()`: the arrays (kept by a
+/// graph that records the scan).
 pub(crate) fn scan<T: ScanOps>(
     device: &Device,
     func: &'static str,
@@ -162,12 +288,17 @@ pub(crate) fn scan<T: ScanOps>(
     output: u64,
     len: Extent,
     inclusive: bool,
+    uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
-    capturing::refuse(Some(device), "a scan")?;
-    with_backend!(device, b => b.scan::<T>(func, input, output, len, inclusive))
+    enqueue(
+        device,
+        func,
+        uses,
+        move |d| with_backend!(d, b => b.scan::<T>(func, input, output, len, inclusive)),
+    )
 }
 
-/// A reduction on `device`'s backend; see [`Backend::reduce`].
+/// A reduction on `device`'s backend; see [`Backend::reduce`] (and [`scan`] for `uses`).
 pub(crate) fn reduce<T: ScanOps>(
     device: &Device,
     func: &'static str,
@@ -175,12 +306,18 @@ pub(crate) fn reduce<T: ScanOps>(
     out: u64,
     len: Extent,
     op: ReduceOp,
+    uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
-    capturing::refuse(Some(device), "a reduction")?;
-    with_backend!(device, b => b.reduce::<T>(func, input, out, len, op))
+    enqueue(
+        device,
+        func,
+        uses,
+        move |d| with_backend!(d, b => b.reduce::<T>(func, input, out, len, op)),
+    )
 }
 
-/// A radix sort on `device`'s backend; see [`Backend::radix_sort_pairs`].
+/// A radix sort on `device`'s backend; see [`Backend::radix_sort_pairs`] (and [`scan`] for
+/// `uses`).
 pub(crate) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
     device: &Device,
     func: &'static str,
@@ -188,27 +325,55 @@ pub(crate) fn radix_sort_pairs<K: SortKeyOps, V: SortValueOps>(
     values: u64,
     len: Extent,
     key_bits: u32,
+    uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
-    capturing::refuse(Some(device), "a radix sort")?;
-    with_backend!(device, b => b.radix_sort_pairs::<K, V>(func, keys, values, len, key_bits))
+    enqueue(
+        device,
+        func,
+        uses,
+        move |d| with_backend!(d, b => b.radix_sort_pairs::<K, V>(func, keys, values, len, key_bits)),
+    )
 }
 
 /// Runs or queues a step of a host object's build on `device`'s backend; see
-/// [`Backend::object_step`].
+/// [`Backend::object_step`]. Refused inside a capture: the graph would not know what memory
+/// the step uses ([`object_step_keeping`] is told).
 pub(crate) fn object_step<S: ObjectStep>(device: &Device, step: &S) -> Result<()> {
     capturing::refuse(Some(device), "a host object's build")?;
     with_backend!(device, b => b.object_step(step))
 }
 
-/// A stream compaction on `device`'s backend; see [`Backend::compact`].
+/// [`object_step`], recorded inside a capture like a launch, with `uses()` (the object's
+/// memory that the step's addresses point into) kept for the graph's replays.
+pub(crate) fn object_step_keeping<S: ObjectStep + 'static>(
+    device: &Device,
+    step: &S,
+    uses: impl FnOnce() -> Keep,
+) -> Result<()> {
+    let step = *step;
+    enqueue(
+        device,
+        "a host object's build step",
+        uses,
+        move |d| with_backend!(d, b => b.object_step(&step)),
+    )
+}
+
+/// A stream compaction on `device`'s backend; see [`Backend::compact`] (and [`scan`] for
+/// `uses`).
 pub(crate) fn compact<T: bytemuck::Pod + Send + Sync>(
     device: &Device,
     func: &'static str,
     arrays: [u64; 4],
     len: Extent,
+    uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
-    capturing::refuse(Some(device), "a compaction")?;
-    with_backend!(device, b => b.compact::<T>(func, arrays, len))
+    enqueue(
+        device,
+        func,
+        uses,
+        move |d| with_backend!(d, b => b.compact::<T>(func, arrays, len)),
+    )
 }
 
 /// `bytes` of zeroed memory on `device`, aligned to at least `align`.
@@ -230,6 +395,108 @@ pub(crate) fn synchronize_all() -> Result<()> {
     #[cfg(feature = "cuda")]
     Cuda::synchronize_all()?;
     Ok(())
+}
+
+/// Starts capturing the calling thread's work on `device`; see [`Backend::begin_capture`].
+pub(crate) fn begin_capture(device: &Device) -> Result<()> {
+    with_backend!(device, b => b.begin_capture())
+}
+
+/// Starts capturing the calling thread's work on `stream`: streams are the CUDA backend's API.
+#[cfg(feature = "cuda")]
+pub(crate) fn begin_capture_on(stream: &crate::cuda::stream::Stream) -> Result<()> {
+    Cuda::of_stream(stream).begin_capture_on(stream)
+}
+
+/// Ends the calling thread's capture on `device`; see [`Backend::end_capture`].
+pub(crate) fn end_capture(device: &Device) -> Result<Replay> {
+    with_backend!(device, b => b.end_capture().map(Replay::from))
+}
+
+/// Ends the calling thread's capture on `device`, dropping what it recorded.
+pub(crate) fn abort_capture(device: &Device) {
+    // (Without the backend in this build there is no capture to end.)
+    let _: Result<()> = with_backend!(device, b => {
+        b.abort_capture();
+        Ok(())
+    });
+}
+
+/// A conditional inside the calling thread's capture on `device`; see
+/// [`Backend::capture_conditional`].
+pub(crate) fn capture_conditional(
+    device: &Device,
+    kind: Conditional,
+    cond: u64,
+    then: &mut dyn FnMut() -> Result<()>,
+    otherwise: Option<&mut dyn FnMut() -> Result<()>>,
+) -> Result<()> {
+    with_backend!(device, b => b.capture_conditional(kind, cond, then, otherwise))
+}
+
+/// What a graph replays: one backend's [`Backend::Graph`].
+pub(crate) enum Replay {
+    Cpu(CpuGraph),
+    #[cfg(feature = "cuda")]
+    Cuda(CudaGraph),
+}
+
+impl From<CpuGraph> for Replay {
+    fn from(g: CpuGraph) -> Replay {
+        Replay::Cpu(g)
+    }
+}
+
+#[cfg(feature = "cuda")]
+impl From<CudaGraph> for Replay {
+    fn from(g: CudaGraph) -> Replay {
+        Replay::Cuda(g)
+    }
+}
+
+impl Replay {
+    /// The graph's size: recorded operations on the CPU; CUDA graph nodes (kernels, memsets,
+    /// copies, conditionals) on a GPU.
+    pub(crate) fn node_count(&self) -> usize {
+        match self {
+            Replay::Cpu(g) => g.node_count(),
+            #[cfg(feature = "cuda")]
+            Replay::Cuda(g) => g.node_count(),
+        }
+    }
+}
+
+/// Replays `graph`, captured on `device`; see [`Backend::replay`].
+pub(crate) fn replay(device: &Device, graph: &Replay) -> Result<()> {
+    match (graph, device.kind()) {
+        (Replay::Cpu(g), DeviceKind::Cpu) => Cpu::new(device).replay(g),
+        #[cfg(feature = "cuda")]
+        (Replay::Cuda(g), DeviceKind::Cuda { ordinal }) => Cuda::new(device, ordinal).replay(g),
+        // (`Graph` pairs each recording with the device it was captured on.)
+        _ => Err(Error::Capture {
+            what: format!("a graph replayed on \"{device}\", another kind of device"),
+        }),
+    }
+}
+
+/// Replays `graph` (captured on `device`) on `stream`: streams are the CUDA backend's API.
+#[cfg(feature = "cuda")]
+pub(crate) fn replay_on(
+    device: &Device,
+    graph: &Replay,
+    stream: &crate::cuda::stream::Stream,
+) -> Result<()> {
+    match (graph, device.kind()) {
+        (Replay::Cuda(g), DeviceKind::Cuda { ordinal }) => {
+            Cuda::new(device, ordinal).replay_on(g, stream)
+        }
+        _ => Err(Error::Capture {
+            what: format!(
+                "a graph captured on \"{device}\" launched on a stream of \"{}\"",
+                stream.device()
+            ),
+        }),
+    }
 }
 
 /// The memory behind an array: one backend's [`Buffer`].

@@ -165,6 +165,24 @@ pub enum Error {
         /// What was refused and what to do instead.
         what: String,
     },
+    /// A kernel uses a capability the device lacks (see `warp_core::capability`): found when
+    /// the kernel is loaded there, before anything is compiled.
+    #[error(
+        "kernel `{kernel}` cannot run on \"{device}\" ({found}): it uses {capability}, which \
+         needs {needs}"
+    )]
+    MissingCapability {
+        /// The kernel.
+        kernel: &'static str,
+        /// The device's alias.
+        device: String,
+        /// What the device is (`sm_35`).
+        found: String,
+        /// The capability, in words.
+        capability: &'static str,
+        /// What it needs (`sm_50 or newer`).
+        needs: String,
+    },
     /// A host-side API was called with unusable arguments (lengths that do not match a shape,
     /// a view range out of bounds, an impossible reinterpretation, ...).
     #[error("invalid argument: {what}")]

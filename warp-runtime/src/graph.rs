@@ -1,99 +1,42 @@
 //! Graphs: work recorded once and replayed with one call ([`capture`], [`ScopedCapture`],
 //! [`Graph`]), Warp's `wp.capture_begin`/`capture_end`/`capture_launch`.
 //!
-//! While a thread captures on a device, its kernel launches (forward and adjoint, so a tape's
-//! backward pass can be captured too) and its array fills and copies on that device are
-//! recorded instead of run; [`Graph::launch`] replays them in order. On a GPU the recording is
-//! a CUDA graph (stream capture: a replay is one `cuGraphLaunch`); on the CPU it is the list
-//! of recorded operations, run one after the other. The rules are the same on both, so code
-//! written for one runs on the other:
+//! While a thread captures on a device, everything it enqueues there without a host
+//! read-back is recorded instead of run: kernel launches (forward and adjoint, so a tape's
+//! backward pass can be captured too), array fills and copies, the parallel primitives (scan,
+//! reductions, radix sort, compaction: with a device count, a replay reads the count then) and
+//! the host objects' builds that read nothing back ([`HashGrid::build`](crate::HashGrid::build)).
+//! [`Graph::launch`] replays them in order. Capture goes through the backend seam
+//! (`backend.rs`): on a GPU the recording is a CUDA graph (stream capture: a replay is one
+//! `cuGraphLaunch`); on the CPU it is the list of recorded operations, run one after the
+//! other. The rules are the same on both, so code written for one runs on the other:
 //! - what cannot be replayed is an [`Error::Capture`] at the call inside the capture: an
-//!   allocation, an upload or a read-back (`to_vec`, `check_finite`), a synchronisation, the
-//!   primitives and object builds (they read sizes back), work on another device, a capture
-//!   inside a capture, and on a GPU a kernel compiled at its first launch (load kernels
-//!   before with [`crate::load`]);
+//!   allocation, an upload or a read-back (`to_vec`, `check_finite`, and the object builds
+//!   that read sizes or checks back: a BVH, a mesh, a volume, marching cubes), a
+//!   synchronisation, work on another device, a capture inside a capture; and on a GPU,
+//!   where nothing is compiled or allocated inside a capture, a kernel compiled at its first
+//!   launch (load kernels before with [`crate::load`]) and a primitive or build step at its
+//!   first use on the device or needing more scratch memory than it had (run it once before
+//!   capturing);
 //! - the graph holds what the recorded work uses (array handles, host objects), so a replay
 //!   never touches freed memory: arrays dropped by their owner after the capture stay
 //!   allocated until the graph is dropped;
-//! - values (scalars, structs, launch dims) are those of the capture; to change them between
-//!   replays, keep them in arrays (or capture again);
+//! - values (scalars, structs, launch dims, host counts) are those of the capture; to change
+//!   them between replays, keep them in arrays (a device count, say) or capture again;
 //! - only the capturing thread's work is recorded (other threads run as usual).
 //!
 //! A tape recording during a capture records the captured launches (once); its backward can
 //! run plainly or be captured into a graph of its own.
 
-use crate::capturing::{
-    self, capturing, check_device, push_op, record_frame, take_active, Active, Captured, Op,
-};
-use crate::device::{Device, DeviceKind};
-use crate::dispatch;
+use crate::backend::Conditional;
+use crate::capturing::{self, capturing, check_device, take_active, Active};
+use crate::device::Device;
+use crate::dispatch::{self, Replay};
 use crate::error::{Error, Result};
-use crate::kernel::{ArgsOf, Kernel, KernelParams};
 use std::marker::PhantomData;
-use warp_core::Grid;
 
-#[cfg(feature = "cuda")]
-use crate::cuda::capture as cuda_capture;
 #[cfg(feature = "cuda")]
 use crate::cuda::stream::Stream;
-
-/// Records a launch of `K` (its adjoint with `adjoint: Some(stack bytes)`) on the calling
-/// thread's capture, if any: on the CPU as an operation of the graph, on a GPU by keeping the
-/// arguments alive for the graph (the backend queues the launch on the capture stream).
-pub(crate) fn on_launch<K: Kernel>(
-    device: &Device,
-    args: &ArgsOf<'_, K>,
-    grid: &Grid,
-    adjoint: Option<usize>,
-) -> Result<Captured> {
-    let recorded = capturing::with_active(|active| {
-        let what = format!("a launch of kernel `{}`", K::INFO.name);
-        check_device(active, device, &what)?;
-        let owned = K::Params::own(args);
-        if matches!(device.kind(), DeviceKind::Cpu) {
-            active.launches += 1;
-            let (grid, device) = (*grid, device.clone());
-            let op: Op = Box::new(move || {
-                let args = K::Params::borrow(&owned);
-                match adjoint {
-                    None => dispatch::launch::<K>(&device, &args, &grid),
-                    Some(bytes) => dispatch::launch_adjoint::<K>(&device, &args, &grid, bytes),
-                }
-            });
-            push_op(active, op);
-            return Ok(Captured::Recorded);
-        }
-        // (Counted by `launched` once the backend has queued it.)
-        active.keep.push(Box::new(owned));
-        Ok(Captured::OnGpu)
-    });
-    recorded.unwrap_or(Ok(Captured::No))
-}
-
-/// Counts a launch the backend queued on the capture stream (after [`on_launch`] said
-/// `OnGpu`): a launch the backend refused is not part of the graph.
-pub(crate) fn launched() {
-    capturing::with_active(|active| active.launches += 1);
-}
-
-/// The adjoint of a launch of `K`, as a tape's backward runs it: recorded when the calling
-/// thread captures (a captured backward pass), else run.
-pub(crate) fn launch_adjoint<K: Kernel>(
-    device: &Device,
-    args: &ArgsOf<'_, K>,
-    grid: &Grid,
-    adstack_bytes: usize,
-) -> Result<()> {
-    match on_launch::<K>(device, args, grid, Some(adstack_bytes))? {
-        Captured::Recorded => Ok(()),
-        Captured::OnGpu => {
-            dispatch::launch_adjoint::<K>(device, args, grid, adstack_bytes)?;
-            launched();
-            Ok(())
-        }
-        Captured::No => dispatch::launch_adjoint::<K>(device, args, grid, adstack_bytes),
-    }
-}
 
 /// Where a capture records: a device (on a GPU, a stream of the capture's own, or the
 /// thread's current stream set by a `ScopedStream`), or a given CUDA stream.
@@ -138,48 +81,26 @@ impl ScopedCapture {
     /// [`Error::Capture`] inside another capture, or on a GPU's default stream;
     /// [`Error::Cuda`] when the driver refuses.
     pub fn new(on: impl Into<CaptureOn>) -> Result<ScopedCapture> {
-        if capturing() {
-            let device = capturing::with_active(|a| a.device.clone());
+        if let Some(device) = capturing::device() {
             return Err(Error::Capture {
                 what: format!(
-                    "a capture inside a capture (the thread is capturing on \"{}\"); nest the \
-                     work in the outer capture instead",
-                    device.map(|d| d.to_string()).unwrap_or_default()
+                    "a capture inside a capture (the thread is capturing on \"{device}\"); nest \
+                     the work in the outer capture instead"
                 ),
             });
         }
-        let on = on.into();
-        let device = match &on {
-            CaptureOn::Device(d) => d.clone(),
+        let device = match on.into() {
+            CaptureOn::Device(d) => {
+                dispatch::begin_capture(&d)?;
+                d
+            }
             #[cfg(feature = "cuda")]
-            CaptureOn::Stream(s) => s.device().clone(),
-        };
-        #[cfg(feature = "cuda")]
-        let cuda = match device.kind() {
-            DeviceKind::Cpu => None,
-            DeviceKind::Cuda { ordinal } => {
-                let stream = match &on {
-                    CaptureOn::Stream(s) => Some(s),
-                    CaptureOn::Device(_) => None,
-                };
-                Some(cuda_capture::begin(&device, ordinal, stream)?)
+            CaptureOn::Stream(s) => {
+                dispatch::begin_capture_on(&s)?;
+                s.device().clone()
             }
         };
-        #[cfg(not(feature = "cuda"))]
-        if let DeviceKind::Cuda { .. } = device.kind() {
-            return Err(Error::NoDevice {
-                name: device.alias().to_string(),
-                reason: crate::device::CUDA_UNAVAILABLE.to_string(),
-            });
-        }
-        capturing::start(Active {
-            device,
-            frames: vec![Vec::new()],
-            keep: Vec::new(),
-            launches: 0,
-            #[cfg(feature = "cuda")]
-            cuda,
-        });
+        capturing::start(Active::new(device));
         Ok(ScopedCapture {
             finished: false,
             _not_send: PhantomData,
@@ -193,34 +114,19 @@ impl ScopedCapture {
     /// driver cannot instantiate the graph.
     pub fn finish(mut self) -> Result<Graph> {
         self.finished = true;
-        let active = take_active();
-        let Some(mut active) = active else {
+        let Some(active) = take_active() else {
             return Err(Error::Capture {
                 what: "the capture was already ended".into(),
             });
         };
-        #[cfg(feature = "cuda")]
-        let cuda = active.cuda.take();
-        if active.frames.len() != 1 {
-            #[cfg(feature = "cuda")]
-            if let Some(c) = cuda {
-                c.abort();
-            }
-            return Err(Error::Capture {
-                what: "a conditional body is still open at the end of the capture".into(),
-            });
+        let body = dispatch::end_capture(&active.device);
+        if body.is_err() {
+            // Whatever the backend still holds of the capture goes.
+            dispatch::abort_capture(&active.device);
         }
-        let ops = active.frames.swap_remove(0);
-        #[cfg(feature = "cuda")]
-        let body = match cuda {
-            Some(c) => Body::Cuda(c.end()?),
-            None => Body::Cpu(ops),
-        };
-        #[cfg(not(feature = "cuda"))]
-        let body = Body::Cpu(ops);
         Ok(Graph {
+            body: body?,
             device: active.device,
-            body,
             launches: active.launches,
             _keep: active.keep,
         })
@@ -232,12 +138,9 @@ impl Drop for ScopedCapture {
         if self.finished {
             return;
         }
-        #[cfg(feature = "cuda")]
-        if let Some(c) = take_active().and_then(|mut a| a.cuda.take()) {
-            c.abort();
+        if let Some(active) = take_active() {
+            dispatch::abort_capture(&active.device);
         }
-        #[cfg(not(feature = "cuda"))]
-        drop(take_active());
     }
 }
 
@@ -300,7 +203,7 @@ pub fn capture_while(cond: &crate::Array<i32>, mut body: impl FnMut() -> Result<
         }
         return Ok(());
     }
-    conditional(cond, ConditionalKind::While, &mut body, None)
+    conditional(cond, Conditional::While, &mut body, None)
 }
 
 /// Runs `on_true` when element 0 of `cond` is non-zero and `on_false` otherwise (Warp's
@@ -322,13 +225,7 @@ pub fn capture_if(
             on_false()
         };
     }
-    conditional(cond, ConditionalKind::If, &mut on_true, Some(&mut on_false))
-}
-
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum ConditionalKind {
-    If,
-    While,
+    conditional(cond, Conditional::If, &mut on_true, Some(&mut on_false))
 }
 
 fn check_condition(cond: &crate::Array<i32>, what: &str) -> Result<()> {
@@ -345,83 +242,29 @@ fn first(cond: &crate::Array<i32>) -> Result<i32> {
     Ok(cond.view(..1)?.to_vec()?[0])
 }
 
-/// A conditional inside the calling thread's capture: on the CPU the bodies recorded into
-/// frames of their own and replayed by one operation that reads the flag; on a GPU conditional
-/// nodes.
+/// A conditional inside the calling thread's capture, recorded by the capture's backend (see
+/// [`Backend::capture_conditional`](crate::backend::Backend::capture_conditional)), with
+/// `cond` kept for the graph.
 fn conditional(
     cond: &crate::Array<i32>,
-    kind: ConditionalKind,
+    kind: Conditional,
     then: &mut dyn FnMut() -> Result<()>,
     otherwise: Option<&mut dyn FnMut() -> Result<()>>,
 ) -> Result<()> {
     let what = match kind {
-        ConditionalKind::If => "capture_if",
-        ConditionalKind::While => "capture_while",
+        Conditional::If => "capture_if",
+        Conditional::While => "capture_while",
     };
-    let device = capturing::with_active(|active| -> Result<Device> {
-        check_device(active, cond.device(), what)?;
-        active.keep.push(Box::new(cond.clone()));
-        Ok(active.device.clone())
-    })
-    .expect("called while capturing")?;
-    match device.kind() {
-        DeviceKind::Cpu => {
-            let then_ops = record_frame(then)?;
-            let else_ops = match otherwise {
-                Some(body) => record_frame(body)?,
-                None => Vec::new(),
-            };
-            let cond = cond.clone();
-            let op: Op = match kind {
-                ConditionalKind::While => Box::new(move || {
-                    while first(&cond)? != 0 {
-                        run_ops(&then_ops)?;
-                    }
-                    Ok(())
-                }),
-                ConditionalKind::If => Box::new(move || {
-                    if first(&cond)? != 0 {
-                        run_ops(&then_ops)
-                    } else {
-                        run_ops(&else_ops)
-                    }
-                }),
-            };
-            capturing::with_active(|active| push_op(active, op));
-            Ok(())
-        }
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda { ordinal } => {
-            let kind = match kind {
-                ConditionalKind::If => warp_cuda::Conditional::If,
-                ConditionalKind::While => warp_cuda::Conditional::While,
-            };
-            cuda_capture::conditional(
-                &device,
-                ordinal,
-                kind,
-                cond.device_address(),
-                then,
-                otherwise,
-            )
-        }
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda { .. } => unreachable!("no CUDA capture without the cuda feature"),
-    }
-}
-
-/// What a graph replays.
-enum Body {
-    Cpu(Vec<Op>),
-    #[cfg(feature = "cuda")]
-    Cuda(cuda_capture::CudaGraph),
+    check_device(cond.device(), &|| what.to_string())?;
+    capturing::keep(Box::new(cond.clone()));
+    dispatch::capture_conditional(cond.device(), kind, cond.device_address(), then, otherwise)
 }
 
 /// Recorded work, replayed by [`Graph::launch`] (Warp's `wp.Graph` and `wp.capture_launch`).
 #[must_use = "a capture records its work without running it: the work runs when the `Graph` is launched"]
 pub struct Graph {
     device: Device,
-    body: Body,
+    body: Replay,
     launches: usize,
     /// What the recorded work uses, alive for as long as the graph can be replayed.
     _keep: Vec<capturing::Keep>,
@@ -470,23 +313,11 @@ impl Graph {
                     .into(),
             });
         }
-        match &self.body {
-            Body::Cpu(ops) => {
-                #[cfg(feature = "cuda")]
-                if let Some(s) = stream {
-                    return Err(Error::Capture {
-                        what: format!(
-                            "a graph captured on \"{}\" launched on a stream of \"{}\"",
-                            self.device,
-                            s.device()
-                        ),
-                    });
-                }
-                run_ops(ops)
-            }
-            #[cfg(feature = "cuda")]
-            Body::Cuda(g) => cuda_capture::launch(g, &self.device, stream),
+        #[cfg(feature = "cuda")]
+        if let Some(s) = stream {
+            return dispatch::replay_on(&self.device, &self.body, s);
         }
+        dispatch::replay(&self.device, &self.body)
     }
 
     /// The device the graph runs on.
@@ -502,17 +333,6 @@ impl Graph {
     /// The graph's size: CUDA graph nodes (kernels, memsets, copies, conditionals) on a GPU,
     /// recorded operations on the CPU.
     pub fn node_count(&self) -> usize {
-        match &self.body {
-            Body::Cpu(ops) => ops.len(),
-            #[cfg(feature = "cuda")]
-            Body::Cuda(g) => g.node_count(),
-        }
+        self.body.node_count()
     }
-}
-
-fn run_ops(ops: &[Op]) -> Result<()> {
-    for op in ops {
-        op()?;
-    }
-    Ok(())
 }

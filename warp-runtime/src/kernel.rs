@@ -4,8 +4,10 @@
 //! `integrate` that implements [`Kernel`]: its static facts ([`KernelInfo`]), its parameter
 //! types as one tuple (`type Params = (Array<Vec3>, f32)`), and its thread bodies. Each
 //! parameter type implements [`KernelArg`], which says what the host passes (`&Array<T, N>` for
-//! arrays, the value itself for scalars, vectors and structs) and what a kernel thread sees (an
-//! [`ArrayView`](warp_core::ArrayView) for arrays). The runtime implements [`KernelParams`] for
+//! arrays, `&HashGrid` for host objects, the value itself for scalars, vectors and structs) and
+//! what a kernel thread sees (an [`ArrayView`](warp_core::ArrayView) for arrays, the object's
+//! view for objects). Host objects get their impl from one blanket impl over
+//! [`HostObject`](crate::objects::HostObject). The runtime implements [`KernelParams`] for
 //! tuples of `KernelArg`s (`params.rs`), so every conversion of launch arguments is written once
 //! for all kernels. Launch arguments are statically typed through [`KernelParams::Args`]:
 //! passing an `Array<f32>` where the kernel takes `Array<Vec3>` does not compile.
@@ -171,6 +173,10 @@ pub struct KernelInfo {
     /// The module-level `const`s the kernel reads, in the order of its `@@K<k>@@` placeholders
     /// (see [`CudaConst`]).
     pub consts: &'static [warp_core::ConstLiteral],
+    /// The capabilities its code (forward and adjoint) needs beyond the core language, by the
+    /// macros' validator (`warp_core::capability`; the funcs it calls list theirs): loading it
+    /// on a GPU that lacks one is an error naming the kernel and the capability.
+    pub requires: &'static [warp_core::Capability],
 }
 
 impl KernelInfo {
@@ -195,6 +201,7 @@ impl KernelInfo {
         cuda_adjoint_stack: false,
         cuda_adjoint_error: None,
         consts: &[],
+        requires: &[],
     };
 }
 

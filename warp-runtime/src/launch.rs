@@ -6,7 +6,6 @@
 //! pool; a GPU: queued on a stream), then records it on the recording tapes. Everything is
 //! generic over the kernel, so that its thread body is inlined into the backend's loop.
 
-use crate::capturing::Captured;
 use crate::config;
 #[cfg(feature = "cuda")]
 use crate::cuda::stream::Stream;
@@ -422,16 +421,8 @@ fn launch_with<'a, K: Kernel>(
 ) -> Result<()> {
     let grid = grid_of(K::INFO.name, dim)?;
     check_shapes::<K>(&args, &grid)?;
-    // A capture records the launch (CPU: instead of running it; GPU: keeping its arguments
-    // for the graph, the backend queueing it on the capture stream).
-    match crate::graph::on_launch::<K>(device, &args, &grid, None)? {
-        Captured::Recorded => {}
-        Captured::OnGpu => {
-            run(&args, &grid)?;
-            crate::graph::launched();
-        }
-        Captured::No => run(&args, &grid)?,
-    }
+    // (Inside a capture `dispatch` has the backend record the launch.)
+    run(&args, &grid)?;
     crate::tape::on_launch::<K>(&args, &grid, device)?;
     // (Inside a capture the launch has not run: there is nothing to check yet.)
     if config::verify_fp() && !crate::capturing::capturing() {

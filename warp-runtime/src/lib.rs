@@ -10,7 +10,8 @@
 //!   rules between streams and array operations.
 //! - [`kernel`]: the traits that `#[kernel]` implements (`params.rs`: the launch-argument
 //!   conversions, once for every tuple of parameter types).
-//! - [`objects`]: kernel-visible host objects ([`HashGrid`], [`Bvh`], [`Mesh`]), passed as typed parameters.
+//! - [`objects`]: kernel-visible host objects ([`HashGrid`], [`Bvh`], [`Mesh`], [`Volume`]),
+//!   passed as typed parameters through one trait, [`objects::HostObject`].
 //! - The backends: `cpu/` and [`cuda`], each implementing the crate-private `Backend` and
 //!   `Buffer` traits (`backend.rs`); `dispatch.rs` picks a device's backend and is the only
 //!   place that names them all.
@@ -85,7 +86,7 @@ pub use kernel::{
 pub use launch::launch_on;
 pub use launch::{launch, load, load_with_adjoints, synchronize, Dim, Launch, OwnedArgsOf};
 pub use launch_id::{last_launch_id, LaunchId};
-pub use objects::{Bvh, HashGrid, MarchingCubes, Mesh, Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
+pub use objects::exports::*;
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;
 pub use primitives::{
@@ -95,8 +96,6 @@ pub use primitives::{
 #[cfg(feature = "cuda")]
 pub use stream::{get_stream, Event, ScopedStream, Stream};
 pub use tape::{copy, Recording, Seed, Tape};
-pub use warp_core::objects::nanovdb::Map as VolumeMap;
-pub use warp_core::objects::VoxelIndex;
 
 /// What this process compiled at run time, one line per kernel variant, for scenes and
 /// benchmarks to print beside their results: the kernel, forward or adjoint, the contiguous

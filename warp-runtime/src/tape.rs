@@ -279,7 +279,12 @@ pub(crate) fn on_launch<K: Kernel>(
             records.records.push(Record {
                 name: K::INFO.name,
                 backward: Box::new(move |cap| {
-                    crate::graph::launch_adjoint::<K>(&device, &K::Params::borrow(&o1), &grid, cap)
+                    crate::dispatch::launch_adjoint::<K>(
+                        &device,
+                        &K::Params::borrow(&o1),
+                        &grid,
+                        cap,
+                    )
                 }),
                 zero: Box::new(move || K::Params::zero_grads(&K::Params::borrow(&o2))),
             });

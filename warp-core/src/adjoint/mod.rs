@@ -20,6 +20,9 @@
 //!   the forward builtin plus an adjoint trait. Each recomputes whatever forward values it
 //!   needs from the arguments.
 //! * Casts: [`adj_cast`] (`f32` and `f64` convert; anything integer or `bool` is a no-op).
+//! * Atomics: [`adj_atomic_extreme`]`(cur, v, &mut adj_v, adj_ret)` for `atomic_min`/
+//!   `atomic_max` (`cur`: the array's value after the launch); `atomic_add`/`atomic_sub` need
+//!   none (the gradient at the index, or [`adj_neg`] of it).
 //!
 //! Floating point: the adjoint formulas are IEEE arithmetic with the evaluation order written
 //! in each function's documentation, so that a CUDA mirror can match them bit for bit.
@@ -33,6 +36,7 @@ use glam::{
 
 use crate::builtins::math::Float;
 
+mod atomic;
 mod builtins;
 mod cast;
 mod float16;
@@ -48,6 +52,7 @@ mod tests;
 mod transform;
 mod volume;
 
+pub use atomic::*;
 pub use builtins::*;
 pub use cast::*;
 pub use geometry::*;

@@ -23,9 +23,9 @@
 //! * [`misc`]: more vector, quaternion and transform builtins ([`copysign`], [`argmin`],
 //!   [`quat_to_axis_angle`], [`transform_compose`], ...) and [`lower_bound`].
 //! * the hash grid's queries (section "hash_grid"), which live with its view in
-//!   [`objects::hash_grid`](crate::objects::hash_grid) and are re-exported here
-//!   ([`hash_grid_query`], [`hash_grid_point_id`], and the steps a `for` over a query is
-//!   lowered into).
+//!   [`objects::hash_grid`](crate::objects::hash_grid) and are re-exported here through
+//!   [`objects::builtins`](crate::objects::builtins) ([`hash_grid_query`],
+//!   [`hash_grid_point_id`], and the steps a `for` over a query is lowered into).
 //! * [`geometry`]: the BVH's and the mesh's queries (sections "bvh", "mesh", "geometry"),
 //!   adapters over [`objects::bvh`](crate::objects::bvh) and
 //!   [`objects::mesh`](crate::objects::mesh) (tuple results, `i32` indices).
@@ -64,8 +64,5 @@ pub use rand::*;
 pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};
 pub use transform::*;
 pub use volume::*;
-
-pub use crate::objects::hash_grid::{
-    hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,
-    hash_grid_query_point,
-};
+// The builtins written with their object's view (the hash grid's), listed in `objects`.
+pub use crate::objects::builtins::*;

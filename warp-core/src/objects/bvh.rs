@@ -817,29 +817,13 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
     }
 }
 
-/// Box values carry no gradient; the adjoint's placeholder for one is the empty tree.
-impl crate::adjoint::Adjoint for BvhView {
-    fn adj_zero() -> Self {
-        BvhView::empty()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
-
-/// Query states carry no gradient (what depends on them, the primitives, are indices).
-impl crate::adjoint::Adjoint for BvhQueryAabb {
-    fn adj_zero() -> Self {
-        BvhQueryAabb::default()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
-
-/// Query states carry no gradient (what depends on them, the primitives, are indices).
-impl crate::adjoint::Adjoint for BvhQueryRay {
-    fn adj_zero() -> Self {
-        BvhQueryRay::default()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
+// A BVH carries no gradient: the placeholder is the empty tree; query states carry none
+// either (what depends on them, the primitives, are indices).
+no_gradient!(
+    BvhView = BvhView::empty(),
+    BvhQueryAabb = BvhQueryAabb::default(),
+    BvhQueryRay = BvhQueryRay::default(),
+);
 
 #[cfg(test)]
 pub(crate) mod tests {

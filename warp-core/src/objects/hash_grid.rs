@@ -349,21 +349,12 @@ pub fn hash_grid_point_id<I: KernelIndex<1>>(grid: HashGridView, i: I) -> KResul
     Ok(grid.point_ids.load(i)? as usize)
 }
 
-/// Grid values carry no gradient; the adjoint's placeholder for one is an empty grid.
-impl crate::adjoint::Adjoint for HashGridView {
-    fn adj_zero() -> Self {
-        HashGridView::empty()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
-
-/// Query states carry no gradient (what depends on them, the candidates, are indices).
-impl crate::adjoint::Adjoint for HashGridQuery {
-    fn adj_zero() -> Self {
-        HashGridQuery::default()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
+// Grid values carry no gradient: the placeholder is an empty grid; query states carry none
+// either (what depends on them, the candidates, are indices).
+no_gradient!(
+    HashGridView = HashGridView::empty(),
+    HashGridQuery = HashGridQuery::default(),
+);
 
 #[cfg(test)]
 mod tests {

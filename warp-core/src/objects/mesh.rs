@@ -843,21 +843,12 @@ pub fn adj_mesh_query_furthest_point_no_sign(
     Ok(())
 }
 
-/// Mesh values carry no gradient; the adjoint's placeholder for one is the empty mesh.
-impl crate::adjoint::Adjoint for MeshView {
-    fn adj_zero() -> Self {
-        MeshView::empty()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
-
-/// Query states carry no gradient (what depends on them, the faces, are indices).
-impl crate::adjoint::Adjoint for MeshQueryAabb {
-    fn adj_zero() -> Self {
-        MeshQueryAabb::default()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
+// A mesh carries no gradient: the placeholder is the empty mesh; the box query's state
+// carries none either (what depends on it, the faces, are indices).
+no_gradient!(
+    MeshView = MeshView::empty(),
+    MeshQueryAabb = MeshQueryAabb::default(),
+);
 
 /// Accumulates the float fields (`sign`, `u`, `v`); `result` and `face` have none.
 impl crate::adjoint::Adjoint for MeshQueryPoint {

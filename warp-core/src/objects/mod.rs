@@ -1,4 +1,4 @@
-//! Kernel-side views of host objects (Warp's hash grid; later its BVH, mesh and volume).
+//! Kernel-side views of host objects (Warp's hash grid, BVH, mesh and sparse volume).
 //!
 //! A host object (`warp_runtime::HashGrid`) owns its buffers on one device; a kernel thread
 //! sees it through a `Copy` view made of [`ArrayView`](crate::ArrayView)s and sizes, which
@@ -20,12 +20,41 @@
 //!   transforms, index variants and their adjoints. Unlike the views above, a
 //!   [`VolumeView`] reads a grid that `nanovdb::validate` proved well formed, without checks.
 
+/// The adjoint placeholder of an object's view or query state, which carry no gradient (what
+/// depends on them are indices, and a gradient an object has travels inside its view): zero
+/// is the given empty value, accumulation does nothing. One row per type:
+/// `no_gradient!(HashGridView = HashGridView::empty())`, and for a generic view
+/// `no_gradient!(where [T: VolumeGrid] VolumeView<T> = VolumeView::empty())`.
+/// The C++ side's counterpart is the `wp_object_tag` member type (`wp_adjoint_core.h`).
+macro_rules! no_gradient {
+    ($($(where [$($g:tt)*])? $t:ty = $zero:expr),* $(,)?) => {$(
+        impl<$($($g)*)?> crate::adjoint::Adjoint for $t {
+            #[inline(always)]
+            fn adj_zero() -> Self {
+                $zero
+            }
+            #[inline(always)]
+            fn adj_accum(&mut self, _: Self) {}
+        }
+    )*};
+}
+
 pub mod bvh;
 pub mod geometry;
 pub mod hash_grid;
 pub mod mesh;
 pub mod nanovdb;
 pub mod volume;
+
+/// The builtins that live with their object's view, which [`builtins`](crate::builtins)
+/// re-exports whole (generated code calls `builtins::NAME`): an object whose builtins are
+/// written in its own module lists them here, and edits no other list.
+pub mod builtins {
+    pub use super::hash_grid::{
+        hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,
+        hash_grid_query_point,
+    };
+}
 
 pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};

@@ -1308,13 +1308,9 @@ pub fn volume_lookup_index<G: VolumeGrid>(
 // ---------------------------------------------------------------------------------------
 // The adjoints.
 
-/// Volumes carry no gradient as values; the adjoint's placeholder for one is an empty grid.
-impl<T: VolumeGrid> Adjoint for VolumeView<T> {
-    fn adj_zero() -> Self {
-        VolumeView::empty()
-    }
-    fn adj_accum(&mut self, _: Self) {}
-}
+// Volumes carry no gradient as values (a gradient grid travels inside the view): the
+// placeholder is an empty grid.
+no_gradient!(where [T: VolumeGrid] VolumeView<T> = VolumeView::empty());
 
 /// Adjoint of [`volume_sample`]: the position's (LINEAR), and with a gradient grid the
 /// values' (module docs).

@@ -67,8 +67,8 @@ pub(crate) struct Emitter<'a> {
     file: String,
     pub(crate) sections: Vec<&'static str>,
     pub(crate) tmp: usize,
-    /// Emit expressions for an adjoint's replay: atomics are not redone (zero) and funcs are
-    /// called through their replay (`@@F<k>@@_replay`).
+    /// Emit an adjoint's replay: atomics are not redone (zero), funcs are called through their
+    /// replay (`@@F<k>@@_replay`), and a func is emitted as `@@SELF@@_replay`.
     pub(crate) replay: bool,
     /// `(array, loop variable, flag)`: inside a native loop, accesses of `array` at exactly
     /// the loop variable are in bounds when `flag` (checked once before the loop) is true; an
@@ -311,21 +311,24 @@ impl<'a> Emitter<'a> {
             }
             FnKind::Func => {
                 params.push("wp::ctx_t* __ctx".into());
-                let ret = if matches!(self.f.ret, Ty::Unit) {
-                    "void".to_string()
-                } else {
-                    cpp_type(&self.f.ret).ok_or("the func's return type has no CUDA type")?
+                // A unit func's replay (`@@SELF@@_replay`) returns `wp::unit_t`, so that an
+                // adjoint can assign its result like any other.
+                let ret = match (&self.f.ret, self.replay) {
+                    (Ty::Unit, false) => "void".to_string(),
+                    (Ty::Unit, true) => "wp::unit_t".to_string(),
+                    (t, _) => cpp_type(t).ok_or("the func's return type has no CUDA type")?,
                 };
+                let name = if self.replay { "_replay" } else { "" };
                 let _ = writeln!(
                     self.out,
-                    "static WP_FN {ret} @@SELF@@({}) {{",
+                    "static WP_FN {ret} @@SELF@@{name}({}) {{",
                     params.join(", ")
                 );
             }
         }
         let body = self.f.body.clone();
         self.block(&body)?;
-        if self.f.kind == FnKind::Func && !matches!(self.f.ret, Ty::Unit) {
+        if self.f.kind == FnKind::Func && (self.replay || !matches!(self.f.ret, Ty::Unit)) {
             // Rust proved every path returns; C++ compilers cannot always see it.
             let _ = writeln!(self.out, "    return {{}};");
         }
@@ -582,6 +585,9 @@ impl<'a> Emitter<'a> {
             }
             StmtKind::Break => self.line(sp, "break;"),
             StmtKind::Continue => self.line(sp, "continue;"),
+            StmtKind::Return { value: None } if self.replay => {
+                self.line(sp, "return wp::unit_t{};")
+            }
             StmtKind::Return { value: None } => self.line(sp, "return;"),
             StmtKind::Return { value: Some(v) } => {
                 let v = self.var(*v);

@@ -13,6 +13,7 @@ use super::cuda::{cpp_member, cpp_type, Emitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
 use crate::types::Ty;
+use std::fmt::Write as _;
 
 /// The adjoint templates of kernel or func `f`.
 pub struct CudaAdjoint {
@@ -31,7 +32,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
         FnKind::Func => func_replay(f, file)?,
         FnKind::Kernel => String::new(),
     };
-    let text = Printer::new(&adj, file, &adj.f.callees).function()?;
+    let text = Printer::new(&adj, file).function()?;
     Ok(CudaAdjoint {
         source: format!("{replay}{text}"),
         uses_stack: adj.uses_stack,
@@ -39,8 +40,8 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
 }
 
 /// The CUDA replay and adjoint of a func with custom gradients `grads` (parameter, gradient
-/// func): the adjoint calls the gradient funcs, which are appended to `callees` (their
-/// `@@F<k>@@` indices follow the body's callees).
+/// func): the adjoint calls the gradient funcs, which `middle::adjoint::custom` appends to
+/// the callees (their `@@F<k>@@` indices follow the body's); `callees` becomes that list.
 pub fn emit_custom(
     f: &Function,
     file: &str,
@@ -48,56 +49,33 @@ pub fn emit_custom(
     callees: &mut Vec<syn::Path>,
 ) -> Result<String, String> {
     let adj = custom(f, grads)?;
-    for (_, gf) in grads {
-        if !callees.contains(gf) {
-            callees.push(gf.clone());
-        }
-    }
+    callees.clone_from(&adj.f.callees);
     let replay = func_replay(f, file)?;
-    let text = Printer::new(&adj, file, callees).function()?;
+    let text = Printer::new(&adj, file).function()?;
     Ok(format!("{replay}{text}"))
 }
 
-/// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, atomics
-/// not redone, funcs called through their replays.
+/// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, printed by
+/// the forward emitter in replay mode (atomics not redone, funcs called through their
+/// replays, a unit func returning `wp::unit_t`).
 fn func_replay(f: &Function, file: &str) -> Result<String, String> {
     let stripped = replay_of(f);
     let mut r = Emitter::new(&stripped, file);
     r.replay = true;
-    let text = r.function_text()?;
-    if matches!(f.ret, Ty::Unit) {
-        // A unit func's replay returns `wp::unit_t`, so that callers can assign its result
-        // like any other (the declared variable is a `wp::unit_t`).
-        let text = text
-            .replacen(
-                "static WP_FN void @@SELF@@(",
-                "static WP_FN wp::unit_t @@SELF@@_replay(",
-                1,
-            )
-            .replace("return;", "return wp::unit_t{};");
-        let body_end = text.rfind('}').ok_or("replay text")?;
-        return Ok(format!(
-            "{}    return wp::unit_t{{}};\n{}",
-            &text[..body_end],
-            &text[body_end..]
-        ));
-    }
-    Ok(text.replacen("@@SELF@@(", "@@SELF@@_replay(", 1))
+    r.function_text()
 }
 
 struct Printer<'a> {
     e: Emitter<'a>,
     adj: &'a Adjoint,
-    /// The callees by `@@F<k>@@` index (a custom adjoint's gradient funcs follow the body's).
-    callees: &'a [syn::Path],
 }
 
 impl<'a> Printer<'a> {
-    fn new(adj: &'a Adjoint, file: &str, callees: &'a [syn::Path]) -> Self {
+    fn new(adj: &'a Adjoint, file: &str) -> Self {
         let mut e = Emitter::new(&adj.f, file);
         // User funcs are called through their replays.
         e.replay = true;
-        Printer { e, adj, callees }
+        Printer { e, adj }
     }
 
     fn f(&self) -> &'a Function {
@@ -109,48 +87,24 @@ impl<'a> Printer<'a> {
     fn adj(&self, v: VarId) -> String {
         format!("adj_{}", self.e.var(v))
     }
-    fn is_array(&self, v: VarId) -> bool {
-        matches!(self.f().ty(v), Ty::Array(..))
+    fn line(&mut self, sp: proc_macro2::Span, text: impl AsRef<str>) {
+        self.e.line(sp, text.as_ref());
     }
-    fn line(&mut self, sp: proc_macro2::Span, text: &str) {
-        self.e.line(sp, text);
-    }
-    fn callee(&self, path: &syn::Path) -> Result<usize, String> {
-        self.callees
-            .iter()
-            .position(|p| p == path)
-            .ok_or_else(|| "callee not recorded".to_string())
+    fn ty(&self, v: VarId) -> Result<String, String> {
+        cpp_type(self.f().ty(v)).ok_or_else(|| format!("`{}` has no CUDA type", self.var(v)))
     }
 
-    /// The thread index, one component per array dimension.
-    fn tid_index(&self, array: VarId) -> Result<String, String> {
-        match self.f().ty(array) {
-            Ty::Array(_, n) => Ok((0..*n as usize)
-                .map(|d| format!("__tid[{d}]"))
-                .collect::<Vec<_>>()
-                .join(", ")),
-            _ => Err("internal: a thread-owned array that is no array".into()),
-        }
-    }
-
-    /// The parameter list: forward parameters, then gradients of arrays (kernels and funcs)
-    /// and `&` adjoints of value parameters (funcs).
+    /// The forward parameters, then the gradient parameters (`middle::adjoint::GradParam`).
     fn params(&self) -> Result<Vec<String>, String> {
         let mut ps = Vec::new();
         for p in &self.f().params {
-            ps.push(format!(
-                "{} {}",
-                cpp_type(&p.ty).ok_or("parameter type")?,
-                self.var(p.var)
-            ));
+            ps.push(format!("{} {}", self.ty(p.var)?, self.var(p.var)));
         }
-        for (k, p) in self.f().params.iter().enumerate() {
-            let t = cpp_type(&p.ty).ok_or("parameter type")?;
-            if self.is_array(p.var) {
-                ps.push(format!("{t} {}", self.adj(p.var)));
-            } else if self.f().kind == FnKind::Func {
-                ps.push(format!("{t}& __adj_out{k}"));
-            }
+        for gp in &self.adj.grad_params {
+            ps.push(match *gp {
+                GradParam::Array(v) => format!("{} {}", self.ty(v)?, self.adj(v)),
+                GradParam::Out { k, var } => format!("{}& __adj_out{k}", self.ty(var)?),
+            });
         }
         Ok(ps)
     }
@@ -189,8 +143,10 @@ impl<'a> Printer<'a> {
         let mut ps = self.params()?;
         let kernel = self.f().kind == FnKind::Kernel;
         if kernel {
-            ps.push("const wp::launch_t& __launch".into());
-            ps.push("wp::i64 __flat".into());
+            ps.extend([
+                "const wp::launch_t& __launch".into(),
+                "wp::i64 __flat".into(),
+            ]);
         } else {
             let ret = match &self.f().ret {
                 Ty::Unit => "wp::unit_t".to_string(),
@@ -198,52 +154,39 @@ impl<'a> Printer<'a> {
             };
             ps.push(format!("{ret} __adj_ret"));
         }
-        ps.push("wp::ctx_t* __ctx".into());
-        ps.push("wp::adstack_t* __stack".into());
-        if !kernel {
-            // The types of the value parameters' adjoints, for the temporaries of callers
-            // (an argument may have another type, such as a literal's `int` for a `usize`).
-            for (k, p) in self.f().params.iter().enumerate() {
-                if !self.is_array(p.var) {
-                    let t = cpp_type(&p.ty).ok_or("parameter type")?;
-                    self.e
-                        .out
-                        .push_str(&format!("typedef {t} @@SELF@@_adj_arg{k};\n"));
-                }
+        ps.extend(["wp::ctx_t* __ctx".into(), "wp::adstack_t* __stack".into()]);
+        // The types of the value parameters' adjoints, for the temporaries of callers
+        // (`TempLike::Param`).
+        for gp in &self.adj.grad_params {
+            if let GradParam::Out { k, var } = *gp {
+                let t = self.ty(var)?;
+                let _ = writeln!(self.e.out, "typedef {t} @@SELF@@_adj_arg{k};");
             }
         }
-        self.e.out.push_str(&format!(
-            "static WP_FN void @@SELF@@_adj({}) {{\n",
+        let _ = writeln!(
+            self.e.out,
+            "static WP_FN void @@SELF@@_adj({}) {{",
             ps.join(", ")
-        ));
+        );
         if kernel {
             self.e
                 .out
                 .push_str("    const bool __FAST = __launch.fast != 0;\n");
             if let Some(n) = self.f().tid_ndim {
-                self.e.out.push_str(&format!(
-                    "    wp::i64 __tid[4];\n    wp::unflatten(__launch, __flat, __tid, {n});\n"
-                ));
+                let _ = writeln!(
+                    self.e.out,
+                    "    wp::i64 __tid[4];\n    wp::unflatten(__launch, __flat, __tid, {n});"
+                );
             }
         }
         let adj = self.adj;
         for d in &adj.decls {
-            let t = self.decl_type(d)?;
-            let x = self.var(d.var);
-            self.e.out.push_str(&format!("    {t} {x}{{}};\n"));
+            let (t, x) = (self.decl_type(d)?, self.var(d.var));
+            let _ = writeln!(self.e.out, "    {t} {x}{{}};");
         }
-        for &v in &self.adj.adjs {
+        for &v in &adj.adjs {
             let (a, x) = (self.adj(v), self.var(v));
-            self.e
-                .out
-                .push_str(&format!("    auto {a} = wp::zero_like({x});\n"));
-        }
-        for &arr in &self.adj.gathered {
-            if let Ty::Array(elem, _) = self.f().ty(arr) {
-                let t = cpp_type(elem).ok_or("element type")?;
-                let v = self.var(arr);
-                self.e.out.push_str(&format!("    {t} __acc_{v}{{}};\n"));
-            }
+            let _ = writeln!(self.e.out, "    auto {a} = wp::zero_like({x});");
         }
         self.block(&adj.body)?;
         self.e.out.push_str("}\n");
@@ -257,40 +200,24 @@ impl<'a> Printer<'a> {
     /// per-thread local memory.
     fn entry(&mut self) -> Result<(), String> {
         let mut decl = vec![
-            "wp::launch_t __launch".to_string(),
+            "wp::launch_t __launch".into(),
             "wp::ctx_t __ctx_value".into(),
         ];
-        let mut call = Vec::new();
-        for p in &self.f().params {
-            decl.push(format!(
-                "{} {}",
-                cpp_type(&p.ty).ok_or("type")?,
-                self.var(p.var)
-            ));
-            call.push(self.var(p.var));
-        }
-        for p in &self.f().params {
-            if self.is_array(p.var) {
-                decl.push(format!(
-                    "{} {}",
-                    cpp_type(&p.ty).ok_or("type")?,
-                    self.adj(p.var)
-                ));
-                call.push(self.adj(p.var));
+        decl.extend(self.params()?);
+        let mut call: Vec<String> = self.f().params.iter().map(|p| self.var(p.var)).collect();
+        for gp in &self.adj.grad_params {
+            if let GradParam::Array(v) = *gp {
+                call.push(self.adj(v));
             }
         }
-        call.extend([
-            "__launch".into(),
-            "__flat".into(),
-            "&__ctx_value".into(),
-            "&__st".into(),
-        ]);
+        call.extend(["__launch", "__flat", "&__ctx_value", "&__st"].map(String::from));
         let bytes = if self.adj.uses_stack {
             "WP_ADSTACK_BYTES"
         } else {
             "0"
         };
-        self.e.out.push_str(&format!(
+        let _ = write!(
+            self.e.out,
             "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@_adj({}) {{\n    \
              char __buf[{bytes} > 0 ? {bytes} : 1];\n    \
              wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n    \
@@ -299,15 +226,12 @@ impl<'a> Printer<'a> {
              __st.top = 0;\n        @@SELF@@_adj({});\n    }}\n}}\n#endif\n",
             decl.join(", "),
             call.join(", ")
-        ));
+        );
         Ok(())
     }
 
     fn block(&mut self, b: &[AStmt]) -> Result<(), String> {
-        for s in b {
-            self.stmt(s)?;
-        }
-        Ok(())
+        b.iter().try_for_each(|s| self.stmt(s))
     }
 
     fn nested(&mut self, b: &[AStmt]) -> Result<(), String> {
@@ -319,250 +243,149 @@ impl<'a> Printer<'a> {
 
     fn stmt(&mut self, s: &AStmt) -> Result<(), String> {
         let sp = s.span;
-        match &s.kind {
+        let text = match &s.kind {
             AKind::Assign { dst, value } => {
                 let rhs = self.value(value, *dst)?;
-                if matches!(self.f().ty(*dst), Ty::Unit) {
-                    self.line(sp, &format!("{rhs};"));
-                } else {
-                    let x = self.var(*dst);
-                    self.line(sp, &format!("{x} = {rhs};"));
+                match self.f().ty(*dst) {
+                    Ty::Unit => format!("{rhs};"),
+                    _ => format!("{} = {rhs};", self.var(*dst)),
                 }
             }
             AKind::SetMember { var, path, value } => {
                 let (x, v) = (self.var(*var), self.var(*value));
-                self.line(sp, &format!("{x}.{} = {v};", member_path(path)));
+                format!("{x}{} = {v};", member_path(path))
             }
             AKind::Push { var, line } => {
-                let x = self.var(*var);
-                self.line(
-                    sp,
-                    &format!("wp::adstack_push(__stack, {x}, {line}, __ctx);"),
-                );
+                format!(
+                    "wp::adstack_push(__stack, {}, {line}, __ctx);",
+                    self.var(*var)
+                )
             }
-            AKind::If {
-                cond,
-                then,
-                els,
-                record,
-            } => {
-                let c = self.var(*cond);
-                self.line(sp, &format!("{{ const bool __c = {c}; if (__c) {{"));
-                self.nested(then)?;
-                self.line(sp, "} else {");
-                self.nested(els)?;
-                if *record {
-                    self.line(sp, "} wp::adstack_push(__stack, __c, 0, __ctx); }");
-                } else {
-                    self.line(sp, "} }");
-                }
-            }
-            AKind::For {
+            AKind::Loop {
                 range,
                 exit,
                 body,
                 line,
             } => {
-                let (s0, e0) = (self.var(range.start), self.var(range.end));
                 self.line(sp, "{");
                 self.e.indent += 1;
-                self.line(
-                    sp,
-                    &format!(
-                        "wp::range_t __r = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {});",
-                        range.inclusive
-                    ),
-                );
-                for a in &range.adapters {
-                    match a {
-                        RangeAdapter::Rev => self.line(sp, "__r = wp::range_rev(__r);"),
-                        RangeAdapter::StepBy(k) => {
-                            let k = self.var(*k);
-                            self.line(
-                                sp,
-                                &format!("__r = wp::range_step_by(__r, (wp::i64)({k}), __ctx);"),
-                            );
-                        }
-                    }
+                if let Some(range) = range {
+                    self.range(range, sp);
                 }
                 self.line(sp, "wp::i64 __count = 0;");
-                self.line(sp, "for (wp::i64 __n = 0; __n < __r.count; ++__n) {");
+                self.line(
+                    sp,
+                    match range {
+                        Some(_) => "for (wp::i64 __n = 0; __n < __r.count; ++__n) {",
+                        None => "for (;;) {",
+                    },
+                );
                 self.e.indent += 1;
-                self.exit(exit, sp);
+                if !exit.is_empty() {
+                    let fs: Vec<String> = exit.iter().map(|v| self.var(*v)).collect();
+                    self.line(sp, format!("if ({}) break;", fs.join(" || ")));
+                }
                 self.block(body)?;
                 self.line(sp, "++__count;");
                 self.e.indent -= 1;
                 self.line(sp, "}");
                 self.line(
                     sp,
-                    &format!("wp::adstack_push(__stack, __count, {line}, __ctx);"),
+                    format!("wp::adstack_push(__stack, __count, {line}, __ctx);"),
                 );
                 self.e.indent -= 1;
-                self.line(sp, "}");
-            }
-            AKind::Loop { exit, body, line } => {
-                self.line(sp, "{ wp::i64 __count = 0; for (;;) {");
-                self.e.indent += 1;
-                self.exit(exit, sp);
-                self.block(body)?;
-                self.line(sp, "++__count;");
-                self.e.indent -= 1;
-                self.line(
-                    sp,
-                    &format!("}} wp::adstack_push(__stack, __count, {line}, __ctx); }}"),
-                );
+                "}".into()
             }
             AKind::StepVar { var, .. } => {
                 let v = self.var(*var);
-                self.line(
-                    sp,
-                    &format!("{v} = wp::cast<decltype({v})>(wp::range_at(__r, __n));"),
-                );
+                format!("{v} = wp::cast<decltype({v})>(wp::range_at(__r, __n));")
+            }
+            AKind::If { cond, then, els } => {
+                let c = match cond {
+                    Cond::Var(c) => self.var(*c),
+                    Cond::Popped => "wp::adstack_pop<bool>(__stack)".into(),
+                    Cond::Fast => "__FAST".into(),
+                };
+                self.line(sp, format!("if ({c}) {{"));
+                self.nested(then)?;
+                self.line(sp, "} else {");
+                self.nested(els)?;
+                "}".into()
             }
             AKind::Scope(b) => {
                 self.line(sp, "{");
                 self.nested(b)?;
-                self.line(sp, "}");
+                "}".into()
             }
-            AKind::Seed { var } => {
-                let (a, x) = (self.adj(*var), self.var(*var));
-                self.line(sp, &format!("auto __r = {a}; {a} = wp::zero_like({x});"));
-            }
-            AKind::SeedMember { var, path } => {
-                let (a, p) = (self.adj(*var), member_path(path));
-                self.line(
-                    sp,
-                    &format!("auto __r = {a}.{p}; {a}.{p} = wp::zero_like(__r);"),
-                );
-            }
-            AKind::SeedZero { like } => {
-                let x = self.var(*like);
-                self.line(sp, &format!("auto __r = wp::zero_like({x});"));
-            }
-            AKind::ClearAdj { var } => {
-                let (a, x) = (self.adj(*var), self.var(*var));
-                self.line(sp, &format!("{a} = wp::zero_like({x});"));
+            AKind::Seed(from) => format!("auto __r = {};", self.grad(from)?),
+            AKind::ClearAdj { var, path } => {
+                let (a, x, p) = (self.adj(*var), self.var(*var), member_path(path));
+                format!("{a}{p} = wp::zero_like({x}{p});")
             }
             AKind::Pop { var } => {
                 let x = self.var(*var);
-                self.line(
-                    sp,
-                    &format!("{x} = wp::adstack_pop<decltype({x})>(__stack);"),
-                );
+                format!("{x} = wp::adstack_pop<decltype({x})>(__stack);")
             }
-            AKind::Accum { var, member, from } => {
-                let mut a = self.adj(*var);
-                if let Some(m) = member {
-                    a = format!("{a}.{}", cpp_member(m));
+            AKind::Accum { to, from } => {
+                let to = match to {
+                    AdjOf::Var { var, path } => format!("{}{}", self.adj(*var), member_path(path)),
+                    AdjOf::Out(k) => format!("__adj_out{k}"),
+                };
+                format!("wp::adj_accum({to}, {});", self.grad(from)?)
+            }
+            AKind::ZeroTemp { k, like } => match like {
+                TempLike::Var(v) => format!("auto __g{k} = wp::zero_like({});", self.var(*v)),
+                TempLike::Param { func, k: j, .. } => {
+                    format!("auto __g{k} = wp::adj_zero<@@F{func}@@_adj_arg{j}>();")
                 }
-                let g = self.grad(from)?;
-                self.line(sp, &format!("wp::adj_accum({a}, {g});"));
-            }
+            },
             AKind::AdjCall {
                 func,
-                inputs,
+                values,
+                grads,
                 faults,
             } => {
-                let xs: Vec<String> = inputs.iter().map(|v| self.var(*v)).collect();
-                // An array input's adjoint is the array's gradient; the others' zeroed
-                // temporaries.
-                let mut gs = Vec::new();
-                for (k, (x, v)) in xs.iter().zip(inputs).enumerate() {
-                    if matches!(self.f().ty(*v), crate::types::Ty::Array(..)) {
-                        gs.push(self.adj(*v));
-                    } else {
-                        self.line(sp, &format!("auto __g{k} = wp::zero_like({x});"));
-                        gs.push(format!("__g{k}"));
-                    }
-                }
+                let mut args: Vec<String> = values
+                    .iter()
+                    .map(|(Arg::Value(v) | Arg::Array(v))| self.var(*v))
+                    .collect();
+                args.extend(grads.iter().map(|g| self.grad_arg(g)));
+                args.push("__r".into());
                 // An adjoint that reads an object's buffers (`adj_mesh_query_point`) takes the
                 // fault context last, as its forward call does.
-                let ctx = if *faults { ", __ctx" } else { "" };
-                self.line(
-                    sp,
-                    &format!(
-                        "wp::{func}({}, {}, __r{ctx});",
-                        xs.join(", "),
-                        gs.join(", ")
-                    ),
-                );
-            }
-            AKind::AdjCast { from } => {
-                let x = self.var(*from);
-                self.line(
-                    sp,
-                    &format!("auto __g0 = wp::zero_like({x}); wp::adj_cast(__g0, __r);"),
-                );
-            }
-            AKind::FuncAdj { path, args } => {
-                let k = self.callee(path)?;
-                let mut pass: Vec<String> = args.iter().map(|(a, _)| self.var(*a)).collect();
-                for (j, (a, how)) in args.iter().enumerate() {
-                    match how {
-                        FuncArgAdj::ArrayGrad => pass.push(self.adj(*a)),
-                        FuncArgAdj::Temp => {
-                            self.line(
-                                sp,
-                                &format!("auto __g{j} = wp::adj_zero<@@F{k}@@_adj_arg{j}>();"),
-                            );
-                            pass.push(format!("__g{j}"));
-                        }
-                    }
+                if *faults {
+                    args.push("__ctx".into());
                 }
-                pass.extend(["__r".into(), "__ctx".into(), "__stack".into()]);
-                self.line(sp, &format!("@@F{k}@@_adj({});", pass.join(", ")));
+                format!("wp::{func}({});", args.join(", "))
             }
-            AKind::AtomicAdj {
-                kind,
+            AKind::FuncAdj {
+                func,
+                values,
+                grads,
+            } => {
+                let mut args: Vec<String> = values.iter().map(|v| self.var(*v)).collect();
+                args.extend(grads.iter().map(|g| self.grad_arg(g)));
+                args.extend(["__r", "__ctx", "__stack"].map(String::from));
+                format!("@@F{func}@@_adj({});", args.join(", "))
+            }
+            AKind::GradAccum {
                 array,
                 index,
-                value,
+                from,
+                own,
             } => {
-                let (g, idx, x, av) = (
+                let (g, idx, v) = (self.adj(*array), self.index(index), self.grad(from)?);
+                match own {
+                    true => format!("wp::grad_accum_own({g}, {idx}, {v});"),
+                    false => format!("wp::grad_accum({g}, {idx}, {v}, __ctx);"),
+                }
+            }
+            AKind::GradClearOwn { array, index } => {
+                format!(
+                    "wp::grad_clear_own({}, {});",
                     self.adj(*array),
-                    self.e.index(index),
-                    self.var(*value),
-                    self.adj(*value),
-                );
-                self.line(
-                    sp,
-                    &format!("auto __grad = wp::grad_get({g}, {idx}, wp::zero_like({x}), __ctx);"),
-                );
-                let text = match kind {
-                    AtomicKind::Sub => format!("wp::adj_neg({x}, {av}, __grad);"),
-                    AtomicKind::Add => format!("wp::adj_accum({av}, __grad);"),
-                    AtomicKind::Extreme => {
-                        let a = self.var(*array);
-                        format!("wp::adj_atomic_extreme(wp::load({a}, {idx}, __ctx), {x}, {av}, __grad);")
-                    }
-                };
-                self.line(sp, &text);
-            }
-            AKind::GradAccum { array, index, mode } => {
-                let (g, idx) = (self.adj(*array), self.e.index(index));
-                let atomic = format!("wp::grad_accum({g}, {idx}, __r, __ctx);");
-                let text = match mode {
-                    AccumMode::Atomic => atomic,
-                    AccumMode::OwnWhenFast => {
-                        format!("if (__FAST) wp::grad_accum_own({g}, {idx}, __r); else {atomic}")
-                    }
-                    AccumMode::GatherWhenFast => {
-                        let v = self.var(*array);
-                        format!("if (__FAST) wp::adj_accum(__acc_{v}, __r); else {atomic}")
-                    }
-                };
-                self.line(sp, &text);
-            }
-            AKind::RevIf { cond, then, els } => {
-                let c = match cond {
-                    Some(c) => self.var(*c),
-                    None => "wp::adstack_pop<bool>(__stack)".to_string(),
-                };
-                self.line(sp, &format!("if ({c}) {{"));
-                self.nested(then)?;
-                self.line(sp, "} else {");
-                self.nested(els)?;
-                self.line(sp, "}");
+                    self.index(index)
+                )
             }
             AKind::RevLoop { body } => {
                 self.line(
@@ -571,43 +394,47 @@ impl<'a> Printer<'a> {
                 );
                 self.line(sp, "for (wp::i64 __k = 0; __k < __count; ++__k) {");
                 self.nested(body)?;
-                self.line(sp, "} }");
+                "} }".into()
             }
-            AKind::FlushGathered { array } => {
-                let (g, v, idx) = (self.adj(*array), self.var(*array), self.tid_index(*array)?);
-                self.line(
-                    sp,
-                    &format!("if (__FAST) wp::grad_accum_own({g}, {idx}, __acc_{v});"),
-                );
-            }
-            AKind::ClearOwn { array } => {
-                let (g, idx) = (self.adj(*array), self.tid_index(*array)?);
-                self.line(sp, &format!("if (__FAST) wp::grad_clear_own({g}, {idx});"));
-            }
-            AKind::AccumOut { k, var } => {
-                let a = self.adj(*var);
-                self.line(sp, &format!("wp::adj_accum(__adj_out{k}, {a});"));
-            }
-            AKind::CustomGrad { k, func } => {
-                let j = self.callee(func)?;
-                let args: Vec<String> = self.f().params.iter().map(|p| self.var(p.var)).collect();
-                self.line(
-                    sp,
-                    &format!(
-                        "wp::adj_accum(__adj_out{k}, @@F{j}@@({}, __adj_ret, __ctx));",
-                        args.join(", ")
-                    ),
-                );
-            }
-        }
+        };
+        self.line(sp, text);
         Ok(())
     }
 
-    /// A loop's exit check (before anything of the iteration runs).
-    fn exit(&mut self, flags: &[VarId], sp: proc_macro2::Span) {
-        if !flags.is_empty() {
-            let fs: Vec<String> = flags.iter().map(|v| self.var(*v)).collect();
-            self.line(sp, &format!("if ({}) break;", fs.join(" || ")));
+    /// `__r`, the progression of a `for`.
+    fn range(&mut self, range: &RangeSpec, sp: proc_macro2::Span) {
+        let (s0, e0, incl) = (self.var(range.start), self.var(range.end), range.inclusive);
+        self.line(
+            sp,
+            format!("wp::range_t __r = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {incl});"),
+        );
+        for a in &range.adapters {
+            let text = match a {
+                RangeAdapter::Rev => "__r = wp::range_rev(__r);".to_string(),
+                RangeAdapter::StepBy(k) => {
+                    let k = self.var(*k);
+                    format!("__r = wp::range_step_by(__r, (wp::i64)({k}), __ctx);")
+                }
+            };
+            self.line(sp, text);
+        }
+    }
+
+    /// An index: its variables, or the thread index, one component per dimension.
+    fn index(&self, index: &Index) -> String {
+        match index {
+            Index::At(vs) => self.e.index(vs),
+            Index::Thread(n) => {
+                let ks: Vec<String> = (0..*n).map(|d| format!("__tid[{d}]")).collect();
+                ks.join(", ")
+            }
+        }
+    }
+
+    fn grad_arg(&self, g: &GradArg) -> String {
+        match g {
+            GradArg::Temp(k) => format!("__g{k}"),
+            GradArg::Adj(v) | GradArg::ArrayGrad(v) => self.adj(*v),
         }
     }
 
@@ -615,11 +442,10 @@ impl<'a> Printer<'a> {
         Ok(match g {
             GradSrc::Seed => "__r".into(),
             GradSrc::SeedLane(l) => format!("__r.{l}"),
-            GradSrc::LaneSum(lanes) => lanes
-                .iter()
-                .map(|l| format!("__r.{l}"))
-                .collect::<Vec<_>>()
-                .join(" + "),
+            GradSrc::LaneSum(lanes) => {
+                let ls: Vec<String> = lanes.iter().map(|l| format!("__r.{l}")).collect();
+                ls.join(" + ")
+            }
             GradSrc::Diagonal { vector, entries } => {
                 let name = vector
                     .glam_name()
@@ -632,31 +458,27 @@ impl<'a> Printer<'a> {
             }
             GradSrc::Temp(k) => format!("__g{k}"),
             GradSrc::AdjRet => "__adj_ret".into(),
-            GradSrc::Take {
-                array,
-                index,
-                like,
-                mode,
-            } => {
-                let (g, idx, v) = (self.adj(*array), self.e.index(index), self.var(*like));
-                let take = format!("wp::grad_take({g}, {idx}, wp::zero_like({v}), __ctx)");
-                match mode {
-                    TakeMode::Take => take,
-                    TakeMode::GetWhenFast => format!(
-                        "__FAST ? wp::grad_get({g}, {idx}, wp::zero_like({v}), __ctx) : {take}"
-                    ),
-                }
+            GradSrc::Adj { var, path } => format!("{}{}", self.adj(*var), member_path(path)),
+            GradSrc::Zero(like) => format!("wp::zero_like({})", self.var(*like)),
+            GradSrc::Take { array, index, like } | GradSrc::Get { array, index, like } => {
+                let f = match g {
+                    GradSrc::Take { .. } => "take",
+                    _ => "get",
+                };
+                let (a, idx, v) = (self.adj(*array), self.index(index), self.var(*like));
+                format!("wp::grad_{f}({a}, {idx}, wp::zero_like({v}), __ctx)")
+            }
+            GradSrc::Custom { func, args } => {
+                let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                format!("@@F{func}@@({}, __adj_ret, __ctx)", args.join(", "))
             }
         })
     }
 }
 
-/// `a.b.c` in C++ (tuple elements are `f<k>`).
+/// `.a.b.c` in C++ (tuple elements are `f<k>`).
 fn member_path(path: &[String]) -> String {
-    path.iter()
-        .map(|m| cpp_member(m))
-        .collect::<Vec<_>>()
-        .join(".")
+    path.iter().map(|m| format!(".{}", cpp_member(m))).collect()
 }
 
 #[cfg(test)]

@@ -1,22 +1,22 @@
-//! Rust printer of the adjoint IR (`middle::adjoint`, which holds the scheme and its docs):
-//! the body of a kernel's CPU adjoint thread, or of a func's `__wp_adj`.
+//! Rust printer of the adjoint IR (`middle::adjoint`, which holds the scheme, its decisions
+//! and its docs): the body of a kernel's CPU adjoint thread, or of a func's `__wp_adj`.
 //!
 //! The stack is the thread's [`AdStack`](warp_core::AdStack) (`__stack`, `push` faults when
 //! full); library calls are `warp_core::adjoint`'s (`adj_<op>(inputs.., &mut adj_inputs..,
-//! adj_ret)` accumulate); array gradients are `GradView`s (`adj_<array>`). Variables whose
-//! type the macro cannot see are declared without one: rustc infers it from their
-//! assignments.
+//! adj_ret)` accumulate; arrays by reference); array gradients are `GradView`s
+//! (`adj_<array>`). Variables whose type the macro cannot see are declared without one: rustc
+//! infers it from their assignments.
 
 use super::rust::{member_tokens, ty_tokens, RustEmitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
 use proc_macro2::{Span, TokenStream};
-use quote::{format_ident, quote, quote_spanned};
+use quote::{format_ident, quote, quote_spanned, ToTokens};
 
 /// Emits the adjoint body of kernel or func `f`, or why it cannot yet. In scope: the forward
 /// parameters, `adj_<param>` gradient views for array parameters, `__stack`, and for a kernel
 /// `__tid` and `__FAST`; for a func also `__adj_ret` (the adjoint of its result) and
-/// `__adj_out<k>` (`&mut` adjoints of its value parameters, accumulated into at the end).
+/// `__adj_out<k>` (`&mut` adjoints of its value parameters).
 pub fn emit(f: &Function) -> Result<TokenStream, String> {
     print(&build(f, Policy::CPU)?)
 }
@@ -31,7 +31,7 @@ fn print(adj: &Adjoint) -> Result<TokenStream, String> {
     // User funcs are called through their replays.
     fwd.replay = true;
     let p = Printer { fwd, adj };
-    let mut out = p.declarations()?;
+    let mut out = p.declarations();
     out.extend(p.block(&adj.body)?);
     Ok(out)
 }
@@ -50,16 +50,19 @@ impl Printer<'_> {
         self.fwd.var(v)
     }
 
+    fn callee(&self, k: Callee) -> Result<&syn::Path, String> {
+        self.f()
+            .callees
+            .get(k)
+            .ok_or_else(|| "internal: no such callee".into())
+    }
+
     fn adj(&self, v: VarId) -> syn::Ident {
         format_ident!("adj_{}", self.var(v))
     }
 
-    fn gather(&self, v: VarId) -> syn::Ident {
-        format_ident!("__acc_{}", self.var(v))
-    }
-
-    /// The variables, their adjoints and the gathering registers, zero.
-    fn declarations(&self) -> Result<TokenStream, String> {
+    /// The variables and their adjoints, zero.
+    fn declarations(&self) -> TokenStream {
         let mut out = TokenStream::new();
         for d in &self.adj.decls {
             let x = self.var(d.var);
@@ -72,19 +75,11 @@ impl Printer<'_> {
             let (x, a) = (self.var(v), self.adj(v));
             out.extend(quote!(let mut #a = __wp::zero_like(&#x);));
         }
-        for &a in &self.adj.gathered {
-            let acc = self.gather(a);
-            out.extend(quote!(let mut #acc = __wp::adjoint::zero();));
-        }
-        Ok(out)
+        out
     }
 
     fn block(&self, b: &[AStmt]) -> Result<TokenStream, String> {
-        let mut out = TokenStream::new();
-        for s in b {
-            out.extend(self.stmt(s)?);
-        }
-        Ok(out)
+        b.iter().map(|s| self.stmt(s)).collect()
     }
 
     fn stmt(&self, s: &AStmt) -> Result<TokenStream, String> {
@@ -103,59 +98,29 @@ impl Printer<'_> {
                 quote_spanned!(sp=> #x = #rhs;)
             }
             AKind::SetMember { var, path, value } => {
-                let (x, val) = (self.var(*var), self.var(*value));
-                let path = path.iter().map(|m| member_tokens(m));
-                quote_spanned!(sp=> #x #(.#path)* = #val;)
+                let (x, val, path) = (self.var(*var), self.var(*value), members(path));
+                quote_spanned!(sp=> #x #path = #val;)
             }
             AKind::Push { var, line } => {
                 let x = self.var(*var);
                 quote_spanned!(sp=> __stack.push(#x, #line)?;)
             }
-            AKind::If {
-                cond,
-                then,
-                els,
-                record,
-            } => {
-                let c = self.var(*cond);
-                let (t, e) = (self.block(then)?, self.block(els)?);
-                if *record {
-                    quote_spanned!(sp=>
-                        let __c = #c;
-                        if __c { #t } else { #e }
-                        __stack.push(__c, 0)?;
-                    )
-                } else {
-                    quote_spanned!(sp=> if #c { #t } else { #e })
-                }
-            }
-            AKind::For {
+            AKind::Loop {
                 range,
                 exit,
                 body,
                 line,
             } => {
-                let range = self.range(range);
                 let (exit, body) = (self.exit(exit), self.block(body)?);
+                let (range, head) = match range {
+                    Some(r) => (self.range(r), quote!(for __n in 0..__range.count)),
+                    None => (quote!(()), quote!(loop)),
+                };
                 quote_spanned! {sp=>
                     {
                         let __range = #range;
                         let mut __count: i64 = 0;
-                        for __n in 0..__range.count {
-                            #exit
-                            #body
-                            __count += 1;
-                        }
-                        __stack.push(__count, #line)?;
-                    }
-                }
-            }
-            AKind::Loop { exit, body, line } => {
-                let (exit, body) = (self.exit(exit), self.block(body)?);
-                quote_spanned! {sp=>
-                    {
-                        let mut __count: i64 = 0;
-                        loop {
+                        #head {
                             #exit
                             #body
                             __count += 1;
@@ -175,159 +140,104 @@ impl Printer<'_> {
                 };
                 quote_spanned!(sp=> #v = #value;)
             }
+            AKind::If { cond, then, els } => {
+                let c = match cond {
+                    Cond::Var(c) => self.var(*c).into_token_stream(),
+                    Cond::Popped => quote!(__stack.pop::<bool>()),
+                    Cond::Fast => quote!(__FAST),
+                };
+                let (t, e) = (self.block(then)?, self.block(els)?);
+                quote_spanned!(sp=> if #c { #t } else { #e })
+            }
             AKind::Scope(b) => {
                 let b = self.block(b)?;
                 quote_spanned!(sp=> { #b })
             }
-            AKind::Seed { var } => {
-                let (a, x) = (self.adj(*var), self.var(*var));
-                quote_spanned!(sp=> let __r = #a; #a = __wp::zero_like(&#x);)
+            AKind::Seed(from) => {
+                let g = self.grad(from)?;
+                quote_spanned!(sp=> let __r = #g;)
             }
-            AKind::SeedMember { var, path } => {
-                let a = self.adj(*var);
-                let path: Vec<_> = path.iter().map(|m| member_tokens(m)).collect();
-                quote_spanned!(sp=>
-                    let __r = #a #(.#path)*;
-                    #a #(.#path)* = __wp::zero_like(&__r);
-                )
-            }
-            AKind::SeedZero { like } => {
-                let x = self.var(*like);
-                quote_spanned!(sp=> let __r = __wp::zero_like(&#x);)
-            }
-            AKind::ClearAdj { var } => {
-                let (a, x) = (self.adj(*var), self.var(*var));
-                quote_spanned!(sp=> #a = __wp::zero_like(&#x);)
+            AKind::ClearAdj { var, path } => {
+                let (a, x, path) = (self.adj(*var), self.var(*var), members(path));
+                quote_spanned!(sp=> #a #path = __wp::zero_like(&#x #path);)
             }
             AKind::Pop { var } => {
                 let x = self.var(*var);
                 quote_spanned!(sp=> #x = __stack.pop();)
             }
-            AKind::Accum { var, member, from } => {
-                let a = self.adj(*var);
-                let g = self.grad(from)?;
-                match member {
-                    Some(m) => {
-                        let m = member_tokens(m);
-                        quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(&mut #a.#m, #g);)
+            AKind::Accum { to, from } => {
+                let to = match to {
+                    AdjOf::Var { var, path } => {
+                        let (a, path) = (self.adj(*var), members(path));
+                        quote!(&mut #a #path)
                     }
-                    None => quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(&mut #a, #g);),
-                }
+                    AdjOf::Out(k) => format_ident!("__adj_out{}", k).into_token_stream(),
+                };
+                let g = self.grad(from)?;
+                quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(#to, #g);)
+            }
+            AKind::ZeroTemp { k, like } => {
+                let (g, x) = match like {
+                    TempLike::Var(v) | TempLike::Param { arg: v, .. } => (temp(*k), self.var(*v)),
+                };
+                quote_spanned!(sp=> let mut #g = __wp::zero_like(&#x);)
             }
             AKind::AdjCall {
                 func,
-                inputs,
+                values,
+                grads,
                 faults,
             } => {
                 let f = format_ident!("{}", func);
-                // An array input (`volume_sample_index`'s data) is passed by reference, and its
-                // adjoint is the array's gradient view; every other input's a zeroed temporary.
-                let is_array = |v: VarId| matches!(self.f().ty(v), crate::types::Ty::Array(..));
-                let mut temps = TokenStream::new();
-                let mut xs = Vec::new();
-                let mut gs = Vec::new();
-                for (k, v) in inputs.iter().enumerate() {
-                    let x = self.var(*v);
-                    if is_array(*v) {
-                        // A copy of the view (it accumulates through shared memory).
-                        let (a, g) = (self.adj(*v), temp(k));
-                        temps.extend(quote_spanned!(sp=> let mut #g = #a;));
-                        xs.push(quote!(&#x));
-                        gs.push(quote!(&mut #g));
-                    } else {
-                        let g = temp(k);
-                        temps.extend(quote_spanned!(sp=> let mut #g = __wp::zero_like(&#x);));
-                        xs.push(quote!(#x));
-                        gs.push(quote!(&mut #g));
+                let xs = values.iter().map(|a| match a {
+                    Arg::Value(v) => self.var(*v).into_token_stream(),
+                    Arg::Array(v) => {
+                        let x = self.var(*v);
+                        quote!(&#x)
                     }
-                }
+                });
+                // A gradient view is passed as a `&mut` copy (it accumulates through shared
+                // memory).
+                let gs = grads.iter().map(|g| match g {
+                    GradArg::ArrayGrad(a) => {
+                        let a = self.adj(*a);
+                        quote!(&mut #a.clone())
+                    }
+                    g => self.grad_arg(g),
+                });
                 // An adjoint that reads an object's buffers (`adj_mesh_query_point`) returns a
                 // `KResult`, as its forward call does.
                 let q = if *faults { quote!(?) } else { quote!() };
-                quote_spanned!(sp=>
-                    #temps
-                    __wp::adjoint::#f(#(#xs,)* #(#gs,)* __r)#q;
-                )
+                quote_spanned!(sp=> __wp::adjoint::#f(#(#xs,)* #(#gs,)* __r)#q;)
             }
-            AKind::AdjCast { from } => {
-                let x = self.var(*from);
-                quote_spanned!(sp=>
-                    let mut __g0 = __wp::zero_like(&#x);
-                    __wp::adjoint::adj_cast(&mut __g0, __r);
-                )
+            AKind::FuncAdj {
+                func,
+                values,
+                grads,
+            } => {
+                let path = self.callee(*func)?;
+                let xs = values.iter().map(|v| self.var(*v));
+                let gs = grads.iter().map(|g| self.grad_arg(g));
+                quote_spanned!(sp=> #path::__wp_adj(#(#xs,)* #(#gs,)* __r, __stack)?;)
             }
-            AKind::FuncAdj { path, args } => {
-                let mut temps = TokenStream::new();
-                let mut pass = Vec::new();
-                for (k, (a, how)) in args.iter().enumerate() {
-                    match how {
-                        FuncArgAdj::ArrayGrad => {
-                            let g = self.adj(*a);
-                            pass.push(quote!(#g));
-                        }
-                        FuncArgAdj::Temp => {
-                            let (g, v) = (temp(k), self.var(*a));
-                            temps.extend(quote_spanned!(sp=> let mut #g = __wp::zero_like(&#v);));
-                            pass.push(quote!(&mut #g));
-                        }
-                    }
-                }
-                let xs = args.iter().map(|(a, _)| self.var(*a));
-                quote_spanned!(sp=>
-                    #temps
-                    #path::__wp_adj(#(#xs,)* #(#pass,)* __r, __stack)?;
-                )
-            }
-            AKind::AtomicAdj {
-                kind,
+            AKind::GradAccum {
                 array,
                 index,
-                value,
+                from,
+                own,
             } => {
-                let g = self.adj(*array);
-                let idx = self.fwd.index_tokens(index);
-                let (x, av, arr) = (self.var(*value), self.adj(*value), self.var(*array));
-                let to_value = match kind {
-                    AtomicKind::Sub => quote!(__wp::adjoint::adj_neg(#x, &mut #av, __grad)),
-                    AtomicKind::Add => quote!(__wp::adjoint::Adjoint::adj_accum(&mut #av, __grad)),
-                    AtomicKind::Extreme => {
-                        quote!(__wp::adj_atomic_extreme(#arr.load(#idx)?, #x, &mut #av, __grad))
-                    }
-                };
-                quote_spanned!(sp=>
-                    let __grad = #g.get(#idx, __wp::zero_like(&#x))?;
-                    #to_value;
-                )
-            }
-            AKind::GradAccum { array, index, mode } => {
-                let g = self.adj(*array);
-                let idx = self.fwd.index_tokens(index);
-                match mode {
-                    AccumMode::Atomic => quote_spanned!(sp=> #g.accumulate(#idx, __r)?;),
+                let (g, idx, v) = (self.adj(*array), self.index(index), self.grad(from)?);
+                if *own {
                     // SAFETY (of the generated code): under __FAST the array covers the grid,
                     // so the index is in bounds, only this thread touches the element, and no
                     // other adjoint launch runs (the runtime turns __FAST off otherwise).
-                    AccumMode::OwnWhenFast => quote_spanned!(sp=>
-                        if __FAST { unsafe { #g.accumulate_own(#idx, __r) } } else { #g.accumulate(#idx, __r)?; }
-                    ),
-                    AccumMode::GatherWhenFast => {
-                        let acc = self.gather(*array);
-                        quote_spanned!(sp=>
-                            if __FAST { __wp::adjoint::Adjoint::adj_accum(&mut #acc, __r) } else { #g.accumulate(#idx, __r)?; }
-                        )
-                    }
+                    quote_spanned!(sp=> unsafe { #g.accumulate_own(#idx, #v) })
+                } else {
+                    quote_spanned!(sp=> #g.accumulate(#idx, #v)?;)
                 }
             }
-            AKind::RevIf { cond, then, els } => {
-                let (t, e) = (self.block(then)?, self.block(els)?);
-                let c = match cond {
-                    Some(c) => {
-                        let c = self.var(*c);
-                        quote!(#c)
-                    }
-                    None => quote!(__stack.pop::<bool>()),
-                };
-                quote_spanned!(sp=> if #c { #t } else { #e })
+            AKind::GradClearOwn { .. } => {
+                return Err("internal: the CPU adjoint has no deferred gradient clear".into())
             }
             AKind::RevLoop { body } => {
                 let body = self.block(body)?;
@@ -340,40 +250,34 @@ impl Printer<'_> {
                     }
                 }
             }
-            AKind::FlushGathered { array } => {
-                let (g, acc, idx) = (self.adj(*array), self.gather(*array), self.tid_index()?);
-                // SAFETY (of the generated code): as for `accumulate_own` above.
-                quote_spanned!(sp=> if __FAST { unsafe { #g.accumulate_own(#idx, #acc) } })
-            }
-            AKind::ClearOwn { .. } => {
-                return Err("internal: the CPU adjoint has no deferred gradient clear".into())
-            }
-            AKind::AccumOut { k, var } => {
-                let (a, out) = (self.adj(*var), format_ident!("__adj_out{}", k));
-                quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(#out, #a);)
-            }
-            AKind::CustomGrad { k, func } => {
-                let out = format_ident!("__adj_out{}", k);
-                let args = self.f().params.iter().map(|p| self.var(p.var));
-                quote_spanned!(sp=>
-                    __wp::adjoint::Adjoint::adj_accum(#out, #func::__wp_cpu(#(#args,)* __adj_ret)?);
-                )
-            }
         })
     }
 
-    /// The thread index as an array index (`__tid[0]`, or a tuple of components).
-    fn tid_index(&self) -> Result<TokenStream, String> {
-        let n = self
-            .f()
-            .tid_ndim
-            .ok_or("internal: a thread-owned array without tid()")? as usize;
-        let ks = 0..n;
-        Ok(if n == 1 {
-            quote!(__tid[0])
-        } else {
-            quote!((#(__tid[#ks]),*))
-        })
+    /// A temporary or an adjoint as a `&mut` argument; an array's gradient view by value.
+    fn grad_arg(&self, g: &GradArg) -> TokenStream {
+        match g {
+            GradArg::Temp(k) => {
+                let g = temp(*k);
+                quote!(&mut #g)
+            }
+            GradArg::Adj(v) => {
+                let a = self.adj(*v);
+                quote!(&mut #a)
+            }
+            GradArg::ArrayGrad(v) => self.adj(*v).into_token_stream(),
+        }
+    }
+
+    /// An array index: one variable, a tuple of them, or the thread index.
+    fn index(&self, index: &Index) -> TokenStream {
+        match index {
+            Index::At(vs) => self.fwd.index_tokens(vs),
+            Index::Thread(1) => quote!(__tid[0]),
+            Index::Thread(n) => {
+                let ks = 0..*n as usize;
+                quote!((#(__tid[#ks]),*))
+            }
+        }
     }
 
     /// A loop's exit check (before anything of the iteration runs).
@@ -420,31 +324,36 @@ impl Printer<'_> {
                 });
                 quote!(#vt::new(#(#parts),*))
             }
-            GradSrc::Temp(k) => {
-                let g = temp(*k);
-                quote!(#g)
-            }
+            GradSrc::Temp(k) => temp(*k).into_token_stream(),
             GradSrc::AdjRet => quote!(__adj_ret),
-            GradSrc::Take {
-                array,
-                index,
-                like,
-                mode,
-            } => {
-                let g = self.adj(*array);
-                let idx = self.fwd.index_tokens(index);
-                let v = self.var(*like);
-                match mode {
-                    TakeMode::Take => quote!(#g.take(#idx, __wp::zero_like(&#v))?),
-                    TakeMode::GetWhenFast => {
-                        return Err(
-                            "internal: the CPU adjoint has no deferred gradient clear".into()
-                        )
-                    }
-                }
+            GradSrc::Adj { var, path } => {
+                let (a, path) = (self.adj(*var), members(path));
+                quote!(#a #path)
+            }
+            GradSrc::Zero(like) => {
+                let x = self.var(*like);
+                quote!(__wp::zero_like(&#x))
+            }
+            GradSrc::Take { array, index, like } | GradSrc::Get { array, index, like } => {
+                let (a, idx, v) = (self.adj(*array), self.index(index), self.var(*like));
+                let f = match g {
+                    GradSrc::Take { .. } => quote!(take),
+                    _ => quote!(get),
+                };
+                quote!(#a.#f(#idx, __wp::zero_like(&#v))?)
+            }
+            GradSrc::Custom { func, args } => {
+                let (path, args) = (self.callee(*func)?, args.iter().map(|v| self.var(*v)));
+                quote!(#path::__wp_cpu(#(#args,)* __adj_ret)?)
             }
         })
     }
+}
+
+/// `.a.b` (tuple elements by position).
+fn members(path: &[String]) -> TokenStream {
+    let path = path.iter().map(|m| member_tokens(m));
+    quote!(#(.#path)*)
 }
 
 /// The temporary `__g<k>`.

@@ -53,7 +53,6 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         tid_ndim: None,
         callees: Vec::new(),
         ret: Ty::Unit,
-        loops: 0,
         views: HashMap::new(),
         consts: Vec::new(),
         tuple_result: false,
@@ -153,11 +152,6 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         Ok(None) => {}
         Err(e) => cx.errors.push(e),
     }
-    if let Some(b) = cx.blocks.last() {
-        let mut errors = Vec::new();
-        cx.unsupported_view_uses(b, &mut errors);
-        cx.errors.extend(errors);
-    }
     if !cx.errors.is_empty() {
         return Err(cx.errors);
     }
@@ -187,7 +181,6 @@ struct Lowerer {
     tid_ndim: Option<u8>,
     callees: Vec<syn::Path>,
     ret: Ty,
-    loops: usize,
     /// In-kernel views (`a.row(i)`, `a.view(lo..hi)`), resolved into the arrays they view.
     views: HashMap<VarId, views::ViewDef>,
     /// Module-level consts read (`Op::Const`), each once, in first-use order.

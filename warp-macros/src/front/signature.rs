@@ -1,6 +1,6 @@
 //! Kernel and func signatures: parameter types and the return type.
 
-use crate::types::{ObjectKind, Scalar, Ty, VolumeElem};
+use crate::types::{ObjectRow, Scalar, Ty, VolumeElem};
 use syn::spanned::Spanned;
 use syn::{GenericArgument, PathArguments, Type};
 
@@ -17,20 +17,22 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             if let Some(t) = Ty::from_glam_name(&name) {
                 return Ok(t);
             }
-            // Host objects (`HashGrid`): the runtime's type of that name, which the prelude
-            // exports; kernels see its view.
-            if let Some(k) = ObjectKind::param_named(&name) {
+            // Host objects (`HashGrid`, `Volume<f32>`): the runtime's type of that name, which
+            // the prelude exports; kernels see its view.
+            if let Some(row) = ObjectRow::param_named(&name) {
+                if row.elem {
+                    return parse_elem_object(row, last, ty);
+                }
                 if !matches!(last.arguments, PathArguments::None) {
                     return Err(syn::Error::new(
                         ty.span(),
                         format!("`{name}` takes no type arguments"),
                     ));
                 }
-                return Ok(Ty::Object(k));
+                return Ok(Ty::Object(row.kind));
             }
             match name.as_str() {
                 "Array" => parse_array(last, ty),
-                "Volume" => parse_volume(last, ty),
                 "String" | "Vec" | "Box" | "Rc" | "Arc" | "HashMap" | "BTreeMap" | "VecDeque" => Err(syn::Error::new(
                     ty.span(),
                     format!("heap type `{name}` is not supported in kernels: use Array<T> arguments"),
@@ -116,8 +118,10 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     Ok(Ty::Array(Box::new(elem), ndim))
 }
 
-/// `Volume<T>`: a NanoVDB grid of one of the value types, or `Volume<VoxelIndex>`.
-fn parse_volume(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
+/// An object generic over its element (`Volume<T>`: a NanoVDB grid of one of the value types,
+/// or `Volume<VoxelIndex>`).
+fn parse_elem_object(row: &ObjectRow, seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
+    let name = row.name;
     let elems = || {
         let names: Vec<String> = VolumeElem::ALL.iter().map(|e| e.name()).collect();
         names.join(", ")
@@ -126,7 +130,7 @@ fn parse_volume(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         return Err(syn::Error::new(
             whole.span(),
             format!(
-                "Volume needs its value type: Volume<f32> (one of {})",
+                "{name} needs its value type: {name}<f32> (one of {})",
                 elems()
             ),
         ));
@@ -135,7 +139,7 @@ fn parse_volume(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     let (Some(GenericArgument::Type(t)), None) = (it.next(), it.next()) else {
         return Err(syn::Error::new(
             whole.span(),
-            "Volume takes one type argument: Volume<f32>",
+            format!("{name} takes one type argument: {name}<f32>"),
         ));
     };
     let is_index = matches!(t, Type::Path(p) if p.path.segments.last().is_some_and(|s| s.ident == "VoxelIndex"));
@@ -145,10 +149,10 @@ fn parse_volume(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         parse_type(t).ok().and_then(|t| VolumeElem::of(&t))
     };
     match elem {
-        Some(e) => Ok(Ty::Object(ObjectKind::Volume(e))),
+        Some(e) => Ok(Ty::Object(row.kind.with_elem(e))),
         None => Err(syn::Error::new(
             t.span(),
-            format!("a Volume holds one of {}", elems()),
+            format!("a {name} holds one of {}", elems()),
         )),
     }
 }
@@ -181,6 +185,7 @@ fn const_usize(arg: &GenericArgument) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::types::ObjectKind;
     use syn::parse_quote;
 
     #[test]

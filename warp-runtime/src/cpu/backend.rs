@@ -1,11 +1,12 @@
 //! [`Cpu`]: the CPU backend as the runtime dispatches to it (`backend.rs`).
 
+use super::capture::{self, CpuGraph};
 use super::executor;
 use super::memory::HostBuffer;
 use super::primitives;
 use super::race;
 use super::shared_grads::{self, AdjointLaunch};
-use crate::backend::{Backend, ObjectStep};
+use crate::backend::{Backend, Conditional, ObjectStep, Op, Record};
 use crate::config;
 use crate::device::Device;
 use crate::error::Result;
@@ -84,6 +85,7 @@ impl Cpu<'_> {
 
 impl Backend for Cpu<'_> {
     type Buffer = HostBuffer;
+    type Graph = CpuGraph;
 
     fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid, _: LaunchId) -> Result<()> {
         if config::race_check() {
@@ -179,5 +181,40 @@ impl Backend for Cpu<'_> {
 
     fn synchronize_all() -> Result<()> {
         Ok(())
+    }
+
+    fn begin_capture(&self) -> Result<()> {
+        capture::begin();
+        Ok(())
+    }
+
+    fn end_capture(&self) -> Result<CpuGraph> {
+        capture::end()
+    }
+
+    fn abort_capture(&self) {
+        capture::abort();
+    }
+
+    fn record(&self, op: impl FnOnce() -> Op) -> Record {
+        if capture::record(op()) {
+            Record::Recorded
+        } else {
+            Record::Enqueue
+        }
+    }
+
+    fn capture_conditional(
+        &self,
+        kind: Conditional,
+        cond: u64,
+        then: &mut dyn FnMut() -> Result<()>,
+        otherwise: Option<&mut dyn FnMut() -> Result<()>>,
+    ) -> Result<()> {
+        capture::conditional(kind, cond, then, otherwise)
+    }
+
+    fn replay(&self, graph: &CpuGraph) -> Result<()> {
+        graph.replay()
     }
 }

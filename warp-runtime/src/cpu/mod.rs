@@ -4,9 +4,11 @@
 //! `primitives`: scan, reductions, radix sort and compaction with rayon. Host objects' build
 //! steps bring their own CPU code (`ObjectStep::run_cpu`, next to each object). `race`: the
 //! write-race check of launches (`config::set_race_check`). `shared_grads`: when adjoint
-//! launches running at once make gradient updates atomic.
+//! launches running at once make gradient updates atomic. `capture`: graph capture, the
+//! operations recorded and replayed in order.
 
 mod backend;
+pub(crate) mod capture;
 mod executor;
 pub(crate) mod memory;
 mod primitives;

@@ -57,10 +57,10 @@ unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
     unsafe { std::slice::from_raw_parts(addr as *const T, n) }
 }
 
-/// [`slice`], mutable.
+/// [`slice()`], mutable.
 ///
 /// # Safety
-/// As [`slice`], and no other reference to these elements exists while it lives.
+/// As [`slice()`], and no other reference to these elements exists while it lives.
 unsafe fn slice_mut<'a, T>(addr: u64, n: usize) -> &'a mut [T] {
     if n == 0 {
         return &mut [];

@@ -1,9 +1,10 @@
 //! [`Cuda`]: the CUDA backend as the runtime dispatches to it (`backend.rs`).
 
+use super::capture::{self, CudaGraph};
 use super::memory::CudaBuffer;
 use super::stream::Stream;
 use super::{gpu, launch, objects, primitives};
-use crate::backend::{Backend, ObjectStep};
+use crate::backend::{Backend, Conditional, ObjectStep, Op, Record};
 use crate::device::Device;
 use crate::error::Result;
 use crate::kernel::{ArgsOf, Kernel, KernelInfo};
@@ -39,10 +40,21 @@ impl<'d> Cuda<'d> {
         let on = Some(stream.cuda_stream());
         launch::launch::<K>(args, grid, self.device, self.ordinal, on, None, id)
     }
+
+    /// [`Backend::begin_capture`] on `stream` (not the default stream).
+    pub(crate) fn begin_capture_on(&self, stream: &Stream) -> Result<()> {
+        capture::begin(self.device, self.ordinal, Some(stream))
+    }
+
+    /// [`Backend::replay`] on `stream` rather than on the calling thread's current stream.
+    pub(crate) fn replay_on(&self, graph: &CudaGraph, stream: &Stream) -> Result<()> {
+        capture::launch(graph, self.device, Some(stream))
+    }
 }
 
 impl Backend for Cuda<'_> {
     type Buffer = CudaBuffer;
+    type Graph = CudaGraph;
 
     fn launch<K: Kernel>(&self, args: &ArgsOf<'_, K>, grid: &Grid, id: LaunchId) -> Result<()> {
         launch::launch::<K>(args, grid, self.device, self.ordinal, None, None, id)
@@ -143,5 +155,41 @@ impl Backend for Cuda<'_> {
 
     fn synchronize_all() -> Result<()> {
         gpu::synchronize_all()
+    }
+
+    fn begin_capture(&self) -> Result<()> {
+        capture::begin(self.device, self.ordinal, None)
+    }
+
+    fn end_capture(&self) -> Result<CudaGraph> {
+        capture::end()
+    }
+
+    fn abort_capture(&self) {
+        capture::abort();
+    }
+
+    /// Everything this backend queues goes on the thread's capture stream while it captures
+    /// (`GpuState::queue`): the caller runs the operation now.
+    fn record(&self, _op: impl FnOnce() -> Op) -> Record {
+        Record::Enqueue
+    }
+
+    fn capture_conditional(
+        &self,
+        kind: Conditional,
+        cond: u64,
+        then: &mut dyn FnMut() -> Result<()>,
+        otherwise: Option<&mut dyn FnMut() -> Result<()>>,
+    ) -> Result<()> {
+        let kind = match kind {
+            Conditional::If => warp_cuda::Conditional::If,
+            Conditional::While => warp_cuda::Conditional::While,
+        };
+        capture::conditional(self.device, self.ordinal, kind, cond, then, otherwise)
+    }
+
+    fn replay(&self, graph: &CudaGraph) -> Result<()> {
+        capture::launch(graph, self.device, None)
     }
 }

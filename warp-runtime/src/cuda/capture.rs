@@ -1,32 +1,45 @@
-//! Graph capture on a GPU: the CUDA half of `graph.rs`.
+//! Graph capture on a GPU: what recording means on the CUDA backend (`backend.rs`).
 //!
 //! A capture records the calling thread's work on one GPU into a CUDA graph: `begin` starts
 //! stream capture on a stream of its own and makes it the thread's capture stream
-//! (`gpu::capture_stream`), so that launches, fills and copies of this thread on that GPU are
-//! queued there (and nothing else: allocations, uploads, read-backs, synchronisations and
-//! compiles are refused with [`Error::Capture`]); `end` instantiates the graph. A replay is
-//! queued like a launch, in the ordering model of `gpu.rs`: after the default stream's work
-//! (arrays written before), and the default stream waits for it before its next operation.
+//! (`gpu::capture_stream`), so that everything this thread queues on that GPU (launches,
+//! fills, copies, the primitives' kernels, host objects' build steps) is queued there, and
+//! nothing else: what would allocate, upload, read back, synchronise or load a module is
+//! refused with [`Error::Capture`]; `end` instantiates the graph. A replay is queued like a
+//! launch, in the ordering model of `gpu.rs`: after the default stream's work (arrays written
+//! before), and the default stream waits for it before its next operation; a graph that
+//! recorded primitives also orders itself after the last user of the scratch memory it holds.
 
 use super::fault::{self, FaultRecord};
-use super::gpu::{self, err, state, GpuState};
+use super::gpu::{self, err, state, GpuState, Scratch};
 use super::stream::Stream;
 use crate::device::Device;
 use crate::error::{Error, Result};
+use std::cell::RefCell;
 use std::sync::Arc;
 
 /// A capture in progress on one GPU.
-pub(crate) struct CudaCapture {
+struct CudaCapture {
     st: Arc<GpuState>,
     device: Device,
     stream: warp_cuda::Stream,
     faults: Arc<FaultRecord>,
+    /// The primitives' scratch memory the recorded kernels use (the GPU's workspace, which
+    /// cannot grow inside a capture: one at most).
+    scratch: Option<Arc<Scratch>>,
 }
 
-/// A captured graph, with the fault record its launches write into (`fault.rs`).
+thread_local! {
+    /// The calling thread's capture, from `begin` to `end` or `abort`.
+    static CAPTURE: RefCell<Option<CudaCapture>> = const { RefCell::new(None) };
+}
+
+/// A captured graph, with the fault record its launches write into (`fault.rs`) and the
+/// scratch memory its primitives use.
 pub(crate) struct CudaGraph {
     graph: warp_cuda::Graph,
     faults: Arc<FaultRecord>,
+    scratch: Option<Arc<Scratch>>,
 }
 
 impl CudaGraph {
@@ -39,11 +52,7 @@ impl CudaGraph {
 /// Starts capturing the calling thread's work on GPU `ordinal` (`device`): on `stream` when
 /// given (a stream the caller made, not the default one), else on the thread's current stream
 /// when a `ScopedStream` set one, else on a new stream.
-pub(crate) fn begin(
-    device: &Device,
-    ordinal: usize,
-    stream: Option<&Stream>,
-) -> Result<CudaCapture> {
+pub(crate) fn begin(device: &Device, ordinal: usize, stream: Option<&Stream>) -> Result<()> {
     let st = state(device, ordinal)?;
     let stream = match stream {
         Some(s) => {
@@ -75,47 +84,76 @@ pub(crate) fn begin(
         load_setter(&st, device, ordinal);
     }
     // Made before the capture starts (an allocation cannot be captured).
-    let faults = fault::begin_capture(&st, ordinal)?;
+    let faults = fault::begin_capture(&st.faults, ordinal)?;
     if let Err(e) = stream.begin_capture() {
         fault::end_capture();
         return Err(err(device, e));
     }
     gpu::set_capture_stream(Some((ordinal, stream.clone())));
-    Ok(CudaCapture {
+    let capture = CudaCapture {
         st,
         device: device.clone(),
         stream,
         faults,
+        scratch: None,
+    };
+    CAPTURE.with(|c| *c.borrow_mut() = Some(capture));
+    Ok(())
+}
+
+/// The calling thread's capture, taken (its capture stream cleared).
+fn take() -> Option<CudaCapture> {
+    gpu::set_capture_stream(None);
+    fault::end_capture();
+    CAPTURE.with(|c| c.borrow_mut().take())
+}
+
+/// Ends the calling thread's capture and instantiates the graph.
+pub(crate) fn end() -> Result<CudaGraph> {
+    let Some(c) = take() else {
+        return Err(Error::Capture {
+            what: "the capture was already ended".into(),
+        });
+    };
+    let graph = c
+        .stream
+        .end_capture(&c.st.gpu)
+        .map_err(|e| err(&c.device, e))?;
+    Ok(CudaGraph {
+        graph,
+        faults: c.faults,
+        scratch: c.scratch,
     })
 }
 
-impl CudaCapture {
-    /// Ends the capture and instantiates the graph.
-    pub(crate) fn end(self) -> Result<CudaGraph> {
-        gpu::set_capture_stream(None);
-        fault::end_capture();
-        let graph = self
-            .stream
-            .end_capture(&self.st.gpu)
-            .map_err(|e| err(&self.device, e))?;
-        Ok(CudaGraph {
-            graph,
-            faults: self.faults,
-        })
+/// Ends the calling thread's capture and drops what it recorded (the capture failed or was
+/// abandoned).
+pub(crate) fn abort() {
+    if let Some(c) = take() {
+        let _ = c.stream.end_capture(&c.st.gpu);
     }
+}
 
-    /// Ends the capture and drops what it recorded (the capture failed or was abandoned).
-    pub(crate) fn abort(self) {
-        gpu::set_capture_stream(None);
-        fault::end_capture();
-        let _ = self.stream.end_capture(&self.st.gpu);
-    }
+/// Notes that the kernels just recorded into the calling thread's capture on GPU `ordinal`
+/// use `scratch`: the graph holds it and orders its replays after the scratch's last user.
+pub(crate) fn uses_scratch(ordinal: usize, scratch: Arc<Scratch>) {
+    CAPTURE.with(|c| {
+        if let Some(c) = c.borrow_mut().as_mut() {
+            debug_assert_eq!(c.st.gpu.ordinal(), ordinal);
+            debug_assert!(c.scratch.as_ref().is_none_or(|s| Arc::ptr_eq(s, &scratch)));
+            c.scratch = Some(scratch);
+        }
+    });
 }
 
 /// Queues a replay of `graph` on `stream` when given, else on the calling thread's current
 /// stream for its GPU, else on the default stream (the ordering model of `gpu.rs`).
 pub(crate) fn launch(graph: &CudaGraph, device: &Device, stream: Option<&Stream>) -> Result<()> {
-    let CudaGraph { graph, faults } = graph;
+    let CudaGraph {
+        graph,
+        faults,
+        scratch,
+    } = graph;
     let ordinal = graph.ordinal();
     if let Some(s) = stream {
         if s.device() != device {
@@ -128,9 +166,15 @@ pub(crate) fn launch(graph: &CudaGraph, device: &Device, stream: Option<&Stream>
         }
     }
     let st = state(device, ordinal)?;
+    // Held while the replay is queued, as a primitive holds it (`primitives.rs`).
+    let mut last = scratch.as_ref().map(|s| s.last());
     st.queue(ordinal, stream.map(Stream::cuda_stream), |on| {
+        if let Some(last) = last.as_mut() {
+            gpu::order_scratch(device, last, on)?;
+        }
         graph.launch(on).map_err(|e| err(device, e))
     })?;
+    drop(last);
     // This thread's next synchronisation reads the faults of the replay.
     fault::replayed(ordinal, faults);
     Ok(())

@@ -14,15 +14,46 @@
 //! next new thread takes it over. A fault found there that a launch older than the takeover
 //! raised belongs to the thread that ended: it is logged at error level, not reported to the
 //! new owner.
+//!
+//! A GPU's records are a [`RecordPool`], which its state (`gpu.rs`) holds: this module knows
+//! the opened GPU and nothing else of that state, so the imports run one way (`gpu.rs` asks
+//! here for the faults at a synchronisation).
 
-use super::gpu::{err, GpuState};
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
 use std::cell::RefCell;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use warp_core::{Fault, FaultKind, LaunchId};
-use warp_cuda::DeviceBuffer;
+use warp_cuda::{CudaError, DeviceBuffer, Gpu};
+
+/// A CUDA error about `device`'s fault records.
+fn err(device: &Device, e: CudaError) -> Error {
+    Error::cuda(device.alias(), e)
+}
+
+/// One GPU's fault records: the GPU they are allocated on, and the records whose threads have
+/// ended (the spare list).
+pub(crate) struct RecordPool {
+    gpu: Arc<Gpu>,
+    device: Device,
+    spare: Mutex<SpareRecords>,
+}
+
+impl RecordPool {
+    /// The pool of GPU `gpu` (`device`), with no record yet.
+    pub(crate) fn new(gpu: Arc<Gpu>, device: Device) -> Arc<RecordPool> {
+        Arc::new(RecordPool {
+            gpu,
+            device,
+            spare: Mutex::default(),
+        })
+    }
+
+    fn spare(&self) -> MutexGuard<'_, SpareRecords> {
+        self.spare.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
 
 /// `wp::fault_t` (88 bytes, `wp_core.h`) followed by the `u32` flag the first faulting thread
 /// sets (and padding to 8 bytes).
@@ -47,9 +78,9 @@ struct HostSide {
 }
 
 impl FaultRecord {
-    /// A new, clear record on `st`'s GPU.
-    fn new(st: &GpuState) -> Result<Arc<FaultRecord>> {
-        let buffer = DeviceBuffer::zeros(&st.gpu, BYTES).map_err(|e| err(st.device(), e))?;
+    /// A new, clear record on `pool`'s GPU.
+    fn new(pool: &RecordPool) -> Result<Arc<FaultRecord>> {
+        let buffer = DeviceBuffer::zeros(&pool.gpu, BYTES).map_err(|e| err(&pool.device, e))?;
         Ok(Arc::new(FaultRecord {
             buffer,
             // A new record has had no earlier owner.
@@ -177,7 +208,7 @@ fn kernel_ids() -> &'static Mutex<Vec<&'static KernelInfo>> {
 /// synchronisation.
 #[derive(Default)]
 struct ThreadRecords {
-    own: Vec<(usize, Arc<GpuState>, Arc<FaultRecord>)>,
+    own: Vec<(usize, Arc<RecordPool>, Arc<FaultRecord>)>,
     /// Records of graphs this thread replayed since its last full synchronisation of the GPU.
     graphs: Vec<(usize, Arc<FaultRecord>)>,
     /// The record of the graph this thread is capturing, with its GPU: launches inside the
@@ -188,15 +219,15 @@ struct ThreadRecords {
 impl Drop for ThreadRecords {
     fn drop(&mut self) {
         // The thread has ended: its records go back to their GPUs for the next new thread.
-        for (_, st, rec) in self.own.drain(..) {
-            st.spare_records().ended.push(rec);
+        for (_, pool, rec) in self.own.drain(..) {
+            pool.spare().ended.push(rec);
         }
     }
 }
 
 /// A GPU's records whose threads have ended.
 #[derive(Default)]
-pub(crate) struct SpareRecords {
+struct SpareRecords {
     /// Not read since their thread ended: they may hold its last fault.
     ended: Vec<Arc<FaultRecord>>,
     /// Read (and cleared) while the GPU was idle: nothing writes them any more.
@@ -207,11 +238,11 @@ thread_local! {
     static RECORDS: RefCell<ThreadRecords> = RefCell::default();
 }
 
-/// The record that `launch`, made by the calling thread on GPU `ordinal` (`st`), writes: the
-/// capture's inside a capture, else the thread's own (taken from the spare list, or made, at
-/// the thread's first launch there).
+/// The record that `launch`, made by the calling thread on GPU `ordinal` (`pool`'s), writes:
+/// the capture's inside a capture, else the thread's own (taken from the spare list, or made,
+/// at the thread's first launch there).
 pub(crate) fn with_record<R>(
-    st: &Arc<GpuState>,
+    pool: &Arc<RecordPool>,
     ordinal: usize,
     launch: LaunchId,
     f: impl FnOnce(&FaultRecord) -> R,
@@ -227,7 +258,7 @@ pub(crate) fn with_record<R>(
             return Ok(f(rec));
         }
         let spare = {
-            let mut spare = st.spare_records();
+            let mut spare = pool.spare();
             spare.clean.pop().or_else(|| spare.ended.pop())
         };
         let rec = match spare {
@@ -237,26 +268,26 @@ pub(crate) fn with_record<R>(
                 rec.lock().since = launch.0;
                 rec
             }
-            None => FaultRecord::new(st)?,
+            None => FaultRecord::new(pool)?,
         };
         let out = f(&rec);
-        r.own.push((ordinal, st.clone(), rec));
+        r.own.push((ordinal, pool.clone(), rec));
         Ok(out)
     });
     records.unwrap_or_else(|_| {
         Err(Error::invalid(format!(
             "a launch on {} while its thread is ending (its fault record is gone)",
-            st.device()
+            pool.device
         )))
     })
 }
 
 /// Starts a graph's record for the calling thread's capture on GPU `ordinal`: launches in
 /// the capture write into it. Returns the record (the graph keeps it).
-pub(crate) fn begin_capture(st: &GpuState, ordinal: usize) -> Result<Arc<FaultRecord>> {
+pub(crate) fn begin_capture(pool: &RecordPool, ordinal: usize) -> Result<Arc<FaultRecord>> {
     // Its faults all belong to the graph (launch numbers are fixed at capture: every replay's
     // fault names the captured launch).
-    let rec = FaultRecord::new(st)?;
+    let rec = FaultRecord::new(pool)?;
     RECORDS.with(|r| r.borrow_mut().capture = Some((ordinal, rec.clone())));
     Ok(rec)
 }
@@ -285,7 +316,7 @@ pub(crate) fn replayed(ordinal: usize, rec: &Arc<FaultRecord>) {
 /// or a graph it replayed there, without waiting for other work than the default stream's.
 /// `idle`: every stream of the GPU has finished (a full synchronisation), so the replayed
 /// graphs need not be read again.
-pub(crate) fn check(st: &GpuState, ordinal: usize, idle: bool) -> Result<()> {
+pub(crate) fn check(pool: &RecordPool, ordinal: usize, idle: bool) -> Result<()> {
     let (own, graphs) = RECORDS.with(|r| {
         let r = r.borrow();
         let own = r
@@ -303,22 +334,22 @@ pub(crate) fn check(st: &GpuState, ordinal: usize, idle: bool) -> Result<()> {
     });
     for rec in own.iter().chain(&graphs) {
         // One fault per check: the others stay in their records for the next.
-        if let Some(fault) = rec.take(st.device())? {
+        if let Some(fault) = rec.take(&pool.device)? {
             return Err(Error::Fault(fault));
         }
     }
     if idle {
         RECORDS.with(|r| r.borrow_mut().graphs.retain(|(o, _)| *o != ordinal));
         // Records of threads that have ended: their last faults are logged, never lost.
-        let ended = std::mem::take(&mut st.spare_records().ended);
+        let ended = std::mem::take(&mut pool.spare().ended);
         for rec in ended {
-            let fault = rec.take(st.device());
-            st.spare_records().clean.push(rec);
+            let fault = rec.take(&pool.device);
+            pool.spare().clean.push(rec);
             if let Some(fault) = fault? {
                 log::error!(
                     "{fault} on {}: raised by a launch from a thread that ended without \
                      synchronising",
-                    st.device()
+                    pool.device
                 );
             }
         }

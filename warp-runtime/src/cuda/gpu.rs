@@ -1,4 +1,5 @@
-//! Per-GPU state: the opened GPU and the stream ordering model (fault records: `fault.rs`).
+//! Per-GPU state: the opened GPU and the stream ordering model (fault records: `fault.rs`,
+//! which imports nothing from here).
 //!
 //! # The ordering model
 //! Array operations (allocation, copies, fills, frees) and launches without a stream run on
@@ -14,7 +15,7 @@
 //! record after each launch in debug mode, and otherwise at its next synchronisation
 //! (`synchronize`, `to_vec`).
 
-use super::fault::{self, SpareRecords};
+use super::fault::{self, RecordPool};
 use crate::device::Device;
 use crate::error::{Error, Result};
 use std::cell::RefCell;
@@ -99,7 +100,7 @@ pub(crate) fn pop_current(ordinal: usize, stream: &warp_cuda::Stream) {
 }
 
 /// Per-GPU state: the user streams with work queued since the default stream last waited for
-/// them, the fault records of threads that have ended, and the primitives' workspace.
+/// them, the fault records, and the primitives' workspace.
 ///
 /// The ordering model is the module's (`pending` holds the user streams the default stream
 /// has yet to wait for).
@@ -107,22 +108,62 @@ pub(crate) struct GpuState {
     device: Device,
     ordinal: usize,
     pub(crate) gpu: Arc<Gpu>,
-    /// Fault records whose threads have ended (`fault.rs`).
-    spare_records: Mutex<SpareRecords>,
+    /// The GPU's fault records (`fault.rs`).
+    pub(crate) faults: Arc<RecordPool>,
     pending: Mutex<Vec<warp_cuda::Stream>>,
     has_pending: AtomicBool,
-    /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls.
-    pub(crate) workspace: Mutex<Workspace>,
+    /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls: the
+    /// largest needed so far.
+    pub(crate) workspace: Mutex<Option<Arc<Scratch>>>,
 }
 
-/// Scratch memory the primitives reuse from call to call: one buffer per GPU that grows to
-/// the largest need seen, and the stream of its last use. A primitive holds the lock while it
-/// queues its launches; a launch on another stream than the last user's first waits for that
-/// stream, so uses of the workspace are ordered like those of an array.
-#[derive(Default)]
-pub(crate) struct Workspace {
-    pub(crate) buffer: Option<DeviceBuffer>,
-    pub(crate) last: Option<warp_cuda::Stream>,
+/// Scratch memory the primitives reuse from call to call (the GPU's workspace), with the
+/// stream of its last use. A use first waits for the last user's stream when it is another
+/// one, and becomes the last user: uses of the scratch are ordered like those of an array.
+/// A graph that recorded primitives holds the scratch they use and orders each replay the same
+/// way (`capture.rs`), so the workspace growing later frees nothing a graph still uses.
+pub(crate) struct Scratch {
+    pub(crate) buffer: DeviceBuffer,
+    last: Mutex<Option<warp_cuda::Stream>>,
+}
+
+impl Scratch {
+    /// Scratch memory of `buffer`, not used yet.
+    pub(crate) fn new(buffer: DeviceBuffer) -> Arc<Scratch> {
+        Arc::new(Scratch {
+            buffer,
+            last: Mutex::new(None),
+        })
+    }
+
+    /// The stream of the last use, locked: hold it while queueing a use, which then sets it
+    /// ([`order_scratch`]).
+    pub(crate) fn last(&self) -> MutexGuard<'_, Option<warp_cuda::Stream>> {
+        self.last.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// Orders a use of scratch memory on `stream` after its last use (`last`, locked) and makes
+/// `stream` the last user.
+pub(crate) fn order_scratch(
+    device: &Device,
+    last: &mut Option<warp_cuda::Stream>,
+    stream: &warp_cuda::Stream,
+) -> Result<()> {
+    if let Some(l) = last.as_ref().filter(|l| !l.is(stream)) {
+        stream.wait_stream(l).map_err(|e| err(device, e))?;
+    }
+    *last = Some(stream.clone());
+    Ok(())
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        // The free is queued on the default stream: after every user stream's work (a replay
+        // of the last graph that held it, say). A failure means a broken context, which the
+        // next fallible call reports.
+        let _ = join_ordinal(self.buffer.gpu().ordinal());
+    }
 }
 
 impl GpuState {
@@ -188,16 +229,6 @@ impl GpuState {
         }
     }
 
-    /// The GPU's device.
-    pub(crate) fn device(&self) -> &Device {
-        &self.device
-    }
-
-    /// The fault records of threads that have ended.
-    pub(crate) fn spare_records(&self) -> MutexGuard<'_, SpareRecords> {
-        self.spare_records.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
     /// Records that `stream` (a user stream) has work the default stream must wait for.
     fn mark_pending(&self, stream: &warp_cuda::Stream) {
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
@@ -234,14 +265,15 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
     if let Some(s) = map.get(&ordinal) {
         return Ok(s.clone());
     }
+    let gpu = gpu(ordinal)?;
     let s = Arc::new(GpuState {
         device: device.clone(),
         ordinal,
-        gpu: gpu(ordinal)?,
-        spare_records: Mutex::default(),
+        faults: RecordPool::new(gpu.clone(), device.clone()),
+        gpu,
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
-        workspace: Mutex::new(Workspace::default()),
+        workspace: Mutex::new(None),
     });
     map.insert(ordinal, s.clone());
     Ok(s)
@@ -270,13 +302,13 @@ pub(crate) fn check_state(st: &GpuState) -> Result<()> {
     // Every stream is idle: nothing is pending any more.
     st.pending.lock().unwrap_or_else(|p| p.into_inner()).clear();
     st.has_pending.store(false, Ordering::Release);
-    fault::check(st, st.ordinal, true)
+    fault::check(&st.faults, st.ordinal, true)
 }
 
 /// Reports (and clears) a fault that a launch of the calling thread recorded, without waiting
 /// for the GPU's other work (the read waits for the default stream only).
 pub(crate) fn read_fault(st: &GpuState) -> Result<()> {
-    fault::check(st, st.ordinal, false)
+    fault::check(&st.faults, st.ordinal, false)
 }
 
 /// Waits for every GPU used so far and reports the first recorded fault.

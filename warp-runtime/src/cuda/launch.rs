@@ -168,7 +168,8 @@ impl<K: Kernel> Prepared<K> {
         let (kernel, ordinal) = (&self.kernel, self.ordinal);
         let st = &kernel.st;
         // Faults go to the launching thread's record (the capture's inside a capture).
-        (ctx.fault, ctx.fault_flag) = fault::with_record(st, ordinal, id, |r| r.addresses())?;
+        (ctx.fault, ctx.fault_flag) =
+            fault::with_record(&st.faults, ordinal, id, |r| r.addresses())?;
         ctx.launch = id.0;
         // The launch and the context, then the parameters and (adjoint) their gradients.
         let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];

@@ -5,11 +5,13 @@
 //!   `warp_cuda::library`; the host tests compile generated units with g++).
 //! - `options`, `aot`, `module`: how a unit is compiled (NVRTC options), ahead-of-time cubins,
 //!   and the per-GPU cache of loaded kernels with what compiling them cost.
-//! - `gpu`: per-GPU state, the stream ordering model and the fault record.
+//! - `gpu`: per-GPU state and the stream ordering model; `fault`: the fault records kernels
+//!   write and synchronisations read (it imports nothing from `gpu`).
 //! - `launch`: a launch's parameter block and `cuLaunchKernel`.
 //! - `primitives`: the launch plans of the parallel primitives (`wp_primitives.h`), run.
 //! - `objects`: the build kernels of host objects (the hash grid's, `wp_hash_grid.h`).
-//! - `capture`: graph capture on a GPU (the thread's capture stream) and graph replay.
+//! - `capture`: what graph capture means on a GPU (the thread's capture stream, onto which
+//!   every enqueue of the thread goes) and graph replay.
 //! - `distributed`: several GPUs: NCCL communicators and collectives on arrays, peer access.
 //! - `memory`: GPU memory for arrays. `stream`, `pinned`: the public streams, events and
 //!   pinned host memory.

@@ -9,11 +9,13 @@ use super::gpu::{err, state, GpuState};
 use super::options::{needs_exact, with_compile_options};
 use super::{aot, source};
 use crate::device::Device;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
+use warp_core::capability::{first_missing, Capability, Support, Target};
+use warp_core::FuncInfo;
 use warp_cuda::cache::CacheEntry;
 use warp_cuda::{CacheOutcome, Function, KernelCache, Module};
 
@@ -174,12 +176,13 @@ pub(crate) fn loaded(
         ),
     )?;
     let st = state(device, ordinal)?;
+    let arch = st.gpu.arch();
+    check_capabilities(info, device.alias(), arch)?;
     let t0 = std::time::Instant::now();
     let src = match adjoint {
         Some(_) => source::assemble_adjoint(info),
         None => source::assemble(info),
     };
-    let arch = st.gpu.arch();
     let stack_define = adjoint.map(|b| b.to_string());
     let (compiled, outcome, aot, entry) = with_compile_options(
         contiguous,
@@ -288,6 +291,59 @@ pub(crate) fn loaded(
     Ok(l)
 }
 
+/// The capabilities `info` and the funcs it calls (transitively) need, each once, in the
+/// table's order.
+fn required_capabilities(info: &KernelInfo) -> Vec<Capability> {
+    fn funcs(f: &'static FuncInfo, seen: &mut Vec<*const FuncInfo>, out: &mut Vec<Capability>) {
+        if seen.contains(&(f as *const FuncInfo)) {
+            return;
+        }
+        seen.push(f);
+        out.extend_from_slice(f.requires);
+        for c in f.callees {
+            funcs(c, seen, out);
+        }
+    }
+    let mut out = info.requires.to_vec();
+    let mut seen = Vec::new();
+    for f in info.callees {
+        funcs(f, &mut seen, &mut out);
+    }
+    out.sort();
+    out.dedup();
+    out
+}
+
+/// Refuses a kernel that needs a capability a GPU of architecture `arch` lacks (the table is
+/// `warp_core::capability`), before NVRTC sees it; says at debug level which capabilities the
+/// CUDA library emulates there.
+fn check_capabilities(info: &KernelInfo, device: &str, arch: u32) -> Result<()> {
+    let requires = required_capabilities(info);
+    let target = Target::Cuda { arch };
+    if let Some(row) = first_missing(&requires, target) {
+        return Err(Error::MissingCapability {
+            kernel: info.name,
+            device: device.to_string(),
+            found: format!("sm_{arch}"),
+            capability: row.what,
+            needs: format!("sm_{} or newer", row.cuda_required_arch),
+        });
+    }
+    for c in requires {
+        let row = c.row();
+        if let Support::Emulated(how) = row.on(target) {
+            log::debug!(
+                "kernel {}::{} on {device} (sm_{arch}): {} is {how} (an instruction from sm_{})",
+                info.module,
+                info.name,
+                row.what,
+                row.cuda_native_arch
+            );
+        }
+    }
+    Ok(())
+}
+
 /// "forward" or "adjoint", for log records.
 fn variant_name(adjoint: Option<usize>) -> &'static str {
     if adjoint.is_some() {
@@ -331,7 +387,111 @@ pub(crate) fn prepare(
 
 #[cfg(test)]
 mod tests {
-    use super::{format_compile_reports, CompileReport};
+    use super::{check_capabilities, format_compile_reports, CompileReport};
+    use crate::kernel::KernelInfo;
+    use warp_core::capability::{Capability, CAPABILITIES};
+    use warp_core::FuncInfo;
+
+    static LEAF: FuncInfo = FuncInfo {
+        name: "leaf",
+        module: "m",
+        file: "src/m.rs",
+        cuda: "",
+        cuda_ret: "void",
+        sections: &[],
+        callees: &[],
+        structs: &[],
+        cuda_adj: "",
+        cuda_adj_error: None,
+        consts: &[],
+        requires: &[Capability::AtomicMinMaxBits64],
+    };
+    static MID: FuncInfo = FuncInfo {
+        name: "mid",
+        callees: &[&LEAF],
+        requires: &[],
+        ..LEAF
+    };
+
+    #[test]
+    fn a_gpu_without_a_capability_is_refused_naming_kernel_and_capability() {
+        // The capability comes from a func two calls down.
+        static CALLEES: [&FuncInfo; 1] = [&MID];
+        let info = KernelInfo {
+            name: "minima",
+            callees: &CALLEES,
+            requires: &[Capability::AtomicAddF64],
+            ..KernelInfo::BLANK
+        };
+        let e = check_capabilities(&info, "cuda:1", 35).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("kernel `minima`")
+                && msg.contains("\"cuda:1\" (sm_35)")
+                && msg.contains("64-bit integer atomic min")
+                && msg.contains("sm_50 or newer"),
+            "{msg}"
+        );
+        // f64 atomic adds are emulated below sm_60, not refused; every capability runs on
+        // sm_50 and newer.
+        for arch in [50, 52, 61, 90, 120] {
+            check_capabilities(&info, "cuda:0", arch).unwrap();
+        }
+        check_capabilities(&KernelInfo::BLANK, "cuda:0", 20).unwrap();
+    }
+
+    /// The CUDA library's `#if __CUDA_ARCH__ >= N` switches between an atomic's instruction and
+    /// its emulation are the table's `cuda_native_arch` (`N` is the architecture times 10).
+    #[test]
+    fn the_atomic_header_switches_where_the_table_says() {
+        let header = warp_cuda::HEADERS
+            .iter()
+            .find(|(n, _)| *n == "wp_atomic.h")
+            .expect("wp_atomic.h")
+            .1;
+        // The `#if` guarding each emulated capability's instruction, and what it guards.
+        let guard = |arch: u32| format!("__CUDA_ARCH__ >= {}", arch * 10);
+        let guarded = |arch: u32| -> Vec<&str> {
+            header
+                .split(&guard(arch))
+                .skip(1)
+                .map(|rest| rest.split("#else").next().unwrap_or(""))
+                .collect()
+        };
+        for row in CAPABILITIES {
+            let uses = match row.capability {
+                Capability::AtomicAddF64 => "atomicAdd(p, v)",
+                Capability::AtomicF16 => "atomicCAS(h, assumed",
+                // Not emulated: no switch.
+                Capability::AtomicMinMaxBits64 => {
+                    assert!(row.cuda_emulation.is_none());
+                    continue;
+                }
+                _ => panic!("a capability this test does not know: {row:?}"),
+            };
+            assert!(
+                guarded(row.cuda_native_arch)
+                    .iter()
+                    .any(|g| g.contains(uses)),
+                "{:?}: wp_atomic.h has no `{}` guarding `{uses}`",
+                row.capability,
+                guard(row.cuda_native_arch)
+            );
+        }
+        // No switch at an architecture the table does not name.
+        let named: Vec<String> = CAPABILITIES
+            .iter()
+            .map(|r| guard(r.cuda_native_arch))
+            .collect();
+        for (k, _) in header.match_indices("__CUDA_ARCH__ >= ") {
+            let at = &header[k..];
+            assert!(
+                named.iter().any(|n| at.starts_with(n.as_str())),
+                "{}",
+                &at[..24]
+            );
+        }
+    }
 
     fn report(module: &'static str, adjoint: bool, cache_hit: bool) -> CompileReport {
         CompileReport {

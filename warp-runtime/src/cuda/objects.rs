@@ -5,6 +5,8 @@
 //! loaded, and kept for the process with its functions; a step's launch goes on the calling
 //! thread's current stream, as a kernel's does (the ordering model of `gpu.rs`), without host
 //! synchronisation. Nothing here names an object: the step says which library and kernel.
+//! Inside a capture a step's launch goes on the capture stream; its library and kernel must
+//! be loaded before (a module load would break the capture).
 
 use super::gpu;
 use crate::backend::{ObjectLibrary, ObjectStep};
@@ -69,6 +71,14 @@ pub fn compile_library(lib: &ObjectLibrary, arch: u32) -> warp_cuda::Result<warp
     })
 }
 
+/// What a capture refuses when a build step would load `what` (its library or kernel).
+fn first_use(what: &str) -> String {
+    format!(
+        "loading {what} of a host object's build at its first use on this GPU: run the build \
+         once on this device before capturing"
+    )
+}
+
 /// `lib` on GPU `ordinal` (`device`), compiled and loaded once per process.
 fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Result<Arc<Loaded>> {
     type Cache = Mutex<HashMap<(usize, &'static str), Arc<Loaded>>>;
@@ -78,6 +88,7 @@ fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Resul
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
+    gpu::refuse_in_capture(ordinal, &first_use(&format!("the library {}", lib.name)))?;
     let st = gpu::state(device, ordinal)?;
     let p = program(lib).map_err(|e| gpu::err(device, e))?;
     let (compiled, _) = with_options(&p, |opts| {
@@ -115,6 +126,7 @@ pub(super) fn object_step<S: ObjectStep>(device: &Device, ordinal: usize, step: 
         match fns.get(S::KERNEL) {
             Some(f) => f.clone(),
             None => {
+                gpu::refuse_in_capture(ordinal, &first_use(&format!("the kernel {}", S::KERNEL)))?;
                 let f = lib
                     .module
                     .function(S::KERNEL)
@@ -140,7 +152,8 @@ pub(super) fn object_step<S: ObjectStep>(device: &Device, ordinal: usize, step: 
                 .map_err(|e| gpu::err(device, e))
         }
     })?;
-    if config::debug() {
+    // (Inside a capture nothing has run yet: there is nothing to check.)
+    if config::debug() && gpu::capture_stream(ordinal).is_none() {
         gpu::synchronize(device, ordinal)?;
     }
     Ok(())

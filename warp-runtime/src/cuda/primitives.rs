@@ -4,8 +4,10 @@
 //! key type, compaction of one element size). A module is compiled by NVRTC through the
 //! kernel disk cache the first time a GPU needs it, loaded, and kept for the process, like a
 //! kernel. A plan's launches go on the calling thread's current stream (the ordering model of
-//! `gpu.rs`: after the array operations queued before; the scratch arrays are freed on the
-//! default stream after them), with no host synchronisation: counts stay on the device.
+//! `gpu.rs`: after the array operations queued before; the scratch memory is the GPU's
+//! workspace, ordered like an array), with no host synchronisation: counts stay on the device.
+//! So a primitive can be recorded into a graph: inside a capture its launches go on the capture
+//! stream, and the graph holds the workspace they use.
 
 use super::fault;
 use super::gpu;
@@ -28,11 +30,19 @@ struct Loaded {
 }
 
 impl Loaded {
-    fn function(&self, device: &Device, name: &str) -> Result<Function> {
+    /// Entry `name`, looked up at its first use (outside a capture: `func`'s call before).
+    fn function(
+        &self,
+        device: &Device,
+        ordinal: usize,
+        func: &str,
+        name: &str,
+    ) -> Result<Function> {
         let mut fns = self.functions.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(f) = fns.get(name) {
             return Ok(f.clone());
         }
+        gpu::refuse_in_capture(ordinal, &first_use(func, &format!("the GPU entry {name}")))?;
         let f = self
             .module
             .function(name)
@@ -62,8 +72,17 @@ pub(crate) fn with_options<R>(module: &Module, f: impl FnOnce(&CompileOptions) -
     })
 }
 
-/// `module` compiled and loaded for GPU `ordinal` (once per process).
-fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded>> {
+/// What a capture refuses when primitive `func` would load `what` (a module load would break
+/// the capture).
+fn first_use(func: &str, what: &str) -> String {
+    format!(
+        "loading {what} at the first use of `{func}` on this GPU: call `{func}` once with these \
+         lengths on this device before capturing"
+    )
+}
+
+/// `module` compiled and loaded for GPU `ordinal` (once per process), for primitive `func`.
+fn loaded(device: &Device, ordinal: usize, module: &Module, func: &str) -> Result<Arc<Loaded>> {
     type Cache = Mutex<HashMap<(usize, Module), Arc<Loaded>>>;
     static CACHE: OnceLock<Cache> = OnceLock::new();
     let cache = CACHE.get_or_init(Default::default);
@@ -71,6 +90,8 @@ fn loaded(device: &Device, ordinal: usize, module: &Module) -> Result<Arc<Loaded
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
+    let what = format!("the GPU module {}", module.name());
+    gpu::refuse_in_capture(ordinal, &first_use(func, &what))?;
     let st = gpu::state(device, ordinal)?;
     let (compiled, _) = with_options(module, |opts| {
         warp_cuda::compile_cached(&module.source(), &module.name(), opts, st.gpu.arch())
@@ -114,6 +135,10 @@ fn info(func: &'static str, params: &'static [&'static str]) -> &'static KernelI
 /// Runs `plan` on GPU `ordinal` (`device`) for primitive `func` (whose parameters, for
 /// fault reports, are `params`); `users` are the device addresses of the caller's arrays in
 /// the plan's order.
+///
+/// Inside a capture the launches go on the capture stream (`GpuState::queue`), and the graph
+/// holds the scratch they use (`capture::uses_scratch`); nothing may be compiled or
+/// allocated there, so the module and a large enough workspace must be there already.
 fn run(
     device: &Device,
     ordinal: usize,
@@ -122,29 +147,39 @@ fn run(
     plan: &Plan,
     users: &[u64],
 ) -> Result<()> {
-    let module = loaded(device, ordinal, &plan.module)?;
+    let capturing = gpu::capture_stream(ordinal).is_some();
+    let module = loaded(device, ordinal, &plan.module, func)?;
     let st = gpu::state(device, ordinal)?;
     // Scratch: slices of the GPU's workspace, which grows to the largest need and is kept
     // (no allocation per call). Its lock is held until the launches are queued.
     let (offsets, need) = scratch_layout(&plan.scratch);
     let mut ws = st.workspace.lock().unwrap_or_else(|p| p.into_inner());
-    if ws.buffer.as_ref().is_none_or(|b| b.len() < need) {
-        let old = ws.buffer.as_ref().map_or(0, |b| b.len());
+    if ws.as_ref().is_none_or(|s| s.buffer.len() < need) {
+        gpu::refuse_in_capture(
+            ordinal,
+            &format!(
+                "growing the primitives' scratch memory to {need} bytes for `{func}` (an \
+                 allocation): call `{func}` once with these lengths on this device before \
+                 capturing"
+            ),
+        )?;
+        let old = ws.as_ref().map_or(0, |s| s.buffer.len());
         // The old buffer's free is queued on the default stream: after its last user.
         st.join_pending()?;
-        ws.buffer = None;
+        *ws = None;
         let bytes = need.max(old + old / 2);
         let buf = warp_cuda::DeviceBuffer::alloc(&st.gpu, bytes)
             .map_err(|e| Error::cuda_alloc(device.alias(), bytes, e))?;
-        ws.buffer = Some(buf);
-        // Allocated on the default stream, which every user stream waits for before a launch.
-        ws.last = None;
+        // Allocated on the default stream, which every user stream waits for before a launch:
+        // no last user to wait for.
+        *ws = Some(gpu::Scratch::new(buf));
     }
-    let base = ws.buffer.as_ref().map_or(0, |b| b.device_ptr());
+    let scratch = ws.as_ref().expect("made above").clone();
+    let base = scratch.buffer.device_ptr();
     // A primitive is one launch, however many kernels it queues; its kernels carry no id, so
     // its record notes it as the launch a fault without one comes from.
     let launch = crate::launch_id::next();
-    let (fault, flag) = fault::with_record(&st, ordinal, launch, |r| {
+    let (fault, flag) = fault::with_record(&st.faults, ordinal, launch, |r| {
         r.set_primitive(info(func, params), launch);
         r.addresses()
     })?;
@@ -172,20 +207,25 @@ fn run(
         for (a, w) in args.iter_mut().zip(&s.args) {
             *a = word(w);
         }
-        launches.push((module.function(device, &s.entry)?, blocks, args));
+        launches.push((
+            module.function(device, ordinal, func, &s.entry)?,
+            blocks,
+            args,
+        ));
     }
+    let mut last = scratch.last();
     st.queue(ordinal, None, |stream| {
-        // The workspace's last user may be another stream: wait for its work first.
-        if let Some(last) = ws.last.as_ref().filter(|l| !l.is(stream)) {
-            stream.wait_stream(last).map_err(|e| gpu::err(device, e))?;
+        // The workspace's last user may be another stream: wait for its work first. A graph
+        // orders itself so at each replay instead (nothing runs at capture).
+        if !capturing {
+            gpu::order_scratch(device, &mut last, stream)?;
         }
-        ws.last = Some(stream.clone());
         for (f, blocks, args) in &mut launches {
             let mut params = [args.as_mut_ptr() as *mut c_void];
             // SAFETY: every entry takes one `wp::prim::args_t` (16 u64 words) by value, which
             // `params[0]` points at; the words are device addresses of live memory (the
-            // caller's arrays, checked to hold what the plan touches, and the scratch, freed
-            // only after these launches) and integers.
+            // caller's arrays, checked to hold what the plan touches, and the scratch, kept
+            // by the workspace or the graph) and integers.
             unsafe {
                 st.gpu
                     .launch_raw(f, stream, *blocks, tile.threads, 0, &mut params)
@@ -194,8 +234,12 @@ fn run(
         }
         Ok(())
     })?;
+    drop(last);
     drop(ws);
-    if config::debug() {
+    if capturing {
+        // (Nothing has run yet: there is no fault to check.)
+        super::capture::uses_scratch(ordinal, scratch);
+    } else if config::debug() {
         gpu::synchronize(device, ordinal)?;
     }
     Ok(())

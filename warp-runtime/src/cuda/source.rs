@@ -207,6 +207,7 @@ mod tests {
         cuda_adj: "",
         cuda_adj_error: None,
         consts: &[],
+        requires: &[],
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -221,6 +222,7 @@ mod tests {
         cuda_adj: "",
         cuda_adj_error: None,
         consts: &[],
+        requires: &[],
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -234,6 +236,7 @@ mod tests {
         cuda_adj: "",
         cuda_adj_error: None,
         consts: &[],
+        requires: &[],
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];

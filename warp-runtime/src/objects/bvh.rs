@@ -34,10 +34,11 @@ use warp_core::ArrayView;
 use super::bvh_build::{build_sah, refit as refit_nodes, BuiltBvh};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
 use super::lbvh::{self, Lbvh, LbvhTree};
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use crate::kernel::{ArgCtx, KernelArg};
+use crate::kernel::ArgCtx;
 
 /// An `InvalidArgument` from `what` (`"Bvh::new"`) about its argument `arg`.
 pub(crate) fn bad(what: &str, arg: &str, why: impl std::fmt::Display) -> Error {
@@ -291,7 +292,7 @@ impl Tree {
     /// The CPU kernels' view of the tree; faults carry `ctx`'s names.
     ///
     /// # Safety
-    /// As [`KernelArg::cpu_view`]: the tree (its arrays) must outlive the view's use.
+    /// As [`HostObject::cpu_view`]: the tree (its arrays) must outlive the view's use.
     pub(crate) unsafe fn cpu_tree(&self, ctx: &ArgCtx<'_>) -> BvhTree {
         let words = self.nodes.cpu_view(ctx.kernel, ctx.arg);
         let n = self.num_nodes;
@@ -525,68 +526,32 @@ impl Bvh {
     pub fn tree_host(&self) -> Result<(Vec<BvhNode>, Vec<i32>, Vec<i32>)> {
         self.tree.host()
     }
-
-    fn check_device(&self, ctx: &ArgCtx<'_>) -> Result<()> {
-        if &self.device != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: self.device.alias().to_string(),
-            });
-        }
-        Ok(())
-    }
 }
 
-impl KernelArg for Bvh {
-    type Arg<'a> = &'a Bvh;
-    type CpuView = BvhView;
+impl HostObject for Bvh {
+    type View = BvhView;
+    type Cuda = CudaBvh;
 
-    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
-        arg.check_device(ctx)?;
+    fn device(&self) -> &Device {
+        &self.device
+    }
+
+    unsafe fn cpu_view(&self, ctx: &ArgCtx<'_>) -> Result<BvhView> {
         // SAFETY: the launch borrows the BVH (its tree and arrays) for the view's whole use.
-        let tree = unsafe { arg.tree.cpu_tree(ctx) };
+        let tree = unsafe { self.tree.cpu_tree(ctx) };
         Ok(BvhView::new(
             tree,
-            arg.lowers.cpu_view(ctx.kernel, ctx.arg),
-            arg.uppers.cpu_view(ctx.kernel, ctx.arg),
+            self.lowers.cpu_view(ctx.kernel, ctx.arg),
+            self.uppers.cpu_view(ctx.kernel, ctx.arg),
         ))
     }
 
-    type CudaArg = CudaBvh;
-
-    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
-        arg.check_device(ctx)?;
+    fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaBvh> {
         Ok(CudaBvh {
-            tree: arg.tree.cuda_tree(ctx.index),
-            lowers: arg.lowers.device_address(),
-            uppers: arg.uppers.device_address(),
+            tree: self.tree.cuda_tree(ctx.index),
+            lowers: self.lowers.device_address(),
+            uppers: self.uppers.device_address(),
         })
-    }
-
-    // A BVH carries no gradient.
-    type GradView = ();
-
-    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    type CudaGrad = ();
-
-    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    /// A clone sharing the tree: the tape replays against the tree as it was.
-    type Owned = Bvh;
-
-    fn own(arg: &Self::Arg<'_>) -> Bvh {
-        (*arg).clone()
-    }
-
-    fn borrow(owned: &Bvh) -> &Bvh {
-        owned
     }
 }
 

@@ -27,11 +27,13 @@ use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
 use super::hash_grid_steps::{HashGridKeys, HashGridRanges};
+use super::HostObject;
 use crate::array::Array;
+use crate::capturing::{self, Keep};
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::kernel::{ArgCtx, KernelArg};
+use crate::kernel::ArgCtx;
 use crate::primitives::radix_sort_pairs;
 
 /// A hash grid on one device: `HashGrid::new(dim_x, dim_y, dim_z, &device)`, then
@@ -287,11 +289,22 @@ impl HashGrid {
     ///
     /// A failed build leaves the grid unbuilt (kernels refuse it until a build succeeds).
     ///
+    /// Inside a [capture](crate::capture) the build is recorded like a launch (the same on
+    /// every backend): each replay rebuilds the grid from the contents of `points` at that
+    /// time (as many points as now; launches recorded after it take the grid as built). It
+    /// must allocate nothing there: [`reserve`](HashGrid::reserve) room for the points before
+    /// capturing, pass contiguous points, and build a grid once per capture (a launch recorded
+    /// after a build holds the grid's buffers). On a GPU, build once before capturing (the
+    /// first build loads its kernels and sizes the sort's scratch memory). The check of the
+    /// points is a read-back, which a graph cannot replay: a recorded build does not report
+    /// a non-finite point (it buckets it, consistently; check the points before capturing).
+    ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the argument: `radius` not positive and finite (or so
     /// small that `1 / radius` is infinite); `points` on another device than the grid, with
     /// more than `i32::MAX` points, or with a NaN or infinite coordinate (the first such
-    /// index); device errors.
+    /// index); [`Error::Capture`] for a build inside a capture that would allocate (see
+    /// above); device errors.
     pub fn build(&mut self, points: &Array<Vec3>, radius: f32) -> Result<()> {
         if !(radius.is_finite() && radius > 0.0) {
             return Err(bad(
@@ -321,6 +334,19 @@ impl HashGrid {
         }
         let n = points.len();
         self.built = None;
+        // Inside a capture the build is recorded: it must find its buffers (nothing is
+        // allocated there), and what the last replay left is unknown at each replay.
+        let in_capture = capturing::capturing();
+        if in_capture && (Arc::strong_count(&self.buffers) > 1 || self.capacity() < n) {
+            return Err(Error::Capture {
+                what: format!(
+                    "{WHAT} of {n} points inside a capture needs buffers of the grid's own for \
+                     them, which it would allocate: call `reserve({n})` on the grid before \
+                     capturing, and build it once per capture (a launch recorded after a build \
+                     holds the grid's buffers)"
+                ),
+            });
+        }
         self.reserve(n)?;
         // The steps read the points as a contiguous run.
         let copy;
@@ -334,12 +360,20 @@ impl HashGrid {
         let cells = self.buffers.cell_starts.len();
         // Zero the ranges of the last build: from its keys (still in `keys`) when they are few
         // against the buckets, else every entry (a fill, the fastest way to zero them all).
-        // Unknown until the new ranges are written.
-        let clear_from = self.ranges_from_keys.take();
+        // Unknown until the new ranges are written; always every entry in a graph, whose
+        // replays may follow any build.
+        let clear_from = self.ranges_from_keys.take().filter(|_| !in_capture);
         let b = self.own_buffers();
+        // What the steps' addresses point into, kept by a graph that records them.
+        let uses = || -> Keep {
+            Box::new((
+                points.clone(),
+                [&b.keys, &b.point_ids, &b.cell_starts, &b.cell_ends, &b.bad].map(Array::clone),
+            ))
+        };
         match clear_from {
             Some(0) => {}
-            Some(m) if m <= cells / 8 => dispatch::object_step(
+            Some(m) if m <= cells / 8 => dispatch::object_step_keeping(
                 &self.device,
                 &HashGridRanges {
                     keys: b.keys.device_address(),
@@ -350,6 +384,7 @@ impl HashGrid {
                     clear: 1,
                     pad: 0,
                 },
+                uses,
             )?,
             _ => {
                 b.cell_starts.fill(0)?;
@@ -366,11 +401,11 @@ impl HashGrid {
             values: b.point_ids.device_address(),
             bad: b.bad.device_address(),
         };
-        dispatch::object_step(&self.device, &step)?;
+        dispatch::object_step_keeping(&self.device, &step, uses)?;
         // Buckets lie in 0..cells: sorting by their low bits is sorting by them.
         let bits = (usize::BITS - (cells - 1).leading_zeros()).max(1);
         radix_sort_pairs(&b.keys, &b.point_ids, n, Some(bits))?;
-        dispatch::object_step(
+        dispatch::object_step_keeping(
             &self.device,
             &HashGridRanges {
                 keys: b.keys.device_address(),
@@ -381,7 +416,19 @@ impl HashGrid {
                 clear: 0,
                 pad: 0,
             },
+            uses,
         )?;
+        let built = Built {
+            num_points: n,
+            cell_width: radius,
+            cell_width_inv: inv,
+        };
+        if in_capture {
+            // Recorded: the points' check is a read-back, which a graph cannot replay (see
+            // above). The launches recorded next take the grid as built.
+            self.built = Some(built);
+            return Ok(());
+        }
         // The points' check, read back once everything is queued (on a GPU, the one wait of a
         // build, after its last step: no idle gap between the steps). A build of a non-finite
         // point is complete and consistent, only refused.
@@ -396,11 +443,7 @@ impl HashGrid {
                 format!("has a non-finite point at index {i}: {p:?}"),
             ));
         }
-        self.built = Some(Built {
-            num_points: n,
-            cell_width: radius,
-            cell_width_inv: inv,
-        });
+        self.built = Some(built);
         Ok(())
     }
 
@@ -410,16 +453,9 @@ impl HashGrid {
         &self.buffers
     }
 
-    /// The build a launch of `ctx.kernel` may use: the grid on the launch device and built.
+    /// The build a launch of `ctx.kernel` may use (the launch device is checked by the
+    /// [`HostObject`] seam before).
     fn launch_build(&self, ctx: &ArgCtx<'_>) -> Result<Built> {
-        if &self.device != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: self.device.alias().to_string(),
-            });
-        }
         self.built.ok_or_else(|| Error::InvalidArgument {
             what: format!(
                 "kernel `{}`: argument `{}`: the HashGrid was never built (or its last build \
@@ -464,62 +500,40 @@ pub struct CudaHashGrid {
 
 const _: () = assert!(std::mem::size_of::<CudaHashGrid>() == 48);
 
-impl KernelArg for HashGrid {
-    type Arg<'a> = &'a HashGrid;
-    type CpuView = HashGridView;
+impl HostObject for HashGrid {
+    type View = HashGridView;
+    type Cuda = CudaHashGrid;
 
-    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
-        let built = arg.launch_build(ctx)?;
-        let b = &arg.buffers;
+    fn device(&self) -> &Device {
+        &self.device
+    }
+
+    unsafe fn cpu_view(&self, ctx: &ArgCtx<'_>) -> Result<HashGridView> {
+        let built = self.launch_build(ctx)?;
+        let b = &self.buffers;
         let ids = b.point_ids.view(0..built.num_points)?;
         Ok(HashGridView::new(
             ids.cpu_view(ctx.kernel, ctx.arg),
             b.cell_starts.cpu_view(ctx.kernel, ctx.arg),
             b.cell_ends.cpu_view(ctx.kernel, ctx.arg),
-            arg.dims,
+            self.dims,
             built.cell_width_inv,
         ))
     }
 
-    type CudaArg = CudaHashGrid;
-
-    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
-        let built = arg.launch_build(ctx)?;
-        let b = &arg.buffers;
+    fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaHashGrid> {
+        let built = self.launch_build(ctx)?;
+        let b = &self.buffers;
         let ptr = |a: &Array<i32>| a.device_address();
         Ok(CudaHashGrid {
             point_ids: ptr(&b.point_ids),
             cell_starts: ptr(&b.cell_starts),
             cell_ends: ptr(&b.cell_ends),
-            dims: arg.dims,
+            dims: self.dims,
             num_points: built.num_points as i32,
             cell_width_inv: built.cell_width_inv,
             arg: ctx.index as i32,
         })
-    }
-
-    // A grid carries no gradient.
-    type GradView = ();
-
-    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    type CudaGrad = ();
-
-    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    /// A clone sharing the buffers: the tape replays against the grid as it was.
-    type Owned = HashGrid;
-
-    fn own(arg: &Self::Arg<'_>) -> HashGrid {
-        (*arg).clone()
-    }
-
-    fn borrow(owned: &HashGrid) -> &HashGrid {
-        owned
     }
 }
 

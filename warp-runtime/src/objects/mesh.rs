@@ -29,10 +29,11 @@ use super::bvh::{
 };
 use super::geometry_abi::CudaMesh;
 use super::lbvh;
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use crate::kernel::{ArgCtx, KernelArg};
+use crate::kernel::ArgCtx;
 
 /// A triangle mesh on one device (Warp's `wp.Mesh(points, indices, velocities)`; the suite
 /// `tests/suite/mesh.rs` runs kernels like this one):
@@ -362,16 +363,8 @@ impl Mesh {
         self.tree.host()
     }
 
-    /// The checks of a launch: the launch device, and the points as many as built with.
+    /// The checks of a launch beyond its device: the points as many as built with.
     fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
-        if &self.device != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: self.device.alias().to_string(),
-            });
-        }
         if self.points.len() != self.num_points {
             return Err(Error::InvalidArgument {
                 what: format!(
@@ -388,60 +381,38 @@ impl Mesh {
     }
 }
 
-impl KernelArg for Mesh {
-    type Arg<'a> = &'a Mesh;
-    type CpuView = MeshView;
+impl HostObject for Mesh {
+    type View = MeshView;
+    type Cuda = CudaMesh;
 
-    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
-        arg.check_launch(ctx)?;
+    fn device(&self) -> &Device {
+        &self.device
+    }
+
+    unsafe fn cpu_view(&self, ctx: &ArgCtx<'_>) -> Result<MeshView> {
+        self.check_launch(ctx)?;
         // SAFETY: the launch borrows the mesh (its tree and arrays) for the view's whole use.
-        let tree = unsafe { arg.tree.cpu_tree(ctx) };
+        let tree = unsafe { self.tree.cpu_tree(ctx) };
         Ok(MeshView::new(
             tree,
-            arg.points.cpu_view(ctx.kernel, ctx.arg),
-            arg.velocities
+            self.points.cpu_view(ctx.kernel, ctx.arg),
+            self.velocities
                 .as_ref()
                 .map(|v| v.cpu_view(ctx.kernel, ctx.arg)),
-            arg.indices.cpu_view(ctx.kernel, ctx.arg),
+            self.indices.cpu_view(ctx.kernel, ctx.arg),
         ))
     }
 
-    type CudaArg = CudaMesh;
-
-    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
-        arg.check_launch(ctx)?;
+    fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaMesh> {
+        self.check_launch(ctx)?;
         Ok(CudaMesh {
-            tree: arg.tree.cuda_tree(ctx.index),
-            points: arg.points.device_address(),
-            velocities: arg.velocities.as_ref().map_or(0, |v| v.device_address()),
-            indices: arg.indices.device_address(),
-            num_points: arg.num_points as i32,
+            tree: self.tree.cuda_tree(ctx.index),
+            points: self.points.device_address(),
+            velocities: self.velocities.as_ref().map_or(0, |v| v.device_address()),
+            indices: self.indices.device_address(),
+            num_points: self.num_points as i32,
             pad: 0,
         })
-    }
-
-    // A mesh carries no gradient (Warp's mesh queries give none to the points either).
-    type GradView = ();
-
-    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    type CudaGrad = ();
-
-    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    /// A clone sharing the tree: the tape replays against the tree as it was.
-    type Owned = Mesh;
-
-    fn own(arg: &Self::Arg<'_>) -> Mesh {
-        (*arg).clone()
-    }
-
-    fn borrow(owned: &Mesh) -> &Mesh {
-        owned
     }
 }
 

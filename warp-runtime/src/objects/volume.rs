@@ -23,10 +23,11 @@ use warp_core::objects::nanovdb::{self, BuildKind, GridInfo, GridType, Map};
 use warp_core::objects::volume::{VolumeGrid, VolumeValue, VolumeView, VoxelIndex};
 
 use super::nvdb::{self, Codec, NvdbGrid};
+use super::HostObject;
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
-use crate::kernel::{ArgCtx, KernelArg};
+use crate::kernel::ArgCtx;
 
 /// Warp's volume sampling modes (`wp.Volume.CLOSEST`): the nearest voxel.
 pub const VOLUME_CLOSEST: i32 = 0;
@@ -344,19 +345,6 @@ impl<T: VolumeGrid> Volume<T> {
         }
     }
 
-    /// The checks of a launch: the device.
-    fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
-        if &self.device != ctx.device {
-            return Err(Error::DeviceMismatch {
-                kernel: ctx.kernel,
-                arg: ctx.arg,
-                expected: ctx.device.alias().to_string(),
-                found: self.device.alias().to_string(),
-            });
-        }
-        Ok(())
-    }
-
     /// The kernel view over the volume's device memory.
     fn view(&self, kernel: &'static str) -> VolumeView<T> {
         let grad = self.grad.as_ref().map_or(0, |g| g.device_address());
@@ -548,49 +536,25 @@ impl Volume<VoxelIndex> {
     }
 }
 
-impl<T: VolumeGrid> KernelArg for Volume<T> {
-    type Arg<'a> = &'a Volume<T>;
-    type CpuView = VolumeView<T>;
+/// The kernel's record on a GPU is the CPU view itself: `wp::volume_t<T>` is laid out as
+/// `VolumeView<T>`; the gradient grid travels in it.
+impl<T: VolumeGrid> HostObject for Volume<T> {
+    type View = VolumeView<T>;
+    type Cuda = VolumeView<T>;
 
-    unsafe fn cpu_view(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CpuView> {
-        arg.check_launch(ctx)?;
-        Ok(arg.view(ctx.kernel))
+    fn device(&self) -> &Device {
+        &self.device
     }
 
-    /// The same record on a GPU: `wp::volume_t<T>` is laid out as `VolumeView<T>`.
-    type CudaArg = VolumeView<T>;
-
-    fn cuda_arg(arg: &Self::Arg<'_>, ctx: &ArgCtx<'_>) -> Result<Self::CudaArg> {
-        arg.check_launch(ctx)?;
-        Ok(arg.view(ctx.kernel))
+    unsafe fn cpu_view(&self, ctx: &ArgCtx<'_>) -> Result<VolumeView<T>> {
+        Ok(self.view(ctx.kernel))
     }
 
-    // The gradient grid travels in the view itself (the adjoints add into it at the offsets
-    // they read), so there is no separate gradient argument.
-    type GradView = ();
-
-    unsafe fn grad_view(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
+    fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<VolumeView<T>> {
+        Ok(self.view(ctx.kernel))
     }
 
-    type CudaGrad = ();
-
-    fn cuda_grad(_: &Self::Arg<'_>, _: &ArgCtx<'_>) -> Result<()> {
-        Ok(())
-    }
-
-    /// A clone sharing the buffers.
-    type Owned = Volume<T>;
-
-    fn own(arg: &Self::Arg<'_>) -> Volume<T> {
-        (*arg).clone()
-    }
-
-    fn borrow(owned: &Volume<T>) -> &Volume<T> {
-        owned
-    }
-
-    fn zero_grad(arg: &Self::Arg<'_>) -> Result<()> {
-        arg.zero_grad()
+    fn zero_grad(&self) -> Result<()> {
+        Volume::zero_grad(self)
     }
 }

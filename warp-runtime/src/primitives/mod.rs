@@ -30,9 +30,17 @@
 //! Everything runs on the arrays' device. On a GPU the kernels are queued on the calling
 //! thread's current stream (a [`ScopedStream`](crate::ScopedStream)'s, else the default
 //! stream), after the array operations queued before, without waiting: a primitive returns
-//! before its result is ready, like a launch. Scratch memory is allocated per call from the
-//! device's stream-ordered pool and freed after the call's kernels. On the CPU a primitive
+//! before its result is ready, like a launch. Scratch memory is the device's workspace, which
+//! grows to the largest need seen and is reused from call to call. On the CPU a primitive
 //! has finished when it returns.
+//!
+//! # Graphs
+//! A primitive reads nothing back, so a [capture](crate::capture) records it like a launch,
+//! on every backend: each replay runs it on the arrays' contents at that time, with a device
+//! count read where the work runs, and a host count fixed at capture (like a launch's dims).
+//! On a GPU nothing is compiled or allocated inside a capture: call the primitive once with
+//! the same lengths on the device before capturing (its first call loads its GPU module and
+//! sizes the scratch memory that calls reuse).
 //!
 //! Primitives are not recorded by a [`Tape`](crate::Tape): they have no adjoint.
 
@@ -299,7 +307,17 @@ fn scan_impl<T: ScanElement>(
         output.device_address(),
         len,
         inclusive,
+        || uses((input.clone(), output.clone()), count),
     )
+}
+
+/// What a graph that records a primitive keeps alive: its arrays and its count array.
+fn uses<A: Send + 'static>(arrays: A, count: Count<'_>) -> crate::capturing::Keep {
+    let count = match count {
+        Count::Device(c) => Some(c.clone()),
+        Count::Host(_) => None,
+    };
+    Box::new((arrays, count))
 }
 
 /// The smaller of two arrays' lengths and that array's name.
@@ -456,6 +474,7 @@ fn reduce_impl<T: ScanElement>(
         out.device_address(),
         len,
         op,
+        || uses((values.clone(), out.clone()), count),
     )
 }
 
@@ -476,8 +495,8 @@ fn reduce_impl<T: ScanElement>(
 ///   indices, Morton codes). Not for `f32` keys (their low bits have no order).
 ///
 /// Unlike Warp, the arrays need not hold `2 * count` elements: the ping-pong buffers are
-/// scratch memory the call allocates (stream-ordered on a GPU), and nothing past `count` is
-/// touched. Keys and values must not overlap; both are contiguous and on the same device.
+/// scratch memory (on a GPU the device's workspace, reused between calls), and nothing past
+/// `count` is touched. Keys and values must not overlap; both are contiguous and on the same device.
 ///
 /// Algorithm: LSD radix sort (8-bit digits on the CPU, 4-bit digits on a GPU), see
 /// `docs/primitives-notes.md`.
@@ -537,6 +556,7 @@ pub fn radix_sort_pairs<'c, K: SortKey, V: SortValue>(
         values.device_address(),
         len,
         bits,
+        || uses((keys.clone(), values.clone()), count),
     )
 }
 
@@ -660,6 +680,15 @@ fn compact_impl<T: Element>(
             out_count.device_address(),
         ],
         len,
+        || {
+            let arrays = (
+                values.clone(),
+                flags.clone(),
+                out.clone(),
+                out_count.clone(),
+            );
+            uses(arrays, count)
+        },
     )
 }
 

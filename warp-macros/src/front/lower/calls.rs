@@ -53,7 +53,7 @@ impl Lowerer {
         let last = segs.last().cloned().unwrap_or_default();
         let last = last.strip_prefix("r#").map(str::to_owned).unwrap_or(last);
         let prefix_ok =
-            segs.len() == 1 || (segs.len() == 2 && (segs[0] == "wp" || segs[0] == "warp_lang"));
+            segs.len() == 1 || (segs.len() == 2 && crate::paths::names_facade(&segs[0]));
 
         if prefix_ok && last == "tid" {
             if !c.args.is_empty() {

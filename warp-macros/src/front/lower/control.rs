@@ -1,17 +1,15 @@
 //! Control flow: `if` as a statement and as a value (a variable both branches assign),
 //! `while` (a `loop` that breaks on the negated condition), `for` over integer ranges with
-//! `.rev()` and `.step_by(k)` (and over host objects' queries, `query.rs`), the loop depth that `break` and `continue` are checked against,
-//! and the short-circuit `&&` and `||` (an `if` around the right operand).
+//! `.rev()` and `.step_by(k)` (and over host objects' queries, `query.rs`), and the
+//! short-circuit `&&` and `||` (an `if` around the right operand). That `break` and `continue`
+//! are inside a loop is the validator's check (`valid::wellformed`).
 
 use super::typing::flex_value;
 use super::*;
 
 impl Lowerer {
     pub(super) fn loop_body<T>(&mut self, f: impl FnOnce(&mut Self) -> R<T>) -> R<(Block, T)> {
-        self.loops += 1;
-        let r = self.in_block(f);
-        self.loops -= 1;
-        r
+        self.in_block(f)
     }
 
     pub(super) fn while_loop(&mut self, w: &syn::ExprWhile) -> R<()> {

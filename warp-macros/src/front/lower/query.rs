@@ -43,7 +43,7 @@ impl Lowerer {
             .map(|s| s.ident.to_string())
             .collect();
         let prefix_ok =
-            segs.len() == 1 || (segs.len() == 2 && (segs[0] == "wp" || segs[0] == "warp_lang"));
+            segs.len() == 1 || (segs.len() == 2 && crate::paths::names_facade(&segs[0]));
         let b = builtins::lookup_user(segs.last()?)?;
         (prefix_ok && b.iterate.is_some()).then_some((c, b))
     }

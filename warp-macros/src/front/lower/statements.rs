@@ -288,18 +288,13 @@ impl Lowerer {
                         "`break` with a label or a value is not supported in kernels",
                     );
                 }
-                if self.loops == 0 {
-                    return err(span, "`break` outside of a loop");
-                }
+                // Outside of a loop: the validator's error (`valid::wellformed`).
                 self.push(StmtKind::Break, span);
                 Ok(())
             }
             Expr::Continue(c) => {
                 if c.label.is_some() {
                     return err(span, "`continue` with a label is not supported in kernels");
-                }
-                if self.loops == 0 {
-                    return err(span, "`continue` outside of a loop");
                 }
                 self.push(StmtKind::Continue, span);
                 Ok(())

@@ -200,14 +200,6 @@ fn subset_errors() {
         ),
         (
             parse_quote!(
-                fn k(x: f32) {
-                    break;
-                }
-            ),
-            "outside of a loop",
-        ),
-        (
-            parse_quote!(
                 fn k(x: i32) {
                     match x {
                         _ => {}

@@ -11,7 +11,9 @@
 //! gradients through views need nothing of their own. What a view adds is its bounds: the
 //! range of `view` is checked when the view is made (`lo <= hi <= len`, as Rust slicing
 //! panics) and each index into it against its length (`Op::ViewCheck`); an index fixed by
-//! `row` is checked by the access itself, as part of the full index into the array.
+//! `row` is checked by the access itself, as part of the full index into the array. A use of a
+//! view that is not rewritten (passed to a func, printed, copied into an `if` value) reads its
+//! never-defined variable: the validator reports it (`valid::wellformed`).
 
 use super::*;
 
@@ -277,21 +279,5 @@ impl Lowerer {
     pub(super) fn view_extent(&mut self, a: VarId, k: u8, span: Span) -> VarId {
         let d = self.view_of(a);
         self.free_extent(&d, k, span)
-    }
-
-    /// Errors for every use of a view that was not rewritten (a view passed to a func,
-    /// returned, copied into an `if` value, printed, ...).
-    pub(super) fn unsupported_view_uses(&self, b: &Block, errors: &mut Vec<syn::Error>) {
-        walk_stmts(b, &mut |s| {
-            let mut bad = false;
-            s.kind.for_each_read(&mut |v| bad |= self.is_view(v));
-            if bad {
-                errors.push(syn::Error::new(
-                    s.span,
-                    "a view (`row`, `view`, `indexed`) can be indexed, measured (`len`, `shape`) and \
-                     viewed again, nothing else yet: pass the array and its index to funcs",
-                ));
-            }
-        });
     }
 }
