@@ -88,7 +88,10 @@ fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Resul
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
-    gpu::refuse_in_capture(ordinal, &first_use(&format!("the library {}", lib.name)))?;
+    gpu::refuse_in_capture(
+        ordinal,
+        &first_use(&format!("the library {}", lib.section())),
+    )?;
     let st = gpu::state(device, ordinal)?;
     let p = program(lib).map_err(|e| gpu::err(device, e))?;
     let (compiled, _) = with_options(&p, |opts| {
