@@ -115,6 +115,7 @@ pub use warp_report as report;
 pub use warp_runtime::aot;
 #[cfg(feature = "cuda")]
 pub use warp_runtime::cuda::{compile_reports, CompileReport};
+#[cfg(feature = "cuda")]
 pub use warp_runtime::cuda_source;
 /// Several GPUs: NCCL collectives on arrays (`Communicator`, `group`), peer access.
 #[cfg(feature = "cuda")]

@@ -1278,7 +1278,7 @@ const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
     ),
     (8, "kernel", &["kernel.rs"]),
     (9, "device", &["device.rs", "launch_id.rs"]),
-    (10, "leaves", &["error.rs", "config.rs"]),
+    (10, "leaves", &["error.rs", "config.rs", "cpp_table.rs"]),
 ];
 
 /// The imports that climb a layer on purpose (ARCHITECTURE.md states each): (file, the files it

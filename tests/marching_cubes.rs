@@ -157,74 +157,6 @@ fn padded(dims: [usize; 3], inner: &[f32], outside: f32) -> ([usize; 3], Vec<f32
 // The tables
 // ------------------------------------------------------------------------------------------
 
-/// The C++ rendering of the tables (what `wp_marching_cubes.h` holds between its markers).
-fn render_tables() -> String {
-    let mut s = String::new();
-    s.push_str("WP_MC_TABLE static const u16 mc_case_to_tri_range[257] = {\n");
-    for row in MarchingCubes::CASE_TO_TRI_RANGE.chunks(12) {
-        let items: Vec<String> = row.iter().map(|v| v.to_string()).collect();
-        s.push_str(&format!("    {},\n", items.join(", ")));
-    }
-    s.push_str("};\n");
-    s.push_str("WP_MC_TABLE static const u8 mc_tri_local_indices[2460] = {\n");
-    let r = MarchingCubes::CASE_TO_TRI_RANGE;
-    for c in 0..256 {
-        let tris = &MarchingCubes::TRI_LOCAL_INDICES[r[c] as usize..r[c + 1] as usize];
-        if !tris.is_empty() {
-            let items: Vec<String> = tris.iter().map(|v| v.to_string()).collect();
-            s.push_str(&format!("    {},  // {c}\n", items.join(", ")));
-        }
-    }
-    s.push_str("};\n");
-    s.push_str("WP_MC_TABLE static const u8 mc_edge_offsets[12][4] = {\n");
-    for e in MarchingCubes::EDGE_GRID_OFFSETS {
-        s.push_str(&format!(
-            "    {{{}, {}, {}, {}}},\n",
-            e[0], e[1], e[2], e[3]
-        ));
-    }
-    s.push_str("};\n");
-    s
-}
-
-const HEADER: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/warp-cuda/cuda/wp_marching_cubes.h"
-);
-const BEGIN: &str = "// BEGIN GENERATED TABLES";
-const END: &str = "// END GENERATED TABLES";
-
-/// The header's tables are the Rust ones, rendered (`WARP_LANG_BLESS=1` rewrites them): the
-/// tables cannot drift apart.
-#[test]
-fn header_tables_are_the_rust_tables() {
-    let text = std::fs::read_to_string(HEADER).unwrap();
-    let begin = text.find(BEGIN).expect("begin marker");
-    // The tables start after the marker's comment lines.
-    let mut body = begin;
-    for line in text[begin..].split_inclusive('\n') {
-        if !line.starts_with("//") || line.starts_with(END) {
-            break;
-        }
-        body += line.len();
-    }
-    let end = text.find(END).expect("end marker");
-    assert!(body <= end);
-    let want = render_tables();
-    if text[body..end] != want {
-        if std::env::var("WARP_LANG_BLESS").as_deref() == Ok("1") {
-            let fresh = format!("{}{}{}", &text[..body], want, &text[end..]);
-            std::fs::write(HEADER, fresh).unwrap();
-            eprintln!("rewrote the tables of {HEADER}");
-        } else {
-            panic!(
-                "the tables in {HEADER} differ from MarchingCubes' (run with WARP_LANG_BLESS=1 \
-                 to rewrite them)"
-            );
-        }
-    }
-}
-
 /// The tables' own consistency: the derived grid-edge table is Warp's, every triangle's edges
 /// are crossed in its case (endpoints on different sides), complementary cases have as many
 /// vertices, and the tables have Warp's sizes and extremes.
@@ -1001,13 +933,12 @@ fn nvrtc_compiles_the_kernels() {
         eprintln!("SKIPPED marching_cubes::nvrtc_compiles_the_kernels: {e}");
         return;
     }
-    let lib = wp::objects::BUILD_LIBRARIES
-        .iter()
-        .find(|l| l.name == "wp_marching_cubes")
+    let lib = wp::objects::build_libraries()
+        .find(|l| l.section() == "marching_cubes")
         .expect("the marching cubes library is listed");
     for arch in [90, 80] {
-        let c = wp::objects::compile_library(lib, arch)
-            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.name));
+        let c = wp::objects::compile_library(&lib, arch)
+            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.section()));
         assert!(!c.cubin.is_empty());
         assert!(!c.log.contains("warning"), "sm_{arch}: {}", c.log);
     }

@@ -781,13 +781,12 @@ fn nvrtc_compiles_the_kernels() {
         eprintln!("SKIPPED volume_build::nvrtc_compiles_the_kernels: {e}");
         return;
     }
-    let lib = wp::objects::BUILD_LIBRARIES
-        .iter()
-        .find(|l| l.name == "wp_volume_build")
+    let lib = wp::objects::build_libraries()
+        .find(|l| l.section() == "volume_build")
         .expect("the volume build library is listed");
     for arch in [90, 80] {
-        let c = wp::objects::compile_library(lib, arch)
-            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.name));
+        let c = wp::objects::compile_library(&lib, arch)
+            .unwrap_or_else(|e| panic!("{} for sm_{arch}: {e}", lib.section()));
         assert!(!c.cubin.is_empty());
         assert!(!c.log.contains("warning"), "sm_{arch}: {}", c.log);
     }

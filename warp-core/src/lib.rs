@@ -10,6 +10,8 @@
 pub mod adjoint;
 pub mod builtins;
 pub mod capability;
+#[cfg(test)]
+mod cuda_constants;
 pub mod fault;
 pub mod float16;
 pub mod grad;

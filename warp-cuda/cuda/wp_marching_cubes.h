@@ -46,8 +46,12 @@ namespace wp {
 #define WP_MC_TABLE
 #endif
 
-// BEGIN GENERATED TABLES (rendered from warp-runtime's MarchingCubes tables by
-// tests/marching_cubes.rs, which fails when they differ; WARP_LANG_BLESS=1 rewrites them)
+// The case tables (the classic marching cubes tables, as Warp 1.19 has them): case c's
+// triangles are mc_tri_local_indices[mc_case_to_tri_range[c] .. mc_case_to_tri_range[c + 1]],
+// three cell edges each, one line per case that has any. The one copy: warp-runtime's CPU
+// steps read these initializers at compile time (objects/marching_cubes.rs, cpp_table.rs), and
+// check mc_edge_offsets against the corner and edge tables they derive it from; so keep them
+// plain: decimal integers, comments, braces.
 WP_MC_TABLE static const u16 mc_case_to_tri_range[257] = {
     0, 0, 3, 6, 12, 15, 21, 27, 36, 39, 45, 51,
     60, 66, 75, 84, 90, 93, 99, 105, 114, 120, 129, 138,
@@ -342,7 +346,6 @@ WP_MC_TABLE static const u8 mc_edge_offsets[12][4] = {
     {1, 1, 0, 2},
     {0, 1, 0, 2},
 };
-// END GENERATED TABLES
 
 /// Offset of cell corner c (0..7) from the cell's node.
 WP_FN i32 mc_corner_dx(i32 c) { return ((c + 1) >> 1) & 1; }

@@ -20,6 +20,9 @@ mod builtins;
 mod expand;
 mod front;
 mod ir;
+#[cfg(test)]
+#[path = "tests/library_sections.rs"]
+mod library_sections;
 mod middle;
 mod operators;
 mod paths;

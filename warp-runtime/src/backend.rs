@@ -206,17 +206,33 @@ pub(crate) unsafe trait ObjectStep: Copy + Send + Sync {
     fn run_cpu(&self) -> Result<()>;
 }
 
-/// A host object's CUDA build library: a translation unit of its header with the build
-/// kernels enabled, compiled by NVRTC through the kernel disk cache the first time a GPU runs
-/// one of its steps, and kept loaded for the process.
-#[derive(Debug)]
+/// A host object's CUDA build library: a section of the CUDA library whose header, with its
+/// build kernels enabled, holds the kernels of the object's steps. The facts (header, define,
+/// program name) are the section's row in `warp_cuda::library::SECTIONS`; this names the row.
+/// Compiled by NVRTC through the kernel disk cache the first time a GPU runs one of its steps,
+/// and kept loaded for the process.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ObjectLibrary {
-    /// The program's name (also its cache key).
-    pub name: &'static str,
-    /// The translation unit (`#define WP_HASH_GRID_BUILD 1` and the header's `#include`).
-    pub source: &'static str,
-    /// The library headers it includes (names in `warp_cuda::HEADERS`).
-    pub headers: &'static [&'static str],
+    section: &'static str,
+}
+
+impl ObjectLibrary {
+    /// The build library of `section`. With the `cuda` feature, a section that is no row of
+    /// the library or has no build library fails the build where this is evaluated as a
+    /// constant (the objects' `LIBRARY` statics are).
+    pub(crate) const fn of(section: &'static str) -> Self {
+        #[cfg(feature = "cuda")]
+        assert!(
+            warp_cuda::library::get(section).build.is_some(),
+            "the section has no build library"
+        );
+        ObjectLibrary { section }
+    }
+
+    /// The library section's name (`"hash_grid"`; its header is `wp_hash_grid.h`).
+    pub fn section(&self) -> &'static str {
+        self.section
+    }
 }
 /// A backend's memory, as array operations use it: bytes at offsets. Every operation is
 /// ordered after the kernels that may use the memory (on a GPU: after every stream's work;

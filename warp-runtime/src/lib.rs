@@ -34,6 +34,7 @@ mod backend;
 mod capturing;
 pub mod checkpoint;
 pub mod config;
+mod cpp_table;
 mod cpu;
 pub mod cuda;
 pub mod device;
@@ -55,6 +56,7 @@ pub use cuda::aot;
 pub use cuda::distributed;
 #[cfg(feature = "cuda")]
 pub use cuda::pinned;
+#[cfg(feature = "cuda")]
 pub use cuda::source as cuda_source;
 #[cfg(feature = "cuda")]
 pub use cuda::stream;

@@ -11,7 +11,9 @@
 //! (the return of a user func, say), so every builtin is a generic free function dispatching
 //! through a small trait implemented, by macros, for exactly the supported types:
 //!
-//! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...).
+//! * [`math`]: scalar and componentwise math, vector math ([`min`], [`normalize`], ...), and
+//!   the traits the builtins dispatch through ([`Float`], [`FloatVec`], ...; defined in the
+//!   leaf module `traits`, which `math` and `norm` both build on).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
 //! * [`transform`]: rigid-transform builtins ([`transform_point`], [`transform_multiply`], ...).
 //! * [`svd`]: matrix decompositions returning tuples ([`svd3`], [`eig3`], [`qr3`], [`svd2`]).
@@ -42,6 +44,7 @@ pub(crate) mod norm;
 pub mod rand;
 pub mod special;
 pub mod svd;
+mod traits;
 pub mod transform;
 pub mod volume;
 

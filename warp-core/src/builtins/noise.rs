@@ -32,7 +32,7 @@ use glam::{IVec2, IVec3, IVec4, Vec2, Vec3, Vec4};
 use super::rand::rand_pcg;
 
 /// Warp's primes for hashing lattice coordinates, one per axis.
-const PRIMES: [u32; 4] = [73_856_093, 19_349_663, 53_471_161, 10_000_019];
+pub(crate) const PRIMES: [u32; 4] = [73_856_093, 19_349_663, 53_471_161, 10_000_019];
 
 /// The noise's argument types: `f32`, `Vec2`, `Vec3`, `Vec4`, with their period types (`i32`,
 /// `IVec2`, `IVec3`, `IVec4`).

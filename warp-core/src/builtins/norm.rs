@@ -48,7 +48,7 @@
 
 use glam::{DQuat, DVec2, DVec3, DVec4, Quat, Vec2, Vec3, Vec4};
 
-use super::math::{Float, FloatVec, Scalar, Signed};
+use super::traits::{Float, FloatVec, Scalar, Signed};
 
 /// The scalar facts the rescaled norms need: `f32`, `f64`.
 pub(crate) trait NormScalar: Float + core::ops::Div<Output = Self> {

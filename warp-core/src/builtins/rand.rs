@@ -51,10 +51,10 @@ pub const DRAWS: &[(&str, u32)] = &[
 use glam::{Vec2, Vec3};
 
 /// `2^-24`: the spacing of uniform draws.
-const UNIT: f32 = 1.0 / 16_777_216.0;
+pub(crate) const UNIT: f32 = 1.0 / 16_777_216.0;
 /// Added to the radius draw of `randn` so that its logarithm is finite (Warp's
 /// `RANDN_EPSILON`, about `2^-24`).
-const RANDN_EPSILON: f32 = 5.96e-8;
+pub(crate) const RANDN_EPSILON: f32 = 5.96e-8;
 /// `2π` rounded to f32 (`2 * PI`, which is exact in binary).
 const TWO_PI: f32 = 2.0 * core::f32::consts::PI;
 

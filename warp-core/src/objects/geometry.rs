@@ -550,7 +550,7 @@ pub fn intersect_tri_tri(v0: Vec3, v1: Vec3, v2: Vec3, u0: Vec3, u1: Vec3, u2: V
 }
 
 /// The distance tolerance of [`intersect_tri_tri`], relative to `|n|` in scaled units.
-const TRI_TRI_EPS: f32 = 1e-6;
+pub(crate) const TRI_TRI_EPS: f32 = 1e-6;
 
 fn degenerate(t: &[Vec3; 3]) -> bool {
     let (e0, e1, e2) = (t[1] - t[0], t[2] - t[0], t[2] - t[1]);

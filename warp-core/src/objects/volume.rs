@@ -103,7 +103,7 @@ const POSITION: &str = "volume sample position";
 /// Offset of the leaf's value mask (8 little-endian u64 words).
 const LEAF_MASK: u64 = super::nanovdb::LEAF_VALUE_MASK as u64;
 /// Offset of an index leaf's `mPrefixSum` (its `mOffset` is at the value table, 80).
-const INDEX_PREFIX_SUM: u64 = 88;
+pub(crate) const INDEX_PREFIX_SUM: u64 = 88;
 /// Voxels in a leaf.
 const LEAF_VOXELS: u64 = 512;
 

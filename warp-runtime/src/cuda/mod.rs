@@ -1,8 +1,8 @@
 //! The CUDA backend: kernels compiled from their CUDA C++ templates by NVRTC at first launch
 //! and launched asynchronously on a GPU's streams; arrays in GPU memory.
 //!
-//! - `source`: assembles a kernel's translation unit (also without the `cuda` feature: the
-//!   host tests compile generated units with g++).
+//! - `source`: assembles a kernel's translation unit (its sections from
+//!   `warp_cuda::library`; the host tests compile generated units with g++).
 //! - `options`, `aot`, `module`: how a unit is compiled (NVRTC options), ahead-of-time cubins,
 //!   and the per-GPU cache of loaded kernels with what compiling them cost.
 //! - `gpu`: per-GPU state and the stream ordering model; `fault`: the fault records kernels
@@ -18,6 +18,7 @@
 //! - `backend`: `Cuda`, the backend (see the crate's `backend.rs`) that the runtime
 //!   dispatches to for `"cuda:N"`.
 
+#[cfg(feature = "cuda")]
 pub mod source;
 
 #[cfg(feature = "cuda")]

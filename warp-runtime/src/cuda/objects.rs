@@ -1,5 +1,6 @@
 //! Host objects' build steps on a GPU ([`ObjectStep`]): each object's build library (its
-//! header with the build kernels enabled, e.g. `wp_hash_grid.h` with `WP_HASH_GRID_BUILD`) is
+//! header with the build kernels enabled, e.g. `wp_hash_grid.h` with `WP_HASH_GRID_BUILD`: the
+//! section's row in `warp_cuda::library::SECTIONS`) is
 //! compiled by NVRTC through the kernel disk cache the first time a GPU runs one of its steps,
 //! loaded, and kept for the process with its functions; a step's launch goes on the calling
 //! thread's current stream, as a kernel's does (the ordering model of `gpu.rs`), without host
@@ -15,7 +16,8 @@ use crate::error::Result;
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::{Arc, Mutex, OnceLock};
-use warp_cuda::{CompileOptions, Function};
+use warp_cuda::library::{self, Section};
+use warp_cuda::{CompileOptions, CudaError, Function};
 
 /// Threads per block of the build kernels (grid-stride loops: any count of blocks works).
 const THREADS: u32 = 256;
@@ -26,18 +28,36 @@ struct Loaded {
     functions: Mutex<HashMap<&'static str, Function>>,
 }
 
-/// Compiles with the runtime's options: the library's headers, FMA contraction as
-/// `config::cuda_fmad` says (one setting for all GPU code).
-fn with_options<R>(lib: &ObjectLibrary, f: impl FnOnce(&CompileOptions) -> R) -> R {
-    let headers: Vec<(&str, &str)> = warp_cuda::HEADERS
-        .iter()
-        .copied()
-        .filter(|(name, _)| lib.headers.contains(name))
-        .collect();
+/// A build library's program: its name (NVRTC's and the cache key), its translation unit, and
+/// the section's row (headers and rounding).
+struct Program {
+    name: String,
+    source: String,
+    row: &'static Section,
+}
+
+/// The program of `lib`, from its section's row. (`ObjectLibrary::of` checked at compile time
+/// that the row has a build library; the error is for a library made otherwise.)
+fn program(lib: &ObjectLibrary) -> warp_cuda::Result<Program> {
+    let row = library::find(lib.section());
+    match row.and_then(|r| Some((r, r.build_name()?, r.build_source()?))) {
+        Some((row, name, source)) => Ok(Program { name, source, row }),
+        None => Err(CudaError::InvalidArgument(format!(
+            "the CUDA library has no build library named `{}`",
+            lib.section()
+        ))),
+    }
+}
+
+/// Compiles with the runtime's options: the core and the section's header, FMA contraction as
+/// `config::cuda_fmad` says (one setting for all GPU code) unless the section's row rounds
+/// exactly.
+fn with_options<R>(p: &Program, f: impl FnOnce(&CompileOptions) -> R) -> R {
     f(&CompileOptions {
-        fmad: config::cuda_fmad(),
+        fmad: p.row.exact.fmad(config::cuda_fmad()),
         line_info: true,
-        headers: &headers,
+        headers: &p.row.standalone_headers(),
+        extra_options: p.row.exact.extra_options(),
         ..Default::default()
     })
 }
@@ -45,8 +65,9 @@ fn with_options<R>(lib: &ObjectLibrary, f: impl FnOnce(&CompileOptions) -> R) ->
 /// Compiles `lib` for `sm_{arch}` (no GPU needed, only libnvrtc): how the tests check that
 /// NVRTC accepts every build library on machines without a GPU.
 pub fn compile_library(lib: &ObjectLibrary, arch: u32) -> warp_cuda::Result<warp_cuda::Compiled> {
-    with_options(lib, |opts| {
-        warp_cuda::compile(lib.source, lib.name, opts, arch)
+    let p = program(lib)?;
+    with_options(&p, |opts| {
+        warp_cuda::compile(&p.source, &p.name, opts, arch)
     })
 }
 
@@ -63,21 +84,25 @@ fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Resul
     type Cache = Mutex<HashMap<(usize, &'static str), Arc<Loaded>>>;
     static CACHE: OnceLock<Cache> = OnceLock::new();
     let cache = CACHE.get_or_init(Default::default);
-    let key = (ordinal, lib.name);
+    let key = (ordinal, lib.section());
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         return Ok(l.clone());
     }
-    gpu::refuse_in_capture(ordinal, &first_use(&format!("the library {}", lib.name)))?;
+    gpu::refuse_in_capture(
+        ordinal,
+        &first_use(&format!("the library {}", lib.section())),
+    )?;
     let st = gpu::state(device, ordinal)?;
-    let (compiled, _) = with_options(lib, |opts| {
-        warp_cuda::compile_cached(lib.source, lib.name, opts, st.gpu.arch())
+    let p = program(lib).map_err(|e| gpu::err(device, e))?;
+    let (compiled, _) = with_options(&p, |opts| {
+        warp_cuda::compile_cached(&p.source, &p.name, opts, st.gpu.arch())
     })
     .map_err(|e| gpu::err(device, e))?;
     let module = st
         .gpu
         .load_module(&compiled.cubin)
         .map_err(|e| gpu::err(device, e))?;
-    log::info!("loaded the build library {} on {device}", lib.name);
+    log::info!("loaded the build library {} on {device}", p.name);
     let l = Arc::new(Loaded {
         module,
         functions: Mutex::new(HashMap::new()),

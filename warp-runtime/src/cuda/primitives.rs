@@ -20,6 +20,7 @@ use crate::primitives::plan::{self, gpu_tile, Buf, Module, Plan, ReduceOp, Word,
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::{Arc, Mutex, OnceLock};
+use warp_cuda::library::{self, Section};
 use warp_cuda::{CompileOptions, Function};
 
 /// A module loaded on one GPU, with the entries looked up so far.
@@ -51,28 +52,22 @@ impl Loaded {
     }
 }
 
-/// The library headers a module needs (handing NVRTC the whole library would only cost
-/// compile time and cache-key hashing).
-fn headers() -> Vec<(&'static str, &'static str)> {
-    warp_cuda::HEADERS
-        .iter()
-        .copied()
-        .filter(|(name, _)| matches!(*name, "wp_core.h" | "wp_primitives.h"))
-        .collect()
-}
+/// The primitives' section of the CUDA library (`wp_primitives.h`).
+const PRIMITIVES: &Section = library::get("primitives");
 
 /// Calls `f` with the NVRTC options of primitives module `module`: its GPU tile's defines,
-/// the two headers, FMA contraction as `config::cuda_fmad` says (sums of products do not
-/// occur, so it changes nothing here but keeps one setting for all GPU code).
+/// the core and the section's header (handing NVRTC the whole library would only cost
+/// compile time and cache-key hashing), FMA contraction as `config::cuda_fmad` says (sums of
+/// products do not occur, so it changes nothing here but keeps one setting for all GPU code).
 pub(crate) fn with_options<R>(module: &Module, f: impl FnOnce(&CompileOptions) -> R) -> R {
     let defines = gpu_tile(module).defines();
     let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
-    let headers = headers();
     f(&CompileOptions {
-        fmad: config::cuda_fmad(),
+        fmad: PRIMITIVES.exact.fmad(config::cuda_fmad()),
         line_info: true,
         defines: &defines,
-        headers: &headers,
+        headers: &PRIMITIVES.standalone_headers(),
+        extra_options: PRIMITIVES.exact.extra_options(),
         ..Default::default()
     })
 }

@@ -4,50 +4,14 @@
 //! transitively) are concatenated, callees first, with their placeholders filled: each func
 //! gets a unique C++ name here (`wpf<k>_<name>`), because funcs of the same name may live in
 //! different modules. Only the library sections that these templates use are included, so
-//! NVRTC parses no more than the kernel needs.
+//! NVRTC parses no more than the kernel needs: in the order of their rows in
+//! `warp_cuda::library::SECTIONS`, and in an adjoint unit the adjoint core and the sections'
+//! adjoint parts after them (each part includes its forward section and the parts it builds
+//! on).
 
 use crate::kernel::KernelInfo;
 use warp_core::FuncInfo;
-
-/// The builtin-table sections, in include order: section `s` is `wp_<s>.h` (in
-/// `warp-cuda/cuda/`, embedded by `warp_cuda::HEADERS`).
-pub const SECTIONS: [&str; 14] = [
-    "scalar",
-    "vector",
-    "linalg",
-    "svd",
-    "transform",
-    "misc",
-    "atomic",
-    "rand",
-    "hash_grid",
-    "geometry",
-    "bvh",
-    "mesh",
-    "volume",
-    "print",
-];
-
-/// The part of the adjoint library every adjoint unit includes: zero and accumulation, lanes,
-/// operators, casts, array gradients, the per-thread stack.
-pub const ADJOINT_CORE: &str = "wp_adjoint_core.h";
-
-/// The adjoint library's part for each section that has adjoints (`atomic`, `hash_grid`,
-/// `bvh` and `print` have none): an adjoint unit includes the parts of the sections its kernel and funcs use, so
-/// NVRTC parses no more than they need. Each part includes its forward section and the parts
-/// it builds on; `wp_adjoint.h` includes them all (for host tests and hand-written code).
-pub const ADJOINT_PARTS: [(&str, &str); 10] = [
-    ("scalar", "wp_adjoint_builtins.h"),
-    ("vector", "wp_adjoint_builtins.h"),
-    ("linalg", "wp_adjoint_linalg.h"),
-    ("svd", "wp_adjoint_svd.h"),
-    ("transform", "wp_adjoint_transform.h"),
-    ("misc", "wp_adjoint_misc.h"),
-    ("rand", "wp_adjoint_rand.h"),
-    ("geometry", "wp_adjoint_geometry.h"),
-    ("mesh", "wp_adjoint_mesh.h"),
-    ("volume", "wp_adjoint_volume.h"),
-];
+use warp_cuda::library::{self, SECTIONS};
 
 /// The assembled source of one kernel.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -154,17 +118,16 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
     {
         sections.push("transform");
     }
-    let mut headers = vec!["wp_core.h".to_string()];
-    for s in SECTIONS {
-        if sections.contains(&s) {
-            headers.push(format!("wp_{s}.h"));
-        }
-    }
+    let used = SECTIONS
+        .iter()
+        .filter(|s| s.kernel && sections.contains(&s.name));
+    let mut headers = vec![library::CORE.name.to_string()];
+    headers.extend(used.clone().map(|s| s.header.name.to_string()));
     if adjoint {
-        headers.push(ADJOINT_CORE.to_string());
-        for (s, part) in ADJOINT_PARTS {
-            if sections.contains(&s) && !headers.iter().any(|h| h == part) {
-                headers.push(part.to_string());
+        headers.push(library::ADJOINT_CORE.name.to_string());
+        for part in used.filter_map(|s| s.adjoint) {
+            if !headers.iter().any(|h| h == part.name) {
+                headers.push(part.name.to_string());
             }
         }
     }
@@ -346,30 +309,38 @@ mod tests {
             .starts_with("// warp-lang kernel `k` (src/kernels.rs)\n"));
     }
 
-    /// Every header the assembler may name is a file of the CUDA library (which
-    /// `warp_cuda::HEADERS` embeds), and every section with adjoints has its part.
+    /// A unit includes the sections it uses in the table's order, whatever order the
+    /// templates name them in, and an adjoint unit the parts of those that have one (a shared
+    /// part once); a section with no part (`bvh`) adds none.
     #[test]
-    fn named_headers_exist() {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda/");
-        let mut names: Vec<String> = SECTIONS.iter().map(|s| format!("wp_{s}.h")).collect();
-        names.push(ADJOINT_CORE.into());
-        names.extend(ADJOINT_PARTS.iter().map(|(_, h)| h.to_string()));
-        for n in names {
-            assert!(std::path::Path::new(dir).join(&n).is_file(), "{n}");
-        }
-        for s in SECTIONS {
-            assert_eq!(
-                ADJOINT_PARTS.iter().any(|(p, _)| *p == s),
-                !matches!(s, "atomic" | "hash_grid" | "bvh" | "print"),
-                "{s}"
-            );
-        }
-        // A section with an adjoint part is a section the assembler includes.
-        for (p, _) in ADJOINT_PARTS {
-            assert!(
-                SECTIONS.contains(&p),
-                "{p} has an adjoint part but is not in SECTIONS"
-            );
-        }
+    fn sections_are_included_in_table_order() {
+        let info = KernelInfo {
+            name: "k",
+            module: "m",
+            file: "src/k.rs",
+            cuda: "static WP_FN void @@SELF@@(wp::ctx_t* __ctx) {}\nvoid @@ENTRY@@() {}\n",
+            cuda_sections: &["mesh", "vector", "bvh", "scalar", "rand"],
+            ..KernelInfo::BLANK
+        };
+        assert_eq!(
+            assemble(&info).headers,
+            vec![
+                "wp_core.h",
+                "wp_scalar.h",
+                "wp_vector.h",
+                "wp_rand.h",
+                "wp_bvh.h",
+                "wp_mesh.h"
+            ]
+        );
+        assert_eq!(
+            assemble_adjoint(&info).headers[6..],
+            [
+                "wp_adjoint_core.h",
+                "wp_adjoint_builtins.h",
+                "wp_adjoint_rand.h",
+                "wp_adjoint_mesh.h"
+            ]
+        );
     }
 }

@@ -10,11 +10,7 @@ use std::sync::atomic::{AtomicI32, Ordering};
 use warp_core::objects::hash_grid::point_bucket;
 
 /// The hash grid's build library: `wp_hash_grid.h` with its kernels enabled.
-pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary {
-    name: "wp_hash_grid_build",
-    source: "#define WP_HASH_GRID_BUILD 1\n#include \"wp_hash_grid.h\"\n",
-    headers: &["wp_core.h", "wp_hash_grid.h"],
-};
+pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary::of("hash_grid");
 
 /// Each point's bucket and index: for each of the `n` points (contiguous `Vec3`s at `points`),
 /// its bucket (`warp_core::objects::hash_grid::point_bucket`, the CUDA library's

@@ -25,11 +25,7 @@ use rayon::prelude::*;
 use warp_core::objects::bvh::BvhNode;
 
 /// The BVH build library: `wp_bvh_build.h` with its kernels enabled.
-pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary {
-    name: "wp_bvh_build",
-    source: "#define WP_BVH_BUILD 1\n#include \"wp_bvh_build.h\"\n",
-    headers: &["wp_core.h", "wp_bvh_build.h"],
-};
+pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary::of("bvh_build");
 
 /// The leaf size of a `Bvh`'s linear BVH: one box per leaf, as Warp's `wp.Bvh` (its box and
 /// ray queries test each box anyway, so a larger leaf only adds tests).

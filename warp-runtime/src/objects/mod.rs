@@ -63,13 +63,14 @@ pub mod exports {
 }
 
 /// Every host object's CUDA build library (each compiled the first time a GPU runs one of
-/// its steps).
-pub static BUILD_LIBRARIES: &[&ObjectLibrary] = &[
-    &hash_grid_steps::LIBRARY,
-    &lbvh::LIBRARY,
-    &marching_cubes::LIBRARY,
-    &volume_build::LIBRARY,
-];
+/// its steps): the library sections that have one (`warp_cuda::library::SECTIONS`).
+#[cfg(feature = "cuda")]
+pub fn build_libraries() -> impl Iterator<Item = ObjectLibrary> {
+    warp_cuda::library::SECTIONS
+        .iter()
+        .filter(|s| s.build.is_some())
+        .map(|s| ObjectLibrary::of(s.name))
+}
 
 /// Compiles a build library with NVRTC for `sm_{arch}` with the runtime's options (no GPU
 /// needed): how the tests check that NVRTC accepts each on machines without a GPU.

@@ -48,22 +48,21 @@ use warp_core::objects::nanovdb::{
 
 use crate::array::Array;
 use crate::backend::{ObjectLibrary, ObjectStep};
+use crate::cpp_table;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
 use crate::primitives::{array_scan, radix_sort_pairs};
 
 /// The volume build library: `wp_volume_build.h` with its kernels enabled.
-pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary {
-    name: "wp_volume_build",
-    source: "#define WP_VOLUME_BUILD 1\n#include \"wp_volume_build.h\"\n",
-    headers: &["wp_core.h", "wp_volume_build.h"],
-};
+pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary::of("volume_build");
 
-/// The kinds of grid the link step builds (`wp::vb_kind_*`).
-const KIND_VALUE: u32 = 0;
-const KIND_INDEX: u32 = 1;
-const KIND_ON_INDEX: u32 = 2;
+/// The kinds of grid the link step builds (`wp::vb_kind_*`, read from the header at compile
+/// time).
+const KIND_VALUE: u32 = cpp_table::integer(HEADER, "vb_kind_value");
+const KIND_INDEX: u32 = cpp_table::integer(HEADER, "vb_kind_index");
+const KIND_ON_INDEX: u32 = cpp_table::integer(HEADER, "vb_kind_on_index");
+const HEADER: &str = include_str!("../../../warp-cuda/cuda/wp_volume_build.h");
 
 /// `i32::MAX` in the bad-point slot: every point has a voxel.
 const NO_BAD_POINT: i32 = i32::MAX;

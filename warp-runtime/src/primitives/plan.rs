@@ -7,6 +7,8 @@
 //! compiled by g++ under a block emulator. So the orchestration tested on the host is the one
 //! the GPU runs, and only the NVRTC compile and the hardware are left to the GPU tests.
 
+use crate::cpp_table;
+
 /// The block shape the kernels are compiled for (`WP_PRIM_THREADS`, `WP_PRIM_ITEMS`): a block
 /// handles a tile of `threads * items` elements.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,13 +60,15 @@ pub fn gpu_tile(module: &Module) -> Tile {
     }
 }
 
+/// The kernels' header, whose sort constants the plans read at compile time (one copy).
+const HEADER: &str = include_str!("../../../warp-cuda/cuda/wp_primitives.h");
 /// Bits sorted per radix pass on the GPU (`SORT_BITS` in `wp_primitives.h`).
-pub const RADIX_BITS: u32 = 8;
+pub const RADIX_BITS: u32 = cpp_table::integer(HEADER, "SORT_BITS");
 const RADIX: u64 = 1 << RADIX_BITS;
 /// Most passes of a sort (32-bit keys), `SORT_MAX_PASSES`.
-const MAX_PASSES: u64 = 4;
+const MAX_PASSES: u64 = cpp_table::integer(HEADER, "SORT_MAX_PASSES") as u64;
 /// Tiles counted per block of the upfront histogram (`SORT_HIST_TILES`).
-const HIST_TILES: u64 = 8;
+const HIST_TILES: u64 = cpp_table::integer(HEADER, "SORT_HIST_TILES") as u64;
 
 /// A buffer a plan uses: one of the caller's arrays (by position in the primitive's list) or
 /// scratch memory the executor allocates for the call.
