@@ -2411,3 +2411,66 @@ fn snake_case(name: &str) -> String {
     }
     out
 }
+
+// ---------------------------------------------------------------------------------------------
+// ARCHITECTURE.md's `Backend` block against `warp-runtime/src/backend.rs`
+// ---------------------------------------------------------------------------------------------
+
+/// The names of the `fn`s between `start` and the brace that closes the item opened on its
+/// line (a trait's methods), in order.
+fn trait_methods(text: &str, start: &str) -> Vec<String> {
+    let Some(at) = text.find(start) else {
+        return Vec::new();
+    };
+    let body = &text[at..];
+    let (mut depth, mut end) = (0i32, body.len());
+    for (i, c) in body.char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' => {
+                depth -= 1;
+                if depth == 0 {
+                    end = i;
+                    break;
+                }
+            }
+            _ => {}
+        }
+    }
+    body[..end]
+        .lines()
+        .map(|l| l.split("//").next().unwrap_or(""))
+        .filter_map(|l| {
+            let rest = l.trim_start().strip_prefix("fn ")?;
+            let name: String = rest
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            (!name.is_empty()).then_some(name)
+        })
+        .collect()
+}
+
+/// The code block ARCHITECTURE.md shows of the backend seam names every method of the trait,
+/// and no other: it was out of date once (review of 2026-11-28), and it is what a second
+/// backend's author reads first.
+#[test]
+fn the_backend_block_names_every_method() {
+    let code = read_required("warp-runtime/src/backend.rs");
+    let doc = read_required("ARCHITECTURE.md");
+    let start = "pub(crate) trait Backend {";
+    let in_code = trait_methods(&code, start);
+    let in_doc = trait_methods(&doc, start);
+    assert!(
+        in_code.len() > 5,
+        "read {} methods of Backend in backend.rs: has the trait moved?",
+        in_code.len()
+    );
+    let (mut c, mut d) = (in_code.clone(), in_doc.clone());
+    c.sort();
+    d.sort();
+    assert_eq!(
+        d, c,
+        "ARCHITECTURE.md's `Backend` block names {in_doc:?}, backend.rs has {in_code:?}"
+    );
+}

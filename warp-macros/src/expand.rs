@@ -533,8 +533,8 @@ fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>, Literal) {
 /// `@@K<k>@@` placeholders: one small fn per const, spanned at the use, so that a const of a
 /// type without `CudaConst` is an error there.
 fn const_literals(f: &crate::ir::Function) -> TokenStream {
-    let wp = crate::paths::private();
     let fns = f.consts.iter().map(|p| {
+        let wp = crate::paths::private_at(p.span());
         quote_spanned! {p.span()=>
             {
                 fn __wp_const() -> ::std::string::String {
@@ -839,11 +839,12 @@ fn func_instance(
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
     // points there and names this constant.
+    let wp_at_name = crate::paths::private_at(name.span());
     let depth_const = quote_spanned! {name.span()=>
         /// Longest chain of funcs below this one (a cycle fails to compile).
         #[doc(hidden)]
         #vis const __WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED: usize =
-            1 + #wp::max_depth(&[#(#depths),*]);
+            1 + #wp_at_name::max_depth(&[#(#depths),*]);
     };
     Ok(quote! {
             #depth_const

@@ -7,15 +7,21 @@
 //! seam a `#[kernel(crate = ..)]` option would change (as serde's `#[serde(crate = ..)]`).
 
 use proc_macro2::{Ident, Span, TokenStream};
-use quote::quote;
+use quote::quote_spanned;
 
 /// The facade crate's name as user crates see it.
 const FACADE: &str = "warp_lang";
 
 /// `::warp_lang::__private`, the module generated code takes every runtime item from.
 pub fn private() -> TokenStream {
-    let facade = Ident::new(FACADE, Span::call_site());
-    quote!(::#facade::__private)
+    private_at(Span::call_site())
+}
+
+/// The same path with every token at `span`: code generated at a user's span (a const's use,
+/// a func's name) reports a trait bound there, not at the attribute.
+pub fn private_at(span: Span) -> TokenStream {
+    let facade = Ident::new(FACADE, span);
+    quote_spanned!(span=> ::#facade::__private)
 }
 
 /// Whether `name` is a path segment that names the facade (`wp` is the alias the docs use:
