@@ -1854,11 +1854,8 @@ fn warp_core_allocates_only_where_listed() {
 /// definition makes rows with `Builtin::row` (today `table!` in builtins.rs; each row
 /// `"name": classes, (params) -> result, "section", Grad, facts..;`).
 const BUILTIN_ROW_CONSTRUCTOR: [&str; 2] = ["Builtin", "row"];
-/// The CUDA library's sections (`SECTIONS`: section `s` is `wp_<s>.h`) and each section's
-/// adjoint part (`ADJOINT_PARTS`: (section, header) pairs).
-const SECTIONS_FILE: &str = "warp-runtime/src/cuda/source.rs";
-/// Or one row per section, `kernel!(..)` for the sections kernels include (see
-/// `cuda_sections`).
+/// The CUDA library's sections: one row per section, `kernel!(..)` for the sections kernels
+/// include (see `cuda_sections`); section `s` is `wp_<s>.h`.
 const SECTION_ROWS_FILE: &str = "warp-cuda/src/library.rs";
 const SECTION_ROW_MACRO: &str = "kernel";
 /// The host objects' kinds (`OBJECTS`: `ObjectRow { kind, name, param, rust, cuda, section }`).
@@ -1953,66 +1950,35 @@ fn builtin_rows() -> Vec<BuiltinRow> {
     rows
 }
 
-/// The string literals of the initializer of `const NAME` / `static NAME` in `file`.
-fn const_strings(file: &str, name: &str) -> Vec<String> {
-    let t = lex(&read_required(file));
-    let Some(k) =
-        (1..t.len()).find(|&k| t[k].is(name) && (t[k - 1].is("const") || t[k - 1].is("static")))
-    else {
-        panic!("{file} defines no const {name}");
-    };
-    let eq = (k..t.len()).find(|&e| t[e].is("=")).unwrap();
-    let end = item_end(&t, eq, t.len());
-    t[eq..end]
-        .iter()
-        .filter_map(Tok::str_value)
-        .map(str::to_string)
-        .collect()
-}
-
-/// The CUDA library's sections, each with its adjoint part's header where it has one: from
-/// `SECTIONS`/`ADJOINT_PARTS` in `SECTIONS_FILE`, or, where the sections are rows of their own
-/// (`SECTION_ROWS_FILE`: `kernel!("name", Some(header!("wp_adjoint_x.h")) | Some(CONST) | None,
-/// ..)`), from the rows that kernels include.
+/// The CUDA library's sections, each with its adjoint part's header where it has one, from
+/// the rows kernels include (`SECTION_ROWS_FILE`: `kernel!("name", Some(header!("wp_adjoint_x.h"))
+/// | Some(CONST) | None, ..)`).
 fn cuda_sections() -> BTreeMap<String, Option<String>> {
-    if let Some(text) = read_rel(SECTION_ROWS_FILE) {
-        let t = lex(&text);
-        let header_of = |k: usize| -> Option<String> {
-            // `header!("x")`, or a const holding one.
-            if t[k].is("header") {
-                return t[k + 3].str_value().map(str::to_string);
-            }
-            let c = (1..t.len()).find(|&c| t[c].is(&t[k].text) && t[c - 1].is("const"))?;
-            let h = (c..t.len()).find(|&h| t[h].is("header"))?;
-            t[h + 3].str_value().map(str::to_string)
-        };
-        let mut out = BTreeMap::new();
-        for k in 0..t.len().saturating_sub(3) {
-            if t[k].is(SECTION_ROW_MACRO)
-                && t[k + 1].is("!")
-                && t[k + 2].is("(")
-                && !t[k - 1].is("!")
-            {
-                let Some(name) = t[k + 3].str_value() else {
-                    continue;
-                };
-                let part = (t[k + 5].is("Some")).then(|| header_of(k + 7)).flatten();
-                out.insert(name.to_string(), part);
-            }
+    let t = lex(&read_required(SECTION_ROWS_FILE));
+    let header_of = |k: usize| -> Option<String> {
+        // `header!("x")`, or a const holding one.
+        if t[k].is("header") {
+            return t[k + 3].str_value().map(str::to_string);
         }
-        if !out.is_empty() {
-            return out;
+        let c = (1..t.len()).find(|&c| t[c].is(&t[k].text) && t[c - 1].is("const"))?;
+        let h = (c..t.len()).find(|&h| t[h].is("header"))?;
+        t[h + 3].str_value().map(str::to_string)
+    };
+    let mut out = BTreeMap::new();
+    for k in 1..t.len().saturating_sub(3) {
+        if t[k].is(SECTION_ROW_MACRO) && t[k + 1].is("!") && t[k + 2].is("(") && !t[k - 1].is("!") {
+            let Some(name) = t[k + 3].str_value() else {
+                continue;
+            };
+            let part = (t[k + 5].is("Some")).then(|| header_of(k + 7)).flatten();
+            out.insert(name.to_string(), part);
         }
     }
-    let mut out: BTreeMap<String, Option<String>> = const_strings(SECTIONS_FILE, "SECTIONS")
-        .into_iter()
-        .map(|s| (s, None))
-        .collect();
-    for pair in const_strings(SECTIONS_FILE, "ADJOINT_PARTS").chunks(2) {
-        if let Some(part) = out.get_mut(&pair[0]) {
-            *part = Some(pair[1].clone());
-        }
-    }
+    assert!(
+        out.len() > 5,
+        "read {} section rows in {SECTION_ROWS_FILE}: has the table moved?",
+        out.len()
+    );
     out
 }
 
