@@ -86,6 +86,29 @@
 //! assert_eq!(counts.to_vec().unwrap(), vec![1, 1, 0]);
 //! ```
 //!
+//! ## Kernels and data races
+//!
+//! A kernel's threads run at once (rayon tasks on the CPU, GPU threads), so what they may do
+//! to one array is a contract, the same on both backends:
+//! - **Guaranteed by the runtime:** no access touches memory outside its array (every index is
+//!   checked, or proven in range); the arrays a launch was given stay allocated until it has
+//!   finished; a fault is a value ([`Error`]), never a panic unwinding through kernel code; a
+//!   gradient, which the user never writes, is accumulated without races (atomically where
+//!   threads may share it).
+//! - **Safe for kernels:** each thread writing only its own elements (`a[tid()] = ..`), any
+//!   number of threads reading an element nobody writes in that launch, and `atomic_*`
+//!   builtins among themselves.
+//! - **A data race, as in CUDA and in Rust's memory model:** two threads of one launch writing
+//!   one element without an atomic, one writing while another reads it, or a plain access racing
+//!   an atomic one. The language cannot rule these out at compile time (the index is a run-time
+//!   value), so they are the kernel author's to avoid; the result is then unspecified.
+//! - **The opt-in check:** [`config::set_race_check`] (or `WARP_RACE_CHECK=1`) makes CPU launches
+//!   log every store and turn a second thread's write to an element into
+//!   [`FaultKind::WriteRace`] naming the kernel, argument, index and both threads. It covers
+//!   write-write races of one CPU launch; not read-write races, atomics, host objects' buffers,
+//!   races between launches on different threads or streams, or the GPU (run the kernel on the
+//!   CPU with the check to find them).
+//!
 //! The kernel language (types, the literal rule, builtins) is described in [`docs::language`]
 //! (ARCHITECTURE.md), its builtins in [`docs::builtins`], and the macros in the docs of
 //! [`kernel`].
