@@ -176,6 +176,19 @@ struct Params {
     t: u64,
 }
 
+/// What an optimizer's `Debug` shows: its settings and progress, not its arrays' contents (a
+/// schedule is a closure, shown only as present).
+impl std::fmt::Debug for Params {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Params")
+            .field("parameters", &self.flats.len())
+            .field("lr", &self.lr)
+            .field("schedule", &self.schedule.is_some())
+            .field("step", &self.t)
+            .finish()
+    }
+}
+
 impl Params {
     fn new(who: &'static str, states: usize, lr: f64) -> Params {
         Params {
@@ -282,6 +295,7 @@ macro_rules! optimizer_methods {
 /// Adam (Kingma and Ba), as Warp's `warp.optim.Adam`: per component,
 /// `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`,
 /// `p -= lr (m / (1 - b1^t)) / (sqrt(v / (1 - b2^t)) + eps)`.
+#[derive(Debug)]
 pub struct Adam {
     params: Params,
     beta1: f64,
@@ -357,6 +371,7 @@ impl Adam {
 /// `g += weight_decay p`; with momentum, `b = g` at the first step and
 /// `b = momentum b + (1 - dampening) g` after, then `g = b` (or `g += momentum b` with
 /// Nesterov); `p -= lr g`.
+#[derive(Debug)]
 pub struct Sgd {
     params: Params,
     momentum: f64,

@@ -123,6 +123,12 @@ fn checkpointed(
         roll.backward().unwrap();
     }
     let (recomputed, last) = (roll.report().recomputed_steps, roll.recomputed());
+    // Its `Debug` shows the rollout's length and report, for a user logging it.
+    let d = format!("{roll:?}");
+    assert!(
+        d.starts_with("Checkpointed") && d.contains(&format!("steps: {steps}")),
+        "{d}"
+    );
     drop(roll);
     (
         grad_of(&s0.0),

@@ -11,6 +11,7 @@ backend_tests!(
     constant_gradient_updates,
     quadratic_bowl_converges,
     parameters_need_gradients,
+    optimizers_debug_their_settings,
 );
 
 /// Sets every component of `a`'s gradient to `c`.
@@ -151,4 +152,28 @@ fn parameters_need_gradients(dev: &wp::Device) {
     let m = zeros::<f32, 2>((3, 4), dev).with_grad().unwrap();
     let e = Sgd::new(0.1).add(&m.transpose()).unwrap_err().to_string();
     assert!(e.contains("not contiguous"), "{e}");
+}
+
+/// `Debug` shows an optimizer's settings and progress (a user logging it sees its learning
+/// rate, betas or momentum, how many parameters it updates and how many steps it took).
+fn optimizers_debug_their_settings(dev: &wp::Device) {
+    let x = zeros::<f32, 1>(4, dev).with_grad().unwrap();
+    let mut adam = Adam::new(0.25);
+    adam.add(&x).unwrap();
+    adam.step().unwrap();
+    let d = format!("{adam:?}");
+    assert!(
+        d.starts_with("Adam")
+            && d.contains("parameters: 1")
+            && d.contains("lr: 0.25")
+            && d.contains("step: 1")
+            && d.contains("beta1: 0.9"),
+        "{d}"
+    );
+    let sgd = Sgd::new(0.5).momentum(0.75);
+    let d = format!("{sgd:?}");
+    assert!(
+        d.starts_with("Sgd") && d.contains("momentum: 0.75") && d.contains("parameters: 0"),
+        "{d}"
+    );
 }

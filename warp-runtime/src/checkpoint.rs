@@ -512,6 +512,20 @@ pub struct Checkpointed<'a, S: CheckpointState> {
     recomputed: u64,
 }
 
+/// What a rollout's `Debug` shows: its length, its snapshot slots, where it is (forward done,
+/// reversed) and its report; not the states (they are arrays, and `S` need not be `Debug`) nor
+/// the step closure.
+impl<S: CheckpointState> std::fmt::Debug for Checkpointed<'_, S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Checkpointed")
+            .field("steps", &self.steps)
+            .field("slots", &self.slots.len())
+            .field("phase", &self.phase)
+            .field("report", &self.report)
+            .finish_non_exhaustive()
+    }
+}
+
 impl<'a, S: CheckpointState> Checkpointed<'a, S> {
     /// The snapshot budget of [`sqrt_memory`](Self::sqrt_memory): `floor(sqrt(steps)) - 3`
     /// (at least zero), so that the states held (initial, two working, snapshots) are at most
