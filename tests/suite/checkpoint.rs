@@ -402,15 +402,13 @@ fn errors_and_misuse(dev: &wp::Device) {
         wp::launch(step, dim, (x0, v0, x1, v1, B, MASS, GRAVITY, DT), dev)
     };
     let e = wp::Checkpointed::new(&s0, 0, 3, |_, f, t| launch_step(n, f, t))
-        .err()
-        .expect("zero steps refused")
+        .expect_err("zero steps refused")
         .to_string();
     assert!(e.contains("zero steps"), "{e}");
 
     let bad = Shrinking(arr(&[1.0f32, 2.0, 3.0, 4.0], dev).with_grad().unwrap());
     let e = wp::Checkpointed::new(&bad, 5, 1, |_, _, _| Ok(()))
-        .err()
-        .expect("a layout mismatch refused")
+        .expect_err("a layout mismatch refused")
         .to_string();
     assert!(e.contains("shape [4] against [3]"), "{e}");
 
@@ -420,8 +418,7 @@ fn errors_and_misuse(dev: &wp::Device) {
             arr(&v0, &gpu).with_grad().unwrap(),
         );
         let e = wp::Checkpointed::new(&mixed, 5, 1, |_, _, _| Ok(()))
-            .err()
-            .expect("parts on two devices refused")
+            .expect_err("parts on two devices refused")
             .to_string();
         assert!(e.contains("different devices"), "{e}");
     }
