@@ -48,25 +48,21 @@ const HEADER_LEN: usize = 16 + MAC_LEN;
 const KEY_FILE: &str = "key";
 
 // ---------------------------------------------------------------------------------------------
-// Hashing: FNV-1a 128 for the cache key, which names an entry and needs no secrecy (the
-// entries themselves are authenticated with a keyed BLAKE3, see `mac`)
+// Hashing: BLAKE3 (unkeyed) for the cache key, which names an entry and needs no secrecy (the
+// entries themselves are authenticated with a keyed BLAKE3, see `mac`). The key is the first
+// 128 bits of the hash: collisions are out of reach, and entry names stay 32 hex digits.
 
-const FNV128_OFFSET: u128 = 0x6c62_272e_07bb_0142_62b8_2175_6295_c58d;
-const FNV128_PRIME: u128 = 0x0000_0000_0100_0000_0000_0000_0000_013b;
-
-/// Incremental FNV-1a 128 (the cache key).
+/// An incremental hash of the inputs that name a cache entry.
 #[derive(Clone)]
-pub(crate) struct Fnv128(u128);
+pub(crate) struct KeyHasher(blake3::Hasher);
 
-impl Fnv128 {
+impl KeyHasher {
     pub(crate) fn new() -> Self {
-        Fnv128(FNV128_OFFSET)
+        KeyHasher(blake3::Hasher::new())
     }
 
     pub(crate) fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ b as u128).wrapping_mul(FNV128_PRIME);
-        }
+        self.0.update(bytes);
     }
 
     /// Writes a length-prefixed field, so that ("ab", "c") and ("a", "bc") hash differently.
@@ -75,8 +71,12 @@ impl Fnv128 {
         self.write(bytes);
     }
 
+    /// The first 16 bytes of the hash, little-endian.
     pub(crate) fn finish(&self) -> u128 {
-        self.0
+        let hash = self.0.finalize();
+        let mut first = [0u8; 16];
+        first.copy_from_slice(&hash.as_bytes()[..16]);
+        u128::from_le_bytes(first)
     }
 }
 
@@ -88,8 +88,8 @@ pub fn cache_key(
     arch: u32,
     nvrtc_version: (i32, i32),
 ) -> u128 {
-    let mut h = Fnv128::new();
-    h.field(b"warp-lang kernel cache v1");
+    let mut h = KeyHasher::new();
+    h.field(b"warp-lang kernel cache v2");
     h.field(&nvrtc_version.0.to_le_bytes());
     h.field(&nvrtc_version.1.to_le_bytes());
     hash_inputs(h, source, name, opts, arch)
@@ -100,12 +100,18 @@ pub fn cache_key(
 /// that loads it need not have (or load) NVRTC at all; the cost is that a toolkit upgrade
 /// does not rebuild the entries: compile them again with the build.
 pub fn aot_key(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> u128 {
-    let mut h = Fnv128::new();
-    h.field(b"warp-lang ahead-of-time v1");
+    let mut h = KeyHasher::new();
+    h.field(b"warp-lang ahead-of-time v2");
     hash_inputs(h, source, name, opts, arch)
 }
 
-fn hash_inputs(mut h: Fnv128, source: &str, name: &str, opts: &CompileOptions, arch: u32) -> u128 {
+fn hash_inputs(
+    mut h: KeyHasher,
+    source: &str,
+    name: &str,
+    opts: &CompileOptions,
+    arch: u32,
+) -> u128 {
     h.field(CRATE_VERSION.as_bytes());
     h.field(&arch.to_le_bytes());
     h.field(name.as_bytes());
@@ -128,7 +134,7 @@ fn hash_inputs(mut h: Fnv128, source: &str, name: &str, opts: &CompileOptions, a
 /// disk cache or an ahead-of-time directory spends on it. Other headers are hashed each time.
 fn header_digest(header: &(&str, &str)) -> u128 {
     let hash = |(name, text): &(&str, &str)| {
-        let mut h = Fnv128::new();
+        let mut h = KeyHasher::new();
         h.field(name.as_bytes());
         h.field(text.as_bytes());
         h.finish()
@@ -424,7 +430,7 @@ fn unique_suffix() -> String {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos())
             .unwrap_or(0);
-        let mut h = Fnv128::new();
+        let mut h = KeyHasher::new();
         h.write(&nanos.to_le_bytes());
         h.write(&COUNTER.fetch_add(1, Ordering::Relaxed).to_le_bytes());
         random = (h.finish() as u64).to_le_bytes();
@@ -825,15 +831,23 @@ pub(crate) mod tests {
         v
     }
 
+    /// The key is BLAKE3's hash (the crate's, not a hand-written one): its first 16 bytes for
+    /// the reference input of the BLAKE3 specification's test vectors (the empty input).
     #[test]
-    fn fnv_reference_values() {
+    fn key_hasher_is_blake3() {
         let h = |s: &[u8]| {
-            let mut f = Fnv128::new();
+            let mut f = KeyHasher::new();
             f.write(s);
             f.finish()
         };
-        assert_eq!(h(b""), 0x6c62272e07bb014262b821756295c58d);
-        assert_eq!(h(b"a"), 0xd228cb696f1a8caf78912b704e4a8964);
+        // BLAKE3("") = af1349b9f5f9a1a6a0404dea36dcc9499bcb25c9adc112b7cc9a93cae41f3262.
+        assert_eq!(
+            h(b""),
+            u128::from_le_bytes(
+                *b"\xaf\x13\x49\xb9\xf5\xf9\xa1\xa6\xa0\x40\x4d\xea\x36\xdc\xc9\x49"
+            )
+        );
+        assert_ne!(h(b"a"), h(b""));
     }
 
     #[test]
@@ -934,7 +948,7 @@ pub(crate) mod tests {
         assert_eq!(dedup.len(), keys.len(), "some inputs do not change the key");
         // Field boundaries matter.
         let f = |a: &str, b: &str| {
-            let mut h = Fnv128::new();
+            let mut h = KeyHasher::new();
             h.field(a.as_bytes());
             h.field(b.as_bytes());
             h.finish()
