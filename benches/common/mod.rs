@@ -40,7 +40,7 @@ pub fn median(runs: usize, mut f: impl FnMut()) -> Duration {
 }
 
 /// Runs `script` with `args` under `python3`; its last line parsed as JSON, or why not.
-pub fn python_side(script: &str, args: &[String]) -> Result<String, String> {
+pub fn python_side(script: &str, args: &[String]) -> Result<serde_json::Value, String> {
     let out = Command::new("python3")
         .arg(script)
         .args(args)
@@ -51,28 +51,18 @@ pub fn python_side(script: &str, args: &[String]) -> Result<String, String> {
         return Err(err.lines().last().unwrap_or("failed").to_string());
     }
     let text = String::from_utf8_lossy(&out.stdout).to_string();
-    text.lines()
-        .last()
-        .map(str::to_string)
-        .ok_or_else(|| "no output".into())
+    let last = text.lines().last().ok_or("no output")?;
+    serde_json::from_str(last).map_err(|e| format!("{script}: its last line is not JSON ({e})"))
 }
 
-/// The number after `"key":` in a flat JSON text (the Python sides print flat objects, and
-/// nested ones only under size keys, which the caller slices out first).
-pub fn json_number(json: &str, key: &str) -> Option<f64> {
-    let at = json.find(&format!("\"{key}\":"))? + key.len() + 3;
-    let rest = json[at..].trim_start();
-    let end = rest
-        .find(|c: char| !(c.is_ascii_digit() || matches!(c, '.' | '-' | 'e' | 'E' | '+')))
-        .unwrap_or(rest.len());
-    rest[..end].parse().ok()
+/// The number under `key` in an object a Python side printed.
+pub fn json_number(json: &serde_json::Value, key: &str) -> Option<f64> {
+    json.get(key)?.as_f64()
 }
 
-/// The object under `"n"` in the PyTorch side's `sizes`.
-pub fn size_section(json: &str, n: usize) -> Option<&str> {
-    let at = json.find(&format!("\"{n}\":"))?;
-    let end = json[at..].find('}')? + at;
-    Some(&json[at..end])
+/// The object under `sizes."n"` in the PyTorch side's output.
+pub fn size_section(json: &serde_json::Value, n: usize) -> Option<&serde_json::Value> {
+    json.get("sizes")?.get(n.to_string())
 }
 
 pub fn ratio(ours: f64, theirs: Option<f64>) -> String {
