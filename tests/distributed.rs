@@ -393,6 +393,70 @@ fn send_and_recv_in_a_ring() {
     }
 }
 
+/// Handles of one rank used from several threads at once: NCCL allows one call at a time on a
+/// communicator, and `Communicator` serialises them (issue 35: before, the calls of clones on
+/// different threads reached NCCL concurrently, undefined behaviour). Threads 0..4 call
+/// `all_reduce` on clones of rank 0 outside any group (only in a world of one, where every
+/// order of calls agrees across ranks); threads 4..8 each issue one group over every rank per
+/// step (a group holds its communicators until issued, so each step reaches every rank in the
+/// same order, and two groups over the same ranks cannot deadlock). Sums of small integers:
+/// compared exactly.
+#[test]
+fn one_communicator_from_several_threads_at_once() {
+    let _s = serial();
+    let Some(gpus) = gpus("one_communicator_from_several_threads_at_once", 1) else {
+        return;
+    };
+    let comms = Communicator::for_devices(&gpus).unwrap();
+    let world = comms.len();
+    let (n, steps) = (4096, 50);
+    std::thread::scope(|scope| {
+        for t in 0..8usize {
+            let comms: Vec<Communicator> = comms.to_vec();
+            scope.spawn(move || {
+                let value = (t + 1) as f32;
+                let send: Vec<wp::Array<f32>> = comms
+                    .iter()
+                    .map(|c| wp::Array::from_slice(&vec![value; n], c.device()).unwrap())
+                    .collect();
+                let recv: Vec<wp::Array<f32>> = comms
+                    .iter()
+                    .map(|c| wp::Array::zeros(n, c.device()).unwrap())
+                    .collect();
+                let plain = t < 4;
+                if plain && world != 1 {
+                    return;
+                }
+                for _ in 0..steps {
+                    if plain {
+                        comms[0]
+                            .all_reduce(&send[0], &recv[0], ReduceOp::Sum)
+                            .unwrap();
+                    } else {
+                        group(|| {
+                            for (r, c) in comms.iter().enumerate() {
+                                c.all_reduce(&send[r], &recv[r], ReduceOp::Sum)?;
+                            }
+                            Ok(())
+                        })
+                        .unwrap();
+                    }
+                }
+                for (r, c) in comms.iter().enumerate() {
+                    c.synchronize().unwrap();
+                    let want = value * world as f32;
+                    let got = recv[r].to_vec().unwrap();
+                    assert!(
+                        got.iter().all(|v| *v == want),
+                        "thread {t}, rank {r}: want {want}, got {:?}",
+                        &got[..4]
+                    );
+                }
+            });
+        }
+    });
+}
+
 /// One thread per GPU, each capturing a graph with a kernel and an all-reduce and replaying it:
 /// collectives are recorded into graphs like launches.
 #[test]

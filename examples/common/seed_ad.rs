@@ -163,7 +163,7 @@ pub fn particle_gradients(n: usize, steps: usize, dev: &wp::Device) -> wp::Resul
         wp::launch(sum_sq, n, (&xs[1], &loss), dev)?;
     }
     tape.backward(&loss)?;
-    tape.reset();
+    tape.reset()?;
     loss.fill(0.0)?;
     for a in xs.iter().chain(&vs) {
         a.zero_grad()?;

@@ -464,6 +464,28 @@ fn tape_misuse(dev: &wp::Device) {
     .unwrap();
     let e = tape.backward(&y).unwrap_err().to_string();
     assert!(e.contains("runs backward"), "{e}");
+    // Steps that reset or reconfigure their own tape during its backward (these panicked
+    // before issue 35): errors, and the tape keeps its steps.
+    let other = std::rc::Rc::new(wp::Tape::new());
+    {
+        let _rec = other.record();
+        wp::launch(tape_square, 2, (&x, &y), dev).unwrap();
+    }
+    let t3 = std::rc::Rc::downgrade(&other);
+    other
+        .record_func(move || t3.upgrade().expect("alive").reset())
+        .unwrap();
+    let e = other.backward(&y).unwrap_err().to_string();
+    assert!(e.contains("reset on a tape that runs backward"), "{e}");
+    let t4 = std::rc::Rc::downgrade(&other);
+    other
+        .record_func(move || t4.upgrade().expect("alive").set_adstack_bytes(None))
+        .unwrap();
+    let e = other.backward(&y).unwrap_err().to_string();
+    assert!(e.contains("set_adstack_bytes(None) on a tape"), "{e}");
+    assert_eq!(other.steps(), vec!["tape_square", "custom", "custom"]);
+    other.reset().unwrap();
+    assert!(other.is_empty());
     // The tape is not broken: without the bad step, backward works.
     let fresh = wp::Tape::new();
     x.zero_grad().unwrap();

@@ -618,7 +618,7 @@ fn adjoint_stack_limit(dev: &wp::Device) {
         wp::launch(k_prod, 1, (&x, n as i32, &out), dev).unwrap();
     }
     // A per-tape capacity: the process-wide one (other tests run in parallel) is untouched.
-    tape.set_adstack_bytes(Some(256));
+    tape.set_adstack_bytes(Some(256)).unwrap();
     match tape.backward(&out) {
         Err(Error::Fault(f)) => {
             assert_eq!(f.kernel, "k_prod");
@@ -633,7 +633,7 @@ fn adjoint_stack_limit(dev: &wp::Device) {
     // With room it works (about 16 bytes per iteration here): every gradient is the
     // product of the other ones, 1.
     x.zero_grad().unwrap();
-    tape.set_adstack_bytes(Some(1 << 16));
+    tape.set_adstack_bytes(Some(1 << 16)).unwrap();
     tape.backward(&out).unwrap();
     assert!(x
         .grad()
@@ -846,7 +846,7 @@ fn tape_zero_accumulate_reset(dev: &wp::Device) {
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![10.0, 14.0]);
     tape.zero().unwrap();
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![0.0, 0.0]);
-    tape.reset();
+    tape.reset().unwrap();
     assert!(tape.is_empty());
     tape.backward(&loss).unwrap();
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![0.0, 0.0]);

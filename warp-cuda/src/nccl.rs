@@ -18,12 +18,26 @@
 //! [`CudaError::Timeout`]. So a rank that never joins ([`Comm::init_rank`]) or a peer that
 //! never posts the matching operation ([`Comm::synchronize`]) is an error after the timeout,
 //! not a process stuck forever. An aborted communicator refuses further work.
+//!
+//! # One call at a time
+//! NCCL's communicators are not thread-safe: its documentation allows no concurrent calls on
+//! one communicator (and in non-blocking mode no other call while one is still in progress).
+//! A [`Comm`] may still be shared between threads (it is `Sync`), because every NCCL call on
+//! it takes the communicator's call lock first and holds it until NCCL has accepted the work
+//! (the call returned and, in non-blocking mode, the communicator polled ready). Inside a
+//! [`Group`] the calls are only recorded until `ncclGroupEnd`, so the lock of each
+//! communicator used in the group stays held by the group's thread until the group ends. The
+//! lock is re-entrant for its thread, and waiting for it is bounded by the communicator's
+//! timeout (two threads whose groups take two communicators in opposite orders get a
+//! [`CudaError::Timeout`], not a deadlock).
 
 use crate::device::{Gpu, Stream};
 use crate::error::{CudaError, Result};
+use std::cell::RefCell;
 use std::ffi::{c_char, c_int, c_uint, c_void, CStr};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
+use std::thread::ThreadId;
 use std::time::{Duration, Instant};
 
 /// The environment variable naming the NCCL library to load (a path).
@@ -444,20 +458,108 @@ impl std::fmt::Debug for UniqueId {
 /// its own (destroying is a collective of the node's ranks; see `Drop`), or aborts it when it
 /// does not finalize within the timeout.
 pub struct Comm {
+    /// The NCCL handle: used only while `lock` is held by the calling thread (or in `Drop`,
+    /// which owns the communicator).
     raw: NcclComm,
+    /// Serialises the NCCL calls on `raw` (see "One call at a time" in the module). In an
+    /// `Arc` because an open [`Group`] and the teardown thread hold it beyond a borrow.
+    lock: Arc<CallLock>,
     gpu: Arc<Gpu>,
     rank: usize,
     world: usize,
     /// The timeout in nanoseconds (settable through shared handles).
     timeout_ns: AtomicU64,
+    /// Set once `ncclCommAbort` has freed `raw` (read under the lock before every call).
     aborted: AtomicBool,
+    /// An [`abort`](Comm::abort) that could not take the lock in time: the holder aborts at
+    /// its next poll, and every later call does.
+    abort_pending: AtomicBool,
 }
 
-// SAFETY: an NCCL communicator may be used from any thread, one call at a time; the methods
-// that queue work take `&self` but NCCL serialises calls on one communicator internally
-// (the non-blocking API's documented thread model), and `Drop` has `&mut self`.
+// SAFETY: NCCL allows a communicator to be used from any thread but never by two at once.
+// Every use of `raw` through `&self` happens while the calling thread holds `lock` (a
+// re-entrant lock checked after acquisition for an earlier abort, so a freed handle is
+// never used), and `Drop` owns the communicator (its teardown thread takes the lock too,
+// after any group still holding it has ended). So moving or sharing a `Comm` between
+// threads never lets two NCCL calls on one communicator overlap.
 unsafe impl Send for Comm {}
 unsafe impl Sync for Comm {}
+
+/// A re-entrant lock with a bounded wait: the call lock of one communicator.
+///
+/// Not `std::sync::Mutex`: a thread re-enters it (a [`Group`] holds it across several calls
+/// on one communicator, a timed-out wait aborts under it), an open group keeps it past the
+/// call that took it (a `MutexGuard` would borrow the communicator), and waiting for it must
+/// end in an error after the communicator's timeout rather than hang.
+#[derive(Default)]
+struct CallLock {
+    state: Mutex<LockState>,
+    freed: Condvar,
+}
+
+#[derive(Default)]
+struct LockState {
+    owner: Option<ThreadId>,
+    depth: usize,
+}
+
+impl CallLock {
+    /// Takes the lock for the calling thread (again, if it holds it already); false when
+    /// another thread held it for all of `timeout`.
+    fn acquire(&self, timeout: Duration) -> bool {
+        let me = std::thread::current().id();
+        let deadline = Instant::now().checked_add(timeout);
+        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        loop {
+            match st.owner {
+                None => {
+                    st.owner = Some(me);
+                    st.depth = 1;
+                    return true;
+                }
+                Some(o) if o == me => {
+                    st.depth += 1;
+                    return true;
+                }
+                Some(_) => {
+                    let wait = match deadline {
+                        Some(d) => match d.checked_duration_since(Instant::now()) {
+                            Some(w) if !w.is_zero() => w,
+                            _ => return false,
+                        },
+                        // A timeout too large for an `Instant`: wait in steps, for ever.
+                        None => Duration::from_secs(3600),
+                    };
+                    st = self
+                        .freed
+                        .wait_timeout(st, wait)
+                        .unwrap_or_else(|p| p.into_inner())
+                        .0;
+                }
+            }
+        }
+    }
+
+    /// Undoes one `acquire` of the calling thread.
+    fn release(&self) {
+        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        debug_assert_eq!(st.owner, Some(std::thread::current().id()));
+        st.depth = st.depth.saturating_sub(1);
+        if st.depth == 0 {
+            st.owner = None;
+            self.freed.notify_all();
+        }
+    }
+}
+
+/// One `acquire` of a [`CallLock`], released when dropped.
+struct Held<'a>(&'a CallLock);
+
+impl Drop for Held<'_> {
+    fn drop(&mut self) {
+        self.0.release();
+    }
+}
 
 impl std::fmt::Debug for Comm {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -546,11 +648,13 @@ impl Comm {
         }
         let comm = Comm {
             raw,
+            lock: Arc::default(),
             gpu: gpu.clone(),
             rank,
             world,
             timeout_ns: AtomicU64::new(nanos(timeout)),
             aborted: AtomicBool::new(false),
+            abort_pending: AtomicBool::new(false),
         };
         comm.wait_ready(op)?;
         Ok(comm)
@@ -608,11 +712,13 @@ impl Comm {
             .filter(|(_, (raw, _))| !raw.is_null())
             .map(|(rank, (raw, gpu))| Comm {
                 raw,
+                lock: Arc::default(),
                 gpu: gpu.clone(),
                 rank,
                 world,
                 timeout_ns: AtomicU64::new(nanos(timeout)),
                 aborted: AtomicBool::new(false),
+                abort_pending: AtomicBool::new(false),
             })
             .collect();
         if let Some(e) = first_err {
@@ -665,16 +771,54 @@ impl Comm {
 
     /// Aborts the communicator: its queued and running collectives stop, and every later call
     /// fails. Peers blocked on this rank then time out or see a remote error.
+    ///
+    /// A call of another thread still in progress on this communicator finishes first (it
+    /// holds the call lock, for at most the timeout); if it holds the lock longer (an open
+    /// [`Group`]), the abort is left to that thread's next poll or call.
     pub fn abort(&self) {
+        match self.hold(self.timeout()) {
+            Some(_held) => self.abort_locked(),
+            None => self.abort_pending.store(true, Ordering::Release),
+        }
+    }
+
+    /// Takes the call lock (waiting at most `timeout`); see [`CallLock`].
+    fn hold(&self, timeout: Duration) -> Option<Held<'_>> {
+        self.lock.acquire(timeout).then(|| Held(&self.lock))
+    }
+
+    /// [`hold`](Self::hold) with the communicator's timeout, as an error naming `op`.
+    fn hold_for(&self, op: &dyn Fn() -> String) -> Result<Held<'_>> {
+        let start = Instant::now();
+        self.hold(self.timeout()).ok_or_else(|| CudaError::Timeout {
+            op: format!(
+                "{}: another thread kept NCCL rank {} of {} busy (a call or an open group on \
+                 the same communicator)",
+                op(),
+                self.rank,
+                self.world
+            ),
+            waited: start.elapsed(),
+        })
+    }
+
+    /// `ncclCommAbort`, once. The caller holds the call lock.
+    fn abort_locked(&self) {
         if !self.aborted.swap(true, Ordering::AcqRel) {
             if let Ok(api) = api() {
-                // SAFETY: a live communicator; marked aborted first so no call follows.
+                // SAFETY: a live communicator, used by no other thread (the caller holds the
+                // call lock); marked aborted first so no call follows.
                 unsafe { (api.comm_abort)(self.raw) };
             }
         }
     }
 
+    /// The API, if the communicator may still be called. The caller holds the call lock, so
+    /// no other thread can abort (free) the communicator between this check and the call.
     fn live(&self, op: &dyn Fn() -> String) -> Result<&'static Api> {
+        if self.abort_pending.load(Ordering::Acquire) {
+            self.abort_locked();
+        }
         if self.is_aborted() {
             return Err(CudaError::InvalidArgument(format!(
                 "{}: the NCCL communicator (rank {} of {}) was aborted after an earlier \
@@ -688,7 +832,8 @@ impl Comm {
     }
 
     /// The communicator's asynchronous state: Ok(true) when ready, Ok(false) while an
-    /// operation is in progress, an error (after which the communicator is aborted).
+    /// operation is in progress, an error (after which the communicator is aborted). The
+    /// caller holds the call lock.
     fn async_state(&self, api: &Api, op: &dyn Fn() -> String) -> Result<bool> {
         let mut state: NcclResult = NCCL_SUCCESS;
         // SAFETY: a live communicator and a valid out pointer.
@@ -696,7 +841,7 @@ impl Comm {
         for c in [code, state] {
             if c != NCCL_SUCCESS && c != NCCL_IN_PROGRESS {
                 let e = nccl_error(api, c, Some(self.raw), op());
-                self.abort();
+                self.abort_locked();
                 return Err(e);
             }
         }
@@ -721,17 +866,20 @@ impl Comm {
     }
 
     /// Polls until the communicator's last call is no longer in progress; aborts and fails
-    /// after the timeout.
+    /// after the timeout. Holds the call lock throughout: NCCL allows no other call on the
+    /// communicator while one is in progress.
     fn wait_ready(&self, op: impl Fn() -> String) -> Result<()> {
-        let api = self.live(&op)?;
+        let _held = self.hold_for(&op)?;
         let start = Instant::now();
         let mut backoff = Backoff::default();
         loop {
+            // `live` each poll: an abort left pending by another thread is done here.
+            let api = self.live(&op)?;
             if self.async_state(api, &op)? {
                 return Ok(());
             }
             if start.elapsed() > self.timeout() {
-                self.abort();
+                self.abort_locked();
                 return Err(CudaError::Timeout {
                     op: op(),
                     waited: start.elapsed(),
@@ -754,22 +902,37 @@ impl Comm {
     }
 
     /// Issues one NCCL call (`call` gets the communicator and the stream) and waits until it
-    /// is queued. Inside a [`Group`] NCCL defers the work to the group's end.
+    /// is queued, holding the call lock. Inside a [`Group`] NCCL defers the work to the
+    /// group's end, so the lock stays held by this thread until then.
     fn issue(
         &self,
         stream: &Stream,
         op: &dyn Fn() -> String,
         call: impl FnOnce(&Api, NcclComm, *mut c_void) -> NcclResult,
     ) -> Result<()> {
-        let api = self.live(op)?;
         self.check_stream(stream, op)?;
+        let _held = self.hold_for(op)?;
+        let in_group = Group::depth() > 0;
+        let already_in_group =
+            in_group && GROUP_HELD.with(|h| h.borrow().iter().any(|l| Arc::ptr_eq(l, &self.lock)));
+        if !already_in_group {
+            // Another thread's group may have ended just before this thread took the lock,
+            // its work still being set up: NCCL allows no call until the communicator is
+            // ready again (immediate when it is).
+            self.wait_ready(op)?;
+        }
+        let api = self.live(op)?;
         self.gpu.bind()?;
         let code = call(api, self.raw, stream.cu_stream() as *mut c_void);
         if code != NCCL_SUCCESS && code != NCCL_IN_PROGRESS {
             return Err(nccl_error(api, code, Some(self.raw), op()));
         }
-        if Group::depth() == 0 {
+        if !in_group {
             self.wait_ready(op)?;
+        } else {
+            // Re-entrant, so immediate; released by the outermost group's end.
+            self.lock.acquire(Duration::ZERO);
+            GROUP_HELD.with(|h| h.borrow_mut().push(self.lock.clone()));
         }
         Ok(())
     }
@@ -1021,22 +1184,28 @@ impl Comm {
                 self.gpu.ordinal()
             )
         };
-        let api = self.live(&what)?;
         self.check_stream(stream, &what)?;
         let start = Instant::now();
         let mut backoff = Backoff::default();
         loop {
+            // The stream is the driver's, not NCCL's: queried without the lock.
             if stream.query()? {
                 return Ok(());
             }
+            // The lock for each poll only, not for the whole wait: other threads' calls on
+            // this communicator go on meanwhile (one of them may be what this stream waits
+            // for, on a peer's side).
+            let held = self.hold_for(&what)?;
+            let api = self.live(&what)?;
             self.async_state(api, &what)?;
             if start.elapsed() > self.timeout() {
-                self.abort();
+                self.abort_locked();
                 return Err(CudaError::Timeout {
                     op: format!("{} (a peer never posted its matching operation?)", what()),
                     waited: start.elapsed(),
                 });
             }
+            drop(held);
             backoff.pause();
         }
     }
@@ -1054,18 +1223,38 @@ impl Drop for Comm {
         // wait for each other forever, so the teardown runs on a thread of its own, with the
         // timeout for the finalize and an abort if it does not complete.
         struct Raw(NcclComm);
-        // SAFETY: the handle moves to the teardown thread and is used there only.
+        // SAFETY: the handle moves to the teardown thread and is used there only, under the
+        // call lock.
         unsafe impl Send for Raw {}
         let raw = Raw(self.raw);
         let gpu = self.gpu.clone();
         let timeout = self.timeout();
+        let lock = self.lock.clone();
+        let pending_abort = self.abort_pending.load(Ordering::Acquire);
         teardowns::started();
         let spawned = std::thread::Builder::new()
             .name("warp-nccl-teardown".into())
             .spawn(move || {
                 let _done = teardowns::Done;
                 let raw = raw;
+                // A group of another thread may still hold the communicator (its calls are
+                // issued at the group's end): finalize after it. If it does not let go within
+                // the timeout, leak the handle rather than free it under that group.
+                if !lock.acquire(timeout) {
+                    log::warn!(
+                        target: "warp_cuda::nccl",
+                        "a dropped NCCL communicator stays in use by an open group: not \
+                         destroyed"
+                    );
+                    return;
+                }
+                let _held = Held(&lock);
                 let _ = gpu.bind();
+                if pending_abort {
+                    // SAFETY: a live communicator that nothing else uses any more; once.
+                    unsafe { (api.comm_abort)(raw.0) };
+                    return;
+                }
                 // SAFETY: a live communicator that nothing else uses any more.
                 let code = unsafe { (api.comm_finalize)(raw.0) };
                 let start = Instant::now();
@@ -1095,9 +1284,13 @@ impl Drop for Comm {
             });
         if spawned.is_err() {
             teardowns::finished();
-            // No thread to be had: abort, which is local.
-            // SAFETY: a live communicator, freed once.
-            unsafe { (api.comm_abort)(self.raw) };
+            // No thread to be had: abort, which is local, unless a group of another thread
+            // still holds the communicator (then leak it rather than free it under the group).
+            if self.lock.acquire(Duration::ZERO) {
+                let _held = Held(&self.lock);
+                // SAFETY: a live communicator, freed once, under the call lock.
+                unsafe { (api.comm_abort)(self.raw) };
+            }
         }
     }
 }
@@ -1177,6 +1370,9 @@ pub fn wait_for_teardowns(limit: Duration) -> bool {
 
 thread_local! {
     static GROUP_DEPTH: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    /// The call locks taken by calls inside this thread's open groups, one entry per
+    /// acquisition: released when the outermost group ends (see [`Comm::issue`]).
+    static GROUP_HELD: RefCell<Vec<Arc<CallLock>>> = const { RefCell::new(Vec::new()) };
 }
 
 /// An NCCL group on the calling thread (`ncclGroupStart` .. `ncclGroupEnd`): the calls made
@@ -1221,17 +1417,142 @@ impl Group {
         if !std::mem::take(&mut self.open) {
             return Ok(());
         }
-        GROUP_DEPTH.with(|d| d.set(d.get().saturating_sub(1)));
-        let api = api()?;
-        // SAFETY: matches this group's start.
-        check(api, unsafe { (api.group_end)() }, None, || {
-            "ncclGroupEnd".into()
-        })
+        let depth = GROUP_DEPTH.with(|d| {
+            d.set(d.get().saturating_sub(1));
+            d.get()
+        });
+        let end = api().and_then(|api| {
+            // SAFETY: matches this group's start.
+            check(api, unsafe { (api.group_end)() }, None, || {
+                "ncclGroupEnd".into()
+            })
+        });
+        if depth == 0 {
+            // The outermost end issued the calls: the communicators are free again.
+            let held = GROUP_HELD.with(|h| std::mem::take(&mut *h.borrow_mut()));
+            held.iter().for_each(|l| l.release());
+        }
+        end
     }
 }
 
 impl Drop for Group {
     fn drop(&mut self) {
         let _ = self.finish();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicUsize;
+
+    /// `Comm` stays `Send + Sync` (the runtime's `Communicator` is `Clone` and shared between
+    /// threads): soundly, because of the call lock whose discipline the tests below check.
+    #[test]
+    fn comm_holds_a_shared_call_lock() {
+        fn shared<T: Send + Sync>() {}
+        shared::<Arc<CallLock>>();
+        shared::<Comm>();
+    }
+
+    /// The property `unsafe impl Sync for Comm` rests on: at most one thread inside.
+    #[test]
+    fn call_lock_admits_one_thread_at_a_time() {
+        let lock = Arc::new(CallLock::default());
+        let inside = Arc::new(AtomicUsize::new(0));
+        let most = Arc::new(AtomicUsize::new(0));
+        let threads: Vec<_> = (0..8)
+            .map(|_| {
+                let (lock, inside, most) = (lock.clone(), inside.clone(), most.clone());
+                std::thread::spawn(move || {
+                    for _ in 0..200 {
+                        assert!(lock.acquire(Duration::from_secs(60)));
+                        let _held = Held(&lock);
+                        let now = inside.fetch_add(1, Ordering::SeqCst) + 1;
+                        most.fetch_max(now, Ordering::SeqCst);
+                        std::thread::yield_now();
+                        inside.fetch_sub(1, Ordering::SeqCst);
+                    }
+                })
+            })
+            .collect();
+        threads.into_iter().for_each(|t| t.join().unwrap());
+        assert_eq!(most.load(Ordering::SeqCst), 1);
+    }
+
+    /// A group's thread re-enters the lock (several calls on one communicator, a timed-out
+    /// wait aborting under it); another thread waits until every acquisition is released,
+    /// and its wait is bounded by the timeout rather than a hang.
+    #[test]
+    fn call_lock_is_reentrant_and_bounded() {
+        let lock = Arc::new(CallLock::default());
+        assert!(lock.acquire(Duration::ZERO));
+        assert!(lock.acquire(Duration::ZERO), "re-entry by the holder");
+        let other = {
+            let lock = lock.clone();
+            std::thread::spawn(move || lock.acquire(Duration::from_millis(50)))
+                .join()
+                .unwrap()
+        };
+        assert!(
+            !other,
+            "another thread must time out while the lock is held"
+        );
+        lock.release();
+        let other = {
+            let lock = lock.clone();
+            std::thread::spawn(move || lock.acquire(Duration::from_millis(50)))
+                .join()
+                .unwrap()
+        };
+        assert!(!other, "still held once");
+        lock.release();
+        let other = {
+            let lock = lock.clone();
+            std::thread::spawn(move || {
+                let got = lock.acquire(Duration::from_millis(50));
+                if got {
+                    lock.release();
+                }
+                got
+            })
+            .join()
+            .unwrap()
+        };
+        assert!(other, "free after the last release");
+    }
+
+    /// A group keeps the locks its calls took until the outermost group ends, and only then
+    /// lets another thread in (the calls are issued at `ncclGroupEnd`). Exercised without
+    /// NCCL: the group's bookkeeping, as `Comm::issue` and `Group::finish` do it.
+    #[test]
+    fn group_held_locks_are_released_at_the_outermost_end() {
+        let lock = Arc::new(CallLock::default());
+        GROUP_DEPTH.with(|d| d.set(2));
+        for _ in 0..3 {
+            assert!(lock.acquire(Duration::ZERO));
+            GROUP_HELD.with(|h| h.borrow_mut().push(lock.clone()));
+        }
+        let try_other = |lock: &Arc<CallLock>| {
+            let lock = lock.clone();
+            std::thread::spawn(move || {
+                let got = lock.acquire(Duration::from_millis(20));
+                if got {
+                    lock.release();
+                }
+                got
+            })
+            .join()
+            .unwrap()
+        };
+        // The inner end (no NCCL here: its error is ignored) keeps the locks.
+        let _ = Group { open: true }.finish();
+        assert_eq!(Group::depth(), 1);
+        assert!(!try_other(&lock));
+        let _ = Group { open: true }.finish();
+        assert_eq!(Group::depth(), 0);
+        assert!(try_other(&lock));
+        assert!(GROUP_HELD.with(|h| h.borrow().is_empty()));
     }
 }

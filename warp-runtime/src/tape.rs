@@ -209,8 +209,17 @@ impl Tape {
 
     /// Sets this tape's per-thread adjoint stack capacity in bytes (`None`: the process-wide
     /// [`config::adstack_bytes`]).
-    pub fn set_adstack_bytes(&self, bytes: Option<usize>) {
-        self.inner.borrow_mut().adstack_bytes = bytes;
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when called from a step of this tape's own backward (a
+    /// [`record_func`](Self::record_func) step): the running backward holds the tape, and
+    /// its capacity is fixed for the pass.
+    pub fn set_adstack_bytes(&self, bytes: Option<usize>) -> Result<()> {
+        self.inner
+            .try_borrow_mut()
+            .map_err(|_| running_backward(&format!("set_adstack_bytes({bytes:?})")))?
+            .adstack_bytes = bytes;
+        Ok(())
     }
 
     /// Zeroes the gradients of every array the recorded launches took.
@@ -226,8 +235,18 @@ impl Tape {
     }
 
     /// Forgets the recorded steps (gradients are left as they are).
-    pub fn reset(&self) {
-        self.inner.borrow_mut().records.clear();
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when called from a step of this tape's own backward (a
+    /// [`record_func`](Self::record_func) step): the steps being replayed cannot be dropped
+    /// under the running backward. Reset after `backward` returns.
+    pub fn reset(&self) -> Result<()> {
+        self.inner
+            .try_borrow_mut()
+            .map_err(|_| running_backward("reset"))?
+            .records
+            .clear();
+        Ok(())
     }
 
     /// Records a host-side step: `backward` runs at its place in the reverse order (for
@@ -249,12 +268,13 @@ impl Tape {
     }
 }
 
-/// The error of recording onto a tape whose backward is running (a `record_func` step that
-/// records on its own tape).
+/// The error of changing a tape whose backward is running (a `record_func` step that records
+/// on, resets or reconfigures its own tape).
 #[cold]
 fn running_backward(what: &str) -> Error {
     Error::invalid(format!(
-        "{what} on a tape that runs backward (a record_func step recording on its own tape)"
+        "{what} on a tape that runs backward (a record_func step changing its own tape; do it \
+         after backward returns)"
     ))
 }
 
@@ -337,4 +357,41 @@ fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> 
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `record_func` step reaches its own tape (through an `Rc` it captured) and changes
+    /// it while the tape's backward runs: before issue 35 `reset` and `set_adstack_bytes`
+    /// panicked there (a `RefCell` already borrowed by the backward); now each is an error
+    /// naming the call, backward returns it, and the tape still works afterwards.
+    fn step_changes_its_tape(change: fn(&Tape) -> Result<()>, names: &str) {
+        let tape = Rc::new(Tape::new());
+        let t = Rc::downgrade(&tape);
+        tape.record_func(move || change(&t.upgrade().expect("the tape is alive")))
+            .unwrap();
+        let e = tape.backward_from_grads().unwrap_err().to_string();
+        assert!(e.contains(names) && e.contains("runs backward"), "{e}");
+        // Nothing was changed, and outside backward the same calls work.
+        assert_eq!(tape.steps(), vec!["custom"]);
+        tape.set_adstack_bytes(Some(64)).unwrap();
+        tape.reset().unwrap();
+        assert!(tape.is_empty());
+        tape.backward_from_grads().unwrap();
+    }
+
+    #[test]
+    fn reset_during_backward_is_an_error() {
+        step_changes_its_tape(|t| t.reset(), "reset");
+    }
+
+    #[test]
+    fn set_adstack_bytes_during_backward_is_an_error() {
+        step_changes_its_tape(
+            |t| t.set_adstack_bytes(Some(64)),
+            "set_adstack_bytes(Some(64))",
+        );
+    }
 }

@@ -133,6 +133,13 @@ impl Call {
 
 /// One rank of an NCCL communicator, bound to one GPU. See the module documentation.
 /// Cloning gives another handle to the same rank.
+///
+/// Handles may be used from several threads at once: NCCL allows only one call at a time
+/// on a communicator, so the calls are serialised (each takes the rank's call lock until
+/// NCCL has accepted its work; a [`group`] holds it until the group is issued). Collectives
+/// from different threads on one rank therefore run in the order they took the lock, and
+/// every rank must see the same order: threads sharing one rank need an order of their own
+/// (a barrier, a channel), or one thread per rank.
 #[derive(Clone)]
 pub struct Communicator(Arc<Inner>);
 
@@ -740,9 +747,16 @@ pub fn group<R>(body: impl FnOnce() -> Result<R>) -> Result<R> {
     let out = body();
     let ops = GROUP.with(|g| g.borrow_mut().take()).unwrap_or_default();
     let out = out?;
-    let ops: Vec<(Communicator, Call, Issue)> =
+    let mut ops: Vec<(Communicator, Call, Issue)> =
         ops.into_iter().map(|p| (p.comm, p.call, p.issue)).collect();
     check_group(&ops)?;
+    // Each communicator's call lock is taken at its first call below and held until the
+    // NCCL group ends (NCCL allows no other thread's call on it meanwhile). Issuing in one
+    // global order of communicators (a stable sort, so each communicator's own calls keep
+    // their order; the order across communicators does not matter inside one NCCL group)
+    // means two threads' groups over the same communicators take their locks in the same
+    // order, and cannot deadlock.
+    ops.sort_by_key(|(c, ..)| Arc::as_ptr(&c.0) as usize);
     let nccl_group = nccl::Group::start().map_err(|e| Error::cuda("cuda", e))?;
     let mut first_err = None;
     let mut used: Vec<Communicator> = Vec::new();
