@@ -70,6 +70,30 @@ pub struct Tape {
     inner: Rc<RefCell<TapeInner>>,
 }
 
+/// What a tape's `Debug` shows: how many operations it holds and its adjoint-stack setting
+/// (`busy: true` while the tape itself is being changed, when they cannot be read; it never
+/// panics).
+impl std::fmt::Debug for Tape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut d = f.debug_struct("Tape");
+        match self.inner.try_borrow() {
+            Ok(inner) => d
+                .field("records", &inner.records.len())
+                .field("adstack_bytes", &inner.adstack_bytes),
+            Err(_) => d.field("busy", &true),
+        }
+        .finish()
+    }
+}
+
+impl std::fmt::Debug for Recording<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recording")
+            .field("tape_alive", &(self.inner.strong_count() > 0))
+            .finish()
+    }
+}
+
 /// While alive, launches on this thread are recorded on the tape (see [`Tape::record`]).
 #[must_use = "the tape records only while the `Recording` is alive: bind it (`let _rec = tape.record();`), not `let _ =`, which drops it at once"]
 pub struct Recording<'t> {
@@ -393,5 +417,25 @@ mod tests {
             |t| t.set_adstack_bytes(Some(64)),
             "set_adstack_bytes(Some(64))",
         );
+    }
+
+    /// `Debug` shows the record count and the stack setting, also from a step of the tape's
+    /// own backward pass (which reads the records: no panic).
+    #[test]
+    fn debug_shows_records_and_never_panics() {
+        let tape = Rc::new(Tape::new());
+        tape.set_adstack_bytes(Some(128)).unwrap();
+        let t = Rc::downgrade(&tape);
+        let seen = Rc::new(RefCell::new(String::new()));
+        let s2 = seen.clone();
+        tape.record_func(move || {
+            *s2.borrow_mut() = format!("{:?}", t.upgrade().expect("the tape is alive"));
+            Ok(())
+        })
+        .unwrap();
+        let d = format!("{tape:?}");
+        assert_eq!(d, "Tape { records: 1, adstack_bytes: Some(128) }");
+        tape.backward_from_grads().unwrap();
+        assert_eq!(*seen.borrow(), d);
     }
 }
