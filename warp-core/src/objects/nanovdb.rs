@@ -307,6 +307,20 @@ impl Layout {
             GridType::Other(_) => return None,
         })
     }
+
+    /// The fewest bytes a grid of this layout with `nodes` (leaves, lower nodes, upper
+    /// nodes: TreeData's `nodeCount` order, which a file's metadata record repeats) can
+    /// take: GridData, TreeData, RootData and every node; root tiles and blind data only add
+    /// to it. A declared gridSize below it cannot be the grid's, so a reader can refuse it
+    /// before allocating or inflating anything. (The u32 counts times node sizes below 2^20
+    /// cannot overflow a u64.)
+    pub fn min_grid_size(&self, nodes: [u32; 3]) -> u64 {
+        let [leaves, lowers, uppers] = nodes.map(u64::from);
+        (GRID_DATA + TREE_DATA + self.root_size) as u64
+            + leaves * self.leaf_size as u64
+            + lowers * self.lo_size as u64
+            + uppers * self.up_size as u64
+    }
 }
 
 /// The index-to-world transform of a grid: `world = mat * ijk + translation`, `mat`
@@ -1838,6 +1852,9 @@ mod tests {
             (3, 4, 4)
         );
         assert_eq!(info.first_leaf + 4 * l.leaf_size as u64, info.size);
+        // The least a grid with these nodes takes: all of it but the root's three tiles.
+        assert_eq!(l.min_grid_size([4, 4, 3]), info.size - 3 * 32);
+        assert_eq!(l.min_grid_size([0; 3]), 736 + 64);
         // Every type the builder makes passes.
         let map = Map::uniform(1.0, [0.0; 3]);
         for (t, bg) in [

@@ -7,7 +7,10 @@
 //!
 //! A grid is validated when made ([`NvdbGrid::from_bytes`]), so every offset a lookup
 //! follows is inside it; the reads here are bounds-checked all the same: a truncated or
-//! corrupted file is an `Err`, never a panic or an out-of-bounds read.
+//! corrupted file is an `Err`, never a panic or an out-of-bounds read. Every allocation whose
+//! size a file declares is bounded first (by the file's length, by what the grid's nodes
+//! need, by what a ZIP stream of its length can inflate to) and fallible, so a file that
+//! declares an enormous grid is an `Err` too, never an abort on allocation.
 
 use std::path::Path;
 
@@ -466,7 +469,11 @@ pub fn save_nvdb(path: impl AsRef<Path>, grids: &[&NvdbGrid], codec: Codec) -> R
 /// [`Error::InvalidArgument`]: a short or unknown header, a major version other than 32, a
 /// BLOSC or unknown codec, a ZIP stream that does not inflate to the grid's size, metadata
 /// or a payload past the end, a payload whose size is not the
-/// grid's, a grid that fails [`NvdbGrid::from_bytes`].
+/// grid's, a grid that fails [`NvdbGrid::from_bytes`]. A declared grid size that is not a
+/// grid's (below the headers, not a multiple of 32, less than the record's node counts
+/// need, more than the ZIP stream can inflate to, or not the inflated grid's own) is refused
+/// before it is allocated, and host memory that cannot be allocated is an error too (never an
+/// abort); these errors name the grid's index in the file and the sizes.
 pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
     const WHAT: &str = "NanoVDB file";
     let mut grids = Vec::new();
@@ -505,24 +512,37 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
             c => return Err(Error::invalid_in(WHAT, format!("unknown codec {c}"))),
         }
         at += FILE_HEADER;
+        let first = grids.len();
         let mut sizes = Vec::with_capacity(count);
-        for _ in 0..count {
+        for n in 0..count {
+            let index = first + n;
             let grid_size = u64_at(bytes, at, WHAT)?;
             let file_size = u64_at(bytes, at + 8, WHAT)?;
             if codec == 0 && grid_size != file_size {
                 return Err(Error::invalid_in(
                     WHAT,
-                    format!("a grid of {grid_size} bytes stored in {file_size}"),
+                    format!("grid {index}: a grid of {grid_size} bytes stored in {file_size}"),
                 ));
             }
+            // The record repeats the grid's type and node counts: a declared size the
+            // nodes cannot fit in is refused here, before any payload is read or inflated.
+            let grid_type = GridType::from_code(u32_at(bytes, at + 32, WHAT)?);
+            let nodes = [
+                u32_at(bytes, at + 140, WHAT)?,
+                u32_at(bytes, at + 144, WHAT)?,
+                u32_at(bytes, at + 148, WHAT)?,
+            ];
+            let size = declared_size(grid_size, Layout::of(grid_type), nodes)
+                .map_err(|e| Error::invalid_in(WHAT, format!("grid {index}'s record: {e}")))?;
             let name = u32_at(bytes, at + 136, WHAT)? as usize;
             at = at
                 .checked_add(FILE_META + name)
                 .filter(|e| *e <= bytes.len())
                 .ok_or_else(|| Error::invalid_in(WHAT, "grid metadata past the end"))?;
-            sizes.push(grid_size as usize);
+            sizes.push(size);
         }
-        for size in sizes {
+        for (n, size) in sizes.into_iter().enumerate() {
+            let index = first + n;
             // ZIP: the stream's length (u64), then one zlib stream of the grid. (Upstream counts
             // the length word in the metadata's fileSize, Warp does not: neither is read.)
             let (start, stored) = if codec == 1 {
@@ -538,37 +558,172 @@ pub fn read_nvdb(bytes: &[u8]) -> Result<Vec<NvdbGrid>> {
                     Error::invalid_in(
                         WHAT,
                         format!(
-                            "a grid of {stored} bytes at {start} is past the end ({})",
+                            "grid {index}: a grid of {stored} bytes at {start} is past the end ({})",
                             bytes.len()
                         ),
                     )
                 })?;
+            let payload = &bytes[start..end];
             let grid = if codec == 1 {
-                let g = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(
-                    &bytes[start..end],
-                    size,
-                )
-                .map_err(|e| {
+                inflate_grid(payload, size).map_err(|e| {
                     Error::invalid_in(
                         WHAT,
-                        format!("a ZIP stream at {start} does not inflate: {e:?}"),
+                        format!(
+                            "grid {index} (a ZIP stream of {stored} bytes at {start}, declared \
+                             {size} bytes inflated): {e}"
+                        ),
                     )
-                })?;
-                if g.len() != size {
-                    return Err(Error::invalid_in(
-                        WHAT,
-                        format!("a ZIP stream inflates to {} bytes, not {size}", g.len()),
-                    ));
-                }
-                g
+                })?
             } else {
-                bytes[start..end].to_vec()
+                // The bytes are in the file, so this is at most its length; still fallible,
+                // as every allocation a file's contents size.
+                let mut g = Vec::new();
+                grow(&mut g, size)
+                    .map_err(|e| Error::invalid_in(WHAT, format!("grid {index}: {e}")))?;
+                g.copy_from_slice(payload);
+                g
             };
             grids.push(NvdbGrid::from_bytes(grid)?);
             at = end;
         }
     }
     Ok(grids)
+}
+
+/// Bytes of GridData and TreeData, the headers every grid starts with.
+const HEADERS: usize = GRID_DATA + TREE_DATA;
+
+/// DEFLATE's largest expansion: a 258-byte match coded in 2 bits (a 1-bit length code and
+/// a 1-bit distance code) is 1032 output bytes per input byte, and no valid stream does
+/// better. A zlib stream of `n` bytes cannot inflate to more than `1032 * n`.
+const DEFLATE_MAX_RATIO: u64 = 1032;
+
+/// A grid size a file's metadata record declares, checked against what the grid's own
+/// structure needs before anything is allocated for it: at least GridData and TreeData, a
+/// multiple of 32 (as [`nv::validate`] requires of every grid), room for the root and the
+/// nodes the record counts (`nodes`: leaves, lowers, uppers) when the record's type has a
+/// [`Layout`], and a `usize`.
+fn declared_size(
+    size: u64,
+    layout: Option<Layout>,
+    nodes: [u32; 3],
+) -> std::result::Result<usize, String> {
+    if size < HEADERS as u64 || !size.is_multiple_of(32) {
+        return Err(format!(
+            "gridSize {size} is not a grid's (at least GridData and TreeData, {HEADERS} bytes, and a multiple of 32)"
+        ));
+    }
+    if let Some(l) = layout {
+        let need = l.min_grid_size(nodes);
+        if size < need {
+            return Err(format!(
+                "gridSize {size} is less than its {} leaves, {} lower and {} upper nodes need ({need} bytes)",
+                nodes[0], nodes[1], nodes[2]
+            ));
+        }
+    }
+    usize::try_from(size)
+        .map_err(|_| format!("gridSize {size} does not fit in this machine's address space"))
+}
+
+/// `v` grown to `len` zeroed bytes, the allocation fallible: a size the allocator cannot
+/// give is an `Err`, not an abort.
+fn grow(v: &mut Vec<u8>, len: usize) -> std::result::Result<(), String> {
+    v.try_reserve_exact(len.saturating_sub(v.len()))
+        .map_err(|e| format!("{len} bytes of host memory could not be allocated ({e})"))?;
+    v.resize(len, 0);
+    Ok(())
+}
+
+/// The grid a zlib `stream` inflates to, which must be exactly `size` bytes (its record's
+/// declared gridSize, already checked by [`declared_size`]). Nothing is allocated for a
+/// size the stream cannot reach ([`DEFLATE_MAX_RATIO`]); the output buffer grows with what
+/// the stream actually yields (doubling, fallibly) and never past `size`, so a stream that
+/// inflates further (a ZIP bomb) stops there; and once the headers are out, the grid's own
+/// magic, gridSize and node counts must agree with `size` before the rest is inflated.
+fn inflate_grid(stream: &[u8], size: usize) -> std::result::Result<Vec<u8>, String> {
+    use miniz_oxide::inflate::core::{decompress, inflate_flags, DecompressorOxide};
+    use miniz_oxide::inflate::TINFLStatus;
+    let most = (stream.len() as u64).saturating_mul(DEFLATE_MAX_RATIO);
+    if size as u64 > most {
+        return Err(format!(
+            "{} bytes of DEFLATE cannot inflate to more than {most} ({DEFLATE_MAX_RATIO} per byte)",
+            stream.len()
+        ));
+    }
+    // As miniz_oxide's own `decompress_to_vec_zlib`: a zlib header, and an output buffer
+    // that holds everything inflated so far (matches refer back into it).
+    let flags = inflate_flags::TINFL_FLAG_PARSE_ZLIB_HEADER
+        | inflate_flags::TINFL_FLAG_USING_NON_WRAPPING_OUTPUT_BUF;
+    let mut d = Box::<DecompressorOxide>::default();
+    let mut out = Vec::new();
+    grow(
+        &mut out,
+        stream.len().saturating_mul(2).max(HEADERS).min(size),
+    )?;
+    let (mut input, mut out_pos, mut header_checked) = (stream, 0usize, false);
+    loop {
+        let (status, used, produced) = decompress(&mut d, input, &mut out, out_pos, flags);
+        input = input.get(used..).unwrap_or_default();
+        out_pos += produced;
+        if !header_checked && out_pos >= HEADERS {
+            inflated_header(&out[..HEADERS], size)?;
+            header_checked = true;
+        }
+        match status {
+            TINFLStatus::Done if out_pos == size => {
+                out.truncate(out_pos);
+                return Ok(out);
+            }
+            TINFLStatus::Done => {
+                return Err(format!(
+                    "the ZIP stream inflates to {out_pos} bytes, not {size}"
+                ))
+            }
+            TINFLStatus::HasMoreOutput if out.len() >= size => {
+                return Err(format!(
+                    "the ZIP stream inflates past its declared {size} bytes"
+                ))
+            }
+            TINFLStatus::HasMoreOutput => {
+                let len = out.len().saturating_mul(2).min(size);
+                grow(&mut out, len)?
+            }
+            s => {
+                return Err(format!(
+                    "the ZIP stream does not inflate ({s:?}) after {out_pos} bytes"
+                ))
+            }
+        }
+    }
+}
+
+/// The first [`HEADERS`] bytes of an inflating grid agree with its declared `size`: a
+/// grid's magic, the same gridSize, and node counts (TreeData's) that fit in it.
+fn inflated_header(h: &[u8], size: usize) -> std::result::Result<(), String> {
+    let u32_of = |at: usize| u32::from_le_bytes(h[at..at + 4].try_into().expect("4 bytes"));
+    let magic = u64::from_le_bytes(h[..8].try_into().expect("8 bytes"));
+    if magic != nv::MAGIC_GRID && magic != nv::MAGIC_0 {
+        return Err(format!(
+            "inflates to magic {magic:#018x}, not a NanoVDB grid's"
+        ));
+    }
+    let own = u64::from_le_bytes(
+        h[nv::grid::SIZE..nv::grid::SIZE + 8]
+            .try_into()
+            .expect("8 bytes"),
+    );
+    if own != size as u64 {
+        return Err(format!(
+            "the grid's own gridSize is {own}, its record says {size}"
+        ));
+    }
+    let counts = GRID_DATA + nv::tree::NODE_COUNT;
+    let nodes = [u32_of(counts), u32_of(counts + 4), u32_of(counts + 8)];
+    let layout = Layout::of(GridType::from_code(u32_of(nv::grid::TYPE)));
+    declared_size(own, layout, nodes)
+        .map(|_| ())
+        .map_err(|e| format!("the grid's header: {e}"))
 }
 
 /// [`read_nvdb`] of the file at `path`.
@@ -624,6 +779,172 @@ mod tests {
         out[16 + 168..16 + 170].copy_from_slice(&0u16.to_le_bytes());
         out.extend_from_slice(grid.as_bytes());
         out
+    }
+
+    /// The sphere fixture's header and metadata record (ZIP), declaring `declared` bytes,
+    /// then `stream` as its payload: a file whose one grid inflates from `stream`.
+    fn zip_file(declared: u64, stream: &[u8]) -> Vec<u8> {
+        let zip = warp_sphere_zip();
+        let name = u32::from_le_bytes(zip[16 + 136..16 + 140].try_into().unwrap()) as usize;
+        let mut out = zip[..FILE_HEADER + FILE_META + name].to_vec();
+        out[16..24].copy_from_slice(&declared.to_le_bytes());
+        out[24..32].copy_from_slice(&(8 + stream.len() as u64).to_le_bytes());
+        out.extend((stream.len() as u64).to_le_bytes());
+        out.extend_from_slice(stream);
+        out
+    }
+
+    fn zlib(data: &[u8]) -> Vec<u8> {
+        miniz_oxide::deflate::compress_to_vec_zlib(data, 6)
+    }
+
+    /// A small file declaring an enormous grid is an `Err` at once, naming the grid and the
+    /// sizes, before anything is allocated for it. (Before this check the declared size was
+    /// only the inflater's limit: a stream of zeros declared at 2^62 bytes was inflated in
+    /// full, its buffer doubling as it went, so a stream of n bytes made the reader allocate
+    /// up to about 2 * 1032 * n bytes, and the process abort when the allocator could not.)
+    #[test]
+    fn huge_declared_sizes_are_errors_before_allocating() {
+        let huge = 1u64 << 62;
+        let start = std::time::Instant::now();
+        // 16 MiB of zeros is a 16 KiB stream.
+        let bomb = zlib(&vec![0u8; 16 << 20]);
+        for stream in [
+            &bomb[..],
+            &zlib(read_nvdb(&warp_sphere()).unwrap()[0].as_bytes()),
+        ] {
+            let e = read_nvdb(&zip_file(huge, stream)).unwrap_err().to_string();
+            assert!(e.contains("grid 0"), "{e}");
+            assert!(e.contains(&format!("declared {huge} bytes")), "{e}");
+            assert!(e.contains("cannot inflate to more than"), "{e}");
+        }
+        // Uncompressed, the bytes must be in the file.
+        let mut b = warp_sphere();
+        b[16..24].copy_from_slice(&huge.to_le_bytes());
+        b[24..32].copy_from_slice(&huge.to_le_bytes());
+        let e = read_nvdb(&b).unwrap_err().to_string();
+        assert!(e.contains("grid 0") && e.contains("past the end"), "{e}");
+        // Not a grid's size at all: below the headers, not a multiple of 32.
+        for bad in [0, 700, 40_000 + 1] {
+            let e = read_nvdb(&zip_file(bad, &bomb)).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("gridSize {bad} is not a grid's")),
+                "{e}"
+            );
+        }
+        // Where a bound still leaves a size the allocator refuses, it is an Err too.
+        assert!(grow(&mut Vec::new(), usize::MAX)
+            .unwrap_err()
+            .contains("could not be allocated"));
+        assert!(grow(&mut Vec::new(), huge as usize)
+            .unwrap_err()
+            .contains(&format!("{huge} bytes")));
+        assert!(start.elapsed().as_secs() < 30, "{:?}", start.elapsed());
+    }
+
+    /// A ZIP stream that inflates past its declared size stops there: an `Err` naming the
+    /// size, with no more than the declared bytes allocated; one that inflates to something
+    /// that is not the declared grid stops once its headers are out.
+    #[test]
+    fn zip_streams_stop_at_the_declared_size() {
+        let grid = read_nvdb(&warp_sphere()).unwrap()[0].as_bytes().to_vec();
+        let size = grid.len() as u64;
+        // The grid, then 1 MiB more.
+        let mut longer = grid.clone();
+        longer.resize(grid.len() + (1 << 20), 0);
+        let e = read_nvdb(&zip_file(size, &zlib(&longer)))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("grid 0"), "{e}");
+        assert!(
+            e.contains(&format!("inflates past its declared {size} bytes")),
+            "{e}"
+        );
+        // 16 MiB of zeros declared as 16 MiB (within DEFLATE's ratio): refused by its first
+        // bytes, the headers, not after inflating all of it.
+        let zeros = zlib(&vec![0u8; 16 << 20]);
+        let e = read_nvdb(&zip_file(16 << 20, &zeros))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("inflates to magic 0x0000000000000000"), "{e}");
+        // The grid's own gridSize must be the record's.
+        let e = read_nvdb(&zip_file(size + 32, &zlib(&grid)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "own gridSize is {size}, its record says {}",
+                size + 32
+            )),
+            "{e}"
+        );
+    }
+
+    /// Node counts that cannot fit in the declared size are an `Err`: the metadata record's
+    /// (before the payload is read or inflated) and the grid's own TreeData's (once its
+    /// headers are inflated).
+    #[test]
+    fn counts_inconsistent_with_the_declared_size_are_errors() {
+        for file in [warp_sphere(), warp_sphere_zip()] {
+            let mut b = file.clone();
+            b[16 + 140..16 + 144].copy_from_slice(&1_000_000u32.to_le_bytes());
+            let e = read_nvdb(&b).unwrap_err().to_string();
+            assert!(e.contains("grid 0's record"), "{e}");
+            assert!(e.contains("less than its 1000000 leaves"), "{e}");
+        }
+        let mut grid = read_nvdb(&warp_sphere()).unwrap()[0].as_bytes().to_vec();
+        let uppers = GRID_DATA + nv::tree::NODE_COUNT + 8;
+        grid[uppers..uppers + 4].copy_from_slice(&70_000u32.to_le_bytes());
+        let e = read_nvdb(&zip_file(grid.len() as u64, &zlib(&grid)))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("the grid's header"), "{e}");
+        assert!(e.contains("70000 upper nodes need"), "{e}");
+    }
+
+    /// Truncated and mutated valid files (uncompressed and ZIP; bytes of the headers, the
+    /// records, the length word and the payload, and whole size fields set to extremes)
+    /// read as grids or as `Err`s: never a panic or an abort, and in bounded time.
+    #[test]
+    fn mutated_files_never_panic() {
+        let start = std::time::Instant::now();
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        let extremes = [0, 1, 736, 1 << 32, 1 << 62, u64::MAX / 2, u64::MAX];
+        for file in [warp_sphere(), warp_sphere_zip()] {
+            let head = FILE_HEADER + FILE_META + 8 + 16;
+            for cut in (0..head).chain((head..file.len()).step_by(997)) {
+                let _ = read_nvdb(&file[..cut]);
+            }
+            for _ in 0..400 {
+                let mut b = file.clone();
+                let r = next();
+                if r % 3 == 0 {
+                    // A whole u64 (the sizes, the stream length) at a 4-aligned place early on.
+                    let at = 4 * (r >> 8) as usize % (head - 8);
+                    let v = extremes[(r >> 40) as usize % extremes.len()];
+                    b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+                } else {
+                    for _ in 0..1 + r % 4 {
+                        let r = next();
+                        // Mostly the headers and records, sometimes anywhere.
+                        let span = if r % 2 == 0 { head } else { b.len() };
+                        b[(r >> 8) as usize % span] = (r >> 48) as u8;
+                    }
+                }
+                if let Ok(grids) = read_nvdb(&b) {
+                    for g in grids {
+                        let _ = g.value_f32([3, 4, 5]);
+                    }
+                }
+            }
+        }
+        assert!(start.elapsed().as_secs() < 60, "{:?}", start.elapsed());
     }
 
     /// The fixture's value at `ijk`: the array's inside it (the same f64 arithmetic, then
