@@ -158,8 +158,8 @@ where
     /// (a zero stride on an axis of more than one element, as of a broadcast or PyTorch's
     /// `expand()`: arrays are writable, and there is no read-only array to import it as;
     /// import a contiguous copy), a stride, offset or size past the address space, a
-    /// misaligned pointer, a read-only tensor, a device warp-lang cannot address; [`Error::NoDevice`] for a GPU
-    /// that is not available. The tensor is released on error.
+    /// misaligned pointer, a read-only tensor, a device warp-lang cannot address;
+    /// [`Error::NoDevice`] for a GPU that is not available. The tensor is released on error.
     pub unsafe fn from_dlpack<M: ManagedTensorBase>(tensor: Managed<M>) -> Result<Self> {
         let what = "from_dlpack";
         if tensor.flags().contains(DlpackFlags::READ_ONLY) {
