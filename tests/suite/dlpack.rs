@@ -17,6 +17,7 @@ backend_tests!(
     producer_released_with_last_handle,
     strided_and_component_layouts,
     dlpack_errors,
+    overlapping_and_overflowing_tensors,
 );
 
 #[wp::kernel]
@@ -197,4 +198,105 @@ fn dlpack_errors(dev: &wp::Device) {
     let e = err::<f32, 1>(unsafe { init.finish() });
     assert!(e.contains("DLPack device type 7"), "{e}");
     let _ = dev;
+}
+
+/// A tensor built by hand over `n` f32 of memory on `dev` (a `Vec` on the CPU, an array's
+/// device memory on a GPU), kept alive by the tensor's context, with the given shape,
+/// strides (in scalars) and byte offset.
+fn hand_built(
+    dev: &wp::Device,
+    values: &[f32],
+    shape: Vec<i64>,
+    strides: Vec<i64>,
+    byte_offset: u64,
+) -> versioned::Dlpack {
+    let (ptr, owner): (u64, Box<dyn Send>) = if dev.is_cpu() {
+        let v = values.to_vec();
+        (v.as_ptr() as u64, Box::new(v))
+    } else {
+        let g = wp::Array::<f32>::from_slice(values, dev).unwrap();
+        (g.device_ptr(), Box::new(g))
+    };
+    let mut init = Dynamic::new(shape, strides)
+        .initialize_as::<warp_runtime::dlpack::ffi::DLManagedTensorVersioned>(Box::new(owner))
+        .unwrap();
+    init.set_data(ptr as usize as *mut std::ffi::c_void)
+        .set_dtype(DLDataType::F32)
+        .set_byte_offset(byte_offset)
+        .set_device(dl_device(dev));
+    // SAFETY: the memory is owned by the context until the deleter runs; the layouts the
+    // tests import address it, the others are refused before it is touched.
+    unsafe { init.finish() }
+}
+
+/// Arrays are writable, so a tensor whose elements alias (a zero stride, as PyTorch's
+/// `expand()` makes) is refused, as are strides and offsets whose byte arithmetic overflows
+/// (an error, not a wrap to some other address); a transposed, strided, reversed tensor that
+/// does not overlap is imported.
+fn overlapping_and_overflowing_tensors(dev: &wp::Device) {
+    fn err<T: wp::NdComponents, const N: usize>(t: versioned::Dlpack) -> String
+    where
+        T::Scalar: warp_runtime::DlpackScalar,
+    {
+        // SAFETY: a hand-built descriptor over live memory, or one the callee rejects before
+        // any access.
+        match unsafe { wp::Array::<T, N>::from_dlpack(t) } {
+            Ok(a) => panic!("imported {:?} with strides {:?}", a.shape(), a.strides()),
+            Err(e @ wp::Error::InvalidArgument { .. }) => e.to_string(),
+            Err(e) => panic!("unexpected error {e:?}"),
+        }
+    }
+    let values: Vec<f32> = (0..12).map(|k| k as f32).collect();
+    // `torch.arange(4.).expand(3, 4)`: shape [3, 4], strides [0, 1].
+    let e = err::<f32, 2>(hand_built(dev, &values, vec![3, 4], vec![0, 1], 0));
+    assert!(
+        e.contains("from_dlpack")
+            && e.contains("shape [3, 4]")
+            && e.contains("strides [0, 1]")
+            && e.contains("more than one index"),
+        "{e}"
+    );
+    // One Vec3 expanded to 5: shape [5, 3], strides [0, 1].
+    let e = err::<Vec3, 1>(hand_built(dev, &values, vec![5, 3], vec![0, 1], 0));
+    assert!(e.contains("strides [0, 1]"), "{e}");
+    // Aliasing without a zero stride: [i, j] at 2i + j ([0, 2] is [1, 0]).
+    let e = err::<f32, 2>(hand_built(dev, &values, vec![3, 3], vec![2, 1], 0));
+    assert!(e.contains("more than one index"), "{e}");
+
+    // A stride of 2^62 f32 is 2^64 bytes: it wrapped to a zero byte stride before.
+    let e = err::<f32, 1>(hand_built(dev, &values, vec![2], vec![1 << 62], 0));
+    assert!(e.contains("overflows a byte offset"), "{e}");
+    let e = err::<f32, 2>(hand_built(dev, &values, vec![2, 2], vec![i64::MIN, 1], 0));
+    assert!(e.contains("overflows a byte offset"), "{e}");
+    // A byte offset that wraps the data pointer around the address space.
+    let e = err::<f32, 1>(hand_built(dev, &values, vec![2], vec![1], u64::MAX - 3));
+    assert!(e.contains("overflows the address space"), "{e}");
+    // A huge stride on an axis of one element is never applied: no overflow, no error.
+    // SAFETY: a hand-built descriptor over live memory.
+    let one = unsafe {
+        wp::Array::<f32, 2>::from_dlpack(hand_built(dev, &values, vec![1, 3], vec![i64::MAX, 1], 0))
+    }
+    .unwrap();
+    assert_eq!(host(&one), [0.0, 1.0, 2.0]);
+
+    // Not overlapping: [i, j] at 2i + 6j (a transposed view of every other element), offset
+    // by one element.
+    // SAFETY: every element lies in the 12 f32 of the tensor's memory.
+    let t = unsafe {
+        wp::Array::<f32, 2>::from_dlpack(hand_built(dev, &values, vec![3, 2], vec![2, 6], 4))
+    }
+    .unwrap();
+    assert_eq!(t.strides(), [2, 6]);
+    assert_eq!(host(&t), [1.0, 7.0, 3.0, 9.0, 5.0, 11.0]);
+    let out = wp::Array::<f32, 2>::zeros((3, 2), dev).unwrap();
+    wp::launch(k_copy_2d, (3, 2), (&t, &out), dev).unwrap();
+    assert_eq!(host(&out), [1.0, 7.0, 3.0, 9.0, 5.0, 11.0]);
+    // Rows reversed: element zero is the last of three rows of 4 (byte offset 32).
+    // SAFETY: as above.
+    let r = unsafe {
+        wp::Array::<f32, 2>::from_dlpack(hand_built(dev, &values, vec![3, 4], vec![-4, 1], 32))
+    }
+    .unwrap();
+    assert_eq!(host(&r)[..4], [8.0, 9.0, 10.0, 11.0]);
+    assert_eq!(host(&r)[8..], [0.0, 1.0, 2.0, 3.0]);
 }

@@ -13,6 +13,7 @@ backend_tests!(
     owner_drops_with_last_handle,
     strided_and_negative_wraps,
     wrap_errors,
+    overlapping_wraps_refused,
     ndarray_views,
     from_ndarray,
     external_stream,
@@ -193,6 +194,87 @@ fn wrap_errors(dev: &wp::Device) {
         1,
         "refused wraps drop their owner"
     );
+}
+
+/// A layout that addresses one element from two indices is refused, since every array is
+/// writable (there is no read-only array): an ndarray broadcast view (a zero stride, as
+/// PyTorch's `expand()`), and non-zero strides that alias. Non-overlapping strided layouts
+/// (every other element, transposed, reversed) are still wrapped, and a mutable ndarray view
+/// of one is built.
+fn overlapping_wraps_refused(dev: &wp::Device) {
+    let values: Vec<f32> = (0..12).map(|k| k as f32).collect();
+    let (ptr, owner, _read) = external(dev, &values);
+    let owner = Arc::new(owner);
+    let err = |r: wp::Result<wp::Array<f32, 2>>| match r {
+        Ok(a) => panic!("wrapped {:?} with strides {:?}", a.shape(), a.strides()),
+        Err(e @ wp::Error::InvalidArgument { .. }) => e.to_string(),
+        Err(e) => panic!("unexpected error {e:?}"),
+    };
+    let call = if dev.is_cpu() {
+        "from_host_ptr"
+    } else {
+        "from_device_ptr"
+    };
+    // The layout of an ndarray broadcast: a row of 4 repeated 3 times.
+    let row = ndarray::Array1::from_iter((0..4).map(|k| k as f32));
+    let b = row.broadcast((3, 4)).unwrap();
+    let byte_strides = [b.strides()[0] * 4, b.strides()[1] * 4];
+    assert_eq!(byte_strides, [0, 4]);
+    // SAFETY (all): every layout lies in the 12 f32 at `ptr` (kept alive by `owner`); the
+    // refused ones are refused before the memory is used.
+    unsafe {
+        let e = err(wrap(dev, ptr, [3, 4], Some(byte_strides), owner.clone()));
+        assert!(
+            e.contains(call)
+                && e.contains("shape [3, 4]")
+                && e.contains("byte_strides [0, 4]")
+                && e.contains("more than one index"),
+            "{e}"
+        );
+        // The host memory of the broadcast view itself, on the CPU.
+        if dev.is_cpu() {
+            let e = err(wp::Array::<f32, 2>::from_host_ptr(
+                b.as_ptr() as *mut f32,
+                [3, 4],
+                Some(byte_strides),
+                dev,
+                (),
+            ));
+            assert!(e.contains("byte_strides [0, 4]"), "{e}");
+        }
+        // Aliasing without a zero stride: element [i, j] at i + j (so [0, 1] is [1, 0]).
+        let e = err(wrap(dev, ptr, [3, 2], Some([4, 4]), owner.clone()));
+        assert!(e.contains("shape [3, 2] with byte_strides [4, 4]"), "{e}");
+        // A row stride inside the span of a row: [1, 0] is [0, 2].
+        let e = err(wrap(dev, ptr, [2, 3], Some([8, 4]), owner.clone()));
+        assert!(e.contains("more than one index"), "{e}");
+        // Negative and aliasing: [i, j] at element 8 - 2i - j ([0, 2] is [1, 0]).
+        let e = err(wrap(dev, ptr + 32, [3, 3], Some([-8, -4]), owner.clone()));
+        assert!(e.contains("byte_strides [-8, -4]"), "{e}");
+
+        // A zero stride on an axis of one element, and any layout of no elements, address
+        // each element once.
+        let one = wrap(dev, ptr, [1, 4], Some([0, 4]), owner.clone()).unwrap();
+        assert_eq!(one.to_vec().unwrap(), [0.0, 1.0, 2.0, 3.0]);
+        let none = wrap(dev, ptr, [0, 4], Some([0, 0]), owner.clone()).unwrap();
+        assert!(none.is_empty());
+
+        // Not overlapping: every other element, transposed ([i, j] at 2i + 6j: 3 x 2 of
+        // the even elements), and rows reversed with a gap.
+        let mut t = wrap(dev, ptr, [3, 2], Some([8, 24]), owner.clone()).unwrap();
+        assert_eq!(t.to_vec().unwrap(), [0.0, 6.0, 2.0, 8.0, 4.0, 10.0]);
+        let r = wrap(dev, ptr + 32, [3, 3], Some([-16, 4]), owner.clone()).unwrap();
+        assert_eq!(
+            r.to_vec().unwrap(),
+            [8.0, 9.0, 10.0, 4.0, 5.0, 6.0, 0.0, 1.0, 2.0]
+        );
+        drop(r);
+        if dev.is_cpu() {
+            t.as_ndarray_mut().unwrap()[[2, 1]] = -1.0;
+            assert_eq!(t.to_vec().unwrap()[5], -1.0);
+        }
+    }
+    assert_eq!(Arc::strong_count(&owner), 1, "every wrap dropped its owner");
 }
 
 /// `as_ndarray` views a CPU array in place (strides included); a shared array needs the

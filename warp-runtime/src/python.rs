@@ -136,7 +136,9 @@ pub unsafe fn stream_from_handle(
 ///
 /// # Errors
 /// `ValueError` when the tensor does not match `Array<T, N>` (dtype, axes, trailing axes,
-/// strides) or is read-only; the producer's exception when it cannot export.
+/// strides), is read-only, or has a layout that overlaps itself (an `expand()`ed or broadcast
+/// tensor: arrays are writable, so pass a contiguous copy, `t.contiguous()`); the producer's
+/// exception when it cannot export.
 pub fn from_dlpack<T, const N: usize>(obj: &Bound<'_, PyAny>) -> PyResult<Array<T, N>>
 where
     T: NdComponents,

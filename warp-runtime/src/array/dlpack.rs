@@ -102,8 +102,22 @@ where
     /// for an array this crate allocated).
     pub fn to_dlpack<M: ManagedTensorBase>(&self) -> Result<Managed<M>> {
         let (shape, strides) = self.component_shape_strides();
-        let shape: Vec<i64> = shape.into_iter().map(|d| d as i64).collect();
-        let strides: Vec<i64> = strides.into_iter().map(|s| s as i64).collect();
+        // Checked, not `as`: a cast would wrap a value past i64 (none on a 64-bit target).
+        let too_large = |v: &dyn std::fmt::Debug| {
+            Error::invalid(format!(
+                "to_dlpack: the layout (shape {shape:?}, strides {strides:?} in scalars) has \
+                 {v:?}, which does not fit DLPack's 64-bit fields"
+            ))
+        };
+        let shape64 = shape
+            .iter()
+            .map(|&d| i64::try_from(d).map_err(|_| too_large(&d)))
+            .collect::<Result<Vec<i64>>>()?;
+        let strides64 = strides
+            .iter()
+            .map(|&s| i64::try_from(s).map_err(|_| too_large(&s)))
+            .collect::<Result<Vec<i64>>>()?;
+        let (shape, strides) = (shape64, strides64);
         let data = self.device_address() as usize as *mut std::ffi::c_void;
         // The context keeps the memory (not the gradient) alive.
         let owner = Box::new(std::sync::Arc::clone(&self.storage));
@@ -140,9 +154,12 @@ where
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming what does not match: the dtype, the number of axes,
-    /// the trailing axes, a stride that is not a whole element, a misaligned pointer, a
-    /// read-only tensor, a device warp-lang cannot address; [`Error::NoDevice`] for a GPU
-    /// that is not available. The tensor is released on error.
+    /// the trailing axes, a stride that is not a whole element, a layout that overlaps itself
+    /// (a zero stride on an axis of more than one element, as of a broadcast or PyTorch's
+    /// `expand()`: arrays are writable, and there is no read-only array to import it as;
+    /// import a contiguous copy), a stride, offset or size past the address space, a
+    /// misaligned pointer, a read-only tensor, a device warp-lang cannot address;
+    /// [`Error::NoDevice`] for a GPU that is not available. The tensor is released on error.
     pub unsafe fn from_dlpack<M: ManagedTensorBase>(tensor: Managed<M>) -> Result<Self> {
         let what = "from_dlpack";
         if tensor.flags().contains(DlpackFlags::READ_ONLY) {
@@ -181,6 +198,17 @@ where
                 }
             )));
         }
+        // Shapes are non-negative (`validate`); the conversion only fails where `usize` is
+        // narrower than 64 bits.
+        let mut dims = [0usize; N];
+        for d in 0..N {
+            dims[d] = usize::try_from(shape[d]).map_err(|_| {
+                Error::invalid(format!(
+                    "{what}: axis {d} of the shape {shape:?} has more elements than an \
+                     address space"
+                ))
+            })?;
+        }
         let lead_shape = &shape[..N];
         let empty = lead_shape.contains(&0);
         // The components of one element must sit where `T` keeps them (a vector's contiguous,
@@ -189,13 +217,13 @@ where
         let tail_ok = tail_shape
             .iter()
             .zip(T::SHAPE)
-            .all(|(&d, &e)| d as usize == e)
+            .all(|(&d, &e)| usize::try_from(d) == Ok(e))
             && (empty
                 || tail_strides
                     .iter()
                     .zip(T::STRIDES)
                     .zip(T::SHAPE)
-                    .all(|((&s, &e), &d)| d == 1 || s as isize == e));
+                    .all(|((&s, &e), &d)| d == 1 || isize::try_from(s) == Ok(e)));
         if !tail_ok {
             return Err(Error::invalid(format!(
                 "{what}: the trailing axes have shape {tail_shape:?} and strides \
@@ -207,13 +235,15 @@ where
         }
         let k = Self::components_per_element() as i64;
         let scalar = std::mem::size_of::<T::Scalar>() as isize;
-        let mut dims = [0usize; N];
+        let mut element_strides = [0isize; N];
         let mut byte_strides = [0isize; N];
         for d in 0..N {
-            dims[d] = lead_shape[d] as usize;
             let s = strides[d];
             // A stride of a length-1 axis is never applied: any value is as good as another.
-            if s % k != 0 && lead_shape[d] > 1 {
+            if lead_shape[d] <= 1 {
+                continue;
+            }
+            if s % k != 0 {
                 return Err(Error::invalid(format!(
                     "{what}: the stride of axis {d} is {s} scalars, not a whole number of {} \
                      ({k} scalars each); strides are {:?}",
@@ -221,25 +251,57 @@ where
                     &strides[..]
                 )));
             }
-            byte_strides[d] = if lead_shape[d] > 1 {
-                (s as isize) * scalar
-            } else {
-                0
-            };
+            // Checked: a stride times the scalar size past `isize` must not wrap (in a
+            // release build it would, to a small or zero stride that aliases other memory).
+            byte_strides[d] = isize::try_from(s)
+                .ok()
+                .and_then(|s| s.checked_mul(scalar))
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "{what}: the stride of axis {d} is {s} scalars of {} bytes, which \
+                         overflows a byte offset; strides are {:?}",
+                        scalar,
+                        &strides[..]
+                    ))
+                })?;
+            // `s / k`, exact (checked above), and in range (`byte_strides[d]` is).
+            element_strides[d] = byte_strides[d] / (k as isize * scalar);
         }
-        let ptr = (t.data_ptr() as u64).wrapping_add(t.byte_offset());
+        // Every array is writable (kernels write in place): a tensor whose elements alias (a
+        // broadcast, PyTorch's `expand()`) is refused, whatever its flags say.
+        if super::interop::layout_overlaps(&dims, &element_strides) {
+            return Err(super::interop::overlap_error(
+                what,
+                &format!(
+                    "the tensor's shape {shape:?} with strides {:?} (in scalars)",
+                    &strides[..]
+                ),
+            ));
+        }
+        let ptr = (t.data_ptr() as u64)
+            .checked_add(t.byte_offset())
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "{what}: the data pointer {:#x} plus the byte_offset {} overflows the \
+                     address space",
+                    t.data_ptr() as u64,
+                    t.byte_offset()
+                ))
+            })?;
         // Release the tensor when the array's memory is dropped, whichever ABI it came by.
         let owner = tensor.into_deleter();
         // SAFETY: the caller's contract (the DLPack producer's guarantee that the descriptor
         // addresses live memory until the deleter runs; `owner` runs it when the last
         // handle drops). Shape, strides and alignment are checked by the callee.
         unsafe {
-            if device.is_cpu() {
-                let ptr = ptr as usize as *mut T;
-                Self::from_host_ptr(ptr, dims, Some(byte_strides), &device, owner)
-            } else {
-                Self::from_device_ptr(ptr, dims, Some(byte_strides), &device, owner)
-            }
+            Self::from_external(
+                what,
+                ptr,
+                dims,
+                Some(byte_strides),
+                &device,
+                Box::new(owner),
+            )
         }
     }
 }

@@ -11,6 +11,55 @@ use crate::error::{Error, Result};
 use std::marker::PhantomData;
 use std::sync::Arc;
 
+/// Whether a layout overlaps itself: whether two different in-bounds indices address the
+/// same element (`strides` in elements, or any unit common to all axes).
+///
+/// The rule (ndarray's own, which its safe constructors apply): leave out the axes of extent
+/// 1 (their stride is never applied), sort the others by |stride|, and require each |stride|
+/// to exceed the span of all the smaller axes (Σ |stride| · (extent - 1) over them). That
+/// makes the index map injective (a mixed-radix number), so a layout that passes never
+/// overlaps; it catches every zero stride on an axis of extent > 1 (a broadcast, PyTorch's
+/// `expand()`) and every aliasing pair. It is conservative: a few interleaved layouts that
+/// happen to be injective (shape `[3, 2]`, strides `[2, 3]`) are reported as overlapping,
+/// none that array libraries produce by slicing, transposing or reversing. A layout of no
+/// elements never overlaps. Arithmetic saturates in `u128`: a saturated span exceeds every
+/// stride, which is then rightly counted as overlapping (no index reaches that far).
+pub(crate) fn layout_overlaps<const N: usize>(shape: &[usize; N], strides: &[isize; N]) -> bool {
+    if shape.contains(&0) {
+        return false;
+    }
+    let mut axes = [(0u128, 0u128); N];
+    let mut m = 0;
+    for d in 0..N {
+        if shape[d] > 1 {
+            axes[m] = (strides[d].unsigned_abs() as u128, shape[d] as u128 - 1);
+            m += 1;
+        }
+    }
+    let axes = &mut axes[..m];
+    axes.sort_unstable();
+    // The highest offset the smaller axes reach from element zero, all strides made positive.
+    let mut span = 0u128;
+    for &(stride, last) in axes.iter() {
+        if stride <= span {
+            return true;
+        }
+        span = span.saturating_add(stride.saturating_mul(last));
+    }
+    false
+}
+
+/// The error for an overlapping layout at an import: the crate has no read-only array (every
+/// array is writable, by kernels and host-side calls), so a layout whose elements alias
+/// (threads writing one element through two indices race) is refused rather than wrapped.
+pub(crate) fn overlap_error(what: &str, layout: &str) -> Error {
+    Error::invalid(format!(
+        "{what}: {layout} addresses some elements from more than one index (a zero or \
+         aliasing stride, as of a broadcast or an expand()ed tensor); arrays are writable and \
+         an overlapping layout would alias, so it is refused: import a contiguous copy"
+    ))
+}
+
 /// The storage span of a strided layout: the byte offset of element zero from the lowest
 /// byte the layout addresses, and the number of bytes from there to the end of the highest
 /// element. `byte_strides` are checked to be whole elements; the result fits `isize`.
@@ -106,14 +155,18 @@ impl<T: Element, const N: usize> Array<T, N> {
     ///   for reads and writes of `T` until `owner` drops (or forever, for an `owner` that
     ///   does not free it);
     /// - nothing else reads the memory while a kernel or host-side call writes it, or writes
-    ///   it while they read it (the array's own concurrency contract applies to its handles);
-    /// - a layout whose elements overlap (a zero stride) is only read by kernels, never
-    ///   written by more than one thread at a time.
+    ///   it while they read it (the array's own concurrency contract applies to its handles).
+    ///
+    /// A layout that overlaps itself (two indices addressing one element: a zero stride on an
+    /// axis of extent > 1, as of a broadcast, or strides that alias) is refused: every array
+    /// is writable and there is no read-only array, so an aliasing layout would let two
+    /// threads write one element through different indices. The rule is ndarray's: sorted by
+    /// |stride|, each axis of extent > 1 must step past the span of the smaller ones. Wrap a contiguous copy of broadcast data instead.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the argument: `device` is not the CPU, `ptr` is null
     /// (for a non-empty shape) or not aligned for `T`, a byte stride is not a multiple of the
-    /// size of `T`, or the layout is too large.
+    /// size of `T`, the layout overlaps itself, or the layout is too large.
     pub unsafe fn from_host_ptr(
         ptr: *mut T,
         shape: impl super::IntoShape<N>,
@@ -182,7 +235,7 @@ impl<T: Element, const N: usize> Array<T, N> {
 
     /// See [`from_host_ptr`](Self::from_host_ptr) and
     /// [`from_device_ptr`](Self::from_device_ptr).
-    unsafe fn from_external(
+    pub(super) unsafe fn from_external(
         what: &str,
         ptr: u64,
         shape: [usize; N],
@@ -196,6 +249,12 @@ impl<T: Element, const N: usize> Array<T, N> {
         let size = std::mem::size_of::<T>() as isize;
         let byte_strides = byte_strides.unwrap_or_else(|| row_major(&shape).map(|s| s * size));
         let (mut strides, byte_offset, bytes) = strided_span::<T, N>(what, shape, byte_strides)?;
+        if layout_overlaps(&shape, &strides) {
+            return Err(overlap_error(
+                what,
+                &format!("shape {shape:?} with byte_strides {byte_strides:?}"),
+            ));
+        }
         if len == 0 {
             // Nothing is addressed: row-major strides (valid for the shape, by
             // `checked_size`) rather than the caller's, whose products with the extents of
@@ -288,9 +347,12 @@ mod nd {
             if self.shared() {
                 return Err(Self::shared_error("as_ndarray_components_mut"));
             }
+            self.refuse_overlap("as_ndarray_components_mut")?;
             let ptr = self.component_ptr("as_ndarray_components_mut")?;
             let (shape, strides) = self.component_layout();
-            // SAFETY: as in `as_ndarray_components`; the view is the only access.
+            // SAFETY: as in `as_ndarray_components`; the view is the only access, and no two
+            // indices address one scalar (the elements do not overlap, checked above, and a
+            // `T`'s components are distinct scalars of it).
             Ok(unsafe { ArrayViewMut::from_shape_ptr(shape.strides(strides), ptr) })
         }
 
@@ -308,6 +370,24 @@ mod nd {
         /// Whether another handle (a clone, a view) shares this array's memory.
         fn shared(&self) -> bool {
             Arc::strong_count(&self.storage) > 1
+        }
+
+        /// Refuses a layout that overlaps itself for a mutable view: `ArrayViewMut` hands out
+        /// `&mut` to each element, and two indices of one element would be two `&mut` to it.
+        /// The imports refuse such layouts, and views, rows and transposes keep a layout
+        /// injective, so no array has one today; the check keeps the safe views sound
+        /// should a future layout (a broadcast) allow it.
+        fn refuse_overlap(&self, what: &str) -> Result<()> {
+            if super::layout_overlaps(&self.shape, &self.strides) {
+                return Err(super::overlap_error(
+                    what,
+                    &format!(
+                        "the array's shape {:?} with strides {:?} (in elements)",
+                        self.shape, self.strides
+                    ),
+                ));
+            }
+            Ok(())
         }
 
         fn shared_error(what: &str) -> Error {
@@ -369,10 +449,12 @@ mod nd {
             if self.shared() {
                 return Err(Self::shared_error("as_ndarray_mut"));
             }
+            self.refuse_overlap("as_ndarray_mut")?;
             let (dim, strides, ptr) = self.nd_parts("as_ndarray_mut")?;
             // SAFETY: every index of the shape and strides addresses an element of the
             // storage (an invariant of every array), which `self` keeps alive; no other handle
-            // exists and `self` is borrowed exclusively, so the view is the only access.
+            // exists and `self` is borrowed exclusively, so the view is the only access; no
+            // two indices address one element (checked above).
             Ok(unsafe { ArrayViewMut::from_shape_ptr(dim.strides(strides), ptr) })
         }
 
@@ -396,7 +478,9 @@ mod nd {
         /// memory's owner and drops with the last handle. On a GPU: a copy.
         ///
         /// # Errors
-        /// [`Error::InvalidArgument`] for a layout the array cannot address.
+        /// [`Error::InvalidArgument`] for a layout the array cannot address, or one that
+        /// overlaps itself (as [`from_host_ptr`](Self::from_host_ptr); a broadcast view
+        /// is imported by [`from_ndarray_copy`](Self::from_ndarray_copy)).
         pub fn from_ndarray(
             a: ndarray::Array<T, Dim<[usize; N]>>,
             device: &Device,
@@ -417,7 +501,16 @@ mod nd {
             // allocation, which the array keeps as the owner (moving an ndarray array does not
             // move its elements); the owner is moved into the array, so nothing else
             // accesses the memory.
-            unsafe { Self::from_host_ptr(ptr, shape, Some(byte_strides), device, a) }
+            unsafe {
+                Self::from_external(
+                    "from_ndarray",
+                    ptr as usize as u64,
+                    shape,
+                    Some(byte_strides),
+                    device,
+                    Box::new(a),
+                )
+            }
         }
 
         /// An array holding a copy of any `ndarray` array or view (of any layout), on any
@@ -439,5 +532,55 @@ mod nd {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::layout_overlaps;
+
+    /// The rule on the layouts it is documented for: zero strides on extents > 1 and aliasing
+    /// strides overlap; axes of extent 1, empty layouts, transposes, gaps and reversals do not.
+    #[test]
+    fn overlap_rule() {
+        assert!(layout_overlaps(&[3, 4], &[0, 1]));
+        assert!(layout_overlaps(&[3, 2], &[1, 1]));
+        assert!(layout_overlaps(&[2, 3], &[2, 1]));
+        assert!(layout_overlaps(&[3, 3], &[-2, -1]));
+        assert!(layout_overlaps(&[2, 2], &[1 << 62, 1 << 62]));
+        // Conservative: injective (offsets 0, 2, 4, 3, 5, 7) but interleaved.
+        assert!(layout_overlaps(&[3, 2], &[2, 3]));
+        // A saturated span: every later stride is within it.
+        assert!(layout_overlaps(
+            &[usize::MAX, usize::MAX, 2],
+            &[isize::MAX, isize::MAX, isize::MAX]
+        ));
+        assert!(!layout_overlaps(&[1, 4], &[0, 1]));
+        assert!(!layout_overlaps(&[0, 4], &[0, 0]));
+        assert!(!layout_overlaps(&[3, 4], &[4, 1]));
+        assert!(!layout_overlaps(&[4, 3], &[1, 4]));
+        assert!(!layout_overlaps(&[3, 2], &[2, 6]));
+        assert!(!layout_overlaps(&[3, 4], &[-5, 1]));
+        assert!(!layout_overlaps::<0>(&[], &[]));
+    }
+
+    /// `as_ndarray_mut` never builds an aliasing mutable view, even of an array whose layout
+    /// overlaps (no import makes one; built here by hand: one element seen three times).
+    #[cfg(feature = "ndarray")]
+    #[test]
+    fn as_ndarray_mut_refuses_overlap() {
+        let dev = crate::device::get_device("cpu").unwrap();
+        let mut a = crate::array::Array::<f32, 1>::zeros(1, &dev).unwrap();
+        a.shape = [3];
+        a.strides = [0];
+        let e = a.as_ndarray_mut().unwrap_err().to_string();
+        assert!(
+            e.contains("as_ndarray_mut") && e.contains("shape [3] with strides [0]"),
+            "{e}"
+        );
+        let e = a.as_ndarray_components_mut().unwrap_err().to_string();
+        assert!(e.contains("as_ndarray_components_mut"), "{e}");
+        // Reading through aliases is fine.
+        assert_eq!(a.as_ndarray().unwrap().to_vec(), [0.0; 3]);
     }
 }
