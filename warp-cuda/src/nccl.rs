@@ -20,10 +20,16 @@
 //! not a process stuck forever. An aborted communicator refuses further work.
 //!
 //! # One call at a time
-//! NCCL's communicators are not thread-safe: its documentation allows no concurrent calls on
-//! one communicator (and in non-blocking mode no other call while one is still in progress).
+//! NCCL's communicators are not thread-safe. Its user guide ("Thread Safety") says: "it is
+//! not allowed to issue NCCL operations to a single communicator in parallel with multiple
+//! threads; it is not safe to issue NCCL operations in parallel to independent communicators
+//! located on the same device with multiple threads", and "It is safe to operate a
+//! communicator from multiple threads as long as users can guarantee only one thread
+//! operates the communicator at a time. However, for any grouped NCCL operations, users need
+//! to ensure only one thread issues the all operations in the group." So the call lock is one
+//! per GPU, shared by every communicator on it ([`device_lock`]), not one per communicator.
 //! A [`Comm`] may still be shared between threads (it is `Sync`), because every NCCL call on
-//! it takes the communicator's call lock first and holds it until NCCL has accepted the work
+//! it takes its GPU's call lock first and holds it until NCCL has accepted the work
 //! (the call returned and, in non-blocking mode, the communicator polled ready). Inside a
 //! [`Group`] the calls are only recorded until `ncclGroupEnd`, so the lock of each
 //! communicator used in the group stays held by the group's thread until the group ends. The
@@ -461,8 +467,9 @@ pub struct Comm {
     /// The NCCL handle: used only while `lock` is held by the calling thread (or in `Drop`,
     /// which owns the communicator).
     raw: NcclComm,
-    /// Serialises the NCCL calls on `raw` (see "One call at a time" in the module). In an
-    /// `Arc` because an open [`Group`] and the teardown thread hold it beyond a borrow.
+    /// Serialises the NCCL calls on `raw` and on every communicator of its GPU (see "One call
+    /// at a time" in the module). In an `Arc` because an open [`Group`] and the teardown
+    /// thread hold it beyond a borrow.
     lock: Arc<CallLock>,
     gpu: Arc<Gpu>,
     rank: usize,
@@ -476,8 +483,12 @@ pub struct Comm {
     abort_pending: AtomicBool,
 }
 
-// SAFETY: NCCL allows a communicator to be used from any thread but never by two at once.
-// Every use of `raw` through `&self` happens while the calling thread holds `lock` (a
+// SAFETY: NCCL's user guide ("Thread Safety", quoted in the module docs) allows a
+// communicator to be operated from any thread as long as one thread at a time operates it,
+// and no two threads to operate communicators of one device in parallel, a group's calls
+// coming from one thread. Every use of `raw` through `&self` happens while the calling thread
+// holds `lock`, its GPU's lock ([`device_lock`]), which a group's thread keeps until the group
+// ends (a
 // re-entrant lock checked after acquisition for an earlier abort, so a freed handle is
 // never used), and `Drop` owns the communicator (its teardown thread takes the lock too,
 // after any group still holding it has ended). So moving or sharing a `Comm` between
@@ -485,7 +496,18 @@ pub struct Comm {
 unsafe impl Send for Comm {}
 unsafe impl Sync for Comm {}
 
-/// A re-entrant lock with a bounded wait: the call lock of one communicator.
+/// The call lock of GPU `ordinal`, one per device for the whole process: NCCL allows no two
+/// threads to issue operations in parallel to communicators of one device.
+fn device_lock(ordinal: usize) -> Arc<CallLock> {
+    static LOCKS: Mutex<Vec<Arc<CallLock>>> = Mutex::new(Vec::new());
+    let mut locks = LOCKS.lock().unwrap_or_else(|e| e.into_inner());
+    while locks.len() <= ordinal {
+        locks.push(Arc::default());
+    }
+    locks[ordinal].clone()
+}
+
+/// A re-entrant lock with a bounded wait: the call lock of one GPU's communicators.
 ///
 /// Not `std::sync::Mutex`: a thread re-enters it (a [`Group`] holds it across several calls
 /// on one communicator, a timed-out wait aborts under it), an open group keeps it past the
@@ -648,7 +670,7 @@ impl Comm {
         }
         let comm = Comm {
             raw,
-            lock: Arc::default(),
+            lock: device_lock(gpu.ordinal()),
             gpu: gpu.clone(),
             rank,
             world,
@@ -712,7 +734,7 @@ impl Comm {
             .filter(|(_, (raw, _))| !raw.is_null())
             .map(|(rank, (raw, gpu))| Comm {
                 raw,
-                lock: Arc::default(),
+                lock: device_lock(gpu.ordinal()),
                 gpu: gpu.clone(),
                 rank,
                 world,
@@ -1454,6 +1476,15 @@ mod tests {
         fn shared<T: Send + Sync>() {}
         shared::<Arc<CallLock>>();
         shared::<Comm>();
+    }
+
+    /// One lock per GPU: communicators of one device share it (NCCL allows no parallel calls
+    /// to communicators of one device), communicators of other devices do not.
+    #[test]
+    fn call_locks_are_one_per_gpu() {
+        assert!(Arc::ptr_eq(&device_lock(0), &device_lock(0)));
+        assert!(Arc::ptr_eq(&device_lock(5), &device_lock(5)));
+        assert!(!Arc::ptr_eq(&device_lock(0), &device_lock(1)));
     }
 
     /// The property `unsafe impl Sync for Comm` rests on: at most one thread inside.

@@ -750,13 +750,13 @@ pub fn group<R>(body: impl FnOnce() -> Result<R>) -> Result<R> {
     let mut ops: Vec<(Communicator, Call, Issue)> =
         ops.into_iter().map(|p| (p.comm, p.call, p.issue)).collect();
     check_group(&ops)?;
-    // Each communicator's call lock is taken at its first call below and held until the
-    // NCCL group ends (NCCL allows no other thread's call on it meanwhile). Issuing in one
-    // global order of communicators (a stable sort, so each communicator's own calls keep
-    // their order; the order across communicators does not matter inside one NCCL group)
-    // means two threads' groups over the same communicators take their locks in the same
+    // Each communicator's call lock (one per GPU) is taken at its first call below and held
+    // until the NCCL group ends (NCCL allows no other thread's call on that GPU meanwhile).
+    // Issuing in one global order, by GPU and then communicator (a stable sort, so each
+    // communicator's own calls keep their order; the order across communicators does not
+    // matter inside one NCCL group), means two threads' groups take their locks in the same
     // order, and cannot deadlock.
-    ops.sort_by_key(|(c, ..)| Arc::as_ptr(&c.0) as usize);
+    ops.sort_by_key(|(c, ..)| (c.0.comm.gpu().ordinal(), Arc::as_ptr(&c.0) as usize));
     let nccl_group = nccl::Group::start().map_err(|e| Error::cuda("cuda", e))?;
     let mut first_err = None;
     let mut used: Vec<Communicator> = Vec::new();
