@@ -27,7 +27,7 @@
 //! communicator from multiple threads as long as users can guarantee only one thread
 //! operates the communicator at a time. However, for any grouped NCCL operations, users need
 //! to ensure only one thread issues the all operations in the group." So the call lock is one
-//! per GPU, shared by every communicator on it ([`device_lock`]), not one per communicator.
+//! per GPU, shared by every communicator on it (`device_lock`), not one per communicator.
 //! A [`Comm`] may still be shared between threads (it is `Sync`), because every NCCL call on
 //! it takes its GPU's call lock first and holds it until NCCL has accepted the work
 //! (the call returned and, in non-blocking mode, the communicator polled ready). Inside a
