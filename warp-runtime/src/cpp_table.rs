@@ -90,41 +90,27 @@ pub(crate) const fn integer(header: &str, name: &str) -> u32 {
     v
 }
 
-/// `a`, each value narrowed to `u16`.
+/// `to_u16`, `to_u8`: `a`, each value narrowed to the Rust table's type. A `const fn` cannot
+/// call `TryFrom`, so one macro writes the check once for each type.
 ///
 /// # Panics
 /// Where a value does not fit (at compile time, in a constant).
-pub(crate) const fn to_u16<const N: usize>(a: [u32; N]) -> [u16; N] {
-    let mut out = [0u16; N];
-    let mut k = 0;
-    while k < N {
-        assert!(
-            a[k] <= u16::MAX as u32,
-            "a value does not fit the Rust table's type"
-        );
-        out[k] = a[k] as u16;
-        k += 1;
-    }
-    out
+macro_rules! narrowing {
+    ($($name:ident -> $t:ty),*) => {$(
+        pub(crate) const fn $name<const N: usize>(a: [u32; N]) -> [$t; N] {
+            let mut out = [0 as $t; N];
+            let mut k = 0;
+            while k < N {
+                assert!(a[k] <= <$t>::MAX as u32, "a value does not fit the Rust table's type");
+                out[k] = a[k] as $t;
+                k += 1;
+            }
+            out
+        }
+    )*};
 }
 
-/// `a`, each value narrowed to `u8`.
-///
-/// # Panics
-/// Where a value does not fit (at compile time, in a constant).
-pub(crate) const fn to_u8<const N: usize>(a: [u32; N]) -> [u8; N] {
-    let mut out = [0u8; N];
-    let mut k = 0;
-    while k < N {
-        assert!(
-            a[k] <= u8::MAX as u32,
-            "a value does not fit the Rust table's type"
-        );
-        out[k] = a[k] as u8;
-        k += 1;
-    }
-    out
-}
+narrowing!(to_u16 -> u16, to_u8 -> u8);
 
 /// The index of `next` after the declaration of `name`: the name as a whole word, outside
 /// comments, followed by `next` (`[` for an array, `=` for a constant; spaces between).
