@@ -41,8 +41,9 @@ pub mod nccl;
 mod gpu_tests;
 
 pub use cache::{
-    aot_key, cache_dir, cache_key, clear_kernel_cache, compile_cached, set_cache_dir, CacheLookup,
-    CacheOutcome, KernelCache, CACHE_DIR_ENV,
+    aot_key, cache_dir, cache_key, cache_max_bytes, clear_kernel_cache, compile_cached,
+    set_cache_dir, set_cache_max_bytes, CacheLookup, CacheOutcome, KernelCache, CACHE_DIR_ENV,
+    CACHE_MAX_BYTES_ENV, DEFAULT_CACHE_MAX_BYTES,
 };
 pub use compile::{
     compile, cudadevrt_path, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled,
