@@ -6,7 +6,8 @@
 //! entries are summed and, while over the limit, the oldest are removed. Only entries are
 //! counted and removed (never the key, the NVRTC stamp, or other files); an entry another
 //! process removed meanwhile is simply gone; the entry just stored is kept even when it alone
-//! is over the limit. A process still holding an evicted entry open reads it whole (the
+//! is over the limit. Temporary files older than an hour (left by a crashed writer) are
+//! removed at the same time. A process still holding an evicted entry open reads it whole (the
 //! file lives on until closed).
 
 use std::io::{self, ErrorKind};
@@ -22,6 +23,9 @@ pub const CACHE_MAX_BYTES_ENV: &str = "WARP_LANG_CACHE_MAX_BYTES";
 /// The size bound of the kernel cache without [`CACHE_MAX_BYTES_ENV`] or
 /// [`set_cache_max_bytes`]: 1 GiB (a cubin is tens of kilobytes to a few megabytes).
 pub const DEFAULT_CACHE_MAX_BYTES: u64 = 1 << 30;
+
+/// How old a temporary file must be to count as left by a crashed writer.
+const STALE_TEMP: std::time::Duration = std::time::Duration::from_secs(3600);
 
 static MAX_OVERRIDE: RwLock<Option<u64>> = RwLock::new(None);
 
@@ -82,7 +86,24 @@ pub(super) fn parse_bytes(text: &str) -> Option<u64> {
 /// Removes the least recently used entries of `dir` until they total at most `limit` bytes,
 /// never the entry `keep` (the one just stored). Returns how many this call removed.
 pub(super) fn evict(dir: &OpenDir, limit: u64, keep: &str) -> io::Result<usize> {
-    let mut entries = dir.files(is_entry)?;
+    let (temps, mut entries): (Vec<_>, Vec<_>) = dir
+        .files(|name| is_entry(name) || name.contains(".tmp."))?
+        .into_iter()
+        .partition(|f| f.name.contains(".tmp."));
+    // Temporary files a crashed writer left behind (a live one is renamed within moments of
+    // its creation) would otherwise pile up outside the bound.
+    let now = std::time::SystemTime::now();
+    let stale = now.checked_sub(STALE_TEMP).unwrap_or(now);
+    for temp in temps.iter().filter(|f| f.modified < stale) {
+        match dir.remove(&temp.name) {
+            Ok(()) => log::debug!(
+                "kernel cache: removed stale temporary {}",
+                dir.path().join(&temp.name).display()
+            ),
+            Err(e) if e.kind() == ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
+    }
     let mut total: u64 = entries.iter().map(|f| f.len).sum();
     if total <= limit {
         return Ok(0);

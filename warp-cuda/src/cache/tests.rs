@@ -812,6 +812,18 @@ fn eviction_removes_least_recently_used_first() {
     assert_eq!(tiny.load("g", 1), CacheLookup::Hit(vec![0u8; 100]));
     assert!(t.0.join(KEY_FILE).is_file() && t.0.join(STAMP_FILE).is_file());
     assert!(t.0.join("notes.txt").is_file());
+    // A temporary file a crashed writer left an hour ago goes with the next eviction; a
+    // fresh one (a writer at work) stays.
+    let (old, fresh) = (
+        t.0.join("x-1.cubin.tmp.1.00"),
+        t.0.join("y-1.cubin.tmp.1.00"),
+    );
+    fs::write(&old, b"partial").unwrap();
+    fs::write(&fresh, b"partial").unwrap();
+    set_mtime(&old, 1_000_000);
+    tiny.store("g", 1, &[0u8; 100]).unwrap();
+    assert!(!old.exists() && fresh.exists());
+    fs::remove_file(&fresh).unwrap();
     // Unbounded (an ahead-of-time directory): nothing is evicted.
     let unbounded = KernelCache::new(&t.0);
     assert_eq!(unbounded.max_bytes(), None);

@@ -106,7 +106,7 @@ pub(super) fn warn_distrusted(path: &Path, why: &io::Error) {
     if !warned.iter().any(|d| d == path) {
         warned.push(path.to_path_buf());
         log::warn!(
-            "kernel cache {} is not used: {why}; kernels are compiled in memory",
+            "kernel cache: {} is not used: {why}; kernels are compiled in memory",
             path.display()
         );
     }
