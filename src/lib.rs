@@ -126,10 +126,13 @@ pub use nalgebra;
 pub use warp_core::capability;
 pub use warp_core::f16;
 pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
-/// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`) and
-/// emptying it.
+/// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`), its
+/// size bound (`WARP_LANG_CACHE_MAX_BYTES` wins over `set_cache_max_bytes`; least recently
+/// used entries go first) and emptying it.
 #[cfg(feature = "cuda")]
-pub use warp_cuda::{cache_dir, clear_kernel_cache, set_cache_dir};
+pub use warp_cuda::{
+    cache_dir, cache_max_bytes, clear_kernel_cache, set_cache_dir, set_cache_max_bytes,
+};
 pub use warp_macros::{func, kernel, Struct};
 /// Work-precision sweeps: tables, SVG plots and progress (the `report` feature).
 #[cfg(feature = "report")]
