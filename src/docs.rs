@@ -12,8 +12,8 @@
 #[doc = include_str!("../ARCHITECTURE.md")]
 pub mod language {}
 
-#[doc = include_str!("../docs/builtins.md")]
+#[doc = include_str!("../docs/book/src/builtins.md")]
 pub mod builtins {}
 
-#[doc = include_str!("../docs/primitives.md")]
+#[doc = include_str!("../docs/book/src/primitives.md")]
 pub mod primitives {}

@@ -224,5 +224,51 @@ pub mod __private {
     };
 }
 
+// The book (docs/book, mdBook): each chapter is the documentation of an item here, so
+// `cargo test --doc` compiles and runs its Rust blocks against this crate as a user's code
+// would see it (`mdbook test` cannot link the crate). tests/docs.rs fails when a chapter is
+// missing from this list, so a new chapter's code cannot go uncompiled.
+#[cfg(doctest)]
+mod book {
+    #[doc = include_str!("../README.md")]
+    struct Readme;
+    #[doc = include_str!("../docs/book/src/autodiff.md")]
+    struct Autodiff;
+    #[doc = include_str!("../docs/book/src/builtins-edge-cases.md")]
+    struct BuiltinsEdgeCases;
+    #[doc = include_str!("../docs/book/src/builtins.md")]
+    struct Builtins;
+    #[doc = include_str!("../docs/book/src/cache-env.md")]
+    struct CacheEnv;
+    #[doc = include_str!("../docs/book/src/devices.md")]
+    struct Devices;
+    #[doc = include_str!("../docs/book/src/getting-started.md")]
+    struct GettingStarted;
+    #[doc = include_str!("../docs/book/src/graphs.md")]
+    struct Graphs;
+    #[doc = include_str!("../docs/book/src/interop.md")]
+    struct Interop;
+    #[doc = include_str!("../docs/book/src/introduction.md")]
+    struct Introduction;
+    #[doc = include_str!("../docs/book/src/kernels.md")]
+    struct Kernels;
+    #[doc = include_str!("../docs/book/src/multi-gpu.md")]
+    struct MultiGpu;
+    #[doc = include_str!("../docs/book/src/nanovdb.md")]
+    struct Nanovdb;
+    #[doc = include_str!("../docs/book/src/numerics.md")]
+    struct Numerics;
+    #[doc = include_str!("../docs/book/src/performance.md")]
+    struct Performance;
+    #[doc = include_str!("../docs/book/src/primitives.md")]
+    struct Primitives;
+    #[doc = include_str!("../docs/book/src/scenes.md")]
+    struct Scenes;
+    #[doc = include_str!("../docs/book/src/spatial.md")]
+    struct Spatial;
+    #[doc = include_str!("../docs/book/src/testing.md")]
+    struct Testing;
+}
+
 // Lets the crate's own unit tests and doc tests use the macros, which name `::warp_lang`.
 extern crate self as warp_lang;

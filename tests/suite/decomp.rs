@@ -15,7 +15,7 @@
 //! matrices: orthogonality within 31 eps (f32) and 61 eps (f64), reconstruction within 67 eps
 //! (f64). Convergence: 8 sweeps always converge in f64 here, and 5 in f32 (Warp's 4 do not
 //! for about 1 random matrix in 40: reconstruction errors up to 1.4e-2 of `max |A|`, which is
-//! why f32 runs 5; see docs/builtins.md); random matrices are checked in both precisions. On CUDA the compiler may contract products into FMAs, which changes the
+//! why f32 runs 5; see docs/book/src/builtins.md); random matrices are checked in both precisions. On CUDA the compiler may contract products into FMAs, which changes the
 //! last bits but not these bounds.
 
 use crate::{arr, host, zeros};

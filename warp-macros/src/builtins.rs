@@ -11,7 +11,7 @@
 //! reaches the emitters as a call or as something else (`mod` is `%`). The CPU function is
 //! `warp_core::builtins::<name>`, the CUDA one `wp::<name>`. Adding a builtin is one row in
 //! its section's file under `rows/` plus the two implementations and their tests, and its
-//! line in docs/builtins.md, which a test holds to this table (`doc` below).
+//! line in docs/book/src/builtins.md, which a test holds to this table (`doc` below).
 //!
 //! - `row`: the row's facts ([`Builtin`]) and the builder the rows are written with;
 //! - `signature`: the signature's vocabulary ([`Class`], [`Pos`]), a leaf; `matcher`: the matcher

@@ -1,4 +1,4 @@
-//! The NanoVDB format facts (docs/nanovdb.md has the layout with offsets), in one place for
+//! The NanoVDB format facts (docs/book/src/nanovdb.md has the layout with offsets), in one place for
 //! every reader and writer of grids: the value types, the per-type node layout, the tree's
 //! shape, the root key, the index-to-world map; the validator that makes a buffer safe for
 //! kernel lookups ([`validate`]); and the CPU builder of grids laid out as Warp's
@@ -21,7 +21,7 @@ pub const TREE_DATA: usize = 64;
 pub const MAP: usize = 296;
 /// Bytes of one blind-data metadata entry (GridBlindMetaData).
 pub const BLIND_META: usize = 288;
-/// The byte offsets of GridData's fields (docs/nanovdb.md, section 2).
+/// The byte offsets of GridData's fields (docs/book/src/nanovdb.md, section 2).
 pub mod grid {
     /// u64 checksum: head CRC in the low half, tail CRC in the high half; all ones = none.
     pub const CHECKSUM: usize = 8;
@@ -188,7 +188,7 @@ impl GridType {
     }
 }
 
-/// The offsets and sizes that depend on the value type (docs/nanovdb.md, section 2): bytes,
+/// The offsets and sizes that depend on the value type (docs/book/src/nanovdb.md, section 2): bytes,
 /// from the start of the node they belong to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
@@ -535,7 +535,7 @@ pub struct GridInfo {
 }
 
 // ---------------------------------------------------------------------------------------
-// The validator (docs/nanovdb.md, section 7): a port of Warp 1.19's `wp_volume_validate_host`.
+// The validator (docs/book/src/nanovdb.md, section 7): a port of Warp 1.19's `wp_volume_validate_host`.
 // ---------------------------------------------------------------------------------------
 
 /// Checks that the grid at the start of `bytes` is one lookups can walk without reading
@@ -922,7 +922,7 @@ fn validate_index_leaves(
 }
 
 // ---------------------------------------------------------------------------------------
-// The CPU builder (docs/nanovdb.md, section 6).
+// The CPU builder (docs/book/src/nanovdb.md, section 6).
 // ---------------------------------------------------------------------------------------
 
 /// What [`build_from_tiles`] builds.
@@ -943,7 +943,7 @@ pub enum BuildKind<'a> {
 
 /// A grid with a leaf (8^3 voxels, all active) for every tile named in `tiles` (any voxel of
 /// a leaf names it, `ijk & !7`; duplicates are fine), laid out byte for byte as Warp 1.19's
-/// `Volume.allocate_by_tiles` lays it out (docs/nanovdb.md, section 6): uppers in the order
+/// `Volume.allocate_by_tiles` lays it out (docs/book/src/nanovdb.md, section 6): uppers in the order
 /// of their signed origins, lowers by (upper, slot), leaves by (lower, slot); magic
 /// NanoVDB1, no checksum, version 32.8.0, flags HasBBox | IsBreadthFirst, an empty name,
 /// node and tile counts, bboxes propagated from the leaves. Root tile values are left zero,
@@ -989,7 +989,7 @@ pub fn build_from_tiles(kind: BuildKind, tiles: &[[i32; 3]], map: &Map) -> Resul
 /// An `OnIndex` grid whose active voxels are `voxels` (duplicates are fine), laid out as
 /// Warp 1.19's `Volume.allocate_by_voxels` lays it out: a leaf for every voxel's tile, its
 /// value mask the listed voxels, `mOffset` = 1 + the active voxels of the leaves before it,
-/// `mPrefixSum` the running popcounts of the mask words (docs/nanovdb.md, section 2), and
+/// `mPrefixSum` the running popcounts of the mask words (docs/book/src/nanovdb.md, section 2), and
 /// GridData's mData1 = active voxels + 1 (the value count, slot 0 being the background). The
 /// world bbox and an empty input are as [`build_from_tiles`] says.
 ///
@@ -1178,7 +1178,7 @@ impl Grid<'_> {
     }
 }
 
-/// Builds the grid of `t` (docs/nanovdb.md, section 6, each step as Warp's host builder).
+/// Builds the grid of `t` (docs/book/src/nanovdb.md, section 6, each step as Warp's host builder).
 fn build(
     grid_type: GridType,
     background: Option<&[u8]>,
@@ -1686,7 +1686,7 @@ mod tests {
     }
 
     /// OnIndex grids: the listed voxels active, numbered 1..=N in leaf order, the prefix sums
-    /// as docs/nanovdb.md's worked example (words [0x103, 0x1, 0, 0x20, 0..] give the
+    /// as docs/book/src/nanovdb.md's worked example (words [0x103, 0x1, 0, 0x20, 0..] give the
     /// fields [3, 4, 4, 5, 5, 5, 5]).
     #[test]
     fn onindex_grids_number_active_voxels() {
@@ -1777,7 +1777,7 @@ mod tests {
     }
 
     /// The map as NanoVDB stores it: the matrix as given (row-major, world = M*ijk + t), its
-    /// inverse, f32 copies, taper 1, voxel size = row sums (docs/nanovdb.md: the transform
+    /// inverse, f32 copies, taper 1, voxel size = row sums (docs/book/src/nanovdb.md: the transform
     /// [[1,2,0],[0,1,0],[0,0,3]] gave (3,1,3) in Warp); read back unchanged.
     #[test]
     fn maps_are_written_and_read() {

@@ -1,7 +1,7 @@
 //! Warp's sparse volumes (NanoVDB grids), kernel side: [`VolumeView`] (what a `Volume<T>`
 //! kernel parameter is on the CPU, and field for field what `wp::volume_t<T>` is on CUDA), the
 //! lookup from a voxel to its value, and the `volume_*` builtins with their adjoints, with the
-//! meaning they have in Warp 1.19 (docs/nanovdb.md, sections 4 and 5).
+//! meaning they have in Warp 1.19 (docs/book/src/nanovdb.md, sections 4 and 5).
 //!
 //! # The invariant that makes lookups unchecked
 //!
@@ -723,7 +723,7 @@ impl<T: VolumeGrid> VolumeView<T> {
         (self.u64_at(mask + ((n >> 6) << 3)) >> (n & 63)) & 1 != 0
     }
 
-    /// Where the value of voxel `ijk` lives (docs/nanovdb.md, section 4; no active-mask
+    /// Where the value of voxel `ijk` lives (docs/book/src/nanovdb.md, section 4; no active-mask
     /// test), without a cache.
     #[inline]
     pub fn locate(&self, ijk: [i32; 3]) -> VoxelAddress {

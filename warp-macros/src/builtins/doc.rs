@@ -1,4 +1,4 @@
-//! docs/builtins.md held to the builtin table (the page's "How this page is kept true" says
+//! docs/book/src/builtins.md held to the builtin table (the page's "How this page is kept true" says
 //! what is generated and what is checked, and why).
 //!
 //! Generated: the section "The builtin table" (from [`BUILTINS`]) and the Summary counts
@@ -389,12 +389,12 @@ fn regenerate(doc: &str, name: &str, body: &str) -> String {
     let end = format!("<!-- end generated: {name} -->");
     let start = doc
         .find(&begin)
-        .unwrap_or_else(|| panic!("docs/builtins.md has no `{}`", begin.trim()))
+        .unwrap_or_else(|| panic!("docs/book/src/builtins.md has no `{}`", begin.trim()))
         + begin.len();
     let stop = start
         + doc[start..]
             .find(&end)
-            .unwrap_or_else(|| panic!("docs/builtins.md has no `{end}`"));
+            .unwrap_or_else(|| panic!("docs/book/src/builtins.md has no `{end}`"));
     format!("{}{body}{}", &doc[..start], &doc[stop..])
 }
 
@@ -437,7 +437,7 @@ fn check_or_bless(name: &str, have: &str, want: &str) -> Option<String> {
 
 #[test]
 fn generated_parts_are_current() {
-    let doc = read("docs/builtins.md");
+    let doc = read("docs/book/src/builtins.md");
     let (rows, _) = group_tables(&doc);
     let counts = counts(&rows);
     let want = regenerate(&doc, "builtin table", &builtin_table());
@@ -445,7 +445,7 @@ fn generated_parts_are_current() {
     let all = counts.last().expect("the total").1;
     let readme = read("README.md");
     let stale: Vec<String> = [
-        check_or_bless("docs/builtins.md", &doc, &want),
+        check_or_bless("docs/book/src/builtins.md", &doc, &want),
         check_or_bless("README.md", &readme, &readme_with(&readme, all[0], all[1])),
     ]
     .into_iter()
@@ -460,7 +460,7 @@ fn generated_parts_are_current() {
 
 #[test]
 fn group_tables_agree_with_the_table() {
-    let doc = read("docs/builtins.md");
+    let doc = read("docs/book/src/builtins.md");
     let (rows, intros) = group_tables(&doc);
     let callable: Vec<&Builtin> = BUILTINS.iter().filter(|b| !b.internal).collect();
     let warp_names: BTreeSet<&str> = callable.iter().filter_map(|b| b.warp_name()).collect();
@@ -542,7 +542,7 @@ fn group_tables_agree_with_the_table() {
     }
     assert!(
         problems.is_empty(),
-        "docs/builtins.md and the builtin table disagree:\n{}",
+        "docs/book/src/builtins.md and the builtin table disagree:\n{}",
         problems.join("\n")
     );
 }

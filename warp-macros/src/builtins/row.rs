@@ -99,7 +99,7 @@ pub struct Builtin {
     /// The names of a tuple result's parts, in the order of Warp's output arguments, as a
     /// destructuring pattern (`"(u, sigma, v)"`); error messages show it.
     pub results: Option<&'static str>,
-    /// Not a Warp builtin: an extension of warp-lang's (docs/builtins.md lists it there).
+    /// Not a Warp builtin: an extension of warp-lang's (docs/book/src/builtins.md lists it there).
     pub extension: bool,
     /// A query that only a `for` loop iterates (`for j in hash_grid_query(..)`), by these
     /// steps; user code cannot bind its result otherwise.
@@ -324,7 +324,7 @@ impl Builtin {
 
     /// The builtin's name in Warp: its own, or that of the builtin it is an overload of
     /// (`min_element` is Warp's `min` of one vector). None for an extension.
-    #[allow(dead_code)] // read by the docs/builtins.md check
+    #[allow(dead_code)] // read by the docs/book/src/builtins.md check
     pub fn warp_name(&self) -> Option<&'static str> {
         if self.extension {
             return None;

@@ -1,5 +1,5 @@
 //! The table's rows, one file per group of sections, and [`BUILTINS`], their concatenation in
-//! the order docs/builtins.md lists them. A row is written with [`rows!`]; this module holds
+//! the order docs/book/src/builtins.md lists them. A row is written with [`rows!`]; this module holds
 //! the shorthands the rows share (sets of classes, fixed positions).
 
 use super::tangent::{

@@ -1,4 +1,4 @@
-//! The NanoVDB file layer (docs/nanovdb.md has the layout with offsets): `.nvdb` files read
+//! The NanoVDB file layer (docs/book/src/nanovdb.md has the layout with offsets): `.nvdb` files read
 //! and written on the host, and grid buffers checked by warp-core's validator (the format
 //! facts live in [`warp_core::objects::nanovdb`], one place for every reader and writer):
 //! their metadata, index-to-world transform, CRC32 checksum, and the value of a voxel by its
@@ -249,7 +249,7 @@ impl NvdbGrid {
         self
     }
 
-    /// The two CRC32s NanoVDB stores (docs/nanovdb.md, section 3): the head over the grid's
+    /// The two CRC32s NanoVDB stores (docs/book/src/nanovdb.md, section 3): the head over the grid's
     /// headers, the tail over its nodes (as the grid's version lays them out).
     ///
     /// # Errors
@@ -300,7 +300,7 @@ impl NvdbGrid {
         }
     }
 
-    /// The per-type layout (docs/nanovdb.md, section 2).
+    /// The per-type layout (docs/book/src/nanovdb.md, section 2).
     fn layout(&self) -> &Layout {
         &self.info.layout
     }

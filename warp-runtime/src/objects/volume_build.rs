@@ -8,7 +8,7 @@
 //!
 //! The grid is byte for byte the one warp-core's CPU builder makes from the same voxels
 //! ([`nanovdb::build_from_tiles`], [`nanovdb::build_from_voxels`]), which is laid out as Warp
-//! 1.19's `volume_builder.cu` lays grids out (docs/nanovdb.md, sections 2 and 6): uppers in the
+//! 1.19's `volume_builder.cu` lays grids out (docs/book/src/nanovdb.md, sections 2 and 6): uppers in the
 //! order of their signed origins, lowers by (upper, slot), leaves by (lower, slot).
 //!
 //! The steps (the header's comment has each one's details):

@@ -499,7 +499,7 @@ fn reduce_impl<T: ScanElement>(
 /// `count` is touched. Keys and values must not overlap; both are contiguous and on the same device.
 ///
 /// Algorithm: LSD radix sort (8-bit digits on the CPU, 4-bit digits on a GPU), see
-/// `docs/primitives-notes.md`.
+/// `docs/book/src/primitives.md`.
 ///
 /// ```
 /// # use warp_runtime as wp;

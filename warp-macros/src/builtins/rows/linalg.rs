@@ -60,7 +60,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "quat_slerp": QUAT,           (T, T, ScalarOfT) -> T,   "linalg", Adjoint, no_tangent;
 };
 
-/// The decompositions (after the transforms in the table, as in docs/builtins.md).
+/// The decompositions (after the transforms in the table, as in docs/book/src/builtins.md).
 pub(super) const DECOMPOSITIONS: &[Builtin] = rows! {
     // Decompositions: tuples in the order of Warp's output arguments, only bound by a
     // destructuring `let` (see `front::lower::statements`). Forward mode does not follow
