@@ -1302,7 +1302,8 @@ pub(crate) mod tests {
             c.store("k", 1, b"planted").unwrap();
             fs::set_permissions(&t.0, fs::Permissions::from_mode(mode)).unwrap();
             assert_eq!(c.load("k", 1), CacheLookup::Absent, "mode {mode:o}");
-            let e = c.store("k", 2, b"x").unwrap_err().to_string();
+            // The message names the directory; the reason is its source (the chain says both).
+            let e = crate::error::Chain(&c.store("k", 2, b"x").unwrap_err()).to_string();
             assert!(
                 e.contains(&t.0.display().to_string()) && e.contains("writable by"),
                 "{e}"
