@@ -138,7 +138,6 @@ struct Row {
 }
 
 fn main() -> wp::Result<()> {
-    wp::config::set_quiet(true);
     let dev = match wp::get_device("cuda:0") {
         Ok(d) => d,
         Err(e) => {

@@ -115,6 +115,8 @@
 
 // docs.rs (`--cfg docsrs`, nightly): label feature-gated items with the feature they need.
 #![cfg_attr(docsrs, feature(doc_cfg))]
+// Every public type can be printed in a test or a log line.
+#![warn(missing_debug_implementations)]
 
 pub use glam;
 /// nalgebra, whose `From` conversions to and from glam (the element types of arrays) the

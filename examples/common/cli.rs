@@ -23,10 +23,13 @@ impl DeviceArg {
     /// one (the first GPU, or the CPU without one).
     pub fn get(&self) -> wp::Result<wp::Device> {
         wp::init();
-        match &self.device {
-            Some(name) => wp::get_device(name),
-            None => Ok(wp::get_preferred_device()),
-        }
+        let dev = match &self.device {
+            Some(name) => wp::get_device(name)?,
+            None => wp::get_preferred_device(),
+        };
+        // warp-lang logs its device banner rather than printing it: say where the example runs.
+        println!("running on \"{dev}\": {}", dev.name());
+        Ok(dev)
     }
 }
 

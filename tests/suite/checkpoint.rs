@@ -495,12 +495,17 @@ fn errors_and_misuse(dev: &wp::Device) {
     );
     let again = roll.backward().unwrap_err().to_string();
     assert!(again.contains("after a failed"), "{again}");
+    // The message names the step; the step's error is its source, not repeated in it.
     let msg = e.to_string();
     assert!(
         msg.contains("step 2 of a checkpointed rollout (backward pass)")
-            && msg.contains("the test's failure"),
+            && !msg.contains("the test's failure"),
         "{msg}"
     );
+    let source = std::error::Error::source(&e)
+        .expect("the step's error")
+        .to_string();
+    assert!(source.contains("the test's failure"), "{source}");
 }
 
 /// The square-root default at the size (1,000 steps): at most floor(sqrt(1000)) = 31

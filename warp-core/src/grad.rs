@@ -109,7 +109,7 @@ grad_none!(
 
 /// The gradient of an array argument inside an adjoint kernel: a view of the array's grad,
 /// or nothing when the array has none (then accumulating is a no-op and taking gives zero).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub struct GradView<T, const N: usize> {
     view: Option<ArrayView<T, N>>,
 }
@@ -207,6 +207,17 @@ pub struct AdStack {
     buf: Vec<u8>,
     cap: usize,
     kernel: &'static str,
+}
+
+/// The stack's size, capacity and kernel; not the bytes it holds.
+impl std::fmt::Debug for AdStack {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AdStack")
+            .field("len", &self.buf.len())
+            .field("cap", &self.cap)
+            .field("kernel", &self.kernel)
+            .finish()
+    }
 }
 
 impl AdStack {

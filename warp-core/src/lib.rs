@@ -6,6 +6,8 @@
 //! wrapping semantics, range loops as arithmetic progressions, the builtin functions and CPU
 //! atomics, and the kernel-side views of host objects ([`objects`]: the hash grid). Nothing
 //! here allocates or talks to a device: that is `warp-runtime`'s job.
+// Every public type can be printed in a test or a log line.
+#![warn(missing_debug_implementations)]
 
 pub mod adjoint;
 pub mod builtins;

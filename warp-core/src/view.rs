@@ -26,6 +26,20 @@ pub struct ArrayView<T, const N: usize> {
     arg: &'static str,
 }
 
+/// The view's shape, strides, kernel and argument; not its elements (a view can be large, and
+/// reading through it here would race with the launch that owns it).
+impl<T, const N: usize> std::fmt::Debug for ArrayView<T, N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ArrayView")
+            .field("ptr", &self.ptr)
+            .field("shape", &self.shape)
+            .field("strides", &self.strides)
+            .field("kernel", &self.kernel)
+            .field("arg", &self.arg)
+            .finish()
+    }
+}
+
 impl<T, const N: usize> Clone for ArrayView<T, N> {
     fn clone(&self) -> Self {
         *self

@@ -259,7 +259,7 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
         return Err(CudaError::Nvrtc {
             op: format!("nvrtcGetCUBIN({name})"),
             message: format!("NVRTC produced no cubin for sm_{arch} (is it a real architecture?)"),
-            source: None,
+            code: None,
         });
     }
     let mut cubin = vec![0u8; size];

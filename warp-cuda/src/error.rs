@@ -15,11 +15,14 @@ pub type Result<T> = std::result::Result<T, CudaError>;
 
 /// An error from the CUDA driver, NVRTC, the kernel cache, or a rejected argument.
 ///
-/// The errors of cudarc and of the file system are kept as the [`source`] of the variants
-/// that wrap them; the message itself already names the operation and the driver's
-/// description, so printing only the top error loses nothing.
-///
-/// [`source`]: std::error::Error::source
+/// Following the Rust API guidelines, a message never repeats its
+/// [`source`](std::error::Error::source): error reporters (anyhow, eyre, `log` lines that walk
+/// the chain) print the message and then each source, so a repeated cause would be printed
+/// twice. [`CudaError::Io`] keeps the file system's error as its source and names only the
+/// operation. The driver's and NVRTC's codes are not sources but fields
+/// ([`CudaError::Driver`]'s and [`CudaError::Nvrtc`]'s `code`): their messages are part of
+/// the text, read from the library when the error is made, because cudarc's errors display as
+/// their `Debug` form and call back into the library when printed.
 #[derive(Debug, Clone, thiserror::Error)]
 #[non_exhaustive]
 pub enum CudaError {
@@ -36,9 +39,9 @@ pub enum CudaError {
         name: String,
         /// The driver's description, e.g. "out of memory".
         message: String,
-        /// cudarc's error (the raw `CUresult`).
-        #[source]
-        source: DriverError,
+        /// cudarc's error (the raw `CUresult`). Not the error's `source`: `name` and
+        /// `message` already say what it says.
+        code: DriverError,
     },
     /// An NVRTC call other than the compilation itself failed.
     #[error("{op}: {message}")]
@@ -48,9 +51,9 @@ pub enum CudaError {
         /// NVRTC's description of the failure.
         message: String,
         /// cudarc's error (the raw `nvrtcResult`); `None` where NVRTC reported success but
-        /// its result was unusable (an empty cubin).
-        #[source]
-        source: Option<NvrtcError>,
+        /// its result was unusable (an empty cubin). Not the error's `source`: `message`
+        /// already says what it says.
+        code: Option<NvrtcError>,
     },
     /// NVRTC rejected the source; `log` is NVRTC's full log (errors with line numbers).
     #[error("NVRTC failed to compile {name} for sm_{arch}:\n{log}")]
@@ -84,8 +87,8 @@ pub enum CudaError {
         /// How long it waited.
         waited: std::time::Duration,
     },
-    /// A file-system operation of the kernel cache failed.
-    #[error("{op}: {source}")]
+    /// A file-system operation of the kernel cache failed; the I/O error is the `source`.
+    #[error("I/O error: {op}")]
     Io {
         /// What was being done, with the path.
         op: String,
@@ -108,25 +111,25 @@ impl PartialEq for CudaError {
                     op: o1,
                     name: n1,
                     message: m1,
-                    source: s1,
+                    code: s1,
                 },
                 Driver {
                     op: o2,
                     name: n2,
                     message: m2,
-                    source: s2,
+                    code: s2,
                 },
             ) => o1 == o2 && n1 == n2 && m1 == m2 && s1 == s2,
             (
                 Nvrtc {
                     op: o1,
                     message: m1,
-                    source: s1,
+                    code: s1,
                 },
                 Nvrtc {
                     op: o2,
                     message: m2,
-                    source: s2,
+                    code: s2,
                 },
             ) => o1 == o2 && m1 == m2 && s1 == s2,
             (
@@ -167,6 +170,22 @@ impl PartialEq for CudaError {
 
 impl Eq for CudaError {}
 
+/// An error and its sources, "error: source: source's source", as a `log` line shows an error
+/// (the message alone no longer carries its source).
+pub(crate) struct Chain<'a>(pub &'a (dyn std::error::Error + 'static));
+
+impl std::fmt::Display for Chain<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.0)?;
+        let mut source = self.0.source();
+        while let Some(s) = source {
+            write!(f, ": {s}")?;
+            source = s.source();
+        }
+        Ok(())
+    }
+}
+
 impl CudaError {
     /// Wraps a driver error with a description of the operation.
     pub(crate) fn driver(err: DriverError, op: impl Into<String>) -> Self {
@@ -186,7 +205,7 @@ impl CudaError {
             op: op.into(),
             name,
             message,
-            source: err,
+            code: err,
         }
     }
 
@@ -205,7 +224,7 @@ impl CudaError {
         CudaError::Nvrtc {
             op: op.into(),
             message,
-            source: Some(err),
+            code: Some(err),
         }
     }
 
@@ -219,7 +238,7 @@ impl CudaError {
     /// The raw `CUresult` code, for driver errors.
     pub fn driver_code(&self) -> Option<u32> {
         match self {
-            CudaError::Driver { source, .. } => Some(source.0 as u32),
+            CudaError::Driver { code, .. } => Some(code.0 as u32),
             _ => None,
         }
     }
@@ -228,8 +247,8 @@ impl CudaError {
     pub fn is_out_of_memory(&self) -> bool {
         matches!(
             self,
-            CudaError::Driver { source, .. }
-                if source.0 == cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY
+            CudaError::Driver { code, .. }
+                if code.0 == cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY
         )
     }
 }
@@ -245,7 +264,7 @@ mod tests {
             op: "cuMemAllocAsync of 48000000 bytes on cuda:0".into(),
             name: "CUDA_ERROR_OUT_OF_MEMORY".into(),
             message: "out of memory".into(),
-            source: DriverError(cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY),
+            code: DriverError(cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY),
         };
         assert_eq!(
             e.to_string(),
@@ -253,14 +272,9 @@ mod tests {
         );
         assert!(e.is_out_of_memory());
         assert_eq!(e.driver_code(), Some(2));
-        // The driver's error is the source, not a string.
-        let source = std::error::Error::source(&e).expect("a source");
-        assert_eq!(
-            source.downcast_ref::<DriverError>(),
-            Some(&DriverError(
-                cudarc::driver::sys::CUresult::CUDA_ERROR_OUT_OF_MEMORY
-            ))
-        );
+        // The driver's description is in the message, so its raw error is not the source too
+        // (a reporter would print the cause twice).
+        assert!(std::error::Error::source(&e).is_none());
         let c = CudaError::Compile {
             name: "k.cu".into(),
             arch: 90,
@@ -283,7 +297,12 @@ mod io_tests {
             std::io::Error::new(std::io::ErrorKind::PermissionDenied, "denied"),
             "writing cache entry /x",
         );
-        assert_eq!(e.to_string(), "writing cache entry /x: denied");
+        // The message names the operation; the cause is the source, printed once by a reporter.
+        assert_eq!(e.to_string(), "I/O error: writing cache entry /x");
+        assert_eq!(
+            Chain(&e).to_string(),
+            "I/O error: writing cache entry /x: denied"
+        );
         let source = std::error::Error::source(&e).expect("a source");
         // The source is the `Arc` (it is an error itself, forwarding to the `io::Error`).
         let io = source
@@ -296,5 +315,81 @@ mod io_tests {
             "writing cache entry /x",
         );
         assert_ne!(e, other);
+    }
+}
+
+#[cfg(test)]
+mod source_tests {
+    use super::*;
+    use std::error::Error as _;
+
+    /// One error of each variant (a driver error built by hand: CI has no libcuda to name it).
+    fn every_variant() -> Vec<CudaError> {
+        use cudarc::driver::sys::CUresult;
+        vec![
+            CudaError::NotAvailable("libcuda.so not found".into()),
+            CudaError::Driver {
+                op: "cuMemAllocAsync of 8 bytes on cuda:0".into(),
+                name: "CUDA_ERROR_OUT_OF_MEMORY".into(),
+                message: "out of memory".into(),
+                code: DriverError(CUresult::CUDA_ERROR_OUT_OF_MEMORY),
+            },
+            CudaError::Nvrtc {
+                op: "nvrtcGetCUBIN(k)".into(),
+                message: "NVRTC produced no cubin".into(),
+                code: None,
+            },
+            CudaError::Compile {
+                name: "k.cu".into(),
+                arch: 90,
+                log: "k.cu(3): error: x".into(),
+            },
+            CudaError::InvalidArgument("offset 9 past 8".into()),
+            CudaError::Nccl {
+                op: "ncclAllReduce".into(),
+                code: 3,
+                message: "internal error".into(),
+            },
+            CudaError::Timeout {
+                op: "waiting for rank 1".into(),
+                waited: std::time::Duration::from_secs(2),
+            },
+            CudaError::io(
+                std::io::Error::new(std::io::ErrorKind::PermissionDenied, "permission denied"),
+                "writing cache entry /x",
+            ),
+        ]
+    }
+
+    #[test]
+    fn no_message_repeats_its_source() {
+        for e in every_variant() {
+            if let Some(source) = e.source() {
+                let (message, cause) = (e.to_string(), source.to_string());
+                assert!(!message.contains(&cause), "{message:?} repeats {cause:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_chain_walk_prints_the_cause_once() {
+        // What anyhow's `{:#}` or eyre's report does: the message, then each source.
+        let e = CudaError::io(
+            std::io::Error::new(std::io::ErrorKind::PermissionDenied, "permission denied"),
+            "writing cache entry /x",
+        );
+        let mut lines = vec![e.to_string()];
+        let mut source = e.source();
+        while let Some(s) = source {
+            lines.push(s.to_string());
+            source = s.source();
+        }
+        assert_eq!(
+            lines,
+            ["I/O error: writing cache entry /x", "permission denied"]
+        );
+        let report = lines.join(": ");
+        assert_eq!(report.matches("permission denied").count(), 1, "{report}");
+        assert_eq!(Chain(&e).to_string(), report);
     }
 }

@@ -26,6 +26,8 @@
 //! in `cuda/` and is embedded here ([`library`]).
 
 #![warn(missing_docs)]
+// Every public type can be printed in a test or a log line; manual impls keep buffers out.
+#![warn(missing_debug_implementations)]
 
 pub mod cache;
 pub mod compile;

@@ -1402,6 +1402,7 @@ thread_local! {
 /// must put their collectives in one group, and paired sends and receives go in one group.
 /// Dropping an open group ends it (errors then are lost: call `end`).
 #[must_use = "a group issues its calls when it ends"]
+#[derive(Debug)]
 pub struct Group {
     open: bool,
 }

@@ -12,32 +12,23 @@ use std::collections::HashSet;
 use std::fmt::Write as _;
 use std::path::Path;
 
+use glam::DVec3;
+
 use crate::PlotError;
 
 /// A colour, red, green and blue.
 pub type Rgb = [u8; 3];
 
+/// A point or direction as the API takes it (plain arrays: no maths library in the signatures);
+/// the drawing converts to glam's `DVec3`.
 type V3 = [f64; 3];
 
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn normalize(a: V3) -> Option<V3> {
-    let n = dot(a, a).sqrt();
-    (n > 0.0 && n.is_finite()).then(|| [a[0] / n, a[1] / n, a[2] / n])
+/// `a` over its length, or None for a zero or non-finite vector. Divides by the length rather
+/// than multiplying by its reciprocal (glam's `try_normalize`), which rounds differently and
+/// would move shapes by a tenth of a pixel now and then.
+fn normalize(a: DVec3) -> Option<DVec3> {
+    let n = a.length();
+    (n > 0.0 && n.is_finite()).then(|| a / n)
 }
 
 /// How the camera maps depth: parallel rays, or rays through the eye.
@@ -81,7 +72,7 @@ impl Camera {
     }
 
     /// The camera's frame: right, up and forward unit vectors, or why there is none.
-    fn basis(&self) -> Result<[V3; 3], PlotError> {
+    fn basis(&self) -> Result<[DVec3; 3], PlotError> {
         let bad = || {
             PlotError::new(format!(
                 "camera: eye {:?}, target {:?} and up {:?} do not give a view (eye at the \
@@ -89,9 +80,9 @@ impl Camera {
                 self.eye, self.target, self.up
             ))
         };
-        let f = normalize(sub(self.target, self.eye)).ok_or_else(bad)?;
-        let r = normalize(cross(f, self.up)).ok_or_else(bad)?;
-        Ok([r, cross(r, f), f])
+        let f = normalize(DVec3::from(self.target) - DVec3::from(self.eye)).ok_or_else(bad)?;
+        let r = normalize(f.cross(DVec3::from(self.up))).ok_or_else(bad)?;
+        Ok([r, r.cross(f), f])
     }
 }
 
@@ -508,20 +499,20 @@ impl Frame {
     pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
         let svg = self.to_svg()?;
         std::fs::write(path, svg)
-            .map_err(|e| PlotError::caused_by(format!("writing {}: {e}", path.display()), e))
+            .map_err(|e| PlotError::caused_by(crate::plot::cannot_write(path), e))
     }
 
     /// The SVG text: an error names what cannot be drawn (a degenerate camera, values that do
     /// not match the positions, a triangle index out of range).
     pub fn to_svg(&self) -> Result<String, PlotError> {
         let [right, up, forward] = self.camera.basis()?;
-        let eye = self.camera.eye;
+        let eye = DVec3::from(self.camera.eye);
         let perspective = self.camera.projection == Projection::Perspective;
         // Camera coordinates: (x, y) on the picture plane (perspective: divided by depth), z
         // the depth; None behind the eye.
         let view = |p: V3| -> Option<[f64; 3]> {
-            let d = sub(p, eye);
-            let (x, y, z) = (dot(d, right), dot(d, up), dot(d, forward));
+            let d = DVec3::from(p) - eye;
+            let (x, y, z) = (d.dot(right), d.dot(up), d.dot(forward));
             if !(x.is_finite() && y.is_finite() && z.is_finite()) {
                 return None;
             }
@@ -595,44 +586,40 @@ impl Frame {
             }
         }
         // The light, in world space: from the upper left of the camera, towards the scene.
-        let light = normalize([
-            -0.45 * right[0] + 0.65 * up[0] - 0.6 * forward[0],
-            -0.45 * right[1] + 0.65 * up[1] - 0.6 * forward[1],
-            -0.45 * right[2] + 0.65 * up[2] - 0.6 * forward[2],
-        ])
-        .unwrap_or(up);
+        let light = normalize(right * -0.45 + up * 0.65 - forward * 0.6).unwrap_or(up);
         for mesh in &self.meshes {
             // A closed mesh's outward side: the sign of its enclosed volume.
             let volume: f64 = mesh
                 .triangles
                 .iter()
                 .map(|t| {
-                    let [a, b, c] = t.map(|i| mesh.points[i]);
-                    dot(a, cross(b, c))
+                    let [a, b, c] = t.map(|i| DVec3::from(mesh.points[i]));
+                    a.dot(b.cross(c))
                 })
                 .sum();
             let outward = if volume < 0.0 { -1.0 } else { 1.0 };
             match mesh.style {
                 MeshStyle::Shaded => {
                     for t in &mesh.triangles {
-                        let [a, b, c] = t.map(|i| mesh.points[i]);
-                        let Some(n) = normalize(cross(sub(b, a), sub(c, a))) else {
+                        let [pa, pb, pc] = t.map(|i| mesh.points[i]);
+                        let [a, b, c] = [pa, pb, pc].map(DVec3::from);
+                        let Some(n) = normalize((b - a).cross(c - a)) else {
                             continue; // degenerate: no area to draw
                         };
                         if mesh.closed {
                             // Turned away: the ray from the eye to the face meets its back.
-                            let to_face = if perspective { sub(a, eye) } else { forward };
-                            if outward * dot(n, to_face) > 0.0 {
+                            let to_face = if perspective { a - eye } else { forward };
+                            if outward * n.dot(to_face) > 0.0 {
                                 continue;
                             }
                         }
-                        let (Some(pa), Some(pb), Some(pc)) = (view(a), view(b), view(c)) else {
+                        let (Some(qa), Some(qb), Some(qc)) = (view(pa), view(pb), view(pc)) else {
                             continue;
                         };
                         items.push(Item::Triangle {
-                            p: [pa, pb, pc],
+                            p: [qa, qb, qc],
                             colour: mesh.colour,
-                            light: dot(n, light).abs(),
+                            light: n.dot(light).abs(),
                         });
                     }
                 }
@@ -896,6 +883,47 @@ impl Frame {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small frame of every kind of shape (coloured particles, a closed shaded mesh, a
+    /// wireframe, lines) under an oblique perspective camera, for `the_pinned_frame_is_unchanged`.
+    fn pinned_frame() -> Frame {
+        let tet = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let faces = vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        Frame::new(
+            "pinned",
+            Camera::perspective([3.1, 1.7, 2.3], [0.2, 0.3, 0.1], [0.1, 0.0, 1.0]),
+        )
+        .size(320, 240)
+        .note("a note")
+        .points(
+            Points::new([[0.5, 0.5, 1.2], [-0.3, 0.2, 0.1], [1.1, -0.4, 0.6]], 0.07)
+                .values("speed", [0.0, 0.5, 2.0]),
+        )
+        .mesh(TriMesh::new(tet.clone(), faces.clone()).closed())
+        .mesh(
+            TriMesh::new(tet.iter().map(|p| [p[0] - 1.5, p[1], p[2]]), faces)
+                .wireframe()
+                .colour([200, 30, 30]),
+        )
+        .lines(Lines::bounding_box([-1.6, -0.5, 0.0], [1.2, 1.1, 1.3]).width(1.5))
+    }
+
+    /// The SVG of `pinned_frame`, byte for byte as it was before the vector maths moved to glam
+    /// (`WARP_REPORT_BLESS=1` rewrites the file after an intended change of the picture).
+    #[test]
+    fn the_pinned_frame_is_unchanged() {
+        let svg = pinned_frame().to_svg().unwrap();
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/testdata/pinned_frame.svg");
+        if std::env::var_os("WARP_REPORT_BLESS").is_some() {
+            std::fs::write(path, &svg).unwrap();
+        }
+        assert_eq!(svg, include_str!("testdata/pinned_frame.svg"));
+    }
 
     fn cam() -> Camera {
         Camera::orthographic([0.0, 0.0, 5.0], [0.0; 3], [0.0, 1.0, 0.0])

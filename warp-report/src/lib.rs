@@ -30,6 +30,8 @@
 //! }
 //! assert!(sweep.table().contains("explicit Euler"));
 //! ```
+// Every public type can be printed in a test or a log line.
+#![warn(missing_debug_implementations)]
 
 use std::fmt;
 use std::path::Path;

@@ -7,7 +7,8 @@ use plotters::prelude::*;
 use crate::{sci, Sweep};
 
 /// Why a plot could not be written: nothing to plot, or the SVG file could not be written
-/// (then plotters' error is the [`source`](std::error::Error::source)).
+/// (then plotters' or the file system's error is the
+/// [`source`](std::error::Error::source), which the message does not repeat).
 #[derive(Debug, thiserror::Error)]
 #[error("{message}")]
 pub struct PlotError {
@@ -37,15 +38,17 @@ impl PlotError {
     }
 }
 
-/// plotters' error while drawing into `path`, as a [`PlotError`] naming the path (and
-/// repeating plotters' message, so that printing only the top error loses nothing).
+/// plotters' error while drawing into `path`, as a [`PlotError`] naming the path, with
+/// plotters' error as its source (not repeated in the message: reporters print the chain).
 pub(crate) fn drawing<E: std::error::Error + Send + Sync + 'static>(
     path: &Path,
 ) -> impl Fn(DrawingAreaErrorKind<E>) -> PlotError + '_ {
-    move |e| PlotError {
-        message: format!("writing {}: {e}", path.display()),
-        source: Some(Box::new(e)),
-    }
+    move |e| PlotError::caused_by(cannot_write(path), e)
+}
+
+/// The message of a [`PlotError`] whose source says why `path` could not be written.
+pub(crate) fn cannot_write(path: &Path) -> String {
+    format!("cannot write {}", path.display())
 }
 
 /// Bounds of a log axis around positive values, padded by a factor on each side.
@@ -133,4 +136,43 @@ pub(crate) fn write_svg(sweep: &Sweep, path: &Path) -> Result<(), PlotError> {
         .map_err(&err)?;
     root.present().map_err(&err)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::error::Error as _;
+
+    /// A frame written where it cannot be: the message names the path, the source says why.
+    fn unwritable() -> PlotError {
+        let camera = crate::frame::Camera::orthographic([0.0, 0.0, 5.0], [0.0; 3], [0.0, 1.0, 0.0]);
+        crate::frame::Frame::new("t", camera)
+            .write_svg(Path::new("/nonexistent-warp-report-dir/plot.svg"))
+            .expect_err("no such directory")
+    }
+
+    #[test]
+    fn the_message_does_not_repeat_its_source() {
+        let e = unwritable();
+        assert_eq!(
+            e.to_string(),
+            "cannot write /nonexistent-warp-report-dir/plot.svg"
+        );
+        let source = e.source().expect("the I/O error").to_string();
+        assert!(!e.to_string().contains(&source), "{e} repeats {source}");
+        assert!(PlotError::new("nothing to plot".into()).source().is_none());
+    }
+
+    #[test]
+    fn a_chain_walk_prints_the_cause_once() {
+        let e = unwritable();
+        let cause = e.source().expect("the I/O error").to_string();
+        let mut report = e.to_string();
+        let mut source = e.source();
+        while let Some(s) = source {
+            report.push_str(&format!(": {s}"));
+            source = s.source();
+        }
+        assert_eq!(report.matches(&cause).count(), 1, "{report}");
+    }
 }

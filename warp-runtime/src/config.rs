@@ -11,7 +11,7 @@
 //!
 //! | target | level | what |
 //! |---|---|---|
-//! | `warp_runtime::device` | info | the [`init`](crate::init) banner (also printed to stdout unless [`quiet`]); the preferred device, first asked, and why not a GPU when it is the CPU |
+//! | `warp_runtime::device` | info | the [`init`](crate::init) banner (only here: nothing is printed to stdout); the preferred device, first asked, and why not a GPU when it is the CPU |
 //! | `warp_runtime::device` | debug | each device found |
 //! | `warp_cuda::device` | info | the CUDA driver version and each GPU (name, `sm_XX`, SMs, memory), or why CUDA is not available when there is no driver or no device |
 //! | `warp_cuda::device` | warn | a driver that is there but cannot be used (too old, the toolkit's stub, a version mismatch, `cuInit` failing) |
@@ -34,10 +34,6 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 
 static DEBUG: AtomicBool = AtomicBool::new(cfg!(debug_assertions));
 
-// 0: not decided yet (read WARP_QUIET at first use), 1: false, 2: true. A tri-state lets
-// `set_quiet` win over the environment whichever comes first.
-static QUIET: AtomicU8 = AtomicU8::new(0);
-
 static CPU_MIN_CHUNK: AtomicUsize = AtomicUsize::new(DEFAULT_CPU_MIN_CHUNK);
 
 /// The default of [`cpu_min_chunk`].
@@ -56,19 +52,6 @@ pub fn set_debug(on: bool) {
 /// Whether debug mode is on. Defaults to `cfg!(debug_assertions)` of this crate's build.
 pub fn debug() -> bool {
     DEBUG.load(Ordering::Relaxed)
-}
-
-/// Suppresses (or restores) the banner that [`init`](crate::init) prints.
-pub fn set_quiet(on: bool) {
-    QUIET.store(if on { 2 } else { 1 }, Ordering::Relaxed);
-}
-
-/// Whether the init banner is suppressed.
-///
-/// Defaults to false, unless the environment variable `WARP_QUIET` is `1` (or `true`) when this
-/// is first read and [`set_quiet`] has not been called.
-pub fn quiet() -> bool {
-    env_flag(&QUIET, "WARP_QUIET")
 }
 
 /// A tri-state switch (0: not decided, 1: false, 2: true) whose default is the environment
@@ -139,7 +122,8 @@ pub fn verify_fp() -> bool {
         .unwrap_or_else(|| VERIFY_FP.load(Ordering::Relaxed))
 }
 
-// Tri-state as `QUIET`: the environment's `WARP_RACE_CHECK` unless `set_race_check` came first.
+// 0: not decided yet (read `WARP_RACE_CHECK` at first use), 1: false, 2: true. A tri-state
+// lets `set_race_check` win over the environment whichever comes first.
 static RACE_CHECK: AtomicU8 = AtomicU8::new(0);
 
 thread_local! {
@@ -281,15 +265,6 @@ mod tests {
         assert_eq!(debug(), !before);
         set_debug(before);
         assert_eq!(debug(), before);
-    }
-
-    #[test]
-    fn quiet_round_trips() {
-        set_quiet(true);
-        assert!(quiet());
-        set_quiet(false);
-        assert!(!quiet());
-        set_quiet(true);
     }
 
     #[test]

@@ -4,7 +4,6 @@
 //! only the CPU backend; asking for a CUDA device is an error that says so, and code written as
 //! `get_device("cuda:0").unwrap_or(cpu())` runs on the CPU. No GPU is a normal situation.
 
-use crate::config;
 use crate::error::{Error, Result};
 use std::fmt;
 use std::hash::{Hash, Hasher};
@@ -182,12 +181,13 @@ impl Runtime {
         self.devices.iter().any(Device::is_cuda)
     }
 
-    /// The warp-lang version, as printed in the banner.
+    /// The warp-lang version, as the banner shows it.
     pub fn version(&self) -> &'static str {
         env!("CARGO_PKG_VERSION")
     }
 
-    /// The banner [`init`] prints.
+    /// The banner [`init`] logs: the version, each device, and whether CUDA is available (why
+    /// not, if not).
     pub fn banner(&self) -> String {
         let mut s = format!("warp-lang {} initialized:\n   Devices:\n", self.version());
         for d in &self.devices {
@@ -253,22 +253,18 @@ fn cuda_devices() -> (Vec<Device>, String) {
     (Vec::new(), CUDA_UNAVAILABLE.to_string())
 }
 
-/// Initialises the runtime and prints the device list once, like Warp's `wp.init()`.
+/// Initialises the runtime and logs the device list once, like Warp's `wp.init()`.
 ///
-/// Idempotent: later calls return the same runtime and print nothing. The banner is not
-/// printed when [`config::quiet`] is set (`WARP_QUIET=1`); it goes to the `log` facade at
-/// info level either way (target `warp_runtime::device`). Calling `init` is optional: the
-/// other functions initialise the runtime on demand, silently.
+/// The banner ([`Runtime::banner`]) goes to the `log` facade at info level (target
+/// `warp_runtime::device`), never to stdout: a library does not write to the application's
+/// output, and a program that wants the banner on screen installs a logger (`env_logger` with
+/// `RUST_LOG=warp_runtime=info`, say) or prints [`Runtime::banner`] itself. Idempotent: later
+/// calls return the same runtime and log nothing. Calling `init` is optional: the other
+/// functions initialise the runtime on demand.
 pub fn init() -> &'static Runtime {
-    static PRINTED: OnceLock<()> = OnceLock::new();
+    static LOGGED: OnceLock<()> = OnceLock::new();
     let rt = runtime();
-    PRINTED.get_or_init(|| {
-        let banner = rt.banner();
-        log::info!("{banner}");
-        if !config::quiet() {
-            println!("{banner}");
-        }
-    });
+    LOGGED.get_or_init(|| log::info!("{}", rt.banner()));
     rt
 }
 
@@ -426,9 +422,34 @@ mod tests {
         assert!(get_device("cuda:x").is_err());
     }
 
+    /// Run in a child process by [`init_writes_nothing_to_stdout`]: `init` and nothing else.
+    #[test]
+    fn init_alone() {
+        if std::env::var_os("WARP_TEST_INIT_CHILD").is_some() {
+            init();
+        }
+    }
+
+    #[test]
+    fn init_writes_nothing_to_stdout() {
+        // The test harness captures `println!` inside a test, so the banner is looked for in
+        // the real stdout of a child process running `init_alone` with capture off.
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["device::tests::init_alone", "--exact", "--nocapture"])
+            .env("WARP_TEST_INIT_CHILD", "1")
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            stdout.contains("1 passed"),
+            "the child ran no test: {stdout}"
+        );
+        assert!(!stdout.contains("initialized"), "init printed: {stdout}");
+    }
+
     #[test]
     fn init_is_idempotent_and_banner_lists_cpu() {
-        config::set_quiet(true);
         let a = init() as *const Runtime;
         let b = init() as *const Runtime;
         assert_eq!(a, b);

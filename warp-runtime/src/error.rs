@@ -14,17 +14,20 @@ pub type Result<T> = std::result::Result<T, Error>;
 ///
 /// An error that wraps a lower-level one keeps it as its
 /// [`source`](std::error::Error::source) ([`Error::Cuda`]'s driver or NVRTC error,
-/// [`Error::OutOfMemory`]'s on a GPU, [`Error::Step`]'s step error, [`Error::Fault`]'s
-/// fault); the message repeats what the source says, so printing only the top error loses
-/// nothing.
+/// [`Error::OutOfMemory`]'s on a GPU, [`Error::Step`]'s step error), and its message does not
+/// repeat it, as the Rust API guidelines ask: reporters (anyhow, eyre, a loop over `source()`)
+/// print the message and then each source, so a repeated cause would show twice. Print the
+/// chain, not the message alone, to see why (`{:#}` of an `anyhow::Error`, or walk
+/// `source()`). [`Error::Fault`] is the fault itself: its message and source are the fault's.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
     /// A kernel thread faulted (out-of-bounds index, integer division by zero, zero step). The
     /// launch stopped at the first fault it saw.
-    // The fault already names the kernel, argument, index and shape.
-    #[error("{0}")]
-    Fault(#[source] Fault),
+    // The fault already names the kernel, argument, index and shape: the error is the fault
+    // (transparent), not a message wrapping it, so that it is not printed twice.
+    #[error(transparent)]
+    Fault(Fault),
     /// An array argument lives on another device than the one the launch runs on.
     #[error(
         "kernel `{kernel}`: argument `{arg}` is on device \"{found}\" but the launch is on \
@@ -80,11 +83,12 @@ pub enum Error {
     /// failing for another reason than memory). Only with the `cuda` feature: without it
     /// nothing reaches CUDA.
     #[cfg(feature = "cuda")]
-    #[error("CUDA error on \"{device}\": {source}")]
+    #[error("CUDA error on \"{device}\"")]
     Cuda {
         /// The device (`"nvrtc"` for ahead-of-time compilation, which has none).
         device: String,
-        /// What failed and why (an NVRTC error includes the compiler's log).
+        /// What failed and why (an NVRTC error includes the compiler's log): the error's
+        /// `source`.
         #[source]
         source: warp_cuda::CudaError,
     },
@@ -192,13 +196,13 @@ pub enum Error {
     },
     /// The step function of a checkpointed rollout ([`Checkpointed`](crate::Checkpointed))
     /// failed; `source` is its error.
-    #[error("step {step} of a checkpointed rollout ({pass} pass): {source}")]
+    #[error("step {step} of a checkpointed rollout ({pass} pass) failed")]
     Step {
         /// The step `t` (the step from state `t` to state `t + 1`).
         step: usize,
         /// The pass that ran it: "forward", "recomputation" or "backward".
         pass: &'static str,
-        /// The step function's error.
+        /// The step function's error: the error's `source`.
         source: Box<Error>,
     },
 }
@@ -284,6 +288,23 @@ impl Error {
     }
 }
 
+/// An error and its sources, "error: source: source's source", for a `log` line (a message
+/// alone no longer carries its source).
+#[cfg_attr(not(feature = "cuda"), allow(dead_code))]
+pub(crate) struct Chain<'a>(pub &'a (dyn std::error::Error + 'static));
+
+impl fmt::Display for Chain<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.0)?;
+        let mut source = self.0.source();
+        while let Some(s) = source {
+            write!(f, ": {s}")?;
+            source = s.source();
+        }
+        Ok(())
+    }
+}
+
 /// `same_shape`'s arguments and their shapes, as [`Error::ShapeMismatch`] lists them.
 struct ShapeList<'a>(&'a [String], &'a [Vec<usize>]);
 
@@ -319,7 +340,8 @@ mod tests {
             err.to_string(),
             "kernel `k`: index [-1] is out of bounds for argument `a` of shape [4]"
         );
-        assert!(std::error::Error::source(&err).is_some());
+        // The error is the fault (transparent): not the fault again as its source.
+        assert!(std::error::Error::source(&err).is_none());
     }
 
     #[test]
@@ -360,5 +382,110 @@ mod tests {
             reason: "zero".into(),
         };
         assert_eq!(e.to_string(), "kernel `k`: invalid launch dim [0]: zero");
+    }
+
+    /// One error of each variant that can have a source, and a few without.
+    fn representative() -> Vec<Error> {
+        let fault = Fault::new(
+            "k",
+            FaultKind::OutOfBounds {
+                arg: "a",
+                index: vec![4],
+                shape: vec![4],
+            },
+        );
+        let mut errors = vec![
+            Error::from(fault.clone()),
+            Error::Step {
+                step: 3,
+                pass: "forward",
+                source: Box::new(Error::from(fault)),
+            },
+            Error::out_of_memory("cpu", 1 << 40),
+            Error::invalid("Array::view: range 0..9 past 8"),
+        ];
+        #[cfg(feature = "cuda")]
+        {
+            let io = warp_cuda::CudaError::Io {
+                op: "writing cache entry /x".into(),
+                source: std::sync::Arc::new(std::io::Error::other("disk full")),
+            };
+            errors.push(Error::cuda("cuda:0", io));
+            errors.push(Error::cuda(
+                "nvrtc",
+                warp_cuda::CudaError::Compile {
+                    name: "k.cu".into(),
+                    arch: 90,
+                    log: "k.cu(3): error: x".into(),
+                },
+            ));
+        }
+        errors
+    }
+
+    #[test]
+    fn no_message_repeats_its_source() {
+        let mut with_source = 0;
+        for e in representative() {
+            if let Some(source) = std::error::Error::source(&e) {
+                with_source += 1;
+                let (message, cause) = (e.to_string(), source.to_string());
+                assert!(!message.contains(&cause), "{message:?} repeats {cause:?}");
+            }
+        }
+        assert!(with_source >= 1);
+    }
+
+    #[test]
+    fn a_chain_walk_prints_each_cause_once() {
+        // What anyhow's `{:#}` or eyre's report does: the message, then each source.
+        let fault = Fault::new(
+            "k",
+            FaultKind::OutOfBounds {
+                arg: "a",
+                index: vec![4],
+                shape: vec![4],
+            },
+        );
+        let cause = fault.to_string();
+        let e = Error::Step {
+            step: 3,
+            pass: "backward",
+            source: Box::new(Error::from(fault)),
+        };
+        let mut lines = vec![e.to_string()];
+        let mut source = std::error::Error::source(&e);
+        while let Some(s) = source {
+            lines.push(s.to_string());
+            source = s.source();
+        }
+        assert_eq!(
+            lines,
+            [
+                "step 3 of a checkpointed rollout (backward pass) failed".to_string(),
+                cause.clone()
+            ]
+        );
+        let report = Chain(&e).to_string();
+        assert_eq!(report, lines.join(": "));
+        assert_eq!(report.matches(&cause).count(), 1, "{report}");
+    }
+
+    #[cfg(feature = "cuda")]
+    #[test]
+    fn a_cuda_error_reads_alone_and_in_its_chain() {
+        let e = Error::cuda(
+            "nvrtc",
+            warp_cuda::CudaError::Compile {
+                name: "k.cu".into(),
+                arch: 90,
+                log: "k.cu(3): error: x".into(),
+            },
+        );
+        assert_eq!(e.to_string(), "CUDA error on \"nvrtc\"");
+        assert_eq!(
+            Chain(&e).to_string(),
+            "CUDA error on \"nvrtc\": NVRTC failed to compile k.cu for sm_90:\nk.cu(3): error: x"
+        );
     }
 }

@@ -18,7 +18,7 @@
 //! - [`primitives`]: scan, reductions, radix sort and stream compaction on arrays.
 //! - [`graph`]: work recorded once and replayed ([`capture`], [`Graph`]): CUDA graphs on a
 //!   GPU, the list of recorded operations on the CPU.
-//! - [`config`]: process-wide settings (debug mode, quiet banner, CPU chunk size), and what
+//! - [`config`]: process-wide settings (debug mode, CPU chunk size), and what
 //!   warp-lang sends to the `log` facade ([targets and levels](config#logging)).
 //!
 //! Kernel threads never panic on bad input: an out-of-bounds index or an integer division by
@@ -27,6 +27,8 @@
 // docs.rs (`--cfg docsrs`, nightly): label feature-gated items with the feature they need.
 #![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
+// Every public type can be printed in a test or a log line; manual impls keep buffers out.
+#![warn(missing_debug_implementations)]
 
 pub mod array;
 pub mod autograd;

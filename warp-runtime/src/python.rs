@@ -177,6 +177,18 @@ pub struct DlpackArray {
     array: Box<dyn Exported>,
 }
 
+/// The array's device, shape and element type (what `describe` says); not its elements.
+impl std::fmt::Debug for DlpackArray {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (shape, dtype, _) = self.array.describe();
+        f.debug_struct("DlpackArray")
+            .field("device", self.array.device())
+            .field("shape", &shape)
+            .field("dtype", &dtype)
+            .finish()
+    }
+}
+
 /// What an exported array needs from its element type, with the type erased.
 trait Exported: Send + Sync {
     fn device(&self) -> &Device;

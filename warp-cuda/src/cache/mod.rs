@@ -594,7 +594,10 @@ impl KernelCache {
             }
             Err(e) => {
                 // Handled: the kernel still runs, only the next process compiles it again.
-                log::warn!("kernel cache: {e} (the compiled {name} is used but not kept)");
+                log::warn!(
+                    "kernel cache: {} (the compiled {name} is used but not kept)",
+                    crate::error::Chain(&e)
+                );
                 None
             }
         };

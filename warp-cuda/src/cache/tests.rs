@@ -486,7 +486,7 @@ fn writable_by_others_is_refused() {
         c.store("k", 1, b"planted").unwrap();
         fs::set_permissions(&t.0, fs::Permissions::from_mode(mode)).unwrap();
         assert_eq!(c.load("k", 1), CacheLookup::Absent, "mode {mode:o}");
-        let e = c.store("k", 2, b"x").unwrap_err().to_string();
+        let e = crate::error::Chain(&c.store("k", 2, b"x").unwrap_err()).to_string();
         assert!(
             e.contains(&t.0.display().to_string()) && e.contains("writable by"),
             "{e}"
@@ -631,7 +631,7 @@ fn key_of_wrong_mode_is_refused() {
     ] {
         chmod(&key, mode);
         assert_eq!(c.load("k", 1), CacheLookup::Absent, "mode {mode:o}");
-        let e = c.store("k", 2, b"x").unwrap_err().to_string();
+        let e = crate::error::Chain(&c.store("k", 2, b"x").unwrap_err()).to_string();
         assert!(e.contains(why) && e.contains("key"), "{e}");
         assert_eq!(mode_of(&key), mode, "left alone");
     }
@@ -642,7 +642,7 @@ fn key_of_wrong_mode_is_refused() {
     fs::rename(&key, &elsewhere).unwrap();
     std::os::unix::fs::symlink(&elsewhere, &key).unwrap();
     assert_eq!(c.load("k", 1), CacheLookup::Absent);
-    let e = c.store("k", 2, b"x").unwrap_err().to_string();
+    let e = crate::error::Chain(&c.store("k", 2, b"x").unwrap_err()).to_string();
     assert!(e.contains("symbolic link"), "{e}");
     assert!(fs::symlink_metadata(&key).unwrap().file_type().is_symlink());
 }

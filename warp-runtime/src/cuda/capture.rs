@@ -255,7 +255,10 @@ fn load_setter(st: &GpuState, device: &Device, ordinal: usize) {
                     .map_err(|e| err(device, e))?;
                 // A cache that cannot be written only costs the next start a link.
                 if let Err(e) = cache.store(name, key, &image) {
-                    log::warn!("kernel cache: {e} (the linked condition kernel is not kept)");
+                    log::warn!(
+                        "kernel cache: {} (the linked condition kernel is not kept)",
+                        crate::error::Chain(&e)
+                    );
                 }
                 image
             }
