@@ -240,7 +240,7 @@ fn budget_sweep(
     }
     bar.suspend(|| {
         println!(
-        "  snapshot budget against memory and recomputation (a full tape: {} states):\n\n{table}\n",
+        "  snapshot budget against memory and recomputation (a full tape: {} states):\n\n{table}",
         sci((steps + 1) as f64)
     );
         common::write_plot("checkpoint", |path| {
