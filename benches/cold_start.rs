@@ -110,11 +110,6 @@ fn start(bin: &Path, args: &[&str], cache: &Path) -> Result<Start, String> {
     found.ok_or_else(|| format!("no cold_start line in the output of {}", bin.display()))
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// `reps` starts; `cache(k)` is the cache directory of start `k`. The medians, and the
 /// counts of the last start.
 fn case(
@@ -126,7 +121,7 @@ fn case(
     let runs = (0..reps)
         .map(|k| start(bin, args, &cache(k)))
         .collect::<Result<Vec<_>, _>>()?;
-    let m = |f: fn(&Start) -> f64| median(runs.iter().map(f).collect());
+    let m = |f: fn(&Start) -> f64| common::median_of(runs.iter().map(f).collect());
     Ok(Start {
         first_ms: m(|s| s.first_ms),
         spawn_ms: m(|s| s.spawn_ms),

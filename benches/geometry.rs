@@ -25,7 +25,9 @@ use warp_lang as wp;
 use wp::prelude::*;
 
 mod common;
-use common::{json_number, median_ms, python_side, ratio, XorShift};
+
+use common::{json_number, median_ms, python_side, ratio};
+use rand::Rng as _;
 
 #[path = "../examples/common/meshes.rs"]
 mod meshes;
@@ -115,13 +117,13 @@ fn main() -> wp::Result<()> {
     row("mesh refit", refit, "mesh_refit_ms", String::new());
 
     // Query points, and the reference on a subset.
-    let mut r = XorShift(0x243f_6a88);
+    let mut r = common::rng(0x243f_6a88);
     let qs: Vec<Vec3> = (0..n)
         .map(|_| {
             Vec3::new(
-                r.unit() * 4.0 - 2.0,
-                r.unit() * 4.0 - 2.0,
-                r.unit() * 2.0 - 1.0,
+                r.random::<f32>() * 4.0 - 2.0,
+                r.random::<f32>() * 4.0 - 2.0,
+                r.random::<f32>() * 2.0 - 1.0,
             )
         })
         .collect();
@@ -172,16 +174,17 @@ fn main() -> wp::Result<()> {
     let mut dirs = Vec::with_capacity(n);
     for _ in 0..n {
         let s = loop {
-            let v = Vec3::new(r.unit(), r.unit(), r.unit()) * 2.0 - Vec3::ONE;
+            let v = Vec3::new(r.random::<f32>(), r.random::<f32>(), r.random::<f32>()) * 2.0
+                - Vec3::ONE;
             let l = v.length();
             if l > 0.1 && l <= 1.0 {
                 break v / l * 3.0;
             }
         };
         let target = Vec3::new(
-            r.unit() * 2.8 - 1.4,
-            r.unit() * 2.8 - 1.4,
-            r.unit() * 0.8 - 0.4,
+            r.random::<f32>() * 2.8 - 1.4,
+            r.random::<f32>() * 2.8 - 1.4,
+            r.random::<f32>() * 0.8 - 0.4,
         );
         starts.push(s);
         dirs.push((target - s).normalize());
@@ -216,8 +219,9 @@ fn main() -> wp::Result<()> {
     // A Bvh of 1M boxes.
     let (mut lo, mut hi) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for _ in 0..n {
-        let c = Vec3::new(r.unit(), r.unit(), r.unit()) * 10.0;
-        let h = Vec3::new(r.unit(), r.unit(), r.unit()) * 0.05 + Vec3::splat(0.025);
+        let c = Vec3::new(r.random::<f32>(), r.random::<f32>(), r.random::<f32>()) * 10.0;
+        let h = Vec3::new(r.random::<f32>(), r.random::<f32>(), r.random::<f32>()) * 0.05
+            + Vec3::splat(0.025);
         lo.push(c - h);
         hi.push(c + h);
     }

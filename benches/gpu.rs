@@ -10,6 +10,7 @@
 //! brute-force n-body (64K bodies, f32), host cost per launch of a small kernel with 6
 //! arguments, and the first launch in a fresh process with an empty and with a warm cache.
 
+use rand::Rng as _;
 use std::ffi::c_void;
 use std::process::Command;
 use std::sync::Arc;
@@ -40,6 +41,8 @@ fn nbody(pos: Array<Vec3>, mass: Array<f32>, acc: Array<Vec3>, eps2: f32, n: i32
 }
 
 /// The AD section's kernels are the autodiff example's (one step per tape record, and the loss).
+mod common;
+
 #[path = "../examples/common/seed_ad.rs"]
 mod seed_ad;
 
@@ -125,14 +128,6 @@ fn ptr<T>(v: &mut T) -> *mut c_void {
     v as *mut T as *mut c_void
 }
 
-fn splitmix(seed: &mut u64) -> f32 {
-    *seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *seed;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-}
-
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
@@ -142,13 +137,13 @@ fn particles(dev: &wp::Device, hand: &Hand) {
     let (b, mass, g) = (0.05f32, 0.1f32, 9.81f32);
     let dt = 0.01 * (2.0 * mass / b);
     let gravity = Vec3::new(0.0, 0.0, -g);
-    let mut seed = 12345u64;
+    let mut seed = common::rng(12345u64);
     let x0: Vec<Vec3> = (0..n)
         .map(|_| {
             Vec3::new(
-                splitmix(&mut seed),
-                splitmix(&mut seed),
-                splitmix(&mut seed),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
             ) * 2.0
                 - 1.0
         })
@@ -156,9 +151,9 @@ fn particles(dev: &wp::Device, hand: &Hand) {
     let v0: Vec<Vec3> = (0..n)
         .map(|_| {
             Vec3::new(
-                splitmix(&mut seed),
-                splitmix(&mut seed),
-                splitmix(&mut seed),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
             ) - 0.5
         })
         .collect();
@@ -236,18 +231,18 @@ fn particles(dev: &wp::Device, hand: &Hand) {
 fn nbody_bench(dev: &wp::Device, hand: &Hand) {
     let n = 65_536usize;
     let eps2 = 1e-4f32;
-    let mut seed = 7u64;
+    let mut seed = common::rng(7u64);
     let p: Vec<Vec3> = (0..n)
         .map(|_| {
             Vec3::new(
-                splitmix(&mut seed),
-                splitmix(&mut seed),
-                splitmix(&mut seed),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
             ) * 2.0
                 - 1.0
         })
         .collect();
-    let m: Vec<f32> = (0..n).map(|_| 0.5 + splitmix(&mut seed)).collect();
+    let m: Vec<f32> = (0..n).map(|_| 0.5 + seed.random::<f32>()).collect();
     let (pos, mass, acc) = (
         wp::Array::from_slice(&p, dev).unwrap(),
         wp::Array::from_slice(&m, dev).unwrap(),
@@ -456,18 +451,18 @@ fn ad_bench(dev: &wp::Device) {
     let (n, steps) = (1_000_000usize, 100usize);
     let (b, mass, dt) = (0.05f32, 0.1f32, 0.01f32);
     let gravity = Vec3::new(0.0, 0.0, -9.81);
-    let mut seed = 11u64;
+    let mut seed = common::rng(11u64);
     let x0: Vec<Vec3> = (0..n)
         .map(|_| {
             Vec3::new(
-                splitmix(&mut seed),
-                splitmix(&mut seed),
-                splitmix(&mut seed),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
+                seed.random::<f32>(),
             )
         })
         .collect();
     let v0: Vec<Vec3> = (0..n)
-        .map(|_| Vec3::new(splitmix(&mut seed), splitmix(&mut seed), 0.0))
+        .map(|_| Vec3::new(seed.random::<f32>(), seed.random::<f32>(), 0.0))
         .collect();
     let grad_array = |data: Option<&[Vec3]>| {
         match data {

@@ -86,11 +86,7 @@ fn timed(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<(f64, f64)> {
         wp::synchronize()?;
         total.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    let med = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    Ok((med(host), med(total)))
+    Ok((common::median_of(host), common::median_of(total)))
 }
 
 /// Host microseconds per launch when the GPU keeps up: 200 launches of `launch` from an idle
@@ -108,8 +104,7 @@ fn host_cost(mut launch: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
     }
     wp::synchronize()?;
     t.remove(0);
-    t.sort_by(f64::total_cmp);
-    Ok(t[t.len() / 2])
+    Ok(common::median_of(t))
 }
 
 /// Microseconds per kernel of `ms` spent on `KERNELS` launches.

@@ -20,46 +20,15 @@
 //! in before each run, outside the timing.
 use criterion::{black_box, Criterion};
 use rayon::prelude::*;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use warp_lang as wp;
 
+mod common;
+
+use common::{median_after, median_on};
+use rand::Rng as _;
+
 const N: usize = 1_000_000;
-
-/// A deterministic generator (xorshift64*), for inputs without a dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-}
-
-/// Median of `runs` timings of `f` on `state`, each after an untimed `setup` of it.
-fn median_on<S>(
-    runs: usize,
-    state: &mut S,
-    mut setup: impl FnMut(&mut S),
-    mut f: impl FnMut(&mut S),
-) -> Duration {
-    let mut t: Vec<Duration> = (0..runs)
-        .map(|_| {
-            setup(state);
-            let s = Instant::now();
-            f(state);
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    t[runs / 2]
-}
-
-/// Median of `runs` timings of `f`, each after an untimed `setup`.
-fn median(runs: usize, mut setup: impl FnMut(), mut f: impl FnMut()) -> Duration {
-    median_on(runs, &mut (), |_| setup(), |_| f())
-}
 
 fn serial_scan(x: &[i32], out: &mut [i32]) {
     let mut acc = 0i32;
@@ -71,14 +40,16 @@ fn serial_scan(x: &[i32], out: &mut [i32]) {
 
 fn main() {
     let dev = wp::cpu();
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-    let ints: Vec<i32> = (0..N).map(|_| (rng.next() % 2001) as i32 - 1000).collect();
-    let floats: Vec<f32> = (0..N)
-        .map(|_| (rng.next() % 2_000_001) as f32 * 1e-6 - 1.0)
+    let mut rng = common::rng(0x9e37_79b9_7f4a_7c15);
+    let ints: Vec<i32> = (0..N)
+        .map(|_| (rng.random::<u64>() % 2001) as i32 - 1000)
         .collect();
-    let keys: Vec<u32> = (0..N).map(|_| rng.next() as u32).collect();
+    let floats: Vec<f32> = (0..N)
+        .map(|_| (rng.random::<u64>() % 2_000_001) as f32 * 1e-6 - 1.0)
+        .collect();
+    let keys: Vec<u32> = (0..N).map(|_| rng.random::<u64>() as u32).collect();
     let idx: Vec<u32> = (0..N as u32).collect();
-    let flags: Vec<i32> = (0..N).map(|_| (rng.next() % 2) as i32).collect();
+    let flags: Vec<i32> = (0..N).map(|_| (rng.random::<u64>() % 2) as i32).collect();
     let pairs: Vec<(u32, u32)> = keys.iter().copied().zip(idx.iter().copied()).collect();
     let fpairs: Vec<(f32, u32)> = floats.iter().copied().zip(idx.iter().copied()).collect();
 
@@ -192,7 +163,7 @@ fn main() {
     let runs = 21;
     let nothing = || {};
     // Timed once, compared with both baselines.
-    let warp_sort_u32 = median(
+    let warp_sort_u32 = median_after(
         runs,
         || load(&a_keys, &a_vals),
         || wp::radix_sort_pairs(&a_keys, &a_vals, N, None).unwrap(),
@@ -201,24 +172,24 @@ fn main() {
         (
             "scan i32 (inclusive)",
             "serial loop",
-            median(runs, nothing, || {
+            median_after(runs, nothing, || {
                 wp::array_scan(&a_ints, &a_scan, true).unwrap()
             }),
-            median(runs, nothing, || serial_scan(&ints, &mut scan_out)),
+            median_after(runs, nothing, || serial_scan(&ints, &mut scan_out)),
         ),
         (
             "sum f32",
             "rayon sum",
-            median(runs, nothing, || wp::array_sum(&a_floats, &a_out).unwrap()),
-            median(runs, nothing, || {
+            median_after(runs, nothing, || wp::array_sum(&a_floats, &a_out).unwrap()),
+            median_after(runs, nothing, || {
                 black_box(floats.par_iter().sum::<f32>());
             }),
         ),
         (
             "min f32",
             "rayon reduce",
-            median(runs, nothing, || wp::array_min(&a_floats, &a_out).unwrap()),
-            median(runs, nothing, || {
+            median_after(runs, nothing, || wp::array_min(&a_floats, &a_out).unwrap()),
+            median_after(runs, nothing, || {
                 black_box(
                     floats
                         .par_iter()
@@ -252,7 +223,7 @@ fn main() {
         (
             "sort f32 pairs",
             "par_sort_unstable",
-            median(
+            median_after(
                 runs,
                 || load_f(&a_fkeys, &a_vals),
                 || wp::radix_sort_pairs(&a_fkeys, &a_vals, N, None).unwrap(),
@@ -267,8 +238,8 @@ fn main() {
         (
             "compact f32 (1/2 kept)",
             "rayon filter",
-            median(runs, nothing, warp_compact),
-            median(runs, nothing, || rayon_compact(&mut kept)),
+            median_after(runs, nothing, warp_compact),
+            median_after(runs, nothing, || rayon_compact(&mut kept)),
         ),
     ];
     println!();

@@ -26,7 +26,9 @@ use warp_lang as wp;
 use wp::prelude::*;
 
 mod common;
-use common::{json_number, median_ms, python_side, ratio, size_section, uniform_points, XorShift};
+
+use common::{json_number, median_ms, python_side, ratio, size_section, uniform_points};
+use rand::Rng as _;
 
 /// Neighbours of each point within `r`, a thread per point in point order.
 #[wp::kernel]
@@ -199,11 +201,11 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
     for n in sizes {
         let section = torch.as_ref().ok().and_then(|t| size_section(t, n));
         let theirs = |k: &str| section.and_then(|s| json_number(s, k));
-        let mut r = XorShift(0x2545_f491);
-        let ki: Vec<i32> = (0..n).map(|_| (r.next() >> 33) as i32).collect();
-        let kf: Vec<f32> = (0..n).map(|_| r.unit()).collect();
+        let mut r = common::rng(0x2545_f491);
+        let ki: Vec<i32> = (0..n).map(|_| (r.random::<u64>() >> 33) as i32).collect();
+        let kf: Vec<f32> = (0..n).map(|_| r.random::<f32>()).collect();
         let vals: Vec<i32> = (0..n as i32).collect();
-        let small: Vec<i32> = (0..n).map(|_| (r.next() % 100) as i32).collect();
+        let small: Vec<i32> = (0..n).map(|_| (r.random::<u64>() % 100) as i32).collect();
 
         let ms = sort_case(&ki, &vals, dev, &cpu)?;
         println!(

@@ -23,7 +23,9 @@ use warp_lang as wp;
 use wp::prelude::*;
 
 mod common;
-use common::{json_number, median_ms, python_side, ratio, XorShift};
+
+use common::{json_number, median_ms, python_side, ratio};
+use rand::Rng as _;
 
 const RES: usize = 256;
 const H: f64 = 2.0 / RES as f64;
@@ -84,13 +86,13 @@ fn band_tiles() -> Vec<IVec3> {
 }
 
 /// `n` points uniform in the band `|sdf| < band`.
-fn band_points(n: usize, band: f64, r: &mut XorShift) -> Vec<Vec3> {
+fn band_points(n: usize, band: f64, r: &mut common::Rng) -> Vec<Vec3> {
     let mut out = Vec::with_capacity(n);
     while out.len() < n {
         let p = Vec3::new(
-            r.unit() * 2.0 - 1.0,
-            (r.unit() * 2.0 - 1.0) * 0.45,
-            r.unit() * 2.0 - 1.0,
+            r.random::<f32>() * 2.0 - 1.0,
+            (r.random::<f32>() * 2.0 - 1.0) * 0.45,
+            r.random::<f32>() * 2.0 - 1.0,
         );
         if sdf64(p).abs() < band {
             out.push(p);
@@ -147,7 +149,7 @@ fn main() -> wp::Result<()> {
         ),
     );
     let vol = build()?;
-    let mut r = XorShift(0x5eed_1234);
+    let mut r = common::rng(0x5eed_1234);
     let pts_h = band_points(n, 0.05, &mut r);
     let pts = wp::Array::from_slice(&pts_h, &dev)?;
     let out = wp::Array::<f32>::zeros(n, &dev)?;

@@ -35,6 +35,7 @@ mod common;
 
 use bounce::{Balls, Contact, Setup};
 use clap::Parser;
+use rand::Rng as _;
 use warp_lang as wp;
 use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Table};
@@ -56,13 +57,16 @@ const H_WIDE: f64 = 0.05;
 /// Launch velocities whose trajectories define the targets: ball 0's, then a deterministic
 /// spread.
 fn aims(balls: usize) -> Vec<DVec2> {
-    let mut rng = common::Rng(7);
+    let mut rng = common::rng(7);
     (0..balls)
         .map(|b| {
             if b == 0 {
                 DVec2::new(2.0, -1.0)
             } else {
-                DVec2::new(1.5 + 1.5 * rng.next_f64(), -2.0 + 3.0 * rng.next_f64())
+                DVec2::new(
+                    1.5 + 1.5 * rng.random::<f64>(),
+                    -2.0 + 3.0 * rng.random::<f64>(),
+                )
             }
         })
         .collect()
@@ -252,7 +256,9 @@ fn main() -> wp::Result<()> {
         "loss",
         &["max miss (m)"],
         25,
-    );
+    )
+    // The TOI gradient's iterations, then the naive one's (at most as many).
+    .progress(2 * iterations as u64);
     let (toi_its, toi_miss) = optimise(
         &balls,
         Contact::Toi,

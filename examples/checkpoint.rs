@@ -4,6 +4,7 @@
 //! ```text
 //! cargo run --release --example checkpoint -- [--device cpu|cuda:0] [--particles 1000000]
 //!     [--steps 1000] [--snapshots K] [--compare-particles 10000] [--compare-steps 1000]
+//!     [--plot-dir DIR]
 //! ```
 //! Runs on the GPU when there is one. The main run (default 1M particles x 1000 steps) prints
 //! the forward and backward times, the recomputed steps, the states and bytes held at the peak
@@ -11,7 +12,11 @@
 //! closed form (dL/dx0 = 2 x_T, dL/dv0 = 2 c x_T, see `common/seed_ad.rs`). The comparison run,
 //! first (default 10k particles x 1000 steps, where a full tape fits in memory;
 //! `--compare-particles 0` skips it), runs a full tape too and prints the largest differences
-//! of the gradients (0 on the CPU: the same adjoints on the same inputs in the same order). On Linux each run also
+//! of the gradients (0 on the CPU: the same adjoints on the same inputs in the same order),
+//! then sweeps the snapshot budget at that size (2, 4, 8, .. snapshots, below the steps) and
+//! prints the trade-off as a table (states held, MiB, steps recomputed, time) and as the plot
+//! `<--plot-dir or target/report>/checkpoint.svg` (memory falls as the budget shrinks,
+//! recomputation and time rise). On Linux each run also
 //! prints the process's measured peak resident memory (host memory: on a GPU the states live
 //! in device memory and the schedule's figures are the ones to read).
 
@@ -26,6 +31,7 @@ use seed_ad::{
 };
 use std::time::Instant;
 use warp_lang as wp;
+use warp_report::{sci, Curves, Table};
 use wp::prelude::*;
 
 type State = (wp::Array<Vec3>, wp::Array<Vec3>);
@@ -179,11 +185,76 @@ struct Cli {
     compare_steps: usize,
     #[command(flatten)]
     device: common::DeviceArg,
+    #[command(flatten)]
+    plot: common::PlotDirArg,
+}
+
+/// The snapshot budgets of the trade-off sweep: 2, 4, 8, .. below `steps` (fewer than two
+/// snapshots recompute about T^2 / 2 steps: minutes at the comparison's size).
+fn sweep_budgets(steps: usize) -> Vec<usize> {
+    std::iter::successors(Some(2usize), |k| Some(k * 2))
+        .take_while(|&k| k < steps)
+        .collect()
+}
+
+/// The memory against recomputation trade-off of `n` particles x `steps` steps over the
+/// snapshot budgets: its table, printed, and its plot, written.
+fn budget_sweep(
+    n: usize,
+    steps: usize,
+    budgets: &[usize],
+    dev: &wp::Device,
+    bar: &indicatif::ProgressBar,
+) -> wp::Result<()> {
+    let mut table = Table::new([
+        "snapshots",
+        "states held",
+        "MiB held",
+        "steps recomputed",
+        "forward + backward (ms)",
+    ]);
+    let mut curves = Curves::new(
+        format!("checkpointed gradient, {n} particles x {steps} steps on {dev}"),
+        "value",
+    );
+    for &k in budgets {
+        bar.set_message(format!("{k} snapshots"));
+        let run = checkpointed(n, steps, Some(k), dev)?;
+        bar.inc(1);
+        let ms = run.forward_ms + run.backward_ms;
+        let r = &run.report;
+        table.push([
+            k.to_string(),
+            r.states_held.to_string(),
+            format!("{:.2}", mib(r.bytes_held)),
+            run.recomputed.to_string(),
+            format!("{ms:.1}"),
+        ]);
+        curves.push("MiB held", k as f64, mib(r.bytes_held));
+        curves.push("forward + backward (ms)", k as f64, ms);
+        curves.push(
+            "steps recomputed / T",
+            k as f64,
+            run.recomputed as f64 / steps as f64,
+        );
+    }
+    bar.suspend(|| {
+        println!(
+        "  snapshot budget against memory and recomputation (a full tape: {} states):\n\n{table}",
+        sci((steps + 1) as f64)
+    );
+        common::write_plot("checkpoint", |path| {
+            curves.write_svg(path).map_err(|e| e.to_string())
+        });
+        println!();
+    });
+    Ok(())
 }
 
 fn main() -> wp::Result<()> {
     let cli = Cli::parse();
     let dev = cli.device.get()?;
+    cli.plot.init();
     let (n, steps, snapshots) = (cli.particles, cli.steps, cli.snapshots);
     let (cn, csteps) = (cli.compare_particles, cli.compare_steps);
 
@@ -192,46 +263,64 @@ fn main() -> wp::Result<()> {
 
     // The comparison first: the allocator may keep memory a larger run freed, which would
     // count in a later run's measured peak.
+    let budgets = if cn > 0 {
+        sweep_budgets(csteps)
+    } else {
+        Vec::new()
+    };
+    // One tick per run: the comparison's two, the budget sweep's, then the main run's (long:
+    // 1M particles x 1000 steps by default).
+    let bar = common::progress(if cn > 0 { 2 + budgets.len() as u64 } else { 0 } + 1);
     if cn > 0 {
-        println!("against a full tape, {cn} particles x {csteps} steps on \"{dev}\":");
+        bar.set_message("comparison: checkpointed");
         let measured = reset_peak_rss();
         let run = checkpointed(cn, csteps, snapshots, &dev)?;
         let ck_rss = peak_rss().filter(|_| measured);
+        bar.inc(1);
+        bar.set_message("comparison: full tape");
         let measured = reset_peak_rss();
         let (gx, gv, full_ms) = full_tape(cn, csteps, &dev)?;
         let full_rss = peak_rss().filter(|_| measured);
+        bar.inc(1);
         let r = &run.report;
-        println!(
-            "  checkpointed: {} states held, {:.1} MiB, forward + backward {:.1} ms, {} steps \
-             recomputed",
-            r.states_held,
-            mib(r.bytes_held),
-            run.forward_ms + run.backward_ms,
-            run.recomputed
-        );
-        println!(
-            "  full tape:    {} states with gradients, {:.1} MiB, forward + backward {:.1} ms",
-            r.full_tape_states,
-            mib(r.full_tape_bytes),
-            full_ms
-        );
-        if let (Some(a), Some(b)) = (ck_rss, full_rss) {
+        // Printed with the bar hidden (indicatif draws it again below).
+        bar.suspend(|| {
+            println!("against a full tape, {cn} particles x {csteps} steps on \"{dev}\":");
             println!(
-                "  measured peak resident memory: checkpointed {:.1} MiB, full tape {:.1} MiB",
-                mib(a),
-                mib(b)
+                "  checkpointed: {} states held, {:.1} MiB, forward + backward {:.1} ms, {} steps \
+             recomputed",
+                r.states_held,
+                mib(r.bytes_held),
+                run.forward_ms + run.backward_ms,
+                run.recomputed
             );
-        }
-        let (dx, sx) = max_diff(&run.gx, &gx);
-        let (dv, sv) = max_diff(&run.gv, &gv);
-        let word = |same: bool| if same { "bit-identical" } else { "differ" };
-        println!("  max |dL/dx0 difference| {dx:e} ({})", word(sx));
-        println!("  max |dL/dv0 difference| {dv:e} ({})\n", word(sv));
+            println!(
+                "  full tape:    {} states with gradients, {:.1} MiB, forward + backward {:.1} ms",
+                r.full_tape_states,
+                mib(r.full_tape_bytes),
+                full_ms
+            );
+            if let (Some(a), Some(b)) = (ck_rss, full_rss) {
+                println!(
+                    "  measured peak resident memory: checkpointed {:.1} MiB, full tape {:.1} MiB",
+                    mib(a),
+                    mib(b)
+                );
+            }
+            let (dx, sx) = max_diff(&run.gx, &gx);
+            let (dv, sv) = max_diff(&run.gv, &gv);
+            let word = |same: bool| if same { "bit-identical" } else { "differ" };
+            println!("  max |dL/dx0 difference| {dx:e} ({})", word(sx));
+            println!("  max |dL/dv0 difference| {dv:e} ({})\n", word(sv));
+        });
+        budget_sweep(cn, csteps, &budgets, &dev, &bar)?;
     }
-    println!("seed particle program, {n} particles x {steps} steps on \"{dev}\"");
+    bar.set_message(format!("{n} particles x {steps} steps"));
     let measured = reset_peak_rss();
     let run = checkpointed(n, steps, snapshots, &dev)?;
     let rss = peak_rss().filter(|_| measured);
+    bar.finish_and_clear();
+    println!("seed particle program, {n} particles x {steps} steps on \"{dev}\"");
     println!("{}", run.report);
     println!(
         "  forward {:.1} ms, backward {:.1} ms (ratio {:.2}); the backward pass recomputed {} \

@@ -41,6 +41,8 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
+use rand_distr::StandardNormal;
 use warp_lang as wp;
 use warp_report::frame::{Frame, Points, TriMesh};
 use warp_report::{sci, Table};
@@ -536,9 +538,15 @@ fn main() -> wp::Result<()> {
     // The gradient check at the start (initial velocities of about 1 cm/s, not zero, so that
     // the check is not at a special point): f64 tape against central differences, and
     // the f32 tape beside them.
-    let mut rng = common::Rng(3);
+    let mut rng = common::rng(3);
     let v_start: Vec<DVec3> = (0..n * n)
-        .map(|_| DVec3::new(rng.normal(), rng.normal(), rng.normal()) * 0.01)
+        .map(|_| {
+            DVec3::new(
+                rng.sample::<f64, _>(StandardNormal),
+                rng.sample::<f64, _>(StandardNormal),
+                rng.sample::<f64, _>(StandardNormal),
+            ) * 0.01
+        })
         .collect();
     c64.set_v0(&v_start, &dev)?;
     let (_, loss64) = c64.gradient(target, &dev)?;
@@ -635,7 +643,8 @@ fn main() -> wp::Result<()> {
         "loss",
         &["|com_T - target| (m)"],
         1,
-    );
+    )
+    .progress(iterations as u64);
     let field = Field { n, k: field_k };
     let mut theta = vec![DVec3::ZERO; field.nodes()];
     c64.set_v0(&field.velocities(&v_start, &theta), &dev)?;

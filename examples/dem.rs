@@ -21,6 +21,8 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
+use rand_distr::StandardNormal;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -278,7 +280,8 @@ fn restitution(dev: &wp::Device) -> wp::Result<()> {
         format!("two-particle collision on {dev}: max over {PAIRS} phases of |e - e_exact|"),
         "dt (s)",
     )
-    .with_extras(&["steps per contact"]);
+    .with_extras(&["steps per contact"])
+    .progress(8);
     for k in 0..8 {
         let dt = (t_contact / 10.0 / 2f64.powi(k)) as f32;
         let mut x0 = Vec::with_capacity(2 * PAIRS);
@@ -312,7 +315,7 @@ fn restitution(dev: &wp::Device) -> wp::Result<()> {
 
 /// A jittered lattice of `n` particles filling a fraction of a box, with random velocities.
 fn gas(n: usize, radius: f32, half_width: f32, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
-    let mut rng = common::Rng(seed);
+    let mut rng = common::rng(seed);
     let side = (n as f64).cbrt().ceil() as usize;
     let spacing = 2.0 * half_width / side as f32;
     assert!(spacing > 2.0 * radius, "the lattice overlaps");
@@ -321,16 +324,16 @@ fn gas(n: usize, radius: f32, half_width: f32, seed: u64) -> (Vec<Vec3>, Vec<Vec
     for k in 0..n {
         let (a, b, c) = (k % side, (k / side) % side, k / (side * side));
         let jitter =
-            |r: &mut common::Rng| (r.next_f64() as f32 - 0.5) * (spacing - 2.0 * radius) * 0.5;
+            |r: &mut common::Rng| (r.random::<f64>() as f32 - 0.5) * (spacing - 2.0 * radius) * 0.5;
         x.push(Vec3::new(
             -half_width + (a as f32 + 0.5) * spacing + jitter(&mut rng),
             (b as f32 + 0.5) * spacing + jitter(&mut rng),
             -half_width + (c as f32 + 0.5) * spacing + jitter(&mut rng),
         ));
         v.push(Vec3::new(
-            rng.normal() as f32,
-            rng.normal() as f32,
-            rng.normal() as f32,
+            rng.sample::<f64, _>(StandardNormal) as f32,
+            rng.sample::<f64, _>(StandardNormal) as f32,
+            rng.sample::<f64, _>(StandardNormal) as f32,
         ));
     }
     (x, v)
@@ -444,7 +447,8 @@ fn energy_drift(dev: &wp::Device) -> wp::Result<()> {
     let mut sweep = Sweep::new(
         format!("undamped gas on {dev}: |E(0.25 s) - E(0)| / E(0)"),
         "dt (s)",
-    );
+    )
+    .progress(5);
     for k in 0..5 {
         let dt = (0.4 / omega / 2f64.powi(k)) as f32;
         let run = run_gas(dev, m, n, dt, 0.25)?;
@@ -514,11 +518,11 @@ fn settle(dev: &wp::Device, n: usize, frames: usize, args: &common::SceneArgs) -
     let spacing = 2.05 * m.radius;
     let half_width = 0.75 * side as f32 * spacing;
     let m = Material { half_width, ..m };
-    let mut rng = common::Rng(11);
+    let mut rng = common::rng(11);
     let mut x0 = Vec::with_capacity(n);
     for k in 0..n {
         let (a, b, c) = (k % side, k / (side * side), (k / side) % side);
-        let j = |r: &mut common::Rng| (r.next_f64() as f32 - 0.5) * 0.02 * m.radius;
+        let j = |r: &mut common::Rng| (r.random::<f64>() as f32 - 0.5) * 0.02 * m.radius;
         x0.push(Vec3::new(
             (a as f32 - side as f32 / 2.0) * spacing + j(&mut rng),
             m.radius + b as f32 * spacing * 1.5 + j(&mut rng),
@@ -557,7 +561,8 @@ fn settle(dev: &wp::Device, n: usize, frames: usize, args: &common::SceneArgs) -
         format!("cohesive pile on {dev}: max overlap / radius"),
         "simulated time (s)",
     )
-    .with_extras(&["ms per frame"]);
+    .with_extras(&["ms per frame"])
+    .progress(frames as u64);
     let mut elapsed = 0.0f64;
     // With `--rerun`, every frame of the run (its natural cadence), outside the timing.
     let mut rec = args.recorder("dem");
@@ -695,12 +700,12 @@ fn warp_preset(dev: &wp::Device, frames: usize, args: &common::SceneArgs) -> wp:
         ceiling: f32::INFINITY,
     };
     let (nx, ny, nz) = (32usize, 64usize, 32usize);
-    let mut rng = common::Rng(3);
+    let mut rng = common::rng(3);
     let mut x0 = Vec::with_capacity(nx * ny * nz);
     for a in 0..nx {
         for b in 0..ny {
             for c in 0..nz {
-                let mut j = || rng.next_f64() as f32 * m.radius * 0.1;
+                let mut j = || rng.random::<f64>() as f32 * m.radius * 0.1;
                 x0.push(Vec3::new(
                     a as f32 * 2.0 * m.radius + j(),
                     0.5 + b as f32 * 2.0 * m.radius + j(),

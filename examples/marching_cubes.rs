@@ -14,6 +14,7 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -69,13 +70,13 @@ fn to_mesh(mesh: Mesh, surf: Array<Vec3>, err: Array<f32>, q: Array<Vec3>, serr:
 
 /// Points on the exact torus (uniform in its angles) and query points in [-1, 1]^3.
 fn samples(n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
-    let mut r = common::Rng(11);
+    let mut r = common::rng(11);
     let mut surf = Vec::with_capacity(n);
     let mut q = Vec::with_capacity(n);
     for _ in 0..n {
         let (u, v) = (
-            std::f64::consts::TAU * r.next_f64(),
-            std::f64::consts::TAU * r.next_f64(),
+            std::f64::consts::TAU * r.random::<f64>(),
+            std::f64::consts::TAU * r.random::<f64>(),
         );
         let (big, small) = (MAJOR as f64, MINOR as f64);
         let rad = big + small * v.cos();
@@ -84,7 +85,7 @@ fn samples(n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
             (small * v.sin()) as f32,
             (rad * u.sin()) as f32,
         ));
-        let mut c = || (2.0 * r.next_f64() - 1.0) as f32;
+        let mut c = || (2.0 * r.random::<f64>() - 1.0) as f32;
         q.push(Vec3::new(c(), c(), c()));
     }
     (surf, q)
@@ -142,7 +143,8 @@ fn main() -> wp::Result<()> {
         "extract ms",
         "mesh build ms",
         "max |signed query - sdf|",
-    ]);
+    ])
+    .progress(common::grid_count(17, max_res));
     // The frame: the extraction on the 33^3 grid (about 5K triangles: a small file that
     // still shows the faceting).
     let mut shown = None;

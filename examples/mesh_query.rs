@@ -24,6 +24,7 @@ mod common;
 mod meshes;
 
 use clap::Parser;
+use rand::Rng as _;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -54,13 +55,13 @@ type Sdf = Box<dyn Fn(DVec3) -> f64>;
 
 /// `n` points uniform in the box `[lo, hi]`.
 fn points(n: usize, lo: Vec3, hi: Vec3, seed: u64) -> Vec<Vec3> {
-    let mut r = common::Rng(seed);
+    let mut r = common::rng(seed);
     (0..n)
         .map(|_| {
             let t = Vec3::new(
-                r.next_f64() as f32,
-                r.next_f64() as f32,
-                r.next_f64() as f32,
+                r.random::<f64>() as f32,
+                r.random::<f64>() as f32,
+                r.random::<f64>() as f32,
             );
             lo + (hi - lo) * t
         })
@@ -144,7 +145,8 @@ fn main() -> wp::Result<()> {
         format!("signed distance on {dev}: max |d_mesh - sdf| over {n} points"),
         "triangles",
     )
-    .with_extras(&["build ms", "wrong signs"]);
+    .with_extras(&["build ms", "wrong signs"])
+    .progress(2 * 6); // a torus and a sphere at each of 6 tessellations
     println!("\n2. signed distance against the closed-form SDF, over the tessellation");
     for k in [1usize, 2, 4, 8, 16, 32] {
         let cases: [(&str, meshes::TriMesh, Sdf); 2] = [

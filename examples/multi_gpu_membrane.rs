@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo run --release --example multi_gpu_membrane -- [--gpus 4] [--rows 8192] [--cols 8192]
-//!     [--steps 200]
+//!     [--steps 200] [--plot-dir DIR]
 //! ```
 //! The membrane: `rows x cols` particles 1 cm apart, each joined to its four neighbours by a
 //! spring (stiffness 5000 N/m, rest length 1 cm), 1 g each, under gravity, its top row pinned;
@@ -24,6 +24,9 @@
 //!    efficiency `T1 / (G TG)` and the share of the step spent in the halo exchange (GPU time
 //!    between events around the exchange, the slowest rank's);
 //! 3. weak scaling (`--rows` rows per GPU): efficiency `T1 / TG`.
+//!
+//! Both scalings are plotted, ms per step against the GPU count with the ideal of each, to
+//! `<--plot-dir or target/report>/multi_gpu_membrane.svg`; a progress bar counts the runs.
 
 mod common;
 
@@ -101,6 +104,8 @@ struct Args {
     /// Steps per run (the first 10 are not timed).
     #[arg(long, default_value = "200", value_parser = common::cli::num::<usize>)]
     steps: usize,
+    #[command(flatten)]
+    plot: common::PlotDirArg,
 }
 
 const SPACING: f32 = 0.01;
@@ -227,6 +232,7 @@ fn main() {
 
 fn real_main(args: &Args) -> wp::Result<()> {
     wp::init();
+    args.plot.init();
     let all: Vec<wp::Device> = wp::devices().into_iter().filter(|d| d.is_cuda()).collect();
     let max = args.gpus.unwrap_or(all.len()).min(all.len());
     if max == 0 || !wp::distributed::nccl_available() {
@@ -274,8 +280,13 @@ fn real_main(args: &Args) -> wp::Result<()> {
     ]);
     let mut reference: Option<(Vec<Vec3>, f64)> = None;
     let mut all_equal = true;
+    // One tick per run: strong and weak scaling, each on 1, 2, .. G GPUs.
+    let bar = common::progress(2 * counts.len() as u64);
+    let (mut strong_ms, mut weak_ms) = (Vec::new(), Vec::new());
     for &g in &counts {
+        bar.set_message(format!("strong scaling, {g} GPUs"));
         let bands = run(&all, g, args.rows, args)?;
+        bar.inc(1);
         let t = bands.iter().map(|b| b.per_step).fold(0.0, f64::max);
         let h = bands.iter().map(|b| b.halo_share).fold(0.0, f64::max);
         let positions: Vec<Vec3> = bands.into_iter().flat_map(|b| b.rows).collect();
@@ -288,6 +299,7 @@ fn real_main(args: &Args) -> wp::Result<()> {
         all_equal &= differing == 0;
         let centre = (args.rows / 2) * args.cols + args.cols / 2;
         let sag = -((args.rows / 2) as f32) * SPACING - positions[centre].y;
+        strong_ms.push((g, t * 1e3));
         strong.push([
             g.to_string(),
             format!("{:.3}", t * 1e3),
@@ -298,17 +310,16 @@ fn real_main(args: &Args) -> wp::Result<()> {
             sci(sag as f64),
         ]);
     }
-    println!(
-        "\nStrong scaling: {} x {} membrane\n\n{strong}",
-        args.rows, args.cols
-    );
     let mut weak = Table::new(["GPUs", "rows", "ms / step", "efficiency", "halo exchange"]);
     let mut t1 = None;
     for &g in &counts {
+        bar.set_message(format!("weak scaling, {g} GPUs"));
         let bands = run(&all, g, args.rows * g, args)?;
+        bar.inc(1);
         let t = bands.iter().map(|b| b.per_step).fold(0.0, f64::max);
         let h = bands.iter().map(|b| b.halo_share).fold(0.0, f64::max);
         let t1 = *t1.get_or_insert(t);
+        weak_ms.push((g, t * 1e3));
         weak.push([
             g.to_string(),
             (args.rows * g).to_string(),
@@ -317,7 +328,22 @@ fn real_main(args: &Args) -> wp::Result<()> {
             format!("{:.1}%", 100.0 * h),
         ]);
     }
+    bar.finish_and_clear();
+    println!(
+        "\nStrong scaling: {} x {} membrane\n\n{strong}",
+        args.rows, args.cols
+    );
     println!("\nWeak scaling: {} rows per GPU\n\n{weak}", args.rows);
+    common::write_scaling_plot(
+        "multi_gpu_membrane",
+        &format!(
+            "membrane: strong ({} x {}) and weak ({} rows per GPU) scaling",
+            args.rows, args.cols, args.rows
+        ),
+        "ms / step",
+        &strong_ms,
+        &weak_ms,
+    );
     println!(
         "\n{}: every position on 1..{} GPUs equal bit for bit (tolerance 0)",
         if all_equal { "PASS" } else { "FAIL" },

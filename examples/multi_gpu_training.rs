@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo run --release --example multi_gpu_training -- [--gpus 4] [--envs 1_048_576]
-//!     [--steps 64] [--iterations 20]
+//!     [--steps 64] [--iterations 20] [--plot-dir DIR]
 //! ```
 //! The task: one open-loop control sequence `u[s]` (a force for each of `--steps` steps, shared
 //! by every environment) must bring a particle to the origin at the last step, whatever its
@@ -25,6 +25,11 @@
 //! 4. for each, the share of an iteration spent in communication: from the moment this rank's
 //!    backward pass has finished to the moment its all-reduces have (waiting for slower ranks
 //!    included), the slowest rank's share.
+//!
+//! Plots, in `<--plot-dir or target/report>/`: `multi_gpu_training.svg`, the loss curve of
+//! every GPU count (they lie on each other), and `multi_gpu_training_scaling.svg`, ms per
+//! iteration against the GPU count with the ideal of each scaling. A progress bar counts the
+//! runs.
 
 mod common;
 
@@ -80,6 +85,8 @@ struct Args {
     /// Optimisation iterations per run (the first is not timed: it compiles and warms up).
     #[arg(long, default_value = "20", value_parser = common::cli::num::<usize>)]
     iterations: usize,
+    #[command(flatten)]
+    plot: common::PlotDirArg,
 }
 
 const DT: f32 = 1.0 / 60.0;
@@ -218,6 +225,7 @@ fn main() {
 
 fn real_main(args: &Args) -> wp::Result<()> {
     wp::init();
+    args.plot.init();
     let all: Vec<wp::Device> = wp::devices().into_iter().filter(|d| d.is_cuda()).collect();
     let max = args.gpus.unwrap_or(all.len()).min(all.len());
     if max == 0 || !wp::distributed::nccl_available() {
@@ -257,8 +265,22 @@ fn real_main(args: &Args) -> wp::Result<()> {
     ]);
     let mut base: Option<(Vec<f32>, f64)> = None;
     let mut worst_diff = 0.0f64;
+    // One tick per run: strong and weak scaling, each on 1, 2, .. G GPUs.
+    let bar = common::progress(2 * counts.len() as u64);
+    let (mut strong_ms, mut weak_ms) = (Vec::new(), Vec::new());
+    // The loss curve of every GPU count, plotted against the iteration.
+    let mut curves = warp_report::Curves::new(
+        format!(
+            "multi_gpu_training: mean |x_T|^2 over {} environments",
+            args.envs
+        ),
+        "loss",
+    );
+    let mut curve_table = None;
     for &g in &counts {
+        bar.set_message(format!("strong scaling, {g} GPUs"));
         let runs = run(&all, g, args.envs, args)?;
+        bar.inc(1);
         let t = runs.iter().map(|r| r.per_iteration).fold(0.0, f64::max);
         let c = runs
             .iter()
@@ -276,6 +298,10 @@ fn real_main(args: &Args) -> wp::Result<()> {
             .map(|(a, b)| ((a - b) / a).abs() as f64)
             .fold(0.0, f64::max);
         worst_diff = worst_diff.max(diff);
+        strong_ms.push((g, t * 1e3));
+        for (k, l) in losses.iter().enumerate() {
+            curves.push(&format!("{g} GPUs"), k as f64, *l as f64);
+        }
         strong.push([
             g.to_string(),
             format!("{:.3}", t * 1e3),
@@ -286,20 +312,15 @@ fn real_main(args: &Args) -> wp::Result<()> {
             sci(diff),
         ]);
         if g == *counts.last().unwrap() {
-            let mut curve_table =
-                Table::new(["iteration", "loss, 1 GPU", &format!("loss, {g} GPUs")]);
+            let mut table = Table::new(["iteration", "loss, 1 GPU", &format!("loss, {g} GPUs")]);
             for (k, (a, b)) in base.as_ref().unwrap().0.iter().zip(losses).enumerate() {
                 if k % (args.iterations / 10).max(1) == 0 || k + 1 == losses.len() {
-                    curve_table.push([k.to_string(), sci(*a as f64), sci(*b as f64)]);
+                    table.push([k.to_string(), sci(*a as f64), sci(*b as f64)]);
                 }
             }
-            println!("\nLoss curves\n\n{curve_table}");
+            curve_table = Some(table);
         }
     }
-    println!(
-        "\nStrong scaling: {} environments in all\n\n{strong}",
-        args.envs
-    );
     // Weak scaling.
     let mut weak = Table::new([
         "GPUs",
@@ -310,13 +331,16 @@ fn real_main(args: &Args) -> wp::Result<()> {
     ]);
     let mut t1 = None;
     for &g in &counts {
+        bar.set_message(format!("weak scaling, {g} GPUs"));
         let runs = run(&all, g, args.envs * g, args)?;
+        bar.inc(1);
         let t = runs.iter().map(|r| r.per_iteration).fold(0.0, f64::max);
         let c = runs
             .iter()
             .map(|r| r.communication / r.per_iteration)
             .fold(0.0, f64::max);
         let t1 = *t1.get_or_insert(t);
+        weak_ms.push((g, t * 1e3));
         weak.push([
             g.to_string(),
             (args.envs * g).to_string(),
@@ -325,9 +349,30 @@ fn real_main(args: &Args) -> wp::Result<()> {
             format!("{:.1}%", 100.0 * c),
         ]);
     }
+    bar.finish_and_clear();
+    if let Some(table) = curve_table {
+        println!("\nLoss curves\n\n{table}");
+    }
+    common::write_plot("multi_gpu_training", |path| {
+        curves.write_svg(path).map_err(|e| e.to_string())
+    });
+    println!(
+        "\nStrong scaling: {} environments in all\n\n{strong}",
+        args.envs
+    );
     println!(
         "\nWeak scaling: {} environments per GPU\n\n{weak}",
         args.envs
+    );
+    common::write_scaling_plot(
+        "multi_gpu_training_scaling",
+        &format!(
+            "training: strong ({} environments) and weak ({} per GPU) scaling",
+            args.envs, args.envs
+        ),
+        "ms / iteration",
+        &strong_ms,
+        &weak_ms,
     );
     let ok = worst_diff <= 1e-4;
     println!(

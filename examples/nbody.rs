@@ -22,6 +22,8 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
+use rand_distr::StandardNormal;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -107,10 +109,15 @@ const SOFTENING: f64 = 0.05;
 
 /// The start state: positions, velocities, masses (f64).
 fn start(n: usize) -> (Vec<DVec3>, Vec<DVec3>, Vec<f64>) {
-    let mut rng = common::Rng(2026);
+    let mut rng = common::rng(2026);
     let mut x = Vec::with_capacity(n);
     while x.len() < n {
-        let p = DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64()) * 2.0 - 1.0;
+        let p = DVec3::new(
+            rng.random::<f64>(),
+            rng.random::<f64>(),
+            rng.random::<f64>(),
+        ) * 2.0
+            - 1.0;
         if p.length_squared() <= 1.0 {
             x.push(p);
         }
@@ -118,7 +125,13 @@ fn start(n: usize) -> (Vec<DVec3>, Vec<DVec3>, Vec<f64>) {
     // Uniform ball of mass 1, radius 1: potential energy -3/5, so a virial kinetic energy of
     // 3/10, i.e. an rms speed of sqrt(0.6).
     let mut v: Vec<DVec3> = (0..n)
-        .map(|_| DVec3::new(rng.normal(), rng.normal(), rng.normal()) * (0.6f64 / 3.0).sqrt())
+        .map(|_| {
+            DVec3::new(
+                rng.sample::<f64, _>(StandardNormal),
+                rng.sample::<f64, _>(StandardNormal),
+                rng.sample::<f64, _>(StandardNormal),
+            ) * (0.6f64 / 3.0).sqrt()
+        })
         .collect();
     let (cx, cv) = (
         x.iter().sum::<DVec3>() / n as f64,

@@ -21,6 +21,7 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
 use std::time::Instant;
 use warp_lang as wp;
 use warp_report::frame::{Frame, Lines, Points};
@@ -36,7 +37,7 @@ fn integrate(x: Array<Vec3>, v: Array<Vec3>, b: f32, mass: f32, gravity: Vec3, d
 }
 
 fn uniform_vec3(rng: &mut common::Rng, lo: f32, hi: f32) -> Vec3 {
-    let mut c = || lo + (hi - lo) * rng.next_f64() as f32;
+    let mut c = || lo + (hi - lo) * rng.random::<f64>() as f32;
     Vec3::new(c(), c(), c())
 }
 
@@ -204,7 +205,7 @@ fn main() -> wp::Result<()> {
     let dt = 0.01 * (2.0 * mass / b); // s
     let gravity = Vec3::new(0.0, 0.0, -g);
 
-    let mut rng = common::Rng(12345);
+    let mut rng = common::rng(12345);
     let x0: Vec<Vec3> = (0..n).map(|_| uniform_vec3(&mut rng, -1.0, 1.0)).collect();
     let v0: Vec<Vec3> = (0..n).map(|_| uniform_vec3(&mut rng, -0.5, 0.5)).collect();
     let x = wp::Array::from_slice(&x0, &dev)?;

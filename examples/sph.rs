@@ -290,7 +290,8 @@ fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
         format!("hydrostatic column on {dev}: RMS |p - rho0 g d| / (rho0 g H)"),
         "dx (m)",
     )
-    .with_extras(&["particles", "max rho/rho0 - 1"]);
+    .with_extras(&["particles", "max rho/rho0 - 1"])
+    .progress(3);
     println!("\n1. hydrostatic column, {depth} m deep, settled 1 s, CFL 0.25");
     for k in [2.0f32, 1.5, 1.0] {
         let dx = dx * k;
@@ -374,7 +375,9 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
         format!("dam break on {dev}: max compression rho/rho0 - 1 over the run"),
         "CFL number (dt c0 / h)",
     )
-    .with_extras(&["particles", "front x (m)"]);
+    .with_extras(&["particles", "front x (m)"])
+    // Six CFL numbers at the coarse spacing, the three up to 0.4 at the fine one.
+    .progress(6 + 3);
     let cfls = [0.1f32, 0.2, 0.4, 0.8, 1.6, 3.2];
     // The frame: the water at t_end of the last stable run (finest spacing, largest CFL).
     let mut shown: Option<(Vec<Vec3>, Vec<f32>, f32, f32)> = None;

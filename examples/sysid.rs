@@ -29,6 +29,8 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
+use rand_distr::StandardNormal;
 use warp_lang as wp;
 use warp_report::frame::{Frame, Lines, Points};
 use warp_report::{sci, Table};
@@ -81,18 +83,26 @@ struct Rig {
 
 impl Rig {
     fn new(particles: usize, steps: usize, dev: &wp::Device) -> wp::Result<Rig> {
-        let mut rng = common::Rng(11);
+        let mut rng = common::rng(11);
         let mut x0 = Vec::new();
         let mut v0 = Vec::new();
         let mut pushes = Vec::new();
         for _ in 0..particles {
-            x0.push(DVec3::new(rng.normal(), 1.0 + rng.next_f64(), rng.normal()));
-            v0.push(DVec3::new(rng.normal(), 2.0 * rng.next_f64(), rng.normal()));
+            x0.push(DVec3::new(
+                rng.sample::<f64, _>(StandardNormal),
+                1.0 + rng.random::<f64>(),
+                rng.sample::<f64, _>(StandardNormal),
+            ));
+            v0.push(DVec3::new(
+                rng.sample::<f64, _>(StandardNormal),
+                2.0 * rng.random::<f64>(),
+                rng.sample::<f64, _>(StandardNormal),
+            ));
             // Amplitude 0.5-2 N, angular frequency 2-6 rad/s, a phase.
             pushes.push((
-                0.5 + 1.5 * rng.next_f64(),
-                2.0 + 4.0 * rng.next_f64(),
-                std::f64::consts::TAU * rng.next_f64(),
+                0.5 + 1.5 * rng.random::<f64>(),
+                2.0 + 4.0 * rng.random::<f64>(),
+                std::f64::consts::TAU * rng.random::<f64>(),
             ));
         }
         // The known push at each step: a force turning in the horizontal plane with a vertical
@@ -301,7 +311,8 @@ fn main() -> wp::Result<()> {
         "loss",
         &["b", "m", "rel. err b", "rel. err m"],
         10,
-    );
+    )
+    .progress(iterations as u64);
     let mut adam = wp::optim::Adam::new(lr);
     adam.add(&theta)?;
     let rel = |t: &[f64]| {

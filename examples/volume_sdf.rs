@@ -15,6 +15,7 @@
 mod common;
 
 use clap::Parser;
+use rand::Rng as _;
 use std::time::Instant;
 
 use warp_lang as wp;
@@ -99,10 +100,10 @@ fn step(vol: Volume<f32>, x: Array<Vec3>, v: Array<Vec3>, dt: f32, e: f32, pen: 
 
 /// Points uniformly distributed in the band `|sdf| < BAND` (rejection sampling, host f64).
 fn band_points(n: usize, seed: u64) -> Vec<Vec3> {
-    let mut r = common::Rng(seed);
+    let mut r = common::rng(seed);
     let mut out = Vec::with_capacity(n);
     while out.len() < n {
-        let mut c = || (2.0 * r.next_f64() - 1.0) as f32;
+        let mut c = || (2.0 * r.random::<f64>() - 1.0) as f32;
         let p = Vec3::new(c(), 0.45 * c(), c());
         let q = Vec2::new(Vec2::new(p.x, p.z).length() - MAJOR, p.y);
         if (q.length() - MINOR).abs() < BAND {
@@ -236,7 +237,7 @@ fn main() -> wp::Result<()> {
     let aerr = wp::Array::<f32>::zeros(n, &dev)?;
     let out = wp::Array::<f32>::zeros(n, &dev)?;
 
-    let mut acc = Sweep::new(
+    let acc = Sweep::new(
         format!("sampled SDF vs the exact torus, on {dev}: max |distance error|"),
         "voxel size",
     )
@@ -246,6 +247,8 @@ fn main() -> wp::Result<()> {
         "ns per sample",
         "build ms",
     ]);
+    // The accuracy sweep's bar (the contact runs of each grid come with them).
+    let mut acc = acc.progress(common::grid_count(17, max_res));
     let mut contact = Sweep::new(
         format!("particles on the volume's torus (dt 1e-3, 0.5 s), on {dev}: max penetration / r"),
         "voxel size",

@@ -1409,7 +1409,10 @@ fn warp_runtime_imports_follow_its_layers() {
 /// warp-cuda stand alone (warp-core is the kernel-side vocabulary, warp-cuda the driver
 /// layer); warp-macros depends on no workspace crate (the code it generates names
 /// `::warp_lang::__private`, which the user's crate resolves); warp-report stands alone;
-/// warp-runtime sits on warp-core and warp-cuda, never on the compiler; the facade on all.
+/// warp-runtime sits on warp-core and warp-cuda, never on the compiler; the facade on all; the
+/// examples' crate (`examples/`, package warp-lang-examples) on the facade, warp-report and
+/// warp-cuda (the kernel cache's settings).
+/// A member is named here by its folder (the workspace's `members` list).
 const CRATE_DEPS: &[(&str, &str, &[&str])] = &[
     ("warp-core", "warp-core/Cargo.toml", &[]),
     ("warp-cuda", "warp-cuda/Cargo.toml", &[]),
@@ -1431,7 +1434,15 @@ const CRATE_DEPS: &[(&str, &str, &[&str])] = &[
             "warp-runtime",
         ],
     ),
+    (
+        "examples",
+        "examples/Cargo.toml",
+        &["warp-cuda", "warp-lang", "warp-report"],
+    ),
 ];
+
+/// The examples' crate's package name: what its manifest's dependents would name it.
+const EXAMPLES_PACKAGE: &str = "warp-lang-examples";
 
 /// The packages a manifest's library depends on: every dependency table but
 /// `[dev-dependencies]` (tests and examples may use any crate; a dev-dependency adds nothing to
@@ -1472,7 +1483,11 @@ fn manifest_deps(toml: &str) -> BTreeSet<String> {
 /// depends on one above it), and `CRATE_DEPS` names every member.
 #[test]
 fn workspace_crates_form_the_intended_dag() {
-    let names: BTreeSet<&str> = CRATE_DEPS.iter().map(|(n, _, _)| *n).collect();
+    let names: BTreeSet<&str> = CRATE_DEPS
+        .iter()
+        .map(|(n, _, _)| *n)
+        .chain([EXAMPLES_PACKAGE])
+        .collect();
     let root = read_required("Cargo.toml");
     let members = root
         .split("members")
@@ -1500,6 +1515,17 @@ fn workspace_crates_form_the_intended_dag() {
         if got != want {
             problems.push(format!(
                 "{name} depends on {got:?}; the architecture says {want:?}"
+            ));
+        }
+    }
+    // Only the examples use what the examples need: the library's own graph holds neither
+    // rerun's SDK (hundreds of crates for the scenes' recordings) nor their command lines.
+    let lib = manifest_deps(&root);
+    for only_examples in ["rerun", "clap"] {
+        if lib.contains(only_examples) {
+            problems.push(format!(
+                "warp-lang depends on {only_examples}, which only the examples use: it belongs \
+                 in examples/Cargo.toml"
             ));
         }
     }

@@ -7,10 +7,22 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
+use rand::Rng as _;
 use warp_lang as wp;
 
 pub const REPS: usize = 15;
 
+/// The median of `samples`: the middle one after sorting (of an even count, the upper of the
+/// two middle ones). Every bench's median is this one, so their tables agree on what a median
+/// is. Timings are never NaN; one would sort as equal to its neighbours.
+pub fn median_of<T: Copy + PartialOrd>(mut samples: Vec<T>) -> T {
+    assert!(!samples.is_empty(), "median_of: no samples");
+    samples.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    samples[samples.len() / 2]
+}
+
+/// Median milliseconds of `REPS` runs of `f` after one warm-up run, the device synchronised
+/// around each (GPU launches are asynchronous).
 pub fn median_ms(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
     f()?;
     wp::synchronize()?;
@@ -22,21 +34,37 @@ pub fn median_ms(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
         wp::synchronize()?;
         t.push(s.elapsed().as_secs_f64() * 1e3);
     }
-    t.sort_by(f64::total_cmp);
-    Ok(t[REPS / 2])
+    Ok(median_of(t))
+}
+
+/// Median of `runs` timings of `f` on `state`, each after an untimed `setup` of it (a CPU
+/// call: nothing to synchronise).
+pub fn median_on<S>(
+    runs: usize,
+    state: &mut S,
+    mut setup: impl FnMut(&mut S),
+    mut f: impl FnMut(&mut S),
+) -> Duration {
+    median_of(
+        (0..runs)
+            .map(|_| {
+                setup(state);
+                let s = Instant::now();
+                f(state);
+                s.elapsed()
+            })
+            .collect(),
+    )
+}
+
+/// Median of `runs` timings of `f`, each after an untimed `setup`.
+pub fn median_after(runs: usize, mut setup: impl FnMut(), mut f: impl FnMut()) -> Duration {
+    median_on(runs, &mut (), |_| setup(), |_| f())
 }
 
 /// Median of `runs` timings of `f` (a CPU call: nothing to synchronise).
-pub fn median(runs: usize, mut f: impl FnMut()) -> Duration {
-    let mut t: Vec<Duration> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    t[runs / 2]
+pub fn median(runs: usize, f: impl FnMut()) -> Duration {
+    median_after(runs, || {}, f)
 }
 
 /// Runs `script` with `args` under `python3`; its last line parsed as JSON, or why not.
@@ -72,27 +100,20 @@ pub fn ratio(ours: f64, theirs: Option<f64>) -> String {
     }
 }
 
-/// A fixed xorshift sequence: the same inputs on every run.
-pub struct XorShift(pub u64);
+/// The benches' random inputs: ChaCha8 (rand_chacha) with a fixed seed, the same inputs on
+/// every run and platform (its stream is fixed by the algorithm). Samples come from
+/// `rand::Rng::random` (a uniform `f32` in [0, 1), a `u64`, ...).
+pub type Rng = rand_chacha::ChaCha8Rng;
 
-impl XorShift {
-    pub fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-
-    /// Uniform in [0, 1), 24 bits.
-    pub fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
+/// The generator of `seed`.
+pub fn rng(seed: u64) -> Rng {
+    rand::SeedableRng::seed_from_u64(seed)
 }
 
 /// `n` points uniform in a cube of side `side`.
 pub fn uniform_points(n: usize, side: f32, seed: u64) -> Vec<Vec3> {
-    let mut r = XorShift(seed);
+    let mut r = rng(seed);
     (0..n)
-        .map(|_| Vec3::new(r.unit(), r.unit(), r.unit()) * side)
+        .map(|_| Vec3::new(r.random(), r.random(), r.random()) * side)
         .collect()
 }

@@ -21,6 +21,22 @@ pub const DEFAULT_PLOT_DIR: &str = "target/report";
 /// The output folder the scene's command line named (set once by `SceneArgs::init`).
 static PLOT_DIR: OnceLock<PathBuf> = OnceLock::new();
 
+/// `--plot-dir` alone, for the examples that are not scenes (their own device options) but
+/// write plots.
+#[derive(clap::Args, Debug, Clone)]
+pub struct PlotDirArg {
+    /// Folder for the example's plots (SVG), created if missing
+    #[arg(long, value_name = "DIR", default_value = DEFAULT_PLOT_DIR)]
+    pub plot_dir: PathBuf,
+}
+
+impl PlotDirArg {
+    /// Records the output folder for `write_plot` (as `SceneArgs::init` does).
+    pub fn init(&self) {
+        let _ = PLOT_DIR.set(self.plot_dir.clone());
+    }
+}
+
 /// The options every scene has; each scene's own `#[derive(Parser)]` struct flattens them.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SceneArgs {
@@ -105,6 +121,53 @@ pub fn write_plot(name: &str, write: impl FnOnce(&std::path::Path) -> Result<(),
     }
 }
 
+/// A progress bar of `total` runs on stderr, in the style of the sweeps' bars
+/// (`warp_report::Sweep::progress`), for an example whose runs are not a sweep. indicatif
+/// draws it only on a terminal, so logs and CI output stay clean; `finish_and_clear` it before
+/// printing a table.
+pub fn progress(total: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(total);
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{msg:>28} [{bar:30}] {pos}/{len} {elapsed}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+/// The grids of a resolution sweep `res`, `2 res - 1`, .. up to `max` (each halves the
+/// spacing and keeps the nodes): how many runs its progress bar counts.
+pub fn grid_count(res: usize, max: usize) -> u64 {
+    std::iter::successors(Some(res.max(2)), |r| Some(2 * r - 1))
+        .take_while(|&r| r <= max)
+        .count() as u64
+}
+
+/// Milliseconds per step (or iteration) on 1, 2, .. G GPUs, strong and weak scaling, against
+/// the ideal of each (strong: T1 / G; weak: T1), plotted to `<plot-dir>/<name>.svg` with the
+/// GPU count on the horizontal axis and the time on a log axis.
+pub fn write_scaling_plot(
+    name: &str,
+    title: &str,
+    unit: &str,
+    strong: &[(usize, f64)],
+    weak: &[(usize, f64)],
+) {
+    let mut c = warp_report::Curves::new(title, unit);
+    for (series, runs, ideal) in [("strong", strong, true), ("weak", weak, false)] {
+        let Some(&(_, t1)) = runs.first() else {
+            continue;
+        };
+        for &(g, t) in runs {
+            c.push(&format!("{series} scaling"), g as f64, t);
+            let best = if ideal { t1 / g as f64 } else { t1 };
+            let label = if ideal { "T1 / G" } else { "T1" };
+            c.push(&format!("{series}: ideal ({label})"), g as f64, best);
+        }
+    }
+    write_plot(name, |path| c.write_svg(path).map_err(|e| e.to_string()));
+}
+
 /// Writes the scene's last frame to `<--plot-dir or target/report>/<name>_frame.svg` and
 /// prints where, or why not.
 pub fn write_frame(name: &str, frame: &warp_report::frame::Frame) {
@@ -170,6 +233,7 @@ pub struct OptLog {
     pub curves: warp_report::Curves,
     start: std::time::Instant,
     every: usize,
+    bar: Option<indicatif::ProgressBar>,
 }
 
 impl OptLog {
@@ -184,7 +248,15 @@ impl OptLog {
             curves: warp_report::Curves::new(title, value),
             start: std::time::Instant::now(),
             every: every.max(1),
+            bar: None,
         }
+    }
+
+    /// Shows a progress bar of at most `total` iterations (all series together; an
+    /// optimisation that converges early ends its bar there), as `common::progress` draws it.
+    pub fn progress(mut self, total: u64) -> OptLog {
+        self.bar = Some(progress(total));
+        self
     }
 
     /// Restarts the clock (for a second series timed from its own start).
@@ -203,6 +275,10 @@ impl OptLog {
         last: bool,
     ) {
         self.curves.push(series, it as f64, value);
+        if let Some(bar) = &self.bar {
+            bar.set_message(format!("{series}, iteration {it}"));
+            bar.inc(1);
+        }
         if it == 1 || it.is_multiple_of(self.every) || last {
             let secs = self.start.elapsed().as_secs_f64();
             let mut row = vec![
@@ -220,6 +296,9 @@ impl OptLog {
 
     /// Prints the table and writes the plot `<plot dir>/<name>.svg`.
     pub fn finish(&self, name: &str) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
         println!("\n{}\n\n{}", self.curves.title(), self.table);
         write_plot(name, |path| {
             self.curves.write_svg(path).map_err(|e| e.to_string())
@@ -249,27 +328,16 @@ pub fn print_compiled() {
     print!("\n{}", wp::compile_summary());
 }
 
-/// SplitMix64: a small, well-known generator, so that start states are reproducible
-/// without extra dependencies.
-pub struct Rng(pub u64);
+/// The scenes' random start states: ChaCha8 (rand_chacha) seeded by the scene, so that every
+/// run, on every platform, starts from the same state and reports the same accuracy (its
+/// stream is fixed by the algorithm, unlike `rand`'s `StdRng`, which may change between
+/// releases). Uniform samples come from `rand::Rng::random`, normal ones from
+/// `rand_distr::StandardNormal`.
+pub type Rng = rand_chacha::ChaCha8Rng;
 
-impl Rng {
-    /// Uniform in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Standard normal (Box-Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u = 1.0 - self.next_f64(); // (0, 1]: the log is finite
-        let w = self.next_f64();
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * w).cos()
-    }
+/// The generator of `seed`.
+pub fn rng(seed: u64) -> Rng {
+    rand::SeedableRng::seed_from_u64(seed)
 }
 
 /// The scenes' `--graph`: the timed runs once with plain launches and once as replays of

@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::SystemTime;
 
-/// The examples: `examples/<name>.rs` (every file there is one).
+/// The examples: `examples/<name>.rs` (every file there is one; this crate's folder).
 fn example_names() -> Vec<String> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
-    let mut names: Vec<String> = std::fs::read_dir(&dir)
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut names: Vec<String> = std::fs::read_dir(dir)
         .expect("the examples directory")
         .filter_map(|e| {
             let path = e.ok()?.path();
@@ -41,13 +41,13 @@ fn modified(path: &Path) -> Option<SystemTime> {
 /// cargo's dep-info file beside the binary (`<name>.d`: `binary: source source ..`) lists,
 /// else the example's file alone.
 fn sources_modified(name: &str, bin_dir: &Path) -> Option<SystemTime> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut newest = modified(&root.join(format!("{name}.rs")))?;
     if let Ok(dep_info) = std::fs::read_to_string(bin_dir.join(format!("{name}.d"))) {
         let sources = dep_info.split_once(": ").map_or("", |(_, s)| s);
         // (A path with a space is escaped as `\ ` and split here: none under examples/ has one.)
         for src in sources.split_whitespace().map(Path::new) {
-            if src.starts_with(&root) {
+            if src.starts_with(root) {
                 newest = newest.max(modified(src).unwrap_or(newest));
             }
         }
@@ -244,5 +244,28 @@ fn every_example_has_help_and_refuses_unknown_options() {
         "examples_cli: checked {} of {} examples: {checked:?}",
         checked.len(),
         names.len()
+    );
+}
+
+/// Every `examples/<name>.rs` is an example of this crate: cargo looks for a package's
+/// examples in `<package>/examples/`, so this crate lists its own (`[[example]]` in its
+/// Cargo.toml), and a file left out of the list would be built by nobody.
+#[test]
+fn every_example_file_is_listed_in_the_manifest() {
+    let manifest =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("Cargo.toml"))
+            .expect("examples/Cargo.toml");
+    let listed: Vec<&str> = manifest
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("path = \""))
+        .filter_map(|p| p.strip_suffix(".rs\""))
+        .collect();
+    let missing: Vec<String> = example_names()
+        .into_iter()
+        .filter(|n| !listed.contains(&n.as_str()))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "examples/*.rs not listed as [[example]] in examples/Cargo.toml: {missing:?}"
     );
 }
