@@ -29,8 +29,9 @@ fn corpus(target: &str) -> Vec<PathBuf> {
 }
 
 /// Every file of `target`'s corpus through `run`: none may panic, and a file named `valid_*`
-/// must be accepted, one named `broken_*` refused (each an `Err`, not a crash); the fuzzer's
-/// own finds (named by their hash) only must not fail.
+/// must be accepted, one named `broken_*` refused (each an `Err`, not a crash); any other
+/// (the fuzzer's finds, `found_*`, and inputs whose outcome depends on the machine, such as
+/// `any_cuda_device`: refused without a GPU, imported with one) only must not fail.
 fn replay(target: &str, run: fn(&[u8]) -> bool) {
     for file in corpus(target) {
         let bytes = std::fs::read(&file).unwrap();
