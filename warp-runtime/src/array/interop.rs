@@ -287,6 +287,16 @@ impl<T: Element, const N: usize> Array<T, N> {
                      below from ptr {ptr:#x}"
                 ))
             })?;
+        // The span must end inside the address space: no allocation wraps around it, and the
+        // element addresses computed from `base` (in `usize`) would wrap. An import can only
+        // check its own arithmetic, not that the memory exists (the caller's contract); a
+        // pointer this close to the top (a byte_offset near 2^64 on a null DLPack data
+        // pointer, found by the `dlpack` fuzz target) is refused here.
+        if base.checked_add(bytes as u64).is_none() {
+            return Err(Error::invalid(format!(
+                "{what}: the layout (shape {shape:?}, byte_strides {byte_strides:?}) spans                  {bytes} bytes from address {base:#x}, past the end of the address space"
+            )));
+        }
         // SAFETY: the caller's contract covers the span (lowest to highest element).
         let storage = unsafe { Storage::external(device, base, bytes, owner)? };
         Ok(Array {
@@ -562,6 +572,29 @@ mod tests {
         assert!(!layout_overlaps(&[3, 2], &[2, 6]));
         assert!(!layout_overlaps(&[3, 4], &[-5, 1]));
         assert!(!layout_overlaps::<0>(&[], &[]));
+    }
+
+    /// A layout whose span runs past the top of the address space is refused, not wrapped
+    /// (it was accepted before: the `dlpack` fuzz target found it through a null data
+    /// pointer and a byte offset near 2^64).
+    #[test]
+    fn span_past_the_address_space_is_an_error() {
+        let dev = crate::device::get_device("cpu").unwrap();
+        // 4 f32 (16 bytes) from 8 bytes below the top; aligned, not null.
+        let top = (usize::MAX - 7) as *mut f32;
+        // SAFETY: refused before any access (the assertion's point); nothing is read.
+        let r = unsafe { crate::array::Array::<f32, 1>::from_host_ptr(top, 4, None, &dev, ()) };
+        let e = r.unwrap_err().to_string();
+        assert!(
+            e.contains("from_host_ptr") && e.contains("past the end of the address space"),
+            "{e}"
+        );
+        // Reversed from the same pointer, the 16 bytes lie below it: accepted (nothing is read).
+        let last = top;
+        // SAFETY: as above; the array is dropped without an access.
+        let ok =
+            unsafe { crate::array::Array::<f32, 1>::from_host_ptr(last, 4, Some([-4]), &dev, ()) };
+        assert!(ok.is_ok());
     }
 
     /// `as_ndarray_mut` never builds an aliasing mutable view, even of an array whose layout

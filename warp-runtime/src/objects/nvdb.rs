@@ -95,32 +95,10 @@ fn offset(base: usize, rel: i64, what: &str) -> Result<usize> {
         })
 }
 
-/// CRC-32/IEEE (reflected polynomial 0xEDB88320, initial and final xor all ones), as zlib's.
+/// CRC-32/IEEE (reflected polynomial 0xEDB88320, initial and final xor all ones), as zlib's
+/// and NanoVDB's: the crc32fast crate's.
 pub fn crc32(data: &[u8]) -> u32 {
-    const TABLE: [u32; 256] = {
-        let mut t = [0u32; 256];
-        let mut i = 0;
-        while i < 256 {
-            let mut c = i as u32;
-            let mut k = 0;
-            while k < 8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-                k += 1;
-            }
-            t[i] = c;
-            i += 1;
-        }
-        t
-    };
-    let mut c = !0u32;
-    for &x in data {
-        c = TABLE[((c ^ x as u32) & 0xff) as usize] ^ (c >> 8);
-    }
-    !c
+    crc32fast::hash(data)
 }
 
 /// NanoVDB's string hash of a grid name (a file's `nameKey`): `h = h*67 + c + (h >> 56)` over

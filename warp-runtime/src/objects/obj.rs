@@ -27,6 +27,25 @@ pub struct ObjMesh {
     pub indices: Vec<i32>,
 }
 
+/// The OBJ text without its texture-coordinate and normal statements (`vt`, `vn`), which
+/// `ObjMesh` does not use. Without them tobj never resolves a face's texture-coordinate or
+/// normal index, and that is where tobj 4.0.5 overflows: a relative index reaching before
+/// the first `vt` / `vn` (`f 1/-4 ...` after one `vt`) becomes an index near `usize::MAX`
+/// that it multiplies unchecked (a panic in a debug build, a wrapped index in a release
+/// build; found by the `obj` fuzz target). Positions are checked by tobj with saturating
+/// arithmetic, and face indices into them by [`ObjMesh::read`] too.
+fn positions_and_faces(reader: &mut impl BufRead) -> std::io::Result<String> {
+    let mut kept = String::new();
+    for line in reader.lines() {
+        let line = line?;
+        if !matches!(line.split_whitespace().next(), Some("vt" | "vn")) {
+            kept.push_str(&line);
+            kept.push('\n');
+        }
+    }
+    Ok(kept)
+}
+
 impl ObjMesh {
     /// Reads the OBJ file at `path` (material libraries it names are not read).
     ///
@@ -56,10 +75,12 @@ impl ObjMesh {
             ignore_lines: true,
             ..Default::default()
         };
+        let text = positions_and_faces(reader).map_err(|e| Error::invalid_in(what, e))?;
         // Materials are not needed: every material library resolves to none.
-        let (models, _materials) =
-            tobj::load_obj_buf(reader, &options, |_| Ok((Vec::new(), Default::default())))
-                .map_err(|e| Error::invalid_in(what, e))?;
+        let (models, _materials) = tobj::load_obj_buf(&mut text.as_bytes(), &options, |_| {
+            Ok((Vec::new(), Default::default()))
+        })
+        .map_err(|e| Error::invalid_in(what, e))?;
         let mut out = ObjMesh::default();
         for model in models {
             let m = model.mesh;
@@ -107,5 +128,28 @@ impl ObjMesh {
             &Array::from_slice(&self.indices, device)?,
             None,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A face whose texture-coordinate or normal index is relative (negative) and reaches
+    /// before the first `vt` / `vn`: tobj 4.0.5 turns it into an index near `usize::MAX` and
+    /// multiplies it (`vt * 2`), which overflows: a panic in a debug build (found by the `obj`
+    /// fuzz target, fuzz/corpus/obj/found_texcoord_index_overflow_806132b2.obj). ObjMesh
+    /// ignores texture coordinates and normals, so the face's positions make the triangle.
+    #[test]
+    fn relative_texcoord_and_normal_indices_before_the_start() {
+        for text in [
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/-4 2/1 3/1\n",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//-7 2//1 3//1\n",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/-2/-9 2/1/1 3/1/1\n",
+        ] {
+            let m = ObjMesh::parse(text).unwrap();
+            assert_eq!(m.indices, [0, 1, 2], "{text}");
+            assert_eq!(m.points.len(), 3);
+        }
     }
 }
