@@ -186,11 +186,11 @@ pub use warp_runtime::{
 };
 pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
-    cast_slice, compile_summary, config, copy, cpu, devices, get_device, get_preferred_device,
-    init, kernel_info, last_launch_id, launch, load, load_with_adjoints, synchronize, ArgCtx,
-    Array, Device, DeviceKind, Dim, Element, Error, GenericKernel, IntoShape, Kernel, KernelArg,
-    KernelInfo, KernelParams, Launch, Launchable, MemoryInfo, OwnedArgsOf, Recording, Result,
-    Runtime, Seed, Tape,
+    cast_slice, compile_summary, config, copy, cpu, cpu_fallback_reason, devices, get_device,
+    get_preferred_device, init, kernel_info, last_launch_id, launch, load, load_with_adjoints,
+    synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, GenericKernel, IntoShape,
+    Kernel, KernelArg, KernelInfo, KernelParams, Launch, Launchable, MemoryInfo, OwnedArgsOf,
+    Recording, Result, Runtime, Seed, Tape,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};

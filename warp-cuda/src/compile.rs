@@ -85,17 +85,37 @@ pub struct Compiled {
     pub compile_ms: f64,
 }
 
+/// Environment variable that, set to anything but empty or `0` before the first use of NVRTC,
+/// makes this process behave as if libnvrtc were not installed: a machine with a GPU and the
+/// CUDA toolkit can then run the paths of one with a driver alone (the preferred device falls
+/// back to the CPU, a JIT launch on an explicit GPU is an error naming NVRTC, ahead-of-time
+/// cubins still load). Read once, with the probe.
+pub const NO_NVRTC_ENV: &str = "WARP_LANG_NO_NVRTC";
+
+/// Whether `value` (of [`NO_NVRTC_ENV`]) turns NVRTC off: set, not empty and not `0`.
+fn no_nvrtc_requested(value: Option<&std::ffi::OsStr>) -> bool {
+    value.is_some_and(|v| !v.is_empty() && v != "0")
+}
+
 static NVRTC: OnceLock<std::result::Result<(i32, i32), String>> = OnceLock::new();
 
-/// Loads libnvrtc (once) and returns its version, or why it cannot be used.
+/// Loads libnvrtc (once) and returns its version, or why it cannot be used. Every reason
+/// names NVRTC: it is shown to users whose GPU and driver are fine (see
+/// `warp_runtime::cpu_fallback_reason`).
 fn nvrtc_state() -> &'static std::result::Result<(i32, i32), String> {
     NVRTC.get_or_init(|| {
+        if no_nvrtc_requested(std::env::var_os(NO_NVRTC_ENV).as_deref()) {
+            log::info!("NVRTC not used: {NO_NVRTC_ENV} is set");
+            return Err(format!("NVRTC turned off by {NO_NVRTC_ENV}"));
+        }
+        // The probe is one dlopen attempt per candidate name (no CUDA call): cheap enough for
+        // `get_preferred_device` to make on a machine with a GPU.
         // SAFETY: only tries Library::new on cudarc's candidate names.
         if !unsafe { sys::is_culib_present() } {
             log::info!("NVRTC not available: libnvrtc.so not found");
             return Err(
-                "libnvrtc.so not found (CUDA toolkit runtime libraries not installed, \
-                        or not on the library search path)"
+                "NVRTC's libnvrtc.so not found (the CUDA toolkit's runtime libraries are not \
+                 installed, or not on the library search path)"
                     .to_string(),
             );
         }
@@ -108,7 +128,7 @@ fn nvrtc_state() -> &'static std::result::Result<(i32, i32), String> {
         }));
         let state = match r {
             Ok(Ok(v)) => Ok(v),
-            Ok(Err(e)) => Err(format!("nvrtcVersion failed: {e}")),
+            Ok(Err(e)) => Err(format!("NVRTC's nvrtcVersion failed: {e}")),
             Err(p) => Err(format!(
                 "libnvrtc could not be used: {}",
                 panic_message(p.as_ref())
@@ -372,6 +392,16 @@ mod tests {
     }
 
     #[test]
+    fn no_nvrtc_env_values() {
+        use std::ffi::OsStr;
+        assert!(!no_nvrtc_requested(None));
+        assert!(!no_nvrtc_requested(Some(OsStr::new(""))));
+        assert!(!no_nvrtc_requested(Some(OsStr::new("0"))));
+        assert!(no_nvrtc_requested(Some(OsStr::new("1"))));
+        assert!(no_nvrtc_requested(Some(OsStr::new("true"))));
+    }
+
+    #[test]
     fn missing_nvrtc_is_an_error_not_a_panic() {
         let r = compile(
             "extern \"C\" __global__ void k() {}",
@@ -381,6 +411,8 @@ mod tests {
         );
         match nvrtc_version() {
             Err(CudaError::NotAvailable(reason)) => {
+                // The reason reaches users whose GPU works: it must say that NVRTC is missing.
+                assert!(reason.contains("NVRTC"), "{reason}");
                 assert!(matches!(r, Err(CudaError::NotAvailable(ref r2)) if *r2 == reason));
             }
             Err(e) => panic!("unexpected {e}"),

@@ -49,7 +49,7 @@ pub use cache::{
 };
 pub use compile::{
     compile, cudadevrt_path, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled,
-    CUDADEVRT_ENV,
+    CUDADEVRT_ENV, NO_NVRTC_ENV,
 };
 pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_VERSION};
 pub use error::{CudaError, Result};

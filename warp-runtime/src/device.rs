@@ -280,30 +280,97 @@ pub fn devices() -> Vec<Device> {
 
 /// The device Warp would pick by default: the first GPU, else the CPU.
 ///
-/// The first call says which at info level, and why not a GPU when it falls back to the CPU.
+/// A GPU counts only when kernels can run on it: when NVRTC (the CUDA toolkit's runtime
+/// compiler, which compiles kernels at first launch) cannot be loaded and no ahead-of-time
+/// cubin directory (`aot::set_aot_dir`, `WARP_LANG_AOT_DIR`) is
+/// set, the preferred device is the CPU and [`cpu_fallback_reason`] says why. The GPU stays
+/// reachable through [`get_device`], where a launch that needs NVRTC is an error naming it.
+///
+/// The first call says which device at info level, and why not a GPU when it falls back to the
+/// CPU (at warn level when a GPU is present but unusable).
 pub fn get_preferred_device() -> Device {
     static SAID: std::sync::Once = std::sync::Once::new();
     let rt = runtime();
-    let device = rt
-        .devices
-        .iter()
-        .find(|d| d.is_cuda())
-        .unwrap_or(&rt.devices[0]);
-    SAID.call_once(|| {
-        if device.is_cpu() {
-            log::info!(
-                "preferred device: \"cpu\" (no CUDA device: {})",
-                rt.cuda_status
-            );
-        } else {
-            log::info!(
-                "preferred device: \"{}\" ({})",
-                device.alias(),
-                device.name()
-            );
-        }
+    let gpu = rt.devices.iter().find(|d| d.is_cuda());
+    let fallback = gpu.and_then(|_| jit_unusable_reason());
+    let device = match (gpu, &fallback) {
+        (Some(gpu), None) => gpu,
+        _ => &rt.devices[0],
+    };
+    SAID.call_once(|| match (gpu, &fallback) {
+        (Some(gpu), Some(why)) => log::warn!(
+            "preferred device: \"cpu\", not \"{}\" ({}): {why}, and no ahead-of-time cubin \
+             directory is set; get_device(\"{}\") still opens the GPU",
+            gpu.alias(),
+            gpu.name(),
+            gpu.alias()
+        ),
+        _ if device.is_cpu() => log::info!(
+            "preferred device: \"cpu\" (no CUDA device: {})",
+            rt.cuda_status
+        ),
+        _ => log::info!(
+            "preferred device: \"{}\" ({})",
+            device.alias(),
+            device.name()
+        ),
     });
     device.clone()
+}
+
+/// Why [`get_preferred_device`] is the CPU although the driver reports a GPU: NVRTC cannot be
+/// loaded (e.g. "NVRTC's libnvrtc.so not found (...)") and no ahead-of-time cubin directory
+/// is set. `None` when the preferred device is a GPU, and when there is no GPU at all (then
+/// [`Runtime::banner`] says why). For a program's one line to its user, such as the examples'
+/// "warp-lang: no NVRTC: ...; running on the CPU".
+///
+/// The first call with a GPU present probes NVRTC (a `dlopen`, once per process); the
+/// environment variable `WARP_LANG_NO_NVRTC=1` makes the probe fail, to try this path on a
+/// machine that has NVRTC.
+pub fn cpu_fallback_reason() -> Option<String> {
+    runtime()
+        .devices
+        .iter()
+        .any(Device::is_cuda)
+        .then(jit_unusable_reason)
+        .flatten()
+}
+
+/// Why kernels cannot be made for a GPU that is present (NVRTC probed now, once per process,
+/// and the ahead-of-time directory in effect), or `None` when they can.
+#[cfg(feature = "cuda")]
+fn jit_unusable_reason() -> Option<String> {
+    let nvrtc = match warp_cuda::nvrtc_version() {
+        Ok(_) => Ok(()),
+        // The probe's reason names NVRTC; `NotAvailable`'s Display would add "CUDA is not
+        // available", which is wrong about a machine whose GPU works.
+        Err(warp_cuda::CudaError::NotAvailable(why)) => Err(why),
+        Err(e) => Err(e.to_string()),
+    };
+    gpu_fallback_decision(nvrtc, crate::aot::aot_dir().as_deref())
+}
+
+#[cfg(not(feature = "cuda"))]
+fn jit_unusable_reason() -> Option<String> {
+    // No GPU is ever listed in this build; nothing to fall back from.
+    None
+}
+
+/// The decision behind [`get_preferred_device`] for a GPU that is present: `None` (use it)
+/// when NVRTC loads or when an ahead-of-time directory exists (its cubins need no NVRTC; a
+/// kernel missing from it then fails with an error naming NVRTC, which is the program's
+/// packaging to fix, not a reason to ignore the GPU), else why not, starting "no NVRTC".
+/// A directory that is named but does not exist counts as none: no cubin can come from it.
+#[cfg(any(feature = "cuda", test))]
+fn gpu_fallback_decision(
+    nvrtc: std::result::Result<(), String>,
+    aot_dir: Option<&std::path::Path>,
+) -> Option<String> {
+    let why = nvrtc.err()?;
+    if aot_dir.is_some_and(std::path::Path::is_dir) {
+        return None;
+    }
+    Some(format!("no NVRTC: {why}"))
 }
 
 /// The device named by `alias`: `"cpu"`, `"cuda"` (the first GPU) or `"cuda:N"`.
@@ -379,6 +446,40 @@ mod tests {
         assert_ne!(d, Device::fake_cuda(0));
         // The CPU's memory is the operating system's to report.
         assert_eq!(d.memory_info().unwrap(), None);
+    }
+
+    #[test]
+    fn gpu_fallback_needs_nvrtc_or_an_aot_dir() {
+        let missing = || Err("NVRTC's libnvrtc.so not found".to_string());
+        // NVRTC loads: the GPU, whatever the ahead-of-time directory.
+        assert_eq!(gpu_fallback_decision(Ok(()), None), None);
+        let dir = std::env::temp_dir();
+        assert_eq!(gpu_fallback_decision(Ok(()), Some(&dir)), None);
+        // No NVRTC but an existing ahead-of-time directory (examples/prebuilt): the GPU.
+        assert_eq!(gpu_fallback_decision(missing(), Some(&dir)), None);
+        // No NVRTC and no directory, or one that does not exist: the CPU, with the reason.
+        let want = Some("no NVRTC: NVRTC's libnvrtc.so not found".to_string());
+        assert_eq!(gpu_fallback_decision(missing(), None), want);
+        let gone = dir.join("warp-lang-no-such-aot-dir-8c1f");
+        assert_eq!(gpu_fallback_decision(missing(), Some(&gone)), want);
+    }
+
+    #[test]
+    fn preferred_device_agrees_with_the_fallback_reason() {
+        // Whatever this machine has: a reason exactly when a GPU is present but not preferred.
+        let gpu = devices().into_iter().find(Device::is_cuda);
+        let preferred = get_preferred_device();
+        match (gpu, cpu_fallback_reason()) {
+            (None, reason) => {
+                assert!(preferred.is_cpu());
+                assert_eq!(reason, None);
+            }
+            (Some(gpu), None) => assert_eq!(preferred, gpu),
+            (Some(_), Some(why)) => {
+                assert!(preferred.is_cpu());
+                assert!(why.starts_with("no NVRTC: "), "{why}");
+            }
+        }
     }
 
     #[test]

@@ -73,7 +73,8 @@ pub use autograd::{gradcheck, hvp, jacobian, jacobian_fd, jvp, GradcheckOptions,
 pub use bytemuck::cast_slice;
 pub use checkpoint::{CheckpointReport, CheckpointState, Checkpointed};
 pub use device::{
-    cpu, devices, get_device, get_preferred_device, init, Device, DeviceKind, MemoryInfo, Runtime,
+    cpu, cpu_fallback_reason, devices, get_device, get_preferred_device, init, Device, DeviceKind,
+    MemoryInfo, Runtime,
 };
 /// The DLPack crate (`dlpark`) that [`Array::to_dlpack`] and [`Array::from_dlpack`] speak.
 #[cfg(feature = "dlpack")]
