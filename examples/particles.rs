@@ -197,11 +197,6 @@ fn main() -> wp::Result<()> {
     let cli = Cli::parse();
     let (n, steps, sweep_n) = (cli.n, cli.steps, cli.sweep_n);
     let dev = cli.scene.init()?;
-    // A GPU without NVRTC cannot compile kernels: the preferred device is then the CPU, and the
-    // user is told why in one line (the library only logs it).
-    if let (None, Some(why)) = (&cli.scene.device.device, wp::cpu_fallback_reason()) {
-        eprintln!("warp-lang: {why}; running on the CPU");
-    }
 
     // The seed's constants.
     let mass = 0.1f32; // kg

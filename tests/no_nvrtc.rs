@@ -25,7 +25,6 @@ fn without_nvrtc_the_preferred_device_is_the_cpu() {
     let cache = std::env::temp_dir().join(format!("warp-lang-no-nvrtc-{}", std::process::id()));
     std::env::set_var("WARP_LANG_CACHE_DIR", &cache);
     std::env::remove_var("WARP_LANG_AOT_DIR");
-    wp::config::set_quiet(true);
 
     let why = warp_cuda::nvrtc_version().unwrap_err().to_string();
     assert!(

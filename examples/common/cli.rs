@@ -25,7 +25,15 @@ impl DeviceArg {
         wp::init();
         let dev = match &self.device {
             Some(name) => wp::get_device(name)?,
-            None => wp::get_preferred_device(),
+            None => {
+                let dev = wp::get_preferred_device();
+                // A GPU without NVRTC cannot compile kernels: the preferred device is then the
+                // CPU, and the user is told why in one line (the library only logs it).
+                if let Some(why) = wp::cpu_fallback_reason() {
+                    eprintln!("warp-lang: {why}; running on the CPU");
+                }
+                dev
+            }
         };
         // warp-lang logs its device banner rather than printing it: say where the example runs.
         println!("running on \"{dev}\": {}", dev.name());

@@ -144,9 +144,9 @@ fn nvrtc_state() -> &'static std::result::Result<(i32, i32), String> {
 }
 
 /// NVRTC's version (major, minor), e.g. (13, 0). Fails with
-/// [`CudaError::NotAvailable`] when libnvrtc cannot be loaded.
+/// [`CudaError::NoNvrtc`] when libnvrtc cannot be loaded.
 pub fn nvrtc_version() -> Result<(i32, i32)> {
-    nvrtc_state().clone().map_err(CudaError::NotAvailable)
+    nvrtc_state().clone().map_err(CudaError::NoNvrtc)
 }
 
 /// The `sm_XX` architectures this NVRTC can compile for, e.g. `[75, 80, 86, 89, 90, 100, ...]`.
@@ -410,10 +410,10 @@ mod tests {
             90,
         );
         match nvrtc_version() {
-            Err(CudaError::NotAvailable(reason)) => {
+            Err(CudaError::NoNvrtc(reason)) => {
                 // The reason reaches users whose GPU works: it must say that NVRTC is missing.
                 assert!(reason.contains("NVRTC"), "{reason}");
-                assert!(matches!(r, Err(CudaError::NotAvailable(ref r2)) if *r2 == reason));
+                assert!(matches!(r, Err(CudaError::NoNvrtc(ref r2)) if *r2 == reason));
             }
             Err(e) => panic!("unexpected {e}"),
             Ok(_) => {

@@ -27,9 +27,15 @@ pub type Result<T> = std::result::Result<T, CudaError>;
 #[non_exhaustive]
 pub enum CudaError {
     /// CUDA cannot be used on this machine (no driver library, no device, driver too old,
-    /// no NVRTC library). The string is the reason, e.g. "libcuda.so not found".
+    /// no NCCL library for collectives). The string is the reason, e.g. "libcuda.so not
+    /// found".
     #[error("CUDA is not available: {0}")]
     NotAvailable(String),
+    /// Kernels cannot be compiled at run time: NVRTC cannot be loaded (or is turned off by
+    /// `WARP_LANG_NO_NVRTC`). The GPU itself may work: memory, copies and prebuilt cubins
+    /// (`wp::aot`) need no NVRTC. The string is the reason, which names NVRTC.
+    #[error("kernels cannot be compiled: {0}")]
+    NoNvrtc(String),
     /// A driver API call failed.
     #[error("{op}: {message} ({name})")]
     Driver {
@@ -105,7 +111,7 @@ impl PartialEq for CudaError {
     fn eq(&self, other: &Self) -> bool {
         use CudaError::*;
         match (self, other) {
-            (NotAvailable(a), NotAvailable(b)) => a == b,
+            (NotAvailable(a), NotAvailable(b)) | (NoNvrtc(a), NoNvrtc(b)) => a == b,
             (
                 Driver {
                     op: o1,
@@ -328,6 +334,7 @@ mod source_tests {
         use cudarc::driver::sys::CUresult;
         vec![
             CudaError::NotAvailable("libcuda.so not found".into()),
+            CudaError::NoNvrtc("NVRTC's libnvrtc.so not found".into()),
             CudaError::Driver {
                 op: "cuMemAllocAsync of 8 bytes on cuda:0".into(),
                 name: "CUDA_ERROR_OUT_OF_MEMORY".into(),

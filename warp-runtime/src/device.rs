@@ -342,9 +342,8 @@ pub fn cpu_fallback_reason() -> Option<String> {
 fn jit_unusable_reason() -> Option<String> {
     let nvrtc = match warp_cuda::nvrtc_version() {
         Ok(_) => Ok(()),
-        // The probe's reason names NVRTC; `NotAvailable`'s Display would add "CUDA is not
-        // available", which is wrong about a machine whose GPU works.
-        Err(warp_cuda::CudaError::NotAvailable(why)) => Err(why),
+        // The bare reason (it names NVRTC), for the one line an example prints.
+        Err(warp_cuda::CudaError::NoNvrtc(why)) => Err(why),
         Err(e) => Err(e.to_string()),
     };
     gpu_fallback_decision(nvrtc, crate::aot::aot_dir().as_deref())
