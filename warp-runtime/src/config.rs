@@ -252,6 +252,31 @@ pub fn cuda_block_dim() -> u32 {
     CUDA_BLOCK_DIM.load(Ordering::Relaxed) as u32
 }
 
+// The ahead-of-time cubin directory (`wp::aot`): where first launches look before the kernel
+// cache and NVRTC.
+#[cfg(feature = "cuda")]
+/// Environment variable naming the ahead-of-time directory; wins over [`set_aot_dir`].
+pub const AOT_DIR_ENV: &str = "WARP_LANG_AOT_DIR";
+
+#[cfg(feature = "cuda")]
+static AOT_DIR: std::sync::RwLock<Option<std::path::PathBuf>> = std::sync::RwLock::new(None);
+
+#[cfg(feature = "cuda")]
+/// Sets (or with `None` clears) the directory where first launches look for ahead-of-time
+/// cubins. `WARP_LANG_AOT_DIR`, when set and not empty, wins.
+pub fn set_aot_dir(dir: Option<std::path::PathBuf>) {
+    *AOT_DIR.write().unwrap_or_else(|p| p.into_inner()) = dir;
+}
+
+#[cfg(feature = "cuda")]
+/// The ahead-of-time directory in effect, if any.
+pub fn aot_dir() -> Option<std::path::PathBuf> {
+    match std::env::var_os(AOT_DIR_ENV) {
+        Some(v) if !v.is_empty() => Some(std::path::PathBuf::from(v)),
+        _ => AOT_DIR.read().unwrap_or_else(|p| p.into_inner()).clone(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -346,7 +346,7 @@ fn jit_unusable_reason() -> Option<String> {
         Err(warp_cuda::CudaError::NoNvrtc(why)) => Err(why),
         Err(e) => Err(e.to_string()),
     };
-    gpu_fallback_decision(nvrtc, crate::aot::aot_dir().as_deref())
+    gpu_fallback_decision(nvrtc, crate::config::aot_dir().as_deref())
 }
 
 #[cfg(not(feature = "cuda"))]

@@ -53,27 +53,11 @@ use super::source::CudaSource;
 use crate::error::{Error, Result};
 use crate::kernel::{GenericKernel, Kernel, KernelInfo};
 use std::path::{Path, PathBuf};
-use std::sync::RwLock;
 use warp_cuda::{CacheLookup, CompileOptions, KernelCache};
 
-/// Environment variable naming the ahead-of-time directory; wins over [`set_aot_dir`].
-pub const AOT_DIR_ENV: &str = "WARP_LANG_AOT_DIR";
-
-static AOT_DIR: RwLock<Option<PathBuf>> = RwLock::new(None);
-
-/// Sets (or with `None` clears) the directory where first launches look for ahead-of-time
-/// cubins. `WARP_LANG_AOT_DIR`, when set and not empty, wins.
-pub fn set_aot_dir(dir: Option<PathBuf>) {
-    *AOT_DIR.write().unwrap_or_else(|p| p.into_inner()) = dir;
-}
-
-/// The ahead-of-time directory in effect, if any.
-pub fn aot_dir() -> Option<PathBuf> {
-    match std::env::var_os(AOT_DIR_ENV) {
-        Some(v) if !v.is_empty() => Some(PathBuf::from(v)),
-        _ => AOT_DIR.read().unwrap_or_else(|p| p.into_inner()).clone(),
-    }
-}
+// The directory setting is the config layer's (the device layer reads it to pick the preferred
+// device without importing the CUDA backend); re-exported here, where users look for it.
+pub use crate::config::{aot_dir, set_aot_dir, AOT_DIR_ENV};
 
 /// The static description of a kernel, for [`compile`]: `wp::aot::kernel(integrate)`.
 pub fn kernel<K: Kernel>(kernel: K) -> &'static KernelInfo {
