@@ -22,6 +22,24 @@ use wp::prelude::*;
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
+/// An error and its sources, as anyhow's `{:#}` prints them: messages that moved into a
+/// source (the API guidelines' rule: a message does not repeat its source) are still found.
+trait Chain {
+    fn chain(&self) -> String;
+}
+
+impl<E: std::error::Error> Chain for E {
+    fn chain(&self) -> String {
+        let mut text = self.to_string();
+        let mut source = self.source();
+        while let Some(s) = source {
+            text += &format!(": {s}");
+            source = s.source();
+        }
+        text
+    }
+}
+
 fn serial() -> std::sync::MutexGuard<'static, ()> {
     SERIAL.lock().unwrap_or_else(|p| p.into_inner())
 }
@@ -518,27 +536,21 @@ fn bad_arguments_are_errors() {
     let a = wp::Array::<f32>::zeros(8, c.device()).unwrap();
     // An array on the CPU.
     let host = wp::Array::<f32>::zeros(8, &wp::cpu()).unwrap();
-    let e = c
-        .all_reduce(&host, &a, ReduceOp::Sum)
-        .unwrap_err()
-        .to_string();
+    let e = c.all_reduce(&host, &a, ReduceOp::Sum).unwrap_err().chain();
     assert!(
         e.contains("all_reduce on rank 0") && e.contains("\"cpu\""),
         "{e}"
     );
     // Lengths that do not fit.
     let b = wp::Array::<f32>::zeros(9, c.device()).unwrap();
-    let e = c.all_reduce(&a, &b, ReduceOp::Sum).unwrap_err().to_string();
+    let e = c.all_reduce(&a, &b, ReduceOp::Sum).unwrap_err().chain();
     assert!(e.contains("send has 8 elements and recv 9"), "{e}");
     // (In a world of one, recv = 1 × send: the same length is right.)
     if world > 1 {
-        let e = c.all_gather(&a, &a).unwrap_err().to_string();
+        let e = c.all_gather(&a, &a).unwrap_err().chain();
         assert!(e.contains(&format!("recv = world ({world}) × send")), "{e}");
     }
-    let e = c
-        .reduce_scatter(&a, &b, ReduceOp::Sum)
-        .unwrap_err()
-        .to_string();
+    let e = c.reduce_scatter(&a, &b, ReduceOp::Sum).unwrap_err().chain();
     assert!(e.contains("reduce_scatter"), "{e}");
     // A non-contiguous view.
     let m = wp::Array::<f32, 2>::zeros([4, 4], c.device()).unwrap();
@@ -546,20 +558,20 @@ fn bad_arguments_are_errors() {
     let e = c
         .all_reduce_in_place(&t, ReduceOp::Sum)
         .unwrap_err()
-        .to_string();
+        .chain();
     assert!(e.contains("not contiguous"), "{e}");
     // Roots and peers outside the world.
-    let e = c.broadcast(&a, world).unwrap_err().to_string();
+    let e = c.broadcast(&a, world).unwrap_err().chain();
     assert!(e.contains(&format!("root {world} is not a rank")), "{e}");
-    let e = c.send(&a, 0).unwrap_err().to_string();
+    let e = c.send(&a, 0).unwrap_err().chain();
     assert!(e.contains("peer 0 is not another rank"), "{e}");
     // The same GPU twice in one world.
     let e = Communicator::for_devices(&[gpus[0].clone(), gpus[0].clone()])
         .unwrap_err()
-        .to_string();
+        .chain();
     assert!(e.contains("one rank per GPU"), "{e}");
     // Groups do not nest, and a failing body issues nothing.
-    let e = group(|| group(|| Ok(()))).unwrap_err().to_string();
+    let e = group(|| group(|| Ok(()))).unwrap_err().chain();
     assert!(e.contains("do not nest"), "{e}");
     // The communicators still work.
     let ones: Vec<wp::Array<f32>> = comms
@@ -594,7 +606,7 @@ fn mismatched_ranks_in_a_group_are_errors_not_hangs() {
         comms[1].all_reduce_in_place(&b1, ReduceOp::Sum)
     })
     .unwrap_err()
-    .to_string();
+    .chain();
     assert!(
         e.contains("rank 0 calls all_reduce (Sum) of 8 F32")
             && e.contains("rank 1 calls all_reduce (Sum) of 16 F32"),
@@ -605,14 +617,14 @@ fn mismatched_ranks_in_a_group_are_errors_not_hangs() {
         comms[1].all_reduce_in_place(&a1, ReduceOp::Max)
     })
     .unwrap_err()
-    .to_string();
+    .chain();
     assert!(e.contains("(Max)"), "{e}");
     let e = group(|| {
         comms[0].send(&a0, 1)?;
         comms[1].recv(&b1, 0)
     })
     .unwrap_err()
-    .to_string();
+    .chain();
     assert!(
         e.contains("rank 0 posts 1 send to rank 1 of 8 F32")
             && e.contains("rank 1 posts 0 matching recv from rank 0 of 8 F32"),
@@ -622,7 +634,7 @@ fn mismatched_ranks_in_a_group_are_errors_not_hangs() {
     let e = comms[0]
         .all_reduce_in_place(&a1, ReduceOp::Sum)
         .unwrap_err()
-        .to_string();
+        .chain();
     assert!(
         e.contains("all_reduce on rank 0") && e.contains("is on \"cuda:1\""),
         "{e}"
@@ -650,7 +662,7 @@ fn a_missing_rank_times_out() {
     let start = std::time::Instant::now();
     let e = Communicator::with_timeout(&gpus[0], 0, 2, &id, Duration::from_secs(3))
         .unwrap_err()
-        .to_string();
+        .chain();
     let waited = start.elapsed();
     assert!(
         e.contains("ncclCommInitRank (rank 0 of 2") && e.contains("timed out"),
@@ -661,16 +673,14 @@ fn a_missing_rank_times_out() {
         "returned after {waited:?}"
     );
     // A rank outside the world.
-    let e = Communicator::new(&gpus[0], 2, 2, &id)
-        .unwrap_err()
-        .to_string();
+    let e = Communicator::new(&gpus[0], 2, 2, &id).unwrap_err().chain();
     assert!(e.contains("rank 2 of a world of 2"), "{e}");
     // Unique ids round-trip through hex; malformed text is an error.
     assert_eq!(
         UniqueId::from_hex(&id.to_hex()).unwrap().to_bytes(),
         id.to_bytes()
     );
-    let e = UniqueId::from_hex("abc").unwrap_err().to_string();
+    let e = UniqueId::from_hex("abc").unwrap_err().chain();
     assert!(e.contains("256 hexadecimal digits"), "{e}");
 }
 
@@ -689,7 +699,7 @@ fn unique_id_text_form() {
     }
     // Without a device, making a communicator from the environment names what is missing.
     if std::env::var_os("WARP_RANK").is_none() {
-        let e = Communicator::from_env(&wp::cpu()).unwrap_err().to_string();
+        let e = Communicator::from_env(&wp::cpu()).unwrap_err().chain();
         assert!(e.contains("WARP_RANK is not set"), "{e}");
     }
 }
@@ -714,7 +724,7 @@ fn child_rank() {
     let a = wp::Array::from_slice(&vec![rank as f64 + 1.0; n], &dev).unwrap();
     let r = comm.all_reduce_in_place(&a, ReduceOp::Sum);
     if std::env::var_os("WARP_TEST_MISMATCH").is_some() {
-        let e = r.unwrap_err().to_string();
+        let e = r.unwrap_err().chain();
         assert!(
             e.contains("rank 0 calls all_reduce (Sum) of 32 F64")
                 || e.contains("rank 1 calls all_reduce (Sum) of 64 F64"),

@@ -56,7 +56,15 @@ fn without_nvrtc_the_preferred_device_is_the_cpu() {
     let b = wp::Array::<f32>::zeros(8, &gpu).unwrap();
     assert_eq!(b.to_vec().unwrap(), vec![0.0; 8]);
     // ... but a kernel compiled at first launch cannot be: an error naming NVRTC, no panic.
-    let err = wp::launch(add_one, 8, (&b,), &gpu).unwrap_err().to_string();
+    // The chain (as anyhow prints it): the message names the device, its source NVRTC.
+    let err = wp::launch(add_one, 8, (&b,), &gpu).unwrap_err();
+    let mut source: Option<&dyn std::error::Error> = Some(&err);
+    let mut text = Vec::new();
+    while let Some(s) = source {
+        text.push(s.to_string());
+        source = s.source();
+    }
+    let err = text.join(": ");
     assert!(err.contains("NVRTC"), "{err}");
     assert!(err.contains("cuda:0"), "{err}");
     let _ = std::fs::remove_dir_all(&cache);

@@ -59,6 +59,18 @@ macro_rules! backend_tests {
     };
 }
 
+/// An error and its sources, as anyhow's `{:#}` prints them: messages that moved into a
+/// source (the API guidelines' rule: a message does not repeat its source) are still found.
+fn chain(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text += &format!(": {s}");
+        source = s.source();
+    }
+    text
+}
+
 /// The GPU the CUDA instances run on: `WARP_TEST_CUDA_DEVICE`, else `cuda:0`.
 fn test_gpu() -> String {
     std::env::var("WARP_TEST_CUDA_DEVICE").unwrap_or_else(|_| "cuda:0".to_string())
