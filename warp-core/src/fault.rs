@@ -82,6 +82,23 @@ pub enum FaultKind {
         /// wrote first and of the thread that wrote again.
         threads: (usize, usize),
     },
+    /// A tile element index outside the tile's shape (`t[i, j]`, `tile_extract`).
+    TileIndex {
+        /// The index, one entry per dimension of the tile (the first `rank` entries count).
+        index: [i128; 4],
+        /// The tile's shape (the first `rank` entries count).
+        shape: [usize; 4],
+        /// The tile's rank, 1..=4.
+        rank: u8,
+    },
+    /// `tile(x)` of a width other than the block's lane count, or a block dimension outside
+    /// `1..=1024` (`launch_tiled` refuses such launches, so generated code never sees this).
+    TileWidth {
+        /// The width of the tile (its one dimension).
+        width: usize,
+        /// The block's lane count.
+        block_dim: usize,
+    },
 }
 
 impl Fault {
@@ -139,6 +156,22 @@ impl Fault {
             FaultKind::NonFinite { what, values } => write!(
                 f,
                 "kernel `{}`: {what} {values:?} is not finite (NaN or infinite)",
+                self.kernel
+            ),
+            FaultKind::TileIndex { index, shape, rank } => {
+                let r = usize::from(*rank).min(4);
+                write!(
+                    f,
+                    "kernel `{}`: index {:?} is out of bounds for a tile of shape {:?}",
+                    self.kernel,
+                    &index[..r],
+                    &shape[..r]
+                )
+            }
+            FaultKind::TileWidth { width, block_dim } => write!(
+                f,
+                "kernel `{}`: `tile(x)` makes a tile of width {width}, but the block has \
+                 {block_dim} lanes (a block has 1..=1024 lanes, and the width must equal them)",
                 self.kernel
             ),
             FaultKind::WriteRace {

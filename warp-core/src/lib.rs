@@ -10,6 +10,7 @@
 #![warn(missing_debug_implementations)]
 
 pub mod adjoint;
+pub mod block;
 pub mod builtins;
 pub mod capability;
 #[cfg(test)]
@@ -23,6 +24,7 @@ pub mod meta;
 pub mod objects;
 pub mod ops;
 pub mod range;
+pub mod tile;
 pub mod transform;
 pub mod view;
 

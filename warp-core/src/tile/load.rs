@@ -1,0 +1,187 @@
+//! Loads and stores of tiles against array views (`tile_load`, `tile_store`).
+//!
+//! Offsets are signed, one per axis of the array: element `(i, j)` of the tile is array
+//! element `(o0 + i, o1 + j)`. A coordinate outside the array on any axis (negative, or at
+//! least the extent) reads as `T`'s zero (all bits zero, C++'s `T{}`), and a store to it is
+//! skipped: Warp's `bounds_check=True` semantics, where only `c >= shape` is checked, extended
+//! to negative coordinates. Neither is a fault. Every in-bounds access goes through the view's
+//! checked [`ArrayView::load`]/[`ArrayView::store`], so a corrupt view still faults cleanly and
+//! the runtime's race check sees every store. Elements are visited in row-major order, so the
+//! first fault (if any) is that of the first element in that order.
+
+use bytemuck::Zeroable;
+
+use super::{Tile1, Tile2};
+use crate::fault::KResult;
+use crate::index::IndexInt;
+use crate::view::ArrayView;
+
+/// Coordinate `o + i` as an index below `extent`, or `None` when it lies outside `0..extent`.
+#[inline(always)]
+fn coord<O: IndexInt>(o: O, i: usize, extent: usize) -> Option<usize> {
+    let c = o.widen() + i as i128;
+    if c >= 0 && c < extent as i128 {
+        Some(c as usize)
+    } else {
+        None
+    }
+}
+
+/// A rank-1 tile read from `a` at offset `o` (`tile_load(a, o)`): element `i` is `a[o + i]`,
+/// or zero where `o + i` is outside the array.
+#[inline]
+pub fn load1<T: Copy + Zeroable, const N0: usize, O: IndexInt>(
+    a: &ArrayView<T, 1>,
+    o: O,
+) -> KResult<Tile1<T, N0>> {
+    let [n] = a.shape();
+    let mut t = Tile1 {
+        data: [T::zeroed(); N0],
+    };
+    for (i, d) in t.data.iter_mut().enumerate() {
+        if let Some(c) = coord(o, i, n) {
+            *d = a.load(c)?;
+        }
+    }
+    Ok(t)
+}
+
+/// A rank-2 tile read from `a` at offsets `(o0, o1)` (`tile_load(a, (o0, o1))`): element
+/// `(i, j)` is `a[o0 + i, o1 + j]`, or zero where that is outside the array on either axis.
+#[inline]
+pub fn load2<T: Copy + Zeroable, const N0: usize, const N1: usize, O0: IndexInt, O1: IndexInt>(
+    a: &ArrayView<T, 2>,
+    o0: O0,
+    o1: O1,
+) -> KResult<Tile2<T, N0, N1>> {
+    let [n0, n1] = a.shape();
+    let mut t = Tile2 {
+        data: [[T::zeroed(); N1]; N0],
+    };
+    for (i, row) in t.data.iter_mut().enumerate() {
+        let Some(c0) = coord(o0, i, n0) else { continue };
+        for (j, d) in row.iter_mut().enumerate() {
+            if let Some(c1) = coord(o1, j, n1) {
+                *d = a.load((c0, c1))?;
+            }
+        }
+    }
+    Ok(t)
+}
+
+/// Writes rank-1 tile `t` into `a` at offset `o` (`tile_store(a, o, t)`): `a[o + i] = t[i]`
+/// for every `o + i` inside the array; the other elements are skipped.
+#[inline]
+pub fn store1<T: Copy, const N0: usize, O: IndexInt>(
+    a: &ArrayView<T, 1>,
+    o: O,
+    t: &Tile1<T, N0>,
+) -> KResult<()> {
+    let [n] = a.shape();
+    for (i, &v) in t.data.iter().enumerate() {
+        if let Some(c) = coord(o, i, n) {
+            a.store(c, v)?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes rank-2 tile `t` into `a` at offsets `(o0, o1)` (`tile_store(a, (o0, o1), t)`):
+/// `a[o0 + i, o1 + j] = t[i, j]` wherever that is inside the array; the rest is skipped.
+#[inline]
+pub fn store2<T: Copy, const N0: usize, const N1: usize, O0: IndexInt, O1: IndexInt>(
+    a: &ArrayView<T, 2>,
+    o0: O0,
+    o1: O1,
+    t: &Tile2<T, N0, N1>,
+) -> KResult<()> {
+    let [n0, n1] = a.shape();
+    for (i, row) in t.data.iter().enumerate() {
+        let Some(c0) = coord(o0, i, n0) else { continue };
+        for (j, &v) in row.iter().enumerate() {
+            if let Some(c1) = coord(o1, j, n1) {
+                a.store((c0, c1), v)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A view of `data` with the given shape (row-major, contiguous).
+    fn view<T: Copy, const N: usize>(data: &mut [T], shape: [usize; N]) -> ArrayView<T, N> {
+        let mut strides = [0isize; N];
+        let mut s = 1isize;
+        for k in (0..N).rev() {
+            strides[k] = s;
+            s *= shape[k] as isize;
+        }
+        assert_eq!(s as usize, data.len());
+        // SAFETY: `data` outlives the view in every test, and the shape and strides cover it.
+        unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
+    }
+
+    #[test]
+    fn load1_pads_both_edges_with_zero() {
+        let mut d = [1.0f32, 2.0, 3.0, 4.0, 5.0];
+        let a = view(&mut d, [5]);
+        let t: Tile1<f32, 4> = load1(&a, 0).unwrap();
+        assert_eq!(t.data, [1.0, 2.0, 3.0, 4.0]);
+        let t: Tile1<f32, 4> = load1(&a, 3i32).unwrap();
+        assert_eq!(t.data, [4.0, 5.0, 0.0, 0.0]);
+        let t: Tile1<f32, 4> = load1(&a, -2i64).unwrap();
+        assert_eq!(t.data, [0.0, 0.0, 1.0, 2.0]);
+        let t: Tile1<f32, 3> = load1(&a, i64::MIN).unwrap();
+        assert_eq!(t.data, [0.0; 3]);
+        let t: Tile1<f32, 3> = load1(&a, u64::MAX).unwrap(); // 2^64 - 1, not -1
+        assert_eq!(t.data, [0.0; 3]);
+        let t: Tile1<f32, 8> = load1(&a, -1).unwrap(); // wider than the array
+        assert_eq!(t.data, [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn load2_and_store2_ragged_and_negative() {
+        let mut d: [i32; 12] = std::array::from_fn(|k| k as i32 + 1); // 3 x 4
+        let a = view(&mut d, [3, 4]);
+        let t: Tile2<i32, 2, 3> = load2(&a, 2, -1).unwrap();
+        assert_eq!(t.data, [[0, 9, 10], [0, 0, 0]]);
+        let t: Tile2<i32, 2, 2> = load2(&a, -1, 3).unwrap();
+        assert_eq!(t.data, [[0, 0], [4, 0]]);
+        let t: Tile2<i32, 2, 2> = load2(&a, 1usize, 1usize).unwrap();
+        assert_eq!(t.data, [[6, 7], [10, 11]]);
+
+        let mut o = [0i32; 12];
+        let b = view(&mut o, [3, 4]);
+        let s = Tile2::<i32, 2, 3> {
+            data: [[1, 2, 3], [4, 5, 6]],
+        };
+        store2(&b, -1, 2, &s).unwrap(); // row -1 skipped; columns 4 skipped
+        store2(&b, 2, -2, &s).unwrap(); // row 2 gets column 0 only; row 3 skipped
+        assert_eq!(o, [0, 0, 4, 5, 0, 0, 0, 0, 3, 0, 0, 0]);
+    }
+
+    #[test]
+    fn store1_skips_outside() {
+        let mut o = [0u8; 4];
+        let b = view(&mut o, [4]);
+        store1(&b, -2, &Tile1::<u8, 3> { data: [7, 8, 9] }).unwrap();
+        store1(&b, 3, &Tile1::<u8, 3> { data: [1, 2, 3] }).unwrap();
+        assert_eq!(o, [9, 0, 0, 1]);
+    }
+
+    #[test]
+    fn tiles_larger_than_the_array_and_empty_arrays() {
+        let mut d = [1.0f64; 4];
+        let a = view(&mut d, [2, 2]);
+        let t: Tile2<f64, 3, 3> = load2(&a, 0, 0).unwrap();
+        assert_eq!(t.data, [[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0; 3]]);
+        let e: &mut [f64] = &mut [];
+        let z = view(e, [0, 5]);
+        let t: Tile2<f64, 2, 2> = load2(&z, 0, 0).unwrap();
+        assert_eq!(t.data, [[0.0; 2]; 2]);
+        store2(&z, 0, 0, &t).unwrap();
+    }
+}

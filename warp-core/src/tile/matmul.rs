@@ -1,0 +1,159 @@
+//! The tile matrix product with fused multiply-adds (`tile_matmul`, its FMA path).
+//!
+//! Every output element is one chain of fused multiply-adds over `k = 0..K` in ascending
+//! order, `acc = fma(a[i][k], b[k][j], acc)`, each rounded once (Rust's `mul_add`, CUDA's
+//! `fmaf`/`fma`). The CUDA library walks `k` in the same order in every thread, so the product
+//! is bit-identical on both back ends and independent of the block size.
+//!
+//! Shapes are const generics: `a: Tile2<T, M, K>` and `b: Tile2<T, K, N>` must agree on `K`,
+//! and the output is `Tile2<T, M, N>`. A mismatch is a type error at compile time, never a
+//! run-time check.
+
+use super::Tile2;
+use crate::builtins::Scalar;
+
+/// A fused multiply-add, `self * b + c` with one rounding: `f32` and `f64`.
+pub trait Fma: Copy {
+    /// `self * b + c`, rounded once (C's `fma`).
+    fn fma(self, b: Self, c: Self) -> Self;
+}
+
+impl Fma for f32 {
+    #[inline(always)]
+    fn fma(self, b: f32, c: f32) -> f32 {
+        self.mul_add(b, c)
+    }
+}
+
+impl Fma for f64 {
+    #[inline(always)]
+    fn fma(self, b: f64, c: f64) -> f64 {
+        self.mul_add(b, c)
+    }
+}
+
+/// `c += a · b` in place (Warp's `tile_matmul(a, b, out)` with `alpha = beta = 1`): for each
+/// `(i, j)`, `acc = c[i][j]`, then `acc = a[i][k].mul_add(b[k][j], acc)` for `k = 0..K`
+/// ascending, then `c[i][j] = acc`.
+///
+/// The inner dimensions must agree (`K`), and `c` must be `M × N`: the const generics make any
+/// other shape a compile error.
+pub fn matmul_acc<T: Fma, const M: usize, const K: usize, const N: usize>(
+    a: &Tile2<T, M, K>,
+    b: &Tile2<T, K, N>,
+    c: &mut Tile2<T, M, N>,
+) {
+    for (arow, crow) in a.data.iter().zip(c.data.iter_mut()) {
+        for (j, cij) in crow.iter_mut().enumerate() {
+            let mut acc = *cij;
+            for (aik, brow) in arow.iter().zip(&b.data) {
+                acc = aik.fma(brow[j], acc);
+            }
+            *cij = acc;
+        }
+    }
+}
+
+/// `a · b` (Warp's `c = tile_matmul(a, b)`): [`matmul_acc`] into a zero tile, so each element
+/// is the FMA chain starting from `+0`.
+///
+/// The inner dimensions must agree (`K`); the const generics make a mismatch a compile error.
+pub fn matmul<T: Fma + Scalar, const M: usize, const K: usize, const N: usize>(
+    a: &Tile2<T, M, K>,
+    b: &Tile2<T, K, N>,
+) -> Tile2<T, M, N> {
+    let mut c = Tile2::zeros();
+    matmul_acc(a, b, &mut c);
+    c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic values in [-1, 1) with full mantissas.
+    fn values(seed: u64) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        }
+    }
+
+    #[test]
+    fn f32_matmul_matches_the_scalar_fma_loop_exactly_and_f64_closely() {
+        let mut r = values(7);
+        let a = Tile2::<f32, 5, 17> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| r() as f32)),
+        };
+        let b = Tile2::<f32, 17, 3> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| r() as f32)),
+        };
+        let c0 = Tile2::<f32, 5, 3> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| r() as f32)),
+        };
+        let mut c = c0;
+        matmul_acc(&a, &b, &mut c);
+        let p = matmul(&a, &b);
+        for i in 0..5 {
+            for j in 0..3 {
+                // Exact: the same chain, written as a scalar loop with the libm-style call.
+                let mut acc = c0.data[i][j];
+                let mut acc0 = 0.0f32;
+                for k in 0..17 {
+                    acc = f32::mul_add(a.data[i][k], b.data[k][j], acc);
+                    acc0 = f32::mul_add(a.data[i][k], b.data[k][j], acc0);
+                }
+                assert_eq!(c.data[i][j].to_bits(), acc.to_bits());
+                assert_eq!(p.data[i][j].to_bits(), acc0.to_bits());
+                // Against f64 (exact products of f32 inputs, one f64 rounding per add): 17
+                // f32 roundings of partial sums bounded by sum |a||b| <= 18, so an error of at
+                // most 17 * 2^-24 * 18 < 2e-5 in absolute terms.
+                let mut r64 = c0.data[i][j] as f64;
+                for k in 0..17 {
+                    r64 += a.data[i][k] as f64 * b.data[k][j] as f64;
+                }
+                assert!((c.data[i][j] as f64 - r64).abs() < 2e-5, "{i} {j}");
+            }
+        }
+    }
+
+    #[test]
+    fn fma_is_fused() {
+        // (1 + 2^-12)^2 = 1 + 2^-11 + 2^-24: an unfused f32 multiply drops the 2^-24 term.
+        let x = 1.0f32 + f32::EPSILON * 2048.0;
+        let a = Tile2::<f32, 1, 1> { data: [[x]] };
+        let mut c = Tile2::<f32, 1, 1> {
+            data: [[-(1.0 + 2.0 * f32::EPSILON * 2048.0)]],
+        };
+        matmul_acc(&a, &a, &mut c);
+        assert_eq!(c.data[0][0], 2f32.powi(-24));
+        let d = Tile2::<f64, 1, 1> { data: [[3.0]] };
+        assert_eq!(matmul(&d, &d).data[0][0], 9.0);
+    }
+
+    #[test]
+    fn f64_matmul_against_a_naive_product() {
+        let mut r = values(11);
+        let a = Tile2::<f64, 8, 8> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| r())),
+        };
+        let id = Tile2::<f64, 8, 8> {
+            data: std::array::from_fn(|i| std::array::from_fn(|j| (i == j) as u8 as f64)),
+        };
+        // Multiplying by the identity is exact (each step adds an exact product or zero).
+        assert_eq!(matmul(&a, &id), a);
+        assert_eq!(matmul(&id, &a), a);
+        let p = matmul(&a, &a);
+        for i in 0..8 {
+            for j in 0..8 {
+                let naive: f64 = (0..8).map(|k| a.data[i][k] * a.data[k][j]).sum();
+                // Both are within 8 roundings of partial sums bounded by 8: |diff| < 2 * 8 * 8 *
+                // 2^-53 < 2e-14.
+                assert!((p.data[i][j] - naive).abs() < 2e-14);
+            }
+        }
+    }
+}

@@ -1,0 +1,210 @@
+//! Elementwise operations on tiles: `map` (unary and binary), the operators `+ - *` between
+//! tiles of one shape and between a tile and a scalar (on either side), `/` for float tiles,
+//! and checked integer division.
+//!
+//! Each element is computed independently with the builtins' dispatch traits
+//! ([`Scalar`]: IEEE for floats, wrapping for integers, as on CUDA), so the results do not
+//! depend on the block size and equal the GPU's bit for bit. A shape mismatch is a type error.
+
+use std::ops::{Add, Div, Mul, Sub};
+
+use super::{Tile1, Tile2};
+use crate::builtins::{Float, Scalar};
+use crate::fault::KResult;
+use crate::ops::WrapInt;
+
+impl<T: Copy, const N0: usize> Tile1<T, N0> {
+    /// `f` applied to each element (`tile_map(f, t)`).
+    #[inline(always)]
+    pub fn map<U>(&self, f: impl Fn(T) -> U) -> Tile1<U, N0> {
+        Tile1 {
+            data: self.data.map(f),
+        }
+    }
+
+    /// `f` applied to each pair of elements at the same position (`tile_map(f, a, b)`).
+    #[inline(always)]
+    pub fn map2<U: Copy, V>(&self, o: &Tile1<U, N0>, f: impl Fn(T, U) -> V) -> Tile1<V, N0> {
+        Tile1 {
+            data: std::array::from_fn(|i| f(self.data[i], o.data[i])),
+        }
+    }
+}
+
+impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
+    /// `f` applied to each element (`tile_map(f, t)`).
+    #[inline(always)]
+    pub fn map<U>(&self, f: impl Fn(T) -> U) -> Tile2<U, N0, N1> {
+        Tile2 {
+            data: self.data.map(|row| row.map(&f)),
+        }
+    }
+
+    /// `f` applied to each pair of elements at the same position (`tile_map(f, a, b)`).
+    #[inline(always)]
+    pub fn map2<U: Copy, V>(
+        &self,
+        o: &Tile2<U, N0, N1>,
+        f: impl Fn(T, U) -> V,
+    ) -> Tile2<V, N0, N1> {
+        Tile2 {
+            data: std::array::from_fn(|i| {
+                std::array::from_fn(|j| f(self.data[i][j], o.data[i][j]))
+            }),
+        }
+    }
+}
+
+/// `+ - *` (tile with tile, tile with scalar, scalar with tile) and `/` (float tiles) for one
+/// tile type, given its const parameters.
+macro_rules! tile_operators {
+    ($tile:ident < $($n:ident),+ >) => {
+        tile_operators!(@op $tile<$($n),+>, Add, add, s_add, Scalar);
+        tile_operators!(@op $tile<$($n),+>, Sub, sub, s_sub, Scalar);
+        tile_operators!(@op $tile<$($n),+>, Mul, mul, s_mul, Scalar);
+        tile_operators!(@div $tile<$($n),+>);
+
+        impl<T: WrapInt, $(const $n: usize),+> $tile<T, $($n),+> {
+            /// Integer `/` elementwise (`a / b`): wrapping on `MIN / -1`, and a division by
+            /// zero in any element is a fault of `kernel` (the first in row-major order).
+            pub fn div_int(&self, o: &Self, kernel: &'static str) -> KResult<Self> {
+                let mut out = *self;
+                for (d, &b) in
+                    super::Tile::as_flat_mut(&mut out).iter_mut().zip(super::Tile::as_flat(o))
+                {
+                    *d = d.w_div(b, kernel)?;
+                }
+                Ok(out)
+            }
+
+            /// Integer `/` by a scalar elementwise (`a / s`); `s == 0` is a fault of `kernel`.
+            pub fn div_int_scalar(&self, s: T, kernel: &'static str) -> KResult<Self> {
+                let mut out = *self;
+                for d in super::Tile::as_flat_mut(&mut out).iter_mut() {
+                    *d = d.w_div(s, kernel)?;
+                }
+                Ok(out)
+            }
+        }
+    };
+    (@op $tile:ident < $($n:ident),+ >, $tr:ident, $m:ident, $f:ident, $bound:ident) => {
+        impl<T: $bound, $(const $n: usize),+> $tr for $tile<T, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn $m(self, o: Self) -> Self {
+                self.map2(&o, |a, b| a.$f(b))
+            }
+        }
+        impl<T: $bound, $(const $n: usize),+> $tr<T> for $tile<T, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn $m(self, s: T) -> Self {
+                self.map(|a| a.$f(s))
+            }
+        }
+        tile_operators!(@left $tile [$($n),+], $tr, $m, $f;
+            i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64);
+    };
+    (@left $tile:ident $ns:tt, $tr:ident, $m:ident, $f:ident; $($s:ty),+) => {$(
+        tile_operators!(@left1 $tile $ns, $tr, $m, $f, $s);
+    )+};
+    (@left1 $tile:ident [$($n:ident),+], $tr:ident, $m:ident, $f:ident, $s:ty) => {
+        impl<$(const $n: usize),+> $tr<$tile<$s, $($n),+>> for $s {
+            type Output = $tile<$s, $($n),+>;
+            #[inline(always)]
+            fn $m(self, t: $tile<$s, $($n),+>) -> Self::Output {
+                t.map(|a| self.$f(a))
+            }
+        }
+    };
+    (@div $tile:ident < $($n:ident),+ >) => {
+        impl<T: Float + Div<Output = T>, $(const $n: usize),+> Div for $tile<T, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn div(self, o: Self) -> Self {
+                self.map2(&o, |a, b| a / b)
+            }
+        }
+        impl<T: Float + Div<Output = T>, $(const $n: usize),+> Div<T> for $tile<T, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn div(self, s: T) -> Self {
+                self.map(|a| a / s)
+            }
+        }
+        tile_operators!(@divleft $tile [$($n),+]; f32, f64);
+    };
+    (@divleft $tile:ident $ns:tt; $($s:ty),+) => {$(
+        tile_operators!(@divleft1 $tile $ns, $s);
+    )+};
+    (@divleft1 $tile:ident [$($n:ident),+], $s:ty) => {
+        impl<$(const $n: usize),+> Div<$tile<$s, $($n),+>> for $s {
+            type Output = $tile<$s, $($n),+>;
+            #[inline(always)]
+            fn div(self, t: $tile<$s, $($n),+>) -> Self::Output {
+                t.map(|a| self / a)
+            }
+        }
+    };
+}
+
+tile_operators!(Tile1<N0>);
+tile_operators!(Tile2<N0, N1>);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fault::FaultKind;
+
+    #[test]
+    fn operators_elementwise() {
+        let a = Tile2::<f32, 2, 2> {
+            data: [[1.0, 2.0], [3.0, 4.0]],
+        };
+        let b = Tile2::<f32, 2, 2>::ones();
+        assert_eq!((a + b).data, [[2.0, 3.0], [4.0, 5.0]]);
+        assert_eq!((a - b).data, [[0.0, 1.0], [2.0, 3.0]]);
+        assert_eq!((a * a).data, [[1.0, 4.0], [9.0, 16.0]]);
+        assert_eq!((a / (b + b)).data, [[0.5, 1.0], [1.5, 2.0]]);
+        assert_eq!((a * 2.0).data, [[2.0, 4.0], [6.0, 8.0]]);
+        assert_eq!((2.0 * a).data, (a * 2.0).data);
+        assert_eq!((10.0 - a).data, [[9.0, 8.0], [7.0, 6.0]]);
+        assert_eq!((a - 1.0).data, [[0.0, 1.0], [2.0, 3.0]]);
+        assert_eq!((a / 2.0).data, [[0.5, 1.0], [1.5, 2.0]]);
+        assert_eq!((4.0 / a).data, [[4.0, 2.0], [4.0 / 3.0, 1.0]]);
+        let i = Tile1::<i32, 3> { data: [1, -2, 3] };
+        assert_eq!((i + i * 3).data, [4, -8, 12]);
+        assert_eq!((5 - i).data, [4, 7, 2]);
+    }
+
+    #[test]
+    fn integer_ops_wrap_and_divide_checked() {
+        let m = Tile1::<i32, 2> {
+            data: [i32::MAX, i32::MIN],
+        };
+        assert_eq!((m + 1).data, [i32::MIN, i32::MIN + 1]);
+        assert_eq!((m * 2).data, [-2, 0]);
+        let d = Tile1::<i32, 2> { data: [7, -1] };
+        assert_eq!(m.div_int(&d, "k").unwrap().data, [i32::MAX / 7, i32::MIN]);
+        assert_eq!(
+            m.div_int_scalar(2, "k").unwrap().data,
+            [i32::MAX / 2, i32::MIN / 2]
+        );
+        let z = Tile1::<i32, 2> { data: [1, 0] };
+        let e = m.div_int(&z, "k").unwrap_err();
+        assert_eq!(e.kind, FaultKind::DivisionByZero);
+        assert!(m.div_int_scalar(0, "k").is_err());
+    }
+
+    #[test]
+    fn map_unary_and_binary() {
+        let a = Tile1::<f32, 4>::arange(0.0, 1.0);
+        assert_eq!(a.map(|x| x * x).data, [0.0, 1.0, 4.0, 9.0]);
+        assert_eq!(a.map(|x| x as i32 + 1).data, [1, 2, 3, 4]);
+        let b = Tile1::<i32, 4> { data: [1, 2, 3, 4] };
+        assert_eq!(a.map2(&b, |x, y| x * y as f32).data, [0.0, 2.0, 6.0, 12.0]);
+        let t = Tile2::<f64, 2, 3>::ones();
+        let u = t.map2(&t.map(|x| x * 3.0), |x, y| x + y);
+        assert_eq!(u.data, [[4.0; 3]; 2]);
+    }
+}
