@@ -184,4 +184,40 @@ mod tests {
         assert_eq!(t.data, [[0.0; 2]; 2]);
         store2(&z, 0, 0, &t).unwrap();
     }
+
+    /// A write log that refuses every write: each store that reaches the view's checked path
+    /// reports a race with "thread 7", and counts itself.
+    struct RefuseAll(std::sync::atomic::AtomicUsize);
+
+    impl crate::view::WriteLog for RefuseAll {
+        fn register(&self, _: usize, _: usize, _: &[usize], _: &[isize]) {}
+        fn record(&self, _: usize, _: usize, _: usize) -> Result<(), usize> {
+            self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Err(7)
+        }
+    }
+
+    #[test]
+    fn in_bounds_stores_go_through_the_checked_store() {
+        let mut o = [0i32; 6];
+        let b = view(&mut o, [2, 3]);
+        let log = RefuseAll(Default::default());
+        let _active = crate::view::WriteLogActive::new();
+        let t = Tile2::<i32, 2, 2>::ones();
+        // SAFETY: `o` outlives the view, used only inside the call while `log` lives.
+        let r = unsafe { crate::view::with_write_log(&log, 0, || store2(&b, -1, 2, &t)) };
+        // Row -1 and column 3 are skipped without reaching the view; the first in-bounds
+        // element in row-major order, (0, 2), reaches the log, which refuses it.
+        let e = r.unwrap_err();
+        assert_eq!(
+            e.kind,
+            crate::fault::FaultKind::WriteRace {
+                arg: "a",
+                index: vec![0, 2],
+                threads: (7, 0)
+            }
+        );
+        assert_eq!(log.0.load(std::sync::atomic::Ordering::Relaxed), 1);
+        assert_eq!(o, [0; 6]);
+    }
 }
