@@ -83,11 +83,14 @@ pub enum FaultKind {
         threads: (usize, usize),
     },
     /// A tile element index outside the tile's shape (`t[i, j]`, `tile_extract`).
+    // Fixed-size and narrow fields: a fault travels inside every `Result` a launch returns,
+    // so this variant must stay no larger than `OutOfBounds` (clippy's `result_large_err`).
     TileIndex {
-        /// The index, one entry per dimension of the tile (the first `rank` entries count).
-        index: [i128; 4],
+        /// The index, one entry per dimension of the tile (the first `rank` entries count;
+        /// saturated to `i64`, which a tile's extent never approaches).
+        index: [i64; 4],
         /// The tile's shape (the first `rank` entries count).
-        shape: [usize; 4],
+        shape: [u32; 4],
         /// The tile's rank, 1..=4.
         rank: u8,
     },

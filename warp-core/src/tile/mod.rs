@@ -103,8 +103,8 @@ fn index_fault<T, X: Tile>(kernel: &'static str, index: [i128; 4]) -> KResult<T>
     Err(Fault::new(
         kernel,
         FaultKind::TileIndex {
-            index,
-            shape: X::SHAPE,
+            index: index.map(|i| i.clamp(i64::MIN.into(), i64::MAX.into()) as i64),
+            shape: X::SHAPE.map(|n| u32::try_from(n).unwrap_or(u32::MAX)),
             rank: X::RANK as u8,
         },
     ))
@@ -258,7 +258,7 @@ mod tests {
             assert_eq!(
                 e.kind,
                 FaultKind::TileIndex {
-                    index: [bad as i128, 0, 0, 0],
+                    index: [bad, 0, 0, 0],
                     shape: [4, 1, 1, 1],
                     rank: 1
                 }
