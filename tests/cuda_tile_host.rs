@@ -495,3 +495,103 @@ fn fma_matmul_matches() {
         assert_eq!(got, want, "block size {bd}");
     }
 }
+
+// ------------------------------------------------------------------------------------------
+// NVRTC
+// ------------------------------------------------------------------------------------------
+
+/// A kernel that instantiates every operation of `wp_tile.h` for f32, f64 and i32 (matmul:
+/// floats), over one dynamic shared-memory buffer as the emitter will lay it out.
+const NVRTC_SOURCE: &str = r#"
+#include "wp_tile.h"
+
+template <typename T>
+__device__ unsigned char* all_ops(const wp::array_t<T, 1>& a1, const wp::array_t<T, 2>& a2,
+                                  unsigned char* at, wp::ctx_t* c) {
+  wp::tile_t<T, 300> t(at);
+  at += (wp::tile_t<T, 300>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 5, 7> u(at);
+  at += (wp::tile_t<T, 5, 7>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 5, 7> v(at);
+  at += (wp::tile_t<T, 5, 7>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 1> r(at);
+  at += 16;
+  wp::tile_load(t, a1, (wp::i64)-3, c);
+  wp::tile_load(u, a2, -1, (wp::u64)2, c);
+  wp::tile_zeros(v);
+  wp::tile_ones(v);
+  wp::tile_add(v, u, v);
+  wp::tile_sub(v, v, (T)2);
+  wp::tile_mul(v, (T)3, v);
+  wp::tile_map(u, v, [](T x) { return x; });
+  wp::tile_sum(r, t);
+  wp::tile_min(r, u);
+  wp::tile_max(r, t);
+  wp::tile_store(a2, 1, -2, v, c);
+  wp::tile_store(a1, (wp::i64)7, t, c);
+  wp::tile_t<T, 300> w(at);
+  at += (wp::tile_t<T, 300>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_arange(w, (T)1, (T)3);
+  return at;
+}
+
+template <typename T>
+__device__ unsigned char* matmuls(unsigned char* at) {
+  wp::tile_t<T, 7, 13> a(at);
+  at += (wp::tile_t<T, 7, 13>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 13, 5> b(at);
+  at += (wp::tile_t<T, 13, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 7, 5> p(at);
+  at += (wp::tile_t<T, 7, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_ones(a);
+  wp::tile_ones(b);
+  wp::tile_matmul(p, a, b);
+  wp::tile_matmul_acc(p, a, b);
+  return at;
+}
+
+extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
+    tile_all(wp::array_t<float, 1> f1, wp::array_t<float, 2> f2, wp::array_t<double, 1> d1,
+             wp::array_t<double, 2> d2, wp::array_t<int, 1> i1, wp::array_t<int, 2> i2,
+             wp::fault_t* fault, wp::u32* flag) {
+  extern __shared__ __align__(16) unsigned char smem[];
+  wp::ctx_t c = wp::ctx_make(fault, flag);
+  unsigned char* at = smem;
+  at = all_ops(f1, f2, at, &c);
+  at = all_ops(d1, d2, at, &c);
+  at = all_ops(i1, i2, at, &c);
+  at = matmuls<float>(at);
+  at = matmuls<double>(at);
+}
+"#;
+
+/// `wp_tile.h` compiles with NVRTC, without warnings, for block sizes that fill warps and one
+/// that does not, on the benchmarks' GPUs (sm_90) and an older one (sm_80), as the tile
+/// section's units will (no FMA contraction). Needs only libnvrtc, no GPU; skipped, saying so,
+/// without it.
+#[test]
+fn nvrtc_compiles_the_tile_library() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED nvrtc_compiles_the_tile_library: {e}");
+        return;
+    }
+    for bd in ["45", "128", "1024"] {
+        let defines = [("WP_TILE_BLOCK_DIM", bd)];
+        let opts = warp_cuda::CompileOptions {
+            fmad: false,
+            defines: &defines,
+            headers: warp_cuda::HEADERS,
+            ..Default::default()
+        };
+        for arch in [90, 80] {
+            let c = warp_cuda::compile(NVRTC_SOURCE, "tile_all.cu", &opts, arch)
+                .unwrap_or_else(|e| panic!("block size {bd}, sm_{arch}: {e}"));
+            assert!(!c.cubin.is_empty());
+            assert!(
+                !c.log.contains("warning"),
+                "block size {bd}, sm_{arch}: {}",
+                c.log
+            );
+        }
+    }
+}

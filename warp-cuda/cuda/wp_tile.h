@@ -60,11 +60,12 @@
 #error "wp_tile.h: define WP_TILE_BLOCK_DIM (the block size of the tiled launch)"
 #endif
 
+// WP_TILE_SHARED_ALIGNED: a block's shared variable aligned to 16 bytes, in a device function.
 #if defined(__CUDACC__)
-#define WP_TILE_SHARED __shared__
+#define WP_TILE_SHARED_ALIGNED __shared__ __align__(16)
 #elif defined(WP_PRIM_EMULATOR)
 // One block runs at a time in the emulator: static storage is the block's shared memory.
-#define WP_TILE_SHARED static
+#define WP_TILE_SHARED_ALIGNED alignas(16) static
 #else
 #error "wp_tile.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
 #endif
@@ -184,7 +185,7 @@ WP_FN void reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op) {
   constexpr int ACTIVE = S < BD ? S : BD;
   constexpr int WARPS = (ACTIVE + 31) / 32;
   // The warps' results, in warp order.
-  alignas(16) WP_TILE_SHARED unsigned char warp_bytes[32 * sizeof(T)];
+  WP_TILE_SHARED_ALIGNED unsigned char warp_bytes[32 * sizeof(T)];
   T* warp_part = reinterpret_cast<T*>(warp_bytes);
   const int l = (int)threadIdx.x;
   // 1. The lane's partial (T{} and unused when the lane is empty).
