@@ -436,6 +436,35 @@ fn elementwise_and_constructors_match() {
         }
         want.push(w);
     }
+    // i32: wrapping arithmetic, and an arange that wraps.
+    for s in [[7i32, -5, 3], [i32::MAX, i32::MAX - 20, 1 << 30]] {
+        let mut x: Vec<i32> = (0..40).map(|_| rng.next() as i32).collect();
+        let mut y: Vec<i32> = (0..40).map(|_| (rng.next() % 2001) as i32 - 1000).collect();
+        x[0] = i32::MIN;
+        y[0] = -1;
+        script.arr("i1", 0, &[40], &x);
+        script.arr("i1", 1, &[40], &y);
+        script.scal(s.map(|v| f32::from_bits(v as u32)));
+        script.run("arith_i32");
+        let x: Tile1<i32, 40> = tile::load1(&view(&mut x, [40]), 0).unwrap();
+        let y: Tile1<i32, 40> = tile::load1(&view(&mut y, [40]), 0).unwrap();
+        let mut w = Vec::new();
+        for t in [
+            x + y,
+            x - y,
+            x * y,
+            x + s[0],
+            s[0] - x,
+            x * s[0],
+            Tile1::zeros(),
+            Tile1::ones(),
+            Tile1::arange(s[1], s[2]),
+            x * y - x,
+        ] {
+            w.extend(flat(&t));
+        }
+        want.push(w);
+    }
     for bd in BLOCK_DIMS {
         let got = script.exec(bd);
         for (k, w) in want.iter().enumerate() {

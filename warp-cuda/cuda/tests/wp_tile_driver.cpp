@@ -30,7 +30,7 @@ struct args_t {
   wp::array_t<f32, 2> f2[3];
   wp::array_t<f64, 1> d1[1];
   wp::array_t<f64, 2> d2[2];
-  wp::array_t<i32, 1> i1[1];
+  wp::array_t<i32, 1> i1[2];
   i64 o[4];
   f32 s[3];
   unsigned char* out;
@@ -141,15 +141,21 @@ static void k_red_f64(args_t a) {
   reductions(a, smem_at_, t);
 }
 
-static void k_arith(args_t a) {
+/// `+ - *` of tiles and scalars, the constructors, and an in-place update, over two 40-element
+/// arrays of T and the scalars (f32 bit patterns, read as T's bits for i32).
+template <typename T>
+static void arith(const args_t& a, const wp::array_t<T, 1>& ax, const wp::array_t<T, 1>& ay) {
   wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
   SLOTS_BEGIN();
-  typedef tile_t<f32, 40> T40;
+  typedef tile_t<T, 40> T40;
+  static_assert(sizeof(T) == 4, "scalars are 32-bit patterns");
+  T s[3];
+  std::memcpy(s, a.s, sizeof(s));
   auto x = SLOT(T40);
   auto y = SLOT(T40);
   auto r = SLOT(T40);
-  wp::tile_load(x, a.f1[0], 0, &c);
-  wp::tile_load(y, a.f1[1], 0, &c);
+  wp::tile_load(x, ax, 0, &c);
+  wp::tile_load(y, ay, 0, &c);
   size_t at = 0;
   wp::tile_add(r, x, y);
   dump(a, at, r);
@@ -157,23 +163,26 @@ static void k_arith(args_t a) {
   dump(a, at, r);
   wp::tile_mul(r, x, y);
   dump(a, at, r);
-  wp::tile_add(r, x, a.s[0]);
+  wp::tile_add(r, x, s[0]);
   dump(a, at, r);
-  wp::tile_sub(r, a.s[0], x);
+  wp::tile_sub(r, s[0], x);
   dump(a, at, r);
-  wp::tile_mul(r, x, a.s[0]);
+  wp::tile_mul(r, x, s[0]);
   dump(a, at, r);
   wp::tile_zeros(r);
   dump(a, at, r);
   wp::tile_ones(r);
   dump(a, at, r);
-  wp::tile_arange(r, a.s[1], a.s[2]);
+  wp::tile_arange(r, s[1], s[2]);
   dump(a, at, r);
   // In place: x = x * y - x (each element read and written by one thread).
   wp::tile_mul(r, x, y);
   wp::tile_sub(x, r, x);
   dump(a, at, x);
 }
+
+static void k_arith(args_t a) { arith(a, a.f1[0], a.f1[1]); }
+static void k_arith_i32(args_t a) { arith(a, a.i1[0], a.i1[1]); }
 
 static void k_matmul_f32(args_t a) {
   wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
@@ -264,12 +273,12 @@ int run(const char* path) {
       {"load1", k_load1},         {"load2", k_load2},           {"red_f32_300", k_red_f32_300},
       {"red_f32_5", k_red_f32_5}, {"red_f32_2d", k_red_f32_2d}, {"red_i32", k_red_i32},
       {"red_f64", k_red_f64},     {"arith", k_arith},           {"matmul_f32", k_matmul_f32},
-      {"matmul_f64", k_matmul_f64},
+      {"matmul_f64", k_matmul_f64}, {"arith_i32", k_arith_i32},
   };
   std::map<std::string, size_t> out_bytes = {
       {"load1", 37 * 4},   {"load2", 35 * 4},   {"red_f32_300", 12}, {"red_f32_5", 12},
       {"red_f32_2d", 12},  {"red_i32", 12},     {"red_f64", 24},     {"arith", 10 * 160},
-      {"matmul_f32", 280}, {"matmul_f64", 144},
+      {"matmul_f32", 280}, {"matmul_f64", 144}, {"arith_i32", 10 * 160},
   };
   std::string line;
   while (std::getline(in, line)) {
