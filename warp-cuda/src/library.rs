@@ -199,6 +199,9 @@ pub static SECTIONS: &[Section] = &[
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),
     standalone!("volume_build",   Some("WP_VOLUME_BUILD")),
     standalone!("primitives",     None),
+    // The tile library (docs/design/tiles.md, section 5): standalone until the emitter's tile
+    // builtins name it, then a kernel row (rounding `Yes`); tests/cuda_tile_host.rs runs it.
+    standalone!("tile",           None),
 ];
 
 /// The section named `name`. In a constant (`const P: &Section = get("primitives")`) a name

@@ -20,8 +20,15 @@
 //   * a decoupled look-back that finds a predecessor's status unpublished aborts: blocks run
 //     in order (tile counters hand out tiles in launch order), so every tile before has been
 //     finished and an unpublished status is a bug that would hang a GPU.
-// Not emulated: warps (the primitives use no warp-level operations), memory ordering between
-// blocks, and interleavings inside a phase.
+//   * for the tile library (wp_tile.h, tests/cuda_tile_host.rs): `threadIdx` (x only),
+//     `__syncthreads()`, and `__shfl_down_sync`, an exchange among the 32 lanes of a warp made
+//     of two block-wide barriers (every thread writes its value, all wait, each reads its
+//     partner's, all wait). It is exact for shuffles that every thread of the block calls
+//     together, as the tile reductions do; a thread outside `mask`, or a shuffle that only some
+//     warps reach, aborts or is a barrier divergence. A source lane outside the warp or the
+//     mask gives the caller's own value (CUDA leaves the latter undefined).
+// Not emulated: warps otherwise (the primitives use no warp-level operations), memory ordering
+// between blocks, and interleavings inside a phase.
 #pragma once
 
 #define WP_PRIM_EMULATOR 1
@@ -177,7 +184,39 @@ T atomic_add(T* p, T v) {
   std::abort();
 }
 
+/// `threadIdx` of the running thread (a 1-D block).
+struct dim3_t {
+  unsigned x, y, z;
+};
+inline dim3_t thread_idx() { return dim3_t{(unsigned)tid, 0u, 0u}; }
+
+/// `__shfl_down_sync(mask, v, delta)` among the 32 lanes of the caller's warp (see the top).
+template <typename T>
+T shfl_down_sync(unsigned mask, T v, unsigned delta) {
+  static std::vector<T> slots;
+  const int threads = (int)sched().fibers.size();
+  const int lane = tid % 32;
+  if (!((mask >> lane) & 1u)) {
+    std::fprintf(stderr, "wp_prim_emu: thread %d of block %lld shuffles outside its mask %08x\n",
+                 tid, bid, mask);
+    std::abort();
+  }
+  if ((int)slots.size() < threads) slots.resize((size_t)threads);
+  slots[(size_t)tid] = v;
+  sync();
+  const unsigned src = (unsigned)lane + delta;
+  T r = v;
+  if (src < 32u && ((mask >> src) & 1u) && tid - lane + (int)src < threads)
+    r = slots[(size_t)(tid - lane + (int)src)];
+  sync();
+  return r;
+}
+
 }  // namespace wp_emu
+
+#define threadIdx (::wp_emu::thread_idx())
+#define __syncthreads() ::wp_emu::sync()
+#define __shfl_down_sync(mask, v, delta) ::wp_emu::shfl_down_sync((mask), (v), (unsigned)(delta))
 
 #define WP_PRIM_FN inline
 #define WP_PRIM_ENTRY extern "C" void

@@ -1,0 +1,626 @@
+//! The CUDA tile library (`warp-cuda/cuda/wp_tile.h`), checked without a GPU against the CPU's
+//! tiles (`warp_core::tile`), bit for bit.
+//!
+//! A small driver (`warp-cuda/cuda/tests/wp_tile_driver.cpp`) runs the header's cooperative
+//! operations in one block under the block emulator (`wp_prim_emu.h`: the block's threads are
+//! fibers, `__syncthreads` a barrier, `__shfl_down_sync` an exchange among a warp's 32 lanes).
+//! It is compiled with g++ for several block sizes (`-DWP_TILE_BLOCK_DIM`): 1 (sequential), a
+//! warp, 45 (a partial second warp), 96 and 256 (three and eight warps); each result is
+//! compared with warp-core's function for the same block size. Sums of order-sensitive data
+//! (a large value followed by ones) differ between block sizes, so agreeing for each shows the
+//! order is the same, not merely the value. What this cannot check is what only hardware does:
+//! NVRTC's acceptance of the header, real warps and shared memory.
+//!
+//! Skipped, saying so, without g++.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::{Arc, Mutex, OnceLock};
+use warp_core::tile::{self, Tile, Tile1, Tile2};
+use warp_core::ArrayView;
+
+/// The block sizes every test runs.
+const BLOCK_DIMS: [usize; 5] = [1, 32, 45, 96, 256];
+
+fn have_gpp() -> bool {
+    static HAVE: OnceLock<bool> = OnceLock::new();
+    *HAVE.get_or_init(|| {
+        let ok = Command::new("g++").arg("--version").output().is_ok();
+        if !ok {
+            eprintln!("SKIPPED cuda_tile_host: no g++ on this machine");
+        }
+        ok
+    })
+}
+
+/// The driver compiled for block size `bd` (built once per process).
+fn executable(bd: usize) -> Arc<PathBuf> {
+    type Slot = Arc<Mutex<Option<Arc<PathBuf>>>>;
+    static BUILT: OnceLock<Mutex<HashMap<usize, Slot>>> = OnceLock::new();
+    let slot = BUILT
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap()
+        .entry(bd)
+        .or_default()
+        .clone();
+    let mut slot = slot.lock().unwrap();
+    if let Some(exe) = slot.as_ref() {
+        return exe.clone();
+    }
+    let dir = std::env::temp_dir().join(format!("wp_tile_{bd}_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cuda = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let exe = dir.join("driver");
+    let out = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+        ])
+        .arg(format!("-DWP_TILE_BLOCK_DIM={bd}"))
+        .args(["-I", cuda, "-I", &format!("{cuda}/tests")])
+        .arg(format!("{cuda}/tests/wp_tile_driver.cpp"))
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "g++ failed on wp_tile_driver.cpp (block size {bd}):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let exe = Arc::new(exe);
+    *slot = Some(exe.clone());
+    exe
+}
+
+fn hex(bytes: &[u8]) -> String {
+    if bytes.is_empty() {
+        return "-".into();
+    }
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn unhex(s: &str) -> Vec<u8> {
+    (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+        .collect()
+}
+
+fn bytes<T: bytemuck::Pod>(v: &[T]) -> Vec<u8> {
+    bytemuck::cast_slice(v).to_vec()
+}
+
+fn typed<T: bytemuck::Pod>(b: &[u8]) -> Vec<T> {
+    b.chunks_exact(std::mem::size_of::<T>())
+        .map(bytemuck::pod_read_unaligned)
+        .collect()
+}
+
+/// A driver script; `outputs` counts the lines of output it asks for.
+#[derive(Default)]
+struct Script {
+    text: String,
+    outputs: usize,
+}
+
+impl Script {
+    /// Array argument `kind` (`f1 f2 d1 d2 i1`) number `slot`.
+    fn arr<T: bytemuck::Pod>(&mut self, kind: &str, slot: usize, shape: &[usize], data: &[T]) {
+        assert_eq!(shape.iter().product::<usize>(), data.len());
+        let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+        self.text += &format!(
+            "arr {kind} {slot} {} {}\n",
+            dims.join(" "),
+            hex(&bytes(data))
+        );
+    }
+    fn off(&mut self, o: [i64; 4]) {
+        self.text += &format!("off {} {} {} {}\n", o[0], o[1], o[2], o[3]);
+    }
+    fn scal(&mut self, s: [f32; 3]) {
+        self.text += &format!(
+            "scal {:08x} {:08x} {:08x}\n",
+            s[0].to_bits(),
+            s[1].to_bits(),
+            s[2].to_bits()
+        );
+    }
+    fn run(&mut self, kernel: &str) {
+        self.text += &format!("run {kernel}\n");
+        self.outputs += 1;
+    }
+    fn dump(&mut self, kind: &str, slot: usize) {
+        self.text += &format!("dump {kind} {slot}\n");
+        self.outputs += 1;
+    }
+
+    /// Runs the script for block size `bd`: the outputs of `run` and `dump`, in order. A fault
+    /// fails the test (no case here faults).
+    fn exec(&self, bd: usize) -> Vec<Vec<u8>> {
+        let exe = executable(bd);
+        let path = exe.with_file_name(format!("script_{:?}.txt", std::thread::current().id()));
+        std::fs::write(&path, &self.text).unwrap();
+        let out = Command::new(exe.as_path()).arg(&path).output().unwrap();
+        assert!(
+            out.status.success(),
+            "driver (block size {bd}) failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8(out.stdout).unwrap();
+        let mut got = Vec::new();
+        for l in text.lines() {
+            let (tag, rest) = l.split_once(' ').unwrap_or((l, ""));
+            match tag {
+                "out" | "dump" => got.push(unhex(rest)),
+                "nofault" => {}
+                _ => panic!("block size {bd}: unexpected driver line {l}"),
+            }
+        }
+        assert_eq!(got.len(), self.outputs, "block size {bd}");
+        got
+    }
+}
+
+/// A view of `data` with the given shape (row-major, contiguous).
+fn view<T: Copy, const N: usize>(data: &mut [T], shape: [usize; N]) -> ArrayView<T, N> {
+    let mut strides = [0isize; N];
+    let mut s = 1isize;
+    for k in (0..N).rev() {
+        strides[k] = s;
+        s *= shape[k] as isize;
+    }
+    assert_eq!(s as usize, data.len());
+    // SAFETY: every caller keeps `data` alive and unmoved while it uses the view.
+    unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
+}
+
+/// A small deterministic generator (xorshift64*).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    /// In [-1, 1) with a full mantissa, times 2^e for e in -8..8 (a spread of magnitudes, so
+    /// sums round differently in different orders).
+    fn f32(&mut self) -> f32 {
+        let m = (self.next() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0;
+        m * 2f32.powi((self.next() % 16) as i32 - 8)
+    }
+    fn f64(&mut self) -> f64 {
+        let m = (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
+        m * 2f64.powi((self.next() % 40) as i32 - 20)
+    }
+}
+
+fn flat<X: Tile<Elem: bytemuck::Pod>>(t: &X) -> Vec<u8> {
+    bytes(t.as_flat())
+}
+
+// ------------------------------------------------------------------------------------------
+// Loads and stores
+// ------------------------------------------------------------------------------------------
+
+#[test]
+fn loads_and_stores_with_ragged_and_negative_offsets_match() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x5eed_0001);
+    let mut script = Script::default();
+    // (tile bytes, array after the store) per run, from warp-core.
+    let mut want: Vec<(Vec<u8>, Vec<u8>, String)> = Vec::new();
+    // Rank 1: a Tile1<f32, 37> loaded from `a` at `o` and stored into `b` at `p`.
+    for n in [0usize, 5, 37, 50, 100] {
+        for (o, p) in [
+            (0i64, 0i64),
+            (-1, 3),
+            (-5, -36),
+            (-40, -37),
+            (3, 60),
+            (n as i64 - 2, n as i64 - 40),
+            (n as i64 + 1, -1),
+            (i64::MIN, i64::MAX),
+            (i64::MAX, i64::MIN),
+        ] {
+            let mut a: Vec<f32> = (0..n).map(|_| rng.f32()).collect();
+            let m = 61;
+            let mut b: Vec<f32> = (0..m).map(|i| -(i as f32) - 0.5).collect();
+            script.arr("f1", 0, &[n], &a);
+            script.arr("f1", 1, &[m], &b);
+            script.off([o, p, 0, 0]);
+            script.run("load1");
+            script.dump("f1", 1);
+            let t: Tile1<f32, 37> = tile::load1(&view(&mut a, [n]), o).unwrap();
+            tile::store1(&view(&mut b, [m]), p, &t).unwrap();
+            want.push((flat(&t), bytes(&b), format!("load1 n {n} o {o} p {p}")));
+        }
+    }
+    // Rank 2: a Tile2<f32, 5, 7> loaded from `a` at (o0, o1), stored into `b` at (p0, p1).
+    for shape in [[4usize, 6], [9, 10], [0, 3], [5, 7]] {
+        for o in [
+            [0i64, 0, 0, 0],
+            [-3, -2, 1, 4],
+            [2, 3, -4, -6],
+            [-1, 5, 3, -2],
+            [i64::MIN, 0, 0, i64::MAX],
+            [1, i64::MAX, i64::MIN, 1],
+            [-5, -7, 6, 5],
+        ] {
+            let mut a: Vec<f32> = (0..shape[0] * shape[1]).map(|_| rng.f32()).collect();
+            let bs = [6usize, 5];
+            let mut b: Vec<f32> = (0..30).map(|i| i as f32 + 0.25).collect();
+            script.arr("f2", 0, &shape, &a);
+            script.arr("f2", 1, &bs, &b);
+            script.off(o);
+            script.run("load2");
+            script.dump("f2", 1);
+            let t: Tile2<f32, 5, 7> = tile::load2(&view(&mut a, shape), o[0], o[1]).unwrap();
+            tile::store2(&view(&mut b, bs), o[2], o[3], &t).unwrap();
+            want.push((flat(&t), bytes(&b), format!("load2 {shape:?} at {o:?}")));
+        }
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (t, b, what)) in want.iter().enumerate() {
+            assert_eq!(&got[2 * k], t, "tile, {what}, block size {bd}");
+            assert_eq!(&got[2 * k + 1], b, "stored array, {what}, block size {bd}");
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Reductions
+// ------------------------------------------------------------------------------------------
+
+/// `[sum, min, max]` of `t` for block size `bd`, as warp-core computes them.
+fn reductions<X: Tile<Elem: warp_core::builtins::MinMax + bytemuck::Pod>>(
+    t: &X,
+    bd: usize,
+) -> Vec<u8>
+where
+    X::Elem: warp_core::builtins::Scalar,
+{
+    let mut v = bytes(&tile::sum(t, bd).data);
+    v.extend(bytes(&tile::min(t, bd).data));
+    v.extend(bytes(&tile::max(t, bd).data));
+    v
+}
+
+#[test]
+fn reductions_match_warp_core_bit_for_bit() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x5eed_0002);
+    let mut script = Script::default();
+    // Per run: the expected bytes for each block size.
+    let mut want: Vec<(Vec<Vec<u8>>, String)> = Vec::new();
+    let per_bd = |f: &dyn Fn(usize) -> Vec<u8>| BLOCK_DIMS.iter().map(|&bd| f(bd)).collect();
+
+    // Tile1<f32, 300> from arrays of 300 or fewer elements (zero padding).
+    let mut f32_300: Vec<(Vec<f32>, &str)> = vec![
+        (
+            std::iter::once(1e8)
+                .chain(std::iter::repeat_n(1.0, 299))
+                .collect(),
+            "1e8 then ones",
+        ),
+        (
+            std::iter::repeat_n(1.0, 299)
+                .chain(std::iter::once(1e8))
+                .collect(),
+            "ones then 1e8",
+        ),
+        ((0..300).map(|_| rng.f32()).collect(), "random"),
+        ((0..77).map(|_| rng.f32()).collect(), "77 random, padded"),
+        (vec![-0.0; 300], "negative zeros"),
+    ];
+    let mut spiky: Vec<f32> = (0..300).map(|_| rng.f32()).collect();
+    spiky[123] = f32::NAN;
+    spiky[7] = 3e38;
+    spiky[290] = -3e38;
+    f32_300.push((spiky, "NaN and large values"));
+    let mut sums_1e8 = Vec::new();
+    for (x, what) in &f32_300 {
+        let mut x = x.clone();
+        let n = x.len();
+        script.arr("f1", 0, &[n], &x);
+        script.run("red_f32_300");
+        let t: Tile1<f32, 300> = tile::load1(&view(&mut x, [n]), 0).unwrap();
+        if *what == "1e8 then ones" {
+            sums_1e8 = BLOCK_DIMS.map(|bd| tile::sum(&t, bd).data[0]).to_vec();
+        }
+        want.push((per_bd(&|bd| reductions(&t, bd)), format!("f32 x300 {what}")));
+    }
+    // Sequentially every 1.0 after 1e8 is lost; with many lanes they are summed first. The
+    // test only shows the order if the block sizes disagree.
+    assert_eq!(sums_1e8[0], 1e8);
+    assert!(sums_1e8.iter().any(|&s| s != 1e8), "{sums_1e8:?}");
+
+    // Tile1<f32, 5>: fewer elements than lanes.
+    for _ in 0..3 {
+        let mut x: Vec<f32> = (0..5).map(|_| rng.f32()).collect();
+        script.arr("f1", 0, &[5], &x);
+        script.run("red_f32_5");
+        let t: Tile1<f32, 5> = tile::load1(&view(&mut x, [5]), 0).unwrap();
+        want.push((per_bd(&|bd| reductions(&t, bd)), "f32 x5".into()));
+    }
+    // Tile2<f32, 13, 11>: row-major order over two axes.
+    for _ in 0..3 {
+        let mut x: Vec<f32> = (0..143).map(|_| rng.f32()).collect();
+        x[0] = 1e9;
+        script.arr("f2", 0, &[13, 11], &x);
+        script.run("red_f32_2d");
+        let t: Tile2<f32, 13, 11> = tile::load2(&view(&mut x, [13, 11]), 0, 0).unwrap();
+        want.push((per_bd(&|bd| reductions(&t, bd)), "f32 13x11".into()));
+    }
+    // Tile1<i32, 200>: wrapping sums.
+    for spread in [1000u64, 1 << 32] {
+        let mut x: Vec<i32> = (0..200)
+            .map(|_| (rng.next() % spread) as i64 as i32)
+            .collect();
+        script.arr("i1", 0, &[200], &x);
+        script.run("red_i32");
+        let t: Tile1<i32, 200> = tile::load1(&view(&mut x, [200]), 0).unwrap();
+        want.push((
+            per_bd(&|bd| reductions(&t, bd)),
+            format!("i32 spread {spread}"),
+        ));
+    }
+    // Tile1<f64, 150>.
+    for big in [false, true] {
+        let mut x: Vec<f64> = (0..150).map(|_| rng.f64()).collect();
+        if big {
+            x[0] = 1e17;
+        }
+        script.arr("d1", 0, &[150], &x);
+        script.run("red_f64");
+        let t: Tile1<f64, 150> = tile::load1(&view(&mut x, [150]), 0).unwrap();
+        want.push((per_bd(&|bd| reductions(&t, bd)), format!("f64 big {big}")));
+    }
+
+    for (i, bd) in BLOCK_DIMS.into_iter().enumerate() {
+        let got = script.exec(bd);
+        for (k, (w, what)) in want.iter().enumerate() {
+            assert_eq!(got[k], w[i], "{what}, block size {bd}");
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Elementwise and constructors
+// ------------------------------------------------------------------------------------------
+
+#[test]
+fn elementwise_and_constructors_match() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x5eed_0003);
+    let mut script = Script::default();
+    let mut want = Vec::new();
+    for s in [[1.5f32, 0.1, 0.1], [-3.25, -7.0, 0.3]] {
+        let mut x: Vec<f32> = (0..40).map(|_| rng.f32()).collect();
+        let mut y: Vec<f32> = (0..40).map(|_| rng.f32()).collect();
+        script.arr("f1", 0, &[40], &x);
+        script.arr("f1", 1, &[40], &y);
+        script.scal(s);
+        script.run("arith");
+        let x: Tile1<f32, 40> = tile::load1(&view(&mut x, [40]), 0).unwrap();
+        let y: Tile1<f32, 40> = tile::load1(&view(&mut y, [40]), 0).unwrap();
+        let mut w = Vec::new();
+        for t in [
+            x + y,
+            x - y,
+            x * y,
+            x + s[0],
+            s[0] - x,
+            x * s[0],
+            Tile1::zeros(),
+            Tile1::ones(),
+            Tile1::arange(s[1], s[2]),
+            x * y - x,
+        ] {
+            w.extend(flat(&t));
+        }
+        want.push(w);
+    }
+    // i32: wrapping arithmetic, and an arange that wraps.
+    for s in [[7i32, -5, 3], [i32::MAX, i32::MAX - 20, 1 << 30]] {
+        let mut x: Vec<i32> = (0..40).map(|_| rng.next() as i32).collect();
+        let mut y: Vec<i32> = (0..40).map(|_| (rng.next() % 2001) as i32 - 1000).collect();
+        x[0] = i32::MIN;
+        y[0] = -1;
+        script.arr("i1", 0, &[40], &x);
+        script.arr("i1", 1, &[40], &y);
+        script.scal(s.map(|v| f32::from_bits(v as u32)));
+        script.run("arith_i32");
+        let x: Tile1<i32, 40> = tile::load1(&view(&mut x, [40]), 0).unwrap();
+        let y: Tile1<i32, 40> = tile::load1(&view(&mut y, [40]), 0).unwrap();
+        let mut w = Vec::new();
+        for t in [
+            x + y,
+            x - y,
+            x * y,
+            x + s[0],
+            s[0] - x,
+            x * s[0],
+            Tile1::zeros(),
+            Tile1::ones(),
+            Tile1::arange(s[1], s[2]),
+            x * y - x,
+        ] {
+            w.extend(flat(&t));
+        }
+        want.push(w);
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, w) in want.iter().enumerate() {
+            let (g, w) = (typed::<u32>(&got[k]), typed::<u32>(w));
+            for (e, (g, w)) in g.iter().zip(&w).enumerate() {
+                assert_eq!(
+                    g,
+                    w,
+                    "case {k}, result {} element {}, block size {bd}",
+                    e / 40,
+                    e % 40
+                );
+            }
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Matmul
+// ------------------------------------------------------------------------------------------
+
+#[test]
+fn fma_matmul_matches() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x5eed_0004);
+    let mut script = Script::default();
+    let mut want = Vec::new();
+    for _ in 0..2 {
+        let mut a: Vec<f32> = (0..7 * 13).map(|_| rng.f32()).collect();
+        let mut b: Vec<f32> = (0..13 * 5).map(|_| rng.f32()).collect();
+        let mut c: Vec<f32> = (0..7 * 5).map(|_| rng.f32()).collect();
+        script.arr("f2", 0, &[7, 13], &a);
+        script.arr("f2", 1, &[13, 5], &b);
+        script.arr("f2", 2, &[7, 5], &c);
+        script.run("matmul_f32");
+        let a: Tile2<f32, 7, 13> = tile::load2(&view(&mut a, [7, 13]), 0, 0).unwrap();
+        let b: Tile2<f32, 13, 5> = tile::load2(&view(&mut b, [13, 5]), 0, 0).unwrap();
+        let mut c: Tile2<f32, 7, 5> = tile::load2(&view(&mut c, [7, 5]), 0, 0).unwrap();
+        let mut w = flat(&tile::matmul(&a, &b));
+        tile::matmul_acc(&a, &b, &mut c);
+        w.extend(flat(&c));
+        want.push(w);
+
+        let mut a: Vec<f64> = (0..12).map(|_| rng.f64()).collect();
+        let mut b: Vec<f64> = (0..24).map(|_| rng.f64()).collect();
+        script.arr("d2", 0, &[3, 4], &a);
+        script.arr("d2", 1, &[4, 6], &b);
+        script.run("matmul_f64");
+        let a: Tile2<f64, 3, 4> = tile::load2(&view(&mut a, [3, 4]), 0, 0).unwrap();
+        let b: Tile2<f64, 4, 6> = tile::load2(&view(&mut b, [4, 6]), 0, 0).unwrap();
+        want.push(flat(&tile::matmul(&a, &b)));
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        assert_eq!(got, want, "block size {bd}");
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// NVRTC
+// ------------------------------------------------------------------------------------------
+
+/// A kernel that instantiates every operation of `wp_tile.h` for f32, f64 and i32 (matmul:
+/// floats), over one dynamic shared-memory buffer as the emitter will lay it out.
+const NVRTC_SOURCE: &str = r#"
+#include "wp_tile.h"
+
+template <typename T>
+__device__ unsigned char* all_ops(const wp::array_t<T, 1>& a1, const wp::array_t<T, 2>& a2,
+                                  unsigned char* at, wp::ctx_t* c) {
+  wp::tile_t<T, 300> t(at);
+  at += (wp::tile_t<T, 300>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 5, 7> u(at);
+  at += (wp::tile_t<T, 5, 7>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 5, 7> v(at);
+  at += (wp::tile_t<T, 5, 7>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 1> r(at);
+  at += 16;
+  wp::tile_load(t, a1, (wp::i64)-3, c);
+  wp::tile_load(u, a2, -1, (wp::u64)2, c);
+  wp::tile_zeros(v);
+  wp::tile_ones(v);
+  wp::tile_add(v, u, v);
+  wp::tile_sub(v, v, (T)2);
+  wp::tile_mul(v, (T)3, v);
+  wp::tile_map(u, v, [](T x) { return x; });
+  wp::tile_sum(r, t);
+  wp::tile_min(r, u);
+  wp::tile_max(r, t);
+  wp::tile_store(a2, 1, -2, v, c);
+  wp::tile_store(a1, (wp::i64)7, t, c);
+  wp::tile_t<T, 300> w(at);
+  at += (wp::tile_t<T, 300>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_arange(w, (T)1, (T)3);
+  return at;
+}
+
+template <typename T>
+__device__ unsigned char* matmuls(unsigned char* at) {
+  wp::tile_t<T, 7, 13> a(at);
+  at += (wp::tile_t<T, 7, 13>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 13, 5> b(at);
+  at += (wp::tile_t<T, 13, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 7, 5> p(at);
+  at += (wp::tile_t<T, 7, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_ones(a);
+  wp::tile_ones(b);
+  wp::tile_matmul(p, a, b);
+  wp::tile_matmul_acc(p, a, b);
+  return at;
+}
+
+extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
+    tile_all(wp::array_t<float, 1> f1, wp::array_t<float, 2> f2, wp::array_t<double, 1> d1,
+             wp::array_t<double, 2> d2, wp::array_t<int, 1> i1, wp::array_t<int, 2> i2,
+             wp::fault_t* fault, wp::u32* flag) {
+  extern __shared__ __align__(16) unsigned char smem[];
+  wp::ctx_t c = wp::ctx_make(fault, flag);
+  unsigned char* at = smem;
+  at = all_ops(f1, f2, at, &c);
+  at = all_ops(d1, d2, at, &c);
+  at = all_ops(i1, i2, at, &c);
+  at = matmuls<float>(at);
+  at = matmuls<double>(at);
+}
+"#;
+
+/// `wp_tile.h` compiles with NVRTC, without warnings, for block sizes that fill warps and one
+/// that does not, on the benchmarks' GPUs (sm_90) and an older one (sm_80), as the tile
+/// section's units will (no FMA contraction). Needs only libnvrtc, no GPU; skipped, saying so,
+/// without it.
+#[test]
+fn nvrtc_compiles_the_tile_library() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED nvrtc_compiles_the_tile_library: {e}");
+        return;
+    }
+    for bd in ["45", "128", "1024"] {
+        let defines = [("WP_TILE_BLOCK_DIM", bd)];
+        let opts = warp_cuda::CompileOptions {
+            fmad: false,
+            defines: &defines,
+            headers: warp_cuda::HEADERS,
+            ..Default::default()
+        };
+        for arch in [90, 80] {
+            let c = warp_cuda::compile(NVRTC_SOURCE, "tile_all.cu", &opts, arch)
+                .unwrap_or_else(|e| panic!("block size {bd}, sm_{arch}: {e}"));
+            assert!(!c.cubin.is_empty());
+            assert!(
+                !c.log.contains("warning"),
+                "block size {bd}, sm_{arch}: {}",
+                c.log
+            );
+        }
+    }
+}

@@ -1,0 +1,356 @@
+// wp_tile_driver.cpp: runs wp_tile.h's operations on the host, one block under the emulator
+// (tests/cuda_tile_host.rs writes the script, compiles this file for several block sizes with
+// -DWP_TILE_BLOCK_DIM=<bd>, and compares the output with warp-core's tile functions).
+//
+// Script (argv[1]), one command per line:
+//   arr KIND SLOT N0 [N1] HEX   an array argument (KIND f1 f2 d1 d2 i1: f32 / f64 / i32, rank
+//                               1 or 2), row-major and contiguous; HEX its bytes ('-': none)
+//   off O0 O1 O2 O3             the offsets (i64) the next run uses
+//   scal HEX HEX HEX            three f32 scalars (bit patterns, 8 hex digits each)
+//   run KERNEL                  one block of WP_TILE_BLOCK_DIM threads; prints `out HEX` (what
+//                               the kernel wrote) and `fault KIND` or `nofault`
+//   dump KIND SLOT              prints `dump HEX`: the array's bytes now
+#include "wp_prim_emu.h"
+#include "wp_tile.h"
+
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+using wp::f32;
+using wp::f64;
+using wp::i32;
+using wp::i64;
+using wp::tile_t;
+
+struct args_t {
+  wp::array_t<f32, 1> f1[2];
+  wp::array_t<f32, 2> f2[3];
+  wp::array_t<f64, 1> d1[1];
+  wp::array_t<f64, 2> d2[2];
+  wp::array_t<i32, 1> i1[2];
+  i64 o[4];
+  f32 s[3];
+  unsigned char* out;
+  wp::fault_t* fault;
+  wp::u32* flag;
+};
+
+/// A block's shared memory (static storage: the emulator runs one block at a time). Each
+/// kernel carves its slots from the start in the same order in every thread, as the emitter's
+/// constant offsets will.
+alignas(16) static unsigned char smem[64 * 1024];
+
+template <typename Tile>
+Tile slot_at(size_t& at) {
+  at = (at + 15) & ~(size_t)15;
+  Tile t(smem + at);
+  at += Tile::BYTES;
+  if (at > sizeof(smem)) std::abort();
+  return t;
+}
+#define SLOTS_BEGIN() \
+  size_t smem_at_ = 0; \
+  (void)smem_at_
+#define SLOT(...) slot_at<__VA_ARGS__>(smem_at_)
+
+/// Thread 0 appends `t`'s bytes to the output (after the operation's closing barrier), and the
+/// block waits for it before anything overwrites the slot.
+template <typename Tile>
+void dump(const args_t& a, size_t& at, const Tile& t) {
+  if (threadIdx.x == 0) std::memcpy(a.out + at, t.data, Tile::BYTES);
+  at += Tile::BYTES;
+  __syncthreads();
+}
+
+static void k_load1(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 37>);
+  wp::tile_load(t, a.f1[0], a.o[0], &c);
+  wp::tile_store(a.f1[1], a.o[1], t, &c);
+  size_t at = 0;
+  dump(a, at, t);
+}
+
+static void k_load2(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 5, 7>);
+  wp::tile_load(t, a.f2[0], a.o[0], a.o[1], &c);
+  wp::tile_store(a.f2[1], a.o[2], a.o[3], t, &c);
+  size_t at = 0;
+  dump(a, at, t);
+}
+
+/// sum, min, max of `t` (already loaded), appended to the output.
+template <typename Tile>
+static void reductions(const args_t& a, size_t& smem_at_, const Tile& t) {
+  typedef typename Tile::elem_t T;
+  auto s = SLOT(tile_t<T, 1>);
+  auto lo = SLOT(tile_t<T, 1>);
+  auto hi = SLOT(tile_t<T, 1>);
+  wp::tile_sum(s, t);
+  wp::tile_min(lo, t);
+  wp::tile_max(hi, t);
+  size_t at = 0;
+  dump(a, at, s);
+  dump(a, at, lo);
+  dump(a, at, hi);
+}
+
+static void k_red_f32_300(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 300>);
+  wp::tile_load(t, a.f1[0], 0, &c);
+  reductions(a, smem_at_, t);
+}
+
+static void k_red_f32_5(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 5>);
+  wp::tile_load(t, a.f1[0], 0, &c);
+  reductions(a, smem_at_, t);
+}
+
+static void k_red_f32_2d(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 13, 11>);
+  wp::tile_load(t, a.f2[0], 0, 0, &c);
+  reductions(a, smem_at_, t);
+}
+
+static void k_red_i32(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<i32, 200>);
+  wp::tile_load(t, a.i1[0], 0, &c);
+  reductions(a, smem_at_, t);
+}
+
+static void k_red_f64(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f64, 150>);
+  wp::tile_load(t, a.d1[0], 0, &c);
+  reductions(a, smem_at_, t);
+}
+
+/// `+ - *` of tiles and scalars, the constructors, and an in-place update, over two 40-element
+/// arrays of T and the scalars (f32 bit patterns, read as T's bits for i32).
+template <typename T>
+static void arith(const args_t& a, const wp::array_t<T, 1>& ax, const wp::array_t<T, 1>& ay) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  typedef tile_t<T, 40> T40;
+  static_assert(sizeof(T) == 4, "scalars are 32-bit patterns");
+  T s[3];
+  std::memcpy(s, a.s, sizeof(s));
+  auto x = SLOT(T40);
+  auto y = SLOT(T40);
+  auto r = SLOT(T40);
+  wp::tile_load(x, ax, 0, &c);
+  wp::tile_load(y, ay, 0, &c);
+  size_t at = 0;
+  wp::tile_add(r, x, y);
+  dump(a, at, r);
+  wp::tile_sub(r, x, y);
+  dump(a, at, r);
+  wp::tile_mul(r, x, y);
+  dump(a, at, r);
+  wp::tile_add(r, x, s[0]);
+  dump(a, at, r);
+  wp::tile_sub(r, s[0], x);
+  dump(a, at, r);
+  wp::tile_mul(r, x, s[0]);
+  dump(a, at, r);
+  wp::tile_zeros(r);
+  dump(a, at, r);
+  wp::tile_ones(r);
+  dump(a, at, r);
+  wp::tile_arange(r, s[1], s[2]);
+  dump(a, at, r);
+  // In place: x = x * y - x (each element read and written by one thread).
+  wp::tile_mul(r, x, y);
+  wp::tile_sub(x, r, x);
+  dump(a, at, x);
+}
+
+static void k_arith(args_t a) { arith(a, a.f1[0], a.f1[1]); }
+static void k_arith_i32(args_t a) { arith(a, a.i1[0], a.i1[1]); }
+
+static void k_matmul_f32(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto ta = SLOT(tile_t<f32, 7, 13>);
+  auto tb = SLOT(tile_t<f32, 13, 5>);
+  auto tc = SLOT(tile_t<f32, 7, 5>);
+  auto tp = SLOT(tile_t<f32, 7, 5>);
+  wp::tile_load(ta, a.f2[0], 0, 0, &c);
+  wp::tile_load(tb, a.f2[1], 0, 0, &c);
+  wp::tile_load(tc, a.f2[2], 0, 0, &c);
+  wp::tile_matmul(tp, ta, tb);
+  wp::tile_matmul_acc(tc, ta, tb);
+  size_t at = 0;
+  dump(a, at, tp);
+  dump(a, at, tc);
+}
+
+static void k_matmul_f64(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto ta = SLOT(tile_t<f64, 3, 4>);
+  auto tb = SLOT(tile_t<f64, 4, 6>);
+  auto tp = SLOT(tile_t<f64, 3, 6>);
+  wp::tile_load(ta, a.d2[0], 0, 0, &c);
+  wp::tile_load(tb, a.d2[1], 0, 0, &c);
+  wp::tile_matmul(tp, ta, tb);
+  size_t at = 0;
+  dump(a, at, tp);
+}
+
+namespace {
+
+struct buffer {
+  std::vector<unsigned long long> words;  // 8-byte aligned storage
+  size_t bytes = 0;
+  unsigned char* data() { return reinterpret_cast<unsigned char*>(words.data()); }
+};
+
+int hexval(char c) {
+  if (c >= '0' && c <= '9') return c - '0';
+  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+  return c - 'A' + 10;
+}
+
+void unhex(const std::string& hex, buffer& b) {
+  b.bytes = hex == "-" ? 0 : hex.size() / 2;
+  b.words.assign(b.bytes / 8 + 1, 0);
+  for (size_t k = 0; k < b.bytes; ++k)
+    b.data()[k] = (unsigned char)(hexval(hex[2 * k]) * 16 + hexval(hex[2 * k + 1]));
+}
+
+void print_hex(const char* tag, const unsigned char* p, size_t n) {
+  std::printf("%s ", tag);
+  for (size_t k = 0; k < n; ++k) std::printf("%02x", p[k]);
+  std::printf("\n");
+}
+
+/// Points array argument `arr` at `b` with the given shape (row-major, contiguous).
+template <typename T, int N>
+void bind(wp::array_t<T, N>& arr, buffer& b, const i64* shape, int index) {
+  arr.data = reinterpret_cast<T*>(b.data());
+  i64 stride = (i64)sizeof(T);
+  for (int k = N - 1; k >= 0; --k) {
+    arr.shape[k] = shape[k];
+    arr.strides[k] = stride;
+    stride *= shape[k];
+  }
+  arr.arg = index;
+  arr.pad = 0;
+}
+
+int run(const char* path) {
+  std::ifstream in(path);
+  if (!in) {
+    std::fprintf(stderr, "cannot open %s\n", path);
+    return 2;
+  }
+  std::map<std::string, buffer> bufs;
+  std::vector<unsigned char> out(64 * 1024);
+  wp::fault_t fault{};
+  wp::u32 flag[2] = {0, 0};
+  args_t a{};
+  a.out = out.data();
+  a.fault = &fault;
+  a.flag = &flag[0];
+  std::map<std::string, void (*)(args_t)> kernels = {
+      {"load1", k_load1},         {"load2", k_load2},           {"red_f32_300", k_red_f32_300},
+      {"red_f32_5", k_red_f32_5}, {"red_f32_2d", k_red_f32_2d}, {"red_i32", k_red_i32},
+      {"red_f64", k_red_f64},     {"arith", k_arith},           {"matmul_f32", k_matmul_f32},
+      {"matmul_f64", k_matmul_f64}, {"arith_i32", k_arith_i32},
+  };
+  std::map<std::string, size_t> out_bytes = {
+      {"load1", 37 * 4},   {"load2", 35 * 4},   {"red_f32_300", 12}, {"red_f32_5", 12},
+      {"red_f32_2d", 12},  {"red_i32", 12},     {"red_f64", 24},     {"arith", 10 * 160},
+      {"matmul_f32", 280}, {"matmul_f64", 144}, {"arith_i32", 10 * 160},
+  };
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream ss(line);
+    std::string cmd;
+    ss >> cmd;
+    if (cmd.empty()) continue;
+    if (cmd == "arr") {
+      std::string kind, hex;
+      int slot;
+      i64 shape[2] = {0, 1};
+      ss >> kind >> slot >> shape[0];
+      const bool two = kind[1] == '2';
+      if (two) ss >> shape[1];
+      ss >> hex;
+      buffer& b = bufs[kind + std::to_string(slot)];
+      unhex(hex, b);
+      const int arg = slot + 10 * (int)(kind[0] - 'a');
+      if (kind == "f1") bind(a.f1[slot], b, shape, arg);
+      else if (kind == "f2") bind(a.f2[slot], b, shape, arg);
+      else if (kind == "d1") bind(a.d1[slot], b, shape, arg);
+      else if (kind == "d2") bind(a.d2[slot], b, shape, arg);
+      else if (kind == "i1") bind(a.i1[slot], b, shape, arg);
+      else return 2;
+    } else if (cmd == "off") {
+      ss >> a.o[0] >> a.o[1] >> a.o[2] >> a.o[3];
+    } else if (cmd == "scal") {
+      for (int k = 0; k < 3; ++k) {
+        std::string h;
+        ss >> h;
+        const wp::u32 bits = (wp::u32)std::stoul(h, nullptr, 16);
+        std::memcpy(&a.s[k], &bits, 4);
+      }
+    } else if (cmd == "run") {
+      std::string name;
+      ss >> name;
+      auto k = kernels.find(name);
+      if (k == kernels.end()) {
+        std::fprintf(stderr, "no kernel %s\n", name.c_str());
+        return 2;
+      }
+      std::fill(out.begin(), out.end(), (unsigned char)0xCD);
+      std::fill(smem, smem + sizeof(smem), (unsigned char)0xCD);
+      wp_emu::launch(k->second, 1, WP_TILE_BLOCK_DIM, a);
+      print_hex("out", out.data(), out_bytes.at(name));
+      if (flag[0]) {
+        std::printf("fault %d\n", fault.kind);
+        fault = wp::fault_t{};
+        flag[0] = 0;
+      } else {
+        std::printf("nofault\n");
+      }
+    } else if (cmd == "dump") {
+      std::string kind;
+      int slot;
+      ss >> kind >> slot;
+      buffer& b = bufs.at(kind + std::to_string(slot));
+      print_hex("dump", b.data(), b.bytes);
+    } else {
+      std::fprintf(stderr, "bad command %s\n", cmd.c_str());
+      return 2;
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: %s SCRIPT\n", argv[0]);
+    return 2;
+  }
+  return run(argv[1]);
+}

@@ -1,0 +1,409 @@
+// wp_tile.h: block-cooperative tiles (design slice 1, docs/design/tiles.md section 5), the CUDA
+// side of warp-core/src/tile/. Every result here must agree bit for bit with warp-core's for the
+// same block size: tests/cuda_tile_host.rs compiles this header with g++ under the block
+// emulator (warp-cuda/cuda/tests/wp_prim_emu.h) and compares.
+//
+// A tile `wp::tile_t<T, D0>` or `wp::tile_t<T, D0, D1>` is a pointer to a slot of shared memory
+// holding its elements in row-major order (the emitter hands out the slots; a tile never owns
+// storage). `WP_TILE_BLOCK_DIM`, the block size, is a compile-time define.
+//
+// Every operation is cooperative: every thread of the block calls it, with the same arguments,
+// under block-uniform control flow. It is a block-strided loop over the elements
+// (`for (i = threadIdx.x; i < SIZE; i += WP_TILE_BLOCK_DIM)`) and ends in `__syncthreads()`, so
+// its result is visible to every thread when it returns. An output tile may be an input of an
+// elementwise operation (each element is read and written by one thread); the output of a
+// matmul or a reduction is a slot of its own.
+//
+//   tile_zeros, tile_ones, tile_arange(out, start, step)   element i: start + T(i) * step (one
+//                        multiplication, then one addition, no accumulation; integers wrap)
+//   tile_load(out, a, o0[, o1]), tile_store(a, o0[, o1], t)   1-D and 2-D against arrays:
+//                        element (i, j) is a[o0 + i, o1 + j]; signed offsets (any integer type);
+//                        a coordinate outside the array (negative too) reads as T{} and its
+//                        store is skipped, neither is a fault. In-bounds accesses go through
+//                        the checked wp::load / wp::store (a corrupt array faults cleanly).
+//   tile_add, tile_sub, tile_mul(out, a, b)   tile with tile, tile with scalar, scalar with
+//                        tile: the builtins' arithmetic (IEEE for floats, wrapping for integers)
+//   tile_map(out, a, f)  f applied to each element
+//   tile_sum, tile_min, tile_max(out, t)   into a 1-element tile, in the order below
+//   tile_matmul(c, a, b), tile_matmul_acc(c, a, b)   FMA matmul (f32, f64), see below
+//
+// Reduction order (warp-core/src/tile/reduce.rs documents it; the two must stay the same). With
+// S elements, BD = WP_TILE_BLOCK_DIM and ACTIVE = min(S, BD) (the lanes that own an element):
+//   1. lane l < ACTIVE starts from element l and folds l + BD, l + 2 BD, .. in increasing order;
+//      lanes >= ACTIVE are empty;
+//   2. in each warp of 32 lanes, for offset = 16, 8, 4, 2, 1: lane i combines its partial (left)
+//      with lane i + offset's (`__shfl_down_sync`), when i + offset < 32 and that lane is not
+//      empty. Owners are a prefix of the lanes, so a lane whose partner is present is present
+//      itself and the empties need no flag; lanes of a partial warp (BD not a multiple of 32)
+//      shuffle under the mask of the lanes that exist;
+//   3. lane 0 of each non-empty warp writes its result to shared memory; thread 0 folds them in
+//      warp order (r = w0; r = op(r, w1); ..) and writes the 1-element output.
+// Sums use the builtins' + (IEEE, wrapping for integers); min and max the builtins' (a NaN
+// operand loses to a number: fminf/fmaxf).
+//
+// Matmul: output c[i][j] is one chain acc = fma(a[i][k], b[k][j], acc) over k = 0..K ascending,
+// starting from c[i][j] (tile_matmul_acc) or +0 (tile_matmul), with fmaf/fma: one rounding each,
+// whatever the compiler's contraction setting. The outputs are spread over the threads
+// block-strided; each is computed by one thread, so the block size does not change them.
+//
+// Host builds: include tests/wp_prim_emu.h first (it provides threadIdx, __syncthreads and
+// __shfl_down_sync for fibers); otherwise this header needs CUDA.
+//
+// Not yet here (later slices): the 16-byte vector path of loads and stores, ranks 3 and 4,
+// register tiles, argmin/argmax, scans, tensor cores. The header is not yet a kernel section
+// (no builtin names it until the emitter does), so nothing but the host test includes it.
+#pragma once
+
+#include "wp_core.h"
+
+#if !defined(WP_TILE_BLOCK_DIM)
+#error "wp_tile.h: define WP_TILE_BLOCK_DIM (the block size of the tiled launch)"
+#endif
+
+// WP_TILE_SHARED_ALIGNED: a block's shared variable aligned to 16 bytes, in a device function.
+#if defined(__CUDACC__)
+#define WP_TILE_SHARED_ALIGNED __shared__ __align__(16)
+#elif defined(WP_PRIM_EMULATOR)
+// One block runs at a time in the emulator: static storage is the block's shared memory.
+#define WP_TILE_SHARED_ALIGNED alignas(16) static
+#else
+#error "wp_tile.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
+#endif
+
+namespace wp {
+
+constexpr int TILE_BLOCK_DIM = WP_TILE_BLOCK_DIM;
+static_assert(TILE_BLOCK_DIM >= 1 && TILE_BLOCK_DIM <= 1024, "block size in 1..=1024");
+
+/// A tile of shape D... (rank 1 or 2 for now) over a slot of shared memory.
+template <typename T, int... D>
+struct tile_t {
+  static_assert(sizeof...(D) >= 1 && sizeof...(D) <= 2, "tiles of rank 1 and 2 (slice 1)");
+  static_assert(((D > 0) && ...), "a tile has at least one element on every axis");
+  static constexpr int RANK = (int)sizeof...(D);
+  static constexpr int SIZE = (D * ...);
+  /// The bytes of a slot.
+  static constexpr usize BYTES = sizeof(T) * (usize)SIZE;
+  typedef T elem_t;
+  /// The elements, row-major.
+  T* data;
+  WP_FN explicit tile_t(void* slot) : data(static_cast<T*>(slot)) {}
+};
+
+namespace tile_detail {
+
+/// Coordinate `o + i` of an axis of extent `n`, when it lies inside `0..n`: the exact
+/// coordinate, without i64 overflow for any offset (warp-core widens to i128).
+template <typename O>
+WP_FN bool coord(O o, int i, i64 n, i64* c) {
+  if constexpr (num<O>::is_signed) {
+    const i64 s = (i64)o;
+    if (s >= 0) {
+      if (s >= n || (i64)i >= n - s) return false;
+      *c = s + (i64)i;
+      return true;
+    }
+    // s < 0: o + i >= 0 iff i >= -s (as u64: -i64::MIN is 2^63).
+    const u64 neg = 0ull - (u64)s;
+    if ((u64)i < neg) return false;
+    const u64 v = (u64)i - neg;
+    if (v >= (u64)n) return false;
+    *c = (i64)v;
+    return true;
+  } else {
+    const u64 u = (u64)o;
+    if (n <= 0 || u >= (u64)n || (u64)i >= (u64)n - u) return false;
+    *c = (i64)(u + (u64)i);
+    return true;
+  }
+}
+
+/// The builtins' min and max (wp_scalar.h's; repeated here so that the header needs only the
+/// core): IEEE fmin/fmax for floats (a NaN operand loses), `<` for integers.
+WP_FN f32 tmin(f32 a, f32 b) { return ::fminf(a, b); }
+WP_FN f32 tmax(f32 a, f32 b) { return ::fmaxf(a, b); }
+WP_FN f64 tmin(f64 a, f64 b) { return ::fmin(a, b); }
+WP_FN f64 tmax(f64 a, f64 b) { return ::fmax(a, b); }
+template <typename T>
+WP_FN T tmin(T a, T b) {
+  return b < a ? b : a;
+}
+template <typename T>
+WP_FN T tmax(T a, T b) {
+  return a < b ? b : a;
+}
+
+struct add_op {
+  template <typename T>
+  WP_FN T operator()(T a, T b) const {
+    return detail::s_add(a, b);
+  }
+};
+struct sub_op {
+  template <typename T>
+  WP_FN T operator()(T a, T b) const {
+    return detail::s_sub(a, b);
+  }
+};
+struct mul_op {
+  template <typename T>
+  WP_FN T operator()(T a, T b) const {
+    return detail::s_mul(a, b);
+  }
+};
+struct min_op {
+  template <typename T>
+  WP_FN T operator()(T a, T b) const {
+    return tmin(a, b);
+  }
+};
+struct max_op {
+  template <typename T>
+  WP_FN T operator()(T a, T b) const {
+    return tmax(a, b);
+  }
+};
+
+/// `__shfl_down_sync` for the element types: the 32- and 64-bit types CUDA overloads, and the
+/// narrower integers through 32 bits.
+WP_FN f32 shfl_down(unsigned mask, f32 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_FN f64 shfl_down(unsigned mask, f64 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_FN i32 shfl_down(unsigned mask, i32 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_FN u32 shfl_down(unsigned mask, u32 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_FN i64 shfl_down(unsigned mask, i64 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_FN u64 shfl_down(unsigned mask, u64 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_FN i8 shfl_down(unsigned mask, i8 v, int off) { return (i8)__shfl_down_sync(mask, (i32)v, off); }
+WP_FN i16 shfl_down(unsigned mask, i16 v, int off) { return (i16)__shfl_down_sync(mask, (i32)v, off); }
+WP_FN u8 shfl_down(unsigned mask, u8 v, int off) { return (u8)__shfl_down_sync(mask, (u32)v, off); }
+WP_FN u16 shfl_down(unsigned mask, u16 v, int off) { return (u16)__shfl_down_sync(mask, (u32)v, off); }
+
+/// `t`'s elements reduced with `op` in the order of the header comment, into `out.data[0]`.
+template <typename T, int... D, typename Op>
+WP_FN void reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op) {
+  constexpr int S = tile_t<T, D...>::SIZE;
+  constexpr int BD = TILE_BLOCK_DIM;
+  constexpr int ACTIVE = S < BD ? S : BD;
+  constexpr int WARPS = (ACTIVE + 31) / 32;
+  // The warps' results, in warp order.
+  WP_TILE_SHARED_ALIGNED unsigned char warp_bytes[32 * sizeof(T)];
+  T* warp_part = reinterpret_cast<T*>(warp_bytes);
+  const int l = (int)threadIdx.x;
+  // 1. The lane's partial (T{} and unused when the lane is empty).
+  T p{};
+  if (l < ACTIVE) {
+    p = t.data[l];
+    for (int e = l + BD; e < S; e += BD) p = op(p, t.data[e]);
+  }
+  // 2. The warp's tree. Every thread of the block takes part (the mask names the lanes of its
+  // warp that exist); a lane combines only with a present partner.
+  const int lane = l & 31;
+  const int base = l - lane;
+  const int exist = BD - base < 32 ? BD - base : 32;
+  const unsigned mask = exist == 32 ? 0xffffffffu : ((1u << exist) - 1u);
+  for (int off = 16; off > 0; off >>= 1) {
+    const T q = shfl_down(mask, p, off);
+    if (lane + off < 32 && base + lane + off < ACTIVE) p = op(p, q);
+  }
+  if (lane == 0 && base < ACTIVE) warp_part[base / 32] = p;
+  __syncthreads();
+  // 3. Thread 0 folds the warps in order.
+  if (l == 0) {
+    T r = warp_part[0];
+    for (int w = 1; w < WARPS; ++w) r = op(r, warp_part[w]);
+    out.data[0] = r;
+  }
+  __syncthreads();
+}
+
+}  // namespace tile_detail
+
+// ------------------------------------------------------------------------------------------
+// Constructors
+// ------------------------------------------------------------------------------------------
+
+/// Every element `v`.
+template <typename T, int... D>
+WP_FN void tile_fill(const tile_t<T, D...>& out, T v) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM) out.data[i] = v;
+  __syncthreads();
+}
+
+/// `tile_zeros`.
+template <typename T, int... D>
+WP_FN void tile_zeros(const tile_t<T, D...>& out) {
+  tile_fill(out, (T)0);
+}
+
+/// `tile_ones`.
+template <typename T, int... D>
+WP_FN void tile_ones(const tile_t<T, D...>& out) {
+  tile_fill(out, (T)1);
+}
+
+/// `tile_arange`: element i is `start + T(i) * step` (warp-core's `Tile1::arange`).
+template <typename T, int N0>
+WP_FN void tile_arange(const tile_t<T, N0>& out, T start, T step) {
+  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM)
+    out.data[i] = detail::s_add(start, detail::s_mul(cast<T>((i64)i), step));
+  __syncthreads();
+}
+
+// ------------------------------------------------------------------------------------------
+// Loads and stores
+// ------------------------------------------------------------------------------------------
+
+/// `tile_load(a, o)`: element i is `a[o + i]`, or T{} where that is outside the array.
+template <typename T, int N0, typename O>
+WP_FN void tile_load(const tile_t<T, N0>& out, const array_t<T, 1>& a, O o, ctx_t* ctx) {
+  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+    i64 c;
+    out.data[i] = tile_detail::coord(o, i, a.shape[0], &c) ? load(a, c, ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_load(a, (o0, o1))`: element (i, j) is `a[o0 + i, o1 + j]`, or T{} outside the array.
+template <typename T, int N0, int N1, typename O0, typename O1>
+WP_FN void tile_load(const tile_t<T, N0, N1>& out, const array_t<T, 2>& a, O0 o0, O1 o1,
+                     ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+    const int i = e / N1, j = e % N1;
+    i64 c0, c1;
+    const bool in = tile_detail::coord(o0, i, a.shape[0], &c0) &&
+                    tile_detail::coord(o1, j, a.shape[1], &c1);
+    out.data[e] = in ? load(a, c0, c1, ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, o, t)`: `a[o + i] = t[i]` where `o + i` is inside the array; the rest is
+/// skipped.
+template <typename T, int N0, typename O>
+WP_FN void tile_store(const array_t<T, 1>& a, O o, const tile_t<T, N0>& t, ctx_t* ctx) {
+  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+    i64 c;
+    if (tile_detail::coord(o, i, a.shape[0], &c)) store(a, c, t.data[i], ctx);
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, (o0, o1), t)`: `a[o0 + i, o1 + j] = t[i, j]` inside the array; the rest is
+/// skipped.
+template <typename T, int N0, int N1, typename O0, typename O1>
+WP_FN void tile_store(const array_t<T, 2>& a, O0 o0, O1 o1, const tile_t<T, N0, N1>& t,
+                      ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+    const int i = e / N1, j = e % N1;
+    i64 c0, c1;
+    if (tile_detail::coord(o0, i, a.shape[0], &c0) && tile_detail::coord(o1, j, a.shape[1], &c1))
+      store(a, c0, c1, t.data[e], ctx);
+  }
+  __syncthreads();
+}
+
+// ------------------------------------------------------------------------------------------
+// Elementwise
+// ------------------------------------------------------------------------------------------
+
+/// `tile_map(f, a)`: `out[i] = f(a[i])`.
+template <typename T, typename U, int... D, typename F>
+WP_FN void tile_map(const tile_t<U, D...>& out, const tile_t<T, D...>& a, F f) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)
+    out.data[i] = f(a.data[i]);
+  __syncthreads();
+}
+
+#define WP_TILE_BINARY(NAME, OP)                                                              \
+  /* tile with tile */                                                                        \
+  template <typename T, int... D>                                                             \
+  WP_FN void NAME(const tile_t<T, D...>& out, const tile_t<T, D...>& a,                       \
+                  const tile_t<T, D...>& b) {                                                 \
+    for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)         \
+      out.data[i] = OP{}(a.data[i], b.data[i]);                                               \
+    __syncthreads();                                                                          \
+  }                                                                                           \
+  /* tile with scalar */                                                                      \
+  template <typename T, int... D>                                                             \
+  WP_FN void NAME(const tile_t<T, D...>& out, const tile_t<T, D...>& a,                       \
+                  typename identity<T>::type s) {                                             \
+    for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)         \
+      out.data[i] = OP{}(a.data[i], s);                                                       \
+    __syncthreads();                                                                          \
+  }                                                                                           \
+  /* scalar with tile */                                                                      \
+  template <typename T, int... D>                                                             \
+  WP_FN void NAME(const tile_t<T, D...>& out, typename identity<T>::type s,                   \
+                  const tile_t<T, D...>& b) {                                                 \
+    for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)         \
+      out.data[i] = OP{}(s, b.data[i]);                                                       \
+    __syncthreads();                                                                          \
+  }
+WP_TILE_BINARY(tile_add, tile_detail::add_op)
+WP_TILE_BINARY(tile_sub, tile_detail::sub_op)
+WP_TILE_BINARY(tile_mul, tile_detail::mul_op)
+#undef WP_TILE_BINARY
+
+// ------------------------------------------------------------------------------------------
+// Reductions
+// ------------------------------------------------------------------------------------------
+
+/// `tile_sum`.
+template <typename T, int... D>
+WP_FN void tile_sum(const tile_t<T, 1>& out, const tile_t<T, D...>& t) {
+  tile_detail::reduce(out, t, tile_detail::add_op{});
+}
+
+/// `tile_min`.
+template <typename T, int... D>
+WP_FN void tile_min(const tile_t<T, 1>& out, const tile_t<T, D...>& t) {
+  tile_detail::reduce(out, t, tile_detail::min_op{});
+}
+
+/// `tile_max`.
+template <typename T, int... D>
+WP_FN void tile_max(const tile_t<T, 1>& out, const tile_t<T, D...>& t) {
+  tile_detail::reduce(out, t, tile_detail::max_op{});
+}
+
+/// `tile_reduce(op, t)` with a user's combining function `op(earlier, later)`.
+template <typename T, int... D, typename Op>
+WP_FN void tile_reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op) {
+  tile_detail::reduce(out, t, op);
+}
+
+// ------------------------------------------------------------------------------------------
+// Matmul (FMA)
+// ------------------------------------------------------------------------------------------
+
+namespace tile_detail {
+WP_FN f32 fma_(f32 a, f32 b, f32 c) { return ::fmaf(a, b, c); }
+WP_FN f64 fma_(f64 a, f64 b, f64 c) { return ::fma(a, b, c); }
+
+template <bool Acc, typename T, int M, int K, int N>
+WP_FN void matmul(const tile_t<T, M, N>& c, const tile_t<T, M, K>& a, const tile_t<T, K, N>& b) {
+  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
+    const int i = e / N, j = e % N;
+    T acc = Acc ? c.data[e] : (T)0;
+    for (int k = 0; k < K; ++k) acc = fma_(a.data[i * K + k], b.data[k * N + j], acc);
+    c.data[e] = acc;
+  }
+  __syncthreads();
+}
+}  // namespace tile_detail
+
+/// `c += a . b` (Warp's `tile_matmul(a, b, out)`): each output an ascending-k FMA chain from
+/// its value. `c` is a slot of its own (neither `a` nor `b`).
+template <typename T, int M, int K, int N>
+WP_FN void tile_matmul_acc(const tile_t<T, M, N>& c, const tile_t<T, M, K>& a,
+                           const tile_t<T, K, N>& b) {
+  tile_detail::matmul<true>(c, a, b);
+}
+
+/// `c = a . b`: the FMA chains from +0.
+template <typename T, int M, int K, int N>
+WP_FN void tile_matmul(const tile_t<T, M, N>& c, const tile_t<T, M, K>& a,
+                       const tile_t<T, K, N>& b) {
+  tile_detail::matmul<false>(c, a, b);
+}
+
+}  // namespace wp
