@@ -117,13 +117,20 @@ fn diagnostics_go_to_log() {
 
     // Device selection, with the reason when it falls back to the CPU.
     let preferred = wp::get_preferred_device();
-    let said = find(
-        "warp_runtime::device",
-        log::Level::Info,
-        &format!("preferred device: \"{}\"", preferred.alias()),
-    );
-    if preferred.is_cpu() {
-        assert!(said.message.contains("no CUDA device"), "{said:?}");
+    let wanted = format!("preferred device: \"{}\"", preferred.alias());
+    match wp::cpu_fallback_reason() {
+        // A GPU without NVRTC (or `WARP_LANG_NO_NVRTC` set): a warning naming the GPU passed
+        // over and why.
+        Some(why) => {
+            let said = find("warp_runtime::device", log::Level::Warn, &wanted);
+            assert!(said.message.contains(&why), "{said:?}");
+        }
+        None => {
+            let said = find("warp_runtime::device", log::Level::Info, &wanted);
+            if preferred.is_cpu() {
+                assert!(said.message.contains("no CUDA device"), "{said:?}");
+            }
+        }
     }
 
     // CPU launches are the hot path: no record at any level, even with trace enabled.
@@ -172,6 +179,11 @@ fn gpu_records() {
             return;
         }
     };
+    // These records are of a compile: without NVRTC there is none to log.
+    if let Some(why) = wp::cpu_fallback_reason() {
+        eprintln!("SKIPPED logging::gpu_records: {why}");
+        return;
+    }
     // An empty cache, so that the kernel is compiled here.
     let dir = TempDir::new("gpu");
     warp_cuda::set_cache_dir(Some(dir.0.clone()));
