@@ -398,6 +398,174 @@ fn reductions_match_warp_core_bit_for_bit() {
     }
 }
 
+/// `[argmin, argmax]` of `t` for block size `bd`, as warp-core computes them, checked first
+/// against the plain definition: the first index of the extremum among the numbers (NaNs only
+/// when all are, index 0 then; `-0` ties with `+0`).
+fn arg_reductions<X: Tile<Elem: warp_core::builtins::Scalar>>(t: &X, bd: usize) -> Vec<u8> {
+    let x = t.as_flat();
+    #[allow(clippy::eq_op)] // `v == v` is false exactly for NaN
+    let first = |better: &dyn Fn(&X::Elem, &X::Elem) -> bool| {
+        let mut best: Option<usize> = None;
+        for (e, v) in x.iter().enumerate() {
+            if v == v && best.is_none_or(|b| better(v, &x[b])) {
+                best = Some(e);
+            }
+        }
+        best.unwrap_or(0) as i32
+    };
+    let (lo, hi) = (tile::argmin(t, bd).data[0], tile::argmax(t, bd).data[0]);
+    assert_eq!(
+        lo,
+        first(&|a, b| a < b),
+        "warp-core argmin, block size {bd}"
+    );
+    assert_eq!(
+        hi,
+        first(&|a, b| a > b),
+        "warp-core argmax, block size {bd}"
+    );
+    bytes(&[lo, hi])
+}
+
+#[test]
+fn argmin_argmax_match_warp_core() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x5eed_0005);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<Vec<u8>>, String)> = Vec::new();
+    let per_bd = |f: &dyn Fn(usize) -> Vec<u8>| BLOCK_DIMS.iter().map(|&bd| f(bd)).collect();
+    let nan = f32::NAN;
+
+    // Tile1<f32, 300> (arrays shorter than 300 are zero padded: the padding ties).
+    let mut cases: Vec<(Vec<f32>, &str)> = Vec::new();
+    let mut ties: Vec<f32> = (0..300).map(|_| rng.f32()).collect();
+    for e in [299, 37, 200, 5, 133] {
+        ties[e] = -500.0;
+    }
+    for e in [250, 64, 31, 290] {
+        ties[e] = 500.0;
+    }
+    cases.push((ties, "ties across lanes and warps"));
+    let mut nans: Vec<f32> = (0..300).map(|_| rng.f32()).collect();
+    for e in (0..300).step_by(7) {
+        nans[e] = nan;
+    }
+    nans[1] = -f32::NAN;
+    cases.push((nans, "NaNs, one at index 0"));
+    let mut nan_extreme = vec![nan; 300];
+    nan_extreme[299] = 1.0;
+    nan_extreme[150] = 1.0;
+    nan_extreme[45] = -1.0;
+    cases.push((nan_extreme, "NaNs but three"));
+    cases.push((vec![nan; 300], "all NaN"));
+    let mut all_neg_nan = vec![-f32::NAN; 300];
+    all_neg_nan[17] = f32::from_bits(0x7fc0_0001);
+    cases.push((all_neg_nan, "all NaN, mixed signs and payloads"));
+    let zeros: Vec<f32> = (0..300)
+        .map(|e| if e % 3 == 1 { -0.0 } else { 0.0 })
+        .collect();
+    cases.push((zeros, "+0 and -0"));
+    let neg_first: Vec<f32> = (0..300)
+        .map(|e| if e % 5 == 0 { -0.0 } else { 1.0 })
+        .collect();
+    cases.push((neg_first, "-0 first, ties with ones"));
+    let mut inf = vec![f32::INFINITY; 300];
+    inf[100] = f32::NEG_INFINITY;
+    inf[3] = nan;
+    cases.push((inf, "infinities"));
+    cases.push(((0..77).map(|_| rng.f32()).collect(), "77 random, padded"));
+    cases.push((
+        (0..300).map(|_| (rng.next() % 4) as f32 - 1.5).collect(),
+        "four values, many ties",
+    ));
+    for (x, what) in &cases {
+        let mut x = x.clone();
+        let n = x.len();
+        script.arr("f1", 0, &[n], &x);
+        script.run("arg_f32_300");
+        let t: Tile1<f32, 300> = tile::load1(&view(&mut x, [n]), 0).unwrap();
+        want.push((
+            per_bd(&|bd| arg_reductions(&t, bd)),
+            format!("f32 x300 {what}"),
+        ));
+    }
+    // Tile1<f32, 5>: fewer elements than lanes.
+    for x in [
+        [nan, 2.0, -1.0, -1.0, 2.0],
+        [nan; 5],
+        [0.0, -0.0, nan, -0.0, 0.0],
+        [3.0, nan, 3.0, 3.0, nan],
+    ] {
+        let mut x = x.to_vec();
+        script.arr("f1", 0, &[5], &x);
+        script.run("arg_f32_5");
+        let t: Tile1<f32, 5> = tile::load1(&view(&mut x, [5]), 0).unwrap();
+        want.push((
+            per_bd(&|bd| arg_reductions(&t, bd)),
+            format!("f32 x5 {x:?}"),
+        ));
+    }
+    // Tile2<f32, 13, 11>: row-major indices over two axes.
+    for k in 0..3 {
+        let mut x: Vec<f32> = (0..143).map(|_| (rng.next() % 9) as f32).collect();
+        if k == 1 {
+            x.iter_mut().step_by(4).for_each(|v| *v = nan);
+        }
+        if k == 2 {
+            x = vec![nan; 143];
+        }
+        script.arr("f2", 0, &[13, 11], &x);
+        script.run("arg_f32_2d");
+        let t: Tile2<f32, 13, 11> = tile::load2(&view(&mut x, [13, 11]), 0, 0).unwrap();
+        want.push((
+            per_bd(&|bd| arg_reductions(&t, bd)),
+            format!("f32 13x11 case {k}"),
+        ));
+    }
+    // Tile1<i32, 200>: ties, and the extremes of i32.
+    for k in 0..4 {
+        let mut x: Vec<i32> = match k {
+            0 => (0..200).map(|_| (rng.next() % 5) as i32 - 2).collect(),
+            1 => (0..200).map(|_| rng.next() as i32).collect(),
+            2 => vec![7; 200],
+            _ => (0..200)
+                .map(|e| match e % 3 {
+                    0 => i32::MAX,
+                    1 => i32::MIN,
+                    _ => 0,
+                })
+                .rev()
+                .collect(),
+        };
+        if k == 1 {
+            x[190] = i32::MIN;
+            x[60] = i32::MIN;
+            x[33] = i32::MAX;
+            x[199] = i32::MAX;
+        }
+        script.arr("i1", 0, &[200], &x);
+        script.run("arg_i32");
+        let t: Tile1<i32, 200> = tile::load1(&view(&mut x, [200]), 0).unwrap();
+        want.push((
+            per_bd(&|bd| arg_reductions(&t, bd)),
+            format!("i32 case {k}"),
+        ));
+    }
+
+    for (i, bd) in BLOCK_DIMS.into_iter().enumerate() {
+        let got = script.exec(bd);
+        for (k, (w, what)) in want.iter().enumerate() {
+            assert_eq!(
+                typed::<i32>(&got[k]),
+                typed::<i32>(&w[i]),
+                "{what}, block size {bd}"
+            );
+        }
+    }
+}
+
 // ------------------------------------------------------------------------------------------
 // Elementwise and constructors
 // ------------------------------------------------------------------------------------------
@@ -482,6 +650,34 @@ fn elementwise_and_constructors_match() {
     }
 }
 
+#[test]
+fn negation_matches() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng(0x5eed_0006);
+    let mut x: Vec<f32> = (0..40).map(|_| rng.f32()).collect();
+    x[..6].copy_from_slice(&[0.0, -0.0, f32::NAN, -f32::NAN, f32::INFINITY, f32::MIN]);
+    x[6] = f32::from_bits(0x7f80_0001); // a signalling NaN
+    let mut y: Vec<i32> = (0..40).map(|_| rng.next() as i32).collect();
+    y[..4].copy_from_slice(&[i32::MIN, i32::MAX, 0, -1]);
+    let mut script = Script::default();
+    script.arr("f1", 0, &[40], &x);
+    script.arr("i1", 0, &[40], &y);
+    script.run("neg");
+    let x: Tile1<f32, 40> = tile::load1(&view(&mut x, [40]), 0).unwrap();
+    let y: Tile1<i32, 40> = tile::load1(&view(&mut y, [40]), 0).unwrap();
+    assert_eq!((-x).data[1].to_bits(), 0.0f32.to_bits());
+    assert_eq!((-y).data[0], i32::MIN);
+    let mut w = flat(&-x);
+    w.extend(flat(&-y));
+    w.extend(flat(&-(-y)));
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        assert_eq!(typed::<u32>(&got[0]), typed::<u32>(&w), "block size {bd}");
+    }
+}
+
 // ------------------------------------------------------------------------------------------
 // Matmul
 // ------------------------------------------------------------------------------------------
@@ -556,6 +752,11 @@ __device__ unsigned char* all_ops(const wp::array_t<T, 1>& a1, const wp::array_t
   wp::tile_sum(r, t);
   wp::tile_min(r, u);
   wp::tile_max(r, t);
+  wp::tile_neg(v, v);
+  wp::tile_t<int, 1> k(at);
+  at += 16;
+  wp::tile_argmin(k, t);
+  wp::tile_argmax(k, u);
   wp::tile_store(a2, 1, -2, v, c);
   wp::tile_store(a1, (wp::i64)7, t, c);
   wp::tile_t<T, 300> w(at);

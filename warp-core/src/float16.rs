@@ -215,6 +215,10 @@ impl Scalar for f16 {
     fn s_mul(self, o: Self) -> Self {
         self * o
     }
+    #[inline(always)]
+    fn s_neg(self) -> Self {
+        -self
+    }
 }
 
 impl MinMax for f16 {

@@ -23,8 +23,11 @@
 //                        the checked wp::load / wp::store (a corrupt array faults cleanly).
 //   tile_add, tile_sub, tile_mul(out, a, b)   tile with tile, tile with scalar, scalar with
 //                        tile: the builtins' arithmetic (IEEE for floats, wrapping for integers)
+//   tile_neg(out, a)     -a (wrapping for integers, a sign flip for floats)
 //   tile_map(out, a, f)  f applied to each element
 //   tile_sum, tile_min, tile_max(out, t)   into a 1-element tile, in the order below
+//   tile_argmin, tile_argmax(out, t)   the row-major index into a 1-element i32 tile, in the
+//                        order below over (value, index) pairs (both shuffled)
 //   tile_matmul(c, a, b), tile_matmul_acc(c, a, b)   FMA matmul (f32, f64), see below
 //
 // Reduction order (warp-core/src/tile/reduce.rs documents it; the two must stay the same). With
@@ -39,7 +42,9 @@
 //   3. lane 0 of each non-empty warp writes its result to shared memory; thread 0 folds them in
 //      warp order (r = w0; r = op(r, w1); ..) and writes the 1-element output.
 // Sums use the builtins' + (IEEE, wrapping for integers); min and max the builtins' (a NaN
-// operand loses to a number: fminf/fmaxf).
+// operand loses to a number: fminf/fmaxf). Argmin and argmax combine (value, index) pairs by a
+// total order (numbers before NaN, then the value, then the smaller index; -0 and +0 tie), so
+// they give the first index of the extremum for every block size; a tile of NaNs gives 0.
 //
 // Matmul: output c[i][j] is one chain acc = fma(a[i][k], b[k][j], acc) over k = 0..K ascending,
 // starting from c[i][j] (tile_matmul_acc) or +0 (tile_matmul), with fmaf/fma: one rounding each,
@@ -50,8 +55,8 @@
 // __shfl_down_sync for fibers); otherwise this header needs CUDA.
 //
 // Not yet here (later slices): the 16-byte vector path of loads and stores, ranks 3 and 4,
-// register tiles, argmin/argmax, scans, tensor cores. The header is not yet a kernel section
-// (no builtin names it until the emitter does), so nothing but the host test includes it.
+// register tiles, scans, tensor cores. The header is not yet a kernel section (no builtin names
+// it until the emitter does), so nothing but the host test includes it.
 #pragma once
 
 #include "wp_core.h"
@@ -164,6 +169,14 @@ struct max_op {
   }
 };
 
+/// `-v`: the builtins' wrapping negation for integers, IEEE negation (the sign bit) for floats.
+WP_FN f32 neg(f32 v) { return -v; }
+WP_FN f64 neg(f64 v) { return -v; }
+template <typename T>
+WP_FN T neg(T v) {
+  return w_neg(v);
+}
+
 /// `__shfl_down_sync` for the element types: the 32- and 64-bit types CUDA overloads, and the
 /// narrower integers through 32 bits.
 WP_FN f32 shfl_down(unsigned mask, f32 v, int off) { return __shfl_down_sync(mask, v, off); }
@@ -177,22 +190,22 @@ WP_FN i16 shfl_down(unsigned mask, i16 v, int off) { return (i16)__shfl_down_syn
 WP_FN u8 shfl_down(unsigned mask, u8 v, int off) { return (u8)__shfl_down_sync(mask, (u32)v, off); }
 WP_FN u16 shfl_down(unsigned mask, u16 v, int off) { return (u16)__shfl_down_sync(mask, (u32)v, off); }
 
-/// `t`'s elements reduced with `op` in the order of the header comment, into `out.data[0]`.
-template <typename T, int... D, typename Op>
-WP_FN void reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op) {
-  constexpr int S = tile_t<T, D...>::SIZE;
+/// The elements `elem(0..S)` (partials of type P) reduced with `op` in the order of the header
+/// comment; thread 0 passes the result to `put`. Every thread of the block calls it.
+template <typename P, int S, typename Elem, typename Op, typename Put>
+WP_FN void reduce_with(Elem elem, Op op, Put put) {
   constexpr int BD = TILE_BLOCK_DIM;
   constexpr int ACTIVE = S < BD ? S : BD;
   constexpr int WARPS = (ACTIVE + 31) / 32;
   // The warps' results, in warp order.
-  WP_TILE_SHARED_ALIGNED unsigned char warp_bytes[32 * sizeof(T)];
-  T* warp_part = reinterpret_cast<T*>(warp_bytes);
+  WP_TILE_SHARED_ALIGNED unsigned char warp_bytes[32 * sizeof(P)];
+  P* warp_part = reinterpret_cast<P*>(warp_bytes);
   const int l = (int)threadIdx.x;
-  // 1. The lane's partial (T{} and unused when the lane is empty).
-  T p{};
+  // 1. The lane's partial (P{} and unused when the lane is empty).
+  P p{};
   if (l < ACTIVE) {
-    p = t.data[l];
-    for (int e = l + BD; e < S; e += BD) p = op(p, t.data[e]);
+    p = elem(l);
+    for (int e = l + BD; e < S; e += BD) p = op(p, elem(e));
   }
   // 2. The warp's tree. Every thread of the block takes part (the mask names the lanes of its
   // warp that exist); a lane combines only with a present partner.
@@ -201,18 +214,80 @@ WP_FN void reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op) {
   const int exist = BD - base < 32 ? BD - base : 32;
   const unsigned mask = exist == 32 ? 0xffffffffu : ((1u << exist) - 1u);
   for (int off = 16; off > 0; off >>= 1) {
-    const T q = shfl_down(mask, p, off);
+    const P q = shfl_down(mask, p, off);
     if (lane + off < 32 && base + lane + off < ACTIVE) p = op(p, q);
   }
   if (lane == 0 && base < ACTIVE) warp_part[base / 32] = p;
   __syncthreads();
   // 3. Thread 0 folds the warps in order.
   if (l == 0) {
-    T r = warp_part[0];
+    P r = warp_part[0];
     for (int w = 1; w < WARPS; ++w) r = op(r, warp_part[w]);
-    out.data[0] = r;
+    put(r);
   }
   __syncthreads();
+}
+
+/// `t`'s elements reduced with `op` in the order of the header comment, into `out.data[0]`.
+template <typename T, int... D, typename Op>
+WP_FN void reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op) {
+  const T* x = t.data;
+  reduce_with<T, tile_t<T, D...>::SIZE>([x](int e) { return x[e]; }, op,
+                                        [&out](T r) { out.data[0] = r; });
+}
+
+/// A `(value, index)` partial of `tile_argmin` / `tile_argmax`.
+template <typename T>
+struct arg_t {
+  T v;
+  i32 i;
+};
+
+/// Both fields shuffled (the value as `shfl_down` of its type, the index as i32).
+template <typename T>
+WP_FN arg_t<T> shfl_down(unsigned mask, const arg_t<T>& a, int off) {
+  arg_t<T> r;
+  r.v = shfl_down(mask, a.v, off);
+  r.i = shfl_down(mask, a.i, off);
+  return r;
+}
+
+/// NaN (a value unordered with itself); never for integers.
+WP_FN bool tnan(f32 v) { return v != v; }
+WP_FN bool tnan(f64 v) { return v != v; }
+template <typename T>
+WP_FN bool tnan(T) {
+  return false;
+}
+
+/// The pair that comes first in argmin's (`Max` false) or argmax's (`Max` true) total order:
+/// numbers before NaN, then the smaller (larger) value, then the smaller index. `-0` and `+0`
+/// are equal values (the index decides). warp-core's `pick` in tile/reduce.rs.
+template <bool Max>
+struct arg_op {
+  template <typename T>
+  WP_FN arg_t<T> operator()(const arg_t<T>& a, const arg_t<T>& b) const {
+    const bool an = tnan(a.v), bn = tnan(b.v);
+    bool b_first;
+    if (an != bn) b_first = an;
+    else if (an || a.v == b.v) b_first = b.i < a.i;
+    else b_first = Max ? b.v > a.v : b.v < a.v;
+    return b_first ? b : a;
+  }
+};
+
+/// The row-major index of `t`'s extremum in `Op`'s order, into `out.data[0]`.
+template <typename Op, typename T, int... D>
+WP_FN void arg_reduce(const tile_t<i32, 1>& out, const tile_t<T, D...>& t) {
+  const T* x = t.data;
+  reduce_with<arg_t<T>, tile_t<T, D...>::SIZE>(
+      [x](int e) {
+        arg_t<T> a;
+        a.v = x[e];
+        a.i = (i32)e;
+        return a;
+      },
+      Op{}, [&out](const arg_t<T>& r) { out.data[0] = r.i; });
 }
 
 }  // namespace tile_detail
@@ -305,6 +380,15 @@ WP_FN void tile_store(const array_t<T, 2>& a, O0 o0, O1 o1, const tile_t<T, N0, 
 // Elementwise
 // ------------------------------------------------------------------------------------------
 
+/// `tile_neg(out, a)` (`-a`): `out[i] = -a[i]`, wrapping for integers (`MIN` stays `MIN`,
+/// unsigned `0 - a`), the sign bit flipped for floats (warp-core's `Scalar::s_neg`).
+template <typename T, int... D>
+WP_FN void tile_neg(const tile_t<T, D...>& out, const tile_t<T, D...>& a) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)
+    out.data[i] = tile_detail::neg(a.data[i]);
+  __syncthreads();
+}
+
 /// `tile_map(f, a)`: `out[i] = f(a[i])`.
 template <typename T, typename U, int... D, typename F>
 WP_FN void tile_map(const tile_t<U, D...>& out, const tile_t<T, D...>& a, F f) {
@@ -363,6 +447,19 @@ WP_FN void tile_min(const tile_t<T, 1>& out, const tile_t<T, D...>& t) {
 template <typename T, int... D>
 WP_FN void tile_max(const tile_t<T, 1>& out, const tile_t<T, D...>& t) {
   tile_detail::reduce(out, t, tile_detail::max_op{});
+}
+
+/// `tile_argmin`: the row-major index of the smallest element (numbers before NaN: a NaN only
+/// when every element is one, index 0 then), the first on ties (`-0` ties with `+0`).
+template <typename T, int... D>
+WP_FN void tile_argmin(const tile_t<i32, 1>& out, const tile_t<T, D...>& t) {
+  tile_detail::arg_reduce<tile_detail::arg_op<false>>(out, t);
+}
+
+/// `tile_argmax`: the row-major index of the largest element, as `tile_argmin` otherwise.
+template <typename T, int... D>
+WP_FN void tile_argmax(const tile_t<i32, 1>& out, const tile_t<T, D...>& t) {
+  tile_detail::arg_reduce<tile_detail::arg_op<true>>(out, t);
 }
 
 /// `tile_reduce(op, t)` with a user's combining function `op(earlier, later)`.

@@ -327,6 +327,7 @@ macro_rules! int_scalar {
             #[inline(always)] fn s_add(self, o: Self) -> Self { self.wrapping_add(o) }
             #[inline(always)] fn s_sub(self, o: Self) -> Self { self.wrapping_sub(o) }
             #[inline(always)] fn s_mul(self, o: Self) -> Self { self.wrapping_mul(o) }
+            #[inline(always)] fn s_neg(self) -> Self { self.wrapping_neg() }
         }
         impl MinMax for $t {
             #[inline(always)] fn w_min(self, o: Self) -> Self { Ord::min(self, o) }
@@ -369,6 +370,7 @@ macro_rules! float_scalar {
             #[inline(always)] fn s_add(self, o: Self) -> Self { self + o }
             #[inline(always)] fn s_sub(self, o: Self) -> Self { self - o }
             #[inline(always)] fn s_mul(self, o: Self) -> Self { self * o }
+            #[inline(always)] fn s_neg(self) -> Self { -self }
         }
         impl MinMax for $t {
             // `f32::min`/`max` are IEEE minNum/maxNum (C's fminf/fmaxf): NaN loses.

@@ -20,6 +20,9 @@ pub trait Scalar: Copy + PartialOrd + Send + Sync + 'static {
     fn s_sub(self, o: Self) -> Self;
     /// `self * o` (wrapping for integers).
     fn s_mul(self, o: Self) -> Self;
+    /// `-self`: wrapping for integers (`MIN` stays `MIN`, unsigned `0 - self`), the sign bit
+    /// flipped for floats (`-0.0` from `+0.0`, NaN stays NaN).
+    fn s_neg(self) -> Self;
 }
 
 /// `min`, `max` (and so `clamp`): all [`Scalar`]s and the `glam` vectors `Vec2/3/4`,

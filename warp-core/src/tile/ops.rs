@@ -1,12 +1,12 @@
 //! Elementwise operations on tiles: `map` (unary and binary), the operators `+ - *` between
 //! tiles of one shape and between a tile and a scalar (on either side), `/` for float tiles,
-//! and checked integer division.
+//! unary `-` (wrapping for integers, a sign flip for floats), and checked integer division.
 //!
 //! Each element is computed independently with the builtins' dispatch traits
 //! ([`Scalar`]: IEEE for floats, wrapping for integers, as on CUDA), so the results do not
 //! depend on the block size and equal the GPU's bit for bit. A shape mismatch is a type error.
 
-use std::ops::{Add, Div, Mul, Sub};
+use std::ops::{Add, Div, Mul, Neg, Sub};
 
 use super::{Tile1, Tile2};
 use crate::builtins::{Float, Scalar};
@@ -63,6 +63,15 @@ macro_rules! tile_operators {
         tile_operators!(@op $tile<$($n),+>, Sub, sub, s_sub, Scalar);
         tile_operators!(@op $tile<$($n),+>, Mul, mul, s_mul, Scalar);
         tile_operators!(@div $tile<$($n),+>);
+
+        impl<T: Scalar, $(const $n: usize),+> Neg for $tile<T, $($n),+> {
+            type Output = Self;
+            /// `-t` elementwise (`tile_neg`): [`Scalar::s_neg`].
+            #[inline(always)]
+            fn neg(self) -> Self {
+                self.map(Scalar::s_neg)
+            }
+        }
 
         impl<T: WrapInt, $(const $n: usize),+> $tile<T, $($n),+> {
             /// Integer `/` elementwise (`a / b`): wrapping on `MIN / -1`, and a division by
@@ -194,6 +203,21 @@ mod tests {
         let e = m.div_int(&z, "k").unwrap_err();
         assert_eq!(e.kind, FaultKind::DivisionByZero);
         assert!(m.div_int_scalar(0, "k").is_err());
+    }
+
+    #[test]
+    fn negation_flips_signs_and_wraps() {
+        let f = Tile1::<f32, 4> {
+            data: [0.0, -0.0, 1.5, f32::NAN],
+        };
+        let n = (-f).data.map(f32::to_bits);
+        assert_eq!(n, f.data.map(|x| x.to_bits() ^ 0x8000_0000));
+        let i = Tile2::<i32, 1, 3> {
+            data: [[i32::MIN, 0, -7]],
+        };
+        assert_eq!((-i).data, [[i32::MIN, 0, 7]]);
+        let u = Tile1::<u8, 2> { data: [1, 0] };
+        assert_eq!((-u).data, [255, 0]);
     }
 
     #[test]

@@ -133,6 +133,69 @@ static void k_red_i32(args_t a) {
   reductions(a, smem_at_, t);
 }
 
+/// argmin, argmax of `t` (already loaded), appended to the output as two i32.
+template <typename Tile>
+static void arg_reductions(const args_t& a, size_t& smem_at_, const Tile& t) {
+  auto lo = SLOT(tile_t<i32, 1>);
+  auto hi = SLOT(tile_t<i32, 1>);
+  wp::tile_argmin(lo, t);
+  wp::tile_argmax(hi, t);
+  size_t at = 0;
+  dump(a, at, lo);
+  dump(a, at, hi);
+}
+
+static void k_arg_f32_300(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 300>);
+  wp::tile_load(t, a.f1[0], 0, &c);
+  arg_reductions(a, smem_at_, t);
+}
+
+static void k_arg_f32_5(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 5>);
+  wp::tile_load(t, a.f1[0], 0, &c);
+  arg_reductions(a, smem_at_, t);
+}
+
+static void k_arg_f32_2d(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 13, 11>);
+  wp::tile_load(t, a.f2[0], 0, 0, &c);
+  arg_reductions(a, smem_at_, t);
+}
+
+static void k_arg_i32(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<i32, 200>);
+  wp::tile_load(t, a.i1[0], 0, &c);
+  arg_reductions(a, smem_at_, t);
+}
+
+/// `-x` of a 40-element f32 tile and of a 40-element i32 tile, then `-x` in place.
+static void k_neg(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto x = SLOT(tile_t<f32, 40>);
+  auto r = SLOT(tile_t<f32, 40>);
+  auto y = SLOT(tile_t<i32, 40>);
+  auto q = SLOT(tile_t<i32, 40>);
+  wp::tile_load(x, a.f1[0], 0, &c);
+  wp::tile_load(y, a.i1[0], 0, &c);
+  size_t at = 0;
+  wp::tile_neg(r, x);
+  dump(a, at, r);
+  wp::tile_neg(q, y);
+  dump(a, at, q);
+  wp::tile_neg(q, q);
+  dump(a, at, q);
+}
+
 static void k_red_f64(args_t a) {
   wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
   SLOTS_BEGIN();
@@ -274,11 +337,16 @@ int run(const char* path) {
       {"red_f32_5", k_red_f32_5}, {"red_f32_2d", k_red_f32_2d}, {"red_i32", k_red_i32},
       {"red_f64", k_red_f64},     {"arith", k_arith},           {"matmul_f32", k_matmul_f32},
       {"matmul_f64", k_matmul_f64}, {"arith_i32", k_arith_i32},
+      {"arg_f32_300", k_arg_f32_300}, {"arg_f32_5", k_arg_f32_5},
+      {"arg_f32_2d", k_arg_f32_2d},   {"arg_i32", k_arg_i32},
+      {"neg", k_neg},
   };
   std::map<std::string, size_t> out_bytes = {
       {"load1", 37 * 4},   {"load2", 35 * 4},   {"red_f32_300", 12}, {"red_f32_5", 12},
       {"red_f32_2d", 12},  {"red_i32", 12},     {"red_f64", 24},     {"arith", 10 * 160},
       {"matmul_f32", 280}, {"matmul_f64", 144}, {"arith_i32", 10 * 160},
+      {"arg_f32_300", 8},  {"arg_f32_5", 8},    {"arg_f32_2d", 8},   {"arg_i32", 8},
+      {"neg", 3 * 160},
   };
   std::string line;
   while (std::getline(in, line)) {
