@@ -13,6 +13,9 @@
 //!
 //! Skipped, saying so, without g++.
 
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::Command;
@@ -26,7 +29,7 @@ const BLOCK_DIMS: [usize; 5] = [1, 32, 45, 96, 256];
 fn have_gpp() -> bool {
     static HAVE: OnceLock<bool> = OnceLock::new();
     *HAVE.get_or_init(|| {
-        let ok = Command::new("g++").arg("--version").output().is_ok();
+        let ok = host_cpp::gpp();
         if !ok {
             eprintln!("SKIPPED cuda_tile_host: no g++ on this machine");
         }
@@ -49,30 +52,10 @@ fn executable(bd: usize) -> Arc<PathBuf> {
     if let Some(exe) = slot.as_ref() {
         return exe.clone();
     }
-    let dir = std::env::temp_dir().join(format!("wp_tile_{bd}_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cuda = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
-    let exe = dir.join("driver");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-        ])
-        .arg(format!("-DWP_TILE_BLOCK_DIM={bd}"))
-        .args(["-I", cuda, "-I", &format!("{cuda}/tests")])
-        .arg(format!("{cuda}/tests/wp_tile_driver.cpp"))
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "g++ failed on wp_tile_driver.cpp (block size {bd}):\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let (_dir, exe) = host_cpp::compile_driver(
+        &format!("tile_{bd}"),
+        include_str!("../warp-cuda/cuda/tests/wp_tile_driver.cpp"),
+        &[&format!("WP_TILE_BLOCK_DIM={bd}")],
     );
     let exe = Arc::new(exe);
     *slot = Some(exe.clone());

@@ -12,8 +12,9 @@ pub fn gpp() -> bool {
 }
 
 /// Writes `source` to a fresh directory under the temp dir named after `name` and the
-/// process, compiles it with the library's headers and `defines` (`-DNAME=1` each), and
-/// returns the directory and the executable.
+/// process, compiles it with the library's headers, the test headers beside them
+/// (`cuda/tests/`: the block emulator) and `defines` (`-DNAME=1` for a bare `NAME`,
+/// `-DNAME=VALUE` as given), and returns the directory and the executable.
 ///
 /// # Panics
 /// When g++ fails, with its messages.
@@ -33,8 +34,11 @@ pub fn compile_driver(name: &str, source: &str, defines: &[&str]) -> (PathBuf, P
             "-Werror",
             "-Wdouble-promotion",
         ])
-        .args(defines.iter().map(|d| format!("-D{d}=1")))
-        .args(["-I", include])
+        .args(defines.iter().map(|d| match d.contains('=') {
+            true => format!("-D{d}"),
+            false => format!("-D{d}=1"),
+        }))
+        .args(["-I", include, "-I", &format!("{include}/tests")])
         .arg(&cpp)
         .arg("-o")
         .arg(&exe)
