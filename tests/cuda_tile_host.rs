@@ -164,15 +164,15 @@ fn view<T: Copy, const N: usize>(data: &mut [T], shape: [usize; N]) -> ArrayView
     unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
 }
 
-/// A small deterministic generator (xorshift64*).
-struct Rng(u64);
+/// Seeded draws (the benches' generator: ChaCha8), shaped for order-sensitive sums.
+struct Rng(rand_chacha::ChaCha8Rng);
 
 impl Rng {
+    fn seeded(seed: u64) -> Self {
+        Rng(<rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed))
+    }
     fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        rand::RngCore::next_u64(&mut self.0)
     }
     /// In [-1, 1) with a full mantissa, times 2^e for e in -8..8 (a spread of magnitudes, so
     /// sums round differently in different orders).
@@ -199,7 +199,7 @@ fn loads_and_stores_with_ragged_and_negative_offsets_match() {
     if !have_gpp() {
         return;
     }
-    let mut rng = Rng(0x5eed_0001);
+    let mut rng = Rng::seeded(0x5eed_0001);
     let mut script = Script::default();
     // (tile bytes, array after the store) per run, from warp-core.
     let mut want: Vec<(Vec<u8>, Vec<u8>, String)> = Vec::new();
@@ -285,7 +285,7 @@ fn reductions_match_warp_core_bit_for_bit() {
     if !have_gpp() {
         return;
     }
-    let mut rng = Rng(0x5eed_0002);
+    let mut rng = Rng::seeded(0x5eed_0002);
     let mut script = Script::default();
     // Per run: the expected bytes for each block size.
     let mut want: Vec<(Vec<Vec<u8>>, String)> = Vec::new();
@@ -415,7 +415,7 @@ fn argmin_argmax_match_warp_core() {
     if !have_gpp() {
         return;
     }
-    let mut rng = Rng(0x5eed_0005);
+    let mut rng = Rng::seeded(0x5eed_0005);
     let mut script = Script::default();
     let mut want: Vec<(Vec<Vec<u8>>, String)> = Vec::new();
     let per_bd = |f: &dyn Fn(usize) -> Vec<u8>| BLOCK_DIMS.iter().map(|&bd| f(bd)).collect();
@@ -558,7 +558,7 @@ fn elementwise_and_constructors_match() {
     if !have_gpp() {
         return;
     }
-    let mut rng = Rng(0x5eed_0003);
+    let mut rng = Rng::seeded(0x5eed_0003);
     let mut script = Script::default();
     let mut want = Vec::new();
     for s in [[1.5f32, 0.1, 0.1], [-3.25, -7.0, 0.3]] {
@@ -638,7 +638,7 @@ fn negation_matches() {
     if !have_gpp() {
         return;
     }
-    let mut rng = Rng(0x5eed_0006);
+    let mut rng = Rng::seeded(0x5eed_0006);
     let mut x: Vec<f32> = (0..40).map(|_| rng.f32()).collect();
     x[..6].copy_from_slice(&[0.0, -0.0, f32::NAN, -f32::NAN, f32::INFINITY, f32::MIN]);
     x[6] = f32::from_bits(0x7f80_0001); // a signalling NaN
@@ -670,7 +670,7 @@ fn fma_matmul_matches() {
     if !have_gpp() {
         return;
     }
-    let mut rng = Rng(0x5eed_0004);
+    let mut rng = Rng::seeded(0x5eed_0004);
     let mut script = Script::default();
     let mut want = Vec::new();
     for _ in 0..2 {
