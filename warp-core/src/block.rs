@@ -12,7 +12,7 @@ use std::ops::{Index, IndexMut};
 use bytemuck::Zeroable;
 
 use crate::fault::{Fault, FaultKind, KResult};
-use crate::tile::reduce::MAX_BLOCK_DIM;
+pub use crate::tile::reduce::MAX_BLOCK_DIM;
 use crate::tile::Tile1;
 
 /// A value stored per lane: anything `Copy` whose all-zero bit pattern is a value (scalars,
@@ -39,6 +39,16 @@ impl<T: LaneValue> PerLane<T> {
     pub fn new(bd: usize) -> Self {
         PerLane {
             lanes: [T::zeroed(); MAX_BLOCK_DIM],
+            bd: bd.clamp(1, MAX_BLOCK_DIM),
+        }
+    }
+
+    /// Every lane holding `v`: a block-level value seen as per-lane (`tile(x)` of a value
+    /// that is the same in every thread).
+    #[inline]
+    pub fn splat(v: T, bd: usize) -> Self {
+        PerLane {
+            lanes: [v; MAX_BLOCK_DIM],
             bd: bd.clamp(1, MAX_BLOCK_DIM),
         }
     }

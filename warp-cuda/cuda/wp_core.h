@@ -427,6 +427,7 @@ enum fault_kind : i32 {
   FAULT_BAD_STEP = 3,
   // 4 is FAULT_ADSTACK_OVERFLOW (wp_adjoint_core.h).
   FAULT_NON_FINITE = 5,
+  FAULT_TILE_INDEX = 6,
 };
 
 /// The first fault of the launches that share a record, filled by the first faulting thread
@@ -438,7 +439,8 @@ enum fault_kind : i32 {
 /// OutOfBounds: index/shape hold `ndim` entries. DivisionByZero: ndim 0. BadStep: ndim 1,
 /// index[0] is the step, shape all 0. NonFinite (a NaN or infinite volume sample position,
 /// warp_core::FaultKind::NonFinite): ndim 3, index[0..3] are the coordinates' f64 bit
-/// patterns (x, y, z), shape all 0. Unused entries are 0.
+/// patterns (x, y, z), shape all 0. TileIndex (an index outside a tile, wp_tile.h): index and
+/// shape hold `ndim` entries (the tile's rank). Unused entries are 0.
 struct fault_t {
   i32 kind;
   i32 arg;

@@ -156,6 +156,13 @@ struct mul_op {
     return detail::s_mul(a, b);
   }
 };
+/// Float division only (integer tiles have no `/` yet): IEEE, as warp-core's.
+struct div_op {
+  template <typename T>
+  WP_FN T operator()(T a, T b) const {
+    return a / b;
+  }
+};
 struct min_op {
   template <typename T>
   WP_FN T operator()(T a, T b) const {
@@ -425,7 +432,79 @@ WP_FN void tile_map(const tile_t<U, D...>& out, const tile_t<T, D...>& a, F f) {
 WP_TILE_BINARY(tile_add, tile_detail::add_op)
 WP_TILE_BINARY(tile_sub, tile_detail::sub_op)
 WP_TILE_BINARY(tile_mul, tile_detail::mul_op)
+WP_TILE_BINARY(tile_div, tile_detail::div_op)
 #undef WP_TILE_BINARY
+
+/// `tile_map(f, a, b)`: `out[i] = f(a[i], b[i])`.
+template <typename T, typename U, typename V, int... D, typename F>
+WP_FN void tile_map2(const tile_t<V, D...>& out, const tile_t<T, D...>& a,
+                     const tile_t<U, D...>& b, F f) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)
+    out.data[i] = f(a.data[i], b.data[i]);
+  __syncthreads();
+}
+
+/// `let b = a;` of tiles: a copy into `b`'s slot.
+template <typename T, int... D>
+WP_FN void tile_copy(const tile_t<T, D...>& out, const tile_t<T, D...>& a) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)
+    out.data[i] = a.data[i];
+  __syncthreads();
+}
+
+// ------------------------------------------------------------------------------------------
+// Threads and tiles
+// ------------------------------------------------------------------------------------------
+
+/// `tile(x)`: element `threadIdx.x` is this thread's `x`. The tile is as wide as the block
+/// (the launch checks the kernel's `block_dim` against its width).
+template <typename T, int N0>
+WP_FN void tile_from_thread(const tile_t<T, N0>& out, T x) {
+  static_assert(N0 == WP_TILE_BLOCK_DIM, "tile(x) makes a tile as wide as the block");
+  out.data[threadIdx.x] = x;
+  __syncthreads();
+}
+
+/// `untile(t)`: this thread's element of a tile as wide as the block.
+template <typename T, int N0>
+WP_FN T untile(const tile_t<T, N0>& t) {
+  static_assert(N0 == WP_TILE_BLOCK_DIM, "untile takes a tile as wide as the block");
+  return t.data[threadIdx.x];
+}
+
+/// The fault of an index outside a tile (warp_core::FaultKind::TileIndex): the index and the
+/// shape, `RANK` entries.
+template <typename T, int... D>
+WP_FN void tile_index_fault(ctx_t* ctx, const i64* idx) {
+  const i64 shape[4] = {(i64)D...};
+  raise(ctx, FAULT_TILE_INDEX, -1, (i32)sizeof...(D), idx, shape);
+}
+
+/// `t[i]`: a read by one thread; outside the tile, a fault and zero.
+template <typename T, int N0, typename I>
+WP_FN T tile_extract(const tile_t<T, N0>& t, I i, ctx_t* ctx) {
+  const i64 c = (i64)i;
+  if (!(num<I>::is_signed && c < 0) && (u64)i < (u64)N0) return t.data[c];
+  const u64 big = 0x7fffffffffffffffull;
+  const i64 idx[1] = {num<I>::is_signed ? c : ((u64)i > big ? (i64)big : (i64)i)};
+  tile_index_fault<T, N0>(ctx, idx);
+  return T{};
+}
+
+/// `t[i, j]`.
+template <typename T, int N0, int N1, typename I, typename J>
+WP_FN T tile_extract(const tile_t<T, N0, N1>& t, I i, J j, ctx_t* ctx) {
+  const bool in0 = !(num<I>::is_signed && (i64)i < 0) && (u64)i < (u64)N0;
+  const bool in1 = !(num<J>::is_signed && (i64)j < 0) && (u64)j < (u64)N1;
+  if (in0 && in1) return t.data[(i64)i * N1 + (i64)j];
+  const i64 idx[2] = {(i64)i, (i64)j};
+  tile_index_fault<T, N0, N1>(ctx, idx);
+  return T{};
+}
+
+/// The end of a tile's slot at `offset` holding `bytes`, rounded up to 16 bytes (the next
+/// slot's offset). warp-macros' TileInfo computes the block's total with the same rule.
+constexpr usize tile_slot_end(usize offset, usize bytes) { return (offset + bytes + 15) / 16 * 16; }
 
 // ------------------------------------------------------------------------------------------
 // Reductions

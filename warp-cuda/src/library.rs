@@ -194,14 +194,13 @@ pub static SECTIONS: &[Section] = &[
     kernel!("mesh",      Some(header!("wp_adjoint_mesh.h")),      WithRegisterCap),
     kernel!("volume",    Some(header!("wp_adjoint_volume.h")),    Yes),
     kernel!("print",     None,                                    No),
+    // Tiles (docs: the tiles chapter): exact, so that elementwise results match the CPU.
+    kernel!("tile",      None,                                    Yes),
     // Compiled on their own: name, the define of a host object's build library.
     standalone!("bvh_build",      Some("WP_BVH_BUILD")),
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),
     standalone!("volume_build",   Some("WP_VOLUME_BUILD")),
     standalone!("primitives",     None),
-    // The tile library (docs/design/tiles.md, section 5): standalone until the emitter's tile
-    // builtins name it, then a kernel row (rounding `Yes`); tests/cuda_tile_host.rs runs it.
-    standalone!("tile",           None),
 ];
 
 /// The section named `name`. In a constant (`const P: &Section = get("primitives")`) a name

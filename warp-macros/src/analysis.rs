@@ -32,7 +32,10 @@ pub fn tid_components(f: &Function) -> Vec<Option<u8>> {
 /// Then the launch can check it once for the whole grid instead of once per thread.
 pub fn is_tid_access(f: &Function, tid: &[Option<u8>], array: VarId, index: &[VarId]) -> bool {
     let is_param = f.params.iter().any(|p| p.var == array);
-    is_param
+    // In a tiled kernel `tid()` is the block's index: the launch's cover check says nothing
+    // about the accesses it indexes.
+    f.tiled.is_none()
+        && is_param
         && f.tid_ndim == Some(index.len() as u8)
         && index
             .iter()

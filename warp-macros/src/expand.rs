@@ -7,6 +7,8 @@ use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 use syn::spanned::Spanned;
 
+mod tiled;
+
 fn errors_to_tokens(errors: Vec<syn::Error>) -> TokenStream {
     errors.into_iter().map(|e| e.to_compile_error()).collect()
 }
@@ -167,7 +169,7 @@ fn kernel_instance(
     ident: &syn::Ident,
     display: Option<String>,
 ) -> Result<(TokenStream, TokenStream), Vec<syn::Error>> {
-    let mut f = lower::lower_fn(item, FnKind::Kernel)?;
+    let mut f = lower::lower_kernel(item, FnKind::Kernel, opts.block_dim.clone())?;
     if let Some(d) = display {
         f.name = d;
     }
@@ -246,6 +248,7 @@ fn kernel_impl(
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
     let written = crate::analysis::written_params(f);
     let body = em.block(&f.body);
+    let tile_info = tiled::info(f);
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
@@ -304,6 +307,45 @@ fn kernel_impl(
         .map(|k| quote::format_ident!("__grad{}", k))
         .collect();
 
+    let run_cpu = match f.tiled {
+        Some(_) => tiled::run_cpu(f, &pvars, &pnames_plain, &tys, tid_setup.as_ref()),
+        None => quote! {
+                    fn run_cpu(
+                        __params: &__wp::CpuParamsOf<Self>,
+                        __grid: &__wp::Grid,
+                        __range: ::core::ops::Range<usize>,
+                    ) -> __wp::KResult<()> {
+                        // One thread. Its parameters arrive by value, so that they live in registers:
+                        // read through `__params`, every array access would have to reload the views,
+                        // since a store through a raw pointer might alias them.
+                        #[inline(always)]
+                        #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
+                        fn __thread<const __FAST: bool>(
+                            #( #pvars: <#tys as __wp::KernelArg>::CpuView, )*
+                            __grid: &__wp::Grid,
+                            __flat: usize,
+                        ) -> __wp::KResult<()> {
+                            #tid_setup
+                            #body
+                            ::core::result::Result::Ok(())
+                        }
+                        let ( #(#pnames_plain,)* ) = *__params;
+                        let __grid = *__grid;
+                        // Arrays indexed by the thread index: if they cover the grid, those accesses
+                        // are in bounds for every thread and the per-thread checks can go.
+                        if true #( && #fast_arrays.covers(&__grid.dims) )* {
+                            for __flat in __range {
+                                __thread::<true>( #(#pnames_plain,)* &__grid, __flat)?;
+                            }
+                        } else {
+                            for __flat in __range {
+                                __thread::<false>( #(#pnames_plain,)* &__grid, __flat)?;
+                            }
+                        }
+                        ::core::result::Result::Ok(())
+                    }
+        },
+    };
     // The launch arguments' type spelt out (what `KernelParams::Args` normalises to): a generic
     // kernel's `Launchable` impls are told apart by these, and coherence does not normalise.
     let launch_args = f.params.iter().map(|p| {
@@ -347,6 +389,7 @@ fn kernel_impl(
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                         consts: #consts,
                         requires: &[#(#requires),*],
+                        tile: #tile_info,
                     };
                     fn info() -> &'static __wp::KernelInfo {
                         &<Self as __wp::Kernel>::INFO
@@ -391,40 +434,7 @@ fn kernel_impl(
                         }
                         ::core::result::Result::Ok(())
                     }
-                    fn run_cpu(
-                        __params: &__wp::CpuParamsOf<Self>,
-                        __grid: &__wp::Grid,
-                        __range: ::core::ops::Range<usize>,
-                    ) -> __wp::KResult<()> {
-                        // One thread. Its parameters arrive by value, so that they live in registers:
-                        // read through `__params`, every array access would have to reload the views,
-                        // since a store through a raw pointer might alias them.
-                        #[inline(always)]
-                        #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
-                        fn __thread<const __FAST: bool>(
-                            #( #pvars: <#tys as __wp::KernelArg>::CpuView, )*
-                            __grid: &__wp::Grid,
-                            __flat: usize,
-                        ) -> __wp::KResult<()> {
-                            #tid_setup
-                            #body
-                            ::core::result::Result::Ok(())
-                        }
-                        let ( #(#pnames_plain,)* ) = *__params;
-                        let __grid = *__grid;
-                        // Arrays indexed by the thread index: if they cover the grid, those accesses
-                        // are in bounds for every thread and the per-thread checks can go.
-                        if true #( && #fast_arrays.covers(&__grid.dims) )* {
-                            for __flat in __range {
-                                __thread::<true>( #(#pnames_plain,)* &__grid, __flat)?;
-                            }
-                        } else {
-                            for __flat in __range {
-                                __thread::<false>( #(#pnames_plain,)* &__grid, __flat)?;
-                            }
-                        }
-                        ::core::result::Result::Ok(())
-                    }
+                    #run_cpu
                 }
             };
         },

@@ -63,8 +63,19 @@ pub struct Function {
     /// User funcs called (paths as written), for dependency tracking.
     pub callees: Vec<syn::Path>,
     /// The module-level consts the function reads, in the order of its `@@K<k>@@`
-    /// placeholders.
+    /// placeholders (tile dims that name consts included).
     pub consts: Vec<syn::Path>,
+    /// A block-cooperative kernel (launched with `launch_tiled`): it holds tiles, calls
+    /// `lane()`, or says `#[kernel(block_dim = N)]`.
+    pub tiled: Option<Tiled>,
+}
+
+/// What makes a kernel tiled.
+#[derive(Clone, Debug, Default)]
+pub struct Tiled {
+    /// The block size `#[kernel(block_dim = N)]` fixes: the width of `tile(x)`, and the only
+    /// `block_dim` the kernel may be launched with.
+    pub width: Option<crate::types::Dim>,
 }
 
 pub type Block = Vec<Stmt>;
@@ -207,8 +218,16 @@ pub enum Op {
         ctor: Ctor,
         args: Vec<VarId>,
     },
-    /// Component `k` of the thread index.
+    /// Component `k` of the thread index (of the block index, in a tiled kernel).
     Tid(u8),
+    /// `lane()`: the thread's index in its block (`usize`), in a tiled kernel.
+    Lane,
+    /// `tile_map(f, a)`, `tile_map(f, a, b)`: the builtin `f` on every element (its `T` is the
+    /// tiles' element type).
+    TileMap {
+        f: &'static Builtin,
+        args: Vec<VarId>,
+    },
     /// `array.shape()[k]` (usize).
     Extent(VarId, u8),
     /// `array.len()` (usize).
@@ -245,9 +264,10 @@ impl Op {
                 f(*a);
                 f(*b)
             }
-            Op::Builtin { args, .. } | Op::Func { args, .. } | Op::Construct { args, .. } => {
-                args.iter().for_each(|v| f(*v))
-            }
+            Op::Builtin { args, .. }
+            | Op::Func { args, .. }
+            | Op::Construct { args, .. }
+            | Op::TileMap { args, .. } => args.iter().for_each(|v| f(*v)),
             Op::Load { array, index } => {
                 f(*array);
                 index.iter().for_each(|v| f(*v))
@@ -262,7 +282,7 @@ impl Op {
                 f(*index);
                 f(*bound)
             }
-            Op::Lit(_) | Op::Tid(_) | Op::Const(_) => {}
+            Op::Lit(_) | Op::Tid(_) | Op::Lane | Op::Const(_) => {}
         }
     }
 }
@@ -316,6 +336,20 @@ impl StmtKind {
 impl Function {
     pub fn ty(&self, v: VarId) -> &Ty {
         &self.vars[v].ty
+    }
+
+    /// Whether `s` is block-cooperative (every thread of the block must run it together): a
+    /// cooperative row (the tile operations), `tile_map`, or anything else that sets a tile
+    /// (a copy or an operator: each thread computes its part of the tile).
+    pub fn is_cooperative(&self, s: &Stmt) -> bool {
+        match &s.kind {
+            StmtKind::Assign { dst, op, .. } => {
+                self.vars[*dst].ty.is_tile()
+                    || matches!(op, Op::TileMap { .. })
+                    || matches!(op, Op::Builtin { builtin, .. } if builtin.cooperative)
+            }
+            _ => false,
+        }
     }
 }
 

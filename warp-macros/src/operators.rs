@@ -81,6 +81,9 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
     if l.is_deferred() || r.is_deferred() {
         return Ok(if op.is_comparison() { BOOL } else { Deferred });
     }
+    if let (Tile(..), _) | (_, Tile(..)) = (l, r) {
+        return tile_binary(op, l, r);
+    }
     match op {
         BinOp::Eq | BinOp::Ne => {
             if l == r
@@ -144,5 +147,35 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             (Scalar(a), Transform(b)) if a == b && op == BinOp::Mul => Ok(r.clone()),
             _ => bad(),
         },
+    }
+}
+
+/// `+ - * /` on tiles (Warp's `tile_add`, ..): elementwise on two tiles of one element type
+/// and shape, or a tile and a scalar of its element type (`s * t`, `t / s`; a scalar on the
+/// left with `+ - *`). Shapes the macro cannot compare (a const against a literal) are left to
+/// rustc, which sees the dims as const generics.
+fn tile_binary(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
+    use Ty::*;
+    let bad = || Err(format!("cannot apply `{}` to `{l}` and `{r}`", op.symbol()));
+    let arith = matches!(op, BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div);
+    if !arith {
+        return bad();
+    }
+    match (l, r) {
+        (Tile(a, da), Tile(b, db)) if a == b => {
+            let differ =
+                da.len() != db.len() || da.iter().zip(db).any(|(x, y)| x.same(y) == Some(false));
+            if differ {
+                Err(format!(
+                    "`{}` on tiles of different shapes: `{l}` and `{r}`",
+                    op.symbol()
+                ))
+            } else {
+                Ok(l.clone())
+            }
+        }
+        (Tile(a, _), s @ Scalar(_)) if **a == *s => Ok(l.clone()),
+        (s @ Scalar(_), Tile(b, _)) if **b == *s && op != BinOp::Div => Ok(r.clone()),
+        _ => bad(),
     }
 }

@@ -336,10 +336,58 @@ pub enum Ty {
     /// A host object a kernel takes as a parameter (`HashGrid`), or the state of one of its
     /// queries; kernels see objects only through builtin rows.
     Object(ObjectKind),
+    /// A block-cooperative tile (`Tile<f32, 16, 8>`): its element (a scalar) and its shape,
+    /// rank 1 or 2. Only kernels launched with `launch_tiled` hold tiles.
+    Tile(Box<Ty>, Vec<Dim>),
     /// `()`.
     Unit,
     /// Not knowable from inside this function; typed by the target compiler.
     Deferred,
+}
+
+/// One dimension of a tile's shape: an integer literal, or a module-level `const` named by its
+/// path (SCREAMING_CASE), whose value only rustc knows.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Dim {
+    Lit(u32),
+    /// The path as written, segments joined by `::`.
+    Const(String),
+}
+
+impl Dim {
+    /// Whether two dims are equal: `Some(true)` or `Some(false)` when the macro can tell (two
+    /// literals, or the same const), `None` when only rustc can (a const against a literal or
+    /// another const): such a rule becomes a `const` assertion in the generated code.
+    pub fn same(&self, o: &Dim) -> Option<bool> {
+        match (self, o) {
+            (Dim::Lit(a), Dim::Lit(b)) => Some(a == b),
+            (Dim::Const(a), Dim::Const(b)) if a == b => Some(true),
+            _ => None,
+        }
+    }
+
+    /// The dim as a Rust `usize` constant expression (`16`, `{ TM as usize }`).
+    pub fn rust_tokens(&self) -> proc_macro2::TokenStream {
+        match self {
+            Dim::Lit(n) => {
+                let n = proc_macro2::Literal::usize_unsuffixed(*n as usize);
+                quote::quote!(#n)
+            }
+            Dim::Const(p) => {
+                let p: syn::Path = syn::parse_str(p).expect("a const path");
+                quote::quote!({ #p as usize })
+            }
+        }
+    }
+}
+
+impl fmt::Display for Dim {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Dim::Lit(n) => write!(f, "{n}"),
+            Dim::Const(p) => f.write_str(p),
+        }
+    }
 }
 
 pub const F32: Ty = Ty::Scalar(Scalar::F32);
@@ -362,6 +410,10 @@ impl Ty {
 
     pub fn is_deferred(&self) -> bool {
         matches!(self, Ty::Deferred)
+    }
+
+    pub fn is_tile(&self) -> bool {
+        matches!(self, Ty::Tile(..))
     }
 
     pub fn is_int_scalar(&self) -> bool {
@@ -457,6 +509,13 @@ impl fmt::Display for Ty {
             }
             Ty::Object(ObjectKind::Volume(e)) => write!(f, "Volume<{}>", e.name()),
             Ty::Object(k) => f.write_str(k.row().name),
+            Ty::Tile(e, dims) => {
+                write!(f, "Tile<{e}")?;
+                for d in dims {
+                    write!(f, ", {d}")?;
+                }
+                f.write_str(">")
+            }
             Ty::Unit => f.write_str("()"),
             Ty::Deferred => f.write_str("_"),
         }

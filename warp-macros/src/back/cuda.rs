@@ -76,6 +76,8 @@ pub(crate) struct Emitter<'a> {
     in_range: Vec<(VarId, VarId, String)>,
     /// How many unswitched loops enclose the current statement (each doubles the code).
     unswitched: usize,
+    /// The statement just printed was a tile operation (which ends in a barrier).
+    pub(crate) after_tile_op: bool,
 }
 
 /// Unswitched loops nest at most this deep; deeper ones test their flag at each access.
@@ -176,6 +178,7 @@ impl<'a> Emitter<'a> {
             replay: false,
             in_range: Vec::new(),
             unswitched: 0,
+            after_tile_op: false,
         }
     }
 
@@ -308,6 +311,10 @@ impl<'a> Emitter<'a> {
                         "    wp::i64 __tid[4];\n    wp::unflatten(__launch, __flat, __tid, {n});"
                     );
                 }
+                if self.f.tiled.is_some() {
+                    self.section("tile");
+                    super::cuda_tile::slots(self)?;
+                }
             }
             FnKind::Func => {
                 params.push("wp::ctx_t* __ctx".into());
@@ -349,6 +356,11 @@ impl<'a> Emitter<'a> {
                 call.push(self.var(p.var));
             }
             call.extend(["__launch".into(), "__flat".into(), "&__ctx_value".into()]);
+            if self.f.tiled.is_some() {
+                let entry = super::cuda_tile::entry(&decl.join(", "), &call.join(", "));
+                self.out.push_str(&entry);
+                return Ok(());
+            }
             let _ = write!(
                 self.out,
                 "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@({}) {{\n    \
@@ -406,6 +418,18 @@ impl<'a> Emitter<'a> {
     }
 
     fn stmt(&mut self, s: &Stmt) -> Result<(), String> {
+        if self.f.tiled.is_some() && super::cuda_tile::is_tile_stmt(self.f, s) {
+            return super::cuda_tile::stmt(self, s);
+        }
+        self.after_tile_op = false;
+        let r = self.stmt_plain(s);
+        // Control may arrive after a compound statement from before it (a loop that ran no
+        // iteration): no tile operation's barrier is known to precede.
+        self.after_tile_op = false;
+        r
+    }
+
+    fn stmt_plain(&mut self, s: &Stmt) -> Result<(), String> {
         let sp = s.span;
         match &s.kind {
             StmtKind::Declare { var } => {
@@ -626,6 +650,8 @@ impl<'a> Emitter<'a> {
     pub(crate) fn op(&mut self, op: &Op, dst: VarId) -> Result<String, String> {
         let ty = self.f.ty(dst).clone();
         Ok(match op {
+            Op::Lane => "((wp::usize)threadIdx.x)".into(),
+            Op::TileMap { .. } => return Err("`tile_map` is a tile statement".into()),
             Op::Lit(Lit::Bool(b)) => b.to_string(),
             Op::Lit(Lit::Int(v)) => match &ty {
                 Ty::Scalar(s) if s.is_int() => int_lit(*v, *s),

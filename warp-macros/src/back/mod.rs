@@ -2,5 +2,7 @@
 
 pub mod cuda;
 pub mod cuda_adjoint;
+pub mod cuda_tile;
 pub mod rust;
 pub mod rust_adjoint;
+pub mod rust_tile;

@@ -111,40 +111,7 @@ impl<'a> RustEmitter<'a> {
                     quote_spanned!(sp=> if #c { #t } else { #e })
                 }
             }
-            StmtKind::For { var, range, body } => {
-                let start = self.var(range.start);
-                let end = self.var(range.end);
-                let incl = range.inclusive;
-                let name = self.name_lit();
-                let adapters = range.adapters.iter().map(|a| match a {
-                    RangeAdapter::Rev => quote!(.rev()),
-                    RangeAdapter::StepBy(k) => {
-                        let k = self.var(*k);
-                        quote!(.step_by(#k as i64, #name)?)
-                    }
-                });
-                let v = self.var(*var);
-                let m = if self.f.vars[*var].mutable {
-                    quote!(mut)
-                } else {
-                    quote!()
-                };
-                // A loop variable whose type the macro cannot see takes the end bound's type.
-                let value = match ty_tokens(&self.f.vars[*var].ty) {
-                    Some(t) => quote!(__range.at(__n) as #t),
-                    None => quote!(__wp::ops::int_like(&#end, __range.at(__n))),
-                };
-                let body = self.block(body);
-                quote_spanned! {sp=>
-                    {
-                        let __range = __wp::RangeProg::new(#start as i64, #end as i64, #incl) #(#adapters)*;
-                        for __n in 0..__range.count {
-                            let #m #v = #value;
-                            #body
-                        }
-                    }
-                }
-            }
+            StmtKind::For { .. } => self.for_loop(s, &|b| self.block(b)),
             StmtKind::Loop { body } => {
                 let body = self.block(body);
                 quote_spanned!(sp=> loop { #body })
@@ -181,6 +148,52 @@ impl<'a> RustEmitter<'a> {
                 }
             }
         }
+    }
+
+    /// A `for` statement, its body printed by `print_body` (the block printer of a tiled
+    /// kernel prints block-level loops with its own).
+    pub fn for_loop(&self, s: &Stmt, print_body: &dyn Fn(&Block) -> TokenStream) -> TokenStream {
+        let sp = s.span;
+        let StmtKind::For { var, range, body } = &s.kind else {
+            unreachable!("a for statement")
+        };
+        let start = self.var(range.start);
+        let end = self.var(range.end);
+        let incl = range.inclusive;
+        let name = self.name_lit();
+        let adapters = range.adapters.iter().map(|a| match a {
+            RangeAdapter::Rev => quote!(.rev()),
+            RangeAdapter::StepBy(k) => {
+                let k = self.var(*k);
+                quote!(.step_by(#k as i64, #name)?)
+            }
+        });
+        let v = self.var(*var);
+        let m = if self.f.vars[*var].mutable {
+            quote!(mut)
+        } else {
+            quote!()
+        };
+        // A loop variable whose type the macro cannot see takes the end bound's type.
+        let value = match ty_tokens(&self.f.vars[*var].ty) {
+            Some(t) => quote!(__range.at(__n) as #t),
+            None => quote!(__wp::ops::int_like(&#end, __range.at(__n))),
+        };
+        let body = print_body(body);
+        quote_spanned! {sp=>
+            {
+                let __range = __wp::RangeProg::new(#start as i64, #end as i64, #incl) #(#adapters)*;
+                for __n in 0..__range.count {
+                    let #m #v = #value;
+                    #body
+                }
+            }
+        }
+    }
+
+    /// One statement, as the thread's body prints it.
+    pub fn stmt_tokens(&self, s: &Stmt) -> TokenStream {
+        self.stmt(s)
     }
 
     pub fn index_tokens(&self, index: &[VarId]) -> TokenStream {
@@ -289,6 +302,17 @@ impl<'a> RustEmitter<'a> {
                     quote_spanned!(sp=> (#x as #to))
                 }
             }
+            Op::Builtin { builtin, args } if builtin.is_tile() => {
+                super::rust_tile::tile_op(self, builtin, args, ty, sp)
+            }
+            // In a tiled kernel, the block's size (the launch's `block_dim`).
+            Op::Builtin { builtin, .. }
+                if builtin.name == "block_dim" && self.f.tiled.is_some() =>
+            {
+                quote_spanned!(sp=> (__bd as i32))
+            }
+            Op::TileMap { f, args } => super::rust_tile::tile_map(self, f, args, sp),
+            Op::Lane => quote_spanned!(sp=> __lane),
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);
                 if builtin.grad == crate::builtins::Grad::Effect && self.replay {
@@ -417,6 +441,13 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
         Ty::Transform(_) => {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::#id))
+        }
+        // warp-core's tiles, their dims as const generics.
+        Ty::Tile(e, dims) => {
+            let e = ty_tokens(e)?;
+            let id = format_ident!("Tile{}", dims.len());
+            let dims = dims.iter().map(|d| d.rust_tokens());
+            Some(quote!(__wp::tile::#id<#e, #(#dims),*>))
         }
         // An object's view or a query state (warp-core's `objects`).
         Ty::Object(k) => {

@@ -254,6 +254,10 @@ fn pos(p: &Pos) -> String {
         Pos::AnyVolume => "Volume<_>".into(),
         Pos::VolumeGradOfT => "Grad(T)".into(),
         Pos::Unit => "()".into(),
+        Pos::Tile => "Tile<T>".into(),
+        Pos::TileShape => "shape".into(),
+        Pos::Offsets => "offsets".into(),
+        Pos::TileFn => "fn".into(),
     }
 }
 

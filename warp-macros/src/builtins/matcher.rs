@@ -176,6 +176,8 @@ impl Builtin {
                 _ => Ty::Deferred,
             },
             Pos::Unit => Ty::Unit,
+            // Tile rows are typed by `front::lower::tiles`, never here.
+            Pos::Tile | Pos::TileShape | Pos::Offsets | Pos::TileFn => Ty::Deferred,
             // Results only (below).
             Pos::Tuple(_) => Ty::Deferred,
         };

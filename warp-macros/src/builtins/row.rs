@@ -122,6 +122,9 @@ pub struct Builtin {
     /// together, so it must not be under control flow that depends on the thread (the
     /// validator's uniformity rule, `valid::uniformity`).
     pub cooperative: bool,
+    /// Moves values between a tile and the block's threads (`tile(x)`, `untile(t)`): its
+    /// per-thread side is each lane's own, and the tile's width is the block size.
+    pub lanes: bool,
 }
 
 /// The row builder: [`Builtin::row`] gives a row every default (a user-callable builtin in
@@ -159,16 +162,27 @@ impl Builtin {
             grad,
             tangent: None,
             cooperative: false,
+            lanes: false,
         }
     }
 
-    /// The tile rows will set it; until then only the validator's tests do.
-    #[cfg_attr(not(test), allow(dead_code))]
     pub(crate) const fn cooperative(self) -> Builtin {
         Builtin {
             cooperative: true,
             ..self
         }
+    }
+
+    pub(super) const fn lanes(self) -> Builtin {
+        Builtin {
+            lanes: true,
+            ..self
+        }
+    }
+
+    /// A tile operation (its signature mentions a tile): typed by `front::lower::tiles`.
+    pub fn is_tile(&self) -> bool {
+        self.section == "tile"
     }
 
     pub(super) const fn method(self) -> Builtin {

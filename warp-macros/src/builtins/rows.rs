@@ -31,6 +31,7 @@ mod linalg;
 mod misc;
 mod rand;
 mod scalar;
+mod tile;
 mod transform;
 mod volume;
 
@@ -45,6 +46,7 @@ const SECTIONS: &[&[Builtin]] = &[
     misc::ROWS,
     geometry::ROWS,
     volume::ROWS,
+    tile::ROWS,
 ];
 
 const COUNT: usize = {

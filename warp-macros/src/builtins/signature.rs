@@ -173,6 +173,14 @@ pub enum Pos {
     VolumeGradOfT,
     /// `()`: the builtin is a statement (`volume_store`).
     Unit,
+    /// A tile of `T` (its shape is the tile typer's business: `front::lower::tiles`).
+    Tile,
+    /// A tile's shape, written as a turbofish, Warp's tuple or the `let` annotation.
+    TileShape,
+    /// A tile's offsets into an array: one signed integer per array dimension.
+    Offsets,
+    /// The function `tile_map` applies (a builtin's name).
+    TileFn,
 }
 
 impl Pos {

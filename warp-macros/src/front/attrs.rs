@@ -10,6 +10,9 @@ pub struct KernelAttrs {
     /// `enable_backward = false`: no adjoint is generated; backward through the kernel is an
     /// error.
     pub disable_backward: bool,
+    /// `block_dim = N` (a literal or a module const): the kernel is tiled, and `tile(x)` makes
+    /// tiles N wide; `launch_tiled` with another block size is an error.
+    pub block_dim: Option<crate::types::Dim>,
 }
 
 /// Parses `#[kernel(same_shape(x, v, dim), ...)]`.
@@ -33,9 +36,32 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
             let v: syn::LitBool = meta.value()?.parse()?;
             out.disable_backward = !v.value;
             Ok(())
+        } else if meta.path.is_ident("block_dim") {
+            let e: syn::Expr = meta.value()?.parse()?;
+            let dim = match &e {
+                syn::Expr::Lit(syn::ExprLit {
+                    lit: syn::Lit::Int(i),
+                    ..
+                }) => i
+                    .base10_parse::<u32>()
+                    .ok()
+                    .filter(|n| (1..=1024).contains(n))
+                    .map(crate::types::Dim::Lit),
+                syn::Expr::Path(p) if p.qself.is_none() => {
+                    crate::front::signature::dim_of_path(&p.path)
+                }
+                _ => None,
+            };
+            out.block_dim = Some(dim.ok_or_else(|| {
+                syn::Error::new_spanned(
+                    &e,
+                    "block_dim is an integer literal in 1..=1024 or a module const",
+                )
+            })?);
+            Ok(())
         } else {
             Err(meta.error(
-                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false",
+                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N",
             ))
         }
     });

@@ -15,6 +15,7 @@
 //! - `rng`: the random draws that advance a state in place; `rand_init`'s and `pnoise`'s
 //!   overloads by arity.
 //! - `query`: `for j in hash_grid_query(..)`, a loop over a host object's query.
+//! - `tiles`: tile calls typed by their shapes, `lane()`, operators and indexing on tiles.
 
 use crate::builtins::{self, ArgTy, Builtin, Emit, Pos};
 use crate::front::signature::parse_type;
@@ -32,6 +33,7 @@ mod places;
 mod query;
 mod rng;
 mod statements;
+mod tiles;
 pub(crate) mod typing;
 mod views;
 
@@ -43,7 +45,18 @@ fn err<T>(span: Span, msg: impl std::fmt::Display) -> R<T> {
 
 /// Lowers a kernel or func. All errors found are returned together.
 pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::Error>> {
+    lower_kernel(item, kind, None)
+}
+
+/// Lowers a kernel or func; `block_dim` is `#[kernel(block_dim = N)]`'s (which makes the kernel
+/// tiled, and is the width of its `tile(x)`).
+pub fn lower_kernel(
+    item: &syn::ItemFn,
+    kind: FnKind,
+    block_dim: Option<crate::types::Dim>,
+) -> Result<Function, Vec<syn::Error>> {
     let mut cx = Lowerer {
+        tiled: block_dim.clone().map(|width| Tiled { width: Some(width) }),
         kind,
         fn_name: item.sig.ident.to_string(),
         vars: Vec::new(),
@@ -93,6 +106,10 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
                     }
                 };
                 match parse_type(&pt.ty) {
+                    Ok(Ty::Tile(..)) => cx.errors.push(syn::Error::new(
+                        pt.ty.span(),
+                        "a tile is not a parameter: pass an array and load tiles from it with `tile_load`",
+                    )),
                     Ok(ty) => {
                         let var = cx.new_var(Some(name.clone()), ty.clone(), mutable);
                         cx.scopes[0].insert(name.clone(), var);
@@ -124,6 +141,10 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
                     k.row().name
                 ),
             )),
+            Ok(Ty::Tile(..)) => cx.errors.push(syn::Error::new(
+                t.span(),
+                "funcs cannot return tiles yet: write the tile code in the kernel",
+            )),
             Ok(ty) => cx.ret = ty,
             Err(e) => cx.errors.push(e),
         }
@@ -152,6 +173,13 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         Ok(None) => {}
         Err(e) => cx.errors.push(e),
     }
+    if cx.tiled.is_some() && kind == FnKind::Func {
+        cx.errors.push(syn::Error::new(
+            item.sig.ident.span(),
+            "funcs cannot use tiles or `lane()` yet: write the tile code in the kernel",
+        ));
+    }
+    cx.note_tile_consts();
     if !cx.errors.is_empty() {
         return Err(cx.errors);
     }
@@ -167,6 +195,7 @@ pub fn lower_fn(item: &syn::ItemFn, kind: FnKind) -> Result<Function, Vec<syn::E
         tid_ndim: cx.tid_ndim,
         callees: cx.callees,
         consts: cx.consts,
+        tiled: cx.tiled,
     })
 }
 
@@ -188,6 +217,8 @@ struct Lowerer {
     /// Set by a destructuring `let` for the call it lowers: that call (and no other) may be a
     /// builtin returning a tuple (`let (u, sigma, v) = svd3(a);`).
     tuple_result: bool,
+    /// Set by the first tile operation or `lane()`, or by `#[kernel(block_dim = N)]`.
+    tiled: Option<Tiled>,
 }
 
 fn strip(e: &Expr) -> &Expr {

@@ -1,6 +1,6 @@
 //! Kernel and func signatures: parameter types and the return type.
 
-use crate::types::{ObjectRow, Scalar, Ty, VolumeElem};
+use crate::types::{Dim, ObjectRow, Scalar, Ty, VolumeElem};
 use syn::spanned::Spanned;
 use syn::{GenericArgument, PathArguments, Type};
 
@@ -33,6 +33,7 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             }
             match name.as_str() {
                 "Array" => parse_array(last, ty),
+                "Tile" => parse_tile(last, ty),
                 "String" | "Vec" | "Box" | "Rc" | "Arc" | "HashMap" | "BTreeMap" | "VecDeque" => Err(syn::Error::new(
                     ty.span(),
                     format!("heap type `{name}` is not supported in kernels: use Array<T> arguments"),
@@ -155,6 +156,90 @@ fn parse_elem_object(row: &ObjectRow, seg: &syn::PathSegment, whole: &Type) -> s
             format!("a {name} holds one of {}", elems()),
         )),
     }
+}
+
+/// `Tile<T, D0>` or `Tile<T, D0, D1>`: a scalar element and one or two dims, each a literal or a
+/// module const ([`dim_of`]).
+fn parse_tile(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
+    let PathArguments::AngleBracketed(args) = &seg.arguments else {
+        return Err(syn::Error::new(
+            whole.span(),
+            "a tile type names its element and shape: `Tile<f32, 16, 16>`",
+        ));
+    };
+    let mut it = args.args.iter();
+    let elem = match it.next() {
+        Some(GenericArgument::Type(t)) => parse_type(t)?,
+        _ => {
+            return Err(syn::Error::new(
+                whole.span(),
+                "a tile type names its element first: `Tile<f32, 16, 16>`",
+            ))
+        }
+    };
+    if !matches!(elem, Ty::Scalar(s) if s != Scalar::Bool) {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("tiles hold integer or float scalars, not `{elem}`"),
+        ));
+    }
+    let dims = it.map(dim_of).collect::<syn::Result<Vec<_>>>()?;
+    tile_rank(&dims, whole.span())?;
+    Ok(Ty::Tile(Box::new(elem), dims))
+}
+
+/// Checks a tile shape's rank (1 or 2 for now) and that no literal dim is zero.
+pub fn tile_rank(dims: &[Dim], span: proc_macro2::Span) -> syn::Result<()> {
+    if dims.is_empty() || dims.len() > 2 {
+        return Err(syn::Error::new(
+            span,
+            format!(
+                "tiles have one or two dimensions (3-D and 4-D tiles are not supported yet), found {}",
+                dims.len()
+            ),
+        ));
+    }
+    if dims.contains(&Dim::Lit(0)) {
+        return Err(syn::Error::new(span, "a tile dimension must be at least 1"));
+    }
+    Ok(())
+}
+
+/// A tile dimension as written in a type or a turbofish: an integer literal, or a module
+/// const named by a SCREAMING_CASE path (`TM`, `consts::TM`).
+pub fn dim_of(arg: &GenericArgument) -> syn::Result<Dim> {
+    let bad = || {
+        syn::Error::new(
+            arg.span(),
+            "a tile dimension must be an integer literal or a module const (`16`, `TM`)",
+        )
+    };
+    if let Some(n) = const_usize(arg) {
+        return u32::try_from(n).map(Dim::Lit).map_err(|_| bad());
+    }
+    let path = match arg {
+        GenericArgument::Type(Type::Path(tp)) if tp.qself.is_none() => &tp.path,
+        GenericArgument::Const(syn::Expr::Path(p)) if p.qself.is_none() => &p.path,
+        _ => return Err(bad()),
+    };
+    dim_of_path(path).ok_or_else(bad)
+}
+
+/// A const path as a dim, if its last segment is SCREAMING_CASE and it has no arguments.
+pub fn dim_of_path(path: &syn::Path) -> Option<Dim> {
+    let plain = path
+        .segments
+        .iter()
+        .all(|s| matches!(s.arguments, PathArguments::None));
+    let last = path.segments.last()?.ident.to_string();
+    let screaming = last.chars().next()?.is_ascii_uppercase()
+        && last
+            .chars()
+            .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_');
+    (plain && screaming).then(|| {
+        let segs: Vec<String> = path.segments.iter().map(|s| s.ident.to_string()).collect();
+        Dim::Const(segs.join("::"))
+    })
 }
 
 fn const_usize(arg: &GenericArgument) -> Option<usize> {

@@ -5,6 +5,8 @@
 //!   forward replay, the adjoint stack's pushes and pops, the reverse sweep, and every decision
 //!   of how gradients flow. `back/rust_adjoint.rs` and `back/cuda_adjoint.rs` only print it,
 //!   so the CPU and CUDA gradients come from one scheme;
+//! - `lanes`: a tiled kernel's block as one CPU task: which statements run once per block and
+//!   which in loops over its lanes, and where each variable lives;
 //! - `tangent`: forward mode as one pass, from a lowered kernel to its *tangent kernel*, an
 //!   ordinary kernel IR the back ends emit and the adjoint pass differentiates again.
 //!
@@ -15,4 +17,5 @@
 
 pub mod adjoint;
 pub mod adjoint_prep;
+pub mod lanes;
 pub mod tangent;

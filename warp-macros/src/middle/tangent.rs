@@ -62,6 +62,10 @@ fn untracked_float(t: &Ty) -> bool {
 /// The tangent kernel of `f`, or why there is none (a sentence after "it": "calls `quat_rotate`
 /// (line 12), which forward mode does not differentiate yet").
 pub fn build(f: &Function) -> Result<Function, String> {
+    // Tile operations have no tangents yet; the rules' arms for them are never reached.
+    if f.tiled.is_some() {
+        return Err(crate::middle::adjoint::TILE_ADJOINT.into());
+    }
     if f.params.len() * 2 > MAX_PARAMS {
         return Err(format!(
             "has {} parameters: its tangent kernel would take {}, more than the {MAX_PARAMS} a kernel may take",
@@ -118,6 +122,7 @@ pub fn build(f: &Function) -> Result<Function, String> {
         tid_ndim: f.tid_ndim,
         callees: f.callees.clone(),
         consts: f.consts.clone(),
+        tiled: f.tiled.clone(),
     })
 }
 
@@ -127,6 +132,8 @@ fn carries(op: &Op) -> bool {
         Op::Lit(_)
         | Op::LitLike(..)
         | Op::Tid(_)
+        | Op::Lane
+        | Op::TileMap { .. }
         | Op::Extent(..)
         | Op::Len(_)
         | Op::Const(_)
@@ -469,6 +476,8 @@ impl Tx {
             Op::Lit(_)
             | Op::LitLike(..)
             | Op::Tid(_)
+            | Op::Lane
+            | Op::TileMap { .. }
             | Op::Extent(..)
             | Op::Len(_)
             | Op::Const(_)

@@ -12,7 +12,8 @@
 //!   parameters, `grad(x = ..)` names value parameters).
 //! - `uniformity`: which values are the same in every thread and which statements run under
 //!   thread-dependent control flow; a block-cooperative builtin call (a row with the
-//!   `cooperative` fact: the tile operations) under such control flow is an error.
+//!   `cooperative` fact: the tile operations) under such control flow is an error, and so is
+//!   a tile operation's scalar argument (an offset) that differs between the block's threads.
 //! - `capabilities`: what the code needs of its target beyond the core language (an f64
 //!   atomic add, a 64-bit integer atomic minimum, ...), by the names of warp-core's capability
 //!   table, for the `requires` field of `KernelInfo` and `FuncInfo`, which the runtime checks
@@ -32,6 +33,7 @@ mod tests;
 use crate::ir::Function;
 
 pub use capabilities::{required_capabilities, Capability};
+pub use uniformity::Uniformity;
 
 /// What a function is validated against besides its body: its macro's options.
 pub enum Options<'a> {
@@ -57,6 +59,7 @@ pub fn validate(f: &Function, options: Options) -> Result<Valid, Vec<syn::Error>
     wellformed::check(f, &mut errors);
     let same_shape = options::check(f, &options, &mut errors);
     uniformity::check_cooperative(f, &mut errors);
+    uniformity::check_tile_arguments(f, &mut errors);
     if errors.is_empty() {
         Ok(Valid {
             same_shape,

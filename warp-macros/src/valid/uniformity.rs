@@ -71,7 +71,6 @@ impl Uniformity {
     }
 
     /// Whether every thread holds the same value of `v` (wherever `v` is in scope).
-    #[cfg_attr(not(test), allow(dead_code))]
     pub fn is_uniform(&self, v: VarId) -> bool {
         !self.varying[v]
     }
@@ -85,31 +84,33 @@ impl Uniformity {
 
 /// A block-cooperative call under divergent control flow is an error at the call.
 pub(super) fn check_cooperative(f: &Function, errors: &mut Vec<syn::Error>) {
-    let is_cooperative = |s: &Stmt| matches!(&s.kind, StmtKind::Assign { op: Op::Builtin { builtin, .. }, .. } if builtin.cooperative);
     let mut any = false;
-    walk_stmts(&f.body, &mut |s| any |= is_cooperative(s));
+    walk_stmts(&f.body, &mut |s| any |= f.is_cooperative(s));
     if !any {
         return;
     }
     let u = Uniformity::of(f);
     walk_stmts(&f.body, &mut |s| {
-        let StmtKind::Assign {
-            op: Op::Builtin { builtin, .. },
-            ..
-        } = &s.kind
-        else {
-            return;
-        };
-        if !builtin.cooperative {
+        if !f.is_cooperative(s) {
             return;
         }
+        let what = match &s.kind {
+            StmtKind::Assign {
+                op: Op::Builtin { builtin, .. },
+                ..
+            } => format!("`{}`", builtin.name),
+            StmtKind::Assign {
+                op: Op::TileMap { .. },
+                ..
+            } => "`tile_map`".to_string(),
+            _ => "an operation on tiles".to_string(),
+        };
         if let Some(cause) = u.divergence(s) {
             let mut e = syn::Error::new(
                 s.span,
                 format!(
-                    "`{}` is block-cooperative: every thread of the block must call it \
-                     together, but this call is under control flow that depends on the thread",
-                    builtin.name
+                    "{what} is block-cooperative: every thread of the block must call it \
+                     together, but this call is under control flow that depends on the thread"
                 ),
             );
             e.combine(syn::Error::new(
@@ -119,6 +120,46 @@ pub(super) fn check_cooperative(f: &Function, errors: &mut Vec<syn::Error>) {
                  some threads take)",
             ));
             errors.push(e);
+        }
+    });
+}
+
+/// A tile operation's scalar arguments (offsets, `tile_arange`'s bounds) must be the same in
+/// every thread of the block: the block runs the operation once. (`tile(x)` takes each
+/// thread's own value.)
+pub(super) fn check_tile_arguments(f: &Function, errors: &mut Vec<syn::Error>) {
+    if f.tiled.is_none() {
+        return;
+    }
+    let u = Uniformity::of(f);
+    walk_stmts(&f.body, &mut |s| {
+        let StmtKind::Assign {
+            op: Op::Builtin { builtin, args },
+            ..
+        } = &s.kind
+        else {
+            return;
+        };
+        if !builtin.cooperative || builtin.lanes {
+            return;
+        }
+        for a in args {
+            let t = f.ty(*a);
+            if matches!(t, Ty::Array(..) | Ty::Tile(..)) || u.is_uniform(*a) {
+                continue;
+            }
+            let what = match builtin.name {
+                "tile_load" | "tile_store" => "offset",
+                _ => "argument",
+            };
+            errors.push(syn::Error::new(
+                s.span,
+                format!(
+                    "the {what} of `{}` must be the same in every thread of the block (it may not depend on `lane()`, on a value read from memory the kernel writes, or on control flow that depends on the thread)",
+                    builtin.name
+                ),
+            ));
+            return;
         }
     });
 }
@@ -219,7 +260,11 @@ impl Analysis<'_> {
                 .any(|a| is_memory(&self.f.vars[*a].ty) && self.may_be_written(*a))
         };
         match op {
-            Op::Tid(_) => true,
+            // In a tiled kernel `tid()` is the block's index: the same in its threads.
+            Op::Tid(_) => self.f.tiled.is_none(),
+            Op::Lane => true,
+            // Per-thread values out of a tile.
+            Op::Builtin { builtin, .. } if builtin.lanes => true,
             // Only the type of the variable counts.
             Op::LitLike(..) => false,
             Op::Load { array, .. } => any || self.may_be_written(*array),
@@ -284,6 +329,12 @@ impl Analysis<'_> {
             let level = self.level();
             match &s.kind {
                 StmtKind::Declare { var } => self.def_level[*var] = level,
+                // A tile is one value of the whole block, whatever it was computed from.
+                StmtKind::Assign { dst, define, .. } if self.f.vars[*dst].ty.is_tile() => {
+                    if *define {
+                        self.def_level[*dst] = level;
+                    }
+                }
                 StmtKind::Assign { dst, op, define } => {
                     if *define {
                         self.def_level[*dst] = level;

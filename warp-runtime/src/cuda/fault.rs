@@ -177,6 +177,20 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
                 .map(|k| f64::from_bits(i64_at(8 + 8 * k) as u64))
                 .collect(),
         },
+        // wp_core.h FAULT_TILE_INDEX: an index outside a tile of rank `ndim`.
+        6 => {
+            let mut index = [0i64; 4];
+            let mut shape = [0u32; 4];
+            for k in 0..ndim.min(4) {
+                index[k] = i64_at(8 + 8 * k);
+                shape[k] = u32::try_from(i64_at(40 + 8 * k)).unwrap_or(u32::MAX);
+            }
+            FaultKind::TileIndex {
+                index,
+                shape,
+                rank: ndim as u8,
+            }
+        }
         _ => FaultKind::BadStep { step: i64_at(8) },
     };
     Fault {

@@ -62,6 +62,15 @@ impl Lowerer {
             self.use_tid(1, span)?;
             return Ok(self.def(Op::Tid(0), USIZE, span));
         }
+        if prefix_ok {
+            let fish = match &fp.path.segments.last().expect("a segment").arguments {
+                syn::PathArguments::AngleBracketed(a) => Some(a),
+                _ => None,
+            };
+            if let Some(v) = self.tile_call(&last, c, fish, want, span)? {
+                return Ok(v);
+            }
+        }
         // glam constructors: Vec3::new, Vec3::splat, Mat3::from_cols, Quat::from_xyzw, vec3(..)
         if segs.len() >= 2 {
             if let Some(ty) = Ty::from_glam_name(&segs[segs.len() - 2]) {

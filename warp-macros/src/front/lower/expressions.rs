@@ -168,6 +168,9 @@ impl Lowerer {
                         Ty::Scalar(s) => s.is_float() || s.is_signed_int(),
                         Ty::Vector(s, _) => *s != Scalar::U32,
                         Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) | Ty::Deferred => true,
+                        Ty::Tile(e, _) => {
+                            matches!(**e, Ty::Scalar(s) if s.is_float() || s.is_signed_int())
+                        }
                         _ => false,
                     };
                     if !ok {
@@ -266,6 +269,17 @@ impl Lowerer {
                             return Ok(self.view_extent(a, k, span));
                         }
                         return Ok(self.def(Op::Extent(a, k), USIZE, span));
+                    }
+                }
+                // `t[i]` of a tile variable.
+                if let Expr::Path(p) = strip(&ix.expr) {
+                    let tile = p
+                        .path
+                        .get_ident()
+                        .and_then(|i| self.lookup(&i.to_string()))
+                        .filter(|v| self.ty(*v).is_tile());
+                    if let Some(t) = tile {
+                        return self.tile_index(t, &ix.index, span);
                     }
                 }
                 let (array, index) = self.array_index(ix)?;

@@ -70,6 +70,7 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
             Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => {
                 Some(Ty::Scalar(*s))
             }
+            Ty::Tile(e, _) => Some((**e).clone()),
             Ty::Deferred => Some(Ty::Deferred),
             _ => None,
         },

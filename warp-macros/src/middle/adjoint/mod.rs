@@ -115,7 +115,15 @@ fn grad_params(f: &Function) -> Vec<GradParam> {
 }
 
 /// The adjoint of `f` for a target with `policy`, or why there is none.
+/// Why a tiled kernel has no adjoint (nor tangent) yet.
+pub const TILE_ADJOINT: &str =
+    "uses tiles, and backward through tile operations is not supported yet";
+
 pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
+    // Tile operations have no adjoints yet; the sweep's arms for them are never reached.
+    if f.tiled.is_some() {
+        return Err(TILE_ADJOINT.into());
+    }
     if let Some(why) = crate::analysis::atomic_without_adjoint(f) {
         return Err(why);
     }

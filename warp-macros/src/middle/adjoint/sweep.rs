@@ -305,6 +305,8 @@ impl Cx<'_> {
             | Op::LitLike(..)
             | Op::Unary(UnOp::Not, _)
             | Op::Tid(_)
+            | Op::Lane
+            | Op::TileMap { .. }
             | Op::Extent(..)
             | Op::Len(_)
             | Op::ViewCheck { .. }

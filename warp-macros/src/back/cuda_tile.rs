@@ -1,0 +1,176 @@
+//! CUDA back end for tiles: the slots of a tiled kernel's tiles in shared memory, its tile
+//! statements as calls of wp_tile.h, the barriers between lane code and tile operations, and
+//! the entry that gives each block its block index.
+//!
+//! Every thread runs the whole body (lane code needs no plan here, unlike the CPU's). A tile
+//! is a `wp::tile_t` over a slot of the block's dynamic shared memory: one slot per tile
+//! variable, never reused, each 16-byte aligned; `expand`'s `TileInfo` computes the same total
+//! with the same rule (`tile_slot_end`), which is the launch's dynamic shared memory size.
+//!
+//! Barriers: each tile operation of wp_tile.h ends with `__syncthreads()`, so its result is
+//! visible when it returns. Before a tile operation that does not directly follow another,
+//! the emitter adds one more: lane code since the last barrier may still be reading a slot the
+//! operation is about to write (a tile read by `t[i]`, a loop's previous iteration). The entry
+//! ends each block with one, before the block's slots are reused for the next block.
+
+use super::cuda::Emitter;
+use crate::builtins::Emit;
+use crate::ir::*;
+use crate::types::{Dim, Ty};
+
+/// The C++ spelling of a tile dim: a literal, or the const's value (`@@K<k>@@`).
+fn dim_cpp(f: &Function, d: &Dim) -> Result<String, String> {
+    match d {
+        Dim::Lit(n) => Ok(n.to_string()),
+        Dim::Const(p) => {
+            let want: syn::Path = syn::parse_str(p).map_err(|e| e.to_string())?;
+            let k =
+                f.consts.iter().position(|c| c == &want).ok_or_else(|| {
+                    format!("the tile dim `{p}` is not among the kernel's consts")
+                })?;
+            Ok(format!("@@K{k}@@"))
+        }
+    }
+}
+
+/// `wp::tile_t<float, 16, @@K0@@>`.
+pub(crate) fn tile_type(f: &Function, t: &Ty) -> Result<String, String> {
+    let Ty::Tile(e, dims) = t else {
+        return Err(format!("`{t}` is not a tile"));
+    };
+    let e = super::cuda::cpp_type(e).ok_or("a tile element without a C++ type")?;
+    let dims = dims
+        .iter()
+        .map(|d| dim_cpp(f, d))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(format!("wp::tile_t<{e}, {}>", dims.join(", ")))
+}
+
+/// The slots: the block's shared memory, then each tile variable's `tile_t` on its slot.
+pub(crate) fn slots(e: &mut Emitter) -> Result<(), String> {
+    let f = e.f;
+    e.out
+        .push_str("    extern __shared__ __align__(16) unsigned char __smem[];\n");
+    let mut prev: Option<String> = None;
+    for (v, var) in f.vars.iter().enumerate() {
+        if !var.ty.is_tile() {
+            continue;
+        }
+        let t = tile_type(f, &var.ty)?;
+        let name = e.var(v);
+        let off = match &prev {
+            None => "0".to_string(),
+            Some(p) => format!("wp::tile_slot_end(__off_{p}, decltype({p})::BYTES)"),
+        };
+        e.out.push_str(&format!(
+            "    constexpr wp::usize __off_{name} = {off};\n    {t} {name}(__smem + __off_{name});\n"
+        ));
+        prev = Some(name);
+    }
+    Ok(())
+}
+
+/// Whether `s` is a tile statement this module prints: a cooperative one, or a tile row
+/// (`t[i]`).
+pub(crate) fn is_tile_stmt(f: &Function, s: &Stmt) -> bool {
+    f.is_cooperative(s)
+        || matches!(&s.kind, StmtKind::Assign { op: Op::Builtin { builtin, .. }, .. } if builtin.is_tile())
+}
+
+/// A tile statement.
+pub(crate) fn stmt(e: &mut Emitter, s: &Stmt) -> Result<(), String> {
+    let f = e.f;
+    let sp = s.span;
+    let StmtKind::Assign { dst, op, define } = &s.kind else {
+        unreachable!("tile statements are assignments")
+    };
+    let d = e.var(*dst);
+    let v = |e: &Emitter, x: &VarId| e.var(*x);
+    let cooperative = f.is_cooperative(s);
+    if cooperative && !e.after_tile_op {
+        e.line(sp, "__syncthreads();");
+    }
+    let text = match op {
+        Op::Builtin { builtin, args } => {
+            let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
+            match builtin.name {
+                "tile_zeros" | "tile_ones" => format!("wp::{}({d});", builtin.name),
+                "tile_arange" => format!("wp::tile_arange({d}, {}, {});", a[0], a[1]),
+                "tile_load" => format!("wp::tile_load({d}, {}, __ctx);", a.join(", ")),
+                "tile_store" => {
+                    // (array, tile, offsets..) -> (array, offsets.., tile)
+                    let mut r = vec![a[0].clone()];
+                    r.extend(a[2..].iter().cloned());
+                    r.push(a[1].clone());
+                    format!("wp::tile_store({}, __ctx);", r.join(", "))
+                }
+                "tile" => format!("wp::tile_from_thread({d}, {});", a[0]),
+                "untile" => {
+                    let t = super::cuda::cpp_type(f.ty(*dst)).ok_or("an untile result type")?;
+                    if *define {
+                        format!("{t} {d} = wp::untile({});", a[0])
+                    } else {
+                        format!("{d} = wp::untile({});", a[0])
+                    }
+                }
+                "tile_extract" => {
+                    let t = super::cuda::cpp_type(f.ty(*dst)).ok_or("a tile element type")?;
+                    let call = format!("wp::tile_extract({}, __ctx)", a.join(", "));
+                    if *define {
+                        format!("{t} {d} = {call};")
+                    } else {
+                        format!("{d} = {call};")
+                    }
+                }
+                "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
+                    format!("wp::{}({d}, {});", builtin.name, a[0])
+                }
+                "tile_matmul" => format!("wp::tile_matmul({d}, {}, {});", a[0], a[1]),
+                "tile_matmul_acc" => format!("wp::tile_matmul_acc({d}, {}, {});", a[0], a[1]),
+                other => return Err(format!("`{other}` has no CUDA form yet")),
+            }
+        }
+        Op::TileMap { f: g, args } => {
+            let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
+            let call = match (g.emit, a.len()) {
+                (Emit::Operator(o), _) => {
+                    format!("[](auto x, auto y) {{ return x {} y; }}", o.symbol())
+                }
+                (_, 1) => format!("[](auto x) {{ return {}(x); }}", g.cuda),
+                _ => format!("[](auto x, auto y) {{ return {}(x, y); }}", g.cuda),
+            };
+            e.section(g.section);
+            match a.len() {
+                1 => format!("wp::tile_map({d}, {}, {call});", a[0]),
+                _ => format!("wp::tile_map2({d}, {}, {}, {call});", a[0], a[1]),
+            }
+        }
+        Op::Copy(x) => format!("wp::tile_copy({d}, {});", v(e, x)),
+        Op::Unary(UnOp::Neg, x) => format!("wp::tile_neg({d}, {});", v(e, x)),
+        Op::Binary(o, l, r) => {
+            let name = match o {
+                BinOp::Add => "tile_add",
+                BinOp::Sub => "tile_sub",
+                BinOp::Mul => "tile_mul",
+                BinOp::Div => "tile_div",
+                _ => return Err(format!("`{}` on tiles has no CUDA form", o.symbol())),
+            };
+            format!("wp::{name}({d}, {}, {});", v(e, l), v(e, r))
+        }
+        _ => return Err("this operation on tiles has no CUDA form yet".into()),
+    };
+    e.line(sp, &text);
+    e.after_tile_op = cooperative;
+    Ok(())
+}
+
+/// The entry of a tiled kernel: block `b` of the launch runs `@@SELF@@` with `__flat = b`
+/// (its `tid()`), every thread of the CUDA block together; a barrier ends each block, before
+/// the next one's tile operations reuse the slots.
+pub(crate) fn entry(decl: &str, call: &str) -> String {
+    format!(
+        "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM) @@ENTRY@@({decl}) {{\n    \
+         for (wp::i64 __flat = (wp::i64)blockIdx.x; __flat < __launch.total; __flat += (wp::i64)gridDim.x) {{\n        \
+         @@SELF@@({call});\n        __syncthreads();\n    }}\n}}\n#endif\n"
+    )
+}

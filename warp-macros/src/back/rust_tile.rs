@@ -1,0 +1,270 @@
+//! Rust back end for tiles: the tile operations as calls of `warp_core::tile`, and the body of
+//! a tiled kernel's CPU block, printed from `middle::lanes`'s plan.
+//!
+//! A block runs as one task. Each block-level statement is printed once; each lane region is
+//! a loop over the block's lanes (`for __lane in 0..__nl`, where `__nl` is the block size, or
+//! 1 for a lane-invariant kernel). A variable kept per lane lives in a `PerLane` array
+//! (`__pl_x_5`): a region loads it into a local of the same name at the top of each lane's
+//! turn and stores it back at the end, so the region's statements are printed by the ordinary
+//! emitter unchanged; a block-level statement that reads it reads lane 0's value, which the
+//! validator has proved is every lane's.
+
+use super::rust::{ty_tokens, RustEmitter};
+use crate::builtins::{Builtin, Emit};
+use crate::ir::*;
+use crate::middle::lanes::{region_vars, LanePlan, Storage};
+use crate::types::Ty;
+use proc_macro2::{Span, TokenStream};
+use quote::{format_ident, quote, quote_spanned};
+
+/// The CPU call of a tile row (`None` for the rows the block printer writes itself: `tile`,
+/// `untile`, and the accumulating matmul).
+pub(super) fn tile_op(
+    em: &RustEmitter,
+    b: &Builtin,
+    args: &[VarId],
+    ty: &Ty,
+    sp: Span,
+) -> TokenStream {
+    let name = proc_macro2::Literal::string(&em.f.name);
+    let v: Vec<syn::Ident> = args.iter().map(|a| em.var(*a)).collect();
+    let t = ty_tokens(ty);
+    match b.name {
+        "tile_zeros" => quote_spanned!(sp=> <#t>::zeros()),
+        "tile_ones" => quote_spanned!(sp=> <#t>::ones()),
+        "tile_arange" => {
+            let (s, d) = (&v[0], &v[1]);
+            quote_spanned!(sp=> <#t>::arange(#s, #d))
+        }
+        "tile_load" => {
+            let a = &v[0];
+            let offs = &v[1..];
+            let f = format_ident!("load{}", offs.len());
+            quote_spanned!(sp=> __wp::tile::#f(&#a, #(#offs),*)?)
+        }
+        "tile_store" => {
+            let (a, tile) = (&v[0], &v[1]);
+            let offs = &v[2..];
+            let f = format_ident!("store{}", offs.len());
+            quote_spanned!(sp=> __wp::tile::#f(&#a, #(#offs,)* &#tile)?)
+        }
+        "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
+            let f = format_ident!("{}", &b.name[5..]);
+            let x = &v[0];
+            quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
+        }
+        "tile_matmul" => {
+            let (x, y) = (&v[0], &v[1]);
+            quote_spanned!(sp=> __wp::tile::matmul(&#x, &#y))
+        }
+        "tile_extract" => {
+            let x = &v[0];
+            let idx = &v[1..];
+            quote_spanned!(sp=> #x.extract(#(#idx,)* #name)?)
+        }
+        other => unreachable!("`{other}` is printed by the block printer"),
+    }
+}
+
+/// `tile_map(f, a)`: `a.map(f)`, `a.map2(&b, f)`.
+pub(super) fn tile_map(em: &RustEmitter, f: &Builtin, args: &[VarId], sp: Span) -> TokenStream {
+    let g = format_ident!("{}", f.rust);
+    let v: Vec<syn::Ident> = args.iter().map(|a| em.var(*a)).collect();
+    let call = match f.emit {
+        Emit::Operator(op) => {
+            let o: TokenStream = op.symbol().parse().expect("operator");
+            quote!(|__x, __y| __x #o __y)
+        }
+        _ if v.len() == 1 => quote!(|__x| __wp::builtins::#g(__x)),
+        _ => quote!(|__x, __y| __wp::builtins::#g(__x, __y)),
+    };
+    match &v[..] {
+        [a] => quote_spanned!(sp=> #a.map(#call)),
+        [a, b] => quote_spanned!(sp=> #a.map2(&#b, #call)),
+        _ => unreachable!("tile_map takes one or two tiles"),
+    }
+}
+
+/// Prints a tiled kernel's block body.
+pub struct BlockPrinter<'a> {
+    pub em: RustEmitter<'a>,
+    pub plan: LanePlan,
+}
+
+impl<'a> BlockPrinter<'a> {
+    pub fn new(f: &'a Function) -> Result<Self, String> {
+        Ok(BlockPrinter {
+            em: RustEmitter::new(f),
+            plan: LanePlan::of(f)?,
+        })
+    }
+
+    fn per_lane(&self, v: VarId) -> syn::Ident {
+        format_ident!("__pl_{}", self.em.var(v))
+    }
+
+    fn is_per_lane(&self, v: VarId) -> bool {
+        self.plan.storage[v] == Storage::PerLane
+    }
+
+    /// The block's setup (the lane count, the per-lane arrays) and body.
+    pub fn body(&self) -> TokenStream {
+        let f = self.em.f;
+        let invariant = self.plan.lane_invariant;
+        let per_lane = (0..f.vars.len()).filter(|v| self.is_per_lane(*v)).map(|v| {
+            let pl = self.per_lane(v);
+            match ty_tokens(&f.vars[v].ty) {
+                Some(t) => quote!(let mut #pl = __wp::block::PerLane::<#t>::new(__bd);),
+                None => quote!(let mut #pl = __wp::block::PerLane::new(__bd);),
+            }
+        });
+        let alive = self
+            .plan
+            .lane_returns
+            .then(|| quote!(let mut __alive = [true; __wp::block::MAX_BLOCK_DIM];));
+        let body = self.list(&f.body);
+        quote! {
+            let __bd = __grid.block_dim;
+            // A lane-invariant kernel's lanes all compute the same: one does it for all.
+            let __nl = if #invariant { 1 } else { __bd };
+            #alive
+            #(#per_lane)*
+            #body
+        }
+    }
+
+    fn list(&self, b: &Block) -> TokenStream {
+        let mut out = TokenStream::new();
+        let mut run: Vec<&Stmt> = Vec::new();
+        for s in b {
+            if self.plan.is_block_level(s) {
+                out.extend(self.region(&run));
+                run.clear();
+                out.extend(self.block_stmt(s));
+            } else {
+                run.push(s);
+            }
+        }
+        out.extend(self.region(&run));
+        out
+    }
+
+    /// A lane region: the loop over the lanes.
+    fn region(&self, run: &[&Stmt]) -> TokenStream {
+        if run.is_empty() {
+            return TokenStream::new();
+        }
+        let owned: Vec<Stmt> = run.iter().map(|s| (*s).clone()).collect();
+        let (vars, set) = region_vars(&owned);
+        let kept: Vec<VarId> = vars.into_iter().filter(|v| self.is_per_lane(*v)).collect();
+        let loads = kept.iter().map(|v| {
+            let (x, pl) = (self.em.var(*v), self.per_lane(*v));
+            quote!(let mut #x = #pl[__lane];)
+        });
+        let stores = kept.iter().filter(|v| set.contains(v)).map(|v| {
+            let (x, pl) = (self.em.var(*v), self.per_lane(*v));
+            quote!(#pl[__lane] = #x;)
+        });
+        let body: TokenStream = run
+            .iter()
+            .map(|s| match &s.kind {
+                // A per-lane variable is declared by its array; the load above is its value.
+                StmtKind::Declare { var } if self.is_per_lane(*var) => TokenStream::new(),
+                _ => self.em.stmt_tokens(s),
+            })
+            .collect();
+        let skip_dead = self.plan.lane_returns.then(|| {
+            quote!(if !__alive[__lane] {
+                continue '__lanes;
+            })
+        });
+        quote! {
+            '__lanes: for __lane in 0..__nl {
+                #skip_dead
+                #(#loads)*
+                #body
+                #(#stores)*
+            }
+        }
+    }
+
+    /// Loads, before a block-level statement, the per-lane values it reads (lane 0's).
+    fn lane0_reads(&self, s: &Stmt) -> TokenStream {
+        let mut out = TokenStream::new();
+        let mut seen = Vec::new();
+        s.kind.for_each_read(&mut |v| {
+            if self.is_per_lane(v) && !seen.contains(&v) {
+                seen.push(v);
+                let (x, pl) = (self.em.var(v), self.per_lane(v));
+                out.extend(quote!(let #x = #pl[0];));
+            }
+        });
+        out
+    }
+
+    fn block_stmt(&self, s: &Stmt) -> TokenStream {
+        let sp = s.span;
+        let reads = self.lane0_reads(s);
+        let name = proc_macro2::Literal::string(&self.em.f.name);
+        let body = match &s.kind {
+            StmtKind::If { cond, then, els } => {
+                let c = self.em.var(*cond);
+                let (t, e) = (self.list(then), self.list(els));
+                quote_spanned!(sp=> if #c { #t } else { #e })
+            }
+            StmtKind::For { .. } => {
+                // The loop as the ordinary emitter prints it, with this printer's body.
+                self.em.for_loop(s, &|b| self.list(b))
+            }
+            StmtKind::Loop { body } => {
+                let b = self.list(body);
+                quote_spanned!(sp=> loop { #b })
+            }
+            StmtKind::Break => quote_spanned!(sp=> break;),
+            StmtKind::Continue => quote_spanned!(sp=> continue;),
+            StmtKind::Return { .. } => quote_spanned!(sp=> return ::core::result::Result::Ok(());),
+            StmtKind::Assign {
+                dst,
+                op: Op::Builtin { builtin, args },
+                define,
+            } if builtin.lanes || builtin.name == "tile_matmul_acc" => {
+                let d = self.em.var(*dst);
+                match builtin.name {
+                    "tile" => {
+                        let x = args[0];
+                        let t = ty_tokens(self.em.f.ty(*dst));
+                        let lanes = if self.is_per_lane(x) {
+                            let pl = self.per_lane(x);
+                            quote!(&#pl)
+                        } else {
+                            // One value for the block: every lane holds it.
+                            let x = self.em.var(x);
+                            quote!(&__wp::block::PerLane::splat(#x, __bd))
+                        };
+                        let call = quote!(__wp::block::from_lanes(#lanes, __bd, #name)?);
+                        if *define {
+                            quote_spanned!(sp=> let #d: #t = #call;)
+                        } else {
+                            quote_spanned!(sp=> #d = #call;)
+                        }
+                    }
+                    "untile" => {
+                        let t = self.em.var(args[0]);
+                        let pl = self.per_lane(*dst);
+                        quote_spanned! {sp=>
+                            for __l in 0..__bd {
+                                #pl[__l] = __wp::block::untile(&#t, __l, #name)?;
+                            }
+                        }
+                    }
+                    _ => {
+                        let (a, b) = (self.em.var(args[0]), self.em.var(args[1]));
+                        quote_spanned!(sp=> __wp::tile::matmul_acc(&#a, &#b, &mut #d);)
+                    }
+                }
+            }
+            _ => self.em.stmt_tokens(s),
+        };
+        quote!(#reads #body)
+    }
+}

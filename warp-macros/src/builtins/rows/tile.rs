@@ -1,0 +1,50 @@
+//! Tiles (section "tile"): block-cooperative values that a whole block of a `launch_tiled`
+//! kernel holds together.
+//!
+//! A tile row's signature is for the reference only: tile calls are typed by their shapes in
+//! `front::lower::tiles`, not by [`Builtin::resolve`], since a tile's type is its element and
+//! its shape. Every row but `tile_extract` is cooperative (the validator's uniformity rule).
+//! The CPU functions are in `warp_core::tile` and `warp_core::block`, the CUDA ones in
+//! wp_tile.h. Backward through tiles is not supported yet: their rows state `Adjoint`, and a
+//! kernel with tiles reports why it has no adjoint.
+
+use super::*;
+
+/// Tiles hold integer and float scalars.
+const TILE_ELEM: &[Class] = &[Number];
+
+/// Warp's tile builtins that this slice has.
+pub(super) const ROWS: &[Builtin] = rows! {
+    // Construction. The shape (Warp's `shape=`) and element (`dtype=`) are the turbofish's
+    // (`tile_zeros::<f32, 16, 8>()`) or the `let` annotation's; `tile_arange(n)`,
+    // `(start, stop)` or `(start, stop, step)` take integer literals, as Warp's constants.
+    "tile_zeros": TILE_ELEM, (TileShape) -> Tile, "tile", Zero, cooperative;
+    "tile_ones": TILE_ELEM, (TileShape) -> Tile, "tile", Zero, cooperative;
+    "tile_arange": TILE_ELEM, (T, T, T) -> Tile, "tile", Zero, cooperative;
+    // Loads and stores: out-of-bounds elements read zero and are not written; offsets are
+    // signed, and negative coordinates are out of bounds too.
+    "tile_load": TILE_ELEM, (ArrayOfT, TileShape, Offsets) -> Tile, "tile", Adjoint,
+        no_tangent, cooperative;
+    "tile_store": TILE_ELEM, (ArrayOfT, Tile, Offsets) -> Unit, "tile", Adjoint,
+        no_tangent, cooperative;
+    // Per-thread values and back: `tile(x)` is `Tile<T, block_dim>`, `untile(t)` lane `l`'s
+    // element `l`.
+    "tile": TILE_ELEM, (T) -> Tile, "tile", Adjoint, no_tangent, cooperative, lanes;
+    "untile": TILE_ELEM, (Tile) -> T, "tile", Adjoint, no_tangent, cooperative, lanes;
+    // `t[i]`, `t[i, j]`: a read, not cooperative; an index outside the tile faults.
+    "tile_extract": TILE_ELEM, (Tile, Index) -> T, "tile", Adjoint, no_tangent;
+    // Elementwise: `tile_map(f, a)`, `tile_map(f, a, b)` with a builtin function
+    // (`tile_map(sin, a)`); operators `+ - * /` and unary `-` on tiles are Warp's `tile_add`...
+    "tile_map": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    // Reductions to a `Tile<T, 1>` (`Tile<i32, 1>` for the arg-extrema), in the GPU's order.
+    "tile_sum": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_min": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_max": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_argmin": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
+    "tile_argmax": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
+    // `c = tile_matmul(a, b)`; `tile_matmul(a, b, &mut c)` is `c += a b` (Warp's `out`
+    // argument), each element an FMA chain in ascending k.
+    "tile_matmul": FLOAT, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_matmul_acc": FLOAT, (Tile, Tile, Tile) -> Unit, "tile", Adjoint, no_tangent,
+        cooperative, overload("tile_matmul", 3);
+};

@@ -1,0 +1,102 @@
+//! The parts of a tiled kernel's `Kernel` impl: its `TileInfo` (the block's shared memory and
+//! CPU frame, the width its `tile(x)` fixes) and its CPU entry, which runs whole blocks.
+
+use crate::back::rust::ty_tokens;
+use crate::back::rust_tile::BlockPrinter;
+use crate::ir::Function;
+use crate::middle::lanes::Storage;
+use proc_macro2::TokenStream;
+use quote::quote;
+
+/// Bytes assumed per lane for a per-lane value whose type only rustc knows (a func's result):
+/// the frame estimate must not fall short, and kernel values are at most a 4x4 f64 matrix.
+const DEFERRED_LANE_BYTES: usize = 128;
+
+/// `KernelInfo::tile`: `None` for an ordinary kernel.
+pub(super) fn info(f: &Function) -> TokenStream {
+    let Some(tiled) = &f.tiled else {
+        return quote!(::core::option::Option::None);
+    };
+    let width = match &tiled.width {
+        Some(d) => {
+            let d = d.rust_tokens();
+            quote!(::core::option::Option::Some(#d))
+        }
+        None => quote!(::core::option::Option::None),
+    };
+    // One 16-byte aligned slot per tile variable, in variable order: the rule of the CUDA
+    // emitter's slots (`wp::tile_slot_end`), so this is the dynamic shared memory it uses.
+    let tiles: Vec<TokenStream> = f
+        .vars
+        .iter()
+        .filter(|v| v.ty.is_tile())
+        .map(|v| ty_tokens(&v.ty).expect("a tile type"))
+        .collect();
+    let per_lane: Vec<TokenStream> = match BlockPrinter::new(f) {
+        Ok(p) => (0..f.vars.len())
+            .filter(|v| p.plan.storage[*v] == Storage::PerLane)
+            .map(|v| match ty_tokens(&f.vars[v].ty) {
+                Some(t) => quote!(::core::mem::size_of::<__wp::block::PerLane<#t>>()),
+                None => quote!(#DEFERRED_LANE_BYTES * __wp::block::MAX_BLOCK_DIM),
+            })
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    quote! {
+        ::core::option::Option::Some(__wp::TileInfo {
+            width: #width,
+            shared_bytes: {
+                let mut __o = 0usize;
+                #( __o = (__o + ::core::mem::size_of::<#tiles>() + 15) / 16 * 16; )*
+                __o
+            },
+            adjoint_shared_bytes: 0,
+            cpu_frame_bytes: 0usize #( + ::core::mem::size_of::<#tiles>() )* #( + #per_lane )*,
+        })
+    }
+}
+
+/// `Kernel::run_cpu` of a tiled kernel: `__range` is a range of blocks, each run whole by
+/// `__block` (the lane plan's body).
+pub(super) fn run_cpu(
+    f: &Function,
+    pvars: &[TokenStream],
+    pnames: &[syn::Ident],
+    tys: &[&syn::Type],
+    tid_setup: Option<&TokenStream>,
+) -> TokenStream {
+    let body = match BlockPrinter::new(f) {
+        Ok(p) => p.body(),
+        Err(why) => {
+            let msg = format!("`{}`: {why}", f.name);
+            quote!(::core::compile_error!(#msg);)
+        }
+    };
+    quote! {
+        fn run_cpu(
+            __params: &__wp::CpuParamsOf<Self>,
+            __grid: &__wp::Grid,
+            __range: ::core::ops::Range<usize>,
+        ) -> __wp::KResult<()> {
+            // One block: its tile operations once, its lane code in loops over the lanes
+            // (`middle::lanes`). Parameters by value, as `run_cpu`'s thread function.
+            #[inline(always)]
+            #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, unused_labels, non_snake_case, unreachable_code, clippy::all)]
+            fn __block(
+                #( #pvars: <#tys as __wp::KernelArg>::CpuView, )*
+                __grid: &__wp::Grid,
+                __flat: usize,
+            ) -> __wp::KResult<()> {
+                #tid_setup
+                #body
+                ::core::result::Result::Ok(())
+            }
+            let ( #(#pnames,)* ) = *__params;
+            let __grid = *__grid;
+            for __flat in __range {
+                __block( #(#pnames,)* &__grid, __flat)?;
+            }
+            ::core::result::Result::Ok(())
+        }
+    }
+}

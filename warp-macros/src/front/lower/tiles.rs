@@ -1,0 +1,788 @@
+//! Tiles in the front end: the calls of the tile rows typed by their shapes, `lane()`, and
+//! `t[i]`. A tile's type is its element and its shape (`Tile<f32, 16, 8>`), so these calls are
+//! not matched by `Builtin::resolve` (whose type variable is one type) but here: each call's
+//! shape comes from its turbofish (`tile_zeros::<f32, 16, 8>()`), Warp's positional shape
+//! (`tile_load(a, (16, 8), (i, j))`), the `let` annotation (the `want` type), or its operands.
+//!
+//! Shape rules the macro can decide (two literals, or the same const) are errors here, at the
+//! call. The others (a const against a literal) are left to rustc: the generated code types
+//! every tile with its dims as const generics, so a mismatch is a type error at the statement.
+
+use super::*;
+use crate::front::signature::{dim_of, dim_of_path, tile_rank};
+use crate::types::Dim;
+
+/// A tile's element and dims, from its type.
+fn tile_parts(t: &Ty) -> Option<(&Ty, &[Dim])> {
+    match t {
+        Ty::Tile(e, d) => Some((e, d)),
+        _ => None,
+    }
+}
+
+fn dims_text(d: &[Dim]) -> String {
+    d.iter()
+        .map(|d| d.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Whether two shapes are known to differ (rank, or a pair of dims the macro can compare).
+fn shapes_differ(a: &[Dim], b: &[Dim]) -> bool {
+    a.len() != b.len() || a.iter().zip(b).any(|(x, y)| x.same(y) == Some(false))
+}
+
+impl Lowerer {
+    /// Marks the function a tiled kernel (its first tile operation or `lane()`).
+    fn mark_tiled(&mut self) {
+        self.tiled.get_or_insert_with(Tiled::default);
+    }
+
+    /// Registers the consts that tile dims name, so that the CUDA template can write their
+    /// values (`@@K<k>@@`), as for consts read as values.
+    pub(super) fn note_tile_consts(&mut self) {
+        let mut paths = Vec::new();
+        for v in &self.vars {
+            if let Ty::Tile(_, dims) = &v.ty {
+                for d in dims {
+                    if let Dim::Const(p) = d {
+                        paths.push(syn::parse_str::<syn::Path>(p).expect("a const path"));
+                    }
+                }
+            }
+        }
+        if let Some(Tiled {
+            width: Some(Dim::Const(p)),
+        }) = &self.tiled
+        {
+            paths.push(syn::parse_str::<syn::Path>(p).expect("a const path"));
+        }
+        for p in paths {
+            if !self.consts.contains(&p) {
+                self.consts.push(p);
+            }
+        }
+    }
+
+    /// A call of `lane()` or of a tile row; `None` when `name` is neither.
+    pub(super) fn tile_call(
+        &mut self,
+        name: &str,
+        c: &syn::ExprCall,
+        turbofish: Option<&syn::AngleBracketedGenericArguments>,
+        want: Option<&Ty>,
+        span: Span,
+    ) -> R<Option<VarId>> {
+        let args: Vec<&Expr> = c.args.iter().collect();
+        if name == "lane" {
+            if !args.is_empty() {
+                return err(span, "lane() takes no arguments");
+            }
+            if self.kind == FnKind::Func {
+                return err(span, "`lane()` is only defined in kernels");
+            }
+            self.mark_tiled();
+            return Ok(Some(self.def(Op::Lane, USIZE, span)));
+        }
+        let row = match builtins::lookup_overload(name, args.len()) {
+            Some(b) if b.is_tile() => b,
+            _ => match builtins::lookup_user(name) {
+                Some(b) if b.is_tile() => b,
+                _ => return Ok(None),
+            },
+        };
+        if self.kind == FnKind::Func {
+            return err(
+                span,
+                format!("`{name}` is a tile operation: funcs cannot use tiles yet"),
+            );
+        }
+        self.mark_tiled();
+        // The turbofish: an element type first where the row makes one, then dims.
+        let (fish_elem, fish_dims) = self.turbofish(name, turbofish)?;
+        let want_tile = want.and_then(tile_parts);
+        let v = match row.name {
+            "tile_zeros" | "tile_ones" => {
+                if !args.is_empty() {
+                    return err(
+                        span,
+                        format!("`{name}` takes its shape and element as a turbofish, `{name}::<f32, 16, 8>()`, or from the annotation, `let t: Tile<f32, 16, 8> = {name}();`"),
+                    );
+                }
+                let ty = self.made_tile(name, fish_elem, fish_dims, want_tile, span)?;
+                self.def(
+                    Op::Builtin {
+                        builtin: row,
+                        args: vec![],
+                    },
+                    ty,
+                    span,
+                )
+            }
+            "tile_arange" => self.tile_arange(row, &args, fish_elem, fish_dims, want_tile, span)?,
+            "tile_load" => self.tile_load(row, &args, fish_dims, want_tile, span)?,
+            "tile_store" => self.tile_store(row, &args, span)?,
+            "tile" => {
+                let [x] = args[..] else {
+                    return err(span, "`tile(x)` takes one value");
+                };
+                let x = self.expr(x, want_tile.map(|(e, _)| e))?;
+                let e = self.ty(x);
+                if !matches!(e, Ty::Scalar(s) if s != Scalar::Bool) {
+                    return err(
+                        span,
+                        format!("`tile(x)` makes a tile of integer or float scalars, not of `{e}`"),
+                    );
+                }
+                let attr = self.tiled.as_ref().and_then(|t| t.width.clone());
+                let width = fish_dims
+                    .map(|d| d.to_vec())
+                    .or_else(|| want_tile.map(|(_, d)| d.to_vec()))
+                    .or_else(|| attr.clone().map(|w| vec![w]));
+                let Some(width) = width else {
+                    return err(
+                        span,
+                        "`tile(x)` makes a tile as wide as the block: give the width with `#[kernel(block_dim = 64)]`, `tile::<64>(x)` or a `Tile<f32, 64>` annotation",
+                    );
+                };
+                if width.len() != 1 {
+                    return err(span, "`tile(x)` makes a one-dimensional tile");
+                }
+                if let Some(a) = &attr {
+                    if a.same(&width[0]) == Some(false) {
+                        return err(
+                            span,
+                            format!("`tile(x)` makes a tile as wide as the block, {a} (`#[kernel(block_dim = {a})]`), not {}", width[0]),
+                        );
+                    }
+                }
+                let ty = Ty::Tile(Box::new(e), width);
+                self.def(
+                    Op::Builtin {
+                        builtin: row,
+                        args: vec![x],
+                    },
+                    ty,
+                    span,
+                )
+            }
+            "untile" => {
+                let [t] = args[..] else {
+                    return err(span, "`untile(t)` takes one tile");
+                };
+                let t = self.tile_arg(name, t)?;
+                let ty = self.ty(t);
+                let (e, d) = tile_parts(&ty).expect("a tile");
+                if d.len() != 1 {
+                    return err(
+                        span,
+                        format!("`untile` takes a one-dimensional tile, found `{ty}`"),
+                    );
+                }
+                let e = e.clone();
+                self.def(
+                    Op::Builtin {
+                        builtin: row,
+                        args: vec![t],
+                    },
+                    e,
+                    span,
+                )
+            }
+            "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
+                let [t] = args[..] else {
+                    return err(span, format!("`{name}` takes one tile"));
+                };
+                let t = self.tile_arg(name, t)?;
+                let ty = self.ty(t);
+                let (e, _) = tile_parts(&ty).expect("a tile");
+                let e = if name.starts_with("tile_arg") {
+                    crate::types::I32
+                } else {
+                    e.clone()
+                };
+                self.def(
+                    Op::Builtin {
+                        builtin: row,
+                        args: vec![t],
+                    },
+                    Ty::Tile(Box::new(e), vec![Dim::Lit(1)]),
+                    span,
+                )
+            }
+            "tile_map" => self.tile_map(&args, span)?,
+            "tile_matmul" => self.tile_matmul(row, &args, span)?,
+            "tile_matmul_acc" => self.tile_matmul_acc(row, &args, span)?,
+            "tile_extract" => {
+                return err(
+                    span,
+                    "read a tile's element by indexing it: `t[i]`, `t[i, j]`",
+                )
+            }
+            other => unreachable!("tile row `{other}` has no typing rule"),
+        };
+        // A shape the annotation states must be the one made (decidable dims only).
+        if let (Some((we, wd)), Ty::Tile(e, d)) = (want_tile, self.ty(v)) {
+            if *we != *e || shapes_differ(wd, &d) {
+                return err(
+                    span,
+                    format!(
+                        "`{name}` makes a `{}`, but a `{}` is expected here",
+                        self.ty(v),
+                        want.expect("a want")
+                    ),
+                );
+            }
+        }
+        Ok(Some(v))
+    }
+
+    /// The turbofish's element type (when its first argument is a scalar type) and its dims.
+    fn turbofish(
+        &self,
+        name: &str,
+        fish: Option<&syn::AngleBracketedGenericArguments>,
+    ) -> R<(Option<Ty>, Option<Vec<Dim>>)> {
+        let Some(fish) = fish else {
+            return Ok((None, None));
+        };
+        let mut it = fish.args.iter().peekable();
+        let mut elem = None;
+        if let Some(syn::GenericArgument::Type(syn::Type::Path(tp))) = it.peek() {
+            if let Some(id) = tp.path.get_ident() {
+                if let Some(s) = Scalar::from_name(&id.to_string()) {
+                    if s == Scalar::Bool {
+                        return err(tp.span(), "tiles hold integer or float scalars, not `bool`");
+                    }
+                    elem = Some(Ty::Scalar(s));
+                    it.next();
+                }
+            }
+        }
+        let dims = it.map(dim_of).collect::<R<Vec<_>>>()?;
+        if !dims.is_empty() {
+            tile_rank(&dims, fish.span())?;
+        }
+        if elem.is_none() && dims.is_empty() {
+            return err(
+                fish.span(),
+                format!("`{name}::<..>` names the tile's element or shape"),
+            );
+        }
+        Ok((elem, (!dims.is_empty()).then_some(dims)))
+    }
+
+    /// The type of a tile made from nothing (`tile_zeros`): element and shape from the
+    /// turbofish, else from the annotation.
+    fn made_tile(
+        &self,
+        name: &str,
+        elem: Option<Ty>,
+        dims: Option<Vec<Dim>>,
+        want: Option<(&Ty, &[Dim])>,
+        span: Span,
+    ) -> R<Ty> {
+        let elem = elem.or_else(|| want.map(|(e, _)| e.clone()));
+        let dims = dims.or_else(|| want.map(|(_, d)| d.to_vec()));
+        match (elem, dims) {
+            (Some(e), Some(d)) => Ok(Ty::Tile(Box::new(e), d)),
+            _ => err(
+                span,
+                format!("`{name}` needs its element and shape: `{name}::<f32, 16, 8>()`, or `let t: Tile<f32, 16, 8> = {name}();`"),
+            ),
+        }
+    }
+
+    /// An argument that must be a tile.
+    fn tile_arg(&mut self, name: &str, e: &Expr) -> R<VarId> {
+        let v = self.expr(e, None)?;
+        let t = self.ty(v);
+        if !t.is_tile() {
+            return err(e.span(), format!("`{name}` takes a tile here, found `{t}`"));
+        }
+        Ok(v)
+    }
+
+    /// A dim written as a call argument (Warp's positional shape): a literal or a const.
+    fn dim_expr(e: &Expr) -> R<Dim> {
+        let bad = || {
+            syn::Error::new(
+                e.span(),
+                "a tile dimension must be an integer literal or a module const (`16`, `TM`)",
+            )
+        };
+        match strip(e) {
+            Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Int(i),
+                ..
+            }) => i.base10_parse::<u32>().map(Dim::Lit).map_err(|_| bad()),
+            Expr::Path(p) if p.qself.is_none() => dim_of_path(&p.path).ok_or_else(bad),
+            _ => Err(bad()),
+        }
+    }
+
+    /// Offsets into an array of `ndim` dimensions: one integer, or a tuple of `ndim`; absent
+    /// (Warp's default), zeros.
+    fn offsets(&mut self, name: &str, e: Option<&Expr>, ndim: u8, span: Span) -> R<Vec<VarId>> {
+        let Some(e) = e else {
+            return Ok((0..ndim)
+                .map(|_| self.def(Op::Lit(Lit::Int(0)), crate::types::I32, span))
+                .collect());
+        };
+        let parts: Vec<&Expr> = match strip(e) {
+            Expr::Tuple(t) => t.elems.iter().collect(),
+            other => vec![other],
+        };
+        if parts.len() != ndim as usize {
+            return err(
+                e.span(),
+                format!(
+                    "`{name}` into an array of {ndim} dimension(s) takes {ndim} offset(s), found {}",
+                    parts.len()
+                ),
+            );
+        }
+        let mut out = Vec::new();
+        for p in parts {
+            let v = self.expr(p, None)?;
+            let t = self.ty(v);
+            if !(t.is_deferred() || t.is_int_scalar()) {
+                return err(p.span(), format!("tile offsets are integers, found `{t}`"));
+            }
+            out.push(v);
+        }
+        Ok(out)
+    }
+
+    /// An array argument of a tile load or store: its element and dimensions (1 or 2).
+    fn tile_array(&mut self, name: &str, e: &Expr) -> R<(VarId, Ty, u8)> {
+        let a = self.expr(e, None)?;
+        match self.ty(a) {
+            Ty::Array(elem, n) if n <= 2 && matches!(*elem, Ty::Scalar(s) if s != Scalar::Bool) => {
+                Ok((a, *elem, n))
+            }
+            Ty::Array(elem, n) if n <= 2 => err(
+                e.span(),
+                format!("`{name}`: tiles hold integer or float scalars, and this array holds `{elem}`"),
+            ),
+            Ty::Array(_, n) => err(
+                e.span(),
+                format!("`{name}` of {n}-D arrays is not supported yet (tiles have one or two dimensions)"),
+            ),
+            t => err(e.span(), format!("`{name}` takes an array first, found `{t}`")),
+        }
+    }
+
+    fn tile_load(
+        &mut self,
+        row: &'static Builtin,
+        args: &[&Expr],
+        fish: Option<Vec<Dim>>,
+        want: Option<(&Ty, &[Dim])>,
+        span: Span,
+    ) -> R<VarId> {
+        let known = fish.clone().or_else(|| want.map(|(_, d)| d.to_vec()));
+        // `tile_load(a, shape, offsets)` (Warp's order); with the shape known from the turbofish
+        // or the annotation, `tile_load(a, offsets)`; `tile_load(a, shape)` reads at zero.
+        let (shape_arg, offs_arg) = match (args.len(), &known) {
+            (3, _) => (Some(args[1]), Some(args[2])),
+            (2, Some(_)) => (None, Some(args[1])),
+            (2, None) => (Some(args[1]), None),
+            (1, Some(_)) => (None, None),
+            (n, _) => {
+                return err(
+                    span,
+                    format!("`tile_load` takes an array, the tile's shape and the offsets, `tile_load(a, (16, 8), (i, j))`, or `tile_load::<16, 8>(a, (i, j))`; found {n} argument(s)"),
+                )
+            }
+        };
+        let (a, elem, ndim) = self.tile_array("tile_load", args[0])?;
+        let dims = match shape_arg {
+            Some(s) => {
+                let parts: Vec<&Expr> = match strip(s) {
+                    Expr::Tuple(t) => t.elems.iter().collect(),
+                    other => vec![other],
+                };
+                let d = parts
+                    .into_iter()
+                    .map(Self::dim_expr)
+                    .collect::<R<Vec<_>>>()?;
+                tile_rank(&d, s.span())?;
+                if let Some(k) = &known {
+                    if shapes_differ(k, &d) {
+                        return err(
+                            s.span(),
+                            format!(
+                                "`tile_load`: the shape ({}) differs from the expected ({})",
+                                dims_text(&d),
+                                dims_text(k)
+                            ),
+                        );
+                    }
+                }
+                d
+            }
+            None => known.expect("a known shape"),
+        };
+        if dims.len() != ndim as usize {
+            return err(
+                span,
+                format!(
+                    "`tile_load`: a tile of {} dimension(s) from an array of {ndim}; their ranks must agree",
+                    dims.len()
+                ),
+            );
+        }
+        let mut vars = vec![a];
+        vars.extend(self.offsets("tile_load", offs_arg, ndim, span)?);
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vars,
+            },
+            Ty::Tile(Box::new(elem), dims),
+            span,
+        ))
+    }
+
+    fn tile_store(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        if !(2..=3).contains(&args.len()) {
+            return err(
+                span,
+                "`tile_store` takes an array, a tile and the offsets: `tile_store(a, t, (i, j))`",
+            );
+        }
+        let (a, elem, ndim) = self.tile_array("tile_store", args[0])?;
+        let t = self.tile_arg("tile_store", args[1])?;
+        let tt = self.ty(t);
+        let (te, td) = tile_parts(&tt).expect("a tile");
+        if *te != elem {
+            return err(
+                args[1].span(),
+                format!("`tile_store`: a `{tt}` into an array of `{elem}`"),
+            );
+        }
+        if td.len() != ndim as usize {
+            return err(
+                args[1].span(),
+                format!("`tile_store`: a tile of {} dimension(s) into an array of {ndim}; their ranks must agree", td.len()),
+            );
+        }
+        let mut vars = vec![a, t];
+        vars.extend(self.offsets("tile_store", args.get(2).copied(), ndim, span)?);
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vars,
+            },
+            Ty::Unit,
+            span,
+        ))
+    }
+
+    /// `tile_arange::<T, N>()` (0 to N-1), or Warp's integer-literal forms `tile_arange(n)`,
+    /// `(start, stop)`, `(start, stop, step)`; the element is the turbofish's or the
+    /// annotation's, `i32` otherwise (Warp's default `int`).
+    fn tile_arange(
+        &mut self,
+        row: &'static Builtin,
+        args: &[&Expr],
+        fish_elem: Option<Ty>,
+        fish_dims: Option<Vec<Dim>>,
+        want: Option<(&Ty, &[Dim])>,
+        span: Span,
+    ) -> R<VarId> {
+        let elem = fish_elem
+            .or_else(|| want.map(|(e, _)| e.clone()))
+            .unwrap_or(crate::types::I32);
+        let lit = |e: &Expr| -> R<i64> {
+            let (neg, inner) = match strip(e) {
+                Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => (true, strip(&u.expr)),
+                other => (false, other),
+            };
+            match inner {
+                Expr::Lit(syn::ExprLit {
+                    lit: syn::Lit::Int(i),
+                    ..
+                }) => i
+                    .base10_parse::<i64>()
+                    .map(|v| if neg { -v } else { v }),
+                _ => err(
+                    e.span(),
+                    "`tile_arange`'s bounds are integer literals (its length is part of the tile's type)",
+                ),
+            }
+        };
+        let (start, step, dims) = match args.len() {
+            0 => {
+                let d = fish_dims.or_else(|| want.map(|(_, d)| d.to_vec()));
+                match d {
+                    Some(d) if d.len() == 1 => (0, 1, d),
+                    _ => {
+                        return err(
+                            span,
+                            "`tile_arange` needs its length: `tile_arange::<f32, 16>()` or `tile_arange(16)`",
+                        )
+                    }
+                }
+            }
+            1..=3 => {
+                let v = args.iter().map(|e| lit(e)).collect::<R<Vec<_>>>()?;
+                let (start, stop, step) = match v[..] {
+                    [n] => (0, n, 1),
+                    [a, b] => (a, b, 1),
+                    [a, b, s] => (a, b, s),
+                    _ => unreachable!(),
+                };
+                if step == 0 {
+                    return err(span, "`tile_arange`: the step must not be zero");
+                }
+                let n = (stop - start + step - step.signum()) / step;
+                if n < 1 || n > u32::MAX as i64 {
+                    return err(
+                        span,
+                        format!("`tile_arange({start}, {stop}, {step})` would be empty: a tile has at least one element"),
+                    );
+                }
+                (start, step, vec![Dim::Lit(n as u32)])
+            }
+            n => {
+                return err(
+                    span,
+                    format!("`tile_arange` takes at most 3 arguments, found {n}"),
+                )
+            }
+        };
+        let lit_of = |this: &mut Self, v: i64| {
+            let l = if matches!(elem, Ty::Scalar(s) if s.is_float()) {
+                Lit::Float(v as f64)
+            } else {
+                Lit::Int(v as i128)
+            };
+            this.def(Op::Lit(l), elem.clone(), span)
+        };
+        let s0 = lit_of(self, start);
+        let s1 = lit_of(self, step);
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vec![s0, s1],
+            },
+            Ty::Tile(Box::new(elem.clone()), dims),
+            span,
+        ))
+    }
+
+    /// `tile_map(f, a)`, `tile_map(f, a, b)` with `f` a builtin's name.
+    fn tile_map(&mut self, args: &[&Expr], span: Span) -> R<VarId> {
+        if !(2..=3).contains(&args.len()) {
+            return err(
+                span,
+                "`tile_map` takes a function and one or two tiles: `tile_map(sin, a)`",
+            );
+        }
+        let f = match strip(args[0]) {
+            Expr::Path(p) if p.qself.is_none() => {
+                let segs: Vec<String> = p
+                    .path
+                    .segments
+                    .iter()
+                    .map(|s| s.ident.to_string())
+                    .collect();
+                let ok =
+                    segs.len() == 1 || (segs.len() == 2 && crate::paths::names_facade(&segs[0]));
+                let last = segs.last().cloned().unwrap_or_default();
+                match builtins::lookup_user(&last) {
+                    Some(b) if ok && !b.is_tile() && b.params.len() == args.len() - 1 => b,
+                    Some(b) if ok && !b.is_tile() => {
+                        return err(
+                            args[0].span(),
+                            format!("`tile_map` with `{last}` takes {} tile(s)", b.params.len()),
+                        )
+                    }
+                    _ => {
+                        return err(
+                            args[0].span(),
+                            "`tile_map` takes a builtin function here (`sin`, `exp`, `max`, ..); user #[func]s are not supported yet",
+                        )
+                    }
+                }
+            }
+            other => {
+                return err(
+                    other.span(),
+                    "`tile_map` takes a function by name: `tile_map(sin, a)`",
+                )
+            }
+        };
+        let mut vars = Vec::new();
+        let mut shape: Option<Vec<Dim>> = None;
+        let mut elems = Vec::new();
+        for a in &args[1..] {
+            let v = self.tile_arg("tile_map", a)?;
+            let t = self.ty(v);
+            let (e, d) = tile_parts(&t).expect("a tile");
+            if let Some(s) = &shape {
+                if shapes_differ(s, d) {
+                    return err(
+                        a.span(),
+                        format!(
+                            "`tile_map`: the tiles' shapes differ ({} and {})",
+                            dims_text(s),
+                            dims_text(d)
+                        ),
+                    );
+                }
+            }
+            shape = Some(d.to_vec());
+            elems.push(ArgTy::Known(e.clone()));
+            vars.push(v);
+        }
+        if f.is_atomic() || f.faults() || f.draw.is_some() || f.iterate.is_some() {
+            return err(
+                args[0].span(),
+                format!("`tile_map` cannot apply `{}`", f.name),
+            );
+        }
+        let r = f
+            .resolve(&elems)
+            .map_err(|m| syn::Error::new(args[0].span(), format!("in `tile_map`: {m}")))?;
+        if !matches!(r.ret, Ty::Scalar(s) if s != Scalar::Bool) {
+            return err(
+                args[0].span(),
+                format!(
+                    "`tile_map` makes tiles of scalars; `{}` gives `{}`",
+                    f.name, r.ret
+                ),
+            );
+        }
+        Ok(self.def(
+            Op::TileMap { f, args: vars },
+            Ty::Tile(Box::new(r.ret), shape.expect("a tile")),
+            span,
+        ))
+    }
+
+    /// The operands of a matmul: two 2-D tiles of one float element whose inner dims agree.
+    fn matmul_operands(&mut self, args: &[&Expr]) -> R<(VarId, VarId, Ty, Dim, Dim)> {
+        let a = self.tile_arg("tile_matmul", args[0])?;
+        let b = self.tile_arg("tile_matmul", args[1])?;
+        let (ta, tb) = (self.ty(a), self.ty(b));
+        let ((ea, da), (eb, db)) = (tile_parts(&ta).unwrap(), tile_parts(&tb).unwrap());
+        if da.len() != 2 || db.len() != 2 {
+            return err(
+                args[0].span(),
+                format!("`tile_matmul` multiplies 2-D tiles, found `{ta}` and `{tb}`"),
+            );
+        }
+        if ea != eb || !matches!(ea, Ty::Scalar(Scalar::F32 | Scalar::F64)) {
+            return err(
+                args[0].span(),
+                format!("`tile_matmul` multiplies f32 or f64 tiles of one element type, found `{ta}` and `{tb}`"),
+            );
+        }
+        if da[1].same(&db[0]) == Some(false) {
+            return err(
+                args[1].span(),
+                format!("`tile_matmul`: the inner dimensions differ: `a` is `{ta}`, `b` is `{tb}`"),
+            );
+        }
+        Ok((a, b, ea.clone(), da[0].clone(), db[1].clone()))
+    }
+
+    fn tile_matmul(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        if args.len() != 2 {
+            return err(span, "`tile_matmul` takes two tiles, `c = tile_matmul(a, b)`, or accumulates, `tile_matmul(a, b, &mut c)`");
+        }
+        let (a, b, e, m, n) = self.matmul_operands(args)?;
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vec![a, b],
+            },
+            Ty::Tile(Box::new(e), vec![m, n]),
+            span,
+        ))
+    }
+
+    /// `tile_matmul(a, b, &mut c)`: `c = c + a b`, an assignment of `c`.
+    fn tile_matmul_acc(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        let (a, b, e, m, n) = self.matmul_operands(args)?;
+        let target = match strip(args[2]) {
+            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
+                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
+                _ => None,
+            },
+            _ => None,
+        };
+        let Some(cname) = target else {
+            return err(
+                args[2].span(),
+                "`tile_matmul` accumulates into a tile variable passed as `&mut c`",
+            );
+        };
+        let Some(c) = self.lookup(&cname) else {
+            return err(args[2].span(), format!("cannot find `{cname}`"));
+        };
+        let ct = self.ty(c);
+        let (e2, d2) = (e.clone(), vec![m.clone(), n.clone()]);
+        let want = Ty::Tile(Box::new(e), vec![m, n]);
+        match tile_parts(&ct) {
+            Some((ce, cd)) if *ce == e2 && !shapes_differ(cd, &d2) => {}
+            _ => {
+                return err(
+                    args[2].span(),
+                    format!("`tile_matmul`: `{cname}` is a `{ct}`, but `a b` is a `{want}`"),
+                )
+            }
+        }
+        if !self.vars[c].mutable {
+            return err(
+                args[2].span(),
+                format!("`{cname}` is not mutable: declare it `let mut {cname}`"),
+            );
+        }
+        self.push(
+            StmtKind::Assign {
+                dst: c,
+                op: Op::Builtin {
+                    builtin: row,
+                    args: vec![a, b, c],
+                },
+                define: false,
+            },
+            span,
+        );
+        // The call is a statement; as a value it is the accumulator.
+        Ok(c)
+    }
+
+    /// `t[i]`, `t[i, j]`: an element of a tile (a read by each thread; an index outside the
+    /// tile faults).
+    pub(super) fn tile_index(&mut self, t: VarId, index: &Expr, span: Span) -> R<VarId> {
+        let tt = self.ty(t);
+        let (e, d) = tile_parts(&tt).expect("a tile");
+        let (e, n) = (e.clone(), d.len() as u8);
+        let parts: Vec<&Expr> = match strip(index) {
+            Expr::Tuple(t) => t.elems.iter().collect(),
+            other => vec![other],
+        };
+        if parts.len() != n as usize {
+            return err(
+                index.span(),
+                format!("`{tt}` has {n} dimension(s): index it with {n} integer(s)"),
+            );
+        }
+        let mut args = vec![t];
+        for p in parts {
+            let v = self.expr(p, Some(&USIZE))?;
+            let it = self.ty(v);
+            if !(it.is_deferred() || it.is_int_scalar()) {
+                return err(p.span(), format!("tile indices are integers, found `{it}`"));
+            }
+            args.push(v);
+        }
+        let row = builtins::lookup("tile_extract").expect("the tile_extract row");
+        Ok(self.def(Op::Builtin { builtin: row, args }, e, span))
+    }
+}
