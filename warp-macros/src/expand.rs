@@ -347,6 +347,7 @@ fn kernel_impl(
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                         consts: #consts,
                         requires: &[#(#requires),*],
+                        tile: ::core::option::Option::None,
                     };
                     fn info() -> &'static __wp::KernelInfo {
                         &<Self as __wp::Kernel>::INFO
