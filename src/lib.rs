@@ -187,13 +187,16 @@ pub use warp_runtime::{
 pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, cpu_fallback_reason, devices, get_device,
-    get_preferred_device, init, kernel_info, last_launch_id, launch, load, load_with_adjoints,
-    synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element, Error, GenericKernel, IntoShape,
-    Kernel, KernelArg, KernelInfo, KernelParams, Launch, Launchable, MemoryInfo, OwnedArgsOf,
-    Recording, Result, Runtime, Seed, Tape,
+    get_preferred_device, init, kernel_info, last_launch_id, launch, launch_tiled, load,
+    load_tiled, load_with_adjoints, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element,
+    Error, GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launch,
+    Launchable, MemoryInfo, OwnedArgsOf, Recording, Result, Runtime, Seed, Tape, TileInfo,
+    MAX_BLOCK_DIM,
 };
 #[cfg(feature = "cuda")]
-pub use warp_runtime::{get_stream, launch_on, Event, PinnedVec, ScopedStream, Stream};
+pub use warp_runtime::{
+    get_stream, launch_on, launch_tiled_on, Event, PinnedVec, ScopedStream, Stream,
+};
 pub use warp_runtime::{hvp, jvp, Forward};
 pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
@@ -222,7 +225,7 @@ pub mod __private {
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
     pub use warp_runtime::{
         ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,
-        KernelInfo, KernelParams, Launchable, Result,
+        KernelInfo, KernelParams, Launchable, Result, TileInfo,
     };
 }
 

@@ -2224,6 +2224,7 @@ fn unflatten_cases(c: &mut Cases) {
             dims: d4,
             ndim: n,
             total,
+            block_dim: 1,
         };
         for flat in 0..total {
             let want: Vec<usize> = match n {

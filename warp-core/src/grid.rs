@@ -1,6 +1,6 @@
 //! The launch grid as kernel code sees it: up to four dimensions, flattened row-major.
 
-/// The launch dimensions. Thread `flat` of a launch has the multi-index obtained by
+/// The launch dimensions (of blocks, for a tiled launch). Thread `flat` of a launch has the multi-index obtained by
 /// [`Grid::unflatten`] (row-major: the last dimension varies fastest, as in Warp).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Grid {
@@ -10,6 +10,10 @@ pub struct Grid {
     pub ndim: usize,
     /// Product of the extents.
     pub total: usize,
+    /// Threads per block: 1 for an ordinary launch. For a tiled launch (`launch_tiled`) the
+    /// extents above count blocks (`tid()` is the block index) and each block runs this many
+    /// lanes cooperatively.
+    pub block_dim: usize,
 }
 
 impl Grid {

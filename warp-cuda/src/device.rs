@@ -333,6 +333,22 @@ impl Gpu {
         self.async_alloc
     }
 
+    /// The most shared memory one block may have on this device, static and dynamic together,
+    /// once a kernel opts in ([`Function::set_max_dynamic_shared_bytes`](crate::Function::set_max_dynamic_shared_bytes)):
+    /// `CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_BLOCK_OPTIN` (227 KiB on an H100).
+    pub fn max_shared_bytes_per_block_optin(&self) -> Result<usize> {
+        let attr = sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_BLOCK_OPTIN;
+        // SAFETY: the device handle of a live context.
+        unsafe { result::device::get_attribute(self.ctx.cu_device(), attr) }
+            .map(|v| v.max(0) as usize)
+            .map_err(|e| {
+                CudaError::driver(
+                    e,
+                    format!("cuDeviceGetAttribute({attr:?}) on cuda:{}", self.ordinal()),
+                )
+            })
+    }
+
     /// Waits for all work on all streams of this device.
     pub fn synchronize(&self) -> Result<()> {
         self.ctx.synchronize().map_err(|e| {

@@ -407,6 +407,42 @@ impl Function {
         self.attribute(sys::CUfunction_attribute::CU_FUNC_ATTRIBUTE_NUM_REGS)
             .map(|v| v.max(0) as u32)
     }
+
+    /// Bytes of statically allocated shared memory (`__shared__` arrays of fixed size) the
+    /// kernel uses, besides what a launch gives it dynamically.
+    pub fn static_shared_bytes(&self) -> Result<usize> {
+        self.attribute(sys::CUfunction_attribute::CU_FUNC_ATTRIBUTE_SHARED_SIZE_BYTES)
+            .map(|v| v.max(0) as usize)
+    }
+
+    /// Lets launches of this kernel ask for up to `bytes` of dynamic shared memory
+    /// (`cuFuncSetAttribute(CU_FUNC_ATTRIBUTE_MAX_DYNAMIC_SHARED_SIZE_BYTES)`): without it a
+    /// launch may take at most 48 KiB, whatever the device has.
+    pub fn set_max_dynamic_shared_bytes(&self, bytes: usize) -> Result<()> {
+        let gpu = &self.module.gpu;
+        let value = i32::try_from(bytes).map_err(|_| {
+            CudaError::InvalidArgument(format!(
+                "{bytes} bytes of dynamic shared memory for {} on cuda:{}",
+                self.name,
+                gpu.ordinal()
+            ))
+        })?;
+        gpu.bind()?;
+        let attr = sys::CUfunction_attribute::CU_FUNC_ATTRIBUTE_MAX_DYNAMIC_SHARED_SIZE_BYTES;
+        // SAFETY: a live function handle of the bound context; the attribute takes an int.
+        unsafe { sys::cuFuncSetAttribute(self.func, attr, value) }
+            .result()
+            .map_err(|e| {
+                CudaError::driver(
+                    e,
+                    format!(
+                        "cuFuncSetAttribute({attr:?}, {bytes}) of {} on cuda:{}",
+                        self.name,
+                        gpu.ordinal()
+                    ),
+                )
+            })
+    }
 }
 
 #[cfg(test)]

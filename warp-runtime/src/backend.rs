@@ -133,8 +133,14 @@ pub(crate) trait Backend {
     /// Makes `kernels` ready to launch before their first launch: a backend that compiles at
     /// run time compiles and loads them now, each
     /// kernel's variant for contiguous arrays and, with `adjoint: Some(bytes)`, its adjoint
-    /// with `bytes` of stack per thread. The CPU's kernels are compiled by cargo: nothing.
-    fn prepare(&self, kernels: &[&'static KernelInfo], adjoint: Option<usize>) -> Result<()>;
+    /// with `bytes` of stack per thread; with `block_dim: Some(n)` (tiled kernels) the variants
+    /// for blocks of `n` threads. The CPU's kernels are compiled by cargo: nothing.
+    fn prepare(
+        &self,
+        kernels: &[&'static KernelInfo],
+        adjoint: Option<usize>,
+        block_dim: Option<usize>,
+    ) -> Result<()>;
 
     /// Runs (the CPU: [`ObjectStep::run_cpu`]) or queues (a GPU: the step's kernel, on the
     /// calling thread's current stream) one step of a host object's build. On a GPU inside a

@@ -56,7 +56,17 @@ pub(crate) fn prepare(
     kernels: &[&'static crate::kernel::KernelInfo],
     adjoint: Option<usize>,
 ) -> Result<()> {
-    with_backend!(device, b => b.prepare(kernels, adjoint))
+    with_backend!(device, b => b.prepare(kernels, adjoint, None))
+}
+
+/// Makes the tiled `kernels` ready on `device` for blocks of `block_dim` threads; see
+/// [`Backend::prepare`].
+pub(crate) fn prepare_tiled(
+    device: &Device,
+    kernels: &[&'static crate::kernel::KernelInfo],
+    block_dim: usize,
+) -> Result<()> {
+    with_backend!(device, b => b.prepare(kernels, None, Some(block_dim)))
 }
 
 /// Runs (or queues) a launch of `K` on `device`; see [`Backend::launch`]. Inside a capture,

@@ -79,6 +79,59 @@ pub enum Error {
         /// Their shapes, in the same order.
         shapes: Vec<Vec<usize>>,
     },
+    /// A tiled kernel launched with [`launch`](crate::launch()), or an ordinary kernel with
+    /// [`launch_tiled`](crate::launch_tiled()): a tiled kernel's `dim` counts blocks and it
+    /// needs a block size, an ordinary one has neither.
+    #[error("kernel `{kernel}`: {why}")]
+    LaunchKind {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// Which launch was made and which one the kernel takes.
+        why: String,
+    },
+    /// The block size of a tiled launch is unusable: zero, above 1024 (or above what the GPU
+    /// allows for the kernel), or not the width the kernel's tiles fix.
+    #[error("kernel `{kernel}`: invalid block_dim {block_dim}: {why}")]
+    InvalidBlockDim {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// The block size as given.
+        block_dim: usize,
+        /// Why it was rejected.
+        why: String,
+    },
+    /// One block of a tiled kernel needs more stack on the CPU (its tiles and per-lane values)
+    /// than the threads that run tiled launches have to give it.
+    #[error(
+        "kernel `{kernel}`: a block needs {bytes} bytes of stack on the CPU for its tiles and \
+         per-lane values, more than the {limit} bytes a block may take; use smaller tiles or a \
+         smaller block_dim"
+    )]
+    TileFrame {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// The stack one block needs.
+        bytes: usize,
+        /// The most a block may take (half the stack of a tiled launch's threads).
+        limit: usize,
+    },
+    /// One block of a tiled kernel needs more shared memory than the GPU gives a block.
+    #[error(
+        "kernel `{kernel}`: a block of {block_dim} threads needs {requested} bytes of shared \
+         memory on \"{device}\", which gives a block at most {available}; use smaller tiles"
+    )]
+    SharedMemory {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// The device's alias.
+        device: String,
+        /// The shared memory one block needs (its tiles and the kernel's static shared memory).
+        requested: usize,
+        /// The most one block may have on the device (with the opt-in carve-out).
+        available: usize,
+        /// The block size of the launch.
+        block_dim: usize,
+    },
     /// The CUDA driver or NVRTC reported an error (copy, compilation, launch, an allocation
     /// failing for another reason than memory). Only with the `cuda` feature: without it
     /// nothing reaches CUDA.

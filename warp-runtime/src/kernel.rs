@@ -177,6 +177,25 @@ pub struct KernelInfo {
     /// macros' validator (`warp_core::capability`; the funcs it calls list theirs): loading it
     /// on a GPU that lacks one is an error naming the kernel and the capability.
     pub requires: &'static [warp_core::Capability],
+    /// What a tiled kernel (one that uses tiles, launched with
+    /// [`launch_tiled`](crate::launch_tiled())) needs of a launch; `None` for an ordinary
+    /// kernel.
+    pub tile: Option<TileInfo>,
+}
+
+/// What a tiled kernel needs of its launches: the block size it fixes and the memory one block
+/// takes, computed by `#[kernel]` as constants from its tiles' shapes and element sizes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileInfo {
+    /// The block size the kernel's `tile(x)`/`untile` fix (`#[kernel(block_dim = N)]`): a
+    /// launch with another `block_dim` is refused. `None`: any block size.
+    pub width: Option<usize>,
+    /// Dynamic shared memory (bytes) one block of the CUDA forward kernel needs.
+    pub shared_bytes: usize,
+    /// The same for the CUDA adjoint (0 until tile adjoints exist).
+    pub adjoint_shared_bytes: usize,
+    /// Stack bytes one CPU block needs for its tiles and per-lane values.
+    pub cpu_frame_bytes: usize,
 }
 
 impl KernelInfo {
@@ -202,6 +221,7 @@ impl KernelInfo {
         cuda_adjoint_error: None,
         consts: &[],
         requires: &[],
+        tile: None,
     };
 }
 

@@ -76,7 +76,45 @@ impl From<(usize, usize, usize, usize)> for Dim {
     }
 }
 
-/// Checks `dim` and turns it into the grid kernel code sees.
+/// The most threads a block of a tiled launch may have: what every CUDA GPU allows, and
+/// what `warp_core::block::PerLane` holds on the CPU.
+pub const MAX_BLOCK_DIM: usize = 1024;
+
+/// Checks that the launch fits the kind of kernel `K` is: `block_dim: None` for [`launch`],
+/// `Some(threads per block)` for [`launch_tiled`]. A tiled kernel takes only tiled launches,
+/// whose block size is 1 to [`MAX_BLOCK_DIM`] and the width its tiles fix, if any.
+fn check_kind<K: Kernel>(block_dim: Option<usize>) -> Result<()> {
+    let info = &K::INFO;
+    let kernel = info.name;
+    match (info.tile, block_dim) {
+        (None, None) => Ok(()),
+        (Some(_), None) => Err(Error::LaunchKind {
+            kernel,
+            why: format!(
+                "a tiled kernel (it uses tiles) launched with `launch`: launch it with \
+                 `launch_tiled({kernel}, blocks, args, block_dim, &device)` (dim counts blocks)"
+            ),
+        }),
+        (None, Some(_)) => Err(Error::LaunchKind {
+            kernel,
+            why: "an ordinary kernel (it uses no tiles) launched with `launch_tiled`: launch \
+                  it with `launch`"
+                .to_string(),
+        }),
+        (Some(_), Some(bd)) => check_tiled_info(info, bd),
+    }
+}
+
+/// [`check_kind`], then [`grid_of`] with the block size (1 for an ordinary launch).
+fn checked_grid<K: Kernel>(dim: Dim, block_dim: Option<usize>) -> Result<Grid> {
+    check_kind::<K>(block_dim)?;
+    let mut grid = grid_of(K::INFO.name, dim)?;
+    grid.block_dim = block_dim.unwrap_or(1);
+    Ok(grid)
+}
+
+/// Checks `dim` and turns it into the grid kernel code sees (of one-thread blocks: the caller
+/// sets a tiled launch's block size).
 fn grid_of(kernel: &'static str, dim: Dim) -> Result<Grid> {
     let invalid = |reason: String| Error::InvalidDim {
         kernel,
@@ -110,6 +148,7 @@ fn grid_of(kernel: &'static str, dim: Dim) -> Result<Grid> {
         dims: dim.dims,
         ndim: dim.ndim,
         total,
+        block_dim: 1,
     })
 }
 
@@ -197,6 +236,58 @@ pub fn load_with_adjoints(kernels: &[&'static KernelInfo], device: &Device) -> R
     dispatch::prepare(device, kernels, Some(config::adstack_bytes()))
 }
 
+/// [`load`] for tiled kernels, launched with `block_dim` threads per block: on a GPU each
+/// kernel's variant for that block size (`WP_TILE_BLOCK_DIM`) is compiled and loaded, and its
+/// shared memory checked against the device. On the CPU, nothing.
+///
+/// # Errors
+/// As [`load`]; [`Error::LaunchKind`] for a kernel that is not tiled;
+/// [`Error::InvalidBlockDim`] for a block size a kernel does not take;
+/// [`Error::SharedMemory`] for a kernel whose blocks need more shared memory than the GPU has.
+pub fn load_tiled(
+    kernels: &[&'static KernelInfo],
+    block_dim: usize,
+    device: &Device,
+) -> Result<()> {
+    for info in kernels {
+        check_tiled_info(info, block_dim)?;
+    }
+    dispatch::prepare_tiled(device, kernels, block_dim)
+}
+
+/// [`check_kind`] for a kernel known by its info only ([`load_tiled`]).
+fn check_tiled_info(info: &KernelInfo, block_dim: usize) -> Result<()> {
+    let kernel = info.name;
+    let Some(tile) = info.tile else {
+        return Err(Error::LaunchKind {
+            kernel,
+            why: "an ordinary kernel (it uses no tiles) given to `load_tiled`: load it with \
+                  `load`"
+                .to_string(),
+        });
+    };
+    let invalid = |why: String| Error::InvalidBlockDim {
+        kernel,
+        block_dim,
+        why,
+    };
+    if block_dim == 0 {
+        return Err(invalid("a block has at least one thread".to_string()));
+    }
+    if block_dim > MAX_BLOCK_DIM {
+        return Err(invalid(format!(
+            "a block has at most {MAX_BLOCK_DIM} threads"
+        )));
+    }
+    match tile.width {
+        Some(w) if w != block_dim => Err(invalid(format!(
+            "`{kernel}` tiles per-thread values into width {w}: launch it with block_dim {w}, \
+             not {block_dim}"
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Launches `kernel` over `dim` threads with `args` on `device`.
 ///
 /// On the CPU the launch has finished when this returns. On a GPU it is queued on the calling
@@ -222,7 +313,39 @@ where
     L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
-    launch_with::<L::Kernel>(dim.into(), args, device, |args, grid| {
+    launch_with::<L::Kernel>(dim.into(), None, args, device, |args, grid| {
+        dispatch::launch::<L::Kernel>(device, args, grid)
+    })
+}
+
+/// Launches the tiled kernel `kernel` (one that uses tiles) over `dim` blocks of `block_dim`
+/// threads each, with `args` on `device`: Warp's `wp.launch_tiled`. `tid()` is the block's
+/// index in `dim`; the threads of a block (its lanes) run the kernel together, sharing its
+/// tiles. Otherwise as [`launch`].
+///
+/// On the CPU a block is one task, its lanes run in turn between the tile operations; on a GPU
+/// a block is a CUDA block of `block_dim` threads, compiled for that block size (each block
+/// size a variant, compiled at its first launch or by [`load_tiled`]).
+///
+/// # Errors
+/// As [`launch`], and [`Error::LaunchKind`] for a kernel that uses no tiles,
+/// [`Error::InvalidBlockDim`] for a `block_dim` of 0, above [`MAX_BLOCK_DIM`], or not the
+/// width the kernel's tiles fix (`#[kernel(block_dim = N)]`), [`Error::TileFrame`] when a
+/// block's tiles do not fit the CPU's stack, [`Error::SharedMemory`] when they do not fit a
+/// GPU's shared memory.
+pub fn launch_tiled<'a, L, A>(
+    kernel: L,
+    dim: impl Into<Dim>,
+    args: A,
+    block_dim: usize,
+    device: &Device,
+) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
+{
+    let _ = kernel;
+    launch_with::<L::Kernel>(dim.into(), Some(block_dim), args, device, |args, grid| {
         dispatch::launch::<L::Kernel>(device, args, grid)
     })
 }
@@ -241,9 +364,35 @@ where
     L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
 {
     let _ = kernel;
-    launch_with::<L::Kernel>(dim.into(), args, stream.device(), |args, grid| {
+    launch_with::<L::Kernel>(dim.into(), None, args, stream.device(), |args, grid| {
         dispatch::launch_on::<L::Kernel>(stream, args, grid)
     })
+}
+
+/// [`launch_tiled`] on `stream` (a CUDA stream), as [`launch_on`].
+///
+/// # Errors
+/// As [`launch_tiled`].
+#[cfg(feature = "cuda")]
+pub fn launch_tiled_on<'a, L, A>(
+    kernel: L,
+    dim: impl Into<Dim>,
+    args: A,
+    block_dim: usize,
+    stream: &Stream,
+) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
+{
+    let _ = kernel;
+    launch_with::<L::Kernel>(
+        dim.into(),
+        Some(block_dim),
+        args,
+        stream.device(),
+        |args, grid| dispatch::launch_on::<L::Kernel>(stream, args, grid),
+    )
 }
 
 /// The owned launch arguments of kernel `K` (array handles and values), as a [`Launch`]
@@ -275,6 +424,8 @@ pub type OwnedArgsOf<K> = <<K as Kernel>::Params as KernelParams>::Owned;
 pub struct Launch<K: Kernel> {
     device: Device,
     dim: Dim,
+    /// The block size of a tiled launch ([`Launch::new_tiled`]); `None` for an ordinary one.
+    block_dim: Option<usize>,
     grid: Grid,
     args: OwnedArgsOf<K>,
     /// `None` after [`Launch::args_mut`] or [`Launch::set_dim`]: checked again at the next
@@ -287,6 +438,7 @@ impl<K: Kernel> std::fmt::Debug for Launch<K> {
         f.debug_struct("Launch")
             .field("kernel", &K::INFO.name)
             .field("dim", &self.dim)
+            .field("block_dim", &self.block_dim)
             .field("device", &self.device)
             .finish()
     }
@@ -304,13 +456,43 @@ impl<K: Kernel> Launch<K> {
         K: Kernel<Params: KernelParams<Args<'a> = A>>,
     {
         let _ = kernel;
-        let dim = dim.into();
-        let grid = grid_of(K::INFO.name, dim)?;
+        Self::bind(dim.into(), None, args, device)
+    }
+
+    /// Binds a tiled launch of `kernel` over `dim` blocks of `block_dim` threads, as
+    /// [`launch_tiled`] checks it; on a GPU the kernel's variant for `block_dim` is compiled
+    /// (or found) now.
+    ///
+    /// # Errors
+    /// As [`launch_tiled`].
+    pub fn new_tiled<'a, L, A>(
+        kernel: L,
+        dim: impl Into<Dim>,
+        args: A,
+        block_dim: usize,
+        device: &Device,
+    ) -> Result<Self>
+    where
+        L: Launchable<A, Kernel = K>,
+        K: Kernel<Params: KernelParams<Args<'a> = A>>,
+    {
+        let _ = kernel;
+        Self::bind(dim.into(), Some(block_dim), args, device)
+    }
+
+    fn bind(
+        dim: Dim,
+        block_dim: Option<usize>,
+        args: ArgsOf<'_, K>,
+        device: &Device,
+    ) -> Result<Self> {
+        let grid = checked_grid::<K>(dim, block_dim)?;
         check_shapes::<K>(&args, &grid)?;
         let prepared = dispatch::prepare_launch::<K>(device, &args, &grid)?;
         Ok(Launch {
             device: device.clone(),
             dim,
+            block_dim,
             grid,
             args: K::Params::own(&args),
             prepared: Some(prepared),
@@ -329,7 +511,7 @@ impl<K: Kernel> Launch<K> {
         &mut self.args
     }
 
-    /// Changes the launch dimensions (checked at the next launch).
+    /// Changes the launch dimensions (checked at the next launch; blocks, for a tiled launch).
     pub fn set_dim(&mut self, dim: impl Into<Dim>) {
         self.dim = dim.into();
         self.prepared = None;
@@ -378,7 +560,7 @@ impl<K: Kernel> Launch<K> {
     fn launch_inner(&mut self, #[cfg(feature = "cuda")] stream: Option<&Stream>) -> Result<()> {
         let args = K::Params::borrow(&self.args);
         if self.prepared.is_none() {
-            self.grid = grid_of(K::INFO.name, self.dim)?;
+            self.grid = checked_grid::<K>(self.dim, self.block_dim)?;
             check_shapes::<K>(&args, &self.grid)?;
             self.prepared = Some(dispatch::prepare_launch::<K>(
                 &self.device,
@@ -389,7 +571,7 @@ impl<K: Kernel> Launch<K> {
         let device = &self.device;
         if crate::capturing::capturing() || config::verify_fp() {
             // What a plain launch does around the backend's: a capture's record, the check.
-            return launch_with::<K>(self.dim, args, device, |args, grid| {
+            return launch_with::<K>(self.dim, self.block_dim, args, device, |args, grid| {
                 #[cfg(feature = "cuda")]
                 if let Some(s) = stream {
                     return dispatch::launch_on::<K>(s, args, grid);
@@ -411,15 +593,17 @@ impl<K: Kernel> Launch<K> {
     }
 }
 
-/// Checks a launch of `K` on `device`, has `run` run it (on the device's backend), then records
+/// Checks a launch of `K` on `device` (a tiled one with `block_dim: Some(threads per
+/// block)`), has `run` run it (on the device's backend), then records
 /// it on the recording tapes and, in `verify_fp` mode, checks what it wrote.
 fn launch_with<'a, K: Kernel>(
     dim: Dim,
+    block_dim: Option<usize>,
     args: ArgsOf<'a, K>,
     device: &Device,
     run: impl FnOnce(&ArgsOf<'a, K>, &Grid) -> Result<()>,
 ) -> Result<()> {
-    let grid = grid_of(K::INFO.name, dim)?;
+    let grid = checked_grid::<K>(dim, block_dim)?;
     check_shapes::<K>(&args, &grid)?;
     // (Inside a capture `dispatch` has the backend record the launch.)
     run(&args, &grid)?;
@@ -442,7 +626,7 @@ mod tests {
     use super::*;
     use crate::array::Array;
     use crate::device::cpu;
-    use crate::kernel::{CpuGradsOf, CpuParamsOf, KernelInfo};
+    use crate::kernel::{CpuGradsOf, CpuParamsOf, KernelInfo, TileInfo};
     use std::ops::Range;
 
     use warp_core::{Fault, FaultKind, KResult};
@@ -452,6 +636,9 @@ mod tests {
     /// an adjoint that does nothing.
     macro_rules! test_kernel {
         ($name:literal, [$($param:literal),*], $tid:expr, $same_shape:expr) => {
+            test_kernel!($name, [$($param),*], $tid, $same_shape, None);
+        };
+        ($name:literal, [$($param:literal),*], $tid:expr, $same_shape:expr, $tile:expr) => {
             const INFO: KernelInfo = KernelInfo {
                 name: $name,
                 module: module_path!(),
@@ -459,6 +646,7 @@ mod tests {
                 tid_ndim: Some($tid),
                 same_shape: $same_shape,
                 file: file!(),
+                tile: $tile,
                 ..KernelInfo::BLANK
             };
             fn info() -> &'static KernelInfo {
@@ -527,6 +715,253 @@ mod tests {
             }
             Ok(())
         }
+    }
+
+    /// The facts of a tiled test kernel: any width, a small CPU frame.
+    const ANY_WIDTH: Option<TileInfo> = Some(TileInfo {
+        width: None,
+        shared_bytes: 256,
+        adjoint_shared_bytes: 0,
+        cpu_frame_bytes: 4096,
+    });
+
+    /// A tiled kernel by hand: `run_cpu` gets a range of blocks and adds the launch's
+    /// `block_dim` to `out[block]`, so that each element says how often its block ran and with
+    /// what block size.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct record_blocks;
+
+    impl Kernel for record_blocks {
+        type Params = (Array<u64>,);
+        test_kernel!("record_blocks", ["out"], 1, &[], ANY_WIDTH);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            for b in range {
+                let [i] = grid.unflatten::<1>(b);
+                let v = params.0.load(i)?;
+                params.0.store(i, v + grid.block_dim as u64)?;
+            }
+            Ok(())
+        }
+    }
+
+    /// [`record_blocks`] over a 2-D grid of blocks: `out[i, j] += flat * 10_000 + block_dim`.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct record_blocks_2d;
+
+    impl Kernel for record_blocks_2d {
+        type Params = (Array<u64, 2>,);
+        test_kernel!("record_blocks_2d", ["out"], 2, &[], ANY_WIDTH);
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            for b in range {
+                let [i, j] = grid.unflatten::<2>(b);
+                let v = params.0.load((i, j))?;
+                params
+                    .0
+                    .store((i, j), v + b as u64 * 10_000 + grid.block_dim as u64)?;
+            }
+            Ok(())
+        }
+    }
+
+    /// A tiled kernel whose tiles fix the block size at 64 (`#[kernel(block_dim = 64)]`).
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct width_64;
+
+    impl Kernel for width_64 {
+        type Params = (Array<u64>,);
+        test_kernel!(
+            "width_64",
+            ["out"],
+            1,
+            &[],
+            Some(TileInfo {
+                width: Some(64),
+                ..ANY_WIDTH.unwrap()
+            })
+        );
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            record_blocks::run_cpu(params, grid, range)
+        }
+    }
+
+    /// A tiled kernel whose blocks need 40 MiB of stack on the CPU.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct huge_frame;
+
+    impl Kernel for huge_frame {
+        type Params = (Array<u64>,);
+        test_kernel!(
+            "huge_frame",
+            ["out"],
+            1,
+            &[],
+            Some(TileInfo {
+                cpu_frame_bytes: 40 << 20,
+                ..ANY_WIDTH.unwrap()
+            })
+        );
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            record_blocks::run_cpu(params, grid, range)
+        }
+    }
+
+    #[test]
+    fn every_block_of_a_tiled_launch_runs_once_with_its_block_dim() {
+        let dev = cpu();
+        // Serial (few blocks) and chunked; chunks shrink with the block size.
+        for (blocks, bd) in [
+            (1usize, 1usize),
+            (7, 64),
+            (5000, 1),
+            (3000, 256),
+            (100_003, 32),
+            (3, 1024),
+        ] {
+            let out = Array::<u64>::zeros(blocks, &dev).unwrap();
+            launch_tiled(record_blocks, blocks, (&out,), bd, &dev).unwrap();
+            let v = out.to_vec().unwrap();
+            assert!(v.iter().all(|&x| x == bd as u64), "{blocks} blocks of {bd}");
+        }
+    }
+
+    #[test]
+    fn a_two_d_grid_of_blocks_is_row_major() {
+        let dev = cpu();
+        for ((rows, cols), bd) in [((3usize, 5usize), 128usize), ((70, 130), 16)] {
+            let out = Array::<u64, 2>::zeros((rows, cols), &dev).unwrap();
+            launch_tiled(record_blocks_2d, (rows, cols), (&out,), bd, &dev).unwrap();
+            let v = out.to_vec().unwrap();
+            for (flat, &x) in v.iter().enumerate() {
+                assert_eq!(x, flat as u64 * 10_000 + bd as u64, "{rows}x{cols}");
+            }
+        }
+        // `tid()` arity against the block grid, as for `launch`.
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        let err = launch_tiled(record_blocks, (2, 2), (&out,), 8, &dev).unwrap_err();
+        assert!(matches!(err, Error::TidMismatch { .. }), "{err}");
+    }
+
+    #[test]
+    fn tiled_and_ordinary_kernels_take_only_their_launch() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        let err = launch(record_blocks, 4, (&out,), &dev).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                Error::LaunchKind {
+                    kernel: "record_blocks",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(
+            err.to_string(),
+            "kernel `record_blocks`: a tiled kernel (it uses tiles) launched with `launch`: \
+             launch it with `launch_tiled(record_blocks, blocks, args, block_dim, &device)` (dim \
+             counts blocks)"
+        );
+        let err = launch_tiled(write_flat, 4, (&out,), 64, &dev).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                Error::LaunchKind {
+                    kernel: "write_flat",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("launch it with `launch`"), "{err}");
+        let err = Launch::new(record_blocks, 4, (&out,), &dev).unwrap_err();
+        assert!(matches!(err, Error::LaunchKind { .. }), "{err}");
+        let err = Launch::new_tiled(write_flat, 4, (&out,), 1, &dev).unwrap_err();
+        assert!(matches!(err, Error::LaunchKind { .. }), "{err}");
+        // Nothing ran.
+        assert_eq!(out.to_vec().unwrap(), vec![0; 4]);
+    }
+
+    #[test]
+    fn block_dim_is_checked() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        for bd in [0usize, 1025, usize::MAX] {
+            let err = launch_tiled(record_blocks, 4, (&out,), bd, &dev).unwrap_err();
+            assert!(
+                matches!(err, Error::InvalidBlockDim { kernel: "record_blocks", block_dim, .. } if block_dim == bd),
+                "{err}"
+            );
+        }
+        let err = launch_tiled(record_blocks, 4, (&out,), 0, &dev).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "kernel `record_blocks`: invalid block_dim 0: a block has at least one thread"
+        );
+        let err = launch_tiled(width_64, 4, (&out,), 128, &dev).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "kernel `width_64`: invalid block_dim 128: `width_64` tiles per-thread values into \
+             width 64: launch it with block_dim 64, not 128"
+        );
+        assert_eq!(out.to_vec().unwrap(), vec![0; 4]);
+        launch_tiled(width_64, 4, (&out,), 64, &dev).unwrap();
+        assert_eq!(out.to_vec().unwrap(), vec![64; 4]);
+        // `load_tiled` checks the same (and on the CPU compiles nothing).
+        load_tiled(&[&record_blocks::INFO, &width_64::INFO], 64, &dev).unwrap();
+        let err = load_tiled(&[&width_64::INFO], 32, &dev).unwrap_err();
+        assert!(
+            matches!(err, Error::InvalidBlockDim { block_dim: 32, .. }),
+            "{err}"
+        );
+        let err = load_tiled(&[&write_flat::INFO], 32, &dev).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                Error::LaunchKind {
+                    kernel: "write_flat",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_block_frame_past_the_stack_is_an_error() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(4, &dev).unwrap();
+        let err = launch_tiled(huge_frame, 4, (&out,), 64, &dev).unwrap_err();
+        assert_eq!(
+            err,
+            Error::TileFrame {
+                kernel: "huge_frame",
+                bytes: 40 << 20,
+                limit: 32 << 20
+            }
+        );
+        assert!(err.to_string().contains("41943040 bytes of stack"), "{err}");
+        assert_eq!(out.to_vec().unwrap(), vec![0; 4]);
+    }
+
+    #[test]
+    fn a_bound_tiled_launch_keeps_its_block_dim() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(6, &dev).unwrap();
+        let mut l = Launch::new_tiled(record_blocks, 4, (&out,), 32, &dev).unwrap();
+        l.launch().unwrap();
+        l.set_dim(6);
+        l.launch().unwrap();
+        assert_eq!(out.to_vec().unwrap(), vec![64, 64, 64, 64, 32, 32]);
+        let err = Launch::new_tiled(width_64, 4, (&out,), 16, &dev).unwrap_err();
+        assert!(
+            matches!(err, Error::InvalidBlockDim { block_dim: 16, .. }),
+            "{err}"
+        );
     }
 
     #[test]
@@ -618,7 +1053,8 @@ mod tests {
             Grid {
                 dims: [2, 3, 4, 1],
                 ndim: 3,
-                total: 24
+                total: 24,
+                block_dim: 1
             }
         );
         assert_eq!(Dim::from([1, 2, 3, 4]).as_slice(), &[1, 2, 3, 4]);

@@ -83,11 +83,14 @@ pub use error::{Error, Result};
 pub use graph::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use kernel::{
     kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, Forward, GenericKernel, Kernel,
-    KernelArg, KernelInfo, KernelParams, Launchable,
+    KernelArg, KernelInfo, KernelParams, Launchable, TileInfo,
+};
+pub use launch::{
+    launch, launch_tiled, load, load_tiled, load_with_adjoints, synchronize, Dim, Launch,
+    OwnedArgsOf, MAX_BLOCK_DIM,
 };
 #[cfg(feature = "cuda")]
-pub use launch::launch_on;
-pub use launch::{launch, load, load_with_adjoints, synchronize, Dim, Launch, OwnedArgsOf};
+pub use launch::{launch_on, launch_tiled_on};
 pub use launch_id::{last_launch_id, LaunchId};
 pub use objects::exports::*;
 #[cfg(feature = "cuda")]

@@ -211,6 +211,7 @@ mod tests {
             dims: [n, 1, 1, 1],
             ndim: 1,
             total: n,
+            block_dim: 1,
         };
         assert!(P::cover(&args, INFO.tid_indexed, &grid(4)));
         assert!(!P::cover(&args, INFO.tid_indexed, &grid(5)));

@@ -9,7 +9,7 @@ use super::shared_grads::{self, AdjointLaunch};
 use crate::backend::{Backend, Conditional, ObjectStep, Op, Record};
 use crate::config;
 use crate::device::Device;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::kernel::{ArgsOf, Kernel, KernelInfo, KernelParams};
 use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
@@ -25,6 +25,29 @@ impl<'d> Cpu<'d> {
     /// The backend of `device` (the CPU).
     pub(crate) fn new(device: &'d Device) -> Self {
         Cpu { device }
+    }
+}
+
+/// Runs `run` over the launch's work items in chunks: the threads of an ordinary kernel's
+/// launch on the rayon pool, the blocks of a tiled kernel's launch (`grid.total` counts blocks,
+/// each running `grid.block_dim` lanes) on the big-stack pool, once a block's stack frame is
+/// known to fit there.
+fn for_each<K: Kernel, F>(grid: &Grid, run: F) -> Result<()>
+where
+    F: Fn(std::ops::Range<usize>) -> warp_core::KResult<()> + Sync + Send,
+{
+    match K::INFO.tile {
+        None => executor::for_each_chunk(grid.total, run),
+        Some(tile) => {
+            if tile.cpu_frame_bytes > executor::TILE_FRAME_LIMIT {
+                return Err(Error::TileFrame {
+                    kernel: K::INFO.name,
+                    bytes: tile.cpu_frame_bytes,
+                    limit: executor::TILE_FRAME_LIMIT,
+                });
+            }
+            executor::for_each_block(grid.total, grid.block_dim, run)
+        }
     }
 }
 
@@ -44,7 +67,8 @@ impl Cpu<'_> {
             })?
         };
         log.seal()?;
-        executor::for_each_chunk(grid.total, |range| {
+        // (A tiled launch's blocks log as threads: the lanes of a block share its index.)
+        for_each::<K, _>(grid, |range| {
             race::each_thread(&log, range, |t| K::run_cpu(&params, grid, t))
         })
     }
@@ -72,7 +96,7 @@ impl Cpu<'_> {
         };
         log.seal()?;
         let launch = AdjointLaunch::begin();
-        executor::for_each_chunk(grid.total, |range| {
+        for_each::<K, _>(grid, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
             shared_grads::chunk(&launch, |shared| {
                 race::each_thread(&log, range, |t| {
@@ -93,7 +117,7 @@ impl Backend for Cpu<'_> {
         }
         // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
-        executor::for_each_chunk(grid.total, |range| K::run_cpu(&params, grid, range))
+        for_each::<K, _>(grid, |range| K::run_cpu(&params, grid, range))
     }
 
     fn launch_adjoint<K: Kernel>(
@@ -112,7 +136,7 @@ impl Backend for Cpu<'_> {
         // One adjoint stack per chunk, reused (cleared) thread by thread. Each chunk learns
         // whether another adjoint launch may share its gradients (`shared_grads`).
         let launch = AdjointLaunch::begin();
-        executor::for_each_chunk(grid.total, |range| {
+        for_each::<K, _>(grid, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
             shared_grads::chunk(&launch, |shared| {
                 K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack, shared)
@@ -175,7 +199,12 @@ impl Backend for Cpu<'_> {
         step.run_cpu()
     }
 
-    fn prepare(&self, _kernels: &[&'static KernelInfo], _adjoint: Option<usize>) -> Result<()> {
+    fn prepare(
+        &self,
+        _kernels: &[&'static KernelInfo],
+        _adjoint: Option<usize>,
+        _block_dim: Option<usize>,
+    ) -> Result<()> {
         Ok(())
     }
 

@@ -221,6 +221,16 @@ fn compile_units(
             )),
         ));
     }
+    // A tiled kernel's unit needs the block size of its launches, which `compile` is not
+    // given: refuse it plainly rather than let NVRTC fail on an undefined WP_TILE_BLOCK_DIM.
+    if let Some(info) = kernels.iter().find(|k| k.tile.is_some()) {
+        return Err(Error::LaunchKind {
+            kernel: info.name,
+            why: "a tiled kernel given to `aot::compile`, which does not compile tiled kernels \
+                  yet: load it at run time with `load_tiled`"
+                .to_string(),
+        });
+    }
     let cache = KernelCache::new(dir);
     // One after the other: NVRTC compiles one program at a time in a process (measured with
     // NVRTC 13.0 on two cores: two threads took as long as one, each compile twice as long).
@@ -228,7 +238,7 @@ fn compile_units(
         .into_iter()
         .map(|((info, src, stack_define), arch, contiguous)| {
             let exact = needs_exact(&src.headers);
-            with_compile_options(contiguous, stack_define.as_deref(), exact, |opts| {
+            with_compile_options(contiguous, stack_define.as_deref(), exact, None, |opts| {
                 let compiled = warp_cuda::compile(&src.text, info.name, opts, arch)?;
                 let key = warp_cuda::aot_key(&src.text, info.name, opts, arch);
                 let path = cache.store(info.name, key, &compiled.cubin)?;
@@ -279,9 +289,10 @@ pub fn verify(
         .into_iter()
         .map(|((info, src, stack_define), arch, contiguous)| {
             let exact = needs_exact(&src.headers);
-            let key = with_compile_options(contiguous, stack_define.as_deref(), exact, |opts| {
-                warp_cuda::aot_key(&src.text, info.name, opts, arch)
-            });
+            let key =
+                with_compile_options(contiguous, stack_define.as_deref(), exact, None, |opts| {
+                    warp_cuda::aot_key(&src.text, info.name, opts, arch)
+                });
             AotCheck {
                 kernel: info.name,
                 arch,

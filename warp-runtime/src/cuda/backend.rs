@@ -149,8 +149,13 @@ impl Backend for Cuda<'_> {
         objects::object_step(self.device, self.ordinal, step)
     }
 
-    fn prepare(&self, kernels: &[&'static KernelInfo], adjoint: Option<usize>) -> Result<()> {
-        super::module::prepare(self.device, self.ordinal, kernels, adjoint)
+    fn prepare(
+        &self,
+        kernels: &[&'static KernelInfo],
+        adjoint: Option<usize>,
+        block_dim: Option<usize>,
+    ) -> Result<()> {
+        super::module::prepare(self.device, self.ordinal, kernels, adjoint, block_dim)
     }
 
     fn synchronize_all() -> Result<()> {

@@ -66,6 +66,8 @@ pub(crate) struct Prepared<K: Kernel> {
     ctx: Ctx,
     blocks: u32,
     block: u32,
+    /// Dynamic shared memory per block: a tiled kernel's tiles (0 for an ordinary kernel).
+    shared_bytes: u32,
     ordinal: usize,
     adjoint: bool,
     _kernel: PhantomData<K>,
@@ -107,7 +109,17 @@ impl<K: Kernel> Prepared<K> {
             Some(_) => Some(K::Params::cuda_grads(args, info, device)?),
             None => None,
         };
-        let kernel = loaded(device, ordinal, info, K::Params::contiguous(args), adjoint)?;
+        // A tiled kernel is compiled per block size (`WP_TILE_BLOCK_DIM`); `launch.rs` has
+        // checked that only tiled launches reach it, with a block size it takes.
+        let tile_block = info.tile.map(|_| grid.block_dim);
+        let kernel = loaded(
+            device,
+            ordinal,
+            info,
+            K::Params::contiguous(args),
+            adjoint,
+            tile_block,
+        )?;
         // The fault record and the launch number are each launch's (`enqueue_converted`).
         let ctx = Ctx {
             fault: 0,
@@ -122,14 +134,25 @@ impl<K: Kernel> Prepared<K> {
             ndim: grid.ndim as i32,
             fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
         };
-        let block = config::cuda_block_dim();
-        let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
+        let (block, blocks) = match tile_block {
+            // One CUDA block per block of the launch: the entry grid-strides over the blocks
+            // (`grid.total` counts them) past i32::MAX.
+            Some(bd) => (bd as u32, grid.total.min(i32::MAX as usize) as u32),
+            None => {
+                let block = config::cuda_block_dim();
+                let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
+                (block, blocks)
+            }
+        };
+        // (`loaded` checked it against the device and opted in above 48 KiB; it fits u32.)
+        let shared_bytes = super::module::tile_shared_bytes(info, adjoint.is_some()) as u32;
         let prepared = Prepared {
             kernel,
             dims,
             ctx,
             blocks,
             block,
+            shared_bytes,
             ordinal,
             adjoint: adjoint.is_some(),
             _kernel: PhantomData,
@@ -190,7 +213,7 @@ impl<K: Kernel> Prepared<K> {
                         on,
                         self.blocks,
                         self.block,
-                        0,
+                        self.shared_bytes,
                         &mut ptrs[..n],
                     )
                     .map_err(|e| err(device, e))

@@ -6,7 +6,7 @@
 //! for the process.
 
 use super::gpu::{err, state, GpuState};
-use super::options::{needs_exact, with_compile_options};
+use super::options::{needs_exact, with_compile_options, TileDefines};
 use super::{aot, source};
 use crate::device::Device;
 use crate::error::{Error, Result};
@@ -118,16 +118,36 @@ pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
 ///
 /// `adjoint: Some(bytes)` picks the adjoint unit instead, with `bytes` of adjoint stack per
 /// thread (`WP_ADSTACK_BYTES`).
+///
+/// `block_dim: Some(n)` (a tiled kernel: `info.tile` is set) picks the variant for blocks of
+/// `n` threads (`WP_TILE_BLOCK_DIM`), each block size its own module, and checks at load that
+/// the GPU can run such blocks with the shared memory the kernel's tiles take
+/// ([`check_tile_budget`]), so that a launch never fails for it.
 pub(crate) fn loaded(
     device: &Device,
     ordinal: usize,
     info: &'static KernelInfo,
     contiguous: bool,
     adjoint: Option<usize>,
+    block_dim: Option<usize>,
 ) -> Result<Arc<Loaded>> {
-    type Key = (usize, &'static str, &'static str, bool, Option<usize>);
+    type Key = (
+        usize,
+        &'static str,
+        &'static str,
+        bool,
+        Option<usize>,
+        Option<usize>,
+    );
     static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
-    let key = (ordinal, info.module, info.name, contiguous, adjoint);
+    let key = (
+        ordinal,
+        info.module,
+        info.name,
+        contiguous,
+        adjoint,
+        block_dim,
+    );
     let cache = CACHE.get_or_init(Default::default);
     if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
         // Every launch that is not a launch object comes here: nothing is formatted unless a
@@ -155,7 +175,7 @@ pub(crate) fn loaded(
         ordinal,
         &format!(
             "compiling kernel `{}` ({}, {}) at its first launch: load it before capturing with \
-             wp::load{}(&[wp::kernel_info({})], &device)",
+             wp::load{}(&[wp::kernel_info({})]{}, &device)",
             info.name,
             if adjoint.is_some() {
                 "adjoint"
@@ -167,12 +187,15 @@ pub(crate) fn loaded(
             } else {
                 "strided arrays: launch it once before capturing"
             },
-            if adjoint.is_some() {
+            if block_dim.is_some() {
+                "_tiled"
+            } else if adjoint.is_some() {
                 "_with_adjoints"
             } else {
                 ""
             },
-            info.name
+            info.name,
+            block_dim.map_or(String::new(), |bd| format!(", {bd}"))
         ),
     )?;
     let st = state(device, ordinal)?;
@@ -184,10 +207,16 @@ pub(crate) fn loaded(
         None => source::assemble(info),
     };
     let stack_define = adjoint.map(|b| b.to_string());
+    let tile_shared = tile_shared_bytes(info, adjoint.is_some());
+    let tile = block_dim.map(|block_dim| TileDefines {
+        block_dim,
+        shared_bytes: tile_shared,
+    });
     let (compiled, outcome, aot, entry) = with_compile_options(
         contiguous,
         stack_define.as_deref(),
         needs_exact(&src.headers),
+        tile,
         |opts| {
             // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
             if let Some((cubin, key, path)) = aot::lookup(&src.text, info.name, opts, arch) {
@@ -232,6 +261,7 @@ pub(crate) fn loaded(
                 contiguous,
                 stack_define.as_deref(),
                 needs_exact(&src.headers),
+                tile,
                 |opts| {
                     KernelCache::current().recompile_entry(&src.text, info.name, opts, arch, bad)
                 },
@@ -246,6 +276,21 @@ pub(crate) fn loaded(
         Err(e) => return Err(err(device, e)),
     };
     let function = module.function(&src.entry).map_err(|e| err(device, e))?;
+    if let Some(bd) = block_dim {
+        let f = |e| err(device, e);
+        let budget = TileBudget {
+            block_dim: bd,
+            dynamic: tile_shared,
+            static_bytes: function.static_shared_bytes().map_err(f)?,
+            available: st.gpu.max_shared_bytes_per_block_optin().map_err(f)?,
+            max_threads: function.max_threads_per_block().map_err(f)? as usize,
+        };
+        if check_tile_budget(info.name, device.alias(), &budget)? {
+            function
+                .set_max_dynamic_shared_bytes(tile_shared)
+                .map_err(f)?;
+        }
+    }
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     log::info!(
         "loaded kernel {}::{} ({}, {}) on {device} in {total_ms:.1} ms: {}",
@@ -289,6 +334,65 @@ pub(crate) fn loaded(
         .unwrap_or_else(|p| p.into_inner())
         .insert(key, l.clone());
     Ok(l)
+}
+
+/// The dynamic shared memory one block of `info`'s forward unit (or adjoint unit) takes: 0 for
+/// an ordinary kernel.
+pub(crate) fn tile_shared_bytes(info: &KernelInfo, adjoint: bool) -> usize {
+    match info.tile {
+        Some(t) if adjoint => t.adjoint_shared_bytes,
+        Some(t) => t.shared_bytes,
+        None => 0,
+    }
+}
+
+/// The dynamic shared memory a launch may ask for without the kernel opting in: 48 KiB.
+const DEFAULT_DYNAMIC_SHARED: usize = 48 * 1024;
+
+/// What a tiled kernel's module asks of its GPU, and what the GPU and the compiled function
+/// give (their attributes), for [`check_tile_budget`].
+#[derive(Clone, Copy, Debug)]
+struct TileBudget {
+    /// Threads per block of the launch.
+    block_dim: usize,
+    /// Dynamic shared memory one block takes (`TileInfo::shared_bytes`).
+    dynamic: usize,
+    /// The function's static shared memory (`CU_FUNC_ATTRIBUTE_SHARED_SIZE_BYTES`).
+    static_bytes: usize,
+    /// The device's most per block, opted in
+    /// (`CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_BLOCK_OPTIN`).
+    available: usize,
+    /// The function's `CU_FUNC_ATTRIBUTE_MAX_THREADS_PER_BLOCK` (registers can lower it).
+    max_threads: usize,
+}
+
+/// Refuses a tiled kernel's module whose blocks cannot run on the GPU (too many threads for
+/// the function, or more shared memory than a block may have), naming the kernel and the
+/// numbers: at load, rather than as a launch failure. `Ok(true)` when the kernel must opt in
+/// to more than 48 KiB of dynamic shared memory before its launches.
+fn check_tile_budget(kernel: &'static str, device: &str, b: &TileBudget) -> Result<bool> {
+    if b.block_dim > b.max_threads {
+        return Err(Error::InvalidBlockDim {
+            kernel,
+            block_dim: b.block_dim,
+            why: format!(
+                "the compiled kernel runs at most {} threads per block on \"{device}\" (its \
+                 registers limit it)",
+                b.max_threads
+            ),
+        });
+    }
+    let requested = b.dynamic.saturating_add(b.static_bytes);
+    if requested > b.available {
+        return Err(Error::SharedMemory {
+            kernel,
+            device: device.to_string(),
+            requested,
+            available: b.available,
+            block_dim: b.block_dim,
+        });
+    }
+    Ok(b.dynamic > DEFAULT_DYNAMIC_SHARED)
 }
 
 /// The capabilities `info` and the funcs it calls (transitively) need, each once, in the
@@ -364,7 +468,8 @@ fn layout_name(contiguous: bool) -> &'static str {
 
 /// Compiles and loads `kernels` for GPU `ordinal` now (each variant the one `loaded` keeps,
 /// so their first launches find them): the contiguous forward variant of each, and with
-/// `adjoint: Some(bytes)` the adjoint with that stack. They go to the rayon pool together
+/// `adjoint: Some(bytes)` the adjoint with that stack; with `block_dim: Some(n)` (tiled kernels,
+/// [`crate::load_tiled`]) their variants for blocks of `n` threads. They go to the rayon pool together
 /// (NVRTC is thread-safe), though NVRTC measured one compile at a time in a process (see
 /// `crate::load`). A kernel already loaded costs a map lookup.
 pub(crate) fn prepare(
@@ -372,6 +477,7 @@ pub(crate) fn prepare(
     ordinal: usize,
     kernels: &[&'static KernelInfo],
     adjoint: Option<usize>,
+    block_dim: Option<usize>,
 ) -> Result<()> {
     use rayon::prelude::*;
     let mut work: Vec<(&'static KernelInfo, Option<usize>)> =
@@ -382,13 +488,18 @@ pub(crate) fn prepare(
     // One task per variant: a compile is hundreds of milliseconds, so no chunking.
     work.par_iter()
         .with_max_len(1)
-        .try_for_each(|(info, adj)| loaded(device, ordinal, info, true, *adj).map(drop))
+        .try_for_each(|(info, adj)| loaded(device, ordinal, info, true, *adj, block_dim).map(drop))
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{check_capabilities, format_compile_reports, CompileReport};
+    use super::{
+        check_capabilities, check_tile_budget, format_compile_reports, tile_shared_bytes,
+        CompileReport, TileBudget,
+    };
+    use crate::error::Error;
     use crate::kernel::KernelInfo;
+    use crate::kernel::TileInfo;
     use warp_core::capability::{Capability, CAPABILITIES};
     use warp_core::FuncInfo;
 
@@ -412,6 +523,92 @@ mod tests {
         requires: &[],
         ..LEAF
     };
+
+    /// A tiled kernel's module is refused at load, naming the numbers, when its blocks cannot
+    /// run: too many threads for the compiled function, or too much shared memory (dynamic and
+    /// static together); above 48 KiB of dynamic shared memory it must opt in.
+    #[test]
+    fn tile_budgets_are_checked_at_load() {
+        let b = TileBudget {
+            block_dim: 256,
+            dynamic: 32 * 1024,
+            static_bytes: 1024,
+            available: 227 * 1024,
+            max_threads: 1024,
+        };
+        assert!(!check_tile_budget("gemm", "cuda:0", &b).unwrap());
+        let big = TileBudget {
+            dynamic: 100 * 1024,
+            ..b
+        };
+        assert!(check_tile_budget("gemm", "cuda:0", &big).unwrap());
+        // Exactly what the device gives fits; one byte more does not.
+        let full = TileBudget {
+            dynamic: 226 * 1024,
+            ..b
+        };
+        assert!(check_tile_budget("gemm", "cuda:0", &full).unwrap());
+        let over = TileBudget {
+            dynamic: 226 * 1024 + 1,
+            ..b
+        };
+        let e = check_tile_budget("gemm", "cuda:1", &over).unwrap_err();
+        assert_eq!(
+            e,
+            Error::SharedMemory {
+                kernel: "gemm",
+                device: "cuda:1".into(),
+                requested: 227 * 1024 + 1,
+                available: 227 * 1024,
+                block_dim: 256,
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "kernel `gemm`: a block of 256 threads needs 232449 bytes of shared memory on \
+             \"cuda:1\", which gives a block at most 232448; use smaller tiles"
+        );
+        let e = check_tile_budget(
+            "gemm",
+            "cuda:0",
+            &TileBudget {
+                max_threads: 128,
+                ..b
+            },
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::InvalidBlockDim {
+                    kernel: "gemm",
+                    block_dim: 256,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("at most 128 threads per block"),
+            "{e}"
+        );
+        // Forward and adjoint units take their own shared memory; ordinary kernels none.
+        let info = crate::kernel::KernelInfo {
+            tile: Some(TileInfo {
+                width: None,
+                shared_bytes: 4096,
+                adjoint_shared_bytes: 8192,
+                cpu_frame_bytes: 0,
+            }),
+            ..crate::kernel::KernelInfo::BLANK
+        };
+        assert_eq!(tile_shared_bytes(&info, false), 4096);
+        assert_eq!(tile_shared_bytes(&info, true), 8192);
+        assert_eq!(
+            tile_shared_bytes(&crate::kernel::KernelInfo::BLANK, false),
+            0
+        );
+    }
 
     #[test]
     fn a_gpu_without_a_capability_is_refused_naming_kernel_and_capability() {

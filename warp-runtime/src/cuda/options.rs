@@ -16,11 +16,15 @@ pub(crate) fn needs_exact(headers: &[String]) -> Exact {
 /// Calls `f` with the NVRTC options of a kernel translation unit (the runtime's and the
 /// ahead-of-time compiler's, which must agree for AOT entries to be found).
 /// `adstack_bytes`: the per-thread adjoint stack of an adjoint unit; `exact`: no FMA
-/// contraction, and for traversals a register cap (see [`needs_exact`]).
+/// contraction, and for traversals a register cap (see [`needs_exact`]); `tile`: a tiled
+/// kernel's variant, its block size and the dynamic shared memory a block takes
+/// (`WP_TILE_BLOCK_DIM`, `WP_TILE_SMEM_BYTES`). Defines are part of the options every cache
+/// key hashes, so each block size is its own cubin in the kernel cache and the AOT directory.
 pub(crate) fn with_compile_options<R>(
     contiguous: bool,
     adstack_bytes: Option<&str>,
     exact: Exact,
+    tile: Option<TileDefines>,
     f: impl FnOnce(&CompileOptions) -> R,
 ) -> R {
     let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
@@ -30,6 +34,11 @@ pub(crate) fn with_compile_options<R>(
     }
     if let Some(b) = adstack_bytes {
         defines.push(("WP_ADSTACK_BYTES", b));
+    }
+    let tile = tile.map(|t| (t.block_dim.to_string(), t.shared_bytes.to_string()));
+    if let Some((bd, smem)) = &tile {
+        defines.push(("WP_TILE_BLOCK_DIM", bd));
+        defines.push(("WP_TILE_SMEM_BYTES", smem));
     }
     let defines = &defines[..];
     // (NVRTC's automatic precompiled headers, `-pch`, were tried for the autodiff example's six
@@ -44,9 +53,53 @@ pub(crate) fn with_compile_options<R>(
     })
 }
 
+/// The defines of a tiled kernel's unit: its launch's block size and the shared memory one
+/// block of the unit (forward or adjoint) takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct TileDefines {
+    pub(crate) block_dim: usize,
+    pub(crate) shared_bytes: usize,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A tiled unit's block size and shared memory are defines, so they are part of every
+    /// cache key (each block size its own cubin); other units have neither.
+    #[test]
+    fn tiled_units_define_their_block_size() {
+        let defines = |tile| {
+            with_compile_options(true, None, Exact::No, tile, |o| {
+                o.defines
+                    .iter()
+                    .map(|(k, v)| format!("{k}={v}"))
+                    .collect::<Vec<_>>()
+            })
+        };
+        assert_eq!(defines(None), vec!["WP_CONTIGUOUS=1"]);
+        let tile = |block_dim| TileDefines {
+            block_dim,
+            shared_bytes: 2048,
+        };
+        assert_eq!(
+            defines(Some(tile(64))),
+            vec![
+                "WP_CONTIGUOUS=1",
+                "WP_TILE_BLOCK_DIM=64",
+                "WP_TILE_SMEM_BYTES=2048"
+            ]
+        );
+        assert_ne!(defines(Some(tile(64))), defines(Some(tile(128))));
+        // The keys of the kernel cache and the AOT directory hash the options.
+        let key = |tile| {
+            with_compile_options(true, None, Exact::No, tile, |o| {
+                warp_cuda::aot_key("extern \"C\" __global__ void k() {}", "k", o, 90)
+            })
+        };
+        assert_ne!(key(Some(tile(64))), key(Some(tile(128))));
+        assert_ne!(key(None), key(Some(tile(64))));
+    }
 
     /// A unit's headers decide its rounding through their sections' rows (the rows' own
     /// decision is tested in warp-cuda).
