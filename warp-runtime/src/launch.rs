@@ -964,6 +964,66 @@ mod tests {
         );
     }
 
+    /// [`record_blocks`] with an adjoint that adds `1000 * block_dim` to `out[block]`: what its
+    /// backward saw of the launch.
+    #[derive(Clone, Copy)]
+    #[allow(non_camel_case_types)]
+    struct record_blocks_adjoint;
+
+    impl Kernel for record_blocks_adjoint {
+        type Params = (Array<u64>,);
+        const INFO: KernelInfo = KernelInfo {
+            name: "record_blocks_adjoint",
+            params: &["out"],
+            tid_ndim: Some(1),
+            tile: ANY_WIDTH,
+            ..KernelInfo::BLANK
+        };
+        fn info() -> &'static KernelInfo {
+            &Self::INFO
+        }
+        fn run_cpu(params: &CpuParamsOf<Self>, grid: &Grid, range: Range<usize>) -> KResult<()> {
+            record_blocks::run_cpu(params, grid, range)
+        }
+        fn run_cpu_adjoint(
+            params: &CpuParamsOf<Self>,
+            _: &CpuGradsOf<Self>,
+            grid: &Grid,
+            range: Range<usize>,
+            _: &mut warp_core::AdStack,
+            _: bool,
+        ) -> KResult<()> {
+            for b in range {
+                let v = params.0.load(b)?;
+                params.0.store(b, v + 1000 * grid.block_dim as u64)?;
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn tapes_and_graphs_keep_a_tiled_launch_block_dim() {
+        let dev = cpu();
+        let out = Array::<u64>::zeros(5, &dev).unwrap();
+        let tape = crate::Tape::new();
+        {
+            let _rec = tape.record();
+            launch_tiled(record_blocks_adjoint, 5, (&out,), 16, &dev).unwrap();
+        }
+        assert_eq!(out.to_vec().unwrap(), vec![16; 5]);
+        // The backward pass launches the adjoint over the same blocks of the same size.
+        tape.backward_from_grads().unwrap();
+        assert_eq!(out.to_vec().unwrap(), vec![16 + 16_000; 5]);
+
+        // A captured tiled launch replays with its block size.
+        let out = Array::<u64>::zeros(3, &dev).unwrap();
+        let graph =
+            crate::capture(&dev, || launch_tiled(record_blocks, 3, (&out,), 8, &dev)).unwrap();
+        graph.launch().unwrap();
+        graph.launch().unwrap();
+        assert_eq!(out.to_vec().unwrap(), vec![16; 3]);
+    }
+
     #[test]
     fn every_thread_runs_once() {
         let dev = cpu();

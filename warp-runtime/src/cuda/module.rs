@@ -41,6 +41,8 @@ pub struct CompileReport {
     pub contiguous: bool,
     /// Whether this is the kernel's adjoint (compiled when backward first ran on the GPU).
     pub adjoint: bool,
+    /// A tiled kernel's block size (each its own variant); `None` for an ordinary kernel.
+    pub block_dim: Option<usize>,
     /// Bytes of generated CUDA source (without the library headers).
     pub source_bytes: usize,
     /// NVRTC time (0 on a cache hit).
@@ -94,6 +96,11 @@ pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
         let name = match r.module.split_once("::") {
             Some((_, inner)) => format!("{inner}::{}", r.kernel),
             None => r.kernel.to_string(),
+        };
+        // A tiled kernel's variants differ by block size: name it with the kernel.
+        let name = match r.block_dim {
+            Some(bd) => format!("{name} [block_dim {bd}]"),
+            None => name,
         };
         let _ = writeln!(
             s,
@@ -315,6 +322,7 @@ pub(crate) fn loaded(
             device: device.alias().to_string(),
             contiguous,
             adjoint: adjoint.is_some(),
+            block_dim,
             source_bytes: src.text.len(),
             compile_ms: compiled.compile_ms,
             cache_hit: matches!(outcome, CacheOutcome::Hit),
@@ -697,6 +705,7 @@ mod tests {
             device: "cuda:0".into(),
             contiguous: true,
             adjoint,
+            block_dim: None,
             source_bytes: 5730,
             compile_ms: if cache_hit { 0.0 } else { 145.25 },
             cache_hit,
@@ -713,9 +722,20 @@ mod tests {
             report("nbody::single", false, false),
             report("nbody::double", true, true),
             report("top", false, true),
+            CompileReport {
+                block_dim: Some(128),
+                ..report("tiles", false, false)
+            },
         ]);
         let lines: Vec<&str> = s.lines().collect();
-        assert_eq!(lines[0], "compiled at run time: 3 kernel variant(s)");
+        assert_eq!(lines[0], "compiled at run time: 4 kernel variant(s)");
+        assert!(
+            lines[4]
+                .trim_start()
+                .starts_with("accelerations [block_dim 128] forward"),
+            "{}",
+            lines[4]
+        );
         assert!(lines[1].contains("single::accelerations") && lines[1].contains("forward"));
         assert!(
             lines[1].contains("5730 bytes of CUDA, NVRTC 145.2 ms"),
