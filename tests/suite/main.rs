@@ -117,6 +117,7 @@ mod scenes;
 mod stability;
 mod streams;
 mod structs;
+mod tiles;
 mod transforms;
 mod views;
 mod volume;

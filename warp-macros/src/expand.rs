@@ -247,7 +247,12 @@ fn kernel_impl(
     });
     let groups = groups.iter().map(|g| quote!(&[#(#g),*]));
     let written = crate::analysis::written_params(f);
-    let body = em.block(&f.body);
+    // A tiled kernel's body is printed by its block printer (`tiled::run_cpu`).
+    let body = if f.tiled.is_none() {
+        em.block(&f.body)
+    } else {
+        TokenStream::new()
+    };
     let tile_info = tiled::info(f);
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(f);

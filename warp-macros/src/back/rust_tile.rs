@@ -62,7 +62,12 @@ pub(super) fn tile_op(
             let idx = &v[1..];
             quote_spanned!(sp=> #x.extract(#(#idx,)* #name)?)
         }
-        other => unreachable!("`{other}` is printed by the block printer"),
+        // `tile`, `untile` and the accumulating matmul are the block printer's (they need the
+        // lane plan); an ordinary thread body never holds them.
+        other => {
+            let msg = format!("internal: `{other}` outside a tiled kernel's block");
+            quote_spanned!(sp=> ::core::compile_error!(#msg))
+        }
     }
 }
 
