@@ -372,3 +372,10 @@ fn tile_index_out_of_range_faults(dev: &wp::Device) {
         f.kind
     );
 }
+
+#[test]
+#[ignore = "prints the CUDA template"]
+fn dump_cuda() {
+    println!("{}", wp::kernel_info(k_gemm).cuda);
+    println!("{}", wp::kernel_info(k_lanes).cuda);
+}

@@ -338,6 +338,20 @@ impl Function {
         &self.vars[v].ty
     }
 
+    /// The tile variables that some statement sets, in variable order: each has a slot of the
+    /// block's shared memory on CUDA (`back::cuda_tile`), and `TileInfo` counts them.
+    pub fn tile_vars(&self) -> Vec<VarId> {
+        let mut set = vec![false; self.vars.len()];
+        walk_stmts(&self.body, &mut |s| {
+            if let StmtKind::Assign { dst, .. } = &s.kind {
+                set[*dst] = true;
+            }
+        });
+        (0..self.vars.len())
+            .filter(|v| set[*v] && self.vars[*v].ty.is_tile())
+            .collect()
+    }
+
     /// Whether `s` is block-cooperative (every thread of the block must run it together): a
     /// cooperative row (the tile operations), `tile_map`, or anything else that sets a tile
     /// (a copy or an operator: each thread computes its part of the tile).

@@ -52,11 +52,8 @@ pub(crate) fn slots(e: &mut Emitter) -> Result<(), String> {
     e.out
         .push_str("    extern __shared__ __align__(16) unsigned char __smem[];\n");
     let mut prev: Option<String> = None;
-    for (v, var) in f.vars.iter().enumerate() {
-        if !var.ty.is_tile() {
-            continue;
-        }
-        let t = tile_type(f, &var.ty)?;
+    for v in f.tile_vars() {
+        let t = tile_type(f, f.ty(v))?;
         let name = e.var(v);
         let off = match &prev {
             None => "0".to_string(),

@@ -27,10 +27,9 @@ pub(super) fn info(f: &Function) -> TokenStream {
     // One 16-byte aligned slot per tile variable, in variable order: the rule of the CUDA
     // emitter's slots (`wp::tile_slot_end`), so this is the dynamic shared memory it uses.
     let tiles: Vec<TokenStream> = f
-        .vars
-        .iter()
-        .filter(|v| v.ty.is_tile())
-        .map(|v| ty_tokens(&v.ty).expect("a tile type"))
+        .tile_vars()
+        .into_iter()
+        .map(|v| ty_tokens(f.ty(v)).expect("a tile type"))
         .collect();
     let per_lane: Vec<TokenStream> = match BlockPrinter::new(f) {
         Ok(p) => (0..f.vars.len())

@@ -211,7 +211,26 @@ impl Lowerer {
             Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() => {
                 let ty = self.ty(value);
                 let name = pi.ident.to_string();
-                let v = self.new_var(Some(name.clone()), ty, pi.mutability.is_some());
+                let v = self.new_var(Some(name.clone()), ty.clone(), pi.mutability.is_some());
+                // A tile made by the statement just before: that statement makes it in the
+                // named variable. A copy would cost a second shared-memory slot and a pass
+                // over the tile.
+                if ty.is_tile() && self.vars[value].name.is_none() {
+                    if let Some(Stmt {
+                        kind:
+                            StmtKind::Assign {
+                                dst, define: true, ..
+                            },
+                        ..
+                    }) = self.blocks.last_mut().expect("block").last_mut()
+                    {
+                        if *dst == value {
+                            *dst = v;
+                            self.scopes.last_mut().expect("scope").insert(name, v);
+                            return Ok(());
+                        }
+                    }
+                }
                 self.push(
                     StmtKind::Assign {
                         dst: v,
