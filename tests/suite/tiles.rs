@@ -291,7 +291,7 @@ fn lanes_keep_values_between_tile_operations(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_lane_return(x: Array<f32>, out: Array<f32>) {
+fn k_lane_return(x: Array<f32>, out: Array<f32>, odd: Array<f32>) {
     let b = tid();
     let t = tile_load::<16>(x, (b * 16) as i32);
     let s = tile_sum(t);
@@ -300,6 +300,11 @@ fn k_lane_return(x: Array<f32>, out: Array<f32>) {
         return;
     }
     out[i] = t[lane()] / s[0];
+    // Even lanes stop here; the odd ones (after the even ones on the CPU) go on.
+    if lane() % 2 == 0 {
+        return;
+    }
+    odd[i] = s[0];
 }
 
 /// A `return` some threads take after the last tile operation: they stop, the others go on.
@@ -308,12 +313,15 @@ fn lane_returns_after_the_last_tile_operation(dev: &wp::Device) {
     let data: Vec<f32> = (0..n).map(|k| (k % 5 + 1) as f32).collect();
     let x = arr(&data, dev);
     let out = wp::Array::<f32, 1>::full(n, -1.0, dev).unwrap();
-    wp::launch_tiled(k_lane_return, n.div_ceil(16), (&x, &out), 64, dev).unwrap();
-    let got = host(&out);
+    let odd = wp::Array::<f32, 1>::full(n, -1.0, dev).unwrap();
+    wp::launch_tiled(k_lane_return, n.div_ceil(16), (&x, &out, &odd), 64, dev).unwrap();
+    let (got, godd) = (host(&out), host(&odd));
     for b in 0..n.div_ceil(16) {
         let s: f32 = (b * 16..(b * 16 + 16).min(n)).map(|i| data[i]).sum();
         for i in b * 16..(b * 16 + 16).min(n) {
             assert_eq!(got[i], data[i] / s, "element {i}");
+            let want = if i % 2 == 1 { s } else { -1.0 };
+            assert_eq!(godd[i], want, "odd lanes' element {i}");
         }
     }
 }

@@ -65,6 +65,14 @@
 #error "wp_tile.h: define WP_TILE_BLOCK_DIM (the block size of the tiled launch)"
 #endif
 
+// WP_TILE_LAMBDA: the execution space of the functions `tile_map` applies (NVRTC compiles an
+// unannotated lambda as a host function).
+#if defined(__CUDACC__)
+#define WP_TILE_LAMBDA __device__
+#else
+#define WP_TILE_LAMBDA
+#endif
+
 // WP_TILE_SHARED_ALIGNED: a block's shared variable aligned to 16 bytes, in a device function.
 #if defined(__CUDACC__)
 #define WP_TILE_SHARED_ALIGNED __shared__ __align__(16)
@@ -504,7 +512,9 @@ WP_FN T tile_extract(const tile_t<T, N0, N1>& t, I i, J j, ctx_t* ctx) {
 
 /// The end of a tile's slot at `offset` holding `bytes`, rounded up to 16 bytes (the next
 /// slot's offset). warp-macros' TileInfo computes the block's total with the same rule.
-constexpr usize tile_slot_end(usize offset, usize bytes) { return (offset + bytes + 15) / 16 * 16; }
+WP_FN constexpr usize tile_slot_end(usize offset, usize bytes) {
+  return (offset + bytes + 15) / 16 * 16;
+}
 
 // ------------------------------------------------------------------------------------------
 // Reductions

@@ -131,10 +131,10 @@ pub(crate) fn stmt(e: &mut Emitter, s: &Stmt) -> Result<(), String> {
             let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
             let call = match (g.emit, a.len()) {
                 (Emit::Operator(o), _) => {
-                    format!("[](auto x, auto y) {{ return x {} y; }}", o.symbol())
+                    format!("[] WP_TILE_LAMBDA (auto x, auto y) {{ return x {} y; }}", o.symbol())
                 }
-                (_, 1) => format!("[](auto x) {{ return {}(x); }}", g.cuda),
-                _ => format!("[](auto x, auto y) {{ return {}(x, y); }}", g.cuda),
+                (_, 1) => format!("[] WP_TILE_LAMBDA (auto x) {{ return {}(x); }}", g.cuda),
+                _ => format!("[] WP_TILE_LAMBDA (auto x, auto y) {{ return {}(x, y); }}", g.cuda),
             };
             e.section(g.section);
             match a.len() {

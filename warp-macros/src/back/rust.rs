@@ -22,6 +22,9 @@ pub struct RustEmitter<'a> {
     /// Emit expressions for an adjoint's replay (of a body `middle::adjoint` prepared): atomics
     /// are not redone (zero) and funcs are called through their replay.
     pub replay: bool,
+    /// Printing a tiled kernel's lane region (`back::rust_tile`): a `return` ends this lane's
+    /// part of the block, not the block.
+    pub in_lanes: std::cell::Cell<bool>,
 }
 
 impl<'a> RustEmitter<'a> {
@@ -30,6 +33,7 @@ impl<'a> RustEmitter<'a> {
             f,
             tid: crate::analysis::tid_components(f),
             replay: false,
+            in_lanes: std::cell::Cell::new(false),
         }
     }
 
@@ -122,6 +126,9 @@ impl<'a> RustEmitter<'a> {
             }
             StmtKind::Break => quote_spanned!(sp=> break;),
             StmtKind::Continue => quote_spanned!(sp=> continue;),
+            StmtKind::Return { value: None } if self.in_lanes.get() => {
+                quote_spanned!(sp=> { __alive[__lane] = false; continue '__lanes; })
+            }
             StmtKind::Return { value: None } => {
                 quote_spanned!(sp=> return ::core::result::Result::Ok(());)
             }

@@ -170,6 +170,7 @@ impl<'a> BlockPrinter<'a> {
             let (x, pl) = (self.em.var(*v), self.per_lane(*v));
             quote!(#pl[__lane] = #x;)
         });
+        self.em.in_lanes.set(true);
         let body: TokenStream = run
             .iter()
             .map(|s| match &s.kind {
@@ -178,6 +179,7 @@ impl<'a> BlockPrinter<'a> {
                 _ => self.em.stmt_tokens(s),
             })
             .collect();
+        self.em.in_lanes.set(false);
         let skip_dead = self.plan.lane_returns.then(|| {
             quote!(if !__alive[__lane] {
                 continue '__lanes;
