@@ -218,8 +218,8 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, block, builtins, f16, first_error, max_depth, objects, ops,
-        tile, zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo, GradElement,
-        GradView, Grid, KResult, RangeProg, Transform,
+        tile, zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo,
+        GradElement, GradView, Grid, KResult, RangeProg, Transform,
     };
     pub use warp_macros::__object_rows;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};

@@ -69,7 +69,9 @@ fn k_block_sum(x: Array<f32>, out: Array<f32>, n: usize) {
 /// blocks of 64 (the last one ragged), against the host's sum in the reduction's order.
 fn block_sum_of_thread_values(dev: &wp::Device) {
     let n = 1000usize;
-    let data: Vec<f32> = (0..n).map(|k| ((k * 37 % 101) as f32 - 50.0) * 0.125).collect();
+    let data: Vec<f32> = (0..n)
+        .map(|k| ((k * 37 % 101) as f32 - 50.0) * 0.125)
+        .collect();
     let x = arr(&data, dev);
     let blocks = n.div_ceil(64);
     let out = zeros::<f32, 1>(blocks, dev);
@@ -120,26 +122,43 @@ fn gemm_host(a: &[f32], b: &[f32], m: usize, k: usize, n: usize) -> Vec<f32> {
 /// rounding bound of a float64 product.
 fn gemm_k_loop(dev: &wp::Device) {
     let (m, k, n) = (45usize, 37usize, 29usize);
-    let ad: Vec<f32> = (0..m * k).map(|t| ((t * 7919 % 1013) as f32) / 1013.0 - 0.5).collect();
-    let bd_: Vec<f32> = (0..k * n).map(|t| ((t * 104729 % 997) as f32) / 997.0 - 0.5).collect();
+    let ad: Vec<f32> = (0..m * k)
+        .map(|t| ((t * 7919 % 1013) as f32) / 1013.0 - 0.5)
+        .collect();
+    let bd_: Vec<f32> = (0..k * n)
+        .map(|t| ((t * 104729 % 997) as f32) / 997.0 - 0.5)
+        .collect();
     let a = wp::Array::from_slice_shape(&ad, (m, k), dev).unwrap();
     let b = wp::Array::from_slice_shape(&bd_, (k, n), dev).unwrap();
     let c = zeros::<f32, 2>((m, n), dev);
     let want = gemm_host(&ad, &bd_, m, k, n);
     for block_dim in [1, 33, 128, 256] {
         c.fill(0.0).unwrap();
-        wp::launch_tiled(k_gemm, (m.div_ceil(BM), n.div_ceil(BN)), (&a, &b, &c), block_dim, dev)
-            .unwrap();
+        wp::launch_tiled(
+            k_gemm,
+            (m.div_ceil(BM), n.div_ceil(BN)),
+            (&a, &b, &c),
+            block_dim,
+            dev,
+        )
+        .unwrap();
         let got = host(&c);
         assert_eq!(got, want, "block_dim {block_dim}");
     }
     // Against float64: |error| <= k * 2^-24 * sum |a||b| per element (a rounding per FMA).
     for i in 0..m {
         for j in 0..n {
-            let exact: f64 = (0..k).map(|p| ad[i * k + p] as f64 * bd_[p * n + j] as f64).sum();
-            let mag: f64 = (0..k).map(|p| (ad[i * k + p] as f64 * bd_[p * n + j] as f64).abs()).sum();
+            let exact: f64 = (0..k)
+                .map(|p| ad[i * k + p] as f64 * bd_[p * n + j] as f64)
+                .sum();
+            let mag: f64 = (0..k)
+                .map(|p| (ad[i * k + p] as f64 * bd_[p * n + j] as f64).abs())
+                .sum();
             let err = (want[i * n + j] as f64 - exact).abs();
-            assert!(err <= k as f64 * f32::EPSILON as f64 * mag, "({i}, {j}): {err:e}");
+            assert!(
+                err <= k as f64 * f32::EPSILON as f64 * mag,
+                "({i}, {j}): {err:e}"
+            );
         }
     }
 }
@@ -162,7 +181,14 @@ fn gemm_f64(dev: &wp::Device) {
     let a = wp::Array::from_slice_shape(&ad, (m, 4), dev).unwrap();
     let b = wp::Array::from_slice_shape(&bd_, (4, n), dev).unwrap();
     let c = zeros::<f64, 2>((m, n), dev);
-    wp::launch_tiled(k_gemm64, (m.div_ceil(8), n.div_ceil(8)), (&a, &b, &c), 32, dev).unwrap();
+    wp::launch_tiled(
+        k_gemm64,
+        (m.div_ceil(8), n.div_ceil(8)),
+        (&a, &b, &c),
+        32,
+        dev,
+    )
+    .unwrap();
     let got = host(&c);
     for i in 0..m {
         for j in 0..n {
@@ -201,7 +227,9 @@ fn k_reduce(x: Array<f32>, out: Array<f32>, idx: Array<i32>) {
 /// 20 zeros), `tile_ones` and `tile_arange`.
 fn reductions_and_construction(dev: &wp::Device) {
     let n = 100usize;
-    let data: Vec<f32> = (0..n).map(|k| ((k * 29 % 53) as f32 - 20.0) * 0.5).collect();
+    let data: Vec<f32> = (0..n)
+        .map(|k| ((k * 29 % 53) as f32 - 20.0) * 0.5)
+        .collect();
     let x = arr(&data, dev);
     let blocks = n.div_ceil(40);
     let out = zeros::<f32, 1>(blocks * 4, dev);
@@ -209,7 +237,9 @@ fn reductions_and_construction(dev: &wp::Device) {
     wp::launch_tiled(k_reduce, blocks, (&x, &out, &idx), 64, dev).unwrap();
     let (got, gidx) = (host(&out), host(&idx));
     for b in 0..blocks {
-        let t: Vec<f32> = (0..40).map(|e| data.get(b * 40 + e).copied().unwrap_or(0.0)).collect();
+        let t: Vec<f32> = (0..40)
+            .map(|e| data.get(b * 40 + e).copied().unwrap_or(0.0))
+            .collect();
         let lo = t.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = t.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         assert_eq!(got[b * 4], lo, "min of block {b}");
@@ -333,7 +363,10 @@ fn tiled_kernel_launched_plainly_is_an_error(dev: &wp::Device) {
     let out = zeros::<f32, 1>(1, dev);
     let e = wp::launch(k_block_sum, 1, (&x, &out, 64usize), dev).unwrap_err();
     let msg = crate::chain(&e);
-    assert!(msg.contains("k_block_sum") && msg.contains("launch_tiled"), "{msg}");
+    assert!(
+        msg.contains("k_block_sum") && msg.contains("launch_tiled"),
+        "{msg}"
+    );
     let e = wp::launch_tiled(k_plain, 1, (&out,), 32, dev).unwrap_err();
     let msg = crate::chain(&e);
     assert!(msg.contains("k_plain"), "{msg}");
@@ -352,7 +385,10 @@ fn width_must_match_block_dim(dev: &wp::Device) {
     for bd in [0, 32, 128, 2048] {
         let e = wp::launch_tiled(k_block_sum, 2, (&x, &out, 128usize), bd, dev).unwrap_err();
         let msg = crate::chain(&e);
-        assert!(msg.contains("k_block_sum") && msg.contains(&bd.to_string()), "{msg}");
+        assert!(
+            msg.contains("k_block_sum") && msg.contains(&bd.to_string()),
+            "{msg}"
+        );
     }
     assert_eq!(host(&out), vec![0.0, 0.0], "nothing ran");
 }
@@ -375,7 +411,14 @@ fn tile_index_out_of_range_faults(dev: &wp::Device) {
         panic!("expected a fault, got {msg}")
     };
     assert!(
-        matches!(f.kind, wp::FaultKind::TileIndex { index: [8, ..], shape: [8, ..], rank: 1 }),
+        matches!(
+            f.kind,
+            wp::FaultKind::TileIndex {
+                index: [8, ..],
+                shape: [8, ..],
+                rank: 1
+            }
+        ),
         "{:?}",
         f.kind
     );

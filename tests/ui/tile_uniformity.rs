@@ -2,19 +2,32 @@ use warp_lang as wp;
 use wp::prelude::*;
 
 // Tile operations are block-cooperative: under control flow that depends on the thread, or
-// with an offset that does, they are errors at the call; `tile(x)` needs its width; funcs
-// cannot use tiles yet.
+// with an offset that does, they are errors at the call.
 #[wp::kernel]
-fn k(a: Array<f32>, out: Array<f32>) {
-    let b = tid();
+fn divergent(a: Array<f32>, out: Array<f32>) {
     if lane() < 4 {
         let t = tile_load::<32>(a, 0);
         tile_store(out, t, 0);
     }
-    let u = tile_load::<32>(a, lane() as i32);
-    let w = tile(a[b]);
 }
 
+#[wp::kernel]
+fn varying_offset(a: Array<f32>) {
+    let u = tile_load::<32>(a, lane() as i32);
+}
+
+// `tile(x)` needs its width: the block size.
+#[wp::kernel]
+fn no_width(a: Array<f32>) {
+    let w = tile(a[tid()]);
+}
+
+#[wp::kernel(block_dim = 64)]
+fn other_width(a: Array<f32>) {
+    let w = tile::<32>(a[tid()]);
+}
+
+// Funcs cannot use tiles yet.
 #[wp::func]
 fn f(a: Array<f32>) -> f32 {
     let t = tile_load::<8>(a, 0);

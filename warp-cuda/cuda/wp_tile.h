@@ -65,14 +65,6 @@
 #error "wp_tile.h: define WP_TILE_BLOCK_DIM (the block size of the tiled launch)"
 #endif
 
-// WP_TILE_LAMBDA: the execution space of the functions `tile_map` applies (NVRTC compiles an
-// unannotated lambda as a host function).
-#if defined(__CUDACC__)
-#define WP_TILE_LAMBDA __device__
-#else
-#define WP_TILE_LAMBDA
-#endif
-
 // WP_TILE_SHARED_ALIGNED: a block's shared variable aligned to 16 bytes, in a device function.
 #if defined(__CUDACC__)
 #define WP_TILE_SHARED_ALIGNED __shared__ __align__(16)

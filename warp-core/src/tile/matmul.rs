@@ -43,15 +43,44 @@ pub fn matmul_acc<T: Fma, const M: usize, const K: usize, const N: usize>(
     b: &Tile2<T, K, N>,
     c: &mut Tile2<T, M, N>,
 ) {
+    // With hardware FMA the same loops compile to vector FMAs (`mul_add` is otherwise a libm
+    // call per element). The chains, and so the bits, are the same either way.
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has FMA (checked above), all `matmul_fma` needs.
+        unsafe { matmul_fma(a, b, c) };
+        return;
+    }
+    matmul_rows(a, b, c);
+}
+
+/// The loops of [`matmul_acc`]: row `i` of `c` takes `a[i][k] * b[k]` for `k` ascending, so
+/// each `c[i][j]` is its own FMA chain in ascending `k` while the inner loop runs along a row
+/// of `b` (contiguous, vectorizable).
+#[inline(always)]
+fn matmul_rows<T: Fma, const M: usize, const K: usize, const N: usize>(
+    a: &Tile2<T, M, K>,
+    b: &Tile2<T, K, N>,
+    c: &mut Tile2<T, M, N>,
+) {
     for (arow, crow) in a.data.iter().zip(c.data.iter_mut()) {
-        for (j, cij) in crow.iter_mut().enumerate() {
-            let mut acc = *cij;
-            for (aik, brow) in arow.iter().zip(&b.data) {
-                acc = aik.fma(brow[j], acc);
+        for (aik, brow) in arow.iter().zip(&b.data) {
+            for (cij, bkj) in crow.iter_mut().zip(brow) {
+                *cij = aik.fma(*bkj, *cij);
             }
-            *cij = acc;
         }
     }
+}
+
+/// [`matmul_rows`] compiled with FMA enabled.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "fma")]
+unsafe fn matmul_fma<T: Fma, const M: usize, const K: usize, const N: usize>(
+    a: &Tile2<T, M, K>,
+    b: &Tile2<T, K, N>,
+    c: &mut Tile2<T, M, N>,
+) {
+    matmul_rows(a, b, c)
 }
 
 /// `a · b` (Warp's `c = tile_matmul(a, b)`): [`matmul_acc`] into a zero tile, so each element

@@ -128,18 +128,37 @@ pub(crate) fn stmt(e: &mut Emitter, s: &Stmt) -> Result<(), String> {
             }
         }
         Op::TileMap { f: g, args } => {
+            // A local functor over the concrete element types: NVRTC compiles a lambda as a
+            // host function, and a local class may not have a member template.
             let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
-            let call = match (g.emit, a.len()) {
-                (Emit::Operator(o), _) => {
-                    format!("[] WP_TILE_LAMBDA (auto x, auto y) {{ return x {} y; }}", o.symbol())
-                }
-                (_, 1) => format!("[] WP_TILE_LAMBDA (auto x) {{ return {}(x); }}", g.cuda),
-                _ => format!("[] WP_TILE_LAMBDA (auto x, auto y) {{ return {}(x, y); }}", g.cuda),
+            let elem = |t: &Ty| match t {
+                Ty::Tile(el, _) => super::cuda::cpp_type(el).ok_or("a tile element type"),
+                _ => Err("a tile"),
+            };
+            let r = elem(f.ty(*dst))?;
+            let ps: Vec<String> = args
+                .iter()
+                .zip(["x", "y"])
+                .map(|(x, n)| elem(f.ty(*x)).map(|t| format!("{t} {n}")))
+                .collect::<Result<_, _>>()?;
+            let body = match (g.emit, a.len()) {
+                (Emit::Operator(o), _) => format!("x {} y", o.symbol()),
+                (_, 1) => format!("{}(x)", g.cuda),
+                _ => format!("{}(x, y)", g.cuda),
             };
             e.section(g.section);
+            e.tmp += 1;
+            let m = format!("__map{}", e.tmp);
+            e.line(
+                sp,
+                &format!(
+                    "struct {m} {{ WP_FN {r} operator()({}) const {{ return {body}; }} }};",
+                    ps.join(", ")
+                ),
+            );
             match a.len() {
-                1 => format!("wp::tile_map({d}, {}, {call});", a[0]),
-                _ => format!("wp::tile_map2({d}, {}, {}, {call});", a[0], a[1]),
+                1 => format!("wp::tile_map({d}, {}, {m}{{}});", a[0]),
+                _ => format!("wp::tile_map2({d}, {}, {}, {m}{{}});", a[0], a[1]),
             }
         }
         Op::Copy(x) => format!("wp::tile_copy({d}, {});", v(e, x)),

@@ -16,9 +16,19 @@ fn every_entry_is_unique_and_well_formed() {
             "duplicate {}",
             b.name
         );
+        // A tile row's `T` is its tile's element, from a tile argument or the shape written
+        // with it (the turbofish or the annotation: `front::lower::tiles`).
+        let tile_pos = |p: &Pos| matches!(p, Pos::Tile | Pos::TileShape);
+        assert_eq!(
+            b.is_tile(),
+            b.params.iter().chain([&b.ret]).any(tile_pos),
+            "{}: a tile row, and only a tile row, has tile positions",
+            b.name
+        );
         let binds_t = b.params.contains(&Pos::T)
             || b.params.contains(&Pos::ArrayOfT)
-            || b.params.contains(&Pos::VolumeOfT);
+            || b.params.contains(&Pos::VolumeOfT)
+            || b.params.iter().any(tile_pos);
         let all_fixed = b.params.iter().chain([&b.ret]).all(Pos::fixed);
         assert!(binds_t || all_fixed, "{} cannot bind T", b.name);
         assert_eq!(b.classes.is_empty(), all_fixed, "{}: classes", b.name);

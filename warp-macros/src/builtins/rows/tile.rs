@@ -12,6 +12,8 @@ use super::*;
 
 /// Tiles hold integer and float scalars.
 const TILE_ELEM: &[Class] = &[Number];
+/// The matmul's elements (tensor-core f16 and bf16: later).
+const TILE_MATMUL: &[Class] = &[FloatWide];
 
 /// Warp's tile builtins that this slice has.
 pub(super) const ROWS: &[Builtin] = rows! {
@@ -44,7 +46,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "tile_argmax": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
     // `c = tile_matmul(a, b)`; `tile_matmul(a, b, &mut c)` is `c += a b` (Warp's `out`
     // argument), each element an FMA chain in ascending k.
-    "tile_matmul": FLOAT, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
-    "tile_matmul_acc": FLOAT, (Tile, Tile, Tile) -> Unit, "tile", Adjoint, no_tangent,
+    "tile_matmul": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_matmul_acc": TILE_MATMUL, (Tile, Tile, Tile) -> Unit, "tile", Adjoint, no_tangent,
         cooperative, overload("tile_matmul", 3);
 };
