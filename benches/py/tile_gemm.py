@@ -18,8 +18,10 @@ Run on the GPU machine with Warp unpacked by ../shared/tools/warp-bundle:
     PYTHONPATH=/root/warp-lang python3 benches/py/tile_gemm.py ...
 """
 
+import atexit
 import json
 import os
+import shutil
 import statistics
 import sys
 import tempfile
@@ -91,6 +93,7 @@ try:
     wp.config.quiet = True
     # An empty kernel cache: the first launch below compiles, and is timed as the cold compile.
     wp.config.kernel_cache_dir = tempfile.mkdtemp(prefix="warp-tile-gemm-")
+    atexit.register(shutil.rmtree, wp.config.kernel_cache_dir, ignore_errors=True)
     wp.init()
     wp.set_module_options({"enable_backward": False})
 
