@@ -4,11 +4,17 @@
 //!
 //! ```text
 //! cargo bench --bench gpu            # needs a CUDA device; prints SKIPPED otherwise
+//! cargo bench --bench gpu -- --tile-gemm   # the tile GEMM section alone
 //! ```
 //!
 //! Workloads (DESIGN.md, "Figures to beat"): the seed particle program (10M x 100 steps),
 //! brute-force n-body (64K bodies, f32), host cost per launch of a small kernel with 6
-//! arguments, and the first launch in a fresh process with an empty and with a warm cache.
+//! arguments, the first launch in a fresh process with an empty and with a warm cache, and a
+//! 4096^3 fp32 tile GEMM (issue 31: `examples/common/tile_gemm.rs`'s kernel against cuBLAS
+//! SGEMM through PyTorch and Warp 1.19's tile GEMM, both run by `benches/py/tile_gemm.py` on
+//! the same inputs in the same run; Warp's side needs `PYTHONPATH` pointing at Warp, e.g.
+//! `PYTHONPATH=/root/warp-lang` after ../shared/tools/warp-bundle; a side that cannot run says
+//! why on its row).
 
 use rand::Rng as _;
 use std::ffi::c_void;
@@ -45,6 +51,10 @@ mod common;
 
 #[path = "../examples/common/seed_ad.rs"]
 mod seed_ad;
+
+/// The tile GEMM section's kernels are the tile_matmul example's.
+#[path = "../examples/common/tile_gemm.rs"]
+mod tile_gemm;
 
 #[wp::kernel]
 fn small(a: Array<f32>, b: Array<f32>, s: f32, t: f32, k: i32, c: Array<f32>) {
@@ -529,9 +539,220 @@ fn ad_bench(dev: &wp::Device) {
     );
 }
 
+/// The tile GEMM section's cold compile (the child mode `--tile-compile-child`, run with an
+/// empty kernel cache): the first launch of the f32 tile GEMM kernel in a fresh process, and
+/// its NVRTC time.
+fn tile_compile_child() {
+    let run = || -> wp::Result<String> {
+        let dev = wp::get_device("cuda:0")?;
+        let zeros = || wp::Array::<f32, 2>::zeros((64, 64), &dev);
+        let (a, b, c) = (zeros()?, zeros()?, zeros()?);
+        let t = Instant::now();
+        let kernel = tile_gemm::gemm_tiled_f32;
+        wp::launch_tiled(kernel, (1, 1), (&a, &b, &c), TILE_BLOCK_DIM, &dev)?;
+        wp::synchronize()?;
+        let total = ms(t);
+        let reports = wp::compile_reports();
+        let r = reports.iter().find(|r| r.kernel == "gemm_tiled_f32");
+        Ok(match r {
+            Some(r) => format!("{total:.2} {:.2} {}", r.compile_ms, r.cache_hit),
+            None => "error: no compile report for gemm_tiled_f32".to_string(),
+        })
+    };
+    // One line for the parent: the three numbers, or the error (never a panic's backtrace).
+    match run() {
+        Ok(line) => println!("{line}"),
+        Err(e) => println!("error: {e}"),
+    }
+}
+
+/// Threads per block of the tile GEMM (ours and Warp's).
+const TILE_BLOCK_DIM: usize = 256;
+
+/// max over `entries` of |c - c64| / sum_p |a_ip b_pj|, c64 the float64 product: the error of
+/// each dot product relative to its magnitude (a k-term f32 FMA chain stays below k 2^-24;
+/// plain relative error is unbounded where an entry cancels to about zero).
+fn gemm_error(
+    c: &[f32],
+    a: &[f32],
+    b: &[f32],
+    (n, k): (usize, usize),
+    entries: &[(usize, usize)],
+) -> f64 {
+    let mut worst = 0.0f64;
+    for &(i, j) in entries {
+        let (mut exact, mut mag) = (0.0f64, 0.0f64);
+        for p in 0..k {
+            let t = a[i * k + p] as f64 * b[p * n + j] as f64;
+            exact += t;
+            mag += t.abs();
+        }
+        let err = (c[i * n + j] as f64 - exact).abs();
+        worst = worst.max(if mag > 0.0 { err / mag } else { err });
+    }
+    worst
+}
+
+/// 4096^3 fp32 GEMM: our tile kernel (and the plain one-thread-per-output kernel) against
+/// cuBLAS SGEMM (PyTorch, TF32 off) and Warp 1.19's tile GEMM with the same tiles, all on the
+/// same inputs; TFLOP/s, time ratios, the error on 4096 sampled entries against float64, and
+/// the tile kernel's cold compile.
+fn tile_gemm_bench(dev: &wp::Device, size: usize) {
+    use tile_gemm::{BK, BM, BN};
+    let (m, n, k) = (size, size, size);
+    let mut r = common::rng(31u64);
+    let ah: Vec<f32> = (0..m * k).map(|_| r.random::<f32>() * 2.0 - 1.0).collect();
+    let bh: Vec<f32> = (0..k * n).map(|_| r.random::<f32>() * 2.0 - 1.0).collect();
+    let entries: Vec<(usize, usize)> = (0..4096)
+        .map(|_| (r.random_range(0..m), r.random_range(0..n)))
+        .collect();
+    let tflops = |ms: f64| 2.0 * (m * n * k) as f64 / (ms * 1e-3) / 1e12;
+    let bound = k as f64 * f32::EPSILON as f64 / 2.0;
+    println!(
+        "\ntile GEMM {m} x {k} x {n} fp32 (tiles {BM} x {BN}, k-step {BK}, {TILE_BLOCK_DIM} threads a block; \
+         A, B uniform in [-1, 1); err = max |c - c64| / sum |a||b| over {} sampled entries, the \
+         bound of an f32 FMA chain k u = {bound:.1e}); times: median of {} after a warm-up",
+        entries.len(),
+        common::REPS
+    );
+
+    // The other sides first (their process frees its GPU memory when it ends), on our inputs.
+    let dir = std::env::temp_dir().join(format!("warp-lang-tile-gemm-{}", std::process::id()));
+    let written = std::fs::create_dir_all(&dir).and_then(|()| {
+        std::fs::write(dir.join("a.f32"), bytemuck::cast_slice(&ah))?;
+        std::fs::write(dir.join("b.f32"), bytemuck::cast_slice(&bh))?;
+        let idx: Vec<i64> = entries
+            .iter()
+            .map(|e| e.0 as i64)
+            .chain(entries.iter().map(|e| e.1 as i64))
+            .collect();
+        std::fs::write(dir.join("idx.i64"), bytemuck::cast_slice(&idx))
+    });
+    let theirs = match written {
+        Ok(()) => {
+            let args = [m, n, k, BM, BN, BK, TILE_BLOCK_DIM].map(|x| x.to_string());
+            let mut all = vec![dir.display().to_string()];
+            all.extend(args);
+            common::python_side("benches/py/tile_gemm.py", &all)
+        }
+        Err(e) => Err(format!("writing the inputs to {}: {e}", dir.display())),
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    let side = |key: &str| {
+        theirs
+            .as_ref()
+            .ok()
+            .and_then(|t| common::json_number(t, key))
+    };
+    let why = |key: &str| match &theirs {
+        Ok(t) => t
+            .get(key)
+            .and_then(|v| v.as_str())
+            .unwrap_or("no result")
+            .to_string(),
+        Err(e) => e.clone(),
+    };
+
+    let a = wp::Array::from_slice_shape(&ah, (m, k), dev).unwrap();
+    let b = wp::Array::from_slice_shape(&bh, (k, n), dev).unwrap();
+    let c = wp::Array::<f32, 2>::zeros((m, n), dev).unwrap();
+    let blocks = (m.div_ceil(BM), n.div_ceil(BN));
+    let t_tile = common::median_ms(|| {
+        wp::launch_tiled(
+            tile_gemm::gemm_tiled_f32,
+            blocks,
+            (&a, &b, &c),
+            TILE_BLOCK_DIM,
+            dev,
+        )
+    });
+    let err_tile = gemm_error(&c.to_vec().unwrap(), &ah, &bh, (n, k), &entries);
+    c.fill(0.0).unwrap();
+    let t_plain =
+        common::median_ms(|| wp::launch(tile_gemm::gemm_plain, (m, n), (&a, &b, &c), dev));
+    let err_plain = gemm_error(&c.to_vec().unwrap(), &ah, &bh, (n, k), &entries);
+
+    let row = |what: &str, t: f64, err: f64| {
+        println!(
+            "  {what:<37} {t:9.3} ms {:7.2} TFLOP/s   err {err:.2e}",
+            tflops(t)
+        );
+    };
+    // A launch that fails (a kernel the GPU cannot hold, say) is a row saying so, not a panic
+    // that would lose the other rows.
+    let (t_tile, t_plain) = match (t_tile, t_plain) {
+        (Ok(t), Ok(p)) => {
+            row("warp-lang tile_matmul", t, err_tile);
+            row("warp-lang plain (thread per output)", p, err_plain);
+            (t, p)
+        }
+        (t, p) => {
+            println!("  warp-lang tile_matmul: {t:?}\n  warp-lang plain: {p:?}");
+            return;
+        }
+    };
+    let mut ratios = vec![format!("ours / plain {:.2}", t_tile / t_plain)];
+    for (what, key, name) in [
+        ("Warp 1.19 tile_matmul (same tiles)", "warp", "Warp"),
+        ("cuBLAS SGEMM (torch.matmul, no TF32)", "torch", "cuBLAS"),
+    ] {
+        match (side(&format!("{key}_ms")), side(&format!("{key}_err"))) {
+            (Some(t), Some(err)) => {
+                row(what, t, err);
+                ratios.push(format!("ours / {name} {:.2}", t_tile / t));
+            }
+            _ => println!("  {what:<37} not run: {}", why(&format!("{key}_error"))),
+        }
+    }
+    println!(
+        "  time ratios (above 1: ours is slower): {}",
+        ratios.join(", ")
+    );
+
+    // The cold compile, in a fresh process with an empty cache.
+    let cache = std::env::temp_dir().join(format!("warp-lang-tile-cache-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&cache);
+    let out = Command::new(std::env::current_exe().unwrap())
+        .arg("--tile-compile-child")
+        .env("WARP_LANG_CACHE_DIR", &cache)
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_dir_all(&cache);
+    let cold = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    match cold.split_whitespace().collect::<Vec<_>>().as_slice() {
+        [total, nvrtc, hit] if !cold.starts_with("error") => println!(
+            "  cold compile of the tile kernel: first launch {total} ms (NVRTC {nvrtc} ms, cache hit \
+             {hit}), target < 5000 ms{}",
+            side("warp_first_ms")
+                .map(|w| format!("; Warp's first launch with an empty cache: {w:.0} ms"))
+                .unwrap_or_default()
+        ),
+        _ => println!(
+            "  cold compile of the tile kernel: not measured: {}",
+            if cold.is_empty() {
+                String::from_utf8_lossy(&out.stderr).trim().to_string()
+            } else {
+                cold
+            }
+        ),
+    }
+    println!("  fp16/bf16: not yet (no tensor-core tile matmul)");
+}
+
 fn main() {
     if std::env::args().any(|a| a == "--first-launch-child") {
         return first_launch_child();
+    }
+    if std::env::args().any(|a| a == "--tile-compile-child") {
+        return tile_compile_child();
+    }
+    // `--tile-gemm-cpu N`: the tile GEMM section at N^3 on the CPU, to check its plumbing (the
+    // inputs handed to the Python sides, the errors, the rows) on a machine without a GPU; the
+    // Python sides still ask for cuda:0, and their rows say why they did not run.
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--tile-gemm-cpu") {
+        let size = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(256);
+        return tile_gemm_bench(&wp::get_device("cpu").unwrap(), size);
     }
     if std::env::args().any(|a| a == "--first-launch-parts") {
         return first_launch_parts_child();
@@ -544,12 +765,17 @@ fn main() {
         }
     };
     println!("gpu bench on {} ({})", dev, dev.name());
+    // `--tile-gemm`: the tile GEMM section alone (the others take minutes).
+    if std::env::args().any(|a| a == "--tile-gemm") {
+        return tile_gemm_bench(&dev, 4096);
+    }
     let hand = Hand::new();
     particles(&dev, &hand);
     nbody_bench(&dev, &hand);
     launch_cost(&dev, &hand);
     ad_bench(&dev);
     first_launch();
+    tile_gemm_bench(&dev, 4096);
     println!("\ngenerated source and compile time per kernel (this process):");
     for r in wp::compile_reports() {
         let name = format!("{}{}", r.kernel, if r.adjoint { " (adjoint)" } else { "" });

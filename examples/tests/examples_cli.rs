@@ -269,3 +269,45 @@ fn every_example_file_is_listed_in_the_manifest() {
         "examples/*.rs not listed as [[example]] in examples/Cargo.toml: {missing:?}"
     );
 }
+
+/// tile_matmul on the CPU, small and ragged (70 is not a multiple of the 64-wide tiles): it
+/// runs the tiled and the plain GEMM, prints both rows with their errors and the ratio, and its
+/// verdict (the errors within the FMA bound k u) is yes, exit status 0.
+#[test]
+fn tile_matmul_runs_small_on_the_cpu() {
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("tile_matmul", &dir) else {
+        return;
+    };
+    let out = Command::new(&bin)
+        .args([
+            "--device", "cpu", "--m", "70", "--n", "33", "--k", "45", "--reps", "1",
+        ])
+        .output()
+        .expect("run tile_matmul");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "tile_matmul: {:?}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for want in [
+        "all 2310 entries",
+        "\ntiled ",
+        "\nplain ",
+        "tiled / plain time",
+        "converged: yes",
+    ] {
+        assert!(stdout.contains(want), "no {want:?} in:\n{stdout}");
+    }
+
+    // A zero size is refused before any work, naming the options.
+    let bad = Command::new(&bin)
+        .args(["--device", "cpu", "--size", "0"])
+        .output()
+        .expect("run tile_matmul --size 0");
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(2), "{err}");
+    assert!(err.contains("--size") && err.contains("[0, 0, 0]"), "{err}");
+}

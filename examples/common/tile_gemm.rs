@@ -1,0 +1,60 @@
+//! The tiled GEMM kernels of `examples/tile_matmul.rs`, shared with the GPU benchmark's tile
+//! GEMM section (benches/gpu.rs includes this file), so that both measure the same kernels.
+
+// Each includer uses its own subset.
+#![allow(dead_code)]
+// The kernel language has no `div_ceil` (the book's GEMM spells it `(k + BK - 1) / BK`), and
+// clippy sees that spelling in the kernels' CPU code (any other spelling too).
+#![allow(clippy::manual_div_ceil)]
+
+use warp_lang as wp;
+use wp::prelude::*;
+
+/// The tile of C a block owns (rows, columns), and the k-step of its loop.
+pub const BM: usize = 64;
+pub const BN: usize = 64;
+pub const BK: usize = 16;
+/// The k-step of the f64 kernel: its tiles are twice as large, and 64 x 64 + 2 (64 x 16) f64
+/// (48 KiB) would leave no room under the 48 KiB of static shared memory a CUDA block gets.
+pub const BK64: usize = 8;
+
+/// C = A B, one `BM x BN` tile of C per block.
+#[wp::kernel]
+pub fn gemm_tiled_f32(a: Array<f32, 2>, b: Array<f32, 2>, c: Array<f32, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f32, BM, BN>();
+    // The k-steps, the last one ragged (its loads read zeros past the edge).
+    let k_tiles = (a.shape()[1] + BK - 1) / BK;
+    for k in 0..k_tiles {
+        let ta = tile_load::<BM, BK>(a, ((i * BM) as i32, (k * BK) as i32));
+        let tb = tile_load::<BK, BN>(b, ((k * BK) as i32, (j * BN) as i32));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, ((i * BM) as i32, (j * BN) as i32));
+}
+
+/// `gemm_tiled_f32` in f64 (k-steps of `BK64`).
+#[wp::kernel]
+pub fn gemm_tiled_f64(a: Array<f64, 2>, b: Array<f64, 2>, c: Array<f64, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f64, BM, BN>();
+    // The k-steps, the last one ragged (its loads read zeros past the edge).
+    let k_tiles = (a.shape()[1] + BK64 - 1) / BK64;
+    for k in 0..k_tiles {
+        let ta = tile_load::<BM, BK64>(a, ((i * BM) as i32, (k * BK64) as i32));
+        let tb = tile_load::<BK64, BN>(b, ((k * BK64) as i32, (j * BN) as i32));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, ((i * BM) as i32, (j * BN) as i32));
+}
+
+/// The same product as a plain kernel: one thread per entry of C, a dot product over k.
+#[wp::kernel]
+pub fn gemm_plain<T: Float>(a: Array<T, 2>, b: Array<T, 2>, c: Array<T, 2>) {
+    let (i, j) = tid();
+    let mut acc: T = 0.0;
+    for p in 0..a.shape()[1] {
+        acc += a[(i, p)] * b[(p, j)];
+    }
+    c[(i, j)] = acc;
+}
