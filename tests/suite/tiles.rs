@@ -7,6 +7,9 @@
 //! same bits on the CPU and on a GPU, so those comparisons are exact; `tile_map(sin, ..)` is
 //! compared with `math_rel` (CUDA's `sinf` is not the host's).
 
+// The kernel language has no `div_ceil` yet: kernels round up with `(n + d - 1) / d`.
+#![allow(clippy::manual_div_ceil)]
+
 use crate::{arr, assert_close_f32, host, math_rel, zeros};
 use warp_lang as wp;
 use wp::prelude::*;

@@ -254,6 +254,7 @@ fn kernel_impl(
         TokenStream::new()
     };
     let tile_info = tiled::info(f);
+    let shape_checks = tiled::shape_checks(f);
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
@@ -372,6 +373,7 @@ fn kernel_impl(
             const _: () = {
                 use #wp as __wp;
                 #callee_checks
+                #shape_checks
                 #hide
                 impl __wp::Kernel for #name {
                     #params

@@ -68,6 +68,21 @@ pub struct Function {
     /// A block-cooperative kernel (launched with `launch_tiled`): it holds tiles, calls
     /// `lane()`, or says `#[kernel(block_dim = N)]`.
     pub tiled: Option<Tiled>,
+    /// Tile shape rules the macro could not decide (a const against a literal or another
+    /// const): `expand` makes each a `const` assertion spanned at the call, which rustc
+    /// evaluates at `cargo check`.
+    pub shape_obligations: Vec<ShapeObligation>,
+}
+
+/// A tile dim that must equal another, checked by rustc (see `Function::shape_obligations`).
+#[derive(Clone, Debug)]
+pub struct ShapeObligation {
+    /// The call that needs it.
+    pub span: Span,
+    pub lhs: crate::types::Dim,
+    pub rhs: crate::types::Dim,
+    /// The error when they differ.
+    pub msg: String,
 }
 
 /// What makes a kernel tiled.

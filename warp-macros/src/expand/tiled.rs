@@ -55,6 +55,23 @@ pub(super) fn info(f: &Function) -> TokenStream {
     }
 }
 
+/// The tile shape rules only rustc can decide, each a `const` assertion spanned at its call:
+/// `cargo check` evaluates it, so a mismatch of named consts is an error there with the
+/// macro's message.
+pub(super) fn shape_checks(f: &Function) -> TokenStream {
+    f.shape_obligations
+        .iter()
+        .map(|o| {
+            let (l, r) = (o.lhs.rust_tokens(), o.rhs.rust_tokens());
+            // `assert!`'s message is a format string.
+            let msg = o.msg.replace('{', "{{").replace('}', "}}");
+            quote::quote_spanned! {o.span=>
+                const _: () = ::core::assert!(#l == #r, #msg);
+            }
+        })
+        .collect()
+}
+
 /// `Kernel::run_cpu` of a tiled kernel: `__range` is a range of blocks, each run whole by
 /// `__block` (the lane plan's body).
 pub(super) fn run_cpu(

@@ -57,6 +57,7 @@ pub fn lower_kernel(
 ) -> Result<Function, Vec<syn::Error>> {
     let mut cx = Lowerer {
         tiled: block_dim.clone().map(|width| Tiled { width: Some(width) }),
+        obligations: Vec::new(),
         kind,
         fn_name: item.sig.ident.to_string(),
         vars: Vec::new(),
@@ -196,6 +197,7 @@ pub fn lower_kernel(
         callees: cx.callees,
         consts: cx.consts,
         tiled: cx.tiled,
+        shape_obligations: cx.obligations,
     })
 }
 
@@ -219,6 +221,8 @@ struct Lowerer {
     tuple_result: bool,
     /// Set by the first tile operation or `lane()`, or by `#[kernel(block_dim = N)]`.
     tiled: Option<Tiled>,
+    /// Tile shape rules left to rustc (`Function::shape_obligations`).
+    obligations: Vec<ShapeObligation>,
 }
 
 fn strip(e: &Expr) -> &Expr {

@@ -123,6 +123,7 @@ pub fn build(f: &Function) -> Result<Function, String> {
         callees: f.callees.clone(),
         consts: f.consts.clone(),
         tiled: f.tiled.clone(),
+        shape_obligations: Vec::new(),
     })
 }
 

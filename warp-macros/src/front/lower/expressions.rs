@@ -207,6 +207,16 @@ impl Lowerer {
                         let (l, r) = self.operand_pair(&b.left, &b.right, hint, op)?;
                         let res = binary_result(op, &self.ty(l), &self.ty(r))
                             .map_err(|m| syn::Error::new(b.op.span(), m))?;
+                        // Tile shapes the macro cannot compare: rustc's.
+                        if let (Ty::Tile(_, dl), Ty::Tile(_, dr)) = (self.ty(l), self.ty(r)) {
+                            let msg = format!(
+                                "`{}` on tiles of different shapes: `{}` and `{}`",
+                                op.symbol(),
+                                self.ty(l),
+                                self.ty(r)
+                            );
+                            self.same_shapes(&dl, &dr, b.op.span(), msg)?;
+                        }
                         Ok(self.def(Op::Binary(op, l, r), res, span))
                     }
                 }

@@ -33,6 +33,25 @@ fn shapes_differ(a: &[Dim], b: &[Dim]) -> bool {
 }
 
 impl Lowerer {
+    /// Checks that shapes `a` and `b` agree: an error at `span` where the macro can tell they
+    /// differ (`msg`), and an obligation for rustc for each pair of dims only rustc can compare.
+    pub(super) fn same_shapes(&mut self, a: &[Dim], b: &[Dim], span: Span, msg: String) -> R<()> {
+        if shapes_differ(a, b) {
+            return err(span, msg);
+        }
+        for (x, y) in a.iter().zip(b) {
+            if x.same(y).is_none() {
+                self.obligations.push(ShapeObligation {
+                    span,
+                    lhs: x.clone(),
+                    rhs: y.clone(),
+                    msg: msg.clone(),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Marks the function a tiled kernel (its first tile operation or `lane()`).
     fn mark_tiled(&mut self) {
         self.tiled.get_or_insert_with(Tiled::default);
@@ -149,12 +168,8 @@ impl Lowerer {
                     return err(span, "`tile(x)` makes a one-dimensional tile");
                 }
                 if let Some(a) = &attr {
-                    if a.same(&width[0]) == Some(false) {
-                        return err(
-                            span,
-                            format!("`tile(x)` makes a tile as wide as the block, {a} (`#[kernel(block_dim = {a})]`), not {}", width[0]),
-                        );
-                    }
+                    let msg = format!("`tile(x)` makes a tile as wide as the block, {a} (`#[kernel(block_dim = {a})]`), not {}", width[0]);
+                    self.same_shapes(std::slice::from_ref(a), &width[..1], span, msg)?;
                 }
                 let ty = Ty::Tile(Box::new(e), width);
                 self.def(
@@ -223,16 +238,15 @@ impl Lowerer {
         };
         // A shape the annotation states must be the one made (decidable dims only).
         if let (Some((we, wd)), Ty::Tile(e, d)) = (want_tile, self.ty(v)) {
-            if *we != *e || shapes_differ(wd, &d) {
-                return err(
-                    span,
-                    format!(
-                        "`{name}` makes a `{}`, but a `{}` is expected here",
-                        self.ty(v),
-                        want.expect("a want")
-                    ),
-                );
+            let msg = format!(
+                "`{name}` makes a `{}`, but a `{}` is expected here",
+                self.ty(v),
+                want.expect("a want")
+            );
+            if *we != *e {
+                return err(span, msg);
             }
+            self.same_shapes(wd, &d, span, msg)?;
         }
         Ok(Some(v))
     }
@@ -681,12 +695,10 @@ impl Lowerer {
                 format!("`tile_matmul` multiplies f32 or f64 tiles of one element type, found `{ta}` and `{tb}`"),
             );
         }
-        if da[1].same(&db[0]) == Some(false) {
-            return err(
-                args[1].span(),
-                format!("`tile_matmul`: the inner dimensions differ: `a` is `{ta}`, `b` is `{tb}`"),
-            );
-        }
+        let msg =
+            format!("`tile_matmul`: the inner dimensions differ: `a` is `{ta}`, `b` is `{tb}`");
+        let (inner_a, inner_b) = (da[1].clone(), db[0].clone());
+        self.same_shapes(&[inner_a], &[inner_b], args[1].span(), msg)?;
         Ok((a, b, ea.clone(), da[0].clone(), db[1].clone()))
     }
 
@@ -727,14 +739,13 @@ impl Lowerer {
         let ct = self.ty(c);
         let (e2, d2) = (e.clone(), vec![m.clone(), n.clone()]);
         let want = Ty::Tile(Box::new(e), vec![m, n]);
+        let msg = format!("`tile_matmul`: `{cname}` is a `{ct}`, but `a b` is a `{want}`");
         match tile_parts(&ct) {
-            Some((ce, cd)) if *ce == e2 && !shapes_differ(cd, &d2) => {}
-            _ => {
-                return err(
-                    args[2].span(),
-                    format!("`tile_matmul`: `{cname}` is a `{ct}`, but `a b` is a `{want}`"),
-                )
+            Some((ce, cd)) if *ce == e2 => {
+                let cd = cd.to_vec();
+                self.same_shapes(&cd, &d2, args[2].span(), msg)?;
             }
+            _ => return err(args[2].span(), msg),
         }
         if !self.vars[c].mutable {
             return err(
