@@ -26,6 +26,9 @@ backend_tests!(
     tiled_kernel_launched_plainly_is_an_error,
     width_must_match_block_dim,
     tile_index_out_of_range_faults,
+    transpose_and_broadcast,
+    reduce_with_functions,
+    atomic_add_of_tiles,
 );
 
 const TM: usize = 16;
@@ -425,6 +428,133 @@ fn tile_index_out_of_range_faults(dev: &wp::Device) {
         "{:?}",
         f.kind
     );
+}
+
+#[wp::kernel]
+fn k_shapes(a: Array<f32, 2>, row: Array<f32>, t_out: Array<f32, 2>, b_out: Array<f32, 2>) {
+    let t = tile_load::<8, 4>(a, (0, 0));
+    let tt = tile_transpose(t);
+    tile_store(t_out, tt, (0, 0));
+    let r = tile_load::<4>(row, 0);
+    let rb = tile_broadcast::<8, 4>(r);
+    let one = tile_sum(r);
+    let ob: Tile<f32, 8, 4> = tile_broadcast(one);
+    tile_store(b_out, t + rb * 10.0 + ob, (0, 0));
+}
+
+/// `tile_transpose`, and `tile_broadcast` of a row (`(4,)` to `(8, 4)`) and of one element.
+fn transpose_and_broadcast(dev: &wp::Device) {
+    let ad: Vec<f32> = (0..32).map(|k| k as f32).collect();
+    let rd = [1.0f32, 2.0, 3.0, 4.0];
+    let a = wp::Array::from_slice_shape(&ad, (8, 4), dev).unwrap();
+    let row = arr(&rd, dev);
+    let t_out = zeros::<f32, 2>((4, 8), dev);
+    let b_out = zeros::<f32, 2>((8, 4), dev);
+    wp::launch_tiled(k_shapes, 1, (&a, &row, &t_out, &b_out), 32, dev).unwrap();
+    let (tt, bb) = (host(&t_out), host(&b_out));
+    for i in 0..8 {
+        for j in 0..4 {
+            assert_eq!(tt[j * 8 + i], ad[i * 4 + j], "transpose ({j}, {i})");
+            assert_eq!(
+                bb[i * 4 + j],
+                ad[i * 4 + j] + rd[j] * 10.0 + 10.0,
+                "({i}, {j})"
+            );
+        }
+    }
+}
+
+#[wp::kernel]
+fn k_reduce_fns(x: Array<f32>, ints: Array<i32>, out: Array<f32>, iout: Array<i32>) {
+    let t = tile_load::<50>(x, 0);
+    let m = tile_reduce(max, t);
+    let s = tile_reduce(add, t);
+    let s2 = tile_sum(t);
+    let it = tile_load::<6>(ints, 0);
+    let p = tile_reduce(mul, it);
+    let q = tile_map(add, it, it);
+    if lane() == 0 {
+        out[0] = m[0];
+        out[1] = s[0];
+        out[2] = s2[0];
+        iout[0] = p[0];
+        iout[1] = q[5];
+    }
+}
+
+/// `tile_reduce` with a builtin (`max`) and with Warp's operator names (`add` gives
+/// `tile_sum`'s bits; `mul` on integers wraps), and `tile_map(add, a, b)`.
+fn reduce_with_functions(dev: &wp::Device) {
+    // Order-sensitive floats: a large value then small ones.
+    let xd: Vec<f32> = (0..50)
+        .map(|k| if k == 0 { 1e8 } else { 0.3 + k as f32 * 0.01 })
+        .collect();
+    let ints = [3i32, -7, 11, 100000, 5, 9];
+    let (x, xi) = (arr(&xd, dev), arr(&ints, dev));
+    let out = zeros::<f32, 1>(3, dev);
+    let iout = zeros::<i32, 1>(2, dev);
+    for bd in [1, 32, 64] {
+        wp::launch_tiled(k_reduce_fns, 1, (&x, &xi, &out, &iout), bd, dev).unwrap();
+        let (o, io) = (host(&out), host(&iout));
+        assert_eq!(o[0], 1e8, "max at block_dim {bd}");
+        assert_eq!(
+            o[1].to_bits(),
+            o[2].to_bits(),
+            "add == tile_sum at block_dim {bd}"
+        );
+        let prod = ints.iter().fold(1i32, |p, &v| p.wrapping_mul(v));
+        assert_eq!(io[0], prod, "wrapping product at block_dim {bd}");
+        assert_eq!(io[1], 18);
+    }
+}
+
+#[wp::kernel]
+fn k_atomic_tiles(acc: Array<i32, 2>, facc: Array<f32>, old_sum: Array<i32>) {
+    let b = tid();
+    let ones: Tile<i32, 4, 4> = tile_ones();
+    // Blocks overlap: block b adds at (b % 3, 1); part of each tile falls outside the array.
+    let old = tile_atomic_add(acc, ones, ((b % 3) as i32, 1));
+    let f = tile_arange::<f32, 8>();
+    let fold = tile_atomic_add(facc, f, -2);
+    let s = tile_sum(old);
+    let fs = tile_sum(fold);
+    if lane() == 0 {
+        atomic_add(old_sum, 0, s[0]);
+        atomic_add(old_sum, 1, fs[0] as i32);
+    }
+}
+
+/// `tile_atomic_add` from many blocks into overlapping parts of an array (integers and
+/// integer-valued floats: exact in any order); parts outside the array are skipped.
+fn atomic_add_of_tiles(dev: &wp::Device) {
+    let blocks = 30usize;
+    let acc = zeros::<i32, 2>((5, 4), dev);
+    let facc = zeros::<f32, 1>(5, dev);
+    let old_sum = zeros::<i32, 1>(2, dev);
+    wp::launch_tiled(k_atomic_tiles, blocks, (&acc, &facc, &old_sum), 64, dev).unwrap();
+    let got = host(&acc);
+    let mut want = vec![0i32; 20];
+    for b in 0..blocks {
+        for i in 0..4 {
+            for j in 0..4 {
+                let (r, c) = (b % 3 + i, 1 + j);
+                if r < 5 && c < 4 {
+                    want[r * 4 + c] += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(got, want);
+    // Element e of the float tile lands at e - 2: elements 2..7 at 0..5.
+    let fwant: Vec<f32> = (0..5).map(|c| (c + 2) as f32 * blocks as f32).collect();
+    assert_eq!(host(&facc), fwant);
+    // The old values a block saw sum to at most what was there: their total over the blocks is
+    // the sum of 0 + 1 + .. + (n - 1) over each element's n adds.
+    let olds = host(&old_sum);
+    let tri = |n: i32| n * (n - 1) / 2;
+    assert_eq!(olds[0], want.iter().map(|&n| tri(n)).sum::<i32>());
+    let ftri: i32 = (0..5).map(|c| (c + 2) * tri(blocks as i32)).sum();
+    assert_eq!(olds[1], ftri);
 }
 
 #[test]

@@ -459,7 +459,7 @@ WP_FN void tile_copy(const tile_t<T, D...>& out, const tile_t<T, D...>& a) {
 /// `tile(x)`: element `threadIdx.x` is this thread's `x`. The tile is as wide as the block
 /// (the launch checks the kernel's `block_dim` against its width).
 template <typename T, int N0>
-WP_FN void tile_from_thread(const tile_t<T, N0>& out, T x) {
+WP_FN void tile(const tile_t<T, N0>& out, T x) {
   static_assert(N0 == WP_TILE_BLOCK_DIM, "tile(x) makes a tile as wide as the block");
   out.data[threadIdx.x] = x;
   __syncthreads();
@@ -582,6 +582,79 @@ template <typename T, int M, int K, int N>
 WP_FN void tile_matmul(const tile_t<T, M, N>& c, const tile_t<T, M, K>& a,
                        const tile_t<T, K, N>& b) {
   tile_detail::matmul<false>(c, a, b);
+}
+
+// ------------------------------------------------------------------------------------------
+// Shapes: transpose and broadcast (warp-core/src/tile/shape.rs)
+// ------------------------------------------------------------------------------------------
+
+/// `tile_transpose(a)`: `out[j][i] = a[i][j]`; `out` is a slot of its own.
+template <typename T, int M, int N>
+WP_FN void tile_transpose(const tile_t<T, N, M>& out, const tile_t<T, M, N>& a) {
+  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
+    const int i = e / N, j = e % N;
+    out.data[j * M + i] = a.data[e];
+  }
+  __syncthreads();
+}
+
+/// `tile_broadcast(a)` to `(N,)`: numpy's rule, each source dim 1 or the target's.
+template <typename T, int S, int N>
+WP_FN void tile_broadcast(const tile_t<T, N>& out, const tile_t<T, S>& a) {
+  static_assert(S == N || S == 1, "tile_broadcast: each source dim is 1 or the target's");
+  for (int j = (int)threadIdx.x; j < N; j += WP_TILE_BLOCK_DIM) out.data[j] = a.data[S == 1 ? 0 : j];
+  __syncthreads();
+}
+
+/// `tile_broadcast(a)` of `(S,)` to `(M, N)`: the row repeated.
+template <typename T, int S, int M, int N>
+WP_FN void tile_broadcast(const tile_t<T, M, N>& out, const tile_t<T, S>& a) {
+  static_assert(S == N || S == 1, "tile_broadcast: each source dim is 1 or the target's");
+  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM)
+    out.data[e] = a.data[S == 1 ? 0 : e % N];
+  __syncthreads();
+}
+
+/// `tile_broadcast(a)` of `(S0, S1)` to `(M, N)`.
+template <typename T, int S0, int S1, int M, int N>
+WP_FN void tile_broadcast(const tile_t<T, M, N>& out, const tile_t<T, S0, S1>& a) {
+  static_assert((S0 == M || S0 == 1) && (S1 == N || S1 == 1),
+                "tile_broadcast: each source dim is 1 or the target's");
+  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
+    const int i = S0 == 1 ? 0 : e / N, j = S1 == 1 ? 0 : e % N;
+    out.data[e] = a.data[i * S1 + j];
+  }
+  __syncthreads();
+}
+
+// ------------------------------------------------------------------------------------------
+// Atomic add of a tile into an array (needs wp_atomic.h in the unit: the emitter adds the
+// section; `atomic_add` is found by argument-dependent lookup where this is instantiated)
+// ------------------------------------------------------------------------------------------
+
+/// `tile_atomic_add(a, t, o)`: `a[o + i] += t[i]` atomically where inside the array; `old`
+/// gets the values before (zero outside).
+template <typename T, int N0, typename O>
+WP_FN void tile_atomic_add(const tile_t<T, N0>& old, const array_t<T, 1>& a, O o,
+                           const tile_t<T, N0>& t, ctx_t* ctx) {
+  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+    i64 c;
+    old.data[i] = tile_detail::coord(o, i, a.shape[0], &c) ? atomic_add(a, c, t.data[i], ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_atomic_add(a, t, (o0, o1))` into a 2-D array.
+template <typename T, int N0, int N1, typename O0, typename O1>
+WP_FN void tile_atomic_add(const tile_t<T, N0, N1>& old, const array_t<T, 2>& a, O0 o0, O1 o1,
+                           const tile_t<T, N0, N1>& t, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+    i64 c0, c1;
+    const bool in = tile_detail::coord(o0, e / N1, a.shape[0], &c0) &&
+                    tile_detail::coord(o1, e % N1, a.shape[1], &c1);
+    old.data[e] = in ? atomic_add(a, c0, c1, t.data[e], ctx) : T{};
+  }
+  __syncthreads();
 }
 
 }  // namespace wp

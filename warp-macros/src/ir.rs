@@ -83,6 +83,8 @@ pub struct ShapeObligation {
     pub rhs: crate::types::Dim,
     /// The error when they differ.
     pub msg: String,
+    /// `lhs` may also be 1 (a broadcast's source dim).
+    pub or_one: bool,
 }
 
 /// What makes a kernel tiled.
@@ -181,6 +183,14 @@ pub enum RangeAdapter {
     StepBy(VarId),
 }
 
+/// The function `tile_map` and `tile_reduce` apply: a builtin (its `T` is the tiles' element
+/// type), or an arithmetic operator by Warp's name (`add`, `sub`, `mul`, `div`).
+#[derive(Clone, Copy, Debug)]
+pub enum TileFn {
+    Builtin(&'static Builtin),
+    Op(BinOp),
+}
+
 /// A literal value with its final type.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Lit {
@@ -237,11 +247,16 @@ pub enum Op {
     Tid(u8),
     /// `lane()`: the thread's index in its block (`usize`), in a tiled kernel.
     Lane,
-    /// `tile_map(f, a)`, `tile_map(f, a, b)`: the builtin `f` on every element (its `T` is the
-    /// tiles' element type).
+    /// `tile_map(f, a)`, `tile_map(f, a, b)`: `f` on every element.
     TileMap {
-        f: &'static Builtin,
+        f: TileFn,
         args: Vec<VarId>,
+    },
+    /// `tile_reduce(f, t)`: the elements combined with the binary `f`, in the reductions'
+    /// order (a `Tile<T, 1>`).
+    TileReduce {
+        f: TileFn,
+        arg: VarId,
     },
     /// `array.shape()[k]` (usize).
     Extent(VarId, u8),
@@ -273,6 +288,7 @@ impl Op {
             | Op::Cast(v, _)
             | Op::Member(v, _)
             | Op::LitLike(_, v)
+            | Op::TileReduce { arg: v, .. }
             | Op::Extent(v, _)
             | Op::Len(v) => f(*v),
             Op::Binary(_, a, b) => {
@@ -374,7 +390,7 @@ impl Function {
         match &s.kind {
             StmtKind::Assign { dst, op, .. } => {
                 self.vars[*dst].ty.is_tile()
-                    || matches!(op, Op::TileMap { .. })
+                    || matches!(op, Op::TileMap { .. } | Op::TileReduce { .. })
                     || matches!(op, Op::Builtin { builtin, .. } if builtin.cooperative)
             }
             _ => false,

@@ -18,7 +18,7 @@ use crate::view::ArrayView;
 
 /// Coordinate `o + i` as an index below `extent`, or `None` when it lies outside `0..extent`.
 #[inline(always)]
-fn coord<O: IndexInt>(o: O, i: usize, extent: usize) -> Option<usize> {
+pub(super) fn coord<O: IndexInt>(o: O, i: usize, extent: usize) -> Option<usize> {
     let c = o.widen() + i as i128;
     if c >= 0 && c < extent as i128 {
         Some(c as usize)

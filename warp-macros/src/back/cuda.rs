@@ -313,7 +313,7 @@ impl<'a> Emitter<'a> {
                 }
                 if self.f.tiled.is_some() {
                     self.section("tile");
-                    super::cuda_tile::slots(self)?;
+                    self.tile_slots()?;
                 }
             }
             FnKind::Func => {
@@ -357,7 +357,7 @@ impl<'a> Emitter<'a> {
             }
             call.extend(["__launch".into(), "__flat".into(), "&__ctx_value".into()]);
             if self.f.tiled.is_some() {
-                let entry = super::cuda_tile::entry(&decl.join(", "), &call.join(", "));
+                let entry = Self::tile_entry(&decl.join(", "), &call.join(", "));
                 self.out.push_str(&entry);
                 return Ok(());
             }
@@ -418,8 +418,8 @@ impl<'a> Emitter<'a> {
     }
 
     fn stmt(&mut self, s: &Stmt) -> Result<(), String> {
-        if self.f.tiled.is_some() && super::cuda_tile::is_tile_stmt(self.f, s) {
-            return super::cuda_tile::stmt(self, s);
+        if self.f.tiled.is_some() && self.is_tile_stmt(s) {
+            return self.tile_stmt(s);
         }
         self.after_tile_op = false;
         let r = self.stmt_plain(s);
@@ -651,7 +651,9 @@ impl<'a> Emitter<'a> {
         let ty = self.f.ty(dst).clone();
         Ok(match op {
             Op::Lane => "((wp::usize)threadIdx.x)".into(),
-            Op::TileMap { .. } => return Err("`tile_map` is a tile statement".into()),
+            Op::TileMap { .. } | Op::TileReduce { .. } => {
+                return Err("`tile_map` and `tile_reduce` are tile statements".into())
+            }
             Op::Lit(Lit::Bool(b)) => b.to_string(),
             Op::Lit(Lit::Int(v)) => match &ty {
                 Ty::Scalar(s) if s.is_int() => int_lit(*v, *s),

@@ -14,7 +14,6 @@
 //! ends each block with one, before the block's slots are reused for the next block.
 
 use super::cuda::Emitter;
-use crate::builtins::Emit;
 use crate::ir::*;
 use crate::types::{Dim, Ty};
 
@@ -46,147 +45,197 @@ pub(crate) fn tile_type(f: &Function, t: &Ty) -> Result<String, String> {
     Ok(format!("wp::tile_t<{e}, {}>", dims.join(", ")))
 }
 
-/// The slots: the block's shared memory, then each tile variable's `tile_t` on its slot.
-pub(crate) fn slots(e: &mut Emitter) -> Result<(), String> {
-    let f = e.f;
-    e.out
-        .push_str("    extern __shared__ __align__(16) unsigned char __smem[];\n");
-    let mut prev: Option<String> = None;
-    for v in f.tile_vars() {
-        let t = tile_type(f, f.ty(v))?;
-        let name = e.var(v);
-        let off = match &prev {
-            None => "0".to_string(),
-            Some(p) => format!("wp::tile_slot_end(__off_{p}, decltype({p})::BYTES)"),
-        };
-        e.out.push_str(&format!(
+impl Emitter<'_> {
+    /// The slots: the block's shared memory, then each tile variable's `tile_t` on its slot.
+    pub(crate) fn tile_slots(&mut self) -> Result<(), String> {
+        let e = self;
+        let f = e.f;
+        e.out
+            .push_str("    extern __shared__ __align__(16) unsigned char __smem[];\n");
+        let mut prev: Option<String> = None;
+        for v in f.tile_vars() {
+            let t = tile_type(f, f.ty(v))?;
+            let name = e.var(v);
+            let off = match &prev {
+                None => "0".to_string(),
+                Some(p) => format!("wp::tile_slot_end(__off_{p}, decltype({p})::BYTES)"),
+            };
+            e.out.push_str(&format!(
             "    constexpr wp::usize __off_{name} = {off};\n    {t} {name}(__smem + __off_{name});\n"
         ));
-        prev = Some(name);
+            prev = Some(name);
+        }
+        Ok(())
     }
-    Ok(())
-}
 
-/// Whether `s` is a tile statement this module prints: a cooperative one, or a tile row
-/// (`t[i]`).
-pub(crate) fn is_tile_stmt(f: &Function, s: &Stmt) -> bool {
-    f.is_cooperative(s)
-        || matches!(&s.kind, StmtKind::Assign { op: Op::Builtin { builtin, .. }, .. } if builtin.is_tile())
-}
-
-/// A tile statement.
-pub(crate) fn stmt(e: &mut Emitter, s: &Stmt) -> Result<(), String> {
-    let f = e.f;
-    let sp = s.span;
-    let StmtKind::Assign { dst, op, define } = &s.kind else {
-        unreachable!("tile statements are assignments")
-    };
-    let d = e.var(*dst);
-    let v = |e: &Emitter, x: &VarId| e.var(*x);
-    let cooperative = f.is_cooperative(s);
-    if cooperative && !e.after_tile_op {
-        e.line(sp, "__syncthreads();");
+    /// Whether `s` is a tile statement this module prints: a cooperative one, or a tile row
+    /// (`t[i]`).
+    pub(crate) fn is_tile_stmt(&self, s: &Stmt) -> bool {
+        let f = self.f;
+        f.is_cooperative(s)
+            || matches!(&s.kind, StmtKind::Assign { op: Op::Builtin { builtin, .. }, .. } if builtin.is_tile())
     }
-    let text = match op {
-        Op::Builtin { builtin, args } => {
-            let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
-            match builtin.name {
-                "tile_zeros" | "tile_ones" => format!("wp::{}({d});", builtin.name),
-                "tile_arange" => format!("wp::tile_arange({d}, {}, {});", a[0], a[1]),
-                "tile_load" => format!("wp::tile_load({d}, {}, __ctx);", a.join(", ")),
-                "tile_store" => {
-                    // (array, tile, offsets..) -> (array, offsets.., tile)
-                    let mut r = vec![a[0].clone()];
-                    r.extend(a[2..].iter().cloned());
-                    r.push(a[1].clone());
-                    format!("wp::tile_store({}, __ctx);", r.join(", "))
-                }
-                "tile" => format!("wp::tile_from_thread({d}, {});", a[0]),
-                "untile" => {
-                    let t = super::cuda::cpp_type(f.ty(*dst)).ok_or("an untile result type")?;
-                    if *define {
-                        format!("{t} {d} = wp::untile({});", a[0])
-                    } else {
-                        format!("{d} = wp::untile({});", a[0])
-                    }
-                }
-                "tile_extract" => {
-                    let t = super::cuda::cpp_type(f.ty(*dst)).ok_or("a tile element type")?;
-                    let call = format!("wp::tile_extract({}, __ctx)", a.join(", "));
-                    if *define {
-                        format!("{t} {d} = {call};")
-                    } else {
-                        format!("{d} = {call};")
-                    }
-                }
-                "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
-                    format!("wp::{}({d}, {});", builtin.name, a[0])
-                }
-                "tile_matmul" => format!("wp::tile_matmul({d}, {}, {});", a[0], a[1]),
-                "tile_matmul_acc" => format!("wp::tile_matmul_acc({d}, {}, {});", a[0], a[1]),
-                other => return Err(format!("`{other}` has no CUDA form yet")),
-            }
-        }
-        Op::TileMap { f: g, args } => {
-            // A local functor over the concrete element types: NVRTC compiles a lambda as a
-            // host function, and a local class may not have a member template.
-            let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
-            let elem = |t: &Ty| match t {
-                Ty::Tile(el, _) => super::cuda::cpp_type(el).ok_or("a tile element type"),
-                _ => Err("a tile"),
-            };
-            let r = elem(f.ty(*dst))?;
-            let ps: Vec<String> = args
-                .iter()
-                .zip(["x", "y"])
-                .map(|(x, n)| elem(f.ty(*x)).map(|t| format!("{t} {n}")))
-                .collect::<Result<_, _>>()?;
-            let body = match (g.emit, a.len()) {
-                (Emit::Operator(o), _) => format!("x {} y", o.symbol()),
-                (_, 1) => format!("{}(x)", g.cuda),
-                _ => format!("{}(x, y)", g.cuda),
-            };
-            e.section(g.section);
-            e.tmp += 1;
-            let m = format!("__map{}", e.tmp);
-            e.line(
-                sp,
-                &format!(
-                    "struct {m} {{ WP_FN {r} operator()({}) const {{ return {body}; }} }};",
-                    ps.join(", ")
-                ),
-            );
-            match a.len() {
-                1 => format!("wp::tile_map({d}, {}, {m}{{}});", a[0]),
-                _ => format!("wp::tile_map2({d}, {}, {}, {m}{{}});", a[0], a[1]),
-            }
-        }
-        Op::Copy(x) => format!("wp::tile_copy({d}, {});", v(e, x)),
-        Op::Unary(UnOp::Neg, x) => format!("wp::tile_neg({d}, {});", v(e, x)),
-        Op::Binary(o, l, r) => {
-            let name = match o {
-                BinOp::Add => "tile_add",
-                BinOp::Sub => "tile_sub",
-                BinOp::Mul => "tile_mul",
-                BinOp::Div => "tile_div",
-                _ => return Err(format!("`{}` on tiles has no CUDA form", o.symbol())),
-            };
-            format!("wp::{name}({d}, {}, {});", v(e, l), v(e, r))
-        }
-        _ => return Err("this operation on tiles has no CUDA form yet".into()),
-    };
-    e.line(sp, &text);
-    e.after_tile_op = cooperative;
-    Ok(())
-}
 
-/// The entry of a tiled kernel: block `b` of the launch runs `@@SELF@@` with `__flat = b`
-/// (its `tid()`), every thread of the CUDA block together; a barrier ends each block, before
-/// the next one's tile operations reuse the slots.
-pub(crate) fn entry(decl: &str, call: &str) -> String {
-    format!(
+    /// A tile statement.
+    pub(crate) fn tile_stmt(&mut self, s: &Stmt) -> Result<(), String> {
+        let e = self;
+        let f = e.f;
+        let sp = s.span;
+        let StmtKind::Assign { dst, op, define } = &s.kind else {
+            unreachable!("tile statements are assignments")
+        };
+        let d = e.var(*dst);
+        let v = |e: &Emitter, x: &VarId| e.var(*x);
+        let cooperative = f.is_cooperative(s);
+        if cooperative && !e.after_tile_op {
+            e.line(sp, "__syncthreads();");
+        }
+        let text = match op {
+            Op::Builtin { builtin, args } => {
+                let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
+                match builtin.name {
+                    "tile_zeros" | "tile_ones" => format!("wp::{}({d});", builtin.name),
+                    "tile_arange" => format!("wp::tile_arange({d}, {}, {});", a[0], a[1]),
+                    "tile_load" => format!("wp::tile_load({d}, {}, __ctx);", a.join(", ")),
+                    "tile_store" => {
+                        // (array, tile, offsets..) -> (array, offsets.., tile)
+                        let mut r = vec![a[0].clone()];
+                        r.extend(a[2..].iter().cloned());
+                        r.push(a[1].clone());
+                        format!("wp::tile_store({}, __ctx);", r.join(", "))
+                    }
+                    "tile" => format!("wp::tile({d}, {});", a[0]),
+                    "tile_transpose" => format!("wp::tile_transpose({d}, {});", a[0]),
+                    "tile_broadcast" => format!("wp::tile_broadcast({d}, {});", a[0]),
+                    "tile_atomic_add" => {
+                        e.section("atomic");
+                        // (array, tile, offsets..) -> (old, array, offsets.., tile)
+                        let mut r = vec![a[0].clone()];
+                        r.extend(a[2..].iter().cloned());
+                        r.push(a[1].clone());
+                        format!("wp::tile_atomic_add({d}, {}, __ctx);", r.join(", "))
+                    }
+                    "untile" => {
+                        let t = super::cuda::cpp_type(f.ty(*dst)).ok_or("an untile result type")?;
+                        if *define {
+                            format!("{t} {d} = wp::untile({});", a[0])
+                        } else {
+                            format!("{d} = wp::untile({});", a[0])
+                        }
+                    }
+                    "tile_extract" => {
+                        let t = super::cuda::cpp_type(f.ty(*dst)).ok_or("a tile element type")?;
+                        let call = format!("wp::tile_extract({}, __ctx)", a.join(", "));
+                        if *define {
+                            format!("{t} {d} = {call};")
+                        } else {
+                            format!("{d} = {call};")
+                        }
+                    }
+                    "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
+                        format!("wp::{}({d}, {});", builtin.name, a[0])
+                    }
+                    "tile_matmul" => format!("wp::tile_matmul({d}, {}, {});", a[0], a[1]),
+                    "tile_matmul_acc" => format!("wp::tile_matmul_acc({d}, {}, {});", a[0], a[1]),
+                    other => return Err(format!("`{other}` has no CUDA form yet")),
+                }
+            }
+            Op::TileMap { f: g, args } => {
+                let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
+                let m = e.tile_functor(*g, args, *dst, sp)?;
+                match a.len() {
+                    1 => format!("wp::tile_map({d}, {}, {m}{{}});", a[0]),
+                    _ => format!("wp::tile_map2({d}, {}, {}, {m}{{}});", a[0], a[1]),
+                }
+            }
+            Op::TileReduce { f: g, arg } => {
+                let m = e.tile_functor(*g, &[*arg, *arg], *dst, sp)?;
+                format!("wp::tile_reduce({d}, {}, {m}{{}});", v(e, arg))
+            }
+            Op::Copy(x) => format!("wp::tile_copy({d}, {});", v(e, x)),
+            Op::Unary(UnOp::Neg, x) => format!("wp::tile_neg({d}, {});", v(e, x)),
+            Op::Binary(o, l, r) => {
+                let name = match o {
+                    BinOp::Add => "tile_add",
+                    BinOp::Sub => "tile_sub",
+                    BinOp::Mul => "tile_mul",
+                    BinOp::Div => "tile_div",
+                    _ => return Err(format!("`{}` on tiles has no CUDA form", o.symbol())),
+                };
+                format!("wp::{name}({d}, {}, {});", v(e, l), v(e, r))
+            }
+            _ => return Err("this operation on tiles has no CUDA form yet".into()),
+        };
+        e.line(sp, &text);
+        e.after_tile_op = cooperative;
+        Ok(())
+    }
+
+    /// A local functor applying `g` to elements of the tiles `args`, giving elements of the tile
+    /// `dst` (NVRTC compiles a lambda as a host function, and a local class may not have a member
+    /// template, so its types are concrete); returns its name.
+    fn tile_functor(
+        &mut self,
+        g: TileFn,
+        args: &[VarId],
+        dst: VarId,
+        sp: proc_macro2::Span,
+    ) -> Result<String, String> {
+        let f = self.f;
+        let elem = |t: &Ty| match t {
+            Ty::Tile(el, _) => super::cuda::cpp_type(el).ok_or("a tile element type"),
+            _ => Err("a tile"),
+        };
+        let r = elem(f.ty(dst))?;
+        let ps: Vec<String> = args
+            .iter()
+            .zip(["x", "y"])
+            .map(|(x, n)| elem(f.ty(*x)).map(|t| format!("{t} {n}")))
+            .collect::<Result<_, _>>()?;
+        let body = match (g, args.len()) {
+            (TileFn::Op(o), _) if is_int_elem(f.ty(args[0])) => {
+                let w = match o {
+                    BinOp::Add => "w_add",
+                    BinOp::Sub => "w_sub",
+                    _ => "w_mul",
+                };
+                format!("wp::{w}(x, y)")
+            }
+            (TileFn::Op(o), _) => format!("x {} y", o.symbol()),
+            (TileFn::Builtin(b), 1) => {
+                self.section(b.section);
+                format!("{}(x)", b.cuda)
+            }
+            (TileFn::Builtin(b), _) => {
+                self.section(b.section);
+                format!("{}(x, y)", b.cuda)
+            }
+        };
+        self.tmp += 1;
+        let m = format!("__fn{}", self.tmp);
+        self.line(
+            sp,
+            &format!(
+                "struct {m} {{ WP_FN {r} operator()({}) const {{ return {body}; }} }};",
+                ps.join(", ")
+            ),
+        );
+        Ok(m)
+    }
+
+    /// The entry of a tiled kernel: block `b` of the launch runs `@@SELF@@` with `__flat = b`
+    /// (its `tid()`), every thread of the CUDA block together; a barrier ends each block, before
+    /// the next one's tile operations reuse the slots.
+    pub(crate) fn tile_entry(decl: &str, call: &str) -> String {
+        format!(
         "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM) @@ENTRY@@({decl}) {{\n    \
          for (wp::i64 __flat = (wp::i64)blockIdx.x; __flat < __launch.total; __flat += (wp::i64)gridDim.x) {{\n        \
          @@SELF@@({call});\n        __syncthreads();\n    }}\n}}\n#endif\n"
     )
+    }
+}
+
+/// Integer tiles: their `+ - *` wrap (`wp::w_add`, ..), as the CPU's.
+fn is_int_elem(t: &Ty) -> bool {
+    matches!(t, Ty::Tile(e, _) if e.is_int_scalar())
 }

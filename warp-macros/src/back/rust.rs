@@ -310,7 +310,7 @@ impl<'a> RustEmitter<'a> {
                 }
             }
             Op::Builtin { builtin, args } if builtin.is_tile() => {
-                super::rust_tile::tile_op(self, builtin, args, ty, sp)
+                self.tile_op(builtin, args, ty, sp)
             }
             // In a tiled kernel, the block's size (the launch's `block_dim`).
             Op::Builtin { builtin, .. }
@@ -318,7 +318,8 @@ impl<'a> RustEmitter<'a> {
             {
                 quote_spanned!(sp=> (__bd as i32))
             }
-            Op::TileMap { f, args } => super::rust_tile::tile_map(self, f, args, sp),
+            Op::TileMap { f, args } => self.tile_map(*f, args, sp),
+            Op::TileReduce { f, arg } => self.tile_reduce(*f, *arg, sp),
             Op::Lane => quote_spanned!(sp=> __lane),
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);

@@ -10,83 +10,127 @@
 //! validator has proved is every lane's.
 
 use super::rust::{ty_tokens, RustEmitter};
-use crate::builtins::{Builtin, Emit};
+use crate::builtins::Builtin;
 use crate::ir::*;
 use crate::middle::lanes::{region_vars, LanePlan, Storage};
 use crate::types::Ty;
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 
-/// The CPU call of a tile row (`None` for the rows the block printer writes itself: `tile`,
-/// `untile`, and the accumulating matmul).
-pub(super) fn tile_op(
-    em: &RustEmitter,
-    b: &Builtin,
-    args: &[VarId],
-    ty: &Ty,
-    sp: Span,
-) -> TokenStream {
-    let name = proc_macro2::Literal::string(&em.f.name);
-    let v: Vec<syn::Ident> = args.iter().map(|a| em.var(*a)).collect();
-    let t = ty_tokens(ty);
-    match b.name {
-        "tile_zeros" => quote_spanned!(sp=> <#t>::zeros()),
-        "tile_ones" => quote_spanned!(sp=> <#t>::ones()),
-        "tile_arange" => {
-            let (s, d) = (&v[0], &v[1]);
-            quote_spanned!(sp=> <#t>::arange(#s, #d))
-        }
-        "tile_load" => {
-            let a = &v[0];
-            let offs = &v[1..];
-            let f = format_ident!("load{}", offs.len());
-            quote_spanned!(sp=> __wp::tile::#f(&#a, #(#offs),*)?)
-        }
-        "tile_store" => {
-            let (a, tile) = (&v[0], &v[1]);
-            let offs = &v[2..];
-            let f = format_ident!("store{}", offs.len());
-            quote_spanned!(sp=> __wp::tile::#f(&#a, #(#offs,)* &#tile)?)
-        }
-        "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
-            let f = format_ident!("{}", &b.name[5..]);
-            let x = &v[0];
-            quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
-        }
-        "tile_matmul" => {
-            let (x, y) = (&v[0], &v[1]);
-            quote_spanned!(sp=> __wp::tile::matmul(&#x, &#y))
-        }
-        "tile_extract" => {
-            let x = &v[0];
-            let idx = &v[1..];
-            quote_spanned!(sp=> #x.extract(#(#idx,)* #name)?)
-        }
-        // `tile`, `untile` and the accumulating matmul are the block printer's (they need the
-        // lane plan); an ordinary thread body never holds them.
-        other => {
-            let msg = format!("internal: `{other}` outside a tiled kernel's block");
-            quote_spanned!(sp=> ::core::compile_error!(#msg))
+impl RustEmitter<'_> {
+    /// The CPU call of a tile row (the rows that need the lane plan, `tile`, `untile` and the
+    /// accumulating matmul, are the block printer's).
+    pub(super) fn tile_op(&self, b: &Builtin, args: &[VarId], ty: &Ty, sp: Span) -> TokenStream {
+        let name = proc_macro2::Literal::string(&self.f.name);
+        let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
+        let t = ty_tokens(ty);
+        let rank = |x: &VarId| match self.f.ty(*x) {
+            Ty::Tile(_, d) => d.len(),
+            _ => 0,
+        };
+        match b.name {
+            "tile_zeros" => quote_spanned!(sp=> <#t>::zeros()),
+            "tile_ones" => quote_spanned!(sp=> <#t>::ones()),
+            "tile_arange" => {
+                let (s, d) = (&v[0], &v[1]);
+                quote_spanned!(sp=> <#t>::arange(#s, #d))
+            }
+            "tile_load" => {
+                let a = &v[0];
+                let offs = &v[1..];
+                let f = format_ident!("load{}", offs.len());
+                quote_spanned!(sp=> __wp::tile::#f(&#a, #(#offs),*)?)
+            }
+            "tile_store" | "tile_atomic_add" => {
+                let (a, tile) = (&v[0], &v[1]);
+                let offs = &v[2..];
+                let f = if b.name == "tile_store" {
+                    format_ident!("store{}", offs.len())
+                } else {
+                    format_ident!("atomic_add{}", offs.len())
+                };
+                quote_spanned!(sp=> __wp::tile::#f(&#a, #(#offs,)* &#tile)?)
+            }
+            "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
+                let f = format_ident!("{}", &b.name[5..]);
+                let x = &v[0];
+                quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
+            }
+            "tile_matmul" => {
+                let (x, y) = (&v[0], &v[1]);
+                quote_spanned!(sp=> __wp::tile::matmul(&#x, &#y))
+            }
+            "tile_transpose" => {
+                let x = &v[0];
+                quote_spanned!(sp=> __wp::tile::transpose(&#x))
+            }
+            "tile_broadcast" => {
+                let x = &v[0];
+                let to = match ty {
+                    Ty::Tile(_, d) => d.len(),
+                    _ => 0,
+                };
+                let f = format_ident!("broadcast{}{}", rank(&args[0]), to);
+                quote_spanned!(sp=> __wp::tile::#f(&#x))
+            }
+            "tile_extract" => {
+                let x = &v[0];
+                let idx = &v[1..];
+                quote_spanned!(sp=> #x.extract(#(#idx,)* #name)?)
+            }
+            other => {
+                let msg = format!("internal: `{other}` outside a tiled kernel's block");
+                quote_spanned!(sp=> ::core::compile_error!(#msg))
+            }
         }
     }
-}
 
-/// `tile_map(f, a)`: `a.map(f)`, `a.map2(&b, f)`.
-pub(super) fn tile_map(em: &RustEmitter, f: &Builtin, args: &[VarId], sp: Span) -> TokenStream {
-    let g = format_ident!("{}", f.rust);
-    let v: Vec<syn::Ident> = args.iter().map(|a| em.var(*a)).collect();
-    let call = match f.emit {
-        Emit::Operator(op) => {
-            let o: TokenStream = op.symbol().parse().expect("operator");
-            quote!(|__x, __y| __x #o __y)
+    /// The closure of a `tile_map` or `tile_reduce` function.
+    fn tile_fn(&self, f: TileFn, arity: usize) -> TokenStream {
+        match f {
+            TileFn::Op(op) => {
+                let m = format_ident!(
+                    "{}",
+                    match op {
+                        BinOp::Add => "s_add",
+                        BinOp::Sub => "s_sub",
+                        BinOp::Mul => "s_mul",
+                        _ => "s_div",
+                    }
+                );
+                if op == BinOp::Div {
+                    quote!(|__x, __y| __x / __y)
+                } else {
+                    quote!(|__x, __y| __wp::builtins::Scalar::#m(__x, __y))
+                }
+            }
+            TileFn::Builtin(b) => {
+                let g = format_ident!("{}", b.rust);
+                if arity == 1 {
+                    quote!(|__x| __wp::builtins::#g(__x))
+                } else {
+                    quote!(|__x, __y| __wp::builtins::#g(__x, __y))
+                }
+            }
         }
-        _ if v.len() == 1 => quote!(|__x| __wp::builtins::#g(__x)),
-        _ => quote!(|__x, __y| __wp::builtins::#g(__x, __y)),
-    };
-    match &v[..] {
-        [a] => quote_spanned!(sp=> #a.map(#call)),
-        [a, b] => quote_spanned!(sp=> #a.map2(&#b, #call)),
-        _ => unreachable!("tile_map takes one or two tiles"),
+    }
+
+    /// `tile_map(f, a)`: `a.map(f)`, `a.map2(&b, f)`.
+    pub(super) fn tile_map(&self, f: TileFn, args: &[VarId], sp: Span) -> TokenStream {
+        let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
+        let call = self.tile_fn(f, v.len());
+        match &v[..] {
+            [a] => quote_spanned!(sp=> #a.map(#call)),
+            [a, b] => quote_spanned!(sp=> #a.map2(&#b, #call)),
+            _ => unreachable!("tile_map takes one or two tiles"),
+        }
+    }
+
+    /// `tile_reduce(f, t)`: warp-core's reduction in the GPU's order.
+    pub(super) fn tile_reduce(&self, f: TileFn, arg: VarId, sp: Span) -> TokenStream {
+        let x = self.var(arg);
+        let call = self.tile_fn(f, 2);
+        quote_spanned!(sp=> __wp::tile::reduce(&#x, __bd, #call))
     }
 }
 

@@ -353,7 +353,7 @@ fn builtin_table() -> String {
         let classes: Vec<&str> = b.classes.iter().map(|c| c.describe()).collect();
         let grad = match b.grad {
             // Tile adjoints are the next slice: a kernel with tiles refuses backward.
-            Grad::Adjoint if b.is_tile() => "not yet (tiles)",
+            Grad::Adjoint | Grad::Atomic if b.is_tile() => "not yet (tiles)",
             Grad::Adjoint => "adjoint",
             Grad::Zero => "zero",
             Grad::Atomic => "atomic",

@@ -65,8 +65,14 @@ pub(super) fn shape_checks(f: &Function) -> TokenStream {
             let (l, r) = (o.lhs.rust_tokens(), o.rhs.rust_tokens());
             // `assert!`'s message is a format string.
             let msg = o.msg.replace('{', "{{").replace('}', "}}");
-            quote::quote_spanned! {o.span=>
-                const _: () = ::core::assert!(#l == #r, #msg);
+            if o.or_one {
+                quote::quote_spanned! {o.span=>
+                    const _: () = ::core::assert!(#l == #r || #l == 1, #msg);
+                }
+            } else {
+                quote::quote_spanned! {o.span=>
+                    const _: () = ::core::assert!(#l == #r, #msg);
+                }
             }
         })
         .collect()

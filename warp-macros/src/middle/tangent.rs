@@ -135,6 +135,7 @@ fn carries(op: &Op) -> bool {
         | Op::Tid(_)
         | Op::Lane
         | Op::TileMap { .. }
+        | Op::TileReduce { .. }
         | Op::Extent(..)
         | Op::Len(_)
         | Op::Const(_)
@@ -479,6 +480,7 @@ impl Tx {
             | Op::Tid(_)
             | Op::Lane
             | Op::TileMap { .. }
+            | Op::TileReduce { .. }
             | Op::Extent(..)
             | Op::Len(_)
             | Op::Const(_)

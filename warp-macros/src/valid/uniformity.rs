@@ -103,6 +103,10 @@ pub(super) fn check_cooperative(f: &Function, errors: &mut Vec<syn::Error>) {
                 op: Op::TileMap { .. },
                 ..
             } => "`tile_map`".to_string(),
+            StmtKind::Assign {
+                op: Op::TileReduce { .. },
+                ..
+            } => "`tile_reduce`".to_string(),
             _ => "an operation on tiles".to_string(),
         };
         if let Some(cause) = u.divergence(s) {

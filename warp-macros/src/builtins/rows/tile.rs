@@ -12,6 +12,8 @@ use super::*;
 
 /// Tiles hold integer and float scalars.
 const TILE_ELEM: &[Class] = &[Number];
+/// The elements atomics exist for on both backends.
+const TILE_ATOMIC: &[Class] = &[AtomicScalar];
 /// The matmul's elements (tensor-core f16 and bf16: later).
 const TILE_MATMUL: &[Class] = &[FloatWide];
 
@@ -38,6 +40,18 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // Elementwise: `tile_map(f, a)`, `tile_map(f, a, b)` with a builtin function
     // (`tile_map(sin, a)`); operators `+ - * /` and unary `-` on tiles are Warp's `tile_add`...
     "tile_map": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    // Shapes: `tile_transpose(t)` of a 2-D tile; `tile_broadcast::<M, N>(t)` (or Warp's
+    // `tile_broadcast(t, (M, N))`, or the annotation's shape): numpy's rule, shapes aligned on
+    // the right, each source dim 1 or the target's.
+    "tile_transpose": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_broadcast": TILE_ELEM, (Tile, TileShape) -> Tile, "tile", Adjoint, no_tangent,
+        cooperative;
+    // `tile_atomic_add(a, t, offsets)`: the tile added into the array atomically (elements
+    // outside skipped); the result is the tile of the old values.
+    "tile_atomic_add": TILE_ATOMIC, (ArrayOfT, Tile, Offsets) -> Tile, "tile", Atomic,
+        no_tangent, cooperative;
+    // `tile_reduce(f, t)` with a binary builtin or `add`/`mul`, in the reductions' order.
+    "tile_reduce": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     // Reductions to a `Tile<T, 1>` (`Tile<i32, 1>` for the arg-extrema), in the GPU's order.
     "tile_sum": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_min": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;

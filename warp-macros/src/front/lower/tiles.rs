@@ -46,6 +46,7 @@ impl Lowerer {
                     lhs: x.clone(),
                     rhs: y.clone(),
                     msg: msg.clone(),
+                    or_one: false,
                 });
             }
         }
@@ -226,6 +227,10 @@ impl Lowerer {
                 )
             }
             "tile_map" => self.tile_map(&args, span)?,
+            "tile_reduce" => self.tile_reduce(&args, span)?,
+            "tile_transpose" => self.tile_transpose(row, &args, span)?,
+            "tile_broadcast" => self.tile_broadcast(row, &args, fish_dims, want_tile, span)?,
+            "tile_atomic_add" => self.tile_atomic_add(row, &args, span)?,
             "tile_matmul" => self.tile_matmul(row, &args, span)?,
             "tile_matmul_acc" => self.tile_matmul_acc(row, &args, span)?,
             "tile_extract" => {
@@ -422,17 +427,13 @@ impl Lowerer {
                     .map(Self::dim_expr)
                     .collect::<R<Vec<_>>>()?;
                 tile_rank(&d, s.span())?;
-                if let Some(k) = &known {
-                    if shapes_differ(k, &d) {
-                        return err(
-                            s.span(),
-                            format!(
-                                "`tile_load`: the shape ({}) differs from the expected ({})",
-                                dims_text(&d),
-                                dims_text(k)
-                            ),
-                        );
-                    }
+                if let Some(k) = known.clone() {
+                    let msg = format!(
+                        "`tile_load`: the shape ({}) differs from the expected ({})",
+                        dims_text(&d),
+                        dims_text(&k)
+                    );
+                    self.same_shapes(&k, &d, s.span(), msg)?;
                 }
                 d
             }
@@ -587,7 +588,80 @@ impl Lowerer {
         ))
     }
 
-    /// `tile_map(f, a)`, `tile_map(f, a, b)` with `f` a builtin's name.
+    /// The function of `tile_map` or `tile_reduce`: a builtin taking `arity` values, or Warp's
+    /// operator names `add`, `sub`, `mul`, `div` (binary).
+    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize) -> R<TileFn> {
+        let Expr::Path(p) = strip(e) else {
+            return err(
+                e.span(),
+                format!("`{which}` takes a function by name: `{which}(max, ..)`"),
+            );
+        };
+        let segs: Vec<String> = p
+            .path
+            .segments
+            .iter()
+            .map(|s| s.ident.to_string())
+            .collect();
+        let ok = p.qself.is_none()
+            && (segs.len() == 1 || (segs.len() == 2 && crate::paths::names_facade(&segs[0])));
+        let last = segs.last().cloned().unwrap_or_default();
+        let op = match last.as_str() {
+            "add" => Some(BinOp::Add),
+            "sub" => Some(BinOp::Sub),
+            "mul" => Some(BinOp::Mul),
+            "div" => Some(BinOp::Div),
+            _ => None,
+        };
+        match (op, builtins::lookup_user(&last)) {
+            (Some(op), _) if ok && arity == 2 => Ok(TileFn::Op(op)),
+            (_, Some(b)) if ok && !b.is_tile() && b.params.len() == arity => {
+                if b.is_atomic() || b.faults() || b.draw.is_some() || b.iterate.is_some() {
+                    return err(e.span(), format!("`{which}` cannot apply `{}`", b.name));
+                }
+                Ok(TileFn::Builtin(b))
+            }
+            (_, Some(b)) if ok && !b.is_tile() => err(
+                e.span(),
+                format!(
+                    "`{which}` applies a function of {arity} value(s) here; `{last}` takes {}",
+                    b.params.len()
+                ),
+            ),
+            _ => err(
+                e.span(),
+                format!("`{which}` takes a builtin function here (`sin`, `max`, `add`, ..); user #[func]s are not supported yet"),
+            ),
+        }
+    }
+
+    /// The element type `f` makes of elements `elems`.
+    fn tile_fn_result(&self, which: &str, f: TileFn, elems: &[Ty], span: Span) -> R<Ty> {
+        if let (TileFn::Op(BinOp::Div), Ty::Scalar(s)) = (f, &elems[0]) {
+            if !s.is_float() {
+                return err(span, format!("`{which}` with `div` divides float tiles only (integer division would need a fault per element)"));
+            }
+        }
+        let r = match f {
+            TileFn::Op(op) => crate::operators::binary_result(op, &elems[0], &elems[1])
+                .map_err(|m| syn::Error::new(span, format!("in `{which}`: {m}")))?,
+            TileFn::Builtin(b) => {
+                let args: Vec<ArgTy> = elems.iter().cloned().map(ArgTy::Known).collect();
+                b.resolve(&args)
+                    .map_err(|m| syn::Error::new(span, format!("in `{which}`: {m}")))?
+                    .ret
+            }
+        };
+        if !matches!(r, Ty::Scalar(s) if s != Scalar::Bool) {
+            return err(
+                span,
+                format!("`{which}` makes tiles of scalars, not of `{r}`"),
+            );
+        }
+        Ok(r)
+    }
+
+    /// `tile_map(f, a)`, `tile_map(f, a, b)`.
     fn tile_map(&mut self, args: &[&Expr], span: Span) -> R<VarId> {
         if !(2..=3).contains(&args.len()) {
             return err(
@@ -595,40 +669,7 @@ impl Lowerer {
                 "`tile_map` takes a function and one or two tiles: `tile_map(sin, a)`",
             );
         }
-        let f = match strip(args[0]) {
-            Expr::Path(p) if p.qself.is_none() => {
-                let segs: Vec<String> = p
-                    .path
-                    .segments
-                    .iter()
-                    .map(|s| s.ident.to_string())
-                    .collect();
-                let ok =
-                    segs.len() == 1 || (segs.len() == 2 && crate::paths::names_facade(&segs[0]));
-                let last = segs.last().cloned().unwrap_or_default();
-                match builtins::lookup_user(&last) {
-                    Some(b) if ok && !b.is_tile() && b.params.len() == args.len() - 1 => b,
-                    Some(b) if ok && !b.is_tile() => {
-                        return err(
-                            args[0].span(),
-                            format!("`tile_map` with `{last}` takes {} tile(s)", b.params.len()),
-                        )
-                    }
-                    _ => {
-                        return err(
-                            args[0].span(),
-                            "`tile_map` takes a builtin function here (`sin`, `exp`, `max`, ..); user #[func]s are not supported yet",
-                        )
-                    }
-                }
-            }
-            other => {
-                return err(
-                    other.span(),
-                    "`tile_map` takes a function by name: `tile_map(sin, a)`",
-                )
-            }
-        };
+        let f = self.tile_fn("tile_map", args[0], args.len() - 1)?;
         let mut vars = Vec::new();
         let mut shape: Option<Vec<Dim>> = None;
         let mut elems = Vec::new();
@@ -636,43 +677,194 @@ impl Lowerer {
             let v = self.tile_arg("tile_map", a)?;
             let t = self.ty(v);
             let (e, d) = tile_parts(&t).expect("a tile");
-            if let Some(s) = &shape {
-                if shapes_differ(s, d) {
-                    return err(
-                        a.span(),
-                        format!(
-                            "`tile_map`: the tiles' shapes differ ({} and {})",
-                            dims_text(s),
-                            dims_text(d)
-                        ),
-                    );
-                }
+            let d = d.to_vec();
+            if let Some(s) = shape.clone() {
+                let msg = format!(
+                    "`tile_map`: the tiles' shapes differ ({} and {})",
+                    dims_text(&s),
+                    dims_text(&d)
+                );
+                self.same_shapes(&s, &d, a.span(), msg)?;
             }
-            shape = Some(d.to_vec());
-            elems.push(ArgTy::Known(e.clone()));
+            shape = Some(d);
+            elems.push(e.clone());
             vars.push(v);
         }
-        if f.is_atomic() || f.faults() || f.draw.is_some() || f.iterate.is_some() {
+        let r = self.tile_fn_result("tile_map", f, &elems, args[0].span())?;
+        Ok(self.def(
+            Op::TileMap { f, args: vars },
+            Ty::Tile(Box::new(r), shape.expect("a tile")),
+            span,
+        ))
+    }
+
+    /// `tile_reduce(f, t)`: a `Tile<T, 1>`; `f` must give `T` back.
+    fn tile_reduce(&mut self, args: &[&Expr], span: Span) -> R<VarId> {
+        let [f, t] = args[..] else {
             return err(
-                args[0].span(),
-                format!("`tile_map` cannot apply `{}`", f.name),
+                span,
+                "`tile_reduce` takes a function and a tile: `tile_reduce(max, t)`",
             );
-        }
-        let r = f
-            .resolve(&elems)
-            .map_err(|m| syn::Error::new(args[0].span(), format!("in `tile_map`: {m}")))?;
-        if !matches!(r.ret, Ty::Scalar(s) if s != Scalar::Bool) {
+        };
+        let f = self.tile_fn("tile_reduce", f, 2)?;
+        let v = self.tile_arg("tile_reduce", t)?;
+        let tt = self.ty(v);
+        let e = tile_parts(&tt).expect("a tile").0.clone();
+        let r = self.tile_fn_result("tile_reduce", f, &[e.clone(), e.clone()], args[0].span())?;
+        if r != e {
             return err(
                 args[0].span(),
-                format!(
-                    "`tile_map` makes tiles of scalars; `{}` gives `{}`",
-                    f.name, r.ret
-                ),
+                format!("`tile_reduce` combines `{e}`s into a `{e}`; this function gives `{r}`"),
             );
         }
         Ok(self.def(
-            Op::TileMap { f, args: vars },
-            Ty::Tile(Box::new(r.ret), shape.expect("a tile")),
+            Op::TileReduce { f, arg: v },
+            Ty::Tile(Box::new(e), vec![Dim::Lit(1)]),
+            span,
+        ))
+    }
+
+    /// `tile_transpose(t)` of a 2-D tile.
+    fn tile_transpose(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        let [t] = args[..] else {
+            return err(span, "`tile_transpose` takes one tile");
+        };
+        let v = self.tile_arg("tile_transpose", t)?;
+        let tt = self.ty(v);
+        let (e, d) = tile_parts(&tt).expect("a tile");
+        if d.len() != 2 {
+            return err(
+                t.span(),
+                format!("`tile_transpose` takes a 2-D tile, found `{tt}`"),
+            );
+        }
+        let ty = Ty::Tile(Box::new(e.clone()), vec![d[1].clone(), d[0].clone()]);
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vec![v],
+            },
+            ty,
+            span,
+        ))
+    }
+
+    /// `tile_broadcast::<M, N>(t)`, `tile_broadcast(t, (M, N))` or by the annotation: numpy's
+    /// rule (shapes aligned on the right, each source dim 1 or the target's).
+    fn tile_broadcast(
+        &mut self,
+        row: &'static Builtin,
+        args: &[&Expr],
+        fish: Option<Vec<Dim>>,
+        want: Option<(&Ty, &[Dim])>,
+        span: Span,
+    ) -> R<VarId> {
+        let (t, shape_arg) = match args[..] {
+            [t] => (t, None),
+            [t, s] => (t, Some(s)),
+            _ => {
+                return err(
+                    span,
+                    "`tile_broadcast` takes a tile and the target shape: `tile_broadcast::<M, N>(t)` or `tile_broadcast(t, (M, N))`",
+                )
+            }
+        };
+        let target = match shape_arg {
+            Some(s) => {
+                let parts: Vec<&Expr> = match strip(s) {
+                    Expr::Tuple(t) => t.elems.iter().collect(),
+                    other => vec![other],
+                };
+                let d = parts
+                    .into_iter()
+                    .map(Self::dim_expr)
+                    .collect::<R<Vec<_>>>()?;
+                tile_rank(&d, s.span())?;
+                Some(d)
+            }
+            None => fish.or_else(|| want.map(|(_, d)| d.to_vec())),
+        };
+        let Some(target) = target else {
+            return err(
+                span,
+                "`tile_broadcast` needs the target shape: `tile_broadcast::<M, N>(t)`",
+            );
+        };
+        let v = self.tile_arg("tile_broadcast", t)?;
+        let tt = self.ty(v);
+        let (e, src) = tile_parts(&tt).expect("a tile");
+        let (e, src) = (e.clone(), src.to_vec());
+        if src.len() > target.len() {
+            return err(
+                span,
+                format!(
+                    "`tile_broadcast` cannot lower the rank: `{tt}` to ({})",
+                    dims_text(&target)
+                ),
+            );
+        }
+        let msg = format!(
+            "`tile_broadcast`: `{tt}` does not broadcast to ({}): each dim must be 1 or the target's",
+            dims_text(&target)
+        );
+        // Aligned on the right.
+        let off = target.len() - src.len();
+        for (k, s) in src.iter().enumerate() {
+            let t = &target[off + k];
+            match (s, s.same(t)) {
+                (Dim::Lit(1), _) | (_, Some(true)) => {}
+                (_, Some(false)) => return err(span, msg),
+                (_, None) => self.obligations.push(ShapeObligation {
+                    span,
+                    lhs: s.clone(),
+                    rhs: t.clone(),
+                    msg: msg.clone(),
+                    or_one: true,
+                }),
+            }
+        }
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vec![v],
+            },
+            Ty::Tile(Box::new(e), target),
+            span,
+        ))
+    }
+
+    /// `tile_atomic_add(a, t, offsets)`: the tile of the old values.
+    fn tile_atomic_add(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        if !(2..=3).contains(&args.len()) {
+            return err(
+                span,
+                "`tile_atomic_add` takes an array, a tile and the offsets: `tile_atomic_add(a, t, (i, j))`",
+            );
+        }
+        let (a, elem, ndim) = self.tile_array("tile_atomic_add", args[0])?;
+        let t = self.tile_arg("tile_atomic_add", args[1])?;
+        let tt = self.ty(t);
+        let (te, td) = tile_parts(&tt).expect("a tile");
+        if *te != elem || td.len() != ndim as usize {
+            return err(
+                args[1].span(),
+                format!("`tile_atomic_add`: a `{tt}` into an array of `{elem}` with {ndim} dimension(s)"),
+            );
+        }
+        if !row.classes.iter().any(|c| c.admits(&elem)) {
+            return err(
+                args[0].span(),
+                format!("`tile_atomic_add` adds i32, u32, i64, u64, f32 or f64, not `{elem}`"),
+            );
+        }
+        let mut vars = vec![a, t];
+        vars.extend(self.offsets("tile_atomic_add", args.get(2).copied(), ndim, span)?);
+        Ok(self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vars,
+            },
+            tt,
             span,
         ))
     }

@@ -307,6 +307,7 @@ impl Cx<'_> {
             | Op::Tid(_)
             | Op::Lane
             | Op::TileMap { .. }
+            | Op::TileReduce { .. }
             | Op::Extent(..)
             | Op::Len(_)
             | Op::ViewCheck { .. }
