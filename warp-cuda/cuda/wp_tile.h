@@ -19,8 +19,10 @@
 //   tile_load(out, a, o0[, o1]), tile_store(a, o0[, o1], t)   1-D and 2-D against arrays:
 //                        element (i, j) is a[o0 + i, o1 + j]; signed offsets (any integer type);
 //                        a coordinate outside the array (negative too) reads as T{} and its
-//                        store is skipped, neither is a fault. In-bounds accesses go through
-//                        the checked wp::load / wp::store (a corrupt array faults cleanly).
+//                        store is skipped, neither is a fault. A tile wholly inside an array
+//                        with contiguous rows is moved directly (16-byte vectors where the
+//                        row starts are aligned); otherwise each in-bounds access goes through
+//                        the checked wp::load / wp::store (same values, same faults).
 //   tile_add, tile_sub, tile_mul(out, a, b)   tile with tile, tile with scalar, scalar with
 //                        tile: the builtins' arithmetic (IEEE for floats, wrapping for integers)
 //   tile_neg(out, a)     -a (wrapping for integers, a sign flip for floats)
@@ -48,13 +50,14 @@
 //
 // Matmul: output c[i][j] is one chain acc = fma(a[i][k], b[k][j], acc) over k = 0..K ascending,
 // starting from c[i][j] (tile_matmul_acc) or +0 (tile_matmul), with fmaf/fma: one rounding each,
-// whatever the compiler's contraction setting. The outputs are spread over the threads
-// block-strided; each is computed by one thread, so the block size does not change them.
+// whatever the compiler's contraction setting. The outputs are cut into micro-tiles (up to
+// 4 x 4, tile_detail::mm_plan) spread over the threads block-strided; each output is computed
+// by one thread, in registers, so neither the block size nor the plan changes them.
 //
 // Host builds: include tests/wp_prim_emu.h first (it provides threadIdx, __syncthreads and
 // __shfl_down_sync for fibers); otherwise this header needs CUDA.
 //
-// Not yet here (later slices): the 16-byte vector path of loads and stores, ranks 3 and 4,
+// Not yet here (later slices): ranks 3 and 4,
 // register tiles, scans, tensor cores. The header is not yet a kernel section (no builtin names
 // it until the emitter does), so nothing but the host test includes it.
 #pragma once
