@@ -775,7 +775,11 @@ struct vec16<f64> {
 template <typename T, int M, int K, int N>
 struct mm_plan {
   static constexpr int BD = TILE_BLOCK_DIM;
-  /// Micro-tile sides in order of preference: square first (fewest loads per FMA).
+  /// Micro-tile sides in order of preference: square first (fewest loads per FMA). Host and
+  /// device (it only runs at compile time, in the constants below).
+#if defined(__CUDACC__)
+  __host__ __device__
+#endif
   static constexpr int pick(int which) {
     constexpr int cand[9][2] = {{4, 4}, {4, 2}, {2, 4}, {2, 2}, {4, 1},
                                 {1, 4}, {2, 1}, {1, 2}, {1, 1}};
