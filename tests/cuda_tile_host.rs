@@ -104,6 +104,26 @@ impl Script {
             hex(&bytes(data))
         );
     }
+    /// Array argument `kind` number `slot` over `data` with the given shape and strides (in
+    /// elements; the driver takes bytes): `data` must hold every element the view reaches.
+    fn arr_strided<T: bytemuck::Pod>(
+        &mut self,
+        kind: &str,
+        slot: usize,
+        shape: &[usize],
+        strides: &[isize],
+        data: &[T],
+    ) {
+        let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+        let sz = std::mem::size_of::<T>() as isize;
+        let st: Vec<String> = strides.iter().map(|s| (s * sz).to_string()).collect();
+        self.text += &format!(
+            "arr {kind} {slot} {} {}\nstrides {kind} {slot} {}\n",
+            dims.join(" "),
+            hex(&bytes(data)),
+            st.join(" ")
+        );
+    }
     fn off(&mut self, o: [i64; 4]) {
         self.text += &format!("off {} {} {} {}\n", o[0], o[1], o[2], o[3]);
     }
@@ -161,6 +181,18 @@ fn view<T: Copy, const N: usize>(data: &mut [T], shape: [usize; N]) -> ArrayView
     }
     assert_eq!(s as usize, data.len());
     // SAFETY: every caller keeps `data` alive and unmoved while it uses the view.
+    unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
+}
+
+/// A view of `data` with the given shape and strides (in elements, non-negative).
+fn view_strided<T: Copy, const N: usize>(
+    data: &mut [T],
+    shape: [usize; N],
+    strides: [isize; N],
+) -> ArrayView<T, N> {
+    let last: isize = (0..N).map(|k| (shape[k] as isize - 1) * strides[k]).sum();
+    assert!(shape.contains(&0) || (last as usize) < data.len());
+    // SAFETY: as `view`; every in-bounds index addresses an element of `data` (checked above).
     unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
 }
 
@@ -704,6 +736,169 @@ fn fma_matmul_matches() {
     }
 }
 
+/// The register-blocked matmul (every micro-tile plan the header picks for these shapes and
+/// block sizes: 4 x 4 with vector reads of A and B, 4 x 2 and 2 x 1 with strided columns,
+/// K not a multiple of the vector width, N odd, several rounds of micro-tiles per thread, and
+/// the plain loop), with 16-byte aligned slots and with slots 4 bytes off (the scalar
+/// fallback), against warp-core's FMA chains, bit for bit (tolerance: none).
+#[test]
+fn register_blocked_matmul_matches() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0x5eed_0007);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<u8>, String)> = Vec::new();
+    macro_rules! case {
+        ($t:ty, $kind:literal, $name:literal, $gen:ident, $m:literal, $k:literal, $n:literal) => {{
+            let mut a: Vec<$t> = (0..$m * $k).map(|_| rng.$gen()).collect();
+            let mut b: Vec<$t> = (0..$k * $n).map(|_| rng.$gen()).collect();
+            let mut c: Vec<$t> = (0..$m * $n).map(|_| rng.$gen()).collect();
+            let ta: Tile2<$t, $m, $k> = tile::load2(&view(&mut a, [$m, $k]), 0, 0).unwrap();
+            let tb: Tile2<$t, $k, $n> = tile::load2(&view(&mut b, [$k, $n]), 0, 0).unwrap();
+            let mut tc: Tile2<$t, $m, $n> = tile::load2(&view(&mut c, [$m, $n]), 0, 0).unwrap();
+            let mut w = flat(&tile::matmul(&ta, &tb));
+            tile::matmul_acc(&ta, &tb, &mut tc);
+            w.extend(flat(&tc));
+            for mis in ["", "_mis"] {
+                script.arr($kind, 0, &[$m, $k], &a);
+                script.arr($kind, 1, &[$k, $n], &b);
+                script.arr($kind, 2, &[$m, $n], &c);
+                let name = format!("mm_{}_{}x{}x{}{mis}", $name, $m, $k, $n);
+                script.run(&name);
+                want.push((w.clone(), name));
+            }
+        }};
+    }
+    for _ in 0..2 {
+        case!(f32, "f2", "f32", f32, 64, 16, 64);
+        case!(f32, "f2", "f32", f32, 32, 12, 24);
+        case!(f32, "f2", "f32", f32, 24, 7, 20);
+        case!(f32, "f2", "f32", f32, 12, 5, 9);
+        case!(f32, "f2", "f32", f32, 16, 8, 6);
+        case!(f64, "d2", "f64", f64, 16, 8, 16);
+        case!(f64, "d2", "f64", f64, 8, 6, 10);
+        case!(f64, "d2", "f64", f64, 64, 8, 64);
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (w, what)) in want.iter().enumerate() {
+            if got[k] != *w {
+                let sz = if what.contains("f64") { 8 } else { 4 };
+                let first = (0..w.len() / sz)
+                    .find(|&e| got[k][e * sz..(e + 1) * sz] != w[e * sz..(e + 1) * sz])
+                    .unwrap();
+                panic!("{what}, block size {bd}: first differing output element {first}");
+            }
+        }
+    }
+}
+
+/// The loads' and stores' fast paths (the tile fully inside a contiguous-row array: direct,
+/// and 16-byte vectors when the row starts allow) and their fallbacks (partly outside, rows
+/// not 16-byte aligned, strided rows, a strided innermost axis), against warp-core, bit for bit.
+#[test]
+fn load_store_fast_paths_match() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0x5eed_0008);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<u8>, Vec<u8>, String)> = Vec::new();
+    // Rank 2, f32 4 x 8 (32-byte rows: vectors when aligned) and 3 x 12, f64 3 x 4, from `a`
+    // (shape `sa`, row stride `ra` elements, inner stride `ia`) into `b` (10 x 24, contiguous).
+    macro_rules! case2 {
+        ($t:ty, $kind:literal, $name:literal, $gen:ident, $n0:literal, $n1:literal,
+         $sa:expr, $ra:expr, $ia:expr, $o:expr) => {{
+            let (sa, ra, ia, o): ([usize; 2], usize, usize, [i64; 4]) = ($sa, $ra, $ia, $o);
+            let len = if sa[0] * sa[1] == 0 {
+                0
+            } else {
+                (sa[0] - 1) * ra + (sa[1] - 1) * ia + 1
+            };
+            let mut a: Vec<$t> = (0..len).map(|_| rng.$gen()).collect();
+            let mut b: Vec<$t> = (0..240).map(|i| i as $t + 0.25).collect();
+            script.arr_strided($kind, 0, &sa, &[ra as isize, ia as isize], &a);
+            script.arr($kind, 1, &[10, 24], &b);
+            script.off(o);
+            let name = format!("ld2_{}_{}x{}", $name, $n0, $n1);
+            script.run(&name);
+            script.dump($kind, 1);
+            let t: Tile2<$t, $n0, $n1> = tile::load2(
+                &view_strided(&mut a, sa, [ra as isize, ia as isize]),
+                o[0],
+                o[1],
+            )
+            .unwrap();
+            tile::store2(&view(&mut b, [10, 24]), o[2], o[3], &t).unwrap();
+            want.push((
+                flat(&t),
+                bytes(&b),
+                format!("{name} {sa:?} rows {ra} inner {ia} at {o:?}"),
+            ));
+        }};
+    }
+    for o in [
+        [0i64, 0, 0, 0], // inside, aligned: vectors both ways
+        [2, 4, 3, 8],    // inside, aligned (4 f32 = 16 bytes)
+        [1, 1, 2, 3],    // inside, misaligned starts: direct scalar
+        [5, 2, 6, 16],   // partly outside on load (rows) and store (columns)
+        [-1, 4, 7, -2],  // partly outside, negative
+        [0, 12, 0, 20],  // columns partly outside
+    ] {
+        case2!(f32, "f2", "f32", f32, 4, 8, [8, 16], 16, 1, o);
+        case2!(f32, "f2", "f32", f32, 4, 8, [8, 13], 13, 1, o); // rows 52 bytes apart
+        case2!(f32, "f2", "f32", f32, 4, 8, [8, 13], 20, 1, o); // padded rows, 80 bytes
+        case2!(f32, "f2", "f32", f32, 4, 8, [8, 16], 33, 2, o); // strided inner axis
+        case2!(f32, "f2", "f32", f32, 3, 12, [6, 24], 24, 1, o);
+        case2!(f64, "d2", "f64", f64, 3, 4, [8, 16], 16, 1, o);
+        case2!(f64, "d2", "f64", f64, 3, 4, [8, 9], 9, 1, o);
+    }
+    // Rank 1: f32 x 64 and f64 x 9 (a vector tail), contiguous and strided.
+    macro_rules! case1 {
+        ($t:ty, $kind:literal, $name:literal, $gen:ident, $n:literal, $sa:expr, $st:expr,
+         $o:expr, $p:expr) => {{
+            let (sa, st, o, p): (usize, usize, i64, i64) = ($sa, $st, $o, $p);
+            let len = if sa == 0 { 0 } else { (sa - 1) * st + 1 };
+            let mut a: Vec<$t> = (0..len).map(|_| rng.$gen()).collect();
+            let name = format!("ld1_{}_{}", $name, $n);
+            let what = format!("{name} n {sa} stride {st} at {o} store at {p}");
+            script.arr_strided($kind, 0, &[sa], &[st as isize], &a);
+            let t: Tile1<$t, $n> =
+                tile::load1(&view_strided(&mut a, [sa], [st as isize]), o).unwrap();
+            if $name == "f32" {
+                let mut b: Vec<$t> = (0..100).map(|i| -(i as $t) - 0.5).collect();
+                script.arr($kind, 1, &[100], &b);
+                script.off([o, p, 0, 0]);
+                script.run(&name);
+                script.dump($kind, 1);
+                tile::store1(&view(&mut b, [100]), p, &t).unwrap();
+                want.push((flat(&t), bytes(&b), what));
+            } else {
+                // The f64 store goes back into array 0, after the load.
+                script.off([o, p, 0, 0]);
+                script.run(&name);
+                script.dump($kind, 0);
+                tile::store1(&view_strided(&mut a, [sa], [st as isize]), p, &t).unwrap();
+                want.push((flat(&t), bytes(&a), what));
+            }
+        }};
+    }
+    for (o, p) in [(0i64, 0i64), (4, 8), (1, 3), (-2, 30), (50, -5), (36, 36)] {
+        case1!(f32, "f1", "f32", f32, 64, 100, 1, o, p);
+        case1!(f32, "f1", "f32", f32, 64, 100, 3, o, p);
+        case1!(f64, "d1", "f64", f64, 9, 20, 1, o, p);
+        case1!(f64, "d1", "f64", f64, 9, 20, 2, o, p);
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (t, b, what)) in want.iter().enumerate() {
+            assert_eq!(&got[2 * k], t, "tile, {what}, block size {bd}");
+            assert_eq!(&got[2 * k + 1], b, "stored array, {what}, block size {bd}");
+        }
+    }
+}
+
 // ------------------------------------------------------------------------------------------
 // NVRTC
 // ------------------------------------------------------------------------------------------
@@ -760,6 +955,17 @@ __device__ unsigned char* matmuls(unsigned char* at) {
   wp::tile_ones(b);
   wp::tile_matmul(p, a, b);
   wp::tile_matmul_acc(p, a, b);
+  // The benchmark's shapes (register blocking, 16-byte vector reads of the slots).
+  wp::tile_t<T, 64, 8> ba(at);
+  at += (wp::tile_t<T, 64, 8>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 8, 64> bb(at);
+  at += (wp::tile_t<T, 8, 64>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 64, 64> bc(at);
+  at += (wp::tile_t<T, 64, 64>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_ones(ba);
+  wp::tile_ones(bb);
+  wp::tile_matmul(bc, ba, bb);
+  wp::tile_matmul_acc(bc, ba, bb);
   return at;
 }
 

@@ -19,8 +19,10 @@
 //   tile_load(out, a, o0[, o1]), tile_store(a, o0[, o1], t)   1-D and 2-D against arrays:
 //                        element (i, j) is a[o0 + i, o1 + j]; signed offsets (any integer type);
 //                        a coordinate outside the array (negative too) reads as T{} and its
-//                        store is skipped, neither is a fault. In-bounds accesses go through
-//                        the checked wp::load / wp::store (a corrupt array faults cleanly).
+//                        store is skipped, neither is a fault. A tile wholly inside an array
+//                        with contiguous rows is moved directly (16-byte vectors where the
+//                        row starts are aligned); otherwise each in-bounds access goes through
+//                        the checked wp::load / wp::store (same values, same faults).
 //   tile_add, tile_sub, tile_mul(out, a, b)   tile with tile, tile with scalar, scalar with
 //                        tile: the builtins' arithmetic (IEEE for floats, wrapping for integers)
 //   tile_neg(out, a)     -a (wrapping for integers, a sign flip for floats)
@@ -48,13 +50,14 @@
 //
 // Matmul: output c[i][j] is one chain acc = fma(a[i][k], b[k][j], acc) over k = 0..K ascending,
 // starting from c[i][j] (tile_matmul_acc) or +0 (tile_matmul), with fmaf/fma: one rounding each,
-// whatever the compiler's contraction setting. The outputs are spread over the threads
-// block-strided; each is computed by one thread, so the block size does not change them.
+// whatever the compiler's contraction setting. The outputs are cut into micro-tiles (up to
+// 4 x 4, tile_detail::mm_plan) spread over the threads block-strided; each output is computed
+// by one thread, in registers, so neither the block size nor the plan changes them.
 //
 // Host builds: include tests/wp_prim_emu.h first (it provides threadIdx, __syncthreads and
 // __shfl_down_sync for fibers); otherwise this header needs CUDA.
 //
-// Not yet here (later slices): the 16-byte vector path of loads and stores, ranks 3 and 4,
+// Not yet here (later slices): ranks 3 and 4,
 // register tiles, scans, tensor cores. The header is not yet a kernel section (no builtin names
 // it until the emitter does), so nothing but the host test includes it.
 #pragma once
@@ -73,6 +76,18 @@
 #define WP_TILE_SHARED_ALIGNED alignas(16) static
 #else
 #error "wp_tile.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
+#endif
+
+// WP_TILE_UNROLL / WP_TILE_UNROLL_N(n): `#pragma unroll` on the GPU (register blocking needs
+// its small loops unrolled, so that the accumulator arrays live in registers); nothing on the
+// host, where g++ -Wall would reject the unknown pragma.
+#if defined(__CUDACC__)
+#define WP_TILE_PRAGMA_(x) _Pragma(#x)
+#define WP_TILE_UNROLL WP_TILE_PRAGMA_(unroll)
+#define WP_TILE_UNROLL_N(n) WP_TILE_PRAGMA_(unroll n)
+#else
+#define WP_TILE_UNROLL
+#define WP_TILE_UNROLL_N(n)
 #endif
 
 namespace wp {
@@ -334,12 +349,125 @@ WP_FN void tile_arange(const tile_t<T, N0>& out, T start, T step) {
 // Loads and stores
 // ------------------------------------------------------------------------------------------
 
+namespace tile_detail {
+
+/// 16-byte alignment of a shared or global address (the vector paths' precondition).
+WP_FN bool aligned16(const void* p) { return ((usize)p & 15) == 0; }
+
+/// 16 raw bytes, copied as one access (LDG.128 / STG.128 / LDS.128 / STS.128): the loads'
+/// and stores' vector path moves bits, whatever the element type.
+#if defined(__CUDACC__)
+typedef uint4 raw16;
+#else
+struct alignas(16) raw16 {
+  u32 w[4];
+};
+#endif
+
+/// The fast path's plan for one axis-`N` tile access at coordinates `o` (every offset a
+/// coordinate of the tile's first element): true, with the first element's coordinates in
+/// `c0` (and `c1`), when the whole tile lies inside the array, so that no element needs its
+/// own check. `coord` of the first and of the last element proves it (the axis is an
+/// interval); every thread computes the same answer (block-uniform).
+template <typename O>
+WP_FN bool inside(O o, int n, i64 extent, i64* c) {
+  i64 last;
+  return coord(o, 0, extent, c) && coord(o, n - 1, extent, &last);
+}
+
+/// The innermost stride is the element size (rows are contiguous runs of elements), and the
+/// byte stride between rows. With WP_CONTIGUOUS the launch checked every array argument is
+/// contiguous and row-major, so both follow from the shape (as in wp_core.h's element
+/// addressing).
+template <typename T, int N>
+WP_FN bool inner_contiguous(const array_t<T, N>& a) {
+#if defined(WP_CONTIGUOUS)
+  (void)a;
+  return true;
+#else
+  return a.strides[N - 1] == (i64)sizeof(T);
+#endif
+}
+template <typename T>
+WP_FN i64 row_stride(const array_t<T, 2>& a) {
+#if defined(WP_CONTIGUOUS)
+  return a.shape[1] * (i64)sizeof(T);
+#else
+  return a.strides[0];
+#endif
+}
+
+/// Copies `n` elements from `src` to `dst` cooperatively (one row of a 1-D tile), as 16-byte
+/// vectors when both are 16-byte aligned, then the tail element by element.
+template <typename T, int n>
+WP_FN void copy_run(T* __restrict__ dst, const T* __restrict__ src) {
+  constexpr int W = 16 / (int)sizeof(T);
+  constexpr int CH = (16 % sizeof(T) == 0) ? n / W : 0;
+  int start = 0;
+  if (CH > 0 && aligned16(src) && aligned16(dst)) {
+    const raw16* s = reinterpret_cast<const raw16*>(src);
+    raw16* d = reinterpret_cast<raw16*>(dst);
+    for (int q = (int)threadIdx.x; q < CH; q += WP_TILE_BLOCK_DIM) d[q] = s[q];
+    start = CH * W;
+  }
+  for (int i = start + (int)threadIdx.x; i < n; i += WP_TILE_BLOCK_DIM) dst[i] = src[i];
+}
+
+/// Copies a tile's N0 rows of N1 elements between a shared slot (rows N1 apart) and an
+/// array's rows (`rs` bytes apart from `base`), cooperatively; `ToArray` picks the
+/// direction. 16-byte vectors when every row start on both sides is 16-byte aligned (the
+/// bases, the row stride and the row's bytes all multiples of 16), one block-uniform test;
+/// else element by element.
+template <bool ToArray, typename T, int N0, int N1>
+WP_FN void copy_rows(T* slot, char* base, i64 rs) {
+  constexpr int W = 16 / (int)sizeof(T);
+  constexpr bool CAN = 16 % sizeof(T) == 0 && (N1 * (int)sizeof(T)) % 16 == 0;
+  if (CAN && aligned16(slot) && aligned16(base) && (rs & 15) == 0) {
+    constexpr int CH = CAN ? N1 / W : 1;  // vectors per row
+    for (int e = (int)threadIdx.x; e < N0 * CH; e += WP_TILE_BLOCK_DIM) {
+      const int i = e / CH, q = e % CH;
+      raw16* arr = reinterpret_cast<raw16*>(base + (i64)i * rs) + q;
+      raw16* sh = reinterpret_cast<raw16*>(slot + i * N1) + q;
+      if (ToArray) *arr = *sh;
+      else *sh = *arr;
+    }
+  } else {
+    for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+      const int i = e / N1, j = e % N1;
+      T* arr = reinterpret_cast<T*>(base + (i64)i * rs) + j;
+      if (ToArray) *arr = slot[e];
+      else slot[e] = *arr;
+    }
+  }
+}
+
+}  // namespace tile_detail
+
+// The fast paths below: when the whole tile lies inside the array (one block-uniform check of
+// its first and last coordinates per axis) and the array's rows are contiguous, the elements
+// are read and written through the array's base pointer and strides, without a check each.
+// This is the same behaviour, not a weaker one: wp::load / wp::store check an index only
+// against the shape, and the tile-wide check already proves every index of the tile inside
+// it, so none of those checks could fail (a corrupt array, a bad pointer under a valid shape,
+// faults neither way). Row starts aligned to 16 bytes, on both sides, move as 16-byte vectors
+// (the benchmark's 64 x 16, 16 x 64 and 64 x 64 f32 tiles of 4096 x 4096 arrays: one
+// LDG.128 or STG.128 per 4 elements instead of a checked 4-byte access each).
+
 /// `tile_load(a, o)`: element i is `a[o + i]`, or T{} where that is outside the array.
 template <typename T, int N0, typename O>
 WP_FN void tile_load(const tile_t<T, N0>& out, const array_t<T, 1>& a, O o, ctx_t* ctx) {
-  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
-    i64 c;
-    out.data[i] = tile_detail::coord(o, i, a.shape[0], &c) ? load(a, c, ctx) : T{};
+  i64 c;
+  if (tile_detail::inside(o, N0, a.shape[0], &c) && tile_detail::inner_contiguous(a)) {
+    const T* src = reinterpret_cast<const T*>(reinterpret_cast<const char*>(a.data) +
+                                              c * a.strides[0]);
+#if defined(WP_CONTIGUOUS)
+    src = a.data + c;
+#endif
+    tile_detail::copy_run<T, N0>(out.data, src);
+  } else {
+    for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+      out.data[i] = tile_detail::coord(o, i, a.shape[0], &c) ? load(a, c, ctx) : T{};
+    }
   }
   __syncthreads();
 }
@@ -348,12 +476,20 @@ WP_FN void tile_load(const tile_t<T, N0>& out, const array_t<T, 1>& a, O o, ctx_
 template <typename T, int N0, int N1, typename O0, typename O1>
 WP_FN void tile_load(const tile_t<T, N0, N1>& out, const array_t<T, 2>& a, O0 o0, O1 o1,
                      ctx_t* ctx) {
-  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
-    const int i = e / N1, j = e % N1;
-    i64 c0, c1;
-    const bool in = tile_detail::coord(o0, i, a.shape[0], &c0) &&
-                    tile_detail::coord(o1, j, a.shape[1], &c1);
-    out.data[e] = in ? load(a, c0, c1, ctx) : T{};
+  i64 s0, s1;
+  if (tile_detail::inside(o0, N0, a.shape[0], &s0) &&
+      tile_detail::inside(o1, N1, a.shape[1], &s1) && tile_detail::inner_contiguous(a)) {
+    const i64 rs = tile_detail::row_stride(a);
+    char* base = reinterpret_cast<char*>(a.data) + s0 * rs + s1 * (i64)sizeof(T);
+    tile_detail::copy_rows<false, T, N0, N1>(out.data, base, rs);
+  } else {
+    for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+      const int i = e / N1, j = e % N1;
+      i64 c0, c1;
+      const bool in = tile_detail::coord(o0, i, a.shape[0], &c0) &&
+                      tile_detail::coord(o1, j, a.shape[1], &c1);
+      out.data[e] = in ? load(a, c0, c1, ctx) : T{};
+    }
   }
   __syncthreads();
 }
@@ -362,9 +498,17 @@ WP_FN void tile_load(const tile_t<T, N0, N1>& out, const array_t<T, 2>& a, O0 o0
 /// skipped.
 template <typename T, int N0, typename O>
 WP_FN void tile_store(const array_t<T, 1>& a, O o, const tile_t<T, N0>& t, ctx_t* ctx) {
-  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
-    i64 c;
-    if (tile_detail::coord(o, i, a.shape[0], &c)) store(a, c, t.data[i], ctx);
+  i64 c;
+  if (tile_detail::inside(o, N0, a.shape[0], &c) && tile_detail::inner_contiguous(a)) {
+    T* dst = reinterpret_cast<T*>(reinterpret_cast<char*>(a.data) + c * a.strides[0]);
+#if defined(WP_CONTIGUOUS)
+    dst = a.data + c;
+#endif
+    tile_detail::copy_run<T, N0>(dst, t.data);
+  } else {
+    for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+      if (tile_detail::coord(o, i, a.shape[0], &c)) store(a, c, t.data[i], ctx);
+    }
   }
   __syncthreads();
 }
@@ -374,11 +518,20 @@ WP_FN void tile_store(const array_t<T, 1>& a, O o, const tile_t<T, N0>& t, ctx_t
 template <typename T, int N0, int N1, typename O0, typename O1>
 WP_FN void tile_store(const array_t<T, 2>& a, O0 o0, O1 o1, const tile_t<T, N0, N1>& t,
                       ctx_t* ctx) {
-  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
-    const int i = e / N1, j = e % N1;
-    i64 c0, c1;
-    if (tile_detail::coord(o0, i, a.shape[0], &c0) && tile_detail::coord(o1, j, a.shape[1], &c1))
-      store(a, c0, c1, t.data[e], ctx);
+  i64 s0, s1;
+  if (tile_detail::inside(o0, N0, a.shape[0], &s0) &&
+      tile_detail::inside(o1, N1, a.shape[1], &s1) && tile_detail::inner_contiguous(a)) {
+    const i64 rs = tile_detail::row_stride(a);
+    char* base = reinterpret_cast<char*>(a.data) + s0 * rs + s1 * (i64)sizeof(T);
+    tile_detail::copy_rows<true, T, N0, N1>(t.data, base, rs);
+  } else {
+    for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+      const int i = e / N1, j = e % N1;
+      i64 c0, c1;
+      if (tile_detail::coord(o0, i, a.shape[0], &c0) &&
+          tile_detail::coord(o1, j, a.shape[1], &c1))
+        store(a, c0, c1, t.data[e], ctx);
+    }
   }
   __syncthreads();
 }
@@ -557,13 +710,219 @@ namespace tile_detail {
 WP_FN f32 fma_(f32 a, f32 b, f32 c) { return ::fmaf(a, b, c); }
 WP_FN f64 fma_(f64 a, f64 b, f64 c) { return ::fma(a, b, c); }
 
+/// 16 bytes of floats read or written as one access (LDS.128 / STS.128 on the GPU): `W`
+/// elements of `T`, `p` 16-byte aligned (the callers check it). On the host, a plain copy.
+template <typename T>
+struct vec16;
+template <>
+struct vec16<f32> {
+  static constexpr int W = 4;
+  WP_FN static void get(const f32* p, f32* v) {
+#if defined(__CUDACC__)
+    const float4 q = *reinterpret_cast<const float4*>(p);
+    v[0] = q.x, v[1] = q.y, v[2] = q.z, v[3] = q.w;
+#else
+    for (int k = 0; k < 4; ++k) v[k] = p[k];
+#endif
+  }
+  WP_FN static void put(f32* p, const f32* v) {
+#if defined(__CUDACC__)
+    *reinterpret_cast<float4*>(p) = make_float4(v[0], v[1], v[2], v[3]);
+#else
+    for (int k = 0; k < 4; ++k) p[k] = v[k];
+#endif
+  }
+};
+template <>
+struct vec16<f64> {
+  static constexpr int W = 2;
+  WP_FN static void get(const f64* p, f64* v) {
+#if defined(__CUDACC__)
+    const double2 q = *reinterpret_cast<const double2*>(p);
+    v[0] = q.x, v[1] = q.y;
+#else
+    v[0] = p[0], v[1] = p[1];
+#endif
+  }
+  WP_FN static void put(f64* p, const f64* v) {
+#if defined(__CUDACC__)
+    *reinterpret_cast<double2*>(p) = make_double2(v[0], v[1]);
+#else
+    p[0] = v[0], p[1] = v[1];
+#endif
+  }
+};
+
+/// How a matmul spreads its M x N outputs over the block (register blocking).
+///
+/// The outputs are cut into micro-tiles of TM rows x TN columns; micro-tile u (of
+/// RU = M / TM rows and CU = N / TN columns of micro-tiles) is owned by thread u % BD, which
+/// keeps its TM x TN accumulators in registers and, per k, reads TM values of A and TN of B
+/// from shared memory once and does TM * TN FMAs with them: (TM + TN) loads for TM * TN FMAs
+/// instead of 2 per FMA. For the benchmark's 64 x 64 tile and 256 threads that is 4 x 4, one
+/// micro-tile per thread: 16 accumulators, 8 shared loads (2 as 16-byte vectors) per 16 FMAs.
+///
+/// The plan is the largest micro-tile, at most 4 x 4 (16 accumulators: 32 registers for f64,
+/// so the block keeps its occupancy), whose sides divide M and N and that still gives every
+/// thread of the block a micro-tile; when none does (tiles smaller than the block), 1 x 1,
+/// which is the plain block-strided loop over outputs. Larger blocks get smaller micro-tiles
+/// (64 x 64 with 1024 threads: 2 x 2), smaller blocks loop over several (45 threads: 4 x 4,
+/// 6 rounds).
+///
+/// Whatever the plan, each output is still one chain acc = fma(a[i][k], b[k][j], acc) over k
+/// ascending from its start value, computed by one thread: the plan changes who computes it
+/// and when, never the arithmetic, so every plan gives the bits of warp-core's matmul.
+template <typename T, int M, int K, int N>
+struct mm_plan {
+  static constexpr int BD = TILE_BLOCK_DIM;
+  /// Micro-tile sides in order of preference: square first (fewest loads per FMA). Host and
+  /// device (it only runs at compile time, in the constants below).
+#if defined(__CUDACC__)
+  __host__ __device__
+#endif
+  static constexpr int pick(int which) {
+    constexpr int cand[9][2] = {{4, 4}, {4, 2}, {2, 4}, {2, 2}, {4, 1},
+                                {1, 4}, {2, 1}, {1, 2}, {1, 1}};
+    for (int c = 0; c < 9; ++c) {
+      const int tm = cand[c][0], tn = cand[c][1];
+      if (M % tm == 0 && N % tn == 0 && (M / tm) * (N / tn) >= BD) return cand[c][which];
+    }
+    return 1;
+  }
+  static constexpr int TM = pick(0);
+  static constexpr int TN = pick(1);
+  static constexpr int RU = M / TM;
+  static constexpr int CU = N / TN;
+  static constexpr int W = vec16<T>::W;
+  /// A's rows read as 16-byte vectors along k (W values of k per access, then W k-steps
+  /// from registers): needs every row start 16-byte aligned (K * sizeof(T) a multiple of 16,
+  /// the slot's start checked at run time) and k-steps of W.
+  static constexpr bool VA = TM > 1 && (K * (int)sizeof(T)) % 16 == 0;
+  /// A thread's TN columns contiguous and read (and C written) as 16-byte vectors: needs TN
+  /// a multiple of W and row starts aligned (N * sizeof(T) a multiple of 16). Otherwise its
+  /// columns are strided by CU (j = uc + CU * q), so that the warp's lanes, which differ in
+  /// uc, read consecutive words of B's row: distinct banks, no conflict.
+  static constexpr bool VB = TN % W == 0 && (N * (int)sizeof(T)) % 16 == 0;
+  /// Blocking at all (1 x 1 is the plain loop).
+  static constexpr bool BLOCKED = TM * TN > 1;
+};
+
+/// The plain loop: one output per thread at a time, block-strided (tiles smaller than the
+/// block, shapes no micro-tile divides, and slots that are not 16-byte aligned).
 template <bool Acc, typename T, int M, int K, int N>
-WP_FN void matmul(const tile_t<T, M, N>& c, const tile_t<T, M, K>& a, const tile_t<T, K, N>& b) {
+WP_FN void matmul_simple(T* c, const T* a, const T* b) {
   for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
     const int i = e / N, j = e % N;
-    T acc = Acc ? c.data[e] : (T)0;
-    for (int k = 0; k < K; ++k) acc = fma_(a.data[i * K + k], b.data[k * N + j], acc);
-    c.data[e] = acc;
+    T acc = Acc ? c[e] : (T)0;
+    for (int k = 0; k < K; ++k) acc = fma_(a[i * K + k], b[k * N + j], acc);
+    c[e] = acc;
+  }
+}
+
+/// The register-blocked matmul of `mm_plan` (its `VA` and `VB` only when the slots are
+/// 16-byte aligned: `Vec` false turns both off).
+///
+/// Rows: micro-tile row ur owns rows ur + RU * r (strided, not contiguous). A warp's lanes
+/// span few micro-tile rows (2 for 64 x 64, 4 x 4, 256 threads: 16 lanes per row of
+/// micro-tiles), and consecutive ur then read A rows K elements apart (64 bytes for K = 16 f32),
+/// in different banks; contiguous rows would put them TM * K elements apart, in the same
+/// banks (a 2-way conflict on every A read). The lanes of one ur read the same A address
+/// (a broadcast).
+template <bool Acc, bool Vec, typename T, int M, int K, int N>
+WP_FN void matmul_blocked(T* __restrict__ c, const T* __restrict__ a, const T* __restrict__ b) {
+  typedef mm_plan<T, M, K, N> P;
+  constexpr int TM = P::TM, TN = P::TN, RU = P::RU, CU = P::CU, W = P::W;
+  constexpr bool VA = Vec && P::VA, VB = Vec && P::VB;
+  for (int u = (int)threadIdx.x; u < RU * CU; u += WP_TILE_BLOCK_DIM) {
+    const int ur = u / CU, uc = u % CU;
+    // Column q of the micro-tile: contiguous for vector access, else strided by CU.
+    auto col = [uc](int q) { return VB ? uc * TN + q : uc + CU * q; };
+    T acc[TM][TN];
+WP_TILE_UNROLL
+    for (int r = 0; r < TM; ++r) {
+      T* crow = c + (ur + RU * r) * N;
+      if constexpr (VB) {
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; q += W) {
+          if (Acc) vec16<T>::get(crow + col(q), &acc[r][q]);
+          else
+            for (int w = 0; w < W; ++w) acc[r][q + w] = (T)0;
+        }
+      } else {
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; ++q) acc[r][q] = Acc ? crow[col(q)] : (T)0;
+      }
+    }
+    // One k-step: B's row k for the thread's columns, then the TM x TN FMAs. The order of
+    // the FMAs within a k-step does not matter (each updates its own accumulator); across
+    // k-steps every accumulator sees k ascending.
+    auto step = [&](int k, const T* av) {
+      T bv[TN];
+      const T* brow = b + k * N;
+      if constexpr (VB) {
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; q += W) vec16<T>::get(brow + col(q), &bv[q]);
+      } else {
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; ++q) bv[q] = brow[col(q)];
+      }
+WP_TILE_UNROLL
+      for (int r = 0; r < TM; ++r)
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; ++q) acc[r][q] = fma_(av[r], bv[q], acc[r][q]);
+    };
+    if constexpr (VA) {
+      // W k-steps per vector read of each of the TM rows of A.
+WP_TILE_UNROLL_N(4)
+      for (int k0 = 0; k0 < K; k0 += W) {
+        T aw[TM][W];
+WP_TILE_UNROLL
+        for (int r = 0; r < TM; ++r) vec16<T>::get(a + (ur + RU * r) * K + k0, aw[r]);
+WP_TILE_UNROLL
+        for (int w = 0; w < W; ++w) {
+          T av[TM];
+WP_TILE_UNROLL
+          for (int r = 0; r < TM; ++r) av[r] = aw[r][w];
+          step(k0 + w, av);
+        }
+      }
+    } else {
+WP_TILE_UNROLL_N(8)
+      for (int k = 0; k < K; ++k) {
+        T av[TM];
+WP_TILE_UNROLL
+        for (int r = 0; r < TM; ++r) av[r] = a[(ur + RU * r) * K + k];
+        step(k, av);
+      }
+    }
+WP_TILE_UNROLL
+    for (int r = 0; r < TM; ++r) {
+      T* crow = c + (ur + RU * r) * N;
+      if constexpr (VB) {
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; q += W) vec16<T>::put(crow + col(q), &acc[r][q]);
+      } else {
+WP_TILE_UNROLL
+        for (int q = 0; q < TN; ++q) crow[col(q)] = acc[r][q];
+      }
+    }
+  }
+}
+
+template <bool Acc, typename T, int M, int K, int N>
+WP_FN void matmul(const tile_t<T, M, N>& c, const tile_t<T, M, K>& a, const tile_t<T, K, N>& b) {
+  typedef mm_plan<T, M, K, N> P;
+  if constexpr (!P::BLOCKED) {
+    matmul_simple<Acc, T, M, K, N>(c.data, a.data, b.data);
+  } else if constexpr (P::VA || P::VB) {
+    // The emitter's slots are 16-byte aligned (tile_slot_end); a tile made over another
+    // pointer takes the scalar accesses. One uniform test per call.
+    if (aligned16(a.data) && aligned16(b.data) && aligned16(c.data))
+      matmul_blocked<Acc, true, T, M, K, N>(c.data, a.data, b.data);
+    else
+      matmul_blocked<Acc, false, T, M, K, N>(c.data, a.data, b.data);
+  } else {
+    matmul_blocked<Acc, false, T, M, K, N>(c.data, a.data, b.data);
   }
   __syncthreads();
 }

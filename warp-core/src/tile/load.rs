@@ -4,9 +4,11 @@
 //! element `(o0 + i, o1 + j)`. A coordinate outside the array on any axis (negative, or at
 //! least the extent) reads as `T`'s zero (all bits zero, C++'s `T{}`), and a store to it is
 //! skipped: Warp's `bounds_check=True` semantics, where only `c >= shape` is checked, extended
-//! to negative coordinates. Neither is a fault. Every in-bounds access goes through the view's
-//! checked [`ArrayView::load`]/[`ArrayView::store`], so a corrupt view still faults cleanly and
-//! the runtime's race check sees every store. Elements are visited in row-major order, so the
+//! to negative coordinates. Neither is a fault. Every in-bounds store goes through the view's
+//! checked [`ArrayView::store`], so the runtime's race check sees every store; a load of a tile
+//! wholly inside the view is checked once for the tile and read row by row (the same elements
+//! and the same outcome: the per-element check is against the shape only), otherwise each
+//! in-bounds element through [`ArrayView::load`]. Elements are visited in row-major order, so the
 //! first fault (if any) is that of the first element in that order.
 
 use bytemuck::Zeroable;
@@ -27,6 +29,14 @@ pub(super) fn coord<O: IndexInt>(o: O, i: usize, extent: usize) -> Option<usize>
     }
 }
 
+/// The first coordinate of an axis the whole tile lies inside: `o` and `o + n - 1` both in
+/// `0..extent` (`n >= 1`), so every coordinate of the tile on that axis is.
+#[inline(always)]
+fn inside<O: IndexInt>(o: O, n: usize, extent: usize) -> Option<usize> {
+    let c = coord(o, 0, extent)?;
+    coord(o, n - 1, extent).map(|_| c)
+}
+
 /// A rank-1 tile read from `a` at offset `o` (`tile_load(a, o)`): element `i` is `a[o + i]`,
 /// or zero where `o + i` is outside the array.
 #[inline]
@@ -38,6 +48,28 @@ pub fn load1<T: Copy + Zeroable, const N0: usize, O: IndexInt>(
     let mut t = Tile1 {
         data: [T::zeroed(); N0],
     };
+    // The fast path: the whole tile inside the array (one check), then no check per element.
+    // Not weaker than the checked path: `ArrayView::load` checks an index only against the
+    // shape, which the tile-wide check already proves for every element, and loads are not
+    // logged (the race check sees stores only).
+    if N0 > 0 {
+        if let Some(c) = inside(o, N0, n) {
+            let [s] = a.strides();
+            // SAFETY: c..c + N0 are in bounds (checked above), so each pointer is live and aligned
+            // (`ArrayView::new`'s contract); with stride 1 they are one run of N0 elements.
+            unsafe {
+                let p = a.ptr_unchecked(c);
+                if s == 1 {
+                    std::ptr::copy_nonoverlapping(p, t.data.as_mut_ptr(), N0);
+                } else {
+                    for (i, d) in t.data.iter_mut().enumerate() {
+                        *d = p.offset(i as isize * s).read();
+                    }
+                }
+            }
+            return Ok(t);
+        }
+    }
     for (i, d) in t.data.iter_mut().enumerate() {
         if let Some(c) = coord(o, i, n) {
             *d = a.load(c)?;
@@ -58,6 +90,30 @@ pub fn load2<T: Copy + Zeroable, const N0: usize, const N1: usize, O0: IndexInt,
     let mut t = Tile2 {
         data: [[T::zeroed(); N1]; N0],
     };
+    // The fast path, as `load1`'s: the whole tile inside (one check per axis), then rows read
+    // directly, as one copy each when the innermost stride is 1.
+    if N0 > 0 && N1 > 0 {
+        if let (Some(c0), Some(c1)) = (inside(o0, N0, n0), inside(o1, N1, n1)) {
+            let [s0, s1] = a.strides();
+            // SAFETY: every (c0 + i, c1 + j) of the tile is in bounds (checked above), so each
+            // pointer is live and aligned (`ArrayView::new`'s contract); with s1 == 1 a row is
+            // one run of N1 elements.
+            unsafe {
+                let p = a.ptr_unchecked((c0, c1));
+                for (i, row) in t.data.iter_mut().enumerate() {
+                    let r = p.offset(i as isize * s0);
+                    if s1 == 1 {
+                        std::ptr::copy_nonoverlapping(r, row.as_mut_ptr(), N1);
+                    } else {
+                        for (j, d) in row.iter_mut().enumerate() {
+                            *d = r.offset(j as isize * s1).read();
+                        }
+                    }
+                }
+            }
+            return Ok(t);
+        }
+    }
     for (i, row) in t.data.iter_mut().enumerate() {
         let Some(c0) = coord(o0, i, n0) else { continue };
         for (j, d) in row.iter_mut().enumerate() {
@@ -183,6 +239,60 @@ mod tests {
         let t: Tile2<f64, 2, 2> = load2(&z, 0, 0).unwrap();
         assert_eq!(t.data, [[0.0; 2]; 2]);
         store2(&z, 0, 0, &t).unwrap();
+    }
+
+    /// A view with the given strides (elements) over `data`.
+    fn strided<T: Copy, const N: usize>(
+        data: &mut [T],
+        shape: [usize; N],
+        strides: [isize; N],
+    ) -> ArrayView<T, N> {
+        // SAFETY: each caller's shape and strides stay inside `data`, which outlives the view.
+        unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
+    }
+
+    /// Every element of a tile read through the fully-inside fast path (and through the
+    /// per-element path where the tile overhangs), for contiguous rows, padded rows, a strided
+    /// innermost axis and reversed rows, is the element the plain definition names.
+    #[test]
+    fn fast_path_loads_equal_the_definition() {
+        let mut d: Vec<i32> = (0..400).collect();
+        let base = d.as_mut_ptr();
+        for (shape, strides, off) in [
+            ([6usize, 10usize], [10isize, 1isize], 0usize),
+            ([6, 10], [13, 1], 0),
+            ([6, 10], [31, 3], 0),
+            ([6, 10], [-20, 1], 100),
+        ] {
+            // SAFETY: every index below stays inside `d` (offsets 0..=393).
+            let a = unsafe { ArrayView::new(base.add(off), shape, strides, "k", "a") };
+            let at = |c0: i64, c1: i64| -> i32 {
+                if (0..6).contains(&c0) && (0..10).contains(&c1) {
+                    (off as isize + c0 as isize * strides[0] + c1 as isize * strides[1]) as i32
+                } else {
+                    0
+                }
+            };
+            for (o0, o1) in [(0i64, 0i64), (2, 3), (3, 7), (-1, 2), (4, 0), (0, 9)] {
+                let t: Tile2<i32, 3, 4> = load2(&a, o0, o1).unwrap();
+                for i in 0..3 {
+                    for j in 0..4 {
+                        assert_eq!(
+                            t.data[i][j],
+                            at(o0 + i as i64, o1 + j as i64),
+                            "{shape:?} {strides:?} at ({o0}, {o1}), element ({i}, {j})"
+                        );
+                    }
+                }
+            }
+            let r = strided(&mut d[..], [40], [strides[1].abs() * 3]);
+            let t: Tile1<i32, 5> = load1(&r, 7).unwrap();
+            let s = strides[1].abs() * 3;
+            assert_eq!(
+                t.data,
+                std::array::from_fn(|i| ((7 + i as isize) * s) as i32)
+            );
+        }
     }
 
     /// A write log that refuses every write: each store that reaches the view's checked path

@@ -5,6 +5,7 @@
 // Script (argv[1]), one command per line:
 //   arr KIND SLOT N0 [N1] HEX   an array argument (KIND f1 f2 d1 d2 i1: f32 / f64 / i32, rank
 //                               1 or 2), row-major and contiguous; HEX its bytes ('-': none)
+//   strides KIND SLOT S0 [S1]   the array's strides now (bytes; its bytes must cover them)
 //   off O0 O1 O2 O3             the offsets (i64) the next run uses
 //   scal HEX HEX HEX            three f32 scalars (bit patterns, 8 hex digits each)
 //   run KERNEL                  one block of WP_TILE_BLOCK_DIM threads; prints `out HEX` (what
@@ -29,7 +30,7 @@ struct args_t {
   wp::array_t<f32, 1> f1[2];
   wp::array_t<f32, 2> f2[3];
   wp::array_t<f64, 1> d1[1];
-  wp::array_t<f64, 2> d2[2];
+  wp::array_t<f64, 2> d2[3];
   wp::array_t<i32, 1> i1[2];
   i64 o[4];
   f32 s[3];
@@ -41,7 +42,7 @@ struct args_t {
 /// A block's shared memory (static storage: the emulator runs one block at a time). Each
 /// kernel carves its slots from the start in the same order in every thread, as the emitter's
 /// constant offsets will.
-alignas(16) static unsigned char smem[64 * 1024];
+alignas(16) static unsigned char smem[128 * 1024];
 
 template <typename Tile>
 Tile slot_at(size_t& at) {
@@ -277,6 +278,74 @@ static void k_matmul_f64(args_t a) {
   dump(a, at, tp);
 }
 
+/// The rank-2 f32 or f64 arguments.
+template <typename T>
+static const wp::array_t<T, 2>* arrays2(const args_t& a);
+template <>
+const wp::array_t<f32, 2>* arrays2<f32>(const args_t& a) { return a.f2; }
+template <>
+const wp::array_t<f64, 2>* arrays2<f64>(const args_t& a) { return a.d2; }
+template <typename T>
+static const wp::array_t<T, 1>* arrays1(const args_t& a);
+template <>
+const wp::array_t<f32, 1>* arrays1<f32>(const args_t& a) { return a.f1; }
+template <>
+const wp::array_t<f64, 1>* arrays1<f64>(const args_t& a) { return a.d1; }
+
+/// `c = a b` and `c2 += a b` of M x K and K x N tiles loaded from arrays 0 and 1 (at (0, 0)),
+/// c2 loaded from array 2; outputs both. With `Mis` the tiles start 4 bytes past a 16-byte
+/// boundary (the matmul's and the loads' scalar fallbacks).
+template <typename T, int M, int K, int N, bool Mis>
+static void k_mm(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  const int sh = Mis ? 1 : 0;
+  auto sa = SLOT(tile_t<T, M * K + 1>);
+  auto sb = SLOT(tile_t<T, K * N + 1>);
+  auto sp = SLOT(tile_t<T, M * N + 1>);
+  auto sc = SLOT(tile_t<T, M * N + 1>);
+  tile_t<T, M, K> ta(sa.data + sh);
+  tile_t<T, K, N> tb(sb.data + sh);
+  tile_t<T, M, N> tp(sp.data + sh), tc(sc.data + sh);
+  const wp::array_t<T, 2>* arr = arrays2<T>(a);
+  wp::tile_load(ta, arr[0], 0, 0, &c);
+  wp::tile_load(tb, arr[1], 0, 0, &c);
+  wp::tile_load(tc, arr[2], 0, 0, &c);
+  wp::tile_matmul(tp, ta, tb);
+  wp::tile_matmul_acc(tc, ta, tb);
+  size_t at = 0;
+  dump(a, at, tp);
+  dump(a, at, tc);
+}
+
+/// A N0 x N1 tile of T loaded from rank-2 array 0 at (o0, o1) and stored into array 1 at
+/// (o2, o3); outputs the tile (the caller dumps array 1).
+template <typename T, int N0, int N1>
+static void k_ld2(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<T, N0, N1>);
+  const wp::array_t<T, 2>* arr = arrays2<T>(a);
+  wp::tile_load(t, arr[0], a.o[0], a.o[1], &c);
+  wp::tile_store(arr[1], a.o[2], a.o[3], t, &c);
+  size_t at = 0;
+  dump(a, at, t);
+}
+
+/// A rank-1 tile of N0 T loaded from array 0 at o0, stored into array 1 at o1 (the f64
+/// arguments have one rank-1 slot: f64 stores go back into it, at o1).
+template <typename T, int N0>
+static void k_ld1(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<T, N0>);
+  const wp::array_t<T, 1>* arr = arrays1<T>(a);
+  wp::tile_load(t, arr[0], a.o[0], &c);
+  wp::tile_store(arr[sizeof(T) == 4 ? 1 : 0], a.o[1], t, &c);
+  size_t at = 0;
+  dump(a, at, t);
+}
+
 namespace {
 
 struct buffer {
@@ -325,7 +394,7 @@ int run(const char* path) {
     return 2;
   }
   std::map<std::string, buffer> bufs;
-  std::vector<unsigned char> out(64 * 1024);
+  std::vector<unsigned char> out(128 * 1024);
   wp::fault_t fault{};
   wp::u32 flag[2] = {0, 0};
   args_t a{};
@@ -348,6 +417,33 @@ int run(const char* path) {
       {"arg_f32_300", 8},  {"arg_f32_5", 8},    {"arg_f32_2d", 8},   {"arg_i32", 8},
       {"neg", 3 * 160},
   };
+  // The register-blocked matmul's shapes (tests/cuda_tile_host.rs names them mm_T_MxKxN, with
+  // _mis for the misaligned slots).
+#define MM(T, M, K, N)                                                                         \
+  kernels["mm_" #T "_" #M "x" #K "x" #N] = k_mm<T, M, K, N, false>;                           \
+  kernels["mm_" #T "_" #M "x" #K "x" #N "_mis"] = k_mm<T, M, K, N, true>;                     \
+  out_bytes["mm_" #T "_" #M "x" #K "x" #N] = 2 * M * N * sizeof(T);                            \
+  out_bytes["mm_" #T "_" #M "x" #K "x" #N "_mis"] = 2 * M * N * sizeof(T);
+  MM(f32, 64, 16, 64)
+  MM(f32, 32, 12, 24)
+  MM(f32, 24, 7, 20)
+  MM(f32, 12, 5, 9)
+  MM(f32, 16, 8, 6)
+  MM(f64, 16, 8, 16)
+  MM(f64, 8, 6, 10)
+  MM(f64, 64, 8, 64)
+#undef MM
+#define LD(T, N0, N1)                                                                          \
+  kernels["ld2_" #T "_" #N0 "x" #N1] = k_ld2<T, N0, N1>;                                      \
+  out_bytes["ld2_" #T "_" #N0 "x" #N1] = N0 * N1 * sizeof(T);
+  LD(f32, 4, 8)
+  LD(f32, 3, 12)
+  LD(f64, 3, 4)
+#undef LD
+  kernels["ld1_f32_64"] = k_ld1<f32, 64>;
+  out_bytes["ld1_f32_64"] = 64 * 4;
+  kernels["ld1_f64_9"] = k_ld1<f64, 9>;
+  out_bytes["ld1_f64_9"] = 9 * 8;
   std::string line;
   while (std::getline(in, line)) {
     std::istringstream ss(line);
@@ -370,6 +466,17 @@ int run(const char* path) {
       else if (kind == "d1") bind(a.d1[slot], b, shape, arg);
       else if (kind == "d2") bind(a.d2[slot], b, shape, arg);
       else if (kind == "i1") bind(a.i1[slot], b, shape, arg);
+      else return 2;
+    } else if (cmd == "strides") {
+      std::string kind;
+      int slot;
+      i64 st[2] = {0, 0};
+      ss >> kind >> slot >> st[0];
+      if (kind[1] == '2') ss >> st[1];
+      if (kind == "f1") a.f1[slot].strides[0] = st[0];
+      else if (kind == "f2") a.f2[slot].strides[0] = st[0], a.f2[slot].strides[1] = st[1];
+      else if (kind == "d1") a.d1[slot].strides[0] = st[0];
+      else if (kind == "d2") a.d2[slot].strides[0] = st[0], a.d2[slot].strides[1] = st[1];
       else return 2;
     } else if (cmd == "off") {
       ss >> a.o[0] >> a.o[1] >> a.o[2] >> a.o[3];
