@@ -29,6 +29,7 @@ backend_tests!(
     transpose_and_broadcast,
     reduce_with_functions,
     atomic_add_of_tiles,
+    scans,
 );
 
 const TM: usize = 16;
@@ -555,6 +556,89 @@ fn atomic_add_of_tiles(dev: &wp::Device) {
     assert_eq!(olds[0], want.iter().map(|&n| tri(n)).sum::<i32>());
     let ftri: i32 = (0..5).map(|c| (c + 2) * tri(blocks as i32)).sum();
     assert_eq!(olds[1], ftri);
+}
+
+#[wp::kernel]
+fn k_scans(x: Array<f32>, ix: Array<i32>, out: Array<f32, 2>, iout: Array<i32, 2>) {
+    let t = tile_load::<100>(x, 0);
+    tile_store(
+        out,
+        tile_broadcast::<1, 100>(tile_scan_inclusive(t)),
+        (0, 0),
+    );
+    tile_store(
+        out,
+        tile_broadcast::<1, 100>(tile_scan_max_inclusive(t)),
+        (1, 0),
+    );
+    tile_store(
+        out,
+        tile_broadcast::<1, 100>(tile_scan_min_inclusive(t)),
+        (2, 0),
+    );
+    let it = tile_load::<100>(ix, 0);
+    tile_store(
+        iout,
+        tile_broadcast::<1, 100>(tile_scan_exclusive(it)),
+        (0, 0),
+    );
+    tile_store(
+        iout,
+        tile_broadcast::<1, 100>(tile_scan_inclusive(it)),
+        (1, 0),
+    );
+}
+
+/// Inclusive and exclusive scans (integers: exact prefix sums for every block size), running
+/// maxima and minima, and float sums in the documented chunked order: a large value then ones,
+/// where the order decides the bits.
+fn scans(dev: &wp::Device) {
+    let xd: Vec<f32> = (0..100)
+        .map(|k| {
+            if k == 0 {
+                1e8
+            } else {
+                ((k * 37 % 11) as f32) - 5.0
+            }
+        })
+        .collect();
+    let id: Vec<i32> = (0..100).map(|k| (k * 7919 % 201) - 100).collect();
+    let (x, ix) = (arr(&xd, dev), arr(&id, dev));
+    let out = zeros::<f32, 2>((3, 100), dev);
+    let iout = zeros::<i32, 2>((2, 100), dev);
+    for bd in [1, 7, 32, 128] {
+        wp::launch_tiled(k_scans, 1, (&x, &ix, &out, &iout), bd, dev).unwrap();
+        let (o, io) = (host(&out), host(&iout));
+        // The documented order on the host: chunks of ceil(100 / bd), their running values,
+        // then the prefixes of their totals in lane order.
+        let c = 100usize.div_ceil(bd);
+        let mut want = vec![0f32; 100];
+        let mut prefix: Option<f32> = None;
+        for start in (0..100).step_by(c) {
+            let mut r = xd[start];
+            for e in start..(start + c).min(100) {
+                if e > start {
+                    r += xd[e];
+                }
+                want[e] = prefix.map_or(r, |p| p + r);
+            }
+            prefix = Some(prefix.map_or(r, |p| p + r));
+        }
+        assert_eq!(&o[..100], &want[..], "sum scan at block_dim {bd}");
+        let (mut hi, mut lo) = (f32::NEG_INFINITY, f32::INFINITY);
+        for e in 0..100 {
+            hi = hi.max(xd[e]);
+            lo = lo.min(xd[e]);
+            assert_eq!(o[100 + e], hi, "max scan {e} at block_dim {bd}");
+            assert_eq!(o[200 + e], lo, "min scan {e} at block_dim {bd}");
+        }
+        let mut acc = 0i32;
+        for e in 0..100 {
+            assert_eq!(io[e], acc, "exclusive {e} at block_dim {bd}");
+            acc += id[e];
+            assert_eq!(io[100 + e], acc, "inclusive {e} at block_dim {bd}");
+        }
+    }
 }
 
 #[test]

@@ -1016,4 +1016,78 @@ WP_FN void tile_atomic_add(const tile_t<T, N0, N1>& old, const array_t<T, 2>& a,
   __syncthreads();
 }
 
+// ------------------------------------------------------------------------------------------
+// Scans of rank-1 tiles (warp-core/src/tile/scan.rs documents the order; the two must stay the
+// same): lane l runs through its contiguous chunk [l C, (l + 1) C), C = ceil(S / BD); thread 0
+// folds the chunk totals in lane order into prefixes; each element then takes op(prefix, r)
+// (chunk 0: r alone).
+// ------------------------------------------------------------------------------------------
+
+namespace tile_detail {
+
+template <typename T, int N, typename Op>
+WP_FN void scan_inclusive(const tile_t<T, N>& out, const tile_t<T, N>& a, Op op) {
+  constexpr int C = (N + WP_TILE_BLOCK_DIM - 1) / WP_TILE_BLOCK_DIM;
+  constexpr int CHUNKS = (N + C - 1) / C;
+  WP_TILE_SHARED_ALIGNED T totals[CHUNKS];
+  const int l = (int)threadIdx.x;
+  const int start = l * C;
+  if (l < CHUNKS) {
+    const int end = start + C < N ? start + C : N;
+    T r = a.data[start];
+    out.data[start] = r;
+    for (int e = start + 1; e < end; ++e) {
+      r = op(r, a.data[e]);
+      out.data[e] = r;
+    }
+    totals[l] = r;
+  }
+  __syncthreads();
+  if (l == 0) {
+    // totals[k] becomes the prefix of chunk k + 1.
+    for (int k = 1; k < CHUNKS; ++k) totals[k] = op(totals[k - 1], totals[k]);
+  }
+  __syncthreads();
+  if (l < CHUNKS && l > 0) {
+    const int end = start + C < N ? start + C : N;
+    const T p = totals[l - 1];
+    for (int e = start; e < end; ++e) out.data[e] = op(p, out.data[e]);
+  }
+  __syncthreads();
+}
+
+}  // namespace tile_detail
+
+/// `tile_scan_inclusive(a)`: running sums (`out` a slot of its own).
+template <typename T, int N>
+WP_FN void tile_scan_inclusive(const tile_t<T, N>& out, const tile_t<T, N>& a) {
+  tile_detail::scan_inclusive(out, a, tile_detail::add_op{});
+}
+
+/// `tile_scan_exclusive(a)`: the running sums before each element (zero first).
+template <typename T, int N>
+WP_FN void tile_scan_exclusive(const tile_t<T, N>& out, const tile_t<T, N>& a) {
+  tile_detail::scan_inclusive(out, a, tile_detail::add_op{});
+  // Shift right by one: every thread reads its elements' predecessors, then writes.
+  T keep[(N + WP_TILE_BLOCK_DIM - 1) / WP_TILE_BLOCK_DIM];
+  int k = 0;
+  for (int e = (int)threadIdx.x; e < N; e += WP_TILE_BLOCK_DIM) keep[k++] = e > 0 ? out.data[e - 1] : T{};
+  __syncthreads();
+  k = 0;
+  for (int e = (int)threadIdx.x; e < N; e += WP_TILE_BLOCK_DIM) out.data[e] = keep[k++];
+  __syncthreads();
+}
+
+/// `tile_scan_max_inclusive(a)`: running maxima.
+template <typename T, int N>
+WP_FN void tile_scan_max_inclusive(const tile_t<T, N>& out, const tile_t<T, N>& a) {
+  tile_detail::scan_inclusive(out, a, tile_detail::max_op{});
+}
+
+/// `tile_scan_min_inclusive(a)`: running minima.
+template <typename T, int N>
+WP_FN void tile_scan_min_inclusive(const tile_t<T, N>& out, const tile_t<T, N>& a) {
+  tile_detail::scan_inclusive(out, a, tile_detail::min_op{});
+}
+
 }  // namespace wp

@@ -106,6 +106,10 @@ impl Emitter<'_> {
                     }
                     "tile" => format!("wp::tile({d}, {});", a[0]),
                     "tile_transpose" => format!("wp::tile_transpose({d}, {});", a[0]),
+                    "tile_scan_inclusive"
+                    | "tile_scan_exclusive"
+                    | "tile_scan_max_inclusive"
+                    | "tile_scan_min_inclusive" => format!("wp::{}({d}, {});", builtin.name, a[0]),
                     "tile_broadcast" => format!("wp::tile_broadcast({d}, {});", a[0]),
                     "tile_atomic_add" => {
                         e.section("atomic");

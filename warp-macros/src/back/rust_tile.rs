@@ -60,6 +60,14 @@ impl RustEmitter<'_> {
                 let (x, y) = (&v[0], &v[1]);
                 quote_spanned!(sp=> __wp::tile::matmul(&#x, &#y))
             }
+            "tile_scan_inclusive"
+            | "tile_scan_exclusive"
+            | "tile_scan_max_inclusive"
+            | "tile_scan_min_inclusive" => {
+                let f = format_ident!("{}", &b.name[5..]);
+                let x = &v[0];
+                quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
+            }
             "tile_transpose" => {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::transpose(&#x))

@@ -52,6 +52,11 @@ pub(super) const ROWS: &[Builtin] = rows! {
         no_tangent, cooperative;
     // `tile_reduce(f, t)` with a binary builtin or `add`/`mul`, in the reductions' order.
     "tile_reduce": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    // Scans of 1-D tiles, in an order both backends share (warp-core's `tile::scan`).
+    "tile_scan_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_scan_exclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_scan_max_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
+    "tile_scan_min_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
     // Reductions to a `Tile<T, 1>` (`Tile<i32, 1>` for the arg-extrema), in the GPU's order.
     "tile_sum": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_min": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;

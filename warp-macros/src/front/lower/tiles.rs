@@ -226,6 +226,30 @@ impl Lowerer {
                     span,
                 )
             }
+            "tile_scan_inclusive"
+            | "tile_scan_exclusive"
+            | "tile_scan_max_inclusive"
+            | "tile_scan_min_inclusive" => {
+                let [t] = args[..] else {
+                    return err(span, format!("`{name}` takes one tile"));
+                };
+                let t = self.tile_arg(name, t)?;
+                let ty = self.ty(t);
+                if !matches!(&ty, Ty::Tile(_, d) if d.len() == 1) {
+                    return err(
+                        span,
+                        format!("`{name}` scans a one-dimensional tile, found `{ty}`"),
+                    );
+                }
+                self.def(
+                    Op::Builtin {
+                        builtin: row,
+                        args: vec![t],
+                    },
+                    ty,
+                    span,
+                )
+            }
             "tile_map" => self.tile_map(&args, span)?,
             "tile_reduce" => self.tile_reduce(&args, span)?,
             "tile_transpose" => self.tile_transpose(row, &args, span)?,
