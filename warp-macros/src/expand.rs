@@ -253,7 +253,12 @@ fn kernel_impl(
     } else {
         TokenStream::new()
     };
-    let tile_info = tiled::info(f);
+    // The lane plan of a tiled kernel, made once for its `TileInfo` and its CPU entry.
+    let block = f
+        .tiled
+        .as_ref()
+        .map(|_| crate::back::rust_tile::BlockPrinter::new(f));
+    let tile_info = tiled::info(f, block.as_ref());
     let shape_checks = tiled::shape_checks(f);
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
@@ -313,8 +318,8 @@ fn kernel_impl(
         .map(|k| quote::format_ident!("__grad{}", k))
         .collect();
 
-    let run_cpu = match f.tiled {
-        Some(_) => tiled::run_cpu(f, &pvars, &pnames_plain, &tys, tid_setup.as_ref()),
+    let run_cpu = match &block {
+        Some(block) => tiled::run_cpu(f, block, &pvars, &pnames_plain, &tys, tid_setup.as_ref()),
         None => quote! {
                     fn run_cpu(
                         __params: &__wp::CpuParamsOf<Self>,

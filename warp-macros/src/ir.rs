@@ -399,7 +399,7 @@ impl Function {
 }
 
 /// Visits every statement of a block, depth first.
-pub fn walk_stmts<'a>(block: &'a Block, f: &mut dyn FnMut(&'a Stmt)) {
+pub fn walk_stmts<'a>(block: &'a [Stmt], f: &mut dyn FnMut(&'a Stmt)) {
     for s in block {
         f(s);
         match &s.kind {

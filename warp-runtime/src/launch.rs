@@ -77,8 +77,9 @@ impl From<(usize, usize, usize, usize)> for Dim {
 }
 
 /// The most threads a block of a tiled launch may have: what every CUDA GPU allows, and
-/// what `warp_core::block::PerLane` holds on the CPU.
-pub const MAX_BLOCK_DIM: usize = 1024;
+/// what `warp_core::block::PerLane` holds on the CPU (warp-core's constant, so the two cannot
+/// drift).
+pub use warp_core::block::MAX_BLOCK_DIM;
 
 /// Checks that the launch fits the kind of kernel `K` is: `block_dim: None` for [`launch`],
 /// `Some(threads per block)` for [`launch_tiled`]. A tiled kernel takes only tiled launches,

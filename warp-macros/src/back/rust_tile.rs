@@ -211,8 +211,7 @@ impl<'a> BlockPrinter<'a> {
         if run.is_empty() {
             return TokenStream::new();
         }
-        let owned: Vec<Stmt> = run.iter().map(|s| (*s).clone()).collect();
-        let (vars, set) = region_vars(&owned);
+        let (vars, set) = region_vars(run);
         let kept: Vec<VarId> = vars.into_iter().filter(|v| self.is_per_lane(*v)).collect();
         let loads = kept.iter().map(|v| {
             let (x, pl) = (self.em.var(*v), self.per_lane(*v));

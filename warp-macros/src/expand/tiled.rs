@@ -12,9 +12,13 @@ use quote::quote;
 /// the frame estimate must not fall short, and kernel values are at most a 4x4 f64 matrix.
 const DEFERRED_LANE_BYTES: usize = 128;
 
-/// `KernelInfo::tile`: `None` for an ordinary kernel.
-pub(super) fn info(f: &Function) -> TokenStream {
-    let Some(tiled) = &f.tiled else {
+/// A tiled kernel's block printer (its lane plan), made once for the parts below; why there is
+/// none when the plan refuses the kernel.
+pub(super) type Block<'a> = Result<BlockPrinter<'a>, String>;
+
+/// `KernelInfo::tile`: `None` for an ordinary kernel (`block` is `None` then).
+pub(super) fn info(f: &Function, block: Option<&Block>) -> TokenStream {
+    let (Some(tiled), Some(block)) = (&f.tiled, block) else {
         return quote!(::core::option::Option::None);
     };
     let width = match &tiled.width {
@@ -31,7 +35,7 @@ pub(super) fn info(f: &Function) -> TokenStream {
         .into_iter()
         .map(|v| ty_tokens(f.ty(v)).expect("a tile type"))
         .collect();
-    let per_lane: Vec<TokenStream> = match BlockPrinter::new(f) {
+    let per_lane: Vec<TokenStream> = match block {
         Ok(p) => (0..f.vars.len())
             .filter(|v| p.plan.storage[*v] == Storage::PerLane)
             .map(|v| match ty_tokens(&f.vars[v].ty) {
@@ -82,12 +86,13 @@ pub(super) fn shape_checks(f: &Function) -> TokenStream {
 /// `__block` (the lane plan's body).
 pub(super) fn run_cpu(
     f: &Function,
+    block: &Block,
     pvars: &[TokenStream],
     pnames: &[syn::Ident],
     tys: &[&syn::Type],
     tid_setup: Option<&TokenStream>,
 ) -> TokenStream {
-    let body = match BlockPrinter::new(f) {
+    let body = match block {
         Ok(p) => p.body(),
         Err(why) => {
             let msg = format!("`{}`: {why}", f.name);

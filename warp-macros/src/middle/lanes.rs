@@ -17,7 +17,7 @@
 
 use crate::ir::*;
 use crate::valid::Uniformity;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 
 /// Where a variable of a tiled kernel lives on the CPU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -276,29 +276,16 @@ impl Planner<'_> {
 
 /// The variables the statements of a lane region read or assign (nested blocks included), in
 /// first-occurrence order, and which of them it assigns.
-pub fn region_vars(b: &[Stmt]) -> (Vec<VarId>, HashSet<VarId>) {
+pub fn region_vars(b: &[&Stmt]) -> (Vec<VarId>, HashSet<VarId>) {
     let mut order = Vec::new();
-    let mut seen = HashMap::new();
+    let mut seen = HashSet::new();
     let mut set = HashSet::new();
     let mut note = |v: VarId, order: &mut Vec<VarId>| {
-        if seen.insert(v, ()).is_none() {
+        if seen.insert(v) {
             order.push(v);
         }
     };
-    fn walk(b: &[Stmt], f: &mut dyn FnMut(&Stmt)) {
-        for s in b {
-            f(s);
-            match &s.kind {
-                StmtKind::If { then, els, .. } => {
-                    walk(then, f);
-                    walk(els, f);
-                }
-                StmtKind::For { body, .. } | StmtKind::Loop { body } => walk(body, f),
-                _ => {}
-            }
-        }
-    }
-    walk(b, &mut |s| {
+    let mut visit = |s: &Stmt| {
         s.kind.for_each_read(&mut |v| note(v, &mut order));
         match &s.kind {
             StmtKind::Assign { dst: v, .. }
@@ -310,6 +297,9 @@ pub fn region_vars(b: &[Stmt]) -> (Vec<VarId>, HashSet<VarId>) {
             }
             _ => {}
         }
-    });
+    };
+    for s in b {
+        walk_stmts(std::slice::from_ref(*s), &mut visit);
+    }
     (order, set)
 }

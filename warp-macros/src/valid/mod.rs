@@ -59,7 +59,6 @@ pub fn validate(f: &Function, options: Options) -> Result<Valid, Vec<syn::Error>
     wellformed::check(f, &mut errors);
     let same_shape = options::check(f, &options, &mut errors);
     uniformity::check_cooperative(f, &mut errors);
-    uniformity::check_tile_arguments(f, &mut errors);
     if errors.is_empty() {
         Ok(Valid {
             same_shape,

@@ -82,7 +82,8 @@ impl Uniformity {
     }
 }
 
-/// A block-cooperative call under divergent control flow is an error at the call.
+/// A block-cooperative call under divergent control flow is an error at the call, and so is
+/// one whose scalar arguments differ between the block's threads ([`check_tile_arguments`]).
 pub(super) fn check_cooperative(f: &Function, errors: &mut Vec<syn::Error>) {
     let mut any = false;
     walk_stmts(&f.body, &mut |s| any |= f.is_cooperative(s));
@@ -126,16 +127,15 @@ pub(super) fn check_cooperative(f: &Function, errors: &mut Vec<syn::Error>) {
             errors.push(e);
         }
     });
+    if f.tiled.is_some() {
+        check_tile_arguments(f, &u, errors);
+    }
 }
 
 /// A tile operation's scalar arguments (offsets, `tile_arange`'s bounds) must be the same in
 /// every thread of the block: the block runs the operation once. (`tile(x)` takes each
 /// thread's own value.)
-pub(super) fn check_tile_arguments(f: &Function, errors: &mut Vec<syn::Error>) {
-    if f.tiled.is_none() {
-        return;
-    }
-    let u = Uniformity::of(f);
+fn check_tile_arguments(f: &Function, u: &Uniformity, errors: &mut Vec<syn::Error>) {
     walk_stmts(&f.body, &mut |s| {
         let StmtKind::Assign {
             op: Op::Builtin { builtin, args },

@@ -484,31 +484,47 @@ impl Lowerer {
         ))
     }
 
-    fn tile_store(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+    /// The arguments of a tile written into an array (`tile_store`, `tile_atomic_add`):
+    /// `(array, tile, offsets)`, the offsets optional; the tile's element and rank must be the
+    /// array's. Returns the argument variables and the tile's type.
+    fn array_tile_offsets(
+        &mut self,
+        name: &str,
+        args: &[&Expr],
+        span: Span,
+    ) -> R<(Vec<VarId>, Ty)> {
         if !(2..=3).contains(&args.len()) {
             return err(
                 span,
-                "`tile_store` takes an array, a tile and the offsets: `tile_store(a, t, (i, j))`",
+                format!("`{name}` takes an array, a tile and the offsets: `{name}(a, t, (i, j))`"),
             );
         }
-        let (a, elem, ndim) = self.tile_array("tile_store", args[0])?;
-        let t = self.tile_arg("tile_store", args[1])?;
+        let (a, elem, ndim) = self.tile_array(name, args[0])?;
+        let t = self.tile_arg(name, args[1])?;
         let tt = self.ty(t);
         let (te, td) = tile_parts(&tt).expect("a tile");
         if *te != elem {
             return err(
                 args[1].span(),
-                format!("`tile_store`: a `{tt}` into an array of `{elem}`"),
+                format!("`{name}`: a `{tt}` into an array of `{elem}`"),
             );
         }
         if td.len() != ndim as usize {
             return err(
                 args[1].span(),
-                format!("`tile_store`: a tile of {} dimension(s) into an array of {ndim}; their ranks must agree", td.len()),
+                format!(
+                    "`{name}`: a tile of {} dimension(s) into an array of {ndim}; their ranks must agree",
+                    td.len()
+                ),
             );
         }
         let mut vars = vec![a, t];
-        vars.extend(self.offsets("tile_store", args.get(2).copied(), ndim, span)?);
+        vars.extend(self.offsets(name, args.get(2).copied(), ndim, span)?);
+        Ok((vars, tt))
+    }
+
+    fn tile_store(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        let (vars, _) = self.array_tile_offsets("tile_store", args, span)?;
         Ok(self.def(
             Op::Builtin {
                 builtin: row,
@@ -859,30 +875,14 @@ impl Lowerer {
 
     /// `tile_atomic_add(a, t, offsets)`: the tile of the old values.
     fn tile_atomic_add(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
-        if !(2..=3).contains(&args.len()) {
-            return err(
-                span,
-                "`tile_atomic_add` takes an array, a tile and the offsets: `tile_atomic_add(a, t, (i, j))`",
-            );
-        }
-        let (a, elem, ndim) = self.tile_array("tile_atomic_add", args[0])?;
-        let t = self.tile_arg("tile_atomic_add", args[1])?;
-        let tt = self.ty(t);
-        let (te, td) = tile_parts(&tt).expect("a tile");
-        if *te != elem || td.len() != ndim as usize {
-            return err(
-                args[1].span(),
-                format!("`tile_atomic_add`: a `{tt}` into an array of `{elem}` with {ndim} dimension(s)"),
-            );
-        }
-        if !row.classes.iter().any(|c| c.admits(&elem)) {
+        let (vars, tt) = self.array_tile_offsets("tile_atomic_add", args, span)?;
+        let elem = tile_parts(&tt).expect("a tile").0;
+        if !row.classes.iter().any(|c| c.admits(elem)) {
             return err(
                 args[0].span(),
                 format!("`tile_atomic_add` adds i32, u32, i64, u64, f32 or f64, not `{elem}`"),
             );
         }
-        let mut vars = vec![a, t];
-        vars.extend(self.offsets("tile_atomic_add", args.get(2).copied(), ndim, span)?);
         Ok(self.def(
             Op::Builtin {
                 builtin: row,
