@@ -30,6 +30,8 @@ backend_tests!(
     reduce_with_functions,
     atomic_add_of_tiles,
     scans,
+    backward_through_tiles_is_refused,
+    shared_memory_beyond_48k_and_beyond_the_device,
 );
 
 const TM: usize = 16;
@@ -638,6 +640,79 @@ fn scans(dev: &wp::Device) {
             acc += id[e];
             assert_eq!(io[100 + e], acc, "inclusive {e} at block_dim {bd}");
         }
+    }
+}
+
+/// Backward through a kernel with tiles is an error that names it and says why (tile
+/// adjoints are not built yet): never a silent zero gradient.
+fn backward_through_tiles_is_refused(dev: &wp::Device) {
+    let a = wp::Array::<f32, 2>::full((8, 8), 1.0, dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let b = zeros::<f32, 2>((8, 8), dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch_tiled(k_scale_2d, (1, 1), (&a, &b, 2.0f32), 32, dev).unwrap();
+    }
+    let e = tape.backward(&b).unwrap_err();
+    assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(msg.contains("k_scale_2d") && msg.contains("tile"), "{msg}");
+}
+
+/// 64 KiB of tiles: above the 48 KiB a CUDA kernel gets without opting in.
+#[wp::kernel]
+fn k_big_tile(a: Array<f32, 2>, b: Array<f32, 2>) {
+    let t = tile_load::<128, 128>(a, (0, 0));
+    tile_store(b, t, (0, 0));
+}
+
+/// 256 KiB of tiles: more shared memory than any GPU has per block (227 KiB on an H100).
+#[wp::kernel]
+fn k_huge_tile(a: Array<f32, 2>, b: Array<f32, 2>) {
+    let t = tile_load::<256, 256>(a, (0, 0));
+    tile_store(b, t, (0, 0));
+}
+
+/// A kernel with more than 48 KiB of tiles runs (the launch opts in); one with more than the
+/// device allows is an error at load naming the kernel and the sizes, not a failed launch. The
+/// CPU runs both (its tiles are stack values on the tile pool's big stacks).
+fn shared_memory_beyond_48k_and_beyond_the_device(dev: &wp::Device) {
+    let data: Vec<f32> = (0..256 * 256).map(|k| k as f32).collect();
+    let a = wp::Array::from_slice_shape(&data, (256, 256), dev).unwrap();
+    let b = zeros::<f32, 2>((256, 256), dev);
+    wp::launch_tiled(k_big_tile, 1, (&a, &b), 256, dev).unwrap();
+    let got = host(&b);
+    for i in 0..256 {
+        for j in 0..256 {
+            let want = if i < 128 && j < 128 {
+                data[i * 256 + j]
+            } else {
+                0.0
+            };
+            assert_eq!(got[i * 256 + j], want, "({i}, {j})");
+        }
+    }
+    let r = wp::launch_tiled(k_huge_tile, 1, (&a, &b), 256, dev);
+    if dev.is_cpu() {
+        r.unwrap();
+        assert_eq!(host(&b), data);
+    } else {
+        let e = r.unwrap_err();
+        let msg = crate::chain(&e);
+        assert!(msg.contains("k_huge_tile"), "{msg}");
+        // The tiles' bytes, plus whatever static shared memory the kernel has.
+        let wp::Error::SharedMemory {
+            requested,
+            available,
+            ..
+        } = e
+        else {
+            panic!("expected a shared-memory error, got {msg}")
+        };
+        assert!(requested >= 256 * 256 * 4 && requested > available, "{msg}");
     }
 }
 
