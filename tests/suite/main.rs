@@ -117,6 +117,7 @@ mod scenes;
 mod stability;
 mod streams;
 mod structs;
+mod tile_grad;
 mod tiles;
 mod transforms;
 mod views;

@@ -388,13 +388,16 @@ impl Function {
     /// (a copy or an operator: each thread computes its part of the tile).
     pub fn is_cooperative(&self, s: &Stmt) -> bool {
         match &s.kind {
-            StmtKind::Assign { dst, op, .. } => {
-                self.vars[*dst].ty.is_tile()
-                    || matches!(op, Op::TileMap { .. } | Op::TileReduce { .. })
-                    || matches!(op, Op::Builtin { builtin, .. } if builtin.cooperative)
-            }
+            StmtKind::Assign { dst, op, .. } => self.is_cooperative_op(*dst, op),
             _ => false,
         }
+    }
+
+    /// Whether `dst = op` is cooperative (see [`Function::is_cooperative`]).
+    pub fn is_cooperative_op(&self, dst: VarId, op: &Op) -> bool {
+        self.vars[dst].ty.is_tile()
+            || matches!(op, Op::TileMap { .. } | Op::TileReduce { .. })
+            || matches!(op, Op::Builtin { builtin, .. } if builtin.cooperative)
     }
 }
 

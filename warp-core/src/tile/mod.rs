@@ -25,6 +25,7 @@ use crate::fault::{Fault, FaultKind, KResult};
 use crate::index::IndexInt;
 use crate::ops::FromLiteral;
 
+pub mod adjoint;
 pub mod atomic;
 pub mod load;
 pub mod matmul;

@@ -28,6 +28,9 @@ pub struct CudaAdjoint {
 /// Emits the CUDA adjoint of `f`, or why it cannot.
 pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
     let adj = build(f, Policy::CUDA)?;
+    if f.tiled.is_some() {
+        return Err("tile adjoints on CUDA: in progress".into());
+    }
     let replay = match f.kind {
         FnKind::Func => func_replay(f, file)?,
         FnKind::Kernel => String::new(),
@@ -386,6 +389,9 @@ impl<'a> Printer<'a> {
                     self.adj(*array),
                     self.index(index)
                 )
+            }
+            AKind::TileMapAdj { .. } | AKind::LaneAdj { .. } => {
+                return Err("internal: a tile adjoint outside a tiled kernel".into())
             }
             AKind::RevLoop { body } => {
                 self.line(

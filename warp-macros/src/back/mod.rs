@@ -6,3 +6,4 @@ pub mod cuda_tile;
 pub mod rust;
 pub mod rust_adjoint;
 pub mod rust_tile;
+pub mod rust_tile_adjoint;

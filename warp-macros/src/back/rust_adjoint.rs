@@ -18,7 +18,11 @@ use quote::{format_ident, quote, quote_spanned, ToTokens};
 /// `__tid` and `__FAST`; for a func also `__adj_ret` (the adjoint of its result) and
 /// `__adj_out<k>` (`&mut` adjoints of its value parameters).
 pub fn emit(f: &Function) -> Result<TokenStream, String> {
-    print(&build(f, Policy::CPU)?)
+    let adj = build(f, Policy::CPU)?;
+    if adj.f.tiled.is_some() {
+        return super::rust_tile_adjoint::print(&adj);
+    }
+    print(&adj)
 }
 
 /// The adjoint body of a func with custom gradients `grads` (see `middle::adjoint::custom`).
@@ -30,23 +34,29 @@ fn print(adj: &Adjoint) -> Result<TokenStream, String> {
     let mut fwd = RustEmitter::new(&adj.f);
     // User funcs are called through their replays.
     fwd.replay = true;
-    let p = Printer { fwd, adj };
+    let p = Printer {
+        fwd,
+        adj,
+        per_lane: Vec::new(),
+    };
     let mut out = p.declarations();
     out.extend(p.block(&adj.body)?);
     Ok(out)
 }
 
-struct Printer<'a> {
-    fwd: RustEmitter<'a>,
-    adj: &'a Adjoint,
+pub(super) struct Printer<'a> {
+    pub(super) fwd: RustEmitter<'a>,
+    pub(super) adj: &'a Adjoint,
+    /// A tiled kernel's variables kept per lane (`back::rust_tile_adjoint`); empty otherwise.
+    pub(super) per_lane: Vec<bool>,
 }
 
 impl Printer<'_> {
-    fn f(&self) -> &Function {
+    pub(super) fn f(&self) -> &Function {
         &self.adj.f
     }
 
-    fn var(&self, v: VarId) -> syn::Ident {
+    pub(super) fn var(&self, v: VarId) -> syn::Ident {
         self.fwd.var(v)
     }
 
@@ -57,12 +67,12 @@ impl Printer<'_> {
             .ok_or_else(|| "internal: no such callee".into())
     }
 
-    fn adj(&self, v: VarId) -> syn::Ident {
+    pub(super) fn adj(&self, v: VarId) -> syn::Ident {
         format_ident!("adj_{}", self.var(v))
     }
 
     /// The variables and their adjoints, zero.
-    fn declarations(&self) -> TokenStream {
+    pub(super) fn declarations(&self) -> TokenStream {
         let mut out = TokenStream::new();
         for d in &self.adj.decls {
             let x = self.var(d.var);
@@ -78,11 +88,11 @@ impl Printer<'_> {
         out
     }
 
-    fn block(&self, b: &[AStmt]) -> Result<TokenStream, String> {
+    pub(super) fn block(&self, b: &[AStmt]) -> Result<TokenStream, String> {
         b.iter().map(|s| self.stmt(s)).collect()
     }
 
-    fn stmt(&self, s: &AStmt) -> Result<TokenStream, String> {
+    pub(super) fn stmt(&self, s: &AStmt) -> Result<TokenStream, String> {
         // The user's location, but the macro's hygiene: the generated locals (`__stack`, `__r`,
         // `__tid`) resolve where the macro declared them even when the user's tokens came from
         // another expansion (a func call passed to a `macro_rules!` that writes the kernel).
@@ -187,6 +197,16 @@ impl Printer<'_> {
                 values,
                 grads,
                 faults,
+            } if func.starts_with("adj_tile") => {
+                self.tile_adj_call(func, values, grads, *faults, sp)
+            }
+            AKind::TileMapAdj { f, values, grads } => self.tile_map_adj(*f, values, grads, sp),
+            AKind::LaneAdj { func, lanes, tile } => self.lane_adj(func, *lanes, *tile, sp),
+            AKind::AdjCall {
+                func,
+                values,
+                grads,
+                faults,
             } => {
                 let f = format_ident!("{}", func);
                 let xs = values.iter().map(|a| match a {
@@ -254,7 +274,7 @@ impl Printer<'_> {
     }
 
     /// A temporary or an adjoint as a `&mut` argument; an array's gradient view by value.
-    fn grad_arg(&self, g: &GradArg) -> TokenStream {
+    pub(super) fn grad_arg(&self, g: &GradArg) -> TokenStream {
         match g {
             GradArg::Temp(k) => {
                 let g = temp(*k);
@@ -357,6 +377,6 @@ fn members(path: &[String]) -> TokenStream {
 }
 
 /// The temporary `__g<k>`.
-fn temp(k: usize) -> syn::Ident {
+pub(super) fn temp(k: usize) -> syn::Ident {
     format_ident!("__g{}", k)
 }

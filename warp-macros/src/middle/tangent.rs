@@ -64,7 +64,7 @@ fn untracked_float(t: &Ty) -> bool {
 pub fn build(f: &Function) -> Result<Function, String> {
     // Tile operations have no tangents yet; the rules' arms for them are never reached.
     if f.tiled.is_some() {
-        return Err(crate::middle::adjoint::TILE_ADJOINT.into());
+        return Err(crate::middle::adjoint::TILE_TANGENT.into());
     }
     if f.params.len() * 2 > MAX_PARAMS {
         return Err(format!(

@@ -9,7 +9,7 @@
 //! of its result and of its value parameter `k`), `__FAST` (the launch's thread-owned arrays
 //! cover the grid) and `__tid` (the thread index).
 
-use crate::ir::{Function, Op, RangeSpec, VarId};
+use crate::ir::{Function, Op, RangeSpec, TileFn, VarId};
 use crate::types::Ty;
 use proc_macro2::Span;
 
@@ -265,4 +265,19 @@ pub enum AKind {
     GradClearOwn { array: VarId, index: Index },
     /// Pops a trip count and runs `body` that many times.
     RevLoop { body: Vec<AStmt> },
+    /// The adjoint of `tile_map(f, values..)` with seed `__r` (a tile): on each element,
+    /// the scalar adjoint of `f`, into `grads` (the tiles' adjoints).
+    TileMapAdj {
+        f: TileFn,
+        values: Vec<VarId>,
+        grads: Vec<GradArg>,
+    },
+    /// Between a tile and per-lane values, the block together: `adj_tile_lanes` (the reverse of
+    /// `tile = tile(lanes)`: each lane's adjoint of `lanes` gains its element of `tile`'s
+    /// adjoint) or `adj_untile` (the reverse of `lanes = untile(tile)`: the other way).
+    LaneAdj {
+        func: &'static str,
+        lanes: VarId,
+        tile: VarId,
+    },
 }

@@ -44,9 +44,11 @@ mod replay;
 mod sweep;
 #[cfg(test)]
 mod tests;
+mod tiles;
 
 pub use ir::*;
 pub use replay::replay_of;
+pub use tiles::{is_block_call, is_block_level};
 
 use super::adjoint_prep::without_jumps;
 use crate::ir::*;
@@ -115,21 +117,29 @@ fn grad_params(f: &Function) -> Vec<GradParam> {
 }
 
 /// The adjoint of `f` for a target with `policy`, or why there is none.
-/// Why a tiled kernel has no adjoint (nor tangent) yet.
-pub const TILE_ADJOINT: &str =
-    "uses tiles, and backward through tile operations is not supported yet";
+/// Why a tiled kernel has no tangent yet.
+pub const TILE_TANGENT: &str =
+    "uses tiles, and forward-mode derivatives through tiles are not supported yet";
 
 pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
-    // Tile operations have no adjoints yet; the sweep's arms for them are never reached.
-    if f.tiled.is_some() {
-        return Err(TILE_ADJOINT.into());
+    let tiled = f.tiled.is_some();
+    if tiled && !f.callees.is_empty() {
+        return Err(
+            "uses tiles and calls funcs, and backward through such a kernel is not supported yet"
+                .into(),
+        );
     }
     if let Some(why) = crate::analysis::atomic_without_adjoint(f) {
         return Err(why);
     }
     let mut g = without_jumps(f);
     let tid = crate::analysis::tid_components(&g);
-    let own = crate::analysis::tid_only_params(&g, &tid);
+    // In a tiled kernel `tid()` is the block's index, which all of its lanes share: no array
+    // element belongs to one thread.
+    let own = match tiled {
+        false => crate::analysis::tid_only_params(&g, &tid),
+        true => Vec::new(),
+    };
     let kernel = g.kind == FnKind::Kernel;
     let mut stored = Vec::new();
     let mut loaded = Vec::new();
@@ -206,6 +216,15 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
     }
     if let Some(why) = cx.error.take() {
         return Err(why);
+    }
+    // Tiled adjoints have no per-lane stacks yet: what needs one (a loop, a variable assigned
+    // twice, a decision inside a loop) is refused rather than mixed between lanes.
+    if tiled && replay::pushes(&out) {
+        return Err(
+            "uses tiles, and backward through a tiled kernel that needs the adjoint stack \
+             (a loop, or a variable assigned more than once) is not supported yet"
+                .into(),
+        );
     }
     let regs = cx.registers.iter().map(|r| r.1);
     let adjs = (0..g.vars.len())

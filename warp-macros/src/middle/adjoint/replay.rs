@@ -13,6 +13,11 @@ impl Cx<'_> {
         for s in b {
             let sp = s.span;
             match &s.kind {
+                // A tile store, like any store, is not redone.
+                StmtKind::Assign {
+                    op: Op::Builtin { builtin, .. },
+                    ..
+                } if builtin.name == "tile_store" => {}
                 StmtKind::Assign { dst, op, .. } => {
                     if self.overwritten[*dst] {
                         out.push(push(*dst, sp));

@@ -11,7 +11,7 @@ use crate::types::Ty;
 use proc_macro2::Span;
 
 /// `__r = adj_var.path; adj_var.path = 0`: the seed of a scope, taken from an adjoint.
-fn seed_from(var: VarId, path: Vec<String>, sp: Span) -> [AStmt; 2] {
+pub(super) fn seed_from(var: VarId, path: Vec<String>, sp: Span) -> [AStmt; 2] {
     let from = GradSrc::Adj {
         var,
         path: path.clone(),
@@ -90,6 +90,12 @@ impl Cx<'_> {
     /// Reverse of `dst = op`: take `dst`'s adjoint, restore `dst`'s old value, accumulate the
     /// operands' adjoints.
     fn reverse_assign(&mut self, out: &mut Vec<AStmt>, dst: VarId, op: &Op, sp: Span) {
+        if self.f.tiled.is_some() {
+            if let Some(b) = self.reverse_tile(dst, op, sp) {
+                out.extend(b);
+                return;
+            }
+        }
         let restore = self.overwritten[dst].then(|| pop(dst, sp));
         if let Op::Func { path, args } = op {
             let func = self.callee(path);

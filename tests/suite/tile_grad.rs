@@ -1,0 +1,370 @@
+//! Backward through tiles: every differentiable tile operation checked by `wp::gradcheck`
+//! against central differences in f64 (at several block sizes, ragged array edges included),
+//! a tile MLP's gradients against the same MLP written without tiles, the uniform-operand rule
+//! (a scalar every lane computed receives a tile's adjoint once), and what is still refused.
+//!
+//! Tolerances: `GradcheckOptions::for_type::<f64>()` (central differences with a step near
+//! the cube root of f64's epsilon) and an explicit 1e-6 relative bound on the worst element
+//! (the truncation error of the differences reaches 2e-7 on the `sin`/`tanh` maps), far below
+//! any wrong rule (a missing or doubled term is an O(1) relative error). The tile and plain MLPs sum the same products
+//! in different orders: 1e-12 relative is a few hundred f64 roundings at these sizes.
+
+// The kernel language has no `div_ceil` yet: kernels round up with `(n + d - 1) / d`.
+#![allow(clippy::manual_div_ceil)]
+
+use crate::{arr, zeros};
+use warp_lang as wp;
+use wp::prelude::*;
+
+backend_tests!(
+    elementwise_and_uniform_scalars,
+    maps_and_reductions,
+    transpose_broadcast_matmul,
+    lanes_and_elements,
+    tile_mlp_matches_plain_mlp,
+    what_backward_refuses,
+);
+
+/// Whether this device runs tile adjoints yet (CUDA: not yet; the test says so and stops).
+fn tile_backward_here(dev: &wp::Device) -> bool {
+    if dev.is_cpu() {
+        return true;
+    }
+    eprintln!("SKIPPED on {dev:?}: tile adjoints on CUDA are not built yet");
+    false
+}
+
+/// `gradcheck` of `run` on inputs `xs` and output `out`, asserting a pass within 1e-6.
+fn check(
+    what: &str,
+    mut run: impl FnMut() -> wp::Result<()>,
+    xs: &[&wp::Array<f64>],
+    out: &wp::Array<f64>,
+) {
+    let report = wp::gradcheck(
+        &mut run,
+        xs,
+        &[out],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(
+        report.passed && report.max_rel_error < 1e-6,
+        "{what}: {:?} (max rel {})",
+        report.worst,
+        report.max_rel_error
+    );
+    // The check must have seen gradients: an all-zero analytic Jacobian would pass against
+    // an all-zero numeric one only if the function were constant.
+    let any = report.analytic.iter().flatten().any(|g| *g != 0.0);
+    assert!(any, "{what}: every gradient is zero");
+}
+
+/// Smooth test values in [-1.5, 1.5], away from zero (a divisor) by at least 0.2.
+fn values(n: usize, seed: usize) -> Vec<f64> {
+    (0..n)
+        .map(|k| {
+            let t = ((k * 7 + seed * 13) % 23) as f64 / 22.0;
+            let v = -1.5 + 3.0 * t;
+            if v.abs() < 0.2 {
+                v + 0.45
+            } else {
+                v
+            }
+        })
+        .collect()
+}
+
+const R: usize = 4;
+const C: usize = 3;
+
+#[wp::kernel]
+fn k_elementwise(a: Array<f64, 2>, b: Array<f64, 2>, w: Array<f64>, out: Array<f64, 2>) {
+    let (i, j) = tid();
+    let o0 = (i * R) as i32;
+    let o1 = (j * C) as i32;
+    // A scalar every lane computes: its adjoint from the tiles arrives once.
+    let s = w[0] * 2.0 + 1.0;
+    let x: Tile<f64, R, C> = tile_load(a, (o0, o1));
+    let y: Tile<f64, R, C> = tile_load(b, (o0, o1));
+    let p = x * y + x * s - s * y;
+    let q = p / (y * y + 2.0) + (-x) / s;
+    let z = q - (x * x + 1.0) / 3.0 + (y * y + 3.0) / s + (s - x) * (s + y);
+    tile_store(out, z * w[1], (o0, o1));
+}
+
+/// `+ - * /` of tiles with tiles and with uniform scalars (both sides), unary minus, loads and
+/// stores on a 5 x 7 array (ragged against 4 x 3 tiles), at block sizes 1, 7 and 32.
+fn elementwise_and_uniform_scalars(dev: &wp::Device) {
+    if !tile_backward_here(dev) {
+        return;
+    }
+    let (m, n) = (5usize, 7usize);
+    let a = arr(&values(m * n, 1), dev).with_grad().unwrap();
+    let b = arr(&values(m * n, 2), dev).with_grad().unwrap();
+    let w = arr(&[0.3f64, -1.25], dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(m * n, dev).with_grad().unwrap();
+    let (a2, b2, o2) = (
+        a.reshape((m, n)).unwrap(),
+        b.reshape((m, n)).unwrap(),
+        out.reshape((m, n)).unwrap(),
+    );
+    for bd in [1, 7, 32] {
+        let blocks = ((m + R - 1) / R, (n + C - 1) / C);
+        let run = || wp::launch_tiled(k_elementwise, blocks, (&a2, &b2, &w, &o2), bd, dev);
+        check(
+            &format!("elementwise, block_dim {bd}"),
+            run,
+            &[&a, &b, &w],
+            &out,
+        );
+    }
+}
+
+#[wp::kernel]
+fn k_maps(x: Array<f64>, y: Array<f64>, out: Array<f64>) {
+    let b = tid();
+    let t = tile_load::<8>(x, (b * 8) as i32);
+    let u = tile_load::<8>(y, (b * 8) as i32);
+    let s = tile_map(sin, t);
+    let e = tile_map(tanh, u);
+    let m = tile_map(mul, s, e) + tile_map(add, t, t);
+    tile_store(out, m, (b * 8) as i32);
+    // Reductions, each block's stored after the elementwise part.
+    let sum = tile_sum(m);
+    let mx = tile_max(t);
+    let mn = tile_min(u);
+    let rd = tile_reduce(add, s);
+    let all = sum + mx * 2.0 + mn * 3.0 + rd;
+    tile_store(out, all, 24 + b as i32);
+}
+
+/// `tile_map` of unary and binary builtins and operators (with the same tile twice),
+/// `tile_sum`, `tile_max`, `tile_min` (to the extremum) and `tile_reduce(add)`.
+fn maps_and_reductions(dev: &wp::Device) {
+    if !tile_backward_here(dev) {
+        return;
+    }
+    let n = 3 * 8;
+    // Distinct values, so the extremum of each block is unique and the function smooth there.
+    let xs: Vec<f64> = (0..n)
+        .map(|k| (k as f64 * 0.37).sin() * 1.3 + k as f64 * 1e-3)
+        .collect();
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let y = arr(&values(n, 3), dev).with_grad().unwrap();
+    let y = {
+        // Make `y` distinct as well.
+        let v: Vec<f64> = y
+            .to_vec()
+            .unwrap()
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v + k as f64 * 1e-3)
+            .collect();
+        arr(&v, dev).with_grad().unwrap()
+    };
+    let out = zeros::<f64, 1>(n + 3, dev).with_grad().unwrap();
+    for bd in [1, 5, 32] {
+        let run = || wp::launch_tiled(k_maps, 3, (&x, &y, &out), bd, dev);
+        check(&format!("maps, block_dim {bd}"), run, &[&x, &y], &out);
+    }
+}
+
+const M: usize = 4;
+const K: usize = 3;
+const N: usize = 5;
+
+#[wp::kernel]
+fn k_shapes(a: Array<f64, 2>, b: Array<f64, 2>, row: Array<f64>, out: Array<f64, 2>) {
+    let x: Tile<f64, M, K> = tile_load(a, (0, 0));
+    let y: Tile<f64, K, N> = tile_load(b, (0, 0));
+    let r = tile_load::<N>(row, 0);
+    let c = tile_matmul(x, y);
+    let ct = tile_transpose(c);
+    let back = tile_transpose(ct);
+    let rb = tile_broadcast::<M, N>(r);
+    let one = tile_sum(r);
+    let ob: Tile<f64, M, N> = tile_broadcast(one);
+    let sq = tile_matmul(tile_transpose(y), tile_transpose(x));
+    tile_store(out, back * rb + ob + tile_transpose(sq), (0, 0));
+}
+
+/// `tile_matmul`, `tile_transpose`, and `tile_broadcast` of a row and of one element.
+fn transpose_broadcast_matmul(dev: &wp::Device) {
+    if !tile_backward_here(dev) {
+        return;
+    }
+    let a = arr(&values(M * K, 4), dev).with_grad().unwrap();
+    let b = arr(&values(K * N, 5), dev).with_grad().unwrap();
+    let row = arr(&values(N, 6), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(M * N, dev).with_grad().unwrap();
+    let (a2, b2, o2) = (
+        a.reshape((M, K)).unwrap(),
+        b.reshape((K, N)).unwrap(),
+        out.reshape((M, N)).unwrap(),
+    );
+    for bd in [1, 8, 64] {
+        let run = || wp::launch_tiled(k_shapes, 1, (&a2, &b2, &row, &o2), bd, dev);
+        check(
+            &format!("shapes, block_dim {bd}"),
+            run,
+            &[&a, &b, &row],
+            &out,
+        );
+    }
+}
+
+#[wp::kernel(block_dim = 8)]
+fn k_lanes(x: Array<f64>, out: Array<f64>) {
+    let b = tid();
+    let l = lane();
+    let v = x[b * 8 + l] * 1.5;
+    let t = tile(v);
+    let u = t * t + t;
+    let w = untile(u);
+    // Every lane reads element 2 and element l of `u`.
+    let e = u[2] + u[l];
+    out[b * 8 + l] = w * v + e;
+    let su = tile_sum(u);
+    if l == 0 {
+        out[16 + b] = su[0];
+    }
+}
+
+/// `tile(x)`, `untile(t)` and `t[i]` (a uniform and a per-lane index), with per-lane values
+/// whose adjoints cross the tile operations.
+fn lanes_and_elements(dev: &wp::Device) {
+    if !tile_backward_here(dev) {
+        return;
+    }
+    let x = arr(&values(16, 7), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(18, dev).with_grad().unwrap();
+    let run = || wp::launch_tiled(k_lanes, 2, (&x, &out), 8, dev);
+    check("lanes", run, &[&x], &out);
+}
+
+const IN: usize = 4;
+const HID: usize = 8;
+const OUT: usize = 3;
+const BT: usize = 4;
+
+#[wp::kernel]
+fn k_tile_mlp(x: Array<f64, 2>, w1: Array<f64, 2>, w2: Array<f64, 2>, y: Array<f64, 2>) {
+    let i = tid();
+    let xt: Tile<f64, BT, IN> = tile_load(x, ((i * BT) as i32, 0));
+    let w1t: Tile<f64, IN, HID> = tile_load(w1, (0, 0));
+    let w2t: Tile<f64, HID, OUT> = tile_load(w2, (0, 0));
+    let h = tile_map(tanh, tile_matmul(xt, w1t));
+    tile_store(y, tile_matmul(h, w2t), ((i * BT) as i32, 0));
+}
+
+#[wp::kernel]
+fn k_plain_mlp(x: Array<f64, 2>, w1: Array<f64, 2>, w2: Array<f64, 2>, y: Array<f64, 2>) {
+    let (n, o) = tid();
+    let mut acc = 0.0f64;
+    for k in 0..HID {
+        let mut z = 0.0f64;
+        for j in 0..IN {
+            z = z + x[(n, j)] * w1[(j, k)];
+        }
+        acc = acc + tanh(z) * w2[(k, o)];
+    }
+    y[(n, o)] = acc;
+}
+
+/// A two-layer tile MLP (tanh hidden layer): its gradients against central differences, and
+/// against the same network written per output element without tiles.
+fn tile_mlp_matches_plain_mlp(dev: &wp::Device) {
+    if !tile_backward_here(dev) {
+        return;
+    }
+    let batch = 3 * BT;
+    let mk = |n: usize, seed: usize| {
+        let v: Vec<f64> = values(n, seed).iter().map(|v| v * 0.5).collect();
+        arr(&v, dev).with_grad().unwrap()
+    };
+    let (x, w1, w2) = (mk(batch * IN, 8), mk(IN * HID, 9), mk(HID * OUT, 10));
+    let y = zeros::<f64, 1>(batch * OUT, dev).with_grad().unwrap();
+    let (x2, w12, w22, y2) = (
+        x.reshape((batch, IN)).unwrap(),
+        w1.reshape((IN, HID)).unwrap(),
+        w2.reshape((HID, OUT)).unwrap(),
+        y.reshape((batch, OUT)).unwrap(),
+    );
+    let tile = || wp::launch_tiled(k_tile_mlp, batch / BT, (&x2, &w12, &w22, &y2), 32, dev);
+    check("tile MLP", tile, &[&x, &w1, &w2], &y);
+
+    // One backward each from the same seed (ones), gradients compared.
+    let grads = |tiled: bool| -> Vec<Vec<f64>> {
+        for a in [&x, &w1, &w2, &y] {
+            a.grad().unwrap().fill(0.0).unwrap();
+        }
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            if tiled {
+                wp::launch_tiled(k_tile_mlp, batch / BT, (&x2, &w12, &w22, &y2), 32, dev)
+            } else {
+                wp::launch(k_plain_mlp, (batch, OUT), (&x2, &w12, &w22, &y2), dev)
+            }
+            .unwrap();
+        }
+        tape.backward(&y).unwrap();
+        [&x, &w1, &w2]
+            .iter()
+            .map(|a| a.grad().unwrap().to_vec().unwrap())
+            .collect()
+    };
+    let (gt, gp) = (grads(true), grads(false));
+    for (which, (t, p)) in ["x", "w1", "w2"].iter().zip(gt.iter().zip(&gp)) {
+        for (k, (a, b)) in t.iter().zip(p).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+                "{which}[{k}]: tile {a} vs plain {b}"
+            );
+        }
+    }
+}
+
+#[wp::kernel]
+fn k_tile_loop(a: Array<f64>, out: Array<f64>) {
+    let mut acc = tile_zeros::<f64, 8>();
+    for k in 0..3 {
+        let t = tile_load::<8>(a, (k * 8) as i32);
+        acc = acc + t;
+    }
+    tile_store(out, acc, 0);
+}
+
+#[wp::kernel]
+fn k_tile_scan(a: Array<f64>, out: Array<f64>) {
+    let t = tile_load::<8>(a, 0);
+    tile_store(out, tile_scan_inclusive(t), 0);
+}
+
+/// Backward through what tile adjoints do not cover yet is an error naming the kernel and the
+/// reason, never a silent zero: a tile reassigned in a loop (needs the stack), a scan.
+fn what_backward_refuses(dev: &wp::Device) {
+    let a = arr(&values(24, 11), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(8, dev).with_grad().unwrap();
+    for (name, stack) in [("k_tile_loop", true), ("k_tile_scan", false)] {
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            if stack {
+                wp::launch_tiled(k_tile_loop, 1, (&a, &out), 8, dev).unwrap();
+            } else {
+                wp::launch_tiled(k_tile_scan, 1, (&a, &out), 8, dev).unwrap();
+            }
+        }
+        let e = tape.backward(&out).unwrap_err();
+        assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
+        let msg = e.to_string();
+        let why = if stack {
+            "stack"
+        } else {
+            "tile_scan_inclusive"
+        };
+        assert!(msg.contains(name) && msg.contains(why), "{msg}");
+    }
+}

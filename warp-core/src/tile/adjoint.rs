@@ -1,0 +1,501 @@
+//! Reverse-mode adjoints of the tile operations (CPU), for the adjoint of a tiled kernel.
+//!
+//! Conventions are [`crate::adjoint`]'s: every function **accumulates** into the adjoints it
+//! is given, from `r`, the adjoint of the operation's result. Arguments come in the order the
+//! generated code passes them: the operation's inputs (tiles by reference, arrays by
+//! reference), then one adjoint per input (an array's [`GradView`], an integer offset's unused
+//! adjoint), then `r`, then the block size `bd`.
+//!
+//! Every result is reproduced bit for bit by `wp_adjoint_tile.h` on the GPU:
+//! - elementwise adjoints call the scalar adjoint of the operation on each element (the same
+//!   formula as an ordinary kernel's `adj_mul`), each element independently;
+//! - where a uniform scalar meets a tile (`t * s`), `s`'s adjoint is the sum of the
+//!   elements' contributions in the reductions' order for block size `bd`
+//!   ([`reduce::gpu_order`]), added once for the block (by lane 0: the caller's part);
+//! - a sum over several elements into one (a broadcast's adjoint, a matmul's) is one chain in
+//!   ascending row-major order, starting from zero, computed by one GPU thread; the matmul's
+//!   chains are FMAs ([`Fma`]), as its forward.
+//!
+//! Loads and stores skip what their forward skipped (coordinates outside the array): the
+//! adjoint of a zero read of padding is nothing, and a skipped store hands nothing over.
+
+use super::load::coord;
+use super::matmul::Fma;
+use super::reduce::{self, gpu_order};
+use super::{Tile, Tile1, Tile2};
+use crate::adjoint::{AdjAdd, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
+use crate::block::{LaneValue, PerLane};
+use crate::builtins::Scalar;
+use crate::fault::KResult;
+use crate::grad::{GradElement, GradView};
+use crate::index::IndexInt;
+use crate::view::ArrayView;
+
+impl<T: Adjoint, const N0: usize> Adjoint for Tile1<T, N0> {
+    #[inline(always)]
+    fn adj_zero() -> Self {
+        Tile1 {
+            data: [T::adj_zero(); N0],
+        }
+    }
+    #[inline(always)]
+    fn adj_accum(&mut self, v: Self) {
+        for (a, b) in self.data.iter_mut().zip(v.data) {
+            a.adj_accum(b);
+        }
+    }
+}
+
+impl<T: Adjoint, const N0: usize, const N1: usize> Adjoint for Tile2<T, N0, N1> {
+    #[inline(always)]
+    fn adj_zero() -> Self {
+        Tile2 {
+            data: [[T::adj_zero(); N1]; N0],
+        }
+    }
+    #[inline(always)]
+    fn adj_accum(&mut self, v: Self) {
+        let flat = v.data.as_flattened();
+        for (a, b) in self.data.as_flattened_mut().iter_mut().zip(flat) {
+            a.adj_accum(*b);
+        }
+    }
+}
+
+// ---- Loads and stores ----------------------------------------------------------------------
+
+/// Adjoint of `t = tile_load(a, o)`: `a.grad[o + i] += r[i]` for every `o + i` inside `a`
+/// (atomically: blocks may load overlapping tiles).
+pub fn adj_tile_load1<T: GradElement, const N0: usize, O: IndexInt>(
+    a: &ArrayView<T, 1>,
+    o: O,
+    adj_a: &mut GradView<T, 1>,
+    _adj_o: &mut O,
+    r: &Tile1<T, N0>,
+    _bd: usize,
+) -> KResult<()> {
+    let [n] = a.shape();
+    for (i, &g) in r.data.iter().enumerate() {
+        if let Some(c) = coord(o, i, n) {
+            adj_a.accumulate(c, g)?;
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `t = tile_load(a, (o0, o1))`, as [`adj_tile_load1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_load2<T: GradElement, const N0: usize, const N1: usize, O0, O1>(
+    a: &ArrayView<T, 2>,
+    o0: O0,
+    o1: O1,
+    adj_a: &mut GradView<T, 2>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    r: &Tile2<T, N0, N1>,
+    _bd: usize,
+) -> KResult<()>
+where
+    O0: IndexInt,
+    O1: IndexInt,
+{
+    let [n0, n1] = a.shape();
+    for (i, row) in r.data.iter().enumerate() {
+        let Some(c0) = coord(o0, i, n0) else { continue };
+        for (j, &g) in row.iter().enumerate() {
+            if let Some(c1) = coord(o1, j, n1) {
+                adj_a.accumulate((c0, c1), g)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `tile_store(a, t, o)`: the gradient of each element written hands over to
+/// `t`'s adjoint and is cleared there (the write replaced the element), as an ordinary store's.
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_store1<T: GradElement + Adjoint, const N0: usize, O: IndexInt>(
+    a: &ArrayView<T, 1>,
+    _t: &Tile1<T, N0>,
+    o: O,
+    adj_a: &mut GradView<T, 1>,
+    adj_t: &mut Tile1<T, N0>,
+    _adj_o: &mut O,
+    _r: &(),
+    _bd: usize,
+) -> KResult<()> {
+    let [n] = a.shape();
+    for (i, d) in adj_t.data.iter_mut().enumerate() {
+        if let Some(c) = coord(o, i, n) {
+            d.adj_accum(adj_a.take(c, T::adj_zero())?);
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `tile_store(a, t, (o0, o1))`, as [`adj_tile_store1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_store2<T, const N0: usize, const N1: usize, O0, O1>(
+    a: &ArrayView<T, 2>,
+    _t: &Tile2<T, N0, N1>,
+    o0: O0,
+    o1: O1,
+    adj_a: &mut GradView<T, 2>,
+    adj_t: &mut Tile2<T, N0, N1>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _r: &(),
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+{
+    let [n0, n1] = a.shape();
+    for (i, row) in adj_t.data.iter_mut().enumerate() {
+        let Some(c0) = coord(o0, i, n0) else { continue };
+        for (j, d) in row.iter_mut().enumerate() {
+            if let Some(c1) = coord(o1, j, n1) {
+                d.adj_accum(adj_a.take((c0, c1), T::adj_zero())?);
+            }
+        }
+    }
+    Ok(())
+}
+
+// ---- Elementwise ---------------------------------------------------------------------------
+
+/// The sum of `c`'s elements in the reductions' order for block size `bd` (zero for none):
+/// what a uniform scalar operand's adjoint receives from a whole tile.
+fn block_total<T: Scalar>(c: &[T], bd: usize) -> T {
+    gpu_order(c.len(), bd, |e| c[e], Scalar::s_add).unwrap_or(T::ZERO)
+}
+
+macro_rules! elementwise {
+    ($tr:ident, $f:ident, $tt:ident, $ts:ident, $st:ident, $what:literal) => {
+        #[doc = concat!("Adjoint of `a ", $what, " b` on two tiles of one shape: element by element, the scalar rule.")]
+        pub fn $tt<X>(a: &X, b: &X, adj_a: &mut X, adj_b: &mut X, r: &X, _bd: usize)
+        where
+            X: Tile,
+            X::Elem: $tr<X::Elem, Output = X::Elem> + Copy,
+        {
+            let (a, b, r) = (a.as_flat(), b.as_flat(), r.as_flat());
+            let aa = adj_a.as_flat_mut();
+            for e in 0..aa.len() {
+                crate::adjoint::$f(a[e], b[e], &mut aa[e], &mut adj_b.as_flat_mut()[e], r[e]);
+            }
+        }
+
+        #[doc = concat!("Adjoint of `t ", $what, " s` (tile with a uniform scalar): the tile's adjoint element by element; `s`'s, the sum of the elements' contributions in the reductions' order (see the module docs).")]
+        pub fn $ts<X>(a: &X, s: X::Elem, adj_a: &mut X, adj_s: &mut X::Elem, r: &X, bd: usize)
+        where
+            X: Tile + Copy,
+            X::Elem: $tr<X::Elem, Output = X::Elem> + Adjoint + Scalar,
+        {
+            let mut c = *a;
+            let (a, r) = (a.as_flat(), r.as_flat());
+            let aa = adj_a.as_flat_mut();
+            for (e, ce) in c.as_flat_mut().iter_mut().enumerate() {
+                let mut g = X::Elem::adj_zero();
+                crate::adjoint::$f(a[e], s, &mut aa[e], &mut g, r[e]);
+                *ce = g;
+            }
+            adj_s.adj_accum(block_total(c.as_flat(), bd));
+        }
+
+        #[doc = concat!("Adjoint of `s ", $what, " t` (a uniform scalar with a tile), as the tile-scalar form.")]
+        pub fn $st<X>(s: X::Elem, b: &X, adj_s: &mut X::Elem, adj_b: &mut X, r: &X, bd: usize)
+        where
+            X: Tile + Copy,
+            X::Elem: $tr<X::Elem, Output = X::Elem> + Adjoint + Scalar,
+        {
+            let mut c = *b;
+            let (b, r) = (b.as_flat(), r.as_flat());
+            let ab = adj_b.as_flat_mut();
+            for (e, ce) in c.as_flat_mut().iter_mut().enumerate() {
+                let mut g = X::Elem::adj_zero();
+                crate::adjoint::$f(s, b[e], &mut g, &mut ab[e], r[e]);
+                *ce = g;
+            }
+            adj_s.adj_accum(block_total(c.as_flat(), bd));
+        }
+    };
+}
+elementwise!(
+    AdjAdd,
+    adj_add,
+    adj_tile_add_tt,
+    adj_tile_add_ts,
+    adj_tile_add_st,
+    "+"
+);
+elementwise!(
+    AdjSub,
+    adj_sub,
+    adj_tile_sub_tt,
+    adj_tile_sub_ts,
+    adj_tile_sub_st,
+    "-"
+);
+elementwise!(
+    AdjMul,
+    adj_mul,
+    adj_tile_mul_tt,
+    adj_tile_mul_ts,
+    adj_tile_mul_st,
+    "*"
+);
+elementwise!(
+    AdjDiv,
+    adj_div,
+    adj_tile_div_tt,
+    adj_tile_div_ts,
+    adj_tile_div_st,
+    "/"
+);
+
+/// Adjoint of `-t`.
+pub fn adj_tile_neg<X>(a: &X, adj_a: &mut X, r: &X, _bd: usize)
+where
+    X: Tile,
+    X::Elem: AdjNeg + Copy,
+{
+    let (a, r) = (a.as_flat(), r.as_flat());
+    for (e, d) in adj_a.as_flat_mut().iter_mut().enumerate() {
+        crate::adjoint::adj_neg(a[e], d, r[e]);
+    }
+}
+
+/// Adjoint of `tile_map(f, a)`: `adj` (the scalar adjoint of `f`) on each element.
+pub fn adj_tile_map1<X: Tile, Y: Tile>(
+    a: &X,
+    adj_a: &mut X,
+    r: &Y,
+    adj: impl Fn(X::Elem, &mut X::Elem, Y::Elem),
+) where
+    X::Elem: Copy,
+    Y::Elem: Copy,
+{
+    let (a, r) = (a.as_flat(), r.as_flat());
+    for (e, d) in adj_a.as_flat_mut().iter_mut().enumerate() {
+        adj(a[e], d, r[e]);
+    }
+}
+
+/// Adjoint of `tile_map(f, a, b)`: `adj` (the scalar adjoint of `f`) on each pair of elements.
+pub fn adj_tile_map2<X: Tile, Y: Tile, Z: Tile>(
+    a: &X,
+    b: &Y,
+    adj_a: &mut X,
+    adj_b: &mut Y,
+    r: &Z,
+    adj: impl Fn(X::Elem, Y::Elem, &mut X::Elem, &mut Y::Elem, Z::Elem),
+) where
+    X::Elem: Copy,
+    Y::Elem: Copy,
+    Z::Elem: Copy,
+{
+    let (a, b, r) = (a.as_flat(), b.as_flat(), r.as_flat());
+    let ab = adj_b.as_flat_mut();
+    for (e, d) in adj_a.as_flat_mut().iter_mut().enumerate() {
+        adj(a[e], b[e], d, &mut ab[e], r[e]);
+    }
+}
+
+// ---- Reductions ----------------------------------------------------------------------------
+
+/// Adjoint of `tile_sum(t)` (and `tile_reduce(add, t)`): every element gets the result's
+/// adjoint.
+pub fn adj_tile_sum<X: Tile>(_t: &X, adj_t: &mut X, r: &Tile1<X::Elem, 1>, _bd: usize)
+where
+    X::Elem: Adjoint,
+{
+    for d in adj_t.as_flat_mut() {
+        d.adj_accum(r.data[0]);
+    }
+}
+
+/// Adjoint of `tile_min(t)`: the element `tile_argmin` picks (the first smallest for block
+/// size `bd`) gets the result's adjoint.
+pub fn adj_tile_min<X: Tile>(t: &X, adj_t: &mut X, r: &Tile1<X::Elem, 1>, bd: usize)
+where
+    X::Elem: Adjoint + Scalar,
+{
+    let i = reduce::argmin(t, bd).data[0] as usize;
+    adj_t.as_flat_mut()[i].adj_accum(r.data[0]);
+}
+
+/// Adjoint of `tile_max(t)`, as [`adj_tile_min`] with `tile_argmax`.
+pub fn adj_tile_max<X: Tile>(t: &X, adj_t: &mut X, r: &Tile1<X::Elem, 1>, bd: usize)
+where
+    X::Elem: Adjoint + Scalar,
+{
+    let i = reduce::argmax(t, bd).data[0] as usize;
+    adj_t.as_flat_mut()[i].adj_accum(r.data[0]);
+}
+
+// ---- Shapes --------------------------------------------------------------------------------
+
+/// Adjoint of `tile_transpose(a)`: `adj_a[i][j] += r[j][i]`.
+pub fn adj_tile_transpose<T: Adjoint, const M: usize, const N: usize>(
+    _a: &Tile2<T, M, N>,
+    adj_a: &mut Tile2<T, M, N>,
+    r: &Tile2<T, N, M>,
+    _bd: usize,
+) {
+    for (i, row) in adj_a.data.iter_mut().enumerate() {
+        for (j, d) in row.iter_mut().enumerate() {
+            d.adj_accum(r.data[j][i]);
+        }
+    }
+}
+
+/// The adjoint of a broadcast from shape `(s0, s1)` to `(m, n)` (each source dim equal to the
+/// target's or 1, `src` and `dst` row-major): each source element's adjoint gains the sum, in
+/// ascending row-major order from zero, of the target elements it was copied to.
+fn unbroadcast<T: Adjoint + Scalar>(src: &mut [T], s: [usize; 2], dst: &[T], t: [usize; 2]) {
+    for p in 0..s[0] {
+        for q in 0..s[1] {
+            let rows = if s[0] == t[0] { p..p + 1 } else { 0..t[0] };
+            let cols = if s[1] == t[1] { q..q + 1 } else { 0..t[1] };
+            let mut acc = T::ZERO;
+            for i in rows {
+                for j in cols.clone() {
+                    acc = acc.s_add(dst[i * t[1] + j]);
+                }
+            }
+            src[p * s[1] + q].adj_accum(acc);
+        }
+    }
+}
+
+/// Adjoint of `tile_broadcast` from a rank-1 tile to a rank-1 tile.
+pub fn adj_tile_broadcast11<T: Adjoint + Scalar, const S: usize, const N: usize>(
+    _a: &Tile1<T, S>,
+    adj_a: &mut Tile1<T, S>,
+    r: &Tile1<T, N>,
+    _bd: usize,
+) {
+    unbroadcast(&mut adj_a.data, [1, S], &r.data, [1, N]);
+}
+
+/// Adjoint of `tile_broadcast` from a rank-1 tile (aligned with the last axis) to a rank-2.
+pub fn adj_tile_broadcast12<T: Adjoint + Scalar, const S: usize, const M: usize, const N: usize>(
+    _a: &Tile1<T, S>,
+    adj_a: &mut Tile1<T, S>,
+    r: &Tile2<T, M, N>,
+    _bd: usize,
+) {
+    unbroadcast(&mut adj_a.data, [1, S], r.data.as_flattened(), [M, N]);
+}
+
+/// Adjoint of `tile_broadcast` from a rank-2 tile to a rank-2 tile.
+pub fn adj_tile_broadcast22<T, const S0: usize, const S1: usize, const M: usize, const N: usize>(
+    _a: &Tile2<T, S0, S1>,
+    adj_a: &mut Tile2<T, S0, S1>,
+    r: &Tile2<T, M, N>,
+    _bd: usize,
+) where
+    T: Adjoint + Scalar,
+{
+    let src = adj_a.data.as_flattened_mut();
+    unbroadcast(src, [S0, S1], r.data.as_flattened(), [M, N]);
+}
+
+// ---- Matmul --------------------------------------------------------------------------------
+
+/// Adjoint of `c = tile_matmul(a, b)`: `adj_a += r bᵀ` and `adj_b += aᵀ r`, each element one
+/// FMA chain from zero in ascending order (over `r`'s columns for `adj_a`, its rows for
+/// `adj_b`), then added to the adjoint. `adj_a` is complete before `adj_b` starts.
+pub fn adj_tile_matmul<T, const M: usize, const K: usize, const N: usize>(
+    a: &Tile2<T, M, K>,
+    b: &Tile2<T, K, N>,
+    adj_a: &mut Tile2<T, M, K>,
+    adj_b: &mut Tile2<T, K, N>,
+    r: &Tile2<T, M, N>,
+    _bd: usize,
+) where
+    T: Fma + Adjoint + Scalar,
+{
+    for i in 0..M {
+        for k in 0..K {
+            let mut acc = T::ZERO;
+            for j in 0..N {
+                acc = r.data[i][j].fma(b.data[k][j], acc);
+            }
+            adj_a.data[i][k].adj_accum(acc);
+        }
+    }
+    for k in 0..K {
+        for j in 0..N {
+            let mut acc = T::ZERO;
+            for i in 0..M {
+                acc = a.data[i][k].fma(r.data[i][j], acc);
+            }
+            adj_b.data[k][j].adj_accum(acc);
+        }
+    }
+}
+
+// ---- Threads and elements ------------------------------------------------------------------
+
+/// Adjoint of `x = t[i]` in one lane: `adj_t[i] += r` (the forward checked `i`; an index
+/// outside the tile is the same fault here).
+pub fn adj_tile_extract1<T: Adjoint, const N0: usize, I: IndexInt>(
+    t: &Tile1<T, N0>,
+    i: I,
+    adj_t: &mut Tile1<T, N0>,
+    _adj_i: &mut I,
+    r: T,
+    kernel: &'static str,
+) -> KResult<()> {
+    t.extract(i, kernel)?;
+    let i = i.widen() as usize;
+    adj_t.data[i].adj_accum(r);
+    Ok(())
+}
+
+/// Adjoint of `x = t[i, j]` in one lane, as [`adj_tile_extract1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_extract2<T: Adjoint, const N0: usize, const N1: usize, I, J>(
+    t: &Tile2<T, N0, N1>,
+    i: I,
+    j: J,
+    adj_t: &mut Tile2<T, N0, N1>,
+    _adj_i: &mut I,
+    _adj_j: &mut J,
+    r: T,
+    kernel: &'static str,
+) -> KResult<()>
+where
+    I: IndexInt,
+    J: IndexInt,
+{
+    t.extract(i, j, kernel)?;
+    let (i, j) = (i.widen() as usize, j.widen() as usize);
+    adj_t.data[i][j].adj_accum(r);
+    Ok(())
+}
+
+/// Adjoint of `t = tile(x)`: lane `l`'s `x` gains element `l` of `t`'s adjoint `r`.
+pub fn adj_tile_lanes<T: LaneValue + Adjoint, const N: usize>(
+    adj_x: &mut PerLane<T>,
+    r: &Tile1<T, N>,
+    bd: usize,
+) {
+    for (l, &g) in r.data.iter().enumerate().take(bd) {
+        adj_x[l].adj_accum(g);
+    }
+}
+
+/// Adjoint of `x = untile(t)`: element `l` of `t`'s adjoint gains lane `l`'s adjoint of `x`.
+pub fn adj_untile<T: LaneValue + Adjoint, const N: usize>(
+    adj_t: &mut Tile1<T, N>,
+    adj_x: &PerLane<T>,
+    bd: usize,
+) {
+    for (l, d) in adj_t.data.iter_mut().enumerate().take(bd) {
+        d.adj_accum(adj_x[l]);
+    }
+}

@@ -1,0 +1,302 @@
+//! The reverse sweep of tile operations (tiled kernels), and which adjoint statements the
+//! whole block runs together.
+//!
+//! A tile's adjoint is a tile of the same shape, held where the tile is (a block value on the
+//! CPU, a shared-memory slot on CUDA). A tile operation's adjoint is a library call
+//! (`adj_tile_<op>` in warp-core's `tile::adjoint` and wp_adjoint_tile.h) that every thread of
+//! the block makes together, like the operation itself: it accumulates into the adjoints of
+//! the tile operands directly ([`GradArg::Adj`]; no temporaries, which on CUDA would need slots
+//! of their own), and into temporaries for scalar operands.
+//!
+//! **The uniform-operand rule.** A scalar operand of a tile operation (`s` in `t * s`) is the
+//! same in every lane, and every lane computed it. Its adjoint from the whole tile is added
+//! once for the block, into lane 0's adjoint: the CPU's block-level statements read and write
+//! lane 0 of per-lane values, and CUDA guards the accumulation with `threadIdx.x == 0`. The
+//! reverse of the lane code that computed `s` then runs in every lane, and the lanes other
+//! than 0 pass on zero, so the operand's inputs receive the contribution exactly once.
+//!
+//! Order of a tile's adjoint statements: seed (`__r` is the tile's adjoint itself, a
+//! reference on CUDA), the call, then the clear. The usual order (clear before the call) would
+//! clear the seed it reads; this one is the same because a tile in a kernel whose adjoint is
+//! built is assigned once (a reassigned tile would need the stack, which tiled adjoints refuse
+//! for now), so it is never its own operand.
+
+use super::{at, AKind, AStmt, Arg, Cx, GradArg, GradSrc, TempLike};
+use crate::builtins::Grad;
+use crate::ir::*;
+use proc_macro2::Span;
+
+/// Whether the whole block runs `s` together (on the CPU: once for the block, outside the
+/// lane loops), for a statement of the adjoint of tiled kernel `f`: a tile operation of the
+/// replay, a tile adjoint call, the seeding, clearing or accumulating of a tile's adjoint, and
+/// control flow around any of those.
+pub fn is_block_level(f: &Function, s: &AStmt) -> bool {
+    let tile = |v: &VarId| f.ty(*v).is_tile();
+    match &s.kind {
+        AKind::Assign {
+            dst,
+            value: super::Value::Op(op),
+        } => f.is_cooperative_op(*dst, op),
+        AKind::AdjCall { func, .. } => is_block_call(func),
+        AKind::TileMapAdj { .. } | AKind::LaneAdj { .. } => true,
+        AKind::Seed(GradSrc::Adj { var, .. }) | AKind::ClearAdj { var, .. } => tile(var),
+        AKind::Accum {
+            to: super::AdjOf::Var { var, .. },
+            ..
+        } => tile(var),
+        AKind::Scope(b) | AKind::RevLoop { body: b } | AKind::Loop { body: b, .. } => {
+            b.iter().any(|s| is_block_level(f, s))
+        }
+        AKind::If { then, els, .. } => then.iter().chain(els).any(|s| is_block_level(f, s)),
+        _ => false,
+    }
+}
+
+/// Whether the library adjoint `func` is a tile operation's, which the block calls together
+/// (every one but `t[i]`'s, which a lane calls for its own read).
+pub fn is_block_call(func: &str) -> bool {
+    func.starts_with("adj_tile") && !func.starts_with("adj_tile_extract")
+}
+
+impl Cx<'_> {
+    /// The reverse of `dst = op` in a tiled kernel when `op` is a tile operation (or `dst` a
+    /// tile); `None` for anything else, which the ordinary rules handle.
+    pub(super) fn reverse_tile(&mut self, dst: VarId, op: &Op, sp: Span) -> Option<Vec<AStmt>> {
+        let f = self.f;
+        let tile = |v: VarId| f.ty(v).is_tile();
+        let tile_op = match op {
+            Op::Builtin { builtin, .. } => builtin.is_tile(),
+            Op::TileMap { .. } | Op::TileReduce { .. } => true,
+            _ => tile(dst),
+        };
+        if !tile_op {
+            return None;
+        }
+        let mut b = Vec::new();
+        match op {
+            Op::Builtin { builtin, args } => {
+                let name = builtin.name;
+                match name {
+                    // The store hands each written element's gradient to the tile.
+                    "tile_store" => {
+                        if !self.diff(args[1]) {
+                            return Some(b);
+                        }
+                        b.push(at(AKind::Seed(GradSrc::Zero(dst)), sp));
+                        let func = format!("adj_tile_store{}", args.len() - 2);
+                        self.tile_call(&mut b, &func, args, true, sp);
+                        return Some(vec![at(AKind::Scope(b), sp)]);
+                    }
+                    // A lane's read of one element.
+                    "tile_extract" => {
+                        if !self.diff(dst) {
+                            return Some(b);
+                        }
+                        b.extend(super::sweep::seed_from(dst, Vec::new(), sp));
+                        let func = format!("adj_tile_extract{}", args.len() - 1);
+                        self.tile_call(&mut b, &func, args, true, sp);
+                        return Some(vec![at(AKind::Scope(b), sp)]);
+                    }
+                    "untile" => {
+                        if self.diff(dst) {
+                            let (lanes, tile) = (dst, args[0]);
+                            let func = "adj_untile";
+                            b.push(at(AKind::LaneAdj { func, lanes, tile }, sp));
+                        }
+                        return Some(b);
+                    }
+                    _ => {}
+                }
+                if !self.diff(dst) {
+                    return Some(b);
+                }
+                let seed = GradSrc::Adj {
+                    var: dst,
+                    path: Vec::new(),
+                };
+                b.push(at(AKind::Seed(seed), sp));
+                match (name, builtin.grad) {
+                    (_, Grad::Zero) => {}
+                    ("tile", _) => {
+                        // Kernel parameters' adjoints go nowhere.
+                        let (lanes, tile) = (args[0], dst);
+                        if self.diff(lanes) && !f.params.iter().any(|p| p.var == lanes) {
+                            let func = "adj_tile_lanes";
+                            b.push(at(AKind::LaneAdj { func, lanes, tile }, sp));
+                        }
+                    }
+                    ("tile_load", _) => {
+                        let func = format!("adj_tile_load{}", args.len() - 1);
+                        self.tile_call(&mut b, &func, args, true, sp);
+                    }
+                    (
+                        "tile_sum" | "tile_min" | "tile_max" | "tile_transpose" | "tile_matmul",
+                        _,
+                    ) => {
+                        let func = format!("adj_{name}");
+                        self.tile_call(&mut b, &func, args, false, sp);
+                    }
+                    ("tile_broadcast", _) => {
+                        let rank = |v: VarId| match f.ty(v) {
+                            crate::types::Ty::Tile(_, d) => d.len(),
+                            _ => 0,
+                        };
+                        let func = format!("adj_tile_broadcast{}{}", rank(args[0]), rank(dst));
+                        self.tile_call(&mut b, &func, args, false, sp);
+                    }
+                    _ => {
+                        self.refuse(name);
+                        return Some(Vec::new());
+                    }
+                }
+            }
+            Op::TileMap { f: g, args } => {
+                if !self.diff(dst) {
+                    return Some(b);
+                }
+                let seed = GradSrc::Adj {
+                    var: dst,
+                    path: Vec::new(),
+                };
+                b.push(at(AKind::Seed(seed), sp));
+                match g {
+                    TileFn::Builtin(bi) if bi.grad == Grad::Zero => {}
+                    TileFn::Builtin(bi) if bi.grad != Grad::Adjoint => {
+                        self.refuse(&format!("tile_map({}, ..)", bi.name));
+                        return Some(Vec::new());
+                    }
+                    _ => {
+                        let grads = args.iter().map(|a| GradArg::Adj(*a)).collect();
+                        let (f, values) = (*g, args.clone());
+                        b.push(at(AKind::TileMapAdj { f, values, grads }, sp));
+                    }
+                }
+            }
+            Op::TileReduce { f: g, arg } => {
+                if !self.diff(dst) {
+                    return Some(b);
+                }
+                if !matches!(g, TileFn::Op(BinOp::Add)) {
+                    // Warp differentiates no other reduction either; a silent zero would be a
+                    // wrong gradient.
+                    self.refuse("tile_reduce with anything but `add`");
+                    return Some(Vec::new());
+                }
+                let seed = GradSrc::Adj {
+                    var: dst,
+                    path: Vec::new(),
+                };
+                b.push(at(AKind::Seed(seed), sp));
+                self.tile_call(&mut b, "adj_tile_sum", &[*arg], false, sp);
+            }
+            Op::Binary(o, l, r) => {
+                if !self.diff(dst) {
+                    return Some(b);
+                }
+                let name = match o {
+                    BinOp::Add => "add",
+                    BinOp::Sub => "sub",
+                    BinOp::Mul => "mul",
+                    BinOp::Div => "div",
+                    _ => {
+                        self.refuse(&format!("`{}` on tiles", o.symbol()));
+                        return Some(Vec::new());
+                    }
+                };
+                let form = match (tile(*l), tile(*r)) {
+                    (true, true) => "tt",
+                    (true, false) => "ts",
+                    _ => "st",
+                };
+                let seed = GradSrc::Adj {
+                    var: dst,
+                    path: Vec::new(),
+                };
+                b.push(at(AKind::Seed(seed), sp));
+                let func = format!("adj_tile_{name}_{form}");
+                self.tile_call(&mut b, &func, &[*l, *r], false, sp);
+            }
+            Op::Unary(UnOp::Neg, a) => {
+                if !self.diff(dst) {
+                    return Some(b);
+                }
+                let seed = GradSrc::Adj {
+                    var: dst,
+                    path: Vec::new(),
+                };
+                b.push(at(AKind::Seed(seed), sp));
+                self.tile_call(&mut b, "adj_tile_neg", &[*a], false, sp);
+            }
+            Op::Copy(a) => {
+                if !self.diff(dst) {
+                    return Some(b);
+                }
+                let seed = GradSrc::Adj {
+                    var: dst,
+                    path: Vec::new(),
+                };
+                b.push(at(AKind::Seed(seed), sp));
+                self.accum(&mut b, *a, Vec::new(), GradSrc::Seed, sp);
+            }
+            _ => {
+                self.refuse("this tile operation");
+                return Some(Vec::new());
+            }
+        }
+        let path = Vec::new();
+        b.push(at(AKind::ClearAdj { var: dst, path }, sp));
+        Some(vec![at(AKind::Scope(b), sp)])
+    }
+
+    /// `func(inputs.., adjoints.., __r)`: a tile input's adjoint directly, an array's gradient,
+    /// a scalar's through a temporary that is then accumulated (see the uniform-operand rule).
+    fn tile_call(
+        &self,
+        out: &mut Vec<AStmt>,
+        func: &str,
+        inputs: &[VarId],
+        faults: bool,
+        sp: Span,
+    ) {
+        let (mut values, mut grads) = (Vec::new(), Vec::new());
+        let mut temps = Vec::new();
+        for (k, &v) in inputs.iter().enumerate() {
+            if self.is_array(v) {
+                values.push(Arg::Array(v));
+                grads.push(GradArg::ArrayGrad(v));
+                continue;
+            }
+            values.push(Arg::Value(v));
+            if self.f.ty(v).is_tile() && self.diff(v) {
+                grads.push(GradArg::Adj(v));
+            } else {
+                let like = TempLike::Var(v);
+                out.push(at(AKind::ZeroTemp { k, like }, sp));
+                grads.push(GradArg::Temp(k));
+                temps.push((k, v));
+            }
+        }
+        let func = func.to_string();
+        let call = AKind::AdjCall {
+            func,
+            values,
+            grads,
+            faults,
+        };
+        out.push(at(call, sp));
+        for (k, v) in temps {
+            if !self.f.ty(v).is_tile() {
+                self.accum(out, v, Vec::new(), GradSrc::Temp(k), sp);
+            }
+        }
+    }
+
+    /// Records that backward through `what` is not supported yet.
+    fn refuse(&mut self, what: &str) {
+        if self.error.is_none() {
+            self.error = Some(format!(
+                "uses tiles, and backward through {what} is not supported yet"
+            ));
+        }
+    }
+}
