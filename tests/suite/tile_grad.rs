@@ -25,13 +25,9 @@ backend_tests!(
     what_backward_refuses,
 );
 
-/// Whether this device runs tile adjoints yet (CUDA: not yet; the test says so and stops).
-fn tile_backward_here(dev: &wp::Device) -> bool {
-    if dev.is_cpu() {
-        return true;
-    }
-    eprintln!("SKIPPED on {dev:?}: tile adjoints on CUDA are not built yet");
-    false
+/// Every device runs tile adjoints.
+fn tile_backward_here(_dev: &wp::Device) -> bool {
+    true
 }
 
 /// `gradcheck` of `run` on inputs `xs` and output `out`, asserting a pass within 1e-6.
@@ -366,5 +362,24 @@ fn what_backward_refuses(dev: &wp::Device) {
             "tile_scan_inclusive"
         };
         assert!(msg.contains(name) && msg.contains(why), "{msg}");
+    }
+}
+
+#[test]
+#[ignore = "prints the CUDA adjoint templates"]
+fn dump_cuda_adjoints() {
+    for info in [
+        wp::kernel_info(k_elementwise),
+        wp::kernel_info(k_maps),
+        wp::kernel_info(k_shapes),
+        wp::kernel_info(k_lanes),
+        wp::kernel_info(k_tile_mlp),
+    ] {
+        println!("// ---- {}\n{}", info.name, info.cuda_adjoint);
+        assert!(
+            info.cuda_adjoint_error.is_none(),
+            "{:?}",
+            info.cuda_adjoint_error
+        );
     }
 }

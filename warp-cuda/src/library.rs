@@ -195,7 +195,7 @@ pub static SECTIONS: &[Section] = &[
     kernel!("volume",    Some(header!("wp_adjoint_volume.h")),    Yes),
     kernel!("print",     None,                                    No),
     // Tiles (docs: the tiles chapter): exact, so that elementwise results match the CPU.
-    kernel!("tile",      None,                                    Yes),
+    kernel!("tile",      Some(header!("wp_adjoint_tile.h")),      Yes),
     // Compiled on their own: name, the define of a host object's build library.
     standalone!("bvh_build",      Some("WP_BVH_BUILD")),
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),

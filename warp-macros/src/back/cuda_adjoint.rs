@@ -28,9 +28,6 @@ pub struct CudaAdjoint {
 /// Emits the CUDA adjoint of `f`, or why it cannot.
 pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
     let adj = build(f, Policy::CUDA)?;
-    if f.tiled.is_some() {
-        return Err("tile adjoints on CUDA: in progress".into());
-    }
     let replay = match f.kind {
         FnKind::Func => func_replay(f, file)?,
         FnKind::Kernel => String::new(),
@@ -68,9 +65,12 @@ fn func_replay(f: &Function, file: &str) -> Result<String, String> {
     r.function_text()
 }
 
-struct Printer<'a> {
-    e: Emitter<'a>,
-    adj: &'a Adjoint,
+pub(super) struct Printer<'a> {
+    pub(super) e: Emitter<'a>,
+    pub(super) adj: &'a Adjoint,
+    /// Inside this many block-level scopes of a tiled kernel (`middle::adjoint::tiles`): an
+    /// accumulation into a scalar's adjoint there is thread 0's alone.
+    pub(super) block_depth: usize,
 }
 
 impl<'a> Printer<'a> {
@@ -78,19 +78,23 @@ impl<'a> Printer<'a> {
         let mut e = Emitter::new(&adj.f, file);
         // User funcs are called through their replays.
         e.replay = true;
-        Printer { e, adj }
+        Printer {
+            e,
+            adj,
+            block_depth: 0,
+        }
     }
 
-    fn f(&self) -> &'a Function {
+    pub(super) fn f(&self) -> &'a Function {
         &self.adj.f
     }
-    fn var(&self, v: VarId) -> String {
+    pub(super) fn var(&self, v: VarId) -> String {
         self.e.var(v)
     }
-    fn adj(&self, v: VarId) -> String {
+    pub(super) fn adj(&self, v: VarId) -> String {
         format!("adj_{}", self.e.var(v))
     }
-    fn line(&mut self, sp: proc_macro2::Span, text: impl AsRef<str>) {
+    pub(super) fn line(&mut self, sp: proc_macro2::Span, text: impl AsRef<str>) {
         self.e.line(sp, text.as_ref());
     }
     fn ty(&self, v: VarId) -> Result<String, String> {
@@ -98,7 +102,7 @@ impl<'a> Printer<'a> {
     }
 
     /// The forward parameters, then the gradient parameters (`middle::adjoint::GradParam`).
-    fn params(&self) -> Result<Vec<String>, String> {
+    pub(super) fn params(&self) -> Result<Vec<String>, String> {
         let mut ps = Vec::new();
         for p in &self.f().params {
             ps.push(format!("{} {}", self.ty(p.var)?, self.var(p.var)));
@@ -183,13 +187,19 @@ impl<'a> Printer<'a> {
             }
         }
         let adj = self.adj;
-        for d in &adj.decls {
+        let tiled = self.f().tiled.is_some();
+        // A tiled kernel's tiles and their adjoints are on slots of shared memory.
+        let on_slot = |v: VarId| tiled && adj.f.ty(v).is_tile();
+        for d in adj.decls.iter().filter(|d| !on_slot(d.var)) {
             let (t, x) = (self.decl_type(d)?, self.var(d.var));
             let _ = writeln!(self.e.out, "    {t} {x}{{}};");
         }
-        for &v in &adj.adjs {
+        for &v in adj.adjs.iter().filter(|v| !on_slot(**v)) {
             let (a, x) = (self.adj(v), self.var(v));
             let _ = writeln!(self.e.out, "    auto {a} = wp::zero_like({x});");
+        }
+        if tiled {
+            self.tile_slots()?;
         }
         self.block(&adj.body)?;
         self.e.out.push_str("}\n");
@@ -202,6 +212,9 @@ impl<'a> Printer<'a> {
     /// `@@ENTRY@@_adj`: the grid-stride loop over threads, each with an empty stack in
     /// per-thread local memory.
     fn entry(&mut self) -> Result<(), String> {
+        if self.f().tiled.is_some() {
+            return self.tile_entry();
+        }
         let mut decl = vec![
             "wp::launch_t __launch".into(),
             "wp::ctx_t __ctx_value".into(),
@@ -237,7 +250,7 @@ impl<'a> Printer<'a> {
         b.iter().try_for_each(|s| self.stmt(s))
     }
 
-    fn nested(&mut self, b: &[AStmt]) -> Result<(), String> {
+    pub(super) fn nested(&mut self, b: &[AStmt]) -> Result<(), String> {
         self.e.indent += 1;
         let r = self.block(b);
         self.e.indent -= 1;
@@ -246,6 +259,18 @@ impl<'a> Printer<'a> {
 
     fn stmt(&mut self, s: &AStmt) -> Result<(), String> {
         let sp = s.span;
+        let tiled = self.f().tiled.is_some();
+        if tiled {
+            if let Some(r) = self.tile_replay(s) {
+                return r;
+            }
+        }
+        // A cooperative statement of a tiled kernel waits for lane code before it to finish
+        // with the slots it is about to write.
+        let coop = tiled && self.is_coop_leaf(s);
+        if coop && !self.e.after_tile_op {
+            self.line(sp, "__syncthreads();");
+        }
         let text = match &s.kind {
             AKind::Assign { dst, value } => {
                 let rhs = self.value(value, *dst)?;
@@ -316,11 +341,16 @@ impl<'a> Printer<'a> {
                 "}".into()
             }
             AKind::Scope(b) => {
+                let block = tiled && is_block_level(self.f(), s);
+                self.block_depth += block as usize;
                 self.line(sp, "{");
-                self.nested(b)?;
+                let r = self.nested(b);
+                self.block_depth -= block as usize;
+                r?;
                 "}".into()
             }
             AKind::Seed(from) => format!("auto __r = {};", self.grad(from)?),
+            AKind::ClearAdj { var, .. } if coop => format!("wp::tile_zeros({});", self.adj(*var)),
             AKind::ClearAdj { var, path } => {
                 let (a, x, p) = (self.adj(*var), self.var(*var), member_path(path));
                 format!("{a}{p} = wp::zero_like({x}{p});")
@@ -334,7 +364,15 @@ impl<'a> Printer<'a> {
                     AdjOf::Var { var, path } => format!("{}{}", self.adj(*var), member_path(path)),
                     AdjOf::Out(k) => format!("__adj_out{k}"),
                 };
-                format!("wp::adj_accum({to}, {});", self.grad(from)?)
+                let g = self.grad(from)?;
+                if coop {
+                    format!("wp::adj_tile_accum({to}, {g});")
+                } else if self.block_depth > 0 {
+                    // The uniform-operand rule: once for the block.
+                    format!("if (threadIdx.x == 0) wp::adj_accum({to}, {g});")
+                } else {
+                    format!("wp::adj_accum({to}, {g});")
+                }
             }
             AKind::ZeroTemp { k, like } => match like {
                 TempLike::Var(v) => format!("auto __g{k} = wp::zero_like({});", self.var(*v)),
@@ -390,8 +428,13 @@ impl<'a> Printer<'a> {
                     self.index(index)
                 )
             }
-            AKind::TileMapAdj { .. } | AKind::LaneAdj { .. } => {
-                return Err("internal: a tile adjoint outside a tiled kernel".into())
+            AKind::TileMapAdj { f, values, grads } => self.tile_map_adj(*f, values, grads, sp)?,
+            AKind::LaneAdj { func, lanes, tile } => {
+                let (x, t) = (self.adj(*lanes), self.adj(*tile));
+                match *func {
+                    "adj_tile_lanes" => format!("wp::adj_tile_lanes({x}, {t});"),
+                    _ => format!("wp::adj_untile({t}, {x});"),
+                }
             }
             AKind::RevLoop { body } => {
                 self.line(
@@ -404,6 +447,8 @@ impl<'a> Printer<'a> {
             }
         };
         self.line(sp, text);
+        // After a compound statement, control may come from anywhere inside it.
+        self.e.after_tile_op = coop;
         Ok(())
     }
 
@@ -437,7 +482,7 @@ impl<'a> Printer<'a> {
         }
     }
 
-    fn grad_arg(&self, g: &GradArg) -> String {
+    pub(super) fn grad_arg(&self, g: &GradArg) -> String {
         match g {
             GradArg::Temp(k) => format!("__g{k}"),
             GradArg::Adj(v) | GradArg::ArrayGrad(v) => self.adj(*v),

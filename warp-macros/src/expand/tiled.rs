@@ -35,6 +35,12 @@ pub(super) fn info(f: &Function, block: Option<&Block>) -> TokenStream {
         .into_iter()
         .map(|v| ty_tokens(f.ty(v)).expect("a tile type"))
         .collect();
+    // The adjoint's slots: the forward's, then an adjoint tile for each tile that has one
+    // (`middle::adjoint::adjoint_tiles`, the CUDA adjoint's order).
+    let adj_tiles: Vec<TokenStream> = crate::middle::adjoint::adjoint_tiles(f)
+        .into_iter()
+        .map(|v| ty_tokens(f.ty(v)).expect("a tile type"))
+        .collect();
     let per_lane: Vec<TokenStream> = match block {
         Ok(p) => (0..f.vars.len())
             .filter(|v| p.plan.storage[*v] == Storage::PerLane)
@@ -53,7 +59,12 @@ pub(super) fn info(f: &Function, block: Option<&Block>) -> TokenStream {
                 #( __o = (__o + ::core::mem::size_of::<#tiles>() + 15) / 16 * 16; )*
                 __o
             },
-            adjoint_shared_bytes: 0,
+            adjoint_shared_bytes: {
+                let mut __o = 0usize;
+                #( __o = (__o + ::core::mem::size_of::<#tiles>() + 15) / 16 * 16; )*
+                #( __o = (__o + ::core::mem::size_of::<#adj_tiles>() + 15) / 16 * 16; )*
+                __o
+            },
             cpu_frame_bytes: 0usize #( + ::core::mem::size_of::<#tiles>() )* #( + #per_lane )*,
         })
     }

@@ -89,8 +89,16 @@ fn differentiable(t: &Ty) -> bool {
         Ty::Matrix(..) | Ty::Quat(_) => true,
         // Objects and query states: indices and buffers, no gradient.
         Ty::Array(..) | Ty::Object(_) | Ty::Unit => false,
+        Ty::Tile(e, _) => differentiable(e),
         _ => true,
     }
+}
+
+/// The tiles of tiled kernel `f` that have an adjoint tile, in the order of their slots after
+/// the forward ones (the CUDA adjoint's shared memory, and `TileInfo::adjoint_shared_bytes`).
+pub fn adjoint_tiles(f: &Function) -> Vec<VarId> {
+    let tiles = f.tile_vars().into_iter();
+    tiles.filter(|v| differentiable(f.ty(*v))).collect()
 }
 
 /// A func's body without its final `return value` (its result, which the adjoint seeds with

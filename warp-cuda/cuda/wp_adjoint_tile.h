@@ -1,0 +1,339 @@
+// wp_adjoint_tile.h: the adjoints of the tile operations, the CUDA side of
+// warp-core/src/tile/adjoint.rs (whose docs give the rules; every formula and every order of
+// summation here is the same, so that a tiled kernel's gradients agree with the CPU's).
+//
+// Conventions: every function accumulates (`+=`) into the adjoints it is given, from `r`, the
+// adjoint of the operation's result. Arguments: the operation's inputs, one adjoint per input
+// (an array's gradient, a tile's adjoint tile, a scalar's or an offset's adjoint by
+// reference), then `r`, then the fault context where the function reads an array's gradient.
+// Every function but `adj_tile_extract*` is cooperative, like wp_tile.h's operations: every
+// thread of the block calls it with the same arguments, it works block-strided over elements
+// and ends in `__syncthreads()`.
+//
+// A uniform scalar operand (`s` in `t * s`) receives the sum of the elements' contributions
+// in the reductions' order (tile_detail::reduce_with), returned to every thread; the caller
+// adds it once for the block (thread 0). `adj_tile_extract*` is one thread's: it adds to the
+// element with a shared-memory atomic, so when several threads read one element the order of
+// their contributions is not fixed (the CPU adds them in lane order).
+#pragma once
+
+#include "wp_adjoint_core.h"
+#include "wp_tile.h"
+
+namespace wp {
+
+namespace tile_detail {
+
+/// `*p += v` from one thread while others may add to the same element: a shared-memory
+/// atomic on the GPU; in the host emulator the block's threads are fibers, which switch only at
+/// barriers.
+template <typename T>
+WP_FN void shared_add(T* p, T v) {
+#if defined(__CUDACC__)
+  atomicAdd(p, v);
+#else
+  *p += v;
+#endif
+}
+
+/// The sum of `c(e)` for e in 0..S in the reductions' order, returned to every thread (each
+/// `c(e)` is called once, by one thread).
+template <typename T, int S, typename Elem>
+WP_FN T block_total(Elem c) {
+  WP_TILE_SHARED_ALIGNED unsigned char total_bytes[sizeof(T) < 16 ? 16 : sizeof(T)];
+  T* total = reinterpret_cast<T*>(total_bytes);
+  reduce_with<T, S>(c, add_op{}, [total](T r) { *total = r; });
+  const T r = *total;
+  // The slot is reused by the next call.
+  __syncthreads();
+  return r;
+}
+
+/// The adjoint of a broadcast from `(S0, S1)` to `(M, N)` (each source dim the target's or
+/// 1): each source element gains the sum, from zero in ascending row-major order, of the
+/// target elements it was copied to.
+template <int S0, int S1, int M, int N, typename T>
+WP_FN void unbroadcast(T* src, const T* dst) {
+  for (int e = (int)threadIdx.x; e < S0 * S1; e += WP_TILE_BLOCK_DIM) {
+    const int p = e / S1, q = e % S1;
+    const int i0 = S0 == M ? p : 0, i1 = S0 == M ? p + 1 : M;
+    const int j0 = S1 == N ? q : 0, j1 = S1 == N ? q + 1 : N;
+    T acc = T(0);
+    for (int i = i0; i < i1; ++i)
+      for (int j = j0; j < j1; ++j) acc = acc + dst[i * N + j];
+    src[e] += acc;
+  }
+  __syncthreads();
+}
+
+}  // namespace tile_detail
+
+// ---- Loads and stores ----------------------------------------------------------------------
+
+/// `t = tile_load(a, o)`: `a.grad[o + i] += r[i]` inside the array (atomically).
+template <typename T, int N0, typename O>
+WP_FN void adj_tile_load1(const array_t<T, 1>& a, O o, const array_t<T, 1>& adj_a, O&,
+                          const tile_t<T, N0>& r, ctx_t* ctx) {
+  if (adj_a.data != nullptr) {
+    for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+      i64 c;
+      if (tile_detail::coord(o, i, a.shape[0], &c)) grad_accum(adj_a, c, r.data[i], ctx);
+    }
+  }
+  __syncthreads();
+}
+
+/// `t = tile_load(a, (o0, o1))`.
+template <typename T, int N0, int N1, typename O0, typename O1>
+WP_FN void adj_tile_load2(const array_t<T, 2>& a, O0 o0, O1 o1, const array_t<T, 2>& adj_a, O0&,
+                          O1&, const tile_t<T, N0, N1>& r, ctx_t* ctx) {
+  if (adj_a.data != nullptr) {
+    for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+      i64 c0, c1;
+      if (tile_detail::coord(o0, e / N1, a.shape[0], &c0) &&
+          tile_detail::coord(o1, e % N1, a.shape[1], &c1))
+        grad_accum(adj_a, c0, c1, r.data[e], ctx);
+    }
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, t, o)`: each written element's gradient hands over to `t`'s adjoint and is
+/// cleared.
+template <typename T, int N0, typename O>
+WP_FN void adj_tile_store1(const array_t<T, 1>& a, const tile_t<T, N0>&, O o,
+                           const array_t<T, 1>& adj_a, const tile_t<T, N0>& adj_t, O&,
+                           const unit_t&, ctx_t* ctx) {
+  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+    i64 c;
+    if (tile_detail::coord(o, i, a.shape[0], &c)) adj_t.data[i] += grad_take(adj_a, c, T{}, ctx);
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, t, (o0, o1))`.
+template <typename T, int N0, int N1, typename O0, typename O1>
+WP_FN void adj_tile_store2(const array_t<T, 2>& a, const tile_t<T, N0, N1>&, O0 o0, O1 o1,
+                           const array_t<T, 2>& adj_a, const tile_t<T, N0, N1>& adj_t, O0&, O1&,
+                           const unit_t&, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+    i64 c0, c1;
+    if (tile_detail::coord(o0, e / N1, a.shape[0], &c0) &&
+        tile_detail::coord(o1, e % N1, a.shape[1], &c1))
+      adj_t.data[e] += grad_take(adj_a, c0, c1, T{}, ctx);
+  }
+  __syncthreads();
+}
+
+// ---- Elementwise ---------------------------------------------------------------------------
+
+// `a op b` on two tiles (`_tt`), a tile and a uniform scalar (`_ts`), a scalar and a tile
+// (`_st`): the scalar adjoint `FN` per element; a scalar's adjoint is the block total.
+#define WP_TILE_ADJ_BINARY(NAME, FN)                                                          \
+  template <typename T, int... D>                                                             \
+  WP_FN void adj_tile_##NAME##_tt(const tile_t<T, D...>& a, const tile_t<T, D...>& b,         \
+                                  const tile_t<T, D...>& adj_a, const tile_t<T, D...>& adj_b, \
+                                  const tile_t<T, D...>& r) {                                 \
+    for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)         \
+      FN(a.data[e], b.data[e], adj_a.data[e], adj_b.data[e], r.data[e]);                      \
+    __syncthreads();                                                                          \
+  }                                                                                           \
+  template <typename T, int... D>                                                             \
+  WP_FN void adj_tile_##NAME##_ts(const tile_t<T, D...>& a, T s, const tile_t<T, D...>& adj_a, \
+                                  T& adj_s, const tile_t<T, D...>& r) {                       \
+    adj_s += tile_detail::block_total<T, tile_t<T, D...>::SIZE>([&](int e) {                  \
+      T g = T(0);                                                                             \
+      FN(a.data[e], s, adj_a.data[e], g, r.data[e]);                                          \
+      return g;                                                                               \
+    });                                                                                       \
+  }                                                                                           \
+  template <typename T, int... D>                                                             \
+  WP_FN void adj_tile_##NAME##_st(T s, const tile_t<T, D...>& b, T& adj_s,                    \
+                                  const tile_t<T, D...>& adj_b, const tile_t<T, D...>& r) {   \
+    adj_s += tile_detail::block_total<T, tile_t<T, D...>::SIZE>([&](int e) {                  \
+      T g = T(0);                                                                             \
+      FN(s, b.data[e], g, adj_b.data[e], r.data[e]);                                          \
+      return g;                                                                               \
+    });                                                                                       \
+  }
+WP_TILE_ADJ_BINARY(add, adj_add)
+WP_TILE_ADJ_BINARY(sub, adj_sub)
+WP_TILE_ADJ_BINARY(mul, adj_mul)
+WP_TILE_ADJ_BINARY(div, adj_div)
+#undef WP_TILE_ADJ_BINARY
+
+/// `-t`.
+template <typename T, int... D>
+WP_FN void adj_tile_neg(const tile_t<T, D...>& a, const tile_t<T, D...>& adj_a,
+                        const tile_t<T, D...>& r) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj_neg(a.data[e], adj_a.data[e], r.data[e]);
+  __syncthreads();
+}
+
+/// `tile_map(f, a)`: `adj` (a functor calling f's scalar adjoint) on each element.
+template <typename T, typename U, int... D, typename F>
+WP_FN void adj_tile_map1(const tile_t<T, D...>& a, const tile_t<T, D...>& adj_a,
+                         const tile_t<U, D...>& r, F adj) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj(a.data[e], adj_a.data[e], r.data[e]);
+  __syncthreads();
+}
+
+/// `tile_map(f, a, b)`.
+template <typename T, typename U, typename V, int... D, typename F>
+WP_FN void adj_tile_map2(const tile_t<T, D...>& a, const tile_t<U, D...>& b,
+                         const tile_t<T, D...>& adj_a, const tile_t<U, D...>& adj_b,
+                         const tile_t<V, D...>& r, F adj) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj(a.data[e], b.data[e], adj_a.data[e], adj_b.data[e], r.data[e]);
+  __syncthreads();
+}
+
+// ---- Reductions ----------------------------------------------------------------------------
+
+/// `tile_sum(t)`, `tile_reduce(add, t)`: every element gets the result's adjoint.
+template <typename T, int... D>
+WP_FN void adj_tile_sum(const tile_t<T, D...>&, const tile_t<T, D...>& adj_t,
+                        const tile_t<T, 1>& r) {
+  const T g = r.data[0];
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj_t.data[e] += g;
+  __syncthreads();
+}
+
+namespace tile_detail {
+/// The extremum `arg_reduce` picks gets the result's adjoint (thread 0 adds it).
+template <bool Max, typename T, int... D>
+WP_FN void adj_extreme(const tile_t<T, D...>& t, const tile_t<T, D...>& adj_t,
+                       const tile_t<T, 1>& r) {
+  WP_TILE_SHARED_ALIGNED i32 at[4];
+  const T* x = t.data;
+  reduce_with<arg_t<T>, tile_t<T, D...>::SIZE>(
+      [x](int e) {
+        arg_t<T> a;
+        a.v = x[e];
+        a.i = (i32)e;
+        return a;
+      },
+      arg_op<Max>{}, [](const arg_t<T>& p) { at[0] = p.i; });
+  if (threadIdx.x == 0) adj_t.data[at[0]] += r.data[0];
+  __syncthreads();
+}
+}  // namespace tile_detail
+
+/// `tile_min(t)`: to the first smallest element (tile_argmin's).
+template <typename T, int... D>
+WP_FN void adj_tile_min(const tile_t<T, D...>& t, const tile_t<T, D...>& adj_t,
+                        const tile_t<T, 1>& r) {
+  tile_detail::adj_extreme<false>(t, adj_t, r);
+}
+
+/// `tile_max(t)`: to the first largest element (tile_argmax's).
+template <typename T, int... D>
+WP_FN void adj_tile_max(const tile_t<T, D...>& t, const tile_t<T, D...>& adj_t,
+                        const tile_t<T, 1>& r) {
+  tile_detail::adj_extreme<true>(t, adj_t, r);
+}
+
+// ---- Shapes --------------------------------------------------------------------------------
+
+/// `tile_transpose(a)`: `adj_a[i][j] += r[j][i]`.
+template <typename T, int M, int N>
+WP_FN void adj_tile_transpose(const tile_t<T, M, N>&, const tile_t<T, M, N>& adj_a,
+                              const tile_t<T, N, M>& r) {
+  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM)
+    adj_a.data[e] += r.data[(e % N) * M + e / N];
+  __syncthreads();
+}
+
+/// `tile_broadcast`, rank 1 to rank 1.
+template <typename T, int S, int N>
+WP_FN void adj_tile_broadcast11(const tile_t<T, S>&, const tile_t<T, S>& adj_a,
+                                const tile_t<T, N>& r) {
+  tile_detail::unbroadcast<1, S, 1, N>(adj_a.data, r.data);
+}
+
+/// `tile_broadcast`, rank 1 (aligned with the last axis) to rank 2.
+template <typename T, int S, int M, int N>
+WP_FN void adj_tile_broadcast12(const tile_t<T, S>&, const tile_t<T, S>& adj_a,
+                                const tile_t<T, M, N>& r) {
+  tile_detail::unbroadcast<1, S, M, N>(adj_a.data, r.data);
+}
+
+/// `tile_broadcast`, rank 2 to rank 2.
+template <typename T, int S0, int S1, int M, int N>
+WP_FN void adj_tile_broadcast22(const tile_t<T, S0, S1>&, const tile_t<T, S0, S1>& adj_a,
+                                const tile_t<T, M, N>& r) {
+  tile_detail::unbroadcast<S0, S1, M, N>(adj_a.data, r.data);
+}
+
+// ---- Matmul --------------------------------------------------------------------------------
+
+/// `c = tile_matmul(a, b)`: `adj_a += r bᵀ`, then `adj_b += aᵀ r`, each element one FMA chain
+/// from zero in ascending order, added to the adjoint.
+template <typename T, int M, int K, int N>
+WP_FN void adj_tile_matmul(const tile_t<T, M, K>& a, const tile_t<T, K, N>& b,
+                           const tile_t<T, M, K>& adj_a, const tile_t<T, K, N>& adj_b,
+                           const tile_t<T, M, N>& r) {
+  for (int e = (int)threadIdx.x; e < M * K; e += WP_TILE_BLOCK_DIM) {
+    const int i = e / K, k = e % K;
+    T acc = T(0);
+    for (int j = 0; j < N; ++j) acc = tile_detail::fma_(r.data[i * N + j], b.data[k * N + j], acc);
+    adj_a.data[e] += acc;
+  }
+  __syncthreads();
+  for (int e = (int)threadIdx.x; e < K * N; e += WP_TILE_BLOCK_DIM) {
+    const int k = e / N, j = e % N;
+    T acc = T(0);
+    for (int i = 0; i < M; ++i) acc = tile_detail::fma_(a.data[i * K + k], r.data[i * N + j], acc);
+    adj_b.data[e] += acc;
+  }
+  __syncthreads();
+}
+
+// ---- Threads and elements ------------------------------------------------------------------
+
+/// `x = t[i]` in one thread: `adj_t[i] += r` (a shared-memory atomic; outside the tile, the
+/// forward's fault).
+template <typename T, int N0, typename I>
+WP_FN void adj_tile_extract1(const tile_t<T, N0>& t, I i, const tile_t<T, N0>& adj_t, I&, T r,
+                             ctx_t* ctx) {
+  (void)tile_extract(t, i, ctx);
+  if (!(num<I>::is_signed && (i64)i < 0) && (u64)i < (u64)N0)
+    tile_detail::shared_add(&adj_t.data[(i64)i], r);
+}
+
+/// `x = t[i, j]` in one thread.
+template <typename T, int N0, int N1, typename I, typename J>
+WP_FN void adj_tile_extract2(const tile_t<T, N0, N1>& t, I i, J j, const tile_t<T, N0, N1>& adj_t,
+                             I&, J&, T r, ctx_t* ctx) {
+  (void)tile_extract(t, i, j, ctx);
+  const bool in0 = !(num<I>::is_signed && (i64)i < 0) && (u64)i < (u64)N0;
+  const bool in1 = !(num<J>::is_signed && (i64)j < 0) && (u64)j < (u64)N1;
+  if (in0 && in1) tile_detail::shared_add(&adj_t.data[(i64)i * N1 + (i64)j], r);
+}
+
+/// `t = tile(x)`: the thread's `x` gains its element of `t`'s adjoint.
+template <typename T, int N>
+WP_FN void adj_tile_lanes(T& adj_x, const tile_t<T, N>& r) {
+  if ((int)threadIdx.x < N) adj_x += r.data[threadIdx.x];
+  __syncthreads();
+}
+
+/// `x = untile(t)`: the thread's element of `t`'s adjoint gains its adjoint of `x`.
+template <typename T, int N>
+WP_FN void adj_untile(const tile_t<T, N>& adj_t, const T& adj_x) {
+  if ((int)threadIdx.x < N) adj_t.data[threadIdx.x] += adj_x;
+  __syncthreads();
+}
+
+/// A tile adjoint's accumulation (`adj_a += r`, a tile's copy).
+template <typename T, int... D>
+WP_FN void adj_tile_accum(const tile_t<T, D...>& adj_a, const tile_t<T, D...>& r) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj_a.data[e] += r.data[e];
+  __syncthreads();
+}
+
+}  // namespace wp

@@ -1,0 +1,174 @@
+//! The CUDA adjoint of a tiled kernel: what `back::cuda_adjoint` prints differently for one
+//! (see `middle::adjoint::tiles` for the scheme).
+//!
+//! Every thread of a block runs the whole adjoint, as it runs the forward. Tiles and their
+//! adjoint tiles are on slots of the block's dynamic shared memory: the forward's slots (the
+//! replay recomputes the tiles there), then one per tile with an adjoint
+//! (`middle::adjoint::adjoint_tiles`, the order `TileInfo::adjoint_shared_bytes` counts), zeroed
+//! at the start. A cooperative statement (a tile operation of the replay, a tile adjoint call, a
+//! tile adjoint's clear or accumulation) ends in a barrier, and gets one before it when lane
+//! code ran since the last one, as in the forward (`back::cuda_tile`). A tile's seed `__r` is a
+//! second `tile_t` over the adjoint's slot.
+
+use super::cuda_adjoint::Printer;
+use crate::ir::*;
+use crate::middle::adjoint::*;
+use crate::types::Ty;
+use std::fmt::Write as _;
+
+impl Printer<'_> {
+    /// The replay's tile statements, printed as the forward prints them (`None`: not one).
+    pub(super) fn tile_replay(&mut self, s: &AStmt) -> Option<Result<(), String>> {
+        let AKind::Assign {
+            dst,
+            value: Value::Op(op),
+        } = &s.kind
+        else {
+            return None;
+        };
+        let f = self.f();
+        let tile_row = matches!(op, Op::Builtin { builtin, .. } if builtin.is_tile());
+        if !(f.is_cooperative_op(*dst, op) || tile_row) {
+            return None;
+        }
+        let st = Stmt {
+            span: s.span,
+            kind: StmtKind::Assign {
+                dst: *dst,
+                op: op.clone(),
+                define: false,
+            },
+        };
+        Some(self.e.tile_stmt(&st))
+    }
+
+    /// Whether `s` is a cooperative statement of the sweep (not control flow around one).
+    pub(super) fn is_coop_leaf(&self, s: &AStmt) -> bool {
+        let tile = |v: &VarId| self.f().ty(*v).is_tile();
+        match &s.kind {
+            AKind::AdjCall { func, .. } => is_block_call(func),
+            AKind::TileMapAdj { .. } | AKind::LaneAdj { .. } => true,
+            AKind::ClearAdj { var, .. } => tile(var),
+            AKind::Accum {
+                to: AdjOf::Var { var, .. },
+                ..
+            } => tile(var),
+            _ => false,
+        }
+    }
+
+    /// The slots: the forward's tiles, then the adjoint tiles, which start zero.
+    pub(super) fn tile_slots(&mut self) -> Result<(), String> {
+        self.e.section("tile");
+        self.e.tile_slots()?;
+        let f = self.f();
+        let mut prev = f.tile_vars().last().map(|v| self.var(*v));
+        let adj_tiles = adjoint_tiles(f);
+        for &v in &adj_tiles {
+            let t = super::cuda_tile::tile_type(f, f.ty(v))?;
+            let name = self.adj(v);
+            let off = match &prev {
+                None => "0".to_string(),
+                Some(p) => format!("wp::tile_slot_end(__off_{p}, decltype({p})::BYTES)"),
+            };
+            let _ = writeln!(
+                self.e.out,
+                "    constexpr wp::usize __off_{name} = {off};\n    {t} {name}(__smem + __off_{name});"
+            );
+            prev = Some(name);
+        }
+        for &v in &adj_tiles {
+            let _ = writeln!(self.e.out, "    wp::tile_zeros({});", self.adj(v));
+        }
+        self.e.after_tile_op = !adj_tiles.is_empty();
+        Ok(())
+    }
+
+    /// `@@ENTRY@@_adj` of a tiled kernel: block `b` of the launch runs the adjoint with
+    /// `__flat = b`, all of the CUDA block's threads together, and a barrier ends each block
+    /// before the next one reuses the slots. Tiled adjoints use no stack (they refuse what
+    /// would need one).
+    pub(super) fn tile_entry(&mut self) -> Result<(), String> {
+        let mut decl = vec![
+            "wp::launch_t __launch".into(),
+            "wp::ctx_t __ctx_value".into(),
+        ];
+        decl.extend(self.params()?);
+        let mut call: Vec<String> = self.f().params.iter().map(|p| self.var(p.var)).collect();
+        for gp in &self.adj.grad_params {
+            if let GradParam::Array(v) = *gp {
+                call.push(self.adj(v));
+            }
+        }
+        call.extend(["__launch", "__flat", "&__ctx_value", "&__st"].map(String::from));
+        let _ = write!(
+            self.e.out,
+            "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM) @@ENTRY@@_adj({}) {{\n    \
+             char __buf[1];\n    \
+             wp::adstack_t __st = wp::adstack_new(__buf, 0);\n    \
+             for (wp::i64 __flat = (wp::i64)blockIdx.x; __flat < __launch.total; __flat += (wp::i64)gridDim.x) {{\n        \
+             @@SELF@@_adj({});\n        __syncthreads();\n    }}\n}}\n#endif\n",
+            decl.join(", "),
+            call.join(", ")
+        );
+        Ok(())
+    }
+
+    /// `tile_map`'s adjoint: a local functor calling the scalar adjoint of its function, and
+    /// `wp::adj_tile_map1/2` with it.
+    pub(super) fn tile_map_adj(
+        &mut self,
+        g: TileFn,
+        values: &[VarId],
+        grads: &[GradArg],
+        sp: proc_macro2::Span,
+    ) -> Result<String, String> {
+        let f = self.f();
+        let elem = |v: VarId| match f.ty(v) {
+            Ty::Tile(e, _) => super::cuda::cpp_type(e).ok_or("a tile element type"),
+            _ => Err("a tile"),
+        };
+        let scalar = match g {
+            TileFn::Builtin(b) => {
+                self.e.section(b.section);
+                format!("wp::adj_{}", b.name)
+            }
+            TileFn::Op(o) => format!("wp::{}", o.adjoint_fn().unwrap_or("adj_add")),
+        };
+        let ts: Vec<String> = values
+            .iter()
+            .map(|v| elem(*v).map(String::from))
+            .collect::<Result<_, _>>()?;
+        // The result's element is the function's result type: its seed's type is that of
+        // the first operand for every function a tile map differentiates (builtins and
+        // operators on one float type).
+        let rt = ts[0].clone();
+        let (ps, call) = match values.len() {
+            1 => (
+                format!("{} x, {}& ax, {rt} g", ts[0], ts[0]),
+                format!("{scalar}(x, ax, g);"),
+            ),
+            _ => (
+                format!(
+                    "{} x, {} y, {}& ax, {}& ay, {rt} g",
+                    ts[0], ts[1], ts[0], ts[1]
+                ),
+                format!("{scalar}(x, y, ax, ay, g);"),
+            ),
+        };
+        self.e.tmp += 1;
+        let m = format!("__afn{}", self.e.tmp);
+        self.line(
+            sp,
+            format!("struct {m} {{ WP_FN void operator()({ps}) const {{ {call} }} }};"),
+        );
+        let xs: Vec<String> = values.iter().map(|v| self.var(*v)).collect();
+        let gs: Vec<String> = grads.iter().map(|g| self.grad_arg(g)).collect();
+        Ok(format!(
+            "wp::adj_tile_map{}({}, {}, __r, {m}{{}});",
+            values.len(),
+            xs.join(", "),
+            gs.join(", ")
+        ))
+    }
+}
