@@ -352,8 +352,10 @@ fn builtin_table() -> String {
         };
         let classes: Vec<&str> = b.classes.iter().map(|c| c.describe()).collect();
         let grad = match b.grad {
-            // Tile adjoints are the next slice: a kernel with tiles refuses backward.
-            Grad::Adjoint | Grad::Atomic if b.is_tile() => "not yet (tiles)",
+            // Backward through the other tile rows is refused (`middle::adjoint::tiles`).
+            Grad::Adjoint | Grad::Atomic if b.is_tile() => {
+                crate::middle::adjoint::tile_adjoint(b.name).unwrap_or("not yet")
+            }
             Grad::Adjoint => "adjoint",
             Grad::Zero => "zero",
             Grad::Atomic => "atomic",

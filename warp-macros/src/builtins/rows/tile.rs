@@ -5,8 +5,9 @@
 //! `front::lower::tiles`, not by [`Builtin::resolve`], since a tile's type is its element and
 //! its shape. Every row but `tile_extract` is cooperative (the validator's uniformity rule).
 //! The CPU functions are in `warp_core::tile` and `warp_core::block`, the CUDA ones in
-//! wp_tile.h. Backward through tiles is not supported yet: their rows state `Adjoint`, and a
-//! kernel with tiles reports why it has no adjoint.
+//! wp_tile.h. Backward: the rows that state `Adjoint` have one where
+//! `middle::adjoint::tiles::TILE_ADJOINTS` lists them (warp-core's `tile::adjoint`,
+//! wp_adjoint_tile.h); backward through the others is refused with the reason.
 
 use super::*;
 
@@ -55,8 +56,10 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // Scans of 1-D tiles, in an order both backends share (warp-core's `tile::scan`).
     "tile_scan_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_scan_exclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
-    "tile_scan_max_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
-    "tile_scan_min_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
+    "tile_scan_max_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_scan_min_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent,
+        cooperative;
     // Reductions to a `Tile<T, 1>` (`Tile<i32, 1>` for the arg-extrema), in the GPU's order.
     "tile_sum": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_min": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;

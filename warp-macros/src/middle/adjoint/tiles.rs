@@ -26,6 +26,30 @@ use crate::builtins::Grad;
 use crate::ir::*;
 use proc_macro2::Span;
 
+/// The tile rows with an adjoint, and what the builtins table says of each: the one list
+/// the sweep (which refuses every other row that is not constant) and the docs read.
+pub const TILE_ADJOINTS: &[(&str, &str)] = &[
+    ("tile_load", "adjoint"),
+    ("tile_store", "adjoint"),
+    ("tile", "adjoint"),
+    ("untile", "adjoint"),
+    ("tile_extract", "adjoint"),
+    ("tile_map", "adjoint"),
+    ("tile_reduce", "adjoint (`add` only; Warp differentiates none)"),
+    ("tile_sum", "adjoint"),
+    ("tile_min", "adjoint (to the first minimum)"),
+    ("tile_max", "adjoint (to the first maximum)"),
+    ("tile_transpose", "adjoint"),
+    ("tile_broadcast", "adjoint"),
+    ("tile_matmul", "adjoint"),
+];
+
+/// What the builtins table says of tile row `name`'s gradient, `None` where backward through
+/// it is refused.
+pub fn tile_adjoint(name: &str) -> Option<&'static str> {
+    TILE_ADJOINTS.iter().find(|r| r.0 == name).map(|r| r.1)
+}
+
 /// Whether the whole block runs `s` together (on the CPU: once for the block, outside the
 /// lane loops), for a statement of the adjoint of tiled kernel `f`: a tile operation of the
 /// replay, a tile adjoint call, the seeding, clearing or accumulating of a tile's adjoint, and
@@ -76,6 +100,10 @@ impl Cx<'_> {
         match op {
             Op::Builtin { builtin, args } => {
                 let name = builtin.name;
+                if builtin.grad != Grad::Zero && tile_adjoint(name).is_none() {
+                    self.refuse(name);
+                    return Some(Vec::new());
+                }
                 match name {
                     // The store hands each written element's gradient to the tile.
                     "tile_store" => {
