@@ -172,7 +172,10 @@ fn samples(n: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
     let mut x = Vec::with_capacity(n * IN);
     let mut t = Vec::with_capacity(n);
     for _ in 0..n {
-        let (u, v) = (rng.random_range(-1.0..1.0f64), rng.random_range(-1.0..1.0f64));
+        let (u, v) = (
+            rng.random_range(-1.0..1.0f64),
+            rng.random_range(-1.0..1.0f64),
+        );
         x.extend([u as f32, v as f32]);
         t.push(f(u, v) as f32);
     }

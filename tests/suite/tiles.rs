@@ -30,7 +30,6 @@ backend_tests!(
     reduce_with_functions,
     atomic_add_of_tiles,
     scans,
-    backward_through_tiles_is_refused,
     shared_memory_beyond_48k_and_beyond_the_device,
 );
 
@@ -641,25 +640,6 @@ fn scans(dev: &wp::Device) {
             assert_eq!(io[100 + e], acc, "inclusive {e} at block_dim {bd}");
         }
     }
-}
-
-/// Backward through a kernel with tiles is an error that names it and says why (tile
-/// adjoints are not built yet): never a silent zero gradient.
-fn backward_through_tiles_is_refused(dev: &wp::Device) {
-    let a = wp::Array::<f32, 2>::full((8, 8), 1.0, dev)
-        .unwrap()
-        .with_grad()
-        .unwrap();
-    let b = zeros::<f32, 2>((8, 8), dev).with_grad().unwrap();
-    let tape = wp::Tape::new();
-    {
-        let _rec = tape.record();
-        wp::launch_tiled(k_scale_2d, (1, 1), (&a, &b, 2.0f32), 32, dev).unwrap();
-    }
-    let e = tape.backward(&b).unwrap_err();
-    assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
-    let msg = e.to_string();
-    assert!(msg.contains("k_scale_2d") && msg.contains("tile"), "{msg}");
 }
 
 /// 64 KiB of tiles: above the 48 KiB a CUDA kernel gets without opting in.

@@ -135,10 +135,7 @@ impl Printer<'_> {
             }
             TileFn::Op(o) => format!("wp::{}", o.adjoint_fn().unwrap_or("adj_add")),
         };
-        let ts: Vec<String> = values
-            .iter()
-            .map(|v| elem(*v).map(String::from))
-            .collect::<Result<_, _>>()?;
+        let ts: Vec<String> = values.iter().map(|v| elem(*v)).collect::<Result<_, _>>()?;
         // The result's element is the function's result type: its seed's type is that of
         // the first operand for every function a tile map differentiates (builtins and
         // operators on one float type).

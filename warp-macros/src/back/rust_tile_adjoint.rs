@@ -69,7 +69,7 @@ fn per_lane_vars(adj: &Adjoint) -> Vec<bool> {
                 AKind::Scope(b) => walk(f, b, out),
                 _ => {}
             }
-            for v in lane_operands(f, s) {
+            for v in lane_operands(s) {
                 out[v] = laneable(f, v);
             }
         }
@@ -80,7 +80,7 @@ fn per_lane_vars(adj: &Adjoint) -> Vec<bool> {
 
 /// The per-lane operands of a block-level statement that reads or writes all lanes' copies:
 /// `tile(x)` and `untile(t)` of the replay, and [`AKind::LaneAdj`].
-fn lane_operands(f: &Function, s: &AStmt) -> Vec<VarId> {
+fn lane_operands(s: &AStmt) -> Vec<VarId> {
     match &s.kind {
         AKind::Assign {
             dst,
@@ -90,7 +90,7 @@ fn lane_operands(f: &Function, s: &AStmt) -> Vec<VarId> {
             _ => vec![*dst],
         },
         AKind::LaneAdj { lanes, .. } => vec![*lanes],
-        AKind::Scope(b) => b.iter().flat_map(|s| lane_operands(f, s)).collect(),
+        AKind::Scope(b) => b.iter().flat_map(lane_operands).collect(),
         _ => Vec::new(),
     }
 }
@@ -308,7 +308,7 @@ impl Printer<'_> {
         if matches!(s.kind, AKind::Loop { .. } | AKind::RevLoop { .. }) {
             return Err("internal: a loop around tile operations in a tiled adjoint".into());
         }
-        let skip = lane_operands(self.f(), s);
+        let skip = lane_operands(s);
         let vars = self.lane_vars(&[s], &skip);
         let (load, store) = self.lane_copies(&vars, quote!(0));
         let body = match &s.kind {

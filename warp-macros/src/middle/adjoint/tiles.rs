@@ -35,7 +35,10 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("untile", "adjoint"),
     ("tile_extract", "adjoint"),
     ("tile_map", "adjoint"),
-    ("tile_reduce", "adjoint (`add` only; Warp differentiates none)"),
+    (
+        "tile_reduce",
+        "adjoint (`add` only; Warp differentiates none)",
+    ),
     ("tile_sum", "adjoint"),
     ("tile_min", "adjoint (to the first minimum)"),
     ("tile_max", "adjoint (to the first maximum)"),
