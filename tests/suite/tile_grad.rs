@@ -21,6 +21,7 @@ backend_tests!(
     maps_and_reductions,
     transpose_broadcast_matmul,
     lanes_and_elements,
+    every_lane_storing_one_element,
     tile_mlp_matches_plain_mlp,
     what_backward_refuses,
 );
@@ -237,6 +238,26 @@ fn lanes_and_elements(dev: &wp::Device) {
     let out = zeros::<f64, 1>(18, dev).with_grad().unwrap();
     let run = || wp::launch_tiled(k_lanes, 2, (&x, &out), 8, dev);
     check("lanes", run, &[&x], &out);
+}
+
+#[wp::kernel]
+fn k_all_lanes_store(x: Array<f64>, out: Array<f64>) {
+    let b = tid();
+    let t = tile_load::<8>(x, (b * 8) as i32);
+    let s = tile_sum(t * t);
+    // Every lane of the block stores the same value to the same element.
+    out[b] = s[0] * 2.0;
+}
+
+/// Every lane of a block storing one element: the gradient of that element reaches the tile
+/// once (on a GPU one lane takes it, on the CPU lane 0), not once per lane.
+fn every_lane_storing_one_element(dev: &wp::Device) {
+    let x = arr(&values(24, 12), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(3, dev).with_grad().unwrap();
+    for bd in [1, 32, 128] {
+        let run = || wp::launch_tiled(k_all_lanes_store, 3, (&x, &out), bd, dev);
+        check(&format!("all lanes store, block_dim {bd}"), run, &[&x], &out);
+    }
 }
 
 const IN: usize = 4;

@@ -68,6 +68,52 @@ WP_FN void unbroadcast(T* src, const T* dst) {
 
 }  // namespace tile_detail
 
+// ---- A lane's store -------------------------------------------------------------------------
+
+namespace tile_detail {
+/// `*p`, leaving `zero` there: one atomic exchange for an f32 or f64 element on the GPU, a
+/// plain read and write otherwise.
+template <typename T>
+WP_FN T exchange(T* p, const T& zero) {
+  const T r = *p;
+  *p = zero;
+  return r;
+}
+#if defined(__CUDACC__)
+WP_FN f32 exchange(f32* p, const f32& zero) { return atomicExch(p, zero); }
+WP_FN f64 exchange(f64* p, const f64& zero) {
+  const unsigned long long z = (unsigned long long)__double_as_longlong(zero);
+  return __longlong_as_double((long long)atomicExch((unsigned long long*)p, z));
+}
+#endif
+template <typename T, int N>
+WP_FN T grad_take_lanes_idx(const array_t<T, N>& g, const i64* idx, const T& zero, ctx_t* ctx) {
+  if (g.data == nullptr) return zero;
+  T* p = detail::elem_ptr_idx(g, idx, ctx);
+  if (p == nullptr) return T{};
+  return exchange(p, zero);
+}
+}  // namespace tile_detail
+
+// `grad_take` in a tiled kernel's lane code (the adjoint of a lane's store): several lanes of a
+// block may have stored the same element, and each takes its gradient; the exchange gives it
+// to one of them and zero to the others (the CPU's lanes take it in order: lane 0 gets it).
+// Scalar float elements only are exchanged atomically (vector elements: one read and write).
+#define WP_GRAD_TAKE_LANES(N, PARAMS, ...)                                                   \
+  template <typename T>                                                                      \
+  WP_FN T grad_take_lanes(const array_t<T, N>& g, PARAMS,                                    \
+                          const typename identity<T>::type& zero, ctx_t* ctx) {             \
+    const i64 idx[N] = {__VA_ARGS__};                                                        \
+    return tile_detail::grad_take_lanes_idx(g, idx, zero, ctx);                              \
+  }
+#define WP_COMMA ,
+WP_GRAD_TAKE_LANES(1, i64 i0, i0)
+WP_GRAD_TAKE_LANES(2, i64 i0 WP_COMMA i64 i1, i0, i1)
+WP_GRAD_TAKE_LANES(3, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2, i0, i1, i2)
+WP_GRAD_TAKE_LANES(4, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2 WP_COMMA i64 i3, i0, i1, i2, i3)
+#undef WP_COMMA
+#undef WP_GRAD_TAKE_LANES
+
 // ---- Loads and stores ----------------------------------------------------------------------
 
 /// `t = tile_load(a, o)`: `a.grad[o + i] += r[i]` inside the array (atomically).

@@ -513,6 +513,9 @@ impl<'a> Printer<'a> {
             GradSrc::Zero(like) => format!("wp::zero_like({})", self.var(*like)),
             GradSrc::Take { array, index, like } | GradSrc::Get { array, index, like } => {
                 let f = match g {
+                    // Lanes of a tiled kernel's block may have stored the same element: one
+                    // of them takes its gradient (wp_adjoint_tile.h).
+                    GradSrc::Take { .. } if self.f().tiled.is_some() => "take_lanes",
                     GradSrc::Take { .. } => "take",
                     _ => "get",
                 };
