@@ -165,7 +165,10 @@ fn cholesky_and_solves_match_warp_core_bit_for_bit() {
         let got = run(bd, &cases);
         for ((name, _), (g, w)) in cases.iter().zip(got.iter().zip(&want)) {
             // NaNs compare by bits too: both produce the default quiet NaN.
-            assert!(g == w, "block size {bd}, case {name}: the GPU header differs from warp-core");
+            assert!(
+                g == w,
+                "block size {bd}, case {name}: the GPU header differs from warp-core"
+            );
         }
     }
 }

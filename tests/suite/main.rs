@@ -117,6 +117,7 @@ mod scenes;
 mod stability;
 mod streams;
 mod structs;
+mod tile_linalg;
 mod tiles;
 mod transforms;
 mod views;

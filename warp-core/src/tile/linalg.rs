@@ -152,11 +152,7 @@ fn forward<T: LinalgFloat, X: Rows<T, N>, const N: usize>(
 
 /// Back substitution in place: `x` holds `z` and becomes the solution of `M x = z`, `M` upper
 /// triangular, `M[i][j]` being `m[i][j]` or, `trans`, `m[j][i]`; `j` descending.
-fn back<T: LinalgFloat, X: Rows<T, N>, const N: usize>(
-    m: &Tile2<T, N, N>,
-    trans: bool,
-    x: &mut X,
-) {
+fn back<T: LinalgFloat, X: Rows<T, N>, const N: usize>(m: &Tile2<T, N, N>, trans: bool, x: &mut X) {
     let at = |i: usize, j: usize| if trans { m.data[j][i] } else { m.data[i][j] };
     for c in 0..X::K {
         for i in (0..N).rev() {

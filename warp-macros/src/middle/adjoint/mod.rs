@@ -49,6 +49,7 @@ pub use ir::*;
 pub use replay::replay_of;
 
 use super::adjoint_prep::without_jumps;
+use crate::builtins::Grad;
 use crate::ir::*;
 use crate::types::Ty;
 use proc_macro2::Span;
@@ -120,6 +121,25 @@ pub const TILE_ADJOINT: &str =
     "uses tiles, and backward through tile operations is not supported yet";
 
 pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
+    // A builtin with no adjoint yet: refused by name (before the tiles' general reason, which
+    // will go once tile adjoints exist, while these rows still have none).
+    let mut not_yet = None;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op: Op::Builtin { builtin, .. },
+            ..
+        } = &s.kind
+        {
+            if builtin.grad == Grad::NotYet && not_yet.is_none() {
+                not_yet = Some(builtin.name);
+            }
+        }
+    });
+    if let Some(name) = not_yet {
+        return Err(format!(
+            "calls `{name}`, which has no adjoint yet (Warp differentiates it; warp-lang does not yet)"
+        ));
+    }
     // Tile operations have no adjoints yet; the sweep's arms for them are never reached.
     if f.tiled.is_some() {
         return Err(TILE_ADJOINT.into());
