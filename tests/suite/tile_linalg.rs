@@ -15,6 +15,10 @@
 //!   on these systems are at most `0.18 N eps`, so the factor 4 only leaves room, it does not
 //!   hide an error of the algorithm (a wrong term would give O(1)).
 
+// The code the kernel macro generates for a tiled kernel's CPU block rounds up by hand, and
+// clippy reports it at the kernel (as in tiles.rs).
+#![allow(clippy::manual_div_ceil)]
+
 use crate::{arr, host, zeros};
 use warp_core::tile::{self as ct, Tile1, Tile2};
 use warp_lang as wp;

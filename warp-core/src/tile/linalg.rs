@@ -79,8 +79,8 @@ pub fn cholesky<T: LinalgFloat, const N: usize>(a: &Tile2<T, N, N>) -> Tile2<T, 
         for k in 0..j {
             p = p - l.data[j][k] * l.data[j][k];
         }
-        // `!(p > 0)`: also a NaN pivot.
-        if !(p > T::ZERO) {
+        // Not greater than zero: also a NaN pivot (which compares as unordered).
+        if p.partial_cmp(&T::ZERO) != Some(core::cmp::Ordering::Greater) {
             return Tile2 {
                 data: [[T::NAN; N]; N],
             };
