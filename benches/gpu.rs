@@ -5,6 +5,7 @@
 //! ```text
 //! cargo bench --bench gpu            # needs a CUDA device; prints SKIPPED otherwise
 //! cargo bench --bench gpu -- --tile-gemm   # the tile GEMM section alone
+//! cargo bench --bench gpu -- --tile-cholesky   # the batched tile Cholesky section alone
 //! ```
 //!
 //! Workloads (DESIGN.md, "Figures to beat"): the seed particle program (10M x 100 steps),
@@ -14,7 +15,10 @@
 //! SGEMM through PyTorch and Warp 1.19's tile GEMM, both run by `benches/py/tile_gemm.py` on
 //! the same inputs in the same run; Warp's side needs `PYTHONPATH` pointing at Warp, e.g.
 //! `PYTHONPATH=/root/warp-lang` after ../shared/tools/warp-bundle; a side that cannot run says
-//! why on its row).
+//! why on its row). The batched 32 x 32 Cholesky solve (issue 31: `examples/common/
+//! tile_cholesky.rs`'s kernel, 65,536 systems) is timed against cuSOLVER's batched factor and
+//! solve through PyTorch (`torch.linalg.cholesky`, `torch.cholesky_solve`) and Warp 1.19's
+//! `tile_cholesky`/`tile_cholesky_solve`, by `benches/py/tile_cholesky.py` in the same way.
 
 use rand::Rng as _;
 use std::ffi::c_void;
@@ -55,6 +59,10 @@ mod seed_ad;
 /// The tile GEMM section's kernels are the tile_matmul example's.
 #[path = "../examples/common/tile_gemm.rs"]
 mod tile_gemm;
+
+/// The tile Cholesky section's kernel, systems and reference are the tile_cholesky example's.
+#[path = "../examples/common/tile_cholesky.rs"]
+mod tile_cholesky;
 
 #[wp::kernel]
 fn small(a: Array<f32>, b: Array<f32>, s: f32, t: f32, k: i32, c: Array<f32>) {
@@ -739,6 +747,153 @@ fn tile_gemm_bench(dev: &wp::Device, size: usize) {
     println!("  fp16/bf16: not yet (no tensor-core tile matmul)");
 }
 
+/// Threads per block of the batched Cholesky (ours and Warp's).
+const CHOL_BLOCK_DIM: usize = 64;
+
+/// Batched 32 x 32 SPD solves in f32, one system per block (factor and solve in one kernel):
+/// ours against cuSOLVER's batched potrf + potrs (PyTorch) and Warp 1.19's tile Cholesky, all
+/// on the same systems; time per batch, ratios, and on 1024 sampled systems the forward error
+/// |x - x64| / |x64| and the backward error |A x - y| / (|A| |x| + |y|) against float64.
+fn tile_cholesky_bench(dev: &wp::Device, batch: usize) {
+    use tile_cholesky::N;
+    let (a64, y64) = tile_cholesky::systems(batch, 31);
+    let ah: Vec<f32> = a64.iter().map(|&v| v as f32).collect();
+    let yh: Vec<f32> = y64.iter().map(|&v| v as f32).collect();
+    // The reference solves the rounded inputs every side is handed.
+    let (a64, y64): (Vec<f64>, Vec<f64>) = (
+        ah.iter().map(|&v| v as f64).collect(),
+        yh.iter().map(|&v| v as f64).collect(),
+    );
+    let checked = tile_cholesky::checked_systems(batch, 1024);
+    println!(
+        "\ntile Cholesky: {batch} SPD systems of {N} x {N} in f32 (B Bt + I, B uniform in [-1, 1)), \
+         factor + solve, {CHOL_BLOCK_DIM} threads a block; errors on {} sampled systems against \
+         float64: forward |x - x64| / |x64|, backward |Ax - y| / (|A||x| + |y|) (4 N eps = {:.1e}); \
+         times: median of {} after a warm-up",
+        checked.len(),
+        4.0 * N as f64 * f32::EPSILON as f64,
+        common::REPS
+    );
+    let dir = std::env::temp_dir().join(format!("warp-lang-tile-chol-{}", std::process::id()));
+    let written = std::fs::create_dir_all(&dir).and_then(|()| {
+        std::fs::write(dir.join("a.f32"), bytemuck::cast_slice(&ah))?;
+        std::fs::write(dir.join("y.f32"), bytemuck::cast_slice(&yh))?;
+        let idx: Vec<i64> = checked.iter().map(|&s| s as i64).collect();
+        std::fs::write(dir.join("idx.i64"), bytemuck::cast_slice(&idx))
+    });
+    let theirs = match written {
+        Ok(()) => common::python_side(
+            "benches/py/tile_cholesky.py",
+            &[
+                dir.display().to_string(),
+                batch.to_string(),
+                N.to_string(),
+                CHOL_BLOCK_DIM.to_string(),
+            ],
+        ),
+        Err(e) => Err(format!("writing the inputs to {}: {e}", dir.display())),
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    let side = |key: &str| {
+        theirs
+            .as_ref()
+            .ok()
+            .and_then(|t| common::json_number(t, key))
+    };
+    let why = |key: &str| match &theirs {
+        Ok(t) => t
+            .get(key)
+            .and_then(|v| v.as_str())
+            .unwrap_or("no result")
+            .to_string(),
+        Err(e) => e.clone(),
+    };
+    let row = |what: &str, t: f64, fwd: f64, bwd: f64| {
+        println!(
+            "  {what:<44} {t:9.3} ms {:9.2} M systems/s   forward {fwd:.2e}   backward {bwd:.2e}",
+            batch as f64 / (t * 1e-3) / 1e6
+        );
+    };
+
+    let a = wp::Array::from_slice_shape(&ah, (batch * N, N), dev).unwrap();
+    let y = wp::Array::from_slice(&yh, dev).unwrap();
+    let x = wp::Array::<f32>::zeros(batch * N, dev).unwrap();
+    let t0 = Instant::now();
+    let first = wp::launch_tiled(
+        tile_cholesky::chol_solve_f32,
+        batch,
+        (&a, &y, &x),
+        CHOL_BLOCK_DIM,
+        dev,
+    )
+    .and_then(|()| wp::synchronize());
+    let first_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t_ours = first.and_then(|()| {
+        common::median_ms(|| {
+            wp::launch_tiled(
+                tile_cholesky::chol_solve_f32,
+                batch,
+                (&a, &y, &x),
+                CHOL_BLOCK_DIM,
+                dev,
+            )
+        })
+    });
+    let t_ours = match t_ours {
+        Ok(t) => t,
+        Err(e) => {
+            println!("  warp-lang tile_cholesky: {e}");
+            return;
+        }
+    };
+    let xs: Vec<f64> = x.to_vec().unwrap().iter().map(|&v| v as f64).collect();
+    row(
+        "warp-lang tile_cholesky + tile_cholesky_solve",
+        t_ours,
+        tile_cholesky::max_error(&a64, &y64, &xs, &checked),
+        tile_cholesky::max_backward_error(&a64, &y64, &xs, &checked),
+    );
+    let mut ratios = Vec::new();
+    for (what, key, name) in [
+        (
+            "Warp 1.19 tile_cholesky + tile_cholesky_solve",
+            "warp",
+            "Warp",
+        ),
+        (
+            "cuSOLVER batched potrf + potrs (torch)",
+            "torch",
+            "cuSOLVER",
+        ),
+    ] {
+        match (
+            side(&format!("{key}_ms")),
+            side(&format!("{key}_err")),
+            side(&format!("{key}_berr")),
+        ) {
+            (Some(t), Some(fwd), Some(bwd)) => {
+                row(what, t, fwd, bwd);
+                ratios.push(format!("ours / {name} {:.2}", t_ours / t));
+            }
+            _ => println!("  {what:<44} not run: {}", why(&format!("{key}_error"))),
+        }
+    }
+    println!(
+        "  time ratios (above 1: ours is slower): {}",
+        if ratios.is_empty() {
+            "none (no other side ran)".to_string()
+        } else {
+            ratios.join(", ")
+        }
+    );
+    println!(
+        "  first launch (compile included): ours {first_ms:.0} ms{}",
+        side("warp_first_ms")
+            .map(|w| format!(", Warp {w:.0} ms (empty kernel cache)"))
+            .unwrap_or_default()
+    );
+}
+
 fn main() {
     if std::env::args().any(|a| a == "--first-launch-child") {
         return first_launch_child();
@@ -753,6 +908,11 @@ fn main() {
     if let Some(i) = args.iter().position(|a| a == "--tile-gemm-cpu") {
         let size = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(256);
         return tile_gemm_bench(&wp::get_device("cpu").unwrap(), size);
+    }
+    // `--tile-cholesky-cpu B`: the tile Cholesky section with B systems on the CPU (plumbing).
+    if let Some(i) = args.iter().position(|a| a == "--tile-cholesky-cpu") {
+        let batch = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(1024);
+        return tile_cholesky_bench(&wp::get_device("cpu").unwrap(), batch);
     }
     if std::env::args().any(|a| a == "--first-launch-parts") {
         return first_launch_parts_child();
@@ -769,6 +929,10 @@ fn main() {
     if std::env::args().any(|a| a == "--tile-gemm") {
         return tile_gemm_bench(&dev, 4096);
     }
+    // `--tile-cholesky`: the batched tile Cholesky section alone.
+    if std::env::args().any(|a| a == "--tile-cholesky") {
+        return tile_cholesky_bench(&dev, 65536);
+    }
     let hand = Hand::new();
     particles(&dev, &hand);
     nbody_bench(&dev, &hand);
@@ -776,6 +940,7 @@ fn main() {
     ad_bench(&dev);
     first_launch();
     tile_gemm_bench(&dev, 4096);
+    tile_cholesky_bench(&dev, 65536);
     println!("\ngenerated source and compile time per kernel (this process):");
     for r in wp::compile_reports() {
         let name = format!("{}{}", r.kernel, if r.adjoint { " (adjoint)" } else { "" });

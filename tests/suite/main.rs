@@ -118,6 +118,7 @@ mod stability;
 mod streams;
 mod structs;
 mod tile_grad;
+mod tile_linalg;
 mod tiles;
 mod transforms;
 mod views;

@@ -256,7 +256,12 @@ fn every_lane_storing_one_element(dev: &wp::Device) {
     let out = zeros::<f64, 1>(3, dev).with_grad().unwrap();
     for bd in [1, 32, 128] {
         let run = || wp::launch_tiled(k_all_lanes_store, 3, (&x, &out), bd, dev);
-        check(&format!("all lanes store, block_dim {bd}"), run, &[&x], &out);
+        check(
+            &format!("all lanes store, block_dim {bd}"),
+            run,
+            &[&x],
+            &out,
+        );
     }
 }
 

@@ -196,6 +196,9 @@ pub static SECTIONS: &[Section] = &[
     kernel!("print",     None,                                    No),
     // Tiles (docs: the tiles chapter): exact, so that elementwise results match the CPU.
     kernel!("tile",      Some(header!("wp_adjoint_tile.h")),      Yes),
+    // The tile Cholesky factor and triangular solves: exact too, so that they match warp-core's
+    // tile::linalg bit for bit (its order of roundings; tests/cuda_tile_linalg_host.rs).
+    kernel!("tile_linalg", None,                                  Yes),
     // Compiled on their own: name, the define of a host object's build library.
     standalone!("bvh_build",      Some("WP_BVH_BUILD")),
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),

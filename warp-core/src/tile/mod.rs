@@ -14,7 +14,7 @@
 //! Files by concept: this module holds the types, their constructors and element access;
 //! [`ops`] the elementwise operators and `map`; [`load`] loads and stores against array views;
 //! [`reduce`](mod@reduce) the reductions in the GPU's order; [`matmul`](mod@matmul) the FMA
-//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`atomic`] the atomic add of a tile. The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
+//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order. The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
 //!
 //! Nothing here allocates or panics on a kernel's data: an index outside a tile is a
 //! [`FaultKind::TileIndex`] fault, and an array coordinate outside the array is a zero read or
@@ -27,6 +27,7 @@ use crate::ops::FromLiteral;
 
 pub mod adjoint;
 pub mod atomic;
+pub mod linalg;
 pub mod load;
 pub mod matmul;
 pub mod ops;
@@ -35,6 +36,10 @@ pub mod scan;
 pub mod shape;
 
 pub use atomic::{atomic_add1, atomic_add2};
+pub use linalg::{
+    cholesky, cholesky_solve1, cholesky_solve2, lower_solve1, lower_solve2, upper_solve1,
+    upper_solve2,
+};
 pub use load::{load1, load2, store1, store2};
 pub use matmul::{matmul, matmul_acc, Fma};
 pub use reduce::{argmax, argmin, max, min, reduce, sum};

@@ -141,6 +141,14 @@ impl Emitter<'_> {
                     }
                     "tile_matmul" => format!("wp::tile_matmul({d}, {}, {});", a[0], a[1]),
                     "tile_matmul_acc" => format!("wp::tile_matmul_acc({d}, {}, {});", a[0], a[1]),
+                    "tile_cholesky" => {
+                        e.section("tile_linalg");
+                        format!("wp::tile_cholesky({d}, {});", a[0])
+                    }
+                    "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
+                        e.section("tile_linalg");
+                        format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1])
+                    }
                     other => return Err(format!("`{other}` has no CUDA form yet")),
                 }
             }

@@ -68,6 +68,16 @@ impl RustEmitter<'_> {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
             }
+            "tile_cholesky" => {
+                let x = &v[0];
+                quote_spanned!(sp=> __wp::tile::cholesky(&#x))
+            }
+            "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
+                // By the right-hand side's rank: `lower_solve1`, `lower_solve2`, ..
+                let f = format_ident!("{}{}", &b.name[5..], rank(&args[1]));
+                let (m, y) = (&v[0], &v[1]);
+                quote_spanned!(sp=> __wp::tile::#f(&#m, &#y))
+            }
             "tile_transpose" => {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::transpose(&#x))

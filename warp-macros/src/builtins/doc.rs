@@ -361,6 +361,7 @@ fn builtin_table() -> String {
             Grad::Atomic => "atomic",
             Grad::AtomicNone => "none",
             Grad::Effect => "none (a store)",
+            Grad::NotYet => "not yet",
         };
         t += &format!(
             "| {name} | `{}` | {} | {} | {grad} | {} |\n",

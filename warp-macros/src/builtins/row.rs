@@ -37,6 +37,10 @@ pub enum Grad {
     /// where the replay would need the old value it returned (see
     /// `analysis::atomic_without_adjoint`).
     AtomicNone,
+    /// Differentiable in Warp, but without an adjoint here yet (the tile Cholesky factor and
+    /// solves): backward through a kernel that calls it is refused, naming the builtin
+    /// (`middle::adjoint::build`), never a gradient silently missing.
+    NotYet,
 }
 
 /// How a draw `name(&mut state, ..)` advances the generator state (`front::lower::rng`).

@@ -4,23 +4,29 @@
 //! `warp_cuda::library::SECTIONS` (warp-runtime's `cuda/source.rs`): a name that is no kernel
 //! row there would leave its builtins undefined on a GPU alone, and the CPU tests would not
 //! notice. The names come from the builtin table's rows, the object kinds' rows (`OBJECTS`),
-//! and the two the CUDA emitter adds itself (`back/cuda.rs`: a transform value's and
-//! `print`'s). A proc-macro crate cannot depend on warp-cuda; its tests can, so the check is
-//! here.
+//! and those the CUDA emitter adds itself (`back/cuda.rs`: a transform value's and
+//! `print`'s; `back/cuda_tile.rs`: the tile sections). A proc-macro crate cannot depend on
+//! warp-cuda; its tests can, so the check is here.
 
 use crate::builtins::BUILTINS;
 use crate::types::OBJECTS;
 use std::collections::BTreeSet;
 
-/// The section names that `back/cuda.rs` passes to `Emitter::section` as string literals.
+/// The section names that `back/cuda.rs` and `back/cuda_tile.rs` pass to `Emitter::section` as
+/// string literals.
 fn emitter_literals() -> Vec<&'static str> {
-    let text = include_str!("../back/cuda.rs");
-    text.match_indices(".section(\"")
-        .map(|(i, m)| {
+    [
+        include_str!("../back/cuda.rs"),
+        include_str!("../back/cuda_tile.rs"),
+    ]
+    .into_iter()
+    .flat_map(|text| {
+        text.match_indices(".section(\"").map(move |(i, m)| {
             let rest = &text[i + m.len()..];
             &rest[..rest.find('"').expect("a closing quote")]
         })
-        .collect()
+    })
+    .collect()
 }
 
 #[test]
@@ -36,7 +42,7 @@ fn every_section_the_macros_name_is_a_kernel_row_of_the_library() {
                 .iter()
                 .map(|o| (o.section, format!("object kind `{}`", o.name))),
         )
-        .chain(emitted.iter().map(|s| (*s, "back/cuda.rs".to_string())));
+        .chain(emitted.iter().map(|s| (*s, "the CUDA emitter".to_string())));
     let mut used = BTreeSet::new();
     for (section, by) in named {
         let row = warp_cuda::library::find(section);

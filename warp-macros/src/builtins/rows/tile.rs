@@ -71,4 +71,19 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "tile_matmul": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_matmul_acc": TILE_MATMUL, (Tile, Tile, Tile) -> Unit, "tile", Adjoint, no_tangent,
         cooperative, overload("tile_matmul", 3);
+    // Dense linear algebra (Warp's default `fill_mode="lower"`), in the order warp-core's
+    // `tile::linalg` documents, which the CUDA section `tile_linalg` shares bit for bit.
+    // `tile_cholesky(a)`: `L` with `L Lᵀ = a` from the lower triangle of a square tile; every
+    // element NaN when `a` is not positive definite. The solves take `L` (or `U`) square and a
+    // right-hand side of as many rows, 1-D or 2-D (`K` columns), and return its shape:
+    // `tile_cholesky_solve(L, y)` solves `L Lᵀ x = y`, `tile_lower_solve(L, y)` `L z = y`,
+    // `tile_upper_solve(U, z)` `U x = z`. Warp differentiates them; here backward through them
+    // is refused by name (`NotYet`) until tile adjoints exist.
+    "tile_cholesky": TILE_MATMUL, (Tile) -> Tile, "tile", NotYet, no_tangent, cooperative;
+    "tile_cholesky_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
+        cooperative;
+    "tile_lower_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
+        cooperative;
+    "tile_upper_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
+        cooperative;
 };

@@ -12,6 +12,9 @@ use super::*;
 use crate::front::signature::{dim_of, dim_of_path, tile_rank};
 use crate::types::Dim;
 
+#[path = "tiles_linalg.rs"]
+mod linalg;
+
 /// A tile's element and dims, from its type.
 fn tile_parts(t: &Ty) -> Option<(&Ty, &[Dim])> {
     match t {
@@ -257,6 +260,9 @@ impl Lowerer {
             "tile_atomic_add" => self.tile_atomic_add(row, &args, span)?,
             "tile_matmul" => self.tile_matmul(row, &args, span)?,
             "tile_matmul_acc" => self.tile_matmul_acc(row, &args, span)?,
+            "tile_cholesky" | "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
+                self.tile_linalg(row, &args, span)?
+            }
             "tile_extract" => {
                 return err(
                     span,

@@ -54,6 +54,7 @@ pub use tiles::{is_block_call, is_block_level};
 pub use tiles::tile_adjoint;
 
 use super::adjoint_prep::without_jumps;
+use crate::builtins::Grad;
 use crate::ir::*;
 use crate::types::Ty;
 use proc_macro2::Span;
@@ -133,6 +134,25 @@ pub const TILE_TANGENT: &str =
     "uses tiles, and forward-mode derivatives through tiles are not supported yet";
 
 pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
+    // A builtin with no adjoint yet (`Grad::NotYet`: the tile Cholesky factor and solves):
+    // refused by name.
+    let mut not_yet = None;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op: Op::Builtin { builtin, .. },
+            ..
+        } = &s.kind
+        {
+            if builtin.grad == Grad::NotYet && not_yet.is_none() {
+                not_yet = Some(builtin.name);
+            }
+        }
+    });
+    if let Some(name) = not_yet {
+        return Err(format!(
+            "calls `{name}`, which has no adjoint yet (Warp differentiates it; warp-lang does not yet)"
+        ));
+    }
     let tiled = f.tiled.is_some();
     if tiled && !f.callees.is_empty() {
         return Err(

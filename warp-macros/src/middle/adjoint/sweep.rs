@@ -272,6 +272,9 @@ impl Cx<'_> {
                     self.call(&mut out, &func, args, builtin.faults(), sp)
                 }
                 Grad::Atomic => self.atomic(&mut out, builtin.name, args, sp),
+                Grad::NotYet => {
+                    unreachable!("`build` refuses a kernel that calls `{}`", builtin.name)
+                }
             },
             Op::Load { array, index } => out.push(at(self.load(*array, index, sp), sp)),
             Op::Member(v, m) => self.accum(&mut out, *v, vec![m.clone()], GradSrc::Seed, sp),

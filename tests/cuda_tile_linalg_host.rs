@@ -1,0 +1,174 @@
+//! The CUDA tile linear algebra (`warp-cuda/cuda/wp_tile_linalg.h`), checked without a GPU
+//! against the CPU's (`warp_core::tile::linalg`), bit for bit.
+//!
+//! A driver (`warp-cuda/cuda/tests/wp_tile_linalg_driver.cpp`) runs the header's cooperative
+//! Cholesky factor and solves in one block under the block emulator (`wp_prim_emu.h`: the
+//! block's threads are fibers that run in a new random order between barriers, so a read that
+//! races a write in the same phase would show). It is compiled with g++ without FMA
+//! contraction for several block sizes: 1, a warp, 45 (a partial warp), 96, 256. Every case
+//! must give warp-core's bits: the two run the same roundings in the same order. What this
+//! cannot check is what only hardware does (NVRTC's acceptance, real shared memory); the
+//! suite's `tiles` tests do that on a GPU.
+//!
+//! Skipped, saying so, without g++.
+
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
+use std::process::Command;
+use warp_core::tile::{self, Tile, Tile1, Tile2};
+
+const BLOCK_DIMS: [usize; 5] = [1, 32, 45, 96, 256];
+
+/// Seeded values in [-1, 1).
+fn values(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed;
+    move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// `B Bᵀ + n I`, rounded to `T`: symmetric positive definite.
+fn spd<const N: usize>(seed: u64) -> [[f64; N]; N] {
+    let mut r = values(seed);
+    let b: [[f64; N]; N] = std::array::from_fn(|_| std::array::from_fn(|_| r()));
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            (0..N).map(|k| b[i][k] * b[j][k]).sum::<f64>() + if i == j { N as f64 } else { 0.0 }
+        })
+    })
+}
+
+fn bytes<X: Tile>(t: &X) -> Vec<u8>
+where
+    X::Elem: bytemuck::Pod,
+{
+    bytemuck::cast_slice(t.as_flat()).to_vec()
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+fn unhex(s: &str) -> Vec<u8> {
+    (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+        .collect()
+}
+
+/// Runs `cases` (name, input bytes) on the driver for block size `bd`: each case's output.
+fn run(bd: usize, cases: &[(String, Vec<u8>)]) -> Vec<Vec<u8>> {
+    let (dir, exe) = host_cpp::compile_driver(
+        &format!("tile_linalg_{bd}"),
+        include_str!("../warp-cuda/cuda/tests/wp_tile_linalg_driver.cpp"),
+        &[&format!("WP_TILE_BLOCK_DIM={bd}")],
+    );
+    let script: String = cases
+        .iter()
+        .map(|(n, b)| format!("run {n} {}\n", hex(b)))
+        .collect();
+    let path = dir.join("script.txt");
+    std::fs::write(&path, script).unwrap();
+    let out = Command::new(&exe).arg(&path).output().unwrap();
+    assert!(
+        out.status.success(),
+        "driver (block size {bd}): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got: Vec<Vec<u8>> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| unhex(l.strip_prefix("out ").expect("an out line")))
+        .collect();
+    assert_eq!(got.len(), cases.len());
+    got
+}
+
+/// What warp-core gives for a case: L, Z = lower_solve(L, y), X = cholesky_solve(L, y),
+/// W = upper_solve(Lᵀ, Z), as bytes; `solve` is the rank's (1-D or 2-D) trio of solves.
+macro_rules! case {
+    ($cases:ident, $want:ident, $t:ty, $n:literal, 0, $a:expr, $seed:expr) => {{
+        let a = Tile2::<$t, $n, $n> {
+            data: $a.map(|r| r.map(|v| v as $t)),
+        };
+        let mut r = values($seed);
+        let y = Tile1::<$t, $n> {
+            data: std::array::from_fn(|_| r() as $t),
+        };
+        let l = tile::cholesky(&a);
+        let z = tile::lower_solve1(&l, &y);
+        let x = tile::cholesky_solve1(&l, &y);
+        let w = tile::upper_solve1(&tile::transpose(&l), &z);
+        let mut input = bytes(&a);
+        input.extend(bytes(&y));
+        $cases.push((format!("{}_{}_0", stringify!($t), $n), input));
+        $want.push([bytes(&l), bytes(&z), bytes(&x), bytes(&w)].concat());
+    }};
+    ($cases:ident, $want:ident, $t:ty, $n:literal, $k:literal, $a:expr, $seed:expr) => {{
+        let a = Tile2::<$t, $n, $n> {
+            data: $a.map(|r| r.map(|v| v as $t)),
+        };
+        let mut r = values($seed);
+        let y = Tile2::<$t, $n, $k> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| r() as $t)),
+        };
+        let l = tile::cholesky(&a);
+        let z = tile::lower_solve2(&l, &y);
+        let x = tile::cholesky_solve2(&l, &y);
+        let w = tile::upper_solve2(&tile::transpose(&l), &z);
+        let mut input = bytes(&a);
+        input.extend(bytes(&y));
+        $cases.push((format!("{}_{}_{}", stringify!($t), $n, $k), input));
+        $want.push([bytes(&l), bytes(&z), bytes(&x), bytes(&w)].concat());
+    }};
+}
+
+#[test]
+fn cholesky_and_solves_match_warp_core_bit_for_bit() {
+    if !host_cpp::gpp() {
+        eprintln!("SKIPPED cuda_tile_linalg_host: no g++ on this machine");
+        return;
+    }
+    let mut cases = Vec::new();
+    let mut want = Vec::new();
+    case!(cases, want, f32, 1, 0, spd::<1>(1), 2);
+    case!(cases, want, f32, 4, 0, spd::<4>(3), 4);
+    case!(cases, want, f32, 5, 3, spd::<5>(5), 6);
+    case!(cases, want, f32, 16, 0, spd::<16>(7), 8);
+    case!(cases, want, f32, 16, 3, spd::<16>(9), 10);
+    case!(cases, want, f32, 32, 0, spd::<32>(11), 12);
+    case!(cases, want, f64, 4, 2, spd::<4>(13), 14);
+    case!(cases, want, f64, 16, 0, spd::<16>(15), 16);
+    case!(cases, want, f64, 32, 0, spd::<32>(17), 18);
+    case!(cases, want, f64, 32, 2, spd::<32>(19), 20);
+    // Not positive definite (pivot 2 is 1 - 4): an all-NaN factor and NaN solutions.
+    let mut bad = spd::<4>(21);
+    bad[1][0] = 2.0 * bad[0][0].sqrt() * bad[1][1].sqrt();
+    case!(cases, want, f32, 4, 0, bad, 22);
+    assert!(
+        bytemuck::cast_slice::<u8, f32>(&want.last().unwrap()[..64])
+            .iter()
+            .all(|v| v.is_nan()),
+        "the bad case is not positive definite"
+    );
+    // In place: `tile_cholesky(A, A)`.
+    let a16 = Tile2::<f32, 16, 16> {
+        data: spd::<16>(23).map(|r| r.map(|v| v as f32)),
+    };
+    cases.push(("inplace_f32_16".into(), bytes(&a16)));
+    want.push(bytes(&tile::cholesky(&a16)));
+    for bd in BLOCK_DIMS {
+        let got = run(bd, &cases);
+        for ((name, _), (g, w)) in cases.iter().zip(got.iter().zip(&want)) {
+            // NaNs compare by bits too: both produce the default quiet NaN.
+            assert!(
+                g == w,
+                "block size {bd}, case {name}: the GPU header differs from warp-core"
+            );
+        }
+    }
+}
