@@ -118,6 +118,7 @@ mod stability;
 mod streams;
 mod structs;
 mod tiles;
+mod tiles_f16;
 mod transforms;
 mod views;
 mod volume;

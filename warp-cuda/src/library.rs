@@ -196,6 +196,8 @@ pub static SECTIONS: &[Section] = &[
     kernel!("print",     None,                                    No),
     // Tiles (docs: the tiles chapter): exact, so that elementwise results match the CPU.
     kernel!("tile",      None,                                    Yes),
+    // The f16 tile matmul on tensor cores (its FMA fallback bit-exact with the CPU).
+    kernel!("tile_mma",  None,                                    Yes),
     // Compiled on their own: name, the define of a host object's build library.
     standalone!("bvh_build",      Some("WP_BVH_BUILD")),
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),

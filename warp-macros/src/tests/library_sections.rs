@@ -12,15 +12,21 @@ use crate::builtins::BUILTINS;
 use crate::types::OBJECTS;
 use std::collections::BTreeSet;
 
-/// The section names that `back/cuda.rs` passes to `Emitter::section` as string literals.
+/// The section names that `back/cuda.rs` and `back/cuda_tile.rs` pass to `Emitter::section`
+/// as string literals.
 fn emitter_literals() -> Vec<&'static str> {
-    let text = include_str!("../back/cuda.rs");
-    text.match_indices(".section(\"")
-        .map(|(i, m)| {
+    [
+        include_str!("../back/cuda.rs"),
+        include_str!("../back/cuda_tile.rs"),
+    ]
+    .into_iter()
+    .flat_map(|text| {
+        text.match_indices(".section(\"").map(move |(i, m)| {
             let rest = &text[i + m.len()..];
             &rest[..rest.find('"').expect("a closing quote")]
         })
-        .collect()
+    })
+    .collect()
 }
 
 #[test]
@@ -28,6 +34,7 @@ fn every_section_the_macros_name_is_a_kernel_row_of_the_library() {
     let emitted = emitter_literals();
     // The scan finds the emitter's own (else it would check nothing).
     assert!(emitted.contains(&"transform") && emitted.contains(&"print"));
+    assert!(emitted.contains(&"tile_mma"));
     let named = BUILTINS
         .iter()
         .map(|b| (b.section, format!("builtin `{}`", b.name)))
