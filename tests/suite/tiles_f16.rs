@@ -206,3 +206,49 @@ fn f16_matmul_fma_shapes_are_exact(dev: &wp::Device) {
         }
     }
 }
+
+/// NVRTC compiles the f16 tile kernels (the tensor-core path on sm_80 and sm_90, the FMA
+/// fallback on sm_75 and for a block that is not whole warps) without a GPU: the CUDA tests
+/// above compile them only where a GPU is. Skipped, saying so, without NVRTC.
+#[test]
+fn f16_tile_kernels_compile_under_nvrtc() {
+    let archs = match warp_cuda::nvrtc_supported_archs() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("SKIPPED f16_tile_kernels_compile_under_nvrtc: no NVRTC ({e})");
+            return;
+        }
+    };
+    let headers: Vec<(&str, &str)> = warp_cuda::HEADERS.to_vec();
+    for info in [
+        wp::aot::kernel(k_f16_ops),
+        wp::aot::kernel(k_gemm_f16),
+        wp::aot::kernel(k_mm_f16_odd),
+    ] {
+        let src = wp::cuda_source::assemble(info);
+        assert!(
+            info.name == "k_f16_ops" || src.text.contains("#include \"wp_tile_mma.h\""),
+            "{}: an f16 matmul includes the tensor-core section",
+            info.name
+        );
+        let smem = info.tile.as_ref().expect("tiled").shared_bytes.to_string();
+        for arch in [75, 80, 90].into_iter().filter(|a| archs.contains(a)) {
+            for bd in ["45", "128"] {
+                let defines = [
+                    ("WP_CONTIGUOUS", "1"),
+                    ("WP_TILE_BLOCK_DIM", bd),
+                    ("WP_TILE_SMEM_BYTES", smem.as_str()),
+                ];
+                let opts = warp_cuda::CompileOptions {
+                    fmad: false,
+                    defines: &defines,
+                    headers: &headers,
+                    ..Default::default()
+                };
+                if let Err(e) = warp_cuda::compile(&src.text, info.name, &opts, arch) {
+                    panic!("{} at sm_{arch}, block_dim {bd}: {e}", info.name);
+                }
+            }
+        }
+    }
+}
