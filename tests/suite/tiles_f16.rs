@@ -79,7 +79,7 @@ fn f16_elementwise_map_and_reductions(dev: &wp::Device) {
 
 const GM: usize = 32;
 const GN: usize = 32;
-const GK: usize = 16;
+const GK: usize = 32;
 
 #[wp::kernel]
 fn k_gemm_f16(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>, d: Array<f16, 2>) {
@@ -127,9 +127,10 @@ fn chain(
 
 /// A tiled GEMM of f16 inputs with an f32 accumulator on a ragged 45 x 40 x 37 problem, and
 /// the returning form's f16 product of the first k-step. Block sizes 64 and 128 (whole warps:
-/// tensor cores on an sm_80+ GPU) are within the tolerance of the module docs of the f64
-/// product; block size 45 (not whole warps: the FMA path on every GPU) and the CPU are the
-/// host's FMA chain bit for bit.
+/// tensor cores on an sm_80+ GPU; 32 x 32 operands, whose 64-byte rows the tensor-core path
+/// reads from padded copies) are within the tolerance of the module docs of the f64 product;
+/// block size 45 (not whole warps: the FMA path on every GPU) and the CPU are the host's FMA
+/// chain bit for bit.
 fn f16_gemm_accumulates_in_f32(dev: &wp::Device) {
     let (m, k, n) = (45usize, 40usize, 37usize);
     let ad = values(m * k, 3);

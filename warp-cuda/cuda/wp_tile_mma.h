@@ -8,7 +8,9 @@
 //   * tensor cores (sm_80 and up): `mma.sync.aligned.m16n8k16.row.col.f32.f16.f16.f32`, its
 //     operands loaded from the shared-memory slots with `ldmatrix` (A row-major as it is; B
 //     row-major through `ldmatrix.trans`, which gives the column-major fragment the `.col`
-//     operand wants). Each warp owns warp tiles of FM x FN mma tiles (16 x 8 outputs each),
+//     operand wants; operands whose rows would make ldmatrix conflict 4 ways or more are first
+//     copied to padded rows in static shared memory). Each warp owns warp tiles of FM x FN mma
+//     tiles (16 x 8 outputs each),
 //     handed out round-robin; per k-step of 16 it loads FM A fragments and FN B fragments and
 //     issues FM * FN mmas, the accumulators in registers, loaded from and stored to `c` once
 //     per call. The hardware sums each k-step's 16 products (exact: an f16 x f16 product fits
@@ -64,6 +66,49 @@ struct mma_plan {
   static constexpr int WTN = FITS ? NT / FN : 1;
   static constexpr int WT = FITS ? (MT / FM) * WTN : 1;
 };
+
+/// How matmul_mma reads an R x C f16 operand (row-major, C a multiple of 8): from its slot, or
+/// from a padded copy in static shared memory. ldmatrix reads 8 rows of 16 bytes per matrix in
+/// one pass; rows S = C / 8 16-byte units apart fall on gcd(S, 8) times the same banks (S = 8,
+/// a 64-wide f16 row, is an 8-way conflict). A copy whose rows are S + 1 units apart (S + 1
+/// odd) is conflict-free; it costs one pass over the operand, so it is made for conflicts of 4
+/// ways or more, and while the copies of both operands fit STAGE_BUDGET (static shared memory
+/// has a 48 KiB limit; the copies are per matmul instantiation).
+template <int R, int C>
+struct stage_plan {
+  static constexpr int S = C / 8;
+  static constexpr int WAYS = S % 8 == 0 ? 8 : S % 4 == 0 ? 4 : S % 2 == 0 ? 2 : 1;
+  static constexpr bool WANT = WAYS >= 4;
+  static constexpr int BYTES = R * (C + 8) * 2;
+};
+constexpr int STAGE_BUDGET = 40 * 1024;
+
+/// The staging decisions of an M x K by K x N product: A's copy first, then B's if it fits too.
+template <int M, int K, int N>
+struct stage_both {
+  typedef stage_plan<M, K> SA;
+  typedef stage_plan<K, N> SB;
+  static constexpr bool A = SA::WANT && SA::BYTES <= STAGE_BUDGET;
+  static constexpr bool B = SB::WANT && (A ? SA::BYTES : 0) + SB::BYTES <= STAGE_BUDGET;
+  /// Row pitches (halves) of the operands as read.
+  static constexpr int PA = A ? K + 8 : K;
+  static constexpr int PB = B ? N + 8 : N;
+  /// Static shared bytes of the copies (at least 16: no zero-sized arrays).
+  static constexpr int BYTES_A = A ? SA::BYTES : 16;
+  static constexpr int BYTES_B = B ? SB::BYTES : 16;
+};
+
+/// Copies an R x C f16 operand (16-byte aligned, C a multiple of 8) to rows `P` halves apart,
+/// 16 bytes at a time, block-strided; the caller synchronises.
+template <int R, int C, int P>
+WP_FN void stage_copy(f16* dst, const f16* src) {
+  constexpr int S = C / 8;
+  for (int e = (int)threadIdx.x; e < R * S; e += WP_TILE_BLOCK_DIM) {
+    const int r = e / S, u = e % S;
+    *reinterpret_cast<tile_detail::raw16*>(dst + r * P + u * 8) =
+        *reinterpret_cast<const tile_detail::raw16*>(src + r * C + u * 8);
+  }
+}
 
 /// The FMA path: each output one f32 chain over k ascending (warp-core's order), written as
 /// f32 (`Acc`: starting from c) or rounded once to f16 (starting from +0).
@@ -121,11 +166,28 @@ WP_FN void mma_16816(f32* d, const unsigned* a, const unsigned* b) {
 }
 
 /// The tensor-core path of mma_plan (slots 16-byte aligned: every ldmatrix row address is,
-/// since K and N are multiples of 8 halves).
+/// since K and N, and the copies' pitches, are multiples of 8 halves). Operands whose rows
+/// would make ldmatrix conflict 4 ways or more are read from padded copies (stage_both).
 template <bool Acc, typename C, int M, int K, int N>
-WP_FN void matmul_mma(C* c, const f16* a, const f16* b) {
+WP_FN void matmul_mma(C* c, const f16* a_slot, const f16* b_slot) {
   typedef mma_plan<M, K, N> P;
-  constexpr int FM = P::FM, FN = P::FN;
+  typedef stage_both<M, K, N> ST;
+  constexpr int FM = P::FM, FN = P::FN, PA = ST::PA, PB = ST::PB;
+  const f16* a = a_slot;
+  const f16* b = b_slot;
+  if constexpr (ST::A || ST::B) {
+    WP_TILE_SHARED_ALIGNED unsigned char stage_a[ST::BYTES_A];
+    WP_TILE_SHARED_ALIGNED unsigned char stage_b[ST::BYTES_B];
+    if constexpr (ST::A) {
+      stage_copy<M, K, PA>(reinterpret_cast<f16*>(stage_a), a_slot);
+      a = reinterpret_cast<const f16*>(stage_a);
+    }
+    if constexpr (ST::B) {
+      stage_copy<K, N, PB>(reinterpret_cast<f16*>(stage_b), b_slot);
+      b = reinterpret_cast<const f16*>(stage_b);
+    }
+    __syncthreads();
+  }
   const int lane = (int)threadIdx.x & 31;
   const int warp = (int)threadIdx.x >> 5;
   const int g = lane >> 2, t = lane & 3;
@@ -159,7 +221,7 @@ WP_TILE_UNROLL_N(4)
 WP_TILE_UNROLL
       for (int fm = 0; fm < FM; ++fm) {
         const int row = m0 + fm * 16 + (lane & 7) + 8 * ((lane >> 3) & 1);
-        ldmatrix_x4(af[fm], a + row * K + k0 + 8 * (lane >> 4));
+        ldmatrix_x4(af[fm], a + row * PA + k0 + 8 * (lane >> 4));
       }
       // B (K x N row-major): lane l names row k0 + (l % 16) at column n + 8 (l / 16); the
       // transposed matrices (k 0-7, k 8-15) of columns n..n+7 are b[0], b[1] of that mma tile,
@@ -167,11 +229,11 @@ WP_TILE_UNROLL
 WP_TILE_UNROLL
       for (int fn = 0; fn + 1 < FN; fn += 2) {
         unsigned r[4];
-        ldmatrix_x4_trans(r, b + (k0 + (lane & 15)) * N + n0 + fn * 8 + 8 * (lane >> 4));
+        ldmatrix_x4_trans(r, b + (k0 + (lane & 15)) * PB + n0 + fn * 8 + 8 * (lane >> 4));
         bf[fn][0] = r[0], bf[fn][1] = r[1], bf[fn + 1][0] = r[2], bf[fn + 1][1] = r[3];
       }
       if constexpr (FN % 2 == 1) {
-        ldmatrix_x2_trans(bf[FN - 1], b + (k0 + (lane & 15)) * N + n0 + (FN - 1) * 8);
+        ldmatrix_x2_trans(bf[FN - 1], b + (k0 + (lane & 15)) * PB + n0 + (FN - 1) * 8);
       }
 WP_TILE_UNROLL
       for (int fm = 0; fm < FM; ++fm)
