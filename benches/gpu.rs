@@ -547,30 +547,86 @@ fn ad_bench(dev: &wp::Device) {
     );
 }
 
-/// The tile GEMM section's cold compile (the child mode `--tile-compile-child`, run with an
-/// empty kernel cache): the first launch of the f32 tile GEMM kernel in a fresh process, and
-/// its NVRTC time.
+/// The tile GEMM section's cold compile (the child mode `--tile-compile-child [f16]`, run with
+/// an empty kernel cache): the first launch of the f32 (or, with `f16`, the fp16) tile GEMM
+/// kernel in a fresh process, and its NVRTC time.
 fn tile_compile_child() {
+    let f16 = std::env::args().any(|a| a == "f16");
     let run = || -> wp::Result<String> {
         let dev = wp::get_device("cuda:0")?;
-        let zeros = || wp::Array::<f32, 2>::zeros((64, 64), &dev);
-        let (a, b, c) = (zeros()?, zeros()?, zeros()?);
-        let t = Instant::now();
-        let kernel = tile_gemm::gemm_tiled_f32;
-        wp::launch_tiled(kernel, (1, 1), (&a, &b, &c), TILE_BLOCK_DIM, &dev)?;
+        let t;
+        let name = if f16 {
+            let h = || wp::Array::<wp::f16, 2>::zeros((128, 128), &dev);
+            let (a, b) = (h()?, h()?);
+            let c = wp::Array::<f32, 2>::zeros((128, 128), &dev)?;
+            t = Instant::now();
+            wp::launch_tiled(
+                tile_gemm::gemm_tiled_f16,
+                (1, 1),
+                (&a, &b, &c),
+                TILE_BLOCK_DIM,
+                &dev,
+            )?;
+            "gemm_tiled_f16"
+        } else {
+            let zeros = || wp::Array::<f32, 2>::zeros((64, 64), &dev);
+            let (a, b, c) = (zeros()?, zeros()?, zeros()?);
+            t = Instant::now();
+            wp::launch_tiled(
+                tile_gemm::gemm_tiled_f32,
+                (1, 1),
+                (&a, &b, &c),
+                TILE_BLOCK_DIM,
+                &dev,
+            )?;
+            "gemm_tiled_f32"
+        };
         wp::synchronize()?;
         let total = ms(t);
         let reports = wp::compile_reports();
-        let r = reports.iter().find(|r| r.kernel == "gemm_tiled_f32");
+        let r = reports.iter().find(|r| r.kernel == name);
         Ok(match r {
             Some(r) => format!("{total:.2} {:.2} {}", r.compile_ms, r.cache_hit),
-            None => "error: no compile report for gemm_tiled_f32".to_string(),
+            None => format!("error: no compile report for {name}"),
         })
     };
     // One line for the parent: the three numbers, or the error (never a panic's backtrace).
     match run() {
         Ok(line) => println!("{line}"),
         Err(e) => println!("error: {e}"),
+    }
+}
+
+/// The cold compile of a tile GEMM kernel (`--tile-compile-child`, with `f16` for the fp16
+/// one), in a fresh process with an empty cache: one line of the section. `warp_first`: Warp's
+/// first launch with an empty cache, from the Python side.
+fn cold_compile_row(what: &str, f16: bool, warp_first: Option<f64>) {
+    let cache = std::env::temp_dir().join(format!("warp-lang-tile-cache-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&cache);
+    let mut cmd = Command::new(std::env::current_exe().unwrap());
+    cmd.arg("--tile-compile-child");
+    if f16 {
+        cmd.arg("f16");
+    }
+    let out = cmd.env("WARP_LANG_CACHE_DIR", &cache).output().unwrap();
+    let _ = std::fs::remove_dir_all(&cache);
+    let cold = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    match cold.split_whitespace().collect::<Vec<_>>().as_slice() {
+        [total, nvrtc, hit] if !cold.starts_with("error") => println!(
+            "  cold compile of the {what} kernel: first launch {total} ms (NVRTC {nvrtc} ms, cache \
+             hit {hit}), target < 5000 ms{}",
+            warp_first
+                .map(|w| format!("; Warp's first launch with an empty cache: {w:.0} ms"))
+                .unwrap_or_default()
+        ),
+        _ => println!(
+            "  cold compile of the {what} kernel: not measured: {}",
+            if cold.is_empty() {
+                String::from_utf8_lossy(&out.stderr).trim().to_string()
+            } else {
+                cold
+            }
+        ),
     }
 }
 
@@ -606,7 +662,7 @@ fn gemm_error(
 /// same inputs; TFLOP/s, time ratios, the error on 4096 sampled entries against float64, and
 /// the tile kernel's cold compile.
 fn tile_gemm_bench(dev: &wp::Device, size: usize) {
-    use tile_gemm::{BK, BM, BN};
+    use tile_gemm::{BK, BK16, BM, BM16, BN, BN16};
     let (m, n, k) = (size, size, size);
     let mut r = common::rng(31u64);
     let ah: Vec<f32> = (0..m * k).map(|_| r.random::<f32>() * 2.0 - 1.0).collect();
@@ -638,7 +694,8 @@ fn tile_gemm_bench(dev: &wp::Device, size: usize) {
     });
     let theirs = match written {
         Ok(()) => {
-            let args = [m, n, k, BM, BN, BK, TILE_BLOCK_DIM].map(|x| x.to_string());
+            let args =
+                [m, n, k, BM, BN, BK, TILE_BLOCK_DIM, BM16, BN16, BK16].map(|x| x.to_string());
             let mut all = vec![dir.display().to_string()];
             all.extend(args);
             common::python_side("benches/py/tile_gemm.py", &all)
@@ -718,33 +775,67 @@ fn tile_gemm_bench(dev: &wp::Device, size: usize) {
     );
 
     // The cold compile, in a fresh process with an empty cache.
-    let cache = std::env::temp_dir().join(format!("warp-lang-tile-cache-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&cache);
-    let out = Command::new(std::env::current_exe().unwrap())
-        .arg("--tile-compile-child")
-        .env("WARP_LANG_CACHE_DIR", &cache)
-        .output()
-        .unwrap();
-    let _ = std::fs::remove_dir_all(&cache);
-    let cold = String::from_utf8_lossy(&out.stdout).trim().to_string();
-    match cold.split_whitespace().collect::<Vec<_>>().as_slice() {
-        [total, nvrtc, hit] if !cold.starts_with("error") => println!(
-            "  cold compile of the tile kernel: first launch {total} ms (NVRTC {nvrtc} ms, cache hit \
-             {hit}), target < 5000 ms{}",
-            side("warp_first_ms")
-                .map(|w| format!("; Warp's first launch with an empty cache: {w:.0} ms"))
-                .unwrap_or_default()
-        ),
-        _ => println!(
-            "  cold compile of the tile kernel: not measured: {}",
-            if cold.is_empty() {
-                String::from_utf8_lossy(&out.stderr).trim().to_string()
-            } else {
-                cold
+    cold_compile_row("f32 tile", false, side("warp_first_ms"));
+
+    // fp16: the same inputs rounded to f16 (numpy's astype(float16) on the Python side rounds
+    // the same way, to nearest even), f32 accumulation; errors against the float64 product of
+    // the f16 values.
+    let ah16: Vec<wp::f16> = ah.iter().map(|&x| wp::f16::from_f32(x)).collect();
+    let bh16: Vec<wp::f16> = bh.iter().map(|&x| wp::f16::from_f32(x)).collect();
+    let (aw, bw): (Vec<f32>, Vec<f32>) = (
+        ah16.iter().map(|x| x.to_f32()).collect(),
+        bh16.iter().map(|x| x.to_f32()).collect(),
+    );
+    println!(
+        "\ntile GEMM {m} x {k} x {n} fp16 inputs, f32 accumulate (tiles {BM16} x {BN16}, k-step \
+         {BK16}, {TILE_BLOCK_DIM} threads a block; tensor cores, mma.sync m16n8k16, on sm_80+; \
+         err against the float64 product of the f16 inputs)"
+    );
+    drop((a, b));
+    let a16 = wp::Array::from_slice_shape(&ah16, (m, k), dev).unwrap();
+    let b16 = wp::Array::from_slice_shape(&bh16, (k, n), dev).unwrap();
+    c.fill(0.0).unwrap();
+    let blocks16 = (m.div_ceil(BM16), n.div_ceil(BN16));
+    let t16 = common::median_ms(|| {
+        wp::launch_tiled(
+            tile_gemm::gemm_tiled_f16,
+            blocks16,
+            (&a16, &b16, &c),
+            TILE_BLOCK_DIM,
+            dev,
+        )
+    });
+    match t16 {
+        Ok(t16) => {
+            let err16 = gemm_error(&c.to_vec().unwrap(), &aw, &bw, (n, k), &entries);
+            row("warp-lang tile_matmul fp16", t16, err16);
+            let mut ratios = Vec::new();
+            for (what, key, name) in [
+                ("Warp 1.19 tile_matmul fp16 (same tiles)", "warp16", "Warp"),
+                ("cuBLAS fp16 (torch.matmul on half)", "torch16", "cuBLAS"),
+            ] {
+                match (side(&format!("{key}_ms")), side(&format!("{key}_err"))) {
+                    (Some(t), Some(err)) => {
+                        row(what, t, err);
+                        ratios.push(format!(
+                            "ours / {name} {:.2} ({:.0}% of its TFLOP/s)",
+                            t16 / t,
+                            100.0 * t / t16
+                        ));
+                    }
+                    _ => println!("  {what:<37} not run: {}", why(&format!("{key}_error"))),
+                }
             }
-        ),
+            if !ratios.is_empty() {
+                println!(
+                    "  time ratios (above 1: ours is slower): {}",
+                    ratios.join(", ")
+                );
+            }
+        }
+        Err(e) => println!("  warp-lang tile_matmul fp16: {e:?}"),
     }
-    println!("  fp16/bf16: not yet (no tensor-core tile matmul)");
+    cold_compile_row("fp16 tile", true, side("warp16_first_ms"));
 }
 
 /// Threads per block of the batched Cholesky (ours and Warp's).

@@ -794,6 +794,67 @@ fn register_blocked_matmul_matches() {
     }
 }
 
+/// The f16 matmul of wp_tile_mma.h on the host (its FMA path: the tensor cores are the GPU's):
+/// `p = a b` rounded once to f16 and `c += a b` in f32, against warp-core's f16 matmul, bit for
+/// bit (tolerance: none), for a shape the tensor cores would take on a GPU (32 x 16 x 32) and
+/// one they would not (12 x 20 x 8).
+#[test]
+fn f16_matmul_fma_path_matches() {
+    if !have_gpp() {
+        return;
+    }
+    use warp_core::f16;
+    let mut rng = Rng::seeded(0x5eed_0016);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<u8>, String)> = Vec::new();
+    // f16 bits, little-endian (half's f16 is not bytemuck's Pod here).
+    fn bits<X: Tile<Elem = f16>>(t: &X) -> Vec<u8> {
+        t.as_flat()
+            .iter()
+            .flat_map(|x| x.to_bits().to_le_bytes())
+            .collect()
+    }
+    macro_rules! case {
+        ($m:literal, $k:literal, $n:literal) => {{
+            let mut r = |len: usize| -> Vec<f32> {
+                (0..len)
+                    .map(|_| f16::from_f32(rng.f32()).to_f32())
+                    .collect()
+            };
+            let (a, b, c) = (r($m * $k), r($k * $n), r($m * $n));
+            let h = |v: &[f32], i: usize| f16::from_f32(v[i]);
+            let ta = Tile2::<f16, $m, $k> {
+                data: std::array::from_fn(|i| std::array::from_fn(|j| h(&a, i * $k + j))),
+            };
+            let tb = Tile2::<f16, $k, $n> {
+                data: std::array::from_fn(|i| std::array::from_fn(|j| h(&b, i * $n + j))),
+            };
+            let mut tc = Tile2::<f32, $m, $n> {
+                data: std::array::from_fn(|i| std::array::from_fn(|j| c[i * $n + j])),
+            };
+            let mut w = bits(&tile::matmul(&ta, &tb));
+            tile::matmul_acc(&ta, &tb, &mut tc);
+            w.extend(flat(&tc));
+            script.arr("f2", 0, &[$m, $k], &a);
+            script.arr("f2", 1, &[$k, $n], &b);
+            script.arr("f2", 2, &[$m, $n], &c);
+            let name = format!("mm16_{}x{}x{}", $m, $k, $n);
+            script.run(&name);
+            want.push((w, name));
+        }};
+    }
+    for _ in 0..2 {
+        case!(32, 16, 32);
+        case!(12, 20, 8);
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (w, what)) in want.iter().enumerate() {
+            assert!(got[k] == *w, "{what}, block size {bd}");
+        }
+    }
+}
+
 /// The loads' and stores' fast paths (the tile fully inside a contiguous-row array: direct,
 /// and 16-byte vectors when the row starts allow) and their fallbacks (partly outside, rows
 /// not 16-byte aligned, strided rows, a strided innermost axis), against warp-core, bit for bit.

@@ -58,3 +58,28 @@ pub fn gemm_plain<T: Float>(a: Array<T, 2>, b: Array<T, 2>, c: Array<T, 2>) {
     }
     c[(i, j)] = acc;
 }
+
+/// The fp16 kernel's tiles: f16 A and B tiles (tensor-core operands), an f32 accumulator.
+/// Larger than the f32 kernel's: the accumulator lives in shared memory and each
+/// `tile_matmul` loads it into the mma fragments and stores it back once, so a longer k-step
+/// (64) spreads that over more tensor-core work; 128 x 128 gives each of 8 warps a 32 x 64
+/// warp tile (16 mma tiles). Shared memory: 2 (128 x 64) f16 + 128 x 128 f32 = 96 KiB.
+pub const BM16: usize = 128;
+pub const BN16: usize = 128;
+pub const BK16: usize = 64;
+
+/// C = A B of f16 inputs with f32 accumulation (tensor cores on sm_80+), one `BM16 x BN16`
+/// tile of C per block.
+#[wp::kernel]
+pub fn gemm_tiled_f16(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f32, BM16, BN16>();
+    // The k-steps, the last one ragged (its loads read zeros past the edge).
+    let k_tiles = (a.shape()[1] + BK16 - 1) / BK16;
+    for k in 0..k_tiles {
+        let ta = tile_load::<BM16, BK16>(a, ((i * BM16) as i32, (k * BK16) as i32));
+        let tb = tile_load::<BK16, BN16>(b, ((k * BK16) as i32, (j * BN16) as i32));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, ((i * BM16) as i32, (j * BN16) as i32));
+}

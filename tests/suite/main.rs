@@ -120,6 +120,7 @@ mod structs;
 mod tile_grad;
 mod tile_linalg;
 mod tiles;
+mod tiles_f16;
 mod transforms;
 mod views;
 mod volume;

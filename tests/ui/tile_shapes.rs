@@ -65,4 +65,20 @@ fn consts(a: Array<f32, 2>, c: Array<f32, 2>) {
 #[wp::kernel]
 fn tile_param(t: Tile<f32, 16>) {}
 
+// f16 products accumulate in f32: an f16 accumulator, or operands of two element types, are
+// refused.
+#[wp::kernel]
+fn f16_into_f16(a: Array<f16, 2>) {
+    let x = tile_load::<16, 16>(a, (0, 0));
+    let mut acc = tile_zeros::<f16, 16, 16>();
+    tile_matmul(x, x, &mut acc);
+}
+
+#[wp::kernel]
+fn mixed_elems(a: Array<f16, 2>, b: Array<f32, 2>) {
+    let x = tile_load::<16, 16>(a, (0, 0));
+    let y = tile_load::<16, 16>(b, (0, 0));
+    let p = tile_matmul(x, y);
+}
+
 fn main() {}

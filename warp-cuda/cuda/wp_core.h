@@ -649,6 +649,10 @@ WP_FN f32 s_mul(f32 a, f32 b) { return a * b; }
 WP_FN f64 s_add(f64 a, f64 b) { return a + b; }
 WP_FN f64 s_sub(f64 a, f64 b) { return a - b; }
 WP_FN f64 s_mul(f64 a, f64 b) { return a * b; }
+// f16: its operators (one f32 operation, rounded once), as `half`'s.
+WP_FN f16 s_add(f16 a, f16 b) { return a + b; }
+WP_FN f16 s_sub(f16 a, f16 b) { return a - b; }
+WP_FN f16 s_mul(f16 a, f16 b) { return a * b; }
 }  // namespace detail
 
 // ------------------------------------------------------------------------------------------

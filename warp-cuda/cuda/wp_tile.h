@@ -144,6 +144,10 @@ WP_FN f32 tmin(f32 a, f32 b) { return ::fminf(a, b); }
 WP_FN f32 tmax(f32 a, f32 b) { return ::fmaxf(a, b); }
 WP_FN f64 tmin(f64 a, f64 b) { return ::fmin(a, b); }
 WP_FN f64 tmax(f64 a, f64 b) { return ::fmax(a, b); }
+// f16: the f32 ones on the widened values, rounded back (exact: the result is an operand),
+// as warp-core's `MinMax for f16`.
+WP_FN f16 tmin(f16 a, f16 b) { return f16_from_f32(::fminf(f16_to_f32(a), f16_to_f32(b))); }
+WP_FN f16 tmax(f16 a, f16 b) { return f16_from_f32(::fmaxf(f16_to_f32(a), f16_to_f32(b))); }
 template <typename T>
 WP_FN T tmin(T a, T b) {
   return b < a ? b : a;
@@ -194,6 +198,7 @@ struct max_op {
 /// `-v`: the builtins' wrapping negation for integers, IEEE negation (the sign bit) for floats.
 WP_FN f32 neg(f32 v) { return -v; }
 WP_FN f64 neg(f64 v) { return -v; }
+WP_FN f16 neg(f16 v) { return -v; }
 template <typename T>
 WP_FN T neg(T v) {
   return w_neg(v);
@@ -211,6 +216,9 @@ WP_FN i8 shfl_down(unsigned mask, i8 v, int off) { return (i8)__shfl_down_sync(m
 WP_FN i16 shfl_down(unsigned mask, i16 v, int off) { return (i16)__shfl_down_sync(mask, (i32)v, off); }
 WP_FN u8 shfl_down(unsigned mask, u8 v, int off) { return (u8)__shfl_down_sync(mask, (u32)v, off); }
 WP_FN u16 shfl_down(unsigned mask, u16 v, int off) { return (u16)__shfl_down_sync(mask, (u32)v, off); }
+WP_FN f16 shfl_down(unsigned mask, f16 v, int off) {
+  return f16_from_bits((u16)__shfl_down_sync(mask, (u32)v.bits, off));
+}
 
 /// The elements `elem(0..S)` (partials of type P) reduced with `op` in the order of the header
 /// comment; thread 0 passes the result to `put`. Every thread of the block calls it.
@@ -277,6 +285,7 @@ WP_FN arg_t<T> shfl_down(unsigned mask, const arg_t<T>& a, int off) {
 /// NaN (a value unordered with itself); never for integers.
 WP_FN bool tnan(f32 v) { return v != v; }
 WP_FN bool tnan(f64 v) { return v != v; }
+WP_FN bool tnan(f16 v) { return v != v; }
 template <typename T>
 WP_FN bool tnan(T) {
   return false;

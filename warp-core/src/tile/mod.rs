@@ -41,7 +41,7 @@ pub use linalg::{
     upper_solve2,
 };
 pub use load::{load1, load2, store1, store2};
-pub use matmul::{matmul, matmul_acc, Fma};
+pub use matmul::{matmul, matmul_acc, Fma, MatmulElem};
 pub use reduce::{argmax, argmin, max, min, reduce, sum};
 pub use scan::{scan_exclusive, scan_inclusive, scan_max_inclusive, scan_min_inclusive};
 pub use shape::{broadcast11, broadcast12, broadcast22, transpose};

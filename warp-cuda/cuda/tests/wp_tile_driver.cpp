@@ -13,6 +13,7 @@
 //   dump KIND SLOT              prints `dump HEX`: the array's bytes now
 #include "wp_prim_emu.h"
 #include "wp_tile.h"
+#include "wp_tile_mma.h"
 
 #include <cstdint>
 #include <cstring>
@@ -278,6 +279,34 @@ static void k_matmul_f64(args_t a) {
   dump(a, at, tp);
 }
 
+/// f16 operands (wp_tile_mma.h; the host has no tensor cores, so its FMA path): arrays 0 and 1
+/// (f32 values that f16 holds exactly) converted into f16 tiles, `p = a b` (f16) and
+/// `c2 += a b` (f32, c2 from array 2); outputs p, then c2.
+template <int M, int K, int N>
+static void k_mm16(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto fa = SLOT(tile_t<f32, M, K>);
+  auto fb = SLOT(tile_t<f32, K, N>);
+  auto ta = SLOT(tile_t<wp::f16, M, K>);
+  auto tb = SLOT(tile_t<wp::f16, K, N>);
+  auto tc = SLOT(tile_t<f32, M, N>);
+  auto tp = SLOT(tile_t<wp::f16, M, N>);
+  wp::tile_load(fa, a.f2[0], 0, 0, &c);
+  wp::tile_load(fb, a.f2[1], 0, 0, &c);
+  wp::tile_load(tc, a.f2[2], 0, 0, &c);
+  for (int e = (int)threadIdx.x; e < M * K; e += WP_TILE_BLOCK_DIM)
+    ta.data[e] = wp::f16_from_f32(fa.data[e]);
+  for (int e = (int)threadIdx.x; e < K * N; e += WP_TILE_BLOCK_DIM)
+    tb.data[e] = wp::f16_from_f32(fb.data[e]);
+  __syncthreads();
+  wp::tile_matmul(tp, ta, tb);
+  wp::tile_matmul_acc(tc, ta, tb);
+  size_t at = 0;
+  dump(a, at, tp);
+  dump(a, at, tc);
+}
+
 /// The rank-2 f32 or f64 arguments.
 template <typename T>
 static const wp::array_t<T, 2>* arrays2(const args_t& a);
@@ -433,6 +462,12 @@ int run(const char* path) {
   MM(f64, 8, 6, 10)
   MM(f64, 64, 8, 64)
 #undef MM
+#define MM16(M, K, N)                                                                          \
+  kernels["mm16_" #M "x" #K "x" #N] = k_mm16<M, K, N>;                                        \
+  out_bytes["mm16_" #M "x" #K "x" #N] = M * N * (2 + 4);
+  MM16(32, 16, 32)
+  MM16(12, 20, 8)
+#undef MM16
 #define LD(T, N0, N1)                                                                          \
   kernels["ld2_" #T "_" #N0 "x" #N1] = k_ld2<T, N0, N1>;                                      \
   out_bytes["ld2_" #T "_" #N0 "x" #N1] = N0 * N1 * sizeof(T);

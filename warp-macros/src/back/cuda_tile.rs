@@ -139,8 +139,14 @@ impl Emitter<'_> {
                     "tile_sum" | "tile_min" | "tile_max" | "tile_argmin" | "tile_argmax" => {
                         format!("wp::{}({d}, {});", builtin.name, a[0])
                     }
-                    "tile_matmul" => format!("wp::tile_matmul({d}, {}, {});", a[0], a[1]),
-                    "tile_matmul_acc" => format!("wp::tile_matmul_acc({d}, {}, {});", a[0], a[1]),
+                    "tile_matmul" | "tile_matmul_acc" => {
+                        // f16 operands: the tensor-core matmul (its FMA fallback included).
+                        if matches!(f.ty(args[0]), Ty::Tile(el, _) if **el == Ty::Scalar(crate::types::Scalar::F16))
+                        {
+                            e.section("tile_mma");
+                        }
+                        format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1])
+                    }
                     "tile_cholesky" => {
                         e.section("tile_linalg");
                         format!("wp::tile_cholesky({d}, {});", a[0])

@@ -10,8 +10,6 @@ use crate::types::{ObjectKind, Scalar, Ty};
 pub enum Class {
     /// f32, f64, f16 (f16: the f32 builtin on the widened arguments, rounded once).
     Float,
-    /// f32 and f64 (the tile matmul: f16 has no matmul yet).
-    FloatWide,
     /// Any integer or float scalar.
     Number,
     /// Signed integers and floats.
@@ -57,7 +55,6 @@ impl Class {
     pub fn admits(self, ty: &Ty) -> bool {
         match (self, ty) {
             (Class::Float, Ty::Scalar(s)) => s.is_float(),
-            (Class::FloatWide, Ty::Scalar(s)) => matches!(s, Scalar::F32 | Scalar::F64),
             (Class::Number, Ty::Scalar(s)) => *s != Scalar::Bool,
             (Class::SignedNumber, Ty::Scalar(s)) => s.is_float() || s.is_signed_int(),
             (Class::FloatVector, Ty::Vector(s, _)) => s.is_float(),
@@ -105,7 +102,6 @@ impl Class {
     pub fn describe(self) -> &'static str {
         match self {
             Class::Float => "f32, f64 or f16",
-            Class::FloatWide => "f32 or f64",
             Class::Number => "an integer or float scalar",
             Class::SignedNumber => "a signed integer or float scalar",
             Class::FloatVector => "a float vector (Vec2-4, DVec2-4)",

@@ -12,8 +12,8 @@ use crate::builtins::BUILTINS;
 use crate::types::OBJECTS;
 use std::collections::BTreeSet;
 
-/// The section names that `back/cuda.rs` and `back/cuda_tile.rs` pass to `Emitter::section` as
-/// string literals.
+/// The section names that `back/cuda.rs` and `back/cuda_tile.rs` pass to `Emitter::section`
+/// as string literals.
 fn emitter_literals() -> Vec<&'static str> {
     [
         include_str!("../back/cuda.rs"),
@@ -34,6 +34,7 @@ fn every_section_the_macros_name_is_a_kernel_row_of_the_library() {
     let emitted = emitter_literals();
     // The scan finds the emitter's own (else it would check nothing).
     assert!(emitted.contains(&"transform") && emitted.contains(&"print"));
+    assert!(emitted.contains(&"tile_mma"));
     let named = BUILTINS
         .iter()
         .map(|b| (b.section, format!("builtin `{}`", b.name)))

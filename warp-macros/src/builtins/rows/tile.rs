@@ -15,8 +15,9 @@ use super::*;
 const TILE_ELEM: &[Class] = &[Number];
 /// The elements atomics exist for on both backends.
 const TILE_ATOMIC: &[Class] = &[AtomicScalar];
-/// The matmul's elements (tensor-core f16 and bf16: later).
-const TILE_MATMUL: &[Class] = &[FloatWide];
+/// The matmul's elements: f16 (tensor cores on sm_80+, f32 accumulation), f32, f64 (bf16:
+/// later).
+const TILE_MATMUL: &[Class] = &[Float];
 
 /// Warp's tile builtins that this slice has.
 pub(super) const ROWS: &[Builtin] = rows! {
@@ -67,7 +68,10 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "tile_argmin": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
     "tile_argmax": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
     // `c = tile_matmul(a, b)`; `tile_matmul(a, b, &mut c)` is `c += a b` (Warp's `out`
-    // argument), each element an FMA chain in ascending k.
+    // argument), each element an FMA chain in ascending k. f16 operands accumulate in f32: `c`
+    // is a `Tile<f32, ..>`, and the returning form's f16 result is rounded once; on CUDA
+    // (sm_80+, whole warps, M % 16, N % 8, K % 16) the tensor cores sum each k-step of 16 in
+    // their own order.
     "tile_matmul": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_matmul_acc": TILE_MATMUL, (Tile, Tile, Tile) -> Unit, "tile", Adjoint, no_tangent,
         cooperative, overload("tile_matmul", 3);

@@ -911,10 +911,10 @@ impl Lowerer {
                 format!("`tile_matmul` multiplies 2-D tiles, found `{ta}` and `{tb}`"),
             );
         }
-        if ea != eb || !matches!(ea, Ty::Scalar(Scalar::F32 | Scalar::F64)) {
+        if ea != eb || !matches!(ea, Ty::Scalar(Scalar::F16 | Scalar::F32 | Scalar::F64)) {
             return err(
                 args[0].span(),
-                format!("`tile_matmul` multiplies f32 or f64 tiles of one element type, found `{ta}` and `{tb}`"),
+                format!("`tile_matmul` multiplies f16, f32 or f64 tiles of one element type, found `{ta}` and `{tb}`"),
             );
         }
         let msg =
@@ -959,9 +959,18 @@ impl Lowerer {
             return err(args[2].span(), format!("cannot find `{cname}`"));
         };
         let ct = self.ty(c);
+        // The accumulator's element: f16 products accumulate in f32 (rounding an f16
+        // accumulator at every step of a k-loop would lose the sum's low bits), the others in
+        // their own type.
+        let e = if e == Ty::Scalar(Scalar::F16) {
+            Ty::Scalar(Scalar::F32)
+        } else {
+            e
+        };
         let (e2, d2) = (e.clone(), vec![m.clone(), n.clone()]);
         let want = Ty::Tile(Box::new(e), vec![m, n]);
-        let msg = format!("`tile_matmul`: `{cname}` is a `{ct}`, but `a b` is a `{want}`");
+        let msg =
+            format!("`tile_matmul`: `{cname}` is a `{ct}`, but `a b` accumulates into a `{want}`");
         match tile_parts(&ct) {
             Some((ce, cd)) if *ce == e2 => {
                 let cd = cd.to_vec();

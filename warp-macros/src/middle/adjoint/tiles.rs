@@ -160,6 +160,11 @@ impl Cx<'_> {
                         let func = format!("adj_tile_load{}", args.len() - 1);
                         self.tile_call(&mut b, &func, args, true, sp);
                     }
+                    // The f16 matmul (f32 accumulation, tensor cores) has no adjoint yet.
+                    ("tile_matmul", _) if !f.ty(args[0]).is_tile_of_wide_float() => {
+                        self.refuse("tile_matmul of f16 tiles");
+                        return Some(Vec::new());
+                    }
                     (
                         "tile_sum" | "tile_min" | "tile_max" | "tile_transpose" | "tile_matmul",
                         _,
