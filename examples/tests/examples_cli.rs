@@ -270,6 +270,61 @@ fn every_example_file_is_listed_in_the_manifest() {
     );
 }
 
+/// tile_mlp on the CPU, a few steps: the tiled network's first-step gradients agree with the
+/// plain network's, the loss is printed, and with a loose tolerance the verdict passes.
+#[test]
+fn tile_mlp_trains_briefly_on_the_cpu() {
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("tile_mlp", &dir) else {
+        return;
+    };
+    let out = Command::new(&bin)
+        .args([
+            "--device",
+            "cpu",
+            "--samples",
+            "256",
+            "--iterations",
+            "20",
+            "--tol",
+            "10",
+        ])
+        .output()
+        .expect("run tile_mlp");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "tile_mlp: {:?}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for want in ["first-step gradients", "step     20: loss", "verdict: PASS"] {
+        assert!(stdout.contains(want), "no {want:?} in:\n{stdout}");
+    }
+}
+
+/// tile_cholesky on the CPU, a small batch: its verdict (the backward error within 4 N eps)
+/// is yes, exit status 0.
+#[test]
+fn tile_cholesky_solves_a_small_batch_on_the_cpu() {
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("tile_cholesky", &dir) else {
+        return;
+    };
+    let out = Command::new(&bin)
+        .args(["--device", "cpu", "--batch", "8", "--reps", "1"])
+        .output()
+        .expect("run tile_cholesky");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "tile_cholesky: {:?}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("converged: yes"), "{stdout}");
+}
+
 /// tile_matmul on the CPU, small and ragged (70 is not a multiple of the 64-wide tiles): it
 /// runs the tiled and the plain GEMM, prints both rows with their errors and the ratio, and its
 /// verdict (the errors within the FMA bound k u) is yes, exit status 0.
