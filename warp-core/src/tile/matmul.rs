@@ -5,7 +5,7 @@
 //! `fmaf`/`fma`). The CUDA library walks `k` in the same order in every thread, so the product
 //! is bit-identical on both back ends and independent of the block size.
 //!
-//! Half precision ([`f16`] operands) accumulates in `f32` ([`MatmulElem::Acc`]): each operand
+//! Half precision ([`f16`](struct@crate::f16) operands) accumulates in `f32` ([`MatmulElem::Acc`]): each operand
 //! is widened to `f32` (exactly), the chain is the `f32` one above, and the returning form
 //! [`matmul`] rounds each output to `f16` once at the end (Warp's dtype rule: the result has
 //! `a`'s element). The accumulating form [`matmul_acc`] takes an `f32` accumulator, which is

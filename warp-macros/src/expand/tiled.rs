@@ -56,13 +56,13 @@ pub(super) fn info(f: &Function, block: Option<&Block>) -> TokenStream {
             width: #width,
             shared_bytes: {
                 let mut __o = 0usize;
-                #( __o = (__o + ::core::mem::size_of::<#tiles>() + 15) / 16 * 16; )*
+                #( __o = (__o + ::core::mem::size_of::<#tiles>()).div_ceil(16) * 16; )*
                 __o
             },
             adjoint_shared_bytes: {
                 let mut __o = 0usize;
-                #( __o = (__o + ::core::mem::size_of::<#tiles>() + 15) / 16 * 16; )*
-                #( __o = (__o + ::core::mem::size_of::<#adj_tiles>() + 15) / 16 * 16; )*
+                #( __o = (__o + ::core::mem::size_of::<#tiles>()).div_ceil(16) * 16; )*
+                #( __o = (__o + ::core::mem::size_of::<#adj_tiles>()).div_ceil(16) * 16; )*
                 __o
             },
             cpu_frame_bytes: 0usize #( + ::core::mem::size_of::<#tiles>() )* #( + #per_lane )*,
