@@ -2098,12 +2098,19 @@ fn builtin_rows_follow_the_recipe() {
         }
         // Tile rows: the CPU side is warp-core's `tile` and `block` modules (typed generic
         // functions the block printer names), not `builtins`; the CUDA side is `wp::<name>` in
-        // wp_tile.h like any row's; their adjoints are the next slice (the builtin reference
-        // says "not yet", and a kernel with tiles refuses backward).
+        // wp_tile.h or one of the tile sections the emitter adds for some rows (`tile_linalg`,
+        // `tile_mma`); their adjoints are named by the sweep's tile rules
+        // (`middle/adjoint/tiles.rs`: `adj_tile_load1`, ..), held to warp-core by
+        // tests/cuda_tile_adjoint_host.rs, not by this recipe.
         if r.section == "tile" {
-            if !cpp_names(&cuda_closure(&header), &r.name) {
+            let tile_headers: String = sections
+                .keys()
+                .filter(|s| s.starts_with("tile"))
+                .map(|s| cuda_closure(&format!("wp_{s}.h")))
+                .collect();
+            if !cpp_names(&tile_headers, &r.name) {
                 problems.push(format!(
-                    "{}: no CUDA function wp::{} in {header}",
+                    "{}: no CUDA function wp::{} in the tile sections' headers",
                     r.at, r.name
                 ));
             }

@@ -18,11 +18,7 @@ use quote::{format_ident, quote, quote_spanned, ToTokens};
 /// `__tid` and `__FAST`; for a func also `__adj_ret` (the adjoint of its result) and
 /// `__adj_out<k>` (`&mut` adjoints of its value parameters).
 pub fn emit(f: &Function) -> Result<TokenStream, String> {
-    let adj = build(f, Policy::CPU)?;
-    if adj.f.tiled.is_some() {
-        return super::rust_tile_adjoint::print(&adj);
-    }
-    print(&adj)
+    print(&build(f, Policy::CPU)?)
 }
 
 /// The adjoint body of a func with custom gradients `grads` (see `middle::adjoint::custom`).
@@ -39,6 +35,10 @@ fn print(adj: &Adjoint) -> Result<TokenStream, String> {
         adj,
         per_lane: Vec::new(),
     };
+    // A tiled kernel's block (`back::rust_tile_adjoint`).
+    if adj.f.tiled.is_some() {
+        return p.tiled_body();
+    }
     let mut out = p.declarations();
     out.extend(p.block(&adj.body)?);
     Ok(out)

@@ -18,31 +18,28 @@ use crate::types::Ty;
 use proc_macro2::{Literal, Span, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 
-/// The body of tiled kernel's CPU adjoint for one block (`__flat` is the block's index).
-pub(super) fn print(adj: &Adjoint) -> Result<TokenStream, String> {
-    let mut fwd = super::rust::RustEmitter::new(&adj.f);
-    fwd.replay = true;
-    let mut p = Printer {
-        fwd,
-        adj,
-        per_lane: Vec::new(),
-    };
-    p.per_lane = per_lane_vars(adj);
-    let mut out = quote!(let __bd = __grid.block_dim;);
-    out.extend(p.declarations());
-    for v in 0..adj.f.vars.len() {
-        if !p.per_lane[v] {
-            continue;
+impl Printer<'_> {
+    /// The body of a tiled kernel's CPU adjoint for one block (`__flat` is the block's index).
+    pub(super) fn tiled_body(mut self) -> Result<TokenStream, String> {
+        let adj = self.adj;
+        self.per_lane = per_lane_vars(adj);
+        let p = &self;
+        let mut out = quote!(let __bd = __grid.block_dim;);
+        out.extend(p.declarations());
+        for v in 0..adj.f.vars.len() {
+            if !p.per_lane[v] {
+                continue;
+            }
+            let (x, pl) = (p.var(v), p.pl(v));
+            out.extend(quote!(let mut #pl = __wp::block::PerLane::splat(#x, __bd);));
+            if adj.adjs.contains(&v) {
+                let (a, pa) = (p.adj(v), p.pl_adj(v));
+                out.extend(quote!(let mut #pa = __wp::block::PerLane::splat(#a, __bd);));
+            }
         }
-        let (x, pl) = (p.var(v), p.pl(v));
-        out.extend(quote!(let mut #pl = __wp::block::PerLane::splat(#x, __bd);));
-        if adj.adjs.contains(&v) {
-            let (a, pa) = (p.adj(v), p.pl_adj(v));
-            out.extend(quote!(let mut #pa = __wp::block::PerLane::splat(#a, __bd);));
-        }
+        out.extend(p.list(&adj.body)?);
+        Ok(out)
     }
-    out.extend(p.list(&adj.body)?);
-    Ok(out)
 }
 
 /// Whether `v` may be kept per lane: not a parameter, array or tile (those are the block's).
