@@ -100,52 +100,57 @@ impl Cx<'_> {
             return None;
         }
         let mut b = Vec::new();
+        // The rows whose reverse is not seeded from the result's adjoint tile.
+        if let Op::Builtin { builtin, args } = op {
+            let name = builtin.name;
+            if builtin.grad != Grad::Zero && tile_adjoint(name).is_none() {
+                self.refuse(name);
+                return Some(Vec::new());
+            }
+            match name {
+                // The store hands each written element's gradient to the tile.
+                "tile_store" => {
+                    if !self.diff(args[1]) {
+                        return Some(b);
+                    }
+                    b.push(at(AKind::Seed(GradSrc::Zero(dst)), sp));
+                    let func = format!("adj_tile_store{}", args.len() - 2);
+                    self.tile_call(&mut b, &func, args, true, sp);
+                    return Some(vec![at(AKind::Scope(b), sp)]);
+                }
+                // A lane's read of one element.
+                "tile_extract" => {
+                    if !self.diff(dst) {
+                        return Some(b);
+                    }
+                    b.extend(super::sweep::seed_from(dst, Vec::new(), sp));
+                    let func = format!("adj_tile_extract{}", args.len() - 1);
+                    self.tile_call(&mut b, &func, args, true, sp);
+                    return Some(vec![at(AKind::Scope(b), sp)]);
+                }
+                "untile" => {
+                    if self.diff(dst) {
+                        let (lanes, tile) = (dst, args[0]);
+                        let func = "adj_untile";
+                        b.push(at(AKind::LaneAdj { func, lanes, tile }, sp));
+                    }
+                    return Some(b);
+                }
+                _ => {}
+            }
+        }
+        // The rest: seeded from `dst`'s adjoint tile, which is cleared at the end.
+        if !self.diff(dst) {
+            return Some(b);
+        }
+        let seed = GradSrc::Adj {
+            var: dst,
+            path: Vec::new(),
+        };
+        b.push(at(AKind::Seed(seed), sp));
         match op {
             Op::Builtin { builtin, args } => {
                 let name = builtin.name;
-                if builtin.grad != Grad::Zero && tile_adjoint(name).is_none() {
-                    self.refuse(name);
-                    return Some(Vec::new());
-                }
-                match name {
-                    // The store hands each written element's gradient to the tile.
-                    "tile_store" => {
-                        if !self.diff(args[1]) {
-                            return Some(b);
-                        }
-                        b.push(at(AKind::Seed(GradSrc::Zero(dst)), sp));
-                        let func = format!("adj_tile_store{}", args.len() - 2);
-                        self.tile_call(&mut b, &func, args, true, sp);
-                        return Some(vec![at(AKind::Scope(b), sp)]);
-                    }
-                    // A lane's read of one element.
-                    "tile_extract" => {
-                        if !self.diff(dst) {
-                            return Some(b);
-                        }
-                        b.extend(super::sweep::seed_from(dst, Vec::new(), sp));
-                        let func = format!("adj_tile_extract{}", args.len() - 1);
-                        self.tile_call(&mut b, &func, args, true, sp);
-                        return Some(vec![at(AKind::Scope(b), sp)]);
-                    }
-                    "untile" => {
-                        if self.diff(dst) {
-                            let (lanes, tile) = (dst, args[0]);
-                            let func = "adj_untile";
-                            b.push(at(AKind::LaneAdj { func, lanes, tile }, sp));
-                        }
-                        return Some(b);
-                    }
-                    _ => {}
-                }
-                if !self.diff(dst) {
-                    return Some(b);
-                }
-                let seed = GradSrc::Adj {
-                    var: dst,
-                    path: Vec::new(),
-                };
-                b.push(at(AKind::Seed(seed), sp));
                 match (name, builtin.grad) {
                     (_, Grad::Zero) => {}
                     ("tile", _) => {
@@ -186,49 +191,28 @@ impl Cx<'_> {
                     }
                 }
             }
-            Op::TileMap { f: g, args } => {
-                if !self.diff(dst) {
-                    return Some(b);
+            Op::TileMap { f: g, args } => match g {
+                TileFn::Builtin(bi) if bi.grad == Grad::Zero => {}
+                TileFn::Builtin(bi) if bi.grad != Grad::Adjoint => {
+                    self.refuse(&format!("tile_map({}, ..)", bi.name));
+                    return Some(Vec::new());
                 }
-                let seed = GradSrc::Adj {
-                    var: dst,
-                    path: Vec::new(),
-                };
-                b.push(at(AKind::Seed(seed), sp));
-                match g {
-                    TileFn::Builtin(bi) if bi.grad == Grad::Zero => {}
-                    TileFn::Builtin(bi) if bi.grad != Grad::Adjoint => {
-                        self.refuse(&format!("tile_map({}, ..)", bi.name));
-                        return Some(Vec::new());
-                    }
-                    _ => {
-                        let grads = args.iter().map(|a| GradArg::Adj(*a)).collect();
-                        let (f, values) = (*g, args.clone());
-                        b.push(at(AKind::TileMapAdj { f, values, grads }, sp));
-                    }
+                _ => {
+                    let grads = args.iter().map(|a| GradArg::Adj(*a)).collect();
+                    let (f, values) = (*g, args.clone());
+                    b.push(at(AKind::TileMapAdj { f, values, grads }, sp));
                 }
-            }
+            },
+            // Warp differentiates no other reduction either; a silent zero would be a wrong
+            // gradient.
             Op::TileReduce { f: g, arg } => {
-                if !self.diff(dst) {
-                    return Some(b);
-                }
                 if !matches!(g, TileFn::Op(BinOp::Add)) {
-                    // Warp differentiates no other reduction either; a silent zero would be a
-                    // wrong gradient.
                     self.refuse("tile_reduce with anything but `add`");
                     return Some(Vec::new());
                 }
-                let seed = GradSrc::Adj {
-                    var: dst,
-                    path: Vec::new(),
-                };
-                b.push(at(AKind::Seed(seed), sp));
                 self.tile_call(&mut b, "adj_tile_sum", &[*arg], false, sp);
             }
             Op::Binary(o, l, r) => {
-                if !self.diff(dst) {
-                    return Some(b);
-                }
                 let name = match o {
                     BinOp::Add => "add",
                     BinOp::Sub => "sub",
@@ -244,36 +228,11 @@ impl Cx<'_> {
                     (true, false) => "ts",
                     _ => "st",
                 };
-                let seed = GradSrc::Adj {
-                    var: dst,
-                    path: Vec::new(),
-                };
-                b.push(at(AKind::Seed(seed), sp));
                 let func = format!("adj_tile_{name}_{form}");
                 self.tile_call(&mut b, &func, &[*l, *r], false, sp);
             }
-            Op::Unary(UnOp::Neg, a) => {
-                if !self.diff(dst) {
-                    return Some(b);
-                }
-                let seed = GradSrc::Adj {
-                    var: dst,
-                    path: Vec::new(),
-                };
-                b.push(at(AKind::Seed(seed), sp));
-                self.tile_call(&mut b, "adj_tile_neg", &[*a], false, sp);
-            }
-            Op::Copy(a) => {
-                if !self.diff(dst) {
-                    return Some(b);
-                }
-                let seed = GradSrc::Adj {
-                    var: dst,
-                    path: Vec::new(),
-                };
-                b.push(at(AKind::Seed(seed), sp));
-                self.accum(&mut b, *a, Vec::new(), GradSrc::Seed, sp);
-            }
+            Op::Unary(UnOp::Neg, a) => self.tile_call(&mut b, "adj_tile_neg", &[*a], false, sp),
+            Op::Copy(a) => self.accum(&mut b, *a, Vec::new(), GradSrc::Seed, sp),
             _ => {
                 self.refuse("this tile operation");
                 return Some(Vec::new());
