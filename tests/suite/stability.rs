@@ -11,6 +11,7 @@ use wp::Error;
 
 backend_tests!(
     verify_fp_names_kernel_argument_and_index,
+    verify_fp_sees_tile_stores,
     symplectic_euler_stability_limit,
     ieee_edge_cases,
     compensated_summation,
@@ -53,6 +54,28 @@ fn verify_fp_names_kernel_argument_and_index(dev: &wp::Device) {
     );
     let ok = arr(&[1.0f32, 2.0], dev);
     ok.check_finite("fine").unwrap();
+}
+
+#[wp::kernel]
+fn k_tile_recip(x: Array<f32>, y: Array<f32>) {
+    let t = tile_load::<4>(x, 0);
+    tile_store(y, tile_map(div, tile_ones::<f32, 4>(), t), 0);
+}
+
+/// `verify_fp` checks the arrays a tiled kernel writes through `tile_store` too.
+fn verify_fp_sees_tile_stores(dev: &wp::Device) {
+    let x = arr(&[1.0f32, 0.0, 2.0, 4.0], dev);
+    let y = zeros::<f32, 1>(4, dev);
+    wp::config::set_verify_fp_for_thread(Some(true));
+    let r = wp::launch_tiled(k_tile_recip, 1, (&x, &y), 4, dev);
+    wp::config::set_verify_fp_for_thread(None);
+    match r {
+        Err(e @ Error::NonFinite { .. }) => assert_eq!(
+            e.to_string(),
+            "kernel `k_tile_recip` wrote a non-finite value to `y` at index [1]: inf"
+        ),
+        other => panic!("expected NonFinite, got {other:?}"),
+    }
 }
 
 /// `steps` steps of symplectic Euler for x'' = -omega^2 x, one oscillator per thread.

@@ -23,6 +23,9 @@ backend_tests!(
     lanes_and_elements,
     every_lane_storing_one_element,
     tile_mlp_matches_plain_mlp,
+    loops_of_loads_and_accumulations,
+    gemm_k_loop,
+    lane_values_reassigned,
     what_backward_refuses,
 );
 
@@ -370,17 +373,30 @@ fn exact_kernel_grads(dev: &wp::Device) -> Vec<Vec<f64>> {
         y.reshape((K, N)).unwrap(),
         out2.reshape((M, N)).unwrap(),
     );
+    // The k-loop GEMM in one block (each gradient element gains one term per launch, so no
+    // atomic order shows), over three k-steps, the last one ragged.
+    let kk = 5;
+    let ga = arr(&values(GM * kk, 7), dev).with_grad().unwrap();
+    let gb = arr(&values(kk * GN, 8), dev).with_grad().unwrap();
+    let gc = zeros::<f64, 1>(GM * GN, dev).with_grad().unwrap();
+    let (ga2, gb2, gc2) = (
+        ga.reshape((GM, kk)).unwrap(),
+        gb.reshape((kk, GN)).unwrap(),
+        gc.reshape((GM, GN)).unwrap(),
+    );
     let tape = wp::Tape::new();
     {
         let _rec = tape.record();
         let blocks = ((m + R - 1) / R, (n + C - 1) / C);
         wp::launch_tiled(k_elementwise, blocks, (&a2, &b2, &w, &o2), 32, dev).unwrap();
         wp::launch_tiled(k_shapes, 1, (&x2, &y2, &row, &o22), 32, dev).unwrap();
+        wp::launch_tiled(k_gemm, (1, 1), (&ga2, &gb2, 3, &gc2), 32, dev).unwrap();
     }
     out.grad().unwrap().fill(1.0).unwrap();
     out2.grad().unwrap().fill(1.0).unwrap();
+    gc.grad().unwrap().fill(1.0).unwrap();
     tape.backward_from_grads().unwrap();
-    [&a, &b, &w, &x, &y, &row]
+    [&a, &b, &w, &x, &y, &row, &ga, &gb]
         .iter()
         .map(|v| v.grad().unwrap().to_vec().unwrap())
         .collect()
@@ -389,7 +405,7 @@ fn exact_kernel_grads(dev: &wp::Device) -> Vec<Vec<f64>> {
 /// The same gradients on the CPU and on a GPU, bit for bit where the order is fixed (every
 /// input but `w`, whose blocks add up through atomics): elementwise adjoints are the scalar rules, the block sums of uniform scalars follow the
 /// reductions' order, and the matmul and broadcast adjoints are fixed chains (FMA for the
-/// matmul) on both. Skipped, saying so, without a GPU.
+/// matmul) on both, in a k-loop too. Skipped, saying so, without a GPU.
 #[test]
 fn cpu_and_gpu_gradients_are_equal() {
     let Ok(gpu) = wp::get_device(&crate::test_gpu()) else {
@@ -424,9 +440,83 @@ fn k_tile_loop(a: Array<f64>, out: Array<f64>) {
     let mut acc = tile_zeros::<f64, 8>();
     for k in 0..3 {
         let t = tile_load::<8>(a, (k * 8) as i32);
-        acc = acc + t;
+        acc = acc + t * t;
     }
     tile_store(out, acc, 0);
+}
+
+/// A loop of loads summed into a reassigned tile (`acc = acc + t * t`): the loaded tile is
+/// loaded again by the reverse sweep (the array is not written), the accumulator's old values
+/// are never needed (its adjoint passes through `+`).
+fn loops_of_loads_and_accumulations(dev: &wp::Device) {
+    let a = arr(&values(24, 11), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(8, dev).with_grad().unwrap();
+    for bd in [1, 3, 8, 32] {
+        let run = || wp::launch_tiled(k_tile_loop, 1, (&a, &out), bd, dev);
+        check(&format!("loop of loads, block_dim {bd}"), run, &[&a], &out);
+    }
+}
+
+const GM: usize = 4;
+const GN: usize = 3;
+const GK: usize = 2;
+
+/// A tiled GEMM with Warp's k-loop: `c += a b` over tiles of K.
+#[wp::kernel]
+fn k_gemm(a: Array<f64, 2>, b: Array<f64, 2>, kt: i32, c: Array<f64, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f64, GM, GN>();
+    for k in 0..kt {
+        let off = k * GK as i32;
+        let at: Tile<f64, GM, GK> = tile_load(a, ((i * GM) as i32, off));
+        let bt: Tile<f64, GK, GN> = tile_load(b, (off, (j * GN) as i32));
+        tile_matmul(at, bt, &mut acc);
+    }
+    tile_store(c, acc, ((i * GM) as i32, (j * GN) as i32));
+}
+
+/// Backward through the k-loop GEMM (ragged: 7 x 5 by 5 x 4 on 4 x 3 tiles over k-steps of 2):
+/// gradcheck of both operands at several block sizes.
+fn gemm_k_loop(dev: &wp::Device) {
+    let (m, n, kk) = (7, 4, 5);
+    let a = arr(&values(m * kk, 2), dev).with_grad().unwrap();
+    let b = arr(&values(kk * n, 9), dev).with_grad().unwrap();
+    let c = zeros::<f64, 1>(m * n, dev).with_grad().unwrap();
+    let (a2, b2, c2) = (
+        a.reshape((m, kk)).unwrap(),
+        b.reshape((kk, n)).unwrap(),
+        c.reshape((m, n)).unwrap(),
+    );
+    let grid = ((m + GM - 1) / GM, (n + GN - 1) / GN);
+    let kt = ((kk + GK - 1) / GK) as i32;
+    for bd in [1, 5, 32] {
+        let run = || wp::launch_tiled(k_gemm, grid, (&a2, &b2, kt, &c2), bd, dev);
+        check(&format!("gemm k-loop, block_dim {bd}"), run, &[&a, &b], &c);
+    }
+}
+
+/// Lane code that reassigns its values around tile operations (each lane's stack holds its own
+/// history) and a loop whose bound every lane computed.
+#[wp::kernel]
+fn k_lane_loop(x: Array<f64>, out: Array<f64>) {
+    let l = lane();
+    let mut s = x[l];
+    let mut total = tile_zeros::<f64, 8>();
+    for k in 0..3 {
+        s = sin(s) * (k + 1) as f64;
+        let t = tile::<8>(s);
+        total = total + tile_map(cos, t);
+    }
+    let sum = tile_sum(total);
+    s = s * sum[0];
+    out[l] = s;
+}
+
+fn lane_values_reassigned(dev: &wp::Device) {
+    let x = arr(&values(8, 3), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(8, dev).with_grad().unwrap();
+    let run = || wp::launch_tiled(k_lane_loop, 1, (&x, &out), 8, dev);
+    check("lane values reassigned", run, &[&x], &out);
 }
 
 #[wp::kernel]
@@ -435,30 +525,44 @@ fn k_tile_scan(a: Array<f64>, out: Array<f64>) {
     tile_store(out, tile_scan_inclusive(t), 0);
 }
 
+/// A loop that loads a tile and stores over it: the reverse sweep cannot load the tile again
+/// (the array holds other values by then), and the product needs it.
+#[wp::kernel]
+fn k_tile_rewrite(a: Array<f64>, out: Array<f64>) {
+    let mut acc = tile_zeros::<f64, 8>();
+    for k in 0..2 {
+        let t = tile_load::<8>(a, (k * 8) as i32);
+        tile_store(a, t * t, (k * 8) as i32);
+        acc = acc + t * t;
+    }
+    tile_store(out, acc, 0);
+}
+
 /// Backward through what tile adjoints do not cover yet is an error naming the kernel and the
-/// reason, never a silent zero: a tile reassigned in a loop (needs the stack), a scan.
+/// reason, never a silent zero: a scan; a tile whose earlier values are gone.
 fn what_backward_refuses(dev: &wp::Device) {
     let a = arr(&values(24, 11), dev).with_grad().unwrap();
     let out = zeros::<f64, 1>(8, dev).with_grad().unwrap();
-    for (name, stack) in [("k_tile_loop", true), ("k_tile_scan", false)] {
+    for (name, why) in [
+        ("k_tile_scan", "tile_scan_inclusive"),
+        ("k_tile_rewrite", "reassigned whose earlier values"),
+    ] {
         let tape = wp::Tape::new();
         {
             let _rec = tape.record();
-            if stack {
-                wp::launch_tiled(k_tile_loop, 1, (&a, &out), 8, dev).unwrap();
-            } else {
-                wp::launch_tiled(k_tile_scan, 1, (&a, &out), 8, dev).unwrap();
+            match name {
+                "k_tile_scan" => wp::launch_tiled(k_tile_scan, 1, (&a, &out), 8, dev),
+                _ => wp::launch_tiled(k_tile_rewrite, 1, (&a, &out), 8, dev),
             }
+            .unwrap();
         }
         let e = tape.backward(&out).unwrap_err();
         assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
         let msg = e.to_string();
-        let why = if stack {
-            "stack"
-        } else {
-            "tile_scan_inclusive"
-        };
         assert!(msg.contains(name) && msg.contains(why), "{msg}");
+        if name == "k_tile_rewrite" {
+            assert!(msg.contains("`t`"), "{msg}");
+        }
     }
 }
 
@@ -471,6 +575,9 @@ fn dump_cuda_adjoints() {
         wp::kernel_info(k_shapes),
         wp::kernel_info(k_lanes),
         wp::kernel_info(k_tile_mlp),
+        wp::kernel_info(k_tile_loop),
+        wp::kernel_info(k_gemm),
+        wp::kernel_info(k_lane_loop),
     ] {
         println!("// ---- {}\n{}", info.name, info.cuda_adjoint);
         assert!(

@@ -207,6 +207,9 @@ pub struct AdStack {
     buf: Vec<u8>,
     cap: usize,
     kernel: &'static str,
+    /// The lanes' stacks of a tiled kernel's block ([`AdStack::lanes`]), kept for the next
+    /// block.
+    lanes: Vec<AdStack>,
 }
 
 /// The stack's size, capacity and kernel; not the bytes it holds.
@@ -227,7 +230,20 @@ impl AdStack {
             buf: Vec::with_capacity(capacity),
             cap: capacity,
             kernel,
+            lanes: Vec::new(),
         }
+    }
+
+    /// `n` empty stacks of this one's capacity, one per lane of a tiled kernel's block: on the
+    /// CPU a block is one task, and each of its lanes keeps its own history, as each CUDA thread
+    /// does in its own stack. Made at the first tiled block, reused (emptied) by the next ones.
+    pub fn lanes(&mut self, n: usize) -> &mut [AdStack] {
+        while self.lanes.len() < n {
+            self.lanes.push(AdStack::new(self.cap, self.kernel));
+        }
+        let lanes = &mut self.lanes[..n];
+        lanes.iter_mut().for_each(AdStack::clear);
+        lanes
     }
 
     /// Empties the stack (for the next thread).
@@ -293,6 +309,23 @@ impl AdStack {
 mod tests {
     use super::*;
     use glam::Vec3;
+
+    #[test]
+    fn lane_stacks_are_separate_and_emptied_for_the_next_block() {
+        let mut s = AdStack::new(8, "k");
+        let lanes = s.lanes(3);
+        assert_eq!(lanes.len(), 3);
+        lanes[0].push(1u32, 1).unwrap();
+        lanes[2].push(2u32, 1).unwrap();
+        lanes[2].push(3u32, 1).unwrap();
+        // Each lane has the whole capacity.
+        assert!(lanes[2].push(4u8, 9).is_err());
+        assert_eq!(lanes[2].pop::<u32>(), 3);
+        assert_eq!(lanes[0].pop::<u32>(), 1);
+        assert!(lanes[1].is_empty());
+        let again = s.lanes(2);
+        assert!(again.iter().all(AdStack::is_empty));
+    }
 
     #[test]
     fn stack_round_trip_and_overflow() {

@@ -73,7 +73,7 @@ pub fn written_params(f: &Function) -> Vec<usize> {
         StmtKind::Assign {
             op: Op::Builtin { builtin, args },
             ..
-        } if builtin.is_atomic() => w.push(args[0]),
+        } if builtin.writes_array() => w.push(args[0]),
         StmtKind::Assign {
             op: Op::Func { args, .. },
             ..

@@ -313,6 +313,8 @@ impl<'a> Printer<'a> {
                     let fs: Vec<String> = exit.iter().map(|v| self.var(*v)).collect();
                     self.line(sp, format!("if ({}) break;", fs.join(" || ")));
                 }
+                // An iteration may follow lane code at the end of the one before.
+                self.e.after_tile_op = false;
                 self.block(body)?;
                 self.line(sp, "++__count;");
                 self.e.indent -= 1;
@@ -442,6 +444,7 @@ impl<'a> Printer<'a> {
                     "{ const wp::i64 __count = wp::adstack_pop<wp::i64>(__stack);",
                 );
                 self.line(sp, "for (wp::i64 __k = 0; __k < __count; ++__k) {");
+                self.e.after_tile_op = false;
                 self.nested(body)?;
                 "} }".into()
             }

@@ -86,8 +86,9 @@ impl Printer<'_> {
 
     /// `@@ENTRY@@_adj` of a tiled kernel: block `b` of the launch runs the adjoint with
     /// `__flat = b`, all of the CUDA block's threads together, and a barrier ends each block
-    /// before the next one reuses the slots. Tiled adjoints use no stack (they refuse what
-    /// would need one).
+    /// before the next one reuses the slots. Each thread keeps its own history on its own stack
+    /// (`WP_ADSTACK_BYTES` of local memory, emptied for each block), as in any adjoint; tiles
+    /// are never pushed (`middle::adjoint::tiles::plan`).
     pub(super) fn tile_entry(&mut self) -> Result<(), String> {
         let mut decl = vec![
             "wp::launch_t __launch".into(),
@@ -101,12 +102,16 @@ impl Printer<'_> {
             }
         }
         call.extend(["__launch", "__flat", "&__ctx_value", "&__st"].map(String::from));
+        let bytes = match self.adj.uses_stack {
+            true => "WP_ADSTACK_BYTES",
+            false => "0",
+        };
         let _ = write!(
             self.e.out,
             "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM) @@ENTRY@@_adj({}) {{\n    \
-             char __buf[1];\n    \
-             wp::adstack_t __st = wp::adstack_new(__buf, 0);\n    \
+             char __buf[{bytes} > 0 ? {bytes} : 1];\n    \
              for (wp::i64 __flat = (wp::i64)blockIdx.x; __flat < __launch.total; __flat += (wp::i64)gridDim.x) {{\n        \
+             wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n        \
              @@SELF@@_adj({});\n        __syncthreads();\n    }}\n}}\n#endif\n",
             decl.join(", "),
             call.join(", ")

@@ -123,7 +123,7 @@ impl Printer<'_> {
             } => {
                 let (exit, body) = (self.exit(exit), self.block(body)?);
                 let (range, head) = match range {
-                    Some(r) => (self.range(r), quote!(for __n in 0..__range.count)),
+                    Some(r) => (self.range_tokens(r), quote!(for __n in 0..__range.count)),
                     None => (quote!(()), quote!(loop)),
                 };
                 quote_spanned! {sp=>
@@ -310,7 +310,7 @@ impl Printer<'_> {
     }
 
     /// The progression of a `for`.
-    fn range(&self, range: &RangeSpec) -> TokenStream {
+    pub(super) fn range_tokens(&self, range: &RangeSpec) -> TokenStream {
         let start = self.var(range.start);
         let end = self.var(range.end);
         let incl = range.inclusive;

@@ -96,6 +96,11 @@ impl RustEmitter<'_> {
                 let idx = &v[1..];
                 quote_spanned!(sp=> #x.extract(#(#idx,)* #name)?)
             }
+            // As a value (the adjoint's replay assigns it to `c` itself): the updated `c`.
+            "tile_matmul_acc" => {
+                let (a, b, c) = (&v[0], &v[1], &v[2]);
+                quote_spanned!(sp=> { __wp::tile::matmul_acc(&#a, &#b, &mut #c); #c })
+            }
             other => {
                 let msg = format!("internal: `{other}` outside a tiled kernel's block");
                 quote_spanned!(sp=> ::core::compile_error!(#msg))

@@ -10,6 +10,12 @@
 //! any adjoint. A block-level statement reads and writes lane 0's copy: its scalar operands are
 //! uniform, and the adjoint it accumulates into one is added once for the block (the
 //! uniform-operand rule of `middle::adjoint::tiles`).
+//!
+//! The adjoint stack: each lane has its own (`__lanes`, `warp_core::AdStack::lanes`), which
+//! `__stack` names inside a lane loop, so a lane pushes and pops its own history in its own
+//! order, as a CUDA thread does. Block-level control flow (a loop around tile operations, an
+//! `if` on a uniform condition) pushes and pops its trip counts on lane 0's stack, in the order
+//! lane 0 would; a decision recorded per lane is popped from every lane's stack.
 
 use super::rust_adjoint::{temp, Printer};
 use crate::ir::*;
@@ -25,6 +31,9 @@ impl Printer<'_> {
         self.per_lane = per_lane_vars(adj);
         let p = &self;
         let mut out = quote!(let __bd = __grid.block_dim;);
+        if adj.uses_stack {
+            out.extend(quote!(let __lanes: &mut [__wp::AdStack] = __stack.lanes(__bd);));
+        }
         out.extend(p.declarations());
         for v in 0..adj.f.vars.len() {
             if !p.per_lane[v] {
@@ -63,7 +72,25 @@ fn per_lane_vars(adj: &Adjoint) -> Vec<bool> {
                     walk(f, then, out);
                     walk(f, els, out);
                 }
-                AKind::Scope(b) => walk(f, b, out),
+                AKind::Scope(b) | AKind::RevLoop { body: b } => walk(f, b, out),
+                AKind::Loop {
+                    range, exit, body, ..
+                } => {
+                    // The header reads lane 0's copies of what lane code computed.
+                    let mut header = exit.clone();
+                    if let Some(r) = range {
+                        header.extend([r.start, r.end]);
+                        for a in &r.adapters {
+                            if let RangeAdapter::StepBy(k) = a {
+                                header.push(*k);
+                            }
+                        }
+                    }
+                    for v in header {
+                        out[v] = out[v] || laneable(f, v);
+                    }
+                    walk(f, body, out)
+                }
                 _ => {}
             }
             for v in lane_operands(s) {
@@ -275,8 +302,10 @@ impl Printer<'_> {
             .iter()
             .map(|s| self.stmt(s))
             .collect::<Result<_, String>>()?;
+        let stack = self.lane_stack(quote!(__lane));
         Ok(quote! {
             for __lane in 0..__bd {
+                #stack
                 #load
                 #body
                 #store
@@ -284,30 +313,114 @@ impl Printer<'_> {
         })
     }
 
+    /// `__stack` as lane `lane`'s stack, where the adjoint has one.
+    fn lane_stack(&self, lane: TokenStream) -> TokenStream {
+        match self.adj.uses_stack {
+            true => quote!(let __stack = &mut __lanes[#lane];),
+            false => TokenStream::new(),
+        }
+    }
+
+    /// Lane 0's copies of the per-lane values among `vars`, loaded into locals of their names.
+    fn lane0_reads(&self, vars: &[VarId]) -> TokenStream {
+        let vars: Vec<VarId> = vars.iter().copied().filter(|v| self.per_lane[*v]).collect();
+        self.lane_copies(&vars, quote!(0)).0
+    }
+
+    /// A loop around tile operations, run by the block together: its header reads lane 0's
+    /// copies, its trip count goes on lane 0's stack.
+    fn block_loop(&self, s: &AStmt) -> Result<TokenStream, String> {
+        let sp = s.span;
+        match &s.kind {
+            AKind::Loop {
+                range,
+                exit,
+                body,
+                line,
+            } => {
+                let (range, head) = match range {
+                    Some(r) => {
+                        let mut vars = vec![r.start, r.end];
+                        for a in &r.adapters {
+                            if let RangeAdapter::StepBy(k) = a {
+                                vars.push(*k);
+                            }
+                        }
+                        let (reads, r) = (self.lane0_reads(&vars), self.range_tokens(r));
+                        (quote!({ #reads #r }), quote!(for __n in 0..__range.count))
+                    }
+                    None => (quote!(()), quote!(loop)),
+                };
+                let exit = match exit.is_empty() {
+                    true => TokenStream::new(),
+                    false => {
+                        let reads = self.lane0_reads(exit);
+                        let fs = exit.iter().map(|v| self.var(*v));
+                        quote!(if { #reads false #(|| #fs)* } { break; })
+                    }
+                };
+                let body = self.list(body)?;
+                Ok(quote_spanned! {sp=>
+                    {
+                        let __range = #range;
+                        let mut __count: i64 = 0;
+                        #head {
+                            #exit
+                            #body
+                            __count += 1;
+                        }
+                        __lanes[0].push(__count, #line)?;
+                    }
+                })
+            }
+            AKind::RevLoop { body } => {
+                let body = self.list(body)?;
+                Ok(quote_spanned! {sp=>
+                    {
+                        let __count: i64 = __lanes[0].pop();
+                        for _ in 0..__count {
+                            #body
+                        }
+                    }
+                })
+            }
+            _ => Err("internal: not a loop".into()),
+        }
+    }
+
     /// A block-level statement, with lane 0's copies of the per-lane values it names.
     fn block_stmt(&self, s: &AStmt) -> Result<TokenStream, String> {
         let sp = s.span;
         if let AKind::If { cond, then, els } = &s.kind {
-            let Cond::Var(c) = cond else {
-                return Err("internal: a recorded decision around tile operations".into());
-            };
-            let x = self.var(*c);
-            let read = match self.per_lane[*c] {
-                true => {
+            let read = match cond {
+                Cond::Var(c) if self.per_lane[*c] => {
                     let pl = self.pl(*c);
                     quote!(#pl[0])
                 }
-                false => quote!(#x),
+                Cond::Var(c) => {
+                    let x = self.var(*c);
+                    quote!(#x)
+                }
+                // Every lane pushed the (uniform) decision: each pops its own.
+                Cond::Popped => quote! {{
+                    let mut __d = false;
+                    for __lane in (0..__bd).rev() {
+                        __d = __lanes[__lane].pop::<bool>();
+                    }
+                    __d
+                }},
+                Cond::Fast => return Err("internal: `__FAST` in a tiled adjoint".into()),
             };
             let (t, e) = (self.list(then)?, self.list(els)?);
             return Ok(quote_spanned!(sp=> if #read { #t } else { #e }));
         }
         if matches!(s.kind, AKind::Loop { .. } | AKind::RevLoop { .. }) {
-            return Err("internal: a loop around tile operations in a tiled adjoint".into());
+            return self.block_loop(s);
         }
         let skip = lane_operands(s);
         let vars = self.lane_vars(&[s], &skip);
-        let (load, store) = self.lane_copies(&vars, quote!(0));
+        let (mut load, store) = self.lane_copies(&vars, quote!(0));
+        load.extend(self.lane_stack(quote!(0)));
         let body = match &s.kind {
             AKind::Assign {
                 dst,

@@ -304,6 +304,12 @@ impl Builtin {
         matches!(self.grad, Grad::Atomic | Grad::AtomicNone)
     }
 
+    /// Whether the builtin writes its first argument, an array: the atomics (`atomic_add`,
+    /// `tile_atomic_add`) and `tile_store`.
+    pub fn writes_array(&self) -> bool {
+        self.is_atomic() || self.name == "tile_store"
+    }
+
     /// How many value arguments follow an atomic's index: 2 for `atomic_cas` (compare,
     /// value), 1 for the others.
     pub fn atomic_values(&self) -> usize {

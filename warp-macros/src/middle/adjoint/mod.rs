@@ -188,13 +188,19 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
     let deferred_clear: Vec<VarId> = own.iter().copied().filter(deferred).collect();
     let (body, tail) = split_tail(&g);
     replay::check(body)?;
+    let mut overwritten = replay::overwritten_vars(&g);
+    let recompute = match tiled {
+        true => tiles::plan(&g, &mut overwritten)?,
+        false => vec![false; g.vars.len()],
+    };
     let mut cx = Cx {
         f: &g,
         tid,
         own,
         registers: Vec::new(),
         deferred_clear: deferred_clear.clone(),
-        overwritten: replay::overwritten_vars(&g),
+        overwritten,
+        recompute,
         fresh: Vec::new(),
         error: None,
     };
@@ -247,15 +253,6 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
     }
     if let Some(why) = cx.error.take() {
         return Err(why);
-    }
-    // Tiled adjoints have no per-lane stacks yet: what needs one (a loop, a variable assigned
-    // twice, a decision inside a loop) is refused rather than mixed between lanes.
-    if tiled && replay::pushes(&out) {
-        return Err(
-            "uses tiles, and backward through a tiled kernel that needs the adjoint stack \
-             (a loop, or a variable assigned more than once) is not supported yet"
-                .into(),
-        );
     }
     let regs = cx.registers.iter().map(|r| r.1);
     let adjs = (0..g.vars.len())
@@ -363,6 +360,8 @@ struct Cx<'a> {
     registers: Vec<(VarId, VarId)>,
     deferred_clear: Vec<VarId>,
     overwritten: Vec<bool>,
+    /// The tiles each reversed loop iteration computes again (`tiles::plan`).
+    recompute: Vec<bool>,
     /// Variables the pass adds (numbered after `f`'s), with the definitions of their types.
     fresh: Vec<(Var, Option<TypeOf>)>,
     /// Why the adjoint cannot be built, found on the way.

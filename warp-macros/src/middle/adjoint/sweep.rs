@@ -74,7 +74,8 @@ impl Cx<'_> {
                 }
                 StmtKind::For { body, .. } | StmtKind::Loop { body } => {
                     let (_, body) = split_exit(body);
-                    let mut b = self.reverse(body, true);
+                    let mut b = self.recomputed(body);
+                    b.extend(self.reverse(body, true));
                     // A `for` restores its variable after each reversed iteration.
                     if let StmtKind::For { var, .. } = &s.kind {
                         b.push(pop(*var, sp));

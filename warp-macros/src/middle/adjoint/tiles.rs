@@ -17,9 +17,25 @@
 //!
 //! Order of a tile's adjoint statements: seed (`__r` is the tile's adjoint itself, a
 //! reference on CUDA), the call, then the clear. The usual order (clear before the call) would
-//! clear the seed it reads; this one is the same because a tile in a kernel whose adjoint is
-//! built is assigned once (a reassigned tile would need the stack, which tiled adjoints refuse
-//! for now), so it is never its own operand.
+//! clear the seed it reads; this one is the same because a tile is never its own operand,
+//! except in the in-place updates below, whose adjoint passes through uncleared.
+//!
+//! **Reassigned tiles** (in a loop, or `let mut`) are not pushed on the adjoint stack (a tile is
+//! too large for a thread's stack). [`plan`] sorts them:
+//! - a tile whose value no adjoint rule reads (an accumulator: `acc = acc + t`,
+//!   `tile_matmul(a, b, &mut acc)`, stored, summed, transposed) needs no history at all: the
+//!   replay leaves its last value, which nothing in the sweep looks at;
+//! - a tile computed once per iteration, at the top level of a loop body, from no other tile
+//!   (`tile_load` from an array the kernel does not write, `tile(x)` of lane values, a constant
+//!   tile), from operands that nothing later in the body reassigns, is *computed again* at the
+//!   start of each reversed iteration (when the loop's variables and the lanes' values hold
+//!   that iteration's values again);
+//! - any other (a tile whose earlier values a product or a map needs, computed rather than
+//!   loaded: a layer loop's activations) is refused by name.
+//!
+//! In-place updates whose adjoint passes through: `acc = acc + x`, `acc = x + acc`,
+//! `acc = acc - x` and `tile_matmul(a, b, &mut acc)`. The adjoint of `acc` before the update is
+//! the adjoint after it, so the seed is neither cleared nor accumulated into.
 
 use super::{at, AKind, AStmt, Arg, Cx, GradArg, GradSrc, TempLike};
 use crate::builtins::Grad;
@@ -45,6 +61,7 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_transpose", "adjoint"),
     ("tile_broadcast", "adjoint"),
     ("tile_matmul", "adjoint"),
+    ("tile_matmul_acc", "adjoint (f32 and f64)"),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -85,7 +102,122 @@ pub fn is_block_call(func: &str) -> bool {
     func.starts_with("adj_tile") && !func.starts_with("adj_tile_extract")
 }
 
+/// How the sweep restores reassigned tiles (see the module docs): which tiles it loads again
+/// in each reversed iteration; `overwritten` loses the tiles that need no stack. An error names
+/// a tile whose history would need one.
+pub(super) fn plan(f: &Function, overwritten: &mut [bool]) -> Result<Vec<bool>, String> {
+    let mut recompute = vec![false; f.vars.len()];
+    let mut assigned = vec![0usize; f.vars.len()];
+    let mut needed = vec![false; f.vars.len()];
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign { dst, op, .. } = &s.kind {
+            assigned[*dst] += 1;
+            reads_value(op, *dst, &mut |v| needed[v] = true);
+        }
+    });
+    let written = crate::analysis::written_params(f);
+    let written: Vec<VarId> = written.iter().map(|k| f.params[*k].var).collect();
+    let mut candidates = Vec::new();
+    recomputable(f, &f.body, false, &written, &mut candidates);
+    for t in f.tile_vars() {
+        if !overwritten[t] {
+            continue;
+        }
+        overwritten[t] = false;
+        if !needed[t] {
+            continue;
+        }
+        if assigned[t] == 1 && candidates.contains(&t) {
+            recompute[t] = true;
+            continue;
+        }
+        let name = f.vars[t].name.as_deref().unwrap_or("a temporary");
+        return Err(format!(
+            "uses tiles, and backward through a tile reassigned whose earlier values the \
+             backward pass needs (`{name}`, computed in a loop or assigned more than once, read \
+             by a product, a map or an extremum) is not supported yet"
+        ));
+    }
+    Ok(recompute)
+}
+
+/// The tile operands of `op` (the value of `dst`) whose values its adjoint reads: the
+/// operands of products, quotients, maps, extrema and matmuls (not the accumulator of
+/// `tile_matmul(a, b, &mut c)`); conservatively every tile operand of an operation not listed
+/// as reading none.
+fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
+    match op {
+        Op::Binary(BinOp::Add | BinOp::Sub, ..) | Op::Unary(UnOp::Neg, _) | Op::Copy(_) => {}
+        Op::TileReduce {
+            f: TileFn::Op(BinOp::Add),
+            ..
+        } => {}
+        Op::Builtin { builtin, args } => match builtin.name {
+            "tile_store" | "tile_sum" | "tile_transpose" | "tile_broadcast" | "tile_extract"
+            | "untile" | "tile_load" | "tile" => {}
+            "tile_matmul_acc" => args.iter().filter(|a| **a != dst).for_each(|a| out(*a)),
+            _ => args.iter().for_each(|a| out(*a)),
+        },
+        op => op.for_each_read(out),
+    }
+}
+
+/// The tiles a loop body (`in_loop`) computes at its top level from no other tile: by a
+/// `tile_load` from an array not in `written`, `tile(x)` of lane values, a constant tile; none
+/// of whose operands the rest of the body reassigns, so that at the end of an iteration they
+/// still hold what the tile was computed from.
+fn recomputable(f: &Function, b: &[Stmt], in_loop: bool, written: &[VarId], out: &mut Vec<VarId>) {
+    for (k, s) in b.iter().enumerate() {
+        match &s.kind {
+            StmtKind::Assign {
+                dst,
+                op: op @ Op::Builtin { builtin, args },
+                ..
+            } if in_loop && f.ty(*dst).is_tile() && !builtin.is_atomic() => {
+                let mut from_tiles_or_written = false;
+                op.for_each_read(&mut |v| {
+                    from_tiles_or_written |= f.ty(v).is_tile() || written.contains(&v)
+                });
+                let mut later = Vec::new();
+                walk_stmts(&b[k + 1..], &mut |s| match &s.kind {
+                    StmtKind::Assign { dst, .. } => later.push(*dst),
+                    StmtKind::For { var, .. } => later.push(*var),
+                    StmtKind::SetMember { var, .. } => later.push(*var),
+                    _ => {}
+                });
+                if !from_tiles_or_written && !args.iter().any(|a| later.contains(a)) {
+                    out.push(*dst);
+                }
+            }
+            StmtKind::If { then, els, .. } => {
+                recomputable(f, then, false, written, out);
+                recomputable(f, els, false, written, out);
+            }
+            StmtKind::For { body, .. } | StmtKind::Loop { body } => {
+                let (_, body) = super::replay::split_exit(body);
+                recomputable(f, body, true, written, out);
+            }
+            _ => {}
+        }
+    }
+}
+
 impl Cx<'_> {
+    /// The recomputations of the tiles at the top level of loop body `b` that the sweep computes again, which start each reversed
+    /// iteration (see [`plan`]).
+    pub(super) fn recomputed(&self, b: &[Stmt]) -> Vec<AStmt> {
+        let mut out = Vec::new();
+        for s in b {
+            if let StmtKind::Assign { dst, op, .. } = &s.kind {
+                if self.recompute[*dst] {
+                    let value = super::Value::Op(op.clone());
+                    out.push(at(AKind::Assign { dst: *dst, value }, s.span));
+                }
+            }
+        }
+        out
+    }
+
     /// The reverse of `dst = op` in a tiled kernel when `op` is a tile operation (or `dst` a
     /// tile); `None` for anything else, which the ordinary rules handle.
     pub(super) fn reverse_tile(&mut self, dst: VarId, op: &Op, sp: Span) -> Option<Vec<AStmt>> {
@@ -128,6 +260,27 @@ impl Cx<'_> {
                     self.tile_call(&mut b, &func, args, true, sp);
                     return Some(vec![at(AKind::Scope(b), sp)]);
                 }
+                // `c += a b`: the accumulator's adjoint passes through.
+                "tile_matmul_acc" => {
+                    let (a, bb, c) = (args[0], args[1], args[2]);
+                    if !f.ty(a).is_tile_of_wide_float() {
+                        self.refuse("tile_matmul of f16 tiles");
+                        return Some(Vec::new());
+                    }
+                    if a == c || bb == c {
+                        self.refuse("a `tile_matmul` accumulating into one of its operands");
+                        return Some(Vec::new());
+                    }
+                    if self.diff(c) {
+                        let seed = GradSrc::Adj {
+                            var: c,
+                            path: Vec::new(),
+                        };
+                        b.push(at(AKind::Seed(seed), sp));
+                        self.tile_call(&mut b, "adj_tile_matmul", &[a, bb], false, sp);
+                    }
+                    return Some(vec![at(AKind::Scope(b), sp)]);
+                }
                 "untile" => {
                     if self.diff(dst) {
                         let (lanes, tile) = (dst, args[0]);
@@ -142,6 +295,9 @@ impl Cx<'_> {
         // The rest: seeded from `dst`'s adjoint tile, which is cleared at the end.
         if !self.diff(dst) {
             return Some(b);
+        }
+        if let Some(r) = self.in_place_update(dst, op, sp) {
+            return Some(r);
         }
         let seed = GradSrc::Adj {
             var: dst,
@@ -240,6 +396,40 @@ impl Cx<'_> {
         }
         let path = Vec::new();
         b.push(at(AKind::ClearAdj { var: dst, path }, sp));
+        Some(vec![at(AKind::Scope(b), sp)])
+    }
+
+    /// The reverse of an in-place update of tile `dst` from itself (see the module docs):
+    /// `acc = acc + x`, `x + acc` or `acc - x` pass the seed to `x` (negated for `-`) and keep
+    /// it as `acc`'s adjoint; another operation reading its own result is refused. `None`: `op`
+    /// does not read `dst`.
+    fn in_place_update(&mut self, dst: VarId, op: &Op, sp: Span) -> Option<Vec<AStmt>> {
+        let mut reads_dst = false;
+        op.for_each_read(&mut |v| reads_dst |= v == dst);
+        if !reads_dst {
+            return None;
+        }
+        let other = match op {
+            Op::Binary(BinOp::Add, l, r) if (*l == dst) != (*r == dst) => {
+                Some((if *l == dst { *r } else { *l }, false))
+            }
+            Op::Binary(BinOp::Sub, l, r) if *l == dst && *r != dst => Some((*r, true)),
+            _ => None,
+        };
+        let Some((x, negate)) = other.filter(|(x, _)| self.f.ty(*x).is_tile()) else {
+            self.refuse("a tile updated in place from itself by this operation");
+            return Some(Vec::new());
+        };
+        let seed = GradSrc::Adj {
+            var: dst,
+            path: Vec::new(),
+        };
+        let mut b = vec![at(AKind::Seed(seed), sp)];
+        if negate {
+            self.tile_call(&mut b, "adj_tile_neg", &[x], false, sp);
+        } else {
+            self.accum(&mut b, x, Vec::new(), GradSrc::Seed, sp);
+        }
         Some(vec![at(AKind::Scope(b), sp)])
     }
 
