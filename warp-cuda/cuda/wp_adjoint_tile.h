@@ -382,4 +382,29 @@ WP_FN void adj_tile_accum(const tile_t<T, D...>& adj_a, const tile_t<T, D...>& r
   __syncthreads();
 }
 
+// ---- A reassigned tile's history on the threads' stacks ----
+// Each thread pushes the elements it owns (threadIdx.x + k * WP_TILE_BLOCK_DIM, ascending) on
+// its own stack and pops them in the reverse order (warp-core's `push_tile`/`pop_tile` put
+// element e on lane e % block_dim's stack in the same order). The pop ends in a barrier: the
+// other threads read the restored elements next.
+
+template <typename T, int... D>
+WP_FN void adstack_push_tile(adstack_t* st, const tile_t<T, D...>& t, i32 line, ctx_t* ctx) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)
+    adstack_push(st, t.data[i], line, ctx);
+  // The assignment that follows may write elements other threads have not pushed yet.
+  __syncthreads();
+}
+
+template <typename T, int... D>
+WP_FN void adstack_pop_tile(adstack_t* st, tile_t<T, D...>& t) {
+  constexpr int S = tile_t<T, D...>::SIZE;
+  const int tx = (int)threadIdx.x;
+  if (tx < S) {
+    int i = tx + ((S - 1 - tx) / WP_TILE_BLOCK_DIM) * WP_TILE_BLOCK_DIM;
+    for (; i >= 0; i -= WP_TILE_BLOCK_DIM) t.data[i] = adstack_pop<T>(st);
+  }
+  __syncthreads();
+}
+
 }  // namespace wp

@@ -27,7 +27,7 @@ use crate::adjoint::{AdjAdd, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
 use crate::block::{LaneValue, PerLane};
 use crate::builtins::Scalar;
 use crate::fault::KResult;
-use crate::grad::{GradElement, GradView};
+use crate::grad::{AdStack, GradElement, GradView};
 use crate::index::IndexInt;
 use crate::view::ArrayView;
 
@@ -497,5 +497,31 @@ pub fn adj_untile<T: LaneValue + Adjoint, const N: usize>(
 ) {
     for (l, d) in adj_t.data.iter_mut().enumerate().take(bd) {
         d.adj_accum(adj_x[l]);
+    }
+}
+
+/// Pushes tile `t` on the lanes' adjoint stacks (a reassigned tile whose old value the reverse
+/// sweep needs): element `e` on lane `e % bd`'s stack, in ascending `e`, as each GPU thread
+/// pushes the elements it owns on its own stack (`adstack_push_tile`), so a lane needs the same
+/// stack capacity on both backends.
+pub fn push_tile<X: Tile>(t: &X, lanes: &mut [AdStack], line: u32) -> KResult<()>
+where
+    X::Elem: Copy,
+{
+    let bd = lanes.len();
+    for (e, v) in t.as_flat().iter().enumerate() {
+        lanes[e % bd].push(*v, line)?;
+    }
+    Ok(())
+}
+
+/// Pops what [`push_tile`] pushed into `t`.
+pub fn pop_tile<X: Tile>(t: &mut X, lanes: &mut [AdStack])
+where
+    X::Elem: Copy,
+{
+    let bd = lanes.len();
+    for (e, v) in t.as_flat_mut().iter_mut().enumerate().rev() {
+        *v = lanes[e % bd].pop();
     }
 }

@@ -283,6 +283,12 @@ impl<'a> Printer<'a> {
                 let (x, v) = (self.var(*var), self.var(*value));
                 format!("{x}{} = {v};", member_path(path))
             }
+            AKind::Push { var, line } if coop => {
+                format!(
+                    "wp::adstack_push_tile(__stack, {}, {line}, __ctx);",
+                    self.var(*var)
+                )
+            }
             AKind::Push { var, line } => {
                 format!(
                     "wp::adstack_push(__stack, {}, {line}, __ctx);",
@@ -356,6 +362,9 @@ impl<'a> Printer<'a> {
             AKind::ClearAdj { var, path } => {
                 let (a, x, p) = (self.adj(*var), self.var(*var), member_path(path));
                 format!("{a}{p} = wp::zero_like({x}{p});")
+            }
+            AKind::Pop { var } if coop => {
+                format!("wp::adstack_pop_tile(__stack, {});", self.var(*var))
             }
             AKind::Pop { var } => {
                 let x = self.var(*var);

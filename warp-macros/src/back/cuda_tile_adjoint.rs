@@ -48,6 +48,7 @@ impl Printer<'_> {
         match &s.kind {
             AKind::AdjCall { func, .. } => is_block_call(func),
             AKind::TileMapAdj { .. } | AKind::LaneAdj { .. } => true,
+            AKind::Push { .. } | AKind::Pop { .. } => tile_stack_op(self.f(), s),
             AKind::ClearAdj { var, .. } => tile(var),
             AKind::Accum {
                 to: AdjOf::Var { var, .. },

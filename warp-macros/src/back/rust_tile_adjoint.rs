@@ -420,12 +420,23 @@ impl Printer<'_> {
         let skip = lane_operands(s);
         let vars = self.lane_vars(&[s], &skip);
         let (mut load, store) = self.lane_copies(&vars, quote!(0));
-        load.extend(self.lane_stack(quote!(0)));
+        if !tile_stack_op(self.f(), s) {
+            load.extend(self.lane_stack(quote!(0)));
+        }
         let body = match &s.kind {
             AKind::Assign {
                 dst,
                 value: Value::Op(Op::Builtin { builtin, args }),
             } if builtin.lanes => self.lanes_replay(builtin.name, *dst, args[0], sp),
+            // A tile's history, spread over the lanes' stacks.
+            AKind::Push { var, line } => {
+                let x = self.var(*var);
+                quote_spanned!(sp=> __wp::tile::adjoint::push_tile(&#x, __lanes, #line)?;)
+            }
+            AKind::Pop { var } => {
+                let x = self.var(*var);
+                quote_spanned!(sp=> __wp::tile::adjoint::pop_tile(&mut #x, __lanes);)
+            }
             AKind::Scope(b) => self.block(b)?,
             _ => self.stmt(s)?,
         };

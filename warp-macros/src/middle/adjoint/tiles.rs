@@ -30,8 +30,10 @@
 //!   tile), from operands that nothing later in the body reassigns, is *computed again* at the
 //!   start of each reversed iteration (when the loop's variables and the lanes' values hold
 //!   that iteration's values again);
-//! - any other (a tile whose earlier values a product or a map needs, computed rather than
-//!   loaded: a layer loop's activations) is refused by name.
+//! - any other (a tile whose earlier values a product or a map needs, computed from other
+//!   tiles: a layer loop's activations) is pushed before it is overwritten, each lane pushing
+//!   the elements it owns on its own stack (`push_tile`, `adstack_push_tile`), and popped after
+//!   its statement's adjoint.
 //!
 //! In-place updates whose adjoint passes through: `acc = acc + x`, `acc = x + acc`,
 //! `acc = acc - x` and `tile_matmul(a, b, &mut acc)`. The adjoint of `acc` before the update is
@@ -41,6 +43,11 @@ use super::{at, AKind, AStmt, Arg, Cx, GradArg, GradSrc, TempLike};
 use crate::builtins::Grad;
 use crate::ir::*;
 use proc_macro2::Span;
+
+/// Whether `s` pushes or pops a tile (the whole block together).
+pub fn tile_stack_op(f: &Function, s: &AStmt) -> bool {
+    matches!(&s.kind, AKind::Push { var, .. } | AKind::Pop { var } if f.ty(*var).is_tile())
+}
 
 /// The tile rows with an adjoint, and what the builtins table says of each: the one list
 /// the sweep (which refuses every other row that is not constant) and the docs read.
@@ -83,6 +90,7 @@ pub fn is_block_level(f: &Function, s: &AStmt) -> bool {
         } => f.is_cooperative_op(*dst, op),
         AKind::AdjCall { func, .. } => is_block_call(func),
         AKind::TileMapAdj { .. } | AKind::LaneAdj { .. } => true,
+        AKind::Push { .. } | AKind::Pop { .. } => tile_stack_op(f, s),
         AKind::Seed(GradSrc::Adj { var, .. }) | AKind::ClearAdj { var, .. } => tile(var),
         AKind::Accum {
             to: super::AdjOf::Var { var, .. },
@@ -102,10 +110,9 @@ pub fn is_block_call(func: &str) -> bool {
     func.starts_with("adj_tile") && !func.starts_with("adj_tile_extract")
 }
 
-/// How the sweep restores reassigned tiles (see the module docs): which tiles it loads again
-/// in each reversed iteration; `overwritten` loses the tiles that need no stack. An error names
-/// a tile whose history would need one.
-pub(super) fn plan(f: &Function, overwritten: &mut [bool]) -> Result<Vec<bool>, String> {
+/// How the sweep restores reassigned tiles (see the module docs): which tiles it computes
+/// again in each reversed iteration; `overwritten` keeps only the tiles pushed on the stack.
+pub(super) fn plan(f: &Function, overwritten: &mut [bool]) -> Vec<bool> {
     let mut recompute = vec![false; f.vars.len()];
     let mut assigned = vec![0usize; f.vars.len()];
     let mut needed = vec![false; f.vars.len()];
@@ -131,14 +138,10 @@ pub(super) fn plan(f: &Function, overwritten: &mut [bool]) -> Result<Vec<bool>, 
             recompute[t] = true;
             continue;
         }
-        let name = f.vars[t].name.as_deref().unwrap_or("a temporary");
-        return Err(format!(
-            "uses tiles, and backward through a tile reassigned whose earlier values the \
-             backward pass needs (`{name}`, computed in a loop or assigned more than once, read \
-             by a product, a map or an extremum) is not supported yet"
-        ));
+        // Its history goes on the lanes' stacks.
+        overwritten[t] = true;
     }
-    Ok(recompute)
+    recompute
 }
 
 /// The tile operands of `op` (the value of `dst`) whose values its adjoint reads: the
@@ -219,8 +222,18 @@ impl Cx<'_> {
     }
 
     /// The reverse of `dst = op` in a tiled kernel when `op` is a tile operation (or `dst` a
-    /// tile); `None` for anything else, which the ordinary rules handle.
+    /// tile); `None` for anything else, which the ordinary rules handle. A reassigned `dst`
+    /// gets its old value back after the adjoint (a tile from the lanes' stacks, see [`plan`]).
     pub(super) fn reverse_tile(&mut self, dst: VarId, op: &Op, sp: Span) -> Option<Vec<AStmt>> {
+        let mut out = self.reverse_tile_op(dst, op, sp)?;
+        let store = matches!(op, Op::Builtin { builtin, .. } if builtin.name == "tile_store");
+        if self.overwritten[dst] && !store {
+            out.push(super::pop(dst, sp));
+        }
+        Some(out)
+    }
+
+    fn reverse_tile_op(&mut self, dst: VarId, op: &Op, sp: Span) -> Option<Vec<AStmt>> {
         let f = self.f;
         let tile = |v: VarId| f.ty(v).is_tile();
         let tile_op = match op {
