@@ -176,7 +176,73 @@ pub(super) fn overwritten_vars(f: &Function) -> Vec<bool> {
         }
     }
     walk(&f.body, false, &mut out);
+    for (v, inv) in invariant_vars(f).into_iter().enumerate() {
+        out[v] &= !inv;
+    }
     out
+}
+
+/// Variables that hold the same value whenever they are assigned: assigned once, not `mut`,
+/// by an operation without side effects or memory reads whose operands are parameters never
+/// reassigned or such variables themselves (`let off = i * 16;`, a const, in a loop). Restoring one would
+/// restore what it already holds, so its history is not pushed: a k-loop's index arithmetic
+/// costs no stack.
+fn invariant_vars(f: &Function) -> Vec<bool> {
+    let n = f.vars.len();
+    let mut assigned = vec![0usize; n];
+    let mut defs: Vec<Option<&Op>> = vec![None; n];
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::Assign { dst, op, .. } => {
+            assigned[*dst] += 1;
+            defs[*dst] = Some(op);
+        }
+        StmtKind::For { var, .. } | StmtKind::SetMember { var, .. } => assigned[*var] += 2,
+        _ => {}
+    });
+    let param = |v: VarId| f.params.iter().any(|p| p.var == v);
+    let mut inv = vec![false; n];
+    // Operands come before their uses, so a pass per nesting level settles it; iterate to a
+    // fixed point for safety.
+    loop {
+        let mut changed = false;
+        for v in 0..n {
+            if inv[v] || assigned[v] != 1 || f.vars[v].mutable || param(v) {
+                continue;
+            }
+            let pure = matches!(
+                defs[v],
+                Some(
+                    Op::Lit(_)
+                        | Op::LitLike(..)
+                        | Op::Const(_)
+                        | Op::Copy(_)
+                        | Op::Unary(..)
+                        | Op::Binary(..)
+                        | Op::Cast(..)
+                        | Op::Member(..)
+                        | Op::Construct { .. }
+                        | Op::Tid(_)
+                        | Op::Lane
+                        | Op::Extent(..)
+                        | Op::Len(_)
+                )
+            );
+            if !pure {
+                continue;
+            }
+            let mut ok = true;
+            if let Some(op) = defs[v] {
+                op.for_each_read(&mut |a| ok &= inv[a] || (param(a) && assigned[a] == 0));
+            }
+            if ok {
+                inv[v] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            return inv;
+        }
+    }
 }
 
 /// What the replay stores for `op`.
