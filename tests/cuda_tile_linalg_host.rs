@@ -202,3 +202,66 @@ fn cholesky_and_solves_match_warp_core_bit_for_bit() {
         }
     }
 }
+
+/// The header as NVRTC compiles it, for the shapes and block sizes of both forms: the warp
+/// forms' shuffles and register arrays (N <= 32, whole first warp), the block-wide ones
+/// (N > 32, and blocks under a warp), a partial last warp (45), one right-hand side and several.
+const NVRTC_SOURCE: &str = r#"
+#include "wp_tile.h"
+#include "wp_tile_linalg.h"
+
+template <typename T, int N, int K>
+__device__ unsigned char* linalg(unsigned char* at) {
+  wp::tile_t<T, N, N> a(at);
+  at += (wp::tile_t<T, N, N>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, N, N> l(at);
+  at += (wp::tile_t<T, N, N>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, N> y(at);
+  at += (wp::tile_t<T, N>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, N> x(at);
+  at += (wp::tile_t<T, N>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, N, K> ys(at);
+  at += (wp::tile_t<T, N, K>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, N, K> xs(at);
+  at += (wp::tile_t<T, N, K>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_cholesky(l, a);
+  wp::tile_cholesky(a, a);
+  wp::tile_cholesky_solve(x, l, y);
+  wp::tile_lower_solve(x, l, y);
+  wp::tile_upper_solve(x, l, y);
+  wp::tile_cholesky_solve(xs, l, ys);
+  wp::tile_lower_solve(xs, l, ys);
+  wp::tile_upper_solve(xs, l, ys);
+  return at;
+}
+
+extern "C" __global__ void linalg_all() {
+  extern __shared__ __align__(16) unsigned char smem[];
+  linalg<wp::f32, 32, 3>(smem);
+  linalg<wp::f32, 5, 2>(smem);
+  linalg<wp::f64, 32, 2>(smem);
+  linalg<wp::f64, 1, 4>(smem);
+  linalg<wp::f32, 40, 2>(smem);
+}
+"#;
+
+#[test]
+fn nvrtc_compiles_the_linalg_header() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED nvrtc_compiles_the_linalg_header: {e}");
+        return;
+    }
+    for bd in ["1", "45", "64"] {
+        let defines = [("WP_TILE_BLOCK_DIM", bd)];
+        let opts = warp_cuda::CompileOptions {
+            fmad: false,
+            defines: &defines,
+            headers: warp_cuda::HEADERS,
+            ..Default::default()
+        };
+        let c = warp_cuda::compile(NVRTC_SOURCE, "tile_linalg.cu", &opts, 90)
+            .unwrap_or_else(|e| panic!("block size {bd}: {e}"));
+        assert!(!c.cubin.is_empty());
+        assert!(!c.log.contains("warning"), "block size {bd}: {}", c.log);
+    }
+}
