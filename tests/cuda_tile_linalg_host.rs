@@ -170,6 +170,33 @@ fn cholesky_and_solves_match_warp_core_bit_for_bit() {
             .all(|v| v.is_nan()),
         "the bad case is not positive definite"
     );
+    // Signed zeros and an unread upper triangle: the lower triangle holds -0.0 off the
+    // diagonal in its first column (so L keeps -0.0 there and products of zeros meet
+    // subtractions), the upper triangle NaN. The warp form loads every column whole and keeps
+    // the strict upper part as scratch that nothing reads back: a NaN there must not reach L.
+    let mut odd = spd::<32>(25);
+    for (i, row) in odd.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            if j > i {
+                *v = f64::NAN;
+            } else if j == 0 && i > 0 {
+                *v = -0.0;
+            }
+        }
+    }
+    case!(cases, want, f32, 32, 0, odd, 26);
+    case!(cases, want, f64, 32, 0, odd, 27);
+    assert!(
+        want.last().unwrap()[..8 * 32 * 32]
+            .chunks(8)
+            .all(|b| !f64::from_le_bytes(b.try_into().unwrap()).is_nan()),
+        "the NaN upper triangle is not read by warp-core"
+    );
+    assert_eq!(
+        want.last().unwrap()[8 * 32..8 * 33],
+        (-0.0f64).to_le_bytes(),
+        "L[1][0] is -0.0"
+    );
     // In place: `tile_cholesky(A, A)`.
     let a16 = Tile2::<f32, 16, 16> {
         data: spd::<16>(23).map(|r| r.map(|v| v as f32)),
