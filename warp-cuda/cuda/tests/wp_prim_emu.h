@@ -20,15 +20,25 @@
 //   * a decoupled look-back that finds a predecessor's status unpublished aborts: blocks run
 //     in order (tile counters hand out tiles in launch order), so every tile before has been
 //     finished and an unpublished status is a bug that would hang a GPU.
-//   * for the tile library (wp_tile.h, tests/cuda_tile_host.rs): `threadIdx` (x only),
-//     `__syncthreads()`, and `__shfl_down_sync`, an exchange among the 32 lanes of a warp made
-//     of two block-wide barriers (every thread writes its value, all wait, each reads its
-//     partner's, all wait). It is exact for shuffles that every thread of the block calls
-//     together, as the tile reductions do; a thread outside `mask`, or a shuffle that only some
-//     warps reach, aborts or is a barrier divergence. A source lane outside the warp or the
-//     mask gives the caller's own value (CUDA leaves the latter undefined).
-// Not emulated: warps otherwise (the primitives use no warp-level operations), memory ordering
-// between blocks, and interleavings inside a phase.
+//   * for the tile library (wp_tile.h, tests/cuda_tile_host.rs) and its linear algebra
+//     (wp_tile_linalg.h): `threadIdx` (x only), `__syncthreads()`, and the warp-synchronous
+//     operations `__syncwarp(mask)`, `__shfl_sync(mask, v, src)` and
+//     `__shfl_down_sync(mask, v, delta)`. Warp w is threads 32 w .. 32 w + 31 (fewer in a
+//     partial last warp). `__syncwarp` is a barrier among the lanes of `mask` that exist: a lane
+//     that reaches it waits until every one of them has, while the block's other warps run on
+//     (a warp is not a block: its lanes are released without the rest of the block, and run
+//     again in a shuffled order, so shared memory written by one lane and read by another with
+//     no `__syncwarp` between them is seen sometimes before and sometimes after the write). A
+//     shuffle is an exchange made of two such barriers (every lane writes its value, the lanes
+//     wait, each reads its source's, they wait). A caller outside its mask, a source lane
+//     outside the mask or the block (for `__shfl_sync`; `__shfl_down_sync` past the warp's end
+//     gives the caller's own value, as CUDA), a lane of the mask that has left the kernel, and
+//     lanes of one mask waiting at different barriers (a `__syncwarp` against a
+//     `__syncthreads`: a deadlock on a GPU) abort, naming the block.
+//   * `block_barriers` counts the `__syncthreads` phases released since the program started
+//     (the linear-algebra test checks how many barriers an operation costs).
+// Not emulated: memory ordering between blocks, and interleavings inside a phase (a lane runs
+// from one barrier to the next without a switch).
 #pragma once
 
 #define WP_PRIM_EMULATOR 1
@@ -46,13 +56,18 @@ namespace wp_emu {
 /// The running thread's index and block (set by the scheduler before each switch).
 inline int tid = 0;
 inline long long bid = 0;
+/// `__syncthreads` phases released so far (every block of every launch).
+inline long long block_barriers = 0;
 
-enum class state { running, waiting, done };
+/// A fiber runs, waits at `__syncthreads`, waits at `__syncwarp(mask)`, or has finished.
+enum class state { running, waiting, at_warp, done };
 
 struct fiber {
   ucontext_t ctx;
   std::vector<char> stack;
   state st = state::running;
+  /// The mask of the `__syncwarp` it waits at (`at_warp`).
+  unsigned mask = 0;
 };
 
 struct scheduler {
@@ -73,6 +88,55 @@ inline void sync() {
   scheduler& s = sched();
   s.fibers[tid].st = state::waiting;
   swapcontext(&s.fibers[tid].ctx, &s.main);
+}
+
+[[noreturn]] inline void warp_fail(const char* what, unsigned mask) {
+  std::fprintf(stderr, "wp_prim_emu: block %lld, thread %d (lane %d), mask %08x: %s\n", bid, tid,
+               tid % 32, mask, what);
+  std::abort();
+}
+
+/// `__syncwarp(mask)`: back to the scheduler until every existing lane of `mask` in the
+/// caller's warp is here (see the top).
+inline void warp_sync(unsigned mask) {
+  scheduler& s = sched();
+  if (!((mask >> (tid % 32)) & 1u)) warp_fail("__syncwarp or a shuffle outside its own mask", mask);
+  s.fibers[tid].st = state::at_warp;
+  s.fibers[tid].mask = mask;
+  swapcontext(&s.fibers[tid].ctx, &s.main);
+}
+
+/// Releases every warp group whose lanes all wait at a `__syncwarp` of the same mask; aborts
+/// when a lane of a waiting group has left the kernel or waits with another mask. Whether any
+/// was released.
+inline bool release_warps() {
+  scheduler& s = sched();
+  const int threads = (int)s.fibers.size();
+  bool released = false;
+  for (int t = 0; t < threads; ++t) {
+    if (s.fibers[t].st != state::at_warp) continue;
+    const unsigned mask = s.fibers[t].mask;
+    const int base = t - t % 32;
+    bool complete = true;
+    for (int l = 0; l < 32 && base + l < threads; ++l) {
+      if (!((mask >> l) & 1u)) continue;
+      const fiber& f = s.fibers[base + l];
+      if (f.st == state::done) {
+        tid = t;
+        warp_fail("a lane of the mask has left the kernel", mask);
+      }
+      if (f.st == state::at_warp && f.mask != mask) {
+        tid = t;
+        warp_fail("lanes of one warp wait at __syncwarp with different masks", mask);
+      }
+      complete = complete && f.st == state::at_warp;
+    }
+    if (!complete) continue;
+    for (int l = 0; l < 32 && base + l < threads; ++l)
+      if ((mask >> l) & 1u) s.fibers[base + l].st = state::running;
+    released = true;
+  }
+  return released;
 }
 
 inline void fiber_entry() {
@@ -131,39 +195,49 @@ void launch(void (*fn)(Args), long long blocks, int threads, const Args& args) {
 #pragma GCC diagnostic pop
 #endif
   s.fibers.resize(threads);
-  std::vector<int> order(threads);
   for (long long b = 0; b < blocks; ++b) {
     bid = b;
     for (fiber& f : s.fibers) start_fiber(f);
+    std::vector<int> order;
     for (long long phase = 0;; ++phase) {
-      // A new order for every phase (Fisher-Yates with an xorshift generator).
-      for (int t = 0; t < threads; ++t) order[t] = t;
-      for (int t = threads - 1; t > 0; --t) {
-        s.rng ^= s.rng << 13;
-        s.rng ^= s.rng >> 7;
-        s.rng ^= s.rng << 17;
-        const int k = (int)(s.rng % (unsigned long long)(t + 1));
-        const int tmp = order[t];
-        order[t] = order[k];
-        order[k] = tmp;
+      // Rounds until every thread waits at __syncthreads (or has finished): each round runs
+      // the runnable threads in a new order (Fisher-Yates with an xorshift generator), each to
+      // its next barrier; then the warps whose __syncwarp is complete go on.
+      for (;;) {
+        order.clear();
+        for (int t = 0; t < threads; ++t)
+          if (s.fibers[t].st == state::running) order.push_back(t);
+        for (int t = (int)order.size() - 1; t > 0; --t) {
+          s.rng ^= s.rng << 13;
+          s.rng ^= s.rng >> 7;
+          s.rng ^= s.rng << 17;
+          const int k = (int)(s.rng % (unsigned long long)(t + 1));
+          const int tmp = order[t];
+          order[t] = order[k];
+          order[k] = tmp;
+        }
+        for (int t : order) {
+          tid = t;
+          swapcontext(&s.main, &s.fibers[t].ctx);
+        }
+        if (!release_warps()) break;
       }
-      for (int t : order) {
-        tid = t;
-        swapcontext(&s.main, &s.fibers[t].ctx);
-      }
-      int waiting = 0, done = 0;
+      int waiting = 0, done = 0, at_warp = 0;
       for (const fiber& f : s.fibers) {
         waiting += f.st == state::waiting;
         done += f.st == state::done;
+        at_warp += f.st == state::at_warp;
       }
       if (done == threads) break;
       if (waiting != threads) {
         std::fprintf(stderr,
                      "wp_prim_emu: barrier divergence in block %lld, phase %lld: %d threads "
-                     "wait at __syncthreads, %d have left the kernel\n",
-                     b, phase, waiting, done);
+                     "wait at __syncthreads, %d at an incomplete __syncwarp, %d have left the "
+                     "kernel\n",
+                     b, phase, waiting, at_warp, done);
         std::abort();
       }
+      ++block_barriers;
       for (fiber& f : s.fibers) f.st = state::running;
     }
   }
@@ -190,26 +264,38 @@ struct dim3_t {
 };
 inline dim3_t thread_idx() { return dim3_t{(unsigned)tid, 0u, 0u}; }
 
-/// `__shfl_down_sync(mask, v, delta)` among the 32 lanes of the caller's warp (see the top).
+/// The value lane `src` of the caller's warp handed to a shuffle (see the top): every lane of
+/// `mask` writes its `v`, waits for the others, reads its source's (`src` < 0: its own), and
+/// waits again, so that no lane overwrites a value another has yet to read.
 template <typename T>
-T shfl_down_sync(unsigned mask, T v, unsigned delta) {
+T exchange(unsigned mask, T v, int src) {
   static std::vector<T> slots;
   const int threads = (int)sched().fibers.size();
-  const int lane = tid % 32;
-  if (!((mask >> lane) & 1u)) {
-    std::fprintf(stderr, "wp_prim_emu: thread %d of block %lld shuffles outside its mask %08x\n",
-                 tid, bid, mask);
-    std::abort();
-  }
   if ((int)slots.size() < threads) slots.resize((size_t)threads);
   slots[(size_t)tid] = v;
-  sync();
-  const unsigned src = (unsigned)lane + delta;
-  T r = v;
-  if (src < 32u && ((mask >> src) & 1u) && tid - lane + (int)src < threads)
-    r = slots[(size_t)(tid - lane + (int)src)];
-  sync();
+  warp_sync(mask);
+  const T r = src < 0 ? v : slots[(size_t)(tid - tid % 32 + src)];
+  warp_sync(mask);
   return r;
+}
+
+/// `__shfl_sync(mask, v, src)`: lane `src % 32`'s value, which must be in the mask and exist.
+template <typename T>
+T shfl_sync(unsigned mask, T v, int src) {
+  const int lane = src & 31;
+  if (!((mask >> lane) & 1u) || tid - tid % 32 + lane >= (int)sched().fibers.size())
+    warp_fail("__shfl_sync reads a lane outside the mask or the block", mask);
+  return exchange(mask, v, lane);
+}
+
+/// `__shfl_down_sync(mask, v, delta)`: lane + delta's value; the caller's own past the warp's
+/// end, the mask or the block.
+template <typename T>
+T shfl_down_sync(unsigned mask, T v, unsigned delta) {
+  const unsigned src = (unsigned)(tid % 32) + delta;
+  const bool own = src >= 32u || !((mask >> src) & 1u) ||
+                   tid - tid % 32 + (int)src >= (int)sched().fibers.size();
+  return exchange(mask, v, own ? -1 : (int)src);
 }
 
 }  // namespace wp_emu
@@ -217,6 +303,8 @@ T shfl_down_sync(unsigned mask, T v, unsigned delta) {
 #define threadIdx (::wp_emu::thread_idx())
 #define __syncthreads() ::wp_emu::sync()
 #define __shfl_down_sync(mask, v, delta) ::wp_emu::shfl_down_sync((mask), (v), (unsigned)(delta))
+#define __shfl_sync(mask, v, src) ::wp_emu::shfl_sync((mask), (v), (int)(src))
+#define __syncwarp(mask) ::wp_emu::warp_sync((unsigned)(mask))
 
 #define WP_PRIM_FN inline
 #define WP_PRIM_ENTRY extern "C" void

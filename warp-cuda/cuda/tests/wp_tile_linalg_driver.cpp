@@ -6,7 +6,9 @@
 //   run NAME HEX   the case NAME (element, N, right-hand side shape) on the bytes HEX: A (N x N)
 //                  then Y (N or N x K), row-major. Prints `out HEX`: L = tile_cholesky(A),
 //                  Z = tile_lower_solve(L, Y), X = tile_cholesky_solve(L, Y),
-//                  W = tile_upper_solve(L^T, Z), each row-major, in that order.
+//                  W = tile_upper_solve(L^T, Z), each row-major, in that order. Then
+//                  `barriers F L S U`: the block barriers (__syncthreads phases) that the
+//                  factor, the lower solve, the Cholesky solve and the upper solve each took.
 #include "wp_prim_emu.h"
 #include "wp_tile.h"
 #include "wp_tile_linalg.h"
@@ -31,6 +33,18 @@ struct args_t {
 };
 
 alignas(16) static unsigned char smem[64 * 1024];
+
+/// The block barriers of the last case's four operations (thread 0 writes them: every thread
+/// sees the same count between two barriers).
+static long long barriers[4];
+
+/// Runs `op` and, in thread 0, stores the barriers it took in `*n`.
+template <typename F>
+void counted(long long* n, F op) {
+  const long long before = wp_emu::block_barriers;
+  op();
+  if (threadIdx.x == 0) *n = wp_emu::block_barriers - before;
+}
 
 template <typename Tile>
 Tile slot_at(size_t& at) {
@@ -81,11 +95,11 @@ void k_case(args_t a) {
   size_t in = 0, out = 0;
   get(a, in, A);
   get(a, in, Y);
-  wp::tile_cholesky(L, A);
-  wp::tile_lower_solve(Z, L, Y);
-  wp::tile_cholesky_solve(X, L, Y);
+  counted(&barriers[0], [&] { wp::tile_cholesky(L, A); });
+  counted(&barriers[1], [&] { wp::tile_lower_solve(Z, L, Y); });
+  counted(&barriers[2], [&] { wp::tile_cholesky_solve(X, L, Y); });
   wp::tile_transpose(Lt, L);
-  wp::tile_upper_solve(W, Lt, Z);
+  counted(&barriers[3], [&] { wp::tile_upper_solve(W, Lt, Z); });
   put(a, out, L);
   put(a, out, Z);
   put(a, out, X);
@@ -104,7 +118,7 @@ void k_inplace(args_t a) {
   auto A = slot_at<tile_t<T, N, N>>(s);
   size_t in = 0, out = 0;
   get(a, in, A);
-  wp::tile_cholesky(A, A);
+  counted(&barriers[0], [&] { wp::tile_cholesky(A, A); });
   put(a, out, A);
 }
 
@@ -150,10 +164,12 @@ int main(int argc, char** argv) {
     unhex(hex, input);
     std::fill(smem, smem + sizeof(smem), (unsigned char)0xCD);
     const args_t a{input.data(), out.data()};
+    for (long long& b : barriers) b = 0;
     wp_emu::launch(c->second.first, 1, WP_TILE_BLOCK_DIM, a);
     std::printf("out ");
     for (size_t i = 0; i < c->second.second; ++i) std::printf("%02x", out[i]);
-    std::printf("\n");
+    std::printf("\nbarriers %lld %lld %lld %lld\n", barriers[0], barriers[1], barriers[2],
+                barriers[3]);
   }
   return 0;
 }
