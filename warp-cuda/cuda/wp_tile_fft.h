@@ -92,7 +92,7 @@ WP_FN void transform(const tile_t<C, M, N>& t) {
   constexpr int H = N / 2 > 0 ? N / 2 : 1;
   if constexpr (N >= 2) {
     // The table: static shared memory of its own, outside the tiles' slots.
-    __shared__ C tw[H];
+    WP_TILE_SHARED_ALIGNED C tw[H];
     for (int k = (int)threadIdx.x; k < N / 2; k += WP_TILE_BLOCK_DIM) {
       f64 re, im;
       twiddle64<L>(k, &re, &im);
