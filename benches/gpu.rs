@@ -1001,7 +1001,7 @@ const FFT_BLOCK_DIM: usize = 64;
 /// sampled signals the error `max |y - Y| / max |Y|` against a float64 DFT.
 fn tile_fft_bench(dev: &wp::Device, rows: usize) {
     use tile_fft::{M, N};
-    if rows == 0 || rows % M != 0 {
+    if rows == 0 || !rows.is_multiple_of(M) {
         println!("\ntile FFT: {rows} signals is not a positive multiple of {M}: skipped");
         return;
     }

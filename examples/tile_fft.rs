@@ -69,7 +69,7 @@ fn median_ms(reps: usize, mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<(
 
 fn main() -> wp::Result<()> {
     let args = Args::parse();
-    if args.rows == 0 || args.rows % M != 0 || args.reps == 0 || args.block_dim == 0 {
+    if args.rows == 0 || !args.rows.is_multiple_of(M) || args.reps == 0 || args.block_dim == 0 {
         eprintln!(
             "tile_fft: --rows must be a positive multiple of {M}, --reps and --block-dim at least 1 (got {}, {}, {})",
             args.rows, args.reps, args.block_dim
@@ -91,7 +91,7 @@ fn main() -> wp::Result<()> {
         let (t, first) = median_ms(args.reps, || {
             wp::launch_tiled(fft_rows_f64, blocks, (&dx, &dy), bd, &dev)
         })?;
-        let y = dy.to_vec()?.iter().map(|v| (v.x, v.y)).collect();
+        let y: Vec<(f64, f64)> = dy.to_vec()?.iter().map(|v| (v.x, v.y)).collect();
         (t, first, x64, y, f64::EPSILON)
     } else {
         let xh: Vec<Vec2> = x64
@@ -103,7 +103,7 @@ fn main() -> wp::Result<()> {
         let (t, first) = median_ms(args.reps, || {
             wp::launch_tiled(fft_rows, blocks, (&dx, &dy), bd, &dev)
         })?;
-        let y = dy
+        let y: Vec<(f64, f64)> = dy
             .to_vec()?
             .iter()
             .map(|v| (v.x as f64, v.y as f64))
