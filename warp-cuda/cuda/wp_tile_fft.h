@@ -41,7 +41,12 @@ struct cx<DVec2> {
 };
 
 /// log2 of a power of two.
-constexpr int log2_pow2(int n) { return n <= 1 ? 0 : 1 + log2_pow2(n / 2); }
+// Device-callable (as wp_tile.h's `tile_slot_end`): NVRTC runs without --expt-relaxed-constexpr.
+WP_FN constexpr int log2_pow2(int n) {
+  int l = 0;
+  for (; n > 1; n /= 2) ++l;
+  return l;
+}
 
 /// The twiddle e^(+2 pi i k / 2^L) in f64 (warp-core's `twiddle64`): the half-angle (c, s) of
 /// 2 pi / 2^j for j = 1..L, then the product over the set bits b of k, ascending, of those of
@@ -111,12 +116,15 @@ WP_FN void transform(const tile_t<C, M, N>& t) {
       }
     }
     __syncthreads();
-    for (int half = 1; half < N; half *= 2) {
-      const int step = N / (2 * half);
+    // Stage s: pairs `half = 2^s` apart; the index arithmetic in shifts and masks (N is a
+    // compile-time power of two, `half` one at run time).
+    for (int s = 0; s < L; ++s) {
+      const int half = 1 << s;
+      const int step = N >> (s + 1);
       for (int q = (int)threadIdx.x; q < M * (N / 2); q += WP_TILE_BLOCK_DIM) {
         const int r = q / (N / 2), b = q % (N / 2);
-        const int g = b / half, p = b % half;
-        const int i0 = r * N + g * 2 * half + p;
+        const int g = b >> s, p = b & (half - 1);
+        const int i0 = r * N + (g << (s + 1)) + p;
         const int i1 = i0 + half;
         const C w = tw[p * step];
         const S wr = w.x;
