@@ -6,6 +6,7 @@
 //! cargo bench --bench gpu            # needs a CUDA device; prints SKIPPED otherwise
 //! cargo bench --bench gpu -- --tile-gemm   # the tile GEMM section alone
 //! cargo bench --bench gpu -- --tile-cholesky   # the batched tile Cholesky section alone
+//! cargo bench --bench gpu -- --tile-fft   # the batched tile FFT section alone
 //! ```
 //!
 //! Workloads (DESIGN.md, "Figures to beat"): the seed particle program (10M x 100 steps),
@@ -18,7 +19,10 @@
 //! why on its row). The batched 32 x 32 Cholesky solve (issue 31: `examples/common/
 //! tile_cholesky.rs`'s kernel, 65,536 systems) is timed against cuSOLVER's batched factor and
 //! solve through PyTorch (`torch.linalg.cholesky`, `torch.cholesky_solve`) and Warp 1.19's
-//! `tile_cholesky`/`tile_cholesky_solve`, by `benches/py/tile_cholesky.py` in the same way.
+//! `tile_cholesky`/`tile_cholesky_solve`, by `benches/py/tile_cholesky.py` in the same way. The
+//! batched 64-point complex FFT in f32 (`examples/common/tile_fft.rs`'s kernel, 1M signals) is
+//! timed against cuFFT through CuPy (`cupy.fft.fft` along the last axis: a batched C2C plan)
+//! and Warp 1.19's `tile_fft`, by `benches/py/tile_fft.py`.
 
 use rand::Rng as _;
 use std::ffi::c_void;
@@ -63,6 +67,10 @@ mod tile_gemm;
 /// The tile Cholesky section's kernel, systems and reference are the tile_cholesky example's.
 #[path = "../examples/common/tile_cholesky.rs"]
 mod tile_cholesky;
+
+/// The tile FFT section's kernel, signals and reference are the tile_fft example's.
+#[path = "../examples/common/tile_fft.rs"]
+mod tile_fft;
 
 #[wp::kernel]
 fn small(a: Array<f32>, b: Array<f32>, s: f32, t: f32, k: i32, c: Array<f32>) {
@@ -985,6 +993,129 @@ fn tile_cholesky_bench(dev: &wp::Device, batch: usize) {
     );
 }
 
+/// Threads per block of the batched FFT (ours and Warp's).
+const FFT_BLOCK_DIM: usize = 64;
+
+/// Batched 64-point complex FFTs in f32, `tile_fft::M` signals a block: ours against cuFFT
+/// (CuPy) and Warp 1.19's `tile_fft`, on the same signals; time per batch, ratios, and on 256
+/// sampled signals the error `max |y - Y| / max |Y|` against a float64 DFT.
+fn tile_fft_bench(dev: &wp::Device, rows: usize) {
+    use tile_fft::{M, N};
+    if rows == 0 || !rows.is_multiple_of(M) {
+        println!("\ntile FFT: {rows} signals is not a positive multiple of {M}: skipped");
+        return;
+    }
+    let x64 = tile_fft::signals(rows, 41);
+    let xh: Vec<Vec2> = x64
+        .iter()
+        .map(|&(a, b)| Vec2::new(a as f32, b as f32))
+        .collect();
+    // The reference transforms the rounded inputs every side is handed.
+    let x64: Vec<(f64, f64)> = xh.iter().map(|v| (v.x as f64, v.y as f64)).collect();
+    let checked = tile_fft::checked_rows(rows, 256);
+    println!(
+        "
+tile FFT: {rows} complex signals of {N} points in f32 (uniform in [-1, 1)^2), {M} a \
+         block of {FFT_BLOCK_DIM} threads; error on {} sampled signals against a float64 DFT: \
+         max |y - Y| / max |Y| (4 eps log2 N = {:.1e}); times: median of {} after a warm-up",
+        checked.len(),
+        4.0 * f32::EPSILON as f64 * N.trailing_zeros() as f64,
+        common::REPS
+    );
+    let dir = std::env::temp_dir().join(format!("warp-lang-tile-fft-{}", std::process::id()));
+    let written = std::fs::create_dir_all(&dir).and_then(|()| {
+        std::fs::write(dir.join("x.c64"), bytemuck::cast_slice(&xh))?;
+        let idx: Vec<i64> = checked.iter().map(|&s| s as i64).collect();
+        std::fs::write(dir.join("idx.i64"), bytemuck::cast_slice(&idx))
+    });
+    let theirs = match written {
+        Ok(()) => common::python_side(
+            "benches/py/tile_fft.py",
+            &[
+                dir.display().to_string(),
+                rows.to_string(),
+                N.to_string(),
+                M.to_string(),
+                FFT_BLOCK_DIM.to_string(),
+            ],
+        ),
+        Err(e) => Err(format!("writing the inputs to {}: {e}", dir.display())),
+    };
+    let _ = std::fs::remove_dir_all(&dir);
+    let side = |key: &str| {
+        theirs
+            .as_ref()
+            .ok()
+            .and_then(|t| common::json_number(t, key))
+    };
+    let why = |key: &str| match &theirs {
+        Ok(t) => t
+            .get(key)
+            .and_then(|v| v.as_str())
+            .unwrap_or("no result")
+            .to_string(),
+        Err(e) => e.clone(),
+    };
+    let row = |what: &str, t: f64, err: f64| {
+        println!(
+            "  {what:<36} {t:9.3} ms {:9.2} M signals/s   error {err:.2e}",
+            rows as f64 / (t * 1e-3) / 1e6
+        );
+    };
+
+    let x = wp::Array::from_slice_shape(&xh, (rows, N), dev).unwrap();
+    let y = wp::Array::<Vec2, 2>::zeros((rows, N), dev).unwrap();
+    let launch = || wp::launch_tiled(tile_fft::fft_rows, rows / M, (&x, &y), FFT_BLOCK_DIM, dev);
+    let t0 = Instant::now();
+    let first = launch().and_then(|()| wp::synchronize());
+    let first_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t_ours = match first.and_then(|()| common::median_ms(launch)) {
+        Ok(t) => t,
+        Err(e) => {
+            println!("  warp-lang tile_fft: {e}");
+            return;
+        }
+    };
+    let ys: Vec<(f64, f64)> = y
+        .to_vec()
+        .unwrap()
+        .iter()
+        .map(|v| (v.x as f64, v.y as f64))
+        .collect();
+    row(
+        "warp-lang tile_fft",
+        t_ours,
+        tile_fft::max_error(&x64, &ys, &checked),
+    );
+    let mut ratios = Vec::new();
+    for (what, key, name) in [
+        ("Warp 1.19 tile_fft", "warp", "Warp"),
+        ("cuFFT batched C2C (CuPy)", "cufft", "cuFFT"),
+    ] {
+        match (side(&format!("{key}_ms")), side(&format!("{key}_err"))) {
+            (Some(t), Some(err)) => {
+                row(what, t, err);
+                ratios.push(format!("ours / {name} {:.2}", t_ours / t));
+            }
+            _ => println!("  {what:<36} not run: {}", why(&format!("{key}_error"))),
+        }
+    }
+    println!(
+        "  time ratios (above 1: ours is slower): {}",
+        if ratios.is_empty() {
+            "none (no other side ran)".to_string()
+        } else {
+            ratios.join(", ")
+        }
+    );
+    println!(
+        "  first launch (compile included): ours {first_ms:.0} ms{}",
+        side("warp_first_ms")
+            .map(|w| format!(", Warp {w:.0} ms (empty kernel cache)"))
+            .unwrap_or_default()
+    );
+}
+
 fn main() {
     if std::env::args().any(|a| a == "--first-launch-child") {
         return first_launch_child();
@@ -1005,6 +1136,11 @@ fn main() {
         let batch = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(1024);
         return tile_cholesky_bench(&wp::get_device("cpu").unwrap(), batch);
     }
+    // `--tile-fft-cpu R`: the tile FFT section with R signals on the CPU (plumbing).
+    if let Some(i) = args.iter().position(|a| a == "--tile-fft-cpu") {
+        let rows = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(4096);
+        return tile_fft_bench(&wp::get_device("cpu").unwrap(), rows);
+    }
     if std::env::args().any(|a| a == "--first-launch-parts") {
         return first_launch_parts_child();
     }
@@ -1024,6 +1160,10 @@ fn main() {
     if std::env::args().any(|a| a == "--tile-cholesky") {
         return tile_cholesky_bench(&dev, 65536);
     }
+    // `--tile-fft`: the batched tile FFT section alone.
+    if std::env::args().any(|a| a == "--tile-fft") {
+        return tile_fft_bench(&dev, 1 << 20);
+    }
     let hand = Hand::new();
     particles(&dev, &hand);
     nbody_bench(&dev, &hand);
@@ -1032,6 +1172,7 @@ fn main() {
     first_launch();
     tile_gemm_bench(&dev, 4096);
     tile_cholesky_bench(&dev, 65536);
+    tile_fft_bench(&dev, 1 << 20);
     println!("\ngenerated source and compile time per kernel (this process):");
     for r in wp::compile_reports() {
         let name = format!("{}{}", r.kernel, if r.adjoint { " (adjoint)" } else { "" });

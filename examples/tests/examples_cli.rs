@@ -325,6 +325,28 @@ fn tile_cholesky_solves_a_small_batch_on_the_cpu() {
     assert!(stdout.contains("converged: yes"), "{stdout}");
 }
 
+/// tile_fft on the CPU, a small batch: its verdict (the error against a float64 DFT within
+/// 4 eps log2 N) is yes, exit status 0.
+#[test]
+fn tile_fft_transforms_a_small_batch_on_the_cpu() {
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("tile_fft", &dir) else {
+        return;
+    };
+    let out = Command::new(&bin)
+        .args(["--device", "cpu", "--rows", "64", "--reps", "1"])
+        .output()
+        .expect("run tile_fft");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "tile_fft: {:?}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("converged: yes"), "{stdout}");
+}
+
 /// tile_matmul on the CPU, small and ragged (70 is not a multiple of the 64-wide tiles): it
 /// runs the tiled and the plain GEMM, prints both rows with their errors and the ratio, and its
 /// verdict (the errors within the FMA bound k u) is yes, exit status 0.

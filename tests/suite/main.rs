@@ -117,6 +117,7 @@ mod scenes;
 mod stability;
 mod streams;
 mod structs;
+mod tile_fft;
 mod tile_grad;
 mod tile_linalg;
 mod tiles;

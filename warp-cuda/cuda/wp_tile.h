@@ -157,23 +157,39 @@ WP_FN T tmax(T a, T b) {
   return a < b ? b : a;
 }
 
+/// The scalar that scales a tile of vectors (`vec_traits<V>::scalar`; no such type for a
+/// scalar element, so the vector overloads below drop out of a scalar tile's overload set).
+template <typename V>
+using vec_scalar_t = typename vec_traits<V>::scalar;
+
 struct add_op {
   template <typename T>
   WP_FN T operator()(T a, T b) const {
     return detail::s_add(a, b);
   }
+  /// Tiles of 2-vectors (complex values): the vector's componentwise `+` (warp-core's glam).
+  /// Plain overloads: they win over the template for vector arguments.
+  WP_FN Vec2 operator()(const Vec2& a, const Vec2& b) const { return a + b; }
+  WP_FN DVec2 operator()(const DVec2& a, const DVec2& b) const { return a + b; }
 };
 struct sub_op {
   template <typename T>
   WP_FN T operator()(T a, T b) const {
     return detail::s_sub(a, b);
   }
+  WP_FN Vec2 operator()(const Vec2& a, const Vec2& b) const { return a - b; }
+  WP_FN DVec2 operator()(const DVec2& a, const DVec2& b) const { return a - b; }
 };
 struct mul_op {
   template <typename T>
   WP_FN T operator()(T a, T b) const {
     return detail::s_mul(a, b);
   }
+  /// A vector scaled by its scalar, on either side (each component one multiply).
+  WP_FN Vec2 operator()(const Vec2& a, f32 s) const { return a * s; }
+  WP_FN Vec2 operator()(f32 s, const Vec2& a) const { return s * a; }
+  WP_FN DVec2 operator()(const DVec2& a, f64 s) const { return a * s; }
+  WP_FN DVec2 operator()(f64 s, const DVec2& a) const { return s * a; }
 };
 /// Float division only (integer tiles have no `/` yet): IEEE, as warp-core's.
 struct div_op {
@@ -334,10 +350,10 @@ WP_FN void tile_fill(const tile_t<T, D...>& out, T v) {
   __syncthreads();
 }
 
-/// `tile_zeros`.
+/// `tile_zeros`: `T{}`, zero for scalars and the zero vector for `Vec2`/`DVec2`.
 template <typename T, int... D>
 WP_FN void tile_zeros(const tile_t<T, D...>& out) {
-  tile_fill(out, (T)0);
+  tile_fill(out, T{});
 }
 
 /// `tile_ones`.
@@ -586,6 +602,21 @@ WP_FN void tile_map(const tile_t<U, D...>& out, const tile_t<T, D...>& a, F f) {
   /* scalar with tile */                                                                      \
   template <typename T, int... D>                                                             \
   WP_FN void NAME(const tile_t<T, D...>& out, typename identity<T>::type s,                   \
+                  const tile_t<T, D...>& b) {                                                 \
+    for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)         \
+      out.data[i] = OP{}(s, b.data[i]);                                                       \
+    __syncthreads();                                                                          \
+  }                                                                                           \
+  /* tile of vectors with their scalar, either side (only `*` is emitted for these) */        \
+  template <typename T, int... D>                                                             \
+  WP_FN void NAME(const tile_t<T, D...>& out, const tile_t<T, D...>& a,                       \
+                  tile_detail::vec_scalar_t<T> s) {                                           \
+    for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)         \
+      out.data[i] = OP{}(a.data[i], s);                                                       \
+    __syncthreads();                                                                          \
+  }                                                                                           \
+  template <typename T, int... D>                                                             \
+  WP_FN void NAME(const tile_t<T, D...>& out, tile_detail::vec_scalar_t<T> s,                 \
                   const tile_t<T, D...>& b) {                                                 \
     for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)         \
       out.data[i] = OP{}(s, b.data[i]);                                                       \

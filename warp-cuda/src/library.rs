@@ -201,6 +201,9 @@ pub static SECTIONS: &[Section] = &[
     kernel!("tile_linalg", None,                                  Yes),
     // The f16 tile matmul on tensor cores (its FMA fallback bit-exact with the CPU).
     kernel!("tile_mma",  None,                                    Yes),
+    // The tile FFTs: exact, so that they match warp-core's tile::fft bit for bit (its order of
+    // roundings; tests/cuda_tile_fft_host.rs).
+    kernel!("tile_fft",  None,                                    Yes),
     // Compiled on their own: name, the define of a host object's build library.
     standalone!("bvh_build",      Some("WP_BVH_BUILD")),
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),

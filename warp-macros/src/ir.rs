@@ -85,6 +85,8 @@ pub struct ShapeObligation {
     pub msg: String,
     /// `lhs` may also be 1 (a broadcast's source dim).
     pub or_one: bool,
+    /// `lhs` must be a power of two (`tile_fft`'s length; `rhs` is not read).
+    pub pow2: bool,
 }
 
 /// What makes a kernel tiled.

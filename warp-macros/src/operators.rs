@@ -162,6 +162,14 @@ fn tile_binary(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
         return bad();
     }
     match (l, r) {
+        // Tiles of 2-vectors add and subtract; their other operations would be componentwise,
+        // which for complex values is not what `*` and `/` mean.
+        (Tile(a, _), Tile(..)) if a.is_vec2_float() && !matches!(op, BinOp::Add | BinOp::Sub) => {
+            Err(format!(
+                "cannot apply `{}` to tiles of `{a}`: tiles of vectors add, subtract and scale by a scalar",
+                op.symbol()
+            ))
+        }
         (Tile(a, da), Tile(b, db)) if a == b => {
             let differ =
                 da.len() != db.len() || da.iter().zip(db).any(|(x, y)| x.same(y) == Some(false));
@@ -176,6 +184,12 @@ fn tile_binary(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
         }
         (Tile(a, _), s @ Scalar(_)) if **a == *s => Ok(l.clone()),
         (s @ Scalar(_), Tile(b, _)) if **b == *s && op != BinOp::Div => Ok(r.clone()),
+        // Tiles of 2-vectors (complex values): scaled by their scalar, on either side.
+        (Tile(a, _), Scalar(s)) | (Scalar(s), Tile(a, _))
+            if op == BinOp::Mul && matches!(**a, Vector(v, 2) if v == *s) =>
+        {
+            Ok(if l.is_tile() { l.clone() } else { r.clone() })
+        }
         _ => bad(),
     }
 }

@@ -412,6 +412,22 @@ impl Ty {
         matches!(self, Ty::Deferred)
     }
 
+    /// Whether this is a tile element: an integer or float scalar, or a 2-vector of floats
+    /// (`Vec2`, `DVec2`: the complex values of `tile_fft`).
+    pub fn is_tile_elem(&self) -> bool {
+        matches!(self, Ty::Scalar(s) if *s != Scalar::Bool) || self.is_vec2_float()
+    }
+
+    /// `Vec2` or `DVec2`.
+    pub fn is_vec2_float(&self) -> bool {
+        matches!(self, Ty::Vector(Scalar::F32 | Scalar::F64, 2))
+    }
+
+    /// A tile of `Vec2` or `DVec2` elements.
+    pub fn is_vector_tile(&self) -> bool {
+        matches!(self, Ty::Tile(e, _) if e.is_vec2_float())
+    }
+
     pub fn is_tile(&self) -> bool {
         matches!(self, Ty::Tile(..))
     }

@@ -182,7 +182,7 @@ pub fn matmul<T: MatmulElem, const M: usize, const K: usize, const N: usize>(
     a: &Tile2<T, M, K>,
     b: &Tile2<T, K, N>,
 ) -> Tile2<T, M, N> {
-    let mut c = Tile2::<T::Acc, M, N>::zeros();
+    let mut c = Tile2::<T::Acc, M, N>::splat(<T::Acc as Scalar>::ZERO);
     matmul_acc(a, b, &mut c);
     Tile2 {
         data: c.data.map(|row| row.map(T::narrow)),

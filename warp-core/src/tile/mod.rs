@@ -14,11 +14,13 @@
 //! Files by concept: this module holds the types, their constructors and element access;
 //! [`ops`] the elementwise operators and `map`; [`load`] loads and stores against array views;
 //! [`reduce`](mod@reduce) the reductions in the GPU's order; [`matmul`](mod@matmul) the FMA
-//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order. The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
+//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order; [`fft`](mod@fft) the FFTs of tiles of complex values (`Vec2`, `DVec2`). The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
 //!
 //! Nothing here allocates or panics on a kernel's data: an index outside a tile is a
 //! [`FaultKind::TileIndex`] fault, and an array coordinate outside the array is a zero read or
 //! a skipped store (Warp's `bounds_check=True`, extended to negative coordinates).
+
+use bytemuck::Zeroable;
 
 use crate::builtins::Scalar;
 use crate::fault::{Fault, FaultKind, KResult};
@@ -27,6 +29,7 @@ use crate::ops::FromLiteral;
 
 pub mod adjoint;
 pub mod atomic;
+pub mod fft;
 pub mod linalg;
 pub mod load;
 pub mod matmul;
@@ -36,6 +39,7 @@ pub mod scan;
 pub mod shape;
 
 pub use atomic::{atomic_add1, atomic_add2};
+pub use fft::{fft, ifft};
 pub use linalg::{
     cholesky, cholesky_solve1, cholesky_solve2, lower_solve1, lower_solve2, upper_solve1,
     upper_solve2,
@@ -151,13 +155,16 @@ impl<T: Copy, const N0: usize> Tile1<T, N0> {
     }
 }
 
-impl<T: Scalar, const N0: usize> Tile1<T, N0> {
-    /// The tile of zeros (`tile_zeros`).
+impl<T: Copy + Zeroable, const N0: usize> Tile1<T, N0> {
+    /// The tile of zeros (`tile_zeros`): every element all bits zero, which is `0` for the
+    /// scalars and the zero vector for the vector elements (`Vec2`, `DVec2`).
     #[inline(always)]
     pub fn zeros() -> Self {
-        Self::splat(T::ZERO)
+        Self::splat(T::zeroed())
     }
+}
 
+impl<T: Scalar, const N0: usize> Tile1<T, N0> {
     /// The tile of ones (`tile_ones`).
     #[inline(always)]
     pub fn ones() -> Self {
@@ -205,13 +212,16 @@ impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
     }
 }
 
-impl<T: Scalar, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
-    /// The tile of zeros (`tile_zeros`).
+impl<T: Copy + Zeroable, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
+    /// The tile of zeros (`tile_zeros`): every element all bits zero, which is `0` for the
+    /// scalars and the zero vector for the vector elements (`Vec2`, `DVec2`).
     #[inline(always)]
     pub fn zeros() -> Self {
-        Self::splat(T::ZERO)
+        Self::splat(T::zeroed())
     }
+}
 
+impl<T: Scalar, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
     /// The tile of ones (`tile_ones`).
     #[inline(always)]
     pub fn ones() -> Self {

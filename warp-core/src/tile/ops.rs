@@ -160,6 +160,47 @@ macro_rules! tile_operators {
 tile_operators!(Tile1<N0>);
 tile_operators!(Tile2<N0, N1>);
 
+/// Tiles of 2-vectors (`Vec2`, `DVec2`: the complex values of `tile_fft`): `+` and `-` between
+/// tiles, `*` by the vector's scalar on either side. Each is glam's componentwise operator (one
+/// IEEE operation per component, as CUDA's `operator+` of `wp::Vec2`).
+macro_rules! vector_tile_operators {
+    ($tile:ident < $($n:ident),+ >, $v:ty, $s:ty) => {
+        impl<$(const $n: usize),+> Add for $tile<$v, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn add(self, o: Self) -> Self {
+                self.map2(&o, |a, b| a + b)
+            }
+        }
+        impl<$(const $n: usize),+> Sub for $tile<$v, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn sub(self, o: Self) -> Self {
+                self.map2(&o, |a, b| a - b)
+            }
+        }
+        impl<$(const $n: usize),+> Mul<$s> for $tile<$v, $($n),+> {
+            type Output = Self;
+            #[inline(always)]
+            fn mul(self, s: $s) -> Self {
+                self.map(|a| a * s)
+            }
+        }
+        impl<$(const $n: usize),+> Mul<$tile<$v, $($n),+>> for $s {
+            type Output = $tile<$v, $($n),+>;
+            #[inline(always)]
+            fn mul(self, t: $tile<$v, $($n),+>) -> Self::Output {
+                t.map(|a| self * a)
+            }
+        }
+    };
+}
+
+vector_tile_operators!(Tile1<N0>, glam::Vec2, f32);
+vector_tile_operators!(Tile1<N0>, glam::DVec2, f64);
+vector_tile_operators!(Tile2<N0, N1>, glam::Vec2, f32);
+vector_tile_operators!(Tile2<N0, N1>, glam::DVec2, f64);
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,6 +259,24 @@ mod tests {
         assert_eq!((-i).data, [[i32::MIN, 0, 7]]);
         let u = Tile1::<u8, 2> { data: [1, 0] };
         assert_eq!((-u).data, [255, 0]);
+    }
+
+    #[test]
+    fn vector_tiles() {
+        use glam::{DVec2, Vec2};
+        let a = Tile2::<Vec2, 1, 2> {
+            data: [[Vec2::new(1.0, 2.0), Vec2::new(-3.0, 0.5)]],
+        };
+        let z = Tile2::<Vec2, 1, 2>::zeros();
+        assert_eq!(z.data, [[Vec2::ZERO; 2]]);
+        assert_eq!((a + a).data, (a * 2.0).data);
+        assert_eq!((2.0 * a).data, (a * 2.0).data);
+        assert_eq!((a - a).data, z.data);
+        let d = Tile1::<DVec2, 2> {
+            data: [DVec2::new(1.0, -1.0), DVec2::ZERO],
+        };
+        assert_eq!((d * 0.5).data, [DVec2::new(0.5, -0.5), DVec2::ZERO]);
+        assert_eq!((d + d - d).data, d.data);
     }
 
     #[test]

@@ -155,6 +155,11 @@ impl Emitter<'_> {
                         e.section("tile_linalg");
                         format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1])
                     }
+                    "tile_fft" | "tile_ifft" => {
+                        // In place: the statement's destination is its argument's slot.
+                        e.section("tile_fft");
+                        format!("wp::{}({d});", builtin.name)
+                    }
                     other => return Err(format!("`{other}` has no CUDA form yet")),
                 }
             }

@@ -78,6 +78,12 @@ impl RustEmitter<'_> {
                 let (m, y) = (&v[0], &v[1]);
                 quote_spanned!(sp=> __wp::tile::#f(&#m, &#y))
             }
+            "tile_fft" | "tile_ifft" => {
+                // `t = fft(&t)`: the statement assigns the tile its transform.
+                let f = format_ident!("{}", &b.name[5..]);
+                let x = &v[0];
+                quote_spanned!(sp=> __wp::tile::#f(&#x))
+            }
             "tile_transpose" => {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::transpose(&#x))

@@ -80,7 +80,11 @@ pub(super) fn shape_checks(f: &Function) -> TokenStream {
             let (l, r) = (o.lhs.rust_tokens(), o.rhs.rust_tokens());
             // `assert!`'s message is a format string.
             let msg = o.msg.replace('{', "{{").replace('}', "}}");
-            if o.or_one {
+            if o.pow2 {
+                quote::quote_spanned! {o.span=>
+                    const _: () = ::core::assert!((#l).is_power_of_two(), #msg);
+                }
+            } else if o.or_one {
                 quote::quote_spanned! {o.span=>
                     const _: () = ::core::assert!(#l == #r || #l == 1, #msg);
                 }

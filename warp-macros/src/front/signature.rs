@@ -158,7 +158,7 @@ fn parse_elem_object(row: &ObjectRow, seg: &syn::PathSegment, whole: &Type) -> s
     }
 }
 
-/// `Tile<T, D0>` or `Tile<T, D0, D1>`: a scalar element and one or two dims, each a literal or a
+/// `Tile<T, D0>` or `Tile<T, D0, D1>`: a scalar (or `Vec2`/`DVec2`) element and one or two dims, each a literal or a
 /// module const ([`dim_of`]).
 fn parse_tile(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     let PathArguments::AngleBracketed(args) = &seg.arguments else {
@@ -177,10 +177,10 @@ fn parse_tile(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
             ))
         }
     };
-    if !matches!(elem, Ty::Scalar(s) if s != Scalar::Bool) {
+    if !elem.is_tile_elem() {
         return Err(syn::Error::new(
             whole.span(),
-            format!("tiles hold integer or float scalars, not `{elem}`"),
+            format!("tiles hold integer or float scalars, or `Vec2`/`DVec2` (complex values), not `{elem}`"),
         ));
     }
     let dims = it.map(dim_of).collect::<syn::Result<Vec<_>>>()?;

@@ -19,6 +19,9 @@ const TILE_ATOMIC: &[Class] = &[AtomicScalar];
 /// later).
 const TILE_MATMUL: &[Class] = &[Float];
 
+/// The FFTs' elements: `Vec2`, `DVec2` (complex values; the class says float vectors).
+const TILE_FFT: &[Class] = &[FloatVector];
+
 /// Warp's tile builtins that this slice has.
 pub(super) const ROWS: &[Builtin] = rows! {
     // Construction. The shape (Warp's `shape=`) and element (`dtype=`) are the turbofish's
@@ -28,7 +31,8 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "tile_ones": TILE_ELEM, (TileShape) -> Tile, "tile", Zero, cooperative;
     "tile_arange": TILE_ELEM, (T, T, T) -> Tile, "tile", Zero, cooperative;
     // Loads and stores: out-of-bounds elements read zero and are not written; offsets are
-    // signed, and negative coordinates are out of bounds too.
+    // signed, and negative coordinates are out of bounds too. Tiles hold `Vec2`/`DVec2` too
+    // (complex values): loads, stores, `t[i, j]`, `tile_zeros`, `+ -`, `*` by a scalar.
     "tile_load": TILE_ELEM, (ArrayOfT, TileShape, Offsets) -> Tile, "tile", Adjoint,
         no_tangent, cooperative;
     "tile_store": TILE_ELEM, (ArrayOfT, Tile, Offsets) -> Unit, "tile", Adjoint,
@@ -90,4 +94,11 @@ pub(super) const ROWS: &[Builtin] = rows! {
         cooperative;
     "tile_upper_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
         cooperative;
+    // FFTs: `tile_fft(&mut t)`, `tile_ifft(&mut t)` transform each row of a
+    // `Tile<Vec2 | DVec2, M, N>` (complex values, `x` the real part) in place along the last
+    // axis, `N` a power of two; the inverse is unnormalised, as Warp's (`ifft(fft(x)) = N x`).
+    // A radix-2 FFT in the order warp-core's `tile::fft` documents, which the CUDA section
+    // `tile_fft` shares bit for bit.
+    "tile_fft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
+    "tile_ifft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
 };

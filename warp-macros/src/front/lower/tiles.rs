@@ -50,6 +50,7 @@ impl Lowerer {
                     rhs: y.clone(),
                     msg: msg.clone(),
                     or_one: false,
+                    pow2: false,
                 });
             }
         }
@@ -189,7 +190,7 @@ impl Lowerer {
                 let [t] = args[..] else {
                     return err(span, "`untile(t)` takes one tile");
                 };
-                let t = self.tile_arg(name, t)?;
+                let t = self.scalar_tile_arg(name, t)?;
                 let ty = self.ty(t);
                 let (e, d) = tile_parts(&ty).expect("a tile");
                 if d.len() != 1 {
@@ -212,7 +213,7 @@ impl Lowerer {
                 let [t] = args[..] else {
                     return err(span, format!("`{name}` takes one tile"));
                 };
-                let t = self.tile_arg(name, t)?;
+                let t = self.scalar_tile_arg(name, t)?;
                 let ty = self.ty(t);
                 let (e, _) = tile_parts(&ty).expect("a tile");
                 let e = if name.starts_with("tile_arg") {
@@ -236,7 +237,7 @@ impl Lowerer {
                 let [t] = args[..] else {
                     return err(span, format!("`{name}` takes one tile"));
                 };
-                let t = self.tile_arg(name, t)?;
+                let t = self.scalar_tile_arg(name, t)?;
                 let ty = self.ty(t);
                 if !matches!(&ty, Ty::Tile(_, d) if d.len() == 1) {
                     return err(
@@ -263,6 +264,7 @@ impl Lowerer {
             "tile_cholesky" | "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
                 self.tile_linalg(row, &args, span)?
             }
+            "tile_fft" | "tile_ifft" => self.tile_fft(row, &args, span)?,
             "tile_extract" => {
                 return err(
                     span,
@@ -305,6 +307,17 @@ impl Lowerer {
                     }
                     elem = Some(Ty::Scalar(s));
                     it.next();
+                } else if let Some(v) = Ty::from_glam_name(&id.to_string()) {
+                    if !v.is_vec2_float() {
+                        return err(
+                            tp.span(),
+                            format!(
+                                "tiles hold integer or float scalars, or `Vec2`/`DVec2`, not `{v}`"
+                            ),
+                        );
+                    }
+                    elem = Some(v);
+                    it.next();
                 }
             }
         }
@@ -340,6 +353,20 @@ impl Lowerer {
                 format!("`{name}` needs its element and shape: `{name}::<f32, 16, 8>()`, or `let t: Tile<f32, 16, 8> = {name}();`"),
             ),
         }
+    }
+
+    /// An argument that must be a tile of scalars: the operations that combine elements other
+    /// than by `+`, `-` and scaling (reductions, scans, maps, products) refuse tiles of vectors.
+    fn scalar_tile_arg(&mut self, name: &str, e: &Expr) -> R<VarId> {
+        let v = self.tile_arg(name, e)?;
+        let t = self.ty(v);
+        if t.is_vector_tile() {
+            return err(
+                e.span(),
+                format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[i, j]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`"),
+            );
+        }
+        Ok(v)
     }
 
     /// An argument that must be a tile.
@@ -407,12 +434,10 @@ impl Lowerer {
     fn tile_array(&mut self, name: &str, e: &Expr) -> R<(VarId, Ty, u8)> {
         let a = self.expr(e, None)?;
         match self.ty(a) {
-            Ty::Array(elem, n) if n <= 2 && matches!(*elem, Ty::Scalar(s) if s != Scalar::Bool) => {
-                Ok((a, *elem, n))
-            }
+            Ty::Array(elem, n) if n <= 2 && elem.is_tile_elem() => Ok((a, *elem, n)),
             Ty::Array(elem, n) if n <= 2 => err(
                 e.span(),
-                format!("`{name}`: tiles hold integer or float scalars, and this array holds `{elem}`"),
+                format!("`{name}`: tiles hold integer or float scalars, or `Vec2`/`DVec2`, and this array holds `{elem}`"),
             ),
             Ty::Array(_, n) => err(
                 e.span(),
@@ -720,7 +745,7 @@ impl Lowerer {
         let mut shape: Option<Vec<Dim>> = None;
         let mut elems = Vec::new();
         for a in &args[1..] {
-            let v = self.tile_arg("tile_map", a)?;
+            let v = self.scalar_tile_arg("tile_map", a)?;
             let t = self.ty(v);
             let (e, d) = tile_parts(&t).expect("a tile");
             let d = d.to_vec();
@@ -753,7 +778,7 @@ impl Lowerer {
             );
         };
         let f = self.tile_fn("tile_reduce", f, 2)?;
-        let v = self.tile_arg("tile_reduce", t)?;
+        let v = self.scalar_tile_arg("tile_reduce", t)?;
         let tt = self.ty(v);
         let e = tile_parts(&tt).expect("a tile").0.clone();
         let r = self.tile_fn_result("tile_reduce", f, &[e.clone(), e.clone()], args[0].span())?;
@@ -866,6 +891,7 @@ impl Lowerer {
                     rhs: t.clone(),
                     msg: msg.clone(),
                     or_one: true,
+                    pow2: false,
                 }),
             }
         }
@@ -997,6 +1023,73 @@ impl Lowerer {
         );
         // The call is a statement; as a value it is the accumulator.
         Ok(c)
+    }
+
+    /// `tile_fft(&mut t)`, `tile_ifft(&mut t)`: `t = tile_fft(t)`, an assignment of `t`, which
+    /// must be a `Tile<Vec2 | DVec2, M, N>` whose `N` is a power of two.
+    fn tile_fft(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        let name = row.name;
+        let usage = format!("`{name}` transforms a tile variable in place: `{name}(&mut t)`");
+        let [arg] = args[..] else {
+            return err(span, usage);
+        };
+        let target = match strip(arg) {
+            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
+                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
+                _ => None,
+            },
+            _ => None,
+        };
+        let Some(tname) = target else {
+            return err(arg.span(), usage);
+        };
+        let Some(t) = self.lookup(&tname) else {
+            return err(arg.span(), format!("cannot find `{tname}`"));
+        };
+        let tt = self.ty(t);
+        let ok = match tile_parts(&tt) {
+            Some((e, d)) => e.is_vec2_float() && d.len() == 2,
+            None => false,
+        };
+        if !ok {
+            return err(
+                arg.span(),
+                format!("`{name}` transforms 2-D tiles of complex values, `Tile<Vec2, M, N>` or `Tile<DVec2, M, N>` (each row along the last axis), found `{tt}`"),
+            );
+        }
+        let n = tile_parts(&tt).expect("a tile").1[1].clone();
+        let msg = format!("`{name}`: the transform's length, the last dim of `{tt}`, must be a power of two (radix-2)");
+        match &n {
+            Dim::Lit(v) if !v.is_power_of_two() => return err(arg.span(), msg),
+            Dim::Lit(_) => {}
+            Dim::Const(_) => self.obligations.push(ShapeObligation {
+                span: arg.span(),
+                lhs: n.clone(),
+                rhs: n.clone(),
+                msg,
+                or_one: false,
+                pow2: true,
+            }),
+        }
+        if !self.vars[t].mutable {
+            return err(
+                arg.span(),
+                format!("`{tname}` is not mutable: declare it `let mut {tname}`"),
+            );
+        }
+        self.push(
+            StmtKind::Assign {
+                dst: t,
+                op: Op::Builtin {
+                    builtin: row,
+                    args: vec![t],
+                },
+                define: false,
+            },
+            span,
+        );
+        // The call is a statement; as a value it is the tile.
+        Ok(t)
     }
 
     /// `t[i]`, `t[i, j]`: an element of a tile (a read by each thread; an index outside the

@@ -70,7 +70,8 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
             Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => {
                 Some(Ty::Scalar(*s))
             }
-            Ty::Tile(e, _) => Some((**e).clone()),
+            // A tile of vectors is scaled by their scalar.
+            Ty::Tile(e, _) => literal_hint(e, op),
             Ty::Deferred => Some(Ty::Deferred),
             _ => None,
         },
