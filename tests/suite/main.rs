@@ -119,6 +119,7 @@ mod streams;
 mod structs;
 mod tile_grad;
 mod tile_linalg;
+mod tile_sort;
 mod tiles;
 mod tiles_f16;
 mod transforms;

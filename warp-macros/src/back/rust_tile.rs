@@ -68,6 +68,12 @@ impl RustEmitter<'_> {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
             }
+            // `p = tile_sort(keys)`, then `x = tile_sort(x, p)` (the row's comment).
+            "tile_sort" => match &v[..] {
+                [k] => quote_spanned!(sp=> __wp::tile::sort_perm(&#k)),
+                [x, p] => quote_spanned!(sp=> __wp::tile::permute(&#x, &#p)),
+                _ => unreachable!("tile_sort's statements have one or two operands"),
+            },
             "tile_cholesky" => {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::cholesky(&#x))

@@ -260,6 +260,7 @@ impl Lowerer {
             "tile_atomic_add" => self.tile_atomic_add(row, &args, span)?,
             "tile_matmul" => self.tile_matmul(row, &args, span)?,
             "tile_matmul_acc" => self.tile_matmul_acc(row, &args, span)?,
+            "tile_sort" => self.tile_sort(row, &args, span)?,
             "tile_cholesky" | "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
                 self.tile_linalg(row, &args, span)?
             }
@@ -942,22 +943,10 @@ impl Lowerer {
     /// `tile_matmul(a, b, &mut c)`: `c = c + a b`, an assignment of `c`.
     fn tile_matmul_acc(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
         let (a, b, e, m, n) = self.matmul_operands(args)?;
-        let target = match strip(args[2]) {
-            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
-                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
-                _ => None,
-            },
-            _ => None,
-        };
-        let Some(cname) = target else {
-            return err(
-                args[2].span(),
-                "`tile_matmul` accumulates into a tile variable passed as `&mut c`",
-            );
-        };
-        let Some(c) = self.lookup(&cname) else {
-            return err(args[2].span(), format!("cannot find `{cname}`"));
-        };
+        let (c, cname) = self.mut_target(
+            args[2],
+            "`tile_matmul` accumulates into a tile variable passed as `&mut c`",
+        )?;
         let ct = self.ty(c);
         // The accumulator's element: f16 products accumulate in f32 (rounding an f16
         // accumulator at every step of a k-loop would lose the sum's low bits), the others in
@@ -978,12 +967,7 @@ impl Lowerer {
             }
             _ => return err(args[2].span(), msg),
         }
-        if !self.vars[c].mutable {
-            return err(
-                args[2].span(),
-                format!("`{cname}` is not mutable: declare it `let mut {cname}`"),
-            );
-        }
+        self.require_mutable(c, &cname, args[2])?;
         self.push(
             StmtKind::Assign {
                 dst: c,
@@ -997,6 +981,108 @@ impl Lowerer {
         );
         // The call is a statement; as a value it is the accumulator.
         Ok(c)
+    }
+
+    /// A variable passed as `&mut x` (`what` says how otherwise): its id and name.
+    fn mut_target(&mut self, e: &Expr, what: &str) -> R<(VarId, String)> {
+        let target = match strip(e) {
+            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
+                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
+                _ => None,
+            },
+            _ => None,
+        };
+        let Some(name) = target else {
+            return err(e.span(), what);
+        };
+        let Some(v) = self.lookup(&name) else {
+            return err(e.span(), format!("cannot find `{name}`"));
+        };
+        Ok((v, name))
+    }
+
+    fn require_mutable(&self, v: VarId, name: &str, e: &Expr) -> R<()> {
+        if !self.vars[v].mutable {
+            return err(
+                e.span(),
+                format!("`{name}` is not mutable: declare it `let mut {name}`"),
+            );
+        }
+        Ok(())
+    }
+
+    /// `tile_sort(&mut keys, &mut values)`: both sorted in place by the keys (the row's comment
+    /// says how it lowers). As a value the call is the keys, as the accumulating matmul's is
+    /// its accumulator.
+    fn tile_sort(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
+        let [ke, ve] = args[..] else {
+            return err(
+                span,
+                "`tile_sort` sorts a key tile and a value tile in place: `tile_sort(&mut keys, &mut values)`",
+            );
+        };
+        let (k, kname) = self.mut_target(
+            ke,
+            "`tile_sort` sorts tile variables in place, passed as `&mut keys`",
+        )?;
+        let (v, vname) = self.mut_target(
+            ve,
+            "`tile_sort` sorts tile variables in place, passed as `&mut values`",
+        )?;
+        let (kt, vt) = (self.ty(k), self.ty(v));
+        let (Some((kel, kd)), Some((_, vd))) = (tile_parts(&kt), tile_parts(&vt)) else {
+            let (bad, e) = if kt.is_tile() { (&vt, ve) } else { (&kt, ke) };
+            return err(e.span(), format!("`tile_sort` sorts tiles, found `{bad}`"));
+        };
+        let (kel, kd, vd) = (kel.clone(), kd.to_vec(), vd.to_vec());
+        if kd.len() != 1 || vd.len() != 1 {
+            let (bad, e) = if kd.len() != 1 { (&kt, ke) } else { (&vt, ve) };
+            return err(
+                e.span(),
+                format!("`tile_sort` sorts one-dimensional tiles, found `{bad}`"),
+            );
+        }
+        if !row.classes.iter().any(|c| c.admits(&kel)) {
+            return err(
+                ke.span(),
+                format!("`tile_sort` sorts keys of i32, u32, i64, u64, f32 or f64, not `{kel}`"),
+            );
+        }
+        if k == v {
+            return err(
+                ve.span(),
+                format!("`tile_sort` takes two different tiles, found `{kname}` twice"),
+            );
+        }
+        let msg = format!(
+            "`tile_sort`: the keys `{kname}` are a `{kt}` and the values `{vname}` a `{vt}`: their lengths differ"
+        );
+        self.same_shapes(&kd, &vd, ve.span(), msg)?;
+        self.require_mutable(k, &kname, ke)?;
+        self.require_mutable(v, &vname, ve)?;
+        let p = self.def(
+            Op::Builtin {
+                builtin: row,
+                args: vec![k],
+            },
+            Ty::Tile(Box::new(crate::types::I32), kd),
+            span,
+        );
+        // Both permutations read `p`, not the keys, so their order does not matter.
+        for dst in [v, k] {
+            self.push(
+                StmtKind::Assign {
+                    dst,
+                    op: Op::Builtin {
+                        builtin: row,
+                        args: vec![dst, p],
+                    },
+                    define: false,
+                },
+                span,
+            );
+        }
+        Ok(k)
     }
 
     /// `t[i]`, `t[i, j]`: an element of a tile (a read by each thread; an index outside the
