@@ -117,6 +117,7 @@ mod scenes;
 mod stability;
 mod streams;
 mod structs;
+mod tile_convert;
 mod tile_grad;
 mod tile_linalg;
 mod tile_sort;

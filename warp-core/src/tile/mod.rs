@@ -14,7 +14,7 @@
 //! Files by concept: this module holds the types, their constructors and element access;
 //! [`ops`] the elementwise operators and `map`; [`load`] loads and stores against array views;
 //! [`reduce`](mod@reduce) the reductions in the GPU's order; [`matmul`](mod@matmul) the FMA
-//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`sort`](mod@sort) the sort's permutation; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order. The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
+//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`sort`](mod@sort) the sort's permutation; [`convert`] reshapes and `tile_diag_add`; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order. The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
 //!
 //! Nothing here allocates or panics on a kernel's data: an index outside a tile is a
 //! [`FaultKind::TileIndex`] fault, and an array coordinate outside the array is a zero read or
@@ -27,6 +27,7 @@ use crate::ops::FromLiteral;
 
 pub mod adjoint;
 pub mod atomic;
+pub mod convert;
 pub mod linalg;
 pub mod load;
 pub mod matmul;
@@ -37,6 +38,7 @@ pub mod shape;
 pub mod sort;
 
 pub use atomic::{atomic_add1, atomic_add2};
+pub use convert::{diag_add, reshape11, reshape12, reshape21, reshape22};
 pub use linalg::{
     cholesky, cholesky_solve1, cholesky_solve2, lower_solve1, lower_solve2, upper_solve1,
     upper_solve2,

@@ -159,6 +159,10 @@ impl Emitter<'_> {
                             }
                         }
                     }
+                    "tile_full" => format!("wp::tile_full({d}, {});", a[0]),
+                    "tile_astype" => format!("wp::tile_astype({d}, {});", a[0]),
+                    "tile_reshape" | "tile_squeeze" => format!("wp::tile_reshape({d}, {});", a[0]),
+                    "tile_diag_add" => format!("wp::tile_diag_add({d}, {}, {});", a[0], a[1]),
                     "tile_cholesky" => {
                         e.section("tile_linalg");
                         format!("wp::tile_cholesky({d}, {});", a[0])

@@ -98,4 +98,16 @@ pub(super) const ROWS: &[Builtin] = rows! {
         cooperative;
     "tile_upper_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
         cooperative;
+    // Conversions (warp-core's `tile::convert`). `tile_full::<f32, 16, 8>(x)` (shape and element
+    // as `tile_zeros`'s, or the annotation's): every element `x`. `tile_astype::<U>(t)`: each
+    // element `as U`. `tile_reshape::<M, N>(t)` (or the annotation's shape): the elements in
+    // row-major order, the size unchanged; `tile_squeeze(t)` drops the dims that are the
+    // literal 1 (all of them: a `Tile<T, 1>`). `tile_diag_add(a, d)`: a square tile with `d`
+    // added to its diagonal. Backward through them: refused by name for now.
+    "tile_full": TILE_ELEM, (T, TileShape) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_astype": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_reshape": TILE_ELEM, (Tile, TileShape) -> Tile, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_squeeze": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_diag_add": TILE_ELEM, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
 };

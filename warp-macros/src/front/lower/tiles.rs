@@ -12,6 +12,8 @@ use super::*;
 use crate::front::signature::{dim_of, dim_of_path, tile_rank};
 use crate::types::Dim;
 
+#[path = "tiles_convert.rs"]
+mod convert;
 #[path = "tiles_linalg.rs"]
 mod linalg;
 
@@ -261,6 +263,12 @@ impl Lowerer {
             "tile_matmul" => self.tile_matmul(row, &args, span)?,
             "tile_matmul_acc" => self.tile_matmul_acc(row, &args, span)?,
             "tile_sort" => self.tile_sort(row, &args, span)?,
+            "tile_full" => self.tile_full(row, &args, fish_elem, fish_dims, want_tile, span)?,
+            "tile_astype" => self.tile_astype(row, &args, fish_elem, fish_dims, want_tile, span)?,
+            "tile_reshape" | "tile_squeeze" => {
+                self.tile_reshape(row, &args, fish_dims, want_tile, span)?
+            }
+            "tile_diag_add" => self.tile_diag_add(row, &args, span)?,
             "tile_cholesky" | "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
                 self.tile_linalg(row, &args, span)?
             }
@@ -984,7 +992,7 @@ impl Lowerer {
     }
 
     /// A variable passed as `&mut x` (`what` says how otherwise): its id and name.
-    fn mut_target(&mut self, e: &Expr, what: &str) -> R<(VarId, String)> {
+    pub(super) fn mut_target(&mut self, e: &Expr, what: &str) -> R<(VarId, String)> {
         let target = match strip(e) {
             Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
                 Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
@@ -1001,7 +1009,7 @@ impl Lowerer {
         Ok((v, name))
     }
 
-    fn require_mutable(&self, v: VarId, name: &str, e: &Expr) -> R<()> {
+    pub(super) fn require_mutable(&self, v: VarId, name: &str, e: &Expr) -> R<()> {
         if !self.vars[v].mutable {
             return err(
                 e.span(),
@@ -1009,80 +1017,6 @@ impl Lowerer {
             );
         }
         Ok(())
-    }
-
-    /// `tile_sort(&mut keys, &mut values)`: both sorted in place by the keys (the row's comment
-    /// says how it lowers). As a value the call is the keys, as the accumulating matmul's is
-    /// its accumulator.
-    fn tile_sort(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
-        let [ke, ve] = args[..] else {
-            return err(
-                span,
-                "`tile_sort` sorts a key tile and a value tile in place: `tile_sort(&mut keys, &mut values)`",
-            );
-        };
-        let (k, kname) = self.mut_target(
-            ke,
-            "`tile_sort` sorts tile variables in place, passed as `&mut keys`",
-        )?;
-        let (v, vname) = self.mut_target(
-            ve,
-            "`tile_sort` sorts tile variables in place, passed as `&mut values`",
-        )?;
-        let (kt, vt) = (self.ty(k), self.ty(v));
-        let (Some((kel, kd)), Some((_, vd))) = (tile_parts(&kt), tile_parts(&vt)) else {
-            let (bad, e) = if kt.is_tile() { (&vt, ve) } else { (&kt, ke) };
-            return err(e.span(), format!("`tile_sort` sorts tiles, found `{bad}`"));
-        };
-        let (kel, kd, vd) = (kel.clone(), kd.to_vec(), vd.to_vec());
-        if kd.len() != 1 || vd.len() != 1 {
-            let (bad, e) = if kd.len() != 1 { (&kt, ke) } else { (&vt, ve) };
-            return err(
-                e.span(),
-                format!("`tile_sort` sorts one-dimensional tiles, found `{bad}`"),
-            );
-        }
-        if !row.classes.iter().any(|c| c.admits(&kel)) {
-            return err(
-                ke.span(),
-                format!("`tile_sort` sorts keys of i32, u32, i64, u64, f32 or f64, not `{kel}`"),
-            );
-        }
-        if k == v {
-            return err(
-                ve.span(),
-                format!("`tile_sort` takes two different tiles, found `{kname}` twice"),
-            );
-        }
-        let msg = format!(
-            "`tile_sort`: the keys `{kname}` are a `{kt}` and the values `{vname}` a `{vt}`: their lengths differ"
-        );
-        self.same_shapes(&kd, &vd, ve.span(), msg)?;
-        self.require_mutable(k, &kname, ke)?;
-        self.require_mutable(v, &vname, ve)?;
-        let p = self.def(
-            Op::Builtin {
-                builtin: row,
-                args: vec![k],
-            },
-            Ty::Tile(Box::new(crate::types::I32), kd),
-            span,
-        );
-        // Both permutations read `p`, not the keys, so their order does not matter.
-        for dst in [v, k] {
-            self.push(
-                StmtKind::Assign {
-                    dst,
-                    op: Op::Builtin {
-                        builtin: row,
-                        args: vec![dst, p],
-                    },
-                    define: false,
-                },
-                span,
-            );
-        }
-        Ok(k)
     }
 
     /// `t[i]`, `t[i, j]`: an element of a tile (a read by each thread; an index outside the
