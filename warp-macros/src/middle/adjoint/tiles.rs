@@ -45,6 +45,9 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_transpose", "adjoint"),
     ("tile_broadcast", "adjoint"),
     ("tile_matmul", "adjoint"),
+    ("tile_reshape", "adjoint"),
+    ("tile_squeeze", "adjoint"),
+    ("tile_diag_add", "adjoint"),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -176,6 +179,13 @@ impl Cx<'_> {
                     ) => {
                         let func = format!("adj_{name}");
                         self.tile_call(&mut b, &func, args, false, sp);
+                    }
+                    // A reshape's adjoint is the same copy the other way.
+                    ("tile_reshape" | "tile_squeeze", _) => {
+                        self.tile_call(&mut b, "adj_tile_reshape", args, false, sp);
+                    }
+                    ("tile_diag_add", _) => {
+                        self.tile_call(&mut b, "adj_tile_diag_add", args, false, sp);
                     }
                     ("tile_broadcast", _) => {
                         let rank = |v: VarId| match f.ty(v) {
