@@ -36,7 +36,7 @@ fn tile_backward_here(_dev: &wp::Device) -> bool {
 }
 
 /// `gradcheck` of `run` on inputs `xs` and output `out`, asserting a pass within 1e-6.
-fn check(
+pub(crate) fn check(
     what: &str,
     mut run: impl FnMut() -> wp::Result<()>,
     xs: &[&wp::Array<f64>],
@@ -62,7 +62,7 @@ fn check(
 }
 
 /// Smooth test values in [-1.5, 1.5], away from zero (a divisor) by at least 0.2.
-fn values(n: usize, seed: usize) -> Vec<f64> {
+pub(crate) fn values(n: usize, seed: usize) -> Vec<f64> {
     (0..n)
         .map(|k| {
             let t = ((k * 7 + seed * 13) % 23) as f64 / 22.0;

@@ -284,6 +284,26 @@ WP_FN void adj_tile_max(const tile_t<T, D...>& t, const tile_t<T, D...>& adj_t,
 
 // ---- Shapes --------------------------------------------------------------------------------
 
+/// `tile_reshape(a)`, `tile_squeeze(a)`: `adj_a[k] += r[k]` over the row-major flattenings.
+template <typename T, int... A, int... B>
+WP_FN void adj_tile_reshape(const tile_t<T, A...>&, const tile_t<T, A...>& adj_a,
+                            const tile_t<T, B...>& r) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, A...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj_a.data[e] += r.data[e];
+  __syncthreads();
+}
+
+/// `tile_diag_add(a, d)`: `adj_a += r`, `adj_d[i] += r[i][i]` (separate loops: a thread's
+/// element of `adj_a` is not another's of `adj_d`).
+template <typename T, int N>
+WP_FN void adj_tile_diag_add(const tile_t<T, N, N>&, const tile_t<T, N>&,
+                             const tile_t<T, N, N>& adj_a, const tile_t<T, N>& adj_d,
+                             const tile_t<T, N, N>& r) {
+  for (int e = (int)threadIdx.x; e < N * N; e += WP_TILE_BLOCK_DIM) adj_a.data[e] += r.data[e];
+  for (int i = (int)threadIdx.x; i < N; i += WP_TILE_BLOCK_DIM) adj_d.data[i] += r.data[i * N + i];
+  __syncthreads();
+}
+
 /// `tile_transpose(a)`: `adj_a[i][j] += r[j][i]`.
 template <typename T, int M, int N>
 WP_FN void adj_tile_transpose(const tile_t<T, M, N>&, const tile_t<T, M, N>& adj_a,

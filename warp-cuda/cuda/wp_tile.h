@@ -1130,4 +1130,40 @@ WP_FN void tile_scan_min_inclusive(const tile_t<T, N>& out, const tile_t<T, N>& 
   tile_detail::scan_inclusive(out, a, tile_detail::min_op{});
 }
 
+// ------------------------------------------------------------------------------------------
+// Conversions (warp-core/src/tile/convert.rs): element types, shapes, the diagonal
+// ------------------------------------------------------------------------------------------
+
+/// `tile_full(x)`: every element `x`.
+template <typename T, int... D>
+WP_FN void tile_full(const tile_t<T, D...>& out, T x) {
+  tile_fill(out, x);
+}
+
+/// `tile_astype::<U>(a)`: each element converted with `as`'s meaning (wp::cast, as `x as U`).
+template <typename U, typename T, int... D>
+WP_FN void tile_astype(const tile_t<U, D...>& out, const tile_t<T, D...>& a) {
+  for (int i = (int)threadIdx.x; i < tile_t<T, D...>::SIZE; i += WP_TILE_BLOCK_DIM)
+    out.data[i] = cast<U>(a.data[i]);
+  __syncthreads();
+}
+
+/// `tile_reshape(a)`, `tile_squeeze(a)`: the elements in row-major order, in another shape of
+/// the same size.
+template <typename T, int... A, int... B>
+WP_FN void tile_reshape(const tile_t<T, B...>& out, const tile_t<T, A...>& a) {
+  static_assert(tile_t<T, A...>::SIZE == tile_t<T, B...>::SIZE, "tile_reshape: the sizes differ");
+  for (int i = (int)threadIdx.x; i < tile_t<T, A...>::SIZE; i += WP_TILE_BLOCK_DIM) out.data[i] = a.data[i];
+  __syncthreads();
+}
+
+/// `tile_diag_add(a, d)`: `a` with `d[i]` added to `a[i][i]` (only there: adding zero elsewhere
+/// would turn -0 into +0).
+template <typename T, int N>
+WP_FN void tile_diag_add(const tile_t<T, N, N>& out, const tile_t<T, N, N>& a, const tile_t<T, N>& d) {
+  for (int k = (int)threadIdx.x; k < N * N; k += WP_TILE_BLOCK_DIM)
+    out.data[k] = (k / N == k % N) ? detail::s_add(a.data[k], d.data[k / N]) : a.data[k];
+  __syncthreads();
+}
+
 }  // namespace wp

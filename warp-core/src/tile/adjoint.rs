@@ -337,6 +337,34 @@ where
 
 // ---- Shapes --------------------------------------------------------------------------------
 
+/// Adjoint of `tile_reshape(a)` and `tile_squeeze(a)`: the same elements in row-major order,
+/// so `adj_a[k] += r[k]` over the flattenings.
+pub fn adj_tile_reshape<X: Tile, Y: Tile<Elem = X::Elem>>(_a: &X, adj_a: &mut X, r: &Y, _bd: usize)
+where
+    X::Elem: Adjoint,
+{
+    for (d, g) in adj_a.as_flat_mut().iter_mut().zip(r.as_flat()) {
+        d.adj_accum(*g);
+    }
+}
+
+/// Adjoint of `tile_diag_add(a, d)`: `adj_a += r`, and `adj_d[i] += r[i][i]`.
+pub fn adj_tile_diag_add<T: Adjoint, const N: usize, const M: usize>(
+    _a: &Tile2<T, N, M>,
+    _d: &Tile1<T, N>,
+    adj_a: &mut Tile2<T, N, M>,
+    adj_d: &mut Tile1<T, N>,
+    r: &Tile2<T, N, M>,
+    _bd: usize,
+) {
+    for (i, row) in adj_a.data.iter_mut().enumerate() {
+        for (j, g) in row.iter_mut().enumerate() {
+            g.adj_accum(r.data[i][j]);
+        }
+        adj_d.data[i].adj_accum(r.data[i][i]);
+    }
+}
+
 /// Adjoint of `tile_transpose(a)`: `adj_a[i][j] += r[j][i]`.
 pub fn adj_tile_transpose<T: Adjoint, const M: usize, const N: usize>(
     _a: &Tile2<T, M, N>,

@@ -147,6 +147,22 @@ impl Emitter<'_> {
                         }
                         format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1])
                     }
+                    // `p = tile_sort(keys)`, then `x = tile_sort(x, p)` (the row's comment);
+                    // `wp::tile_permute` may write the tile it reads.
+                    "tile_sort" => {
+                        e.section("tile_sort");
+                        match &a[..] {
+                            [k] => format!("wp::tile_sort({d}, {k});"),
+                            [x, p] => format!("wp::tile_permute({d}, {x}, {p});"),
+                            _ => {
+                                return Err("tile_sort's statements have one or two operands".into())
+                            }
+                        }
+                    }
+                    "tile_full" => format!("wp::tile_full({d}, {});", a[0]),
+                    "tile_astype" => format!("wp::tile_astype({d}, {});", a[0]),
+                    "tile_reshape" | "tile_squeeze" => format!("wp::tile_reshape({d}, {});", a[0]),
+                    "tile_diag_add" => format!("wp::tile_diag_add({d}, {}, {});", a[0], a[1]),
                     "tile_cholesky" => {
                         e.section("tile_linalg");
                         format!("wp::tile_cholesky({d}, {});", a[0])

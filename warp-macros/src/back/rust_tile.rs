@@ -68,6 +68,37 @@ impl RustEmitter<'_> {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::#f(&#x, __bd))
             }
+            // `p = tile_sort(keys)`, then `x = tile_sort(x, p)` (the row's comment).
+            "tile_sort" => match &v[..] {
+                [k] => quote_spanned!(sp=> __wp::tile::sort_perm(&#k)),
+                [x, p] => quote_spanned!(sp=> __wp::tile::permute(&#x, &#p)),
+                _ => unreachable!("tile_sort's statements have one or two operands"),
+            },
+            "tile_full" => {
+                let x = &v[0];
+                quote_spanned!(sp=> <#t>::splat(#x))
+            }
+            "tile_astype" => {
+                let x = &v[0];
+                let u = match ty {
+                    Ty::Tile(e, _) => ty_tokens(e),
+                    _ => None,
+                };
+                quote_spanned!(sp=> #x.map(|__x| __wp::ops::AsScalar::<#u>::as_scalar(__x)))
+            }
+            "tile_reshape" | "tile_squeeze" => {
+                let x = &v[0];
+                let to = match ty {
+                    Ty::Tile(_, d) => d.len(),
+                    _ => 0,
+                };
+                let f = format_ident!("reshape{}{}", rank(&args[0]), to);
+                quote_spanned!(sp=> __wp::tile::#f(&#x))
+            }
+            "tile_diag_add" => {
+                let (a, d) = (&v[0], &v[1]);
+                quote_spanned!(sp=> __wp::tile::diag_add(&#a, &#d))
+            }
             "tile_cholesky" => {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::cholesky(&#x))

@@ -15,6 +15,8 @@ use super::*;
 const TILE_ELEM: &[Class] = &[Number];
 /// The elements atomics exist for on both backends.
 const TILE_ATOMIC: &[Class] = &[AtomicScalar];
+/// `tile_sort`'s keys: Warp's 32- and 64-bit integers and floats (the atomics' set).
+const TILE_SORT_KEY: &[Class] = &[AtomicScalar];
 /// The matmul's elements: f16 (tensor cores on sm_80+, f32 accumulation), f32, f64 (bf16:
 /// later).
 const TILE_MATMUL: &[Class] = &[Float];
@@ -65,6 +67,12 @@ pub(super) const ROWS: &[Builtin] = rows! {
         cooperative;
     "tile_scan_min_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent,
         cooperative;
+    // `tile_sort(&mut keys, &mut values)`: 1-D tiles of one length, sorted by (key, index), NaN
+    // keys last (warp-core's `tile::sort`). It lowers to three statements of this row: the
+    // sorting permutation `p = tile_sort(keys)` (a hidden `Tile<i32, N>`), then
+    // `values = tile_sort(values, p)` and `keys = tile_sort(keys, p)`, which apply it (CPU
+    // `sort_perm`, `permute`; CUDA `wp::tile_sort`, `wp::tile_permute`). Backward: refused.
+    "tile_sort": TILE_SORT_KEY, (Tile, Tile) -> Unit, "tile", Adjoint, no_tangent, cooperative;
     // Reductions to a `Tile<T, 1>` (`Tile<i32, 1>` for the arg-extrema), in the GPU's order.
     "tile_sum": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_min": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
@@ -101,4 +109,17 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // `tile_fft` shares bit for bit.
     "tile_fft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
     "tile_ifft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
+    // Conversions (warp-core's `tile::convert`). `tile_full::<f32, 16, 8>(x)` (shape and element
+    // as `tile_zeros`'s, or the annotation's): every element `x`. `tile_astype::<U>(t)`: each
+    // element `as U`. `tile_reshape::<M, N>(t)` (or the annotation's shape): the elements in
+    // row-major order, the size unchanged; `tile_squeeze(t)` drops the dims that are the
+    // literal 1 (all of them: a `Tile<T, 1>`). `tile_diag_add(a, d)`: a square tile with `d`
+    // added to its diagonal. Backward: reshape, squeeze and diag_add (copies, `TILE_ADJOINTS`);
+    // through `tile_full` and `tile_astype`, refused by name for now.
+    "tile_full": TILE_ELEM, (T, TileShape) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_astype": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_reshape": TILE_ELEM, (Tile, TileShape) -> Tile, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_squeeze": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_diag_add": TILE_ELEM, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
 };

@@ -12,6 +12,8 @@ use super::*;
 use crate::front::signature::{dim_of, dim_of_path, tile_rank};
 use crate::types::Dim;
 
+#[path = "tiles_convert.rs"]
+mod convert;
 #[path = "tiles_linalg.rs"]
 mod linalg;
 
@@ -261,6 +263,13 @@ impl Lowerer {
             "tile_atomic_add" => self.tile_atomic_add(row, &args, span)?,
             "tile_matmul" => self.tile_matmul(row, &args, span)?,
             "tile_matmul_acc" => self.tile_matmul_acc(row, &args, span)?,
+            "tile_sort" => self.tile_sort(row, &args, span)?,
+            "tile_full" => self.tile_full(row, &args, fish_elem, fish_dims, want_tile, span)?,
+            "tile_astype" => self.tile_astype(row, &args, fish_elem, fish_dims, want_tile, span)?,
+            "tile_reshape" | "tile_squeeze" => {
+                self.tile_reshape(row, &args, fish_dims, want_tile, span)?
+            }
+            "tile_diag_add" => self.tile_diag_add(row, &args, span)?,
             "tile_cholesky" | "tile_cholesky_solve" | "tile_lower_solve" | "tile_upper_solve" => {
                 self.tile_linalg(row, &args, span)?
             }
@@ -968,22 +977,10 @@ impl Lowerer {
     /// `tile_matmul(a, b, &mut c)`: `c = c + a b`, an assignment of `c`.
     fn tile_matmul_acc(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
         let (a, b, e, m, n) = self.matmul_operands(args)?;
-        let target = match strip(args[2]) {
-            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
-                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
-                _ => None,
-            },
-            _ => None,
-        };
-        let Some(cname) = target else {
-            return err(
-                args[2].span(),
-                "`tile_matmul` accumulates into a tile variable passed as `&mut c`",
-            );
-        };
-        let Some(c) = self.lookup(&cname) else {
-            return err(args[2].span(), format!("cannot find `{cname}`"));
-        };
+        let (c, cname) = self.mut_target(
+            args[2],
+            "`tile_matmul` accumulates into a tile variable passed as `&mut c`",
+        )?;
         let ct = self.ty(c);
         // The accumulator's element: f16 products accumulate in f32 (rounding an f16
         // accumulator at every step of a k-loop would lose the sum's low bits), the others in
@@ -1004,12 +1001,7 @@ impl Lowerer {
             }
             _ => return err(args[2].span(), msg),
         }
-        if !self.vars[c].mutable {
-            return err(
-                args[2].span(),
-                format!("`{cname}` is not mutable: declare it `let mut {cname}`"),
-            );
-        }
+        self.require_mutable(c, &cname, args[2])?;
         self.push(
             StmtKind::Assign {
                 dst: c,
@@ -1025,6 +1017,34 @@ impl Lowerer {
         Ok(c)
     }
 
+    /// A variable passed as `&mut x` (`what` says how otherwise): its id and name.
+    pub(super) fn mut_target(&mut self, e: &Expr, what: &str) -> R<(VarId, String)> {
+        let target = match strip(e) {
+            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
+                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
+                _ => None,
+            },
+            _ => None,
+        };
+        let Some(name) = target else {
+            return err(e.span(), what);
+        };
+        let Some(v) = self.lookup(&name) else {
+            return err(e.span(), format!("cannot find `{name}`"));
+        };
+        Ok((v, name))
+    }
+
+    pub(super) fn require_mutable(&self, v: VarId, name: &str, e: &Expr) -> R<()> {
+        if !self.vars[v].mutable {
+            return err(
+                e.span(),
+                format!("`{name}` is not mutable: declare it `let mut {name}`"),
+            );
+        }
+        Ok(())
+    }
+
     /// `tile_fft(&mut t)`, `tile_ifft(&mut t)`: `t = tile_fft(t)`, an assignment of `t`, which
     /// must be a `Tile<Vec2 | DVec2, M, N>` whose `N` is a power of two.
     fn tile_fft(&mut self, row: &'static Builtin, args: &[&Expr], span: Span) -> R<VarId> {
@@ -1033,19 +1053,7 @@ impl Lowerer {
         let [arg] = args[..] else {
             return err(span, usage);
         };
-        let target = match strip(arg) {
-            Expr::Reference(r) if r.mutability.is_some() => match strip(&r.expr) {
-                Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
-                _ => None,
-            },
-            _ => None,
-        };
-        let Some(tname) = target else {
-            return err(arg.span(), usage);
-        };
-        let Some(t) = self.lookup(&tname) else {
-            return err(arg.span(), format!("cannot find `{tname}`"));
-        };
+        let (t, tname) = self.mut_target(arg, &usage)?;
         let tt = self.ty(t);
         let ok = match tile_parts(&tt) {
             Some((e, d)) => e.is_vec2_float() && d.len() == 2,
@@ -1071,12 +1079,7 @@ impl Lowerer {
                 pow2: true,
             }),
         }
-        if !self.vars[t].mutable {
-            return err(
-                arg.span(),
-                format!("`{tname}` is not mutable: declare it `let mut {tname}`"),
-            );
-        }
+        self.require_mutable(t, &tname, arg)?;
         self.push(
             StmtKind::Assign {
                 dst: t,

@@ -69,6 +69,9 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_broadcast", "adjoint"),
     ("tile_matmul", "adjoint"),
     ("tile_matmul_acc", "adjoint (f32 and f64)"),
+    ("tile_reshape", "adjoint"),
+    ("tile_squeeze", "adjoint"),
+    ("tile_diag_add", "adjoint"),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -345,6 +348,13 @@ impl Cx<'_> {
                     ) => {
                         let func = format!("adj_{name}");
                         self.tile_call(&mut b, &func, args, false, sp);
+                    }
+                    // A reshape's adjoint is the same copy the other way.
+                    ("tile_reshape" | "tile_squeeze", _) => {
+                        self.tile_call(&mut b, "adj_tile_reshape", args, false, sp);
+                    }
+                    ("tile_diag_add", _) => {
+                        self.tile_call(&mut b, "adj_tile_diag_add", args, false, sp);
                     }
                     ("tile_broadcast", _) => {
                         let rank = |v: VarId| match f.ty(v) {
