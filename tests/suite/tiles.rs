@@ -31,6 +31,7 @@ backend_tests!(
     atomic_add_of_tiles,
     scans,
     shared_memory_beyond_48k_and_beyond_the_device,
+    more_blocks_than_a_gpu_grid_holds,
 );
 
 const TM: usize = 16;
@@ -694,6 +695,34 @@ fn shared_memory_beyond_48k_and_beyond_the_device(dev: &wp::Device) {
         };
         assert!(requested >= 256 * 256 * 4 && requested > available, "{msg}");
     }
+}
+
+#[wp::kernel]
+fn k_copy_block(a: Array<f32>, b: Array<f32>) {
+    let i = tid();
+    let t = tile_load::<4>(a, (i * 4) as i32);
+    tile_store(b, t, (i * 4) as i32);
+}
+
+/// A GPU runs one CUDA block per block of a tiled launch: more than `i32::MAX` blocks is an
+/// error naming the kernel and the count, before anything runs (the CPU has no such limit, and
+/// 2^31 blocks would take it a while: checked on GPUs only).
+fn more_blocks_than_a_gpu_grid_holds(dev: &wp::Device) {
+    if dev.is_cpu() {
+        return;
+    }
+    let a = zeros::<f32, 1>(8, dev);
+    let b = zeros::<f32, 1>(8, dev);
+    let e = wp::launch_tiled(k_copy_block, 1usize << 31, (&a, &b), 32, dev).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(e, wp::Error::InvalidDim { .. })
+            && msg.contains("k_copy_block")
+            && msg.contains("2147483648"),
+        "{msg}"
+    );
+    // A launch within the limit runs.
+    wp::launch_tiled(k_copy_block, 2, (&a, &b), 32, dev).unwrap();
 }
 
 #[test]

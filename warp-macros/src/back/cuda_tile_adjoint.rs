@@ -85,9 +85,8 @@ impl Printer<'_> {
         Ok(())
     }
 
-    /// `@@ENTRY@@_adj` of a tiled kernel: block `b` of the launch runs the adjoint with
-    /// `__flat = b`, all of the CUDA block's threads together, and a barrier ends each block
-    /// before the next one reuses the slots. Each thread keeps its own history on its own stack
+    /// `@@ENTRY@@_adj` of a tiled kernel: CUDA block `b` runs block `b` of the launch
+    /// (`__flat = b`; the launch has one CUDA block per block), all of its threads together. Each thread keeps its own history on its own stack
     /// (`WP_ADSTACK_BYTES` of local memory, emptied for each block), as in any adjoint; tiles
     /// are never pushed (`middle::adjoint::tiles::plan`).
     pub(super) fn tile_entry(&mut self) -> Result<(), String> {
@@ -111,9 +110,9 @@ impl Printer<'_> {
             self.e.out,
             "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM) @@ENTRY@@_adj({}) {{\n    \
              char __buf[{bytes} > 0 ? {bytes} : 1];\n    \
-             for (wp::i64 __flat = (wp::i64)blockIdx.x; __flat < __launch.total; __flat += (wp::i64)gridDim.x) {{\n        \
-             wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n        \
-             @@SELF@@_adj({});\n        __syncthreads();\n    }}\n}}\n#endif\n",
+             wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n    \
+             const wp::i64 __flat = (wp::i64)blockIdx.x;\n    \
+             if (__flat < __launch.total) @@SELF@@_adj({});\n}}\n#endif\n",
             decl.join(", "),
             call.join(", ")
         );

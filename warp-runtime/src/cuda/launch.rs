@@ -135,9 +135,26 @@ impl<K: Kernel> Prepared<K> {
             fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
         };
         let (block, blocks) = match tile_block {
-            // One CUDA block per block of the launch: the entry grid-strides over the blocks
-            // (`grid.total` counts them) past i32::MAX.
-            Some(bd) => (bd as u32, grid.total.min(i32::MAX as usize) as u32),
+            // One CUDA block per block of the launch (`grid.total` counts them): the entry runs
+            // block `blockIdx.x` and nothing else, which keeps the compiler from hoisting the
+            // tile code's address arithmetic into registers across a grid-stride loop (96
+            // registers a thread against 64 for the batched Cholesky).
+            Some(bd) => {
+                let blocks = u32::try_from(grid.total)
+                    .ok()
+                    .filter(|b| *b <= i32::MAX as u32)
+                    .ok_or_else(|| Error::InvalidDim {
+                        kernel: info.name,
+                        dim: grid.dims[..grid.ndim].to_vec(),
+                        reason: format!(
+                            "a tiled launch on a GPU runs one CUDA block per block: at most {} \
+                             blocks, not {}",
+                            i32::MAX,
+                            grid.total
+                        ),
+                    })?;
+                (bd as u32, blocks)
+            }
             None => {
                 let block = config::cuda_block_dim();
                 let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
