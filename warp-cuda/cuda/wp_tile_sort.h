@@ -40,7 +40,7 @@ WP_FN bool key_lt(T a, T b) {
 }
 
 /// The smallest power of two >= n (n >= 1).
-constexpr int pow2_at_least(int n, int p = 1) { return p >= n ? p : pow2_at_least(n, 2 * p); }
+WP_FN constexpr int pow2_at_least(int n, int p = 1) { return p >= n ? p : pow2_at_least(n, 2 * p); }
 
 }  // namespace tile_sort_detail
 
