@@ -595,17 +595,18 @@ fn layer_loop(dev: &wp::Device) {
 fn what_backward_refuses(dev: &wp::Device) {
     let a = arr(&values(24, 11), dev).with_grad().unwrap();
     let out = zeros::<f64, 1>(8, dev).with_grad().unwrap();
-    for (name, why) in [("k_tile_scan", "tile_scan_inclusive")] {
-        let tape = wp::Tape::new();
-        {
-            let _rec = tape.record();
-            wp::launch_tiled(k_tile_scan, 1, (&a, &out), 8, dev).unwrap();
-        }
-        let e = tape.backward(&out).unwrap_err();
-        assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
-        let msg = e.to_string();
-        assert!(msg.contains(name) && msg.contains(why), "{msg}");
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch_tiled(k_tile_scan, 1, (&a, &out), 8, dev).unwrap();
     }
+    let e = tape.backward(&out).unwrap_err();
+    assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("k_tile_scan") && msg.contains("tile_scan_inclusive"),
+        "{msg}"
+    );
 }
 
 #[test]
