@@ -484,7 +484,7 @@ pub fn adj_tile_extract1<T: Adjoint, const N0: usize, I: IndexInt>(
     Ok(())
 }
 
-/// Adjoint of `x = t[i, j]` in one lane, as [`adj_tile_extract1`].
+/// Adjoint of `x = t[(i, j)]` in one lane, as [`adj_tile_extract1`].
 #[allow(clippy::too_many_arguments)]
 pub fn adj_tile_extract2<T: Adjoint, const N0: usize, const N1: usize, I, J>(
     t: &Tile2<T, N0, N1>,

@@ -200,7 +200,7 @@ impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
         }
     }
 
-    /// Element `(i, j)` (`t[i, j]`, Warp's `tile_extract`); an index outside the shape on
+    /// Element `(i, j)` (`t[(i, j)]`, Warp's `tile_extract`); an index outside the shape on
     /// either axis is a [`FaultKind::TileIndex`] fault of `kernel`.
     #[inline(always)]
     pub fn extract<I: IndexInt, J: IndexInt>(

@@ -34,7 +34,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "tile_arange": TILE_ELEM, (T, T, T) -> Tile, "tile", Zero, cooperative;
     // Loads and stores: out-of-bounds elements read zero and are not written; offsets are
     // signed, and negative coordinates are out of bounds too. Tiles hold `Vec2`/`DVec2` too
-    // (complex values): loads, stores, `t[i, j]`, `tile_zeros`, `+ -`, `*` by a scalar.
+    // (complex values): loads, stores, `t[(i, j)]`, `tile_zeros`, `+ -`, `*` by a scalar.
     "tile_load": TILE_ELEM, (ArrayOfT, TileShape, Offsets) -> Tile, "tile", Adjoint,
         no_tangent, cooperative;
     "tile_store": TILE_ELEM, (ArrayOfT, Tile, Offsets) -> Unit, "tile", Adjoint,
@@ -43,7 +43,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // element `l`.
     "tile": TILE_ELEM, (T) -> Tile, "tile", Adjoint, no_tangent, cooperative, lanes;
     "untile": TILE_ELEM, (Tile) -> T, "tile", Adjoint, no_tangent, cooperative, lanes;
-    // `t[i]`, `t[i, j]`: a read, not cooperative; an index outside the tile faults.
+    // `t[i]`, `t[(i, j)]`: a read, not cooperative; an index outside the tile faults.
     "tile_extract": TILE_ELEM, (Tile, Index) -> T, "tile", Adjoint, no_tangent;
     // Elementwise: `tile_map(f, a)`, `tile_map(f, a, b)` with a builtin function
     // (`tile_map(sin, a)`); operators `+ - * /` and unary `-` on tiles are Warp's `tile_add`...

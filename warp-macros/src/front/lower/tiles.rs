@@ -277,7 +277,7 @@ impl Lowerer {
             "tile_extract" => {
                 return err(
                     span,
-                    "read a tile's element by indexing it: `t[i]`, `t[i, j]`",
+                    "read a tile's element by indexing it: `t[i]`, `t[(i, j)]`",
                 )
             }
             other => unreachable!("tile row `{other}` has no typing rule"),
@@ -372,7 +372,7 @@ impl Lowerer {
         if t.is_vector_tile() {
             return err(
                 e.span(),
-                format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[i, j]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`"),
+                format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[(i, j)]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`"),
             );
         }
         Ok(v)
@@ -1095,7 +1095,7 @@ impl Lowerer {
         Ok(t)
     }
 
-    /// `t[i]`, `t[i, j]`: an element of a tile (a read by each thread; an index outside the
+    /// `t[i]`, `t[(i, j)]`: an element of a tile (a read by each thread; an index outside the
     /// tile faults).
     pub(super) fn tile_index(&mut self, t: VarId, index: &Expr, span: Span) -> R<VarId> {
         let tt = self.ty(t);
