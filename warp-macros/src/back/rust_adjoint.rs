@@ -121,23 +121,9 @@ impl Printer<'_> {
                 body,
                 line,
             } => {
+                let range = range.as_ref().map(|r| self.range_tokens(r));
                 let (exit, body) = (self.exit(exit), self.block(body)?);
-                let (range, head) = match range {
-                    Some(r) => (self.range_tokens(r), quote!(for __n in 0..__range.count)),
-                    None => (quote!(()), quote!(loop)),
-                };
-                quote_spanned! {sp=>
-                    {
-                        let __range = #range;
-                        let mut __count: i64 = 0;
-                        #head {
-                            #exit
-                            #body
-                            __count += 1;
-                        }
-                        __stack.push(__count, #line)?;
-                    }
-                }
+                counted_loop(range, exit, body, quote!(__stack), *line, sp)
             }
             AKind::StepVar { var, end } => {
                 let v = self.var(*var);
@@ -259,17 +245,7 @@ impl Printer<'_> {
             AKind::GradClearOwn { .. } => {
                 return Err("internal: the CPU adjoint has no deferred gradient clear".into())
             }
-            AKind::RevLoop { body } => {
-                let body = self.block(body)?;
-                quote_spanned! {sp=>
-                    {
-                        let __count: i64 = __stack.pop();
-                        for _ in 0..__count {
-                            #body
-                        }
-                    }
-                }
-            }
+            AKind::RevLoop { body } => reversed_loop(self.block(body)?, quote!(__stack), sp),
         })
     }
 
@@ -379,4 +355,45 @@ fn members(path: &[String]) -> TokenStream {
 /// The temporary `__g<k>`.
 pub(super) fn temp(k: usize) -> syn::Ident {
     format_ident!("__g{}", k)
+}
+
+/// The replay of a loop: `body` (after the `exit` check) over the progression `range` (a `for`)
+/// or until it leaves (`None`: a `loop`), counting the iterations, whose count then goes on
+/// `stack`.
+pub(super) fn counted_loop(
+    range: Option<TokenStream>,
+    exit: TokenStream,
+    body: TokenStream,
+    stack: TokenStream,
+    line: u32,
+    sp: Span,
+) -> TokenStream {
+    let (range, head) = match range {
+        Some(r) => (r, quote!(for __n in 0..__range.count)),
+        None => (quote!(()), quote!(loop)),
+    };
+    quote_spanned! {sp=>
+        {
+            let __range = #range;
+            let mut __count: i64 = 0;
+            #head {
+                #exit
+                #body
+                __count += 1;
+            }
+            #stack.push(__count, #line)?;
+        }
+    }
+}
+
+/// The reverse of a loop: `body` as many times as the count popped from `stack`.
+pub(super) fn reversed_loop(body: TokenStream, stack: TokenStream, sp: Span) -> TokenStream {
+    quote_spanned! {sp=>
+        {
+            let __count: i64 = #stack.pop();
+            for _ in 0..__count {
+                #body
+            }
+        }
+    }
 }

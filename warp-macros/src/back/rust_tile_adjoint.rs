@@ -17,7 +17,7 @@
 //! `if` on a uniform condition) pushes and pops its trip counts on lane 0's stack, in the order
 //! lane 0 would; a decision recorded per lane is popped from every lane's stack.
 
-use super::rust_adjoint::{temp, Printer};
+use super::rust_adjoint::{counted_loop, reversed_loop, temp, Printer};
 use crate::ir::*;
 use crate::middle::adjoint::*;
 use crate::types::Ty;
@@ -331,6 +331,7 @@ impl Printer<'_> {
     /// copies, its trip count goes on lane 0's stack.
     fn block_loop(&self, s: &AStmt) -> Result<TokenStream, String> {
         let sp = s.span;
+        let lane0 = quote!(__lanes[0]);
         match &s.kind {
             AKind::Loop {
                 range,
@@ -338,19 +339,16 @@ impl Printer<'_> {
                 body,
                 line,
             } => {
-                let (range, head) = match range {
-                    Some(r) => {
-                        let mut vars = vec![r.start, r.end];
-                        for a in &r.adapters {
-                            if let RangeAdapter::StepBy(k) = a {
-                                vars.push(*k);
-                            }
+                let range = range.as_ref().map(|r| {
+                    let mut vars = vec![r.start, r.end];
+                    for a in &r.adapters {
+                        if let RangeAdapter::StepBy(k) = a {
+                            vars.push(*k);
                         }
-                        let (reads, r) = (self.lane0_reads(&vars), self.range_tokens(r));
-                        (quote!({ #reads #r }), quote!(for __n in 0..__range.count))
                     }
-                    None => (quote!(()), quote!(loop)),
-                };
+                    let (reads, r) = (self.lane0_reads(&vars), self.range_tokens(r));
+                    quote!({ #reads #r })
+                });
                 let exit = match exit.is_empty() {
                     true => TokenStream::new(),
                     false => {
@@ -360,30 +358,9 @@ impl Printer<'_> {
                     }
                 };
                 let body = self.list(body)?;
-                Ok(quote_spanned! {sp=>
-                    {
-                        let __range = #range;
-                        let mut __count: i64 = 0;
-                        #head {
-                            #exit
-                            #body
-                            __count += 1;
-                        }
-                        __lanes[0].push(__count, #line)?;
-                    }
-                })
+                Ok(counted_loop(range, exit, body, lane0, *line, sp))
             }
-            AKind::RevLoop { body } => {
-                let body = self.list(body)?;
-                Ok(quote_spanned! {sp=>
-                    {
-                        let __count: i64 = __lanes[0].pop();
-                        for _ in 0..__count {
-                            #body
-                        }
-                    }
-                })
-            }
+            AKind::RevLoop { body } => Ok(reversed_loop(self.list(body)?, lane0, sp)),
             _ => Err("internal: not a loop".into()),
         }
     }

@@ -18,13 +18,14 @@
 //! Order of a tile's adjoint statements: seed (`__r` is the tile's adjoint itself, a
 //! reference on CUDA), the call, then the clear. The usual order (clear before the call) would
 //! clear the seed it reads; this one is the same because a tile is never its own operand,
-//! except in the in-place updates below, whose adjoint passes through uncleared.
+//! except in `tile_matmul(a, b, &mut acc)`, whose adjoint passes through uncleared.
 //!
 //! **Reassigned tiles** (in a loop, or `let mut`) are not pushed on the adjoint stack (a tile is
 //! too large for a thread's stack). [`plan`] sorts them:
-//! - a tile whose value no adjoint rule reads (an accumulator: `acc = acc + t`,
-//!   `tile_matmul(a, b, &mut acc)`, stored, summed, transposed) needs no history at all: the
-//!   replay leaves its last value, which nothing in the sweep looks at;
+//! - a tile whose value no adjoint rule reads (an accumulator: `acc = acc + t`, lowered to
+//!   `tmp = acc + t; acc = tmp`, or `tile_matmul(a, b, &mut acc)`; a tile only stored, summed,
+//!   transposed) needs no history at all: the replay leaves its last value, which nothing in
+//!   the sweep looks at;
 //! - a tile computed once per iteration, at the top level of a loop body, from no other tile
 //!   (`tile_load` from an array the kernel does not write, `tile(x)` of lane values, a constant
 //!   tile), from operands that nothing later in the body reassigns, is *computed again* at the
@@ -35,9 +36,8 @@
 //!   the elements it owns on its own stack (`push_tile`, `adstack_push_tile`), and popped after
 //!   its statement's adjoint.
 //!
-//! In-place updates whose adjoint passes through: `acc = acc + x`, `acc = x + acc`,
-//! `acc = acc - x` and `tile_matmul(a, b, &mut acc)`. The adjoint of `acc` before the update is
-//! the adjoint after it, so the seed is neither cleared nor accumulated into.
+//! The accumulating `tile_matmul(a, b, &mut acc)` sets the tile it reads: the adjoint of `acc`
+//! before it is the adjoint after it, so the seed is neither cleared nor accumulated into.
 
 use super::{at, AKind, AStmt, Arg, Cx, GradArg, GradSrc, TempLike};
 use crate::builtins::Grad;
@@ -312,8 +312,14 @@ impl Cx<'_> {
         if !self.diff(dst) {
             return Some(b);
         }
-        if let Some(r) = self.in_place_update(dst, op, sp) {
-            return Some(r);
+        // The lowering gives every operation a fresh result (`acc = acc + t` is `tmp = acc + t;
+        // acc = tmp`), so only the accumulating matmul (above) reads the tile it sets; another
+        // one would read and clear one adjoint slot as both seed and operand.
+        let mut reads_dst = false;
+        op.for_each_read(&mut |v| reads_dst |= v == dst);
+        if reads_dst {
+            self.refuse("an operation that reads the tile it sets");
+            return Some(Vec::new());
         }
         let seed = GradSrc::Adj {
             var: dst,
@@ -419,40 +425,6 @@ impl Cx<'_> {
         }
         let path = Vec::new();
         b.push(at(AKind::ClearAdj { var: dst, path }, sp));
-        Some(vec![at(AKind::Scope(b), sp)])
-    }
-
-    /// The reverse of an in-place update of tile `dst` from itself (see the module docs):
-    /// `acc = acc + x`, `x + acc` or `acc - x` pass the seed to `x` (negated for `-`) and keep
-    /// it as `acc`'s adjoint; another operation reading its own result is refused. `None`: `op`
-    /// does not read `dst`.
-    fn in_place_update(&mut self, dst: VarId, op: &Op, sp: Span) -> Option<Vec<AStmt>> {
-        let mut reads_dst = false;
-        op.for_each_read(&mut |v| reads_dst |= v == dst);
-        if !reads_dst {
-            return None;
-        }
-        let other = match op {
-            Op::Binary(BinOp::Add, l, r) if (*l == dst) != (*r == dst) => {
-                Some((if *l == dst { *r } else { *l }, false))
-            }
-            Op::Binary(BinOp::Sub, l, r) if *l == dst && *r != dst => Some((*r, true)),
-            _ => None,
-        };
-        let Some((x, negate)) = other.filter(|(x, _)| self.f.ty(*x).is_tile()) else {
-            self.refuse("a tile updated in place from itself by this operation");
-            return Some(Vec::new());
-        };
-        let seed = GradSrc::Adj {
-            var: dst,
-            path: Vec::new(),
-        };
-        let mut b = vec![at(AKind::Seed(seed), sp)];
-        if negate {
-            self.tile_call(&mut b, "adj_tile_neg", &[x], false, sp);
-        } else {
-            self.accum(&mut b, x, Vec::new(), GradSrc::Seed, sp);
-        }
         Some(vec![at(AKind::Scope(b), sp)])
     }
 
