@@ -60,10 +60,12 @@ pub fn gemm_plain<T: Float>(a: Array<T, 2>, b: Array<T, 2>, c: Array<T, 2>) {
 }
 
 /// The fp16 kernel's tiles: f16 A and B tiles (tensor-core operands), an f32 accumulator.
-/// Larger than the f32 kernel's: the accumulator lives in shared memory and each
-/// `tile_matmul` loads it into the mma fragments and stores it back once, so a longer k-step
-/// (64) spreads that over more tensor-core work; 128 x 128 gives each of 8 warps a 32 x 64
-/// warp tile (16 mma tiles). Shared memory: 2 (128 x 64) f16 + 128 x 128 f32 = 96 KiB.
+/// Larger than the f32 kernel's. On CUDA (sm_80+) the k-loop below is pipelined: the
+/// accumulator stays in registers for the whole loop, and the loads are issued with cp.async
+/// two iterations ahead into stages made of the accumulator's and the operands' slots (three
+/// stages of 128 x 64 + 64 x 128 f16). On Hopper each of the two warpgroups of a 256-thread
+/// block multiplies a 64 x 128 half with `wgmma`; elsewhere each of 8 warps a 32 x 64 warp tile
+/// with `mma.sync`. Shared memory: 2 (128 x 64) f16 + 128 x 128 f32 = 96 KiB, two blocks an SM.
 pub const BM16: usize = 128;
 pub const BN16: usize = 128;
 pub const BK16: usize = 64;

@@ -24,6 +24,7 @@ backend_tests!(
     f16_elementwise_map_and_reductions,
     f16_gemm_accumulates_in_f32,
     f16_matmul_fma_shapes_are_exact,
+    f16_gemm_pipelined_k_loop_matches_the_plain_loop,
 );
 
 fn h(x: f32) -> f16 {
@@ -168,6 +169,72 @@ fn f16_gemm_accumulates_in_f32(dev: &wp::Device) {
                     (g.to_f64() - exact).abs() <= tol,
                     "f16 ({i}, {j}) block_dim {bd}: {g} against {exact}"
                 );
+            }
+        }
+    }
+}
+
+const PM: usize = 64;
+const PK: usize = 32;
+const PN: usize = 64;
+
+/// A GEMM k-loop the CUDA back end pipelines (cp.async stages, accumulators in registers).
+#[wp::kernel]
+fn k_gemm_pipe(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f32, PM, PN>();
+    for k in 0..(a.shape()[1] + PK - 1) / PK {
+        let ta = tile_load::<PM, PK>(a, ((i * PM) as i32, (k * PK) as i32));
+        let tb = tile_load::<PK, PN>(b, ((k * PK) as i32, (j * PN) as i32));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, ((i * PM) as i32, (j * PN) as i32));
+}
+
+/// The same loop, printed as written: the body's `min` is a call, which the pipelined form
+/// does not evaluate ahead (back/cuda_tile_pipe.rs takes pure arithmetic only).
+#[wp::kernel]
+fn k_gemm_plain(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f32, PM, PN>();
+    for k in 0..(a.shape()[1] + PK - 1) / PK {
+        let kk = min(k, 1_000_000);
+        let ta = tile_load::<PM, PK>(a, ((i * PM) as i32, (kk * PK) as i32));
+        let tb = tile_load::<PK, PN>(b, ((kk * PK) as i32, (j * PN) as i32));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, ((i * PM) as i32, (j * PN) as i32));
+}
+
+/// The pipelined k-loop gives the loop's own bits: the same tensor-core k-steps per output in
+/// the same order (or, on the CPU and where the pipe is off, the same code). Shapes: aligned
+/// (every load a cp.async), and ragged with A's rows 600 bytes apart (A's loads element by
+/// element into the stages, B's by cp.async inside and element by element at the edge).
+/// Block sizes: 64 (the pipe is off: too many accumulators a thread), 128 and 256 (on, on
+/// sm_80+). Both within the module's tensor-core tolerance of the f64 product.
+fn f16_gemm_pipelined_k_loop_matches_the_plain_loop(dev: &wp::Device) {
+    for (m, k, n) in [(256usize, 256usize, 256usize), (200, 300, 136)] {
+        let ad = values(m * k, 5);
+        let bd_ = values(k * n, 17);
+        let a = wp::Array::from_slice_shape(&ad, (m, k), dev).unwrap();
+        let b = wp::Array::from_slice_shape(&bd_, (k, n), dev).unwrap();
+        let c = zeros::<f32, 2>((m, n), dev);
+        let c2 = zeros::<f32, 2>((m, n), dev);
+        let blocks = (m.div_ceil(PM), n.div_ceil(PN));
+        let kp = k.div_ceil(PK) * PK;
+        for bd in [64, 128, 256] {
+            wp::launch_tiled(k_gemm_pipe, blocks, (&a, &b, &c), bd, dev).unwrap();
+            wp::launch_tiled(k_gemm_plain, blocks, (&a, &b, &c2), bd, dev).unwrap();
+            let (got, plain) = (host(&c), host(&c2));
+            for i in 0..m {
+                for j in 0..n {
+                    let g = got[i * n + j];
+                    let at = format!("({i}, {j}) of {m} x {k} x {n}, block_dim {bd}");
+                    assert_eq!(g.to_bits(), plain[i * n + j].to_bits(), "{at}");
+                    let (_, exact, mag) = chain(&ad, &bd_, (k, n), (i, j), 0..k);
+                    let tol = kp as f64 * 2f64.powi(-22) * mag;
+                    assert!((g as f64 - exact).abs() <= tol, "{at}: {g} against {exact}");
+                }
             }
         }
     }

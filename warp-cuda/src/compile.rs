@@ -47,12 +47,24 @@ impl Default for CompileOptions<'_> {
     }
 }
 
+/// NVRTC's target for compute capability `arch`: `sm_XX`, except `sm_90a` on 9.0, whose
+/// architecture-specific instructions (`wgmma`, the tile GEMM's warpgroup MMAs) need it. A
+/// `sm_90a` cubin runs on 9.0 GPUs only, which are the only ones an `sm_90` cubin is chosen for
+/// (`aot::compatible_archs`: the same major version, no newer minor exists).
+pub fn nvrtc_target(arch: u32) -> String {
+    if arch == 90 {
+        "sm_90a".to_string()
+    } else {
+        format!("sm_{arch}")
+    }
+}
+
 impl CompileOptions<'_> {
     /// The NVRTC command-line options these settings give for `sm_{arch}` (headers are passed
     /// separately, to `nvrtcCreateProgram`).
     pub fn nvrtc_args(&self, arch: u32) -> Vec<String> {
         let mut args = vec![
-            format!("--gpu-architecture=sm_{arch}"),
+            format!("--gpu-architecture={}", nvrtc_target(arch)),
             "-std=c++17".to_string(),
             format!("--fmad={}", self.fmad),
         ];
@@ -361,9 +373,11 @@ mod tests {
     fn default_args() {
         let o = CompileOptions::default();
         assert_eq!(
-            o.nvrtc_args(90),
-            ["--gpu-architecture=sm_90", "-std=c++17", "--fmad=true"]
+            o.nvrtc_args(80),
+            ["--gpu-architecture=sm_80", "-std=c++17", "--fmad=true"]
         );
+        // 9.0 compiles with its architecture-specific features (wgmma).
+        assert_eq!(o.nvrtc_args(90)[0], "--gpu-architecture=sm_90a");
     }
 
     #[test]

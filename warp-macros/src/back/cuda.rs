@@ -32,6 +32,7 @@ pub struct CudaTemplate {
 /// Emits the CUDA template of a kernel (`kind == Kernel`) or func.
 pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     let mut e = Emitter::new(f, file);
+    e.pipeline = true;
     e.function()?;
     // Transform values need wp_transform.h even where no transform builtin is called (`inverse`
     // and `lerp` are in other sections); an object's type needs its section even in a kernel
@@ -78,6 +79,14 @@ pub(crate) struct Emitter<'a> {
     unswitched: usize,
     /// The statement just printed was a tile operation (which ends in a barrier).
     pub(crate) after_tile_op: bool,
+    /// Print a tiled kernel's GEMM k-loops pipelined (`back/cuda_tile_pipe.rs`): the forward
+    /// kernel only, and not the plain copy printed beside a pipelined loop.
+    pub(crate) pipeline: bool,
+    /// Inside the loop printed beside a pipelined one: that pipe's C++ type, which its
+    /// `tile_matmul` names (`wp::tile_matmul_acc_beside`).
+    pub(crate) beside_pipe: Option<String>,
+    /// The C++ types of the pipelined loops printed (their occupancy hint goes on the entry).
+    pub(crate) pipes: Vec<String>,
 }
 
 /// Unswitched loops nest at most this deep; deeper ones test their flag at each access.
@@ -179,6 +188,9 @@ impl<'a> Emitter<'a> {
             in_range: Vec::new(),
             unswitched: 0,
             after_tile_op: false,
+            pipeline: false,
+            beside_pipe: None,
+            pipes: Vec::new(),
         }
     }
 
@@ -357,7 +369,7 @@ impl<'a> Emitter<'a> {
             }
             call.extend(["__launch".into(), "__flat".into(), "&__ctx_value".into()]);
             if self.f.tiled.is_some() {
-                let entry = Self::tile_entry(&decl.join(", "), &call.join(", "));
+                let entry = self.tile_entry(&decl.join(", "), &call.join(", "));
                 self.out.push_str(&entry);
                 return Ok(());
             }
@@ -388,7 +400,7 @@ impl<'a> Emitter<'a> {
         r
     }
 
-    fn close(&mut self) {
+    pub(crate) fn close(&mut self) {
         for _ in 0..self.indent {
             self.out.push_str("    ");
         }
@@ -417,7 +429,7 @@ impl<'a> Emitter<'a> {
         Ok(())
     }
 
-    fn stmt(&mut self, s: &Stmt) -> Result<(), String> {
+    pub(crate) fn stmt(&mut self, s: &Stmt) -> Result<(), String> {
         if self.f.tiled.is_some() && self.is_tile_stmt(s) {
             return self.tile_stmt(s);
         }
@@ -431,6 +443,11 @@ impl<'a> Emitter<'a> {
 
     fn stmt_plain(&mut self, s: &Stmt) -> Result<(), String> {
         let sp = s.span;
+        if self.pipeline && self.f.tiled.is_some() {
+            if let Some(g) = super::cuda_tile_pipe::gemm_loop(self.f, s) {
+                return self.gemm_pipe_loop(s, &g);
+            }
+        }
         match &s.kind {
             StmtKind::Declare { var } => {
                 let t = self

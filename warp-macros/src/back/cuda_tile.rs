@@ -145,7 +145,13 @@ impl Emitter<'_> {
                         {
                             e.section("tile_mma");
                         }
-                        format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1])
+                        match &e.beside_pipe {
+                            Some(pipe) if builtin.name == "tile_matmul_acc" => format!(
+                                "wp::tile_matmul_acc_beside<{pipe}>({d}, {}, {});",
+                                a[0], a[1]
+                            ),
+                            _ => format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1]),
+                        }
                     }
                     // `p = tile_sort(keys)`, then `x = tile_sort(x, p)` (the row's comment);
                     // `wp::tile_permute` may write the tile it reads.
@@ -265,10 +271,21 @@ impl Emitter<'_> {
     /// The entry of a tiled kernel: CUDA block `b` runs block `b` of the launch, `@@SELF@@` with
     /// `__flat = b` (its `tid()`), every thread of the CUDA block together. The launch has one
     /// CUDA block per block (at most `i32::MAX`, checked when it is prepared): no grid-stride
-    /// loop, whose hoisted address arithmetic cost the tile code a third more registers.
-    pub(crate) fn tile_entry(decl: &str, call: &str) -> String {
+    /// loop, whose hoisted address arithmetic cost the tile code a third more registers. With
+    /// pipelined GEMM loops, the bounds carry their blocks-per-SM hint (`MIN_BLOCKS`: two where
+    /// shared memory and accumulators allow, which caps registers so two blocks fit).
+    pub(crate) fn tile_entry(&self, decl: &str, call: &str) -> String {
+        let bounds = match self.pipes.split_first() {
+            None => "WP_TILE_BLOCK_DIM".to_string(),
+            Some((first, rest)) => {
+                let min = rest.iter().fold(format!("{first}::MIN_BLOCKS"), |m, p| {
+                    format!("({m} < {p}::MIN_BLOCKS ? {m} : {p}::MIN_BLOCKS)")
+                });
+                format!("WP_TILE_BLOCK_DIM, {min}")
+            }
+        };
         format!(
-        "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM) @@ENTRY@@({decl}) {{\n    \
+        "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__({bounds}) @@ENTRY@@({decl}) {{\n    \
          const wp::i64 __flat = (wp::i64)blockIdx.x;\n    \
          if (__flat < __launch.total) @@SELF@@({call});\n}}\n#endif\n"
     )
