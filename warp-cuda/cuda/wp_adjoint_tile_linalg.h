@@ -14,7 +14,8 @@
 // barrier. Each recomputes what it needs of the forward (the solution, the factor) with the
 // forward's own function, so it sees the forward's bits, into static shared scratch (N x K for
 // a solve's solution, twice for the Cholesky solve; N x N for the factor: counted with the
-// kernel's static shared memory in the launch's budget). The seed R is scratch too: its slot
+// kernel's static shared memory in the launch's budget; beyond CUDA's 48 KiB of static shared
+// memory, e.g. a 64 x 64 f64 Cholesky solve's, a compile error naming the operation). The seed R is scratch too: its slot
 // is the result's adjoint, which the sweep clears right after the call and nothing reads
 // before, so the adjoint solves run in place there. The solves use the block-wide sweeps
 // (tile_linalg_detail::substitute) at every size, which warp-core's order fixes as much as the
@@ -31,6 +32,11 @@ namespace tile_linalg_adjoint_detail {
 
 using tile_linalg_detail::rhs;
 using tile_linalg_detail::substitute;
+
+/// The static shared memory a block may declare (CUDA's limit: beyond it only dynamic shared
+/// memory, which the tiles' slots use). Scratch above it fails at compile time with the
+/// assertions below rather than with ptxas's "too much shared data".
+constexpr usize STATIC_SHARED_LIMIT = 48 * 1024;
 
 /// `adj[i][j] -= sum_c a[i][c] b[j][c]` (from zero, c ascending; rows of C values) over the
 /// lower (`Lower`, i >= j) or upper triangle.
@@ -63,6 +69,8 @@ WP_FN void adj_tile_lower_solve(const tile_t<T, N, N>& l, const X& y, const tile
                                 const X& adj_y, const X& r) {
   namespace d = tile_linalg_adjoint_detail;
   constexpr int C = d::rhs<X>::COLS;
+  static_assert(sizeof(T) * N * C <= d::STATIC_SHARED_LIMIT,
+                "backward through tile_lower_solve: its N x K scratch exceeds 48 KiB of static shared memory");
   WP_TILE_SHARED_ALIGNED T xs[d::rhs<X>::ROWS * C];
   const X x(xs);
   tile_lower_solve(x, l, y);
@@ -77,6 +85,8 @@ WP_FN void adj_tile_upper_solve(const tile_t<T, N, N>& u, const X& z, const tile
                                 const X& adj_z, const X& r) {
   namespace d = tile_linalg_adjoint_detail;
   constexpr int C = d::rhs<X>::COLS;
+  static_assert(sizeof(T) * N * C <= d::STATIC_SHARED_LIMIT,
+                "backward through tile_upper_solve: its N x K scratch exceeds 48 KiB of static shared memory");
   WP_TILE_SHARED_ALIGNED T xs[d::rhs<X>::ROWS * C];
   const X x(xs);
   tile_upper_solve(x, u, z);
@@ -92,6 +102,8 @@ WP_FN void adj_tile_cholesky_solve(const tile_t<T, N, N>& l, const X& y,
                                    const tile_t<T, N, N>& adj_l, const X& adj_y, const X& r) {
   namespace d = tile_linalg_adjoint_detail;
   constexpr int C = d::rhs<X>::COLS;
+  static_assert(2 * sizeof(T) * N * C <= d::STATIC_SHARED_LIMIT,
+                "backward through tile_cholesky_solve: its two N x K scratch tiles exceed 48 KiB of static shared memory");
   WP_TILE_SHARED_ALIGNED T zs[d::rhs<X>::ROWS * C];
   WP_TILE_SHARED_ALIGNED T xs[d::rhs<X>::ROWS * C];
   const X z(zs), x(xs);
@@ -112,6 +124,8 @@ template <typename T, int N>
 WP_FN void adj_tile_cholesky(const tile_t<T, N, N>& a, const tile_t<T, N, N>& adj_a,
                              const tile_t<T, N, N>& r) {
   namespace d = tile_linalg_adjoint_detail;
+  static_assert(sizeof(T) * N * N <= d::STATIC_SHARED_LIMIT,
+                "backward through tile_cholesky: its N x N scratch exceeds 48 KiB of static shared memory");
   WP_TILE_SHARED_ALIGNED T ls[N * N];
   const tile_t<T, N, N> l(ls);
   tile_cholesky(l, a);
