@@ -427,4 +427,87 @@ WP_FN void adstack_pop_tile(adstack_t* st, tile_t<T, D...>& t) {
   __syncthreads();
 }
 
+// ---- Scans ---------------------------------------------------------------------------------
+
+namespace tile_detail {
+
+/// `adj[e] += sum of seed(k) for k >= e`, as the forward's inclusive scan (wp_tile.h's
+/// scan_inclusive, warp-core's scan_with) of the reversed seed: lane l runs through chunk l of
+/// the reversed order for its total, thread 0 folds the totals into prefixes, and lane l runs
+/// through its chunk again adding prefix + running value.
+template <typename T, int N, typename Seed>
+WP_FN void add_suffix_sums(const tile_t<T, N>& adj, Seed seed) {
+  constexpr int C = (N + WP_TILE_BLOCK_DIM - 1) / WP_TILE_BLOCK_DIM;
+  constexpr int CHUNKS = (N + C - 1) / C;
+  WP_TILE_SHARED_ALIGNED T totals[CHUNKS];
+  const int l = (int)threadIdx.x;
+  const int start = l * C;
+  const int end = start + C < N ? start + C : N;
+  if (l < CHUNKS) {
+    T r = seed(N - 1 - start);
+    for (int p = start + 1; p < end; ++p) r = add_op{}(r, seed(N - 1 - p));
+    totals[l] = r;
+  }
+  __syncthreads();
+  if (l == 0) {
+    for (int k = 1; k < CHUNKS; ++k) totals[k] = add_op{}(totals[k - 1], totals[k]);
+  }
+  __syncthreads();
+  if (l < CHUNKS) {
+    T r = seed(N - 1 - start);
+    for (int p = start; p < end; ++p) {
+      if (p > start) r = add_op{}(r, seed(N - 1 - p));
+      adj_accum(adj.data[N - 1 - p], l > 0 ? add_op{}(totals[l - 1], r) : r);
+    }
+  }
+  __syncthreads();
+}
+
+/// Each `r[j]` to the element output j of a max (`Max`) or min scan came from: the first
+/// extremum of t[0..=j], a NaN losing to a number (t[0] while all are NaN); thread 0, j
+/// ascending.
+template <bool Max, typename T, int N>
+WP_FN void adj_scan_extreme(const tile_t<T, N>& t, const tile_t<T, N>& adj_t, const tile_t<T, N>& r) {
+  if (threadIdx.x == 0) {
+    int m = 0;
+    for (int j = 0; j < N; ++j) {
+      const T v = t.data[j], old = t.data[m];
+      const bool better = Max ? v > old : v < old;
+      if (better || (old != old && !(v != v))) m = j;
+      adj_accum(adj_t.data[m], r.data[j]);
+    }
+  }
+  __syncthreads();
+}
+
+}  // namespace tile_detail
+
+/// `tile_scan_inclusive(t)`: `adj_t[i] += sum of r[j] for j >= i`.
+template <typename T, int N>
+WP_FN void adj_tile_scan_inclusive(const tile_t<T, N>&, const tile_t<T, N>& adj_t, const tile_t<T, N>& r) {
+  const T* g = r.data;
+  tile_detail::add_suffix_sums(adj_t, [g](int k) { return g[k]; });
+}
+
+/// `tile_scan_exclusive(t)`: `adj_t[i] += sum of r[j] for j > i`.
+template <typename T, int N>
+WP_FN void adj_tile_scan_exclusive(const tile_t<T, N>&, const tile_t<T, N>& adj_t, const tile_t<T, N>& r) {
+  const T* g = r.data;
+  tile_detail::add_suffix_sums(adj_t, [g](int k) { return k + 1 < N ? g[k + 1] : T{}; });
+}
+
+/// `tile_scan_max_inclusive(t)`: each r[j] to the first maximum of t[0..=j].
+template <typename T, int N>
+WP_FN void adj_tile_scan_max_inclusive(const tile_t<T, N>& t, const tile_t<T, N>& adj_t,
+                                       const tile_t<T, N>& r) {
+  tile_detail::adj_scan_extreme<true>(t, adj_t, r);
+}
+
+/// `tile_scan_min_inclusive(t)`: each r[j] to the first minimum of t[0..=j].
+template <typename T, int N>
+WP_FN void adj_tile_scan_min_inclusive(const tile_t<T, N>& t, const tile_t<T, N>& adj_t,
+                                       const tile_t<T, N>& r) {
+  tile_detail::adj_scan_extreme<false>(t, adj_t, r);
+}
+
 }  // namespace wp

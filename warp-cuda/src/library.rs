@@ -198,7 +198,7 @@ pub static SECTIONS: &[Section] = &[
     kernel!("tile",      Some(header!("wp_adjoint_tile.h")),      Yes),
     // The tile Cholesky factor and triangular solves: exact too, so that they match warp-core's
     // tile::linalg bit for bit (its order of roundings; tests/cuda_tile_linalg_host.rs).
-    kernel!("tile_linalg", None,                                  Yes),
+    kernel!("tile_linalg", Some(header!("wp_adjoint_tile_linalg.h")), Yes),
     // The tile sort: comparisons and moves only, so nothing to round (bitonic, in shared memory).
     kernel!("tile_sort", None,                                    No),
     // The f16 tile matmul on tensor cores (its FMA fallback bit-exact with the CPU).

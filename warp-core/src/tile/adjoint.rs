@@ -31,6 +31,9 @@ use crate::grad::{AdStack, GradElement, GradView};
 use crate::index::IndexInt;
 use crate::view::ArrayView;
 
+// The linear algebra's and the scans' adjoints live beside their forwards' order of roundings.
+pub use super::adjoint_linalg::*;
+
 impl<T: Adjoint, const N0: usize> Adjoint for Tile1<T, N0> {
     #[inline(always)]
     fn adj_zero() -> Self {

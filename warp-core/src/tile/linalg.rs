@@ -32,16 +32,23 @@
 //! not compile (the macro reports it first, at the call).
 
 use super::{Tile1, Tile2};
-use core::ops::{Div, Mul, Sub};
+use core::ops::{Add, Div, Mul, Sub};
 
 /// The elements of the linear-algebra tiles: `f32` and `f64`.
 pub trait LinalgFloat:
-    Copy + PartialOrd + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self>
+    Copy
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
 {
     /// Zero.
     const ZERO: Self;
     /// One.
     const ONE: Self;
+    /// One half (the Cholesky adjoint's diagonal).
+    const HALF: Self;
     /// A quiet NaN (the factor of a matrix that is not positive definite).
     const NAN: Self;
     /// The correctly rounded square root (IEEE; CUDA's `sqrtf`/`sqrt` without fast math).
@@ -51,6 +58,7 @@ pub trait LinalgFloat:
 impl LinalgFloat for f32 {
     const ZERO: f32 = 0.0;
     const ONE: f32 = 1.0;
+    const HALF: f32 = 0.5;
     const NAN: f32 = f32::NAN;
     #[inline(always)]
     fn sqrt(self) -> f32 {
@@ -61,6 +69,7 @@ impl LinalgFloat for f32 {
 impl LinalgFloat for f64 {
     const ZERO: f64 = 0.0;
     const ONE: f64 = 1.0;
+    const HALF: f64 = 0.5;
     const NAN: f64 = f64::NAN;
     #[inline(always)]
     fn sqrt(self) -> f64 {
@@ -100,10 +109,13 @@ pub fn cholesky<T: LinalgFloat, const N: usize>(a: &Tile2<T, N, N>) -> Tile2<T, 
 }
 
 /// The right-hand sides of a solve: a 1-D tile (one column) or a 2-D tile (`K` columns), as
-/// `N` rows of `K` values.
-trait Rows<T, const N: usize> {
+/// `N` rows of `K` values (public for the solves' adjoints, `tile::adjoint`, which take either).
+pub trait Rows<T, const N: usize>: Copy {
+    /// The number of columns.
     const K: usize;
+    /// Row `i`, column `c`.
     fn at(&self, i: usize, c: usize) -> T;
+    /// Sets row `i`, column `c`.
     fn set(&mut self, i: usize, c: usize, v: T);
 }
 
@@ -133,7 +145,7 @@ impl<T: Copy, const N: usize, const K: usize> Rows<T, N> for Tile2<T, N, K> {
 
 /// Forward substitution in place: `x` holds `y` and becomes the solution of `M x = y`, `M`
 /// lower triangular, `M[i][j]` being `m[i][j]` or, `trans`, `m[j][i]`.
-fn forward<T: LinalgFloat, X: Rows<T, N>, const N: usize>(
+pub(super) fn forward<T: LinalgFloat, X: Rows<T, N>, const N: usize>(
     m: &Tile2<T, N, N>,
     trans: bool,
     x: &mut X,
@@ -152,7 +164,11 @@ fn forward<T: LinalgFloat, X: Rows<T, N>, const N: usize>(
 
 /// Back substitution in place: `x` holds `z` and becomes the solution of `M x = z`, `M` upper
 /// triangular, `M[i][j]` being `m[i][j]` or, `trans`, `m[j][i]`; `j` descending.
-fn back<T: LinalgFloat, X: Rows<T, N>, const N: usize>(m: &Tile2<T, N, N>, trans: bool, x: &mut X) {
+pub(super) fn back<T: LinalgFloat, X: Rows<T, N>, const N: usize>(
+    m: &Tile2<T, N, N>,
+    trans: bool,
+    x: &mut X,
+) {
     let at = |i: usize, j: usize| if trans { m.data[j][i] } else { m.data[i][j] };
     for c in 0..X::K {
         for i in (0..N).rev() {

@@ -28,6 +28,7 @@ use crate::index::IndexInt;
 use crate::ops::FromLiteral;
 
 pub mod adjoint;
+mod adjoint_linalg;
 pub mod atomic;
 pub mod convert;
 pub mod fft;

@@ -76,8 +76,14 @@ impl Printer<'_> {
         let mut out = TokenStream::new();
         for d in &self.adj.decls {
             let x = self.var(d.var);
-            out.extend(match ty_tokens(self.f().ty(d.var)) {
+            let ty = self.f().ty(d.var);
+            out.extend(match ty_tokens(ty) {
                 Some(t) => quote!(let mut #x: #t = __wp::adjoint::zero();),
+                // A statement's unit result (`tile_store`'s): named, since nothing may use it to
+                // infer its type (a store of a tile that needs no adjoint, an integer one).
+                None if *ty == crate::types::Ty::Unit => {
+                    quote!(let mut #x: () = __wp::adjoint::zero();)
+                }
                 None => quote!(let mut #x = __wp::adjoint::zero();),
             });
         }

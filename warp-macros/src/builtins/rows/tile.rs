@@ -61,6 +61,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // `tile_reduce(f, t)` with a binary builtin or `add`/`mul`, in the reductions' order.
     "tile_reduce": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     // Scans of 1-D tiles, in an order both backends share (warp-core's `tile::scan`).
+    // Backward: all four (`TILE_ADJOINTS`, warp-core's `tile::adjoint_linalg`).
     "tile_scan_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_scan_exclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_scan_max_inclusive": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent,
@@ -93,14 +94,14 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // element NaN when `a` is not positive definite. The solves take `L` (or `U`) square and a
     // right-hand side of as many rows, 1-D or 2-D (`K` columns), and return its shape:
     // `tile_cholesky_solve(L, y)` solves `L Lᵀ x = y`, `tile_lower_solve(L, y)` `L z = y`,
-    // `tile_upper_solve(U, z)` `U x = z`. Warp differentiates them; here backward through them
-    // is refused by name (`NotYet`) until tile adjoints exist.
-    "tile_cholesky": TILE_MATMUL, (Tile) -> Tile, "tile", NotYet, no_tangent, cooperative;
-    "tile_cholesky_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
+    // `tile_upper_solve(U, z)` `U x = z`. Backward: every one (`TILE_ADJOINTS`; warp-core's
+    // `tile::adjoint_linalg` documents the rules), into the triangle the forward reads.
+    "tile_cholesky": TILE_MATMUL, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    "tile_cholesky_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent,
         cooperative;
-    "tile_lower_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
+    "tile_lower_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent,
         cooperative;
-    "tile_upper_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", NotYet, no_tangent,
+    "tile_upper_solve": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent,
         cooperative;
     // FFTs: `tile_fft(&mut t)`, `tile_ifft(&mut t)` transform each row of a
     // `Tile<Vec2 | DVec2, M, N>` (complex values, `x` the real part) in place along the last

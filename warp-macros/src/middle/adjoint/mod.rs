@@ -134,7 +134,7 @@ pub const TILE_TANGENT: &str =
     "uses tiles, and forward-mode derivatives through tiles are not supported yet";
 
 pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
-    // A builtin with no adjoint yet (`Grad::NotYet`: the tile Cholesky factor and solves):
+    // A builtin with no adjoint yet (`Grad::NotYet`: the tile FFTs):
     // refused by name.
     let mut not_yet = None;
     walk_stmts(&f.body, &mut |s| {

@@ -72,6 +72,38 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_reshape", "adjoint"),
     ("tile_squeeze", "adjoint"),
     ("tile_diag_add", "adjoint"),
+    (
+        "tile_lower_solve",
+        "adjoint (into `L`'s lower triangle and `y`)",
+    ),
+    (
+        "tile_upper_solve",
+        "adjoint (into `U`'s upper triangle and `z`)",
+    ),
+    (
+        "tile_cholesky_solve",
+        "adjoint (into `L`'s lower triangle and `y`; Warp does not differentiate it)",
+    ),
+    (
+        "tile_cholesky",
+        "adjoint (with respect to `a`'s lower triangle, which it reads)",
+    ),
+    (
+        "tile_scan_inclusive",
+        "adjoint (suffix sums; Warp differentiates no scan)",
+    ),
+    (
+        "tile_scan_exclusive",
+        "adjoint (suffix sums; Warp differentiates no scan)",
+    ),
+    (
+        "tile_scan_max_inclusive",
+        "adjoint (to the first maximum so far; Warp differentiates no scan)",
+    ),
+    (
+        "tile_scan_min_inclusive",
+        "adjoint (to the first minimum so far; Warp differentiates no scan)",
+    ),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -159,8 +191,16 @@ fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
             ..
         } => {}
         Op::Builtin { builtin, args } => match builtin.name {
-            "tile_store" | "tile_sum" | "tile_transpose" | "tile_broadcast" | "tile_extract"
-            | "untile" | "tile_load" | "tile" => {}
+            "tile_store"
+            | "tile_sum"
+            | "tile_transpose"
+            | "tile_broadcast"
+            | "tile_extract"
+            | "untile"
+            | "tile_load"
+            | "tile"
+            | "tile_scan_inclusive"
+            | "tile_scan_exclusive" => {}
             "tile_matmul_acc" => args.iter().filter(|a| **a != dst).for_each(|a| out(*a)),
             _ => args.iter().for_each(|a| out(*a)),
         },
@@ -361,6 +401,22 @@ impl Cx<'_> {
                     }
                     ("tile_diag_add", _) => {
                         self.tile_call(&mut b, "adj_tile_diag_add", args, false, sp);
+                    }
+                    // The linear algebra recomputes the solution or the factor it needs from
+                    // its operands; the max and min scans their running extrema.
+                    (
+                        "tile_lower_solve"
+                        | "tile_upper_solve"
+                        | "tile_cholesky_solve"
+                        | "tile_cholesky"
+                        | "tile_scan_inclusive"
+                        | "tile_scan_exclusive"
+                        | "tile_scan_max_inclusive"
+                        | "tile_scan_min_inclusive",
+                        _,
+                    ) => {
+                        let func = format!("adj_{name}");
+                        self.tile_call(&mut b, &func, args, false, sp);
                     }
                     ("tile_broadcast", _) => {
                         let rank = |v: VarId| match f.ty(v) {
