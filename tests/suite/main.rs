@@ -122,6 +122,7 @@ mod tile_fft;
 mod tile_grad;
 mod tile_linalg;
 mod tile_sort;
+mod tile_views;
 mod tiles;
 mod tiles_f16;
 mod transforms;

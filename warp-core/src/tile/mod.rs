@@ -39,6 +39,7 @@ pub mod reduce;
 pub mod scan;
 pub mod shape;
 pub mod sort;
+pub mod view;
 
 pub use atomic::{atomic_add1, atomic_add2};
 pub use convert::{diag_add, reshape11, reshape12, reshape21, reshape22};
@@ -53,6 +54,7 @@ pub use reduce::{argmax, argmin, max, min, reduce, sum};
 pub use scan::{scan_exclusive, scan_inclusive, scan_max_inclusive, scan_min_inclusive};
 pub use shape::{broadcast11, broadcast12, broadcast22, transpose};
 pub use sort::{permute, sort_perm, SortKey};
+pub use view::{view11, view21, view22, window1, window2};
 
 /// A rank-1 tile of `N0` elements.
 #[derive(Clone, Copy, Debug, PartialEq)]

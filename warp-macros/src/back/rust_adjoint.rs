@@ -78,6 +78,11 @@ impl Printer<'_> {
             let x = self.var(d.var);
             out.extend(match ty_tokens(self.f().ty(d.var)) {
                 Some(t) => quote!(let mut #x: #t = __wp::adjoint::zero();),
+                // A unit result (`tile_store`'s) that no replayed statement assigns, as in a
+                // kernel of integer tiles only, would leave the type to infer.
+                None if *self.f().ty(d.var) == crate::types::Ty::Unit => {
+                    quote!(let mut #x: () = __wp::adjoint::zero();)
+                }
                 None => quote!(let mut #x = __wp::adjoint::zero();),
             });
         }
