@@ -592,7 +592,7 @@ where
 
 macro_rules! view_adjoints {
     ($($name:ident: ($($o:ident: $O:ident),+)),*) => {$(
-        /// The generated code's entry for [`adj_tile_view`] (the offsets one by one, each with
+        /// Adjoint of `v = tile_view(t, o..)`: `adj_t[o + i] += r[i]` (the offsets one by one, each with
         /// its unused adjoint; then the seed and the block size).
         #[allow(clippy::too_many_arguments)]
         pub fn $name<P, W, $($O),+>(
@@ -654,7 +654,8 @@ where
 
 macro_rules! window_adjoints {
     ($($name:ident, $clear:literal, $neg:literal: ($($o:ident: $O:ident),+)),*) => {$(
-        /// Adjoint of an in-place window form (see [`adj_window`]); the generated code's order:
+        /// Adjoint of an in-place window form (`tile_assign`: the window's adjoint to `src`, cleared
+        /// in `adj_dst`; the adds: passed through, negated into `src` for the sub); the order:
         /// `dst`, `src`, the offsets, their adjoints, the seed, the block size.
         #[allow(clippy::too_many_arguments)]
         pub fn $name<P, W, $($O),+>(
