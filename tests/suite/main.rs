@@ -123,6 +123,7 @@ mod tile_grad;
 mod tile_grad_linalg;
 mod tile_linalg;
 mod tile_sort;
+mod tile_views;
 mod tiles;
 mod tiles_f16;
 mod transforms;

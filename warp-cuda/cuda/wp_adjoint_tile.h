@@ -510,4 +510,104 @@ WP_FN void adj_tile_scan_min_inclusive(const tile_t<T, N>& t, const tile_t<T, N>
   tile_detail::adj_scan_extreme<false>(t, adj_t, r);
 }
 
+// ---- Windows: tile_view and the in-place forms (warp-core's tile::adjoint, "Windows") ------
+//
+// The replayed forward checked each window (and faulted when it did not fit); here a window
+// that does not fit moves nothing. The seed `r` of an in-place form is a view of `adj_d`'s own
+// slot (one adjoint for `d` before and after): each thread reads an element of it before it
+// clears that same element, so the two never race.
+
+namespace tile_detail {
+
+/// The starts of an `(m0, m1)` window at `(o0, o1)` in a tile of shape `(A, B)`; `false` when
+/// it does not fit.
+template <int A, int B, typename O0, typename O1>
+WP_FN bool window_fits2(O0 o0, O1 o1, int m0, int m1, i64* s0, i64* s1) {
+  i64 bad = 0;
+  return window_start(o0, m0, A, s0, &bad) && window_start(o1, m1, B, s1, &bad);
+}
+
+/// The adjoint of an in-place form over the window's elements (`p` the destination's index,
+/// `e` the source's): `adj_s[e] += r[p]` (`-=` for the sub); for `tile_assign`, `adj_d[p] = 0`.
+template <int Op, typename T>
+WP_FN void adj_window_elem(T* adj_d, T* adj_s, const T* r, i64 p, int e) {
+  const T g = r[p];
+  if constexpr (Op == WINDOW_SUB) adj_s[e] -= g;
+  else adj_s[e] += g;
+  if constexpr (Op == WINDOW_ASSIGN) adj_d[p] = T{};
+}
+
+template <int Op, typename T, int A, int M, typename O>
+WP_FN void adj_window1(O o, const tile_t<T, A>& adj_d, const tile_t<T, M>& adj_s, const tile_t<T, A>& r) {
+  i64 s = 0, bad = 0;
+  if (window_start(o, M, A, &s, &bad))
+    for (int i = (int)threadIdx.x; i < M; i += WP_TILE_BLOCK_DIM)
+      adj_window_elem<Op>(adj_d.data, adj_s.data, r.data, s + i, i);
+  __syncthreads();
+}
+
+template <int Op, typename T, int A, int B, int M, int N, typename O0, typename O1>
+WP_FN void adj_window2(O0 o0, O1 o1, const tile_t<T, A, B>& adj_d, const tile_t<T, M, N>& adj_s,
+                       const tile_t<T, A, B>& r) {
+  i64 s0 = 0, s1 = 0;
+  if (window_fits2<A, B>(o0, o1, M, N, &s0, &s1))
+    for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM)
+      adj_window_elem<Op>(adj_d.data, adj_s.data, r.data, (s0 + e / N) * B + s1 + e % N, e);
+  __syncthreads();
+}
+
+}  // namespace tile_detail
+
+/// `v = tile_view(t, o)` of a 1-D tile: `adj_t[o + i] += r[i]`.
+template <typename T, int A, int M, typename O>
+WP_FN void adj_tile_view1(const tile_t<T, A>&, O o, const tile_t<T, A>& adj_t, O&,
+                          const tile_t<T, M>& r, ctx_t*) {
+  i64 s = 0, bad = 0;
+  if (tile_detail::window_start(o, M, A, &s, &bad))
+    for (int i = (int)threadIdx.x; i < M; i += WP_TILE_BLOCK_DIM) adj_t.data[s + i] += r.data[i];
+  __syncthreads();
+}
+
+/// `v = tile_view(t, i)` of a 2-D tile (row `i`): `adj_t[i][j] += r[j]`.
+template <typename T, int A, int B, typename O>
+WP_FN void adj_tile_view1(const tile_t<T, A, B>&, O o, const tile_t<T, A, B>& adj_t, O&,
+                          const tile_t<T, B>& r, ctx_t*) {
+  i64 s = 0, bad = 0;
+  if (tile_detail::window_start(o, 1, A, &s, &bad))
+    for (int j = (int)threadIdx.x; j < B; j += WP_TILE_BLOCK_DIM) adj_t.data[s * B + j] += r.data[j];
+  __syncthreads();
+}
+
+/// `v = tile_view(t, (o0, o1))`: `adj_t[o0 + i][o1 + j] += r[i][j]`.
+template <typename T, int A, int B, int M, int N, typename O0, typename O1>
+WP_FN void adj_tile_view2(const tile_t<T, A, B>&, O0 o0, O1 o1, const tile_t<T, A, B>& adj_t, O0&,
+                          O1&, const tile_t<T, M, N>& r, ctx_t*) {
+  i64 s0 = 0, s1 = 0;
+  if (tile_detail::window_fits2<A, B>(o0, o1, M, N, &s0, &s1))
+    for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM)
+      adj_t.data[(s0 + e / N) * B + s1 + e % N] += r.data[e];
+  __syncthreads();
+}
+
+#define WP_ADJ_TILE_WINDOW(NAME, OP)                                                              \
+  template <typename T, int A, int M, typename O>                                                 \
+  WP_FN void NAME##1(const tile_t<T, A>&, const tile_t<T, M>&, O o, const tile_t<T, A>& adj_d,     \
+                     const tile_t<T, M>& adj_s, O&, const tile_t<T, A>& r, ctx_t*) {              \
+    tile_detail::adj_window1<OP>(o, adj_d, adj_s, r);                                             \
+  }                                                                                               \
+  template <typename T, int A, int B, int M, int N, typename O0, typename O1>                     \
+  WP_FN void NAME##2(const tile_t<T, A, B>&, const tile_t<T, M, N>&, O0 o0, O1 o1,                 \
+                     const tile_t<T, A, B>& adj_d, const tile_t<T, M, N>& adj_s, O0&, O1&,         \
+                     const tile_t<T, A, B>& r, ctx_t*) {                                          \
+    tile_detail::adj_window2<OP>(o0, o1, adj_d, adj_s, r);                                        \
+  }
+
+/// `tile_assign(&mut d, s, o)`: `adj_s += r` over the window, which is cleared in `adj_d`.
+WP_ADJ_TILE_WINDOW(adj_tile_assign, WINDOW_ASSIGN)
+/// `tile_add_inplace(&mut d, s, o)`: `adj_s += r` over the window; `adj_d` passes through.
+WP_ADJ_TILE_WINDOW(adj_tile_add_inplace, WINDOW_ADD)
+/// `tile_sub_inplace(&mut d, s, o)`: `adj_s -= r` over the window; `adj_d` passes through.
+WP_ADJ_TILE_WINDOW(adj_tile_sub_inplace, WINDOW_SUB)
+#undef WP_ADJ_TILE_WINDOW
+
 }  // namespace wp

@@ -31,6 +31,9 @@
 //   tile_argmin, tile_argmax(out, t)   the row-major index into a 1-element i32 tile, in the
 //                        order below over (value, index) pairs (both shuffled)
 //   tile_matmul(c, a, b), tile_matmul_acc(c, a, b)   FMA matmul (f32, f64), see below
+//   tile_view(out, t, o0[, o1]), tile_window<op>(d, s, o0[, o1])   a copy of a window of t;
+//                        s written (added, ..) into d's window in place; a window outside
+//                        the tile faults and moves nothing (the section "Windows" below)
 //
 // Reduction order (warp-core/src/tile/reduce.rs documents it; the two must stay the same). With
 // S elements, BD = WP_TILE_BLOCK_DIM and ACTIVE = min(S, BD) (the lanes that own an element):
@@ -1163,6 +1166,152 @@ template <typename T, int N>
 WP_FN void tile_diag_add(const tile_t<T, N, N>& out, const tile_t<T, N, N>& a, const tile_t<T, N>& d) {
   for (int k = (int)threadIdx.x; k < N * N; k += WP_TILE_BLOCK_DIM)
     out.data[k] = (k / N == k % N) ? detail::s_add(a.data[k], d.data[k / N]) : a.data[k];
+  __syncthreads();
+}
+
+// ---- Windows: tile_view and the in-place forms (warp-core's tile::view) --------------------
+//
+// A window of extent M at offset o on an axis of extent N must lie inside it (0 <= o and
+// o + M <= N); otherwise the operation faults (FAULT_TILE_INDEX with the parent's shape, the
+// index being the offsets with the first bad axis's coordinate: the offset where it is out of
+// range, else the window's last coordinate), reads and writes nothing, and a view is zeros.
+// Every thread checks the same (uniform) offsets, so all take the same path.
+
+namespace tile_detail {
+
+/// The start of a window of extent `m` at offset `o` on an axis of extent `n`; `false` with
+/// the coordinate to report in `*bad` when it does not fit.
+template <typename O>
+WP_FN bool window_start(O o, int m, int n, i64* start, i64* bad) {
+  const u64 big = 0x7fffffffffffffffull;
+  i64 w;
+  if constexpr (num<O>::is_signed) {
+    w = (i64)o;
+  } else {
+    if ((u64)o > big) {
+      *bad = (i64)big;
+      return false;
+    }
+    w = (i64)(u64)o;
+  }
+  if (w < 0 || w >= (i64)n) {
+    *bad = w;
+    return false;
+  }
+  if (w + (i64)m - 1 >= (i64)n) {
+    *bad = w + (i64)m - 1;
+    return false;
+  }
+  *start = w;
+  return true;
+}
+
+/// An offset as the fault reports it (u64 beyond i64 saturates, as warp-core's).
+template <typename O>
+WP_FN i64 offset_index(O o) {
+  if constexpr (num<O>::is_signed) return (i64)o;
+  return (u64)o > 0x7fffffffffffffffull ? (i64)0x7fffffffffffffffll : (i64)(u64)o;
+}
+
+/// The starts of an `(M0, M1)` window at `(o0, o1)` in a tile of shape `(A, B)` (M0 = 1, B
+/// for a row), or the fault (then `false`).
+template <typename T, int A, int B, typename O0, typename O1>
+WP_FN bool window_starts2(O0 o0, O1 o1, int m0, int m1, i64* s0, i64* s1, ctx_t* ctx) {
+  i64 bad = 0;
+  i64 idx[2] = {offset_index(o0), offset_index(o1)};
+  if (!window_start(o0, m0, A, s0, &bad)) {
+    idx[0] = bad;
+  } else if (!window_start(o1, m1, B, s1, &bad)) {
+    idx[1] = bad;
+  } else {
+    return true;
+  }
+  tile_index_fault<T, A, B>(ctx, idx);
+  return false;
+}
+
+}  // namespace tile_detail
+
+/// `tile_view(t, o)` of a 1-D tile: a copy of the `M` elements from `o`.
+template <typename T, int A, int M, typename O>
+WP_FN void tile_view(const tile_t<T, M>& out, const tile_t<T, A>& t, O o, ctx_t* ctx) {
+  static_assert(M <= A, "tile_view: the view is larger than the tile");
+  i64 s = 0, bad = 0;
+  const bool ok = tile_detail::window_start(o, M, A, &s, &bad);
+  if (!ok) {
+    const i64 idx[1] = {bad};
+    tile_index_fault<T, A>(ctx, idx);
+  }
+  for (int i = (int)threadIdx.x; i < M; i += WP_TILE_BLOCK_DIM) out.data[i] = ok ? t.data[s + i] : T{};
+  __syncthreads();
+}
+
+/// `tile_view(t, i)` of a 2-D tile: a copy of row `i`.
+template <typename T, int A, int B, typename O>
+WP_FN void tile_view(const tile_t<T, B>& out, const tile_t<T, A, B>& t, O o, ctx_t* ctx) {
+  i64 s0 = 0, s1 = 0;
+  const bool ok = tile_detail::window_starts2<T, A, B>(o, 0, 1, B, &s0, &s1, ctx);
+  for (int j = (int)threadIdx.x; j < B; j += WP_TILE_BLOCK_DIM)
+    out.data[j] = ok ? t.data[s0 * B + j] : T{};
+  __syncthreads();
+}
+
+/// `tile_view(t, (o0, o1))` of a 2-D tile: a copy of the `(M, N)` window at `(o0, o1)`.
+template <typename T, int A, int B, int M, int N, typename O0, typename O1>
+WP_FN void tile_view(const tile_t<T, M, N>& out, const tile_t<T, A, B>& t, O0 o0, O1 o1, ctx_t* ctx) {
+  static_assert(M <= A && N <= B, "tile_view: the view is larger than the tile");
+  i64 s0 = 0, s1 = 0;
+  const bool ok = tile_detail::window_starts2<T, A, B>(o0, o1, M, N, &s0, &s1, ctx);
+  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM)
+    out.data[e] = ok ? t.data[(s0 + e / N) * B + s1 + e % N] : T{};
+  __syncthreads();
+}
+
+/// The element operations of the in-place window forms (warp-core's `tile::view::op`).
+enum window_op { WINDOW_ASSIGN, WINDOW_ADD, WINDOW_SUB, WINDOW_AND, WINDOW_OR, WINDOW_XOR };
+
+namespace tile_detail {
+template <int Op, typename T>
+WP_FN T window_apply(T d, T s) {
+  if constexpr (Op == WINDOW_ASSIGN) return s;
+  else if constexpr (Op == WINDOW_ADD) return detail::s_add(d, s);
+  else if constexpr (Op == WINDOW_SUB) return detail::s_sub(d, s);
+  else if constexpr (Op == WINDOW_AND) return (T)(d & s);
+  else if constexpr (Op == WINDOW_OR) return (T)(d | s);
+  else return (T)(d ^ s);
+}
+}  // namespace tile_detail
+
+/// `tile_assign(&mut d, s, o)` and the `_inplace` forms, 1-D: `d[o + i] = op(d[o + i], s[i])`.
+/// Each thread reads `s` before it writes `d` (the same element), so `s` may be `d` itself.
+template <int Op, typename T, int A, int M, typename O>
+WP_FN void tile_window(const tile_t<T, A>& d, const tile_t<T, M>& s, O o, ctx_t* ctx) {
+  static_assert(M <= A, "tile_assign: the source is larger than the destination");
+  i64 st = 0, bad = 0;
+  if (tile_detail::window_start(o, M, A, &st, &bad)) {
+    for (int i = (int)threadIdx.x; i < M; i += WP_TILE_BLOCK_DIM) {
+      const T x = s.data[i];
+      d.data[st + i] = tile_detail::window_apply<Op>(d.data[st + i], x);
+    }
+  } else {
+    const i64 idx[1] = {bad};
+    tile_index_fault<T, A>(ctx, idx);
+  }
+  __syncthreads();
+}
+
+/// The same, 2-D: the `(M, N)` window of `d` at `(o0, o1)`.
+template <int Op, typename T, int A, int B, int M, int N, typename O0, typename O1>
+WP_FN void tile_window(const tile_t<T, A, B>& d, const tile_t<T, M, N>& s, O0 o0, O1 o1, ctx_t* ctx) {
+  static_assert(M <= A && N <= B, "tile_assign: the source is larger than the destination");
+  i64 s0 = 0, s1 = 0;
+  if (tile_detail::window_starts2<T, A, B>(o0, o1, M, N, &s0, &s1, ctx)) {
+    for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
+      const T x = s.data[e];
+      T* p = &d.data[(s0 + e / N) * B + s1 + e % N];
+      *p = tile_detail::window_apply<Op>(*p, x);
+    }
+  }
   __syncthreads();
 }
 

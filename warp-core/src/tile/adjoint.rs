@@ -556,3 +556,136 @@ where
         *v = lanes[e % bd].pop();
     }
 }
+
+// ---- Windows: views and the in-place forms -------------------------------------------------
+
+/// The window of a view or an in-place form: its offsets on the parent's axes (0 past the
+/// ones given) and its shape on them (1 on a dropped leading axis).
+fn window_of<P: Tile, W: Tile>(offs: &[i128]) -> ([i128; 2], [usize; 2]) {
+    let mut o = [0i128; 2];
+    o[..offs.len()].copy_from_slice(offs);
+    let mut shape = [1usize; 2];
+    // The window's dims are aligned with the parent's trailing ones.
+    let drop = P::RANK - W::RANK;
+    shape[drop..P::RANK].copy_from_slice(&W::SHAPE[..W::RANK]);
+    (o, shape)
+}
+
+/// Adjoint of `v = tile_view(t, o..)` (a copy of a window): `adj_t[o + i] += r[i]` (the forward
+/// checked the window; one outside the tile is the same fault here).
+fn adj_tile_view<P, W>(
+    _t: &P,
+    offs: &[i128],
+    adj_t: &mut P,
+    r: &W,
+    kernel: &'static str,
+) -> KResult<()>
+where
+    P: Tile,
+    W: Tile<Elem = P::Elem>,
+    P::Elem: Adjoint,
+{
+    let (o, shape) = window_of::<P, W>(offs);
+    let (a, g) = (adj_t.as_flat_mut(), r.as_flat());
+    for (p, w) in super::view::window_pairs::<P>(o, shape, kernel)? {
+        a[p].adj_accum(g[w]);
+    }
+    Ok(())
+}
+
+macro_rules! view_adjoints {
+    ($($name:ident: ($($o:ident: $O:ident),+)),*) => {$(
+        /// Adjoint of `v = tile_view(t, o..)`: `adj_t[o + i] += r[i]` (the offsets one by one, each with
+        /// its unused adjoint; then the seed and the block size).
+        #[allow(clippy::too_many_arguments)]
+        pub fn $name<P, W, $($O),+>(
+            t: &P,
+            $($o: $O,)+
+            adj_t: &mut P,
+            $(_: &mut $O,)+
+            r: &W,
+            _bd: usize,
+        ) -> KResult<()>
+        where
+            P: Tile,
+            W: Tile<Elem = P::Elem>,
+            P::Elem: Adjoint,
+            $($O: IndexInt,)+
+        {
+            let offs = [$(($o).widen()),+];
+            // The replayed forward checked the window, so this fault is never reached; the
+            // seed-and-block-size tail of the block adjoints carries no kernel name.
+            adj_tile_view(t, &offs, adj_t, r, "tile_view")
+        }
+    )*};
+}
+view_adjoints!(adj_tile_view1: (o0: O0), adj_tile_view2: (o0: O0, o1: O1));
+
+/// Adjoint of an in-place window form, `dst = op(dst[o + i], src[i])`, with the seed `r` (the
+/// adjoint of `dst` after): `src`'s adjoint gains `g(r[o + i])` where `g` is the form's
+/// derivative in `src` (`+r`, `-r`), and, for `tile_assign` (`clear`), `dst`'s adjoint is zero
+/// in the window (those elements were replaced: the value before did not reach the result);
+/// elsewhere, and everywhere for the adds, it passes through unchanged (one slot holds the
+/// adjoint of `dst` before and after).
+fn adj_window<P, W>(
+    offs: &[i128],
+    adj_dst: &mut P,
+    adj_src: &mut W,
+    r: &P,
+    clear: bool,
+    negate: bool,
+) -> KResult<()>
+where
+    P: Tile,
+    W: Tile<Elem = P::Elem>,
+    P::Elem: Adjoint + AdjNeg + Copy,
+{
+    let (o, shape) = window_of::<P, W>(offs);
+    let (ad, asrc, g) = (adj_dst.as_flat_mut(), adj_src.as_flat_mut(), r.as_flat());
+    for (p, w) in super::view::window_pairs::<P>(o, shape, "tile_assign")? {
+        if negate {
+            crate::adjoint::adj_neg(g[p], &mut asrc[w], g[p]);
+        } else {
+            asrc[w].adj_accum(g[p]);
+        }
+        if clear {
+            ad[p] = P::Elem::adj_zero();
+        }
+    }
+    Ok(())
+}
+
+macro_rules! window_adjoints {
+    ($($name:ident, $clear:literal, $neg:literal: ($($o:ident: $O:ident),+)),*) => {$(
+        /// Adjoint of an in-place window form (`tile_assign`: the window's adjoint to `src`, cleared
+        /// in `adj_dst`; the adds: passed through, negated into `src` for the sub); the order:
+        /// `dst`, `src`, the offsets, their adjoints, the seed, the block size.
+        #[allow(clippy::too_many_arguments)]
+        pub fn $name<P, W, $($O),+>(
+            _dst: &P,
+            _src: &W,
+            $($o: $O,)+
+            adj_dst: &mut P,
+            adj_src: &mut W,
+            $(_: &mut $O,)+
+            r: &P,
+            _bd: usize,
+        ) -> KResult<()>
+        where
+            P: Tile,
+            W: Tile<Elem = P::Elem>,
+            P::Elem: Adjoint + AdjNeg + Copy,
+            $($O: IndexInt,)+
+        {
+            adj_window(&[$(($o).widen()),+], adj_dst, adj_src, r, $clear, $neg)
+        }
+    )*};
+}
+window_adjoints!(
+    adj_tile_assign1, true, false: (o0: O0),
+    adj_tile_assign2, true, false: (o0: O0, o1: O1),
+    adj_tile_add_inplace1, false, false: (o0: O0),
+    adj_tile_add_inplace2, false, false: (o0: O0, o1: O1),
+    adj_tile_sub_inplace1, false, true: (o0: O0),
+    adj_tile_sub_inplace2, false, true: (o0: O0, o1: O1)
+);

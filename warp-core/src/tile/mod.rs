@@ -14,7 +14,7 @@
 //! Files by concept: this module holds the types, their constructors and element access;
 //! [`ops`] the elementwise operators and `map`; [`load`] loads and stores against array views;
 //! [`reduce`](mod@reduce) the reductions in the GPU's order; [`matmul`](mod@matmul) the FMA
-//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`sort`](mod@sort) the sort's permutation; [`convert`] reshapes and `tile_diag_add`; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order; [`fft`](mod@fft) the FFTs of tiles of complex values (`Vec2`, `DVec2`). The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
+//! matrix product; [`shape`] transposes and broadcasts; [`scan`](mod@scan) the scans in a shared order; [`sort`](mod@sort) the sort's permutation; [`convert`] reshapes and `tile_diag_add`; [`atomic`] the atomic add of a tile; [`linalg`] the Cholesky factor and the triangular solves, in the GPU's order; [`fft`](mod@fft) the FFTs of tiles of complex values (`Vec2`, `DVec2`). [`view`] the windows: `tile_view` and `tile_assign` with the in-place forms. The per-lane side (`tile(x)`, `untile`) is in [`crate::block`].
 //!
 //! Nothing here allocates or panics on a kernel's data: an index outside a tile is a
 //! [`FaultKind::TileIndex`] fault, and an array coordinate outside the array is a zero read or
@@ -40,6 +40,7 @@ pub mod reduce;
 pub mod scan;
 pub mod shape;
 pub mod sort;
+pub mod view;
 
 pub use atomic::{atomic_add1, atomic_add2};
 pub use convert::{diag_add, reshape11, reshape12, reshape21, reshape22};
@@ -54,6 +55,7 @@ pub use reduce::{argmax, argmin, max, min, reduce, sum};
 pub use scan::{scan_exclusive, scan_inclusive, scan_max_inclusive, scan_min_inclusive};
 pub use shape::{broadcast11, broadcast12, broadcast22, transpose};
 pub use sort::{permute, sort_perm, SortKey};
+pub use view::{view11, view21, view22, window1, window2};
 
 /// A rank-1 tile of `N0` elements.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -177,6 +177,27 @@ impl Emitter<'_> {
                         e.section("tile_linalg");
                         format!("wp::{}({d}, {}, {});", builtin.name, a[0], a[1])
                     }
+                    "tile_view" => format!("wp::tile_view({d}, {}, __ctx);", a.join(", ")),
+                    // In place: the statement's destination is its first argument's slot.
+                    "tile_assign"
+                    | "tile_add_inplace"
+                    | "tile_sub_inplace"
+                    | "tile_bit_and_inplace"
+                    | "tile_bit_or_inplace"
+                    | "tile_bit_xor_inplace" => {
+                        let op = match builtin.name {
+                            "tile_assign" => "WINDOW_ASSIGN",
+                            "tile_add_inplace" => "WINDOW_ADD",
+                            "tile_sub_inplace" => "WINDOW_SUB",
+                            "tile_bit_and_inplace" => "WINDOW_AND",
+                            "tile_bit_or_inplace" => "WINDOW_OR",
+                            _ => "WINDOW_XOR",
+                        };
+                        format!(
+                            "wp::tile_window<wp::{op}>({d}, {}, __ctx);",
+                            a[1..].join(", ")
+                        )
+                    }
                     "tile_fft" | "tile_ifft" => {
                         // In place: the statement's destination is its argument's slot.
                         e.section("tile_fft");

@@ -115,6 +115,32 @@ impl RustEmitter<'_> {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::#f(&#x))
             }
+            "tile_view" => {
+                let (x, offs) = (&v[0], &v[1..]);
+                let to = match ty {
+                    Ty::Tile(_, d) => d.len(),
+                    _ => 0,
+                };
+                let f = format_ident!("view{}{}", rank(&args[0]), to);
+                quote_spanned!(sp=> __wp::tile::#f(&#x, #(#offs,)* #name)?)
+            }
+            // `d = window(&d, &s, o..)`: the statement assigns the destination its new value.
+            "tile_assign"
+            | "tile_add_inplace"
+            | "tile_sub_inplace"
+            | "tile_bit_and_inplace"
+            | "tile_bit_or_inplace"
+            | "tile_bit_xor_inplace" => {
+                let (d, s, offs) = (&v[0], &v[1], &v[2..]);
+                let f = format_ident!("window{}", offs.len());
+                let op = format_ident!(
+                    "{}",
+                    b.name
+                        .trim_start_matches("tile_")
+                        .trim_end_matches("_inplace")
+                );
+                quote_spanned!(sp=> __wp::tile::#f(&#d, &#s, #(#offs,)* #name, __wp::tile::view::op::#op)?)
+            }
             "tile_transpose" => {
                 let x = &v[0];
                 quote_spanned!(sp=> __wp::tile::transpose(&#x))

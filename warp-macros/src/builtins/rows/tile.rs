@@ -123,4 +123,27 @@ pub(super) const ROWS: &[Builtin] = rows! {
         cooperative;
     "tile_squeeze": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_diag_add": TILE_ELEM, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
+    // Windows (warp-core's `tile::view`, wp_tile.h's `tile_view`/`tile_window`): a window must
+    // lie inside the tile (a constant offset outside is an error at the call; a run-time one,
+    // a `TileIndex` fault, nothing read or written). `tile_view::<M, N>(t, (i, j))` (or
+    // Warp's `tile_view(t, (i, j), (M, N))`, or the annotation's shape): a copy of the window;
+    // `tile_view(t, i)` of a 2-D tile, row `i`. `tile_assign(&mut d, s, (i, j))` writes `s`
+    // into `d`'s window at the offset (zeros when absent); the `_inplace` forms combine it
+    // with the window's elements (`+`, `-`; `& | ^` of integer tiles). Backward: a view adds
+    // its adjoint into the window's; `tile_assign` hands the window's adjoint to `s` and
+    // clears it; the adds pass it through (`-` to `s` for the sub).
+    "tile_view": TILE_ELEM, (Tile, Offsets, TileShape) -> Tile, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_assign": TILE_ELEM, (Tile, Tile, Offsets) -> Unit, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_add_inplace": TILE_ELEM, (Tile, Tile, Offsets) -> Unit, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_sub_inplace": TILE_ELEM, (Tile, Tile, Offsets) -> Unit, "tile", Adjoint, no_tangent,
+        cooperative;
+    "tile_bit_and_inplace": TILE_ELEM, (Tile, Tile, Offsets) -> Unit, "tile", Zero,
+        cooperative;
+    "tile_bit_or_inplace": TILE_ELEM, (Tile, Tile, Offsets) -> Unit, "tile", Zero,
+        cooperative;
+    "tile_bit_xor_inplace": TILE_ELEM, (Tile, Tile, Offsets) -> Unit, "tile", Zero,
+        cooperative;
 };

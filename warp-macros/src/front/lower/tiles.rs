@@ -16,6 +16,8 @@ use crate::types::Dim;
 mod convert;
 #[path = "tiles_linalg.rs"]
 mod linalg;
+#[path = "tiles_view.rs"]
+mod view;
 
 /// A tile's element and dims, from its type.
 fn tile_parts(t: &Ty) -> Option<(&Ty, &[Dim])> {
@@ -274,6 +276,13 @@ impl Lowerer {
                 self.tile_linalg(row, &args, span)?
             }
             "tile_fft" | "tile_ifft" => self.tile_fft(row, &args, span)?,
+            "tile_view" => self.tile_view(row, &args, fish_dims, want_tile, span)?,
+            "tile_assign"
+            | "tile_add_inplace"
+            | "tile_sub_inplace"
+            | "tile_bit_and_inplace"
+            | "tile_bit_or_inplace"
+            | "tile_bit_xor_inplace" => self.tile_window(row, &args, span)?,
             "tile_extract" => {
                 return err(
                     span,

@@ -104,6 +104,10 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
         "tile_scan_min_inclusive",
         "adjoint (to the first minimum so far; Warp differentiates no scan)",
     ),
+    ("tile_view", "adjoint"),
+    ("tile_assign", "adjoint"),
+    ("tile_add_inplace", "adjoint"),
+    ("tile_sub_inplace", "adjoint"),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -201,6 +205,14 @@ fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
             | "tile"
             | "tile_scan_inclusive"
             | "tile_scan_exclusive" => {}
+            // The windows' adjoints move adjoints around; they read no tile's value.
+            "tile_view"
+            | "tile_assign"
+            | "tile_add_inplace"
+            | "tile_sub_inplace"
+            | "tile_bit_and_inplace"
+            | "tile_bit_or_inplace"
+            | "tile_bit_xor_inplace" => {}
             "tile_matmul_acc" => args.iter().filter(|a| **a != dst).for_each(|a| out(*a)),
             _ => args.iter().for_each(|a| out(*a)),
         },
@@ -337,6 +349,26 @@ impl Cx<'_> {
                     }
                     return Some(vec![at(AKind::Scope(b), sp)]);
                 }
+                // `d = op(d[window], s)` sets the tile it reads, as the accumulating matmul:
+                // one adjoint slot is `d`'s after and before; the library call hands the
+                // window's adjoint to `s` and, for `tile_assign`, clears it there.
+                "tile_assign" | "tile_add_inplace" | "tile_sub_inplace" => {
+                    let (d, src) = (args[0], args[1]);
+                    if d == src {
+                        self.refuse(&format!("a `{name}` of a tile into itself"));
+                        return Some(Vec::new());
+                    }
+                    if self.diff(d) {
+                        let seed = GradSrc::Adj {
+                            var: d,
+                            path: Vec::new(),
+                        };
+                        b.push(at(AKind::Seed(seed), sp));
+                        let func = format!("adj_{name}{}", args.len() - 2);
+                        self.tile_call(&mut b, &func, args, true, sp);
+                    }
+                    return Some(vec![at(AKind::Scope(b), sp)]);
+                }
                 "untile" => {
                     if self.diff(dst) {
                         let (lanes, tile) = (dst, args[0]);
@@ -417,6 +449,11 @@ impl Cx<'_> {
                     ) => {
                         let func = format!("adj_{name}");
                         self.tile_call(&mut b, &func, args, false, sp);
+                    }
+                    // The copy of a window: its adjoint adds into the window's.
+                    ("tile_view", _) => {
+                        let func = format!("adj_tile_view{}", args.len() - 1);
+                        self.tile_call(&mut b, &func, args, true, sp);
                     }
                     ("tile_broadcast", _) => {
                         let rank = |v: VarId| match f.ty(v) {
