@@ -360,9 +360,7 @@ WP_FN int swz(int r, int u) {
   else return u;
 }
 template <int U>
-constexpr bool swz_ok() {
-  return U % 8 == 0 || U == 4 || U == 2 || U == 1;
-}
+constexpr bool swz_ok = U % 8 == 0 || U == 4 || U == 2 || U == 1;
 
 /// The plan of the pipelined k-loop of an M x K by K x N f16 product.
 ///
@@ -408,7 +406,7 @@ struct pipe_plan {
   static constexpr int WT = P::FITS ? (P::MT / FM) * WTN : 1;
   /// Warp tiles a warp owns.
   static constexpr int NW = (WT + WARPS - 1) / WARPS;
-  static constexpr bool FITS = P::FITS && swz_ok<UA>() && swz_ok<UB>() && STAGES >= 2 &&
+  static constexpr bool FITS = P::FITS && swz_ok<UA> && swz_ok<UB> && STAGES >= 2 &&
                                NW * FM * FN * 4 <= 128;
 };
 
@@ -586,9 +584,8 @@ struct tile_gemm_pipe {
                            const tile_t<f16, K, N>& b) {
     if (!ON) return false;
     if (!WGM) return true;
-    const auto al = [](const void* p) { return ((usize)p & 1023) == 0; };
-    return al(c.data) && al(a.data) && al(b.data) && (PP::SA % 1024) == 0 &&
-           (PP::SB % 1024) == 0;
+    const usize bits = (usize)c.data | (usize)a.data | (usize)b.data;
+    return (bits & 1023) == 0 && (PP::SA % 1024) == 0 && (PP::SB % 1024) == 0;
   }
 
   WP_FN f16* stage_a(int s) const {
