@@ -106,9 +106,10 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // `Tile<Vec2 | DVec2, M, N>` (complex values, `x` the real part) in place along the last
     // axis, `N` a power of two; the inverse is unnormalised, as Warp's (`ifft(fft(x)) = N x`).
     // A radix-2 FFT in the order warp-core's `tile::fft` documents, which the CUDA section
-    // `tile_fft` shares bit for bit.
-    "tile_fft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
-    "tile_ifft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
+    // `tile_fft` shares bit for bit. Backward: each is the other's adjoint, on the tile's
+    // adjoint in place (`middle::adjoint::tiles`).
+    "tile_fft": TILE_FFT, (Tile) -> Unit, "tile", Adjoint, no_tangent, cooperative;
+    "tile_ifft": TILE_FFT, (Tile) -> Unit, "tile", Adjoint, no_tangent, cooperative;
     // Conversions (warp-core's `tile::convert`). `tile_full::<f32, 16, 8>(x)` (shape and element
     // as `tile_zeros`'s, or the annotation's): every element `x`. `tile_astype::<U>(t)`: each
     // element `as U`. `tile_reshape::<M, N>(t)` (or the annotation's shape): the elements in

@@ -38,6 +38,12 @@
 //!
 //! The accumulating `tile_matmul(a, b, &mut acc)` sets the tile it reads: the adjoint of `acc`
 //! before it is the adjoint after it, so the seed is neither cleared nor accumulated into.
+//! `tile_fft(&mut t)` and `tile_ifft(&mut t)` set the tile they read too: their adjoint call
+//! gets the adjoint slot of `t` both as the seed and as the operand's adjoint, and replaces it
+//! with the seed's adjoint transform (nothing earlier has added to the adjoint of `t` before
+//! the transform, so replacing is accumulating into zero); the slot is not cleared after.
+//! Being linear, they need no history of `t`: a `let mut t` that only the transforms, loads,
+//! stores and sums read is never pushed.
 
 use super::{at, AKind, AStmt, Arg, Cx, GradArg, GradSrc, TempLike};
 use crate::builtins::Grad;
@@ -72,6 +78,8 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_reshape", "adjoint"),
     ("tile_squeeze", "adjoint"),
     ("tile_diag_add", "adjoint"),
+    ("tile_fft", "adjoint (`tile_ifft` of the seed, in place)"),
+    ("tile_ifft", "adjoint (`tile_fft` of the seed, in place)"),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -160,7 +168,7 @@ fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
         } => {}
         Op::Builtin { builtin, args } => match builtin.name {
             "tile_store" | "tile_sum" | "tile_transpose" | "tile_broadcast" | "tile_extract"
-            | "untile" | "tile_load" | "tile" => {}
+            | "untile" | "tile_load" | "tile" | "tile_fft" | "tile_ifft" => {}
             "tile_matmul_acc" => args.iter().filter(|a| **a != dst).for_each(|a| out(*a)),
             _ => args.iter().for_each(|a| out(*a)),
         },
@@ -255,6 +263,21 @@ impl Cx<'_> {
                 self.refuse(name);
                 return Some(Vec::new());
             }
+            // Tiles of vectors (complex values) have the adjoints of the rows made for them
+            // (and of `+ -` and scaling, which are not rows); the other rules are written for
+            // scalar elements.
+            let vector = |v: &VarId| f.ty(*v).is_vector_tile();
+            let for_vectors = matches!(
+                name,
+                "tile_load" | "tile_store" | "tile_extract" | "tile_fft" | "tile_ifft"
+            );
+            if builtin.grad != Grad::Zero
+                && !for_vectors
+                && (vector(&dst) || args.iter().any(vector))
+            {
+                self.refuse(&format!("`{name}` on tiles of vectors"));
+                return Some(Vec::new());
+            }
             match name {
                 // The store hands each written element's gradient to the tile.
                 "tile_store" => {
@@ -294,6 +317,21 @@ impl Cx<'_> {
                         };
                         b.push(at(AKind::Seed(seed), sp));
                         self.tile_call(&mut b, "adj_tile_matmul", &[a, bb], false, sp);
+                    }
+                    return Some(vec![at(AKind::Scope(b), sp)]);
+                }
+                // `t` transformed in place (`t = tile_fft(t)`): the adjoint of `t` before is
+                // the adjoint transform of the adjoint after, which replaces it in its slot.
+                // Linear: the value of `t` is not read (so the replay need not keep it).
+                "tile_fft" | "tile_ifft" => {
+                    let t = args[0];
+                    if self.diff(t) {
+                        let seed = GradSrc::Adj {
+                            var: t,
+                            path: Vec::new(),
+                        };
+                        b.push(at(AKind::Seed(seed), sp));
+                        self.tile_call(&mut b, &format!("adj_{name}"), &[t], false, sp);
                     }
                     return Some(vec![at(AKind::Scope(b), sp)]);
                 }
