@@ -247,6 +247,25 @@ WP_FN void adj_tile_map2(const tile_t<T, D...>& a, const tile_t<U, D...>& b,
   __syncthreads();
 }
 
+// ---- Conversions ---------------------------------------------------------------------------
+
+/// `tile_full(x)`: the uniform `x` gets the seed's sum in the reductions' order, returned to
+/// every thread (the caller adds it once for the block, as for `t * s`).
+template <typename T, int... D>
+WP_FN void adj_tile_full(T, T& adj_x, const tile_t<T, D...>& r) {
+  adj_x += tile_detail::block_total<T, tile_t<T, D...>::SIZE>([&](int e) { return r.data[e]; });
+}
+
+/// `tile_astype::<U>(t)`: each element's seed converted back as `adj_cast` (between floats;
+/// nothing to or from an integer).
+template <typename T, typename U, int... D>
+WP_FN void adj_tile_astype(const tile_t<T, D...>&, const tile_t<T, D...>& adj_t,
+                           const tile_t<U, D...>& r) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj_cast(adj_t.data[e], r.data[e]);
+  __syncthreads();
+}
+
 // ---- Reductions ----------------------------------------------------------------------------
 
 /// `tile_sum(t)`, `tile_reduce(add, t)`: every element gets the result's adjoint.

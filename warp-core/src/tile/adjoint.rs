@@ -24,7 +24,7 @@ use super::load::coord;
 use super::matmul::Fma;
 use super::reduce::{self, gpu_order};
 use super::{Tile, Tile1, Tile2};
-use crate::adjoint::{AdjAdd, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
+use crate::adjoint::{AdjAdd, AdjCast, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
 use crate::block::{LaneValue, PerLane};
 use crate::builtins::Scalar;
 use crate::fault::KResult;
@@ -369,6 +369,32 @@ pub fn adj_tile_ifft<C: Complex, const M: usize, const N: usize>(
     _bd: usize,
 ) {
     *adj_t = super::fft::fft(r);
+}
+
+// ---- Conversions ---------------------------------------------------------------------------
+
+/// Adjoint of `tile_full(x)`: `x` (a uniform value) gets the sum of the seed in the reductions'
+/// order, added once for the block (the caller's part, as for `t * s`). Warp drops this
+/// gradient (its `tile_full` is not differentiable); a zero would be a wrong one.
+pub fn adj_tile_full<X: Tile>(_x: X::Elem, adj_x: &mut X::Elem, r: &X, bd: usize)
+where
+    X::Elem: Adjoint + Scalar,
+{
+    let r = r.as_flat();
+    adj_x.adj_accum(block_total(r.len(), bd, |e| r[e]));
+}
+
+/// Adjoint of `tile_astype::<U>(t)`: each element's seed converted back as the adjoint of
+/// `x as U` ([`adj_cast`](crate::adjoint::adj_cast)): between floats `adj_t[e] += r[e] as T`,
+/// nothing where either side is an integer (Warp's rule).
+pub fn adj_tile_astype<X: Tile, Y: Tile>(_t: &X, adj_t: &mut X, r: &Y, _bd: usize)
+where
+    X::Elem: AdjCast<Y::Elem>,
+    Y::Elem: Copy,
+{
+    for (d, g) in adj_t.as_flat_mut().iter_mut().zip(r.as_flat()) {
+        crate::adjoint::adj_cast(d, *g);
+    }
 }
 
 // ---- Shapes --------------------------------------------------------------------------------

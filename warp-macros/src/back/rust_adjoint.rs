@@ -10,6 +10,7 @@
 use super::rust::{member_tokens, ty_tokens, RustEmitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
+use crate::types::Ty;
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote, quote_spanned, ToTokens};
 
@@ -76,7 +77,14 @@ impl Printer<'_> {
         let mut out = TokenStream::new();
         for d in &self.adj.decls {
             let x = self.var(d.var);
-            out.extend(match ty_tokens(self.f().ty(d.var)) {
+            // A store's unit result is never assigned in the replay (stores are not redone)
+            // and, when the stored tile carries no gradient (an integer tile), not read by an
+            // adjoint either: its type must be written.
+            let t = match self.f().ty(d.var) {
+                Ty::Unit => Some(quote!(())),
+                t => ty_tokens(t),
+            };
+            out.extend(match t {
                 Some(t) => quote!(let mut #x: #t = __wp::adjoint::zero();),
                 None => quote!(let mut #x = __wp::adjoint::zero();),
             });

@@ -115,8 +115,9 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // element `as U`. `tile_reshape::<M, N>(t)` (or the annotation's shape): the elements in
     // row-major order, the size unchanged; `tile_squeeze(t)` drops the dims that are the
     // literal 1 (all of them: a `Tile<T, 1>`). `tile_diag_add(a, d)`: a square tile with `d`
-    // added to its diagonal. Backward: reshape, squeeze and diag_add (copies, `TILE_ADJOINTS`);
-    // through `tile_full` and `tile_astype`, refused by name for now.
+    // added to its diagonal. Backward through all of them (`TILE_ADJOINTS`): `tile_full`'s value
+    // gets the sum of the seed (Warp drops it), `tile_astype` converts the seed back between
+    // floats (no gradient to or from integers, as Warp), the others are copies.
     "tile_full": TILE_ELEM, (T, TileShape) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_astype": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_reshape": TILE_ELEM, (Tile, TileShape) -> Tile, "tile", Adjoint, no_tangent,

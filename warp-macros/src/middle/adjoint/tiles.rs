@@ -80,6 +80,14 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_diag_add", "adjoint"),
     ("tile_fft", "adjoint (`tile_ifft` of the seed, in place)"),
     ("tile_ifft", "adjoint (`tile_fft` of the seed, in place)"),
+    (
+        "tile_full",
+        "adjoint (the value gets the seed's sum; Warp drops it)",
+    ),
+    (
+        "tile_astype",
+        "adjoint (between floats; none to or from integers, as Warp)",
+    ),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -168,7 +176,8 @@ fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
         } => {}
         Op::Builtin { builtin, args } => match builtin.name {
             "tile_store" | "tile_sum" | "tile_transpose" | "tile_broadcast" | "tile_extract"
-            | "untile" | "tile_load" | "tile" | "tile_fft" | "tile_ifft" => {}
+            | "untile" | "tile_load" | "tile" | "tile_fft" | "tile_ifft" | "tile_full"
+            | "tile_astype" => {}
             "tile_matmul_acc" => args.iter().filter(|a| **a != dst).for_each(|a| out(*a)),
             _ => args.iter().for_each(|a| out(*a)),
         },
@@ -396,6 +405,16 @@ impl Cx<'_> {
                     // A reshape's adjoint is the same copy the other way.
                     ("tile_reshape" | "tile_squeeze", _) => {
                         self.tile_call(&mut b, "adj_tile_reshape", args, false, sp);
+                    }
+                    // A value every lane computed, or a tile whose elements convert back
+                    // (nothing to do for an operand that carries no gradient, such as an
+                    // integer tile or a constant; a kernel parameter's adjoint goes nowhere).
+                    ("tile_full" | "tile_astype", _) => {
+                        let param = f.params.iter().any(|p| p.var == args[0]);
+                        if self.diff(args[0]) && !param {
+                            let func = format!("adj_{name}");
+                            self.tile_call(&mut b, &func, &args[..1], false, sp);
+                        }
                     }
                     ("tile_diag_add", _) => {
                         self.tile_call(&mut b, "adj_tile_diag_add", args, false, sp);
