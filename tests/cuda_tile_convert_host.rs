@@ -1,5 +1,6 @@
 //! The CUDA tile conversions (`wp_tile.h`'s `tile_full`, `tile_astype`, `tile_reshape`,
-//! `tile_diag_add`, and `wp_adjoint_tile.h`'s `adj_tile_reshape`, `adj_tile_diag_add`), checked
+//! `tile_diag_add`, and `wp_adjoint_tile.h`'s `adj_tile_reshape`, `adj_tile_diag_add`,
+//! `adj_tile_astype`, `adj_tile_full`), checked
 //! without a GPU against warp-core bit for bit: a driver
 //! (`warp-cuda/cuda/tests/wp_tile_convert_driver.cpp`) runs them in one block under the block
 //! emulator for block sizes 1, 5, 32 and 256. The values test `as`'s meaning in `tile_astype`
@@ -49,6 +50,10 @@ fn conversions_match_warp_core_bit_for_bit() {
         Tile1::<f32, 4>::zeros(),
     );
     let re: Tile2<f32, 6, 4> = tile::reshape22(&x);
+    // `tile_astype`'s adjoint from the f64 tile converts back; from the integer one, nothing.
+    let (mut adj_w, mut adj_i) = (Tile2::<f32, 4, 6>::zeros(), Tile2::<f32, 4, 6>::zeros());
+    adjoint::adj_tile_astype(&x, &mut adj_w, &x.map(|v| v as f64), 1);
+    adjoint::adj_tile_astype(&x, &mut adj_i, &x.map(|v| v as i32), 1);
     adjoint::adj_tile_reshape(&re, &mut adj_re, &x, 1);
     adjoint::adj_tile_diag_add(&sqr, &d, &mut adj_a, &mut adj_d, &sqr, 1);
     let want = [
@@ -61,12 +66,19 @@ fn conversions_match_warp_core_bit_for_bit() {
         bytes(&adj_re),
         bytes(&adj_a),
         bytes(&adj_d),
+        bytes(&adj_w),
+        bytes(&adj_i),
     ]
     .concat();
     let mut input = bytes(&x);
     input.extend(bytes(&d));
     let hex: String = input.iter().map(|b| format!("{b:02x}")).collect();
     for bd in [1, 5, 32, 256] {
+        // `tile_full`'s value: a block total, in the order for this block size.
+        let mut gx = 0.25f32;
+        adjoint::adj_tile_full(2.5f32, &mut gx, &d, bd);
+        let mut want = want.clone();
+        want.extend(gx.to_ne_bytes());
         let (dir, exe) = host_cpp::compile_driver(
             &format!("tile_convert_{bd}"),
             include_str!("../warp-cuda/cuda/tests/wp_tile_convert_driver.cpp"),

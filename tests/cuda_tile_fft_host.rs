@@ -9,7 +9,10 @@
 //! 128, 256. Every case must give warp-core's bits: the two compute the same twiddles (no
 //! sin/cos: half-angle square roots and products in f64) and run the same butterflies in the
 //! same order of roundings. What this cannot check is what only hardware does (NVRTC's
-//! acceptance, real shared memory); the suite's `tile_fft` tests do that on a GPU.
+//! acceptance, real shared memory); the suite's `tile_fft` tests do that on a GPU. The same
+//! driver checks the FFTs' adjoints (`adj_tile_fft`/`adj_tile_ifft`, in the seed's slot) and
+//! the elementwise adjoints of `wp_adjoint_tile.h` on tiles of vectors against
+//! `warp_core::tile::adjoint`, bit for bit.
 //!
 //! Skipped, saying so, without g++.
 
@@ -18,7 +21,7 @@ mod host_cpp;
 
 use glam::{DVec2, Vec2};
 use std::process::Command;
-use warp_core::tile::{self, Tile, Tile2};
+use warp_core::tile::{self, adjoint as ta, Tile, Tile2};
 
 const BLOCK_DIMS: [usize; 6] = [1, 7, 32, 45, 128, 256];
 
@@ -127,9 +130,62 @@ fn fft_and_ifft_match_warp_core_bit_for_bit() {
     cases.push(("ops_DVec2_2_4".into(), bytes(&x)));
     want.push(bytes(&(0.5 * ((x + x) * 1.75 - x) + Tile2::zeros())));
     for bd in BLOCK_DIMS {
+        let (mut cases, mut want) = (cases.clone(), want.clone());
+        adjoint_cases(bd, &mut cases, &mut want);
         let got = run(bd, &cases);
         for ((name, _), (g, w)) in cases.iter().zip(got.iter().zip(&want)) {
             assert!(g == w, "{name} at block size {bd}: not warp-core's bits");
         }
     }
+}
+
+/// The FFTs' adjoints (`adj_*`: the seed transformed in its slot, `adj_tile_fft` then
+/// `adj_tile_ifft`) and the elementwise adjoints on tiles of vectors (`vadj_*`, the driver's
+/// `k_vadj`; a uniform scalar's adjoint is a block total, so it depends on `bd`), as
+/// warp-core computes them.
+fn adjoint_cases(bd: usize, cases: &mut Vec<(String, Vec<u8>)>, want: &mut Vec<Vec<u8>>) {
+    macro_rules! adj {
+        ($c:ident, $s:ty, $m:literal, $n:literal) => {{
+            let mut r = values($m * 77 + $n);
+            let x = Tile2::<$c, $m, $n> {
+                data: std::array::from_fn(|_| {
+                    std::array::from_fn(|_| $c::new(r() as $s, r() as $s))
+                }),
+            };
+            let mut a = x;
+            ta::adj_tile_fft(&x, &mut a, &x, bd);
+            let y = a;
+            ta::adj_tile_ifft(&x, &mut a, &y, bd);
+            cases.push((format!("adj_{}_{}_{}", stringify!($c), $m, $n), bytes(&x)));
+            want.push([bytes(&y), bytes(&a)].concat());
+        }};
+    }
+    adj!(Vec2, f32, 3, 8);
+    adj!(DVec2, f64, 2, 32);
+    macro_rules! vadj {
+        ($c:ident, $s:ty, $m:literal, $n:literal) => {{
+            let mut r = values($m * 91 + $n);
+            let x = Tile2::<$c, $m, $n> {
+                data: std::array::from_fn(|_| {
+                    std::array::from_fn(|_| $c::new(r() as $s, r() as $s))
+                }),
+            };
+            let mut rev = x;
+            for (d, v) in rev.as_flat_mut().iter_mut().zip(x.as_flat().iter().rev()) {
+                *d = *v;
+            }
+            let (mut a, mut b) = (Tile2::<$c, $m, $n>::zeros(), Tile2::<$c, $m, $n>::zeros());
+            let (s, mut gs, mut gt): ($s, $s, $s) = (1.75, 0.0, 0.0);
+            ta::adj_tile_mul_ts(&x, s, &mut a, &mut gs, &rev, bd);
+            ta::adj_tile_mul_st(s, &x, &mut gt, &mut a, &rev, bd);
+            ta::adj_tile_add_tt(&x, &rev, &mut a, &mut b, &rev, bd);
+            ta::adj_tile_sub_tt(&x, &rev, &mut a, &mut b, &rev, bd);
+            a.data[0][0] += x.as_flat()[1];
+            cases.push((format!("vadj_{}_{}_{}", stringify!($c), $m, $n), bytes(&x)));
+            let scalars = [gs.to_ne_bytes(), gt.to_ne_bytes()].concat();
+            want.push([bytes(&a), bytes(&b), scalars].concat());
+        }};
+    }
+    vadj!(Vec2, f32, 3, 5);
+    vadj!(DVec2, f64, 4, 9);
 }

@@ -14,7 +14,8 @@ use wp::prelude::*;
 backend_tests!(
     conversions,
     reshape_squeeze_diag_add_gradients,
-    backward_through_astype_is_refused_by_name,
+    astype_gradients,
+    full_gradients,
 );
 
 #[wp::kernel]
@@ -157,28 +158,63 @@ fn reshape_squeeze_diag_add_gradients(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_astype_grad(a: Array<f64>, out: Array<f64>) {
+fn k_astype_grad(a: Array<f64>, out: Array<f64>, ints: Array<f64>) {
     let t = tile_load::<8>(a, 0);
     tile_store(out, tile_astype::<f64>(tile_astype::<f32>(t)), 0);
+    // Through an integer: no gradient (Warp's rule, as `x as i32` in any kernel).
+    tile_store(ints, tile_astype::<f64>(tile_astype::<i32>(t * 4.0)), 0);
 }
 
-/// Backward through `tile_astype` (and `tile_full`) is not built yet: an error naming the
-/// kernel and the builtin, never a silent zero gradient.
-fn backward_through_astype_is_refused_by_name(dev: &wp::Device) {
-    let a = arr(&[1.0f64; 8], dev).with_grad().unwrap();
+/// Backward through `tile_astype`: between floats the seed converted back (f64 to f32 and
+/// back: each element's seed rounded to f32, exactly as `as` would); through an integer,
+/// nothing. Exact: one rounding of the seed, computed here the same way.
+fn astype_gradients(dev: &wp::Device) {
+    let a = arr(&crate::tile_grad::values(8, 3), dev)
+        .with_grad()
+        .unwrap();
     let out = zeros::<f64, 1>(8, dev).with_grad().unwrap();
+    let ints = zeros::<f64, 1>(8, dev).with_grad().unwrap();
+    let seed: Vec<f64> = (0..8).map(|k| 0.1 + k as f64 / 3.0).collect();
     let tape = wp::Tape::new();
     {
         let _rec = tape.record();
-        wp::launch_tiled(k_astype_grad, 1, (&a, &out), 8, dev).unwrap();
+        wp::launch_tiled(k_astype_grad, 1, (&a, &out, &ints), 8, dev).unwrap();
     }
-    let e = tape.backward(&out).unwrap_err();
-    assert!(matches!(e, wp::Error::NotDifferentiable { .. }), "{e:?}");
-    let msg = e.to_string();
-    assert!(
-        msg.contains("k_astype_grad") && msg.contains("tile_astype"),
-        "{msg}"
-    );
+    out.grad().unwrap().copy_from(&arr(&seed, dev)).unwrap();
+    ints.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    let want: Vec<f64> = seed.iter().map(|g| *g as f32 as f64).collect();
+    assert_eq!(host(&a.grad().unwrap()), want);
+}
+
+#[wp::kernel]
+fn k_full_grad(a: Array<f64>, w: Array<f64>, out: Array<f64, 2>) {
+    let t = tile_load::<12>(a, 0);
+    let s = w[0] * 2.0 + w[1];
+    let f = tile_full::<f64, 3, 4>(s);
+    let g = f * tile_reshape::<3, 4>(t) + tile_full::<f64, 3, 4>(1.5);
+    tile_store(out, g, (0, 0));
+}
+
+/// `gradcheck` (f64 central differences, 1e-6 relative: see tile_grad.rs) through `tile_full`
+/// of a value every lane computed (its adjoint: the sum of the seed, added once for the block)
+/// and of a constant, at several block sizes.
+fn full_gradients(dev: &wp::Device) {
+    let a = arr(&crate::tile_grad::values(12, 4), dev)
+        .with_grad()
+        .unwrap();
+    let w = arr(&[0.7f64, -0.4], dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(12, dev).with_grad().unwrap();
+    let o2 = out.reshape((3, 4)).unwrap();
+    for bd in [1, 5, 32] {
+        let run = || wp::launch_tiled(k_full_grad, 1, (&a, &w, &o2), bd, dev);
+        crate::tile_grad::check(
+            &format!("tile_full at block_dim {bd}"),
+            run,
+            &[&a, &w],
+            &out,
+        );
+    }
 }
 
 /// The CUDA adjoint the GPU compiles (checked here without one) calls the two new adjoints,
@@ -195,4 +231,32 @@ fn cuda_adjoint_calls_the_copy_rules() {
     let adj = info.cuda_adjoint;
     assert!(adj.matches("wp::adj_tile_reshape(").count() == 3, "{adj}");
     assert!(adj.contains("wp::adj_tile_diag_add("), "{adj}");
+}
+
+/// The CUDA printer translates the conversions' adjoints (NVRTC compiles them only on a GPU:
+/// `full_gradients` and `astype_gradients` there).
+#[test]
+fn cuda_adjoint_calls_the_conversion_rules() {
+    let info = wp::kernel_info(k_full_grad);
+    assert!(
+        info.cuda_adjoint_error.is_none(),
+        "{:?}",
+        info.cuda_adjoint_error
+    );
+    assert!(
+        info.cuda_adjoint.contains("wp::adj_tile_full("),
+        "{}",
+        info.cuda_adjoint
+    );
+    let info = wp::kernel_info(k_astype_grad);
+    assert!(
+        info.cuda_adjoint_error.is_none(),
+        "{:?}",
+        info.cuda_adjoint_error
+    );
+    assert!(
+        info.cuda_adjoint.contains("wp::adj_tile_astype("),
+        "{}",
+        info.cuda_adjoint
+    );
 }

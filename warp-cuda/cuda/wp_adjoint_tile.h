@@ -36,6 +36,16 @@ WP_FN void shared_add(T* p, T v) {
 #endif
 }
 
+/// A vector element (a tile of `Vec2`/`DVec2`): component by component.
+WP_FN void shared_add(Vec2* p, Vec2 v) {
+  shared_add(&p->x, v.x);
+  shared_add(&p->y, v.y);
+}
+WP_FN void shared_add(DVec2* p, DVec2 v) {
+  shared_add(&p->x, v.x);
+  shared_add(&p->y, v.y);
+}
+
 /// The sum of `c(e)` for e in 0..S in the reductions' order, returned to every thread (each
 /// `c(e)` is called once, by one thread).
 template <typename T, int S, typename Elem>
@@ -174,7 +184,8 @@ WP_FN void adj_tile_store2(const array_t<T, 2>& a, const tile_t<T, N0, N1>&, O0 
 // ---- Elementwise ---------------------------------------------------------------------------
 
 // `a op b` on two tiles (`_tt`), a tile and a uniform scalar (`_ts`), a scalar and a tile
-// (`_st`): the scalar adjoint `FN` per element; a scalar's adjoint is the block total.
+// (`_st`): the scalar adjoint `FN` per element; a scalar's adjoint is the block total. The
+// scalar `S` is the elements' type, or their components' for a tile of vectors (`t * s`).
 #define WP_TILE_ADJ_BINARY(NAME, FN)                                                          \
   template <typename T, int... D>                                                             \
   WP_FN void adj_tile_##NAME##_tt(const tile_t<T, D...>& a, const tile_t<T, D...>& b,         \
@@ -184,20 +195,20 @@ WP_FN void adj_tile_store2(const array_t<T, 2>& a, const tile_t<T, N0, N1>&, O0 
       FN(a.data[e], b.data[e], adj_a.data[e], adj_b.data[e], r.data[e]);                      \
     __syncthreads();                                                                          \
   }                                                                                           \
-  template <typename T, int... D>                                                             \
-  WP_FN void adj_tile_##NAME##_ts(const tile_t<T, D...>& a, T s, const tile_t<T, D...>& adj_a, \
-                                  T& adj_s, const tile_t<T, D...>& r) {                       \
-    adj_s += tile_detail::block_total<T, tile_t<T, D...>::SIZE>([&](int e) {                  \
-      T g = T(0);                                                                             \
+  template <typename T, typename S, int... D>                                                 \
+  WP_FN void adj_tile_##NAME##_ts(const tile_t<T, D...>& a, S s, const tile_t<T, D...>& adj_a, \
+                                  S& adj_s, const tile_t<T, D...>& r) {                       \
+    adj_s += tile_detail::block_total<S, tile_t<T, D...>::SIZE>([&](int e) {                  \
+      S g = S(0);                                                                             \
       FN(a.data[e], s, adj_a.data[e], g, r.data[e]);                                          \
       return g;                                                                               \
     });                                                                                       \
   }                                                                                           \
-  template <typename T, int... D>                                                             \
-  WP_FN void adj_tile_##NAME##_st(T s, const tile_t<T, D...>& b, T& adj_s,                    \
+  template <typename T, typename S, int... D>                                                 \
+  WP_FN void adj_tile_##NAME##_st(S s, const tile_t<T, D...>& b, S& adj_s,                    \
                                   const tile_t<T, D...>& adj_b, const tile_t<T, D...>& r) {   \
-    adj_s += tile_detail::block_total<T, tile_t<T, D...>::SIZE>([&](int e) {                  \
-      T g = T(0);                                                                             \
+    adj_s += tile_detail::block_total<S, tile_t<T, D...>::SIZE>([&](int e) {                  \
+      S g = S(0);                                                                             \
       FN(s, b.data[e], g, adj_b.data[e], r.data[e]);                                          \
       return g;                                                                               \
     });                                                                                       \
@@ -233,6 +244,25 @@ WP_FN void adj_tile_map2(const tile_t<T, D...>& a, const tile_t<U, D...>& b,
                          const tile_t<V, D...>& r, F adj) {
   for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
     adj(a.data[e], b.data[e], adj_a.data[e], adj_b.data[e], r.data[e]);
+  __syncthreads();
+}
+
+// ---- Conversions ---------------------------------------------------------------------------
+
+/// `tile_full(x)`: the uniform `x` gets the seed's sum in the reductions' order, returned to
+/// every thread (the caller adds it once for the block, as for `t * s`).
+template <typename T, int... D>
+WP_FN void adj_tile_full(T, T& adj_x, const tile_t<T, D...>& r) {
+  adj_x += tile_detail::block_total<T, tile_t<T, D...>::SIZE>([&](int e) { return r.data[e]; });
+}
+
+/// `tile_astype::<U>(t)`: each element's seed converted back as `adj_cast` (between floats;
+/// nothing to or from an integer).
+template <typename T, typename U, int... D>
+WP_FN void adj_tile_astype(const tile_t<T, D...>&, const tile_t<T, D...>& adj_t,
+                           const tile_t<U, D...>& r) {
+  for (int e = (int)threadIdx.x; e < tile_t<T, D...>::SIZE; e += WP_TILE_BLOCK_DIM)
+    adj_cast(adj_t.data[e], r.data[e]);
   __syncthreads();
 }
 

@@ -3,6 +3,8 @@
 //   tile_fft(t)    each row of t: tile_t<Vec2 | DVec2, M, N> transformed in place along the
 //                  last axis, X[k] = sum_j x[j] e^(-2 pi i jk / N) (numpy's fft)
 //   tile_ifft(t)   the inverse, e^(+2 pi i jk / N), unnormalised (Warp's: ifft(fft(x)) = N x)
+//   adj_tile_fft(t, adj_t, r), adj_tile_ifft(t, adj_t, r)   their adjoints, each the other
+//                  transform of the seed, in the adjoint's slot
 //
 // N is a power of two. Every result is bit for bit warp-core's, for every block size: the
 // roundings and their order are those fft.rs documents (separate IEEE adds, multiplies,
@@ -161,6 +163,25 @@ WP_FN void tile_fft(const tile_t<C, M, N>& t) {
 template <typename C, int M, int N>
 WP_FN void tile_ifft(const tile_t<C, M, N>& t) {
   tile_fft_detail::transform<true>(t);
+}
+
+/// The adjoint of `tile_fft(&mut t)` (warp-core's tile::adjoint::adj_tile_fft): the inverse
+/// transform of the seed. The transform is in place, so the seed `r` is a second tile over
+/// the slot of `adj_t` (the sweep passes the same one): transforming it replaces the adjoint
+/// after the transform with the adjoint before it.
+template <typename C, int M, int N>
+WP_FN void adj_tile_fft(const tile_t<C, M, N>&, const tile_t<C, M, N>& adj_t,
+                        const tile_t<C, M, N>& r) {
+  (void)r;
+  tile_fft_detail::transform<true>(adj_t);
+}
+
+/// The adjoint of `tile_ifft(&mut t)`: the forward transform of the seed, as adj_tile_fft.
+template <typename C, int M, int N>
+WP_FN void adj_tile_ifft(const tile_t<C, M, N>&, const tile_t<C, M, N>& adj_t,
+                         const tile_t<C, M, N>& r) {
+  (void)r;
+  tile_fft_detail::transform<false>(adj_t);
 }
 
 }  // namespace wp

@@ -19,11 +19,12 @@
 //! Loads and stores skip what their forward skipped (coordinates outside the array): the
 //! adjoint of a zero read of padding is nothing, and a skipped store hands nothing over.
 
+use super::fft::Complex;
 use super::load::coord;
 use super::matmul::Fma;
 use super::reduce::{self, gpu_order};
 use super::{Tile, Tile1, Tile2};
-use crate::adjoint::{AdjAdd, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
+use crate::adjoint::{AdjAdd, AdjCast, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
 use crate::block::{LaneValue, PerLane};
 use crate::builtins::Scalar;
 use crate::fault::KResult;
@@ -169,10 +170,10 @@ where
 
 // ---- Elementwise ---------------------------------------------------------------------------
 
-/// The sum of `c`'s elements in the reductions' order for block size `bd` (zero for none):
+/// The sum of `c(0..n)` in the reductions' order for block size `bd` (zero for none):
 /// what a uniform scalar operand's adjoint receives from a whole tile.
-fn block_total<T: Scalar>(c: &[T], bd: usize) -> T {
-    gpu_order(c.len(), bd, |e| c[e], Scalar::s_add).unwrap_or(T::ZERO)
+fn block_total<T: Scalar>(n: usize, bd: usize, c: impl Fn(usize) -> T) -> T {
+    gpu_order(n, bd, c, Scalar::s_add).unwrap_or(T::ZERO)
 }
 
 macro_rules! elementwise {
@@ -190,38 +191,46 @@ macro_rules! elementwise {
             }
         }
 
-        #[doc = concat!("Adjoint of `t ", $what, " s` (tile with a uniform scalar): the tile's adjoint element by element; `s`'s, the sum of the elements' contributions in the reductions' order (see the module docs).")]
-        pub fn $ts<X>(a: &X, s: X::Elem, adj_a: &mut X, adj_s: &mut X::Elem, r: &X, bd: usize)
+        #[doc = concat!("Adjoint of `t ", $what, " s` (tile with a uniform scalar, the elements' own or, for a tile of vectors, their components'): the tile's adjoint element by element; `s`'s, the sum of the elements' contributions in the reductions' order (see the module docs).")]
+        pub fn $ts<X, S>(a: &X, s: S, adj_a: &mut X, adj_s: &mut S, r: &X, bd: usize)
         where
-            X: Tile + Copy,
-            X::Elem: $tr<X::Elem, Output = X::Elem> + Adjoint + Scalar,
+            X: Tile,
+            X::Elem: $tr<S, Output = X::Elem> + Adjoint,
+            S: Adjoint + Scalar,
         {
-            let mut c = *a;
             let (a, r) = (a.as_flat(), r.as_flat());
-            let aa = adj_a.as_flat_mut();
-            for (e, ce) in c.as_flat_mut().iter_mut().enumerate() {
-                let mut g = X::Elem::adj_zero();
-                crate::adjoint::$f(a[e], s, &mut aa[e], &mut g, r[e]);
-                *ce = g;
+            let mut unused = S::adj_zero();
+            for (e, d) in adj_a.as_flat_mut().iter_mut().enumerate() {
+                crate::adjoint::$f(a[e], s, d, &mut unused, r[e]);
             }
-            adj_s.adj_accum(block_total(c.as_flat(), bd));
+            // Each element's contribution to `s` (a vector's components in lane order, as the
+            // scalar rule adds them), computed again on its own, then their block total.
+            let contribution = |e: usize| {
+                let (mut g, mut unused) = (S::adj_zero(), X::Elem::adj_zero());
+                crate::adjoint::$f(a[e], s, &mut unused, &mut g, r[e]);
+                g
+            };
+            adj_s.adj_accum(block_total(a.len(), bd, contribution));
         }
 
         #[doc = concat!("Adjoint of `s ", $what, " t` (a uniform scalar with a tile), as the tile-scalar form.")]
-        pub fn $st<X>(s: X::Elem, b: &X, adj_s: &mut X::Elem, adj_b: &mut X, r: &X, bd: usize)
+        pub fn $st<X, S>(s: S, b: &X, adj_s: &mut S, adj_b: &mut X, r: &X, bd: usize)
         where
-            X: Tile + Copy,
-            X::Elem: $tr<X::Elem, Output = X::Elem> + Adjoint + Scalar,
+            X: Tile,
+            X::Elem: Adjoint,
+            S: $tr<X::Elem, Output = X::Elem> + Adjoint + Scalar,
         {
-            let mut c = *b;
             let (b, r) = (b.as_flat(), r.as_flat());
-            let ab = adj_b.as_flat_mut();
-            for (e, ce) in c.as_flat_mut().iter_mut().enumerate() {
-                let mut g = X::Elem::adj_zero();
-                crate::adjoint::$f(s, b[e], &mut g, &mut ab[e], r[e]);
-                *ce = g;
+            let mut unused = S::adj_zero();
+            for (e, d) in adj_b.as_flat_mut().iter_mut().enumerate() {
+                crate::adjoint::$f(s, b[e], &mut unused, d, r[e]);
             }
-            adj_s.adj_accum(block_total(c.as_flat(), bd));
+            let contribution = |e: usize| {
+                let (mut g, mut unused) = (S::adj_zero(), X::Elem::adj_zero());
+                crate::adjoint::$f(s, b[e], &mut g, &mut unused, r[e]);
+                g
+            };
+            adj_s.adj_accum(block_total(b.len(), bd, contribution));
         }
     };
 }
@@ -336,6 +345,59 @@ where
 {
     let i = reduce::argmax(t, bd).data[0] as usize;
     adj_t.as_flat_mut()[i].adj_accum(r.data[0]);
+}
+
+// ---- FFTs ----------------------------------------------------------------------------------
+
+/// Adjoint of `tile_fft(&mut t)`: the unnormalised inverse transform of the seed (Warp's rule;
+/// with real and imaginary parts as independent reals, the forward DFT's matrix `F` has the
+/// adjoint `conj(F)ᵀ = conj(F)`, the inverse's). The transform is in place, so `adj_t` is the
+/// slot `r` was copied from: the adjoint of `t` before the transform *replaces* the seed (the
+/// statements before it, which add to that adjoint, run after this in the sweep).
+pub fn adj_tile_fft<C: Complex, const M: usize, const N: usize>(
+    _t: &Tile2<C, M, N>,
+    adj_t: &mut Tile2<C, M, N>,
+    r: &Tile2<C, M, N>,
+    _bd: usize,
+) {
+    *adj_t = super::fft::ifft(r);
+}
+
+/// Adjoint of `tile_ifft(&mut t)`: the forward transform of the seed, in place as
+/// [`adj_tile_fft`].
+pub fn adj_tile_ifft<C: Complex, const M: usize, const N: usize>(
+    _t: &Tile2<C, M, N>,
+    adj_t: &mut Tile2<C, M, N>,
+    r: &Tile2<C, M, N>,
+    _bd: usize,
+) {
+    *adj_t = super::fft::fft(r);
+}
+
+// ---- Conversions ---------------------------------------------------------------------------
+
+/// Adjoint of `tile_full(x)`: `x` (a uniform value) gets the sum of the seed in the reductions'
+/// order, added once for the block (the caller's part, as for `t * s`). Warp drops this
+/// gradient (its `tile_full` is not differentiable); a zero would be a wrong one.
+pub fn adj_tile_full<X: Tile>(_x: X::Elem, adj_x: &mut X::Elem, r: &X, bd: usize)
+where
+    X::Elem: Adjoint + Scalar,
+{
+    let r = r.as_flat();
+    adj_x.adj_accum(block_total(r.len(), bd, |e| r[e]));
+}
+
+/// Adjoint of `tile_astype::<U>(t)`: each element's seed converted back as the adjoint of
+/// `x as U` ([`adj_cast`](crate::adjoint::adj_cast)): between floats `adj_t[e] += r[e] as T`,
+/// nothing where either side is an integer (Warp's rule).
+pub fn adj_tile_astype<X: Tile, Y: Tile>(_t: &X, adj_t: &mut X, r: &Y, _bd: usize)
+where
+    X::Elem: AdjCast<Y::Elem>,
+    Y::Elem: Copy,
+{
+    for (d, g) in adj_t.as_flat_mut().iter_mut().zip(r.as_flat()) {
+        crate::adjoint::adj_cast(d, *g);
+    }
 }
 
 // ---- Shapes --------------------------------------------------------------------------------

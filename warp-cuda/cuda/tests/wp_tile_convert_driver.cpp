@@ -8,7 +8,10 @@
 //                  tile_astype<f64>(X), tile_reshape<6, 4>(X), tile_squeeze of X's row 1 taken
 //                  as a 1 x 6 tile, tile_diag_add(X's leading 4 x 4, D); then the adjoints with
 //                  R = X as the result's adjoint: adj_tile_reshape into a zero 6 x 4 from R
-//                  (4 x 6), adj_tile_diag_add into zero 4 x 4 and 4 from R's leading 4 x 4.
+//                  (4 x 6), adj_tile_diag_add into zero 4 x 4 and 4 from R's leading 4 x 4,
+//                  adj_tile_astype into zero 4 x 6 f32 from `wide` and from `ints`, and
+//                  adj_tile_full's value adjoint (from 0.25) from D (a block total: it
+//                  depends on the block size).
 #include "wp_prim_emu.h"
 #include "wp_tile.h"
 #include "wp_adjoint_tile.h"
@@ -76,6 +79,8 @@ void k_convert(args_t a) {
   auto adj_re = slot_at<tile_t<f32, 6, 4>>(s);
   auto adj_a = slot_at<tile_t<f32, 4, 4>>(s);
   auto adj_d = slot_at<tile_t<f32, 4>>(s);
+  auto adj_w = slot_at<tile_t<f32, 4, 6>>(s);
+  auto adj_i = slot_at<tile_t<f32, 4, 6>>(s);
   size_t in = 0, out = 0;
   get(a, in, X);
   get(a, in, D);
@@ -94,6 +99,12 @@ void k_convert(args_t a) {
   wp::tile_zeros(adj_d);
   wp::adj_tile_reshape(re, adj_re, X);
   wp::adj_tile_diag_add(sqr, D, adj_a, adj_d, sqr);
+  wp::tile_zeros(adj_w);
+  wp::tile_zeros(adj_i);
+  wp::adj_tile_astype(X, adj_w, wide);
+  wp::adj_tile_astype(X, adj_i, ints);
+  f32 gx = 0.25f;
+  wp::adj_tile_full(2.5f, gx, D);
   put(a, out, full);
   put(a, out, ints);
   put(a, out, wide);
@@ -103,6 +114,10 @@ void k_convert(args_t a) {
   put(a, out, adj_re);
   put(a, out, adj_a);
   put(a, out, adj_d);
+  put(a, out, adj_w);
+  put(a, out, adj_i);
+  if (threadIdx.x == 0) std::memcpy(a.out + out, &gx, sizeof gx);
+  __syncthreads();
 }
 
 void unhex(const std::string& h, std::vector<unsigned char>& b) {
@@ -118,7 +133,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   std::map<std::string, std::pair<void (*)(args_t), size_t>> cases;
-  cases["convert"] = {k_convert, 4 * (24 + 24 + 24 + 6 + 16 + 24 + 16 + 4) + 8 * 24};
+  cases["convert"] = {k_convert, 4 * (24 + 24 + 24 + 6 + 16 + 24 + 16 + 4 + 24 + 24 + 1) + 8 * 24};
   std::ifstream in(argv[1]);
   std::string line;
   std::vector<unsigned char> input, out(64 * 1024);

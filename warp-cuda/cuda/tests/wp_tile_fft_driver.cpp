@@ -7,9 +7,12 @@
 //                  row-major. Prints `out HEX`: Y = tile_fft(X), then Z = tile_ifft(Y), each
 //                  row-major, both transformed in place in one slot as the emitter does.
 //                  `ops_*` cases: the elementwise operators of tiles of vectors (k_ops).
+//                  `adj_*` cases: the FFTs' adjoints (k_adj); `vadj_*`: the elementwise
+//                  adjoints on tiles of vectors, a uniform scalar's included (k_vadj).
 #include "wp_prim_emu.h"
 #include "wp_tile.h"
 #include "wp_tile_fft.h"
+#include "wp_adjoint_tile.h"
 
 #include <cstdio>
 #include <cstring>
@@ -71,6 +74,56 @@ void k_ops(args_t a) {
   put(a, out, B);
 }
 
+/// The FFTs' adjoints as the sweep calls them, the seed a second tile over the adjoint's slot:
+/// `out HEX` of the slot after `adj_tile_fft(X, A, A)` (A = X), then after `adj_tile_ifft`.
+template <typename C, int M, int N>
+void k_adj(args_t a) {
+  tile_t<C, M, N> X(smem), A(smem + 16384);
+  if (threadIdx.x == 0) {
+    std::memcpy(X.data, a.in, decltype(X)::BYTES);
+    std::memcpy(A.data, a.in, decltype(A)::BYTES);
+  }
+  __syncthreads();
+  const tile_t<C, M, N> R = A;
+  size_t out = 0;
+  wp::adj_tile_fft(X, A, R);
+  put(a, out, A);
+  wp::adj_tile_ifft(X, A, R);
+  put(a, out, A);
+}
+
+/// The elementwise adjoints on tiles of vectors with the seed R = X reversed: `t * s`,
+/// `s * t` (s = 1.75, into A and the scalar's adjoint), `t + u`, `t - u` (into A and B), and a
+/// lane's shared add of X[1] into A[0]: `out HEX` of A, B, then the two scalar adjoints.
+template <typename C, typename S, int M, int N>
+void k_vadj(args_t a) {
+  constexpr int SIZE = M * N;
+  tile_t<C, M, N> X(smem), R(smem + 4096), A(smem + 8192), B(smem + 12288);
+  if (threadIdx.x == 0) {
+    std::memcpy(X.data, a.in, decltype(X)::BYTES);
+    for (int e = 0; e < SIZE; ++e) R.data[e] = X.data[SIZE - 1 - e];
+  }
+  __syncthreads();
+  wp::tile_zeros(A);
+  wp::tile_zeros(B);
+  const S s = (S)1.75;
+  S gs = S(0), gt = S(0);
+  wp::adj_tile_mul_ts(X, s, A, gs, R);
+  wp::adj_tile_mul_st(s, X, gt, A, R);
+  wp::adj_tile_add_tt(X, R, A, B, R);
+  wp::adj_tile_sub_tt(X, R, A, B, R);
+  if (threadIdx.x == 0) wp::tile_detail::shared_add(&A.data[0], X.data[1]);
+  __syncthreads();
+  size_t out = 0;
+  put(a, out, A);
+  put(a, out, B);
+  if (threadIdx.x == 0) {
+    std::memcpy(a.out + out, &gs, sizeof(S));
+    std::memcpy(a.out + out + sizeof(S), &gt, sizeof(S));
+  }
+  __syncthreads();
+}
+
 void unhex(const std::string& h, std::vector<unsigned char>& b) {
   b.resize(h.size() / 2);
   for (size_t i = 0; i < b.size(); ++i) b[i] = (unsigned char)std::stoul(h.substr(2 * i, 2), nullptr, 16);
@@ -98,6 +151,10 @@ int main(int argc, char** argv) {
   CASE(DVec2, 1, 128)
   CASE(DVec2, 2, 256)
 #undef CASE
+  cases["adj_Vec2_3_8"] = {k_adj<Vec2, 3, 8>, 2 * sizeof(Vec2) * 24};
+  cases["adj_DVec2_2_32"] = {k_adj<DVec2, 2, 32>, 2 * sizeof(DVec2) * 64};
+  cases["vadj_Vec2_3_5"] = {k_vadj<Vec2, wp::f32, 3, 5>, 2 * sizeof(Vec2) * 15 + 2 * 4};
+  cases["vadj_DVec2_4_9"] = {k_vadj<DVec2, wp::f64, 4, 9>, 2 * sizeof(DVec2) * 36 + 2 * 8};
   cases["ops_Vec2_3_5"] = {k_ops<Vec2, wp::f32, 3, 5>, sizeof(Vec2) * 15};
   cases["ops_DVec2_2_4"] = {k_ops<DVec2, wp::f64, 2, 4>, sizeof(DVec2) * 8};
   std::ifstream in(argv[1]);

@@ -107,16 +107,18 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // `Tile<Vec2 | DVec2, M, N>` (complex values, `x` the real part) in place along the last
     // axis, `N` a power of two; the inverse is unnormalised, as Warp's (`ifft(fft(x)) = N x`).
     // A radix-2 FFT in the order warp-core's `tile::fft` documents, which the CUDA section
-    // `tile_fft` shares bit for bit.
-    "tile_fft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
-    "tile_ifft": TILE_FFT, (Tile) -> Unit, "tile", NotYet, no_tangent, cooperative;
+    // `tile_fft` shares bit for bit. Backward: each is the other's adjoint, on the tile's
+    // adjoint in place (`middle::adjoint::tiles`).
+    "tile_fft": TILE_FFT, (Tile) -> Unit, "tile", Adjoint, no_tangent, cooperative;
+    "tile_ifft": TILE_FFT, (Tile) -> Unit, "tile", Adjoint, no_tangent, cooperative;
     // Conversions (warp-core's `tile::convert`). `tile_full::<f32, 16, 8>(x)` (shape and element
     // as `tile_zeros`'s, or the annotation's): every element `x`. `tile_astype::<U>(t)`: each
     // element `as U`. `tile_reshape::<M, N>(t)` (or the annotation's shape): the elements in
     // row-major order, the size unchanged; `tile_squeeze(t)` drops the dims that are the
     // literal 1 (all of them: a `Tile<T, 1>`). `tile_diag_add(a, d)`: a square tile with `d`
-    // added to its diagonal. Backward: reshape, squeeze and diag_add (copies, `TILE_ADJOINTS`);
-    // through `tile_full` and `tile_astype`, refused by name for now.
+    // added to its diagonal. Backward through all of them (`TILE_ADJOINTS`): `tile_full`'s value
+    // gets the sum of the seed (Warp drops it), `tile_astype` converts the seed back between
+    // floats (no gradient to or from integers, as Warp), the others are copies.
     "tile_full": TILE_ELEM, (T, TileShape) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_astype": TILE_ELEM, (Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_reshape": TILE_ELEM, (Tile, TileShape) -> Tile, "tile", Adjoint, no_tangent,

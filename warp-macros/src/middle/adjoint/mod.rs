@@ -154,16 +154,6 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
         ));
     }
     let tiled = f.tiled.is_some();
-    if let Some(v) = f
-        .tile_vars()
-        .into_iter()
-        .find(|v| f.ty(*v).is_vector_tile())
-    {
-        return Err(format!(
-            "uses a tile of vectors (`{}`), and backward through tiles of vectors is not supported yet",
-            f.ty(v)
-        ));
-    }
     if tiled && !f.callees.is_empty() {
         return Err(
             "uses tiles and calls funcs, and backward through such a kernel is not supported yet"

@@ -38,6 +38,12 @@
 //!
 //! The accumulating `tile_matmul(a, b, &mut acc)` sets the tile it reads: the adjoint of `acc`
 //! before it is the adjoint after it, so the seed is neither cleared nor accumulated into.
+//! `tile_fft(&mut t)` and `tile_ifft(&mut t)` set the tile they read too: their adjoint call
+//! gets the adjoint slot of `t` both as the seed and as the operand's adjoint, and replaces it
+//! with the seed's adjoint transform (nothing earlier has added to the adjoint of `t` before
+//! the transform, so replacing is accumulating into zero); the slot is not cleared after.
+//! Being linear, they need no history of `t`: a `let mut t` that only the transforms, loads,
+//! stores and sums read is never pushed.
 
 use super::{at, AKind, AStmt, Arg, Cx, GradArg, GradSrc, TempLike};
 use crate::builtins::Grad;
@@ -108,6 +114,16 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_assign", "adjoint"),
     ("tile_add_inplace", "adjoint"),
     ("tile_sub_inplace", "adjoint"),
+    ("tile_fft", "adjoint (`tile_ifft` of the seed, in place)"),
+    ("tile_ifft", "adjoint (`tile_fft` of the seed, in place)"),
+    (
+        "tile_full",
+        "adjoint (the value gets the seed's sum; Warp drops it)",
+    ),
+    (
+        "tile_astype",
+        "adjoint (between floats; none to or from integers, as Warp)",
+    ),
 ];
 
 /// What the builtins table says of tile row `name`'s gradient, `None` where backward through
@@ -204,7 +220,11 @@ fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
             | "tile_load"
             | "tile"
             | "tile_scan_inclusive"
-            | "tile_scan_exclusive" => {}
+            | "tile_scan_exclusive"
+            | "tile_fft"
+            | "tile_ifft"
+            | "tile_full"
+            | "tile_astype" => {}
             // The windows' adjoints move adjoints around; they read no tile's value.
             "tile_view"
             | "tile_assign"
@@ -307,6 +327,21 @@ impl Cx<'_> {
                 self.refuse(name);
                 return Some(Vec::new());
             }
+            // Tiles of vectors (complex values) have the adjoints of the rows made for them
+            // (and of `+ -` and scaling, which are not rows); the other rules are written for
+            // scalar elements.
+            let vector = |v: &VarId| f.ty(*v).is_vector_tile();
+            let for_vectors = matches!(
+                name,
+                "tile_load" | "tile_store" | "tile_extract" | "tile_fft" | "tile_ifft"
+            );
+            if builtin.grad != Grad::Zero
+                && !for_vectors
+                && (vector(&dst) || args.iter().any(vector))
+            {
+                self.refuse(&format!("`{name}` on tiles of vectors"));
+                return Some(Vec::new());
+            }
             match name {
                 // The store hands each written element's gradient to the tile.
                 "tile_store" => {
@@ -366,6 +401,21 @@ impl Cx<'_> {
                         b.push(at(AKind::Seed(seed), sp));
                         let func = format!("adj_{name}{}", args.len() - 2);
                         self.tile_call(&mut b, &func, args, true, sp);
+                    }
+                    return Some(vec![at(AKind::Scope(b), sp)]);
+                }
+                // `t` transformed in place (`t = tile_fft(t)`): the adjoint of `t` before is
+                // the adjoint transform of the adjoint after, which replaces it in its slot.
+                // Linear: the value of `t` is not read (so the replay need not keep it).
+                "tile_fft" | "tile_ifft" => {
+                    let t = args[0];
+                    if self.diff(t) {
+                        let seed = GradSrc::Adj {
+                            var: t,
+                            path: Vec::new(),
+                        };
+                        b.push(at(AKind::Seed(seed), sp));
+                        self.tile_call(&mut b, &format!("adj_{name}"), &[t], false, sp);
                     }
                     return Some(vec![at(AKind::Scope(b), sp)]);
                 }
@@ -430,6 +480,16 @@ impl Cx<'_> {
                     // A reshape's adjoint is the same copy the other way.
                     ("tile_reshape" | "tile_squeeze", _) => {
                         self.tile_call(&mut b, "adj_tile_reshape", args, false, sp);
+                    }
+                    // A value every lane computed, or a tile whose elements convert back
+                    // (nothing to do for an operand that carries no gradient, such as an
+                    // integer tile or a constant; a kernel parameter's adjoint goes nowhere).
+                    ("tile_full" | "tile_astype", _) => {
+                        let param = f.params.iter().any(|p| p.var == args[0]);
+                        if self.diff(args[0]) && !param {
+                            let func = format!("adj_{name}");
+                            self.tile_call(&mut b, &func, &args[..1], false, sp);
+                        }
                     }
                     ("tile_diag_add", _) => {
                         self.tile_call(&mut b, "adj_tile_diag_add", args, false, sp);
