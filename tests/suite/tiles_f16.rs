@@ -213,6 +213,13 @@ fn k_gemm_plain(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>) {
 /// Block sizes: 64 (the pipe is off: too many accumulators a thread), 128 and 256 (on, on
 /// sm_80+). Both within the module's tensor-core tolerance of the f64 product.
 fn f16_gemm_pipelined_k_loop_matches_the_plain_loop(dev: &wp::Device) {
+    // The first kernel's k-loop is the pipelined form's, the second's is not.
+    assert!(wp::kernel_info(k_gemm_pipe)
+        .cuda
+        .contains("tile_gemm_pipe_of"));
+    assert!(!wp::kernel_info(k_gemm_plain)
+        .cuda
+        .contains("tile_gemm_pipe_of"));
     for (m, k, n) in [(256usize, 256usize, 256usize), (200, 300, 136)] {
         let ad = values(m * k, 5);
         let bd_ = values(k * n, 17);

@@ -26,7 +26,7 @@
 //! iteration `k + STAGES - 1` while iteration `k` multiplies); the loaded tiles are read by
 //! nothing but that `tile_matmul`, anywhere in the kernel.
 
-use super::cuda::{cpp_type, Emitter};
+use super::cuda::Emitter;
 use crate::ir::*;
 use crate::types::{Scalar, Ty};
 
@@ -66,16 +66,9 @@ pub(crate) fn gemm_loop<'a>(f: &Function, s: &'a Stmt) -> Option<GemmLoop<'a>> {
     let StmtKind::For { var, range, body } = &s.kind else {
         return None;
     };
-    // The native loop's conditions (back/cuda.rs): a plain ascending range over the loop
-    // variable's own integer type.
-    let vt = f.ty(*var);
-    if !range.adapters.is_empty()
-        || range.inclusive
-        || f.vars[*var].mutable
-        || !vt.is_int_scalar()
-        || f.ty(range.start) != vt
-        || f.ty(range.end) != vt
-    {
+    // A range without adapters (its iterations are `wp::range_at` of a `wp::range_t`, as the
+    // general loop's), over a variable the body does not assign.
+    if !range.adapters.is_empty() || f.vars[*var].mutable {
         return None;
     }
     let (last, rest) = body.split_last()?;
@@ -155,11 +148,14 @@ impl Emitter<'_> {
         let StmtKind::For { var, range, .. } = &s.kind else {
             unreachable!("gemm_loop matched a for loop")
         };
-        let t = cpp_type(self.f.ty(*var)).ok_or("the loop variable's type")?;
+        let (s0, e0) = (self.var(range.start), self.var(range.end));
+        // The loop variable's type, as the general loop spells it.
+        let t = self
+            .type_expr(*var, 0)
+            .unwrap_or_else(|| format!("decltype({e0})"));
         let ta = self.var(load_dst(g.load_a));
         let tb = self.var(load_dst(g.load_b));
         let acc = self.var(g.acc);
-        let (s0, e0) = (self.var(range.start), self.var(range.end));
         self.tmp += 1;
         let k = self.tmp;
         let (pipe, p, n) = (format!("__gp{k}"), format!("__p{k}"), format!("__n{k}"));
@@ -175,12 +171,15 @@ impl Emitter<'_> {
         self.pipes.push(of);
         self.line(sp, &format!("if ({pipe}::usable({acc}, {ta}, {tb})) {{"));
         self.indent += 1;
-        self.line(sp, &format!("const {t} __s{k} = {s0}, __e{k} = {e0};"));
-        // The trip count (the range evaluated once, as Rust does).
+        // The range, evaluated once as Rust does, and its trip count.
         self.line(
             sp,
-            &format!("const wp::i64 {n} = __e{k} > __s{k} ? (wp::i64)(__e{k} - __s{k}) : 0;"),
+            &format!(
+                "const wp::range_t __r{k} = wp::range_new((wp::i64)({s0}), (wp::i64)({e0}), {});",
+                range.inclusive
+            ),
         );
+        self.line(sp, &format!("const wp::i64 {n} = __r{k}.count;"));
         self.line(sp, &format!("{pipe} {p}({acc}, {ta}, {tb});"));
         self.line(sp, &format!("{p}.begin({acc});"));
         // The first AHEAD iterations' loads.
@@ -236,7 +235,10 @@ impl Emitter<'_> {
         let v = self.var(var);
         self.line(sp, &format!("if (__j{k} < __n{k}) {{"));
         self.indent += 1;
-        self.line(sp, &format!("const {t} {v} = ({t})(__s{k} + ({t})__j{k});"));
+        self.line(
+            sp,
+            &format!("const {t} {v} = wp::cast<{t}>(wp::range_at(__r{k}, __j{k}));"),
+        );
         for st in &g.scalars {
             self.stmt(st)?;
         }
@@ -323,6 +325,28 @@ mod tests {
         );
         // Each copy of the offsets' arithmetic sees its own loop variable.
         assert_eq!(src.matches("const wp::usize k_").count(), 2, "{src}");
+    }
+
+    /// The example's kernel: tile dims and offsets through module consts (a loop over a range
+    /// whose type the macro leaves to C++).
+    #[test]
+    fn a_gemm_k_loop_over_consts_is_pipelined() {
+        let src = cuda(parse_quote! {
+            fn gemm(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>) {
+                let (i, j) = tid();
+                let mut acc = tile_zeros::<f32, BM, BN>();
+                let k_tiles = (a.shape()[1] + BK - 1) / BK;
+                for k in 0..k_tiles {
+                    let ta = tile_load::<BM, BK>(a, ((i * BM) as i32, (k * BK) as i32));
+                    let tb = tile_load::<BK, BN>(b, ((k * BK) as i32, (j * BN) as i32));
+                    tile_matmul(ta, tb, &mut acc);
+                }
+                tile_store(c, acc, ((i * BM) as i32, (j * BN) as i32));
+            }
+        });
+        assert!(src.contains("::MIN_BLOCKS)"), "{src}");
+        assert!(src.contains(".load_a(__stage"), "{src}");
+        assert!(src.contains("wp::range_at(__r1, __j1)"), "{src}");
     }
 
     /// A loop whose loaded tile is read by anything but the matmul, or whose body does more
