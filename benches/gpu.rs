@@ -796,7 +796,8 @@ fn tile_gemm_bench(dev: &wp::Device, size: usize) {
     );
     println!(
         "\ntile GEMM {m} x {k} x {n} fp16 inputs, f32 accumulate (tiles {BM16} x {BN16}, k-step \
-         {BK16}, {TILE_BLOCK_DIM} threads a block; tensor cores, mma.sync m16n8k16, on sm_80+; \
+         {BK16}, {TILE_BLOCK_DIM} threads a block; tensor cores on sm_80+, the k-loop pipelined: \
+         wgmma on sm_90, mma.sync m16n8k16 elsewhere; \
          err against the float64 product of the f16 inputs)"
     );
     drop((a, b));
