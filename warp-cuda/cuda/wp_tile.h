@@ -1315,4 +1315,18 @@ WP_FN void tile_window(const tile_t<T, A, B>& d, const tile_t<T, M, N>& s, O0 o0
   __syncthreads();
 }
 
+// The rows' own names (the emitter calls these): `NAME(d, s, offsets.., ctx)`.
+#define WP_TILE_WINDOW_FORM(NAME, OP)                                   \
+  template <typename D, typename S, typename... R>                      \
+  WP_FN void NAME(const D& d, const S& s, R... rest) {                  \
+    tile_window<OP>(d, s, rest...);                                     \
+  }
+WP_TILE_WINDOW_FORM(tile_assign, WINDOW_ASSIGN)
+WP_TILE_WINDOW_FORM(tile_add_inplace, WINDOW_ADD)
+WP_TILE_WINDOW_FORM(tile_sub_inplace, WINDOW_SUB)
+WP_TILE_WINDOW_FORM(tile_bit_and_inplace, WINDOW_AND)
+WP_TILE_WINDOW_FORM(tile_bit_or_inplace, WINDOW_OR)
+WP_TILE_WINDOW_FORM(tile_bit_xor_inplace, WINDOW_XOR)
+#undef WP_TILE_WINDOW_FORM
+
 }  // namespace wp

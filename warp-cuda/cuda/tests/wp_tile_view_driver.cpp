@@ -103,11 +103,11 @@ void k_view(args_t a) {
   wp::tile_view(row, X, (i64)3, &c);
   wp::tile_view(v1, Y, 5u, &c);
   copy(d, X);
-  wp::tile_window<wp::WINDOW_ASSIGN>(d, S, 2, 3, &c);
+  wp::tile_assign(d, S, 2, 3, &c);
   copy(e, X);
-  wp::tile_window<wp::WINDOW_ADD>(e, S, 1, 0, &c);
-  wp::tile_window<wp::WINDOW_SUB>(e, S, 0, 1, &c);
-  wp::tile_window<wp::WINDOW_XOR>(I, J, 4, &c);
+  wp::tile_add_inplace(e, S, 1, 0, &c);
+  wp::tile_sub_inplace(e, S, 0, 1, &c);
+  wp::tile_bit_xor_inplace(I, J, 4, &c);
   const bool before = wp::faulted(&c);
   wp::tile_view(bad, X, 3, 2, &c);
   put(a, out, v);

@@ -444,7 +444,7 @@ impl<'a> Emitter<'a> {
     fn stmt_plain(&mut self, s: &Stmt) -> Result<(), String> {
         let sp = s.span;
         if self.pipeline && self.f.tiled.is_some() {
-            if let Some(g) = super::cuda_tile_pipe::gemm_loop(self.f, s) {
+            if let Some(g) = self.gemm_loop(s) {
                 return self.gemm_pipe_loop(s, &g);
             }
         }

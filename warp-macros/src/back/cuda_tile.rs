@@ -185,18 +185,7 @@ impl Emitter<'_> {
                     | "tile_bit_and_inplace"
                     | "tile_bit_or_inplace"
                     | "tile_bit_xor_inplace" => {
-                        let op = match builtin.name {
-                            "tile_assign" => "WINDOW_ASSIGN",
-                            "tile_add_inplace" => "WINDOW_ADD",
-                            "tile_sub_inplace" => "WINDOW_SUB",
-                            "tile_bit_and_inplace" => "WINDOW_AND",
-                            "tile_bit_or_inplace" => "WINDOW_OR",
-                            _ => "WINDOW_XOR",
-                        };
-                        format!(
-                            "wp::tile_window<wp::{op}>({d}, {}, __ctx);",
-                            a[1..].join(", ")
-                        )
+                        format!("wp::{}({d}, {}, __ctx);", builtin.name, a[1..].join(", "))
                     }
                     "tile_fft" | "tile_ifft" => {
                         // In place: the statement's destination is its argument's slot.

@@ -61,8 +61,15 @@ fn is_tile_of(t: &Ty, s: Scalar) -> bool {
     matches!(t, Ty::Tile(e, dims) if **e == Ty::Scalar(s) && dims.len() == 2)
 }
 
-/// `s` as a k-loop the pipelined form prints, or `None` (the loop is printed as written).
-pub(crate) fn gemm_loop<'a>(f: &Function, s: &'a Stmt) -> Option<GemmLoop<'a>> {
+impl Emitter<'_> {
+    /// `s` as a k-loop the pipelined form prints, or `None` (the loop is printed as written).
+    /// (A method, as the other tile printers': `back/cuda.rs` calls it without an import.)
+    pub(crate) fn gemm_loop<'a>(&self, s: &'a Stmt) -> Option<GemmLoop<'a>> {
+        gemm_loop(self.f, s)
+    }
+}
+
+fn gemm_loop<'a>(f: &Function, s: &'a Stmt) -> Option<GemmLoop<'a>> {
     let StmtKind::For { var, range, body } = &s.kind else {
         return None;
     };
