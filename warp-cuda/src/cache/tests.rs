@@ -774,9 +774,11 @@ fn eviction_removes_least_recently_used_first() {
     let entry_len = (HEADER_LEN + 100) as u64;
     let c = KernelCache::new(&t.0).with_max_bytes(Some(4 * entry_len));
     assert_eq!(c.max_bytes(), Some(4 * entry_len));
+    let mut paths = Vec::new();
     for (i, name) in ["a", "b", "c", "d"].into_iter().enumerate() {
         let path = c.store(name, 1, &[0u8; 100]).unwrap();
         set_mtime(&path, 1_000_000 + i as u64);
+        paths.push(path);
     }
     c.write_stamp((13, 0));
     fs::write(t.0.join("notes.txt"), vec![0u8; 10_000]).unwrap();
@@ -794,8 +796,15 @@ fn eviction_removes_least_recently_used_first() {
     );
     // "a" is the oldest stored, but used now: "b" goes first.
     assert_eq!(c.load("a", 1), CacheLookup::Hit(vec![0u8; 100]));
-    c.store("e", 1, &[0u8; 100]).unwrap();
+    let e = c.store("e", 1, &[0u8; 100]).unwrap();
     assert_eq!(entries(&c), ["a", "c", "d", "e"]);
+    // The load touched "a" (now, not its old stamp); "e" was stored after it. The file clock is
+    // coarse enough for both to get the same mtime, and then eviction would fall to the
+    // tie-break: give them distinct ones in their order.
+    let touched = fs::metadata(&paths[0]).unwrap().modified().unwrap();
+    assert!(touched > std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_000_003));
+    set_mtime(&paths[0], 2_000_000);
+    set_mtime(&e, 2_000_001);
     // A tighter bound: down to what fits, oldest first.
     let small = c.clone().with_max_bytes(Some(2 * entry_len + 10));
     small.store("f", 1, &[0u8; 100]).unwrap();
