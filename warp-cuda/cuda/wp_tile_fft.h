@@ -15,10 +15,15 @@
 // How the work is spread: the twiddle table w[k] = e^(+2 pi i k / N), k < N/2, is built in
 // static shared memory, one entry per thread block-strided (each from the f64 half-angle
 // cosines and sines of 2 pi / 2^j, about log2 N complex products, rounded once); then the
-// bit-reversal permutation of every row (element i of a row swaps with rev(i) when i < rev(i):
-// one thread per pair); then log2 N radix-2 stages, each M * N/2 independent butterflies
-// block-strided over the threads, with a barrier after each. A butterfly reads and writes only
-// its own pair, so the threads' share of the work changes no bit.
+// radix-2 stages in passes of up to three: a pass splits each row into groups of 2^R elements
+// closed under its R stages' pairings, and one thread loads a group, runs its R stages of
+// butterflies in registers and stores it (radix-8 for N = 64: two passes, three barriers in
+// all instead of seven, and a quarter of the shared-memory traffic). The first pass reads its
+// groups from the bit-reversed places, all of a thread's groups before a barrier and the
+// writes after it, so the permutation costs no pass of its own (when a thread's groups fit
+// in FUSED_REGS values; otherwise it is a pass of its own, one thread per swapped pair).
+// Every butterfly is still the one fft.rs computes, with its operands and twiddle, so the
+// grouping changes no bit.
 #pragma once
 
 #include "wp_core.h"
@@ -91,14 +96,129 @@ WP_FN int bit_reverse(int i) {
   return r;
 }
 
+/// One butterfly of the order fft.rs documents: `u = w x1` (each product rounded, then the
+/// sum; no FMA: --fmad=false), `x1 = x0 - u`, `x0 = x0 + u`; the forward transform conjugates
+/// the table's `w`.
+template <bool Inverse, typename C>
+WP_FN void butterfly(C& x0, C& x1, const C w) {
+  typedef typename cx<C>::S S;
+  const S wr = w.x;
+  const S wi = Inverse ? w.y : -w.y;
+  const S ur = wr * x1.x - wi * x1.y;
+  const S ui = wr * x1.y + wi * x1.x;
+  C o0, o1;
+  o1.x = x0.x - ur;
+  o1.y = x0.y - ui;
+  o0.x = x0.x + ur;
+  o0.y = x0.y + ui;
+  x0 = o0;
+  x1 = o1;
+}
+
+WP_FN constexpr int cdiv(int a, int b) { return (a + b - 1) / b; }
+
+/// Stages S0 .. S0 + R of one group, in registers: the group is the 2^R elements
+/// `base + j 2^S0` of a row (`base = g 2^(S0+R) + p`, `p < 2^S0`), closed under those stages'
+/// pairings; at stage S0 + k the pair (j0, j0 + 2^k) sits at position `p + (j0 mod 2^k) 2^S0`
+/// of its 2^(S0+k+1)-block, whose twiddle index that times N / 2^(S0+k+1) is.
+template <bool Inverse, int S0, int R, int N, typename C>
+WP_FN void group_stages(C (&v)[1 << R], int p, const C* tw) {
+#pragma unroll
+  for (int k = 0; k < R; ++k) {
+#pragma unroll
+    for (int blk = 0; blk < (1 << R); blk += (2 << k)) {
+#pragma unroll
+      for (int jj = 0; jj < (1 << k); ++jj) {
+        butterfly<Inverse>(v[blk + jj], v[blk + jj + (1 << k)],
+                           tw[(p + (jj << S0)) * (N >> (S0 + k + 1))]);
+      }
+    }
+  }
+}
+
+/// Where group q of a pass starts: its row's first element and `base`, `p` as above.
+template <int S0, int R, int N>
+WP_FN void group_at(int q, int* row, int* base, int* p) {
+  constexpr int GPR = N / (1 << R);
+  const int b = q % GPR;
+  *row = (q / GPR) * N;
+  *p = b & ((1 << S0) - 1);
+  *base = ((b >> S0) << (S0 + R)) + *p;
+}
+
+/// The most complex values a thread keeps in registers across the first pass's barrier.
+constexpr int FUSED_REGS = 32;
+
+/// One pass: stages S0 .. S0 + R of every group, each group loaded, transformed in registers
+/// and stored back by one thread, a barrier after. `First` fuses the bit-reversal permutation
+/// into the loads: every group of the block is read (from the permuted places) before the
+/// barrier and written after it, so it needs the thread's groups in registers (`PER` of them).
+template <bool Inverse, bool First, int S0, int R, typename C, int M, int N>
+WP_FN void pass(C* d, const C* tw) {
+  constexpr int G = 1 << R;
+  constexpr int NG = M * (N / G);
+  constexpr int PER = First ? cdiv(NG, WP_TILE_BLOCK_DIM) : 1;
+  constexpr int L = log2_pow2(N);
+  if constexpr (First) {
+    C v[PER][G];
+#pragma unroll
+    for (int u = 0; u < PER; ++u) {
+      const int q = (int)threadIdx.x + u * WP_TILE_BLOCK_DIM;
+      if (q < NG) {
+        int row, base, p;
+        group_at<S0, R, N>(q, &row, &base, &p);
+#pragma unroll
+        for (int j = 0; j < G; ++j) v[u][j] = d[row + bit_reverse<L>(base + (j << S0))];
+      }
+    }
+    __syncthreads();
+#pragma unroll
+    for (int u = 0; u < PER; ++u) {
+      const int q = (int)threadIdx.x + u * WP_TILE_BLOCK_DIM;
+      if (q < NG) {
+        int row, base, p;
+        group_at<S0, R, N>(q, &row, &base, &p);
+        group_stages<Inverse, S0, R, N>(v[u], p, tw);
+#pragma unroll
+        for (int j = 0; j < G; ++j) d[row + base + (j << S0)] = v[u][j];
+      }
+    }
+  } else {
+    for (int q = (int)threadIdx.x; q < NG; q += WP_TILE_BLOCK_DIM) {
+      int row, base, p;
+      group_at<S0, R, N>(q, &row, &base, &p);
+      C v[G];
+#pragma unroll
+      for (int j = 0; j < G; ++j) v[j] = d[row + base + (j << S0)];
+      group_stages<Inverse, S0, R, N>(v, p, tw);
+#pragma unroll
+      for (int j = 0; j < G; ++j) d[row + base + (j << S0)] = v[j];
+    }
+  }
+  __syncthreads();
+}
+
+/// Stages S0 .. L in passes of at most three (eight values a group: two passes for N = 64),
+/// the stages spread evenly over the passes.
+template <bool Inverse, bool First, int S0, typename C, int M, int N>
+WP_FN void passes(C* d, const C* tw) {
+  constexpr int L = log2_pow2(N);
+  if constexpr (S0 < L) {
+    constexpr int LEFT = L - S0;
+    constexpr int R = cdiv(LEFT, cdiv(LEFT, 3));
+    pass<Inverse, First, S0, R, C, M, N>(d, tw);
+    passes<Inverse, false, S0 + R, C, M, N>(d, tw);
+  }
+}
+
 template <bool Inverse, typename C, int M, int N>
 WP_FN void transform(const tile_t<C, M, N>& t) {
   static_assert((N & (N - 1)) == 0, "tile_fft: the last dim must be a power of two");
-  typedef typename cx<C>::S S;
   constexpr int L = log2_pow2(N);
   constexpr int H = N / 2 > 0 ? N / 2 : 1;
   if constexpr (N >= 2) {
-    // The table: static shared memory of its own, outside the tiles' slots.
+    // The table: static shared memory of its own, outside the tiles' slots. The first pass's
+    // barrier (or the permutation's) orders its writes before any butterfly reads it.
     WP_TILE_SHARED_ALIGNED C tw[H];
     for (int k = (int)threadIdx.x; k < N / 2; k += WP_TILE_BLOCK_DIM) {
       f64 re, im;
@@ -106,45 +226,25 @@ WP_FN void transform(const tile_t<C, M, N>& t) {
       tw[k].x = cx<C>::round(re);
       tw[k].y = cx<C>::round(im);
     }
-    // The permutation reads only elements that no thread writes before this barrier.
-    for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
-      const int i = e % N;
-      const int j = bit_reverse<L>(i);
-      if (i < j) {
-        const int f = e - i + j;
-        const C a = t.data[e];
-        t.data[e] = t.data[f];
-        t.data[f] = a;
-      }
-    }
-    __syncthreads();
-    // Stage s: pairs `half = 2^s` apart; the index arithmetic in shifts and masks (N is a
-    // compile-time power of two, `half` one at run time).
-    for (int s = 0; s < L; ++s) {
-      const int half = 1 << s;
-      const int step = N >> (s + 1);
-      for (int q = (int)threadIdx.x; q < M * (N / 2); q += WP_TILE_BLOCK_DIM) {
-        const int r = q / (N / 2), b = q % (N / 2);
-        const int g = b >> s, p = b & (half - 1);
-        const int i0 = r * N + (g << (s + 1)) + p;
-        const int i1 = i0 + half;
-        const C w = tw[p * step];
-        const S wr = w.x;
-        const S wi = Inverse ? w.y : -w.y;
-        const C x1 = t.data[i1];
-        const C x0 = t.data[i0];
-        // u = w x1: each product rounded, then the sum (no FMA: --fmad=false).
-        const S ur = wr * x1.x - wi * x1.y;
-        const S ui = wr * x1.y + wi * x1.x;
-        C o0, o1;
-        o1.x = x0.x - ur;
-        o1.y = x0.y - ui;
-        o0.x = x0.x + ur;
-        o0.y = x0.y + ui;
-        t.data[i1] = o1;
-        t.data[i0] = o0;
+    constexpr int R0 = cdiv(L, cdiv(L, 3));
+    constexpr int PER0 = cdiv(M * (N >> R0), WP_TILE_BLOCK_DIM);
+    if constexpr (PER0 << R0 <= FUSED_REGS) {
+      passes<Inverse, true, 0, C, M, N>(t.data, tw);
+    } else {
+      // Too many groups a thread to hold across a barrier: the permutation on its own (it
+      // reads only elements no thread writes before the barrier), then plain passes.
+      for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
+        const int i = e % N;
+        const int j = bit_reverse<L>(i);
+        if (i < j) {
+          const int f = e - i + j;
+          const C a = t.data[e];
+          t.data[e] = t.data[f];
+          t.data[f] = a;
+        }
       }
       __syncthreads();
+      passes<Inverse, false, 0, C, M, N>(t.data, tw);
     }
   } else {
     __syncthreads();
