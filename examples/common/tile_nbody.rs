@@ -189,12 +189,12 @@ impl Sim {
         let eps2 = (softening * softening) as f32;
         if !(softening.is_finite() && eps2 > 0.0 && eps2.is_finite()) {
             return Err(invalid(format!(
-                "tile_nbody Sim::new: softening must be positive with a finite, nonzero square in f32 (got {softening})"
+                "tile_nbody Sim::new: softening must be positive with a finite, nonzero square in f32 (got {softening:?})"
             )));
         }
         if !dt.is_finite() {
             return Err(invalid(format!(
-                "tile_nbody Sim::new: dt must be finite (got {dt})"
+                "tile_nbody Sim::new: dt must be finite (got {dt:?})"
             )));
         }
         if kernel == (Kernel::Tiled { block_dim: 0 }) {
