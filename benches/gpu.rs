@@ -7,6 +7,7 @@
 //! cargo bench --bench gpu -- --tile-gemm   # the tile GEMM section alone
 //! cargo bench --bench gpu -- --tile-cholesky   # the batched tile Cholesky section alone
 //! cargo bench --bench gpu -- --tile-fft   # the batched tile FFT section alone
+//! cargo bench --bench gpu -- --tile-nbody   # the tiled n-body section alone
 //! ```
 //!
 //! Workloads (DESIGN.md, "Figures to beat"): the seed particle program (10M x 100 steps),
@@ -22,7 +23,9 @@
 //! `tile_cholesky`/`tile_cholesky_solve`, by `benches/py/tile_cholesky.py` in the same way. The
 //! batched 64-point complex FFT in f32 (`examples/common/tile_fft.rs`'s kernel, 1M signals) is
 //! timed against cuFFT through CuPy (`cupy.fft.fft` along the last axis: a batched C2C plan)
-//! and Warp 1.19's `tile_fft`, by `benches/py/tile_fft.py`.
+//! and Warp 1.19's `tile_fft`, by `benches/py/tile_fft.py`. The all-pairs n-body step with
+//! shared-memory tiles (`examples/common/tile_nbody.rs`, 64K bodies) is timed against the same
+//! step as a scalar kernel, each with its accelerations' error against float64.
 
 use rand::Rng as _;
 use std::ffi::c_void;
@@ -71,6 +74,10 @@ mod tile_cholesky;
 /// The tile FFT section's kernel, signals and reference are the tile_fft example's.
 #[path = "../examples/common/tile_fft.rs"]
 mod tile_fft;
+
+/// The tiled n-body section's kernels, start state and reference are the tile_nbody example's.
+#[path = "../examples/common/tile_nbody.rs"]
+mod tile_nbody;
 
 #[wp::kernel]
 fn small(a: Array<f32>, b: Array<f32>, s: f32, t: f32, k: i32, c: Array<f32>) {
@@ -1119,6 +1126,77 @@ tile FFT: {rows} complex signals of {N} points in f32 (uniform in [-1, 1)^2), {M
     );
 }
 
+/// Block sizes the tiled n-body step runs at (each lane owns one body; the tile is always
+/// `tile_nbody::TILE` bodies).
+const NBODY_BLOCK_DIMS: [usize; 3] = [64, 128, 256];
+
+/// One all-pairs n-body leapfrog step of `n` bodies (the tile_nbody example's start state):
+/// tiled (shared-memory chunks of `tile_nbody::TILE` bodies) at each of `NBODY_BLOCK_DIMS`,
+/// against the scalar kernel (one thread per body); per row the median time of a step, the
+/// pair interactions per second, and the first step's accelerations' error on 64 sampled bodies
+/// against float64, relative to the sum of the terms' lengths (the bound `(n + 16) u` printed).
+fn tile_nbody_bench(dev: &wp::Device, n: usize) {
+    use tile_nbody::{Kernel, Sim, SOFTENING};
+    if n == 0 {
+        println!("\ntiled n-body: no bodies: skipped");
+        return;
+    }
+    let (x, v, m) = tile_nbody::start(n, 2026);
+    let checked = tile_nbody::checked_bodies(n, 64);
+    println!(
+        "\ntiled n-body: {n} bodies (f32, softening {SOFTENING}), one leapfrog step a launch, \
+         {} bodies a tile; error on {} sampled bodies against float64, relative to the sum of \
+         the terms' lengths (bound (n + 16) u = {:.1e}); times: median of {} after a warm-up",
+        tile_nbody::TILE,
+        checked.len(),
+        tile_nbody::error_bound(n),
+        common::REPS
+    );
+    let mut kernels: Vec<Kernel> = NBODY_BLOCK_DIMS
+        .iter()
+        .map(|&block_dim| Kernel::Tiled { block_dim })
+        .collect();
+    kernels.push(Kernel::Scalar);
+    let (mut best_tiled, mut scalar_ms) = (f64::INFINITY, f64::NAN);
+    for kernel in kernels {
+        let what = match kernel {
+            Kernel::Tiled { block_dim } => format!("tiled, block of {block_dim}"),
+            Kernel::Scalar => "scalar, one thread per body".to_string(),
+        };
+        // The first step's accelerations (at the start state) for the error; the timed steps
+        // go on from there (the state moves a little; the work per step does not change).
+        let measured = Sim::new(kernel, &x, &v, &m, SOFTENING, 1e-3, dev).and_then(|mut sim| {
+            let t0 = Instant::now();
+            sim.step()?;
+            wp::synchronize()?;
+            let first_ms = t0.elapsed().as_secs_f64() * 1e3;
+            let a = sim.accelerations()?;
+            let err = tile_nbody::acceleration_error(&a, &x, &m, SOFTENING, &checked);
+            let t = common::median_ms(|| sim.step())?;
+            sim.check_finite()?;
+            Ok((t, first_ms, err))
+        });
+        match measured {
+            Ok((t, first_ms, err)) => {
+                println!(
+                    "  {what:<28} {t:9.3} ms {:10.1} G pairs/s   error {err:.2e}   first step \
+                     {first_ms:.0} ms",
+                    (n * n) as f64 / (t * 1e-3) / 1e9
+                );
+                match kernel {
+                    Kernel::Tiled { .. } => best_tiled = best_tiled.min(t),
+                    Kernel::Scalar => scalar_ms = t,
+                }
+            }
+            Err(e) => println!("  {what:<28} failed: {e}"),
+        }
+    }
+    println!(
+        "  time ratio tiled (fastest block) / scalar: {:.3} (below 1: the tiles are faster)",
+        best_tiled / scalar_ms
+    );
+}
+
 fn main() {
     if std::env::args().any(|a| a == "--first-launch-child") {
         return first_launch_child();
@@ -1144,6 +1222,11 @@ fn main() {
         let rows = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(4096);
         return tile_fft_bench(&wp::get_device("cpu").unwrap(), rows);
     }
+    // `--tile-nbody-cpu N`: the tiled n-body section with N bodies on the CPU (plumbing).
+    if let Some(i) = args.iter().position(|a| a == "--tile-nbody-cpu") {
+        let n = args.get(i + 1).and_then(|s| s.parse().ok()).unwrap_or(1024);
+        return tile_nbody_bench(&wp::get_device("cpu").unwrap(), n);
+    }
     if std::env::args().any(|a| a == "--first-launch-parts") {
         return first_launch_parts_child();
     }
@@ -1167,6 +1250,10 @@ fn main() {
     if std::env::args().any(|a| a == "--tile-fft") {
         return tile_fft_bench(&dev, 1 << 20);
     }
+    // `--tile-nbody`: the tiled n-body section alone.
+    if std::env::args().any(|a| a == "--tile-nbody") {
+        return tile_nbody_bench(&dev, 65536);
+    }
     let hand = Hand::new();
     particles(&dev, &hand);
     nbody_bench(&dev, &hand);
@@ -1176,6 +1263,7 @@ fn main() {
     tile_gemm_bench(&dev, 4096);
     tile_cholesky_bench(&dev, 65536);
     tile_fft_bench(&dev, 1 << 20);
+    tile_nbody_bench(&dev, 65536);
     println!("\ngenerated source and compile time per kernel (this process):");
     for r in wp::compile_reports() {
         let name = format!("{}{}", r.kernel, if r.adjoint { " (adjoint)" } else { "" });

@@ -388,3 +388,55 @@ fn tile_matmul_runs_small_on_the_cpu() {
     assert_eq!(bad.status.code(), Some(2), "{err}");
     assert!(err.contains("--size") && err.contains("[0, 0, 0]"), "{err}");
 }
+
+/// tile_nbody on the CPU, small and ragged (130 bodies: not a multiple of the 64-body tiles nor
+/// of the 48-thread blocks): both kernels' rows, the same bits from both, the range probes
+/// finite or reported, and its verdict (the accelerations within (n + 16) u of float64) yes,
+/// exit status 0. A zero body count is refused before any work, naming the options.
+#[test]
+fn tile_nbody_runs_small_on_the_cpu() {
+    let dir = examples_dir();
+    let Some(bin) = fresh_binary("tile_nbody", &dir) else {
+        return;
+    };
+    let out = Command::new(&bin)
+        .args([
+            "--device",
+            "cpu",
+            "--n",
+            "130",
+            "--steps",
+            "3",
+            "--block-dim",
+            "48",
+        ])
+        .output()
+        .expect("run tile_nbody");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "tile_nbody: {:?}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for want in [
+        "\ntiled ",
+        "\nscalar ",
+        "tiled / scalar time",
+        "the same bits for all 130 bodies",
+        "two coincident bodies and a third",
+        "reported: tiled n-body accelerations diverged",
+        "reported: scalar n-body accelerations diverged",
+        "converged: yes",
+    ] {
+        assert!(stdout.contains(want), "no {want:?} in:\n{stdout}");
+    }
+
+    let bad = Command::new(&bin)
+        .args(["--device", "cpu", "--n", "0"])
+        .output()
+        .expect("run tile_nbody --n 0");
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(2), "{err}");
+    assert!(err.contains("--n") && err.contains("Some(0)"), "{err}");
+}
