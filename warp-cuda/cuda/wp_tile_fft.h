@@ -123,11 +123,11 @@ WP_FN constexpr int cdiv(int a, int b) { return (a + b - 1) / b; }
 /// of its 2^(S0+k+1)-block, whose twiddle index that times N / 2^(S0+k+1) is.
 template <bool Inverse, int S0, int R, int N, typename C>
 WP_FN void group_stages(C (&v)[1 << R], int p, const C* tw) {
-#pragma unroll
+WP_TILE_UNROLL
   for (int k = 0; k < R; ++k) {
-#pragma unroll
+WP_TILE_UNROLL
     for (int blk = 0; blk < (1 << R); blk += (2 << k)) {
-#pragma unroll
+WP_TILE_UNROLL
       for (int jj = 0; jj < (1 << k); ++jj) {
         butterfly<Inverse>(v[blk + jj], v[blk + jj + (1 << k)],
                            tw[(p + (jj << S0)) * (N >> (S0 + k + 1))]);
@@ -161,25 +161,25 @@ WP_FN void pass(C* d, const C* tw) {
   constexpr int L = log2_pow2(N);
   if constexpr (First) {
     C v[PER][G];
-#pragma unroll
+WP_TILE_UNROLL
     for (int u = 0; u < PER; ++u) {
       const int q = (int)threadIdx.x + u * WP_TILE_BLOCK_DIM;
       if (q < NG) {
         int row, base, p;
         group_at<S0, R, N>(q, &row, &base, &p);
-#pragma unroll
+WP_TILE_UNROLL
         for (int j = 0; j < G; ++j) v[u][j] = d[row + bit_reverse<L>(base + (j << S0))];
       }
     }
     __syncthreads();
-#pragma unroll
+WP_TILE_UNROLL
     for (int u = 0; u < PER; ++u) {
       const int q = (int)threadIdx.x + u * WP_TILE_BLOCK_DIM;
       if (q < NG) {
         int row, base, p;
         group_at<S0, R, N>(q, &row, &base, &p);
         group_stages<Inverse, S0, R, N>(v[u], p, tw);
-#pragma unroll
+WP_TILE_UNROLL
         for (int j = 0; j < G; ++j) d[row + base + (j << S0)] = v[u][j];
       }
     }
@@ -188,10 +188,10 @@ WP_FN void pass(C* d, const C* tw) {
       int row, base, p;
       group_at<S0, R, N>(q, &row, &base, &p);
       C v[G];
-#pragma unroll
+WP_TILE_UNROLL
       for (int j = 0; j < G; ++j) v[j] = d[row + base + (j << S0)];
       group_stages<Inverse, S0, R, N>(v, p, tw);
-#pragma unroll
+WP_TILE_UNROLL
       for (int j = 0; j < G; ++j) d[row + base + (j << S0)] = v[j];
     }
   }
