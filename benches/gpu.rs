@@ -7,6 +7,7 @@
 //! cargo bench --bench gpu -- --tile-gemm   # the tile GEMM section alone
 //! cargo bench --bench gpu -- --tile-cholesky   # the batched tile Cholesky section alone
 //! cargo bench --bench gpu -- --tile-fft   # the batched tile FFT section alone
+//! cargo bench --bench gpu -- --tiles   # every tile section (GEMM, Cholesky, FFT, n-body)
 //! cargo bench --bench gpu -- --tile-nbody   # the tiled n-body section alone
 //! ```
 //!
@@ -1252,6 +1253,13 @@ fn main() {
     }
     // `--tile-nbody`: the tiled n-body section alone.
     if std::env::args().any(|a| a == "--tile-nbody") {
+        return tile_nbody_bench(&dev, 65536);
+    }
+    // `--tiles`: every tile section, in one run (the issue's beside-Warp-and-cuBLAS/cuFFT table).
+    if std::env::args().any(|a| a == "--tiles") {
+        tile_gemm_bench(&dev, 4096);
+        tile_cholesky_bench(&dev, 65536);
+        tile_fft_bench(&dev, 1 << 20);
         return tile_nbody_bench(&dev, 65536);
     }
     let hand = Hand::new();
