@@ -3,7 +3,7 @@
 //! are skipped and read zero, like a store and a load).
 
 use super::load::{coord, coords_nd};
-use super::{Tile, Tile1, Tile2, Tile3, Tile4, TileFromFn};
+use super::{Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::builtins::atomic::{atomic_add, AtomicElement};
 use crate::fault::KResult;
 use crate::index::IndexInt;

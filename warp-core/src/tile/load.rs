@@ -382,7 +382,6 @@ mod tests {
         // A store at (2, 3, 3): only (0, 0, 0..2) of the tile lands, at a[2, 3, 3..5].
         let t = Tile3::<f32, 2, 3, 4>::from_flat_fn(|k| -(k as f32) - 1.0);
         store3(&a, 2u32, 3i8, 3usize, &t).unwrap();
-        drop(a);
         let mut want = orig.clone();
         want[(2 * n1 + 3) * n2 + 3] = -1.0;
         want[(2 * n1 + 3) * n2 + 4] = -2.0;
