@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Arc, Mutex, OnceLock};
-use warp_core::tile::{self, Tile, Tile1, Tile2};
+use warp_core::tile::{self, Tile, Tile1, Tile2, Tile3, Tile4};
 use warp_core::ArrayView;
 
 /// The block sizes every test runs.
@@ -283,6 +283,77 @@ fn loads_and_stores_with_ragged_and_negative_offsets_match() {
             let t: Tile2<f32, 5, 7> = tile::load2(&view(&mut a, shape), o[0], o[1]).unwrap();
             tile::store2(&view(&mut b, bs), o[2], o[3], &t).unwrap();
             want.push((flat(&t), bytes(&b), format!("load2 {shape:?} at {o:?}")));
+        }
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (t, b, what)) in want.iter().enumerate() {
+            assert_eq!(&got[2 * k], t, "tile, {what}, block size {bd}");
+            assert_eq!(&got[2 * k + 1], b, "stored array, {what}, block size {bd}");
+        }
+    }
+}
+
+/// Rank 3 and 4: loads and stores at offsets crossing both ends of every axis (and the i64
+/// extremes), an element read, and (rank 3) an atomic add with its old values, against
+/// warp-core's `load3`/`store3`/`extract`/`atomic_add3` and `load4`/`store4`, bit for bit.
+#[test]
+fn loads_and_stores_rank_3_and_4() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0x5eed_0341);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<u8>, Vec<u8>, String)> = Vec::new();
+    for shape in [[4usize, 5, 6], [2, 3, 4], [3, 4, 5]] {
+        for o in [
+            [0i64, 0, 0, 0],
+            [-1, 2, -3, 1],
+            [2, -2, 3, -4],
+            [1, 1, 1, 3],
+            [i64::MIN, 0, 1, i64::MAX],
+        ] {
+            let n: usize = shape.iter().product();
+            let mut a: Vec<f32> = (0..n).map(|_| rng.f32()).collect();
+            let mut b: Vec<f32> = (0..n).map(|i| i as f32 + 0.25).collect();
+            script.arr("f3", 0, &shape, &a);
+            script.arr("f3", 1, &shape, &b);
+            script.off(o);
+            script.run("load3");
+            script.dump("f3", 1);
+            let t: Tile3<f32, 3, 4, 5> =
+                tile::load3(&view(&mut a, shape), o[0], o[1], o[2]).unwrap();
+            let bv = view(&mut b, shape);
+            tile::store3(&bv, o[1], o[2], o[3], &t).unwrap();
+            let x = t.extract((o[3] & 1) as i32, 2u32, 4i64, "k").unwrap();
+            let old = tile::atomic_add3(&bv, o[2], o[3], o[0], &t).unwrap();
+            let mut out = flat(&t);
+            out.extend(bytes(&[x]));
+            out.extend(flat(&old));
+            want.push((out, bytes(&b), format!("load3 {shape:?} at {o:?}")));
+        }
+    }
+    for shape in [[2usize, 3, 2, 3], [3, 2, 4, 2], [1, 4, 3, 5]] {
+        for o in [
+            [0i64, 0, 0, 0],
+            [1, -1, 1, -2],
+            [-1, 2, -1, 1],
+            [0, 1, 2, 3],
+        ] {
+            let n: usize = shape.iter().product();
+            let mut a: Vec<f32> = (0..n).map(|_| rng.f32()).collect();
+            let mut b: Vec<f32> = (0..n).map(|i| -(i as f32)).collect();
+            script.arr("f4", 0, &shape, &a);
+            script.arr("f4", 1, &shape, &b);
+            script.off(o);
+            script.run("load4");
+            script.dump("f4", 1);
+            let t: Tile4<f32, 2, 3, 2, 3> =
+                tile::load4(&view(&mut a, shape), o[0], o[1], o[2], o[3]).unwrap();
+            tile::store4(&view(&mut b, shape), o[3], o[2], o[1], o[0], &t).unwrap();
+            let mut out = flat(&t);
+            out.extend(bytes(&[t.extract(1, 2, 0, 2, "k").unwrap()]));
+            want.push((out, bytes(&b), format!("load4 {shape:?} at {o:?}")));
         }
     }
     for bd in BLOCK_DIMS {
