@@ -1101,10 +1101,34 @@ __device__ unsigned char* matmuls(unsigned char* at) {
   return at;
 }
 
+// Ranks 3 and 4: loads and stores (signed and unsigned offsets), elementwise, a reduction,
+// a reshape across ranks, an element read.
+template <typename T>
+__device__ unsigned char* nd_ops(const wp::array_t<T, 3>& a3, const wp::array_t<T, 4>& a4,
+                                 unsigned char* at, wp::ctx_t* c) {
+  wp::tile_t<T, 3, 4, 5> t(at);
+  at += (wp::tile_t<T, 3, 4, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 2, 3, 2, 5> q(at);
+  at += (wp::tile_t<T, 2, 3, 2, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 1> r(at);
+  at += 16;
+  wp::tile_load(t, a3, -1, (wp::u64)2, 3, c);
+  wp::tile_load(q, a4, 0, -2, (wp::i64)1, 4u, c);
+  wp::tile_mul(t, t, (T)2);
+  wp::tile_reshape(q, t);
+  wp::tile_sum(r, q);
+  wp::tile_store(a3, 1, 0, -1, t, c);
+  wp::tile_store(a4, 0, 1, 2, -3, q, c);
+  (void)wp::tile_extract(t, 2, 3, 4, c);
+  (void)wp::tile_extract(q, 1, 2, 1, 4, c);
+  return at;
+}
+
 extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
     tile_all(wp::array_t<float, 1> f1, wp::array_t<float, 2> f2, wp::array_t<double, 1> d1,
              wp::array_t<double, 2> d2, wp::array_t<int, 1> i1, wp::array_t<int, 2> i2,
-             wp::fault_t* fault, wp::u32* flag) {
+             wp::array_t<float, 3> f3, wp::array_t<float, 4> f4, wp::fault_t* fault,
+             wp::u32* flag) {
   extern __shared__ __align__(16) unsigned char smem[];
   wp::ctx_t c = wp::ctx_make(fault, flag);
   unsigned char* at = smem;
@@ -1113,6 +1137,7 @@ extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
   at = all_ops(i1, i2, at, &c);
   at = matmuls<float>(at);
   at = matmuls<double>(at);
+  at = nd_ops(f3, f4, at, &c);
 }
 "#;
 
