@@ -26,7 +26,7 @@ use warp_core::block::PerLane;
 use warp_core::builtins::{MinMax, Scalar};
 use warp_core::tile::adjoint as ta;
 use warp_core::tile::matmul::Fma;
-use warp_core::tile::{Tile, Tile1, Tile2};
+use warp_core::tile::{Tile, Tile1, Tile2, Tile3, Tile4};
 use warp_core::{ArrayView, FaultKind, GradElement, GradView, KResult};
 
 /// The block sizes every test runs.
@@ -473,6 +473,198 @@ fn adjoint_loads_and_stores_match() {
     let (mut script, mut want) = (Script::default(), Want::default());
     loads_and_stores::<f32>(&mut rng, &mut script, &mut want);
     loads_and_stores::<f64>(&mut rng, &mut script, &mut want);
+    want.check(&script);
+}
+
+/// `adj_tile_load3/4` and `adj_tile_store3/4` (f32) at offsets crossing both ends of every
+/// axis and at the ends of i64, with and without a gradient array; and `adj_tile_extract3/4`
+/// from many threads at once (contributions exact in any order): against warp-core's.
+#[test]
+fn adjoint_rank_3_and_4_match() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0xad_0341);
+    let (mut script, mut want) = (Script::default(), Want::default());
+    let offsets = [
+        [0i64, 0, 0, 0],
+        [-1, 2, -3, 1],
+        [2, -2, 3, -1],
+        [1, 1, 1, 1],
+        [i64::MIN, 0, 1, i64::MAX],
+    ];
+    for shape in [[4usize, 5, 6], [2, 3, 4], [3, 4, 5]] {
+        for o in offsets {
+            for grad in [true, false] {
+                let len: usize = shape.iter().product();
+                let (a, g) = (f32::draws(&mut rng, len), f32::draws(&mut rng, len));
+                let r = f32::draws(&mut rng, 60);
+                let mut at0 = f32::draws(&mut rng, 60);
+                at0[7] = -0.0;
+                let what = format!("{shape:?} at {o:?} grad {grad}");
+                script.buf(0, &a);
+                script.buf(1, &g);
+                script.buf(2, &r);
+                script.arr("f3", 0, &shape, Some(0));
+                script.arr("f3", 1, &shape, grad.then_some(1));
+                script.off(o);
+                script.run("load3_f32");
+                script.dump(1);
+                let (a2, g2, r2) = (a.clone(), g.clone(), r.clone());
+                want.add(format!("adj_tile_load3 {what}"), move |bd| {
+                    let (mut a, mut g) = (a2.clone(), g2.clone());
+                    let mut gv = match grad {
+                        true => GradView::new(view(&mut g, shape)),
+                        false => GradView::none(),
+                    };
+                    let r: Tile3<f32, 3, 4, 5> = tile_of(&r2);
+                    let res = ta::adj_tile_load3(
+                        &view(&mut a, shape),
+                        o[0],
+                        o[1],
+                        o[2] as i32,
+                        &mut gv,
+                        &mut 0,
+                        &mut 0,
+                        &mut 0,
+                        &r,
+                        bd,
+                    );
+                    vec![vec![], fault_line(res), bytes(&g)]
+                });
+                // Buffer 1 again: the load's adjoint changed the driver's copy.
+                script.buf(1, &g);
+                script.buf(2, &at0);
+                script.buf(3, &r);
+                script.run("store3_f32");
+                script.dump(1);
+                want.add(format!("adj_tile_store3 {what}"), move |bd| {
+                    let (mut a, mut g) = (a.clone(), g.clone());
+                    let mut gv = match grad {
+                        true => GradView::new(view(&mut g, shape)),
+                        false => GradView::none(),
+                    };
+                    let t: Tile3<f32, 3, 4, 5> = tile_of(&r);
+                    let mut at: Tile3<f32, 3, 4, 5> = tile_of(&at0);
+                    let res = ta::adj_tile_store3(
+                        &view(&mut a, shape),
+                        &t,
+                        o[0],
+                        o[1],
+                        o[2],
+                        &mut gv,
+                        &mut at,
+                        &mut 0,
+                        &mut 0,
+                        &mut 0,
+                        &(),
+                        bd,
+                    );
+                    vec![flat(&at), fault_line(res), bytes(&g)]
+                });
+            }
+        }
+    }
+    for shape in [[2usize, 3, 2, 3], [3, 2, 4, 2], [1, 4, 3, 5]] {
+        for o in offsets {
+            for grad in [true, false] {
+                let len: usize = shape.iter().product();
+                let (a, g) = (f32::draws(&mut rng, len), f32::draws(&mut rng, len));
+                let r = f32::draws(&mut rng, 36);
+                let at0 = f32::draws(&mut rng, 36);
+                let what = format!("{shape:?} at {o:?} grad {grad}");
+                script.buf(0, &a);
+                script.buf(1, &g);
+                script.buf(2, &r);
+                script.arr("f4", 0, &shape, Some(0));
+                script.arr("f4", 1, &shape, grad.then_some(1));
+                script.off(o);
+                script.run("load4_f32");
+                script.dump(1);
+                let (a2, g2, r2) = (a.clone(), g.clone(), r.clone());
+                want.add(format!("adj_tile_load4 {what}"), move |bd| {
+                    let (mut a, mut g) = (a2.clone(), g2.clone());
+                    let mut gv = match grad {
+                        true => GradView::new(view(&mut g, shape)),
+                        false => GradView::none(),
+                    };
+                    let r: Tile4<f32, 2, 3, 2, 3> = tile_of(&r2);
+                    let res = ta::adj_tile_load4(
+                        &view(&mut a, shape),
+                        o[0],
+                        o[1],
+                        o[2],
+                        o[3],
+                        &mut gv,
+                        &mut 0,
+                        &mut 0,
+                        &mut 0,
+                        &mut 0,
+                        &r,
+                        bd,
+                    );
+                    vec![vec![], fault_line(res), bytes(&g)]
+                });
+                script.buf(1, &g);
+                script.buf(2, &at0);
+                script.buf(3, &r);
+                script.run("store4_f32");
+                script.dump(1);
+                want.add(format!("adj_tile_store4 {what}"), move |bd| {
+                    let (mut a, mut g) = (a.clone(), g.clone());
+                    let mut gv = match grad {
+                        true => GradView::new(view(&mut g, shape)),
+                        false => GradView::none(),
+                    };
+                    let t: Tile4<f32, 2, 3, 2, 3> = tile_of(&r);
+                    let mut at: Tile4<f32, 2, 3, 2, 3> = tile_of(&at0);
+                    let res = ta::adj_tile_store4(
+                        &view(&mut a, shape),
+                        &t,
+                        o[0],
+                        o[1],
+                        o[2],
+                        o[3],
+                        &mut gv,
+                        &mut at,
+                        &mut 0,
+                        &mut 0,
+                        &mut 0,
+                        &mut 0,
+                        &(),
+                        bd,
+                    );
+                    vec![flat(&at), fault_line(res), bytes(&g)]
+                });
+            }
+        }
+    }
+    // Extracts: thread l reads element l mod SIZE with adjoint 1 + l / 8 (small integers: the
+    // shared-memory adds are exact in any order).
+    let tv = f32::draws(&mut rng, 24);
+    script.buf(0, &tv);
+    script.run("extract_nd_f32");
+    want.add("adj_tile_extract3/4", move |bd| {
+        let t3: Tile3<f32, 2, 3, 4> = tile_of(&tv);
+        let t4: Tile4<f32, 2, 1, 3, 2> = tile_of(&tv[..12]);
+        let mut a3: Tile3<f32, 2, 3, 4> = tile_of(&[0.0; 24]);
+        let mut a4: Tile4<f32, 2, 1, 3, 2> = tile_of(&[0.0; 12]);
+        for l in 0..bd {
+            let r = 1.0 + (l / 8) as f32;
+            let e3 = l % 24;
+            let (i, j, k) = (e3 / 12, (e3 / 4) % 3, e3 % 4);
+            ta::adj_tile_extract3(&t3, i, j, k, &mut a3, &mut 0, &mut 0, &mut 0, r, "k").unwrap();
+            let e4 = l % 12;
+            let (p, u, v) = (e4 / 6, (e4 / 2) % 3, e4 % 2);
+            ta::adj_tile_extract4(
+                &t4, p, 0, u, v, &mut a4, &mut 0, &mut 0, &mut 0, &mut 0, r, "k",
+            )
+            .unwrap();
+        }
+        let mut out = flat(&a3);
+        out.extend(flat(&a4));
+        vec![out, fault_line(Ok(()))]
+    });
     want.check(&script);
 }
 

@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Arc, Mutex, OnceLock};
-use warp_core::tile::{self, Tile, Tile1, Tile2};
+use warp_core::tile::{self, Tile, Tile1, Tile2, Tile3, Tile4};
 use warp_core::ArrayView;
 
 /// The block sizes every test runs.
@@ -283,6 +283,77 @@ fn loads_and_stores_with_ragged_and_negative_offsets_match() {
             let t: Tile2<f32, 5, 7> = tile::load2(&view(&mut a, shape), o[0], o[1]).unwrap();
             tile::store2(&view(&mut b, bs), o[2], o[3], &t).unwrap();
             want.push((flat(&t), bytes(&b), format!("load2 {shape:?} at {o:?}")));
+        }
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (t, b, what)) in want.iter().enumerate() {
+            assert_eq!(&got[2 * k], t, "tile, {what}, block size {bd}");
+            assert_eq!(&got[2 * k + 1], b, "stored array, {what}, block size {bd}");
+        }
+    }
+}
+
+/// Rank 3 and 4: loads and stores at offsets crossing both ends of every axis (and the i64
+/// extremes), an element read, and (rank 3) an atomic add with its old values, against
+/// warp-core's `load3`/`store3`/`extract`/`atomic_add3` and `load4`/`store4`, bit for bit.
+#[test]
+fn loads_and_stores_rank_3_and_4() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0x5eed_0341);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<u8>, Vec<u8>, String)> = Vec::new();
+    for shape in [[4usize, 5, 6], [2, 3, 4], [3, 4, 5]] {
+        for o in [
+            [0i64, 0, 0, 0],
+            [-1, 2, -3, 1],
+            [2, -2, 3, -4],
+            [1, 1, 1, 3],
+            [i64::MIN, 0, 1, i64::MAX],
+        ] {
+            let n: usize = shape.iter().product();
+            let mut a: Vec<f32> = (0..n).map(|_| rng.f32()).collect();
+            let mut b: Vec<f32> = (0..n).map(|i| i as f32 + 0.25).collect();
+            script.arr("f3", 0, &shape, &a);
+            script.arr("f3", 1, &shape, &b);
+            script.off(o);
+            script.run("load3");
+            script.dump("f3", 1);
+            let t: Tile3<f32, 3, 4, 5> =
+                tile::load3(&view(&mut a, shape), o[0], o[1], o[2]).unwrap();
+            let bv = view(&mut b, shape);
+            tile::store3(&bv, o[1], o[2], o[3], &t).unwrap();
+            let x = t.extract((o[3] & 1) as i32, 2u32, 4i64, "k").unwrap();
+            let old = tile::atomic_add3(&bv, o[2], o[3], o[0], &t).unwrap();
+            let mut out = flat(&t);
+            out.extend(bytes(&[x]));
+            out.extend(flat(&old));
+            want.push((out, bytes(&b), format!("load3 {shape:?} at {o:?}")));
+        }
+    }
+    for shape in [[2usize, 3, 2, 3], [3, 2, 4, 2], [1, 4, 3, 5]] {
+        for o in [
+            [0i64, 0, 0, 0],
+            [1, -1, 1, -2],
+            [-1, 2, -1, 1],
+            [0, 1, 2, 3],
+        ] {
+            let n: usize = shape.iter().product();
+            let mut a: Vec<f32> = (0..n).map(|_| rng.f32()).collect();
+            let mut b: Vec<f32> = (0..n).map(|i| -(i as f32)).collect();
+            script.arr("f4", 0, &shape, &a);
+            script.arr("f4", 1, &shape, &b);
+            script.off(o);
+            script.run("load4");
+            script.dump("f4", 1);
+            let t: Tile4<f32, 2, 3, 2, 3> =
+                tile::load4(&view(&mut a, shape), o[0], o[1], o[2], o[3]).unwrap();
+            tile::store4(&view(&mut b, shape), o[3], o[2], o[1], o[0], &t).unwrap();
+            let mut out = flat(&t);
+            out.extend(bytes(&[t.extract(1, 2, 0, 2, "k").unwrap()]));
+            want.push((out, bytes(&b), format!("load4 {shape:?} at {o:?}")));
         }
     }
     for bd in BLOCK_DIMS {
@@ -1030,10 +1101,34 @@ __device__ unsigned char* matmuls(unsigned char* at) {
   return at;
 }
 
+// Ranks 3 and 4: loads and stores (signed and unsigned offsets), elementwise, a reduction,
+// a reshape across ranks, an element read.
+template <typename T>
+__device__ unsigned char* nd_ops(const wp::array_t<T, 3>& a3, const wp::array_t<T, 4>& a4,
+                                 unsigned char* at, wp::ctx_t* c) {
+  wp::tile_t<T, 3, 4, 5> t(at);
+  at += (wp::tile_t<T, 3, 4, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 2, 3, 2, 5> q(at);
+  at += (wp::tile_t<T, 2, 3, 2, 5>::BYTES + 15) & ~(wp::usize)15;
+  wp::tile_t<T, 1> r(at);
+  at += 16;
+  wp::tile_load(t, a3, -1, (wp::u64)2, 3, c);
+  wp::tile_load(q, a4, 0, -2, (wp::i64)1, 4u, c);
+  wp::tile_mul(t, t, (T)2);
+  wp::tile_reshape(q, t);
+  wp::tile_sum(r, q);
+  wp::tile_store(a3, 1, 0, -1, t, c);
+  wp::tile_store(a4, 0, 1, 2, -3, q, c);
+  (void)wp::tile_extract(t, 2, 3, 4, c);
+  (void)wp::tile_extract(q, 1, 2, 1, 4, c);
+  return at;
+}
+
 extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
     tile_all(wp::array_t<float, 1> f1, wp::array_t<float, 2> f2, wp::array_t<double, 1> d1,
              wp::array_t<double, 2> d2, wp::array_t<int, 1> i1, wp::array_t<int, 2> i2,
-             wp::fault_t* fault, wp::u32* flag) {
+             wp::array_t<float, 3> f3, wp::array_t<float, 4> f4, wp::fault_t* fault,
+             wp::u32* flag) {
   extern __shared__ __align__(16) unsigned char smem[];
   wp::ctx_t c = wp::ctx_make(fault, flag);
   unsigned char* at = smem;
@@ -1042,6 +1137,7 @@ extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
   at = all_ops(i1, i2, at, &c);
   at = matmuls<float>(at);
   at = matmuls<double>(at);
+  at = nd_ops(f3, f4, at, &c);
 }
 "#;
 

@@ -126,6 +126,7 @@ mod tile_sort;
 mod tile_views;
 mod tiles;
 mod tiles_f16;
+mod tiles_nd;
 mod transforms;
 mod views;
 mod volume;

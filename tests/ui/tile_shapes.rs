@@ -49,8 +49,8 @@ fn zero_dim() {
 }
 
 #[wp::kernel]
-fn rank3(a: Array<f32, 2>) {
-    let z = tile_load::<16, 16, 16>(a, (0, 0));
+fn rank5(a: Array<f32, 2>) {
+    let z = tile_zeros::<f32, 2, 2, 2, 2, 2>();
 }
 
 // Named consts the macro cannot compare: rustc compares them (TK is 8, KB is 4).

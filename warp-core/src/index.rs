@@ -46,6 +46,19 @@ macro_rules! index_ints {
 }
 index_ints!(i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
 
+/// An index already split into in-range candidates, one `usize` per dimension: what the
+/// rank-generic tile loads and stores (`tile::load3`, ..) compute their coordinates as.
+impl<const N: usize> KernelIndex<N> for [usize; N] {
+    #[inline(always)]
+    fn components(self) -> [i128; N] {
+        self.map(|c| c as i128)
+    }
+    #[inline(always)]
+    fn to_usize(self) -> [usize; N] {
+        self
+    }
+}
+
 impl<A: IndexInt> KernelIndex<1> for (A,) {
     #[inline(always)]
     fn components(self) -> [i128; 1] {

@@ -181,6 +181,64 @@ WP_FN void adj_tile_store2(const array_t<T, 2>& a, const tile_t<T, N0, N1>&, O0 
   __syncthreads();
 }
 
+/// `t = tile_load(a, (o0, o1, o2))`.
+template <typename T, int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN void adj_tile_load3(const array_t<T, 3>& a, O0 o0, O1 o1, O2 o2, const array_t<T, 3>& adj_a,
+                          O0&, O1&, O2&, const tile_t<T, N0, N1, N2>& r, ctx_t* ctx) {
+  if (adj_a.data != nullptr) {
+    for (int e = (int)threadIdx.x; e < N0 * N1 * N2; e += WP_TILE_BLOCK_DIM) {
+      i64 c[3];
+      if (tile_detail::coords3<N0, N1, N2>(e, a.shape, o0, o1, o2, c))
+        grad_accum(adj_a, c[0], c[1], c[2], r.data[e], ctx);
+    }
+  }
+  __syncthreads();
+}
+
+/// `t = tile_load(a, (o0, o1, o2, o3))`.
+template <typename T, int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2,
+          typename O3>
+WP_FN void adj_tile_load4(const array_t<T, 4>& a, O0 o0, O1 o1, O2 o2, O3 o3,
+                          const array_t<T, 4>& adj_a, O0&, O1&, O2&, O3&,
+                          const tile_t<T, N0, N1, N2, N3>& r, ctx_t* ctx) {
+  if (adj_a.data != nullptr) {
+    for (int e = (int)threadIdx.x; e < N0 * N1 * N2 * N3; e += WP_TILE_BLOCK_DIM) {
+      i64 c[4];
+      if (tile_detail::coords4<N0, N1, N2, N3>(e, a.shape, o0, o1, o2, o3, c))
+        grad_accum(adj_a, c[0], c[1], c[2], c[3], r.data[e], ctx);
+    }
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, t, (o0, o1, o2))`.
+template <typename T, int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN void adj_tile_store3(const array_t<T, 3>& a, const tile_t<T, N0, N1, N2>&, O0 o0, O1 o1,
+                           O2 o2, const array_t<T, 3>& adj_a, const tile_t<T, N0, N1, N2>& adj_t,
+                           O0&, O1&, O2&, const unit_t&, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2; e += WP_TILE_BLOCK_DIM) {
+    i64 c[3];
+    if (tile_detail::coords3<N0, N1, N2>(e, a.shape, o0, o1, o2, c))
+      adj_t.data[e] += grad_take(adj_a, c[0], c[1], c[2], T{}, ctx);
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, t, (o0, o1, o2, o3))`.
+template <typename T, int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2,
+          typename O3>
+WP_FN void adj_tile_store4(const array_t<T, 4>& a, const tile_t<T, N0, N1, N2, N3>&, O0 o0, O1 o1,
+                           O2 o2, O3 o3, const array_t<T, 4>& adj_a,
+                           const tile_t<T, N0, N1, N2, N3>& adj_t, O0&, O1&, O2&, O3&,
+                           const unit_t&, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2 * N3; e += WP_TILE_BLOCK_DIM) {
+    i64 c[4];
+    if (tile_detail::coords4<N0, N1, N2, N3>(e, a.shape, o0, o1, o2, o3, c))
+      adj_t.data[e] += grad_take(adj_a, c[0], c[1], c[2], c[3], T{}, ctx);
+  }
+  __syncthreads();
+}
+
 // ---- Elementwise ---------------------------------------------------------------------------
 
 // `a op b` on two tiles (`_tt`), a tile and a uniform scalar (`_ts`), a scalar and a tile
@@ -408,6 +466,27 @@ WP_FN void adj_tile_extract2(const tile_t<T, N0, N1>& t, I i, J j, const tile_t<
   const bool in0 = !(num<I>::is_signed && (i64)i < 0) && (u64)i < (u64)N0;
   const bool in1 = !(num<J>::is_signed && (i64)j < 0) && (u64)j < (u64)N1;
   if (in0 && in1) tile_detail::shared_add(&adj_t.data[(i64)i * N1 + (i64)j], r);
+}
+
+/// `x = t[i, j, k]` in one thread.
+template <typename T, int N0, int N1, int N2, typename I, typename J, typename K>
+WP_FN void adj_tile_extract3(const tile_t<T, N0, N1, N2>& t, I i, J j, K k,
+                             const tile_t<T, N0, N1, N2>& adj_t, I&, J&, K&, T r, ctx_t* ctx) {
+  (void)tile_extract(t, i, j, k, ctx);
+  if (tile_detail::index_in(i, N0) && tile_detail::index_in(j, N1) && tile_detail::index_in(k, N2))
+    tile_detail::shared_add(&adj_t.data[((i64)i * N1 + (i64)j) * N2 + (i64)k], r);
+}
+
+/// `x = t[i, j, k, l]` in one thread.
+template <typename T, int N0, int N1, int N2, int N3, typename I, typename J, typename K,
+          typename L>
+WP_FN void adj_tile_extract4(const tile_t<T, N0, N1, N2, N3>& t, I i, J j, K k, L l,
+                             const tile_t<T, N0, N1, N2, N3>& adj_t, I&, J&, K&, L&, T r,
+                             ctx_t* ctx) {
+  (void)tile_extract(t, i, j, k, l, ctx);
+  if (tile_detail::index_in(i, N0) && tile_detail::index_in(j, N1) &&
+      tile_detail::index_in(k, N2) && tile_detail::index_in(l, N3))
+    tile_detail::shared_add(&adj_t.data[(((i64)i * N1 + (i64)j) * N2 + (i64)k) * N3 + (i64)l], r);
 }
 
 /// `t = tile(x)`: the thread's `x` gains its element of `t`'s adjoint.

@@ -3,8 +3,8 @@
 // same block size: tests/cuda_tile_host.rs compiles this header with g++ under the block
 // emulator (warp-cuda/cuda/tests/wp_prim_emu.h) and compares.
 //
-// A tile `wp::tile_t<T, D0>` or `wp::tile_t<T, D0, D1>` is a pointer to a slot of shared memory
-// holding its elements in row-major order (the emitter hands out the slots; a tile never owns
+// A tile `wp::tile_t<T, D0>` .. `wp::tile_t<T, D0, D1, D2, D3>` (rank 1 to 4) is a pointer to a
+// slot of shared memory holding its elements in row-major order (flattened) (the emitter hands out the slots; a tile never owns
 // storage). `WP_TILE_BLOCK_DIM`, the block size, is a compile-time define.
 //
 // Every operation is cooperative: every thread of the block calls it, with the same arguments,
@@ -16,13 +16,14 @@
 //
 //   tile_zeros, tile_ones, tile_arange(out, start, step)   element i: start + T(i) * step (one
 //                        multiplication, then one addition, no accumulation; integers wrap)
-//   tile_load(out, a, o0[, o1]), tile_store(a, o0[, o1], t)   1-D and 2-D against arrays:
+//   tile_load(out, a, o0[, o1..]), tile_store(a, o0[, o1..], t)   1-D to 4-D against arrays:
 //                        element (i, j) is a[o0 + i, o1 + j]; signed offsets (any integer type);
 //                        a coordinate outside the array (negative too) reads as T{} and its
 //                        store is skipped, neither is a fault. A tile wholly inside an array
 //                        with contiguous rows is moved directly (16-byte vectors where the
 //                        row starts are aligned); otherwise each in-bounds access goes through
-//                        the checked wp::load / wp::store (same values, same faults).
+//                        the checked wp::load / wp::store (same values, same faults). Ranks
+//                        3 and 4 always take the checked path.
 //   tile_add, tile_sub, tile_mul(out, a, b)   tile with tile, tile with scalar, scalar with
 //                        tile: the builtins' arithmetic (IEEE for floats, wrapping for integers)
 //   tile_neg(out, a)     -a (wrapping for integers, a sign flip for floats)
@@ -60,7 +61,9 @@
 // Host builds: include tests/wp_prim_emu.h first (it provides threadIdx, __syncthreads and
 // __shfl_down_sync for fibers); otherwise this header needs CUDA.
 //
-// Not yet here (later slices): ranks 3 and 4,
+// Ranks 3 and 4 have the rank-generic operations (constructors, loads, stores, elementwise,
+// maps, reductions, reshapes, extract, atomic add); matmul, transpose, broadcast, views, FFTs
+// and the linear algebra are rank 1-2. Not yet here (later slices):
 // register tiles, scans, tensor cores. The header is not yet a kernel section (no builtin names
 // it until the emitter does), so nothing but the host test includes it.
 #pragma once
@@ -98,10 +101,10 @@ namespace wp {
 constexpr int TILE_BLOCK_DIM = WP_TILE_BLOCK_DIM;
 static_assert(TILE_BLOCK_DIM >= 1 && TILE_BLOCK_DIM <= 1024, "block size in 1..=1024");
 
-/// A tile of shape D... (rank 1 or 2 for now) over a slot of shared memory.
+/// A tile of shape D... (rank 1 to 4) over a slot of shared memory, row-major (flattened).
 template <typename T, int... D>
 struct tile_t {
-  static_assert(sizeof...(D) >= 1 && sizeof...(D) <= 2, "tiles of rank 1 and 2 (slice 1)");
+  static_assert(sizeof...(D) >= 1 && sizeof...(D) <= 4, "tiles of rank 1 to 4");
   static_assert(((D > 0) && ...), "a tile has at least one element on every axis");
   static constexpr int RANK = (int)sizeof...(D);
   static constexpr int SIZE = (D * ...);
@@ -139,6 +142,22 @@ WP_FN bool coord(O o, int i, i64 n, i64* c) {
     *c = (i64)(u + (u64)i);
     return true;
   }
+}
+
+/// The array coordinates `c` of row-major element `e` of a rank-3 tile (N0, N1, N2) at offsets
+/// (o0, o1, o2) of an array of `shape`, when every axis lies inside it (`coord` per axis).
+template <int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN bool coords3(int e, const i64* shape, O0 o0, O1 o1, O2 o2, i64* c) {
+  return coord(o0, e / (N1 * N2), shape[0], &c[0]) && coord(o1, (e / N2) % N1, shape[1], &c[1]) &&
+         coord(o2, e % N2, shape[2], &c[2]);
+}
+
+/// As `coords3`, for a rank-4 tile (N0, N1, N2, N3).
+template <int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2, typename O3>
+WP_FN bool coords4(int e, const i64* shape, O0 o0, O1 o1, O2 o2, O3 o3, i64* c) {
+  return coord(o0, e / (N1 * N2 * N3), shape[0], &c[0]) &&
+         coord(o1, (e / (N2 * N3)) % N1, shape[1], &c[1]) &&
+         coord(o2, (e / N3) % N2, shape[2], &c[2]) && coord(o3, e % N3, shape[3], &c[3]);
 }
 
 /// The builtins' min and max (wp_scalar.h's; repeated here so that the header needs only the
@@ -564,6 +583,62 @@ WP_FN void tile_store(const array_t<T, 2>& a, O0 o0, O1 o1, const tile_t<T, N0, 
   __syncthreads();
 }
 
+// Ranks 3 and 4: every element through the checked wp::load / wp::store (no fast path: these
+// are the uncommon shapes; the result is the same either way), block-strided over the
+// row-major flattening.
+
+/// `tile_load(a, (o0, o1, o2))`: element (i, j, k) is `a[o0 + i, o1 + j, o2 + k]`, or T{}
+/// outside the array.
+template <typename T, int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN void tile_load(const tile_t<T, N0, N1, N2>& out, const array_t<T, 3>& a, O0 o0, O1 o1,
+                     O2 o2, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2; e += WP_TILE_BLOCK_DIM) {
+    i64 c[3];
+    const bool in = tile_detail::coords3<N0, N1, N2>(e, a.shape, o0, o1, o2, c);
+    out.data[e] = in ? load(a, c[0], c[1], c[2], ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_load(a, (o0, o1, o2, o3))`, as the rank-3 one.
+template <typename T, int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2,
+          typename O3>
+WP_FN void tile_load(const tile_t<T, N0, N1, N2, N3>& out, const array_t<T, 4>& a, O0 o0, O1 o1,
+                     O2 o2, O3 o3, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2 * N3; e += WP_TILE_BLOCK_DIM) {
+    i64 c[4];
+    const bool in = tile_detail::coords4<N0, N1, N2, N3>(e, a.shape, o0, o1, o2, o3, c);
+    out.data[e] = in ? load(a, c[0], c[1], c[2], c[3], ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, (o0, o1, o2), t)`: `a[o0 + i, o1 + j, o2 + k] = t[i, j, k]` inside the
+/// array; the rest is skipped.
+template <typename T, int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN void tile_store(const array_t<T, 3>& a, O0 o0, O1 o1, O2 o2, const tile_t<T, N0, N1, N2>& t,
+                      ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2; e += WP_TILE_BLOCK_DIM) {
+    i64 c[3];
+    if (tile_detail::coords3<N0, N1, N2>(e, a.shape, o0, o1, o2, c))
+      store(a, c[0], c[1], c[2], t.data[e], ctx);
+  }
+  __syncthreads();
+}
+
+/// `tile_store(a, (o0, o1, o2, o3), t)`, as the rank-3 one.
+template <typename T, int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2,
+          typename O3>
+WP_FN void tile_store(const array_t<T, 4>& a, O0 o0, O1 o1, O2 o2, O3 o3,
+                      const tile_t<T, N0, N1, N2, N3>& t, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2 * N3; e += WP_TILE_BLOCK_DIM) {
+    i64 c[4];
+    if (tile_detail::coords4<N0, N1, N2, N3>(e, a.shape, o0, o1, o2, o3, c))
+      store(a, c[0], c[1], c[2], c[3], t.data[e], ctx);
+  }
+  __syncthreads();
+}
+
 // ------------------------------------------------------------------------------------------
 // Elementwise
 // ------------------------------------------------------------------------------------------
@@ -695,6 +770,36 @@ WP_FN T tile_extract(const tile_t<T, N0, N1>& t, I i, J j, ctx_t* ctx) {
   if (in0 && in1) return t.data[(i64)i * N1 + (i64)j];
   const i64 idx[2] = {(i64)i, (i64)j};
   tile_index_fault<T, N0, N1>(ctx, idx);
+  return T{};
+}
+
+namespace tile_detail {
+/// Index `i` inside `0..n` (negative values and unsigned values past i64 are outside).
+template <typename I>
+WP_FN bool index_in(I i, int n) {
+  return !(num<I>::is_signed && (i64)i < 0) && (u64)i < (u64)n;
+}
+}  // namespace tile_detail
+
+/// `t[i, j, k]`.
+template <typename T, int N0, int N1, int N2, typename I, typename J, typename K>
+WP_FN T tile_extract(const tile_t<T, N0, N1, N2>& t, I i, J j, K k, ctx_t* ctx) {
+  if (tile_detail::index_in(i, N0) && tile_detail::index_in(j, N1) && tile_detail::index_in(k, N2))
+    return t.data[((i64)i * N1 + (i64)j) * N2 + (i64)k];
+  const i64 idx[3] = {(i64)i, (i64)j, (i64)k};
+  tile_index_fault<T, N0, N1, N2>(ctx, idx);
+  return T{};
+}
+
+/// `t[i, j, k, l]`.
+template <typename T, int N0, int N1, int N2, int N3, typename I, typename J, typename K,
+          typename L>
+WP_FN T tile_extract(const tile_t<T, N0, N1, N2, N3>& t, I i, J j, K k, L l, ctx_t* ctx) {
+  if (tile_detail::index_in(i, N0) && tile_detail::index_in(j, N1) &&
+      tile_detail::index_in(k, N2) && tile_detail::index_in(l, N3))
+    return t.data[(((i64)i * N1 + (i64)j) * N2 + (i64)k) * N3 + (i64)l];
+  const i64 idx[4] = {(i64)i, (i64)j, (i64)k, (i64)l};
+  tile_index_fault<T, N0, N1, N2, N3>(ctx, idx);
   return T{};
 }
 
@@ -1055,6 +1160,31 @@ WP_FN void tile_atomic_add(const tile_t<T, N0, N1>& old, const array_t<T, 2>& a,
     const bool in = tile_detail::coord(o0, e / N1, a.shape[0], &c0) &&
                     tile_detail::coord(o1, e % N1, a.shape[1], &c1);
     old.data[e] = in ? atomic_add(a, c0, c1, t.data[e], ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_atomic_add(a, t, (o0, o1, o2))` into a 3-D array.
+template <typename T, int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN void tile_atomic_add(const tile_t<T, N0, N1, N2>& old, const array_t<T, 3>& a, O0 o0,
+                           O1 o1, O2 o2, const tile_t<T, N0, N1, N2>& t, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2; e += WP_TILE_BLOCK_DIM) {
+    i64 c[3];
+    const bool in = tile_detail::coords3<N0, N1, N2>(e, a.shape, o0, o1, o2, c);
+    old.data[e] = in ? atomic_add(a, c[0], c[1], c[2], t.data[e], ctx) : T{};
+  }
+  __syncthreads();
+}
+
+/// `tile_atomic_add(a, t, (o0, o1, o2, o3))` into a 4-D array.
+template <typename T, int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2,
+          typename O3>
+WP_FN void tile_atomic_add(const tile_t<T, N0, N1, N2, N3>& old, const array_t<T, 4>& a, O0 o0,
+                           O1 o1, O2 o2, O3 o3, const tile_t<T, N0, N1, N2, N3>& t, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2 * N3; e += WP_TILE_BLOCK_DIM) {
+    i64 c[4];
+    const bool in = tile_detail::coords4<N0, N1, N2, N3>(e, a.shape, o0, o1, o2, o3, c);
+    old.data[e] = in ? atomic_add(a, c[0], c[1], c[2], c[3], t.data[e], ctx) : T{};
   }
   __syncthreads();
 }

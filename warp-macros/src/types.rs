@@ -337,7 +337,7 @@ pub enum Ty {
     /// queries; kernels see objects only through builtin rows.
     Object(ObjectKind),
     /// A block-cooperative tile (`Tile<f32, 16, 8>`): its element (a scalar) and its shape,
-    /// rank 1 or 2. Only kernels launched with `launch_tiled` hold tiles.
+    /// rank 1 to 4. Only kernels launched with `launch_tiled` hold tiles.
     Tile(Box<Ty>, Vec<Dim>),
     /// `()`.
     Unit,

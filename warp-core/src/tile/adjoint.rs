@@ -21,9 +21,10 @@
 
 use super::fft::Complex;
 use super::load::coord;
+use super::load::coords_nd;
 use super::matmul::Fma;
 use super::reduce::{self, gpu_order};
-use super::{Tile, Tile1, Tile2};
+use super::{Tile, Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::adjoint::{AdjAdd, AdjCast, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
 use crate::block::{LaneValue, PerLane};
 use crate::builtins::Scalar;
@@ -65,6 +66,26 @@ impl<T: Adjoint, const N0: usize, const N1: usize> Adjoint for Tile2<T, N0, N1> 
         }
     }
 }
+
+/// The adjoint algebra of the rank-3 and rank-4 tiles, elementwise over the flattening.
+macro_rules! nd_adjoint {
+    ($tile:ident < $($n:ident),+ >) => {
+        impl<T: Adjoint, $(const $n: usize),+> Adjoint for $tile<T, $($n),+> {
+            #[inline(always)]
+            fn adj_zero() -> Self {
+                <Self as TileFromFn>::from_flat_fn(|_| T::adj_zero())
+            }
+            #[inline(always)]
+            fn adj_accum(&mut self, v: Self) {
+                for (a, b) in self.as_flat_mut().iter_mut().zip(v.as_flat()) {
+                    a.adj_accum(*b);
+                }
+            }
+        }
+    };
+}
+nd_adjoint!(Tile3<N0, N1, N2>);
+nd_adjoint!(Tile4<N0, N1, N2, N3>);
 
 // ---- Loads and stores ----------------------------------------------------------------------
 
@@ -166,6 +187,180 @@ where
         }
     }
     Ok(())
+}
+
+/// The adjoint of a rank-3 or rank-4 `tile_load` at the widened offsets `o`:
+/// `a.grad[c] += r[k]` for every element `k` whose coordinates `c` lie inside the array.
+fn adj_load_nd<X, const R: usize>(
+    a: &ArrayView<X::Elem, R>,
+    o: [i128; R],
+    adj_a: &mut GradView<X::Elem, R>,
+    r: &X,
+) -> KResult<()>
+where
+    X: Tile<Elem: GradElement>,
+    [usize; R]: crate::index::KernelIndex<R>,
+{
+    let shape = a.shape();
+    for (k, &g) in r.as_flat().iter().enumerate() {
+        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
+            adj_a.accumulate(c, g)?;
+        }
+    }
+    Ok(())
+}
+
+/// The adjoint of a rank-3 or rank-4 `tile_store`: each written element's gradient hands over
+/// to `adj_t` and is cleared in the array's gradient.
+fn adj_store_nd<X, const R: usize>(
+    a: &ArrayView<X::Elem, R>,
+    o: [i128; R],
+    adj_a: &mut GradView<X::Elem, R>,
+    adj_t: &mut X,
+) -> KResult<()>
+where
+    X: Tile<Elem: GradElement + Adjoint>,
+    [usize; R]: crate::index::KernelIndex<R>,
+{
+    let shape = a.shape();
+    for (k, d) in adj_t.as_flat_mut().iter_mut().enumerate() {
+        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
+            d.adj_accum(adj_a.take(c, <X::Elem as Adjoint>::adj_zero())?);
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `t = tile_load(a, (o0, o1, o2))`, as [`adj_tile_load1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_load3<T, const N0: usize, const N1: usize, const N2: usize, O0, O1, O2>(
+    a: &ArrayView<T, 3>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    adj_a: &mut GradView<T, 3>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _adj_o2: &mut O2,
+    r: &Tile3<T, N0, N1, N2>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+{
+    adj_load_nd(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, r)
+}
+
+/// Adjoint of `t = tile_load(a, (o0, o1, o2, o3))`, as [`adj_tile_load1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_load4<
+    T,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    O0,
+    O1,
+    O2,
+    O3,
+>(
+    a: &ArrayView<T, 4>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    o3: O3,
+    adj_a: &mut GradView<T, 4>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _adj_o2: &mut O2,
+    _adj_o3: &mut O3,
+    r: &Tile4<T, N0, N1, N2, N3>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+    O3: IndexInt,
+{
+    adj_load_nd(
+        a,
+        [o0.widen(), o1.widen(), o2.widen(), o3.widen()],
+        adj_a,
+        r,
+    )
+}
+
+/// Adjoint of `tile_store(a, t, (o0, o1, o2))`, as [`adj_tile_store1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_store3<T, const N0: usize, const N1: usize, const N2: usize, O0, O1, O2>(
+    a: &ArrayView<T, 3>,
+    _t: &Tile3<T, N0, N1, N2>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    adj_a: &mut GradView<T, 3>,
+    adj_t: &mut Tile3<T, N0, N1, N2>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _adj_o2: &mut O2,
+    _r: &(),
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+{
+    adj_store_nd(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, adj_t)
+}
+
+/// Adjoint of `tile_store(a, t, (o0, o1, o2, o3))`, as [`adj_tile_store1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_store4<
+    T,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    O0,
+    O1,
+    O2,
+    O3,
+>(
+    a: &ArrayView<T, 4>,
+    _t: &Tile4<T, N0, N1, N2, N3>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    o3: O3,
+    adj_a: &mut GradView<T, 4>,
+    adj_t: &mut Tile4<T, N0, N1, N2, N3>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _adj_o2: &mut O2,
+    _adj_o3: &mut O3,
+    _r: &(),
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+    O3: IndexInt,
+{
+    adj_store_nd(
+        a,
+        [o0.widen(), o1.widen(), o2.widen(), o3.widen()],
+        adj_a,
+        adj_t,
+    )
 }
 
 // ---- Elementwise ---------------------------------------------------------------------------
@@ -568,6 +763,69 @@ where
     t.extract(i, j, kernel)?;
     let (i, j) = (i.widen() as usize, j.widen() as usize);
     adj_t.data[i][j].adj_accum(r);
+    Ok(())
+}
+
+/// Adjoint of `x = t[(i, j, k)]` in one lane, as [`adj_tile_extract1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_extract3<T: Adjoint, const N0: usize, const N1: usize, const N2: usize, I, J, K>(
+    t: &Tile3<T, N0, N1, N2>,
+    i: I,
+    j: J,
+    k: K,
+    adj_t: &mut Tile3<T, N0, N1, N2>,
+    _adj_i: &mut I,
+    _adj_j: &mut J,
+    _adj_k: &mut K,
+    r: T,
+    kernel: &'static str,
+) -> KResult<()>
+where
+    I: IndexInt,
+    J: IndexInt,
+    K: IndexInt,
+{
+    t.extract(i, j, k, kernel)?;
+    let (i, j, k) = (i.widen() as usize, j.widen() as usize, k.widen() as usize);
+    adj_t.data[i][j][k].adj_accum(r);
+    Ok(())
+}
+
+/// Adjoint of `x = t[(i, j, k, l)]` in one lane, as [`adj_tile_extract1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_extract4<
+    T: Adjoint,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    I,
+    J,
+    K,
+    L,
+>(
+    t: &Tile4<T, N0, N1, N2, N3>,
+    i: I,
+    j: J,
+    k: K,
+    l: L,
+    adj_t: &mut Tile4<T, N0, N1, N2, N3>,
+    _adj_i: &mut I,
+    _adj_j: &mut J,
+    _adj_k: &mut K,
+    _adj_l: &mut L,
+    r: T,
+    kernel: &'static str,
+) -> KResult<()>
+where
+    I: IndexInt,
+    J: IndexInt,
+    K: IndexInt,
+    L: IndexInt,
+{
+    t.extract(i, j, k, l, kernel)?;
+    let [i, j, k, l] = [i.widen(), j.widen(), k.widen(), l.widen()].map(|x| x as usize);
+    adj_t.data[i][j][k][l].adj_accum(r);
     Ok(())
 }
 

@@ -2,8 +2,8 @@
 //! (the result is the tile of the values each element held before; elements outside the array
 //! are skipped and read zero, like a store and a load).
 
-use super::load::coord;
-use super::{Tile1, Tile2};
+use super::load::{coord, coords_nd};
+use super::{Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::builtins::atomic::{atomic_add, AtomicElement};
 use crate::fault::KResult;
 use crate::index::IndexInt;
@@ -57,4 +57,72 @@ pub fn atomic_add2<
         }
     }
     Ok(old)
+}
+
+/// `tile_atomic_add` of a rank-`R` tile (3 or 4) into an `R`-D array at the widened offsets
+/// `o`: element by element in row-major order, skipping (and reading zero for) the elements
+/// outside the array.
+fn atomic_add_nd<X, const R: usize>(a: &ArrayView<X::Elem, R>, o: [i128; R], t: &X) -> KResult<X>
+where
+    X: TileFromFn<Elem: AtomicElement + Zeroable>,
+    [usize; R]: crate::index::KernelIndex<R>,
+{
+    const { assert!(X::RANK == R, "a tile's rank is its array's") };
+    let shape = a.shape();
+    let mut old = X::from_flat_fn(|_| Zeroable::zeroed());
+    for (k, (d, &v)) in old.as_flat_mut().iter_mut().zip(t.as_flat()).enumerate() {
+        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
+            *d = atomic_add(a, c, v)?;
+        }
+    }
+    Ok(old)
+}
+
+/// `tile_atomic_add(a, t, (o0, o1, o2))` into a 3-D array.
+#[inline]
+pub fn atomic_add3<T, const N0: usize, const N1: usize, const N2: usize, O0, O1, O2>(
+    a: &ArrayView<T, 3>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    t: &Tile3<T, N0, N1, N2>,
+) -> KResult<Tile3<T, N0, N1, N2>>
+where
+    T: AtomicElement + Zeroable,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+{
+    atomic_add_nd(a, [o0.widen(), o1.widen(), o2.widen()], t)
+}
+
+/// `tile_atomic_add(a, t, (o0, o1, o2, o3))` into a 4-D array.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn atomic_add4<
+    T,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    O0,
+    O1,
+    O2,
+    O3,
+>(
+    a: &ArrayView<T, 4>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    o3: O3,
+    t: &Tile4<T, N0, N1, N2, N3>,
+) -> KResult<Tile4<T, N0, N1, N2, N3>>
+where
+    T: AtomicElement + Zeroable,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+    O3: IndexInt,
+{
+    atomic_add_nd(a, [o0.widen(), o1.widen(), o2.widen(), o3.widen()], t)
 }

@@ -6,8 +6,21 @@
 //! source is element `k` of the result's. The sizes must agree; the macro checks literal dims
 //! at the call, and the `const` assertions here check the rest when rustc instantiates them.
 
-use super::{Tile1, Tile2};
+use super::{Tile, Tile1, Tile2, TileFromFn};
 use crate::builtins::Scalar;
+
+/// `tile_reshape` between tiles of any ranks (1 to 4) of the same size: what the generated code
+/// calls when either side has rank 3 or 4 (`reshape11` .. `reshape22` stay for ranks 1-2).
+#[inline]
+pub fn reshape<X, Y>(a: &X) -> Y
+where
+    X: Tile<Elem: Copy>,
+    Y: TileFromFn<Elem = X::Elem>,
+{
+    const { assert!(X::SIZE == Y::SIZE, "tile_reshape: the sizes differ") };
+    let flat = a.as_flat();
+    Y::from_flat_fn(|k| flat[k])
+}
 
 /// `tile_reshape` of `(A,)` to `(M,)`.
 #[inline]
@@ -72,6 +85,20 @@ pub fn diag_add<T: Scalar, const N: usize, const M: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reshape_between_ranks_keeps_row_major_order() {
+        use super::super::{Tile3, Tile4};
+        let a = Tile3::<i32, 2, 3, 2>::from_flat_fn(|k| k as i32);
+        let b: Tile2<i32, 6, 2> = reshape(&a);
+        assert_eq!(b.data[4], [8, 9]);
+        let c: Tile4<i32, 1, 2, 2, 3> = reshape(&b);
+        assert_eq!(c.data[0][1][0], [6, 7, 8]);
+        let d: Tile1<i32, 12> = reshape(&c);
+        assert_eq!(d.data, std::array::from_fn(|k| k as i32));
+        let e: Tile3<i32, 2, 3, 2> = reshape(&d);
+        assert_eq!(e, a);
+    }
 
     #[test]
     fn reshapes_keep_row_major_order() {

@@ -13,7 +13,7 @@
 
 use bytemuck::Zeroable;
 
-use super::{Tile1, Tile2};
+use super::{Tile, Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::fault::KResult;
 use crate::index::IndexInt;
 use crate::view::ArrayView;
@@ -27,6 +27,70 @@ pub(super) fn coord<O: IndexInt>(o: O, i: usize, extent: usize) -> Option<usize>
     } else {
         None
     }
+}
+
+/// The array coordinates of row-major element `k` of a tile of shape `X::SHAPE` at the
+/// (widened) offsets `o`, or `None` when any axis falls outside `0..extent` of `shape`: the
+/// rank-generic form of [`coord`] on every axis, for the tiles of rank 3 and 4.
+#[inline(always)]
+pub(super) fn coords_nd<X: Tile, const R: usize>(
+    k: usize,
+    o: [i128; R],
+    shape: [usize; R],
+) -> Option<[usize; R]> {
+    let mut c = [0usize; R];
+    let mut rest = k;
+    // The last axis varies fastest: peel the tile coordinates off from the right.
+    for ax in (0..R).rev() {
+        let n = X::SHAPE[ax];
+        let v = o[ax] + (rest % n) as i128;
+        rest /= n;
+        if v < 0 || v >= shape[ax] as i128 {
+            return None;
+        }
+        c[ax] = v as usize;
+    }
+    Some(c)
+}
+
+/// A tile of rank `R` (3 or 4) read from an `R`-D array at offsets `o`: each element through
+/// the checked [`ArrayView::load`] in row-major order (so the first fault is the first
+/// element's in that order), zero outside the array. No contiguous fast path: the rank-3 and
+/// rank-4 tiles are the uncommon case, and this keeps one obviously-checked path.
+#[inline]
+fn load_nd<X, const R: usize>(a: &ArrayView<X::Elem, R>, o: [i128; R]) -> KResult<X>
+where
+    X: TileFromFn<Elem: Copy + Zeroable>,
+    [usize; R]: crate::index::KernelIndex<R>,
+{
+    const { assert!(X::RANK == R, "a tile's rank is its array's") };
+    let shape = a.shape();
+    let mut t = X::from_flat_fn(|_| Zeroable::zeroed());
+    for (k, d) in t.as_flat_mut().iter_mut().enumerate() {
+        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
+            *d = a.load(c)?;
+        }
+    }
+    Ok(t)
+}
+
+/// A tile of rank `R` written into an `R`-D array at offsets `o`: each element inside the
+/// array through the checked [`ArrayView::store`] (the race check sees each), row-major; the
+/// rest is skipped.
+#[inline]
+fn store_nd<X, const R: usize>(a: &ArrayView<X::Elem, R>, o: [i128; R], t: &X) -> KResult<()>
+where
+    X: Tile<Elem: Copy>,
+    [usize; R]: crate::index::KernelIndex<R>,
+{
+    const { assert!(X::RANK == R, "a tile's rank is its array's") };
+    let shape = a.shape();
+    for (k, &v) in t.as_flat().iter().enumerate() {
+        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
+            a.store(c, v)?;
+        }
+    }
+    Ok(())
 }
 
 /// The first coordinate of an axis the whole tile lies inside: `o` and `o + n - 1` both in
@@ -163,6 +227,106 @@ pub fn store2<T: Copy, const N0: usize, const N1: usize, O0: IndexInt, O1: Index
     Ok(())
 }
 
+/// A rank-3 tile read from `a` at offsets `(o0, o1, o2)` (`tile_load(a, (o0, o1, o2))`):
+/// element `(i, j, k)` is `a[o0 + i, o1 + j, o2 + k]`, or zero where that is outside the array
+/// on any axis.
+#[inline]
+pub fn load3<T, const N0: usize, const N1: usize, const N2: usize, O0, O1, O2>(
+    a: &ArrayView<T, 3>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+) -> KResult<Tile3<T, N0, N1, N2>>
+where
+    T: Copy + Zeroable,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+{
+    load_nd(a, [o0.widen(), o1.widen(), o2.widen()])
+}
+
+/// A rank-4 tile read from `a` at offsets `(o0, o1, o2, o3)`, as [`load3`].
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn load4<
+    T,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    O0,
+    O1,
+    O2,
+    O3,
+>(
+    a: &ArrayView<T, 4>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    o3: O3,
+) -> KResult<Tile4<T, N0, N1, N2, N3>>
+where
+    T: Copy + Zeroable,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+    O3: IndexInt,
+{
+    load_nd(a, [o0.widen(), o1.widen(), o2.widen(), o3.widen()])
+}
+
+/// Writes rank-3 tile `t` into `a` at offsets `(o0, o1, o2)` (`tile_store(a, (o0, o1, o2),
+/// t)`): `a[o0 + i, o1 + j, o2 + k] = t[i, j, k]` wherever that is inside the array; the rest
+/// is skipped.
+#[inline]
+pub fn store3<T, const N0: usize, const N1: usize, const N2: usize, O0, O1, O2>(
+    a: &ArrayView<T, 3>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    t: &Tile3<T, N0, N1, N2>,
+) -> KResult<()>
+where
+    T: Copy,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+{
+    store_nd(a, [o0.widen(), o1.widen(), o2.widen()], t)
+}
+
+/// Writes rank-4 tile `t` into `a` at offsets `(o0, o1, o2, o3)`, as [`store3`].
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn store4<
+    T,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    O0,
+    O1,
+    O2,
+    O3,
+>(
+    a: &ArrayView<T, 4>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    o3: O3,
+    t: &Tile4<T, N0, N1, N2, N3>,
+) -> KResult<()>
+where
+    T: Copy,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+    O3: IndexInt,
+{
+    store_nd(a, [o0.widen(), o1.widen(), o2.widen(), o3.widen()], t)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,6 +342,67 @@ mod tests {
         assert_eq!(s as usize, data.len());
         // SAFETY: `data` outlives the view in every test, and the shape and strides cover it.
         unsafe { ArrayView::new(data.as_mut_ptr(), shape, strides, "k", "a") }
+    }
+
+    #[test]
+    fn load3_store3_ragged_edges_against_a_scalar_reference() {
+        // A (3, 4, 5) array; a (2, 3, 4) tile at offsets that cross every edge (and below 0).
+        let (n0, n1, n2) = (3usize, 4usize, 5usize);
+        let mut d: Vec<f32> = (0..n0 * n1 * n2).map(|x| x as f32 + 1.0).collect();
+        let orig = d.clone();
+        let a = view(&mut d, [n0, n1, n2]);
+        for (o0, o1, o2) in [
+            (0i64, 0i64, 0i64),
+            (2, 2, 3),
+            (-1, 3, -2),
+            (5, 0, 0),
+            (1, -3, 4),
+        ] {
+            let t: Tile3<f32, 2, 3, 4> = load3(&a, o0, o1, o2).unwrap();
+            for i in 0..2 {
+                for j in 0..3 {
+                    for k in 0..4 {
+                        let (c0, c1, c2) = (o0 + i as i64, o1 + j as i64, o2 + k as i64);
+                        let inside = (0..n0 as i64).contains(&c0)
+                            && (0..n1 as i64).contains(&c1)
+                            && (0..n2 as i64).contains(&c2);
+                        let want = if inside {
+                            orig[((c0 as usize) * n1 + c1 as usize) * n2 + c2 as usize]
+                        } else {
+                            0.0
+                        };
+                        assert_eq!(
+                            t.data[i][j][k], want,
+                            "offsets {o0},{o1},{o2} at {i},{j},{k}"
+                        );
+                    }
+                }
+            }
+        }
+        // A store at (2, 3, 3): only (0, 0, 0..2) of the tile lands, at a[2, 3, 3..5].
+        let t = Tile3::<f32, 2, 3, 4>::from_flat_fn(|k| -(k as f32) - 1.0);
+        store3(&a, 2u32, 3i8, 3usize, &t).unwrap();
+        let mut want = orig.clone();
+        want[(2 * n1 + 3) * n2 + 3] = -1.0;
+        want[(2 * n1 + 3) * n2 + 4] = -2.0;
+        assert_eq!(d, want);
+    }
+
+    #[test]
+    fn load4_store4_round_trip_and_edges() {
+        let shape = [2usize, 3, 2, 3];
+        let mut d: Vec<i32> = (0..36).collect();
+        let a = view(&mut d, shape);
+        let t: Tile4<i32, 2, 2, 2, 2> = load4(&a, 1, 2, 0, 1).unwrap();
+        // (0, 0, k, l) -> a[1, 2, k, 1 + l]; every i = 1 or j = 1 is outside axis 0 or 1.
+        assert_eq!(t.data[0][0], [[31, 32], [34, 35]]);
+        assert_eq!(t.data[1], [[[0; 2]; 2]; 2]);
+        assert_eq!(t.data[0][1], [[0; 2]; 2]);
+        let z = Tile4::<i32, 1, 1, 1, 4>::splat(7);
+        store4(&a, 0, 0, 1, -1, &z).unwrap(); // l = 0 at -1 skipped, l = 3 at 2 lands
+        let back: Tile4<i32, 1, 1, 1, 3> = load4(&a, 0, 0, 1, 0).unwrap();
+        assert_eq!(back.data, [[[[7, 7, 7]]]]);
+        assert_eq!(a.load((0usize, 0usize, 0usize, 2usize)).unwrap(), 2);
     }
 
     #[test]

@@ -1,9 +1,12 @@
 //! Tiles on the CPU: block-wide values that generated code of tiled kernels computes with.
 //!
 //! A tile is a plain value, `Tile1<T, N0>` (`[T; N0]`) or `Tile2<T, N0, N1>` (`[[T; N1]; N0]`,
-//! row-major), `Copy` where `T` is. Its shape is part of its type, so an operation on tiles of
-//! mismatched shapes does not compile (see `docs/design/tiles.md`, §2.1, layer 3). Ranks 3 and 4
-//! (`Tile3`, `Tile4`) will follow the same pattern: a nested array and an impl of [`Tile`].
+//! row-major), `Copy` where `T` is; `Tile3<T, N0, N1, N2>` and `Tile4<T, N0, N1, N2, N3>` are the
+//! same pattern one and two levels deeper. Its shape is part of its type, so an operation on
+//! tiles of mismatched shapes does not compile (see `docs/design/tiles.md`, §2.1, layer 3).
+//! Ranks 3 and 4 have the rank-generic operations (constructors, element access, loads and
+//! stores, elementwise operators and maps, reductions, reshapes, atomic adds); the operations
+//! that are matrix algebra (matmul, transpose, linear algebra, FFTs, views) stay rank 1-2.
 //!
 //! On the GPU a block's lanes hold the tile together; here the block is one task that computes
 //! the whole value, and the operations whose result depends on how lanes share the work
@@ -42,14 +45,14 @@ pub mod shape;
 pub mod sort;
 pub mod view;
 
-pub use atomic::{atomic_add1, atomic_add2};
-pub use convert::{diag_add, reshape11, reshape12, reshape21, reshape22};
+pub use atomic::{atomic_add1, atomic_add2, atomic_add3, atomic_add4};
+pub use convert::{diag_add, reshape, reshape11, reshape12, reshape21, reshape22};
 pub use fft::{fft, ifft};
 pub use linalg::{
     cholesky, cholesky_solve1, cholesky_solve2, lower_solve1, lower_solve2, upper_solve1,
     upper_solve2,
 };
-pub use load::{load1, load2, store1, store2};
+pub use load::{load1, load2, load3, load4, store1, store2, store3, store4};
 pub use matmul::{matmul, matmul_acc, Fma, MatmulElem};
 pub use reduce::{argmax, argmin, max, min, reduce, sum};
 pub use scan::{scan_exclusive, scan_inclusive, scan_max_inclusive, scan_min_inclusive};
@@ -69,6 +72,20 @@ pub struct Tile1<T, const N0: usize> {
 pub struct Tile2<T, const N0: usize, const N1: usize> {
     /// The rows.
     pub data: [[T; N1]; N0],
+}
+
+/// A rank-3 tile of shape `(N0, N1, N2)`, stored row-major (the last axis fastest).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tile3<T, const N0: usize, const N1: usize, const N2: usize> {
+    /// The elements, `data[i][j][k]`.
+    pub data: [[[T; N2]; N1]; N0],
+}
+
+/// A rank-4 tile of shape `(N0, N1, N2, N3)`, stored row-major (the last axis fastest).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tile4<T, const N0: usize, const N1: usize, const N2: usize, const N3: usize> {
+    /// The elements, `data[i][j][k][l]`.
+    pub data: [[[[T; N3]; N2]; N1]; N0],
 }
 
 /// What every tile type shares: its element type, shape, and its elements in row-major order.
@@ -116,6 +133,96 @@ impl<T, const N0: usize, const N1: usize> Tile for Tile2<T, N0, N1> {
     #[inline(always)]
     fn as_flat_mut(&mut self) -> &mut [T] {
         self.data.as_flattened_mut()
+    }
+}
+
+impl<T, const N0: usize, const N1: usize, const N2: usize> Tile for Tile3<T, N0, N1, N2> {
+    type Elem = T;
+    const RANK: usize = 3;
+    const SHAPE: [usize; 4] = [N0, N1, N2, 1];
+    const SIZE: usize = N0 * N1 * N2;
+    #[inline(always)]
+    fn as_flat(&self) -> &[T] {
+        self.data.as_flattened().as_flattened()
+    }
+    #[inline(always)]
+    fn as_flat_mut(&mut self) -> &mut [T] {
+        self.data.as_flattened_mut().as_flattened_mut()
+    }
+}
+
+impl<T, const N0: usize, const N1: usize, const N2: usize, const N3: usize> Tile
+    for Tile4<T, N0, N1, N2, N3>
+{
+    type Elem = T;
+    const RANK: usize = 4;
+    const SHAPE: [usize; 4] = [N0, N1, N2, N3];
+    const SIZE: usize = N0 * N1 * N2 * N3;
+    #[inline(always)]
+    fn as_flat(&self) -> &[T] {
+        self.data.as_flattened().as_flattened().as_flattened()
+    }
+    #[inline(always)]
+    fn as_flat_mut(&mut self) -> &mut [T] {
+        self.data
+            .as_flattened_mut()
+            .as_flattened_mut()
+            .as_flattened_mut()
+    }
+}
+
+/// A tile type that can be built element by element in row-major order: what the
+/// rank-generic operations (the N-D loads, the reshape between any two ranks) construct their
+/// results with, since [`Tile`] itself only reads and writes an existing tile.
+pub trait TileFromFn: Tile + Sized {
+    /// The tile whose row-major element `k` is `f(k)`, for `k` in `0..SIZE` ascending.
+    fn from_flat_fn(f: impl FnMut(usize) -> Self::Elem) -> Self;
+}
+
+impl<T, const N0: usize> TileFromFn for Tile1<T, N0> {
+    #[inline(always)]
+    fn from_flat_fn(f: impl FnMut(usize) -> T) -> Self {
+        Tile1 {
+            data: std::array::from_fn(f),
+        }
+    }
+}
+
+impl<T, const N0: usize, const N1: usize> TileFromFn for Tile2<T, N0, N1> {
+    #[inline(always)]
+    fn from_flat_fn(mut f: impl FnMut(usize) -> T) -> Self {
+        Tile2 {
+            data: std::array::from_fn(|i| std::array::from_fn(|j| f(i * N1 + j))),
+        }
+    }
+}
+
+impl<T, const N0: usize, const N1: usize, const N2: usize> TileFromFn for Tile3<T, N0, N1, N2> {
+    #[inline(always)]
+    fn from_flat_fn(mut f: impl FnMut(usize) -> T) -> Self {
+        // `array::from_fn` fills in index order, so the calls of `f` are row-major.
+        Tile3 {
+            data: std::array::from_fn(|i| {
+                std::array::from_fn(|j| std::array::from_fn(|k| f((i * N1 + j) * N2 + k)))
+            }),
+        }
+    }
+}
+
+impl<T, const N0: usize, const N1: usize, const N2: usize, const N3: usize> TileFromFn
+    for Tile4<T, N0, N1, N2, N3>
+{
+    #[inline(always)]
+    fn from_flat_fn(mut f: impl FnMut(usize) -> T) -> Self {
+        Tile4 {
+            data: std::array::from_fn(|i| {
+                std::array::from_fn(|j| {
+                    std::array::from_fn(|k| {
+                        std::array::from_fn(|l| f(((i * N1 + j) * N2 + k) * N3 + l))
+                    })
+                })
+            }),
+        }
     }
 }
 
@@ -236,6 +343,58 @@ impl<T: Scalar, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
     }
 }
 
+/// The constructors and element access of the rank-3 and rank-4 tiles, one impl block per
+/// rank (the same methods as `Tile1`'s and `Tile2`'s, written over [`TileFromFn`]).
+macro_rules! nd_tile_basics {
+    ($tile:ident < $($n:ident),+ >, $($i:ident : $ti:ident),+) => {
+        impl<T: Copy, $(const $n: usize),+> $tile<T, $($n),+> {
+            /// A tile with every element `v`.
+            #[inline(always)]
+            pub fn splat(v: T) -> Self {
+                <Self as TileFromFn>::from_flat_fn(|_| v)
+            }
+
+            /// The element at the given index (`t[(i, j, ..)]`, Warp's `tile_extract`); an
+            /// index outside the shape on any axis is a [`FaultKind::TileIndex`] fault of
+            /// `kernel`.
+            #[inline(always)]
+            pub fn extract<$($ti: IndexInt),+>(&self, $($i: $ti,)+ kernel: &'static str) -> KResult<T> {
+                let ns = [$($n),+];
+                let wide = [$($i.widen()),+];
+                let mut flat = 0usize;
+                for (&w, &n) in wide.iter().zip(&ns) {
+                    if w < 0 || w >= n as i128 {
+                        let mut index = [0i128; 4];
+                        index[..ns.len()].copy_from_slice(&wide);
+                        return index_fault::<T, Self>(kernel, index);
+                    }
+                    flat = flat * n + w as usize;
+                }
+                Ok(self.as_flat()[flat])
+            }
+        }
+
+        impl<T: Copy + Zeroable, $(const $n: usize),+> $tile<T, $($n),+> {
+            /// The tile of zeros (`tile_zeros`): every element all bits zero.
+            #[inline(always)]
+            pub fn zeros() -> Self {
+                Self::splat(T::zeroed())
+            }
+        }
+
+        impl<T: Scalar, $(const $n: usize),+> $tile<T, $($n),+> {
+            /// The tile of ones (`tile_ones`).
+            #[inline(always)]
+            pub fn ones() -> Self {
+                Self::splat(T::ONE)
+            }
+        }
+    };
+}
+
+nd_tile_basics!(Tile3<N0, N1, N2>, i: I, j: J, k: K);
+nd_tile_basics!(Tile4<N0, N1, N2, N3>, i: I, j: J, k: K, l: L);
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -301,5 +460,35 @@ mod tests {
         );
         assert!(t.extract(-1, 0, "kern").is_err());
         assert!(t.extract(2usize, 0usize, "kern").is_err());
+    }
+
+    #[test]
+    fn rank3_and_rank4_layout_and_extract() {
+        // Row-major: element (i, j, k) of a (2, 3, 4) tile is flat element (i * 3 + j) * 4 + k.
+        let t = Tile3::<i32, 2, 3, 4>::from_flat_fn(|f| f as i32);
+        assert_eq!(t.data[1][2][3], 23);
+        assert_eq!(t.as_flat().len(), 24);
+        assert_eq!(t.extract(1, 0, 2u8, "k").unwrap(), 14);
+        let e = t.extract(0, 3, 0, "kern").unwrap_err();
+        assert_eq!(
+            e.kind,
+            FaultKind::TileIndex {
+                index: [0, 3, 0, 0],
+                shape: [2, 3, 4, 1],
+                rank: 3
+            }
+        );
+        assert!(t.extract(-1, 0, 0, "kern").is_err());
+        let q = Tile4::<i32, 2, 1, 3, 2>::from_flat_fn(|f| f as i32);
+        assert_eq!(q.extract(1, 0, 2, 1, "k").unwrap(), 11);
+        assert_eq!(<Tile4<i32, 2, 1, 3, 2> as Tile>::SHAPE, [2, 1, 3, 2]);
+        let e = q.extract(0, 0, 0, 2, "kern").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "kernel `kern`: index [0, 0, 0, 2] is out of bounds for a tile of shape [2, 1, 3, 2]"
+        );
+        assert_eq!(Tile3::<f32, 1, 2, 2>::ones().as_flat(), &[1.0; 4]);
+        assert_eq!(Tile4::<u8, 1, 1, 1, 2>::zeros().data, [[[[0, 0]]]]);
+        assert_eq!(Tile3::<i8, 1, 1, 2>::splat(-3).data, [[[-3, -3]]]);
     }
 }

@@ -8,7 +8,7 @@
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-use super::{Tile1, Tile2};
+use super::{Tile, Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::builtins::{Float, Scalar};
 use crate::fault::KResult;
 use crate::ops::WrapInt;
@@ -54,6 +54,35 @@ impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
         }
     }
 }
+
+/// `map` and `map2` of the rank-3 and rank-4 tiles, over their row-major flattening (each
+/// element is independent, so the order of the calls does not matter to the result).
+macro_rules! nd_maps {
+    ($tile:ident < $($n:ident),+ >) => {
+        impl<T: Copy, $(const $n: usize),+> $tile<T, $($n),+> {
+            /// `f` applied to each element (`tile_map(f, t)`).
+            #[inline(always)]
+            pub fn map<U>(&self, f: impl Fn(T) -> U) -> $tile<U, $($n),+> {
+                let a = self.as_flat();
+                <$tile<U, $($n),+>>::from_flat_fn(|k| f(a[k]))
+            }
+
+            /// `f` applied to each pair of elements at the same position (`tile_map(f, a, b)`).
+            #[inline(always)]
+            pub fn map2<U: Copy, V>(
+                &self,
+                o: &$tile<U, $($n),+>,
+                f: impl Fn(T, U) -> V,
+            ) -> $tile<V, $($n),+> {
+                let (a, b) = (self.as_flat(), o.as_flat());
+                <$tile<V, $($n),+>>::from_flat_fn(|k| f(a[k], b[k]))
+            }
+        }
+    };
+}
+
+nd_maps!(Tile3<N0, N1, N2>);
+nd_maps!(Tile4<N0, N1, N2, N3>);
 
 /// `+ - *` (tile with tile, tile with scalar, scalar with tile) and `/` (float tiles) for one
 /// tile type, given its const parameters.
@@ -159,6 +188,8 @@ macro_rules! tile_operators {
 
 tile_operators!(Tile1<N0>);
 tile_operators!(Tile2<N0, N1>);
+tile_operators!(Tile3<N0, N1, N2>);
+tile_operators!(Tile4<N0, N1, N2, N3>);
 
 /// Tiles of 2-vectors (`Vec2`, `DVec2`: the complex values of `tile_fft`): `+` and `-` between
 /// tiles, `*` by the vector's scalar on either side. Each is glam's componentwise operator (one
@@ -200,11 +231,31 @@ vector_tile_operators!(Tile1<N0>, glam::Vec2, f32);
 vector_tile_operators!(Tile1<N0>, glam::DVec2, f64);
 vector_tile_operators!(Tile2<N0, N1>, glam::Vec2, f32);
 vector_tile_operators!(Tile2<N0, N1>, glam::DVec2, f64);
+vector_tile_operators!(Tile3<N0, N1, N2>, glam::Vec2, f32);
+vector_tile_operators!(Tile3<N0, N1, N2>, glam::DVec2, f64);
+vector_tile_operators!(Tile4<N0, N1, N2, N3>, glam::Vec2, f32);
+vector_tile_operators!(Tile4<N0, N1, N2, N3>, glam::DVec2, f64);
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::fault::FaultKind;
+
+    #[test]
+    fn rank3_and_rank4_operators() {
+        let a = Tile3::<f32, 2, 1, 3>::from_flat_fn(|k| k as f32);
+        let b = Tile3::<f32, 2, 1, 3>::splat(2.0);
+        assert_eq!((a + b).as_flat(), &[2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+        assert_eq!((a * b - 1.0).as_flat(), &[-1.0, 1.0, 3.0, 5.0, 7.0, 9.0]);
+        assert_eq!((1.0 / b).data[1][0][2], 0.5);
+        assert_eq!((-a).data[1][0][1], -4.0);
+        let q = Tile4::<i32, 1, 2, 1, 2>::from_flat_fn(|k| k as i32 - 1);
+        assert_eq!((3 * q).as_flat(), &[-3, 0, 3, 6]);
+        assert_eq!(q.map(|x| x as f64 * 0.5).as_flat(), &[-0.5, 0.0, 0.5, 1.0]);
+        let d = q.div_int(&Tile4::splat(2), "k").unwrap();
+        assert_eq!(d.as_flat(), &[0, 0, 0, 1]);
+        assert!(q.div_int_scalar(0, "k").is_err());
+    }
 
     #[test]
     fn operators_elementwise() {

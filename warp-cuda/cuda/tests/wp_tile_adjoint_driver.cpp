@@ -7,8 +7,9 @@
 //   buf K HEX                   buffer K (0..15): raw bytes ('-': none); a kernel copies its
 //                               input tiles from buffers (each thread its elements) and the
 //                               arrays below live in them
-//   arr KIND SLOT N0 [N1] K     array argument SLOT (0: the value, 1: its gradient) of KIND
-//                               (f1 f2 d1 d2: f32 / f64, rank 1 or 2) over buffer K,
+//   arr KIND SLOT N0 [N1..] K   array argument SLOT (0: the value, 1: its gradient) of KIND
+//                               (f1 f2 f3 f4 d1 d2: f32 / f64, of the rank its digit says)
+//                               over buffer K,
 //                               row-major and contiguous; K '-' for no data (a null gradient);
 //                               bound at each run, so a later `buf K` is what it sees
 //   off O0 O1 O2 O3             the i64 offsets (or a count) the next run uses
@@ -37,6 +38,8 @@ struct args_t {
   size_t n[NBUF];  // bytes
   wp::array_t<f32, 1> f1[2];
   wp::array_t<f32, 2> f2[2];
+  wp::array_t<f32, 3> f3[2];
+  wp::array_t<f32, 4> f4[2];
   wp::array_t<f64, 1> d1[2];
   wp::array_t<f64, 2> d2[2];
   i64 o[4];
@@ -162,6 +165,85 @@ static void k_load2(args_t a) {
   i64 adj_o0 = 0;
   wp::i32 o1 = (wp::i32)a.o[1], adj_o1 = 0;
   wp::adj_tile_load2(arr[0], a.o[0], o1, arr[1], adj_o0, adj_o1, r, &c);
+}
+
+/// adj_tile_load3 of a 3 x 4 x 5 f32 tile at (o0, o1, o2) (the last offset an i32), adjoint
+/// from buffer 2.
+static void k_load3(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto r = SLOT(tile_t<f32, 3, 4, 5>);
+  fill(a, 2, r);
+  i64 adj_o0 = 0, adj_o1 = 0;
+  wp::i32 o2 = (wp::i32)a.o[2], adj_o2 = 0;
+  wp::adj_tile_load3(a.f3[0], a.o[0], a.o[1], o2, a.f3[1], adj_o0, adj_o1, adj_o2, r, &c);
+}
+
+/// adj_tile_load4 of a 2 x 3 x 2 x 3 f32 tile at (o0, o1, o2, o3), adjoint from buffer 2.
+static void k_load4(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto r = SLOT(tile_t<f32, 2, 3, 2, 3>);
+  fill(a, 2, r);
+  i64 z[4] = {0, 0, 0, 0};
+  wp::adj_tile_load4(a.f4[0], a.o[0], a.o[1], a.o[2], a.o[3], a.f4[1], z[0], z[1], z[2], z[3], r,
+                     &c);
+}
+
+/// adj_tile_store3 of a 3 x 4 x 5 f32 tile at (o0, o1, o2): the tile's adjoint starts from
+/// buffer 2 (the tile from buffer 3); outputs the tile's adjoint.
+static void k_store3(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 3, 4, 5>);
+  auto at = SLOT(tile_t<f32, 3, 4, 5>);
+  fill(a, 2, at);
+  fill(a, 3, t);
+  i64 z[3] = {0, 0, 0};
+  wp::adj_tile_store3(a.f3[0], t, a.o[0], a.o[1], a.o[2], a.f3[1], at, z[0], z[1], z[2],
+                      wp::unit_t{}, &c);
+  dump(a, at);
+}
+
+/// adj_tile_store4 of a 2 x 3 x 2 x 3 f32 tile at (o0, o1, o2, o3), as k_store3.
+static void k_store4(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 2, 3, 2, 3>);
+  auto at = SLOT(tile_t<f32, 2, 3, 2, 3>);
+  fill(a, 2, at);
+  fill(a, 3, t);
+  i64 z[4] = {0, 0, 0, 0};
+  wp::adj_tile_store4(a.f4[0], t, a.o[0], a.o[1], a.o[2], a.o[3], a.f4[1], at, z[0], z[1], z[2],
+                      z[3], wp::unit_t{}, &c);
+  dump(a, at);
+}
+
+/// adj_tile_extract3 / adj_tile_extract4: thread l reads element l mod SIZE of a 2 x 3 x 4 and
+/// a 2 x 1 x 3 x 2 tile (from buffer 0) with adjoint 1 + l / 8 (exact sums in any order); the
+/// adjoints start at zero. Outputs both adjoints.
+static void k_extract_nd(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t3 = SLOT(tile_t<f32, 2, 3, 4>);
+  auto a3 = SLOT(tile_t<f32, 2, 3, 4>);
+  auto t4 = SLOT(tile_t<f32, 2, 1, 3, 2>);
+  auto a4 = SLOT(tile_t<f32, 2, 1, 3, 2>);
+  fill(a, 0, t3);
+  fill(a, 0, t4);
+  wp::tile_zeros(a3);
+  wp::tile_zeros(a4);
+  const int l = (int)threadIdx.x;
+  const f32 r = 1.0f + (f32)(l / 8);
+  const int e3 = l % 24, e4 = l % 12;
+  int i = e3 / 12, j = (e3 / 4) % 3, k = e3 % 4;
+  wp::adj_tile_extract3(t3, i, j, k, a3, i, j, k, r, &c);
+  __syncthreads();
+  int p = e4 / 6, q = 0, u = (e4 / 2) % 3, v = e4 % 2;
+  wp::adj_tile_extract4(t4, p, q, u, v, a4, p, q, u, v, r, &c);
+  __syncthreads();
+  dump(a, a3);
+  dump(a, a4);
 }
 
 /// adj_tile_store1 of a 37-element tile at o0: the tile's adjoint starts from buffer 2
@@ -509,7 +591,7 @@ int run(const char* path) {
   struct binding {
     std::string kind;
     int slot = 0;
-    i64 shape[2] = {0, 1};
+    i64 shape[4] = {0, 1, 1, 1};
     int buf = -1;
   };
   std::map<std::string, binding> binds;
@@ -536,6 +618,11 @@ int run(const char* path) {
   BOTH("extract1", k_extract1)
   BOTH("extract2", k_extract2)
 #undef BOTH
+  kernels["load3_f32"] = k_load3;
+  kernels["load4_f32"] = k_load4;
+  kernels["store3_f32"] = k_store3;
+  kernels["store4_f32"] = k_store4;
+  kernels["extract_nd_f32"] = k_extract_nd;
   kernels["elem_f32_300"] = k_elem<f32, 300>;
   kernels["elem_f64_300"] = k_elem<f64, 300>;
   kernels["elem_f32_13x11"] = k_elem<f32, 13, 11>;
@@ -578,17 +665,19 @@ int run(const char* path) {
     } else if (cmd == "arr") {
       std::string kind, bk;
       int slot;
-      i64 shape[2] = {0, 1};
-      ss >> kind >> slot >> shape[0];
-      if (kind[1] == '2') ss >> shape[1];
+      i64 shape[4] = {0, 1, 1, 1};
+      ss >> kind >> slot;
+      if (kind.size() != 2 || kind[1] < '1' || kind[1] > '4') return 2;
+      for (int k = 0; k < kind[1] - '0'; ++k) ss >> shape[k];
       ss >> bk;
       if (slot < 0 || slot > 1) return 2;
-      if (kind != "f1" && kind != "f2" && kind != "d1" && kind != "d2") return 2;
+      if (kind != "f1" && kind != "f2" && kind != "f3" && kind != "f4" && kind != "d1" &&
+          kind != "d2")
+        return 2;
       binding& b = binds[kind + std::to_string(slot)];
       b.kind = kind;
       b.slot = slot;
-      b.shape[0] = shape[0];
-      b.shape[1] = shape[1];
+      for (int k = 0; k < 4; ++k) b.shape[k] = shape[k];
       b.buf = bk == "-" ? -1 : std::stoi(bk);
     } else if (cmd == "off") {
       ss >> a.o[0] >> a.o[1] >> a.o[2] >> a.o[3];
@@ -607,6 +696,8 @@ int run(const char* path) {
         const int arg = b.slot + 10 * (int)(b.kind[0] - 'a');
         if (b.kind == "f1") bind(a.f1[b.slot], data, b.shape, arg);
         else if (b.kind == "f2") bind(a.f2[b.slot], data, b.shape, arg);
+        else if (b.kind == "f3") bind(a.f3[b.slot], data, b.shape, arg);
+        else if (b.kind == "f4") bind(a.f4[b.slot], data, b.shape, arg);
         else if (b.kind == "d1") bind(a.d1[b.slot], data, b.shape, arg);
         else bind(a.d2[b.slot], data, b.shape, arg);
       }

@@ -3,8 +3,9 @@
 // -DWP_TILE_BLOCK_DIM=<bd>, and compares the output with warp-core's tile functions).
 //
 // Script (argv[1]), one command per line:
-//   arr KIND SLOT N0 [N1] HEX   an array argument (KIND f1 f2 d1 d2 i1: f32 / f64 / i32, rank
-//                               1 or 2), row-major and contiguous; HEX its bytes ('-': none)
+//   arr KIND SLOT N0 [N1..] HEX an array argument (KIND f1 f2 f3 f4 d1 d2 i1: f32 / f64 / i32,
+//                               of the rank its digit says), row-major and contiguous; HEX its
+//                               bytes ('-': none)
 //   strides KIND SLOT S0 [S1]   the array's strides now (bytes; its bytes must cover them)
 //   off O0 O1 O2 O3             the offsets (i64) the next run uses
 //   scal HEX HEX HEX            three f32 scalars (bit patterns, 8 hex digits each)
@@ -14,6 +15,7 @@
 #include "wp_prim_emu.h"
 #include "wp_tile.h"
 #include "wp_tile_mma.h"
+#include "wp_atomic.h"
 
 #include <cstdint>
 #include <cstring>
@@ -30,6 +32,8 @@ using wp::tile_t;
 struct args_t {
   wp::array_t<f32, 1> f1[2];
   wp::array_t<f32, 2> f2[3];
+  wp::array_t<f32, 3> f3[2];
+  wp::array_t<f32, 4> f4[2];
   wp::array_t<f64, 1> d1[1];
   wp::array_t<f64, 2> d2[3];
   wp::array_t<i32, 1> i1[2];
@@ -75,6 +79,42 @@ static void k_load1(args_t a) {
   wp::tile_store(a.f1[1], a.o[1], t, &c);
   size_t at = 0;
   dump(a, at, t);
+}
+
+/// Rank 3: a (3, 4, 5) tile loaded from f3[0] at (o0, o1, o2), stored into f3[1] at
+/// (o1, o2, o3), an element read at (o3 & 1, 2, 4) appended; then atomically added into f3[1]
+/// at (o2, o3, o0), the old values appended. Outputs: the tile, the element, the old values.
+static void k_load3(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 3, 4, 5>);
+  auto old = SLOT(tile_t<f32, 3, 4, 5>);
+  wp::tile_load(t, a.f3[0], a.o[0], a.o[1], a.o[2], &c);
+  wp::tile_store(a.f3[1], a.o[1], a.o[2], a.o[3], t, &c);
+  size_t at = 0;
+  dump(a, at, t);
+  const f32 x = wp::tile_extract(t, (int)(a.o[3] & 1), 2u, (i64)4, &c);
+  if (threadIdx.x == 0) std::memcpy(a.out + at, &x, 4);
+  at += 4;
+  __syncthreads();
+  wp::tile_atomic_add(old, a.f3[1], a.o[2], a.o[3], a.o[0], t, &c);
+  dump(a, at, old);
+}
+
+/// Rank 4: a (2, 3, 2, 3) tile loaded from f4[0] at (o0, o1, o2, o3), stored into f4[1] at
+/// (o3, o2, o1, o0), an element read at (1, 2, 0, 2) appended.
+static void k_load4(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<f32, 2, 3, 2, 3>);
+  wp::tile_load(t, a.f4[0], a.o[0], a.o[1], a.o[2], a.o[3], &c);
+  wp::tile_store(a.f4[1], a.o[3], a.o[2], a.o[1], a.o[0], t, &c);
+  size_t at = 0;
+  dump(a, at, t);
+  const f32 x = wp::tile_extract(t, 1, 2, 0, 2, &c);
+  if (threadIdx.x == 0) std::memcpy(a.out + at, &x, 4);
+  at += 4;
+  __syncthreads();
 }
 
 static void k_load2(args_t a) {
@@ -438,6 +478,8 @@ int run(const char* path) {
       {"arg_f32_300", k_arg_f32_300}, {"arg_f32_5", k_arg_f32_5},
       {"arg_f32_2d", k_arg_f32_2d},   {"arg_i32", k_arg_i32},
       {"neg", k_neg},
+      {"load3", k_load3},
+      {"load4", k_load4},
   };
   std::map<std::string, size_t> out_bytes = {
       {"load1", 37 * 4},   {"load2", 35 * 4},   {"red_f32_300", 12}, {"red_f32_5", 12},
@@ -445,6 +487,7 @@ int run(const char* path) {
       {"matmul_f32", 280}, {"matmul_f64", 144}, {"arith_i32", 10 * 160},
       {"arg_f32_300", 8},  {"arg_f32_5", 8},    {"arg_f32_2d", 8},   {"arg_i32", 8},
       {"neg", 3 * 160},
+      {"load3", 60 * 4 * 2 + 4}, {"load4", 36 * 4 + 4},
   };
   // The register-blocked matmul's shapes (tests/cuda_tile_host.rs names them mm_T_MxKxN, with
   // _mis for the misaligned slots).
@@ -488,16 +531,18 @@ int run(const char* path) {
     if (cmd == "arr") {
       std::string kind, hex;
       int slot;
-      i64 shape[2] = {0, 1};
-      ss >> kind >> slot >> shape[0];
-      const bool two = kind[1] == '2';
-      if (two) ss >> shape[1];
+      i64 shape[4] = {0, 1, 1, 1};
+      ss >> kind >> slot;
+      const int rank = kind[1] - '0';
+      for (int k = 0; k < rank; ++k) ss >> shape[k];
       ss >> hex;
       buffer& b = bufs[kind + std::to_string(slot)];
       unhex(hex, b);
       const int arg = slot + 10 * (int)(kind[0] - 'a');
       if (kind == "f1") bind(a.f1[slot], b, shape, arg);
       else if (kind == "f2") bind(a.f2[slot], b, shape, arg);
+      else if (kind == "f3") bind(a.f3[slot], b, shape, arg);
+      else if (kind == "f4") bind(a.f4[slot], b, shape, arg);
       else if (kind == "d1") bind(a.d1[slot], b, shape, arg);
       else if (kind == "d2") bind(a.d2[slot], b, shape, arg);
       else if (kind == "i1") bind(a.i1[slot], b, shape, arg);

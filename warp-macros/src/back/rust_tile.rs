@@ -92,8 +92,13 @@ impl RustEmitter<'_> {
                     Ty::Tile(_, d) => d.len(),
                     _ => 0,
                 };
-                let f = format_ident!("reshape{}{}", rank(&args[0]), to);
-                quote_spanned!(sp=> __wp::tile::#f(&#x))
+                if rank(&args[0]) > 2 || to > 2 {
+                    // Ranks 3 and 4: the rank-generic reshape, told its result type.
+                    quote_spanned!(sp=> __wp::tile::reshape::<_, #t>(&#x))
+                } else {
+                    let f = format_ident!("reshape{}{}", rank(&args[0]), to);
+                    quote_spanned!(sp=> __wp::tile::#f(&#x))
+                }
             }
             "tile_diag_add" => {
                 let (a, d) = (&v[0], &v[1]);

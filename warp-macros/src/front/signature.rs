@@ -188,15 +188,12 @@ fn parse_tile(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     Ok(Ty::Tile(Box::new(elem), dims))
 }
 
-/// Checks a tile shape's rank (1 or 2 for now) and that no literal dim is zero.
+/// Checks a tile shape's rank (1 to 4, Warp's tiles' ranks) and that no literal dim is zero.
 pub fn tile_rank(dims: &[Dim], span: proc_macro2::Span) -> syn::Result<()> {
-    if dims.is_empty() || dims.len() > 2 {
+    if dims.is_empty() || dims.len() > 4 {
         return Err(syn::Error::new(
             span,
-            format!(
-                "tiles have one or two dimensions (3-D and 4-D tiles are not supported yet), found {}",
-                dims.len()
-            ),
+            format!("tiles have one to four dimensions, found {}", dims.len()),
         ));
     }
     if dims.contains(&Dim::Lit(0)) {

@@ -448,18 +448,14 @@ impl Lowerer {
         Ok(out)
     }
 
-    /// An array argument of a tile load or store: its element and dimensions (1 or 2).
+    /// An array argument of a tile load or store: its element and dimensions (1 to 4).
     fn tile_array(&mut self, name: &str, e: &Expr) -> R<(VarId, Ty, u8)> {
         let a = self.expr(e, None)?;
         match self.ty(a) {
-            Ty::Array(elem, n) if n <= 2 && elem.is_tile_elem() => Ok((a, *elem, n)),
-            Ty::Array(elem, n) if n <= 2 => err(
+            Ty::Array(elem, n) if elem.is_tile_elem() => Ok((a, *elem, n)),
+            Ty::Array(elem, _) => err(
                 e.span(),
                 format!("`{name}`: tiles hold integer or float scalars, or `Vec2`/`DVec2`, and this array holds `{elem}`"),
-            ),
-            Ty::Array(_, n) => err(
-                e.span(),
-                format!("`{name}` of {n}-D arrays is not supported yet (tiles have one or two dimensions)"),
             ),
             t => err(e.span(), format!("`{name}` takes an array first, found `{t}`")),
         }
@@ -883,6 +879,18 @@ impl Lowerer {
         let tt = self.ty(v);
         let (e, src) = tile_parts(&tt).expect("a tile");
         let (e, src) = (e.clone(), src.to_vec());
+        // Broadcasts are written for ranks 1 and 2 (warp-core's `broadcast11` .. `broadcast22`
+        // and their adjoints); a 3-D or 4-D one is a clear error, not a missing function.
+        if target.len() > 2 {
+            return err(
+                span,
+                format!(
+                    "`tile_broadcast` is defined for 1-D and 2-D tiles; the target ({}) has {} dimensions",
+                    dims_text(&target),
+                    target.len()
+                ),
+            );
+        }
         if src.len() > target.len() {
             return err(
                 span,

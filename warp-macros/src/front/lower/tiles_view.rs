@@ -134,6 +134,13 @@ impl Lowerer {
         let tt = self.ty(t);
         let (e, td) = tile_parts(&tt).expect("a tile");
         let (e, td) = (e.clone(), td.to_vec());
+        // Windows are written for ranks 1 and 2 (warp-core's `view11` .. `window2`).
+        if td.len() > 2 {
+            return err(
+                te.span(),
+                format!("`tile_view` is defined for 1-D and 2-D tiles, found `{tt}`"),
+            );
+        }
         let explicit = match se {
             Some(s) => {
                 let parts: Vec<&Expr> = match strip(s) {
@@ -222,6 +229,12 @@ impl Lowerer {
             );
         };
         let (del, dd) = (del.clone(), dd.to_vec());
+        if dd.len() > 2 {
+            return err(
+                de.span(),
+                format!("`{name}` is defined for 1-D and 2-D tiles, found `{dt}`"),
+            );
+        }
         let s = self.tile_arg(name, se)?;
         let st = self.ty(s);
         let (sel, sd) = tile_parts(&st).expect("a tile");
