@@ -4,8 +4,10 @@
 
 use super::load::coord;
 use super::{Tile1, Tile2};
+use crate::adjoint::Adjoint;
 use crate::builtins::atomic::{atomic_add, AtomicElement};
 use crate::fault::KResult;
+use crate::grad::{GradElement, GradView};
 use crate::index::IndexInt;
 use crate::view::ArrayView;
 use bytemuck::Zeroable;
@@ -57,4 +59,66 @@ pub fn atomic_add2<
         }
     }
     Ok(old)
+}
+
+// ---- Adjoints ------------------------------------------------------------------------------
+
+/// Adjoint of `old = tile_atomic_add(a, t, o)` (Warp's `adj_tile_atomic_add`): the update
+/// added `t[i]` to `a[o + i]`, so `t`'s adjoint gets `a.grad[o + i]` for every `o + i` inside
+/// the array (read, not cleared: the element's earlier value keeps its gradient too, as for
+/// the scalar `atomic_add`); elements outside get nothing. `r`, the adjoint of the old values,
+/// goes nowhere: Warp drops it, and the kernel cannot read them (the adjoint's replay does not
+/// redo the atomic). Arguments in [`super::adjoint`]'s order.
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_atomic_add1<T, const N0: usize, O: IndexInt>(
+    a: &ArrayView<T, 1>,
+    _t: &Tile1<T, N0>,
+    o: O,
+    adj_a: &mut GradView<T, 1>,
+    adj_t: &mut Tile1<T, N0>,
+    _adj_o: &mut O,
+    _r: &Tile1<T, N0>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+{
+    let [n] = a.shape();
+    for (i, d) in adj_t.data.iter_mut().enumerate() {
+        if let Some(c) = coord(o, i, n) {
+            d.adj_accum(adj_a.get(c, T::adj_zero())?);
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `old = tile_atomic_add(a, t, (o0, o1))`, as [`adj_tile_atomic_add1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_atomic_add2<T, const N0: usize, const N1: usize, O0, O1>(
+    a: &ArrayView<T, 2>,
+    _t: &Tile2<T, N0, N1>,
+    o0: O0,
+    o1: O1,
+    adj_a: &mut GradView<T, 2>,
+    adj_t: &mut Tile2<T, N0, N1>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _r: &Tile2<T, N0, N1>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+{
+    let [n0, n1] = a.shape();
+    for (i, row) in adj_t.data.iter_mut().enumerate() {
+        let Some(c0) = coord(o0, i, n0) else { continue };
+        for (j, d) in row.iter_mut().enumerate() {
+            if let Some(c1) = coord(o1, j, n1) {
+                d.adj_accum(adj_a.get((c0, c1), T::adj_zero())?);
+            }
+        }
+    }
+    Ok(())
 }
