@@ -26,7 +26,9 @@ use wp::prelude::*;
 backend_tests!(
     tile_atomic_add_gradcheck,
     tile_atomic_add_old_values_refused,
+    integer_tile_atomic_add_beside_gradients,
     f16_matmul_backward,
+    f16_gemm_k_loop_backward,
 );
 
 const R: usize = 4;
@@ -314,4 +316,113 @@ fn cuda_adjoints_call_the_new_rules() {
     );
     let adj = &info.cuda_adjoint;
     assert_eq!(adj.matches("wp::adj_tile_matmul(").count(), 2, "{adj}");
+}
+
+/// An integer `tile_atomic_add` (a counter) in a kernel that is differentiated for its floats:
+/// nothing to propagate through the counter, and it is not redone by the backward pass.
+#[wp::kernel]
+fn k_count(x: Array<f64>, count: Array<i32>, out: Array<f64>) {
+    let b = tid();
+    let t = tile_load::<8>(x, (b * 8) as i32);
+    tile_atomic_add(count, tile_ones::<i32, 8>(), 0);
+    tile_store(out, t * t, (b * 8) as i32);
+}
+
+fn integer_tile_atomic_add_beside_gradients(dev: &wp::Device) {
+    let x = arr(&values(16, 7), dev).with_grad().unwrap();
+    let count = arr(&[0i32; 8], dev);
+    let out = arr(&[0.0f64; 16], dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch_tiled(k_count, 2, (&x, &count, &out), 8, dev).unwrap();
+    }
+    out.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    assert_eq!(
+        host(&count),
+        vec![2; 8],
+        "the backward pass redid the atomic"
+    );
+    let (xs, gx) = (host(&x), host(&x.grad().unwrap()));
+    for (k, (v, g)) in xs.iter().zip(&gx).enumerate() {
+        assert_eq!(*g, 2.0 * v, "x[{k}]");
+    }
+}
+
+const KM: usize = 16;
+const KK: usize = 16;
+const KN: usize = 8;
+
+/// An f16 GEMM's k-loop (the form the CUDA emitter pipelines on tensor cores) with an f32
+/// accumulator, stored as f32.
+#[wp::kernel]
+fn k_gemm_f16(a: Array<f16, 2>, b: Array<f16, 2>, kt: i32, c: Array<f32, 2>) {
+    let mut acc = tile_zeros::<f32, KM, KN>();
+    for k in 0..kt {
+        let ta = tile_load::<KM, KK>(a, (0, k * KK as i32));
+        let tb = tile_load::<KK, KN>(b, (k * KK as i32, 0));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, (0, 0));
+}
+
+/// Backward through the k-loop over three k-steps (the last ragged: K = 37) at block sizes 1,
+/// 32 and 64: each gradient element gets one step's contribution, within the module docs'
+/// `2^-8 S` of the f64 product.
+fn f16_gemm_k_loop_backward(dev: &wp::Device) {
+    let (m, k, n) = (KM, 37usize, KN);
+    let (ad, bd_) = (hvalues(m * k, 21), hvalues(k * n, 23));
+    let gc: Vec<f32> = hvalues(m * n, 25).iter().map(|v| v.to_f32()).collect();
+    for bd in [1, 32, 64] {
+        let a = wp::Array::from_slice_shape(&ad, (m, k), dev)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        let b = wp::Array::from_slice_shape(&bd_, (k, n), dev)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        let c = wp::Array::<f32, 2>::zeros((m, n), dev)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            let kt = k.div_ceil(KK) as i32;
+            wp::launch_tiled(k_gemm_f16, 1, (&a, &b, kt, &c), bd, dev).unwrap();
+        }
+        let seed = wp::Array::from_slice_shape(&gc, (m, n), dev).unwrap();
+        c.grad().unwrap().copy_from(&seed).unwrap();
+        tape.backward_from_grads().unwrap();
+        let (ga, gb) = (host(&a.grad().unwrap()), host(&b.grad().unwrap()));
+        let r = |i: usize, j: usize| gc[i * n + j] as f64;
+        let av = |i: usize, q: usize| ad[i * k + q].to_f32() as f64;
+        let bv = |q: usize, j: usize| bd_[q * n + j].to_f32() as f64;
+        for i in 0..m {
+            for q in 0..k {
+                let (want, mag) = (0..n).fold((0.0, 0.0), |(s, g), j| {
+                    (s + r(i, j) * bv(q, j), g + (r(i, j) * bv(q, j)).abs())
+                });
+                let got = ga[i * k + q].to_f32() as f64;
+                assert!(
+                    (got - want).abs() <= mag / 256.0,
+                    "ā[{i}][{q}] at block_dim {bd}: {got} vs {want}"
+                );
+            }
+        }
+        for q in 0..k {
+            for j in 0..n {
+                let (want, mag) = (0..m).fold((0.0, 0.0), |(s, g), i| {
+                    (s + av(i, q) * r(i, j), g + (av(i, q) * r(i, j)).abs())
+                });
+                let got = gb[q * n + j].to_f32() as f64;
+                assert!(
+                    (got - want).abs() <= mag / 256.0,
+                    "b̄[{q}][{j}] at block_dim {bd}: {got} vs {want}"
+                );
+            }
+        }
+    }
 }
