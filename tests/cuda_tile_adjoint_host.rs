@@ -247,6 +247,7 @@ trait El:
     + Adjoint
     + GradElement
     + Fma
+    + warp_core::tile::MatmulElem<Acc = Self>
     + AdjAdd<Output = Self>
     + AdjSub<Output = Self>
     + AdjMul<Output = Self>
@@ -1192,5 +1193,193 @@ fn adjoint_extracts_match() {
     let (mut script, mut want) = (Script::default(), Want::default());
     extracts::<f32>(&mut rng, &mut script, &mut want);
     extracts::<f64>(&mut rng, &mut script, &mut want);
+    want.check(&script);
+}
+
+// ------------------------------------------------------------------------------------------
+// Atomic add
+// ------------------------------------------------------------------------------------------
+
+fn atomics<E: El>(rng: &mut Rng, script: &mut Script, want: &mut Want) {
+    // Rank 1, a 37-element tile at `o` of an array of `n`, with and without a gradient.
+    for n in [0usize, 5, 50] {
+        for o in [0i64, -5, 3, n as i64 - 2, i64::MIN, i64::MAX] {
+            for grad in [true, false] {
+                let (a, g) = (E::draws(rng, n), E::draws(rng, n));
+                let (t, r, at0) = (E::draws(rng, 37), E::draws(rng, 37), E::draws(rng, 37));
+                script.buf(0, &a);
+                script.buf(1, &g);
+                script.buf(2, &at0);
+                script.buf(3, &t);
+                script.buf(4, &r);
+                script.arr(E::K1, 0, &[n], Some(0));
+                script.arr(E::K1, 1, &[n], grad.then_some(1));
+                script.off([o, 0, 0, 0]);
+                script.run(&format!("atomic1_{}", E::NAME));
+                script.dump(1);
+                let what = format!("adj_tile_atomic_add1 {} n {n} at {o} grad {grad}", E::NAME);
+                want.add(what, move |bd| {
+                    let (mut a, mut g) = (a.clone(), g.clone());
+                    let mut gv = match grad {
+                        true => GradView::new(view(&mut g, [n])),
+                        false => GradView::none(),
+                    };
+                    let (t, r): (Tile1<E, 37>, Tile1<E, 37>) = (tile_of(&t), tile_of(&r));
+                    let mut at: Tile1<E, 37> = tile_of(&at0);
+                    let av = view(&mut a, [n]);
+                    let res =
+                        ta::adj_tile_atomic_add1(&av, &t, o, &mut gv, &mut at, &mut 0, &r, bd);
+                    vec![flat(&at), fault_line(res), bytes(&g)]
+                });
+            }
+        }
+    }
+    // Rank 2, a 5 x 7 tile (the column offset an i32).
+    for shape in [[4usize, 6], [9, 10], [0, 3]] {
+        for o in [[0i64, 0], [-3, -2], [2, 3], [i64::MIN, 1], [6, 5]] {
+            for grad in [true, false] {
+                let len = shape[0] * shape[1];
+                let (a, g) = (E::draws(rng, len), E::draws(rng, len));
+                let (t, r, at0) = (E::draws(rng, 35), E::draws(rng, 35), E::draws(rng, 35));
+                script.buf(0, &a);
+                script.buf(1, &g);
+                script.buf(2, &at0);
+                script.buf(3, &t);
+                script.buf(4, &r);
+                script.arr(E::K2, 0, &shape, Some(0));
+                script.arr(E::K2, 1, &shape, grad.then_some(1));
+                script.off([o[0], o[1], 0, 0]);
+                script.run(&format!("atomic2_{}", E::NAME));
+                script.dump(1);
+                let what = format!(
+                    "adj_tile_atomic_add2 {} {shape:?} at {o:?} grad {grad}",
+                    E::NAME
+                );
+                want.add(what, move |bd| {
+                    let (mut a, mut g) = (a.clone(), g.clone());
+                    let mut gv = match grad {
+                        true => GradView::new(view(&mut g, shape)),
+                        false => GradView::none(),
+                    };
+                    let (t, r): (Tile2<E, 5, 7>, Tile2<E, 5, 7>) = (tile_of(&t), tile_of(&r));
+                    let mut at: Tile2<E, 5, 7> = tile_of(&at0);
+                    let av = view(&mut a, shape);
+                    let (o0, o1) = (o[0], o[1] as i32);
+                    let res = ta::adj_tile_atomic_add2(
+                        &av, &t, o0, o1, &mut gv, &mut at, &mut 0, &mut 0, &r, bd,
+                    );
+                    vec![flat(&at), fault_line(res), bytes(&g)]
+                });
+            }
+        }
+    }
+}
+
+/// `adj_tile_atomic_add*`: the tile's adjoint gathers the gradient over the window (nothing
+/// outside the array, nothing without a gradient), the gradient unchanged.
+#[test]
+fn adjoint_atomic_add_matches() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0xad_00a7);
+    let (mut script, mut want) = (Script::default(), Want::default());
+    atomics::<f32>(&mut rng, &mut script, &mut want);
+    atomics::<f64>(&mut rng, &mut script, &mut want);
+    want.check(&script);
+}
+
+/// The f16 matmul's adjoint: a seed of `R` (f16, or the f32 accumulator's) against
+/// warp-core's, bit for bit (f32 chains of exact products, each rounded once to f16).
+fn matmul_h<R, const M: usize, const K: usize, const N: usize>(
+    rng: &mut Rng,
+    script: &mut Script,
+    want: &mut Want,
+    seed: impl Fn(f32) -> R,
+) where
+    R: warp_core::tile::MatmulElem<Acc = f32> + Copy + 'static,
+{
+    use warp_core::f16;
+    // f16 values (and seeds) as their bits, little-endian (half's f16 is not bytemuck's Pod).
+    fn le<X: Copy>(v: &[X]) -> Vec<u8> {
+        let n = std::mem::size_of::<X>();
+        // SAFETY: f16 and f32 are plain bit patterns of `n` bytes.
+        v.iter()
+            .flat_map(|x| unsafe { std::slice::from_raw_parts(x as *const X as *const u8, n) })
+            .copied()
+            .collect()
+    }
+    let hs = |rng: &mut Rng, n: usize| -> Vec<f16> {
+        (0..n).map(|_| f16::from_f32(rng.f32())).collect()
+    };
+    let (a, b) = (hs(rng, M * K), hs(rng, K * N));
+    let r: Vec<R> = (0..M * N).map(|_| seed(rng.f32())).collect();
+    let (aa0, ab0) = (hs(rng, M * K), hs(rng, K * N));
+    script.text += &format!("buf 0 {}\n", hex(&le(&a)));
+    script.text += &format!("buf 1 {}\n", hex(&le(&b)));
+    script.text += &format!("buf 2 {}\n", hex(&le(&r)));
+    script.text += &format!("buf 3 {}\n", hex(&le(&aa0)));
+    script.text += &format!("buf 4 {}\n", hex(&le(&ab0)));
+    let rname = if std::mem::size_of::<R>() == 2 {
+        "f16"
+    } else {
+        "f32"
+    };
+    let name = format!("mmh_{rname}_{M}x{K}x{N}");
+    script.run(&name);
+    want.add(name, move |bd| {
+        let mut ta_ = Tile2::<f16, M, K> {
+            data: [[f16::ZERO; K]; M],
+        };
+        let mut tb = Tile2::<f16, K, N> {
+            data: [[f16::ZERO; N]; K],
+        };
+        let mut tr = Tile2::<R, M, N> {
+            data: [[r[0]; N]; M],
+        };
+        let mut aa = Tile2::<f16, M, K> {
+            data: [[f16::ZERO; K]; M],
+        };
+        let mut ab = Tile2::<f16, K, N> {
+            data: [[f16::ZERO; N]; K],
+        };
+        for i in 0..M {
+            for k in 0..K {
+                ta_.data[i][k] = a[i * K + k];
+                aa.data[i][k] = aa0[i * K + k];
+            }
+            for j in 0..N {
+                tr.data[i][j] = r[i * N + j];
+            }
+        }
+        for k in 0..K {
+            for j in 0..N {
+                tb.data[k][j] = b[k * N + j];
+                ab.data[k][j] = ab0[k * N + j];
+            }
+        }
+        ta::adj_tile_matmul(&ta_, &tb, &mut aa, &mut ab, &tr, bd);
+        let mut out = le(aa.data.as_flattened());
+        out.extend(le(ab.data.as_flattened()));
+        vec![out, b"nofault".to_vec()]
+    });
+}
+
+/// `adj_tile_matmul` of f16 operands, both seeds (the returning form's f16, the accumulating
+/// form's f32), at a ragged shape and the tensor cores' 16 x 16 x 8.
+#[test]
+fn adjoint_f16_matmul_matches() {
+    if !have_gpp() {
+        return;
+    }
+    let mut rng = Rng::seeded(0xad_0f16);
+    let (mut script, mut want) = (Script::default(), Want::default());
+    let h = warp_core::f16::from_f32;
+    for _ in 0..2 {
+        matmul_h::<_, 7, 13, 5>(&mut rng, &mut script, &mut want, h);
+        matmul_h::<_, 16, 16, 8>(&mut rng, &mut script, &mut want, h);
+        matmul_h::<_, 7, 13, 5>(&mut rng, &mut script, &mut want, |x: f32| x);
+        matmul_h::<_, 16, 16, 8>(&mut rng, &mut script, &mut want, |x: f32| x);
+    }
     want.check(&script);
 }

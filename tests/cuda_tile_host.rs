@@ -926,6 +926,66 @@ fn f16_matmul_fma_path_matches() {
     }
 }
 
+/// The bf16 matmul of wp_tile_mma.h on the host (its FMA path, the only one bf16 has): `p = a b`
+/// rounded once to bf16 and `c += a b` in f32, against warp-core's bf16 matmul, bit for bit
+/// (both are f32 chains of exact products in ascending k; the conversions are the same bit
+/// operations), at every block size.
+#[test]
+fn bf16_matmul_fma_path_matches() {
+    if !have_gpp() {
+        return;
+    }
+    use warp_core::bf16;
+    let mut rng = Rng::seeded(0x5eed_bf16);
+    let mut script = Script::default();
+    let mut want: Vec<(Vec<u8>, String)> = Vec::new();
+    fn bits<X: Tile<Elem = bf16>>(t: &X) -> Vec<u8> {
+        t.as_flat()
+            .iter()
+            .flat_map(|x| x.to_bits().to_le_bytes())
+            .collect()
+    }
+    macro_rules! case {
+        ($m:literal, $k:literal, $n:literal) => {{
+            let mut r = |len: usize| -> Vec<f32> {
+                (0..len)
+                    .map(|_| bf16::from_f32(rng.f32()).to_f32())
+                    .collect()
+            };
+            let (a, b, c) = (r($m * $k), r($k * $n), r($m * $n));
+            let h = |v: &[f32], i: usize| bf16::from_f32(v[i]);
+            let ta = Tile2::<bf16, $m, $k> {
+                data: std::array::from_fn(|i| std::array::from_fn(|j| h(&a, i * $k + j))),
+            };
+            let tb = Tile2::<bf16, $k, $n> {
+                data: std::array::from_fn(|i| std::array::from_fn(|j| h(&b, i * $n + j))),
+            };
+            let mut tc = Tile2::<f32, $m, $n> {
+                data: std::array::from_fn(|i| std::array::from_fn(|j| c[i * $n + j])),
+            };
+            let mut w = bits(&tile::matmul(&ta, &tb));
+            tile::matmul_acc(&ta, &tb, &mut tc);
+            w.extend(flat(&tc));
+            script.arr("f2", 0, &[$m, $k], &a);
+            script.arr("f2", 1, &[$k, $n], &b);
+            script.arr("f2", 2, &[$m, $n], &c);
+            let name = format!("mmb16_{}x{}x{}", $m, $k, $n);
+            script.run(&name);
+            want.push((w, name));
+        }};
+    }
+    for _ in 0..2 {
+        case!(32, 16, 32);
+        case!(12, 21, 9);
+    }
+    for bd in BLOCK_DIMS {
+        let got = script.exec(bd);
+        for (k, (w, what)) in want.iter().enumerate() {
+            assert!(got[k] == *w, "{what}, block size {bd}");
+        }
+    }
+}
+
 /// The loads' and stores' fast paths (the tile fully inside a contiguous-row array: direct,
 /// and 16-byte vectors when the row starts allow) and their fallbacks (partly outside, rows
 /// not 16-byte aligned, strided rows, a strided innermost axis), against warp-core, bit for bit.

@@ -120,6 +120,7 @@ mod structs;
 mod tile_convert;
 mod tile_fft;
 mod tile_grad;
+mod tile_grad_adj;
 mod tile_grad_linalg;
 mod tile_linalg;
 mod tile_sort;

@@ -26,6 +26,7 @@ backend_tests!(
     atomic_add_3d,
     gradients_3d,
     gradients_4d_and_reshape,
+    atomic_add_gradients_3d_and_4d,
 );
 
 const A: usize = 2;
@@ -316,6 +317,55 @@ fn gradients_4d_and_reshape(dev: &wp::Device) {
         check(&format!("rank 4, out, block_dim {bd}"), run, &[&x], &out);
         let run = || wp::launch_tiled(k_grad4, 1, (&x4, &out, &z4), bd, dev);
         check(&format!("rank 4, stored, block_dim {bd}"), run, &[&x], &z);
+    }
+}
+
+#[wp::kernel]
+fn k_atomic_grad(x: Array<f64, 3>, w: Array<f64>, acc3: Array<f64, 3>, acc4: Array<f64, 4>) {
+    let t: Tile<f64, 2, 2, 3> = tile_load(x, (0, 1, 0));
+    let u = t * t * w[0] + t;
+    // Windows that stick out of both arrays: x's elements whose place is outside get nothing.
+    tile_atomic_add(acc3, u, (1, -1, 0));
+    let v: Tile<f64, 1, 2, 2, 3> = tile_reshape(u * t);
+    tile_atomic_add(acc4, v, (0, 1, 0, 1));
+}
+
+/// A nonlinear read of the accumulators, so that their gradients differ element by element.
+#[wp::kernel]
+fn k_atomic_post(a3: Array<f64>, a4: Array<f64>, out: Array<f64>) {
+    let i = tid();
+    let n3 = a3.len();
+    let v = if i < n3 { a3[i] } else { a4[i - n3] };
+    out[i] = v * v * 0.5 + v * (i as f64 + 1.0);
+}
+
+/// Backward through `tile_atomic_add` of rank 3 and 4 (the tile gathers the array's gradient
+/// over the window, the elements outside get nothing), gradcheck in f64 at block sizes 1, 5
+/// and 32; the accumulators are zeroed before every run, as the adds would pile up otherwise.
+fn atomic_add_gradients_3d_and_4d(dev: &wp::Device) {
+    let (s3, s4) = ((2usize, 3usize, 3usize), (1usize, 2usize, 3usize, 3usize));
+    let n3 = s3.0 * s3.1 * s3.2;
+    let n4 = s4.0 * s4.1 * s4.2 * s4.3;
+    let x = crate::arr(&values(2 * 3 * 3, 7), dev).with_grad().unwrap();
+    let w = crate::arr(&[0.6f64], dev).with_grad().unwrap();
+    let a3 = zeros::<f64, 1>(n3, dev).with_grad().unwrap();
+    let a4 = zeros::<f64, 1>(n4, dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(n3 + n4, dev).with_grad().unwrap();
+    let x3 = x.reshape((2, 3, 3)).unwrap();
+    let (acc3, acc4) = (a3.reshape(s3).unwrap(), a4.reshape(s4).unwrap());
+    for bd in [1, 5, 32] {
+        let run = || -> wp::Result<()> {
+            a3.fill(0.0)?;
+            a4.fill(0.0)?;
+            wp::launch_tiled(k_atomic_grad, 1, (&x3, &w, &acc3, &acc4), bd, dev)?;
+            wp::launch(k_atomic_post, n3 + n4, (&a3, &a4, &out), dev)
+        };
+        check(
+            &format!("rank 3 and 4 atomic adds, block_dim {bd}"),
+            run,
+            &[&x, &w],
+            &out,
+        );
     }
 }
 

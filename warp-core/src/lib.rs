@@ -10,6 +10,7 @@
 #![warn(missing_debug_implementations)]
 
 pub mod adjoint;
+pub mod bfloat16;
 pub mod block;
 pub mod builtins;
 pub mod capability;
@@ -29,6 +30,7 @@ pub mod transform;
 pub mod view;
 
 pub use adjoint::{adj_atomic_extreme, AtomicExtreme};
+pub use bfloat16::bf16;
 pub use capability::Capability;
 pub use fault::{Fault, FaultKind, KResult, LaunchId};
 pub use float16::f16;

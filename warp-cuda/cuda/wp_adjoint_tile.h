@@ -422,26 +422,110 @@ WP_FN void adj_tile_broadcast22(const tile_t<T, S0, S1>&, const tile_t<T, S0, S1
   tile_detail::unbroadcast<S0, S1, M, N>(adj_a.data, r.data);
 }
 
+// ---- Atomic add ----------------------------------------------------------------------------
+
+/// `old = tile_atomic_add(a, t, o)`: `adj_t[i] += a.grad[o + i]` inside the array (read, not
+/// cleared: warp-core's `adj_tile_atomic_add1`); `r`, the old values' adjoint, goes nowhere.
+template <typename T, int N0, typename O>
+WP_FN void adj_tile_atomic_add1(const array_t<T, 1>& a, const tile_t<T, N0>&, O o,
+                                const array_t<T, 1>& adj_a, const tile_t<T, N0>& adj_t, O&,
+                                const tile_t<T, N0>&, ctx_t* ctx) {
+  for (int i = (int)threadIdx.x; i < N0; i += WP_TILE_BLOCK_DIM) {
+    i64 c;
+    if (tile_detail::coord(o, i, a.shape[0], &c)) adj_t.data[i] += grad_get(adj_a, c, T{}, ctx);
+  }
+  __syncthreads();
+}
+
+/// `old = tile_atomic_add(a, t, (o0, o1))`.
+template <typename T, int N0, int N1, typename O0, typename O1>
+WP_FN void adj_tile_atomic_add2(const array_t<T, 2>& a, const tile_t<T, N0, N1>&, O0 o0, O1 o1,
+                                const array_t<T, 2>& adj_a, const tile_t<T, N0, N1>& adj_t, O0&,
+                                O1&, const tile_t<T, N0, N1>&, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1; e += WP_TILE_BLOCK_DIM) {
+    i64 c0, c1;
+    if (tile_detail::coord(o0, e / N1, a.shape[0], &c0) &&
+        tile_detail::coord(o1, e % N1, a.shape[1], &c1))
+      adj_t.data[e] += grad_get(adj_a, c0, c1, T{}, ctx);
+  }
+  __syncthreads();
+}
+
+/// `old = tile_atomic_add(a, t, (o0, o1, o2))`.
+template <typename T, int N0, int N1, int N2, typename O0, typename O1, typename O2>
+WP_FN void adj_tile_atomic_add3(const array_t<T, 3>& a, const tile_t<T, N0, N1, N2>&, O0 o0, O1 o1,
+                                O2 o2, const array_t<T, 3>& adj_a,
+                                const tile_t<T, N0, N1, N2>& adj_t, O0&, O1&, O2&,
+                                const tile_t<T, N0, N1, N2>&, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2; e += WP_TILE_BLOCK_DIM) {
+    i64 c[3];
+    if (tile_detail::coords3<N0, N1, N2>(e, a.shape, o0, o1, o2, c))
+      adj_t.data[e] += grad_get(adj_a, c[0], c[1], c[2], T{}, ctx);
+  }
+  __syncthreads();
+}
+
+/// `old = tile_atomic_add(a, t, (o0, o1, o2, o3))`.
+template <typename T, int N0, int N1, int N2, int N3, typename O0, typename O1, typename O2,
+          typename O3>
+WP_FN void adj_tile_atomic_add4(const array_t<T, 4>& a, const tile_t<T, N0, N1, N2, N3>&, O0 o0,
+                                O1 o1, O2 o2, O3 o3, const array_t<T, 4>& adj_a,
+                                const tile_t<T, N0, N1, N2, N3>& adj_t, O0&, O1&, O2&, O3&,
+                                const tile_t<T, N0, N1, N2, N3>&, ctx_t* ctx) {
+  for (int e = (int)threadIdx.x; e < N0 * N1 * N2 * N3; e += WP_TILE_BLOCK_DIM) {
+    i64 c[4];
+    if (tile_detail::coords4<N0, N1, N2, N3>(e, a.shape, o0, o1, o2, o3, c))
+      adj_t.data[e] += grad_get(adj_a, c[0], c[1], c[2], c[3], T{}, ctx);
+  }
+  __syncthreads();
+}
+
 // ---- Matmul --------------------------------------------------------------------------------
 
-/// `c = tile_matmul(a, b)`: `adj_a += r bᵀ`, then `adj_b += aᵀ r`, each element one FMA chain
-/// from zero in ascending order, added to the adjoint.
-template <typename T, int M, int K, int N>
+namespace tile_detail {
+/// The type a matmul's products accumulate in, and the conversions (warp-core's `MatmulElem`):
+/// f32 and f64 in themselves, f16 in f32 (widening exact, narrowing rounded once).
+template <typename T>
+struct mm_elem {
+  typedef T acc;
+  static WP_FN T widen(T x) { return x; }
+  static WP_FN T narrow(T x) { return x; }
+};
+template <>
+struct mm_elem<f16> {
+  typedef f32 acc;
+  static WP_FN f32 widen(f16 x) { return f16_to_f32(x); }
+  static WP_FN f16 narrow(f32 x) { return f16_from_f32(x); }
+};
+}  // namespace tile_detail
+
+/// `c = tile_matmul(a, b)` and `tile_matmul(a, b, &mut c)`: `adj_a += r bᵀ`, then
+/// `adj_b += aᵀ r`, each element one FMA chain from zero in ascending order in the operands'
+/// accumulator type (f16: exact products in f32, rounded once to f16), added to the adjoint.
+/// `r` is the result's adjoint: `T` for the returning form, the f32 accumulator's for the
+/// accumulating f16 form (warp-core's `adj_tile_matmul`).
+template <typename T, typename R, int M, int K, int N>
 WP_FN void adj_tile_matmul(const tile_t<T, M, K>& a, const tile_t<T, K, N>& b,
                            const tile_t<T, M, K>& adj_a, const tile_t<T, K, N>& adj_b,
-                           const tile_t<T, M, N>& r) {
+                           const tile_t<R, M, N>& r) {
+  typedef tile_detail::mm_elem<T> E;
+  typedef tile_detail::mm_elem<R> ER;
+  typedef typename E::acc A;
+  static_assert(sizeof(A) == sizeof(typename ER::acc), "the seed accumulates like the operands");
   for (int e = (int)threadIdx.x; e < M * K; e += WP_TILE_BLOCK_DIM) {
     const int i = e / K, k = e % K;
-    T acc = T(0);
-    for (int j = 0; j < N; ++j) acc = tile_detail::fma_(r.data[i * N + j], b.data[k * N + j], acc);
-    adj_a.data[e] += acc;
+    A acc = A(0);
+    for (int j = 0; j < N; ++j)
+      acc = tile_detail::fma_(ER::widen(r.data[i * N + j]), E::widen(b.data[k * N + j]), acc);
+    adj_a.data[e] += E::narrow(acc);
   }
   __syncthreads();
   for (int e = (int)threadIdx.x; e < K * N; e += WP_TILE_BLOCK_DIM) {
     const int k = e / N, j = e % N;
-    T acc = T(0);
-    for (int i = 0; i < M; ++i) acc = tile_detail::fma_(a.data[i * K + k], r.data[i * N + j], acc);
-    adj_b.data[e] += acc;
+    A acc = A(0);
+    for (int i = 0; i < M; ++i)
+      acc = tile_detail::fma_(E::widen(a.data[i * K + k]), ER::widen(r.data[i * N + j]), acc);
+    adj_b.data[e] += E::narrow(acc);
   }
   __syncthreads();
 }

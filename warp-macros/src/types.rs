@@ -432,11 +432,6 @@ impl Ty {
         matches!(self, Ty::Tile(..))
     }
 
-    /// A tile of f32 or f64 elements.
-    pub fn is_tile_of_wide_float(&self) -> bool {
-        matches!(self, Ty::Tile(e, _) if matches!(**e, Ty::Scalar(Scalar::F32 | Scalar::F64)))
-    }
-
     pub fn is_int_scalar(&self) -> bool {
         matches!(self, Ty::Scalar(s) if s.is_int())
     }

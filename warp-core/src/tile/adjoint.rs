@@ -22,7 +22,7 @@
 use super::fft::Complex;
 use super::load::coord;
 use super::load::coords_nd;
-use super::matmul::Fma;
+use super::matmul::{Fma, MatmulElem};
 use super::reduce::{self, gpu_order};
 use super::{Tile, Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::adjoint::{AdjAdd, AdjCast, AdjDiv, AdjMul, AdjNeg, AdjSub, Adjoint};
@@ -35,6 +35,10 @@ use crate::view::ArrayView;
 
 // The linear algebra's and the scans' adjoints live beside their forwards' order of roundings.
 pub use super::adjoint_linalg::*;
+// `tile_atomic_add`'s adjoint lives beside its forward.
+pub use super::atomic::{
+    adj_tile_atomic_add1, adj_tile_atomic_add2, adj_tile_atomic_add3, adj_tile_atomic_add4,
+};
 
 impl<T: Adjoint, const N0: usize> Adjoint for Tile1<T, N0> {
     #[inline(always)]
@@ -693,35 +697,45 @@ pub fn adj_tile_broadcast22<T, const S0: usize, const S1: usize, const M: usize,
 
 // ---- Matmul --------------------------------------------------------------------------------
 
-/// Adjoint of `c = tile_matmul(a, b)`: `adj_a += r bᵀ` and `adj_b += aᵀ r`, each element one
-/// FMA chain from zero in ascending order (over `r`'s columns for `adj_a`, its rows for
-/// `adj_b`), then added to the adjoint. `adj_a` is complete before `adj_b` starts.
-pub fn adj_tile_matmul<T, const M: usize, const K: usize, const N: usize>(
+/// Adjoint of `c = tile_matmul(a, b)` and of `tile_matmul(a, b, &mut c)`: `adj_a += r bᵀ` and
+/// `adj_b += aᵀ r`, each element one FMA chain from zero in ascending order (over `r`'s
+/// columns for `adj_a`, its rows for `adj_b`), then added to the adjoint. `adj_a` is complete
+/// before `adj_b` starts.
+///
+/// The chains run in the operands' accumulator type ([`MatmulElem::Acc`]), as the forward's:
+/// f32 and f64 in themselves (each term `r · b` one FMA, bit for bit the plain chain); f16
+/// operands widened exactly to f32, so each product is exact and each chain an f32 one, rounded
+/// once to f16 at the end and added to the f16 adjoint (the adjoint of an f16 tile is an f16
+/// tile, as Warp's). `r` is the result's adjoint: f16 for the returning f16 form, the f32
+/// accumulator's for the accumulating one (`R = f32`, whose accumulator is the same f32).
+pub fn adj_tile_matmul<T, R, const M: usize, const K: usize, const N: usize>(
     a: &Tile2<T, M, K>,
     b: &Tile2<T, K, N>,
     adj_a: &mut Tile2<T, M, K>,
     adj_b: &mut Tile2<T, K, N>,
-    r: &Tile2<T, M, N>,
+    r: &Tile2<R, M, N>,
     _bd: usize,
 ) where
-    T: Fma + Adjoint + Scalar,
+    T: MatmulElem + Adjoint,
+    R: MatmulElem<Acc = T::Acc>,
 {
+    let zero = <T::Acc as Scalar>::ZERO;
     for i in 0..M {
         for k in 0..K {
-            let mut acc = T::ZERO;
+            let mut acc = zero;
             for j in 0..N {
-                acc = r.data[i][j].fma(b.data[k][j], acc);
+                acc = r.data[i][j].widen().fma(b.data[k][j].widen(), acc);
             }
-            adj_a.data[i][k].adj_accum(acc);
+            adj_a.data[i][k].adj_accum(T::narrow(acc));
         }
     }
     for k in 0..K {
         for j in 0..N {
-            let mut acc = T::ZERO;
+            let mut acc = zero;
             for i in 0..M {
-                acc = a.data[i][k].fma(r.data[i][j], acc);
+                acc = a.data[i][k].widen().fma(r.data[i][j].widen(), acc);
             }
-            adj_b.data[k][j].adj_accum(acc);
+            adj_b.data[k][j].adj_accum(T::narrow(acc));
         }
     }
 }

@@ -4,8 +4,10 @@
 
 use super::load::{coord, coords_nd};
 use super::{Tile1, Tile2, Tile3, Tile4, TileFromFn};
+use crate::adjoint::Adjoint;
 use crate::builtins::atomic::{atomic_add, AtomicElement};
 use crate::fault::KResult;
+use crate::grad::{GradElement, GradView};
 use crate::index::IndexInt;
 use crate::view::ArrayView;
 use bytemuck::Zeroable;
@@ -125,4 +127,151 @@ where
     O3: IndexInt,
 {
     atomic_add_nd(a, [o0.widen(), o1.widen(), o2.widen(), o3.widen()], t)
+}
+
+// ---- Adjoints ------------------------------------------------------------------------------
+
+/// Adjoint of `old = tile_atomic_add(a, t, o)` (Warp's `adj_tile_atomic_add`): the update
+/// added `t[i]` to `a[o + i]`, so `t`'s adjoint gets `a.grad[o + i]` for every `o + i` inside
+/// the array (read, not cleared: the element's earlier value keeps its gradient too, as for
+/// the scalar `atomic_add`); elements outside get nothing. `r`, the adjoint of the old values,
+/// goes nowhere: Warp drops it, and the kernel cannot read them (the adjoint's replay does not
+/// redo the atomic). Arguments in [`super::adjoint`]'s order.
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_atomic_add1<T, const N0: usize, O: IndexInt>(
+    a: &ArrayView<T, 1>,
+    _t: &Tile1<T, N0>,
+    o: O,
+    adj_a: &mut GradView<T, 1>,
+    adj_t: &mut Tile1<T, N0>,
+    _adj_o: &mut O,
+    _r: &Tile1<T, N0>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+{
+    let [n] = a.shape();
+    for (i, d) in adj_t.data.iter_mut().enumerate() {
+        if let Some(c) = coord(o, i, n) {
+            d.adj_accum(adj_a.get(c, T::adj_zero())?);
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `old = tile_atomic_add(a, t, (o0, o1))`, as [`adj_tile_atomic_add1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_atomic_add2<T, const N0: usize, const N1: usize, O0, O1>(
+    a: &ArrayView<T, 2>,
+    _t: &Tile2<T, N0, N1>,
+    o0: O0,
+    o1: O1,
+    adj_a: &mut GradView<T, 2>,
+    adj_t: &mut Tile2<T, N0, N1>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _r: &Tile2<T, N0, N1>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+{
+    let [n0, n1] = a.shape();
+    for (i, row) in adj_t.data.iter_mut().enumerate() {
+        let Some(c0) = coord(o0, i, n0) else { continue };
+        for (j, d) in row.iter_mut().enumerate() {
+            if let Some(c1) = coord(o1, j, n1) {
+                d.adj_accum(adj_a.get((c0, c1), T::adj_zero())?);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The adjoint of a rank-`R` `tile_atomic_add` (3 or 4), as [`adj_tile_atomic_add1`]: each
+/// element inside the array gathers its gradient, read and not cleared.
+fn adj_atomic_add_nd<X, const R: usize>(
+    a: &ArrayView<X::Elem, R>,
+    o: [i128; R],
+    adj_a: &GradView<X::Elem, R>,
+    adj_t: &mut X,
+) -> KResult<()>
+where
+    X: TileFromFn<Elem: GradElement + Adjoint>,
+    [usize; R]: crate::index::KernelIndex<R>,
+{
+    let shape = a.shape();
+    for (k, d) in adj_t.as_flat_mut().iter_mut().enumerate() {
+        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
+            d.adj_accum(adj_a.get(c, <X::Elem as Adjoint>::adj_zero())?);
+        }
+    }
+    Ok(())
+}
+
+/// Adjoint of `old = tile_atomic_add(a, t, (o0, o1, o2))`, as [`adj_tile_atomic_add1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_atomic_add3<T, const N0: usize, const N1: usize, const N2: usize, O0, O1, O2>(
+    a: &ArrayView<T, 3>,
+    _t: &Tile3<T, N0, N1, N2>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    adj_a: &mut GradView<T, 3>,
+    adj_t: &mut Tile3<T, N0, N1, N2>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _adj_o2: &mut O2,
+    _r: &Tile3<T, N0, N1, N2>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+{
+    adj_atomic_add_nd(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, adj_t)
+}
+
+/// Adjoint of `old = tile_atomic_add(a, t, (o0, o1, o2, o3))`, as [`adj_tile_atomic_add1`].
+#[allow(clippy::too_many_arguments)]
+pub fn adj_tile_atomic_add4<
+    T,
+    const N0: usize,
+    const N1: usize,
+    const N2: usize,
+    const N3: usize,
+    O0,
+    O1,
+    O2,
+    O3,
+>(
+    a: &ArrayView<T, 4>,
+    _t: &Tile4<T, N0, N1, N2, N3>,
+    o0: O0,
+    o1: O1,
+    o2: O2,
+    o3: O3,
+    adj_a: &mut GradView<T, 4>,
+    adj_t: &mut Tile4<T, N0, N1, N2, N3>,
+    _adj_o0: &mut O0,
+    _adj_o1: &mut O1,
+    _adj_o2: &mut O2,
+    _adj_o3: &mut O3,
+    _r: &Tile4<T, N0, N1, N2, N3>,
+    _bd: usize,
+) -> KResult<()>
+where
+    T: GradElement + Adjoint,
+    O0: IndexInt,
+    O1: IndexInt,
+    O2: IndexInt,
+    O3: IndexInt,
+{
+    let o = [o0.widen(), o1.widen(), o2.widen(), o3.widen()];
+    adj_atomic_add_nd(a, o, adj_a, adj_t)
 }

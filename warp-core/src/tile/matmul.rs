@@ -13,11 +13,15 @@
 //! for bit; its tensor-core path (wp_tile_mma.h) sums each k-step of 16 products in the
 //! hardware's order, which agrees only to a tolerance (see the tiles chapter).
 //!
+//! [`bf16`](struct@crate::bf16) operands do the same (products of two bf16 values are exact in
+//! `f32` too); CUDA computes them on its FMA path only, so they agree bit for bit.
+//!
 //! Shapes are const generics: `a: Tile2<T, M, K>` and `b: Tile2<T, K, N>` must agree on `K`,
 //! and the output is `Tile2<T, M, N>`. A mismatch is a type error at compile time, never a
 //! run-time check.
 
 use super::Tile2;
+use crate::bfloat16::bf16;
 use crate::builtins::Scalar;
 use crate::float16::f16;
 
@@ -93,6 +97,21 @@ impl MatmulElem for f16 {
     #[inline(always)]
     fn narrow(acc: f32) -> f16 {
         f16::from_f32(acc)
+    }
+}
+
+/// bf16 operands accumulate in `f32`, as f16's: each product of two widened bf16 values is
+/// exact in `f32` (8 + 8 significant bits), so a chain rounds only at its additions.
+impl MatmulElem for bf16 {
+    type Acc = f32;
+    const WIDENS: bool = true;
+    #[inline(always)]
+    fn widen(self) -> f32 {
+        self.to_f32()
+    }
+    #[inline(always)]
+    fn narrow(acc: f32) -> bf16 {
+        bf16::from_f32(acc)
     }
 }
 
@@ -319,6 +338,44 @@ mod tests {
                 // is within 39 * 2^-24 * sum |a||b|, and the final rounding adds half an f16
                 // ulp of the result, at most 2^-11 |result| <= 2^-11 sum |a||b|.
                 let bound = (39.0 * 2f64.powi(-24) + 2f64.powi(-11)) * mag;
+                assert!((p.data[i][j].to_f64() - r64).abs() <= bound, "{i} {j}");
+            }
+        }
+    }
+
+    /// bf16 operands, as f16's: each output the f32 FMA chain of the widened operands (exact
+    /// products: 8 significant bits each), `matmul` that chain from +0 rounded once to bf16;
+    /// against f64, the chain's `K 2^-24 S` plus half a bf16 ulp (2^-8 relative), `S` the sum
+    /// of the products' magnitudes.
+    #[test]
+    fn bf16_operands_accumulate_in_f32_and_round_once() {
+        let mut r = values(9);
+        let h = |x: f64| bf16::from_f64(x);
+        let a = Tile2::<bf16, 5, 21> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| h(r()))),
+        };
+        let b = Tile2::<bf16, 21, 7> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| h(r()))),
+        };
+        let c0 = Tile2::<f32, 5, 7> {
+            data: std::array::from_fn(|_| std::array::from_fn(|_| r() as f32)),
+        };
+        let mut c = c0;
+        matmul_acc(&a, &b, &mut c);
+        let p: Tile2<bf16, 5, 7> = matmul(&a, &b);
+        for i in 0..5 {
+            for j in 0..7 {
+                let (mut acc, mut acc0, mut r64, mut mag) = (c0.data[i][j], 0f32, 0f64, 0f64);
+                for k in 0..21 {
+                    let (x, y) = (a.data[i][k].to_f32(), b.data[k][j].to_f32());
+                    acc = x.mul_add(y, acc);
+                    acc0 = x.mul_add(y, acc0);
+                    r64 += x as f64 * y as f64;
+                    mag += (x as f64 * y as f64).abs();
+                }
+                assert_eq!(c.data[i][j].to_bits(), acc.to_bits(), "acc {i} {j}");
+                assert_eq!(p.data[i][j].to_bits(), bf16::from_f32(acc0).to_bits());
+                let bound = (21.0 * 2f64.powi(-24) + 2f64.powi(-8)) * mag;
                 assert!((p.data[i][j].to_f64() - r64).abs() <= bound, "{i} {j}");
             }
         }

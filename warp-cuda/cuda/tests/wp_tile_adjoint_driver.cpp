@@ -481,6 +481,64 @@ static void k_matmul(args_t a) {
   dump(a, ay);
 }
 
+/// The f16 matmul's adjoint: a, b, adj_a, adj_b f16, `r` of type R (f16: the returning form's
+/// seed; f32: the accumulating form's). Buffers as k_matmul.
+template <typename R, int M, int K, int N>
+static void k_matmul_h(args_t a) {
+  SLOTS_BEGIN();
+  auto x = SLOT(tile_t<wp::f16, M, K>);
+  auto y = SLOT(tile_t<wp::f16, K, N>);
+  auto r = SLOT(tile_t<R, M, N>);
+  auto ax = SLOT(tile_t<wp::f16, M, K>);
+  auto ay = SLOT(tile_t<wp::f16, K, N>);
+  fill(a, 0, x);
+  fill(a, 1, y);
+  fill(a, 2, r);
+  fill(a, 3, ax);
+  fill(a, 4, ay);
+  wp::adj_tile_matmul(x, y, ax, ay, r);
+  dump(a, ax);
+  dump(a, ay);
+}
+
+// ---- Atomic add: array 0 the value, array 1 its gradient ------------------------------------
+
+/// adj_tile_atomic_add1 of a 37-element tile at o0: the tile's adjoint starts from buffer 2,
+/// the tile from buffer 3, the old values' adjoint from buffer 4; outputs the tile's adjoint.
+template <typename T>
+static void k_atomic1(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<T, 37>);
+  auto at = SLOT(tile_t<T, 37>);
+  auto r = SLOT(tile_t<T, 37>);
+  fill(a, 2, at);
+  fill(a, 3, t);
+  fill(a, 4, r);
+  const wp::array_t<T, 1>* arr = arrays<T, 1>(a);
+  i64 adj_o = 0;
+  wp::adj_tile_atomic_add1(arr[0], t, a.o[0], arr[1], at, adj_o, r, &c);
+  dump(a, at);
+}
+
+/// adj_tile_atomic_add2 of a 5 x 7 tile at (o0, o1) (i32 column offset), as k_atomic1.
+template <typename T>
+static void k_atomic2(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto t = SLOT(tile_t<T, 5, 7>);
+  auto at = SLOT(tile_t<T, 5, 7>);
+  auto r = SLOT(tile_t<T, 5, 7>);
+  fill(a, 2, at);
+  fill(a, 3, t);
+  fill(a, 4, r);
+  const wp::array_t<T, 2>* arr = arrays<T, 2>(a);
+  i64 adj_o0 = 0;
+  wp::i32 o1 = (wp::i32)a.o[1], adj_o1 = 0;
+  wp::adj_tile_atomic_add2(arr[0], t, a.o[0], o1, arr[1], at, adj_o0, adj_o1, r, &c);
+  dump(a, at);
+}
+
 // ---- Threads and elements --------------------------------------------------------------------
 
 /// Buffers: 0 r (N), 1 each thread's adj_x start (by thread index), 2 adj_t's start (N), 3 each
@@ -648,6 +706,17 @@ int run(const char* path) {
   MM(f64, 1, 1, 1)
   MM(f64, 3, 33, 2)
 #undef MM
+  // The f16 matmul's adjoint (mmh_R_MxKxN, R the seed's type).
+#define MMH(R, M, K, N) kernels["mmh_" #R "_" #M "x" #K "x" #N] = k_matmul_h<wp::R, M, K, N>;
+  MMH(f16, 7, 13, 5)
+  MMH(f16, 16, 16, 8)
+  MMH(f32, 7, 13, 5)
+  MMH(f32, 16, 16, 8)
+#undef MMH
+  kernels["atomic1_f32"] = k_atomic1<f32>;
+  kernels["atomic1_f64"] = k_atomic1<f64>;
+  kernels["atomic2_f32"] = k_atomic2<f32>;
+  kernels["atomic2_f64"] = k_atomic2<f64>;
   std::string line;
   while (std::getline(in, line)) {
     std::istringstream ss(line);

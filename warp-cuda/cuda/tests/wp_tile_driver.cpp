@@ -347,6 +347,34 @@ static void k_mm16(args_t a) {
   dump(a, at, tc);
 }
 
+/// bf16 operands (wp_tile_mma.h's bf16 section, the FMA path), as k_mm16: arrays 0 and 1 (f32
+/// values that bf16 holds exactly) converted into bf16 tiles, `p = a b` (bf16) and `c2 += a b`
+/// (f32, c2 from array 2); outputs p, then c2.
+template <int M, int K, int N>
+static void k_mmb16(args_t a) {
+  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  SLOTS_BEGIN();
+  auto fa = SLOT(tile_t<f32, M, K>);
+  auto fb = SLOT(tile_t<f32, K, N>);
+  auto ta = SLOT(tile_t<wp::bf16, M, K>);
+  auto tb = SLOT(tile_t<wp::bf16, K, N>);
+  auto tc = SLOT(tile_t<f32, M, N>);
+  auto tp = SLOT(tile_t<wp::bf16, M, N>);
+  wp::tile_load(fa, a.f2[0], 0, 0, &c);
+  wp::tile_load(fb, a.f2[1], 0, 0, &c);
+  wp::tile_load(tc, a.f2[2], 0, 0, &c);
+  for (int e = (int)threadIdx.x; e < M * K; e += WP_TILE_BLOCK_DIM)
+    ta.data[e] = wp::bf16_from_f32(fa.data[e]);
+  for (int e = (int)threadIdx.x; e < K * N; e += WP_TILE_BLOCK_DIM)
+    tb.data[e] = wp::bf16_from_f32(fb.data[e]);
+  __syncthreads();
+  wp::tile_matmul(tp, ta, tb);
+  wp::tile_matmul_acc(tc, ta, tb);
+  size_t at = 0;
+  dump(a, at, tp);
+  dump(a, at, tc);
+}
+
 /// The rank-2 f32 or f64 arguments.
 template <typename T>
 static const wp::array_t<T, 2>* arrays2(const args_t& a);
@@ -511,6 +539,10 @@ int run(const char* path) {
   MM16(32, 16, 32)
   MM16(12, 20, 8)
 #undef MM16
+  kernels["mmb16_32x16x32"] = k_mmb16<32, 16, 32>;
+  out_bytes["mmb16_32x16x32"] = 32 * 32 * (2 + 4);
+  kernels["mmb16_12x21x9"] = k_mmb16<12, 21, 9>;
+  out_bytes["mmb16_12x21x9"] = 12 * 9 * (2 + 4);
 #define LD(T, N0, N1)                                                                          \
   kernels["ld2_" #T "_" #N0 "x" #N1] = k_ld2<T, N0, N1>;                                      \
   out_bytes["ld2_" #T "_" #N0 "x" #N1] = N0 * N1 * sizeof(T);

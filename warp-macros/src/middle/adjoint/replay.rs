@@ -13,11 +13,15 @@ impl Cx<'_> {
         for s in b {
             let sp = s.span;
             match &s.kind {
-                // A tile store, like any store, is not redone.
+                // A tile store, like any store, is not redone; nor is a tile atomic (the
+                // forward launch did it), whose tile of old values nothing reads
+                // (`analysis::atomic_without_adjoint` refuses a kernel that does): it keeps
+                // its declaration's zeros.
                 StmtKind::Assign {
                     op: Op::Builtin { builtin, .. },
                     ..
-                } if builtin.name == "tile_store" => {}
+                } if builtin.name == "tile_store" || (builtin.is_tile() && builtin.is_atomic()) => {
+                }
                 StmtKind::Assign { dst, op, .. } => {
                     if self.overwritten[*dst] {
                         out.push(push(*dst, sp));
@@ -248,6 +252,10 @@ fn invariant_vars(f: &Function) -> Vec<bool> {
 /// What the replay stores for `op`.
 fn replay_value(op: &Op) -> Value {
     match op {
+        // A tile atomic's result is a tile like its value operand, `(array, tile, offsets..)`.
+        Op::Builtin { builtin, args } if builtin.is_atomic() && builtin.is_tile() => {
+            Value::Zero { like: args[1] }
+        }
         Op::Builtin { builtin, args } if builtin.is_atomic() => Value::Zero {
             like: args[args.len() - 1],
         },

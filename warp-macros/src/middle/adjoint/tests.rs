@@ -248,3 +248,54 @@ fn atomic_extremes_compare_with_the_array_after_the_launch() {
             if func == "adj_atomic_extreme" && values[0] == Arg::Value(cur)
     )));
 }
+
+/// The adjoint calls of `a`, in order.
+fn adj_calls(a: &Adjoint) -> Vec<String> {
+    let calls = all(&a.body).into_iter().filter_map(|s| match &s.kind {
+        AKind::AdjCall { func, .. } => Some(func.clone()),
+        _ => None,
+    });
+    calls.collect()
+}
+
+/// Backward through `tile_atomic_add`: the value tile's adjoint gathers the array's gradient
+/// (`adj_tile_atomic_add<rank>`), and the replay does not redo the atomic.
+#[test]
+fn tile_atomic_add_has_an_adjoint_and_is_not_replayed() {
+    let f = kernel(parse_quote! {
+        fn k(x: Array<f64, 2>, acc: Array<f64, 2>) {
+            let t: Tile<f64, 4, 3> = tile_load(x, (0, 0));
+            tile_atomic_add(acc, t * t, (1, -1));
+        }
+    });
+    let a = build(&f, Policy::CUDA).unwrap();
+    let calls = adj_calls(&a);
+    assert!(
+        calls.iter().any(|c| c == "adj_tile_atomic_add2"),
+        "{calls:?}"
+    );
+    let redone = all(&a.body).into_iter().any(|s| {
+        matches!(&s.kind, AKind::Assign { value: Value::Op(Op::Builtin { builtin, .. }), .. }
+            if builtin.name == "tile_atomic_add")
+    });
+    assert!(!redone, "the replay redoes the atomic");
+}
+
+/// Backward through both forms of the f16 matmul: `adj_tile_matmul` for each.
+#[test]
+fn f16_matmul_has_an_adjoint() {
+    let f = kernel(parse_quote! {
+        fn k(a: Array<f16, 2>, b: Array<f16, 2>, p: Array<f16, 2>, c: Array<f32, 2>) {
+            let ta: Tile<f16, 16, 16> = tile_load(a, (0, 0));
+            let tb: Tile<f16, 16, 8> = tile_load(b, (0, 0));
+            tile_store(p, tile_matmul(ta, tb), (0, 0));
+            let mut acc = tile_zeros::<f32, 16, 8>();
+            tile_matmul(ta, tb, &mut acc);
+            tile_store(c, acc, (0, 0));
+        }
+    });
+    let a = build(&f, Policy::CUDA).unwrap();
+    let calls = adj_calls(&a);
+    let n = calls.iter().filter(|c| *c == "adj_tile_matmul").count();
+    assert_eq!(n, 2, "{calls:?}");
+}

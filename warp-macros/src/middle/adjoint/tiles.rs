@@ -73,8 +73,14 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_max", "adjoint (to the first maximum)"),
     ("tile_transpose", "adjoint"),
     ("tile_broadcast", "adjoint"),
-    ("tile_matmul", "adjoint"),
-    ("tile_matmul_acc", "adjoint (f32 and f64)"),
+    (
+        "tile_matmul",
+        "adjoint (f16: f16 adjoints, each an f32 chain rounded once)",
+    ),
+    (
+        "tile_matmul_acc",
+        "adjoint (f16: f16 adjoints, each an f32 chain rounded once)",
+    ),
     ("tile_reshape", "adjoint"),
     ("tile_squeeze", "adjoint"),
     ("tile_diag_add", "adjoint"),
@@ -123,6 +129,10 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     (
         "tile_astype",
         "adjoint (between floats; none to or from integers, as Warp)",
+    ),
+    (
+        "tile_atomic_add",
+        "adjoint (the tile gets the array's gradient over the window; the old values none, as Warp)",
     ),
 ];
 
@@ -224,7 +234,8 @@ fn reads_value(op: &Op, dst: VarId, out: &mut dyn FnMut(VarId)) {
             | "tile_fft"
             | "tile_ifft"
             | "tile_full"
-            | "tile_astype" => {}
+            | "tile_astype"
+            | "tile_atomic_add" => {}
             // The windows' adjoints move adjoints around; they read no tile's value.
             "tile_view"
             | "tile_assign"
@@ -366,10 +377,6 @@ impl Cx<'_> {
                 // `c += a b`: the accumulator's adjoint passes through.
                 "tile_matmul_acc" => {
                     let (a, bb, c) = (args[0], args[1], args[2]);
-                    if !f.ty(a).is_tile_of_wide_float() {
-                        self.refuse("tile_matmul of f16 tiles");
-                        return Some(Vec::new());
-                    }
                     if a == c || bb == c {
                         self.refuse("a `tile_matmul` accumulating into one of its operands");
                         return Some(Vec::new());
@@ -465,10 +472,12 @@ impl Cx<'_> {
                         let func = format!("adj_tile_load{}", args.len() - 1);
                         self.tile_call(&mut b, &func, args, true, sp);
                     }
-                    // The f16 matmul (f32 accumulation, tensor cores) has no adjoint yet.
-                    ("tile_matmul", _) if !f.ty(args[0]).is_tile_of_wide_float() => {
-                        self.refuse("tile_matmul of f16 tiles");
-                        return Some(Vec::new());
+                    // The value tile gets the array's gradient over the window (the update
+                    // added it there); the seed, the adjoint of the old values, goes nowhere,
+                    // as Warp's `adj_ret` (the kernel cannot read them: see `replay`).
+                    ("tile_atomic_add", _) => {
+                        let func = format!("adj_tile_atomic_add{}", args.len() - 2);
+                        self.tile_call(&mut b, &func, args, true, sp);
                     }
                     (
                         "tile_sum" | "tile_min" | "tile_max" | "tile_transpose" | "tile_matmul",
