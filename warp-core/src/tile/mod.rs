@@ -57,6 +57,23 @@ pub use shape::{broadcast11, broadcast12, broadcast22, transpose};
 pub use sort::{permute, sort_perm, SortKey};
 pub use view::{view11, view21, view22, window1, window2};
 
+/// Implemented by each `#[func]` whose parameters and result are scalars (not `bool`): the
+/// func takes the elements `Args` (a tuple, one per parameter) and returns `Ret`. The kernel
+/// macro cannot see a func's signature, so `tile_map(func, ..)` asks rustc, through
+/// [`tile_map_fn_check`], whether the func fits the tiles' elements and the result's.
+#[diagnostic::on_unimplemented(
+    message = "`tile_map` cannot apply `{Self}` to elements `{Args}` giving `{Ret}`",
+    label = "not a #[func] taking `{Args}` and returning `{Ret}`",
+    note = "`tile_map(f, a..)` takes a #[func] of scalars with one parameter per tile, of the tiles' element types",
+    note = "a func returning another type than the first tile's element names it: `let r: Tile<i32, 8> = tile_map(f, a);` or `tile_map::<i32>(f, a)`"
+)]
+pub trait TileMapFn<Args, Ret> {}
+
+/// Compiles only where `F` is a `#[func]` taking `Args` and returning `Ret` (see
+/// [`TileMapFn`]); generated `tile_map` code calls it before mapping.
+#[inline(always)]
+pub fn tile_map_fn_check<F: TileMapFn<Args, Ret>, Args, Ret>() {}
+
 /// A rank-1 tile of `N0` elements.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tile1<T, const N0: usize> {

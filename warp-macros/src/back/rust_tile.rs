@@ -198,11 +198,52 @@ impl RustEmitter<'_> {
                     quote!(|__x, __y| __wp::builtins::#g(__x, __y))
                 }
             }
+            TileFn::Func(_) => unreachable!("user funcs are mapped by `tile_map_func`"),
+        }
+    }
+
+    /// `tile_map(func, a..)` of a user `#[func]`: first the check that the func takes the
+    /// tiles' elements and returns the result's (the macro cannot see its signature; the
+    /// bound fails at the func's path, with `TileMapFn`'s message), then `a.try_map(..)?`,
+    /// which stops at the first element whose call faults, as a scalar call does.
+    fn tile_map_func(&self, k: usize, args: &[VarId], dst_elem: &Ty, sp: Span) -> TokenStream {
+        let Some(path) = self.f.callees.get(k) else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func is not among the callees"));
+        };
+        let elem = |t: &Ty| match t {
+            Ty::Tile(e, _) => ty_tokens(e),
+            _ => None,
+        };
+        let ins: Option<Vec<TokenStream>> = args.iter().map(|a| elem(self.f.ty(*a))).collect();
+        let (Some(ins), Some(out)) = (ins, ty_tokens(dst_elem)) else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map of a func over tiles without Rust element types"));
+        };
+        let entry = if self.replay {
+            format_ident!("__wp_replay")
+        } else {
+            format_ident!("__wp_cpu")
+        };
+        let ps = syn::spanned::Spanned::span(path);
+        let check =
+            quote_spanned!(ps=> __wp::tile::tile_map_fn_check::<#path, (#(#ins,)*), #out>(););
+        let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
+        match &v[..] {
+            [a] => quote_spanned!(sp=> { #check #a.try_map(|__x| #path::#entry(__x))? }),
+            [a, b] => {
+                quote_spanned!(sp=> { #check #a.try_map2(&#b, |__x, __y| #path::#entry(__x, __y))? })
+            }
+            _ => unreachable!("tile_map takes one or two tiles"),
         }
     }
 
     /// `tile_map(f, a)`: `a.map(f)`, `a.map2(&b, f)`.
-    pub(super) fn tile_map(&self, f: TileFn, args: &[VarId], sp: Span) -> TokenStream {
+    pub(super) fn tile_map(&self, f: TileFn, args: &[VarId], ty: &Ty, sp: Span) -> TokenStream {
+        if let TileFn::Func(k) = f {
+            let Ty::Tile(e, _) = ty else {
+                return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map makes no tile"));
+            };
+            return self.tile_map_func(k, args, e, sp);
+        }
         let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
         let call = self.tile_fn(f, v.len());
         match &v[..] {

@@ -521,11 +521,13 @@ impl Printer<'_> {
         f: TileFn,
         values: &[VarId],
         grads: &[GradArg],
+        _dst: VarId,
         sp: Span,
     ) -> TokenStream {
         let scalar = match f {
             TileFn::Builtin(b) => format_ident!("adj_{}", b.name),
             TileFn::Op(o) => format_ident!("{}", o.adjoint_fn().unwrap_or("adj_add")),
+            TileFn::Func(k) => return self.tile_map_func_adj(k, values, grads, sp),
         };
         let xs = values.iter().map(|v| {
             let x = self.var(*v);
@@ -540,6 +542,37 @@ impl Printer<'_> {
             _ => quote! {
                 __wp::tile::adjoint::adj_tile_map2(#(#xs,)* #(#gs,)* &__r,
                     |__x, __y, __ax: &mut _, __ay: &mut _, __g| __wp::adjoint::#scalar(__x, __y, __ax, __ay, __g));
+            },
+        };
+        quote_spanned!(sp=> #before #call #after)
+    }
+
+    /// `tile_map(func, ..)`'s adjoint: the func's own adjoint on each element, in row-major
+    /// order, on lane 0's adjoint stack (a block-level statement; each call pushes and pops
+    /// its own history, so the stack is as before after each element).
+    fn tile_map_func_adj(
+        &self,
+        k: usize,
+        values: &[VarId],
+        grads: &[GradArg],
+        sp: Span,
+    ) -> TokenStream {
+        let Some(path) = self.f().callees.get(k) else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func is not among the callees"););
+        };
+        let xs = values.iter().map(|v| {
+            let x = self.var(*v);
+            quote!(&#x)
+        });
+        let (gs, before, after) = self.grads_once(grads);
+        let call = match values.len() {
+            1 => quote! {
+                __wp::tile::adjoint::adj_tile_map_func1(#(#xs,)* #(#gs,)* &__r,
+                    |__x, __ax: &mut _, __g| #path::__wp_adj(__x, __ax, __g, &mut __lanes[0]))?;
+            },
+            _ => quote! {
+                __wp::tile::adjoint::adj_tile_map_func2(#(#xs,)* #(#gs,)* &__r,
+                    |__x, __y, __ax: &mut _, __ay: &mut _, __g| #path::__wp_adj(__x, __y, __ax, __ay, __g, &mut __lanes[0]))?;
             },
         };
         quote_spanned!(sp=> #before #call #after)
