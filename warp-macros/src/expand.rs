@@ -746,8 +746,27 @@ fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
     if params.is_empty() || !scalar(ret) {
         return TokenStream::new();
     }
+    let k: Vec<syn::Index> = (0..params.len()).map(syn::Index::from).collect();
     quote! {
-        impl #wp::tile::TileMapFn<(#(#params,)*), #ret> for #self_ty {}
+        impl #wp::tile::TileMapFn<(#(#params,)*), #ret> for #self_ty {
+            #[inline(always)]
+            fn call(__a: (#(#params,)*)) -> #wp::KResult<#ret> {
+                Self::__wp_cpu(#(__a.#k),*)
+            }
+            #[inline(always)]
+            fn replay(__a: (#(#params,)*)) -> #wp::KResult<#ret> {
+                Self::__wp_replay(#(__a.#k),*)
+            }
+            #[inline(always)]
+            fn adj(
+                __a: (#(#params,)*),
+                __adj: &mut (#(#params,)*),
+                __r: #ret,
+                __stack: &mut #wp::AdStack,
+            ) -> #wp::KResult<()> {
+                Self::__wp_adj(#(__a.#k,)* #(&mut __adj.#k,)* __r, __stack)
+            }
+        }
     }
 }
 

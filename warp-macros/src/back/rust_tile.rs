@@ -202,36 +202,27 @@ impl RustEmitter<'_> {
         }
     }
 
-    /// `tile_map(func, a..)` of a user `#[func]`: first the check that the func takes the
-    /// tiles' elements and returns the result's (the macro cannot see its signature; the
-    /// bound fails at the func's path, with `TileMapFn`'s message), then `a.try_map(..)?`,
-    /// which stops at the first element whose call faults, as a scalar call does.
+    /// `tile_map(func, a..)` of a user `#[func]`: `a.try_map(..)?`, which stops at the first
+    /// element whose call faults, as a scalar call does. The func is called through
+    /// `TileMapFn<(elements..), result>`, whose bound rustc checks at the func's path (the
+    /// macro cannot see the func's signature): a func that does not fit the elements is that
+    /// one error, with the trait's message.
     fn tile_map_func(&self, k: usize, args: &[VarId], dst_elem: &Ty, sp: Span) -> TokenStream {
         let Some(path) = self.f.callees.get(k) else {
             return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func is not among the callees"));
         };
-        let elem = |t: &Ty| match t {
-            Ty::Tile(e, _) => ty_tokens(e),
-            _ => None,
-        };
-        let ins: Option<Vec<TokenStream>> = args.iter().map(|a| elem(self.f.ty(*a))).collect();
-        let (Some(ins), Some(out)) = (ins, ty_tokens(dst_elem)) else {
+        let Some(func) = tile_map_fn(self.f, path, args, dst_elem) else {
             return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map of a func over tiles without Rust element types"));
         };
         let entry = if self.replay {
-            format_ident!("__wp_replay")
+            format_ident!("replay")
         } else {
-            format_ident!("__wp_cpu")
+            format_ident!("call")
         };
-        let ps = syn::spanned::Spanned::span(path);
-        let check =
-            quote_spanned!(ps=> __wp::tile::tile_map_fn_check::<#path, (#(#ins,)*), #out>(););
         let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
         match &v[..] {
-            [a] => quote_spanned!(sp=> { #check #a.try_map(|__x| #path::#entry(__x))? }),
-            [a, b] => {
-                quote_spanned!(sp=> { #check #a.try_map2(&#b, |__x, __y| #path::#entry(__x, __y))? })
-            }
+            [a] => quote_spanned!(sp=> #a.try_map(|__x| #func::#entry((__x,)))?),
+            [a, b] => quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?),
             _ => unreachable!("tile_map takes one or two tiles"),
         }
     }
@@ -444,4 +435,22 @@ impl<'a> BlockPrinter<'a> {
         };
         quote!(#reads #body)
     }
+}
+
+/// `<func as __wp::tile::TileMapFn<(elements of args..), result>>`, spanned at the func's path
+/// (where rustc reports a func that does not fit); `None` where an element has no Rust type.
+pub(super) fn tile_map_fn(
+    f: &Function,
+    path: &syn::Path,
+    args: &[VarId],
+    dst_elem: &Ty,
+) -> Option<TokenStream> {
+    let elem = |t: &Ty| match t {
+        Ty::Tile(e, _) => ty_tokens(e),
+        _ => None,
+    };
+    let ins: Vec<TokenStream> = args.iter().map(|a| elem(f.ty(*a))).collect::<Option<_>>()?;
+    let out = ty_tokens(dst_elem)?;
+    let ps = syn::spanned::Spanned::span(path);
+    Some(quote_spanned!(ps=> <#path as __wp::tile::TileMapFn<(#(#ins,)*), #out>>))
 }

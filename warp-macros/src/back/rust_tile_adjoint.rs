@@ -521,13 +521,13 @@ impl Printer<'_> {
         f: TileFn,
         values: &[VarId],
         grads: &[GradArg],
-        _dst: VarId,
+        dst: VarId,
         sp: Span,
     ) -> TokenStream {
         let scalar = match f {
             TileFn::Builtin(b) => format_ident!("adj_{}", b.name),
             TileFn::Op(o) => format_ident!("{}", o.adjoint_fn().unwrap_or("adj_add")),
-            TileFn::Func(k) => return self.tile_map_func_adj(k, values, grads, sp),
+            TileFn::Func(k) => return self.tile_map_func_adj(k, values, grads, dst, sp),
         };
         let xs = values.iter().map(|v| {
             let x = self.var(*v);
@@ -555,24 +555,41 @@ impl Printer<'_> {
         k: usize,
         values: &[VarId],
         grads: &[GradArg],
+        dst: VarId,
         sp: Span,
     ) -> TokenStream {
-        let Some(path) = self.f().callees.get(k) else {
-            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func is not among the callees"););
+        let f = self.f();
+        let func = match (f.callees.get(k), f.ty(dst)) {
+            (Some(path), Ty::Tile(e, _)) => super::rust_tile::tile_map_fn(f, path, values, e),
+            _ => None,
+        };
+        let Some(func) = func else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func or element types are missing"););
         };
         let xs = values.iter().map(|v| {
             let x = self.var(*v);
             quote!(&#x)
         });
         let (gs, before, after) = self.grads_once(grads);
+        // The func's adjoint accumulates into its adjoint arguments: copies in and out.
         let call = match values.len() {
             1 => quote! {
                 __wp::tile::adjoint::adj_tile_map_func1(#(#xs,)* #(#gs,)* &__r,
-                    |__x, __ax: &mut _, __g| #path::__wp_adj(__x, __ax, __g, &mut __lanes[0]))?;
+                    |__x, __ax: &mut _, __g| {
+                        let mut __a = (*__ax,);
+                        #func::adj((__x,), &mut __a, __g, &mut __lanes[0])?;
+                        *__ax = __a.0;
+                        ::core::result::Result::Ok(())
+                    })?;
             },
             _ => quote! {
                 __wp::tile::adjoint::adj_tile_map_func2(#(#xs,)* #(#gs,)* &__r,
-                    |__x, __y, __ax: &mut _, __ay: &mut _, __g| #path::__wp_adj(__x, __y, __ax, __ay, __g, &mut __lanes[0]))?;
+                    |__x, __y, __ax: &mut _, __ay: &mut _, __g| {
+                        let mut __a = (*__ax, *__ay);
+                        #func::adj((__x, __y), &mut __a, __g, &mut __lanes[0])?;
+                        (*__ax, *__ay) = __a;
+                        ::core::result::Result::Ok(())
+                    })?;
             },
         };
         quote_spanned!(sp=> #before #call #after)
