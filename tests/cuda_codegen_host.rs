@@ -1163,6 +1163,12 @@ fn tile_funcs(x: Array<f32>, y: Array<f32>, out: Array<f32>, out2: Array<f32>, k
     tile_store(out2, b + t, o);
     let kk: Tile<i32, 16> = tile_map(tile_bucket, b);
     tile_store(k, kk * 3, o);
+    tile_store(out, tile_map(tile_weighted, t, u, b), o + 48);
+}
+
+#[wp::func]
+fn tile_weighted(a: f32, b: f32, c: f32) -> f32 {
+    0.5 * a + 0.25 * b - c * tile_cubic(a)
 }
 
 /// The C++ compiler's flags for a tiled kernel's translation unit under the block emulator
@@ -1287,7 +1293,8 @@ fn run_tiled_on_host<K: Kernel>(
     )
 }
 
-/// `tile_map` of user funcs (unary, binary calling another func, and one returning `i32`) in
+/// `tile_map` of user funcs (unary, binary calling another func, one returning `i32`, and
+/// one of three tiles) in
 /// the generated CUDA, run on the host under the block emulator at block sizes 1, 7 and 32
 /// over 37 elements (ragged against 16): the CPU backend's bits exactly (`+ - *`, `as`).
 #[test]
@@ -1299,7 +1306,7 @@ fn tile_map_of_funcs_matches_the_cpu_backend() {
     for bd in [1, 7, 32] {
         let x = wp::Array::from_slice(&xs, &dev).unwrap();
         let y = wp::Array::from_slice(&ys, &dev).unwrap();
-        let out = wp::Array::<f32>::zeros(n, &dev).unwrap();
+        let out = wp::Array::<f32>::zeros(n + 48, &dev).unwrap();
         let out2 = wp::Array::<f32>::zeros(n, &dev).unwrap();
         let k = wp::Array::<i32>::zeros(n, &dev).unwrap();
         let args = [
@@ -1365,14 +1372,16 @@ fn tile_func_grads(x: Array<f32>, y: Array<f32>, out: Array<f32>) {
     let t = tile_load::<16>(x, o);
     let u = tile_load::<16>(y, o);
     let c = tile_map(tile_cubic, t);
+    let w = tile_map(tile_weighted, t, u, c);
     tile_store(
         out,
-        tile_map(tile_blend, c, u) + tile_map(tile_blend, t, t),
+        tile_map(tile_blend, c, u) + tile_map(tile_blend, t, t) + w,
         o,
     );
 }
 
-/// Backward through `tile_map` of funcs (one calling another; the same tile twice) in the
+/// Backward through `tile_map` of funcs (one calling another; the same tile twice; three
+/// tiles) in the
 /// generated CUDA adjoint, run on the host under the block emulator at block sizes 1, 7 and
 /// 32: the CPU backend's gradients bit for bit (`+ - *` only, the same per-element adjoint
 /// chain on both).

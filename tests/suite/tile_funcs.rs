@@ -34,14 +34,26 @@ fn blend(a: f32, b: f32) -> f32 {
     a * b + 1.0
 }
 
+#[wp::func]
+fn weighted(a: f32, b: f32, c: f32) -> f32 {
+    0.5 * a + 0.25 * b - c * c
+}
+
 #[wp::kernel]
-fn k_unary_binary(x: Array<f32>, y: Array<f32>, out: Array<f32>, out2: Array<f32>) {
+fn k_unary_binary(
+    x: Array<f32>,
+    y: Array<f32>,
+    out: Array<f32>,
+    out2: Array<f32>,
+    out3: Array<f32>,
+) {
     let b = tid();
     let o = (b * 16) as i32;
     let t = tile_load::<16>(x, o);
     let u = tile_load::<16>(y, o);
     tile_store(out, tile_map(cubic, t), o);
     tile_store(out2, tile_map(blend, t, u) + t, o);
+    tile_store(out3, tile_map(weighted, t, u, t), o);
 }
 
 fn host_cubic(x: f32) -> f32 {
@@ -55,8 +67,9 @@ fn host_blend(a: f32, b: f32) -> f32 {
     a * b + 1.0
 }
 
-/// `tile_map(cubic, t)` and `tile_map(blend, t, u)` on 37 elements (ragged against 16), at
-/// block sizes 1, 7 and 64: every stored element is the host's, bit for bit.
+/// `tile_map(cubic, t)`, `tile_map(blend, t, u)` and `tile_map(weighted, t, u, t)` on 37
+/// elements (ragged against 16), at block sizes 1, 7 and 64: every stored element is the
+/// host's, bit for bit.
 fn unary_and_binary_funcs(dev: &wp::Device) {
     let n = 37;
     let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.25 - 4.0).collect();
@@ -65,8 +78,9 @@ fn unary_and_binary_funcs(dev: &wp::Device) {
     for bd in [1, 7, 64] {
         let out = zeros::<f32, 1>(n, dev);
         let out2 = zeros::<f32, 1>(n, dev);
-        wp::launch_tiled(k_unary_binary, 3, (&x, &y, &out, &out2), bd, dev).unwrap();
-        let (g, g2) = (host(&out), host(&out2));
+        let out3 = zeros::<f32, 1>(n, dev);
+        wp::launch_tiled(k_unary_binary, 3, (&x, &y, &out, &out2, &out3), bd, dev).unwrap();
+        let (g, g2, g3) = (host(&out), host(&out2), host(&out3));
         for k in 0..n {
             assert_eq!(
                 g[k].to_bits(),
@@ -75,6 +89,8 @@ fn unary_and_binary_funcs(dev: &wp::Device) {
             );
             let want = host_blend(xs[k], ys[k]) + xs[k];
             assert_eq!(g2[k].to_bits(), want.to_bits(), "blend {k}, bd {bd}");
+            let want = 0.5 * xs[k] + 0.25 * ys[k] - xs[k] * xs[k];
+            assert_eq!(g3[k].to_bits(), want.to_bits(), "weighted {k}, bd {bd}");
         }
     }
 }
@@ -182,6 +198,11 @@ fn mix(a: f64, b: f64) -> f64 {
     s
 }
 
+#[wp::func]
+fn mix3(a: f64, b: f64, c: f64) -> f64 {
+    a * b * c + sin(b) * a
+}
+
 #[wp::kernel]
 fn k_func_grads(x: Array<f64>, y: Array<f64>, out: Array<f64>) {
     let b = tid();
@@ -189,14 +210,14 @@ fn k_func_grads(x: Array<f64>, y: Array<f64>, out: Array<f64>) {
     let t = tile_load::<8>(x, o);
     let u = tile_load::<8>(y, o);
     let s = tile_map(soft, t);
-    let m = tile_map(mix, s, u) + tile_map(mix, t, t);
+    let m = tile_map(mix, s, u) + tile_map(mix, t, t) + tile_map(mix3, t, u, s);
     tile_store(out, m, o);
     let total = tile_sum(tile_map(soft, m));
     tile_store(out, total, 24 + b as i32);
 }
 
-/// Backward through `tile_map` of a unary and a binary func (one with a loop, so its adjoint
-/// uses the stack; the same tile twice; a func of a mapped tile), 21 elements in three
+/// Backward through `tile_map` of a unary, a binary and a ternary func (one with a loop, so
+/// its adjoint uses the stack; the same tile twice; a func of a mapped tile), 21 elements in three
 /// blocks of 8 (ragged), at block sizes 1, 5 and 32: gradcheck in f64.
 fn gradients_through_funcs(dev: &wp::Device) {
     let n = 21;

@@ -32,6 +32,20 @@ impl<T: Copy, const N0: usize> Tile1<T, N0> {
 }
 
 impl<T: Copy, const N0: usize> Tile1<T, N0> {
+    /// `f(e, x)` for each element `x` at row-major index `e`, in order, stopping at the first
+    /// fault (`tile_map` of a func over three or more tiles reads the others at `e`).
+    #[inline(always)]
+    pub fn try_map_flat<U: Copy + Default>(
+        &self,
+        f: impl Fn(usize, T) -> KResult<U>,
+    ) -> KResult<Tile1<U, N0>> {
+        let mut data = [U::default(); N0];
+        for (e, (d, x)) in data.iter_mut().zip(&self.data).enumerate() {
+            *d = f(e, *x)?;
+        }
+        Ok(Tile1 { data })
+    }
+
     /// `f` applied to each element in order, stopping at the first fault (`tile_map` of a
     /// user func, whose calls may fault as a scalar call does).
     #[inline(always)]
@@ -59,6 +73,22 @@ impl<T: Copy, const N0: usize> Tile1<T, N0> {
 }
 
 impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
+    /// `f(e, x)` for each element `x` at row-major index `e`, in order, stopping at the first
+    /// fault.
+    #[inline(always)]
+    pub fn try_map_flat<U: Copy + Default>(
+        &self,
+        f: impl Fn(usize, T) -> KResult<U>,
+    ) -> KResult<Tile2<U, N0, N1>> {
+        let mut data = [[U::default(); N1]; N0];
+        for (i, (dr, xr)) in data.iter_mut().zip(&self.data).enumerate() {
+            for (j, (d, x)) in dr.iter_mut().zip(xr).enumerate() {
+                *d = f(i * N1 + j, *x)?;
+            }
+        }
+        Ok(Tile2 { data })
+    }
+
     /// `f` applied to each element in row-major order, stopping at the first fault.
     #[inline(always)]
     pub fn try_map<U: Copy + Default>(

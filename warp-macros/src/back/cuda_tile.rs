@@ -195,6 +195,22 @@ impl Emitter<'_> {
                     other => return Err(format!("`{other}` has no CUDA form yet")),
                 }
             }
+            // A func over three or more tiles: the loop written out (each thread its
+            // elements, as `wp::tile_map`), the func taking the fault context last.
+            Op::TileMap {
+                f: TileFn::Func(k),
+                args,
+            } if args.len() > 2 => {
+                let suffix = if e.replay { "_replay" } else { "" };
+                let xs: Vec<String> = args
+                    .iter()
+                    .map(|x| format!("{}.data[__e]", v(e, x)))
+                    .collect();
+                format!(
+                    "for (int __e = (int)threadIdx.x; __e < decltype({d})::SIZE; __e += WP_TILE_BLOCK_DIM) {d}.data[__e] = @@F{k}@@{suffix}({}, __ctx); __syncthreads();",
+                    xs.join(", ")
+                )
+            }
             Op::TileMap { f: g, args } => {
                 let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
                 let m = e.tile_functor(*g, args, *dst, sp)?;

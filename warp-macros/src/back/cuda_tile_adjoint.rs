@@ -129,6 +129,22 @@ impl Printer<'_> {
         dst: VarId,
         sp: proc_macro2::Span,
     ) -> Result<String, String> {
+        // A func over three or more tiles: its adjoint on each element, the loop written out.
+        if let (TileFn::Func(k), true) = (g, values.len() > 2) {
+            let xs: Vec<String> = values
+                .iter()
+                .map(|v| format!("{}.data[__e]", self.var(*v)))
+                .collect();
+            let gs: Vec<String> = grads
+                .iter()
+                .map(|g| format!("{}.data[__e]", self.grad_arg(g)))
+                .collect();
+            return Ok(format!(
+                "for (int __e = (int)threadIdx.x; __e < wp::detail::remove_cvref<decltype(__r)>::type::SIZE; __e += WP_TILE_BLOCK_DIM) @@F{k}@@_adj({}, {}, __r.data[__e], __ctx, __stack); __syncthreads();",
+                xs.join(", "),
+                gs.join(", ")
+            ));
+        }
         let f = self.f();
         let elem = |v: VarId| match f.ty(v) {
             Ty::Tile(e, _) => super::cuda::cpp_type(e).ok_or("a tile element type"),

@@ -223,7 +223,11 @@ impl RustEmitter<'_> {
         match &v[..] {
             [a] => quote_spanned!(sp=> #a.try_map(|__x| #func::#entry((__x,)))?),
             [a, b] => quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?),
-            _ => unreachable!("tile_map takes one or two tiles"),
+            // Three or more (the shapes are equal: the front end checked them).
+            [a, rest @ ..] => quote_spanned!(sp=> #a.try_map_flat(|__e, __x| #func::#entry((
+                __x, #(__wp::tile::Tile::as_flat(&#rest)[__e],)*
+            )))?),
+            [] => unreachable!("tile_map takes a tile"),
         }
     }
 

@@ -582,7 +582,7 @@ impl Printer<'_> {
                         ::core::result::Result::Ok(())
                     })?;
             },
-            _ => quote! {
+            2 => quote! {
                 __wp::tile::adjoint::adj_tile_map_func2(#(#xs,)* #(#gs,)* &__r,
                     |__x, __y, __ax: &mut _, __ay: &mut _, __g| {
                         let mut __a = (*__ax, *__ay);
@@ -591,6 +591,28 @@ impl Printer<'_> {
                         ::core::result::Result::Ok(())
                     })?;
             },
+            // Three or more: the same, written out over the flat elements (the adjoints are
+            // distinct tiles: `grads_once`).
+            n => {
+                let vs: Vec<syn::Ident> = values.iter().map(|v| self.var(*v)).collect();
+                let g: Vec<syn::Ident> = (0..n).map(|k| format_ident!("__ga{}", k)).collect();
+                let k: Vec<syn::Index> = (0..n).map(syn::Index::from).collect();
+                quote! {
+                    {
+                        #(let #g = #gs;)*
+                        for __e in 0..__wp::tile::Tile::as_flat(&__r).len() {
+                            let mut __a = (#(__wp::tile::Tile::as_flat(&*#g)[__e],)*);
+                            #func::adj(
+                                (#(__wp::tile::Tile::as_flat(&#vs)[__e],)*),
+                                &mut __a,
+                                __wp::tile::Tile::as_flat(&__r)[__e],
+                                &mut __lanes[0],
+                            )?;
+                            #(__wp::tile::Tile::as_flat_mut(&mut *#g)[__e] = __a.#k;)*
+                        }
+                    }
+                }
+            }
         };
         quote_spanned!(sp=> #before #call #after)
     }

@@ -706,6 +706,10 @@ impl Lowerer {
         };
         match (op, builtins::lookup_user(&last)) {
             (Some(op), _) if ok && arity == 2 => Ok(TileFn::Op(op)),
+            (Some(_), _) if ok => err(
+                e.span(),
+                format!("`{which}` applies a function of {arity} value(s) here; `{last}` takes 2"),
+            ),
             (_, Some(b)) if ok && !b.is_tile() && b.params.len() == arity => {
                 if b.is_atomic() || b.faults() || b.draw.is_some() || b.iterate.is_some() {
                     return err(e.span(), format!("`{which}` cannot apply `{}`", b.name));
@@ -816,14 +820,21 @@ impl Lowerer {
         want: Option<(&Ty, &[Dim])>,
         span: Span,
     ) -> R<VarId> {
-        if !(2..=3).contains(&args.len()) {
+        // Warp's variadic form takes up to eight tiles, for user funcs.
+        if !(2..=9).contains(&args.len()) {
             return err(
                 span,
-                "`tile_map` takes a function and one or two tiles: `tile_map(sin, a)`",
+                "`tile_map` takes a function and one to eight tiles: `tile_map(sin, a)`, `tile_map(my_func, a, b, c)`",
             );
         }
         let f = self.tile_fn("tile_map", args[0], args.len() - 1, true)?;
         let user = matches!(f, TileFn::Func(_));
+        if !user && args.len() > 3 {
+            return err(
+                args[0].span(),
+                "`tile_map` of more than two tiles takes a #[func]",
+            );
+        }
         if fish_dims.is_some() || (fish_elem.is_some() && !user) {
             return err(
                 span,
