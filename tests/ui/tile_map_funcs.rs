@@ -45,11 +45,20 @@ fn fish_dims(a: Array<f32>) {
     let v = tile_map::<f64>(sin, t);
 }
 
-// A tile of vectors is no tile of scalars.
+// Tiles hold no `bool`s.
 #[wp::kernel]
 fn bool_result(a: Array<f32>) {
     let t = tile_load::<8>(a, 0);
     let u = tile_map::<bool>(double, t);
+}
+
+// More than two tiles take a #[func]; more than eight are too many.
+#[wp::kernel]
+fn arities(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map(add, t, t, t);
+    let v = tile_map(max, t, t, t);
+    let w = tile_map(double, t, t, t, t, t, t, t, t, t);
 }
 
 fn main() {}
