@@ -19,6 +19,7 @@ backend_tests!(
     func_calling_func_and_builtins,
     fault_in_a_mapped_func,
     gradients_through_funcs,
+    generic_func_instances,
 );
 
 #[wp::func]
@@ -296,8 +297,37 @@ fn cuda_templates_call_the_funcs() {
     }
     assert!(!fwd.contains("#error") && !adj.contains("#error"));
     assert!(fwd.contains("wp::tile_map2("), "{fwd}");
+    let generic = wp::cuda_source::assemble(wp::kernel_info(k_generic)).text;
+    assert!(!generic.contains("#error"), "{generic}");
     assert!(
         adj.contains("wp::adj_tile_map1(") && adj.contains("wp::adj_tile_map2("),
         "{adj}"
     );
+}
+
+#[wp::func]
+fn affine<T: Float>(x: T, s: T) -> T {
+    x * s + 1.0
+}
+
+#[wp::kernel]
+fn k_generic(x: Array<f64>, y: Array<f32>, out: Array<f64>, out32: Array<f32>) {
+    let t = tile_load::<8>(x, 0);
+    let u = tile_load::<8>(y, 0);
+    tile_store(out, tile_map(affine::<f64>, t, t), 0);
+    tile_store(out32, tile_map(affine::<f32>, u, u), 0);
+}
+
+/// A generic func's instances by path (`affine::<f64>`, `affine::<f32>`).
+fn generic_func_instances(dev: &wp::Device) {
+    let xs: Vec<f64> = (0..8).map(|k| k as f64 * 0.5 - 1.0).collect();
+    let ys: Vec<f32> = xs.iter().map(|v| *v as f32).collect();
+    let (x, y) = (arr(&xs, dev), arr(&ys, dev));
+    let out = zeros::<f64, 1>(8, dev);
+    let out32 = zeros::<f32, 1>(8, dev);
+    wp::launch_tiled(k_generic, 1, (&x, &y, &out, &out32), 4, dev).unwrap();
+    let want: Vec<f64> = xs.iter().map(|v| v * v + 1.0).collect();
+    assert_eq!(host(&out), want);
+    let want: Vec<f32> = ys.iter().map(|v| v * v + 1.0).collect();
+    assert_eq!(host(&out32), want);
 }
