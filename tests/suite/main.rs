@@ -119,6 +119,7 @@ mod streams;
 mod structs;
 mod tile_convert;
 mod tile_fft;
+mod tile_funcs;
 mod tile_grad;
 mod tile_grad_adj;
 mod tile_grad_linalg;

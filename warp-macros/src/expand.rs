@@ -646,6 +646,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             }
             return failed(errors);
         }
+        let tile_map_impl = tile_map_impl(&item, quote!(#name));
         return match func_instance(&item, &fattrs, None) {
             Ok(items) => quote! {
                 #(#doc_attrs)*
@@ -659,6 +660,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                 }
 
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                #tile_map_impl
             },
             Err(e) => failed(e),
         };
@@ -690,6 +692,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                 });
+                impls.extend(tile_map_impl(&inst.item, quote!(#name<#(#tys),*>)));
                 per_instance.push((display, Vec::new()));
             }
             Err(e) => per_instance.push((display, e)),
@@ -720,6 +723,50 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         }
         #bound_check
         #impls
+    }
+}
+
+/// `impl TileMapFn<(params..), ret> for func {}` where every parameter and the result are
+/// scalars other than `bool` (what `tile_map` can apply; the kernel checks its use against
+/// it, as the kernel macro cannot see the func's signature); nothing otherwise.
+fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
+    use crate::types::{Scalar, Ty};
+    let wp = crate::paths::private();
+    let scalar = |t: &syn::Type| matches!(crate::front::signature::parse_type(t), Ok(Ty::Scalar(s)) if s != Scalar::Bool);
+    let mut params = Vec::new();
+    for a in &item.sig.inputs {
+        match a {
+            syn::FnArg::Typed(p) if scalar(&p.ty) => params.push(&*p.ty),
+            _ => return TokenStream::new(),
+        }
+    }
+    let syn::ReturnType::Type(_, ret) = &item.sig.output else {
+        return TokenStream::new();
+    };
+    if params.is_empty() || !scalar(ret) {
+        return TokenStream::new();
+    }
+    let k: Vec<syn::Index> = (0..params.len()).map(syn::Index::from).collect();
+    quote! {
+        impl #wp::tile::TileMapFn<(#(#params,)*), #ret> for #self_ty {
+            #[inline(always)]
+            fn call(__a: (#(#params,)*)) -> #wp::KResult<#ret> {
+                Self::__wp_cpu(#(__a.#k),*)
+            }
+            #[inline(always)]
+            fn replay(__a: (#(#params,)*)) -> #wp::KResult<#ret> {
+                Self::__wp_replay(#(__a.#k),*)
+            }
+            #[inline(always)]
+            fn adj(
+                __a: (#(#params,)*),
+                __adj: &mut (#(#params,)*),
+                __r: #ret,
+                __stack: &mut #wp::AdStack,
+            ) -> #wp::KResult<()> {
+                Self::__wp_adj(#(__a.#k,)* #(&mut __adj.#k,)* __r, __stack)
+            }
+        }
     }
 }
 

@@ -186,11 +186,13 @@ pub enum RangeAdapter {
 }
 
 /// The function `tile_map` and `tile_reduce` apply: a builtin (its `T` is the tiles' element
-/// type), or an arithmetic operator by Warp's name (`add`, `sub`, `mul`, `div`).
+/// type), an arithmetic operator by Warp's name (`add`, `sub`, `mul`, `div`), or a user
+/// `#[func]` of scalars (`tile_map` only), by its index in [`Function::callees`].
 #[derive(Clone, Copy, Debug)]
 pub enum TileFn {
     Builtin(&'static Builtin),
     Op(BinOp),
+    Func(usize),
 }
 
 /// A literal value with its final type.

@@ -514,6 +514,47 @@ pub fn adj_tile_map2<X: Tile, Y: Tile, Z: Tile>(
     }
 }
 
+/// Adjoint of `tile_map(func, a)` of a user func: `adj` (the func's adjoint, which may fault
+/// and uses the caller's adjoint stack) on each element in row-major order.
+pub fn adj_tile_map_func1<X: Tile, Y: Tile>(
+    a: &X,
+    adj_a: &mut X,
+    r: &Y,
+    mut adj: impl FnMut(X::Elem, &mut X::Elem, Y::Elem) -> KResult<()>,
+) -> KResult<()>
+where
+    X::Elem: Copy,
+    Y::Elem: Copy,
+{
+    let (a, r) = (a.as_flat(), r.as_flat());
+    for (e, d) in adj_a.as_flat_mut().iter_mut().enumerate() {
+        adj(a[e], d, r[e])?;
+    }
+    Ok(())
+}
+
+/// Adjoint of `tile_map(func, a, b)` of a user func: `adj` on each pair of elements.
+pub fn adj_tile_map_func2<X: Tile, Y: Tile, Z: Tile>(
+    a: &X,
+    b: &Y,
+    adj_a: &mut X,
+    adj_b: &mut Y,
+    r: &Z,
+    mut adj: impl FnMut(X::Elem, Y::Elem, &mut X::Elem, &mut Y::Elem, Z::Elem) -> KResult<()>,
+) -> KResult<()>
+where
+    X::Elem: Copy,
+    Y::Elem: Copy,
+    Z::Elem: Copy,
+{
+    let (a, b, r) = (a.as_flat(), b.as_flat(), r.as_flat());
+    let ab = adj_b.as_flat_mut();
+    for (e, d) in adj_a.as_flat_mut().iter_mut().enumerate() {
+        adj(a[e], b[e], d, &mut ab[e], r[e])?;
+    }
+    Ok(())
+}
+
 // ---- Reductions ----------------------------------------------------------------------------
 
 /// Adjoint of `tile_sum(t)` (and `tile_reduce(add, t)`): every element gets the result's

@@ -60,6 +60,31 @@ pub use shape::{broadcast11, broadcast12, broadcast22, transpose};
 pub use sort::{permute, sort_perm, SortKey};
 pub use view::{view11, view21, view22, window1, window2};
 
+/// Implemented by each `#[func]` whose parameters and result are scalars (not `bool`): the
+/// func takes the elements `Args` (a tuple, one per parameter) and returns `Ret`. The kernel
+/// macro cannot see a func's signature, so `tile_map(func, ..)` calls the func through this
+/// trait, with the elements it chose: a func that does not fit is one error at the func's path
+/// (this message), not a type error in generated code.
+#[diagnostic::on_unimplemented(
+    message = "`tile_map` cannot apply `{Self}` to elements `{Args}` giving `{Ret}`",
+    label = "not a #[func] taking `{Args}` and returning `{Ret}`",
+    note = "`tile_map(f, a..)` takes a #[func] of scalars with one parameter per tile, of the tiles' element types",
+    note = "a func returning another type than the first tile's element names it: `let r: Tile<i32, 8> = tile_map(f, a);` or `tile_map::<i32>(f, a)`"
+)]
+pub trait TileMapFn<Args, Ret> {
+    /// The func's CPU code on one set of elements.
+    fn call(args: Args) -> KResult<Ret>;
+    /// Its replay (an adjoint's forward pass: no prints).
+    fn replay(args: Args) -> KResult<Ret>;
+    /// Its adjoint at `args` with seed `adj_ret`, accumulating into `adj_args`, on `stack`.
+    fn adj(
+        args: Args,
+        adj_args: &mut Args,
+        adj_ret: Ret,
+        stack: &mut crate::grad::AdStack,
+    ) -> KResult<()>;
+}
+
 /// A rank-1 tile of `N0` elements.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tile1<T, const N0: usize> {

@@ -439,7 +439,12 @@ impl<'a> Printer<'a> {
                     self.index(index)
                 )
             }
-            AKind::TileMapAdj { f, values, grads } => self.tile_map_adj(*f, values, grads, sp)?,
+            AKind::TileMapAdj {
+                f,
+                values,
+                grads,
+                dst,
+            } => self.tile_map_adj(*f, values, grads, *dst, sp)?,
             AKind::LaneAdj { func, lanes, tile } => {
                 let (x, t) = (self.adj(*lanes), self.adj(*tile));
                 match *func {

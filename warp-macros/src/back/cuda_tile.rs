@@ -195,17 +195,33 @@ impl Emitter<'_> {
                     other => return Err(format!("`{other}` has no CUDA form yet")),
                 }
             }
+            // A func over three or more tiles: the loop written out (each thread its
+            // elements, as `wp::tile_map`), the func taking the fault context last.
+            Op::TileMap {
+                f: TileFn::Func(k),
+                args,
+            } if args.len() > 2 => {
+                let suffix = if e.replay { "_replay" } else { "" };
+                let xs: Vec<String> = args
+                    .iter()
+                    .map(|x| format!("{}.data[__e]", v(e, x)))
+                    .collect();
+                format!(
+                    "for (int __e = (int)threadIdx.x; __e < decltype({d})::SIZE; __e += WP_TILE_BLOCK_DIM) {d}.data[__e] = @@F{k}@@{suffix}({}, __ctx); __syncthreads();",
+                    xs.join(", ")
+                )
+            }
             Op::TileMap { f: g, args } => {
                 let a: Vec<String> = args.iter().map(|x| v(e, x)).collect();
                 let m = e.tile_functor(*g, args, *dst, sp)?;
                 match a.len() {
-                    1 => format!("wp::tile_map({d}, {}, {m}{{}});", a[0]),
-                    _ => format!("wp::tile_map2({d}, {}, {}, {m}{{}});", a[0], a[1]),
+                    1 => format!("wp::tile_map({d}, {}, {m});", a[0]),
+                    _ => format!("wp::tile_map2({d}, {}, {}, {m});", a[0], a[1]),
                 }
             }
             Op::TileReduce { f: g, arg } => {
                 let m = e.tile_functor(*g, &[*arg, *arg], *dst, sp)?;
-                format!("wp::tile_reduce({d}, {}, {m}{{}});", v(e, arg))
+                format!("wp::tile_reduce({d}, {}, {m});", v(e, arg))
             }
             Op::Copy(x) => format!("wp::tile_copy({d}, {});", v(e, x)),
             Op::Unary(UnOp::Neg, x) => format!("wp::tile_neg({d}, {});", v(e, x)),
@@ -228,7 +244,9 @@ impl Emitter<'_> {
 
     /// A local functor applying `g` to elements of the tiles `args`, giving elements of the tile
     /// `dst` (NVRTC compiles a lambda as a host function, and a local class may not have a member
-    /// template, so its types are concrete); returns its name.
+    /// template, so its types are concrete); returns the expression making one. A user func's
+    /// functor holds the fault context, which the func takes last (a fault in one element sets
+    /// it and that element's result is zero, as for a scalar call).
     fn tile_functor(
         &mut self,
         g: TileFn,
@@ -265,17 +283,26 @@ impl Emitter<'_> {
                 self.section(b.section);
                 format!("{}(x, y)", b.cuda)
             }
+            (TileFn::Func(k), n) => {
+                let suffix = if self.replay { "_replay" } else { "" };
+                let xs = ["x", "y"][..n].join(", ");
+                format!("@@F{k}@@{suffix}({xs}, __ctx)")
+            }
         };
         self.tmp += 1;
         let m = format!("__fn{}", self.tmp);
+        let (member, make) = match g {
+            TileFn::Func(_) => ("wp::ctx_t* __ctx; ", format!("{m}{{__ctx}}")),
+            _ => ("", format!("{m}{{}}")),
+        };
         self.line(
             sp,
             &format!(
-                "struct {m} {{ WP_FN {r} operator()({}) const {{ return {body}; }} }};",
+                "struct {m} {{ {member}WP_FN {r} operator()({}) const {{ return {body}; }} }};",
                 ps.join(", ")
             ),
         );
-        Ok(m)
+        Ok(make)
     }
 
     /// The entry of a tiled kernel: CUDA block `b` runs block `b` of the launch, `@@SELF@@` with

@@ -126,8 +126,25 @@ impl Printer<'_> {
         g: TileFn,
         values: &[VarId],
         grads: &[GradArg],
+        dst: VarId,
         sp: proc_macro2::Span,
     ) -> Result<String, String> {
+        // A func over three or more tiles: its adjoint on each element, the loop written out.
+        if let (TileFn::Func(k), true) = (g, values.len() > 2) {
+            let xs: Vec<String> = values
+                .iter()
+                .map(|v| format!("{}.data[__e]", self.var(*v)))
+                .collect();
+            let gs: Vec<String> = grads
+                .iter()
+                .map(|g| format!("{}.data[__e]", self.grad_arg(g)))
+                .collect();
+            return Ok(format!(
+                "for (int __e = (int)threadIdx.x; __e < wp::detail::remove_cvref<decltype(__r)>::type::SIZE; __e += WP_TILE_BLOCK_DIM) @@F{k}@@_adj({}, {}, __r.data[__e], __ctx, __stack); __syncthreads();",
+                xs.join(", "),
+                gs.join(", ")
+            ));
+        }
         let f = self.f();
         let elem = |v: VarId| match f.ty(v) {
             Ty::Tile(e, _) => super::cuda::cpp_type(e).ok_or("a tile element type"),
@@ -139,35 +156,45 @@ impl Printer<'_> {
                 format!("wp::adj_{}", b.name)
             }
             TileFn::Op(o) => format!("wp::{}", o.adjoint_fn().unwrap_or("adj_add")),
+            // A user func's adjoint takes the fault context and the thread's adjoint stack
+            // last (each thread runs it for the elements it owns, on its own stack).
+            TileFn::Func(k) => format!("@@F{k}@@_adj"),
         };
         let ts: Vec<String> = values.iter().map(|v| elem(*v)).collect::<Result<_, _>>()?;
-        // The result's element is the function's result type: its seed's type is that of
-        // the first operand for every function a tile map differentiates (builtins and
-        // operators on one float type).
-        let rt = ts[0].clone();
+        // The seed's element is the result's: the first operand's for every builtin and
+        // operator a tile map differentiates (one float type), the annotated one for a func.
+        let rt = elem(dst)?;
+        let (member, extra, make) = match g {
+            TileFn::Func(_) => (
+                "wp::ctx_t* __ctx; wp::adstack_t* __stack; ",
+                ", __ctx, __stack",
+                "{__ctx, __stack}",
+            ),
+            _ => ("", "", "{}"),
+        };
         let (ps, call) = match values.len() {
             1 => (
                 format!("{} x, {}& ax, {rt} g", ts[0], ts[0]),
-                format!("{scalar}(x, ax, g);"),
+                format!("{scalar}(x, ax, g{extra});"),
             ),
             _ => (
                 format!(
                     "{} x, {} y, {}& ax, {}& ay, {rt} g",
                     ts[0], ts[1], ts[0], ts[1]
                 ),
-                format!("{scalar}(x, y, ax, ay, g);"),
+                format!("{scalar}(x, y, ax, ay, g{extra});"),
             ),
         };
         self.e.tmp += 1;
         let m = format!("__afn{}", self.e.tmp);
         self.line(
             sp,
-            format!("struct {m} {{ WP_FN void operator()({ps}) const {{ {call} }} }};"),
+            format!("struct {m} {{ {member}WP_FN void operator()({ps}) const {{ {call} }} }};"),
         );
         let xs: Vec<String> = values.iter().map(|v| self.var(*v)).collect();
         let gs: Vec<String> = grads.iter().map(|g| self.grad_arg(g)).collect();
         Ok(format!(
-            "wp::adj_tile_map{}({}, {}, __r, {m}{{}});",
+            "wp::adj_tile_map{}({}, {}, __r, {m}{make});",
             values.len(),
             xs.join(", "),
             gs.join(", ")

@@ -318,7 +318,7 @@ impl<'a> RustEmitter<'a> {
             {
                 quote_spanned!(sp=> (__bd as i32))
             }
-            Op::TileMap { f, args } => self.tile_map(*f, args, sp),
+            Op::TileMap { f, args } => self.tile_map(*f, args, ty, sp),
             Op::TileReduce { f, arg } => self.tile_reduce(*f, *arg, sp),
             Op::Lane => quote_spanned!(sp=> __lane),
             Op::Builtin { builtin, args } => {

@@ -192,7 +192,12 @@ impl Printer<'_> {
             } if func.starts_with("adj_tile") => {
                 self.tile_adj_call(func, values, grads, *faults, sp)
             }
-            AKind::TileMapAdj { f, values, grads } => self.tile_map_adj(*f, values, grads, sp),
+            AKind::TileMapAdj {
+                f,
+                values,
+                grads,
+                dst,
+            } => self.tile_map_adj(*f, values, grads, *dst, sp),
             AKind::LaneAdj { func, lanes, tile } => self.lane_adj(func, *lanes, *tile, sp),
             AKind::AdjCall {
                 func,

@@ -203,11 +203,47 @@ impl RustEmitter<'_> {
                     quote!(|__x, __y| __wp::builtins::#g(__x, __y))
                 }
             }
+            TileFn::Func(_) => unreachable!("user funcs are mapped by `tile_map_func`"),
+        }
+    }
+
+    /// `tile_map(func, a..)` of a user `#[func]`: `a.try_map(..)?`, which stops at the first
+    /// element whose call faults, as a scalar call does. The func is called through
+    /// `TileMapFn<(elements..), result>`, whose bound rustc checks at the func's path (the
+    /// macro cannot see the func's signature): a func that does not fit the elements is that
+    /// one error, with the trait's message.
+    fn tile_map_func(&self, k: usize, args: &[VarId], dst_elem: &Ty, sp: Span) -> TokenStream {
+        let Some(path) = self.f.callees.get(k) else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func is not among the callees"));
+        };
+        let Some(func) = tile_map_fn(self.f, path, args, dst_elem) else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map of a func over tiles without Rust element types"));
+        };
+        let entry = if self.replay {
+            format_ident!("replay")
+        } else {
+            format_ident!("call")
+        };
+        let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
+        match &v[..] {
+            [a] => quote_spanned!(sp=> #a.try_map(|__x| #func::#entry((__x,)))?),
+            [a, b] => quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?),
+            // Three or more (the shapes are equal: the front end checked them).
+            [a, rest @ ..] => quote_spanned!(sp=> #a.try_map_flat(|__e, __x| #func::#entry((
+                __x, #(__wp::tile::Tile::as_flat(&#rest)[__e],)*
+            )))?),
+            [] => unreachable!("tile_map takes a tile"),
         }
     }
 
     /// `tile_map(f, a)`: `a.map(f)`, `a.map2(&b, f)`.
-    pub(super) fn tile_map(&self, f: TileFn, args: &[VarId], sp: Span) -> TokenStream {
+    pub(super) fn tile_map(&self, f: TileFn, args: &[VarId], ty: &Ty, sp: Span) -> TokenStream {
+        if let TileFn::Func(k) = f {
+            let Ty::Tile(e, _) = ty else {
+                return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map makes no tile"));
+            };
+            return self.tile_map_func(k, args, e, sp);
+        }
         let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
         let call = self.tile_fn(f, v.len());
         match &v[..] {
@@ -408,4 +444,22 @@ impl<'a> BlockPrinter<'a> {
         };
         quote!(#reads #body)
     }
+}
+
+/// `<func as __wp::tile::TileMapFn<(elements of args..), result>>`, spanned at the func's path
+/// (where rustc reports a func that does not fit); `None` where an element has no Rust type.
+pub(super) fn tile_map_fn(
+    f: &Function,
+    path: &syn::Path,
+    args: &[VarId],
+    dst_elem: &Ty,
+) -> Option<TokenStream> {
+    let elem = |t: &Ty| match t {
+        Ty::Tile(e, _) => ty_tokens(e),
+        _ => None,
+    };
+    let ins: Vec<TokenStream> = args.iter().map(|a| elem(f.ty(*a))).collect::<Option<_>>()?;
+    let out = ty_tokens(dst_elem)?;
+    let ps = syn::spanned::Spanned::span(path);
+    Some(quote_spanned!(ps=> <#path as __wp::tile::TileMapFn<(#(#ins,)*), #out>>))
 }

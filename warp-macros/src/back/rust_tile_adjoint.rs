@@ -521,11 +521,13 @@ impl Printer<'_> {
         f: TileFn,
         values: &[VarId],
         grads: &[GradArg],
+        dst: VarId,
         sp: Span,
     ) -> TokenStream {
         let scalar = match f {
             TileFn::Builtin(b) => format_ident!("adj_{}", b.name),
             TileFn::Op(o) => format_ident!("{}", o.adjoint_fn().unwrap_or("adj_add")),
+            TileFn::Func(k) => return self.tile_map_func_adj(k, values, grads, dst, sp),
         };
         let xs = values.iter().map(|v| {
             let x = self.var(*v);
@@ -541,6 +543,76 @@ impl Printer<'_> {
                 __wp::tile::adjoint::adj_tile_map2(#(#xs,)* #(#gs,)* &__r,
                     |__x, __y, __ax: &mut _, __ay: &mut _, __g| __wp::adjoint::#scalar(__x, __y, __ax, __ay, __g));
             },
+        };
+        quote_spanned!(sp=> #before #call #after)
+    }
+
+    /// `tile_map(func, ..)`'s adjoint: the func's own adjoint on each element, in row-major
+    /// order, on lane 0's adjoint stack (a block-level statement; each call pushes and pops
+    /// its own history, so the stack is as before after each element).
+    fn tile_map_func_adj(
+        &self,
+        k: usize,
+        values: &[VarId],
+        grads: &[GradArg],
+        dst: VarId,
+        sp: Span,
+    ) -> TokenStream {
+        let f = self.f();
+        let func = match (f.callees.get(k), f.ty(dst)) {
+            (Some(path), Ty::Tile(e, _)) => super::rust_tile::tile_map_fn(f, path, values, e),
+            _ => None,
+        };
+        let Some(func) = func else {
+            return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func or element types are missing"););
+        };
+        let xs = values.iter().map(|v| {
+            let x = self.var(*v);
+            quote!(&#x)
+        });
+        let (gs, before, after) = self.grads_once(grads);
+        // The func's adjoint accumulates into its adjoint arguments: copies in and out.
+        let call = match values.len() {
+            1 => quote! {
+                __wp::tile::adjoint::adj_tile_map_func1(#(#xs,)* #(#gs,)* &__r,
+                    |__x, __ax: &mut _, __g| {
+                        let mut __a = (*__ax,);
+                        #func::adj((__x,), &mut __a, __g, &mut __lanes[0])?;
+                        *__ax = __a.0;
+                        ::core::result::Result::Ok(())
+                    })?;
+            },
+            2 => quote! {
+                __wp::tile::adjoint::adj_tile_map_func2(#(#xs,)* #(#gs,)* &__r,
+                    |__x, __y, __ax: &mut _, __ay: &mut _, __g| {
+                        let mut __a = (*__ax, *__ay);
+                        #func::adj((__x, __y), &mut __a, __g, &mut __lanes[0])?;
+                        (*__ax, *__ay) = __a;
+                        ::core::result::Result::Ok(())
+                    })?;
+            },
+            // Three or more: the same, written out over the flat elements (the adjoints are
+            // distinct tiles: `grads_once`).
+            n => {
+                let vs: Vec<syn::Ident> = values.iter().map(|v| self.var(*v)).collect();
+                let g: Vec<syn::Ident> = (0..n).map(|k| format_ident!("__ga{}", k)).collect();
+                let k: Vec<syn::Index> = (0..n).map(syn::Index::from).collect();
+                quote! {
+                    {
+                        #(let #g = #gs;)*
+                        for __e in 0..__wp::tile::Tile::as_flat(&__r).len() {
+                            let mut __a = (#(__wp::tile::Tile::as_flat(&*#g)[__e],)*);
+                            #func::adj(
+                                (#(__wp::tile::Tile::as_flat(&#vs)[__e],)*),
+                                &mut __a,
+                                __wp::tile::Tile::as_flat(&__r)[__e],
+                                &mut __lanes[0],
+                            )?;
+                            #(__wp::tile::Tile::as_flat_mut(&mut *#g)[__e] = __a.#k;)*
+                        }
+                    }
+                }
+            }
         };
         quote_spanned!(sp=> #before #call #after)
     }

@@ -258,7 +258,7 @@ impl Lowerer {
                     span,
                 )
             }
-            "tile_map" => self.tile_map(&args, span)?,
+            "tile_map" => self.tile_map(&args, fish_elem, fish_dims, want_tile, span)?,
             "tile_reduce" => self.tile_reduce(&args, span)?,
             "tile_transpose" => self.tile_transpose(row, &args, span)?,
             "tile_broadcast" => self.tile_broadcast(row, &args, fish_dims, want_tile, span)?,
@@ -673,9 +673,11 @@ impl Lowerer {
         ))
     }
 
-    /// The function of `tile_map` or `tile_reduce`: a builtin taking `arity` values, or Warp's
-    /// operator names `add`, `sub`, `mul`, `div` (binary).
-    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize) -> R<TileFn> {
+    /// The function of `tile_map` or `tile_reduce`: a builtin taking `arity` values, Warp's
+    /// operator names `add`, `sub`, `mul`, `div` (binary), or (where `user`) a user `#[func]`,
+    /// recorded among the callees. A func's signature is not visible here: rustc checks it
+    /// against the elements where the CPU code is generated (`TileMapFn`).
+    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize, user: bool) -> R<TileFn> {
         let Expr::Path(p) = strip(e) else {
             return err(
                 e.span(),
@@ -700,6 +702,10 @@ impl Lowerer {
         };
         match (op, builtins::lookup_user(&last)) {
             (Some(op), _) if ok && arity == 2 => Ok(TileFn::Op(op)),
+            (Some(_), _) if ok => err(
+                e.span(),
+                format!("`{which}` applies a function of {arity} value(s) here; `{last}` takes 2"),
+            ),
             (_, Some(b)) if ok && !b.is_tile() && b.params.len() == arity => {
                 if b.is_atomic() || b.faults() || b.draw.is_some() || b.iterate.is_some() {
                     return err(e.span(), format!("`{which}` cannot apply `{}`", b.name));
@@ -713,11 +719,62 @@ impl Lowerer {
                     b.params.len()
                 ),
             ),
-            _ => err(
+            _ if !user => err(
                 e.span(),
                 format!("`{which}` takes a builtin function here (`sin`, `max`, `add`, ..); user #[func]s are not supported yet"),
             ),
+            _ => self.tile_user_fn(which, p, e.span()),
         }
+    }
+
+    /// A user `#[func]` as `tile_map`'s function: a path that is no local variable, constant
+    /// or the kernel itself, recorded among the callees (so its CUDA code, adjoint and call
+    /// depth come with the kernel's, as for a call).
+    fn tile_user_fn(&mut self, which: &str, p: &syn::ExprPath, span: Span) -> R<TileFn> {
+        let path = &p.path;
+        if p.qself.is_some() {
+            return err(
+                span,
+                format!("`{which}` takes a builtin or a #[func] by its path"),
+            );
+        }
+        if let Some(id) = path.get_ident() {
+            let name = id.to_string();
+            if self.lookup(&name).is_some() {
+                return err(
+                    span,
+                    format!("`{which}` takes a builtin or a #[func] by name; `{name}` is a local variable"),
+                );
+            }
+            if name == self.fn_name {
+                return err(
+                    span,
+                    format!("recursion is not supported in kernels: `{name}` calls itself"),
+                );
+            }
+        }
+        let last = path
+            .segments
+            .last()
+            .map(|s| s.ident.to_string())
+            .unwrap_or_default();
+        if last
+            .chars()
+            .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
+        {
+            return err(
+                span,
+                format!("`{which}` takes a builtin or a #[func]; `{last}` names a constant"),
+            );
+        }
+        let k = match self.callees.iter().position(|c| c == path) {
+            Some(k) => k,
+            None => {
+                self.callees.push(path.clone());
+                self.callees.len() - 1
+            }
+        };
+        Ok(TileFn::Func(k))
     }
 
     /// The element type `f` makes of elements `elems`.
@@ -736,6 +793,7 @@ impl Lowerer {
                     .map_err(|m| syn::Error::new(span, format!("in `{which}`: {m}")))?
                     .ret
             }
+            TileFn::Func(_) => unreachable!("a func's result is the annotated element"),
         };
         if !matches!(r, Ty::Scalar(s) if s != Scalar::Bool) {
             return err(
@@ -746,15 +804,39 @@ impl Lowerer {
         Ok(r)
     }
 
-    /// `tile_map(f, a)`, `tile_map(f, a, b)`.
-    fn tile_map(&mut self, args: &[&Expr], span: Span) -> R<VarId> {
-        if !(2..=3).contains(&args.len()) {
+    /// `tile_map(f, a)`, `tile_map(f, a, b)`. With a user func, whose result type the macro
+    /// cannot see, the result's element is the one named (`tile_map::<i32>(f, a)`, or the
+    /// annotation `let r: Tile<i32, 8> = tile_map(f, a)`), else the first tile's (Warp takes
+    /// the func's return type; here rustc checks the func against the elements chosen).
+    fn tile_map(
+        &mut self,
+        args: &[&Expr],
+        fish_elem: Option<Ty>,
+        fish_dims: Option<Vec<Dim>>,
+        want: Option<(&Ty, &[Dim])>,
+        span: Span,
+    ) -> R<VarId> {
+        // Warp's variadic form takes up to eight tiles, for user funcs.
+        if !(2..=9).contains(&args.len()) {
             return err(
                 span,
-                "`tile_map` takes a function and one or two tiles: `tile_map(sin, a)`",
+                "`tile_map` takes a function and one to eight tiles: `tile_map(sin, a)`, `tile_map(my_func, a, b, c)`",
             );
         }
-        let f = self.tile_fn("tile_map", args[0], args.len() - 1)?;
+        let f = self.tile_fn("tile_map", args[0], args.len() - 1, true)?;
+        let user = matches!(f, TileFn::Func(_));
+        if !user && args.len() > 3 {
+            return err(
+                args[0].span(),
+                "`tile_map` of more than two tiles takes a #[func]",
+            );
+        }
+        if fish_dims.is_some() || (fish_elem.is_some() && !user) {
+            return err(
+                span,
+                "`tile_map::<T>(f, ..)` names the result's element, for a #[func] only (a builtin's result follows from its operands)",
+            );
+        }
         let mut vars = Vec::new();
         let mut shape: Option<Vec<Dim>> = None;
         let mut elems = Vec::new();
@@ -775,7 +857,22 @@ impl Lowerer {
             elems.push(e.clone());
             vars.push(v);
         }
-        let r = self.tile_fn_result("tile_map", f, &elems, args[0].span())?;
+        let r = if user {
+            let r = fish_elem
+                .or_else(|| want.map(|(e, _)| e.clone()))
+                .unwrap_or_else(|| elems[0].clone());
+            if !matches!(r, Ty::Scalar(s) if s != Scalar::Bool)
+                || elems.iter().any(|e| !matches!(e, Ty::Scalar(_)))
+            {
+                return err(
+                    args[0].span(),
+                    format!("`tile_map` applies a #[func] to tiles of scalars, giving scalars, not `{r}`"),
+                );
+            }
+            r
+        } else {
+            self.tile_fn_result("tile_map", f, &elems, args[0].span())?
+        };
         Ok(self.def(
             Op::TileMap { f, args: vars },
             Ty::Tile(Box::new(r), shape.expect("a tile")),
@@ -791,7 +888,7 @@ impl Lowerer {
                 "`tile_reduce` takes a function and a tile: `tile_reduce(max, t)`",
             );
         };
-        let f = self.tile_fn("tile_reduce", f, 2)?;
+        let f = self.tile_fn("tile_reduce", f, 2, false)?;
         let v = self.scalar_tile_arg("tile_reduce", t)?;
         let tt = self.ty(v);
         let e = tile_parts(&tt).expect("a tile").0.clone();

@@ -265,12 +265,14 @@ pub enum AKind {
     GradClearOwn { array: VarId, index: Index },
     /// Pops a trip count and runs `body` that many times.
     RevLoop { body: Vec<AStmt> },
-    /// The adjoint of `tile_map(f, values..)` with seed `__r` (a tile): on each element,
-    /// the scalar adjoint of `f`, into `grads` (the tiles' adjoints).
+    /// The adjoint of `dst = tile_map(f, values..)` with seed `__r` (a tile of `dst`'s type):
+    /// on each element, the scalar adjoint of `f` (a user func's own adjoint, on the stack),
+    /// into `grads` (the tiles' adjoints).
     TileMapAdj {
         f: TileFn,
         values: Vec<VarId>,
         grads: Vec<GradArg>,
+        dst: VarId,
     },
     /// Between a tile and per-lane values, the block together: `adj_tile_lanes` (the reverse of
     /// `tile = tile(lanes)`: each lane's adjoint of `lanes` gains its element of `tile`'s

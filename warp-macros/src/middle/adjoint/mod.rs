@@ -154,7 +154,19 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
         ));
     }
     let tiled = f.tiled.is_some();
-    if tiled && !f.callees.is_empty() {
+    // Funcs mapped over tiles (`tile_map(func, ..)`) have their adjoint rule
+    // (`tiles::reverse_tile`); a scalar call of a func in lane code does not yet.
+    let mut calls = false;
+    walk_stmts(&f.body, &mut |s| {
+        calls |= matches!(
+            &s.kind,
+            StmtKind::Assign {
+                op: Op::Func { .. },
+                ..
+            }
+        );
+    });
+    if tiled && calls {
         return Err(
             "uses tiles and calls funcs, and backward through such a kernel is not supported yet"
                 .into(),

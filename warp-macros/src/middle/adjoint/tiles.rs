@@ -544,10 +544,41 @@ impl Cx<'_> {
                     self.refuse(&format!("tile_map({}, ..)", bi.name));
                     return Some(Vec::new());
                 }
+                // A user func: its own adjoint on each element. Between float tiles only: a
+                // result of integers carries no gradient (as in Warp), and an integer operand
+                // beside float ones would need an adjoint tile of integers.
+                TileFn::Func(_) => {
+                    let float = |v: VarId| matches!(f.ty(v), crate::types::Ty::Tile(e, _) if matches!(**e, crate::types::Ty::Scalar(s) if s.is_float()));
+                    if !float(dst) {
+                    } else if !args.iter().all(|a| float(*a)) {
+                        self.refuse("tile_map of a func over integer and float tiles together");
+                        return Some(Vec::new());
+                    } else {
+                        let grads = args.iter().map(|a| GradArg::Adj(*a)).collect();
+                        let (f, values) = (*g, args.clone());
+                        b.push(at(
+                            AKind::TileMapAdj {
+                                f,
+                                values,
+                                grads,
+                                dst,
+                            },
+                            sp,
+                        ));
+                    }
+                }
                 _ => {
                     let grads = args.iter().map(|a| GradArg::Adj(*a)).collect();
                     let (f, values) = (*g, args.clone());
-                    b.push(at(AKind::TileMapAdj { f, values, grads }, sp));
+                    b.push(at(
+                        AKind::TileMapAdj {
+                            f,
+                            values,
+                            grads,
+                            dst,
+                        },
+                        sp,
+                    ));
                 }
             },
             // Warp differentiates no other reduction either; a silent zero would be a wrong

@@ -1,0 +1,64 @@
+use warp_lang as wp;
+use wp::prelude::*;
+
+// `tile_map` with user #[func]s: what the kernel macro itself refuses.
+
+#[wp::func]
+fn double(x: f32) -> f32 {
+    x * 2.0
+}
+
+// A local variable is no function.
+#[wp::kernel]
+fn local_var(a: Array<f32>) {
+    let g = 2.0f32;
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map(g, t);
+}
+
+// A module-level constant is no function.
+const SCALE: f32 = 2.0;
+
+#[wp::kernel]
+fn constant(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map(SCALE, t);
+}
+
+// `tile_reduce` takes builtins and operators only.
+#[wp::func]
+fn plus(x: f32, y: f32) -> f32 {
+    x + y
+}
+
+#[wp::kernel]
+fn reduce_with_func(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let s = tile_reduce(plus, t);
+}
+
+// The turbofish names the result's element, not a shape, and only for a func.
+#[wp::kernel]
+fn fish_dims(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map::<f32, 8>(double, t);
+    let v = tile_map::<f64>(sin, t);
+}
+
+// Tiles hold no `bool`s.
+#[wp::kernel]
+fn bool_result(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map::<bool>(double, t);
+}
+
+// More than two tiles take a #[func]; more than eight are too many.
+#[wp::kernel]
+fn arities(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map(add, t, t, t);
+    let v = tile_map(max, t, t, t);
+    let w = tile_map(double, t, t, t, t, t, t, t, t, t);
+}
+
+fn main() {}
