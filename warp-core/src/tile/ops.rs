@@ -432,3 +432,48 @@ mod tests {
         assert_eq!(u.data, [[4.0; 3]; 2]);
     }
 }
+
+/// `tile_map` of a user func on tiles of rank 3 and 4: the rank-1 and rank-2 methods above,
+/// over the row-major flattening (the order the funcs run in, and fault, on every rank).
+macro_rules! try_maps_nd {
+    ($tile:ident, $($n:ident),+) => {
+        impl<T: Copy, $(const $n: usize),+> $tile<T, $($n),+> {
+            /// `f(e, x)` for each element `x` at row-major index `e`, in order, stopping at
+            /// the first fault.
+            #[inline(always)]
+            pub fn try_map_flat<U: Copy + Default>(
+                &self,
+                f: impl Fn(usize, T) -> KResult<U>,
+            ) -> KResult<$tile<U, $($n),+>> {
+                let mut out = <$tile<U, $($n),+> as TileFromFn>::from_flat_fn(|_| U::default());
+                for (e, (d, x)) in out.as_flat_mut().iter_mut().zip(self.as_flat()).enumerate() {
+                    *d = f(e, *x)?;
+                }
+                Ok(out)
+            }
+
+            /// `f` applied to each element in row-major order, stopping at the first fault.
+            #[inline(always)]
+            pub fn try_map<U: Copy + Default>(
+                &self,
+                f: impl Fn(T) -> KResult<U>,
+            ) -> KResult<$tile<U, $($n),+>> {
+                self.try_map_flat(|_, x| f(x))
+            }
+
+            /// `f` applied to each pair of elements in row-major order, stopping at the first
+            /// fault.
+            #[inline(always)]
+            pub fn try_map2<U: Copy, V: Copy + Default>(
+                &self,
+                o: &$tile<U, $($n),+>,
+                f: impl Fn(T, U) -> KResult<V>,
+            ) -> KResult<$tile<V, $($n),+>> {
+                let o = o.as_flat();
+                self.try_map_flat(|e, x| f(x, o[e]))
+            }
+        }
+    };
+}
+try_maps_nd!(Tile3, N0, N1, N2);
+try_maps_nd!(Tile4, N0, N1, N2, N3);
