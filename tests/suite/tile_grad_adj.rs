@@ -5,8 +5,8 @@
 //! returned tile of old values carries no gradient (Warp drops its adjoint), and since the
 //! adjoint's replay does not redo atomics, a kernel that reads it is refused, as for the
 //! scalar atomics. Checked by `gradcheck` in f64 (tolerance 1e-6 relative, `tile_grad`'s) with
-//! windows that overlap between blocks and stick out of the array, and CPU against GPU bit for
-//! bit (every gradient element there is one product, or one copy, on both backends).
+//! windows that overlap between blocks and stick out of the array, and CPU against GPU to 1e-13
+//! relative (the overlapping adds meet in an order the GPU's atomics decide).
 //!
 //! f16 `tile_matmul`: the adjoint tiles of f16 operands are f16 (as Warp's, whose adjoint
 //! tiles have the operands' type); each of their elements' sums (`r bᵀ`, `aᵀ r`) is one f32
@@ -159,10 +159,12 @@ fn atomic_grads(dev: &wp::Device) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The same `tile_atomic_add` gradients on the CPU and a GPU: `x`'s and `acc`'s bit for bit
-/// (each element one gather and the elementwise rules); `w`'s, summed over blocks through
-/// atomics in an order neither backend fixes, to 1e-13 relative. Skipped, saying so, without a
-/// GPU.
+/// The same `tile_atomic_add` gradients on the CPU and a GPU, to 1e-13 relative: the windows
+/// overlap, so an element of `acc` is the sum of several blocks' adds in an order the GPU's
+/// atomics decide (seen on an H200: the last bit or two of some `x` gradients, through `k_post`'s
+/// read of `acc`), and `w`'s gradient is summed over blocks through atomics too. A few f64
+/// roundings apart is far below 1e-13; a missing or misplaced contribution is far above it.
+/// Skipped, saying so, without a GPU.
 #[test]
 fn tile_atomic_add_gradients_cpu_and_gpu_agree() {
     let Ok(gpu) = wp::get_device(&crate::test_gpu()) else {
@@ -173,18 +175,13 @@ fn tile_atomic_add_gradients_cpu_and_gpu_agree() {
     let cpu = wp::get_device("cpu").unwrap();
     let (c, g) = (atomic_grads(&cpu), atomic_grads(&gpu));
     for (k, (c, g)) in c.iter().zip(&g).enumerate() {
-        if k == 1 {
-            for (x, y) in c.iter().zip(g) {
-                assert!(
-                    (x - y).abs() <= 1e-13 * x.abs().max(1.0),
-                    "w: CPU {x} vs GPU {y}"
-                );
-            }
-            continue;
+        assert_eq!(c.len(), g.len(), "input {k}");
+        for (e, (x, y)) in c.iter().zip(g).enumerate() {
+            assert!(
+                (x - y).abs() <= 1e-13 * x.abs().max(1.0),
+                "input {k}, element {e}: CPU {x} vs GPU {y}"
+            );
         }
-        let cb: Vec<u64> = c.iter().map(|v| v.to_bits()).collect();
-        let gb: Vec<u64> = g.iter().map(|v| v.to_bits()).collect();
-        assert_eq!(cb, gb, "input {k}: CPU {c:?} vs GPU {g:?}");
     }
 }
 

@@ -378,7 +378,9 @@ constexpr bool swz_ok = U % 8 == 0 || U == 4 || U == 2 || U == 1;
 template <int M, int K, int N>
 struct pipe_plan {
   typedef mma_plan<M, K, N> P;
-  static constexpr int WARPS = P::WARPS;
+  // At least one: below 32 threads the plan is off (P::FITS), but its arithmetic still
+  // instantiates (a division by zero would be a compile error, not an off plan).
+  static constexpr int WARPS = P::WARPS > 0 ? P::WARPS : 1;
   static constexpr int UA = K / 8, UB = N / 8;
   static constexpr int SA = M * K * 2, SB = K * N * 2;
   static constexpr int R0 = (M * N * 4) / (SA + SB);

@@ -17,6 +17,12 @@
 #include "wp_tile_mma.h"
 #include "wp_atomic.h"
 
+// The GEMM pipe's plan instantiates at every block size (a kernel's k-loop is printed over it
+// whatever block size it is compiled for); below a warp it is off rather than a compile error.
+static_assert(WP_TILE_BLOCK_DIM >= 32 || !wp::tile_gemm_pipe<16, 16, 8>::ON,
+              "tile_gemm_pipe: below 32 threads the pipe must be off");
+static_assert(wp::tile_gemm_pipe<128, 64, 128>::STAGES >= 1, "tile_gemm_pipe: a plan");
+
 #include <cstdint>
 #include <cstring>
 #include <fstream>
