@@ -21,7 +21,7 @@
 // all instead of seven, and a quarter of the shared-memory traffic). The first pass reads its
 // groups from the bit-reversed places, all of a thread's groups before a barrier and the
 // writes after it, so the permutation costs no pass of its own (when a thread's groups fit
-// in FUSED_REGS values; otherwise it is a pass of its own, one thread per swapped pair).
+// in FUSED_BYTES of registers; otherwise it is a pass of its own, one thread per swapped pair).
 // Every butterfly is still the one fft.rs computes, with its operands and twiddle, so the
 // grouping changes no bit.
 #pragma once
@@ -146,8 +146,9 @@ WP_FN void group_at(int q, int* row, int* base, int* p) {
   *base = ((b >> S0) << (S0 + R)) + *p;
 }
 
-/// The most complex values a thread keeps in registers across the first pass's barrier.
-constexpr int FUSED_REGS = 32;
+/// The most bytes of complex values a thread keeps in registers across the first pass's
+/// barrier: 64 32-bit registers (32 `Vec2`, 16 `DVec2`), past which they would spill.
+constexpr int FUSED_BYTES = 256;
 
 /// One pass: stages S0 .. S0 + R of every group, each group loaded, transformed in registers
 /// and stored back by one thread, a barrier after. `First` fuses the bit-reversal permutation
@@ -228,7 +229,7 @@ WP_FN void transform(const tile_t<C, M, N>& t) {
     }
     constexpr int R0 = cdiv(L, cdiv(L, 3));
     constexpr int PER0 = cdiv(M * (N >> R0), WP_TILE_BLOCK_DIM);
-    if constexpr (PER0 << R0 <= FUSED_REGS) {
+    if constexpr ((PER0 << R0) * (int)sizeof(C) <= FUSED_BYTES) {
       passes<Inverse, true, 0, C, M, N>(t.data, tw);
     } else {
       // Too many groups a thread to hold across a barrier: the permutation on its own (it
