@@ -214,22 +214,30 @@ where
     Ok(())
 }
 
-/// The adjoint of a rank-3 or rank-4 `tile_store`: each written element's gradient hands over
-/// to `adj_t` and is cleared in the array's gradient.
-fn adj_store_nd<X, const R: usize>(
+/// Each element `k` of `adj_t` whose coordinates `c` lie inside the array gathers `a.grad[c]`:
+/// taken (cleared) for a `tile_store` of rank 3 or 4, whose write overwrote that element; read
+/// and kept for `tile_atomic_add` of any rank, whose add left the element's earlier value in
+/// the sum (`tile::atomic`'s adjoints).
+pub(super) fn gather_grad<X, const R: usize>(
     a: &ArrayView<X::Elem, R>,
     o: [i128; R],
-    adj_a: &mut GradView<X::Elem, R>,
+    adj_a: &GradView<X::Elem, R>,
     adj_t: &mut X,
+    clear: bool,
 ) -> KResult<()>
 where
     X: Tile<Elem: GradElement + Adjoint>,
     [usize; R]: crate::index::KernelIndex<R>,
 {
     let shape = a.shape();
+    let zero = <X::Elem as Adjoint>::adj_zero;
     for (k, d) in adj_t.as_flat_mut().iter_mut().enumerate() {
         if let Some(c) = coords_nd::<X, R>(k, o, shape) {
-            d.adj_accum(adj_a.take(c, <X::Elem as Adjoint>::adj_zero())?);
+            d.adj_accum(if clear {
+                adj_a.take(c, zero())?
+            } else {
+                adj_a.get(c, zero())?
+            });
         }
     }
     Ok(())
@@ -321,7 +329,7 @@ where
     O1: IndexInt,
     O2: IndexInt,
 {
-    adj_store_nd(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, adj_t)
+    gather_grad(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, adj_t, true)
 }
 
 /// Adjoint of `tile_store(a, t, (o0, o1, o2, o3))`, as [`adj_tile_store1`].
@@ -359,12 +367,8 @@ where
     O2: IndexInt,
     O3: IndexInt,
 {
-    adj_store_nd(
-        a,
-        [o0.widen(), o1.widen(), o2.widen(), o3.widen()],
-        adj_a,
-        adj_t,
-    )
+    let o = [o0.widen(), o1.widen(), o2.widen(), o3.widen()];
+    gather_grad(a, o, adj_a, adj_t, true)
 }
 
 // ---- Elementwise ---------------------------------------------------------------------------

@@ -2,6 +2,7 @@
 //! (the result is the tile of the values each element held before; elements outside the array
 //! are skipped and read zero, like a store and a load).
 
+use super::adjoint::gather_grad;
 use super::load::{coord, coords_nd};
 use super::{Tile1, Tile2, Tile3, Tile4, TileFromFn};
 use crate::adjoint::Adjoint;
@@ -151,13 +152,7 @@ pub fn adj_tile_atomic_add1<T, const N0: usize, O: IndexInt>(
 where
     T: GradElement + Adjoint,
 {
-    let [n] = a.shape();
-    for (i, d) in adj_t.data.iter_mut().enumerate() {
-        if let Some(c) = coord(o, i, n) {
-            d.adj_accum(adj_a.get(c, T::adj_zero())?);
-        }
-    }
-    Ok(())
+    gather_grad(a, [o.widen()], adj_a, adj_t, false)
 }
 
 /// Adjoint of `old = tile_atomic_add(a, t, (o0, o1))`, as [`adj_tile_atomic_add1`].
@@ -179,37 +174,7 @@ where
     O0: IndexInt,
     O1: IndexInt,
 {
-    let [n0, n1] = a.shape();
-    for (i, row) in adj_t.data.iter_mut().enumerate() {
-        let Some(c0) = coord(o0, i, n0) else { continue };
-        for (j, d) in row.iter_mut().enumerate() {
-            if let Some(c1) = coord(o1, j, n1) {
-                d.adj_accum(adj_a.get((c0, c1), T::adj_zero())?);
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The adjoint of a rank-`R` `tile_atomic_add` (3 or 4), as [`adj_tile_atomic_add1`]: each
-/// element inside the array gathers its gradient, read and not cleared.
-fn adj_atomic_add_nd<X, const R: usize>(
-    a: &ArrayView<X::Elem, R>,
-    o: [i128; R],
-    adj_a: &GradView<X::Elem, R>,
-    adj_t: &mut X,
-) -> KResult<()>
-where
-    X: TileFromFn<Elem: GradElement + Adjoint>,
-    [usize; R]: crate::index::KernelIndex<R>,
-{
-    let shape = a.shape();
-    for (k, d) in adj_t.as_flat_mut().iter_mut().enumerate() {
-        if let Some(c) = coords_nd::<X, R>(k, o, shape) {
-            d.adj_accum(adj_a.get(c, <X::Elem as Adjoint>::adj_zero())?);
-        }
-    }
-    Ok(())
+    gather_grad(a, [o0.widen(), o1.widen()], adj_a, adj_t, false)
 }
 
 /// Adjoint of `old = tile_atomic_add(a, t, (o0, o1, o2))`, as [`adj_tile_atomic_add1`].
@@ -234,7 +199,7 @@ where
     O1: IndexInt,
     O2: IndexInt,
 {
-    adj_atomic_add_nd(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, adj_t)
+    gather_grad(a, [o0.widen(), o1.widen(), o2.widen()], adj_a, adj_t, false)
 }
 
 /// Adjoint of `old = tile_atomic_add(a, t, (o0, o1, o2, o3))`, as [`adj_tile_atomic_add1`].
@@ -273,5 +238,5 @@ where
     O3: IndexInt,
 {
     let o = [o0.widen(), o1.widen(), o2.widen(), o3.widen()];
-    adj_atomic_add_nd(a, o, adj_a, adj_t)
+    gather_grad(a, o, adj_a, adj_t, false)
 }
