@@ -31,96 +31,6 @@ impl<T: Copy, const N0: usize> Tile1<T, N0> {
     }
 }
 
-impl<T: Copy, const N0: usize> Tile1<T, N0> {
-    /// `f(e, x)` for each element `x` at row-major index `e`, in order, stopping at the first
-    /// fault (`tile_map` of a func over three or more tiles reads the others at `e`).
-    #[inline(always)]
-    pub fn try_map_flat<U: Copy + Default>(
-        &self,
-        f: impl Fn(usize, T) -> KResult<U>,
-    ) -> KResult<Tile1<U, N0>> {
-        let mut data = [U::default(); N0];
-        for (e, (d, x)) in data.iter_mut().zip(&self.data).enumerate() {
-            *d = f(e, *x)?;
-        }
-        Ok(Tile1 { data })
-    }
-
-    /// `f` applied to each element in order, stopping at the first fault (`tile_map` of a
-    /// user func, whose calls may fault as a scalar call does).
-    #[inline(always)]
-    pub fn try_map<U: Copy + Default>(&self, f: impl Fn(T) -> KResult<U>) -> KResult<Tile1<U, N0>> {
-        let mut data = [U::default(); N0];
-        for (d, x) in data.iter_mut().zip(&self.data) {
-            *d = f(*x)?;
-        }
-        Ok(Tile1 { data })
-    }
-
-    /// `f` applied to each pair of elements in order, stopping at the first fault.
-    #[inline(always)]
-    pub fn try_map2<U: Copy, V: Copy + Default>(
-        &self,
-        o: &Tile1<U, N0>,
-        f: impl Fn(T, U) -> KResult<V>,
-    ) -> KResult<Tile1<V, N0>> {
-        let mut data = [V::default(); N0];
-        for (i, d) in data.iter_mut().enumerate() {
-            *d = f(self.data[i], o.data[i])?;
-        }
-        Ok(Tile1 { data })
-    }
-}
-
-impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
-    /// `f(e, x)` for each element `x` at row-major index `e`, in order, stopping at the first
-    /// fault.
-    #[inline(always)]
-    pub fn try_map_flat<U: Copy + Default>(
-        &self,
-        f: impl Fn(usize, T) -> KResult<U>,
-    ) -> KResult<Tile2<U, N0, N1>> {
-        let mut data = [[U::default(); N1]; N0];
-        for (i, (dr, xr)) in data.iter_mut().zip(&self.data).enumerate() {
-            for (j, (d, x)) in dr.iter_mut().zip(xr).enumerate() {
-                *d = f(i * N1 + j, *x)?;
-            }
-        }
-        Ok(Tile2 { data })
-    }
-
-    /// `f` applied to each element in row-major order, stopping at the first fault.
-    #[inline(always)]
-    pub fn try_map<U: Copy + Default>(
-        &self,
-        f: impl Fn(T) -> KResult<U>,
-    ) -> KResult<Tile2<U, N0, N1>> {
-        let mut data = [[U::default(); N1]; N0];
-        for (dr, xr) in data.iter_mut().zip(&self.data) {
-            for (d, x) in dr.iter_mut().zip(xr) {
-                *d = f(*x)?;
-            }
-        }
-        Ok(Tile2 { data })
-    }
-
-    /// `f` applied to each pair of elements in row-major order, stopping at the first fault.
-    #[inline(always)]
-    pub fn try_map2<U: Copy, V: Copy + Default>(
-        &self,
-        o: &Tile2<U, N0, N1>,
-        f: impl Fn(T, U) -> KResult<V>,
-    ) -> KResult<Tile2<V, N0, N1>> {
-        let mut data = [[V::default(); N1]; N0];
-        for (i, dr) in data.iter_mut().enumerate() {
-            for (j, d) in dr.iter_mut().enumerate() {
-                *d = f(self.data[i][j], o.data[i][j])?;
-            }
-        }
-        Ok(Tile2 { data })
-    }
-}
-
 impl<T: Copy, const N0: usize, const N1: usize> Tile2<T, N0, N1> {
     /// `f` applied to each element (`tile_map(f, t)`).
     #[inline(always)]
@@ -433,9 +343,10 @@ mod tests {
     }
 }
 
-/// `tile_map` of a user func on tiles of rank 3 and 4: the rank-1 and rank-2 methods above,
-/// over the row-major flattening (the order the funcs run in, and fault, on every rank).
-macro_rules! try_maps_nd {
+/// `tile_map` of a user func on tiles of every rank, over the row-major flattening (the order
+/// the funcs run in, and fault, on every rank): `try_map_flat` (`f(e, x)` with the element's
+/// index, for maps of three or more tiles, which read the others at `e`), `try_map`, `try_map2`.
+macro_rules! try_maps {
     ($tile:ident, $($n:ident),+) => {
         impl<T: Copy, $(const $n: usize),+> $tile<T, $($n),+> {
             /// `f(e, x)` for each element `x` at row-major index `e`, in order, stopping at
@@ -475,5 +386,7 @@ macro_rules! try_maps_nd {
         }
     };
 }
-try_maps_nd!(Tile3, N0, N1, N2);
-try_maps_nd!(Tile4, N0, N1, N2, N3);
+try_maps!(Tile1, N0);
+try_maps!(Tile2, N0, N1);
+try_maps!(Tile3, N0, N1, N2);
+try_maps!(Tile4, N0, N1, N2, N3);
