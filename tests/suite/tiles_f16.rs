@@ -25,6 +25,7 @@ backend_tests!(
     f16_gemm_accumulates_in_f32,
     f16_matmul_fma_shapes_are_exact,
     f16_gemm_pipelined_k_loop_matches_the_plain_loop,
+    f16_gemm_with_an_extra_stage_matches_the_smaller_tiles,
 );
 
 fn h(x: f32) -> f16 {
@@ -243,6 +244,86 @@ fn f16_gemm_pipelined_k_loop_matches_the_plain_loop(dev: &wp::Device) {
                     assert!((g as f64 - exact).abs() <= tol, "{at}: {g} against {exact}");
                 }
             }
+        }
+    }
+}
+
+const WM: usize = 128;
+const WK: usize = 64;
+const WN: usize = 256;
+
+/// The bench's tiles: a 128 KiB accumulator holds two 48 KiB stages and the operands' slots a
+/// third, so the pipelined loop asks the runtime for a fourth (`TileInfo::pipe_extra_bytes`).
+#[wp::kernel]
+fn k_gemm_wide(a: Array<f16, 2>, b: Array<f16, 2>, c: Array<f32, 2>) {
+    let (i, j) = tid();
+    let mut acc = tile_zeros::<f32, WM, WN>();
+    for k in 0..(a.shape()[1] + WK - 1) / WK {
+        let ta = tile_load::<WM, WK>(a, ((i * WM) as i32, (k * WK) as i32));
+        let tb = tile_load::<WK, WN>(b, ((k * WK) as i32, (j * WN) as i32));
+        tile_matmul(ta, tb, &mut acc);
+    }
+    tile_store(c, acc, ((i * WM) as i32, (j * WN) as i32));
+}
+
+/// A pipelined k-loop with a stage in the shared memory the runtime adds gives the bits of
+/// another tiling's (each output the same k-steps in the same order: tensor-core k-steps of 16
+/// on the GPU, wgmma or mma.sync alike, one FMA chain on the CPU): `k_gemm_pipe`'s 64 x 64
+/// tiles at the same block size, and within the tensor-core tolerance of the f64 product. On
+/// Hopper (227 KiB a block) the runtime adds the fourth stage, 48 KiB.
+fn f16_gemm_with_an_extra_stage_matches_the_smaller_tiles(dev: &wp::Device) {
+    let info = wp::kernel_info(k_gemm_wide);
+    let want = info.tile.expect("a tiled kernel").pipe_extra_bytes;
+    assert_eq!(want, 48 * 1024);
+    for (m, k, n) in [(256usize, 320usize, 512usize), (200, 300, 300)] {
+        let ad = values(m * k, 7);
+        let bd_ = values(k * n, 11);
+        let a = wp::Array::from_slice_shape(&ad, (m, k), dev).unwrap();
+        let b = wp::Array::from_slice_shape(&bd_, (k, n), dev).unwrap();
+        let c = zeros::<f32, 2>((m, n), dev);
+        let c2 = zeros::<f32, 2>((m, n), dev);
+        wp::launch_tiled(
+            k_gemm_wide,
+            (m.div_ceil(WM), n.div_ceil(WN)),
+            (&a, &b, &c),
+            256,
+            dev,
+        )
+        .unwrap();
+        let blocks = (m.div_ceil(PM), n.div_ceil(PN));
+        wp::launch_tiled(k_gemm_pipe, blocks, (&a, &b, &c2), 256, dev).unwrap();
+        let (got, other) = (host(&c), host(&c2));
+        let kp = k.div_ceil(16) * 16;
+        for i in 0..m {
+            for j in 0..n {
+                let g = got[i * n + j];
+                let at = format!("({i}, {j}) of {m} x {k} x {n}");
+                assert_eq!(g.to_bits(), other[i * n + j].to_bits(), "{at}");
+                let (_, exact, mag) = chain(&ad, &bd_, (k, n), (i, j), 0..k);
+                let tol = kp as f64 * 2f64.powi(-22) * mag;
+                assert!((g as f64 - exact).abs() <= tol, "{at}: {g} against {exact}");
+            }
+        }
+    }
+    if dev.is_cuda() {
+        let report = wp::compile_reports()
+            .into_iter()
+            .find(|r| r.kernel == "k_gemm_wide" && r.device == dev.alias() && !r.adjoint)
+            .expect("a compile report for k_gemm_wide");
+        let ordinal: usize = dev.alias()["cuda:".len()..].parse().unwrap();
+        let arch = warp_cuda::Gpu::open(ordinal).unwrap().arch();
+        eprintln!(
+            "k_gemm_wide on {} (sm_{arch}): {} bytes of shared memory a block, {} of them extra",
+            dev.alias(),
+            report.shared_bytes,
+            report.pipe_extra_bytes
+        );
+        if arch == 90 {
+            assert_eq!(report.pipe_extra_bytes, want, "{report:?}");
+        }
+        if report.pipe_extra_bytes > 0 {
+            let slots = info.tile.unwrap().shared_bytes;
+            assert_eq!(report.shared_bytes, slots.next_multiple_of(1024) + want);
         }
     }
 }

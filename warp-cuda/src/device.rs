@@ -337,7 +337,29 @@ impl Gpu {
     /// once a kernel opts in ([`Function::set_max_dynamic_shared_bytes`](crate::Function::set_max_dynamic_shared_bytes)):
     /// `CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_BLOCK_OPTIN` (227 KiB on an H100).
     pub fn max_shared_bytes_per_block_optin(&self) -> Result<usize> {
-        let attr = sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_BLOCK_OPTIN;
+        self.bytes_attribute(
+            sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_BLOCK_OPTIN,
+        )
+    }
+
+    /// The shared memory of one multiprocessor, which its resident blocks share:
+    /// `CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_MULTIPROCESSOR` (228 KiB on an H100).
+    pub fn max_shared_bytes_per_sm(&self) -> Result<usize> {
+        self.bytes_attribute(
+            sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MAX_SHARED_MEMORY_PER_MULTIPROCESSOR,
+        )
+    }
+
+    /// The shared memory the system reserves for each resident block, on top of the block's
+    /// own: `CU_DEVICE_ATTRIBUTE_RESERVED_SHARED_MEMORY_PER_BLOCK` (1 KiB on an H100).
+    pub fn reserved_shared_bytes_per_block(&self) -> Result<usize> {
+        self.bytes_attribute(
+            sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_RESERVED_SHARED_MEMORY_PER_BLOCK,
+        )
+    }
+
+    /// A device attribute that counts bytes.
+    fn bytes_attribute(&self, attr: sys::CUdevice_attribute) -> Result<usize> {
         // SAFETY: the device handle of a live context.
         unsafe { result::device::get_attribute(self.ctx.cu_device(), attr) }
             .map(|v| v.max(0) as usize)

@@ -196,6 +196,35 @@ pub struct TileInfo {
     pub adjoint_shared_bytes: usize,
     /// Stack bytes one CPU block needs for its tiles and per-lane values.
     pub cpu_frame_bytes: usize,
+    /// Dynamic shared memory the CUDA forward kernel's pipelined f16 GEMM k-loops could use
+    /// beyond `shared_bytes`, for more stages of loads in flight ([`TileInfo::pipe_extra_for`]
+    /// of each loop, the largest; 0 without such a loop). The runtime grants it where the
+    /// device has it and it costs the kernel no blocks per multiprocessor.
+    pub pipe_extra_bytes: usize,
+}
+
+impl TileInfo {
+    /// The most stages of loads a pipelined k-loop keeps (`MAX_STAGES` in the CUDA tile
+    /// library's `wp_tile_mma.h`, which must agree).
+    pub const PIPE_MAX_STAGES: usize = 4;
+
+    /// The extra shared memory a pipelined k-loop of `acc += a . b` asks for, from its tiles'
+    /// sizes in bytes: the stages (`a_bytes + b_bytes` each) it lacks of
+    /// [`PIPE_MAX_STAGES`](Self::PIPE_MAX_STAGES), after those its own slots hold (the
+    /// accumulator's, whose value the loop keeps in registers, and the operands').
+    #[doc(hidden)]
+    pub const fn pipe_extra_for(acc_bytes: usize, a_bytes: usize, b_bytes: usize) -> usize {
+        let stage = a_bytes + b_bytes;
+        if stage == 0 {
+            return 0;
+        }
+        let own = acc_bytes / stage + 1;
+        if own >= Self::PIPE_MAX_STAGES {
+            0
+        } else {
+            (Self::PIPE_MAX_STAGES - own) * stage
+        }
+    }
 }
 
 impl KernelInfo {

@@ -724,6 +724,7 @@ mod tests {
         shared_bytes: 256,
         adjoint_shared_bytes: 0,
         cpu_frame_bytes: 4096,
+        pipe_extra_bytes: 0,
     });
 
     /// A tiled kernel by hand: `run_cpu` gets a range of blocks and adds the launch's

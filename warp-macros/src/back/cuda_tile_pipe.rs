@@ -61,6 +61,18 @@ fn is_tile_of(t: &Ty, s: Scalar) -> bool {
     matches!(t, Ty::Tile(e, dims) if **e == Ty::Scalar(s) && dims.len() == 2)
 }
 
+/// The (accumulator, A, B) tiles of each k-loop of `f` the pipelined form prints, for
+/// `TileInfo::pipe_extra_bytes` (the extra stages each may use).
+pub(crate) fn gemm_loop_tiles(f: &Function) -> Vec<(VarId, VarId, VarId)> {
+    let mut out = Vec::new();
+    walk_stmts(&f.body, &mut |s| {
+        if let Some(g) = gemm_loop(f, s) {
+            out.push((g.acc, load_dst(g.load_a), load_dst(g.load_b)));
+        }
+    });
+    out
+}
+
 impl Emitter<'_> {
     /// `s` as a k-loop the pipelined form prints, or `None` (the loop is printed as written).
     /// (A method, as the other tile printers': `back/cuda.rs` calls it without an import.)

@@ -41,6 +41,19 @@ pub(super) fn info(f: &Function, block: Option<&Block>) -> TokenStream {
         .into_iter()
         .map(|v| ty_tokens(f.ty(v)).expect("a tile type"))
         .collect();
+    // The extra stages the forward kernel's pipelined GEMM k-loops may use (the CUDA emitter
+    // prints exactly these loops pipelined).
+    let pipes: Vec<TokenStream> = crate::back::cuda_tile_pipe::gemm_loop_tiles(f)
+        .into_iter()
+        .map(|(acc, a, b)| {
+            let [acc, a, b] = [acc, a, b].map(|v| ty_tokens(f.ty(v)).expect("a tile type"));
+            quote!(__wp::TileInfo::pipe_extra_for(
+                ::core::mem::size_of::<#acc>(),
+                ::core::mem::size_of::<#a>(),
+                ::core::mem::size_of::<#b>(),
+            ))
+        })
+        .collect();
     let per_lane: Vec<TokenStream> = match block {
         Ok(p) => (0..f.vars.len())
             .filter(|v| p.plan.storage[*v] == Storage::PerLane)
@@ -66,6 +79,11 @@ pub(super) fn info(f: &Function, block: Option<&Block>) -> TokenStream {
                 __o
             },
             cpu_frame_bytes: 0usize #( + ::core::mem::size_of::<#tiles>() )* #( + #per_lane )*,
+            pipe_extra_bytes: {
+                let mut __x = 0usize;
+                #( let __p = #pipes; if __p > __x { __x = __p; } )*
+                __x
+            },
         })
     }
 }

@@ -162,7 +162,7 @@ impl<K: Kernel> Prepared<K> {
             }
         };
         // (`loaded` checked it against the device and opted in above 48 KiB; it fits u32.)
-        let shared_bytes = super::module::tile_shared_bytes(info, adjoint.is_some()) as u32;
+        let shared_bytes = kernel.shared_bytes as u32;
         let prepared = Prepared {
             kernel,
             dims,

@@ -26,6 +26,8 @@ pub(crate) struct Loaded {
     pub(crate) function: Function,
     /// What its launches put in `wp::ctx_t::kernel`, so that a fault names this kernel.
     pub(crate) id: i32,
+    /// The dynamic shared memory each block of its launches takes ([`tile_shared`]).
+    pub(crate) shared_bytes: usize,
 }
 
 /// What compiling a kernel cost, for reports.
@@ -43,6 +45,12 @@ pub struct CompileReport {
     pub adjoint: bool,
     /// A tiled kernel's block size (each its own variant); `None` for an ordinary kernel.
     pub block_dim: Option<usize>,
+    /// The dynamic shared memory each block of a tiled kernel takes on this device (0 for an
+    /// ordinary kernel): its tiles' slots, and for the forward kernel the extra stages of its
+    /// pipelined f16 GEMM k-loops where the device grants them (`pipe_extra_bytes` of it).
+    pub shared_bytes: usize,
+    /// Of `shared_bytes`, the pipelined GEMM k-loops' extra stages.
+    pub pipe_extra_bytes: usize,
     /// Bytes of generated CUDA source (without the library headers).
     pub source_bytes: usize,
     /// NVRTC time (0 on a cache hit).
@@ -214,10 +222,15 @@ pub(crate) fn loaded(
         None => source::assemble(info),
     };
     let stack_define = adjoint.map(|b| b.to_string());
-    let tile_shared = tile_shared_bytes(info, adjoint.is_some());
+    let shared = match block_dim {
+        Some(_) => tile_shared(info, adjoint.is_some(), &SharedLimits::of(&st.gpu, device)?),
+        None => TileShared::default(),
+    };
+    let tile_shared = shared.bytes;
     let tile = block_dim.map(|block_dim| TileDefines {
         block_dim,
-        shared_bytes: tile_shared,
+        shared_bytes: shared.bytes,
+        pipe_extra: shared.pipe_extra,
     });
     let (compiled, outcome, aot, entry) = with_compile_options(
         contiguous,
@@ -323,6 +336,8 @@ pub(crate) fn loaded(
             contiguous,
             adjoint: adjoint.is_some(),
             block_dim,
+            shared_bytes: shared.bytes,
+            pipe_extra_bytes: shared.pipe_extra,
             source_bytes: src.text.len(),
             compile_ms: compiled.compile_ms,
             cache_hit: matches!(outcome, CacheOutcome::Hit),
@@ -336,6 +351,7 @@ pub(crate) fn loaded(
         _module: module,
         function,
         id: super::fault::kernel_id(info),
+        shared_bytes: tile_shared,
     });
     cache
         .lock()
@@ -344,13 +360,83 @@ pub(crate) fn loaded(
     Ok(l)
 }
 
-/// The dynamic shared memory one block of `info`'s forward unit (or adjoint unit) takes: 0 for
-/// an ordinary kernel.
-pub(crate) fn tile_shared_bytes(info: &KernelInfo, adjoint: bool) -> usize {
-    match info.tile {
-        Some(t) if adjoint => t.adjoint_shared_bytes,
-        Some(t) => t.shared_bytes,
-        None => 0,
+/// What a GPU's shared memory allows a block: [`tile_shared`]'s view of the device.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SharedLimits {
+    /// The most one block may have, opted in.
+    pub(crate) per_block: usize,
+    /// A multiprocessor's, shared by its resident blocks.
+    pub(crate) per_sm: usize,
+    /// What the system reserves for each resident block beside its own.
+    pub(crate) reserved: usize,
+}
+
+impl SharedLimits {
+    fn of(gpu: &warp_cuda::Gpu, device: &Device) -> Result<Self> {
+        let f = |e| err(device, e);
+        Ok(Self {
+            per_block: gpu.max_shared_bytes_per_block_optin().map_err(f)?,
+            per_sm: gpu.max_shared_bytes_per_sm().map_err(f)?,
+            reserved: gpu.reserved_shared_bytes_per_block().map_err(f)?,
+        })
+    }
+
+    /// Blocks of `bytes` dynamic shared memory a multiprocessor holds, by shared memory alone.
+    fn blocks(&self, bytes: usize) -> usize {
+        self.per_sm / (bytes + self.reserved).max(1)
+    }
+}
+
+/// The dynamic shared memory of a tiled kernel's unit: [`tile_shared`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct TileShared {
+    /// What one block takes.
+    pub(crate) bytes: usize,
+    /// Of it, the extra at its end (1024-byte aligned) that the forward unit's pipelined GEMM
+    /// k-loops use for more stages (`WP_TILE_PIPE_EXTRA`); 0: none.
+    pub(crate) pipe_extra: usize,
+}
+
+/// The alignment of the pipe's extra shared memory: wgmma's swizzle patterns' period.
+const PIPE_EXTRA_ALIGN: usize = 1024;
+
+/// Shared memory left to static declarations when the extra is granted (the forward tile
+/// library declares none; the budget check after compiling counts what there is).
+const STATIC_ROOM: usize = 1024;
+
+/// The dynamic shared memory one block of `info`'s forward unit (or adjoint unit) takes on a
+/// GPU with `limits`: the tiles' slots (`TileInfo::shared_bytes`, or `adjoint_shared_bytes`),
+/// and for the forward unit the extra its pipelined GEMM k-loops ask for
+/// (`TileInfo::pipe_extra_bytes`) where the block then still fits and the multiprocessor still
+/// holds as many blocks (more stages in flight at the price of occupancy measured slower: on
+/// an H200 at 4096^3 with 128 x 128 x 64 tiles, 0.47 ms against 0.40 ms). 0 for an ordinary
+/// kernel.
+pub(crate) fn tile_shared(info: &KernelInfo, adjoint: bool, limits: &SharedLimits) -> TileShared {
+    let Some(t) = info.tile else {
+        return TileShared::default();
+    };
+    if adjoint {
+        return TileShared {
+            bytes: t.adjoint_shared_bytes,
+            pipe_extra: 0,
+        };
+    }
+    let plain = TileShared {
+        bytes: t.shared_bytes,
+        pipe_extra: 0,
+    };
+    if t.pipe_extra_bytes == 0 {
+        return plain;
+    }
+    let total = t.shared_bytes.next_multiple_of(PIPE_EXTRA_ALIGN) + t.pipe_extra_bytes;
+    let blocks = limits.blocks(t.shared_bytes);
+    if total + STATIC_ROOM <= limits.per_block && blocks >= 1 && limits.blocks(total) == blocks {
+        TileShared {
+            bytes: total,
+            pipe_extra: t.pipe_extra_bytes,
+        }
+    } else {
+        plain
     }
 }
 
@@ -502,8 +588,8 @@ pub(crate) fn prepare(
 #[cfg(test)]
 mod tests {
     use super::{
-        check_capabilities, check_tile_budget, format_compile_reports, tile_shared_bytes,
-        CompileReport, TileBudget,
+        check_capabilities, check_tile_budget, format_compile_reports, tile_shared, CompileReport,
+        SharedLimits, TileBudget, TileShared,
     };
     use crate::error::Error;
     use crate::kernel::KernelInfo;
@@ -600,22 +686,88 @@ mod tests {
             e.to_string().contains("at most 128 threads per block"),
             "{e}"
         );
-        // Forward and adjoint units take their own shared memory; ordinary kernels none.
-        let info = crate::kernel::KernelInfo {
+    }
+
+    /// An H100's or H200's shared memory.
+    const HOPPER: SharedLimits = SharedLimits {
+        per_block: 227 * 1024,
+        per_sm: 228 * 1024,
+        reserved: 1024,
+    };
+
+    fn tiled(shared_bytes: usize, pipe_extra_bytes: usize) -> KernelInfo {
+        KernelInfo {
             tile: Some(TileInfo {
                 width: None,
-                shared_bytes: 4096,
+                shared_bytes,
                 adjoint_shared_bytes: 8192,
                 cpu_frame_bytes: 0,
+                pipe_extra_bytes,
             }),
-            ..crate::kernel::KernelInfo::BLANK
+            ..KernelInfo::BLANK
+        }
+    }
+
+    /// Forward and adjoint units take their own shared memory; ordinary kernels none.
+    #[test]
+    fn units_take_their_own_shared_memory() {
+        let plain = |bytes| TileShared {
+            bytes,
+            pipe_extra: 0,
         };
-        assert_eq!(tile_shared_bytes(&info, false), 4096);
-        assert_eq!(tile_shared_bytes(&info, true), 8192);
+        assert_eq!(tile_shared(&tiled(4096, 0), false, &HOPPER), plain(4096));
+        assert_eq!(tile_shared(&tiled(4096, 0), true, &HOPPER), plain(8192));
+        assert_eq!(tile_shared(&KernelInfo::BLANK, false, &HOPPER), plain(0));
+    }
+
+    /// The pipelined GEMM loops' extra stages are granted, 1024-byte aligned at the end, where
+    /// the block still fits and a multiprocessor holds as many blocks; never to the adjoint.
+    #[test]
+    fn pipe_extra_stages_are_granted_where_they_cost_no_blocks() {
+        // 128 x 256 x 64 f16 tiles: a 128 KiB accumulator holds two stages of 48 KiB, the
+        // operands' slots a third; the fourth is extra (one block an SM either way).
+        let (acc, a, b) = (128 * 256 * 4, 128 * 64 * 2, 64 * 256 * 2);
+        let want = TileInfo::pipe_extra_for(acc, a, b);
+        assert_eq!(want, 48 * 1024);
+        let base = acc + a + b;
         assert_eq!(
-            tile_shared_bytes(&crate::kernel::KernelInfo::BLANK, false),
+            tile_shared(&tiled(base, want), false, &HOPPER),
+            TileShared {
+                bytes: base + want,
+                pipe_extra: want,
+            }
+        );
+        // Unaligned slots: the extra starts at the next 1024 bytes.
+        assert_eq!(
+            tile_shared(&tiled(base - 16, want), false, &HOPPER).bytes,
+            base + want
+        );
+        assert_eq!(tile_shared(&tiled(base, want), true, &HOPPER).pipe_extra, 0);
+        // 128 x 128 x 64: two blocks an SM without the extra stage, one with it: not granted.
+        let (acc, a, b) = (128 * 128 * 4, 128 * 64 * 2, 64 * 128 * 2);
+        let want = TileInfo::pipe_extra_for(acc, a, b);
+        assert_eq!(want, 32 * 1024);
+        assert_eq!(
+            tile_shared(&tiled(acc + a + b, want), false, &HOPPER).pipe_extra,
             0
         );
+        // A GPU whose blocks cannot have it (an sm_80-class 163 KiB block): not granted.
+        let small = SharedLimits {
+            per_block: 163 * 1024,
+            per_sm: 164 * 1024,
+            ..HOPPER
+        };
+        assert_eq!(
+            tile_shared(&tiled(128 * 1024, 48 * 1024), false, &small),
+            TileShared {
+                bytes: 128 * 1024,
+                pipe_extra: 0,
+            }
+        );
+        // An accumulator that holds three stages already asks for none.
+        assert_eq!(TileInfo::pipe_extra_for(3 * 8192, 4096, 4096), 0);
+        assert_eq!(TileInfo::pipe_extra_for(2 * 8192, 4096, 4096), 8192);
+        assert_eq!(TileInfo::pipe_extra_for(0, 0, 0), 0);
     }
 
     #[test]
@@ -706,6 +858,8 @@ mod tests {
             contiguous: true,
             adjoint,
             block_dim: None,
+            shared_bytes: 0,
+            pipe_extra_bytes: 0,
             source_bytes: 5730,
             compile_ms: if cache_hit { 0.0 } else { 145.25 },
             cache_hit,

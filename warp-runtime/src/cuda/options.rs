@@ -35,10 +35,19 @@ pub(crate) fn with_compile_options<R>(
     if let Some(b) = adstack_bytes {
         defines.push(("WP_ADSTACK_BYTES", b));
     }
-    let tile = tile.map(|t| (t.block_dim.to_string(), t.shared_bytes.to_string()));
-    if let Some((bd, smem)) = &tile {
+    let tile = tile.map(|t| {
+        (
+            t.block_dim.to_string(),
+            t.shared_bytes.to_string(),
+            (t.pipe_extra > 0).then(|| t.pipe_extra.to_string()),
+        )
+    });
+    if let Some((bd, smem, extra)) = &tile {
         defines.push(("WP_TILE_BLOCK_DIM", bd));
         defines.push(("WP_TILE_SMEM_BYTES", smem));
+        if let Some(extra) = extra {
+            defines.push(("WP_TILE_PIPE_EXTRA", extra));
+        }
     }
     let defines = &defines[..];
     // (NVRTC's automatic precompiled headers, `-pch`, were tried for the autodiff example's six
@@ -53,12 +62,14 @@ pub(crate) fn with_compile_options<R>(
     })
 }
 
-/// The defines of a tiled kernel's unit: its launch's block size and the shared memory one
-/// block of the unit (forward or adjoint) takes.
+/// The defines of a tiled kernel's unit: its launch's block size, the shared memory one
+/// block of the unit (forward or adjoint) takes, and of it the pipelined GEMM loops' extra at
+/// its end (`module::tile_shared`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct TileDefines {
     pub(crate) block_dim: usize,
     pub(crate) shared_bytes: usize,
+    pub(crate) pipe_extra: usize,
 }
 
 #[cfg(test)]
@@ -81,6 +92,7 @@ mod tests {
         let tile = |block_dim| TileDefines {
             block_dim,
             shared_bytes: 2048,
+            pipe_extra: 0,
         };
         assert_eq!(
             defines(Some(tile(64))),
@@ -91,6 +103,20 @@ mod tests {
             ]
         );
         assert_ne!(defines(Some(tile(64))), defines(Some(tile(128))));
+        // The pipelined GEMM loops' extra shared memory, where the runtime grants it.
+        let extra = TileDefines {
+            shared_bytes: 3072,
+            pipe_extra: 1024,
+            ..tile(64)
+        };
+        assert_eq!(
+            defines(Some(extra))[1..],
+            [
+                "WP_TILE_BLOCK_DIM=64",
+                "WP_TILE_SMEM_BYTES=3072",
+                "WP_TILE_PIPE_EXTRA=1024"
+            ]
+        );
         // The keys of the kernel cache and the AOT directory hash the options.
         let key = |tile| {
             with_compile_options(true, None, Exact::No, tile, |o| {
