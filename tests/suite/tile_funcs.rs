@@ -20,6 +20,8 @@ backend_tests!(
     fault_in_a_mapped_func,
     gradients_through_funcs,
     generic_func_instances,
+    reduce_with_funcs,
+    fault_in_a_reducing_func,
 );
 
 #[wp::func]
@@ -330,4 +332,143 @@ fn generic_func_instances(dev: &wp::Device) {
     assert_eq!(host(&out), want);
     let want: Vec<f32> = ys.iter().map(|v| v * v + 1.0).collect();
     assert_eq!(host(&out32), want);
+}
+
+// ---- `tile_reduce` with a user #[func] ----------------------------------------------------
+
+/// Order-dependent (neither associative nor commutative), so the result shows the order.
+#[wp::func]
+fn halve_add(a: f32, b: f32) -> f32 {
+    0.5 * a + b
+}
+
+/// The same on integers (values stay below 2^17: no overflow).
+#[wp::func]
+fn mix_int(a: i32, b: i32) -> i32 {
+    (a * 7 + b) % 10007
+}
+
+#[wp::kernel]
+fn k_reduce_funcs(
+    x: Array<f32>,
+    xi: Array<i32>,
+    x2: Array<f32, 2>,
+    out: Array<f32>,
+    outi: Array<i32>,
+) {
+    let t = tile_load::<37>(x, 0);
+    tile_store(out, tile_reduce(halve_add, t), 0);
+    let t2: Tile<f32, 3, 5> = tile_load(x2, (0, 0));
+    tile_store(out, tile_reduce(halve_add, t2), 1);
+    let ti = tile_load::<37>(xi, 0);
+    tile_store(outi, tile_reduce(mix_int, ti), 0);
+}
+
+/// The reductions' documented order (warp-core's tile/reduce.rs, `wp_tile.h`), written out
+/// on the host: lane `l` folds elements `l, l + bd, ..`; each warp of 32 lanes combines by
+/// `shfl_down` offsets 16..1 (an absent partner leaves the value); warps fold in order.
+fn host_gpu_order<E: Copy>(x: &[E], bd: usize, op: impl Fn(E, E) -> E) -> E {
+    let comb = |a: Option<E>, b: Option<E>| match (a, b) {
+        (Some(a), Some(b)) => Some(op(a, b)),
+        (a, None) => a,
+        (None, b) => b,
+    };
+    let lanes: Vec<Option<E>> = (0..x.len().min(bd))
+        .map(|l| {
+            let mut p = x[l];
+            let mut e = l + bd;
+            while e < x.len() {
+                p = op(p, x[e]);
+                e += bd;
+            }
+            Some(p)
+        })
+        .collect();
+    let mut result = None;
+    for w in lanes.chunks(32) {
+        let mut p = w.to_vec();
+        p.resize(32, None);
+        for off in [16, 8, 4, 2, 1] {
+            for i in 0..off {
+                p[i] = comb(p[i], p[i + off]);
+            }
+        }
+        result = comb(result, p[0]);
+    }
+    result.expect("a non-empty tile")
+}
+
+/// `tile_reduce` of a user func over a 37-element f32 tile, a 3x5 f32 tile and a 37-element
+/// i32 tile, at block sizes 1 (sequential), 7, 33 (two warps, one partial) and 64: the host's
+/// order applied to the same func, bit for bit (exact: the func is `*` and `+` only).
+fn reduce_with_funcs(dev: &wp::Device) {
+    let xs: Vec<f32> = (0..37).map(|k| (k as f32 * 0.37).sin() * 3.0).collect();
+    let xis: Vec<i32> = (0..37).map(|k| (k * 131 + 17) % 1000).collect();
+    let x2s: Vec<f32> = xs[..15].to_vec();
+    let x = arr(&xs, dev);
+    let xi = arr(&xis, dev);
+    let x2 = wp::Array::from_slice_shape(&x2s, (3, 5), dev).unwrap();
+    for bd in [1, 7, 33, 64] {
+        let out = zeros::<f32, 1>(2, dev);
+        let outi = zeros::<i32, 1>(1, dev);
+        wp::launch_tiled(k_reduce_funcs, 1, (&x, &xi, &x2, &out, &outi), bd, dev).unwrap();
+        let (g, gi) = (host(&out), host(&outi));
+        let f = |a: f32, b: f32| 0.5 * a + b;
+        let want = host_gpu_order(&xs, bd, f);
+        assert_eq!(
+            g[0].to_bits(),
+            want.to_bits(),
+            "1-D, bd {bd}: {} vs {want}",
+            g[0]
+        );
+        let want = host_gpu_order(&x2s, bd, f);
+        assert_eq!(
+            g[1].to_bits(),
+            want.to_bits(),
+            "2-D, bd {bd}: {} vs {want}",
+            g[1]
+        );
+        let want = host_gpu_order(&xis, bd, |a: i32, b: i32| (a * 7 + b) % 10007);
+        assert_eq!(gi[0], want, "i32, bd {bd}");
+    }
+}
+
+#[wp::kernel]
+fn k_reduce_idiv(a: Array<i32>, out: Array<i32>) {
+    let t = tile_load::<4>(a, 0);
+    tile_store(out, tile_reduce(idiv, t), 0);
+}
+
+/// An integer division by zero inside a reducing func is the launch's `Err`; without the
+/// zero the quotient is the host's (block size 1: `((1000 / 5) / -4) / 2`).
+fn fault_in_a_reducing_func(dev: &wp::Device) {
+    let out = zeros::<i32, 1>(1, dev);
+    let good = arr(&[1000i32, 5, -4, 2], dev);
+    wp::launch_tiled(k_reduce_idiv, 1, (&good, &out), 1, dev).unwrap();
+    assert_eq!(host(&out), vec![-25]);
+    let bad = arr(&[1000i32, 5, 0, 2], dev);
+    for bd in [1, 8] {
+        let e = wp::launch_tiled(k_reduce_idiv, 1, (&bad, &out), bd, dev).unwrap_err();
+        let msg = crate::chain(&e);
+        assert!(
+            matches!(e, wp::Error::Fault(_)) && msg.contains("division by zero"),
+            "bd {bd}: expected a division fault, got {msg}"
+        );
+    }
+}
+
+/// Backward through `tile_reduce` of a user func is refused (Warp differentiates none) with
+/// an error naming the call, and only the adjoint is: the forward kernel and its CUDA source
+/// are whole (the CUDA reduction calls the func through a functor with the fault context).
+#[test]
+fn reduce_with_a_func_refuses_backward() {
+    let info = wp::kernel_info(k_reduce_funcs);
+    let why = info.adjoint_error.as_deref().unwrap_or("");
+    assert!(
+        why.contains("tile_reduce(halve_add, ..)") && why.contains("Warp differentiates none"),
+        "{why:?}"
+    );
+    let fwd = wp::cuda_source::assemble(info).text;
+    assert!(!fwd.contains("#error"), "{fwd}");
+    assert!(fwd.contains("wp::tile_reduce("), "{fwd}");
 }

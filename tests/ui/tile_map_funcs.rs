@@ -25,16 +25,16 @@ fn constant(a: Array<f32>) {
     let u = tile_map(SCALE, t);
 }
 
-// `tile_reduce` takes builtins and operators only.
-#[wp::func]
-fn plus(x: f32, y: f32) -> f32 {
-    x + y
-}
-
+// `tile_reduce` takes a builtin, an operator or a #[func] by name: not a local variable, a
+// constant or a call.
 #[wp::kernel]
-fn reduce_with_func(a: Array<f32>) {
+fn reduce_with_local(a: Array<f32>) {
+    let plus = 1.0f32;
     let t = tile_load::<8>(a, 0);
     let s = tile_reduce(plus, t);
+    let u = tile_reduce(SCALE, t);
+    let v = tile_reduce(double(1.0), t);
+    let w = tile_reduce(sin, t);
 }
 
 // The turbofish names the result's element, not a shape, and only for a func.

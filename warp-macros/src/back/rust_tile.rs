@@ -203,7 +203,9 @@ impl RustEmitter<'_> {
                     quote!(|__x, __y| __wp::builtins::#g(__x, __y))
                 }
             }
-            TileFn::Func(_) => unreachable!("user funcs are mapped by `tile_map_func`"),
+            TileFn::Func(_) => {
+                unreachable!("user funcs are applied by `tile_map_func` and `tile_reduce`")
+            }
         }
     }
 
@@ -253,9 +255,29 @@ impl RustEmitter<'_> {
         }
     }
 
-    /// `tile_reduce(f, t)`: warp-core's reduction in the GPU's order.
+    /// `tile_reduce(f, t)`: warp-core's reduction in the GPU's order. A user func goes through
+    /// `TileMapFn<(T, T), T>` (rustc checks it at the func's path) and `try_reduce`, which
+    /// stops at the first call that faults.
     pub(super) fn tile_reduce(&self, f: TileFn, arg: VarId, sp: Span) -> TokenStream {
         let x = self.var(arg);
+        if let TileFn::Func(k) = f {
+            let Some(path) = self.f.callees.get(k) else {
+                return quote_spanned!(sp=> ::core::compile_error!("internal: tile_reduce's func is not among the callees"));
+            };
+            let func = match self.f.ty(arg) {
+                Ty::Tile(e, _) => tile_map_fn(self.f, path, &[arg, arg], e),
+                _ => None,
+            };
+            let Some(func) = func else {
+                return quote_spanned!(sp=> ::core::compile_error!("internal: tile_reduce of a func over a tile without a Rust element type"));
+            };
+            let entry = if self.replay {
+                format_ident!("replay")
+            } else {
+                format_ident!("call")
+            };
+            return quote_spanned!(sp=> __wp::tile::try_reduce(&#x, __bd, |__x, __y| #func::#entry((__x, __y)))?);
+        }
         let call = self.tile_fn(f, 2);
         quote_spanned!(sp=> __wp::tile::reduce(&#x, __bd, #call))
     }

@@ -674,10 +674,10 @@ impl Lowerer {
     }
 
     /// The function of `tile_map` or `tile_reduce`: a builtin taking `arity` values, Warp's
-    /// operator names `add`, `sub`, `mul`, `div` (binary), or (where `user`) a user `#[func]`,
-    /// recorded among the callees. A func's signature is not visible here: rustc checks it
+    /// operator names `add`, `sub`, `mul`, `div` (binary), or a user `#[func]`, recorded among
+    /// the callees. A func's signature is not visible here: rustc checks it
     /// against the elements where the CPU code is generated (`TileMapFn`).
-    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize, user: bool) -> R<TileFn> {
+    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize) -> R<TileFn> {
         let Expr::Path(p) = strip(e) else {
             return err(
                 e.span(),
@@ -719,15 +719,11 @@ impl Lowerer {
                     b.params.len()
                 ),
             ),
-            _ if !user => err(
-                e.span(),
-                format!("`{which}` takes a builtin function here (`sin`, `max`, `add`, ..); user #[func]s are not supported yet"),
-            ),
             _ => self.tile_user_fn(which, p, e.span()),
         }
     }
 
-    /// A user `#[func]` as `tile_map`'s function: a path that is no local variable, constant
+    /// A user `#[func]` as `tile_map`'s or `tile_reduce`'s function: a path that is no local variable, constant
     /// or the kernel itself, recorded among the callees (so its CUDA code, adjoint and call
     /// depth come with the kernel's, as for a call).
     fn tile_user_fn(&mut self, which: &str, p: &syn::ExprPath, span: Span) -> R<TileFn> {
@@ -823,7 +819,7 @@ impl Lowerer {
                 "`tile_map` takes a function and one to eight tiles: `tile_map(sin, a)`, `tile_map(my_func, a, b, c)`",
             );
         }
-        let f = self.tile_fn("tile_map", args[0], args.len() - 1, true)?;
+        let f = self.tile_fn("tile_map", args[0], args.len() - 1)?;
         let user = matches!(f, TileFn::Func(_));
         if !user && args.len() > 3 {
             return err(
@@ -880,19 +876,23 @@ impl Lowerer {
         ))
     }
 
-    /// `tile_reduce(f, t)`: a `Tile<T, 1>`; `f` must give `T` back.
+    /// `tile_reduce(f, t)`: a `Tile<T, 1>`; `f` must give `T` back. A user `#[func]` is taken
+    /// as `f(T, T) -> T`, which rustc checks at its path (`TileMapFn<(T, T), T>`).
     fn tile_reduce(&mut self, args: &[&Expr], span: Span) -> R<VarId> {
         let [f, t] = args[..] else {
             return err(
                 span,
-                "`tile_reduce` takes a function and a tile: `tile_reduce(max, t)`",
+                "`tile_reduce` takes a function and a tile: `tile_reduce(max, t)`, `tile_reduce(my_func, t)`",
             );
         };
-        let f = self.tile_fn("tile_reduce", f, 2, false)?;
+        let f = self.tile_fn("tile_reduce", f, 2)?;
         let v = self.scalar_tile_arg("tile_reduce", t)?;
         let tt = self.ty(v);
         let e = tile_parts(&tt).expect("a tile").0.clone();
-        let r = self.tile_fn_result("tile_reduce", f, &[e.clone(), e.clone()], args[0].span())?;
+        let r = match f {
+            TileFn::Func(_) => e.clone(),
+            _ => self.tile_fn_result("tile_reduce", f, &[e.clone(), e.clone()], args[0].span())?,
+        };
         if r != e {
             return err(
                 args[0].span(),

@@ -584,6 +584,25 @@ impl Cx<'_> {
             // Warp differentiates no other reduction either; a silent zero would be a wrong
             // gradient.
             Op::TileReduce { f: g, arg } => {
+                // Warp differentiates no `tile_reduce` of a user func either: its adjoint
+                // would replay the reduction tree, keeping every partial. A result that
+                // carries no gradient (integers, or values of no differentiable input) needs
+                // no adjoint, so only a differentiable one is refused.
+                if let TileFn::Func(k) = g {
+                    if !self.diff(dst) {
+                        return Some(Vec::new());
+                    }
+                    let name = f.callees.get(*k).map_or_else(
+                        || "the func".to_string(),
+                        |p| {
+                            quote::ToTokens::to_token_stream(p)
+                                .to_string()
+                                .replace(' ', "")
+                        },
+                    );
+                    self.refuse(&format!("`tile_reduce({name}, ..)` (a reduction with a user #[func]; Warp differentiates none: reduce with `add` or `tile_sum`, or keep it out of the differentiated kernel)"));
+                    return Some(Vec::new());
+                }
                 if !matches!(g, TileFn::Op(BinOp::Add)) {
                     self.refuse("tile_reduce with anything but `add`");
                     return Some(Vec::new());
