@@ -61,4 +61,14 @@ fn arities(a: Array<f32>) {
     let w = tile_map(double, t, t, t, t, t, t, t, t, t);
 }
 
+// After the function comes a tile (it gives the shape); later arguments may be tiles or
+// integer or float scalars, broadcast to every element.
+#[wp::kernel]
+fn constants(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map(mul, 2.0, t);
+    let v = tile_map(max, t, true);
+    let w = tile_map(mul, t, vec3(1.0, 2.0, 3.0));
+}
+
 fn main() {}

@@ -227,13 +227,27 @@ impl RustEmitter<'_> {
             format_ident!("call")
         };
         let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
+        let all_tiles = args.iter().all(|a| self.f.ty(*a).is_tile());
         match &v[..] {
             [a] => quote_spanned!(sp=> #a.try_map(|__x| #func::#entry((__x,)))?),
-            [a, b] => quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?),
-            // Three or more (the shapes are equal: the front end checked them).
-            [a, rest @ ..] => quote_spanned!(sp=> #a.try_map_flat(|__e, __x| #func::#entry((
-                __x, #(__wp::tile::Tile::as_flat(&#rest)[__e],)*
-            )))?),
+            [a, b] if all_tiles => {
+                quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?)
+            }
+            // Three or more, or scalar constants (the tiles' shapes are equal: the front end
+            // checked them): the other tiles read at the element's index, the scalars as
+            // they are.
+            [a, ..] => {
+                let rest = args[1..].iter().zip(&v[1..]).map(|(x, n)| {
+                    if self.f.ty(*x).is_tile() {
+                        quote!(__wp::tile::Tile::as_flat(&#n)[__e])
+                    } else {
+                        quote!(#n)
+                    }
+                });
+                quote_spanned!(sp=> #a.try_map_flat(|__e, __x| #func::#entry((
+                    __x, #(#rest,)*
+                )))?)
+            }
             [] => unreachable!("tile_map takes a tile"),
         }
     }
@@ -250,8 +264,13 @@ impl RustEmitter<'_> {
         let call = self.tile_fn(f, v.len());
         match &v[..] {
             [a] => quote_spanned!(sp=> #a.map(#call)),
+            // A scalar constant: the same second operand for every element.
+            [a, b] if !self.f.ty(args[1]).is_tile() => quote_spanned!(sp=> {
+                let (__f, __s) = (#call, #b);
+                #a.map(|__x| __f(__x, __s))
+            }),
             [a, b] => quote_spanned!(sp=> #a.map2(&#b, #call)),
-            _ => unreachable!("tile_map takes one or two tiles"),
+            _ => unreachable!("tile_map takes one or two operands with a builtin"),
         }
     }
 
@@ -468,7 +487,7 @@ impl<'a> BlockPrinter<'a> {
     }
 }
 
-/// `<func as __wp::tile::TileMapFn<(elements of args..), result>>`, spanned at the func's path
+/// `<func as __wp::tile::TileMapFn<(elements of args.. or the scalars), result>>`, spanned at the func's path
 /// (where rustc reports a func that does not fit); `None` where an element has no Rust type.
 pub(super) fn tile_map_fn(
     f: &Function,
@@ -476,9 +495,10 @@ pub(super) fn tile_map_fn(
     args: &[VarId],
     dst_elem: &Ty,
 ) -> Option<TokenStream> {
+    // A tile gives its element; a scalar constant (broadcast) is its own type.
     let elem = |t: &Ty| match t {
         Ty::Tile(e, _) => ty_tokens(e),
-        _ => None,
+        t => ty_tokens(t),
     };
     let ins: Vec<TokenStream> = args.iter().map(|a| elem(f.ty(*a))).collect::<Option<_>>()?;
     let out = ty_tokens(dst_elem)?;

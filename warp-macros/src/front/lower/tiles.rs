@@ -379,10 +379,7 @@ impl Lowerer {
         let v = self.tile_arg(name, e)?;
         let t = self.ty(v);
         if t.is_vector_tile() {
-            return err(
-                e.span(),
-                format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[(i, j)]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`"),
-            );
+            return err(e.span(), vector_tile_msg(name, &t));
         }
         Ok(v)
     }
@@ -800,7 +797,9 @@ impl Lowerer {
         Ok(r)
     }
 
-    /// `tile_map(f, a)`, `tile_map(f, a, b)`. With a user func, whose result type the macro
+    /// `tile_map(f, a)`, `tile_map(f, a, b)`, `tile_map(f, a, 2.0)`: the first argument after
+    /// `f` is a tile, each later one a tile of its shape or a scalar constant (given to every
+    /// element, as Warp broadcasts it). With a user func, whose result type the macro
     /// cannot see, the result's element is the one named (`tile_map::<i32>(f, a)`, or the
     /// annotation `let r: Tile<i32, 8> = tile_map(f, a)`), else the first tile's (Warp takes
     /// the func's return type; here rustc checks the func against the elements chosen).
@@ -816,7 +815,7 @@ impl Lowerer {
         if !(2..=9).contains(&args.len()) {
             return err(
                 span,
-                "`tile_map` takes a function and one to eight tiles: `tile_map(sin, a)`, `tile_map(my_func, a, b, c)`",
+                "`tile_map` takes a function, a tile and up to seven more tiles or scalars: `tile_map(sin, a)`, `tile_map(my_func, a, b, 2.0)`",
             );
         }
         let f = self.tile_fn("tile_map", args[0], args.len() - 1)?;
@@ -835,9 +834,47 @@ impl Lowerer {
         }
         let mut vars = Vec::new();
         let mut shape: Option<Vec<Dim>> = None;
-        let mut elems = Vec::new();
-        for a in &args[1..] {
-            let v = self.scalar_tile_arg("tile_map", a)?;
+        let mut elems: Vec<Ty> = Vec::new();
+        for (i, a) in args[1..].iter().enumerate() {
+            // After the first tile (which gives the shape, as in Warp), an argument may be a
+            // scalar constant, broadcast to every element. An unsuffixed literal takes the
+            // first tile's element type.
+            let v = match elems.first() {
+                None => {
+                    let v = self.expr(a, None)?;
+                    let t = self.ty(v);
+                    if !t.is_tile() {
+                        return err(
+                            a.span(),
+                            format!("`tile_map` takes a tile after the function (it gives the result's shape), found `{t}`; scalar constants may follow it: `tile_map(f, t, 2.0)`"),
+                        );
+                    }
+                    if t.is_vector_tile() {
+                        return err(a.span(), vector_tile_msg("tile_map", &t));
+                    }
+                    v
+                }
+                Some(first) => {
+                    let first = first.clone();
+                    let v = self.expr(a, Some(&first))?;
+                    let t = self.ty(v);
+                    if !t.is_tile() {
+                        if !matches!(t, Ty::Scalar(s) if s != Scalar::Bool) {
+                            return err(
+                                a.span(),
+                                format!("`tile_map` broadcasts integer or float scalars (and takes tiles); argument {} is `{t}`{}", i + 1, if t.is_deferred() { " (a value whose type the kernel cannot see: bind it with a type, `let s: f32 = ..`)" } else { "" }),
+                            );
+                        }
+                        elems.push(t);
+                        vars.push(v);
+                        continue;
+                    }
+                    if t.is_vector_tile() {
+                        return err(a.span(), vector_tile_msg("tile_map", &t));
+                    }
+                    v
+                }
+            };
             let t = self.ty(v);
             let (e, d) = tile_parts(&t).expect("a tile");
             let d = d.to_vec();
@@ -1237,4 +1274,9 @@ impl Lowerer {
         let row = builtins::lookup("tile_extract").expect("the tile_extract row");
         Ok(self.def(Op::Builtin { builtin: row, args }, e, span))
     }
+}
+
+/// The error for a tile of vectors where an operation takes tiles of scalars.
+fn vector_tile_msg(name: &str, t: &Ty) -> String {
+    format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[(i, j)]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`")
 }
