@@ -51,4 +51,24 @@ fn not_a_func(a: Array<f32>) {
     let u = tile_map(plain_rust, t);
 }
 
+// `tile_reduce(f, t)` takes `f(T, T) -> T`: one parameter is too few, an `i32` result is not
+// the `f32` element, and a plain Rust fn is no #[func].
+#[wp::kernel]
+fn reduce_wrong_funcs(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_reduce(to_int, t);
+    let v = tile_reduce(plain_rust, t);
+}
+
+#[wp::func]
+fn unary(x: f32) -> f32 {
+    x
+}
+
+#[wp::kernel]
+fn reduce_unary(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_reduce(unary, t);
+}
+
 fn main() {}

@@ -25,16 +25,16 @@ fn constant(a: Array<f32>) {
     let u = tile_map(SCALE, t);
 }
 
-// `tile_reduce` takes builtins and operators only.
-#[wp::func]
-fn plus(x: f32, y: f32) -> f32 {
-    x + y
-}
-
+// `tile_reduce` takes a builtin, an operator or a #[func] by name: not a local variable, a
+// constant or a call.
 #[wp::kernel]
-fn reduce_with_func(a: Array<f32>) {
+fn reduce_with_local(a: Array<f32>) {
+    let plus = 1.0f32;
     let t = tile_load::<8>(a, 0);
     let s = tile_reduce(plus, t);
+    let u = tile_reduce(SCALE, t);
+    let v = tile_reduce(double(1.0), t);
+    let w = tile_reduce(sin, t);
 }
 
 // The turbofish names the result's element, not a shape, and only for a func.
@@ -59,6 +59,16 @@ fn arities(a: Array<f32>) {
     let u = tile_map(add, t, t, t);
     let v = tile_map(max, t, t, t);
     let w = tile_map(double, t, t, t, t, t, t, t, t, t);
+}
+
+// After the function comes a tile (it gives the shape); later arguments may be tiles or
+// integer or float scalars, broadcast to every element.
+#[wp::kernel]
+fn constants(a: Array<f32>) {
+    let t = tile_load::<8>(a, 0);
+    let u = tile_map(mul, 2.0, t);
+    let v = tile_map(max, t, true);
+    let w = tile_map(mul, t, vec3(1.0, 2.0, 3.0));
 }
 
 fn main() {}

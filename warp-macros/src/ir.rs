@@ -187,7 +187,7 @@ pub enum RangeAdapter {
 
 /// The function `tile_map` and `tile_reduce` apply: a builtin (its `T` is the tiles' element
 /// type), an arithmetic operator by Warp's name (`add`, `sub`, `mul`, `div`), or a user
-/// `#[func]` of scalars (`tile_map` only), by its index in [`Function::callees`].
+/// `#[func]` of scalars, by its index in [`Function::callees`].
 #[derive(Clone, Copy, Debug)]
 pub enum TileFn {
     Builtin(&'static Builtin),

@@ -379,6 +379,13 @@ fn block_total<T: Scalar>(n: usize, bd: usize, c: impl Fn(usize) -> T) -> T {
     gpu_order(n, bd, c, Scalar::s_add).unwrap_or(T::ZERO)
 }
 
+/// The sum of the contributions `c` in the reductions' order for block size `bd`: the adjoint
+/// of a scalar constant of `tile_map` (`tile_map(f, t, s)`), whose elements' contributions the
+/// generated code collects, as `t * s` gives `s` its adjoint.
+pub fn block_sum<T: Scalar>(c: &[T], bd: usize) -> T {
+    block_total(c.len(), bd, |e| c[e])
+}
+
 macro_rules! elementwise {
     ($tr:ident, $f:ident, $tt:ident, $ts:ident, $st:ident, $what:literal) => {
         #[doc = concat!("Adjoint of `a ", $what, " b` on two tiles of one shape: element by element, the scalar rule.")]

@@ -54,7 +54,7 @@ pub use linalg::{
 };
 pub use load::{load1, load2, load3, load4, store1, store2, store3, store4};
 pub use matmul::{matmul, matmul_acc, Fma, MatmulElem};
-pub use reduce::{argmax, argmin, max, min, reduce, sum};
+pub use reduce::{argmax, argmin, max, min, reduce, sum, try_reduce};
 pub use scan::{scan_exclusive, scan_inclusive, scan_max_inclusive, scan_min_inclusive};
 pub use shape::{broadcast11, broadcast12, broadcast22, transpose};
 pub use sort::{permute, sort_perm, SortKey};
@@ -62,13 +62,14 @@ pub use view::{view11, view21, view22, window1, window2};
 
 /// Implemented by each `#[func]` whose parameters and result are scalars (not `bool`): the
 /// func takes the elements `Args` (a tuple, one per parameter) and returns `Ret`. The kernel
-/// macro cannot see a func's signature, so `tile_map(func, ..)` calls the func through this
-/// trait, with the elements it chose: a func that does not fit is one error at the func's path
-/// (this message), not a type error in generated code.
+/// macro cannot see a func's signature, so `tile_map(func, ..)` and `tile_reduce(func, t)` call
+/// the func through this trait, with the elements it chose: a func that does not fit is one
+/// error at the func's path (this message), not a type error in generated code.
 #[diagnostic::on_unimplemented(
-    message = "`tile_map` cannot apply `{Self}` to elements `{Args}` giving `{Ret}`",
+    message = "`tile_map` / `tile_reduce` cannot apply `{Self}` to elements `{Args}` giving `{Ret}`",
     label = "not a #[func] taking `{Args}` and returning `{Ret}`",
     note = "`tile_map(f, a..)` takes a #[func] of scalars with one parameter per tile, of the tiles' element types",
+    note = "`tile_reduce(f, t)` takes a #[func] of two elements of `t`'s type returning that type",
     note = "a func returning another type than the first tile's element names it: `let r: Tile<i32, 8> = tile_map(f, a);` or `tile_map::<i32>(f, a)`"
 )]
 pub trait TileMapFn<Args, Ret> {

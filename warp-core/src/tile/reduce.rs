@@ -39,6 +39,7 @@
 
 use super::{Tile, Tile1};
 use crate::builtins::{MinMax, Scalar};
+use crate::fault::KResult;
 
 /// The largest block size (CUDA's limit on threads per block).
 pub const MAX_BLOCK_DIM: usize = 1024;
@@ -121,6 +122,38 @@ pub fn reduce<X: Tile<Elem: Copy>>(
     op: impl Fn(X::Elem, X::Elem) -> X::Elem,
 ) -> Tile1<X::Elem, 1> {
     reduce_tile(t, bd, op)
+}
+
+/// `tile_reduce(func, t)` of a user func, which may fault: `reduce`'s order, stopping at the
+/// first call that faults (in that order) with its error, as a scalar call stops the thread.
+/// The GPU lets every call run and sets the fault; either way the launch fails.
+pub fn try_reduce<X: Tile<Elem: Copy>>(
+    t: &X,
+    bd: usize,
+    op: impl Fn(X::Elem, X::Elem) -> KResult<X::Elem>,
+) -> KResult<Tile1<X::Elem, 1>> {
+    // `gpu_order` takes an infallible `op`: after the first fault the remaining combinations
+    // return their left operand unchanged, without calling the func again.
+    let fault = core::cell::Cell::new(None);
+    let r = reduce_tile(t, bd, |a, b| {
+        let failed = fault.take();
+        let ok = failed.is_none();
+        fault.set(failed);
+        if !ok {
+            return a;
+        }
+        match op(a, b) {
+            Ok(v) => v,
+            Err(e) => {
+                fault.set(Some(e));
+                a
+            }
+        }
+    });
+    match fault.into_inner() {
+        Some(e) => Err(e),
+        None => Ok(r),
+    }
 }
 
 /// `tile_sum(t)`: IEEE `+` for floats, wrapping `+` for integers, in the GPU's order for block

@@ -195,20 +195,24 @@ impl Emitter<'_> {
                     other => return Err(format!("`{other}` has no CUDA form yet")),
                 }
             }
-            // A func over three or more tiles: the loop written out (each thread its
-            // elements, as `wp::tile_map`), the func taking the fault context last.
-            Op::TileMap {
-                f: TileFn::Func(k),
-                args,
-            } if args.len() > 2 => {
-                let suffix = if e.replay { "_replay" } else { "" };
+            // A func over three or more tiles, or a map with scalar constants: the loop
+            // written out (each thread its elements, as `wp::tile_map`), a tile read at the
+            // element, a scalar as it is (the same in every thread), a func taking the fault
+            // context last.
+            Op::TileMap { f: g, args }
+                if (matches!(g, TileFn::Func(_)) && args.len() > 2)
+                    || args.iter().any(|x| !f.ty(*x).is_tile()) =>
+            {
                 let xs: Vec<String> = args
                     .iter()
-                    .map(|x| format!("{}.data[__e]", v(e, x)))
+                    .map(|x| match f.ty(*x).is_tile() {
+                        true => format!("{}.data[__e]", v(e, x)),
+                        false => v(e, x),
+                    })
                     .collect();
+                let body = e.tile_fn_body(*g, args, &xs);
                 format!(
-                    "for (int __e = (int)threadIdx.x; __e < decltype({d})::SIZE; __e += WP_TILE_BLOCK_DIM) {d}.data[__e] = @@F{k}@@{suffix}({}, __ctx); __syncthreads();",
-                    xs.join(", ")
+                    "for (int __e = (int)threadIdx.x; __e < decltype({d})::SIZE; __e += WP_TILE_BLOCK_DIM) {d}.data[__e] = {body}; __syncthreads();"
                 )
             }
             Op::TileMap { f: g, args } => {
@@ -265,30 +269,11 @@ impl Emitter<'_> {
             .zip(["x", "y"])
             .map(|(x, n)| elem(f.ty(*x)).map(|t| format!("{t} {n}")))
             .collect::<Result<_, _>>()?;
-        let body = match (g, args.len()) {
-            (TileFn::Op(o), _) if is_int_elem(f.ty(args[0])) => {
-                let w = match o {
-                    BinOp::Add => "w_add",
-                    BinOp::Sub => "w_sub",
-                    _ => "w_mul",
-                };
-                format!("wp::{w}(x, y)")
-            }
-            (TileFn::Op(o), _) => format!("x {} y", o.symbol()),
-            (TileFn::Builtin(b), 1) => {
-                self.section(b.section);
-                format!("{}(x)", b.cuda)
-            }
-            (TileFn::Builtin(b), _) => {
-                self.section(b.section);
-                format!("{}(x, y)", b.cuda)
-            }
-            (TileFn::Func(k), n) => {
-                let suffix = if self.replay { "_replay" } else { "" };
-                let xs = ["x", "y"][..n].join(", ");
-                format!("@@F{k}@@{suffix}({xs}, __ctx)")
-            }
-        };
+        let xs: Vec<String> = ["x", "y"][..args.len()]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let body = self.tile_fn_body(g, args, &xs);
         self.tmp += 1;
         let m = format!("__fn{}", self.tmp);
         let (member, make) = match g {
@@ -303,6 +288,32 @@ impl Emitter<'_> {
             ),
         );
         Ok(make)
+    }
+
+    /// `g` applied to the operands `xs` (C++ expressions of the elements of `args`, or of a
+    /// scalar constant): integer `+ - *` wrap as on the CPU; a user func takes the fault
+    /// context (`__ctx`) last.
+    pub(crate) fn tile_fn_body(&mut self, g: TileFn, args: &[VarId], xs: &[String]) -> String {
+        match (g, xs) {
+            (TileFn::Op(o), [x, y]) if is_int_elem(self.f.ty(args[0])) => {
+                let w = match o {
+                    BinOp::Add => "w_add",
+                    BinOp::Sub => "w_sub",
+                    _ => "w_mul",
+                };
+                format!("wp::{w}({x}, {y})")
+            }
+            (TileFn::Op(o), [x, y]) => format!("({x} {} {y})", o.symbol()),
+            (TileFn::Builtin(b), _) => {
+                self.section(b.section);
+                format!("{}({})", b.cuda, xs.join(", "))
+            }
+            (TileFn::Func(k), _) => {
+                let suffix = if self.replay { "_replay" } else { "" };
+                format!("@@F{k}@@{suffix}({}, __ctx)", xs.join(", "))
+            }
+            (TileFn::Op(_), _) => "/* an operator takes two operands */ 0".to_string(),
+        }
     }
 
     /// The entry of a tiled kernel: CUDA block `b` runs block `b` of the launch, `@@SELF@@` with

@@ -119,6 +119,126 @@ impl Printer<'_> {
         Ok(())
     }
 
+    /// `tile_map`'s adjoint with scalar constants, as the CPU's (`rust_tile_adjoint`): the
+    /// scalar adjoint of its function on each element, the tiles' adjoints element by element,
+    /// each float constant's temporary (`__g<k>`) the block total of the elements'
+    /// contributions in the reductions' order (`tile_detail::block_total`, returned to every
+    /// thread, as `t * s` gives `s` its adjoint). One pass per float constant, through a local
+    /// functor of the element index holding copies of the tile views it reads; the first also
+    /// accumulates the tiles' adjoints, the others give them to locals they drop. Without a
+    /// float constant one loop over the elements does it.
+    fn tile_map_consts_adj(
+        &mut self,
+        g: TileFn,
+        values: &[VarId],
+        grads: &[GradArg],
+        sp: proc_macro2::Span,
+    ) -> Result<String, String> {
+        let f = self.f();
+        let n = values.len();
+        let is_tile: Vec<bool> = values.iter().map(|v| f.ty(*v).is_tile()).collect();
+        let elem = |v: VarId| match f.ty(v) {
+            Ty::Tile(e, _) => super::cuda::cpp_type(e).ok_or("a tile element type"),
+            t => super::cuda::cpp_type(t).ok_or("a scalar constant's type"),
+        };
+        let types: Vec<String> = values.iter().map(|v| elem(*v)).collect::<Result<_, _>>()?;
+        let floats: Vec<usize> = (0..n)
+            .filter(|j| !is_tile[*j] && matches!(f.ty(values[*j]), Ty::Scalar(s) if s.is_float()))
+            .collect();
+        let xs: Vec<String> = values.iter().map(|v| self.var(*v)).collect();
+        let gs: Vec<String> = grads.iter().map(|g| self.grad_arg(g)).collect();
+        let (name, extra) = match g {
+            TileFn::Builtin(b) => {
+                self.e.section(b.section);
+                (format!("wp::adj_{}", b.name), "")
+            }
+            TileFn::Op(o) => (format!("wp::{}", o.adjoint_fn().unwrap_or("adj_add")), ""),
+            TileFn::Func(k) => (format!("@@F{k}@@_adj"), ", __ctx, __stack"),
+        };
+        // The locals and the call of one pass, naming the outer values through `at` (a
+        // functor's members have names of their own: a member named as the outer variable its
+        // type is taken from would change that name's meaning in the class); `writes`: the
+        // tiles' adjoints are the real ones.
+        let body = |writes: bool, at: &dyn Fn(&str) -> String| {
+            let mut locals = String::new();
+            let mut adjs = Vec::new();
+            for j in 0..n {
+                if is_tile[j] && writes {
+                    adjs.push(format!("{}.data[__e]", at(&gs[j])));
+                } else {
+                    let _ = write!(locals, "{t} __z{j} = {t}(0); ", t = types[j]);
+                    adjs.push(format!("__z{j}"));
+                }
+            }
+            let ops: Vec<String> = (0..n)
+                .map(|j| match is_tile[j] {
+                    true => format!("{}.data[__e]", at(&xs[j])),
+                    false => at(&xs[j]),
+                })
+                .collect();
+            let call = format!(
+                "{name}({}, {}, {}.data[__e]{extra});",
+                ops.join(", "),
+                adjs.join(", "),
+                at("__r"),
+            );
+            (locals, call)
+        };
+        let size = "wp::detail::remove_cvref<decltype(__r)>::type::SIZE";
+        if floats.is_empty() {
+            let (locals, call) = body(true, &|x| x.to_string());
+            return Ok(format!(
+                "for (int __e = (int)threadIdx.x; __e < {size}; __e += WP_TILE_BLOCK_DIM) {{ {locals}{call} }} __syncthreads();"
+            ));
+        }
+        let mut text = String::new();
+        for (pass, &j) in floats.iter().enumerate() {
+            let writes = pass == 0;
+            // What the functor reads: the operands, the tiles' adjoints it writes, the seed.
+            let mut names: Vec<String> = xs.clone();
+            if writes {
+                names.extend((0..n).filter(|q| is_tile[*q]).map(|q| gs[q].clone()));
+            }
+            names.push("__r".into());
+            let mut seen = std::collections::HashSet::new();
+            names.retain(|m| seen.insert(m.clone()));
+            let members: String = names
+                .iter()
+                .enumerate()
+                .map(|(i, m)| format!("wp::detail::remove_cvref<decltype({m})>::type __m{i}; "))
+                .collect();
+            let at = |x: &str| match names.iter().position(|m| m == x) {
+                Some(i) => format!("__m{i}"),
+                None => x.to_string(),
+            };
+            let (locals, call) = body(writes, &at);
+            // A func's adjoint takes the fault context and the thread's stack last.
+            let (ctx_members, ctx_values) = match g {
+                TileFn::Func(_) => (
+                    "wp::ctx_t* __ctx; wp::adstack_t* __stack; ",
+                    ", __ctx, __stack",
+                ),
+                _ => ("", ""),
+            };
+            self.e.tmp += 1;
+            let m = format!("__cfn{}", self.e.tmp);
+            let t = &types[j];
+            self.line(
+                sp,
+                format!(
+                    "struct {m} {{ {members}{ctx_members}WP_FN {t} operator()(int __e) const {{ {locals}{call} return __z{j}; }} }};"
+                ),
+            );
+            let _ = write!(
+                text,
+                "{} += wp::tile_detail::block_total<{t}, {size}>({m}{{{}{ctx_values}}}); ",
+                gs[j],
+                names.join(", ")
+            );
+        }
+        Ok(text)
+    }
+
     /// `tile_map`'s adjoint: a local functor calling the scalar adjoint of its function, and
     /// `wp::adj_tile_map1/2` with it.
     pub(super) fn tile_map_adj(
@@ -129,6 +249,9 @@ impl Printer<'_> {
         dst: VarId,
         sp: proc_macro2::Span,
     ) -> Result<String, String> {
+        if values.iter().any(|v| !self.f().ty(*v).is_tile()) {
+            return self.tile_map_consts_adj(g, values, grads, sp);
+        }
         // A func over three or more tiles: its adjoint on each element, the loop written out.
         if let (TileFn::Func(k), true) = (g, values.len() > 2) {
             let xs: Vec<String> = values

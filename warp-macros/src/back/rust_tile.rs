@@ -203,7 +203,9 @@ impl RustEmitter<'_> {
                     quote!(|__x, __y| __wp::builtins::#g(__x, __y))
                 }
             }
-            TileFn::Func(_) => unreachable!("user funcs are mapped by `tile_map_func`"),
+            TileFn::Func(_) => {
+                unreachable!("user funcs are applied by `tile_map_func` and `tile_reduce`")
+            }
         }
     }
 
@@ -225,13 +227,27 @@ impl RustEmitter<'_> {
             format_ident!("call")
         };
         let v: Vec<syn::Ident> = args.iter().map(|a| self.var(*a)).collect();
+        let all_tiles = args.iter().all(|a| self.f.ty(*a).is_tile());
         match &v[..] {
             [a] => quote_spanned!(sp=> #a.try_map(|__x| #func::#entry((__x,)))?),
-            [a, b] => quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?),
-            // Three or more (the shapes are equal: the front end checked them).
-            [a, rest @ ..] => quote_spanned!(sp=> #a.try_map_flat(|__e, __x| #func::#entry((
-                __x, #(__wp::tile::Tile::as_flat(&#rest)[__e],)*
-            )))?),
+            [a, b] if all_tiles => {
+                quote_spanned!(sp=> #a.try_map2(&#b, |__x, __y| #func::#entry((__x, __y)))?)
+            }
+            // Three or more, or scalar constants (the tiles' shapes are equal: the front end
+            // checked them): the other tiles read at the element's index, the scalars as
+            // they are.
+            [a, ..] => {
+                let rest = args[1..].iter().zip(&v[1..]).map(|(x, n)| {
+                    if self.f.ty(*x).is_tile() {
+                        quote!(__wp::tile::Tile::as_flat(&#n)[__e])
+                    } else {
+                        quote!(#n)
+                    }
+                });
+                quote_spanned!(sp=> #a.try_map_flat(|__e, __x| #func::#entry((
+                    __x, #(#rest,)*
+                )))?)
+            }
             [] => unreachable!("tile_map takes a tile"),
         }
     }
@@ -248,14 +264,39 @@ impl RustEmitter<'_> {
         let call = self.tile_fn(f, v.len());
         match &v[..] {
             [a] => quote_spanned!(sp=> #a.map(#call)),
+            // A scalar constant: the same second operand for every element.
+            [a, b] if !self.f.ty(args[1]).is_tile() => quote_spanned!(sp=> {
+                let (__f, __s) = (#call, #b);
+                #a.map(|__x| __f(__x, __s))
+            }),
             [a, b] => quote_spanned!(sp=> #a.map2(&#b, #call)),
-            _ => unreachable!("tile_map takes one or two tiles"),
+            _ => unreachable!("tile_map takes one or two operands with a builtin"),
         }
     }
 
-    /// `tile_reduce(f, t)`: warp-core's reduction in the GPU's order.
+    /// `tile_reduce(f, t)`: warp-core's reduction in the GPU's order. A user func goes through
+    /// `TileMapFn<(T, T), T>` (rustc checks it at the func's path) and `try_reduce`, which
+    /// stops at the first call that faults.
     pub(super) fn tile_reduce(&self, f: TileFn, arg: VarId, sp: Span) -> TokenStream {
         let x = self.var(arg);
+        if let TileFn::Func(k) = f {
+            let Some(path) = self.f.callees.get(k) else {
+                return quote_spanned!(sp=> ::core::compile_error!("internal: tile_reduce's func is not among the callees"));
+            };
+            let func = match self.f.ty(arg) {
+                Ty::Tile(e, _) => tile_map_fn(self.f, path, &[arg, arg], e),
+                _ => None,
+            };
+            let Some(func) = func else {
+                return quote_spanned!(sp=> ::core::compile_error!("internal: tile_reduce of a func over a tile without a Rust element type"));
+            };
+            let entry = if self.replay {
+                format_ident!("replay")
+            } else {
+                format_ident!("call")
+            };
+            return quote_spanned!(sp=> __wp::tile::try_reduce(&#x, __bd, |__x, __y| #func::#entry((__x, __y)))?);
+        }
         let call = self.tile_fn(f, 2);
         quote_spanned!(sp=> __wp::tile::reduce(&#x, __bd, #call))
     }
@@ -446,7 +487,7 @@ impl<'a> BlockPrinter<'a> {
     }
 }
 
-/// `<func as __wp::tile::TileMapFn<(elements of args..), result>>`, spanned at the func's path
+/// `<func as __wp::tile::TileMapFn<(elements of args.. or the scalars), result>>`, spanned at the func's path
 /// (where rustc reports a func that does not fit); `None` where an element has no Rust type.
 pub(super) fn tile_map_fn(
     f: &Function,
@@ -454,9 +495,10 @@ pub(super) fn tile_map_fn(
     args: &[VarId],
     dst_elem: &Ty,
 ) -> Option<TokenStream> {
+    // A tile gives its element; a scalar constant (broadcast) is its own type.
     let elem = |t: &Ty| match t {
         Ty::Tile(e, _) => ty_tokens(e),
-        _ => None,
+        t => ty_tokens(t),
     };
     let ins: Vec<TokenStream> = args.iter().map(|a| elem(f.ty(*a))).collect::<Option<_>>()?;
     let out = ty_tokens(dst_elem)?;

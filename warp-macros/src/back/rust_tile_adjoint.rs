@@ -524,6 +524,9 @@ impl Printer<'_> {
         dst: VarId,
         sp: Span,
     ) -> TokenStream {
+        if values.iter().any(|v| !self.f().ty(*v).is_tile()) {
+            return self.tile_map_consts_adj(f, values, grads, dst, sp);
+        }
         let scalar = match f {
             TileFn::Builtin(b) => format_ident!("adj_{}", b.name),
             TileFn::Op(o) => format_ident!("{}", o.adjoint_fn().unwrap_or("adj_add")),
@@ -545,6 +548,99 @@ impl Printer<'_> {
             },
         };
         quote_spanned!(sp=> #before #call #after)
+    }
+
+    /// `tile_map`'s adjoint with scalar constants (broadcast to every element): the scalar
+    /// adjoint of its function (a builtin's rule or a func's own adjoint) on each element in
+    /// row-major order, the tiles' adjoints element by element, each float constant's adjoint
+    /// (a temporary, `GradArg::Temp`) the sum of the elements' contributions in the
+    /// reductions' order, as for `t * s` (so the GPU's is the same). An integer constant's
+    /// contributions are dropped.
+    fn tile_map_consts_adj(
+        &self,
+        f: TileFn,
+        values: &[VarId],
+        grads: &[GradArg],
+        dst: VarId,
+        sp: Span,
+    ) -> TokenStream {
+        let fun = self.f();
+        let is_tile: Vec<bool> = values.iter().map(|v| fun.ty(*v).is_tile()).collect();
+        let float = |v: VarId| matches!(fun.ty(v), Ty::Scalar(s) if s.is_float());
+        let n = values.len();
+        let (gs, before, after) = self.grads_once(grads);
+        let g: Vec<syn::Ident> = (0..n).map(|k| format_ident!("__ga{}", k)).collect();
+        let c: Vec<syn::Ident> = (0..n).map(|k| format_ident!("__gc{}", k)).collect();
+        let k: Vec<syn::Index> = (0..n).map(syn::Index::from).collect();
+        let xs: Vec<TokenStream> = values
+            .iter()
+            .zip(&is_tile)
+            .map(|(v, t)| {
+                let x = self.var(*v);
+                match t {
+                    true => quote!(__wp::tile::Tile::as_flat(&#x)[__e]),
+                    false => quote!(#x),
+                }
+            })
+            .collect();
+        let mut init = Vec::new();
+        let (mut collect, mut put, mut total, mut store) = (
+            TokenStream::new(),
+            TokenStream::new(),
+            TokenStream::new(),
+            TokenStream::new(),
+        );
+        for j in 0..n {
+            let (gj, cj, kj) = (&g[j], &c[j], &k[j]);
+            if is_tile[j] {
+                init.push(quote!(__wp::tile::Tile::as_flat(&*#gj)[__e]));
+                put.extend(quote!(__wp::tile::Tile::as_flat_mut(&mut *#gj)[__e] = __a.#kj;));
+            } else {
+                init.push(quote!(__wp::zero_like(&*#gj)));
+                if float(values[j]) {
+                    collect.extend(quote!(let mut #cj = ::std::vec::Vec::with_capacity(__n);));
+                    put.extend(quote!(#cj.push(__a.#kj);));
+                    total.extend(quote!(
+                        __wp::adjoint::Adjoint::adj_accum(&mut *#gj, __wp::tile::adjoint::block_sum(&#cj, __bd));
+                    ));
+                }
+            }
+        }
+        let seed = quote!(__wp::tile::Tile::as_flat(&__r)[__e]);
+        let call = match f {
+            TileFn::Func(q) => {
+                let func = match (fun.callees.get(q), fun.ty(dst)) {
+                    (Some(path), Ty::Tile(e, _)) => {
+                        super::rust_tile::tile_map_fn(fun, path, values, e)
+                    }
+                    _ => None,
+                };
+                let Some(func) = func else {
+                    return quote_spanned!(sp=> ::core::compile_error!("internal: tile_map's func or element types are missing"););
+                };
+                quote!(#func::adj((#(#xs,)*), &mut __a, #seed, &mut __lanes[0])?;)
+            }
+            TileFn::Builtin(b) => {
+                let h = format_ident!("adj_{}", b.name);
+                quote!(__wp::adjoint::#h(#(#xs,)* #(&mut __a.#k,)* #seed);)
+            }
+            TileFn::Op(o) => {
+                let h = format_ident!("{}", o.adjoint_fn().unwrap_or("adj_add"));
+                quote!(__wp::adjoint::#h(#(#xs,)* #(&mut __a.#k,)* #seed);)
+            }
+        };
+        store.extend(total);
+        quote_spanned!(sp=> #before {
+            #(let #g = #gs;)*
+            let __n = __wp::tile::Tile::as_flat(&__r).len();
+            #collect
+            for __e in 0..__n {
+                let mut __a = (#(#init,)*);
+                #call
+                #put
+            }
+            #store
+        } #after)
     }
 
     /// `tile_map(func, ..)`'s adjoint: the func's own adjoint on each element, in row-major

@@ -45,8 +45,9 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "untile": TILE_ELEM, (Tile) -> T, "tile", Adjoint, no_tangent, cooperative, lanes;
     // `t[i]`, `t[(i, j)]`: a read, not cooperative; an index outside the tile faults.
     "tile_extract": TILE_ELEM, (Tile, Index) -> T, "tile", Adjoint, no_tangent;
-    // Elementwise: `tile_map(f, a)`, `tile_map(f, a, b)` with a builtin function
-    // (`tile_map(sin, a)`); operators `+ - * /` and unary `-` on tiles are Warp's `tile_add`...
+    // Elementwise: `tile_map(f, a)`, `tile_map(f, a, b)`, `tile_map(f, a, 2.0)` with a builtin
+    // function (`tile_map(sin, a)`), an operator name or a user #[func], scalar constants
+    // after the first tile broadcast; operators `+ - * /` and unary `-` on tiles are Warp's `tile_add`...
     "tile_map": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     // Shapes: `tile_transpose(t)` of a 2-D tile; `tile_broadcast::<M, N>(t)` (or Warp's
     // `tile_broadcast(t, (M, N))`, or the annotation's shape): numpy's rule, shapes aligned on
@@ -58,7 +59,8 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // outside skipped); the result is the tile of the old values.
     "tile_atomic_add": TILE_ATOMIC, (ArrayOfT, Tile, Offsets) -> Tile, "tile", Atomic,
         no_tangent, cooperative;
-    // `tile_reduce(f, t)` with a binary builtin or `add`/`mul`, in the reductions' order.
+    // `tile_reduce(f, t)` with a binary builtin, `add`/`mul`.., or a user #[func], in the
+    // reductions' order.
     "tile_reduce": TILE_ELEM, (TileFn, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     // Scans of 1-D tiles, in an order both backends share (warp-core's `tile::scan`).
     // Backward: all four (`TILE_ADJOINTS`, warp-core's `tile::adjoint_linalg`).

@@ -379,10 +379,7 @@ impl Lowerer {
         let v = self.tile_arg(name, e)?;
         let t = self.ty(v);
         if t.is_vector_tile() {
-            return err(
-                e.span(),
-                format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[(i, j)]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`"),
-            );
+            return err(e.span(), vector_tile_msg(name, &t));
         }
         Ok(v)
     }
@@ -674,10 +671,10 @@ impl Lowerer {
     }
 
     /// The function of `tile_map` or `tile_reduce`: a builtin taking `arity` values, Warp's
-    /// operator names `add`, `sub`, `mul`, `div` (binary), or (where `user`) a user `#[func]`,
-    /// recorded among the callees. A func's signature is not visible here: rustc checks it
+    /// operator names `add`, `sub`, `mul`, `div` (binary), or a user `#[func]`, recorded among
+    /// the callees. A func's signature is not visible here: rustc checks it
     /// against the elements where the CPU code is generated (`TileMapFn`).
-    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize, user: bool) -> R<TileFn> {
+    fn tile_fn(&mut self, which: &str, e: &Expr, arity: usize) -> R<TileFn> {
         let Expr::Path(p) = strip(e) else {
             return err(
                 e.span(),
@@ -719,15 +716,11 @@ impl Lowerer {
                     b.params.len()
                 ),
             ),
-            _ if !user => err(
-                e.span(),
-                format!("`{which}` takes a builtin function here (`sin`, `max`, `add`, ..); user #[func]s are not supported yet"),
-            ),
             _ => self.tile_user_fn(which, p, e.span()),
         }
     }
 
-    /// A user `#[func]` as `tile_map`'s function: a path that is no local variable, constant
+    /// A user `#[func]` as `tile_map`'s or `tile_reduce`'s function: a path that is no local variable, constant
     /// or the kernel itself, recorded among the callees (so its CUDA code, adjoint and call
     /// depth come with the kernel's, as for a call).
     fn tile_user_fn(&mut self, which: &str, p: &syn::ExprPath, span: Span) -> R<TileFn> {
@@ -804,7 +797,9 @@ impl Lowerer {
         Ok(r)
     }
 
-    /// `tile_map(f, a)`, `tile_map(f, a, b)`. With a user func, whose result type the macro
+    /// `tile_map(f, a)`, `tile_map(f, a, b)`, `tile_map(f, a, 2.0)`: the first argument after
+    /// `f` is a tile, each later one a tile of its shape or a scalar constant (given to every
+    /// element, as Warp broadcasts it). With a user func, whose result type the macro
     /// cannot see, the result's element is the one named (`tile_map::<i32>(f, a)`, or the
     /// annotation `let r: Tile<i32, 8> = tile_map(f, a)`), else the first tile's (Warp takes
     /// the func's return type; here rustc checks the func against the elements chosen).
@@ -820,10 +815,10 @@ impl Lowerer {
         if !(2..=9).contains(&args.len()) {
             return err(
                 span,
-                "`tile_map` takes a function and one to eight tiles: `tile_map(sin, a)`, `tile_map(my_func, a, b, c)`",
+                "`tile_map` takes a function, a tile and up to seven more tiles or scalars: `tile_map(sin, a)`, `tile_map(my_func, a, b, 2.0)`",
             );
         }
-        let f = self.tile_fn("tile_map", args[0], args.len() - 1, true)?;
+        let f = self.tile_fn("tile_map", args[0], args.len() - 1)?;
         let user = matches!(f, TileFn::Func(_));
         if !user && args.len() > 3 {
             return err(
@@ -839,9 +834,47 @@ impl Lowerer {
         }
         let mut vars = Vec::new();
         let mut shape: Option<Vec<Dim>> = None;
-        let mut elems = Vec::new();
-        for a in &args[1..] {
-            let v = self.scalar_tile_arg("tile_map", a)?;
+        let mut elems: Vec<Ty> = Vec::new();
+        for (i, a) in args[1..].iter().enumerate() {
+            // After the first tile (which gives the shape, as in Warp), an argument may be a
+            // scalar constant, broadcast to every element. An unsuffixed literal takes the
+            // first tile's element type.
+            let v = match elems.first() {
+                None => {
+                    let v = self.expr(a, None)?;
+                    let t = self.ty(v);
+                    if !t.is_tile() {
+                        return err(
+                            a.span(),
+                            format!("`tile_map` takes a tile after the function (it gives the result's shape), found `{t}`; scalar constants may follow it: `tile_map(f, t, 2.0)`"),
+                        );
+                    }
+                    if t.is_vector_tile() {
+                        return err(a.span(), vector_tile_msg("tile_map", &t));
+                    }
+                    v
+                }
+                Some(first) => {
+                    let first = first.clone();
+                    let v = self.expr(a, Some(&first))?;
+                    let t = self.ty(v);
+                    if !t.is_tile() {
+                        if !matches!(t, Ty::Scalar(s) if s != Scalar::Bool) {
+                            return err(
+                                a.span(),
+                                format!("`tile_map` broadcasts integer or float scalars (and takes tiles); argument {} is `{t}`{}", i + 1, if t.is_deferred() { " (a value whose type the kernel cannot see: bind it with a type, `let s: f32 = ..`)" } else { "" }),
+                            );
+                        }
+                        elems.push(t);
+                        vars.push(v);
+                        continue;
+                    }
+                    if t.is_vector_tile() {
+                        return err(a.span(), vector_tile_msg("tile_map", &t));
+                    }
+                    v
+                }
+            };
             let t = self.ty(v);
             let (e, d) = tile_parts(&t).expect("a tile");
             let d = d.to_vec();
@@ -880,19 +913,23 @@ impl Lowerer {
         ))
     }
 
-    /// `tile_reduce(f, t)`: a `Tile<T, 1>`; `f` must give `T` back.
+    /// `tile_reduce(f, t)`: a `Tile<T, 1>`; `f` must give `T` back. A user `#[func]` is taken
+    /// as `f(T, T) -> T`, which rustc checks at its path (`TileMapFn<(T, T), T>`).
     fn tile_reduce(&mut self, args: &[&Expr], span: Span) -> R<VarId> {
         let [f, t] = args[..] else {
             return err(
                 span,
-                "`tile_reduce` takes a function and a tile: `tile_reduce(max, t)`",
+                "`tile_reduce` takes a function and a tile: `tile_reduce(max, t)`, `tile_reduce(my_func, t)`",
             );
         };
-        let f = self.tile_fn("tile_reduce", f, 2, false)?;
+        let f = self.tile_fn("tile_reduce", f, 2)?;
         let v = self.scalar_tile_arg("tile_reduce", t)?;
         let tt = self.ty(v);
         let e = tile_parts(&tt).expect("a tile").0.clone();
-        let r = self.tile_fn_result("tile_reduce", f, &[e.clone(), e.clone()], args[0].span())?;
+        let r = match f {
+            TileFn::Func(_) => e.clone(),
+            _ => self.tile_fn_result("tile_reduce", f, &[e.clone(), e.clone()], args[0].span())?,
+        };
         if r != e {
             return err(
                 args[0].span(),
@@ -1237,4 +1274,9 @@ impl Lowerer {
         let row = builtins::lookup("tile_extract").expect("the tile_extract row");
         Ok(self.def(Op::Builtin { builtin: row, args }, e, span))
     }
+}
+
+/// The error for a tile of vectors where an operation takes tiles of scalars.
+fn vector_tile_msg(name: &str, t: &Ty) -> String {
+    format!("`{name}` takes a tile of scalars, found `{t}`: tiles of `Vec2`/`DVec2` support loads, stores, `t[(i, j)]`, `tile_zeros`, `+`, `-`, `*` by a scalar, `tile_fft` and `tile_ifft`")
 }

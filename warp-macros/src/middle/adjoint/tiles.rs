@@ -538,6 +538,11 @@ impl Cx<'_> {
                     }
                 }
             }
+            Op::TileMap { f: g, args } if args.iter().any(|a| !tile(*a)) => {
+                if !self.tile_map_consts_adj(&mut b, *g, args, dst, sp) {
+                    return Some(Vec::new());
+                }
+            }
             Op::TileMap { f: g, args } => match g {
                 TileFn::Builtin(bi) if bi.grad == Grad::Zero => {}
                 TileFn::Builtin(bi) if bi.grad != Grad::Adjoint => {
@@ -584,6 +589,25 @@ impl Cx<'_> {
             // Warp differentiates no other reduction either; a silent zero would be a wrong
             // gradient.
             Op::TileReduce { f: g, arg } => {
+                // Warp differentiates no `tile_reduce` of a user func either: its adjoint
+                // would replay the reduction tree, keeping every partial. A result that
+                // carries no gradient (integers, or values of no differentiable input) needs
+                // no adjoint, so only a differentiable one is refused.
+                if let TileFn::Func(k) = g {
+                    if !self.diff(dst) {
+                        return Some(Vec::new());
+                    }
+                    let name = f.callees.get(*k).map_or_else(
+                        || "the func".to_string(),
+                        |p| {
+                            quote::ToTokens::to_token_stream(p)
+                                .to_string()
+                                .replace(' ', "")
+                        },
+                    );
+                    self.refuse(&format!("`tile_reduce({name}, ..)` (a reduction with a user #[func]; Warp differentiates none: reduce with `add` or `tile_sum`, or keep it out of the differentiated kernel)"));
+                    return Some(Vec::new());
+                }
                 if !matches!(g, TileFn::Op(BinOp::Add)) {
                     self.refuse("tile_reduce with anything but `add`");
                     return Some(Vec::new());
@@ -662,6 +686,68 @@ impl Cx<'_> {
                 self.accum(out, v, Vec::new(), GradSrc::Temp(k), sp);
             }
         }
+    }
+
+    /// The adjoint of `tile_map` with scalar constants (broadcast to every element) into `b`;
+    /// false where it is refused. The constants' adjoints are temporaries the map's adjoint
+    /// fills (each element's contribution, summed in the reductions' order), then added to
+    /// the constants' own. An integer constant's temporary stays zero and is dropped; a result
+    /// that carries no gradient needs nothing.
+    fn tile_map_consts_adj(
+        &mut self,
+        b: &mut Vec<AStmt>,
+        g: TileFn,
+        args: &[VarId],
+        dst: VarId,
+        sp: Span,
+    ) -> bool {
+        use crate::types::Ty;
+        let f = self.f;
+        let tile = |v: VarId| f.ty(v).is_tile();
+        if !self.diff(dst) {
+            return true;
+        }
+        let float_tile = |v: VarId| matches!(f.ty(v), Ty::Tile(e, _) if matches!(**e, Ty::Scalar(s) if s.is_float()));
+        match g {
+            TileFn::Builtin(bi) if bi.grad == Grad::Zero => return true,
+            TileFn::Builtin(bi) if bi.grad != Grad::Adjoint => {
+                self.refuse(&format!("tile_map({}, ..)", bi.name));
+                return false;
+            }
+            // As without constants: an integer tile beside float ones would need an adjoint
+            // tile of integers.
+            TileFn::Func(_) if !args.iter().filter(|a| tile(**a)).all(|a| float_tile(*a)) => {
+                self.refuse("tile_map of a func over integer and float tiles together");
+                return false;
+            }
+            _ => {}
+        }
+        let mut grads = Vec::new();
+        for (k, &a) in args.iter().enumerate() {
+            if tile(a) {
+                grads.push(GradArg::Adj(a));
+            } else {
+                let like = TempLike::Var(a);
+                b.push(at(AKind::ZeroTemp { k, like }, sp));
+                grads.push(GradArg::Temp(k));
+            }
+        }
+        let values = args.to_vec();
+        b.push(at(
+            AKind::TileMapAdj {
+                f: g,
+                values,
+                grads,
+                dst,
+            },
+            sp,
+        ));
+        for (k, &a) in args.iter().enumerate() {
+            if !tile(a) && matches!(f.ty(a), Ty::Scalar(s) if s.is_float()) {
+                self.accum(b, a, Vec::new(), GradSrc::Temp(k), sp);
+            }
+        }
+        true
     }
 
     /// Records that backward through `what` is not supported yet.
