@@ -197,6 +197,13 @@ impl Sim {
                 "tile_nbody Sim::new: dt must be finite (got {dt:?})"
             )));
         }
+        // The kernels index bodies with i32 tile offsets.
+        if n > i32::MAX as usize {
+            return Err(invalid(format!(
+                "tile_nbody Sim::new: at most {} bodies (the kernels' tile offsets are i32), got {n}",
+                i32::MAX
+            )));
+        }
         if kernel == (Kernel::Tiled { block_dim: 0 }) {
             return Err(invalid(
                 "tile_nbody Sim::new: block_dim must be at least 1 (got 0)".into(),
