@@ -364,15 +364,15 @@ constexpr bool swz_ok = U % 8 == 0 || U == 4 || U == 2 || U == 1;
 
 /// Shared memory the runtime gave the block's pipelined k-loops beyond its tiles' slots, at the
 /// end of the block's dynamic shared memory, 1024-byte aligned (0: none). The runtime grants
-/// what `TileInfo::pipe_extra_bytes` asks (warp-runtime's `tile_pipe_extra_bytes`, which
+/// what `TileInfo::pipe_extra_bytes` asks (warp-runtime's `TileInfo::pipe_extra_for`, which
 /// counts the stages up to MAX_STAGES below) where it costs the kernel no blocks per SM.
 #if defined(WP_TILE_PIPE_EXTRA) && defined(WP_TILE_SMEM_BYTES)
 constexpr int PIPE_EXTRA = WP_TILE_PIPE_EXTRA;
 #else
 constexpr int PIPE_EXTRA = 0;
 #endif
-/// The most stages a pipelined k-loop uses (warp-runtime's `tile_pipe_extra_bytes` asks for
-/// no more).
+/// The most stages a pipelined k-loop uses (warp-runtime's `TileInfo::PIPE_MAX_STAGES`, which
+/// must agree).
 constexpr int MAX_STAGES = 4;
 
 /// The plan of the pipelined k-loop of an M x K by K x N f16 product.
@@ -604,7 +604,7 @@ WP_FN void tile_matmul(const tile_t<bf16, M, N>& c, const tile_t<bf16, M, K>& a,
 ///
 /// with f16 tiles and an f32 accumulator (back/cuda_tile_pipe.rs states when it applies). The
 /// accumulator stays in the mma fragments for the whole loop (loaded from `c` at `begin`,
-/// written back at `end`), and each iteration's loads are issued STAGES - 1 iterations ahead
+/// written back at `end`), and each iteration's loads are issued AHEAD iterations ahead
 /// with cp.async into stage buffers, so global-memory latency overlaps the tensor cores. The
 /// products are those of `tile_matmul_acc`'s tensor-core path, in the same order (per output,
 /// the k-steps of 16 ascending, iteration after iteration), so the results are the same bits.

@@ -23,7 +23,7 @@
 //! The loop qualifies when nothing else can observe the difference: the loop is a plain
 //! `a..b` over an integer; its body is the two loads, the accumulating `tile_matmul` last,
 //! and otherwise only `let`s of pure scalar arithmetic (which the pipelined form evaluates for
-//! iteration `k + STAGES - 1` while iteration `k` multiplies); the loaded tiles are read by
+//! iteration `k + AHEAD` while iteration `k` multiplies); the loaded tiles are read by
 //! nothing but that `tile_matmul`, anywhere in the kernel.
 
 use super::cuda::Emitter;

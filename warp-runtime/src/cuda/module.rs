@@ -222,80 +222,54 @@ pub(crate) fn loaded(
         None => source::assemble(info),
     };
     let stack_define = adjoint.map(|b| b.to_string());
-    let shared = match block_dim {
-        Some(_) => tile_shared(info, adjoint.is_some(), &SharedLimits::of(&st.gpu, device)?),
+    let unit = |shared: TileShared| {
+        let tile = block_dim.map(|block_dim| TileDefines {
+            block_dim,
+            shared_bytes: shared.bytes,
+            pipe_extra: shared.pipe_extra,
+        });
+        compile_unit(
+            device,
+            &st,
+            info,
+            &src,
+            (contiguous, adjoint),
+            stack_define.as_deref(),
+            tile,
+        )
+    };
+    let mut shared = match block_dim {
+        Some(_) => tile_shared(info, adjoint.is_some(), arch, || {
+            SharedLimits::of(&st.gpu, device)
+        })?,
         None => TileShared::default(),
     };
-    let tile_shared = shared.bytes;
-    let tile = block_dim.map(|block_dim| TileDefines {
-        block_dim,
-        shared_bytes: shared.bytes,
-        pipe_extra: shared.pipe_extra,
-    });
-    let (compiled, outcome, aot, entry) = with_compile_options(
-        contiguous,
-        stack_define.as_deref(),
-        needs_exact(&src.headers),
-        tile,
-        |opts| {
-            // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
-            if let Some((cubin, key, path)) = aot::lookup(&src.text, info.name, opts, arch) {
-                let c = warp_cuda::Compiled {
-                    cubin,
-                    log: String::new(),
-                    compile_ms: 0.0,
-                };
-                let entry = CacheEntry {
-                    key,
-                    path: Some(path),
-                };
-                return Ok((c, CacheOutcome::Hit, true, entry));
-            }
-            KernelCache::current()
-                .compile_cached_entry(&src.text, info.name, opts, arch)
-                .map(|(c, o, e)| (c, o, false, e))
-        },
-    )
-    .map_err(|e| err(device, e))?;
-    // A cubin from the disk cache or an ahead-of-time directory that the driver refuses is
-    // compiled again (and the cache entry replaced; an ahead-of-time file is left alone) before
-    // giving up: a second refusal is the error.
-    let (module, compiled, outcome, aot, entry) = match st.gpu.load_module(&compiled.cubin) {
-        Ok(module) => (module, compiled, outcome, aot, entry),
-        Err(e) if outcome == CacheOutcome::Hit => {
-            log::warn!(
-                "{} cubin {} of kernel {}::{} ({}, {}) failed to load on {device}: {e}; \
-                 compiling it again",
-                if aot { "ahead-of-time" } else { "cached" },
-                entry
-                    .path
-                    .as_deref()
-                    .map_or("(no file)".into(), |p| p.display().to_string()),
+    let (mut module, mut compiled, mut outcome, mut aot, mut entry) = unit(shared)?;
+    let mut function = module.function(&src.entry).map_err(|e| err(device, e))?;
+    // The extra stages were granted counting no static shared memory: with the unit's own,
+    // the block must still fit and a multiprocessor hold as many blocks, or the unit is
+    // compiled again without them.
+    if shared.pipe_extra > 0 {
+        let static_bytes = function.static_shared_bytes().map_err(|e| err(device, e))?;
+        let limits = SharedLimits::of(&st.gpu, device)?;
+        let slots = info.tile.map_or(0, |t| t.shared_bytes);
+        if !limits.grants(slots, shared.bytes, static_bytes) {
+            log::debug!(
+                "kernel {}::{}: {static_bytes} bytes of static shared memory take back the \
+                 pipelined loops' extra {} bytes; compiling it without them",
                 info.module,
                 info.name,
-                variant_name(adjoint),
-                layout_name(contiguous)
+                shared.pipe_extra
             );
-            let bad = if aot { None } else { entry.path.as_deref() };
-            let (fresh, fresh_entry) = with_compile_options(
-                contiguous,
-                stack_define.as_deref(),
-                needs_exact(&src.headers),
-                tile,
-                |opts| {
-                    KernelCache::current().recompile_entry(&src.text, info.name, opts, arch, bad)
-                },
-            )
-            .map_err(|e| err(device, e))?;
-            let module = st
-                .gpu
-                .load_module(&fresh.cubin)
-                .map_err(|e| err(device, e))?;
-            (module, fresh, CacheOutcome::Rebuilt, false, fresh_entry)
+            shared = TileShared {
+                bytes: slots,
+                pipe_extra: 0,
+            };
+            (module, compiled, outcome, aot, entry) = unit(shared)?;
+            function = module.function(&src.entry).map_err(|e| err(device, e))?;
         }
-        Err(e) => return Err(err(device, e)),
-    };
-    let function = module.function(&src.entry).map_err(|e| err(device, e))?;
+    }
+    let tile_shared = shared.bytes;
     if let Some(bd) = block_dim {
         let f = |e| err(device, e);
         let budget = TileBudget {
@@ -360,6 +334,94 @@ pub(crate) fn loaded(
     Ok(l)
 }
 
+/// What [`compile_unit`] gives: the loaded module, the compile, whether it came from a cache
+/// (and which), and its cache entry.
+type Unit = (
+    warp_cuda::Module,
+    warp_cuda::Compiled,
+    CacheOutcome,
+    bool,
+    CacheEntry,
+);
+
+/// Compiles `info`'s unit `src` (the variant of `contiguous` and `adjoint`) with the options of
+/// `stack_define` and `tile` (or finds it in the ahead-of-time directory or the kernel cache) and loads it on `st`'s GPU.
+fn compile_unit(
+    device: &Device,
+    st: &GpuState,
+    info: &'static KernelInfo,
+    src: &source::CudaSource,
+    (contiguous, adjoint): (bool, Option<usize>),
+    stack_define: Option<&str>,
+    tile: Option<TileDefines>,
+) -> Result<Unit> {
+    let arch = st.gpu.arch();
+    let (compiled, outcome, aot, entry) = with_compile_options(
+        contiguous,
+        stack_define,
+        needs_exact(&src.headers),
+        tile,
+        |opts| {
+            // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
+            if let Some((cubin, key, path)) = aot::lookup(&src.text, info.name, opts, arch) {
+                let c = warp_cuda::Compiled {
+                    cubin,
+                    log: String::new(),
+                    compile_ms: 0.0,
+                };
+                let entry = CacheEntry {
+                    key,
+                    path: Some(path),
+                };
+                return Ok((c, CacheOutcome::Hit, true, entry));
+            }
+            KernelCache::current()
+                .compile_cached_entry(&src.text, info.name, opts, arch)
+                .map(|(c, o, e)| (c, o, false, e))
+        },
+    )
+    .map_err(|e| err(device, e))?;
+    // A cubin from the disk cache or an ahead-of-time directory that the driver refuses is
+    // compiled again (and the cache entry replaced; an ahead-of-time file is left alone) before
+    // giving up: a second refusal is the error.
+    let (module, compiled, outcome, aot, entry) = match st.gpu.load_module(&compiled.cubin) {
+        Ok(module) => (module, compiled, outcome, aot, entry),
+        Err(e) if outcome == CacheOutcome::Hit => {
+            log::warn!(
+                "{} cubin {} of kernel {}::{} ({}, {}) failed to load on {device}: {e}; \
+                 compiling it again",
+                if aot { "ahead-of-time" } else { "cached" },
+                entry
+                    .path
+                    .as_deref()
+                    .map_or("(no file)".into(), |p| p.display().to_string()),
+                info.module,
+                info.name,
+                variant_name(adjoint),
+                layout_name(contiguous)
+            );
+            let bad = if aot { None } else { entry.path.as_deref() };
+            let (fresh, fresh_entry) = with_compile_options(
+                contiguous,
+                stack_define,
+                needs_exact(&src.headers),
+                tile,
+                |opts| {
+                    KernelCache::current().recompile_entry(&src.text, info.name, opts, arch, bad)
+                },
+            )
+            .map_err(|e| err(device, e))?;
+            let module = st
+                .gpu
+                .load_module(&fresh.cubin)
+                .map_err(|e| err(device, e))?;
+            (module, fresh, CacheOutcome::Rebuilt, false, fresh_entry)
+        }
+        Err(e) => return Err(err(device, e)),
+    };
+    Ok((module, compiled, outcome, aot, entry))
+}
+
 /// What a GPU's shared memory allows a block: [`tile_shared`]'s view of the device.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SharedLimits {
@@ -381,9 +443,18 @@ impl SharedLimits {
         })
     }
 
-    /// Blocks of `bytes` dynamic shared memory a multiprocessor holds, by shared memory alone.
+    /// Blocks of `bytes` shared memory a multiprocessor holds, by shared memory alone.
     fn blocks(&self, bytes: usize) -> usize {
         self.per_sm / (bytes + self.reserved).max(1)
+    }
+
+    /// Whether a block of `slots` bytes of dynamic shared memory and `static_bytes` of static
+    /// may take `total` dynamic instead: it still fits, and a multiprocessor holds as many.
+    fn grants(&self, slots: usize, total: usize, static_bytes: usize) -> bool {
+        let blocks = self.blocks(slots + static_bytes);
+        total + static_bytes <= self.per_block
+            && blocks >= 1
+            && self.blocks(total + static_bytes) == blocks
     }
 }
 
@@ -400,44 +471,45 @@ pub(crate) struct TileShared {
 /// The alignment of the pipe's extra shared memory: wgmma's swizzle patterns' period.
 const PIPE_EXTRA_ALIGN: usize = 1024;
 
-/// Shared memory left to static declarations when the extra is granted (the forward tile
-/// library declares none; the budget check after compiling counts what there is).
-const STATIC_ROOM: usize = 1024;
-
 /// The dynamic shared memory one block of `info`'s forward unit (or adjoint unit) takes on a
-/// GPU with `limits`: the tiles' slots (`TileInfo::shared_bytes`, or `adjoint_shared_bytes`),
-/// and for the forward unit the extra its pipelined GEMM k-loops ask for
-/// (`TileInfo::pipe_extra_bytes`) where the block then still fits and the multiprocessor still
-/// holds as many blocks (more stages in flight at the price of occupancy measured slower: on
-/// an H200 at 4096^3 with 128 x 128 x 64 tiles, 0.47 ms against 0.40 ms). 0 for an ordinary
-/// kernel.
-pub(crate) fn tile_shared(info: &KernelInfo, adjoint: bool, limits: &SharedLimits) -> TileShared {
+/// GPU of compute capability `arch` with `limits`: the tiles' slots (`TileInfo::shared_bytes`,
+/// or `adjoint_shared_bytes`), and for the forward unit on sm_80+ (where the pipelined loops
+/// run) the extra its pipelined GEMM k-loops ask for (`TileInfo::pipe_extra_bytes`) where the
+/// block then still fits and the multiprocessor still holds as many blocks (more stages in
+/// flight at the price of occupancy measured slower: on an H200 at 4096^3 with 128 x 128 x 64
+/// tiles, 0.47 ms against 0.40 ms). The unit's static shared memory is not known before it is
+/// compiled: `loaded` checks the grant again with it. 0 for an ordinary kernel. `limits` is
+/// asked only when there is an extra to grant.
+pub(crate) fn tile_shared(
+    info: &KernelInfo,
+    adjoint: bool,
+    arch: u32,
+    limits: impl FnOnce() -> Result<SharedLimits>,
+) -> Result<TileShared> {
     let Some(t) = info.tile else {
-        return TileShared::default();
+        return Ok(TileShared::default());
     };
-    if adjoint {
-        return TileShared {
-            bytes: t.adjoint_shared_bytes,
-            pipe_extra: 0,
-        };
-    }
+    let slots = if adjoint {
+        t.adjoint_shared_bytes
+    } else {
+        t.shared_bytes
+    };
     let plain = TileShared {
-        bytes: t.shared_bytes,
+        bytes: slots,
         pipe_extra: 0,
     };
-    if t.pipe_extra_bytes == 0 {
-        return plain;
+    if adjoint || t.pipe_extra_bytes == 0 || arch < 80 {
+        return Ok(plain);
     }
-    let total = t.shared_bytes.next_multiple_of(PIPE_EXTRA_ALIGN) + t.pipe_extra_bytes;
-    let blocks = limits.blocks(t.shared_bytes);
-    if total + STATIC_ROOM <= limits.per_block && blocks >= 1 && limits.blocks(total) == blocks {
+    let total = slots.next_multiple_of(PIPE_EXTRA_ALIGN) + t.pipe_extra_bytes;
+    Ok(if limits()?.grants(slots, total, 0) {
         TileShared {
             bytes: total,
             pipe_extra: t.pipe_extra_bytes,
         }
     } else {
         plain
-    }
+    })
 }
 
 /// The dynamic shared memory a launch may ask for without the kernel opting in: 48 KiB.
@@ -708,6 +780,11 @@ mod tests {
         }
     }
 
+    /// [`tile_shared`] on an sm_90 GPU with `limits`.
+    fn shared_on(info: &KernelInfo, adjoint: bool, limits: SharedLimits) -> TileShared {
+        tile_shared(info, adjoint, 90, || Ok(limits)).unwrap()
+    }
+
     /// Forward and adjoint units take their own shared memory; ordinary kernels none.
     #[test]
     fn units_take_their_own_shared_memory() {
@@ -715,13 +792,20 @@ mod tests {
             bytes,
             pipe_extra: 0,
         };
-        assert_eq!(tile_shared(&tiled(4096, 0), false, &HOPPER), plain(4096));
-        assert_eq!(tile_shared(&tiled(4096, 0), true, &HOPPER), plain(8192));
-        assert_eq!(tile_shared(&KernelInfo::BLANK, false, &HOPPER), plain(0));
+        assert_eq!(shared_on(&tiled(4096, 0), false, HOPPER), plain(4096));
+        assert_eq!(shared_on(&tiled(4096, 0), true, HOPPER), plain(8192));
+        assert_eq!(shared_on(&KernelInfo::BLANK, false, HOPPER), plain(0));
+        // Without an extra to grant, the device is not asked.
+        let unasked = || -> crate::error::Result<SharedLimits> { panic!("limits asked") };
+        assert_eq!(
+            tile_shared(&tiled(4096, 0), false, 90, unasked).unwrap(),
+            plain(4096)
+        );
     }
 
     /// The pipelined GEMM loops' extra stages are granted, 1024-byte aligned at the end, where
-    /// the block still fits and a multiprocessor holds as many blocks; never to the adjoint.
+    /// the block still fits and a multiprocessor holds as many blocks; never to the adjoint,
+    /// nor below sm_80 (where the loops are not pipelined).
     #[test]
     fn pipe_extra_stages_are_granted_where_they_cost_no_blocks() {
         // 128 x 256 x 64 f16 tiles: a 128 KiB accumulator holds two stages of 48 KiB, the
@@ -731,7 +815,7 @@ mod tests {
         assert_eq!(want, 48 * 1024);
         let base = acc + a + b;
         assert_eq!(
-            tile_shared(&tiled(base, want), false, &HOPPER),
+            shared_on(&tiled(base, want), false, HOPPER),
             TileShared {
                 bytes: base + want,
                 pipe_extra: want,
@@ -739,16 +823,20 @@ mod tests {
         );
         // Unaligned slots: the extra starts at the next 1024 bytes.
         assert_eq!(
-            tile_shared(&tiled(base - 16, want), false, &HOPPER).bytes,
+            shared_on(&tiled(base - 16, want), false, HOPPER).bytes,
             base + want
         );
-        assert_eq!(tile_shared(&tiled(base, want), true, &HOPPER).pipe_extra, 0);
+        assert_eq!(shared_on(&tiled(base, want), true, HOPPER).pipe_extra, 0);
+        let sm80 = tile_shared(&tiled(base, want), false, 80, || Ok(HOPPER)).unwrap();
+        assert_eq!(sm80.pipe_extra, want);
+        let sm75 = tile_shared(&tiled(base, want), false, 75, || Ok(HOPPER)).unwrap();
+        assert_eq!(sm75.pipe_extra, 0);
         // 128 x 128 x 64: two blocks an SM without the extra stage, one with it: not granted.
         let (acc, a, b) = (128 * 128 * 4, 128 * 64 * 2, 64 * 128 * 2);
         let want = TileInfo::pipe_extra_for(acc, a, b);
         assert_eq!(want, 32 * 1024);
         assert_eq!(
-            tile_shared(&tiled(acc + a + b, want), false, &HOPPER).pipe_extra,
+            shared_on(&tiled(acc + a + b, want), false, HOPPER).pipe_extra,
             0
         );
         // A GPU whose blocks cannot have it (an sm_80-class 163 KiB block): not granted.
@@ -758,7 +846,7 @@ mod tests {
             ..HOPPER
         };
         assert_eq!(
-            tile_shared(&tiled(128 * 1024, 48 * 1024), false, &small),
+            shared_on(&tiled(128 * 1024, 48 * 1024), false, small),
             TileShared {
                 bytes: 128 * 1024,
                 pipe_extra: 0,
@@ -768,6 +856,23 @@ mod tests {
         assert_eq!(TileInfo::pipe_extra_for(3 * 8192, 4096, 4096), 0);
         assert_eq!(TileInfo::pipe_extra_for(2 * 8192, 4096, 4096), 8192);
         assert_eq!(TileInfo::pipe_extra_for(0, 0, 0), 0);
+    }
+
+    /// The grant counted again with the unit's static shared memory (`loaded` recompiles
+    /// without the extra when it no longer holds): the block must still fit, and a
+    /// multiprocessor hold as many blocks.
+    #[test]
+    fn static_shared_memory_can_take_the_grant_back() {
+        let (slots, total) = (176 * 1024, 224 * 1024);
+        assert!(HOPPER.grants(slots, total, 0));
+        assert!(HOPPER.grants(slots, total, 3 * 1024));
+        // A tile_sort's keys of 4 KiB: 228 KiB, more than a block may have.
+        assert!(!HOPPER.grants(slots, total, 4 * 1024));
+        // Two blocks an SM with 12 KiB of static memory and 100 KiB of slots; one with 10 KiB
+        // more.
+        assert!(HOPPER.grants(100 * 1024, 101 * 1024, 12 * 1024));
+        assert!(!HOPPER.grants(100 * 1024, 110 * 1024, 12 * 1024));
+        assert!(HOPPER.grants(100 * 1024, 110 * 1024, 0));
     }
 
     #[test]
