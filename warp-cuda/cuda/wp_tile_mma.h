@@ -521,34 +521,10 @@ WP_FN void tile_matmul(const tile_t<f16, M, N>& c, const tile_t<f16, M, K>& a,
 }
 
 // ---- bf16 ----------------------------------------------------------------------------------
-// bf16 (Warp's bfloat16): the bit pattern of `half::bf16` (warp-core's `bf16`), a tile element
-// for loads and stores (wp_tile.h's, generic over the element) and this matmul with an f32
-// accumulator. Conversions in software on every architecture, as warp-core's (`half`): to f32
-// exact (the top half of its bits), from f32 rounded to nearest even, NaN kept NaN (the top
-// bits with the quiet bit set), so both backends give the same bits. The matmul takes the FMA
-// path only: each output one f32 chain of exact products (8 significant bits each) over k
-// ascending, bit for bit warp-core's; the bf16 tensor-core instruction
-// (`mma.sync.aligned.m16n8k16.row.col.f32.bf16.bf16.f32`) is not used yet, and the kernel
-// language does not name bf16 yet (the tiles chapter's "Not yet").
-
-struct bf16 {
-  u16 bits;
-};
-static_assert(sizeof(bf16) == 2 && alignof(bf16) == 2, "bf16 layout (half::bf16)");
-
-WP_FN bf16 bf16_from_bits(u16 b) {
-  bf16 h;
-  h.bits = b;
-  return h;
-}
-WP_FN f32 bf16_to_f32(bf16 h) { return f32_from_bits((u32)h.bits << 16); }
-WP_FN bf16 bf16_from_f32(f32 x) {
-  const u32 u = f32_to_bits(x);
-  if ((u & 0x7FFFFFFFu) > 0x7F800000u) return bf16_from_bits((u16)((u >> 16) | 0x0040u));
-  // Round bit set, and a sticky bit or the kept lowest bit set: up (ties to even).
-  const bool up = (u & 0x8000u) != 0 && (u & 0x17FFFu) != 0;
-  return bf16_from_bits((u16)((u >> 16) + (up ? 1u : 0u)));
-}
+// bf16 (Warp's bfloat16; the scalar is wp_core.h's `wp::bf16`): this matmul with an f32
+// accumulator. It takes the FMA path only: each output one f32 chain of exact products (8
+// significant bits each) over k ascending, bit for bit warp-core's; the bf16 tensor-core
+// instruction (`mma.sync.aligned.m16n8k16.row.col.f32.bf16.bf16.f32`) is not used yet.
 
 namespace tile_mma_detail {
 /// The FMA path for bf16 operands: `Acc` as matmul_fma's (from `c` in f32, or from +0 rounded
