@@ -7,10 +7,11 @@
 //! operation and rounds once to nearest even, in software on both backends (`half`'s rounding,
 //! transcribed in `wp_core.h`), so `+ - * / %`, casts and the exact builtins are compared bit
 //! for bit, NaNs included. The transcendental builtins are each platform's f32 functions, a few
-//! f32 ulp apart, so they may differ by one bf16 ulp on CUDA. The tile matmul is one f32 FMA
-//! chain per output in ascending k on both backends (CUDA's bf16 matmul takes the FMA path),
-//! so it is compared bit for bit with the host's chain, and against f64 within the bound
-//! stated at `bf16_gemm_accumulates_in_f32`.
+//! f32 ulp apart, so they may differ by one bf16 ulp on CUDA. The tile matmul's FMA path (the
+//! CPU; CUDA below sm_80, or for shapes or blocks the tensor cores do not take) is one f32 FMA
+//! chain per output in ascending k, compared bit for bit with the host's chain; CUDA's tensor
+//! cores (`mma.sync` m16n8k16 `.bf16`) sum each k-step in their own order, so there the matmul
+//! is compared with f64 only, within the bound stated at `bf16_gemm_accumulates_in_f32`.
 
 // The kernel language has no `div_ceil` yet: kernels round up with `(n + d - 1) / d`.
 #![allow(clippy::manual_div_ceil)]
@@ -522,12 +523,14 @@ fn k_gemm(a: Array<bf16, 2>, b: Array<bf16, 2>, c: Array<f32, 2>, d: Array<bf16,
 /// the first k-step.
 ///
 /// Tolerance: the product of two bf16 values (8 significant bits each) has at most 16 bits
-/// and is exact in f32, so the only errors are the f32 chain's roundings, at most K 2^-24
-/// sum_k |a||b| (K additions, each off by half an f32 ulp of the running magnitude, itself at
-/// most sum |a||b|); the test allows `K 2^-23 sum |a||b|` against the f64 product of the same
-/// bf16 inputs, plus half a bf16 ulp (2^-8 relative to the result) for the bf16 result. Both
-/// backends run the same f32 FMA chain in ascending k, so they also equal the host's chain bit
-/// for bit.
+/// and is exact in f32, so the only errors are the f32 accumulation's roundings: the FMA chain
+/// is within K 2^-24 sum_k |a||b| (K additions, each off by half an f32 ulp of the running
+/// magnitude, itself at most sum |a||b|); the tensor cores, which may truncate rather than
+/// round at each addition, within K 2^-23 sum |a||b|. The test allows `K 2^-22 sum |a||b|`
+/// against the f64 product of the same bf16 inputs, plus half a bf16 ulp (2^-8 relative to the
+/// result) for the bf16 result. Block size 1 (and the CPU at every block size) takes the FMA
+/// path and equals the host's chain bit for bit; on CUDA, block sizes 32 and 128 (whole warps,
+/// 16 x 16 x 16 operands) take the tensor cores on sm_80+.
 fn bf16_gemm_accumulates_in_f32(dev: &wp::Device) {
     let (m, k, n) = (37usize, 45usize, 29usize);
     let vals = |len: usize, seed: usize| -> Vec<bf16> {
@@ -550,6 +553,8 @@ fn bf16_gemm_accumulates_in_f32(dev: &wp::Device) {
         )
         .unwrap();
         let (gc, gd) = (host(&c), host(&d));
+        // The FMA path: the CPU, or a block of fewer than a warp on CUDA.
+        let exact_chain = dev.is_cpu() || bd % 32 != 0;
         for i in 0..m {
             for j in 0..n {
                 let chain = |ks: std::ops::Range<usize>| {
@@ -564,20 +569,24 @@ fn bf16_gemm_accumulates_in_f32(dev: &wp::Device) {
                 };
                 let (acc, exact, mag) = chain(0..k);
                 let got = gc[i * n + j];
-                assert_eq!(
-                    got.to_bits(),
-                    acc.to_bits(),
-                    "c[{i}][{j}] at block_dim {bd}"
-                );
-                let tol = k as f64 * 2f64.powi(-23) * mag;
+                if exact_chain {
+                    assert_eq!(
+                        got.to_bits(),
+                        acc.to_bits(),
+                        "c[{i}][{j}] at block_dim {bd}"
+                    );
+                }
+                let tol = k as f64 * 2f64.powi(-22) * mag;
                 assert!(
                     (got as f64 - exact).abs() <= tol,
                     "c[{i}][{j}]: {got} vs {exact} (tol {tol:e})"
                 );
                 let (acc1, exact1, mag1) = chain(0..GK.min(k));
                 let gotd = gd[i * n + j];
-                assert_eq!(gotd, b(acc1), "d[{i}][{j}] at block_dim {bd}");
-                let tol = GK as f64 * 2f64.powi(-23) * mag1 + 2f64.powi(-8) * exact1.abs();
+                if exact_chain {
+                    assert_eq!(gotd, b(acc1), "d[{i}][{j}] at block_dim {bd}");
+                }
+                let tol = GK as f64 * 2f64.powi(-22) * mag1 + 2f64.powi(-8) * exact1.abs();
                 assert!(
                     (gotd.to_f64() - exact1).abs() <= tol,
                     "d[{i}][{j}]: {gotd} vs {exact1} (tol {tol:e})"
