@@ -30,6 +30,7 @@ backend_tests!(
     bf16_tiles_elementwise,
     bf16_gemm_accumulates_in_f32,
     bf16_tile_matmul_gradients,
+    bf16_dlpack_dtype,
 );
 
 fn b(x: f32) -> bf16 {
@@ -464,14 +465,22 @@ fn bf16_gradients_through_a_tape(dev: &wp::Device) {
 }
 
 #[wp::kernel]
-fn k_tile_ops(a: Array<bf16, 2>, out: Array<bf16, 2>, s: bf16) {
+fn k_tile_ops(a: Array<bf16, 2>, out: Array<bf16, 2>, s: bf16, red: Array<bf16>) {
     let (i, j) = tid();
     let t: Tile<bf16, 16, 8> = tile_load(a, ((i * 16) as i32, (j * 8) as i32));
     let u = -(t * s + t) - tile_ones::<bf16, 16, 8>();
     tile_store(out, tile_map(abs, u), ((i * 16) as i32, (j * 8) as i32));
+    let total = tile_sum(tile_map(sign, t));
+    let hi = tile_max(t);
+    if lane() == 0 && i == 0 && j == 0 {
+        red[0] = total[0];
+        red[1] = hi[0];
+    }
 }
 
-/// Tiles of bf16: a ragged load, `abs(-(t s + t) - 1)`, a store; bit for bit the host's.
+/// Tiles of bf16: a ragged load, `abs(-(t s + t) - 1)`, a store; bit for bit the host's. The
+/// first block's reductions: the sum of the signs (partial sums are integers of at most 128 in
+/// magnitude, exact in bf16 in any order) and the maximum (one of the values).
 fn bf16_tiles_elementwise(dev: &wp::Device) {
     let (m, n) = (37usize, 21usize);
     let data: Vec<bf16> = (0..m * n)
@@ -480,11 +489,21 @@ fn bf16_tiles_elementwise(dev: &wp::Device) {
     let a = wp::Array::from_slice_shape(&data, (m, n), dev).unwrap();
     let out = wp::Array::<bf16, 2>::zeros((m, n), dev).unwrap();
     let s = b(1.7);
+    let red = zeros::<bf16, 1>(2, dev);
+    let block0: Vec<f32> = (0..16)
+        .flat_map(|r| (0..8).map(move |c| r * n + c))
+        .map(|k| data[k].to_f32())
+        .collect();
+    let signs: f32 = block0
+        .iter()
+        .map(|x| if *x < 0.0 { -1.0 } else { 1.0 })
+        .sum();
+    let hi = block0.iter().copied().fold(f32::MIN, f32::max);
     for bd in [1, 32, 64] {
         wp::launch_tiled(
             k_tile_ops,
             (m.div_ceil(16), n.div_ceil(8)),
-            (&a, &out, s),
+            (&a, &out, s, &red),
             bd,
             dev,
         )
@@ -493,6 +512,11 @@ fn bf16_tiles_elementwise(dev: &wp::Device) {
             let want = b((-(x * s + x) - b(1.0)).to_f32().abs());
             same(g, want, &format!("element {k} at block_dim {bd}"));
         }
+        assert_eq!(
+            host(&red),
+            vec![b(signs), b(hi)],
+            "reductions at block_dim {bd}"
+        );
     }
 }
 
@@ -645,5 +669,32 @@ fn bf16_tile_matmul_gradients(dev: &wp::Device) {
             let want: f32 = (0..8).map(|i| av[i * 8 + kk].to_f32()).sum();
             assert_eq!(gb[kk * 8 + j], b(want), "adj_b[{kk}][{j}]");
         }
+    }
+}
+
+/// DLPack: a bf16 array exports as `kDLBfloat` (code 4), 16 bits, one lane (what PyTorch's
+/// `torch.bfloat16` is), imports back as the same memory, and refuses to import as f16.
+fn bf16_dlpack_dtype(dev: &wp::Device) {
+    use warp_runtime::dlpack::ffi::{DLDataType, DLDataTypeCode};
+    use warp_runtime::dlpack::versioned;
+    let xs: Vec<bf16> = [1.5f32, -2.0, 0.1, 3e38].map(b).to_vec();
+    let a = arr(&xs, dev);
+    let t: versioned::Dlpack = a.to_dlpack().unwrap();
+    {
+        let r = t.validate().unwrap();
+        assert!(r
+            .dtype()
+            .matches(DLDataType::scalar(DLDataTypeCode::BFLOAT, 16)));
+        assert_eq!(r.shape(), &[4]);
+    }
+    // SAFETY: this crate's export (valid until its deleter runs).
+    let back = unsafe { wp::Array::<bf16>::from_dlpack(t) }.unwrap();
+    assert_eq!(back.device_ptr(), a.device_ptr());
+    assert_eq!(host(&back), xs);
+    let t: versioned::Dlpack = a.to_dlpack().unwrap();
+    // SAFETY: rejected by its dtype before any access.
+    match unsafe { wp::Array::<f16>::from_dlpack(t) } {
+        Ok(_) => panic!("a bfloat16 tensor imported as f16"),
+        Err(e) => assert!(e.to_string().contains("bfloat16"), "{e}"),
     }
 }
