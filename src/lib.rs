@@ -123,6 +123,9 @@ pub use glam;
 /// `nalgebra` feature turns on.
 #[cfg(feature = "nalgebra")]
 pub use nalgebra;
+/// Brain float (Warp's `bfloat16`): the `half` crate's type, a scalar of the kernel language
+/// and a tile element (see `warp_core::bfloat16` for its arithmetic, casts and builtins).
+pub use warp_core::bf16;
 /// Half precision (Warp's `float16`): the `half` crate's type, a scalar of the kernel language
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::capability;
@@ -202,7 +205,7 @@ pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{f16, func, kernel, Array, DTransform, Float, Struct, Transform};
+    pub use crate::{bf16, f16, func, kernel, Array, DTransform, Float, Struct, Transform};
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -217,8 +220,8 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, block, builtins, f16, first_error, max_depth, objects, ops,
-        tile, zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo,
+        adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, max_depth, objects,
+        ops, tile, zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo,
         GradElement, GradView, Grid, KResult, RangeProg, Transform,
     };
     pub use warp_macros::__object_rows;

@@ -287,6 +287,42 @@ fn half_precision(a: Array<f32>, d: Array<f32>, out: Array<f32, 2>) {
     };
 }
 
+#[wp::func]
+fn bf16_poly(x: bf16, k: i32) -> bf16 {
+    x * x * 0.5 - (k as bf16) + 1.0
+}
+
+/// bf16, as `half_precision` does f16: operators, compound assignment, literals (rounded once,
+/// ties to even), casts from f32/f64/integers/f16 and to f32/i32/f16, a func's bf16 parameters
+/// and result, builtins.
+#[wp::kernel]
+fn brain_float(a: Array<f32>, d: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let x = a[i] as bf16;
+    let y = (d[i] as f64) as bf16;
+    let mut acc = x;
+    acc += 0.1;
+    acc *= y;
+    acc -= 1.00390625;
+    out[(i, 0)] = (x + y) as f32;
+    out[(i, 1)] = (x * y - 3.0) as f32;
+    out[(i, 2)] = (x / y) as f32;
+    out[(i, 3)] = (x % y) as f32;
+    out[(i, 4)] = acc as f32;
+    out[(i, 5)] = sqrt(abs(x)) as f32;
+    out[(i, 6)] = max(x, y).min(2.5) as f32;
+    out[(i, 7)] = bf16_poly(x, i as i32) as f32;
+    out[(i, 8)] = ((x * 1000.0) as i32) as f32;
+    out[(i, 9)] = (-x + bf16::MAX * 0.5 + y) as f32;
+    let big = (i as i64 * 33_554_435) as bf16;
+    out[(i, 10)] = big as f32;
+    out[(i, 11)] = if x < y {
+        floor(x * 3.0) as f32
+    } else {
+        ((lerp(x, y, 0.25) as f16) as bf16) as f32
+    };
+}
+
 /// The misc section: reductions and their overloads, copysign, nonzero, get_diag, norms
 /// (with the default delta), axis-angle (a tuple), roll-pitch-yaw, twists, compose and
 /// decompose (a tuple), classification of quaternions and matrices, `lower_bound` (both
@@ -758,6 +794,38 @@ fn f16_matches_the_cpu_backend() {
                 h == c || (nan(h) && nan(c)),
                 "element {k}: C++ {h}, CPU {c}"
             );
+        }
+    }
+}
+
+#[test]
+fn bf16_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..40).map(|k| k as f32 * 0.37 - 7.0).collect();
+    xs.extend([
+        0.5,
+        -2.5,
+        3.3e38,
+        1e-39,
+        -0.0,
+        f32::INFINITY,
+        f32::NAN,
+        70000.0,
+    ]);
+    let ds: Vec<f32> = xs.iter().rev().map(|x| x * 0.7 + 0.3).collect();
+    let n = xs.len();
+    let a = wp::Array::from_slice(&xs, &dev).unwrap();
+    let d = wp::Array::from_slice(&ds, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 12), &dev).unwrap();
+    let args = [Arg::F32s(&a), Arg::F32s(&d), Arg::F32Grid(&out)];
+    let host = run_on_host::<brain_float>(&[n], &args);
+    wp::launch(brain_float, n, (&a, &d, &out), &dev).unwrap();
+    if let Some(host) = host {
+        let cpu = cpu_results(&args);
+        assert_eq!(host.len(), cpu.len());
+        for (k, (h, c)) in host.iter().zip(&cpu).enumerate() {
+            // bf16 converts in software on both sides, so NaNs match too.
+            assert_eq!(h, c, "element {k}: C++ {h}, CPU {c}");
         }
     }
 }

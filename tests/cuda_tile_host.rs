@@ -926,7 +926,31 @@ fn f16_matmul_fma_path_matches() {
     }
 }
 
-/// The bf16 matmul of wp_tile_mma.h on the host (its FMA path, the only one bf16 has): `p = a b`
+/// wp_tile_mma.h's tensor-core path (device code for sm_80+, which no host driver runs)
+/// type-checks for f16 and bf16 operands: `g++ -fsyntax-only` over
+/// `cuda/tests/wp_tile_mma_syntax.cpp`, which fakes `__CUDA_ARCH__` and instantiates both
+/// element types' matmuls on tensor-core shapes.
+#[test]
+fn tensor_core_path_type_checks_for_f16_and_bf16() {
+    if !have_gpp() {
+        return;
+    }
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let out = Command::new("g++")
+        .args(["-std=c++17", "-fsyntax-only", "-ffp-contract=off"])
+        .args(["-Wall", "-Wextra", "-Werror", "-DWP_TILE_BLOCK_DIM=64"])
+        .args(["-I", include, "-I", &format!("{include}/tests")])
+        .arg(format!("{include}/tests/wp_tile_mma_syntax.cpp"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "g++: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The bf16 matmul of wp_tile_mma.h on the host (its FMA path; the tensor cores are device-only): `p = a b`
 /// rounded once to bf16 and `c += a b` in f32, against warp-core's bf16 matmul, bit for bit
 /// (both are f32 chains of exact products in ascending k; the conversions are the same bit
 /// operations), at every block size.

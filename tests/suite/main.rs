@@ -86,6 +86,7 @@ fn gpu_lock() -> std::sync::MutexGuard<'static, ()> {
 mod arith;
 mod arrays;
 mod atomics;
+mod bf16;
 mod builtins;
 mod bvh;
 mod checkpoint;

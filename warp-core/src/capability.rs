@@ -20,8 +20,8 @@ pub enum Capability {
     /// `atomic_add` and `atomic_sub` on f64 elements (and f64 vector components), and an
     /// adjoint's gradient accumulation into f64 arrays and volumes.
     AtomicAddF64,
-    /// Atomics on f16 elements (`atomic_add`, `atomic_sub`, `atomic_min`, `atomic_max`), and an
-    /// adjoint's gradient accumulation into f16 arrays.
+    /// Atomics on f16 and bf16 elements (`atomic_add`, `atomic_sub`, `atomic_min`,
+    /// `atomic_max`), and an adjoint's gradient accumulation into f16 and bf16 arrays.
     AtomicF16,
     /// `atomic_min`, `atomic_max`, `atomic_and`, `atomic_or` and `atomic_xor` on 64-bit integer
     /// elements (i64, u64, isize, usize).
@@ -60,7 +60,7 @@ pub static CAPABILITIES: &[CapabilityRow] = &[
     },
     CapabilityRow {
         capability: Capability::AtomicF16,
-        what: "f16 atomics",
+        what: "f16 and bf16 atomics",
         cpu: true,
         cuda_required_arch: 0,
         // The 16-bit atomicCAS.

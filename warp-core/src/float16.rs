@@ -188,124 +188,161 @@ impl crate::ops::FromLiteral for f16 {
 // Builtins: the f32 builtin on the widened arguments, rounded once.
 // ------------------------------------------------------------------------------------------
 
-/// `f(x)` in f32, rounded to f16.
+/// `f(x)` in f32, rounded to the 16-bit float `H`.
 #[inline(always)]
-fn via1(x: f16, f: impl Fn(f32) -> f32) -> f16 {
-    f16::from_f32(f(x.to_f32()))
+pub(crate) fn via1<H: Half16>(x: H, f: impl Fn(f32) -> f32) -> H {
+    H::from_f32(f(x.to_f32()))
 }
 
-/// `f(x, y)` in f32, rounded to f16.
+/// `f(x, y)` in f32, rounded to the 16-bit float `H`.
 #[inline(always)]
-fn via2(x: f16, y: f16, f: impl Fn(f32, f32) -> f32) -> f16 {
-    f16::from_f32(f(x.to_f32(), y.to_f32()))
+pub(crate) fn via2<H: Half16>(x: H, y: H, f: impl Fn(f32, f32) -> f32) -> H {
+    H::from_f32(f(x.to_f32(), y.to_f32()))
 }
 
-impl Scalar for f16 {
-    const ZERO: Self = f16::ZERO;
-    const ONE: Self = f16::ONE;
+/// The two 16-bit floats (`f16`, `bf16`): exact widening to f32, one rounding back.
+pub(crate) trait Half16: Copy {
+    fn to_f32(self) -> f32;
+    fn from_f32(x: f32) -> Self;
+}
+impl Half16 for f16 {
     #[inline(always)]
-    fn s_add(self, o: Self) -> Self {
-        self + o
+    fn to_f32(self) -> f32 {
+        f16::to_f32(self)
     }
     #[inline(always)]
-    fn s_sub(self, o: Self) -> Self {
-        self - o
-    }
-    #[inline(always)]
-    fn s_mul(self, o: Self) -> Self {
-        self * o
-    }
-    #[inline(always)]
-    fn s_neg(self) -> Self {
-        -self
+    fn from_f32(x: f32) -> Self {
+        f16::from_f32(x)
     }
 }
-
-impl MinMax for f16 {
+impl Half16 for half::bf16 {
     #[inline(always)]
-    fn w_min(self, o: Self) -> Self {
-        via2(self, o, f32::w_min)
+    fn to_f32(self) -> f32 {
+        half::bf16::to_f32(self)
     }
     #[inline(always)]
-    fn w_max(self, o: Self) -> Self {
-        via2(self, o, f32::w_max)
+    fn from_f32(x: f32) -> Self {
+        half::bf16::from_f32(x)
     }
 }
 
-impl Signed for f16 {
-    #[inline(always)]
-    fn w_abs(self) -> Self {
-        via1(self, f32::w_abs)
-    }
-    #[inline(always)]
-    fn w_sign(self) -> Self {
-        via1(self, f32::w_sign)
-    }
-}
-
+/// Unary builtins of a 16-bit float: the f32 builtin, rounded once.
 macro_rules! via_f32 {
     ($($m:ident),*) => {$(
         #[inline(always)]
         fn $m(self) -> Self {
-            via1(self, <f32 as Float>::$m)
+            $crate::float16::via1(self, <f32 as Float>::$m)
         }
     )*};
 }
 
-impl Float for f16 {
-    via_f32!(
-        w_floor, w_ceil, w_sqrt, w_exp, w_log, w_sin, w_cos, w_tan, w_asin, w_acos, w_atan, w_sinh,
-        w_cosh, w_tanh, w_exp2, w_log2, w_log10, w_cbrt, w_erf, w_erfc, w_erfinv, w_erfcinv,
-        w_round, w_rint, w_trunc, w_degrees, w_radians
-    );
-    #[inline(always)]
-    fn w_atan2(self, x: Self) -> Self {
-        via2(self, x, f32::w_atan2)
-    }
-    #[inline(always)]
-    fn w_pow(self, y: Self) -> Self {
-        via2(self, y, f32::w_pow)
-    }
-    #[inline(always)]
-    fn w_isfinite(self) -> bool {
-        self.is_finite()
-    }
-    #[inline(always)]
-    fn w_isnan(self) -> bool {
-        self.is_nan()
-    }
-    #[inline(always)]
-    fn w_isinf(self) -> bool {
-        self.is_infinite()
-    }
-    #[inline(always)]
-    fn w_smoothstep(self, e1: Self, x: Self) -> Self {
-        f16::from_f32(self.to_f32().w_smoothstep(e1.to_f32(), x.to_f32()))
-    }
-}
+pub(crate) use via_f32;
 
-impl Classify for f16 {
-    #[inline(always)]
-    fn w_isfinite(self) -> bool {
-        self.is_finite()
-    }
-    #[inline(always)]
-    fn w_isnan(self) -> bool {
-        self.is_nan()
-    }
-    #[inline(always)]
-    fn w_isinf(self) -> bool {
-        self.is_infinite()
-    }
-}
+/// The scalar math traits of a 16-bit float (`f16`, `bf16`): each builtin the `f32` one on
+/// the widened arguments, rounded once.
+macro_rules! half_math {
+    ($t:ident) => {
+        impl Scalar for $t {
+            const ZERO: Self = $t::ZERO;
+            const ONE: Self = $t::ONE;
+            #[inline(always)]
+            fn s_add(self, o: Self) -> Self {
+                self + o
+            }
+            #[inline(always)]
+            fn s_sub(self, o: Self) -> Self {
+                self - o
+            }
+            #[inline(always)]
+            fn s_mul(self, o: Self) -> Self {
+                self * o
+            }
+            #[inline(always)]
+            fn s_neg(self) -> Self {
+                -self
+            }
+        }
 
-impl Lerp for f16 {
-    type Scalar = f16;
-    #[inline(always)]
-    fn w_lerp(self, b: Self, t: Self) -> Self {
-        f16::from_f32(self.to_f32().w_lerp(b.to_f32(), t.to_f32()))
-    }
+        impl MinMax for $t {
+            #[inline(always)]
+            fn w_min(self, o: Self) -> Self {
+                $crate::float16::via2(self, o, f32::w_min)
+            }
+            #[inline(always)]
+            fn w_max(self, o: Self) -> Self {
+                $crate::float16::via2(self, o, f32::w_max)
+            }
+        }
+
+        impl Signed for $t {
+            #[inline(always)]
+            fn w_abs(self) -> Self {
+                $crate::float16::via1(self, f32::w_abs)
+            }
+            #[inline(always)]
+            fn w_sign(self) -> Self {
+                $crate::float16::via1(self, f32::w_sign)
+            }
+        }
+
+        impl Float for $t {
+            $crate::float16::via_f32!(
+                w_floor, w_ceil, w_sqrt, w_exp, w_log, w_sin, w_cos, w_tan, w_asin, w_acos, w_atan,
+                w_sinh, w_cosh, w_tanh, w_exp2, w_log2, w_log10, w_cbrt, w_erf, w_erfc, w_erfinv,
+                w_erfcinv, w_round, w_rint, w_trunc, w_degrees, w_radians
+            );
+            #[inline(always)]
+            fn w_atan2(self, x: Self) -> Self {
+                $crate::float16::via2(self, x, f32::w_atan2)
+            }
+            #[inline(always)]
+            fn w_pow(self, y: Self) -> Self {
+                $crate::float16::via2(self, y, f32::w_pow)
+            }
+            #[inline(always)]
+            fn w_isfinite(self) -> bool {
+                self.is_finite()
+            }
+            #[inline(always)]
+            fn w_isnan(self) -> bool {
+                self.is_nan()
+            }
+            #[inline(always)]
+            fn w_isinf(self) -> bool {
+                self.is_infinite()
+            }
+            #[inline(always)]
+            fn w_smoothstep(self, e1: Self, x: Self) -> Self {
+                $t::from_f32(self.to_f32().w_smoothstep(e1.to_f32(), x.to_f32()))
+            }
+        }
+
+        impl Classify for $t {
+            #[inline(always)]
+            fn w_isfinite(self) -> bool {
+                self.is_finite()
+            }
+            #[inline(always)]
+            fn w_isnan(self) -> bool {
+                self.is_nan()
+            }
+            #[inline(always)]
+            fn w_isinf(self) -> bool {
+                self.is_infinite()
+            }
+        }
+
+        impl Lerp for $t {
+            type Scalar = $t;
+            #[inline(always)]
+            fn w_lerp(self, b: Self, t: Self) -> Self {
+                $t::from_f32(self.to_f32().w_lerp(b.to_f32(), t.to_f32()))
+            }
+        }
+    };
 }
+pub(crate) use half_math;
+half_math!(f16);
 
 #[cfg(test)]
 mod tests {

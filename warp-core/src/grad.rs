@@ -60,6 +60,7 @@ grad_atomic!(
     f32,
     f64,
     half::f16,
+    half::bf16,
     glam::Vec2,
     glam::Vec3,
     glam::Vec4,

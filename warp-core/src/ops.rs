@@ -8,6 +8,7 @@ use crate::fault::{Fault, FaultKind, KResult};
 
 /// Casts to and from `f16` (generated code writes `x as f16` as `ToF16::to_f16(x)`, and a cast
 /// of a value it cannot type as `AsScalar::<T>::as_scalar(x)`).
+pub use crate::bfloat16::{FromBf16, ToBf16};
 pub use crate::float16::{AsScalar, FromF16, ToF16};
 
 /// Integer arithmetic with wrapping semantics and checked division.

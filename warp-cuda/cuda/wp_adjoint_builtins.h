@@ -57,6 +57,7 @@ WP_ADJ_NOOP_MINMAX(UVec4, const UVec4&)
 WP_ADJ_FMINMAX_S(f32)
 WP_ADJ_FMINMAX_S(f64)
 WP_ADJ_FMINMAX_S(f16)
+WP_ADJ_FMINMAX_S(bf16)
 WP_ADJ_FMINMAX_V(Vec2)
 WP_ADJ_FMINMAX_V(Vec3)
 WP_ADJ_FMINMAX_V(Vec4)
@@ -89,6 +90,7 @@ WP_ADJ_NOOP_SIGNED(IVec4, const IVec4&)
 WP_ADJ_FSCALAR_SIGNED(f32)
 WP_ADJ_FSCALAR_SIGNED(f64)
 WP_ADJ_FSCALAR_SIGNED(f16)
+WP_ADJ_FSCALAR_SIGNED(bf16)
 #undef WP_ADJ_FSCALAR_SIGNED
 #define WP_ADJ_FVEC_SIGNED(V)                                                              \
   WP_FN void adj_abs(const V& x, V& adj_x, const V& adj_ret) {                             \
@@ -137,6 +139,7 @@ WP_ADJ_FVEC_SIGNED(DVec4)
 WP_ADJ_FSCALAR_FNS(f32)
 WP_ADJ_FSCALAR_FNS(f64)
 WP_ADJ_FSCALAR_FNS(f16)
+WP_ADJ_FSCALAR_FNS(bf16)
 #undef WP_ADJ_FSCALAR_FNS
 
 // ----- more float scalar functions (warp-core/src/adjoint/builtins.rs, same order) -----
@@ -208,6 +211,9 @@ WP_ADJ_FSCALAR_MORE(f64, f64_from_bits(0x3fe62e42fefa39efull), f64_from_bits(0x4
 // formula is an f16 operation, as on the CPU.
 WP_ADJ_FSCALAR_MORE(f16, f16_from_bits(0x398Cu), f16_from_bits(0x409Bu), f16_from_bits(0x3C83u),
                     f16_from_bits(0x3B17u))
+// bf16 likewise (warp-core/src/adjoint/bfloat16.rs).
+WP_ADJ_FSCALAR_MORE(bf16, bf16_from_bits(0x3F31u), bf16_from_bits(0x4013u), bf16_from_bits(0x3F90u),
+                    bf16_from_bits(0x3F63u))
 #undef WP_ADJ_FSCALAR_MORE
 
 // step on integers: not differentiable.

@@ -92,6 +92,7 @@ template <typename F> WP_FN bool adj_isnan(F x) { return !(x == x); }
 WP_FN f32 adj_trunc(f32 x) { return ::truncf(x); }
 WP_FN f64 adj_trunc(f64 x) { return ::trunc(x); }
 WP_FN f16 adj_trunc(f16 x) { return f16_from_f32(::truncf(f16_to_f32(x))); }
+WP_FN bf16 adj_trunc(bf16 x) { return bf16_from_f32(::truncf(bf16_to_f32(x))); }
 
 /// `min(a, b)` returned `a`: `a <= b`, or `b` alone is NaN, or both are NaN.
 template <typename F>
@@ -258,6 +259,7 @@ WP_ADJ_NOOP_IVEC(UVec4, u32)
 WP_ADJ_FSCALAR_OPS(f32)
 WP_ADJ_FSCALAR_OPS(f64)
 WP_ADJ_FSCALAR_OPS(f16)
+WP_ADJ_FSCALAR_OPS(bf16)
 #undef WP_ADJ_FSCALAR_OPS
 
 // ----- float vectors: lane by lane, with a scalar on either side -----

@@ -484,7 +484,7 @@ WP_FN void adj_tile_atomic_add4(const array_t<T, 4>& a, const tile_t<T, N0, N1, 
 
 namespace tile_detail {
 /// The type a matmul's products accumulate in, and the conversions (warp-core's `MatmulElem`):
-/// f32 and f64 in themselves, f16 in f32 (widening exact, narrowing rounded once).
+/// f32 and f64 in themselves, f16 and bf16 in f32 (widening exact, narrowing rounded once).
 template <typename T>
 struct mm_elem {
   typedef T acc;
@@ -496,6 +496,12 @@ struct mm_elem<f16> {
   typedef f32 acc;
   static WP_FN f32 widen(f16 x) { return f16_to_f32(x); }
   static WP_FN f16 narrow(f32 x) { return f16_from_f32(x); }
+};
+template <>
+struct mm_elem<bf16> {
+  typedef f32 acc;
+  static WP_FN f32 widen(bf16 x) { return bf16_to_f32(x); }
+  static WP_FN bf16 narrow(f32 x) { return bf16_from_f32(x); }
 };
 }  // namespace tile_detail
 

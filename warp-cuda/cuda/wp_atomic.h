@@ -83,25 +83,31 @@ WP_FN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { retu
 WP_FN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
 WP_FN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
 
-// ----- f16: a CAS loop on the element's 16 bits -----
+// ----- f16 and bf16: a CAS loop on the element's 16 bits -----
 // sm_70 and newer (every architecture CUDA 13's NVRTC targets) have a 16-bit atomicCAS.
 // Older ones CAS the aligned 32-bit word holding the element, writing the other half back
 // unchanged (a concurrent change to it fails the CAS and retries); that reads 2 bytes past a
 // last element at the end of an allocation (inside the allocation granularity, but
 // compute-sanitizer's memcheck reports it, and an external array's neighbour may lie there),
-// so it is kept only where there is nothing else. Each new value is one f16 operation
-// (through f32), as on the CPU.
-template <typename F>
-WP_FN f16 cas_loop_f16(f16* p, F f) {
+// so it is kept only where there is nothing else. Each new value is one f16 or bf16
+// operation (through f32), as on the CPU.
+/// The bits of a 16-bit float as `H` (f16 or bf16).
+template <typename H> WP_FN H h16_from_bits(u16 b) {
+  H h;
+  h.bits = b;
+  return h;
+}
+template <typename H, typename F>
+WP_FN H cas_loop_h16(H* p, F f) {
 #if !defined(__CUDA_ARCH__) || __CUDA_ARCH__ >= 700
   unsigned short* h = (unsigned short*)p;
   unsigned short old = *(volatile unsigned short*)h;
   unsigned short assumed;
   do {
     assumed = old;
-    old = atomicCAS(h, assumed, (unsigned short)f(f16_from_bits((u16)assumed)).bits);
+    old = atomicCAS(h, assumed, (unsigned short)f(h16_from_bits<H>((u16)assumed)).bits);
   } while (old != assumed);
-  return f16_from_bits((u16)old);
+  return h16_from_bits<H>((u16)old);
 #else
   const unsigned long long addr = (unsigned long long)p;
   unsigned int* w = (unsigned int*)(addr & ~3ull);
@@ -110,17 +116,21 @@ WP_FN f16 cas_loop_f16(f16* p, F f) {
   unsigned int assumed;
   do {
     assumed = old;
-    const u16 next = f(f16_from_bits((u16)(assumed >> shift))).bits;
+    const u16 next = f(h16_from_bits<H>((u16)(assumed >> shift))).bits;
     const unsigned int word = (assumed & ~(0xFFFFu << shift)) | ((unsigned int)next << shift);
     old = atomicCAS(w, assumed, word);
   } while (old != assumed);
-  return f16_from_bits((u16)(old >> shift));
+  return h16_from_bits<H>((u16)(old >> shift));
 #endif
 }
-WP_FN f16 atomic_add_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return x + v; }); }
-WP_FN f16 atomic_sub_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return x - v; }); }
-WP_FN f16 atomic_min_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return wp::min(x, v); }); }
-WP_FN f16 atomic_max_p(f16* p, f16 v) { return cas_loop_f16(p, [v](f16 x) { return wp::max(x, v); }); }
+WP_FN f16 atomic_add_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return x + v; }); }
+WP_FN f16 atomic_sub_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return x - v; }); }
+WP_FN f16 atomic_min_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return wp::min(x, v); }); }
+WP_FN f16 atomic_max_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return wp::max(x, v); }); }
+WP_FN bf16 atomic_add_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return x + v; }); }
+WP_FN bf16 atomic_sub_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return x - v; }); }
+WP_FN bf16 atomic_min_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return wp::min(x, v); }); }
+WP_FN bf16 atomic_max_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return wp::max(x, v); }); }
 
 // ----- compare-and-swap, exchange, bitwise (no adjoint) -----
 // Floats compare and swap bit patterns (as warp-core's AtomicSwapElement).
@@ -179,6 +189,7 @@ WP_HOST_RMW(u64)
 WP_HOST_RMW_F(f32)
 WP_HOST_RMW_F(f64)
 WP_HOST_RMW_F(f16)
+WP_HOST_RMW_F(bf16)
 #undef WP_HOST_RMW_F
 #define WP_HOST_SWAP(T, BITS)                                                    \
   WP_FN T atomic_cas_p(T* p, T c, T v) {                                         \

@@ -8,6 +8,7 @@
 // Contents:
 //   * integer/float typedefs (i8..u64, isize = i64, usize = u64, f32, f64) and `num<T>` traits;
 //   * `f16` (half precision, the layout of `half::f16`): conversions, arithmetic through f32;
+//   * `bf16` (brain float, the layout of `half::bf16`): the same, in software on every arch;
 //   * the glam types with glam 0.30's x86_64 layout (Vec4, Mat2, Mat4 and Quat are 16-byte
 //     aligned because glam stores them in SSE registers), constructors and constants as free
 //     functions (`Vec3_new`, `Vec3_splat`, `Vec3_ZERO()`, `Mat3_from_cols`, `Quat_IDENTITY()`...);
@@ -348,6 +349,114 @@ template <> WP_FN f16 float_nan<f16>() { return f16_from_bits(0x7E00u); }
 template <> WP_FN f16 float_inf<f16>() { return f16_from_bits(0x7C00u); }
 template <> WP_FN f16 float_max<f16>() { return f16_from_bits(0x7BFFu); }
 
+// ------------------------------------------------------------------------------------------
+// bf16 (Warp's bfloat16; warp-core/src/bfloat16.rs, the `half` crate's bf16)
+// ------------------------------------------------------------------------------------------
+//
+// `wp::bf16` is the top half of an f32's bits (2 bytes, align 2: the layout of `half::bf16`):
+// f32's exponent range, 8 significant bits. As f16, every operation widens to f32 exactly,
+// computes in f32 and rounds to bf16 once, to nearest even; the conversions are software on
+// every architecture (a shift and an add, as `half`'s; no cuda_bf16.h, which NVRTC would need
+// on its include path), so both backends give the same bits, NaNs included:
+//   * f32 -> bf16: `half`'s f32_to_bf16, transcribed (NaN: the top bits, quiet bit set);
+//   * bf16 -> f32: the bits shifted up (exact; `half` also sets a NaN's quiet bit);
+//   * f64 -> bf16 and 64-bit integers -> bf16: rounded once (warp_core::bfloat16).
+// f32's 24 bits are more than twice bf16's 8 plus two, so + - * / and sqrt rounded twice are
+// correctly rounded bf16 operations.
+
+WP_FN u16 f32_to_bf16_bits(f32 x) {
+  const u32 u = f32_to_bits(x);
+  if ((u & 0x7FFFFFFFu) > 0x7F800000u) return (u16)((u >> 16) | 0x0040u);
+  // Round bit set, and a sticky bit or the kept lowest bit set: up (ties to even).
+  const bool up = (u & 0x8000u) != 0 && (u & 0x17FFFu) != 0;
+  return (u16)((u >> 16) + (up ? 1u : 0u));
+}
+WP_FN f32 bf16_bits_to_f32(u16 b) {
+  const u32 u = (u32)b << 16;
+  // A NaN gets its quiet bit, as `half`'s bf16_to_f32.
+  return f32_from_bits((b & 0x7FFFu) > 0x7F80u ? (u | 0x00400000u) : u);
+}
+/// f64 -> bf16 bits, rounded once to nearest even (warp_core::bfloat16::bf16_from_f64): as
+/// f64_to_f16_bits, in units of the bf16 ulp (2^(e-7), 2^-133 below 2^-126).
+WP_FN u16 f64_to_bf16_bits(f64 x) {
+  const u64 bits = f64_to_bits(x);
+  const u16 sign = (u16)((bits >> 48) & 0x8000u);
+  const f64 a = f64_from_bits(bits & 0x7FFFFFFFFFFFFFFFull);
+  // NaN: as Rust's `x as f32` then `half` (quiet, the top payload bits).
+  if (!(a == a)) return (u16)(sign | 0x7FC0u | (u16)((bits >> 45) & 0x3Fu));
+  // From the midpoint between bf16::MAX and 2^128 ((2 - 2^-8) 2^127) on: infinity.
+  if (a >= f64_from_bits(0x47EFF00000000000ull)) return (u16)(sign | 0x7F80u);
+  const i32 e = (i32)((bits >> 52) & 0x7FFu) - 1023;
+  const i32 ulp = (e > -126 ? e : -126) - 7;
+  const f64 down = f64_from_bits((u64)(1023 - ulp) << 52);  // 2^-ulp
+  const f64 up = f64_from_bits((u64)(1023 + ulp) << 52);    // 2^ulp
+  const f64 r = ::rint(a * down) * up;                      // a bf16 value (or 0), exact in f32
+  return (u16)(sign | (u16)(f32_to_bits((f32)r) >> 16));
+}
+/// An integer's magnitude rounded once to bf16 bits: above 2^25 the bits below the 25th
+/// are folded into a sticky bit (exact in f64 then), so f32's own rounding of a large
+/// integer cannot round a second time (warp_core::bfloat16's int_to_bf16).
+WP_FN u16 u64_to_bf16_bits(u64 a) {
+  i32 cut = 0;
+  u64 sticky = 0;
+  while ((a >> 25) != 0) {
+    sticky |= a & 1u;
+    a >>= 1;
+    ++cut;
+  }
+  a |= sticky;
+  return f64_to_bf16_bits((f64)a * f64_from_bits((u64)(1023 + cut) << 52));
+}
+
+/// Brain float: the bit pattern of `half::bf16`. Conversions are explicit, as f16's.
+struct bf16 {
+  u16 bits;
+  bf16() = default;
+  explicit WP_FN bf16(f32 x) : bits(f32_to_bf16_bits(x)) {}
+  explicit WP_FN bf16(f64 x) : bits(f64_to_bf16_bits(x)) {}
+  explicit WP_FN bf16(int x) : bits(f32_to_bf16_bits((f32)x)) {}
+  explicit WP_FN operator f32() const { return bf16_bits_to_f32(bits); }
+  explicit WP_FN operator f64() const { return (f64)bf16_bits_to_f32(bits); }
+};
+static_assert(sizeof(bf16) == 2 && alignof(bf16) == 2, "bf16 layout (half::bf16)");
+
+WP_FN bf16 bf16_from_bits(u16 b) {
+  bf16 h;
+  h.bits = b;
+  return h;
+}
+WP_FN bf16 bf16_from_f32(f32 x) { return bf16_from_bits(f32_to_bf16_bits(x)); }
+WP_FN bf16 bf16_from_f64(f64 x) { return bf16_from_bits(f64_to_bf16_bits(x)); }
+WP_FN f32 bf16_to_f32(bf16 h) { return bf16_bits_to_f32(h.bits); }
+
+WP_FN bf16 operator+(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) + bf16_to_f32(b)); }
+WP_FN bf16 operator-(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) - bf16_to_f32(b)); }
+WP_FN bf16 operator*(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) * bf16_to_f32(b)); }
+WP_FN bf16 operator/(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) / bf16_to_f32(b)); }
+WP_FN bf16 operator-(bf16 a) { return bf16_from_bits((u16)(a.bits ^ 0x8000u)); }
+WP_FN bf16& operator+=(bf16& a, bf16 b) { return a = a + b; }
+WP_FN bf16& operator-=(bf16& a, bf16 b) { return a = a - b; }
+WP_FN bf16& operator*=(bf16& a, bf16 b) { return a = a * b; }
+WP_FN bf16& operator/=(bf16& a, bf16 b) { return a = a / b; }
+WP_FN bool operator==(bf16 a, bf16 b) { return bf16_to_f32(a) == bf16_to_f32(b); }
+WP_FN bool operator!=(bf16 a, bf16 b) { return bf16_to_f32(a) != bf16_to_f32(b); }
+WP_FN bool operator<(bf16 a, bf16 b) { return bf16_to_f32(a) < bf16_to_f32(b); }
+WP_FN bool operator<=(bf16 a, bf16 b) { return bf16_to_f32(a) <= bf16_to_f32(b); }
+WP_FN bool operator>(bf16 a, bf16 b) { return bf16_to_f32(a) > bf16_to_f32(b); }
+WP_FN bool operator>=(bf16 a, bf16 b) { return bf16_to_f32(a) >= bf16_to_f32(b); }
+
+template <>
+struct num<bf16> {
+  static constexpr bool is_int = false;
+  static constexpr bool is_float = true;
+  static constexpr bool is_signed = true;
+  static constexpr bool is_bool = false;
+  static constexpr int bits = 16;
+};
+template <> WP_FN bf16 float_nan<bf16>() { return bf16_from_bits(0x7FC0u); }
+template <> WP_FN bf16 float_inf<bf16>() { return bf16_from_bits(0x7F80u); }
+template <> WP_FN bf16 float_max<bf16>() { return bf16_from_bits(0x7F7Fu); }
+
 namespace detail {
 template <typename A, typename B> struct same_type { static constexpr bool value = false; };
 template <typename A> struct same_type<A, A> { static constexpr bool value = true; };
@@ -539,6 +648,26 @@ WP_FN To cast(From x) {
     }
   } else if constexpr (detail::same_type<From, f16>::value) {
     return cast<To>(f16_to_f32(x));  // f16 -> f32 is exact; then Rust's rules from f32
+  } else if constexpr (detail::same_type<To, bf16>::value) {
+    // To bf16: rounded once from every type; integers of more than 24 bits through the
+    // sticky fold (u64_to_bf16_bits), where f32 would round first.
+    if constexpr (detail::same_type<From, f64>::value) {
+      return bf16_from_f64(x);
+    } else if constexpr (num<From>::is_bool) {
+      return bf16_from_f32(x ? 1.0f : 0.0f);
+    } else if constexpr (num<From>::is_int) {
+      if constexpr (num<From>::is_signed) {
+        const u64 m = x < 0 ? (u64)0 - (u64)(i64)x : (u64)(i64)x;
+        const u16 b = u64_to_bf16_bits(m);
+        return bf16_from_bits(x < 0 ? (u16)(b | 0x8000u) : b);
+      } else {
+        return bf16_from_bits(u64_to_bf16_bits((u64)x));
+      }
+    } else {
+      return bf16_from_f32((f32)x);  // f32 directly; f16 -> f32 exact, then once
+    }
+  } else if constexpr (detail::same_type<From, bf16>::value) {
+    return cast<To>(bf16_to_f32(x));  // bf16 -> f32 is exact; then Rust's rules from f32
   } else if constexpr (num<From>::is_float && num<To>::is_int) {
     if (!(x == x)) return (To)0;
     if constexpr (num<To>::is_signed) {
@@ -627,6 +756,8 @@ WP_FN f64 fmod(f64 a, f64 b) { return ::fmod(a, b); }
 // f16 `%`: fmod in f32 (exact), rounded to f16 (exact too), as `half`'s `%`.
 WP_FN f16 frem(f16 a, f16 b) { return f16_from_f32(::fmodf(f16_to_f32(a), f16_to_f32(b))); }
 WP_FN f16 fmod(f16 a, f16 b) { return frem(a, b); }
+WP_FN bf16 frem(bf16 a, bf16 b) { return bf16_from_f32(::fmodf(bf16_to_f32(a), bf16_to_f32(b))); }
+WP_FN bf16 fmod(bf16 a, bf16 b) { return frem(a, b); }
 
 namespace detail {
 // Scalar arithmetic of builtins (warp_core::builtins::Scalar): wrapping for ints, IEEE else.
@@ -653,6 +784,9 @@ WP_FN f64 s_mul(f64 a, f64 b) { return a * b; }
 WP_FN f16 s_add(f16 a, f16 b) { return a + b; }
 WP_FN f16 s_sub(f16 a, f16 b) { return a - b; }
 WP_FN f16 s_mul(f16 a, f16 b) { return a * b; }
+WP_FN bf16 s_add(bf16 a, bf16 b) { return a + b; }
+WP_FN bf16 s_sub(bf16 a, bf16 b) { return a - b; }
+WP_FN bf16 s_mul(bf16 a, bf16 b) { return a * b; }
 }  // namespace detail
 
 // ------------------------------------------------------------------------------------------

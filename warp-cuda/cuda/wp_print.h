@@ -32,6 +32,7 @@ WP_FN void print_value(f64 x) {
 }
 WP_FN void print_value(f32 x) { print_value((f64)x); }
 WP_FN void print_value(f16 x) { print_value((f64)f16_to_f32(x)); }
+WP_FN void print_value(bf16 x) { print_value((f64)bf16_to_f32(x)); }
 
 namespace detail {
 template <typename V>

@@ -448,6 +448,59 @@ WP_FN f16 step(f16 x) { return f16_from_f32(step(f16_to_f32(x))); }
 WP_FN bool isnan(f16 x) { return isnan(f16_to_f32(x)); }
 WP_FN bool isinf(f16 x) { return isinf(f16_to_f32(x)); }
 WP_FN bool isfinite(f16 x) { return isfinite(f16_to_f32(x)); }
+// bf16: the same, rounded once to bf16 (warp-core/src/bfloat16.rs).
+#define WP_BF16_1(NAME) \
+  WP_FN bf16 NAME(bf16 x) { return bf16_from_f32(NAME(bf16_to_f32(x))); }
+#define WP_BF16_2(NAME) \
+  WP_FN bf16 NAME(bf16 x, bf16 y) { return bf16_from_f32(NAME(bf16_to_f32(x), bf16_to_f32(y))); }
+#define WP_BF16_3(NAME)                                                                  \
+  WP_FN bf16 NAME(bf16 x, bf16 y, bf16 z) {                                                 \
+    return bf16_from_f32(NAME(bf16_to_f32(x), bf16_to_f32(y), bf16_to_f32(z)));             \
+  }
+WP_BF16_2(min)
+WP_BF16_2(max)
+WP_BF16_3(clamp)
+WP_BF16_1(abs)
+WP_BF16_1(sign)
+WP_BF16_1(floor)
+WP_BF16_1(ceil)
+WP_BF16_1(sqrt)
+WP_BF16_1(exp)
+WP_BF16_1(log)
+WP_BF16_1(sin)
+WP_BF16_1(cos)
+WP_BF16_1(tan)
+WP_BF16_2(atan2)
+WP_BF16_2(pow)
+WP_BF16_1(asin)
+WP_BF16_1(acos)
+WP_BF16_1(atan)
+WP_BF16_1(sinh)
+WP_BF16_1(cosh)
+WP_BF16_1(tanh)
+WP_BF16_1(exp2)
+WP_BF16_1(log2)
+WP_BF16_1(log10)
+WP_BF16_1(cbrt)
+WP_BF16_1(round)
+WP_BF16_1(rint)
+WP_BF16_1(trunc)
+WP_BF16_1(frac)
+WP_BF16_1(degrees)
+WP_BF16_1(radians)
+WP_BF16_1(erf)
+WP_BF16_1(erfc)
+WP_BF16_1(erfinv)
+WP_BF16_1(erfcinv)
+WP_BF16_3(smoothstep)
+WP_BF16_3(lerp)
+#undef WP_BF16_3
+#undef WP_BF16_2
+#undef WP_BF16_1
+WP_FN bf16 step(bf16 x) { return bf16_from_f32(step(bf16_to_f32(x))); }
+WP_FN bool isnan(bf16 x) { return isnan(bf16_to_f32(x)); }
+WP_FN bool isinf(bf16 x) { return isinf(bf16_to_f32(x)); }
+WP_FN bool isfinite(bf16 x) { return isfinite(bf16_to_f32(x)); }
 
 // ----- isfinite / isnan / isinf of quaternions and matrices (warp-core builtins::misc):
 // every lane finite, some lane NaN, some lane infinite (the vector rules over vec_traits) -----

@@ -170,6 +170,8 @@ WP_FN f64 tmax(f64 a, f64 b) { return ::fmax(a, b); }
 // as warp-core's `MinMax for f16`.
 WP_FN f16 tmin(f16 a, f16 b) { return f16_from_f32(::fminf(f16_to_f32(a), f16_to_f32(b))); }
 WP_FN f16 tmax(f16 a, f16 b) { return f16_from_f32(::fmaxf(f16_to_f32(a), f16_to_f32(b))); }
+WP_FN bf16 tmin(bf16 a, bf16 b) { return bf16_from_f32(::fminf(bf16_to_f32(a), bf16_to_f32(b))); }
+WP_FN bf16 tmax(bf16 a, bf16 b) { return bf16_from_f32(::fmaxf(bf16_to_f32(a), bf16_to_f32(b))); }
 template <typename T>
 WP_FN T tmin(T a, T b) {
   return b < a ? b : a;
@@ -237,6 +239,7 @@ struct max_op {
 WP_FN f32 neg(f32 v) { return -v; }
 WP_FN f64 neg(f64 v) { return -v; }
 WP_FN f16 neg(f16 v) { return -v; }
+WP_FN bf16 neg(bf16 v) { return -v; }
 template <typename T>
 WP_FN T neg(T v) {
   return w_neg(v);
@@ -256,6 +259,9 @@ WP_FN u8 shfl_down(unsigned mask, u8 v, int off) { return (u8)__shfl_down_sync(m
 WP_FN u16 shfl_down(unsigned mask, u16 v, int off) { return (u16)__shfl_down_sync(mask, (u32)v, off); }
 WP_FN f16 shfl_down(unsigned mask, f16 v, int off) {
   return f16_from_bits((u16)__shfl_down_sync(mask, (u32)v.bits, off));
+}
+WP_FN bf16 shfl_down(unsigned mask, bf16 v, int off) {
+  return bf16_from_bits((u16)__shfl_down_sync(mask, (u32)v.bits, off));
 }
 
 /// The elements `elem(0..S)` (partials of type P) reduced with `op` in the order of the header
@@ -324,6 +330,7 @@ WP_FN arg_t<T> shfl_down(unsigned mask, const arg_t<T>& a, int off) {
 WP_FN bool tnan(f32 v) { return v != v; }
 WP_FN bool tnan(f64 v) { return v != v; }
 WP_FN bool tnan(f16 v) { return v != v; }
+WP_FN bool tnan(bf16 v) { return v != v; }
 template <typename T>
 WP_FN bool tnan(T) {
   return false;

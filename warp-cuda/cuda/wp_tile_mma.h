@@ -1,11 +1,13 @@
-// wp_tile_mma.h: tile_matmul of half-precision tiles (docs/design/tiles.md section 5,
-// "Tensor cores"), the CUDA side of warp-core/src/tile/matmul.rs's f16 case.
+// wp_tile_mma.h: tile_matmul of 16-bit float tiles, f16 and bf16 (docs/design/tiles.md
+// section 5, "Tensor cores"), the CUDA side of warp-core/src/tile/matmul.rs's f16 and bf16
+// cases. `E` below is f16 or bf16:
 //
-//   tile_matmul_acc(c, a, b)   c: tile_t<f32, M, N> += a: tile_t<f16, M, K> . b: tile_t<f16, K, N>
-//   tile_matmul(c, a, b)       c: tile_t<f16, M, N>  = a . b, accumulated in f32, rounded once
+//   tile_matmul_acc(c, a, b)   c: tile_t<f32, M, N> += a: tile_t<E, M, K> . b: tile_t<E, K, N>
+//   tile_matmul(c, a, b)       c: tile_t<E, M, N>  = a . b, accumulated in f32, rounded once
 //
 // Two paths, chosen at compile time by mma_plan:
-//   * tensor cores (sm_80 and up): `mma.sync.aligned.m16n8k16.row.col.f32.f16.f16.f32`, its
+//   * tensor cores (sm_80 and up): `mma.sync.aligned.m16n8k16.row.col.f32.E.E.f32` (bf16
+//     fragments have f16's layout, so the loads are the same), its
 //     operands loaded from the shared-memory slots with `ldmatrix` (A row-major as it is; B
 //     row-major through `ldmatrix.trans`, which gives the column-major fragment the `.col`
 //     operand wants; operands whose rows would make ldmatrix conflict 4 ways or more are first
@@ -13,13 +15,13 @@
 //     tiles (16 x 8 outputs each),
 //     handed out round-robin; per k-step of 16 it loads FM A fragments and FN B fragments and
 //     issues FM * FN mmas, the accumulators in registers, loaded from and stored to `c` once
-//     per call. The hardware sums each k-step's 16 products (exact: an f16 x f16 product fits
-//     in f32) onto the accumulator in an order and with alignment roundings it does not
+//     per call. The hardware sums each k-step's 16 products (exact: an f16 x f16 or a
+//     bf16 x bf16 product fits in f32) onto the accumulator in an order and with alignment roundings it does not
 //     specify, so results agree with the CPU's FMA chains only to a tolerance (the tiles
 //     chapter states it: about K * 2^-23 * sum |a||b| per output);
 //   * FMA (any other shape, block size, architecture, or slots not 16-byte aligned): each
 //     output one chain acc = fmaf(f32(a[i][k]), f32(b[k][j]), acc) over k ascending, from
-//     c[i][j] or +0: bit for bit warp-core's f16 matmul.
+//     c[i][j] or +0: bit for bit warp-core's f16 and bf16 matmuls.
 //
 // The planner takes the tensor cores when M % 16 == 0, N % 8 == 0, K % 16 == 0 and the block
 // is whole warps (WP_TILE_BLOCK_DIM % 32 == 0); the architecture is checked with
@@ -100,8 +102,8 @@ struct stage_both {
 
 /// Copies an R x C f16 operand (16-byte aligned, C a multiple of 8) to rows `P` halves apart,
 /// 16 bytes at a time, block-strided; the caller synchronises.
-template <int R, int C, int P>
-WP_FN void stage_copy(f16* dst, const f16* src) {
+template <int R, int C, int P, typename E>
+WP_FN void stage_copy(E* dst, const E* src) {
   constexpr int S = C / 8;
   for (int e = (int)threadIdx.x; e < R * S; e += WP_TILE_BLOCK_DIM) {
     const int r = e / S, u = e % S;
@@ -111,17 +113,18 @@ WP_FN void stage_copy(f16* dst, const f16* src) {
 }
 
 /// The FMA path: each output one f32 chain over k ascending (warp-core's order), written as
-/// f32 (`Acc`: starting from c) or rounded once to f16 (starting from +0).
-template <bool Acc, typename C, int M, int K, int N>
-WP_FN void matmul_fma(C* c, const f16* a, const f16* b) {
+/// f32 (`Acc`: starting from c) or rounded once to `E` (starting from +0). The explicit
+/// conversions are f16_to_f32/f16_from_f32 (bf16_to_f32/bf16_from_f32).
+template <bool Acc, typename C, int M, int K, int N, typename E>
+WP_FN void matmul_fma(C* c, const E* a, const E* b) {
   for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
     const int i = e / N, j = e % N;
     f32 acc = 0.0f;
     if constexpr (Acc) acc = (f32)c[e];
     for (int k = 0; k < K; ++k)
-      acc = ::fmaf(f16_to_f32(a[i * K + k]), f16_to_f32(b[k * N + j]), acc);
+      acc = ::fmaf(static_cast<f32>(a[i * K + k]), static_cast<f32>(b[k * N + j]), acc);
     if constexpr (Acc) c[e] = acc;
-    else c[e] = f16_from_f32(acc);
+    else c[e] = static_cast<C>(acc);
   }
 }
 
@@ -157,37 +160,47 @@ WP_FN void ldmatrix_x2_trans(unsigned* r, const void* p) {
 ///   a[0]: A[g][2t..2t+1]   a[1]: A[g+8][2t..]   a[2]: A[g][2t+8..]   a[3]: A[g+8][2t+8..]
 ///   b[0]: B[2t..2t+1][g]   b[1]: B[2t+8..2t+9][g]
 ///   d[0], d[1]: D[g][2t], D[g][2t+1]   d[2], d[3]: D[g+8][2t], D[g+8][2t+1]
+/// `E`: the operands' type, f16 or bf16 (the same fragments; only the instruction differs).
+template <typename E = f16>
 WP_FN void mma_16816(f32* d, const unsigned* a, const unsigned* b) {
-  asm volatile(
-      "mma.sync.aligned.m16n8k16.row.col.f32.f16.f16.f32 {%0, %1, %2, %3}, {%4, %5, %6, %7}, "
-      "{%8, %9}, {%0, %1, %2, %3};\n"
-      : "+f"(d[0]), "+f"(d[1]), "+f"(d[2]), "+f"(d[3])
-      : "r"(a[0]), "r"(a[1]), "r"(a[2]), "r"(a[3]), "r"(b[0]), "r"(b[1]));
+  if constexpr (detail::same_type<E, bf16>::value) {
+    asm volatile(
+        "mma.sync.aligned.m16n8k16.row.col.f32.bf16.bf16.f32 {%0, %1, %2, %3}, {%4, %5, %6, %7}, "
+        "{%8, %9}, {%0, %1, %2, %3};\n"
+        : "+f"(d[0]), "+f"(d[1]), "+f"(d[2]), "+f"(d[3])
+        : "r"(a[0]), "r"(a[1]), "r"(a[2]), "r"(a[3]), "r"(b[0]), "r"(b[1]));
+  } else {
+    asm volatile(
+        "mma.sync.aligned.m16n8k16.row.col.f32.f16.f16.f32 {%0, %1, %2, %3}, {%4, %5, %6, %7}, "
+        "{%8, %9}, {%0, %1, %2, %3};\n"
+        : "+f"(d[0]), "+f"(d[1]), "+f"(d[2]), "+f"(d[3])
+        : "r"(a[0]), "r"(a[1]), "r"(a[2]), "r"(a[3]), "r"(b[0]), "r"(b[1]));
+  }
 }
 
 /// The tensor-core path of mma_plan (slots 16-byte aligned: every ldmatrix row address is,
 /// since K and N, and the copies' pitches, are multiples of 8 halves). Operands whose rows
 /// would make ldmatrix conflict 4 ways or more are read from padded copies (stage_both).
-template <bool Acc, typename C, int M, int K, int N, bool Stage>
-WP_FN void matmul_mma(C* c, const f16* a_slot, const f16* b_slot) {
+template <bool Acc, typename C, int M, int K, int N, bool Stage, typename E>
+WP_FN void matmul_mma(C* c, const E* a_slot, const E* b_slot) {
   typedef mma_plan<M, K, N> P;
   typedef stage_both<M, K, N> ST;
   // `Stage`: padded copies allowed (their static shared memory is reserved by every block of
   // the kernel, whether or not this call runs).
   constexpr bool SA = Stage && ST::A, SB = Stage && ST::B;
   constexpr int FM = P::FM, FN = P::FN, PA = SA ? ST::PA : K, PB = SB ? ST::PB : N;
-  const f16* a = a_slot;
-  const f16* b = b_slot;
+  const E* a = a_slot;
+  const E* b = b_slot;
   if constexpr (SA || SB) {
     WP_TILE_SHARED_ALIGNED unsigned char stage_a[ST::BYTES_A];
     WP_TILE_SHARED_ALIGNED unsigned char stage_b[ST::BYTES_B];
     if constexpr (SA) {
-      stage_copy<M, K, PA>(reinterpret_cast<f16*>(stage_a), a_slot);
-      a = reinterpret_cast<const f16*>(stage_a);
+      stage_copy<M, K, PA>(reinterpret_cast<E*>(stage_a), a_slot);
+      a = reinterpret_cast<const E*>(stage_a);
     }
     if constexpr (SB) {
-      stage_copy<K, N, PB>(reinterpret_cast<f16*>(stage_b), b_slot);
-      b = reinterpret_cast<const f16*>(stage_b);
+      stage_copy<K, N, PB>(reinterpret_cast<E*>(stage_b), b_slot);
+      b = reinterpret_cast<const E*>(stage_b);
     }
     __syncthreads();
   }
@@ -241,7 +254,7 @@ WP_TILE_UNROLL
 WP_TILE_UNROLL
       for (int fm = 0; fm < FM; ++fm)
 WP_TILE_UNROLL
-        for (int fn = 0; fn < FN; ++fn) mma_16816(acc[fm][fn], af[fm], bf[fn]);
+        for (int fn = 0; fn < FN; ++fn) mma_16816<E>(acc[fm][fn], af[fm], bf[fn]);
     }
 WP_TILE_UNROLL
     for (int fm = 0; fm < FM; ++fm)
@@ -254,8 +267,8 @@ WP_TILE_UNROLL
             *reinterpret_cast<float2*>(&c[row * N + col]) =
                 make_float2(acc[fm][fn][2 * h], acc[fm][fn][2 * h + 1]);
           } else {
-            c[row * N + col] = f16_from_f32(acc[fm][fn][2 * h]);
-            c[row * N + col + 1] = f16_from_f32(acc[fm][fn][2 * h + 1]);
+            c[row * N + col] = static_cast<C>(acc[fm][fn][2 * h]);
+            c[row * N + col + 1] = static_cast<C>(acc[fm][fn][2 * h + 1]);
           }
         }
   }
@@ -502,8 +515,10 @@ WP_FN void pipe_load(f16* dst, const array_t<f16, 2>& a, O0 o0, O1 o1, ctx_t* ct
   }
 }
 
-template <bool Acc, typename C, int M, int K, int N, bool Stage = true>
-WP_FN void matmul(C* c, const f16* a, const f16* b) {
+/// The matmul of f16 or bf16 operands (`E`, deduced): the tensor cores where mma_plan fits,
+/// else the FMA path.
+template <bool Acc, typename C, int M, int K, int N, bool Stage = true, typename E>
+WP_FN void matmul(C* c, const E* a, const E* b) {
 #if defined(WP_TILE_MMA)
   if constexpr (mma_plan<M, K, N>::FITS) {
     // The emitter's slots are 16-byte aligned (tile_slot_end); a tile over another pointer
@@ -537,65 +552,22 @@ WP_FN void tile_matmul(const tile_t<f16, M, N>& c, const tile_t<f16, M, K>& a,
 }
 
 // ---- bf16 ----------------------------------------------------------------------------------
-// bf16 (Warp's bfloat16): the bit pattern of `half::bf16` (warp-core's `bf16`), a tile element
-// for loads and stores (wp_tile.h's, generic over the element) and this matmul with an f32
-// accumulator. Conversions in software on every architecture, as warp-core's (`half`): to f32
-// exact (the top half of its bits), from f32 rounded to nearest even, NaN kept NaN (the top
-// bits with the quiet bit set), so both backends give the same bits. The matmul takes the FMA
-// path only: each output one f32 chain of exact products (8 significant bits each) over k
-// ascending, bit for bit warp-core's; the bf16 tensor-core instruction
-// (`mma.sync.aligned.m16n8k16.row.col.f32.bf16.bf16.f32`) is not used yet, and the kernel
-// language does not name bf16 yet (the tiles chapter's "Not yet").
+// bf16 (Warp's bfloat16; the scalar is wp_core.h's `wp::bf16`): the same two paths as f16's,
+// the tensor cores through `mma.sync.aligned.m16n8k16.row.col.f32.bf16.bf16.f32`. The
+// pipelined GEMM k-loop below (and its wgmma) is f16's only: a bf16 k-loop runs as written.
 
-struct bf16 {
-  u16 bits;
-};
-static_assert(sizeof(bf16) == 2 && alignof(bf16) == 2, "bf16 layout (half::bf16)");
-
-WP_FN bf16 bf16_from_bits(u16 b) {
-  bf16 h;
-  h.bits = b;
-  return h;
-}
-WP_FN f32 bf16_to_f32(bf16 h) { return f32_from_bits((u32)h.bits << 16); }
-WP_FN bf16 bf16_from_f32(f32 x) {
-  const u32 u = f32_to_bits(x);
-  if ((u & 0x7FFFFFFFu) > 0x7F800000u) return bf16_from_bits((u16)((u >> 16) | 0x0040u));
-  // Round bit set, and a sticky bit or the kept lowest bit set: up (ties to even).
-  const bool up = (u & 0x8000u) != 0 && (u & 0x17FFFu) != 0;
-  return bf16_from_bits((u16)((u >> 16) + (up ? 1u : 0u)));
-}
-
-namespace tile_mma_detail {
-/// The FMA path for bf16 operands: `Acc` as matmul_fma's (from `c` in f32, or from +0 rounded
-/// once to bf16).
-template <bool Acc, typename C, int M, int K, int N>
-WP_FN void matmul_fma_bf16(C* c, const bf16* a, const bf16* b) {
-  for (int e = (int)threadIdx.x; e < M * N; e += WP_TILE_BLOCK_DIM) {
-    const int i = e / N, j = e % N;
-    f32 acc = 0.0f;
-    if constexpr (Acc) acc = (f32)c[e];
-    for (int k = 0; k < K; ++k)
-      acc = ::fmaf(bf16_to_f32(a[i * K + k]), bf16_to_f32(b[k * N + j]), acc);
-    if constexpr (Acc) c[e] = acc;
-    else c[e] = bf16_from_f32(acc);
-  }
-  __syncthreads();
-}
-}  // namespace tile_mma_detail
-
-/// `c += a . b` of bf16 tiles into an f32 accumulator (the FMA path).
+/// `c += a . b` of bf16 tiles into an f32 accumulator.
 template <int M, int K, int N>
 WP_FN void tile_matmul_acc(const tile_t<f32, M, N>& c, const tile_t<bf16, M, K>& a,
                            const tile_t<bf16, K, N>& b) {
-  tile_mma_detail::matmul_fma_bf16<true, f32, M, K, N>(c.data, a.data, b.data);
+  tile_mma_detail::matmul<true, f32, M, K, N>(c.data, a.data, b.data);
 }
 
 /// `c = a . b` of bf16 tiles: accumulated in f32 from +0, each output rounded to bf16 once.
 template <int M, int K, int N>
 WP_FN void tile_matmul(const tile_t<bf16, M, N>& c, const tile_t<bf16, M, K>& a,
                        const tile_t<bf16, K, N>& b) {
-  tile_mma_detail::matmul_fma_bf16<false, bf16, M, K, N>(c.data, a.data, b.data);
+  tile_mma_detail::matmul<false, bf16, M, K, N>(c.data, a.data, b.data);
 }
 
 /// The software-pipelined k-loop of a tile GEMM: the CUDA emitter's form of

@@ -27,10 +27,14 @@ pub enum Scalar {
     /// Half precision (Warp's `float16`, the `half` crate's `f16`): every operation computes
     /// in f32 and rounds once. No vectors, matrices or generic instances are made of it.
     F16,
+    /// Brain float (Warp's `bfloat16`, the `half` crate's `bf16`): f32's exponent range, 8
+    /// significant bits; as `F16`, every operation computes in f32 and rounds once, and no
+    /// vectors, matrices or generic instances are made of it.
+    BF16,
 }
 
 impl Scalar {
-    pub const ALL: [Scalar; 14] = [
+    pub const ALL: [Scalar; 15] = [
         Scalar::Bool,
         Scalar::I8,
         Scalar::I16,
@@ -45,6 +49,7 @@ impl Scalar {
         Scalar::F32,
         Scalar::F64,
         Scalar::F16,
+        Scalar::BF16,
     ];
 
     pub fn name(self) -> &'static str {
@@ -63,6 +68,7 @@ impl Scalar {
             Scalar::F32 => "f32",
             Scalar::F64 => "f64",
             Scalar::F16 => "f16",
+            Scalar::BF16 => "bf16",
         }
     }
 
@@ -71,7 +77,7 @@ impl Scalar {
     }
 
     pub fn is_float(self) -> bool {
-        matches!(self, Scalar::F32 | Scalar::F64 | Scalar::F16)
+        matches!(self, Scalar::F32 | Scalar::F64 | Scalar::F16 | Scalar::BF16)
     }
 
     pub fn is_int(self) -> bool {
@@ -114,6 +120,27 @@ pub fn f16_bits(v: f64) -> u16 {
         (((re + 15) as u16) << 10) | ((rb >> 42) & 0x3FF) as u16
     };
     sign | mag
+}
+
+/// The bit pattern of `v` rounded once to the nearest `bf16`, ties to even (the same rounding
+/// as `warp_core::bfloat16::bf16_from_f64`): how `bf16` literals are emitted.
+pub fn bf16_bits(v: f64) -> u16 {
+    let bits = v.to_bits();
+    let sign = ((bits >> 48) & 0x8000) as u16;
+    let a = v.abs();
+    if a.is_nan() {
+        // A quiet NaN of `v`'s sign (literals are never NaN; `f32::NAN`-like constants are).
+        return sign | 0x7FC0;
+    }
+    let pow2 = |k: i32| f64::from_bits(((1023 + k) as u64) << 52);
+    if a >= (2.0 - pow2(-8)) * pow2(127) {
+        return sign | 0x7F80;
+    }
+    let e = ((bits >> 52) & 0x7FF) as i32 - 1023;
+    let ulp = e.max(-126) - 7;
+    // `r` is a bf16 value, exact in f32: its top 16 bits are the bf16's.
+    let r = (a * pow2(-ulp)).round_ties_even() * pow2(ulp);
+    sign | ((r as f32).to_bits() >> 16) as u16
 }
 
 /// Declares the object kinds: one row per kind makes both the [`ObjectKind`] variant and its
@@ -572,6 +599,23 @@ mod tests {
         ] {
             assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
         }
+    }
+
+    #[test]
+    fn bf16_literal_bits() {
+        assert_eq!(bf16_bits(1.0), 0x3F80);
+        assert_eq!(bf16_bits(-2.0), 0xC000);
+        assert_eq!(bf16_bits(0.1), 0x3DCD);
+        assert_eq!(bf16_bits(1.0 + 2f64.powi(-8)), 0x3F80); // tie to even
+        assert_eq!(bf16_bits(1.0 + 3.0 * 2f64.powi(-8)), 0x3F82);
+        assert_eq!(bf16_bits(1.0 + 2f64.powi(-8) + 2f64.powi(-40)), 0x3F81);
+        assert_eq!(bf16_bits(3.39e38), 0x7F7F); // MAX (3.3895e38); the tie above is 3.3962e38
+        assert_eq!(bf16_bits(3.4e38), 0x7F80);
+        assert_eq!(bf16_bits(1e39), 0x7F80);
+        assert_eq!(bf16_bits(-0.0), 0x8000);
+        assert_eq!(bf16_bits(2f64.powi(-133)), 0x0001);
+        assert_eq!(bf16_bits(2f64.powi(-134)), 0x0000);
+        assert_eq!(bf16_bits(std::f64::consts::PI), 0x4049);
     }
 
     #[test]

@@ -22,7 +22,7 @@ use std::fmt;
 use std::marker::PhantomData;
 use std::ops::{Bound, RangeBounds};
 use std::sync::Arc;
-use warp_core::{f16, ArrayView, DTransform, Transform};
+use warp_core::{bf16, f16, ArrayView, DTransform, Transform};
 
 mod components;
 #[cfg(feature = "dlpack")]
@@ -38,7 +38,7 @@ pub(crate) use dlpack::{device_of as device_of_dlpack, dlpack_device};
 ///
 /// `Pod` is what makes zero-filled memory, byte copies between host and device and
 /// [`Array::reinterpret`] sound. Implemented for the integer and float scalars (`f16`
-/// included) and for glam's
+/// and `bf16` included) and for glam's
 /// vectors, matrices and quaternions that are `Pod` (not `Vec3A` or `Mat3A`, which have
 /// padding), and for warp-core's `Transform` and `DTransform`; `#[derive(Struct)]` implements it for user structs. `bool` is not an element: it is
 /// not `Pod`.
@@ -78,7 +78,7 @@ macro_rules! float_elements {
 }
 elements!(i8, i16, i32, i64, u8, u16, u32, u64);
 elements!(IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
-float_elements!(f32, f64, f16, Vec2, Vec3, Vec4, DVec2, DVec3, DVec4);
+float_elements!(f32, f64, f16, bf16, Vec2, Vec3, Vec4, DVec2, DVec3, DVec4);
 float_elements!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 float_elements!(Transform, DTransform);
 
@@ -1065,7 +1065,7 @@ macro_rules! value_kernel_args {
         }
     )*};
 }
-value_kernel_args!(bool, i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64, f16);
+value_kernel_args!(bool, i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32, f64, f16, bf16);
 value_kernel_args!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
 value_kernel_args!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 value_kernel_args!(Transform, DTransform);

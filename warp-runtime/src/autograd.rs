@@ -15,7 +15,8 @@ use crate::kernel::{ArgsOf, Forward, Kernel, KernelParams, Launchable};
 use crate::launch::Dim;
 use crate::tape::{Seed, Tape};
 
-/// A float element type for gradient checks (f32, f64, f16), with its default check settings.
+/// A float element type for gradient checks (f32, f64, f16, bf16), with its default check
+/// settings.
 pub trait CheckFloat: Seed {
     /// Converts to f64.
     fn to_f64(self) -> f64;
@@ -80,6 +81,26 @@ impl CheckFloat for warp_core::f16 {
     };
 }
 
+impl CheckFloat for warp_core::bf16 {
+    fn to_f64(self) -> f64 {
+        self.to_f64()
+    }
+    fn from_f64(v: f64) -> Self {
+        warp_core::bfloat16::bf16_from_f64(v)
+    }
+    // bf16 has 8 significant bits: a unit roundoff of 2^-8 (3.9e-3), 8 times f16's. A step of
+    // 1/4 is exact for |x| < 32 (x +- h needs no rounding); the quotient's rounding error is
+    // then about 2 * 2^-8 |f| / (2h) = 1.6e-2 |f|, the truncation error h^2/6 |f'''| =
+    // 1e-2 |f'''|, and the analytic side rounds each step of its formula (a few 2^-8
+    // relative). 1e-1 relative (5e-2 absolute near zero) passes a right gradient of moderate
+    // curvature and still fails a wrong one by a factor or a sign.
+    const DEFAULTS: GradcheckOptions = GradcheckOptions {
+        eps: 0.25,
+        atol: 5e-2,
+        rtol: 1e-1,
+    };
+}
+
 /// Step and tolerances of [`gradcheck`]: an entry passes when
 /// `|analytic - numeric| <= atol + rtol * |numeric|`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -94,7 +115,7 @@ pub struct GradcheckOptions {
 
 impl GradcheckOptions {
     /// The defaults for element type `T` (f32: eps 1e-3, atol 1e-3, rtol 1e-2; f64: eps
-    /// 1e-6, atol 1e-8, rtol 1e-6; f16: eps 1/16, atol 2e-2, rtol 5e-2; the reasons are in
+    /// 1e-6, atol 1e-8, rtol 1e-6; f16: eps 1/16, atol 2e-2, rtol 5e-2; bf16: eps 1/4, atol 5e-2, rtol 1e-1; the reasons are in
     /// the source).
     pub fn for_type<T: CheckFloat>() -> Self {
         T::DEFAULTS

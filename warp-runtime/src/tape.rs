@@ -155,6 +155,10 @@ impl Seed for warp_core::f16 {
     const ONE: warp_core::f16 = warp_core::f16::ONE;
 }
 
+impl Seed for warp_core::bf16 {
+    const ONE: warp_core::bf16 = warp_core::bf16::ONE;
+}
+
 impl Tape {
     /// An empty tape.
     pub fn new() -> Tape {

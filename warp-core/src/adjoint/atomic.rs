@@ -21,7 +21,7 @@ macro_rules! extreme_float {
         }
     )*};
 }
-extreme_float!(f32, f64, half::f16);
+extreme_float!(f32, f64, half::f16, half::bf16);
 
 macro_rules! extreme_vec {
     ($($t:ty => $n:expr),*) => {$(

@@ -37,6 +37,7 @@ use glam::{
 use crate::builtins::math::Float;
 
 mod atomic;
+mod bfloat16;
 mod builtins;
 mod cast;
 mod float16;

@@ -142,8 +142,8 @@ macro_rules! float_scalar_ops {
         }
     };
 }
-use half::f16;
-float_scalar_ops!(f32, f64, f16);
+use half::{bf16, f16};
+float_scalar_ops!(f32, f64, f16, bf16);
 
 // ------------------------------------------------------------------------------------------
 // Float vectors (componentwise; with a scalar on either side)

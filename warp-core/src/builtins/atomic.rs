@@ -26,7 +26,7 @@
 
 use std::sync::atomic::{AtomicI32, AtomicI64, AtomicU16, AtomicU32, AtomicU64, Ordering::Relaxed};
 
-use half::f16;
+use half::{bf16, f16};
 
 use glam::{DVec2, DVec3, DVec4, Vec2, Vec3, Vec4};
 
@@ -34,7 +34,7 @@ use crate::fault::KResult;
 use crate::index::KernelIndex;
 use crate::view::ArrayView;
 
-/// An element type the atomic builtins accept: `i32`, `u32`, `i64`, `u64`, `f32`, `f64`, `f16`,
+/// An element type the atomic builtins accept: `i32`, `u32`, `i64`, `u64`, `f32`, `f64`, `f16`, `bf16`,
 /// `Vec2/3/4`, `DVec2/3/4`.
 ///
 /// Each operation stores the new value and returns the old one.
@@ -183,7 +183,7 @@ macro_rules! from_ptr {
     )*};
 }
 from_ptr!(i32 => AtomicI32, u32 => AtomicU32, i64 => AtomicI64, u64 => AtomicU64);
-from_ptr!(f32 => AtomicU32, f64 => AtomicU64, f16 => AtomicU16);
+from_ptr!(f32 => AtomicU32, f64 => AtomicU64, f16 => AtomicU16, bf16 => AtomicU16);
 
 // ------------------------------------------------------------------------------------------
 // Floats: compare-exchange loop on the bit pattern.
@@ -240,32 +240,38 @@ macro_rules! float_bits {
         }
     )*};
 }
-float_bits!(f32 => AtomicU32, f64 => AtomicU64, f16 => AtomicU16);
+float_bits!(f32 => AtomicU32, f64 => AtomicU64, f16 => AtomicU16, bf16 => AtomicU16);
 
-/// `f16`: a compare-exchange loop on the 16-bit pattern (`AtomicU16`), each new value one
-/// `f16` operation (computed in `f32`, rounded once), `min`/`max` the `f16` builtins.
-impl AtomicElement for f16 {
+/// `f16` and `bf16`: a compare-exchange loop on the 16-bit pattern (`AtomicU16`), each new
+/// value one 16-bit float operation (computed in `f32`, rounded once), `min`/`max` the
+/// builtins.
+macro_rules! atomic_half {
+    ($($t:ident),*) => {$(
+impl AtomicElement for $t {
     #[inline(always)]
     unsafe fn atomic_add(p: *mut Self, v: Self) -> Self {
         // SAFETY: as `atomic_rmw` requires, forwarded from the caller.
-        unsafe { float_rmw(p, |x: f16| x + v) }
+        unsafe { float_rmw(p, |x: $t| x + v) }
     }
     #[inline(always)]
     unsafe fn atomic_sub(p: *mut Self, v: Self) -> Self {
         // SAFETY: as in `atomic_add`.
-        unsafe { float_rmw(p, |x: f16| x - v) }
+        unsafe { float_rmw(p, |x: $t| x - v) }
     }
     #[inline(always)]
     unsafe fn atomic_min(p: *mut Self, v: Self) -> Self {
         // SAFETY: as in `atomic_add`.
-        unsafe { float_rmw(p, |x: f16| super::min(x, v)) }
+        unsafe { float_rmw(p, |x: $t| super::min(x, v)) }
     }
     #[inline(always)]
     unsafe fn atomic_max(p: *mut Self, v: Self) -> Self {
         // SAFETY: as in `atomic_add`.
-        unsafe { float_rmw(p, |x: f16| super::max(x, v)) }
+        unsafe { float_rmw(p, |x: $t| super::max(x, v)) }
     }
 }
+    )*};
+}
+atomic_half!(f16, bf16);
 
 /// `*p = f(*p)` atomically via compare-exchange on the bits; returns the old value.
 ///

@@ -136,6 +136,9 @@ fn float_lit(v: f64, s: Scalar) -> String {
         // The literal rounded once to f16, by its bit pattern (the Rust backend's too).
         return format!("wp::f16_from_bits({:#06x})", crate::types::f16_bits(v));
     }
+    if s == Scalar::BF16 {
+        return format!("wp::bf16_from_bits({:#06x})", crate::types::bf16_bits(v));
+    }
     let ty = if s == Scalar::F32 {
         "wp::f32"
     } else {
@@ -987,6 +990,7 @@ mod tests {
         assert_eq!(float_lit(0.1, Scalar::F64), "0.1");
         assert_eq!(float_lit(0.1, Scalar::F16), "wp::f16_from_bits(0x2e66)");
         assert_eq!(float_lit(-1e9, Scalar::F16), "wp::f16_from_bits(0xfc00)");
+        assert_eq!(float_lit(0.1, Scalar::BF16), "wp::bf16_from_bits(0x3dcd)");
         assert_eq!(int_lit(i32::MIN as i128, Scalar::I32), "(-2147483647 - 1)");
     }
 }

@@ -140,8 +140,9 @@ impl Emitter<'_> {
                         format!("wp::{}({d}, {});", builtin.name, a[0])
                     }
                     "tile_matmul" | "tile_matmul_acc" => {
-                        // f16 operands: the tensor-core matmul (its FMA fallback included).
-                        if matches!(f.ty(args[0]), Ty::Tile(el, _) if **el == Ty::Scalar(crate::types::Scalar::F16))
+                        // f16 and bf16 operands: the tensor-core matmul (its FMA fallback
+                        // included).
+                        if matches!(f.ty(args[0]), Ty::Tile(el, _) if matches!(**el, Ty::Scalar(crate::types::Scalar::F16 | crate::types::Scalar::BF16)))
                         {
                             e.section("tile_mma");
                         }

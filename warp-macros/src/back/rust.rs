@@ -296,14 +296,18 @@ impl<'a> RustEmitter<'a> {
                 let x = self.var(*v);
                 let from = self.f.ty(*v);
                 let to = ty_tokens(t).expect("casts are to scalars");
-                // `as` has no f16 (the `half` crate's type): its casts go through traits with
-                // `as`'s meaning (warp_core::float16).
+                // `as` has no f16 or bf16 (the `half` crate's types): their casts go through
+                // traits with `as`'s meaning (warp_core::float16, warp_core::bfloat16).
                 if *t == Ty::Scalar(Scalar::F16) {
                     quote_spanned!(sp=> __wp::ops::ToF16::to_f16(#x))
                 } else if *from == Ty::Scalar(Scalar::F16) {
                     quote_spanned!(sp=> <#to as __wp::ops::FromF16>::from_f16(#x))
+                } else if *t == Ty::Scalar(Scalar::BF16) {
+                    quote_spanned!(sp=> __wp::ops::ToBf16::to_bf16(#x))
+                } else if *from == Ty::Scalar(Scalar::BF16) {
+                    quote_spanned!(sp=> <#to as __wp::ops::FromBf16>::from_bf16(#x))
                 } else if from.is_deferred() {
-                    // A func's result may be an f16.
+                    // A func's result may be an f16 or a bf16.
                     quote_spanned!(sp=> __wp::ops::AsScalar::<#to>::as_scalar(#x))
                 } else {
                     quote_spanned!(sp=> (#x as #to))
@@ -437,6 +441,7 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
         }
         // The `half` crate's type, by the facade's path (the user's `f16` may be any import).
         Ty::Scalar(Scalar::F16) => Some(quote!(__wp::f16)),
+        Ty::Scalar(Scalar::BF16) => Some(quote!(__wp::bf16)),
         Ty::Scalar(s) => {
             let id = format_ident!("{}", s.name());
             Some(quote!(#id))
@@ -503,6 +508,11 @@ fn literal(l: &Lit, ty: &Ty) -> TokenStream {
         (Lit::Float(v), Ty::Scalar(Scalar::F16)) => {
             let bits = Literal::u16_suffixed(crate::types::f16_bits(*v));
             quote!(__wp::f16::from_bits(#bits))
+        }
+        // bf16 likewise (warp_core::bfloat16::bf16_from_f64's rounding).
+        (Lit::Float(v), Ty::Scalar(Scalar::BF16)) => {
+            let bits = Literal::u16_suffixed(crate::types::bf16_bits(*v));
+            quote!(__wp::bf16::from_bits(#bits))
         }
         (Lit::Float(v), Ty::Scalar(s)) if s.is_float() => {
             let t = format_ident!("{}", s.name());

@@ -22,7 +22,7 @@ pub enum Class {
     SignedVector,
     /// Vec3, DVec3, IVec3 (cross).
     Vector3,
-    /// Types CPU and GPU atomics exist for: i32, u32, i64, u64, f32, f64, f16 and float
+    /// Types CPU and GPU atomics exist for: i32, u32, i64, u64, f32, f64, f16, bf16 and float
     /// vectors.
     Atomic,
     /// Float square matrices (Mat2-4, DMat2-4).
@@ -72,6 +72,7 @@ impl Class {
                         | Scalar::F32
                         | Scalar::F64
                         | Scalar::F16
+                        | Scalar::BF16
                 )
             }
             (Class::Atomic, Ty::Vector(s, _)) => s.is_float(),
@@ -101,14 +102,14 @@ impl Class {
 
     pub fn describe(self) -> &'static str {
         match self {
-            Class::Float => "f32, f64 or f16",
+            Class::Float => "f32, f64, f16 or bf16",
             Class::Number => "an integer or float scalar",
             Class::SignedNumber => "a signed integer or float scalar",
             Class::FloatVector => "a float vector (Vec2-4, DVec2-4)",
             Class::IntVector => "an integer vector (IVec2-4, UVec2-4)",
             Class::SignedVector => "a signed vector (Vec2-4, DVec2-4, IVec2-4)",
             Class::Vector3 => "a 3-vector (Vec3, DVec3, IVec3)",
-            Class::Atomic => "i32, u32, i64, u64, f32, f64, f16 or a float vector",
+            Class::Atomic => "i32, u32, i64, u64, f32, f64, f16, bf16 or a float vector",
             Class::Matrix => "a matrix (Mat2-4, DMat2-4)",
             Class::Matrix3 => "a 3x3 matrix (Mat3, DMat3)",
             Class::Matrix2 => "a 2x2 matrix (Mat2, DMat2)",

@@ -21,7 +21,8 @@ pub enum Capability {
     /// `atomic_add`/`atomic_sub` on f64 (and f64 vector components); gradient accumulation
     /// into f64 arrays and volumes.
     AtomicAddF64,
-    /// Any atomic on f16 elements; gradient accumulation into f16 arrays.
+    /// Any atomic on f16 or bf16 elements (both a 16-bit compare-and-swap on CUDA); gradient
+    /// accumulation into f16 and bf16 arrays.
     AtomicF16,
     /// `atomic_min/max/and/or/xor` on 64-bit integer elements.
     AtomicMinMaxBits64,
@@ -55,7 +56,7 @@ pub fn required_capabilities(f: &Function) -> Vec<Capability> {
         };
         let scalar = elem.scalar();
         let needs = match (builtin.name, scalar) {
-            (_, Some(Scalar::F16)) => Some(Capability::AtomicF16),
+            (_, Some(Scalar::F16 | Scalar::BF16)) => Some(Capability::AtomicF16),
             ("atomic_add" | "atomic_sub", Some(Scalar::F64)) => Some(Capability::AtomicAddF64),
             (
                 "atomic_min" | "atomic_max" | "atomic_and" | "atomic_or" | "atomic_xor",
@@ -70,7 +71,7 @@ pub fn required_capabilities(f: &Function) -> Vec<Capability> {
         let needs = match &p.ty {
             Ty::Array(elem, _) => match elem.scalar() {
                 Some(Scalar::F64) => Some(Capability::AtomicAddF64),
-                Some(Scalar::F16) => Some(Capability::AtomicF16),
+                Some(Scalar::F16 | Scalar::BF16) => Some(Capability::AtomicF16),
                 _ => None,
             },
             Ty::Object(ObjectKind::Volume(VolumeElem::F64 | VolumeElem::DVec3)) => {

@@ -35,7 +35,8 @@ nd_scalars!(
     u64,
     f32,
     f64,
-    warp_core::f16
+    warp_core::f16,
+    warp_core::bf16
 );
 
 macro_rules! nd_vectors {

@@ -20,7 +20,7 @@ use crate::device::{get_device, Device, DeviceKind};
 use crate::error::{Error, Result};
 use dlpark::ffi::{DLDataType, DLDataTypeCode, DLDevice, DLDeviceType};
 use dlpark::{DlpackFlags, Managed, ManagedTensorBase};
-use warp_core::f16;
+use warp_core::{bf16, f16};
 
 /// A scalar type with a DLPack data type: the components of the elements that arrays
 /// exchange through DLPack.
@@ -40,6 +40,8 @@ dlpack_scalars!(
     i8 => INT, 8; i16 => INT, 16; i32 => INT, 32; i64 => INT, 64;
     u8 => UINT, 8; u16 => UINT, 16; u32 => UINT, 32; u64 => UINT, 64;
     f16 => FLOAT, 16; f32 => FLOAT, 32; f64 => FLOAT, 64;
+    // kDLBfloat (4): the brain float, as PyTorch exports torch.bfloat16.
+    bf16 => BFLOAT, 16;
 );
 
 /// The DLPack device of an array's device.

@@ -17,8 +17,7 @@ const TILE_ELEM: &[Class] = &[Number];
 const TILE_ATOMIC: &[Class] = &[AtomicScalar];
 /// `tile_sort`'s keys: Warp's 32- and 64-bit integers and floats (the atomics' set).
 const TILE_SORT_KEY: &[Class] = &[AtomicScalar];
-/// The matmul's elements: f16 (tensor cores on sm_80+, f32 accumulation), f32, f64 (bf16:
-/// later).
+/// The matmul's elements: f16 and bf16 (tensor cores on sm_80+, f32 accumulation), f32, f64.
 const TILE_MATMUL: &[Class] = &[Float];
 
 /// The FFTs' elements: `Vec2`, `DVec2` (complex values; the class says float vectors).
@@ -83,10 +82,10 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "tile_argmin": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
     "tile_argmax": TILE_ELEM, (Tile) -> Tile, "tile", Zero, cooperative;
     // `c = tile_matmul(a, b)`; `tile_matmul(a, b, &mut c)` is `c += a b` (Warp's `out`
-    // argument), each element an FMA chain in ascending k. f16 operands accumulate in f32: `c`
-    // is a `Tile<f32, ..>`, and the returning form's f16 result is rounded once; on CUDA
-    // (sm_80+, whole warps, M % 16, N % 8, K % 16) the tensor cores sum each k-step of 16 in
-    // their own order.
+    // argument), each element an FMA chain in ascending k. f16 and bf16 operands accumulate
+    // in f32: `c` is a `Tile<f32, ..>`, and the returning form's 16-bit result is rounded once;
+    // on CUDA (sm_80+, whole warps, M % 16, N % 8, K % 16) the tensor cores sum each k-step of
+    // 16 in their own order.
     "tile_matmul": TILE_MATMUL, (Tile, Tile) -> Tile, "tile", Adjoint, no_tangent, cooperative;
     "tile_matmul_acc": TILE_MATMUL, (Tile, Tile, Tile) -> Unit, "tile", Adjoint, no_tangent,
         cooperative, overload("tile_matmul", 3);

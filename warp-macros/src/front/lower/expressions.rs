@@ -62,10 +62,17 @@ fn path_constant(segments: &[String]) -> Option<(Scalar, f64, Option<i128>)> {
         ["consts", n] => *n,
         _ => return None,
     };
-    if s == Scalar::F16 {
-        // `half`'s constants (`f16::MAX`, `f16::PI`, ...); the value is rounded to f16 where
-        // it is emitted.
+    if matches!(s, Scalar::F16 | Scalar::BF16) {
+        // `half`'s constants (`f16::MAX`, `bf16::PI`, ...); the value is rounded to the type
+        // where it is emitted.
+        let bf = s == Scalar::BF16;
+        let bf16_max = (2.0 - 2f64.powi(-7)) * 2f64.powi(127);
         let v = match name {
+            "MAX" if bf => bf16_max,
+            "MIN" if bf => -bf16_max,
+            "EPSILON" if bf => 2f64.powi(-7),
+            "MIN_POSITIVE" if bf => 2f64.powi(-126),
+            "MIN_POSITIVE_SUBNORMAL" if bf => 2f64.powi(-133),
             "MAX" => 65504.0,
             "MIN" => -65504.0,
             "EPSILON" => 2f64.powi(-10),

@@ -1097,10 +1097,15 @@ impl Lowerer {
                 format!("`tile_matmul` multiplies 2-D tiles, found `{ta}` and `{tb}`"),
             );
         }
-        if ea != eb || !matches!(ea, Ty::Scalar(Scalar::F16 | Scalar::F32 | Scalar::F64)) {
+        if ea != eb
+            || !matches!(
+                ea,
+                Ty::Scalar(Scalar::F16 | Scalar::BF16 | Scalar::F32 | Scalar::F64)
+            )
+        {
             return err(
                 args[0].span(),
-                format!("`tile_matmul` multiplies f16, f32 or f64 tiles of one element type, found `{ta}` and `{tb}`"),
+                format!("`tile_matmul` multiplies f16, bf16, f32 or f64 tiles of one element type, found `{ta}` and `{tb}`"),
             );
         }
         let msg =
@@ -1133,10 +1138,10 @@ impl Lowerer {
             "`tile_matmul` accumulates into a tile variable passed as `&mut c`",
         )?;
         let ct = self.ty(c);
-        // The accumulator's element: f16 products accumulate in f32 (rounding an f16
-        // accumulator at every step of a k-loop would lose the sum's low bits), the others in
-        // their own type.
-        let e = if e == Ty::Scalar(Scalar::F16) {
+        // The accumulator's element: f16 and bf16 products accumulate in f32 (rounding a
+        // 16-bit accumulator at every step of a k-loop would lose the sum's low bits), the
+        // others in their own type.
+        let e = if matches!(e, Ty::Scalar(Scalar::F16 | Scalar::BF16)) {
             Ty::Scalar(Scalar::F32)
         } else {
             e

@@ -85,6 +85,8 @@ pub(super) fn float_literal_fits(v: f64, s: Scalar) -> bool {
     match s {
         // The largest f16 is 65504; from 65520 on, rounding to nearest gives infinity.
         Scalar::F16 => v.abs() < 65520.0,
+        // The largest bf16 is (2 - 2^-7) 2^127; from the midpoint to 2^128 on, infinity.
+        Scalar::BF16 => v.abs() < (2.0 - 2f64.powi(-8)) * 2f64.powi(127),
         Scalar::F32 => (v as f32).is_finite(),
         _ => v.is_finite(),
     }
@@ -254,6 +256,7 @@ impl Lowerer {
                     "f32" => crate::types::F32,
                     "f64" => Ty::Scalar(Scalar::F64),
                     "f16" => Ty::Scalar(Scalar::F16),
+                    "bf16" => Ty::Scalar(Scalar::BF16),
                     suf => return err(span, format!("unknown literal suffix `{suf}`")),
                 };
                 // A deferred type is some float the target compiler picks: f64 at least.

@@ -75,11 +75,11 @@ pub const TILE_ADJOINTS: &[(&str, &str)] = &[
     ("tile_broadcast", "adjoint"),
     (
         "tile_matmul",
-        "adjoint (f16: f16 adjoints, each an f32 chain rounded once)",
+        "adjoint (f16, bf16: adjoints of the operands' type, each an f32 chain rounded once)",
     ),
     (
         "tile_matmul_acc",
-        "adjoint (f16: f16 adjoints, each an f32 chain rounded once)",
+        "adjoint (f16, bf16: adjoints of the operands' type, each an f32 chain rounded once)",
     ),
     ("tile_reshape", "adjoint"),
     ("tile_squeeze", "adjoint"),
