@@ -6,7 +6,7 @@
 //! Exactness: every bf16 operation widens its operands to f32 exactly, computes one f32
 //! operation and rounds once to nearest even, in software on both backends (`half`'s rounding,
 //! transcribed in `wp_core.h`), so `+ - * / %`, casts and the exact builtins are compared bit
-//! for bit, NaNs included. The transcendental builtins are each platform's f32 functions, a few
+//! for bit (a NaN result against any NaN: an f32 operation's NaN payload is the platform's). The transcendental builtins are each platform's f32 functions, a few
 //! f32 ulp apart, so they may differ by one bf16 ulp on CUDA. The tile matmul's FMA path (the
 //! CPU; CUDA below sm_80, or for shapes or blocks the tensor cores do not take) is one f32 FMA
 //! chain per output in ascending k, compared bit for bit with the host's chain; CUDA's tensor

@@ -16,6 +16,23 @@ fn varying_offset(a: Array<f32>) {
     let u = tile_load::<32>(a, lane() as i32);
 }
 
+// A scalar that varies by thread is no tile_map constant nor a tile operator's operand: the
+// block computes the tile once.
+#[wp::kernel]
+fn varying_map_constant(a: Array<f32>, out: Array<f32>) {
+    let t = tile_load::<32>(a, 0);
+    let u = tile_map(add, t, lane() as f32);
+    tile_store(out, u, 0);
+}
+
+#[wp::kernel]
+fn varying_scalar_operand(a: Array<f32>, out: Array<f32>) {
+    let t = tile_load::<32>(a, 0);
+    let s = lane() as f32 * 0.5;
+    let u = t * s;
+    tile_store(out, u, 0);
+}
+
 // `tile(x)` needs its width: the block size.
 #[wp::kernel]
 fn no_width(a: Array<f32>) {

@@ -11,7 +11,8 @@
 //!   than twice bf16's 8 plus two, so the double rounding is innocuous for `+ - * /` and
 //!   `sqrt`: each is the correctly rounded bf16 operation. The CUDA library computes the same
 //!   way (`wp::bf16` in `wp_core.h`, the same software rounding), so both backends agree bit
-//!   for bit, NaN payloads included.
+//!   for bit on every number; an operation whose result is NaN gives a NaN on both, whose
+//!   payload is each platform's f32 NaN (the conversions themselves keep payloads).
 //! * **Builtins**: `bf16(f(f32(x)))`, the `f32` builtin on the widened arguments, rounded once.
 //! * **Casts** (`as`, Rust's meaning): to `bf16` from every scalar rounds to nearest even,
 //!   once ([`bf16_from_f64`] for `f64`: `half::bf16::from_f64` drops the low 32 bits of the

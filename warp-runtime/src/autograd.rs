@@ -88,9 +88,9 @@ impl CheckFloat for warp_core::bf16 {
     fn from_f64(v: f64) -> Self {
         warp_core::bfloat16::bf16_from_f64(v)
     }
-    // bf16 has 8 significant bits: a unit roundoff of 2^-8 (3.9e-3), 8 times f16's. A step of
-    // 1/4 is exact for |x| < 32 (x +- h needs no rounding); the quotient's rounding error is
-    // then about 2 * 2^-8 |f| / (2h) = 1.6e-2 |f|, the truncation error h^2/6 |f'''| =
+    // bf16 has 8 significant bits: a unit roundoff of 2^-8 (3.9e-3), 8 times f16's. With a
+    // step of 1/4, x +- h rounds by at most 2^-8 |x| (exact where x's last bit is at 1/4 or
+    // coarser); the quotient's rounding error is then about 2 * 2^-8 |f| / (2h) = 1.6e-2 |f|, the truncation error h^2/6 |f'''| =
     // 1e-2 |f'''|, and the analytic side rounds each step of its formula (a few 2^-8
     // relative). 1e-1 relative (5e-2 absolute near zero) passes a right gradient of moderate
     // curvature and still fails a wrong one by a factor or a sign.

@@ -132,35 +132,41 @@ pub(super) fn check_cooperative(f: &Function, errors: &mut Vec<syn::Error>) {
     }
 }
 
-/// A tile operation's scalar arguments (offsets, `tile_arange`'s bounds) must be the same in
-/// every thread of the block: the block runs the operation once. (`tile(x)` takes each
+/// A tile operation's scalar arguments (offsets, `tile_arange`'s bounds, `tile_map`'s
+/// constants, the scalar of `t * s`) must be the same in every thread of the block: the block
+/// runs the operation once (the CPU reads lane 0's value, a CUDA thread its own, so a
+/// thread-dependent one would give each backend another result). (`tile(x)` takes each
 /// thread's own value.)
 fn check_tile_arguments(f: &Function, u: &Uniformity, errors: &mut Vec<syn::Error>) {
     walk_stmts(&f.body, &mut |s| {
-        let StmtKind::Assign {
-            op: Op::Builtin { builtin, args },
-            ..
-        } = &s.kind
-        else {
+        let StmtKind::Assign { op, .. } = &s.kind else {
             return;
         };
-        if !builtin.cooperative || builtin.lanes {
-            return;
-        }
+        let (name, what, args): (String, &str, &[VarId]) = match op {
+            Op::Builtin { builtin, args } if builtin.cooperative && !builtin.lanes => {
+                let what = match builtin.name {
+                    "tile_load" | "tile_store" => "offset",
+                    _ => "argument",
+                };
+                (format!("`{}`", builtin.name), what, args)
+            }
+            Op::TileMap { args, .. } => ("`tile_map`".into(), "constant", args),
+            Op::Binary(op, a, b) if f.ty(*a).is_tile() != f.ty(*b).is_tile() => (
+                format!("a tile's `{}`", op.symbol()),
+                "scalar operand",
+                std::slice::from_ref(if f.ty(*a).is_tile() { b } else { a }),
+            ),
+            _ => return,
+        };
         for a in args {
             let t = f.ty(*a);
             if matches!(t, Ty::Array(..) | Ty::Tile(..)) || u.is_uniform(*a) {
                 continue;
             }
-            let what = match builtin.name {
-                "tile_load" | "tile_store" => "offset",
-                _ => "argument",
-            };
             errors.push(syn::Error::new(
                 s.span,
                 format!(
-                    "the {what} of `{}` must be the same in every thread of the block (it may not depend on `lane()`, on a value read from memory the kernel writes, or on control flow that depends on the thread)",
-                    builtin.name
+                    "the {what} of {name} must be the same in every thread of the block (it may not depend on `lane()`, on a value read from memory the kernel writes, or on control flow that depends on the thread)"
                 ),
             ));
             return;

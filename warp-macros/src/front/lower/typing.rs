@@ -81,6 +81,64 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
 /// Whether the literal value `v` stays finite once rounded to the float type `s`. As Rust's
 /// `overflowing_literals` (deny by default) rejects `1e39_f32`, so does the kernel language:
 /// the value would otherwise become an infinity on one backend and an error on the other.
+/// `v` as an f64 rounded to odd (truncated, its last bit set when that dropped anything):
+/// rounding the result once more to a float of at most 51 significant bits (f32, f16, bf16)
+/// rounds `v` once, where `v as f64` would round twice for integers past 2^53 (2^60 + 2^52 + 1
+/// becomes the bf16 tie 2^60 + 2^52, which rounds to even, not up).
+fn int_to_f64_odd(v: i128) -> f64 {
+    let m = v.unsigned_abs();
+    let bits = 128 - m.leading_zeros();
+    if bits <= 53 {
+        return v as f64;
+    }
+    let shift = bits - 53;
+    let mut top = m >> shift;
+    if m & ((1u128 << shift) - 1) != 0 {
+        top |= 1;
+    }
+    // `top` has 53 bits (exact in f64), and the power of two at most 2^74.
+    let r = top as f64 * 2f64.powi(shift as i32);
+    if v < 0 {
+        -r
+    } else {
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::int_to_f64_odd;
+    use crate::types::bf16_bits;
+
+    /// Integer literals past 2^53 round once to the narrower floats: through f64 rounded to
+    /// odd, not to nearest (which makes ties that were not there).
+    #[test]
+    fn integer_literals_round_once() {
+        let v: i128 = (1 << 60) + (1 << 52) + 1;
+        // To nearest: the tie 2^60 + 2^52, even in bf16 (0x5D80); once: up (0x5D81).
+        assert_eq!(bf16_bits(v as f64), 0x5D80);
+        assert_eq!(bf16_bits(int_to_f64_odd(v)), 0x5D81);
+        assert_eq!(bf16_bits(int_to_f64_odd(-v)), 0xDD81);
+        // f32 alike: 2^60 + 2^36 + 1 is above the f32 tie 2^60 + 2^36.
+        let w: i128 = (1 << 60) + (1 << 36) + 1;
+        assert_eq!(int_to_f64_odd(w) as f32, 2f32.powi(60) + 2f32.powi(37));
+        assert_eq!(w as f64 as f32, 2f32.powi(60));
+        // Integers exact in f64 are unchanged.
+        for v in [
+            0i128,
+            1,
+            -7,
+            (1 << 53) - 1,
+            1 << 53,
+            -(1 << 53),
+            1 << 70,
+            -(3 << 90),
+        ] {
+            assert_eq!(int_to_f64_odd(v), v as f64, "{v}");
+        }
+    }
+}
+
 pub(super) fn float_literal_fits(v: f64, s: Scalar) -> bool {
     match s {
         // The largest f16 is 65504; from 65520 on, rounding to nearest gives infinity.
@@ -210,10 +268,17 @@ impl Lowerer {
                     .ok_or_else(|| syn::Error::new(span, "integer literal too large"))?;
                 let v = if neg { -v } else { v };
                 let float = |this: &mut Self, s: Scalar| {
-                    if !float_literal_fits(v as f64, s) {
+                    // Rounded once to `s`: directly for f64, through f64 rounded to odd for
+                    // the narrower floats (which the back ends round from the f64).
+                    let x = if s == Scalar::F64 {
+                        v as f64
+                    } else {
+                        int_to_f64_odd(v)
+                    };
+                    if !float_literal_fits(x, s) {
                         return Err(float_out_of_range(span, s));
                     }
-                    Ok(this.def(Op::Lit(Lit::Float(v as f64)), Ty::Scalar(s), span))
+                    Ok(this.def(Op::Lit(Lit::Float(x)), Ty::Scalar(s), span))
                 };
                 let ty = match i.suffix() {
                     "" => match want_scalar {
