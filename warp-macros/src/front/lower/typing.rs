@@ -105,40 +105,6 @@ fn int_to_f64_odd(v: i128) -> f64 {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::int_to_f64_odd;
-    use crate::types::bf16_bits;
-
-    /// Integer literals past 2^53 round once to the narrower floats: through f64 rounded to
-    /// odd, not to nearest (which makes ties that were not there).
-    #[test]
-    fn integer_literals_round_once() {
-        let v: i128 = (1 << 60) + (1 << 52) + 1;
-        // To nearest: the tie 2^60 + 2^52, even in bf16 (0x5D80); once: up (0x5D81).
-        assert_eq!(bf16_bits(v as f64), 0x5D80);
-        assert_eq!(bf16_bits(int_to_f64_odd(v)), 0x5D81);
-        assert_eq!(bf16_bits(int_to_f64_odd(-v)), 0xDD81);
-        // f32 alike: 2^60 + 2^36 + 1 is above the f32 tie 2^60 + 2^36.
-        let w: i128 = (1 << 60) + (1 << 36) + 1;
-        assert_eq!(int_to_f64_odd(w) as f32, 2f32.powi(60) + 2f32.powi(37));
-        assert_eq!(w as f64 as f32, 2f32.powi(60));
-        // Integers exact in f64 are unchanged.
-        for v in [
-            0i128,
-            1,
-            -7,
-            (1 << 53) - 1,
-            1 << 53,
-            -(1 << 53),
-            1 << 70,
-            -(3 << 90),
-        ] {
-            assert_eq!(int_to_f64_odd(v), v as f64, "{v}");
-        }
-    }
-}
-
 pub(super) fn float_literal_fits(v: f64, s: Scalar) -> bool {
     match s {
         // The largest f16 is 65504; from 65520 on, rounding to nearest gives infinity.
@@ -339,6 +305,40 @@ impl Lowerer {
                 "strings are not supported in kernels (except as print! formats)",
             ),
             _ => err(span, "this literal is not supported in kernels"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::int_to_f64_odd;
+    use crate::types::bf16_bits;
+
+    /// Integer literals past 2^53 round once to the narrower floats: through f64 rounded to
+    /// odd, not to nearest (which makes ties that were not there).
+    #[test]
+    fn integer_literals_round_once() {
+        let v: i128 = (1 << 60) + (1 << 52) + 1;
+        // To nearest: the tie 2^60 + 2^52, even in bf16 (0x5D80); once: up (0x5D81).
+        assert_eq!(bf16_bits(v as f64), 0x5D80);
+        assert_eq!(bf16_bits(int_to_f64_odd(v)), 0x5D81);
+        assert_eq!(bf16_bits(int_to_f64_odd(-v)), 0xDD81);
+        // f32 alike: 2^60 + 2^36 + 1 is above the f32 tie 2^60 + 2^36.
+        let w: i128 = (1 << 60) + (1 << 36) + 1;
+        assert_eq!(int_to_f64_odd(w) as f32, 2f32.powi(60) + 2f32.powi(37));
+        assert_eq!(w as f64 as f32, 2f32.powi(60));
+        // Integers exact in f64 are unchanged.
+        for v in [
+            0i128,
+            1,
+            -7,
+            (1 << 53) - 1,
+            1 << 53,
+            -(1 << 53),
+            1 << 70,
+            -(3 << 90),
+        ] {
+            assert_eq!(int_to_f64_odd(v), v as f64, "{v}");
         }
     }
 }
