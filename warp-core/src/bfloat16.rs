@@ -26,7 +26,7 @@
 //!   ([`crate::tile::MatmulElem`]).
 
 use crate::builtins::math::{Classify, Float, Lerp, MinMax, Scalar, Signed};
-use crate::float16::{AsScalar, FromF16, ToF16};
+use crate::float16::{pow2, round_to_ulp, AsScalar, FromF16, ToF16};
 
 pub use half::bf16;
 use half::f16;
@@ -46,19 +46,10 @@ pub fn bf16_from_f64(x: f64) -> bf16 {
     if a >= (2.0 - 2f64.powi(-8)) * 2f64.powi(127) {
         return bf16::from_bits(sign | 0x7F80);
     }
-    // The exponent of the bf16 ulp at `a`: 2^(e - 7) for normal values, 2^-133 below 2^-126.
-    let e = ((bits >> 52) & 0x7FF) as i32 - 1023;
-    let ulp = e.max(-126) - 7;
-    // Scaling by powers of two is exact here (no overflow; scaling up never underflows).
-    let q = a * pow2(-ulp);
-    let r = q.round_ties_even() * pow2(ulp);
+    // 2^(e - 7) for normal values, 2^-133 below 2^-126.
+    let r = round_to_ulp(a, -126, 7);
     // `r` is a bf16 value, exact in f32, so both conversions below are exact.
     bf16::from_bits(sign | bf16::from_f32(r as f32).to_bits())
-}
-
-/// 2^k as an f64, for -1022 <= k <= 1023.
-fn pow2(k: i32) -> f64 {
-    f64::from_bits(((1023 + k) as u64) << 52)
 }
 
 /// `x as bf16` for every numeric scalar of the kernel language (what generated code calls for

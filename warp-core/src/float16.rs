@@ -40,19 +40,26 @@ pub fn f16_from_f64(x: f64) -> f16 {
     if a >= 65520.0 {
         return f16::from_bits(sign | 0x7C00);
     }
-    // The exponent of the f16 ulp at `a`: 2^(e - 10) for normal f16 values, 2^-24 below 2^-14.
-    let e = ((bits >> 52) & 0x7FF) as i32 - 1023;
-    let ulp = e.max(-14) - 10;
-    // Scaling by powers of two is exact here (no overflow, and scaling up never underflows).
-    let q = a * pow2(-ulp);
-    let r = q.round_ties_even() * pow2(ulp);
+    // 2^(e - 10) for normal f16 values, 2^-24 below 2^-14.
+    let r = round_to_ulp(a, -14, 10);
     // `r` is an f16 value (or 2^16 when `a` rounds up past f16::MAX, which the check above
     // excludes), so both conversions are exact.
     f16::from_bits(sign | f16::from_f32(r as f32).to_bits())
 }
 
+/// The finite `a >= 0` rounded to nearest, ties to even, on the grid of a binary float with
+/// `frac` fraction bits and smallest normal exponent `min_exp` (its ulp at `a`: 2^(e - frac)
+/// for `a` in [2^e, 2^(e+1)), e >= min_exp; 2^(min_exp - frac) below). The rounding step of
+/// [`f16_from_f64`] and `bf16_from_f64`.
+pub(crate) fn round_to_ulp(a: f64, min_exp: i32, frac: i32) -> f64 {
+    let e = ((a.to_bits() >> 52) & 0x7FF) as i32 - 1023;
+    let ulp = e.max(min_exp) - frac;
+    // Scaling by powers of two is exact here (no overflow, and scaling up never underflows).
+    (a * pow2(-ulp)).round_ties_even() * pow2(ulp)
+}
+
 /// 2^k as an f64, for -1022 <= k <= 1023.
-fn pow2(k: i32) -> f64 {
+pub(crate) fn pow2(k: i32) -> f64 {
     f64::from_bits(((1023 + k) as u64) << 52)
 }
 
