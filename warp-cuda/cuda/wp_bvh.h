@@ -127,24 +127,44 @@ WP_FN void bvh_fault(const bvh_tree_t& t, i64 index, i64 len, ctx_t* ctx) {
 WP_FN Vec3 bvh_node_lower(const bvh_node_t& n) { return Vec3_new(n.lower[0], n.lower[1], n.lower[2]); }
 WP_FN Vec3 bvh_node_upper(const bvh_node_t& n) { return Vec3_new(n.upper[0], n.upper[1], n.upper[2]); }
 
+/// Node i, which the caller has checked to be one of the nodes.
+WP_FN bvh_node_t bvh_node_in_bounds(const bvh_tree_t& t, i32 i) {
+#if defined(__CUDACC__)
+  // Two 16-byte read-only loads (the runtime allocates nodes 16-byte aligned) instead of
+  // eight 4-byte ones: the traversals are bound by these loads.
+  const float4* q = reinterpret_cast<const float4*>(t.nodes + i);
+  const float4 lo = __ldg(q), hi = __ldg(q + 1);
+  bvh_node_t n;
+  n.lower[0] = lo.x; n.lower[1] = lo.y; n.lower[2] = lo.z; n.left = __float_as_int(lo.w);
+  n.upper[0] = hi.x; n.upper[1] = hi.y; n.upper[2] = hi.z; n.right = __float_as_int(hi.w);
+  return n;
+#else
+  return t.nodes[i];
+#endif
+}
+
 /// Node i, or a fault (and a zero node) when i is outside the nodes.
 WP_FN bvh_node_t bvh_node(const bvh_tree_t& t, i32 i, ctx_t* ctx) {
-  if ((u32)i < (u32)t.num_nodes) {
-#if defined(__CUDACC__)
-    // Two 16-byte read-only loads (the runtime allocates nodes 16-byte aligned) instead of
-    // eight 4-byte ones: the traversals are bound by these loads.
-    const float4* q = reinterpret_cast<const float4*>(t.nodes + i);
-    const float4 lo = __ldg(q), hi = __ldg(q + 1);
-    bvh_node_t n;
-    n.lower[0] = lo.x; n.lower[1] = lo.y; n.lower[2] = lo.z; n.left = __float_as_int(lo.w);
-    n.upper[0] = hi.x; n.upper[1] = hi.y; n.upper[2] = hi.z; n.right = __float_as_int(hi.w);
-    return n;
-#else
-    return t.nodes[i];
-#endif
-  }
+  if ((u32)i < (u32)t.num_nodes) return bvh_node_in_bounds(t, i);
   bvh_fault(t, (i64)i, (i64)t.num_nodes, ctx);
   return bvh_node_t{};
+}
+
+/// Nodes i and j, or a fault at the first of them outside the nodes (and zero nodes). Both
+/// indices are checked before either node is read, so that the two reads are issued together:
+/// a read after a check that may return cannot be hoisted above it, and the ordered walk reads
+/// both children of every node it enters.
+WP_FN void bvh_node_pair(const bvh_tree_t& t, i32 i, i32 j, bvh_node_t* a, bvh_node_t* b,
+                         ctx_t* ctx) {
+  const bool ok_i = (u32)i < (u32)t.num_nodes, ok_j = (u32)j < (u32)t.num_nodes;
+  if (ok_i && ok_j) {
+    *a = bvh_node_in_bounds(t, i);
+    *b = bvh_node_in_bounds(t, j);
+    return;
+  }
+  bvh_fault(t, ok_i ? (i64)j : (i64)i, (i64)t.num_nodes, ctx);
+  *a = bvh_node_t{};
+  *b = bvh_node_t{};
 }
 
 /// The parent of node i, or a fault.
@@ -276,9 +296,8 @@ template <typename S>
 WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_t& n, i32* a,
                                 f32* ka, bvh_node_t* an, i32* b, f32* kb, bvh_node_t* bn,
                                 ctx_t* ctx) {
-  const bvh_node_t l = bvh_node(t, n.left, ctx);
-  if (faulted(ctx)) return;
-  const bvh_node_t r = bvh_node(t, n.right, ctx);
+  bvh_node_t l, r;
+  bvh_node_pair(t, n.left, n.right, &l, &r, ctx);
   if (faulted(ctx)) return;
   const f32 kl = bvh_key(s.node_key(bvh_node_lower(l), bvh_node_upper(l)));
   const f32 kr = bvh_key(s.node_key(bvh_node_lower(r), bvh_node_upper(r)));
