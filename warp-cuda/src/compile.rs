@@ -161,6 +161,12 @@ pub fn nvrtc_version() -> Result<(i32, i32)> {
     nvrtc_state().clone().map_err(CudaError::NoNvrtc)
 }
 
+/// NVRTC's version if it is loaded already (`None` if not, or if it cannot be): never loads
+/// it, so a lookup that needs the version only to find a cached cubin stays free.
+pub(crate) fn loaded_nvrtc_version() -> Option<(i32, i32)> {
+    NVRTC.get().and_then(|s| s.as_ref().ok().copied())
+}
+
 /// The `sm_XX` architectures this NVRTC can compile for, e.g. `[75, 80, 86, 89, 90, 100, ...]`.
 pub fn nvrtc_supported_archs() -> Result<Vec<u32>> {
     nvrtc_version()?;
