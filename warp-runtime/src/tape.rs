@@ -306,6 +306,18 @@ fn running_backward(what: &str) -> Error {
     ))
 }
 
+/// When a tape records on this thread, the adjoint stack its backward will run with (the
+/// innermost tape's): a kernel compiled now for a launch it records compiles its adjoint
+/// along, in one unit (the CUDA backend's `module::loaded`). `None` when nothing records.
+pub(crate) fn recording_adstack_bytes() -> Option<usize> {
+    RECORDING.with(|r| {
+        let tape = r.borrow().iter().rev().find_map(Weak::upgrade)?;
+        // (A tape busy in its own backward records nothing: the launch is refused there.)
+        let own = tape.try_borrow().ok().and_then(|t| t.adstack_bytes);
+        Some(own.unwrap_or_else(config::adstack_bytes))
+    })
+}
+
 /// Records the launch of `K` on every tape recording on this thread.
 ///
 /// # Errors
