@@ -18,7 +18,7 @@
 //! libc loaded into another namespace has not set up the locale tables of threads it did not
 //! start, and NVRTC's option parser (`isspace`) reads them.
 
-use std::ffi::c_char;
+use std::ffi::{c_char, c_void};
 use std::sync::{Condvar, Mutex, OnceLock};
 
 use cudarc::nvrtc::sys;
@@ -35,26 +35,33 @@ pub const DEFAULT_MAX_NVRTC_THREADS: usize = 4;
 type Prog = sys::nvrtcProgram;
 type Res = sys::nvrtcResult;
 
+type CreateFn = unsafe extern "C" fn(
+    *mut Prog,
+    *const c_char,
+    *const c_char,
+    i32,
+    *const *const c_char,
+    *const *const c_char,
+) -> Res;
+type CompileFn = unsafe extern "C" fn(Prog, i32, *const *const c_char) -> Res;
+type DestroyFn = unsafe extern "C" fn(*mut Prog) -> Res;
+type SizeFn = unsafe extern "C" fn(Prog, *mut usize) -> Res;
+type BytesFn = unsafe extern "C" fn(Prog, *mut c_char) -> Res;
+type InitFn = unsafe extern "C" fn();
+
 /// The NVRTC entry points compiling uses, from one copy of libnvrtc.
 #[derive(Clone, Copy)]
 pub(crate) struct Api {
-    pub(crate) create: unsafe extern "C" fn(
-        *mut Prog,
-        *const c_char,
-        *const c_char,
-        i32,
-        *const *const c_char,
-        *const *const c_char,
-    ) -> Res,
-    pub(crate) compile: unsafe extern "C" fn(Prog, i32, *const *const c_char) -> Res,
-    pub(crate) destroy: unsafe extern "C" fn(*mut Prog) -> Res,
-    pub(crate) log_size: unsafe extern "C" fn(Prog, *mut usize) -> Res,
-    pub(crate) log: unsafe extern "C" fn(Prog, *mut c_char) -> Res,
-    pub(crate) cubin_size: unsafe extern "C" fn(Prog, *mut usize) -> Res,
-    pub(crate) cubin: unsafe extern "C" fn(Prog, *mut c_char) -> Res,
+    pub(crate) create: CreateFn,
+    pub(crate) compile: CompileFn,
+    pub(crate) destroy: DestroyFn,
+    pub(crate) log_size: SizeFn,
+    pub(crate) log: BytesFn,
+    pub(crate) cubin_size: SizeFn,
+    pub(crate) cubin: BytesFn,
     /// The copy's libc's `__ctype_init` (`None` for the first copy, whose libc is the
     /// program's).
-    ctype_init: Option<unsafe extern "C" fn()>,
+    ctype_init: Option<InitFn>,
     /// Which copy: 0 for the first (cudarc's).
     pub(crate) copy: usize,
 }
@@ -69,32 +76,26 @@ impl Api {
     }
 }
 
-/// Looks up `names`' symbols with `sym` into an [`Api`] (`None` if one is missing).
+/// Looks up NVRTC's symbols with `sym` into an [`Api`] (`None` if one is missing).
 fn api_from(
-    sym: impl Fn(&str) -> Option<*const std::ffi::c_void>,
+    sym: impl Fn(&str) -> Option<*const c_void>,
     ctype_init: bool,
     copy: usize,
 ) -> Option<Api> {
-    // SAFETY (each transmute): the symbol is NVRTC's function of that name, whose C signature
-    // is the field's type (cudarc's bindings of the CUDA 13 API).
+    use std::mem::transmute;
+    // SAFETY (each transmute): the symbol is NVRTC's (or glibc's) function of that name, whose
+    // C signature is the field's type (cudarc's bindings of the CUDA 13 API).
     unsafe {
         Some(Api {
-            create: std::mem::transmute::<*const std::ffi::c_void, _>(sym("nvrtcCreateProgram")?),
-            compile: std::mem::transmute::<*const std::ffi::c_void, _>(sym("nvrtcCompileProgram")?),
-            destroy: std::mem::transmute::<*const std::ffi::c_void, _>(sym("nvrtcDestroyProgram")?),
-            log_size: std::mem::transmute::<*const std::ffi::c_void, _>(sym(
-                "nvrtcGetProgramLogSize",
-            )?),
-            log: std::mem::transmute::<*const std::ffi::c_void, _>(sym("nvrtcGetProgramLog")?),
-            cubin_size: std::mem::transmute::<*const std::ffi::c_void, _>(sym(
-                "nvrtcGetCUBINSize",
-            )?),
-            cubin: std::mem::transmute::<*const std::ffi::c_void, _>(sym("nvrtcGetCUBIN")?),
+            create: transmute::<*const c_void, CreateFn>(sym("nvrtcCreateProgram")?),
+            compile: transmute::<*const c_void, CompileFn>(sym("nvrtcCompileProgram")?),
+            destroy: transmute::<*const c_void, DestroyFn>(sym("nvrtcDestroyProgram")?),
+            log_size: transmute::<*const c_void, SizeFn>(sym("nvrtcGetProgramLogSize")?),
+            log: transmute::<*const c_void, BytesFn>(sym("nvrtcGetProgramLog")?),
+            cubin_size: transmute::<*const c_void, SizeFn>(sym("nvrtcGetCUBINSize")?),
+            cubin: transmute::<*const c_void, BytesFn>(sym("nvrtcGetCUBIN")?),
             ctype_init: if ctype_init {
-                Some(std::mem::transmute::<
-                    *const std::ffi::c_void,
-                    unsafe extern "C" fn(),
-                >(sym("__ctype_init")?))
+                Some(transmute::<*const c_void, InitFn>(sym("__ctype_init")?))
             } else {
                 None
             },
@@ -112,7 +113,7 @@ fn first() -> Option<Api> {
             let name = format!("{name}\0");
             // SAFETY: a symbol lookup; the pointer is only turned into the function type of
             // its name (`api_from`).
-            unsafe { lib.get::<*const std::ffi::c_void>(name.as_bytes()) }
+            unsafe { lib.get::<*const c_void>(name.as_bytes()) }
                 .ok()
                 .map(|s| *s)
         },

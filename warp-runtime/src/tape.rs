@@ -309,6 +309,7 @@ fn running_backward(what: &str) -> Error {
 /// When a tape records on this thread, the adjoint stack its backward will run with (the
 /// innermost tape's): a kernel compiled now for a launch it records compiles its adjoint
 /// along, in one unit (the CUDA backend's `module::loaded`). `None` when nothing records.
+#[cfg(feature = "cuda")]
 pub(crate) fn recording_adstack_bytes() -> Option<usize> {
     RECORDING.with(|r| {
         let tape = r.borrow().iter().rev().find_map(Weak::upgrade)?;

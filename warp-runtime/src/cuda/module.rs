@@ -928,8 +928,8 @@ fn layout_name(contiguous: bool) -> &'static str {
 /// `adjoint: Some(bytes)` the adjoint with that stack, both from one unit where neither is
 /// compiled yet (see [`loaded`]); with `block_dim: Some(n)` (tiled kernels,
 /// [`crate::load_tiled`]) their variants for blocks of `n` threads. The kernels go to the rayon
-/// pool together (NVRTC is thread-safe), though NVRTC measured one compile at a time in a
-/// process (see `crate::load`). A kernel already loaded costs a map lookup. Every kernel is
+/// pool together, compiled side by side (each overlapping compile in a copy of NVRTC of its
+/// own: see `crate::load`). A kernel already loaded costs a map lookup. Every kernel is
 /// tried: each failure is logged, and the first of `kernels` that failed is the error.
 pub(crate) fn prepare(
     device: &Device,
