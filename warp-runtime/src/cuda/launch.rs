@@ -120,7 +120,7 @@ impl<K: Kernel> Prepared<K> {
             K::Params::contiguous(args),
             adjoint,
             tile_block,
-            crate::tape::recording_adstack_bytes,
+            crate::backend::recording_adstack_bytes,
         )?;
         // The fault record and the launch number are each launch's (`enqueue_converted`).
         let ctx = Ctx {
