@@ -20,9 +20,12 @@
 //! why it did not run.
 //!
 //! Per case: the time from the child's `main` to its first result and from spawning it (both
-//! include creating the CUDA context), and what loading the kernels cost inside it (from each
-//! variant's first launch to a loaded module, summed: NVRTC, or a cache or ahead-of-time file
-//! read, and the module load), with where the variants came from.
+//! include creating the CUDA context), the derivative's relative error against the closed form,
+//! and what loading the kernels cost inside it (from each variant's first launch to a loaded
+//! module, summed: NVRTC, or a cache or ahead-of-time file read, and the module load), the
+//! slowest unit's NVRTC time, how many units the variants came in (a kernel's forward and
+//! adjoint compiled as one unit count once) and where they came from, and each unit NVRTC
+//! compiled with its time. The goals of the cold start follow the table.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -32,6 +35,8 @@ use warp_lang as wp;
 
 mod common;
 use common::{json_number, python_side};
+#[path = "../examples/common/seed_ad.rs"]
+mod seed_ad;
 
 /// The first existing path of `env` (when set), `names` beside this binary, and `fallbacks`.
 fn find(env: &str, names: &[&str], fallbacks: &[&str]) -> Option<PathBuf> {
@@ -51,19 +56,28 @@ fn find(env: &str, names: &[&str], fallbacks: &[&str]) -> Option<PathBuf> {
 struct Start {
     first_ms: f64,
     spawn_ms: f64,
+    rel_error: f64,
     loading_ms: f64,
     nvrtc_ms: f64,
+    nvrtc_max_ms: f64,
     variants: f64,
+    units: f64,
     nvrtc: f64,
     cache_hits: f64,
     aot: f64,
+    /// Each unit NVRTC compiled: `kernel:halves:ms`, comma-separated.
+    unit_ms: String,
 }
 
-/// The value after `key=` in a `cold_start ...` line.
-fn field(line: &str, key: &str) -> Option<f64> {
+/// The text after `key=` in a `cold_start ...` line.
+fn text_field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
     line.split_whitespace()
         .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
-        .and_then(|v| v.parse().ok())
+}
+
+/// The number after `key=` in a `cold_start ...` line.
+fn field(line: &str, key: &str) -> Option<f64> {
+    text_field(line, key).and_then(|v| v.parse().ok())
 }
 
 /// Runs `bin` with `args`, the kernel cache in `cache` and the ahead-of-time directory unset
@@ -88,12 +102,16 @@ fn start(bin: &Path, args: &[&str], cache: &Path) -> Result<Start, String> {
             found = Some(Start {
                 first_ms: f("first_result_ms"),
                 spawn_ms,
+                rel_error: f("rel_error"),
                 loading_ms: f("kernel_loading_ms"),
                 nvrtc_ms: f("nvrtc_ms"),
+                nvrtc_max_ms: f("nvrtc_max_ms"),
                 variants: f("variants"),
+                units: f("units"),
                 nvrtc: f("nvrtc"),
                 cache_hits: f("cache_hits"),
                 aot: f("aot"),
+                unit_ms: text_field(&line, "unit_ms").unwrap_or("?").to_string(),
             });
         }
     }
@@ -127,26 +145,36 @@ fn case(
         spawn_ms: m(|s| s.spawn_ms),
         loading_ms: m(|s| s.loading_ms),
         nvrtc_ms: m(|s| s.nvrtc_ms),
+        nvrtc_max_ms: m(|s| s.nvrtc_max_ms),
+        rel_error: runs.iter().map(|s| s.rel_error).fold(0.0, f64::max),
         ..runs.last().expect("reps > 0").clone()
     })
 }
 
-fn print_case(what: &str, r: &Result<Start, String>) -> Option<f64> {
+/// One row of the table (and, when NVRTC compiled units, the units with their times); the
+/// case's figures for the goals.
+fn print_case(what: &str, r: &Result<Start, String>) -> Option<Start> {
     match r {
         Ok(s) => {
             println!(
-                "  {what:<44} {:8.1} {:8.1} {:10.2} {:8.1}   {} variants: {} NVRTC, {} cache, {} \
-                 ahead-of-time",
+                "  {what:<44} {:8.1} {:8.1} {:10.2} {:8.1} {:8.1} {:>9.1e}   {} variants in {} \
+                 units: {} NVRTC, {} cache, {} ahead-of-time",
                 s.first_ms,
                 s.spawn_ms,
                 s.loading_ms,
                 s.nvrtc_ms,
+                s.nvrtc_max_ms,
+                s.rel_error,
                 s.variants,
+                s.units,
                 s.nvrtc,
                 s.cache_hits,
                 s.aot
             );
-            Some(s.loading_ms)
+            if s.nvrtc > 0.0 {
+                println!("  {:<44} NVRTC per unit (ms): {}", "", s.unit_ms);
+            }
+            Some(s.clone())
         }
         Err(e) => {
             println!("  {what}: {e}");
@@ -189,8 +217,8 @@ fn main() {
          medians of {reps} starts):"
     );
     println!(
-        "  {:<44} {:>8} {:>8} {:>10} {:>8}",
-        "", "main ms", "spawn ms", "loading ms", "NVRTC ms"
+        "  {:<44} {:>8} {:>8} {:>10} {:>8} {:>8} {:>9}",
+        "", "main ms", "spawn ms", "loading ms", "NVRTC ms", "max unit", "rel. err"
     );
     let (mut cold, mut warm, mut aot) = (None, None, None);
     if let Some(bin) = &prebuilt {
@@ -200,15 +228,17 @@ fn main() {
         cold = print_case(
             "warp-lang cold (NVRTC, empty cache)",
             &case(bin, &no_aot, reps, cold_dir),
-        );
+        )
+        .map(|s| s.loading_ms);
         // The cache the last cold start filled.
         let warm_dir = tmp.join(format!("prebuilt-cold-{}", reps - 1));
         warm = print_case(
             "warp-lang warm (disk cache)",
             &case(bin, &no_aot, reps, |_| warm_dir.clone()),
-        );
+        )
+        .map(|s| s.loading_ms);
         let r = case(bin, &args, reps, |k| fresh(format!("prebuilt-aot-{k}")));
-        aot = print_case("warp-lang build-time cubins (empty cache)", &r);
+        aot = print_case("warp-lang build-time cubins (empty cache)", &r).map(|s| s.loading_ms);
         if let Ok(s) = &r {
             if s.nvrtc > 0.0 || s.aot < s.variants {
                 println!(
@@ -226,16 +256,20 @@ fn main() {
              (cargo build --release --manifest-path examples/prebuilt/Cargo.toml)"
         );
     }
+    let (mut example_cold, mut example_load) = (None, None);
     if let Some(bin) = &autodiff {
         let small = ["--n", "1000", "--steps", "2"];
         let dir = fresh("autodiff".into());
         for what in ["cold", "warm"] {
             let r = case(bin, &small, 1, |_| dir.clone());
-            print_case(&format!("autodiff example, {what}"), &r);
+            let s = print_case(&format!("autodiff example, {what}"), &r);
+            if what == "cold" {
+                example_cold = s;
+            }
         }
         let load = ["--n", "1000", "--steps", "2", "--load"];
         let r = case(bin, &load, 1, |_| fresh("autodiff-load".into()));
-        print_case("autodiff example --load (six variants), cold", &r);
+        example_load = print_case("autodiff example --load (six variants), cold", &r);
     }
     let warp_dir = fresh("warp".into()).display().to_string();
     let mut warp_cold = None;
@@ -246,16 +280,21 @@ fn main() {
         ) {
             Ok(j) => {
                 let n = |k| json_number(&j, k).unwrap_or(f64::NAN);
+                let (_, want) = seed_ad::seed_closed_form(0.5);
                 println!(
-                    "  {:<44} {:8.1} {:>8} {:10.2} {:>8}   one module, forward and backward \
-                     (import warp {:.0} ms, wp.init() {:.0} ms; main ms: from after wp.init())",
+                    "  {:<44} {:8.1} {:>8} {:10.2} {:>8} {:>8} {:>9.1e}   one module, forward \
+                     and backward (import warp {:.0} ms, wp.init() {:.0} ms; main ms: from after \
+                     wp.init(), {:.0} ms from the start of the process)",
                     format!("Warp 1.19 {what}"),
                     n("after_init_ms"),
                     "-",
                     n("load_ms"),
                     "-",
+                    "-",
+                    ((n("grad") - want) / want).abs(),
                     n("import_ms"),
-                    n("init_ms")
+                    n("init_ms"),
+                    n("first_result_ms")
                 );
                 if what == "cold" {
                     warp_cold = Some(n("load_ms"));
@@ -276,5 +315,27 @@ fn main() {
         verdict(cold.zip(warp_cold).map(|(c, w)| c <= w)),
         verdict(warm.map(|w| w < 10.0)),
         verdict(aot.map(|a| a < 5.0))
+    );
+    // The cold start's own: the autodiff example's first result from an empty cache, NVRTC
+    // per unit, and a load of several units in about its slowest unit's time (a fifth more,
+    // for the module loads and the copies of NVRTC).
+    let load_ratio = example_load
+        .as_ref()
+        .filter(|s| s.nvrtc_max_ms > 0.0)
+        .map(|s| s.loading_ms / s.nvrtc_max_ms);
+    println!(
+        "goals: autodiff example's first result cold at most 300 ms ({}), at most 100 ms of \
+         NVRTC a unit ({}), its --load of {} units in at most 1.2 times its slowest unit ({}{})",
+        verdict(example_cold.as_ref().map(|s| s.first_ms <= 300.0)),
+        verdict(
+            example_cold
+                .iter()
+                .chain(&example_load)
+                .map(|s| s.nvrtc_max_ms <= 100.0)
+                .reduce(|a, b| a && b)
+        ),
+        example_load.as_ref().map_or(f64::NAN, |s| s.units),
+        verdict(load_ratio.map(|r| r <= 1.2)),
+        load_ratio.map_or(String::new(), |r| format!(": {r:.2}x"))
     );
 }

@@ -55,7 +55,7 @@ fn main() -> wp::Result<()> {
 
     // 1. The seed function.
     let (f, g) = seed_ad::first_result(&dev)?;
-    let line = seed_ad::cold_start_line(start, &dev);
+    let line = seed_ad::cold_start_line(start, &dev, g);
     println!(
         "first result after {:.0} ms (from the start of main)",
         start.elapsed().as_secs_f64() * 1e3

@@ -579,7 +579,8 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
     dims4[..dims.len()].copy_from_slice(dims);
     let total: usize = dims.iter().product();
     let params: Vec<String> = (0..args.len()).map(|k| format!("p{k}")).collect();
-    let program = format!(
+    let program = |text: &str| {
+        format!(
         "{text}\n\
          static void print_f32(wp::f32 x) {{ unsigned u; memcpy(&u, &x, 4); printf(\"%08x\\n\", u); }}\n\
          static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
@@ -595,7 +596,6 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
          // Both variants of the thread function, each on fresh data: the unchecked one (what\n\
          // a launch whose arrays cover the grid runs) and the checked one.\n\
          int main() {{ if (run<true>()) return 1; printf(\"--\\n\"); return run<false>(); }}\n",
-        text = src.text,
         d0 = dims4[0],
         d1 = dims4[1],
         d2 = dims4[2],
@@ -603,23 +603,33 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
         ndim = dims.len(),
         thread = src.thread_fn,
         params = params.join(", "),
-    );
+    )
+    };
     let dir = std::env::temp_dir().join(format!(
         "wp_codegen_{}_{}",
         K::INFO.name,
         std::process::id()
     ));
     std::fs::create_dir_all(&dir).unwrap();
-    let cpp = dir.join("k.cpp");
-    std::fs::write(&cpp, format!("#include <cstring>\n{program}")).unwrap();
     let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
     // Both translation units the runtime may compile: the general one and the variant for
-    // launches whose arrays are all contiguous (the arrays here are).
+    // launches whose arrays are all contiguous (the arrays here are); and for a kernel with an
+    // adjoint, the unit that holds both halves (what a launch under a recording tape
+    // compiles), whose forward must run as the forward's own unit does.
+    let differentiable = K::INFO.adjoint_error.is_none() && K::INFO.cuda_adjoint_error.is_none();
+    let both = wp::cuda_source::assemble_with_adjoint(&K::INFO);
+    assert_eq!(both.thread_fn, src.thread_fn);
+    let mut units = vec![
+        (src.text.as_str(), "-DWP_GENERAL_STRIDES"),
+        (src.text.as_str(), "-DWP_CONTIGUOUS=1"),
+    ];
+    if differentiable {
+        units.push((both.text.as_str(), "-DWP_CONTIGUOUS=1"));
+    }
     let mut outputs = Vec::new();
-    for (k, define) in ["-DWP_GENERAL_STRIDES", "-DWP_CONTIGUOUS=1"]
-        .iter()
-        .enumerate()
-    {
+    for (k, (text, define)) in units.into_iter().enumerate() {
+        let cpp = dir.join(format!("k{k}.cpp"));
+        std::fs::write(&cpp, format!("#include <cstring>\n{}", program(text))).unwrap();
         let exe = dir.join(format!("k{k}"));
         let out = Command::new("g++")
             .args([
@@ -654,6 +664,12 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
         outputs[0], outputs[1],
         "the general and the contiguous-array translation units disagree"
     );
+    if let Some(both) = outputs.get(2) {
+        assert_eq!(
+            *both, outputs[1],
+            "the unit of forward and adjoint runs the forward otherwise than the forward's unit"
+        );
+    }
     let text = outputs.swap_remove(0);
     let (fast, checked) = text.split_once("--\n").expect("two runs");
     assert_eq!(fast, checked, "the unchecked and checked variants disagree");

@@ -50,24 +50,52 @@ pub fn first_result(dev: &wp::Device) -> wp::Result<(f64, f64)> {
 }
 
 /// The machine-readable line `benches/cold_start.rs` reads: the time from `start` to now (the
-/// first result) and what loading the kernels cost so far (the compile reports: how many
-/// variants, how many NVRTC compiled, the disk cache served, or came from ahead-of-time
-/// cubins, and the time from their first launch to a loaded module, summed).
-pub fn cold_start_line(start: Instant, dev: &wp::Device) -> String {
+/// first result), the derivative `df`'s relative error against the closed form, and what
+/// loading the kernels cost so far (the compile reports: how many variants in how many units
+/// (a kernel's forward and adjoint compiled as one unit count once), how many units NVRTC
+/// compiled, how many variants the disk cache served or came from ahead-of-time cubins, the
+/// time from their first launch to a loaded module and NVRTC's, summed, the slowest unit's
+/// NVRTC time, and each compiled unit as `kernel:halves:ms`).
+pub fn cold_start_line(start: Instant, dev: &wp::Device, df: f64) -> String {
     let first_ms = start.elapsed().as_secs_f64() * 1e3;
     let reports = wp::compile_reports();
     let count = |f: &dyn Fn(&wp::CompileReport) -> bool| reports.iter().filter(|r| f(r)).count();
     // (An empty f64 sum is -0.0.)
     let sum = |f: fn(&wp::CompileReport) -> f64| 0.0 + reports.iter().map(f).sum::<f64>();
+    let compiled: Vec<&wp::CompileReport> = reports
+        .iter()
+        .filter(|r| r.is_unit() && !r.cache_hit)
+        .collect();
+    let units_ms: Vec<String> = compiled
+        .iter()
+        .map(|r| {
+            let halves = match (r.one_unit, r.adjoint) {
+                (true, _) => "fwd+adj",
+                (false, true) => "adj",
+                (false, false) => "fwd",
+            };
+            format!("{}:{halves}:{:.1}", r.kernel, r.compile_ms)
+        })
+        .collect();
+    let max_ms = compiled.iter().map(|r| r.compile_ms).fold(0.0, f64::max);
+    let (_, want) = seed_closed_form(0.5);
     format!(
-        "cold_start first_result_ms={first_ms:.2} kernel_loading_ms={:.3} nvrtc_ms={:.1} \
-         variants={} nvrtc={} cache_hits={} aot={} device={dev}",
+        "cold_start first_result_ms={first_ms:.2} rel_error={:.2e} kernel_loading_ms={:.3} \
+         nvrtc_ms={:.1} nvrtc_max_ms={max_ms:.1} variants={} units={} nvrtc={} cache_hits={} \
+         aot={} unit_ms={} device={dev}",
+        ((df - want) / want).abs(),
         sum(|r| r.total_ms),
         sum(|r| r.compile_ms),
         reports.len(),
-        count(&|r| !r.cache_hit),
+        count(&|r| r.is_unit()),
+        compiled.len(),
         count(&|r| r.cache_hit && !r.aot),
         count(&|r| r.aot),
+        if units_ms.is_empty() {
+            "-".to_string()
+        } else {
+            units_ms.join(",")
+        },
     )
 }
 

@@ -17,6 +17,7 @@ backend_tests!(
     ahead_of_time_compile,
     ahead_of_time_adjoints,
     load_compiles_before_the_first_launch,
+    a_tape_compiles_forward_and_adjoint_as_one_unit,
 );
 
 /// Compiled only through `load_compiles_before_the_first_launch`.
@@ -37,18 +38,32 @@ fn k_loaded_adj(a: Array<f32>, b: Array<f32>) {
 /// adjoints) before any launch: on a GPU the compile report lists them before they ran, and
 /// the launches and backward that follow use them (no second entry); on the CPU it is a no-op.
 fn load_compiles_before_the_first_launch(dev: &wp::Device) {
-    let entries = |name: &str, direction: &str| {
-        wp::compile_summary()
-            .lines()
-            .filter(|l| l.contains(name) && l.contains(direction))
-            .count()
+    let reports = |name: &str, adjoint: bool| -> Vec<wp::CompileReport> {
+        wp::compile_reports()
+            .into_iter()
+            .filter(|r| r.kernel == name && r.adjoint == adjoint && r.device == dev.alias())
+            .collect()
     };
+    let entries = |name: &str, direction: &str| reports(name, direction == "adjoint").len();
     wp::load(&[wp::kernel_info(k_loaded)], dev).unwrap();
     wp::load_with_adjoints(&[wp::kernel_info(k_loaded_adj)], dev).unwrap();
     let expect = usize::from(!dev.is_cpu());
-    assert_eq!(entries("k_loaded ", "forward"), expect);
-    assert_eq!(entries("k_loaded_adj ", "forward"), expect);
-    assert_eq!(entries("k_loaded_adj ", "adjoint"), expect);
+    assert_eq!(entries("k_loaded", "forward"), expect);
+    assert_eq!(entries("k_loaded_adj", "forward"), expect);
+    assert_eq!(entries("k_loaded_adj", "adjoint"), expect);
+    // Neither half was compiled before: one unit for both (a disk cache that holds the halves
+    // from an older run would serve them apart; the suite's cache holds this run's units).
+    let (fwd, adj) = (
+        reports("k_loaded_adj", false),
+        reports("k_loaded_adj", true),
+    );
+    if let (Some(f), Some(a)) = (fwd.first(), adj.first()) {
+        assert_eq!(f.one_unit, a.one_unit, "{f:?} {a:?}");
+        if f.one_unit {
+            assert_eq!((f.cache_key, a.is_unit()), (a.cache_key, false));
+        }
+    }
+    assert!(reports("k_loaded", false).iter().all(|r| !r.one_unit));
     let a = arr(&[1.0f32, 2.0, 3.0], dev).with_grad().unwrap();
     let b = zeros::<f32, 1>(3, dev).with_grad().unwrap();
     wp::launch(k_loaded, 3, (&a, &b), dev).unwrap();
@@ -60,11 +75,128 @@ fn load_compiles_before_the_first_launch(dev: &wp::Device) {
     }
     tape.backward(&b).unwrap();
     // Loaded once: the launches and the backward found the loaded variants.
-    assert_eq!(entries("k_loaded ", "forward"), expect);
-    assert_eq!(entries("k_loaded_adj ", "adjoint"), expect);
+    assert_eq!(entries("k_loaded", "forward"), expect);
+    assert_eq!(entries("k_loaded_adj", "adjoint"), expect);
     // Loading again is a lookup.
     wp::load(&[wp::kernel_info(k_loaded)], dev).unwrap();
-    assert_eq!(entries("k_loaded ", "forward"), expect);
+    assert_eq!(entries("k_loaded", "forward"), expect);
+}
+
+#[wp::func]
+fn unit_sq(x: f32) -> f32 {
+    x * x
+}
+
+/// Launched only by `a_tape_compiles_forward_and_adjoint_as_one_unit`, first under a tape.
+#[wp::kernel]
+fn k_unit(a: Array<f32>, b: Array<f32>) {
+    let i = tid();
+    b[i] = unit_sq(a[i]) * 3.0 + sin(a[i]);
+}
+
+/// Launched only by `a_tape_compiles_forward_and_adjoint_as_one_unit`, first with no tape.
+#[wp::kernel]
+fn k_unit_plain(a: Array<f32>, b: Array<f32>) {
+    let i = tid();
+    b[i] = unit_sq(a[i]) * 3.0 + sin(a[i]);
+}
+
+/// A kernel's first launch under a recording tape compiles its forward and adjoint as one
+/// unit (one NVRTC run, one module): both reports say so, share the key and the entry, and
+/// the unit's cost is counted once; backward then compiles nothing. A kernel first launched
+/// without a tape compiles its forward alone, and its adjoint when backward needs it. The
+/// unit itself is checked with NVRTC alone on every backend (both entry points in its cubin;
+/// skipped without NVRTC). Gradients: d/da (3 a^2 + sin a) = 6 a + cos a, to 1e-5 relative
+/// (f32 `sin`/`cos` within a few ulps on a GPU).
+fn a_tape_compiles_forward_and_adjoint_as_one_unit(dev: &wp::Device) {
+    let (_, arch) = aot_target(dev, "one-unit");
+    let info = wp::kernel_info(k_unit);
+    let src = wp::cuda_source::assemble_with_adjoint(info);
+    let adjoint = src.adjoint.clone().expect("the adjoint's names");
+    let stack = wp::config::adstack_bytes().to_string();
+    let defines = [("WP_CONTIGUOUS", "1"), ("WP_ADSTACK_BYTES", stack.as_str())];
+    let headers = warp_cuda::HEADERS.to_vec();
+    let opts = warp_cuda::CompileOptions {
+        defines: &defines,
+        headers: &headers,
+        ..Default::default()
+    };
+    match warp_cuda::compile(&src.text, info.name, &opts, arch) {
+        Ok(c) => {
+            let has = |name: &str| {
+                c.cubin
+                    .windows(name.len() + 1)
+                    .any(|w| w[..name.len()] == *name.as_bytes() && w[name.len()] == 0)
+            };
+            assert!(
+                has(&src.entry) && has(&adjoint.entry),
+                "entries of {}",
+                info.name
+            );
+        }
+        Err(e) if warp_cuda::nvrtc_version().is_err() => {
+            eprintln!("SKIPPED the NVRTC part of a_tape_compiles_forward_and_adjoint_as_one_unit on {dev}: {e}");
+        }
+        Err(e) => panic!("NVRTC refused the unit of both halves: {e}"),
+    }
+    let xs = [0.5f32, 1.0, 2.0];
+    let run = |k: bool| -> (Vec<f32>, Vec<f32>) {
+        let a = arr(&xs, dev).with_grad().unwrap();
+        let b = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+        if !k {
+            // First launch with no tape: the forward alone.
+            wp::launch(k_unit_plain, 3, (&a, &b), dev).unwrap();
+        }
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            if k {
+                wp::launch(k_unit, 3, (&a, &b), dev).unwrap();
+            } else {
+                wp::launch(k_unit_plain, 3, (&a, &b), dev).unwrap();
+            }
+        }
+        tape.backward(&b).unwrap();
+        (host(&b), a.grad().expect("with_grad").to_vec().unwrap())
+    };
+    for k in [true, false] {
+        let (b, g) = run(k);
+        for (i, x) in xs.into_iter().enumerate() {
+            let (want_b, want_g) = (3.0 * x * x + x.sin(), 6.0 * x + x.cos());
+            assert!((b[i] - want_b).abs() <= 1e-5 * want_b.abs(), "{b:?}");
+            assert!((g[i] - want_g).abs() <= 1e-5 * want_g.abs(), "{g:?}");
+        }
+    }
+    if dev.is_cpu() {
+        return;
+    }
+    let reports = |name: &str| -> Vec<wp::CompileReport> {
+        wp::compile_reports()
+            .into_iter()
+            .filter(|r| r.kernel == name && r.device == dev.alias())
+            .collect()
+    };
+    let unit = reports("k_unit");
+    assert_eq!(unit.len(), 2, "{unit:?}");
+    let (f, a) = (&unit[0], &unit[1]);
+    assert!(!f.adjoint && a.adjoint, "{unit:?}");
+    assert!(f.one_unit && a.one_unit, "{unit:?}");
+    assert_eq!((f.cache_key, &f.cache_entry), (a.cache_key, &a.cache_entry));
+    assert!(f.is_unit() && !a.is_unit());
+    assert_eq!((a.compile_ms, a.total_ms), (0.0, 0.0));
+    // Compiled here, or found whole in the disk cache of an earlier run.
+    assert!(f.cache_hit == (f.compile_ms == 0.0), "{f:?}");
+    assert!(f.total_ms > 0.0);
+    assert!(wp::compile_summary()
+        .lines()
+        .any(|l| l.contains("k_unit ") && l.contains("in the forward's unit")));
+    let plain = reports("k_unit_plain");
+    assert_eq!(plain.len(), 2, "{plain:?}");
+    assert!(
+        plain.iter().all(|r| !r.one_unit && r.is_unit()),
+        "{plain:?}"
+    );
+    assert_ne!(plain[0].cache_key, plain[1].cache_key);
 }
 
 /// A fresh ahead-of-time directory for a test (`name`) on `dev`, and the architecture to

@@ -389,13 +389,14 @@ WP_ADJ_QUAT_OPS(DQuat, DVec3, f64)
 // Casts (warp-core/src/adjoint/cast.rs)
 // ------------------------------------------------------------------------------------------
 
-/// Adjoint of `x as To` for the 13 scalar types: between f32 and f64 (either way, or to the
-/// same type) `adj_from += (From)adj_to`; a no-op when either side is an integer or bool.
+/// Adjoint of `x as To` for the scalar types: between floats (either way, or to the same type)
+/// `adj_from += adj_to as From`, rounded as the forward cast rounds (`cast`: f16 and bf16
+/// have no C++ conversion to each other); a no-op when either side is an integer or bool.
 template <typename From, typename To>
 WP_FN void adj_cast(From& adj_from, To adj_to) {
   static_assert(detail::adj_is_scalar<From>::value && detail::adj_is_scalar<To>::value,
                 "adj_cast: scalar types only");
-  if constexpr (num<From>::is_float && num<To>::is_float) adj_from += (From)adj_to;
+  if constexpr (num<From>::is_float && num<To>::is_float) adj_from += cast<From>(adj_to);
 }
 
 // ------------------------------------------------------------------------------------------

@@ -14,6 +14,8 @@ use cudarc::nvrtc::sys;
 
 use crate::device::panic_message;
 use crate::error::{CudaError, Result};
+use crate::nvrtc_pool::{acquire, Api};
+pub use crate::nvrtc_pool::{DEFAULT_MAX_NVRTC_THREADS, NVRTC_THREADS_ENV};
 
 /// NVRTC options. `Default` gives IEEE-faithful code with FMA contraction on (NVRTC's own
 /// default), no fast math, no line info.
@@ -161,6 +163,12 @@ pub fn nvrtc_version() -> Result<(i32, i32)> {
     nvrtc_state().clone().map_err(CudaError::NoNvrtc)
 }
 
+/// NVRTC's version if it is loaded already (`None` if not, or if it cannot be): never loads
+/// it, so a lookup that needs the version only to find a cached cubin stays free.
+pub(crate) fn loaded_nvrtc_version() -> Option<(i32, i32)> {
+    NVRTC.get().and_then(|s| s.as_ref().ok().copied())
+}
+
 /// The `sm_XX` architectures this NVRTC can compile for, e.g. `[75, 80, 86, 89, 90, 100, ...]`.
 pub fn nvrtc_supported_archs() -> Result<Vec<u32>> {
     nvrtc_version()?;
@@ -178,13 +186,13 @@ pub fn nvrtc_supported_archs() -> Result<Vec<u32>> {
     Ok(archs.into_iter().map(|a| a.max(0) as u32).collect())
 }
 
-/// Destroys the program on every exit path.
-struct Program(sys::nvrtcProgram);
+/// Destroys the program on every exit path (with the copy of NVRTC that created it).
+struct Program<'a>(sys::nvrtcProgram, &'a Api);
 
-impl Drop for Program {
+impl Drop for Program<'_> {
     fn drop(&mut self) {
-        // SAFETY: created by nvrtcCreateProgram, destroyed once.
-        let _ = unsafe { sys::nvrtcDestroyProgram(&mut self.0) };
+        // SAFETY: created by this copy's nvrtcCreateProgram, destroyed once.
+        let _ = unsafe { (self.1.destroy)(&mut self.0) };
     }
 }
 
@@ -192,10 +200,10 @@ fn cstring(s: &str, what: &str) -> Result<CString> {
     CString::new(s).map_err(|_| CudaError::InvalidArgument(format!("{what} contains a NUL byte")))
 }
 
-fn program_log(prog: sys::nvrtcProgram) -> String {
+fn program_log(prog: &Program) -> String {
     let mut size = 0usize;
     // SAFETY: out-parameter calls on a live program; buffer of the reported size.
-    if unsafe { sys::nvrtcGetProgramLogSize(prog, &mut size) }
+    if unsafe { (prog.1.log_size)(prog.0, &mut size) }
         .result()
         .is_err()
         || size == 0
@@ -203,7 +211,7 @@ fn program_log(prog: sys::nvrtcProgram) -> String {
         return String::new();
     }
     let mut buf = vec![0u8; size];
-    if unsafe { sys::nvrtcGetProgramLog(prog, buf.as_mut_ptr() as *mut c_char) }
+    if unsafe { (prog.1.log)(prog.0, buf.as_mut_ptr() as *mut c_char) }
         .result()
         .is_err()
     {
@@ -217,8 +225,19 @@ fn program_log(prog: sys::nvrtcProgram) -> String {
 
 /// Compiles `source` (program name `name`, used in NVRTC's messages) to a cubin for
 /// `sm_{arch}`. On a compile error the result is [`CudaError::Compile`] with NVRTC's log.
+///
+/// Threads may call it at once: compiles that overlap run side by side, each in a copy of
+/// NVRTC of its own, up to a limit (`nvrtc_pool`: [`NVRTC_THREADS_ENV`]); `compile_ms` is
+/// the compile's own time, not the wait for a copy.
 pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Result<Compiled> {
     nvrtc_version()?;
+    let slot = acquire().ok_or_else(|| CudaError::Nvrtc {
+        op: "loading NVRTC's entry points".into(),
+        message: "libnvrtc lacks an entry point of the CUDA 13 API".into(),
+        code: None,
+    })?;
+    let api = &slot.api;
+    api.enter();
     let start = Instant::now();
     let c_src = cstring(source, "kernel source")?;
     let c_name = cstring(name, "program name")?;
@@ -241,7 +260,7 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
     // SAFETY: all strings are NUL-terminated and outlive the program (dropped at function end,
     // after `Program`); header arrays have `len` entries each.
     unsafe {
-        sys::nvrtcCreateProgram(
+        (api.create)(
             &mut raw,
             c_src.as_ptr(),
             c_name.as_ptr(),
@@ -260,13 +279,12 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
     }
     .result()
     .map_err(|e| CudaError::nvrtc(e, format!("nvrtcCreateProgram({name})")))?;
-    let prog = Program(raw);
+    let prog = Program(raw, api);
 
     // SAFETY: live program; option pointers valid for the call.
     let compiled =
-        unsafe { sys::nvrtcCompileProgram(prog.0, arg_ptrs.len() as i32, arg_ptrs.as_ptr()) }
-            .result();
-    let log = program_log(prog.0);
+        unsafe { (api.compile)(prog.0, arg_ptrs.len() as i32, arg_ptrs.as_ptr()) }.result();
+    let log = program_log(&prog);
     if let Err(NvrtcError(code)) = compiled {
         let log = if code == sys::nvrtcResult::NVRTC_ERROR_COMPILATION {
             log
@@ -284,7 +302,7 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
 
     let mut size = 0usize;
     // SAFETY: live, successfully compiled program; buffer of the reported size.
-    unsafe { sys::nvrtcGetCUBINSize(prog.0, &mut size) }
+    unsafe { (api.cubin_size)(prog.0, &mut size) }
         .result()
         .map_err(|e| CudaError::nvrtc(e, format!("nvrtcGetCUBINSize({name}, sm_{arch})")))?;
     if size == 0 {
@@ -295,13 +313,16 @@ pub fn compile(source: &str, name: &str, opts: &CompileOptions, arch: u32) -> Re
         });
     }
     let mut cubin = vec![0u8; size];
-    unsafe { sys::nvrtcGetCUBIN(prog.0, cubin.as_mut_ptr() as *mut c_char) }
+    unsafe { (api.cubin)(prog.0, cubin.as_mut_ptr() as *mut c_char) }
         .result()
         .map_err(|e| CudaError::nvrtc(e, format!("nvrtcGetCUBIN({name}, sm_{arch})")))?;
     drop(prog);
+    let copy = api.copy;
+    drop(slot);
     let compile_ms = start.elapsed().as_secs_f64() * 1e3;
     log::info!(
-        "NVRTC compiled {name} for sm_{arch} in {compile_ms:.1} ms ({} bytes of cubin)",
+        "NVRTC compiled {name} for sm_{arch} in {compile_ms:.1} ms ({} bytes of cubin, copy {copy} \
+         of libnvrtc)",
         cubin.len()
     );
     if !log.trim().is_empty() {

@@ -9,7 +9,9 @@
 //! - [`device`]: [`probe`], [`GpuInfo`], [`Gpu`] (primary context + default stream),
 //!   [`Stream`], [`Event`];
 //! - [`memory`]: [`DeviceBuffer`] (untyped, stream-ordered), [`PinnedBuffer`];
-//! - [`compile`](mod@compile): NVRTC to cubin ([`compile()`], [`CompileOptions`], [`nvrtc_version`]);
+//! - [`compile`](mod@compile): NVRTC to cubin ([`compile()`], [`CompileOptions`], [`nvrtc_version`]),
+//!   compiles that overlap each in a copy of libnvrtc of its own (`nvrtc_pool`,
+//!   [`NVRTC_THREADS_ENV`]);
 //! - [`cache`]: the on-disk kernel cache ([`compile_cached`], [`KernelCache`]);
 //! - [`launch`]: [`Module`], [`Function`], [`Gpu::launch_raw`];
 //! - [`library`]: the CUDA C++ library's sections, one row each ([`library::SECTIONS`]), and
@@ -38,6 +40,7 @@ pub mod launch;
 pub mod library;
 pub mod memory;
 pub mod nccl;
+mod nvrtc_pool;
 
 #[cfg(test)]
 mod gpu_tests;
@@ -49,7 +52,7 @@ pub use cache::{
 };
 pub use compile::{
     compile, cudadevrt_path, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled,
-    CUDADEVRT_ENV, NO_NVRTC_ENV,
+    CUDADEVRT_ENV, DEFAULT_MAX_NVRTC_THREADS, NO_NVRTC_ENV, NVRTC_THREADS_ENV,
 };
 pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_VERSION};
 pub use error::{CudaError, Result};

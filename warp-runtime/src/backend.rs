@@ -25,6 +25,25 @@ use crate::primitives::elements::{Extent, ScanOps, SortKeyOps, SortValueOps};
 use crate::primitives::plan::ReduceOp;
 use warp_core::{Grid, LaunchId};
 
+/// The tape layer's answer to "will the launch being compiled need its adjoint?": when a tape
+/// records on the calling thread, the adjoint stack its backward will run with. The tape
+/// registers it ([`set_recording_query`]) the first time one records, so that a backend below
+/// it can ask (`recording_adstack_bytes`) without importing it; before that nothing records.
+static RECORDING_QUERY: std::sync::OnceLock<fn() -> Option<usize>> = std::sync::OnceLock::new();
+
+/// Registers the tape layer's query (see [`RECORDING_QUERY`]); later calls change nothing.
+pub(crate) fn set_recording_query(query: fn() -> Option<usize>) {
+    let _ = RECORDING_QUERY.set(query);
+}
+
+/// When a tape records on the calling thread, the adjoint stack its backward will run with: a
+/// backend compiling a kernel for a launch then compiles its adjoint along (the CUDA backend's
+/// one unit of both). `None` when nothing records.
+#[cfg(feature = "cuda")]
+pub(crate) fn recording_adstack_bytes() -> Option<usize> {
+    RECORDING_QUERY.get().and_then(|query| query())
+}
+
 /// One operation recorded into a CPU graph, run again at each replay (it owns what it uses).
 pub(crate) type Op = Box<dyn Fn() -> Result<()> + Send>;
 

@@ -206,10 +206,11 @@ fn check_shapes<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
 /// NVRTC (or read from the disk cache) and loaded, so that no later launch, timed loop or
 /// graph capture compiles. On the CPU, nothing: cargo compiled the kernels.
 ///
-/// The variants are handed to the rayon pool together, but NVRTC (CUDA 13, measured on an
-/// H100) runs one compile at a time within a process: the six variants of the autodiff
-/// example took 1.36-1.44 s together against 1.37-2.4 s one after another, so this does not
-/// shorten a cold start; the disk cache and `wp::aot` do.
+/// The kernels are handed to the rayon pool together and compiled side by side: NVRTC (CUDA
+/// 13) runs one compile at a time per loaded copy of libnvrtc, so compiles that overlap each
+/// take a copy of their own (`warp_cuda::NVRTC_THREADS_ENV` says how many at most; before
+/// the copies, the autodiff example's six variants took as long on the pool as one after
+/// another). A warm start needs none of this: the disk cache and `wp::aot` serve the cubins.
 ///
 /// ```ignore
 /// // (tests/suite/launch.rs runs this on both backends)
@@ -229,7 +230,9 @@ pub fn load(kernels: &[&'static KernelInfo], device: &Device) -> Result<()> {
 }
 
 /// [`load`], and each kernel's adjoint too (with the adjoint stack
-/// [`config::adstack_bytes`] sets), for programs that will run backward.
+/// [`config::adstack_bytes`] sets), for programs that will run backward. A kernel whose
+/// forward and adjoint are both still to compile gets one unit holding both (one NVRTC run,
+/// as a first launch under a recording [`Tape`](crate::Tape) does).
 ///
 /// # Errors
 /// As [`load`].

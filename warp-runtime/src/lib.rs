@@ -108,8 +108,10 @@ pub use tape::{copy, Recording, Seed, Tape};
 /// variant or not, bytes of generated CUDA, NVRTC time and whether the cache or the
 /// ahead-of-time directory served it.
 ///
-/// Kernels are compiled when first launched, adjoints when a backward pass first needs them,
-/// so the list is also the proof that a scene compiled nothing it did not run. On the CPU
+/// Kernels are compiled when first launched, adjoints when a backward pass first needs them
+/// (or with the forward, in one unit, when a recording tape or `load_with_adjoints` says
+/// backward will need them), so the list is also the proof that a scene compiled nothing it
+/// did not run or record for backward. On the CPU
 /// nothing is compiled at run time (kernels are Rust, built by cargo), and the summary says so.
 pub fn compile_summary() -> String {
     #[cfg(feature = "cuda")]

@@ -167,6 +167,7 @@ impl Tape {
 
     /// Starts recording launches made on this thread; recording stops when the guard drops.
     pub fn record(&self) -> Recording<'_> {
+        crate::backend::set_recording_query(recording_adstack_bytes);
         let inner = Rc::downgrade(&self.inner);
         RECORDING.with(|r| r.borrow_mut().push(inner.clone()));
         Recording {
@@ -304,6 +305,19 @@ fn running_backward(what: &str) -> Error {
         "{what} on a tape that runs backward (a record_func step changing its own tape; do it \
          after backward returns)"
     ))
+}
+
+/// When a tape records on this thread, the adjoint stack its backward will run with (the
+/// innermost tape's): a kernel compiled now for a launch it records compiles its adjoint
+/// along, in one unit (the CUDA backend's `module::loaded`, which asks through
+/// `backend::recording_adstack_bytes`). `None` when nothing records.
+fn recording_adstack_bytes() -> Option<usize> {
+    RECORDING.with(|r| {
+        let tape = r.borrow().iter().rev().find_map(Weak::upgrade)?;
+        // (A tape busy in its own backward records nothing: the launch is refused there.)
+        let own = tape.try_borrow().ok().and_then(|t| t.adstack_bytes);
+        Some(own.unwrap_or_else(config::adstack_bytes))
+    })
 }
 
 /// Records the launch of `K` on every tape recording on this thread.

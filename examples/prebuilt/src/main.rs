@@ -124,7 +124,7 @@ fn main() -> wp::Result<std::process::ExitCode> {
 
     // 1. The seed function: the first result.
     let (f, df) = seed_ad::first_result(&dev)?;
-    let line = seed_ad::cold_start_line(start, &dev);
+    let line = seed_ad::cold_start_line(start, &dev, df);
     println!(
         "first result after {:.1} ms (from the start of main) on \"{dev}\"",
         start.elapsed().as_secs_f64() * 1e3

@@ -61,7 +61,7 @@ use std::io::{ErrorKind, Read};
 use std::path::{Path, PathBuf};
 use std::sync::{OnceLock, RwLock};
 
-use crate::compile::{compile, nvrtc_version, CompileOptions, Compiled};
+use crate::compile::{compile, loaded_nvrtc_version, nvrtc_version, CompileOptions, Compiled};
 use crate::error::{CudaError, Result};
 use entry::{entry_name, key_for_store, read_entry, read_key, write_atomically, KeyFile, KEY_FILE};
 pub use evict::{
@@ -573,6 +573,44 @@ impl KernelCache {
         };
         let (compiled, entry) = self.compile_and_store(source, name, opts, arch, version)?;
         Ok((compiled, outcome, entry))
+    }
+
+    /// The cubin for this compile if the cache holds it, without compiling and without loading
+    /// NVRTC: the key under the version in the stamp, and under the loaded NVRTC's version when
+    /// NVRTC is loaded already and differs. `None` when absent (or damaged: the compile that
+    /// follows replaces it, see [`compile_cached_entry`](Self::compile_cached_entry)). For a
+    /// caller choosing between units by what is already compiled (the runtime compiles a
+    /// kernel's forward and adjoint as one unit when neither is).
+    pub fn lookup_entry(
+        &self,
+        source: &str,
+        name: &str,
+        opts: &CompileOptions,
+        arch: u32,
+    ) -> Option<(Compiled, CacheEntry)> {
+        let stamped = self.read_stamp();
+        let loaded = loaded_nvrtc_version().filter(|v| Some(*v) != stamped);
+        stamped.into_iter().chain(loaded).find_map(|version| {
+            let key = cache_key(source, name, opts, arch, version);
+            match self.load(name, key) {
+                CacheLookup::Hit(cubin) => {
+                    log::debug!(
+                        "kernel cache hit: {name} (sm_{arch}, NVRTC {}.{}) from {}",
+                        version.0,
+                        version.1,
+                        self.path_for(name, key).display()
+                    );
+                    let compiled = Compiled {
+                        cubin,
+                        log: String::new(),
+                        compile_ms: 0.0,
+                    };
+                    let path = Some(self.path_for(name, key));
+                    Some((compiled, CacheEntry { key, path }))
+                }
+                CacheLookup::Absent | CacheLookup::Damaged => None,
+            }
+        })
     }
 
     /// Compiles with NVRTC `version` and stores the cubin under its key; a store that fails is

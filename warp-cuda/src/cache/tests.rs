@@ -365,6 +365,55 @@ fn stamped_version_hits_without_nvrtc() {
     }
 }
 
+/// A lookup finds what `compile_cached_entry` would serve, under the stamp's version, and
+/// otherwise nothing: it never compiles (an absent or damaged entry, another source, another
+/// architecture, options or name, or no stamp at all), so it passes without NVRTC.
+#[test]
+fn lookups_find_cached_cubins_and_never_compile() {
+    let t = TempDir::new("lookup");
+    let c = KernelCache::new(&t.0);
+    let opts = CompileOptions::default();
+    // No stamp yet: nothing compiled into this cache, nothing found.
+    assert!(c.lookup_entry("src", "k", &opts, 90).is_none());
+    let stamped = (99, 7);
+    let key = cache_key("src", "k", &opts, 90, stamped);
+    c.store("k", key, b"cubin bytes").unwrap();
+    c.write_stamp(stamped);
+    let (compiled, entry) = c.lookup_entry("src", "k", &opts, 90).expect("a hit");
+    assert_eq!(compiled.cubin, b"cubin bytes");
+    assert_eq!(compiled.compile_ms, 0.0);
+    assert_eq!(
+        entry,
+        CacheEntry {
+            key,
+            path: Some(c.path_for("k", key))
+        }
+    );
+    let fmad_off = CompileOptions {
+        fmad: false,
+        ..CompileOptions::default()
+    };
+    assert!(c.lookup_entry("other", "k", &opts, 90).is_none());
+    assert!(c.lookup_entry("src", "k", &opts, 80).is_none());
+    assert!(c.lookup_entry("src", "k2", &opts, 90).is_none());
+    assert!(c.lookup_entry("src", "k", &fmad_off, 90).is_none());
+    // A damaged entry is no hit (the compile that follows replaces it).
+    let path = c.path_for("k", key);
+    let mut bytes = fs::read(&path).unwrap();
+    let last = bytes.len() - 1;
+    bytes[last] ^= 1;
+    fs::write(&path, bytes).unwrap();
+    assert!(c.lookup_entry("src", "k", &opts, 90).is_none());
+    // Nothing was written by the lookups.
+    let mut want = vec![
+        entry_name("k", key),
+        KEY_FILE.to_string(),
+        STAMP_FILE.to_string(),
+    ];
+    want.sort();
+    assert_eq!(files(&t.0), want);
+}
+
 /// A compile (a miss) reports the key it was stored under and the file; the next call
 /// hits that entry and reports the same. Needs NVRTC (not a GPU); skipped without it.
 #[test]

@@ -90,8 +90,10 @@ pub struct AotEntry {
 
 /// Compiles `kernels` for every architecture in `archs` (both launch variants each) into
 /// `dir`, creating it, and returns the entries in the order kernel, architecture, variant
-/// (contiguous first). Needs NVRTC, not a GPU. The compiles run one after the other (NVRTC
-/// compiles one program at a time in a process): about 150-350 ms each on a Xeon core.
+/// (contiguous first). Needs NVRTC, not a GPU. The compiles run one after the other, about
+/// 150-350 ms each on a Xeon core; a forward and its adjoint are separate units here (a
+/// program may launch the forward without a tape), which the runtime takes before compiling
+/// them as one.
 ///
 /// # Errors
 /// [`Error::Cuda`] (device `"nvrtc"`) when NVRTC is missing, does not support one of `archs`

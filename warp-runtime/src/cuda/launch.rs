@@ -112,6 +112,7 @@ impl<K: Kernel> Prepared<K> {
         // A tiled kernel is compiled per block size (`WP_TILE_BLOCK_DIM`); `launch.rs` has
         // checked that only tiled launches reach it, with a block size it takes.
         let tile_block = info.tile.map(|_| grid.block_dim);
+        // A forward compiled under a recording tape brings its adjoint along (one unit).
         let kernel = loaded(
             device,
             ordinal,
@@ -119,6 +120,7 @@ impl<K: Kernel> Prepared<K> {
             K::Params::contiguous(args),
             adjoint,
             tile_block,
+            crate::backend::recording_adstack_bytes,
         )?;
         // The fault record and the launch number are each launch's (`enqueue_converted`).
         let ctx = Ctx {

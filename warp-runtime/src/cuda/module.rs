@@ -41,7 +41,8 @@ pub struct CompileReport {
     pub device: String,
     /// Whether this is the variant for launches whose arrays are all contiguous.
     pub contiguous: bool,
-    /// Whether this is the kernel's adjoint (compiled when backward first ran on the GPU).
+    /// Whether this is the kernel's adjoint (compiled when backward first ran on the GPU, or
+    /// with the forward: `one_unit`).
     pub adjoint: bool,
     /// A tiled kernel's block size (each its own variant); `None` for an ordinary kernel.
     pub block_dim: Option<usize>,
@@ -53,13 +54,14 @@ pub struct CompileReport {
     pub pipe_extra_bytes: usize,
     /// Bytes of generated CUDA source (without the library headers).
     pub source_bytes: usize,
-    /// NVRTC time (0 on a cache hit).
+    /// NVRTC time (0 on a cache hit, and on the adjoint's report of a unit of both halves).
     pub compile_ms: f64,
     /// Whether the cubin came from the disk cache (or the ahead-of-time directory).
     pub cache_hit: bool,
     /// Whether it came from the ahead-of-time directory (`aot`).
     pub aot: bool,
-    /// Time from the start of the first launch to a loaded module.
+    /// Time from the start of the first launch to a loaded module (0 on the adjoint's report
+    /// of a unit of both halves).
     pub total_ms: f64,
     /// The key the cubin is stored under: a 128-bit hash of the generated source (with its
     /// `#line` directives, so the kernel's file and lines count), the NVRTC options, the
@@ -72,6 +74,21 @@ pub struct CompileReport {
     /// `warp_cuda::cache_dir()`), or the ahead-of-time entry when `aot` is set. `None` when a
     /// compiled cubin could not be written to the cache (the kernel still runs).
     pub cache_entry: Option<PathBuf>,
+    /// Whether the forward and the adjoint came from one translation unit, compiled (or read
+    /// from the kernel cache) and loaded once for both: the kernel's first launch was under a
+    /// recording tape, or in `load_with_adjoints`. Each has its report, both with this set and
+    /// the same key, entry and source; the unit's NVRTC and loading times are on the
+    /// forward's, the adjoint's has 0 for both, so that sums over reports count each unit
+    /// once ([`CompileReport::is_unit`]).
+    pub one_unit: bool,
+}
+
+impl CompileReport {
+    /// Whether this report carries a unit's cost: every report but the adjoint's of a unit of
+    /// both halves (`one_unit`). Counting these counts NVRTC runs and module loads.
+    pub fn is_unit(&self) -> bool {
+        !(self.one_unit && self.adjoint)
+    }
 }
 
 fn reports() -> &'static Mutex<Vec<CompileReport>> {
@@ -88,17 +105,25 @@ pub fn compile_reports() -> Vec<CompileReport> {
 /// One line per report (see `compile_summary`).
 pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
     use std::fmt::Write as _;
+    let units = reports.iter().filter(|r| r.is_unit()).count();
     let mut s = format!(
-        "compiled at run time: {} kernel variant(s)\n",
+        "compiled at run time: {} kernel variant(s) in {units} unit(s)\n",
         reports.len()
     );
     for r in reports {
-        let source = if r.aot {
+        let source = if !r.is_unit() {
+            "in the forward's unit".to_string()
+        } else if r.aot {
             "ahead-of-time cubin".to_string()
         } else if r.cache_hit {
             "disk cache hit".to_string()
         } else {
             format!("NVRTC {:.1} ms", r.compile_ms)
+        };
+        let source = if r.one_unit && !r.adjoint {
+            format!("{source}, one unit with the adjoint")
+        } else {
+            source
         };
         // The path below the crate: `single::accelerations` beside `double::accelerations`.
         let name = match r.module.split_once("::") {
@@ -127,6 +152,42 @@ pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
     s
 }
 
+/// A loaded kernel variant's key: the GPU, the kernel's module path and name, the contiguous
+/// variant or not, the adjoint's stack (`None`: the forward), a tiled kernel's block size.
+type Key = (
+    usize,
+    &'static str,
+    &'static str,
+    bool,
+    Option<usize>,
+    Option<usize>,
+);
+
+/// The kernel variants loaded in this process.
+fn loaded_variants() -> &'static Mutex<HashMap<Key, Arc<Loaded>>> {
+    static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
+    CACHE.get_or_init(Default::default)
+}
+
+/// The variant of `key` if it is loaded.
+fn loaded_variant(key: &Key) -> Option<Arc<Loaded>> {
+    loaded_variants()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .get(key)
+        .cloned()
+}
+
+/// Keeps `l` as the variant of `key` (for the process) and returns it.
+fn keep(key: Key, l: Loaded) -> Arc<Loaded> {
+    let l = Arc::new(l);
+    loaded_variants()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .insert(key, l.clone());
+    l
+}
+
 /// The kernel `info` compiled for GPU `ordinal`; `contiguous` picks the variant for launches
 /// whose arrays are all contiguous (`WP_CONTIGUOUS`: strides known to the compiler). Each
 /// variant is compiled the first time a launch needs it.
@@ -138,6 +199,15 @@ pub(crate) fn format_compile_reports(reports: &[CompileReport]) -> String {
 /// `n` threads (`WP_TILE_BLOCK_DIM`), each block size its own module, and checks at load that
 /// the GPU can run such blocks with the shared memory the kernel's tiles take
 /// ([`check_tile_budget`]), so that a launch never fails for it.
+///
+/// `with_adjoint` is asked only when an ordinary kernel's forward is to be loaded: `Some(bytes)`
+/// when its adjoint will be needed too, with that stack (a tape records the launch, or
+/// `load_with_adjoints`). Unless the kernel has no CUDA adjoint, or one of the two variants is
+/// loaded or compiled already (an ahead-of-time cubin, a kernel cache entry: it is used, and
+/// the other compiled when it is needed), both then come from one unit
+/// (`source::assemble_with_adjoint`): one NVRTC run, which parses the library and the funcs
+/// once instead of twice, and one module, whose two functions are kept under both variants'
+/// keys. (A tiled kernel's units differ in their shared memory defines: never one unit.)
 pub(crate) fn loaded(
     device: &Device,
     ordinal: usize,
@@ -145,16 +215,8 @@ pub(crate) fn loaded(
     contiguous: bool,
     adjoint: Option<usize>,
     block_dim: Option<usize>,
+    with_adjoint: impl FnOnce() -> Option<usize>,
 ) -> Result<Arc<Loaded>> {
-    type Key = (
-        usize,
-        &'static str,
-        &'static str,
-        bool,
-        Option<usize>,
-        Option<usize>,
-    );
-    static CACHE: OnceLock<Mutex<HashMap<Key, Arc<Loaded>>>> = OnceLock::new();
     let key = (
         ordinal,
         info.module,
@@ -163,8 +225,7 @@ pub(crate) fn loaded(
         adjoint,
         block_dim,
     );
-    let cache = CACHE.get_or_init(Default::default);
-    if let Some(l) = cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+    if let Some(l) = loaded_variant(&key) {
         // Every launch that is not a launch object comes here: nothing is formatted unless a
         // logger asked for trace records of this target.
         if log::log_enabled!(log::Level::Trace) {
@@ -176,7 +237,7 @@ pub(crate) fn loaded(
                 layout_name(contiguous)
             );
         }
-        return Ok(l.clone());
+        return Ok(l);
     }
     log::debug!(
         "module cache miss: {}::{} on {device} ({}, {}): loading it",
@@ -213,16 +274,139 @@ pub(crate) fn loaded(
             block_dim.map_or(String::new(), |bd| format!(", {bd}"))
         ),
     )?;
-    let st = state(device, ordinal)?;
-    let arch = st.gpu.arch();
-    check_capabilities(info, device.alias(), arch)?;
     let t0 = std::time::Instant::now();
+    let st = state(device, ordinal)?;
+    check_capabilities(info, device.alias(), st.gpu.arch())?;
+    let differentiable = info.adjoint_error.is_none() && info.cuda_adjoint_error.is_none();
+    let stack = match (adjoint, block_dim) {
+        (None, None) if differentiable => with_adjoint().filter(|bytes| {
+            loaded_variant(&(
+                ordinal,
+                info.module,
+                info.name,
+                contiguous,
+                Some(*bytes),
+                None,
+            ))
+            .is_none()
+        }),
+        _ => None,
+    };
+    let Some(stack) = stack else {
+        return load_variant(device, st, info, contiguous, adjoint, block_dim, None, t0);
+    };
+    // The forward and the adjoint, each where it is compiled already, else both in one unit.
+    let forward = source::assemble(info);
+    if let Some(found) = find_compiled(&forward, info.name, contiguous, None, st.gpu.arch()) {
+        return load_variant(device, st, info, contiguous, None, None, Some(found), t0);
+    }
+    let stack_define = stack.to_string();
+    let adjoint_src = source::assemble_adjoint(info);
+    let arch = st.gpu.arch();
+    if find_compiled(
+        &adjoint_src,
+        info.name,
+        contiguous,
+        Some(&stack_define),
+        arch,
+    )
+    .is_some()
+    {
+        // (The adjoint loads its cubin when backward first needs it.)
+        return load_variant(device, st, info, contiguous, None, None, None, t0);
+    }
+    match load_both(device, st.clone(), info, contiguous, stack, t0) {
+        Ok(l) => Ok(l),
+        Err(e) => {
+            // The forward must not fail for its adjoint (one whose code NVRTC refuses, say):
+            // it is compiled alone, and the adjoint's error comes when backward needs it.
+            log::warn!(
+                "kernel {}::{} on {device}: the unit of forward and adjoint failed ({e});                  compiling the forward alone",
+                info.module,
+                info.name
+            );
+            load_variant(device, st, info, contiguous, None, None, None, t0)
+        }
+    }
+}
+
+/// A cubin and where it came from.
+struct Obtained {
+    compiled: warp_cuda::Compiled,
+    outcome: CacheOutcome,
+    /// From the ahead-of-time directory.
+    aot: bool,
+    entry: CacheEntry,
+}
+
+/// The cubin of unit `src` (the variant of `contiguous`, an adjoint's `stack_define`) if it
+/// is compiled already: in the ahead-of-time directory or the kernel cache. Never NVRTC.
+fn find_compiled(
+    src: &source::CudaSource,
+    name: &str,
+    contiguous: bool,
+    stack_define: Option<&str>,
+    arch: u32,
+) -> Option<Obtained> {
+    let exact = needs_exact(&src.headers);
+    with_compile_options(contiguous, stack_define, exact, None, |opts| {
+        if let Some((cubin, key, path)) = aot::lookup(&src.text, name, opts, arch) {
+            return Some(Obtained {
+                compiled: warp_cuda::Compiled {
+                    cubin,
+                    log: String::new(),
+                    compile_ms: 0.0,
+                },
+                outcome: CacheOutcome::Hit,
+                aot: true,
+                entry: CacheEntry {
+                    key,
+                    path: Some(path),
+                },
+            });
+        }
+        let (compiled, entry) = KernelCache::current().lookup_entry(&src.text, name, opts, arch)?;
+        Some(Obtained {
+            compiled,
+            outcome: CacheOutcome::Hit,
+            aot: false,
+            entry,
+        })
+    })
+}
+
+/// Where a unit's cubin came from, for log records.
+fn origin(o: &Obtained) -> String {
+    if o.aot {
+        "ahead-of-time cubin".to_string()
+    } else if matches!(o.outcome, CacheOutcome::Hit) {
+        "kernel cache hit".to_string()
+    } else {
+        format!("NVRTC {:.1} ms", o.compiled.compile_ms)
+    }
+}
+
+/// One variant of `info` (see [`loaded`]) from its own unit: `found` when [`find_compiled`]
+/// found its cubin, else the ahead-of-time directory, the kernel cache or NVRTC. `t0`: when
+/// its loading began.
+#[allow(clippy::too_many_arguments)]
+fn load_variant(
+    device: &Device,
+    st: Arc<GpuState>,
+    info: &'static KernelInfo,
+    contiguous: bool,
+    adjoint: Option<usize>,
+    block_dim: Option<usize>,
+    found: Option<Obtained>,
+    t0: std::time::Instant,
+) -> Result<Arc<Loaded>> {
+    let arch = st.gpu.arch();
     let src = match adjoint {
         Some(_) => source::assemble_adjoint(info),
         None => source::assemble(info),
     };
     let stack_define = adjoint.map(|b| b.to_string());
-    let unit = |shared: TileShared| {
+    let unit = |shared: TileShared, found: Option<Obtained>| {
         let tile = block_dim.map(|block_dim| TileDefines {
             block_dim,
             shared_bytes: shared.bytes,
@@ -233,9 +417,11 @@ pub(crate) fn loaded(
             &st,
             info,
             &src,
-            (contiguous, adjoint),
+            contiguous,
             stack_define.as_deref(),
             tile,
+            found,
+            variant_name(adjoint),
         )
     };
     let mut shared = match block_dim {
@@ -244,7 +430,7 @@ pub(crate) fn loaded(
         })?,
         None => TileShared::default(),
     };
-    let (mut module, mut compiled, mut outcome, mut aot, mut entry) = unit(shared)?;
+    let (mut module, mut got) = unit(shared, found)?;
     let mut function = module.function(&src.entry).map_err(|e| err(device, e))?;
     // The extra stages were granted counting no static shared memory: with the unit's own,
     // the block must still fit and a multiprocessor hold as many blocks, or the unit is
@@ -265,7 +451,7 @@ pub(crate) fn loaded(
                 bytes: slots,
                 pipe_extra: 0,
             };
-            (module, compiled, outcome, aot, entry) = unit(shared)?;
+            (module, got) = unit(shared, None)?;
             function = module.function(&src.entry).map_err(|e| err(device, e))?;
         }
     }
@@ -292,134 +478,239 @@ pub(crate) fn loaded(
         info.name,
         variant_name(adjoint),
         layout_name(contiguous),
-        if aot {
-            "ahead-of-time cubin".to_string()
-        } else if matches!(outcome, CacheOutcome::Hit) {
-            "kernel cache hit".to_string()
-        } else {
-            format!("NVRTC {:.1} ms", compiled.compile_ms)
-        }
+        origin(&got)
     );
-    reports()
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .push(CompileReport {
-            kernel: info.name,
-            module: info.module,
-            device: device.alias().to_string(),
-            contiguous,
-            adjoint: adjoint.is_some(),
-            block_dim,
-            shared_bytes: shared.bytes,
-            pipe_extra_bytes: shared.pipe_extra,
-            source_bytes: src.text.len(),
-            compile_ms: compiled.compile_ms,
-            cache_hit: matches!(outcome, CacheOutcome::Hit),
-            aot,
-            total_ms,
-            cache_key: entry.key,
-            cache_entry: entry.path,
-        });
-    let l = Arc::new(Loaded {
-        st,
-        _module: module,
-        function,
-        id: super::fault::kernel_id(info),
-        shared_bytes: tile_shared,
+    report(CompileReport {
+        kernel: info.name,
+        module: info.module,
+        device: device.alias().to_string(),
+        contiguous,
+        adjoint: adjoint.is_some(),
+        block_dim,
+        shared_bytes: shared.bytes,
+        pipe_extra_bytes: shared.pipe_extra,
+        source_bytes: src.text.len(),
+        compile_ms: got.compiled.compile_ms,
+        cache_hit: matches!(got.outcome, CacheOutcome::Hit),
+        aot: got.aot,
+        total_ms,
+        cache_key: got.entry.key,
+        cache_entry: got.entry.path,
+        one_unit: false,
     });
-    cache
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .insert(key, l.clone());
-    Ok(l)
+    let key = (
+        st.gpu.ordinal(),
+        info.module,
+        info.name,
+        contiguous,
+        adjoint,
+        block_dim,
+    );
+    Ok(keep(
+        key,
+        Loaded {
+            st,
+            _module: module,
+            function,
+            id: super::fault::kernel_id(info),
+            shared_bytes: tile_shared,
+        },
+    ))
 }
 
-/// What [`compile_unit`] gives: the loaded module, the compile, whether it came from a cache
-/// (and which), and its cache entry.
-type Unit = (
-    warp_cuda::Module,
-    warp_cuda::Compiled,
-    CacheOutcome,
-    bool,
-    CacheEntry,
-);
+/// The forward of the ordinary kernel `info` and its adjoint with `stack` bytes of stack, from
+/// one unit (see [`loaded`]): both kept, the forward returned. `t0`: when loading began.
+fn load_both(
+    device: &Device,
+    st: Arc<GpuState>,
+    info: &'static KernelInfo,
+    contiguous: bool,
+    stack: usize,
+    t0: std::time::Instant,
+) -> Result<Arc<Loaded>> {
+    let src = source::assemble_with_adjoint(info);
+    let adjoint = src
+        .adjoint
+        .as_ref()
+        .expect("a unit of both halves names its adjoint");
+    let stack_define = stack.to_string();
+    let (module, got) = compile_unit(
+        device,
+        &st,
+        info,
+        &src,
+        contiguous,
+        Some(&stack_define),
+        None,
+        None,
+        "forward and adjoint",
+    )?;
+    let forward_fn = module.function(&src.entry).map_err(|e| err(device, e))?;
+    let adjoint_fn = module
+        .function(&adjoint.entry)
+        .map_err(|e| err(device, e))?;
+    let total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    log::info!(
+        "loaded kernel {}::{} (forward and adjoint in one unit, {}) on {device} in {total_ms:.1} \
+         ms: {}",
+        info.module,
+        info.name,
+        layout_name(contiguous),
+        origin(&got)
+    );
+    // One report a variant; the unit's cost on the forward's alone, so that sums count it once.
+    let forward_report = CompileReport {
+        kernel: info.name,
+        module: info.module,
+        device: device.alias().to_string(),
+        contiguous,
+        adjoint: false,
+        block_dim: None,
+        shared_bytes: 0,
+        pipe_extra_bytes: 0,
+        source_bytes: src.text.len(),
+        compile_ms: got.compiled.compile_ms,
+        cache_hit: matches!(got.outcome, CacheOutcome::Hit),
+        aot: got.aot,
+        total_ms,
+        cache_key: got.entry.key,
+        cache_entry: got.entry.path,
+        one_unit: true,
+    };
+    let adjoint_report = CompileReport {
+        adjoint: true,
+        compile_ms: 0.0,
+        total_ms: 0.0,
+        ..forward_report.clone()
+    };
+    report(forward_report);
+    report(adjoint_report);
+    let ordinal = st.gpu.ordinal();
+    let id = super::fault::kernel_id(info);
+    keep(
+        (
+            ordinal,
+            info.module,
+            info.name,
+            contiguous,
+            Some(stack),
+            None,
+        ),
+        Loaded {
+            st: st.clone(),
+            _module: module.clone(),
+            function: adjoint_fn,
+            id,
+            shared_bytes: 0,
+        },
+    );
+    Ok(keep(
+        (ordinal, info.module, info.name, contiguous, None, None),
+        Loaded {
+            st,
+            _module: module,
+            function: forward_fn,
+            id,
+            shared_bytes: 0,
+        },
+    ))
+}
 
-/// Compiles `info`'s unit `src` (the variant of `contiguous` and `adjoint`) with the options of
-/// `stack_define` and `tile` (or finds it in the ahead-of-time directory or the kernel cache) and loads it on `st`'s GPU.
+/// Adds `r` to [`compile_reports`].
+fn report(r: CompileReport) {
+    reports().lock().unwrap_or_else(|p| p.into_inner()).push(r);
+}
+
+/// Compiles `info`'s unit `src` (the variant of `contiguous`) with the options of
+/// `stack_define` (an adjoint's stack) and `tile`, or takes `found`, or finds it in the
+/// ahead-of-time directory or the kernel cache, and loads it on `st`'s GPU. `variant` names
+/// the unit's entries in log records.
+#[allow(clippy::too_many_arguments)]
 fn compile_unit(
     device: &Device,
     st: &GpuState,
     info: &'static KernelInfo,
     src: &source::CudaSource,
-    (contiguous, adjoint): (bool, Option<usize>),
+    contiguous: bool,
     stack_define: Option<&str>,
     tile: Option<TileDefines>,
-) -> Result<Unit> {
+    found: Option<Obtained>,
+    variant: &str,
+) -> Result<(warp_cuda::Module, Obtained)> {
     let arch = st.gpu.arch();
-    let (compiled, outcome, aot, entry) = with_compile_options(
-        contiguous,
-        stack_define,
-        needs_exact(&src.headers),
-        tile,
-        |opts| {
+    let exact = needs_exact(&src.headers);
+    let got = match found {
+        Some(found) => found,
+        None => with_compile_options(contiguous, stack_define, exact, tile, |opts| {
             // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
             if let Some((cubin, key, path)) = aot::lookup(&src.text, info.name, opts, arch) {
-                let c = warp_cuda::Compiled {
-                    cubin,
-                    log: String::new(),
-                    compile_ms: 0.0,
-                };
-                let entry = CacheEntry {
-                    key,
-                    path: Some(path),
-                };
-                return Ok((c, CacheOutcome::Hit, true, entry));
+                return Ok(Obtained {
+                    compiled: warp_cuda::Compiled {
+                        cubin,
+                        log: String::new(),
+                        compile_ms: 0.0,
+                    },
+                    outcome: CacheOutcome::Hit,
+                    aot: true,
+                    entry: CacheEntry {
+                        key,
+                        path: Some(path),
+                    },
+                });
             }
             KernelCache::current()
                 .compile_cached_entry(&src.text, info.name, opts, arch)
-                .map(|(c, o, e)| (c, o, false, e))
-        },
-    )
-    .map_err(|e| err(device, e))?;
+                .map(|(compiled, outcome, entry)| Obtained {
+                    compiled,
+                    outcome,
+                    aot: false,
+                    entry,
+                })
+        })
+        .map_err(|e| err(device, e))?,
+    };
     // A cubin from the disk cache or an ahead-of-time directory that the driver refuses is
     // compiled again (and the cache entry replaced; an ahead-of-time file is left alone) before
     // giving up: a second refusal is the error.
-    let (module, compiled, outcome, aot, entry) = match st.gpu.load_module(&compiled.cubin) {
-        Ok(module) => (module, compiled, outcome, aot, entry),
-        Err(e) if outcome == CacheOutcome::Hit => {
+    match st.gpu.load_module(&got.compiled.cubin) {
+        Ok(module) => Ok((module, got)),
+        Err(e) if got.outcome == CacheOutcome::Hit => {
             log::warn!(
-                "{} cubin {} of kernel {}::{} ({}, {}) failed to load on {device}: {e}; \
+                "{} cubin {} of kernel {}::{} ({variant}, {}) failed to load on {device}: {e}; \
                  compiling it again",
-                if aot { "ahead-of-time" } else { "cached" },
-                entry
+                if got.aot { "ahead-of-time" } else { "cached" },
+                got.entry
                     .path
                     .as_deref()
                     .map_or("(no file)".into(), |p| p.display().to_string()),
                 info.module,
                 info.name,
-                variant_name(adjoint),
                 layout_name(contiguous)
             );
-            let bad = if aot { None } else { entry.path.as_deref() };
-            let (fresh, fresh_entry) = with_compile_options(
-                contiguous,
-                stack_define,
-                needs_exact(&src.headers),
-                tile,
-                |opts| {
+            let bad = if got.aot {
+                None
+            } else {
+                got.entry.path.as_deref()
+            };
+            let (compiled, entry) =
+                with_compile_options(contiguous, stack_define, exact, tile, |opts| {
                     KernelCache::current().recompile_entry(&src.text, info.name, opts, arch, bad)
-                },
-            )
-            .map_err(|e| err(device, e))?;
+                })
+                .map_err(|e| err(device, e))?;
             let module = st
                 .gpu
-                .load_module(&fresh.cubin)
+                .load_module(&compiled.cubin)
                 .map_err(|e| err(device, e))?;
-            (module, fresh, CacheOutcome::Rebuilt, false, fresh_entry)
+            let got = Obtained {
+                compiled,
+                outcome: CacheOutcome::Rebuilt,
+                aot: false,
+                entry,
+            };
+            Ok((module, got))
         }
-        Err(e) => return Err(err(device, e)),
-    };
-    Ok((module, compiled, outcome, aot, entry))
+        Err(e) => Err(err(device, e)),
+    }
 }
 
 /// What a GPU's shared memory allows a block: [`tile_shared`]'s view of the device.
@@ -634,10 +925,12 @@ fn layout_name(contiguous: bool) -> &'static str {
 
 /// Compiles and loads `kernels` for GPU `ordinal` now (each variant the one `loaded` keeps,
 /// so their first launches find them): the contiguous forward variant of each, and with
-/// `adjoint: Some(bytes)` the adjoint with that stack; with `block_dim: Some(n)` (tiled kernels,
-/// [`crate::load_tiled`]) their variants for blocks of `n` threads. They go to the rayon pool together
-/// (NVRTC is thread-safe), though NVRTC measured one compile at a time in a process (see
-/// `crate::load`). A kernel already loaded costs a map lookup.
+/// `adjoint: Some(bytes)` the adjoint with that stack, both from one unit where neither is
+/// compiled yet (see [`loaded`]); with `block_dim: Some(n)` (tiled kernels,
+/// [`crate::load_tiled`]) their variants for blocks of `n` threads. The kernels go to the rayon
+/// pool together, compiled side by side (each overlapping compile in a copy of NVRTC of its
+/// own: see `crate::load`). A kernel already loaded costs a map lookup. Every kernel is
+/// tried: each failure is logged, and the first of `kernels` that failed is the error.
 pub(crate) fn prepare(
     device: &Device,
     ordinal: usize,
@@ -646,15 +939,31 @@ pub(crate) fn prepare(
     block_dim: Option<usize>,
 ) -> Result<()> {
     use rayon::prelude::*;
-    let mut work: Vec<(&'static KernelInfo, Option<usize>)> =
-        kernels.iter().map(|k| (*k, None)).collect();
-    if adjoint.is_some() {
-        work.extend(kernels.iter().map(|k| (*k, adjoint)));
-    }
-    // One task per variant: a compile is hundreds of milliseconds, so no chunking.
-    work.par_iter()
+    // One task per kernel (a compile is hundreds of milliseconds, so no chunking): its forward
+    // (with the adjoint when they make one unit), then its adjoint, loaded by then if so.
+    let results: Vec<Result<()>> = kernels
+        .par_iter()
         .with_max_len(1)
-        .try_for_each(|(info, adj)| loaded(device, ordinal, info, true, *adj, block_dim).map(drop))
+        .map(|info| {
+            loaded(device, ordinal, info, true, None, block_dim, || adjoint)?;
+            if adjoint.is_some() {
+                loaded(device, ordinal, info, true, adjoint, block_dim, || None)?;
+            }
+            Ok(())
+        })
+        .collect();
+    let mut first = None;
+    for (info, r) in kernels.iter().zip(results) {
+        if let Err(e) = r {
+            log::error!(
+                "loading kernel {}::{} on {device}: {e}",
+                info.module,
+                info.name
+            );
+            first.get_or_insert(e);
+        }
+    }
+    first.map_or(Ok(()), Err)
 }
 
 #[cfg(test)]
@@ -972,6 +1281,7 @@ mod tests {
             total_ms: 156.3,
             cache_key: 0x1234,
             cache_entry: None,
+            one_unit: false,
         }
     }
 
@@ -987,7 +1297,10 @@ mod tests {
             },
         ]);
         let lines: Vec<&str> = s.lines().collect();
-        assert_eq!(lines[0], "compiled at run time: 4 kernel variant(s)");
+        assert_eq!(
+            lines[0],
+            "compiled at run time: 4 kernel variant(s) in 4 unit(s)"
+        );
         assert!(
             lines[4]
                 .trim_start()
@@ -1008,5 +1321,45 @@ mod tests {
             "{}",
             lines[3]
         );
+    }
+
+    /// A unit of forward and adjoint has a report a variant: the forward's carries the unit's
+    /// NVRTC and loading time and says it holds the adjoint; the adjoint's says where it came
+    /// from and costs nothing, so that sums and unit counts see one compile.
+    #[test]
+    fn a_unit_of_both_halves_is_counted_once() {
+        let forward = CompileReport {
+            one_unit: true,
+            ..report("seed_ad", false, false)
+        };
+        let adjoint = CompileReport {
+            adjoint: true,
+            compile_ms: 0.0,
+            total_ms: 0.0,
+            ..forward.clone()
+        };
+        assert!(forward.is_unit() && !adjoint.is_unit());
+        assert!(report("m", true, false).is_unit());
+        let s =
+            format_compile_reports(&[forward.clone(), adjoint.clone(), report("m", false, true)]);
+        let lines: Vec<&str> = s.lines().collect();
+        assert_eq!(
+            lines[0],
+            "compiled at run time: 3 kernel variant(s) in 2 unit(s)"
+        );
+        assert!(
+            lines[1].contains("forward")
+                && lines[1].contains("NVRTC 145.2 ms, one unit with the adjoint"),
+            "{}",
+            lines[1]
+        );
+        assert!(
+            lines[2].contains("adjoint") && lines[2].contains("in the forward's unit"),
+            "{}",
+            lines[2]
+        );
+        let units = [&forward, &adjoint].iter().filter(|r| r.is_unit()).count();
+        let nvrtc: f64 = [&forward, &adjoint].iter().map(|r| r.compile_ms).sum();
+        assert_eq!((units, nvrtc), (1, 145.25));
     }
 }

@@ -8,6 +8,14 @@
 //! `warp_cuda::library::SECTIONS`, and in an adjoint unit the adjoint core and the sections'
 //! adjoint parts after them (each part includes its forward section and the parts it builds
 //! on).
+//!
+//! A kernel's first launch under a recording tape (or `load_with_adjoints`) compiles one unit
+//! holding both its forward and its adjoint entry ([`assemble_with_adjoint`]): the adjoint
+//! unit's text with the kernel's forward template before its adjoint one. Nothing clashes:
+//! every name a unit defines at file scope is a func's (`wpf<k>_<name>`, its `_replay` and
+//! `_adj`, the same in both halves, each defined once) or the kernel's (`wpk_<name>_thread`
+//! and the entry `wpk_<name>`, whose adjoint template appends `_adj` to both). One NVRTC run
+//! then parses the library and the funcs once instead of twice.
 
 use crate::kernel::KernelInfo;
 use warp_core::FuncInfo;
@@ -24,6 +32,34 @@ pub struct CudaSource {
     pub thread_fn: String,
     /// The library headers it includes, in order (`wp_core.h` first).
     pub headers: Vec<String>,
+    /// In a unit of forward and adjoint ([`assemble_with_adjoint`]), the adjoint's names
+    /// (`entry` and `thread_fn` are then the forward's); `None` in a unit of one of them.
+    pub adjoint: Option<AdjointNames>,
+}
+
+/// The adjoint's entry point and per-thread function in a unit that also holds the forward.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AdjointNames {
+    /// The `extern "C"` entry point (`wpk_<name>_adj`).
+    pub entry: String,
+    /// The per-thread function (`wpk_<name>_thread_adj`).
+    pub thread_fn: String,
+}
+
+/// Which entries a unit holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Halves {
+    Forward,
+    Adjoint,
+    Both,
+}
+
+impl Halves {
+    /// Whether the unit holds the adjoint (and so the adjoint library and the funcs' replays
+    /// and adjoints).
+    fn adjoint(self) -> bool {
+        self != Halves::Forward
+    }
 }
 
 /// Funcs reachable from `roots`, callees before callers, each once (keyed by module and name:
@@ -76,17 +112,29 @@ fn fill(
 
 /// Builds the translation unit for `info`.
 pub fn assemble(info: &KernelInfo) -> CudaSource {
-    assemble_unit(info, false)
+    assemble_unit(info, Halves::Forward)
 }
 
 /// Builds the adjoint translation unit for `info`: the adjoint library, every func's forward,
 /// replay and adjoint templates, and the kernel's adjoint (entry `wpk_<name>_adj`). Compiled
-/// only when backward first runs through the kernel on a GPU.
+/// only when backward first runs through the kernel on a GPU whose forward was compiled
+/// without it.
 pub fn assemble_adjoint(info: &KernelInfo) -> CudaSource {
-    assemble_unit(info, true)
+    assemble_unit(info, Halves::Adjoint)
 }
 
-fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
+/// Builds one translation unit holding both the forward (`entry`, `thread_fn`) and the
+/// adjoint (`adjoint`) of `info`: [`assemble_adjoint`]'s text with the kernel's forward
+/// template before its adjoint one (see the module documentation). Compiled with the adjoint
+/// unit's options, which change nothing in the forward's code (`WP_ADSTACK_BYTES` is read by
+/// the adjoint entry alone, `WP_ADJOINT_UNIT` only adds the user structs' adjoint helpers, and
+/// the rounding follows the sections, which both halves share).
+pub fn assemble_with_adjoint(info: &KernelInfo) -> CudaSource {
+    assemble_unit(info, Halves::Both)
+}
+
+fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
+    let adjoint = halves.adjoint();
     let mut funcs = Vec::new();
     collect(info.callees, &mut funcs);
     let name_of = |f: &FuncInfo| -> String {
@@ -171,23 +219,33 @@ fn assemble_unit(info: &KernelInfo, adjoint: bool) -> CudaSource {
         .iter()
         .map(|c| (name_of(c), c.cuda_ret))
         .collect();
-    text.push('\n');
-    let (template, suffix) = if adjoint {
-        (info.cuda_adjoint, "_adj")
-    } else {
-        (info.cuda, "")
+    let kernel = |template: &str| {
+        fill(template, &base_self, info.file, &callees, info.consts)
+            .replace("@@ENTRY@@", &base_entry)
     };
-    let entry = format!("{base_entry}{suffix}");
-    let thread_fn = format!("{base_self}{suffix}");
-    text.push_str(
-        &fill(template, &base_self, info.file, &callees, info.consts)
-            .replace("@@ENTRY@@", &base_entry),
-    );
+    if halves != Halves::Adjoint {
+        text.push('\n');
+        text.push_str(&kernel(info.cuda));
+    }
+    if adjoint {
+        text.push('\n');
+        text.push_str(&kernel(info.cuda_adjoint));
+    }
+    let adjoint_names = AdjointNames {
+        entry: format!("{base_entry}_adj"),
+        thread_fn: format!("{base_self}_adj"),
+    };
+    let (entry, thread_fn, adjoint) = match halves {
+        Halves::Forward => (base_entry, base_self, None),
+        Halves::Adjoint => (adjoint_names.entry, adjoint_names.thread_fn, None),
+        Halves::Both => (base_entry, base_self, Some(adjoint_names)),
+    };
     CudaSource {
         text,
         entry,
         thread_fn,
         headers,
+        adjoint,
     }
 }
 
@@ -282,6 +340,85 @@ mod tests {
                 "wp_adjoint_builtins.h"
             ]
         );
+    }
+
+    /// A unit of forward and adjoint is the adjoint unit with the kernel's forward template
+    /// before its adjoint one: the same headers and defines, each func once, both entries; the
+    /// units of one half keep their text (their cache and ahead-of-time keys).
+    #[test]
+    fn a_unit_of_both_halves_holds_each_name_once() {
+        let info = KernelInfo {
+            name: "k",
+            module: "m",
+            file: "src/k.rs",
+            cuda: "static WP_FN void @@SELF@@(wp::ctx_t* __ctx) { @@F0@@(1.0f, __ctx); }\nvoid @@ENTRY@@() {}\n",
+            cuda_adjoint: "static WP_FN void @@SELF@@_adj(wp::ctx_t* __ctx) { @@F1@@(2.0f, __ctx); }\nvoid @@ENTRY@@_adj() {}\n",
+            cuda_sections: &["vector"],
+            callees: &KERNEL_CALLEES,
+            ..KernelInfo::BLANK
+        };
+        let (fwd, adj, both) = (
+            assemble(&info),
+            assemble_adjoint(&info),
+            assemble_with_adjoint(&info),
+        );
+        assert_eq!(both.headers, adj.headers);
+        assert_eq!(
+            (both.entry.as_str(), both.thread_fn.as_str()),
+            ("wpk_k", "wpk_k_thread")
+        );
+        assert_eq!(
+            both.adjoint,
+            Some(AdjointNames {
+                entry: "wpk_k_adj".into(),
+                thread_fn: "wpk_k_thread_adj".into()
+            })
+        );
+        assert_eq!((fwd.adjoint.as_ref(), adj.adjoint.as_ref()), (None, None));
+        assert_eq!(
+            (adj.entry.as_str(), adj.thread_fn.as_str()),
+            ("wpk_k_adj", "wpk_k_thread_adj")
+        );
+        // The adjoint unit's text, the forward template spliced in before the adjoint's.
+        let forward =
+            "void wpk_k_thread(wp::ctx_t* __ctx) { wpf2_both(1.0f, __ctx); }\nvoid wpk_k() {}\n";
+        let at = adj
+            .text
+            .find("\nstatic WP_FN void wpk_k_thread_adj")
+            .expect("adjoint");
+        assert_eq!(
+            both.text,
+            format!(
+                "{}\nstatic WP_FN {forward}{}",
+                &adj.text[..at],
+                &adj.text[at..]
+            )
+        );
+        assert!(both.text.starts_with(&adj.text[..at]));
+        assert!(both.text.contains("#define WP_ADJOINT_UNIT 1"));
+        for name in [
+            "wpf0_sq(",
+            "wpf1_sq(",
+            "wpf2_both(",
+            "wpk_k_thread(",
+            "wpk_k(",
+            "wpk_k_adj(",
+        ] {
+            assert_eq!(
+                both.text.matches(&format!("void {name}")).count()
+                    + both.text.matches(&format!("wp::f32 {name}")).count(),
+                1,
+                "{name} defined once in:\n{}",
+                both.text
+            );
+        }
+        // Forward and adjoint units alone are what they were (same text, so same keys).
+        assert!(
+            fwd.text.ends_with(&format!("\nstatic WP_FN {forward}")),
+            "{}",
+            fwd.text
+        );
+        assert!(!fwd.text.contains("wpk_k_adj"));
     }
 
     /// The unit does not depend on the crate that compiled the kernel (a build script that
