@@ -123,10 +123,13 @@ fn first() -> Option<Api> {
 }
 
 /// How many compiles may run at once: `value` of [`NVRTC_THREADS_ENV`] when it is a number of
-/// at least 1, else `parallelism` capped at [`DEFAULT_MAX_NVRTC_THREADS`].
+/// at least 1, else `parallelism`; at most [`DEFAULT_MAX_NVRTC_THREADS`] either way. Each copy
+/// is a link-map namespace with a libc of its own, which takes static TLS: glibc reserves
+/// room for four namespaces by default (`rtld.nns`), and copies past it would use up the
+/// reserve that a later, unrelated `dlopen` of a library with initial-exec TLS needs.
 pub(crate) fn limit_from(value: Option<&str>, parallelism: usize) -> usize {
     match value.map(str::trim).and_then(|v| v.parse::<usize>().ok()) {
-        Some(n) if n >= 1 => n,
+        Some(n) if n >= 1 => n.min(DEFAULT_MAX_NVRTC_THREADS),
         _ => parallelism.clamp(1, DEFAULT_MAX_NVRTC_THREADS),
     }
 }
@@ -264,6 +267,9 @@ struct Pool {
     state: Mutex<State>,
     freed: Condvar,
     first: Api,
+    /// The process that made the pool: a child forked from it has neither the loader thread
+    /// nor the slots its parent's compiling threads held (nor, maybe, an unlocked mutex).
+    pid: u32,
 }
 
 fn pool() -> Option<&'static Pool> {
@@ -287,22 +293,26 @@ fn pool() -> Option<&'static Pool> {
             }),
             freed: Condvar::new(),
             first,
+            pid: std::process::id(),
         })
     })
     .as_ref()
 }
 
-/// A copy of NVRTC held for one compile; back to the pool on drop.
+/// A copy of NVRTC held for one compile; back to the pool on drop (`pool` is `None` for the
+/// first copy handed out without the pool, in a forked child).
 pub(crate) struct Slot {
-    pool: &'static Pool,
+    pool: Option<&'static Pool>,
     pub(crate) api: Api,
 }
 
 impl Drop for Slot {
     fn drop(&mut self) {
-        let mut s = self.pool.state.lock().unwrap_or_else(|p| p.into_inner());
-        s.free.push(self.api);
-        self.pool.freed.notify_one();
+        if let Some(pool) = self.pool {
+            let mut s = pool.state.lock().unwrap_or_else(|p| p.into_inner());
+            s.free.push(self.api);
+            pool.freed.notify_one();
+        }
     }
 }
 
@@ -311,10 +321,22 @@ impl Drop for Slot {
 /// found (the caller has checked that it loads).
 pub(crate) fn acquire() -> Option<Slot> {
     let pool = pool()?;
+    if pool.pid != std::process::id() {
+        // A forked child: the first copy, without the pool's lock or loader (NVRTC makes its
+        // compiles take turns there).
+        return Some(Slot {
+            pool: None,
+            api: pool.first,
+        });
+    }
+    let pool_ref = Some(pool);
     let mut s = pool.state.lock().unwrap_or_else(|p| p.into_inner());
     loop {
         if let Some(api) = s.free.pop() {
-            return Some(Slot { pool, api });
+            return Some(Slot {
+                pool: pool_ref,
+                api,
+            });
         }
         if s.made < s.limit && !s.failed {
             let copy = s.made;
@@ -323,7 +345,10 @@ pub(crate) fn acquire() -> Option<Slot> {
             match copies::load(&pool.first, copy) {
                 Ok(api) => {
                     log::debug!("NVRTC: loaded copy {copy} of libnvrtc for a concurrent compile");
-                    return Some(Slot { pool, api });
+                    return Some(Slot {
+                        pool: pool_ref,
+                        api,
+                    });
                 }
                 Err(why) => {
                     log::warn!(
@@ -401,7 +426,8 @@ mod tests {
     #[test]
     fn the_limit_comes_from_the_setting_or_the_machine() {
         assert_eq!(limit_from(Some("1"), 16), 1);
-        assert_eq!(limit_from(Some(" 6 "), 2), 6);
+        assert_eq!(limit_from(Some(" 3 "), 2), 3);
+        assert_eq!(limit_from(Some("64"), 2), DEFAULT_MAX_NVRTC_THREADS);
         assert_eq!(limit_from(None, 16), DEFAULT_MAX_NVRTC_THREADS);
         assert_eq!(limit_from(None, 2), 2);
         assert_eq!(limit_from(None, 0), 1);

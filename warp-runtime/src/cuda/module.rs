@@ -321,7 +321,8 @@ pub(crate) fn loaded(
             // The forward must not fail for its adjoint (one whose code NVRTC refuses, say):
             // it is compiled alone, and the adjoint's error comes when backward needs it.
             log::warn!(
-                "kernel {}::{} on {device}: the unit of forward and adjoint failed ({e});                  compiling the forward alone",
+                "kernel {}::{} on {device}: the unit of forward and adjoint failed ({e}); \
+                 compiling the forward alone",
                 info.module,
                 info.name
             );
