@@ -437,8 +437,8 @@ constexpr i32 SORT_BITS = 8;
 constexpr i32 SORT_RADIX = 1 << SORT_BITS;
 /// At most this many passes (32-bit keys).
 constexpr i32 SORT_MAX_PASSES = 4;
-/// Tiles of keys one block of the histogram kernel counts.
-constexpr i32 SORT_HIST_TILES = 8;
+/// Blocks of the histogram kernel at most (each takes every so many tiles).
+constexpr i32 SORT_HIST_BLOCKS = 512;
 /// Look-back status words: (flag << 32) | count, flag 0 not yet published, 1 the tile's own
 /// count (aggregate), 2 the count of this tile and every tile before it (inclusive).
 constexpr u64 STATUS_AGGREGATE = 1ull << 32;
@@ -579,10 +579,13 @@ WP_PRIM_FN void k_sort_init(const args_t& a) {
 }
 
 /// args: 0 keys (const u32*), 1 count, 2 capacity, 3 hist (u32*, zeroed), 4 passes, 5 key
-/// bits, 6 status (u64*, passes * tiles * SORT_RADIX), 7 number of tiles.
-/// Block h counts the digits of every pass of the keys of tiles h * SORT_HIST_TILES ..
-/// (one read of the keys for all passes, per-block counts in shared memory, then one global
-/// atomic add per digit) and zeroes those tiles' look-back status words of every pass.
+/// bits, 6 status (u64*, passes * tiles * SORT_RADIX), 7 number of tiles, 8 number of blocks.
+/// Block h takes tiles h, h + blocks, .. (at most SORT_HIST_BLOCKS blocks, so that large sorts
+/// flush few per-block counts, and small ones still spread over the GPU): it zeroes their
+/// look-back status words of every pass and counts the digits of every pass of their keys
+/// (one read of the keys for all passes: each thread loads its ITEMS keys of a tile at once,
+/// striped and coalesced, then counts them in shared memory); at the end one global atomic
+/// add per digit it saw.
 template <typename K>
 WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
   WP_PRIM_SHARED u32 counts[SORT_MAX_PASSES * SORT_RADIX];
@@ -593,23 +596,34 @@ WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
   const i32 key_bits = (i32)int_arg(a, 5);
   u64* status = ptr<u64>(a, 6);
   const i64 tiles = int_arg(a, 7);
+  const i64 blocks = int_arg(a, 8);
   const i32 t = WP_PRIM_TID;
-  const i64 first = WP_PRIM_BID * SORT_HIST_TILES;
-  const i64 last = first + SORT_HIST_TILES < tiles ? first + SORT_HIST_TILES : tiles;
-  for (i32 p = 0; p < passes; ++p) {
-    u64* s = status + (p * tiles + first) * SORT_RADIX;
-    for (i64 i = t; i < (last - first) * SORT_RADIX; i += THREADS) s[i] = 0;
-  }
   for (i32 i = t; i < SORT_MAX_PASSES * SORT_RADIX; i += THREADS) counts[i] = 0;
-  WP_PRIM_SYNC();
-  const i64 end = last * TILE < n ? last * TILE : n;
-  for (i64 i = first * TILE + t; i < end; i += THREADS) {
-    const u32 bits = radix_key<K>::bits(keys[i]);
+  for (i64 tile = WP_PRIM_BID; tile < tiles; tile += blocks) {
     for (i32 p = 0; p < passes; ++p) {
-      const i32 shift = p * SORT_BITS;
-      const i32 width = key_bits - shift < SORT_BITS ? key_bits - shift : SORT_BITS;
-      const u32 d = (bits >> shift) & ((1u << width) - 1);
-      WP_PRIM_ATOMIC_ADD(&counts[p * SORT_RADIX + d], 1u);
+      u64* s = status + (p * tiles + tile) * SORT_RADIX;
+      for (i32 i = t; i < SORT_RADIX; i += THREADS) s[i] = 0;
+    }
+  }
+  WP_PRIM_SYNC();
+  for (i64 tile = WP_PRIM_BID; tile * TILE < n; tile += blocks) {
+    const i64 base = tile * TILE + t;
+    u32 kr[ITEMS];
+    WP_PRIM_UNROLL
+    for (i32 k = 0; k < ITEMS; ++k) {
+      const i64 i = base + (i64)k * THREADS;
+      kr[k] = i < n ? keys[i] : 0u;
+    }
+    WP_PRIM_UNROLL
+    for (i32 k = 0; k < ITEMS; ++k) {
+      if (base + (i64)k * THREADS >= n) break;
+      const u32 bits = radix_key<K>::bits(kr[k]);
+      for (i32 p = 0; p < passes; ++p) {
+        const i32 shift = p * SORT_BITS;
+        const i32 width = key_bits - shift < SORT_BITS ? key_bits - shift : SORT_BITS;
+        const u32 d = (bits >> shift) & ((1u << width) - 1);
+        WP_PRIM_ATOMIC_ADD(&counts[p * SORT_RADIX + d], 1u);
+      }
     }
   }
   WP_PRIM_SYNC();
