@@ -11,10 +11,12 @@
 // integers), so that every entry has the same C++ signature: the host tests run the very same
 // plans on the CPU by compiling this file with g++ under a block emulator
 // (warp-cuda/cuda/tests/wp_prim_emu.h), which finds entries by name through
-// `WP_PRIM_REGISTER`. For the same reason the kernels use only `__syncthreads`, shared
-// memory and `atomicAdd` (WP_PRIM_ATOMIC_ADD) for cooperation (no warp shuffles); the one
-// kernel that waits for other blocks (the sort's look-back) waits only for tiles handed out
-// earlier by an atomic counter, which the emulator (blocks in order) has already finished.
+// `WP_PRIM_REGISTER`. For the same reason the kernels cooperate only through what the
+// emulator models: `__syncthreads`, shared memory, `atomicAdd` (WP_PRIM_ATOMIC_ADD), and in
+// the sort the warp intrinsics `__ballot_sync`, `__match_any_sync`, `__shfl_sync`,
+// `__shfl_up_sync` (with `__popc`, `__clz`); the one kernel that waits for other blocks (the
+// sort's look-back) waits only for tiles handed out earlier by an atomic counter, which the
+// emulator (blocks in order) has already finished.
 //
 // Algorithms (learned from the literature, written for this project):
 //   * Block scan: each thread reduces WP_PRIM_ITEMS consecutive elements serially, the block
@@ -27,10 +29,11 @@
 //     position; the spine's total is the count.
 //   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
 //     once and counts the digits of every pass; then one kernel per pass: a block takes the
-//     next tile from an atomic counter, sorts it by the digit in shared memory (two stable
-//     4-bit counting passes: per-thread counts scanned digit-major), publishes its digit
-//     counts, and adds the counts of earlier tiles by decoupled look-back; each element goes
-//     to digit offset + earlier tiles' count + rank in the tile (runs written coalesced).
+//     next tile from an atomic counter, ranks its keys by the digit (per warp, the lanes of
+//     one digit found by ballots; the warps' counts scanned digit-major), publishes its digit
+//     counts, sorts keys and values in shared memory, and adds the counts of earlier tiles by
+//     decoupled look-back; each element goes to digit offset + earlier tiles' count + rank in
+//     the tile (runs written coalesced). See k_sort_onesweep.
 //
 // Lengths: a kernel processes `n` elements where `n` is a host value (`capacity`), or read on
 // the device from a 1-element i32 array (`count`) so that no host synchronisation is needed.

@@ -35,6 +35,12 @@
 //     gives the caller's own value, as CUDA), a lane of the mask that has left the kernel, and
 //     lanes of one mask waiting at different barriers (a `__syncwarp` against a
 //     `__syncthreads`: a deadlock on a GPU) abort, naming the block.
+//   * for the radix sort's warp-level ranking: `__ballot_sync(mask, pred)`,
+//     `__match_any_sync(mask, v)` and `__shfl_up_sync(mask, v, delta)`, exchanges like the
+//     shuffles, which also abort when their mask names a lane past the block's end or (for
+//     `__shfl_up_sync`) reads a lane outside the mask; and `__popc`, `__clz`. Every lane of a
+//     warp collective (a shuffle, ballot or match, and a `__syncwarp`) records which one it is
+//     in, and one that finds a lane of its mask in another aborts (undefined on a GPU).
 //   * `block_barriers` counts the `__syncthreads` phases released since the program started
 //     (the linear-algebra test checks how many barriers an operation costs).
 // Not emulated: memory ordering between blocks, and interleavings inside a phase (a lane runs
