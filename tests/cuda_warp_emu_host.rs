@@ -96,8 +96,14 @@ fn misused_warp_barriers_abort() {
     for (case, says) in [
         ("divergent", "incomplete __syncwarp"),
         ("exited", "a lane of the mask has left the kernel"),
-        ("mixed", "lanes of one mask are in different warp collectives"),
-        ("past_block", "__ballot_sync with a mask past the block's end"),
+        (
+            "mixed",
+            "lanes of one mask are in different warp collectives",
+        ),
+        (
+            "past_block",
+            "__ballot_sync with a mask past the block's end",
+        ),
         ("up_outside", "__shfl_up_sync reads a lane outside the mask"),
     ] {
         let out = run(case);
