@@ -548,10 +548,19 @@ fn sort_u32_with_duplicates_and_key_bits() {
 /// 8-bit passes with `key_bits` cutting them: 8 bits (one pass and the copy back), 16 (two),
 /// 21 (the hash grid's cell ids: three passes, user -> B -> C -> user), 24, 32 (four), with
 /// random high bits the sort must ignore; the histograms of every pass come from one upfront
-/// read, and 131 tiles make long look-back chains.
+/// read (which counts runs of one digit among a thread's keys at once: sorted keys have long
+/// ones), and 131 tiles make long look-back chains.
 #[test]
 fn sort_u32_passes_by_key_bits() {
-    sort_cases::<u32>(ballot(), &[8, 16, 21, 24, 32], |r| r.next() as u32, &[]);
+    let mut r = Rng(9);
+    let mut sorted: Vec<u32> = (0..40_000).map(|_| r.next() as u32 >> 4).collect();
+    sorted.sort_unstable();
+    sort_cases::<u32>(
+        ballot(),
+        &[8, 16, 21, 24, 32],
+        |r| r.next() as u32,
+        &[sorted],
+    );
     // Few distinct digits per pass: long runs inside tiles, most digits absent from a tile.
     sort_cases::<u32>(
         ballot(),

@@ -617,16 +617,32 @@ WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
       const i64 i = base + (i64)k * THREADS;
       kr[k] = i < n ? keys[i] : 0u;
     }
-    WP_PRIM_UNROLL
-    for (i32 k = 0; k < ITEMS; ++k) {
-      if (base + (i64)k * THREADS >= n) break;
-      const u32 bits = radix_key<K>::bits(kr[k]);
-      for (i32 p = 0; p < passes; ++p) {
-        const i32 shift = p * SORT_BITS;
-        const i32 width = key_bits - shift < SORT_BITS ? key_bits - shift : SORT_BITS;
-        const u32 d = (bits >> shift) & ((1u << width) - 1);
-        WP_PRIM_ATOMIC_ADD(&counts[p * SORT_RADIX + d], 1u);
+    // Runs of one digit among a thread's keys count with one atomic: keys in order (a grid's
+    // coherent points) have few digits of the high passes per thread, and the lanes of a warp
+    // that add to one counter at once are served one after another.
+    const i64 left = n - base;  // this thread's keys of the tile: k < valid
+    const i32 valid = left <= 0                       ? 0
+                      : left >= (i64)ITEMS * THREADS ? ITEMS
+                                                      : (i32)((left + THREADS - 1) / THREADS);
+    for (i32 p = 0; p < passes; ++p) {
+      const i32 shift = p * SORT_BITS;
+      const i32 width = key_bits - shift < SORT_BITS ? key_bits - shift : SORT_BITS;
+      const u32 m = (1u << width) - 1;
+      u32* c = counts + p * SORT_RADIX;
+      u32 run_d = (radix_key<K>::bits(kr[0]) >> shift) & m;
+      u32 run_n = 0;
+      WP_PRIM_UNROLL
+      for (i32 k = 0; k < ITEMS; ++k) {
+        if (k >= valid) break;
+        const u32 d = (radix_key<K>::bits(kr[k]) >> shift) & m;
+        if (d != run_d) {
+          WP_PRIM_ATOMIC_ADD(&c[run_d], run_n);
+          run_d = d;
+          run_n = 0;
+        }
+        ++run_n;
       }
+      if (run_n != 0) WP_PRIM_ATOMIC_ADD(&c[run_d], run_n);
     }
   }
   WP_PRIM_SYNC();
