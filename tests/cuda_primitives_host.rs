@@ -60,17 +60,18 @@ fn have_gpp() -> bool {
     })
 }
 
-/// The host executable of `module` compiled for `tile` (built once per process).
-fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
-    // One slot per (module, tile): the first test to need it compiles it, others wait.
+/// The host executable of `module` compiled for `tile`, with the `extra` definitions
+/// (`NAME=VALUE`), built once per process.
+fn executable(module: &Module, tile: Tile, extra: &[&str]) -> Arc<std::path::PathBuf> {
+    // One slot per build: the first test to need it compiles it, others wait.
     type Slot = Arc<Mutex<Option<Arc<std::path::PathBuf>>>>;
-    type Built = Mutex<HashMap<(String, u32, u32), Slot>>;
+    type Built = Mutex<HashMap<(String, u32, u32, String), Slot>>;
     static BUILT: OnceLock<Built> = OnceLock::new();
     let slot = BUILT
         .get_or_init(Default::default)
         .lock()
         .unwrap()
-        .entry((module.name(), tile.threads, tile.items))
+        .entry((module.name(), tile.threads, tile.items, extra.join(" ")))
         .or_default()
         .clone();
     let mut slot = slot.lock().unwrap();
@@ -78,10 +79,11 @@ fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
         return exe.clone();
     }
     let dir = std::env::temp_dir().join(format!(
-        "wp_prims_{}_{}x{}_{}",
+        "wp_prims_{}_{}x{}_{}_{}",
         module.name(),
         tile.threads,
         tile.items,
+        extra.len(),
         std::process::id()
     ));
     std::fs::create_dir_all(&dir).unwrap();
@@ -100,6 +102,7 @@ fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
         .defines(tile)
         .iter()
         .map(|(k, v)| format!("-D{k}={v}"))
+        .chain(extra.iter().map(|d| format!("-D{d}")))
         .collect();
     let out = Command::new("g++")
         .args([
@@ -154,9 +157,14 @@ fn unhex(s: &str) -> Vec<u8> {
 
 /// Runs the cases (all of one module) in one process of the host build.
 fn run(tile: Tile, cases: &[Case]) -> Vec<Ran> {
+    run_with(tile, &[], cases)
+}
+
+/// `run` on a build with the `extra` definitions.
+fn run_with(tile: Tile, extra: &[&str], cases: &[Case]) -> Vec<Ran> {
     let module = &cases[0].plan.module;
     assert!(cases.iter().all(|c| &c.plan.module == module));
-    let exe = executable(module, tile);
+    let exe = executable(module, tile, extra);
     let mut script = String::new();
     for c in cases {
         let u = c.users.len();
@@ -470,6 +478,17 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
     gen: impl Fn(&mut Rng) -> K,
     extra: &[Vec<K>],
 ) {
+    sort_cases_with(config, &[], key_bits, gen, extra)
+}
+
+/// `sort_cases` on a build with the `defines` (`NAME=VALUE`) too.
+fn sort_cases_with<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
+    config: SortConfig,
+    defines: &[&str],
+    key_bits: &[u32],
+    gen: impl Fn(&mut Rng) -> K,
+    extra: &[Vec<K>],
+) {
     if !have_gpp() {
         return;
     }
@@ -514,7 +533,7 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
             want.push((wk, wv, format!("n {n} device count {count} bits {bits}")));
         }
     }
-    for (r, (wk, wv, what)) in run(tile, &cases).iter().zip(&want) {
+    for (r, (wk, wv, what)) in run_with(tile, defines, &cases).iter().zip(&want) {
         assert_eq!(r.fault, None, "{what}");
         let gk: Vec<K> = typed(&r.users[0]);
         let gv: Vec<u32> = typed(&r.users[1]);
@@ -608,8 +627,9 @@ fn sort_odd_tile() {
 }
 
 /// The other kernels give the same results (bit for bit: the reference is a stable sort):
-/// ranking by `__match_any_sync`, the 4-bit counting passes, and warp ballots in a block of
-/// three warps.
+/// ranking by `__match_any_sync`, the 4-bit counting passes, warp ballots in a block of three
+/// warps, and the layout of large tiles (the warps' counts in the sorted keys' memory, which
+/// small tiles take only when told to).
 #[test]
 fn sort_variants_agree() {
     let dup = |r: &mut Rng| (r.below(37) as u32) * 0x0101_0101;
@@ -620,6 +640,13 @@ fn sort_variants_agree() {
     ] {
         sort_cases::<u32>(config, &[32, 21, 5], dup, &[]);
     }
+    sort_cases_with::<u32>(
+        sort_config(SortVariant::Ballot, WARPS_TILE),
+        &["WP_PRIM_SORT_SHARE_COUNTS=1"],
+        &[32, 21],
+        dup,
+        &[],
+    );
     sort_cases::<f32>(
         sort_config(SortVariant::MatchAny, WARPS_TILE),
         &[32],

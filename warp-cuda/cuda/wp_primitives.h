@@ -548,8 +548,8 @@ WP_PRIM_UNROLL
 /// Exclusive sum across the block of one value per thread: each warp scans its lanes with
 /// shuffles, the last lane of each warp leaves the warp's total in `warp_totals` (WARPS
 /// values in shared memory), and each thread adds the totals of the warps before its own.
-/// Every thread of the block must call it; it synchronises twice, so `warp_totals` may be
-/// reused as soon as it returns.
+/// Every thread of the block must call it; it synchronises once (before the totals are
+/// read), so `warp_totals` must not be written again before the caller's next barrier.
 template <typename T>
 WP_PRIM_FN T block_exclusive_sum(T v, T* warp_totals) {
   const i32 lane = WP_PRIM_TID % WARP_LANES;
@@ -564,7 +564,6 @@ WP_PRIM_UNROLL
   WP_PRIM_SYNC();
   T before = 0;
   for (i32 i = 0; i < w; ++i) before += warp_totals[i];
-  WP_PRIM_SYNC();
   return before + x - v;
 }
 #endif
@@ -807,14 +806,22 @@ WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
 /// come after every real element, and are neither counted nor written.
 template <typename K>
 WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
-  // The warps' digit counts (steps 2-3) and then the sorted keys (steps 4-6) share memory.
+  // The warps' digit counts (steps 2-4) have their own memory where it fits in the 48 KiB of
+  // static shared memory beside the sorted tile; else they share the sorted keys' (steps
+  // 4-6), and a barrier more separates their last read from the keys' first write.
   constexpr i32 COUNTS = WARPS * SORT_RADIX;
-  WP_PRIM_SHARED u32 skeys[TILE > COUNTS ? TILE : COUNTS];
+#ifdef WP_PRIM_SORT_SHARE_COUNTS  // the host tests' way to run the shared layout on small tiles
+  constexpr bool SHARE = WP_PRIM_SORT_SHARE_COUNTS != 0;
+#else
+  constexpr bool SHARE = (2 * TILE + COUNTS + SORT_RADIX) * 4 + (WARPS + 1) * 8 > 48 * 1024;
+#endif
+  WP_PRIM_SHARED u32 skeys[SHARE && COUNTS > TILE ? COUNTS : TILE];
   WP_PRIM_SHARED u32 svals[TILE];
+  WP_PRIM_SHARED u32 own_counts[SHARE ? 1 : COUNTS];
   WP_PRIM_SHARED u32 gbase[SORT_RADIX];
   WP_PRIM_SHARED u64 warp_totals[WARPS];
   WP_PRIM_SHARED i64 tile_sh;
-  u32* counts = skeys;
+  u32* counts = SHARE ? skeys : own_counts;
   const i64 n = resolve_count(ptr<const i32>(a, 4), int_arg(a, 5), nullptr, nullptr, 0, false);
   const i32 shift = (i32)int_arg(a, 6);
   const u32 mask = (u32)int_arg(a, 7);
@@ -912,13 +919,13 @@ WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
   }
   WP_PRIM_SYNC();
 
-  // 4. The tile sorted by digit in shared memory (the counts are read before the barrier,
-  // the sorted tile written after it: they share memory).
+  // 4. The tile sorted by digit in shared memory (where the counts share the keys' memory,
+  // they are read before the barrier, and the sorted tile written after it).
   WP_PRIM_UNROLL
   for (i32 k = 0; k < ITEMS; ++k) {
     rank[k] = (rank[k] & 0xffffu) + counts[w * SORT_RADIX + (rank[k] >> 16)];
   }
-  WP_PRIM_SYNC();
+  if (SHARE) WP_PRIM_SYNC();
   WP_PRIM_UNROLL
   for (i32 k = 0; k < ITEMS; ++k) {
     const i32 li = wb + k * WARP_LANES;
