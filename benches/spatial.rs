@@ -341,6 +341,8 @@ fn sort_kernels(dev: &wp::Device, torch: Option<&serde_json::Value>) -> wp::Resu
         with(SortVariant::Ballot, 512, 8, 2),
         with(SortVariant::Ballot, 256, 16, 4),
         with(SortVariant::Ballot, 256, 12, 4),
+        with(SortVariant::Ballot, 256, 8, 4),
+        with(SortVariant::Ballot, 128, 16, 6),
         with(SortVariant::Nibbles, 256, 16, 4),
     ];
     println!(

@@ -341,6 +341,7 @@ fn sort_every_kernel_config(dev: &wp::Device) {
         with(SortVariant::Ballot, 384, 12, 2),
         with(SortVariant::Ballot, 512, 8, 2),
         with(SortVariant::Ballot, 256, 12, 4),
+        with(SortVariant::Ballot, 128, 16, 6),
         with(SortVariant::Nibbles, 256, 16, 4),
         with(SortVariant::Ballot, 32, 4, 1),
     ];
