@@ -76,7 +76,9 @@ pub struct SortConfig {
 impl SortConfig {
     /// Whether the kernels compile for this configuration: the block is 16 threads or whole
     /// warps (a power of two dividing or divisible by 256 for `Nibbles`), a tile holds at
-    /// most 65536 keys (ranks are 16-bit), and at least one block fits.
+    /// most 65536 keys (ranks are 16-bit), and at least one block fits. (A tile whose keys and
+    /// values pass the 48 KiB of static shared memory, about 6000 keys, is NVRTC's error at
+    /// the module's first use.)
     pub fn check(self) -> std::result::Result<(), String> {
         let Tile { threads, items } = self.tile;
         let warps = threads == 16 || (threads >= 32 && threads % 32 == 0);
