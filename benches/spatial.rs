@@ -17,17 +17,27 @@
 //! not in the bundle, so they cannot be timed in this run).
 //!
 //! Primitives (PyTorch: torch.sort with stable=True and a gather of the values, torch.cumsum,
-//! torch.sum): a stable key/value radix sort (i32 and f32 keys), inclusive scans and a sum, at
+//! torch.sum; CuPy, where it is installed: argsort, CUB's radix sort through Thrust, and two
+//! gathers): a stable key/value radix sort (i32 and f32 keys), inclusive scans and a sum, at
 //! 1M and 16M elements. Each figure is a median of timed repetitions after a warm-up
-//! (compilation excluded), synchronised around every repetition; every result is checked
-//! against the CPU backend's.
+//! (compilation excluded); every result is checked against the CPU backend's. Sorts are timed
+//! by CUDA events around the sort (on random keys restored before each repetition, as the
+//! Python sides time theirs), scans and sums by the host clock, synchronised around each.
+//! Then the GPU sort's kernel configurations (`SortConfig`) are timed side by side on random
+//! i32 keys and on 21-bit keys (the hash grid's).
+//!
+//! ```text
+//! .gpu/bin/spatial-* --primitives              # the primitives and sort kernels only
+//! ```
 
 use warp_lang as wp;
 use wp::prelude::*;
 
 mod common;
 
-use common::{json_number, median_ms, python_side, ratio, size_section, uniform_points};
+use common::{
+    json_number, median_ms, median_of, python_side, ratio, size_section, uniform_points, REPS,
+};
 use rand::Rng as _;
 
 /// Neighbours of each point within `r`, a thread per point in point order.
@@ -69,7 +79,10 @@ fn main() -> wp::Result<()> {
         }
     };
     println!("spatial bench on {dev}");
-    hash_grid(&dev)?;
+    // `--primitives`: only the primitives' section (and the sort kernels' comparison).
+    if !std::env::args().any(|a| a == "--primitives") {
+        hash_grid(&dev)?;
+    }
     primitives(&dev)
 }
 
@@ -207,17 +220,19 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
         let vals: Vec<i32> = (0..n as i32).collect();
         let small: Vec<i32> = (0..n).map(|_| (r.random::<u64>() % 100) as i32).collect();
 
-        let ms = sort_case(&ki, &vals, dev, &cpu)?;
+        let ms = sort_case(&ki, &vals, None, dev, &cpu)?;
         println!(
-            "{:<28} {ms:7.3} ms   {}",
+            "{:<28} {ms:7.3} ms   {}   CuPy {}",
             format!("sort pairs i32 ({n})"),
-            ratio(ms, theirs("sort_pairs_i32_ms"))
+            ratio(ms, theirs("sort_pairs_i32_ms")),
+            ratio(ms, theirs("cupy_sort_pairs_i32_ms"))
         );
-        let ms = sort_case(&kf, &vals, dev, &cpu)?;
+        let ms = sort_case(&kf, &vals, None, dev, &cpu)?;
         println!(
-            "{:<28} {ms:7.3} ms   {}",
+            "{:<28} {ms:7.3} ms   {}   CuPy {}",
             format!("sort pairs f32 ({n})"),
-            ratio(ms, theirs("sort_pairs_f32_ms"))
+            ratio(ms, theirs("sort_pairs_f32_ms")),
+            ratio(ms, theirs("cupy_sort_pairs_f32_ms"))
         );
 
         let a = wp::Array::from_slice(&small, dev)?;
@@ -260,29 +275,101 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
             ((got - exact) / exact).abs()
         );
     }
-    Ok(())
+    sort_kernels(dev, torch.as_ref().ok())
 }
 
-/// A stable key/value sort on the GPU, checked against the CPU backend's, then timed. The
-/// timed repetitions sort the already sorted arrays again: a radix sort runs every pass
-/// whatever the order, so this times the same work without re-uploading.
+/// A stable key/value sort on the GPU by `key_bits` (None: all), checked against the CPU
+/// backend's, then timed: GPU milliseconds between CUDA events around the sort alone (as
+/// PyTorch's side times its own), median of `REPS` after a warm-up. Before each repetition the
+/// random input is copied back from pristine arrays (outside the timed span), so that every
+/// repetition sorts the same random order: sorting sorted keys again would scatter in long
+/// coalesced runs and time less than PyTorch's random keys.
 fn sort_case<K: wp::primitives::SortKey>(
     keys: &[K],
     vals: &[i32],
+    key_bits: Option<u32>,
     dev: &wp::Device,
     cpu: &wp::Device,
 ) -> wp::Result<f64> {
     let n = keys.len();
-    let (k, v) = (
+    let (k0, v0) = (
         wp::Array::from_slice(keys, dev)?,
         wp::Array::from_slice(vals, dev)?,
+    );
+    let (k, v) = (
+        wp::Array::<K>::zeros(n, dev)?,
+        wp::Array::<i32>::zeros(n, dev)?,
     );
     let (kc, vc) = (
         wp::Array::from_slice(keys, cpu)?,
         wp::Array::from_slice(vals, cpu)?,
     );
-    wp::radix_sort_pairs(&kc, &vc, n, None)?;
-    wp::radix_sort_pairs(&k, &v, n, None)?;
-    assert_eq!(v.to_vec()?, vc.to_vec()?, "GPU and CPU sorts disagree");
-    median_ms(|| wp::radix_sort_pairs(&k, &v, n, None))
+    wp::radix_sort_pairs(&kc, &vc, n, key_bits)?;
+    let stream = wp::get_stream(dev)?;
+    let mut times = Vec::with_capacity(REPS + 1);
+    for rep in 0..=REPS {
+        k.copy_from(&k0)?;
+        v.copy_from(&v0)?;
+        let start = stream.record_event()?;
+        wp::radix_sort_pairs(&k, &v, n, key_bits)?;
+        let end = stream.record_event()?;
+        times.push(start.elapsed_ms(&end)? as f64);
+        if rep == 0 {
+            // The warm-up (compilation, scratch growth) is checked, not timed.
+            assert_eq!(v.to_vec()?, vc.to_vec()?, "GPU and CPU sorts disagree");
+            times.clear();
+        }
+    }
+    Ok(median_of(times))
+}
+
+/// The GPU sort's kernel configurations, timed one after another in this process (each is its
+/// own module: `wp::primitives::plan::SortConfig`): the default first, then the alternatives
+/// worth measuring against it, and the first kernel (4-bit counting passes) for reference.
+fn sort_kernels(dev: &wp::Device, torch: Option<&serde_json::Value>) -> wp::Result<()> {
+    use wp::primitives::plan::{self, SortConfig, SortVariant, Tile};
+    let cpu = wp::get_device("cpu")?;
+    let with = |variant, threads, items, min_blocks| SortConfig {
+        variant,
+        tile: Tile { threads, items },
+        min_blocks,
+    };
+    let configs = [
+        plan::GPU_SORT,
+        with(SortVariant::MatchAny, 256, 16, 3),
+        with(SortVariant::Ballot, 384, 12, 2),
+        with(SortVariant::Ballot, 512, 8, 2),
+        with(SortVariant::Ballot, 256, 16, 4),
+        with(SortVariant::Ballot, 256, 12, 4),
+        with(SortVariant::Ballot, 256, 8, 4),
+        with(SortVariant::Ballot, 128, 16, 6),
+        with(SortVariant::Nibbles, 256, 16, 4),
+    ];
+    println!(
+        "sort kernels (GPU ms between CUDA events, random keys; the PyTorch column as above):"
+    );
+    for n in [1usize << 20, 1 << 24] {
+        let section = torch.and_then(|t| size_section(t, n));
+        let theirs = section.and_then(|s| json_number(s, "sort_pairs_i32_ms"));
+        let mut r = common::rng(0x5eed ^ n as u64);
+        let ki: Vec<i32> = (0..n).map(|_| (r.random::<u64>() >> 33) as i32).collect();
+        // The hash grid's keys: cells of a 128^3 grid, 21 bits.
+        let cells: Vec<i32> = (0..n).map(|_| r.random_range(0..1 << 21)).collect();
+        let vals: Vec<i32> = (0..n as i32).collect();
+        for c in configs {
+            wp::primitives::plan::set_gpu_sort_config(Some(c))?;
+            let all = sort_case(&ki, &vals, None, dev, &cpu)?;
+            let grid = sort_case(&cells, &vals, Some(21), dev, &cpu)?;
+            println!(
+                "  {:<10} {:>3}x{:<2} {} blocks/SM  n {n:>8}: i32 {all:7.3} ms   {}   21-bit \
+                 {grid:7.3} ms",
+                format!("{:?}", c.variant),
+                c.tile.threads,
+                c.tile.items,
+                c.min_blocks,
+                ratio(all, theirs)
+            );
+        }
+    }
+    wp::primitives::plan::set_gpu_sort_config(None)
 }

@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use std::process::Command;
 use std::sync::{Arc, Mutex, OnceLock};
 use warp_lang as wp;
-use wp::primitives::plan::{self, Len, Module, Plan, ReduceOp, Tile};
+use wp::primitives::plan::{self, Len, Module, Plan, ReduceOp, SortConfig, SortVariant, Tile};
 use wp::primitives::SortKey;
 
 /// 64 threads, like the GPU's 256 an even power of two: the block scan's double buffer ends
@@ -27,12 +27,27 @@ const TILE: Tile = Tile {
     threads: 64,
     items: 2,
 };
-/// The smallest block the sort allows (one thread per digit) and a tile that is not a power
+/// The smallest block the kernels allow (one partial warp) and a tile that is not a power
 /// of two.
 const ODD_TILE: Tile = Tile {
     threads: 16,
     items: 3,
 };
+/// Three whole warps: a block that is not a power of two, and whose threads hold more than
+/// one digit each in the sort's per-digit steps (the last thread fewer).
+const WARPS_TILE: Tile = Tile {
+    threads: 96,
+    items: 2,
+};
+
+/// The sort's kernels of `variant` compiled for `tile`.
+fn sort_config(variant: SortVariant, tile: Tile) -> SortConfig {
+    SortConfig {
+        variant,
+        tile,
+        min_blocks: 1,
+    }
+}
 
 fn have_gpp() -> bool {
     static HAVE: OnceLock<bool> = OnceLock::new();
@@ -45,17 +60,18 @@ fn have_gpp() -> bool {
     })
 }
 
-/// The host executable of `module` compiled for `tile` (built once per process).
-fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
-    // One slot per (module, tile): the first test to need it compiles it, others wait.
+/// The host executable of `module` compiled for `tile`, with the `extra` definitions
+/// (`NAME=VALUE`), built once per process.
+fn executable(module: &Module, tile: Tile, extra: &[&str]) -> Arc<std::path::PathBuf> {
+    // One slot per build: the first test to need it compiles it, others wait.
     type Slot = Arc<Mutex<Option<Arc<std::path::PathBuf>>>>;
-    type Built = Mutex<HashMap<(String, u32, u32), Slot>>;
+    type Built = Mutex<HashMap<(String, u32, u32, String), Slot>>;
     static BUILT: OnceLock<Built> = OnceLock::new();
     let slot = BUILT
         .get_or_init(Default::default)
         .lock()
         .unwrap()
-        .entry((module.name(), tile.threads, tile.items))
+        .entry((module.name(), tile.threads, tile.items, extra.join(" ")))
         .or_default()
         .clone();
     let mut slot = slot.lock().unwrap();
@@ -63,10 +79,11 @@ fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
         return exe.clone();
     }
     let dir = std::env::temp_dir().join(format!(
-        "wp_prims_{}_{}x{}_{}",
+        "wp_prims_{}_{}x{}_{}_{}",
         module.name(),
         tile.threads,
         tile.items,
+        extra.len(),
         std::process::id()
     ));
     std::fs::create_dir_all(&dir).unwrap();
@@ -81,10 +98,11 @@ fn executable(module: &Module, tile: Tile) -> Arc<std::path::PathBuf> {
     .unwrap();
     let cuda = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
     let exe = dir.join("module");
-    let defines: Vec<String> = tile
-        .defines()
+    let defines: Vec<String> = module
+        .defines(tile)
         .iter()
         .map(|(k, v)| format!("-D{k}={v}"))
+        .chain(extra.iter().map(|d| format!("-D{d}")))
         .collect();
     let out = Command::new("g++")
         .args([
@@ -139,9 +157,14 @@ fn unhex(s: &str) -> Vec<u8> {
 
 /// Runs the cases (all of one module) in one process of the host build.
 fn run(tile: Tile, cases: &[Case]) -> Vec<Ran> {
+    run_with(tile, &[], cases)
+}
+
+/// `run` on a build with the `extra` definitions.
+fn run_with(tile: Tile, extra: &[&str], cases: &[Case]) -> Vec<Ran> {
     let module = &cases[0].plan.module;
     assert!(cases.iter().all(|c| &c.plan.module == module));
-    let exe = executable(module, tile);
+    let exe = executable(module, tile, extra);
     let mut script = String::new();
     for c in cases {
         let u = c.users.len();
@@ -450,7 +473,18 @@ fn sort_reference<K: SortKey + bytemuck::Pod>(
 }
 
 fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
-    tile: Tile,
+    config: SortConfig,
+    key_bits: &[u32],
+    gen: impl Fn(&mut Rng) -> K,
+    extra: &[Vec<K>],
+) {
+    sort_cases_with(config, &[], key_bits, gen, extra)
+}
+
+/// `sort_cases` on a build with the `defines` (`NAME=VALUE`) too.
+fn sort_cases_with<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
+    config: SortConfig,
+    defines: &[&str],
     key_bits: &[u32],
     gen: impl Fn(&mut Rng) -> K,
     extra: &[Vec<K>],
@@ -458,6 +492,7 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
     if !have_gpp() {
         return;
     }
+    let tile = config.tile;
     let mut rng = Rng(0xdead_beef ^ K::CUDA.len() as u64);
     let mut inputs: Vec<Vec<K>> = sizes(tile)
         .into_iter()
@@ -474,7 +509,7 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
             // Host count of all but the last few (the tail stays put).
             let count = n - n.min(3);
             cases.push(Case {
-                plan: plan::sort(tile, K::CUDA, bits, Len::Host(count as u64)),
+                plan: plan::sort(config, K::CUDA, bits, Len::Host(count as u64)),
                 users: vec![bytes(keys), bytes(&values)],
             });
             let (mut wk, mut wv) = sort_reference(&keys[..count], &values[..count], bits);
@@ -489,7 +524,7 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
                 arg: 2,
             };
             cases.push(Case {
-                plan: plan::sort(tile, K::CUDA, bits, len),
+                plan: plan::sort(config, K::CUDA, bits, len),
                 users: vec![bytes(keys), bytes(&values), bytes(&[count as i32])],
             });
             let (mut wk, mut wv) = sort_reference(&keys[..count], &values[..count], bits);
@@ -498,7 +533,7 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
             want.push((wk, wv, format!("n {n} device count {count} bits {bits}")));
         }
     }
-    for (r, (wk, wv, what)) in run(tile, &cases).iter().zip(&want) {
+    for (r, (wk, wv, what)) in run_with(tile, defines, &cases).iter().zip(&want) {
         assert_eq!(r.fault, None, "{what}");
         let gk: Vec<K> = typed(&r.users[0]);
         let gv: Vec<u32> = typed(&r.users[1]);
@@ -507,17 +542,22 @@ fn sort_cases<K: SortKey + bytemuck::Pod + std::fmt::Debug>(
     }
 }
 
+/// The GPU's sort kernel on the small tile.
+fn ballot() -> SortConfig {
+    sort_config(SortVariant::Ballot, TILE)
+}
+
 #[test]
 fn sort_u32_with_duplicates_and_key_bits() {
     // Few distinct keys: long runs of equal keys test stability.
     sort_cases::<u32>(
-        TILE,
+        ballot(),
         &[32, 5, 9, 1],
         |r| (r.below(37) as u32) * 0x0101_0101,
         &[],
     );
     sort_cases::<u32>(
-        TILE,
+        ballot(),
         &[32],
         |r| r.next() as u32,
         &[vec![u32::MAX, 0, u32::MAX, 1]],
@@ -527,13 +567,22 @@ fn sort_u32_with_duplicates_and_key_bits() {
 /// 8-bit passes with `key_bits` cutting them: 8 bits (one pass and the copy back), 16 (two),
 /// 21 (the hash grid's cell ids: three passes, user -> B -> C -> user), 24, 32 (four), with
 /// random high bits the sort must ignore; the histograms of every pass come from one upfront
-/// read, and 131 tiles make long look-back chains.
+/// read (which counts runs of one digit among a thread's keys at once: sorted keys have long
+/// ones), and 131 tiles make long look-back chains.
 #[test]
 fn sort_u32_passes_by_key_bits() {
-    sort_cases::<u32>(TILE, &[8, 16, 21, 24, 32], |r| r.next() as u32, &[]);
+    let mut r = Rng(9);
+    let mut sorted: Vec<u32> = (0..40_000).map(|_| r.next() as u32 >> 4).collect();
+    sorted.sort_unstable();
+    sort_cases::<u32>(
+        ballot(),
+        &[8, 16, 21, 24, 32],
+        |r| r.next() as u32,
+        &[sorted],
+    );
     // Few distinct digits per pass: long runs inside tiles, most digits absent from a tile.
     sort_cases::<u32>(
-        TILE,
+        ballot(),
         &[21, 17],
         |r| {
             ((r.below(3) as u32) << 16)
@@ -547,7 +596,7 @@ fn sort_u32_passes_by_key_bits() {
 #[test]
 fn sort_i32_negative() {
     sort_cases::<i32>(
-        TILE,
+        ballot(),
         &[32, 12],
         |r| r.below(2001) as i32 - 1000,
         &[vec![i32::MIN, i32::MAX, -1, 0, 1, i32::MIN, -1]],
@@ -558,7 +607,7 @@ fn sort_i32_negative() {
 fn sort_f32_total_order() {
     let specials = F32_SPECIALS.to_vec();
     sort_cases::<f32>(
-        TILE,
+        ballot(),
         &[32],
         |r| (r.below(41) as f32 - 20.0) * 0.25,
         &[specials],
@@ -567,8 +616,43 @@ fn sort_f32_total_order() {
 
 #[test]
 fn sort_odd_tile() {
-    sort_cases::<u32>(ODD_TILE, &[32, 7, 21], |r| r.below(1000) as u32, &[]);
-    sort_cases::<f32>(ODD_TILE, &[32], |r| (r.below(41) as f32 - 20.0) * 0.25, &[]);
+    let odd = sort_config(SortVariant::Ballot, ODD_TILE);
+    // 600 tiles: more than the histogram kernel's blocks, so that some count two tiles.
+    let mut r = Rng(7);
+    let many: Vec<u32> = (0..600 * 48).map(|_| r.below(1000) as u32).collect();
+    let upsweep = &plan::sort(odd, "u32", 32, Len::Host(many.len() as u64)).steps[1];
+    assert!(upsweep.blocks < 600, "{upsweep:?}");
+    sort_cases::<u32>(odd, &[32, 7, 21], |r| r.below(1000) as u32, &[many]);
+    sort_cases::<f32>(odd, &[32], |r| (r.below(41) as f32 - 20.0) * 0.25, &[]);
+}
+
+/// The other kernels give the same results (bit for bit: the reference is a stable sort):
+/// ranking by `__match_any_sync`, the 4-bit counting passes, warp ballots in a block of three
+/// warps, and the layout of large tiles (the warps' counts in the sorted keys' memory, which
+/// small tiles take only when told to).
+#[test]
+fn sort_variants_agree() {
+    let dup = |r: &mut Rng| (r.below(37) as u32) * 0x0101_0101;
+    for config in [
+        sort_config(SortVariant::MatchAny, TILE),
+        sort_config(SortVariant::Nibbles, TILE),
+        sort_config(SortVariant::Ballot, WARPS_TILE),
+    ] {
+        sort_cases::<u32>(config, &[32, 21, 5], dup, &[]);
+    }
+    sort_cases_with::<u32>(
+        sort_config(SortVariant::Ballot, WARPS_TILE),
+        &["WP_PRIM_SORT_SHARE_COUNTS=1"],
+        &[32, 21],
+        dup,
+        &[],
+    );
+    sort_cases::<f32>(
+        sort_config(SortVariant::MatchAny, WARPS_TILE),
+        &[32],
+        |r| (r.below(41) as f32 - 20.0) * 0.25,
+        &[F32_SPECIALS.to_vec()],
+    );
 }
 
 // ------------------------------------------------------------------------------------------
@@ -693,7 +777,7 @@ fn bad_device_counts_fault_and_write_nothing() {
         let ran = run(
             TILE,
             &[Case {
-                plan: plan::sort(TILE, "u32", 32, len),
+                plan: plan::sort(ballot(), "u32", 32, len),
                 users: vec![bytes(&keys), bytes(&x), bytes(&[bad])],
             }],
         );
@@ -741,7 +825,28 @@ fn nvrtc_compiles_every_module() {
         .into_iter()
         .map(Module::Scan)
         .collect();
-    modules.extend(["u32", "i32", "f32"].into_iter().map(Module::Sort));
+    let gpu = plan::GPU_SORT;
+    modules.extend(["u32", "i32", "f32"].map(|k| Module::Sort(k, gpu)));
+    // The other kernels, and a block of 384 threads (12 keys each: the keys and values of a
+    // tile stay within the 48 KiB of static shared memory).
+    let big = Tile {
+        threads: 384,
+        items: 12,
+    };
+    for (variant, tile) in [
+        (SortVariant::MatchAny, gpu.tile),
+        (SortVariant::Nibbles, gpu.tile),
+        (SortVariant::Ballot, big),
+    ] {
+        modules.push(Module::Sort(
+            "u32",
+            SortConfig {
+                variant,
+                tile,
+                min_blocks: 2,
+            },
+        ));
+    }
     for word in [1, 2, 4, 8] {
         for words in [1, 3] {
             modules.push(Module::Compact { word, words });

@@ -1,6 +1,6 @@
 //! The block emulator's warp-synchronous operations (`warp-cuda/cuda/tests/wp_prim_emu.h`:
-//! `__syncwarp`, `__shfl_sync`, `__shfl_down_sync`), which the host tests of the tile headers
-//! rely on to show races the GPU could have: a driver
+//! `__syncwarp`, the shuffles, `__ballot_sync`, `__match_any_sync`), which the host tests of
+//! the tile headers and the primitives rely on to show races the GPU could have: a driver
 //! (`warp-cuda/cuda/tests/wp_warp_emu_driver.cpp`) runs small kernels of two warps and prints
 //! what they saw. A shared-memory exchange between lanes with its `__syncwarp` missing must show
 //! stale reads; with it, none; a warp must get through its own barriers while the other waits at
@@ -81,6 +81,14 @@ fn shuffles_exchange_within_a_warp() {
 }
 
 #[test]
+fn votes_and_matches_within_a_warp() {
+    if skip() {
+        return;
+    }
+    assert_eq!(line("vote"), "ok");
+}
+
+#[test]
 fn misused_warp_barriers_abort() {
     if skip() {
         return;
@@ -88,6 +96,15 @@ fn misused_warp_barriers_abort() {
     for (case, says) in [
         ("divergent", "incomplete __syncwarp"),
         ("exited", "a lane of the mask has left the kernel"),
+        (
+            "mixed",
+            "lanes of one mask are in different warp collectives",
+        ),
+        (
+            "past_block",
+            "__ballot_sync with a mask past the block's end",
+        ),
+        ("up_outside", "__shfl_up_sync reads a lane outside the mask"),
     ] {
         let out = run(case);
         let err = String::from_utf8_lossy(&out.stderr);

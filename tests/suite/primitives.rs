@@ -23,6 +23,7 @@ backend_tests!(
     sort_i32_and_f32_keys,
     sort_key_bits,
     sort_counts,
+    sort_every_kernel_config,
     workspace_reuse_across_sizes_types_and_streams,
     compact_types_and_counts,
     device_counts_chain_without_host_reads,
@@ -311,6 +312,67 @@ fn sort_key_bits(dev: &wp::Device) {
             let keys: Vec<i32> = (0..n).map(|_| rng.next() as i32).collect();
             check_sort(dev, &keys, Some(bits), &format!("i32 {bits} bits n {n}"));
         }
+    }
+}
+
+/// Every GPU sort kernel and block shape the bench compares gives the default's results (the
+/// stable order, bit for bit), with more tiles than the GPU holds at once (long look-back
+/// chains) and a partial last tile; a block of one warp of 4 keys makes tiles of 128. On the
+/// CPU the configuration plays no part, and is left alone (the CPU instances run beside the
+/// GPU's): the same checks run once.
+fn sort_every_kernel_config(dev: &wp::Device) {
+    use wp::primitives::plan::{self, SortConfig, SortVariant, Tile};
+    /// Puts the default configuration back however the test ends (the GPU instances run one
+    /// at a time: no other sort sees the choice).
+    struct Restore;
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            plan::set_gpu_sort_config(None).unwrap();
+        }
+    }
+    let _restore = dev.is_cuda().then_some(Restore);
+    let with = |variant, threads, items, min_blocks| SortConfig {
+        variant,
+        tile: Tile { threads, items },
+        min_blocks,
+    };
+    let configs = [
+        with(SortVariant::MatchAny, 256, 16, 3),
+        with(SortVariant::Ballot, 384, 12, 2),
+        with(SortVariant::Ballot, 512, 8, 2),
+        with(SortVariant::Ballot, 256, 12, 4),
+        with(SortVariant::Ballot, 128, 16, 6),
+        with(SortVariant::Nibbles, 256, 16, 4),
+        with(SortVariant::Ballot, 32, 4, 1),
+    ];
+    let runs = if dev.is_cuda() {
+        &configs[..]
+    } else {
+        &configs[..1]
+    };
+    let mut rng = Rng(25);
+    for &c in runs {
+        if dev.is_cuda() {
+            plan::set_gpu_sort_config(Some(c)).unwrap();
+        }
+        for n in [1, 5000, 300_001] {
+            let keys: Vec<u32> = (0..n).map(|_| rng.next() as u32).collect();
+            check_sort(dev, &keys, None, &format!("{c:?} random n {n}"));
+            let keys: Vec<u32> = (0..n).map(|_| rng.below(37) as u32 * 0x0101_0101).collect();
+            check_sort(dev, &keys, None, &format!("{c:?} duplicates n {n}"));
+            let keys: Vec<u32> = (0..n).map(|_| rng.below(1 << 21) as u32).collect();
+            check_sort(dev, &keys, Some(21), &format!("{c:?} 21 bits n {n}"));
+        }
+        // A count on the device that ends inside a tile.
+        let keys: Vec<u32> = (0..9000).map(|_| rng.below(500) as u32).collect();
+        let values: Vec<u32> = (0..9000).collect();
+        let (k, v, count) = (arr(&keys, dev), arr(&values, dev), arr(&[6001i32], dev));
+        wp::radix_sort_pairs(&k, &v, &count, None).unwrap();
+        let (mut wk, mut wv) = sort_reference(&keys[..6001], &values[..6001], 32);
+        wk.extend_from_slice(&keys[6001..]);
+        wv.extend_from_slice(&values[6001..]);
+        assert_eq!(host(&k), wk, "{c:?} device count");
+        assert_eq!(host(&v), wv, "{c:?} device count");
     }
 }
 

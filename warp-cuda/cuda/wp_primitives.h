@@ -11,10 +11,12 @@
 // integers), so that every entry has the same C++ signature: the host tests run the very same
 // plans on the CPU by compiling this file with g++ under a block emulator
 // (warp-cuda/cuda/tests/wp_prim_emu.h), which finds entries by name through
-// `WP_PRIM_REGISTER`. For the same reason the kernels use only `__syncthreads`, shared
-// memory and `atomicAdd` (WP_PRIM_ATOMIC_ADD) for cooperation (no warp shuffles); the one
-// kernel that waits for other blocks (the sort's look-back) waits only for tiles handed out
-// earlier by an atomic counter, which the emulator (blocks in order) has already finished.
+// `WP_PRIM_REGISTER`. For the same reason the kernels cooperate only through what the
+// emulator models: `__syncthreads`, shared memory, `atomicAdd` (WP_PRIM_ATOMIC_ADD), and in
+// the sort the warp intrinsics `__ballot_sync`, `__match_any_sync`, `__shfl_sync`,
+// `__shfl_up_sync` (with `__popc`, `__clz`); the one kernel that waits for other blocks (the
+// sort's look-back) waits only for tiles handed out earlier by an atomic counter, which the
+// emulator (blocks in order) has already finished.
 //
 // Algorithms (learned from the literature, written for this project):
 //   * Block scan: each thread reduces WP_PRIM_ITEMS consecutive elements serially, the block
@@ -27,10 +29,11 @@
 //     position; the spine's total is the count.
 //   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
 //     once and counts the digits of every pass; then one kernel per pass: a block takes the
-//     next tile from an atomic counter, sorts it by the digit in shared memory (two stable
-//     4-bit counting passes: per-thread counts scanned digit-major), publishes its digit
-//     counts, and adds the counts of earlier tiles by decoupled look-back; each element goes
-//     to digit offset + earlier tiles' count + rank in the tile (runs written coalesced).
+//     next tile from an atomic counter, ranks its keys by the digit (per warp, the lanes of
+//     one digit found by ballots; the warps' counts scanned digit-major), publishes its digit
+//     counts, sorts keys and values in shared memory, and adds the counts of earlier tiles by
+//     decoupled look-back; each element goes to digit offset + earlier tiles' count + rank in
+//     the tile (runs written coalesced). See k_sort_onesweep.
 //
 // Lengths: a kernel processes `n` elements where `n` is a host value (`capacity`), or read on
 // the device from a 1-element i32 array (`count`) so that no host synchronisation is needed.
@@ -51,6 +54,9 @@
 #if defined(__CUDACC__)
 #define WP_PRIM_FN __device__ __forceinline__
 #define WP_PRIM_ENTRY extern "C" __global__ void __launch_bounds__(WP_PRIM_THREADS)
+// An entry that asks for `min_blocks` resident blocks per multiprocessor (a register cap).
+#define WP_PRIM_ENTRY_MIN(min_blocks) \
+  extern "C" __global__ void __launch_bounds__(WP_PRIM_THREADS, min_blocks)
 #define WP_PRIM_SHARED __shared__
 #define WP_PRIM_SYNC() __syncthreads()
 #define WP_PRIM_TID ((wp::i32)threadIdx.x)
@@ -59,8 +65,19 @@
 #define WP_PRIM_ATOMIC_ADD(p, v) atomicAdd((p), (v))
 // A look-back waits for a block that has started and will publish: keep polling.
 #define WP_PRIM_LOOKBACK_WAIT() ((void)0)
+#define WP_PRIM_UNROLL _Pragma("unroll")
 #elif !defined(WP_PRIM_EMULATOR)
 #error "wp_primitives.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
+#endif
+
+// The sort's onesweep kernel (see "Radix sort" below): 0 ranks a tile with two 4-bit counting
+// passes, 1 with warp ballots, 2 with `__match_any_sync`. The runtime passes it for the sort
+// module (`SortVariant` in warp-runtime/src/primitives/plan.rs); other modules have no sort.
+#ifndef WP_PRIM_SORT_VARIANT
+#define WP_PRIM_SORT_VARIANT 1
+#endif
+#ifndef WP_PRIM_SORT_MIN_BLOCKS
+#define WP_PRIM_SORT_MIN_BLOCKS 1
 #endif
 
 namespace wp {
@@ -69,12 +86,11 @@ namespace prim {
 constexpr i32 THREADS = WP_PRIM_THREADS;
 constexpr i32 ITEMS = WP_PRIM_ITEMS;
 constexpr i64 TILE = (i64)THREADS * ITEMS;
-/// Bits of the key sorted per radix pass, and the number of digits.
-constexpr i32 RADIX_BITS = 4;
-constexpr i32 RADIX = 1 << RADIX_BITS;
 
-static_assert(THREADS >= RADIX && (THREADS & (THREADS - 1)) == 0,
-              "the block size is a power of two of at least RADIX threads");
+// A block of fewer than 32 threads is one partial warp (the host tests' small tiles); a
+// larger one is whole warps, so that the sort's warp-level ranking never meets a partial warp.
+static_assert(THREADS >= 16 && (THREADS < 32 ? (THREADS & (THREADS - 1)) == 0 : THREADS % 32 == 0),
+              "the block size is 16 threads, or a multiple of 32");
 static_assert(ITEMS >= 1, "at least one element per thread");
 
 /// The one kernel parameter: device addresses and integers, in an order each kernel states.
@@ -424,16 +440,14 @@ constexpr i32 SORT_BITS = 8;
 constexpr i32 SORT_RADIX = 1 << SORT_BITS;
 /// At most this many passes (32-bit keys).
 constexpr i32 SORT_MAX_PASSES = 4;
-/// Tiles of keys one block of the histogram kernel counts.
-constexpr i32 SORT_HIST_TILES = 8;
+/// Blocks of the histogram kernel at most (each takes every so many tiles).
+constexpr i32 SORT_HIST_BLOCKS = 512;
 /// Look-back status words: (flag << 32) | count, flag 0 not yet published, 1 the tile's own
 /// count (aggregate), 2 the count of this tile and every tile before it (inclusive).
 constexpr u64 STATUS_AGGREGATE = 1ull << 32;
 constexpr u64 STATUS_INCLUSIVE = 2ull << 32;
 
-static_assert(SORT_RADIX % THREADS == 0 || THREADS % SORT_RADIX == 0,
-              "threads and sort digits divide one another");
-static_assert(TILE <= 65536, "a sort tile's local indices fit in 16 bits");
+static_assert(TILE <= 65536, "a sort tile's local indices (and ranks) fit in 16 bits");
 
 /// A 64-bit word another block may be writing: read once, never cached in a register.
 WP_PRIM_FN u64 load_status(const u64* p) { return *(const volatile u64*)p; }
@@ -444,6 +458,17 @@ template <typename K>
 WP_PRIM_FN u32 sort_digit(u32 key, i32 shift, u32 mask) {
   return (radix_key<K>::bits(key) >> shift) & mask;
 }
+
+#if WP_PRIM_SORT_VARIANT == 0
+// ---- Variant 0: the tile sorted by two stable 4-bit counting passes in shared memory ----
+
+/// Bits of one counting pass of variant 0, and its digits.
+constexpr i32 RADIX_BITS = 4;
+constexpr i32 RADIX = 1 << RADIX_BITS;
+static_assert((THREADS & (THREADS - 1)) == 0 &&
+                  (SORT_RADIX % THREADS == 0 || THREADS % SORT_RADIX == 0),
+              "variant 0: the block size is a power of two (threads and digits divide one "
+              "another)");
 
 /// One stable 4-bit counting pass over the tile held in registers (thread t holds the tile's
 /// elements t * ITEMS + k, k < ITEMS, of which those below `tn` are real): ranks them by
@@ -489,6 +514,60 @@ WP_PRIM_FN void nibble_pass(const u32* kr, const u16* ir, i64 tn, i32 shift, u32
   WP_PRIM_SYNC();
 }
 
+#else
+// ---- Variants 1 and 2: warp-level ranking of the 8-bit digit ----
+
+/// Lanes of a warp of the block (a block below 32 threads is one partial warp), the warps,
+/// and the mask of a warp's lanes.
+constexpr i32 WARP_LANES = THREADS < 32 ? THREADS : 32;
+constexpr i32 WARPS = THREADS / WARP_LANES;
+constexpr u32 WARP_MASK = THREADS < 32 ? (1u << THREADS) - 1u : 0xffffffffu;
+/// Digits of the pass per thread in the per-digit steps (threads past SORT_RADIX have none).
+constexpr i32 DIGITS_PER_THREAD = (SORT_RADIX + THREADS - 1) / THREADS;
+
+/// The lanes of the caller's warp whose `d` (a digit of `bits` bits) equals the caller's.
+WP_PRIM_FN u32 warp_peers(u32 d, i32 bits) {
+#if WP_PRIM_SORT_VARIANT == 2
+  (void)bits;
+  return __match_any_sync(WARP_MASK, d);
+#else
+  // One ballot per bit: the lanes that agree with the caller on every bit.
+  u32 peers = WARP_MASK;
+WP_PRIM_UNROLL
+  for (i32 b = 0; b < SORT_BITS; ++b) {
+    if (b < bits) {
+      const u32 bit = (d >> b) & 1u;
+      const u32 set = __ballot_sync(WARP_MASK, bit);
+      peers &= bit ? set : ~set;
+    }
+  }
+  return peers;
+#endif
+}
+
+/// Exclusive sum across the block of one value per thread: each warp scans its lanes with
+/// shuffles, the last lane of each warp leaves the warp's total in `warp_totals` (WARPS
+/// values in shared memory), and each thread adds the totals of the warps before its own.
+/// Every thread of the block must call it; it synchronises once (before the totals are
+/// read), so `warp_totals` must not be written again before the caller's next barrier.
+template <typename T>
+WP_PRIM_FN T block_exclusive_sum(T v, T* warp_totals) {
+  const i32 lane = WP_PRIM_TID % WARP_LANES;
+  const i32 w = WP_PRIM_TID / WARP_LANES;
+  T x = v;
+WP_PRIM_UNROLL
+  for (i32 off = 1; off < WARP_LANES; off <<= 1) {
+    const T y = __shfl_up_sync(WARP_MASK, x, off);
+    if (lane >= off) x += y;
+  }
+  if (lane == WARP_LANES - 1) warp_totals[w] = x;
+  WP_PRIM_SYNC();
+  T before = 0;
+  for (i32 i = 0; i < w; ++i) before += warp_totals[i];
+  return before + x - v;
+}
+#endif
+
 /// args: 0 count, 1 capacity, 2 hist (u32*, SORT_MAX_PASSES * SORT_RADIX), 3 tile counters
 /// (u32*, SORT_MAX_PASSES), 4 fault, 5 fault flag, 6 count's argument index, 7 report.
 /// One block: zeroes the histograms and the tile counters (and reports a bad count).
@@ -502,10 +581,13 @@ WP_PRIM_FN void k_sort_init(const args_t& a) {
 }
 
 /// args: 0 keys (const u32*), 1 count, 2 capacity, 3 hist (u32*, zeroed), 4 passes, 5 key
-/// bits, 6 status (u64*, passes * tiles * SORT_RADIX), 7 number of tiles.
-/// Block h counts the digits of every pass of the keys of tiles h * SORT_HIST_TILES ..
-/// (one read of the keys for all passes, per-block counts in shared memory, then one global
-/// atomic add per digit) and zeroes those tiles' look-back status words of every pass.
+/// bits, 6 status (u64*, passes * tiles * SORT_RADIX), 7 number of tiles, 8 number of blocks.
+/// Block h takes tiles h, h + blocks, .. (at most SORT_HIST_BLOCKS blocks, so that large sorts
+/// flush few per-block counts, and small ones still spread over the GPU): it zeroes their
+/// look-back status words of every pass and counts the digits of every pass of their keys
+/// (one read of the keys for all passes: each thread loads its ITEMS keys of a tile at once,
+/// striped and coalesced, then counts them in shared memory); at the end one global atomic
+/// add per digit it saw.
 template <typename K>
 WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
   WP_PRIM_SHARED u32 counts[SORT_MAX_PASSES * SORT_RADIX];
@@ -516,23 +598,50 @@ WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
   const i32 key_bits = (i32)int_arg(a, 5);
   u64* status = ptr<u64>(a, 6);
   const i64 tiles = int_arg(a, 7);
+  const i64 blocks = int_arg(a, 8);
   const i32 t = WP_PRIM_TID;
-  const i64 first = WP_PRIM_BID * SORT_HIST_TILES;
-  const i64 last = first + SORT_HIST_TILES < tiles ? first + SORT_HIST_TILES : tiles;
-  for (i32 p = 0; p < passes; ++p) {
-    u64* s = status + (p * tiles + first) * SORT_RADIX;
-    for (i64 i = t; i < (last - first) * SORT_RADIX; i += THREADS) s[i] = 0;
-  }
   for (i32 i = t; i < SORT_MAX_PASSES * SORT_RADIX; i += THREADS) counts[i] = 0;
+  for (i64 tile = WP_PRIM_BID; tile < tiles; tile += blocks) {
+    for (i32 p = 0; p < passes; ++p) {
+      u64* s = status + (p * tiles + tile) * SORT_RADIX;
+      for (i32 i = t; i < SORT_RADIX; i += THREADS) s[i] = 0;
+    }
+  }
   WP_PRIM_SYNC();
-  const i64 end = last * TILE < n ? last * TILE : n;
-  for (i64 i = first * TILE + t; i < end; i += THREADS) {
-    const u32 bits = radix_key<K>::bits(keys[i]);
+  for (i64 tile = WP_PRIM_BID; tile * TILE < n; tile += blocks) {
+    const i64 base = tile * TILE + t;
+    u32 kr[ITEMS];
+    WP_PRIM_UNROLL
+    for (i32 k = 0; k < ITEMS; ++k) {
+      const i64 i = base + (i64)k * THREADS;
+      kr[k] = i < n ? keys[i] : 0u;
+    }
+    // Runs of one digit among a thread's keys count with one atomic: keys in order (a grid's
+    // coherent points) have few digits of the high passes per thread, and the lanes of a warp
+    // that add to one counter at once are served one after another.
+    const i64 left = n - base;  // this thread's keys of the tile: k < valid
+    const i32 valid = left <= 0                       ? 0
+                      : left >= (i64)ITEMS * THREADS ? ITEMS
+                                                      : (i32)((left + THREADS - 1) / THREADS);
     for (i32 p = 0; p < passes; ++p) {
       const i32 shift = p * SORT_BITS;
       const i32 width = key_bits - shift < SORT_BITS ? key_bits - shift : SORT_BITS;
-      const u32 d = (bits >> shift) & ((1u << width) - 1);
-      WP_PRIM_ATOMIC_ADD(&counts[p * SORT_RADIX + d], 1u);
+      const u32 m = (1u << width) - 1;
+      u32* c = counts + p * SORT_RADIX;
+      u32 run_d = (radix_key<K>::bits(kr[0]) >> shift) & m;
+      u32 run_n = 0;
+      WP_PRIM_UNROLL
+      for (i32 k = 0; k < ITEMS; ++k) {
+        if (k >= valid) break;
+        const u32 d = (radix_key<K>::bits(kr[k]) >> shift) & m;
+        if (d != run_d) {
+          WP_PRIM_ATOMIC_ADD(&c[run_d], run_n);
+          run_d = d;
+          run_n = 0;
+        }
+        ++run_n;
+      }
+      if (run_n != 0) WP_PRIM_ATOMIC_ADD(&c[run_d], run_n);
     }
   }
   WP_PRIM_SYNC();
@@ -541,6 +650,7 @@ WP_PRIM_FN void k_sort_upsweep(const args_t& a) {
   }
 }
 
+#if WP_PRIM_SORT_VARIANT == 0
 /// One pass of the onesweep sort. args: 0 keys in (const u32*), 1 values in (const u32*),
 /// 2 keys out (u32*), 3 values out (u32*), 4 count, 5 capacity, 6 shift, 7 mask (at most
 /// 255), 8 the pass's histogram (const u32*, SORT_RADIX digit counts of all keys), 9 the
@@ -667,6 +777,201 @@ WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
   }
 }
 
+#else
+/// One pass of the onesweep sort. args: 0 keys in (const u32*), 1 values in (const u32*),
+/// 2 keys out (u32*), 3 values out (u32*), 4 count, 5 capacity, 6 shift, 7 mask (at most
+/// 255), 8 the pass's histogram (const u32*, SORT_RADIX digit counts of all keys), 9 the
+/// pass's status words (u64*, tiles * SORT_RADIX, zeroed), 10 the pass's tile counter
+/// (u32*, zeroed), 11 number of tiles.
+///
+/// A block takes the next tile from an atomic counter (so every tile before it belongs to a
+/// block that has started: waiting for them cannot deadlock) and:
+///   1. loads the tile's pairs into registers, warp-striped: warp w holds the tile's elements
+///      w * WARP_LANES * ITEMS .., lane l its element k * WARP_LANES + l of them (every load
+///      coalesced, and the order of (warp, item, lane) is the tile's order);
+///   2. ranks each key among its warp's keys of the same digit, item after item: the lanes
+///      of one digit find one another with ballots (variant 1) or `__match_any_sync`
+///      (variant 2), the highest of them adds their number to the warp's count of the
+///      digit, and each takes the old count plus the number of its peers on lower lanes;
+///   3. scans the warps' counts digit-major (the tile's start of each digit, and each warp's
+///      start within it) and publishes the tile's digit counts for the look-back;
+///   4. writes keys and values to shared memory at their rank, so that the tile is sorted
+///      by digit and stable (earlier warps, items and lanes first);
+///   5. adds up the counts of the tiles before it, one thread per digit (decoupled
+///      look-back: a tile that has published its inclusive count ends the walk; tile 0's
+///      inclusive counts start from the digits' offsets, the scan of the pass's histogram);
+///   6. writes each element to its digit's offset + earlier tiles' count + its rank, threads
+///      striped over the sorted tile, so that runs of one digit are written coalesced.
+/// The elements of a partial tile's tail are ranked as the largest digit (`mask`): they
+/// come after every real element, and are neither counted nor written.
+template <typename K>
+WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
+  // The warps' digit counts (steps 2-4) have their own memory where it fits in the 48 KiB of
+  // static shared memory beside the sorted tile; else they share the sorted keys' (steps
+  // 4-6), and a barrier more separates their last read from the keys' first write.
+  constexpr i32 COUNTS = WARPS * SORT_RADIX;
+#ifdef WP_PRIM_SORT_SHARE_COUNTS  // the host tests' way to run the shared layout on small tiles
+  constexpr bool SHARE = WP_PRIM_SORT_SHARE_COUNTS != 0;
+#else
+  constexpr bool SHARE = (2 * TILE + COUNTS + SORT_RADIX) * 4 + (WARPS + 1) * 8 > 48 * 1024;
+#endif
+  WP_PRIM_SHARED u32 skeys[SHARE && COUNTS > TILE ? COUNTS : TILE];
+  WP_PRIM_SHARED u32 svals[TILE];
+  WP_PRIM_SHARED u32 own_counts[SHARE ? 1 : COUNTS];
+  WP_PRIM_SHARED u32 gbase[SORT_RADIX];
+  WP_PRIM_SHARED u64 warp_totals[WARPS];
+  WP_PRIM_SHARED i64 tile_sh;
+  u32* counts = SHARE ? skeys : own_counts;
+  const i64 n = resolve_count(ptr<const i32>(a, 4), int_arg(a, 5), nullptr, nullptr, 0, false);
+  const i32 shift = (i32)int_arg(a, 6);
+  const u32 mask = (u32)int_arg(a, 7);
+  const u32* hist = ptr<const u32>(a, 8);
+  u64* status = ptr<u64>(a, 9);
+  u32* counter = ptr<u32>(a, 10);
+  const i32 t = WP_PRIM_TID;
+  const i32 lane = t % WARP_LANES;
+  const i32 w = t / WARP_LANES;
+  if (t == 0) tile_sh = (i64)WP_PRIM_ATOMIC_ADD(counter, 1u);
+  for (i32 i = t; i < COUNTS; i += THREADS) counts[i] = 0;
+  WP_PRIM_SYNC();
+  const i64 tile = tile_sh;
+  const i64 tb = tile * TILE;
+  if (tb >= n) return;  // the whole block: tiles past n are nobody's predecessors
+  // Elements of this tile (TILE <= 65536: local indices are 32-bit).
+  const i32 tn = (i32)(n - tb < TILE ? n - tb : TILE);
+  const u32* keys = ptr<const u32>(a, 0) + tb;
+  const u32* values = ptr<const u32>(a, 1) + tb;
+  u32* keys_out = ptr<u32>(a, 2);
+  u32* values_out = ptr<u32>(a, 3);
+  u64* my_status = status + tile * SORT_RADIX;
+
+  // 1. Warp-striped loads of the keys.
+  const i32 wb = w * WARP_LANES * ITEMS + lane;
+  u32 kr[ITEMS];
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i32 li = wb + k * WARP_LANES;
+    kr[k] = li < tn ? keys[li] : 0u;
+  }
+
+  // 2. Ranks within the warp.
+  const i32 bits = 32 - __clz((i32)mask);
+  const u32 lower = (1u << lane) - 1u;
+  u32* wcounts = counts + w * SORT_RADIX;
+  // The digit (high 16 bits) and the rank among the warp's keys of that digit (low 16 bits):
+  // one register per element between the steps.
+  u32 rank[ITEMS];
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const u32 d = wb + k * WARP_LANES < tn ? sort_digit<K>(kr[k], shift, mask) : mask;
+    const u32 peers = warp_peers(d, bits);
+    const i32 leader = 31 - __clz((i32)peers);
+    u32 before = 0;
+    // Only the leader of each digit's lanes touches the warp's count of that digit; the
+    // atomic orders it after the previous item's update by another lane.
+    if (lane == leader) before = WP_PRIM_ATOMIC_ADD(&wcounts[d], (u32)__popc(peers));
+    before = __shfl_sync(WARP_MASK, before, leader);
+    rank[k] = (d << 16) | (before + (u32)__popc(peers & lower));
+  }
+  WP_PRIM_SYNC();
+
+  // 3. Digit-major scan: each thread sums its digits' counts over the warps; tile 0 also
+  // scans the pass's histogram (in the high word: both sums fit 32 bits).
+  u32 cnt[DIGITS_PER_THREAD];
+  u64 hi[DIGITS_PER_THREAD];
+  u64 sum = 0;
+  WP_PRIM_UNROLL
+  for (i32 j = 0; j < DIGITS_PER_THREAD; ++j) {
+    const i32 d = t * DIGITS_PER_THREAD + j;
+    u32 c = 0;
+    hi[j] = 0;
+    if (d < SORT_RADIX) {
+      // (A partial tile's padding counts as digit `mask`: only the last tile has padding,
+      // and no tile reads its counts.)
+      for (i32 v = 0; v < WARPS; ++v) c += counts[v * SORT_RADIX + d];
+      if (tile == 0) hi[j] = (u64)hist[d] << 32;
+    }
+    cnt[j] = c;
+    sum += hi[j] + c;
+  }
+  u64 run = block_exclusive_sum<u64>(sum, warp_totals);
+  u32 dstart[DIGITS_PER_THREAD];
+  WP_PRIM_UNROLL
+  for (i32 j = 0; j < DIGITS_PER_THREAD; ++j) {
+    const i32 d = t * DIGITS_PER_THREAD + j;
+    dstart[j] = (u32)run;
+    if (d < SORT_RADIX) {
+      // Published as early as possible: later tiles wait for it.
+      const u32 goff = (u32)(run >> 32);
+      store_status(my_status + d, tile == 0 ? STATUS_INCLUSIVE | (u32)(goff + cnt[j])
+                                            : STATUS_AGGREGATE | cnt[j]);
+      if (tile == 0) gbase[d] = goff - dstart[j];
+      run += hi[j] + cnt[j];
+      // Each warp's start within the digit (exclusive over warps), from the digit's start.
+      u32 at = dstart[j];
+      for (i32 v = 0; v < WARPS; ++v) {
+        u32* c = &counts[v * SORT_RADIX + d];
+        const u32 mine = *c;
+        *c = at;
+        at += mine;
+      }
+    }
+  }
+  WP_PRIM_SYNC();
+
+  // 4. The tile sorted by digit in shared memory (where the counts share the keys' memory,
+  // they are read before the barrier, and the sorted tile written after it).
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    rank[k] = (rank[k] & 0xffffu) + counts[w * SORT_RADIX + (rank[k] >> 16)];
+  }
+  if (SHARE) WP_PRIM_SYNC();
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i32 li = wb + k * WARP_LANES;
+    if (li < tn) {
+      skeys[rank[k]] = kr[k];
+      svals[rank[k]] = values[li];
+    }
+  }
+
+  // 5. Decoupled look-back, one digit per thread (tile 0 has its offsets from step 3).
+  if (tile > 0) {
+    WP_PRIM_UNROLL
+    for (i32 j = 0; j < DIGITS_PER_THREAD; ++j) {
+      const i32 d = t * DIGITS_PER_THREAD + j;
+      if (d >= SORT_RADIX) break;
+      u32 excl = 0;
+      for (i64 k = tile - 1; k >= 0; --k) {
+        const u64* other = status + k * SORT_RADIX + d;
+        u64 s = load_status(other);
+        while ((s >> 32) == 0) {
+          WP_PRIM_LOOKBACK_WAIT();
+          s = load_status(other);
+        }
+        excl += (u32)s;
+        if ((s >> 32) == (STATUS_INCLUSIVE >> 32)) break;
+      }
+      store_status(my_status + d, STATUS_INCLUSIVE | (u32)(excl + cnt[j]));
+      gbase[d] = excl - dstart[j];
+    }
+  }
+  WP_PRIM_SYNC();
+
+  // 6. Scatter in tile order: consecutive threads, consecutive positions of a digit's run.
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i32 i = t + k * THREADS;
+    if (i < tn) {
+      const u32 key = skeys[i];
+      const u32 dst = gbase[sort_digit<K>(key, shift, mask)] + (u32)i;
+      keys_out[dst] = key;
+      values_out[dst] = svals[i];
+    }
+  }
+}
+#endif
+
 /// args: 0 keys in, 1 values in, 2 keys out, 3 values out (u32*), 4 count, 5 capacity.
 /// Copies the first n pairs (the last pass of an odd number of passes ends in the scratch).
 WP_PRIM_FN void k_copy_pairs(const args_t& a) {
@@ -691,6 +996,9 @@ WP_PRIM_FN void k_copy_pairs(const args_t& a) {
 #define WP_PRIM_DEFINE(name, body)                 \
   WP_PRIM_ENTRY name(wp::prim::args_t a) { body(a); } \
   WP_PRIM_REGISTER(name)
+#define WP_PRIM_DEFINE_MIN(name, body, min_blocks)                 \
+  WP_PRIM_ENTRY_MIN(min_blocks) name(wp::prim::args_t a) { body(a); } \
+  WP_PRIM_REGISTER(name)
 
 /// Scan and reductions of T: `wp_prim_total_{sum,min,max}_T`, `wp_prim_spine_{sum,min,max}_T`,
 /// `wp_prim_scan_down_T`.
@@ -709,7 +1017,8 @@ WP_PRIM_FN void k_copy_pairs(const args_t& a) {
 #define WP_PRIM_SORT_MODULE(K)                                                    \
   WP_PRIM_DEFINE(wp_prim_sort_init, wp::prim::k_sort_init)                        \
   WP_PRIM_DEFINE(wp_prim_sort_upsweep_##K, (wp::prim::k_sort_upsweep<wp::K>))     \
-  WP_PRIM_DEFINE(wp_prim_sort_onesweep_##K, (wp::prim::k_sort_onesweep<wp::K>))   \
+  WP_PRIM_DEFINE_MIN(wp_prim_sort_onesweep_##K, (wp::prim::k_sort_onesweep<wp::K>),   \
+                     WP_PRIM_SORT_MIN_BLOCKS)                                      \
   WP_PRIM_DEFINE(wp_prim_copy_pairs, wp::prim::k_copy_pairs)
 
 /// Compaction of elements of `W` words of type `Word` (u8, u16, u32 or u64):

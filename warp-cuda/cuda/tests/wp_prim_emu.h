@@ -35,6 +35,12 @@
 //     gives the caller's own value, as CUDA), a lane of the mask that has left the kernel, and
 //     lanes of one mask waiting at different barriers (a `__syncwarp` against a
 //     `__syncthreads`: a deadlock on a GPU) abort, naming the block.
+//   * for the radix sort's warp-level ranking: `__ballot_sync(mask, pred)`,
+//     `__match_any_sync(mask, v)` and `__shfl_up_sync(mask, v, delta)`, exchanges like the
+//     shuffles, which also abort when their mask names a lane past the block's end or (for
+//     `__shfl_up_sync`) reads a lane outside the mask; and `__popc`, `__clz`. Every lane of a
+//     warp collective (a shuffle, ballot or match, and a `__syncwarp`) records which one it is
+//     in, and one that finds a lane of its mask in another aborts (undefined on a GPU).
 //   * `block_barriers` counts the `__syncthreads` phases released since the program started
 //     (the linear-algebra test checks how many barriers an operation costs).
 // Not emulated: memory ordering between blocks, and interleavings inside a phase (a lane runs
@@ -47,6 +53,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <map>
 #include <string>
 #include <vector>
@@ -264,19 +271,64 @@ struct dim3_t {
 };
 inline dim3_t thread_idx() { return dim3_t{(unsigned)tid, 0u, 0u}; }
 
-/// The value lane `src` of the caller's warp handed to a shuffle (see the top): every lane of
-/// `mask` writes its `v`, waits for the others, reads its source's (`src` < 0: its own), and
-/// waits again, so that no lane overwrites a value another has yet to read.
+/// The warp collective each thread is in (its name), checked by every lane of a collective.
+inline std::vector<const char*>& collective_names() {
+  static std::vector<const char*> names;
+  return names;
+}
+
+/// The values the lanes of `mask` in the caller's warp hand to collective `what` (see the
+/// top): every lane writes its `v` and `what`, waits for the others, checks that each lane of
+/// the mask is in the same collective (a shuffle against a ballot, say, is undefined on a
+/// GPU), copies the mask's values into `out` (by lane), and waits again, so that no lane
+/// overwrites a value another has yet to read.
 template <typename T>
-T exchange(unsigned mask, T v, int src) {
+void gather(unsigned mask, T v, const char* what, T* out) {
   static std::vector<T> slots;
+  std::vector<const char*>& names = collective_names();
   const int threads = (int)sched().fibers.size();
   if ((int)slots.size() < threads) slots.resize((size_t)threads);
+  if ((int)names.size() < threads) names.resize((size_t)threads, nullptr);
   slots[(size_t)tid] = v;
+  names[(size_t)tid] = what;
   warp_sync(mask);
-  const T r = src < 0 ? v : slots[(size_t)(tid - tid % 32 + src)];
+  const int base = tid - tid % 32;
+  for (int l = 0; l < 32 && base + l < threads; ++l) {
+    if (!((mask >> l) & 1u)) continue;
+    const char* theirs = names[(size_t)(base + l)];
+    if (theirs == nullptr || std::strcmp(theirs, what) != 0)
+      warp_fail("lanes of one mask are in different warp collectives", mask);
+    out[l] = slots[(size_t)(base + l)];
+  }
   warp_sync(mask);
-  return r;
+}
+
+/// `__syncwarp(mask)`: a barrier of the mask's lanes, which no lane of the mask may meet in
+/// a warp collective.
+inline void syncwarp(unsigned mask) {
+  std::vector<const char*>& names = collective_names();
+  const int threads = (int)sched().fibers.size();
+  if ((int)names.size() < threads) names.resize((size_t)threads, nullptr);
+  names[(size_t)tid] = "__syncwarp";
+  warp_sync(mask);
+}
+
+/// Aborts when `mask` names a lane past the end of the block (a lane of a partial warp that
+/// does not exist: the collectives of the sort use the exact mask of their warp).
+inline void mask_in_block(unsigned mask, const char* what) {
+  const int threads = (int)sched().fibers.size();
+  const int base = tid - tid % 32;
+  for (int l = 0; l < 32; ++l)
+    if (((mask >> l) & 1u) && base + l >= threads) warp_fail(what, mask);
+}
+
+/// The value lane `src` of the caller's warp handed to shuffle `what` (`src` < 0: the
+/// caller's own).
+template <typename T>
+T exchange(unsigned mask, T v, int src, const char* what) {
+  T all[32];
+  gather(mask, v, what, all);
+  return src < 0 ? v : all[src];
 }
 
 /// `__shfl_sync(mask, v, src)`: lane `src % 32`'s value, which must be in the mask and exist.
@@ -285,7 +337,7 @@ T shfl_sync(unsigned mask, T v, int src) {
   const int lane = src & 31;
   if (!((mask >> lane) & 1u) || tid - tid % 32 + lane >= (int)sched().fibers.size())
     warp_fail("__shfl_sync reads a lane outside the mask or the block", mask);
-  return exchange(mask, v, lane);
+  return exchange(mask, v, lane, "__shfl_sync");
 }
 
 /// `__shfl_down_sync(mask, v, delta)`: lane + delta's value; the caller's own past the warp's
@@ -295,8 +347,47 @@ T shfl_down_sync(unsigned mask, T v, unsigned delta) {
   const unsigned src = (unsigned)(tid % 32) + delta;
   const bool own = src >= 32u || !((mask >> src) & 1u) ||
                    tid - tid % 32 + (int)src >= (int)sched().fibers.size();
-  return exchange(mask, v, own ? -1 : (int)src);
+  return exchange(mask, v, own ? -1 : (int)src, "__shfl_down_sync");
 }
+
+/// `__shfl_up_sync(mask, v, delta)`: lane - delta's value; the caller's own below lane delta
+/// (as CUDA). A source lane outside the mask aborts (its value is undefined on a GPU).
+template <typename T>
+T shfl_up_sync(unsigned mask, T v, unsigned delta) {
+  mask_in_block(mask, "__shfl_up_sync with a mask past the block's end");
+  const int lane = tid % 32;
+  const int src = lane - (int)delta;
+  if (src >= 0 && !((mask >> src) & 1u))
+    warp_fail("__shfl_up_sync reads a lane outside the mask", mask);
+  return exchange(mask, v, src, "__shfl_up_sync");
+}
+
+/// `__ballot_sync(mask, pred)`: bit l set for each lane l of the mask whose `pred` is nonzero.
+inline unsigned ballot_sync(unsigned mask, int pred) {
+  mask_in_block(mask, "__ballot_sync with a mask past the block's end");
+  int all[32];
+  gather(mask, pred, "__ballot_sync", all);
+  unsigned r = 0;
+  for (int l = 0; l < 32; ++l)
+    if (((mask >> l) & 1u) && all[l] != 0) r |= 1u << l;
+  return r;
+}
+
+/// `__match_any_sync(mask, v)`: the lanes of the mask whose `v` equals the caller's.
+template <typename T>
+unsigned match_any_sync(unsigned mask, T v) {
+  mask_in_block(mask, "__match_any_sync with a mask past the block's end");
+  T all[32];
+  gather(mask, v, "__match_any_sync", all);
+  unsigned r = 0;
+  for (int l = 0; l < 32; ++l)
+    if (((mask >> l) & 1u) && all[l] == v) r |= 1u << l;
+  return r;
+}
+
+/// `__popc(x)`: the set bits of x; `__clz(x)`: its leading zero bits (32 for 0), as CUDA.
+inline int popc(unsigned x) { return __builtin_popcount(x); }
+inline int clz(int x) { return x == 0 ? 32 : __builtin_clz((unsigned)x); }
 
 }  // namespace wp_emu
 
@@ -304,15 +395,22 @@ T shfl_down_sync(unsigned mask, T v, unsigned delta) {
 #define __syncthreads() ::wp_emu::sync()
 #define __shfl_down_sync(mask, v, delta) ::wp_emu::shfl_down_sync((mask), (v), (unsigned)(delta))
 #define __shfl_sync(mask, v, src) ::wp_emu::shfl_sync((mask), (v), (int)(src))
-#define __syncwarp(mask) ::wp_emu::warp_sync((unsigned)(mask))
+#define __syncwarp(mask) ::wp_emu::syncwarp((unsigned)(mask))
+#define __shfl_up_sync(mask, v, delta) ::wp_emu::shfl_up_sync((mask), (v), (unsigned)(delta))
+#define __ballot_sync(mask, pred) ::wp_emu::ballot_sync((unsigned)(mask), (int)(pred))
+#define __match_any_sync(mask, v) ::wp_emu::match_any_sync((unsigned)(mask), (v))
+#define __popc(x) ::wp_emu::popc((unsigned)(x))
+#define __clz(x) ::wp_emu::clz((int)(x))
 
 #define WP_PRIM_FN inline
 #define WP_PRIM_ENTRY extern "C" void
+#define WP_PRIM_ENTRY_MIN(min_blocks) extern "C" void
 #define WP_PRIM_SHARED static
 #define WP_PRIM_SYNC() ::wp_emu::sync()
 #define WP_PRIM_TID ((wp::i32)::wp_emu::tid)
 #define WP_PRIM_BID ((wp::i64)::wp_emu::bid)
 #define WP_PRIM_ATOMIC_ADD(p, v) ::wp_emu::atomic_add((p), (v))
 #define WP_PRIM_LOOKBACK_WAIT() ::wp_emu::lookback_stuck()
+#define WP_PRIM_UNROLL
 #define WP_PRIM_REGISTER(name) \
   static ::wp_emu::registrar wp_emu_registrar_##name(#name, reinterpret_cast<void*>(&name));

@@ -1,6 +1,8 @@
 // wp_warp_emu_driver.cpp: the block emulator's warp-synchronous operations (wp_prim_emu.h:
-// `__syncwarp`, `__shfl_sync`, `__shfl_down_sync`) on small kernels of one block of 64 threads
-// (two warps); tests/cuda_warp_emu_host.rs runs each case and reads what it prints.
+// `__syncwarp`, `__shfl_sync`, `__shfl_down_sync`, `__shfl_up_sync`, `__ballot_sync`,
+// `__match_any_sync`, and `__popc`, `__clz`) on small kernels of one block of 64 threads (two
+// warps) or 16 (one partial warp); tests/cuda_warp_emu_host.rs runs each case and reads what
+// it prints.
 //
 //   race       each lane writes its slot of shared memory and reads its neighbour's (lane + 1
 //              of the same warp) with no __syncwarp between: prints `stale N`, the reads that
@@ -11,6 +13,11 @@
 //   shfl       __shfl_sync (a rotation, a broadcast) and __shfl_down_sync: `ok` or what differs
 //   divergent  lane 0 waits at __syncthreads, lanes 1..31 at __syncwarp: the emulator aborts
 //   exited     lane 5 leaves the kernel, the others __syncwarp with it in the mask: aborts
+//   vote       ballots, matches, __shfl_up_sync, __popc and __clz in two warps, and ballots and
+//              matches in a partial warp of 16 with its own mask: `ok` or what differs
+//   mixed      half a warp in a ballot, the other half in a shuffle of the same mask: aborts
+//   past_block a block of 16 threads ballots with the whole warp's mask: aborts
+//   up_outside __shfl_up_sync reads a lane below the mask's first: aborts
 #include "wp_prim_emu.h"
 
 #include <cstdio>
@@ -71,6 +78,51 @@ void k_shfl(args_t a) {
   a.out[t] = bad;
 }
 
+void k_vote(args_t a) {
+  const int t = (int)threadIdx.x, lane = t % 32;
+  int bad = 0;
+  // Ballot: the lanes whose index is a multiple of 3.
+  unsigned want = 0;
+  for (int l = 0; l < 32; l += 3) want |= 1u << l;
+  bad += __ballot_sync(ALL, lane % 3 == 0) != want;
+  // Match: the lanes with the same index mod 5 (a value that differs between the warps, so
+  // a match across warps would show).
+  unsigned peers = 0;
+  for (int l = lane % 5; l < 32; l += 5) peers |= 1u << l;
+  bad += __match_any_sync(ALL, (unsigned)(lane % 5 + 100 * (t / 32))) != peers;
+  // Up by 3: the lowest three lanes keep their own; 64-bit values.
+  const unsigned long long u = __shfl_up_sync(ALL, 1000ull * t, 3);
+  bad += u != 1000ull * (lane >= 3 ? t - 3 : t);
+  bad += __popc(0xf0f0u) != 8;
+  bad += __clz(0) != 32;
+  bad += __clz(1) != 31;
+  bad += __clz(-1) != 0;
+  a.out[t] = bad;
+}
+
+/// A block of 16 threads: a partial warp, its collectives on its own mask.
+void k_vote16(args_t a) {
+  const int t = (int)threadIdx.x;
+  constexpr unsigned HALF = 0xffffu;
+  int bad = 0;
+  bad += __ballot_sync(HALF, t >= 10) != 0xfc00u;
+  bad += __match_any_sync(HALF, t / 4) != (0xfu << (t / 4 * 4));
+  bad += __shfl_up_sync(HALF, t, 1) != (t > 0 ? t - 1 : t);
+  a.out[t] = bad;
+}
+
+void k_mixed(args_t) {
+  if (threadIdx.x % 32 < 16) (void)__ballot_sync(ALL, 1);
+  else (void)__shfl_sync(ALL, 1, 0);
+}
+
+void k_past_block(args_t) { (void)__ballot_sync(ALL, 1); }
+
+void k_up_outside(args_t) {
+  constexpr unsigned FROM4 = 0xfffffff0u;
+  if (threadIdx.x % 32 >= 4) (void)__shfl_up_sync(FROM4, 1, 3);
+}
+
 void k_divergent(args_t) {
   if (threadIdx.x % 32 == 0) __syncthreads();
   else __syncwarp(ALL);
@@ -110,6 +162,16 @@ int main(int argc, char** argv) {
     wp_emu::launch(k_shfl, 1, THREADS, a);
     if (sum(out) != 0) std::printf("wrong %d\n", sum(out));
     else std::printf("ok\n");
+  } else if (c == "vote") {
+    wp_emu::launch(k_vote, 1, THREADS, a);
+    wp_emu::launch(k_vote16, 1, 16, a);  // the first 16 slots again
+    if (sum(out) != 0) std::printf("wrong %d\n", sum(out));
+    else std::printf("ok\n");
+  } else if (c == "mixed" || c == "past_block" || c == "up_outside") {
+    if (c == "mixed") wp_emu::launch(k_mixed, 1, THREADS, a);
+    if (c == "past_block") wp_emu::launch(k_past_block, 1, 16, a);
+    if (c == "up_outside") wp_emu::launch(k_up_outside, 1, THREADS, a);
+    std::printf("finished\n");
   } else if (c == "divergent") {
     wp_emu::launch(k_divergent, 1, THREADS, a);
     std::printf("finished\n");

@@ -55,12 +55,12 @@ impl Loaded {
 /// The primitives' section of the CUDA library (`wp_primitives.h`).
 const PRIMITIVES: &Section = library::get("primitives");
 
-/// Calls `f` with the NVRTC options of primitives module `module`: its GPU tile's defines,
-/// the core and the section's header (handing NVRTC the whole library would only cost
-/// compile time and cache-key hashing), FMA contraction as `config::cuda_fmad` says (sums of
+/// Calls `f` with the NVRTC options of primitives module `module`: its GPU defines (tile, and
+/// a sort's kernel), the core and the section's header (handing NVRTC the whole library would
+/// only cost compile time and cache-key hashing), FMA contraction as `config::cuda_fmad` says (sums of
 /// products do not occur, so it changes nothing here but keeps one setting for all GPU code).
 pub(crate) fn with_options<R>(module: &Module, f: impl FnOnce(&CompileOptions) -> R) -> R {
-    let defines = gpu_tile(module).defines();
+    let defines = module.defines(gpu_tile(module));
     let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
     f(&CompileOptions {
         fmad: PRIMITIVES.exact.fmad(config::cuda_fmad()),
@@ -329,7 +329,7 @@ pub(super) fn radix_sort_pairs<K: SortKeyOps>(
 ) -> Result<()> {
     let mut users = vec![keys, values];
     let len = plan_len(len, &mut users, 2);
-    let p = plan::sort(plan::GPU_SORT_TILE, K::CUDA, key_bits, len);
+    let p = plan::sort(plan::gpu_sort_config(), K::CUDA, key_bits, len);
     run(
         device,
         ordinal,

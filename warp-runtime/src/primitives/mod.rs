@@ -498,8 +498,8 @@ fn reduce_impl<T: ScanElement>(
 /// scratch memory (on a GPU the device's workspace, reused between calls), and nothing past
 /// `count` is touched. Keys and values must not overlap; both are contiguous and on the same device.
 ///
-/// Algorithm: LSD radix sort (8-bit digits on the CPU, 4-bit digits on a GPU), see
-/// `docs/book/src/primitives.md`.
+/// Algorithm: LSD radix sort with 8-bit digits (on a GPU one "onesweep" kernel per digit,
+/// ranking keys per warp), see `docs/book/src/primitives.md`.
 ///
 /// ```
 /// # use warp_runtime as wp;

@@ -11,9 +11,9 @@ use crate::cpp_table;
 
 /// The block shape the kernels are compiled for (`WP_PRIM_THREADS`, `WP_PRIM_ITEMS`): a block
 /// handles a tile of `threads * items` elements.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Tile {
-    /// Threads per block (a power of two, at least 16: one per radix digit).
+    /// Threads per block: 16, or a multiple of 32 (whole warps).
     pub threads: u32,
     /// Consecutive elements per thread.
     pub items: u32,
@@ -45,17 +45,108 @@ pub const GPU_TILE: Tile = Tile {
     items: 8,
 };
 
-/// The shape of the sort module on GPUs: 256 threads of 16 keys (tiles of 4096, so that a
-/// tile holds about 16 keys of each of the 256 digits and writes go out in runs).
-pub const GPU_SORT_TILE: Tile = Tile {
-    threads: 256,
-    items: 16,
+/// The onesweep kernel of the GPU sort (`WP_PRIM_SORT_VARIANT` in `wp_primitives.h`): how a
+/// block ranks its tile's keys by the pass's 8-bit digit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SortVariant {
+    /// Two stable 4-bit counting passes in shared memory, values gathered from global memory
+    /// (the first GPU sort, kept to measure the others against).
+    Nibbles = 0,
+    /// Each warp ranks its keys by the whole digit: the lanes of one digit find one another
+    /// with eight ballots, counts are per warp; values are loaded coalesced and scattered from
+    /// shared memory.
+    Ballot = 1,
+    /// As `Ballot`, the lanes of one digit found by `__match_any_sync`.
+    MatchAny = 2,
+}
+
+/// What the GPU sort module is compiled for: the onesweep kernel, the block shape, and the
+/// blocks per multiprocessor the onesweep kernel's registers must allow (the minimum of its
+/// `__launch_bounds__`: more blocks, fewer registers per thread).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SortConfig {
+    /// The onesweep kernel.
+    pub variant: SortVariant,
+    /// Threads and keys per thread of a block.
+    pub tile: Tile,
+    /// Resident blocks per multiprocessor the registers must allow (at least 1).
+    pub min_blocks: u32,
+}
+
+impl SortConfig {
+    /// Whether the kernels compile for this configuration: the block is 16 threads or whole
+    /// warps (a power of two dividing or divisible by 256 for `Nibbles`), a tile holds at
+    /// most 65536 keys (ranks are 16-bit), and at least one block fits. (A tile whose keys and
+    /// values pass the 48 KiB of static shared memory, about 6000 keys, is NVRTC's error at
+    /// the module's first use.)
+    pub fn check(self) -> std::result::Result<(), String> {
+        let Tile { threads, items } = self.tile;
+        let warps = threads == 16 || (threads >= 32 && threads % 32 == 0);
+        let nibbles = threads.is_power_of_two() && (256 % threads == 0 || threads % 256 == 0);
+        if !warps || (self.variant == SortVariant::Nibbles && !nibbles) || threads > 1024 {
+            return Err(format!(
+                "{} threads per block: the sort needs 16, or a multiple of 32 up to 1024 (a \
+                 power of two dividing or divisible by 256 for {:?})",
+                threads,
+                SortVariant::Nibbles
+            ));
+        }
+        if items == 0 || self.tile.elements() > 65536 {
+            return Err(format!(
+                "{threads} x {items} keys per block: the sort needs 1 to 65536 keys per tile"
+            ));
+        }
+        if self.min_blocks == 0 {
+            return Err("`min_blocks` is 0: at least one block must fit".into());
+        }
+        Ok(())
+    }
+}
+
+/// The sort module's configuration on GPUs: warp ballots ranking 256 threads of 16 keys
+/// (tiles of 4096, so that a tile holds about 16 keys of each of the 256 digits and writes go
+/// out in runs), registers for 3 blocks per multiprocessor (80 a thread: no spills on sm_90).
+pub const GPU_SORT: SortConfig = SortConfig {
+    variant: SortVariant::Ballot,
+    tile: Tile {
+        threads: 256,
+        items: 16,
+    },
+    min_blocks: 3,
 };
+
+/// A configuration a benchmark chose in place of [`GPU_SORT`] (`set_gpu_sort_config`).
+static SORT_CHOICE: std::sync::RwLock<Option<SortConfig>> = std::sync::RwLock::new(None);
+
+/// The configuration GPU sorts use now: [`GPU_SORT`], unless a benchmark chose another.
+pub fn gpu_sort_config() -> SortConfig {
+    SORT_CHOICE
+        .read()
+        .unwrap_or_else(|p| p.into_inner())
+        .unwrap_or(GPU_SORT)
+}
+
+/// For benchmarks that compare sort kernels in one process: makes the GPU sorts that follow
+/// use `config` (`None`: [`GPU_SORT`] again). Each configuration is its own module, compiled
+/// and loaded at its first use; a configuration the kernels do not support is refused.
+///
+/// # Errors
+/// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming what the kernels do not
+/// support.
+#[doc(hidden)]
+pub fn set_gpu_sort_config(config: Option<SortConfig>) -> crate::Result<()> {
+    if let Some(c) = config {
+        c.check()
+            .map_err(|why| crate::Error::invalid(format!("set_gpu_sort_config({c:?}): {why}")))?;
+    }
+    *SORT_CHOICE.write().unwrap_or_else(|p| p.into_inner()) = config;
+    Ok(())
+}
 
 /// The tile a module is compiled for on GPUs.
 pub fn gpu_tile(module: &Module) -> Tile {
     match module {
-        Module::Sort(_) => GPU_SORT_TILE,
+        Module::Sort(_, config) => config.tile,
         _ => GPU_TILE,
     }
 }
@@ -67,8 +158,8 @@ pub const RADIX_BITS: u32 = cpp_table::integer(HEADER, "SORT_BITS");
 const RADIX: u64 = 1 << RADIX_BITS;
 /// Most passes of a sort (32-bit keys), `SORT_MAX_PASSES`.
 const MAX_PASSES: u64 = cpp_table::integer(HEADER, "SORT_MAX_PASSES") as u64;
-/// Tiles counted per block of the upfront histogram (`SORT_HIST_TILES`).
-const HIST_TILES: u64 = cpp_table::integer(HEADER, "SORT_HIST_TILES") as u64;
+/// Blocks of the upfront histogram at most (`SORT_HIST_BLOCKS`).
+const HIST_BLOCKS: u64 = cpp_table::integer(HEADER, "SORT_HIST_BLOCKS") as u64;
 
 /// A buffer a plan uses: one of the caller's arrays (by position in the primitive's list) or
 /// scratch memory the executor allocates for the call.
@@ -111,8 +202,8 @@ pub struct Step {
 pub enum Module {
     /// Scan and reductions of one element type (its C++ name: `i32`, `f64`, ...).
     Scan(&'static str),
-    /// Radix sort with one key type (`u32`, `i32`, `f32`).
-    Sort(&'static str),
+    /// Radix sort with one key type (`u32`, `i32`, `f32`), in one configuration.
+    Sort(&'static str, SortConfig),
     /// Compaction of elements of `words` words of `word` bytes.
     Compact {
         /// Bytes per word: 1, 2, 4 or 8.
@@ -127,7 +218,10 @@ impl Module {
     pub fn name(&self) -> String {
         match self {
             Module::Scan(t) => format!("wp_prim_scan_{t}"),
-            Module::Sort(k) => format!("wp_prim_sort_{k}"),
+            Module::Sort(k, c) => format!(
+                "wp_prim_sort_{k}_v{}_{}x{}_m{}",
+                c.variant as u32, c.tile.threads, c.tile.items, c.min_blocks
+            ),
             Module::Compact { word, words } => format!("wp_prim_compact_{word}x{words}"),
         }
     }
@@ -136,7 +230,7 @@ impl Module {
     pub fn source(&self) -> String {
         let entries = match self {
             Module::Scan(t) => format!("WP_PRIM_SCAN_MODULE({t})"),
-            Module::Sort(k) => format!("WP_PRIM_SORT_MODULE({k})"),
+            Module::Sort(k, _) => format!("WP_PRIM_SORT_MODULE({k})"),
             Module::Compact { word, words } => {
                 let w = match word {
                     1 => "u8",
@@ -148,6 +242,17 @@ impl Module {
             }
         };
         format!("#include \"wp_primitives.h\"\n{entries}\n")
+    }
+
+    /// The preprocessor definitions that compile the module for block shape `tile`: the
+    /// tile's, and a sort module's kernel variant and blocks per multiprocessor.
+    pub fn defines(&self, tile: Tile) -> Vec<(&'static str, String)> {
+        let mut d = tile.defines().to_vec();
+        if let Module::Sort(_, c) = self {
+            d.push(("WP_PRIM_SORT_VARIANT", (c.variant as u32).to_string()));
+            d.push(("WP_PRIM_SORT_MIN_BLOCKS", c.min_blocks.to_string()));
+        }
+        d
     }
 }
 
@@ -371,7 +476,8 @@ pub fn radix_passes(key_bits: u32, radix_bits: u32) -> Vec<(u32, u32)> {
 
 /// LSD radix sort of 32-bit keys (C++ type `k`: `u32`, `i32`, `f32`) with 32-bit values,
 /// `key_bits` (1 to 32) low bits of the ordered key, 8 bits per pass (`ceil(key_bits / 8)`
-/// passes). Caller's arrays: 0 keys, 1 values, then the count.
+/// passes), by the kernels of `config` (its tile sets the grids). Caller's arrays: 0 keys,
+/// 1 values, then the count.
 ///
 /// Steps: `wp_prim_sort_init` (one block: zeroes the histograms and tile counters, reports a
 /// bad count), `wp_prim_sort_upsweep_K` (one read of the keys: the digit counts of every pass,
@@ -381,7 +487,8 @@ pub fn radix_passes(key_bits: u32, radix_bits: u32) -> Vec<(u32, u32)> {
 /// status words (u64, passes x tiles x 256), 3 keys and 4 values of ping-pong side B, and for
 /// an odd number of passes (3) 5 keys and 6 values of side C, so that the passes go
 /// user -> B -> C -> user and no copy is needed. A single pass ends in B and copies back.
-pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
+pub fn sort(config: SortConfig, k: &'static str, key_bits: u32, len: Len) -> Plan {
+    let tile = config.tile;
     let cap = len.capacity();
     let nb = tile.blocks(cap);
     let [count, capw] = len.words();
@@ -417,7 +524,7 @@ pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
         ),
         step(
             format!("wp_prim_sort_upsweep_{k}"),
-            nb.div_ceil(HIST_TILES),
+            nb.min(HIST_BLOCKS),
             [
                 user(0),
                 count,
@@ -427,6 +534,7 @@ pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
                 Word::Int(key_bits as i64),
                 scratch(2),
                 Word::Int(nb as i64),
+                Word::Int(nb.min(HIST_BLOCKS) as i64),
             ],
         ),
     ];
@@ -470,7 +578,7 @@ pub fn sort(tile: Tile, k: &'static str, key_bits: u32, len: Len) -> Plan {
         scratch_sizes.extend([cap * 4, cap * 4]);
     }
     Plan {
-        module: Module::Sort(k),
+        module: Module::Sort(k, config),
         scratch: scratch_sizes,
         steps,
     }
@@ -510,7 +618,11 @@ mod tests {
         // init, upsweep, one onesweep per 8 bits; a single pass copies back; three passes go
         // user -> B -> C -> user.
         let entries = |s: &Plan| s.steps.iter().map(|s| s.entry.clone()).collect::<Vec<_>>();
-        let s = sort(t, "u32", 5, Len::Host(10));
+        let c = SortConfig {
+            tile: t,
+            ..GPU_SORT
+        };
+        let s = sort(c, "u32", 5, Len::Host(10));
         assert_eq!(
             entries(&s),
             [
@@ -520,9 +632,9 @@ mod tests {
                 "wp_prim_copy_pairs"
             ]
         );
-        assert_eq!(sort(t, "u32", 16, Len::Host(10)).steps.len(), 4);
-        assert_eq!(sort(t, "u32", 32, Len::Host(10)).steps.len(), 6);
-        let s = sort(t, "u32", 21, Len::Host(10));
+        assert_eq!(sort(c, "u32", 16, Len::Host(10)).steps.len(), 4);
+        assert_eq!(sort(c, "u32", 32, Len::Host(10)).steps.len(), 6);
+        let s = sort(c, "u32", 21, Len::Host(10));
         assert_eq!(s.steps.len(), 5);
         assert_eq!(s.scratch.len(), 7);
         let hops: Vec<_> = s.steps[2..]
@@ -543,12 +655,51 @@ mod tests {
             capacity: 100,
             arg: 2,
         };
-        let s = sort(t, "i32", 32, len);
+        let s = sort(c, "i32", 32, len);
         assert_eq!(s.steps[0].args[7], Word::Int(1));
         assert!(s
             .steps
             .iter()
             .all(|s| !s.args.contains(&Word::Fault) || s.entry == "wp_prim_sort_init"));
+    }
+
+    #[test]
+    fn sort_configs_the_kernels_support() {
+        assert_eq!(GPU_SORT.check(), Ok(()));
+        let with = |variant, threads, items, min_blocks| SortConfig {
+            variant,
+            tile: Tile { threads, items },
+            min_blocks,
+        };
+        for ok in [
+            with(SortVariant::Ballot, 16, 3, 1),
+            with(SortVariant::MatchAny, 384, 16, 2),
+            with(SortVariant::Nibbles, 512, 8, 1),
+        ] {
+            assert_eq!(ok.check(), Ok(()), "{ok:?}");
+        }
+        for bad in [
+            with(SortVariant::Ballot, 48, 2, 1),
+            with(SortVariant::Ballot, 2048, 2, 1),
+            with(SortVariant::Nibbles, 384, 16, 1),
+            with(SortVariant::Ballot, 256, 0, 1),
+            with(SortVariant::Ballot, 1024, 65, 1),
+            with(SortVariant::Ballot, 256, 16, 0),
+        ] {
+            assert!(bad.check().is_err(), "{bad:?}");
+        }
+        let e = set_gpu_sort_config(Some(with(SortVariant::Ballot, 48, 2, 1))).unwrap_err();
+        assert!(e.to_string().contains("48 threads per block"), "{e}");
+        assert_eq!(gpu_sort_config(), GPU_SORT);
+        let m = Module::Sort("f32", GPU_SORT);
+        assert_eq!(m.name(), "wp_prim_sort_f32_v1_256x16_m3");
+        assert_eq!(
+            m.defines(GPU_SORT.tile)[2..],
+            [
+                ("WP_PRIM_SORT_VARIANT", "1".to_string()),
+                ("WP_PRIM_SORT_MIN_BLOCKS", "3".to_string())
+            ]
+        );
     }
 
     #[test]
