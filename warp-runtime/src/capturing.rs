@@ -20,6 +20,8 @@ pub(crate) struct Active {
     pub(crate) keep: Vec<Keep>,
     /// Kernel launches recorded (forward and adjoint).
     pub(crate) launches: usize,
+    /// The host objects' buffers this capture writes (see [`adopt`]), by address.
+    adopted: Vec<usize>,
 }
 
 impl Active {
@@ -29,6 +31,7 @@ impl Active {
             device,
             keep: Vec::new(),
             launches: 0,
+            adopted: Vec::new(),
         }
     }
 }
@@ -73,6 +76,31 @@ pub(crate) fn check_device(device: &Device, what: &dyn Fn() -> String) -> Result
 /// for as long as the graph, so that a replay never touches freed memory.
 pub(crate) fn keep(uses: Keep) {
     with_active(|a| a.keep.push(uses));
+}
+
+/// Whether a host object may write the buffers `shared` (its `Arc`) in place in the calling
+/// thread's capture, and if so makes them the capture's: when no one else holds them (the
+/// object's own), or when this capture adopted them before. An object's operation recorded
+/// into a graph (a hash grid's build, a BVH's refit) writes its buffers in place at every
+/// replay, so the launches recorded after it (which hold the same buffers) see its result;
+/// buffers shared with a clone made before the capture (a tape's) are refused, as that clone
+/// must keep what it holds (the object's copy-on-write, which would allocate). Adopted
+/// buffers are kept alive for the graph (their address names them until it is dropped).
+pub(crate) fn adopt<T: Send + Sync + 'static>(shared: &mut std::sync::Arc<T>) -> bool {
+    let address = std::sync::Arc::as_ptr(shared) as usize;
+    let own = std::sync::Arc::get_mut(shared).is_some();
+    with_active(|a| {
+        if a.adopted.contains(&address) {
+            return true;
+        }
+        if !own {
+            return false;
+        }
+        a.adopted.push(address);
+        a.keep.push(Box::new(std::sync::Arc::clone(shared)));
+        true
+    })
+    .unwrap_or(own)
 }
 
 /// Counts a kernel launch recorded into the calling thread's capture.
