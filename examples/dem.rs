@@ -20,9 +20,10 @@
 //!
 //! `--graph` also runs the energy drift, the pile and Warp's configuration with each frame
 //! (all its substeps: the grid builds, the force and integration kernels) captured once into
-//! a graph and replayed frame after frame, as Warp's example does: ms per frame beside the
-//! uncaptured run's, and the same errors (the replays do the same work in the same order, so
-//! the particles end where the uncaptured run leaves them, bit for bit).
+//! a graph and replayed frame after frame, as Warp's example does (captured before the clock
+//! starts, as there), as series of their own (`.. graph`): ms per frame beside the uncaptured
+//! run's, and the same errors (the replays do the same work in the same order, so the
+//! particles end where the uncaptured run leaves them, bit for bit).
 
 mod common;
 
@@ -479,7 +480,7 @@ fn energy_drift(dev: &wp::Device, graph: bool) -> wp::Result<()> {
         m.k_n,
         2.0 / omega
     );
-    let modes: &[bool] = if graph { &[false, true] } else { &[false] };
+    let modes = common::graph_modes(graph);
     let mut sweep = Sweep::new(
         format!("undamped gas on {dev}: |E(0.25 s) - E(0)| / E(0)"),
         "dt (s)",
@@ -490,7 +491,7 @@ fn energy_drift(dev: &wp::Device, graph: bool) -> wp::Result<()> {
         for &captured in modes {
             let run = run_gas(dev, m, n, dt, 0.25, captured)?;
             let series = if captured {
-                "f32, semi-implicit Euler, graph"
+                "f32, semi-implicit Euler graph"
             } else {
                 "f32, semi-implicit Euler"
             };
@@ -603,7 +604,7 @@ fn settle(
         m.radius,
         2.0 / omega
     );
-    let modes: &[bool] = if graph { &[false, true] } else { &[false] };
+    let modes = common::graph_modes(graph);
     let mut sweep = Sweep::new(
         format!("cohesive pile on {dev}: max overlap / radius"),
         "simulated time (s)",
@@ -631,7 +632,7 @@ fn settle(
             None
         };
         wp::synchronize()?;
-        let series = if captured { "f32, graph" } else { "f32" };
+        let series = if captured { "f32 graph" } else { "f32" };
         let recording = rec.is_on() && !captured;
         if recording {
             rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
@@ -689,7 +690,9 @@ fn settle(
     );
     let frame = pile_frame(x, 1, m.radius as f64, half_width as f64, title);
     common::write_frame("dem", &frame);
-    println!("settling: {ms:.2} ms per frame ({substeps} substeps, a grid build each) on \"{dev}\"");
+    println!(
+        "settling: {ms:.2} ms per frame ({substeps} substeps, a grid build each) on \"{dev}\""
+    );
     if let Some((ms_graph, x_graph)) = results.get(1) {
         print_graph_line("settling", *ms, *ms_graph, x, x_graph);
     }
@@ -822,7 +825,7 @@ fn warp_preset(
                 .values("height (m)", pos.iter().map(|p| p[1])),
         )
     };
-    let modes: &[bool] = if graph { &[false, true] } else { &[false] };
+    let modes = common::graph_modes(graph);
     // Per mode: ms per frame and the particles at the end.
     let mut results: Vec<(f64, Vec<Vec3>)> = Vec::new();
     for &captured in modes {

@@ -219,7 +219,8 @@ fn refit_faults_reach_the_next_synchronisation() {
         let mut bad = boxes.clone();
         bad[9] = Vec3::new(1.0, f32::INFINITY, 2.0);
         bad[40] = Vec3::NEG_INFINITY;
-        hi.copy_from(&Array::from_slice(&bad, dev).unwrap()).unwrap();
+        hi.copy_from(&Array::from_slice(&bad, dev).unwrap())
+            .unwrap();
         let x = Array::<f32>::zeros(4, dev).unwrap();
         let r = bvh.refit();
         if dev.is_cpu() {
@@ -256,7 +257,9 @@ fn refit_faults_reach_the_next_synchronisation() {
         let mut mesh = wp::Mesh::new(&points, &indices, None).unwrap();
         let mut moved = boxes[..4].to_vec();
         moved[2] = Vec3::new(f32::INFINITY, 0.0, 0.0);
-        points.copy_from(&Array::from_slice(&moved, dev).unwrap()).unwrap();
+        points
+            .copy_from(&Array::from_slice(&moved, dev).unwrap())
+            .unwrap();
         let r = mesh.refit();
         let e = if dev.is_cpu() {
             r.unwrap_err()

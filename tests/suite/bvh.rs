@@ -358,7 +358,10 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     if dev.is_cpu() {
         assert_eq!(bvh.tree_host().unwrap(), tree);
     } else {
-        assert!(matches!(&e, Error::Fault(f) if f.kernel == "Bvh::refit"), "{e:?}");
+        assert!(
+            matches!(&e, Error::Fault(f) if f.kernel == "Bvh::refit"),
+            "{e:?}"
+        );
     }
     // Finite again: the refit is right (the check was reset).
     l.copy_from(&arr(&[Vec3::ZERO, Vec3::ONE], dev)).unwrap();

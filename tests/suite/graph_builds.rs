@@ -388,9 +388,10 @@ fn hash_grid_builds_that_would_allocate_are_refused(dev: &wp::Device) {
     // The discarded capture let go of the grid: a plain frame works.
     f.step().unwrap();
     assert!(f.grid.is_built());
-    // Twice in one capture (the launch between holds the grid): recorded.
+    // Queried, then built twice in one capture (the launches hold the grid): recorded.
     let grid = &mut f.grid;
     let graph = wp::capture(dev, || {
+        wp::launch(gb_neighbours, n, (&*grid, &x, RADIUS, &counts), dev)?;
         grid.build(&x, RADIUS)?;
         wp::launch(gb_neighbours, n, (&*grid, &x, RADIUS, &counts), dev)?;
         grid.build(&x, RADIUS)
@@ -417,7 +418,11 @@ fn replay_error(graph: &wp::Graph) -> wp::Error {
 #[track_caller]
 fn assert_non_finite(e: &wp::Error, what: &str, arg: &str, index: usize, dev: &wp::Device) {
     let t = e.to_string();
-    for s in [what, &format!("argument `{arg}`"), &format!("at index {index}:")] {
+    for s in [
+        what,
+        &format!("argument `{arg}`"),
+        &format!("at index {index}:"),
+    ] {
         assert!(t.contains(s), "`{s}` not in: {t}");
     }
     if !dev.is_cpu() {
@@ -554,7 +559,11 @@ impl Boxes {
                 rng.range(-2.0, 2.0),
                 rng.range(-2.0, 2.0),
             );
-            let e = Vec3::new(rng.range(0.01, 0.2), rng.range(0.01, 0.2), rng.range(0.01, 0.2));
+            let e = Vec3::new(
+                rng.range(0.01, 0.2),
+                rng.range(0.01, 0.2),
+                rng.range(0.01, 0.2),
+            );
             lo.push(c - e);
             hi.push(c + e);
             v.push(Vec3::new(
@@ -643,7 +652,10 @@ fn mesh_refit_frame_replays_as_plain_frames(dev: &wp::Device) {
     let mut velocities = Vec::new();
     for a in 0..=k {
         for b in 0..=k {
-            let (x, z) = (a as f32 / k as f32 * 4.0 - 2.0, b as f32 / k as f32 * 4.0 - 2.0);
+            let (x, z) = (
+                a as f32 / k as f32 * 4.0 - 2.0,
+                b as f32 / k as f32 * 4.0 - 2.0,
+            );
             points.push(Vec3::new(x, 0.2 * (3.0 * x).sin() * z.cos(), z));
             velocities.push(Vec3::new(0.1 * z, (2.0 * x).cos(), -0.1 * x));
         }
@@ -710,7 +722,11 @@ fn mesh_refit_frame_replays_as_plain_frames(dev: &wp::Device) {
         assert!(state(&captured) == state(&plain), "frame {i}");
     }
     let last = state(&plain).0;
-    assert_eq!((&first.1, &first.2), (&last.1, &last.2), "a refit keeps the shape");
+    assert_eq!(
+        (&first.1, &first.2),
+        (&last.1, &last.2),
+        "a refit keeps the shape"
+    );
     assert_ne!(first.0, last.0, "the refits moved the boxes");
 }
 
@@ -735,8 +751,19 @@ fn refits_of_a_shared_tree_are_refused_in_a_capture(dev: &wp::Device) {
     assert_eq!(kept.tree_host().unwrap(), tree, "the clone kept its tree");
     assert_ne!(b.bvh.tree_host().unwrap().0, tree.0);
     drop(kept);
-    let bvh = &mut b.bvh;
-    let graph = wp::capture(dev, || bvh.refit()).unwrap();
+    // Queried, then refit: the capture's own launch holds the tree, which stays the capture's.
+    wp::load(&[wp::kernel_info(gb_overlaps)], dev).unwrap();
+    let graph = wp::capture(dev, || {
+        let (lo, hi) = (b.bvh.lowers().clone(), b.bvh.uppers().clone());
+        wp::launch(
+            gb_overlaps,
+            200,
+            (&b.bvh, &lo, &hi, &b.counts, &b.first),
+            dev,
+        )?;
+        b.bvh.refit()
+    })
+    .unwrap();
     graph.launch().unwrap();
 }
 
@@ -774,10 +801,17 @@ fn a_recorded_refit_reports_non_finite_input(dev: &wp::Device) {
     let points = arr(&[Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z], dev);
     let mut mesh = wp::Mesh::new(&points, &arr(&[0, 1, 2, 0, 2, 3], dev), None).unwrap();
     let graph = wp::capture(dev, || mesh.refit()).unwrap();
-    let nan = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(0.0, 0.0, f32::INFINITY)];
+    let nan = [
+        Vec3::ZERO,
+        Vec3::X,
+        Vec3::Y,
+        Vec3::new(0.0, 0.0, f32::INFINITY),
+    ];
     points.copy_from(&arr(&nan, dev)).unwrap();
     assert_non_finite(&replay_error(&graph), "Mesh::refit", "points", 3, dev);
-    points.copy_from(&arr(&[Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z], dev)).unwrap();
+    points
+        .copy_from(&arr(&[Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z], dev))
+        .unwrap();
     graph.launch().unwrap();
     wp::synchronize().unwrap();
 }

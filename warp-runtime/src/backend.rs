@@ -240,10 +240,7 @@ const _: () = assert!(std::mem::size_of::<StepFault>() == 40);
 impl StepFault {
     /// A context naming faults by `names`, to be filled by the GPU backend.
     pub(crate) const fn new(names: &'static KernelInfo) -> StepFault {
-        StepFault {
-            ctx: [0; 4],
-            names,
-        }
+        StepFault { ctx: [0; 4], names }
     }
 
     /// Fills the context: the fault record at `fault`, its flag at `flag`, the kernel id

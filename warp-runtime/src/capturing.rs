@@ -86,9 +86,14 @@ pub(crate) fn keep(uses: Keep) {
 /// buffers shared with a clone made before the capture (a tape's) are refused, as that clone
 /// must keep what it holds (the object's copy-on-write, which would allocate). Adopted
 /// buffers are kept alive for the graph (their address names them until it is dropped).
-pub(crate) fn adopt<T: Send + Sync + 'static>(shared: &mut std::sync::Arc<T>) -> bool {
+///
+/// A launch recorded into the capture adopts the host objects it takes this way before the
+/// graph keeps their clones (`HostObject::adopt_in_capture`), so that a frame may query an
+/// object before it rebuilds it.
+pub(crate) fn adopt<T: Send + Sync + 'static>(shared: &std::sync::Arc<T>) -> bool {
     let address = std::sync::Arc::as_ptr(shared) as usize;
-    let own = std::sync::Arc::get_mut(shared).is_some();
+    // (No weak references to the objects' buffers are made: the strong count is every holder.)
+    let own = std::sync::Arc::strong_count(shared) == 1;
     with_active(|a| {
         if a.adopted.contains(&address) {
             return true;

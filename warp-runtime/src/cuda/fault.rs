@@ -386,7 +386,14 @@ mod tests {
 
     /// A record as `wp::raise` fills it: kind, arg, index[4], shape[4], ndim, kernel, launch,
     /// then the flag.
-    fn record(kind: i32, arg: i32, index: [i64; 4], ndim: i32, kernel: i32, launch: u64) -> [u8; BYTES] {
+    fn record(
+        kind: i32,
+        arg: i32,
+        index: [i64; 4],
+        ndim: i32,
+        kernel: i32,
+        launch: u64,
+    ) -> [u8; BYTES] {
         let mut rec = [0u8; BYTES];
         rec[0..4].copy_from_slice(&kind.to_le_bytes());
         rec[4..8].copy_from_slice(&arg.to_le_bytes());

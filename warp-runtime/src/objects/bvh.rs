@@ -9,20 +9,21 @@
 //! Warp's `bvh.lowers`): a kernel may move the boxes, then [`Bvh::refit`] recomputes the
 //! tree's boxes from them, keeping its shape.
 //!
-//! # Where the tree is built
+//! # Where the tree is built and refit
 //!
-//! Every device builds on the host, with the binned SAH builder of
-//! [`bvh_build`](super::bvh_build): on a GPU the boxes are copied to the host, the tree built
-//! there and its three buffers uploaded; a refit likewise (the boxes down, the nodes up). This
-//! is the interim path: a GPU LBVH build and refit (kernels of `wp_bvh.h`, through
-//! `dispatch::object_step` like the hash grid's) is a separate task and changes nothing here
-//! but the two build functions of `Tree`. The host keeps a copy of the tree, so a GPU refit
-//! reads back only the boxes.
+//! Where its device is: the CPU builds with the binned SAH builder of
+//! [`bvh_build`](super::bvh_build) and refits the nodes in place, in one host operation that
+//! checks the boxes first; a GPU builds a linear BVH with the kernels of `wp_bvh_build.h`
+//! (`lbvh.rs`) and refits with one of them, which checks the boxes it reads and raises the
+//! first non-finite one as a fault. Either way a refit allocates nothing and reads nothing
+//! back, so a capture records it.
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps of a launch's BVH) shares the
-//! tree; a refit gives the refit BVH a new node buffer, so a recorded launch replays in
-//! backward against the tree it ran with. (The boxes themselves are the user's arrays, which a
-//! replay reads as they are then, like any array argument.)
+//! tree; a refit of a shared tree gives the refit BVH a new node buffer, so a recorded launch
+//! replays in backward against the tree it ran with. (The boxes themselves are the user's
+//! arrays, which a replay reads as they are then, like any array argument.) Inside a capture
+//! the refit writes the tree in place at each replay (the launches recorded after it hold the
+//! same tree), which a clone made before the capture would see: it is refused then.
 
 use std::sync::Arc;
 
@@ -137,9 +138,7 @@ impl RefitFrom<'_> {
     fn uses(&self) -> Keep {
         match *self {
             RefitFrom::Boxes { lowers, uppers } => Box::new([lowers.clone(), uppers.clone()]),
-            RefitFrom::Triangles { points, indices } => {
-                Box::new((points.clone(), indices.clone()))
-            }
+            RefitFrom::Triangles { points, indices } => Box::new((points.clone(), indices.clone())),
         }
     }
 }
@@ -299,7 +298,7 @@ impl Tree {
         };
         if capturing::capturing() {
             capturing::check_device(tree.nodes.device(), &|| format!("`{what}`"))?;
-            if !capturing::adopt(tree) {
+            if !capturing::adopt(&*tree) {
                 return Err(Error::Capture {
                     what: format!(
                         "{what} inside a capture writes the tree in place, but a clone made \
@@ -734,6 +733,11 @@ impl HostObject for Bvh {
             self.lowers.cpu_view(ctx.kernel, ctx.arg),
             self.uppers.cpu_view(ctx.kernel, ctx.arg),
         ))
+    }
+
+    fn adopt_in_capture(&self) {
+        // Shared with a clone made before the capture: not adopted (a rebuild is refused).
+        capturing::adopt(&self.tree);
     }
 
     fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaBvh> {

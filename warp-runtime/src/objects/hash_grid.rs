@@ -354,7 +354,7 @@ impl HashGrid {
             }
             // Written in place at each replay, the launches recorded after the build holding
             // the same buffers (a grid may be built several times in one capture).
-            if !capturing::adopt(&mut self.buffers) {
+            if !capturing::adopt(&self.buffers) {
                 return Err(Error::Capture {
                     what: format!(
                         "{WHAT} inside a capture writes the grid's buffers in place, but a \
@@ -543,6 +543,11 @@ impl HostObject for HashGrid {
             self.dims,
             built.cell_width_inv,
         ))
+    }
+
+    fn adopt_in_capture(&self) {
+        // Shared with a clone made before the capture: not adopted (a rebuild is refused).
+        capturing::adopt(&self.buffers);
     }
 
     fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaHashGrid> {

@@ -741,9 +741,8 @@ unsafe impl ObjectStep for LbvhRefit {
         };
         // SAFETY: unless `bad` is 0, two i32 words the caller owns (each sized and aligned as
         // an AtomicI32).
-        let bad = (self.bad != 0).then(|| unsafe {
-            &*(self.bad as *const [std::sync::atomic::AtomicI32; 2])
-        });
+        let bad = (self.bad != 0)
+            .then(|| unsafe { &*(self.bad as *const [std::sync::atomic::AtomicI32; 2]) });
         if let (Some(bad), 1) = (bad, self.check) {
             for (word, boxes) in bad.iter().zip([lo, hi]) {
                 if let Some(i) = boxes.par_iter().position_first(|p| !p.is_finite()) {
@@ -988,7 +987,10 @@ mod tests {
         )
         .unwrap();
         assert_eq!(bad.to_vec().unwrap(), vec![2, i32::MAX]);
-        assert_eq!((tl.to_vec().unwrap(), th.to_vec().unwrap()), (vec![Vec3::ZERO], vec![Vec3::ONE.with_z(0.0)]));
+        assert_eq!(
+            (tl.to_vec().unwrap(), th.to_vec().unwrap()),
+            (vec![Vec3::ZERO], vec![Vec3::ONE.with_z(0.0)])
+        );
     }
 
     #[test]

@@ -10,14 +10,16 @@
 //! them against the points; a later change could not be).
 //!
 //! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
-//! SAH builder over the triangles' boxes; on a GPU the triangles' boxes, the points' check and
-//! a linear BVH are kernels (`lbvh.rs`), and only the checks' flags are read back. The indices
-//! are checked once, at `new` (on a GPU by the triangles' boxes step, which reads no point
-//! through a bad index).
+//! SAH builder over the triangles' boxes; on a GPU the triangles' boxes (with the checks of
+//! the indices and the points) and a linear BVH are kernels (`lbvh.rs`), and only the checks'
+//! flags are read back, at `new`. The indices are checked once, at `new` (on a GPU by the
+//! triangles' boxes step, which reads no point through a bad index). A refit reads nothing
+//! back: on a GPU the boxes step checks the points and the refit step reports a non-finite
+//! one as a fault.
 //!
-//! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit gives
-//! the refit mesh a new node buffer, so a recorded launch replays against the tree it ran
-//! with.
+//! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit of a
+//! shared tree gives the refit mesh a new node buffer, so a recorded launch replays against
+//! the tree it ran with.
 
 use std::sync::Arc;
 
@@ -29,6 +31,7 @@ use super::geometry_abi::CudaMesh;
 use super::lbvh;
 use super::HostObject;
 use crate::array::Array;
+use crate::capturing;
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::ArgCtx;
@@ -398,6 +401,11 @@ impl HostObject for Mesh {
                 .map(|v| v.cpu_view(ctx.kernel, ctx.arg)),
             self.indices.cpu_view(ctx.kernel, ctx.arg),
         ))
+    }
+
+    fn adopt_in_capture(&self) {
+        // Shared with a clone made before the capture: not adopted (a rebuild is refused).
+        capturing::adopt(&self.tree);
     }
 
     fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaMesh> {
