@@ -22,6 +22,8 @@ pub(crate) struct Active {
     pub(crate) launches: usize,
     /// The host objects' buffers this capture writes (see [`adopt`]), by address.
     adopted: Vec<usize>,
+    /// The capture's number, distinct from every other capture's in the process ([`id`]).
+    id: u64,
 }
 
 impl Active {
@@ -32,6 +34,10 @@ impl Active {
             keep: Vec::new(),
             launches: 0,
             adopted: Vec::new(),
+            id: {
+                static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+                NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            },
         }
     }
 }
@@ -46,6 +52,13 @@ thread_local! {
 #[inline]
 pub(crate) fn capturing() -> bool {
     CAPTURING.with(Cell::get)
+}
+
+/// The number of the calling thread's capture, if it captures: an object may note which
+/// capture recorded its last operation (what it knows of its buffers holds within that
+/// capture's replays only).
+pub(crate) fn id() -> Option<u64> {
+    with_active(|a| a.id)
 }
 
 /// The device the calling thread captures on, if it captures.

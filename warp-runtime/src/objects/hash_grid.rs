@@ -75,6 +75,10 @@ pub struct HashGrid {
     /// nonzero entry was written from the first `m` keys (then clearing those entries is
     /// enough), `None` when unknown (zero them all).
     ranges_from_keys: Option<usize>,
+    /// The capture that recorded the build `ranges_from_keys` describes, if one did: then it
+    /// holds within that capture only (each replay runs that build before the next one it
+    /// recorded), and is unknown outside it (a replay may or may not have run).
+    ranges_capture: Option<u64>,
 }
 
 /// The grid's buffers on its device.
@@ -119,6 +123,7 @@ impl Clone for HashGrid {
             buffers: Arc::clone(&self.buffers),
             built: self.built,
             ranges_from_keys: self.ranges_from_keys,
+            ranges_capture: self.ranges_capture,
         }
     }
 }
@@ -184,6 +189,7 @@ impl HashGrid {
             buffers: Arc::new(Buffers::new(0, cells, device)?),
             built: None,
             ranges_from_keys: Some(0),
+            ranges_capture: None,
         })
     }
 
@@ -379,9 +385,15 @@ impl HashGrid {
         let cells = self.buffers.cell_starts.len();
         // Zero the ranges of the last build: from its keys (still in `keys`) when they are few
         // against the buckets, else every entry (a fill, the fastest way to zero them all).
-        // Unknown until the new ranges are written; always every entry in a graph, whose
-        // replays may follow any build.
-        let clear_from = self.ranges_from_keys.take().filter(|_| !in_capture);
+        // Unknown until the new ranges are written. In a graph, from the keys of the build
+        // recorded before this one in the same capture (which each replay runs just before);
+        // every entry at the capture's first build, whose replays may follow any build.
+        let capture = capturing::id();
+        let clear_from = self
+            .ranges_from_keys
+            .take()
+            .filter(|_| self.ranges_capture == capture);
+        self.ranges_capture = None;
         let b: &Buffers = &self.buffers;
         // What the steps' addresses point into, kept by a graph that records them.
         let uses = || -> Keep {
@@ -455,8 +467,10 @@ impl HashGrid {
         };
         if in_capture {
             // Recorded: the ranges step reports the points' check (see above). The launches
-            // recorded next take the grid as built.
+            // recorded next take the grid as built, the next build recorded here clears from
+            // these keys.
             self.built = Some(built);
+            (self.ranges_from_keys, self.ranges_capture) = (Some(n), capture);
             return Ok(());
         }
         // The points' check, read back once everything is queued (on a GPU, the one wait of a
