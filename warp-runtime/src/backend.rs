@@ -216,6 +216,7 @@ pub(crate) unsafe trait ObjectStep: Copy + Send + Sync {
     /// step's launch number), so that a fault the step raises is reported at the next
     /// synchronisation, or a graph replay's, like a kernel's. On the CPU, `run_cpu` returns
     /// the fault itself.
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
     fn fault_slot(&mut self) -> Option<&mut StepFault> {
         None
     }

@@ -32,10 +32,9 @@ use warp_core::objects::bvh::{BvhNode, BvhTree};
 use warp_core::objects::BvhView;
 use warp_core::ArrayView;
 
-use super::bvh_build::{build_sah, refit as refit_nodes, BuiltBvh};
+use super::bvh_build::{build_sah, refit as refit_nodes, triangle_boxes, BuiltBvh};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
 use super::lbvh::{self, Lbvh, LbvhTree, RefitCheck};
-use super::mesh::triangle_boxes;
 use super::HostObject;
 use crate::array::Array;
 use crate::capturing::{self, Keep};
@@ -398,7 +397,19 @@ impl Tree {
                             format!("has a non-finite point at index {i}: {v:?}"),
                         ));
                     }
-                    let (lo, hi) = triangle_boxes(p, ix);
+                    // The mesh checked its indices at its build, but they are an array a
+                    // kernel may have written since (`Mesh::indices`).
+                    let (lo, hi) = triangle_boxes(p, ix).map_err(|k| {
+                        bad(
+                            MESH_REFIT.name,
+                            "indices",
+                            format!(
+                                "has {} at position {k}, outside the {num_points} points (the \
+                                 mesh's indices were written after its build)",
+                                ix[k]
+                            ),
+                        )
+                    })?;
                     refit(&lo, &hi);
                     Ok(())
                 })

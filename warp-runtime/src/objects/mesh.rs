@@ -27,6 +27,7 @@ use glam::Vec3;
 use warp_core::objects::MeshView;
 
 use super::bvh::{bad, contiguous, first_non_finite, same_device, RefitFrom, Tree, MAX_PRIMS};
+use super::bvh_build::triangle_boxes;
 use super::geometry_abi::CudaMesh;
 use super::lbvh;
 use super::HostObject;
@@ -82,17 +83,6 @@ impl std::fmt::Debug for Mesh {
             .field("velocities", &self.velocities.is_some())
             .finish()
     }
-}
-
-/// The triangles' boxes (indices checked against the points).
-pub(crate) fn triangle_boxes(points: &[Vec3], indices: &[i32]) -> (Vec<Vec3>, Vec<Vec3>) {
-    indices
-        .chunks_exact(3)
-        .map(|t| {
-            let [a, b, c] = [0, 1, 2].map(|k| points[t[k] as usize]);
-            (a.min(b).min(c), a.max(b).max(c))
-        })
-        .unzip()
 }
 
 /// The triangles' boxes on the mesh's device (a GPU's: queued, nothing read back); the
@@ -234,7 +224,7 @@ impl Mesh {
             let ix = indices.to_vec()?;
             check_indices(WHAT, &ix, n)?;
             let p = read_points(WHAT, points, n)?;
-            let (lo, hi) = triangle_boxes(&p, &ix);
+            let (lo, hi) = triangle_boxes(&p, &ix).map_err(|k| bad_index(WHAT, k, ix[k], n))?;
             let tree = Tree::build_on_host(&lo, &hi, &device)?;
             (Array::from_slice(&ix, &device)?, tree)
         } else {
@@ -284,7 +274,10 @@ impl Mesh {
     /// naming `Mesh::refit`, `points` and the first such index, reported at the next
     /// synchronisation, the tree refit from the values read (queries stay in bounds, their
     /// results unspecified until a refit from finite points). A mesh without triangles has no
-    /// box to refit: a GPU checks nothing then.
+    /// box to refit: a GPU checks nothing then. (An index a kernel wrote outside the points
+    /// since the build, through [`indices`](Mesh::indices): the CPU's refit refuses it, naming
+    /// `indices`; a GPU's gives its triangle an empty box, and the queries' checked reads
+    /// fault on it.)
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `points` when the points array (replaced by
@@ -464,6 +457,13 @@ mod tests {
             &["argument `velocities`", "1 velocities for 3 points"],
         );
         let mut m = Mesh::new(&p, &ix(&[0, 1, 2]), None).unwrap();
+        m.indices().copy_from(&ix(&[0, 7, 2])).unwrap();
+        has(
+            m.refit().unwrap_err(),
+            &["argument `indices`", "7 at position 1"],
+        );
+        m.indices().copy_from(&ix(&[0, 1, 2])).unwrap();
+        m.refit().unwrap();
         m.set_points(&pts(&[Vec3::ZERO])).unwrap();
         has(
             m.refit().unwrap_err(),
