@@ -16,7 +16,14 @@
 //! 4. the settling pile (100K+ particles on a GPU): ms per frame, the largest overlap
 //!    relative to the radius, and whether every particle stayed in the box. `--preset warp`
 //!    runs Warp's example_dem configuration instead (65,536 particles, 64 substeps a frame,
-//!    a 128^3 grid queried at 5 radii): the figure shared/DESIGN.md compares with Warp's.
+//!    a 128^3 grid queried at 5 radii): the figure compared with Warp's.
+//!
+//! `--graph` also runs the energy drift, the pile and Warp's configuration with each frame
+//! (all its substeps: the grid builds, the force and integration kernels) captured once into
+//! a graph and replayed frame after frame, as Warp's example does (captured before the clock
+//! starts, as there), as series of their own (`.. graph`): ms per frame beside the uncaptured
+//! run's, and the same errors (the replays do the same work in the same order, so the
+//! particles end where the uncaptured run leaves them, bit for bit).
 
 mod common;
 
@@ -178,6 +185,15 @@ impl Scene {
         })
     }
 
+    /// [`Scene::frame`] captured into a graph, whose replays run the frame again (from the
+    /// particles as they are then). A plain frame must come first: on a GPU it compiles the
+    /// kernels and loads the grid build's (nothing is compiled inside a capture), and it gives
+    /// the grid room for the points (nothing is allocated there).
+    fn capture(&mut self, substeps: usize, dt: f32) -> wp::Result<wp::Graph> {
+        let dev = self.dev.clone();
+        wp::capture(&dev, || self.frame(substeps, dt))
+    }
+
     /// `substeps` steps of `dt`, the grid rebuilt every `rebuild_every` of them.
     fn frame(&mut self, substeps: usize, dt: f32) -> wp::Result<()> {
         let n = self.x.len();
@@ -223,6 +239,10 @@ struct Cli {
     /// `warp`: only Warp's example_dem configuration, timed
     #[arg(long, value_parser = ["warp"])]
     preset: Option<String>,
+    /// Also run the timed frames (energy drift, pile, Warp's configuration) captured into a
+    /// graph, one frame recorded once and replayed: printed beside the uncaptured run
+    #[arg(long)]
+    graph: bool,
     #[command(flatten)]
     scene: common::SceneArgs,
 }
@@ -232,15 +252,15 @@ fn main() -> wp::Result<()> {
     let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
     if cli.preset.as_deref() == Some("warp") {
-        return warp_preset(&dev, cli.frames.unwrap_or(100), &cli.scene);
+        return warp_preset(&dev, cli.frames.unwrap_or(100), &cli.scene, cli.graph);
     }
     println!("DEM on \"{dev}\": linear spring-dashpot contacts, cohesion, Coulomb friction");
     restitution(&dev)?;
-    energy_drift(&dev)?;
+    energy_drift(&dev, cli.graph)?;
     stability_limit(&dev)?;
     let n = cli.n.unwrap_or(if gpu { 110_592 } else { 8_000 });
     let frames = cli.frames.unwrap_or(60);
-    settle(&dev, n, frames, &cli.scene)?;
+    settle(&dev, n, frames, &cli.scene, cli.graph)?;
     common::print_compiled();
     Ok(())
 }
@@ -389,7 +409,15 @@ fn gas_material(k_n: f32) -> Material {
 }
 
 /// Runs the gas for `t_end` seconds at `dt`; the relative energy change, or why it blew up.
-fn run_gas(dev: &wp::Device, m: Material, n: usize, dt: f32, t_end: f32) -> wp::Result<Run> {
+/// With `graph`, the frames after the first are replays of it captured.
+fn run_gas(
+    dev: &wp::Device,
+    m: Material,
+    n: usize,
+    dt: f32,
+    t_end: f32,
+    graph: bool,
+) -> wp::Result<Run> {
     let (x0, v0) = gas(n, m.radius, m.half_width, 7);
     let e0 = energy(&m, &x0, &v0);
     // The grid is rebuilt every step, with a margin of one radius: no particle outruns it
@@ -399,10 +427,18 @@ fn run_gas(dev: &wp::Device, m: Material, n: usize, dt: f32, t_end: f32) -> wp::
     let steps = (t_end / dt).ceil() as usize;
     let frames = steps.div_ceil(substeps);
     let t = Instant::now();
+    let mut captured: Option<wp::Graph> = None;
     for fr in 0..frames {
-        // A blow-up shows as a non-finite point refused by the grid's build, or at the
-        // check after the frame: either way the run is unstable, and the table says where.
-        let built = s.frame(substeps, dt);
+        // A blow-up shows as a non-finite point refused by the grid's build (reported by the
+        // check's synchronisation after a replay), or at the check after the frame: either
+        // way the run is unstable, and the table says where.
+        let built = match &captured {
+            Some(g) => g.launch(),
+            None => s.frame(substeps, dt),
+        };
+        if graph && fr == 0 && built.is_ok() {
+            captured = Some(s.capture(substeps, dt)?);
+        }
         if let Err(e) = built.and_then(|()| s.x.check_finite("x")) {
             return Ok(Run::unstable(
                 ((fr + 1) * substeps) as u64,
@@ -435,7 +471,7 @@ fn run_gas(dev: &wp::Device, m: Material, n: usize, dt: f32, t_end: f32) -> wp::
 
 /// Energy drift of the undamped gas against dt (symplectic Euler: bounded oscillation for a
 /// smooth force; contacts switching on and off between steps leave O(dt) per collision).
-fn energy_drift(dev: &wp::Device) -> wp::Result<()> {
+fn energy_drift(dev: &wp::Device, graph: bool) -> wp::Result<()> {
     let m = gas_material(1e4);
     let n = 1000;
     let omega = (2.0 * m.k_n as f64 / m.mass as f64).sqrt();
@@ -444,15 +480,23 @@ fn energy_drift(dev: &wp::Device) -> wp::Result<()> {
         m.k_n,
         2.0 / omega
     );
+    let modes = common::graph_modes(graph);
     let mut sweep = Sweep::new(
         format!("undamped gas on {dev}: |E(0.25 s) - E(0)| / E(0)"),
         "dt (s)",
     )
-    .progress(5);
+    .progress(5 * modes.len() as u64);
     for k in 0..5 {
         let dt = (0.4 / omega / 2f64.powi(k)) as f32;
-        let run = run_gas(dev, m, n, dt, 0.25)?;
-        sweep.record("f32, semi-implicit Euler", dt as f64, run);
+        for &captured in modes {
+            let run = run_gas(dev, m, n, dt, 0.25, captured)?;
+            let series = if captured {
+                "f32, semi-implicit Euler graph"
+            } else {
+                "f32, semi-implicit Euler"
+            };
+            sweep.record(series, dt as f64, run);
+        }
     }
     common::finish(&sweep, "dem_energy");
     Ok(())
@@ -477,7 +521,7 @@ fn stability_limit(dev: &wp::Device) -> wp::Result<()> {
         let mut failed = String::from("-");
         for j in 0..16 {
             let dt = 1e-2f32 / 2f32.powi(j);
-            let run = run_gas(dev, m, 512, dt, 0.25)?;
+            let run = run_gas(dev, m, 512, dt, 0.25, false)?;
             if run.stability.is_stable() {
                 stable = Some(dt);
                 break;
@@ -499,8 +543,15 @@ fn stability_limit(dev: &wp::Device) -> wp::Result<()> {
 }
 
 /// The cohesive pile settling into a box: ms per frame (128 substeps, a grid build each), and
-/// the largest overlap relative to the radius at the end of each reported frame.
-fn settle(dev: &wp::Device, n: usize, frames: usize, args: &common::SceneArgs) -> wp::Result<()> {
+/// the largest overlap relative to the radius at the end of each reported frame. With
+/// `graph`, the run again with each frame a replay of one captured, beside the first.
+fn settle(
+    dev: &wp::Device,
+    n: usize,
+    frames: usize,
+    args: &common::SceneArgs,
+    graph: bool,
+) -> wp::Result<()> {
     let m = Material {
         radius: 0.01,
         mass: 1e-3,
@@ -553,18 +604,15 @@ fn settle(dev: &wp::Device, n: usize, frames: usize, args: &common::SceneArgs) -
         m.radius,
         2.0 / omega
     );
-    let mut s = Scene::new(m, &x0, &v0, dim, query, 1, dev)?;
-    // Warm-up: compiles on a GPU.
-    s.frame(1, dt)?;
-    wp::synchronize()?;
+    let modes = common::graph_modes(graph);
     let mut sweep = Sweep::new(
         format!("cohesive pile on {dev}: max overlap / radius"),
         "simulated time (s)",
     )
     .with_extras(&["ms per frame"])
-    .progress(frames as u64);
-    let mut elapsed = 0.0f64;
-    // With `--rerun`, every frame of the run (its natural cadence), outside the timing.
+    .progress((frames * modes.len()) as u64);
+    // With `--rerun`, every frame of the (uncaptured) run, its natural cadence, outside the
+    // timing.
     let mut rec = args.recorder("dem");
     let stride = common::record::stride(n);
     let picture = |x: &[Vec3], fr: usize| {
@@ -572,62 +620,97 @@ fn settle(dev: &wp::Device, n: usize, frames: usize, args: &common::SceneArgs) -
         let title = format!("dem: {n} particles after {fr} frames ({t:.2} s)");
         pile_frame(x, stride, m.radius as f64, half_width as f64, title)
     };
-    if rec.is_on() {
-        rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
-    }
-    for fr in 0..frames {
-        let t = Instant::now();
-        s.frame(substeps, dt)?;
+    // Per mode: ms per frame and the particles at the end.
+    let mut results: Vec<(f64, Vec<Vec3>)> = Vec::new();
+    for &captured in modes {
+        let mut s = Scene::new(m, &x0, &v0, dim, query, 1, dev)?;
+        // Warm-up: compiles on a GPU (and, captured, loads what the capture may not).
+        s.frame(1, dt)?;
+        let graph = if captured {
+            Some(s.capture(substeps, dt)?)
+        } else {
+            None
+        };
         wp::synchronize()?;
-        elapsed += t.elapsed().as_secs_f64();
-        if rec.is_on() {
-            let sim_t = (fr + 1) as f64 * frame_dt as f64;
-            rec.frame(fr + 1, sim_t, &picture(&s.x.to_vec()?, fr + 1));
+        let series = if captured { "f32 graph" } else { "f32" };
+        let recording = rec.is_on() && !captured;
+        if recording {
+            rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
         }
-        if (fr + 1) % (frames / 6).max(1) == 0 || fr + 1 == frames {
-            let x = s.x.to_vec()?;
-            let fastest =
-                s.v.to_vec()?
-                    .iter()
-                    .map(|v| v.length())
-                    .fold(0.0f32, f32::max);
-            if fastest * dt > query - 2.0 * m.radius - m.cohesion {
-                println!("warning: a particle at {fastest:.2} m/s outruns the grid's margin");
+        let mut elapsed = 0.0f64;
+        for fr in 0..frames {
+            let t = Instant::now();
+            match &graph {
+                Some(g) => g.launch()?,
+                None => s.frame(substeps, dt)?,
             }
-            let stable = x.iter().all(|p| p.is_finite())
-                && x.iter().all(|p| {
-                    p.y > -m.radius
-                        && p.x.abs() < half_width + m.radius
-                        && p.z.abs() < half_width + m.radius
-                });
-            let ms = elapsed * 1e3 / (fr + 1) as f64;
-            let run = if stable {
-                Run::stable(
-                    ((fr + 1) * substeps) as u64,
-                    max_overlap(&x, m.radius) / m.radius as f64,
-                    elapsed,
-                )
-            } else {
-                Run::unstable(((fr + 1) * substeps) as u64, elapsed, "NaN or escaped")
-            };
-            sweep.record("f32", (fr + 1) as f64 * frame_dt as f64, run.extra(ms));
+            wp::synchronize()?;
+            elapsed += t.elapsed().as_secs_f64();
+            if recording {
+                let sim_t = (fr + 1) as f64 * frame_dt as f64;
+                rec.frame(fr + 1, sim_t, &picture(&s.x.to_vec()?, fr + 1));
+            }
+            if (fr + 1) % (frames / 6).max(1) == 0 || fr + 1 == frames {
+                let x = s.x.to_vec()?;
+                let fastest =
+                    s.v.to_vec()?
+                        .iter()
+                        .map(|v| v.length())
+                        .fold(0.0f32, f32::max);
+                if fastest * dt > query - 2.0 * m.radius - m.cohesion {
+                    println!("warning: a particle at {fastest:.2} m/s outruns the grid's margin");
+                }
+                let stable = x.iter().all(|p| p.is_finite())
+                    && x.iter().all(|p| {
+                        p.y > -m.radius
+                            && p.x.abs() < half_width + m.radius
+                            && p.z.abs() < half_width + m.radius
+                    });
+                let ms = elapsed * 1e3 / (fr + 1) as f64;
+                let run = if stable {
+                    Run::stable(
+                        ((fr + 1) * substeps) as u64,
+                        max_overlap(&x, m.radius) / m.radius as f64,
+                        elapsed,
+                    )
+                } else {
+                    Run::unstable(((fr + 1) * substeps) as u64, elapsed, "NaN or escaped")
+                };
+                sweep.record(series, (fr + 1) as f64 * frame_dt as f64, run.extra(ms));
+            }
         }
+        results.push((elapsed * 1e3 / frames as f64, s.x.to_vec()?));
     }
     common::finish(&sweep, "dem_settle");
     rec.finish();
+    let (ms, x) = &results[0];
     let title = format!(
         "dem: {n} particles after {frames} frames ({:.2} s)",
         frames as f32 * frame_dt
     );
-    let x = s.x.to_vec()?;
-    let frame = pile_frame(&x, 1, m.radius as f64, half_width as f64, title);
+    let frame = pile_frame(x, 1, m.radius as f64, half_width as f64, title);
     common::write_frame("dem", &frame);
     println!(
-        "settling: {:.2} ms per frame ({} substeps, a grid build each) on \"{dev}\"",
-        elapsed * 1e3 / frames as f64,
-        substeps
+        "settling: {ms:.2} ms per frame ({substeps} substeps, a grid build each) on \"{dev}\""
     );
+    if let Some((ms_graph, x_graph)) = results.get(1) {
+        print_graph_line("settling", *ms, *ms_graph, x, x_graph);
+    }
     Ok(())
+}
+
+/// The line comparing a run whose frames were graph replays (`ms_graph` per frame, particles
+/// at `x_graph`) with the uncaptured run (`ms`, `x`).
+fn print_graph_line(what: &str, ms: f64, ms_graph: f64, x: &[Vec3], x_graph: &[Vec3]) {
+    let same = x.len() == x_graph.len()
+        && x.iter()
+            .zip(x_graph)
+            .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits));
+    println!(
+        "{what}, graph-captured: {ms_graph:.2} ms per frame against {ms:.2} uncaptured \
+         ({:.2}x); particles bit for bit those of the uncaptured run: {same}",
+        ms_graph / ms
+    );
 }
 
 /// The pile (one particle in `stride`) in its box of half-width `w`, up to its top, coloured
@@ -686,7 +769,12 @@ fn max_overlap(x: &[Vec3], radius: f32) -> f64 {
 /// Differences: the ground here has the particles' friction (Warp's: k_t 100, mu 0.5, and a
 /// cohesion of 0.02), and damping acts on separation too (Warp's only on approach); the
 /// arithmetic per pair is the same.
-fn warp_preset(dev: &wp::Device, frames: usize, args: &common::SceneArgs) -> wp::Result<()> {
+fn warp_preset(
+    dev: &wp::Device,
+    frames: usize,
+    args: &common::SceneArgs,
+    graph: bool,
+) -> wp::Result<()> {
     let m = Material {
         radius: 0.1,
         mass: 1.0 / 64.0,
@@ -717,10 +805,8 @@ fn warp_preset(dev: &wp::Device, frames: usize, args: &common::SceneArgs) -> wp:
     let v0 = vec![Vec3::new(0.0, 0.0, 15.0); x0.len()];
     let (frame_dt, substeps) = (1.0f32 / 60.0, 64usize);
     let dt = frame_dt / substeps as f32;
-    let mut s = Scene::new(m, &x0, &v0, 128, 5.0 * m.radius, substeps, dev)?;
-    s.frame(1, dt)?;
-    wp::synchronize()?;
-    // With `--rerun`, every frame, the clock stopped while one is recorded.
+    // With `--rerun`, every frame of the uncaptured run, the clock stopped while one is
+    // recorded.
     let mut rec = args.recorder("dem");
     let stride = common::record::stride(x0.len());
     let picture = |x: &[Vec3], fr: usize| {
@@ -739,37 +825,61 @@ fn warp_preset(dev: &wp::Device, frames: usize, args: &common::SceneArgs) -> wp:
                 .values("height (m)", pos.iter().map(|p| p[1])),
         )
     };
-    if rec.is_on() {
-        rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
-    }
-    let mut elapsed = 0.0;
-    let mut t = Instant::now();
-    for fr in 1..=frames {
-        s.frame(substeps, dt)?;
-        if rec.is_on() {
-            wp::synchronize()?;
-            elapsed += t.elapsed().as_secs_f64();
-            rec.frame(
-                fr,
-                fr as f64 * frame_dt as f64,
-                &picture(&s.x.to_vec()?, fr),
-            );
-            t = Instant::now();
+    let modes = common::graph_modes(graph);
+    // Per mode: ms per frame and the particles at the end.
+    let mut results: Vec<(f64, Vec<Vec3>)> = Vec::new();
+    for &captured in modes {
+        let mut s = Scene::new(m, &x0, &v0, 128, 5.0 * m.radius, substeps, dev)?;
+        // Warm-up: compiles on a GPU (and, captured, loads what the capture may not).
+        s.frame(1, dt)?;
+        // Warp captures one frame (its grid build and substeps) and replays it.
+        let graph = if captured {
+            Some(s.capture(substeps, dt)?)
+        } else {
+            None
+        };
+        wp::synchronize()?;
+        let recording = rec.is_on() && !captured;
+        if recording {
+            rec.frame(0, 0.0, &picture(&s.x.to_vec()?, 0));
         }
+        let mut elapsed = 0.0;
+        let mut t = Instant::now();
+        for fr in 1..=frames {
+            match &graph {
+                Some(g) => g.launch()?,
+                None => s.frame(substeps, dt)?,
+            }
+            if recording {
+                wp::synchronize()?;
+                elapsed += t.elapsed().as_secs_f64();
+                rec.frame(
+                    fr,
+                    fr as f64 * frame_dt as f64,
+                    &picture(&s.x.to_vec()?, fr),
+                );
+                t = Instant::now();
+            }
+        }
+        wp::synchronize()?;
+        elapsed += t.elapsed().as_secs_f64();
+        let ms = elapsed * 1e3 / frames as f64;
+        let x = s.x.to_vec()?;
+        let finite = x.iter().all(|p| p.is_finite());
+        println!(
+            "Warp's example_dem configuration on \"{dev}\"{}: {} particles, {frames} frames of \
+             {substeps} substeps: {ms:.2} ms per frame (Warp 1.19, H100, graph-captured: 13.0 \
+             ms); max overlap / radius {:.3}, all finite: {finite}",
+            if captured { ", graph-captured" } else { "" },
+            x0.len(),
+            max_overlap(&x, m.radius) / m.radius as f64
+        );
+        results.push((ms, x));
     }
-    wp::synchronize()?;
-    elapsed += t.elapsed().as_secs_f64();
     rec.finish();
-    let ms = elapsed * 1e3 / frames as f64;
-    let x = s.x.to_vec()?;
-    let finite = x.iter().all(|p| p.is_finite());
-    println!(
-        "Warp's example_dem configuration on \"{dev}\": {} particles, {frames} frames of \
-         {substeps} substeps: {ms:.2} ms per frame (Warp 1.19, H100, graph-captured: 13.0 ms); \
-         max overlap / radius {:.3}, all finite: {finite}",
-        x0.len(),
-        max_overlap(&x, m.radius) / m.radius as f64
-    );
+    if let [(ms, x), (ms_graph, x_graph)] = &results[..] {
+        print_graph_line("Warp's configuration", *ms, *ms_graph, x, x_graph);
+    }
     common::print_compiled();
     Ok(())
 }

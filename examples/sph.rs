@@ -18,6 +18,11 @@
 //!    to be incompressible; summation's deficit at the free surface is not counted, the
 //!    clamped pressure ignores it), the run time, and where it blew up: the stability limit
 //!    in the CFL number.
+//!
+//! `--graph` also runs both with the steps captured into a graph, 64 steps (grid builds,
+//! density and force kernels) recorded once and replayed, as series of their own (`.. graph`):
+//! the run times (the capture included) beside the uncaptured ones, and the same errors (the
+//! replays do the same work in the same order, and the checks come after the same steps).
 
 mod common;
 
@@ -252,6 +257,46 @@ impl Sph {
     }
 }
 
+/// The steps one graph replay runs (`--graph`): even, since each step swaps the old and new
+/// arrays (after a replay they are where the capture found them).
+const GRAPH_STEPS: usize = 64;
+const _: () = assert!(GRAPH_STEPS.is_multiple_of(2));
+
+/// Runs steps `1..steps` of `s` (step 0, the warm-up, is the caller's: on a GPU it compiles
+/// the kernels and loads the grid build's, which a capture may not), in chunks of
+/// [`GRAPH_STEPS`] (with `graph`, each whole chunk a replay of a captured one: the scenes'
+/// `common::Stepper`); `check(s, k)` after step `k` whenever `every` (a multiple of the chunk)
+/// divides `k` and after the last step, so after the same steps either way; it returns
+/// `Some(why)` to stop (a blow-up). The run time (the capture included), and why it stopped.
+fn run_steps(
+    s: &mut Sph,
+    steps: usize,
+    dt: f32,
+    graph: bool,
+    every: usize,
+    mut check: impl FnMut(&Sph, usize) -> wp::Result<Option<String>>,
+) -> wp::Result<(f64, Option<String>)> {
+    debug_assert!(every.is_multiple_of(GRAPH_STEPS));
+    let dev = s.dev.clone();
+    let mut stepper = common::Stepper::new(graph, GRAPH_STEPS);
+    wp::synchronize()?;
+    let t = Instant::now();
+    let mut k = 1;
+    while k < steps {
+        let n = GRAPH_STEPS.min(steps - k);
+        stepper.advance(&dev, n, &mut || s.step(dt))?;
+        let last = k + n - 1;
+        if last.is_multiple_of(every) || last + 1 == steps {
+            if let Some(why) = check(s, last)? {
+                return Ok((t.elapsed().as_secs_f64(), Some(why)));
+            }
+        }
+        k = last + 1;
+    }
+    wp::synchronize()?;
+    Ok((t.elapsed().as_secs_f64(), None))
+}
+
 /// Weakly compressible SPH: a hydrostatic column's pressure against rho0 g depth, and a dam
 /// break's compression and stability limit against dt.
 #[derive(Parser)]
@@ -259,6 +304,10 @@ struct Cli {
     /// Particle spacing (m) [default: 0.015 on a GPU, 0.03 on the CPU]
     #[arg(long)]
     dx: Option<f32>,
+    /// Also run the scenes with the steps captured into a graph (64 steps recorded once and
+    /// replayed): printed beside the uncaptured runs
+    #[arg(long)]
+    graph: bool,
     #[command(flatten)]
     scene: common::SceneArgs,
 }
@@ -269,8 +318,9 @@ fn main() -> wp::Result<()> {
     let gpu = dev.to_string() != "cpu";
     let dx = cli.dx.unwrap_or(if gpu { 0.015 } else { 0.03 });
     println!("SPH (WCSPH, cubic spline, dynamic wall particles) on \"{dev}\"");
-    hydrostatic(&dev, dx)?;
-    dam_break(&dev, dx)?;
+    let modes = common::graph_modes(cli.graph);
+    hydrostatic(&dev, dx, modes)?;
+    dam_break(&dev, dx, modes)?;
     let mut rec = cli.scene.recorder("sph");
     if rec.is_on() {
         record_dam_break(&dev, dx, &mut rec)?;
@@ -284,16 +334,20 @@ fn main() -> wp::Result<()> {
 /// start-up waves), then the pressure of the particles at least 2 dx from every wall and the
 /// surface against rho0 g depth (depth from the fluid's top, the highest fluid particle plus
 /// half a spacing).
-fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
+fn hydrostatic(dev: &wp::Device, dx: f32, modes: &[bool]) -> wp::Result<()> {
     let depth = 0.4f32;
     let mut sweep = Sweep::new(
         format!("hydrostatic column on {dev}: RMS |p - rho0 g d| / (rho0 g H)"),
         "dx (m)",
     )
     .with_extras(&["particles", "max rho/rho0 - 1"])
-    .progress(3);
+    .progress(3 * modes.len() as u64);
     println!("\n1. hydrostatic column, {depth} m deep, settled 1 s, CFL 0.25");
-    for k in [2.0f32, 1.5, 1.0] {
+    for (k, &graph) in [2.0f32, 1.5, 1.0]
+        .into_iter()
+        .flat_map(|k| modes.iter().map(move |g| (k, g)))
+    {
+        let series = if graph { "f32 graph" } else { "f32" };
         let dx = dx * k;
         let size = Vec3::new(0.3, depth * 1.5, 0.3);
         let (x0, fluid) = layout(size, Vec3::new(0.3, depth, 0.3), dx);
@@ -301,22 +355,14 @@ fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
         let dt = s.dt(0.25);
         let steps = (1.0 / dt).ceil() as usize;
         s.step(dt)?;
-        wp::synchronize()?;
-        let t = Instant::now();
-        let mut unstable = None;
-        for k in 1..steps {
-            s.step(dt)?;
-            if k % 256 == 0 {
-                if let Err(e) = s.x.check_finite("x") {
-                    unstable = Some(format!("step {k}: {e}"));
-                    break;
-                }
-            }
-        }
-        wp::synchronize()?;
-        let seconds = t.elapsed().as_secs_f64();
+        let (seconds, unstable) = run_steps(&mut s, steps, dt, graph, 256, |s, k| {
+            Ok(s.x
+                .check_finite("x")
+                .err()
+                .map(|e| format!("step {k}: {e}")))
+        })?;
         if let Some(why) = unstable {
-            sweep.record("f32", dx as f64, Run::unstable(steps as u64, seconds, why));
+            sweep.record(series, dx as f64, Run::unstable(steps as u64, seconds, why));
             continue;
         }
         let (x, p, rho) = (s.x.to_vec()?, s.p.to_vec()?, s.rho.to_vec()?);
@@ -349,12 +395,12 @@ fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
         }
         if count == 0 {
             let why = "no particle 2 dx inside the column: a finer dx is needed";
-            sweep.record("f32", dx as f64, Run::unstable(steps as u64, seconds, why));
+            sweep.record(series, dx as f64, Run::unstable(steps as u64, seconds, why));
             continue;
         }
         let err = (sq / count as f64).sqrt();
         sweep.record(
-            "f32",
+            series,
             dx as f64,
             Run::stable(steps as u64, err, seconds)
                 .extra(s.n_fluid as f64)
@@ -368,7 +414,7 @@ fn hydrostatic(dev: &wp::Device, dx: f32) -> wp::Result<()> {
 /// A 0.4 m cube of water collapsing in a 1.2 m x 0.6 m x 0.4 m tank for 0.5 s: the largest
 /// density deviation over the run, against the CFL number (up to past the limit) and against
 /// the particle count.
-fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
+fn dam_break(dev: &wp::Device, dx: f32, modes: &[bool]) -> wp::Result<()> {
     let (size, water, t_end) = (DAM_TANK, DAM_WATER, DAM_T_END);
     println!("\n2. dam break: a {water} m block in a {size} m tank, {t_end} s");
     let mut sweep = Sweep::new(
@@ -377,13 +423,13 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
     )
     .with_extras(&["particles", "front x (m)"])
     // Six CFL numbers at the coarse spacing, the three up to 0.4 at the fine one.
-    .progress(6 + 3);
+    .progress((6 + 3) * modes.len() as u64);
     let cfls = [0.1f32, 0.2, 0.4, 0.8, 1.6, 3.2];
     // The frame: the water at t_end of the last stable run (finest spacing, largest CFL).
     let mut shown: Option<(Vec<Vec3>, Vec<f32>, f32, f32)> = None;
     for (k, spacing) in [(2.0f32, dx * 2.0), (1.0, dx)] {
         let (x0, fluid) = layout(size, water, spacing);
-        for &cfl in &cfls {
+        for (&cfl, &graph) in cfls.iter().flat_map(|c| modes.iter().map(move |g| (c, g))) {
             // The finer resolution only at the usual CFL numbers (its runs are 8x longer).
             if k == 1.0 && cfl > 0.4 {
                 continue;
@@ -392,30 +438,26 @@ fn dam_break(dev: &wp::Device, dx: f32) -> wp::Result<()> {
             let dt = s.dt(cfl);
             let steps = (t_end / dt).ceil() as usize;
             s.step(dt)?;
-            wp::synchronize()?;
-            let t = Instant::now();
             let mut worst = 0.0f64;
-            let mut why = None;
-            for k in 1..steps {
-                s.step(dt)?;
-                if k % 64 == 0 || k + 1 == steps {
-                    let rho = s.rho.to_vec()?;
-                    let dev_max = rho
-                        .iter()
-                        .zip(&fluid)
-                        .filter(|(_, &f)| f != 0)
-                        .map(|(r, _)| (r / s.rho0 - 1.0) as f64)
-                        .fold(0.0f64, |a, b| if b.is_nan() { f64::NAN } else { a.max(b) });
-                    if !dev_max.is_finite() || dev_max > 0.2 {
-                        why = Some(format!("step {k}: max rho/rho0 - 1 = {dev_max:.2e}"));
-                        break;
-                    }
-                    worst = worst.max(dev_max);
+            let (seconds, why) = run_steps(&mut s, steps, dt, graph, 64, |s, k| {
+                let rho = s.rho.to_vec()?;
+                let dev_max = rho
+                    .iter()
+                    .zip(&fluid)
+                    .filter(|(_, &f)| f != 0)
+                    .map(|(r, _)| (r / s.rho0 - 1.0) as f64)
+                    .fold(0.0f64, |a, b| if b.is_nan() { f64::NAN } else { a.max(b) });
+                if !dev_max.is_finite() || dev_max > 0.2 {
+                    return Ok(Some(format!("step {k}: max rho/rho0 - 1 = {dev_max:.2e}")));
                 }
-            }
-            wp::synchronize()?;
-            let seconds = t.elapsed().as_secs_f64();
-            let series = format!("{} fluid particles", s.n_fluid);
+                worst = worst.max(dev_max);
+                Ok(None)
+            })?;
+            let series = format!(
+                "{} fluid particles{}",
+                s.n_fluid,
+                if graph { " graph" } else { "" }
+            );
             let run = match why {
                 Some(w) => Run::unstable(steps as u64, seconds, w),
                 None => {

@@ -174,6 +174,9 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::TileIndex { .. } | FaultKind::TileWidth { .. } => {
             unreachable!("no builtin of the CUDA library makes a tile fault yet")
         }
+        FaultKind::NonFiniteInput { .. } => {
+            unreachable!("only host objects' build steps check their inputs")
+        }
         // The coordinates' f64 bit patterns (wp_core.h's FAULT_NON_FINITE record).
         FaultKind::NonFinite { values, .. } => (
             5,

@@ -205,6 +205,76 @@ fn graph_fault_reaches_the_replaying_thread() {
     });
 }
 
+/// A refit reads nothing back: on a GPU its check of the boxes (a mesh's points) is a fault
+/// of the refit's own launch, reported by the next synchronisation after other launches,
+/// naming the operation, the argument and the first bad index; the CPU refuses at the
+/// refit, as before. Finite again, the refit is clean (its check reset).
+#[test]
+fn refit_faults_reach_the_next_synchronisation() {
+    on_every_backend("refit_faults_reach_the_next_synchronisation", |dev| {
+        let boxes: Vec<Vec3> = (0..64).map(|i| Vec3::splat(i as f32)).collect();
+        let lo = Array::from_slice(&boxes, dev).unwrap();
+        let hi = Array::from_slice(&boxes, dev).unwrap();
+        let mut bvh = wp::Bvh::new(&lo, &hi).unwrap();
+        let mut bad = boxes.clone();
+        bad[9] = Vec3::new(1.0, f32::INFINITY, 2.0);
+        bad[40] = Vec3::NEG_INFINITY;
+        hi.copy_from(&Array::from_slice(&bad, dev).unwrap())
+            .unwrap();
+        let x = Array::<f32>::zeros(4, dev).unwrap();
+        let r = bvh.refit();
+        if dev.is_cpu() {
+            let e = r.unwrap_err().to_string();
+            assert!(
+                e.contains("argument `uppers`") && e.contains("index 9"),
+                "{e}"
+            );
+        } else {
+            r.unwrap();
+            let refit = wp::last_launch_id();
+            wp::launch(k_double, 4, (&x,), dev).unwrap();
+            let f = fault(wp::synchronize());
+            assert_eq!(
+                f,
+                Fault {
+                    kernel: "Bvh::refit",
+                    kind: FaultKind::NonFiniteInput {
+                        arg: "uppers",
+                        index: 9,
+                        values: vec![1.0, f64::INFINITY, 2.0],
+                    },
+                    launch: refit,
+                }
+            );
+            wp::synchronize().unwrap();
+        }
+        hi.copy_from(&lo).unwrap();
+        bvh.refit().unwrap();
+        wp::synchronize().unwrap();
+        // A mesh's points.
+        let points = Array::from_slice(&boxes[..4], dev).unwrap();
+        let indices = Array::from_slice(&[0, 1, 2, 1, 2, 3], dev).unwrap();
+        let mut mesh = wp::Mesh::new(&points, &indices, None).unwrap();
+        let mut moved = boxes[..4].to_vec();
+        moved[2] = Vec3::new(f32::INFINITY, 0.0, 0.0);
+        points
+            .copy_from(&Array::from_slice(&moved, dev).unwrap())
+            .unwrap();
+        let r = mesh.refit();
+        let e = if dev.is_cpu() {
+            r.unwrap_err()
+        } else {
+            r.unwrap();
+            Error::Fault(fault(wp::synchronize()))
+        };
+        let t = e.to_string();
+        assert!(
+            t.contains("Mesh::refit") && t.contains("argument `points`") && t.contains("index 2"),
+            "{t}"
+        );
+    });
+}
+
 /// A thread that faults and ends without synchronising: its fault is not handed to another
 /// thread (it is logged), and a new thread taking over its record starts clean.
 #[test]

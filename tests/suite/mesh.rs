@@ -693,10 +693,17 @@ fn bad_input_is_an_error(dev: &wp::Device) {
     has(&e, "index 1");
     let e = wp::Mesh::new(&p, &arr(&[0, 1, 2], dev), Some(&arr(&[Vec3::ZERO], dev))).unwrap_err();
     has(&e, "argument `velocities`");
-    // A refit of non-finite points, or of a points array of another length, is refused.
+    // A refit of non-finite points (on a GPU a fault, reported at once in debug mode), or of
+    // a points array of another length, is refused.
     let mut mesh = wp::Mesh::new(&p, &arr(&[0, 1, 2], dev), None).unwrap();
     mesh.points().copy_from(&nan).unwrap();
-    has(&mesh.refit().unwrap_err(), "argument `points`");
+    let e = mesh.refit().unwrap_err();
+    has(&e, "argument `points`");
+    has(&e, "index 1");
+    // (The mesh's points are `p`'s memory: refilled from a new array.)
+    let good = arr(&[Vec3::ZERO, Vec3::X, Vec3::Y], dev);
+    mesh.points().copy_from(&good).unwrap();
+    mesh.refit().unwrap();
     mesh.set_points(&arr(&[Vec3::ZERO; 4], dev)).unwrap();
     let e = mesh.refit().unwrap_err();
     has(&e, "argument `points`");

@@ -69,6 +69,19 @@ pub enum FaultKind {
         /// The values as given (every component, finite or not).
         values: Vec<f64>,
     },
+    /// An element of a host object's input array that must be finite has a NaN or infinite
+    /// coordinate: a BVH's boxes or a mesh's points at a GPU refit, a hash grid's points at a
+    /// build recorded into a graph. On a GPU such a check is a fault raised by the object's
+    /// own build kernel, reported at the next synchronisation (no read-back, so the step can
+    /// be recorded into a graph); `Fault::kernel` names the operation (`"Bvh::refit"`).
+    NonFiniteInput {
+        /// The operation's argument holding the element (`"lowers"`, `"points"`).
+        arg: &'static str,
+        /// The element's index (the smallest such index).
+        index: usize,
+        /// The element's coordinates as given.
+        values: Vec<f64>,
+    },
     /// Two threads of one CPU launch wrote the same array element without an atomic: a data
     /// race (undefined behaviour in Rust's memory model, as in CUDA's). Reported only with
     /// the runtime's race check on (`wp::config::set_race_check`), at the second write, which
@@ -159,6 +172,11 @@ impl Fault {
             FaultKind::NonFinite { what, values } => write!(
                 f,
                 "kernel `{}`: {what} {values:?} is not finite (NaN or infinite)",
+                self.kernel
+            ),
+            FaultKind::NonFiniteInput { arg, index, values } => write!(
+                f,
+                "`{}`: argument `{arg}` has a non-finite value at index {index}: {values:?}",
                 self.kernel
             ),
             FaultKind::TileIndex { index, shape, rank } => {

@@ -22,9 +22,14 @@
 //                      primitive; an internal node over at most leaf_size primitives is
 //                      written as a leaf of their range (the nodes under it stay, unreached)
 //   wp_lbvh_refit      each leaf's box, then up the parent links: the second thread to reach a
-//                      node (an atomic counter per node, zeroed before) writes its box as the
-//                      union of its children's, or of its primitives' for an internal node
-//                      the hierarchy made a leaf (fminf/fmaxf: exact and order-free)
+//                      node (an atomic counter per node, zero at the start, which that thread
+//                      sets to zero again for the next refit) writes its box as the union of
+//                      its children's, or of its primitives' for an internal node the hierarchy
+//                      made a leaf (fminf/fmaxf: exact and order-free). With a check word pair
+//                      `bad`, it also checks each box it reads for NaN and infinite coordinates
+//                      (when asked) and the thread that writes the root reports the smallest
+//                      bad index as a fault (FAULT_NON_FINITE_INPUT), resetting the words: a
+//                      refit is one launch, with no read-back, that a graph can record.
 //
 // Only compiled with WP_BVH_BUILD (the runtime's BVH build library); kernels that query a BVH
 // never include this file.
@@ -79,7 +84,12 @@ struct lbvh_hierarchy_t {
 static_assert(sizeof(lbvh_hierarchy_t) == 56, "lbvh_hierarchy_t layout");
 
 /// LbvhRefit: lowers, uppers (per primitive), nodes, parents, prim_ids, counters (i32*, one per
-/// internal node, zeroed), n.
+/// internal node, zero, left zero), n; bad (i32*, two words at INT_MAX, or 0: no check and no
+/// report): with `check`, the smallest index of a box with a non-finite lower corner lowers
+/// bad[0], of an upper one bad[1] (an earlier step may have lowered them too); the thread that
+/// writes the root resets both and reports the first word that is set as a fault of argument
+/// 0 or 1, with the element of `sources[0]` or `sources[1]` (Vec3*) at that index; `fault`
+/// is the fault context.
 struct lbvh_refit_t {
   u64 lowers;
   u64 uppers;
@@ -88,8 +98,12 @@ struct lbvh_refit_t {
   u64 prim_ids;
   u64 counters;
   i64 n;
+  u64 bad;
+  u64 sources[2];
+  i64 check;
+  step_fault_t fault;
 };
-static_assert(sizeof(lbvh_refit_t) == 56, "lbvh_refit_t layout");
+static_assert(sizeof(lbvh_refit_t) == 128, "lbvh_refit_t layout");
 
 /// LbvhFinite: the smallest index of a non-finite vector of `n` (Vec3*) into *bad (i32,
 /// atomically lowered; left alone when all are finite).
@@ -103,7 +117,8 @@ static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
 /// LbvhTriangleBoxes: each of the `n` triangles' box (points: `num_points`, indices: 3 per
 /// triangle) into lowers and uppers; the smallest position of an index outside the points
 /// into *bad (i32, atomically lowered; `bad` 0: not recorded, for indices checked before),
-/// whose triangle gets an empty box and reads no point.
+/// whose triangle gets an empty box and reads no point; the smallest index of a point with a
+/// NaN or infinite coordinate into *bad_point (i32, likewise; 0: not checked).
 struct lbvh_triangle_boxes_t {
   u64 points;
   u64 indices;
@@ -112,8 +127,14 @@ struct lbvh_triangle_boxes_t {
   u64 bad;
   i64 n;
   i64 num_points;
+  u64 bad_point;
 };
-static_assert(sizeof(lbvh_triangle_boxes_t) == 56, "lbvh_triangle_boxes_t layout");
+static_assert(sizeof(lbvh_triangle_boxes_t) == 64, "lbvh_triangle_boxes_t layout");
+
+/// Whether every coordinate of `v` is finite (x - x is 0 exactly when x is finite).
+WP_FN bool lbvh_finite(const Vec3& v) {
+  return v.x - v.x == 0.0f && v.y - v.y == 0.0f && v.z - v.z == 0.0f;
+}
 
 /// The order-preserving u32 image of an f32 (negative values reversed below positive ones).
 WP_FN u32 lbvh_ordered(f32 x) {
@@ -290,6 +311,22 @@ extern "C" __global__ void wp_lbvh_hierarchy(wp::lbvh_hierarchy_t s) {
   }
 }
 
+/// The refit's report (by the thread that wrote the root, after every other thread's check):
+/// both check words reset, the first one set raised as a fault of argument 0 or 1.
+__device__ void wp_lbvh_refit_report(const wp::lbvh_refit_t& s) {
+  wp::i32* bad = (wp::i32*)s.bad;
+  wp::ctx_t ctx = s.fault.ctx;
+  for (int a = 0; a < 2; ++a) {
+    const wp::i32 i = atomicExch(&bad[a], 0x7fffffff);
+    if (i == 0x7fffffff || wp::faulted(&ctx) || s.sources[a] == 0) continue;
+    const wp::Vec3 v = ((const wp::Vec3*)s.sources[a])[i];
+    const wp::i64 index[4] = {(wp::i64)i, (wp::i64)wp::f64_to_bits((wp::f64)v.x),
+                              (wp::i64)wp::f64_to_bits((wp::f64)v.y),
+                              (wp::i64)wp::f64_to_bits((wp::f64)v.z)};
+    wp::raise(&ctx, wp::FAULT_NON_FINITE_INPUT, a, 4, index, nullptr);
+  }
+}
+
 extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
   const wp::Vec3* lo = (const wp::Vec3*)s.lowers;
   const wp::Vec3* hi = (const wp::Vec3*)s.uppers;
@@ -299,18 +336,28 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
   const wp::i32* parents = (const wp::i32*)s.parents;
   const wp::i32* prim_ids = (const wp::i32*)s.prim_ids;
   wp::i32* counters = (wp::i32*)s.counters;
+  wp::i32* bad = (wp::i32*)s.bad;
   WP_LBVH_LOOP(k, s.n) {
     const wp::i64 leaf = s.n - 1 + k;
     const wp::i32 p = prim_ids[k];
+    const wp::Vec3 l = lo[p], h = hi[p];
+    // Every primitive is one leaf's: checked once, before this thread arrives anywhere.
+    if (s.check != 0) {
+      if (!wp::lbvh_finite(l)) atomicMin(&bad[0], p);
+      if (!wp::lbvh_finite(h)) atomicMin(&bad[1], p);
+    }
     // The leaf of sorted position k holds [k, k + 1) (the hierarchy wrote the same).
-    __stcg(&nodes[2 * leaf], make_float4(lo[p].x, lo[p].y, lo[p].z, __int_as_float(~(wp::i32)k)));
-    __stcg(&nodes[2 * leaf + 1],
-           make_float4(hi[p].x, hi[p].y, hi[p].z, __int_as_float((wp::i32)k + 1)));
+    __stcg(&nodes[2 * leaf], make_float4(l.x, l.y, l.z, __int_as_float(~(wp::i32)k)));
+    __stcg(&nodes[2 * leaf + 1], make_float4(h.x, h.y, h.z, __int_as_float((wp::i32)k + 1)));
     wp::i32 c = parents[leaf];
     while (c >= 0) {
-      // Publish this subtree's boxes before arriving; the second arrival reads both children.
+      // Publish this subtree's boxes (and checks) before arriving; the second arrival reads
+      // both children.
       __threadfence();
       if (atomicAdd(&counters[c], 1) == 0) break;
+      // The second arrival: the node's last visitor in this refit, which leaves its counter
+      // zero for the next (no fill before a refit).
+      counters[c] = 0;
       __threadfence();
       const float4 a = __ldcg(&nodes[2 * c]), b = __ldcg(&nodes[2 * c + 1]);
       const wp::i32 left = __float_as_int(a.w), right = __float_as_int(b.w);
@@ -334,6 +381,12 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
       __stcg(&nodes[2 * c], make_float4(bl.x, bl.y, bl.z, a.w));
       __stcg(&nodes[2 * c + 1], make_float4(bu.x, bu.y, bu.z, b.w));
       c = parents[c];
+    }
+    // Past the root (c < 0, not a first arrival's break): this thread wrote the root, after
+    // every other thread's boxes and checks (the counters' chain of fences orders them).
+    if (c < 0 && s.bad != 0) {
+      __threadfence();
+      wp_lbvh_refit_report(s);
     }
   }
 }
@@ -366,11 +419,16 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
       continue;
     }
     const wp::Vec3 a = p[ix[3 * f]], b = p[ix[3 * f + 1]], c = p[ix[3 * f + 2]];
-    // Finite points (checked): fminf/fmaxf are the CPU's f32::min/max.
+    // Finite points (checked, here or by the caller): fminf/fmaxf are the CPU's f32::min/max.
     lo[f] = wp::Vec3_new(fminf(fminf(a.x, b.x), c.x), fminf(fminf(a.y, b.y), c.y),
                          fminf(fminf(a.z, b.z), c.z));
     hi[f] = wp::Vec3_new(fmaxf(fmaxf(a.x, b.x), c.x), fmaxf(fmaxf(a.y, b.y), c.y),
                          fmaxf(fmaxf(a.z, b.z), c.z));
+  }
+  if (s.bad_point != 0) {
+    WP_LBVH_LOOP(i, s.num_points) {
+      if (!wp::lbvh_finite(p[i])) atomicMin((wp::i32*)s.bad_point, (wp::i32)i);
+    }
   }
 }
 #undef WP_LBVH_LOOP

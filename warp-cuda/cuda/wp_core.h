@@ -537,6 +537,7 @@ enum fault_kind : i32 {
   // 4 is FAULT_ADSTACK_OVERFLOW (wp_adjoint_core.h).
   FAULT_NON_FINITE = 5,
   FAULT_TILE_INDEX = 6,
+  FAULT_NON_FINITE_INPUT = 7,
 };
 
 /// The first fault of the launches that share a record, filled by the first faulting thread
@@ -549,7 +550,11 @@ enum fault_kind : i32 {
 /// index[0] is the step, shape all 0. NonFinite (a NaN or infinite volume sample position,
 /// warp_core::FaultKind::NonFinite): ndim 3, index[0..3] are the coordinates' f64 bit
 /// patterns (x, y, z), shape all 0. TileIndex (an index outside a tile, wp_tile.h): index and
-/// shape hold `ndim` entries (the tile's rank). Unused entries are 0.
+/// shape hold `ndim` entries (the tile's rank). NonFiniteInput (an element with a NaN or
+/// infinite coordinate in an input of a host object's build step, warp_core::FaultKind::
+/// NonFiniteInput): arg is the operation's argument (its index in the names the runtime
+/// gives the step), ndim 4, index[0] the element's index and index[1..4] its coordinates' f64
+/// bit patterns, shape all 0. Unused entries are 0.
 struct fault_t {
   i32 kind;
   i32 arg;
@@ -578,6 +583,16 @@ struct ctx_t {
   u64 launch;
 };
 static_assert(sizeof(ctx_t) == 32 && alignof(ctx_t) == 8, "ctx_t layout");
+
+/// The fault context of a host object's build step whose kernel raises faults (40 bytes, in
+/// the step's record): the ctx_t its threads raise with (the runtime fills fault, fault_flag,
+/// kernel and launch before the launch; raised is 0), then `names`, the runtime's own (what
+/// it names the fault's operation and arguments by; never read here).
+struct step_fault_t {
+  ctx_t ctx;
+  u64 names;
+};
+static_assert(sizeof(step_fault_t) == 40 && alignof(step_fault_t) == 8, "step_fault_t layout");
 
 WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
   ctx_t c;

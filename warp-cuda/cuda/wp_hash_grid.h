@@ -220,8 +220,8 @@ WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* star
 // generic object-step launcher, which compiles this header with WP_HASH_GRID_BUILD defined once
 // per GPU; kernels that only query a grid do not get them). Each takes one record, laid out as
 // the Rust step's `#[repr(C)]` struct (both sides assert the size). Grid-stride loops, one
-// element per thread; nothing here can fault (every index is in range by construction: n
-// points, keys in [0, buckets)).
+// element per thread; no index can be out of range (by construction: n points, keys in
+// [0, buckets)); the one fault is a recorded build's report of a non-finite point.
 #if defined(WP_HASH_GRID_BUILD)
 namespace wp {
 /// HashGridKeys: points (Vec3*), n, dims, inv, keys (i32*), values (i32*), bad (i32*).
@@ -235,7 +235,10 @@ struct hash_grid_keys_t {
   u64 bad;
 };
 static_assert(sizeof(hash_grid_keys_t) == 56, "hash_grid_keys_t layout");
-/// HashGridRanges: keys (sorted i32*), starts, ends (i32*, buckets each), n, buckets, clear.
+/// HashGridRanges: keys (sorted i32*), starts, ends (i32*, buckets each), n, buckets, clear;
+/// bad (the keys step's i32*, or 0): reset to INT_MAX, and the point of `points` (Vec3*) it
+/// names reported as a fault (argument 0) with the `fault` context: a build recorded into a
+/// graph, which cannot read the word back.
 struct hash_grid_ranges_t {
   u64 keys;
   u64 starts;
@@ -244,8 +247,11 @@ struct hash_grid_ranges_t {
   i32 buckets;
   i32 clear;
   i32 pad;
+  u64 bad;
+  u64 points;
+  step_fault_t fault;
 };
-static_assert(sizeof(hash_grid_ranges_t) == 40, "hash_grid_ranges_t layout");
+static_assert(sizeof(hash_grid_ranges_t) == 96, "hash_grid_ranges_t layout");
 }  // namespace wp
 #endif
 
@@ -263,11 +269,23 @@ extern "C" __global__ void wp_hash_grid_keys(wp::hash_grid_keys_t s) {
   }
 }
 /// Bucket ranges from the sorted keys (starts and ends zeroed before), or with `clear` != 0
-/// their zeroing.
+/// their zeroing; with `bad`, the keys step's report (by one thread: the word was written by
+/// an earlier launch).
 extern "C" __global__ void wp_hash_grid_ranges(wp::hash_grid_ranges_t s) {
   const wp::i64 stride = (wp::i64)blockDim.x * gridDim.x;
   for (wp::i64 k = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; k < s.n; k += stride)
     wp::hash_grid_build_range((const wp::i32*)s.keys, s.n, (wp::i32)k, (wp::i32*)s.starts,
                               (wp::i32*)s.ends, s.buckets, s.clear != 0);
+  if (s.bad != 0 && blockIdx.x == 0 && threadIdx.x == 0) {
+    const wp::i32 i = atomicExch((wp::i32*)s.bad, 0x7fffffff);
+    if (i != 0x7fffffff) {
+      const wp::Vec3 p = ((const wp::Vec3*)s.points)[i];
+      const wp::i64 index[4] = {(wp::i64)i, (wp::i64)wp::f64_to_bits((wp::f64)p.x),
+                                (wp::i64)wp::f64_to_bits((wp::f64)p.y),
+                                (wp::i64)wp::f64_to_bits((wp::f64)p.z)};
+      wp::ctx_t ctx = s.fault.ctx;
+      wp::raise(&ctx, wp::FAULT_NON_FINITE_INPUT, 0, 4, index, nullptr);
+    }
+  }
 }
 #endif

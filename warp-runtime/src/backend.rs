@@ -229,6 +229,57 @@ pub(crate) unsafe trait ObjectStep: Copy + Send + Sync {
     fn len(&self) -> usize;
     /// The step on the CPU (rayon), on host memory.
     fn run_cpu(&self) -> Result<()>;
+    /// The fault context in the record of a step whose kernel raises faults (`None`, the
+    /// default: the step raises none). The GPU backend fills it before queuing the step (the
+    /// calling thread's fault record, or the capture's; a kernel id for its names; the
+    /// step's launch number), so that a fault the step raises is reported at the next
+    /// synchronisation, or a graph replay's, like a kernel's. On the CPU, `run_cpu` returns
+    /// the fault itself.
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
+    fn fault_slot(&mut self) -> Option<&mut StepFault> {
+        None
+    }
+}
+
+/// The fault context of a build step whose kernel raises faults (`wp::step_fault_t`: a
+/// `wp::ctx_t`, then the names), part of the step's record.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub(crate) struct StepFault {
+    /// The `wp::ctx_t` the step's threads raise with: fault record and flag addresses,
+    /// `raised` (0), the kernel id of `names`, the launch number (the GPU backend's to fill;
+    /// zeros on the CPU).
+    pub(crate) ctx: [u64; 4],
+    /// What the step's faults are named by: the operation (`Bvh::refit`) as the kernel and
+    /// its arguments by index (the kernel never reads it).
+    pub(crate) names: &'static KernelInfo,
+}
+
+const _: () = assert!(std::mem::size_of::<StepFault>() == 40);
+
+impl StepFault {
+    /// A context naming faults by `names`, to be filled by the GPU backend.
+    pub(crate) const fn new(names: &'static KernelInfo) -> StepFault {
+        StepFault { ctx: [0; 4], names }
+    }
+
+    /// Fills the context: the fault record at `fault`, its flag at `flag`, the kernel id
+    /// `kernel` (of `names`), the launch number `launch`.
+    // Called by the CUDA backend alone.
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
+    pub(crate) fn fill(&mut self, fault: u64, flag: u64, kernel: i32, launch: u64) {
+        // ctx_t: 0 fault, 8 fault_flag, 16 raised (i32, 0) and 20 kernel (i32), 24 launch.
+        self.ctx = [fault, flag, ((kernel as u32 as u64) << 32), launch];
+    }
+}
+
+impl std::fmt::Debug for StepFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StepFault")
+            .field("ctx", &self.ctx)
+            .field("names", &self.names.name)
+            .finish()
+    }
 }
 
 /// A host object's CUDA build library: a section of the CUDA library whose header, with its

@@ -20,6 +20,10 @@ pub(crate) struct Active {
     pub(crate) keep: Vec<Keep>,
     /// Kernel launches recorded (forward and adjoint).
     pub(crate) launches: usize,
+    /// The host objects' buffers this capture writes (see [`adopt`]), by address.
+    adopted: Vec<usize>,
+    /// The capture's number, distinct from every other capture's in the process ([`id`]).
+    id: u64,
 }
 
 impl Active {
@@ -29,6 +33,11 @@ impl Active {
             device,
             keep: Vec::new(),
             launches: 0,
+            adopted: Vec::new(),
+            id: {
+                static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+                NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            },
         }
     }
 }
@@ -43,6 +52,13 @@ thread_local! {
 #[inline]
 pub(crate) fn capturing() -> bool {
     CAPTURING.with(Cell::get)
+}
+
+/// The number of the calling thread's capture, if it captures: an object may note which
+/// capture recorded its last operation (what it knows of its buffers holds within that
+/// capture's replays only).
+pub(crate) fn id() -> Option<u64> {
+    with_active(|a| a.id)
 }
 
 /// The device the calling thread captures on, if it captures.
@@ -73,6 +89,36 @@ pub(crate) fn check_device(device: &Device, what: &dyn Fn() -> String) -> Result
 /// for as long as the graph, so that a replay never touches freed memory.
 pub(crate) fn keep(uses: Keep) {
     with_active(|a| a.keep.push(uses));
+}
+
+/// Whether a host object may write the buffers `shared` (its `Arc`) in place in the calling
+/// thread's capture, and if so makes them the capture's: when no one else holds them (the
+/// object's own), or when this capture adopted them before. An object's operation recorded
+/// into a graph (a hash grid's build, a BVH's refit) writes its buffers in place at every
+/// replay, so the launches recorded after it (which hold the same buffers) see its result;
+/// buffers shared with a clone made before the capture (a tape's) are refused, as that clone
+/// must keep what it holds (the object's copy-on-write, which would allocate). Adopted
+/// buffers are kept alive for the graph (their address names them until it is dropped).
+///
+/// A launch recorded into the capture adopts the host objects it takes this way before the
+/// graph keeps their clones (`HostObject::adopt_in_capture`), so that a frame may query an
+/// object before it rebuilds it.
+pub(crate) fn adopt<T: Send + Sync + 'static>(shared: &std::sync::Arc<T>) -> bool {
+    let address = std::sync::Arc::as_ptr(shared) as usize;
+    // (No weak references to the objects' buffers are made: the strong count is every holder.)
+    let own = std::sync::Arc::strong_count(shared) == 1;
+    with_active(|a| {
+        if a.adopted.contains(&address) {
+            return true;
+        }
+        if !own {
+            return false;
+        }
+        a.adopted.push(address);
+        a.keep.push(Box::new(std::sync::Arc::clone(shared)));
+        true
+    })
+    .unwrap_or(own)
 }
 
 /// Counts a kernel launch recorded into the calling thread's capture.

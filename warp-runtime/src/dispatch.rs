@@ -237,8 +237,9 @@ pub(crate) fn launch_adjoint<K: Kernel>(
 
 /// An operation (`what`) that `run` enqueues on `device`'s backend, using the memory of
 /// `uses()` by address: run now, or inside the calling thread's capture recorded (on the
-/// capture's device only), with `uses()` kept for the graph's replays.
-fn enqueue(
+/// capture's device only), with `uses()` kept for the graph's replays. (A host object's
+/// operation of its own, a CPU tree's refit, is one too.)
+pub(crate) fn enqueue(
     device: &Device,
     what: &str,
     uses: impl FnOnce() -> Keep,

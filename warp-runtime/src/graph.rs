@@ -5,7 +5,10 @@
 //! read-back is recorded instead of run: kernel launches (forward and adjoint, so a tape's
 //! backward pass can be captured too), array fills and copies, the parallel primitives (scan,
 //! reductions, radix sort, compaction: with a device count, a replay reads the count then) and
-//! the host objects' builds that read nothing back ([`HashGrid::build`](crate::HashGrid::build)).
+//! the host objects' operations that read nothing back ([`HashGrid::build`](crate::HashGrid::build),
+//! [`Bvh::refit`](crate::Bvh::refit), [`Mesh::refit`](crate::Mesh::refit): each replay builds
+//! or refits the object in place, as often as the capture did; a check of their input that
+//! would read a flag back is a fault raised on the device instead).
 //! [`Graph::launch`] replays them in order. Capture goes through the backend seam
 //! (`backend.rs`): on a GPU the recording is a CUDA graph (stream capture: a replay is one
 //! `cuGraphLaunch`); on the CPU it is the list of recorded operations, run one after the

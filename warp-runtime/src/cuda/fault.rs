@@ -177,6 +177,15 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
                 .map(|k| f64::from_bits(i64_at(8 + 8 * k) as u64))
                 .collect(),
         },
+        // wp_core.h FAULT_NON_FINITE_INPUT: the element's index, then its coordinates as f64
+        // bit patterns.
+        7 => FaultKind::NonFiniteInput {
+            arg: info.params.get(arg as usize).copied().unwrap_or("?"),
+            index: i64_at(8) as usize,
+            values: (1..ndim)
+                .map(|k| f64::from_bits(i64_at(8 + 8 * k) as u64))
+                .collect(),
+        },
         // wp_core.h FAULT_TILE_INDEX: an index outside a tile of rank `ndim`.
         6 => {
             let mut index = [0i64; 4];
@@ -369,4 +378,68 @@ pub(crate) fn check(pool: &RecordPool, ordinal: usize, idle: bool) -> Result<()>
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record as `wp::raise` fills it: kind, arg, index[4], shape[4], ndim, kernel, launch,
+    /// then the flag.
+    fn record(
+        kind: i32,
+        arg: i32,
+        index: [i64; 4],
+        ndim: i32,
+        kernel: i32,
+        launch: u64,
+    ) -> [u8; BYTES] {
+        let mut rec = [0u8; BYTES];
+        rec[0..4].copy_from_slice(&kind.to_le_bytes());
+        rec[4..8].copy_from_slice(&arg.to_le_bytes());
+        for (k, v) in index.iter().enumerate() {
+            rec[8 + 8 * k..16 + 8 * k].copy_from_slice(&v.to_le_bytes());
+        }
+        rec[72..76].copy_from_slice(&ndim.to_le_bytes());
+        rec[76..80].copy_from_slice(&kernel.to_le_bytes());
+        rec[80..88].copy_from_slice(&launch.to_le_bytes());
+        rec[RECORD_BYTES..RECORD_BYTES + 4].copy_from_slice(&1u32.to_le_bytes());
+        rec
+    }
+
+    #[test]
+    fn a_build_steps_non_finite_input_names_its_argument_index_and_values() {
+        static NAMES: KernelInfo = KernelInfo {
+            name: "Bvh::refit",
+            params: &["lowers", "uppers"],
+            ..KernelInfo::BLANK
+        };
+        let id = kernel_id(&NAMES);
+        let bits = |x: f32| f64::from(x).to_bits() as i64;
+        let rec = record(
+            7,
+            1,
+            [12, bits(0.5), bits(f32::NAN), bits(f32::NEG_INFINITY)],
+            4,
+            id,
+            41,
+        );
+        let f = decode(&rec, None);
+        assert_eq!((f.kernel, f.launch), ("Bvh::refit", Some(LaunchId(41))));
+        match &f.kind {
+            FaultKind::NonFiniteInput { arg, index, values } => {
+                assert_eq!((*arg, *index), ("uppers", 12));
+                assert_eq!(values.len(), 3);
+                assert_eq!(values[0], 0.5);
+                assert!(values[1].is_nan() && values[2] == f64::NEG_INFINITY);
+            }
+            k => panic!("{k:?}"),
+        }
+        let msg = f.to_string();
+        assert!(
+            msg.starts_with("`Bvh::refit`: argument `uppers` has a non-finite value at index 12")
+                && msg.ends_with("(launch #41)"),
+            "{msg}"
+        );
+    }
 }

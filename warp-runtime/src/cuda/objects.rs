@@ -8,11 +8,12 @@
 //! Inside a capture a step's launch goes on the capture stream; its library and kernel must
 //! be loaded before (a module load would break the capture).
 
-use super::gpu;
+use super::{fault, gpu};
 use crate::backend::{ObjectLibrary, ObjectStep};
 use crate::config;
 use crate::device::Device;
 use crate::error::Result;
+use crate::kernel::KernelInfo;
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -116,6 +117,18 @@ fn loaded(device: &Device, ordinal: usize, lib: &'static ObjectLibrary) -> Resul
         .clone())
 }
 
+/// The kernel id (`fault::kernel_id`) the faults of build steps named by `names` carry: one
+/// per names, made at their first use.
+fn names_id(names: &'static KernelInfo) -> i32 {
+    static IDS: OnceLock<Mutex<HashMap<usize, i32>>> = OnceLock::new();
+    let mut ids = IDS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    *ids.entry(names as *const KernelInfo as usize)
+        .or_insert_with(|| fault::kernel_id(names))
+}
+
 /// [`Backend::object_step`](crate::backend::Backend::object_step) on a GPU: queues the step's
 /// kernel over `step.len()` elements with the record as its one argument.
 pub(super) fn object_step<S: ObjectStep>(device: &Device, ordinal: usize, step: &S) -> Result<()> {
@@ -143,6 +156,13 @@ pub(super) fn object_step<S: ObjectStep>(device: &Device, ordinal: usize, step: 
     // At most 2^16 blocks: the kernels loop over the rest.
     let blocks = n.div_ceil(THREADS as usize).min(1 << 16) as u32;
     let mut record = *step;
+    if let Some(slot) = record.fault_slot() {
+        // A step that raises faults is a launch of its own: its faults go to the calling
+        // thread's record (the capture's, inside one) under its names and this number.
+        let launch = crate::launch_id::next();
+        let (fault, flag) = fault::with_record(&st.faults, ordinal, launch, |r| r.addresses())?;
+        slot.fill(fault, flag, names_id(slot.names), launch.0);
+    }
     let mut params = [&mut record as *mut S as *mut c_void];
     st.queue(ordinal, None, |stream| {
         // SAFETY: the kernel takes one parameter, the C++ struct `S` is laid out as

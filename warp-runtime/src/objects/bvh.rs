@@ -9,20 +9,21 @@
 //! Warp's `bvh.lowers`): a kernel may move the boxes, then [`Bvh::refit`] recomputes the
 //! tree's boxes from them, keeping its shape.
 //!
-//! # Where the tree is built
+//! # Where the tree is built and refit
 //!
-//! Every device builds on the host, with the binned SAH builder of
-//! [`bvh_build`](super::bvh_build): on a GPU the boxes are copied to the host, the tree built
-//! there and its three buffers uploaded; a refit likewise (the boxes down, the nodes up). This
-//! is the interim path: a GPU LBVH build and refit (kernels of `wp_bvh.h`, through
-//! `dispatch::object_step` like the hash grid's) is a separate task and changes nothing here
-//! but the two build functions of `Tree`. The host keeps a copy of the tree, so a GPU refit
-//! reads back only the boxes.
+//! Where its device is: the CPU builds with the binned SAH builder of
+//! [`bvh_build`](super::bvh_build) and refits the nodes in place, in one host operation that
+//! checks the boxes first; a GPU builds a linear BVH with the kernels of `wp_bvh_build.h`
+//! (`lbvh.rs`) and refits with one of them, which checks the boxes it reads and raises the
+//! first non-finite one as a fault. Either way a refit allocates nothing and reads nothing
+//! back, so a capture records it.
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps of a launch's BVH) shares the
-//! tree; a refit gives the refit BVH a new node buffer, so a recorded launch replays in
-//! backward against the tree it ran with. (The boxes themselves are the user's arrays, which a
-//! replay reads as they are then, like any array argument.)
+//! tree; a refit of a shared tree gives the refit BVH a new node buffer, so a recorded launch
+//! replays in backward against the tree it ran with. (The boxes themselves are the user's
+//! arrays, which a replay reads as they are then, like any array argument.) Inside a capture
+//! the refit writes the tree in place at each replay (the launches recorded after it hold the
+//! same tree), which a clone made before the capture would see: it is refused then.
 
 use std::sync::Arc;
 
@@ -31,14 +32,16 @@ use warp_core::objects::bvh::{BvhNode, BvhTree};
 use warp_core::objects::BvhView;
 use warp_core::ArrayView;
 
-use super::bvh_build::{build_sah, refit as refit_nodes, BuiltBvh};
+use super::bvh_build::{build_sah, refit as refit_nodes, triangle_boxes, BuiltBvh};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
-use super::lbvh::{self, Lbvh, LbvhTree};
+use super::lbvh::{self, Lbvh, LbvhTree, RefitCheck};
 use super::HostObject;
 use crate::array::Array;
+use crate::capturing::{self, Keep};
 use crate::device::Device;
+use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::kernel::ArgCtx;
+use crate::kernel::{ArgCtx, KernelInfo};
 
 /// An `InvalidArgument` from `what` (`"Bvh::new"`) about its argument `arg`.
 pub(crate) fn bad(what: &str, arg: &str, why: impl std::fmt::Display) -> Error {
@@ -96,12 +99,55 @@ pub(crate) fn contiguous<T: crate::array::Element>(
     ))
 }
 
+/// What a BVH's refit names its faults by (the GPU's check of the boxes: argument 0 is
+/// `lowers`, 1 `uppers`).
+pub(crate) static BVH_REFIT: KernelInfo = KernelInfo {
+    name: "Bvh::refit",
+    module: "warp_lang::objects",
+    params: &["lowers", "uppers"],
+    ..KernelInfo::BLANK
+};
+
+/// What a mesh's refit names its faults by (the GPU's check of the points).
+pub(crate) static MESH_REFIT: KernelInfo = KernelInfo {
+    name: "Mesh::refit",
+    module: "warp_lang::objects",
+    params: &["points"],
+    ..KernelInfo::BLANK
+};
+
+/// What a tree is refit from.
+#[derive(Clone, Copy)]
+pub(crate) enum RefitFrom<'a> {
+    /// A BVH's boxes (as many as the tree's primitives).
+    Boxes {
+        lowers: &'a Array<Vec3>,
+        uppers: &'a Array<Vec3>,
+    },
+    /// A mesh's triangles: its points and its own indices (checked against the points'
+    /// count at the mesh's build; the points are as many).
+    Triangles {
+        points: &'a Array<Vec3>,
+        indices: &'a Array<i32>,
+    },
+}
+
+impl RefitFrom<'_> {
+    /// The arrays the refit reads, kept by a graph that records it.
+    fn uses(&self) -> Keep {
+        match *self {
+            RefitFrom::Boxes { lowers, uppers } => Box::new([lowers.clone(), uppers.clone()]),
+            RefitFrom::Triangles { points, indices } => Box::new((points.clone(), indices.clone())),
+        }
+    }
+}
+
 /// A built tree on one device.
 ///
 /// Built where its device is: on the CPU by the binned SAH builder (better trees, and the CPU
-/// has the cores for it), which keeps a host copy that a refit starts from; on a GPU as a
-/// linear BVH by the kernels of `wp_bvh_build.h` (`lbvh.rs`), which never leaves the GPU.
-/// `parents` and `prim_ids` never change after a build, so refit trees share them.
+/// has the cores for it), refit there in place; on a GPU as a linear BVH by the kernels of
+/// `wp_bvh_build.h` (`lbvh.rs`), which never leaves the GPU. `parents` and `prim_ids` never
+/// change after a build, so the copy a shared tree's refit makes shares them.
 pub(crate) struct Tree {
     /// The nodes on the device, two `Vec4`s (32 bytes, 16-aligned) per `BvhNode`.
     nodes: Array<Vec4>,
@@ -109,17 +155,35 @@ pub(crate) struct Tree {
     prim_ids: Array<i32>,
     num_nodes: usize,
     num_prims: usize,
-    /// The host copy of a tree built on the host (`None` for a GPU-built tree).
-    host: Option<HostTree>,
-    /// A device-built tree's refit scratch, kept between refits.
-    scratch: std::sync::Mutex<Option<Lbvh>>,
+    /// A GPU-built tree's refit state (`None` for a tree built on the host, the CPU's).
+    device_refit: Option<DeviceRefit>,
 }
 
-/// The host copy of a host-built tree.
-struct HostTree {
-    nodes: Vec<BvhNode>,
-    parents: Arc<Vec<i32>>,
-    prim_ids: Arc<Vec<i32>>,
+/// What a GPU tree's refit uses, made with the tree: a refit allocates nothing.
+struct DeviceRefit {
+    /// One counter per node, zero between refits (each refit leaves them so).
+    counters: Array<i32>,
+    /// The refit's two check words (`lbvh::RefitCheck`), `i32::MAX` between refits.
+    bad: Array<i32>,
+    /// A mesh's triangle boxes, the refit's input (its first step writes them); `None` for a
+    /// BVH, whose boxes are the user's arrays.
+    boxes: Option<[Array<Vec3>; 2]>,
+}
+
+impl DeviceRefit {
+    /// The state of a tree of `nodes` nodes on `device`, with room for `faces` triangle boxes
+    /// for a mesh's tree.
+    fn new(nodes: usize, faces: Option<usize>, device: &Device) -> Result<DeviceRefit> {
+        Ok(DeviceRefit {
+            counters: Array::zeros(nodes, device)?,
+            bad: Array::from_slice(&[i32::MAX; 2], device)?,
+            // Written whole by the refit's first step.
+            boxes: match faces {
+                Some(f) => Some([Array::empty(f, device)?, Array::empty(f, device)?]),
+                None => None,
+            },
+        })
+    }
 }
 
 /// The nodes as the device buffer holds them.
@@ -129,7 +193,7 @@ fn node_words(nodes: &[BvhNode]) -> &[Vec4] {
 
 impl Tree {
     /// A tree over the boxes `[lowers[i], uppers[i]]` (validated by the caller: equal lengths,
-    /// finite, at most [`MAX_PRIMS`]), built on the host and uploaded to `device`.
+    /// finite, at most [`MAX_PRIMS`]), built on the host and uploaded to `device` (the CPU).
     pub(crate) fn build_on_host(lowers: &[Vec3], uppers: &[Vec3], device: &Device) -> Result<Tree> {
         let BuiltBvh {
             nodes,
@@ -142,23 +206,20 @@ impl Tree {
             prim_ids: Array::from_slice(&prim_ids, device)?,
             num_nodes: nodes.len(),
             num_prims: prim_ids.len(),
-            host: Some(HostTree {
-                nodes,
-                parents: Arc::new(parents),
-                prim_ids: Arc::new(prim_ids),
-            }),
-            scratch: Default::default(),
+            device_refit: None,
         })
     }
 
     /// A linear BVH over the boxes (contiguous, equal lengths, at most [`MAX_PRIMS`]: checked
     /// by the caller; non-finite corners give a tree that the caller refuses), with leaves of
     /// up to `leaf_size` boxes, built on their device without leaving it (queued: nothing
-    /// waits).
+    /// waits). `mesh`: the boxes are a mesh's triangle boxes, which the tree keeps for its
+    /// refits to write (else they are the user's, which a refit reads).
     pub(crate) fn build_on_device(
         lowers: &Array<Vec3>,
         uppers: &Array<Vec3>,
         leaf_size: usize,
+        mesh: bool,
     ) -> Result<Tree> {
         let device = lowers.device();
         let n = lowers.len();
@@ -170,100 +231,233 @@ impl Tree {
             prim_ids: Array::empty(n, device)?,
             num_nodes: count,
             num_prims: n,
-            host: None,
-            scratch: Default::default(),
+            device_refit: Some(DeviceRefit {
+                boxes: mesh.then(|| [lowers.clone(), uppers.clone()]),
+                ..DeviceRefit::new(count, None, device)?
+            }),
         };
+        let refit = tree.device_refit.as_ref().expect("made above");
         Lbvh::new(device)?.build(
             lowers,
             uppers,
-            &tree.lbvh_buffers(&tree.nodes.reinterpret()?),
+            &tree.lbvh_buffers(&tree.nodes.reinterpret()?, refit),
             leaf_size,
         )?;
         Ok(tree)
     }
 
-    /// The buffers as the LBVH builder takes them (`nodes`: this tree's or a refit's).
-    fn lbvh_buffers<'a>(&'a self, nodes: &'a Array<i32>) -> LbvhTree<'a> {
+    /// The buffers as the LBVH builder takes them (`nodes`: this tree's, reinterpreted).
+    fn lbvh_buffers<'a>(&'a self, nodes: &'a Array<i32>, refit: &'a DeviceRefit) -> LbvhTree<'a> {
         LbvhTree {
             nodes,
             parents: &self.parents,
             prim_ids: &self.prim_ids,
+            counters: &refit.counters,
         }
     }
 
-    /// This host-built tree's shape with its boxes recomputed on the host from the primitive
-    /// boxes (as many as when built): a new node buffer, the parents and primitive ids
-    /// shared.
-    pub(crate) fn refit_on_host(&self, lowers: &[Vec3], uppers: &[Vec3]) -> Result<Tree> {
-        let host = self
-            .host
-            .as_ref()
-            .expect("a tree built on the host refits there");
-        debug_assert_eq!(lowers.len(), self.num_prims);
-        let mut nodes = host.nodes.clone();
-        if self.num_prims == 0 {
-            // The empty tree keeps its inverted box.
-            nodes = vec![BvhNode::EMPTY];
-        } else {
-            refit_nodes(&mut nodes, &host.parents, &host.prim_ids, lowers, uppers);
-        }
+    /// A copy of this tree with a node buffer (and refit state) of its own, the parents and
+    /// primitive ids shared: what a refit of a shared tree writes (copy-on-write).
+    fn copy(&self) -> Result<Tree> {
+        let device = self.nodes.device();
+        let nodes = Array::<Vec4>::empty(self.nodes.len(), device)?;
+        nodes.copy_from(&self.nodes)?;
+        let device_refit = match &self.device_refit {
+            Some(r) => Some(DeviceRefit::new(
+                self.num_nodes,
+                r.boxes.as_ref().map(|b| b[0].len()),
+                device,
+            )?),
+            None => None,
+        };
         Ok(Tree {
-            nodes: Array::from_slice(node_words(&nodes), self.nodes.device())?,
+            nodes,
             parents: self.parents.clone(),
             prim_ids: self.prim_ids.clone(),
             num_nodes: self.num_nodes,
             num_prims: self.num_prims,
-            host: Some(HostTree {
-                nodes,
-                parents: Arc::clone(&host.parents),
-                prim_ids: Arc::clone(&host.prim_ids),
-            }),
-            scratch: Default::default(),
+            device_refit,
         })
     }
 
-    /// This device-built tree's boxes recomputed on its device from the primitive boxes (as
-    /// many as when built; queued): in place when `tree` is not shared (no tape holds a clone:
-    /// nothing else can see the change), else into a new node buffer, the parents and
-    /// primitive ids shared. The scratch of the refit is kept for the next.
-    pub(crate) fn refit_on_device(
-        tree: &mut Arc<Tree>,
-        lowers: &Array<Vec3>,
-        uppers: &Array<Vec3>,
-    ) -> Result<()> {
-        debug_assert!(tree.host.is_none() && lowers.len() == tree.num_prims);
-        if tree.num_prims == 0 {
+    /// Recomputes the tree's boxes from `from`, keeping its shape, where the tree is (the
+    /// CPU: on the host; a GPU: one or two steps there, queued). In place when `tree` is not
+    /// shared; a shared tree (a clone, a tape's, holds it) is copied first, so the clone
+    /// keeps what it holds. Allocates and reads back nothing otherwise: inside a capture the
+    /// refit is recorded, writing in place at each replay (see `capturing::adopt`).
+    ///
+    /// Non-finite input is an [`Error::InvalidArgument`] on the CPU, checked before the tree is
+    /// written (it is left as it was); on a GPU a fault ([`FaultKind::NonFiniteInput`](
+    /// warp_core::FaultKind::NonFiniteInput)) that the refit's step raises, reported at the
+    /// next synchronisation, after the tree was refit from what it read.
+    pub(crate) fn refit(tree: &mut Arc<Tree>, from: RefitFrom<'_>) -> Result<()> {
+        let what = match from {
+            RefitFrom::Boxes { .. } => BVH_REFIT.name,
+            RefitFrom::Triangles { .. } => MESH_REFIT.name,
+        };
+        if capturing::capturing() {
+            capturing::check_device(tree.nodes.device(), &|| format!("`{what}`"))?;
+            if !capturing::adopt(&*tree) {
+                return Err(Error::Capture {
+                    what: format!(
+                        "{what} inside a capture writes the tree in place, but a clone made \
+                         before the capture (a tape's) shares it and must keep it: the copy \
+                         it would write allocates (refit once before capturing, or drop the \
+                         clone)"
+                    ),
+                });
+            }
+        } else if Arc::get_mut(tree).is_none() {
+            *tree = Arc::new(tree.copy()?);
+        }
+        match tree.device_refit {
+            None => tree.refit_on_host(from),
+            Some(_) => tree.refit_on_device(from),
+        }
+    }
+
+    /// [`Tree::refit`] of a CPU tree: one host operation (recorded inside a capture), which
+    /// checks the input, then refits the nodes in place.
+    fn refit_on_host(&self, from: RefitFrom<'_>) -> Result<()> {
+        let device = self.nodes.device();
+        debug_assert!(device.is_cpu());
+        // The operation reads and writes the arrays by address (CPU memory), as a build step
+        // does: they live as long as this tree, or the graph that records it.
+        let at = |a: u64| a as usize;
+        let (nodes, parents, ids) = (
+            at(self.nodes.device_address()),
+            at(self.parents.device_address()),
+            at(self.prim_ids.device_address()),
+        );
+        let (num_nodes, num_prims) = (self.num_nodes, self.num_prims);
+        let uses = || -> Keep {
+            Box::new((
+                [&self.parents, &self.prim_ids].map(Array::clone),
+                self.nodes.clone(),
+                from.uses(),
+            ))
+        };
+        // SAFETY (of the slices below): the addresses are of contiguous CPU arrays of these
+        // lengths, alive for the operation's every run (the tree, or the graph's keep); the
+        // refit is the only writer of the nodes while it runs (one thread runs it, in order
+        // with the launches that read the tree).
+        let refit = move |lo: &[Vec3], hi: &[Vec3]| {
+            if num_prims == 0 {
+                // The empty tree keeps its one inverted node.
+                return;
+            }
+            let (nodes, parents, ids) = unsafe {
+                (
+                    std::slice::from_raw_parts_mut(nodes as *mut BvhNode, num_nodes),
+                    std::slice::from_raw_parts(parents as *const i32, num_nodes),
+                    std::slice::from_raw_parts(ids as *const i32, num_prims),
+                )
+            };
+            refit_nodes(nodes, parents, ids, lo, hi);
+        };
+        match from {
+            RefitFrom::Boxes { lowers, uppers } => {
+                debug_assert!(lowers.len() == num_prims && uppers.len() == num_prims);
+                let (lo, hi) = (at(lowers.device_address()), at(uppers.device_address()));
+                dispatch::enqueue(device, BVH_REFIT.name, uses, move |_| {
+                    let (lo, hi) = unsafe {
+                        (
+                            std::slice::from_raw_parts(lo as *const Vec3, num_prims),
+                            std::slice::from_raw_parts(hi as *const Vec3, num_prims),
+                        )
+                    };
+                    for (name, v) in [("lowers", lo), ("uppers", hi)] {
+                        if let Some((i, p)) = first_non_finite(v) {
+                            return Err(bad(
+                                BVH_REFIT.name,
+                                name,
+                                format!("has a non-finite corner at index {i}: {p:?}"),
+                            ));
+                        }
+                    }
+                    refit(lo, hi);
+                    Ok(())
+                })
+            }
+            RefitFrom::Triangles { points, indices } => {
+                let num_points = points.len();
+                debug_assert_eq!(indices.len(), 3 * num_prims);
+                let (p, ix) = (at(points.device_address()), at(indices.device_address()));
+                dispatch::enqueue(device, MESH_REFIT.name, uses, move |_| {
+                    let (p, ix) = unsafe {
+                        (
+                            std::slice::from_raw_parts(p as *const Vec3, num_points),
+                            std::slice::from_raw_parts(ix as *const i32, 3 * num_prims),
+                        )
+                    };
+                    if let Some((i, v)) = first_non_finite(p) {
+                        return Err(bad(
+                            MESH_REFIT.name,
+                            "points",
+                            format!("has a non-finite point at index {i}: {v:?}"),
+                        ));
+                    }
+                    // The mesh checked its indices at its build, but they are an array a
+                    // kernel may have written since (`Mesh::indices`).
+                    let (lo, hi) = triangle_boxes(p, ix).map_err(|k| {
+                        bad(
+                            MESH_REFIT.name,
+                            "indices",
+                            format!(
+                                "has {} at position {k}, outside the {num_points} points (the \
+                                 mesh's indices were written after its build)",
+                                ix[k]
+                            ),
+                        )
+                    })?;
+                    refit(&lo, &hi);
+                    Ok(())
+                })
+            }
+        }
+    }
+
+    /// [`Tree::refit`] of a GPU tree: the refit's step (a mesh's: its triangle boxes' step
+    /// first), which checks the input and reports what it finds as a fault.
+    fn refit_on_device(&self, from: RefitFrom<'_>) -> Result<()> {
+        let r = self.device_refit.as_ref().expect("a GPU tree");
+        if self.num_prims == 0 {
             return Ok(());
         }
-        let device = tree.nodes.device().clone();
-        let scratch = tree
-            .scratch
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take();
-        let mut lbvh = match scratch {
-            Some(l) => l,
-            None => Lbvh::new(&device)?,
+        let nodes = self.nodes.reinterpret()?;
+        let buffers = self.lbvh_buffers(&nodes, r);
+        let uses = || -> Keep {
+            Box::new((
+                [&self.parents, &self.prim_ids, &r.counters, &r.bad].map(Array::clone),
+                self.nodes.clone(),
+                r.boxes.clone(),
+                from.uses(),
+            ))
         };
-        let result = if let Some(t) = Arc::get_mut(tree) {
-            lbvh.refit(lowers, uppers, &t.lbvh_buffers(&t.nodes.reinterpret()?))
-        } else {
-            let nodes = Array::<Vec4>::empty(tree.nodes.len(), &device)?;
-            nodes.copy_from(&tree.nodes)?;
-            lbvh.refit(lowers, uppers, &tree.lbvh_buffers(&nodes.reinterpret()?))?;
-            *tree = Arc::new(Tree {
-                nodes,
-                parents: tree.parents.clone(),
-                prim_ids: tree.prim_ids.clone(),
-                num_nodes: tree.num_nodes,
-                num_prims: tree.num_prims,
-                host: None,
-                scratch: Default::default(),
-            });
-            Ok(())
-        };
-        *tree.scratch.lock().unwrap_or_else(|p| p.into_inner()) = Some(lbvh);
-        result
+        match from {
+            RefitFrom::Boxes { lowers, uppers } => {
+                let check = RefitCheck {
+                    bad: &r.bad,
+                    sources: [Some(lowers), Some(uppers)],
+                    check_boxes: true,
+                    names: &BVH_REFIT,
+                };
+                lbvh::refit(lowers, uppers, &buffers, Some(&check), uses)
+            }
+            RefitFrom::Triangles { points, indices } => {
+                let [lo, hi] = r.boxes.as_ref().expect("a mesh's tree keeps its boxes");
+                // The indices were checked at the mesh's build: no index flag.
+                let flags = [0, r.bad.device_address()];
+                lbvh::triangle_boxes(points, indices, lo, hi, flags, uses)?;
+                let check = RefitCheck {
+                    bad: &r.bad,
+                    sources: [Some(points), None],
+                    check_boxes: false,
+                    names: &MESH_REFIT,
+                };
+                lbvh::refit(lo, hi, &buffers, Some(&check), uses)
+            }
+        }
     }
 
     /// Primitives in the tree.
@@ -276,11 +470,8 @@ impl Tree {
         self.num_nodes
     }
 
-    /// The tree on the host: nodes, parents, primitive ids (a GPU-built tree is read back).
+    /// The tree on the host: nodes, parents, primitive ids (read back from the device).
     pub(crate) fn host(&self) -> Result<(Vec<BvhNode>, Vec<i32>, Vec<i32>)> {
-        if let Some(h) = &self.host {
-            return Ok((h.nodes.clone(), h.parents.to_vec(), h.prim_ids.to_vec()));
-        }
         let words = self.nodes.to_vec()?;
         Ok((
             bytemuck::cast_slice(&words).to_vec(),
@@ -456,7 +647,7 @@ impl Bvh {
             Tree::build_on_host(&lo, &hi, &device)?
         } else {
             check_box_counts(WHAT, lowers, uppers)?;
-            let tree = Tree::build_on_device(lowers, uppers, lbvh::BVH_LEAF_SIZE)?;
+            let tree = Tree::build_on_device(lowers, uppers, lbvh::BVH_LEAF_SIZE, false)?;
             check_finite_on_device(WHAT, &[("lowers", lowers), ("uppers", uppers)])?;
             tree
         };
@@ -471,26 +662,35 @@ impl Bvh {
     /// Recomputes the tree's boxes from the current `lowers` and `uppers` (after a kernel or
     /// the host moved the boxes), keeping the tree's shape (Warp's `refit`): fast, but queries
     /// slow down when the boxes moved far from where they were built (then build a new `Bvh`).
-    /// A failed refit leaves the BVH as it was.
+    ///
+    /// A refit allocates nothing and reads nothing back (unless a clone of the BVH, a tape's,
+    /// shares the tree: the refit then writes a copy, which the clone does not see), so it can
+    /// be recorded into a [capture](crate::capture): each replay refits the tree in place from
+    /// the boxes as they are then, and the launches recorded after it query the refit tree. A
+    /// captured refit of a BVH whose tree a clone made before the capture shares is an
+    /// [`Error::Capture`]; a BVH may be refit several times in one capture.
+    ///
+    /// On the CPU the boxes are checked first: a NaN or infinite corner is an
+    /// [`Error::InvalidArgument`] naming `lowers` or `uppers` and the first such index, and the
+    /// BVH is left as it was (in a graph, the replay stops there with that error). On a GPU the
+    /// refit is queued: its kernel checks every corner it reads, and a non-finite one is a
+    /// fault ([`FaultKind::NonFiniteInput`](warp_core::FaultKind::NonFiniteInput) naming
+    /// `Bvh::refit`, the argument and the first such index, lowers before uppers) reported by
+    /// the next synchronisation (of a replay too), like a kernel's; the tree is then refit from
+    /// the values read, non-finite ones included: queries over it stay in bounds, but what
+    /// they find is unspecified until a refit from finite boxes.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `lowers` or `uppers` when a corner is NaN or
-    /// infinite; device errors.
+    /// [`Error::InvalidArgument`] (CPU) when a corner is NaN or infinite; [`Error::Capture`]
+    /// as above; device errors.
     pub fn refit(&mut self) -> Result<()> {
-        const WHAT: &str = "Bvh::refit";
-        let (lowers, uppers) = (&self.lowers, &self.uppers);
-        let tree = if self.device.is_cpu() {
-            let [lo, hi] = read_boxes(WHAT, lowers, uppers)?;
-            self.tree.refit_on_host(&lo, &hi)?
-        } else {
-            // Checked before the refit, which may write the tree in place: a failed refit
-            // leaves the BVH as it was.
-            check_box_counts(WHAT, lowers, uppers)?;
-            check_finite_on_device(WHAT, &[("lowers", lowers), ("uppers", uppers)])?;
-            return Tree::refit_on_device(&mut self.tree, lowers, uppers);
-        };
-        self.tree = Arc::new(tree);
-        Ok(())
+        Tree::refit(
+            &mut self.tree,
+            RefitFrom::Boxes {
+                lowers: &self.lowers,
+                uppers: &self.uppers,
+            },
+        )
     }
 
     /// The device the BVH lives on (the device of the launches that take it).
@@ -544,6 +744,11 @@ impl HostObject for Bvh {
             self.lowers.cpu_view(ctx.kernel, ctx.arg),
             self.uppers.cpu_view(ctx.kernel, ctx.arg),
         ))
+    }
+
+    fn adopt_in_capture(&self) {
+        // Shared with a clone made before the capture: not adopted (a rebuild is refused).
+        capturing::adopt(&self.tree);
     }
 
     fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaBvh> {

@@ -479,6 +479,27 @@ pub fn build_sah(lowers: &[Vec3], uppers: &[Vec3]) -> BuiltBvh {
     }
 }
 
+/// The boxes of the triangles `indices[3f..3f + 3]` of `points`, or the first position of an
+/// index outside the points.
+pub(crate) fn triangle_boxes(
+    points: &[Vec3],
+    indices: &[i32],
+) -> Result<(Vec<Vec3>, Vec<Vec3>), usize> {
+    if let Some(k) = indices
+        .iter()
+        .position(|&i| usize::try_from(i).map_or(true, |i| i >= points.len()))
+    {
+        return Err(k);
+    }
+    Ok(indices
+        .chunks_exact(3)
+        .map(|t| {
+            let [a, b, c] = [0, 1, 2].map(|k| points[t[k] as usize]);
+            (a.min(b).min(c), a.max(b).max(c))
+        })
+        .unzip())
+}
+
 /// A raw pointer to the nodes that refit's threads write through, each its own nodes.
 #[derive(Clone, Copy)]
 struct NodesPtr(*mut BvhNode);

@@ -26,9 +26,10 @@ use glam::Vec3;
 use warp_core::objects::hash_grid::cell_count;
 use warp_core::objects::HashGridView;
 
-use super::hash_grid_steps::{HashGridKeys, HashGridRanges};
+use super::hash_grid_steps::{HashGridKeys, HashGridRanges, BUILD_NAMES};
 use super::HostObject;
 use crate::array::Array;
+use crate::backend::StepFault;
 use crate::capturing::{self, Keep};
 use crate::device::Device;
 use crate::dispatch;
@@ -74,6 +75,10 @@ pub struct HashGrid {
     /// nonzero entry was written from the first `m` keys (then clearing those entries is
     /// enough), `None` when unknown (zero them all).
     ranges_from_keys: Option<usize>,
+    /// The capture that recorded the build `ranges_from_keys` describes, if one did: then it
+    /// holds within that capture only (each replay runs that build before the next one it
+    /// recorded), and is unknown outside it (a replay may or may not have run).
+    ranges_capture: Option<u64>,
 }
 
 /// The grid's buffers on its device.
@@ -118,6 +123,7 @@ impl Clone for HashGrid {
             buffers: Arc::clone(&self.buffers),
             built: self.built,
             ranges_from_keys: self.ranges_from_keys,
+            ranges_capture: self.ranges_capture,
         }
     }
 }
@@ -183,6 +189,7 @@ impl HashGrid {
             buffers: Arc::new(Buffers::new(0, cells, device)?),
             built: None,
             ranges_from_keys: Some(0),
+            ranges_capture: None,
         })
     }
 
@@ -291,13 +298,18 @@ impl HashGrid {
     ///
     /// Inside a [capture](crate::capture) the build is recorded like a launch (the same on
     /// every backend): each replay rebuilds the grid from the contents of `points` at that
-    /// time (as many points as now; launches recorded after it take the grid as built). It
-    /// must allocate nothing there: [`reserve`](HashGrid::reserve) room for the points before
-    /// capturing, pass contiguous points, and build a grid once per capture (a launch recorded
-    /// after a build holds the grid's buffers). On a GPU, build once before capturing (the
-    /// first build loads its kernels and sizes the sort's scratch memory). The check of the
-    /// points is a read-back, which a graph cannot replay: a recorded build does not report
-    /// a non-finite point (it buckets it, consistently; check the points before capturing).
+    /// time (as many points as now; launches recorded after it take the grid as built), in
+    /// the grid's own buffers, so a grid may be built several times in one capture (a DEM
+    /// frame's substeps). It must allocate nothing there: [`reserve`](HashGrid::reserve) room
+    /// for the points before capturing, pass contiguous points, and let no clone made before
+    /// the capture (a tape's) share the grid's buffers. On a GPU, build once before capturing
+    /// (the first build loads its kernels and sizes the sort's scratch memory). A graph cannot
+    /// read the points' check back: a recorded build reports a non-finite point itself, as
+    /// the error of the replay on the CPU (which stops there), and on a GPU as a fault
+    /// ([`FaultKind::NonFiniteInput`](warp_core::FaultKind::NonFiniteInput) naming
+    /// `HashGrid::build`, `points` and the first such index) reported by the synchronisation
+    /// after the replay; the grid is then built with that point bucketed consistently (queries
+    /// stay in bounds).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the argument: `radius` not positive and finite (or so
@@ -337,17 +349,30 @@ impl HashGrid {
         // Inside a capture the build is recorded: it must find its buffers (nothing is
         // allocated there), and what the last replay left is unknown at each replay.
         let in_capture = capturing::capturing();
-        if in_capture && (Arc::strong_count(&self.buffers) > 1 || self.capacity() < n) {
-            return Err(Error::Capture {
-                what: format!(
-                    "{WHAT} of {n} points inside a capture needs buffers of the grid's own for \
-                     them, which it would allocate: call `reserve({n})` on the grid before \
-                     capturing, and build it once per capture (a launch recorded after a build \
-                     holds the grid's buffers)"
-                ),
-            });
+        if in_capture {
+            if self.capacity() < n {
+                return Err(Error::Capture {
+                    what: format!(
+                        "{WHAT} of {n} points inside a capture needs room for them, which it \
+                         would allocate: call `reserve({n})` on the grid before capturing"
+                    ),
+                });
+            }
+            // Written in place at each replay, the launches recorded after the build holding
+            // the same buffers (a grid may be built several times in one capture).
+            if !capturing::adopt(&self.buffers) {
+                return Err(Error::Capture {
+                    what: format!(
+                        "{WHAT} inside a capture writes the grid's buffers in place, but a \
+                         clone of the grid made before the capture (a tape's) shares them and \
+                         must keep them: the copy it would write allocates (build once before \
+                         capturing, or drop the clone)"
+                    ),
+                });
+            }
+        } else {
+            self.reserve(n)?;
         }
-        self.reserve(n)?;
         // The steps read the points as a contiguous run.
         let copy;
         let points = if points.is_contiguous() {
@@ -360,10 +385,16 @@ impl HashGrid {
         let cells = self.buffers.cell_starts.len();
         // Zero the ranges of the last build: from its keys (still in `keys`) when they are few
         // against the buckets, else every entry (a fill, the fastest way to zero them all).
-        // Unknown until the new ranges are written; always every entry in a graph, whose
-        // replays may follow any build.
-        let clear_from = self.ranges_from_keys.take().filter(|_| !in_capture);
-        let b = self.own_buffers();
+        // Unknown until the new ranges are written. In a graph, from the keys of the build
+        // recorded before this one in the same capture (which each replay runs just before);
+        // every entry at the capture's first build, whose replays may follow any build.
+        let capture = capturing::id();
+        let clear_from = self
+            .ranges_from_keys
+            .take()
+            .filter(|_| self.ranges_capture == capture);
+        self.ranges_capture = None;
+        let b: &Buffers = &self.buffers;
         // What the steps' addresses point into, kept by a graph that records them.
         let uses = || -> Keep {
             Box::new((
@@ -383,6 +414,9 @@ impl HashGrid {
                     buckets: cells as i32,
                     clear: 1,
                     pad: 0,
+                    bad: 0,
+                    points: 0,
+                    fault: StepFault::new(&BUILD_NAMES),
                 },
                 uses,
             )?,
@@ -415,6 +449,14 @@ impl HashGrid {
                 buckets: cells as i32,
                 clear: 0,
                 pad: 0,
+                // Recorded, the build cannot read its check back: the step reports it.
+                bad: if in_capture {
+                    b.bad.device_address()
+                } else {
+                    0
+                },
+                points: points.device_address(),
+                fault: StepFault::new(&BUILD_NAMES),
             },
             uses,
         )?;
@@ -424,9 +466,11 @@ impl HashGrid {
             cell_width_inv: inv,
         };
         if in_capture {
-            // Recorded: the points' check is a read-back, which a graph cannot replay (see
-            // above). The launches recorded next take the grid as built.
+            // Recorded: the ranges step reports the points' check (see above). The launches
+            // recorded next take the grid as built, the next build recorded here clears from
+            // these keys.
             self.built = Some(built);
+            (self.ranges_from_keys, self.ranges_capture) = (Some(n), capture);
             return Ok(());
         }
         // The points' check, read back once everything is queued (on a GPU, the one wait of a
@@ -445,12 +489,6 @@ impl HashGrid {
         }
         self.built = Some(built);
         Ok(())
-    }
-
-    /// The buffers to write a build into: this grid's own (`reserve` made them so).
-    fn own_buffers(&self) -> &Buffers {
-        debug_assert_eq!(Arc::strong_count(&self.buffers), 1);
-        &self.buffers
     }
 
     /// The build a launch of `ctx.kernel` may use (the launch device is checked by the
@@ -519,6 +557,11 @@ impl HostObject for HashGrid {
             self.dims,
             built.cell_width_inv,
         ))
+    }
+
+    fn adopt_in_capture(&self) {
+        // Shared with a clone made before the capture: not adopted (a rebuild is refused).
+        capturing::adopt(&self.buffers);
     }
 
     fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaHashGrid> {

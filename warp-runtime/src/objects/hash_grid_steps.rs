@@ -2,8 +2,9 @@
 //! laid out as the C++ struct its kernel in `wp_hash_grid.h` takes, and the same step on the
 //! CPU with rayon. `hash_grid.rs` orders them around the primitives' radix sort.
 
-use crate::backend::{ObjectLibrary, ObjectStep};
+use crate::backend::{ObjectLibrary, ObjectStep, StepFault};
 use crate::error::Result;
+use crate::kernel::KernelInfo;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicI32, Ordering};
@@ -36,7 +37,10 @@ const _: () = assert!(std::mem::size_of::<HashGridKeys>() == 56);
 /// (`buckets` each; a bucket no key names is left alone, so the caller zeroed them). With
 /// `clear` (nonzero), zeros instead of positions: the same writes, undoing a build from its
 /// keys (cheaper than zeroing every bucket when the points are few). Keys outside
-/// `0..buckets` are skipped. `wp::hash_grid_ranges_t` in C++ (40 bytes).
+/// `0..buckets` are skipped. With `bad` (nonzero: the keys step's word, the build recorded
+/// into a graph, which cannot read it back), the step also resets that word to `i32::MAX`
+/// and reports the point it names (of the `points`) as a fault (`fault`; on the CPU as the
+/// build's error). `wp::hash_grid_ranges_t` in C++ (96 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct HashGridRanges {
@@ -47,9 +51,20 @@ pub(crate) struct HashGridRanges {
     pub buckets: i32,
     pub clear: i32,
     pub pad: i32,
+    pub bad: u64,
+    pub points: u64,
+    pub fault: StepFault,
 }
 
-const _: () = assert!(std::mem::size_of::<HashGridRanges>() == 40);
+const _: () = assert!(std::mem::size_of::<HashGridRanges>() == 96);
+
+/// What a recorded build's report names its fault by (argument 0: the points).
+pub(crate) static BUILD_NAMES: KernelInfo = KernelInfo {
+    name: "HashGrid::build",
+    module: "warp_lang::objects",
+    params: &["points"],
+    ..KernelInfo::BLANK
+};
 
 /// A pointer that rayon tasks may share, for writes to elements no two tasks share.
 #[derive(Clone, Copy)]
@@ -109,7 +124,7 @@ unsafe impl ObjectStep for HashGridKeys {
     }
 }
 
-// SAFETY: `#[repr(C)]`, the layout of `wp::hash_grid_ranges_t` (both sides assert 40 bytes);
+// SAFETY: `#[repr(C)]`, the layout of `wp::hash_grid_ranges_t` (both sides assert 96 bytes);
 // the build passes addresses of its own buffers: `n` keys, `buckets` starts and ends.
 unsafe impl ObjectStep for HashGridRanges {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
@@ -120,9 +135,36 @@ unsafe impl ObjectStep for HashGridRanges {
     }
 
     fn run_cpu(&self) -> Result<()> {
+        self.ranges_on_cpu();
+        if self.bad == 0 {
+            return Ok(());
+        }
+        // The kernel's report. SAFETY: the build's one-element i32 array (sized and aligned as
+        // an AtomicI32), and its points, which hold the index the keys step recorded.
+        let i = unsafe { &*(self.bad as *const AtomicI32) }.swap(i32::MAX, Ordering::Relaxed);
+        if i == i32::MAX {
+            return Ok(());
+        }
+        let p = unsafe { *(self.points as *const Vec3).add(i as usize) };
+        Err(crate::error::Error::InvalidArgument {
+            what: format!(
+                "{}: argument `points` has a non-finite point at index {i}: {p:?}",
+                BUILD_NAMES.name
+            ),
+        })
+    }
+
+    fn fault_slot(&mut self) -> Option<&mut StepFault> {
+        (self.bad != 0).then_some(&mut self.fault)
+    }
+}
+
+impl HashGridRanges {
+    /// The ranges on the CPU (the step without its report).
+    fn ranges_on_cpu(&self) {
         let n = self.len();
         if n == 0 {
-            return Ok(());
+            return;
         }
         // SAFETY: `n` sorted keys in a host array the build owns.
         let keys = unsafe { std::slice::from_raw_parts(self.keys as *const i32, n) };
@@ -151,6 +193,5 @@ unsafe impl ObjectStep for HashGridRanges {
                 }
             }
         });
-        Ok(())
     }
 }

@@ -56,6 +56,13 @@ pub trait HostObject: Clone + Send + Sync + 'static {
     fn zero_grad(&self) -> Result<()> {
         Ok(())
     }
+
+    /// Called when a launch recorded into the calling thread's capture takes the object,
+    /// before the graph keeps a clone of it: an object whose builds or refits a capture
+    /// records in place (a hash grid, a BVH, a mesh) makes its buffers the capture's, so that
+    /// the capture may rebuild it after such a launch. Nothing by default.
+    #[doc(hidden)]
+    fn adopt_in_capture(&self) {}
 }
 
 /// The launch device check every object shares.
@@ -106,6 +113,9 @@ impl<O: HostObject> KernelArg for O {
     type Owned = O;
 
     fn own(arg: &Self::Arg<'_>) -> O {
+        if crate::capturing::capturing() {
+            arg.adopt_in_capture();
+        }
         (*arg).clone()
     }
 

@@ -15,14 +15,17 @@
 
 use super::bvh_build;
 use crate::array::Array;
-use crate::backend::{ObjectLibrary, ObjectStep};
+use crate::backend::{ObjectLibrary, ObjectStep, StepFault};
+use crate::capturing::Keep;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::Result;
+use crate::kernel::KernelInfo;
 use crate::primitives::radix_sort_pairs;
 use glam::Vec3;
 use rayon::prelude::*;
 use warp_core::objects::bvh::BvhNode;
+use warp_core::{Fault, FaultKind};
 
 /// The BVH build library: `wp_bvh_build.h` with its kernels enabled.
 pub(crate) static LIBRARY: ObjectLibrary = ObjectLibrary::of("bvh_build");
@@ -42,19 +45,38 @@ pub(crate) fn node_count(n: usize) -> usize {
 }
 
 /// The tree's buffers (allocated by the caller on the build's device): `node_count(n)` nodes
-/// (as 8 words each) and parents, `n` primitive ids.
+/// (as 8 words each) and parents, `n` primitive ids, and the refit's counters, one per node,
+/// zero (`Array::zeros`; a refit leaves them zero).
 pub(crate) struct LbvhTree<'a> {
     pub nodes: &'a Array<i32>,
     pub parents: &'a Array<i32>,
     pub prim_ids: &'a Array<i32>,
+    pub counters: &'a Array<i32>,
 }
 
-/// The build's scratch on one device, kept between builds (grown when needed).
+/// What a refit checks and reports (`wp::lbvh_refit_t`'s `bad`, `sources`, `check` and
+/// `fault`): the smallest index of a non-finite element, as a fault named by `names` (a
+/// `NonFiniteInput` of argument 0 or 1) raised by the refit itself, so that a refit is one
+/// launch that reads nothing back.
+pub(crate) struct RefitCheck<'a> {
+    /// Two `i32` words at `i32::MAX` (the refit leaves them so): the smallest bad index of
+    /// argument 0 and of argument 1.
+    pub bad: &'a Array<i32>,
+    /// The elements the words index, by argument (reported with the index).
+    pub sources: [Option<&'a Array<Vec3>>; 2],
+    /// Whether the refit checks the boxes it reads (then `sources` are the lowers and
+    /// uppers), or only reports what an earlier step found (a mesh's points, checked by
+    /// [`triangle_boxes`]).
+    pub check_boxes: bool,
+    /// The operation and its arguments, as the fault names them.
+    pub names: &'static KernelInfo,
+}
+
+/// The build's scratch on one device (its sort's pairs and the centroids' box).
 pub(crate) struct Lbvh {
     device: Device,
     keys: Array<u32>,
     values: Array<u32>,
-    counters: Array<i32>,
     bounds: Array<u32>,
 }
 
@@ -65,7 +87,6 @@ impl Lbvh {
             device: device.clone(),
             keys: Array::empty(0, device)?,
             values: Array::empty(0, device)?,
-            counters: Array::empty(0, device)?,
             bounds: Array::empty(6, device)?,
         })
     }
@@ -91,12 +112,11 @@ impl Lbvh {
                 .view(0..1)?
                 .copy_from(&Array::from_slice(&[-1], &self.device)?);
         }
-        // Every element is written before it is read (keys and values by the codes' step,
-        // counters zeroed by the refit): no zeroing here.
+        // Every element is written before it is read (keys and values by the codes' step):
+        // no zeroing here.
         if self.keys.len() < n {
             self.keys = Array::empty(n, &self.device)?;
             self.values = Array::empty(n, &self.device)?;
-            self.counters = Array::empty(n, &self.device)?;
         }
         // The empty box: min images at their largest, max images at their smallest.
         self.bounds.view(0..3)?.fill(u32::MAX)?;
@@ -135,39 +155,48 @@ impl Lbvh {
                 leaf_size: leaf_size.max(1) as i64,
             },
         )?;
-        self.refit(lowers, uppers, tree)
-    }
-
-    /// Recomputes the boxes of a tree this builder made over `lowers.len()` boxes (the same
-    /// count), keeping its shape.
-    pub(crate) fn refit(
-        &mut self,
-        lowers: &Array<Vec3>,
-        uppers: &Array<Vec3>,
-        tree: &LbvhTree<'_>,
-    ) -> Result<()> {
-        let n = lowers.len();
-        if n == 0 {
-            return Ok(());
-        }
-        if self.counters.len() < n {
-            self.counters = Array::empty(n, &self.device)?;
-        }
-        self.counters.view(0..n)?.fill(0)?;
-        dispatch::object_step(
-            &self.device,
-            &LbvhRefit {
-                lowers: lowers.device_address(),
-                uppers: uppers.device_address(),
-                nodes: tree.nodes.device_address(),
-                parents: tree.parents.device_address(),
-                prim_ids: tree.prim_ids.device_address(),
-                counters: self.counters.device_address(),
-                n: n as i64,
-            },
-        )
+        refit(lowers, uppers, tree, None, || Box::new(()))
     }
 }
+
+/// Recomputes the boxes of a linear BVH over `lowers.len()` boxes (the count it was built
+/// with), keeping its shape: one step, which allocates nothing and reads nothing back, so a
+/// capture records it (`uses()`: the memory its addresses point into, kept for the graph).
+/// With `check`, the step checks and reports as [`RefitCheck`] says.
+pub(crate) fn refit(
+    lowers: &Array<Vec3>,
+    uppers: &Array<Vec3>,
+    tree: &LbvhTree<'_>,
+    check: Option<&RefitCheck<'_>>,
+    uses: impl FnOnce() -> Keep,
+) -> Result<()> {
+    let n = lowers.len();
+    if n == 0 {
+        return Ok(());
+    }
+    let addr = |a: Option<&Array<Vec3>>| a.map_or(0, Array::device_address);
+    let step = LbvhRefit {
+        lowers: lowers.device_address(),
+        uppers: uppers.device_address(),
+        nodes: tree.nodes.device_address(),
+        parents: tree.parents.device_address(),
+        prim_ids: tree.prim_ids.device_address(),
+        counters: tree.counters.device_address(),
+        n: n as i64,
+        bad: check.map_or(0, |c| c.bad.device_address()),
+        sources: check.map_or([0; 2], |c| c.sources.map(addr)),
+        check: check.is_some_and(|c| c.check_boxes) as i64,
+        fault: StepFault::new(check.map_or(&NO_NAMES, |c| c.names)),
+    };
+    dispatch::object_step_keeping(lowers.device(), &step, uses)
+}
+
+/// The names of a refit that reports nothing (never read: its `bad` is 0).
+static NO_NAMES: KernelInfo = KernelInfo {
+    name: "refit",
+    module: "warp_lang::objects",
+    ..KernelInfo::BLANK
+};
 
 /// The tree as host vectors: nodes (8 words each), parents, primitive ids.
 pub type HostTree = (Vec<[i32; 8]>, Vec<i32>, Vec<i32>);
@@ -187,15 +216,22 @@ pub fn build_for_tests(
     let nodes = Array::<i32>::zeros(8 * node_count(n), &dev)?;
     let parents = Array::<i32>::zeros(node_count(n), &dev)?;
     let prim_ids = Array::<i32>::zeros(n, &dev)?;
+    let counters = Array::<i32>::zeros(node_count(n), &dev)?;
     let tree = LbvhTree {
         nodes: &nodes,
         parents: &parents,
         prim_ids: &prim_ids,
+        counters: &counters,
     };
-    let mut b = Lbvh::new(&dev)?;
-    b.build(lowers, uppers, &tree, leaf_size)?;
+    Lbvh::new(&dev)?.build(lowers, uppers, &tree, leaf_size)?;
     if let Some((lo, hi)) = moved {
-        b.refit(lo, hi, &tree)?;
+        refit(lo, hi, &tree, None, || Box::new(()))?;
+        // A refit leaves its counters zero for the next (the kernel resets them).
+        if counters.to_vec()?.iter().any(|&c| c != 0) {
+            return Err(crate::error::Error::invalid(
+                "lbvh refit: a counter was left nonzero".to_string(),
+            ));
+        }
     }
     let words = nodes.to_vec()?;
     Ok((
@@ -224,15 +260,18 @@ pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
 /// Queues the boxes of the `lowers.len()` triangles of `points` and `indices` (three each)
 /// into `lowers` and `uppers`; the smallest position of an index outside the points lowers
 /// the `i32` at `bad` (0: not recorded, for indices checked before); that triangle reads no
-/// point and gets an empty box.
+/// point and gets an empty box. The smallest index of a point with a NaN or infinite
+/// coordinate lowers the `i32` at `bad_point` (0: not checked). A capture records the step,
+/// keeping `uses()`.
 pub(crate) fn triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
     lowers: &Array<Vec3>,
     uppers: &Array<Vec3>,
-    bad: u64,
+    [bad, bad_point]: [u64; 2],
+    uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
-    dispatch::object_step(
+    dispatch::object_step_keeping(
         points.device(),
         &LbvhTriangleBoxes {
             points: points.device_address(),
@@ -242,7 +281,9 @@ pub(crate) fn triangle_boxes(
             bad,
             n: lowers.len() as i64,
             num_points: points.len() as i64,
+            bad_point,
         },
+        uses,
     )
 }
 
@@ -267,8 +308,9 @@ struct LbvhTriangleBoxes {
     bad: u64,
     n: i64,
     num_points: i64,
+    bad_point: u64,
 }
-const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 56);
+const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 64);
 
 unsafe impl ObjectStep for LbvhFinite {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
@@ -296,10 +338,30 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
     const KERNEL: &'static str = "wp_lbvh_triangle_boxes";
     fn len(&self) -> usize {
-        self.n as usize
+        // The points' check loops over the points, in the same launch.
+        match self.bad_point {
+            0 => self.n as usize,
+            _ => self.n.max(self.num_points) as usize,
+        }
     }
     fn run_cpu(&self) -> Result<()> {
-        let n = self.len();
+        let n = self.n as usize;
+        if self.bad_point != 0 {
+            // SAFETY: `num_points` points and one i32 the caller owns (sized and aligned as
+            // an AtomicI32).
+            let (points, bad) = unsafe {
+                (
+                    std::slice::from_raw_parts(
+                        self.points as *const Vec3,
+                        self.num_points as usize,
+                    ),
+                    &*(self.bad_point as *const std::sync::atomic::AtomicI32),
+                )
+            };
+            if let Some(i) = points.par_iter().position_first(|p| !p.is_finite()) {
+                bad.fetch_min(i as i32, std::sync::atomic::Ordering::Relaxed);
+            }
+        }
         // SAFETY: `num_points` points, `3n` indices, `n` boxes and, unless `bad` is 0, one i32
         // the caller owns (an i32 is sized and aligned as an AtomicI32).
         let (points, ix, lo, hi, bad) = unsafe {
@@ -372,7 +434,7 @@ struct LbvhHierarchy {
 }
 const _: () = assert!(std::mem::size_of::<LbvhHierarchy>() == 56);
 
-/// `wp::lbvh_refit_t`: the boxes, bottom-up.
+/// `wp::lbvh_refit_t`: the boxes, bottom-up, checked and reported as [`RefitCheck`] says.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 struct LbvhRefit {
@@ -383,8 +445,12 @@ struct LbvhRefit {
     prim_ids: u64,
     counters: u64,
     n: i64,
+    bad: u64,
+    sources: [u64; 2],
+    check: i64,
+    fault: StepFault,
 }
-const _: () = assert!(std::mem::size_of::<LbvhRefit>() == 56);
+const _: () = assert!(std::mem::size_of::<LbvhRefit>() == 128);
 
 /// The order-preserving `u32` image of an `f32` (`wp::lbvh_ordered`).
 fn ordered(x: f32) -> u32 {
@@ -673,12 +739,53 @@ unsafe impl ObjectStep for LbvhRefit {
                 std::slice::from_raw_parts(self.uppers as *const Vec3, n),
             )
         };
+        // SAFETY: unless `bad` is 0, two i32 words the caller owns (each sized and aligned as
+        // an AtomicI32).
+        let bad = (self.bad != 0)
+            .then(|| unsafe { &*(self.bad as *const [std::sync::atomic::AtomicI32; 2]) });
+        if let (Some(bad), 1) = (bad, self.check) {
+            for (word, boxes) in bad.iter().zip([lo, hi]) {
+                if let Some(i) = boxes.par_iter().position_first(|p| !p.is_finite()) {
+                    word.fetch_min(i as i32, std::sync::atomic::Ordering::Relaxed);
+                }
+            }
+        }
         // The kernel's climb from every primitive's leaf (a leaf over several primitives is
         // one the hierarchy made from an internal node: reached by climbing), with the same
         // unions (min/max: exact and order-free), in any order.
         let first_leaf = n - 1;
         bvh_build::refit_from(nodes, parents, ids, lo, hi, first_leaf..first_leaf + n);
+        // The kernel's report: both words reset, the first one set is the fault.
+        let Some(bad) = bad else {
+            return Ok(());
+        };
+        let found = bad
+            .iter()
+            .map(|w| w.swap(i32::MAX, std::sync::atomic::Ordering::Relaxed))
+            .collect::<Vec<_>>();
+        for (arg, (&i, &source)) in found.iter().zip(&self.sources).enumerate() {
+            if i == i32::MAX || source == 0 {
+                continue;
+            }
+            // SAFETY: the source holds the element the word indexes (the check found it
+            // there).
+            let v = unsafe { *(source as *const Vec3).add(i as usize) };
+            let names = self.fault.names;
+            return Err(Fault {
+                kernel: names.name,
+                kind: FaultKind::NonFiniteInput {
+                    arg: names.params.get(arg).copied().unwrap_or("?"),
+                    index: i as usize,
+                    values: v.to_array().map(f64::from).to_vec(),
+                },
+                launch: None,
+            }
+            .into());
+        }
         Ok(())
+    }
+    fn fault_slot(&mut self) -> Option<&mut StepFault> {
+        (self.bad != 0).then_some(&mut self.fault)
     }
 }
 
@@ -715,6 +822,7 @@ mod tests {
         let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
         let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
         let ids = Array::<i32>::zeros(n, &dev).unwrap();
+        let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
         let mut b = Lbvh::new(&dev).unwrap();
         let (l, h) = (
             Array::from_slice(lo, &dev).unwrap(),
@@ -724,6 +832,7 @@ mod tests {
             nodes: &nodes,
             parents: &parents,
             prim_ids: &ids,
+            counters: &counters,
         };
         b.build(&l, &h, &tree, leaf).unwrap();
         let words = nodes.to_vec().unwrap();
@@ -794,6 +903,94 @@ mod tests {
             let (nodes, parents, ids) = build_on_cpu(&lo, &hi, leaf);
             bvh_build::check_layout(&nodes, &parents, &ids, &lo, &hi).unwrap();
         }
+    }
+
+    /// The refit's check on the CPU mirrors the kernel's: the smallest bad index, lowers
+    /// before uppers, the words reset for the next refit; a mesh's points checked by its
+    /// triangle boxes' step and reported by the refit.
+    #[test]
+    fn a_refit_reports_the_first_non_finite_input() {
+        static NAMES: KernelInfo = KernelInfo {
+            name: "Bvh::refit",
+            params: &["lowers", "uppers"],
+            ..KernelInfo::BLANK
+        };
+        let dev = crate::device::get_device("cpu").unwrap();
+        let (lo, hi) = boxes(300, 99, true);
+        let n = lo.len();
+        let a = |v: &[Vec3]| Array::from_slice(v, &dev).unwrap();
+        let (l, h) = (a(&lo), a(&hi));
+        let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
+        let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+        let ids = Array::<i32>::zeros(n, &dev).unwrap();
+        let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+        let tree = LbvhTree {
+            nodes: &nodes,
+            parents: &parents,
+            prim_ids: &ids,
+            counters: &counters,
+        };
+        Lbvh::new(&dev).unwrap().build(&l, &h, &tree, 1).unwrap();
+        let bad = Array::from_slice(&[i32::MAX; 2], &dev).unwrap();
+        let check = RefitCheck {
+            bad: &bad,
+            sources: [Some(&l), Some(&h)],
+            check_boxes: true,
+            names: &NAMES,
+        };
+        let refit_err = || match refit(&l, &h, &tree, Some(&check), || Box::new(())) {
+            Err(crate::error::Error::Fault(f)) => {
+                assert_eq!(bad.to_vec().unwrap(), vec![i32::MAX; 2], "the words reset");
+                match f.kind {
+                    FaultKind::NonFiniteInput { arg, index, values } => (arg, index, values),
+                    k => panic!("{k:?}"),
+                }
+            }
+            r => panic!("{r:?}"),
+        };
+        refit(&l, &h, &tree, Some(&check), || Box::new(())).unwrap();
+        let set = |arr: &Array<Vec3>, i: usize, v: Vec3| {
+            arr.view(i..i + 1).unwrap().copy_from(&a(&[v])).unwrap();
+        };
+        let nan = Vec3::new(1.0, f32::NAN, 2.0);
+        set(&h, 40, nan);
+        set(&h, 7, Vec3::INFINITY);
+        let (arg, index, values) = refit_err();
+        assert_eq!((arg, index), ("uppers", 7));
+        assert!(values.iter().all(|v| *v == f64::INFINITY));
+        // A bad lower corner comes first, whatever its index.
+        set(&l, 250, nan);
+        let (arg, index, values) = refit_err();
+        assert_eq!((arg, index), ("lowers", 250));
+        assert!(values[0] == 1.0 && values[1].is_nan() && values[2] == 2.0);
+        // Finite again: the refit passes (the words were reset) and gives the tree a build
+        // over the same boxes gives.
+        set(&l, 250, lo[250]);
+        set(&h, 40, hi[40]);
+        set(&h, 7, hi[7]);
+        refit(&l, &h, &tree, Some(&check), || Box::new(())).unwrap();
+        let words = nodes.to_vec().unwrap();
+        let (built, _, _) = build_on_cpu(&lo, &hi, 1);
+        assert_eq!(bytemuck::cast_slice::<i32, BvhNode>(&words), &built[..]);
+        // A mesh's points: checked by the triangle boxes' step into the word the refit
+        // reports (argument 0, the points).
+        let points = a(&[Vec3::ZERO, Vec3::X, Vec3::new(f32::NAN, 0.0, 0.0), Vec3::Y]);
+        let indices = Array::from_slice(&[0, 1, 3], &dev).unwrap();
+        let (tl, th) = (a(&[Vec3::ZERO]), a(&[Vec3::ZERO]));
+        triangle_boxes(
+            &points,
+            &indices,
+            &tl,
+            &th,
+            [0, bad.device_address()],
+            || Box::new(()),
+        )
+        .unwrap();
+        assert_eq!(bad.to_vec().unwrap(), vec![2, i32::MAX]);
+        assert_eq!(
+            (tl.to_vec().unwrap(), th.to_vec().unwrap()),
+            (vec![Vec3::ZERO], vec![Vec3::ONE.with_z(0.0)])
+        );
     }
 
     #[test]

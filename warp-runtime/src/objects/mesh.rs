@@ -10,27 +10,29 @@
 //! them against the points; a later change could not be).
 //!
 //! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
-//! SAH builder over the triangles' boxes; on a GPU the triangles' boxes, the points' check and
-//! a linear BVH are kernels (`lbvh.rs`), and only the checks' flags are read back. The indices
-//! are checked once, at `new` (on a GPU by the triangles' boxes step, which reads no point
-//! through a bad index).
+//! SAH builder over the triangles' boxes; on a GPU the triangles' boxes (with the checks of
+//! the indices and the points) and a linear BVH are kernels (`lbvh.rs`), and only the checks'
+//! flags are read back, at `new`. The indices are checked once, at `new` (on a GPU by the
+//! triangles' boxes step, which reads no point through a bad index). A refit reads nothing
+//! back: on a GPU the boxes step checks the points and the refit step reports a non-finite
+//! one as a fault.
 //!
-//! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit gives
-//! the refit mesh a new node buffer, so a recorded launch replays against the tree it ran
-//! with.
+//! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit of a
+//! shared tree gives the refit mesh a new node buffer, so a recorded launch replays against
+//! the tree it ran with.
 
 use std::sync::Arc;
 
 use glam::Vec3;
 use warp_core::objects::MeshView;
 
-use super::bvh::{
-    bad, check_finite_on_device, contiguous, first_non_finite, same_device, Tree, MAX_PRIMS,
-};
+use super::bvh::{bad, contiguous, first_non_finite, same_device, RefitFrom, Tree, MAX_PRIMS};
+use super::bvh_build::triangle_boxes;
 use super::geometry_abi::CudaMesh;
 use super::lbvh;
 use super::HostObject;
 use crate::array::Array;
+use crate::capturing;
 use crate::device::Device;
 use crate::error::{Error, Result};
 use crate::kernel::ArgCtx;
@@ -67,8 +69,6 @@ pub struct Mesh {
     velocities: Option<Array<Vec3>>,
     /// The mesh's own copy of the indices, on its device.
     indices: Array<i32>,
-    /// The same on the host, for a CPU mesh's refit (empty on a GPU, which refits there).
-    host_indices: Arc<Vec<i32>>,
     /// The point count the indices were validated against (the build's).
     num_points: usize,
     tree: Arc<Tree>,
@@ -85,29 +85,19 @@ impl std::fmt::Debug for Mesh {
     }
 }
 
-/// The triangles' boxes.
-fn triangle_boxes(points: &[Vec3], indices: &[i32]) -> (Vec<Vec3>, Vec<Vec3>) {
-    indices
-        .chunks_exact(3)
-        .map(|t| {
-            let [a, b, c] = [0, 1, 2].map(|k| points[t[k] as usize]);
-            (a.min(b).min(c), a.max(b).max(c))
-        })
-        .unzip()
-}
-
 /// The triangles' boxes on the mesh's device (a GPU's: queued, nothing read back); the
-/// first position of an index outside the points lowers the `i32` at `bad` (0: not recorded).
+/// first position of an index outside the points lowers the `i32` at `flags[0]`, the first
+/// non-finite point the one at `flags[1]`.
 fn device_triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
-    bad: u64,
+    flags: [u64; 2],
 ) -> Result<(Array<Vec3>, Array<Vec3>)> {
     let faces = indices.len() / 3;
     // Written whole by the boxes' step.
     let lo = Array::empty(faces, points.device())?;
     let hi = Array::empty(faces, points.device())?;
-    lbvh::triangle_boxes(points, indices, &lo, &hi, bad)?;
+    lbvh::triangle_boxes(points, indices, &lo, &hi, flags, || Box::new(()))?;
     Ok((lo, hi))
 }
 
@@ -230,22 +220,23 @@ impl Mesh {
                 format!("has {} triangles, more than {MAX_PRIMS}", indices.len() / 3),
             ));
         }
-        let (dev_indices, host_indices, tree) = if device.is_cpu() {
+        let (dev_indices, tree) = if device.is_cpu() {
             let ix = indices.to_vec()?;
             check_indices(WHAT, &ix, n)?;
             let p = read_points(WHAT, points, n)?;
-            let (lo, hi) = triangle_boxes(&p, &ix);
+            let (lo, hi) = triangle_boxes(&p, &ix).map_err(|k| bad_index(WHAT, k, ix[k], n))?;
             let tree = Tree::build_on_host(&lo, &hi, &device)?;
-            (Array::from_slice(&ix, &device)?, ix, tree)
+            (Array::from_slice(&ix, &device)?, tree)
         } else {
-            // Everything on the device: the indices are checked by the triangles' boxes, the
-            // points by a check step, and only the two flags come back (after the build).
+            // Everything on the device: the indices and the points are checked by the
+            // triangles' boxes step, and only its two flags come back (after the build).
             let own = Array::empty(indices.len(), &device)?;
             own.copy_from(indices)?;
             let flags = Array::from_slice(&[i32::MAX, i32::MAX], &device)?;
-            let (lo, hi) = device_triangle_boxes(points, &own, flags.device_address())?;
-            let tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE)?;
-            lbvh::check_finite(points, flags.device_address() + 4)?;
+            let at = flags.device_address();
+            let (lo, hi) = device_triangle_boxes(points, &own, [at, at + 4])?;
+            // The tree keeps the boxes: its refits write them.
+            let tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE, true)?;
             let f = flags.to_vec()?;
             if f[0] != i32::MAX {
                 let k = f[0] as usize;
@@ -261,12 +252,10 @@ impl Mesh {
                     format!("has a non-finite point at index {i}: {p:?}"),
                 ));
             }
-            // A GPU mesh refits on the device: no host copy of the indices is needed.
-            (own, Vec::new(), tree)
+            (own, tree)
         };
         Ok(Mesh {
             indices: dev_indices,
-            host_indices: Arc::new(host_indices),
             device,
             points: points.clone(),
             velocities: velocities.cloned(),
@@ -276,30 +265,34 @@ impl Mesh {
     }
 
     /// Recomputes the tree's boxes from the current points (after a kernel or the host moved
-    /// them), keeping the tree's shape (Warp's `refit`). A failed refit leaves the mesh as it
-    /// was.
+    /// them), keeping the tree's shape (Warp's `refit`).
+    ///
+    /// As [`Bvh::refit`](super::Bvh::refit): nothing is allocated or read back (unless a clone
+    /// shares the tree), so a refit can be recorded into a capture, which refits in place at
+    /// each replay. On the CPU the points are checked first (a failed refit leaves the mesh as
+    /// it was); on a GPU the refit's steps check them and a NaN or infinite point is a fault
+    /// naming `Mesh::refit`, `points` and the first such index, reported at the next
+    /// synchronisation, the tree refit from the values read (queries stay in bounds, their
+    /// results unspecified until a refit from finite points). A mesh without triangles has no
+    /// box to refit: a GPU checks nothing then. (An index a kernel wrote outside the points
+    /// since the build, through [`indices`](Mesh::indices): the CPU's refit refuses it, naming
+    /// `indices`; a GPU's gives its triangle an empty box, and the queries' checked reads
+    /// fault on it.)
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `points` when a point is NaN or infinite, or when
-    /// the points array (replaced by [`set_points`](Mesh::set_points)) has another length than
-    /// the one the mesh was built with; device errors.
+    /// [`Error::InvalidArgument`] naming `points` when the points array (replaced by
+    /// [`set_points`](Mesh::set_points)) has another length than the one the mesh was built
+    /// with, and on the CPU when a point is NaN or infinite; [`Error::Capture`] inside a
+    /// capture when a clone made before it shares the tree; device errors.
     pub fn refit(&mut self) -> Result<()> {
-        const WHAT: &str = "Mesh::refit";
-        let tree = if self.device.is_cpu() {
-            let p = read_points(WHAT, &self.points, self.num_points)?;
-            let (lo, hi) = triangle_boxes(&p, &self.host_indices);
-            self.tree.refit_on_host(&lo, &hi)?
-        } else {
-            // Checked before the refit, which may write the tree in place: a failed refit
-            // leaves the mesh as it was.
-            check_point_count(WHAT, &self.points, self.num_points)?;
-            check_finite_on_device(WHAT, &[("points", &self.points)])?;
-            // The indices were checked at `new`: nothing to record (no flag to allocate).
-            let (lo, hi) = device_triangle_boxes(&self.points, &self.indices, 0)?;
-            return Tree::refit_on_device(&mut self.tree, &lo, &hi);
-        };
-        self.tree = Arc::new(tree);
-        Ok(())
+        check_point_count("Mesh::refit", &self.points, self.num_points)?;
+        Tree::refit(
+            &mut self.tree,
+            RefitFrom::Triangles {
+                points: &self.points,
+                indices: &self.indices,
+            },
+        )
     }
 
     /// Replaces the points array (Warp's `mesh.points = a`), for a [`refit`](Mesh::refit)
@@ -403,6 +396,11 @@ impl HostObject for Mesh {
         ))
     }
 
+    fn adopt_in_capture(&self) {
+        // Shared with a clone made before the capture: not adopted (a rebuild is refused).
+        capturing::adopt(&self.tree);
+    }
+
     fn cuda_record(&self, ctx: &ArgCtx<'_>) -> Result<CudaMesh> {
         self.check_launch(ctx)?;
         Ok(CudaMesh {
@@ -459,6 +457,13 @@ mod tests {
             &["argument `velocities`", "1 velocities for 3 points"],
         );
         let mut m = Mesh::new(&p, &ix(&[0, 1, 2]), None).unwrap();
+        m.indices().copy_from(&ix(&[0, 7, 2])).unwrap();
+        has(
+            m.refit().unwrap_err(),
+            &["argument `indices`", "7 at position 1"],
+        );
+        m.indices().copy_from(&ix(&[0, 1, 2])).unwrap();
+        m.refit().unwrap();
         m.set_points(&pts(&[Vec3::ZERO])).unwrap();
         has(
             m.refit().unwrap_err(),
