@@ -424,6 +424,12 @@ impl Tree {
         if self.num_prims == 0 {
             return Ok(());
         }
+        // The refit kernel leaves its counters zero itself, but a fill first (on the default
+        // stream, which joins the user streams: recorded as a memset in a capture) orders this
+        // refit after one of the same tree queued on another stream; without it two such
+        // refits would overlap, and a counter one of them left behind would spoil every
+        // later refit of the tree, silently.
+        r.counters.fill(0)?;
         let nodes = self.nodes.reinterpret()?;
         let buffers = self.lbvh_buffers(&nodes, r);
         let uses = || -> Keep {
