@@ -340,6 +340,25 @@ struct Obtained {
     entry: CacheEntry,
 }
 
+impl Obtained {
+    /// An ahead-of-time entry's cubin, stored under `key` at `path`.
+    fn ahead_of_time(cubin: Vec<u8>, key: u128, path: PathBuf) -> Self {
+        Obtained {
+            compiled: warp_cuda::Compiled {
+                cubin,
+                log: String::new(),
+                compile_ms: 0.0,
+            },
+            outcome: CacheOutcome::Hit,
+            aot: true,
+            entry: CacheEntry {
+                key,
+                path: Some(path),
+            },
+        }
+    }
+}
+
 /// The cubin of unit `src` (the variant of `contiguous`, an adjoint's `stack_define`) if it
 /// is compiled already: in the ahead-of-time directory or the kernel cache. Never NVRTC.
 fn find_compiled(
@@ -352,19 +371,7 @@ fn find_compiled(
     let exact = needs_exact(&src.headers);
     with_compile_options(contiguous, stack_define, exact, None, |opts| {
         if let Some((cubin, key, path)) = aot::lookup(&src.text, name, opts, arch) {
-            return Some(Obtained {
-                compiled: warp_cuda::Compiled {
-                    cubin,
-                    log: String::new(),
-                    compile_ms: 0.0,
-                },
-                outcome: CacheOutcome::Hit,
-                aot: true,
-                entry: CacheEntry {
-                    key,
-                    path: Some(path),
-                },
-            });
+            return Some(Obtained::ahead_of_time(cubin, key, path));
         }
         let (compiled, entry) = KernelCache::current().lookup_entry(&src.text, name, opts, arch)?;
         Some(Obtained {
@@ -645,19 +652,7 @@ fn compile_unit(
         None => with_compile_options(contiguous, stack_define, exact, tile, |opts| {
             // An ahead-of-time entry first: it needs no NVRTC (not even loading it).
             if let Some((cubin, key, path)) = aot::lookup(&src.text, info.name, opts, arch) {
-                return Ok(Obtained {
-                    compiled: warp_cuda::Compiled {
-                        cubin,
-                        log: String::new(),
-                        compile_ms: 0.0,
-                    },
-                    outcome: CacheOutcome::Hit,
-                    aot: true,
-                    entry: CacheEntry {
-                        key,
-                        path: Some(path),
-                    },
-                });
+                return Ok(Obtained::ahead_of_time(cubin, key, path));
             }
             KernelCache::current()
                 .compile_cached_entry(&src.text, info.name, opts, arch)
