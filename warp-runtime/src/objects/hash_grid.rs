@@ -315,8 +315,9 @@ impl HashGrid {
     /// [`Error::InvalidArgument`] naming the argument: `radius` not positive and finite (or so
     /// small that `1 / radius` is infinite); `points` on another device than the grid, with
     /// more than `i32::MAX` points, or with a NaN or infinite coordinate (the first such
-    /// index); [`Error::Capture`] for a build inside a capture that would allocate (see
-    /// above); device errors.
+    /// index); [`Error::Capture`] for a build inside a capture that would allocate (no room
+    /// reserved, or buffers a clone made before the capture shares: see above); device
+    /// errors.
     pub fn build(&mut self, points: &Array<Vec3>, radius: f32) -> Result<()> {
         if !(radius.is_finite() && radius > 0.0) {
             return Err(bad(
