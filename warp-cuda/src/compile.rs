@@ -15,7 +15,7 @@ use cudarc::nvrtc::sys;
 use crate::device::panic_message;
 use crate::error::{CudaError, Result};
 use crate::nvrtc_pool::{acquire, Api};
-pub use crate::nvrtc_pool::{DEFAULT_MAX_NVRTC_THREADS, NVRTC_THREADS_ENV};
+pub use crate::nvrtc_pool::{MAX_NVRTC_THREADS, NVRTC_THREADS_ENV};
 
 /// NVRTC options. `Default` gives IEEE-faithful code with FMA contraction on (NVRTC's own
 /// default), no fast math, no line info.

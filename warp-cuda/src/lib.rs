@@ -52,7 +52,7 @@ pub use cache::{
 };
 pub use compile::{
     compile, cudadevrt_path, nvrtc_supported_archs, nvrtc_version, CompileOptions, Compiled,
-    CUDADEVRT_ENV, DEFAULT_MAX_NVRTC_THREADS, NO_NVRTC_ENV, NVRTC_THREADS_ENV,
+    CUDADEVRT_ENV, MAX_NVRTC_THREADS, NO_NVRTC_ENV, NVRTC_THREADS_ENV,
 };
 pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_VERSION};
 pub use error::{CudaError, Result};

@@ -8,8 +8,11 @@
 //! shared with the first) and is kept for the process; copies are made only when compiles
 //! overlap (`wp::load` of several kernels), never for one compile at a time.
 //!
-//! How many compiles may run at once: [`NVRTC_THREADS_ENV`] (`WARP_LANG_NVRTC_THREADS`), else
-//! the machine's parallelism, at most [`DEFAULT_MAX_NVRTC_THREADS`]; 1 turns the copies off. Only
+//! **Opt-in and experimental:** on the H200 machine (glibc 2.39, a CUDA context open), a
+//! `wp::load` of the autodiff example's three kernels with copies ended in a segmentation
+//! fault (2026-11-30), where the same load with one compile at a time ran. So by default
+//! compiles take turns on the first copy; [`NVRTC_THREADS_ENV`] (`WARP_LANG_NVRTC_THREADS`)
+//! set to a number above 1 allows that many at once, at most [`MAX_NVRTC_THREADS`]. Only
 //! on Linux with glibc 2.32 or newer (whose libc copies in other namespaces take their memory
 //! with mmap, never by moving the program break that the first libc owns); elsewhere, or when
 //! a copy cannot be loaded (said once, at warning level), compiles take turns on the first.
@@ -27,10 +30,9 @@ use cudarc::nvrtc::sys;
 /// module documentation); read once, at the first compile. `1` turns the copies of libnvrtc off.
 pub const NVRTC_THREADS_ENV: &str = "WARP_LANG_NVRTC_THREADS";
 
-/// The most compiles that run at once when [`NVRTC_THREADS_ENV`] is not set (fewer on a
-/// machine with fewer hardware threads): a `wp::load` of the autodiff example's three kernels
-/// compiles three units.
-pub const DEFAULT_MAX_NVRTC_THREADS: usize = 4;
+/// The most compiles that run at once, whatever [`NVRTC_THREADS_ENV`] says (see
+/// [`limit_from`]'s note on static TLS).
+pub const MAX_NVRTC_THREADS: usize = 4;
 
 type Prog = sys::nvrtcProgram;
 type Res = sys::nvrtcResult;
@@ -123,14 +125,15 @@ fn first() -> Option<Api> {
 }
 
 /// How many compiles may run at once: `value` of [`NVRTC_THREADS_ENV`] when it is a number of
-/// at least 1, else `parallelism`; at most [`DEFAULT_MAX_NVRTC_THREADS`] either way. Each copy
-/// is a link-map namespace with a libc of its own, which takes static TLS: glibc reserves
-/// room for four namespaces by default (`rtld.nns`), and copies past it would use up the
-/// reserve that a later, unrelated `dlopen` of a library with initial-exec TLS needs.
-pub(crate) fn limit_from(value: Option<&str>, parallelism: usize) -> usize {
+/// at least 1, else 1 (the copies are opt-in, see the module documentation); at most
+/// [`MAX_NVRTC_THREADS`] either way. Each copy is a link-map namespace with a libc of its
+/// own, which takes static TLS: glibc reserves room for four namespaces by default
+/// (`rtld.nns`), and copies past it would use up the reserve that a later, unrelated `dlopen`
+/// of a library with initial-exec TLS needs.
+pub(crate) fn limit_from(value: Option<&str>) -> usize {
     match value.map(str::trim).and_then(|v| v.parse::<usize>().ok()) {
-        Some(n) if n >= 1 => n.min(DEFAULT_MAX_NVRTC_THREADS),
-        _ => parallelism.clamp(1, DEFAULT_MAX_NVRTC_THREADS),
+        Some(n) if n >= 1 => n.min(MAX_NVRTC_THREADS),
+        _ => 1,
     }
 }
 
@@ -276,9 +279,8 @@ fn pool() -> Option<&'static Pool> {
     static POOL: OnceLock<Option<Pool>> = OnceLock::new();
     POOL.get_or_init(|| {
         let first = first()?;
-        let parallelism = std::thread::available_parallelism().map_or(1, |n| n.get());
         let env = std::env::var(NVRTC_THREADS_ENV).ok();
-        let mut limit = limit_from(env.as_deref(), parallelism);
+        let mut limit = limit_from(env.as_deref());
         if limit > 1 && !copies::allowed() {
             log::debug!("NVRTC compiles take turns: no copies of libnvrtc on this platform");
             limit = 1;
@@ -421,18 +423,15 @@ mod tests {
         }
     }
 
-    /// The setting: a number of at least one, else the machine's parallelism up to the
-    /// default cap.
+    /// The setting: a number of at least one, at most the cap; else one compile at a time.
     #[test]
-    fn the_limit_comes_from_the_setting_or_the_machine() {
-        assert_eq!(limit_from(Some("1"), 16), 1);
-        assert_eq!(limit_from(Some(" 3 "), 2), 3);
-        assert_eq!(limit_from(Some("64"), 2), DEFAULT_MAX_NVRTC_THREADS);
-        assert_eq!(limit_from(None, 16), DEFAULT_MAX_NVRTC_THREADS);
-        assert_eq!(limit_from(None, 2), 2);
-        assert_eq!(limit_from(None, 0), 1);
+    fn the_limit_comes_from_the_setting_else_one() {
+        assert_eq!(limit_from(Some("1")), 1);
+        assert_eq!(limit_from(Some(" 3 ")), 3);
+        assert_eq!(limit_from(Some("64")), MAX_NVRTC_THREADS);
+        assert_eq!(limit_from(None), 1);
         for bad in ["0", "", "many", "-2"] {
-            assert_eq!(limit_from(Some(bad), 3), 3, "{bad:?}");
+            assert_eq!(limit_from(Some(bad)), 1, "{bad:?}");
         }
     }
 

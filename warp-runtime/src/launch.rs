@@ -206,11 +206,11 @@ fn check_shapes<K: Kernel>(args: &ArgsOf<'_, K>, grid: &Grid) -> Result<()> {
 /// NVRTC (or read from the disk cache) and loaded, so that no later launch, timed loop or
 /// graph capture compiles. On the CPU, nothing: cargo compiled the kernels.
 ///
-/// The kernels are handed to the rayon pool together and compiled side by side: NVRTC (CUDA
-/// 13) runs one compile at a time per loaded copy of libnvrtc, so compiles that overlap each
-/// take a copy of their own (`warp_cuda::NVRTC_THREADS_ENV` says how many at most; before
-/// the copies, the autodiff example's six variants took as long on the pool as one after
-/// another). A warm start needs none of this: the disk cache and `wp::aot` serve the cubins.
+/// The kernels are handed to the rayon pool together, but NVRTC (CUDA 13) runs one compile
+/// at a time per loaded copy of libnvrtc: they take turns unless `warp_cuda::NVRTC_THREADS_ENV`
+/// allows copies of libnvrtc (experimental, off by default: a load with copies crashed on a
+/// GPU machine with glibc 2.39). A warm start needs none of this: the disk cache and
+/// `wp::aot` serve the cubins.
 ///
 /// ```ignore
 /// // (tests/suite/launch.rs runs this on both backends)
