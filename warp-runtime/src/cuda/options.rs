@@ -134,6 +134,10 @@ mod tests {
         let h = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         assert_eq!(
             needs_exact(&h(&["wp_core.h", "wp_geometry.h", "wp_bvh.h"])),
+            Exact::Yes
+        );
+        assert_eq!(
+            needs_exact(&h(&["wp_core.h", "wp_geometry.h", "wp_bvh.h", "wp_mesh.h"])),
             Exact::WithRegisterCap
         );
         assert_eq!(
