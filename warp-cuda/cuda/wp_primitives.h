@@ -453,6 +453,24 @@ static_assert(TILE <= 65536, "a sort tile's local indices (and ranks) fit in 16 
 WP_PRIM_FN u64 load_status(const u64* p) { return *(const volatile u64*)p; }
 WP_PRIM_FN void store_status(u64* p, u64 v) { *(volatile u64*)p = v; }
 
+/// Decoupled look-back for digit `d` of tile `tile`: the counts of the tiles before it, added
+/// from the nearest back until one has published its inclusive count (waiting for a tile
+/// that has published nothing yet: it has started, the tile counter's order).
+WP_PRIM_FN u32 lookback_exclusive(const u64* status, i64 tile, i32 d) {
+  u32 excl = 0;
+  for (i64 k = tile - 1; k >= 0; --k) {
+    const u64* other = status + k * SORT_RADIX + d;
+    u64 s = load_status(other);
+    while ((s >> 32) == 0) {
+      WP_PRIM_LOOKBACK_WAIT();
+      s = load_status(other);
+    }
+    excl += (u32)s;
+    if ((s >> 32) == (STATUS_INCLUSIVE >> 32)) break;
+  }
+  return excl;
+}
+
 /// The key's digit of a pass: `mask` (at most 255) of its ordered image shifted right.
 template <typename K>
 WP_PRIM_FN u32 sort_digit(u32 key, i32 shift, u32 mask) {
@@ -753,17 +771,7 @@ WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
       continue;
     }
     store_status(mine, STATUS_AGGREGATE | cnt);
-    u32 excl = 0;
-    for (i64 k = tile - 1; k >= 0; --k) {
-      const u64* other = status + k * SORT_RADIX + d;
-      u64 s = load_status(other);
-      while ((s >> 32) == 0) {
-        WP_PRIM_LOOKBACK_WAIT();
-        s = load_status(other);
-      }
-      excl += (u32)s;
-      if ((s >> 32) == (STATUS_INCLUSIVE >> 32)) break;
-    }
+    const u32 excl = lookback_exclusive(status, tile, d);
     store_status(mine, STATUS_INCLUSIVE | (u32)(excl + cnt));
     dbase[d] = dbase[d] + excl - dstart[d];
   }
@@ -941,17 +949,7 @@ WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
     for (i32 j = 0; j < DIGITS_PER_THREAD; ++j) {
       const i32 d = t * DIGITS_PER_THREAD + j;
       if (d >= SORT_RADIX) break;
-      u32 excl = 0;
-      for (i64 k = tile - 1; k >= 0; --k) {
-        const u64* other = status + k * SORT_RADIX + d;
-        u64 s = load_status(other);
-        while ((s >> 32) == 0) {
-          WP_PRIM_LOOKBACK_WAIT();
-          s = load_status(other);
-        }
-        excl += (u32)s;
-        if ((s >> 32) == (STATUS_INCLUSIVE >> 32)) break;
-      }
+      const u32 excl = lookback_exclusive(status, tile, d);
       store_status(my_status + d, STATUS_INCLUSIVE | (u32)(excl + cnt[j]));
       gbase[d] = excl - dstart[j];
     }
