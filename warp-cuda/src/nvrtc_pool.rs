@@ -30,8 +30,10 @@ use cudarc::nvrtc::sys;
 /// module documentation); read once, at the first compile. `1` turns the copies of libnvrtc off.
 pub const NVRTC_THREADS_ENV: &str = "WARP_LANG_NVRTC_THREADS";
 
-/// The most compiles that run at once, whatever [`NVRTC_THREADS_ENV`] says (see
-/// [`limit_from`]'s note on static TLS).
+/// The most compiles that run at once, whatever [`NVRTC_THREADS_ENV`] says. Each copy of
+/// libnvrtc is a link-map namespace with a libc of its own, which takes static TLS; glibc
+/// reserves room for four namespaces by default, and more copies would use up the reserve a
+/// later `dlopen` of a library with initial-exec TLS needs.
 pub const MAX_NVRTC_THREADS: usize = 4;
 
 type Prog = sys::nvrtcProgram;
