@@ -11,7 +11,9 @@
 //! - Mesh: a torus (R = 1, r = 0.4) on a 500 x 200 grid, 200K triangles: build and refit.
 //! - 1M query points uniform in [-2, 2]^2 x [-1, 1]: `mesh_query_point` (signed) and
 //!   `mesh_query_point_no_sign` with max_dist 10; the distance of 2000 of them against brute
-//!   force in f64, and the sign against the torus's closed-form SDF.
+//!   force in f64, and the sign against the torus's closed-form SDF. The signed query is
+//!   timed against Warp's `mesh_query_point` (its sign from three axis-aligned rays) and
+//!   against `mesh_query_point_sign_normal` (the angle-weighted pseudonormal, as here).
 //! - 1M rays from the radius-3 sphere aimed at random points of the torus's box:
 //!   `mesh_query_ray`; 500 of them against a brute-force ray cast.
 //! - A Bvh of 1M boxes (centres uniform in 10^3, half extents U[0.025, 0.075]): build, refit,
@@ -143,13 +145,27 @@ fn main() -> wp::Result<()> {
             wrong_sign += 1;
         }
     }
+    let inside = d.iter().filter(|&&x| x < 0.0).count() as f64 / n as f64;
+    let fraction = |key| theirs(key).map_or("-".into(), |f| format!("{f:.4}"));
     row(
         "mesh_query_point (signed)",
         signed,
         "query_point_ms",
         format!(
-            "|d| vs brute force: max {worst:.1e}; wrong signs {wrong_sign} of {}",
-            subset.len()
+            "|d| vs brute force: max {worst:.1e}; wrong signs {wrong_sign} of {}; inside \
+             {inside:.4} (Warp's points, three-ray sign: {})",
+            subset.len(),
+            fraction("signed_inside_fraction")
+        ),
+    );
+    // The same sign method on both sides: Warp's pseudonormal variant.
+    row(
+        "  vs Warp's _sign_normal",
+        signed,
+        "query_point_sign_normal_ms",
+        format!(
+            "Warp's inside fraction {}",
+            fraction("sign_normal_inside_fraction")
         ),
     );
     let unsigned = median_ms(|| wp::launch(query_point_no_sign, n, (&mesh, &q, &out), &dev))?;

@@ -9,6 +9,7 @@
 //! cargo bench --bench gpu -- --tile-fft   # the batched tile FFT section alone
 //! cargo bench --bench gpu -- --tiles   # every tile section (GEMM, Cholesky, FFT, n-body)
 //! cargo bench --bench gpu -- --tile-nbody   # the tiled n-body section alone
+//! cargo bench --bench gpu -- --ad   # the reverse-mode section alone (plain and atomic backward)
 //! ```
 //!
 //! Workloads (DESIGN.md, "Figures to beat"): the seed particle program (10M x 100 steps),
@@ -537,6 +538,27 @@ fn ad_bench(dev: &wp::Device) {
     record(&tape, steps);
     wp::synchronize().unwrap();
     let fwd = ms(t);
+    // The same backward pass on a stream of its own, where another launch may run beside it,
+    // so the gradients of thread-owned elements are added atomically: the baseline of the
+    // plain adds a backward pass on the default stream makes (it runs alone). One untimed
+    // pass first, so that neither timed one pays a first use.
+    tape.backward(&loss).unwrap();
+    tape.zero().unwrap();
+    wp::synchronize().unwrap();
+    let t = Instant::now();
+    {
+        let stream = wp::Stream::new(dev).unwrap();
+        let _on = wp::ScopedStream::new(&stream).unwrap();
+        tape.backward(&loss).unwrap();
+        stream.synchronize().unwrap();
+    }
+    let bwd_atomic = ms(t);
+    let g_atomic = (
+        xs[0].grad().unwrap().to_vec().unwrap(),
+        vs[0].grad().unwrap().to_vec().unwrap(),
+    );
+    tape.zero().unwrap();
+    wp::synchronize().unwrap();
     let t = Instant::now();
     tape.backward(&loss).unwrap();
     wp::synchronize().unwrap();
@@ -546,6 +568,8 @@ fn ad_bench(dev: &wp::Device) {
     let x_t = xs[steps].to_vec().unwrap();
     let gx = xs[0].grad().unwrap().to_vec().unwrap();
     let gv = vs[0].grad().unwrap().to_vec().unwrap();
+    // Each element's gradient is added by one thread per step either way: the same bits.
+    let same = g_atomic.0 == gx && g_atomic.1 == gv;
     let rel = |g: Vec3, want: glam::DVec3| {
         (g.as_dvec3() - want).abs().max_element() / want.abs().max_element().max(1.0)
     };
@@ -557,9 +581,16 @@ fn ad_bench(dev: &wp::Device) {
     }
     println!(
         "AD 1M x 100 steps     forward {fwd:6.2} ms   backward {bwd:6.2} ms   ratio {:.2} (target <= 2)   \
-         total {:.2} ms (target <= Warp 3.3 + 5.2 = 8.5 ms)   max rel err dL/dx0 {ex:.1e}, dL/dv0 {ev:.1e}",
+         total {:.2} ms (target <= Warp 3.3 + 5.2 = 8.5 ms)   max rel err dL/dx0 {ex:.1e}, dL/dv0 {ev:.1e}\n\
+         AD backward on a user stream (atomic adds of owned gradients) {bwd_atomic:6.2} ms   \
+         plain / atomic {:.2}   same gradients: {same}",
         bwd / fwd,
-        fwd + bwd
+        fwd + bwd,
+        bwd / bwd_atomic
+    );
+    assert!(
+        same,
+        "the backward pass's gradients differ between the plain and atomic adds"
     );
 }
 
@@ -1254,6 +1285,10 @@ fn main() {
     // `--tile-nbody`: the tiled n-body section alone.
     if std::env::args().any(|a| a == "--tile-nbody") {
         return tile_nbody_bench(&dev, 65536);
+    }
+    // `--ad`: the reverse-mode section alone (forward, backward, and backward with atomic adds).
+    if std::env::args().any(|a| a == "--ad") {
+        return ad_bench(&dev);
     }
     // `--tiles`: every tile section, in one run (the issue's beside-Warp-and-cuBLAS/cuFFT table).
     if std::env::args().any(|a| a == "--tiles") {

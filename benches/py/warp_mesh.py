@@ -4,8 +4,10 @@ print ratios.
 
 - Mesh: a torus (R = 1, r = 0.4) on a 500 x 200 grid of quads, 200K triangles: build (BVH) and
   refit.
-- 1M query points uniform in [-2, 2]^2 x [-1, 1]: mesh_query_point (signed) and
-  mesh_query_point_no_sign, max_dist 10; the mean distance is printed as a check.
+- 1M query points uniform in [-2, 2]^2 x [-1, 1]: mesh_query_point (signed by three
+  axis-aligned rays), mesh_query_point_sign_normal (signed by the angle-weighted pseudonormal,
+  warp-lang's method) and mesh_query_point_no_sign, max_dist 10; the mean distance is printed
+  as a check.
 - 1M rays from points on the radius-3 sphere aimed at random points of the torus's box:
   mesh_query_ray, max_t 100; the hit fraction is printed (about 80%).
 - Bvh of 1M boxes, centres uniform in 10^3, half extents U[0.025, 0.075]: build, refit, and a
@@ -60,6 +62,16 @@ def torus(nu=500, nv=200, big=1.0, small=0.4):
 def query_point(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
     i = wp.tid()
     q = wp.mesh_query_point(mesh, pts[i], 10.0)
+    d = float(0.0)
+    if q.result:
+        d = wp.length(pts[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v)) * q.sign
+    out[i] = d
+
+
+@wp.kernel
+def query_point_sign_normal(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+    i = wp.tid()
+    q = wp.mesh_query_point_sign_normal(mesh, pts[i], 10.0)
     d = float(0.0)
     if q.result:
         d = wp.length(pts[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v)) * q.sign
@@ -127,6 +139,10 @@ qp = wp.array(q_np, dtype=wp.vec3)
 dist = wp.zeros(N, dtype=float)
 res["query_point_ms"] = median_ms(lambda: wp.launch(query_point, N, inputs=[mesh.id, qp, dist]))
 res["signed_inside_fraction"] = float((dist.numpy() < 0).mean())
+res["query_point_sign_normal_ms"] = median_ms(
+    lambda: wp.launch(query_point_sign_normal, N, inputs=[mesh.id, qp, dist])
+)
+res["sign_normal_inside_fraction"] = float((dist.numpy() < 0).mean())
 res["query_point_no_sign_ms"] = median_ms(lambda: wp.launch(query_point_no_sign, N, inputs=[mesh.id, qp, dist]))
 res["mean_distance"] = float(dist.numpy().mean())
 

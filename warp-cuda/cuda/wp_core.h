@@ -1723,10 +1723,17 @@ struct launch_t {
   i64 dims[4];
   i64 total;
   i32 ndim;
-  /// Nonzero when every array the kernel indexes by the thread index covers the grid (checked
-  /// by the host): those accesses then skip their bounds checks.
-  i32 fast;
+  /// Flags set by the host for this launch (warp_runtime's `cuda/launch.rs`):
+  ///   LAUNCH_FAST   every array the kernel indexes by the thread index covers the grid, so
+  ///                 those accesses skip their bounds checks;
+  ///   LAUNCH_ALONE  (adjoint launches) nothing else runs on the GPU while this launch does:
+  ///                 the host queued it on the default stream outside a capture, and every
+  ///                 other stream's work is ordered before or after it. The gradients of
+  ///                 thread-owned elements are then plain adds (`grad_accum_own`).
+  i32 flags;
 };
+constexpr i32 LAUNCH_FAST = 1;
+constexpr i32 LAUNCH_ALONE = 2;
 static_assert(sizeof(launch_t) == 48 && alignof(launch_t) == 8, "launch_t layout");
 
 /// The n-dimensional index of thread `flat`, row-major (the last dimension varies fastest).

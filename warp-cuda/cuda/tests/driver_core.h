@@ -846,7 +846,7 @@ DRV_FN void run_unflatten(reader& r, out_t& o) {
     if (k < n) l.total *= l.dims[k];
   }
   l.ndim = n;
-  l.fast = 0;
+  l.flags = 0;
   const i64 flat = (i64)r.a[r.pos++];
   i64 out[4] = {0, 0, 0, 0};
   unflatten(l, flat, out, n);

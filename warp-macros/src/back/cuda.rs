@@ -260,7 +260,7 @@ impl<'a> Emitter<'a> {
     }
 
     /// An access indexed exactly by the thread index: unchecked when the launch says the
-    /// arrays cover the grid (`__FAST`, read once per thread from `launch_t::fast`; the branch
+    /// arrays cover the grid (`__FAST`, read once per thread from `launch_t::flags`; the branch
     /// is the same for every thread, and one function body keeps the code small).
     ///
     /// Likewise an access at exactly a native loop's variable, when a check before the loop
@@ -317,7 +317,7 @@ impl<'a> Emitter<'a> {
                 params.push("wp::ctx_t* __ctx".into());
                 let _ = writeln!(
                     self.out,
-                    "static WP_FN void @@SELF@@({}) {{\n    const bool __FAST = __launch.fast != 0;",
+                    "static WP_FN void @@SELF@@({}) {{\n    const bool __FAST = (__launch.flags & wp::LAUNCH_FAST) != 0;",
                     params.join(", ")
                 );
                 if let Some(n) = self.f.tid_ndim {

@@ -178,7 +178,7 @@ impl<'a> Printer<'a> {
         if kernel {
             self.e
                 .out
-                .push_str("    const bool __FAST = __launch.fast != 0;\n");
+                .push_str("    const bool __FAST = (__launch.flags & wp::LAUNCH_FAST) != 0;\n");
             if let Some(n) = self.f().tid_ndim {
                 let _ = writeln!(
                     self.e.out,
@@ -428,7 +428,11 @@ impl<'a> Printer<'a> {
             } => {
                 let (g, idx, v) = (self.adj(*array), self.index(index), self.grad(from)?);
                 match own {
-                    true => format!("wp::grad_accum_own({g}, {idx}, {v});"),
+                    // `__launch` is the kernel's: thread-owned arrays are a kernel's (a func's
+                    // accesses are never thread-owned).
+                    true => format!(
+                        "wp::grad_accum_own({g}, {idx}, {v}, (__launch.flags & wp::LAUNCH_ALONE) != 0);"
+                    ),
                     false => format!("wp::grad_accum({g}, {idx}, {v}, __ctx);"),
                 }
             }

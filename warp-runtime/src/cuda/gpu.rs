@@ -9,6 +9,11 @@
 //! is never freed or rewritten under a kernel still using it, and kernels on different user
 //! streams may overlap.
 //!
+//! A launch queues its waits and itself as one step (`GpuState::queue` holds a per-GPU lock
+//! across them), so work on the default stream runs after or before every user stream's work
+//! queued by any thread, never beside it. An adjoint launch there adds the gradients of its
+//! thread-owned elements without atomics (`GpuState::alone`).
+//!
 //! # Faults
 //! Kernel threads record faults (out-of-bounds index, integer division by zero, bad step,
 //! adjoint stack overflow) in their launching thread's record (`fault.rs`); a thread reads its
@@ -112,6 +117,9 @@ pub(crate) struct GpuState {
     pub(crate) faults: Arc<RecordPool>,
     pending: Mutex<Vec<warp_cuda::Stream>>,
     has_pending: AtomicBool,
+    /// Held while work is queued outside a capture: its waits and the work are one step (see
+    /// the module's ordering model).
+    order: Mutex<()>,
     /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls: the
     /// largest needed so far.
     pub(crate) workspace: Mutex<Option<Arc<Scratch>>>,
@@ -204,6 +212,7 @@ impl GpuState {
             }
             return enqueue(&capture);
         }
+        let _order = self.order.lock().unwrap_or_else(|p| p.into_inner());
         let default = self.gpu.default_stream();
         let scoped;
         let user = match stream {
@@ -227,6 +236,14 @@ impl GpuState {
                 enqueue(default)
             }
         }
+    }
+
+    /// Whether work that [`queue`](Self::queue) hands `on` runs alone on the GPU: on the default
+    /// stream outside a capture, where the queue's lock orders it after every user stream's
+    /// work queued before and before every user stream's work queued after. (Inside a capture
+    /// nothing runs until the graph is launched, on any stream: never alone.)
+    pub(crate) fn alone(&self, on: &warp_cuda::Stream) -> bool {
+        on.is(self.gpu.default_stream()) && capture_stream(self.ordinal).is_none()
     }
 
     /// Records that `stream` (a user stream) has work the default stream must wait for.
@@ -273,6 +290,7 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
         gpu,
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
+        order: Mutex::new(()),
         workspace: Mutex::new(None),
     });
     map.insert(ordinal, s.clone());

@@ -20,8 +20,17 @@ struct LaunchDims {
     dims: [i64; 4],
     total: i64,
     ndim: i32,
-    fast: i32,
+    /// `LAUNCH_FAST | LAUNCH_ALONE` (see `wp::launch_t`).
+    flags: i32,
 }
+
+/// `wp::LAUNCH_FAST`: every array the kernel indexes by the thread index covers the grid.
+const LAUNCH_FAST: i32 = 1;
+/// `wp::LAUNCH_ALONE`: an adjoint launch that nothing else runs beside ([`GpuState::alone`]),
+/// so its thread-owned gradients are plain adds.
+///
+/// [`GpuState::alone`]: super::gpu::GpuState::alone
+const LAUNCH_ALONE: i32 = 2;
 
 /// `wp::ctx_t`.
 #[repr(C)]
@@ -134,7 +143,10 @@ impl<K: Kernel> Prepared<K> {
             dims: grid.dims.map(|d| d as i64),
             total: grid.total as i64,
             ndim: grid.ndim as i32,
-            fast: K::Params::cover(args, info.tid_indexed, grid) as i32,
+            flags: match K::Params::cover(args, info.tid_indexed, grid) {
+                true => LAUNCH_FAST,
+                false => 0,
+            },
         };
         let (block, blocks) = match tile_block {
             // One CUDA block per block of the launch (`grid.total` counts them): the entry runs
@@ -213,15 +225,18 @@ impl<K: Kernel> Prepared<K> {
         (ctx.fault, ctx.fault_flag) =
             fault::with_record(&st.faults, ordinal, id, |r| r.addresses())?;
         ctx.launch = id.0;
-        // The launch and the context, then the parameters and (adjoint) their gradients.
-        let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
-        ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
-        ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
-        let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
-        if let Some(g) = grads.as_mut() {
-            n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
-        }
         st.queue(ordinal, stream, |on| {
+            if self.adjoint && st.alone(on) {
+                dims.flags |= LAUNCH_ALONE;
+            }
+            // The launch and the context, then the parameters and (adjoint) their gradients.
+            let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
+            ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
+            ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
+            let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+            if let Some(g) = grads.as_mut() {
+                n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
+            }
             // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
             // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type),
             // alive until the call returns; cuLaunchKernel copies them.
