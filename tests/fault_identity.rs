@@ -272,6 +272,46 @@ fn refit_faults_reach_the_next_synchronisation() {
             t.contains("Mesh::refit") && t.contains("argument `points`") && t.contains("index 2"),
             "{t}"
         );
+        // A hash grid's points: the build's own check (a GPU build reads nothing back).
+        let mut grid = wp::HashGrid::new(8, 8, 8, dev).unwrap();
+        let pts = Array::from_slice(&moved, dev).unwrap();
+        let r = grid.build(&pts, 0.5);
+        if dev.is_cpu() {
+            let e = r.unwrap_err().to_string();
+            assert!(
+                e.contains("HashGrid::build")
+                    && e.contains("argument `points`")
+                    && e.contains("index 2"),
+                "{e}"
+            );
+            assert!(
+                !grid.is_built(),
+                "a refused CPU build leaves the grid unbuilt"
+            );
+        } else {
+            r.unwrap();
+            let build = wp::last_launch_id();
+            let f = fault(wp::synchronize());
+            assert_eq!(f.kernel, "HashGrid::build");
+            assert_eq!(f.launch, build, "the fault is the build's last step's");
+            assert!(
+                matches!(
+                    &f.kind,
+                    FaultKind::NonFiniteInput {
+                        arg: "points",
+                        index: 2,
+                        ..
+                    }
+                ),
+                "{f:?}"
+            );
+            wp::synchronize().unwrap();
+        }
+        // A build of finite points afterwards is a plain one.
+        let finite = Array::from_slice(&boxes[..4], dev).unwrap();
+        grid.build(&finite, 0.5).unwrap();
+        wp::synchronize().unwrap();
+        assert!(grid.is_built());
     });
 }
 

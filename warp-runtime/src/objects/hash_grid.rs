@@ -291,8 +291,8 @@ impl HashGrid {
     /// radius)`): the point indices sorted by bucket, each bucket's range recorded. Queries of
     /// any radius work on the result (a larger query radius visits more cells); a cell as wide
     /// as the usual query radius visits the fewest points. On a GPU the build is queued like a
-    /// launch, except that it waits once, after its last step, for its check of the points
-    /// (one flag read back).
+    /// launch and reads nothing back: its check of the points is a fault of its own step (see
+    /// Errors).
     ///
     /// A failed build leaves the grid unbuilt (kernels refuse it until a build succeeds).
     ///
@@ -303,19 +303,19 @@ impl HashGrid {
     /// frame's substeps). It must allocate nothing there: [`reserve`](HashGrid::reserve) room
     /// for the points before capturing, pass contiguous points, and let no clone made before
     /// the capture (a tape's) share the grid's buffers. On a GPU, build once before capturing
-    /// (the first build loads its kernels and sizes the sort's scratch memory). A graph cannot
-    /// read the points' check back: a recorded build reports a non-finite point itself, as
-    /// the error of the replay on the CPU (which stops there), and on a GPU as a fault
-    /// ([`FaultKind::NonFiniteInput`](warp_core::FaultKind::NonFiniteInput) naming
-    /// `HashGrid::build`, `points` and the first such index) reported by the synchronisation
-    /// after the replay; the grid is then built with that point bucketed consistently (queries
-    /// stay in bounds).
+    /// (the first build loads its kernels and sizes the sort's scratch memory). A recorded
+    /// build reports a non-finite point as a build does (below), at the replay.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the argument: `radius` not positive and finite (or so
     /// small that `1 / radius` is infinite); `points` on another device than the grid, with
-    /// more than `i32::MAX` points, or with a NaN or infinite coordinate (the first such
-    /// index); [`Error::Capture`] for a build inside a capture that would allocate (no room
+    /// more than `i32::MAX` points, or, on the CPU, with a NaN or infinite coordinate (the
+    /// first such index; the grid is left unbuilt). On a GPU a non-finite point is a fault
+    /// ([`FaultKind::NonFiniteInput`](warp_core::FaultKind::NonFiniteInput) naming
+    /// `HashGrid::build`, `points` and the first such index) reported by the next
+    /// synchronisation, as a kernel's faults are (at once in debug mode); the grid is then
+    /// built with that point bucketed consistently, so queries stay in bounds.
+    /// [`Error::Capture`] for a build inside a capture that would allocate (no room
     /// reserved, or buffers a clone made before the capture shares: see above); device
     /// errors.
     pub fn build(&mut self, points: &Array<Vec3>, radius: f32) -> Result<()> {
@@ -450,12 +450,8 @@ impl HashGrid {
                 buckets: cells as i32,
                 clear: 0,
                 pad: 0,
-                // Recorded, the build cannot read its check back: the step reports it.
-                bad: if in_capture {
-                    b.bad.device_address()
-                } else {
-                    0
-                },
+                // The step reports the points' check itself (a GPU build reads nothing back).
+                bad: b.bad.device_address(),
                 points: points.device_address(),
                 fault: StepFault::new(&BUILD_NAMES),
             },
@@ -466,29 +462,13 @@ impl HashGrid {
             cell_width: radius,
             cell_width_inv: inv,
         };
-        if in_capture {
-            // Recorded: the ranges step reports the points' check (see above). The launches
-            // recorded next take the grid as built, the next build recorded here clears from
-            // these keys.
-            self.built = Some(built);
-            (self.ranges_from_keys, self.ranges_capture) = (Some(n), capture);
-            return Ok(());
-        }
-        // The points' check, read back once everything is queued (on a GPU, the one wait of a
-        // build, after its last step: no idle gap between the steps). A build of a non-finite
-        // point is complete and consistent, only refused.
-        let first_bad = b.bad.to_vec()?[0];
-        self.ranges_from_keys = Some(n);
-        if first_bad != i32::MAX {
-            let i = first_bad as usize;
-            let p = points.view(i..i + 1)?.to_vec()?[0];
-            return Err(bad(
-                WHAT,
-                "points",
-                format!("has a non-finite point at index {i}: {p:?}"),
-            ));
-        }
+        // The ranges step reported the points' check (on the CPU its error returned above; on a
+        // GPU a fault, read at the next synchronisation). A build of a non-finite point is
+        // complete and consistent. The launches queued (or recorded) next take the grid as
+        // built; the next build clears from these keys (in a capture, the next one recorded
+        // there).
         self.built = Some(built);
+        (self.ranges_from_keys, self.ranges_capture) = (Some(n), capture);
         Ok(())
     }
 
