@@ -456,7 +456,7 @@ pub fn mesh_query_point_sign_parity(
 /// with a grid are not grazed. Stored as `(15/16, 3/4, 1)` (the same direction, divided by
 /// 0.64), which binary floating point holds exactly, as it does the slopes of the ray's
 /// sheared frame (the unit vector's components are not exact, nor their ratios). All its
-/// components are positive, which [`ray_may_meet_box`] relies on.
+/// components are positive, which the walk's box test relies on.
 pub const PARITY_DIR: Vec3 = Vec3::new(0.9375, 0.75, 1.0);
 
 /// The slack of [`ray_may_meet_box`], relative to the ray parameters it compares: `2^-18`,
