@@ -13,7 +13,9 @@
 //!   `mesh_query_point_no_sign` with max_dist 10; the distance of 2000 of them against brute
 //!   force in f64, and the sign against the torus's closed-form SDF. The signed query is
 //!   timed against Warp's `mesh_query_point` (its sign from three axis-aligned rays) and
-//!   against `mesh_query_point_sign_normal` (the angle-weighted pseudonormal, as here).
+//!   against `mesh_query_point_sign_normal` (the angle-weighted pseudonormal, as here);
+//!   `mesh_query_point_sign_parity` against Warp's with its defaults (one ray), with the same
+//!   error columns.
 //! - 1M rays from the radius-3 sphere aimed at random points of the torus's box:
 //!   `mesh_query_ray`; 500 of them against a brute-force ray cast.
 //! - A Bvh of 1M boxes (centres uniform in 10^3, half extents U[0.025, 0.075]): build, refit,
@@ -39,6 +41,18 @@ fn query_point(mesh: Mesh, pts: Array<Vec3>, out: Array<f32>) {
     let i = tid();
     let p = pts[i];
     let (found, sign, face, u, v) = mesh_query_point(mesh, p, 10.0);
+    let mut d = 0.0;
+    if found {
+        d = length(p - mesh_eval_position(mesh, face, u, v)) * sign;
+    }
+    out[i] = d;
+}
+
+#[wp::kernel]
+fn query_point_sign_parity(mesh: Mesh, pts: Array<Vec3>, out: Array<f32>) {
+    let i = tid();
+    let p = pts[i];
+    let (found, sign, face, u, v) = mesh_query_point_sign_parity(mesh, p, 10.0);
     let mut d = 0.0;
     if found {
         d = length(p - mesh_eval_position(mesh, face, u, v)) * sign;
@@ -134,18 +148,24 @@ fn main() -> wp::Result<()> {
     let subset: Vec<usize> = (0..2000).map(|k| k * (n / 2000)).collect();
     let signed = median_ms(|| wp::launch(query_point, n, (&mesh, &q, &out), &dev))?;
     let d = out.to_vec()?;
-    let (mut worst, mut wrong_sign) = (0.0f64, 0usize);
-    for &k in &subset {
-        let p = qs[k].as_dvec3();
-        let exact = meshes::brute_distance(&torus, p);
-        worst = worst.max((d[k].abs() as f64 - exact).abs());
-        // Points nearer the surface than the faceting (about 1e-4 here) may take either sign.
-        let sdf = meshes::torus_sdf(p, 1.0, 0.4);
-        if sdf.abs() > 1e-3 && (sdf < 0.0) != (d[k] < 0.0) {
-            wrong_sign += 1;
+    // The largest distance error and the wrong signs on the subset, and the inside fraction.
+    let check_signed = |d: &[f32]| {
+        let (mut worst, mut wrong_sign) = (0.0f64, 0usize);
+        for &k in &subset {
+            let p = qs[k].as_dvec3();
+            let exact = meshes::brute_distance(&torus, p);
+            worst = worst.max((d[k].abs() as f64 - exact).abs());
+            // Points nearer the surface than the faceting (about 1e-4 here) may take either
+            // sign.
+            let sdf = meshes::torus_sdf(p, 1.0, 0.4);
+            if sdf.abs() > 1e-3 && (sdf < 0.0) != (d[k] < 0.0) {
+                wrong_sign += 1;
+            }
         }
-    }
-    let inside = d.iter().filter(|&&x| x < 0.0).count() as f64 / n as f64;
+        let inside = d.iter().filter(|&&x| x < 0.0).count() as f64 / n as f64;
+        (worst, wrong_sign, inside)
+    };
+    let (worst, wrong_sign, inside) = check_signed(&d);
     let fraction = |key| theirs(key).map_or("-".into(), |f| format!("{f:.4}"));
     row(
         "mesh_query_point (signed)",
@@ -166,6 +186,20 @@ fn main() -> wp::Result<()> {
         format!(
             "Warp's inside fraction {}",
             fraction("sign_normal_inside_fraction")
+        ),
+    );
+    // The parity sign: one ray, on both sides (Warp's defaults: n_sample 1).
+    let parity = median_ms(|| wp::launch(query_point_sign_parity, n, (&mesh, &q, &out), &dev))?;
+    let (worst, wrong_sign, inside) = check_signed(&out.to_vec()?);
+    row(
+        "mesh_query_point_sign_parity",
+        parity,
+        "query_point_sign_parity_ms",
+        format!(
+            "|d| vs brute force: max {worst:.1e}; wrong signs {wrong_sign} of {}; inside \
+             {inside:.4} (Warp's points, its parity: {})",
+            subset.len(),
+            fraction("sign_parity_inside_fraction")
         ),
     );
     let unsigned = median_ms(|| wp::launch(query_point_no_sign, n, (&mesh, &q, &out), &dev))?;

@@ -33,15 +33,17 @@ use warp_core::objects::bvh::{
 };
 use warp_core::objects::geometry::{
     aabb_distance_sq, aabb_overlap, adj_closest_point_triangle, closest_point_triangle,
-    intersect_ray_aabb, intersect_ray_triangle, intersect_tri_tri, pow2_scale, ray_inv_dir,
-    RayTriangleHit, TriFeature, TriangleClosestPoint,
+    intersect_ray_aabb, intersect_ray_triangle, intersect_tri_tri, pow2_scale,
+    ray_crosses_triangle, ray_inv_dir, RayTriangleHit, TriFeature, TriangleClosestPoint,
 };
 use warp_core::objects::mesh::{
     adj_mesh_eval_position, adj_mesh_eval_velocity, adj_mesh_query_point,
-    adj_mesh_query_point_no_sign, mesh_eval_face_normal, mesh_eval_position, mesh_eval_velocity,
-    mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item, mesh_query_aabb_next,
-    mesh_query_furthest_point_no_sign, mesh_query_point, mesh_query_point_no_sign, mesh_query_ray,
-    MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView,
+    adj_mesh_query_point_no_sign, adj_mesh_query_point_sign_normal,
+    adj_mesh_query_point_sign_parity, mesh_eval_face_normal, mesh_eval_position,
+    mesh_eval_velocity, mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item,
+    mesh_query_aabb_next, mesh_query_furthest_point_no_sign, mesh_query_point,
+    mesh_query_point_no_sign, mesh_query_point_sign_normal, mesh_query_point_sign_parity,
+    mesh_query_ray, MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView, PARITY_DIR,
 };
 use warp_core::{Fault, FaultKind, KResult};
 use warp_runtime::objects::bvh_build::{build_sah, check_layout};
@@ -149,6 +151,7 @@ int main(int argc, char** argv) {
         const Vec3 s = wv(), d = wv(), a = wv(), b = wv(), c = wv();
         const ray_triangle_hit_t h = intersect_ray_triangle(s, d, a, b, c);
         printf("rt %d", (int)h.result); pf(h.t); pf(h.u); pf(h.v); pf(h.sign);
+        printf(" x%d", (int)ray_crosses_triangle(s, d, a, b, c));
         break;
       }
       case 3: {
@@ -228,17 +231,20 @@ int main(int argc, char** argv) {
         printf("mesh");
         break;
       }
-      case 21: case 22: case 23: {
+      case 21: case 22: case 23: case 27: case 28: {
         const Vec3 p = wv();
         const f32 d = wf();
         mesh_query_point_t g{};
         g.u = wf(); g.v = wf();
         Vec3 ap = wv();
         ctx_t c = fresh();
-        const mesh_query_point_t r = op == 21 ? mesh_query_point(mesh, p, d, &c)
-                                     : op == 22 ? mesh_query_point_no_sign(mesh, p, d, &c)
-                                                : mesh_query_furthest_point_no_sign(mesh, p, d, &c);
-        printf(op == 21 ? "mp" : op == 22 ? "mn" : "mf");
+        const mesh_query_point_t r =
+            op == 21   ? mesh_query_point(mesh, p, d, &c)
+            : op == 22 ? mesh_query_point_no_sign(mesh, p, d, &c)
+            : op == 27 ? mesh_query_point_sign_normal(mesh, p, d, &c)
+            : op == 28 ? mesh_query_point_sign_parity(mesh, p, d, &c)
+                       : mesh_query_furthest_point_no_sign(mesh, p, d, &c);
+        printf(op == 21 ? "mp" : op == 22 ? "mn" : op == 27 ? "ms" : op == 28 ? "mq" : "mf");
         if (pfault(c)) break;
         printf(" %d", (int)r.result); pf(r.sign); printf(" %d", r.face); pf(r.u); pf(r.v);
         mesh_t am{};
@@ -246,6 +252,12 @@ int main(int argc, char** argv) {
         c = fresh();
         if (op == 21) adj_mesh_query_point(mesh, p, d, am, ap, ad, g, &c);
         else if (op == 22) adj_mesh_query_point_no_sign(mesh, p, d, am, ap, ad, g, &c);
+        else if (op == 27) adj_mesh_query_point_sign_normal(mesh, p, d, am, ap, ad, g, &c);
+        else if (op == 28) {
+          // The tuple overload, as generated code calls it.
+          const mesh_query_point_tuple_t gt = g;
+          adj_mesh_query_point_sign_parity(mesh, p, d, am, ap, ad, gt, &c);
+        }
         else adj_mesh_query_furthest_point_no_sign(mesh, p, d, am, ap, ad, g, &c);
         printf(" |"); if (!pfault(c)) pv(ap);
         break;
@@ -471,12 +483,13 @@ fn ray_tri_case(c: &mut Cases, s: Vec3, d: Vec3, a: Vec3, b: Vec3, cc: Vec3) {
     c.op(2).v(s).v(d).v(a).v(b).v(cc);
     let h: RayTriangleHit = intersect_ray_triangle(s, d, a, b, cc);
     c.expect(format!(
-        "rt {}{}{}{}{}",
+        "rt {}{}{}{}{} x{}",
         h.result as i32,
         hf(h.t),
         hf(h.u),
         hf(h.v),
-        hf(h.sign)
+        hf(h.sign),
+        ray_crosses_triangle(s, d, a, b, cc) as i32
     ));
 }
 
@@ -612,6 +625,27 @@ fn geometry_cases(c: &mut Cases) {
         let d = p[0] + (p[2] - p[0]) * rng.f(0.0, 1.0) - o;
         ray_tri_case(c, o, d, p[0], p[1], p[2]);
         ray_tri_case(c, o, d, p[0], p[2], p[3]);
+    }
+    // The crossing's ties: dyadic rays exactly through a fan's centre, its spokes, its rim.
+    let fan = [Vec3::X, Vec3::Y, -Vec3::X, -Vec3::Y];
+    for d in [
+        -Vec3::Z,
+        Vec3::new(0.25, -0.5, -1.0),
+        Vec3::new(0.9375, 0.75, 1.0),
+        Vec3::new(-1.0, 0.5, 0.25),
+    ] {
+        for t in [
+            Vec3::ZERO,
+            Vec3::new(0.25, 0.0, 0.0),
+            Vec3::new(0.0, -0.5, 0.0),
+            Vec3::new(0.5, 0.5, 0.0),
+            Vec3::X,
+        ] {
+            for i in 0..4 {
+                ray_tri_case(c, t - d, d, Vec3::ZERO, fan[i], fan[(i + 1) % 4]);
+                ray_tri_case(c, t - d, d, Vec3::ZERO, fan[(i + 1) % 4], fan[i]);
+            }
+        }
     }
 
     c.label = "intersect_tri_tri".into();
@@ -1178,7 +1212,8 @@ fn mesh_queries(c: &mut Cases, m: &Mesh, rng: &mut Rng, n: usize, scale: f32) {
             MeshQueryPoint,
         ) -> KResult<()>;
         let furthest_adj: Backward = |_, _, _, _, _, _, _| Ok(());
-        let queries: [(u32, &str, Forward, Backward); 3] = [
+        // The signed queries after the furthest point's, whose rng draw the others follow.
+        let queries: [(u32, &str, Forward, Backward); 5] = [
             (21, "mp", mesh_query_point, adj_mesh_query_point),
             (
                 22,
@@ -1187,6 +1222,18 @@ fn mesh_queries(c: &mut Cases, m: &Mesh, rng: &mut Rng, n: usize, scale: f32) {
                 adj_mesh_query_point_no_sign,
             ),
             (23, "mf", mesh_query_furthest_point_no_sign, furthest_adj),
+            (
+                27,
+                "ms",
+                mesh_query_point_sign_normal,
+                adj_mesh_query_point_sign_normal,
+            ),
+            (
+                28,
+                "mq",
+                mesh_query_point_sign_parity,
+                adj_mesh_query_point_sign_parity,
+            ),
         ];
         for (op, tag, fwd, bwd) in queries {
             let d = if op == 23 && k % 2 == 0 {
@@ -1301,6 +1348,32 @@ fn mesh_queries(c: &mut Cases, m: &Mesh, rng: &mut Rng, n: usize, scale: f32) {
             adj(adj_mesh_eval_position::<i32>),
             adj(adj_mesh_eval_velocity::<i32>),
         ));
+    }
+    // The parity's ray along the edges and through the vertices: starts a little back from a
+    // vertex or an edge's midpoint along the ray's direction.
+    let mut prng = Rng(0x5eed_0005 ^ n as u64);
+    for k in 0..n / 2 {
+        if npts == 0 || nfaces == 0 {
+            break;
+        }
+        let f = prng.below(nfaces);
+        let at = |k: usize| m.points[(m.indices[k].max(0) as usize).min(npts - 1)];
+        let (a, b) = (at(3 * f), at(3 * f + 1));
+        let target = if k % 2 == 0 { a } else { a + (b - a) * 0.5 };
+        let p = target - PARITY_DIR * (prng.f(0.0, 2.0) * scale);
+        c.op(28).v(p).f(f32::MAX).f(0.5).f(-0.5).v(Vec3::ZERO);
+        let g = MeshQueryPoint {
+            u: 0.5,
+            v: -0.5,
+            ..Default::default()
+        };
+        let r = mesh_query_point_sign_parity(v, p, f32::MAX);
+        let adj = r.as_ref().ok().map(|_| {
+            let (mut am, mut ap, mut ad) = (MeshView::empty(), Vec3::ZERO, 0.0f32);
+            adj_mesh_query_point_sign_parity(v, p, f32::MAX, &mut am, &mut ap, &mut ad, g)
+                .map(|_| ap)
+        });
+        c.expect(point_line("mq", r, adj.unwrap_or(Ok(Vec3::ZERO))));
     }
 }
 

@@ -6,8 +6,8 @@ print ratios.
   refit.
 - 1M query points uniform in [-2, 2]^2 x [-1, 1]: mesh_query_point (signed by three
   axis-aligned rays), mesh_query_point_sign_normal (signed by the angle-weighted pseudonormal,
-  warp-lang's method) and mesh_query_point_no_sign, max_dist 10; the mean distance is printed
-  as a check.
+  warp-lang's method), mesh_query_point_sign_parity (its defaults: one ray) and
+  mesh_query_point_no_sign, max_dist 10; the mean distance is printed as a check.
 - 1M rays from points on the radius-3 sphere aimed at random points of the torus's box:
   mesh_query_ray, max_t 100; the hit fraction is printed (about 80%).
 - Bvh of 1M boxes, centres uniform in 10^3, half extents U[0.025, 0.075]: build, refit, and a
@@ -79,6 +79,16 @@ def query_point_sign_normal(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: 
 
 
 @wp.kernel
+def query_point_sign_parity(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+    i = wp.tid()
+    q = wp.mesh_query_point_sign_parity(mesh, pts[i], 10.0)
+    d = float(0.0)
+    if q.result:
+        d = wp.length(pts[i] - wp.mesh_eval_position(mesh, q.face, q.u, q.v)) * q.sign
+    out[i] = d
+
+
+@wp.kernel
 def query_point_no_sign(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
     i = wp.tid()
     q = wp.mesh_query_point_no_sign(mesh, pts[i], 10.0)
@@ -143,6 +153,10 @@ res["query_point_sign_normal_ms"] = median_ms(
     lambda: wp.launch(query_point_sign_normal, N, inputs=[mesh.id, qp, dist])
 )
 res["sign_normal_inside_fraction"] = float((dist.numpy() < 0).mean())
+res["query_point_sign_parity_ms"] = median_ms(
+    lambda: wp.launch(query_point_sign_parity, N, inputs=[mesh.id, qp, dist])
+)
+res["sign_parity_inside_fraction"] = float((dist.numpy() < 0).mean())
 res["query_point_no_sign_ms"] = median_ms(lambda: wp.launch(query_point_no_sign, N, inputs=[mesh.id, qp, dist]))
 res["mean_distance"] = float(dist.numpy().mean())
 

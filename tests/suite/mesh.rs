@@ -4,7 +4,9 @@
 //! edges; closest points (signed: inside/outside the closed meshes), furthest points, ray hits
 //! (rays parallel to faces included), faces in a box, evaluation at barycentrics (positions,
 //! velocities, normals); the empty mesh; a kernel deforming `mesh.points()`, then `refit`,
-//! then queries; a gradcheck through `mesh_query_point_no_sign` + `mesh_eval_position`; bad
+//! then queries; Warp's other sign methods (`mesh_query_point_sign_normal`, `_sign_parity`)
+//! against the analytic solids and bit for bit across backends; gradchecks through
+//! `mesh_query_point_no_sign` (and the signed queries) + `mesh_eval_position`; bad
 //! input (errors naming the argument); an OBJ file read and queried against its closed form.
 
 use crate::bvh::Rng;
@@ -24,6 +26,8 @@ backend_tests!(
     empty_mesh_finds_nothing,
     deform_then_refit_then_query,
     gradients_through_the_closest_point,
+    sign_methods_agree,
+    gradients_through_the_signed_queries,
     bad_input_is_an_error,
     obj_files_load_and_query,
 );
@@ -59,6 +63,22 @@ fn k_closest_no_sign(mesh: Mesh, q: Array<Vec3>, max_d: f32, found: Array<i32>, 
     if result && s == 0.0 {
         found[i] = 1;
         cp[i] = mesh_eval_position(mesh, face, u, v);
+    }
+}
+
+/// The three signed queries and the unsigned one at `q[i]`: `signs[i] = (pseudonormal,
+/// sign_normal, parity)`; `same[i] = 1` when the parity query's result, face and barycentrics
+/// are the unsigned query's.
+#[wp::kernel]
+fn k_signs(mesh: Mesh, q: Array<Vec3>, max_d: f32, signs: Array<Vec3>, same: Array<i32>) {
+    let i = tid();
+    let (r0, s0, _f0, _u0, _v0) = mesh_query_point(mesh, q[i], max_d);
+    let (r1, s1, _f1, _u1, _v1) = mesh_query_point_sign_normal(mesh, q[i], max_d);
+    let (r2, s2, f2, u2, v2) = mesh_query_point_sign_parity(mesh, q[i], max_d);
+    let (r3, _s3, f3, u3, v3) = mesh_query_point_no_sign(mesh, q[i], max_d);
+    signs[i] = vec3(s0, s1, s2);
+    if r0 == r3 && r1 == r3 && r2 == r3 && f2 == f3 && u2 == u3 && v2 == v3 {
+        same[i] = 1;
     }
 }
 
@@ -130,6 +150,20 @@ fn k_energy(mesh: Mesh, x: Array<f32>, w: Vec3, out: Array<f32>) {
     let (result, _s, face, u, v) = mesh_query_point_no_sign(mesh, p, 100.0);
     if result {
         out[i] = dot(w, mesh_eval_position(mesh, face, u, v));
+    }
+}
+
+/// As `k_energy` through the signed queries: `w . c(x_i)` by the parity's closest point
+/// plus half of it by the pseudonormal's (`sign_normal`).
+#[wp::kernel]
+fn k_energy_signed(mesh: Mesh, x: Array<f32>, w: Vec3, out: Array<f32>) {
+    let i = tid();
+    let p = vec3(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+    let (r1, _s1, f1, u1, v1) = mesh_query_point_sign_parity(mesh, p, 100.0);
+    let (r2, _s2, f2, u2, v2) = mesh_query_point_sign_normal(mesh, p, 100.0);
+    if r1 && r2 {
+        out[i] = dot(w, mesh_eval_position(mesh, f1, u1, v1))
+            + 0.5 * dot(w, mesh_eval_position(mesh, f2, u2, v2));
     }
 }
 
@@ -673,6 +707,88 @@ fn gradients_through_the_closest_point(dev: &wp::Device) {
     assert!(nonzero >= 2 * n, "too few nonzero gradients: {nonzero}");
 }
 
+/// `mesh_query_point_sign_normal` is `mesh_query_point`; `mesh_query_point_sign_parity`
+/// finds the unsigned query's point and signs it right wherever the analytic solid is
+/// decided (the margins of `meshes()`: the meshes are coarse facetings); on a GPU, all of it
+/// bit for bit the CPU's.
+fn sign_methods_agree(dev: &wp::Device) {
+    let cpu = wp::cpu();
+    for (name, m, inside) in meshes() {
+        let mut qs = query_points(&m, 29);
+        // Points whose parity ray runs through a vertex.
+        qs.extend(
+            m.points
+                .iter()
+                .step_by(5)
+                .map(|p| *p - Vec3::new(0.9375, 0.75, 1.0) * 0.25),
+        );
+        let n = qs.len();
+        let run = |dev: &wp::Device| {
+            let (mesh, q) = (m.upload(dev), arr(&qs, dev));
+            let (signs, same) = (zeros::<Vec3, 1>(n, dev), zeros::<i32, 1>(n, dev));
+            wp::launch(k_signs, n, (&mesh, &q, 10.0f32, &signs, &same), dev).unwrap();
+            (host(&signs), host(&same))
+        };
+        let (signs, same) = run(dev);
+        let mut decided = 0;
+        for (i, p) in qs.iter().enumerate() {
+            assert_eq!(same[i], 1, "{name} {i} at {p}: parity's closest point");
+            let [s0, s1, s2] = signs[i].to_array();
+            assert_eq!(s0.to_bits(), s1.to_bits(), "{name} {i} at {p}: sign_normal");
+            assert!(s2 == 1.0 || s2 == -1.0, "{name} {i} at {p}: parity {s2}");
+            if let Some(s) = inside(*p) {
+                assert_eq!(s2, s, "{name} {i} at {p}: parity sign");
+                decided += 1;
+            }
+        }
+        assert!(decided > 150, "{name}: {decided}");
+        if !dev.is_cpu() {
+            let (cs, csame) = run(&cpu);
+            assert_eq!(csame, same, "{name}: CPU and {dev:?}");
+            for i in 0..n {
+                assert_eq!(
+                    cs[i].to_array().map(f32::to_bits),
+                    signs[i].to_array().map(f32::to_bits),
+                    "{name} {i} at {}: CPU and {dev:?}",
+                    qs[i]
+                );
+            }
+        }
+    }
+}
+
+/// The gradcheck of `gradients_through_the_closest_point` through the signed queries (their
+/// adjoints are the unsigned one's: the sign is piecewise constant).
+fn gradients_through_the_signed_queries(dev: &wp::Device) {
+    let m = sphere(1.0, 8, 10);
+    let mesh = m.upload(dev);
+    let mut x = Vec::new();
+    for f in (0..m.faces()).step_by(7) {
+        let [a, b, c] = m.tri(f);
+        x.extend(((a + b + c) / 3.0 * 1.15).to_array());
+    }
+    let n = x.len() / 3;
+    let x = arr(&x, dev).with_grad().unwrap();
+    let out = zeros::<f32, 1>(n, dev).with_grad().unwrap();
+    let w = Vec3::new(0.3, -1.0, 0.7);
+    let mut forward = || wp::launch(k_energy_signed, n, (&mesh, &x, w, &out), dev);
+    let report = wp::gradcheck(
+        &mut forward,
+        &[&x],
+        &[&out],
+        wp::GradcheckOptions::for_type::<f32>(),
+    )
+    .unwrap();
+    assert!(report.passed, "{:?}", report.worst);
+    let nonzero = report
+        .analytic
+        .iter()
+        .flatten()
+        .filter(|g| g.abs() > 1e-2)
+        .count();
+    assert!(nonzero >= 2 * n, "too few nonzero gradients: {nonzero}");
+}
+
 fn bad_input_is_an_error(dev: &wp::Device) {
     let has = |e: &Error, s: &str| {
         let t = e.to_string();
@@ -831,6 +947,8 @@ fn obj_files_load_and_query(dev: &wp::Device) {
 fn cuda_sources_name_the_library_functions() {
     let fwd = wp::cuda_source::assemble(&<k_closest as wp::Kernel>::INFO).text;
     let adj = wp::cuda_source::assemble_adjoint(&<k_energy as wp::Kernel>::INFO).text;
+    let signed = wp::cuda_source::assemble(&<k_signs as wp::Kernel>::INFO).text;
+    let adj_signed = wp::cuda_source::assemble_adjoint(&<k_energy_signed as wp::Kernel>::INFO).text;
     let bvh = wp::cuda_source::assemble(&<crate::bvh::k_ray as wp::Kernel>::INFO).text;
     let ray = wp::cuda_source::assemble(&<k_ray as wp::Kernel>::INFO).text;
     if std::env::var("WP_PRINT_SOURCES").is_ok() {
@@ -848,6 +966,10 @@ fn cuda_sources_name_the_library_functions() {
         (&adj, "#include \"wp_adjoint_mesh.h\""),
         (&adj, "wp::adj_mesh_query_point_no_sign("),
         (&adj, "wp::adj_mesh_eval_position("),
+        (&signed, "wp::mesh_query_point_sign_normal("),
+        (&signed, "wp::mesh_query_point_sign_parity("),
+        (&adj_signed, "wp::adj_mesh_query_point_sign_normal("),
+        (&adj_signed, "wp::adj_mesh_query_point_sign_parity("),
         (&bvh, "#include \"wp_bvh.h\""),
         (&bvh, "wp::bvh_query_ray_t"),
         (&bvh, "wp::bvh_query_ray_next("),

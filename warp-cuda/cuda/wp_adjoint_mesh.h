@@ -8,6 +8,7 @@
 //   adj_mesh_eval_velocity(..same..)       the same with the velocities (nothing without)
 //   adj_mesh_query_point(m, p, max_dist, adj_m, adj_p, adj_max_dist, adj_ret, ctx)
 //   adj_mesh_query_point_no_sign(..same..) adj_p through the closest point's barycentrics
+//   adj_mesh_query_point_sign_normal, adj_mesh_query_point_sign_parity(..same..): as _no_sign
 //       (u, v) of the face the forward query finds (recomputed), as
 //       adj_closest_point_triangle with adj_ret (u, v, w = 0)
 //   adj_mesh_query_furthest_point_no_sign(..same..)   nothing (the point is a vertex)
@@ -97,6 +98,20 @@ WP_FN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, me
                                ctx);
 }
 
+WP_FN void adj_mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                            mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
+                                            const mesh_query_point_t& adj_ret, ctx_t* ctx) {
+  adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist, adj_ret,
+                               ctx);
+}
+
+WP_FN void adj_mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                            mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
+                                            const mesh_query_point_t& adj_ret, ctx_t* ctx) {
+  adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist, adj_ret,
+                               ctx);
+}
+
 WP_FN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
                                                  const mesh_query_point_t&, ctx_t*) {}
 
@@ -119,6 +134,18 @@ WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_
                                         const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
                                detail::mesh_query_point_of(adj_ret), ctx);
+}
+WP_FN void adj_mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                            mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
+                                            const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
+  adj_mesh_query_point_sign_normal(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
+                              detail::mesh_query_point_of(adj_ret), ctx);
+}
+WP_FN void adj_mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                            mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
+                                            const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
+  adj_mesh_query_point_sign_parity(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
+                              detail::mesh_query_point_of(adj_ret), ctx);
 }
 WP_FN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
                                                  const mesh_query_point_tuple_t&, ctx_t*) {}

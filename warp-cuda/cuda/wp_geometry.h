@@ -12,6 +12,7 @@
 //   closest_point_triangle(a, b, c, p)              the closest point of a triangle
 //   ray_triangle_hit_t                              RayTriangleHit (result, t, u, v, sign)
 //   intersect_ray_triangle(start, dir, a, b, c)     watertight ray-triangle (f64 edge functions)
+//   ray_crosses_triangle(start, dir, a, b, c)       its crossing for parity counts (ties broken)
 //   aabb_overlap(al, au, bl, bu)                    box-box, touching included
 //   intersect_ray_aabb(start, inv_dir, lo, hi, &t)  slab test: Some(t_enter) is `true` and *t
 //   ray_inv_dir(dir), aabb_distance_sq(p, lo, hi)
@@ -241,6 +242,45 @@ struct ray_triangle_hit_t {
 };
 static_assert(sizeof(ray_triangle_hit_t) == 20, "ray_triangle_hit_t layout");
 
+namespace detail {
+/// shear_triangle's frame: the direction's dominant axis kz (x and y following cyclically,
+/// swapped when it points backwards) and the shear sx, sy, sz; false for a zero or non-finite
+/// direction.
+WP_FN bool ray_frame(Vec3 dir, int& kx, int& ky, int& kz, f32& sx, f32& sy, f32& sz) {
+  const Vec3 ad = g_abs(dir);
+  kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
+  const f32 dz = g_comp(dir, kz);
+  kx = (kz + 1) % 3;
+  ky = (kz + 2) % 3;
+  sx = sy = sz = 0.0f;
+  if (!(dz != 0.0f && g_finite3(dir))) return false;
+  if (dz < 0.0f) {
+    const int t = kx;
+    kx = ky;
+    ky = t;
+  }
+  sx = g_comp(dir, kx) / dz;
+  sy = g_comp(dir, ky) / dz;
+  sz = 1.0f / dz;
+  return true;
+}
+
+/// tie_broken_side: the sign of the edge function e = p.x * q.y - p.y * q.x once the origin
+/// moves by (eps, eps^2): its own, else that of p.y - q.y, else of q.x - p.x; 0 for NaN.
+WP_FN int tie_broken_side(f64 e, f32 px, f32 py, f32 qx, f32 qy) {
+  if (e > 0.0) return 1;
+  if (e < 0.0) return -1;
+  if (!(e == 0.0)) return 0;
+  const f32 gx = py - qy;
+  if (gx > 0.0f) return 1;
+  if (gx < 0.0f) return -1;
+  const f32 gy = qx - px;
+  if (gy > 0.0f) return 1;
+  if (gy < 0.0f) return -1;
+  return 0;
+}
+}  // namespace detail
+
 /// Woop, Benthin and Wald's watertight test: shear into the ray's frame, then the signs of
 /// three edge functions computed as exact f32 products in f64 (one rounding each, so exact
 /// signs: a shared edge evaluates identically for both of its triangles).
@@ -252,17 +292,9 @@ WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Ve
   miss.u = 0.0f;
   miss.v = 0.0f;
   miss.sign = 0.0f;
-  const Vec3 ad = g_abs(dir);
-  const int kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
-  const f32 dz = g_comp(dir, kz);
-  if (!(dz != 0.0f && g_finite3(dir))) return miss;
-  int kx = (kz + 1) % 3, ky = (kz + 2) % 3;
-  if (dz < 0.0f) {
-    const int t = kx;
-    kx = ky;
-    ky = t;
-  }
-  const f32 sx = g_comp(dir, kx) / dz, sy = g_comp(dir, ky) / dz, sz = 1.0f / dz;
+  int kx, ky, kz;
+  f32 sx, sy, sz;
+  if (!ray_frame(dir, kx, ky, kz, sx, sy, sz)) return miss;
 
   Vec3 aa = a - start, bb = b - start, cc = c - start;
   const Vec3 vs[3] = {aa, bb, cc};
@@ -297,6 +329,38 @@ WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Ve
   h.v = (f32)(vv / det);
   h.sign = dn < 0.0f ? 1.0f : -1.0f;
   return h;
+}
+
+/// Whether the ray start + t * dir, t >= 0, crosses triangle (a, b, c) for a parity count:
+/// intersect_ray_triangle's sheared edge functions with their exact zeros tie-broken
+/// (simulation of simplicity) and no parallel rejection (see the Rust for why).
+WP_FN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+  using namespace detail;
+  int kx, ky, kz;
+  f32 sx, sy, sz;
+  if (!ray_frame(dir, kx, ky, kz, sx, sy, sz)) return false;
+  Vec3 aa = a - start, bb = b - start, cc = c - start;
+  const Vec3 vs[3] = {aa, bb, cc};
+  const f32 s = pow2_scale(g_max_abs(vs));
+  aa = aa * s;
+  bb = bb * s;
+  cc = cc * s;
+  const f32 ax = g_comp(aa, kx) - sx * g_comp(aa, kz), ay = g_comp(aa, ky) - sy * g_comp(aa, kz);
+  const f32 bx = g_comp(bb, kx) - sx * g_comp(bb, kz), by = g_comp(bb, ky) - sy * g_comp(bb, kz);
+  const f32 cx = g_comp(cc, kx) - sx * g_comp(cc, kz), cy = g_comp(cc, ky) - sy * g_comp(cc, kz);
+  const f64 uu = (f64)cx * (f64)by - (f64)cy * (f64)bx;
+  const f64 vv = (f64)ax * (f64)cy - (f64)ay * (f64)cx;
+  const f64 ww = (f64)bx * (f64)ay - (f64)by * (f64)ax;
+  const int su = tie_broken_side(uu, cx, cy, bx, by);
+  const int sv = tie_broken_side(vv, ax, ay, cx, cy);
+  const int sw = tie_broken_side(ww, bx, by, ax, ay);
+  if (!(su != 0 && su == sv && sv == sw)) return false;
+  const f64 det = (uu + vv) + ww;
+  if (det == 0.0) return false;
+  const f32 az = sz * g_comp(aa, kz), bz = sz * g_comp(bb, kz), cz = sz * g_comp(cc, kz);
+  const f64 tt = (uu * (f64)az + vv * (f64)bz) + ww * (f64)cz;
+  const f64 t = tt / det;
+  return t >= 0.0 && t - t == 0.0;  // finite: inf - inf and NaN - NaN are NaN
 }
 
 // ------------------------------------------------------------------------------------------

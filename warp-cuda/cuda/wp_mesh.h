@@ -11,6 +11,8 @@
 //   mesh_query_aabb_t                            MeshQueryAabb (44 bytes)
 //   mesh_query_point(m, p, max_dist, ctx)        closest point with the inside/outside sign
 //   mesh_query_point_no_sign(m, p, max_dist, ctx)
+//   mesh_query_point_sign_normal(m, p, max_dist, ctx)   mesh_query_point (Warp's name)
+//   mesh_query_point_sign_parity(m, p, max_dist, ctx)   sign by the parity of one ray's crossings
 //   mesh_query_furthest_point_no_sign(m, p, min_dist, ctx)
 //   mesh_query_ray(m, start, dir, max_t, ctx)    first hit at 0 <= t < max_t (watertight)
 //   mesh_query_aabb(m, lo, hi, ctx), mesh_query_aabb_next(m, q, ctx), _done(q), _item(q)
@@ -420,6 +422,78 @@ WP_FN mesh_query_point_t mesh_query_point(const mesh_t& mesh, Vec3 point, f32 ma
   mesh_query_point_t r;
   r.result = true;
   r.sign = sign;
+  r.face = c.face;
+  r.u = c.bary.u;
+  r.v = c.bary.v;
+  return r;
+}
+
+/// Warp's mesh_query_point_sign_normal: mesh_query_point under Warp's name for its method.
+WP_FN mesh_query_point_t mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                                      ctx_t* ctx) {
+  return mesh_query_point(mesh, point, max_dist, ctx);
+}
+
+namespace detail {
+
+/// PARITY_DIR: the direction of (0.6, 0.48, 0.64), held exactly as (15/16, 3/4, 1).
+WP_FN Vec3 mesh_parity_dir() { return Vec3_new(0.9375f, 0.75f, 1.0f); }
+
+/// PARITY_BOX_SLACK: 2^-18.
+#define WP_PARITY_BOX_SLACK (1.0f / 262144.0f)
+
+/// ray_may_meet_box: the slab test for a direction of positive components, widened by the
+/// slack relative to the parameters compared; inverted boxes and NaN miss.
+WP_FN bool mesh_ray_may_meet_box(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper) {
+  if (!(lower.x <= upper.x && lower.y <= upper.y && lower.z <= upper.z)) return false;
+  const Vec3 lo = lower - start, hi = upper - start;
+  const f32 nx = lo.x * inv_dir.x, ny = lo.y * inv_dir.y, nz = lo.z * inv_dir.z;
+  const f32 fx = hi.x * inv_dir.x, fy = hi.y * inv_dir.y, fz = hi.z * inv_dir.z;
+  const f32 t0 = g_gt_max(nx, g_gt_max(ny, nz));
+  const f32 fyz = fy < fz ? fy : fz;
+  const f32 t1 = fx < fyz ? fx : fyz;
+  const f32 slack = (::fabsf(t0) + ::fabsf(t1)) * WP_PARITY_BOX_SLACK;
+  return t0 <= t1 + slack && t1 + slack >= 0.0f;
+}
+
+/// The parity search (Crossings): every box the ray may meet entered (key 0, bound +inf),
+/// every face of an entered leaf tested.
+struct mesh_crossings_t {
+  const mesh_t* mesh;
+  Vec3 start;
+  Vec3 inv_dir;
+  bool odd;
+  WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
+    return mesh_ray_may_meet_box(start, inv_dir, lower, upper) ? 0.0f : f32_inf();
+  }
+  WP_FN f32 bound() const { return f32_inf(); }
+  WP_FN void visit(i32 id, ctx_t* ctx) {
+    Vec3 t[3];
+    mesh_triangle(*mesh, (i64)id, t, ctx);
+    if (faulted(ctx)) return;
+    if (ray_crosses_triangle(start, mesh_parity_dir(), t[0], t[1], t[2])) odd = !odd;
+  }
+};
+
+}  // namespace detail
+
+/// The closest point strictly within max_dist as mesh_query_point_no_sign finds it, with the
+/// sign from the parity of the faces one ray from the point crosses (odd: inside, -1).
+WP_FN mesh_query_point_t mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
+                                                      ctx_t* ctx) {
+  using namespace detail;
+  mesh_closest_t c;
+  if (!mesh_closest(mesh, point, max_dist, &c, ctx)) return mesh_point_none();
+  mesh_crossings_t x;
+  x.mesh = &mesh;
+  x.start = point;
+  x.inv_dir = ray_inv_dir(mesh_parity_dir());
+  x.odd = false;
+  bvh_walk_ordered(mesh.tree, x, ctx);
+  if (faulted(ctx)) return mesh_point_none();
+  mesh_query_point_t r;
+  r.result = true;
+  r.sign = x.odd ? -1.0f : 1.0f;
   r.face = c.face;
   r.u = c.bary.u;
   r.v = c.bary.v;

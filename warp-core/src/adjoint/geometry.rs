@@ -1,7 +1,8 @@
 //! Adjoints of the BVH and mesh builtins ([`crate::builtins::geometry`]), each through the
 //! object's own adjoint in [`crate::objects::mesh`] or [`crate::objects::geometry`]:
 //!
-//! * `mesh_query_point`, `mesh_query_point_no_sign`: the query point's adjoint through the
+//! * `mesh_query_point`, `mesh_query_point_no_sign`, `mesh_query_point_sign_normal`,
+//!   `mesh_query_point_sign_parity`: the query point's adjoint through the
 //!   barycentrics `u`, `v` of the closest point (zero at a vertex, along the edge on an edge,
 //!   the projection onto the face inside it); `result`, `sign` and `face` have none, nor do
 //!   the mesh and `max_dist`.
@@ -55,6 +56,50 @@ pub fn adj_mesh_query_point_no_sign(
     adj_ret: PointResult,
 ) -> KResult<()> {
     mesh::adj_mesh_query_point_no_sign(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
+}
+
+/// Adjoint of `mesh_query_point_sign_normal` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point_sign_normal(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point_sign_normal(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
+}
+
+/// Adjoint of `mesh_query_point_sign_parity` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point_sign_parity(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point_sign_parity(
         m,
         point,
         max_dist,

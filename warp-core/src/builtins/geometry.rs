@@ -68,6 +68,28 @@ pub fn mesh_query_point_no_sign(m: MeshView, point: Vec3, max_dist: f32) -> KRes
     mesh::mesh_query_point_no_sign(m, point, max_dist).map(point_tuple)
 }
 
+/// Warp's `mesh_query_point_sign_normal`: `mesh_query_point` under Warp's name for its sign
+/// (the angle-weighted pseudonormal).
+#[inline(always)]
+pub fn mesh_query_point_sign_normal(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+) -> KResult<PointResult> {
+    mesh::mesh_query_point_sign_normal(m, point, max_dist).map(point_tuple)
+}
+
+/// Warp's `mesh_query_point_sign_parity`: the closest point within `max_dist`, signed by the
+/// parity of the faces one ray from `point` crosses.
+#[inline(always)]
+pub fn mesh_query_point_sign_parity(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+) -> KResult<PointResult> {
+    mesh::mesh_query_point_sign_parity(m, point, max_dist).map(point_tuple)
+}
+
 /// Warp's `mesh_query_furthest_point_no_sign`: the furthest point beyond `min_dist`.
 #[inline(always)]
 pub fn mesh_query_furthest_point_no_sign(

@@ -54,7 +54,8 @@ pub use geometry::{
     bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, closest_point_triangle,
     intersect_tri_tri, mesh_eval_face_normal, mesh_eval_position, mesh_eval_velocity,
     mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item, mesh_query_aabb_next,
-    mesh_query_furthest_point_no_sign, mesh_query_point, mesh_query_point_no_sign, mesh_query_ray,
+    mesh_query_furthest_point_no_sign, mesh_query_point, mesh_query_point_no_sign,
+    mesh_query_point_sign_normal, mesh_query_point_sign_parity, mesh_query_ray,
 };
 pub use linalg::*;
 pub use math::*;

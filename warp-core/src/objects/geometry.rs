@@ -354,6 +354,64 @@ pub struct RayTriangleHit {
 #[inline]
 pub fn intersect_ray_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> RayTriangleHit {
     let miss = RayTriangleHit::default();
+    let Some(sh) = shear_triangle(start, dir, a, b, c) else {
+        return miss;
+    };
+    let [aa, bb, cc] = sh.q;
+    // Parallel rays (and degenerate triangles) never hit.
+    let (ab, ac) = (bb - aa, cc - aa);
+    let dn = dir.dot(ab.cross(ac));
+    if !(dn.abs() > 1e-6 * dir.length() * ab.length() * ac.length()) {
+        return miss;
+    }
+    let [uu, vv, ww] = sh.e;
+    let inside = (uu >= 0.0 && vv >= 0.0 && ww >= 0.0) || (uu <= 0.0 && vv <= 0.0 && ww <= 0.0);
+    let det = uu + vv + ww;
+    if !(inside && det != 0.0) {
+        return miss;
+    }
+    let t = (sh.depth() / det) as f32 / sh.s;
+    if !(t >= 0.0 && t.is_finite()) {
+        return miss;
+    }
+    RayTriangleHit {
+        result: true,
+        t,
+        u: (uu / det) as f32,
+        v: (vv / det) as f32,
+        sign: if dn < 0.0 { 1.0 } else { -1.0 },
+    }
+}
+
+/// A triangle in a ray's frame, as the watertight tests see it: the direction's dominant
+/// axis `kz` (its scale `sz = 1 / dir[kz]`), the vertices translated to the ray's start and
+/// scaled by the power of two `s` (`q`), their sheared 2D positions (`xy`: the ray is the
+/// origin), and the three edge functions `e` (`e[0]` of the edge `b c`, `e[1]` of `c a`,
+/// `e[2]` of `a b`; twice the signed areas of the origin with each edge, exact in sign).
+struct Sheared {
+    kz: usize,
+    sz: f32,
+    s: f32,
+    q: [Vec3; 3],
+    xy: [(f32, f32); 3],
+    e: [f64; 3],
+}
+
+impl Sheared {
+    /// The hit's depth times `det = e[0] + e[1] + e[2]`, in units of `1 / s` (the depths
+    /// of the vertices weighted by their edge functions).
+    #[inline(always)]
+    fn depth(&self) -> f64 {
+        let [uu, vv, ww] = self.e;
+        let z = self.q.map(|q| (self.sz * q[self.kz]) as f64);
+        uu * z[0] + vv * z[1] + ww * z[2]
+    }
+}
+
+/// The shear of [`intersect_ray_triangle`] and [`ray_crosses_triangle`]; `None` for a zero or
+/// non-finite direction.
+#[inline(always)]
+fn shear_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<Sheared> {
     let ad = dir.abs();
     // The dominant axis of the direction becomes z; x and y follow cyclically, swapped when
     // z points backwards to keep the winding.
@@ -366,7 +424,7 @@ pub fn intersect_ray_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3)
     };
     let dz = dir[kz];
     if !(dz != 0.0 && dir.is_finite()) {
-        return miss;
+        return None;
     }
     let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
     if dz < 0.0 {
@@ -376,41 +434,100 @@ pub fn intersect_ray_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3)
 
     let (aa, bb, cc) = (a - start, b - start, c - start);
     let s = pow2_scale(max_abs(&[aa, bb, cc]));
-    let (aa, bb, cc) = (aa * s, bb * s, cc * s);
+    let q = [aa * s, bb * s, cc * s];
 
-    // Parallel rays (and degenerate triangles) never hit.
-    let (ab, ac) = (bb - aa, cc - aa);
-    let dn = dir.dot(ab.cross(ac));
-    if !(dn.abs() > 1e-6 * dir.length() * ab.length() * ac.length()) {
-        return miss;
-    }
-
-    let shear = |q: Vec3| (q[kx] - sx * q[kz], q[ky] - sy * q[kz]);
-    let (ax, ay) = shear(aa);
-    let (bx, by) = shear(bb);
-    let (cx, cy) = shear(cc);
+    let xy = q.map(|q| (q[kx] - sx * q[kz], q[ky] - sy * q[kz]));
+    let [(ax, ay), (bx, by), (cx, cy)] = xy;
     // Edge functions: exact products, one rounding each, so exact signs.
     let det2 = |p: f32, q: f32, r: f32, t: f32| p as f64 * q as f64 - r as f64 * t as f64;
-    let uu = det2(cx, by, cy, bx);
-    let vv = det2(ax, cy, ay, cx);
-    let ww = det2(bx, ay, by, ax);
-    let inside = (uu >= 0.0 && vv >= 0.0 && ww >= 0.0) || (uu <= 0.0 && vv <= 0.0 && ww <= 0.0);
+    let e = [
+        det2(cx, by, cy, bx),
+        det2(ax, cy, ay, cx),
+        det2(bx, ay, by, ax),
+    ];
+    Some(Sheared {
+        kz,
+        sz,
+        s,
+        q,
+        xy,
+        e,
+    })
+}
+
+/// Whether the ray `start + t * dir`, `t >= 0`, crosses triangle `(a, b, c)`, counted so that
+/// the number of faces of a closed mesh the ray crosses has the parity of the number of times
+/// it passes through the surface: the test of `mesh_query_point_sign_parity`.
+///
+/// [`intersect_ray_triangle`]'s sheared edge functions (exact in sign), with two differences:
+///
+/// - **Ties are broken.** [`intersect_ray_triangle`] counts a point of an edge as inside, so a
+///   ray through an edge hits both faces sharing it and one through a vertex every face
+///   around it: watertight, but a parity counted with it would be wrong there. Here an edge
+///   function that is exactly zero takes the sign it has once the ray's origin is moved by
+///   `(ε, ε²)` in the sheared plane (Edelsbrunner and Mücke's simulation of simplicity): the
+///   sign of its derivative along x, or along y when that is zero. That is a real
+///   displacement, the same for every face, so the faces counted are exactly those a ray
+///   infinitesimally beside it crosses, in general position: through an edge, one of the two
+///   faces when the ray passes through the surface there and none or both when it grazes it;
+///   through a vertex, likewise. A face whose sheared edge is a point (or whose projection
+///   is degenerate) is never crossed, as in general position.
+/// - **No parallel rejection.** A face nearly parallel to the ray is tested as its
+///   neighbours are (dropping it would leave its neighbours' count unbalanced). Its depth is
+///   a weighted mean of its vertices' with weights of one sign, so free of cancellation.
+///
+/// A crossing at `t = 0` (the start on the face) counts: the start is taken as a point just
+/// behind it along `-dir`. NaN anywhere, a zero or non-finite `dir` never cross. Inputs are
+/// translated and scaled as [`intersect_ray_triangle`]'s (consistent between faces sharing a
+/// vertex unless the scaled coordinates underflow, below 1e-38 of the face's extent).
+#[inline]
+pub fn ray_crosses_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> bool {
+    let Some(sh) = shear_triangle(start, dir, a, b, c) else {
+        return false;
+    };
+    let [pa, pb, pc] = sh.xy;
+    let [uu, vv, ww] = sh.e;
+    let (su, sv, sw) = (
+        tie_broken_side(uu, pc, pb),
+        tie_broken_side(vv, pa, pc),
+        tie_broken_side(ww, pb, pa),
+    );
+    if !(su != 0 && su == sv && sv == sw) {
+        return false;
+    }
     let det = uu + vv + ww;
-    if !(inside && det != 0.0) {
-        return miss;
+    if det == 0.0 {
+        return false;
     }
-    let (az, bz, cz) = (sz * aa[kz], sz * bb[kz], sz * cc[kz]);
-    let tt = uu * az as f64 + vv * bz as f64 + ww * cz as f64;
-    let t = (tt / det) as f32 / s;
-    if !(t >= 0.0 && t.is_finite()) {
-        return miss;
-    }
-    RayTriangleHit {
-        result: true,
-        t,
-        u: (uu / det) as f32,
-        v: (vv / det) as f32,
-        sign: if dn < 0.0 { 1.0 } else { -1.0 },
+    let t = sh.depth() / det;
+    t >= 0.0 && t.is_finite()
+}
+
+/// The sign (`-1`, `0`, `1`) of the edge function `e = p.x * q.y - p.y * q.x` once the origin
+/// moves by `(ε, ε²)`: its own when nonzero, else that of its derivative along x
+/// (`p.y - q.y`), else along y (`q.x - p.x`); 0 for NaN or an edge that is a point.
+#[inline(always)]
+fn tie_broken_side(e: f64, p: (f32, f32), q: (f32, f32)) -> i32 {
+    let sign = |x: f32| {
+        if x > 0.0 {
+            1
+        } else if x < 0.0 {
+            -1
+        } else {
+            0
+        }
+    };
+    if e > 0.0 {
+        1
+    } else if e < 0.0 {
+        -1
+    } else if e == 0.0 {
+        match sign(p.1 - q.1) {
+            0 => sign(q.0 - p.0),
+            s => s,
+        }
+    } else {
+        0
     }
 }
 
@@ -1395,5 +1512,57 @@ pub(crate) mod tests {
             base,
             t([f32::NAN, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
         ));
+    }
+
+    /// The parity test: through a fan's centre vertex, a shared edge (spoke) and a face,
+    /// exactly one of the four faces covering the square is crossed, where the hit test finds
+    /// four, two and one (the directions are dyadic, so the rays meet those points exactly);
+    /// elsewhere, away from edges and from parallel faces, it agrees with the hit test.
+    #[test]
+    fn ray_crossing_counts_one_face() {
+        let fan = [Vec3::X, Vec3::Y, -Vec3::X, -Vec3::Y];
+        for d in [-Vec3::Z, Vec3::new(0.25, -0.5, -1.0)] {
+            for (target, hits) in [
+                (Vec3::ZERO, 4),
+                (Vec3::new(0.25, 0.0, 0.0), 2),
+                (Vec3::new(0.0, -0.5, 0.0), 2),
+                (Vec3::new(0.1, 0.2, 0.0), 1),
+            ] {
+                let o = target - d;
+                let count = |f: &dyn Fn(usize) -> bool| (0..4).filter(|i| f(*i)).count();
+                let n =
+                    count(&|i| ray_crosses_triangle(o, d, Vec3::ZERO, fan[i], fan[(i + 1) % 4]));
+                assert_eq!(n, 1, "{o} {d}");
+                let h = count(&|i| {
+                    intersect_ray_triangle(o, d, Vec3::ZERO, fan[i], fan[(i + 1) % 4]).result
+                });
+                assert_eq!(h, hits, "{o} {d}");
+            }
+        }
+        let mut rng = Rng(12);
+        let mut crossed = 0;
+        for _ in 0..20000 {
+            let (a, b, c) = (rng.v(-1.0, 1.0), rng.v(-1.0, 1.0), rng.v(-1.0, 1.0));
+            // Aimed near the triangle, so that about half the rays hit it.
+            let (u, v) = (rng.f(-0.2, 1.0), rng.f(-0.2, 1.0));
+            let o = rng.v(-3.0, 3.0);
+            let d = a * u + b * v + c * (1.0 - u - v) - o;
+            let n = (b - a).cross(c - a);
+            if d.normalize().dot(n.normalize()).abs() < 1e-3 {
+                continue;
+            }
+            let h = intersect_ray_triangle(o, d, a, b, c).result;
+            assert_eq!(ray_crosses_triangle(o, d, a, b, c), h, "{o} {d}");
+            crossed += h as usize;
+        }
+        assert!(crossed > 5000, "{crossed}");
+        // NaN and a zero direction never cross.
+        let (a, b, c) = (Vec3::X, Vec3::Y, -Vec3::X - Vec3::Y);
+        assert!(!ray_crosses_triangle(Vec3::Z, Vec3::ZERO, a, b, c));
+        assert!(!ray_crosses_triangle(Vec3::Z, Vec3::NAN, a, b, c));
+        assert!(!ray_crosses_triangle(Vec3::NAN, -Vec3::Z, a, b, c));
+        assert!(!ray_crosses_triangle(Vec3::Z, -Vec3::Z, Vec3::NAN, b, c));
+        assert!(ray_crosses_triangle(Vec3::Z, -Vec3::Z, a, b, c));
+        assert!(!ray_crosses_triangle(Vec3::Z, Vec3::Z, a, b, c));
     }
 }

@@ -37,6 +37,10 @@
 //! boundary), is inside (`-1`), as in Warp's `mesh_query_point_sign_normal`. Degenerate faces
 //! (slivers, see [`SLIVER_RATIO`]) contribute no normal.
 //!
+//! Warp's other sign methods: `mesh_query_point_sign_normal` is this one under Warp's name;
+//! [`mesh_query_point_sign_parity`] counts the faces one ray crosses (exact on closed meshes
+//! whatever the normals, see there). Winding numbers are not provided.
+//!
 //! Differences from Warp, all deliberate: degenerate triangles still count for distances
 //! (Warp skips slivers; here their edges are found, which are real surface); `max_dist <= 0`
 //! finds nothing (Warp squares it, so `-1` acts as `1`); the furthest point's gradient is zero
@@ -66,8 +70,8 @@ use glam::Vec3;
 use super::bvh::{walk_ordered, BvhTree, OrderedSearch, Walk};
 use super::geometry::{
     aabb_distance_sq, aabb_overlap, closest_point_triangle, intersect_ray_aabb,
-    intersect_ray_triangle, pow2_scale, ray_inv_dir, TriFeature, TriangleClosestPoint,
-    SLIVER_RATIO,
+    intersect_ray_triangle, pow2_scale, ray_crosses_triangle, ray_inv_dir, TriFeature,
+    TriangleClosestPoint, SLIVER_RATIO,
 };
 use crate::{ArrayView, KResult, KernelIndex};
 
@@ -387,6 +391,131 @@ pub fn mesh_query_point(mesh: MeshView, point: Vec3, max_dist: f32) -> KResult<M
         u: c.bary.u,
         v: c.bary.v,
     })
+}
+
+/// Warp's `mesh_query_point_sign_normal`: [`mesh_query_point`] under Warp's name for its
+/// method (the angle-weighted pseudonormal), so that Warp programs port line for line. Warp's
+/// optional `epsilon` (the tolerance by which it decides whether the closest point is on an
+/// edge or a vertex) is not taken: the closest feature is classified exactly here
+/// ([`closest_point_triangle`]'s regions), with no tolerance to choose.
+#[inline]
+pub fn mesh_query_point_sign_normal(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+) -> KResult<MeshQueryPoint> {
+    mesh_query_point(mesh, point, max_dist)
+}
+
+/// The closest point of the mesh to `point` lying strictly within `max_dist`, as
+/// [`mesh_query_point_no_sign`] finds it (the same face, `u`, `v` and `result`), with the sign
+/// of `point` from the parity of the number of faces crossed by one ray from it in the
+/// direction [`PARITY_DIR`]: odd inside (`-1`), even outside (`+1`); `sign` 0 when nothing is
+/// found (Warp's `mesh_query_point_sign_parity`).
+///
+/// The faces are counted by [`ray_crosses_triangle`], whose crossings are exact in sign and
+/// whose ties (a ray through an edge or a vertex) are broken consistently between the faces
+/// sharing them, so on a closed mesh (every edge shared by an even number of faces, shared
+/// vertices at equal positions) the sign is exact whatever the orientation of the faces or
+/// the quality of their normals; only a point within rounding of the surface can take either
+/// sign. Warp casts `n_sample` rays perturbed by `perturbation_scale` and takes the majority,
+/// as its ray-triangle test can count an edge twice or not at all; neither argument is taken
+/// here, one ray suffices. On an open mesh the one ray decides (a point below a plane patch
+/// whose ray leaves through the patch is inside, one whose ray passes beside it outside).
+/// Its cost is one more walk of the tree, along the ray, whatever the closest feature; the
+/// pseudonormal of [`mesh_query_point`] walks again only when the closest point is on an edge
+/// or a vertex (around it), so this is the cheaper of the two there and the dearer inside a
+/// face.
+#[inline]
+pub fn mesh_query_point_sign_parity(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+) -> KResult<MeshQueryPoint> {
+    let Some(c) = closest(&mesh, point, max_dist)? else {
+        return Ok(MeshQueryPoint::default());
+    };
+    let mut x = Crossings {
+        mesh: &mesh,
+        start: point,
+        inv_dir: ray_inv_dir(PARITY_DIR),
+        odd: false,
+    };
+    walk_ordered(&mesh.tree, &mut x)?;
+    Ok(MeshQueryPoint {
+        result: true,
+        sign: if x.odd { -1.0 } else { 1.0 },
+        face: c.face,
+        u: c.bary.u,
+        v: c.bary.v,
+    })
+}
+
+/// The direction of [`mesh_query_point_sign_parity`]'s ray: that of the unit vector `(0.6,
+/// 0.48, 0.64)`, neither along an axis nor a diagonal, so that the faces of meshes aligned
+/// with a grid are not grazed. Stored as `(15/16, 3/4, 1)` (the same direction, divided by
+/// 0.64), which binary floating point holds exactly, as it does the slopes of the ray's
+/// sheared frame (the unit vector's components are not exact, nor their ratios). All its
+/// components are positive, which the walk's box test relies on.
+pub const PARITY_DIR: Vec3 = Vec3::new(0.9375, 0.75, 1.0);
+
+/// The slack of [`ray_may_meet_box`], relative to the ray parameters it compares: `2^-18`,
+/// 64 units in the last place, above the few roundings of the slab test's parameters and the
+/// few of [`ray_crosses_triangle`]'s sheared ray (each a few units relative to the distance
+/// from the start).
+const PARITY_BOX_SLACK: f32 = 1.0 / 262144.0;
+
+/// The parity search: every box the ray may meet is entered (key 0, bound +inf; the count is
+/// the same in any order), every face of an entered leaf is tested.
+struct Crossings<'a> {
+    mesh: &'a MeshView,
+    start: Vec3,
+    inv_dir: Vec3,
+    odd: bool,
+}
+
+impl OrderedSearch for Crossings<'_> {
+    #[inline(always)]
+    fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
+        if ray_may_meet_box(self.start, self.inv_dir, lower, upper) {
+            0.0
+        } else {
+            f32::INFINITY
+        }
+    }
+    #[inline(always)]
+    fn bound(&self) -> f32 {
+        f32::INFINITY
+    }
+    #[inline(always)]
+    fn visit(&mut self, id: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.triangle(id)?;
+        if ray_crosses_triangle(self.start, PARITY_DIR, a, b, c) {
+            self.odd = !self.odd;
+        }
+        Ok(())
+    }
+}
+
+/// Whether the ray `start + t * dir`, `t >= 0`, may meet the box `[lower, upper]`, for a
+/// direction whose components are all positive (`inv_dir = 1 / dir`): the slab test with its
+/// interval widened by [`PARITY_BOX_SLACK`]. The plain test ([`intersect_ray_aabb`]) can
+/// reject by a rounding a box the ray touches at an edge or a corner, where a face's vertex or
+/// edge may lie that [`ray_crosses_triangle`] counts; a face missed would flip the parity, a
+/// box entered needlessly costs a test. Inverted boxes (the empty tree's root) and NaN miss.
+#[inline(always)]
+fn ray_may_meet_box(start: Vec3, inv_dir: Vec3, lower: Vec3, upper: Vec3) -> bool {
+    if !(lower.x <= upper.x && lower.y <= upper.y && lower.z <= upper.z) {
+        return false;
+    }
+    let near = (lower - start) * inv_dir;
+    let far = (upper - start) * inv_dir;
+    let max = |a: f32, b: f32| if a > b { a } else { b };
+    let min = |a: f32, b: f32| if a < b { a } else { b };
+    let t0 = max(near.x, max(near.y, near.z));
+    let t1 = min(far.x, min(far.y, far.z));
+    let slack = (t0.abs() + t1.abs()) * PARITY_BOX_SLACK;
+    t0 <= t1 + slack && t1 + slack >= 0.0
 }
 
 /// The unit normal of a triangle, computed at a power-of-two scale (any magnitude); zero for
@@ -809,6 +938,52 @@ pub fn adj_mesh_query_point_no_sign(
 /// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
 #[inline]
 pub fn adj_mesh_query_point(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: MeshQueryPoint,
+) -> KResult<()> {
+    adj_mesh_query_point_no_sign(
+        mesh,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        adj_ret,
+    )
+}
+
+/// Adjoint of [`mesh_query_point_sign_normal`] with respect to the query point, as
+/// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
+#[inline]
+pub fn adj_mesh_query_point_sign_normal(
+    mesh: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: MeshQueryPoint,
+) -> KResult<()> {
+    adj_mesh_query_point_no_sign(
+        mesh,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        adj_ret,
+    )
+}
+
+/// Adjoint of [`mesh_query_point_sign_parity`] with respect to the query point, as
+/// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
+#[inline]
+pub fn adj_mesh_query_point_sign_parity(
     mesh: MeshView,
     point: Vec3,
     max_dist: f32,
@@ -1432,6 +1607,16 @@ pub(crate) mod tests {
             let mut adj = Vec3::ZERO;
             let (mut am, mut ad) = (MeshView::empty(), 0.0);
             adj_mesh_query_point(v, p, f32::MAX, &mut am, &mut adj, &mut ad, g).unwrap();
+            // The other signed queries' adjoints are the unsigned one's, bit for bit.
+            for f in [
+                adj_mesh_query_point_sign_normal,
+                adj_mesh_query_point_sign_parity,
+                adj_mesh_query_point_no_sign,
+            ] {
+                let mut other = Vec3::ZERO;
+                f(v, p, f32::MAX, &mut am, &mut other, &mut ad, g).unwrap();
+                assert_eq!(other, adj, "{p}");
+            }
             assert!(
                 (num - adj).abs().max_element() <= 1e-4 * adj.abs().max_element().max(1.0),
                 "{num} {adj}"
@@ -1439,5 +1624,182 @@ pub(crate) mod tests {
             checked += 1;
         }
         assert!(checked > 500, "{checked}");
+    }
+
+    /// A unit cube (outward), two triangles a side.
+    fn cube() -> (Vec<Vec3>, Vec<i32>) {
+        let pts: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let mut ix = Vec::new();
+        for q in quads {
+            ix.extend([q[0], q[1], q[2], q[0], q[2], q[3]]);
+        }
+        (pts, ix)
+    }
+
+    /// The parity sign on closed meshes (a sphere at three scales and turned inside out, a
+    /// torus, a cube) against the analytic solids and the pseudonormal's sign, for points
+    /// farther than a margin from the analytic surface: the sphere and the torus are faceted
+    /// (chord error below 2% of the radius), so points within 5% of the sphere's radius or
+    /// 0.02 of the torus's surface can lie on either side of the mesh; the cube is exact and
+    /// its margin, 1e-3, only keeps points off its faces (where either sign is right). The
+    /// closest point is the unsigned query's, bit for bit; `mesh_query_point_sign_normal` is
+    /// `mesh_query_point`.
+    #[test]
+    fn sign_parity_on_closed_meshes() {
+        let mut rng = Rng(41);
+        let check = |v: MeshView, p: Vec3, outward: bool, want: Option<f32>| {
+            let q = mesh_query_point_sign_parity(v, p, f32::MAX).unwrap();
+            let u = mesh_query_point_no_sign(v, p, f32::MAX).unwrap();
+            let n = mesh_query_point(v, p, f32::MAX).unwrap();
+            assert_eq!(n, mesh_query_point_sign_normal(v, p, f32::MAX).unwrap());
+            assert!(q.result && u.result);
+            assert_eq!((q.face, q.u, q.v), (u.face, u.u, u.v), "{p}");
+            if let Some(w) = want {
+                assert_eq!(q.sign, w, "parity at {p}");
+                // The pseudonormal flips with the faces; the parity does not.
+                assert_eq!(n.sign, if outward { w } else { -w }, "pseudonormal at {p}");
+            }
+        };
+        let (pts, ix) = sphere(1.0, 24, 48);
+        let flipped: Vec<i32> = ix.chunks(3).flat_map(|t| [t[0], t[2], t[1]]).collect();
+        for (k, ix, outward) in [
+            (1.0f32, &ix, true),
+            (1e30, &ix, true),
+            (1e-30, &ix, true),
+            (1.0, &flipped, false),
+        ] {
+            let scaled: Vec<Vec3> = pts.iter().map(|p| *p * k).collect();
+            let mut m = TestMesh::new(scaled, ix.clone(), 2);
+            let v = m.view();
+            for _ in 0..1500 {
+                let p = rng.v(-2.0, 2.0);
+                let r = p.length();
+                let want = ((r - 1.0).abs() >= 0.05).then_some(if r < 1.0 { -1.0 } else { 1.0 });
+                check(v, p * k, outward, want);
+            }
+        }
+        let (pts, ix) = torus(1.0, 0.4, 64, 32);
+        let mut m = TestMesh::new(pts, ix, 4);
+        let v = m.view();
+        for _ in 0..3000 {
+            let p = rng.v(-1.6, 1.6);
+            let f = ((p.x * p.x + p.y * p.y).sqrt() - 1.0).hypot(p.z) - 0.4;
+            let want = (f.abs() >= 0.02).then_some(if f < 0.0 { -1.0 } else { 1.0 });
+            check(v, p, true, want);
+        }
+        let (pts, ix) = cube();
+        let mut m = TestMesh::new(pts, ix, 1);
+        let v = m.view();
+        for _ in 0..3000 {
+            let p = rng.v(-0.5, 1.5);
+            let inside = p.cmpgt(Vec3::ZERO).all() && p.cmplt(Vec3::ONE).all();
+            let off = p.min_element().abs() > 1e-3 && (p - Vec3::ONE).max_element().abs() > 1e-3;
+            check(v, p, true, off.then_some(if inside { -1.0 } else { 1.0 }));
+        }
+    }
+
+    /// Rays exactly through the cube's edges and vertices. The ray's sheared frame has the
+    /// exact slopes `15/16` and `3/4`, so from a start
+    /// `p` at a dyadic height the ray meets the plane z = 1 at a point known exactly. Through the diagonal of the top face the watertight hit test finds both
+    /// halves (a parity counted with it would say outside); the tie-broken crossing counts
+    /// one. Through a vertex or an edge where the ray leaves the cube: inside; where it only
+    /// touches the cube: outside.
+    #[test]
+    fn sign_parity_through_edges_and_vertices() {
+        assert!((PARITY_DIR * 0.64 - Vec3::new(0.6, 0.48, 0.64)).length() < 1e-7);
+        let (pts, ix) = cube();
+        let mut m = TestMesh::new(pts, ix, 1);
+        let v = m.view();
+        // The start at height z whose ray meets the plane z = 1 at (x, y).
+        let through =
+            |x: f32, y: f32, z: f32| Vec3::new(x - 0.9375 * (1.0 - z), y - 0.75 * (1.0 - z), z);
+        // The top face's diagonal runs from (0, 0, 1) to (1, 1, 1).
+        let p = through(0.5, 0.5, 0.5);
+        let hits = (0..v.num_faces())
+            .filter(|f| {
+                let [a, b, c] = m.tri(*f);
+                intersect_ray_triangle(p, PARITY_DIR, a, b, c).result
+            })
+            .count();
+        assert_eq!(hits, 2);
+        for (p, want) in [
+            (p, -1.0),
+            (through(1.0, 1.0, 0.5), -1.0), // leaves through the vertex (1, 1, 1)
+            (through(1.0, 0.5, 0.5), -1.0), // through the edge x = z = 1
+            (through(0.25, 0.25, 0.75), -1.0), // the diagonal again, elsewhere
+            (through(1.0, 0.0, 0.5), 1.0),  // touches the vertex (1, 0, 1) only
+            (through(0.5, 0.0, 0.5), 1.0),  // touches the edge y = 0, z = 1 only
+            (through(0.0, 1.0, 0.5), 1.0),  // touches the vertex (0, 1, 1) only
+        ] {
+            let q = mesh_query_point_sign_parity(v, p, f32::MAX).unwrap();
+            assert!(q.result);
+            assert_eq!(q.sign, want, "{p}");
+        }
+    }
+
+    /// Open meshes: the one ray decides (a patch of the plane z = 0 over [-1, 1]^2); far
+    /// points, outside the root box; nothing found gives sign 0; corrupt meshes fault as the
+    /// other queries do.
+    #[test]
+    fn sign_parity_open_far_and_faults() {
+        let (pts, ix) = patch(4);
+        let mut m = TestMesh::new(pts, ix, 2);
+        let v = m.view();
+        for (p, want) in [
+            (Vec3::new(0.0, 0.0, -0.1), -1.0), // its ray leaves through the patch
+            (Vec3::new(-0.9, -0.9, -2.0), -1.0), // meets z = 0 at (0.975, 0.6)
+            (Vec3::new(0.9, 0.0, -1.0), 1.0),  // meets z = 0 at x = 1.8, beside it
+            (Vec3::new(0.0, 0.0, 0.1), 1.0),
+        ] {
+            let q = mesh_query_point_sign_parity(v, p, f32::MAX).unwrap();
+            assert!(q.result);
+            assert_eq!(q.sign, want, "{p}");
+        }
+        // Outside the root box: a ray through the whole sphere crosses it twice.
+        let (pts, ix) = sphere(1.0, 12, 24);
+        let mut m = TestMesh::new(pts, ix, 2);
+        let v = m.view();
+        for p in [Vec3::splat(10.0), -PARITY_DIR * 10.0, -PARITY_DIR * 1e30] {
+            let q = mesh_query_point_sign_parity(v, p, f32::MAX).unwrap();
+            assert!(q.result && q.sign == 1.0, "{p}: {q:?}");
+        }
+        // Nothing within max_dist: as the other queries, sign 0.
+        for d in [0.5, 0.0, -1.0, f32::NAN] {
+            let q = mesh_query_point_sign_parity(v, Vec3::splat(10.0), d).unwrap();
+            assert_eq!(q, MeshQueryPoint::default());
+        }
+        let mut e = TestMesh::new(Vec::new(), Vec::new(), 1);
+        for v in [e.view(), MeshView::empty()] {
+            let q = mesh_query_point_sign_parity(v, Vec3::ZERO, f32::MAX).unwrap();
+            assert_eq!(q, MeshQueryPoint::default());
+        }
+        // A bad vertex index (of a face at the south pole) faults, naming the parameter:
+        // found by the closest point's walk, or by the ray's.
+        let (pts, ix) = sphere(1.0, 4, 6);
+        let mut m = TestMesh::new(pts, ix, 1);
+        m.indices[4] = 1000;
+        let v = m.view();
+        for (p, closest_faults) in [(Vec3::ZERO, true), (-Vec3::Z - PARITY_DIR * 2.0, false)] {
+            let e = mesh_query_point_sign_parity(v, p, f32::MAX).unwrap_err();
+            assert!(e.to_string().contains("argument `mesh`"), "{e}");
+            assert_eq!(
+                mesh_query_point_no_sign(v, p, f32::MAX).is_err(),
+                closest_faults
+            );
+            assert_eq!(
+                mesh_query_point_sign_normal(v, p, f32::MAX).is_err(),
+                closest_faults
+            );
+        }
     }
 }

@@ -612,6 +612,8 @@ fn bvh_and_mesh_rows() {
     for name in [
         "mesh_query_point",
         "mesh_query_point_no_sign",
+        "mesh_query_point_sign_normal",
+        "mesh_query_point_sign_parity",
         "mesh_query_furthest_point_no_sign",
     ] {
         let q = lookup_user(name).unwrap();

@@ -44,6 +44,12 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "mesh_query_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
         no_tangent,
         results("(result, sign, face, u, v)");
+    "mesh_query_point_sign_normal": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
+        no_tangent,
+        results("(result, sign, face, u, v)");
+    "mesh_query_point_sign_parity": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Adjoint,
+        no_tangent,
+        results("(result, sign, face, u, v)");
     "mesh_query_furthest_point_no_sign": NO_T, (MESH, VEC3, F32) -> POINT_RESULT, "mesh", Zero,
         results("(result, sign, face, u, v)");
     "mesh_query_ray": NO_T, (MESH, VEC3, VEC3, F32) -> RAY_RESULT, "mesh", Zero,
