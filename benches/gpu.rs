@@ -545,13 +545,13 @@ fn ad_bench(dev: &wp::Device) {
     tape.backward(&loss).unwrap();
     tape.zero().unwrap();
     wp::synchronize().unwrap();
+    let stream = wp::Stream::new(dev).unwrap();
     let t = Instant::now();
     {
-        let stream = wp::Stream::new(dev).unwrap();
         let _on = wp::ScopedStream::new(&stream).unwrap();
         tape.backward(&loss).unwrap();
-        stream.synchronize().unwrap();
     }
+    wp::synchronize().unwrap();
     let bwd_atomic = ms(t);
     let g_atomic = (
         xs[0].grad().unwrap().to_vec().unwrap(),

@@ -306,12 +306,29 @@ fn refit_faults_reach_the_next_synchronisation() {
                 "{f:?}"
             );
             wp::synchronize().unwrap();
+            assert!(
+                grid.is_built(),
+                "a GPU build of a non-finite point is complete"
+            );
         }
-        // A build of finite points afterwards is a plain one.
+        // A build of finite points afterwards is a plain one: the same ranges and order as a
+        // fresh grid's (the rebuild clears what the faulted build left from its keys).
         let finite = Array::from_slice(&boxes[..4], dev).unwrap();
         grid.build(&finite, 0.5).unwrap();
+        let mut fresh = wp::HashGrid::new(8, 8, 8, dev).unwrap();
+        fresh.build(&finite, 0.5).unwrap();
         wp::synchronize().unwrap();
         assert!(grid.is_built());
+        let table = |g: &wp::HashGrid| {
+            let (starts, ends) = g.cell_ranges().unwrap();
+            let ids = g.point_ids().unwrap();
+            (
+                starts.to_vec().unwrap(),
+                ends.to_vec().unwrap(),
+                ids.to_vec().unwrap(),
+            )
+        };
+        assert_eq!(table(&grid), table(&fresh), "the rebuilt grid's tables");
     });
 }
 

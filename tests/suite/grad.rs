@@ -20,6 +20,7 @@ backend_tests!(
     adjoint_stack_limit,
     kernels_without_adjoint,
     tape_zero_accumulate_reset,
+    aliased_views_gradient,
     gradcheck_builtins,
     gradcheck_scalar_math,
     funcs_gradient,
@@ -850,6 +851,71 @@ fn tape_zero_accumulate_reset(dev: &wp::Device) {
     assert!(tape.is_empty());
     tape.backward(&loss).unwrap();
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![0.0, 0.0]);
+}
+
+/// `c[i] = a[i] - b[i]`: every array at the thread index (thread-owned).
+#[wp::kernel]
+fn k_difference(a: Array<f32>, b: Array<f32>, c: Array<f32>) {
+    let i = tid();
+    c[i] = a[i] - b[i];
+}
+
+/// `out[i, j] = m[i, j] + mt[i, j]` (thread-owned 2-D arrays).
+#[wp::kernel]
+fn k_sum2(m: Array<f32, 2>, mt: Array<f32, 2>, out: Array<f32, 2>) {
+    let (i, j) = tid();
+    out[(i, j)] = m[(i, j)] + mt[(i, j)];
+}
+
+/// Two thread-owned arguments viewing one gradient differently (`x.view(0..n-1)` beside
+/// `x.view(1..n)`, `m` beside `m.transpose()`): thread `i` adds into an element another
+/// thread adds into through the other argument, so the launch takes the atomic adds; every
+/// update must arrive. 64K threads, so that many chunks (CPU) and blocks (GPU) meet at
+/// shared elements. Exact: each gradient element is a sum of at most two +-1.
+fn aliased_views_gradient(dev: &wp::Device) {
+    let n = 1 << 16;
+    let x = zeros::<f32, 1>(n + 1, dev).with_grad().unwrap();
+    let (a, b) = (x.view(0..n).unwrap(), x.view(1..n + 1).unwrap());
+    let c = zeros::<f32, 1>(n, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_difference, n, (&a, &b, &c), dev).unwrap();
+    }
+    c.grad().unwrap().fill(1.0).unwrap();
+    if !backward_ok(dev, tape.backward_from_grads()) {
+        return;
+    }
+    let g = x.grad().unwrap().to_vec().unwrap();
+    let mut want = vec![0.0f32; n + 1];
+    want[0] = 1.0;
+    want[n] = -1.0;
+    let wrong = (0..=n).filter(|&k| g[k] != want[k]).count();
+    assert_eq!(
+        wrong,
+        0,
+        "{wrong} of {} gradient elements of x lost updates",
+        n + 1
+    );
+
+    let s = 256;
+    let m = zeros::<f32, 2>((s, s), dev).with_grad().unwrap();
+    let out = zeros::<f32, 2>((s, s), dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_sum2, [s, s], (&m, &m.transpose(), &out), dev).unwrap();
+    }
+    out.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    let g = m.grad().unwrap().to_vec().unwrap();
+    let wrong = g.iter().filter(|&&v| v != 2.0).count();
+    assert_eq!(
+        wrong,
+        0,
+        "{wrong} of {} gradient elements of m are not 2",
+        s * s
+    );
 }
 
 /// The CUDA adjoint units of this module's kernels compile as host C++ (g++), so a C++ error

@@ -237,8 +237,8 @@ struct hash_grid_keys_t {
 static_assert(sizeof(hash_grid_keys_t) == 56, "hash_grid_keys_t layout");
 /// HashGridRanges: keys (sorted i32*), starts, ends (i32*, buckets each), n, buckets, clear;
 /// bad (the keys step's i32*, or 0): reset to INT_MAX, and the point of `points` (Vec3*) it
-/// names reported as a fault (argument 0) with the `fault` context: a build recorded into a
-/// graph, which cannot read the word back.
+/// names reported as a fault (argument 0) with the `fault` context (a build reads nothing
+/// back; 0 in the clearing step).
 struct hash_grid_ranges_t {
   u64 keys;
   u64 starts;

@@ -1008,6 +1008,17 @@ impl<T: Element, const N: usize> KernelArg for Array<T, N> {
         owned
     }
 
+    fn grad_key(arg: &Self::Arg<'_>) -> Option<crate::kernel::GradKey> {
+        let g = arg.grad.as_ref()?;
+        let mut strides = [0isize; 4];
+        strides[..N].copy_from_slice(&arg.strides);
+        Some(crate::kernel::GradKey {
+            storage: Arc::as_ptr(g) as usize,
+            byte_offset: arg.byte_offset,
+            strides,
+        })
+    }
+
     fn covers(arg: &Self::Arg<'_>, dims: &[usize; 4]) -> bool {
         (0..N).all(|d| arg.shape[d] >= dims[d])
     }

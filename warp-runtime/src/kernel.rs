@@ -94,6 +94,12 @@ pub trait KernelArg: 'static {
         let _ = arg;
         Ok(())
     }
+    /// Where an array argument's gradient lives and how this argument views it (`None` for
+    /// values and arrays without a gradient): see [`grads_alias`].
+    fn grad_key(arg: &Self::Arg<'_>) -> Option<GradKey> {
+        let _ = arg;
+        None
+    }
     /// True when an array argument's extents are at least `dims` (always true for values).
     fn covers(arg: &Self::Arg<'_>, dims: &[usize; 4]) -> bool {
         let _ = (arg, dims);
@@ -110,6 +116,38 @@ pub trait KernelArg: 'static {
         let _ = arg;
         None
     }
+}
+
+/// An array argument's gradient memory and the view of it the argument gives (a kernel thread
+/// at index `i` of a thread-owned argument touches only the element the view puts at `i`).
+#[doc(hidden)]
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct GradKey {
+    /// The gradient's allocation (its address: arguments sharing it share the memory).
+    pub storage: usize,
+    /// The view's first byte in it.
+    pub byte_offset: usize,
+    /// The view's strides as the array keeps them (unused dimensions 0).
+    pub strides: [isize; 4],
+}
+
+/// Whether the gradients of a launch's thread-owned arguments may be added without atomics
+/// as far as its own arguments go: false when an argument at the indices `which` (indexed
+/// only by the thread index: no other thread of the launch touches its elements) shares its
+/// gradient's memory with any other argument through a different view (`a = x.view(0..n-1)`
+/// beside `b = x.view(1..n)`, or `m` beside `m.transpose()`): then thread `i` adds into an
+/// element that another thread adds into through the other argument. The same view passed
+/// twice at thread-indexed positions is one element per thread, as one argument's.
+#[doc(hidden)]
+pub fn grads_alias(keys: &[Option<GradKey>], which: &[usize]) -> bool {
+    keys.iter().enumerate().any(|(k, a)| {
+        let Some(a) = a.filter(|_| which.contains(&k)) else {
+            return false;
+        };
+        keys.iter().enumerate().any(|(j, b)| {
+            j != k && b.is_some_and(|b| b.storage == a.storage && (b != a || !which.contains(&j)))
+        })
+    })
 }
 
 /// An array as a CUDA kernel receives it: `wp::array_t<T, N>` in `warp-cuda/cuda/wp_core.h`
@@ -482,10 +520,43 @@ pub trait KernelParams: 'static {
     /// True when every argument at the indices `which` covers `grid` (see
     /// [`KernelArg::covers`]).
     fn cover(args: &Self::Args<'_>, which: &[usize], grid: &Grid) -> bool;
+    /// True when an argument at the indices `which` (the thread-indexed ones) shares its
+    /// gradient's memory with another argument through a different view (see
+    /// [`grads_alias`]).
+    fn grads_alias(args: &Self::Args<'_>, which: &[usize]) -> bool;
     /// True when every array argument is contiguous (see [`KernelArg::contiguous`]).
     fn contiguous(args: &Self::Args<'_>) -> bool;
     /// Checks the arrays the kernel may write (`info.written`) for NaN and infinite values.
     fn check_finite(args: &Self::Args<'_>, info: &KernelInfo) -> Result<()>;
     /// Zeroes the gradients of the array arguments.
     fn zero_grads(args: &Self::Args<'_>) -> Result<()>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{grads_alias, GradKey};
+
+    fn key(storage: usize, byte_offset: usize, s0: isize) -> Option<GradKey> {
+        Some(GradKey {
+            storage,
+            byte_offset,
+            strides: [s0, 0, 0, 0],
+        })
+    }
+
+    #[test]
+    fn thread_owned_gradients_alias_only_through_other_views() {
+        // Distinct gradients, or none: no alias.
+        assert!(!grads_alias(&[key(1, 0, 4), key(2, 0, 4), None], &[0, 1]));
+        // The same view at two thread-indexed positions: one element per thread.
+        assert!(!grads_alias(&[key(1, 0, 4), key(1, 0, 4)], &[0, 1]));
+        // Shifted views of one gradient (`x.view(0..n-1)`, `x.view(1..n)`).
+        assert!(grads_alias(&[key(1, 0, 4), key(1, 4, 4)], &[0, 1]));
+        // Another stride (a transpose's).
+        assert!(grads_alias(&[key(1, 0, 4), key(1, 0, 64)], &[0, 1]));
+        // The same view, but the other argument is not indexed by the thread alone.
+        assert!(grads_alias(&[key(1, 0, 4), key(1, 0, 4)], &[0]));
+        // Neither argument is thread-owned: their adds are atomic anyway.
+        assert!(!grads_alias(&[key(1, 0, 4), key(1, 4, 4)], &[]));
+    }
 }

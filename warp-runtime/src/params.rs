@@ -113,6 +113,11 @@ macro_rules! tuple_params {
                 true $(&& (!which.contains(&$k) || $T::covers(&args.$k, &grid.dims)))*
             }
 
+            fn grads_alias(args: &Self::Args<'_>, which: &[usize]) -> bool {
+                let keys: &[Option<crate::kernel::GradKey>] = &[$($T::grad_key(&args.$k)),*];
+                crate::kernel::grads_alias(keys, which)
+            }
+
             #[inline(always)]
             fn contiguous(args: &Self::Args<'_>) -> bool {
                 true $(&& $T::contiguous(&args.$k))*

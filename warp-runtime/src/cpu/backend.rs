@@ -95,12 +95,13 @@ impl Cpu<'_> {
             })?
         };
         log.seal()?;
+        let own_alias = K::Params::grads_alias(args, K::INFO.tid_indexed);
         let launch = AdjointLaunch::begin();
         for_each::<K, _>(grid, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
             shared_grads::chunk(&launch, |shared| {
                 race::each_thread(&log, range, |t| {
-                    K::run_cpu_adjoint(&params, &grads, grid, t, &mut stack, shared)
+                    K::run_cpu_adjoint(&params, &grads, grid, t, &mut stack, shared || own_alias)
                 })
             })
         })
@@ -134,12 +135,22 @@ impl Backend for Cpu<'_> {
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
         let grads = unsafe { K::Params::cpu_grads(args, K::info(), self.device)? };
         // One adjoint stack per chunk, reused (cleared) thread by thread. Each chunk learns
-        // whether another adjoint launch may share its gradients (`shared_grads`).
+        // whether another adjoint launch may share its gradients (`shared_grads`); a
+        // thread-owned argument whose gradient another argument views differently
+        // (`grads_alias`: `x.view(0..n-1)` beside `x.view(1..n)`) makes every add atomic too.
+        let own_alias = K::Params::grads_alias(args, K::INFO.tid_indexed);
         let launch = AdjointLaunch::begin();
         for_each::<K, _>(grid, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
             shared_grads::chunk(&launch, |shared| {
-                K::run_cpu_adjoint(&params, &grads, grid, range, &mut stack, shared)
+                K::run_cpu_adjoint(
+                    &params,
+                    &grads,
+                    grid,
+                    range,
+                    &mut stack,
+                    shared || own_alias,
+                )
             })
         })
     }

@@ -630,7 +630,8 @@ impl Communicator {
     fn issue(&self, issue: Issue) -> Result<()> {
         let o = ordinal(&self.0.device, "a collective")?;
         let st = gpu::state(&self.0.device, o)?;
-        st.queue(o, None, |stream| {
+        // Unordered: the call may wait for another thread's group (see `queue_unordered`).
+        st.queue_unordered(o, None, |stream| {
             issue(&self.0.comm, stream).map_err(|e| Error::cuda(self.0.device.alias(), e))?;
             *self.0.last.lock().unwrap_or_else(|p| p.into_inner()) = Some(stream.clone());
             Ok(())

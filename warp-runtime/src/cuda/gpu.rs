@@ -25,7 +25,7 @@ use crate::device::Device;
 use crate::error::{Error, Result};
 use std::cell::RefCell;
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use warp_cuda::{CudaError, DeviceBuffer, Gpu};
 
@@ -115,8 +115,12 @@ pub(crate) struct GpuState {
     pub(crate) gpu: Arc<Gpu>,
     /// The GPU's fault records (`fault.rs`).
     pub(crate) faults: Arc<RecordPool>,
-    pending: Mutex<Vec<warp_cuda::Stream>>,
+    /// Each with the number of the mark that made it pending last (`marks`).
+    pending: Mutex<Vec<(warp_cuda::Stream, u64)>>,
     has_pending: AtomicBool,
+    /// Marks of pending streams so far: a synchronisation forgets only the streams marked
+    /// before it began (`check_state`).
+    marks: AtomicU64,
     /// Held while work is queued outside a capture: its waits and the work are one step (see
     /// the module's ordering model).
     order: Mutex<()>,
@@ -182,8 +186,10 @@ impl GpuState {
         }
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
         let default = self.gpu.default_stream();
-        for s in pending.drain(..) {
-            default.wait_stream(&s).map_err(|e| err(&self.device, e))?;
+        // A stream leaves the list once the wait for it is queued: one that failed stays.
+        while let Some((s, _)) = pending.last() {
+            default.wait_stream(s).map_err(|e| err(&self.device, e))?;
+            pending.pop();
         }
         self.has_pending.store(false, Ordering::Release);
         Ok(())
@@ -199,6 +205,33 @@ impl GpuState {
         stream: Option<&warp_cuda::Stream>,
         enqueue: impl FnOnce(&warp_cuda::Stream) -> Result<()>,
     ) -> Result<()> {
+        self.queue_with(ordinal, stream, true, enqueue)
+    }
+
+    /// [`queue`](Self::queue) without the order lock, for work whose queueing may wait for
+    /// other threads or processes (an NCCL call waits for its communicator's call lock, up to
+    /// a timeout, and inside a group holds it until the group ends): under the lock every
+    /// launch on the GPU would wait too, and another thread's group could not finish. Such
+    /// work is still ordered against the default stream as `queue` orders it, except that an
+    /// adjoint launch the lock calls alone may run beside it: no gradient's additions are
+    /// lost by that, since what it writes (an NCCL result) races with any concurrent access
+    /// to the same memory, atomic adds included.
+    pub(crate) fn queue_unordered(
+        &self,
+        ordinal: usize,
+        stream: Option<&warp_cuda::Stream>,
+        enqueue: impl FnOnce(&warp_cuda::Stream) -> Result<()>,
+    ) -> Result<()> {
+        self.queue_with(ordinal, stream, false, enqueue)
+    }
+
+    fn queue_with(
+        &self,
+        ordinal: usize,
+        stream: Option<&warp_cuda::Stream>,
+        ordered: bool,
+        enqueue: impl FnOnce(&warp_cuda::Stream) -> Result<()>,
+    ) -> Result<()> {
         if let Some(capture) = capture_stream(ordinal) {
             // A capture records this thread's work on its own stream, with no joins: the
             // graph is ordered against the default stream when it is launched.
@@ -212,7 +245,7 @@ impl GpuState {
             }
             return enqueue(&capture);
         }
-        let _order = self.order.lock().unwrap_or_else(|p| p.into_inner());
+        let _order = ordered.then(|| self.order.lock().unwrap_or_else(|p| p.into_inner()));
         let default = self.gpu.default_stream();
         let scoped;
         let user = match stream {
@@ -227,9 +260,10 @@ impl GpuState {
             Some(s) => {
                 // Arrays are allocated and written on the default stream.
                 s.wait_stream(default).map_err(|e| err(&self.device, e))?;
-                enqueue(s)?;
+                // Pending even when `enqueue` failed: it may have queued part of its work.
+                let queued = enqueue(s);
                 self.mark_pending(s);
-                Ok(())
+                queued
             }
             None => {
                 self.join_pending()?;
@@ -249,8 +283,10 @@ impl GpuState {
     /// Records that `stream` (a user stream) has work the default stream must wait for.
     fn mark_pending(&self, stream: &warp_cuda::Stream) {
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
-        if !pending.iter().any(|s| s.is(stream)) {
-            pending.push(stream.clone());
+        let mark = self.marks.fetch_add(1, Ordering::SeqCst) + 1;
+        match pending.iter_mut().find(|(s, _)| s.is(stream)) {
+            Some(entry) => entry.1 = mark,
+            None => pending.push((stream.clone(), mark)),
         }
         self.has_pending.store(true, Ordering::Release);
     }
@@ -290,6 +326,7 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
         gpu,
         pending: Mutex::new(Vec::new()),
         has_pending: AtomicBool::new(false),
+        marks: AtomicU64::new(0),
         order: Mutex::new(()),
         workspace: Mutex::new(None),
     });
@@ -316,10 +353,15 @@ pub(crate) fn synchronize(device: &Device, ordinal: usize) -> Result<()> {
 /// Waits for every stream of the GPU, then reports a fault that a launch of the calling
 /// thread (or a graph it replayed) recorded since its last check.
 pub(crate) fn check_state(st: &GpuState) -> Result<()> {
+    // A stream marked pending before the synchronisation began had its work queued before it
+    // (`queue` marks after queueing), so the synchronisation waits for that work; one marked
+    // since, by another thread, may have work still running and stays pending.
+    let before = st.marks.load(Ordering::SeqCst);
     st.gpu.synchronize().map_err(|e| err(&st.device, e))?;
-    // Every stream is idle: nothing is pending any more.
-    st.pending.lock().unwrap_or_else(|p| p.into_inner()).clear();
-    st.has_pending.store(false, Ordering::Release);
+    let mut pending = st.pending.lock().unwrap_or_else(|p| p.into_inner());
+    pending.retain(|(_, mark)| *mark > before);
+    st.has_pending.store(!pending.is_empty(), Ordering::Release);
+    drop(pending);
     fault::check(&st.faults, st.ordinal, true)
 }
 

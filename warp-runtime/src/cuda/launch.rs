@@ -60,7 +60,8 @@ pub(crate) fn launch<K: Kernel>(
 ) -> Result<()> {
     let (prepared, params, grads) =
         Prepared::<K>::with_params(args, grid, device, ordinal, adjoint)?;
-    prepared.enqueue_converted(params, grads, device, stream, id)
+    let own_alias = K::Params::grads_alias(args, K::info().tid_indexed);
+    prepared.enqueue_converted(params, grads, own_alias, device, stream, id)
 }
 
 type CudaParamsOf<K> = <<K as Kernel>::Params as KernelParams>::CudaParams;
@@ -206,14 +207,18 @@ impl<K: Kernel> Prepared<K> {
             true => Some(K::Params::cuda_grads(args, info, device)?),
             false => None,
         };
-        self.enqueue_converted(params, grads, device, stream, id)
+        let own_alias = K::Params::grads_alias(args, info.tid_indexed);
+        self.enqueue_converted(params, grads, own_alias, device, stream, id)
     }
 
-    /// Queues the launch with arguments already converted.
+    /// Queues the launch with arguments already converted. `own_alias`: a thread-owned
+    /// argument's gradient is shared with another argument (`grads_alias`), so its adds stay
+    /// atomic even when the launch runs alone.
     fn enqueue_converted(
         &self,
         mut params: CudaParamsOf<K>,
         mut grads: Option<CudaGradsOf<K>>,
+        own_alias: bool,
         device: &Device,
         stream: Option<&warp_cuda::Stream>,
         id: LaunchId,
@@ -226,7 +231,7 @@ impl<K: Kernel> Prepared<K> {
             fault::with_record(&st.faults, ordinal, id, |r| r.addresses())?;
         ctx.launch = id.0;
         st.queue(ordinal, stream, |on| {
-            if self.adjoint && st.alone(on) {
+            if self.adjoint && !own_alias && st.alone(on) {
                 dims.flags |= LAUNCH_ALONE;
             }
             // The launch and the context, then the parameters and (adjoint) their gradients.

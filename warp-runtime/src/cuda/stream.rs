@@ -62,7 +62,10 @@ impl Stream {
     ///
     /// The ordering model of this module applies: array operations wait for the work this
     /// crate queued on the stream. Work the other library queues on it is ordered by the
-    /// stream itself; work it queues elsewhere is the caller's to order.
+    /// stream itself; work it queues elsewhere is the caller's to order. In particular a
+    /// backward pass on the default stream counts as running alone (its thread-owned
+    /// gradients are plain adds) against this crate's work only: another library's kernel
+    /// that adds into a gradient array at the same time must be ordered by the caller.
     ///
     /// # Safety
     /// `cu_stream` must be a valid stream of `device`'s primary context (the runtime API's

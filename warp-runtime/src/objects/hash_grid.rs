@@ -313,8 +313,9 @@ impl HashGrid {
     /// first such index; the grid is left unbuilt). On a GPU a non-finite point is a fault
     /// ([`FaultKind::NonFiniteInput`](warp_core::FaultKind::NonFiniteInput) naming
     /// `HashGrid::build`, `points` and the first such index) reported by the next
-    /// synchronisation, as a kernel's faults are (at once in debug mode); the grid is then
-    /// built with that point bucketed consistently, so queries stay in bounds.
+    /// synchronisation, as a kernel's faults are; the grid is then built with that point
+    /// bucketed consistently, so queries stay in bounds. (In debug mode the build waits for
+    /// its steps, returns the fault and leaves the grid unbuilt, as on the CPU.)
     /// [`Error::Capture`] for a build inside a capture that would allocate (no room
     /// reserved, or buffers a clone made before the capture shares: see above); device
     /// errors.

@@ -37,10 +37,10 @@ const _: () = assert!(std::mem::size_of::<HashGridKeys>() == 56);
 /// (`buckets` each; a bucket no key names is left alone, so the caller zeroed them). With
 /// `clear` (nonzero), zeros instead of positions: the same writes, undoing a build from its
 /// keys (cheaper than zeroing every bucket when the points are few). Keys outside
-/// `0..buckets` are skipped. With `bad` (nonzero: the keys step's word, the build recorded
-/// into a graph, which cannot read it back), the step also resets that word to `i32::MAX`
-/// and reports the point it names (of the `points`) as a fault (`fault`; on the CPU as the
-/// build's error). `wp::hash_grid_ranges_t` in C++ (96 bytes).
+/// `0..buckets` are skipped. With `bad` (nonzero: the keys step's word; every build but the
+/// clearing step passes it, since a build reads nothing back), the step also resets that
+/// word to `i32::MAX` and reports the point it names (of the `points`) as a fault (`fault`;
+/// on the CPU as the build's error). `wp::hash_grid_ranges_t` in C++ (96 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct HashGridRanges {

@@ -252,8 +252,9 @@ pub enum AKind {
     },
     /// `from` into `array`'s gradient at `index`: atomically and checked, or (`own`, only
     /// under [`Cond::Fast`]) as the element's only user in this launch, without a bounds check
-    /// (and on the CPU, where no other adjoint launch runs under `__FAST`, without atomics; a
-    /// GPU launch on another stream may share the gradient, so CUDA's add stays atomic).
+    /// (without atomics when the runtime says nothing else adds into the gradient meanwhile:
+    /// on the CPU no other adjoint launch, on CUDA a launch that runs alone, `LAUNCH_ALONE`;
+    /// and no other argument viewing the same gradient differently, `grads_alias`).
     GradAccum {
         array: VarId,
         index: Index,
