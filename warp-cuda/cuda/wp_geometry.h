@@ -279,6 +279,52 @@ WP_FN int tie_broken_side(f64 e, f32 px, f32 py, f32 qx, f32 qy) {
   if (gy < 0.0f) return -1;
   return 0;
 }
+
+/// A triangle in a ray's frame (Rust's `Sheared`): the vertices relative to the start at the
+/// power-of-two scale s (q), their sheared x, y (xy) and the three edge functions (e: exact
+/// f32 products in f64), with the frame's kz and sz for the depths.
+struct sheared_t {
+  int kz;
+  f32 sz, s;
+  Vec3 q[3];
+  f32 x[3], y[3];
+  f64 e[3];
+};
+
+/// Shears triangle (a, b, c) into the frame of the ray start + t * dir: false for a zero or
+/// non-finite direction.
+WP_FN bool shear_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c, sheared_t& sh) {
+  int kx, ky;
+  f32 sx, sy;
+  if (!ray_frame(dir, kx, ky, sh.kz, sx, sy, sh.sz)) return false;
+  sh.q[0] = a - start;
+  sh.q[1] = b - start;
+  sh.q[2] = c - start;
+  sh.s = pow2_scale(g_max_abs(sh.q));
+  // Unrolled, so that the arrays stay in registers (see g_max_abs).
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+  for (int k = 0; k < 3; ++k) {
+    sh.q[k] = sh.q[k] * sh.s;
+    sh.x[k] = g_comp(sh.q[k], kx) - sx * g_comp(sh.q[k], sh.kz);
+    sh.y[k] = g_comp(sh.q[k], ky) - sy * g_comp(sh.q[k], sh.kz);
+  }
+  // The products are exact in f64 (24-bit significands), so contraction cannot change these.
+  sh.e[0] = (f64)sh.x[2] * (f64)sh.y[1] - (f64)sh.y[2] * (f64)sh.x[1];
+  sh.e[1] = (f64)sh.x[0] * (f64)sh.y[2] - (f64)sh.y[0] * (f64)sh.x[2];
+  sh.e[2] = (f64)sh.x[1] * (f64)sh.y[0] - (f64)sh.y[1] * (f64)sh.x[0];
+  return true;
+}
+
+/// The ray parameter where the sheared triangle's plane is met, from the edge functions and
+/// their sum `det` (nonzero); NaN or inf for a degenerate one.
+WP_FN f64 sheared_depth(const sheared_t& sh, f64 det) {
+  const f32 az = sh.sz * g_comp(sh.q[0], sh.kz), bz = sh.sz * g_comp(sh.q[1], sh.kz),
+            cz = sh.sz * g_comp(sh.q[2], sh.kz);
+  const f64 tt = (sh.e[0] * (f64)az + sh.e[1] * (f64)bz) + sh.e[2] * (f64)cz;
+  return tt / det;
+}
 }  // namespace detail
 
 /// Woop, Benthin and Wald's watertight test: shear into the ray's frame, then the signs of
@@ -292,35 +338,18 @@ WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Ve
   miss.u = 0.0f;
   miss.v = 0.0f;
   miss.sign = 0.0f;
-  int kx, ky, kz;
-  f32 sx, sy, sz;
-  if (!ray_frame(dir, kx, ky, kz, sx, sy, sz)) return miss;
-
-  Vec3 aa = a - start, bb = b - start, cc = c - start;
-  const Vec3 vs[3] = {aa, bb, cc};
-  const f32 s = pow2_scale(g_max_abs(vs));
-  aa = aa * s;
-  bb = bb * s;
-  cc = cc * s;
-
-  const Vec3 ab = bb - aa, ac = cc - aa;
+  sheared_t sh;
+  if (!shear_triangle(start, dir, a, b, c, sh)) return miss;
+  // Parallel rays (and degenerate triangles) never hit.
+  const Vec3 ab = sh.q[1] - sh.q[0], ac = sh.q[2] - sh.q[0];
   const f32 dn = g_dot(dir, g_cross(ab, ac));
   if (!(::fabsf(dn) > ((1e-6f * g_len(dir)) * g_len(ab)) * g_len(ac))) return miss;
-
-  const f32 ax = g_comp(aa, kx) - sx * g_comp(aa, kz), ay = g_comp(aa, ky) - sy * g_comp(aa, kz);
-  const f32 bx = g_comp(bb, kx) - sx * g_comp(bb, kz), by = g_comp(bb, ky) - sy * g_comp(bb, kz);
-  const f32 cx = g_comp(cc, kx) - sx * g_comp(cc, kz), cy = g_comp(cc, ky) - sy * g_comp(cc, kz);
-  // The products are exact in f64 (24-bit significands), so contraction cannot change these.
-  const f64 uu = (f64)cx * (f64)by - (f64)cy * (f64)bx;
-  const f64 vv = (f64)ax * (f64)cy - (f64)ay * (f64)cx;
-  const f64 ww = (f64)bx * (f64)ay - (f64)by * (f64)ax;
+  const f64 uu = sh.e[0], vv = sh.e[1], ww = sh.e[2];
   const bool inside =
       (uu >= 0.0 && vv >= 0.0 && ww >= 0.0) || (uu <= 0.0 && vv <= 0.0 && ww <= 0.0);
   const f64 det = (uu + vv) + ww;
   if (!(inside && det != 0.0)) return miss;
-  const f32 az = sz * g_comp(aa, kz), bz = sz * g_comp(bb, kz), cz = sz * g_comp(cc, kz);
-  const f64 tt = (uu * (f64)az + vv * (f64)bz) + ww * (f64)cz;
-  const f32 t = (f32)(tt / det) / s;
+  const f32 t = (f32)sheared_depth(sh, det) / sh.s;
   if (!(t >= 0.0f && g_finite(t))) return miss;
   ray_triangle_hit_t h;
   h.result = true;
@@ -336,30 +365,15 @@ WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Ve
 /// (simulation of simplicity) and no parallel rejection (see the Rust for why).
 WP_FN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
   using namespace detail;
-  int kx, ky, kz;
-  f32 sx, sy, sz;
-  if (!ray_frame(dir, kx, ky, kz, sx, sy, sz)) return false;
-  Vec3 aa = a - start, bb = b - start, cc = c - start;
-  const Vec3 vs[3] = {aa, bb, cc};
-  const f32 s = pow2_scale(g_max_abs(vs));
-  aa = aa * s;
-  bb = bb * s;
-  cc = cc * s;
-  const f32 ax = g_comp(aa, kx) - sx * g_comp(aa, kz), ay = g_comp(aa, ky) - sy * g_comp(aa, kz);
-  const f32 bx = g_comp(bb, kx) - sx * g_comp(bb, kz), by = g_comp(bb, ky) - sy * g_comp(bb, kz);
-  const f32 cx = g_comp(cc, kx) - sx * g_comp(cc, kz), cy = g_comp(cc, ky) - sy * g_comp(cc, kz);
-  const f64 uu = (f64)cx * (f64)by - (f64)cy * (f64)bx;
-  const f64 vv = (f64)ax * (f64)cy - (f64)ay * (f64)cx;
-  const f64 ww = (f64)bx * (f64)ay - (f64)by * (f64)ax;
-  const int su = tie_broken_side(uu, cx, cy, bx, by);
-  const int sv = tie_broken_side(vv, ax, ay, cx, cy);
-  const int sw = tie_broken_side(ww, bx, by, ax, ay);
+  sheared_t sh;
+  if (!shear_triangle(start, dir, a, b, c, sh)) return false;
+  const int su = tie_broken_side(sh.e[0], sh.x[2], sh.y[2], sh.x[1], sh.y[1]);
+  const int sv = tie_broken_side(sh.e[1], sh.x[0], sh.y[0], sh.x[2], sh.y[2]);
+  const int sw = tie_broken_side(sh.e[2], sh.x[1], sh.y[1], sh.x[0], sh.y[0]);
   if (!(su != 0 && su == sv && sv == sw)) return false;
-  const f64 det = (uu + vv) + ww;
+  const f64 det = (sh.e[0] + sh.e[1]) + sh.e[2];
   if (det == 0.0) return false;
-  const f32 az = sz * g_comp(aa, kz), bz = sz * g_comp(bb, kz), cz = sz * g_comp(cc, kz);
-  const f64 tt = (uu * (f64)az + vv * (f64)bz) + ww * (f64)cz;
-  const f64 t = tt / det;
+  const f64 t = sheared_depth(sh, det);
   return t >= 0.0 && t - t == 0.0;  // finite: inf - inf and NaN - NaN are NaN
 }
 

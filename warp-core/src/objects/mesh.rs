@@ -934,73 +934,42 @@ pub fn adj_mesh_query_point_no_sign(
     Ok(())
 }
 
-/// Adjoint of [`mesh_query_point`] with respect to the query point, as
-/// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
-#[inline]
-pub fn adj_mesh_query_point(
-    mesh: MeshView,
-    point: Vec3,
-    max_dist: f32,
-    adj_mesh: &mut MeshView,
-    adj_point: &mut Vec3,
-    adj_max_dist: &mut f32,
-    adj_ret: MeshQueryPoint,
-) -> KResult<()> {
-    adj_mesh_query_point_no_sign(
-        mesh,
-        point,
-        max_dist,
-        adj_mesh,
-        adj_point,
-        adj_max_dist,
-        adj_ret,
-    )
+/// The adjoints of the signed point queries with respect to the query point: the unsigned
+/// query's ([`adj_mesh_query_point_no_sign`]), since the sign is piecewise constant and the
+/// closest point is the same.
+macro_rules! signed_query_adjoints {
+    ($($name:ident: $query:literal;)*) => {$(
+        #[doc = concat!(
+            "Adjoint of [`", $query, "`] with respect to the query point, as ",
+            "[`adj_mesh_query_point_no_sign`] (the sign is piecewise constant)."
+        )]
+        #[inline]
+        pub fn $name(
+            mesh: MeshView,
+            point: Vec3,
+            max_dist: f32,
+            adj_mesh: &mut MeshView,
+            adj_point: &mut Vec3,
+            adj_max_dist: &mut f32,
+            adj_ret: MeshQueryPoint,
+        ) -> KResult<()> {
+            adj_mesh_query_point_no_sign(
+                mesh,
+                point,
+                max_dist,
+                adj_mesh,
+                adj_point,
+                adj_max_dist,
+                adj_ret,
+            )
+        }
+    )*};
 }
 
-/// Adjoint of [`mesh_query_point_sign_normal`] with respect to the query point, as
-/// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
-#[inline]
-pub fn adj_mesh_query_point_sign_normal(
-    mesh: MeshView,
-    point: Vec3,
-    max_dist: f32,
-    adj_mesh: &mut MeshView,
-    adj_point: &mut Vec3,
-    adj_max_dist: &mut f32,
-    adj_ret: MeshQueryPoint,
-) -> KResult<()> {
-    adj_mesh_query_point_no_sign(
-        mesh,
-        point,
-        max_dist,
-        adj_mesh,
-        adj_point,
-        adj_max_dist,
-        adj_ret,
-    )
-}
-
-/// Adjoint of [`mesh_query_point_sign_parity`] with respect to the query point, as
-/// [`adj_mesh_query_point_no_sign`] (the sign is piecewise constant).
-#[inline]
-pub fn adj_mesh_query_point_sign_parity(
-    mesh: MeshView,
-    point: Vec3,
-    max_dist: f32,
-    adj_mesh: &mut MeshView,
-    adj_point: &mut Vec3,
-    adj_max_dist: &mut f32,
-    adj_ret: MeshQueryPoint,
-) -> KResult<()> {
-    adj_mesh_query_point_no_sign(
-        mesh,
-        point,
-        max_dist,
-        adj_mesh,
-        adj_point,
-        adj_max_dist,
-        adj_ret,
-    )
+signed_query_adjoints! {
+    adj_mesh_query_point: "mesh_query_point";
+    adj_mesh_query_point_sign_normal: "mesh_query_point_sign_normal";
+    adj_mesh_query_point_sign_parity: "mesh_query_point_sign_parity";
 }
 
 /// Adjoint of [`mesh_query_furthest_point_no_sign`]: nothing (the furthest point is a vertex,
