@@ -200,6 +200,16 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
                 rank: ndim as u8,
             }
         }
+        // wp_core.h FAULT_ASSERTION: the line and column (the message is found by them in the
+        // kernel's and its callees' tables), then the flat thread index (-1 in a func).
+        8 => {
+            let (line, column) = (i64_at(8) as u32, i64_at(16) as u32);
+            FaultKind::AssertionFailed {
+                line,
+                message: assert_message(info, line, column),
+                thread: usize::try_from(i64_at(24)).ok(),
+            }
+        }
         _ => FaultKind::BadStep { step: i64_at(8) },
     };
     Fault {
@@ -207,6 +217,37 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
         kind,
         launch,
     }
+}
+
+/// The message of the assertion at `line` and `column` of `info`'s kernel or of a func it
+/// calls (directly or not); a placeholder when no table has it (a fault of a kernel the host
+/// could not name).
+fn assert_message(info: &KernelInfo, line: u32, column: u32) -> &'static str {
+    fn in_funcs(
+        funcs: &[&'static warp_core::FuncInfo],
+        line: u32,
+        column: u32,
+        depth: usize,
+    ) -> Option<&'static str> {
+        // Funcs cannot recurse (a cycle fails to compile), so the walk ends; the bound only
+        // keeps a corrupt record from costing more than a deep call tree.
+        if depth > 64 {
+            return None;
+        }
+        funcs.iter().find_map(|f| {
+            f.asserts
+                .iter()
+                .find(|s| s.line == line && s.column == column)
+                .map(|s| s.message)
+                .or_else(|| in_funcs(f.callees, line, column, depth + 1))
+        })
+    }
+    info.asserts
+        .iter()
+        .find(|s| s.line == line && s.column == column)
+        .map(|s| s.message)
+        .or_else(|| in_funcs(info.callees, line, column, 0))
+        .unwrap_or("assertion failed (its message is not in the kernel's tables)")
 }
 
 static UNKNOWN: KernelInfo = KernelInfo {
