@@ -24,23 +24,25 @@ pub(super) const EXPECTATIONS: &[&str] = &["expect_eq", "expect_neq", "expect_ne
 /// token's text, with one space where the source has a gap between two tokens (a line break
 /// counts as one). Without token positions (code a macro made), the tokens as printed.
 fn source_text(node: &impl quote::ToTokens) -> String {
-    fn walk(ts: TokenStream, out: &mut String, last: &mut Option<LineColumn>) -> Option<()> {
-        fn put(
-            span: Span,
-            text: &str,
-            out: &mut String,
-            last: &mut Option<LineColumn>,
-        ) -> Option<()> {
-            if span.start().line == 0 {
-                return None;
-            }
-            if last.is_some_and(|l| l != span.start()) {
-                out.push(' ');
-            }
-            out.push_str(text);
-            *last = Some(span.end());
-            Some(())
+    /// Appends `text`, which spans `start..end` in the source.
+    fn put(
+        start: LineColumn,
+        end: LineColumn,
+        text: &str,
+        out: &mut String,
+        last: &mut Option<LineColumn>,
+    ) -> Option<()> {
+        if start.line == 0 {
+            return None;
         }
+        if last.is_some_and(|l| l != start) {
+            out.push(' ');
+        }
+        out.push_str(text);
+        *last = Some(end);
+        Some(())
+    }
+    fn walk(ts: TokenStream, out: &mut String, last: &mut Option<LineColumn>) -> Option<()> {
         for tt in ts {
             match tt {
                 TokenTree::Group(g) => {
@@ -50,15 +52,26 @@ fn source_text(node: &impl quote::ToTokens) -> String {
                         Delimiter::Brace => ("{", "}"),
                         Delimiter::None => ("", ""),
                     };
+                    // The delimiters are one column wide at the group's ends (the compiler's
+                    // `span_open` is the whole group's span on stable).
+                    let (start, end) = (g.span().start(), g.span().end());
+                    let after_open = LineColumn {
+                        column: start.column + 1,
+                        ..start
+                    };
+                    let before_close = LineColumn {
+                        column: end.column.saturating_sub(1),
+                        ..end
+                    };
                     if !open.is_empty() {
-                        put(g.span_open(), open, out, last)?;
+                        put(start, after_open, open, out, last)?;
                     }
                     walk(g.stream(), out, last)?;
                     if !close.is_empty() {
-                        put(g.span_close(), close, out, last)?;
+                        put(before_close, end, close, out, last)?;
                     }
                 }
-                t => put(t.span(), &t.to_string(), out, last)?,
+                t => put(t.span().start(), t.span().end(), &t.to_string(), out, last)?,
             }
         }
         Some(())
