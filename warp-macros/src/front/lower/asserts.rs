@@ -217,3 +217,95 @@ pub(super) fn expectation_as_value(span: Span, name: &str) -> syn::Error {
         ),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::lower_fn;
+    use crate::ir::*;
+
+    fn lower(src: &str) -> Result<Function, Vec<String>> {
+        let item: syn::ItemFn = syn::parse_str(src).expect("a fn");
+        lower_fn(&item, FnKind::Kernel).map_err(|e| e.iter().map(|e| e.to_string()).collect())
+    }
+
+    fn messages(f: &Function) -> Vec<String> {
+        let mut out = Vec::new();
+        walk_stmts(&f.body, &mut |s| {
+            if let StmtKind::Assert { message, .. } = &s.kind {
+                out.push(message.clone());
+            }
+        });
+        out
+    }
+
+    #[test]
+    fn messages_are_the_source_text_or_the_literal() {
+        let f = lower(
+            "fn k(a: Array<f32>, v: Array<Vec3>) {
+                let i = tid();
+                assert!(a[i]  >  0.0);
+                assert!(a[i] < 1.0, \"below {{one}}\");
+                expect_near(v[i], vec3(1.0, 2.0,
+                    3.0), 0.5);
+            }",
+        )
+        .unwrap();
+        assert_eq!(
+            messages(&f),
+            [
+                "assertion failed: a[i] > 0.0",
+                "below {one}",
+                "expectation failed: expect_near(v[i], vec3(1.0, 2.0, 3.0), 0.5)",
+            ]
+        );
+    }
+
+    #[test]
+    fn debug_assert_is_guarded_by_the_debug_mode() {
+        let f = lower("fn k(a: Array<f32>) { let i = tid(); debug_assert!(a[i] > 0.0); }").unwrap();
+        let StmtKind::If { cond, then, els } = &f.body.last().unwrap().kind else {
+            panic!("{:?}", f.body)
+        };
+        assert!(els.is_empty());
+        assert!(f.body.iter().any(|s| matches!(
+            &s.kind,
+            StmtKind::Assign { dst, op: Op::DebugMode, .. } if dst == cond
+        )));
+        // The condition is computed inside the guard.
+        assert!(matches!(
+            then.first().unwrap().kind,
+            StmtKind::Assign { .. }
+        ));
+        assert!(matches!(then.last().unwrap().kind, StmtKind::Assert { .. }));
+    }
+
+    #[test]
+    fn misuse_is_refused() {
+        let cases = [
+            (
+                "assert!(x > 0.0, \"x = {}\", x);",
+                "format arguments are not supported",
+            ),
+            (
+                "assert!(x > 0.0, \"x = {x}\");",
+                "format arguments are not supported",
+            ),
+            ("assert!(x > 0.0, msg);", "is a string literal"),
+            (
+                "assert!(x);",
+                "an assertion's condition is a `bool`, found `f32`",
+            ),
+            ("assert!();", "needs a condition"),
+            ("let ok = expect_eq(x, 1.0);", "`expect_eq` is a statement"),
+            ("expect_near(x, 1.0f64, 0.5);", "expect_near"),
+        ];
+        for (stmt, want) in cases {
+            let src = format!("fn k(x: f32) {{ {stmt} }}");
+            let errors = lower(&src).err().unwrap_or_default();
+            assert!(
+                errors.iter().any(|e| e.contains(want)),
+                "{stmt}: {errors:?} should contain {want:?}"
+            );
+        }
+    }
+}
