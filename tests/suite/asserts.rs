@@ -16,6 +16,7 @@ backend_tests!(
     expectations_hold,
     expectations_fail,
     backward_does_not_check_again,
+    tangent_kernel_does_not_check,
 );
 
 /// The fault of a failed launch (without its launch number), or a panic naming what came
@@ -286,4 +287,18 @@ fn backward_does_not_check_again(dev: &wp::Device) {
     tape.backward(&y).unwrap();
     // d(x^2)/dx at the values backward read: 2 * -3, exact.
     assert_eq!(x.grad().unwrap().to_vec().unwrap(), vec![-6.0, -6.0]);
+}
+
+/// Forward mode's tangent kernel drops assertions: `wp::jvp` on inputs that fail the forward
+/// kernel's runs, and gives the tangent `2 x v` (exact: one product of small integers).
+fn tangent_kernel_does_not_check(dev: &wp::Device) {
+    let x = arr(&[-1.0f32, 2.0], dev).with_grad().unwrap();
+    let y = zeros::<f32, 1>(2, dev).with_grad().unwrap();
+    let (v, y_dot) = (arr(&[3.0f32, -1.0], dev), zeros::<f32, 1>(2, dev));
+    assert!(matches!(
+        wp::launch(k_square_positive, 2, (&x, &y), dev),
+        Err(Error::Fault(_))
+    ));
+    wp::jvp(k_square_positive, 2, (&x, &y), (&v, &y_dot), dev).unwrap();
+    assert_eq!(y_dot.to_vec().unwrap(), vec![-6.0, -4.0]);
 }
