@@ -448,6 +448,78 @@ mod tests {
         rec
     }
 
+    /// A failed assertion's record leads to its message by line and column, in the kernel's
+    /// table or in a func's below it (two on one line told apart by the column); a func's
+    /// names no thread.
+    #[test]
+    fn an_assertion_finds_its_message_in_the_kernel_or_its_funcs() {
+        use warp_core::{AssertSite, FuncInfo};
+        static LEAF: FuncInfo = FuncInfo {
+            name: "leaf",
+            module: "m",
+            file: "src/m.rs",
+            cuda: "",
+            cuda_ret: "void",
+            sections: &[],
+            callees: &[],
+            structs: &[],
+            cuda_adj: "",
+            cuda_adj_error: None,
+            consts: &[],
+            requires: &[],
+            asserts: &[AssertSite {
+                line: 3,
+                column: 4,
+                message: "in the leaf",
+            }],
+        };
+        static MID: FuncInfo = FuncInfo {
+            name: "mid",
+            callees: &[&LEAF],
+            asserts: &[],
+            ..LEAF
+        };
+        static K: KernelInfo = KernelInfo {
+            name: "k_asserts",
+            callees: &[&MID],
+            asserts: &[
+                AssertSite {
+                    line: 10,
+                    column: 4,
+                    message: "first",
+                },
+                AssertSite {
+                    line: 10,
+                    column: 30,
+                    message: "second",
+                },
+            ],
+            ..KernelInfo::BLANK
+        };
+        let id = kernel_id(&K);
+        let at = |line, column, thread| {
+            decode(&record(8, -1, [line, column, thread, 0], 3, id, 5), None)
+        };
+        let want = |line, message, thread| FaultKind::AssertionFailed {
+            line,
+            message,
+            thread,
+        };
+        assert_eq!(at(10, 30, 7).kind, want(10, "second", Some(7)));
+        assert_eq!(at(10, 4, 0).kind, want(10, "first", Some(0)));
+        assert_eq!(at(3, 4, -1).kind, want(3, "in the leaf", None));
+        let lost = at(99, 1, 2);
+        assert_eq!(lost.kernel, "k_asserts");
+        assert!(matches!(
+            lost.kind,
+            FaultKind::AssertionFailed { line: 99, message, .. } if message.contains("not in")
+        ));
+        assert_eq!(
+            at(10, 30, 7).to_string(),
+            "kernel `k_asserts`: second (line 10, thread 7) (launch #5)"
+        );
+    }
+
     #[test]
     fn a_build_steps_non_finite_input_names_its_argument_index_and_values() {
         static NAMES: KernelInfo = KernelInfo {

@@ -270,3 +270,19 @@ impl<K: Kernel> Prepared<K> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// The launch and context flags are the library's (`wp_core.h`), written there once each.
+    #[test]
+    fn flags_match_the_library() {
+        let core = warp_cuda::library::CORE.text;
+        for decl in [
+            format!("constexpr i32 LAUNCH_FAST = {};", super::LAUNCH_FAST),
+            format!("constexpr i32 LAUNCH_ALONE = {};", super::LAUNCH_ALONE),
+            format!("constexpr i16 CTX_DEBUG = {};", super::CTX_DEBUG),
+        ] {
+            assert!(core.contains(&decl), "wp_core.h lacks `{decl}`");
+        }
+    }
+}
