@@ -1839,4 +1839,29 @@ fn assertions_fault_as_on_the_cpu_backend() {
     }
     // Cases 2 and 4 to 7 fail (the debug assertion only with the flag on).
     assert_eq!(faulted, 5);
+    // The adjoint drops the assertions but replays the debug guard's reads: its unit (forward
+    // and adjoint, as a launch under a tape compiles it) compiles too.
+    assert_eq!(asserting::INFO.adjoint_error, None);
+    assert_eq!(asserting::INFO.cuda_adjoint_error, None);
+    let both = wp::cuda_source::assemble_with_adjoint(&asserting::INFO);
+    let cpp = dir.join("both.cpp");
+    std::fs::write(&cpp, &both.text).unwrap();
+    let built = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-fsyntax-only",
+            "-Wno-unused",
+            "-DWP_CONTIGUOUS=1",
+            "-I",
+            include,
+        ])
+        .arg(&cpp)
+        .output()
+        .unwrap();
+    assert!(
+        built.status.success(),
+        "g++ failed on {}:\n{}",
+        cpp.display(),
+        String::from_utf8_lossy(&built.stderr)
+    );
 }
