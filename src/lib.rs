@@ -221,10 +221,12 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, max_depth, objects,
-        ops, tile, zero_like, AdStack, ArrayView, Capability, ConstLiteral, DTransform, FuncInfo,
-        GradElement, GradView, Grid, KResult, RangeProg, Transform,
+        ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability, ConstLiteral, DTransform,
+        Fault, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg, Transform,
     };
     pub use warp_macros::__object_rows;
+    /// Whether `debug_assert!` is checked: the runtime's debug mode (`wp::config::debug`).
+    pub use warp_runtime::config::debug as debug_mode;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
     pub use warp_runtime::{
         ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,

@@ -1774,10 +1774,11 @@ enum Why {
 const WARP_CORE_ALLOCATES: &[(&str, &[&str], Why, &str)] = &[
     (
         "warp-core/src/fault.rs",
-        &[ITEM_LEVEL, "new"],
+        &[ITEM_LEVEL, "new", "assertion_failed"],
         Why::Fault,
         "`KResult<T> = Result<T, Box<Fault>>`: a fault is boxed so that `Ok` stays one word, and \
-         `FaultKind` holds the index, shape and values it names as `Vec`s; `Fault::new` boxes it",
+         `FaultKind` holds the index, shape and values it names as `Vec`s; `Fault::new` boxes it \
+         (`Fault::assertion_failed`, a failed assertion's, through it)",
     ),
     (
         "warp-core/src/view.rs",

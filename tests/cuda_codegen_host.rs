@@ -1697,3 +1697,171 @@ fn tile_map_constant_gradients_match_the_cpu_backend() {
         assert!(hw.iter().all(|b| b != "00000000"), "no gradient reached w");
     }
 }
+
+#[wp::func]
+fn halve_checked(x: f32) -> f32 {
+    assert!(x < 100.0, "too big");
+    x * 0.5
+}
+
+/// Every kind of assertion: one always checked, one in debug mode only, the three
+/// expectations, and one in a func.
+#[wp::kernel]
+fn asserting(x: Array<f32>, v: Array<Vec3>, out: Array<f32>) {
+    let i = tid();
+    assert!(x[i] >= 0.0);
+    debug_assert!(x[i] < 50.0, "debug only");
+    expect_near(v[i], vec3(1.0, 2.0, 3.0), 0.5);
+    expect_eq(x[i] * 0.0, 0.0);
+    expect_neq(x[i], 7.0);
+    out[i] = halve_checked(x[i]);
+}
+
+/// The generated CUDA's assertions run on the host (g++) with the debug flag off and on
+/// (`wp::CTX_DEBUG` in the context), against the CPU backend: the same first fault (the host
+/// runs the threads in order, as a small CPU launch does), whose record's line, column and
+/// thread lead to the CPU's message through the kernel's and its func's `asserts` tables.
+#[test]
+fn assertions_fault_as_on_the_cpu_backend() {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (assertions): no g++ on this machine");
+        return;
+    }
+    let dev = wp::cpu();
+    let n = 4;
+    let good_v = [Vec3::new(1.0, 2.0, 3.0); 4];
+    let mut near_v = good_v;
+    near_v[1] = Vec3::new(1.0, 2.5, 2.5);
+    let mut far_v = good_v;
+    far_v[1] = Vec3::new(1.0, 2.0, 3.75);
+    // (x, v, debug): what passes, what fails each assertion.
+    let cases: [([f32; 4], [Vec3; 4], bool); 8] = [
+        ([0.0, 1.0, 2.0, 3.0], good_v, true),
+        ([0.0, 1.0, 2.0, 3.0], near_v, true),
+        ([0.0, 1.0, -2.0, 3.0], good_v, false),
+        ([0.0, 1.0, 60.0, 3.0], good_v, false),
+        ([0.0, 1.0, 60.0, 3.0], good_v, true),
+        ([0.0, 1.0, 2.0, 3.0], far_v, false),
+        ([0.0, 7.0, f32::NAN, 3.0], good_v, false),
+        ([0.0, 1.0, 2.0, 200.0], good_v, false),
+    ];
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let src = wp::cuda_source::assemble(&asserting::INFO);
+    let dir = std::env::temp_dir().join(format!("wp_codegen_asserts_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let was = wp::config::debug();
+    let mut faulted = 0;
+    for (k, (xs, vs, debug)) in cases.into_iter().enumerate() {
+        let x = wp::Array::from_slice(&xs, &dev).unwrap();
+        let v = wp::Array::from_slice(&vs, &dev).unwrap();
+        let out = wp::Array::<f32>::zeros(n, &dev).unwrap();
+        let args = [Arg::F32s(&x), Arg::Vec3s(&v), Arg::F32s(&out)];
+        let (decl, _) = cpp_args(&args);
+        let program = format!(
+            "#include <cstring>\n{text}\n\
+             static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+             int main() {{\n\
+             {decl}\n\
+             wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+             wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+             ctx.flags = {flags};\n\
+             wp::launch_t launch = {{{{{n}, 1, 1, 1}}, {n}, 1, 0}};\n\
+             for (wp::i64 flat = 0; flat < {n}; ++flat) {thread}(p0, p1, p2, launch, flat, &ctx);\n\
+             if (flag) printf(\"%d %lld %lld %lld\\n\", fault.kind, (long long)fault.index[0],\n\
+                              (long long)fault.index[1], (long long)fault.index[2]);\n\
+             else printf(\"ok\\n\");\n\
+             return 0;\n}}\n",
+            text = src.text,
+            flags = if debug { "wp::CTX_DEBUG" } else { "0" },
+            thread = src.thread_fn,
+        );
+        let cpp = dir.join(format!("a{k}.cpp"));
+        std::fs::write(&cpp, program).unwrap();
+        let exe = dir.join(format!("a{k}"));
+        let built = Command::new("g++")
+            .args([
+                "-std=c++17",
+                "-O1",
+                "-Wno-unused",
+                "-DWP_CONTIGUOUS=1",
+                "-I",
+                include,
+            ])
+            .arg(&cpp)
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            built.status.success(),
+            "g++ failed on {}:\n{}",
+            cpp.display(),
+            String::from_utf8_lossy(&built.stderr)
+        );
+        let run = Command::new(&exe).output().unwrap();
+        let host = String::from_utf8(run.stdout).unwrap();
+        wp::config::set_debug(debug);
+        let cpu = wp::launch(asserting, n, (&x, &v, &out), &dev);
+        wp::config::set_debug(was);
+        match cpu {
+            Ok(()) => assert_eq!(host.trim(), "ok", "case {k}"),
+            Err(wp::Error::Fault(f)) => {
+                faulted += 1;
+                let wp::FaultKind::AssertionFailed {
+                    line,
+                    message,
+                    thread,
+                } = f.kind
+                else {
+                    panic!("case {k}: {f}")
+                };
+                let rec: Vec<i64> = host
+                    .split_whitespace()
+                    .map(|w| w.parse().unwrap())
+                    .collect();
+                // FAULT_ASSERTION, line, column, thread (-1 in a func).
+                assert_eq!(rec.len(), 4, "case {k}: {host}");
+                assert_eq!((rec[0], rec[1]), (8, line as i64), "case {k}: {f}");
+                let thread_rec = usize::try_from(rec[3]).ok();
+                assert_eq!(thread_rec, thread, "case {k}: {f}");
+                let sites = asserting::INFO
+                    .asserts
+                    .iter()
+                    .chain(asserting::INFO.callees.iter().flat_map(|c| c.asserts));
+                let found: Vec<&str> = sites
+                    .filter(|s| (s.line as i64, s.column as i64) == (rec[1], rec[2]))
+                    .map(|s| s.message)
+                    .collect();
+                assert_eq!(found, [message], "case {k}: {f}");
+            }
+            Err(e) => panic!("case {k}: {e}"),
+        }
+    }
+    // Cases 2 and 4 to 7 fail (the debug assertion only with the flag on).
+    assert_eq!(faulted, 5);
+    // The adjoint drops the assertions but replays the debug guard's reads: its unit (forward
+    // and adjoint, as a launch under a tape compiles it) compiles too.
+    assert_eq!(asserting::INFO.adjoint_error, None);
+    assert_eq!(asserting::INFO.cuda_adjoint_error, None);
+    let both = wp::cuda_source::assemble_with_adjoint(&asserting::INFO);
+    let cpp = dir.join("both.cpp");
+    std::fs::write(&cpp, &both.text).unwrap();
+    let built = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-fsyntax-only",
+            "-Wno-unused",
+            "-DWP_CONTIGUOUS=1",
+            "-I",
+            include,
+        ])
+        .arg(&cpp)
+        .output()
+        .unwrap();
+    assert!(
+        built.status.success(),
+        "g++ failed on {}:\n{}",
+        cpp.display(),
+        String::from_utf8_lossy(&built.stderr)
+    );
+}

@@ -177,6 +177,9 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::NonFiniteInput { .. } => {
             unreachable!("only host objects' build steps check their inputs")
         }
+        FaultKind::AssertionFailed { .. } => {
+            unreachable!("only generated code asserts (tests/cuda_codegen_host.rs)")
+        }
         // The coordinates' f64 bit patterns (wp_core.h's FAULT_NON_FINITE record).
         FaultKind::NonFinite { values, .. } => (
             5,

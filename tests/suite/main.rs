@@ -85,6 +85,7 @@ fn gpu_lock() -> std::sync::MutexGuard<'static, ()> {
 
 mod arith;
 mod arrays;
+mod asserts;
 mod atomics;
 mod bf16;
 mod builtins;

@@ -107,6 +107,18 @@ pub enum FaultKind {
         /// The tile's rank, 1..=4.
         rank: u8,
     },
+    /// A failed `assert!` or `debug_assert!` (checked only in debug mode), or a failed
+    /// expectation (`expect_eq`, `expect_neq`, `expect_near`) in a kernel or func.
+    AssertionFailed {
+        /// The source line of the assertion.
+        line: u32,
+        /// The assertion's message: its own, else `assertion failed: <condition>` or
+        /// `expect_eq(<a>, <b>) failed`, the arguments as written.
+        message: &'static str,
+        /// The flat launch index (row-major over the launch dimensions) of the thread that
+        /// failed; `None` when the assertion is in a func, which does not know it.
+        thread: Option<usize>,
+    },
     /// `tile(x)` of a width other than the block's lane count, or a block dimension outside
     /// `1..=1024` (`launch_tiled` refuses such launches, so generated code never sees this).
     TileWidth {
@@ -126,6 +138,25 @@ impl Fault {
             kind,
             launch: None,
         })
+    }
+
+    /// A failed assertion or expectation: what generated CPU code returns (`kernel` is the
+    /// kernel or func whose code failed; `thread` as in [`FaultKind::AssertionFailed`]).
+    #[cold]
+    pub fn assertion_failed(
+        kernel: &'static str,
+        line: u32,
+        message: &'static str,
+        thread: Option<usize>,
+    ) -> Box<Fault> {
+        Fault::new(
+            kernel,
+            FaultKind::AssertionFailed {
+                line,
+                message,
+                thread,
+            },
+        )
     }
 
     /// The fault, naming `launch` as the launch that raised it.
@@ -188,6 +219,17 @@ impl Fault {
                     &index[..r],
                     &shape[..r]
                 )
+            }
+            FaultKind::AssertionFailed {
+                line,
+                message,
+                thread,
+            } => {
+                write!(f, "kernel `{}`: {message} (line {line}", self.kernel)?;
+                match thread {
+                    Some(t) => write!(f, ", thread {t})"),
+                    None => write!(f, ")"),
+                }
             }
             FaultKind::TileWidth { width, block_dim } => write!(
                 f,

@@ -37,7 +37,7 @@ pub use float16::f16;
 pub use grad::{first_error, zero_like, AdStack, GradElement, GradView};
 pub use grid::Grid;
 pub use index::KernelIndex;
-pub use meta::{ConstLiteral, FuncInfo, StructDefs};
+pub use meta::{AssertSite, ConstLiteral, FuncInfo, StructDefs};
 pub use range::RangeProg;
 pub use transform::{DTransform, Transform};
 pub use view::ArrayView;

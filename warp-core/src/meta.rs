@@ -31,6 +31,23 @@ pub struct FuncInfo {
     /// The capabilities its code (and its adjoint's) needs beyond the core language, by the
     /// macros' validator: a kernel calling it needs them too (see [`crate::capability`]).
     pub requires: &'static [crate::Capability],
+    /// Its assertion sites (`assert!`, `debug_assert!`, `expect_*`), by which a GPU fault's
+    /// line and column find the message.
+    pub asserts: &'static [AssertSite],
+}
+
+/// An assertion in a kernel or func's source. A GPU fault record holds no text: a failed
+/// assertion records its line and column, and the host finds the message in the `asserts`
+/// table of the kernel or of one of its callees (the CPU builds its fault with the message
+/// directly).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AssertSite {
+    /// The source line (as the fault reports it).
+    pub line: u32,
+    /// The column of the assertion's start (tells apart assertions on one line).
+    pub column: u32,
+    /// The message (see `FaultKind::AssertionFailed`).
+    pub message: &'static str,
 }
 
 /// The value of a module-level `const` a kernel or func reads, as a C++ expression.

@@ -538,6 +538,7 @@ enum fault_kind : i32 {
   FAULT_NON_FINITE = 5,
   FAULT_TILE_INDEX = 6,
   FAULT_NON_FINITE_INPUT = 7,
+  FAULT_ASSERTION = 8,
 };
 
 /// The first fault of the launches that share a record, filled by the first faulting thread
@@ -554,7 +555,11 @@ enum fault_kind : i32 {
 /// infinite coordinate in an input of a host object's build step, warp_core::FaultKind::
 /// NonFiniteInput): arg is the operation's argument (its index in the names the runtime
 /// gives the step), ndim 4, index[0] the element's index and index[1..4] its coordinates' f64
-/// bit patterns, shape all 0. Unused entries are 0.
+/// bit patterns, shape all 0. Assertion (a failed `assert!`, `debug_assert!` or `expect_*`,
+/// warp_core::FaultKind::AssertionFailed): ndim 3, index[0] the source line, index[1] the
+/// column (the host finds the message by both in the `asserts` tables of the kernel and its
+/// callees), index[2] the thread's flat launch index (-1 in a func), shape all 0. Unused
+/// entries are 0.
 struct fault_t {
   i32 kind;
   i32 arg;
@@ -568,7 +573,9 @@ static_assert(sizeof(fault_t) == 88 && alignof(fault_t) == 8, "fault_t layout");
 
 /// Per-thread fault context (32 bytes, align 8):
 ///   0 fault (fault_t*, device memory), 8 fault_flag (u32*, device memory, 0 = no fault yet),
-///   16 raised (i32: set to 1 by `raise` in this thread; starts at 0), 20 kernel (i32: an id
+///   16 raised (i16: set to 1 by `raise` in this thread; starts at 0), 18 flags (i16: the
+///   launch's CTX_* bits, set by the host: CTX_DEBUG, the runtime's debug mode, which
+///   `debug_assert!` reads through `debug_mode`), 20 kernel (i32: an id
 ///   the host gives each loaded kernel, copied into the fault record so that a fault names its
 ///   kernel even when launches of several kernels are in flight, as in a replayed graph),
 ///   24 launch (u64: the launch's number, copied into the fault record likewise).
@@ -578,11 +585,14 @@ static_assert(sizeof(fault_t) == 88 && alignof(fault_t) == 8, "fault_t layout");
 struct ctx_t {
   fault_t* fault;
   u32* fault_flag;
-  i32 raised;
+  i16 raised;
+  i16 flags;
   i32 kernel;
   u64 launch;
 };
 static_assert(sizeof(ctx_t) == 32 && alignof(ctx_t) == 8, "ctx_t layout");
+/// ctx_t::flags: the runtime's debug mode is on for this launch (`debug_assert!` is checked).
+constexpr i16 CTX_DEBUG = 1;
 
 /// The fault context of a host object's build step whose kernel raises faults (40 bytes, in
 /// the step's record): the ctx_t its threads raise with (the runtime fills fault, fault_flag,
@@ -599,6 +609,7 @@ WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
   c.fault = fault;
   c.fault_flag = fault_flag;
   c.raised = 0;
+  c.flags = 0;
   c.kernel = 0;
   c.launch = 0;
   return c;
@@ -639,6 +650,18 @@ WP_FN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* in
 
 /// True once this thread raised a fault.
 WP_FN bool faulted(const ctx_t* ctx) { return ctx->raised != 0; }
+
+/// A failed assertion (`assert!`, `debug_assert!` in debug mode, `expect_*`) at `line` and
+/// `column` of the user's source, in the thread of flat launch index `thread` (-1 in a func).
+/// The thread goes on, as after any fault on a GPU.
+WP_FN void assert_fail(ctx_t* ctx, i64 line, i64 column, i64 thread) {
+  const i64 at[3] = {line, column, thread};
+  raise(ctx, FAULT_ASSERTION, -1, 3, at, nullptr);
+}
+
+/// Whether the launch runs in the runtime's debug mode (the guard of `debug_assert!`): the
+/// same for every thread of a launch, so the branch on it is uniform.
+WP_FN bool debug_mode(const ctx_t* ctx) { return (ctx->flags & CTX_DEBUG) != 0; }
 
 // ------------------------------------------------------------------------------------------
 // Casts: Rust `as`

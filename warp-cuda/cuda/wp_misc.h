@@ -16,6 +16,10 @@
 //   lower_bound(a, value), lower_bound_range(a, lo, hi, value)   1-D arrays of scalars, the
 //                              reads checked (a fault returns 0, as the other accesses' zero
 //                              values).
+//   expect_eq(a, b), expect_neq(a, b)   bool: a == b, !(a == b) (warp-core builtins/expect.rs).
+//   expect_near(a, b, tol)     bool: every lane has (x <= y ? y - x : x - y) <= tol (false for
+//                              NaN), float scalars and vectors. Generated code raises the
+//                              fault of a false one (wp::assert_fail).
 #pragma once
 #include "wp_svd.h"
 #include "wp_transform.h"
@@ -43,6 +47,34 @@ WP_FN i32 block_dim() {
 template <typename T>
 WP_FN T nonzero(T x) {
   return x != (T)0 ? (T)1 : (T)0;
+}
+
+// ----- test expectations: the checks (true when the expectation holds) -----
+template <typename T>
+WP_FN bool expect_eq(const T& a, const T& b) {
+  return a == b;
+}
+template <typename T>
+WP_FN bool expect_neq(const T& a, const T& b) {
+  return !(a == b);
+}
+namespace detail {
+template <typename S>
+WP_FN bool near_lane(S a, S b, S tol) {
+  const S d = a <= b ? b - a : a - b;
+  return d <= tol;
+}
+}  // namespace detail
+template <typename T, typename S>
+WP_FN bool expect_near(const T& a, const T& b, S tol) {
+  if constexpr (vec_traits<T>::is_vec) {
+    for (int k = 0; k < vec_traits<T>::N; ++k) {
+      if (!detail::near_lane(vec_traits<T>::get(a, k), vec_traits<T>::get(b, k), tol)) return false;
+    }
+    return true;
+  } else {
+    return detail::near_lane(a, b, tol);
+  }
 }
 
 // ----- one-vector reductions -----

@@ -265,6 +265,7 @@ fn kernel_impl(
     let callees = &f.callees;
     let consts = const_literals(f);
     let requires = requires.iter().map(|c| c.tokens());
+    let asserts = assert_sites(f, &quote!(__wp));
     let struct_tys = struct_types(f);
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
@@ -401,6 +402,7 @@ fn kernel_impl(
                         cuda_adjoint_error: __wp::first_error(&[#cuda_adjoint_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
                         consts: #consts,
                         requires: &[#(#requires),*],
+                        asserts: #asserts,
                         tile: #tile_info,
                     };
                     fn info() -> &'static __wp::KernelInfo {
@@ -549,6 +551,20 @@ fn cuda_template(f: &crate::ir::Function) -> (Literal, Vec<Literal>, Literal) {
             Literal::string("void"),
         ),
     }
+}
+
+/// The function's assertion sites (`KernelInfo::asserts`, `FuncInfo::asserts`): the line and
+/// column its CUDA code records on a failure, with the message the host reports.
+fn assert_sites(f: &crate::ir::Function, wp: &TokenStream) -> TokenStream {
+    let mut sites = Vec::new();
+    crate::ir::walk_stmts(&f.body, &mut |s| {
+        if let crate::ir::StmtKind::Assert { message, .. } = &s.kind {
+            let (line, column) = (s.span.start().line as u32, s.span.start().column as u32);
+            let message = Literal::string(message);
+            sites.push(quote!(#wp::AssertSite { line: #line, column: #column, message: #message }));
+        }
+    });
+    quote!(&[#(#sites),*])
 }
 
 /// The values of the module-level consts a function reads, as C++ expressions for its
@@ -888,6 +904,7 @@ fn func_instance(
     let callees = &f.callees;
     let consts = const_literals(&f);
     let requires = valid.requires.iter().map(|c| c.tokens());
+    let asserts = assert_sites(&f, &wp);
     let func_info = quote! {
         /// What the CUDA assembler needs to know about this func.
         #[doc(hidden)]
@@ -904,6 +921,7 @@ fn func_instance(
             cuda_adj_error: #wp::first_error(&[#cuda_adj_error #(, #callees::__WP_FUNC.cuda_adj_error)*]),
             consts: #consts,
             requires: &[#(#requires),*],
+            asserts: #asserts,
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs

@@ -161,6 +161,16 @@ pub enum StmtKind {
         pieces: Vec<FmtPiece>,
         newline: bool,
     },
+    /// `assert!(cond)`, `debug_assert!(cond)`, `expect_eq(a, b);` and the other expectations:
+    /// when `cond` (a bool) is false the thread faults (`FaultKind::AssertionFailed`) with
+    /// `message` and the statement's line. A `debug_assert!` is this statement inside
+    /// `if debug { .. }` ([`Op::DebugMode`]), so that its condition is not computed while
+    /// debug mode is off. An adjoint's replay and a tangent kernel drop it (the forward
+    /// launch checked it).
+    Assert {
+        cond: VarId,
+        message: String,
+    },
 }
 
 /// A piece of a print format.
@@ -251,6 +261,9 @@ pub enum Op {
     Tid(u8),
     /// `lane()`: the thread's index in its block (`usize`), in a tiled kernel.
     Lane,
+    /// Whether the runtime's debug mode is on for this launch (`bool`, the same for every
+    /// thread): the guard of a `debug_assert!`.
+    DebugMode,
     /// `tile_map(f, a)`, `tile_map(f, a, b)`: `f` on every element.
     TileMap {
         f: TileFn,
@@ -317,7 +330,7 @@ impl Op {
                 f(*index);
                 f(*bound)
             }
-            Op::Lit(_) | Op::Tid(_) | Op::Lane | Op::Const(_) => {}
+            Op::Lit(_) | Op::Tid(_) | Op::Lane | Op::DebugMode | Op::Const(_) => {}
         }
     }
 }
@@ -351,6 +364,7 @@ impl StmtKind {
                 }
             }
             StmtKind::Return { value: Some(v) } => f(*v),
+            StmtKind::Assert { cond, .. } => f(*cond),
             StmtKind::ExitIf { flags } => flags.iter().for_each(|v| f(*v)),
             StmtKind::Print { pieces, .. } => {
                 for p in pieces {

@@ -215,6 +215,9 @@ pub struct KernelInfo {
     /// macros' validator (`warp_core::capability`; the funcs it calls list theirs): loading it
     /// on a GPU that lacks one is an error naming the kernel and the capability.
     pub requires: &'static [warp_core::Capability],
+    /// Its assertion sites (`assert!`, `debug_assert!`, `expect_*`; its funcs list theirs), by
+    /// which a GPU fault's line and column find the message (`cuda/fault.rs`).
+    pub asserts: &'static [warp_core::AssertSite],
     /// What a tiled kernel (one that uses tiles, launched with
     /// [`launch_tiled`](crate::launch_tiled())) needs of a launch; `None` for an ordinary
     /// kernel.
@@ -288,6 +291,7 @@ impl KernelInfo {
         cuda_adjoint_error: None,
         consts: &[],
         requires: &[],
+        asserts: &[],
         tile: None,
     };
 }

@@ -35,6 +35,7 @@
 //!   variants).
 
 pub mod atomic;
+pub mod expect;
 pub mod geometry;
 pub mod linalg;
 pub mod math;
@@ -49,6 +50,7 @@ pub mod transform;
 pub mod volume;
 
 pub use atomic::*;
+pub use expect::{expect_eq, expect_near, expect_neq, Near};
 pub use geometry::{
     bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,
     bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, closest_point_triangle,

@@ -655,6 +655,22 @@ impl<'a> Emitter<'a> {
                 }
                 self.line(sp, &parts.join(" "));
             }
+            StmtKind::Assert { cond, .. } => {
+                // The record carries the line and column, by which the host finds the message
+                // in the kernel's (or a callee's) `asserts` table, and the thread's flat launch
+                // index (a func does not know it: -1). The thread goes on, as after any fault
+                // on a GPU.
+                let c = self.var(*cond);
+                let (line, column) = (sp.start().line, sp.start().column);
+                let thread = match self.f.kind {
+                    FnKind::Kernel => "__flat",
+                    FnKind::Func => "-1",
+                };
+                self.line(
+                    sp,
+                    &format!("if (!{c}) wp::assert_fail(__ctx, {line}, {column}, {thread});"),
+                );
+            }
         }
         Ok(())
     }
@@ -671,6 +687,7 @@ impl<'a> Emitter<'a> {
         let ty = self.f.ty(dst).clone();
         Ok(match op {
             Op::Lane => "((wp::usize)threadIdx.x)".into(),
+            Op::DebugMode => "wp::debug_mode(__ctx)".into(),
             Op::TileMap { .. } | Op::TileReduce { .. } => {
                 return Err("`tile_map` and `tile_reduce` are tile statements".into())
             }

@@ -154,6 +154,20 @@ impl<'a> RustEmitter<'a> {
                     quote_spanned!(sp=> ::std::print!(#fmt #(, #args)*);)
                 }
             }
+            StmtKind::Assert { cond, message } => {
+                let c = self.var(*cond);
+                let name = self.name_lit();
+                let line = Literal::u32_unsuffixed(sp.start().line as u32);
+                let message = Literal::string(message);
+                // A kernel names the thread by its flat launch index; a func does not know it.
+                let thread = match self.f.kind {
+                    FnKind::Kernel => quote!(::core::option::Option::Some(__flat)),
+                    FnKind::Func => quote!(::core::option::Option::None),
+                };
+                quote_spanned!(sp=> if !#c {
+                    return ::core::result::Result::Err(__wp::Fault::assertion_failed(#name, #line, #message, #thread));
+                })
+            }
         }
     }
 
@@ -325,6 +339,8 @@ impl<'a> RustEmitter<'a> {
             Op::TileMap { f, args } => self.tile_map(*f, args, ty, sp),
             Op::TileReduce { f, arg } => self.tile_reduce(*f, *arg, sp),
             Op::Lane => quote_spanned!(sp=> __lane),
+            // One relaxed load of the runtime's setting (`wp::config::debug`).
+            Op::DebugMode => quote_spanned!(sp=> __wp::debug_mode()),
             Op::Builtin { builtin, args } => {
                 let f = format_ident!("{}", builtin.rust);
                 if builtin.grad == crate::builtins::Grad::Effect && self.replay {

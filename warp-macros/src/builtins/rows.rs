@@ -92,6 +92,10 @@ const CLASSIFY: &[Class] = &[Float, FloatVector, Quaternion, Matrix];
 const VECS: &[Class] = &[FloatVector, IntVector];
 const FVEC: &[Class] = &[FloatVector];
 const NUMBER: &[Class] = &[Number];
+/// `expect_eq`, `expect_neq`: every type with `==` but bool and the tuples.
+const EXPECT: &[Class] = &[Number, FloatVector, IntVector, Quaternion, Matrix];
+/// `expect_near`: float scalars and vectors (the tolerance is a lane's).
+const NEAR: &[Class] = &[Float, FloatVector];
 const VEC_OR_QUAT: &[Class] = &[FloatVector, IntVector, Quaternion];
 const FVEC_OR_QUAT: &[Class] = &[FloatVector, Quaternion];
 const FVEC_OR_MAT: &[Class] = &[FloatVector, Matrix];

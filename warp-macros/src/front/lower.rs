@@ -7,6 +7,7 @@
 //!
 //! - `typing`: the type rules of the operators and the literal rule; literals.
 //! - `statements`: blocks, `let` and its patterns, expression statements, `return`, `print!`.
+//! - `asserts`: `assert!`, `debug_assert!` and the expectations (`expect_eq(a, b);`).
 //! - `control`: `if`, `while`, `for` over ranges, loop bodies, `&&` and `||`.
 //! - `places`: assignment targets, assignment, array indexing, members.
 //! - `expressions`: operators, casts, fields, paths and constants; what is outside the subset.
@@ -26,6 +27,7 @@ use std::collections::HashMap;
 use syn::spanned::Spanned;
 use syn::{Expr, Pat};
 
+mod asserts;
 mod calls;
 mod control;
 mod expressions;

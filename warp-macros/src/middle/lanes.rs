@@ -251,7 +251,7 @@ impl Planner<'_> {
                 self.homes[*var].insert(r);
                 self.lane_set[*var] = true;
             }
-            StmtKind::Print { .. } => self.lane_invariant = false,
+            StmtKind::Print { .. } | StmtKind::Assert { .. } => self.lane_invariant = false,
             StmtKind::Return { .. } => self.lane_returns = true,
             StmtKind::If { then, els, .. } => {
                 self.lane_block(then, r);

@@ -134,6 +134,7 @@ fn carries(op: &Op) -> bool {
         | Op::LitLike(..)
         | Op::Tid(_)
         | Op::Lane
+        | Op::DebugMode
         | Op::TileMap { .. }
         | Op::TileReduce { .. }
         | Op::Extent(..)
@@ -422,6 +423,10 @@ impl Tx {
             | StmtKind::Return { .. }
             | StmtKind::ExitIf { .. }
             | StmtKind::Print { .. } => self.out.push(s.clone()),
+            // Dropped: the tangent kernel runs after (or instead of) the forward launch, which
+            // checks the assertion; a tangent kernel that faulted on it would report the
+            // hidden kernel's name.
+            StmtKind::Assert { .. } => {}
         }
         Ok(())
     }
@@ -479,6 +484,7 @@ impl Tx {
             | Op::LitLike(..)
             | Op::Tid(_)
             | Op::Lane
+            | Op::DebugMode
             | Op::TileMap { .. }
             | Op::TileReduce { .. }
             | Op::Extent(..)

@@ -358,7 +358,7 @@ impl Analysis<'_> {
                         self.set_varying(*var);
                     }
                 }
-                StmtKind::Store { .. } | StmtKind::Print { .. } => {}
+                StmtKind::Store { .. } | StmtKind::Print { .. } | StmtKind::Assert { .. } => {}
                 StmtKind::If { cond, then, els } => {
                     let cause = self.varying[*cond].then_some(s.span);
                     self.nested(then, cause);

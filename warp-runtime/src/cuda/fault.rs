@@ -200,6 +200,16 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
                 rank: ndim as u8,
             }
         }
+        // wp_core.h FAULT_ASSERTION: the line and column (the message is found by them in the
+        // kernel's and its callees' tables), then the flat thread index (-1 in a func).
+        8 => {
+            let (line, column) = (i64_at(8) as u32, i64_at(16) as u32);
+            FaultKind::AssertionFailed {
+                line,
+                message: assert_message(info, line, column),
+                thread: usize::try_from(i64_at(24)).ok(),
+            }
+        }
         _ => FaultKind::BadStep { step: i64_at(8) },
     };
     Fault {
@@ -207,6 +217,37 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
         kind,
         launch,
     }
+}
+
+/// The message of the assertion at `line` and `column` of `info`'s kernel or of a func it
+/// calls (directly or not); a placeholder when no table has it (a fault of a kernel the host
+/// could not name).
+fn assert_message(info: &KernelInfo, line: u32, column: u32) -> &'static str {
+    fn in_funcs(
+        funcs: &[&'static warp_core::FuncInfo],
+        line: u32,
+        column: u32,
+        depth: usize,
+    ) -> Option<&'static str> {
+        // Funcs cannot recurse (a cycle fails to compile), so the walk ends; the bound only
+        // keeps a corrupt record from costing more than a deep call tree.
+        if depth > 64 {
+            return None;
+        }
+        funcs.iter().find_map(|f| {
+            f.asserts
+                .iter()
+                .find(|s| s.line == line && s.column == column)
+                .map(|s| s.message)
+                .or_else(|| in_funcs(f.callees, line, column, depth + 1))
+        })
+    }
+    info.asserts
+        .iter()
+        .find(|s| s.line == line && s.column == column)
+        .map(|s| s.message)
+        .or_else(|| in_funcs(info.callees, line, column, 0))
+        .unwrap_or("assertion failed (its message is not in the kernel's tables)")
 }
 
 static UNKNOWN: KernelInfo = KernelInfo {
@@ -405,6 +446,78 @@ mod tests {
         rec[80..88].copy_from_slice(&launch.to_le_bytes());
         rec[RECORD_BYTES..RECORD_BYTES + 4].copy_from_slice(&1u32.to_le_bytes());
         rec
+    }
+
+    /// A failed assertion's record leads to its message by line and column, in the kernel's
+    /// table or in a func's below it (two on one line told apart by the column); a func's
+    /// names no thread.
+    #[test]
+    fn an_assertion_finds_its_message_in_the_kernel_or_its_funcs() {
+        use warp_core::{AssertSite, FuncInfo};
+        static LEAF: FuncInfo = FuncInfo {
+            name: "leaf",
+            module: "m",
+            file: "src/m.rs",
+            cuda: "",
+            cuda_ret: "void",
+            sections: &[],
+            callees: &[],
+            structs: &[],
+            cuda_adj: "",
+            cuda_adj_error: None,
+            consts: &[],
+            requires: &[],
+            asserts: &[AssertSite {
+                line: 3,
+                column: 4,
+                message: "in the leaf",
+            }],
+        };
+        static MID: FuncInfo = FuncInfo {
+            name: "mid",
+            callees: &[&LEAF],
+            asserts: &[],
+            ..LEAF
+        };
+        static K: KernelInfo = KernelInfo {
+            name: "k_asserts",
+            callees: &[&MID],
+            asserts: &[
+                AssertSite {
+                    line: 10,
+                    column: 4,
+                    message: "first",
+                },
+                AssertSite {
+                    line: 10,
+                    column: 30,
+                    message: "second",
+                },
+            ],
+            ..KernelInfo::BLANK
+        };
+        let id = kernel_id(&K);
+        let at = |line, column, thread| {
+            decode(&record(8, -1, [line, column, thread, 0], 3, id, 5), None)
+        };
+        let want = |line, message, thread| FaultKind::AssertionFailed {
+            line,
+            message,
+            thread,
+        };
+        assert_eq!(at(10, 30, 7).kind, want(10, "second", Some(7)));
+        assert_eq!(at(10, 4, 0).kind, want(10, "first", Some(0)));
+        assert_eq!(at(3, 4, -1).kind, want(3, "in the leaf", None));
+        let lost = at(99, 1, 2);
+        assert_eq!(lost.kernel, "k_asserts");
+        assert!(matches!(
+            lost.kind,
+            FaultKind::AssertionFailed { line: 99, message, .. } if message.contains("not in")
+        ));
+        assert_eq!(
+            at(10, 30, 7).to_string(),
+            "kernel `k_asserts`: second (line 10, thread 7) (launch #5)"
+        );
     }
 
     #[test]

@@ -38,10 +38,16 @@ const LAUNCH_ALONE: i32 = 2;
 struct Ctx {
     fault: u64,
     fault_flag: u64,
-    raised: i32,
+    raised: i16,
+    /// `CTX_DEBUG` (see `wp::ctx_t`).
+    flags: i16,
     kernel: i32,
     launch: u64,
 }
+
+/// `wp::CTX_DEBUG`: the runtime's debug mode is on for this launch, so `debug_assert!` is
+/// checked (read at each enqueue: a graph keeps the setting of its capture).
+const CTX_DEBUG: i16 = 1;
 const _: () = assert!(std::mem::size_of::<Ctx>() == 32, "wp::ctx_t is 32 bytes");
 
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
@@ -137,6 +143,7 @@ impl<K: Kernel> Prepared<K> {
             fault: 0,
             fault_flag: 0,
             raised: 0,
+            flags: 0,
             kernel: kernel.id,
             launch: 0,
         };
@@ -230,6 +237,9 @@ impl<K: Kernel> Prepared<K> {
         (ctx.fault, ctx.fault_flag) =
             fault::with_record(&st.faults, ordinal, id, |r| r.addresses())?;
         ctx.launch = id.0;
+        if config::debug() {
+            ctx.flags |= CTX_DEBUG;
+        }
         st.queue(ordinal, stream, |on| {
             if self.adjoint && !own_alias && st.alone(on) {
                 dims.flags |= LAUNCH_ALONE;
@@ -263,5 +273,21 @@ impl<K: Kernel> Prepared<K> {
             check_state(st)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The launch and context flags are the library's (`wp_core.h`), written there once each.
+    #[test]
+    fn flags_match_the_library() {
+        let core = warp_cuda::library::CORE.text;
+        for decl in [
+            format!("constexpr i32 LAUNCH_FAST = {};", super::LAUNCH_FAST),
+            format!("constexpr i32 LAUNCH_ALONE = {};", super::LAUNCH_ALONE),
+            format!("constexpr i16 CTX_DEBUG = {};", super::CTX_DEBUG),
+        ] {
+            assert!(core.contains(&decl), "wp_core.h lacks `{decl}`");
+        }
     }
 }

@@ -987,11 +987,13 @@ mod tests {
         cuda_adj_error: None,
         consts: &[],
         requires: &[Capability::AtomicMinMaxBits64],
+        asserts: &[],
     };
     static MID: FuncInfo = FuncInfo {
         name: "mid",
         callees: &[&LEAF],
         requires: &[],
+        asserts: &[],
         ..LEAF
     };
 

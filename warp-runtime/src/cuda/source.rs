@@ -266,6 +266,7 @@ mod tests {
         cuda_adj_error: None,
         consts: &[],
         requires: &[],
+        asserts: &[],
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -281,6 +282,7 @@ mod tests {
         cuda_adj_error: None,
         consts: &[],
         requires: &[],
+        asserts: &[],
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -295,6 +297,7 @@ mod tests {
         cuda_adj_error: None,
         consts: &[],
         requires: &[],
+        asserts: &[],
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];

@@ -40,4 +40,10 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "lower_bound": NUMBER, (ArrayOfT, T) -> I32, "misc", Zero;
     "lower_bound_range": NUMBER, (ArrayOfT, I32, I32, T) -> I32, "misc", Zero,
         overload("lower_bound", 4), internal;
+    // Warp's test expectations (warp-core `builtins::expect`): each row is the check, true when
+    // the expectation holds. Written as a statement (`expect_eq(a, b);`, the only way the front
+    // end takes them, `front/lower/asserts.rs`), a false one is a fault naming the line.
+    "expect_eq":  EXPECT,         (T, T) -> BOOL,           "misc", Zero;
+    "expect_neq": EXPECT,         (T, T) -> BOOL,           "misc", Zero;
+    "expect_near": NEAR,          (T, T, ScalarOfT) -> BOOL, "misc", Zero;
 };

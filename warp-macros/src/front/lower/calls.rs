@@ -55,6 +55,9 @@ impl Lowerer {
         let prefix_ok =
             segs.len() == 1 || (segs.len() == 2 && crate::paths::names_facade(&segs[0]));
 
+        if prefix_ok && super::asserts::EXPECTATIONS.contains(&last.as_str()) {
+            return Err(super::asserts::expectation_as_value(span, &last));
+        }
         if prefix_ok && last == "tid" {
             if !c.args.is_empty() {
                 return err(span, "tid() takes no arguments");

@@ -320,6 +320,10 @@ impl Lowerer {
             }
             Expr::Return(r) => self.ret_stmt(r),
             Expr::Macro(m) => self.macro_stmt(&m.mac),
+            _ if super::asserts::expectation_call(e).is_some() => {
+                let (c, name) = super::asserts::expectation_call(e).expect("matched");
+                self.expectation(c, name)
+            }
             _ => {
                 self.expr(e, None)?;
                 Ok(())
@@ -370,11 +374,14 @@ impl Lowerer {
         let newline = match name.as_str() {
             "println" => true,
             "print" => false,
+            "assert" => return self.assert_macro(mac, &name, false),
+            "debug_assert" => return self.assert_macro(mac, &name, true),
             _ => {
                 return err(
                     mac.path.span(),
                     format!(
-                        "macro `{name}!` is not supported in kernels (print! and println! are)"
+                        "macro `{name}!` is not supported in kernels (print!, println!, assert! \
+                         and debug_assert! are)"
                     ),
                 )
             }

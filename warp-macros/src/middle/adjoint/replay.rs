@@ -92,8 +92,8 @@ impl Cx<'_> {
                         sp,
                     ));
                 }
-                // Stores and prints are not redone; declarations are at the top; jumps were
-                // removed (`check`).
+                // Stores, prints and assertions are not redone (the forward launch checked
+                // the assertions); declarations are at the top; jumps were removed (`check`).
                 _ => {}
             }
         }
@@ -108,13 +108,19 @@ impl Cx<'_> {
     }
 }
 
-/// `f` as an adjoint's replay of a func runs it: without stores and prints (they are not
-/// needed to recompute its result, and must not be redone). Atomics are not redone either: the
+/// `f` as an adjoint's replay of a func runs it: without stores, prints and assertions (they
+/// are not needed to recompute its result, and must not be redone: the forward launch checked
+/// the assertions). Atomics are not redone either: the
 /// printers' replay mode writes zero for them, as for [`Value::Zero`].
 pub fn replay_of(f: &Function) -> Function {
     fn strip(b: &Block) -> Block {
         b.iter()
-            .filter(|s| !matches!(s.kind, StmtKind::Store { .. } | StmtKind::Print { .. }))
+            .filter(|s| {
+                !matches!(
+                    s.kind,
+                    StmtKind::Store { .. } | StmtKind::Print { .. } | StmtKind::Assert { .. }
+                )
+            })
             .map(|s| Stmt {
                 span: s.span,
                 kind: match &s.kind {
@@ -227,6 +233,7 @@ fn invariant_vars(f: &Function) -> Vec<bool> {
                         | Op::Construct { .. }
                         | Op::Tid(_)
                         | Op::Lane
+                        | Op::DebugMode
                         | Op::Extent(..)
                         | Op::Len(_)
                 )

@@ -316,6 +316,7 @@ impl Cx<'_> {
             | Op::Unary(UnOp::Not, _)
             | Op::Tid(_)
             | Op::Lane
+            | Op::DebugMode
             | Op::TileMap { .. }
             | Op::TileReduce { .. }
             | Op::Extent(..)
