@@ -22,39 +22,95 @@ use crate::objects::geometry::{self, TriFeature, TriangleClosestPoint};
 use crate::objects::{mesh, MeshView};
 use crate::{KResult, KernelIndex};
 
-/// The adjoints of the point queries with respect to the query point (module docs), each
-/// through the object's own with the result's tuple as the struct.
-macro_rules! point_query_adjoints {
-    ($($name:ident: $query:literal;)*) => {$(
-        #[doc = concat!("Adjoint of `", $query, "` with respect to the query point (module docs).")]
-        #[inline]
-        pub fn $name(
-            m: MeshView,
-            point: Vec3,
-            max_dist: f32,
-            adj_mesh: &mut MeshView,
-            adj_point: &mut Vec3,
-            adj_max_dist: &mut f32,
-            adj_ret: PointResult,
-        ) -> KResult<()> {
-            mesh::$name(
-                m,
-                point,
-                max_dist,
-                adj_mesh,
-                adj_point,
-                adj_max_dist,
-                point_struct(adj_ret),
-            )
-        }
-    )*};
+// One function written out per builtin (not made by a macro): `tests/architecture.rs` finds
+// each builtin's adjoint here by name.
+
+/// Adjoint of `mesh_query_point` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
 }
 
-point_query_adjoints! {
-    adj_mesh_query_point: "mesh_query_point";
-    adj_mesh_query_point_no_sign: "mesh_query_point_no_sign";
-    adj_mesh_query_point_sign_normal: "mesh_query_point_sign_normal";
-    adj_mesh_query_point_sign_parity: "mesh_query_point_sign_parity";
+/// Adjoint of `mesh_query_point_no_sign` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point_no_sign(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point_no_sign(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
+}
+
+/// Adjoint of `mesh_query_point_sign_normal` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point_sign_normal(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point_sign_normal(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
+}
+
+/// Adjoint of `mesh_query_point_sign_parity` with respect to the query point (module docs).
+#[inline]
+pub fn adj_mesh_query_point_sign_parity(
+    m: MeshView,
+    point: Vec3,
+    max_dist: f32,
+    adj_mesh: &mut MeshView,
+    adj_point: &mut Vec3,
+    adj_max_dist: &mut f32,
+    adj_ret: PointResult,
+) -> KResult<()> {
+    mesh::adj_mesh_query_point_sign_parity(
+        m,
+        point,
+        max_dist,
+        adj_mesh,
+        adj_point,
+        adj_max_dist,
+        point_struct(adj_ret),
+    )
 }
 
 /// Adjoint of `mesh_eval_position` with respect to `u` and `v`.
