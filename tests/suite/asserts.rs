@@ -78,14 +78,15 @@ fn k_message(a: Array<i32, 2>, limit: i32) {
 fn assert_with_message(dev: &wp::Device) {
     let a = wp::Array::<i32, 2>::from_slice_shape(&[0, 1, 2, 3, 4, 5], (2, 3), dev).unwrap();
     wp::launch(k_message, (2, 3), (&a, 6), dev).unwrap();
-    // Element (1, 1) fails the second assertion: flat thread index 1 * 3 + 1.
-    let f = fault_of(wp::launch(k_message, (2, 3), (&a, 4), dev));
+    // Only element (1, 2) fails the second assertion (so the fault is its own whatever the
+    // threads' order): flat thread index 1 * 3 + 2.
+    let f = fault_of(wp::launch(k_message, (2, 3), (&a, 5), dev));
     assert_eq!(
         f.kind,
         FaultKind::AssertionFailed {
             line: K_MESSAGE_LINE,
             message: "past the limit",
-            thread: Some(4),
+            thread: Some(5),
         }
     );
     let a = wp::Array::<i32, 2>::from_slice_shape(&[0, 1, 2, 3, 4, -5], (2, 3), dev).unwrap();

@@ -579,8 +579,10 @@ static_assert(sizeof(fault_t) == 88 && alignof(fault_t) == 8, "fault_t layout");
 ///   the host gives each loaded kernel, copied into the fault record so that a fault names its
 ///   kernel even when launches of several kernels are in flight, as in a replayed graph),
 ///   24 launch (u64: the launch's number, copied into the fault record likewise).
-/// A kernel builds one per thread (`ctx_make(fault, flag)`) and passes its address down; after
-/// any call that may fault, generated code checks `ctx->raised` and returns (the CPU's `?`).
+/// A kernel builds one per thread (`ctx_make(fault, flag)`) and passes its address down. A
+/// faulting call returns a harmless value and the thread goes on (unlike the CPU's `?`, which
+/// stops it); library code checks `faulted(ctx)` where going on would be unsafe, and a failed
+/// assertion in a kernel ends its thread.
 /// `fault` and `fault_flag` may be null: faults then only set `raised`.
 struct ctx_t {
   fault_t* fault;

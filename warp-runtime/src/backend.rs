@@ -268,7 +268,8 @@ impl StepFault {
     // Called by the CUDA backend alone.
     #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
     pub(crate) fn fill(&mut self, fault: u64, flag: u64, kernel: i32, launch: u64) {
-        // ctx_t: 0 fault, 8 fault_flag, 16 raised (i32, 0) and 20 kernel (i32), 24 launch.
+        // ctx_t: 0 fault, 8 fault_flag, 16 raised (i16, 0), 18 flags (i16, 0), 20 kernel
+        // (i32), 24 launch.
         self.ctx = [fault, flag, ((kernel as u32 as u64) << 32), launch];
     }
 }

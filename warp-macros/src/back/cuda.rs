@@ -658,17 +658,23 @@ impl<'a> Emitter<'a> {
             StmtKind::Assert { cond, .. } => {
                 // The record carries the line and column, by which the host finds the message
                 // in the kernel's (or a callee's) `asserts` table, and the thread's flat launch
-                // index (a func does not know it: -1). The thread goes on, as after any fault
-                // on a GPU.
+                // index (a func does not know it: -1). A kernel's thread then ends, as the CPU's
+                // stops at the fault: code after an assertion used as a guard (a loop that
+                // ends only for finite values) does not run. (`return` ends this flat index
+                // only: the grid-stride loop is the entry's.) A tiled kernel's lanes go on,
+                // since its barriers need every lane, and so does a func's caller.
                 let c = self.var(*cond);
                 let (line, column) = (sp.start().line, sp.start().column);
-                let thread = match self.f.kind {
-                    FnKind::Kernel => "__flat",
-                    FnKind::Func => "-1",
+                let (thread, end) = match self.f.kind {
+                    FnKind::Kernel if self.f.tiled.is_none() => ("__flat", " return;"),
+                    FnKind::Kernel => ("__flat", ""),
+                    FnKind::Func => ("-1", ""),
                 };
                 self.line(
                     sp,
-                    &format!("if (!{c}) wp::assert_fail(__ctx, {line}, {column}, {thread});"),
+                    &format!(
+                        "if (!{c}) {{ wp::assert_fail(__ctx, {line}, {column}, {thread});{end} }}"
+                    ),
                 );
             }
         }

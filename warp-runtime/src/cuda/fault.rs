@@ -204,10 +204,11 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
         // kernel's and its callees' tables), then the flat thread index (-1 in a func).
         8 => {
             let (line, column) = (i64_at(8) as u32, i64_at(16) as u32);
+            let thread = usize::try_from(i64_at(24)).ok();
             FaultKind::AssertionFailed {
                 line,
-                message: assert_message(info, line, column),
-                thread: usize::try_from(i64_at(24)).ok(),
+                message: assert_message(info, line, column, thread.is_none()),
+                thread,
             }
         }
         _ => FaultKind::BadStep { step: i64_at(8) },
@@ -219,10 +220,13 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
     }
 }
 
-/// The message of the assertion at `line` and `column` of `info`'s kernel or of a func it
-/// calls (directly or not); a placeholder when no table has it (a fault of a kernel the host
-/// could not name).
-fn assert_message(info: &KernelInfo, line: u32, column: u32) -> &'static str {
+/// The message of the assertion at `line` and `column` of `info`'s kernel (`in_func` false:
+/// the record has the thread index, which only a kernel's own assertions know) or of a func it
+/// calls, directly or not (`in_func`); a placeholder when no table has it (a fault of a kernel
+/// the host could not name). Sites are told apart by line and column only: two in one func
+/// tree at the same position (a `macro_rules!` expanding to several asserts, funcs of
+/// different files) give the first one's message.
+fn assert_message(info: &KernelInfo, line: u32, column: u32, in_func: bool) -> &'static str {
     fn in_funcs(
         funcs: &[&'static warp_core::FuncInfo],
         line: u32,
@@ -242,12 +246,15 @@ fn assert_message(info: &KernelInfo, line: u32, column: u32) -> &'static str {
                 .or_else(|| in_funcs(f.callees, line, column, depth + 1))
         })
     }
-    info.asserts
-        .iter()
-        .find(|s| s.line == line && s.column == column)
-        .map(|s| s.message)
-        .or_else(|| in_funcs(info.callees, line, column, 0))
-        .unwrap_or("assertion failed (its message is not in the kernel's tables)")
+    let found = match in_func {
+        false => info
+            .asserts
+            .iter()
+            .find(|s| s.line == line && s.column == column)
+            .map(|s| s.message),
+        true => in_funcs(info.callees, line, column, 0),
+    };
+    found.unwrap_or("assertion failed (its message is not in the kernel's tables)")
 }
 
 static UNKNOWN: KernelInfo = KernelInfo {

@@ -49,6 +49,14 @@ struct Ctx {
 /// checked (read at each enqueue: a graph keeps the setting of its capture).
 const CTX_DEBUG: i16 = 1;
 const _: () = assert!(std::mem::size_of::<Ctx>() == 32, "wp::ctx_t is 32 bytes");
+// The offsets `wp::ctx_t` declares (and `StepFault::fill` writes).
+const _: () = assert!(
+    std::mem::offset_of!(Ctx, raised) == 16
+        && std::mem::offset_of!(Ctx, flags) == 18
+        && std::mem::offset_of!(Ctx, kernel) == 20
+        && std::mem::offset_of!(Ctx, launch) == 24,
+    "wp::ctx_t's field offsets"
+);
 
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
 /// thread's current stream for the GPU (`ScopedStream`), else on the default stream.
