@@ -1,5 +1,5 @@
-//! Assertions in kernels: `assert!` (always checked), `debug_assert!` (checked in debug mode,
-//! `wp::config::set_debug`), and Warp's expectations `expect_eq`, `expect_neq`, `expect_near`.
+//! Assertions in kernels: `assert!`, `assert_eq!`, `assert_ne!` (always checked), their
+//! `debug_` forms (checked in debug mode, `wp::config::set_debug`), and Warp's expectations `expect_eq`, `expect_neq`, `expect_near`.
 //! A failed one is a fault naming the kernel, the line, the message and the thread; backward
 //! does not check them again.
 
@@ -17,6 +17,7 @@ backend_tests!(
     expectations_fail,
     backward_does_not_check_again,
     tangent_kernel_does_not_check,
+    assert_eq_and_ne,
 );
 
 /// The fault of a failed launch (without its launch number), or a panic naming what came
@@ -302,4 +303,43 @@ fn tangent_kernel_does_not_check(dev: &wp::Device) {
     ));
     wp::jvp(k_square_positive, 2, (&x, &y), (&v, &y_dot), dev).unwrap();
     assert_eq!(y_dot.to_vec().unwrap(), vec![-6.0, -4.0]);
+}
+
+/// The lines of `k_cmp`'s three assertions.
+const K_CMP_LINE: u32 = line!() + 4;
+#[wp::kernel]
+fn k_cmp(n: Array<i32>, v: Array<Vec3>, same: Array<Vec3>) {
+    let i = tid();
+    assert_eq!(v[i], same[i]);
+    assert_ne!(n[i], 0, "n is zero");
+    debug_assert_eq!(n[i] * 2, n[i] + n[i]);
+}
+
+/// `assert_eq!`/`assert_ne!` compare as `expect_eq`/`expect_neq` (vectors componentwise) and
+/// fail with Rust's message, the operands as written (or the message given).
+fn assert_eq_and_ne(dev: &wp::Device) {
+    let v = arr(&[Vec3::ONE, Vec3::new(1.0, 2.0, 3.0)], dev);
+    let n = arr(&[1i32, 2], dev);
+    wp::launch(k_cmp, 2, (&n, &v, &v), dev).unwrap();
+    // Only thread 1's vectors differ (in one component).
+    let other = arr(&[Vec3::ONE, Vec3::new(1.0, 2.0, 3.5)], dev);
+    let f = fault_of(wp::launch(k_cmp, 2, (&n, &v, &other), dev));
+    assert_eq!(
+        f.kind,
+        FaultKind::AssertionFailed {
+            line: K_CMP_LINE,
+            message: "assertion `left == right` failed: v[i] == same[i]",
+            thread: Some(1),
+        }
+    );
+    let zero = arr(&[3i32, 0], dev);
+    let f = fault_of(wp::launch(k_cmp, 2, (&zero, &v, &v), dev));
+    assert_eq!(
+        f.kind,
+        FaultKind::AssertionFailed {
+            line: K_CMP_LINE + 1,
+            message: "n is zero",
+            thread: Some(1),
+        }
+    );
 }

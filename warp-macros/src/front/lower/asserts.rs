@@ -162,6 +162,74 @@ impl Lowerer {
         Ok(())
     }
 
+    /// `assert_eq!(a, b)` and `assert_ne!(a, b)`, each with an optional message literal, and
+    /// their `debug_` forms (`name`): the check of `expect_eq`/`expect_neq` (numbers, vectors,
+    /// quaternions, matrices; the same types on both sides), with Rust's message
+    /// (``assertion `left == right` failed: a == b``, the operands as written: a GPU fault
+    /// record cannot carry their values).
+    pub(super) fn assert_cmp_macro(&mut self, mac: &syn::Macro, name: &str) -> R<()> {
+        let span = mac.span();
+        let (debug, eq) = (name.starts_with("debug_"), name.ends_with("_eq"));
+        let args: syn::punctuated::Punctuated<Expr, syn::Token![,]> =
+            mac.parse_body_with(syn::punctuated::Punctuated::parse_terminated)?;
+        let items: Vec<&Expr> = args.iter().collect();
+        if items.len() < 2 {
+            return err(span, format!("{name}! needs two values: `{name}!(a, b)`"));
+        }
+        let op = if eq { "==" } else { "!=" };
+        let message = match items.get(2) {
+            None => format!(
+                "assertion `left {op} right` failed: {} {op} {}",
+                source_text(items[0]),
+                source_text(items[1])
+            ),
+            Some(Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Str(s),
+                ..
+            })) => plain_message(s)?,
+            Some(other) => {
+                return err(
+                    other.span(),
+                    format!(
+                        "the message of {name}! in a kernel is a string literal: \
+                         `{name}!(a, b, \"message\")`"
+                    ),
+                )
+            }
+        };
+        if let Some(extra) = items.get(3) {
+            return err(
+                extra.span(),
+                format!(
+                    "format arguments are not supported in a kernel's {name}!: the message is \
+                     a plain string literal"
+                ),
+            );
+        }
+        let check = builtins::lookup(if eq { "expect_eq" } else { "expect_neq" })
+            .expect("an expectation has a row");
+        let operands = [items[0], items[1]];
+        let compare = move |cx: &mut Self| -> R<()> {
+            let ok = cx.builtin_call(check, &operands, None, span)?;
+            cx.push(StmtKind::Assert { cond: ok, message }, span);
+            Ok(())
+        };
+        if !debug {
+            return compare(self);
+        }
+        let on = self.def(Op::DebugMode, BOOL, span);
+        let (then, ()) = self.in_block(compare)?;
+        self.push(
+            StmtKind::If {
+                cond: on,
+                then,
+                els: Vec::new(),
+            },
+            span,
+        );
+        Ok(())
+    }
+
     /// The condition's statements and the assertion on it.
     fn assertion(&mut self, cond: &Expr, message: String, span: Span) -> R<()> {
         let c = self.expr(cond, Some(&BOOL))?;

@@ -376,12 +376,15 @@ impl Lowerer {
             "print" => false,
             "assert" => return self.assert_macro(mac, &name, false),
             "debug_assert" => return self.assert_macro(mac, &name, true),
+            "assert_eq" | "assert_ne" | "debug_assert_eq" | "debug_assert_ne" => {
+                return self.assert_cmp_macro(mac, &name)
+            }
             _ => {
                 return err(
                     mac.path.span(),
                     format!(
-                        "macro `{name}!` is not supported in kernels (print!, println!, assert! \
-                         and debug_assert! are)"
+                        "macro `{name}!` is not supported in kernels (print!, println!, \
+                         assert!, assert_eq!, assert_ne! and their debug_ forms are)"
                     ),
                 )
             }
