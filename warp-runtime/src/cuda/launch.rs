@@ -74,8 +74,8 @@ pub(crate) fn launch<K: Kernel>(
 ) -> Result<()> {
     let (prepared, params, grads) =
         Prepared::<K>::with_params(args, grid, device, ordinal, adjoint)?;
-    let own_alias = K::Params::grads_alias(args, K::info().tid_indexed);
-    prepared.enqueue_converted(params, grads, own_alias, device, stream, id)
+    let plain_own = prepared.plain_own(args);
+    prepared.enqueue_converted(params, grads, plain_own, device, stream, id)
 }
 
 type CudaParamsOf<K> = <<K as Kernel>::Params as KernelParams>::CudaParams;
@@ -222,18 +222,23 @@ impl<K: Kernel> Prepared<K> {
             true => Some(K::Params::cuda_grads(args, info, device)?),
             false => None,
         };
-        let own_alias = K::Params::grads_alias(args, info.tid_indexed);
-        self.enqueue_converted(params, grads, own_alias, device, stream, id)
+        self.enqueue_converted(params, grads, self.plain_own(args), device, stream, id)
     }
 
-    /// Queues the launch with arguments already converted. `own_alias`: a thread-owned
-    /// argument's gradient is shared with another argument (`grads_alias`), so its adds stay
-    /// atomic even when the launch runs alone.
+    /// Whether an adjoint launch with `args` may add its thread-owned gradients plainly when it
+    /// runs alone: not when another argument views one of their gradients differently
+    /// (`grads_alias`). False for a forward launch, which adds no gradients (and so pays
+    /// nothing for the check).
+    fn plain_own(&self, args: &ArgsOf<'_, K>) -> bool {
+        self.adjoint && !K::Params::grads_alias(args, K::info().tid_indexed)
+    }
+
+    /// Queues the launch with arguments already converted. `plain_own`: [`Self::plain_own`].
     fn enqueue_converted(
         &self,
         mut params: CudaParamsOf<K>,
         mut grads: Option<CudaGradsOf<K>>,
-        own_alias: bool,
+        plain_own: bool,
         device: &Device,
         stream: Option<&warp_cuda::Stream>,
         id: LaunchId,
@@ -249,7 +254,7 @@ impl<K: Kernel> Prepared<K> {
             ctx.flags |= CTX_DEBUG;
         }
         st.queue(ordinal, stream, |on| {
-            if self.adjoint && !own_alias && st.alone(on) {
+            if plain_own && st.alone(on) {
                 dims.flags |= LAUNCH_ALONE;
             }
             // The launch and the context, then the parameters and (adjoint) their gradients.

@@ -109,95 +109,62 @@ fn plain_message(lit: &syn::LitStr) -> R<String> {
 }
 
 impl Lowerer {
-    /// `assert!(cond)`, `assert!(cond, "message")`; `debug_assert!` when `debug`.
-    pub(super) fn assert_macro(&mut self, mac: &syn::Macro, name: &str, debug: bool) -> R<()> {
-        let span = mac.span();
-        let args: syn::punctuated::Punctuated<Expr, syn::Token![,]> =
-            mac.parse_body_with(syn::punctuated::Punctuated::parse_terminated)?;
-        let mut it = args.iter();
-        let Some(cond) = it.next() else {
-            return err(
-                span,
-                format!("{name}! needs a condition: `{name}!(x > 0.0)`"),
-            );
-        };
-        let message = match it.next() {
-            None => format!("assertion failed: {}", source_text(cond)),
-            Some(Expr::Lit(syn::ExprLit {
-                lit: syn::Lit::Str(s),
-                ..
-            })) => plain_message(s)?,
-            Some(other) => {
-                return err(
-                    other.span(),
-                    format!(
-                        "the message of {name}! in a kernel is a string literal: \
-                         `{name}!(cond, \"message\")`"
-                    ),
-                )
-            }
-        };
-        if let Some(extra) = it.next() {
-            return err(
-                extra.span(),
-                format!(
-                    "format arguments are not supported in a kernel's {name}!: the message is \
-                     a plain string literal"
-                ),
-            );
-        }
-        if !debug {
-            return self.assertion(cond, message, span);
-        }
-        let on = self.def(Op::DebugMode, BOOL, span);
-        let (then, ()) = self.in_block(|cx| cx.assertion(cond, message, span))?;
-        self.push(
-            StmtKind::If {
-                cond: on,
-                then,
-                els: Vec::new(),
-            },
-            span,
-        );
-        Ok(())
-    }
-
-    /// `assert_eq!(a, b)` and `assert_ne!(a, b)`, each with an optional message literal, and
-    /// their `debug_` forms (`name`): the check of `expect_eq`/`expect_neq` (numbers, vectors,
-    /// quaternions, matrices; the same types on both sides), with Rust's message
+    /// `assert!(cond)`, `assert_eq!(a, b)` and `assert_ne!(a, b)`, each with an optional
+    /// message literal, and their `debug_` forms (`name`), checked only in debug mode. The
+    /// comparisons are the checks of `expect_eq`/`expect_neq` (numbers, vectors, quaternions,
+    /// matrices; the same type on both sides), with Rust's message
     /// (``assertion `left == right` failed: a == b``, the operands as written: a GPU fault
     /// record cannot carry their values).
-    pub(super) fn assert_cmp_macro(&mut self, mac: &syn::Macro, name: &str) -> R<()> {
+    pub(super) fn assert_macro(&mut self, mac: &syn::Macro, name: &str) -> R<()> {
         let span = mac.span();
-        let (debug, eq) = (name.starts_with("debug_"), name.ends_with("_eq"));
-        let args: syn::punctuated::Punctuated<Expr, syn::Token![,]> =
+        let debug = name.starts_with("debug_");
+        // The comparison's operator and expectation, or `None` for `assert!`.
+        let cmp = match name.trim_start_matches("debug_") {
+            "assert_eq" => Some(("==", "expect_eq")),
+            "assert_ne" => Some(("!=", "expect_neq")),
+            _ => None,
+        };
+        let parsed: syn::punctuated::Punctuated<Expr, syn::Token![,]> =
             mac.parse_body_with(syn::punctuated::Punctuated::parse_terminated)?;
-        let items: Vec<&Expr> = args.iter().collect();
-        if items.len() < 2 {
-            return err(span, format!("{name}! needs two values: `{name}!(a, b)`"));
+        let args: Vec<&Expr> = parsed.iter().collect();
+        let (values, usage) = match cmp {
+            None => (1, "cond"),
+            Some(_) => (2, "a, b"),
+        };
+        if args.len() < values {
+            return err(
+                span,
+                match cmp {
+                    None => format!("{name}! needs a condition: `{name}!(x > 0.0)`"),
+                    Some(_) => format!("{name}! needs two values: `{name}!(a, b)`"),
+                },
+            );
         }
-        let op = if eq { "==" } else { "!=" };
-        let message = match items.get(2) {
-            None => format!(
+        let message = match (args.get(values), cmp) {
+            (None, None) => format!("assertion failed: {}", source_text(args[0])),
+            (None, Some((op, _))) => format!(
                 "assertion `left {op} right` failed: {} {op} {}",
-                source_text(items[0]),
-                source_text(items[1])
+                source_text(args[0]),
+                source_text(args[1])
             ),
-            Some(Expr::Lit(syn::ExprLit {
-                lit: syn::Lit::Str(s),
-                ..
-            })) => plain_message(s)?,
-            Some(other) => {
+            (
+                Some(Expr::Lit(syn::ExprLit {
+                    lit: syn::Lit::Str(s),
+                    ..
+                })),
+                _,
+            ) => plain_message(s)?,
+            (Some(other), _) => {
                 return err(
                     other.span(),
                     format!(
                         "the message of {name}! in a kernel is a string literal: \
-                         `{name}!(a, b, \"message\")`"
+                         `{name}!({usage}, \"message\")`"
                     ),
                 )
             }
         };
-        if let Some(extra) = items.get(3) {
+        if let Some(extra) = args.get(values + 1) {
             return err(
                 extra.span(),
                 format!(
@@ -206,19 +173,15 @@ impl Lowerer {
                 ),
             );
         }
-        let check = builtins::lookup(if eq { "expect_eq" } else { "expect_neq" })
-            .expect("an expectation has a row");
-        let operands = [items[0], items[1]];
-        let compare = move |cx: &mut Self| -> R<()> {
-            let ok = cx.builtin_call(check, &operands, None, span)?;
-            cx.push(StmtKind::Assert { cond: ok, message }, span);
-            Ok(())
+        let check = move |cx: &mut Self| match cmp {
+            None => cx.assertion(args[0], message, span),
+            Some((_, expectation)) => cx.expected(expectation, &args[..2], message, span),
         };
         if !debug {
-            return compare(self);
+            return check(self);
         }
         let on = self.def(Op::DebugMode, BOOL, span);
-        let (then, ()) = self.in_block(compare)?;
+        let (then, ()) = self.in_block(check)?;
         self.push(
             StmtKind::If {
                 cond: on,
@@ -249,11 +212,15 @@ impl Lowerer {
     /// `expect_eq(a, b);` and the other expectations (`name`), as statements: the row's check,
     /// then the assertion on it, whose message is the call as written.
     pub(super) fn expectation(&mut self, c: &syn::ExprCall, name: &str) -> R<()> {
-        let b = builtins::lookup(name).expect("an expectation has a row");
         let args: Vec<&Expr> = c.args.iter().collect();
-        let span = c.span();
-        let ok = self.builtin_call(b, &args, None, span)?;
         let message = format!("expectation failed: {}", source_text(c));
+        self.expected(name, &args, message, c.span())
+    }
+
+    /// Expectation `name`'s check of `args` and the assertion on it with `message`.
+    fn expected(&mut self, name: &str, args: &[&Expr], message: String, span: Span) -> R<()> {
+        let b = builtins::lookup(name).expect("an expectation has a row");
+        let ok = self.builtin_call(b, args, None, span)?;
         self.push(StmtKind::Assert { cond: ok, message }, span);
         Ok(())
     }

@@ -374,11 +374,8 @@ impl Lowerer {
         let newline = match name.as_str() {
             "println" => true,
             "print" => false,
-            "assert" => return self.assert_macro(mac, &name, false),
-            "debug_assert" => return self.assert_macro(mac, &name, true),
-            "assert_eq" | "assert_ne" | "debug_assert_eq" | "debug_assert_ne" => {
-                return self.assert_cmp_macro(mac, &name)
-            }
+            "assert" | "debug_assert" | "assert_eq" | "assert_ne" | "debug_assert_eq"
+            | "debug_assert_ne" => return self.assert_macro(mac, &name),
             _ => {
                 return err(
                     mac.path.span(),
