@@ -243,6 +243,10 @@ struct Cli {
     /// graph, one frame recorded once and replayed: printed beside the uncaptured run
     #[arg(long)]
     graph: bool,
+    /// With `--preset warp`: also time NVIDIA Warp's own example_dem on the same device, in
+    /// this run (`python3 benches/py/warp_dem.py`, with Warp importable), and print the ratio
+    #[arg(long)]
+    compare_warp: bool,
     #[command(flatten)]
     scene: common::SceneArgs,
 }
@@ -252,7 +256,8 @@ fn main() -> wp::Result<()> {
     let dev = cli.scene.init()?;
     let gpu = dev.to_string() != "cpu";
     if cli.preset.as_deref() == Some("warp") {
-        return warp_preset(&dev, cli.frames.unwrap_or(100), &cli.scene, cli.graph);
+        let frames = cli.frames.unwrap_or(100);
+        return warp_preset(&dev, frames, &cli.scene, cli.graph, cli.compare_warp);
     }
     println!("DEM on \"{dev}\": linear spring-dashpot contacts, cohesion, Coulomb friction");
     restitution(&dev)?;
@@ -774,6 +779,7 @@ fn warp_preset(
     frames: usize,
     args: &common::SceneArgs,
     graph: bool,
+    compare_warp: bool,
 ) -> wp::Result<()> {
     let m = Material {
         radius: 0.1,
@@ -868,8 +874,8 @@ fn warp_preset(
         let finite = x.iter().all(|p| p.is_finite());
         println!(
             "Warp's example_dem configuration on \"{dev}\"{}: {} particles, {frames} frames of \
-             {substeps} substeps: {ms:.2} ms per frame (Warp 1.19, H100, graph-captured: 13.0 \
-             ms); max overlap / radius {:.3}, all finite: {finite}",
+             {substeps} substeps: {ms:.2} ms per frame; max overlap / radius {:.3}, all \
+             finite: {finite}",
             if captured { ", graph-captured" } else { "" },
             x0.len(),
             max_overlap(&x, m.radius) / m.radius as f64
@@ -880,6 +886,62 @@ fn warp_preset(
     if let [(ms, x), (ms_graph, x_graph)] = &results[..] {
         print_graph_line("Warp's configuration", *ms, *ms_graph, x, x_graph);
     }
+    if compare_warp {
+        // Our best mode against Warp's (which replays a captured graph).
+        let ours = results.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+        match warp_side(frames) {
+            Ok((warp_ms, n, finite)) => println!(
+                "NVIDIA Warp's example_dem on this device, same run: {warp_ms:.2} ms per frame \
+                 ({n} particles, all finite: {finite}); ours / Warp: {:.2}",
+                ours / warp_ms
+            ),
+            Err(why) => println!("NVIDIA Warp's example_dem not timed: {why}"),
+        }
+    } else {
+        println!(
+            "(Warp 1.19's own figure for this configuration, H100, graph-captured: 13.0 ms per \
+             frame; `--compare-warp` times Warp here)"
+        );
+    }
     common::print_compiled();
     Ok(())
+}
+
+/// Runs benches/py/warp_dem.py for `frames` frames: Warp's ms per frame, its particle count
+/// and whether its particles stayed finite; or why it could not run.
+fn warp_side(frames: usize) -> Result<(f64, usize, bool), String> {
+    // From the repository root, from examples/, or where this example was built.
+    let script = [
+        "benches/py/warp_dem.py",
+        "../benches/py/warp_dem.py",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../benches/py/warp_dem.py"),
+    ]
+    .into_iter()
+    .find(|p| std::path::Path::new(p).exists())
+    .ok_or("benches/py/warp_dem.py not found")?;
+    let out = std::process::Command::new("python3")
+        .arg(script)
+        .arg(frames.to_string())
+        .output()
+        .map_err(|e| format!("python3: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(err.lines().last().unwrap_or("failed").to_string());
+    }
+    // `warp_dem_ms_per_frame <ms> particles <n> finite <0|1>`
+    let words: Vec<&str> = text
+        .lines()
+        .last()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    match words[..] {
+        ["warp_dem_ms_per_frame", ms, "particles", n, "finite", f] => Ok((
+            ms.parse().map_err(|_| format!("bad time {ms}"))?,
+            n.parse().map_err(|_| format!("bad count {n}"))?,
+            f == "1",
+        )),
+        _ => Err(format!("unexpected output: {text}")),
+    }
 }
