@@ -430,14 +430,13 @@ WP_FN void grad_add_p(T* p, const T& v) {
 template <typename T, int N>
 WP_FN void grad_accum_idx(const array_t<T, N>& g, const i64* idx, const T& v, ctx_t* ctx) {
   if (g.data == nullptr) return;
-  T* p = elem_ptr_idx(g, idx, ctx);
-  if (p != nullptr) grad_add_p(p, v);
+  if (check_idx(g, idx, ctx)) grad_add_p(elem_ptr_unchecked_idx(g, idx), v);
 }
 template <typename T, int N>
 WP_FN T grad_take_idx(const array_t<T, N>& g, const i64* idx, const T& zero, ctx_t* ctx) {
   if (g.data == nullptr) return zero;
-  T* p = elem_ptr_idx(g, idx, ctx);
-  if (p == nullptr) return T{};
+  if (!check_idx(g, idx, ctx)) return T{};
+  T* p = elem_ptr_unchecked_idx(g, idx);
   const T r = *p;
   *p = zero;
   return r;

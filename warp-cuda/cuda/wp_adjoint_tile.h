@@ -99,9 +99,8 @@ WP_FN f64 exchange(f64* p, const f64& zero) {
 template <typename T, int N>
 WP_FN T grad_take_lanes_idx(const array_t<T, N>& g, const i64* idx, const T& zero, ctx_t* ctx) {
   if (g.data == nullptr) return zero;
-  T* p = detail::elem_ptr_idx(g, idx, ctx);
-  if (p == nullptr) return T{};
-  return exchange(p, zero);
+  if (!detail::check_idx(g, idx, ctx)) return T{};
+  return exchange(detail::elem_ptr_unchecked_idx(g, idx), zero);
 }
 }  // namespace tile_detail
 

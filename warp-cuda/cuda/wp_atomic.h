@@ -248,23 +248,23 @@ WP_VEC_ATOMICS(DVec4, f64)
 #define WP_ATOMIC_BUILTIN(OP)                                                                  \
   template <typename T>                                                                        \
   WP_FN T atomic_##OP(const array_t<T, 1>& a, i64 i0, typename identity<T>::type v, ctx_t* ctx) {                       \
-    T* p = elem_ptr(a, i0, ctx);                                                               \
-    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+    const i64 idx[] = {i0};                                                               \
+    return detail::check_idx(a, idx, ctx) ? detail::atomic_##OP##_p(detail::elem_ptr_unchecked_idx(a, idx), v) : T{}; \
   }                                                                                            \
   template <typename T>                                                                        \
   WP_FN T atomic_##OP(const array_t<T, 2>& a, i64 i0, i64 i1, typename identity<T>::type v, ctx_t* ctx) {               \
-    T* p = elem_ptr(a, i0, i1, ctx);                                                           \
-    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+    const i64 idx[] = {i0, i1};                                                           \
+    return detail::check_idx(a, idx, ctx) ? detail::atomic_##OP##_p(detail::elem_ptr_unchecked_idx(a, idx), v) : T{}; \
   }                                                                                            \
   template <typename T>                                                                        \
   WP_FN T atomic_##OP(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, typename identity<T>::type v, ctx_t* ctx) {       \
-    T* p = elem_ptr(a, i0, i1, i2, ctx);                                                       \
-    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+    const i64 idx[] = {i0, i1, i2};                                                       \
+    return detail::check_idx(a, idx, ctx) ? detail::atomic_##OP##_p(detail::elem_ptr_unchecked_idx(a, idx), v) : T{}; \
   }                                                                                            \
   template <typename T>                                                                        \
   WP_FN T atomic_##OP(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3, typename identity<T>::type v, ctx_t* ctx) { \
-    T* p = elem_ptr(a, i0, i1, i2, i3, ctx);                                                   \
-    return p == nullptr ? T{} : detail::atomic_##OP##_p(p, v);                                 \
+    const i64 idx[] = {i0, i1, i2, i3};                                                   \
+    return detail::check_idx(a, idx, ctx) ? detail::atomic_##OP##_p(detail::elem_ptr_unchecked_idx(a, idx), v) : T{}; \
   }
 WP_ATOMIC_BUILTIN(add)
 WP_ATOMIC_BUILTIN(sub)
@@ -280,26 +280,30 @@ WP_ATOMIC_BUILTIN(xor)
 template <typename T>
 WP_FN T atomic_cas(const array_t<T, 1>& a, i64 i0, typename identity<T>::type c,
                    typename identity<T>::type v, ctx_t* ctx) {
-  T* p = elem_ptr(a, i0, ctx);
-  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+  const i64 idx[] = {i0};
+  return detail::check_idx(a, idx, ctx) ? detail::atomic_cas_p(detail::elem_ptr_unchecked_idx(a, idx), c, v)
+                                        : T{};
 }
 template <typename T>
 WP_FN T atomic_cas(const array_t<T, 2>& a, i64 i0, i64 i1, typename identity<T>::type c,
                    typename identity<T>::type v, ctx_t* ctx) {
-  T* p = elem_ptr(a, i0, i1, ctx);
-  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+  const i64 idx[] = {i0, i1};
+  return detail::check_idx(a, idx, ctx) ? detail::atomic_cas_p(detail::elem_ptr_unchecked_idx(a, idx), c, v)
+                                        : T{};
 }
 template <typename T>
 WP_FN T atomic_cas(const array_t<T, 3>& a, i64 i0, i64 i1, i64 i2, typename identity<T>::type c,
                    typename identity<T>::type v, ctx_t* ctx) {
-  T* p = elem_ptr(a, i0, i1, i2, ctx);
-  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+  const i64 idx[] = {i0, i1, i2};
+  return detail::check_idx(a, idx, ctx) ? detail::atomic_cas_p(detail::elem_ptr_unchecked_idx(a, idx), c, v)
+                                        : T{};
 }
 template <typename T>
 WP_FN T atomic_cas(const array_t<T, 4>& a, i64 i0, i64 i1, i64 i2, i64 i3,
                    typename identity<T>::type c, typename identity<T>::type v, ctx_t* ctx) {
-  T* p = elem_ptr(a, i0, i1, i2, i3, ctx);
-  return p == nullptr ? T{} : detail::atomic_cas_p(p, c, v);
+  const i64 idx[] = {i0, i1, i2, i3};
+  return detail::check_idx(a, idx, ctx) ? detail::atomic_cas_p(detail::elem_ptr_unchecked_idx(a, idx), c, v)
+                                        : T{};
 }
 
 }  // namespace wp

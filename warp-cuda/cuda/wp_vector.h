@@ -86,10 +86,10 @@ template <typename V, typename S, typename Dot>
 WP_FN void norm_scaled(const V& v, Dot dotself, V& w, S& l, S& k, S& inv) {
   typedef vec_traits<V> T;
   S m = (S)0;
-  for (int i = 0; i < T::N; ++i) {
-    const S a = wp::abs(T::get(v, i));
-    m = a > m ? a : m;
-  }
+  // wp::max (IEEE fmax) returns the operand that is not NaN, as `a > m ? a : m` from 0 does
+  // (`m` is never NaN), in one instruction with the absolute value folded in (FMNMX |a|)
+  // where the comparison takes a compare and a select.
+  for (int i = 0; i < T::N; ++i) m = wp::max(wp::abs(T::get(v, i)), m);
   pow2_pair(m, k, inv);
   for (int i = 0; i < T::N; ++i) T::at(w, i) = T::get(v, i) * k;
   l = wp::sqrt(dotself(w));
