@@ -225,6 +225,7 @@ pub mod __private {
         Fault, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg, Transform,
     };
     pub use warp_macros::__object_rows;
+    pub use warp_runtime::__deterministic as deterministic;
     /// Whether `debug_assert!` is checked: the runtime's debug mode (`wp::config::debug`).
     pub use warp_runtime::config::debug as debug_mode;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
@@ -250,6 +251,8 @@ mod book {
     struct Builtins;
     #[doc = include_str!("../docs/book/src/cache-env.md")]
     struct CacheEnv;
+    #[doc = include_str!("../docs/book/src/deterministic.md")]
+    struct Deterministic;
     #[doc = include_str!("../docs/book/src/devices.md")]
     struct Devices;
     #[doc = include_str!("../docs/book/src/getting-started.md")]

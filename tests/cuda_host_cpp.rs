@@ -171,6 +171,9 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::BadStep { step } => (3, -1, 1, vec![*step], vec![]),
         FaultKind::AdStackOverflow { .. } => unreachable!("forward library calls never push"),
         FaultKind::WriteRace { .. } => unreachable!("only the CPU race check reports races"),
+        FaultKind::DeterministicRecords { .. } => {
+            unreachable!("only the CPU's deterministic launches record accumulations")
+        }
         FaultKind::TileIndex { .. } | FaultKind::TileWidth { .. } => {
             unreachable!("no builtin of the CUDA library makes a tile fault yet")
         }

@@ -93,6 +93,7 @@ mod bvh;
 mod checkpoint;
 mod control;
 mod decomp;
+mod deterministic;
 mod dlpack;
 mod errors;
 mod extreme;

@@ -127,6 +127,15 @@ pub enum FaultKind {
         /// The block's lane count.
         block_dim: usize,
     },
+    /// A thread of a `#[kernel(deterministic)]` launch made more float `atomic_add`/
+    /// `atomic_sub` calls than the kernel's per-thread record limit (`max_records`): its
+    /// accumulations cannot all be recorded, and none is dropped silently.
+    DeterministicRecords {
+        /// The flat launch index of the thread.
+        thread: usize,
+        /// The kernel's per-thread record limit.
+        limit: u32,
+    },
 }
 
 impl Fault {
@@ -246,6 +255,13 @@ impl Fault {
                 "kernel `{}`: threads {a} and {b} (flat launch indices) both wrote element \
                  {index:?} of argument `{arg}` in one launch without an atomic (a data race); \
                  use an atomic_* builtin, or give each thread its own element",
+                self.kernel
+            ),
+            FaultKind::DeterministicRecords { thread, limit } => write!(
+                f,
+                "kernel `{}`: thread {thread} made more than {limit} float atomic_add/atomic_sub \
+                 calls, the per-thread record limit of a deterministic kernel; raise it with \
+                 #[kernel(deterministic(max_records = N))]",
                 self.kernel
             ),
         }

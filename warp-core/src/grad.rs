@@ -131,6 +131,12 @@ impl<T: Copy + GradElement, const N: usize> GradView<T, N> {
         self.view.is_some()
     }
 
+    /// The gradient array's view, if there is one (what a deterministic kernel's adjoint
+    /// records its accumulations against).
+    pub fn view(&self) -> Option<&ArrayView<T, N>> {
+        self.view.as_ref()
+    }
+
     /// `grad[idx] += v`, atomically (the adjoint of a read of the value at `idx`).
     #[inline(always)]
     pub fn accumulate<I: KernelIndex<N>>(&self, idx: I, v: T) -> KResult<()> {

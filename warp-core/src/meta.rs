@@ -34,6 +34,10 @@ pub struct FuncInfo {
     /// Its assertion sites (`assert!`, `debug_assert!`, `expect_*`), by which a GPU fault's
     /// line and column find the message.
     pub asserts: &'static [AssertSite],
+    /// Whether it (or a func it calls) uses float `atomic_add`/`atomic_sub`: a
+    /// `#[kernel(deterministic)]` kernel cannot record a func's accumulations, so launching
+    /// one that calls such a func is refused.
+    pub float_atomics: bool,
 }
 
 /// An assertion in a kernel or func's source. A GPU fault record holds no text: a failed

@@ -142,6 +142,60 @@ pub fn loop_indexed_params(f: &Function, body: &Block, var: VarId) -> Vec<VarId>
     out
 }
 
+/// Whether `array` is an array of floats or float vectors (the array's element type: a
+/// value's type may be one the macro cannot see).
+pub fn float_elements(f: &Function, array: VarId) -> bool {
+    matches!(f.ty(array), crate::types::Ty::Array(e, _)
+        if e.scalar().is_some_and(|s| s.is_float()))
+}
+
+/// Whether a call of `builtin` on `args` is a float accumulation, what a deterministic kernel
+/// records: `atomic_add` or `atomic_sub` into an array of floats or float vectors.
+pub fn float_accumulation(
+    f: &Function,
+    builtin: &crate::builtins::Builtin,
+    args: &[VarId],
+) -> bool {
+    matches!(builtin.name, "atomic_add" | "atomic_sub") && float_elements(f, args[0])
+}
+
+/// Whether `f` makes a float accumulation ([`float_accumulation`]) anywhere: a func that
+/// does cannot be called from a deterministic kernel (its calls are not recorded).
+pub fn has_float_accumulation(f: &Function) -> bool {
+    let mut found = false;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op: Op::Builtin { builtin, args },
+            ..
+        } = &s.kind
+        {
+            found |= float_accumulation(f, builtin, args);
+        }
+    });
+    found
+}
+
+/// The arrays `f` stores into with a plain store or passes to a func (which may store into
+/// them). A deterministic kernel's adjoint records its gradient accumulations into the other
+/// arrays only: the adjoint of a store takes (reads and clears) the element's gradient during
+/// the launch, and must see every accumulation into it made before, which a recorded one,
+/// added after the launch, is not.
+pub fn stored_or_passed(f: &Function) -> Vec<VarId> {
+    let mut out = Vec::new();
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::Store { array, .. } => out.push(*array),
+        StmtKind::Assign {
+            op: Op::Func { args, .. },
+            ..
+        } => out.extend(
+            args.iter()
+                .filter(|v| matches!(f.ty(**v), crate::types::Ty::Array(..))),
+        ),
+        _ => {}
+    });
+    out
+}
+
 /// Why an adjoint of `f` cannot be generated because of an atomic: one without an adjoint
 /// (`atomic_cas`, `atomic_exch`, `atomic_and/or/xor`) on float elements (the gradient it
 /// carries would be lost), or any atomic whose returned old value is used (the adjoint's
@@ -181,10 +235,7 @@ pub fn atomic_without_adjoint(f: &Function) -> Option<String> {
             if !builtin.is_atomic() {
                 return;
             }
-            // The array's element type (a value's type may be one the macro cannot see).
-            let float_elements = matches!(f.ty(args[0]), crate::types::Ty::Array(e, _)
-                if e.scalar().is_some_and(|s| s.is_float()));
-            if builtin.grad == crate::builtins::Grad::AtomicNone && float_elements {
+            if builtin.grad == crate::builtins::Grad::AtomicNone && float_elements(f, args[0]) {
                 why = Some(format!(
                     "uses `{}` on floats, which has no adjoint (as in Warp)",
                     builtin.name

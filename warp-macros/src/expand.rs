@@ -179,6 +179,16 @@ fn kernel_instance(
             same_shape: &opts.same_shape,
         },
     )?;
+    if let Some(explicit) = opts.deterministic {
+        if f.tiled.is_some() {
+            return Err(vec![syn::Error::new_spanned(
+                &item.sig.ident,
+                "a deterministic kernel cannot use tiles yet (its lanes' accumulations are not \
+                 recorded)",
+            )]);
+        }
+        f.deterministic = Some(crate::valid::deterministic::check(&f, explicit)?);
+    }
     let groups = valid.same_shape;
 
     let paren = item.sig.paren_token.span.join();
@@ -267,6 +277,10 @@ fn kernel_impl(
     let requires = requires.iter().map(|c| c.tokens());
     let asserts = assert_sites(f, &quote!(__wp));
     let struct_tys = struct_types(f);
+    let deterministic = match f.deterministic {
+        Some(n) => quote!(::core::option::Option::Some(#n)),
+        None => quote!(::core::option::Option::None),
+    };
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
     // does not handle yet becomes an error that backward reports.
     let adjoint = if disable_backward {
@@ -404,6 +418,7 @@ fn kernel_impl(
                         requires: &[#(#requires),*],
                         asserts: #asserts,
                         tile: #tile_info,
+                        deterministic: #deterministic,
                     };
                     fn info() -> &'static __wp::KernelInfo {
                         &<Self as __wp::Kernel>::INFO
@@ -905,6 +920,7 @@ fn func_instance(
     let consts = const_literals(&f);
     let requires = valid.requires.iter().map(|c| c.tokens());
     let asserts = assert_sites(&f, &wp);
+    let float_atomics = crate::analysis::has_float_accumulation(&f);
     let func_info = quote! {
         /// What the CUDA assembler needs to know about this func.
         #[doc(hidden)]
@@ -922,6 +938,7 @@ fn func_instance(
             consts: #consts,
             requires: &[#(#requires),*],
             asserts: #asserts,
+            float_atomics: #float_atomics,
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs

@@ -72,6 +72,9 @@ pub struct Function {
     /// const): `expand` makes each a `const` assertion spanned at the call, which rustc
     /// evaluates at `cargo check`.
     pub shape_obligations: Vec<ShapeObligation>,
+    /// `#[kernel(deterministic)]`: the per-thread record limit of its float accumulations
+    /// (`valid::deterministic`), which the emitters record instead of adding atomically.
+    pub deterministic: Option<u32>,
 }
 
 /// A tile dim that must equal another, checked by rustc (see `Function::shape_obligations`).

@@ -89,6 +89,16 @@ pub enum Error {
         /// Which launch was made and which one the kernel takes.
         why: String,
     },
+    /// A `#[kernel(deterministic)]` launch that cannot keep its promise of the same bits on
+    /// every run: on a backend without the deterministic path yet, or calling a func that
+    /// accumulates floats atomically (a func's accumulations are not recorded).
+    #[error("kernel `{kernel}` is deterministic, but {why}")]
+    Deterministic {
+        /// The kernel being launched.
+        kernel: &'static str,
+        /// What stands in the way.
+        why: String,
+    },
     /// The block size of a tiled launch is unusable: zero, above 1024 (or above what the GPU
     /// allows for the kernel), or not the width the kernel's tiles fix.
     #[error("kernel `{kernel}`: invalid block_dim {block_dim}: {why}")]

@@ -222,6 +222,10 @@ pub struct KernelInfo {
     /// [`launch_tiled`](crate::launch_tiled())) needs of a launch; `None` for an ordinary
     /// kernel.
     pub tile: Option<TileInfo>,
+    /// `#[kernel(deterministic)]`: the per-thread limit of recorded float accumulations
+    /// (`atomic_add`/`atomic_sub` on floats are recorded and reduced after the launch in a
+    /// fixed order; docs/book/src/deterministic.md). `None` for an ordinary kernel.
+    pub deterministic: Option<u32>,
 }
 
 /// What a tiled kernel needs of its launches: the block size it fixes and the memory one block
@@ -293,6 +297,7 @@ impl KernelInfo {
         requires: &[],
         asserts: &[],
         tile: None,
+        deterministic: None,
     };
 }
 

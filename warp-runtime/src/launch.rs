@@ -87,6 +87,17 @@ pub use warp_core::block::MAX_BLOCK_DIM;
 fn check_kind<K: Kernel>(block_dim: Option<usize>) -> Result<()> {
     let info = &K::INFO;
     let kernel = info.name;
+    if info.deterministic.is_some() {
+        if let Some(func) = float_atomic_func(info.callees) {
+            return Err(Error::Deterministic {
+                kernel,
+                why: format!(
+                    "it calls func `{func}`, which uses float atomic_add/atomic_sub: a func's \
+                     accumulations are not recorded (do them in the kernel)"
+                ),
+            });
+        }
+    }
     match (info.tile, block_dim) {
         (None, None) => Ok(()),
         (Some(_), None) => Err(Error::LaunchKind {
@@ -104,6 +115,17 @@ fn check_kind<K: Kernel>(block_dim: Option<usize>) -> Result<()> {
         }),
         (Some(_), Some(bd)) => check_tiled_info(info, bd),
     }
+}
+
+/// The name of a func among `funcs` and their callees that accumulates floats atomically.
+fn float_atomic_func(funcs: &[&'static warp_core::FuncInfo]) -> Option<&'static str> {
+    funcs.iter().find_map(|f| {
+        if f.float_atomics {
+            Some(f.name)
+        } else {
+            float_atomic_func(f.callees)
+        }
+    })
 }
 
 /// [`check_kind`], then [`grid_of`] with the block size (1 for an ordinary launch).

@@ -92,6 +92,12 @@ pub use launch::{
 #[cfg(feature = "cuda")]
 pub use launch::{launch_on, launch_tiled_on};
 pub use launch_id::{last_launch_id, LaunchId};
+/// What generated code of a `#[kernel(deterministic)]` kernel calls on the CPU (its float
+/// `atomic_add`/`atomic_sub`); not an API.
+#[doc(hidden)]
+pub mod __deterministic {
+    pub use crate::cpu::deterministic::{add, grad_add, sub};
+}
 pub use objects::exports::*;
 #[cfg(feature = "cuda")]
 pub use pinned::PinnedVec;

@@ -349,6 +349,20 @@ impl<'a> RustEmitter<'a> {
                 } else if builtin.is_atomic() && self.replay {
                     // Not replayed: the forward launch did it.
                     quote_spanned!(sp=> __wp::adjoint::zero())
+                } else if self.f.deterministic.is_some()
+                    && crate::analysis::float_accumulation(self.f, builtin, args)
+                {
+                    // Recorded for the launch's ordered reduction (warp-runtime's
+                    // cpu/deterministic.rs); `__flat` is the thread's flat launch index.
+                    let a = self.var(args[0]);
+                    let idx = self.index(&args[1..args.len() - 1]);
+                    let v = self.var(args[args.len() - 1]);
+                    let g = if builtin.name == "atomic_sub" {
+                        quote!(sub)
+                    } else {
+                        quote!(add)
+                    };
+                    quote_spanned!(sp=> __wp::deterministic::#g(&#a, #idx, #v, __flat)?)
                 } else if builtin.is_atomic() {
                     let a = self.var(args[0]);
                     let vals_at = args.len() - builtin.atomic_values();

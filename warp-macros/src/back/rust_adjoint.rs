@@ -244,7 +244,14 @@ impl Printer<'_> {
                 own,
             } => {
                 let (g, idx, v) = (self.adj(*array), self.index(index), self.grad(from)?);
-                if *own {
+                if self.f().deterministic.is_some()
+                    && self.f().kind == FnKind::Kernel
+                    && !crate::analysis::stored_or_passed(self.f()).contains(array)
+                {
+                    // Recorded for the launch's ordered reduction, on the fast path too, so
+                    // that both paths add in one order (warp-runtime's cpu/deterministic.rs).
+                    quote_spanned!(sp=> __wp::deterministic::grad_add(&#g, #idx, #v, __flat)?;)
+                } else if *own {
                     // SAFETY (of the generated code): under __FAST the array covers the grid,
                     // so the index is in bounds, only this thread touches the element, and no
                     // other adjoint launch runs (the runtime turns __FAST off otherwise).

@@ -13,6 +13,10 @@ pub struct KernelAttrs {
     /// `block_dim = N` (a literal or a module const): the kernel is tiled, and `tile(x)` makes
     /// tiles N wide; `launch_tiled` with another block size is an error.
     pub block_dim: Option<crate::types::Dim>,
+    /// `deterministic` or `deterministic(max_records = N)`: float `atomic_add`/`atomic_sub`
+    /// are recorded and reduced after the launch in a fixed order (`Some(None)`: the limit of
+    /// records per thread is counted, or `DEFAULT_MAX_RECORDS` under a loop).
+    pub deterministic: Option<Option<u32>>,
 }
 
 /// Parses `#[kernel(same_shape(x, v, dim), ...)]`.
@@ -59,9 +63,33 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
                 )
             })?);
             Ok(())
+        } else if meta.path.is_ident("deterministic") {
+            let mut max = None;
+            if meta.input.peek(syn::token::Paren) {
+                meta.parse_nested_meta(|inner| {
+                    if !inner.path.is_ident("max_records") {
+                        return Err(inner.error("deterministic takes `max_records = N`"));
+                    }
+                    let n: syn::LitInt = inner.value()?.parse()?;
+                    let v = n
+                        .base10_parse::<u32>()
+                        .ok()
+                        .filter(|v| *v >= 1)
+                        .ok_or_else(|| {
+                            syn::Error::new_spanned(
+                                &n,
+                                "max_records is an integer in 1..=4294967295",
+                            )
+                        })?;
+                    max = Some(v);
+                    Ok(())
+                })?;
+            }
+            out.deterministic = Some(max);
+            Ok(())
         } else {
             Err(meta.error(
-                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N",
+                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N, deterministic, deterministic(max_records = N)",
             ))
         }
     });

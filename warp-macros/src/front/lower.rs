@@ -200,6 +200,7 @@ pub fn lower_kernel(
         consts: cx.consts,
         tiled: cx.tiled,
         shape_obligations: cx.obligations,
+        deterministic: None,
     })
 }
 

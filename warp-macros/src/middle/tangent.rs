@@ -124,6 +124,9 @@ pub fn build(f: &Function) -> Result<Function, String> {
         consts: f.consts.clone(),
         tiled: f.tiled.clone(),
         shape_obligations: Vec::new(),
+        // The tangent kernel of a deterministic kernel records its primal's accumulations
+        // and their tangents' (one each per primal call).
+        deterministic: f.deterministic.map(|n| n.saturating_mul(2)),
     })
 }
 

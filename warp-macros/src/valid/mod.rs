@@ -19,10 +19,14 @@
 //!   table, for the `requires` field of `KernelInfo` and `FuncInfo`, which the runtime checks
 //!   against a GPU's architecture when it loads the kernel.
 //!
+//! - `deterministic`: what a `#[kernel(deterministic)]` kernel may not do (use an
+//!   accumulation's old value, exchange floats), and its per-thread record limit.
+//!
 //! Errors are gathered with the user's spans, all at once, like the front end's; the expansion
 //! turns them into compile errors.
 
 mod capabilities;
+pub mod deterministic;
 mod options;
 mod uniformity;
 mod wellformed;

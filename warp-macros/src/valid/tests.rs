@@ -399,3 +399,50 @@ fn every_function_in_the_repository_validates() {
         files.len()
     );
 }
+
+/// `#[kernel(deterministic)]`: a float accumulation's old value and float exchanges are
+/// errors at the call; integer atomics and unused results are fine; the record limit is the
+/// count of accumulation calls outside loops, the default under a loop, or the one given.
+#[test]
+fn deterministic_kernels_refuse_order_dependent_atomics_and_count_records() {
+    let check = |item: syn::ItemFn, explicit| {
+        super::deterministic::check(&lower(item), explicit)
+            .map_err(|es| es.iter().map(|e| e.to_string()).collect::<Vec<_>>())
+    };
+    let e = check(
+        parse_quote! {
+            fn k(a: Array<f32>, b: Array<f64>, out: Array<f32>, n: Array<i32>) {
+                let i = tid();
+                let old = atomic_add(a, 0, 1.0);
+                out[i] = old;
+                atomic_exch(b, 0, 2.0);
+                out[i] += atomic_add(n, 0, 1) as f32;
+            }
+        },
+        None,
+    )
+    .unwrap_err();
+    assert_eq!(e.len(), 2, "{e:?}");
+    assert!(e[0].contains("old value `atomic_add`"), "{e:?}");
+    assert!(e[1].contains("`atomic_exch` on floats"), "{e:?}");
+    let straight: syn::ItemFn = parse_quote! {
+        fn k(a: Array<f32>, v: Array<Vec3>, n: Array<i32>) {
+            let i = tid();
+            atomic_add(a, 0, 1.0);
+            if i > 2 { atomic_sub(v, 1, Vec3::new(1.0, 1.0, 1.0)); }
+            atomic_add(n, 0, 1);
+            atomic_max(a, 1, 2.0);
+        }
+    };
+    assert_eq!(check(straight.clone(), None), Ok(2));
+    assert_eq!(check(straight, Some(7)), Ok(7));
+    let looped: syn::ItemFn = parse_quote! {
+        fn k(a: Array<f32>) {
+            for j in 0..3 { atomic_add(a, j, 1.0); }
+        }
+    };
+    assert_eq!(
+        check(looped, None),
+        Ok(super::deterministic::DEFAULT_MAX_RECORDS)
+    );
+}

@@ -1,6 +1,7 @@
 //! [`Cpu`]: the CPU backend as the runtime dispatches to it (`backend.rs`).
 
 use super::capture::{self, CpuGraph};
+use super::deterministic;
 use super::executor;
 use super::memory::HostBuffer;
 use super::primitives;
@@ -51,6 +52,41 @@ where
     }
 }
 
+/// [`for_each`] of a launch; for a `#[kernel(deterministic)]` kernel, each chunk runs with a
+/// sink for its float accumulations (forward) or gradient accumulations (adjoint), which are
+/// added into their elements in launch order once every chunk has run (`deterministic.rs`). A fault drops the records:
+/// the launch's results are not to be trusted then anyway.
+///
+/// The forward's records per thread are limited by the kernel's `max_records` (the limit a
+/// GPU's record buffer will need); the adjoint's are not limited on the CPU (they are as many
+/// as the thread's gradient accumulations, bounded by memory alone).
+fn run_chunks<K: Kernel>(
+    grid: &Grid,
+    adjoint: bool,
+    run: impl Fn(std::ops::Range<usize>) -> warp_core::KResult<()> + Sync + Send,
+) -> Result<()> {
+    let Some(limit) = K::INFO.deterministic else {
+        return for_each::<K, _>(grid, run);
+    };
+    let limit = if adjoint { u32::MAX } else { limit };
+    let chunks = std::sync::Mutex::new(Vec::new());
+    for_each::<K, _>(grid, |range| {
+        let start = range.start;
+        let (r, records) = deterministic::record_chunk(K::INFO.name, limit, || run(range));
+        r?;
+        chunks
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push((start, records));
+        Ok(())
+    })?;
+    let chunks = chunks.into_inner().unwrap_or_else(|e| e.into_inner());
+    // SAFETY: the caller's arguments (every array the records point into) stay borrowed until
+    // it returns, and no kernel thread runs any more.
+    unsafe { deterministic::reduce(chunks) };
+    Ok(())
+}
+
 impl Cpu<'_> {
     /// `launch` with the write-race check (`config::set_race_check`): the views are made
     /// with a write log installed, so that they register their memory with it and log their
@@ -68,7 +104,7 @@ impl Cpu<'_> {
         };
         log.seal()?;
         // (A tiled launch's blocks log as threads: the lanes of a block share its index.)
-        for_each::<K, _>(grid, |range| {
+        run_chunks::<K>(grid, false, |range| {
             race::each_thread(&log, range, |t| K::run_cpu(&params, grid, t))
         })
     }
@@ -97,7 +133,7 @@ impl Cpu<'_> {
         log.seal()?;
         let own_alias = K::Params::grads_alias(args, K::INFO.tid_indexed);
         let launch = AdjointLaunch::begin();
-        for_each::<K, _>(grid, |range| {
+        run_chunks::<K>(grid, true, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
             shared_grads::chunk(&launch, |shared| {
                 race::each_thread(&log, range, |t| {
@@ -118,7 +154,7 @@ impl Backend for Cpu<'_> {
         }
         // SAFETY: `args` (and so every array) stays borrowed until the run below ends.
         let params = unsafe { K::Params::cpu_params(args, K::info(), self.device)? };
-        for_each::<K, _>(grid, |range| K::run_cpu(&params, grid, range))
+        run_chunks::<K>(grid, false, |range| K::run_cpu(&params, grid, range))
     }
 
     fn launch_adjoint<K: Kernel>(
@@ -140,7 +176,7 @@ impl Backend for Cpu<'_> {
         // (`grads_alias`: `x.view(0..n-1)` beside `x.view(1..n)`) makes every add atomic too.
         let own_alias = K::Params::grads_alias(args, K::INFO.tid_indexed);
         let launch = AdjointLaunch::begin();
-        for_each::<K, _>(grid, |range| {
+        run_chunks::<K>(grid, true, |range| {
             let mut stack = AdStack::new(adstack_bytes, K::INFO.name);
             shared_grads::chunk(&launch, |shared| {
                 K::run_cpu_adjoint(

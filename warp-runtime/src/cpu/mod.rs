@@ -5,10 +5,12 @@
 //! steps bring their own CPU code (`ObjectStep::run_cpu`, next to each object). `race`: the
 //! write-race check of launches (`config::set_race_check`). `shared_grads`: when adjoint
 //! launches running at once make gradient updates atomic. `capture`: graph capture, the
-//! operations recorded and replayed in order.
+//! operations recorded and replayed in order. `deterministic`: the records and ordered
+//! reduction of `#[kernel(deterministic)]` launches.
 
 mod backend;
 pub(crate) mod capture;
+pub(crate) mod deterministic;
 mod executor;
 pub(crate) mod memory;
 mod primitives;

@@ -479,6 +479,7 @@ mod tests {
                 column: 4,
                 message: "in the leaf",
             }],
+            float_atomics: false,
         };
         static MID: FuncInfo = FuncInfo {
             name: "mid",

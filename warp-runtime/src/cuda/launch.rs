@@ -119,6 +119,19 @@ impl<K: Kernel> Prepared<K> {
         adjoint: Option<usize>,
     ) -> Result<(Self, CudaParamsOf<K>, Option<CudaGradsOf<K>>)> {
         let info = K::info();
+        if adjoint.is_none() && info.deterministic.is_some() {
+            // The records, the sort and the ordered reduction exist on the CPU only so far
+            // (docs/book/src/deterministic.md, "On a GPU"): refused, never run with plain
+            // atomics under a deterministic kernel's name.
+            return Err(Error::Deterministic {
+                kernel: info.name,
+                why: format!(
+                    "the deterministic path is not implemented on CUDA yet (\"{}\"): launch \
+                     it on the CPU",
+                    device.alias()
+                ),
+            });
+        }
         if adjoint.is_some() {
             if let Some(reason) = info.cuda_adjoint_error {
                 return Err(Error::NotDifferentiable {

@@ -988,6 +988,7 @@ mod tests {
         consts: &[],
         requires: &[Capability::AtomicMinMaxBits64],
         asserts: &[],
+        float_atomics: false,
     };
     static MID: FuncInfo = FuncInfo {
         name: "mid",

@@ -267,6 +267,7 @@ mod tests {
         consts: &[],
         requires: &[],
         asserts: &[],
+        float_atomics: false,
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -283,6 +284,7 @@ mod tests {
         consts: &[],
         requires: &[],
         asserts: &[],
+        float_atomics: false,
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -298,6 +300,7 @@ mod tests {
         consts: &[],
         requires: &[],
         asserts: &[],
+        float_atomics: false,
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];

@@ -1,0 +1,93 @@
+//! `#[kernel(deterministic)]`: what such a kernel may not do, and its per-thread record limit.
+//!
+//! A deterministic kernel's float `atomic_add`/`atomic_sub` are recorded and added into their
+//! elements after the launch in a fixed order (docs/book/src/deterministic.md), so:
+//! - the old value such a call returns does not exist: reading it is an error at the call;
+//! - `atomic_exch`/`atomic_cas` on floats keep whichever write came last, an order no
+//!   recording fixes: an error at the call;
+//! - a tiled kernel's lanes are not supported yet: an error.
+//!
+//! Integer atomics are exact whatever the order (their final values are deterministic
+//! already; the old values they return are not, and stay the user's to use), and float
+//! `atomic_min`/`atomic_max` are order-independent: both are left as they are.
+
+use crate::analysis::float_accumulation;
+use crate::ir::{Block, Function, Op, StmtKind, VarId};
+
+/// The per-thread record limit when a float accumulation sits in a loop and the kernel does
+/// not say `max_records = N`: the number of calls a thread makes is then not known at compile
+/// time.
+pub const DEFAULT_MAX_RECORDS: u32 = 64;
+
+/// Checks a deterministic kernel and returns its per-thread record limit: `explicit` if
+/// given, else the number of float accumulation calls when none is in a loop (each runs at
+/// most once per thread), else the larger of that number and [`DEFAULT_MAX_RECORDS`].
+pub fn check(f: &Function, explicit: Option<u32>) -> Result<u32, Vec<syn::Error>> {
+    let mut reads: Vec<VarId> = Vec::new();
+    crate::ir::walk_stmts(&f.body, &mut |s| {
+        s.kind.for_each_read(&mut |v| reads.push(v))
+    });
+    let mut errors = Vec::new();
+    let mut sites = 0u32;
+    let mut in_loop = false;
+    walk(&f.body, false, &mut |s_kind, span, looped| {
+        let StmtKind::Assign {
+            dst,
+            op: Op::Builtin { builtin, args },
+            ..
+        } = s_kind
+        else {
+            return;
+        };
+        if float_accumulation(f, builtin, args) {
+            sites = sites.saturating_add(1);
+            in_loop |= looped;
+            if reads.contains(dst) {
+                errors.push(syn::Error::new(
+                    span,
+                    format!(
+                        "a deterministic kernel cannot use the old value `{}` returns: its \
+                         float accumulations are recorded and added after the launch, so there \
+                         is none",
+                        builtin.name
+                    ),
+                ));
+            }
+        } else if matches!(builtin.name, "atomic_exch" | "atomic_cas")
+            && crate::analysis::float_elements(f, args[0])
+        {
+            errors.push(syn::Error::new(
+                span,
+                format!(
+                    "`{}` on floats keeps whichever thread wrote last, which no order of a \
+                     deterministic kernel fixes",
+                    builtin.name
+                ),
+            ));
+        }
+    });
+    if !errors.is_empty() {
+        return Err(errors);
+    }
+    Ok(match explicit {
+        Some(n) => n,
+        None if in_loop => sites.max(DEFAULT_MAX_RECORDS),
+        // A kernel without accumulations records nothing; 1 keeps the limit meaningful.
+        None => sites.max(1),
+    })
+}
+
+/// Calls `visit` on every statement with its span and whether it sits in a loop.
+fn walk(block: &Block, looped: bool, visit: &mut dyn FnMut(&StmtKind, proc_macro2::Span, bool)) {
+    for s in block {
+        visit(&s.kind, s.span, looped);
+        match &s.kind {
+            StmtKind::If { then, els, .. } => {
+                walk(then, looped, visit);
+                walk(els, looped, visit);
+            }
+            StmtKind::For { body, .. } | StmtKind::Loop { body } => walk(body, true, visit),
+            _ => {}
+        }
+    }
+}
