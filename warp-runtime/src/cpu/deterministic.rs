@@ -217,8 +217,10 @@ pub(crate) unsafe fn reduce(mut chunks: Vec<(usize, Chunk)>) {
         .enumerate()
         .flat_map(|(k, (_, c))| c.records.iter().map(move |r| (*r, k)))
         .collect();
-    // Stable: the launch order survives within an element.
-    order.par_sort_by_key(|(r, _)| r.addr);
+    // By element, then launch order: a chunk's bytes grow with its records, so (chunk, `at`)
+    // is the launch order. The keys are unique, so an unstable sort (faster than a stable
+    // one) gives the one order a stable sort by address would.
+    order.par_sort_unstable_by_key(|(r, c)| (r.addr, *c, r.at));
     let starts: Vec<usize> = (0..order.len())
         .filter(|&i| i == 0 || order[i - 1].0.addr != order[i].0.addr)
         .collect();
