@@ -234,3 +234,80 @@ pub(crate) unsafe fn reduce(mut chunks: Vec<(usize, Chunk)>) {
         }
     });
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Values whose sum rounds differently in another order.
+    const VALUES: [f32; 6] = [1.0e8, 3.0, -1.0e8, 0.75, 2.5e-3, -7.0];
+
+    /// Records `VALUES` as threads `first..` into element 0 (one each) and 1 (every other
+    /// thread, a subtraction), as one chunk.
+    fn chunk(view: &ArrayView<f32, 1>, first: usize, values: &[f32]) -> (usize, Chunk) {
+        let (r, c) = record_chunk("k", 2, || -> KResult<()> {
+            for (k, v) in values.iter().enumerate() {
+                let t = first + k;
+                add(view, 0usize, *v, t)?;
+                if t % 2 == 0 {
+                    sub(view, 1usize, *v * 0.5, t)?;
+                }
+            }
+            Ok(())
+        });
+        r.unwrap();
+        (first, c)
+    }
+
+    /// The chunks arrive in any order; each element receives its records in thread order
+    /// from its old value, which a sequential sum on the host reproduces bit for bit.
+    #[test]
+    fn chunks_in_any_order_reduce_in_launch_order() {
+        let mut a = [0.5f32, -2.0];
+        // SAFETY: `a` outlives the view and the reduction.
+        let view = unsafe { ArrayView::new(a.as_mut_ptr(), [2], [1], "k", "a") };
+        let chunks = vec![
+            chunk(&view, 4, &VALUES[4..]),
+            chunk(&view, 0, &VALUES[..2]),
+            chunk(&view, 2, &VALUES[2..4]),
+        ];
+        // SAFETY: `a` is live and nothing else touches it.
+        unsafe { reduce(chunks) };
+        let mut want = [0.5f32, -2.0];
+        for (t, v) in VALUES.iter().enumerate() {
+            want[0] += v;
+            if t % 2 == 0 {
+                want[1] -= v * 0.5;
+            }
+        }
+        assert_eq!(a.map(f32::to_bits), want.map(f32::to_bits));
+        // The values are order-sensitive: reversed, element 0's sum differs.
+        let reversed = VALUES.iter().rev().fold(0.5f32, |acc, v| acc + v);
+        assert_ne!(reversed.to_bits(), want[0].to_bits());
+    }
+
+    /// One record past the limit is a fault naming the thread; outside a deterministic
+    /// launch, recording is a fault too, never a silent drop.
+    #[test]
+    fn the_limit_and_a_missing_sink_are_faults() {
+        let mut a = [0.0f32];
+        // SAFETY: `a` outlives the view.
+        let view = unsafe { ArrayView::new(a.as_mut_ptr(), [1], [1], "k", "a") };
+        let (r, c) = record_chunk("k", 2, || -> KResult<()> {
+            add(&view, 0usize, 1.0, 7)?;
+            add(&view, 0usize, 1.0, 7)?;
+            add(&view, 0usize, 1.0, 7)?;
+            Ok(())
+        });
+        assert_eq!(
+            r.unwrap_err().kind,
+            FaultKind::DeterministicRecords {
+                thread: 7,
+                limit: 2
+            }
+        );
+        assert_eq!(c.records.len(), 2);
+        assert!(add(&view, 0usize, 1.0, 0).is_err());
+        assert_eq!(a, [0.0]);
+    }
+}
