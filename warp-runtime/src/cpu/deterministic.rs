@@ -249,7 +249,7 @@ mod tests {
             for (k, v) in values.iter().enumerate() {
                 let t = first + k;
                 add(view, 0usize, *v, t)?;
-                if t % 2 == 0 {
+                if t.is_multiple_of(2) {
                     sub(view, 1usize, *v * 0.5, t)?;
                 }
             }
@@ -276,7 +276,7 @@ mod tests {
         let mut want = [0.5f32, -2.0];
         for (t, v) in VALUES.iter().enumerate() {
             want[0] += v;
-            if t % 2 == 0 {
+            if t.is_multiple_of(2) {
                 want[1] -= v * 0.5;
             }
         }
