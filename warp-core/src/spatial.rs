@@ -182,9 +182,15 @@ macro_rules! spatial_types {
                 $v(0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
             );
 
-            /// The matrix with these rows.
+            /// The matrix with these rows (`SpatialMatrix::from_rows(r0, .., r5)` in kernels too).
             #[inline(always)]
-            pub const fn from_rows(r: [$v; 6]) -> Self {
+            pub const fn from_rows(r0: $v, r1: $v, r2: $v, r3: $v, r4: $v, r5: $v) -> Self {
+                Self(r0, r1, r2, r3, r4, r5)
+            }
+
+            /// The matrix with the rows of `r`.
+            #[inline(always)]
+            pub const fn from_row_array(r: [$v; 6]) -> Self {
                 Self(r[0], r[1], r[2], r[3], r[4], r[5])
             }
 
@@ -198,7 +204,7 @@ macro_rules! spatial_types {
             /// its row-major order).
             #[inline]
             pub fn from_rows_array(a: [[$s; 6]; 6]) -> Self {
-                Self::from_rows(a.map($v::from_array))
+                Self::from_row_array(a.map($v::from_array))
             }
 
             /// The entries, `[row][col]`.
@@ -216,7 +222,7 @@ macro_rules! spatial_types {
             /// The transpose.
             #[inline]
             pub fn transpose(self) -> Self {
-                Self::from_rows(core::array::from_fn(|j| self.col(j)))
+                Self::from_row_array(core::array::from_fn(|j| self.col(j)))
             }
 
             /// Warp's `spatial_adjoint(r, s)`: `r` in both diagonal 3x3 blocks, `s` in the
@@ -244,13 +250,13 @@ macro_rules! spatial_types {
 
             #[inline(always)]
             fn map_rows(self, f: impl Fn($v) -> $v) -> Self {
-                Self::from_rows(self.to_rows().map(f))
+                Self::from_row_array(self.to_rows().map(f))
             }
 
             #[inline(always)]
             fn zip_rows(self, b: Self, f: impl Fn($v, $v) -> $v) -> Self {
                 let (a, b) = (self.to_rows(), b.to_rows());
-                Self::from_rows(core::array::from_fn(|k| f(a[k], b[k])))
+                Self::from_row_array(core::array::from_fn(|k| f(a[k], b[k])))
             }
         }
 
@@ -548,14 +554,14 @@ impl DSpatialVector {
 impl SpatialMatrix {
     /// The `f64` spatial matrix with the same entries.
     pub fn as_dspatial(self) -> DSpatialMatrix {
-        DSpatialMatrix::from_rows(self.to_rows().map(SpatialVector::as_dspatial))
+        DSpatialMatrix::from_row_array(self.to_rows().map(SpatialVector::as_dspatial))
     }
 }
 
 impl DSpatialMatrix {
     /// The `f32` spatial matrix with the entries rounded to `f32`.
     pub fn as_spatial(self) -> SpatialMatrix {
-        SpatialMatrix::from_rows(self.to_rows().map(DSpatialVector::as_spatial))
+        SpatialMatrix::from_row_array(self.to_rows().map(DSpatialVector::as_spatial))
     }
 }
 

@@ -457,7 +457,7 @@ mod tests {
         V::from_array(core::array::from_fn(|k| ((k as f64 + 1.0) * seed).sin()))
     }
     fn m(seed: f64) -> M {
-        M::from_rows(core::array::from_fn(|i| v(seed + i as f64 * 0.37)))
+        M::from_row_array(core::array::from_fn(|i| v(seed + i as f64 * 0.37)))
     }
     fn wsum(a: V, w: V) -> f64 {
         a.dot(w)
