@@ -470,6 +470,29 @@ macro_rules! spatial_types {
             }
         }
 
+        // A literal of a spatial type (what `lit_like` makes where the macro cannot see a
+        // value's type: a func's result, a struct field) is every lane, as a glam vector's.
+        impl crate::ops::FromLiteral for $v {
+            #[inline(always)]
+            fn from_f64(v: f64) -> Self {
+                Self::from_array([v as $s; 6])
+            }
+            #[inline(always)]
+            fn from_i64(v: i64) -> Self {
+                Self::from_array([v as $s; 6])
+            }
+        }
+        impl crate::ops::FromLiteral for $m {
+            #[inline(always)]
+            fn from_f64(v: f64) -> Self {
+                Self::from_rows_array([[v as $s; 6]; 6])
+            }
+            #[inline(always)]
+            fn from_i64(v: i64) -> Self {
+                Self::from_rows_array([[v as $s; 6]; 6])
+            }
+        }
+
         // Gradients of arrays of them: every lane adds atomically on its own.
         impl crate::grad::GradElement for $v {
             #[inline(always)]

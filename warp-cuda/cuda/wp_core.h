@@ -1591,6 +1591,15 @@ struct literal<T, true> {  // vectors: splat
   static WP_FN T from_f64(f64 v) { return splat(cast<S>(v)); }
   static WP_FN T from_i64(i64 v) { return splat(cast<S>(v)); }
 };
+// Spatial vectors and matrices splat too (warp-core's FromLiteral for them), every lane.
+template <>
+struct literal<SpatialVector, false> : literal<SpatialVector, true> {};
+template <>
+struct literal<DSpatialVector, false> : literal<DSpatialVector, true> {};
+template <>
+struct literal<SpatialMatrix, false> : literal<SpatialMatrix, true> {};
+template <>
+struct literal<DSpatialMatrix, false> : literal<DSpatialMatrix, true> {};
 }  // namespace detail
 
 namespace detail {

@@ -521,6 +521,7 @@ impl<'a> Emitter<'a> {
             }
             StmtKind::SetMember { var, path, value } => {
                 let (v, val) = (self.var(*var), self.var(*value));
+                let path: Vec<String> = path.iter().map(|m| cpp_member(m)).collect();
                 self.line(sp, &format!("{v}.{} = {val};", path.join(".")));
             }
             StmtKind::If { cond, then, els } => {

@@ -101,7 +101,7 @@ impl<'a> RustEmitter<'a> {
             }
             StmtKind::SetMember { var, path, value } => {
                 let v = self.var(*var);
-                let path = path.iter().map(|m| format_ident!("{}", m));
+                let path = path.iter().map(|m| member_tokens(m));
                 let val = self.var(*value);
                 quote_spanned!(sp=> #v #(.#path)* = #val;)
             }
