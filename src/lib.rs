@@ -130,9 +130,9 @@ pub use warp_core::bf16;
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::capability;
 pub use warp_core::f16;
-pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
 /// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
 pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
+pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`), its
 /// size bound (`WARP_LANG_CACHE_MAX_BYTES` wins over `set_cache_max_bytes`; least recently
 /// used entries go first) and emptying it.

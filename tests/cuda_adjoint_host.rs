@@ -35,12 +35,12 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use warp_lang::__private::adjoint::{self as ad, Adjoint};
+use warp_lang::__private::builtins as bi;
 use warp_lang::__private::glam::{
     DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
     UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
 };
 use warp_lang::__private::{zero_like, ArrayView, GradElement, GradView};
-use warp_lang::__private::builtins as bi;
 use warp_lang::{
     DSpatialMatrix, DSpatialVector, DTransform, Fault, FaultKind, SpatialMatrix, SpatialVector,
     Transform,

@@ -57,7 +57,10 @@ fn normwise(got: &[f64], want: &[f64]) -> f64 {
 #[track_caller]
 fn close(got: &[f64], want: &[f64], tol: f64, what: &str) {
     let d = normwise(got, want);
-    assert!(d <= tol, "{what}: got {got:?}, want {want:?} ({d:e} > {tol:e})");
+    assert!(
+        d <= tol,
+        "{what}: got {got:?}, want {want:?} ({d:e} > {tol:e})"
+    );
 }
 
 fn lanes_v(v: DSpatialVector) -> Vec<f64> {
@@ -129,8 +132,8 @@ fn inputs() -> Vec<(DSpatialVector, DSpatialVector, DSpatialMatrix, DTransform)>
             let m = DSpatialMatrix::from_rows_array(std::array::from_fn(|a| {
                 std::array::from_fn(|b| r(k + 100.0 + (a * 6 + b) as f64))
             }));
-            let q = DQuat::from_xyzw(r(k + 20.0), r(k + 21.0), r(k + 22.0), r(k + 23.0))
-                .normalize();
+            let q =
+                DQuat::from_xyzw(r(k + 20.0), r(k + 21.0), r(k + 22.0), r(k + 23.0)).normalize();
             let t = DTransform::new(
                 DVec3::new(3.0 * r(k + 24.0), 3.0 * r(k + 25.0), 3.0 * r(k + 26.0)),
                 q,
@@ -210,8 +213,24 @@ macro_rules! spatial_kernel {
         }
     };
 }
-spatial_kernel!(k_spatial64, DSpatialVector, DSpatialMatrix, DTransform, DVec3, DMat3, f64);
-spatial_kernel!(k_spatial32, SpatialVector, SpatialMatrix, Transform, Vec3, Mat3, f32);
+spatial_kernel!(
+    k_spatial64,
+    DSpatialVector,
+    DSpatialMatrix,
+    DTransform,
+    DVec3,
+    DMat3,
+    f64
+);
+spatial_kernel!(
+    k_spatial32,
+    SpatialVector,
+    SpatialMatrix,
+    Transform,
+    Vec3,
+    Mat3,
+    f32
+);
 
 /// Runs a `spatial_kernel!` and checks it: `$up` and `$upm` take a kernel value to f64, `$dn`
 /// and `$dnm` the f64 inputs to the kernel's precision.
@@ -219,8 +238,11 @@ macro_rules! spatial_test {
     ($dev:expr, $kernel:ident, $sv:ident, $sm:ident, $x:ident, $v3:ident, $m3:ident, $s:ident,
      $f32:expr, $dn:expr, $dnm:expr, $dnx:expr, $up:expr, $upm:expr) => {{
         let dev: &wp::Device = $dev;
-        let (dn, dnm, dnx): (fn(DSpatialVector) -> $sv, fn(DSpatialMatrix) -> $sm, fn(DTransform) -> $x) =
-            ($dn, $dnm, $dnx);
+        let (dn, dnm, dnx): (
+            fn(DSpatialVector) -> $sv,
+            fn(DSpatialMatrix) -> $sm,
+            fn(DTransform) -> $x,
+        ) = ($dn, $dnm, $dnx);
         let (up, upm): (fn($sv) -> DSpatialVector, fn($sm) -> DSpatialMatrix) = ($up, $upm);
         let ins = inputs();
         let n = ins.len();
@@ -235,7 +257,18 @@ macro_rules! spatial_test {
         wp::launch(
             $kernel,
             n,
-            (&arr(&a, dev), &arr(&b, dev), &arr(&m, dev), &arr(&t, dev), s, sm, &vo, &mo, &so, &wo),
+            (
+                &arr(&a, dev),
+                &arr(&b, dev),
+                &arr(&m, dev),
+                &arr(&t, dev),
+                s,
+                sm,
+                &vo,
+                &mo,
+                &so,
+                &wo,
+            ),
             dev,
         )
         .unwrap();
@@ -262,11 +295,17 @@ macro_rules! spatial_test {
                 (mi * x, "m * x"),
                 ($sv::new(x.top(), y.bottom()), "SpatialVector::new"),
                 ($sv::new(x.bottom(), y.top()), "spatial_vector(w, v)"),
-                ($sv::from_array([x[0], x[1], y[2], y[3], x[4], y[5]]), "spatial_vector(6 scalars)"),
+                (
+                    $sv::from_array([x[0], x[1], y[2], y[3], x[4], y[5]]),
+                    "spatial_vector(6 scalars)",
+                ),
                 (x.transform_twist(ti), "transform_twist"),
                 (y.transform_wrench(ti), "transform_wrench"),
                 (mi[2], "m[2]"),
-                ($sv::from_array([x[5], 0.0, 0.0, y[1], 0.0, mi[1][4]]), "lane writes"),
+                (
+                    $sv::from_array([x[5], 0.0, 0.0, y[1], 0.0, mi[1][4]]),
+                    "lane writes",
+                ),
             ];
             for (k, (want, what)) in host_v.iter().enumerate() {
                 close(&lanes_v(v(k)), &lanes_v(up(*want)), gt, &w(what));
@@ -306,25 +345,55 @@ macro_rules! spatial_test {
             close(&[sc(0)], &[x.dot(y) as f64], gt, &w("spatial_dot"));
             close(&[sc(2)], &[mi[3][4] as f64], 0.0, &w("m[(3, 4)]"));
             assert_eq!(sc(3), 1.0, "{}", w("== and !="));
-            assert_eq!(wo[i * 2].to_array(), x.top().to_array(), "{}", w("spatial_top"));
-            assert_eq!(wo[i * 2 + 1].to_array(), x.bottom().to_array(), "{}", w("spatial_bottom"));
+            assert_eq!(
+                wo[i * 2].to_array(),
+                x.top().to_array(),
+                "{}",
+                w("spatial_top")
+            );
+            assert_eq!(
+                wo[i * 2 + 1].to_array(),
+                x.bottom().to_array(),
+                "{}",
+                w("spatial_bottom")
+            );
             // The closed forms, in f64.
             close(&lanes_v(v(0)), &lanes_v(mv(crm(dx), dy)), rt, &w("a× b"));
-            close(&lanes_v(v(1)), &lanes_v(mv(tr(crm(dx)) * -1.0, dy)), rt, &w("a×* b = -(a×)ᵀ b"));
+            close(
+                &lanes_v(v(1)),
+                &lanes_v(mv(tr(crm(dx)) * -1.0, dy)),
+                rt,
+                &w("a×* b = -(a×)ᵀ b"),
+            );
             close(&lanes_v(v(8)), &lanes_v(mv(dm, dx)), rt, &w("m x"));
             close(&lanes_m(mk(0)), &lanes_m(mm(dm, dsm)), rt, &w("m sm"));
             close(&lanes_m(mk(3)), &lanes_m(tr(dm)), 0.0, &w("transpose"));
             let dr = DMat3::from_quat(dt.q);
             let xm = blocks(dr, DMat3::ZERO, skew(dt.p) * dr, dr);
-            close(&lanes_m(mk(6)), &lanes_m(xm), rt, &w("spatial_adjoint(R, skew(p) R)"));
+            close(
+                &lanes_m(mk(6)),
+                &lanes_m(xm),
+                rt,
+                &w("spatial_adjoint(R, skew(p) R)"),
+            );
             close(&lanes_v(v(12)), &lanes_v(mv(xm, dx)), rt, &w("twist = X m"));
             // The force transform is X⁻ᵀ: with X⁻¹ the motion transform of t⁻¹.
             let ti_ = dt.inverse();
             let dri = DMat3::from_quat(ti_.q);
             let xi = blocks(dri, DMat3::ZERO, skew(ti_.p) * dri, dri);
             // (In f32 the rotation rounded to f32 is unit to about 1e-7, within `rt`.)
-            close(&lanes_m(mm(xm, xi)), &lanes_m(DSpatialMatrix::IDENTITY), rt, &w("X X⁻¹"));
-            close(&lanes_v(v(13)), &lanes_v(mv(tr(xi), dy)), rt, &w("wrench = X⁻ᵀ f"));
+            close(
+                &lanes_m(mm(xm, xi)),
+                &lanes_m(DSpatialMatrix::IDENTITY),
+                rt,
+                &w("X X⁻¹"),
+            );
+            close(
+                &lanes_v(v(13)),
+                &lanes_v(mv(tr(xi), dy)),
+                rt,
+                &w("wrench = X⁻ᵀ f"),
+            );
             // Power is frame independent: twist(t, m) · wrench(t, f) = m · f.
             close(&[sc(1)], &[dx.dot(dy)], rt * 10.0, &w("power kept"));
         }
@@ -333,16 +402,39 @@ macro_rules! spatial_test {
 
 fn spatial_f64(dev: &wp::Device) {
     spatial_test!(
-        dev, k_spatial64, DSpatialVector, DSpatialMatrix, DTransform, DVec3, DMat3, f64, false,
-        |v| v, |m| m, |t| t, |v| v, |m| m
+        dev,
+        k_spatial64,
+        DSpatialVector,
+        DSpatialMatrix,
+        DTransform,
+        DVec3,
+        DMat3,
+        f64,
+        false,
+        |v| v,
+        |m| m,
+        |t| t,
+        |v| v,
+        |m| m
     );
 }
 
 fn spatial_f32(dev: &wp::Device) {
     spatial_test!(
-        dev, k_spatial32, SpatialVector, SpatialMatrix, Transform, Vec3, Mat3, f32, true,
-        DSpatialVector::as_spatial, DSpatialMatrix::as_spatial, |t: DTransform| t.as_transform(),
-        SpatialVector::as_dspatial, SpatialMatrix::as_dspatial
+        dev,
+        k_spatial32,
+        SpatialVector,
+        SpatialMatrix,
+        Transform,
+        Vec3,
+        Mat3,
+        f32,
+        true,
+        DSpatialVector::as_spatial,
+        DSpatialMatrix::as_spatial,
+        |t: DTransform| t.as_transform(),
+        SpatialVector::as_dspatial,
+        SpatialMatrix::as_dspatial
     );
 }
 
@@ -388,14 +480,28 @@ fn spatial_struct_field_and_func(dev: &wp::Device) {
         })
         .collect();
     let n = bodies.len();
-    let (ab, out, ke) = (arr(&bodies, dev), zeros::<SpatialVector, 1>(n, dev), zeros::<f32, 1>(n, dev));
+    let (ab, out, ke) = (
+        arr(&bodies, dev),
+        zeros::<SpatialVector, 1>(n, dev),
+        zeros::<f32, 1>(n, dev),
+    );
     wp::launch(k_bodies, n, (&ab, &out, &ke), dev).unwrap();
     let (got_b, got_h, got_ke) = (host(&ab), host(&out), host(&ke));
     let tol = gpu_tol(dev, true);
     for (k, b) in bodies.iter().enumerate() {
         let h = b.inertia * b.twist;
-        close(&lanes_v(got_h[k].as_dspatial()), &lanes_v(h.as_dspatial()), tol, "momentum");
-        close(&[got_ke[k] as f64], &[(0.5 * b.twist.dot(h)) as f64], tol, "kinetic energy");
+        close(
+            &lanes_v(got_h[k].as_dspatial()),
+            &lanes_v(h.as_dspatial()),
+            tol,
+            "momentum",
+        );
+        close(
+            &[got_ke[k] as f64],
+            &[(0.5 * b.twist.dot(h)) as f64],
+            tol,
+            "kinetic energy",
+        );
         let mut want = *b;
         want.twist[0] = 2.5;
         assert_eq!(got_b[k], want, "field lane written back {k}");
@@ -421,7 +527,10 @@ pub(crate) fn k_spatial_loss(xs: Array<f64>, ms: Array<f64>, tq: Array<f64>, los
     m[(3, 2)] = ms[7];
     m[5][0] = ms[8];
     m[4] = x;
-    let t = DTransform::new(DVec3::new(tq[0], tq[1], tq[2]), DQuat::from_xyzw(tq[3], tq[4], tq[5], tq[6]));
+    let t = DTransform::new(
+        DVec3::new(tq[0], tq[1], tq[2]),
+        DQuat::from_xyzw(tq[3], tq[4], tq[5], tq[6]),
+    );
     let r = DMat3::from_cols(
         DVec3::new(ms[9], ms[10], ms[11]),
         DVec3::new(ms[12], ms[13], ms[14]),
@@ -472,11 +581,20 @@ fn spatial_gradients_match_finite_differences(dev: &wp::Device) {
     let touched = (0..report.analytic[0].len())
         .filter(|&c| report.analytic.iter().any(|r| r[c] != 0.0))
         .count();
-    assert_eq!(touched, report.analytic[0].len(), "every input has a gradient");
+    assert_eq!(
+        touched,
+        report.analytic[0].len(),
+        "every input has a gradient"
+    );
 }
 
 #[wp::kernel]
-pub(crate) fn k_spatial_array_loss(xs: Array<SpatialVector>, ms: Array<SpatialMatrix>, w: SpatialVector, loss: Array<f32>) {
+pub(crate) fn k_spatial_array_loss(
+    xs: Array<SpatialVector>,
+    ms: Array<SpatialMatrix>,
+    w: SpatialVector,
+    loss: Array<f32>,
+) {
     let i = tid();
     atomic_add(loss, 0, spatial_dot(ms[i] * xs[i], w));
 }
@@ -503,7 +621,17 @@ fn spatial_array_gradients(dev: &wp::Device) {
     let tol = gpu_tol(dev, true);
     for k in 0..n {
         let want_x = m0[k].transpose() * w;
-        close(&lanes_v(gx[k].as_dspatial()), &lanes_v(want_x.as_dspatial()), tol, "d/dx");
-        close(&lanes_m(gm[k].as_dspatial()), &lanes_m(w.outer(x0[k]).as_dspatial()), tol, "d/dm");
+        close(
+            &lanes_v(gx[k].as_dspatial()),
+            &lanes_v(want_x.as_dspatial()),
+            tol,
+            "d/dx",
+        );
+        close(
+            &lanes_m(gm[k].as_dspatial()),
+            &lanes_m(w.outer(x0[k]).as_dspatial()),
+            tol,
+            "d/dm",
+        );
     }
 }

@@ -616,7 +616,10 @@ mod tests {
     #[test]
     fn lanes_layout_and_indexing() {
         let a = SpatialVector::from_array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
-        assert_eq!(bytemuck::cast::<_, [f32; 6]>(a), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(
+            bytemuck::cast::<_, [f32; 6]>(a),
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+        );
         assert_eq!(a.top(), Vec3::new(1.0, 2.0, 3.0));
         assert_eq!(a.bottom(), Vec3::new(4.0, 5.0, 6.0));
         assert_eq!(SpatialVector::new(a.top(), a.bottom()), a);
@@ -629,7 +632,11 @@ mod tests {
         assert_eq!(m[2][3], 12.0);
         m[(5, 0)] = 0.5;
         assert_eq!(m.5 .0, 0.5);
-        assert_eq!(bytemuck::cast::<_, [SpatialVector; 6]>(m)[5].0, 0.5, "row-major");
+        assert_eq!(
+            bytemuck::cast::<_, [SpatialVector; 6]>(m)[5].0,
+            0.5,
+            "row-major"
+        );
         assert_eq!(format!("{a}"), "[1, 2, 3, 4, 5, 6]");
         assert_eq!(SpatialMatrix::default(), SpatialMatrix::ZERO);
         assert_eq!(a.as_dspatial().as_spatial(), a);
@@ -705,7 +712,8 @@ mod tests {
         let (tw, xm) = (m.transform_twist(t), x * m);
         assert!((tw - xm).to_array().iter().all(|e| e.abs() < 1e-14));
         let ti = t.inverse();
-        let xi = DSpatialMatrix::adjoint(DMat3::from_quat(ti.q), skew(ti.p) * DMat3::from_quat(ti.q));
+        let xi =
+            DSpatialMatrix::adjoint(DMat3::from_quat(ti.q), skew(ti.p) * DMat3::from_quat(ti.q));
         let (wr, xf) = (f.transform_wrench(t), xi.transpose() * f);
         assert!((wr - xf).to_array().iter().all(|e| e.abs() < 1e-14));
         // adjoint's blocks.

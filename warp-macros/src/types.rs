@@ -723,7 +723,10 @@ mod tests {
         assert_eq!(t.member_ty("q"), Some(Ty::Quat(Scalar::F64)));
         assert_eq!(t.member_ty("x"), None);
         assert_eq!(t.to_string(), "DTransform");
-        let (v, m) = (Ty::SpatialVector(Scalar::F32), Ty::SpatialMatrix(Scalar::F64));
+        let (v, m) = (
+            Ty::SpatialVector(Scalar::F32),
+            Ty::SpatialMatrix(Scalar::F64),
+        );
         assert_eq!(v.member_ty("5"), Some(F32));
         assert_eq!(v.member_ty("6"), None);
         assert_eq!(v.member_ty("x"), None);

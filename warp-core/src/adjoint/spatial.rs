@@ -129,13 +129,7 @@ pub fn adj_spatial_cross<X: AdjSpatial>(a: X, b: X, adj_a: &mut X, adj_b: &mut X
 
 /// Adjoint of `spatial_cross_dual(a, b)` (see the module documentation).
 #[inline(always)]
-pub fn adj_spatial_cross_dual<X: AdjSpatial>(
-    a: X,
-    b: X,
-    adj_a: &mut X,
-    adj_b: &mut X,
-    adj_ret: X,
-) {
+pub fn adj_spatial_cross_dual<X: AdjSpatial>(a: X, b: X, adj_a: &mut X, adj_b: &mut X, adj_ret: X) {
     X::adj_cross_dual(a, b, adj_a, adj_b, adj_ret)
 }
 
@@ -478,7 +472,11 @@ mod tests {
             p[k] += H;
             q[k] -= H;
             let fd = (f(p) - f(q)) / (2.0 * H);
-            assert!((fd - adj[k]).abs() < TOL, "{what} lane {k}: {fd} vs {}", adj[k]);
+            assert!(
+                (fd - adj[k]).abs() < TOL,
+                "{what} lane {k}: {fd} vs {}",
+                adj[k]
+            );
         }
     }
     fn fd_mat(f: &dyn Fn(M) -> f64, x: M, adj: M, what: &str) {
@@ -488,7 +486,11 @@ mod tests {
                 p[i][j] += H;
                 q[i][j] -= H;
                 let fd = (f(p) - f(q)) / (2.0 * H);
-                assert!((fd - adj[i][j]).abs() < TOL, "{what} ({i},{j}): {fd} vs {}", adj[i][j]);
+                assert!(
+                    (fd - adj[i][j]).abs() < TOL,
+                    "{what} ({i},{j}): {fd} vs {}",
+                    adj[i][j]
+                );
             }
         }
     }
@@ -543,7 +545,11 @@ mod tests {
                 spatial_cross::<V> as fn(V, V) -> V,
                 adj_spatial_cross::<V> as fn(V, V, &mut V, &mut V, V),
             ),
-            ("cross_dual", spatial_cross_dual::<V>, adj_spatial_cross_dual::<V>),
+            (
+                "cross_dual",
+                spatial_cross_dual::<V>,
+                adj_spatial_cross_dual::<V>,
+            ),
         ] {
             let (mut aa, mut ab) = (V::ZERO, V::ZERO);
             adj(a, b, &mut aa, &mut ab, w);
@@ -558,7 +564,12 @@ mod tests {
         let (gt, gb) = (DVec3::new(0.2, -0.4, 0.9), DVec3::new(-1.0, 0.3, 0.6));
         adj_spatial_top(a, &mut aa, gt);
         adj_spatial_bottom(a, &mut aa, gb);
-        fd_vec(&|a| spatial_top(a).dot(gt) + spatial_bottom(a).dot(gb), a, aa, "top, bottom");
+        fd_vec(
+            &|a| spatial_top(a).dot(gt) + spatial_bottom(a).dot(gb),
+            a,
+            aa,
+            "top, bottom",
+        );
         let (mut aw, mut av) = (DVec3::ZERO, DVec3::ZERO);
         adj_spatial_vector(gt, gb, &mut aw, &mut av, w);
         assert_eq!((aw, av), (w.top(), w.bottom()));
@@ -578,20 +589,31 @@ mod tests {
                 DMat3::from_cols_array(&x)
             };
             let (rc, sc) = (r.to_cols_array(), s3.to_cols_array());
-            let fr = (msum(spatial_adjoint(d(rc, H), s3), gm) - msum(spatial_adjoint(d(rc, -H), s3), gm)) / (2.0 * H);
-            let fs = (msum(spatial_adjoint(r, d(sc, H)), gm) - msum(spatial_adjoint(r, d(sc, -H)), gm)) / (2.0 * H);
+            let fr = (msum(spatial_adjoint(d(rc, H), s3), gm)
+                - msum(spatial_adjoint(d(rc, -H), s3), gm))
+                / (2.0 * H);
+            let fs = (msum(spatial_adjoint(r, d(sc, H)), gm)
+                - msum(spatial_adjoint(r, d(sc, -H)), gm))
+                / (2.0 * H);
             assert!((fr - ar.to_cols_array()[k]).abs() < TOL, "adjoint r[{k}]");
             assert!((fs - as_.to_cols_array()[k]).abs() < TOL, "adjoint s[{k}]");
         }
         // transform_twist / transform_wrench, through the transform's seven lanes and x.
-        let t = DTransform::new(DVec3::new(0.4, -1.1, 0.7), DQuat::from_xyzw(0.3, -0.2, 0.5, 0.8));
+        let t = DTransform::new(
+            DVec3::new(0.4, -1.1, 0.7),
+            DQuat::from_xyzw(0.3, -0.2, 0.5, 0.8),
+        );
         for (name, f, adj) in [
             (
                 "twist",
                 transform_twist::<DTransform> as fn(DTransform, V) -> V,
                 adj_transform_twist::<DTransform> as fn(DTransform, V, &mut DTransform, &mut V, V),
             ),
-            ("wrench", transform_wrench::<DTransform>, adj_transform_wrench::<DTransform>),
+            (
+                "wrench",
+                transform_wrench::<DTransform>,
+                adj_transform_wrench::<DTransform>,
+            ),
         ] {
             let (mut at, mut ax) = (DTransform::adj_zero(), V::ZERO);
             adj(t, a, &mut at, &mut ax, w);

@@ -229,7 +229,10 @@ mod tests {
         let d = spatial_vector(DVec3::X, DVec3::Y);
         assert_eq!(spatial_bottom(d), DVec3::Y);
         // glam's outer and transpose still dispatch.
-        assert_eq!(outer(Vec3::X, Vec3::Y), Mat3::from_cols(Vec3::ZERO, Vec3::X, Vec3::ZERO));
+        assert_eq!(
+            outer(Vec3::X, Vec3::Y),
+            Mat3::from_cols(Vec3::ZERO, Vec3::X, Vec3::ZERO)
+        );
         assert_eq!(transpose(Mat3::IDENTITY), Mat3::IDENTITY);
     }
 }

@@ -42,8 +42,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     }
     // Spatial values likewise need wp_spatial.h (`transpose`, `outer` and the operators'
     // adjoints of spatial types are there).
-    if f
-        .vars
+    if f.vars
         .iter()
         .any(|v| matches!(v.ty, Ty::SpatialVector(_) | Ty::SpatialMatrix(_)))
     {

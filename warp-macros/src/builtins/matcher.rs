@@ -161,8 +161,14 @@ impl Builtin {
                 .map(|s| Ty::Vector(s, 3))
                 .unwrap_or(Ty::Deferred),
             Pos::XformOfT => scalar.scalar().map(Ty::Transform).unwrap_or(Ty::Deferred),
-            Pos::SVecOfT => scalar.scalar().map(Ty::SpatialVector).unwrap_or(Ty::Deferred),
-            Pos::SMatOfT => scalar.scalar().map(Ty::SpatialMatrix).unwrap_or(Ty::Deferred),
+            Pos::SVecOfT => scalar
+                .scalar()
+                .map(Ty::SpatialVector)
+                .unwrap_or(Ty::Deferred),
+            Pos::SMatOfT => scalar
+                .scalar()
+                .map(Ty::SpatialMatrix)
+                .unwrap_or(Ty::Deferred),
             Pos::Mat4OfT => scalar
                 .scalar()
                 .map(|s| Ty::Matrix(s, 4))

@@ -168,7 +168,9 @@ fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
     }
     // Likewise a spatial field (`wp::SpatialVector`, `wp::DSpatialMatrix`, ..) needs the
     // spatial section, whose adjoint part has the operators' adjoints.
-    if struct_defs.iter().any(|d| d.contains("SpatialVector") || d.contains("SpatialMatrix"))
+    if struct_defs
+        .iter()
+        .any(|d| d.contains("SpatialVector") || d.contains("SpatialMatrix"))
         && !sections.contains(&"spatial")
     {
         sections.push("spatial");

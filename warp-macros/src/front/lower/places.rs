@@ -333,7 +333,10 @@ pub(super) fn spatial_index(base: &Ty, index: &Expr) -> R<Option<Vec<String>>> {
         e => vec![e],
     };
     if elems.len() > parts {
-        return err(index.span(), "a spatial matrix takes two indices, `m[(i, j)]`");
+        return err(
+            index.span(),
+            "a spatial matrix takes two indices, `m[(i, j)]`",
+        );
     }
     let mut lanes = Vec::new();
     for e in elems {
