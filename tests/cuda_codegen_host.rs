@@ -196,6 +196,46 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = if t == t && t != u { 1.0 } else { 0.0 };
 }
 
+/// Spatial vectors and matrices: construction (`SpatialVector::new`, `spatial_vector` of two
+/// 3-vectors and of six scalars, `ZERO`, `IDENTITY`, `SpatialMatrix::from_rows`), literal
+/// indexing and lane, row and entry writes, the operators and products, every spatial builtin
+/// (`transpose`, `outer`, `spatial_adjoint`, `transform_twist`/`wrench` too), `==`.
+#[wp::kernel]
+fn spatial(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let u = SpatialVector::new(vec3(a, 0.5, -a), vec3(1.0, a * 0.25, 2.0));
+    let w = spatial_vector(0.3, a, -1.5, 0.75 * a, 2.0, -0.5);
+    let t = Transform::new(
+        vec3(a, 1.0, -0.5),
+        Quat::from_axis_angle(vec3(0.0, 0.6, 0.8), a),
+    );
+    let mut m = outer(u, w) + SpatialMatrix::IDENTITY * a;
+    m[(0, 5)] = a * 3.0;
+    m[2][1] -= 1.0;
+    m[4] = spatial_cross(u, w);
+    let r = quat_to_matrix(t.q);
+    let x6 = spatial_adjoint(r, skew(t.p) * r);
+    let n = SpatialMatrix::from_rows(w, u, w, SpatialVector::ZERO, u, w) * 0.5;
+    let p = (m * n) * u + transpose(m) * w - x6 * u / 2.0 + (-n.transpose()) * w;
+    let mut q = spatial_cross_dual(p, u) + transform_twist(t, u) - transform_wrench(t, w) * a;
+    q[1] += spatial_dot(u, w);
+    let top = spatial_top(q) + spatial_bottom(p);
+    let mut k = 0;
+    while k < 6 {
+        out[(i, k)] = 0.0;
+        k += 1;
+    }
+    out[(i, 0)] = q[0];
+    out[(i, 1)] = q[1];
+    out[(i, 2)] = q[2];
+    out[(i, 3)] = q[3] + top.x;
+    out[(i, 4)] = q[4] + top.y + m[(4, 2)];
+    out[(i, 5)] = q[5] + top.z + x6[3][1];
+    out[(i, 6)] = if u == u && u != w && m == m { 1.0 } else { 0.0 };
+    out[(i, 7)] = spatial_dot(2.0 * p, q);
+}
+
 /// The decompositions: tuple results destructured (with `_` and an annotation), inside a loop
 /// that overwrites them, and every output written out.
 #[wp::kernel]
@@ -921,6 +961,21 @@ fn transforms_match_the_cpu_backend() {
     let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
     let host = run_on_host::<transforms>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
     wp::launch(transforms, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+#[test]
+fn spatial_types_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..30).map(|k| k as f32 * 0.29 - 4.0).collect();
+    xs.extend([0.0, -0.0, 1.0, 3.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<spatial>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(spatial, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }

@@ -116,6 +116,7 @@ mod primitives;
 mod race;
 mod rng;
 mod scenes;
+mod spatial;
 mod stability;
 mod streams;
 mod structs;

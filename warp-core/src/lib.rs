@@ -25,6 +25,7 @@ pub mod meta;
 pub mod objects;
 pub mod ops;
 pub mod range;
+pub mod spatial;
 pub mod tile;
 pub mod transform;
 pub mod view;
@@ -39,6 +40,7 @@ pub use grid::Grid;
 pub use index::KernelIndex;
 pub use meta::{AssertSite, ConstLiteral, FuncInfo, StructDefs};
 pub use range::RangeProg;
+pub use spatial::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 pub use transform::{DTransform, Transform};
 pub use view::ArrayView;
 

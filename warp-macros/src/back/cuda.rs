@@ -40,6 +40,14 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     if f.vars.iter().any(|v| matches!(v.ty, Ty::Transform(_))) {
         e.section("transform");
     }
+    // Spatial values likewise need wp_spatial.h (`transpose`, `outer` and the operators'
+    // adjoints of spatial types are there).
+    if f.vars
+        .iter()
+        .any(|v| matches!(v.ty, Ty::SpatialVector(_) | Ty::SpatialMatrix(_)))
+    {
+        e.section("spatial");
+    }
     for v in &f.vars {
         if let Ty::Object(k) = v.ty {
             e.section(k.row().section);
@@ -97,9 +105,12 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
     Some(match t {
         Ty::Scalar(Scalar::Bool) => "bool".into(),
         Ty::Scalar(s) => format!("wp::{}", s.name()),
-        Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => {
-            format!("wp::{}", t.glam_name()?)
-        }
+        Ty::Vector(..)
+        | Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::Transform(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_) => format!("wp::{}", t.glam_name()?),
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::Struct(name) => name.clone(),
         // `wp::volume_t<T>`: the element a value type, or an index grid's `wp::VoxelIndex`.
@@ -509,6 +520,7 @@ impl<'a> Emitter<'a> {
             }
             StmtKind::SetMember { var, path, value } => {
                 let (v, val) = (self.var(*var), self.var(*value));
+                let path: Vec<String> = path.iter().map(|m| cpp_member(m)).collect();
                 self.line(sp, &format!("{v}.{} = {val};", path.join(".")));
             }
             StmtKind::If { cond, then, els } => {
@@ -821,6 +833,9 @@ impl<'a> Emitter<'a> {
                     }
                     (Ty::Matrix(..), Ctor::Components) => {
                         format!("wp::{name}_from_cols({})", args.join(", "))
+                    }
+                    (Ty::SpatialMatrix(_), Ctor::Components) => {
+                        format!("wp::{name}_from_rows({})", args.join(", "))
                     }
                     (Ty::Vector(..), Ctor::Splat) => {
                         format!("wp::{name}_splat({})", args.join(", "))

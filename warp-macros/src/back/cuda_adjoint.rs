@@ -513,7 +513,7 @@ impl<'a> Printer<'a> {
     fn grad(&self, g: &GradSrc) -> Result<String, String> {
         Ok(match g {
             GradSrc::Seed => "__r".into(),
-            GradSrc::SeedLane(l) => format!("__r.{l}"),
+            GradSrc::SeedLane(l) => format!("__r.{}", cpp_member(l)),
             GradSrc::LaneSum(lanes) => {
                 let ls: Vec<String> = lanes.iter().map(|l| format!("__r.{l}")).collect();
                 ls.join(" + ")

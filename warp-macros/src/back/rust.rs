@@ -101,7 +101,7 @@ impl<'a> RustEmitter<'a> {
             }
             StmtKind::SetMember { var, path, value } => {
                 let v = self.var(*var);
-                let path = path.iter().map(|m| format_ident!("{}", m));
+                let path = path.iter().map(|m| member_tokens(m));
                 let val = self.var(*value);
                 quote_spanned!(sp=> #v #(.#path)* = #val;)
             }
@@ -401,6 +401,7 @@ impl<'a> RustEmitter<'a> {
                     (Ty::Vector(..), Ctor::Components) => format_ident!("new"),
                     (Ty::Quat(_), Ctor::Components) => format_ident!("from_xyzw"),
                     (Ty::Matrix(..), Ctor::Components) => format_ident!("from_cols"),
+                    (Ty::SpatialMatrix(_), Ctor::Components) => format_ident!("from_rows"),
                     (Ty::Vector(..), Ctor::Splat) => format_ident!("splat"),
                     (Ty::Matrix(..), Ctor::Splat) => format_ident!("from_diagonal"),
                     (_, Ctor::Const(c)) => {
@@ -466,8 +467,8 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::glam::#id))
         }
-        // warp-core's transforms, re-exported next to glam.
-        Ty::Transform(_) => {
+        // warp-core's transforms and spatial types, re-exported next to glam.
+        Ty::Transform(_) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::#id))
         }

@@ -316,7 +316,7 @@ impl Printer<'_> {
         Ok(match g {
             GradSrc::Seed => quote!(__r),
             GradSrc::SeedLane(l) => {
-                let l = format_ident!("{}", l);
+                let l = member_tokens(l);
                 quote!(__r.#l)
             }
             GradSrc::LaneSum(lanes) => {

@@ -247,6 +247,8 @@ fn pos(p: &Pos) -> String {
         Pos::FixedVec(s, n) => Ty::Vector(*s, *n).to_string(),
         Pos::Vec3OfT => "Vec3(S)".into(),
         Pos::XformOfT => "Transform(S)".into(),
+        Pos::SVecOfT => "SpatialVector(S)".into(),
+        Pos::SMatOfT => "SpatialMatrix(S)".into(),
         Pos::Mat4OfT => "Mat4(S)".into(),
         Pos::Tuple(ps) => format!("({})", ps.iter().map(pos).collect::<Vec<_>>().join(", ")),
         Pos::Object(k) => k.row().name.into(),
@@ -295,6 +297,7 @@ fn spellings(b: &Builtin) -> Vec<String> {
             Ty::Quat(Scalar::F32),
             Ty::Matrix(Scalar::F32, 3),
             Ty::Transform(Scalar::F32),
+            Ty::SpatialVector(Scalar::F32),
         ]
         .into_iter()
         .find(|t| class.admits(t))

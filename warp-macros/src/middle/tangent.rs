@@ -44,7 +44,11 @@ const MAX_PARAMS: usize = 32;
 fn tangent_type(t: &Ty) -> bool {
     match t {
         Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
-        Ty::Matrix(..) | Ty::Quat(_) | Ty::Deferred => true,
+        Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_)
+        | Ty::Deferred => true,
         _ => false,
     }
 }
@@ -252,7 +256,7 @@ impl Tx {
         let ty = self.ty(like);
         Ok(match &ty {
             Ty::Scalar(_) => self.tmp(ty.clone(), Op::Lit(Lit::Float(0.0))),
-            Ty::Vector(..) | Ty::Matrix(..) => self.tmp(
+            Ty::Vector(..) | Ty::Matrix(..) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => self.tmp(
                 ty.clone(),
                 Op::Construct {
                     ty: ty.clone(),

@@ -174,7 +174,12 @@ impl Lowerer {
                     let ok = match &t {
                         Ty::Scalar(s) => s.is_float() || s.is_signed_int(),
                         Ty::Vector(s, _) => *s != Scalar::U32,
-                        Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) | Ty::Deferred => true,
+                        Ty::Matrix(..)
+                        | Ty::Quat(_)
+                        | Ty::Transform(_)
+                        | Ty::SpatialVector(_)
+                        | Ty::SpatialMatrix(_)
+                        | Ty::Deferred => true,
                         Ty::Tile(e, _) => {
                             matches!(**e, Ty::Scalar(s) if s.is_float() || s.is_signed_int())
                         }
@@ -299,7 +304,17 @@ impl Lowerer {
                         return self.tile_index(t, &ix.index, span);
                     }
                 }
-                let (array, index) = self.array_index(ix)?;
+                let base = self.expr(&ix.expr, None)?;
+                // `v[3]`, `m[i][j]`, `m[(i, j)]`: members of a spatial value.
+                if let Some(lanes) = super::places::spatial_index(&self.ty(base), &ix.index)? {
+                    let mut v = base;
+                    for m in lanes {
+                        let t = self.member_ty(&self.ty(v), &m, span)?;
+                        v = self.def(Op::Member(v, m), t, span);
+                    }
+                    return Ok(v);
+                }
+                let (array, index) = self.array_index_at(base, ix)?;
                 let t = match self.ty(array) {
                     Ty::Array(e, _) => *e,
                     _ => Ty::Deferred,
@@ -411,6 +426,8 @@ impl Lowerer {
                     Ty::Matrix(..) => ["ZERO", "IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Quat(_) => ["IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Transform(_) => name == "IDENTITY",
+                    Ty::SpatialVector(_) => name == "ZERO",
+                    Ty::SpatialMatrix(_) => ["ZERO", "IDENTITY"].contains(&name.as_str()),
                     _ => false,
                 };
                 if !known {

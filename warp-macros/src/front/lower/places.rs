@@ -103,6 +103,18 @@ impl Lowerer {
                 Ok(inner)
             }
             Expr::Index(ix) => {
+                // `v[3] = x`, `m[i][j] += x`: members of a spatial value in a place.
+                if let Some(bt) = self.peek_place_ty(&ix.expr) {
+                    if let Some(lanes) = spatial_index(&bt, &ix.index)? {
+                        let mut inner = self.place(&ix.expr)?;
+                        match &mut inner {
+                            Place::Local { path, .. } | Place::Elem { path, .. } => {
+                                path.extend(lanes)
+                            }
+                        }
+                        return Ok(inner);
+                    }
+                }
                 let (array, index) = self.array_index(ix)?;
                 Ok(Place::Elem {
                     array,
@@ -232,19 +244,49 @@ impl Lowerer {
         }
     }
 
+    /// The type of a place expression as far as locals, fields and indices show it, without
+    /// lowering anything (how `place` tells `v[3] = x` of a spatial value from an array store).
+    fn peek_place_ty(&self, e: &Expr) -> Option<Ty> {
+        match strip(e) {
+            Expr::Path(p) => Some(self.ty(self.lookup(&p.path.get_ident()?.to_string())?)),
+            Expr::Field(f) => match &f.member {
+                syn::Member::Named(m) => self.peek_place_ty(&f.base)?.member_ty(&m.to_string()),
+                syn::Member::Unnamed(_) => None,
+            },
+            Expr::Index(ix) => match self.peek_place_ty(&ix.expr)? {
+                Ty::Array(e, _) => Some(*e),
+                t => spatial_index(&t, &ix.index)
+                    .ok()??
+                    .iter()
+                    .try_fold(t, |t, m| t.member_ty(m)),
+            },
+            _ => None,
+        }
+    }
+
     /// `a[i]`, `a[(i, j)]`: the array variable and one index variable per dimension.
     pub(super) fn array_index(&mut self, ix: &syn::ExprIndex) -> R<(VarId, Vec<VarId>)> {
         let array = self.expr(&ix.expr, None)?;
+        self.array_index_at(array, ix)
+    }
+
+    /// [`Lowerer::array_index`] of the already lowered `array` (`ix.expr`).
+    pub(super) fn array_index_at(
+        &mut self,
+        array: VarId,
+        ix: &syn::ExprIndex,
+    ) -> R<(VarId, Vec<VarId>)> {
         let at = self.ty(array);
         let ndim = match &at {
             Ty::Array(_, n) => *n,
             Ty::Deferred => return err(ix.expr.span(), "only arrays can be indexed"),
-            t => {
+            t @ (Ty::Vector(..) | Ty::Quat(_)) => {
                 return err(
                     ix.expr.span(),
                     format!("`{t}` cannot be indexed: vectors use .x .y .z .w"),
                 )
             }
+            t => return err(ix.expr.span(), format!("`{t}` cannot be indexed")),
         };
         let index = self.index_vars(&ix.index, ndim)?;
         Ok(self.resolve_view(array, index, ix.span()))
@@ -273,4 +315,53 @@ impl Lowerer {
         }
         Ok(out)
     }
+}
+
+/// The members `base[index]` names where `base` is a spatial value: lane `k` of a spatial
+/// vector (`v[k]`: `["k"]`), row `i` of a spatial matrix (`m[i]`) or its entry (`m[(i, j)]`:
+/// `["i", "j"]`; `m[i][j]` is the row's lane). Indices are integer literals, checked here: a
+/// lane is a field of the type on both back ends, so no index is checked at run time. `None`
+/// for a base of another type.
+pub(super) fn spatial_index(base: &Ty, index: &Expr) -> R<Option<Vec<String>>> {
+    let (what, parts) = match base {
+        Ty::SpatialVector(_) => ("a spatial vector's lane", 1),
+        Ty::SpatialMatrix(_) => ("a spatial matrix's row", 2),
+        _ => return Ok(None),
+    };
+    let elems: Vec<&Expr> = match strip(index) {
+        Expr::Tuple(t) if parts == 2 => t.elems.iter().collect(),
+        e => vec![e],
+    };
+    if elems.len() > parts {
+        return err(
+            index.span(),
+            "a spatial matrix takes two indices, `m[(i, j)]`",
+        );
+    }
+    let mut lanes = Vec::new();
+    for e in elems {
+        let k = match strip(e) {
+            Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Int(i),
+                ..
+            }) => i.base10_parse::<u64>().ok(),
+            _ => None,
+        };
+        match k {
+            Some(k) if k < 6 => lanes.push(k.to_string()),
+            Some(k) => {
+                return err(
+                    e.span(),
+                    format!("index {k} is out of range: {what} is 0 to 5"),
+                )
+            }
+            None => {
+                return err(
+                    e.span(),
+                    format!("{what} is indexed by an integer literal, 0 to 5 (`v[3]`, `m[(1, 2)]`): a run-time index is not supported"),
+                )
+            }
+        }
+    }
+    Ok(Some(lanes))
 }

@@ -129,7 +129,7 @@ impl Lowerer {
             }
             return Ok(());
         }
-        let value = self.expr(&init.expr, annot.as_ref())?;
+        let mut value = self.expr(&init.expr, annot.as_ref())?;
         if let Some(a) = &annot {
             let vt = self.ty(value);
             if !vt.is_deferred() && vt != *a {
@@ -137,6 +137,12 @@ impl Lowerer {
                     init.expr.span(),
                     format!("mismatched types: expected `{a}`, found `{vt}`"),
                 );
+            }
+            // A value the macro cannot type (a struct field, a func's result) takes the
+            // annotation's type, which the target compilers check: `let v: SpatialVector =
+            // b.twist;` can then be indexed.
+            if vt.is_deferred() && !a.is_deferred() {
+                value = self.def(Op::Copy(value), a.clone(), init.expr.span());
             }
         }
         self.bind_pat(pat, value, span)
