@@ -107,6 +107,7 @@ mod host_objects;
 mod interop;
 mod jvp;
 mod launch;
+mod local_arrays;
 mod lbvh;
 mod mesh;
 mod misc;

@@ -54,9 +54,18 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             "references are not supported in kernels: pass arrays as Array<T> and values by value",
         )),
         Type::Ptr(_) => Err(syn::Error::new(ty.span(), "raw pointers are not supported in kernels")),
-        Type::Array(_) | Type::Slice(_) => Err(syn::Error::new(
+        // A local array (`[f32; 8]`): a value, in funcs' signatures and `let` annotations.
+        Type::Array(a) => {
+            let elem = parse_type(&a.elem)?;
+            if let Some(why) = local_array_elem_error(&elem) {
+                return Err(syn::Error::new(a.elem.span(), why));
+            }
+            let n = local_array_length(&a.len)?;
+            Ok(Ty::LocalArray(Box::new(elem), n))
+        }
+        Type::Slice(_) => Err(syn::Error::new(
             ty.span(),
-            "fixed-size arrays and slices are not supported in kernels: use Array<T>, a glam vector or a struct",
+            "slices are not supported in kernels: use Array<T>, or a local array `[T; N]`",
         )),
         Type::Tuple(t) if t.elems.is_empty() => Ok(Ty::Unit),
         Type::Tuple(_) => Err(syn::Error::new(ty.span(), "tuples are not supported as kernel types")),
@@ -200,6 +209,50 @@ pub fn tile_rank(dims: &[Dim], span: proc_macro2::Span) -> syn::Result<()> {
         return Err(syn::Error::new(span, "a tile dimension must be at least 1"));
     }
     Ok(())
+}
+
+/// Why a type cannot be a local array's element, if it cannot.
+pub fn local_array_elem_error(t: &Ty) -> Option<String> {
+    match t {
+        Ty::Scalar(_) | Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => None,
+        Ty::LocalArray(e, _) => local_array_elem_error(e),
+        Ty::Deferred => Some(
+            "the elements' type is not known here: annotate it (`let a: [f32; 2] = [f(x), f(y)];`)"
+                .into(),
+        ),
+        t => Some(format!(
+            "`{t}` cannot be a local array's element: scalars, vectors, matrices, quaternions, \
+             transforms and local arrays can"
+        )),
+    }
+}
+
+/// A local array's length as written (`[v; N]`, `[f32; N]`): an integer literal of at least 1,
+/// or a module const named by a SCREAMING_CASE path.
+pub fn local_array_length(e: &syn::Expr) -> syn::Result<Dim> {
+    let bad = || {
+        syn::Error::new(
+            e.span(),
+            "a local array's length must be an integer literal or a module const (`8`, `N`)",
+        )
+    };
+    match e {
+        syn::Expr::Lit(syn::ExprLit {
+            lit: syn::Lit::Int(i),
+            ..
+        }) => match i.base10_parse::<u32>() {
+            Ok(0) => Err(syn::Error::new(
+                e.span(),
+                "a local array holds at least one element",
+            )),
+            Ok(n) => Ok(Dim::Lit(n)),
+            Err(_) => Err(bad()),
+        },
+        syn::Expr::Path(p) if p.qself.is_none() => dim_of_path(&p.path).ok_or_else(bad),
+        syn::Expr::Paren(p) => local_array_length(&p.expr),
+        syn::Expr::Group(g) => local_array_length(&g.expr),
+        _ => Err(bad()),
+    }
 }
 
 /// A tile dimension as written in a type or a turbofish: an integer literal, or a module

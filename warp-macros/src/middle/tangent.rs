@@ -45,6 +45,8 @@ fn tangent_type(t: &Ty) -> bool {
     match t {
         Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
         Ty::Matrix(..) | Ty::Quat(_) | Ty::Deferred => true,
+        // A local array's tangent is a local array of its elements' tangents.
+        Ty::LocalArray(e, _) => !e.is_deferred() && tangent_type(e),
         _ => false,
     }
 }
@@ -165,7 +167,9 @@ fn activity(f: &Function) -> Vec<bool> {
                     }
                     (*dst, any)
                 }
-                StmtKind::SetMember { var, value, .. } => (*var, active[*value]),
+                StmtKind::SetMember { var, value, .. } | StmtKind::SetElem { var, value, .. } => {
+                    (*var, active[*value])
+                }
                 _ => return,
             };
             let t = &f.vars[dst].ty;
@@ -250,7 +254,17 @@ impl Tx {
     /// Zero of `like`'s type.
     fn zero(&mut self, like: VarId) -> Result<VarId, String> {
         let ty = self.ty(like);
+        self.zero_of(ty, like)
+    }
+
+    /// Zero of type `ty` (`like`: a value of that type, for a type the macro cannot see).
+    fn zero_of(&mut self, ty: Ty, like: VarId) -> Result<VarId, String> {
         Ok(match &ty {
+            Ty::LocalArray(e, _) => {
+                let z = self.zero_of((**e).clone(), like)?;
+                let (ctor, args) = (Ctor::Splat, vec![z]);
+                self.tmp(ty.clone(), Op::Construct { ty, ctor, args })
+            }
             Ty::Scalar(_) => self.tmp(ty.clone(), Op::Lit(Lit::Float(0.0))),
             Ty::Vector(..) | Ty::Matrix(..) => self.tmp(
                 ty.clone(),
@@ -379,6 +393,17 @@ impl Tx {
                     self.push(StmtKind::Store {
                         array: ta,
                         index: index.clone(),
+                        value: tv,
+                    });
+                }
+            }
+            StmtKind::SetElem { var, index, value } => {
+                self.out.push(s.clone());
+                if let Some(t) = self.dot[*var] {
+                    let tv = self.or_zero(self.dot[*value], *value)?;
+                    self.push(StmtKind::SetElem {
+                        var: t,
+                        index: *index,
                         value: tv,
                     });
                 }
@@ -537,6 +562,13 @@ impl Tx {
                     ))
                 }
                 None => None,
+            },
+            Op::Index { array, index } => match self.dot[*array] {
+                Some(ta) if tangent_type(&self.ty(d)) => {
+                    let (ty, index) = (self.ty(d), *index);
+                    Some(self.tmp(ty, Op::Index { array: ta, index }))
+                }
+                _ => None,
             },
             Op::Member(v, m) => match self.dot[*v] {
                 Some(t) if tangent_type(&self.ty(d)) => {

@@ -129,7 +129,7 @@ impl Lowerer {
             }
             return Ok(());
         }
-        let value = self.expr(&init.expr, annot.as_ref())?;
+        let mut value = self.expr(&init.expr, annot.as_ref())?;
         if let Some(a) = &annot {
             let vt = self.ty(value);
             if !vt.is_deferred() && vt != *a {
@@ -137,6 +137,11 @@ impl Lowerer {
                     init.expr.span(),
                     format!("mismatched types: expected `{a}`, found `{vt}`"),
                 );
+            }
+            // A func's local array result, typed by the annotation (which the target compiler
+            // checks), so that its elements can be read and written.
+            if vt.is_deferred() && matches!(a, Ty::LocalArray(..)) {
+                value = self.def(Op::Copy(value), a.clone(), init.expr.span());
             }
         }
         self.bind_pat(pat, value, span)

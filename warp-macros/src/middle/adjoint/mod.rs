@@ -93,7 +93,7 @@ fn differentiable(t: &Ty) -> bool {
         Ty::Matrix(..) | Ty::Quat(_) => true,
         // Objects and query states: indices and buffers, no gradient.
         Ty::Array(..) | Ty::Object(_) | Ty::Unit => false,
-        Ty::Tile(e, _) => differentiable(e),
+        Ty::Tile(e, _) | Ty::LocalArray(e, _) => differentiable(e),
         _ => true,
     }
 }
