@@ -9,7 +9,7 @@
 //! (`remove_cvref<decltype(..)>` of the same expression over variables declared before it,
 //! which `middle::adjoint` guarantees), or of its loop's end bound.
 
-use super::cuda::{cpp_member, cpp_type, Emitter};
+use super::cuda::{cpp_member, cpp_type, fill_lengths, Emitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
 use crate::types::Ty;
@@ -34,7 +34,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
     };
     let text = Printer::new(&adj, file).function()?;
     Ok(CudaAdjoint {
-        source: format!("{replay}{text}"),
+        source: fill_lengths(&adj.f, format!("{replay}{text}"))?,
         uses_stack: adj.uses_stack,
     })
 }
@@ -52,7 +52,7 @@ pub fn emit_custom(
     callees.clone_from(&adj.f.callees);
     let replay = func_replay(f, file)?;
     let text = Printer::new(&adj, file).function()?;
-    Ok(format!("{replay}{text}"))
+    fill_lengths(&adj.f, format!("{replay}{text}"))
 }
 
 /// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, printed by
