@@ -20,6 +20,7 @@ backend_tests!(
     gradient_against_finite_differences,
     gradient_through_overwrites_in_loops,
     jvp_matches_the_gradient,
+    adjoint_stack_holds_whole_arrays,
 );
 
 #[wp::kernel]
@@ -402,4 +403,60 @@ fn jvp_matches_the_gradient(dev: &wp::Device) {
             "jvp {jv}, gradient times tangent {want}"
         );
     }
+}
+
+#[wp::kernel]
+fn k_big(x: Array<f64>, y: Array<f64>) {
+    let i = tid();
+    let mut a = [0.0f64; 32];
+    for j in 0..32 {
+        a[j] = x[i] + j as f64;
+    }
+    for j in 0..32 {
+        a[(j + 1) % 32] += a[j] * 0.5;
+    }
+    y[i] = a[0];
+}
+
+/// Each element store in a loop pushes the whole array (here 256 bytes, 64 stores): a stack
+/// too small for that is an error naming the kernel and the line of the store that did not
+/// fit (the fill: 4096 bytes hold 15 of its pushes), never a wrong gradient; with room, the
+/// gradient is the recurrence's.
+fn adjoint_stack_holds_whole_arrays(dev: &wp::Device) {
+    let x = arr(&[0.5f64], dev).with_grad().unwrap();
+    let y = zeros::<f64, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_big, 1, (&x, &y), dev).unwrap();
+    }
+    tape.set_adstack_bytes(Some(4096)).unwrap();
+    y.grad().unwrap().fill(1.0).unwrap();
+    match tape.backward_from_grads() {
+        Err(wp::Error::Fault(f)) => {
+            assert_eq!(f.kernel, "k_big");
+            let src = include_str!("local_arrays.rs");
+            let store = src
+                .lines()
+                .position(|l| l.trim() == "a[j] = x[i] + j as f64;")
+                .unwrap() as u32
+                + 1;
+            assert!(
+                matches!(f.kind, FaultKind::AdStackOverflow { capacity: 4096, line } if line == store),
+                "{f:?}"
+            );
+        }
+        other => panic!("expected an adjoint stack fault, got {other:?}"),
+    }
+    x.zero_grad().unwrap();
+    tape.set_adstack_bytes(Some(1 << 16)).unwrap();
+    tape.backward_from_grads().unwrap();
+    // d/dx of every element of the fill is 1, and each store of the ring adds half of its
+    // predecessor's derivative: the same recurrence on the derivatives, in the same f64
+    // operations (sums of powers of two: exact on both backends).
+    let mut d = [1.0f64; 32];
+    for j in 0..32 {
+        d[(j + 1) % 32] += d[j] * 0.5;
+    }
+    assert_eq!(host(&x.grad().unwrap()), vec![d[0]]);
 }

@@ -462,6 +462,12 @@ impl Lowerer {
                             format!("a `{}` cannot be printed in kernels", k.row().name),
                         );
                     }
+                    if let t @ Ty::LocalArray(..) = self.ty(var) {
+                        return err(
+                            span,
+                            format!("a local array (`{t}`) cannot be printed in kernels: print its elements"),
+                        );
+                    }
                     if !text.is_empty() {
                         pieces.push(FmtPiece::Text(std::mem::take(&mut text)));
                     }
