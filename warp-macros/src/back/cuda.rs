@@ -1073,4 +1073,28 @@ mod tests {
         assert_eq!(float_lit(0.1, Scalar::BF16), "wp::bf16_from_bits(0x3dcd)");
         assert_eq!(int_lit(i32::MIN as i128, Scalar::I32), "(-2147483647 - 1)");
     }
+
+    #[test]
+    fn local_arrays_are_values_with_checked_elements() {
+        let item: syn::ItemFn = parse_quote! {
+            fn k(x: Array<f32>, n: Array<i32>) {
+                let i = tid();
+                let mut a = [0.0f32; N];
+                let b = [x[i], 2.0];
+                a[n[i]] = b[1];
+                x[i] = a[0] + a.len() as f32;
+            }
+        };
+        let f = crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap();
+        let src = emit(&f, "k.rs").unwrap().source;
+        // The const length is the const's value placeholder.
+        assert_eq!(f.consts.len(), 1);
+        assert!(src.contains("wp::local_array_t<wp::f32, @@K0@@>::splat("), "{src}");
+        assert!(!src.contains("@@LEN:"), "{src}");
+        assert!(src.contains("wp::local_array_t<wp::f32, 2>{{t"), "{src}");
+        // Element accesses name the user's line (the kernel's is 1 in a parsed test).
+        assert!(src.contains("wp::local_set(a_"), "{src}");
+        assert!(src.contains("wp::local_get(b_"), "{src}");
+        assert!(src.contains(", __ctx)"), "{src}");
+    }
 }

@@ -104,6 +104,12 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
             format!("`{elem}` cannot be an array element: pass each one as a parameter"),
         ));
     }
+    if let Ty::LocalArray(..) = elem {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("`{elem}` cannot be an array element: add a dimension to the array"),
+        ));
+    }
     let ndim = match it.next() {
         None => 1,
         Some(arg) => {
@@ -357,11 +363,18 @@ mod tests {
             parse_type(&parse_quote!(wp::Volume<wp::VoxelIndex>)).unwrap(),
             Ty::Object(ObjectKind::Volume(VolumeElem::Index))
         );
+        // Local arrays, nested, of a literal or a const length.
+        let t = parse_type(&parse_quote!([[Vec3; 2]; consts::N])).unwrap();
+        assert_eq!(t.to_string(), "[[Vec3; 2]; consts::N]");
         for bad in [
             quote::quote!(&f32),
             quote::quote!(String),
             quote::quote!(Vec<f32>),
-            quote::quote!([f32; 3]),
+            quote::quote!([f32]),
+            quote::quote!([f32; 0]),
+            quote::quote!([f32; n + 1]),
+            quote::quote!([HashGrid; 2]),
+            quote::quote!(Array<[f32; 2]>),
             quote::quote!(Array<f32, 5>),
             quote::quote!(Array<bool>),
             quote::quote!(Option<f32>),

@@ -991,4 +991,37 @@ mod tests {
         let why = build(&f).unwrap_err();
         assert!(why.contains("would take 34"), "{why}");
     }
+
+    #[test]
+    fn element_stores_get_tangent_element_stores() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f64>, y: Array<f64>) {
+                let i = tid();
+                let mut a = [0.0f64; 3];
+                for j in 0..3 {
+                    a[j] = x[i] * a[(j + 2) % 3] + x[i];
+                }
+                y[i] = a[1];
+            }
+        });
+        let g = build(&f).unwrap();
+        let a_dot = g
+            .vars
+            .iter()
+            .position(|v| v.name.as_deref() == Some("a_dot"))
+            .expect("the array has a tangent variable");
+        let (mut sets, mut reads) = (0, 0);
+        walk_stmts(&g.body, &mut |s| match &s.kind {
+            StmtKind::SetElem { var, .. } if *var == a_dot => sets += 1,
+            StmtKind::Assign {
+                op: Op::Index { array, .. },
+                ..
+            } if *array == a_dot => reads += 1,
+            _ => {}
+        });
+        // The store's, and the reads of `a[(j + 2) % 3]` and `a[1]`.
+        assert_eq!((sets, reads), (1, 2));
+        // The tangent of the constant `[0.0; 3]`: a repeat of zero.
+        assert_eq!(g.vars[a_dot].ty.to_string(), "[f64; 3]");
+    }
 }
