@@ -221,8 +221,9 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, local_array,
-        max_depth, objects, ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability, ConstLiteral, DTransform,
-        Fault, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg, Transform,
+        max_depth, objects, ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability,
+        ConstLiteral, DTransform, Fault, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg,
+        Transform,
     };
     pub use warp_macros::__object_rows;
     /// Whether `debug_assert!` is checked: the runtime's debug mode (`wp::config::debug`).

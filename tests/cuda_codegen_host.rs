@@ -1927,7 +1927,9 @@ fn local_arrays(x: Array<f32>, k: Array<i32>, out: Array<f32, 2>) {
 fn local_arrays_match_the_cpu_backend() {
     let dev = wp::cpu();
     let n = 9;
-    let xs: Vec<f32> = (0..37).map(|k| ((k * 7) % 11) as f32 * 0.75 - 3.0).collect();
+    let xs: Vec<f32> = (0..37)
+        .map(|k| ((k * 7) % 11) as f32 * 0.75 - 3.0)
+        .collect();
     let ks: Vec<i32> = (0..n).map(|k| (k * 13 + 4) % 17).collect();
     let x = wp::Array::from_slice(&xs, &dev).unwrap();
     let k = wp::Array::from_slice(&ks, &dev).unwrap();
@@ -1940,7 +1942,9 @@ fn local_arrays_match_the_cpu_backend() {
     assert_eq!(host, cpu_results(&args));
     // The sort ran: each row's first eight values ascend.
     let o = out.to_vec().unwrap();
-    assert!(o.chunks(11).all(|r| r[..8].windows(2).all(|w| w[0] <= w[1])));
+    assert!(o
+        .chunks(11)
+        .all(|r| r[..8].windows(2).all(|w| w[0] <= w[1])));
 }
 
 #[wp::kernel]
@@ -2150,7 +2154,10 @@ fn local_array_gradients_match_the_cpu_backend() {
         .map(|v| format!("{:08x}", v.to_bits()))
         .collect();
     assert_eq!(&host[2 * n..3 * n], &bits[..]);
-    assert!(bits.iter().all(|b| b != "00000000"), "no gradient reached x");
+    assert!(
+        bits.iter().all(|b| b != "00000000"),
+        "no gradient reached x"
+    );
 }
 
 /// The tangent kernel of `local_grads` (forward mode through the element stores and the func)

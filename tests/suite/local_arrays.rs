@@ -223,7 +223,10 @@ fn index_out_of_range_faults(dev: &wp::Device) {
     assert_eq!(f.kernel, "k_oob");
     // The line of `k_oob`'s read of `a`.
     let src = include_str!("local_arrays.rs");
-    let line = 1 + src.lines().position(|l| l.trim() == "out[i] = a[k[i]];").unwrap() as u32;
+    let line = 1 + src
+        .lines()
+        .position(|l| l.trim() == "out[i] = a[k[i]];")
+        .unwrap() as u32;
     assert_eq!(
         f.kind,
         FaultKind::LocalIndex {

@@ -107,7 +107,14 @@ mod tests {
         );
         // A negative index is shown as given, and nothing is written.
         let f = set(&mut a, -1i32, 0.0, "k", 4).unwrap_err();
-        assert!(matches!(f.kind, FaultKind::LocalIndex { index: -1, len: 3, line: 4 }));
+        assert!(matches!(
+            f.kind,
+            FaultKind::LocalIndex {
+                index: -1,
+                len: 3,
+                line: 4
+            }
+        ));
         assert_eq!(a, [5.0, 2.0, 3.0]);
     }
 

@@ -263,7 +263,10 @@ pub enum Op {
     Member(VarId, String),
     /// `a[index]` of a local array (`Ty::LocalArray`), checked against its length (a
     /// `LocalIndex` fault naming the line).
-    Index { array: VarId, index: VarId },
+    Index {
+        array: VarId,
+        index: VarId,
+    },
     Construct {
         ty: Ty,
         ctor: Ctor,

@@ -140,10 +140,15 @@ fn dim_cpp(n: &crate::types::Dim) -> String {
 pub(crate) fn fill_lengths(f: &Function, mut src: String) -> Result<String, String> {
     while let Some(at) = src.find("@@LEN:") {
         let rest = &src[at + 6..];
-        let end = rest.find("@@").ok_or("internal: an unterminated length placeholder")?;
+        let end = rest
+            .find("@@")
+            .ok_or("internal: an unterminated length placeholder")?;
         let want: syn::Path = syn::parse_str(&rest[..end]).map_err(|e| e.to_string())?;
         let k = f.consts.iter().position(|c| c == &want).ok_or_else(|| {
-            format!("internal: the length `{}` is not among the consts", &rest[..end])
+            format!(
+                "internal: the length `{}` is not among the consts",
+                &rest[..end]
+            )
         })?;
         src.replace_range(at..at + 6 + end + 2, &format!("@@K{k}@@"));
     }
@@ -1089,7 +1094,10 @@ mod tests {
         let src = emit(&f, "k.rs").unwrap().source;
         // The const length is the const's value placeholder.
         assert_eq!(f.consts.len(), 1);
-        assert!(src.contains("wp::local_array_t<wp::f32, @@K0@@>::splat("), "{src}");
+        assert!(
+            src.contains("wp::local_array_t<wp::f32, @@K0@@>::splat("),
+            "{src}"
+        );
         assert!(!src.contains("@@LEN:"), "{src}");
         assert!(src.contains("wp::local_array_t<wp::f32, 2>{{t"), "{src}");
         // Element accesses name the user's line (the kernel's is 1 in a parsed test).

@@ -120,7 +120,10 @@ impl Printer<'_> {
             AKind::SetElem { var, index, value } => {
                 let (var, index, value) = (*var, *index, *value);
                 let set = StmtKind::SetElem { var, index, value };
-                self.fwd.stmt_tokens(&Stmt { kind: set, span: sp })
+                self.fwd.stmt_tokens(&Stmt {
+                    kind: set,
+                    span: sp,
+                })
             }
             AKind::ClearAdjElem { var, index } => {
                 let e = self.adj_elem(*var, *index);

@@ -53,7 +53,10 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             ty.span(),
             "references are not supported in kernels: pass arrays as Array<T> and values by value",
         )),
-        Type::Ptr(_) => Err(syn::Error::new(ty.span(), "raw pointers are not supported in kernels")),
+        Type::Ptr(_) => Err(syn::Error::new(
+            ty.span(),
+            "raw pointers are not supported in kernels",
+        )),
         // A local array (`[f32; 8]`): a value, in funcs' signatures and `let` annotations.
         Type::Array(a) => {
             let elem = parse_type(&a.elem)?;
@@ -68,10 +71,16 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             "slices are not supported in kernels: use Array<T>, or a local array `[T; N]`",
         )),
         Type::Tuple(t) if t.elems.is_empty() => Ok(Ty::Unit),
-        Type::Tuple(_) => Err(syn::Error::new(ty.span(), "tuples are not supported as kernel types")),
+        Type::Tuple(_) => Err(syn::Error::new(
+            ty.span(),
+            "tuples are not supported as kernel types",
+        )),
         Type::Paren(p) => parse_type(&p.elem),
         Type::Group(g) => parse_type(&g.elem),
-        _ => Err(syn::Error::new(ty.span(), "this type is not supported in kernels")),
+        _ => Err(syn::Error::new(
+            ty.span(),
+            "this type is not supported in kernels",
+        )),
     }
 }
 

@@ -6,7 +6,9 @@
 
 use super::typing::flex_literal;
 use super::*;
-use crate::front::signature::{local_array_elem_error as bad_elem, local_array_length as length_of};
+use crate::front::signature::{
+    local_array_elem_error as bad_elem, local_array_length as length_of,
+};
 use crate::types::Dim;
 
 impl Lowerer {
@@ -42,9 +44,7 @@ impl Lowerer {
                 let c = self.user_const(&p, span);
                 self.def(Op::Cast(c, USIZE), USIZE, span)
             }
-            Ty::LocalArray(_, Dim::Lit(n)) => {
-                self.def(Op::Lit(Lit::Int(n as i128)), USIZE, span)
-            }
+            Ty::LocalArray(_, Dim::Lit(n)) => self.def(Op::Lit(Lit::Int(n as i128)), USIZE, span),
             _ => unreachable!("`local_len` of a local array"),
         }
     }
@@ -75,7 +75,9 @@ impl Lowerer {
                     Some(w) if !t.is_deferred() && !w.is_deferred() && t != *w => {
                         return err(
                             e.span(),
-                            format!("mismatched types: the array's elements are `{w}`, this is `{t}`"),
+                            format!(
+                                "mismatched types: the array's elements are `{w}`, this is `{t}`"
+                            ),
                         )
                     }
                     Some(w) if !w.is_deferred() => {}
@@ -88,11 +90,20 @@ impl Lowerer {
         if let Some(why) = bad_elem(&elem) {
             return err(span, why);
         }
-        let n = u32::try_from(args.len()).map_err(|_| syn::Error::new(span, "too many elements"))?;
+        let n =
+            u32::try_from(args.len()).map_err(|_| syn::Error::new(span, "too many elements"))?;
         let ty = Ty::LocalArray(Box::new(elem), Dim::Lit(n));
         let args = args.into_iter().map(|v| v.expect("lowered")).collect();
         let ctor = Ctor::Components;
-        Ok(self.def(Op::Construct { ty: ty.clone(), ctor, args }, ty, span))
+        Ok(self.def(
+            Op::Construct {
+                ty: ty.clone(),
+                ctor,
+                args,
+            },
+            ty,
+            span,
+        ))
     }
 
     /// `[v; N]`: Warp's `wp.zeros(N, dtype)` is `[0.0f32; N]`.
@@ -124,7 +135,15 @@ impl Lowerer {
         }
         let ty = Ty::LocalArray(Box::new(elem), n);
         let (ctor, args) = (Ctor::Splat, vec![v]);
-        Ok(self.def(Op::Construct { ty: ty.clone(), ctor, args }, ty, span))
+        Ok(self.def(
+            Op::Construct {
+                ty: ty.clone(),
+                ctor,
+                args,
+            },
+            ty,
+            span,
+        ))
     }
 
     /// The span of the first statement that makes a local array, if any.

@@ -357,7 +357,9 @@ impl Lowerer {
     fn local_array_place(&self, e: &Expr) -> bool {
         fn ty_of(cx: &Lowerer, e: &Expr) -> Option<Ty> {
             match strip(e) {
-                Expr::Path(p) => cx.lookup(&p.path.get_ident()?.to_string()).map(|v| cx.ty(v)),
+                Expr::Path(p) => cx
+                    .lookup(&p.path.get_ident()?.to_string())
+                    .map(|v| cx.ty(v)),
                 Expr::Index(ix) => match ty_of(cx, &ix.expr)? {
                     Ty::LocalArray(e, _) => Some(*e),
                     _ => None,

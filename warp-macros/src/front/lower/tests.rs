@@ -366,52 +366,93 @@ fn walk_find(f: &Function, p: impl Fn(&Op) -> bool) -> bool {
 fn local_array_misuse_is_refused_at_the_use() {
     let cases: [(syn::ItemFn, FnKind, &str); 10] = [
         (
-            parse_quote!(fn k() { let a = [1.0f32, 2.0f64]; }),
+            parse_quote!(
+                fn k() {
+                    let a = [1.0f32, 2.0f64];
+                }
+            ),
             FnKind::Kernel,
             "the array's elements are `f32`, this is `f64`",
         ),
         (
-            parse_quote!(fn k(n: usize) { let a = [0.0f32; n]; }),
+            parse_quote!(
+                fn k(n: usize) {
+                    let a = [0.0f32; n];
+                }
+            ),
             FnKind::Kernel,
             "must be an integer literal or a module const",
         ),
         (
-            parse_quote!(fn k() { let a = [0.0f32; 0]; }),
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 0];
+                }
+            ),
             FnKind::Kernel,
             "at least one element",
         ),
         (
-            parse_quote!(fn k(x: f32) { let a = [0.0f32; 2]; let y = a[x]; }),
+            parse_quote!(
+                fn k(x: f32) {
+                    let a = [0.0f32; 2];
+                    let y = a[x];
+                }
+            ),
             FnKind::Kernel,
             "array indices are integers, found `f32`",
         ),
         (
-            parse_quote!(fn k() { let a = [0.0f32; 2]; let y = a + 1.0; }),
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    let y = a + 1.0;
+                }
+            ),
             FnKind::Kernel,
             "[f32; 2]",
         ),
         (
-            parse_quote!(fn k() { let a = [0.0f32; 2]; let y: f32 = a; }),
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    let y: f32 = a;
+                }
+            ),
             FnKind::Kernel,
             "mismatched types: expected `f32`, found `[f32; 2]`",
         ),
         (
-            parse_quote!(fn k(a: [f32; 4]) {}),
+            parse_quote!(
+                fn k(a: [f32; 4]) {}
+            ),
             FnKind::Kernel,
             "a local array is not a kernel parameter",
         ),
         (
-            parse_quote!(fn k() { let a = [0.0f32; 2]; a[0] = 1.0; }),
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    a[0] = 1.0;
+                }
+            ),
             FnKind::Kernel,
             "immutable variable `a`",
         ),
         (
-            parse_quote!(fn k() { let a = [0.0f32; 2]; println!("{:?}", a); }),
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    println!("{:?}", a);
+                }
+            ),
             FnKind::Kernel,
             "cannot be printed",
         ),
         (
-            parse_quote!(fn f(a: [Array<f32>; 2]) {}),
+            parse_quote!(
+                fn f(a: [Array<f32>; 2]) {}
+            ),
             FnKind::Func,
             "cannot be a local array's element",
         ),

@@ -178,9 +178,7 @@ pub(super) fn overwritten_vars(f: &Function) -> Vec<bool> {
         for s in b {
             match &s.kind {
                 StmtKind::Assign { dst, .. } if in_loop => out[*dst] = true,
-                StmtKind::SetMember { var, .. } | StmtKind::SetElem { var, .. } => {
-                    out[*var] = true
-                }
+                StmtKind::SetMember { var, .. } | StmtKind::SetElem { var, .. } => out[*var] = true,
                 StmtKind::If { then, els, .. } => {
                     walk(then, in_loop, out);
                     walk(els, in_loop, out);

@@ -297,7 +297,13 @@ impl Cx<'_> {
                 if self.diff(*array) {
                     let (var, index) = (*array, *index);
                     let to = AdjOf::Elem { var, index };
-                    out.push(at(AKind::Accum { to, from: GradSrc::Seed }, sp));
+                    out.push(at(
+                        AKind::Accum {
+                            to,
+                            from: GradSrc::Seed,
+                        },
+                        sp,
+                    ));
                 }
             }
             // A local array's literal: element k of the seed to the k-th value; a repeat: the

@@ -330,18 +330,44 @@ fn local_array_element_stores_overwrite_the_array() {
     let count = |p: &dyn Fn(&AKind) -> bool| stmts.iter().filter(|s| p(&s.kind)).count();
     // Its definition (a `mut` variable) and the store in the loop each push it once; the
     // reverse pops it as often.
-    assert_eq!(count(&|k| matches!(k, AKind::Push { var, .. } if *var == arr)), 2);
-    assert_eq!(count(&|k| matches!(k, AKind::Pop { var } if *var == arr)), 2);
+    assert_eq!(
+        count(&|k| matches!(k, AKind::Push { var, .. } if *var == arr)),
+        2
+    );
+    assert_eq!(
+        count(&|k| matches!(k, AKind::Pop { var } if *var == arr)),
+        2
+    );
     assert_eq!(
         count(&|k| matches!(k, AKind::Seed(GradSrc::AdjElem { var, .. }) if *var == arr)),
         1
     );
-    assert_eq!(count(&|k| matches!(k, AKind::ClearAdjElem { var, .. } if *var == arr)), 1);
+    assert_eq!(
+        count(&|k| matches!(k, AKind::ClearAdjElem { var, .. } if *var == arr)),
+        1
+    );
     // Reads of `a` and `b` at an index: into the element's adjoint.
-    let elem_accums = count(&|k| matches!(k, AKind::Accum { to: AdjOf::Elem { .. }, .. }));
+    let elem_accums = count(&|k| {
+        matches!(
+            k,
+            AKind::Accum {
+                to: AdjOf::Elem { .. },
+                ..
+            }
+        )
+    });
     assert_eq!(elem_accums, 3);
     // `[t; 3]`: the sum of the adjoint's elements into `t`.
-    assert_eq!(count(&|k| matches!(k, AKind::Accum { from: GradSrc::ElemSum, .. })), 1);
+    assert_eq!(
+        count(&|k| matches!(
+            k,
+            AKind::Accum {
+                from: GradSrc::ElemSum,
+                ..
+            }
+        )),
+        1
+    );
     let lanes: Vec<usize> = stmts
         .iter()
         .filter_map(|s| match &s.kind {
