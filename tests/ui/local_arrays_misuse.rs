@@ -27,4 +27,10 @@ fn empty(s: f32) -> f32 {
     s
 }
 
+#[derive(Clone, Copy, wp::Struct)]
+#[repr(C)]
+struct WithArray {
+    values: [f32; 4],
+}
+
 fn main() {}

@@ -1030,6 +1030,12 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
                 t.span(),
                 "arrays cannot be struct fields yet: pass them as kernel parameters",
             ));
+        } else if let Ok(crate::types::Ty::LocalArray(..)) = crate::front::signature::parse_type(t)
+        {
+            errors.push(syn::Error::new(
+                t.span(),
+                "local arrays cannot be struct fields yet: use vector or scalar fields",
+            ));
         } else if let Ok(crate::types::Ty::Object(k)) = crate::front::signature::parse_type(t) {
             errors.push(syn::Error::new(
                 t.span(),
