@@ -16,6 +16,7 @@ backend_tests!(
     insertion_sort_of_eight,
     funcs_take_and_return_arrays,
     const_length,
+    generic_kernel,
     index_out_of_range_faults,
     gradient_against_finite_differences,
     gradient_through_overwrites_in_loops,
@@ -203,6 +204,25 @@ fn const_length(dev: &wp::Device) {
     let out = zeros::<u32, 1>(3, dev);
     wp::launch(k_const_len, 3, (&out,), dev).unwrap();
     assert_eq!(host(&out), vec![5 + 6, 15 + 6, 25 + 6]);
+}
+
+#[wp::kernel]
+fn k_generic<T: Float>(x: Array<T>, out: Array<T>) {
+    let i = tid();
+    let mut a = [x[i]; 3];
+    a[1] = a[0] * 2.0;
+    let b: [T; 2] = [a[1], a[2]];
+    out[i] = a[0] + b[0] * b[1];
+}
+
+/// One generic kernel, both instances: `[x; 3]` and `[T; 2]` take the instance's float.
+fn generic_kernel(dev: &wp::Device) {
+    let out = zeros::<f32, 1>(2, dev);
+    wp::launch(k_generic, 2, (&arr(&[1.0f32, 3.0], dev), &out), dev).unwrap();
+    assert_eq!(host(&out), vec![1.0 + 2.0, 3.0 + 18.0]);
+    let out = zeros::<f64, 1>(2, dev);
+    wp::launch(k_generic, 2, (&arr(&[0.5f64, -2.0], dev), &out), dev).unwrap();
+    assert_eq!(host(&out), vec![0.5 + 0.5, -2.0 + 8.0]);
 }
 
 #[wp::kernel]

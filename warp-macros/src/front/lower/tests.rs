@@ -364,7 +364,7 @@ fn walk_find(f: &Function, p: impl Fn(&Op) -> bool) -> bool {
 
 #[test]
 fn local_array_misuse_is_refused_at_the_use() {
-    let cases: [(syn::ItemFn, FnKind, &str); 10] = [
+    let cases: [(syn::ItemFn, FnKind, &str); 11] = [
         (
             parse_quote!(
                 fn k() {
@@ -455,6 +455,16 @@ fn local_array_misuse_is_refused_at_the_use() {
             ),
             FnKind::Func,
             "cannot be a local array's element",
+        ),
+        (
+            parse_quote!(
+                fn k(x: Array<f32>) {
+                    let t: Tile<f32, 8> = tile_zeros();
+                    let a = [1.0f32; 2];
+                }
+            ),
+            FnKind::Kernel,
+            "local arrays are not supported in tiled kernels yet",
         ),
     ];
     for (item, kind, want) in cases {
