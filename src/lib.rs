@@ -225,10 +225,10 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, max_depth, objects,
-        ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability, ConstLiteral,
-        DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo, GradElement, GradView, Grid,
-        KResult, RangeProg, SpatialMatrix, SpatialVector, Transform,
+        adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, local_array,
+        max_depth, objects, ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability,
+        ConstLiteral, DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo, GradElement,
+        GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector, Transform,
     };
     pub use warp_macros::__object_rows;
     /// Whether `debug_assert!` is checked: the runtime's debug mode (`wp::config::debug`).

@@ -108,6 +108,7 @@ mod interop;
 mod jvp;
 mod launch;
 mod lbvh;
+mod local_arrays;
 mod mesh;
 mod misc;
 mod optim;

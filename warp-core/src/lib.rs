@@ -21,6 +21,7 @@ pub mod float16;
 pub mod grad;
 pub mod grid;
 pub mod index;
+pub mod local_array;
 pub mod meta;
 pub mod objects;
 pub mod ops;

@@ -542,6 +542,7 @@ enum fault_kind : i32 {
   FAULT_TILE_INDEX = 6,
   FAULT_NON_FINITE_INPUT = 7,
   FAULT_ASSERTION = 8,
+  FAULT_LOCAL_INDEX = 9,
 };
 
 /// The first fault of the launches that share a record, filled by the first faulting thread
@@ -561,8 +562,10 @@ enum fault_kind : i32 {
 /// bit patterns, shape all 0. Assertion (a failed `assert!`, `debug_assert!` or `expect_*`,
 /// warp_core::FaultKind::AssertionFailed): ndim 3, index[0] the source line, index[1] the
 /// column (the host finds the message by both in the `asserts` tables of the kernel and its
-/// callees), index[2] the thread's flat launch index (-1 in a func), shape all 0. Unused
-/// entries are 0.
+/// callees), index[2] the thread's flat launch index (-1 in a func), shape all 0. LocalIndex
+/// (an index outside a fixed-size local array, warp_core::FaultKind::LocalIndex): ndim 3,
+/// index[0] the index, index[1] the array's length, index[2] the source line, shape all 0.
+/// Unused entries are 0.
 struct fault_t {
   i32 kind;
   i32 arg;
@@ -1849,6 +1852,67 @@ WP_FN bool covers(const array_t<T, N>& a, const i64* dims) {
   for (int k = 0; k < N; ++k)
     if (a.shape[k] < dims[k]) return false;
   return true;
+}
+
+// ------------------------------------------------------------------------------------------
+// Local arrays (warp_core::local_array): `[T; N]` in a kernel or func
+// ------------------------------------------------------------------------------------------
+
+/// A fixed-size local array: a value, copied, passed and returned whole as Rust's `[T; N]`
+/// is (a C array in a struct, so that it can be). `local_array_t<T, N>{}` is all zeros.
+template <typename T, int N>
+struct local_array_t {
+  static_assert(N > 0, "a local array holds at least one element");
+  T data[N];
+  /// `[v; N]`.
+  static WP_FN local_array_t splat(const T& v) {
+    local_array_t a;
+    for (int i = 0; i < N; ++i) a.data[i] = v;
+    return a;
+  }
+};
+
+namespace detail {
+template <typename T>
+struct is_local_array {
+  static constexpr bool value = false;
+};
+template <typename T, int N>
+struct is_local_array<local_array_t<T, N>> {
+  static constexpr bool value = true;
+  typedef T elem;
+};
+/// The fault of an index outside `0..n` at `line` (FAULT_LOCAL_INDEX, see fault_t).
+WP_FN void local_index_fault(i64 i, i64 n, i64 line, ctx_t* ctx) {
+  const i64 at[3] = {i, n, line};
+  raise(ctx, FAULT_LOCAL_INDEX, -1, 3, at, nullptr);
+}
+}  // namespace detail
+
+/// `a[i]` (warp_core::local_array::get): an index outside `0..N` (negative ones compare as
+/// huge) records LocalIndex with the source line and gives T{}.
+template <typename T, int N>
+WP_FN T local_get(const local_array_t<T, N>& a, i64 i, i64 line, ctx_t* ctx) {
+  if ((u64)i < (u64)N) return a.data[i];
+  detail::local_index_fault(i, N, line, ctx);
+  return T{};
+}
+/// `a[i] = v` (warp_core::local_array::set): outside `0..N`, LocalIndex and nothing written.
+template <typename T, int N>
+WP_FN void local_set(local_array_t<T, N>& a, i64 i, const typename identity<T>::type& v, i64 line,
+                     ctx_t* ctx) {
+  if ((u64)i < (u64)N) {
+    a.data[i] = v;
+    return;
+  }
+  detail::local_index_fault(i, N, line, ctx);
+}
+/// The element of an adjoint at an index the replay checked (warp_core::local_array::at_mut):
+/// element 0 for any other index, which a faulting thread (it goes on) may reach, so that the
+/// access stays in bounds.
+template <typename T, int N>
+WP_FN T& local_at(local_array_t<T, N>& a, i64 i) {
+  return a.data[(u64)i < (u64)N ? i : 0];
 }
 
 // ------------------------------------------------------------------------------------------

@@ -359,6 +359,10 @@ pub enum Ty {
     SpatialMatrix(Scalar),
     /// `Array<T, N>`.
     Array(Box<Ty>, u8),
+    /// A fixed-size local array (`[f32; 8]`, `[Vec3; N]`): a value (copied, passed and
+    /// returned whole), its element and its length (a literal, or a module-level `const`).
+    /// Elements are read and written at dynamic indices, checked against the length.
+    LocalArray(Box<Ty>, Dim),
     /// A user struct (made kernel-ready by the derive), by its last path segment.
     Struct(String),
     /// The tuple `tid()` returns for 2-D to 4-D launches.
@@ -467,6 +471,14 @@ impl Ty {
         matches!(self, Ty::Tile(..))
     }
 
+    /// A fixed-size local array's element type and length.
+    pub fn local_array(&self) -> Option<(&Ty, &Dim)> {
+        match self {
+            Ty::LocalArray(e, n) => Some((e, n)),
+            _ => None,
+        }
+    }
+
     pub fn is_int_scalar(&self) -> bool {
         matches!(self, Ty::Scalar(s) if s.is_int())
     }
@@ -570,6 +582,7 @@ impl fmt::Display for Ty {
             | Ty::SpatialMatrix(_) => f.write_str(&self.glam_name().unwrap_or_else(|| "?".into())),
             Ty::Array(t, 1) => write!(f, "Array<{t}>"),
             Ty::Array(t, n) => write!(f, "Array<{t}, {n}>"),
+            Ty::LocalArray(t, n) => write!(f, "[{t}; {n}]"),
             Ty::Struct(name) => f.write_str(name),
             Ty::TidTuple(n) => write!(f, "({})", vec!["usize"; *n as usize].join(", ")),
             Ty::Tuple(ts) => {

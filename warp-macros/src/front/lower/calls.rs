@@ -437,6 +437,9 @@ impl Lowerer {
             if matches!(self.ty(a), Ty::Array(..)) {
                 return Ok(self.def(Op::Len(a), USIZE, span));
             }
+            if matches!(self.ty(a), Ty::LocalArray(..)) {
+                return Ok(self.local_len(a, span));
+            }
             return err(
                 m.method.span(),
                 format!("`len()` is defined on arrays, not on `{}`", self.ty(a)),

@@ -259,7 +259,7 @@ impl Lowerer {
                 };
                 let base = self.expr(&f.base, None)?;
                 let bt = self.ty(base);
-                if matches!(bt, Ty::Array(..)) {
+                if matches!(bt, Ty::Array(..) | Ty::LocalArray(..)) {
                     return err(span, "arrays have no fields: index them, `a[i]`");
                 }
                 let t = self.member_ty(&bt, &name.to_string(), name.span())?;
@@ -314,7 +314,13 @@ impl Lowerer {
                     }
                     return Ok(v);
                 }
-                let (array, index) = self.array_index_at(base, ix)?;
+                let (array, index) = match self.array_index_at(base, ix)? {
+                    places::Indexed::View(array, index) => (array, index),
+                    places::Indexed::Local(array, index) => {
+                        let elem = self.local_elem_ty(array);
+                        return Ok(self.def(Op::Index { array, index }, elem, span));
+                    }
+                };
                 let t = match self.ty(array) {
                     Ty::Array(e, _) => *e,
                     _ => Ty::Deferred,
@@ -338,10 +344,8 @@ impl Lowerer {
                 span,
                 "references are not supported in kernels: pass values and arrays directly",
             ),
-            Expr::Array(_) | Expr::Repeat(_) => err(
-                span,
-                "fixed-size arrays are not supported in kernels: use a glam vector or Array<T>",
-            ),
+            Expr::Array(a) => self.array_literal(a, want, span),
+            Expr::Repeat(r) => self.array_repeat(r, want, span),
             Expr::Tuple(_) => err(
                 span,
                 "tuples are not supported in kernels (except array indices a[(i, j)])",
@@ -455,10 +459,8 @@ impl Lowerer {
 
     /// A module-level `const` (Warp's `wp.constant`): its value on the CPU is the const
     /// itself; the CUDA source gets it at assembly. Its type is the const's (`Deferred` here).
-    fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
-        if !self.consts.contains(path) {
-            self.consts.push(path.clone());
-        }
+    pub(super) fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
+        self.note_const(path);
         self.def(Op::Const(path.clone()), Ty::Deferred, span)
     }
 }

@@ -138,9 +138,10 @@ impl Lowerer {
                     format!("mismatched types: expected `{a}`, found `{vt}`"),
                 );
             }
-            // A value the macro cannot type (a struct field, a func's result) takes the
-            // annotation's type, which the target compilers check: `let v: SpatialVector =
-            // b.twist;` can then be indexed.
+            // A value the macro cannot type (a struct field, a func's result: a local array, a
+            // spatial vector) takes the annotation's type, which the target compilers check, so
+            // that `let v: SpatialVector = b.twist;` can be indexed and the elements of
+            // `let b: [f32; 8] = f(a);` read and written.
             if vt.is_deferred() && !a.is_deferred() {
                 value = self.def(Op::Copy(value), a.clone(), init.expr.span());
             }
@@ -461,6 +462,12 @@ impl Lowerer {
                         return err(
                             span,
                             format!("a `{}` cannot be printed in kernels", k.row().name),
+                        );
+                    }
+                    if let t @ Ty::LocalArray(..) = self.ty(var) {
+                        return err(
+                            span,
+                            format!("a local array (`{t}`) cannot be printed in kernels: print its elements"),
                         );
                     }
                     if !text.is_empty() {
