@@ -2,7 +2,8 @@
 //! and summing, reads and writes at dynamic indices (elements, their members, nested arrays),
 //! an insertion sort, funcs taking and returning arrays, a length that names a const, the
 //! fault of an index outside the array, and derivatives through them (reverse mode against
-//! central differences, through overwrites in loops; forward mode against reverse mode).
+//! central differences, through overwrites in loops; forward mode against reverse mode);
+//! arrays of spatial vectors and matrices, their elements' lanes read and written.
 
 use crate::{arr, host, zeros};
 use warp_lang as wp;
@@ -22,6 +23,7 @@ backend_tests!(
     gradient_through_overwrites_in_loops,
     jvp_matches_the_gradient,
     adjoint_stack_holds_whole_arrays,
+    spatial_elements,
 );
 
 #[wp::kernel]
@@ -482,4 +484,99 @@ fn adjoint_stack_holds_whole_arrays(dev: &wp::Device) {
         d[(j + 1) % 32] += d[j] * 0.5;
     }
     assert_eq!(host(&x.grad().unwrap()), vec![d[0]]);
+}
+
+// ---- arrays of spatial vectors and matrices ----
+
+/// Elements at dynamic indices, their lanes by literal index (`a[j][3] *= t`, `m[1][(2, 3)]`,
+/// `m[0][4][5]`), whole elements into spatial products: reads and writes through both the
+/// element step and the lane members.
+#[wp::kernel]
+fn k_spatial_elems(x: Array<f64>, y: Array<f64>) {
+    let i = tid();
+    let t = x[i];
+    let mut a = [DSpatialVector::ZERO; 4];
+    for j in 0..4 {
+        // Lane by lane (the six-scalar `spatial_vector` has no forward-mode rule yet).
+        let mut e = DSpatialVector::ZERO;
+        e[0] = t;
+        e[1] = t * t;
+        e[2] = 1.0;
+        e[3] = t.sin();
+        e[4] = j as f64;
+        e[5] = t * (j as f64);
+        a[j] = e;
+        a[j][3] *= t;
+    }
+    let k = (i + 1) % 4;
+    a[k][0] += t * 3.0;
+    let mut m = [DSpatialMatrix::IDENTITY; 2];
+    m[1][(2, 3)] = t;
+    m[0][4][5] = a[k][1];
+    let r = m[k % 2] * a[k];
+    let mut s = 0.0f64;
+    for j in 0..4 {
+        s += spatial_dot(a[j], r) * a[j][3];
+    }
+    y[i] = s + m[1][(2, 3)] * m[0][(4, 5)];
+}
+
+/// The closed form of `k_spatial_elems` for thread `i`, with warp-core's host types.
+fn spatial_elems(i: usize, t: f64) -> f64 {
+    let mut a = [DSpatialVector::ZERO; 4];
+    for (j, e) in a.iter_mut().enumerate() {
+        let j = j as f64;
+        *e = DSpatialVector::from_array([t, t * t, 1.0, t.sin(), j, t * j]);
+        e[3] *= t;
+    }
+    let k = (i + 1) % 4;
+    a[k][0] += t * 3.0;
+    let mut m = [DSpatialMatrix::IDENTITY; 2];
+    m[1][(2, 3)] = t;
+    m[0][(4, 5)] = a[k][1];
+    let r = m[k % 2] * a[k];
+    let s: f64 = a.iter().map(|e| e.dot(r) * e[3]).sum();
+    s + m[1][(2, 3)] * m[0][(4, 5)]
+}
+
+/// Values against the closed form, the gradient against central differences (the tolerances
+/// of [`assert_matches_fd`]) and forward mode against the gradient (1e-12 relative, as in
+/// `jvp_matches_the_gradient`).
+fn spatial_elements(dev: &wp::Device) {
+    let xs = [0.3f64, -0.8, 1.1, 0.6];
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let y = zeros::<f64, 1>(4, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_spatial_elems, 4, (&x, &y), dev).unwrap();
+    }
+    // Each element store pushes its whole array (`a`: 192 bytes, eight stores in the loop;
+    // `m`: 576 bytes, three stores): more than the default 4096 bytes a thread.
+    tape.set_adstack_bytes(Some(16384)).unwrap();
+    for (i, (t, v)) in xs.iter().zip(host(&y)).enumerate() {
+        // The same f64 operations on the CPU; FMA contraction on CUDA.
+        let want = spatial_elems(i, *t);
+        assert!(
+            (v - want).abs() <= 1e-13 * want.abs().max(1.0),
+            "{v} vs {want}"
+        );
+    }
+    y.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    let g = host(&x.grad().unwrap());
+    for (i, (&t, &g)) in xs.iter().zip(&g).enumerate() {
+        assert_matches_fd(|t| spatial_elems(i, t), &[t], &[g], "k_spatial_elems");
+    }
+    let vs = [1.0f64, 2.0, -0.5, 0.25];
+    let (v, y_dot) = (arr(&vs, dev), zeros::<f64, 1>(4, dev));
+    let y2 = zeros::<f64, 1>(4, dev);
+    wp::jvp(k_spatial_elems, 4, (&arr(&xs, dev), &y2), (&v, &y_dot), dev).unwrap();
+    for ((jv, g), v) in host(&y_dot).iter().zip(&g).zip(&vs) {
+        let want = g * v;
+        assert!(
+            (jv - want).abs() <= 1e-12 * want.abs().max(1.0),
+            "jvp {jv}, gradient times tangent {want}"
+        );
+    }
 }

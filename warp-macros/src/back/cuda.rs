@@ -37,14 +37,24 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     // Transform values need wp_transform.h even where no transform builtin is called (`inverse`
     // and `lerp` are in other sections); an object's type needs its section even in a kernel
     // that only passes it on to a func.
-    if f.vars.iter().any(|v| matches!(v.ty, Ty::Transform(_))) {
+    // A local array's elements count as values of their type (`[SpatialVector; 4]`).
+    let leaf = |mut t: &Ty| {
+        while let Ty::LocalArray(e, _) = t {
+            t = e;
+        }
+        t.clone()
+    };
+    if f.vars
+        .iter()
+        .any(|v| matches!(leaf(&v.ty), Ty::Transform(_)))
+    {
         e.section("transform");
     }
     // Spatial values likewise need wp_spatial.h (`transpose`, `outer` and the operators'
     // adjoints of spatial types are there).
     if f.vars
         .iter()
-        .any(|v| matches!(v.ty, Ty::SpatialVector(_) | Ty::SpatialMatrix(_)))
+        .any(|v| matches!(leaf(&v.ty), Ty::SpatialVector(_) | Ty::SpatialMatrix(_)))
     {
         e.section("spatial");
     }

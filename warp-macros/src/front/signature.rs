@@ -229,7 +229,15 @@ pub fn tile_rank(dims: &[Dim], span: proc_macro2::Span) -> syn::Result<()> {
 /// Why a type cannot be a local array's element, if it cannot.
 pub fn local_array_elem_error(t: &Ty) -> Option<String> {
     match t {
-        Ty::Scalar(_) | Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => None,
+        // Plain `Copy` structs on both back ends (glam's and warp-core's types, wp_core.h's),
+        // with a zero and an adjoint: a Rust array and `wp::local_array_t` hold them as they are.
+        Ty::Scalar(_)
+        | Ty::Vector(..)
+        | Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::Transform(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_) => None,
         Ty::LocalArray(e, _) => local_array_elem_error(e),
         Ty::Deferred => Some(
             "the elements' type is not known here: annotate it (`let a: [f32; 2] = [f(x), f(y)];`)"
@@ -237,7 +245,7 @@ pub fn local_array_elem_error(t: &Ty) -> Option<String> {
         ),
         t => Some(format!(
             "`{t}` cannot be a local array's element: scalars, vectors, matrices, quaternions, \
-             transforms and local arrays can"
+             transforms, spatial vectors and matrices, and local arrays can"
         )),
     }
 }
