@@ -199,7 +199,8 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
 /// Spatial vectors and matrices: construction (`SpatialVector::new`, `spatial_vector` of two
 /// 3-vectors and of six scalars, `ZERO`, `IDENTITY`, `SpatialMatrix::from_rows`), literal
 /// indexing and lane, row and entry writes, the operators and products, every spatial builtin
-/// (`transpose`, `outer`, `spatial_adjoint`, `transform_twist`/`wrench` too), `==`.
+/// (`transpose`, `outer`, `spatial_adjoint`, `transform_twist`/`wrench` too), `==`, and local
+/// arrays of spatial vectors and matrices.
 #[wp::kernel]
 fn spatial(x: Array<f32>, out: Array<f32, 2>) {
     let i = tid();
@@ -221,6 +222,15 @@ fn spatial(x: Array<f32>, out: Array<f32, 2>) {
     let mut q = spatial_cross_dual(p, u) + transform_twist(t, u) - transform_wrench(t, w) * a;
     q[1] += spatial_dot(u, w);
     let top = spatial_top(q) + spatial_bottom(p);
+    // Local arrays of spatial values: elements at run-time indices, their lanes and entries.
+    let mut sa = [SpatialVector::ZERO; 3];
+    let j = i % 3;
+    sa[j] = u;
+    sa[(j + 1) % 3][4] = a;
+    sa[j][2] += sa[(j + 1) % 3][4];
+    let mut sm = [SpatialMatrix::IDENTITY; 2];
+    sm[i % 2][(1, 3)] = a;
+    sm[1][5][0] = -a;
     let mut k = 0;
     while k < 6 {
         out[(i, k)] = 0.0;
@@ -233,7 +243,7 @@ fn spatial(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 4)] = q[4] + top.y + m[(4, 2)];
     out[(i, 5)] = q[5] + top.z + x6[3][1];
     out[(i, 6)] = if u == u && u != w && m == m { 1.0 } else { 0.0 };
-    out[(i, 7)] = spatial_dot(2.0 * p, q);
+    out[(i, 7)] = spatial_dot(2.0 * p, q) + spatial_dot(sm[i % 2] * sa[j], w);
 }
 
 /// The decompositions: tuple results destructured (with `_` and an annotation), inside a loop
