@@ -196,6 +196,56 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = if t == t && t != u { 1.0 } else { 0.0 };
 }
 
+/// Spatial vectors and matrices: construction (`SpatialVector::new`, `spatial_vector` of two
+/// 3-vectors and of six scalars, `ZERO`, `IDENTITY`, `SpatialMatrix::from_rows`), literal
+/// indexing and lane, row and entry writes, the operators and products, every spatial builtin
+/// (`transpose`, `outer`, `spatial_adjoint`, `transform_twist`/`wrench` too), `==`, and local
+/// arrays of spatial vectors and matrices.
+#[wp::kernel]
+fn spatial(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let u = SpatialVector::new(vec3(a, 0.5, -a), vec3(1.0, a * 0.25, 2.0));
+    let w = spatial_vector(0.3, a, -1.5, 0.75 * a, 2.0, -0.5);
+    let t = Transform::new(
+        vec3(a, 1.0, -0.5),
+        Quat::from_axis_angle(vec3(0.0, 0.6, 0.8), a),
+    );
+    let mut m = outer(u, w) + SpatialMatrix::IDENTITY * a;
+    m[(0, 5)] = a * 3.0;
+    m[2][1] -= 1.0;
+    m[4] = spatial_cross(u, w);
+    let r = quat_to_matrix(t.q);
+    let x6 = spatial_adjoint(r, skew(t.p) * r);
+    let n = SpatialMatrix::from_rows(w, u, w, SpatialVector::ZERO, u, w) * 0.5;
+    let p = (m * n) * u + transpose(m) * w - x6 * u / 2.0 + (-n.transpose()) * w;
+    let mut q = spatial_cross_dual(p, u) + transform_twist(t, u) - transform_wrench(t, w) * a;
+    q[1] += spatial_dot(u, w);
+    let top = spatial_top(q) + spatial_bottom(p);
+    // Local arrays of spatial values: elements at run-time indices, their lanes and entries.
+    let mut sa = [SpatialVector::ZERO; 3];
+    let j = i % 3;
+    sa[j] = u;
+    sa[(j + 1) % 3][4] = a;
+    sa[j][2] += sa[(j + 1) % 3][4];
+    let mut sm = [SpatialMatrix::IDENTITY; 2];
+    sm[i % 2][(1, 3)] = a;
+    sm[1][5][0] = -a;
+    let mut k = 0;
+    while k < 6 {
+        out[(i, k)] = 0.0;
+        k += 1;
+    }
+    out[(i, 0)] = q[0];
+    out[(i, 1)] = q[1];
+    out[(i, 2)] = q[2];
+    out[(i, 3)] = q[3] + top.x;
+    out[(i, 4)] = q[4] + top.y + m[(4, 2)];
+    out[(i, 5)] = q[5] + top.z + x6[3][1];
+    out[(i, 6)] = if u == u && u != w && m == m { 1.0 } else { 0.0 };
+    out[(i, 7)] = spatial_dot(2.0 * p, q) + spatial_dot(sm[i % 2] * sa[j], w);
+}
+
 /// The decompositions: tuple results destructured (with `_` and an annotation), inside a loop
 /// that overwrites them, and every output written out.
 #[wp::kernel]
@@ -921,6 +971,21 @@ fn transforms_match_the_cpu_backend() {
     let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
     let host = run_on_host::<transforms>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
     wp::launch(transforms, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+#[test]
+fn spatial_types_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..30).map(|k| k as f32 * 0.29 - 4.0).collect();
+    xs.extend([0.0, -0.0, 1.0, 3.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<spatial>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(spatial, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }
@@ -1864,4 +1929,339 @@ fn assertions_fault_as_on_the_cpu_backend() {
         cpp.display(),
         String::from_utf8_lossy(&built.stderr)
     );
+}
+
+// ------------------------------------------------------------------------------------------
+// Local arrays: forward, fault, adjoint and tangent units on the host
+// ------------------------------------------------------------------------------------------
+
+const LOCAL_LEN: usize = 5;
+
+#[wp::func]
+fn local_reversed(a: [f32; 4]) -> [f32; 4] {
+    let mut r = a;
+    for j in 0..4 {
+        r[j] = a[3 - j];
+    }
+    r
+}
+
+#[wp::func]
+fn local_dot(a: [Vec3; 2], w: Vec3) -> f32 {
+    a[0].dot(w) - a[1].dot(w)
+}
+
+/// Literals, repeats (a literal and a const length), element, member and nested writes at
+/// dynamic indices, an insertion sort, `len()`, and funcs taking and returning arrays.
+#[wp::kernel]
+fn local_arrays(x: Array<f32>, k: Array<i32>, out: Array<f32, 2>) {
+    let i = tid();
+    let mut a = [0.0f32; 8];
+    for j in 0..8 {
+        a[j] = x[(i * 3 + j as usize * 5) % 37] - (j as f32) * 0.5;
+    }
+    for j in 1..a.len() {
+        let key = a[j];
+        let mut p = j;
+        while p > 0 && a[p - 1] > key {
+            a[p] = a[p - 1];
+            p -= 1;
+        }
+        a[p] = key;
+    }
+    let q = k[i];
+    let mut v = [Vec3::ZERO; 2];
+    v[(q % 2) as usize].y = a[3];
+    v[1].x += a[0] * 2.0;
+    let mut m = [[0.0f32; 3]; 2];
+    m[(q % 2) as usize][(q % 3) as usize] = a[7];
+    m[1][1] -= 1.5;
+    let mut c = [0i32; LOCAL_LEN];
+    c[(q % 5) as usize] += q;
+    let r: [f32; 4] = local_reversed([a[1], a[2], m[1][1], 4.0]);
+    for j in 0..8 {
+        out[(i, j)] = a[j];
+    }
+    out[(i, 8)] = local_dot(v, Vec3::new(1.0, 2.0, 3.0)) + r[0] * 3.0 - r[3];
+    out[(i, 9)] = m[0][0] + m[0][1] * 2.0 + m[0][2] * 4.0 + m[1][0] * 8.0 + m[1][2];
+    out[(i, 10)] = (c[0] + c[1] * 3 + c[4] * 5) as f32 + c.len() as f32;
+}
+
+/// The forward CUDA unit of `local_arrays` on the host: the CPU backend's bits exactly.
+#[test]
+fn local_arrays_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 9;
+    let xs: Vec<f32> = (0..37)
+        .map(|k| ((k * 7) % 11) as f32 * 0.75 - 3.0)
+        .collect();
+    let ks: Vec<i32> = (0..n).map(|k| (k * 13 + 4) % 17).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let k = wp::Array::from_slice(&ks, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n as usize, 11), &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::I32s(&k), Arg::F32Grid(&out)];
+    let Some(host) = run_on_host::<local_arrays>(&[n as usize], &args) else {
+        return;
+    };
+    wp::launch(local_arrays, n as usize, (&x, &k, &out), &dev).unwrap();
+    assert_eq!(host, cpu_results(&args));
+    // The sort ran: each row's first eight values ascend.
+    let o = out.to_vec().unwrap();
+    assert!(o
+        .chunks(11)
+        .all(|r| r[..8].windows(2).all(|w| w[0] <= w[1])));
+}
+
+#[wp::kernel]
+fn local_oob(k: Array<i32>, out: Array<f32>) {
+    let i = tid();
+    let mut a = [1.0f32, 2.0, 3.0];
+    a[k[i]] = 5.0;
+    out[i] = a[k[i] - 1];
+}
+
+/// An index outside a local array in the CUDA unit: the record the host decodes into the
+/// CPU's fault (FAULT_LOCAL_INDEX with the index, the length and the line), for a write and a
+/// read.
+#[test]
+fn local_array_index_faults_like_the_cpu_backend() {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (local arrays): no g++ on this machine");
+        return;
+    }
+    let dev = wp::cpu();
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let src = wp::cuda_source::assemble(&local_oob::INFO);
+    let dir = std::env::temp_dir().join(format!("wp_codegen_local_oob_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (case, ks) in [[0i32, 2, 3], [1, 0, 2]].into_iter().enumerate() {
+        let k = wp::Array::from_slice(&ks, &dev).unwrap();
+        let out = wp::Array::<f32>::zeros(3, &dev).unwrap();
+        let (decl, _) = cpp_args(&[Arg::I32s(&k), Arg::F32s(&out)]);
+        let program = format!(
+            "#include <cstring>\n{text}\n\
+             static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+             int main() {{\n\
+             {decl}\n\
+             wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+             wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+             wp::launch_t launch = {{{{3, 1, 1, 1}}, 3, 1, 0}};\n\
+             for (wp::i64 flat = 0; flat < 3; ++flat) {thread}(p0, p1, launch, flat, &ctx);\n\
+             if (flag) printf(\"%d %d %lld %lld %lld\\n\", fault.kind, fault.ndim,\n\
+                              (long long)fault.index[0], (long long)fault.index[1],\n\
+                              (long long)fault.index[2]);\n\
+             else printf(\"ok\\n\");\n\
+             return 0;\n}}\n",
+            text = src.text,
+            thread = src.thread_fn,
+        );
+        let cpp = dir.join(format!("oob{case}.cpp"));
+        std::fs::write(&cpp, program).unwrap();
+        let exe = dir.join(format!("oob{case}"));
+        let built = Command::new("g++")
+            .args(["-std=c++17", "-O1", "-Wno-unused", "-I", include])
+            .arg(&cpp)
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            built.status.success(),
+            "g++ failed on {}:\n{}",
+            cpp.display(),
+            String::from_utf8_lossy(&built.stderr)
+        );
+        let host = String::from_utf8(Command::new(&exe).output().unwrap().stdout).unwrap();
+        let Err(wp::Error::Fault(f)) = wp::launch(local_oob, 3, (&k, &out), &dev) else {
+            panic!("case {case}: the CPU launch did not fault");
+        };
+        let wp::FaultKind::LocalIndex { index, len, line } = f.kind else {
+            panic!("case {case}: {f}");
+        };
+        // FAULT_LOCAL_INDEX (wp_core.h), ndim 3: the index, the length, the line.
+        let want = format!("9 3 {index} {len} {line}");
+        assert_eq!(host.trim(), want, "case {case}: {f}");
+    }
+}
+
+#[wp::func]
+fn local_scaled(a: [f32; 3], s: f32) -> [f32; 3] {
+    let mut r = a;
+    for j in 0..3 {
+        r[j] = r[j] * s - a[(j + 1) % 3];
+    }
+    r
+}
+
+/// Literals, a repeat, reads and writes at dynamic indices overwriting the array inside loops,
+/// and a func taking and returning an array: `+ - *` only, so that the adjoint is the same
+/// IEEE operations in the same order on both sides.
+#[wp::kernel]
+fn local_grads(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    let t = x[i];
+    let mut a = [t, t * t, 1.0];
+    let mut b = [t * 0.5; 3];
+    for _pass in 0..3 {
+        for j in 0..3 {
+            a[j] = a[j] * a[(j + 2) % 3] * 0.5 + b[j];
+            b[(j as usize + i) % 3] -= a[j] * 0.25;
+        }
+    }
+    let c: [f32; 3] = local_scaled(a, t);
+    y[i] = c[0] + c[1] * b[2] - c[2] * a[1];
+}
+
+/// Compiles and runs `K`'s CUDA adjoint unit on the host over a 1-D grid of `n` threads, each
+/// with an empty stack of its own; `args` are the parameters, then the arrays' adjoints.
+fn run_adjoint_on_host<K: Kernel>(n: usize, args: &[Arg]) -> Option<Vec<String>> {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (adjoint): no g++ on this machine");
+        return None;
+    }
+    assert_eq!(K::INFO.cuda_adjoint_error, None);
+    let src = wp::cuda_source::assemble_adjoint(&K::INFO);
+    let (decl, print) = cpp_args(args);
+    let params: Vec<String> = (0..args.len()).map(|k| format!("p{k}")).collect();
+    let program = format!(
+        "#include <cstring>\n{text}\n\
+         static void print_f32(wp::f32 x) {{ unsigned u; memcpy(&u, &x, 4); printf(\"%08x\\n\", u); }}\n\
+         static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+         int main() {{\n\
+         {decl}\n\
+         wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+         wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+         wp::launch_t launch = {{{{{n}, 1, 1, 1}}, {n}, 1, 0}};\n\
+         static char buf[1 << 16];\n\
+         wp::adstack_t st = wp::adstack_new(buf, sizeof buf);\n\
+         for (wp::i64 flat = 0; flat < {n}; ++flat) {{ st.top = 0; {thread}({params}, launch, flat, &ctx, &st); }}\n\
+         if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
+         {print}\n\
+         return 0;\n}}\n",
+        text = src.text,
+        thread = src.thread_fn,
+        params = params.join(", "),
+    );
+    let dir = std::env::temp_dir().join(format!(
+        "wp_codegen_adj_{}_{}",
+        K::INFO.name,
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cpp = dir.join("adj.cpp");
+    std::fs::write(&cpp, program).unwrap();
+    let exe = dir.join("adj");
+    let built = Command::new("g++")
+        .args([
+            "-std=c++17",
+            "-O1",
+            "-ffp-contract=off",
+            "-Wno-unused",
+            "-DWP_CONTIGUOUS=1",
+            "-I",
+        ])
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"))
+        .arg(&cpp)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    assert!(
+        built.status.success(),
+        "g++ failed on {}:\n{}",
+        cpp.display(),
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let run = Command::new(&exe).output().unwrap();
+    assert!(
+        run.status.success(),
+        "the generated adjoint faulted: {}",
+        String::from_utf8_lossy(&run.stdout)
+    );
+    let text = String::from_utf8(run.stdout).unwrap();
+    Some(text.lines().map(str::to_string).collect())
+}
+
+/// The CUDA adjoint of `local_grads` (element stores in loops pushing the whole array, a func
+/// adjoint taking an array) on the host: the CPU backend's gradients bit for bit.
+#[test]
+fn local_array_gradients_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 7;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.25 - 0.8).collect();
+    let x = wp::Array::from_slice(&xs, &dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let y = wp::Array::<f32>::zeros(n, &dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(local_grads, n, (&x, &y), &dev).unwrap();
+    }
+    let gx = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let gy = wp::Array::<f32>::full(n, 1.0, &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::F32s(&y), Arg::F32s(&gx), Arg::F32s(&gy)];
+    let Some(host) = run_adjoint_on_host::<local_grads>(n, &args) else {
+        return;
+    };
+    y.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    let bits: Vec<String> = x
+        .grad()
+        .unwrap()
+        .to_vec()
+        .unwrap()
+        .iter()
+        .map(|v| format!("{:08x}", v.to_bits()))
+        .collect();
+    assert_eq!(&host[2 * n..3 * n], &bits[..]);
+    assert!(
+        bits.iter().all(|b| b != "00000000"),
+        "no gradient reached x"
+    );
+}
+
+/// The tangent kernel of `local_grads` (forward mode through the element stores and the func)
+/// is refused by name, and that of a kernel without funcs runs on the host as on the CPU.
+#[wp::kernel]
+fn local_tangent(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    let t = x[i];
+    let mut a = [t, t * t, 1.0];
+    for _pass in 0..2 {
+        for j in 0..3 {
+            a[j] = a[j] * a[(j + 2) % 3] + t;
+        }
+    }
+    let b = [a[2]; 2];
+    y[i] = a[0] - a[1] * b[1];
+}
+
+#[test]
+fn local_array_tangent_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 6;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.125 - 0.3).collect();
+    let vs: Vec<f32> = (0..n).map(|k| 1.0 - k as f32 * 0.25).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let y = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let x_dot = wp::Array::from_slice(&vs, &dev).unwrap();
+    let y_dot = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let args = [
+        Arg::F32s(&x),
+        Arg::F32s(&y),
+        Arg::F32s(&x_dot),
+        Arg::F32s(&y_dot),
+    ];
+    type Tangent = <local_tangent as wp::Forward>::Tangent;
+    let host = run_on_host::<Tangent>(&[n], &args);
+    wp::jvp(local_tangent, n, (&x, &y), (&x_dot, &y_dot), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+        assert!(y_dot.to_vec().unwrap().iter().any(|v| *v != 0.0));
+    }
 }

@@ -9,7 +9,6 @@ fn k(a: Array<f32>, n: i32) {
         _ => a[i] = 1.0,
     }
     let t = (1.0, 2.0);
-    let arr = [1.0, 2.0, 3.0];
     'outer: for j in 0..n {
         break 'outer;
     }

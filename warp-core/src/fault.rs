@@ -107,6 +107,15 @@ pub enum FaultKind {
         /// The tile's rank, 1..=4.
         rank: u8,
     },
+    /// An index outside a fixed-size local array (`a[i]` of `let mut a = [0.0f32; 8];`).
+    LocalIndex {
+        /// The index as given (saturated to `i64`).
+        index: i64,
+        /// The array's length.
+        len: usize,
+        /// The source line of the access.
+        line: u32,
+    },
     /// A failed `assert!` or `debug_assert!` (checked only in debug mode), or a failed
     /// expectation (`expect_eq`, `expect_neq`, `expect_near`) in a kernel or func.
     AssertionFailed {
@@ -220,6 +229,12 @@ impl Fault {
                     &shape[..r]
                 )
             }
+            FaultKind::LocalIndex { index, len, line } => write!(
+                f,
+                "kernel `{}`: index {index} is out of bounds for a local array of length {len} \
+                 (line {line})",
+                self.kernel
+            ),
             FaultKind::AssertionFailed {
                 line,
                 message,

@@ -54,6 +54,10 @@ WP_FN T adj_zero() {
     return (T)0;
   } else if constexpr (detail::adj_is_object<T>::value) {
     return T{};
+  } else if constexpr (detail::is_local_array<T>::value) {
+    T r;
+    for (auto& e : r.data) e = adj_zero<typename detail::is_local_array<T>::elem>();
+    return r;
   } else {
     typedef typename vec_traits<T>::scalar S;
     T r;
@@ -81,6 +85,20 @@ WP_FN void adj_accum(T& a, const typename identity<T>::type& v) {
   } else if constexpr (detail::adj_is_float<T>::value) {
     a += v;
   }
+}
+
+/// A local array's adjoint: element by element.
+template <typename T, int N>
+WP_FN void adj_accum(local_array_t<T, N>& a, const local_array_t<T, N>& v) {
+  for (int i = 0; i < N; ++i) adj_accum(a.data[i], v.data[i]);
+}
+/// The sum of a local array's elements from zero in index order (the adjoint of `[v; N]`,
+/// warp_core::local_array::sum).
+template <typename T, int N>
+WP_FN T local_sum(const local_array_t<T, N>& a) {
+  T s = adj_zero<T>();
+  for (int i = 0; i < N; ++i) adj_accum(s, a.data[i]);
+  return s;
 }
 
 // ------------------------------------------------------------------------------------------

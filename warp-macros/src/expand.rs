@@ -786,6 +786,17 @@ fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
     }
 }
 
+/// The type a func's parameter has in its CPU code: what a kernel thread sees of a kernel
+/// parameter of that type (`KernelArg::CpuView`), or a local array itself (a value that only
+/// funcs take).
+fn func_param_ty(p: &crate::ir::Param, wp: &TokenStream) -> TokenStream {
+    let t = &p.syn_ty;
+    match p.ty {
+        crate::types::Ty::LocalArray(..) => quote!(#t),
+        _ => quote!(<#t as #wp::KernelArg>::CpuView),
+    }
+}
+
 /// The inherent items of one func or one instance of a generic func (its CPU code, replay,
 /// adjoint, and what the CUDA assembler needs); `display` names a generic instance.
 fn func_instance(
@@ -809,8 +820,8 @@ fn func_instance(
         } else {
             quote!()
         };
-        let t = &p.syn_ty;
-        quote!(#m #v: <#t as #wp::KernelArg>::CpuView)
+        let t = func_param_ty(p, &wp);
+        quote!(#m #v: #t)
     });
     let ret = match &f.ret_syn {
         Some(t) => quote!(#t),
@@ -879,8 +890,8 @@ fn func_instance(
         .iter()
         .map(|p| {
             let v = em.var(p.var);
-            let t = &p.syn_ty;
-            quote!(mut #v: <#t as #wp::KernelArg>::CpuView)
+            let t = func_param_ty(p, &wp);
+            quote!(mut #v: #t)
         })
         .collect();
     let adj_params: Vec<TokenStream> = f
@@ -893,8 +904,8 @@ fn func_instance(
                 let a = format_ident!("adj_{}", em.var(p.var));
                 quote!(#a: <#t as #wp::KernelArg>::GradView)
             } else {
-                let o = format_ident!("__adj_out{}", k);
-                quote!(#o: &mut <#t as #wp::KernelArg>::CpuView)
+                let (o, t) = (format_ident!("__adj_out{}", k), func_param_ty(p, &wp));
+                quote!(#o: &mut #t)
             }
         })
         .collect();
@@ -1018,6 +1029,12 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             errors.push(syn::Error::new(
                 t.span(),
                 "arrays cannot be struct fields yet: pass them as kernel parameters",
+            ));
+        } else if let Ok(crate::types::Ty::LocalArray(..)) = crate::front::signature::parse_type(t)
+        {
+            errors.push(syn::Error::new(
+                t.span(),
+                "local arrays cannot be struct fields yet: use vector or scalar fields",
             ));
         } else if let Ok(crate::types::Ty::Object(k)) = crate::front::signature::parse_type(t) {
             errors.push(syn::Error::new(

@@ -130,6 +130,14 @@ pub enum StmtKind {
         path: Vec<String>,
         value: VarId,
     },
+    /// `var[index] = value` on a local array (`Ty::LocalArray`): an overwrite of the array
+    /// variable (the adjoint treats it as `var = var with element index set`), checked
+    /// against the length: an index outside it is a `LocalIndex` fault naming the line.
+    SetElem {
+        var: VarId,
+        index: VarId,
+        value: VarId,
+    },
     If {
         cond: VarId,
         then: Block,
@@ -214,12 +222,13 @@ pub enum Lit {
     Float(f64),
 }
 
-/// How a vector, matrix or quaternion value is built.
+/// How a vector, matrix, quaternion or local array value is built.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Ctor {
-    /// `Vec3::new(x, y, z)`, `vec3(x, y, z)`, `Quat::from_xyzw(..)`, `Mat3::from_cols(..)`.
+    /// `Vec3::new(x, y, z)`, `vec3(x, y, z)`, `Quat::from_xyzw(..)`, `Mat3::from_cols(..)`;
+    /// a local array's literal `[x, y, z]`.
     Components,
-    /// `Vec3::splat(s)`, `Mat3::from_diagonal(v)`.
+    /// `Vec3::splat(s)`, `Mat3::from_diagonal(v)`; a local array's repeat `[s; N]`.
     Splat,
     /// `Vec3::ZERO`, `Mat3::IDENTITY`, ...: the associated constant's name.
     Const(String),
@@ -252,6 +261,12 @@ pub enum Op {
     },
     /// `v.x`, `m.x_axis`, `s.field`.
     Member(VarId, String),
+    /// `a[index]` of a local array (`Ty::LocalArray`), checked against its length (a
+    /// `LocalIndex` fault naming the line).
+    Index {
+        array: VarId,
+        index: VarId,
+    },
     Construct {
         ty: Ty,
         ctor: Ctor,
@@ -320,6 +335,10 @@ impl Op {
                 f(*array);
                 index.iter().for_each(|v| f(*v))
             }
+            Op::Index { array, index } => {
+                f(*array);
+                f(*index)
+            }
             Op::ViewCheck {
                 array,
                 index,
@@ -351,6 +370,11 @@ impl StmtKind {
             }
             StmtKind::SetMember { var, value, .. } => {
                 f(*var);
+                f(*value)
+            }
+            StmtKind::SetElem { var, index, value } => {
+                f(*var);
+                f(*index);
                 f(*value)
             }
             StmtKind::If { cond, .. } => f(*cond),

@@ -17,6 +17,8 @@
 //!   overloads by arity.
 //! - `query`: `for j in hash_grid_query(..)`, a loop over a host object's query.
 //! - `tiles`: tile calls typed by their shapes, `lane()`, operators and indexing on tiles.
+//! - `local_arrays`: fixed-size local arrays (`[0.0f32; 8]`, `[x, y, z]`), their elements
+//!   and `len()`.
 
 use crate::builtins::{self, ArgTy, Builtin, Emit, Pos};
 use crate::front::signature::parse_type;
@@ -31,6 +33,7 @@ mod asserts;
 mod calls;
 mod control;
 mod expressions;
+mod local_arrays;
 mod places;
 mod query;
 mod rng;
@@ -113,6 +116,10 @@ pub fn lower_kernel(
                         pt.ty.span(),
                         "a tile is not a parameter: pass an array and load tiles from it with `tile_load`",
                     )),
+                    Ok(Ty::LocalArray(..)) if kind == FnKind::Kernel => cx.errors.push(syn::Error::new(
+                        pt.ty.span(),
+                        "a local array is not a kernel parameter: pass an `Array<T>` (funcs take local arrays)",
+                    )),
                     Ok(ty) => {
                         let var = cx.new_var(Some(name.clone()), ty.clone(), mutable);
                         cx.scopes[0].insert(name.clone(), var);
@@ -183,6 +190,13 @@ pub fn lower_kernel(
         ));
     }
     cx.note_tile_consts();
+    cx.note_length_consts();
+    if let (Some(_), Some(sp)) = (&cx.tiled, cx.local_array_span()) {
+        cx.errors.push(syn::Error::new(
+            sp,
+            "local arrays are not supported in tiled kernels yet: use a tile or lane variables",
+        ));
+    }
     if !cx.errors.is_empty() {
         return Err(cx.errors);
     }

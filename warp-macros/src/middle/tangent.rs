@@ -44,7 +44,13 @@ const MAX_PARAMS: usize = 32;
 fn tangent_type(t: &Ty) -> bool {
     match t {
         Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
-        Ty::Matrix(..) | Ty::Quat(_) | Ty::Deferred => true,
+        Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_)
+        | Ty::Deferred => true,
+        // A local array's tangent is a local array of its elements' tangents.
+        Ty::LocalArray(e, _) => !e.is_deferred() && tangent_type(e),
         _ => false,
     }
 }
@@ -165,7 +171,9 @@ fn activity(f: &Function) -> Vec<bool> {
                     }
                     (*dst, any)
                 }
-                StmtKind::SetMember { var, value, .. } => (*var, active[*value]),
+                StmtKind::SetMember { var, value, .. } | StmtKind::SetElem { var, value, .. } => {
+                    (*var, active[*value])
+                }
                 _ => return,
             };
             let t = &f.vars[dst].ty;
@@ -250,9 +258,19 @@ impl Tx {
     /// Zero of `like`'s type.
     fn zero(&mut self, like: VarId) -> Result<VarId, String> {
         let ty = self.ty(like);
+        self.zero_of(ty, like)
+    }
+
+    /// Zero of type `ty` (`like`: a value of that type, for a type the macro cannot see).
+    fn zero_of(&mut self, ty: Ty, like: VarId) -> Result<VarId, String> {
         Ok(match &ty {
+            Ty::LocalArray(e, _) => {
+                let z = self.zero_of((**e).clone(), like)?;
+                let (ctor, args) = (Ctor::Splat, vec![z]);
+                self.tmp(ty.clone(), Op::Construct { ty, ctor, args })
+            }
             Ty::Scalar(_) => self.tmp(ty.clone(), Op::Lit(Lit::Float(0.0))),
-            Ty::Vector(..) | Ty::Matrix(..) => self.tmp(
+            Ty::Vector(..) | Ty::Matrix(..) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => self.tmp(
                 ty.clone(),
                 Op::Construct {
                     ty: ty.clone(),
@@ -379,6 +397,17 @@ impl Tx {
                     self.push(StmtKind::Store {
                         array: ta,
                         index: index.clone(),
+                        value: tv,
+                    });
+                }
+            }
+            StmtKind::SetElem { var, index, value } => {
+                self.out.push(s.clone());
+                if let Some(t) = self.dot[*var] {
+                    let tv = self.or_zero(self.dot[*value], *value)?;
+                    self.push(StmtKind::SetElem {
+                        var: t,
+                        index: *index,
                         value: tv,
                     });
                 }
@@ -537,6 +566,13 @@ impl Tx {
                     ))
                 }
                 None => None,
+            },
+            Op::Index { array, index } => match self.dot[*array] {
+                Some(ta) if tangent_type(&self.ty(d)) => {
+                    let (ty, index) = (self.ty(d), *index);
+                    Some(self.tmp(ty, Op::Index { array: ta, index }))
+                }
+                _ => None,
             },
             Op::Member(v, m) => match self.dot[*v] {
                 Some(t) if tangent_type(&self.ty(d)) => {
@@ -958,5 +994,38 @@ mod tests {
         let f = kernel(parse_quote! { fn k(#(#params),*) {} });
         let why = build(&f).unwrap_err();
         assert!(why.contains("would take 34"), "{why}");
+    }
+
+    #[test]
+    fn element_stores_get_tangent_element_stores() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f64>, y: Array<f64>) {
+                let i = tid();
+                let mut a = [0.0f64; 3];
+                for j in 0..3 {
+                    a[j] = x[i] * a[(j + 2) % 3] + x[i];
+                }
+                y[i] = a[1];
+            }
+        });
+        let g = build(&f).unwrap();
+        let a_dot = g
+            .vars
+            .iter()
+            .position(|v| v.name.as_deref() == Some("a_dot"))
+            .expect("the array has a tangent variable");
+        let (mut sets, mut reads) = (0, 0);
+        walk_stmts(&g.body, &mut |s| match &s.kind {
+            StmtKind::SetElem { var, .. } if *var == a_dot => sets += 1,
+            StmtKind::Assign {
+                op: Op::Index { array, .. },
+                ..
+            } if *array == a_dot => reads += 1,
+            _ => {}
+        });
+        // The store's, and the reads of `a[(j + 2) % 3]` and `a[1]`.
+        assert_eq!((sets, reads), (1, 2));
+        // The tangent of the constant `[0.0; 3]`: a repeat of zero.
+        assert_eq!(g.vars[a_dot].ty.to_string(), "[f64; 3]");
     }
 }

@@ -248,6 +248,9 @@ impl Lowerer {
                 (Ctor::Components, vec![Ty::Vector(*s, *n); *n as usize])
             }
             (Ty::Matrix(s, n), "from_diagonal") => (Ctor::Splat, vec![Ty::Vector(*s, *n)]),
+            (Ty::SpatialMatrix(s), "from_rows") => {
+                (Ctor::Components, vec![Ty::SpatialVector(*s); 6])
+            }
             _ => {
                 return err(
                     c.func.span(),
@@ -433,6 +436,9 @@ impl Lowerer {
             }
             if matches!(self.ty(a), Ty::Array(..)) {
                 return Ok(self.def(Op::Len(a), USIZE, span));
+            }
+            if matches!(self.ty(a), Ty::LocalArray(..)) {
+                return Ok(self.local_len(a, span));
             }
             return err(
                 m.method.span(),

@@ -174,7 +174,12 @@ impl Lowerer {
                     let ok = match &t {
                         Ty::Scalar(s) => s.is_float() || s.is_signed_int(),
                         Ty::Vector(s, _) => *s != Scalar::U32,
-                        Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) | Ty::Deferred => true,
+                        Ty::Matrix(..)
+                        | Ty::Quat(_)
+                        | Ty::Transform(_)
+                        | Ty::SpatialVector(_)
+                        | Ty::SpatialMatrix(_)
+                        | Ty::Deferred => true,
                         Ty::Tile(e, _) => {
                             matches!(**e, Ty::Scalar(s) if s.is_float() || s.is_signed_int())
                         }
@@ -254,7 +259,7 @@ impl Lowerer {
                 };
                 let base = self.expr(&f.base, None)?;
                 let bt = self.ty(base);
-                if matches!(bt, Ty::Array(..)) {
+                if matches!(bt, Ty::Array(..) | Ty::LocalArray(..)) {
                     return err(span, "arrays have no fields: index them, `a[i]`");
                 }
                 let t = self.member_ty(&bt, &name.to_string(), name.span())?;
@@ -299,7 +304,23 @@ impl Lowerer {
                         return self.tile_index(t, &ix.index, span);
                     }
                 }
-                let (array, index) = self.array_index(ix)?;
+                let base = self.expr(&ix.expr, None)?;
+                // `v[3]`, `m[i][j]`, `m[(i, j)]`: members of a spatial value.
+                if let Some(lanes) = super::places::spatial_index(&self.ty(base), &ix.index)? {
+                    let mut v = base;
+                    for m in lanes {
+                        let t = self.member_ty(&self.ty(v), &m, span)?;
+                        v = self.def(Op::Member(v, m), t, span);
+                    }
+                    return Ok(v);
+                }
+                let (array, index) = match self.array_index_at(base, ix)? {
+                    places::Indexed::View(array, index) => (array, index),
+                    places::Indexed::Local(array, index) => {
+                        let elem = self.local_elem_ty(array);
+                        return Ok(self.def(Op::Index { array, index }, elem, span));
+                    }
+                };
                 let t = match self.ty(array) {
                     Ty::Array(e, _) => *e,
                     _ => Ty::Deferred,
@@ -323,10 +344,8 @@ impl Lowerer {
                 span,
                 "references are not supported in kernels: pass values and arrays directly",
             ),
-            Expr::Array(_) | Expr::Repeat(_) => err(
-                span,
-                "fixed-size arrays are not supported in kernels: use a glam vector or Array<T>",
-            ),
+            Expr::Array(a) => self.array_literal(a, want, span),
+            Expr::Repeat(r) => self.array_repeat(r, want, span),
             Expr::Tuple(_) => err(
                 span,
                 "tuples are not supported in kernels (except array indices a[(i, j)])",
@@ -411,6 +430,8 @@ impl Lowerer {
                     Ty::Matrix(..) => ["ZERO", "IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Quat(_) => ["IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Transform(_) => name == "IDENTITY",
+                    Ty::SpatialVector(_) => name == "ZERO",
+                    Ty::SpatialMatrix(_) => ["ZERO", "IDENTITY"].contains(&name.as_str()),
                     _ => false,
                 };
                 if !known {
@@ -438,10 +459,8 @@ impl Lowerer {
 
     /// A module-level `const` (Warp's `wp.constant`): its value on the CPU is the const
     /// itself; the CUDA source gets it at assembly. Its type is the const's (`Deferred` here).
-    fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
-        if !self.consts.contains(path) {
-            self.consts.push(path.clone());
-        }
+    pub(super) fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
+        self.note_const(path);
         self.def(Op::Const(path.clone()), Ty::Deferred, span)
     }
 }

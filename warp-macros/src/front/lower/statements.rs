@@ -129,7 +129,7 @@ impl Lowerer {
             }
             return Ok(());
         }
-        let value = self.expr(&init.expr, annot.as_ref())?;
+        let mut value = self.expr(&init.expr, annot.as_ref())?;
         if let Some(a) = &annot {
             let vt = self.ty(value);
             if !vt.is_deferred() && vt != *a {
@@ -137,6 +137,13 @@ impl Lowerer {
                     init.expr.span(),
                     format!("mismatched types: expected `{a}`, found `{vt}`"),
                 );
+            }
+            // A value the macro cannot type (a struct field, a func's result: a local array, a
+            // spatial vector) takes the annotation's type, which the target compilers check, so
+            // that `let v: SpatialVector = b.twist;` can be indexed and the elements of
+            // `let b: [f32; 8] = f(a);` read and written.
+            if vt.is_deferred() && !a.is_deferred() {
+                value = self.def(Op::Copy(value), a.clone(), init.expr.span());
             }
         }
         self.bind_pat(pat, value, span)
@@ -455,6 +462,12 @@ impl Lowerer {
                         return err(
                             span,
                             format!("a `{}` cannot be printed in kernels", k.row().name),
+                        );
+                    }
+                    if let t @ Ty::LocalArray(..) = self.ty(var) {
+                        return err(
+                            span,
+                            format!("a local array (`{t}`) cannot be printed in kernels: print its elements"),
                         );
                     }
                     if !text.is_empty() {

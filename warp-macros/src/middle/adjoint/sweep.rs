@@ -64,6 +64,20 @@ impl Cx<'_> {
                     b.push(pop(*var, sp));
                     out.push(at(AKind::Scope(b), sp));
                 }
+                // `var = var with element index set to value`: the element's adjoint goes to
+                // the value and is cleared (the store replaced it), then the old array is
+                // restored.
+                StmtKind::SetElem { var, index, value } => {
+                    let (var, index) = (*var, *index);
+                    let mut b = Vec::new();
+                    if self.diff(var) {
+                        b.push(at(AKind::Seed(GradSrc::AdjElem { var, index }), sp));
+                        b.push(at(AKind::ClearAdjElem { var, index }, sp));
+                        self.accum(&mut b, *value, Vec::new(), GradSrc::Seed, sp);
+                    }
+                    b.push(pop(var, sp));
+                    out.push(at(AKind::Scope(b), sp));
+                }
                 StmtKind::If { cond, then, els } => {
                     let cond = match self.records(*cond, in_loop) {
                         true => Cond::Popped,
@@ -279,10 +293,38 @@ impl Cx<'_> {
             },
             Op::Load { array, index } => out.push(at(self.load(*array, index, sp), sp)),
             Op::Member(v, m) => self.accum(&mut out, *v, vec![m.clone()], GradSrc::Seed, sp),
+            Op::Index { array, index } => {
+                if self.diff(*array) {
+                    let (var, index) = (*array, *index);
+                    let to = AdjOf::Elem { var, index };
+                    out.push(at(
+                        AKind::Accum {
+                            to,
+                            from: GradSrc::Seed,
+                        },
+                        sp,
+                    ));
+                }
+            }
+            // A local array's literal: element k of the seed to the k-th value; a repeat: the
+            // sum of the seed's elements to the repeated value.
+            Op::Construct {
+                ty: Ty::LocalArray(..),
+                ctor,
+                args,
+            } => match ctor {
+                Ctor::Splat => seed(&mut out, args[0], GradSrc::ElemSum),
+                _ => {
+                    for (k, v) in args.iter().enumerate() {
+                        seed(&mut out, *v, GradSrc::SeedElem(k));
+                    }
+                }
+            },
             Op::Construct { ty, ctor, args } => {
                 let lanes: &[&str] = match ty {
                     Ty::Vector(..) | Ty::Quat(_) => &["x", "y", "z", "w"],
                     Ty::Matrix(..) => &["x_axis", "y_axis", "z_axis", "w_axis"],
+                    Ty::SpatialMatrix(_) => &["0", "1", "2", "3", "4", "5"],
                     _ => &[],
                 };
                 match (ctor, ty) {
