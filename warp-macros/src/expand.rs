@@ -260,6 +260,12 @@ fn kernel_impl(
         .map(|_| crate::back::rust_tile::BlockPrinter::new(f));
     let tile_info = tiled::info(f, block.as_ref());
     let shape_checks = tiled::shape_checks(f);
+    // A tangent kernel's arrays are the primal's and their tangents (the same types): the
+    // primal's checks are enough, and one error each.
+    let array_checks = match hidden {
+        false => local_array_checks(f, &wp),
+        true => quote!({}),
+    };
     let callee_checks = callee_depths(&f.callees);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
@@ -380,6 +386,7 @@ fn kernel_impl(
                 use #wp as __wp;
                 #callee_checks
                 #shape_checks
+                const _: () = #array_checks;
                 #hide
                 impl __wp::Kernel for #name {
                     #params
@@ -567,6 +574,57 @@ fn assert_sites(f: &crate::ir::Function, wp: &TokenStream) -> TokenStream {
     quote!(&[#(#sites),*])
 }
 
+/// The most bytes one local array may take: a thread's array (and, in the adjoint, its
+/// gradient twin) lives on the CPU worker's stack and in a CUDA thread's local memory.
+const LOCAL_ARRAY_MAX_BYTES: usize = 65536;
+
+/// An assertion per local array type of the function (`[f32; N]`, nested ones included), to
+/// be evaluated in a `const` initializer: at least one element and at most
+/// [`LOCAL_ARRAY_MAX_BYTES`]. The macro refuses a literal length of 0 itself; a length that
+/// names a const is only known to rustc, which evaluates these at `cargo check`, spanned at the
+/// first statement that makes a local array (or the function, for an array that only its
+/// signature names). A kernel puts them in a `const _`; a func, whose items sit in an `impl`,
+/// in its `__WP_LOCAL_ARRAYS`, which a module-level `const _` reads.
+fn local_array_checks(f: &crate::ir::Function, wp: &TokenStream) -> TokenStream {
+    use crate::types::Ty;
+    let mut tys: Vec<Ty> = Vec::new();
+    let mut note = |t: &Ty| {
+        if matches!(t, Ty::LocalArray(..)) && !tys.contains(t) {
+            tys.push(t.clone());
+        }
+    };
+    f.vars.iter().for_each(|v| note(&v.ty));
+    note(&f.ret);
+    let mut span = None;
+    crate::ir::walk_stmts(&f.body, &mut |s| {
+        if let crate::ir::StmtKind::Assign { dst, .. } = &s.kind {
+            if span.is_none() && matches!(f.vars[*dst].ty, Ty::LocalArray(..)) {
+                span = Some(s.span);
+            }
+        }
+    });
+    let span = span.unwrap_or_else(proc_macro2::Span::call_site);
+    let max = LOCAL_ARRAY_MAX_BYTES;
+    let checks = tys
+        .iter()
+        .filter_map(|t| {
+            let rust = crate::back::rust::ty_tokens(t)?;
+            let msg = format!(
+                "a local array `{t}` of {} holds at least one element and at most {max} bytes",
+                f.name
+            );
+            Some(quote_spanned! {span=>
+                {
+                    use #wp as __wp;
+                    let __bytes = ::core::mem::size_of::<#rust>();
+                    ::core::assert!(__bytes > 0 && __bytes <= #max, #msg);
+                }
+            })
+        })
+        .collect::<Vec<_>>();
+    quote!({ #(#checks;)* })
+}
+
 /// The values of the module-level consts a function reads, as C++ expressions for its
 /// `@@K<k>@@` placeholders: one small fn per const, spanned at the use, so that a const of a
 /// type without `CudaConst` is an error there.
@@ -676,6 +734,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                 }
 
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                const _: () = #name::__WP_LOCAL_ARRAYS;
                 #tile_map_impl
             },
             Err(e) => failed(e),
@@ -707,6 +766,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     }
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                    const _: () = #name::<#(#tys),*>::__WP_LOCAL_ARRAYS;
                 });
                 impls.extend(tile_map_impl(&inst.item, quote!(#name<#(#tys),*>)));
                 per_instance.push((display, Vec::new()));
@@ -944,9 +1004,13 @@ fn func_instance(
         #vis const __WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED: usize =
             1 + #wp_at_name::max_depth(&[#(#depths),*]);
     };
+    let array_checks = local_array_checks(&f, &wp);
     Ok(quote! {
             #depth_const
             #func_info
+            /// The local arrays' size checks (read at module level, so that rustc evaluates them).
+            #[doc(hidden)]
+            #vis const __WP_LOCAL_ARRAYS: () = #array_checks;
 
             #[doc(hidden)]
             #[inline(always)]
