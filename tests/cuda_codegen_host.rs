@@ -1409,12 +1409,28 @@ fn run_tiled_on_host<K: Kernel>(
         K::INFO.name,
         std::process::id()
     ));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cpp = dir.join("k.cpp");
+    Some(build_and_run(
+        &dir,
+        &program,
+        &emu_flags(bd),
+        "generated tiled code",
+    ))
+}
+
+/// Writes `program` into `dir`, compiles it with g++ and `flags`, runs it, and returns what
+/// it printed, one value per line; a compile error or a failed run (`what` faulted) panics
+/// with the messages.
+fn build_and_run(
+    dir: &std::path::Path,
+    program: &str,
+    flags: &[String],
+    what: &str,
+) -> Vec<String> {
+    std::fs::create_dir_all(dir).unwrap();
+    let (cpp, exe) = (dir.join("k.cpp"), dir.join("k"));
     std::fs::write(&cpp, program).unwrap();
-    let exe = dir.join("k");
     let out = Command::new("g++")
-        .args(emu_flags(bd))
+        .args(flags)
         .arg(&cpp)
         .arg("-o")
         .arg(&exe)
@@ -1429,17 +1445,15 @@ fn run_tiled_on_host<K: Kernel>(
     let run = Command::new(&exe).output().unwrap();
     assert!(
         run.status.success(),
-        "generated tiled code faulted: {}{}",
+        "{what} faulted: {}{}",
         String::from_utf8_lossy(&run.stdout),
         String::from_utf8_lossy(&run.stderr)
     );
-    Some(
-        String::from_utf8(run.stdout)
-            .unwrap()
-            .lines()
-            .map(str::to_string)
-            .collect(),
-    )
+    String::from_utf8(run.stdout)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
 }
 
 /// `tile_map` of user funcs (unary, binary calling another func, one returning `i32`, and
@@ -1840,31 +1854,17 @@ fn assertions_fault_as_on_the_cpu_backend() {
             flags = if debug { "wp::CTX_DEBUG" } else { "0" },
             thread = src.thread_fn,
         );
-        let cpp = dir.join(format!("a{k}.cpp"));
-        std::fs::write(&cpp, program).unwrap();
-        let exe = dir.join(format!("a{k}"));
-        let built = Command::new("g++")
-            .args([
-                "-std=c++17",
-                "-O1",
-                "-Wno-unused",
-                "-DWP_CONTIGUOUS=1",
-                "-I",
-                include,
-            ])
-            .arg(&cpp)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .unwrap();
-        assert!(
-            built.status.success(),
-            "g++ failed on {}:\n{}",
-            cpp.display(),
-            String::from_utf8_lossy(&built.stderr)
-        );
-        let run = Command::new(&exe).output().unwrap();
-        let host = String::from_utf8(run.stdout).unwrap();
+        let flags = [
+            "-std=c++17",
+            "-O1",
+            "-Wno-unused",
+            "-DWP_CONTIGUOUS=1",
+            "-I",
+            include,
+        ]
+        .map(String::from);
+        let host =
+            build_and_run(&dir.join(format!("a{k}")), &program, &flags, "asserting").join("\n");
         wp::config::set_debug(debug);
         let cpu = wp::launch(asserting, n, (&x, &v, &out), &dev);
         wp::config::set_debug(was);
@@ -2055,23 +2055,9 @@ fn local_array_index_faults_like_the_cpu_backend() {
             text = src.text,
             thread = src.thread_fn,
         );
-        let cpp = dir.join(format!("oob{case}.cpp"));
-        std::fs::write(&cpp, program).unwrap();
-        let exe = dir.join(format!("oob{case}"));
-        let built = Command::new("g++")
-            .args(["-std=c++17", "-O1", "-Wno-unused", "-I", include])
-            .arg(&cpp)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .unwrap();
-        assert!(
-            built.status.success(),
-            "g++ failed on {}:\n{}",
-            cpp.display(),
-            String::from_utf8_lossy(&built.stderr)
-        );
-        let host = String::from_utf8(Command::new(&exe).output().unwrap().stdout).unwrap();
+        let flags = ["-std=c++17", "-O1", "-Wno-unused", "-I", include].map(String::from);
+        let host =
+            build_and_run(&dir.join(format!("oob{case}")), &program, &flags, "oob").join("\n");
         let Err(wp::Error::Fault(f)) = wp::launch(local_oob, 3, (&k, &out), &dev) else {
             panic!("case {case}: the CPU launch did not fault");
         };
@@ -2147,39 +2133,22 @@ fn run_adjoint_on_host<K: Kernel>(n: usize, args: &[Arg]) -> Option<Vec<String>>
         K::INFO.name,
         std::process::id()
     ));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cpp = dir.join("adj.cpp");
-    std::fs::write(&cpp, program).unwrap();
-    let exe = dir.join("adj");
-    let built = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wno-unused",
-            "-DWP_CONTIGUOUS=1",
-            "-I",
-        ])
-        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"))
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        built.status.success(),
-        "g++ failed on {}:\n{}",
-        cpp.display(),
-        String::from_utf8_lossy(&built.stderr)
-    );
-    let run = Command::new(&exe).output().unwrap();
-    assert!(
-        run.status.success(),
-        "the generated adjoint faulted: {}",
-        String::from_utf8_lossy(&run.stdout)
-    );
-    let text = String::from_utf8(run.stdout).unwrap();
-    Some(text.lines().map(str::to_string).collect())
+    let flags = [
+        "-std=c++17",
+        "-O1",
+        "-ffp-contract=off",
+        "-Wno-unused",
+        "-DWP_CONTIGUOUS=1",
+        "-I",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"),
+    ]
+    .map(String::from);
+    Some(build_and_run(
+        &dir,
+        &program,
+        &flags,
+        "the generated adjoint",
+    ))
 }
 
 /// The CUDA adjoint of `local_grads` (element stores in loops pushing the whole array, a func
