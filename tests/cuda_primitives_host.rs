@@ -372,7 +372,10 @@ fn scan_odd_tile() {
 /// Blocks of one partial warp (16 threads), of two and of three warps.
 #[test]
 fn scan_onepass_walks_back_over_aggregates() {
-    for every in ["WP_PRIM_SCAN_INCLUSIVE_EVERY=5", "WP_PRIM_SCAN_INCLUSIVE_EVERY=40"] {
+    for every in [
+        "WP_PRIM_SCAN_INCLUSIVE_EVERY=5",
+        "WP_PRIM_SCAN_INCLUSIVE_EVERY=40",
+    ] {
         let defines = [every];
         let one = [ScanAlgorithm::OnePass];
         scan_cases_with::<i32>(TILE, &defines, &one);
@@ -399,7 +402,10 @@ fn scan_f32_fractional_within_rounding() {
     for (alg, defines) in [
         (ScanAlgorithm::ThreePass, &[][..]),
         (ScanAlgorithm::OnePass, &[][..]),
-        (ScanAlgorithm::OnePass, &["WP_PRIM_SCAN_INCLUSIVE_EVERY=40"][..]),
+        (
+            ScanAlgorithm::OnePass,
+            &["WP_PRIM_SCAN_INCLUSIVE_EVERY=40"][..],
+        ),
     ] {
         let ran = run_with(
             TILE,
@@ -498,9 +504,56 @@ fn reductions_int() {
 fn reductions_odd_tiles() {
     let nan = f32::NAN;
     for tile in [ODD_TILE, WARPS_TILE] {
-        reduce_cases_on::<i32>(tile, &[(0..20_001).map(|i| (i * 7919 % 1001) - 500).collect()]);
+        reduce_cases_on::<i32>(
+            tile,
+            &[(0..20_001).map(|i| (i * 7919 % 1001) - 500).collect()],
+        );
         reduce_cases_on::<f32>(tile, &[vec![nan, 3.0, -2.0, nan, f32::INFINITY]]);
         reduce_cases_on::<u64>(tile, &[]);
+    }
+}
+
+/// A tile whose threads' elements are whole 16-byte vectors for every element type (4 of 4
+/// bytes, 2 of 8): full tiles of an aligned array are read by vector loads.
+const VEC_TILE: Tile = Tile {
+    threads: 32,
+    items: 4,
+};
+
+/// Reductions by vector loads (full tiles of an aligned input; the driver's buffers are
+/// malloc'd, 16-byte aligned) and, for the same inputs one element in, by scalar loads (the
+/// kernel checks the address), against the serial fold.
+#[test]
+fn reductions_vector_loads() {
+    if !have_gpp() {
+        return;
+    }
+    reduce_cases_on::<i32>(
+        VEC_TILE,
+        &[(0..20_001).map(|i| (i * 7919 % 1001) - 500).collect()],
+    );
+    reduce_cases_on::<f64>(VEC_TILE, &[vec![f64::NAN, -1e300, f64::NEG_INFINITY, 7.0]]);
+    reduce_cases_on::<f32>(VEC_TILE, &[]);
+    reduce_cases_on::<u64>(VEC_TILE, &[]);
+    let x: Vec<i64> = (0..5000).map(|i| (i * 7919 % 1001) - 500).collect();
+    let mut cases = Vec::new();
+    for op in [ReduceOp::Sum, ReduceOp::Min, ReduceOp::Max] {
+        let mut p = plan::reduce(VEC_TILE, "i64", 8, op, Len::Host(x.len() as u64 - 1));
+        p.steps[0].args[0] = plan::Word::Addr(plan::Buf::User(0), 8);
+        cases.push(Case {
+            plan: p,
+            users: vec![bytes(&x), bytes(&[0i64])],
+        });
+    }
+    let ran = run(VEC_TILE, &cases);
+    let rest = &x[1..];
+    let want = [
+        rest.iter().sum::<i64>(),
+        *rest.iter().min().unwrap(),
+        *rest.iter().max().unwrap(),
+    ];
+    for (r, w) in ran.iter().zip(want) {
+        assert_eq!(typed::<i64>(&r.users[1]), vec![w]);
     }
 }
 
@@ -904,9 +957,16 @@ fn nvrtc_compiles_every_module() {
         threads: 384,
         items: 12,
     };
+    // (The 4-bit counting passes keep a count per thread and nibble beside the tile: the
+    // benchmarks' 256 x 16 fits the 48 KiB of static shared memory, the default 512 x 8 does
+    // not.)
+    let nibbles = Tile {
+        threads: 256,
+        items: 16,
+    };
     for (variant, tile) in [
         (SortVariant::MatchAny, gpu.tile),
-        (SortVariant::Nibbles, gpu.tile),
+        (SortVariant::Nibbles, nibbles),
         (SortVariant::Ballot, big),
     ] {
         modules.push(Module::Sort(

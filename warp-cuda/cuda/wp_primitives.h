@@ -296,34 +296,70 @@ WP_PRIM_FN T block_scan_warps(T v, T* warp_totals, T* total) {
   return Op::apply(before, excl);
 }
 
+/// Elements of T per 16-byte vector load, and whether a thread's ITEMS elements of a tile are
+/// whole vectors (then a full tile of a 16-byte aligned array is read by vector loads).
+template <typename T>
+struct vec_load {
+  static constexpr i32 V = sizeof(T) <= 16 && 16 % sizeof(T) == 0 ? (i32)(16 / sizeof(T)) : 1;
+  static constexpr bool OK = V > 1 && ITEMS % V == 0;
+  struct alignas(16) vec_t {
+    T v[V];
+  };
+};
+
 /// Phase 1: the total of block b's tile of `load(i)` for i < n (the identity for a tile past
 /// n), written to `partials[b]`. Loads are striped (element k * THREADS + t of the tile for
 /// thread t): consecutive threads read consecutive elements, so every load is coalesced.
 /// With `per` > 1, block b totals the `per` tiles from b * per (a reduction needs no
-/// per-tile totals, and fewer, fuller blocks spend less on the block scan).
+/// per-tile totals, and fewer, fuller blocks spend less on the block total). `aligned`, when
+/// not null, is the array `load` reads, 16-byte aligned: its full tiles are then read by
+/// 16-byte vector loads (vector k * THREADS + t of the tile for thread t: still coalesced,
+/// a quarter of the load instructions for 4-byte T), where `vec_load<T>::OK`.
 template <typename T, typename Op, typename Load>
-WP_PRIM_FN void tile_total(Load load, i64 n, T* partials, i64 per = 1) {
+WP_PRIM_FN void tile_total(Load load, i64 n, T* partials, i64 per = 1,
+                           const T* aligned = nullptr) {
   WP_PRIM_SHARED T warp_totals[WARPS];
   const i64 b = WP_PRIM_BID;
+  const i32 t = WP_PRIM_TID;
   T acc = Op::identity();
   for (i64 j = 0; j < per; ++j) {
-    const i64 base = (b * per + j) * TILE + (i64)WP_PRIM_TID;
-    if (base - WP_PRIM_TID >= n) break;
+    const i64 tb = (b * per + j) * TILE;
+    if (tb >= n) break;
     // Two accumulators: half the dependent chain (their order is fixed: deterministic).
     T acc0 = Op::identity(), acc1 = Op::identity();
-    for (i32 k = 0; k + 1 < ITEMS; k += 2) {
-      const i64 i = base + (i64)k * THREADS;
-      if (i < n) acc0 = Op::apply(acc0, load(i));
-      if (i + THREADS < n) acc1 = Op::apply(acc1, load(i + THREADS));
+    bool done = false;
+    if constexpr (vec_load<T>::OK) {
+      if (aligned != nullptr && tb + TILE <= n) {
+        typedef typename vec_load<T>::vec_t vec_t;
+        const vec_t* tv = reinterpret_cast<const vec_t*>(aligned + tb);
+        WP_PRIM_UNROLL
+        for (i32 k = 0; k < ITEMS / vec_load<T>::V; ++k) {
+          const vec_t x = tv[(i64)k * THREADS + t];
+          WP_PRIM_UNROLL
+          for (i32 e = 0; e + 1 < vec_load<T>::V; e += 2) {
+            acc0 = Op::apply(acc0, x.v[e]);
+            acc1 = Op::apply(acc1, x.v[e + 1]);
+          }
+        }
+        done = true;
+      }
     }
-    if (ITEMS % 2 == 1) {
-      const i64 i = base + (i64)(ITEMS - 1) * THREADS;
-      if (i < n) acc0 = Op::apply(acc0, load(i));
+    if (!done) {
+      const i64 base = tb + (i64)t;
+      for (i32 k = 0; k + 1 < ITEMS; k += 2) {
+        const i64 i = base + (i64)k * THREADS;
+        if (i < n) acc0 = Op::apply(acc0, load(i));
+        if (i + THREADS < n) acc1 = Op::apply(acc1, load(i + THREADS));
+      }
+      if (ITEMS % 2 == 1) {
+        const i64 i = base + (i64)(ITEMS - 1) * THREADS;
+        if (i < n) acc0 = Op::apply(acc0, load(i));
+      }
     }
     acc = Op::apply(acc, Op::apply(acc0, acc1));
   }
   const T total = block_reduce<T, Op>(acc, warp_totals);
-  if (WP_PRIM_TID == 0) partials[b] = total;
+  if (t == 0) partials[b] = total;
 }
 
 /// Phase 2, one block: the exclusive scan of `partials[0..nb)` in place (when `write_prefix`)
@@ -437,7 +473,9 @@ WP_PRIM_FN void k_tile_total(const args_t& a) {
   const i64 n = resolve_count(ptr<const i32>(a, 1), int_arg(a, 2), ptr<fault_t>(a, 4),
                               ptr<u32>(a, 5), int_arg(a, 6), int_arg(a, 7) != 0);
   const i64 per = int_arg(a, 8) > 1 ? int_arg(a, 8) : 1;
-  tile_total<T, Op>(load_array<T>{ptr<const T>(a, 0)}, n, ptr<T>(a, 3), per);
+  const T* in = ptr<const T>(a, 0);
+  tile_total<T, Op>(load_array<T>{in}, n, ptr<T>(a, 3), per,
+                    ((u64)in & 15u) == 0 ? in : nullptr);
 }
 
 /// args: 0 partials (T*), 1 number of partials, 2 write the exclusive prefixes (0/1),

@@ -36,7 +36,8 @@
 //     gives the caller's own value, as CUDA), a lane of the mask that has left the kernel, and
 //     lanes of one mask waiting at different barriers (a `__syncwarp` against a
 //     `__syncthreads`: a deadlock on a GPU) abort, naming the block.
-//   * for the radix sort's warp-level ranking: `__ballot_sync(mask, pred)`,
+//   * for the radix sort's warp-level ranking, the primitives' block totals and scans and the
+//     single-pass scan's look-back window (with the shuffles above): `__ballot_sync(mask, pred)`,
 //     `__match_any_sync(mask, v)` and `__shfl_up_sync(mask, v, delta)`, exchanges like the
 //     shuffles, which also abort when their mask names a lane past the block's end or (for
 //     `__shfl_up_sync`) reads a lane outside the mask; and `__popc`, `__clz`. Every lane of a

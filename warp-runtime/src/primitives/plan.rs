@@ -815,7 +815,10 @@ mod tests {
         // More tiles than one init block zeroes; an empty scan still checks its count.
         let p = scan_onepass(t, "i32", 4, Len::Host(2048 * 2048 + 1), true);
         assert_eq!((p.steps[0].blocks, p.steps[1].blocks), (2, 2049));
-        assert_eq!(scan_onepass(t, "i32", 4, Len::Host(0), true).steps[1].blocks, 1);
+        assert_eq!(
+            scan_onepass(t, "i32", 4, Len::Host(0), true).steps[1].blocks,
+            1
+        );
         // Only the init step reports a bad device count, with the count's argument index.
         let len = Len::Device {
             count: 2,
