@@ -23,9 +23,10 @@
 //
 // Algorithms (learned from the literature, written for this project):
 //   * Block scan: each thread reduces WP_PRIM_ITEMS consecutive elements serially, the block
-//     scans the per-thread totals (Hillis-Steele in shared memory, double buffered, in the
-//     three-phase scan; warp shuffles and one barrier in the single-pass scan), and each
-//     thread rescans its elements from its offset.
+//     scans the per-thread totals (warp shuffles, the warps' totals in shared memory, one
+//     barrier: `block_scan_warps`; Hillis-Steele in shared memory, double buffered, in the
+//     one-block spine, which scans tile after tile), and each thread rescans its elements
+//     from its offset.
 //   * Block total (reductions, and the tile totals of the three-phase scan and compaction):
 //     each thread's elements reduced serially (two accumulators), then a shuffle tree in each
 //     warp and one barrier: thread 0 combines the warps' totals in warp order.
@@ -403,7 +404,7 @@ WP_PRIM_FN void spine(T* partials, i64 nb, bool write_prefix, T* total_out) {
 /// the input.
 template <typename T, typename Op, typename Load, typename Emit>
 WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool inclusive) {
-  WP_PRIM_SHARED T sh[2 * THREADS];
+  WP_PRIM_SHARED T warp_totals[WARPS];
   WP_PRIM_SHARED T stile[TILE];
   const i64 b = WP_PRIM_BID;
   if (b * TILE >= n) return;  // the whole block leaves: no barrier is skipped by some only
@@ -422,8 +423,8 @@ WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool i
     vals[k] = mine + k < tn ? stile[mine + k] : Op::identity();
     acc = Op::apply(acc, vals[k]);
   }
-  T total;
-  const T excl = block_exclusive_scan<T, Op>(acc, sh, &total);
+  T total = Op::identity();  // (the tile's total: not needed)
+  const T excl = block_scan_warps<T, Op>(acc, warp_totals, &total);
   // Each thread rewrites only its own slots of `stile`, which only it has read.
   T run = Op::apply(prefixes[b], excl);
   for (i32 k = 0; k < ITEMS; ++k) {
