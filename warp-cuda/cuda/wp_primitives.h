@@ -396,16 +396,24 @@ WP_PRIM_FN void spine(T* partials, i64 nb, bool write_prefix, T* total_out) {
   if (total_out != nullptr && WP_PRIM_TID == 0) *total_out = carry;
 }
 
+/// A tile's element `i` in shared memory: a slot of padding after every 32 elements, so that
+/// a warp's accesses fall in distinct banks (4-byte T) both striped (lane l element
+/// k * THREADS + l) and per thread (lane l elements l * ITEMS + k, which unpadded would share
+/// 32 / ITEMS banks); TILE_SLOTS slots hold a tile.
+WP_PRIM_FN i64 slot(i64 i) { return i + (i >> 5); }
+constexpr i64 TILE_SLOTS = TILE + TILE / 32 + 1;
+
 /// Phase 3: block b rescans its tile from `prefixes[b]` (the exclusive scan of the tile
 /// totals) and hands `emit(i, value)` the inclusive or exclusive result of each i < n. The
 /// tile goes through shared memory so that global loads and `emit` calls are striped
-/// (coalesced) while each thread scans ITEMS consecutive elements. Every load of the tile
+/// (coalesced) while each thread scans ITEMS consecutive elements (`slot`: no bank
+/// conflicts). Every load of the tile
 /// happens before the first barrier and every `emit` after the last, so `emit` may overwrite
 /// the input.
 template <typename T, typename Op, typename Load, typename Emit>
 WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool inclusive) {
   WP_PRIM_SHARED T warp_totals[WARPS];
-  WP_PRIM_SHARED T stile[TILE];
+  WP_PRIM_SHARED T stile[TILE_SLOTS];
   const i64 b = WP_PRIM_BID;
   if (b * TILE >= n) return;  // the whole block leaves: no barrier is skipped by some only
   const i32 t = WP_PRIM_TID;
@@ -413,14 +421,14 @@ WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool i
   const i64 tn = n - tb < TILE ? n - tb : TILE;
   for (i32 k = 0; k < ITEMS; ++k) {
     const i64 li = t + (i64)k * THREADS;
-    if (li < tn) stile[li] = load(tb + li);
+    if (li < tn) stile[slot(li)] = load(tb + li);
   }
   WP_PRIM_SYNC();
   const i64 mine = (i64)t * ITEMS;
   T vals[ITEMS];
   T acc = Op::identity();
   for (i32 k = 0; k < ITEMS; ++k) {
-    vals[k] = mine + k < tn ? stile[mine + k] : Op::identity();
+    vals[k] = mine + k < tn ? stile[slot(mine + k)] : Op::identity();
     acc = Op::apply(acc, vals[k]);
   }
   T total = Op::identity();  // (the tile's total: not needed)
@@ -431,16 +439,16 @@ WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool i
     if (mine + k >= tn) break;
     if (inclusive) {
       run = Op::apply(run, vals[k]);
-      stile[mine + k] = run;
+      stile[slot(mine + k)] = run;
     } else {
-      stile[mine + k] = run;
+      stile[slot(mine + k)] = run;
       run = Op::apply(run, vals[k]);
     }
   }
   WP_PRIM_SYNC();
   for (i32 k = 0; k < ITEMS; ++k) {
     const i64 li = t + (i64)k * THREADS;
-    if (li < tn) emit(tb + li, stile[li]);
+    if (li < tn) emit(tb + li, stile[slot(li)]);
   }
 }
 
@@ -634,7 +642,7 @@ WP_PRIM_FN void k_scan_init(const args_t& a) {
 /// after the last, so `out` may be `in`.
 template <typename T, typename Op>
 WP_PRIM_FN void k_scan_onepass(const args_t& a) {
-  WP_PRIM_SHARED T stile[TILE];
+  WP_PRIM_SHARED T stile[TILE_SLOTS];
   WP_PRIM_SHARED T warp_totals[WARPS];
   WP_PRIM_SHARED T prefix_sh;
   WP_PRIM_SHARED i64 tile_sh;
@@ -653,7 +661,7 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
   WP_PRIM_UNROLL
   for (i32 k = 0; k < ITEMS; ++k) {
     const i64 li = t + (i64)k * THREADS;
-    if (li < tn) stile[li] = in[tb + li];
+    if (li < tn) stile[slot(li)] = in[tb + li];
   }
   WP_PRIM_SYNC();
   const i64 mine = (i64)t * ITEMS;
@@ -661,7 +669,7 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
   T acc = Op::identity();
   WP_PRIM_UNROLL
   for (i32 k = 0; k < ITEMS; ++k) {
-    vals[k] = mine + k < tn ? stile[mine + k] : Op::identity();
+    vals[k] = mine + k < tn ? stile[slot(mine + k)] : Op::identity();
     acc = Op::apply(acc, vals[k]);
   }
   T total = Op::identity();  // (set in thread 0, which alone publishes it)
@@ -688,9 +696,9 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
     if (mine + k < tn) {
       if (inclusive) {
         run = Op::apply(run, vals[k]);
-        stile[mine + k] = run;
+        stile[slot(mine + k)] = run;
       } else {
-        stile[mine + k] = run;
+        stile[slot(mine + k)] = run;
         run = Op::apply(run, vals[k]);
       }
     }
@@ -699,7 +707,7 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
   WP_PRIM_UNROLL
   for (i32 k = 0; k < ITEMS; ++k) {
     const i64 li = t + (i64)k * THREADS;
-    if (li < tn) out[tb + li] = stile[li];
+    if (li < tn) out[tb + li] = stile[slot(li)];
   }
 }
 
