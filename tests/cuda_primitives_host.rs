@@ -5,9 +5,9 @@
 //! a barrier, blocks one after another), and the results are compared with serial
 //! references.
 //!
-//! The kernels are compiled for small tiles (64 threads x 2 elements, and 16 x 3) so that
-//! small inputs already span many blocks and the one-block "spine" loops over several tiles
-//! of block totals. Scratch buffers start filled with 0xCD bytes, so a kernel that read
+//! The kernels are compiled for small tiles (64 threads x 2 elements; 16 x 3, 96 x 2 and, for
+//! vector loads, 32 x 4) so that small inputs already span many blocks, the one-block "spine"
+//! loops over several tiles of block totals, and the single-pass scan's look-backs are long. Scratch buffers start filled with 0xCD bytes, so a kernel that read
 //! scratch before writing it would show. What this cannot check is what only hardware does:
 //! NVRTC's acceptance of the source, warp scheduling and memory ordering on the GPU (the
 //! backend suite's `primitives` tests do that on a GPU).
