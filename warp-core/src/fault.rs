@@ -201,7 +201,8 @@ impl Fault {
                 f,
                 "kernel `{}`: backward needs more than the {capacity} bytes of per-thread \
                  stack configured for loop values (at line {line}); raise it with \
-                 wp::config::set_adstack_bytes",
+                 wp::config::set_adstack_bytes or Tape::set_adstack_bytes, zero the \
+                 gradients (Tape::zero), seed them and run backward again",
                 self.kernel
             ),
             FaultKind::BadStep { step } => write!(
