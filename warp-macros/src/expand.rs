@@ -643,8 +643,11 @@ fn const_literals(f: &crate::ir::Function) -> TokenStream {
     quote!(&[#(#fns),*])
 }
 
-/// The user struct types a function's parameters name (`S` and `Array<S, N>`), as written.
+/// The user struct types a function names, as written: its parameters' (`S` and
+/// `Array<S, N>`), its result's and its struct literals' (`S { .. }`), whose C++ definitions
+/// its translation unit needs.
 fn struct_types(f: &crate::ir::Function) -> Vec<syn::Type> {
+    use crate::ir::{Ctor, Op, StmtKind};
     use crate::types::Ty;
     let mut out = Vec::new();
     for p in &f.params {
@@ -657,6 +660,28 @@ fn struct_types(f: &crate::ir::Function) -> Vec<syn::Type> {
             out.push(t);
         }
     }
+    if let (Ty::Struct(_), Some(t)) = (&f.ret, &f.ret_syn) {
+        out.push(t.clone());
+    }
+    crate::ir::walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op:
+                Op::Construct {
+                    ctor: Ctor::Fields { path, .. },
+                    ..
+                },
+            ..
+        } = &s.kind
+        {
+            let t = syn::Type::Path(syn::TypePath {
+                qself: None,
+                path: path.clone(),
+            });
+            if !out.contains(&t) {
+                out.push(t);
+            }
+        }
+    });
     out
 }
 
@@ -1052,6 +1077,34 @@ fn func_instance(
     })
 }
 
+/// Whether the field `e` of type `t` holds only finite floats: an array field (`[f32; 4]`,
+/// `[[Vec3; 2]; 3]`) element by element.
+fn field_finite(t: &syn::Type, e: TokenStream) -> TokenStream {
+    match t {
+        syn::Type::Array(a) => {
+            let inner = field_finite(&a.elem, quote!((*__e)));
+            quote!(#e.iter().all(|__e| #inner))
+        }
+        syn::Type::Paren(p) => field_finite(&p.elem, e),
+        _ => quote!(<#t as __wp::Element>::is_finite_value(&#e)),
+    }
+}
+
+/// The field `e` of type `t` as text: an array field as `[a, b, ..]`.
+fn field_describe(t: &syn::Type, e: TokenStream) -> TokenStream {
+    match t {
+        syn::Type::Array(a) => {
+            let inner = field_describe(&a.elem, quote!((*__e)));
+            quote!(::std::format!(
+                "[{}]",
+                #e.iter().map(|__e| #inner).collect::<::std::vec::Vec<_>>().join(", ")
+            ))
+        }
+        syn::Type::Paren(p) => field_describe(&p.elem, e),
+        _ => quote!(<#t as __wp::Element>::describe(&#e)),
+    }
+}
+
 /// `#[derive(Struct)]`.
 pub fn derive_struct(item: TokenStream) -> TokenStream {
     let wp = crate::paths::private();
@@ -1094,12 +1147,6 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
                 t.span(),
                 "arrays cannot be struct fields yet: pass them as kernel parameters",
             ));
-        } else if let Ok(crate::types::Ty::LocalArray(..)) = crate::front::signature::parse_type(t)
-        {
-            errors.push(syn::Error::new(
-                t.span(),
-                "local arrays cannot be struct fields yet: use vector or scalar fields",
-            ));
         } else if let Ok(crate::types::Ty::Object(k)) = crate::front::signature::parse_type(t) {
             errors.push(syn::Error::new(
                 t.span(),
@@ -1115,8 +1162,20 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
     }
     let name_str = Literal::string(&name.to_string());
     let mut def = format!("struct {name} {{");
+    // The module consts that array fields' lengths name (`[f32; N]`): C++ gets their values
+    // when the definition is first used (`cuda_defs`), as kernels get theirs at assembly.
+    let mut lengths: Vec<(String, syn::Path)> = Vec::new();
     for f in data.fields.iter() {
         let ty = crate::front::signature::parse_type(&f.ty).expect("checked above");
+        let mut t = &ty;
+        while let crate::types::Ty::LocalArray(e, n) = t {
+            if let crate::types::Dim::Const(p) = n {
+                if !lengths.iter().any(|(q, _)| q == p) {
+                    lengths.push((p.clone(), syn::parse_str(p).expect("a const path")));
+                }
+            }
+            t = e;
+        }
         let cpp = crate::back::cuda::cpp_type(&ty).unwrap_or_else(|| name.to_string());
         let field = f.ident.as_ref().map(|i| i.to_string()).unwrap_or_default();
         def.push_str(&format!(" {cpp} {field};"));
@@ -1187,6 +1246,30 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
     let field_asserts = fields
         .iter()
         .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
+    let finite = fields
+        .iter()
+        .zip(&members)
+        .map(|(t, m)| field_finite(t, quote!(self.#m)));
+    let describe = fields
+        .iter()
+        .zip(&members)
+        .map(|(t, m)| field_describe(t, quote!(self.#m)));
+    let own_def = if lengths.is_empty() {
+        quote!(Self::CUDA_DEF)
+    } else {
+        let holes = lengths.iter().map(|(name, p)| {
+            let hole = format!("@@LEN:{name}@@");
+            quote!(.replace(#hole, &::std::string::ToString::to_string(&(#p as usize))))
+        });
+        quote!({
+            static DEF: ::std::sync::OnceLock<&'static str> = ::std::sync::OnceLock::new();
+            *DEF.get_or_init(|| {
+                // Once per struct and process: the definition lives as long as kernels do.
+                let def = Self::CUDA_DEF.to_string() #(#holes)*;
+                ::std::boxed::Box::leak(def.into_boxed_str())
+            })
+        })
+    };
     quote! {
         const _: () = {
             use #wp as __wp;
@@ -1203,11 +1286,11 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             impl __wp::Element for #name {
                 const TYPE_NAME: &'static str = #name_str;
                 fn is_finite_value(&self) -> bool {
-                    true #( && <#fields as __wp::Element>::is_finite_value(&self.#members) )*
+                    true #( && #finite )*
                 }
                 fn describe(&self) -> ::std::string::String {
                     let parts: ::std::vec::Vec<::std::string::String> = ::std::vec![
-                        #( <#fields as __wp::Element>::describe(&self.#members) ),*
+                        #( #describe ),*
                     ];
                     ::std::format!("{} {{ {} }}", #name_str, parts.join(", "))
                 }
@@ -1230,8 +1313,9 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
                 const CUDA_DEF: &'static str = #cuda_def;
                 fn cuda_defs(out: &mut ::std::vec::Vec<&'static str>) {
                     #( <#nested as __wp::CudaStruct>::cuda_defs(out); )*
-                    if !out.contains(&Self::CUDA_DEF) {
-                        out.push(Self::CUDA_DEF);
+                    let def: &'static str = #own_def;
+                    if !out.contains(&def) {
+                        out.push(def);
                     }
                 }
             }
