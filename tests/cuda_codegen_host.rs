@@ -2310,7 +2310,12 @@ fn struct_literals_and_array_fields_match_the_cpu_backend() {
     let j = wp::Array::from_slice(&js, &dev).unwrap();
     let out = wp::Array::<f32, 2>::zeros((9, 3), &dev).unwrap();
     let ints = wp::Array::<i32>::zeros(9, &dev).unwrap();
-    let args = [Arg::F32s(&x), Arg::I32s(&j), Arg::F32Grid(&out), Arg::I32s(&ints)];
+    let args = [
+        Arg::F32s(&x),
+        Arg::I32s(&j),
+        Arg::F32Grid(&out),
+        Arg::I32s(&ints),
+    ];
     let host = run_on_host::<struct_values>(&[9], &args);
     wp::launch(struct_values, 9, (&x, &j, &out, &ints), &dev).unwrap();
     if let Some(host) = host {

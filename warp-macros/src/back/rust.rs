@@ -409,7 +409,12 @@ impl<'a> RustEmitter<'a> {
                 args,
                 ..
             } => {
-                let vals = args.iter().take(names.len()).map(|v| self.var(*v));
+                // Each value at its field's name: a mistyped field's error points there.
+                let vals = names.iter().zip(args).map(|(n, v)| {
+                    let mut v = self.var(*v);
+                    v.set_span(n.span());
+                    v
+                });
                 let rest = base.then(|| {
                     let b = self.var(args[names.len()]);
                     quote_spanned!(sp=> ..#b)
