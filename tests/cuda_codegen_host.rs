@@ -2273,6 +2273,11 @@ fn strand_of(x: f32, k: i32) -> Strand {
     }
 }
 
+#[wp::func]
+fn quad(x: f32) -> [f32; 4] {
+    [x, x * 2.0, x * 3.0, x * 4.0]
+}
+
 /// Struct literals (shorthand, nested, `..base`, from a func) and array fields read and
 /// written at constant and dynamic indices, nested, through `len()`, lanes of vector
 /// elements, a matrix element's column.
@@ -2297,7 +2302,8 @@ fn struct_values(x: Array<f32>, j: Array<i32>, out: Array<f32, 2>, ints: Array<i
     }
     out[(i, 0)] = total;
     out[(i, 1)] = t.knots[0].z + t.rest[2] + t.head.m + t.head.p.x;
-    out[(i, 2)] = t.frame[0].z_axis.z + s.head.m;
+    // A func's array result and a func's struct's array field, indexed directly.
+    out[(i, 2)] = t.frame[0].z_axis.z + s.head.m + quad(x[i])[k] + strand_of(1.5, k).w[k];
     ints[i] = t.grid[1][0] * 100 + t.grid[1][1] + t.id as i32 + t.rest.len() as i32;
 }
 

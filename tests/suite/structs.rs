@@ -19,6 +19,7 @@ backend_tests!(
     array_field_index_faults,
     struct_literal_gradient,
     array_field_gradient,
+    forward_mode_refuses_structs,
 );
 
 /// A struct whose field is another user struct (defined after it here: the generated CUDA
@@ -625,4 +626,37 @@ fn array_field_gradient(dev: &wp::Device) {
     // Bead 0's w[1] is f64 number 4 of the flat array (pos: 0..3, w: 3..6).
     let got = report.analytic[0][4];
     assert!((got - want).abs() <= 1e-12 * want.abs(), "{got} vs {want}");
+}
+
+#[wp::kernel]
+fn k_bead_jvp(x: Array<f64>, out: Array<f64>) {
+    let i = tid();
+    let b = Bead {
+        pos: DVec3::splat(x[i]),
+        w: [x[i]; 3],
+        mass: 2.0,
+    };
+    out[i] = b.mass * b.w[1];
+}
+
+/// Forward mode does not follow struct values yet (the macro cannot tell a struct's integer
+/// fields from its float ones): a struct built from differentiated values is refused, never a
+/// silently zero tangent.
+fn forward_mode_refuses_structs(dev: &wp::Device) {
+    let x = arr(&[1.0f64, 2.0], dev);
+    let out = zeros::<f64, 1>(2, dev);
+    let (x_dot, out_dot) = (arr(&[1.0f64, 1.0], dev), zeros::<f64, 1>(2, dev));
+    let err = wp::jvp(k_bead_jvp, 2, (&x, &out), (&x_dot, &out_dot), dev).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        matches!(
+            err,
+            wp::Error::NoTangent {
+                kernel: "k_bead_jvp",
+                ..
+            }
+        ),
+        "{msg}"
+    );
+    assert!(msg.contains("`Bead`"), "{msg}");
 }
