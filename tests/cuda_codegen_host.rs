@@ -2234,3 +2234,141 @@ fn local_array_tangent_matches_the_cpu_backend() {
         assert!(y_dot.to_vec().unwrap().iter().any(|v| *v != 0.0));
     }
 }
+
+/// The length of `Strand::rest`: a module const, which the C++ definition gets at assembly.
+const STRAND_REST: usize = 3;
+
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Knot {
+    p: Vec3,
+    m: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Strand {
+    w: [f32; 4],
+    knots: [Vec3; 2],
+    rest: [f32; STRAND_REST],
+    grid: [[i32; 2]; 2],
+    frame: [Mat3; 1],
+    head: Knot,
+    id: u32,
+}
+
+#[wp::func]
+fn strand_of(x: f32, k: i32) -> Strand {
+    Strand {
+        w: [x, x * 2.0, 0.5, -x],
+        knots: [Vec3::splat(x), Vec3::new(1.0, x, 2.0)],
+        rest: [0.25; STRAND_REST],
+        grid: [[k, 1], [2, k * 3]],
+        frame: [Mat3::from_diagonal(Vec3::new(x, 1.0, 2.0))],
+        head: Knot {
+            p: Vec3::Z * x,
+            m: 1.5,
+        },
+        id: 7,
+    }
+}
+
+#[wp::func]
+fn quad(x: f32) -> [f32; 4] {
+    [x, x * 2.0, x * 3.0, x * 4.0]
+}
+
+/// Struct literals (shorthand, nested, `..base`, from a func) and array fields read and
+/// written at constant and dynamic indices, nested, through `len()`, lanes of vector
+/// elements, a matrix element's column.
+#[wp::kernel]
+fn struct_values(x: Array<f32>, j: Array<i32>, out: Array<f32, 2>, ints: Array<i32>) {
+    let i = tid();
+    let k = j[i];
+    let mut s = strand_of(x[i], k);
+    s.w[k] += s.knots[1].y;
+    s.knots[0].z = s.w[(k + 1) % 4];
+    s.rest[2] *= 3.0;
+    s.grid[1][k % 2] -= 5;
+    s.head.m = s.frame[0].x_axis.x * 2.0;
+    let m = 0.75;
+    let t = Strand {
+        head: Knot { p: s.knots[0], m },
+        ..s
+    };
+    let mut total = 0.0;
+    for q in 0..t.w.len() {
+        total += t.w[q] * (q as f32 + 1.0);
+    }
+    out[(i, 0)] = total;
+    out[(i, 1)] = t.knots[0].z + t.rest[2] + t.head.m + t.head.p.x;
+    // A func's array result and a func's struct's array field, indexed directly.
+    out[(i, 2)] = t.frame[0].z_axis.z + s.head.m + quad(x[i])[k] + strand_of(1.5, k).w[k];
+    ints[i] = t.grid[1][0] * 100 + t.grid[1][1] + t.id as i32 + t.rest.len() as i32;
+}
+
+#[test]
+fn struct_literals_and_array_fields_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let xs: Vec<f32> = (0..9).map(|k| k as f32 * 0.375 - 1.0).collect();
+    let js: Vec<i32> = (0..9).map(|k| (k * 5 + 1) % 4).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let j = wp::Array::from_slice(&js, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((9, 3), &dev).unwrap();
+    let ints = wp::Array::<i32>::zeros(9, &dev).unwrap();
+    let args = [
+        Arg::F32s(&x),
+        Arg::I32s(&j),
+        Arg::F32Grid(&out),
+        Arg::I32s(&ints),
+    ];
+    let host = run_on_host::<struct_values>(&[9], &args);
+    wp::launch(struct_values, 9, (&x, &j, &out, &ints), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+}
+
+/// A struct's C++ definition has the Rust struct's layout: its size and every field's offset,
+/// with array fields (`wp::local_array_t`) and a const length filled in.
+#[test]
+fn struct_layouts_match_the_rust_side() {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (struct layouts): no g++ on this machine");
+        return;
+    }
+    let mut defs = Vec::new();
+    <Strand as wp::__private::CudaStruct>::cuda_defs(&mut defs);
+    let fields = ["w", "knots", "rest", "grid", "frame", "head", "id"];
+    let print: String = fields
+        .iter()
+        .map(|f| format!("printf(\"%zu\\n\", offsetof(Strand, {f}));\n"))
+        .collect();
+    let program = format!(
+        "#include <cstdio>\n#include <cstddef>\n#include \"wp_core.h\"\n{}\n\
+         int main() {{ printf(\"%zu\\n%zu\\n\", sizeof(Strand), alignof(Strand));\n{print}return 0; }}\n",
+        defs.join("\n")
+    );
+    let dir = std::env::temp_dir().join(format!("wp_codegen_layout_{}", std::process::id()));
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let flags: Vec<String> = ["-std=c++17", "-I", include]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let got = build_and_run(&dir, &program, &flags, "the layout program");
+    let want: Vec<String> = [
+        std::mem::size_of::<Strand>(),
+        std::mem::align_of::<Strand>(),
+        std::mem::offset_of!(Strand, w),
+        std::mem::offset_of!(Strand, knots),
+        std::mem::offset_of!(Strand, rest),
+        std::mem::offset_of!(Strand, grid),
+        std::mem::offset_of!(Strand, frame),
+        std::mem::offset_of!(Strand, head),
+        std::mem::offset_of!(Strand, id),
+    ]
+    .iter()
+    .map(|n| n.to_string())
+    .collect();
+    assert_eq!(got, want);
+}

@@ -29,8 +29,15 @@ fn empty(s: f32) -> f32 {
 
 #[derive(Clone, Copy, wp::Struct)]
 #[repr(C)]
+struct Inner {
+    v: f32,
+}
+
+// Array fields hold what local arrays hold: not user structs.
+#[derive(Clone, Copy, wp::Struct)]
+#[repr(C)]
 struct WithArray {
-    values: [f32; 4],
+    values: [Inner; 4],
 }
 
 fn main() {}

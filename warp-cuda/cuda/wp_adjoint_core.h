@@ -445,6 +445,11 @@ WP_FN void grad_add_p(T* p, const T& v) {
     }
   }
 }
+/// A struct's array field (`[f32; 4]`): element by element.
+template <typename T, int N>
+WP_FN void grad_add_p(local_array_t<T, N>* p, const local_array_t<T, N>& v) {
+  for (int i = 0; i < N; ++i) grad_add_p(&p->data[i], v.data[i]);
+}
 template <typename T, int N>
 WP_FN void grad_accum_idx(const array_t<T, N>& g, const i64* idx, const T& v, ctx_t* ctx) {
   if (g.data == nullptr) return;

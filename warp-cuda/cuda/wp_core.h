@@ -1907,6 +1907,11 @@ WP_FN void local_set(local_array_t<T, N>& a, i64 i, const typename identity<T>::
   }
   detail::local_index_fault(i, N, line, ctx);
 }
+/// `a.len()` of a local array a kernel cannot name the type of (a struct's array field).
+template <typename T, int N>
+WP_FN usize len(const local_array_t<T, N>&) {
+  return (usize)N;
+}
 /// The element of an adjoint at an index the replay checked (warp_core::local_array::at_mut):
 /// element 0 for any other index, which a faulting thread (it goes on) may reach, so that the
 /// access stays in bounds.

@@ -232,6 +232,15 @@ pub enum Ctor {
     Splat,
     /// `Vec3::ZERO`, `Mat3::IDENTITY`, ...: the associated constant's name.
     Const(String),
+    /// A user struct's literal (`Ty::Struct`), `Particle { x: p, v, m: 1.0 }`: the path as
+    /// written and the fields named, in the order written, one argument each; with `base`
+    /// (`Particle { m: 2.0, ..q }`), one more argument last, the value the other fields are
+    /// copied from. rustc checks the fields (missing, unknown, repeated) on the CPU code.
+    Fields {
+        path: syn::Path,
+        names: Vec<syn::Ident>,
+        base: bool,
+    },
 }
 
 /// An operation producing one value.
@@ -261,8 +270,8 @@ pub enum Op {
     },
     /// `v.x`, `m.x_axis`, `s.field`.
     Member(VarId, String),
-    /// `a[index]` of a local array (`Ty::LocalArray`), checked against its length (a
-    /// `LocalIndex` fault naming the line).
+    /// `a[index]` of a local array (`Ty::LocalArray`, or `Deferred`: a struct's array field,
+    /// `s.w[k]`), checked against its length (a `LocalIndex` fault naming the line).
     Index {
         array: VarId,
         index: VarId,
@@ -292,7 +301,8 @@ pub enum Op {
     },
     /// `array.shape()[k]` (usize).
     Extent(VarId, u8),
-    /// `array.len()` (usize).
+    /// `array.len()` (usize); also of a local array whose type the macro cannot see (a
+    /// struct's array field, `s.w.len()`), a constant.
     Len(VarId),
     /// A module-level `const` (Warp's `wp.constant`), by the path written: its type is the
     /// const's, which the macro cannot see (`Deferred`); the CUDA value comes from the const

@@ -881,6 +881,23 @@ impl<'a> Emitter<'a> {
                 self.var(*index),
                 self.stmt_line
             ),
+            // C++ aggregate initialisation would need the fields in declaration order, which
+            // the macro cannot see: a zero (or the base) value with the fields set by name.
+            Op::Construct {
+                ty,
+                ctor: Ctor::Fields { names, base, .. },
+                args,
+            } => {
+                let t = cpp_type(ty).ok_or("a struct literal of no struct")?;
+                let mut body = match base {
+                    true => format!("{t} __s = {};", self.var(args[names.len()])),
+                    false => format!("{t} __s{{}};"),
+                };
+                for (n, v) in names.iter().zip(args) {
+                    write!(body, " __s.{n} = {};", self.var(*v)).expect("a String");
+                }
+                format!("([&]() {{ {body} return __s; }}())")
+            }
             Op::Construct {
                 ty: t @ Ty::LocalArray(..),
                 ctor,

@@ -403,6 +403,24 @@ impl<'a> RustEmitter<'a> {
                 let (a, i, line) = (self.var(*array), self.var(*index), line_lit(sp));
                 quote_spanned!(sp=> __wp::local_array::get(&#a, #i, #name, #line)?)
             }
+            // Printed as the user's literal, so that rustc checks its fields at their spans.
+            Op::Construct {
+                ctor: Ctor::Fields { path, names, base },
+                args,
+                ..
+            } => {
+                // Each value at its field's name: a mistyped field's error points there.
+                let vals = names.iter().zip(args).map(|(n, v)| {
+                    let mut v = self.var(*v);
+                    v.set_span(n.span());
+                    v
+                });
+                let rest = base.then(|| {
+                    let b = self.var(args[names.len()]);
+                    quote_spanned!(sp=> ..#b)
+                });
+                quote_spanned!(sp=> #path { #(#names: #vals,)* #rest })
+            }
             Op::Construct {
                 ty: Ty::LocalArray(_, n),
                 ctor,

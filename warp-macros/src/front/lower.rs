@@ -19,6 +19,7 @@
 //! - `tiles`: tile calls typed by their shapes, `lane()`, operators and indexing on tiles.
 //! - `local_arrays`: fixed-size local arrays (`[0.0f32; 8]`, `[x, y, z]`), their elements
 //!   and `len()`.
+//! - `struct_literals`: user struct literals (`Particle { x, v: Vec3::ZERO, ..q }`).
 
 use crate::builtins::{self, ArgTy, Builtin, Emit, Pos};
 use crate::front::signature::parse_type;
@@ -38,6 +39,7 @@ mod places;
 mod query;
 mod rng;
 mod statements;
+mod struct_literals;
 mod tiles;
 pub(crate) mod typing;
 mod views;

@@ -60,9 +60,11 @@ fn tangent_array(t: &Ty) -> bool {
     matches!(t, Ty::Array(e, _) if !e.is_deferred() && tangent_type(e))
 }
 
-/// Whether a value of this type holds floats that forward mode cannot follow yet.
+/// Whether a value of this type holds floats that forward mode cannot follow yet. A user
+/// struct's fields are invisible to the macro (an integer field's tangent could not be told
+/// from a float's), so a struct computed from differentiated values is refused too.
 fn untracked_float(t: &Ty) -> bool {
-    matches!(t, Ty::Transform(_) | Ty::Tuple(_))
+    matches!(t, Ty::Transform(_) | Ty::Tuple(_) | Ty::Struct(_))
 }
 
 /// The tangent kernel of `f`, or why there is none (a sentence after "it": "calls `quat_rotate`

@@ -434,7 +434,9 @@ impl Lowerer {
             if self.is_view(a) {
                 return Ok(self.view_len(a, span));
             }
-            if matches!(self.ty(a), Ty::Array(..)) {
+            // A deferred value's `len()` is a struct's array field's or a func's array result's
+            // (rustc refuses any other value there).
+            if matches!(self.ty(a), Ty::Array(..) | Ty::Deferred) {
                 return Ok(self.def(Op::Len(a), USIZE, span));
             }
             if matches!(self.ty(a), Ty::LocalArray(..)) {

@@ -351,10 +351,7 @@ impl Lowerer {
                 "tuples are not supported in kernels (except array indices a[(i, j)])",
             ),
             Expr::Match(_) => err(span, "`match` is not supported in kernels: use if / else"),
-            Expr::Struct(_) => err(
-                span,
-                "struct literals are not supported in kernels yet: pass the struct as an argument",
-            ),
+            Expr::Struct(s) => self.struct_literal(s, span),
             Expr::Range(_) => err(span, "ranges are only supported as `for` loop bounds"),
             Expr::Try(_) => err(span, "`?` is not supported in kernels"),
             Expr::Async(_) | Expr::Await(_) => err(span, "async is not supported in kernels"),

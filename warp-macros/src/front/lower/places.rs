@@ -15,11 +15,6 @@ fn fields(path: &[Step]) -> Vec<String> {
     };
     path.iter().filter_map(name).collect()
 }
-
-/// An array element's member path as steps.
-fn steps(path: &[String]) -> Vec<Step> {
-    path.iter().cloned().map(Step::Field).collect()
-}
 use super::*;
 use crate::operators::binary_result;
 
@@ -38,8 +33,8 @@ pub(super) enum Step {
     Elem(VarId),
 }
 
-/// An assignable place: a local (with a path of fields and local array elements) or an array
-/// element (with a member path).
+/// An assignable place: a local or an array element, with a path of fields and local array
+/// elements (a struct's array field, `ps[i].w[k]`).
 pub(super) enum Place {
     Local {
         var: VarId,
@@ -48,8 +43,16 @@ pub(super) enum Place {
     Elem {
         array: VarId,
         index: Vec<VarId>,
-        path: Vec<String>,
+        path: Vec<Step>,
     },
+}
+
+impl Place {
+    fn path_mut(&mut self) -> &mut Vec<Step> {
+        match self {
+            Place::Local { path, .. } | Place::Elem { path, .. } => path,
+        }
+    }
 }
 
 impl Lowerer {
@@ -127,10 +130,7 @@ impl Lowerer {
                     return err(f.member.span(), "tuple fields are not supported in kernels");
                 };
                 let mut inner = self.place(&f.base)?;
-                match &mut inner {
-                    Place::Local { path, .. } => path.push(Step::Field(m.to_string())),
-                    Place::Elem { path, .. } => path.push(m.to_string()),
-                }
+                inner.path_mut().push(Step::Field(m.to_string()));
                 Ok(inner)
             }
             Expr::Index(ix) => {
@@ -140,25 +140,16 @@ impl Lowerer {
                 if let Some(lanes) = base.as_ref().map(|t| spatial_index(t, &ix.index)) {
                     if let Some(lanes) = lanes? {
                         let mut inner = self.place(&ix.expr)?;
-                        match &mut inner {
-                            Place::Local { path, .. } => {
-                                path.extend(lanes.into_iter().map(Step::Field))
-                            }
-                            Place::Elem { path, .. } => path.extend(lanes),
-                        }
+                        inner.path_mut().extend(lanes.into_iter().map(Step::Field));
                         return Ok(inner);
                     }
                 }
-                // An element of a local array: a step of the array's own place.
-                if let Some(Ty::LocalArray(..)) = base {
+                // An element of a local array (or of a struct's array field, whose type only
+                // the target compilers see): a step of the array's own place.
+                if let Some(Ty::LocalArray(..) | Ty::Deferred) = base {
                     let mut inner = self.place(&ix.expr)?;
                     let i = self.local_index(&ix.index)?;
-                    match &mut inner {
-                        Place::Local { path, .. } => path.push(Step::Elem(i)),
-                        Place::Elem { .. } => {
-                            return err(ix.span(), "array elements cannot be local arrays")
-                        }
-                    }
+                    inner.path_mut().push(Step::Elem(i));
                     return Ok(inner);
                 }
                 match self.array_index(ix)? {
@@ -191,8 +182,8 @@ impl Lowerer {
         let (mut t, path) = match p {
             Place::Local { var, path } => (self.ty(*var), path.clone()),
             Place::Elem { array, path, .. } => match self.ty(*array) {
-                Ty::Array(e, _) => (*e, steps(path)),
-                _ => (Ty::Deferred, steps(path)),
+                Ty::Array(e, _) => (*e, path.clone()),
+                _ => (Ty::Deferred, path.clone()),
             },
         };
         for step in &path {
@@ -200,6 +191,7 @@ impl Lowerer {
                 Step::Field(m) => self.member_ty(&t, m, span)?,
                 Step::Elem(_) => match t {
                     Ty::LocalArray(e, _) => *e,
+                    Ty::Deferred => Ty::Deferred,
                     t => return err(span, format!("`{t}` cannot be indexed")),
                 },
             };
@@ -224,7 +216,7 @@ impl Lowerer {
                         elem,
                         span,
                     ),
-                    steps(path),
+                    path.clone(),
                 )
             }
         };
@@ -281,14 +273,7 @@ impl Lowerer {
                     },
                     span,
                 );
-                self.push(
-                    StmtKind::SetMember {
-                        var: tmp,
-                        path,
-                        value,
-                    },
-                    span,
-                );
+                self.write_local(tmp, &path, value, span);
                 self.push(
                     StmtKind::Store {
                         array,
@@ -307,12 +292,15 @@ impl Lowerer {
     fn peek_place_ty(&self, e: &Expr) -> Option<Ty> {
         match strip(e) {
             Expr::Path(p) => Some(self.ty(self.lookup(&p.path.get_ident()?.to_string())?)),
-            Expr::Field(f) => match &f.member {
-                syn::Member::Named(m) => self.peek_place_ty(&f.base)?.member_ty(&m.to_string()),
-                syn::Member::Unnamed(_) => None,
+            Expr::Field(f) => match (&f.member, self.peek_place_ty(&f.base)?) {
+                // A struct's field: its type is the target compilers' to see.
+                (syn::Member::Named(_), Ty::Struct(_) | Ty::Deferred) => Some(Ty::Deferred),
+                (syn::Member::Named(m), t) => t.member_ty(&m.to_string()),
+                (syn::Member::Unnamed(_), _) => None,
             },
             Expr::Index(ix) => match self.peek_place_ty(&ix.expr)? {
                 Ty::Array(e, _) | Ty::LocalArray(e, _) => Some(*e),
+                Ty::Deferred => Some(Ty::Deferred),
                 t => spatial_index(&t, &ix.index)
                     .ok()??
                     .iter()
@@ -324,7 +312,8 @@ impl Lowerer {
 
     /// `var.path = value` for a local: an assignment, a member path, or (for a path through a
     /// local array's element) the element read, written at the rest of the path, and set
-    /// back.
+    /// back; an array reached through fields (a struct's array field, `s.w[k] = v`) is read,
+    /// its element written, and set back.
     fn write_local(&mut self, var: VarId, path: &[Step], value: VarId, span: Span) {
         let Some(k) = path.iter().position(|s| matches!(s, Step::Elem(_))) else {
             let path = fields(path);
@@ -338,8 +327,31 @@ impl Lowerer {
             };
             return self.push(kind, span);
         };
-        // No member of a type the macro knows is a local array: an element step comes first.
-        debug_assert_eq!(k, 0, "a local array reached through a member");
+        if k > 0 {
+            let inner = Place::Local {
+                var,
+                path: path[..k].to_vec(),
+            };
+            let ty = self.place_ty(&inner, span).unwrap_or(Ty::Deferred);
+            let old = self.read_place(&inner, ty.clone(), span);
+            let tmp = self.new_var(None, ty, true);
+            let copy = StmtKind::Assign {
+                dst: tmp,
+                op: Op::Copy(old),
+                define: true,
+            };
+            self.push(copy, span);
+            self.write_local(tmp, &path[k..], value, span);
+            let path = fields(&path[..k]);
+            return self.push(
+                StmtKind::SetMember {
+                    var,
+                    path,
+                    value: tmp,
+                },
+                span,
+            );
+        }
         let Step::Elem(index) = path[k] else {
             unreachable!("found above")
         };
@@ -373,25 +385,24 @@ impl Lowerer {
     /// [`Lowerer::array_index`] of the already lowered `array` (`ix.expr`).
     pub(super) fn array_index_at(&mut self, array: VarId, ix: &syn::ExprIndex) -> R<Indexed> {
         let at = self.ty(array);
-        let ndim =
-            match &at {
-                Ty::Array(_, n) => *n,
-                Ty::LocalArray(..) => {
-                    return Ok(Indexed::Local(array, self.local_index(&ix.index)?));
-                }
-                Ty::Deferred => return err(
+        let ndim = match &at {
+            Ty::Array(_, n) => *n,
+            Ty::LocalArray(..) => {
+                return Ok(Indexed::Local(array, self.local_index(&ix.index)?));
+            }
+            // A struct's array field or a func's array result: a local array whose type
+            // only the target compilers see (rustc refuses any other value there).
+            Ty::Deferred => {
+                return Ok(Indexed::Local(array, self.local_index(&ix.index)?));
+            }
+            t @ (Ty::Vector(..) | Ty::Quat(_)) => {
+                return err(
                     ix.expr.span(),
-                    "only arrays can be indexed (a func's result or a struct's field: annotate \
-                     its type, `let b: [f32; 8] = f(a);`)",
-                ),
-                t @ (Ty::Vector(..) | Ty::Quat(_)) => {
-                    return err(
-                        ix.expr.span(),
-                        format!("`{t}` cannot be indexed: vectors use .x .y .z .w"),
-                    )
-                }
-                t => return err(ix.expr.span(), format!("`{t}` cannot be indexed")),
-            };
+                    format!("`{t}` cannot be indexed: vectors use .x .y .z .w"),
+                )
+            }
+            t => return err(ix.expr.span(), format!("`{t}` cannot be indexed")),
+        };
         let index = self.index_vars(&ix.index, ndim)?;
         let (array, index) = self.resolve_view(array, index, ix.span());
         Ok(Indexed::View(array, index))

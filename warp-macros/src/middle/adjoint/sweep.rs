@@ -152,6 +152,32 @@ impl Cx<'_> {
             out.extend(restore);
             return;
         }
+        // `S { a: x, ..base }`: each named field's adjoint goes to its value and is cleared,
+        // then what is left (the fields copied) goes to the base.
+        if let Op::Construct {
+            ctor: Ctor::Fields {
+                names, base: true, ..
+            },
+            args,
+            ..
+        } = op
+        {
+            let mut b = Vec::new();
+            for (name, v) in names.iter().zip(args) {
+                let path = vec![name.to_string()];
+                let from = GradSrc::Adj {
+                    var: dst,
+                    path: path.clone(),
+                };
+                self.accum(&mut b, *v, Vec::new(), from, sp);
+                b.push(at(AKind::ClearAdj { var: dst, path }, sp));
+            }
+            b.extend(seed_from(dst, Vec::new(), sp));
+            b.extend(restore);
+            self.accum(&mut b, args[names.len()], Vec::new(), GradSrc::Seed, sp);
+            out.push(at(AKind::Scope(b), sp));
+            return;
+        }
         let acc = self.accumulate(op, sp);
         if acc.is_empty() {
             let path = Vec::new();
@@ -320,6 +346,17 @@ impl Cx<'_> {
                     }
                 }
             },
+            // A struct literal (its `..base` form is `reverse_assign`'s): field k of the
+            // seed to the k-th value.
+            Op::Construct {
+                ctor: Ctor::Fields { names, .. },
+                args,
+                ..
+            } => {
+                for (name, v) in names.iter().zip(args) {
+                    seed(&mut out, *v, GradSrc::SeedLane(name.to_string()));
+                }
+            }
             Op::Construct { ty, ctor, args } => {
                 let lanes: &[&str] = match ty {
                     Ty::Vector(..) | Ty::Quat(_) => &["x", "y", "z", "w"],
