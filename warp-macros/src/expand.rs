@@ -267,6 +267,7 @@ fn kernel_impl(
         true => quote!({}),
     };
     let callee_checks = callee_depths(&f.callees);
+    let call_checks = call_checks(f);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
     let consts = const_literals(f);
@@ -386,6 +387,7 @@ fn kernel_impl(
                 use #wp as __wp;
                 #callee_checks
                 #shape_checks
+                #call_checks
                 const _: () = #array_checks;
                 #hide
                 impl __wp::Kernel for #name {
@@ -625,6 +627,34 @@ fn local_array_checks(f: &crate::ir::Function, wp: &TokenStream) -> TokenStream 
     quote!({ #(#checks;)* })
 }
 
+/// Each user func call's `&mut` arguments against the func's `&mut` parameters
+/// (`ir::CallCheck`): `const` assertions spanned at the calls, which rustc evaluates at
+/// `cargo check`. (A call that passes `a` for `acc: &mut f32` would otherwise compile: the
+/// func's CPU code takes the value.)
+fn call_checks(f: &crate::ir::Function) -> TokenStream {
+    f.call_checks
+        .iter()
+        .map(|c| {
+            let (path, mask) = (&c.path, c.mut_args);
+            let name = c.path.segments.last().map(|s| s.ident.to_string()).unwrap_or_default();
+            let passed: Vec<String> = (0..64)
+                .filter(|k| mask >> k & 1 == 1)
+                .map(|k| (k + 1).to_string())
+                .collect();
+            let passed = match passed.len() {
+                0 => "none".to_string(),
+                _ => format!("argument(s) {}", passed.join(", ")),
+            };
+            let msg = format!(
+                "the `&mut` arguments of this call do not match the `&mut` parameters of `{name}` (this call passes {passed} as `&mut`)"
+            );
+            quote_spanned! {c.span=>
+                const _: () = ::core::assert!(#path::__WP_MUT_PARAMS == #mask, #msg);
+            }
+        })
+        .collect()
+}
+
 /// The values of the module-level consts a function reads, as C++ expressions for its
 /// `@@K<k>@@` placeholders: one small fn per const, spanned at the use, so that a const of a
 /// type without `CudaConst` is an error there.
@@ -735,6 +765,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                 const _: () = #name::__WP_LOCAL_ARRAYS;
+                const _: () = #name::__WP_CALLS;
                 #tile_map_impl
             },
             Err(e) => failed(e),
@@ -767,6 +798,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                     const _: () = #name::<#(#tys),*>::__WP_LOCAL_ARRAYS;
+                    const _: () = #name::<#(#tys),*>::__WP_CALLS;
                 });
                 impls.extend(tile_map_impl(&inst.item, quote!(#name<#(#tys),*>)));
                 per_instance.push((display, Vec::new()));
@@ -847,12 +879,12 @@ fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
 }
 
 /// The type a func's parameter has in its CPU code: what a kernel thread sees of a kernel
-/// parameter of that type (`KernelArg::CpuView`), or a local array itself (a value that only
-/// funcs take).
+/// parameter of that type (`KernelArg::CpuView`), or a local array or a tuple itself (values
+/// that only funcs take). A `&mut` parameter is its value (see `ir::Function::ret`).
 fn func_param_ty(p: &crate::ir::Param, wp: &TokenStream) -> TokenStream {
     let t = &p.syn_ty;
     match p.ty {
-        crate::types::Ty::LocalArray(..) => quote!(#t),
+        crate::types::Ty::LocalArray(..) | crate::types::Ty::Tuple(_) => quote!(#t),
         _ => quote!(<#t as #wp::KernelArg>::CpuView),
     }
 }
@@ -1005,9 +1037,24 @@ fn func_instance(
             1 + #wp_at_name::max_depth(&[#(#depths),*]);
     };
     let array_checks = local_array_checks(&f, &wp);
+    let call_checks = call_checks(&f);
+    let mut_params = f
+        .params
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.by_ref)
+        .fold(0u64, |m, (k, _)| m | 1u64.checked_shl(k as u32).unwrap_or(0));
     Ok(quote! {
             #depth_const
             #func_info
+            /// Which parameters are `&mut` (bit `k`: parameter `k`), which callers' checks
+            /// compare with their `&mut` arguments.
+            #[doc(hidden)]
+            #vis const __WP_MUT_PARAMS: u64 = #mut_params;
+            /// The checks of this func's calls of funcs (read at module level, so that rustc
+            /// evaluates them).
+            #[doc(hidden)]
+            #vis const __WP_CALLS: () = { #call_checks };
             /// The local arrays' size checks (read at module level, so that rustc evaluates them).
             #[doc(hidden)]
             #vis const __WP_LOCAL_ARRAYS: () = #array_checks;

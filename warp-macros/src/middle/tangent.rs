@@ -99,6 +99,7 @@ pub fn build(f: &Function) -> Result<Function, String> {
             var: v,
             ty: p.ty.clone(),
             syn_ty: p.syn_ty.clone(),
+            by_ref: false,
         });
         if tx.active[p.var] {
             tx.dot[p.var] = Some(v);
@@ -130,6 +131,8 @@ pub fn build(f: &Function) -> Result<Function, String> {
         consts: f.consts.clone(),
         tiled: f.tiled.clone(),
         shape_obligations: Vec::new(),
+        // The primal's calls are the same calls, checked with the primal.
+        call_checks: Vec::new(),
     })
 }
 
@@ -290,6 +293,19 @@ impl Tx {
                 )
             }
             Ty::Deferred => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(0.0), like)),
+            // A tuple of its elements' zeros; an element without a tangent keeps `like`'s value
+            // (see `Op::Tuple`'s rule).
+            Ty::Tuple(ts) => {
+                let mut zs = Vec::new();
+                for (k, t) in ts.iter().enumerate() {
+                    let m = self.tmp(t.clone(), Op::Member(like, k.to_string()));
+                    zs.push(match tangent_type(t) {
+                        true => self.zero_of(t.clone(), m)?,
+                        false => m,
+                    });
+                }
+                self.tmp(ty.clone(), Op::Tuple(zs))
+            }
             other => {
                 return Err(format!(
                     "computes a `{other}` from differentiated values (line {}), which forward mode does not handle yet",
@@ -581,6 +597,21 @@ impl Tx {
                 }
                 _ => None,
             },
+            // A tuple's tangent is the tuple of its elements' tangents; an element without one
+            // (an integer, a `bool`) keeps its value there, which no member read takes as a
+            // tangent (`tangent_type` of its type is false).
+            Op::Tuple(args) if args.iter().any(|v| self.dot[*v].is_some()) => {
+                let mut targs = Vec::new();
+                for &v in args {
+                    targs.push(match self.dot[v] {
+                        Some(t) => t,
+                        None if tangent_type(&self.ty(v)) => self.zero(v)?,
+                        None => v,
+                    });
+                }
+                Some(self.tmp(self.ty(d), Op::Tuple(targs)))
+            }
+            Op::Tuple(_) => None,
             Op::Construct { ty, ctor, args } => match ctor {
                 Ctor::Const(_) => None,
                 _ if args.iter().all(|v| self.dot[*v].is_none()) => None,
