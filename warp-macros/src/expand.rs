@@ -901,6 +901,15 @@ fn func_instance(
     if let Some(d) = display {
         f.name = d;
     }
+    if let (Some((id, _)), Some(p)) = (fattrs.grad.first(), f.params.iter().find(|p| p.by_ref)) {
+        return Err(vec![syn::Error::new(
+            id.span(),
+            format!(
+                "custom gradients (`#[func(grad(..))]`) are not supported on funcs with `&mut` parameters (`{}`) yet",
+                p.name
+            ),
+        )]);
+    }
     let valid = crate::valid::validate(&f, crate::valid::Options::Func { grad: &fattrs.grad })?;
     let vis = &item.vis;
     let name = &item.sig.ident;

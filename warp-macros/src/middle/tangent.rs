@@ -62,7 +62,7 @@ fn tangent_array(t: &Ty) -> bool {
 
 /// Whether a value of this type holds floats that forward mode cannot follow yet.
 fn untracked_float(t: &Ty) -> bool {
-    matches!(t, Ty::Transform(_) | Ty::Tuple(_))
+    matches!(t, Ty::Transform(_))
 }
 
 /// The tangent kernel of `f`, or why there is none (a sentence after "it": "calls `quat_rotate`
@@ -1058,5 +1058,35 @@ mod tests {
         assert_eq!((sets, reads), (1, 2));
         // The tangent of the constant `[0.0; 3]`: a repeat of zero.
         assert_eq!(g.vars[a_dot].ty.to_string(), "[f64; 3]");
+    }
+
+    #[test]
+    fn tuples_carry_their_elements_tangents() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, y: Array<f32>) {
+                let i = tid();
+                let t = (x[i] * x[i], 3);
+                let u = if x[i] > 0.0 { t } else { (1.0, 2) };
+                let (a, b) = (u.0 * 2.0, x[i]);
+                y[i] = a + b * u.1 as f32;
+            }
+        });
+        let g = build(&f).unwrap();
+        // The tangent tuples: the literal's, the `if`'s (the constant branch's zeros) and the
+        // destructured pair's.
+        let mut tuples = 0;
+        walk_stmts(&g.body, &mut |s| {
+            if let StmtKind::Assign {
+                dst,
+                op: Op::Tuple(_),
+                ..
+            } = &s.kind
+            {
+                if g.vars[*dst].name.is_none() {
+                    tuples += 1;
+                }
+            }
+        });
+        assert_eq!(tuples, 3);
     }
 }
