@@ -473,8 +473,8 @@ template <typename T> T declval();
 #endif
 
 /// Rust's tuples `(A, B, ..)` of 2 to 7 elements, members `f0`, `f1`, ..: what a builtin
-/// returning a tuple returns (a decomposition's factors, a mesh query's result), bound by the
-/// kernel's `let (a, b, ..) = ..`.
+/// returning a tuple returns (a decomposition's factors, a mesh query's result), a tuple
+/// local, a func's tuple parameter or result (and what a func with `&mut` parameters returns).
 template <typename... T>
 struct tuple_t;
 template <typename A, typename B>
