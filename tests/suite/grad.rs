@@ -2163,7 +2163,10 @@ fn cuda_adjoints_run_on_the_host_like_the_cpu() {
             k_refs_grad,
             1,
             (&x, &out),
-            [HostArg::array(&x, "wp::f64"), HostArg::array(&out, "wp::f64")],
+            [
+                HostArg::array(&x, "wp::f64"),
+                HostArg::array(&out, "wp::f64")
+            ],
             [x, out]
         );
     }

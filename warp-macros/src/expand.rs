@@ -976,7 +976,9 @@ fn func_instance(
         .iter()
         .enumerate()
         .filter(|(_, p)| p.by_ref)
-        .fold(0u64, |m, (k, _)| m | 1u64.checked_shl(k as u32).unwrap_or(0));
+        .fold(0u64, |m, (k, _)| {
+            m | 1u64.checked_shl(k as u32).unwrap_or(0)
+        });
     Ok(quote! {
             #depth_const
             #func_info

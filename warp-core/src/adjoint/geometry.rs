@@ -169,4 +169,3 @@ pub fn adj_closest_point_triangle(
     };
     geometry::adj_closest_point_triangle(a, b, c, p, adj_a, adj_b, adj_c, adj_p, g);
 }
-

@@ -51,6 +51,8 @@ fn tangent_type(t: &Ty) -> bool {
         | Ty::Deferred => true,
         // A local array's tangent is a local array of its elements' tangents.
         Ty::LocalArray(e, _) => !e.is_deferred() && tangent_type(e),
+        // A tuple's is a tuple: its elements' tangents, or their values where they have none.
+        Ty::Tuple(ts) => ts.iter().any(tangent_type),
         _ => false,
     }
 }
@@ -1072,21 +1074,17 @@ mod tests {
             }
         });
         let g = build(&f).unwrap();
-        // The tangent tuples: the literal's, the `if`'s (the constant branch's zeros) and the
-        // destructured pair's.
+        // The primal's three literals, then three tangents: `t`'s, the constant branch's
+        // zeros (the `if`'s result has a tangent) and the destructured pair's.
         let mut tuples = 0;
         walk_stmts(&g.body, &mut |s| {
             if let StmtKind::Assign {
-                dst,
-                op: Op::Tuple(_),
-                ..
+                op: Op::Tuple(_), ..
             } = &s.kind
             {
-                if g.vars[*dst].name.is_none() {
-                    tuples += 1;
-                }
+                tuples += 1;
             }
         });
-        assert_eq!(tuples, 3);
+        assert_eq!(tuples, 6);
     }
 }

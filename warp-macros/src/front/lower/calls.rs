@@ -222,7 +222,8 @@ impl Lowerer {
                 continue;
             }
             if let Some(name) = mentions(a, &mut |n| {
-                self.lookup(n).is_some_and(|v| outs.iter().any(|o| o.2 == v))
+                self.lookup(n)
+                    .is_some_and(|v| outs.iter().any(|o| o.2 == v))
             }) {
                 return err(
                     a.span(),

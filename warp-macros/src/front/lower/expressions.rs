@@ -408,7 +408,10 @@ impl Lowerer {
                 if self.ref_params.contains(&v) {
                     return err(
                         span,
-                        format!("`{name}` is a `&mut {}`: its value is `*{name}`", self.ty(v)),
+                        format!(
+                            "`{name}` is a `&mut {}`: its value is `*{name}`",
+                            self.ty(v)
+                        ),
                     );
                 }
                 return Ok(v);

@@ -64,7 +64,10 @@ impl Lowerer {
             let name = self.vars[v].name.clone().unwrap_or_default();
             return err(
                 lhs.span(),
-                format!("`{name}` is a `&mut {}`: assign through it, `*{name} = ..`", self.ty(v)),
+                format!(
+                    "`{name}` is a `&mut {}`: assign through it, `*{name} = ..`",
+                    self.ty(v)
+                ),
             );
         }
         let place = self.place(lhs)?;

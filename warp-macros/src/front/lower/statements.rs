@@ -195,12 +195,14 @@ impl Lowerer {
         };
         let annots: Vec<Option<&Ty>> = match annot {
             Some(a @ Ty::Tuple(w)) => {
-                let ok = w.len() == n
-                    && w.iter().zip(&tys).all(|(w, t)| t.is_deferred() || w == t);
+                let ok = w.len() == n && w.iter().zip(&tys).all(|(w, t)| t.is_deferred() || w == t);
                 if !ok {
                     return err(
                         tuple.span(),
-                        format!("mismatched types: expected `{a}`, found `{}`", self.ty(value)),
+                        format!(
+                            "mismatched types: expected `{a}`, found `{}`",
+                            self.ty(value)
+                        ),
                     );
                 }
                 w.iter().map(Some).collect()
@@ -495,7 +497,9 @@ impl Lowerer {
                     if let t @ Ty::Tuple(_) = self.ty(var) {
                         return err(
                             span,
-                            format!("a tuple (`{t}`) cannot be printed in kernels: print its elements"),
+                            format!(
+                                "a tuple (`{t}`) cannot be printed in kernels: print its elements"
+                            ),
                         );
                     }
                     if let t @ Ty::LocalArray(..) = self.ty(var) {

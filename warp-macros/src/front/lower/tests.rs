@@ -56,7 +56,10 @@ fn mut_params_return_their_values_after_the_result() {
         fn g(acc: &mut f32) { *acc = 1.0; }
     };
     let g = lower_fn(&item, FnKind::Func).unwrap();
-    assert!(matches!(g.body.last().unwrap().kind, StmtKind::Return { value: Some(_) }));
+    assert!(matches!(
+        g.body.last().unwrap().kind,
+        StmtKind::Return { value: Some(_) }
+    ));
 }
 
 #[test]
@@ -192,13 +195,21 @@ fn tuples_are_checked_where_destructured() {
         FnKind::Kernel,
     );
     assert_eq!(e.len(), 4, "{e:?}");
-    assert!(e[0].contains("a tuple pattern destructures a tuple"), "{}", e[0]);
+    assert!(
+        e[0].contains("a tuple pattern destructures a tuple"),
+        "{}",
+        e[0]
+    );
     assert!(
         e[1].contains("binds 2 value(s), but the value is a `(Mat3, Vec3, Mat3)`: `let (u, sigma, v) = svd3(..);`"),
         "{}",
         e[1]
     );
-    assert!(e[2].contains("`transpose` is not defined for `(Mat3, Mat3)`"), "{}", e[2]);
+    assert!(
+        e[2].contains("`transpose` is not defined for `(Mat3, Mat3)`"),
+        "{}",
+        e[2]
+    );
     assert!(e[3].contains("has no field `3`"), "{}", e[3]);
 }
 
