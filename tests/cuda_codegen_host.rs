@@ -280,6 +280,44 @@ fn decompositions(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 9)] = s2.x + s2.y * 3.0 + v2.x_axis.y;
 }
 
+#[wp::func]
+fn split_pair(x: f32) -> (f32, Vec3) {
+    (x * 2.0, vec3(x, x * x, 1.0))
+}
+
+#[wp::func]
+fn add_into(acc: &mut f32, x: f32) -> f32 {
+    *acc += x;
+    *acc * 0.5
+}
+
+#[wp::func]
+fn scale_lanes(v: &mut Vec3, k: &mut f32) {
+    v.x *= *k;
+    add_into(&mut v.y, *k);
+    *k = 0.0;
+}
+
+/// Tuple results (destructured, by element, nested in a literal) and `&mut` parameters (a
+/// local, a lane, a local array's element, an array element; two at once; passed on).
+#[wp::kernel]
+fn refs_and_tuples(x: Array<f32>, acc: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let (s, v) = split_pair(x[i]);
+    let t = (s, (v.y, 3));
+    let mut a = x[i];
+    let h = add_into(&mut a, t.1 .0);
+    let mut w = vec3(x[i], 1.0, 2.0);
+    let mut k = 2.0f32;
+    scale_lanes(&mut w, &mut k);
+    let mut l = [x[i], 0.5];
+    add_into(&mut l[1], split_pair(x[i]).0);
+    add_into(&mut acc[i], x[i]);
+    out[(i, 0)] = a + h;
+    out[(i, 1)] = w.x + w.y + w.z + k;
+    out[(i, 2)] = l[0] + l[1] + t.1 .1 as f32;
+}
+
 const GRAVITY: f32 = -9.81;
 const THIRD: f64 = 1.0 / 3.0;
 const N_STEPS: i32 = 3;
@@ -1007,6 +1045,22 @@ fn decompositions_match_the_cpu_backend() {
     wp::launch(decompositions, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+#[test]
+fn refs_and_tuples_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 5;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.75 - 1.5).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let acc = wp::Array::from_slice(&vec![0.25f32; n], &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 3), &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::F32s(&acc), Arg::F32Grid(&out)];
+    let host = run_on_host::<refs_and_tuples>(&[n], &args);
+    wp::launch(refs_and_tuples, n, (&x, &acc, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
     }
 }
 

@@ -1925,8 +1925,8 @@ struct HostCase {
 /// sides do the same IEEE operations, without FMA contraction; the inputs are binary
 /// fractions, so even a different summation order would give the same bits). So CI without a
 /// GPU runs the CUDA adjoint of nested dependent loops (over a parameter, a const and a func's
-/// bound), nested struct fields, loops in funcs, early exits, custom gradients and the older
-/// loop, branch and func kernels.
+/// bound), nested struct fields, loops in funcs, early exits, custom gradients, funcs' tuple
+/// results and `&mut` parameters, and the older loop, branch and func kernels.
 #[test]
 fn cuda_adjoints_run_on_the_host_like_the_cpu() {
     let dev = wp::cpu();
@@ -2152,6 +2152,22 @@ fn cuda_adjoints_run_on_the_host_like_the_cpu() {
                 HostArg::array(&loss, "wp::f64")
             ],
             [xs, ms, tq, loss]
+        );
+    }
+    {
+        // Tuple results and `&mut` parameters of funcs (`refs_tuples::k_refs_grad`).
+        use crate::refs_tuples::k_refs_grad;
+        let (x, out) = (f64s(&[0.75, -0.5, 1.25]), outs(4));
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_refs_grad,
+            1,
+            (&x, &out),
+            [
+                HostArg::array(&x, "wp::f64"),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [x, out]
         );
     }
     for c in &cases {

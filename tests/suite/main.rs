@@ -115,6 +115,7 @@ mod optim;
 mod params;
 mod primitives;
 mod race;
+mod refs_tuples;
 mod rng;
 mod scenes;
 mod spatial;

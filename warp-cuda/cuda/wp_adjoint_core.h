@@ -574,8 +574,7 @@ WP_FN void adj_accum(tuple_t<A, B, C, D, E, F, G>& a, const tuple_t<A, B, C, D, 
   adj_accum(a.f6, v.f6);
 }
 
-/// A unit func's result (carries no gradient).
-struct unit_t {};
+/// A unit value (`unit_t`, wp_core.h) carries no gradient.
 WP_FN unit_t zero_like(const unit_t&) { return unit_t{}; }
 WP_FN void adj_accum(unit_t&, const unit_t&) {}
 /// A value type for a declared result: `void` (a unit func's) becomes `unit_t`.

@@ -473,8 +473,8 @@ template <typename T> T declval();
 #endif
 
 /// Rust's tuples `(A, B, ..)` of 2 to 7 elements, members `f0`, `f1`, ..: what a builtin
-/// returning a tuple returns (a decomposition's factors, a mesh query's result), bound by the
-/// kernel's `let (a, b, ..) = ..`.
+/// returning a tuple returns (a decomposition's factors, a mesh query's result), a tuple
+/// local, a func's tuple parameter or result (and what a func with `&mut` parameters returns).
 template <typename... T>
 struct tuple_t;
 template <typename A, typename B>
@@ -522,6 +522,38 @@ struct tuple_t<A, B, C, D, E, F, G> {
   F f5;
   G f6;
 };
+
+/// `(a, b, ..)`: a tuple of values whose types the caller may not spell (a func's result, a
+/// struct field): deduced, by value, so without `const`.
+template <typename A, typename B>
+WP_FN tuple_t<A, B> make_tuple(A a, B b) {
+  return tuple_t<A, B>{a, b};
+}
+template <typename A, typename B, typename C>
+WP_FN tuple_t<A, B, C> make_tuple(A a, B b, C c) {
+  return tuple_t<A, B, C>{a, b, c};
+}
+template <typename A, typename B, typename C, typename D>
+WP_FN tuple_t<A, B, C, D> make_tuple(A a, B b, C c, D d) {
+  return tuple_t<A, B, C, D>{a, b, c, d};
+}
+template <typename A, typename B, typename C, typename D, typename E>
+WP_FN tuple_t<A, B, C, D, E> make_tuple(A a, B b, C c, D d, E e) {
+  return tuple_t<A, B, C, D, E>{a, b, c, d, e};
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F>
+WP_FN tuple_t<A, B, C, D, E, F> make_tuple(A a, B b, C c, D d, E e, F f) {
+  return tuple_t<A, B, C, D, E, F>{a, b, c, d, e, f};
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F, typename G>
+WP_FN tuple_t<A, B, C, D, E, F, G> make_tuple(A a, B b, C c, D d, E e, F f, G g) {
+  return tuple_t<A, B, C, D, E, F, G>{a, b, c, d, e, f, g};
+}
+
+/// The unit value `()`: the first element of what a func with `&mut` parameters and no
+/// result returns (its result, then the parameters' final values), and a unit func's result
+/// in an adjoint.
+struct unit_t {};
 
 /// The type T itself, in a non-deduced context (the value parameter of store and atomics is
 /// converted to the array's element type instead of taking part in deduction).

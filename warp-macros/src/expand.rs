@@ -7,9 +7,11 @@ use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 use syn::spanned::Spanned;
 
+mod checks;
 mod derive;
 mod tiled;
 
+use checks::{call_checks, local_array_checks};
 pub use derive::derive_struct;
 
 fn errors_to_tokens(errors: Vec<syn::Error>) -> TokenStream {
@@ -270,6 +272,7 @@ fn kernel_impl(
         true => quote!({}),
     };
     let callee_checks = callee_depths(&f.callees);
+    let call_checks = call_checks(f);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
     let consts = const_literals(f);
@@ -389,6 +392,7 @@ fn kernel_impl(
                 use #wp as __wp;
                 #callee_checks
                 #shape_checks
+                #call_checks
                 const _: () = #array_checks;
                 #hide
                 impl __wp::Kernel for #name {
@@ -577,57 +581,6 @@ fn assert_sites(f: &crate::ir::Function, wp: &TokenStream) -> TokenStream {
     quote!(&[#(#sites),*])
 }
 
-/// The most bytes one local array may take: a thread's array (and, in the adjoint, its
-/// gradient twin) lives on the CPU worker's stack and in a CUDA thread's local memory.
-const LOCAL_ARRAY_MAX_BYTES: usize = 65536;
-
-/// An assertion per local array type of the function (`[f32; N]`, nested ones included), to
-/// be evaluated in a `const` initializer: at least one element and at most
-/// [`LOCAL_ARRAY_MAX_BYTES`]. The macro refuses a literal length of 0 itself; a length that
-/// names a const is only known to rustc, which evaluates these at `cargo check`, spanned at the
-/// first statement that makes a local array (or the function, for an array that only its
-/// signature names). A kernel puts them in a `const _`; a func, whose items sit in an `impl`,
-/// in its `__WP_LOCAL_ARRAYS`, which a module-level `const _` reads.
-fn local_array_checks(f: &crate::ir::Function, wp: &TokenStream) -> TokenStream {
-    use crate::types::Ty;
-    let mut tys: Vec<Ty> = Vec::new();
-    let mut note = |t: &Ty| {
-        if matches!(t, Ty::LocalArray(..)) && !tys.contains(t) {
-            tys.push(t.clone());
-        }
-    };
-    f.vars.iter().for_each(|v| note(&v.ty));
-    note(&f.ret);
-    let mut span = None;
-    crate::ir::walk_stmts(&f.body, &mut |s| {
-        if let crate::ir::StmtKind::Assign { dst, .. } = &s.kind {
-            if span.is_none() && matches!(f.vars[*dst].ty, Ty::LocalArray(..)) {
-                span = Some(s.span);
-            }
-        }
-    });
-    let span = span.unwrap_or_else(proc_macro2::Span::call_site);
-    let max = LOCAL_ARRAY_MAX_BYTES;
-    let checks = tys
-        .iter()
-        .filter_map(|t| {
-            let rust = crate::back::rust::ty_tokens(t)?;
-            let msg = format!(
-                "a local array `{t}` of {} holds at least one element and at most {max} bytes",
-                f.name
-            );
-            Some(quote_spanned! {span=>
-                {
-                    use #wp as __wp;
-                    let __bytes = ::core::mem::size_of::<#rust>();
-                    ::core::assert!(__bytes > 0 && __bytes <= #max, #msg);
-                }
-            })
-        })
-        .collect::<Vec<_>>();
-    quote!({ #(#checks;)* })
-}
-
 /// The values of the module-level consts a function reads, as C++ expressions for its
 /// `@@K<k>@@` placeholders: one small fn per const, spanned at the use, so that a const of a
 /// type without `CudaConst` is an error there.
@@ -763,6 +716,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                 const _: () = #name::__WP_LOCAL_ARRAYS;
+                const _: () = #name::__WP_CALLS;
                 #tile_map_impl
             },
             Err(e) => failed(e),
@@ -795,6 +749,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                     const _: () = #name::<#(#tys),*>::__WP_LOCAL_ARRAYS;
+                    const _: () = #name::<#(#tys),*>::__WP_CALLS;
                 });
                 impls.extend(tile_map_impl(&inst.item, quote!(#name<#(#tys),*>)));
                 per_instance.push((display, Vec::new()));
@@ -875,12 +830,12 @@ fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
 }
 
 /// The type a func's parameter has in its CPU code: what a kernel thread sees of a kernel
-/// parameter of that type (`KernelArg::CpuView`), or a local array itself (a value that only
-/// funcs take).
+/// parameter of that type (`KernelArg::CpuView`), or a local array or a tuple itself (values
+/// that only funcs take). A `&mut` parameter is its value (see `ir::Function::ret`).
 fn func_param_ty(p: &crate::ir::Param, wp: &TokenStream) -> TokenStream {
     let t = &p.syn_ty;
     match p.ty {
-        crate::types::Ty::LocalArray(..) => quote!(#t),
+        crate::types::Ty::LocalArray(..) | crate::types::Ty::Tuple(_) => quote!(#t),
         _ => quote!(<#t as #wp::KernelArg>::CpuView),
     }
 }
@@ -896,6 +851,15 @@ fn func_instance(
     let mut f = lower::lower_fn(item, FnKind::Func)?;
     if let Some(d) = display {
         f.name = d;
+    }
+    if let (Some((id, _)), Some(p)) = (fattrs.grad.first(), f.params.iter().find(|p| p.by_ref)) {
+        return Err(vec![syn::Error::new(
+            id.span(),
+            format!(
+                "custom gradients (`#[func(grad(..))]`) are not supported on funcs with `&mut` parameters (`{}`) yet",
+                p.name
+            ),
+        )]);
     }
     let valid = crate::valid::validate(&f, crate::valid::Options::Func { grad: &fattrs.grad })?;
     let vis = &item.vis;
@@ -1033,9 +997,26 @@ fn func_instance(
             1 + #wp_at_name::max_depth(&[#(#depths),*]);
     };
     let array_checks = local_array_checks(&f, &wp);
+    let call_checks = call_checks(&f);
+    let mut_params = f
+        .params
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.by_ref)
+        .fold(0u64, |m, (k, _)| {
+            m | 1u64.checked_shl(k as u32).unwrap_or(0)
+        });
     Ok(quote! {
             #depth_const
             #func_info
+            /// Which parameters are `&mut` (bit `k`: parameter `k`), which callers' checks
+            /// compare with their `&mut` arguments.
+            #[doc(hidden)]
+            #vis const __WP_MUT_PARAMS: u64 = #mut_params;
+            /// The checks of this func's calls of funcs (read at module level, so that rustc
+            /// evaluates them).
+            #[doc(hidden)]
+            #vis const __WP_CALLS: () = { #call_checks };
             /// The local arrays' size checks (read at module level, so that rustc evaluates them).
             #[doc(hidden)]
             #vis const __WP_LOCAL_ARRAYS: () = #array_checks;

@@ -367,8 +367,9 @@ pub enum Ty {
     Struct(String),
     /// The tuple `tid()` returns for 2-D to 4-D launches.
     TidTuple(u8),
-    /// The tuple a decomposition returns (`svd3`: `(Mat3, Vec3, Mat3)`); only ever bound by a
-    /// `let (u, s, v) = ..` pattern, which reads its elements as members `"0"`, `"1"`, ..
+    /// A tuple of 2 to 7 values: what a decomposition returns (`svd3`: `(Mat3, Vec3, Mat3)`),
+    /// a tuple local or literal (`(a, b)`), a func's declared tuple result. Its elements are
+    /// members `"0"`, `"1"`, .. (`t.0`); an element may be `Deferred` (a func's result).
     Tuple(Vec<Ty>),
     /// A host object a kernel takes as a parameter (`HashGrid`), or the state of one of its
     /// queries; kernels see objects only through builtin rows.
@@ -560,6 +561,7 @@ impl Ty {
             },
             Ty::SpatialVector(s) => spatial_lane(name).then_some(Ty::Scalar(*s)),
             Ty::SpatialMatrix(s) => spatial_lane(name).then_some(Ty::SpatialVector(*s)),
+            Ty::Tuple(ts) => name.parse::<usize>().ok().and_then(|k| ts.get(k).cloned()),
             _ => None,
         }
     }

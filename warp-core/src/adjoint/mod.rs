@@ -88,6 +88,31 @@ pub fn zero<T: Adjoint>() -> T {
     T::adj_zero()
 }
 
+// A tuple (a decomposition's or a query's result, a func's tuple result, a tuple local) has
+// the tuple of its elements' adjoints, for 2 to 7 elements (the CUDA library's `tuple_t`).
+macro_rules! adjoint_tuple {
+    ($(($($t:ident . $k:tt),+)),* $(,)?) => {$(
+        impl<$($t: Adjoint),+> Adjoint for ($($t,)+) {
+            #[inline(always)]
+            fn adj_zero() -> Self {
+                ($($t::adj_zero(),)+)
+            }
+            #[inline(always)]
+            fn adj_accum(&mut self, v: Self) {
+                $(self.$k.adj_accum(v.$k);)+
+            }
+        }
+    )*};
+}
+adjoint_tuple!(
+    (A.0, B.1),
+    (A.0, B.1, C.2),
+    (A.0, B.1, C.2, D.3),
+    (A.0, B.1, C.2, D.3, E.4),
+    (A.0, B.1, C.2, D.3, E.4, F.5),
+    (A.0, B.1, C.2, D.3, E.4, F.5, G.6),
+);
+
 macro_rules! adjoint_noop {
     ($($t:ty = $z:expr),* $(,)?) => {$(
         impl Adjoint for $t {

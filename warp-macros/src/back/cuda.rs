@@ -138,6 +138,8 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
             }
             None => k.row().cuda.into(),
         },
+        // A unit value is a tuple's element only (a func with `&mut` parameters and no result).
+        Ty::Unit => "wp::unit_t".into(),
         Ty::Tuple(ts) => {
             let ts: Option<Vec<String>> = ts.iter().map(cpp_type).collect();
             format!("wp::tuple_t<{}>", ts?.join(", "))
@@ -935,6 +937,12 @@ impl<'a> Emitter<'a> {
                     (_, Ctor::Const(c)) => format!("wp::{name}_{c}()"),
                     _ => return Err("unsupported constructor".into()),
                 }
+            }
+            // `wp::make_tuple` deduces the elements' types (which the macro may not see).
+            Op::Tuple(args) if args.is_empty() => "wp::unit_t{}".into(),
+            Op::Tuple(args) => {
+                let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                format!("wp::make_tuple({})", args.join(", "))
             }
             Op::Tid(k) => format!("(wp::usize)__tid[{k}]"),
             Op::Extent(a, k) => format!("(wp::usize)wp::extent({}, {k})", self.var(*a)),

@@ -467,6 +467,10 @@ impl<'a> RustEmitter<'a> {
                 quote_spanned!(sp=> #a.len())
             }
             Op::Const(p) => quote_spanned!(sp=> #p),
+            Op::Tuple(args) => {
+                let args = args.iter().map(|v| self.var(*v));
+                quote_spanned!(sp=> (#(#args,)*))
+            }
             Op::ViewCheck {
                 array,
                 index,
@@ -501,8 +505,14 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             let (e, n) = (ty_tokens(e)?, n.rust_tokens());
             Some(quote!([#e; #n]))
         }
+        // An element the macro cannot see (of a func's result) is rustc's to infer: `(_, _)`
+        // still states the tuple's length, which rustc then checks.
         Ty::Tuple(ts) => {
-            let ts: Option<Vec<TokenStream>> = ts.iter().map(ty_tokens).collect();
+            let elem = |t: &Ty| match t {
+                Ty::Deferred => Some(quote!(_)),
+                t => ty_tokens(t),
+            };
+            let ts: Option<Vec<TokenStream>> = ts.iter().map(elem).collect();
             let ts = ts?;
             Some(quote!((#(#ts),*)))
         }

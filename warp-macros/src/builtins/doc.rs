@@ -65,6 +65,8 @@ const CONSTRUCTS: &[&str] = &[
     "slice",
     // A fixed-size local array (`front::lower::local_arrays`): Rust's `[0.0f32; N]`.
     "zeros",
+    // A tuple (`ir::Op::Tuple`): Rust's `(a, b)`.
+    "tuple",
     // Calls and macros the front end lowers by name (`front::lower`): the thread index,
     // print!, and Warp's builtins that are other operations here.
     "tid",

@@ -71,10 +71,11 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             "slices are not supported in kernels: use Array<T>, or a local array `[T; N]`",
         )),
         Type::Tuple(t) if t.elems.is_empty() => Ok(Ty::Unit),
-        Type::Tuple(_) => Err(syn::Error::new(
-            ty.span(),
-            "tuples are not supported as kernel types",
-        )),
+        // A tuple of values (`(f32, Vec3)`): a func's parameter or result, a `let` annotation.
+        Type::Tuple(t) => {
+            let elems: Vec<Ty> = t.elems.iter().map(parse_type).collect::<syn::Result<_>>()?;
+            tuple_type(elems, ty.span())
+        }
         Type::Paren(p) => parse_type(&p.elem),
         Type::Group(g) => parse_type(&g.elem),
         _ => Err(syn::Error::new(
@@ -82,6 +83,34 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             "this type is not supported in kernels",
         )),
     }
+}
+
+/// The most elements a tuple has (the CUDA library's `tuple_t` and warp-core's `Adjoint`
+/// impls go this far).
+pub const MAX_TUPLE: usize = 7;
+
+/// A tuple of `elems`, or why the language has no such tuple: 2 to [`MAX_TUPLE`] values
+/// (no arrays, host objects or tiles: those are kernel parameters or block-wide).
+pub fn tuple_type(elems: Vec<Ty>, span: proc_macro2::Span) -> syn::Result<Ty> {
+    if elems.len() < 2 || elems.len() > MAX_TUPLE {
+        return Err(syn::Error::new(
+            span,
+            format!(
+                "tuples in kernels have 2 to {MAX_TUPLE} elements, found {}",
+                elems.len()
+            ),
+        ));
+    }
+    if let Some(t) = elems
+        .iter()
+        .find(|t| matches!(t, Ty::Array(..) | Ty::Object(_) | Ty::Tile(..) | Ty::Unit))
+    {
+        return Err(syn::Error::new(
+            span,
+            format!("`{t}` cannot be a tuple's element: tuples hold values"),
+        ));
+    }
+    Ok(Ty::Tuple(elems))
 }
 
 fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
@@ -111,6 +140,12 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         return Err(syn::Error::new(
             whole.span(),
             format!("`{elem}` cannot be an array element: pass each one as a parameter"),
+        ));
+    }
+    if let Ty::Tuple(_) = elem {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("`{elem}` cannot be an array element: use one array per element, or a #[derive(Struct)]"),
         ));
     }
     if let Ty::LocalArray(..) = elem {

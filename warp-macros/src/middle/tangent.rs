@@ -51,6 +51,8 @@ fn tangent_type(t: &Ty) -> bool {
         | Ty::Deferred => true,
         // A local array's tangent is a local array of its elements' tangents.
         Ty::LocalArray(e, _) => !e.is_deferred() && tangent_type(e),
+        // A tuple's is a tuple: its elements' tangents, or their values where they have none.
+        Ty::Tuple(ts) => ts.iter().any(tangent_type),
         _ => false,
     }
 }
@@ -64,7 +66,7 @@ fn tangent_array(t: &Ty) -> bool {
 /// struct's fields are invisible to the macro (an integer field's tangent could not be told
 /// from a float's), so a struct computed from differentiated values is refused too.
 fn untracked_float(t: &Ty) -> bool {
-    matches!(t, Ty::Transform(_) | Ty::Tuple(_) | Ty::Struct(_))
+    matches!(t, Ty::Transform(_) | Ty::Struct(_))
 }
 
 /// The tangent kernel of `f`, or why there is none (a sentence after "it": "calls `quat_rotate`
@@ -101,6 +103,7 @@ pub fn build(f: &Function) -> Result<Function, String> {
             var: v,
             ty: p.ty.clone(),
             syn_ty: p.syn_ty.clone(),
+            by_ref: false,
         });
         if tx.active[p.var] {
             tx.dot[p.var] = Some(v);
@@ -132,6 +135,8 @@ pub fn build(f: &Function) -> Result<Function, String> {
         consts: f.consts.clone(),
         tiled: f.tiled.clone(),
         shape_obligations: Vec::new(),
+        // The primal's calls are the same calls, checked with the primal.
+        call_checks: Vec::new(),
     })
 }
 
@@ -292,6 +297,19 @@ impl Tx {
                 )
             }
             Ty::Deferred => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(0.0), like)),
+            // A tuple of its elements' zeros; an element without a tangent keeps `like`'s value
+            // (see `Op::Tuple`'s rule).
+            Ty::Tuple(ts) => {
+                let mut zs = Vec::new();
+                for (k, t) in ts.iter().enumerate() {
+                    let m = self.tmp(t.clone(), Op::Member(like, k.to_string()));
+                    zs.push(match tangent_type(t) {
+                        true => self.zero_of(t.clone(), m)?,
+                        false => m,
+                    });
+                }
+                self.tmp(ty.clone(), Op::Tuple(zs))
+            }
             other => {
                 return Err(format!(
                     "computes a `{other}` from differentiated values (line {}), which forward mode does not handle yet",
@@ -583,6 +601,21 @@ impl Tx {
                 }
                 _ => None,
             },
+            // A tuple's tangent is the tuple of its elements' tangents; an element without one
+            // (an integer, a `bool`) keeps its value there, which no member read takes as a
+            // tangent (`tangent_type` of its type is false).
+            Op::Tuple(args) if args.iter().any(|v| self.dot[*v].is_some()) => {
+                let mut targs = Vec::new();
+                for &v in args {
+                    targs.push(match self.dot[v] {
+                        Some(t) => t,
+                        None if tangent_type(&self.ty(v)) => self.zero(v)?,
+                        None => v,
+                    });
+                }
+                Some(self.tmp(self.ty(d), Op::Tuple(targs)))
+            }
+            Op::Tuple(_) => None,
             Op::Construct { ty, ctor, args } => match ctor {
                 Ctor::Const(_) => None,
                 _ if args.iter().all(|v| self.dot[*v].is_none()) => None,
@@ -1029,5 +1062,31 @@ mod tests {
         assert_eq!((sets, reads), (1, 2));
         // The tangent of the constant `[0.0; 3]`: a repeat of zero.
         assert_eq!(g.vars[a_dot].ty.to_string(), "[f64; 3]");
+    }
+
+    #[test]
+    fn tuples_carry_their_elements_tangents() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, y: Array<f32>) {
+                let i = tid();
+                let t = (x[i] * x[i], 3);
+                let u = if x[i] > 0.0 { t } else { (1.0, 2) };
+                let (a, b) = (u.0 * 2.0, x[i]);
+                y[i] = a + b * u.1 as f32;
+            }
+        });
+        let g = build(&f).unwrap();
+        // The primal's three literals, then three tangents: `t`'s, the constant branch's
+        // zeros (the `if`'s result has a tangent) and the destructured pair's.
+        let mut tuples = 0;
+        walk_stmts(&g.body, &mut |s| {
+            if let StmtKind::Assign {
+                op: Op::Tuple(_), ..
+            } = &s.kind
+            {
+                tuples += 1;
+            }
+        });
+        assert_eq!(tuples, 6);
     }
 }

@@ -200,10 +200,14 @@ impl Lowerer {
                     }
                     Ok(self.def(Op::Unary(UnOp::Not, v), t, span))
                 }
-                syn::UnOp::Deref(_) => err(
-                    span,
-                    "references are not supported in kernels (no `*` dereference)",
-                ),
+                // `*acc`: the value of a func's `&mut` parameter.
+                syn::UnOp::Deref(_) => match self.ref_param(&u.expr) {
+                    Some(v) => Ok(v),
+                    None => err(
+                        span,
+                        "`*` dereferences a func's `&mut` parameter only (`*acc`): kernels have no other references",
+                    ),
+                },
                 _ => err(span, "this operator is not supported in kernels"),
             },
             Expr::Binary(b) => {
@@ -254,16 +258,23 @@ impl Lowerer {
             Expr::Call(c) => self.call(c, want),
             Expr::MethodCall(m) => self.method_call(m, want),
             Expr::Field(f) => {
-                let syn::Member::Named(name) = &f.member else {
-                    return err(f.member.span(), "tuple fields are not supported in kernels");
+                let (name, name_span) = match &f.member {
+                    syn::Member::Named(n) => (n.to_string(), n.span()),
+                    // `t.0`: an element of a tuple (a func's tuple result is one, unseen).
+                    syn::Member::Unnamed(i) => (i.index.to_string(), i.span),
                 };
-                let base = self.expr(&f.base, None)?;
+                let base = self.base_expr(&f.base)?;
                 let bt = self.ty(base);
                 if matches!(bt, Ty::Array(..) | Ty::LocalArray(..)) {
                     return err(span, "arrays have no fields: index them, `a[i]`");
                 }
-                let t = self.member_ty(&bt, &name.to_string(), name.span())?;
-                Ok(self.def(Op::Member(base, name.to_string()), t, span))
+                if matches!(f.member, syn::Member::Unnamed(_))
+                    && !matches!(bt, Ty::Tuple(_) | Ty::Deferred | Ty::Struct(_))
+                {
+                    return err(name_span, format!("`{bt}` is no tuple: `.{name}` reads a tuple's element"));
+                }
+                let t = self.member_ty(&bt, &name, name_span)?;
+                Ok(self.def(Op::Member(base, name), t, span))
             }
             Expr::Index(ix) => {
                 if let Expr::MethodCall(m) = strip(&ix.expr) {
@@ -304,7 +315,7 @@ impl Lowerer {
                         return self.tile_index(t, &ix.index, span);
                     }
                 }
-                let base = self.expr(&ix.expr, None)?;
+                let base = self.base_expr(&ix.expr)?;
                 // `v[3]`, `m[i][j]`, `m[(i, j)]`: members of a spatial value.
                 if let Some(lanes) = super::places::spatial_index(&self.ty(base), &ix.index)? {
                     let mut v = base;
@@ -346,10 +357,7 @@ impl Lowerer {
             ),
             Expr::Array(a) => self.array_literal(a, want, span),
             Expr::Repeat(r) => self.array_repeat(r, want, span),
-            Expr::Tuple(_) => err(
-                span,
-                "tuples are not supported in kernels (except array indices a[(i, j)])",
-            ),
+            Expr::Tuple(t) => self.tuple_expr(t, want, span),
             Expr::Match(_) => err(span, "`match` is not supported in kernels: use if / else"),
             Expr::Struct(s) => self.struct_literal(s, span),
             Expr::Range(_) => err(span, "ranges are only supported as `for` loop bounds"),
@@ -394,6 +402,15 @@ impl Lowerer {
         if let Some(id) = p.path.get_ident() {
             let name = id.to_string();
             if let Some(v) = self.lookup(&name) {
+                if self.ref_params.contains(&v) {
+                    return err(
+                        span,
+                        format!(
+                            "`{name}` is a `&mut {}`: its value is `*{name}`",
+                            self.ty(v)
+                        ),
+                    );
+                }
                 return Ok(v);
             }
             if is_const_name(&name) {
@@ -452,6 +469,23 @@ impl Lowerer {
             span,
             "paths to outside items other than `const`s are not supported in kernels: pass the value as a parameter",
         )
+    }
+
+    /// `(a, b, ..)`: a tuple of the values (each typed by `want`'s element, if any).
+    fn tuple_expr(&mut self, t: &syn::ExprTuple, want: Option<&Ty>, span: Span) -> R<VarId> {
+        let wants: Vec<Option<Ty>> = match want {
+            Some(Ty::Tuple(ws)) if ws.len() == t.elems.len() => {
+                ws.iter().cloned().map(Some).collect()
+            }
+            _ => vec![None; t.elems.len()],
+        };
+        let mut elems = Vec::new();
+        for (e, w) in t.elems.iter().zip(&wants) {
+            elems.push(self.expr(e, w.as_ref())?);
+        }
+        let tys = elems.iter().map(|v| self.ty(*v)).collect();
+        let ty = crate::front::signature::tuple_type(tys, span)?;
+        Ok(self.def(Op::Tuple(elems), ty, span))
     }
 
     /// A module-level `const` (Warp's `wp.constant`): its value on the CPU is the const

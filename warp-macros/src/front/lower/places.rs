@@ -63,6 +63,16 @@ impl Lowerer {
         rhs: &Expr,
         span: Span,
     ) -> R<()> {
+        if let Some(v) = self.ref_param(lhs) {
+            let name = self.vars[v].name.clone().unwrap_or_default();
+            return err(
+                lhs.span(),
+                format!(
+                    "`{name}` is a `&mut {}`: assign through it, `*{name} = ..`",
+                    self.ty(v)
+                ),
+            );
+        }
         let place = self.place(lhs)?;
         let place_ty = self.place_ty(&place, lhs.span())?;
         // Current value, for compound assignment.
@@ -125,12 +135,22 @@ impl Lowerer {
                 }
                 Ok(Place::Local { var, path: vec![] })
             }
+            // `*acc`: a func's `&mut` parameter.
+            Expr::Unary(u) if matches!(u.op, syn::UnOp::Deref(_)) => match self.ref_param(&u.expr) {
+                Some(var) => Ok(Place::Local { var, path: vec![] }),
+                None => err(
+                    u.span(),
+                    "`*` dereferences a func's `&mut` parameter only (`*acc`): kernels have no other references",
+                ),
+            },
             Expr::Field(f) => {
-                let syn::Member::Named(m) = &f.member else {
-                    return err(f.member.span(), "tuple fields are not supported in kernels");
+                // `t.0`: an element of a tuple.
+                let m = match &f.member {
+                    syn::Member::Named(m) => m.to_string(),
+                    syn::Member::Unnamed(i) => i.index.to_string(),
                 };
                 let mut inner = self.place(&f.base)?;
-                inner.path_mut().push(Step::Field(m.to_string()));
+                inner.path_mut().push(Step::Field(m));
                 Ok(inner)
             }
             Expr::Index(ix) => {
@@ -292,11 +312,14 @@ impl Lowerer {
     fn peek_place_ty(&self, e: &Expr) -> Option<Ty> {
         match strip(e) {
             Expr::Path(p) => Some(self.ty(self.lookup(&p.path.get_ident()?.to_string())?)),
+            Expr::Unary(u) if matches!(u.op, syn::UnOp::Deref(_)) => {
+                self.ref_param(&u.expr).map(|v| self.ty(v))
+            }
             Expr::Field(f) => match (&f.member, self.peek_place_ty(&f.base)?) {
                 // A struct's field: its type is the target compilers' to see.
                 (syn::Member::Named(_), Ty::Struct(_) | Ty::Deferred) => Some(Ty::Deferred),
                 (syn::Member::Named(m), t) => t.member_ty(&m.to_string()),
-                (syn::Member::Unnamed(_), _) => None,
+                (syn::Member::Unnamed(i), t) => t.member_ty(&i.index.to_string()),
             },
             Expr::Index(ix) => match self.peek_place_ty(&ix.expr)? {
                 Ty::Array(e, _) | Ty::LocalArray(e, _) => Some(*e),

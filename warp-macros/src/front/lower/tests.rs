@@ -27,6 +27,114 @@ fn find_var(f: &Function, name: &str) -> Ty {
 }
 
 #[test]
+fn mut_params_return_their_values_after_the_result() {
+    let item: syn::ItemFn = parse_quote! {
+        fn f(acc: &mut f32, x: f32, v: &mut Vec3) -> bool {
+            if x < 0.0 {
+                return false;
+            }
+            *acc += x;
+            v.y = acc.max(x);
+            true
+        }
+    };
+    let f = lower_fn(&item, FnKind::Func).unwrap();
+    assert_eq!(f.ret.to_string(), "(bool, f32, Vec3)");
+    let by_ref: Vec<bool> = f.params.iter().map(|p| p.by_ref).collect();
+    assert_eq!(by_ref, [true, false, true]);
+    // Both returns give the tuple (result, *acc, *v).
+    let mut returns = 0;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Return { value: Some(v) } = &s.kind {
+            assert_eq!(f.vars[*v].ty.to_string(), "(bool, f32, Vec3)");
+            returns += 1;
+        }
+    });
+    assert_eq!(returns, 2);
+    // A unit func returns `((), ..)` at its end.
+    let item: syn::ItemFn = parse_quote! {
+        fn g(acc: &mut f32) { *acc = 1.0; }
+    };
+    let g = lower_fn(&item, FnKind::Func).unwrap();
+    assert!(matches!(
+        g.body.last().unwrap().kind,
+        StmtKind::Return { value: Some(_) }
+    ));
+}
+
+#[test]
+fn mut_arguments_are_read_then_written_back() {
+    let f = lower(parse_quote! {
+        fn k(a: Array<f32>) {
+            let i = tid();
+            let mut s = 0.0f32;
+            let mut v = Vec3::ZERO;
+            let r = stepper(&mut s, &mut v.y, a[i]);
+            stepper(&mut a[i], &mut s, 1.0);
+        }
+    });
+    assert_eq!(f.call_checks.len(), 2);
+    assert_eq!(f.call_checks[0].mut_args, 0b011);
+    // `v.y` is read; the first call's result is element "0", `s` is written from "1", `v.y`
+    // from "2"; the array element is stored from the second call's "1".
+    let mut members = Vec::new();
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op: Op::Member(_, m),
+            ..
+        } = &s.kind
+        {
+            members.push(m.clone());
+        }
+    });
+    assert_eq!(members, ["y", "1", "2", "0", "1", "2", "0"]);
+    let stores = f
+        .body
+        .iter()
+        .filter(|s| matches!(s.kind, StmtKind::Store { .. }))
+        .count();
+    assert_eq!(stores, 1);
+}
+
+#[test]
+fn mut_arguments_refused() {
+    let e = errors(
+        parse_quote! {
+            fn k(a: Array<f32>) {
+                let i = tid();
+                let mut s = 0.0f32;
+                let t = 1.0f32;
+                stepper(&mut s, &mut s);
+                stepper(&mut s, s + 1.0);
+                stepper(&mut t);
+                stepper(&a[i]);
+            }
+        },
+        FnKind::Kernel,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(e[0].contains("lent as `&mut` twice"), "{e:?}");
+    assert!(e[1].contains("cannot be read by another argument"), "{e:?}");
+    assert!(e[2].contains("immutable"), "{e:?}");
+    assert!(e[3].contains("shared reference"), "{e:?}");
+    let e = errors(
+        parse_quote! {
+            fn f(acc: &mut f32, x: &f32) {
+                let y = acc + 1.0;
+                acc = 2.0;
+                g(&mut acc);
+            }
+        },
+        FnKind::Func,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(e[0].contains("shared reference `&T` adds nothing"), "{e:?}");
+    assert!(e[1].contains("its value is `*acc`"), "{e:?}");
+    assert!(e[2].contains("assign through it"), "{e:?}");
+    assert!(e[3].contains("is a `&mut` already"), "{e:?}");
+}
+
+#[test]
 fn decompositions_destructure_into_members() {
     let f = lower(parse_quote! {
         fn k(a: Array<DMat3>, b: Array<Mat2>) {
@@ -72,7 +180,7 @@ fn decompositions_destructure_into_members() {
 }
 
 #[test]
-fn tuples_only_where_destructured() {
+fn tuples_are_checked_where_destructured() {
     let e = errors(
         parse_quote! {
             fn k(a: Array<Mat3>) {
@@ -81,23 +189,28 @@ fn tuples_only_where_destructured() {
                 let (x, y) = a[i];
                 let (p, q) = svd3(a[i]);
                 let m = transpose(qr3(a[i]));
+                let w = t.3;
             }
         },
         FnKind::Kernel,
     );
     assert_eq!(e.len(), 4, "{e:?}");
-    assert!(e[0].contains("destructure it"), "{}", e[0]);
     assert!(
-        e[1].contains("tuple patterns are only supported"),
+        e[0].contains("a tuple pattern destructures a tuple"),
+        "{}",
+        e[0]
+    );
+    assert!(
+        e[1].contains("binds 2 value(s), but the value is a `(Mat3, Vec3, Mat3)`: `let (u, sigma, v) = svd3(..);`"),
         "{}",
         e[1]
     );
     assert!(
-        e[2].contains("binds 2 value(s), but the call returns 3"),
+        e[2].contains("`transpose` is not defined for `(Mat3, Mat3)`"),
         "{}",
         e[2]
     );
-    assert!(e[3].contains("`qr3` returns a tuple"), "{}", e[3]);
+    assert!(e[3].contains("has no field `3`"), "{}", e[3]);
 }
 
 #[test]

@@ -332,6 +332,12 @@ impl Cx<'_> {
                     ));
                 }
             }
+            // A tuple: element k of the seed to the k-th value.
+            Op::Tuple(args) => {
+                for (k, v) in args.iter().enumerate() {
+                    seed(&mut out, *v, GradSrc::SeedLane(k.to_string()));
+                }
+            }
             // A local array's literal: element k of the seed to the k-th value; a repeat: the
             // sum of the seed's elements to the repeated value.
             Op::Construct {
