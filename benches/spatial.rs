@@ -24,7 +24,9 @@
 //! by CUDA events around the sort (on random keys restored before each repetition, as the
 //! Python sides time theirs), scans and sums by the host clock, synchronised around each.
 //! Then the GPU sort's kernel configurations (`SortConfig`) are timed side by side on random
-//! i32 keys and on 21-bit keys (the hash grid's).
+//! i32 keys and on 21-bit keys (the hash grid's), and the GPU scan's algorithms
+//! (`ScanAlgorithm`: three-phase and single-pass) by CUDA events beside `torch.cumsum`, with
+//! the sum beside `torch.sum`.
 //!
 //! ```text
 //! .gpu/bin/spatial-* --primitives              # the primitives and sort kernels only
@@ -275,7 +277,88 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
             ((got - exact) / exact).abs()
         );
     }
-    sort_kernels(dev, torch.as_ref().ok())
+    sort_kernels(dev, torch.as_ref().ok())?;
+    scan_algorithms(dev, torch.as_ref().ok())
+}
+
+/// GPU milliseconds between CUDA events around `f` on the device's current stream: median of
+/// `REPS` after a warm-up (compilation and scratch growth out of the timing), as the PyTorch
+/// side times its calls.
+fn event_ms(dev: &wp::Device, mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
+    let stream = wp::get_stream(dev)?;
+    f()?;
+    let mut times = Vec::with_capacity(REPS);
+    for _ in 0..REPS {
+        let start = stream.record_event()?;
+        f()?;
+        let end = stream.record_event()?;
+        times.push(start.elapsed_ms(&end)? as f64);
+    }
+    Ok(median_of(times))
+}
+
+/// The GPU scan's algorithms (`wp::primitives::plan::ScanAlgorithm`: the three-phase scan, the
+/// default, and the single-pass decoupled look-back) timed one after the other in this
+/// process by CUDA events, inclusive scans of i32 (0..100, as PyTorch's) and f32 (uniform in
+/// [0, 1)) beside `torch.cumsum`, and the f32 sum beside `torch.sum`: the run that decides the
+/// default (`plan::GPU_SCAN`). The i32 results are checked against the CPU backend's, the f32
+/// ones by the last prefix's error against an f64 sum.
+fn scan_algorithms(dev: &wp::Device, torch: Option<&serde_json::Value>) -> wp::Result<()> {
+    use wp::primitives::plan::{self, ScanAlgorithm};
+    println!("scans (GPU ms between CUDA events; the PyTorch column as above):");
+    for n in [1usize << 20, 1 << 24] {
+        let section = torch.and_then(|t| size_section(t, n));
+        let theirs = |k: &str| section.and_then(|s| json_number(s, k));
+        let mut r = common::rng(0x5ca9 ^ n as u64);
+        let small: Vec<i32> = (0..n).map(|_| (r.random::<u64>() % 100) as i32).collect();
+        let kf: Vec<f32> = (0..n).map(|_| r.random::<f32>()).collect();
+        let want: Vec<i32> = small
+            .iter()
+            .scan(0i32, |acc, x| {
+                *acc = acc.wrapping_add(*x);
+                Some(*acc)
+            })
+            .collect();
+        let exact: f64 = kf.iter().map(|&x| x as f64).sum();
+        let (a, out) = (
+            wp::Array::from_slice(&small, dev)?,
+            wp::Array::<i32>::zeros(n, dev)?,
+        );
+        let (f, fout) = (
+            wp::Array::from_slice(&kf, dev)?,
+            wp::Array::<f32>::zeros(n, dev)?,
+        );
+        for alg in [ScanAlgorithm::ThreePass, ScanAlgorithm::OnePass] {
+            plan::set_gpu_scan_algorithm(Some(alg));
+            let ms = event_ms(dev, || wp::array_scan(&a, &out, true))?;
+            assert_eq!(out.to_vec()?, want, "{alg:?} scan i32 ({n})");
+            println!(
+                "  {:<10} inclusive scan i32 ({n:>8}) {ms:7.3} ms   {}",
+                format!("{alg:?}"),
+                ratio(ms, theirs("cumsum_i32_ms"))
+            );
+            let ms = event_ms(dev, || wp::array_scan(&f, &fout, true))?;
+            let last = fout.to_vec()?[n - 1] as f64;
+            println!(
+                "  {:<10} inclusive scan f32 ({n:>8}) {ms:7.3} ms   {}   last element rel err \
+                 vs f64 {:.1e}",
+                format!("{alg:?}"),
+                ratio(ms, theirs("cumsum_f32_ms")),
+                ((last - exact) / exact).abs()
+            );
+        }
+        plan::set_gpu_scan_algorithm(None);
+        let sum = wp::Array::<f32>::zeros(1, dev)?;
+        let ms = event_ms(dev, || wp::array_sum(&f, &sum))?;
+        let got = sum.to_vec()?[0] as f64;
+        println!(
+            "  {:<10} sum f32            ({n:>8}) {ms:7.3} ms   {}   rel err vs f64 {:.1e}",
+            "",
+            ratio(ms, theirs("sum_f32_ms")),
+            ((got - exact) / exact).abs()
+        );
+    }
+    Ok(())
 }
 
 /// A stable key/value sort on the GPU by `key_bits` (None: all), checked against the CPU

@@ -130,6 +130,8 @@ pub use warp_core::bf16;
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::capability;
 pub use warp_core::f16;
+/// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
+pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`), its
 /// size bound (`WARP_LANG_CACHE_MAX_BYTES` wins over `set_cache_max_bytes`; least recently
@@ -205,7 +207,10 @@ pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
-    pub use crate::{bf16, f16, func, kernel, Array, DTransform, Float, Struct, Transform};
+    pub use crate::{
+        bf16, f16, func, kernel, Array, DSpatialMatrix, DSpatialVector, DTransform, Float,
+        SpatialMatrix, SpatialVector, Struct, Transform,
+    };
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -220,9 +225,10 @@ pub mod __private {
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
-        adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, max_depth, objects,
-        ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability, ConstLiteral, DTransform,
-        Fault, FuncInfo, GradElement, GradView, Grid, KResult, RangeProg, Transform,
+        adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, local_array,
+        max_depth, objects, ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability,
+        ConstLiteral, DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo, GradElement,
+        GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector, Transform,
     };
     pub use warp_macros::__object_rows;
     pub use warp_runtime::__deterministic as deterministic;

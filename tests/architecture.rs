@@ -1788,6 +1788,12 @@ const WARP_CORE_ALLOCATES: &[(&str, &[&str], Why, &str)] = &[
          shape into the fault",
     ),
     (
+        "warp-core/src/local_array.rs",
+        &["out_of_range"],
+        Why::Fault,
+        "an index outside a local array, with the index, the length and the line",
+    ),
+    (
         "warp-core/src/objects/bvh.rs",
         &["fault"],
         Why::Fault,

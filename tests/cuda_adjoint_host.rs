@@ -4,7 +4,8 @@
 //! Every adjoint function is called on both sides with the same inputs, the same nonzero
 //! starting adjoints (so that accumulation, not assignment, is checked) and the same `adj_ret`,
 //! for every operand-type combination the Rust side implements: operators and builtins on
-//! `f32`/`f64`, the float vectors, matrices, quaternions and transforms, the integer types (no-ops), all
+//! `f32`/`f64`, the float vectors, matrices, quaternions, transforms and spatial vectors and
+//! matrices (whose forward functions are compared too), the integer types (no-ops), all
 //! 13 x 13 casts, `adj_zero`/`zero`/`zero_like`/`adj_accum`, and the array gradient helpers
 //! `grad_accum`/`grad_take`/`grad_get` (1-D to 4-D, row- and column-major, in and out of
 //! bounds, with and without a gradient array). Inputs mix special values (0, -0, NaN,
@@ -34,12 +35,16 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use warp_lang::__private::adjoint::{self as ad, Adjoint};
+use warp_lang::__private::builtins as bi;
 use warp_lang::__private::glam::{
     DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
     UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
 };
 use warp_lang::__private::{zero_like, ArrayView, GradElement, GradView};
-use warp_lang::{DTransform, Fault, FaultKind, Transform};
+use warp_lang::{
+    DSpatialMatrix, DSpatialVector, DTransform, Fault, FaultKind, SpatialMatrix, SpatialVector,
+    Transform,
+};
 
 // ------------------------------------------------------------------------------------------
 // Values as lanes of bit patterns (vectors x first, matrices column by column, quats x y z w)
@@ -123,7 +128,28 @@ comp_val!(
     Mat4: f32, 16, to_cols_array, from_cols_array, &; DMat2: f64, 4, to_cols_array, from_cols_array, &;
     DMat3: f64, 9, to_cols_array, from_cols_array, &; DMat4: f64, 16, to_cols_array, from_cols_array, &;
     Transform: f32, 7, to_array, from_array; DTransform: f64, 7, to_array, from_array;
+    SpatialVector: f32, 6, to_array, from_array; DSpatialVector: f64, 6, to_array, from_array;
 );
+
+// Spatial matrices: 36 lanes, row by row (the C++ vec_traits order).
+macro_rules! spatial_mat_val {
+    ($($t:ident: $s:ident),*) => {$(
+        impl Val for $t {
+            const TY: &'static str = stringify!($t);
+            const FLOAT: u32 = <$s as Val>::FLOAT;
+            const LANES: usize = 36;
+            fn bits(&self) -> Vec<u64> {
+                self.to_rows_array().iter().flatten().flat_map(|x| x.bits()).collect()
+            }
+            fn from_bits(w: &[u64]) -> Self {
+                $t::from_rows_array(std::array::from_fn(|i| {
+                    std::array::from_fn(|j| <$s as Val>::from_bits(&w[i * 6 + j..]))
+                }))
+            }
+        }
+    )*};
+}
+spatial_mat_val!(SpatialMatrix: f32, DSpatialMatrix: f64);
 
 fn cxx(ty: &str) -> String {
     if ty == "bool" {
@@ -811,6 +837,105 @@ fn transforms(s: &mut Suite) {
     xforms!(Transform: Vec3, Quat, Mat4, f32, DTransform: DVec3, DQuat, DMat4, f64);
 }
 
+/// `a0 = <expr of v0, v1>`: a forward function of two values, compared bit for bit (the
+/// starting `a0` is overwritten).
+fn fwd2<A: Val, B: Val, R: Val>(s: &mut Suite, expr: &str, f: fn(A, B) -> R) {
+    let op = s.sig(&format!("a0 = {expr}"), &[A::TY, B::TY], &[R::TY], None);
+    for (a, b) in s.inputs2::<A, B>() {
+        let r0 = s.g.adj::<R>();
+        let words = [a.bits(), b.bits(), r0.bits()].concat();
+        s.case(op, &words, toks(&f(a, b)));
+    }
+}
+
+/// The spatial vectors and matrices (wp_core.h's operators, wp_spatial.h's builtins, and
+/// wp_adjoint_spatial.h's adjoints of both), forward and adjoint.
+fn spatial(s: &mut Suite) {
+    macro_rules! each {
+        ($($sv:ident, $sm:ident: $v3:ident, $m3:ident, $x:ident, $s:ident);*) => {$(
+            // Forward.
+            fwd2::<$sv, $sv, $sv>(s, "v0 + v1", |a, b| a + b);
+            fwd2::<$sv, $sv, $sv>(s, "v0 - v1", |a, b| a - b);
+            fwd2::<$sv, $s, $sv>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$s, $sv, $sv>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$sv, $s, $sv>(s, "v0 / v1", |a, b| a / b);
+            fwd2::<$sm, $sm, $sm>(s, "v0 + v1", |a, b| a + b);
+            fwd2::<$sm, $sm, $sm>(s, "v0 - v1", |a, b| a - b);
+            fwd2::<$sm, $s, $sm>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$sm, $s, $sm>(s, "v0 / v1", |a, b| a / b);
+            fwd2::<$sm, $sv, $sv>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$sm, $sm, $sm>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$sv, $sv, $s>(s, "wp::spatial_dot(v0, v1)", bi::spatial_dot);
+            fwd2::<$sv, $sv, $sv>(s, "wp::spatial_cross(v0, v1)", bi::spatial_cross);
+            fwd2::<$sv, $sv, $sv>(s, "wp::spatial_cross_dual(v0, v1)", bi::spatial_cross_dual);
+            fwd2::<$sv, $sv, $sm>(s, "wp::outer(v0, v1)", bi::outer);
+            fwd2::<$sm, $sm, $sm>(s, "wp::transpose(v0) - v1", |a, b| bi::transpose(a) - b);
+            fwd2::<$sv, $sv, $v3>(s, "wp::spatial_top(v0) + wp::spatial_bottom(v1)", |a, b| {
+                bi::spatial_top(a) + bi::spatial_bottom(b)
+            });
+            fwd2::<$v3, $v3, $sv>(s, "wp::spatial_vector(v0, v1)", bi::spatial_vector);
+            fwd2::<$m3, $m3, $sm>(s, "wp::spatial_adjoint(v0, v1)", bi::spatial_adjoint);
+            fwd2::<$x, $sv, $sv>(s, "wp::transform_twist(v0, v1)", bi::transform_twist);
+            fwd2::<$x, $sv, $sv>(s, "wp::transform_wrench(v0, v1)", bi::transform_wrench);
+            fwd2::<$sv, $sv, bool>(s, "v0 == v1 && !(v0 != v1)", |a, b| a == b);
+            // Adjoints.
+            bin::<$sv, $sv, $sv>(s, "adj_add", ad::adj_add);
+            bin::<$sv, $sv, $sv>(s, "adj_sub", ad::adj_sub);
+            bin::<$sv, $s, $sv>(s, "adj_mul", ad::adj_mul);
+            bin::<$s, $sv, $sv>(s, "adj_mul", ad::adj_mul);
+            bin::<$sv, $s, $sv>(s, "adj_div", ad::adj_div);
+            un::<$sv, $sv>(s, "adj_neg", ad::adj_neg);
+            bin::<$sm, $sm, $sm>(s, "adj_add", ad::adj_add);
+            bin::<$sm, $sm, $sm>(s, "adj_sub", ad::adj_sub);
+            bin::<$sm, $s, $sm>(s, "adj_mul", ad::adj_mul);
+            bin::<$s, $sm, $sm>(s, "adj_mul", ad::adj_mul);
+            bin::<$sm, $s, $sm>(s, "adj_div", ad::adj_div);
+            un::<$sm, $sm>(s, "adj_neg", ad::adj_neg);
+            bin::<$sm, $sv, $sv>(s, "adj_mul", ad::adj_mul);
+            bin::<$sm, $sm, $sm>(s, "adj_mul", ad::adj_mul);
+            un::<$sm, $sm>(s, "adj_transpose", ad::adj_transpose);
+            bin::<$sv, $sv, $sm>(s, "adj_outer", ad::adj_outer);
+            bin::<$sv, $sv, $s>(s, "adj_spatial_dot", ad::adj_spatial_dot);
+            bin::<$sv, $sv, $sv>(s, "adj_spatial_cross", ad::adj_spatial_cross);
+            bin::<$sv, $sv, $sv>(s, "adj_spatial_cross_dual", ad::adj_spatial_cross_dual);
+            un::<$sv, $v3>(s, "adj_spatial_top", ad::adj_spatial_top);
+            un::<$sv, $v3>(s, "adj_spatial_bottom", ad::adj_spatial_bottom);
+            bin::<$v3, $v3, $sv>(s, "adj_spatial_vector", ad::adj_spatial_vector);
+            bin::<$m3, $m3, $sm>(s, "adj_spatial_adjoint", ad::adj_spatial_adjoint);
+            bin::<$x, $sv, $sv>(s, "adj_transform_twist", ad::adj_transform_twist);
+            bin::<$x, $sv, $sv>(s, "adj_transform_wrench", ad::adj_transform_wrench);
+            zero_accum::<$sv>(s);
+            zero_accum::<$sm>(s);
+            grad_cases::<$sv>(s);
+        )*};
+    }
+    each!(
+        SpatialVector, SpatialMatrix: Vec3, Mat3, Transform, f32;
+        DSpatialVector, DSpatialMatrix: DVec3, DMat3, DTransform, f64
+    );
+    // The six-scalar constructor and its adjoint (each lane's adjoint is its own).
+    macro_rules! six {
+        ($($sv:ident: $s:ident),*) => {$({
+            let ty = [$s::TY; 6];
+            let op = s.sig("a0 = wp::spatial_vector_scalars(v0, v1, v2, v3, v4, v5)", &ty, &[$sv::TY], None);
+            let adj = s.sig("wp::adj_spatial_vector_scalars($)", &ty, &ty, Some($sv::TY));
+            for _ in 0..s.n {
+                let v: [$s; 6] = std::array::from_fn(|_| s.g.val::<$s>());
+                let r0 = s.g.adj::<$sv>();
+                let words: Vec<u64> = v.iter().flat_map(|x| x.bits()).chain(r0.bits()).collect();
+                s.case(op, &words, toks(&bi::spatial_vector_scalars(v[0], v[1], v[2], v[3], v[4], v[5])));
+                let mut a: [$s; 6] = std::array::from_fn(|_| s.g.adj::<$s>());
+                let g = s.g.ret::<$sv>();
+                let words: Vec<u64> = v.iter().chain(&a).flat_map(|x| x.bits()).chain(g.bits()).collect();
+                let [a0, a1, a2, a3, a4, a5] = &mut a;
+                ad::adj_spatial_vector_scalars(v[0], v[1], v[2], v[3], v[4], v[5], a0, a1, a2, a3, a4, a5, g);
+                s.case(adj, &words, a.iter().flat_map(toks).collect());
+            }
+        })*};
+    }
+    six!(SpatialVector: f32, DSpatialVector: f64);
+}
+
 /// The decompositions of wp_svd.h: `adj_<name>(a, adj_a, tuple_t{..})` on random and special
 /// matrices (the generator's: NaNs, infinities, zero and repeated lanes), and on diagonal
 /// matrices with repeated entries (the clamped `F` of the SVD and the tie rule of eig3).
@@ -1470,6 +1595,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     linalg(&mut s);
     noise(&mut s);
     transforms(&mut s);
+    spatial(&mut s);
     decomps(&mut s);
     misc(&mut s);
     integers(&mut s);

@@ -196,6 +196,56 @@ fn transforms(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = if t == t && t != u { 1.0 } else { 0.0 };
 }
 
+/// Spatial vectors and matrices: construction (`SpatialVector::new`, `spatial_vector` of two
+/// 3-vectors and of six scalars, `ZERO`, `IDENTITY`, `SpatialMatrix::from_rows`), literal
+/// indexing and lane, row and entry writes, the operators and products, every spatial builtin
+/// (`transpose`, `outer`, `spatial_adjoint`, `transform_twist`/`wrench` too), `==`, and local
+/// arrays of spatial vectors and matrices.
+#[wp::kernel]
+fn spatial(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let u = SpatialVector::new(vec3(a, 0.5, -a), vec3(1.0, a * 0.25, 2.0));
+    let w = spatial_vector(0.3, a, -1.5, 0.75 * a, 2.0, -0.5);
+    let t = Transform::new(
+        vec3(a, 1.0, -0.5),
+        Quat::from_axis_angle(vec3(0.0, 0.6, 0.8), a),
+    );
+    let mut m = outer(u, w) + SpatialMatrix::IDENTITY * a;
+    m[(0, 5)] = a * 3.0;
+    m[2][1] -= 1.0;
+    m[4] = spatial_cross(u, w);
+    let r = quat_to_matrix(t.q);
+    let x6 = spatial_adjoint(r, skew(t.p) * r);
+    let n = SpatialMatrix::from_rows(w, u, w, SpatialVector::ZERO, u, w) * 0.5;
+    let p = (m * n) * u + transpose(m) * w - x6 * u / 2.0 + (-n.transpose()) * w;
+    let mut q = spatial_cross_dual(p, u) + transform_twist(t, u) - transform_wrench(t, w) * a;
+    q[1] += spatial_dot(u, w);
+    let top = spatial_top(q) + spatial_bottom(p);
+    // Local arrays of spatial values: elements at run-time indices, their lanes and entries.
+    let mut sa = [SpatialVector::ZERO; 3];
+    let j = i % 3;
+    sa[j] = u;
+    sa[(j + 1) % 3][4] = a;
+    sa[j][2] += sa[(j + 1) % 3][4];
+    let mut sm = [SpatialMatrix::IDENTITY; 2];
+    sm[i % 2][(1, 3)] = a;
+    sm[1][5][0] = -a;
+    let mut k = 0;
+    while k < 6 {
+        out[(i, k)] = 0.0;
+        k += 1;
+    }
+    out[(i, 0)] = q[0];
+    out[(i, 1)] = q[1];
+    out[(i, 2)] = q[2];
+    out[(i, 3)] = q[3] + top.x;
+    out[(i, 4)] = q[4] + top.y + m[(4, 2)];
+    out[(i, 5)] = q[5] + top.z + x6[3][1];
+    out[(i, 6)] = if u == u && u != w && m == m { 1.0 } else { 0.0 };
+    out[(i, 7)] = spatial_dot(2.0 * p, q) + spatial_dot(sm[i % 2] * sa[j], w);
+}
+
 /// The decompositions: tuple results destructured (with `_` and an annotation), inside a loop
 /// that overwrites them, and every output written out.
 #[wp::kernel]
@@ -228,6 +278,44 @@ fn decompositions(x: Array<f32>, out: Array<f32, 2>) {
         Vec2::new(a.y_axis.x, a.y_axis.y),
     ));
     out[(i, 9)] = s2.x + s2.y * 3.0 + v2.x_axis.y;
+}
+
+#[wp::func]
+fn split_pair(x: f32) -> (f32, Vec3) {
+    (x * 2.0, vec3(x, x * x, 1.0))
+}
+
+#[wp::func]
+fn add_into(acc: &mut f32, x: f32) -> f32 {
+    *acc += x;
+    *acc * 0.5
+}
+
+#[wp::func]
+fn scale_lanes(v: &mut Vec3, k: &mut f32) {
+    v.x *= *k;
+    add_into(&mut v.y, *k);
+    *k = 0.0;
+}
+
+/// Tuple results (destructured, by element, nested in a literal) and `&mut` parameters (a
+/// local, a lane, a local array's element, an array element; two at once; passed on).
+#[wp::kernel]
+fn refs_and_tuples(x: Array<f32>, acc: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let (s, v) = split_pair(x[i]);
+    let t = (s, (v.y, 3));
+    let mut a = x[i];
+    let h = add_into(&mut a, t.1 .0);
+    let mut w = vec3(x[i], 1.0, 2.0);
+    let mut k = 2.0f32;
+    scale_lanes(&mut w, &mut k);
+    let mut l = [x[i], 0.5];
+    add_into(&mut l[1], split_pair(x[i]).0);
+    add_into(&mut acc[i], x[i]);
+    out[(i, 0)] = a + h;
+    out[(i, 1)] = w.x + w.y + w.z + k;
+    out[(i, 2)] = l[0] + l[1] + t.1 .1 as f32;
 }
 
 const GRAVITY: f32 = -9.81;
@@ -927,6 +1015,21 @@ fn transforms_match_the_cpu_backend() {
 }
 
 #[test]
+fn spatial_types_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..30).map(|k| k as f32 * 0.29 - 4.0).collect();
+    xs.extend([0.0, -0.0, 1.0, 3.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<spatial>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(spatial, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+#[test]
 fn decompositions_match_the_cpu_backend() {
     let dev = wp::cpu();
     let n = 12;
@@ -942,6 +1045,22 @@ fn decompositions_match_the_cpu_backend() {
     wp::launch(decompositions, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+#[test]
+fn refs_and_tuples_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 5;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.75 - 1.5).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let acc = wp::Array::from_slice(&vec![0.25f32; n], &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 3), &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::F32s(&acc), Arg::F32Grid(&out)];
+    let host = run_on_host::<refs_and_tuples>(&[n], &args);
+    wp::launch(refs_and_tuples, n, (&x, &acc, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
     }
 }
 
@@ -1344,12 +1463,28 @@ fn run_tiled_on_host<K: Kernel>(
         K::INFO.name,
         std::process::id()
     ));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cpp = dir.join("k.cpp");
+    Some(build_and_run(
+        &dir,
+        &program,
+        &emu_flags(bd),
+        "generated tiled code",
+    ))
+}
+
+/// Writes `program` into `dir`, compiles it with g++ and `flags`, runs it, and returns what
+/// it printed, one value per line; a compile error or a failed run (`what` faulted) panics
+/// with the messages.
+fn build_and_run(
+    dir: &std::path::Path,
+    program: &str,
+    flags: &[String],
+    what: &str,
+) -> Vec<String> {
+    std::fs::create_dir_all(dir).unwrap();
+    let (cpp, exe) = (dir.join("k.cpp"), dir.join("k"));
     std::fs::write(&cpp, program).unwrap();
-    let exe = dir.join("k");
     let out = Command::new("g++")
-        .args(emu_flags(bd))
+        .args(flags)
         .arg(&cpp)
         .arg("-o")
         .arg(&exe)
@@ -1364,17 +1499,15 @@ fn run_tiled_on_host<K: Kernel>(
     let run = Command::new(&exe).output().unwrap();
     assert!(
         run.status.success(),
-        "generated tiled code faulted: {}{}",
+        "{what} faulted: {}{}",
         String::from_utf8_lossy(&run.stdout),
         String::from_utf8_lossy(&run.stderr)
     );
-    Some(
-        String::from_utf8(run.stdout)
-            .unwrap()
-            .lines()
-            .map(str::to_string)
-            .collect(),
-    )
+    String::from_utf8(run.stdout)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
 }
 
 /// `tile_map` of user funcs (unary, binary calling another func, one returning `i32`, and
@@ -1775,31 +1908,17 @@ fn assertions_fault_as_on_the_cpu_backend() {
             flags = if debug { "wp::CTX_DEBUG" } else { "0" },
             thread = src.thread_fn,
         );
-        let cpp = dir.join(format!("a{k}.cpp"));
-        std::fs::write(&cpp, program).unwrap();
-        let exe = dir.join(format!("a{k}"));
-        let built = Command::new("g++")
-            .args([
-                "-std=c++17",
-                "-O1",
-                "-Wno-unused",
-                "-DWP_CONTIGUOUS=1",
-                "-I",
-                include,
-            ])
-            .arg(&cpp)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .unwrap();
-        assert!(
-            built.status.success(),
-            "g++ failed on {}:\n{}",
-            cpp.display(),
-            String::from_utf8_lossy(&built.stderr)
-        );
-        let run = Command::new(&exe).output().unwrap();
-        let host = String::from_utf8(run.stdout).unwrap();
+        let flags = [
+            "-std=c++17",
+            "-O1",
+            "-Wno-unused",
+            "-DWP_CONTIGUOUS=1",
+            "-I",
+            include,
+        ]
+        .map(String::from);
+        let host =
+            build_and_run(&dir.join(format!("a{k}")), &program, &flags, "asserting").join("\n");
         wp::config::set_debug(debug);
         let cpu = wp::launch(asserting, n, (&x, &v, &out), &dev);
         wp::config::set_debug(was);
@@ -1864,4 +1983,446 @@ fn assertions_fault_as_on_the_cpu_backend() {
         cpp.display(),
         String::from_utf8_lossy(&built.stderr)
     );
+}
+
+// ------------------------------------------------------------------------------------------
+// Local arrays: forward, fault, adjoint and tangent units on the host
+// ------------------------------------------------------------------------------------------
+
+const LOCAL_LEN: usize = 5;
+
+#[wp::func]
+fn local_reversed(a: [f32; 4]) -> [f32; 4] {
+    let mut r = a;
+    for j in 0..4 {
+        r[j] = a[3 - j];
+    }
+    r
+}
+
+#[wp::func]
+fn local_dot(a: [Vec3; 2], w: Vec3) -> f32 {
+    a[0].dot(w) - a[1].dot(w)
+}
+
+/// Literals, repeats (a literal and a const length), element, member and nested writes at
+/// dynamic indices, an insertion sort, `len()`, and funcs taking and returning arrays.
+#[wp::kernel]
+fn local_arrays(x: Array<f32>, k: Array<i32>, out: Array<f32, 2>) {
+    let i = tid();
+    let mut a = [0.0f32; 8];
+    for j in 0..8 {
+        a[j] = x[(i * 3 + j as usize * 5) % 37] - (j as f32) * 0.5;
+    }
+    for j in 1..a.len() {
+        let key = a[j];
+        let mut p = j;
+        while p > 0 && a[p - 1] > key {
+            a[p] = a[p - 1];
+            p -= 1;
+        }
+        a[p] = key;
+    }
+    let q = k[i];
+    let mut v = [Vec3::ZERO; 2];
+    v[(q % 2) as usize].y = a[3];
+    v[1].x += a[0] * 2.0;
+    let mut m = [[0.0f32; 3]; 2];
+    m[(q % 2) as usize][(q % 3) as usize] = a[7];
+    m[1][1] -= 1.5;
+    let mut c = [0i32; LOCAL_LEN];
+    c[(q % 5) as usize] += q;
+    let r: [f32; 4] = local_reversed([a[1], a[2], m[1][1], 4.0]);
+    for j in 0..8 {
+        out[(i, j)] = a[j];
+    }
+    out[(i, 8)] = local_dot(v, Vec3::new(1.0, 2.0, 3.0)) + r[0] * 3.0 - r[3];
+    out[(i, 9)] = m[0][0] + m[0][1] * 2.0 + m[0][2] * 4.0 + m[1][0] * 8.0 + m[1][2];
+    out[(i, 10)] = (c[0] + c[1] * 3 + c[4] * 5) as f32 + c.len() as f32;
+}
+
+/// The forward CUDA unit of `local_arrays` on the host: the CPU backend's bits exactly.
+#[test]
+fn local_arrays_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 9;
+    let xs: Vec<f32> = (0..37)
+        .map(|k| ((k * 7) % 11) as f32 * 0.75 - 3.0)
+        .collect();
+    let ks: Vec<i32> = (0..n).map(|k| (k * 13 + 4) % 17).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let k = wp::Array::from_slice(&ks, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n as usize, 11), &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::I32s(&k), Arg::F32Grid(&out)];
+    let Some(host) = run_on_host::<local_arrays>(&[n as usize], &args) else {
+        return;
+    };
+    wp::launch(local_arrays, n as usize, (&x, &k, &out), &dev).unwrap();
+    assert_eq!(host, cpu_results(&args));
+    // The sort ran: each row's first eight values ascend.
+    let o = out.to_vec().unwrap();
+    assert!(o
+        .chunks(11)
+        .all(|r| r[..8].windows(2).all(|w| w[0] <= w[1])));
+}
+
+#[wp::kernel]
+fn local_oob(k: Array<i32>, out: Array<f32>) {
+    let i = tid();
+    let mut a = [1.0f32, 2.0, 3.0];
+    a[k[i]] = 5.0;
+    out[i] = a[k[i] - 1];
+}
+
+/// An index outside a local array in the CUDA unit: the record the host decodes into the
+/// CPU's fault (FAULT_LOCAL_INDEX with the index, the length and the line), for a write and a
+/// read.
+#[test]
+fn local_array_index_faults_like_the_cpu_backend() {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (local arrays): no g++ on this machine");
+        return;
+    }
+    let dev = wp::cpu();
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let src = wp::cuda_source::assemble(&local_oob::INFO);
+    let dir = std::env::temp_dir().join(format!("wp_codegen_local_oob_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (case, ks) in [[0i32, 2, 3], [1, 0, 2]].into_iter().enumerate() {
+        let k = wp::Array::from_slice(&ks, &dev).unwrap();
+        let out = wp::Array::<f32>::zeros(3, &dev).unwrap();
+        let (decl, _) = cpp_args(&[Arg::I32s(&k), Arg::F32s(&out)]);
+        let program = format!(
+            "#include <cstring>\n{text}\n\
+             static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+             int main() {{\n\
+             {decl}\n\
+             wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+             wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+             wp::launch_t launch = {{{{3, 1, 1, 1}}, 3, 1, 0}};\n\
+             for (wp::i64 flat = 0; flat < 3; ++flat) {thread}(p0, p1, launch, flat, &ctx);\n\
+             if (flag) printf(\"%d %d %lld %lld %lld\\n\", fault.kind, fault.ndim,\n\
+                              (long long)fault.index[0], (long long)fault.index[1],\n\
+                              (long long)fault.index[2]);\n\
+             else printf(\"ok\\n\");\n\
+             return 0;\n}}\n",
+            text = src.text,
+            thread = src.thread_fn,
+        );
+        let flags = ["-std=c++17", "-O1", "-Wno-unused", "-I", include].map(String::from);
+        let host =
+            build_and_run(&dir.join(format!("oob{case}")), &program, &flags, "oob").join("\n");
+        let Err(wp::Error::Fault(f)) = wp::launch(local_oob, 3, (&k, &out), &dev) else {
+            panic!("case {case}: the CPU launch did not fault");
+        };
+        let wp::FaultKind::LocalIndex { index, len, line } = f.kind else {
+            panic!("case {case}: {f}");
+        };
+        // FAULT_LOCAL_INDEX (wp_core.h), ndim 3: the index, the length, the line.
+        let want = format!("9 3 {index} {len} {line}");
+        assert_eq!(host.trim(), want, "case {case}: {f}");
+    }
+}
+
+#[wp::func]
+fn local_scaled(a: [f32; 3], s: f32) -> [f32; 3] {
+    let mut r = a;
+    for j in 0..3 {
+        r[j] = r[j] * s - a[(j + 1) % 3];
+    }
+    r
+}
+
+/// Literals, a repeat, reads and writes at dynamic indices overwriting the array inside loops,
+/// and a func taking and returning an array: `+ - *` only, so that the adjoint is the same
+/// IEEE operations in the same order on both sides.
+#[wp::kernel]
+fn local_grads(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    let t = x[i];
+    let mut a = [t, t * t, 1.0];
+    let mut b = [t * 0.5; 3];
+    for _pass in 0..3 {
+        for j in 0..3 {
+            a[j] = a[j] * a[(j + 2) % 3] * 0.5 + b[j];
+            b[(j as usize + i) % 3] -= a[j] * 0.25;
+        }
+    }
+    let c: [f32; 3] = local_scaled(a, t);
+    y[i] = c[0] + c[1] * b[2] - c[2] * a[1];
+}
+
+/// Compiles and runs `K`'s CUDA adjoint unit on the host over a 1-D grid of `n` threads, each
+/// with an empty stack of its own; `args` are the parameters, then the arrays' adjoints.
+fn run_adjoint_on_host<K: Kernel>(n: usize, args: &[Arg]) -> Option<Vec<String>> {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (adjoint): no g++ on this machine");
+        return None;
+    }
+    assert_eq!(K::INFO.cuda_adjoint_error, None);
+    let src = wp::cuda_source::assemble_adjoint(&K::INFO);
+    let (decl, print) = cpp_args(args);
+    let params: Vec<String> = (0..args.len()).map(|k| format!("p{k}")).collect();
+    let program = format!(
+        "#include <cstring>\n{text}\n\
+         static void print_f32(wp::f32 x) {{ unsigned u; memcpy(&u, &x, 4); printf(\"%08x\\n\", u); }}\n\
+         static wp::f32 bits_f32(unsigned u) {{ wp::f32 x; memcpy(&x, &u, 4); return x; }}\n\
+         int main() {{\n\
+         {decl}\n\
+         wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+         wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+         wp::launch_t launch = {{{{{n}, 1, 1, 1}}, {n}, 1, 0}};\n\
+         static char buf[1 << 16];\n\
+         wp::adstack_t st = wp::adstack_new(buf, sizeof buf);\n\
+         for (wp::i64 flat = 0; flat < {n}; ++flat) {{ st.top = 0; {thread}({params}, launch, flat, &ctx, &st); }}\n\
+         if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
+         {print}\n\
+         return 0;\n}}\n",
+        text = src.text,
+        thread = src.thread_fn,
+        params = params.join(", "),
+    );
+    let dir = std::env::temp_dir().join(format!(
+        "wp_codegen_adj_{}_{}",
+        K::INFO.name,
+        std::process::id()
+    ));
+    let flags = [
+        "-std=c++17",
+        "-O1",
+        "-ffp-contract=off",
+        "-Wno-unused",
+        "-DWP_CONTIGUOUS=1",
+        "-I",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"),
+    ]
+    .map(String::from);
+    Some(build_and_run(
+        &dir,
+        &program,
+        &flags,
+        "the generated adjoint",
+    ))
+}
+
+/// The CUDA adjoint of `local_grads` (element stores in loops pushing the whole array, a func
+/// adjoint taking an array) on the host: the CPU backend's gradients bit for bit.
+#[test]
+fn local_array_gradients_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 7;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.25 - 0.8).collect();
+    let x = wp::Array::from_slice(&xs, &dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let y = wp::Array::<f32>::zeros(n, &dev)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(local_grads, n, (&x, &y), &dev).unwrap();
+    }
+    let gx = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let gy = wp::Array::<f32>::full(n, 1.0, &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::F32s(&y), Arg::F32s(&gx), Arg::F32s(&gy)];
+    let Some(host) = run_adjoint_on_host::<local_grads>(n, &args) else {
+        return;
+    };
+    y.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    let bits: Vec<String> = x
+        .grad()
+        .unwrap()
+        .to_vec()
+        .unwrap()
+        .iter()
+        .map(|v| format!("{:08x}", v.to_bits()))
+        .collect();
+    assert_eq!(&host[2 * n..3 * n], &bits[..]);
+    assert!(
+        bits.iter().all(|b| b != "00000000"),
+        "no gradient reached x"
+    );
+}
+
+/// The tangent kernel of `local_grads` (forward mode through the element stores and the func)
+/// is refused by name, and that of a kernel without funcs runs on the host as on the CPU.
+#[wp::kernel]
+fn local_tangent(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    let t = x[i];
+    let mut a = [t, t * t, 1.0];
+    for _pass in 0..2 {
+        for j in 0..3 {
+            a[j] = a[j] * a[(j + 2) % 3] + t;
+        }
+    }
+    let b = [a[2]; 2];
+    y[i] = a[0] - a[1] * b[1];
+}
+
+#[test]
+fn local_array_tangent_matches_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 6;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.125 - 0.3).collect();
+    let vs: Vec<f32> = (0..n).map(|k| 1.0 - k as f32 * 0.25).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let y = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let x_dot = wp::Array::from_slice(&vs, &dev).unwrap();
+    let y_dot = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let args = [
+        Arg::F32s(&x),
+        Arg::F32s(&y),
+        Arg::F32s(&x_dot),
+        Arg::F32s(&y_dot),
+    ];
+    type Tangent = <local_tangent as wp::Forward>::Tangent;
+    let host = run_on_host::<Tangent>(&[n], &args);
+    wp::jvp(local_tangent, n, (&x, &y), (&x_dot, &y_dot), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+        assert!(y_dot.to_vec().unwrap().iter().any(|v| *v != 0.0));
+    }
+}
+
+/// The length of `Strand::rest`: a module const, which the C++ definition gets at assembly.
+const STRAND_REST: usize = 3;
+
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Knot {
+    p: Vec3,
+    m: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Strand {
+    w: [f32; 4],
+    knots: [Vec3; 2],
+    rest: [f32; STRAND_REST],
+    grid: [[i32; 2]; 2],
+    frame: [Mat3; 1],
+    head: Knot,
+    id: u32,
+}
+
+#[wp::func]
+fn strand_of(x: f32, k: i32) -> Strand {
+    Strand {
+        w: [x, x * 2.0, 0.5, -x],
+        knots: [Vec3::splat(x), Vec3::new(1.0, x, 2.0)],
+        rest: [0.25; STRAND_REST],
+        grid: [[k, 1], [2, k * 3]],
+        frame: [Mat3::from_diagonal(Vec3::new(x, 1.0, 2.0))],
+        head: Knot {
+            p: Vec3::Z * x,
+            m: 1.5,
+        },
+        id: 7,
+    }
+}
+
+#[wp::func]
+fn quad(x: f32) -> [f32; 4] {
+    [x, x * 2.0, x * 3.0, x * 4.0]
+}
+
+/// Struct literals (shorthand, nested, `..base`, from a func) and array fields read and
+/// written at constant and dynamic indices, nested, through `len()`, lanes of vector
+/// elements, a matrix element's column.
+#[wp::kernel]
+fn struct_values(x: Array<f32>, j: Array<i32>, out: Array<f32, 2>, ints: Array<i32>) {
+    let i = tid();
+    let k = j[i];
+    let mut s = strand_of(x[i], k);
+    s.w[k] += s.knots[1].y;
+    s.knots[0].z = s.w[(k + 1) % 4];
+    s.rest[2] *= 3.0;
+    s.grid[1][k % 2] -= 5;
+    s.head.m = s.frame[0].x_axis.x * 2.0;
+    let m = 0.75;
+    let t = Strand {
+        head: Knot { p: s.knots[0], m },
+        ..s
+    };
+    let mut total = 0.0;
+    for q in 0..t.w.len() {
+        total += t.w[q] * (q as f32 + 1.0);
+    }
+    out[(i, 0)] = total;
+    out[(i, 1)] = t.knots[0].z + t.rest[2] + t.head.m + t.head.p.x;
+    // A func's array result and a func's struct's array field, indexed directly.
+    out[(i, 2)] = t.frame[0].z_axis.z + s.head.m + quad(x[i])[k] + strand_of(1.5, k).w[k];
+    ints[i] = t.grid[1][0] * 100 + t.grid[1][1] + t.id as i32 + t.rest.len() as i32;
+}
+
+#[test]
+fn struct_literals_and_array_fields_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let xs: Vec<f32> = (0..9).map(|k| k as f32 * 0.375 - 1.0).collect();
+    let js: Vec<i32> = (0..9).map(|k| (k * 5 + 1) % 4).collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let j = wp::Array::from_slice(&js, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((9, 3), &dev).unwrap();
+    let ints = wp::Array::<i32>::zeros(9, &dev).unwrap();
+    let args = [
+        Arg::F32s(&x),
+        Arg::I32s(&j),
+        Arg::F32Grid(&out),
+        Arg::I32s(&ints),
+    ];
+    let host = run_on_host::<struct_values>(&[9], &args);
+    wp::launch(struct_values, 9, (&x, &j, &out, &ints), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+}
+
+/// A struct's C++ definition has the Rust struct's layout: its size and every field's offset,
+/// with array fields (`wp::local_array_t`) and a const length filled in.
+#[test]
+fn struct_layouts_match_the_rust_side() {
+    if Command::new("g++").arg("--version").output().is_err() {
+        eprintln!("SKIPPED cuda_codegen_host (struct layouts): no g++ on this machine");
+        return;
+    }
+    let mut defs = Vec::new();
+    <Strand as wp::__private::CudaStruct>::cuda_defs(&mut defs);
+    let fields = ["w", "knots", "rest", "grid", "frame", "head", "id"];
+    let print: String = fields
+        .iter()
+        .map(|f| format!("printf(\"%zu\\n\", offsetof(Strand, {f}));\n"))
+        .collect();
+    let program = format!(
+        "#include <cstdio>\n#include <cstddef>\n#include \"wp_core.h\"\n{}\n\
+         int main() {{ printf(\"%zu\\n%zu\\n\", sizeof(Strand), alignof(Strand));\n{print}return 0; }}\n",
+        defs.join("\n")
+    );
+    let dir = std::env::temp_dir().join(format!("wp_codegen_layout_{}", std::process::id()));
+    let include = concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda");
+    let flags: Vec<String> = ["-std=c++17", "-I", include]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let got = build_and_run(&dir, &program, &flags, "the layout program");
+    let want: Vec<String> = [
+        std::mem::size_of::<Strand>(),
+        std::mem::align_of::<Strand>(),
+        std::mem::offset_of!(Strand, w),
+        std::mem::offset_of!(Strand, knots),
+        std::mem::offset_of!(Strand, rest),
+        std::mem::offset_of!(Strand, grid),
+        std::mem::offset_of!(Strand, frame),
+        std::mem::offset_of!(Strand, head),
+        std::mem::offset_of!(Strand, id),
+    ]
+    .iter()
+    .map(|n| n.to_string())
+    .collect();
+    assert_eq!(got, want);
 }

@@ -183,6 +183,9 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::AssertionFailed { .. } => {
             unreachable!("only generated code asserts (tests/cuda_codegen_host.rs)")
         }
+        FaultKind::LocalIndex { .. } => {
+            unreachable!("only generated code indexes local arrays (tests/cuda_codegen_host.rs)")
+        }
         // The coordinates' f64 bit patterns (wp_core.h's FAULT_NON_FINITE record).
         FaultKind::NonFinite { values, .. } => (
             5,

@@ -5,9 +5,9 @@
 //! a barrier, blocks one after another), and the results are compared with serial
 //! references.
 //!
-//! The kernels are compiled for small tiles (64 threads x 2 elements, and 16 x 3) so that
-//! small inputs already span many blocks and the one-block "spine" loops over several tiles
-//! of block totals. Scratch buffers start filled with 0xCD bytes, so a kernel that read
+//! The kernels are compiled for small tiles (64 threads x 2 elements; 16 x 3, 96 x 2 and, for
+//! vector loads, 32 x 4) so that small inputs already span many blocks, the one-block "spine"
+//! loops over several tiles of block totals, and the single-pass scan's look-backs are long. Scratch buffers start filled with 0xCD bytes, so a kernel that read
 //! scratch before writing it would show. What this cannot check is what only hardware does:
 //! NVRTC's acceptance of the source, warp scheduling and memory ordering on the GPU (the
 //! backend suite's `primitives` tests do that on a GPU).
@@ -18,7 +18,9 @@ use std::collections::HashMap;
 use std::process::Command;
 use std::sync::{Arc, Mutex, OnceLock};
 use warp_lang as wp;
-use wp::primitives::plan::{self, Len, Module, Plan, ReduceOp, SortConfig, SortVariant, Tile};
+use wp::primitives::plan::{
+    self, Len, Module, Plan, ReduceOp, ScanAlgorithm, SortConfig, SortVariant, Tile,
+};
 use wp::primitives::SortKey;
 
 /// 64 threads, like the GPU's 256 an even power of two: the block scan's double buffer ends
@@ -273,10 +275,25 @@ fn sizes(tile: Tile) -> Vec<usize> {
 mod primitives_data;
 use primitives_data::{serial_scan, Elem, F32_SPECIALS};
 
+/// Both scan algorithms.
+const SCANS: [ScanAlgorithm; 2] = [ScanAlgorithm::ThreePass, ScanAlgorithm::OnePass];
+
 fn scan_cases<T: Elem>(tile: Tile) {
+    scan_cases_with::<T>(tile, &[], &SCANS);
+}
+
+/// Scans of every size around the tile boundaries by each of `algorithms`, into a longer
+/// output and in place with a device count, on a build with the `defines` (`NAME=VALUE`).
+fn scan_cases_with<T: Elem>(tile: Tile, defines: &[&str], algorithms: &[ScanAlgorithm]) {
     if !have_gpp() {
         return;
     }
+    for &alg in algorithms {
+        scan_algorithm_cases::<T>(tile, defines, alg);
+    }
+}
+
+fn scan_algorithm_cases<T: Elem>(tile: Tile, defines: &[&str], alg: ScanAlgorithm) {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ T::CUDA.len() as u64);
     let size = std::mem::size_of::<T>() as u64;
     let mut cases = Vec::new();
@@ -287,7 +304,7 @@ fn scan_cases<T: Elem>(tile: Tile) {
             let out0: Vec<T> = (0..n + 3).map(|_| T::small(rng.next())).collect();
             // Host length, into a longer output (its tail stays).
             cases.push(Case {
-                plan: plan::scan(tile, T::CUDA, size, Len::Host(n as u64), inclusive),
+                plan: alg.plan(tile, T::CUDA, size, Len::Host(n as u64), inclusive),
                 users: vec![bytes(&x), bytes(&out0)],
             });
             let mut w = out0.clone();
@@ -301,7 +318,7 @@ fn scan_cases<T: Elem>(tile: Tile) {
                 arg: 2,
             };
             cases.push(Case {
-                plan: plan::scan(tile, T::CUDA, size, len, inclusive),
+                plan: alg.plan(tile, T::CUDA, size, len, inclusive),
                 users: vec![bytes(&x), bytes(&x), bytes(&[count as i32])],
             });
             let mut w = x.clone();
@@ -309,12 +326,12 @@ fn scan_cases<T: Elem>(tile: Tile) {
             want.push((w, format!("in place, n {n}, device count {count}")));
         }
     }
-    let ran = run(tile, &cases);
+    let ran = run_with(tile, defines, &cases);
     for (k, (r, (w, what))) in ran.iter().zip(&want).enumerate() {
-        assert_eq!(r.fault, None, "{} {what}", T::CUDA);
+        assert_eq!(r.fault, None, "{} {alg:?} {what}", T::CUDA);
         // Case 2k writes user 1; case 2k+1 in place writes user 1 too (same data).
         let got: Vec<T> = typed(&r.users[1]);
-        assert_eq!(&got, w, "{} scan, {what} (case {k})", T::CUDA);
+        assert_eq!(&got, w, "{} {alg:?} scan, {what} (case {k})", T::CUDA);
     }
 }
 
@@ -345,10 +362,33 @@ fn scan_f64() {
 #[test]
 fn scan_odd_tile() {
     scan_cases::<i32>(ODD_TILE);
+    scan_cases::<f64>(WARPS_TILE);
 }
 
-/// Float scans of fractional data: within the bound of any summation order,
-/// `|error| <= 2 k eps sum |x|` for the k-th prefix.
+/// The single-pass scan's look-back over tiles that have published only their aggregate:
+/// in the emulator the tile before is always finished, so without this every walk would end
+/// at once. With an inclusive prefix published by every 5th tile, walks add aggregates within
+/// one window; by every 40th (more than a window of 32 or 16 lanes), they cross windows.
+/// Blocks of one partial warp (16 threads), of two and of three warps.
+#[test]
+fn scan_onepass_walks_back_over_aggregates() {
+    for every in [
+        "WP_PRIM_SCAN_INCLUSIVE_EVERY=5",
+        "WP_PRIM_SCAN_INCLUSIVE_EVERY=40",
+    ] {
+        let defines = [every];
+        let one = [ScanAlgorithm::OnePass];
+        scan_cases_with::<i32>(TILE, &defines, &one);
+        scan_cases_with::<u64>(TILE, &defines, &one);
+        scan_cases_with::<f32>(ODD_TILE, &defines, &one);
+        scan_cases_with::<f64>(ODD_TILE, &defines, &one);
+        scan_cases_with::<i64>(WARPS_TILE, &defines, &one);
+    }
+}
+
+/// Float scans of fractional data, by both algorithms: within the bound of any summation
+/// order, `|error| <= 2 k eps sum |x|` for the k-th prefix (the single-pass scan also with
+/// walks over aggregates).
 #[test]
 fn scan_f32_fractional_within_rounding() {
     if !have_gpp() {
@@ -359,30 +399,49 @@ fn scan_f32_fractional_within_rounding() {
     let x: Vec<f32> = (0..n)
         .map(|_| (rng.below(2_000_001) as f32 - 1e6) * 1e-6)
         .collect();
-    let ran = run(
-        TILE,
-        &[Case {
-            plan: plan::scan(TILE, "f32", 4, Len::Host(n as u64), true),
-            users: vec![bytes(&x), bytes(&vec![0f32; n])],
-        }],
-    );
-    let got: Vec<f32> = typed(&ran[0].users[1]);
-    let (mut acc, mut abs) = (0f64, 0f64);
-    for (k, (&g, &v)) in got.iter().zip(&x).enumerate() {
-        acc += v as f64;
-        abs += v.abs() as f64;
-        let bound = 2.0 * (k + 1) as f64 * f32::EPSILON as f64 * abs;
-        assert!((g as f64 - acc).abs() <= bound, "k {k}: {g} vs {acc}");
+    for (alg, defines) in [
+        (ScanAlgorithm::ThreePass, &[][..]),
+        (ScanAlgorithm::OnePass, &[][..]),
+        (
+            ScanAlgorithm::OnePass,
+            &["WP_PRIM_SCAN_INCLUSIVE_EVERY=40"][..],
+        ),
+    ] {
+        let ran = run_with(
+            TILE,
+            defines,
+            &[Case {
+                plan: alg.plan(TILE, "f32", 4, Len::Host(n as u64), true),
+                users: vec![bytes(&x), bytes(&vec![0f32; n])],
+            }],
+        );
+        let got: Vec<f32> = typed(&ran[0].users[1]);
+        let (mut acc, mut abs) = (0f64, 0f64);
+        for (k, (&g, &v)) in got.iter().zip(&x).enumerate() {
+            acc += v as f64;
+            abs += v.abs() as f64;
+            let bound = 2.0 * (k + 1) as f64 * f32::EPSILON as f64 * abs;
+            assert!(
+                (g as f64 - acc).abs() <= bound,
+                "{alg:?} {defines:?} k {k}: {g} vs {acc}"
+            );
+        }
     }
 }
 
 fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
+    reduce_cases_on::<T>(TILE, extra)
+}
+
+/// Sums, minima and maxima of every size around `tile`'s boundaries and of `extra`, with host
+/// and device counts.
+fn reduce_cases_on<T: Elem>(tile: Tile, extra: &[Vec<T>]) {
     if !have_gpp() {
         return;
     }
     let mut rng = Rng(0x1234_5678 ^ T::CUDA.len() as u64);
     let size = std::mem::size_of::<T>() as u64;
-    let mut inputs: Vec<Vec<T>> = sizes(TILE)
+    let mut inputs: Vec<Vec<T>> = sizes(tile)
         .into_iter()
         .map(|n| (0..n).map(|_| T::small(rng.next())).collect())
         .collect();
@@ -397,7 +456,7 @@ fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
                 ReduceOp::Max => (T::MAX_IDENTITY, T::max_of),
             };
             cases.push(Case {
-                plan: plan::reduce(TILE, T::CUDA, size, op, Len::Host(x.len() as u64)),
+                plan: plan::reduce(tile, T::CUDA, size, op, Len::Host(x.len() as u64)),
                 users: vec![bytes(x), bytes(&[T::small(1)])],
             });
             want.push((x.iter().fold(id, |a, &v| f(a, v)), x.len(), op));
@@ -409,13 +468,13 @@ fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
                 arg: 2,
             };
             cases.push(Case {
-                plan: plan::reduce(TILE, T::CUDA, size, op, len),
+                plan: plan::reduce(tile, T::CUDA, size, op, len),
                 users: vec![bytes(x), bytes(&[T::small(1)]), bytes(&[count as i32])],
             });
             want.push((x[..count].iter().fold(id, |a, &v| f(a, v)), count, op));
         }
     }
-    for (r, (w, n, op)) in run(TILE, &cases).iter().zip(&want) {
+    for (r, (w, n, op)) in run(tile, &cases).iter().zip(&want) {
         let got: Vec<T> = typed(&r.users[1]);
         // Bit patterns: NaN-free results must match exactly, signed zeros included.
         assert_eq!(
@@ -437,6 +496,65 @@ fn reductions_int() {
     reduce_cases::<u32>(&[]);
     reduce_cases::<i64>(&[vec![i64::MIN, 3]]);
     reduce_cases::<u64>(&[]);
+}
+
+/// The block total's shuffle tree in a block of one partial warp (16 threads) and of three
+/// warps.
+#[test]
+fn reductions_odd_tiles() {
+    let nan = f32::NAN;
+    for tile in [ODD_TILE, WARPS_TILE] {
+        reduce_cases_on::<i32>(
+            tile,
+            &[(0..20_001).map(|i| (i * 7919 % 1001) - 500).collect()],
+        );
+        reduce_cases_on::<f32>(tile, &[vec![nan, 3.0, -2.0, nan, f32::INFINITY]]);
+        reduce_cases_on::<u64>(tile, &[]);
+    }
+}
+
+/// A tile whose threads' elements are whole 16-byte vectors for every element type (4 of 4
+/// bytes, 2 of 8): full tiles of an aligned array are read by vector loads.
+const VEC_TILE: Tile = Tile {
+    threads: 32,
+    items: 4,
+};
+
+/// Reductions by vector loads (full tiles of an aligned input; the driver's buffers are
+/// malloc'd, 16-byte aligned) and, for the same inputs one element in, by scalar loads (the
+/// kernel checks the address), against the serial fold.
+#[test]
+fn reductions_vector_loads() {
+    if !have_gpp() {
+        return;
+    }
+    reduce_cases_on::<i32>(
+        VEC_TILE,
+        &[(0..20_001).map(|i| (i * 7919 % 1001) - 500).collect()],
+    );
+    reduce_cases_on::<f64>(VEC_TILE, &[vec![f64::NAN, -1e300, f64::NEG_INFINITY, 7.0]]);
+    reduce_cases_on::<f32>(VEC_TILE, &[]);
+    reduce_cases_on::<u64>(VEC_TILE, &[]);
+    let x: Vec<i64> = (0..5000).map(|i| (i * 7919 % 1001) - 500).collect();
+    let mut cases = Vec::new();
+    for op in [ReduceOp::Sum, ReduceOp::Min, ReduceOp::Max] {
+        let mut p = plan::reduce(VEC_TILE, "i64", 8, op, Len::Host(x.len() as u64 - 1));
+        p.steps[0].args[0] = plan::Word::Addr(plan::Buf::User(0), 8);
+        cases.push(Case {
+            plan: p,
+            users: vec![bytes(&x), bytes(&[0i64])],
+        });
+    }
+    let ran = run(VEC_TILE, &cases);
+    let rest = &x[1..];
+    let want = [
+        rest.iter().sum::<i64>(),
+        *rest.iter().min().unwrap(),
+        *rest.iter().max().unwrap(),
+    ];
+    for (r, w) in ran.iter().zip(want) {
+        assert_eq!(typed::<i64>(&r.users[1]), vec![w]);
+    }
 }
 
 #[test]
@@ -761,14 +879,20 @@ fn bad_device_counts_fault_and_write_nothing() {
                     plan: plan::reduce(TILE, "i32", 4, ReduceOp::Sum, len),
                     users: vec![bytes(&x), bytes(&[-1i32]), bytes(&[bad])],
                 },
+                Case {
+                    plan: plan::scan_onepass(TILE, "i32", 4, len, true),
+                    users: vec![bytes(&x), bytes(&out0), bytes(&[bad])],
+                },
             ],
         );
-        assert_eq!(ran[0].fault, Some((1, 2, bad as i64, 301)));
-        assert_eq!(
-            typed::<i32>(&ran[0].users[1]),
-            out0,
-            "scan wrote with count {bad}"
-        );
+        for k in [0, 2] {
+            assert_eq!(ran[k].fault, Some((1, 2, bad as i64, 301)), "case {k}");
+            assert_eq!(
+                typed::<i32>(&ran[k].users[1]),
+                out0,
+                "scan (case {k}) wrote with count {bad}"
+            );
+        }
         assert_eq!(ran[1].fault, Some((1, 2, bad as i64, 301)));
         // A reduction of "nothing": the identity (the plan cannot skip writing `out`).
         assert_eq!(typed::<i32>(&ran[1].users[1]), vec![0]);
@@ -833,9 +957,16 @@ fn nvrtc_compiles_every_module() {
         threads: 384,
         items: 12,
     };
+    // (The 4-bit counting passes keep a count per thread and nibble beside the tile: the
+    // benchmarks' 256 x 16 fits the 48 KiB of static shared memory, the default 512 x 8 does
+    // not.)
+    let nibbles = Tile {
+        threads: 256,
+        items: 16,
+    };
     for (variant, tile) in [
         (SortVariant::MatchAny, gpu.tile),
-        (SortVariant::Nibbles, gpu.tile),
+        (SortVariant::Nibbles, nibbles),
         (SortVariant::Ballot, big),
     ] {
         modules.push(Module::Sort(

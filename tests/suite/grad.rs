@@ -954,6 +954,12 @@ fn cuda_adjoint_units_compile_on_the_host() {
         <crate::transforms::k_xform64 as wp::Kernel>::info(),
         <crate::transforms::k_xform32 as wp::Kernel>::info(),
         <crate::transforms::k_bodies as wp::Kernel>::info(),
+        <crate::spatial::k_spatial64 as wp::Kernel>::info(),
+        <crate::spatial::k_spatial32 as wp::Kernel>::info(),
+        <crate::spatial::k_bodies as wp::Kernel>::info(),
+        <crate::spatial::k_spatial_loss as wp::Kernel>::info(),
+        <crate::spatial::k_spatial_array_loss as wp::Kernel>::info(),
+        <crate::spatial::k_spatial_fwd as wp::Kernel>::info(),
         <k_decomp_grad as wp::Kernel>::info(),
         <k_misc_grad as wp::Kernel>::info(),
         <crate::misc::k_lower_bound as wp::Kernel>::info(),
@@ -1919,8 +1925,8 @@ struct HostCase {
 /// sides do the same IEEE operations, without FMA contraction; the inputs are binary
 /// fractions, so even a different summation order would give the same bits). So CI without a
 /// GPU runs the CUDA adjoint of nested dependent loops (over a parameter, a const and a func's
-/// bound), nested struct fields, loops in funcs, early exits, custom gradients and the older
-/// loop, branch and func kernels.
+/// bound), nested struct fields, loops in funcs, early exits, custom gradients, funcs' tuple
+/// results and `&mut` parameters, and the older loop, branch and func kernels.
 #[test]
 fn cuda_adjoints_run_on_the_host_like_the_cpu() {
     let dev = wp::cpu();
@@ -2118,6 +2124,47 @@ fn cuda_adjoints_run_on_the_host_like_the_cpu() {
                 hg,
                 HostArg::array(&x, "wp::f64"),
                 HostArg::f64(0.6),
+                HostArg::array(&out, "wp::f64")
+            ],
+            [x, out]
+        );
+    }
+    {
+        // Every spatial builtin and operator's adjoint (`spatial::k_spatial_loss`).
+        use crate::spatial::k_spatial_loss;
+        let n = 3;
+        let xs_h: Vec<f64> = (0..n * 12)
+            .map(|k| ((k as f64) * 0.83).sin() * 2.0)
+            .collect();
+        let ms_h: Vec<f64> = (0..18).map(|k| ((k as f64) * 0.731).sin()).collect();
+        let tq_h = [0.4, -1.1, 0.7, 0.3, -0.2, 0.5, 0.8];
+        let (xs, ms, tq) = (f64s(&xs_h), f64s(&ms_h), f64s(&tq_h));
+        let loss = outs(n);
+        loss.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_spatial_loss,
+            n,
+            (&xs, &ms, &tq, &loss),
+            [
+                HostArg::array(&xs, "wp::f64"),
+                HostArg::array(&ms, "wp::f64"),
+                HostArg::array(&tq, "wp::f64"),
+                HostArg::array(&loss, "wp::f64")
+            ],
+            [xs, ms, tq, loss]
+        );
+    }
+    {
+        // Tuple results and `&mut` parameters of funcs (`refs_tuples::k_refs_grad`).
+        use crate::refs_tuples::k_refs_grad;
+        let (x, out) = (f64s(&[0.75, -0.5, 1.25]), outs(4));
+        out.grad().unwrap().fill(1.0).unwrap();
+        case!(
+            k_refs_grad,
+            1,
+            (&x, &out),
+            [
+                HostArg::array(&x, "wp::f64"),
                 HostArg::array(&out, "wp::f64")
             ],
             [x, out]

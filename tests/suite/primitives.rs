@@ -17,6 +17,7 @@ backend_tests!(
     scan_all_types_and_sizes,
     scan_in_place_and_counts,
     scan_float_fractional_within_rounding,
+    scan_onepass_kernel,
     reductions_all_types,
     reductions_nan_and_empty,
     sort_u32_stable_with_duplicates,
@@ -107,16 +108,17 @@ fn scan_in_place_and_counts(dev: &wp::Device) {
     }
 }
 
-fn scan_float_fractional_within_rounding(dev: &wp::Device) {
+/// An inclusive scan of `n` fractional f32 values in [-1, 1], checked within the bound of any
+/// summation order (any order of k additions is within 2 k eps sum |x| of the exact prefix);
+/// the input and the result.
+fn fractional_scan_within_rounding(dev: &wp::Device, n: usize) -> (Vec<f32>, Vec<f32>) {
     let mut rng = Rng(99);
-    let n = 70001;
     let x: Vec<f32> = (0..n)
         .map(|_| (rng.below(2_000_001) as f32 - 1e6) * 1e-6)
         .collect();
     let out = zeros::<f32, 1>(n, dev);
     wp::array_scan(&arr(&x, dev), &out, true).unwrap();
     let got = host(&out);
-    // Any order of k additions is within 2 k eps sum |x| of the exact prefix.
     let (mut exact, mut abs) = (0f64, 0f64);
     for (k, (&g, &v)) in got.iter().zip(&x).enumerate() {
         exact += v as f64;
@@ -127,6 +129,12 @@ fn scan_float_fractional_within_rounding(dev: &wp::Device) {
             "prefix {k}: {g} vs {exact}"
         );
     }
+    (x, got)
+}
+
+fn scan_float_fractional_within_rounding(dev: &wp::Device) {
+    let n = 70001;
+    let (x, got) = fractional_scan_within_rounding(dev, n);
     // Deterministic: the same again.
     let again = zeros::<f32, 1>(n, dev);
     wp::array_scan(&arr(&x, dev), &again, true).unwrap();
@@ -134,6 +142,61 @@ fn scan_float_fractional_within_rounding(dev: &wp::Device) {
         host(&again).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
         got.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
     );
+}
+
+/// The GPU's single-pass scan (decoupled look-back, `plan::ScanAlgorithm::OnePass`), whatever
+/// the default: the checks of `scan_all_types_and_sizes` and `scan_in_place_and_counts`,
+/// fractional floats within rounding (not run to run: which tile ends a look-back depends on
+/// timing, and with it the order of float additions), and inputs of thousands of tiles, where
+/// blocks run at once and look-backs meet tiles that have published only their aggregate.
+/// On the CPU the algorithm plays no part, and is left alone (the CPU instances run beside the
+/// GPU's): the same checks run once.
+fn scan_onepass_kernel(dev: &wp::Device) {
+    use wp::primitives::plan::{self, ScanAlgorithm};
+    /// Puts the default back however the test ends (the GPU instances run one at a time: no
+    /// other scan sees the choice).
+    struct Restore;
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            plan::set_gpu_scan_algorithm(None);
+        }
+    }
+    let _restore = dev.is_cuda().then(|| {
+        plan::set_gpu_scan_algorithm(Some(ScanAlgorithm::OnePass));
+        Restore
+    });
+    scan_all_types_and_sizes(dev);
+    scan_in_place_and_counts(dev);
+    fractional_scan_within_rounding(dev, 1 << 20);
+    let mut rng = Rng(41);
+    for n in [1 << 20, (1 << 22) + 5] {
+        let x: Vec<i32> = (0..n).map(|_| i32::small(rng.next())).collect();
+        let a = arr(&x, dev);
+        let out = zeros::<i32, 1>(n, dev);
+        wp::array_scan(&a, &out, true).unwrap();
+        assert_eq!(host(&out), serial_scan(&x, true), "i32 n {n}");
+        wp::array_scan(&a, &a, false).unwrap();
+        assert_eq!(host(&a), serial_scan(&x, false), "i32 in place n {n}");
+        // 8-byte elements: flags and values apart, ordered by fences.
+        let y: Vec<u64> = (0..n).map(|_| u64::small(rng.next())).collect();
+        let out = zeros::<u64, 1>(n, dev);
+        wp::array_scan(&arr(&y, dev), &out, true).unwrap();
+        assert_eq!(host(&out), serial_scan(&y, true), "u64 n {n}");
+        let z: Vec<f64> = (0..n).map(|_| f64::small(rng.next())).collect();
+        let count = arr(&[(n - 7) as i32], dev);
+        let out = wp::Array::full(n, -0.5f64, dev).unwrap();
+        wp::array_scan_n(&arr(&z, dev), &out, &count, false).unwrap();
+        let got = host(&out);
+        assert_eq!(
+            got[..n - 7],
+            serial_scan(&z[..n - 7], false)[..],
+            "f64 n {n}"
+        );
+        assert!(
+            got[n - 7..].iter().all(|&v| v == -0.5),
+            "f64 n {n}: past the count"
+        );
+    }
 }
 
 fn reduce_type<T: Elem>(dev: &wp::Device) {

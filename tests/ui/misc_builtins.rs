@@ -13,7 +13,7 @@ fn k(a: Array<f32>, g: Array<f32, 2>, n: Array<i32>, q: Array<Quat>, out: Array<
     let z = lower_bound(a, 0, 0.5);
     let d = div_approx(n[i], 2);
     let e = inverse_approx(q[i]);
-    let t = quat_to_axis_angle(q[i]);
+    let t: f32 = quat_to_axis_angle(q[i]);
     let k = argmin(out[i]);
     let mut s = rand_init(1, 2);
     let c = sample_cdf(&mut s, n);

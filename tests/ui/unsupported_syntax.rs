@@ -8,8 +8,7 @@ fn k(a: Array<f32>, n: i32) {
         0 => a[i] = 0.0,
         _ => a[i] = 1.0,
     }
-    let t = (1.0, 2.0);
-    let arr = [1.0, 2.0, 3.0];
+    let t = (1.0,);
     'outer: for j in 0..n {
         break 'outer;
     }

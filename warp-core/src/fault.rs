@@ -107,6 +107,15 @@ pub enum FaultKind {
         /// The tile's rank, 1..=4.
         rank: u8,
     },
+    /// An index outside a fixed-size local array (`a[i]` of `let mut a = [0.0f32; 8];`).
+    LocalIndex {
+        /// The index as given (saturated to `i64`).
+        index: i64,
+        /// The array's length.
+        len: usize,
+        /// The source line of the access.
+        line: u32,
+    },
     /// A failed `assert!` or `debug_assert!` (checked only in debug mode), or a failed
     /// expectation (`expect_eq`, `expect_neq`, `expect_near`) in a kernel or func.
     AssertionFailed {
@@ -201,7 +210,8 @@ impl Fault {
                 f,
                 "kernel `{}`: backward needs more than the {capacity} bytes of per-thread \
                  stack configured for loop values (at line {line}); raise it with \
-                 wp::config::set_adstack_bytes",
+                 wp::config::set_adstack_bytes or Tape::set_adstack_bytes, zero the \
+                 gradients (Tape::zero), seed them and run backward again",
                 self.kernel
             ),
             FaultKind::BadStep { step } => write!(
@@ -229,6 +239,12 @@ impl Fault {
                     &shape[..r]
                 )
             }
+            FaultKind::LocalIndex { index, len, line } => write!(
+                f,
+                "kernel `{}`: index {index} is out of bounds for a local array of length {len} \
+                 (line {line})",
+                self.kernel
+            ),
             FaultKind::AssertionFailed {
                 line,
                 message,

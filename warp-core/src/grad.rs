@@ -99,6 +99,18 @@ macro_rules! grad_none {
     )*};
 }
 grad_none!(bool, i8, i16, i32, i64, isize, u8, u16, u32, u64, usize);
+
+/// A struct's array field (`[f32; 4]`, `[Vec3; 2]`): element by element.
+impl<T: GradElement, const N: usize> GradElement for [T; N] {
+    #[inline(always)]
+    unsafe fn grad_add(p: *mut Self, v: Self) {
+        let base = p as *mut T;
+        for (k, x) in v.into_iter().enumerate() {
+            // SAFETY: element k of a live, aligned `[T; N]` (forwarded contract).
+            unsafe { T::grad_add(base.add(k), x) };
+        }
+    }
+}
 grad_none!(
     glam::IVec2,
     glam::IVec3,

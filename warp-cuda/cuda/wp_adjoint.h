@@ -55,6 +55,7 @@
 //   wp_adjoint_builtins.h   sections "scalar" and "vector"
 //   wp_adjoint_linalg.h     section "linalg"
 //   wp_adjoint_transform.h  section "transform" (and the transforms' operators)
+//   wp_adjoint_spatial.h    section "spatial" (and the spatial types' operators)
 //   wp_adjoint_svd.h        section "svd"
 //   wp_adjoint_misc.h       section "misc"
 //   wp_adjoint_rand.h       section "rand" (noise)
@@ -63,6 +64,7 @@
 #include "wp_adjoint_builtins.h"
 #include "wp_adjoint_linalg.h"
 #include "wp_adjoint_transform.h"
+#include "wp_adjoint_spatial.h"
 #include "wp_adjoint_svd.h"
 #include "wp_adjoint_misc.h"
 #include "wp_adjoint_rand.h"

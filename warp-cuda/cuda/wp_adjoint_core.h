@@ -54,6 +54,10 @@ WP_FN T adj_zero() {
     return (T)0;
   } else if constexpr (detail::adj_is_object<T>::value) {
     return T{};
+  } else if constexpr (detail::is_local_array<T>::value) {
+    T r;
+    for (auto& e : r.data) e = adj_zero<typename detail::is_local_array<T>::elem>();
+    return r;
   } else {
     typedef typename vec_traits<T>::scalar S;
     T r;
@@ -81,6 +85,20 @@ WP_FN void adj_accum(T& a, const typename identity<T>::type& v) {
   } else if constexpr (detail::adj_is_float<T>::value) {
     a += v;
   }
+}
+
+/// A local array's adjoint: element by element.
+template <typename T, int N>
+WP_FN void adj_accum(local_array_t<T, N>& a, const local_array_t<T, N>& v) {
+  for (int i = 0; i < N; ++i) adj_accum(a.data[i], v.data[i]);
+}
+/// The sum of a local array's elements from zero in index order (the adjoint of `[v; N]`,
+/// warp_core::local_array::sum).
+template <typename T, int N>
+WP_FN T local_sum(const local_array_t<T, N>& a) {
+  T s = adj_zero<T>();
+  for (int i = 0; i < N; ++i) adj_accum(s, a.data[i]);
+  return s;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -427,6 +445,11 @@ WP_FN void grad_add_p(T* p, const T& v) {
     }
   }
 }
+/// A struct's array field (`[f32; 4]`): element by element.
+template <typename T, int N>
+WP_FN void grad_add_p(local_array_t<T, N>* p, const local_array_t<T, N>& v) {
+  for (int i = 0; i < N; ++i) grad_add_p(&p->data[i], v.data[i]);
+}
 template <typename T, int N>
 WP_FN void grad_accum_idx(const array_t<T, N>& g, const i64* idx, const T& v, ctx_t* ctx) {
   if (g.data == nullptr) return;
@@ -551,8 +574,7 @@ WP_FN void adj_accum(tuple_t<A, B, C, D, E, F, G>& a, const tuple_t<A, B, C, D, 
   adj_accum(a.f6, v.f6);
 }
 
-/// A unit func's result (carries no gradient).
-struct unit_t {};
+/// A unit value (`unit_t`, wp_core.h) carries no gradient.
 WP_FN unit_t zero_like(const unit_t&) { return unit_t{}; }
 WP_FN void adj_accum(unit_t&, const unit_t&) {}
 /// A value type for a declared result: `void` (a unit func's) becomes `unit_t`.

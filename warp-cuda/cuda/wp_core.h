@@ -13,6 +13,9 @@
 //     aligned because glam stores them in SSE registers), constructors and constants as free
 //     functions (`Vec3_new`, `Vec3_splat`, `Vec3_ZERO()`, `Mat3_from_cols`, `Quat_IDENTITY()`...);
 //   * operators with glam's meaning, including two glam quirks (Vec4 `%`, scalar / matrix);
+//   * warp-core's spatial vectors and 6x6 matrices (`SpatialVector`, `SpatialMatrix` and their
+//     f64 twins: lanes f0..f5, rows f0..f5) and their operators (`SpatialVector_new`,
+//     `SpatialMatrix_from_rows`, `_ZERO()`, `SpatialMatrix_IDENTITY()`, lane-by-lane ops, products);
 //   * warp-core's rigid transforms (`Transform`, `DTransform`: p, padding, q) and their
 //     operators (`Transform_new`, `Transform_IDENTITY()`, composition `*`, lane-by-lane ops);
 //   * integer semantics of warp_core::ops (`w_add` ... `w_shr`), Rust `as` casts (`cast<To>`),
@@ -470,8 +473,8 @@ template <typename T> T declval();
 #endif
 
 /// Rust's tuples `(A, B, ..)` of 2 to 7 elements, members `f0`, `f1`, ..: what a builtin
-/// returning a tuple returns (a decomposition's factors, a mesh query's result), bound by the
-/// kernel's `let (a, b, ..) = ..`.
+/// returning a tuple returns (a decomposition's factors, a mesh query's result), a tuple
+/// local, a func's tuple parameter or result (and what a func with `&mut` parameters returns).
 template <typename... T>
 struct tuple_t;
 template <typename A, typename B>
@@ -520,6 +523,38 @@ struct tuple_t<A, B, C, D, E, F, G> {
   G f6;
 };
 
+/// `(a, b, ..)`: a tuple of values whose types the caller may not spell (a func's result, a
+/// struct field): deduced, by value, so without `const`.
+template <typename A, typename B>
+WP_FN tuple_t<A, B> make_tuple(A a, B b) {
+  return tuple_t<A, B>{a, b};
+}
+template <typename A, typename B, typename C>
+WP_FN tuple_t<A, B, C> make_tuple(A a, B b, C c) {
+  return tuple_t<A, B, C>{a, b, c};
+}
+template <typename A, typename B, typename C, typename D>
+WP_FN tuple_t<A, B, C, D> make_tuple(A a, B b, C c, D d) {
+  return tuple_t<A, B, C, D>{a, b, c, d};
+}
+template <typename A, typename B, typename C, typename D, typename E>
+WP_FN tuple_t<A, B, C, D, E> make_tuple(A a, B b, C c, D d, E e) {
+  return tuple_t<A, B, C, D, E>{a, b, c, d, e};
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F>
+WP_FN tuple_t<A, B, C, D, E, F> make_tuple(A a, B b, C c, D d, E e, F f) {
+  return tuple_t<A, B, C, D, E, F>{a, b, c, d, e, f};
+}
+template <typename A, typename B, typename C, typename D, typename E, typename F, typename G>
+WP_FN tuple_t<A, B, C, D, E, F, G> make_tuple(A a, B b, C c, D d, E e, F f, G g) {
+  return tuple_t<A, B, C, D, E, F, G>{a, b, c, d, e, f, g};
+}
+
+/// The unit value `()`: the first element of what a func with `&mut` parameters and no
+/// result returns (its result, then the parameters' final values), and a unit func's result
+/// in an adjoint.
+struct unit_t {};
+
 /// The type T itself, in a non-deduced context (the value parameter of store and atomics is
 /// converted to the array's element type instead of taking part in deduction).
 template <typename T> struct identity { typedef T type; };
@@ -539,6 +574,7 @@ enum fault_kind : i32 {
   FAULT_TILE_INDEX = 6,
   FAULT_NON_FINITE_INPUT = 7,
   FAULT_ASSERTION = 8,
+  FAULT_LOCAL_INDEX = 9,
 };
 
 /// The first fault of the launches that share a record, filled by the first faulting thread
@@ -558,8 +594,10 @@ enum fault_kind : i32 {
 /// bit patterns, shape all 0. Assertion (a failed `assert!`, `debug_assert!` or `expect_*`,
 /// warp_core::FaultKind::AssertionFailed): ndim 3, index[0] the source line, index[1] the
 /// column (the host finds the message by both in the `asserts` tables of the kernel and its
-/// callees), index[2] the thread's flat launch index (-1 in a func), shape all 0. Unused
-/// entries are 0.
+/// callees), index[2] the thread's flat launch index (-1 in a func), shape all 0. LocalIndex
+/// (an index outside a fixed-size local array, warp_core::FaultKind::LocalIndex): ndim 3,
+/// index[0] the index, index[1] the array's length, index[2] the source line, shape all 0.
+/// Unused entries are 0.
 struct fault_t {
   i32 kind;
   i32 arg;
@@ -1380,6 +1418,158 @@ WP_XFORM_COMMON(DTransform, DVec3, DQuat, f64)
 #undef WP_XFORM_COMMON
 
 // ------------------------------------------------------------------------------------------
+// Spatial vectors and matrices (warp-core's SpatialVector, SpatialMatrix, DSpatialVector,
+// DSpatialMatrix; warp-core/src/spatial.rs)
+// ------------------------------------------------------------------------------------------
+
+// A spatial vector is six scalars f0..f5 (a kernel's `v[k]` is `v.fk`), a spatial matrix six
+// spatial vectors, its rows (row-major, as Warp's mat_t<6, 6>): no padding. As lanes
+// (vec_traits): a vector's six, a matrix's 36 row by row. The operators here are the types'
+// own (lane by lane +, -, negation, * and / by a scalar, ==; the matrix-vector and
+// matrix-matrix products, each sum left to right in ascending index as warp-core's); the
+// builtins are in wp_spatial.h.
+struct SpatialVector {
+  f32 f0, f1, f2, f3, f4, f5;
+};
+struct DSpatialVector {
+  f64 f0, f1, f2, f3, f4, f5;
+};
+struct SpatialMatrix {
+  SpatialVector f0, f1, f2, f3, f4, f5;
+};
+struct DSpatialMatrix {
+  DSpatialVector f0, f1, f2, f3, f4, f5;
+};
+
+#define WP_SPATIAL_PICK6(x, i) \
+  (i == 0 ? x.f0 : i == 1 ? x.f1 : i == 2 ? x.f2 : i == 3 ? x.f3 : i == 4 ? x.f4 : x.f5)
+#define WP_SPATIAL_COMMON(SV, SM, V3, S)                                                        \
+  template <>                                                                                   \
+  struct vec_traits<SV> {                                                                       \
+    typedef S scalar;                                                                           \
+    static constexpr int N = 6;                                                                 \
+    static constexpr bool is_vec = false;                                                       \
+    static WP_FN S get(const SV& v, int i) { return WP_SPATIAL_PICK6(v, i); }                   \
+    static WP_FN S& at(SV& v, int i) { return WP_SPATIAL_PICK6(v, i); }                         \
+  };                                                                                            \
+  WP_FN const SV& SM##_row(const SM& m, int i) { return WP_SPATIAL_PICK6(m, i); }              \
+  WP_FN SV& SM##_row_at(SM& m, int i) { return WP_SPATIAL_PICK6(m, i); }                        \
+  template <>                                                                                   \
+  struct vec_traits<SM> {                                                                       \
+    typedef S scalar;                                                                           \
+    static constexpr int N = 36;                                                                \
+    static constexpr bool is_vec = false;                                                       \
+    static WP_FN S get(const SM& m, int i) { return vec_traits<SV>::get(SM##_row(m, i / 6), i % 6); } \
+    static WP_FN S& at(SM& m, int i) { return vec_traits<SV>::at(SM##_row_at(m, i / 6), i % 6); } \
+  };                                                                                            \
+  WP_FN SV SV##_new6(S a0, S a1, S a2, S a3, S a4, S a5) {                                      \
+    SV r;                                                                                       \
+    r.f0 = a0;                                                                                  \
+    r.f1 = a1;                                                                                  \
+    r.f2 = a2;                                                                                  \
+    r.f3 = a3;                                                                                  \
+    r.f4 = a4;                                                                                  \
+    r.f5 = a5;                                                                                  \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN SV SV##_ZERO() { return SV##_new6((S)0, (S)0, (S)0, (S)0, (S)0, (S)0); }                \
+  WP_FN SV SV##_new(const V3& w, const V3& v) { return SV##_new6(w.x, w.y, w.z, v.x, v.y, v.z); } \
+  WP_FN SM SM##_from_rows(const SV& r0, const SV& r1, const SV& r2, const SV& r3, const SV& r4,  \
+                          const SV& r5) {                                                       \
+    SM m;                                                                                       \
+    m.f0 = r0;                                                                                  \
+    m.f1 = r1;                                                                                  \
+    m.f2 = r2;                                                                                  \
+    m.f3 = r3;                                                                                  \
+    m.f4 = r4;                                                                                  \
+    m.f5 = r5;                                                                                  \
+    return m;                                                                                   \
+  }                                                                                             \
+  WP_FN SM SM##_ZERO() {                                                                        \
+    const SV z = SV##_ZERO();                                                                   \
+    return SM##_from_rows(z, z, z, z, z, z);                                                    \
+  }                                                                                             \
+  WP_FN SM SM##_IDENTITY() {                                                                    \
+    SM m = SM##_ZERO();                                                                         \
+    for (int i = 0; i < 6; ++i) vec_traits<SV>::at(SM##_row_at(m, i), i) = (S)1;               \
+    return m;                                                                                   \
+  }                                                                                             \
+  WP_SPATIAL_LANES(SV, S)                                                                       \
+  WP_SPATIAL_LANES(SM, S)                                                                       \
+  /* ((((a0 b0 + a1 b1) + a2 b2) + a3 b3) + a4 b4) + a5 b5 */                                   \
+  WP_FN S SV##_dot(const SV& a, const SV& b) {                                                  \
+    S r = a.f0 * b.f0;                                                                          \
+    for (int k = 1; k < 6; ++k) r += vec_traits<SV>::get(a, k) * vec_traits<SV>::get(b, k);    \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN SV operator*(const SM& m, const SV& x) {                                                \
+    SV r;                                                                                       \
+    for (int i = 0; i < 6; ++i) vec_traits<SV>::at(r, i) = SV##_dot(SM##_row(m, i), x);        \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN SM operator*(const SM& a, const SM& b) {                                                \
+    SM r;                                                                                       \
+    for (int i = 0; i < 6; ++i)                                                                 \
+      for (int j = 0; j < 6; ++j) {                                                             \
+        S acc = vec_traits<SM>::get(a, i * 6) * vec_traits<SM>::get(b, j);                      \
+        for (int k = 1; k < 6; ++k)                                                             \
+          acc += vec_traits<SM>::get(a, i * 6 + k) * vec_traits<SM>::get(b, k * 6 + j);         \
+        vec_traits<SM>::at(r, i * 6 + j) = acc;                                                 \
+      }                                                                                         \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN SM& operator*=(SM& a, const SM& b) { return a = a * b; }
+// Lane-by-lane operators of a spatial type T of scalar S.
+#define WP_SPATIAL_LANES(T, S)                                                                  \
+  WP_FN T operator+(const T& a, const T& b) {                                                   \
+    T r;                                                                                        \
+    for (int k = 0; k < vec_traits<T>::N; ++k)                                                  \
+      vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) + vec_traits<T>::get(b, k);           \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN T operator-(const T& a, const T& b) {                                                   \
+    T r;                                                                                        \
+    for (int k = 0; k < vec_traits<T>::N; ++k)                                                  \
+      vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) - vec_traits<T>::get(b, k);           \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN T operator-(const T& a) {                                                               \
+    T r;                                                                                        \
+    for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = -vec_traits<T>::get(a, k); \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN T operator*(const T& a, S s) {                                                          \
+    T r;                                                                                        \
+    for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) * s; \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN T operator*(S s, const T& a) {                                                          \
+    T r;                                                                                        \
+    for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = s * vec_traits<T>::get(a, k); \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN T operator/(const T& a, S s) {                                                          \
+    T r;                                                                                        \
+    for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) / s; \
+    return r;                                                                                   \
+  }                                                                                             \
+  WP_FN T& operator+=(T& a, const T& b) { return a = a + b; }                                   \
+  WP_FN T& operator-=(T& a, const T& b) { return a = a - b; }                                   \
+  WP_FN T& operator*=(T& a, S s) { return a = a * s; }                                          \
+  WP_FN T& operator/=(T& a, S s) { return a = a / s; }                                          \
+  WP_FN bool operator==(const T& a, const T& b) {                                               \
+    for (int k = 0; k < vec_traits<T>::N; ++k)                                                  \
+      if (!(vec_traits<T>::get(a, k) == vec_traits<T>::get(b, k))) return false;                \
+    return true;                                                                                \
+  }                                                                                             \
+  WP_FN bool operator!=(const T& a, const T& b) { return !(a == b); }
+WP_SPATIAL_COMMON(SpatialVector, SpatialMatrix, Vec3, f32)
+WP_SPATIAL_COMMON(DSpatialVector, DSpatialMatrix, DVec3, f64)
+#undef WP_SPATIAL_COMMON
+#undef WP_SPATIAL_LANES
+#undef WP_SPATIAL_PICK6
+
+// ------------------------------------------------------------------------------------------
 // Layout: glam 0.30, x86_64, default features (SSE2, no "cuda"/"scalar-math" feature)
 // ------------------------------------------------------------------------------------------
 
@@ -1407,6 +1597,10 @@ WP_LAYOUT(Quat, 16, 16)
 WP_LAYOUT(DQuat, 32, 8)
 WP_LAYOUT(Transform, 32, 16)  // p (12) + pad (4) + q (16): q at 16, as warp-core's
 WP_LAYOUT(DTransform, 56, 8)  // p (24) + q (32): q at 24
+WP_LAYOUT(SpatialVector, 24, 4)  // six f32, no padding (warp-core's SpatialVector)
+WP_LAYOUT(DSpatialVector, 48, 8)
+WP_LAYOUT(SpatialMatrix, 144, 4)  // six rows, row-major
+WP_LAYOUT(DSpatialMatrix, 288, 8)
 #undef WP_LAYOUT
 
 // ------------------------------------------------------------------------------------------
@@ -1432,6 +1626,15 @@ struct literal<T, true> {  // vectors: splat
   static WP_FN T from_f64(f64 v) { return splat(cast<S>(v)); }
   static WP_FN T from_i64(i64 v) { return splat(cast<S>(v)); }
 };
+// Spatial vectors and matrices splat too (warp-core's FromLiteral for them), every lane.
+template <>
+struct literal<SpatialVector, false> : literal<SpatialVector, true> {};
+template <>
+struct literal<DSpatialVector, false> : literal<DSpatialVector, true> {};
+template <>
+struct literal<SpatialMatrix, false> : literal<SpatialMatrix, true> {};
+template <>
+struct literal<DSpatialMatrix, false> : literal<DSpatialMatrix, true> {};
 }  // namespace detail
 
 namespace detail {
@@ -1681,6 +1884,72 @@ WP_FN bool covers(const array_t<T, N>& a, const i64* dims) {
   for (int k = 0; k < N; ++k)
     if (a.shape[k] < dims[k]) return false;
   return true;
+}
+
+// ------------------------------------------------------------------------------------------
+// Local arrays (warp_core::local_array): `[T; N]` in a kernel or func
+// ------------------------------------------------------------------------------------------
+
+/// A fixed-size local array: a value, copied, passed and returned whole as Rust's `[T; N]`
+/// is (a C array in a struct, so that it can be). `local_array_t<T, N>{}` is all zeros.
+template <typename T, int N>
+struct local_array_t {
+  static_assert(N > 0, "a local array holds at least one element");
+  T data[N];
+  /// `[v; N]`.
+  static WP_FN local_array_t splat(const T& v) {
+    local_array_t a;
+    for (int i = 0; i < N; ++i) a.data[i] = v;
+    return a;
+  }
+};
+
+namespace detail {
+template <typename T>
+struct is_local_array {
+  static constexpr bool value = false;
+};
+template <typename T, int N>
+struct is_local_array<local_array_t<T, N>> {
+  static constexpr bool value = true;
+  typedef T elem;
+};
+/// The fault of an index outside `0..n` at `line` (FAULT_LOCAL_INDEX, see fault_t).
+WP_FN void local_index_fault(i64 i, i64 n, i64 line, ctx_t* ctx) {
+  const i64 at[3] = {i, n, line};
+  raise(ctx, FAULT_LOCAL_INDEX, -1, 3, at, nullptr);
+}
+}  // namespace detail
+
+/// `a[i]` (warp_core::local_array::get): an index outside `0..N` (negative ones compare as
+/// huge) records LocalIndex with the source line and gives T{}.
+template <typename T, int N>
+WP_FN T local_get(const local_array_t<T, N>& a, i64 i, i64 line, ctx_t* ctx) {
+  if ((u64)i < (u64)N) return a.data[i];
+  detail::local_index_fault(i, N, line, ctx);
+  return T{};
+}
+/// `a[i] = v` (warp_core::local_array::set): outside `0..N`, LocalIndex and nothing written.
+template <typename T, int N>
+WP_FN void local_set(local_array_t<T, N>& a, i64 i, const typename identity<T>::type& v, i64 line,
+                     ctx_t* ctx) {
+  if ((u64)i < (u64)N) {
+    a.data[i] = v;
+    return;
+  }
+  detail::local_index_fault(i, N, line, ctx);
+}
+/// `a.len()` of a local array a kernel cannot name the type of (a struct's array field).
+template <typename T, int N>
+WP_FN usize len(const local_array_t<T, N>&) {
+  return (usize)N;
+}
+/// The element of an adjoint at an index the replay checked (warp_core::local_array::at_mut):
+/// element 0 for any other index, which a faulting thread (it goes on) may reach, so that the
+/// access stays in bounds.
+template <typename T, int N>
+WP_FN T& local_at(local_array_t<T, N>& a, i64 i) {
+  return a.data[(u64)i < (u64)N ? i : 0];
 }
 
 // ------------------------------------------------------------------------------------------

@@ -12,19 +12,40 @@
 // plans on the CPU by compiling this file with g++ under a block emulator
 // (warp-cuda/cuda/tests/wp_prim_emu.h), which finds entries by name through
 // `WP_PRIM_REGISTER`. For the same reason the kernels cooperate only through what the
-// emulator models: `__syncthreads`, shared memory, `atomicAdd` (WP_PRIM_ATOMIC_ADD), and in
-// the sort the warp intrinsics `__ballot_sync`, `__match_any_sync`, `__shfl_sync`,
-// `__shfl_up_sync` (with `__popc`, `__clz`); the one kernel that waits for other blocks (the
-// sort's look-back) waits only for tiles handed out earlier by an atomic counter, which the
-// emulator (blocks in order) has already finished.
+// emulator models: `__syncthreads`, shared memory, `atomicAdd` (WP_PRIM_ATOMIC_ADD), and the
+// warp intrinsics `__ballot_sync`, `__match_any_sync`, `__shfl_sync`, `__shfl_up_sync`,
+// `__shfl_down_sync` (with `__popc`, `__clz`); the kernels that wait for other blocks (the
+// look-backs of the sort and of the single-pass scan) wait only for tiles handed out earlier
+// by an atomic counter, which the emulator (blocks in order) has already finished. Memory
+// ordering between blocks is the one thing the emulator cannot check: where a look-back reads
+// a value published apart from its flag, a fence (WP_PRIM_FENCE, `__threadfence` on a GPU,
+// nothing in the emulator) orders the two on both sides.
 //
 // Algorithms (learned from the literature, written for this project):
 //   * Block scan: each thread reduces WP_PRIM_ITEMS consecutive elements serially, the block
-//     scans the per-thread totals (Hillis-Steele in shared memory, double buffered), and each
-//     thread rescans its elements from its offset.
-//   * Device scan and reduction: three phases without inter-block waiting: (1) every block
+//     scans the per-thread totals (warp shuffles, the warps' totals in shared memory, one
+//     barrier: `block_scan_warps`; Hillis-Steele in shared memory, double buffered, in the
+//     one-block spine, which scans tile after tile), and each thread rescans its elements
+//     from its offset.
+//   * Block total (reductions, and the tile totals of the three-phase scan and compaction):
+//     each thread's elements reduced serially (two accumulators), then a shuffle tree in each
+//     warp and one barrier: thread 0 combines the warps' totals in warp order.
+//   * Device scan, three phases without inter-block waiting (the default): (1) every block
 //     writes its tile's total, (2) one block scans the totals in tiles with a carry (the
-//     "spine"), (3) every block rescans its tile from its offset. A reduction stops after (2).
+//     "spine"), (3) every block rescans its tile from its offset. The input is read twice.
+//     A reduction stops after (2), its blocks totalling several tiles each.
+//   * Device scan, single pass (decoupled look-back, `k_scan_onepass`; chosen by the plan):
+//     after an init step that zeroes the per-tile status and the tile counter, a block takes
+//     the next tile from the counter, loads and scans it, publishes its aggregate, and its
+//     first warp looks back over a window of WARP_LANES earlier tiles at a time (the nearest
+//     tile that has published its inclusive prefix ends the walk; the others' aggregates are
+//     added), publishes its inclusive prefix and writes the tile. The input is read once.
+//     Integer results equal the three-phase scan's. Float sums are added in another order:
+//     a tile's prefix is the nearest published inclusive prefix plus the aggregates of the
+//     tiles after it (a shuffle tree within each window), where the three-phase scan adds
+//     the tile totals by the spine's block scan; which tile ends a walk depends on timing,
+//     so float results may differ between runs (each within the bound of any summation
+//     order, |error| <= 2 k eps sum |x| for the k-th prefix).
 //   * Compaction: the scan of the flags (nonzero = keep) gives each kept element its output
 //     position; the spine's total is the count.
 //   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
@@ -65,6 +86,9 @@
 #define WP_PRIM_ATOMIC_ADD(p, v) atomicAdd((p), (v))
 // A look-back waits for a block that has started and will publish: keep polling.
 #define WP_PRIM_LOOKBACK_WAIT() ((void)0)
+// Orders a block's global writes (and reads) before and after it as every other block sees
+// them: between a look-back value and its flag.
+#define WP_PRIM_FENCE() __threadfence()
 #define WP_PRIM_UNROLL _Pragma("unroll")
 #elif !defined(WP_PRIM_EMULATOR)
 #error "wp_primitives.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
@@ -92,6 +116,12 @@ constexpr i64 TILE = (i64)THREADS * ITEMS;
 static_assert(THREADS >= 16 && (THREADS < 32 ? (THREADS & (THREADS - 1)) == 0 : THREADS % 32 == 0),
               "the block size is 16 threads, or a multiple of 32");
 static_assert(ITEMS >= 1, "at least one element per thread");
+
+/// Lanes of a warp of the block (a block below 32 threads is one partial warp), the warps,
+/// and the mask of a warp's lanes.
+constexpr i32 WARP_LANES = THREADS < 32 ? THREADS : 32;
+constexpr i32 WARPS = THREADS / WARP_LANES;
+constexpr u32 WARP_MASK = THREADS < 32 ? (1u << THREADS) - 1u : 0xffffffffu;
 
 /// The one kernel parameter: device addresses and integers, in an order each kernel states.
 struct args_t {
@@ -212,35 +242,125 @@ WP_PRIM_FN T block_exclusive_scan(T v, T* sh, T* total) {
   return excl;
 }
 
+/// The block's total of one value per thread, in thread 0 (other threads get their warp's
+/// partial result, which they must not use): a shuffle tree in each warp (lane 0 gets the
+/// warp's total), the warps' totals in `warp_totals` (WARPS values in shared memory), one
+/// barrier, and thread 0 combines them in warp order. Every thread of the block must call it;
+/// `warp_totals` must not be written again before the caller's next barrier.
+template <typename T, typename Op>
+WP_PRIM_FN T block_reduce(T v, T* warp_totals) {
+  const i32 lane = WP_PRIM_TID % WARP_LANES;
+  T x = v;
+  // Lane l combines lane l + off's value (a lane past the warp's end gets its own back: those
+  // lanes' results are garbage, but lane 0 reads only lanes that are in range at every step).
+  WP_PRIM_UNROLL
+  for (i32 off = WARP_LANES / 2; off > 0; off >>= 1) {
+    x = Op::apply(x, __shfl_down_sync(WARP_MASK, x, off));
+  }
+  if (lane == 0) warp_totals[WP_PRIM_TID / WARP_LANES] = x;
+  WP_PRIM_SYNC();
+  if (WP_PRIM_TID == 0) {
+    for (i32 w = 1; w < WARPS; ++w) x = Op::apply(x, warp_totals[w]);
+  }
+  return x;
+}
+
+/// Exclusive scan of one value per thread across the block, by warp shuffles and one
+/// barrier: each warp scans its lanes (`__shfl_up_sync`), the last lane of each warp leaves
+/// the warp's total in `warp_totals` (WARPS values in shared memory), and each thread
+/// combines the totals of the warps before its own. Sets `*total` to the block's total in
+/// thread 0 (only). Every thread of the block must call it; `warp_totals` must not be written
+/// again before the caller's next barrier.
+template <typename T, typename Op>
+WP_PRIM_FN T block_scan_warps(T v, T* warp_totals, T* total) {
+  const i32 lane = WP_PRIM_TID % WARP_LANES;
+  const i32 w = WP_PRIM_TID / WARP_LANES;
+  T x = v;
+  WP_PRIM_UNROLL
+  for (i32 off = 1; off < WARP_LANES; off <<= 1) {
+    const T y = __shfl_up_sync(WARP_MASK, x, off);
+    if (lane >= off) x = Op::apply(y, x);
+  }
+  // The lane below's inclusive result is this lane's exclusive one (no inverse needed: min
+  // and max have none).
+  T excl = __shfl_up_sync(WARP_MASK, x, 1);
+  if (lane == 0) excl = Op::identity();
+  if (lane == WARP_LANES - 1) warp_totals[w] = x;
+  WP_PRIM_SYNC();
+  T before = Op::identity();
+  for (i32 i = 0; i < w; ++i) before = Op::apply(before, warp_totals[i]);
+  if (WP_PRIM_TID == 0) {
+    T all = before;
+    for (i32 i = 0; i < WARPS; ++i) all = Op::apply(all, warp_totals[i]);
+    *total = all;
+  }
+  return Op::apply(before, excl);
+}
+
+/// Elements of T per 16-byte vector load, and whether a thread's ITEMS elements of a tile are
+/// whole vectors (then a full tile of a 16-byte aligned array is read by vector loads).
+template <typename T>
+struct vec_load {
+  static constexpr i32 V = sizeof(T) <= 16 && 16 % sizeof(T) == 0 ? (i32)(16 / sizeof(T)) : 1;
+  static constexpr bool OK = V > 1 && ITEMS % V == 0;
+  struct alignas(16) vec_t {
+    T v[V];
+  };
+};
+
 /// Phase 1: the total of block b's tile of `load(i)` for i < n (the identity for a tile past
 /// n), written to `partials[b]`. Loads are striped (element k * THREADS + t of the tile for
 /// thread t): consecutive threads read consecutive elements, so every load is coalesced.
 /// With `per` > 1, block b totals the `per` tiles from b * per (a reduction needs no
-/// per-tile totals, and fewer, fuller blocks spend less on the block scan).
+/// per-tile totals, and fewer, fuller blocks spend less on the block total). `aligned`, when
+/// not null, is the array `load` reads, 16-byte aligned: its full tiles are then read by
+/// 16-byte vector loads (vector k * THREADS + t of the tile for thread t: still coalesced,
+/// a quarter of the load instructions for 4-byte T), where `vec_load<T>::OK`.
 template <typename T, typename Op, typename Load>
-WP_PRIM_FN void tile_total(Load load, i64 n, T* partials, i64 per = 1) {
-  WP_PRIM_SHARED T sh[2 * THREADS];
+WP_PRIM_FN void tile_total(Load load, i64 n, T* partials, i64 per = 1,
+                           const T* aligned = nullptr) {
+  WP_PRIM_SHARED T warp_totals[WARPS];
   const i64 b = WP_PRIM_BID;
+  const i32 t = WP_PRIM_TID;
   T acc = Op::identity();
   for (i64 j = 0; j < per; ++j) {
-    const i64 base = (b * per + j) * TILE + (i64)WP_PRIM_TID;
-    if (base - WP_PRIM_TID >= n) break;
+    const i64 tb = (b * per + j) * TILE;
+    if (tb >= n) break;
     // Two accumulators: half the dependent chain (their order is fixed: deterministic).
     T acc0 = Op::identity(), acc1 = Op::identity();
-    for (i32 k = 0; k + 1 < ITEMS; k += 2) {
-      const i64 i = base + (i64)k * THREADS;
-      if (i < n) acc0 = Op::apply(acc0, load(i));
-      if (i + THREADS < n) acc1 = Op::apply(acc1, load(i + THREADS));
+    bool done = false;
+    if constexpr (vec_load<T>::OK) {
+      if (aligned != nullptr && tb + TILE <= n) {
+        typedef typename vec_load<T>::vec_t vec_t;
+        const vec_t* tv = reinterpret_cast<const vec_t*>(aligned + tb);
+        WP_PRIM_UNROLL
+        for (i32 k = 0; k < ITEMS / vec_load<T>::V; ++k) {
+          const vec_t x = tv[(i64)k * THREADS + t];
+          WP_PRIM_UNROLL
+          for (i32 e = 0; e + 1 < vec_load<T>::V; e += 2) {
+            acc0 = Op::apply(acc0, x.v[e]);
+            acc1 = Op::apply(acc1, x.v[e + 1]);
+          }
+        }
+        done = true;
+      }
     }
-    if (ITEMS % 2 == 1) {
-      const i64 i = base + (i64)(ITEMS - 1) * THREADS;
-      if (i < n) acc0 = Op::apply(acc0, load(i));
+    if (!done) {
+      const i64 base = tb + (i64)t;
+      for (i32 k = 0; k + 1 < ITEMS; k += 2) {
+        const i64 i = base + (i64)k * THREADS;
+        if (i < n) acc0 = Op::apply(acc0, load(i));
+        if (i + THREADS < n) acc1 = Op::apply(acc1, load(i + THREADS));
+      }
+      if (ITEMS % 2 == 1) {
+        const i64 i = base + (i64)(ITEMS - 1) * THREADS;
+        if (i < n) acc0 = Op::apply(acc0, load(i));
+      }
     }
     acc = Op::apply(acc, Op::apply(acc0, acc1));
   }
-  T total;
-  block_exclusive_scan<T, Op>(acc, sh, &total);
-  if (WP_PRIM_TID == 0) partials[b] = total;
+  const T total = block_reduce<T, Op>(acc, warp_totals);
+  if (t == 0) partials[b] = total;
 }
 
 /// Phase 2, one block: the exclusive scan of `partials[0..nb)` in place (when `write_prefix`)
@@ -276,16 +396,24 @@ WP_PRIM_FN void spine(T* partials, i64 nb, bool write_prefix, T* total_out) {
   if (total_out != nullptr && WP_PRIM_TID == 0) *total_out = carry;
 }
 
+/// A tile's element `i` in shared memory: a slot of padding after every 32 elements, so that
+/// a warp's accesses fall in distinct banks (4-byte T) both striped (lane l element
+/// k * THREADS + l) and per thread (lane l elements l * ITEMS + k, which unpadded would share
+/// 32 / ITEMS banks); TILE_SLOTS slots hold a tile.
+WP_PRIM_FN i64 slot(i64 i) { return i + (i >> 5); }
+constexpr i64 TILE_SLOTS = TILE + TILE / 32 + 1;
+
 /// Phase 3: block b rescans its tile from `prefixes[b]` (the exclusive scan of the tile
 /// totals) and hands `emit(i, value)` the inclusive or exclusive result of each i < n. The
 /// tile goes through shared memory so that global loads and `emit` calls are striped
-/// (coalesced) while each thread scans ITEMS consecutive elements. Every load of the tile
+/// (coalesced) while each thread scans ITEMS consecutive elements (`slot`: no bank
+/// conflicts). Every load of the tile
 /// happens before the first barrier and every `emit` after the last, so `emit` may overwrite
 /// the input.
 template <typename T, typename Op, typename Load, typename Emit>
 WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool inclusive) {
-  WP_PRIM_SHARED T sh[2 * THREADS];
-  WP_PRIM_SHARED T stile[TILE];
+  WP_PRIM_SHARED T warp_totals[WARPS];
+  WP_PRIM_SHARED T stile[TILE_SLOTS];
   const i64 b = WP_PRIM_BID;
   if (b * TILE >= n) return;  // the whole block leaves: no barrier is skipped by some only
   const i32 t = WP_PRIM_TID;
@@ -293,34 +421,34 @@ WP_PRIM_FN void tile_scan(Load load, Emit emit, i64 n, const T* prefixes, bool i
   const i64 tn = n - tb < TILE ? n - tb : TILE;
   for (i32 k = 0; k < ITEMS; ++k) {
     const i64 li = t + (i64)k * THREADS;
-    if (li < tn) stile[li] = load(tb + li);
+    if (li < tn) stile[slot(li)] = load(tb + li);
   }
   WP_PRIM_SYNC();
   const i64 mine = (i64)t * ITEMS;
   T vals[ITEMS];
   T acc = Op::identity();
   for (i32 k = 0; k < ITEMS; ++k) {
-    vals[k] = mine + k < tn ? stile[mine + k] : Op::identity();
+    vals[k] = mine + k < tn ? stile[slot(mine + k)] : Op::identity();
     acc = Op::apply(acc, vals[k]);
   }
-  T total;
-  const T excl = block_exclusive_scan<T, Op>(acc, sh, &total);
+  T total = Op::identity();  // (the tile's total: not needed)
+  const T excl = block_scan_warps<T, Op>(acc, warp_totals, &total);
   // Each thread rewrites only its own slots of `stile`, which only it has read.
   T run = Op::apply(prefixes[b], excl);
   for (i32 k = 0; k < ITEMS; ++k) {
     if (mine + k >= tn) break;
     if (inclusive) {
       run = Op::apply(run, vals[k]);
-      stile[mine + k] = run;
+      stile[slot(mine + k)] = run;
     } else {
-      stile[mine + k] = run;
+      stile[slot(mine + k)] = run;
       run = Op::apply(run, vals[k]);
     }
   }
   WP_PRIM_SYNC();
   for (i32 k = 0; k < ITEMS; ++k) {
     const i64 li = t + (i64)k * THREADS;
-    if (li < tn) emit(tb + li, stile[li]);
+    if (li < tn) emit(tb + li, stile[slot(li)]);
   }
 }
 
@@ -354,7 +482,9 @@ WP_PRIM_FN void k_tile_total(const args_t& a) {
   const i64 n = resolve_count(ptr<const i32>(a, 1), int_arg(a, 2), ptr<fault_t>(a, 4),
                               ptr<u32>(a, 5), int_arg(a, 6), int_arg(a, 7) != 0);
   const i64 per = int_arg(a, 8) > 1 ? int_arg(a, 8) : 1;
-  tile_total<T, Op>(load_array<T>{ptr<const T>(a, 0)}, n, ptr<T>(a, 3), per);
+  const T* in = ptr<const T>(a, 0);
+  tile_total<T, Op>(load_array<T>{in}, n, ptr<T>(a, 3), per,
+                    ((u64)in & 15u) == 0 ? in : nullptr);
 }
 
 /// args: 0 partials (T*), 1 number of partials, 2 write the exclusive prefixes (0/1),
@@ -371,6 +501,214 @@ WP_PRIM_FN void k_scan_down(const args_t& a) {
   const i64 n = resolve_count(ptr<const i32>(a, 2), int_arg(a, 3), nullptr, nullptr, 0, false);
   tile_scan<T, op_sum<T>>(load_array<T>{ptr<const T>(a, 0)}, store_array<T>{ptr<T>(a, 1)}, n,
                           ptr<const T>(a, 4), int_arg(a, 5) != 0);
+}
+
+// ------------------------------------------------------------------------------------------
+// Single-pass scan (decoupled look-back)
+// ------------------------------------------------------------------------------------------
+
+/// A 64-bit word another block may be writing: read once, never cached in a register.
+WP_PRIM_FN u64 load_status(const u64* p) { return *(const volatile u64*)p; }
+WP_PRIM_FN void store_status(u64* p, u64 v) { *(volatile u64*)p = v; }
+
+/// A tile's look-back status: 0 nothing published yet, SCAN_AGGREGATE its own total,
+/// SCAN_INCLUSIVE the total of it and every tile before it.
+constexpr u32 SCAN_AGGREGATE = 1;
+constexpr u32 SCAN_INCLUSIVE = 2;
+
+/// Host tests only: a tile publishes its inclusive prefix only when its index is a multiple
+/// of this (tile 0 always), so that look-backs, which in the emulator always find the tile
+/// before inclusive, walk back over aggregates and across windows as they may on a GPU.
+#ifndef WP_PRIM_SCAN_INCLUSIVE_EVERY
+#define WP_PRIM_SCAN_INCLUSIVE_EVERY 1
+#endif
+
+/// The per-tile status of a single-pass scan of T. A 4-byte T is packed with its flag in one
+/// 64-bit word, `(flag << 32) | bits`, written and read at once (as the sort's). A wider T
+/// has its flag alone in the word (u64 words for both layouts: one init step zeroes them) and
+/// its value in `values`: the aggregate at [tile], the inclusive prefix at [tiles + tile] (two
+/// slots, so that a reader that saw the aggregate flag never reads an inclusive value written
+/// since); the writer fences between the value and the flag, the reader between the flag and
+/// the value.
+template <typename T>
+struct scan_status {
+  u64* words;
+  T* values;  // (wide T only)
+  i64 tiles;
+
+  static constexpr bool PACKED = sizeof(T) == 4;
+
+  static WP_PRIM_FN u32 to_bits(T v) {
+    if constexpr (num<T>::is_int) {
+      return (u32)v;
+    } else {
+      return f32_to_bits((f32)v);
+    }
+  }
+  static WP_PRIM_FN T from_bits(u32 b) {
+    if constexpr (num<T>::is_int) {
+      return (T)b;
+    } else {
+      return (T)f32_from_bits(b);
+    }
+  }
+
+  WP_PRIM_FN void publish(i64 tile, u32 flag, T v) const {
+    if constexpr (PACKED) {
+      store_status(words + tile, ((u64)flag << 32) | to_bits(v));
+    } else {
+      *(volatile T*)(values + (flag == SCAN_INCLUSIVE ? tiles : 0) + tile) = v;
+      WP_PRIM_FENCE();
+      store_status(words + tile, (u64)flag);
+    }
+  }
+
+  /// Waits until tile `k` (handed out before the caller's: its block has started) has
+  /// published, and returns its flag and value.
+  WP_PRIM_FN u32 wait(i64 k, T* v) const {
+    u64 s = load_status(words + k);
+    while (s == 0) {
+      WP_PRIM_LOOKBACK_WAIT();
+      s = load_status(words + k);
+    }
+    if constexpr (PACKED) {
+      *v = from_bits((u32)s);
+      return (u32)(s >> 32);
+    } else {
+      WP_PRIM_FENCE();
+      const u32 flag = (u32)s;
+      *v = *(const volatile T*)(values + (flag == SCAN_INCLUSIVE ? tiles : 0) + k);
+      return flag;
+    }
+  }
+};
+
+/// The exclusive prefix of tile `tile` (> 0): called by every lane of the block's first warp
+/// (the same result in each). The lanes read a window of WARP_LANES tiles before it at once,
+/// lane l tile `end - 1 - l` (tiles before 0 count as the identity, inclusive); the nearest
+/// tile of the window that has published its inclusive prefix ends the walk, and the values
+/// of the tiles from there to the window's nearest are combined by a shuffle tree (earlier
+/// tiles on the left); else the whole window's aggregates are, and the walk goes on with the
+/// window before.
+template <typename T, typename Op>
+WP_PRIM_FN T scan_lookback(const scan_status<T>& st, i64 tile) {
+  const i32 lane = WP_PRIM_TID;
+  T excl = Op::identity();
+  for (i64 end = tile;; end -= WARP_LANES) {
+    const i64 k = end - 1 - lane;
+    T v = Op::identity();
+    const u32 flag = k >= 0 ? st.wait(k, &v) : SCAN_INCLUSIVE;
+    const u32 incl = __ballot_sync(WARP_MASK, flag == SCAN_INCLUSIVE);
+    // The lanes up to the lowest inclusive one (all when there is none).
+    const u32 upto = incl == 0 ? WARP_MASK : ((incl & (0u - incl)) << 1) - 1u;
+    T x = ((upto >> lane) & 1u) ? v : Op::identity();
+    WP_PRIM_UNROLL
+    for (i32 off = WARP_LANES / 2; off > 0; off >>= 1) {
+      x = Op::apply(__shfl_down_sync(WARP_MASK, x, off), x);
+    }
+    x = __shfl_sync(WARP_MASK, x, 0);
+    excl = Op::apply(x, excl);
+    if (incl != 0) return excl;
+  }
+}
+
+/// args: 0 count (const i32* or 0), 1 capacity, 2 status words (u64*, `tiles`), 3 number of
+/// tiles, 4 tile counter (u32*), 5 fault, 6 fault flag, 7 count's argument index, 8 report.
+/// Zeroes the status words (block b the words b * TILE ..) and, in block 0, the counter; and
+/// reports a bad device count.
+WP_PRIM_FN void k_scan_init(const args_t& a) {
+  resolve_count(ptr<const i32>(a, 0), int_arg(a, 1), ptr<fault_t>(a, 5), ptr<u32>(a, 6),
+                int_arg(a, 7), int_arg(a, 8) != 0);
+  u64* words = ptr<u64>(a, 2);
+  const i64 tiles = int_arg(a, 3);
+  const i64 base = WP_PRIM_BID * TILE + (i64)WP_PRIM_TID;
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 i = base + (i64)k * THREADS;
+    if (i < tiles) words[i] = 0;
+  }
+  if (WP_PRIM_BID == 0 && WP_PRIM_TID == 0) *ptr<u32>(a, 4) = 0;
+}
+
+/// Single-pass scan. args: 0 in (const T*), 1 out (T*, may be `in`), 2 count, 3 capacity,
+/// 4 inclusive (0/1), 5 status words (u64*, `tiles`, zeroed), 6 values (T*, 2 * `tiles`; wide
+/// T only, else 0), 7 tile counter (u32*, zeroed), 8 number of tiles.
+///
+/// A block takes the next tile from the counter (so every tile before it belongs to a block
+/// that has started: waiting for them cannot deadlock), loads it striped through shared
+/// memory (coalesced), scans it (each thread its ITEMS consecutive elements, then
+/// `block_scan_warps`), publishes its aggregate (tile 0: its inclusive prefix), looks back
+/// with its first warp (`scan_lookback`), publishes its inclusive prefix, and writes its
+/// results striped. Every load of the tile happens before the first barrier and every store
+/// after the last, so `out` may be `in`.
+template <typename T, typename Op>
+WP_PRIM_FN void k_scan_onepass(const args_t& a) {
+  WP_PRIM_SHARED T stile[TILE_SLOTS];
+  WP_PRIM_SHARED T warp_totals[WARPS];
+  WP_PRIM_SHARED T prefix_sh;
+  WP_PRIM_SHARED i64 tile_sh;
+  const i64 n = resolve_count(ptr<const i32>(a, 2), int_arg(a, 3), nullptr, nullptr, 0, false);
+  const T* in = ptr<const T>(a, 0);
+  T* out = ptr<T>(a, 1);
+  const bool inclusive = int_arg(a, 4) != 0;
+  const scan_status<T> st{ptr<u64>(a, 5), ptr<T>(a, 6), int_arg(a, 8)};
+  const i32 t = WP_PRIM_TID;
+  if (t == 0) tile_sh = (i64)WP_PRIM_ATOMIC_ADD(ptr<u32>(a, 7), 1u);
+  WP_PRIM_SYNC();
+  const i64 tile = tile_sh;
+  const i64 tb = tile * TILE;
+  if (tb >= n) return;  // the whole block: tiles past n are nobody's predecessors
+  const i64 tn = n - tb < TILE ? n - tb : TILE;
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) stile[slot(li)] = in[tb + li];
+  }
+  WP_PRIM_SYNC();
+  const i64 mine = (i64)t * ITEMS;
+  T vals[ITEMS];
+  T acc = Op::identity();
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    vals[k] = mine + k < tn ? stile[slot(mine + k)] : Op::identity();
+    acc = Op::apply(acc, vals[k]);
+  }
+  T total = Op::identity();  // (set in thread 0, which alone publishes it)
+  const T excl = block_scan_warps<T, Op>(acc, warp_totals, &total);
+  // Published as early as possible: later tiles wait for it.
+  if (t == 0) {
+    st.publish(tile, tile == 0 ? SCAN_INCLUSIVE : SCAN_AGGREGATE, total);
+    if (tile == 0) prefix_sh = Op::identity();
+  }
+  if (tile > 0 && t < WARP_LANES) {
+    const T prefix = scan_lookback<T, Op>(st, tile);
+    if (t == 0) {
+      if (tile % WP_PRIM_SCAN_INCLUSIVE_EVERY == 0) {
+        st.publish(tile, SCAN_INCLUSIVE, Op::apply(prefix, total));
+      }
+      prefix_sh = prefix;
+    }
+  }
+  WP_PRIM_SYNC();
+  // Each thread rewrites only its own slots of `stile`, which only it has read.
+  T run = Op::apply(prefix_sh, excl);
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    if (mine + k < tn) {
+      if (inclusive) {
+        run = Op::apply(run, vals[k]);
+        stile[slot(mine + k)] = run;
+      } else {
+        stile[slot(mine + k)] = run;
+        run = Op::apply(run, vals[k]);
+      }
+    }
+  }
+  WP_PRIM_SYNC();
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) out[tb + li] = stile[slot(li)];
+  }
 }
 
 // ------------------------------------------------------------------------------------------
@@ -448,10 +786,6 @@ constexpr u64 STATUS_AGGREGATE = 1ull << 32;
 constexpr u64 STATUS_INCLUSIVE = 2ull << 32;
 
 static_assert(TILE <= 65536, "a sort tile's local indices (and ranks) fit in 16 bits");
-
-/// A 64-bit word another block may be writing: read once, never cached in a register.
-WP_PRIM_FN u64 load_status(const u64* p) { return *(const volatile u64*)p; }
-WP_PRIM_FN void store_status(u64* p, u64 v) { *(volatile u64*)p = v; }
 
 /// Decoupled look-back for digit `d` of tile `tile`: the counts of the tiles before it, added
 /// from the nearest back until one has published its inclusive count (waiting for a tile
@@ -535,11 +869,6 @@ WP_PRIM_FN void nibble_pass(const u32* kr, const u16* ir, i64 tn, i32 shift, u32
 #else
 // ---- Variants 1 and 2: warp-level ranking of the 8-bit digit ----
 
-/// Lanes of a warp of the block (a block below 32 threads is one partial warp), the warps,
-/// and the mask of a warp's lanes.
-constexpr i32 WARP_LANES = THREADS < 32 ? THREADS : 32;
-constexpr i32 WARPS = THREADS / WARP_LANES;
-constexpr u32 WARP_MASK = THREADS < 32 ? (1u << THREADS) - 1u : 0xffffffffu;
 /// Digits of the pass per thread in the per-digit steps (threads past SORT_RADIX have none).
 constexpr i32 DIGITS_PER_THREAD = (SORT_RADIX + THREADS - 1) / THREADS;
 
@@ -563,27 +892,6 @@ WP_PRIM_UNROLL
 #endif
 }
 
-/// Exclusive sum across the block of one value per thread: each warp scans its lanes with
-/// shuffles, the last lane of each warp leaves the warp's total in `warp_totals` (WARPS
-/// values in shared memory), and each thread adds the totals of the warps before its own.
-/// Every thread of the block must call it; it synchronises once (before the totals are
-/// read), so `warp_totals` must not be written again before the caller's next barrier.
-template <typename T>
-WP_PRIM_FN T block_exclusive_sum(T v, T* warp_totals) {
-  const i32 lane = WP_PRIM_TID % WARP_LANES;
-  const i32 w = WP_PRIM_TID / WARP_LANES;
-  T x = v;
-WP_PRIM_UNROLL
-  for (i32 off = 1; off < WARP_LANES; off <<= 1) {
-    const T y = __shfl_up_sync(WARP_MASK, x, off);
-    if (lane >= off) x += y;
-  }
-  if (lane == WARP_LANES - 1) warp_totals[w] = x;
-  WP_PRIM_SYNC();
-  T before = 0;
-  for (i32 i = 0; i < w; ++i) before += warp_totals[i];
-  return before + x - v;
-}
 #endif
 
 /// args: 0 count, 1 capacity, 2 hist (u32*, SORT_MAX_PASSES * SORT_RADIX), 3 tile counters
@@ -902,7 +1210,8 @@ WP_PRIM_FN void k_sort_onesweep(const args_t& a) {
     cnt[j] = c;
     sum += hi[j] + c;
   }
-  u64 run = block_exclusive_sum<u64>(sum, warp_totals);
+  u64 tile_all = 0;  // (the tile's total: not needed)
+  u64 run = block_scan_warps<u64, op_sum<u64>>(sum, warp_totals, &tile_all);
   u32 dstart[DIGITS_PER_THREAD];
   WP_PRIM_UNROLL
   for (i32 j = 0; j < DIGITS_PER_THREAD; ++j) {
@@ -999,7 +1308,8 @@ WP_PRIM_FN void k_copy_pairs(const args_t& a) {
   WP_PRIM_REGISTER(name)
 
 /// Scan and reductions of T: `wp_prim_total_{sum,min,max}_T`, `wp_prim_spine_{sum,min,max}_T`,
-/// `wp_prim_scan_down_T`.
+/// `wp_prim_scan_down_T` (the three-phase scan), `wp_prim_scan_init` and
+/// `wp_prim_scan_onepass_T` (the single-pass scan).
 #define WP_PRIM_SCAN_MODULE(T)                                                       \
   WP_PRIM_DEFINE(wp_prim_total_sum_##T, (wp::prim::k_tile_total<wp::T, wp::prim::op_sum<wp::T>>)) \
   WP_PRIM_DEFINE(wp_prim_total_min_##T, (wp::prim::k_tile_total<wp::T, wp::prim::op_min<wp::T>>)) \
@@ -1007,7 +1317,9 @@ WP_PRIM_FN void k_copy_pairs(const args_t& a) {
   WP_PRIM_DEFINE(wp_prim_spine_sum_##T, (wp::prim::k_spine<wp::T, wp::prim::op_sum<wp::T>>))      \
   WP_PRIM_DEFINE(wp_prim_spine_min_##T, (wp::prim::k_spine<wp::T, wp::prim::op_min<wp::T>>))      \
   WP_PRIM_DEFINE(wp_prim_spine_max_##T, (wp::prim::k_spine<wp::T, wp::prim::op_max<wp::T>>))      \
-  WP_PRIM_DEFINE(wp_prim_scan_down_##T, (wp::prim::k_scan_down<wp::T>))
+  WP_PRIM_DEFINE(wp_prim_scan_down_##T, (wp::prim::k_scan_down<wp::T>))                \
+  WP_PRIM_DEFINE(wp_prim_scan_init, wp::prim::k_scan_init)                              \
+  WP_PRIM_DEFINE(wp_prim_scan_onepass_##T, (wp::prim::k_scan_onepass<wp::T, wp::prim::op_sum<wp::T>>))
 
 /// Radix sort with keys K (u32, i32 or f32): `wp_prim_sort_upsweep_K`,
 /// `wp_prim_sort_onesweep_K`, plus what every sort needs: `wp_prim_sort_init` and

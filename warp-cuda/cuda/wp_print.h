@@ -8,7 +8,8 @@
 //     two agree on short values (`1`, `-2.5`, `0.1`, `inf`, `-0`) but not on others:
 //     1/3 prints `0.333333` (Rust `0.33333334`), 1e7 prints `1e+07` (Rust `10000000`).
 //   * vectors and quaternions: `[x, y, z]`; matrices: `[[col0], [col1], ...]` (glam's Display);
-//     transforms: `{p: [x, y, z], q: [x, y, z, w]}` (warp-core's Display).
+//     transforms: `{p: [x, y, z], q: [x, y, z, w]}` (warp-core's Display); spatial vectors
+//     `[a, .., f]`, spatial matrices `[[row0], .., [row5]]`.
 // Device printf output of different threads may interleave between print_value calls.
 #pragma once
 #include "wp_core.h"
@@ -93,5 +94,20 @@ WP_PRINT_MAT(DMat4)
 WP_PRINT_XFORM(Transform)
 WP_PRINT_XFORM(DTransform)
 #undef WP_PRINT_XFORM
+/// Spatial vectors: `[a, b, c, d, e, f]`; spatial matrices: `[[row0], .., [row5]]`
+/// (warp-core's Display).
+#define WP_PRINT_SPATIAL(SV, SM)                                        \
+  WP_FN void print_value(const SV& v) { detail::print_components(v); } \
+  WP_FN void print_value(const SM& m) {                                 \
+    printf("[");                                                        \
+    for (int i = 0; i < 6; ++i) {                                       \
+      if (i > 0) printf(", ");                                          \
+      detail::print_components(SM##_row(m, i));                         \
+    }                                                                   \
+    printf("]");                                                        \
+  }
+WP_PRINT_SPATIAL(SpatialVector, SpatialMatrix)
+WP_PRINT_SPATIAL(DSpatialVector, DSpatialMatrix)
+#undef WP_PRINT_SPATIAL
 
 }  // namespace wp

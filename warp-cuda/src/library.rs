@@ -188,6 +188,7 @@ pub static SECTIONS: &[Section] = &[
     kernel!("linalg",    Some(header!("wp_adjoint_linalg.h")),    No),
     kernel!("svd",       Some(header!("wp_adjoint_svd.h")),       No),
     kernel!("transform", Some(header!("wp_adjoint_transform.h")), No),
+    kernel!("spatial",   Some(header!("wp_adjoint_spatial.h")),   No),
     kernel!("misc",      Some(header!("wp_adjoint_misc.h")),      No),
     kernel!("atomic",    None,                                    No),
     kernel!("rand",      Some(header!("wp_adjoint_rand.h")),      No),

@@ -7,7 +7,12 @@ use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote, quote_spanned};
 use syn::spanned::Spanned;
 
+mod checks;
+mod derive;
 mod tiled;
+
+use checks::{call_checks, local_array_checks};
+pub use derive::derive_struct;
 
 fn errors_to_tokens(errors: Vec<syn::Error>) -> TokenStream {
     errors.into_iter().map(|e| e.to_compile_error()).collect()
@@ -270,7 +275,14 @@ fn kernel_impl(
         .map(|_| crate::back::rust_tile::BlockPrinter::new(f));
     let tile_info = tiled::info(f, block.as_ref());
     let shape_checks = tiled::shape_checks(f);
+    // A tangent kernel's arrays are the primal's and their tangents (the same types): the
+    // primal's checks are enough, and one error each.
+    let array_checks = match hidden {
+        false => local_array_checks(f, &wp),
+        true => quote!({}),
+    };
     let callee_checks = callee_depths(&f.callees);
+    let call_checks = call_checks(f);
     let (cuda_src, cuda_sections, _) = cuda_template(f);
     let callees = &f.callees;
     let consts = const_literals(f);
@@ -394,6 +406,8 @@ fn kernel_impl(
                 use #wp as __wp;
                 #callee_checks
                 #shape_checks
+                #call_checks
+                const _: () = #array_checks;
                 #hide
                 impl __wp::Kernel for #name {
                     #params
@@ -600,8 +614,11 @@ fn const_literals(f: &crate::ir::Function) -> TokenStream {
     quote!(&[#(#fns),*])
 }
 
-/// The user struct types a function's parameters name (`S` and `Array<S, N>`), as written.
+/// The user struct types a function names, as written: its parameters' (`S` and
+/// `Array<S, N>`), its result's and its struct literals' (`S { .. }`), whose C++ definitions
+/// its translation unit needs.
 fn struct_types(f: &crate::ir::Function) -> Vec<syn::Type> {
+    use crate::ir::{Ctor, Op, StmtKind};
     use crate::types::Ty;
     let mut out = Vec::new();
     for p in &f.params {
@@ -614,6 +631,28 @@ fn struct_types(f: &crate::ir::Function) -> Vec<syn::Type> {
             out.push(t);
         }
     }
+    if let (Ty::Struct(_), Some(t)) = (&f.ret, &f.ret_syn) {
+        out.push(t.clone());
+    }
+    crate::ir::walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op:
+                Op::Construct {
+                    ctor: Ctor::Fields { path, .. },
+                    ..
+                },
+            ..
+        } = &s.kind
+        {
+            let t = syn::Type::Path(syn::TypePath {
+                qself: None,
+                path: path.clone(),
+            });
+            if !out.contains(&t) {
+                out.push(t);
+            }
+        }
+    });
     out
 }
 
@@ -691,6 +730,8 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                 }
 
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                const _: () = #name::__WP_LOCAL_ARRAYS;
+                const _: () = #name::__WP_CALLS;
                 #tile_map_impl
             },
             Err(e) => failed(e),
@@ -722,6 +763,8 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     }
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                    const _: () = #name::<#(#tys),*>::__WP_LOCAL_ARRAYS;
+                    const _: () = #name::<#(#tys),*>::__WP_CALLS;
                 });
                 impls.extend(tile_map_impl(&inst.item, quote!(#name<#(#tys),*>)));
                 per_instance.push((display, Vec::new()));
@@ -801,6 +844,17 @@ fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
     }
 }
 
+/// The type a func's parameter has in its CPU code: what a kernel thread sees of a kernel
+/// parameter of that type (`KernelArg::CpuView`), or a local array or a tuple itself (values
+/// that only funcs take). A `&mut` parameter is its value (see `ir::Function::ret`).
+fn func_param_ty(p: &crate::ir::Param, wp: &TokenStream) -> TokenStream {
+    let t = &p.syn_ty;
+    match p.ty {
+        crate::types::Ty::LocalArray(..) | crate::types::Ty::Tuple(_) => quote!(#t),
+        _ => quote!(<#t as #wp::KernelArg>::CpuView),
+    }
+}
+
 /// The inherent items of one func or one instance of a generic func (its CPU code, replay,
 /// adjoint, and what the CUDA assembler needs); `display` names a generic instance.
 fn func_instance(
@@ -813,6 +867,15 @@ fn func_instance(
     if let Some(d) = display {
         f.name = d;
     }
+    if let (Some((id, _)), Some(p)) = (fattrs.grad.first(), f.params.iter().find(|p| p.by_ref)) {
+        return Err(vec![syn::Error::new(
+            id.span(),
+            format!(
+                "custom gradients (`#[func(grad(..))]`) are not supported on funcs with `&mut` parameters (`{}`) yet",
+                p.name
+            ),
+        )]);
+    }
     let valid = crate::valid::validate(&f, crate::valid::Options::Func { grad: &fattrs.grad })?;
     let vis = &item.vis;
     let name = &item.sig.ident;
@@ -824,8 +887,8 @@ fn func_instance(
         } else {
             quote!()
         };
-        let t = &p.syn_ty;
-        quote!(#m #v: <#t as #wp::KernelArg>::CpuView)
+        let t = func_param_ty(p, &wp);
+        quote!(#m #v: #t)
     });
     let ret = match &f.ret_syn {
         Some(t) => quote!(#t),
@@ -894,8 +957,8 @@ fn func_instance(
         .iter()
         .map(|p| {
             let v = em.var(p.var);
-            let t = &p.syn_ty;
-            quote!(mut #v: <#t as #wp::KernelArg>::CpuView)
+            let t = func_param_ty(p, &wp);
+            quote!(mut #v: #t)
         })
         .collect();
     let adj_params: Vec<TokenStream> = f
@@ -908,8 +971,8 @@ fn func_instance(
                 let a = format_ident!("adj_{}", em.var(p.var));
                 quote!(#a: <#t as #wp::KernelArg>::GradView)
             } else {
-                let o = format_ident!("__adj_out{}", k);
-                quote!(#o: &mut <#t as #wp::KernelArg>::CpuView)
+                let (o, t) = (format_ident!("__adj_out{}", k), func_param_ty(p, &wp));
+                quote!(#o: &mut #t)
             }
         })
         .collect();
@@ -950,9 +1013,30 @@ fn func_instance(
         #vis const __WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED: usize =
             1 + #wp_at_name::max_depth(&[#(#depths),*]);
     };
+    let array_checks = local_array_checks(&f, &wp);
+    let call_checks = call_checks(&f);
+    let mut_params = f
+        .params
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.by_ref)
+        .fold(0u64, |m, (k, _)| {
+            m | 1u64.checked_shl(k as u32).unwrap_or(0)
+        });
     Ok(quote! {
             #depth_const
             #func_info
+            /// Which parameters are `&mut` (bit `k`: parameter `k`), which callers' checks
+            /// compare with their `&mut` arguments.
+            #[doc(hidden)]
+            #vis const __WP_MUT_PARAMS: u64 = #mut_params;
+            /// The checks of this func's calls of funcs (read at module level, so that rustc
+            /// evaluates them).
+            #[doc(hidden)]
+            #vis const __WP_CALLS: () = { #call_checks };
+            /// The local arrays' size checks (read at module level, so that rustc evaluates them).
+            #[doc(hidden)]
+            #vis const __WP_LOCAL_ARRAYS: () = #array_checks;
 
             #[doc(hidden)]
             #[inline(always)]
@@ -992,211 +1076,4 @@ fn func_instance(
                 ::core::result::Result::Ok(())
             }
     })
-}
-
-/// `#[derive(Struct)]`.
-pub fn derive_struct(item: TokenStream) -> TokenStream {
-    let wp = crate::paths::private();
-    let input: syn::DeriveInput = match syn::parse2(item) {
-        Ok(i) => i,
-        Err(e) => return e.to_compile_error(),
-    };
-    let name = &input.ident;
-    let syn::Data::Struct(data) = &input.data else {
-        return syn::Error::new(input.span(), "#[derive(Struct)] is for structs")
-            .to_compile_error();
-    };
-    if !input.generics.params.is_empty() {
-        return syn::Error::new(
-            input.generics.span(),
-            "kernel structs cannot be generic yet",
-        )
-        .to_compile_error();
-    }
-    let repr_c = input.attrs.iter().any(|a| {
-        a.path().is_ident("repr")
-            && a.parse_args::<syn::Ident>()
-                .map(|i| i == "C")
-                .unwrap_or(false)
-    });
-    if !repr_c {
-        return syn::Error::new(
-            name.span(),
-            "kernel structs need #[repr(C)] (the CUDA side must see the same layout)",
-        )
-        .to_compile_error();
-    }
-    let mut errors = Vec::new();
-    let fields: Vec<&syn::Type> = data.fields.iter().map(|f| &f.ty).collect();
-    for t in &fields {
-        if let Err(e) = crate::front::signature::parse_type(t) {
-            errors.push(e);
-        } else if let Ok(crate::types::Ty::Array(..)) = crate::front::signature::parse_type(t) {
-            errors.push(syn::Error::new(
-                t.span(),
-                "arrays cannot be struct fields yet: pass them as kernel parameters",
-            ));
-        } else if let Ok(crate::types::Ty::Object(k)) = crate::front::signature::parse_type(t) {
-            errors.push(syn::Error::new(
-                t.span(),
-                format!(
-                    "a `{}` cannot be a struct field: pass it as a kernel parameter",
-                    k.row().name
-                ),
-            ));
-        }
-    }
-    if !errors.is_empty() {
-        return errors_to_tokens(errors);
-    }
-    let name_str = Literal::string(&name.to_string());
-    let mut def = format!("struct {name} {{");
-    for f in data.fields.iter() {
-        let ty = crate::front::signature::parse_type(&f.ty).expect("checked above");
-        let cpp = crate::back::cuda::cpp_type(&ty).unwrap_or_else(|| name.to_string());
-        let field = f.ident.as_ref().map(|i| i.to_string()).unwrap_or_default();
-        def.push_str(&format!(" {cpp} {field};"));
-    }
-    def.push_str(" };");
-    // Adjoint units (`WP_ADJOINT_UNIT`) also get the struct's adjoint helpers, field by field:
-    // global overloads (found by argument-dependent lookup from the library's templates) and
-    // `wp::` ones (for the qualified calls of generated code). Each field's helper is called
-    // qualified: a struct field's global one (its `wp::` forwarder would be a second,
-    // equally good candidate), the library's for the others.
-    let fields_named: Vec<(String, bool)> = data
-        .fields
-        .iter()
-        .filter_map(|f| {
-            let is_struct = matches!(
-                crate::front::signature::parse_type(&f.ty),
-                Ok(crate::types::Ty::Struct(_))
-            );
-            f.ident.as_ref().map(|i| (i.to_string(), is_struct))
-        })
-        .collect();
-    let accum: String = fields_named
-        .iter()
-        .map(|(f, is_struct)| {
-            let ns = if *is_struct { "" } else { "wp" };
-            format!(" {ns}::adj_accum(a.{f}, v.{f});")
-        })
-        .collect();
-    let grad_add: String = fields_named
-        .iter()
-        .map(|(f, is_struct)| {
-            let ns = if *is_struct { "" } else { "wp::detail" };
-            format!(" {ns}::grad_add_p(&p->{f}, v.{f});")
-        })
-        .collect();
-    def.push_str(&format!(
-        "\n#ifdef WP_ADJOINT_UNIT\n\
-         WP_FN void adj_accum({name}& a, const {name}& v) {{{accum} }}\n\
-         WP_FN void grad_add_p({name}* p, const {name}& v) {{{grad_add} }}\n\
-         namespace wp {{\n\
-         WP_FN void adj_accum(::{name}& a, const ::{name}& v) {{ ::adj_accum(a, v); }}\n\
-         WP_FN ::{name} zero_like(const ::{name}&) {{ return ::{name}{{}}; }}\n\
-         template <> WP_FN ::{name} adj_zero<::{name}>() {{ return ::{name}{{}}; }}\n\
-         }}\n\
-         #endif"
-    ));
-    let cuda_def = Literal::string(&def);
-    // Fields of user struct types: their definitions come first.
-    let nested: Vec<&syn::Type> = fields
-        .iter()
-        .copied()
-        .filter(|t| {
-            matches!(
-                crate::front::signature::parse_type(t),
-                Ok(crate::types::Ty::Struct(_))
-            )
-        })
-        .collect();
-    let members: Vec<syn::Member> = data
-        .fields
-        .iter()
-        .enumerate()
-        .map(|(k, f)| match &f.ident {
-            Some(i) => syn::Member::Named(i.clone()),
-            None => syn::Member::Unnamed(syn::Index::from(k)),
-        })
-        .collect();
-    let field_asserts = fields
-        .iter()
-        .map(|t| quote_spanned!(t.span()=> __assert_pod::<#t>();));
-    quote! {
-        const _: () = {
-            use #wp as __wp;
-            const fn __assert_pod<T: __wp::bytemuck::Pod>() {}
-            const _: () = { #(#field_asserts)* };
-            // No padding: the byte image of the struct is exactly its fields.
-            const _: () = ::core::assert!(
-                ::core::mem::size_of::<#name>() == 0 #( + ::core::mem::size_of::<#fields>() )*,
-                "kernel structs must have no padding: reorder the fields or add explicit padding fields"
-            );
-            // SAFETY: repr(C), every field is Pod (asserted above) and there is no padding.
-            unsafe impl __wp::bytemuck::Zeroable for #name {}
-            unsafe impl __wp::bytemuck::Pod for #name {}
-            impl __wp::Element for #name {
-                const TYPE_NAME: &'static str = #name_str;
-                fn is_finite_value(&self) -> bool {
-                    true #( && <#fields as __wp::Element>::is_finite_value(&self.#members) )*
-                }
-                fn describe(&self) -> ::std::string::String {
-                    let parts: ::std::vec::Vec<::std::string::String> = ::std::vec![
-                        #( <#fields as __wp::Element>::describe(&self.#members) ),*
-                    ];
-                    ::std::format!("{} {{ {} }}", #name_str, parts.join(", "))
-                }
-            }
-            impl __wp::GradElement for #name {
-                unsafe fn grad_add(p: *mut Self, v: Self) {
-                    // SAFETY: field by field, forwarded contract (p is live and aligned).
-                    #( unsafe { <#fields as __wp::GradElement>::grad_add(::core::ptr::addr_of_mut!((*p).#members), v.#members) }; )*
-                }
-            }
-            impl __wp::adjoint::Adjoint for #name {
-                fn adj_zero() -> Self {
-                    <Self as __wp::bytemuck::Zeroable>::zeroed()
-                }
-                fn adj_accum(&mut self, v: Self) {
-                    #( <#fields as __wp::adjoint::Adjoint>::adj_accum(&mut self.#members, v.#members); )*
-                }
-            }
-            impl __wp::CudaStruct for #name {
-                const CUDA_DEF: &'static str = #cuda_def;
-                fn cuda_defs(out: &mut ::std::vec::Vec<&'static str>) {
-                    #( <#nested as __wp::CudaStruct>::cuda_defs(out); )*
-                    if !out.contains(&Self::CUDA_DEF) {
-                        out.push(Self::CUDA_DEF);
-                    }
-                }
-            }
-            impl __wp::KernelArg for #name {
-                type Arg<'a> = #name;
-                type CpuView = #name;
-                unsafe fn cpu_view(arg: &Self::Arg<'_>, _ctx: &__wp::ArgCtx<'_>) -> __wp::Result<Self::CpuView> {
-                    ::core::result::Result::Ok(*arg)
-                }
-                type CudaArg = #name;
-                fn cuda_arg(arg: &Self::Arg<'_>, _ctx: &__wp::ArgCtx<'_>) -> __wp::Result<Self::CudaArg> {
-                    ::core::result::Result::Ok(*arg)
-                }
-                type GradView = ();
-                unsafe fn grad_view(_: &Self::Arg<'_>, _: &__wp::ArgCtx<'_>) -> __wp::Result<()> {
-                    ::core::result::Result::Ok(())
-                }
-                type CudaGrad = ();
-                fn cuda_grad(_: &Self::Arg<'_>, _: &__wp::ArgCtx<'_>) -> __wp::Result<()> {
-                    ::core::result::Result::Ok(())
-                }
-                type Owned = #name;
-                fn own(arg: &Self::Arg<'_>) -> #name {
-                    *arg
-                }
-                fn borrow(owned: &#name) -> #name {
-                    *owned
-                }
-            }
-        };
-    }
 }

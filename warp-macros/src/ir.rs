@@ -41,8 +41,22 @@ pub struct Param {
     pub name: String,
     pub var: VarId,
     pub ty: Ty,
-    /// The type as the user wrote it (resolved in the user's scope by rustc).
+    /// The type as the user wrote it (resolved in the user's scope by rustc); for a `&mut`
+    /// parameter, the type it refers to.
     pub syn_ty: syn::Type,
+    /// A func's `&mut` parameter (`acc: &mut f32`): in the IR a mutable value, whose final
+    /// value the func returns after its result (see `Function::ret`); callers write it back.
+    pub by_ref: bool,
+}
+
+/// A call of a user func: which of its arguments are `&mut` (bit `k`: argument `k`). The macro
+/// cannot see the func's signature, so `expand` checks this against the func's
+/// `__WP_MUT_PARAMS` with a `const` assertion spanned at the call.
+#[derive(Clone, Debug)]
+pub struct CallCheck {
+    pub span: Span,
+    pub path: syn::Path,
+    pub mut_args: u64,
 }
 
 /// A lowered kernel or func.
@@ -52,9 +66,12 @@ pub struct Function {
     pub kind: FnKind,
     pub name: String,
     pub params: Vec<Param>,
-    /// The return type (`Ty::Unit` for kernels).
+    /// The return type (`Ty::Unit` for kernels). A func with `&mut` parameters returns the
+    /// tuple of its declared result (`()` if none) and those parameters' final values, in
+    /// order: `fn f(a: &mut f32, x: f32) -> Vec3` returns `(Vec3, f32)`.
     #[allow(dead_code)] // read by the CUDA emitter and the adjoint transform
     pub ret: Ty,
+    /// The Rust type of `ret` (`None`: unit).
     pub ret_syn: Option<syn::Type>,
     pub vars: Vec<Var>,
     pub body: Block,
@@ -68,6 +85,8 @@ pub struct Function {
     /// A block-cooperative kernel (launched with `launch_tiled`): it holds tiles, calls
     /// `lane()`, or says `#[kernel(block_dim = N)]`.
     pub tiled: Option<Tiled>,
+    /// Every call of a user func, with its `&mut` arguments (see [`CallCheck`]).
+    pub call_checks: Vec<CallCheck>,
     /// Tile shape rules the macro could not decide (a const against a literal or another
     /// const): `expand` makes each a `const` assertion spanned at the call, which rustc
     /// evaluates at `cargo check`.
@@ -131,6 +150,14 @@ pub enum StmtKind {
     SetMember {
         var: VarId,
         path: Vec<String>,
+        value: VarId,
+    },
+    /// `var[index] = value` on a local array (`Ty::LocalArray`): an overwrite of the array
+    /// variable (the adjoint treats it as `var = var with element index set`), checked
+    /// against the length: an index outside it is a `LocalIndex` fault naming the line.
+    SetElem {
+        var: VarId,
+        index: VarId,
         value: VarId,
     },
     If {
@@ -217,15 +244,25 @@ pub enum Lit {
     Float(f64),
 }
 
-/// How a vector, matrix or quaternion value is built.
+/// How a vector, matrix, quaternion or local array value is built.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Ctor {
-    /// `Vec3::new(x, y, z)`, `vec3(x, y, z)`, `Quat::from_xyzw(..)`, `Mat3::from_cols(..)`.
+    /// `Vec3::new(x, y, z)`, `vec3(x, y, z)`, `Quat::from_xyzw(..)`, `Mat3::from_cols(..)`;
+    /// a local array's literal `[x, y, z]`.
     Components,
-    /// `Vec3::splat(s)`, `Mat3::from_diagonal(v)`.
+    /// `Vec3::splat(s)`, `Mat3::from_diagonal(v)`; a local array's repeat `[s; N]`.
     Splat,
     /// `Vec3::ZERO`, `Mat3::IDENTITY`, ...: the associated constant's name.
     Const(String),
+    /// A user struct's literal (`Ty::Struct`), `Particle { x: p, v, m: 1.0 }`: the path as
+    /// written and the fields named, in the order written, one argument each; with `base`
+    /// (`Particle { m: 2.0, ..q }`), one more argument last, the value the other fields are
+    /// copied from. rustc checks the fields (missing, unknown, repeated) on the CPU code.
+    Fields {
+        path: syn::Path,
+        names: Vec<syn::Ident>,
+        base: bool,
+    },
 }
 
 /// An operation producing one value.
@@ -253,8 +290,18 @@ pub enum Op {
         array: VarId,
         index: Vec<VarId>,
     },
-    /// `v.x`, `m.x_axis`, `s.field`.
+    /// `v.x`, `m.x_axis`, `s.field`; element `k` of a tuple is the member `"k"` (`t.0`).
     Member(VarId, String),
+    /// A tuple of the values, in order (`(a, b)`, Rust's `(a, b)`, C++'s `wp::tuple_t`); with
+    /// no values, the unit value `()` (C++'s `wp::unit_t`). A func with `&mut` parameters
+    /// returns one: its result, then each such parameter's final value (see `front/lower.rs`).
+    Tuple(Vec<VarId>),
+    /// `a[index]` of a local array (`Ty::LocalArray`, or `Deferred`: a struct's array field,
+    /// `s.w[k]`), checked against its length (a `LocalIndex` fault naming the line).
+    Index {
+        array: VarId,
+        index: VarId,
+    },
     Construct {
         ty: Ty,
         ctor: Ctor,
@@ -280,7 +327,8 @@ pub enum Op {
     },
     /// `array.shape()[k]` (usize).
     Extent(VarId, u8),
-    /// `array.len()` (usize).
+    /// `array.len()` (usize); also of a local array whose type the macro cannot see (a
+    /// struct's array field, `s.w.len()`), a constant.
     Len(VarId),
     /// A module-level `const` (Warp's `wp.constant`), by the path written: its type is the
     /// const's, which the macro cannot see (`Deferred`); the CUDA value comes from the const
@@ -317,11 +365,16 @@ impl Op {
             }
             Op::Builtin { args, .. }
             | Op::Func { args, .. }
+            | Op::Tuple(args)
             | Op::Construct { args, .. }
             | Op::TileMap { args, .. } => args.iter().for_each(|v| f(*v)),
             Op::Load { array, index } => {
                 f(*array);
                 index.iter().for_each(|v| f(*v))
+            }
+            Op::Index { array, index } => {
+                f(*array);
+                f(*index)
             }
             Op::ViewCheck {
                 array,
@@ -354,6 +407,11 @@ impl StmtKind {
             }
             StmtKind::SetMember { var, value, .. } => {
                 f(*var);
+                f(*value)
+            }
+            StmtKind::SetElem { var, index, value } => {
+                f(*var);
+                f(*index);
                 f(*value)
             }
             StmtKind::If { cond, .. } => f(*cond),

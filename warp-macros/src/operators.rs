@@ -89,7 +89,13 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             if l == r
                 && matches!(
                     l,
-                    Scalar(_) | Vector(..) | Quat(_) | Matrix(..) | Transform(_)
+                    Scalar(_)
+                        | Vector(..)
+                        | Quat(_)
+                        | Matrix(..)
+                        | Transform(_)
+                        | SpatialVector(_)
+                        | SpatialMatrix(_)
                 )
             {
                 Ok(BOOL)
@@ -145,6 +151,23 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             }
             (Transform(a), Scalar(b)) if a == b && op == BinOp::Mul => Ok(l.clone()),
             (Scalar(a), Transform(b)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            // Spatial vectors and matrices (Warp's vec_t<6> and mat_t<6, 6>): `+`, `-` of two
+            // of one type, `*` and `/` by their scalar, the matrix's products.
+            (SpatialVector(a), SpatialVector(b)) | (SpatialMatrix(a), SpatialMatrix(b))
+                if a == b && matches!(op, BinOp::Add | BinOp::Sub) =>
+            {
+                Ok(l.clone())
+            }
+            (SpatialMatrix(a), SpatialMatrix(b)) if a == b && op == BinOp::Mul => Ok(l.clone()),
+            (SpatialMatrix(a), SpatialVector(b)) if a == b && op == BinOp::Mul => Ok(r.clone()),
+            (SpatialVector(a) | SpatialMatrix(a), Scalar(b))
+                if a == b && matches!(op, BinOp::Mul | BinOp::Div) =>
+            {
+                Ok(l.clone())
+            }
+            (Scalar(a), SpatialVector(b) | SpatialMatrix(b)) if a == b && op == BinOp::Mul => {
+                Ok(r.clone())
+            }
             _ => bad(),
         },
     }

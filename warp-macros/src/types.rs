@@ -351,14 +351,25 @@ pub enum Ty {
     /// Rigid transforms (warp-core's, not glam's): Transform (f32), DTransform (f64); fields
     /// `p` (the 3-vector) and `q` (the quaternion).
     Transform(Scalar),
+    /// Spatial vectors (warp-core's, not glam's): SpatialVector (f32), DSpatialVector (f64);
+    /// six lanes, members `"0"` to `"5"` (a kernel's `v[k]`, Rust's `v.k`, C++'s `v.fk`).
+    SpatialVector(Scalar),
+    /// 6x6 spatial matrices: SpatialMatrix (f32), DSpatialMatrix (f64); row-major, members
+    /// `"0"` to `"5"` are the rows (`m[i][j]`).
+    SpatialMatrix(Scalar),
     /// `Array<T, N>`.
     Array(Box<Ty>, u8),
+    /// A fixed-size local array (`[f32; 8]`, `[Vec3; N]`): a value (copied, passed and
+    /// returned whole), its element and its length (a literal, or a module-level `const`).
+    /// Elements are read and written at dynamic indices, checked against the length.
+    LocalArray(Box<Ty>, Dim),
     /// A user struct (made kernel-ready by the derive), by its last path segment.
     Struct(String),
     /// The tuple `tid()` returns for 2-D to 4-D launches.
     TidTuple(u8),
-    /// The tuple a decomposition returns (`svd3`: `(Mat3, Vec3, Mat3)`); only ever bound by a
-    /// `let (u, s, v) = ..` pattern, which reads its elements as members `"0"`, `"1"`, ..
+    /// A tuple of 2 to 7 values: what a decomposition returns (`svd3`: `(Mat3, Vec3, Mat3)`),
+    /// a tuple local or literal (`(a, b)`), a func's declared tuple result. Its elements are
+    /// members `"0"`, `"1"`, .. (`t.0`); an element may be `Deferred` (a func's result).
     Tuple(Vec<Ty>),
     /// A host object a kernel takes as a parameter (`HashGrid`), or the state of one of its
     /// queries; kernels see objects only through builtin rows.
@@ -430,7 +441,9 @@ impl Ty {
             | Ty::Vector(s, _)
             | Ty::Matrix(s, _)
             | Ty::Quat(s)
-            | Ty::Transform(s) => Some(*s),
+            | Ty::Transform(s)
+            | Ty::SpatialVector(s)
+            | Ty::SpatialMatrix(s) => Some(*s),
             _ => None,
         }
     }
@@ -459,6 +472,14 @@ impl Ty {
         matches!(self, Ty::Tile(..))
     }
 
+    /// A fixed-size local array's element type and length.
+    pub fn local_array(&self) -> Option<(&Ty, &Dim)> {
+        match self {
+            Ty::LocalArray(e, n) => Some((e, n)),
+            _ => None,
+        }
+    }
+
     pub fn is_int_scalar(&self) -> bool {
         matches!(self, Ty::Scalar(s) if s.is_int())
     }
@@ -478,6 +499,8 @@ impl Ty {
             Ty::Matrix(s, n) => Some(format!("{}Mat{}", prefix(*s)?, n)),
             Ty::Quat(s) => Some(format!("{}Quat", prefix(*s)?)),
             Ty::Transform(s) if s.is_float() => Some(format!("{}Transform", prefix(*s)?)),
+            Ty::SpatialVector(s) if s.is_float() => Some(format!("{}SpatialVector", prefix(*s)?)),
+            Ty::SpatialMatrix(s) if s.is_float() => Some(format!("{}SpatialMatrix", prefix(*s)?)),
             _ => None,
         }
     }
@@ -499,6 +522,12 @@ impl Ty {
         }
         if rest == "Transform" {
             return scalar.is_float().then_some(Ty::Transform(scalar));
+        }
+        if rest == "SpatialVector" {
+            return scalar.is_float().then_some(Ty::SpatialVector(scalar));
+        }
+        if rest == "SpatialMatrix" {
+            return scalar.is_float().then_some(Ty::SpatialMatrix(scalar));
         }
         let (kind, n) = rest.split_at(rest.len().checked_sub(1)?);
         let n: u8 = n.parse().ok().filter(|n| (2..=4).contains(n))?;
@@ -530,20 +559,32 @@ impl Ty {
                 "q" => Some(Ty::Quat(*s)),
                 _ => None,
             },
+            Ty::SpatialVector(s) => spatial_lane(name).then_some(Ty::Scalar(*s)),
+            Ty::SpatialMatrix(s) => spatial_lane(name).then_some(Ty::SpatialVector(*s)),
+            Ty::Tuple(ts) => name.parse::<usize>().ok().and_then(|k| ts.get(k).cloned()),
             _ => None,
         }
     }
+}
+
+/// Whether `name` is a lane of a spatial vector or a row of a spatial matrix: `"0"` to `"5"`.
+fn spatial_lane(name: &str) -> bool {
+    matches!(name, "0" | "1" | "2" | "3" | "4" | "5")
 }
 
 impl fmt::Display for Ty {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Ty::Scalar(s) => f.write_str(s.name()),
-            Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => {
-                f.write_str(&self.glam_name().unwrap_or_else(|| "?".into()))
-            }
+            Ty::Vector(..)
+            | Ty::Matrix(..)
+            | Ty::Quat(_)
+            | Ty::Transform(_)
+            | Ty::SpatialVector(_)
+            | Ty::SpatialMatrix(_) => f.write_str(&self.glam_name().unwrap_or_else(|| "?".into())),
             Ty::Array(t, 1) => write!(f, "Array<{t}>"),
             Ty::Array(t, n) => write!(f, "Array<{t}, {n}>"),
+            Ty::LocalArray(t, n) => write!(f, "[{t}; {n}]"),
             Ty::Struct(name) => f.write_str(name),
             Ty::TidTuple(n) => write!(f, "({})", vec!["usize"; *n as usize].join(", ")),
             Ty::Tuple(ts) => {
@@ -584,6 +625,8 @@ mod tests {
             "DQuat",
             "Transform",
             "DTransform",
+            "SpatialVector",
+            "DSpatialMatrix",
         ] {
             let ty = Ty::from_glam_name(name).unwrap();
             assert_eq!(ty.glam_name().unwrap(), name);
@@ -596,6 +639,7 @@ mod tests {
             "Foo",
             "ITransform",
             "UTransform",
+            "ISpatialVector",
         ] {
             assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
         }
@@ -694,5 +738,14 @@ mod tests {
         assert_eq!(t.member_ty("q"), Some(Ty::Quat(Scalar::F64)));
         assert_eq!(t.member_ty("x"), None);
         assert_eq!(t.to_string(), "DTransform");
+        let (v, m) = (
+            Ty::SpatialVector(Scalar::F32),
+            Ty::SpatialMatrix(Scalar::F64),
+        );
+        assert_eq!(v.member_ty("5"), Some(F32));
+        assert_eq!(v.member_ty("6"), None);
+        assert_eq!(v.member_ty("x"), None);
+        assert_eq!(m.member_ty("0"), Some(Ty::SpatialVector(Scalar::F64)));
+        assert_eq!(m.to_string(), "DSpatialMatrix");
     }
 }

@@ -22,7 +22,10 @@ use std::fmt;
 use std::marker::PhantomData;
 use std::ops::{Bound, RangeBounds};
 use std::sync::Arc;
-use warp_core::{bf16, f16, ArrayView, DTransform, Transform};
+use warp_core::{
+    bf16, f16, ArrayView, DSpatialMatrix, DSpatialVector, DTransform, SpatialMatrix, SpatialVector,
+    Transform,
+};
 
 mod components;
 #[cfg(feature = "dlpack")]
@@ -40,7 +43,7 @@ pub(crate) use dlpack::{device_of as device_of_dlpack, dlpack_device};
 /// [`Array::reinterpret`] sound. Implemented for the integer and float scalars (`f16`
 /// and `bf16` included) and for glam's
 /// vectors, matrices and quaternions that are `Pod` (not `Vec3A` or `Mat3A`, which have
-/// padding), and for warp-core's `Transform` and `DTransform`; `#[derive(Struct)]` implements it for user structs. `bool` is not an element: it is
+/// padding), for warp-core's `Transform` and `DTransform`, and for its spatial vectors and matrices; `#[derive(Struct)]` implements it for user structs. `bool` is not an element: it is
 /// not `Pod`.
 pub trait Element: bytemuck::Pod + warp_core::GradElement + Send + Sync + 'static {
     /// The type's name as written in Rust (`"f32"`, `"Vec3"`), for messages and code generation.
@@ -81,6 +84,7 @@ elements!(IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
 float_elements!(f32, f64, f16, bf16, Vec2, Vec3, Vec4, DVec2, DVec3, DVec4);
 float_elements!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 float_elements!(Transform, DTransform);
+float_elements!(SpatialVector, DSpatialVector, SpatialMatrix, DSpatialMatrix);
 
 /// Something that names the shape of an `N`-dimensional array: a `usize` (for `N = 1`), an
 /// array `[usize; N]`, or a tuple of 2 to 4 `usize`s.
@@ -1080,6 +1084,7 @@ value_kernel_args!(bool, i8, i16, i32, i64, isize, u8, u16, u32, u64, usize, f32
 value_kernel_args!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4);
 value_kernel_args!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 value_kernel_args!(Transform, DTransform);
+value_kernel_args!(SpatialVector, DSpatialVector, SpatialMatrix, DSpatialMatrix);
 
 #[cfg(test)]
 mod tests {

@@ -197,7 +197,9 @@ impl Tape {
     /// # Errors
     /// [`Error::InvalidArgument`] when `loss` has no gradient; [`Error::NotDifferentiable`]
     /// for a kernel without an adjoint; [`Error::Fault`] from an adjoint thread (including
-    /// an adjoint stack overflow, naming the kernel and line).
+    /// an adjoint stack overflow, naming the kernel and line). After an error the gradients
+    /// hold part of a backward pass (the adjoints that ran, and on a GPU the faulting threads'
+    /// reverse sweeps too): [`zero`](Self::zero) them and seed again before another backward.
     pub fn backward<T: Seed, const N: usize>(&self, loss: &Array<T, N>) -> Result<()> {
         self.not_recording()?;
         let Some(g) = loss.grad() else {
@@ -211,6 +213,9 @@ impl Tape {
 
     /// Runs the recorded adjoints in reverse order with the output gradients the caller has
     /// already set (for several outputs, or seeds other than one).
+    ///
+    /// # Errors
+    /// As [`backward`](Self::backward), whose note on gradients after an error holds here.
     pub fn backward_from_grads(&self) -> Result<()> {
         self.not_recording()?;
         let inner = self

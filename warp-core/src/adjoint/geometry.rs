@@ -16,7 +16,6 @@
 
 use glam::Vec3;
 
-use super::Adjoint;
 use crate::builtins::geometry::{point_struct, PointResult};
 use crate::objects::geometry::{self, TriFeature, TriangleClosestPoint};
 use crate::objects::{mesh, MeshView};
@@ -169,54 +168,4 @@ pub fn adj_closest_point_triangle(
         feature: TriFeature::Face,
     };
     geometry::adj_closest_point_triangle(a, b, c, p, adj_a, adj_b, adj_c, adj_p, g);
-}
-
-// A point query's result (`(result, sign, face, u, v)`) and a ray query's
-// (`(result, sign, face, t, u, v, normal)`) have the tuple of their elements' adjoints.
-impl<A: Adjoint, B: Adjoint, C: Adjoint, D: Adjoint, E: Adjoint> Adjoint for (A, B, C, D, E) {
-    #[inline(always)]
-    fn adj_zero() -> Self {
-        (
-            A::adj_zero(),
-            B::adj_zero(),
-            C::adj_zero(),
-            D::adj_zero(),
-            E::adj_zero(),
-        )
-    }
-    #[inline(always)]
-    fn adj_accum(&mut self, v: Self) {
-        self.0.adj_accum(v.0);
-        self.1.adj_accum(v.1);
-        self.2.adj_accum(v.2);
-        self.3.adj_accum(v.3);
-        self.4.adj_accum(v.4);
-    }
-}
-
-impl<A: Adjoint, B: Adjoint, C: Adjoint, D: Adjoint, E: Adjoint, F: Adjoint, G: Adjoint> Adjoint
-    for (A, B, C, D, E, F, G)
-{
-    #[inline(always)]
-    fn adj_zero() -> Self {
-        (
-            A::adj_zero(),
-            B::adj_zero(),
-            C::adj_zero(),
-            D::adj_zero(),
-            E::adj_zero(),
-            F::adj_zero(),
-            G::adj_zero(),
-        )
-    }
-    #[inline(always)]
-    fn adj_accum(&mut self, v: Self) {
-        self.0.adj_accum(v.0);
-        self.1.adj_accum(v.1);
-        self.2.adj_accum(v.2);
-        self.3.adj_accum(v.3);
-        self.4.adj_accum(v.4);
-        self.5.adj_accum(v.5);
-        self.6.adj_accum(v.6);
-    }
 }

@@ -69,10 +69,24 @@ pub trait AdjVecMat: Adjoint + Sized {
     fn adj_diag(v: Self, adj_v: &mut Self, adj_ret: Self::Mat);
 }
 
+/// Adjoint of `outer`: the float vectors (through [`AdjVecMat`]) and the spatial vectors.
+pub trait AdjOuter: Adjoint + Sized {
+    /// The matrix.
+    type Mat;
+    /// See [`adj_outer`].
+    fn adj_outer_of(a: Self, b: Self, adj_a: &mut Self, adj_b: &mut Self, adj_ret: Self::Mat);
+}
+
+/// Adjoint of `transpose`: the glam matrices (through [`AdjMat`]) and the spatial matrices.
+pub trait AdjTranspose: Adjoint + Sized {
+    /// See [`adj_transpose`].
+    fn adj_transposed(m: Self, adj_m: &mut Self, adj_ret: Self);
+}
+
 /// Adjoint of `outer(a, b)`: `adj_a += G * b`, `adj_b += Gᵀ * a`.
 #[inline(always)]
-pub fn adj_outer<V: AdjVecMat>(a: V, b: V, adj_a: &mut V, adj_b: &mut V, adj_ret: V::Mat) {
-    V::adj_outer(a, b, adj_a, adj_b, adj_ret)
+pub fn adj_outer<V: AdjOuter>(a: V, b: V, adj_a: &mut V, adj_b: &mut V, adj_ret: V::Mat) {
+    V::adj_outer_of(a, b, adj_a, adj_b, adj_ret)
 }
 
 /// Adjoint of `diag(v)`: `adj_v[i] += G[i][i]`.
@@ -115,8 +129,8 @@ pub trait AdjMat: SquareMat + Adjoint {
 
 /// Adjoint of `transpose(m)`: `adj_m += Gᵀ`.
 #[inline(always)]
-pub fn adj_transpose<M: AdjMat>(m: M, adj_m: &mut M, adj_ret: M) {
-    M::adj_transpose(m, adj_m, adj_ret)
+pub fn adj_transpose<M: AdjTranspose>(m: M, adj_m: &mut M, adj_ret: M) {
+    M::adj_transposed(m, adj_m, adj_ret)
 }
 
 /// Adjoint of `determinant(m)`: `adj_m += g * cofactor(m)` (see the module documentation).
@@ -311,6 +325,19 @@ float_length_sq!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, Quat, DQuat);
 
 macro_rules! vec_mat {
     ($($v:ident: $m:ident, $n:literal);* $(;)?) => {$(
+        impl AdjOuter for $v {
+            type Mat = $m;
+            #[inline(always)]
+            fn adj_outer_of(a: $v, b: $v, adj_a: &mut $v, adj_b: &mut $v, g: $m) {
+                <$v as AdjVecMat>::adj_outer(a, b, adj_a, adj_b, g)
+            }
+        }
+        impl AdjTranspose for $m {
+            #[inline(always)]
+            fn adj_transposed(m: $m, adj_m: &mut $m, g: $m) {
+                <$m as AdjMat>::adj_transpose(m, adj_m, g)
+            }
+        }
         impl AdjVecMat for $v {
             type Mat = $m;
             #[inline(always)]

@@ -47,6 +47,7 @@ mod linalg;
 mod misc;
 mod noise;
 mod ops;
+mod spatial;
 mod svd;
 #[cfg(test)]
 mod tests;
@@ -61,6 +62,7 @@ pub use linalg::*;
 pub use misc::*;
 pub use noise::*;
 pub use ops::*;
+pub use spatial::*;
 pub use svd::*;
 pub use transform::*;
 pub use volume::*;
@@ -69,7 +71,8 @@ pub use volume::*;
 ///
 /// Implemented for `bool`, every integer and float scalar, and the glam types of the kernel
 /// language (`Vec2-4`, `DVec2-4`, `IVec2-4`, `UVec2-4`, `Mat2-4`, `DMat2-4`, `Quat`, `DQuat`),
-/// and the transforms (`Transform`, `DTransform`: all seven lanes zero, accumulated lane by lane).
+/// the transforms (`Transform`, `DTransform`: all seven lanes zero, accumulated lane by lane)
+/// and the spatial vectors and matrices (every lane zero, accumulated lane by lane).
 pub trait Adjoint: Copy {
     /// The zero adjoint: `0`, `0.0`, `false`, the zero vector or matrix, and for quaternions
     /// the all-zero quaternion `(0, 0, 0, 0)` (not the identity).
@@ -84,6 +87,31 @@ pub trait Adjoint: Copy {
 pub fn zero<T: Adjoint>() -> T {
     T::adj_zero()
 }
+
+// A tuple (a decomposition's or a query's result, a func's tuple result, a tuple local) has
+// the tuple of its elements' adjoints, for 2 to 7 elements (the CUDA library's `tuple_t`).
+macro_rules! adjoint_tuple {
+    ($(($($t:ident . $k:tt),+)),* $(,)?) => {$(
+        impl<$($t: Adjoint),+> Adjoint for ($($t,)+) {
+            #[inline(always)]
+            fn adj_zero() -> Self {
+                ($($t::adj_zero(),)+)
+            }
+            #[inline(always)]
+            fn adj_accum(&mut self, v: Self) {
+                $(self.$k.adj_accum(v.$k);)+
+            }
+        }
+    )*};
+}
+adjoint_tuple!(
+    (A.0, B.1),
+    (A.0, B.1, C.2),
+    (A.0, B.1, C.2, D.3),
+    (A.0, B.1, C.2, D.3, E.4),
+    (A.0, B.1, C.2, D.3, E.4, F.5),
+    (A.0, B.1, C.2, D.3, E.4, F.5, G.6),
+);
 
 macro_rules! adjoint_noop {
     ($($t:ty = $z:expr),* $(,)?) => {$(

@@ -1,5 +1,4 @@
-//! Adjoints of the matrix decompositions ([`crate::builtins::svd`]), and the adjoint of a tuple
-//! result.
+//! Adjoints of the matrix decompositions ([`crate::builtins::svd`]).
 //!
 //! A decomposition returns a tuple; its adjoint `adj_ret` is the tuple of the outputs'
 //! adjoints, and (as every adjoint here) each function recomputes the forward values it needs
@@ -35,32 +34,6 @@ use crate::builtins::svd::{
     eig3_rows, mul3, mul3_nt, mul3_tn, qr_rows, svd2_rows, svd3_rows, Decomp2, Decomp3,
     DecompFloat, Rows2, Rows3,
 };
-
-// A tuple (a decomposition's result) has the tuple of its elements' adjoints.
-impl<A: Adjoint, B: Adjoint> Adjoint for (A, B) {
-    #[inline(always)]
-    fn adj_zero() -> Self {
-        (A::adj_zero(), B::adj_zero())
-    }
-    #[inline(always)]
-    fn adj_accum(&mut self, v: Self) {
-        self.0.adj_accum(v.0);
-        self.1.adj_accum(v.1);
-    }
-}
-
-impl<A: Adjoint, B: Adjoint, C: Adjoint> Adjoint for (A, B, C) {
-    #[inline(always)]
-    fn adj_zero() -> Self {
-        (A::adj_zero(), B::adj_zero(), C::adj_zero())
-    }
-    #[inline(always)]
-    fn adj_accum(&mut self, v: Self) {
-        self.0.adj_accum(v.0);
-        self.1.adj_accum(v.1);
-        self.2.adj_accum(v.2);
-    }
-}
 
 fn zip3<S: DecompFloat>(a: &Rows3<S>, b: &Rows3<S>, f: impl Fn(S, S) -> S) -> Rows3<S> {
     core::array::from_fn(|i| core::array::from_fn(|j| f(a[i][j], b[i][j])))

@@ -127,10 +127,24 @@ pub fn length_sq<V: VecOps>(v: V) -> V::Scalar {
     v.w_dot(v)
 }
 
-/// The outer product `a bᵀ` (column `j` is `a * b[j]`).
+/// `outer`: the float vectors (through [`VecMat`]) and the spatial vectors.
+pub trait Outer: Copy {
+    /// The square matrix of the vector's size and scalar.
+    type Mat: Copy;
+    /// `self bᵀ`.
+    fn w_outer_of(self, b: Self) -> Self::Mat;
+}
+
+/// `transpose`: the square glam matrices (through [`SquareMat`]) and the spatial matrices.
+pub trait Transpose: Copy {
+    /// The transpose.
+    fn w_transposed(self) -> Self;
+}
+
+/// The outer product `a bᵀ` (column `j` is `a * b[j]`; entry `(i, j)` is `a[i] b[j]`).
 #[inline(always)]
-pub fn outer<V: VecMat>(a: V, b: V) -> V::Mat {
-    a.w_outer(b)
+pub fn outer<V: Outer>(a: V, b: V) -> V::Mat {
+    a.w_outer_of(b)
 }
 
 /// The diagonal matrix with diagonal `v`.
@@ -151,10 +165,10 @@ pub fn cw_div<T: Cw>(a: T, b: T) -> T {
     a.w_cw_div(b)
 }
 
-/// The transpose of a square matrix.
+/// The transpose of a square matrix (glam's, or a spatial matrix's).
 #[inline(always)]
-pub fn transpose<M: SquareMat>(m: M) -> M {
-    m.w_transpose()
+pub fn transpose<M: Transpose>(m: M) -> M {
+    m.w_transposed()
 }
 
 /// The determinant (glam's evaluation order).
@@ -245,6 +259,19 @@ macro_rules! vec_mat {
             #[inline(always)]
             fn w_diag(self) -> $m {
                 $m::from_diagonal(self)
+            }
+        }
+        impl Outer for $v {
+            type Mat = $m;
+            #[inline(always)]
+            fn w_outer_of(self, b: Self) -> $m {
+                <$v as VecMat>::w_outer(self, b)
+            }
+        }
+        impl Transpose for $m {
+            #[inline(always)]
+            fn w_transposed(self) -> Self {
+                self.transpose()
             }
         }
         impl Cw for $v {

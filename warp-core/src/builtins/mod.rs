@@ -16,6 +16,8 @@
 //!   leaf module `traits`, which `math` and `norm` both build on).
 //! * [`linalg`]: vector, matrix and quaternion builtins ([`outer`], [`inverse`], ...).
 //! * [`transform`]: rigid-transform builtins ([`transform_point`], [`transform_multiply`], ...).
+//! * [`spatial`](mod@spatial): spatial-vector builtins ([`spatial_cross`],
+//!   [`spatial_adjoint`], [`transform_twist`], ...).
 //! * [`svd`]: matrix decompositions returning tuples ([`svd3`], [`eig3`], [`qr3`], [`svd2`]).
 //! * [`atomic`]: real CPU atomics on array elements ([`atomic_add`], ...).
 //! * [`rand`]: Warp's random number generator ([`rand_init`], [`randf`], [`randn`], the
@@ -43,6 +45,7 @@ pub mod misc;
 pub mod noise;
 pub(crate) mod norm;
 pub mod rand;
+pub mod spatial;
 pub mod special;
 pub mod svd;
 mod traits;
@@ -64,6 +67,7 @@ pub use math::*;
 pub use misc::*;
 pub use noise::{noise, pnoise, NoiseArg};
 pub use rand::*;
+pub use spatial::*;
 pub use svd::{eig3, qr3, svd2, svd3, Decomp2, Decomp3, DecompFloat};
 pub use transform::*;
 pub use volume::*;

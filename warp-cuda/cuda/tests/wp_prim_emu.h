@@ -19,7 +19,8 @@
 //     exact (and returns the old value, as on a GPU);
 //   * a decoupled look-back that finds a predecessor's status unpublished aborts: blocks run
 //     in order (tile counters hand out tiles in launch order), so every tile before has been
-//     finished and an unpublished status is a bug that would hang a GPU.
+//     finished and an unpublished status is a bug that would hang a GPU. `WP_PRIM_FENCE()`
+//     (`__threadfence` on a GPU) is nothing here.
 //   * for the tile library (wp_tile.h, tests/cuda_tile_host.rs) and its linear algebra
 //     (wp_tile_linalg.h): `threadIdx` (x only), `__syncthreads()`, and the warp-synchronous
 //     operations `__syncwarp(mask)`, `__shfl_sync(mask, v, src)` and
@@ -35,7 +36,8 @@
 //     gives the caller's own value, as CUDA), a lane of the mask that has left the kernel, and
 //     lanes of one mask waiting at different barriers (a `__syncwarp` against a
 //     `__syncthreads`: a deadlock on a GPU) abort, naming the block.
-//   * for the radix sort's warp-level ranking: `__ballot_sync(mask, pred)`,
+//   * for the radix sort's warp-level ranking, the primitives' block totals and scans and the
+//     single-pass scan's look-back window (with the shuffles above): `__ballot_sync(mask, pred)`,
 //     `__match_any_sync(mask, v)` and `__shfl_up_sync(mask, v, delta)`, exchanges like the
 //     shuffles, which also abort when their mask names a lane past the block's end or (for
 //     `__shfl_up_sync`) reads a lane outside the mask; and `__popc`, `__clz`. Every lane of a
@@ -411,6 +413,9 @@ inline int clz(int x) { return x == 0 ? 32 : __builtin_clz((unsigned)x); }
 #define WP_PRIM_BID ((wp::i64)::wp_emu::bid)
 #define WP_PRIM_ATOMIC_ADD(p, v) ::wp_emu::atomic_add((p), (v))
 #define WP_PRIM_LOOKBACK_WAIT() ::wp_emu::lookback_stuck()
+// Blocks never run at once, so there is nothing to order (the one thing these tests cannot
+// check: that the kernels fence where a GPU needs it).
+#define WP_PRIM_FENCE() ((void)0)
 #define WP_PRIM_UNROLL
 #define WP_PRIM_REGISTER(name) \
   static ::wp_emu::registrar wp_emu_registrar_##name(#name, reinterpret_cast<void*>(&name));

@@ -37,8 +37,26 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     // Transform values need wp_transform.h even where no transform builtin is called (`inverse`
     // and `lerp` are in other sections); an object's type needs its section even in a kernel
     // that only passes it on to a func.
-    if f.vars.iter().any(|v| matches!(v.ty, Ty::Transform(_))) {
+    // A local array's elements count as values of their type (`[SpatialVector; 4]`).
+    let leaf = |mut t: &Ty| {
+        while let Ty::LocalArray(e, _) = t {
+            t = e;
+        }
+        t.clone()
+    };
+    if f.vars
+        .iter()
+        .any(|v| matches!(leaf(&v.ty), Ty::Transform(_)))
+    {
         e.section("transform");
+    }
+    // Spatial values likewise need wp_spatial.h (`transpose`, `outer` and the operators'
+    // adjoints of spatial types are there).
+    if f.vars
+        .iter()
+        .any(|v| matches!(leaf(&v.ty), Ty::SpatialVector(_) | Ty::SpatialMatrix(_)))
+    {
+        e.section("spatial");
     }
     for v in &f.vars {
         if let Ty::Object(k) = v.ty {
@@ -51,8 +69,8 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
         cpp_type(&f.ret).unwrap_or_default()
     };
     Ok(CudaTemplate {
-        source: e.out,
-        ret,
+        source: fill_lengths(f, e.out)?,
+        ret: fill_lengths(f, ret)?,
         sections: e.sections,
     })
 }
@@ -87,6 +105,9 @@ pub(crate) struct Emitter<'a> {
     pub(crate) beside_pipe: Option<String>,
     /// The C++ types of the pipelined loops printed (their occupancy hint goes on the entry).
     pub(crate) pipes: Vec<String>,
+    /// The user's line of the statement being printed, which a local array's index fault
+    /// names.
+    pub(crate) stmt_line: usize,
 }
 
 /// Unswitched loops nest at most this deep; deeper ones test their flag at each access.
@@ -97,10 +118,14 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
     Some(match t {
         Ty::Scalar(Scalar::Bool) => "bool".into(),
         Ty::Scalar(s) => format!("wp::{}", s.name()),
-        Ty::Vector(..) | Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) => {
-            format!("wp::{}", t.glam_name()?)
-        }
+        Ty::Vector(..)
+        | Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::Transform(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_) => format!("wp::{}", t.glam_name()?),
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
+        Ty::LocalArray(e, n) => format!("wp::local_array_t<{}, {}>", cpp_type(e)?, dim_cpp(n)),
         Ty::Struct(name) => name.clone(),
         // `wp::volume_t<T>`: the element a value type, or an index grid's `wp::VoxelIndex`.
         Ty::Object(k) => match k.elem() {
@@ -113,12 +138,44 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
             }
             None => k.row().cuda.into(),
         },
+        // A unit value is a tuple's element only (a func with `&mut` parameters and no result).
+        Ty::Unit => "wp::unit_t".into(),
         Ty::Tuple(ts) => {
             let ts: Option<Vec<String>> = ts.iter().map(cpp_type).collect();
             format!("wp::tuple_t<{}>", ts?.join(", "))
         }
         _ => return None,
     })
+}
+
+/// A local array's length in C++: a literal, or a placeholder for a const's value that
+/// [`fill_lengths`] turns into the function's `@@K<k>@@` (a type is spelt without its
+/// function at hand).
+fn dim_cpp(n: &crate::types::Dim) -> String {
+    match n {
+        crate::types::Dim::Lit(n) => n.to_string(),
+        crate::types::Dim::Const(p) => format!("@@LEN:{p}@@"),
+    }
+}
+
+/// The template `src` of `f` with each local array length that names a const (`@@LEN:<path>@@`)
+/// written as the const's value placeholder, `@@K<k>@@`.
+pub(crate) fn fill_lengths(f: &Function, mut src: String) -> Result<String, String> {
+    while let Some(at) = src.find("@@LEN:") {
+        let rest = &src[at + 6..];
+        let end = rest
+            .find("@@")
+            .ok_or("internal: an unterminated length placeholder")?;
+        let want: syn::Path = syn::parse_str(&rest[..end]).map_err(|e| e.to_string())?;
+        let k = f.consts.iter().position(|c| c == &want).ok_or_else(|| {
+            format!(
+                "internal: the length `{}` is not among the consts",
+                &rest[..end]
+            )
+        })?;
+        src.replace_range(at..at + 6 + end + 2, &format!("@@K{k}@@"));
+    }
+    Ok(src)
 }
 
 /// A member's C++ name: fields keep theirs; element `k` of a tuple (`wp::tuple_t`) is `f<k>`.
@@ -194,6 +251,7 @@ impl<'a> Emitter<'a> {
             pipeline: false,
             beside_pipe: None,
             pipes: Vec::new(),
+            stmt_line: 0,
         }
     }
 
@@ -437,6 +495,7 @@ impl<'a> Emitter<'a> {
             return self.tile_stmt(s);
         }
         self.after_tile_op = false;
+        self.stmt_line = s.span.start().line;
         let r = self.stmt_plain(s);
         // Control may arrive after a compound statement from before it (a loop that ran no
         // iteration): no tile operation's barrier is known to precede.
@@ -509,7 +568,16 @@ impl<'a> Emitter<'a> {
             }
             StmtKind::SetMember { var, path, value } => {
                 let (v, val) = (self.var(*var), self.var(*value));
+                let path: Vec<String> = path.iter().map(|m| cpp_member(m)).collect();
                 self.line(sp, &format!("{v}.{} = {val};", path.join(".")));
+            }
+            StmtKind::SetElem { var, index, value } => {
+                let (a, i, val) = (self.var(*var), self.var(*index), self.var(*value));
+                let line = sp.start().line;
+                self.line(
+                    sp,
+                    &format!("wp::local_set({a}, (wp::i64)({i}), {val}, {line}, __ctx);"),
+                );
             }
             StmtKind::If { cond, then, els } => {
                 let c = self.var(*cond);
@@ -809,6 +877,41 @@ impl<'a> Emitter<'a> {
                 self.index(index)
             ),
             Op::Member(v, m) => format!("{}.{}", self.var(*v), cpp_member(m)),
+            Op::Index { array, index } => format!(
+                "wp::local_get({}, (wp::i64)({}), {}, __ctx)",
+                self.var(*array),
+                self.var(*index),
+                self.stmt_line
+            ),
+            // C++ aggregate initialisation would need the fields in declaration order, which
+            // the macro cannot see: a zero (or the base) value with the fields set by name.
+            Op::Construct {
+                ty,
+                ctor: Ctor::Fields { names, base, .. },
+                args,
+            } => {
+                let t = cpp_type(ty).ok_or("a struct literal of no struct")?;
+                let mut body = match base {
+                    true => format!("{t} __s = {};", self.var(args[names.len()])),
+                    false => format!("{t} __s{{}};"),
+                };
+                for (n, v) in names.iter().zip(args) {
+                    write!(body, " __s.{n} = {};", self.var(*v)).expect("a String");
+                }
+                format!("([&]() {{ {body} return __s; }}())")
+            }
+            Op::Construct {
+                ty: t @ Ty::LocalArray(..),
+                ctor,
+                args,
+            } => {
+                let t = cpp_type(t).ok_or("a local array of elements without a C++ type")?;
+                let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                match ctor {
+                    Ctor::Splat => format!("{t}::splat({})", args.join(", ")),
+                    _ => format!("{t}{{{{{}}}}}", args.join(", ")),
+                }
+            }
             Op::Construct { ty: t, ctor, args } => {
                 let name = t.glam_name().ok_or("constructed types are glam types")?;
                 let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
@@ -822,6 +925,9 @@ impl<'a> Emitter<'a> {
                     (Ty::Matrix(..), Ctor::Components) => {
                         format!("wp::{name}_from_cols({})", args.join(", "))
                     }
+                    (Ty::SpatialMatrix(_), Ctor::Components) => {
+                        format!("wp::{name}_from_rows({})", args.join(", "))
+                    }
                     (Ty::Vector(..), Ctor::Splat) => {
                         format!("wp::{name}_splat({})", args.join(", "))
                     }
@@ -831,6 +937,12 @@ impl<'a> Emitter<'a> {
                     (_, Ctor::Const(c)) => format!("wp::{name}_{c}()"),
                     _ => return Err("unsupported constructor".into()),
                 }
+            }
+            // `wp::make_tuple` deduces the elements' types (which the macro may not see).
+            Op::Tuple(args) if args.is_empty() => "wp::unit_t{}".into(),
+            Op::Tuple(args) => {
+                let args: Vec<String> = args.iter().map(|v| self.var(*v)).collect();
+                format!("wp::make_tuple({})", args.join(", "))
             }
             Op::Tid(k) => format!("(wp::usize)__tid[{k}]"),
             Op::Extent(a, k) => format!("(wp::usize)wp::extent({}, {k})", self.var(*a)),
@@ -1015,5 +1127,32 @@ mod tests {
         assert_eq!(float_lit(-1e9, Scalar::F16), "wp::f16_from_bits(0xfc00)");
         assert_eq!(float_lit(0.1, Scalar::BF16), "wp::bf16_from_bits(0x3dcd)");
         assert_eq!(int_lit(i32::MIN as i128, Scalar::I32), "(-2147483647 - 1)");
+    }
+
+    #[test]
+    fn local_arrays_are_values_with_checked_elements() {
+        let item: syn::ItemFn = parse_quote! {
+            fn k(x: Array<f32>, n: Array<i32>) {
+                let i = tid();
+                let mut a = [0.0f32; N];
+                let b = [x[i], 2.0];
+                a[n[i]] = b[1];
+                x[i] = a[0] + a.len() as f32;
+            }
+        };
+        let f = crate::front::lower::lower_fn(&item, FnKind::Kernel).unwrap();
+        let src = emit(&f, "k.rs").unwrap().source;
+        // The const length is the const's value placeholder.
+        assert_eq!(f.consts.len(), 1);
+        assert!(
+            src.contains("wp::local_array_t<wp::f32, @@K0@@>::splat("),
+            "{src}"
+        );
+        assert!(!src.contains("@@LEN:"), "{src}");
+        assert!(src.contains("wp::local_array_t<wp::f32, 2>{{t"), "{src}");
+        // Element accesses name the user's line (the kernel's is 1 in a parsed test).
+        assert!(src.contains("wp::local_set(a_"), "{src}");
+        assert!(src.contains("wp::local_get(b_"), "{src}");
+        assert!(src.contains(", __ctx)"), "{src}");
     }
 }

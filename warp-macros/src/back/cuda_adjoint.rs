@@ -9,7 +9,7 @@
 //! (`remove_cvref<decltype(..)>` of the same expression over variables declared before it,
 //! which `middle::adjoint` guarantees), or of its loop's end bound.
 
-use super::cuda::{cpp_member, cpp_type, Emitter};
+use super::cuda::{cpp_member, cpp_type, fill_lengths, Emitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
 use crate::types::Ty;
@@ -34,7 +34,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
     };
     let text = Printer::new(&adj, file).function()?;
     Ok(CudaAdjoint {
-        source: format!("{replay}{text}"),
+        source: fill_lengths(&adj.f, format!("{replay}{text}"))?,
         uses_stack: adj.uses_stack,
     })
 }
@@ -52,7 +52,7 @@ pub fn emit_custom(
     callees.clone_from(&adj.f.callees);
     let replay = func_replay(f, file)?;
     let text = Printer::new(&adj, file).function()?;
-    Ok(format!("{replay}{text}"))
+    fill_lengths(&adj.f, format!("{replay}{text}"))
 }
 
 /// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, printed by
@@ -259,6 +259,7 @@ impl<'a> Printer<'a> {
 
     fn stmt(&mut self, s: &AStmt) -> Result<(), String> {
         let sp = s.span;
+        self.e.stmt_line = sp.start().line;
         let tiled = self.f().tiled.is_some();
         if tiled {
             if let Some(r) = self.tile_replay(s) {
@@ -282,6 +283,15 @@ impl<'a> Printer<'a> {
             AKind::SetMember { var, path, value } => {
                 let (x, v) = (self.var(*var), self.var(*value));
                 format!("{x}{} = {v};", member_path(path))
+            }
+            AKind::SetElem { var, index, value } => {
+                let (a, i, v) = (self.var(*var), self.var(*index), self.var(*value));
+                let line = sp.start().line;
+                format!("wp::local_set({a}, (wp::i64)({i}), {v}, {line}, __ctx);")
+            }
+            AKind::ClearAdjElem { var, index } => {
+                let e = self.adj_elem(*var, *index);
+                format!("{e} = wp::zero_like({e});")
             }
             AKind::Push { var, line } if coop => {
                 format!(
@@ -374,6 +384,7 @@ impl<'a> Printer<'a> {
                 let to = match to {
                     AdjOf::Var { var, path } => format!("{}{}", self.adj(*var), member_path(path)),
                     AdjOf::Out(k) => format!("__adj_out{k}"),
+                    AdjOf::Elem { var, index } => self.adj_elem(*var, *index),
                 };
                 let g = self.grad(from)?;
                 if coop {
@@ -503,6 +514,13 @@ impl<'a> Printer<'a> {
         }
     }
 
+    /// `adj_<var>[index]` of a local array's adjoint (the index was checked by the replay;
+    /// `local_at` keeps the access in bounds regardless, since a faulting thread goes on).
+    fn adj_elem(&self, var: VarId, index: VarId) -> String {
+        let (a, i) = (self.adj(var), self.var(index));
+        format!("wp::local_at({a}, (wp::i64)({i}))")
+    }
+
     pub(super) fn grad_arg(&self, g: &GradArg) -> String {
         match g {
             GradArg::Temp(k) => format!("__g{k}"),
@@ -513,7 +531,7 @@ impl<'a> Printer<'a> {
     fn grad(&self, g: &GradSrc) -> Result<String, String> {
         Ok(match g {
             GradSrc::Seed => "__r".into(),
-            GradSrc::SeedLane(l) => format!("__r.{l}"),
+            GradSrc::SeedLane(l) => format!("__r.{}", cpp_member(l)),
             GradSrc::LaneSum(lanes) => {
                 let ls: Vec<String> = lanes.iter().map(|l| format!("__r.{l}")).collect();
                 ls.join(" + ")
@@ -532,6 +550,9 @@ impl<'a> Printer<'a> {
             GradSrc::AdjRet => "__adj_ret".into(),
             GradSrc::Adj { var, path } => format!("{}{}", self.adj(*var), member_path(path)),
             GradSrc::Zero(like) => format!("wp::zero_like({})", self.var(*like)),
+            GradSrc::AdjElem { var, index } => self.adj_elem(*var, *index),
+            GradSrc::SeedElem(k) => format!("__r.data[{k}]"),
+            GradSrc::ElemSum => "wp::local_sum(__r)".into(),
             GradSrc::Take { array, index, like } | GradSrc::Get { array, index, like } => {
                 let f = match g {
                     // Lanes of a tiled kernel's block may have stored the same element: one

@@ -101,9 +101,14 @@ impl<'a> RustEmitter<'a> {
             }
             StmtKind::SetMember { var, path, value } => {
                 let v = self.var(*var);
-                let path = path.iter().map(|m| format_ident!("{}", m));
+                let path = path.iter().map(|m| member_tokens(m));
                 let val = self.var(*value);
                 quote_spanned!(sp=> #v #(.#path)* = #val;)
+            }
+            StmtKind::SetElem { var, index, value } => {
+                let (a, i, val) = (self.var(*var), self.var(*index), self.var(*value));
+                let (name, line) = (self.name_lit(), line_lit(sp));
+                quote_spanned!(sp=> __wp::local_array::set(&mut #a, #i, #val, #name, #line)?;)
             }
             StmtKind::If { cond, then, els } => {
                 let c = self.var(*cond);
@@ -408,6 +413,42 @@ impl<'a> RustEmitter<'a> {
                 let m = member_tokens(m);
                 quote_spanned!(sp=> #x.#m)
             }
+            Op::Index { array, index } => {
+                let (a, i, line) = (self.var(*array), self.var(*index), line_lit(sp));
+                quote_spanned!(sp=> __wp::local_array::get(&#a, #i, #name, #line)?)
+            }
+            // Printed as the user's literal, so that rustc checks its fields at their spans.
+            Op::Construct {
+                ctor: Ctor::Fields { path, names, base },
+                args,
+                ..
+            } => {
+                // Each value at its field's name: a mistyped field's error points there.
+                let vals = names.iter().zip(args).map(|(n, v)| {
+                    let mut v = self.var(*v);
+                    v.set_span(n.span());
+                    v
+                });
+                let rest = base.then(|| {
+                    let b = self.var(args[names.len()]);
+                    quote_spanned!(sp=> ..#b)
+                });
+                quote_spanned!(sp=> #path { #(#names: #vals,)* #rest })
+            }
+            Op::Construct {
+                ty: Ty::LocalArray(_, n),
+                ctor,
+                args,
+            } => {
+                let args: Vec<_> = args.iter().map(|v| self.var(*v)).collect();
+                match ctor {
+                    Ctor::Splat => {
+                        let (v, n) = (&args[0], n.rust_tokens());
+                        quote_spanned!(sp=> [#v; #n])
+                    }
+                    _ => quote_spanned!(sp=> [#(#args),*]),
+                }
+            }
             Op::Construct { ty, ctor, args } => {
                 let t = ty_tokens(ty).expect("constructed types are glam types");
                 let args: Vec<_> = args.iter().map(|v| self.var(*v)).collect();
@@ -415,6 +456,7 @@ impl<'a> RustEmitter<'a> {
                     (Ty::Vector(..), Ctor::Components) => format_ident!("new"),
                     (Ty::Quat(_), Ctor::Components) => format_ident!("from_xyzw"),
                     (Ty::Matrix(..), Ctor::Components) => format_ident!("from_cols"),
+                    (Ty::SpatialMatrix(_), Ctor::Components) => format_ident!("from_rows"),
                     (Ty::Vector(..), Ctor::Splat) => format_ident!("splat"),
                     (Ty::Matrix(..), Ctor::Splat) => format_ident!("from_diagonal"),
                     (_, Ctor::Const(c)) => {
@@ -439,6 +481,10 @@ impl<'a> RustEmitter<'a> {
                 quote_spanned!(sp=> #a.len())
             }
             Op::Const(p) => quote_spanned!(sp=> #p),
+            Op::Tuple(args) => {
+                let args = args.iter().map(|v| self.var(*v));
+                quote_spanned!(sp=> (#(#args,)*))
+            }
             Op::ViewCheck {
                 array,
                 index,
@@ -461,11 +507,26 @@ pub(crate) fn member_tokens(m: &str) -> TokenStream {
     }
 }
 
+/// The user's line at `sp`, which a local array's index fault names.
+fn line_lit(sp: Span) -> Literal {
+    Literal::u32_unsuffixed(sp.start().line as u32)
+}
+
 /// The Rust type of a value, where the macro knows it.
 pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
     match t {
+        Ty::LocalArray(e, n) => {
+            let (e, n) = (ty_tokens(e)?, n.rust_tokens());
+            Some(quote!([#e; #n]))
+        }
+        // An element the macro cannot see (of a func's result) is rustc's to infer: `(_, _)`
+        // still states the tuple's length, which rustc then checks.
         Ty::Tuple(ts) => {
-            let ts: Option<Vec<TokenStream>> = ts.iter().map(ty_tokens).collect();
+            let elem = |t: &Ty| match t {
+                Ty::Deferred => Some(quote!(_)),
+                t => ty_tokens(t),
+            };
+            let ts: Option<Vec<TokenStream>> = ts.iter().map(elem).collect();
             let ts = ts?;
             Some(quote!((#(#ts),*)))
         }
@@ -480,8 +541,8 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::glam::#id))
         }
-        // warp-core's transforms, re-exported next to glam.
-        Ty::Transform(_) => {
+        // warp-core's transforms and spatial types, re-exported next to glam.
+        Ty::Transform(_) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::#id))
         }

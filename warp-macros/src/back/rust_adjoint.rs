@@ -117,6 +117,18 @@ impl Printer<'_> {
                 let (x, val, path) = (self.var(*var), self.var(*value), members(path));
                 quote_spanned!(sp=> #x #path = #val;)
             }
+            AKind::SetElem { var, index, value } => {
+                let (var, index, value) = (*var, *index, *value);
+                let set = StmtKind::SetElem { var, index, value };
+                self.fwd.stmt_tokens(&Stmt {
+                    kind: set,
+                    span: sp,
+                })
+            }
+            AKind::ClearAdjElem { var, index } => {
+                let e = self.adj_elem(*var, *index);
+                quote_spanned!(sp=> *#e = __wp::adjoint::zero();)
+            }
             AKind::Push { var, line } => {
                 let x = self.var(*var);
                 quote_spanned!(sp=> __stack.push(#x, #line)?;)
@@ -174,6 +186,7 @@ impl Printer<'_> {
                         quote!(&mut #a #path)
                     }
                     AdjOf::Out(k) => format_ident!("__adj_out{}", k).into_token_stream(),
+                    AdjOf::Elem { var, index } => self.adj_elem(*var, *index),
                 };
                 let g = self.grad(from)?;
                 quote_spanned!(sp=> __wp::adjoint::Adjoint::adj_accum(#to, #g);)
@@ -267,6 +280,13 @@ impl Printer<'_> {
         })
     }
 
+    /// `&mut adj_<var>[index]` of a local array's adjoint (the index was checked by the
+    /// replay; `at_mut` keeps the access in bounds regardless).
+    fn adj_elem(&self, var: VarId, index: VarId) -> TokenStream {
+        let (a, i) = (self.adj(var), self.var(index));
+        quote!(__wp::local_array::at_mut(&mut #a, #i))
+    }
+
     /// A temporary or an adjoint as a `&mut` argument; an array's gradient view by value.
     pub(super) fn grad_arg(&self, g: &GradArg) -> TokenStream {
         match g {
@@ -323,7 +343,7 @@ impl Printer<'_> {
         Ok(match g {
             GradSrc::Seed => quote!(__r),
             GradSrc::SeedLane(l) => {
-                let l = format_ident!("{}", l);
+                let l = member_tokens(l);
                 quote!(__r.#l)
             }
             GradSrc::LaneSum(lanes) => {
@@ -348,6 +368,15 @@ impl Printer<'_> {
                 let x = self.var(*like);
                 quote!(__wp::zero_like(&#x))
             }
+            GradSrc::AdjElem { var, index } => {
+                let e = self.adj_elem(*var, *index);
+                quote!(*#e)
+            }
+            GradSrc::SeedElem(k) => {
+                let k = proc_macro2::Literal::usize_unsuffixed(*k);
+                quote!(__r[#k])
+            }
+            GradSrc::ElemSum => quote!(__wp::local_array::sum(&__r)),
             GradSrc::Take { array, index, like } | GradSrc::Get { array, index, like } => {
                 let (a, idx, v) = (self.adj(*array), self.index(index), self.var(*like));
                 let f = match g {

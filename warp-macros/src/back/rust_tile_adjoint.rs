@@ -143,6 +143,10 @@ fn vars_of(s: &AStmt, out: &mut dyn FnMut(VarId)) {
             index(i, out);
         }
         GradSrc::Custom { args, .. } => args.iter().for_each(|v| out(*v)),
+        GradSrc::AdjElem { var, index } => {
+            out(*var);
+            out(*index);
+        }
         _ => {}
     };
     let garg = |g: &GradArg, out: &mut dyn FnMut(VarId)| match g {
@@ -160,6 +164,15 @@ fn vars_of(s: &AStmt, out: &mut dyn FnMut(VarId)) {
         AKind::SetMember { var, value, .. } => {
             out(*var);
             out(*value);
+        }
+        AKind::SetElem { var, index, value } => {
+            out(*var);
+            out(*index);
+            out(*value);
+        }
+        AKind::ClearAdjElem { var, index } => {
+            out(*var);
+            out(*index);
         }
         AKind::Push { var, .. } | AKind::Pop { var } | AKind::ClearAdj { var, .. } => out(*var),
         AKind::Loop {
@@ -190,8 +203,13 @@ fn vars_of(s: &AStmt, out: &mut dyn FnMut(VarId)) {
         AKind::Scope(b) | AKind::RevLoop { body: b } => b.iter().for_each(|s| vars_of(s, out)),
         AKind::Seed(g) => grad(g, out),
         AKind::Accum { to, from } => {
-            if let AdjOf::Var { var, .. } = to {
-                out(*var);
+            match to {
+                AdjOf::Var { var, .. } => out(*var),
+                AdjOf::Elem { var, index } => {
+                    out(*var);
+                    out(*index);
+                }
+                AdjOf::Out(_) => {}
             }
             grad(from, out);
         }

@@ -63,6 +63,10 @@ const CONSTRUCTS: &[&str] = &[
     "len",
     "view",
     "slice",
+    // A fixed-size local array (`front::lower::local_arrays`): Rust's `[0.0f32; N]`.
+    "zeros",
+    // A tuple (`ir::Op::Tuple`): Rust's `(a, b)`.
+    "tuple",
     // Calls and macros the front end lowers by name (`front::lower`): the thread index,
     // print!, and Warp's builtins that are other operations here.
     "tid",
@@ -247,6 +251,8 @@ fn pos(p: &Pos) -> String {
         Pos::FixedVec(s, n) => Ty::Vector(*s, *n).to_string(),
         Pos::Vec3OfT => "Vec3(S)".into(),
         Pos::XformOfT => "Transform(S)".into(),
+        Pos::SVecOfT => "SpatialVector(S)".into(),
+        Pos::SMatOfT => "SpatialMatrix(S)".into(),
         Pos::Mat4OfT => "Mat4(S)".into(),
         Pos::Tuple(ps) => format!("({})", ps.iter().map(pos).collect::<Vec<_>>().join(", ")),
         Pos::Object(k) => k.row().name.into(),
@@ -295,6 +301,7 @@ fn spellings(b: &Builtin) -> Vec<String> {
             Ty::Quat(Scalar::F32),
             Ty::Matrix(Scalar::F32, 3),
             Ty::Transform(Scalar::F32),
+            Ty::SpatialVector(Scalar::F32),
         ]
         .into_iter()
         .find(|t| class.admits(t))

@@ -140,6 +140,7 @@ impl Builtin {
                 Ty::Vector(s, n) => Ty::Matrix(*s, *n),
                 Ty::Quat(s) => Ty::Matrix(*s, 3),
                 Ty::Transform(s) => Ty::Matrix(*s, 4),
+                Ty::SpatialVector(s) => Ty::SpatialMatrix(*s),
                 _ => Ty::Deferred,
             },
             Pos::VecOfT => match &t {
@@ -160,6 +161,14 @@ impl Builtin {
                 .map(|s| Ty::Vector(s, 3))
                 .unwrap_or(Ty::Deferred),
             Pos::XformOfT => scalar.scalar().map(Ty::Transform).unwrap_or(Ty::Deferred),
+            Pos::SVecOfT => scalar
+                .scalar()
+                .map(Ty::SpatialVector)
+                .unwrap_or(Ty::Deferred),
+            Pos::SMatOfT => scalar
+                .scalar()
+                .map(Ty::SpatialMatrix)
+                .unwrap_or(Ty::Deferred),
             Pos::Mat4OfT => scalar
                 .scalar()
                 .map(|s| Ty::Matrix(s, 4))

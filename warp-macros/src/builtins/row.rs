@@ -101,7 +101,7 @@ pub struct Builtin {
     /// A state-advancing draw (`randf(&mut state)`): how it advances the state.
     pub draw: Option<Draw>,
     /// The names of a tuple result's parts, in the order of Warp's output arguments, as a
-    /// destructuring pattern (`"(u, sigma, v)"`); error messages show it.
+    /// destructuring pattern (`"(u, sigma, v)"`); error messages and the builtin table show it.
     pub results: Option<&'static str>,
     /// Not a Warp builtin: an extension of warp-lang's (docs/book/src/builtins.md lists it there).
     pub extension: bool,

@@ -31,6 +31,7 @@ mod linalg;
 mod misc;
 mod rand;
 mod scalar;
+mod spatial;
 mod tile;
 mod transform;
 mod volume;
@@ -40,6 +41,7 @@ const SECTIONS: &[&[Builtin]] = &[
     scalar::ROWS,
     linalg::ROWS,
     transform::ROWS,
+    spatial::ROWS,
     linalg::DECOMPOSITIONS,
     atomic::ROWS,
     rand::ROWS,
@@ -100,6 +102,12 @@ const VEC_OR_QUAT: &[Class] = &[FloatVector, IntVector, Quaternion];
 const FVEC_OR_QUAT: &[Class] = &[FloatVector, Quaternion];
 const FVEC_OR_MAT: &[Class] = &[FloatVector, Matrix];
 const MAT: &[Class] = &[Matrix];
+/// `transpose`: glam's square matrices and the spatial matrices.
+const MAT_OR_SMAT: &[Class] = &[Matrix, SpatialMatrix];
+/// `outer`: float vectors and spatial vectors.
+const FVEC_OR_SVEC: &[Class] = &[FloatVector, SpatialVector];
+const SVEC: &[Class] = &[SpatialVector];
+const SPATIAL_SCALAR: &[Class] = &[SpatialScalar];
 const MAT_QUAT_XFORM: &[Class] = &[Matrix, Quaternion, Transform];
 const LERP: &[Class] = &[Float, FloatVector, Transform];
 const XFORM: &[Class] = &[Transform];

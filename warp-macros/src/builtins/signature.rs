@@ -45,6 +45,12 @@ pub enum Class {
     Transform,
     /// Mat4, DMat4 (the matrix overloads of transform_point, transform_vector).
     Matrix4,
+    /// SpatialVector, DSpatialVector.
+    SpatialVector,
+    /// SpatialMatrix, DSpatialMatrix.
+    SpatialMatrix,
+    /// f32, f64: the scalars spatial vectors are made of (the six-scalar `spatial_vector`).
+    SpatialScalar,
     /// The values a `Volume<T>` holds: f32, f64, i32, Vec3, DVec3 (lookups, stores).
     VolumeValue,
     /// The values a volume interpolates: f32, f64, Vec3, DVec3 (sampling).
@@ -92,6 +98,9 @@ impl Class {
             (Class::Noise, Ty::Vector(Scalar::F32, _)) => true,
             (Class::Transform, Ty::Transform(_)) => true,
             (Class::Matrix4, Ty::Matrix(_, 4)) => true,
+            (Class::SpatialVector, Ty::SpatialVector(_)) => true,
+            (Class::SpatialMatrix, Ty::SpatialMatrix(_)) => true,
+            (Class::SpatialScalar, Ty::Scalar(s)) => matches!(s, Scalar::F32 | Scalar::F64),
             (Class::VolumeValue, t) => crate::types::VolumeElem::of(t).is_some(),
             (Class::VolumeFloat, t) => {
                 crate::types::VolumeElem::of(t).is_some() && *t != Ty::Scalar(Scalar::I32)
@@ -120,6 +129,9 @@ impl Class {
             Class::Noise => "f32, Vec2, Vec3 or Vec4",
             Class::Transform => "a transform (Transform, DTransform)",
             Class::Matrix4 => "a 4x4 matrix (Mat4, DMat4)",
+            Class::SpatialVector => "a spatial vector (SpatialVector, DSpatialVector)",
+            Class::SpatialMatrix => "a spatial matrix (SpatialMatrix, DSpatialMatrix)",
+            Class::SpatialScalar => "f32 or f64",
             Class::VolumeValue => "a volume value (f32, f64, i32, Vec3, DVec3)",
             Class::VolumeFloat => "a float volume value (f32, f64, Vec3, DVec3)",
         }
@@ -141,7 +153,7 @@ pub enum Pos {
     Bool,
     /// The square matrix of `T`'s scalar whose size is `T`'s: `Mat3` for `Vec3` (`outer`,
     /// `diag`, `skew`), `Mat3` for `Quat` (`quat_to_matrix`), `Mat4` for `Transform`
-    /// (`transform_to_matrix`).
+    /// (`transform_to_matrix`), `SpatialMatrix` for `SpatialVector` (`outer`).
     MatOfT,
     /// The vector `T` acts on: a matrix's column type; `Vec3` for `Quat` (`quat_rotate`).
     VecOfT,
@@ -158,6 +170,10 @@ pub enum Pos {
     Vec3OfT,
     /// The transform of `T`'s scalar (`transformation`, `transform_from_matrix`).
     XformOfT,
+    /// The spatial vector of `T`'s scalar (`spatial_vector`, `transform_twist`).
+    SVecOfT,
+    /// The spatial matrix of `T`'s scalar (`spatial_adjoint`).
+    SMatOfT,
     /// A tuple of these (results only: the decompositions, `svd3(a) -> (T, VecOfT, T)`).
     Tuple(&'static [Pos]),
     /// The 4x4 matrix of `T`'s scalar (`transform_compose`).

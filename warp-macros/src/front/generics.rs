@@ -19,7 +19,7 @@ use syn::visit_mut::VisitMut;
 pub const FLOAT_TYPES: [&str; 2] = ["f32", "f64"];
 
 /// The glam families a type parameter selects a member of: (written name, f32 name, f64 name).
-const FAMILIES: [(&str, &str, &str); 8] = [
+const FAMILIES: [(&str, &str, &str); 10] = [
     ("Vec2", "Vec2", "DVec2"),
     ("Vec3", "Vec3", "DVec3"),
     ("Vec4", "Vec4", "DVec4"),
@@ -28,6 +28,8 @@ const FAMILIES: [(&str, &str, &str); 8] = [
     ("Mat4", "Mat4", "DMat4"),
     ("Quat", "Quat", "DQuat"),
     ("Transform", "Transform", "DTransform"),
+    ("SpatialVector", "SpatialVector", "DSpatialVector"),
+    ("SpatialMatrix", "SpatialMatrix", "DSpatialMatrix"),
 ];
 
 /// One instance of a generic function.

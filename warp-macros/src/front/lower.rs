@@ -17,9 +17,12 @@
 //!   overloads by arity.
 //! - `query`: `for j in hash_grid_query(..)`, a loop over a host object's query.
 //! - `tiles`: tile calls typed by their shapes, `lane()`, operators and indexing on tiles.
+//! - `local_arrays`: fixed-size local arrays (`[0.0f32; 8]`, `[x, y, z]`), their elements
+//!   and `len()`.
+//! - `struct_literals`: user struct literals (`Particle { x, v: Vec3::ZERO, ..q }`).
 
 use crate::builtins::{self, ArgTy, Builtin, Emit, Pos};
-use crate::front::signature::parse_type;
+use crate::front::signature::{parse_type, MAX_TUPLE};
 use crate::ir::*;
 use crate::types::{Scalar, Ty, BOOL, USIZE};
 use proc_macro2::Span;
@@ -31,10 +34,12 @@ mod asserts;
 mod calls;
 mod control;
 mod expressions;
+mod local_arrays;
 mod places;
 mod query;
 mod rng;
 mod statements;
+mod struct_literals;
 mod tiles;
 pub(crate) mod typing;
 mod views;
@@ -71,7 +76,8 @@ pub fn lower_kernel(
         ret: Ty::Unit,
         views: HashMap::new(),
         consts: Vec::new(),
-        tuple_result: false,
+        ref_params: Vec::new(),
+        call_checks: Vec::new(),
     };
     let sig = &item.sig;
     let unsupported = [
@@ -108,19 +114,58 @@ pub fn lower_kernel(
                         continue;
                     }
                 };
-                match parse_type(&pt.ty) {
+                // `acc: &mut f32` (funcs): an in-out parameter, the type it refers to.
+                let (ty_syn, by_ref) = match &*pt.ty {
+                    syn::Type::Reference(r) if kind == FnKind::Func => {
+                        if r.mutability.is_none() {
+                            cx.errors.push(syn::Error::new(
+                                pt.ty.span(),
+                                "a func takes values by value (`x: f32`, a copy) or by `&mut` (`x: &mut f32`, to write the caller's variable): a shared reference `&T` adds nothing",
+                            ));
+                            continue;
+                        }
+                        (&*r.elem, true)
+                    }
+                    t => (t, false),
+                };
+                match parse_type(ty_syn) {
+                    Ok(t @ (Ty::Array(..) | Ty::Object(_))) if by_ref => {
+                        cx.errors.push(syn::Error::new(
+                            pt.ty.span(),
+                            format!("a `&mut` parameter is a value the caller owns: pass a `{t}` by value (an array is written in place)"),
+                        ))
+                    }
+                    Ok(_) if by_ref && cx.ref_params.len() + 1 >= MAX_TUPLE => {
+                        cx.errors.push(syn::Error::new(
+                            pt.ty.span(),
+                            format!("a func takes at most {} `&mut` parameters", MAX_TUPLE - 1),
+                        ))
+                    }
+                    Ok(t @ Ty::Tuple(_)) if kind == FnKind::Kernel => cx.errors.push(syn::Error::new(
+                        pt.ty.span(),
+                        format!("a tuple is not a kernel parameter: pass its elements (funcs take `{t}`)"),
+                    )),
                     Ok(Ty::Tile(..)) => cx.errors.push(syn::Error::new(
                         pt.ty.span(),
                         "a tile is not a parameter: pass an array and load tiles from it with `tile_load`",
                     )),
+                    Ok(Ty::LocalArray(..)) if kind == FnKind::Kernel => cx.errors.push(syn::Error::new(
+                        pt.ty.span(),
+                        "a local array is not a kernel parameter: pass an `Array<T>` (funcs take local arrays)",
+                    )),
                     Ok(ty) => {
-                        let var = cx.new_var(Some(name.clone()), ty.clone(), mutable);
+                        // A `&mut` parameter's value is written by the body (`*acc += x`).
+                        let var = cx.new_var(Some(name.clone()), ty.clone(), mutable || by_ref);
                         cx.scopes[0].insert(name.clone(), var);
+                        if by_ref {
+                            cx.ref_params.push(var);
+                        }
                         params.push(Param {
                             name,
                             var,
                             ty,
-                            syn_ty: (*pt.ty).clone(),
+                            syn_ty: ty_syn.clone(),
+                            by_ref,
                         });
                     }
                     Err(e) => cx.errors.push(e),
@@ -166,16 +211,26 @@ pub fn lower_kernel(
         !matches!(ret, Ty::Unit),
     );
     match tail {
-        Ok(Some(v)) if kind == FnKind::Func => {
-            cx.push(StmtKind::Return { value: Some(v) }, item.block.span())
-        }
+        Ok(Some(v)) if kind == FnKind::Func => cx.push_return(Some(v), item.block.span()),
         Ok(Some(_)) => {}
         Ok(None) if kind == FnKind::Func && !matches!(ret, Ty::Unit) => {
             // Allowed when every path returns explicitly; rustc checks that on the CPU side.
         }
+        // A unit func with `&mut` parameters returns their values at its end.
+        Ok(None) if !cx.ref_params.is_empty() => cx.push_return(None, item.block.span()),
         Ok(None) => {}
         Err(e) => cx.errors.push(e),
     }
+    // What a func with `&mut` parameters returns (see `Function::ret`).
+    let (ret, ret_syn) = if cx.ref_params.is_empty() {
+        (ret, ret_syn)
+    } else {
+        let mut tys = vec![ret];
+        tys.extend(cx.ref_params.iter().map(|v| cx.ty(*v)));
+        let user: syn::Type = ret_syn.unwrap_or_else(|| syn::parse_quote!(()));
+        let refs = params.iter().filter(|p| p.by_ref).map(|p| &p.syn_ty);
+        (Ty::Tuple(tys), Some(syn::parse_quote!((#user, #(#refs),*))))
+    };
     if cx.tiled.is_some() && kind == FnKind::Func {
         cx.errors.push(syn::Error::new(
             item.sig.ident.span(),
@@ -183,6 +238,13 @@ pub fn lower_kernel(
         ));
     }
     cx.note_tile_consts();
+    cx.note_length_consts();
+    if let (Some(_), Some(sp)) = (&cx.tiled, cx.local_array_span()) {
+        cx.errors.push(syn::Error::new(
+            sp,
+            "local arrays are not supported in tiled kernels yet: use a tile or lane variables",
+        ));
+    }
     if !cx.errors.is_empty() {
         return Err(cx.errors);
     }
@@ -201,6 +263,7 @@ pub fn lower_kernel(
         tiled: cx.tiled,
         shape_obligations: cx.obligations,
         deterministic: None,
+        call_checks: cx.call_checks,
     })
 }
 
@@ -219,9 +282,10 @@ struct Lowerer {
     views: HashMap<VarId, views::ViewDef>,
     /// Module-level consts read (`Op::Const`), each once, in first-use order.
     consts: Vec<syn::Path>,
-    /// Set by a destructuring `let` for the call it lowers: that call (and no other) may be a
-    /// builtin returning a tuple (`let (u, sigma, v) = svd3(a);`).
-    tuple_result: bool,
+    /// A func's `&mut` parameters, in order (see `Function::ret`).
+    ref_params: Vec<VarId>,
+    /// Every user func call's `&mut` arguments (`Function::call_checks`).
+    call_checks: Vec<CallCheck>,
     /// Set by the first tile operation or `lane()`, or by `#[kernel(block_dim = N)]`.
     tiled: Option<Tiled>,
     /// Tile shape rules left to rustc (`Function::shape_obligations`).
@@ -265,6 +329,41 @@ impl Lowerer {
 
     fn ty(&self, v: VarId) -> Ty {
         self.vars[v].ty.clone()
+    }
+
+    /// `return value`: in a func with `&mut` parameters, the tuple of the value (`()` if
+    /// none) and those parameters' current values.
+    fn push_return(&mut self, value: Option<VarId>, span: Span) {
+        let value = if self.ref_params.is_empty() {
+            value
+        } else {
+            let r = match value {
+                Some(v) => v,
+                None => self.def(Op::Tuple(Vec::new()), Ty::Unit, span),
+            };
+            let mut elems = vec![r];
+            elems.extend(self.ref_params.iter().copied());
+            let mut tys = vec![self.ret.clone()];
+            tys.extend(self.ref_params.iter().map(|v| self.ty(*v)));
+            Some(self.def(Op::Tuple(elems), Ty::Tuple(tys), span))
+        };
+        self.push(StmtKind::Return { value }, span);
+    }
+
+    /// The `&mut` parameter `e` names, if it is a bare name of one (`acc`, not `*acc`).
+    fn ref_param(&self, e: &Expr) -> Option<VarId> {
+        let Expr::Path(p) = strip(e) else { return None };
+        let v = self.lookup(&p.path.get_ident()?.to_string())?;
+        self.ref_params.contains(&v).then_some(v)
+    }
+
+    /// The base of a field, an index or a method call, where Rust dereferences a `&mut`
+    /// parameter itself (`acc.x`, `acc[i]`, `acc.length()`).
+    fn base_expr(&mut self, e: &Expr) -> R<VarId> {
+        match self.ref_param(e) {
+            Some(v) => Ok(v),
+            None => self.expr(e, None),
+        }
     }
 
     fn lookup(&self, name: &str) -> Option<VarId> {

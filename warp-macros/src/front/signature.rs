@@ -53,17 +53,64 @@ pub fn parse_type(ty: &Type) -> syn::Result<Ty> {
             ty.span(),
             "references are not supported in kernels: pass arrays as Array<T> and values by value",
         )),
-        Type::Ptr(_) => Err(syn::Error::new(ty.span(), "raw pointers are not supported in kernels")),
-        Type::Array(_) | Type::Slice(_) => Err(syn::Error::new(
+        Type::Ptr(_) => Err(syn::Error::new(
             ty.span(),
-            "fixed-size arrays and slices are not supported in kernels: use Array<T>, a glam vector or a struct",
+            "raw pointers are not supported in kernels",
+        )),
+        // A local array (`[f32; 8]`): a value, in funcs' signatures and `let` annotations.
+        Type::Array(a) => {
+            let elem = parse_type(&a.elem)?;
+            if let Some(why) = local_array_elem_error(&elem) {
+                return Err(syn::Error::new(a.elem.span(), why));
+            }
+            let n = local_array_length(&a.len)?;
+            Ok(Ty::LocalArray(Box::new(elem), n))
+        }
+        Type::Slice(_) => Err(syn::Error::new(
+            ty.span(),
+            "slices are not supported in kernels: use Array<T>, or a local array `[T; N]`",
         )),
         Type::Tuple(t) if t.elems.is_empty() => Ok(Ty::Unit),
-        Type::Tuple(_) => Err(syn::Error::new(ty.span(), "tuples are not supported as kernel types")),
+        // A tuple of values (`(f32, Vec3)`): a func's parameter or result, a `let` annotation.
+        Type::Tuple(t) => {
+            let elems: Vec<Ty> = t.elems.iter().map(parse_type).collect::<syn::Result<_>>()?;
+            tuple_type(elems, ty.span())
+        }
         Type::Paren(p) => parse_type(&p.elem),
         Type::Group(g) => parse_type(&g.elem),
-        _ => Err(syn::Error::new(ty.span(), "this type is not supported in kernels")),
+        _ => Err(syn::Error::new(
+            ty.span(),
+            "this type is not supported in kernels",
+        )),
     }
+}
+
+/// The most elements a tuple has (the CUDA library's `tuple_t` and warp-core's `Adjoint`
+/// impls go this far).
+pub const MAX_TUPLE: usize = 7;
+
+/// A tuple of `elems`, or why the language has no such tuple: 2 to [`MAX_TUPLE`] values
+/// (no arrays, host objects or tiles: those are kernel parameters or block-wide).
+pub fn tuple_type(elems: Vec<Ty>, span: proc_macro2::Span) -> syn::Result<Ty> {
+    if elems.len() < 2 || elems.len() > MAX_TUPLE {
+        return Err(syn::Error::new(
+            span,
+            format!(
+                "tuples in kernels have 2 to {MAX_TUPLE} elements, found {}",
+                elems.len()
+            ),
+        ));
+    }
+    if let Some(t) = elems
+        .iter()
+        .find(|t| matches!(t, Ty::Array(..) | Ty::Object(_) | Ty::Tile(..) | Ty::Unit))
+    {
+        return Err(syn::Error::new(
+            span,
+            format!("`{t}` cannot be a tuple's element: tuples hold values"),
+        ));
+    }
+    Ok(Ty::Tuple(elems))
 }
 
 fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
@@ -93,6 +140,18 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
         return Err(syn::Error::new(
             whole.span(),
             format!("`{elem}` cannot be an array element: pass each one as a parameter"),
+        ));
+    }
+    if let Ty::Tuple(_) = elem {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("`{elem}` cannot be an array element: use one array per element, or a #[derive(Struct)]"),
+        ));
+    }
+    if let Ty::LocalArray(..) = elem {
+        return Err(syn::Error::new(
+            whole.span(),
+            format!("`{elem}` cannot be an array element: add a dimension to the array"),
         ));
     }
     let ndim = match it.next() {
@@ -202,6 +261,58 @@ pub fn tile_rank(dims: &[Dim], span: proc_macro2::Span) -> syn::Result<()> {
     Ok(())
 }
 
+/// Why a type cannot be a local array's element, if it cannot.
+pub fn local_array_elem_error(t: &Ty) -> Option<String> {
+    match t {
+        // Plain `Copy` structs on both back ends (glam's and warp-core's types, wp_core.h's),
+        // with a zero and an adjoint: a Rust array and `wp::local_array_t` hold them as they are.
+        Ty::Scalar(_)
+        | Ty::Vector(..)
+        | Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::Transform(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_) => None,
+        Ty::LocalArray(e, _) => local_array_elem_error(e),
+        Ty::Deferred => Some(
+            "the elements' type is not known here: annotate it (`let a: [f32; 2] = [f(x), f(y)];`)"
+                .into(),
+        ),
+        t => Some(format!(
+            "`{t}` cannot be a local array's element: scalars, vectors, matrices, quaternions, \
+             transforms, spatial vectors and matrices, and local arrays can"
+        )),
+    }
+}
+
+/// A local array's length as written (`[v; N]`, `[f32; N]`): an integer literal of at least 1,
+/// or a module const named by a SCREAMING_CASE path.
+pub fn local_array_length(e: &syn::Expr) -> syn::Result<Dim> {
+    let bad = || {
+        syn::Error::new(
+            e.span(),
+            "a local array's length must be an integer literal or a module const (`8`, `N`)",
+        )
+    };
+    match e {
+        syn::Expr::Lit(syn::ExprLit {
+            lit: syn::Lit::Int(i),
+            ..
+        }) => match i.base10_parse::<u32>() {
+            Ok(0) => Err(syn::Error::new(
+                e.span(),
+                "a local array holds at least one element",
+            )),
+            Ok(n) => Ok(Dim::Lit(n)),
+            Err(_) => Err(bad()),
+        },
+        syn::Expr::Path(p) if p.qself.is_none() => dim_of_path(&p.path).ok_or_else(bad),
+        syn::Expr::Paren(p) => local_array_length(&p.expr),
+        syn::Expr::Group(g) => local_array_length(&g.expr),
+        _ => Err(bad()),
+    }
+}
+
 /// A tile dimension as written in a type or a turbofish: an integer literal, or a module
 /// const named by a SCREAMING_CASE path (`TM`, `consts::TM`).
 pub fn dim_of(arg: &GenericArgument) -> syn::Result<Dim> {
@@ -304,11 +415,18 @@ mod tests {
             parse_type(&parse_quote!(wp::Volume<wp::VoxelIndex>)).unwrap(),
             Ty::Object(ObjectKind::Volume(VolumeElem::Index))
         );
+        // Local arrays, nested, of a literal or a const length.
+        let t = parse_type(&parse_quote!([[Vec3; 2]; consts::N])).unwrap();
+        assert_eq!(t.to_string(), "[[Vec3; 2]; consts::N]");
         for bad in [
             quote::quote!(&f32),
             quote::quote!(String),
             quote::quote!(Vec<f32>),
-            quote::quote!([f32; 3]),
+            quote::quote!([f32]),
+            quote::quote!([f32; 0]),
+            quote::quote!([f32; n + 1]),
+            quote::quote!([HashGrid; 2]),
+            quote::quote!(Array<[f32; 2]>),
             quote::quote!(Array<f32, 5>),
             quote::quote!(Array<bool>),
             quote::quote!(Option<f32>),

@@ -247,7 +247,7 @@ impl Planner<'_> {
                 self.homes[*var].insert(r);
                 self.lane_set[*var] = true;
             }
-            StmtKind::SetMember { var, .. } => {
+            StmtKind::SetMember { var, .. } | StmtKind::SetElem { var, .. } => {
                 self.homes[*var].insert(r);
                 self.lane_set[*var] = true;
             }
@@ -291,6 +291,7 @@ pub fn region_vars(b: &[&Stmt]) -> (Vec<VarId>, HashSet<VarId>) {
             StmtKind::Assign { dst: v, .. }
             | StmtKind::Declare { var: v }
             | StmtKind::SetMember { var: v, .. }
+            | StmtKind::SetElem { var: v, .. }
             | StmtKind::For { var: v, .. } => {
                 note(*v, &mut order);
                 set.insert(*v);

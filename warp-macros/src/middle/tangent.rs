@@ -44,7 +44,15 @@ const MAX_PARAMS: usize = 32;
 fn tangent_type(t: &Ty) -> bool {
     match t {
         Ty::Scalar(s) | Ty::Vector(s, _) => s.is_float(),
-        Ty::Matrix(..) | Ty::Quat(_) | Ty::Deferred => true,
+        Ty::Matrix(..)
+        | Ty::Quat(_)
+        | Ty::SpatialVector(_)
+        | Ty::SpatialMatrix(_)
+        | Ty::Deferred => true,
+        // A local array's tangent is a local array of its elements' tangents.
+        Ty::LocalArray(e, _) => !e.is_deferred() && tangent_type(e),
+        // A tuple's is a tuple: its elements' tangents, or their values where they have none.
+        Ty::Tuple(ts) => ts.iter().any(tangent_type),
         _ => false,
     }
 }
@@ -54,9 +62,11 @@ fn tangent_array(t: &Ty) -> bool {
     matches!(t, Ty::Array(e, _) if !e.is_deferred() && tangent_type(e))
 }
 
-/// Whether a value of this type holds floats that forward mode cannot follow yet.
+/// Whether a value of this type holds floats that forward mode cannot follow yet. A user
+/// struct's fields are invisible to the macro (an integer field's tangent could not be told
+/// from a float's), so a struct computed from differentiated values is refused too.
 fn untracked_float(t: &Ty) -> bool {
-    matches!(t, Ty::Transform(_) | Ty::Tuple(_))
+    matches!(t, Ty::Transform(_) | Ty::Struct(_))
 }
 
 /// The tangent kernel of `f`, or why there is none (a sentence after "it": "calls `quat_rotate`
@@ -93,6 +103,7 @@ pub fn build(f: &Function) -> Result<Function, String> {
             var: v,
             ty: p.ty.clone(),
             syn_ty: p.syn_ty.clone(),
+            by_ref: false,
         });
         if tx.active[p.var] {
             tx.dot[p.var] = Some(v);
@@ -127,6 +138,8 @@ pub fn build(f: &Function) -> Result<Function, String> {
         // The tangent kernel of a deterministic kernel records its primal's accumulations
         // and their tangents' (one each per primal call).
         deterministic: f.deterministic.map(|n| n.saturating_mul(2)),
+        // The primal's calls are the same calls, checked with the primal.
+        call_checks: Vec::new(),
     })
 }
 
@@ -168,7 +181,9 @@ fn activity(f: &Function) -> Vec<bool> {
                     }
                     (*dst, any)
                 }
-                StmtKind::SetMember { var, value, .. } => (*var, active[*value]),
+                StmtKind::SetMember { var, value, .. } | StmtKind::SetElem { var, value, .. } => {
+                    (*var, active[*value])
+                }
                 _ => return,
             };
             let t = &f.vars[dst].ty;
@@ -253,9 +268,19 @@ impl Tx {
     /// Zero of `like`'s type.
     fn zero(&mut self, like: VarId) -> Result<VarId, String> {
         let ty = self.ty(like);
+        self.zero_of(ty, like)
+    }
+
+    /// Zero of type `ty` (`like`: a value of that type, for a type the macro cannot see).
+    fn zero_of(&mut self, ty: Ty, like: VarId) -> Result<VarId, String> {
         Ok(match &ty {
+            Ty::LocalArray(e, _) => {
+                let z = self.zero_of((**e).clone(), like)?;
+                let (ctor, args) = (Ctor::Splat, vec![z]);
+                self.tmp(ty.clone(), Op::Construct { ty, ctor, args })
+            }
             Ty::Scalar(_) => self.tmp(ty.clone(), Op::Lit(Lit::Float(0.0))),
-            Ty::Vector(..) | Ty::Matrix(..) => self.tmp(
+            Ty::Vector(..) | Ty::Matrix(..) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => self.tmp(
                 ty.clone(),
                 Op::Construct {
                     ty: ty.clone(),
@@ -275,6 +300,19 @@ impl Tx {
                 )
             }
             Ty::Deferred => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(0.0), like)),
+            // A tuple of its elements' zeros; an element without a tangent keeps `like`'s value
+            // (see `Op::Tuple`'s rule).
+            Ty::Tuple(ts) => {
+                let mut zs = Vec::new();
+                for (k, t) in ts.iter().enumerate() {
+                    let m = self.tmp(t.clone(), Op::Member(like, k.to_string()));
+                    zs.push(match tangent_type(t) {
+                        true => self.zero_of(t.clone(), m)?,
+                        false => m,
+                    });
+                }
+                self.tmp(ty.clone(), Op::Tuple(zs))
+            }
             other => {
                 return Err(format!(
                     "computes a `{other}` from differentiated values (line {}), which forward mode does not handle yet",
@@ -382,6 +420,17 @@ impl Tx {
                     self.push(StmtKind::Store {
                         array: ta,
                         index: index.clone(),
+                        value: tv,
+                    });
+                }
+            }
+            StmtKind::SetElem { var, index, value } => {
+                self.out.push(s.clone());
+                if let Some(t) = self.dot[*var] {
+                    let tv = self.or_zero(self.dot[*value], *value)?;
+                    self.push(StmtKind::SetElem {
+                        var: t,
+                        index: *index,
                         value: tv,
                     });
                 }
@@ -541,6 +590,13 @@ impl Tx {
                 }
                 None => None,
             },
+            Op::Index { array, index } => match self.dot[*array] {
+                Some(ta) if tangent_type(&self.ty(d)) => {
+                    let (ty, index) = (self.ty(d), *index);
+                    Some(self.tmp(ty, Op::Index { array: ta, index }))
+                }
+                _ => None,
+            },
             Op::Member(v, m) => match self.dot[*v] {
                 Some(t) if tangent_type(&self.ty(d)) => {
                     let ty = self.ty(d);
@@ -548,6 +604,21 @@ impl Tx {
                 }
                 _ => None,
             },
+            // A tuple's tangent is the tuple of its elements' tangents; an element without one
+            // (an integer, a `bool`) keeps its value there, which no member read takes as a
+            // tangent (`tangent_type` of its type is false).
+            Op::Tuple(args) if args.iter().any(|v| self.dot[*v].is_some()) => {
+                let mut targs = Vec::new();
+                for &v in args {
+                    targs.push(match self.dot[v] {
+                        Some(t) => t,
+                        None if tangent_type(&self.ty(v)) => self.zero(v)?,
+                        None => v,
+                    });
+                }
+                Some(self.tmp(self.ty(d), Op::Tuple(targs)))
+            }
+            Op::Tuple(_) => None,
             Op::Construct { ty, ctor, args } => match ctor {
                 Ctor::Const(_) => None,
                 _ if args.iter().all(|v| self.dot[*v].is_none()) => None,
@@ -961,5 +1032,64 @@ mod tests {
         let f = kernel(parse_quote! { fn k(#(#params),*) {} });
         let why = build(&f).unwrap_err();
         assert!(why.contains("would take 34"), "{why}");
+    }
+
+    #[test]
+    fn element_stores_get_tangent_element_stores() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f64>, y: Array<f64>) {
+                let i = tid();
+                let mut a = [0.0f64; 3];
+                for j in 0..3 {
+                    a[j] = x[i] * a[(j + 2) % 3] + x[i];
+                }
+                y[i] = a[1];
+            }
+        });
+        let g = build(&f).unwrap();
+        let a_dot = g
+            .vars
+            .iter()
+            .position(|v| v.name.as_deref() == Some("a_dot"))
+            .expect("the array has a tangent variable");
+        let (mut sets, mut reads) = (0, 0);
+        walk_stmts(&g.body, &mut |s| match &s.kind {
+            StmtKind::SetElem { var, .. } if *var == a_dot => sets += 1,
+            StmtKind::Assign {
+                op: Op::Index { array, .. },
+                ..
+            } if *array == a_dot => reads += 1,
+            _ => {}
+        });
+        // The store's, and the reads of `a[(j + 2) % 3]` and `a[1]`.
+        assert_eq!((sets, reads), (1, 2));
+        // The tangent of the constant `[0.0; 3]`: a repeat of zero.
+        assert_eq!(g.vars[a_dot].ty.to_string(), "[f64; 3]");
+    }
+
+    #[test]
+    fn tuples_carry_their_elements_tangents() {
+        let f = kernel(parse_quote! {
+            fn k(x: Array<f32>, y: Array<f32>) {
+                let i = tid();
+                let t = (x[i] * x[i], 3);
+                let u = if x[i] > 0.0 { t } else { (1.0, 2) };
+                let (a, b) = (u.0 * 2.0, x[i]);
+                y[i] = a + b * u.1 as f32;
+            }
+        });
+        let g = build(&f).unwrap();
+        // The primal's three literals, then three tangents: `t`'s, the constant branch's
+        // zeros (the `if`'s result has a tangent) and the destructured pair's.
+        let mut tuples = 0;
+        walk_stmts(&g.body, &mut |s| {
+            if let StmtKind::Assign {
+                op: Op::Tuple(_), ..
+            } = &s.kind
+            {
+                tuples += 1;
+            }
+        });
+        assert_eq!(tuples, 6);
     }
 }

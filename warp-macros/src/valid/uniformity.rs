@@ -358,6 +358,13 @@ impl Analysis<'_> {
                         self.set_varying(*var);
                     }
                 }
+                // An element written at a varying index varies the array, as a varying value.
+                StmtKind::SetElem { var, index, value } => {
+                    let varying = self.varying[*value] || self.varying[*index];
+                    if varying || level > self.def_level[*var] {
+                        self.set_varying(*var);
+                    }
+                }
                 StmtKind::Store { .. } | StmtKind::Print { .. } | StmtKind::Assert { .. } => {}
                 StmtKind::If { cond, then, els } => {
                     let cause = self.varying[*cond].then_some(s.span);

@@ -211,6 +211,12 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
                 thread,
             }
         }
+        // wp_core.h FAULT_LOCAL_INDEX: the index, the local array's length, the source line.
+        9 => FaultKind::LocalIndex {
+            index: i64_at(8),
+            len: i64_at(16) as usize,
+            line: i64_at(24) as u32,
+        },
         _ => FaultKind::BadStep { step: i64_at(8) },
     };
     Fault {

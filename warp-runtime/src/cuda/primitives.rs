@@ -288,7 +288,7 @@ pub(super) fn scan<T: ScanOps>(
     let mut users = vec![input, output];
     let len = plan_len(len, &mut users, 2);
     let size = std::mem::size_of::<T>() as u64;
-    let p = plan::scan(GPU_TILE, T::CUDA, size, len, inclusive);
+    let p = plan::gpu_scan_algorithm().plan(GPU_TILE, T::CUDA, size, len, inclusive);
     let params = &["input", "output", "count"];
     run(device, ordinal, func, params, &p, &users)
 }

@@ -166,6 +166,15 @@ fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
     {
         sections.push("transform");
     }
+    // Likewise a spatial field (`wp::SpatialVector`, `wp::DSpatialMatrix`, ..) needs the
+    // spatial section, whose adjoint part has the operators' adjoints.
+    if struct_defs
+        .iter()
+        .any(|d| d.contains("SpatialVector") || d.contains("SpatialMatrix"))
+        && !sections.contains(&"spatial")
+    {
+        sections.push("spatial");
+    }
     let used = SECTIONS
         .iter()
         .filter(|s| s.kernel && sections.contains(&s.name));

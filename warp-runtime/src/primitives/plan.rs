@@ -147,6 +147,52 @@ pub fn set_gpu_sort_config(config: Option<SortConfig>) -> crate::Result<()> {
     Ok(())
 }
 
+/// How a GPU scans (`array_scan`; compaction and the reductions are not affected).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ScanAlgorithm {
+    /// Three launches without inter-block waiting: tile totals, one block scanning them (the
+    /// "spine"), tiles rescanned from their offsets ([`scan`]). Reads the input twice; float
+    /// results are the same from run to run.
+    ThreePass,
+    /// One launch after a small init step: decoupled look-back over per-tile status words
+    /// ([`scan_onepass`]). Reads the input once. Integer results equal `ThreePass`'s; float
+    /// sums are added in another order, which depends on timing (within the same rounding
+    /// bound, but not the same from run to run: see `k_scan_onepass` in `wp_primitives.h`).
+    OnePass,
+}
+
+impl ScanAlgorithm {
+    /// The plan of a scan by this algorithm (arguments as [`scan`]).
+    pub fn plan(self, tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -> Plan {
+        match self {
+            ScanAlgorithm::ThreePass => scan(tile, t, size, len, inclusive),
+            ScanAlgorithm::OnePass => scan_onepass(tile, t, size, len, inclusive),
+        }
+    }
+}
+
+/// The scan GPUs use unless a benchmark chose another: the three-phase scan, until a GPU run
+/// has timed both (`cargo bench --bench spatial -- --primitives` prints them side by side).
+pub const GPU_SCAN: ScanAlgorithm = ScanAlgorithm::ThreePass;
+
+/// An algorithm a benchmark or test chose in place of [`GPU_SCAN`] (`set_gpu_scan_algorithm`).
+static SCAN_CHOICE: std::sync::RwLock<Option<ScanAlgorithm>> = std::sync::RwLock::new(None);
+
+/// The algorithm GPU scans use now: [`GPU_SCAN`], unless a benchmark chose another.
+pub fn gpu_scan_algorithm() -> ScanAlgorithm {
+    SCAN_CHOICE
+        .read()
+        .unwrap_or_else(|p| p.into_inner())
+        .unwrap_or(GPU_SCAN)
+}
+
+/// For benchmarks and tests that compare the scans in one process: makes the GPU scans that
+/// follow use `algorithm` (`None`: [`GPU_SCAN`] again). Both are in every scan module.
+#[doc(hidden)]
+pub fn set_gpu_scan_algorithm(algorithm: Option<ScanAlgorithm>) {
+    *SCAN_CHOICE.write().unwrap_or_else(|p| p.into_inner()) = algorithm;
+}
+
 /// The tile a module is compiled for on GPUs.
 pub fn gpu_tile(module: &Module) -> Tile {
     match module {
@@ -367,8 +413,9 @@ pub enum ReduceOp {
     Max = 2,
 }
 
-/// Scan of `T` (C++ name `t`, `size` bytes). Caller's arrays: 0 input, 1 output (may be the
-/// input), then the count array if any.
+/// Three-phase scan of `T` (C++ name `t`, `size` bytes). Caller's arrays: 0 input, 1 output
+/// (may be the input), then the count array if any. Steps: tile totals (reports a bad device
+/// count), the one-block spine, the tiles rescanned; scratch 0 the tile totals.
 pub fn scan(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -> Plan {
     let e = scan_entries(t);
     let nb = tile.blocks(len.capacity());
@@ -400,6 +447,49 @@ pub fn scan(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -
                     cap,
                     scratch(0),
                     Word::Int(inclusive as i64),
+                ],
+            ),
+        ],
+    }
+}
+
+/// Single-pass scan of `T` (C++ name `t`, `size` bytes): decoupled look-back. Caller's arrays
+/// as [`scan`].
+///
+/// Steps: `wp_prim_scan_init` (zeroes the look-back status words and the tile counter,
+/// reports a bad device count; a block per tile's worth of words), then
+/// `wp_prim_scan_onepass_T` (one block per tile, tiles handed out by the counter).
+///
+/// Scratch: 0 the tile counter (u32), 1 the status words (u64, one per tile), 2 the tiles'
+/// values (T, two per tile: used only where T does not fit beside its flag in the status
+/// word, which is the kernel's to decide).
+pub fn scan_onepass(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -> Plan {
+    let nb = tile.blocks(len.capacity());
+    let [count, cap] = len.words();
+    Plan {
+        module: Module::Scan(t),
+        scratch: vec![4, nb * 8, 2 * nb * size],
+        steps: vec![
+            step(
+                "wp_prim_scan_init",
+                nb.div_ceil(tile.elements()),
+                [count, cap, scratch(1), Word::Int(nb as i64), scratch(0)]
+                    .into_iter()
+                    .chain(len.report_words(true)),
+            ),
+            step(
+                format!("wp_prim_scan_onepass_{t}"),
+                nb,
+                [
+                    user(0),
+                    user(1),
+                    count,
+                    cap,
+                    Word::Int(inclusive as i64),
+                    scratch(1),
+                    scratch(2),
+                    scratch(0),
+                    Word::Int(nb as i64),
                 ],
             ),
         ],
@@ -703,6 +793,54 @@ mod tests {
                 ("WP_PRIM_SORT_VARIANT", "1".to_string()),
                 ("WP_PRIM_SORT_MIN_BLOCKS", "2".to_string())
             ]
+        );
+    }
+
+    #[test]
+    fn onepass_scan_plan() {
+        let t = GPU_TILE;
+        let p = scan_onepass(t, "f64", 8, Len::Host(5000), false);
+        assert_eq!(p.module, Module::Scan("f64"));
+        // Counter, a status word per tile, two values per tile.
+        assert_eq!(p.scratch, vec![4, 3 * 8, 2 * 3 * 8]);
+        assert_eq!(
+            p.steps
+                .iter()
+                .map(|s| (s.entry.as_str(), s.blocks))
+                .collect::<Vec<_>>(),
+            vec![("wp_prim_scan_init", 1), ("wp_prim_scan_onepass_f64", 3)]
+        );
+        assert_eq!(p.steps[1].args[4], Word::Int(0));
+        assert_eq!(p.steps[1].args[8], Word::Int(3));
+        // More tiles than one init block zeroes; an empty scan still checks its count.
+        let p = scan_onepass(t, "i32", 4, Len::Host(2048 * 2048 + 1), true);
+        assert_eq!((p.steps[0].blocks, p.steps[1].blocks), (2, 2049));
+        assert_eq!(
+            scan_onepass(t, "i32", 4, Len::Host(0), true).steps[1].blocks,
+            1
+        );
+        // Only the init step reports a bad device count, with the count's argument index.
+        let len = Len::Device {
+            count: 2,
+            capacity: 100,
+            arg: 2,
+        };
+        let p = scan_onepass(t, "u32", 4, len, true);
+        assert_eq!(
+            p.steps[0].args[5..],
+            [Word::Fault, Word::FaultFlag, Word::Int(2), Word::Int(1)]
+        );
+        assert!(!p.steps[1].args.contains(&Word::Fault));
+        assert_eq!(p.steps[1].args[2], Word::Addr(Buf::User(2), 0));
+        // The switch picks the plan; the default is the three-phase scan.
+        assert_eq!(GPU_SCAN, ScanAlgorithm::ThreePass);
+        assert_eq!(
+            ScanAlgorithm::OnePass.plan(t, "u32", 4, len, true),
+            scan_onepass(t, "u32", 4, len, true)
+        );
+        assert_eq!(
+            ScanAlgorithm::ThreePass.plan(t, "u32", 4, len, true),
+            scan(t, "u32", 4, len, true)
         );
     }
 

@@ -19,7 +19,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "length_sq":  VEC_OR_QUAT,    (T) -> ScalarOfT,         "linalg", Adjoint,
         tangent(Tangent::Rule(Add(&Call("dot", &[D0, A0]), &Call("dot", &[D0, A0])))),
         aliases(&["length_squared"]);
-    "outer":      FVEC,           (T, T) -> MatOfT,         "linalg", Adjoint,
+    "outer":      FVEC_OR_SVEC,   (T, T) -> MatOfT,         "linalg", Adjoint,
         tangent(BILINEAR);
     "diag":       FVEC,           (T) -> MatOfT,            "linalg", Adjoint,
         tangent(LINEAR);
@@ -31,7 +31,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
             &This(&[D0, A1]),
             &Call("cw_mul", &[OUT, This(&[D1, A1])]),
         )));
-    "transpose":  MAT,            (T) -> T,                 "linalg", Adjoint,
+    "transpose":  MAT_OR_SMAT,    (T) -> T,                 "linalg", Adjoint,
         tangent(LINEAR), method;
     // det(A)' = det(A) tr(A^-1 A')
     "determinant": MAT,           (T) -> ScalarOfT,         "linalg", Adjoint,

@@ -26,17 +26,31 @@ fn lower_ctor_fn(name: &str) -> Option<Ty> {
     Some(Ty::Vector(scalar, n))
 }
 
-/// How to destructure a decomposition's tuple (for error messages).
-fn tuple_hint(b: &Builtin) -> String {
-    let names = b.results.expect("a tuple result has its names");
-    format!("let {names} = {}(a);", b.name)
+/// The first identifier in `e`'s tokens for which `hit` holds (a conservative "reads": any
+/// mention, wherever it stands).
+fn mentions(e: &Expr, hit: &mut dyn FnMut(&str) -> bool) -> Option<String> {
+    fn walk(ts: proc_macro2::TokenStream, hit: &mut dyn FnMut(&str) -> bool) -> Option<String> {
+        for t in ts {
+            match t {
+                proc_macro2::TokenTree::Ident(i) if hit(&i.to_string()) => {
+                    return Some(i.to_string())
+                }
+                proc_macro2::TokenTree::Group(g) => {
+                    if let Some(n) = walk(g.stream(), hit) {
+                        return Some(n);
+                    }
+                }
+                _ => {}
+            }
+        }
+        None
+    }
+    walk(quote::ToTokens::to_token_stream(e), hit)
 }
 
 impl Lowerer {
     pub(super) fn call(&mut self, c: &syn::ExprCall, want: Option<&Ty>) -> R<VarId> {
         let span = c.span();
-        // Only this call may return a tuple, not the calls in its arguments.
-        let tuple_ok = std::mem::take(&mut self.tuple_result);
         let Expr::Path(fp) = strip(&c.func) else {
             return err(
                 c.func.span(),
@@ -140,17 +154,6 @@ impl Lowerer {
                         ),
                     );
                 }
-                if let (Ty::Tuple(_), false) = (self.ty(v), tuple_ok) {
-                    return err(
-                        span,
-                        format!(
-                            "`{}` returns a tuple `{}`: destructure it where it is called, `{}`",
-                            b.name,
-                            self.ty(v),
-                            tuple_hint(b)
-                        ),
-                    );
-                }
                 return Ok(v);
             }
         }
@@ -174,24 +177,104 @@ impl Lowerer {
                 format!("recursion is not supported in kernels: `{last}` calls itself"),
             );
         }
-        // The func's parameter types are not visible here: literals are left to rustc, which
-        // types them from the func's signature.
+        self.func_call(c, &fp.path, span)
+    }
+
+    /// A call of a user `#[func]`. Its parameter types are not visible here: literals are left
+    /// to rustc, which types them from the func's signature. A `&mut` argument (`&mut a`, a
+    /// field, a lane, an element; in a func, its own `&mut` parameter passed on) is read
+    /// before the call and written back after it from the func's result, which is then the
+    /// tuple of its declared result and its `&mut` parameters' final values (see
+    /// `Function::ret`): the same pure-function-plus-write-back shape as the random draws.
+    fn func_call(&mut self, c: &syn::ExprCall, path: &syn::Path, span: Span) -> R<VarId> {
         let mut args = Vec::new();
+        // The `&mut` arguments: the place, its type and the variable it is part of.
+        let mut outs: Vec<(places::Place, Ty, VarId)> = Vec::new();
+        let mut mut_args = 0u64;
+        for (k, a) in c.args.iter().enumerate() {
+            let Some(place_expr) = self.mut_arg(a)? else {
+                let want = flex_literal(a).map(|_| Ty::Deferred);
+                args.push(self.expr(a, want.as_ref())?);
+                continue;
+            };
+            let place = self.place(place_expr)?;
+            let ty = self.place_ty(&place, place_expr.span())?;
+            let root = match &place {
+                places::Place::Local { var, .. } => *var,
+                places::Place::Elem { array, .. } => *array,
+            };
+            if outs.iter().any(|o| o.2 == root) {
+                return err(
+                    a.span(),
+                    format!(
+                        "`{}` is lent as `&mut` twice in this call (Rust lends a variable mutably once at a time)",
+                        self.vars[root].name.as_deref().unwrap_or("this variable")
+                    ),
+                );
+            }
+            args.push(self.read_place(&place, ty.clone(), a.span()));
+            outs.push((place, ty, root));
+            mut_args |= 1u64.checked_shl(k as u32).unwrap_or(0);
+        }
+        // Rust's borrow rule: no other argument reads a variable lent as `&mut`.
         for a in &c.args {
-            let want = flex_literal(a).map(|_| Ty::Deferred);
-            args.push(self.expr(a, want.as_ref())?);
+            if self.mut_arg(a)?.is_some() {
+                continue;
+            }
+            if let Some(name) = mentions(a, &mut |n| {
+                self.lookup(n)
+                    .is_some_and(|v| outs.iter().any(|o| o.2 == v))
+            }) {
+                return err(
+                    a.span(),
+                    format!("`{name}` is lent as `&mut` in this call and cannot be read by another argument: read it into a local before the call"),
+                );
+            }
         }
-        if !self.callees.iter().any(|p| p == &fp.path) {
-            self.callees.push(fp.path.clone());
+        if !self.callees.iter().any(|p| p == path) {
+            self.callees.push(path.clone());
         }
-        Ok(self.def(
-            Op::Func {
-                path: fp.path.clone(),
-                args,
-            },
-            Ty::Deferred,
+        self.call_checks.push(CallCheck {
             span,
-        ))
+            path: path.clone(),
+            mut_args,
+        });
+        let call = Op::Func {
+            path: path.clone(),
+            args,
+        };
+        let v = self.def(call, Ty::Deferred, span);
+        if outs.is_empty() {
+            return Ok(v);
+        }
+        for (k, (place, ty, _)) in outs.into_iter().enumerate() {
+            let m = self.def(Op::Member(v, (k + 1).to_string()), ty, span);
+            self.write_place(place, m, span);
+        }
+        Ok(self.def(Op::Member(v, "0".into()), Ty::Deferred, span))
+    }
+
+    /// The place a `&mut` argument lends (`&mut a` gives `a`; a func's own `&mut` parameter
+    /// `acc`, passed on, gives itself), or `None` for a value argument.
+    fn mut_arg<'e>(&self, a: &'e Expr) -> R<Option<&'e Expr>> {
+        match strip(a) {
+            Expr::Reference(r) if r.mutability.is_some() => {
+                if let Some(v) = self.ref_param(&r.expr) {
+                    let name = self.vars[v].name.clone().unwrap_or_default();
+                    return err(
+                        r.span(),
+                        format!("`{name}` is a `&mut` already: pass it on as `{name}` (or `&mut *{name}`)"),
+                    );
+                }
+                Ok(Some(&r.expr))
+            }
+            Expr::Reference(r) => err(
+                r.span(),
+                "funcs take values (`f(x)`, a copy) or `&mut` places (`f(&mut x)`): a shared reference `&x` is not a kernel value",
+            ),
+            _ if self.ref_param(a).is_some() => Ok(Some(a)),
+            _ => Ok(None),
+        }
     }
 
     /// Warp's builtins that are other operations here: `div_approx(a, b)` is `a / b` and
@@ -248,6 +331,9 @@ impl Lowerer {
                 (Ctor::Components, vec![Ty::Vector(*s, *n); *n as usize])
             }
             (Ty::Matrix(s, n), "from_diagonal") => (Ctor::Splat, vec![Ty::Vector(*s, *n)]),
+            (Ty::SpatialMatrix(s), "from_rows") => {
+                (Ctor::Components, vec![Ty::SpatialVector(*s); 6])
+            }
             _ => {
                 return err(
                     c.func.span(),
@@ -427,24 +513,34 @@ impl Lowerer {
             return Ok(v);
         }
         if name == "len" && m.args.is_empty() {
-            let a = self.expr(&m.receiver, None)?;
+            let a = self.base_expr(&m.receiver)?;
             if self.is_view(a) {
                 return Ok(self.view_len(a, span));
             }
-            if matches!(self.ty(a), Ty::Array(..)) {
+            // A deferred value's `len()` is a struct's array field's or a func's array result's
+            // (rustc refuses any other value there).
+            if matches!(self.ty(a), Ty::Array(..) | Ty::Deferred) {
                 return Ok(self.def(Op::Len(a), USIZE, span));
+            }
+            if matches!(self.ty(a), Ty::LocalArray(..)) {
+                return Ok(self.local_len(a, span));
             }
             return err(
                 m.method.span(),
                 format!("`len()` is defined on arrays, not on `{}`", self.ty(a)),
             );
         }
+        // A func's `&mut` parameter as a receiver is dereferenced, as Rust does (`acc.length()`).
+        let deref: Option<Expr> = self.ref_param(&m.receiver).map(|_| {
+            let r = &m.receiver;
+            syn::parse_quote_spanned!(r.span()=> (*#r))
+        });
         if let Some(b) = builtins::lookup_method(&name) {
-            let mut args: Vec<&Expr> = vec![&m.receiver];
+            let mut args: Vec<&Expr> = vec![deref.as_ref().unwrap_or(&m.receiver)];
             args.extend(m.args.iter());
             return self.builtin_call(b, &args, want, span);
         }
-        let recv = self.expr(&m.receiver, None)?;
+        let recv = self.base_expr(&m.receiver)?;
         let rt = self.ty(recv);
         let known: Vec<&str> = builtins::BUILTINS
             .iter()

@@ -174,7 +174,12 @@ impl Lowerer {
                     let ok = match &t {
                         Ty::Scalar(s) => s.is_float() || s.is_signed_int(),
                         Ty::Vector(s, _) => *s != Scalar::U32,
-                        Ty::Matrix(..) | Ty::Quat(_) | Ty::Transform(_) | Ty::Deferred => true,
+                        Ty::Matrix(..)
+                        | Ty::Quat(_)
+                        | Ty::Transform(_)
+                        | Ty::SpatialVector(_)
+                        | Ty::SpatialMatrix(_)
+                        | Ty::Deferred => true,
                         Ty::Tile(e, _) => {
                             matches!(**e, Ty::Scalar(s) if s.is_float() || s.is_signed_int())
                         }
@@ -195,10 +200,14 @@ impl Lowerer {
                     }
                     Ok(self.def(Op::Unary(UnOp::Not, v), t, span))
                 }
-                syn::UnOp::Deref(_) => err(
-                    span,
-                    "references are not supported in kernels (no `*` dereference)",
-                ),
+                // `*acc`: the value of a func's `&mut` parameter.
+                syn::UnOp::Deref(_) => match self.ref_param(&u.expr) {
+                    Some(v) => Ok(v),
+                    None => err(
+                        span,
+                        "`*` dereferences a func's `&mut` parameter only (`*acc`): kernels have no other references",
+                    ),
+                },
                 _ => err(span, "this operator is not supported in kernels"),
             },
             Expr::Binary(b) => {
@@ -249,16 +258,23 @@ impl Lowerer {
             Expr::Call(c) => self.call(c, want),
             Expr::MethodCall(m) => self.method_call(m, want),
             Expr::Field(f) => {
-                let syn::Member::Named(name) = &f.member else {
-                    return err(f.member.span(), "tuple fields are not supported in kernels");
+                let (name, name_span) = match &f.member {
+                    syn::Member::Named(n) => (n.to_string(), n.span()),
+                    // `t.0`: an element of a tuple (a func's tuple result is one, unseen).
+                    syn::Member::Unnamed(i) => (i.index.to_string(), i.span),
                 };
-                let base = self.expr(&f.base, None)?;
+                let base = self.base_expr(&f.base)?;
                 let bt = self.ty(base);
-                if matches!(bt, Ty::Array(..)) {
+                if matches!(bt, Ty::Array(..) | Ty::LocalArray(..)) {
                     return err(span, "arrays have no fields: index them, `a[i]`");
                 }
-                let t = self.member_ty(&bt, &name.to_string(), name.span())?;
-                Ok(self.def(Op::Member(base, name.to_string()), t, span))
+                if matches!(f.member, syn::Member::Unnamed(_))
+                    && !matches!(bt, Ty::Tuple(_) | Ty::Deferred | Ty::Struct(_))
+                {
+                    return err(name_span, format!("`{bt}` is no tuple: `.{name}` reads a tuple's element"));
+                }
+                let t = self.member_ty(&bt, &name, name_span)?;
+                Ok(self.def(Op::Member(base, name), t, span))
             }
             Expr::Index(ix) => {
                 if let Expr::MethodCall(m) = strip(&ix.expr) {
@@ -299,7 +315,23 @@ impl Lowerer {
                         return self.tile_index(t, &ix.index, span);
                     }
                 }
-                let (array, index) = self.array_index(ix)?;
+                let base = self.base_expr(&ix.expr)?;
+                // `v[3]`, `m[i][j]`, `m[(i, j)]`: members of a spatial value.
+                if let Some(lanes) = super::places::spatial_index(&self.ty(base), &ix.index)? {
+                    let mut v = base;
+                    for m in lanes {
+                        let t = self.member_ty(&self.ty(v), &m, span)?;
+                        v = self.def(Op::Member(v, m), t, span);
+                    }
+                    return Ok(v);
+                }
+                let (array, index) = match self.array_index_at(base, ix)? {
+                    places::Indexed::View(array, index) => (array, index),
+                    places::Indexed::Local(array, index) => {
+                        let elem = self.local_elem_ty(array);
+                        return Ok(self.def(Op::Index { array, index }, elem, span));
+                    }
+                };
                 let t = match self.ty(array) {
                     Ty::Array(e, _) => *e,
                     _ => Ty::Deferred,
@@ -323,19 +355,11 @@ impl Lowerer {
                 span,
                 "references are not supported in kernels: pass values and arrays directly",
             ),
-            Expr::Array(_) | Expr::Repeat(_) => err(
-                span,
-                "fixed-size arrays are not supported in kernels: use a glam vector or Array<T>",
-            ),
-            Expr::Tuple(_) => err(
-                span,
-                "tuples are not supported in kernels (except array indices a[(i, j)])",
-            ),
+            Expr::Array(a) => self.array_literal(a, want, span),
+            Expr::Repeat(r) => self.array_repeat(r, want, span),
+            Expr::Tuple(t) => self.tuple_expr(t, want, span),
             Expr::Match(_) => err(span, "`match` is not supported in kernels: use if / else"),
-            Expr::Struct(_) => err(
-                span,
-                "struct literals are not supported in kernels yet: pass the struct as an argument",
-            ),
+            Expr::Struct(s) => self.struct_literal(s, span),
             Expr::Range(_) => err(span, "ranges are only supported as `for` loop bounds"),
             Expr::Try(_) => err(span, "`?` is not supported in kernels"),
             Expr::Async(_) | Expr::Await(_) => err(span, "async is not supported in kernels"),
@@ -378,6 +402,15 @@ impl Lowerer {
         if let Some(id) = p.path.get_ident() {
             let name = id.to_string();
             if let Some(v) = self.lookup(&name) {
+                if self.ref_params.contains(&v) {
+                    return err(
+                        span,
+                        format!(
+                            "`{name}` is a `&mut {}`: its value is `*{name}`",
+                            self.ty(v)
+                        ),
+                    );
+                }
                 return Ok(v);
             }
             if is_const_name(&name) {
@@ -411,6 +444,8 @@ impl Lowerer {
                     Ty::Matrix(..) => ["ZERO", "IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Quat(_) => ["IDENTITY", "NAN"].contains(&name.as_str()),
                     Ty::Transform(_) => name == "IDENTITY",
+                    Ty::SpatialVector(_) => name == "ZERO",
+                    Ty::SpatialMatrix(_) => ["ZERO", "IDENTITY"].contains(&name.as_str()),
                     _ => false,
                 };
                 if !known {
@@ -436,12 +471,27 @@ impl Lowerer {
         )
     }
 
+    /// `(a, b, ..)`: a tuple of the values (each typed by `want`'s element, if any).
+    fn tuple_expr(&mut self, t: &syn::ExprTuple, want: Option<&Ty>, span: Span) -> R<VarId> {
+        let wants: Vec<Option<Ty>> = match want {
+            Some(Ty::Tuple(ws)) if ws.len() == t.elems.len() => {
+                ws.iter().cloned().map(Some).collect()
+            }
+            _ => vec![None; t.elems.len()],
+        };
+        let mut elems = Vec::new();
+        for (e, w) in t.elems.iter().zip(&wants) {
+            elems.push(self.expr(e, w.as_ref())?);
+        }
+        let tys = elems.iter().map(|v| self.ty(*v)).collect();
+        let ty = crate::front::signature::tuple_type(tys, span)?;
+        Ok(self.def(Op::Tuple(elems), ty, span))
+    }
+
     /// A module-level `const` (Warp's `wp.constant`): its value on the CPU is the const
     /// itself; the CUDA source gets it at assembly. Its type is the const's (`Deferred` here).
-    fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
-        if !self.consts.contains(path) {
-            self.consts.push(path.clone());
-        }
+    pub(super) fn user_const(&mut self, path: &syn::Path, span: Span) -> VarId {
+        self.note_const(path);
         self.def(Op::Const(path.clone()), Ty::Deferred, span)
     }
 }

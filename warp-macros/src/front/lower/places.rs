@@ -1,23 +1,58 @@
-//! Places: what can be assigned (a local, an array element, and a field path of either), `=`
-//! and the compound assignments, reading and writing a place (writing a field of an array
-//! element loads, sets and stores the element), the types of members, and array indexing
-//! with one index variable per dimension.
+//! Places: what can be assigned (a local, an array element, and a path of fields and local
+//! array elements of either), `=` and the compound assignments, reading and writing a place
+//! (writing a field of an array element loads, sets and stores the element; writing inside
+//! an element of a local array reads, sets and writes back the element), the types of
+//! members, array indexing with one index variable per dimension, and a spatial value's
+//! lanes by literal index (members).
 
 use super::typing::flex_literal;
+
+/// The field names of a path of fields.
+fn fields(path: &[Step]) -> Vec<String> {
+    let name = |s: &Step| match s {
+        Step::Field(m) => Some(m.clone()),
+        Step::Elem(_) => None,
+    };
+    path.iter().filter_map(name).collect()
+}
 use super::*;
 use crate::operators::binary_result;
 
-/// An assignable place: a local (with a member path) or an array element (with a member path).
+/// What `a[i]` indexes.
+pub(super) enum Indexed {
+    /// An array (after resolving views), one index variable per dimension.
+    View(VarId, Vec<VarId>),
+    /// A local array and the index.
+    Local(VarId, VarId),
+}
+
+/// A step of a local's place: a field, or an element of a local array.
+#[derive(Clone)]
+pub(super) enum Step {
+    Field(String),
+    Elem(VarId),
+}
+
+/// An assignable place: a local or an array element, with a path of fields and local array
+/// elements (a struct's array field, `ps[i].w[k]`).
 pub(super) enum Place {
     Local {
         var: VarId,
-        path: Vec<String>,
+        path: Vec<Step>,
     },
     Elem {
         array: VarId,
         index: Vec<VarId>,
-        path: Vec<String>,
+        path: Vec<Step>,
     },
+}
+
+impl Place {
+    fn path_mut(&mut self) -> &mut Vec<Step> {
+        match self {
+            Place::Local { path, .. } | Place::Elem { path, .. } => path,
+        }
+    }
 }
 
 impl Lowerer {
@@ -28,6 +63,16 @@ impl Lowerer {
         rhs: &Expr,
         span: Span,
     ) -> R<()> {
+        if let Some(v) = self.ref_param(lhs) {
+            let name = self.vars[v].name.clone().unwrap_or_default();
+            return err(
+                lhs.span(),
+                format!(
+                    "`{name}` is a `&mut {}`: assign through it, `*{name} = ..`",
+                    self.ty(v)
+                ),
+            );
+        }
         let place = self.place(lhs)?;
         let place_ty = self.place_ty(&place, lhs.span())?;
         // Current value, for compound assignment.
@@ -90,25 +135,55 @@ impl Lowerer {
                 }
                 Ok(Place::Local { var, path: vec![] })
             }
+            // `*acc`: a func's `&mut` parameter.
+            Expr::Unary(u) if matches!(u.op, syn::UnOp::Deref(_)) => match self.ref_param(&u.expr) {
+                Some(var) => Ok(Place::Local { var, path: vec![] }),
+                None => err(
+                    u.span(),
+                    "`*` dereferences a func's `&mut` parameter only (`*acc`): kernels have no other references",
+                ),
+            },
             Expr::Field(f) => {
-                let syn::Member::Named(m) = &f.member else {
-                    return err(f.member.span(), "tuple fields are not supported in kernels");
+                // `t.0`: an element of a tuple.
+                let m = match &f.member {
+                    syn::Member::Named(m) => m.to_string(),
+                    syn::Member::Unnamed(i) => i.index.to_string(),
                 };
                 let mut inner = self.place(&f.base)?;
-                match &mut inner {
-                    Place::Local { path, .. } | Place::Elem { path, .. } => {
-                        path.push(m.to_string())
-                    }
-                }
+                inner.path_mut().push(Step::Field(m));
                 Ok(inner)
             }
             Expr::Index(ix) => {
-                let (array, index) = self.array_index(ix)?;
-                Ok(Place::Elem {
-                    array,
-                    index,
-                    path: vec![],
-                })
+                let base = self.peek_place_ty(&ix.expr);
+                // `v[3] = x`, `m[i][j] += x`, `a[i][3] = x`: members of a spatial value in a
+                // place.
+                if let Some(lanes) = base.as_ref().map(|t| spatial_index(t, &ix.index)) {
+                    if let Some(lanes) = lanes? {
+                        let mut inner = self.place(&ix.expr)?;
+                        inner.path_mut().extend(lanes.into_iter().map(Step::Field));
+                        return Ok(inner);
+                    }
+                }
+                // An element of a local array (or of a struct's array field, whose type only
+                // the target compilers see): a step of the array's own place.
+                if let Some(Ty::LocalArray(..) | Ty::Deferred) = base {
+                    let mut inner = self.place(&ix.expr)?;
+                    let i = self.local_index(&ix.index)?;
+                    inner.path_mut().push(Step::Elem(i));
+                    return Ok(inner);
+                }
+                match self.array_index(ix)? {
+                    Indexed::View(array, index) => Ok(Place::Elem {
+                        array,
+                        index,
+                        path: vec![],
+                    }),
+                    Indexed::Local(..) => err(
+                        ix.expr.span(),
+                        "cannot assign to an element of this array: it is a temporary value, \
+                         bind it with `let mut` first",
+                    ),
+                }
             }
             other => err(other.span(), "cannot assign to this expression"),
         }
@@ -125,14 +200,21 @@ impl Lowerer {
 
     pub(super) fn place_ty(&self, p: &Place, span: Span) -> R<Ty> {
         let (mut t, path) = match p {
-            Place::Local { var, path } => (self.ty(*var), path),
+            Place::Local { var, path } => (self.ty(*var), path.clone()),
             Place::Elem { array, path, .. } => match self.ty(*array) {
-                Ty::Array(e, _) => (*e, path),
-                _ => (Ty::Deferred, path),
+                Ty::Array(e, _) => (*e, path.clone()),
+                _ => (Ty::Deferred, path.clone()),
             },
         };
-        for m in path {
-            t = self.member_ty(&t, m, span)?;
+        for step in &path {
+            t = match step {
+                Step::Field(m) => self.member_ty(&t, m, span)?,
+                Step::Elem(_) => match t {
+                    Ty::LocalArray(e, _) => *e,
+                    Ty::Deferred => Ty::Deferred,
+                    t => return err(span, format!("`{t}` cannot be indexed")),
+                },
+            };
         }
         Ok(t)
     }
@@ -159,29 +241,28 @@ impl Lowerer {
             }
         };
         let n = path.len();
-        for (k, m) in path.into_iter().enumerate() {
+        for (k, step) in path.into_iter().enumerate() {
             let t = if k + 1 == n {
                 ty.clone()
             } else {
-                self.member_ty(&self.ty(v), &m, span)
-                    .unwrap_or(Ty::Deferred)
+                match &step {
+                    Step::Field(m) => self.member_ty(&self.ty(v), m, span),
+                    Step::Elem(_) => Ok(self.local_elem_ty(v)),
+                }
+                .unwrap_or(Ty::Deferred)
             };
-            v = self.def(Op::Member(v, m), t, span);
+            let op = match step {
+                Step::Field(m) => Op::Member(v, m),
+                Step::Elem(index) => Op::Index { array: v, index },
+            };
+            v = self.def(op, t, span);
         }
         v
     }
 
     pub(super) fn write_place(&mut self, p: Place, value: VarId, span: Span) {
         match p {
-            Place::Local { var, path } if path.is_empty() => self.push(
-                StmtKind::Assign {
-                    dst: var,
-                    op: Op::Copy(value),
-                    define: false,
-                },
-                span,
-            ),
-            Place::Local { var, path } => self.push(StmtKind::SetMember { var, path, value }, span),
+            Place::Local { var, path } => self.write_local(var, &path, value, span),
             Place::Elem { array, index, path } if path.is_empty() => self.push(
                 StmtKind::Store {
                     array,
@@ -212,14 +293,7 @@ impl Lowerer {
                     },
                     span,
                 );
-                self.push(
-                    StmtKind::SetMember {
-                        var: tmp,
-                        path,
-                        value,
-                    },
-                    span,
-                );
+                self.write_local(tmp, &path, value, span);
                 self.push(
                     StmtKind::Store {
                         array,
@@ -232,22 +306,129 @@ impl Lowerer {
         }
     }
 
-    /// `a[i]`, `a[(i, j)]`: the array variable and one index variable per dimension.
-    pub(super) fn array_index(&mut self, ix: &syn::ExprIndex) -> R<(VarId, Vec<VarId>)> {
+    /// The type of a place expression as far as locals, fields and indices show it, without
+    /// lowering anything: how `place` tells a spatial value's lane (`v[3] = x`) and a local
+    /// array's element (`a[i] = x`, `a[i][3] = x`) from an array store.
+    fn peek_place_ty(&self, e: &Expr) -> Option<Ty> {
+        match strip(e) {
+            Expr::Path(p) => Some(self.ty(self.lookup(&p.path.get_ident()?.to_string())?)),
+            Expr::Unary(u) if matches!(u.op, syn::UnOp::Deref(_)) => {
+                self.ref_param(&u.expr).map(|v| self.ty(v))
+            }
+            Expr::Field(f) => match (&f.member, self.peek_place_ty(&f.base)?) {
+                // A struct's field: its type is the target compilers' to see.
+                (syn::Member::Named(_), Ty::Struct(_) | Ty::Deferred) => Some(Ty::Deferred),
+                (syn::Member::Named(m), t) => t.member_ty(&m.to_string()),
+                (syn::Member::Unnamed(i), t) => t.member_ty(&i.index.to_string()),
+            },
+            Expr::Index(ix) => match self.peek_place_ty(&ix.expr)? {
+                Ty::Array(e, _) | Ty::LocalArray(e, _) => Some(*e),
+                Ty::Deferred => Some(Ty::Deferred),
+                t => spatial_index(&t, &ix.index)
+                    .ok()??
+                    .iter()
+                    .try_fold(t, |t, m| t.member_ty(m)),
+            },
+            _ => None,
+        }
+    }
+
+    /// `var.path = value` for a local: an assignment, a member path, or (for a path through a
+    /// local array's element) the element read, written at the rest of the path, and set
+    /// back; an array reached through fields (a struct's array field, `s.w[k] = v`) is read,
+    /// its element written, and set back.
+    fn write_local(&mut self, var: VarId, path: &[Step], value: VarId, span: Span) {
+        let Some(k) = path.iter().position(|s| matches!(s, Step::Elem(_))) else {
+            let path = fields(path);
+            let kind = match path.is_empty() {
+                true => StmtKind::Assign {
+                    dst: var,
+                    op: Op::Copy(value),
+                    define: false,
+                },
+                false => StmtKind::SetMember { var, path, value },
+            };
+            return self.push(kind, span);
+        };
+        if k > 0 {
+            let inner = Place::Local {
+                var,
+                path: path[..k].to_vec(),
+            };
+            let ty = self.place_ty(&inner, span).unwrap_or(Ty::Deferred);
+            let old = self.read_place(&inner, ty.clone(), span);
+            let tmp = self.new_var(None, ty, true);
+            let copy = StmtKind::Assign {
+                dst: tmp,
+                op: Op::Copy(old),
+                define: true,
+            };
+            self.push(copy, span);
+            self.write_local(tmp, &path[k..], value, span);
+            let path = fields(&path[..k]);
+            return self.push(
+                StmtKind::SetMember {
+                    var,
+                    path,
+                    value: tmp,
+                },
+                span,
+            );
+        }
+        let Step::Elem(index) = path[k] else {
+            unreachable!("found above")
+        };
+        let rest = &path[k + 1..];
+        let value = if rest.is_empty() {
+            value
+        } else {
+            let elem = self.local_elem_ty(var);
+            let old = self.def(Op::Index { array: var, index }, elem.clone(), span);
+            let tmp = self.new_var(None, elem, true);
+            let copy = StmtKind::Assign {
+                dst: tmp,
+                op: Op::Copy(old),
+                define: true,
+            };
+            self.push(copy, span);
+            self.write_local(tmp, rest, value, span);
+            tmp
+        };
+        self.push(StmtKind::SetElem { var, index, value }, span);
+    }
+
+    /// `a[i]`, `a[(i, j)]`: the array variable and one index variable per dimension; or a
+    /// local array and its index (`a[i]`). A spatial value's lanes (`v[3]`) are members,
+    /// resolved by the callers through [`spatial_index`] before.
+    pub(super) fn array_index(&mut self, ix: &syn::ExprIndex) -> R<Indexed> {
         let array = self.expr(&ix.expr, None)?;
+        self.array_index_at(array, ix)
+    }
+
+    /// [`Lowerer::array_index`] of the already lowered `array` (`ix.expr`).
+    pub(super) fn array_index_at(&mut self, array: VarId, ix: &syn::ExprIndex) -> R<Indexed> {
         let at = self.ty(array);
         let ndim = match &at {
             Ty::Array(_, n) => *n,
-            Ty::Deferred => return err(ix.expr.span(), "only arrays can be indexed"),
-            t => {
+            Ty::LocalArray(..) => {
+                return Ok(Indexed::Local(array, self.local_index(&ix.index)?));
+            }
+            // A struct's array field or a func's array result: a local array whose type
+            // only the target compilers see (rustc refuses any other value there).
+            Ty::Deferred => {
+                return Ok(Indexed::Local(array, self.local_index(&ix.index)?));
+            }
+            t @ (Ty::Vector(..) | Ty::Quat(_)) => {
                 return err(
                     ix.expr.span(),
                     format!("`{t}` cannot be indexed: vectors use .x .y .z .w"),
                 )
             }
+            t => return err(ix.expr.span(), format!("`{t}` cannot be indexed")),
         };
         let index = self.index_vars(&ix.index, ndim)?;
-        Ok(self.resolve_view(array, index, ix.span()))
+        let (array, index) = self.resolve_view(array, index, ix.span());
+        Ok(Indexed::View(array, index))
     }
 
     pub(super) fn index_vars(&mut self, e: &Expr, ndim: u8) -> R<Vec<VarId>> {
@@ -273,4 +454,53 @@ impl Lowerer {
         }
         Ok(out)
     }
+}
+
+/// The members `base[index]` names where `base` is a spatial value: lane `k` of a spatial
+/// vector (`v[k]`: `["k"]`), row `i` of a spatial matrix (`m[i]`) or its entry (`m[(i, j)]`:
+/// `["i", "j"]`; `m[i][j]` is the row's lane). Indices are integer literals, checked here: a
+/// lane is a field of the type on both back ends, so no index is checked at run time. `None`
+/// for a base of another type.
+pub(super) fn spatial_index(base: &Ty, index: &Expr) -> R<Option<Vec<String>>> {
+    let (what, parts) = match base {
+        Ty::SpatialVector(_) => ("a spatial vector's lane", 1),
+        Ty::SpatialMatrix(_) => ("a spatial matrix's row", 2),
+        _ => return Ok(None),
+    };
+    let elems: Vec<&Expr> = match strip(index) {
+        Expr::Tuple(t) if parts == 2 => t.elems.iter().collect(),
+        e => vec![e],
+    };
+    if elems.len() > parts {
+        return err(
+            index.span(),
+            "a spatial matrix takes two indices, `m[(i, j)]`",
+        );
+    }
+    let mut lanes = Vec::new();
+    for e in elems {
+        let k = match strip(e) {
+            Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Int(i),
+                ..
+            }) => i.base10_parse::<u64>().ok(),
+            _ => None,
+        };
+        match k {
+            Some(k) if k < 6 => lanes.push(k.to_string()),
+            Some(k) => {
+                return err(
+                    e.span(),
+                    format!("index {k} is out of range: {what} is 0 to 5"),
+                )
+            }
+            None => {
+                return err(
+                    e.span(),
+                    format!("{what} is indexed by an integer literal, 0 to 5 (`v[3]`, `m[(1, 2)]`): a run-time index is not supported"),
+                )
+            }
+        }
+    }
+    Ok(Some(lanes))
 }

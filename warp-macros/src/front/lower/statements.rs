@@ -6,18 +6,6 @@
 use super::expressions::{is_compound_assign, map_binop};
 use super::*;
 
-/// The type annotation of a `let`: a kernel type, or a tuple of them (for a destructured
-/// decomposition).
-fn let_type(ty: &syn::Type) -> R<Ty> {
-    match ty {
-        syn::Type::Tuple(t) if !t.elems.is_empty() => {
-            Ok(Ty::Tuple(t.elems.iter().map(parse_type).collect::<R<_>>()?))
-        }
-        syn::Type::Paren(p) => let_type(&p.elem),
-        _ => parse_type(ty),
-    }
-}
-
 fn is_tid_call(e: &Expr) -> bool {
     match strip(e) {
         Expr::Call(c) => match strip(&c.func) {
@@ -99,12 +87,13 @@ impl Lowerer {
             return err(span, "`let ... else` is not supported in kernels");
         }
         let (pat, annot) = match &local.pat {
-            Pat::Type(pt) => (&*pt.pat, Some(let_type(&pt.ty)?)),
+            Pat::Type(pt) => (&*pt.pat, Some(parse_type(&pt.ty)?)),
             p => (p, None),
         };
         if let Pat::Tuple(tuple) = pat {
             if !is_tid_call(&init.expr) {
-                return self.destructure(tuple, &init.expr, annot, span);
+                let value = self.expr(&init.expr, annot.as_ref())?;
+                return self.bind_tuple(tuple, value, annot.as_ref(), span);
             }
             // `let (i, j) = tid();`
             let n = tuple.elems.len();
@@ -129,7 +118,7 @@ impl Lowerer {
             }
             return Ok(());
         }
-        let value = self.expr(&init.expr, annot.as_ref())?;
+        let mut value = self.expr(&init.expr, annot.as_ref())?;
         if let Some(a) = &annot {
             let vt = self.ty(value);
             if !vt.is_deferred() && vt != *a {
@@ -138,60 +127,107 @@ impl Lowerer {
                     format!("mismatched types: expected `{a}`, found `{vt}`"),
                 );
             }
+            // A value the macro cannot type (a struct field, a func's result: a local array, a
+            // spatial vector) takes the annotation's type, which the target compilers check, so
+            // that `let v: SpatialVector = b.twist;` can be indexed and the elements of
+            // `let b: [f32; 8] = f(a);` read and written.
+            if vt.is_deferred() && !a.is_deferred() {
+                value = self.def(Op::Copy(value), a.clone(), init.expr.span());
+            }
         }
         self.bind_pat(pat, value, span)
     }
 
-    /// `let (u, sigma, v) = svd3(a);`: the call's tuple, then one member read per bound name.
-    fn destructure(
+    /// `let (a, b) = value;` (`value` a tuple: a decomposition's, a func's, a local, a
+    /// literal): one member read per bound name, `_` skipped, a nested pattern destructured in
+    /// turn. A func's result has a type the macro cannot see: it is copied into a variable
+    /// whose type states the pattern's length (`(_, _)`, or the annotation's), which rustc
+    /// then checks.
+    fn bind_tuple(
         &mut self,
         tuple: &syn::PatTuple,
-        init: &Expr,
-        annot: Option<Ty>,
+        mut value: VarId,
+        annot: Option<&Ty>,
         span: Span,
     ) -> R<()> {
-        let only = "tuple patterns are only supported for `let (i, j) = tid();` and the \
-                    decompositions (`let (u, sigma, v) = svd3(a);`, `let (q, d) = eig3(a);`, ..)";
-        if !matches!(strip(init), Expr::Call(_)) {
-            return err(tuple.span(), only);
-        }
-        self.tuple_result = true;
-        let value = self.expr(init, None);
-        self.tuple_result = false;
-        let value = value?;
-        let Ty::Tuple(tys) = self.ty(value) else {
-            return err(tuple.span(), only);
-        };
-        if tys.len() != tuple.elems.len() {
-            return err(
-                tuple.span(),
-                format!(
-                    "this pattern binds {} value(s), but the call returns {}: `{}`",
-                    tuple.elems.len(),
-                    tys.len(),
-                    self.ty(value)
-                ),
-            );
-        }
-        if let Some(a) = annot {
-            let ok = matches!(&a, Ty::Tuple(w) if w.len() == tys.len()
-                && w.iter().zip(&tys).all(|(w, t)| t.is_deferred() || w == t));
-            if !ok {
+        let n = tuple.elems.len();
+        let tys = match self.ty(value) {
+            Ty::Tuple(tys) if tys.len() == n => tys,
+            Ty::Deferred => {
+                let ty = match annot {
+                    Some(a @ Ty::Tuple(w)) if w.len() == n => a.clone(),
+                    _ => Ty::Tuple(vec![Ty::Deferred; n]),
+                };
+                value = self.def(Op::Copy(value), ty.clone(), tuple.span());
+                let Ty::Tuple(tys) = ty else { unreachable!("a tuple") };
+                tys
+            }
+            t @ Ty::Tuple(_) => {
+                // A decomposition's parts have names (Warp's output arguments).
+                let hint = match self.blocks.last().and_then(|b| b.last()) {
+                    Some(Stmt {
+                        kind:
+                            StmtKind::Assign {
+                                dst,
+                                op: Op::Builtin { builtin, .. },
+                                ..
+                            },
+                        ..
+                    }) if *dst == value => builtin
+                        .results
+                        .map(|r| format!(": `let {r} = {}(..);`", builtin.name)),
+                    _ => None,
+                };
                 return err(
-                    init.span(),
+                    tuple.span(),
                     format!(
-                        "mismatched types: expected `{a}`, found `{}`",
-                        self.ty(value)
+                        "this pattern binds {n} value(s), but the value is a `{t}`{}",
+                        hint.unwrap_or_default()
                     ),
                 );
             }
-        }
+            t => {
+                return err(
+                    tuple.span(),
+                    format!("a tuple pattern destructures a tuple (a func's or a decomposition's result, `(a, b)`), found `{t}`"),
+                )
+            }
+        };
+        let annots: Vec<Option<&Ty>> = match annot {
+            Some(a @ Ty::Tuple(w)) => {
+                let ok = w.len() == n && w.iter().zip(&tys).all(|(w, t)| t.is_deferred() || w == t);
+                if !ok {
+                    return err(
+                        tuple.span(),
+                        format!(
+                            "mismatched types: expected `{a}`, found `{}`",
+                            self.ty(value)
+                        ),
+                    );
+                }
+                w.iter().map(Some).collect()
+            }
+            Some(a) => {
+                return err(
+                    tuple.span(),
+                    format!("mismatched types: expected `{a}`, found a tuple pattern"),
+                )
+            }
+            None => vec![None; n],
+        };
         for (k, (el, ty)) in tuple.elems.iter().zip(tys).enumerate() {
+            let el = match el {
+                Pat::Paren(p) => &*p.pat,
+                el => el,
+            };
             if matches!(el, Pat::Wild(_)) {
                 continue;
             }
             let v = self.def(Op::Member(value, k.to_string()), ty, el.span());
-            self.bind_pat(el, v, span)?;
+            match el {
+                Pat::Tuple(inner) => self.bind_tuple(inner, v, annots[k], span)?,
+                el => self.bind_pat(el, v, span)?,
+            }
         }
         Ok(())
     }
@@ -248,7 +284,7 @@ impl Lowerer {
             }
             other => err(
                 other.span(),
-                "only plain names (and `let (i, j) = tid();`) can be bound in kernels",
+                "only plain names, `_` and tuple patterns (`let (a, b) = f(x);`) can be bound in kernels",
             ),
         }
     }
@@ -360,7 +396,7 @@ impl Lowerer {
             }
             (None, _) => None,
         };
-        self.push(StmtKind::Return { value }, span);
+        self.push_return(value, span);
         Ok(())
     }
 
@@ -405,7 +441,8 @@ impl Lowerer {
         let fmt_span = mac.tokens.span();
         let mut values = Vec::new();
         for a in it {
-            values.push(self.expr(a, None)?);
+            // `println!("{}", acc)` prints the value a `&mut` parameter refers to, as in Rust.
+            values.push(self.base_expr(a)?);
         }
         let pieces = self.parse_format(&fmt, &values, fmt_span)?;
         self.push(StmtKind::Print { pieces, newline }, mac.span());
@@ -455,6 +492,20 @@ impl Lowerer {
                         return err(
                             span,
                             format!("a `{}` cannot be printed in kernels", k.row().name),
+                        );
+                    }
+                    if let t @ Ty::Tuple(_) = self.ty(var) {
+                        return err(
+                            span,
+                            format!(
+                                "a tuple (`{t}`) cannot be printed in kernels: print its elements"
+                            ),
+                        );
+                    }
+                    if let t @ Ty::LocalArray(..) = self.ty(var) {
+                        return err(
+                            span,
+                            format!("a local array (`{t}`) cannot be printed in kernels: print its elements"),
                         );
                     }
                     if !text.is_empty() {

@@ -1,7 +1,7 @@
 //! Tests of lowering as a whole: kernels in, IR or errors out.
 
 use super::*;
-use crate::types::{F32, I32};
+use crate::types::{Dim, F32, I32};
 use syn::parse_quote;
 
 fn lower(item: syn::ItemFn) -> Function {
@@ -24,6 +24,114 @@ fn find_var(f: &Function, name: &str) -> Ty {
         .unwrap()
         .ty
         .clone()
+}
+
+#[test]
+fn mut_params_return_their_values_after_the_result() {
+    let item: syn::ItemFn = parse_quote! {
+        fn f(acc: &mut f32, x: f32, v: &mut Vec3) -> bool {
+            if x < 0.0 {
+                return false;
+            }
+            *acc += x;
+            v.y = acc.max(x);
+            true
+        }
+    };
+    let f = lower_fn(&item, FnKind::Func).unwrap();
+    assert_eq!(f.ret.to_string(), "(bool, f32, Vec3)");
+    let by_ref: Vec<bool> = f.params.iter().map(|p| p.by_ref).collect();
+    assert_eq!(by_ref, [true, false, true]);
+    // Both returns give the tuple (result, *acc, *v).
+    let mut returns = 0;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Return { value: Some(v) } = &s.kind {
+            assert_eq!(f.vars[*v].ty.to_string(), "(bool, f32, Vec3)");
+            returns += 1;
+        }
+    });
+    assert_eq!(returns, 2);
+    // A unit func returns `((), ..)` at its end.
+    let item: syn::ItemFn = parse_quote! {
+        fn g(acc: &mut f32) { *acc = 1.0; }
+    };
+    let g = lower_fn(&item, FnKind::Func).unwrap();
+    assert!(matches!(
+        g.body.last().unwrap().kind,
+        StmtKind::Return { value: Some(_) }
+    ));
+}
+
+#[test]
+fn mut_arguments_are_read_then_written_back() {
+    let f = lower(parse_quote! {
+        fn k(a: Array<f32>) {
+            let i = tid();
+            let mut s = 0.0f32;
+            let mut v = Vec3::ZERO;
+            let r = stepper(&mut s, &mut v.y, a[i]);
+            stepper(&mut a[i], &mut s, 1.0);
+        }
+    });
+    assert_eq!(f.call_checks.len(), 2);
+    assert_eq!(f.call_checks[0].mut_args, 0b011);
+    // `v.y` is read; the first call's result is element "0", `s` is written from "1", `v.y`
+    // from "2"; the array element is stored from the second call's "1".
+    let mut members = Vec::new();
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign {
+            op: Op::Member(_, m),
+            ..
+        } = &s.kind
+        {
+            members.push(m.clone());
+        }
+    });
+    assert_eq!(members, ["y", "1", "2", "0", "1", "2", "0"]);
+    let stores = f
+        .body
+        .iter()
+        .filter(|s| matches!(s.kind, StmtKind::Store { .. }))
+        .count();
+    assert_eq!(stores, 1);
+}
+
+#[test]
+fn mut_arguments_refused() {
+    let e = errors(
+        parse_quote! {
+            fn k(a: Array<f32>) {
+                let i = tid();
+                let mut s = 0.0f32;
+                let t = 1.0f32;
+                stepper(&mut s, &mut s);
+                stepper(&mut s, s + 1.0);
+                stepper(&mut t);
+                stepper(&a[i]);
+            }
+        },
+        FnKind::Kernel,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(e[0].contains("lent as `&mut` twice"), "{e:?}");
+    assert!(e[1].contains("cannot be read by another argument"), "{e:?}");
+    assert!(e[2].contains("immutable"), "{e:?}");
+    assert!(e[3].contains("shared reference"), "{e:?}");
+    let e = errors(
+        parse_quote! {
+            fn f(acc: &mut f32, x: &f32) {
+                let y = acc + 1.0;
+                acc = 2.0;
+                g(&mut acc);
+            }
+        },
+        FnKind::Func,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(e[0].contains("shared reference `&T` adds nothing"), "{e:?}");
+    assert!(e[1].contains("its value is `*acc`"), "{e:?}");
+    assert!(e[2].contains("assign through it"), "{e:?}");
+    assert!(e[3].contains("is a `&mut` already"), "{e:?}");
 }
 
 #[test]
@@ -72,7 +180,7 @@ fn decompositions_destructure_into_members() {
 }
 
 #[test]
-fn tuples_only_where_destructured() {
+fn tuples_are_checked_where_destructured() {
     let e = errors(
         parse_quote! {
             fn k(a: Array<Mat3>) {
@@ -81,23 +189,28 @@ fn tuples_only_where_destructured() {
                 let (x, y) = a[i];
                 let (p, q) = svd3(a[i]);
                 let m = transpose(qr3(a[i]));
+                let w = t.3;
             }
         },
         FnKind::Kernel,
     );
     assert_eq!(e.len(), 4, "{e:?}");
-    assert!(e[0].contains("destructure it"), "{}", e[0]);
     assert!(
-        e[1].contains("tuple patterns are only supported"),
+        e[0].contains("a tuple pattern destructures a tuple"),
+        "{}",
+        e[0]
+    );
+    assert!(
+        e[1].contains("binds 2 value(s), but the value is a `(Mat3, Vec3, Mat3)`: `let (u, sigma, v) = svd3(..);`"),
         "{}",
         e[1]
     );
     assert!(
-        e[2].contains("binds 2 value(s), but the call returns 3"),
+        e[2].contains("`transpose` is not defined for `(Mat3, Mat3)`"),
         "{}",
         e[2]
     );
-    assert!(e[3].contains("`qr3` returns a tuple"), "{}", e[3]);
+    assert!(e[3].contains("has no field `3`"), "{}", e[3]);
 }
 
 #[test]
@@ -300,4 +413,176 @@ fn tid_forms() {
         FnKind::Kernel,
     );
     assert!(e[0].contains("1 and with 2"), "{e:?}");
+}
+
+#[test]
+fn local_arrays_lower_to_elements_of_one_variable() {
+    let f = lower(parse_quote!(
+        fn k(x: Array<f32>, n: Array<i32>) {
+            let i = tid();
+            let mut a = [0.0f32; 4];
+            let mut m = [[0.0; 3]; 2];
+            let mut v = [Vec3::ZERO, Vec3::ONE];
+            a[n[i]] = x[i];
+            a[1] += 2.0;
+            m[1][n[i]] = a[0];
+            v[1].y = a.len() as f32;
+            x[i] = a[3] + m[0][2] + v[0].x;
+        }
+    ));
+    let f32_4 = Ty::LocalArray(Box::new(F32), Dim::Lit(4));
+    assert_eq!(find_var(&f, "a"), f32_4);
+    assert_eq!(find_var(&f, "a").to_string(), "[f32; 4]");
+    assert_eq!(
+        find_var(&f, "m").to_string(),
+        "[[f32; 3]; 2]",
+        "an unsuffixed repeat takes the literal rule's type"
+    );
+    let (mut sets, mut reads, mut members) = (Vec::new(), 0, 0);
+    walk_stmts(&f.body, &mut |s| match &s.kind {
+        StmtKind::SetElem { var, .. } => sets.push(f.vars[*var].name.clone()),
+        StmtKind::SetMember { .. } => members += 1,
+        StmtKind::Assign {
+            op: Op::Index { .. },
+            ..
+        } => reads += 1,
+        _ => {}
+    });
+    // `a[n] =`, `a[1] +=`, `m[1][n] =` (the inner row, then the row back into `m`), `v[1].y =`
+    // (the element back into `v`, after a member write of its copy).
+    let named = |n: &str| Some(n.to_string());
+    assert_eq!(
+        sets,
+        [named("a"), named("a"), None, named("m"), named("v")],
+        "{sets:?}"
+    );
+    assert_eq!(members, 1);
+    // `a[1]` (the `+=`), `m[1]` and `v[1]` (read to be written inside), then the final reads.
+    assert_eq!(reads, 3 + 1 + 4);
+    // `len()` of a literal length is a constant.
+    let lit4 = walk_find(&f, |op| matches!(op, Op::Lit(Lit::Int(4))));
+    assert!(lit4, "a.len() as a literal");
+}
+
+/// Whether some assignment's operation satisfies `p`.
+fn walk_find(f: &Function, p: impl Fn(&Op) -> bool) -> bool {
+    let mut found = false;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::Assign { op, .. } = &s.kind {
+            found |= p(op);
+        }
+    });
+    found
+}
+
+#[test]
+fn local_array_misuse_is_refused_at_the_use() {
+    let cases: [(syn::ItemFn, FnKind, &str); 11] = [
+        (
+            parse_quote!(
+                fn k() {
+                    let a = [1.0f32, 2.0f64];
+                }
+            ),
+            FnKind::Kernel,
+            "the array's elements are `f32`, this is `f64`",
+        ),
+        (
+            parse_quote!(
+                fn k(n: usize) {
+                    let a = [0.0f32; n];
+                }
+            ),
+            FnKind::Kernel,
+            "must be an integer literal or a module const",
+        ),
+        (
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 0];
+                }
+            ),
+            FnKind::Kernel,
+            "at least one element",
+        ),
+        (
+            parse_quote!(
+                fn k(x: f32) {
+                    let a = [0.0f32; 2];
+                    let y = a[x];
+                }
+            ),
+            FnKind::Kernel,
+            "array indices are integers, found `f32`",
+        ),
+        (
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    let y = a + 1.0;
+                }
+            ),
+            FnKind::Kernel,
+            "[f32; 2]",
+        ),
+        (
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    let y: f32 = a;
+                }
+            ),
+            FnKind::Kernel,
+            "mismatched types: expected `f32`, found `[f32; 2]`",
+        ),
+        (
+            parse_quote!(
+                fn k(a: [f32; 4]) {}
+            ),
+            FnKind::Kernel,
+            "a local array is not a kernel parameter",
+        ),
+        (
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    a[0] = 1.0;
+                }
+            ),
+            FnKind::Kernel,
+            "immutable variable `a`",
+        ),
+        (
+            parse_quote!(
+                fn k() {
+                    let a = [0.0f32; 2];
+                    println!("{:?}", a);
+                }
+            ),
+            FnKind::Kernel,
+            "cannot be printed",
+        ),
+        (
+            parse_quote!(
+                fn f(a: [Array<f32>; 2]) {}
+            ),
+            FnKind::Func,
+            "cannot be a local array's element",
+        ),
+        (
+            parse_quote!(
+                fn k(x: Array<f32>) {
+                    let t: Tile<f32, 8> = tile_zeros();
+                    let a = [1.0f32; 2];
+                }
+            ),
+            FnKind::Kernel,
+            "local arrays are not supported in tiled kernels yet",
+        ),
+    ];
+    for (item, kind, want) in cases {
+        let text = quote::quote!(#item).to_string();
+        let e = errors(item, kind);
+        assert!(e.iter().any(|e| e.contains(want)), "{text}: {e:?}");
+    }
 }

@@ -67,9 +67,12 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
         BinOp::Shl | BinOp::Shr => None,
         _ => match other {
             Ty::Scalar(_) => Some(other.clone()),
-            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => {
-                Some(Ty::Scalar(*s))
-            }
+            Ty::Vector(s, _)
+            | Ty::Matrix(s, _)
+            | Ty::Quat(s)
+            | Ty::Transform(s)
+            | Ty::SpatialVector(s)
+            | Ty::SpatialMatrix(s) => Some(Ty::Scalar(*s)),
             // A tile of vectors is scaled by their scalar.
             Ty::Tile(e, _) => literal_hint(e, op),
             Ty::Deferred => Some(Ty::Deferred),
@@ -214,7 +217,12 @@ impl Lowerer {
         span: Span,
     ) -> R<VarId> {
         let want_scalar = want.map(|w| match w {
-            Ty::Vector(s, _) | Ty::Matrix(s, _) | Ty::Quat(s) | Ty::Transform(s) => Ty::Scalar(*s),
+            Ty::Vector(s, _)
+            | Ty::Matrix(s, _)
+            | Ty::Quat(s)
+            | Ty::Transform(s)
+            | Ty::SpatialVector(s)
+            | Ty::SpatialMatrix(s) => Ty::Scalar(*s),
             t => t.clone(),
         });
         match lit {

@@ -8,6 +8,11 @@
 //! `__adj_ret` and `__adj_out<k>` (a func's adjoint
 //! of its result and of its value parameter `k`), `__FAST` (the launch's thread-owned arrays
 //! cover the grid) and `__tid` (the thread index).
+//!
+//! A local array's adjoint is a local array of the same type (`adj_<var>`), its elements
+//! named at the index variable the forward access used: the replay checked those indices
+//! (a faulting CUDA thread goes on, so the printers' element accesses stay in bounds
+//! whatever the index).
 
 use crate::ir::{Function, Op, RangeSpec, TileFn, VarId};
 use crate::types::Ty;
@@ -111,6 +116,8 @@ pub enum AdjOf {
     Var { var: VarId, path: Vec<String> },
     /// A func's `__adj_out<k>`.
     Out(usize),
+    /// `adj_<var>[index]`, an element of a local array's adjoint.
+    Elem { var: VarId, index: VarId },
 }
 
 /// A gradient value.
@@ -134,6 +141,12 @@ pub enum GradSrc {
     AdjRet,
     /// `adj_<var>`, or a member of it.
     Adj { var: VarId, path: Vec<String> },
+    /// `adj_<var>[index]`, an element of a local array's adjoint.
+    AdjElem { var: VarId, index: VarId },
+    /// Element `k` of the seed, a local array (the adjoint of a local array's literal).
+    SeedElem(usize),
+    /// The sum of the seed's elements, a local array (the adjoint of a repeat `[v; N]`).
+    ElemSum,
     /// Zero of `like`'s type.
     Zero(VarId),
     /// The gradient of `array` at `index`, which is then cleared (zero of `like`'s type when
@@ -196,6 +209,12 @@ pub enum AKind {
         path: Vec<String>,
         value: VarId,
     },
+    /// `var[index] = value` on a local array, checked as the forward statement is.
+    SetElem {
+        var: VarId,
+        index: VarId,
+        value: VarId,
+    },
     /// Pushes `var`'s current value (`line`: the user's line, for the overflow fault).
     Push { var: VarId, line: u32 },
     /// A loop that counts its iterations (`__count`) and pushes the count after the loop: over
@@ -228,6 +247,8 @@ pub enum AKind {
     Seed(GradSrc),
     /// `adj_var.path = 0` (zero of `var.path`'s type).
     ClearAdj { var: VarId, path: Vec<String> },
+    /// `adj_var[index] = 0`, of a local array's adjoint.
+    ClearAdjElem { var: VarId, index: VarId },
     /// Restores `var`'s value from the stack.
     Pop { var: VarId },
     /// `to += from`.

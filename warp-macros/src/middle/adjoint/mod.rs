@@ -33,6 +33,12 @@
 //! touches their elements, so their gradients need no atomics, and the [`Policy`] of the
 //! target picks how to exploit that.
 //!
+//! Local arrays (`[f32; 8]`) are values, not memory: one variable with an adjoint of its own
+//! type. Reading `a[i]` adds the seed into `adj_a[i]`; writing `a[i] = v` is an overwrite of
+//! `a` (`a = a with element i set`), so the replay pushes the whole array before it (as for
+//! `SetMember`), and the sweep hands `adj_a[i]` to `v`, clears it, and pops `a`. Simple and
+//! correct through loops; its cost is the array's size on the stack per store.
+//!
 //! Variables: every variable the sweep uses is declared once at the top of the adjoint (the
 //! sweep needs values from every block), with the [`TypeOf`] its type can be spelt from where
 //! the IR type is not enough (a user func's result, a const, a struct field, a loop over such
@@ -93,7 +99,7 @@ fn differentiable(t: &Ty) -> bool {
         Ty::Matrix(..) | Ty::Quat(_) => true,
         // Objects and query states: indices and buffers, no gradient.
         Ty::Array(..) | Ty::Object(_) | Ty::Unit => false,
-        Ty::Tile(e, _) => differentiable(e),
+        Ty::Tile(e, _) | Ty::LocalArray(e, _) => differentiable(e),
         _ => true,
     }
 }

@@ -34,6 +34,13 @@ impl Cx<'_> {
                     let (var, path, value) = (*var, path.clone(), *value);
                     out.push(at(AKind::SetMember { var, path, value }, sp));
                 }
+                // An element store overwrites the whole array (a value): its old value is
+                // pushed, as any overwritten variable's.
+                StmtKind::SetElem { var, index, value } => {
+                    out.push(push(*var, sp));
+                    let (var, index, value) = (*var, *index, *value);
+                    out.push(at(AKind::SetElem { var, index, value }, sp));
+                }
                 StmtKind::If { cond, then, els } => {
                     let (then, els) = (self.forward(then, in_loop), self.forward(els, in_loop));
                     if !self.records(*cond, in_loop) {
@@ -171,7 +178,7 @@ pub(super) fn overwritten_vars(f: &Function) -> Vec<bool> {
         for s in b {
             match &s.kind {
                 StmtKind::Assign { dst, .. } if in_loop => out[*dst] = true,
-                StmtKind::SetMember { var, .. } => out[*var] = true,
+                StmtKind::SetMember { var, .. } | StmtKind::SetElem { var, .. } => out[*var] = true,
                 StmtKind::If { then, els, .. } => {
                     walk(then, in_loop, out);
                     walk(els, in_loop, out);
@@ -206,7 +213,9 @@ fn invariant_vars(f: &Function) -> Vec<bool> {
             assigned[*dst] += 1;
             defs[*dst] = Some(op);
         }
-        StmtKind::For { var, .. } | StmtKind::SetMember { var, .. } => assigned[*var] += 2,
+        StmtKind::For { var, .. }
+        | StmtKind::SetMember { var, .. }
+        | StmtKind::SetElem { var, .. } => assigned[*var] += 2,
         _ => {}
     });
     let param = |v: VarId| f.params.iter().any(|p| p.var == v);
@@ -230,6 +239,7 @@ fn invariant_vars(f: &Function) -> Vec<bool> {
                         | Op::Binary(..)
                         | Op::Cast(..)
                         | Op::Member(..)
+                        | Op::Index { .. }
                         | Op::Construct { .. }
                         | Op::Tid(_)
                         | Op::Lane

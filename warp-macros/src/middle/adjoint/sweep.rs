@@ -64,6 +64,20 @@ impl Cx<'_> {
                     b.push(pop(*var, sp));
                     out.push(at(AKind::Scope(b), sp));
                 }
+                // `var = var with element index set to value`: the element's adjoint goes to
+                // the value and is cleared (the store replaced it), then the old array is
+                // restored.
+                StmtKind::SetElem { var, index, value } => {
+                    let (var, index) = (*var, *index);
+                    let mut b = Vec::new();
+                    if self.diff(var) {
+                        b.push(at(AKind::Seed(GradSrc::AdjElem { var, index }), sp));
+                        b.push(at(AKind::ClearAdjElem { var, index }, sp));
+                        self.accum(&mut b, *value, Vec::new(), GradSrc::Seed, sp);
+                    }
+                    b.push(pop(var, sp));
+                    out.push(at(AKind::Scope(b), sp));
+                }
                 StmtKind::If { cond, then, els } => {
                     let cond = match self.records(*cond, in_loop) {
                         true => Cond::Popped,
@@ -136,6 +150,32 @@ impl Cx<'_> {
         }
         if !self.diff(dst) {
             out.extend(restore);
+            return;
+        }
+        // `S { a: x, ..base }`: each named field's adjoint goes to its value and is cleared,
+        // then what is left (the fields copied) goes to the base.
+        if let Op::Construct {
+            ctor: Ctor::Fields {
+                names, base: true, ..
+            },
+            args,
+            ..
+        } = op
+        {
+            let mut b = Vec::new();
+            for (name, v) in names.iter().zip(args) {
+                let path = vec![name.to_string()];
+                let from = GradSrc::Adj {
+                    var: dst,
+                    path: path.clone(),
+                };
+                self.accum(&mut b, *v, Vec::new(), from, sp);
+                b.push(at(AKind::ClearAdj { var: dst, path }, sp));
+            }
+            b.extend(seed_from(dst, Vec::new(), sp));
+            b.extend(restore);
+            self.accum(&mut b, args[names.len()], Vec::new(), GradSrc::Seed, sp);
+            out.push(at(AKind::Scope(b), sp));
             return;
         }
         let acc = self.accumulate(op, sp);
@@ -279,10 +319,55 @@ impl Cx<'_> {
             },
             Op::Load { array, index } => out.push(at(self.load(*array, index, sp), sp)),
             Op::Member(v, m) => self.accum(&mut out, *v, vec![m.clone()], GradSrc::Seed, sp),
+            Op::Index { array, index } => {
+                if self.diff(*array) {
+                    let (var, index) = (*array, *index);
+                    let to = AdjOf::Elem { var, index };
+                    out.push(at(
+                        AKind::Accum {
+                            to,
+                            from: GradSrc::Seed,
+                        },
+                        sp,
+                    ));
+                }
+            }
+            // A tuple: element k of the seed to the k-th value.
+            Op::Tuple(args) => {
+                for (k, v) in args.iter().enumerate() {
+                    seed(&mut out, *v, GradSrc::SeedLane(k.to_string()));
+                }
+            }
+            // A local array's literal: element k of the seed to the k-th value; a repeat: the
+            // sum of the seed's elements to the repeated value.
+            Op::Construct {
+                ty: Ty::LocalArray(..),
+                ctor,
+                args,
+            } => match ctor {
+                Ctor::Splat => seed(&mut out, args[0], GradSrc::ElemSum),
+                _ => {
+                    for (k, v) in args.iter().enumerate() {
+                        seed(&mut out, *v, GradSrc::SeedElem(k));
+                    }
+                }
+            },
+            // A struct literal (its `..base` form is `reverse_assign`'s): field k of the
+            // seed to the k-th value.
+            Op::Construct {
+                ctor: Ctor::Fields { names, .. },
+                args,
+                ..
+            } => {
+                for (name, v) in names.iter().zip(args) {
+                    seed(&mut out, *v, GradSrc::SeedLane(name.to_string()));
+                }
+            }
             Op::Construct { ty, ctor, args } => {
                 let lanes: &[&str] = match ty {
                     Ty::Vector(..) | Ty::Quat(_) => &["x", "y", "z", "w"],
                     Ty::Matrix(..) => &["x_axis", "y_axis", "z_axis", "w_axis"],
+                    Ty::SpatialMatrix(_) => &["0", "1", "2", "3", "4", "5"],
                     _ => &[],
                 };
                 match (ctor, ty) {

@@ -299,3 +299,86 @@ fn f16_matmul_has_an_adjoint() {
     let n = calls.iter().filter(|c| *c == "adj_tile_matmul").count();
     assert_eq!(n, 2, "{calls:?}");
 }
+
+/// A local array is one variable: an element store in a loop pushes the whole array before it
+/// and pops it after its reverse, whose seed is the element's adjoint (then cleared); a read
+/// accumulates into the element's adjoint; a literal seeds its elements' values, a repeat the
+/// sum of its adjoint's elements.
+#[test]
+fn local_array_element_stores_overwrite_the_array() {
+    let f = kernel(parse_quote! {
+        fn k(x: Array<f64>, y: Array<f64>) {
+            let i = tid();
+            let t = x[i];
+            let mut a = [t; 3];
+            let b = [t, 2.0, t * t];
+            for j in 0..3 {
+                a[j] = a[(j + 1) % 3] * b[j];
+            }
+            y[i] = a[0];
+        }
+    });
+    let a = build(&f, Policy::CPU).unwrap();
+    let arr = (0..a.f.vars.len())
+        .find(|v| a.f.vars[*v].name.as_deref() == Some("a"))
+        .unwrap();
+    let stmts = all(&a.body);
+    let pos = |p: &dyn Fn(&AKind) -> bool| stmts.iter().position(|s| p(&s.kind));
+    let push = pos(&|k| matches!(k, AKind::Push { var, .. } if *var == arr)).unwrap();
+    let set = pos(&|k| matches!(k, AKind::SetElem { var, .. } if *var == arr)).unwrap();
+    assert!(push < set, "the array is pushed before its element store");
+    let count = |p: &dyn Fn(&AKind) -> bool| stmts.iter().filter(|s| p(&s.kind)).count();
+    // Its definition (a `mut` variable) and the store in the loop each push it once; the
+    // reverse pops it as often.
+    assert_eq!(
+        count(&|k| matches!(k, AKind::Push { var, .. } if *var == arr)),
+        2
+    );
+    assert_eq!(
+        count(&|k| matches!(k, AKind::Pop { var } if *var == arr)),
+        2
+    );
+    assert_eq!(
+        count(&|k| matches!(k, AKind::Seed(GradSrc::AdjElem { var, .. }) if *var == arr)),
+        1
+    );
+    assert_eq!(
+        count(&|k| matches!(k, AKind::ClearAdjElem { var, .. } if *var == arr)),
+        1
+    );
+    // Reads of `a` and `b` at an index: into the element's adjoint.
+    let elem_accums = count(&|k| {
+        matches!(
+            k,
+            AKind::Accum {
+                to: AdjOf::Elem { .. },
+                ..
+            }
+        )
+    });
+    assert_eq!(elem_accums, 3);
+    // `[t; 3]`: the sum of the adjoint's elements into `t`.
+    assert_eq!(
+        count(&|k| matches!(
+            k,
+            AKind::Accum {
+                from: GradSrc::ElemSum,
+                ..
+            }
+        )),
+        1
+    );
+    let lanes: Vec<usize> = stmts
+        .iter()
+        .filter_map(|s| match &s.kind {
+            AKind::Accum {
+                from: GradSrc::SeedElem(k),
+                ..
+            } => Some(*k),
+            _ => None,
+        })
+        .collect();
+    // Every element of the literal is a float variable (the `2.0` too).
+    assert_eq!(lanes, [0, 1, 2]);
+    assert!(a.adjs.contains(&arr), "the array has an adjoint");
+}

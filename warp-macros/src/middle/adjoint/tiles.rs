@@ -271,7 +271,9 @@ fn recomputable(f: &Function, b: &[Stmt], in_loop: bool, written: &[VarId], out:
                 walk_stmts(&b[k + 1..], &mut |s| match &s.kind {
                     StmtKind::Assign { dst, .. } => later.push(*dst),
                     StmtKind::For { var, .. } => later.push(*var),
-                    StmtKind::SetMember { var, .. } => later.push(*var),
+                    StmtKind::SetMember { var, .. } | StmtKind::SetElem { var, .. } => {
+                        later.push(*var)
+                    }
                     _ => {}
                 });
                 if !from_tiles_or_written && !args.iter().any(|a| later.contains(a)) {
