@@ -8,10 +8,15 @@
 //! ```
 //!
 //! Prints the median milliseconds of each (`common::median_ms`: 15 runs after a warm-up) and
-//! the ratio deterministic / ordinary. The ordinary contended kernel is a compare-exchange
-//! loop per add on 4 hot words; the deterministic one pushes a record per add and sorts and
-//! adds the records after the launch. On a GPU the deterministic path is not built yet: the
-//! bench says so instead of timing it.
+//! the ratio deterministic / ordinary, on the CPU and on `cuda:0` when there is one (the GPU
+//! rows say why they are missing otherwise). On the CPU the ordinary contended kernel is a
+//! compare-exchange loop per add on 4 hot words; the deterministic one pushes a record per add
+//! and sorts and adds the records after the launch. On a GPU the ordinary kernels are
+//! `atomicAdd`s; the deterministic ones write a record per lane into their thread's slots,
+//! then two radix sorts of the slots (the low and the high address words) and one pass that
+//! adds each element's run in order follow the launch (warp-runtime's cuda/deterministic.rs).
+//! The "gather bwd" row is a backward launch: every thread reads one of 7 shared elements,
+//! whose gradients the ordinary adjoint adds atomically and the deterministic one records.
 
 use warp_lang as wp;
 
@@ -47,6 +52,18 @@ fn sparse_det(x: Array<f32>, out: Array<f32>) {
     atomic_add(out, (i + 1) % x.len(), 0.5 * x[i]);
 }
 
+#[wp::kernel]
+fn gather(x: Array<f32>, w: Array<f32>, out: Array<f32>) {
+    let i = tid();
+    out[i] = x[i % 7] * w[i];
+}
+
+#[wp::kernel(deterministic)]
+fn gather_det(x: Array<f32>, w: Array<f32>, out: Array<f32>) {
+    let i = tid();
+    out[i] = x[i % 7] * w[i];
+}
+
 fn row(dev: &wp::Device, what: &str, plain: f64, det: wp::Result<f64>) {
     let dev = dev.to_string();
     match det {
@@ -74,6 +91,28 @@ fn bench(dev: &wp::Device) -> wp::Result<()> {
     let plain = median_ms(|| wp::launch(sparse, N, (&x, &out), dev))?;
     let det = median_ms(|| wp::launch(sparse_det, N, (&x, &out), dev));
     row(dev, "sparse", plain, det);
+    // Backward: each timed run zeroes x's gradient, seeds y's and runs the adjoint launch.
+    let xg = wp::Array::from_slice(&xs[..7], dev)?.with_grad()?;
+    let w = wp::Array::from_slice(&xs, dev)?.with_grad()?;
+    let y = wp::Array::<f32>::zeros(N, dev)?.with_grad()?;
+    let backward = |det: bool| -> wp::Result<f64> {
+        let tape = wp::Tape::new();
+        {
+            let _rec = tape.record();
+            match det {
+                true => wp::launch(gather_det, N, (&xg, &w, &y), dev)?,
+                false => wp::launch(gather, N, (&xg, &w, &y), dev)?,
+            }
+        }
+        median_ms(|| {
+            // (The adjoint of the store takes y's gradient: it is seeded again each run.)
+            xg.zero_grad()?;
+            y.grad().expect("made with a gradient").fill(1.0)?;
+            tape.backward_from_grads()
+        })
+    };
+    let plain = backward(false)?;
+    row(dev, "gather bwd", plain, backward(true));
     Ok(())
 }
 

@@ -236,8 +236,8 @@ pub mod __private {
     pub use warp_runtime::config::debug as debug_mode;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};
     pub use warp_runtime::{
-        ArgCtx, CudaConst, CudaStruct, Device, Element, GenericKernel, Kernel, KernelArg,
-        KernelInfo, KernelParams, Launchable, Result, TileInfo,
+        ArgCtx, CudaConst, CudaStruct, DeterministicInfo, Device, Element, GenericKernel, Kernel,
+        KernelArg, KernelInfo, KernelParams, Launchable, Result, TileInfo,
     };
 }
 

@@ -172,7 +172,7 @@ fn fault_toks(f: &Fault, arg: i64) -> Vec<Tok> {
         FaultKind::AdStackOverflow { .. } => unreachable!("forward library calls never push"),
         FaultKind::WriteRace { .. } => unreachable!("only the CPU race check reports races"),
         FaultKind::DeterministicRecords { .. } => {
-            unreachable!("only the CPU's deterministic launches record accumulations")
+            unreachable!("only generated code of deterministic kernels records accumulations")
         }
         FaultKind::TileIndex { .. } | FaultKind::TileWidth { .. } => {
             unreachable!("no builtin of the CUDA library makes a tile fault yet")

@@ -137,8 +137,9 @@ pub enum FaultKind {
         block_dim: usize,
     },
     /// A thread of a `#[kernel(deterministic)]` launch made more float `atomic_add`/
-    /// `atomic_sub` calls than the kernel's per-thread record limit (`max_records`): its
-    /// accumulations cannot all be recorded, and none is dropped silently.
+    /// `atomic_sub` calls (in a backward launch: gradient accumulations) than the kernel's
+    /// per-thread record limit: its accumulations cannot all be recorded, and none is dropped
+    /// silently.
     DeterministicRecords {
         /// The flat launch index of the thread.
         thread: usize,
@@ -275,9 +276,10 @@ impl Fault {
             ),
             FaultKind::DeterministicRecords { thread, limit } => write!(
                 f,
-                "kernel `{}`: thread {thread} made more than {limit} float atomic_add/atomic_sub \
-                 calls, the per-thread record limit of a deterministic kernel; raise it with \
-                 #[kernel(deterministic(max_records = N))]",
+                "kernel `{}`: thread {thread} made more than {limit} recorded accumulations \
+                 (float atomic_add/atomic_sub calls, or in a backward launch gradient \
+                 accumulations), the per-thread record limit of a deterministic kernel; raise \
+                 it with #[kernel(deterministic(max_records = N))]",
                 self.kernel
             ),
         }

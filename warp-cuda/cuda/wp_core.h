@@ -575,6 +575,7 @@ enum fault_kind : i32 {
   FAULT_NON_FINITE_INPUT = 7,
   FAULT_ASSERTION = 8,
   FAULT_LOCAL_INDEX = 9,
+  FAULT_DETERMINISTIC_RECORDS = 10,
 };
 
 /// The first fault of the launches that share a record, filled by the first faulting thread
@@ -597,6 +598,9 @@ enum fault_kind : i32 {
 /// callees), index[2] the thread's flat launch index (-1 in a func), shape all 0. LocalIndex
 /// (an index outside a fixed-size local array, warp_core::FaultKind::LocalIndex): ndim 3,
 /// index[0] the index, index[1] the array's length, index[2] the source line, shape all 0.
+/// DeterministicRecords (a thread of a `#[kernel(deterministic)]` launch past its record limit,
+/// warp_core::FaultKind::DeterministicRecords): ndim 2, index[0] the thread's flat launch
+/// index, index[1] the limit, shape all 0.
 /// Unused entries are 0.
 struct fault_t {
   i32 kind;
@@ -2052,6 +2056,263 @@ WP_FN void unflatten(const launch_t& l, i64 flat, i64* out, int n) {
 /// This thread's flat index in a 1-D CUDA launch (i64, so that grids over 2^31 work).
 WP_FN i64 flat_thread_id() { return (i64)blockIdx.x * (i64)blockDim.x + (i64)threadIdx.x; }
 #endif
+
+}  // namespace wp
+
+// ------------------------------------------------------------------------------------------
+// Deterministic accumulation: `#[kernel(deterministic)]` (warp-runtime's cuda/deterministic.rs,
+// docs/book/src/deterministic.md)
+// ------------------------------------------------------------------------------------------
+//
+// A deterministic kernel does not add its float `atomic_add`/`atomic_sub` (nor, in its adjoint,
+// its gradient accumulations) into memory: each thread writes records into its own slots of a
+// buffer, one record per float lane (the element's lane address, the value's bits, the lane
+// type and the operation). Slot `flat * lanes + k` is the thread's k-th lane record, so the
+// slot index is the launch order: flat thread index, then program order within the thread.
+// After the launch the runtime orders the slots by (address, slot) with two stable 32-bit
+// radix sorts (the low address words, then the high ones) and `det_apply_at` adds each lane's
+// records into it one after the other, with the element type's own `+`/`-`: the lane ends as
+// `((old + r0) + r1) + ..`, as warp-runtime's cpu/deterministic.rs adds them on the CPU, so
+// both give the same bits. A lane record and the CPU's element record give the same result:
+// the CPU adds an element's lanes independently too (componentwise atomics).
+namespace wp {
+
+/// A record's tag: the lane type times 2, plus 1 for a subtraction.
+constexpr u8 DET_F32 = 0;
+constexpr u8 DET_F64 = 2;
+constexpr u8 DET_F16 = 4;
+constexpr u8 DET_BF16 = 6;
+constexpr u8 DET_SUB = 1;
+/// The key of an unused slot: after every address in the order.
+constexpr u64 DET_UNUSED = ~0ull;
+
+/// A deterministic launch's record buffer, passed to its entry after the ctx_t (40 bytes,
+/// align 8; warp-runtime's cuda/deterministic.rs `DetArgs`):
+///   0 keys (u64*: each slot's lane address, DET_UNUSED when unused), 8 values (u64*: the
+///   value's bits, zero-extended), 16 tags (u8*), 24 lanes (i64: lane slots per thread),
+///   32 limit (i32: recorded calls per thread), 36 pad.
+struct det_t {
+  u64* keys;
+  u64* values;
+  u8* tags;
+  i64 lanes;
+  i32 limit;
+  i32 pad;
+};
+static_assert(sizeof(det_t) == 40 && alignof(det_t) == 8, "det_t layout");
+
+/// One thread's recording: its first slot, how many lane slots and calls it has used.
+struct det_thread_t {
+  u64* keys;
+  u64* values;
+  u8* tags;
+  i64 base;
+  i64 cap;
+  i64 used;
+  i64 flat;
+  i32 calls;
+  i32 limit;
+};
+
+WP_FN det_thread_t det_begin(const det_t& d, i64 flat) {
+  det_thread_t t;
+  t.keys = d.keys;
+  t.values = d.values;
+  t.tags = d.tags;
+  t.base = flat * d.lanes;
+  t.cap = d.lanes;
+  t.used = 0;
+  t.flat = flat;
+  t.calls = 0;
+  t.limit = d.limit;
+  return t;
+}
+
+/// The end of a thread: its unused slots marked (every slot is written each launch, so the
+/// buffer needs no clearing).
+WP_FN void det_end(det_thread_t* t) {
+  for (i64 s = t->used; s < t->cap; ++s) t->keys[t->base + s] = DET_UNUSED;
+}
+
+/// The fault of a thread past its limit (the CPU's `FaultKind::DeterministicRecords`).
+WP_FN void det_fault(det_thread_t* t, ctx_t* ctx) {
+  const i64 at[2] = {t->flat, (i64)t->limit};
+  raise(ctx, FAULT_DETERMINISTIC_RECORDS, -1, 2, at, nullptr);
+}
+
+/// Counts one recorded call (an accumulation, whatever its lane count); past the limit a
+/// fault, and the call records nothing.
+WP_FN bool det_call(det_thread_t* t, ctx_t* ctx) {
+  if (t->calls >= t->limit) {
+    det_fault(t, ctx);
+    return false;
+  }
+  ++t->calls;
+  return true;
+}
+
+namespace detail {
+template <typename T> struct det_lane;
+template <> struct det_lane<f32> {
+  static constexpr u8 tag = DET_F32;
+  static WP_FN u64 bits(f32 x) { return (u64)f32_to_bits(x); }
+  static WP_FN f32 from(u64 b) { return f32_from_bits((u32)b); }
+};
+template <> struct det_lane<f64> {
+  static constexpr u8 tag = DET_F64;
+  static WP_FN u64 bits(f64 x) { return (u64)f64_to_bits(x); }
+  static WP_FN f64 from(u64 b) { return f64_from_bits(b); }
+};
+template <> struct det_lane<f16> {
+  static constexpr u8 tag = DET_F16;
+  static WP_FN u64 bits(f16 x) { return (u64)x.bits; }
+  static WP_FN f16 from(u64 b) { return f16_from_bits((u16)b); }
+};
+template <> struct det_lane<bf16> {
+  static constexpr u8 tag = DET_BF16;
+  static WP_FN u64 bits(bf16 x) { return (u64)x.bits; }
+  static WP_FN bf16 from(u64 b) { return bf16_from_bits((u16)b); }
+};
+}  // namespace detail
+
+/// Records `*p op= v` for one float lane. The slots are sized for the kernel's widest element
+/// (the runtime's `lanes`); running out anyway is the limit's fault, never a write past them.
+template <typename S>
+WP_FN void det_record_lane(det_thread_t* t, S* p, S v, u8 op, ctx_t* ctx) {
+  if (t->used >= t->cap) {
+    det_fault(t, ctx);
+    return;
+  }
+  const i64 s = t->base + t->used++;
+  t->keys[s] = (u64)p;
+  t->values[s] = detail::det_lane<S>::bits(v);
+  t->tags[s] = (u8)(detail::det_lane<S>::tag + op);
+}
+
+/// Records `*p op= v` lane by lane: a float, or each float lane of a vector, matrix,
+/// quaternion, transform or spatial value (`vec_traits`), as `grad_add_p` adds them; nothing
+/// for integers and bools (no gradient). A struct's lanes: the overload made with its
+/// definition (found by argument-dependent lookup); a local array's: element by element.
+template <typename T>
+WP_FN void det_record_p(det_thread_t* t, T* p, const T& v, u8 op, ctx_t* ctx) {
+  if constexpr (num<T>::is_float) {
+    det_record_lane(t, p, v, op, ctx);
+  } else if constexpr (!(num<T>::is_int || num<T>::is_bool)) {
+    typedef typename vec_traits<T>::scalar S;
+    if constexpr (num<S>::is_float) {
+      for (int i = 0; i < vec_traits<T>::N; ++i)
+        det_record_lane(t, &vec_traits<T>::at(*p, i), vec_traits<T>::get(v, i), op, ctx);
+    }
+  }
+}
+template <typename T, int N>
+WP_FN void det_record_p(det_thread_t* t, local_array_t<T, N>* p, const local_array_t<T, N>& v,
+                        u8 op, ctx_t* ctx) {
+  for (int i = 0; i < N; ++i) det_record_p(t, &p->data[i], v.data[i], op, ctx);
+}
+
+namespace detail {
+/// `atomic_add`/`atomic_sub` of a deterministic kernel: the index checked now (a fault
+/// records nothing), the call counted, the value recorded; returns `v` (the old value does not
+/// exist; the macro refuses a use of it).
+template <typename T, int N>
+WP_FN T det_atomic_idx(const array_t<T, N>& a, const i64* idx, const T& v, u8 op,
+                       det_thread_t* t, ctx_t* ctx) {
+  if (!check_idx(a, idx, ctx)) return v;
+  if (!det_call(t, ctx)) return v;
+  det_record_p(t, elem_ptr_unchecked_idx(a, idx), v, op, ctx);
+  return v;
+}
+/// `g[idx] += v` in a deterministic kernel's adjoint (what `grad_accum` adds at once).
+template <typename T, int N>
+WP_FN void det_grad_idx(const array_t<T, N>& g, const i64* idx, const T& v, det_thread_t* t,
+                        ctx_t* ctx) {
+  if (g.data == nullptr) return;
+  if (!check_idx(g, idx, ctx)) return;
+  if (!det_call(t, ctx)) return;
+  // Unqualified: a user struct's `det_record_p` is found by argument-dependent lookup.
+  det_record_p(t, elem_ptr_unchecked_idx(g, idx), v, (u8)0, ctx);
+}
+}  // namespace detail
+
+#define WP_DET_FNS(N, PARAMS, ...)                                                                 \
+  template <typename T>                                                                            \
+  WP_FN T det_atomic_add(const array_t<T, N>& a, PARAMS, typename identity<T>::type v,             \
+                         det_thread_t* t, ctx_t* ctx) {                                            \
+    const i64 idx[N] = {__VA_ARGS__};                                                              \
+    return detail::det_atomic_idx(a, idx, v, (u8)0, t, ctx);                                       \
+  }                                                                                                \
+  template <typename T>                                                                            \
+  WP_FN T det_atomic_sub(const array_t<T, N>& a, PARAMS, typename identity<T>::type v,             \
+                         det_thread_t* t, ctx_t* ctx) {                                            \
+    const i64 idx[N] = {__VA_ARGS__};                                                              \
+    return detail::det_atomic_idx(a, idx, v, DET_SUB, t, ctx);                                     \
+  }                                                                                                \
+  template <typename T>                                                                            \
+  WP_FN void det_grad_accum(const array_t<T, N>& g, PARAMS, const typename identity<T>::type& v,   \
+                            det_thread_t* t, ctx_t* ctx) {                                         \
+    const i64 idx[N] = {__VA_ARGS__};                                                              \
+    detail::det_grad_idx(g, idx, v, t, ctx);                                                       \
+  }
+#define WP_COMMA ,
+WP_DET_FNS(1, i64 i0, i0)
+WP_DET_FNS(2, i64 i0 WP_COMMA i64 i1, i0, i1)
+WP_DET_FNS(3, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2, i0, i1, i2)
+WP_DET_FNS(4, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2 WP_COMMA i64 i3, i0, i1, i2, i3)
+#undef WP_COMMA
+#undef WP_DET_FNS
+
+// The ordering and the additions after the launch, one slot per call (the kernel's
+// `@@ENTRY@@_det_*` entries run them over the slots; the host harness in
+// tests/cuda_deterministic_host.rs calls them directly).
+
+/// Step 1: slot `i`'s low address word, and its index, for the first stable sort.
+WP_FN void det_prepare_at(const det_t& d, u32* word, u32* order, i64 i) {
+  word[i] = (u32)d.keys[i];
+  order[i] = (u32)i;
+}
+
+/// Step 2: after the sort by low words, the high word of the slot at position `j`, for the
+/// second stable sort (which leaves the slots in (address, slot) order).
+WP_FN void det_high_at(const det_t& d, u32* word, const u32* order, i64 j) {
+  word[j] = (u32)(d.keys[order[j]] >> 32);
+}
+
+namespace detail {
+/// Adds the records of lane type S from position `j` of the ordered slots into the lane at
+/// `key`, in order, while the key and the type last; returns the position after them.
+template <typename S>
+WP_FN i64 det_run(const det_t& d, const u32* order, i64 n, i64 j, u64 key) {
+  S* p = (S*)key;
+  S acc = *p;
+  const u8 type = d.tags[order[j]] >> 1;
+  for (; j < n; ++j) {
+    const u32 o = order[j];
+    const u8 tag = d.tags[o];
+    if (d.keys[o] != key || (tag >> 1) != type) break;
+    const S v = det_lane<S>::from(d.values[o]);
+    acc = (tag & DET_SUB) != 0 ? acc - v : acc + v;
+  }
+  *p = acc;
+  return j;
+}
+}  // namespace detail
+
+/// Step 3: if position `j` of the ordered slots (`n` of them) starts a lane's records, adds
+/// them all into the lane, in order; other positions and unused slots do nothing.
+WP_FN void det_apply_at(const det_t& d, const u32* order, i64 n, i64 j) {
+  const u64 key = d.keys[order[j]];
+  if (key == DET_UNUSED) return;
+  if (j > 0 && d.keys[order[j - 1]] == key) return;
+  while (j < n && d.keys[order[j]] == key) {
+    switch (d.tags[order[j]] >> 1) {
+      case DET_F32 >> 1: j = detail::det_run<f32>(d, order, n, j, key); break;
+      case DET_F64 >> 1: j = detail::det_run<f64>(d, order, n, j, key); break;
+      case DET_F16 >> 1: j = detail::det_run<f16>(d, order, n, j, key); break;
+      default: j = detail::det_run<bf16>(d, order, n, j, key); break;
+    }
+  }
+}
 
 }  // namespace wp
 

@@ -290,7 +290,17 @@ fn kernel_impl(
     let asserts = assert_sites(f, &quote!(__wp));
     let struct_tys = struct_types(f);
     let deterministic = match f.deterministic {
-        Some(n) => quote!(::core::option::Option::Some(#n)),
+        Some(n) => {
+            let adjoint = crate::valid::deterministic::adjoint_limit(f, n);
+            let lanes = crate::valid::deterministic::recorded_arrays(f)
+                .into_iter()
+                .filter_map(|a| element_lanes(f, a));
+            quote!(::core::option::Option::Some(__wp::DeterministicInfo {
+                max_records: #n,
+                adjoint_records: #adjoint,
+                lanes: __wp::DeterministicInfo::widest(&[#(#lanes),*]),
+            }))
+        }
         None => quote!(::core::option::Option::None),
     };
     // The CPU adjoint: generated unless the kernel opted out; a construct the reverse sweep
@@ -657,6 +667,31 @@ fn struct_types(f: &crate::ir::Function) -> Vec<syn::Type> {
 }
 
 /// `T` of `Array<T, N>`.
+/// The float lanes of array parameter `array`'s element (a `usize` expression): one record
+/// each in a deterministic kernel's GPU slots. The macro counts those of the types it knows;
+/// a struct's are bounded by its size over 2 (the narrowest lane, f16, is 2 bytes).
+fn element_lanes(f: &crate::ir::Function, array: crate::ir::VarId) -> Option<TokenStream> {
+    use crate::types::Ty;
+    let Ty::Array(e, _) = f.ty(array) else {
+        return None;
+    };
+    let n: usize = match &**e {
+        Ty::Scalar(_) => 1,
+        Ty::Vector(_, n) => *n as usize,
+        Ty::Matrix(_, n) => (*n as usize) * (*n as usize),
+        Ty::Quat(_) => 4,
+        Ty::Transform(_) => 7,
+        Ty::SpatialVector(_) => 6,
+        Ty::SpatialMatrix(_) => 36,
+        _ => {
+            let p = f.params.iter().find(|p| p.var == array)?;
+            let t = array_elem(&p.syn_ty)?;
+            return Some(quote!((::core::mem::size_of::<#t>() / 2)));
+        }
+    };
+    Some(quote!(#n))
+}
+
 fn array_elem(t: &syn::Type) -> Option<syn::Type> {
     let syn::Type::Path(tp) = t else { return None };
     let syn::PathArguments::AngleBracketed(a) = &tp.path.segments.last()?.arguments else {

@@ -90,8 +90,9 @@ pub enum Error {
         why: String,
     },
     /// A `#[kernel(deterministic)]` launch that cannot keep its promise of the same bits on
-    /// every run: on a backend without the deterministic path yet, or calling a func that
-    /// accumulates floats atomically (a func's accumulations are not recorded).
+    /// every run: calling a func that accumulates floats atomically (a func's accumulations
+    /// are not recorded), or on a GPU inside a graph capture or with more record slots than
+    /// its ordering sorts.
     #[error("kernel `{kernel}` is deterministic, but {why}")]
     Deterministic {
         /// The kernel being launched.

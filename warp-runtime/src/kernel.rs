@@ -222,10 +222,45 @@ pub struct KernelInfo {
     /// [`launch_tiled`](crate::launch_tiled())) needs of a launch; `None` for an ordinary
     /// kernel.
     pub tile: Option<TileInfo>,
-    /// `#[kernel(deterministic)]`: the per-thread limit of recorded float accumulations
-    /// (`atomic_add`/`atomic_sub` on floats are recorded and reduced after the launch in a
-    /// fixed order; docs/book/src/deterministic.md). `None` for an ordinary kernel.
-    pub deterministic: Option<u32>,
+    /// `#[kernel(deterministic)]`: its float accumulations are recorded and reduced after the
+    /// launch in a fixed order (docs/book/src/deterministic.md); the record limits. `None` for
+    /// an ordinary kernel.
+    pub deterministic: Option<DeterministicInfo>,
+}
+
+/// What `#[kernel(deterministic)]` computes of a kernel's recorded accumulations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DeterministicInfo {
+    /// The per-thread limit of recorded float `atomic_add`/`atomic_sub` calls of a forward
+    /// launch (`max_records`, or counted).
+    pub max_records: u32,
+    /// The per-thread limit of recorded gradient accumulations of an adjoint launch.
+    pub adjoint_records: u32,
+    /// The float lanes of the widest element an accumulation records into: a GPU keeps one
+    /// record per lane, so a thread's slots are its limit times this.
+    pub lanes: u32,
+}
+
+impl DeterministicInfo {
+    /// The widest of `lanes` (what the macro emits: one entry per recorded array), at least 1.
+    pub const fn widest(lanes: &[usize]) -> u32 {
+        let (mut k, mut w) = (0, 1);
+        while k < lanes.len() {
+            if lanes[k] > w {
+                w = lanes[k];
+            }
+            k += 1;
+        }
+        w as u32
+    }
+
+    /// The per-thread record limit of a forward (`adjoint` false) or adjoint launch.
+    pub fn limit(&self, adjoint: bool) -> u32 {
+        match adjoint {
+            true => self.adjoint_records,
+            false => self.max_records,
+        }
+    }
 }
 
 /// What a tiled kernel needs of its launches: the block size it fixes and the memory one block

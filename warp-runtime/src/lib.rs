@@ -82,8 +82,8 @@ pub use dlpark as dlpack;
 pub use error::{Error, Result};
 pub use graph::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use kernel::{
-    kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, Forward, GenericKernel, Kernel,
-    KernelArg, KernelInfo, KernelParams, Launchable, TileInfo,
+    kernel_info, ArgCtx, CudaArray, CudaConst, CudaStruct, DeterministicInfo, Forward,
+    GenericKernel, Kernel, KernelArg, KernelInfo, KernelParams, Launchable, TileInfo,
 };
 pub use launch::{
     launch, launch_tiled, load, load_tiled, load_with_adjoints, synchronize, Dim, Launch,

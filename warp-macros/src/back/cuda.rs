@@ -110,6 +110,21 @@ pub(crate) struct Emitter<'a> {
     pub(crate) stmt_line: usize,
 }
 
+/// The entries that order and add a deterministic kernel's records after its launch
+/// (`wp::det_prepare_at`, `det_high_at`, `det_apply_at` in wp_core.h; warp-runtime's
+/// cuda/deterministic.rs launches them): emitted with the forward and with the adjoint, once
+/// in a unit holding both.
+pub(crate) const DET_ENTRIES: &str = "#if defined(__CUDACC__) && !defined(WP_DET_ENTRIES_@@ENTRY@@)\n\
+#define WP_DET_ENTRIES_@@ENTRY@@\n\
+extern \"C\" __global__ void @@ENTRY@@_det_prepare(wp::det_t d, wp::u32* word, wp::u32* order, wp::i64 n) {\n    \
+for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += (wp::i64)blockDim.x * gridDim.x) wp::det_prepare_at(d, word, order, i);\n}\n\
+extern \"C\" __global__ void @@ENTRY@@_det_high(wp::det_t d, wp::u32* word, wp::u32* order, wp::i64 n) {\n    \
+for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += (wp::i64)blockDim.x * gridDim.x) wp::det_high_at(d, word, order, i);\n}\n\
+extern \"C\" __global__ void @@ENTRY@@_det_apply(wp::det_t d, wp::u32* word, wp::u32* order, wp::i64 n) {\n    \
+(void)word;\n    \
+for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += (wp::i64)blockDim.x * gridDim.x) wp::det_apply_at(d, order, n, i);\n}\n\
+#endif\n";
+
 /// Unswitched loops nest at most this deep; deeper ones test their flag at each access.
 const MAX_UNSWITCH_DEPTH: usize = 2;
 
@@ -373,6 +388,10 @@ impl<'a> Emitter<'a> {
                 params.push("const wp::launch_t& __launch".into());
                 params.push("wp::i64 __flat".into());
                 params.push("wp::ctx_t* __ctx".into());
+                if self.f.deterministic.is_some() {
+                    // The thread's record slots (`det_entry_loop`).
+                    params.push("wp::det_thread_t* __det".into());
+                }
                 let _ = writeln!(
                     self.out,
                     "static WP_FN void @@SELF@@({}) {{\n    const bool __FAST = (__launch.flags & wp::LAUNCH_FAST) != 0;",
@@ -434,15 +453,30 @@ impl<'a> Emitter<'a> {
                 self.out.push_str(&entry);
                 return Ok(());
             }
+            let det = self.f.deterministic.is_some();
+            if det {
+                decl.insert(2, "wp::det_t __det_buf".into());
+                call.push("&__dt".into());
+            }
+            let (begin, end) = match det {
+                true => (
+                    "wp::det_thread_t __dt = wp::det_begin(__det_buf, __flat);\n        ",
+                    "\n        wp::det_end(&__dt);",
+                ),
+                false => ("", ""),
+            };
             let _ = write!(
                 self.out,
                 "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@({}) {{\n    \
                  const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
                  for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
-                 @@SELF@@({1});\n    }}\n}}\n#endif\n",
+                 {begin}@@SELF@@({1});{end}\n    }}\n}}\n#endif\n",
                 decl.join(", "),
                 call.join(", ")
             );
+            if det {
+                self.out.push_str(DET_ENTRIES);
+            }
         }
         Ok(())
     }
@@ -834,6 +868,15 @@ impl<'a> Emitter<'a> {
                     // Not redone in an adjoint's replay: the forward launch did it.
                     let val = self.var(args[args.len() - 1]);
                     format!("wp::zero_like({val})")
+                } else if self.f.deterministic.is_some()
+                    && crate::analysis::float_accumulation(self.f, builtin, args)
+                {
+                    // Recorded in the thread's slots, added after the launch in launch order
+                    // (`wp::det_atomic_add`, wp_core.h).
+                    let a = self.var(args[0]);
+                    let idx = self.index(&args[1..args.len() - 1]);
+                    let v = self.var(args[args.len() - 1]);
+                    format!("wp::det_{}({a}, {idx}, {v}, __det, __ctx)", builtin.name)
                 } else if builtin.is_atomic() {
                     let a = self.var(args[0]);
                     let vals_at = args.len() - builtin.atomic_values();

@@ -27,7 +27,13 @@ pub struct CudaAdjoint {
 
 /// Emits the CUDA adjoint of `f`, or why it cannot.
 pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
-    let adj = build(f, Policy::CUDA)?;
+    // A deterministic kernel's adjoint has the CPU's structure (no gradients gathered in
+    // registers), so that both backends record the same accumulations in the same order.
+    let policy = match f.deterministic {
+        Some(_) => Policy::CPU,
+        None => Policy::CUDA,
+    };
+    let adj = build(f, policy)?;
     let replay = match f.kind {
         FnKind::Func => func_replay(f, file)?,
         FnKind::Kernel => String::new(),
@@ -162,6 +168,10 @@ impl<'a> Printer<'a> {
             ps.push(format!("{ret} __adj_ret"));
         }
         ps.extend(["wp::ctx_t* __ctx".into(), "wp::adstack_t* __stack".into()]);
+        if kernel && self.f().deterministic.is_some() {
+            // The thread's record slots (wp_core.h's `det_thread_t`).
+            ps.push("wp::det_thread_t* __det".into());
+        }
         // The types of the value parameters' adjoints, for the temporaries of callers
         // (`TempLike::Param`).
         for gp in &self.adj.grad_params {
@@ -227,6 +237,18 @@ impl<'a> Printer<'a> {
             }
         }
         call.extend(["__launch", "__flat", "&__ctx_value", "&__st"].map(String::from));
+        let det = self.f().deterministic.is_some();
+        if det {
+            decl.insert(2, "wp::det_t __det_buf".into());
+            call.push("&__dt".into());
+        }
+        let (begin, end) = match det {
+            true => (
+                "wp::det_thread_t __dt = wp::det_begin(__det_buf, __flat);\n        ",
+                "\n        wp::det_end(&__dt);",
+            ),
+            false => ("", ""),
+        };
         let bytes = if self.adj.uses_stack {
             "WP_ADSTACK_BYTES"
         } else {
@@ -239,10 +261,13 @@ impl<'a> Printer<'a> {
              wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n    \
              const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
              for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
-             __st.top = 0;\n        @@SELF@@_adj({});\n    }}\n}}\n#endif\n",
+             __st.top = 0;\n        {begin}@@SELF@@_adj({});{end}\n    }}\n}}\n#endif\n",
             decl.join(", "),
             call.join(", ")
         );
+        if det {
+            self.e.out.push_str(super::cuda::DET_ENTRIES);
+        }
         Ok(())
     }
 
@@ -438,13 +463,22 @@ impl<'a> Printer<'a> {
                 own,
             } => {
                 let (g, idx, v) = (self.adj(*array), self.index(index), self.grad(from)?);
-                match own {
+                if self.f().deterministic.is_some()
+                    && self.f().kind == FnKind::Kernel
+                    && !crate::analysis::stored_or_passed(self.f()).contains(array)
+                {
+                    // Recorded, on the fast path too, as on the CPU (back/rust_adjoint.rs):
+                    // both backends add in one order.
+                    format!("wp::det_grad_accum({g}, {idx}, {v}, __det, __ctx);")
+                } else {
+                    match own {
                     // `__launch` is the kernel's: thread-owned arrays are a kernel's (a func's
                     // accesses are never thread-owned).
                     true => format!(
                         "wp::grad_accum_own({g}, {idx}, {v}, (__launch.flags & wp::LAUNCH_ALONE) != 0);"
                     ),
                     false => format!("wp::grad_accum({g}, {idx}, {v}, __ctx);"),
+                }
                 }
             }
             AKind::GradClearOwn { array, index } => {

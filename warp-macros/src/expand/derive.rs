@@ -141,10 +141,20 @@ pub fn derive_struct(item: TokenStream) -> TokenStream {
             format!(" {ns}::grad_add_p(&p->{f}, v.{f});")
         })
         .collect();
+    // A deterministic kernel's adjoint records a gradient's lanes field by field
+    // (`wp::det_record_p`, wp_core.h).
+    let det_record: String = fields_named
+        .iter()
+        .map(|(f, is_struct)| {
+            let ns = if *is_struct { "" } else { "wp" };
+            format!(" {ns}::det_record_p(t, &p->{f}, v.{f}, op, ctx);")
+        })
+        .collect();
     def.push_str(&format!(
         "\n#ifdef WP_ADJOINT_UNIT\n\
          WP_FN void adj_accum({name}& a, const {name}& v) {{{accum} }}\n\
          WP_FN void grad_add_p({name}* p, const {name}& v) {{{grad_add} }}\n\
+         WP_FN void det_record_p(wp::det_thread_t* t, {name}* p, const {name}& v, wp::u8 op, wp::ctx_t* ctx) {{{det_record} }}\n\
          namespace wp {{\n\
          WP_FN void adj_accum(::{name}& a, const ::{name}& v) {{ ::adj_accum(a, v); }}\n\
          WP_FN ::{name} zero_like(const ::{name}&) {{ return ::{name}{{}}; }}\n\

@@ -77,6 +77,60 @@ pub fn check(f: &Function, explicit: Option<u32>) -> Result<u32, Vec<syn::Error>
     })
 }
 
+/// The arrays whose elements a deterministic kernel's adjoint records gradient accumulations
+/// into (the reads of arrays it neither stores into nor passes to a func:
+/// `analysis::stored_or_passed`), and whether one such read sits in a loop.
+fn recorded_reads(f: &Function) -> (Vec<VarId>, u32, bool) {
+    let excluded = crate::analysis::stored_or_passed(f);
+    let (mut arrays, mut sites, mut in_loop) = (Vec::new(), 0u32, false);
+    walk(&f.body, false, &mut |s_kind, _, looped| {
+        if let StmtKind::Assign {
+            op: Op::Load { array, .. },
+            ..
+        } = s_kind
+        {
+            if !excluded.contains(array) {
+                sites = sites.saturating_add(1);
+                in_loop |= looped;
+                if !arrays.contains(array) {
+                    arrays.push(*array);
+                }
+            }
+        }
+    });
+    (arrays, sites, in_loop)
+}
+
+/// The per-thread limit of a deterministic kernel's recorded gradient accumulations in its
+/// adjoint (each recorded read's reverse makes one): the number of such reads when none is in
+/// a loop, else the larger of that number and the forward's limit `forward`.
+pub fn adjoint_limit(f: &Function, forward: u32) -> u32 {
+    let (_, sites, in_loop) = recorded_reads(f);
+    match in_loop {
+        true => sites.max(forward),
+        false => sites.max(1),
+    }
+}
+
+/// The arrays whose elements a deterministic kernel records accumulations into, forward
+/// (float `atomic_add`/`atomic_sub`) or in its adjoint (gradients of recorded reads): a GPU's
+/// record slots are sized for the widest of their elements.
+pub fn recorded_arrays(f: &Function) -> Vec<VarId> {
+    let mut out = recorded_reads(f).0;
+    walk(&f.body, false, &mut |s_kind, _, _| {
+        if let StmtKind::Assign {
+            op: Op::Builtin { builtin, args },
+            ..
+        } = s_kind
+        {
+            if float_accumulation(f, builtin, args) && !out.contains(&args[0]) {
+                out.push(args[0]);
+            }
+        }
+    });
+    out
+}
+
 /// Calls `visit` on every statement with its span and whether it sits in a loop.
 fn walk(block: &Block, looped: bool, visit: &mut dyn FnMut(&StmtKind, proc_macro2::Span, bool)) {
     for s in block {

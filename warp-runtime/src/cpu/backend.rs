@@ -57,18 +57,17 @@ where
 /// added into their elements in launch order once every chunk has run (`deterministic.rs`). A fault drops the records:
 /// the launch's results are not to be trusted then anyway.
 ///
-/// The forward's records per thread are limited by the kernel's `max_records` (the limit a
-/// GPU's record buffer will need); the adjoint's are not limited on the CPU (they are as many
-/// as the thread's gradient accumulations, bounded by memory alone).
+/// The records per thread are limited as a GPU's record slots are
+/// (`DeterministicInfo::limit`): a launch that faults on one backend faults on the other.
 fn run_chunks<K: Kernel>(
     grid: &Grid,
     adjoint: bool,
     run: impl Fn(std::ops::Range<usize>) -> warp_core::KResult<()> + Sync + Send,
 ) -> Result<()> {
-    let Some(limit) = K::INFO.deterministic else {
+    let Some(det) = K::INFO.deterministic else {
         return for_each::<K, _>(grid, run);
     };
-    let limit = if adjoint { u32::MAX } else { limit };
+    let limit = det.limit(adjoint);
     let chunks = std::sync::Mutex::new(Vec::new());
     for_each::<K, _>(grid, |range| {
         let start = range.start;

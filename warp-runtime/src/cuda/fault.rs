@@ -217,6 +217,11 @@ fn decode(rec: &[u8; BYTES], primitive: Option<(&'static KernelInfo, LaunchId)>)
             len: i64_at(16) as usize,
             line: i64_at(24) as u32,
         },
+        // wp_core.h FAULT_DETERMINISTIC_RECORDS: the thread's flat index, the limit.
+        10 => FaultKind::DeterministicRecords {
+            thread: i64_at(8) as usize,
+            limit: i64_at(16) as u32,
+        },
         _ => FaultKind::BadStep { step: i64_at(8) },
     };
     Fault {
@@ -568,5 +573,26 @@ mod tests {
                 && msg.ends_with("(launch #41)"),
             "{msg}"
         );
+    }
+    /// wp_core.h's FAULT_DETERMINISTIC_RECORDS (10) decodes to the CPU's fault: the thread
+    /// and the limit, named by the kernel; the code is the library's.
+    #[test]
+    fn a_deterministic_record_fault_names_the_thread_and_limit() {
+        static K: KernelInfo = KernelInfo {
+            name: "k_det",
+            ..KernelInfo::BLANK
+        };
+        let f = decode(&record(10, -1, [70000, 4, 0, 0], 2, kernel_id(&K), 3), None);
+        assert_eq!(f.kernel, "k_det");
+        assert_eq!(
+            f.kind,
+            FaultKind::DeterministicRecords {
+                thread: 70000,
+                limit: 4
+            }
+        );
+        assert!(warp_cuda::library::CORE
+            .text
+            .contains("FAULT_DETERMINISTIC_RECORDS = 10,"));
     }
 }

@@ -127,6 +127,9 @@ pub(crate) struct GpuState {
     /// The primitives' scratch memory (`cuda/primitives.rs`), kept between calls: the
     /// largest needed so far.
     pub(crate) workspace: Mutex<Option<Arc<Scratch>>>,
+    /// The record slots of deterministic launches (`cuda/deterministic.rs`), kept between
+    /// launches: the largest needed so far, ordered like the workspace.
+    pub(crate) det_records: Mutex<Option<Arc<Scratch>>>,
 }
 
 /// Scratch memory the primitives reuse from call to call (the GPU's workspace), with the
@@ -329,6 +332,7 @@ pub(crate) fn state(device: &Device, ordinal: usize) -> Result<Arc<GpuState>> {
         marks: AtomicU64::new(0),
         order: Mutex::new(()),
         workspace: Mutex::new(None),
+        det_records: Mutex::new(None),
     });
     map.insert(ordinal, s.clone());
     Ok(s)

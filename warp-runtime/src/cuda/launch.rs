@@ -1,6 +1,7 @@
 //! A kernel launch on a GPU: the parameter block and `cuLaunchKernel`, asynchronous on a
 //! stream.
 
+use super::deterministic;
 use super::fault;
 use super::gpu::{check_state, err};
 use super::module::{loaded, Loaded};
@@ -119,19 +120,6 @@ impl<K: Kernel> Prepared<K> {
         adjoint: Option<usize>,
     ) -> Result<(Self, CudaParamsOf<K>, Option<CudaGradsOf<K>>)> {
         let info = K::info();
-        if adjoint.is_none() && info.deterministic.is_some() {
-            // The records, the sort and the ordered reduction exist on the CPU only so far
-            // (docs/book/src/deterministic.md, "On a GPU"): refused, never run with plain
-            // atomics under a deterministic kernel's name.
-            return Err(Error::Deterministic {
-                kernel: info.name,
-                why: format!(
-                    "the deterministic path is not implemented on CUDA yet (\"{}\"): launch \
-                     it on the CPU",
-                    device.alias()
-                ),
-            });
-        }
         if adjoint.is_some() {
             if let Some(reason) = info.cuda_adjoint_error {
                 return Err(Error::NotDifferentiable {
@@ -259,6 +247,20 @@ impl<K: Kernel> Prepared<K> {
         let (mut dims, mut ctx) = (self.dims, self.ctx);
         let (kernel, ordinal) = (&self.kernel, self.ordinal);
         let st = &kernel.st;
+        // A deterministic kernel records into the GPU's record buffer, ordered and added after
+        // it on the same stream (`deterministic.rs`); the buffer stays locked until then.
+        let records = match K::info().deterministic {
+            Some(_) => Some(deterministic::records(
+                st,
+                device,
+                ordinal,
+                K::info(),
+                self.dims.total as u64,
+                self.adjoint,
+            )?),
+            None => None,
+        };
+        let mut det_args = records.as_ref().map(|r| r.args);
         // Faults go to the launching thread's record (the capture's inside a capture).
         (ctx.fault, ctx.fault_flag) =
             fault::with_record(&st.faults, ordinal, id, |r| r.addresses())?;
@@ -270,16 +272,26 @@ impl<K: Kernel> Prepared<K> {
             if plain_own && st.alone(on) {
                 dims.flags |= LAUNCH_ALONE;
             }
-            // The launch and the context, then the parameters and (adjoint) their gradients.
-            let mut ptrs = [std::ptr::null_mut::<c_void>(); 2 + 2 * MAX_PARAMS];
+            if let Some(r) = &records {
+                r.order_on(device, on)?;
+            }
+            // The launch and the context, (deterministic) the record buffer, then the
+            // parameters and (adjoint) their gradients.
+            let mut ptrs = [std::ptr::null_mut::<c_void>(); 3 + 2 * MAX_PARAMS];
             ptrs[0] = (&mut dims) as *mut LaunchDims as *mut c_void;
             ptrs[1] = (&mut ctx) as *mut Ctx as *mut c_void;
-            let mut n = 2 + K::Params::cuda_param_ptrs(&mut params, &mut ptrs[2..]);
+            let mut n = 2;
+            if let Some(d) = det_args.as_mut() {
+                ptrs[2] = d as *mut deterministic::DetArgs as *mut c_void;
+                n = 3;
+            }
+            n += K::Params::cuda_param_ptrs(&mut params, &mut ptrs[n..]);
             if let Some(g) = grads.as_mut() {
                 n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
             }
             // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
-            // (launch_t, ctx_t, then each parameter's CudaArg, which mirrors its C++ type),
+            // (launch_t, ctx_t, a deterministic kernel's det_t, then each parameter's
+            // CudaArg, which mirrors its C++ type),
             // alive until the call returns; cuLaunchKernel copies them.
             unsafe {
                 st.gpu
@@ -294,6 +306,13 @@ impl<K: Kernel> Prepared<K> {
                     .map_err(|e| err(device, e))
             }
         })?;
+        if let Some(r) = records {
+            let fns = kernel
+                .det
+                .as_ref()
+                .expect("a deterministic kernel's unit has its ordering entries");
+            r.reduce(st, device, ordinal, fns, stream)?;
+        }
         // (Inside a capture nothing has run yet: there is nothing to check.)
         if config::debug() && super::gpu::capture_stream(ordinal).is_none() {
             check_state(st)?;

@@ -9,6 +9,8 @@
 //!   write and synchronisations read (it imports nothing from `gpu`).
 //! - `launch`: a launch's parameter block and `cuLaunchKernel`.
 //! - `primitives`: the launch plans of the parallel primitives (`wp_primitives.h`), run.
+//! - `deterministic`: a `#[kernel(deterministic)]` launch's record slots, their ordering
+//!   (two of the primitives' radix sorts) and ordered addition.
 //! - `objects`: the build kernels of host objects (the hash grid's, `wp_hash_grid.h`).
 //! - `capture`: what graph capture means on a GPU (the thread's capture stream, onto which
 //!   every enqueue of the thread goes) and graph replay.
@@ -27,6 +29,8 @@ pub mod aot;
 mod backend;
 #[cfg(feature = "cuda")]
 pub(crate) mod capture;
+#[cfg(feature = "cuda")]
+pub(crate) mod deterministic;
 #[cfg(feature = "cuda")]
 pub mod distributed;
 #[cfg(feature = "cuda")]

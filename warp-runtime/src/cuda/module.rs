@@ -28,6 +28,8 @@ pub(crate) struct Loaded {
     pub(crate) id: i32,
     /// The dynamic shared memory each block of its launches takes ([`tile_shared`]).
     pub(crate) shared_bytes: usize,
+    /// A deterministic kernel's ordering and addition entries (`cuda/deterministic.rs`).
+    pub(crate) det: Option<super::deterministic::DetFns>,
 }
 
 /// What compiling a kernel cost, for reports.
@@ -517,6 +519,7 @@ fn load_variant(
     Ok(keep(
         key,
         Loaded {
+            det: super::deterministic::DetFns::of(device, info, &module, &src.entry)?,
             st,
             _module: module,
             function,
@@ -557,6 +560,7 @@ fn load_both(
     let adjoint_fn = module
         .function(&adjoint.entry)
         .map_err(|e| err(device, e))?;
+    let det = super::deterministic::DetFns::of(device, info, &module, &src.entry)?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     log::info!(
         "loaded kernel {}::{} (forward and adjoint in one unit, {}) on {device} in {total_ms:.1} \
@@ -610,6 +614,7 @@ fn load_both(
             function: adjoint_fn,
             id,
             shared_bytes: 0,
+            det: det.clone(),
         },
     );
     Ok(keep(
@@ -620,6 +625,7 @@ fn load_both(
             function: forward_fn,
             id,
             shared_bytes: 0,
+            det,
         },
     ))
 }

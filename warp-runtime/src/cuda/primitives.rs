@@ -147,6 +147,19 @@ fn run(
     plan: &Plan,
     users: &[u64],
 ) -> Result<()> {
+    run_on(device, ordinal, None, func, params, plan, users)
+}
+
+/// [`run`] on `stream` (`None`: the calling thread's current stream), as a launch on it.
+fn run_on(
+    device: &Device,
+    ordinal: usize,
+    stream: Option<&warp_cuda::Stream>,
+    func: &'static str,
+    params: &'static [&'static str],
+    plan: &Plan,
+    users: &[u64],
+) -> Result<()> {
     let capturing = gpu::capture_stream(ordinal).is_some();
     let module = loaded(device, ordinal, &plan.module, func)?;
     let st = gpu::state(device, ordinal)?;
@@ -214,7 +227,7 @@ fn run(
         ));
     }
     let mut last = scratch.last();
-    st.queue(ordinal, None, |stream| {
+    st.queue(ordinal, stream, |stream| {
         // The workspace's last user may be another stream: wait for its work first. A graph
         // orders itself so at each replay instead (nothing runs at capture).
         if !capturing {
@@ -337,6 +350,35 @@ pub(super) fn radix_sort_pairs<K: SortKeyOps>(
         &["keys", "values", "count"],
         &p,
         &users,
+    )
+}
+
+/// A stable sort of `n` pairs of `u32` keys and values at device addresses `keys` and
+/// `values`, on `stream` as a launch there (a deterministic launch's ordering,
+/// `cuda/deterministic.rs`).
+pub(super) fn sort_u32_pairs_on(
+    device: &Device,
+    ordinal: usize,
+    stream: Option<&warp_cuda::Stream>,
+    func: &'static str,
+    keys: u64,
+    values: u64,
+    n: usize,
+) -> Result<()> {
+    let p = plan::sort(
+        plan::gpu_sort_config(),
+        <u32 as SortKeyOps>::CUDA,
+        32,
+        plan::Len::Host(n as u64),
+    );
+    run_on(
+        device,
+        ordinal,
+        stream,
+        func,
+        &["keys", "values", "count"],
+        &p,
+        &[keys, values],
     )
 }
 
