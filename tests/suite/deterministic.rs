@@ -533,7 +533,7 @@ fn struct_gradients_in_order(dev: &wp::Device) {
     out.grad().unwrap().copy_from(&arr(&xs, dev)).unwrap();
     tape.backward_from_grads().unwrap();
     let g = host(&b.grad().unwrap());
-    let mut want = vec![Body::default(); 5];
+    let mut want = [Body::default(); 5];
     for (i, gi) in xs.iter().enumerate() {
         let (s, w) = (bodies[i % 5], &mut want[i % 5]);
         w.m += s.v.y * gi;
