@@ -6,5 +6,5 @@ mod test_fixedarray;
 mod test_func;
 mod test_lerp;
 mod test_smoothstep;
-//mod test_struct;
+mod test_struct;
 mod test_tuple;
