@@ -2,8 +2,10 @@
 //! exercising a feature as Warp users write it (the module's docs name the Warp file, what was
 //! ported, what was not and why). The tests run on every backend like the rest of the suite.
 
+mod test_assert;
 mod test_fixedarray;
 mod test_func;
+mod test_generics;
 mod test_lerp;
 mod test_smoothstep;
 mod test_struct;
