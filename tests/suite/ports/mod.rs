@@ -6,6 +6,7 @@ mod test_assert;
 mod test_fixedarray;
 mod test_func;
 mod test_generics;
+mod test_grad_customs;
 mod test_lerp;
 mod test_smoothstep;
 mod test_struct;
