@@ -9,5 +9,6 @@ mod test_generics;
 mod test_grad_customs;
 mod test_lerp;
 mod test_smoothstep;
+mod test_spatial;
 mod test_struct;
 mod test_tuple;

@@ -87,7 +87,7 @@ const DT: f32 = 0.01;
 
 /// Fixed pseudo-random numbers in [-1, 1) (a sine hash), standing in for Warp's seeded draws.
 fn noise(k: usize) -> f32 {
-    (((k as f64 * 12.9898).sin() * 43758.5453).fract() * 2.0) as f32
+    (((k as f64 * 12.9898).sin() * 43758.5453).rem_euclid(1.0) * 2.0 - 1.0) as f32
 }
 
 fn vecs(offset: usize) -> Vec<Vec3> {
