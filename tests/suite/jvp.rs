@@ -667,12 +667,23 @@ fn jvp_struct_matrix_and_quat_fields(dev: &wp::Device) {
         t: Vec3::ZERO,
     };
     let x = arr(&[1.5f32, -2.0], dev);
-    let (m, q, y) = (zeros::<Mat3, 1>(2, dev), zeros::<Quat, 1>(2, dev), zeros::<f32, 1>(2, dev));
+    let (m, q, y) = (
+        zeros::<Mat3, 1>(2, dev),
+        zeros::<Quat, 1>(2, dev),
+        zeros::<f32, 1>(2, dev),
+    );
     // Tangent outputs start non-zero: the tangent kernel must overwrite them with zeros.
     let m_dot = arr(&[Mat3::IDENTITY; 2], dev);
     let q_dot = arr(&[Quat::IDENTITY; 2], dev);
     let (x_dot, y_dot) = (arr(&[1.0f32, 0.5], dev), zeros::<f32, 1>(2, dev));
-    wp::jvp(k_pose_fields, 2, (pose, &x, &m, &q, &y), (pose, &x_dot, &m_dot, &q_dot, &y_dot), dev).unwrap();
+    wp::jvp(
+        k_pose_fields,
+        2,
+        (pose, &x, &m, &q, &y),
+        (pose, &x_dot, &m_dot, &q_dot, &y_dot),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&m), vec![pose.m; 2]);
     assert_eq!(host(&q), vec![pose.q; 2]);
     assert_eq!(host(&m_dot), vec![Mat3::ZERO; 2]);

@@ -132,18 +132,25 @@ fn debug_basic_assert_true(dev: &wp::Device) {
 
 fn debug_assert_with_msg(dev: &wp::Device) {
     let a = arr(&[0i32], dev);
-    let r = in_mode(dev, true, || wp::launch(expect_ones_with_msg, 1, (&a,), dev));
+    let r = in_mode(dev, true, || {
+        wp::launch(expect_ones_with_msg, 1, (&a,), dev)
+    });
     assert_eq!(assertion(r), ("Array element must be 1", Some(0)));
 }
 
 fn debug_compound_assert_true(dev: &wp::Device) {
     let a = arr(&[1i32], dev);
-    in_mode(dev, true, || wp::launch(expect_ones_compound, 1, (&a,), dev)).unwrap();
+    in_mode(dev, true, || {
+        wp::launch(expect_ones_compound, 1, (&a,), dev)
+    })
+    .unwrap();
 }
 
 fn debug_compound_assert_false(dev: &wp::Device) {
     let a = arr(&[3i32], dev);
-    let r = in_mode(dev, true, || wp::launch(expect_ones_compound, 1, (&a,), dev));
+    let r = in_mode(dev, true, || {
+        wp::launch(expect_ones_compound, 1, (&a,), dev)
+    });
     assert_eq!(
         assertion(r),
         ("assertion failed: a[i] > 0 && a[i] < 2", Some(0))

@@ -178,7 +178,11 @@ fn capture_if(dev: &wp::Device) {
     .unwrap();
     graph.launch().unwrap();
     wp::synchronize().unwrap();
-    assert_eq!(host(&count), vec![512], "the true branch ran once, 512 threads");
+    assert_eq!(
+        host(&count),
+        vec![512],
+        "the true branch ran once, 512 threads"
+    );
 }
 
 #[wp::func]

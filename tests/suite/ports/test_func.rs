@@ -198,7 +198,10 @@ fn user_func_overload_resolution(dev: &wp::Device) {
     let (a2, b2) = (arr(&[5.0f64], dev), arr(&[6.0f64], dev));
     wp::launch(k_overload_resolution, 1, (&a2, &b2), dev).unwrap();
     assert_eq!(host(&a2)[0], 12.0);
-    let (a3, b3) = (arr(&[DVec3::ONE], dev), arr(&[DVec3::new(2.0, 3.0, 4.0)], dev));
+    let (a3, b3) = (
+        arr(&[DVec3::ONE], dev),
+        arr(&[DVec3::new(2.0, 3.0, 4.0)], dev),
+    );
     wp::launch(k_overload_resolution_vec, 1, (&a3, &b3), dev).unwrap();
     assert_eq!(host(&a3)[0], DVec3::new(4.0, 6.0, 8.0));
 }
@@ -248,6 +251,9 @@ fn custom_grad_sqrt(dev: &wp::Device) {
     tape.backward(&y).unwrap();
     for (k, (g, x)) in host(&x.grad().unwrap()).iter().zip(xs).enumerate() {
         let want = 0.5 / (x as f64).sqrt();
-        assert!((*g as f64 - want).abs() <= 1e-5, "x grad [{k}]: got {g}, want {want} (Warp's tolerance 1e-5)");
+        assert!(
+            (*g as f64 - want).abs() <= 1e-5,
+            "x grad [{k}]: got {g}, want {want} (Warp's tolerance 1e-5)"
+        );
     }
 }

@@ -75,7 +75,10 @@ fn k_generic_adder() {
     expect_eq(generic_adder_vec::<f32>(v1, v2), vec3(11.0, 22.0, 33.0));
     let d1 = DVec3::new(1.0, 2.0, 3.0);
     let d2 = DVec3::new(10.0, 20.0, 30.0);
-    expect_eq(generic_adder_vec::<f64>(d1, d2), DVec3::new(11.0, 22.0, 33.0));
+    expect_eq(
+        generic_adder_vec::<f64>(d1, d2),
+        DVec3::new(11.0, 22.0, 33.0),
+    );
 }
 
 fn generic_adder_instances(dev: &wp::Device) {
@@ -97,7 +100,10 @@ fn eager_generic_norm(dev: &wp::Device) {
     wp::launch(k_eager_generic_norm_use_vec2, 1, (&out,), dev).unwrap();
     let (got, want) = (host(&out)[0] as f64, 5.0f64.sqrt());
     // numpy's assert_allclose(rtol=1e-6).
-    assert!((got - want).abs() <= 1e-6 * want.abs(), "|(1, 2)|: got {got}, want {want}");
+    assert!(
+        (got - want).abs() <= 1e-6 * want.abs(),
+        "|(1, 2)|: got {got}, want {want}"
+    );
 }
 
 #[wp::func]
@@ -112,9 +118,21 @@ fn k_eager_generic_array_length<T: Float>(x: Array<T>, out: Array<i32>) {
 
 fn generic_array_length(dev: &wp::Device) {
     let out = zeros::<i32, 1>(1, dev);
-    wp::launch(k_eager_generic_array_length, 1, (&zeros::<f32, 1>(1, dev), &out), dev).unwrap();
+    wp::launch(
+        k_eager_generic_array_length,
+        1,
+        (&zeros::<f32, 1>(1, dev), &out),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&out), vec![1]);
-    wp::launch(k_eager_generic_array_length, 1, (&zeros::<f64, 1>(3, dev), &out), dev).unwrap();
+    wp::launch(
+        k_eager_generic_array_length,
+        1,
+        (&zeros::<f64, 1>(3, dev), &out),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&out), vec![3]);
 }
 
@@ -173,7 +191,11 @@ fn k_generic_fill_vec<T: Float>(a: Array<Vec3<T>>, value: Vec3<T>) {
 
 fn generic_fill(dev: &wp::Device) {
     let n = 10;
-    let (af, ad, a3) = (zeros::<f32, 1>(n, dev), zeros::<f64, 1>(n, dev), zeros::<Vec3, 1>(n, dev));
+    let (af, ad, a3) = (
+        zeros::<f32, 1>(n, dev),
+        zeros::<f64, 1>(n, dev),
+        zeros::<Vec3, 1>(n, dev),
+    );
     wp::launch(k_generic_fill, n, (&af, 17.0f32), dev).unwrap();
     wp::launch(k_generic_fill, n, (&ad, 42.0f64), dev).unwrap();
     wp::launch(k_generic_fill_vec, n, (&a3, Vec3::splat(5.0)), dev).unwrap();
@@ -199,7 +221,13 @@ fn k_generic_conditional_setter<T: Float>(a: Array<T>, i: i32, value: T, relativ
 fn generic_conditional_setter(dev: &wp::Device) {
     let n = 10;
     let a = zeros::<f32, 1>(n, dev);
-    wp::launch(k_generic_conditional_setter, 1, (&a, 1, 42.0f32, false), dev).unwrap();
+    wp::launch(
+        k_generic_conditional_setter,
+        1,
+        (&a, 1, 42.0f32, false),
+        dev,
+    )
+    .unwrap();
     wp::launch(k_generic_conditional_setter, 1, (&a, 1, 5.0f32, true), dev).unwrap();
     let mut want = vec![0.0f32; n];
     want[1] = 47.0;
@@ -222,30 +250,70 @@ fn k_generic_transform4<T: Float>(v: Vec4<T>, m: Mat4<T>, expected: Vec4<T>) {
 }
 
 fn generic_transform(dev: &wp::Device) {
-    let (v2, v3, v4) = (Vec2::new(1.0, 2.0), Vec3::new(1.0, 2.0, 3.0), Vec4::new(1.0, 2.0, 3.0, 4.0));
-    wp::launch(k_generic_transform2, 1, (v2, Mat2::from_diagonal(Vec2::splat(2.0)), v2 * 2.0), dev).unwrap();
-    wp::launch(k_generic_transform3, 1, (v3, Mat3::from_diagonal(Vec3::splat(2.0)), v3 * 2.0), dev).unwrap();
-    wp::launch(k_generic_transform4, 1, (v4, Mat4::from_diagonal(Vec4::splat(2.0)), v4 * 2.0), dev).unwrap();
+    let (v2, v3, v4) = (
+        Vec2::new(1.0, 2.0),
+        Vec3::new(1.0, 2.0, 3.0),
+        Vec4::new(1.0, 2.0, 3.0, 4.0),
+    );
+    wp::launch(
+        k_generic_transform2,
+        1,
+        (v2, Mat2::from_diagonal(Vec2::splat(2.0)), v2 * 2.0),
+        dev,
+    )
+    .unwrap();
+    wp::launch(
+        k_generic_transform3,
+        1,
+        (v3, Mat3::from_diagonal(Vec3::splat(2.0)), v3 * 2.0),
+        dev,
+    )
+    .unwrap();
+    wp::launch(
+        k_generic_transform4,
+        1,
+        (v4, Mat4::from_diagonal(Vec4::splat(2.0)), v4 * 2.0),
+        dev,
+    )
+    .unwrap();
     // And the f64 instances.
     let d3 = DVec3::new(1.0, 2.0, 3.0);
-    wp::launch(k_generic_transform3, 1, (d3, DMat3::from_diagonal(DVec3::splat(2.0)), d3 * 2.0), dev).unwrap();
+    wp::launch(
+        k_generic_transform3,
+        1,
+        (d3, DMat3::from_diagonal(DVec3::splat(2.0)), d3 * 2.0),
+        dev,
+    )
+    .unwrap();
     wp::synchronize().unwrap();
 }
 
 #[wp::kernel]
-fn k_generic_transform_array2<T: Float>(v: Array<Vec2<T>>, m: Array<Mat2<T>>, result: Array<Vec2<T>>) {
+fn k_generic_transform_array2<T: Float>(
+    v: Array<Vec2<T>>,
+    m: Array<Mat2<T>>,
+    result: Array<Vec2<T>>,
+) {
     let tid = tid();
     result[tid] = m[tid] * v[tid];
 }
 
 #[wp::kernel]
-fn k_generic_transform_array3<T: Float>(v: Array<Vec3<T>>, m: Array<Mat3<T>>, result: Array<Vec3<T>>) {
+fn k_generic_transform_array3<T: Float>(
+    v: Array<Vec3<T>>,
+    m: Array<Mat3<T>>,
+    result: Array<Vec3<T>>,
+) {
     let tid = tid();
     result[tid] = m[tid] * v[tid];
 }
 
 #[wp::kernel]
-fn k_generic_transform_array4<T: Float>(v: Array<Vec4<T>>, m: Array<Mat4<T>>, result: Array<Vec4<T>>) {
+fn k_generic_transform_array4<T: Float>(
+    v: Array<Vec4<T>>,
+    m: Array<Mat4<T>>,
+    result: Array<Vec4<T>>,
+) {
     let tid = tid();
     result[tid] = m[tid] * v[tid];
 }
@@ -262,9 +330,27 @@ fn generic_transform_array(dev: &wp::Device) {
     let m2 = arr(&vec![Mat2::from_diagonal(Vec2::splat(2.0)); n], dev);
     let m3 = arr(&vec![Mat3::from_diagonal(Vec3::splat(2.0)); n], dev);
     let m4 = arr(&vec![Mat4::from_diagonal(Vec4::splat(2.0)); n], dev);
-    wp::launch(k_generic_transform_array2, n, (&arr(&a2, dev), &m2, &b2), dev).unwrap();
-    wp::launch(k_generic_transform_array3, n, (&arr(&a3, dev), &m3, &b3), dev).unwrap();
-    wp::launch(k_generic_transform_array4, n, (&arr(&a4, dev), &m4, &b4), dev).unwrap();
+    wp::launch(
+        k_generic_transform_array2,
+        n,
+        (&arr(&a2, dev), &m2, &b2),
+        dev,
+    )
+    .unwrap();
+    wp::launch(
+        k_generic_transform_array3,
+        n,
+        (&arr(&a3, dev), &m3, &b3),
+        dev,
+    )
+    .unwrap();
+    wp::launch(
+        k_generic_transform_array4,
+        n,
+        (&arr(&a4, dev), &m4, &b4),
+        dev,
+    )
+    .unwrap();
     assert_eq!(host(&b2), a2.iter().map(|v| *v * 2.0).collect::<Vec<_>>());
     assert_eq!(host(&b3), a3.iter().map(|v| *v * 2.0).collect::<Vec<_>>());
     assert_eq!(host(&b4), a4.iter().map(|v| *v * 2.0).collect::<Vec<_>>());
@@ -292,8 +378,20 @@ fn k_generic_scalar_construction<T: Float>(a: Array<T>) {
 }
 
 fn generic_scalar_construction(dev: &wp::Device) {
-    wp::launch(k_generic_scalar_construction, 1, (&arr(&[-5.0f64], dev),), dev).unwrap();
-    wp::launch(k_generic_scalar_construction, 1, (&arr(&[1.0f32], dev),), dev).unwrap();
+    wp::launch(
+        k_generic_scalar_construction,
+        1,
+        (&arr(&[-5.0f64], dev),),
+        dev,
+    )
+    .unwrap();
+    wp::launch(
+        k_generic_scalar_construction,
+        1,
+        (&arr(&[1.0f32], dev),),
+        dev,
+    )
+    .unwrap();
     wp::synchronize().unwrap();
 }
 

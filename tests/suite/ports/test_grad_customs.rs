@@ -74,7 +74,12 @@ fn overload_fn_dy(x: f32, y: f32, adj_ret: (f32, f32)) -> f32 {
 }
 
 #[wp::kernel]
-fn k_run_overload_float_fn(xs: Array<f32>, ys: Array<f32>, output0: Array<f32>, output1: Array<f32>) {
+fn k_run_overload_float_fn(
+    xs: Array<f32>,
+    ys: Array<f32>,
+    output0: Array<f32>,
+    output1: Array<f32>,
+) {
     let i = tid();
     let (out0, out1) = overload_fn(xs[i], ys[i]);
     output0[i] = out0;
@@ -103,7 +108,11 @@ fn check_two_output_grads(dev: &wp::Device, imported: bool) {
     out0.grad().unwrap().fill(1.0).unwrap();
     out1.grad().unwrap().fill(1.0).unwrap();
     tape.backward_from_grads().unwrap();
-    let want_x: Vec<f32> = xv.iter().zip(&yv).map(|(x, y)| x * 42.0 + y * 10.0).collect();
+    let want_x: Vec<f32> = xv
+        .iter()
+        .zip(&yv)
+        .map(|(x, y)| x * 42.0 + y * 10.0)
+        .collect();
     let want_y: Vec<f32> = yv.iter().map(|y| y * 3.0).collect();
     assert_eq!(host(&xs.grad().unwrap()), want_x, "x gradient");
     assert_eq!(host(&ys.grad().unwrap()), want_y, "y gradient");
@@ -139,7 +148,12 @@ mod aux {
     }
 
     #[wp::kernel]
-    pub fn k_run_defined_float_fn(xs: Array<f32>, ys: Array<f32>, output0: Array<f32>, output1: Array<f32>) {
+    pub fn k_run_defined_float_fn(
+        xs: Array<f32>,
+        ys: Array<f32>,
+        output0: Array<f32>,
+        output1: Array<f32>,
+    ) {
         let i = tid();
         let (out0, out1) = aux_custom_fn(xs[i], ys[i]);
         output0[i] = out0;
@@ -156,7 +170,11 @@ struct MyStruct {
 
 #[wp::func(grad(x = overload_fn_struct_dx))]
 fn overload_fn_struct(x: MyStruct) -> (f32, f32, f32) {
-    (x.vec.x * x.vec.y * x.vec.z * 4.0, x.vec.length(), x.scalar.powf(0.5))
+    (
+        x.vec.x * x.vec.y * x.vec.z * 4.0,
+        x.vec.length(),
+        x.scalar.powf(0.5),
+    )
 }
 
 /// Warp's `overload_fn_grad` for the struct: one adjoint per field.
@@ -181,9 +199,18 @@ fn k_run_overload_struct_fn(xs: Array<MyStruct>, output: Array<f32>) {
 
 fn custom_overload_grad_struct(dev: &wp::Device) {
     let values = [
-        MyStruct { scalar: 4.0, vec: Vec3::new(1.0, 2.0, 3.0) },
-        MyStruct { scalar: -1.0, vec: Vec3::new(5.0, 6.0, 7.0) },
-        MyStruct { scalar: 19.0, vec: Vec3::new(8.0, 9.0, 10.0) },
+        MyStruct {
+            scalar: 4.0,
+            vec: Vec3::new(1.0, 2.0, 3.0),
+        },
+        MyStruct {
+            scalar: -1.0,
+            vec: Vec3::new(5.0, 6.0, 7.0),
+        },
+        MyStruct {
+            scalar: 19.0,
+            vec: Vec3::new(8.0, 9.0, 10.0),
+        },
     ];
     let xs = arr(&values, dev).with_grad().unwrap();
     let out = zeros::<f32, 1>(3, dev).with_grad().unwrap();
@@ -227,7 +254,11 @@ fn k_nested_custom_grad(vectors: Array<Vec3>, norms: Array<f32>) {
 }
 
 fn nested_custom_grad(dev: &wp::Device) {
-    let vecs = [Vec3::new(0.0, 2.0, 0.0), Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -1.0)];
+    let vecs = [
+        Vec3::new(0.0, 2.0, 0.0),
+        Vec3::new(3.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -1.0),
+    ];
     let v = arr(&vecs, dev).with_grad().unwrap();
     let norms = zeros::<f32, 1>(3, dev).with_grad().unwrap();
     let tape = wp::Tape::new();
@@ -237,8 +268,16 @@ fn nested_custom_grad(dev: &wp::Device) {
     }
     near(&host(&norms), &[2.0, 3.0, 1.0], 1e-4, "norms");
     tape.backward(&norms).unwrap();
-    let g: Vec<f32> = host(&v.grad().unwrap()).iter().flat_map(|g| g.to_array()).collect();
-    near(&g, &[0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0], 1e-4, "vector gradients");
+    let g: Vec<f32> = host(&v.grad().unwrap())
+        .iter()
+        .flat_map(|g| g.to_array())
+        .collect();
+    near(
+        &g,
+        &[0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0],
+        1e-4,
+        "vector gradients",
+    );
 }
 
 #[wp::func]
@@ -278,7 +317,12 @@ fn custom_grad_with_helper_dependency(dev: &wp::Device) {
     }
     near(&host(&outputs), &[9.0, 15.0, 21.0], 1e-4, "outputs");
     tape.backward(&outputs).unwrap();
-    near(&host(&inputs.grad().unwrap()), &[6.0, 6.0, 6.0], 1e-4, "input gradients");
+    near(
+        &host(&inputs.grad().unwrap()),
+        &[6.0, 6.0, 6.0],
+        1e-4,
+        "input gradients",
+    );
 }
 
 #[wp::func]

@@ -80,22 +80,45 @@ fn lerp_vectors(dev: &wp::Device) {
     let t = arr(&[0.5f32], dev);
     let out2 = zeros::<Vec2, 1>(1, dev);
     let (a, b) = (Vec2::new(1.0, 2.0), Vec2::new(3.0, 4.0));
-    wp::launch(k_lerp_vec2, 1, (&arr(&[a], dev), &arr(&[b], dev), &t, &out2), dev).unwrap();
+    wp::launch(
+        k_lerp_vec2,
+        1,
+        (&arr(&[a], dev), &arr(&[b], dev), &t, &out2),
+        dev,
+    )
+    .unwrap();
     near(&host(&out2)[0].to_array(), &[2.0, 3.0], "vec2");
 
     let out3 = zeros::<Vec3, 1>(1, dev);
     let (a, b) = (Vec3::new(1.0, 2.0, 3.0), Vec3::new(3.0, 4.0, 5.0));
-    wp::launch(k_lerp_vec3, 1, (&arr(&[a], dev), &arr(&[b], dev), &t, &out3), dev).unwrap();
+    wp::launch(
+        k_lerp_vec3,
+        1,
+        (&arr(&[a], dev), &arr(&[b], dev), &t, &out3),
+        dev,
+    )
+    .unwrap();
     near(&host(&out3)[0].to_array(), &[2.0, 3.0, 4.0], "vec3");
 
     let out4 = zeros::<Vec4, 1>(1, dev);
     let (a, b) = (Vec4::new(1.0, 2.0, 3.0, 4.0), Vec4::new(3.0, 4.0, 5.0, 6.0));
-    wp::launch(k_lerp_vec4, 1, (&arr(&[a], dev), &arr(&[b], dev), &t, &out4), dev).unwrap();
+    wp::launch(
+        k_lerp_vec4,
+        1,
+        (&arr(&[a], dev), &arr(&[b], dev), &t, &out4),
+        dev,
+    )
+    .unwrap();
     near(&host(&out4)[0].to_array(), &[2.0, 3.0, 4.0, 5.0], "vec4");
 }
 
 #[wp::kernel]
-fn k_lerp_transform(a: Array<Transform>, b: Array<Transform>, t: Array<f32>, out: Array<Transform>) {
+fn k_lerp_transform(
+    a: Array<Transform>,
+    b: Array<Transform>,
+    t: Array<f32>,
+    out: Array<Transform>,
+) {
     out[0] = lerp(a[0], b[0], t[0]);
 }
 
@@ -106,10 +129,26 @@ fn lanes(x: Transform) -> [f32; 7] {
 }
 
 fn lerp_transform(dev: &wp::Device) {
-    let a = Transform::new(Vec3::new(1.0, 2.0, 3.0), Quat::from_xyzw(4.0, 5.0, 6.0, 7.0));
-    let b = Transform::new(Vec3::new(3.0, 4.0, 5.0), Quat::from_xyzw(6.0, 7.0, 8.0, 9.0));
+    let a = Transform::new(
+        Vec3::new(1.0, 2.0, 3.0),
+        Quat::from_xyzw(4.0, 5.0, 6.0, 7.0),
+    );
+    let b = Transform::new(
+        Vec3::new(3.0, 4.0, 5.0),
+        Quat::from_xyzw(6.0, 7.0, 8.0, 9.0),
+    );
     let out = zeros::<Transform, 1>(1, dev);
     let t = arr(&[0.5f32], dev);
-    wp::launch(k_lerp_transform, 1, (&arr(&[a], dev), &arr(&[b], dev), &t, &out), dev).unwrap();
-    near(&lanes(host(&out)[0]), &[2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0], "transform");
+    wp::launch(
+        k_lerp_transform,
+        1,
+        (&arr(&[a], dev), &arr(&[b], dev), &t, &out),
+        dev,
+    )
+    .unwrap();
+    near(
+        &lanes(host(&out)[0]),
+        &[2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0],
+        "transform",
+    );
 }

@@ -195,7 +195,10 @@ fn k_tuple_unpack(out: Array<f32>) {
 fn tuple_unpack_assignment(dev: &wp::Device) {
     let out = zeros::<f32, 1>(10, dev);
     wp::launch(k_tuple_unpack, 1, (&out,), dev).unwrap();
-    assert_eq!(host(&out), vec![3.0, 4.0, 4.0, 3.0, 9.0, 2.0, 7.0, 1.0, 9.0, 2.0]);
+    assert_eq!(
+        host(&out),
+        vec![3.0, 4.0, 4.0, 3.0, 9.0, 2.0, 7.0, 1.0, 9.0, 2.0]
+    );
 }
 
 #[wp::kernel]
@@ -261,7 +264,12 @@ fn set_ref_vec3(x: &mut Vec3, value: Vec3) {
 }
 
 #[wp::kernel]
-fn k_struct_array_fields(boxes: Array<RefBox>, outers: Array<RefOuter>, comps: Array<RefCompositeBox>, out: Array<f32, 2>) {
+fn k_struct_array_fields(
+    boxes: Array<RefBox>,
+    outers: Array<RefOuter>,
+    comps: Array<RefCompositeBox>,
+    out: Array<f32, 2>,
+) {
     let i = tid();
     let fi = i as f32;
     set_ref_float(&mut boxes[i].value, fi + 10.0);
@@ -285,11 +293,25 @@ fn struct_array_fields(dev: &wp::Device) {
     let outers = zeros::<RefOuter, 1>(3, dev);
     let comps = zeros::<RefCompositeBox, 1>(3, dev);
     let out = zeros::<f32, 2>((3, 7), dev);
-    wp::launch(k_struct_array_fields, 3, (&boxes, &outers, &comps, &out), dev).unwrap();
+    wp::launch(
+        k_struct_array_fields,
+        3,
+        (&boxes, &outers, &comps, &out),
+        dev,
+    )
+    .unwrap();
     let want: Vec<f32> = (0..3)
         .flat_map(|i| {
             let f = i as f32;
-            [f + 10.0, f + 20.0, f + 30.0, f + 40.0, f + 10.0, f + 10.0, f + 1.0]
+            [
+                f + 10.0,
+                f + 20.0,
+                f + 30.0,
+                f + 40.0,
+                f + 10.0,
+                f + 10.0,
+                f + 1.0,
+            ]
         })
         .collect();
     assert_eq!(host(&out), want);
@@ -312,7 +334,11 @@ fn bump_ref_mat_lane(m: &mut Mat3) {
 fn k_lanes_and_copies(out: Array<f32>) {
     // Warp's mat33(1, .., 9) lists rows; as glam columns:
     let mut v = vec3(1.0, 2.0, 3.0);
-    let mut m = Mat3::from_cols(vec3(1.0, 4.0, 7.0), vec3(2.0, 5.0, 8.0), vec3(3.0, 6.0, 9.0));
+    let mut m = Mat3::from_cols(
+        vec3(1.0, 4.0, 7.0),
+        vec3(2.0, 5.0, 8.0),
+        vec3(3.0, 6.0, 9.0),
+    );
     bump_ref_vec_lane(&mut v);
     bump_ref_mat_lane(&mut m);
     out[0] = v.x;
@@ -466,7 +492,13 @@ fn adjoints_through_mut_params(dev: &wp::Device) {
     let tape = wp::Tape::new();
     {
         let _rec = tape.record();
-        wp::launch(k_store_double_adjoints, 3, (&x, &direct, &grid, &comps, &outers, &out), dev).unwrap();
+        wp::launch(
+            k_store_double_adjoints,
+            3,
+            (&x, &direct, &grid, &comps, &outers, &out),
+            dev,
+        )
+        .unwrap();
     }
     let want: Vec<f32> = xs.iter().flat_map(|x| [2.0 * x; 11]).collect();
     assert_eq!(host(&out), want);

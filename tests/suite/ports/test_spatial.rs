@@ -126,7 +126,8 @@ macro_rules! spatial_ports {
 
             #[wp::kernel]
             fn k_component_constructor(input: Array<$s>, out: Array<$s>) {
-                let result = spatial_vector(input[0], input[1], input[2], input[3], input[4], input[5]);
+                let result =
+                    spatial_vector(input[0], input[1], input[2], input[3], input[4], input[5]);
                 out[0] = 2.0 * result[0];
                 out[1] = 2.0 * result[1];
                 out[2] = 2.0 * result[2];
@@ -211,11 +212,21 @@ macro_rules! spatial_ports {
                     let _rec = tape.record();
                     wp::launch(k_dot, 1, (&s, &v, &d), dev).unwrap();
                 }
-                let want: f64 = 2.0 * lanes(sv0).iter().zip(lanes(vv0)).map(|(a, b)| a * b).sum::<f64>();
+                let want: f64 = 2.0
+                    * lanes(sv0)
+                        .iter()
+                        .zip(lanes(vv0))
+                        .map(|(a, b)| a * b)
+                        .sum::<f64>();
                 near(&[host(&d)[0] as f64], &[want], TOL, "2 spatial_dot(v, s)");
                 tape.backward(&d).unwrap();
                 let two = |x: $sv| lanes(x).iter().map(|a| 2.0 * a).collect::<Vec<_>>();
-                near(&lanes(host(&s.grad().unwrap())[0]), &two(vv0), 10.0 * TOL, "d/ds");
+                near(
+                    &lanes(host(&s.grad().unwrap())[0]),
+                    &two(vv0),
+                    10.0 * TOL,
+                    "d/ds",
+                );
                 near(&lanes(host(&v.grad().unwrap())[0]), &two(sv0), TOL, "d/dv");
             }
 
@@ -275,19 +286,31 @@ macro_rules! spatial_ports {
                     .map(|&n| zeros::<$s, 1>(n, dev).with_grad().unwrap())
                     .collect();
                 let launch = || {
-                    let args = (&s, &v, &outs[0], &outs[1], &outs[2], &outs[3], &outs[4], &outs[5]);
+                    let args = (
+                        &s, &v, &outs[0], &outs[1], &outs[2], &outs[3], &outs[4], &outs[5],
+                    );
                     wp::launch(k_cross, 1, args, dev).unwrap();
                 };
                 launch();
                 // The closed forms in f64: c = (sw x vw, sv x vw + sw x vv), the dual
                 // (sw x vw + sv x vv, sw x vv).
                 let (a, b) = (lanes(sv0), lanes(vv0));
-                let x = |p: &[f64], q: &[f64]| [p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]];
+                let x = |p: &[f64], q: &[f64]| {
+                    [
+                        p[1] * q[2] - p[2] * q[1],
+                        p[2] * q[0] - p[0] * q[2],
+                        p[0] * q[1] - p[1] * q[0],
+                    ]
+                };
                 let (sw, svv, vw, vv) = (&a[..3], &a[3..], &b[..3], &b[3..]);
                 let (ww, vw_, wv, vv_) = (x(sw, vw), x(svv, vw), x(sw, vv), x(svv, vv));
                 let o: Vec<Vec<f64>> = outs.iter().map(|o| f64s(&host(o))).collect();
-                let want_c: Vec<f64> = (0..6).map(|k| 2.0 * if k < 3 { ww[k] } else { vw_[k - 3] + wv[k - 3] }).collect();
-                let want_d: Vec<f64> = (0..6).map(|k| 2.0 * if k < 3 { ww[k] + vv_[k] } else { wv[k - 3] }).collect();
+                let want_c: Vec<f64> = (0..6)
+                    .map(|k| 2.0 * if k < 3 { ww[k] } else { vw_[k - 3] + wv[k - 3] })
+                    .collect();
+                let want_d: Vec<f64> = (0..6)
+                    .map(|k| 2.0 * if k < 3 { ww[k] + vv_[k] } else { wv[k - 3] })
+                    .collect();
                 near(&o[0], &want_c, TOL, "2 spatial_cross");
                 near(&o[1], &want_d, TOL, "2 spatial_cross_dual");
                 // Warp's gradient check: the spatial products' gradients are those of their
@@ -309,12 +332,17 @@ macro_rules! spatial_ports {
                     r
                 };
                 for i in 0..3 {
-                    let (cw, cv, dw, dv) = (grads(0, i), grads(0, i + 3), grads(1, i), grads(1, i + 3));
+                    let (cw, cv, dw, dv) =
+                        (grads(0, i), grads(0, i + 3), grads(1, i), grads(1, i + 3));
                     let (gww, gvw, gwv, gvv) = (grads(2, i), grads(3, i), grads(4, i), grads(5, i));
                     let checks = [
                         ("d spatial_cross[w]", &cw, comb(&[(2.0, &gww)])),
                         ("d spatial_cross[v]", &cv, comb(&[(2.0, &gvw), (2.0, &gwv)])),
-                        ("d spatial_cross_dual[w]", &dw, comb(&[(2.0, &gww), (2.0, &gvv)])),
+                        (
+                            "d spatial_cross_dual[w]",
+                            &dw,
+                            comb(&[(2.0, &gww), (2.0, &gvv)]),
+                        ),
                         ("d spatial_cross_dual[v]", &dv, comb(&[(2.0, &gwv)])),
                     ];
                     for (what, got, want) in checks {
@@ -364,7 +392,8 @@ macro_rules! spatial_ports {
             pub fn matvec(dev: &wp::Device) {
                 let tol = $tol_mv;
                 let vv = sv(80);
-                let rows: [[$s; 6]; 6] = std::array::from_fn(|i| std::array::from_fn(|j| noise(100 + 6 * i + j) as $s));
+                let rows: [[$s; 6]; 6] =
+                    std::array::from_fn(|i| std::array::from_fn(|j| noise(100 + 6 * i + j) as $s));
                 let mm = $sm::from_rows_array(rows);
                 let v = arr(&[vv], dev).with_grad().unwrap();
                 let m = arr(&[mm], dev).with_grad().unwrap();
@@ -373,7 +402,9 @@ macro_rules! spatial_ports {
                 launch();
                 let x = lanes(vv);
                 let row = |i: usize| rows[i].iter().map(|&a| a as f64).collect::<Vec<_>>();
-                let want: Vec<f64> = (0..6).map(|i| 2.0 * row(i).iter().zip(&x).map(|(a, b)| a * b).sum::<f64>()).collect();
+                let want: Vec<f64> = (0..6)
+                    .map(|i| 2.0 * row(i).iter().zip(&x).map(|(a, b)| a * b).sum::<f64>())
+                    .collect();
                 near(&f64s(&host(&out)), &want, tol, "2 m v");
                 for i in 0..6 {
                     let (gv, gm) = grad_of(dev, &out, i, launch, || {
@@ -381,8 +412,15 @@ macro_rules! spatial_ports {
                     });
                     let want_v: Vec<f64> = row(i).iter().map(|a| 2.0 * a).collect();
                     near(&lanes(gv), &want_v, tol, &format!("d(m v)[{i}]/dv"));
-                    let want_m: Vec<f64> = (0..36).map(|k| if k / 6 == i { 2.0 * x[k % 6] } else { 0.0 }).collect();
-                    let got_m: Vec<f64> = gm.to_rows_array().concat().iter().map(|&a| a as f64).collect();
+                    let want_m: Vec<f64> = (0..36)
+                        .map(|k| if k / 6 == i { 2.0 * x[k % 6] } else { 0.0 })
+                        .collect();
+                    let got_m: Vec<f64> = gm
+                        .to_rows_array()
+                        .concat()
+                        .iter()
+                        .map(|&a| a as f64)
+                        .collect();
                     near(&got_m, &want_m, tol, &format!("d(m v)[{i}]/dm"));
                 }
             }
@@ -451,7 +489,13 @@ macro_rules! spatial_ports {
                     })
                     .collect();
                 near(&f64s(&host(&out)), &want, TOL, "2 spatial_adjoint(R, S)");
-                let rows = |m: $m3| -> Vec<f64> { m.transpose().to_cols_array().iter().map(|&a| a as f64).collect() };
+                let rows = |m: $m3| -> Vec<f64> {
+                    m.transpose()
+                        .to_cols_array()
+                        .iter()
+                        .map(|&a| a as f64)
+                        .collect()
+                };
                 for i in 0..6 {
                     for j in 0..6 {
                         let (gr, gs) = grad_of(dev, &out, 6 * i + j, launch, || {
@@ -465,8 +509,18 @@ macro_rules! spatial_ports {
                         if i / 3 == 1 && j / 3 == 0 {
                             want_s[3 * (i % 3) + j % 3] = 2.0;
                         }
-                        near(&rows(gr), &want_r, 10.0 * TOL, &format!("d out[{i}, {j}] / dR"));
-                        near(&rows(gs), &want_s, 10.0 * TOL, &format!("d out[{i}, {j}] / dS"));
+                        near(
+                            &rows(gr),
+                            &want_r,
+                            10.0 * TOL,
+                            &format!("d out[{i}, {j}] / dR"),
+                        );
+                        near(
+                            &rows(gs),
+                            &want_s,
+                            10.0 * TOL,
+                            &format!("d out[{i}, {j}] / dS"),
+                        );
                     }
                 }
             }
@@ -474,8 +528,26 @@ macro_rules! spatial_ports {
     };
 }
 
-spatial_ports!(p32, f32, SpatialVector, SpatialMatrix, Vec3, Mat3, 1.0e-6, 5.0e-6);
-spatial_ports!(p64, f64, DSpatialVector, DSpatialMatrix, DVec3, DMat3, 1.0e-8, 1.0e-8);
+spatial_ports!(
+    p32,
+    f32,
+    SpatialVector,
+    SpatialMatrix,
+    Vec3,
+    Mat3,
+    1.0e-6,
+    5.0e-6
+);
+spatial_ports!(
+    p64,
+    f64,
+    DSpatialVector,
+    DSpatialMatrix,
+    DVec3,
+    DMat3,
+    1.0e-8,
+    1.0e-8
+);
 
 fn constructors_f32(dev: &wp::Device) {
     p32::constructors(dev);

@@ -59,14 +59,28 @@ struct Model {
 }
 
 #[wp::kernel]
-fn k_step(x_in: Array<Vec3>, v_in: Array<Vec3>, x_out: Array<Vec3>, v_out: Array<Vec3>, model: Model, m: Array<f32>) {
+fn k_step(
+    x_in: Array<Vec3>,
+    v_in: Array<Vec3>,
+    x_out: Array<Vec3>,
+    v_out: Array<Vec3>,
+    model: Model,
+    m: Array<f32>,
+) {
     let i = tid();
     v_out[i] = v_in[i] + model.gravity / m[i] * model.dt;
     x_out[i] = x_in[i] + v_out[i] * model.dt;
 }
 
 #[wp::kernel]
-fn k_step_with_copy(x_in: Array<Vec3>, v_in: Array<Vec3>, x_out: Array<Vec3>, v_out: Array<Vec3>, model: Model, m: Array<f32>) {
+fn k_step_with_copy(
+    x_in: Array<Vec3>,
+    v_in: Array<Vec3>,
+    x_out: Array<Vec3>,
+    v_out: Array<Vec3>,
+    model: Model,
+    m: Array<f32>,
+) {
     let i = tid();
     let model_rescaled = Model {
         dt: 1.0,
@@ -92,7 +106,13 @@ fn noise(k: usize) -> f32 {
 
 fn vecs(offset: usize) -> Vec<Vec3> {
     (0..DIM)
-        .map(|i| 2.0 * Vec3::new(noise(offset + 3 * i), noise(offset + 3 * i + 1), noise(offset + 3 * i + 2)))
+        .map(|i| {
+            2.0 * Vec3::new(
+                noise(offset + 3 * i),
+                noise(offset + 3 * i + 1),
+                noise(offset + 3 * i + 2),
+            )
+        })
         .collect()
 }
 
@@ -101,7 +121,12 @@ fn near3(got: &[Vec3], want: &[[f64; 3]], tol: f64, what: &str) {
     for (i, (g, w)) in got.iter().zip(want).enumerate() {
         for k in 0..3 {
             let d = (g[k] as f64 - w[k]).abs();
-            assert!(d <= tol, "{what}[{i}][{k}]: got {}, want {} (Warp's absolute tolerance {tol:e})", g[k], w[k]);
+            assert!(
+                d <= tol,
+                "{what}[{i}][{k}]: got {}, want {} (Warp's absolute tolerance {tol:e})",
+                g[k],
+                w[k]
+            );
         }
     }
 }
@@ -118,7 +143,11 @@ fn expected_x(x: &[Vec3], v: &[Vec3], m: &[f32]) -> Vec<[f64; 3]> {
     let g = [0.0, 0.0, -9.81f32 as f64];
     let dt = DT as f64;
     (0..DIM)
-        .map(|i| std::array::from_fn(|k| x[i][k] as f64 + (v[i][k] as f64 + g[k] / m[i] as f64 * dt) * dt))
+        .map(|i| {
+            std::array::from_fn(|k| {
+                x[i][k] as f64 + (v[i][k] as f64 + g[k] / m[i] as f64 * dt) * dt
+            })
+        })
         .collect()
 }
 
@@ -135,7 +164,16 @@ fn step(dev: &wp::Device) {
         } else {
             wp::launch(k_step, DIM, args, dev).unwrap();
         }
-        near3(&host(&x_out), &want, 1e-6, if with_copy { "kernel_step_with_copy x" } else { "kernel_step x" });
+        near3(
+            &host(&x_out),
+            &want,
+            1e-6,
+            if with_copy {
+                "kernel_step_with_copy x"
+            } else {
+                "kernel_step x"
+            },
+        );
     }
 }
 
@@ -151,7 +189,11 @@ fn step_grad(dev: &wp::Device) {
     let g = [0.0, 0.0, -9.81f32 as f64];
     let dt = DT as f64;
     for with_copy in [false, true] {
-        let name = if with_copy { "kernel_step_with_copy" } else { "kernel_step" };
+        let name = if with_copy {
+            "kernel_step_with_copy"
+        } else {
+            "kernel_step"
+        };
         let tape = wp::Tape::new();
         {
             let _rec = tape.record();
@@ -166,15 +208,38 @@ fn step_grad(dev: &wp::Device) {
         tape.backward(&loss).unwrap();
         // Warp's reference: dl/dx = 2 x_out, dl/dv = dl/dx dt, dl/dm = sum(dl/dv * -g dt / m²).
         let xo = host(&x_out);
-        let dl_dx: Vec<[f64; 3]> = xo.iter().map(|p| std::array::from_fn(|k| 2.0 * p[k] as f64)).collect();
-        let dl_dv: Vec<[f64; 3]> = dl_dx.iter().map(|d| std::array::from_fn(|k| d[k] * dt)).collect();
-        let dl_dm: Vec<f64> = (0..DIM)
-            .map(|i| (0..3).map(|k| dl_dv[i][k] * (-g[k] * dt / (m[i] as f64).powi(2))).sum())
+        let dl_dx: Vec<[f64; 3]> = xo
+            .iter()
+            .map(|p| std::array::from_fn(|k| 2.0 * p[k] as f64))
             .collect();
-        near3(&host(&x_in.grad().unwrap()), &dl_dx, 1e-6, &format!("{name}: x grad"));
-        near3(&host(&v_in.grad().unwrap()), &dl_dv, 1e-6, &format!("{name}: v grad"));
+        let dl_dv: Vec<[f64; 3]> = dl_dx
+            .iter()
+            .map(|d| std::array::from_fn(|k| d[k] * dt))
+            .collect();
+        let dl_dm: Vec<f64> = (0..DIM)
+            .map(|i| {
+                (0..3)
+                    .map(|k| dl_dv[i][k] * (-g[k] * dt / (m[i] as f64).powi(2)))
+                    .sum()
+            })
+            .collect();
+        near3(
+            &host(&x_in.grad().unwrap()),
+            &dl_dx,
+            1e-6,
+            &format!("{name}: x grad"),
+        );
+        near3(
+            &host(&v_in.grad().unwrap()),
+            &dl_dv,
+            1e-6,
+            &format!("{name}: v grad"),
+        );
         for (i, (gm, w)) in host(&m_a.grad().unwrap()).iter().zip(&dl_dm).enumerate() {
-            assert!((*gm as f64 - w).abs() <= 1e-6, "{name}: m grad[{i}]: got {gm}, want {w}");
+            assert!(
+                (*gm as f64 - w).abs() <= 1e-6,
+                "{name}: m grad[{i}]: got {gm}, want {w}"
+            );
         }
         tape.zero().unwrap();
         // Warp checks that zeroing the tape clears the inputs' gradients.
@@ -208,7 +273,11 @@ struct Foo {
 #[wp::kernel]
 fn k_nested_struct(foo: Foo, data: Array<i32>) {
     let tid = tid();
-    data[tid] = data[tid] + foo.x + (foo.bar.y * 100.0) as i32 + foo.bar.baz.z.length_squared() as i32 + tid as i32 * 2;
+    data[tid] = data[tid]
+        + foo.x
+        + (foo.bar.y * 100.0) as i32
+        + foo.bar.baz.z.length_squared() as i32
+        + tid as i32 * 2;
 }
 
 fn nested_struct(dev: &wp::Device) {
@@ -400,6 +469,10 @@ fn returned_from_func_grad(dev: &wp::Device) {
     tape.backward(&loss).unwrap();
     let g = host(&x.grad().unwrap())[0];
     for (k, want) in [8.0f32, 16.0, 24.0].into_iter().enumerate() {
-        assert!((g[k] - want).abs() <= 1e-5, "x grad [{k}]: got {}, want {want} (Warp's tolerance 1e-5)", g[k]);
+        assert!(
+            (g[k] - want).abs() <= 1e-5,
+            "x grad [{k}]: got {}, want {want} (Warp's tolerance 1e-5)",
+            g[k]
+        );
     }
 }

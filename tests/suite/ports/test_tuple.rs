@@ -175,7 +175,11 @@ fn mixed_types_tuple_function() -> (Vec3, Vec3, f32, Mat3) {
 
 #[wp::func]
 fn homogeneous_tuple_function() -> (Vec3, Vec3, Vec3) {
-    (vec3(1.0, 2.0, 3.0), vec3(4.0, 5.0, 6.0), vec3(7.0, 8.0, 9.0))
+    (
+        vec3(1.0, 2.0, 3.0),
+        vec3(4.0, 5.0, 6.0),
+        vec3(7.0, 8.0, 9.0),
+    )
 }
 
 #[wp::kernel]

@@ -66,7 +66,10 @@ impl Lowerer {
         // `(a, b) = (b, a)`, `(*x, *y) = f(..)`: Rust's destructuring assignment.
         if let Expr::Tuple(t) = strip(lhs) {
             if op.is_some() {
-                return err(span, "a tuple cannot be the target of a compound assignment");
+                return err(
+                    span,
+                    "a tuple cannot be the target of a compound assignment",
+                );
             }
             let value = self.expr(rhs, None)?;
             let mut leaves = Vec::new();
@@ -140,20 +143,21 @@ impl Lowerer {
         leaves: &mut Vec<(&'e Expr, VarId)>,
     ) -> R<()> {
         let n = t.elems.len();
-        let tys = match self.ty(value) {
-            Ty::Tuple(tys) if tys.len() == n => tys,
-            Ty::Deferred => {
-                let ty = Ty::Tuple(vec![Ty::Deferred; n]);
-                value = self.def(Op::Copy(value), ty, t.span());
-                vec![Ty::Deferred; n]
-            }
-            other => {
-                return err(
+        let tys =
+            match self.ty(value) {
+                Ty::Tuple(tys) if tys.len() == n => tys,
+                Ty::Deferred => {
+                    let ty = Ty::Tuple(vec![Ty::Deferred; n]);
+                    value = self.def(Op::Copy(value), ty, t.span());
+                    vec![Ty::Deferred; n]
+                }
+                other => return err(
                     t.span(),
-                    format!("this assignment destructures {n} value(s), but the value is a `{other}`"),
-                )
-            }
-        };
+                    format!(
+                        "this assignment destructures {n} value(s), but the value is a `{other}`"
+                    ),
+                ),
+            };
         for (k, (el, ty)) in t.elems.iter().zip(tys).enumerate() {
             let el = strip(el);
             if matches!(el, Expr::Infer(_)) {
@@ -175,7 +179,10 @@ impl Lowerer {
             let name = self.vars[v].name.clone().unwrap_or_default();
             return err(
                 target.span(),
-                format!("`{name}` is a `&mut {}`: assign through it, `*{name}`", self.ty(v)),
+                format!(
+                    "`{name}` is a `&mut {}`: assign through it, `*{name}`",
+                    self.ty(v)
+                ),
             );
         }
         let place = self.place(target)?;

@@ -198,14 +198,26 @@ fn destructuring_assignment_is_checked() {
         FnKind::Kernel,
     );
     assert_eq!(e.len(), 4, "{e:?}");
-    assert!(e[0].contains("cannot be the target of a compound assignment"), "{}", e[0]);
-    assert!(e[1].contains("destructures 2 value(s), but the value is a `Mat3`"), "{}", e[1]);
+    assert!(
+        e[0].contains("cannot be the target of a compound assignment"),
+        "{}",
+        e[0]
+    );
+    assert!(
+        e[1].contains("destructures 2 value(s), but the value is a `Mat3`"),
+        "{}",
+        e[1]
+    );
     assert!(
         e[2].contains("destructures 2 value(s), but the value is a `(Mat3, Vec3, Mat3)`"),
         "{}",
         e[2]
     );
-    assert!(e[3].contains("mismatched types: expected `f32`, found `i32`"), "{}", e[3]);
+    assert!(
+        e[3].contains("mismatched types: expected `f32`, found `i32`"),
+        "{}",
+        e[3]
+    );
 }
 
 #[test]
