@@ -281,7 +281,7 @@ fn k_nested_struct(foo: Foo, data: Array<i32>) {
 }
 
 fn nested_struct(dev: &wp::Device) {
-    let foo = Foo {
+    let nested = Foo {
         bar: Bar {
             baz: Baz {
                 z: Vec3::new(1.0, 2.0, 3.0),
@@ -291,7 +291,7 @@ fn nested_struct(dev: &wp::Device) {
         x: 123,
     };
     let data = zeros::<i32, 1>(3, dev);
-    wp::launch(k_nested_struct, 3, (foo, &data), dev).unwrap();
+    wp::launch(k_nested_struct, 3, (nested, &data), dev).unwrap();
     assert_eq!(host(&data), vec![260, 262, 264]);
 }
 
