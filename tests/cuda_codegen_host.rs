@@ -298,8 +298,9 @@ fn scale_lanes(v: &mut Vec3, k: &mut f32) {
     *k = 0.0;
 }
 
-/// Tuple results (destructured, by element, nested in a literal) and `&mut` parameters (a
-/// local, a lane, a local array's element, an array element; two at once; passed on).
+/// Tuple results (destructured, by element, nested in a literal), destructuring assignment,
+/// and `&mut` parameters (a local, a lane, a local array's element, an array element; two at
+/// once; passed on).
 #[wp::kernel]
 fn refs_and_tuples(x: Array<f32>, acc: Array<f32>, out: Array<f32, 2>) {
     let i = tid();
@@ -313,7 +314,11 @@ fn refs_and_tuples(x: Array<f32>, acc: Array<f32>, out: Array<f32, 2>) {
     let mut l = [x[i], 0.5];
     add_into(&mut l[1], split_pair(x[i]).0);
     add_into(&mut acc[i], x[i]);
-    out[(i, 0)] = a + h;
+    // Destructuring assignment: the right-hand side is read whole first (a swap).
+    let mut p = (a, h);
+    (p.1, p.0) = p;
+    (w.z, _) = (w.z * 0.5, 0);
+    out[(i, 0)] = p.1 + p.0 * 3.0;
     out[(i, 1)] = w.x + w.y + w.z + k;
     out[(i, 2)] = l[0] + l[1] + t.1 .1 as f32;
 }

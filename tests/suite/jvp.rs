@@ -30,6 +30,7 @@ backend_tests!(
     hvp_springs_vectors,
     jvp_refuses_what_it_cannot_differentiate,
     jvp_normalize_at_zero,
+    jvp_struct_matrix_and_quat_fields,
 );
 
 /// `a` close to `b`: `|a - b| <= atol + rtol |b|`, with a message naming `what` and the index.
@@ -635,4 +636,58 @@ fn jvp_refuses_what_it_cannot_differentiate(dev: &wp::Device) {
     let bad = zeros::<f32, 1>(2, dev);
     let err = wp::jvp(k_func_on_constant, 1, (&x, &o), (&bad, &o_dot), dev).unwrap_err();
     assert!(matches!(err, Error::ShapeMismatch { .. }), "{err}");
+}
+
+/// A struct of a matrix and a quaternion, constant in the kernel below (`t` fills it to a
+/// multiple of the quaternion's 16-byte alignment: kernel structs have no padding).
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Pose {
+    q: Quat,
+    m: Mat3,
+    t: Vec3,
+}
+
+/// Stores a struct parameter's matrix and quaternion fields: values whose type the macro
+/// cannot see, with no tangent, so the tangent kernel stores their zero. (That zero was once
+/// a splatted literal, which matrices and quaternions do not have: the kernel did not
+/// compile.)
+#[wp::kernel]
+fn k_pose_fields(s: Pose, x: Array<f32>, m: Array<Mat3>, q: Array<Quat>, y: Array<f32>) {
+    let i = tid();
+    m[i] = s.m;
+    q[i] = s.q;
+    y[i] = x[i] * x[i];
+}
+
+fn jvp_struct_matrix_and_quat_fields(dev: &wp::Device) {
+    let pose = Pose {
+        q: Quat::from_xyzw(0.0, 0.6, 0.0, 0.8),
+        m: Mat3::from_diagonal(Vec3::new(1.0, 2.0, 3.0)),
+        t: Vec3::ZERO,
+    };
+    let x = arr(&[1.5f32, -2.0], dev);
+    let (m, q, y) = (
+        zeros::<Mat3, 1>(2, dev),
+        zeros::<Quat, 1>(2, dev),
+        zeros::<f32, 1>(2, dev),
+    );
+    // Tangent outputs start non-zero: the tangent kernel must overwrite them with zeros.
+    let m_dot = arr(&[Mat3::IDENTITY; 2], dev);
+    let q_dot = arr(&[Quat::IDENTITY; 2], dev);
+    let (x_dot, y_dot) = (arr(&[1.0f32, 0.5], dev), zeros::<f32, 1>(2, dev));
+    wp::jvp(
+        k_pose_fields,
+        2,
+        (pose, &x, &m, &q, &y),
+        (pose, &x_dot, &m_dot, &q_dot, &y_dot),
+        dev,
+    )
+    .unwrap();
+    assert_eq!(host(&m), vec![pose.m; 2]);
+    assert_eq!(host(&q), vec![pose.q; 2]);
+    assert_eq!(host(&m_dot), vec![Mat3::ZERO; 2]);
+    assert_eq!(host(&q_dot), vec![Quat::from_xyzw(0.0, 0.0, 0.0, 0.0); 2]);
+    // d(x²) = 2 x dx, exact in f32 here.
+    assert_eq!(host(&y_dot), vec![3.0, -2.0]);
 }

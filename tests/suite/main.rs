@@ -114,6 +114,7 @@ mod mesh;
 mod misc;
 mod optim;
 mod params;
+mod ports;
 mod primitives;
 mod race;
 mod refs_tuples;

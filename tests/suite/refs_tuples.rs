@@ -2,7 +2,7 @@
 //! annotations) or read by element (`f(x).0`), tuple locals and literals, tuple parameters;
 //! funcs with `&mut` parameters (Warp's `wp.ref` out-parameters) called on a local, a struct
 //! field, a vector lane, a local array's element, an array element, and passed on by funcs;
-//! and their gradients in both modes where the modes reach (reverse through funcs, forward
+//! destructuring assignment (`(a, b) = (b, a)`); and their gradients in both modes where the modes reach (reverse through funcs, forward
 //! through tuples in a kernel).
 
 use crate::{arr, assert_close_slice, fma_rel, host, math_rel, zeros};
@@ -16,6 +16,8 @@ backend_tests!(
     mut_params_gradcheck,
     mut_param_overwrite_has_no_gradient,
     tuples_forward_mode,
+    destructuring_assignment,
+    destructuring_assignment_gradients,
 );
 
 #[wp::func]
@@ -313,4 +315,71 @@ fn tuples_forward_mode(dev: &wp::Device) {
     let dout = zeros::<f32, 1>(2, dev);
     wp::jvp(k_tuple_jvp, 2, (&x, &out), (&dx, &dout), dev).unwrap();
     assert_eq!(host(&dout), [5.0, -5.0]);
+}
+
+/// Rust's destructuring assignment: the right-hand side is read whole before any place is
+/// written (so `(a, b) = (b, a)` and `(t.1, t.0) = t` swap), `_` skips an element, tuples
+/// nest, and the places are locals, lanes, tuple elements, array elements and `&mut`
+/// parameters.
+#[wp::func]
+fn rotate3(x: &mut f32, y: &mut f32, z: &mut f32) {
+    (*x, *y, *z) = (*y, *z, *x);
+}
+
+#[wp::kernel]
+fn k_destructure(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let mut a = x[i];
+    let mut b = 2.0f32;
+    (a, b) = (b, a);
+    let mut t = (a, b);
+    (t.1, t.0) = t;
+    let mut v = vec3(1.0, 2.0, 3.0);
+    let mut c = 0.0f32;
+    (v.z, (c, _), v.x) = (x[i], split(x[i]), 7.0);
+    let (mut p, mut q, mut r) = (1.0f32, 2.0f32, 3.0f32);
+    rotate3(&mut p, &mut q, &mut r);
+    (out[(i, 0)], out[(i, 1)]) = (a, b);
+    (out[(i, 2)], out[(i, 3)]) = t;
+    out[(i, 4)] = v.x + 10.0 * v.z;
+    out[(i, 5)] = c;
+    (out[(i, 6)], out[(i, 7)], out[(i, 8)]) = (p, q, r);
+}
+
+fn destructuring_assignment(dev: &wp::Device) {
+    let xs = [0.5f32, -3.0];
+    let out = zeros::<f32, 2>((2, 9), dev);
+    wp::launch(k_destructure, 2, (&arr(&xs, dev), &out), dev).unwrap();
+    let want: Vec<f32> = xs
+        .iter()
+        .flat_map(|&x| [2.0, x, x, 2.0, 7.0 + 10.0 * x, 2.0 * x, 2.0, 3.0, 1.0])
+        .collect();
+    assert_eq!(host(&out), want);
+}
+
+#[wp::kernel]
+fn k_destructure_grad(x: Array<f32>, y: Array<f32>) {
+    let i = tid();
+    let mut a = x[i];
+    let mut b = x[i] * x[i];
+    (a, b) = (b * 3.0, a);
+    y[i] = a + b * 5.0;
+}
+
+/// y = 3 x² + 5 x through a swap by destructuring: dy/dx = 6 x + 5, exact in f32 here.
+fn destructuring_assignment_gradients(dev: &wp::Device) {
+    let x = arr(&[1.0f32, -2.0, 0.5], dev).with_grad().unwrap();
+    let y = zeros::<f32, 1>(3, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(k_destructure_grad, 3, (&x, &y), dev).unwrap();
+    }
+    assert_eq!(host(&y), vec![8.0, 2.0, 3.25]);
+    tape.backward(&y).unwrap();
+    assert_eq!(host(&x.grad().unwrap()), vec![11.0, -7.0, 8.0]);
+    // Forward mode, the same derivative.
+    let (v, y_dot) = (arr(&[1.0f32, 1.0, 1.0], dev), zeros::<f32, 1>(3, dev));
+    wp::jvp(k_destructure_grad, 3, (&x, &y), (&v, &y_dot), dev).unwrap();
+    assert_eq!(host(&y_dot), vec![11.0, -7.0, 8.0]);
 }

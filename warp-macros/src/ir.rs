@@ -272,6 +272,10 @@ pub enum Op {
     /// A literal of the same type as the variable (whose type the macro cannot see): an
     /// unsuffixed literal next to a user func's result or a struct field.
     LitLike(Lit, VarId),
+    /// Zero of the variable's type, whatever it is (a matrix, a quaternion, a struct): a
+    /// tangent where the macro cannot see the type and no literal would do (`lit_like` splats
+    /// a literal into scalars and vectors only).
+    ZeroLike(VarId),
     Copy(VarId),
     Unary(UnOp, VarId),
     Binary(BinOp, VarId, VarId),
@@ -356,6 +360,7 @@ impl Op {
             | Op::Cast(v, _)
             | Op::Member(v, _)
             | Op::LitLike(_, v)
+            | Op::ZeroLike(v)
             | Op::TileReduce { arg: v, .. }
             | Op::Extent(v, _)
             | Op::Len(v) => f(*v),

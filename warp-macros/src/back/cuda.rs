@@ -303,7 +303,7 @@ impl<'a> Emitter<'a> {
             }
         });
         match found? {
-            Op::Copy(w) | Op::LitLike(_, w) => self.type_expr(w, depth + 1),
+            Op::Copy(w) | Op::LitLike(_, w) | Op::ZeroLike(w) => self.type_expr(w, depth + 1),
             Op::Func { path, .. } => Some(format!(
                 "@@R{}@@",
                 self.f.callees.iter().position(|p| p == &path)?
@@ -818,6 +818,12 @@ impl<'a> Emitter<'a> {
                 };
                 format!("wp::lit_like<decltype({})>({v:?})", self.var(*like))
             }
+            // Value-initialised: zero for every kernel type (the C++ types are aggregates),
+            // and needs no adjoint header (a tangent kernel is a forward unit).
+            Op::ZeroLike(like) => format!(
+                "typename wp::detail::remove_cvref<decltype({})>::type{{}}",
+                self.var(*like)
+            ),
             Op::Copy(v) => self.var(*v),
             Op::Unary(UnOp::Neg, v) if is_int(self.f.ty(*v)) => {
                 format!("wp::w_neg({})", self.var(*v))

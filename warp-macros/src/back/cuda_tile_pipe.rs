@@ -47,6 +47,7 @@ fn pure_scalar(op: &Op) -> bool {
         op,
         Op::Lit(_)
             | Op::LitLike(..)
+            | Op::ZeroLike(_)
             | Op::Copy(_)
             | Op::Unary(..)
             | Op::Binary(..)

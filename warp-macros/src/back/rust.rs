@@ -254,6 +254,10 @@ impl<'a> RustEmitter<'a> {
                 let v = Literal::f64_unsuffixed(v);
                 quote_spanned!(sp=> __wp::ops::lit_like(&#like, #v))
             }
+            Op::ZeroLike(like) => {
+                let like = self.var(*like);
+                quote_spanned!(sp=> __wp::zero_like(&#like))
+            }
             Op::Copy(v) => {
                 let v = self.var(*v);
                 quote_spanned!(sp=> #v)

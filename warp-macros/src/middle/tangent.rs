@@ -148,6 +148,7 @@ fn carries(op: &Op) -> bool {
     match op {
         Op::Lit(_)
         | Op::LitLike(..)
+        | Op::ZeroLike(_)
         | Op::Tid(_)
         | Op::Lane
         | Op::DebugMode
@@ -299,7 +300,9 @@ impl Tx {
                     },
                 )
             }
-            Ty::Deferred => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(0.0), like)),
+            // Any type (a struct's matrix or quaternion field, a func's result): `zero_like`,
+            // since a literal splats only into scalars and vectors.
+            Ty::Deferred => self.tmp(Ty::Deferred, Op::ZeroLike(like)),
             // A tuple of its elements' zeros; an element without a tangent keeps `like`'s value
             // (see `Op::Tuple`'s rule).
             Ty::Tuple(ts) => {
@@ -534,6 +537,7 @@ impl Tx {
         Ok(match op {
             Op::Lit(_)
             | Op::LitLike(..)
+            | Op::ZeroLike(_)
             | Op::Tid(_)
             | Op::Lane
             | Op::DebugMode

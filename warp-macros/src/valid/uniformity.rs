@@ -276,7 +276,7 @@ impl Analysis<'_> {
             // Per-thread values out of a tile.
             Op::Builtin { builtin, .. } if builtin.lanes => true,
             // Only the type of the variable counts.
-            Op::LitLike(..) => false,
+            Op::LitLike(..) | Op::ZeroLike(_) => false,
             Op::Load { array, .. } => any || self.may_be_written(*array),
             Op::Builtin { builtin, .. } if builtin.is_atomic() => true,
             Op::Builtin { args, .. } | Op::Func { args, .. } => any || reads_written(args),

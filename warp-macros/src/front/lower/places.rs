@@ -63,6 +63,24 @@ impl Lowerer {
         rhs: &Expr,
         span: Span,
     ) -> R<()> {
+        // `(a, b) = (b, a)`, `(*x, *y) = f(..)`: Rust's destructuring assignment.
+        if let Expr::Tuple(t) = strip(lhs) {
+            if op.is_some() {
+                return err(
+                    span,
+                    "a tuple cannot be the target of a compound assignment",
+                );
+            }
+            let value = self.expr(rhs, None)?;
+            let mut leaves = Vec::new();
+            self.tuple_leaves(t, value, &mut leaves)?;
+            // Every element is read before any place is written, as Rust evaluates the
+            // right-hand side whole first: `(t.1, t.0) = t` swaps.
+            for (target, v) in leaves {
+                self.store_value(target, v, span)?;
+            }
+            return Ok(());
+        }
         if let Some(v) = self.ref_param(lhs) {
             let name = self.vars[v].name.clone().unwrap_or_default();
             return err(
@@ -110,6 +128,72 @@ impl Lowerer {
                 self.def(Op::Binary(op, old, r), place_ty.clone(), span)
             }
         };
+        self.write_place(place, value, span);
+        Ok(())
+    }
+
+    /// The places of a destructuring assignment's tuple `t` with the elements of `value`
+    /// they receive (read now, in order), `_` skipped, nested tuples in turn. A value the
+    /// macro cannot type (a func's result) is copied into a tuple of the pattern's length,
+    /// which rustc then checks.
+    fn tuple_leaves<'e>(
+        &mut self,
+        t: &'e syn::ExprTuple,
+        mut value: VarId,
+        leaves: &mut Vec<(&'e Expr, VarId)>,
+    ) -> R<()> {
+        let n = t.elems.len();
+        let tys =
+            match self.ty(value) {
+                Ty::Tuple(tys) if tys.len() == n => tys,
+                Ty::Deferred => {
+                    let ty = Ty::Tuple(vec![Ty::Deferred; n]);
+                    value = self.def(Op::Copy(value), ty, t.span());
+                    vec![Ty::Deferred; n]
+                }
+                other => return err(
+                    t.span(),
+                    format!(
+                        "this assignment destructures {n} value(s), but the value is a `{other}`"
+                    ),
+                ),
+            };
+        for (k, (el, ty)) in t.elems.iter().zip(tys).enumerate() {
+            let el = strip(el);
+            if matches!(el, Expr::Infer(_)) {
+                continue;
+            }
+            let v = self.def(Op::Member(value, k.to_string()), ty, el.span());
+            match el {
+                Expr::Tuple(inner) => self.tuple_leaves(inner, v, leaves)?,
+                el => leaves.push((el, v)),
+            }
+        }
+        Ok(())
+    }
+
+    /// `target = value` for a value already lowered (an element of a destructuring
+    /// assignment): the place, its type checked against the value's.
+    fn store_value(&mut self, target: &Expr, value: VarId, span: Span) -> R<()> {
+        if let Some(v) = self.ref_param(target) {
+            let name = self.vars[v].name.clone().unwrap_or_default();
+            return err(
+                target.span(),
+                format!(
+                    "`{name}` is a `&mut {}`: assign through it, `*{name}`",
+                    self.ty(v)
+                ),
+            );
+        }
+        let place = self.place(target)?;
+        let place_ty = self.place_ty(&place, target.span())?;
+        let vt = self.ty(value);
+        if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
+            return err(
+                target.span(),
+                format!("mismatched types: expected `{place_ty}`, found `{vt}`"),
+            );
+        }
         self.write_place(place, value, span);
         Ok(())
     }

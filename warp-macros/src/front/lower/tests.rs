@@ -180,6 +180,47 @@ fn decompositions_destructure_into_members() {
 }
 
 #[test]
+fn destructuring_assignment_is_checked() {
+    let e = errors(
+        parse_quote! {
+            fn k(a: Array<Mat3>, f: Array<f32>) {
+                let i = tid();
+                let mut x = 0.0f32;
+                let mut y = 0.0f32;
+                (x, y) += (1.0, 2.0);
+                (x, y) = a[i];
+                (x, y) = svd3(a[i]);
+                (x, y) = (1.0, 2i32);
+                (x, y) = (y, x);
+                f[i] = x + y;
+            }
+        },
+        FnKind::Kernel,
+    );
+    assert_eq!(e.len(), 4, "{e:?}");
+    assert!(
+        e[0].contains("cannot be the target of a compound assignment"),
+        "{}",
+        e[0]
+    );
+    assert!(
+        e[1].contains("destructures 2 value(s), but the value is a `Mat3`"),
+        "{}",
+        e[1]
+    );
+    assert!(
+        e[2].contains("destructures 2 value(s), but the value is a `(Mat3, Vec3, Mat3)`"),
+        "{}",
+        e[2]
+    );
+    assert!(
+        e[3].contains("mismatched types: expected `f32`, found `i32`"),
+        "{}",
+        e[3]
+    );
+}
+
+#[test]
 fn tuples_are_checked_where_destructured() {
     let e = errors(
         parse_quote! {

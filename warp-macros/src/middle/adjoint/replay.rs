@@ -233,6 +233,7 @@ fn invariant_vars(f: &Function) -> Vec<bool> {
                 Some(
                     Op::Lit(_)
                         | Op::LitLike(..)
+                        | Op::ZeroLike(_)
                         | Op::Const(_)
                         | Op::Copy(_)
                         | Op::Unary(..)

@@ -398,6 +398,7 @@ impl Cx<'_> {
             }
             Op::Lit(_)
             | Op::LitLike(..)
+            | Op::ZeroLike(_)
             | Op::Unary(UnOp::Not, _)
             | Op::Tid(_)
             | Op::Lane
