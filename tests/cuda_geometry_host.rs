@@ -32,9 +32,10 @@ use warp_core::objects::bvh::{
     BvhTree, BvhView,
 };
 use warp_core::objects::geometry::{
-    aabb_distance_sq, aabb_overlap, adj_closest_point_triangle, closest_point_triangle,
-    intersect_ray_aabb, intersect_ray_triangle, intersect_tri_tri, pow2_scale,
-    ray_crosses_triangle, ray_inv_dir, RayTriangleHit, TriFeature, TriangleClosestPoint,
+    aabb_distance_sq, aabb_distance_sq_scaled, aabb_overlap, adj_closest_point_triangle,
+    closest_point_triangle, intersect_ray_aabb, intersect_ray_triangle, intersect_tri_tri,
+    pow2_scale, ray_crosses_triangle, ray_inv_dir, RayTriangleHit, TriFeature,
+    TriangleClosestPoint,
 };
 use warp_core::objects::mesh::{
     adj_mesh_eval_position, adj_mesh_eval_velocity, adj_mesh_query_point,
@@ -169,6 +170,7 @@ int main(int argc, char** argv) {
       case 5: {
         const Vec3 al = wv(), au = wv(), bl = wv(), bu = wv(), p = wv();
         printf("bx %d", (int)aabb_overlap(al, au, bl, bu)); pf(aabb_distance_sq(p, al, au));
+        pf(aabb_distance_sq_scaled(p, al, au, pow2_scale(::fabsf(bl.x))));
         break;
       }
       case 6: { printf("p2"); pf(pow2_scale(wf())); break; }
@@ -513,10 +515,13 @@ fn ray_aabb_case(c: &mut Cases, s: Vec3, d: Vec3, lo: Vec3, hi: Vec3) {
 
 fn boxes_case(c: &mut Cases, al: Vec3, au: Vec3, bl: Vec3, bu: Vec3, p: Vec3) {
     c.op(5).v(al).v(au).v(bl).v(bu).v(p);
+    // The scaled distance at a power of two from the inputs (up to 2^±126 for the huge and
+    // tiny ones, so that products leave the normal range).
     c.expect(format!(
-        "bx {}{}",
+        "bx {}{}{}",
         aabb_overlap(al, au, bl, bu) as i32,
-        hf(aabb_distance_sq(p, al, au))
+        hf(aabb_distance_sq(p, al, au)),
+        hf(aabb_distance_sq_scaled(p, al, au, pow2_scale(bl.x.abs())))
     ));
 }
 
@@ -690,7 +695,7 @@ fn geometry_cases(c: &mut Cases) {
         tri_tri_case(c, [t[0], t[1], t[2], t[3], t[4], t[5]]);
     }
 
-    c.label = "intersect_ray_aabb / aabb_overlap / aabb_distance_sq".into();
+    c.label = "intersect_ray_aabb / aabb_overlap / aabb_distance_sq(_scaled)".into();
     for _ in 0..10000 {
         let (l, h) = (rng.v(-1.0, 0.0), rng.v(0.0, 1.0));
         let o = rng.v(-3.0, 3.0);
@@ -1557,6 +1562,7 @@ extern "C" __global__ void geometry_all(wp::bvh_t bvh, wp::mesh_t mesh, wp::Vec3
   ctx_t c = ctx_make(fault, flag);
   const Vec3 p = out[threadIdx.x], d = out[threadIdx.x + 1];
   triangle_closest_point_t r = closest_point_triangle(p, d, p + d, d - p);
+  const triangle_closest_point_t rs = closest_point_triangle_scaled(p, d, d - p);
   ray_triangle_hit_t h = intersect_ray_triangle(p, d, p, d, p + d);
   f32 t = 0.0f;
   bool b = intersect_tri_tri(p, d, p, d, p, d) && aabb_overlap(p, d, p, d) &&
@@ -1598,7 +1604,8 @@ extern "C" __global__ void geometry_all(wp::bvh_t bvh, wp::mesh_t mesh, wp::Vec3
   adj_accum(zt, r);
   bvh_query_aabb_t zq = adj_zero<bvh_query_aabb_t>();
   adj_accum(zq, qa);
-  out[threadIdx.x] = e + ap + mr.normal + Vec3_splat(h.t + t + zm.u + zr.t + zt.u + au + av + ad);
+  out[threadIdx.x] = e + ap + mr.normal + Vec3_splat(h.t + t + zm.u + zr.t + zt.u + au + av + ad +
+                                                     rs.v + aabb_distance_sq_scaled(p, d, e, 2.0f));
   iout[threadIdx.x] = n + (int)b + zq.walk.item;
 }
 "#;

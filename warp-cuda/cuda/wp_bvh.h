@@ -323,8 +323,10 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
   if (!(bvh_key(s.node_key(bvh_node_lower(node), bvh_node_upper(node))) < s.bound())) return;
   const u32 max = bvh_max_steps(t);
   u32 steps = 0u;
-  i32 stack_node[WP_BVH_ORDERED_STACK];
-  f32 stack_key[WP_BVH_ORDERED_STACK];
+  // An entry is the node (low word) and its key's bits (high word) in one u64: one local
+  // store per push and one load per pop rather than two (and, unlike an array of structs,
+  // the arrays of the walks inlined into one kernel still share their stack frame).
+  u64 stack[WP_BVH_ORDERED_STACK];
   u32 held = 0u, head = 0u;
   bool dropped = false;
   // node is node cur: a child entered goes on with the node read to order it.
@@ -349,20 +351,16 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       bvh_node_t an{}, bn{};
       bvh_ordered_children(t, s, node, &a, &ka, &an, &b, &kb, &bn, ctx);
       if (faulted(ctx)) return;
+      // ka <= kb: when the nearer child fails the bound the farther fails too.
       if (ka < s.bound()) {
         if (kb < s.bound()) {
-          stack_node[head] = b;
-          stack_key[head] = kb;
+          stack[head] = (u64)(u32)b | ((u64)f32_to_bits(kb) << 32);
           head = (head + 1u) % WP_BVH_ORDERED_STACK;
           dropped = dropped || held == WP_BVH_ORDERED_STACK;
           held = held < WP_BVH_ORDERED_STACK ? held + 1u : held;
         }
         cur = a;
         node = an;
-        descended = true;
-      } else if (kb < s.bound()) {
-        cur = b;
-        node = bn;
         descended = true;
       }
     }
@@ -371,8 +369,9 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
     while (held > 0u) {
       head = (head + WP_BVH_ORDERED_STACK - 1u) % WP_BVH_ORDERED_STACK;
       held -= 1u;
-      if (stack_key[head] < s.bound()) {
-        cur = stack_node[head];
+      const u64 e = stack[head];
+      if (f32_from_bits((u32)(e >> 32)) < s.bound()) {
+        cur = (i32)(u32)e;
         node = bvh_node(t, cur, ctx);
         if (faulted(ctx)) return;
         descended = true;

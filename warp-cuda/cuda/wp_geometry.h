@@ -10,12 +10,13 @@
 //                                                   EdgeAB 4, EdgeBC 5, EdgeCA 6)
 //   triangle_closest_point_t                        TriangleClosestPoint (u, v, w, feature)
 //   closest_point_triangle(a, b, c, p)              the closest point of a triangle
+//   closest_point_triangle_scaled(ab, ac, ap)       its core, on a translated, scaled triangle
 //   ray_triangle_hit_t                              RayTriangleHit (result, t, u, v, sign)
 //   intersect_ray_triangle(start, dir, a, b, c)     watertight ray-triangle (f64 edge functions)
 //   ray_crosses_triangle(start, dir, a, b, c)       its crossing for parity counts (ties broken)
 //   aabb_overlap(al, au, bl, bu)                    box-box, touching included
 //   intersect_ray_aabb(start, inv_dir, lo, hi, &t)  slab test: Some(t_enter) is `true` and *t
-//   ray_inv_dir(dir), aabb_distance_sq(p, lo, hi)
+//   ray_inv_dir(dir), aabb_distance_sq(p, lo, hi), aabb_distance_sq_scaled(p, lo, hi, s)
 //   intersect_tri_tri(v0, v1, v2, u0, u1, u2)       Möller's interval test, robust variant
 //
 // The adjoint of closest_point_triangle is in wp_adjoint_geometry.h. Nothing here can fault.
@@ -183,16 +184,11 @@ WP_FN triangle_closest_point_t closest_point_segments(const Vec3& ab, const Vec3
 }
 }  // namespace detail
 
-/// The closest point of triangle (a, b, c) to p (Ericson 5.1.5 on the translated, scaled
-/// triangle; degenerate triangles as their three edges).
-WP_FN triangle_closest_point_t closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p) {
+/// closest_point_triangle_scaled: the closest point on the triangle translated to a and
+/// scaled by a power of two of the caller's choosing (ab = (b - a) * s, ...); the same bits
+/// for every s under which no intermediate leaves the normal range (see the Rust).
+WP_FN triangle_closest_point_t closest_point_triangle_scaled(Vec3 ab, Vec3 ac, Vec3 ap) {
   using namespace detail;
-  Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const Vec3 vs[3] = {ab, ac, ap};
-  const f32 s = pow2_scale(g_max_abs(vs));
-  ab = ab * s;
-  ac = ac * s;
-  ap = ap * s;
   const Vec3 bc = ac - ab;
   const Vec3 n = g_cross(ab, ac);
   const f32 edges = (g_len_sq(ab) + g_len_sq(ac)) + g_len_sq(bc);
@@ -226,6 +222,15 @@ WP_FN triangle_closest_point_t closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Ve
   const f32 v = vb / sum;
   const f32 w = vc / sum;
   return tri_cp(::fmaxf((1.0f - v) - w, 0.0f), v, w, TRI_FEATURE_FACE);
+}
+
+/// The closest point of triangle (a, b, c) to p (Ericson 5.1.5 on the translated, scaled
+/// triangle; degenerate triangles as their three edges).
+WP_FN triangle_closest_point_t closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const Vec3 vs[3] = {ab, ac, ap};
+  const f32 s = pow2_scale(detail::g_max_abs(vs));
+  return closest_point_triangle_scaled(ab * s, ac * s, ap * s);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -427,6 +432,18 @@ WP_FN f32 aabb_distance_sq(Vec3 p, Vec3 lower, Vec3 upper) {
   const Vec3 q = Vec3_new(c(p.x, lower.x, upper.x), c(p.y, lower.y, upper.y),
                           c(p.z, lower.z, upper.z));
   return detail::g_len_sq(q - p);
+}
+
+/// aabb_distance_sq_scaled: |(clamp(p, lower, upper) - p) * s|^2 for a power of two s. The
+/// clamp by fminf/fmaxf (one instruction each, where the comparisons of aabb_distance_sq take
+/// two) selects the same value as the Rust comparisons in every case, NaN included (a NaN
+/// bound is passed over by both; a NaN p makes the difference NaN either way), except the
+/// sign of a zero, which the difference and its square do not keep: the same bits.
+WP_FN f32 aabb_distance_sq_scaled(Vec3 p, Vec3 lower, Vec3 upper, f32 s) {
+  const Vec3 q = Vec3_new(::fmaxf(::fminf(p.x, upper.x), lower.x),
+                          ::fmaxf(::fminf(p.y, upper.y), lower.y),
+                          ::fmaxf(::fminf(p.z, upper.z), lower.z));
+  return detail::g_len_sq((q - p) * s);
 }
 
 // ------------------------------------------------------------------------------------------

@@ -125,18 +125,21 @@ WP_FN mesh_query_ray_t mesh_ray_none() {
 }
 
 /// MeshView::face_indices: the vertex indices of face f, each checked against the points.
+/// The three are read before any is checked (all lie in the buffer once f is a face), so
+/// that the reads are issued together instead of each waiting on the check before it; the
+/// checks then run in the Rust order, so the same index faults.
 WP_FN void mesh_face_indices(const mesh_t& m, i64 f, i32* ix, ctx_t* ctx) {
   if ((u64)f >= (u64)(i64)m.tree.num_prims) {
     bvh_fault(m.tree, f, (i64)m.tree.num_prims, ctx);
     return;
   }
+  const i32 i3[3] = {m.indices[3 * f], m.indices[3 * f + 1], m.indices[3 * f + 2]};
   for (int k = 0; k < 3; ++k) {
-    const i32 i = m.indices[3 * f + k];
-    if ((u32)i >= (u32)m.num_points) {
-      bvh_fault(m.tree, (i64)i, (i64)m.num_points, ctx);
+    if ((u32)i3[k] >= (u32)m.num_points) {
+      bvh_fault(m.tree, (i64)i3[k], (i64)m.num_points, ctx);
       return;
     }
-    ix[k] = i;
+    ix[k] = i3[k];
   }
 }
 
@@ -260,15 +263,25 @@ struct mesh_closest_t {
   i32 face;
   triangle_closest_point_t bary;
   WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
-    return aabb_distance_sq(p * s, lower * s, upper * s);
+    return aabb_distance_sq_scaled(p, lower, upper, s);
   }
   WP_FN f32 bound() const { return best; }
+  /// Closest::visit: a face whose own box is no nearer than the best is skipped (see the Rust
+  /// for why that is exact up to ties within rounding); the closest point is computed in the
+  /// search's unit s and the distance from the scaled edges.
   WP_FN void visit(i32 id, ctx_t* ctx) {
     Vec3 t[3];
     mesh_triangle(*mesh, (i64)id, t, ctx);
     if (faulted(ctx)) return;
-    const triangle_closest_point_t r = closest_point_triangle(t[0], t[1], t[2], p);
-    const f32 d = g_len_sq((triangle_closest_point_position(r, t[0], t[1], t[2]) - p) * s);
+    const Vec3 a = t[0], b = t[1], c = t[2];
+    const Vec3 lower = Vec3_new(::fminf(::fminf(a.x, b.x), c.x), ::fminf(::fminf(a.y, b.y), c.y),
+                                ::fminf(::fminf(a.z, b.z), c.z));
+    const Vec3 upper = Vec3_new(::fmaxf(::fmaxf(a.x, b.x), c.x), ::fmaxf(::fmaxf(a.y, b.y), c.y),
+                                ::fmaxf(::fmaxf(a.z, b.z), c.z));
+    if (!(aabb_distance_sq_scaled(p, lower, upper, s) < best)) return;
+    const Vec3 ab = (b - a) * s, ac = (c - a) * s, ap = (p - a) * s;
+    const triangle_closest_point_t r = closest_point_triangle_scaled(ab, ac, ap);
+    const f32 d = g_len_sq((ab * r.v + ac * r.w) - ap);
     if (d < best) {
       best = d;
       face = id;

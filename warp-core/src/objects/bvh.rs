@@ -759,7 +759,10 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
                 s.visit(tree.prim(k)?)?;
             }
         } else {
-            let [(a, ka, an), (b, kb, bn)] = ordered_children(tree, s, &node)?;
+            // ka <= kb (keys are totally ordered, NaN counting as +inf): when the nearer
+            // child fails the bound the farther fails too, so there is no case of entering
+            // the farther alone.
+            let [(a, ka, an), (b, kb, _)] = ordered_children(tree, s, &node)?;
             if ka < s.bound() {
                 if kb < s.bound() {
                     stack[head] = (b, kb);
@@ -768,10 +771,6 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
                     held = (held + 1).min(ORDERED_STACK);
                 }
                 (cur, node) = (a, an);
-                continue 'down;
-            }
-            if kb < s.bound() {
-                (cur, node) = (b, bn);
                 continue 'down;
             }
         }

@@ -156,7 +156,18 @@ fn segment_param(s0: Vec3, d: Vec3, q: Vec3) -> f32 {
 pub fn closest_point_triangle(a: Vec3, b: Vec3, c: Vec3, p: Vec3) -> TriangleClosestPoint {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let s = pow2_scale(max_abs(&[ab, ac, ap]));
-    let (ab, ac, ap) = (ab * s, ac * s, ap * s);
+    closest_point_triangle_scaled(ab * s, ac * s, ap * s)
+}
+
+/// [`closest_point_triangle`] on the triangle already translated to `a` and scaled by a power
+/// of two `s` of the caller's choosing: `ab = (b - a) * s`, `ac = (c - a) * s`,
+/// `ap = (p - a) * s`. Every quantity it compares or divides is a homogeneous polynomial of
+/// those (degree 2 for the sliver test's two sides, 4 for the sub-areas), so the result is the
+/// same, bit for bit, for every `s` under which no intermediate leaves the normal range; the
+/// mesh's closest-point search passes its own unit here instead of computing a scale per
+/// triangle (see `mesh::Closest::visit`).
+#[inline(always)]
+pub(crate) fn closest_point_triangle_scaled(ab: Vec3, ac: Vec3, ap: Vec3) -> TriangleClosestPoint {
     let bc = ac - ab;
     let n = ab.cross(ac);
     let edges = ab.length_squared() + ac.length_squared() + bc.length_squared();
@@ -601,6 +612,19 @@ pub fn ray_inv_dir(dir: Vec3) -> Vec3 {
 pub fn aabb_distance_sq(p: Vec3, lower: Vec3, upper: Vec3) -> f32 {
     let d = p.clamp_nan_safe(lower, upper) - p;
     d.length_squared()
+}
+
+/// Squared distance from `p` to the box `[lower, upper]` in units of `1 / s`, for a power of
+/// two `s`: `|(clamp(p, lower, upper) - p) * s|^2` (0 inside). The offset is taken unscaled
+/// and scaled once (three products where `aabb_distance_sq(p * s, lower * s, upper * s)` takes
+/// nine), and the two are the same bits whenever none of those nine products under- or
+/// overflows: clamping only selects, a power-of-two product is exact in the normal range, and
+/// a difference is rounded alike before or after such a product. Where one does (a point
+/// far from the origin beside a box of tiny extent, whose `p * s` overflows), this one is the
+/// right one. The mesh's closest-point search keys its boxes and triangles with it.
+#[inline(always)]
+pub fn aabb_distance_sq_scaled(p: Vec3, lower: Vec3, upper: Vec3, s: f32) -> f32 {
+    ((p.clamp_nan_safe(lower, upper) - p) * s).length_squared()
 }
 
 trait ClampNanSafe {
@@ -1564,5 +1588,107 @@ pub(crate) mod tests {
         assert!(!ray_crosses_triangle(Vec3::Z, -Vec3::Z, Vec3::NAN, b, c));
         assert!(ray_crosses_triangle(Vec3::Z, -Vec3::Z, a, b, c));
         assert!(!ray_crosses_triangle(Vec3::Z, Vec3::Z, a, b, c));
+    }
+
+    /// Whether `x * s` is exact: zero, or finite and normal (a power-of-two product rounds only
+    /// where it leaves the normal range).
+    fn exact_product(x: f32, s: f32) -> bool {
+        let y = x * s;
+        x == 0.0 || (y.is_normal() && y / s == x)
+    }
+
+    /// `aabb_distance_sq_scaled` is the nine-product form `aabb_distance_sq(p * s, lo * s,
+    /// hi * s)`, bit for bit, wherever no product under- or overflows (checked case by case;
+    /// the cases span 1e-30 to 1e30 and scales up to 2^±120, so that many do leave the
+    /// range), and is right where the nine-product form overflows.
+    #[test]
+    fn aabb_distance_sq_scaled_is_the_scaled_key() {
+        let mut rng = Rng(77);
+        let (mut same, mut skipped) = (0, 0);
+        for _ in 0..200_000 {
+            let m = 10f32.powi(rng.below(61) as i32 - 30);
+            let (a, b) = (rng.v(-1.0, 1.0) * m, rng.v(-1.0, 1.0) * m);
+            let (lo, hi) = (a.min(b), a.max(b));
+            // Points inside, on and around the box, sometimes exactly on a face.
+            let mut p = rng.v(-2.0, 2.0) * m;
+            if rng.below(4) == 0 {
+                p.x = lo.x;
+            }
+            let s = 2f32.powi(rng.below(241) as i32 - 120);
+            let d = p.clamp_nan_safe(lo, hi) - p;
+            let exact = [p, lo, hi, d]
+                .iter()
+                .all(|v| v.to_array().iter().all(|&x| exact_product(x, s)));
+            let got = aabb_distance_sq_scaled(p, lo, hi, s);
+            if exact {
+                let want = aabb_distance_sq(p * s, lo * s, hi * s);
+                assert_eq!(got.to_bits(), want.to_bits(), "{p} {lo} {hi} {s}");
+                same += 1;
+            } else {
+                skipped += 1;
+            }
+        }
+        assert!(same > 50_000 && skipped > 10_000, "{same} {skipped}");
+        // A point on a box of extent 1e-20 at x = 1e20, in the unit a mesh query would pick
+        // (the extent brought to [1, 2)): p * s overflows, so the nine-product form is NaN.
+        let lo = Vec3::new(1e20, 0.0, 0.0);
+        let hi = Vec3::new(1e20, 1e-20, 1e-20);
+        let p = Vec3::new(1e20, 5e-21, 2e-20);
+        let s = pow2_scale(1e-20);
+        assert!(aabb_distance_sq(p * s, lo * s, hi * s).is_nan());
+        let want = (((2e-20f64 - 1e-20f32 as f64) * s as f64).powi(2)) as f32;
+        let got = aabb_distance_sq_scaled(p, lo, hi, s);
+        assert!((got - want).abs() <= 1e-6 * want, "{got} vs {want}");
+        assert_eq!(
+            aabb_distance_sq_scaled(Vec3::new(1e20, 5e-21, 0.0), lo, hi, s),
+            0.0
+        );
+        // NaN: a NaN point is never near; a NaN bound is passed over (as by the clamp).
+        assert!(aabb_distance_sq_scaled(Vec3::NAN, lo, hi, s).is_nan());
+        let nan_lo = Vec3::new(f32::NAN, 0.0, 0.0);
+        assert_eq!(
+            aabb_distance_sq_scaled(Vec3::new(2.0, 0.5, 0.5), nan_lo, Vec3::ONE, 1.0),
+            1.0
+        );
+    }
+
+    /// `closest_point_triangle_scaled` gives the same bits at any power-of-two scale under
+    /// which its intermediates stay normal: here the triangle's own scale times `2^j` for
+    /// `|j| <= 20` (the scaled coordinates below 2^21, so the degree-4 sub-areas stay far
+    /// inside the range, and above 2^-20 for triangles not thinner than 1e-3 of their size).
+    #[test]
+    fn closest_point_triangle_scaled_is_scale_free() {
+        let mut rng = Rng(31);
+        for i in 0..20_000 {
+            let m = 10f32.powi(rng.below(41) as i32 - 20);
+            let (a, b, c) = (
+                rng.v(-1.0, 1.0) * m,
+                rng.v(-1.0, 1.0) * m,
+                rng.v(-1.0, 1.0) * m,
+            );
+            let p = rng.v(-2.0, 2.0) * m;
+            let (ab, ac, ap) = (b - a, c - a, p - a);
+            if ab.cross(ac).length() < 1e-3 * ab.length_squared().max(ac.length_squared()) {
+                continue;
+            }
+            let want = closest_point_triangle(a, b, c, p);
+            let s = pow2_scale(max_abs(&[ab, ac, ap])) * 2f32.powi(i % 41 - 20);
+            let got = closest_point_triangle_scaled(ab * s, ac * s, ap * s);
+            assert_eq!(
+                (
+                    got.u.to_bits(),
+                    got.v.to_bits(),
+                    got.w.to_bits(),
+                    got.feature
+                ),
+                (
+                    want.u.to_bits(),
+                    want.v.to_bits(),
+                    want.w.to_bits(),
+                    want.feature
+                ),
+                "{a} {b} {c} {p} at {s}"
+            );
+        }
     }
 }

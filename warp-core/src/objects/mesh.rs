@@ -53,7 +53,9 @@
 //! below 1e-19. Each point query therefore measures in units of a power of two chosen from the
 //! root box's extent around the query point (exact, and the same for every candidate), so
 //! meshes at 1e30 or 1e-30 are queried as at 1. The geometric predicates scale themselves
-//! ([`super::geometry`]).
+//! ([`super::geometry`]), except that the closest-point search computes each face's closest
+//! point in its own unit (`Closest::visit`): the same bits, but for a face and a query point
+//! both within about 1e-10 of the root box's extent around the point.
 //!
 //! # Safety
 //!
@@ -69,7 +71,7 @@ use glam::Vec3;
 
 use super::bvh::{walk_ordered, BvhTree, OrderedSearch, Walk};
 use super::geometry::{
-    aabb_distance_sq, aabb_overlap, closest_point_triangle, intersect_ray_aabb,
+    aabb_distance_sq_scaled, aabb_overlap, closest_point_triangle_scaled, intersect_ray_aabb,
     intersect_ray_triangle, pow2_scale, ray_crosses_triangle, ray_inv_dir, TriFeature,
     TriangleClosestPoint, SLIVER_RATIO,
 };
@@ -303,17 +305,47 @@ struct Closest<'a> {
 impl OrderedSearch for Closest<'_> {
     #[inline(always)]
     fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
-        aabb_distance_sq(self.p * self.s, lower * self.s, upper * self.s)
+        aabb_distance_sq_scaled(self.p, lower, upper, self.s)
     }
     #[inline(always)]
     fn bound(&self) -> f32 {
         self.best
     }
+    /// A face is skipped when its own box is no nearer than the best distance so far (the
+    /// box key of a node, on the face's box: a fraction of the closest point's cost). In exact
+    /// arithmetic the box distance is a lower bound of the face's, so nothing nearer is
+    /// skipped; in f32 the face's computed distance can round below its box's by a few ulps,
+    /// so a skipped face may be one whose distance ties the best within rounding, and then
+    /// the face reported is that best, equally close within f32 rounding. Both backends skip
+    /// the same faces (the same key, the same comparison), so they still agree bit for bit.
+    ///
+    /// The closest point is computed in the search's unit `s` rather than at a scale of the
+    /// face's own (`closest_point_triangle_scaled`): the same barycentrics, bit for bit,
+    /// unless its degree-4 intermediates fall below f32's normal range in this unit, which
+    /// takes a face and a query point both within about 1e-10 of the root box's extent
+    /// around the point, and there the error stays below the face's size. The distance is
+    /// then taken from the translated, scaled edges already at hand.
     #[inline(always)]
     fn visit(&mut self, id: i32) -> KResult<()> {
         let [a, b, c] = self.mesh.triangle(id)?;
-        let r = closest_point_triangle(a, b, c, self.p);
-        let d = ((r.position(a, b, c) - self.p) * self.s).length_squared();
+        // Rust's f32::min/max (IEEE minNum/maxNum), as fminf/fmaxf on the GPU.
+        let lower = Vec3::new(
+            a.x.min(b.x).min(c.x),
+            a.y.min(b.y).min(c.y),
+            a.z.min(b.z).min(c.z),
+        );
+        let upper = Vec3::new(
+            a.x.max(b.x).max(c.x),
+            a.y.max(b.y).max(c.y),
+            a.z.max(b.z).max(c.z),
+        );
+        if !(aabb_distance_sq_scaled(self.p, lower, upper, self.s) < self.best) {
+            return Ok(());
+        }
+        let s = self.s;
+        let (ab, ac, ap) = ((b - a) * s, (c - a) * s, (self.p - a) * s);
+        let r = closest_point_triangle_scaled(ab, ac, ap);
+        let d = (ab * r.v + ac * r.w - ap).length_squared();
         if d < self.best {
             self.best = d;
             self.face = id;
@@ -397,7 +429,8 @@ pub fn mesh_query_point(mesh: MeshView, point: Vec3, max_dist: f32) -> KResult<M
 /// method (the angle-weighted pseudonormal), so that Warp programs port line for line. Warp's
 /// optional `epsilon` (the tolerance by which it decides whether the closest point is on an
 /// edge or a vertex) is not taken: the closest feature is classified exactly here
-/// ([`closest_point_triangle`]'s regions), with no tolerance to choose.
+/// ([`closest_point_triangle`](super::geometry::closest_point_triangle)'s regions), with no
+/// tolerance to choose.
 #[inline]
 pub fn mesh_query_point_sign_normal(
     mesh: MeshView,
@@ -1036,6 +1069,7 @@ impl crate::adjoint::Adjoint for TriangleClosestPoint {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::super::bvh::tests::Built;
+    use super::super::geometry::closest_point_triangle;
     use super::super::geometry::tests::Rng;
     use super::*;
 
@@ -1770,5 +1804,99 @@ pub(crate) mod tests {
                 closest_faults
             );
         }
+    }
+
+    /// The closest search's visit: a face whose box is no nearer than the best is skipped, a
+    /// face whose box is nearer is computed (and kept only when it is nearer itself).
+    #[test]
+    fn closest_skips_faces_by_their_box() {
+        let pts = vec![
+            // Face 0: in z = 0 over [0, 1]^2.
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            // Face 1: the same, moved to x = 3.
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(4.0, 0.0, 0.0),
+            Vec3::new(3.0, 1.0, 0.0),
+            // Face 2: in the plane x + y = 0, its box [-1, 1]^2 x [1, 1.5] holding p.
+            Vec3::new(-1.0, 1.0, 1.0),
+            Vec3::new(1.0, -1.0, 1.0),
+            Vec3::new(1.0, -1.0, 1.5),
+        ];
+        let mut m = TestMesh::new(pts, (0..9).collect(), 4);
+        let v = m.view();
+        let p = Vec3::new(0.25, 0.25, 1.0);
+        let search = |best: f32| Closest {
+            mesh: &v,
+            p,
+            s: 1.0,
+            best,
+            face: -1,
+            bary: TriangleClosestPoint::default(),
+            tri: [Vec3::ZERO; 3],
+        };
+        // Face 1's box is at squared distance 2.75^2 + 1: skipped below that.
+        let box1 =
+            aabb_distance_sq_scaled(p, Vec3::new(3.0, 0.0, 0.0), Vec3::new(4.0, 1.0, 0.0), 1.0);
+        assert_eq!(box1, 2.75 * 2.75 + 1.0);
+        let mut c = search(box1);
+        c.visit(1).unwrap();
+        assert_eq!((c.face, c.best), (-1, box1));
+        // Just above it, face 1 is computed: its distance is its box's (p is over the box's
+        // corner region), so it is not below the bound either.
+        let mut c = search(box1 * (1.0 + f32::EPSILON));
+        c.visit(1).unwrap();
+        assert_eq!((c.face, c.best), (1, box1));
+        // Face 2's box holds p (key 0), but the face's nearest point to p is (0, 0, 1), on its
+        // edge ab, at squared distance 0.125: computed and rejected under a bound of 0.1,
+        // kept under 1.
+        let d2 = 0.125;
+        let mut c = search(0.1);
+        c.visit(2).unwrap();
+        assert_eq!(c.face, -1);
+        let mut c = search(1.0);
+        c.visit(2).unwrap();
+        assert_eq!(c.face, 2);
+        assert!((c.best - d2).abs() < 1e-6, "{}", c.best);
+        // Face 0 under p at height 1: kept with its barycentrics, u * a + v * b + w * c = p's
+        // foot (0.25, 0.25, 0).
+        let mut c = search(1.5);
+        c.visit(0).unwrap();
+        assert_eq!((c.face, c.best), (0, 1.0));
+        assert_eq!((c.bary.u, c.bary.v, c.bary.w), (0.5, 0.25, 0.25));
+        // The query over all three: face 2 is nearest.
+        let r = mesh_query_point_no_sign(v, p, f32::MAX).unwrap();
+        assert_eq!(r.face, 2);
+    }
+
+    /// A mesh of extent 1e-20 at x = 1e20: the query's unit (the extent around the point,
+    /// about 2^67) times the point's x overflows f32, so boxes must be measured from the
+    /// unscaled offsets (as `aabb_distance_sq_scaled` does) for the mesh to be found at all.
+    #[test]
+    fn closest_on_a_tiny_mesh_far_from_the_origin() {
+        let pts = vec![
+            Vec3::new(1e20, 0.0, 0.0),
+            Vec3::new(1e20, 1e-20, 0.0),
+            Vec3::new(1e20, 0.0, 1e-20),
+        ];
+        let mut m = TestMesh::new(pts, vec![0, 1, 2], 1);
+        let v = m.view();
+        let p = Vec3::new(1e20, 2.5e-21, 2.5e-21);
+        assert!(p.x * v.measure_scale(p).unwrap() == f32::INFINITY);
+        let r = mesh_query_point_no_sign(v, p, f32::MAX).unwrap();
+        assert!(r.result);
+        // p lies on the face at u * a + v * b + w * c with v = w = 0.25 (to 1e-6: the edges
+        // are 1e-20 rounded to f32).
+        assert_eq!(r.face, 0);
+        assert!(
+            (r.u - 0.5).abs() < 1e-6 && (r.v - 0.25).abs() < 1e-6,
+            "{r:?}"
+        );
+        // Beside the face in its plane: the nearest point is on edge ca, at w = 0.25.
+        let q = Vec3::new(1e20, -1e-20, 2.5e-21);
+        let r = mesh_query_point_no_sign(v, q, f32::MAX).unwrap();
+        assert!(r.result && r.face == 0);
+        assert!((r.v).abs() < 1e-6 && (r.u - 0.75).abs() < 1e-6, "{r:?}");
     }
 }
