@@ -132,7 +132,7 @@ pub use warp_core::capability;
 pub use warp_core::f16;
 /// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
 pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
-pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
+pub use warp_core::{DTransform, Fault, FaultKind, Float, Int, LaunchId, Transform, Vector};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`), its
 /// size bound (`WARP_LANG_CACHE_MAX_BYTES` wins over `set_cache_max_bytes`; least recently
 /// used entries go first) and emptying it.
@@ -208,8 +208,8 @@ pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
     pub use crate::{
-        bf16, f16, func, kernel, Array, DSpatialMatrix, DSpatialVector, DTransform, Float,
-        SpatialMatrix, SpatialVector, Struct, Transform,
+        bf16, f16, func, kernel, Array, DSpatialMatrix, DSpatialVector, DTransform, Element,
+        Float, Int, SpatialMatrix, SpatialVector, Struct, Transform, Vector,
     };
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,

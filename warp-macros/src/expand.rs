@@ -43,7 +43,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         let errs = errors_to_tokens(errors);
         quote!(#errs #[allow(non_camel_case_types)] #vis struct #name;)
     };
-    let generics = match generics::parse(&item) {
+    let generics = match generics::parse(&item, &opts.instances) {
         Ok(g) => g,
         Err(e) => {
             errors.extend(e);
@@ -687,7 +687,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         let errs = errors_to_tokens(errors);
         quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {})
     };
-    let generics = match generics::parse(&item) {
+    let generics = match generics::parse(&item, &fattrs.instances) {
         Ok(g) => g,
         Err(e) => {
             errors.extend(e);
@@ -735,11 +735,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     let mut per_instance = Vec::new();
     for inst in generics::instances(&item, &g) {
         let display = inst.display_name(&name.to_string());
-        let tys: Vec<syn::Ident> = inst
-            .types
-            .iter()
-            .map(|t| syn::Ident::new(t, name.span()))
-            .collect();
+        let tys = &inst.types;
         match func_instance(&inst.item, &fattrs, Some(display.clone())) {
             Ok(items) => {
                 impls.extend(quote! {
@@ -758,7 +754,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         }
     }
     errors.extend(instance_errors(per_instance));
-    let params: Vec<&syn::Ident> = g.params.iter().map(|(id, _)| id).collect();
+    let params: Vec<&syn::Ident> = g.params.iter().map(|p| &p.ident).collect();
     if !errors.is_empty() {
         // Keep the generic type, so that callers' `f::<f32>(..)` add no errors of their own.
         let errs = errors_to_tokens(errors);

@@ -13,6 +13,9 @@ pub struct KernelAttrs {
     /// `block_dim = N` (a literal or a module const): the kernel is tiled, and `tile(x)` makes
     /// tiles N wide; `launch_tiled` with another block size is an error.
     pub block_dim: Option<crate::types::Dim>,
+    /// `instances(T = [f32, Particle])`: the instance types of a generic kernel's parameters
+    /// (see `front::generics`).
+    pub instances: crate::front::generics::Lists,
 }
 
 /// Parses `#[kernel(same_shape(x, v, dim), ...)]`.
@@ -59,9 +62,12 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
                 )
             })?);
             Ok(())
+        } else if meta.path.is_ident("instances") {
+            out.instances = crate::front::generics::parse_lists(meta)?;
+            Ok(())
         } else {
             Err(meta.error(
-                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N",
+                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N, instances(T = [..])",
             ))
         }
     });
@@ -75,6 +81,8 @@ pub struct FuncAttrs {
     /// `grad(x = fx, y = fy)`: custom gradients, one func per parameter. `fx` takes the func's
     /// parameters followed by the adjoint of its result and returns the adjoint of `x`.
     pub grad: Vec<(syn::Ident, syn::Path)>,
+    /// `instances(T = [f32, Particle])`, as for kernels.
+    pub instances: crate::front::generics::Lists,
 }
 
 /// Parses `#[func(grad(x = dfdx, ..))]`.
@@ -88,8 +96,13 @@ pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<FuncAtt
                 out.grad.push((param, f));
                 Ok(())
             })
+        } else if meta.path.is_ident("instances") {
+            out.instances = crate::front::generics::parse_lists(meta)?;
+            Ok(())
         } else {
-            Err(meta.error("unknown func option; supported: grad(param = gradient_func, ..)"))
+            Err(meta.error(
+                "unknown func option; supported: grad(param = gradient_func, ..), instances(T = [..])",
+            ))
         }
     });
     parser.parse2(tokens)?;
