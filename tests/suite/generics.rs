@@ -20,6 +20,8 @@ backend_tests!(
     vector_kernel_gradients,
     element_type_parameters,
     element_kernel_gradients,
+    overloads_by_first_argument,
+    overload_gradients,
 );
 
 /// `y = a * x + y` in the array's precision.
@@ -376,7 +378,13 @@ fn vector_type_parameters(dev: &wp::Device) {
     let x = arr(&[Vec2::new(3.0, 4.0), Vec2::new(-1.0, 0.5)], dev);
     let out = zeros::<Vec2, 1>(2, dev);
     let len = zeros::<f32, 1>(2, dev);
-    wp::launch(reject, 2, (&x, Vec2::new(0.0, 2.0), 2.0f32, &out, &len), dev).unwrap();
+    wp::launch(
+        reject,
+        2,
+        (&x, Vec2::new(0.0, 2.0), 2.0f32, &out, &len),
+        dev,
+    )
+    .unwrap();
     // Exact: products by 0 and 1, doubling, and sums of small dyadic squares.
     assert_eq!(host(&out), [Vec2::new(6.0, 0.0), Vec2::new(-2.0, 0.0)]);
     assert_eq!(host(&len), [6.0 + 36.0 + 2.0, 2.0 + 4.0 + 2.0]);
@@ -480,13 +488,15 @@ fn pick<T: Element>(a: T, b: T, first: bool) -> T {
 }
 
 fn element_type_parameters(dev: &wp::Device) {
-    let names: Vec<&str> = wp::aot::instances(gather)
-        .iter()
-        .map(|i| i.name)
-        .collect();
+    let names: Vec<&str> = wp::aot::instances(gather).iter().map(|i| i.name).collect();
     assert_eq!(
         names,
-        ["gather<i32>", "gather<f64>", "gather<DVec3>", "gather<Probe>"]
+        [
+            "gather<i32>",
+            "gather<f64>",
+            "gather<DVec3>",
+            "gather<Probe>"
+        ]
     );
     let idx = arr(&[2i32, 0, 1, 2], dev);
     let src = arr(&[10i32, 20, 30], dev);
@@ -533,13 +543,10 @@ fn element_kernel_gradients(dev: &wp::Device) {
     tape.backward_from_grads().unwrap();
     assert_eq!(host(&src.grad().unwrap()), [10.0, 0.0, 101.0]);
     // The struct instance: the same scatter, field by field.
-    let probes = [
-        Probe {
-            pos: DVec3::new(1.0, 2.0, 3.0),
-            weight: 4.0,
-        };
-        2
-    ];
+    let probes = [Probe {
+        pos: DVec3::new(1.0, 2.0, 3.0),
+        weight: 4.0,
+    }; 2];
     let src = arr(&probes, dev).with_grad().unwrap();
     let dst = zeros::<Probe, 1>(2, dev).with_grad().unwrap();
     let idx = arr(&[1i32, 1], dev);
@@ -558,4 +565,142 @@ fn element_kernel_gradients(dev: &wp::Device) {
     assert_eq!(g[0].weight, 0.0);
     assert_eq!(g[1].pos, DVec3::new(1.0, 2.0, 4.0));
     assert_eq!(g[1].weight, 16.0);
+}
+
+wp::overloads!(
+    /// One name, a body per first-argument type (Warp's `@wp.func` overloads).
+    combine
+);
+
+/// Integers: the difference.
+#[wp::func(overload)]
+fn combine(a: i32, b: i32) -> i32 {
+    a - b
+}
+
+/// Float vectors: the midpoint (one generic overload gives one instance per vector type).
+#[wp::func(overload)]
+fn combine<V: Vector>(a: V, b: V) -> V {
+    (a + b) * 0.5
+}
+
+/// Structs: the first position, the weights summed.
+#[wp::func(overload)]
+fn combine(a: Probe, b: Probe) -> Probe {
+    Probe {
+        pos: a.pos,
+        weight: a.weight + b.weight,
+    }
+}
+
+/// A generic kernel whose instances each call their own overload.
+#[wp::kernel(instances(T = [i32, Vec2, DVec3, Probe]))]
+fn combine_all<T: Element>(a: Array<T>, b: Array<T>, out: Array<T>) {
+    let i = tid();
+    out[i] = combine::<T>(a[i], b[i]);
+}
+
+/// A plain kernel names the overload by the argument type.
+#[wp::kernel]
+fn combine_ints(out: Array<i32>) {
+    out[0] = combine::<i32>(7, 10) + combine::<i32>(out[1], 1);
+}
+
+fn overloads_by_first_argument(dev: &wp::Device) {
+    let out = zeros::<i32, 1>(2, dev);
+    wp::launch(
+        combine_all,
+        2,
+        (&arr(&[5i32, -1], dev), &arr(&[2i32, 4], dev), &out),
+        dev,
+    )
+    .unwrap();
+    assert_eq!(host(&out), [3, -5]);
+    let out = zeros::<Vec2, 1>(1, dev);
+    let a = arr(&[Vec2::new(1.0, 3.0)], dev);
+    let b = arr(&[Vec2::new(2.0, -1.0)], dev);
+    wp::launch(combine_all, 1, (&a, &b, &out), dev).unwrap();
+    // Dyadic values: exact.
+    assert_eq!(host(&out), [Vec2::new(1.5, 1.0)]);
+    let p = Probe {
+        pos: DVec3::new(1.0, 2.0, 3.0),
+        weight: 0.25,
+    };
+    let q = Probe {
+        pos: DVec3::ZERO,
+        weight: 0.5,
+    };
+    let out = zeros::<Probe, 1>(1, dev);
+    wp::launch(
+        combine_all,
+        1,
+        (&arr(&[p], dev), &arr(&[q], dev), &out),
+        dev,
+    )
+    .unwrap();
+    assert_eq!(
+        host(&out),
+        [Probe {
+            pos: p.pos,
+            weight: 0.75
+        }]
+    );
+    let out = arr(&[0i32, 9], dev);
+    wp::launch(combine_ints, 1, (&out,), dev).unwrap();
+    assert_eq!(host(&out)[0], (7 - 10) + (9 - 1));
+    // Each overload is a func of its own in reports: named by its first argument's type.
+    let info = wp::aot::instances(combine_all);
+    let callees: Vec<&str> = info.iter().map(|i| i.callees[0].name).collect();
+    assert_eq!(
+        callees,
+        [
+            "combine<i32>",
+            "combine<Vec2>",
+            "combine<DVec3>",
+            "combine<Probe>"
+        ]
+    );
+}
+
+fn overload_gradients(dev: &wp::Device) {
+    // d out / d a = d out / d b = 0.5 through the vector overload: exact.
+    let a = arr(&[DVec3::new(1.0, 2.0, 3.0)], dev).with_grad().unwrap();
+    let b = arr(&[DVec3::new(-1.0, 0.5, 8.0)], dev).with_grad().unwrap();
+    let out = zeros::<DVec3, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(combine_all, 1, (&a, &b, &out), dev).unwrap();
+    }
+    out.grad()
+        .unwrap()
+        .fill(DVec3::new(2.0, 4.0, -8.0))
+        .unwrap();
+    tape.backward_from_grads().unwrap();
+    assert_eq!(host(&a.grad().unwrap()), [DVec3::new(1.0, 2.0, -4.0)]);
+    assert_eq!(host(&b.grad().unwrap()), [DVec3::new(1.0, 2.0, -4.0)]);
+    // Through the struct overload: the weight's gradient reaches both, the position's only a.
+    let p = Probe {
+        pos: DVec3::ONE,
+        weight: 1.0,
+    };
+    let a = arr(&[p], dev).with_grad().unwrap();
+    let b = arr(&[p], dev).with_grad().unwrap();
+    let out = zeros::<Probe, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(combine_all, 1, (&a, &b, &out), dev).unwrap();
+    }
+    out.grad()
+        .unwrap()
+        .fill(Probe {
+            pos: DVec3::splat(3.0),
+            weight: 5.0,
+        })
+        .unwrap();
+    tape.backward_from_grads().unwrap();
+    let (ga, gb) = (host(&a.grad().unwrap())[0], host(&b.grad().unwrap())[0]);
+    assert_eq!((ga.pos, ga.weight), (DVec3::splat(3.0), 5.0));
+    assert_eq!((gb.pos, gb.weight), (DVec3::ZERO, 5.0));
 }

@@ -83,6 +83,9 @@ pub struct FuncAttrs {
     pub grad: Vec<(syn::Ident, syn::Path)>,
     /// `instances(T = [f32, Particle])`, as for kernels.
     pub instances: crate::front::generics::Lists,
+    /// `overload`: the func is one overload of the set `wp::overloads!(name)` declares,
+    /// selected by its first parameter's type (`name::<i32>(..)`).
+    pub overload: Option<syn::Path>,
 }
 
 /// Parses `#[func(grad(x = dfdx, ..))]`.
@@ -99,9 +102,12 @@ pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<FuncAtt
         } else if meta.path.is_ident("instances") {
             out.instances = crate::front::generics::parse_lists(meta)?;
             Ok(())
+        } else if meta.path.is_ident("overload") {
+            out.overload = Some(meta.path.clone());
+            Ok(())
         } else {
             Err(meta.error(
-                "unknown func option; supported: grad(param = gradient_func, ..), instances(T = [..])",
+                "unknown func option; supported: grad(param = gradient_func, ..), instances(T = [..]), overload",
             ))
         }
     });

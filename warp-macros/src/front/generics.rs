@@ -153,9 +153,8 @@ pub fn parse_lists(meta: syn::meta::ParseNestedMeta) -> syn::Result<Lists> {
         let value = inner.value()?;
         let content;
         syn::bracketed!(content in value);
-        let tys = syn::punctuated::Punctuated::<syn::Type, syn::Token![,]>::parse_terminated(
-            &content,
-        )?;
+        let tys =
+            syn::punctuated::Punctuated::<syn::Type, syn::Token![,]>::parse_terminated(&content)?;
         if out.iter().any(|(o, _)| *o == id) {
             return Err(syn::Error::new(
                 id.span(),
@@ -691,12 +690,20 @@ mod tests {
             .into_iter()
             .map(|i| i.item.to_token_stream().to_string())
             .collect();
-        assert!(out[0].contains("v : Array < DVec3 > , s : f64"), "{}", out[0]);
+        assert!(
+            out[0].contains("v : Array < DVec3 > , s : f64"),
+            "{}",
+            out[0]
+        );
         assert!(out[0].contains("DVec3 :: ZERO"), "{}", out[0]);
         assert!(out[0].contains("n : f64"), "{}", out[0]);
         assert!(out[0].contains("0 .. 3"), "{}", out[0]);
         assert!(out[0].contains("[0.0f32 ; 3]"), "{}", out[0]);
-        assert!(out[1].contains("s : f32") && out[1].contains("0 .. 2"), "{}", out[1]);
+        assert!(
+            out[1].contains("s : f32") && out[1].contains("0 .. 2"),
+            "{}",
+            out[1]
+        );
     }
 
     #[test]
