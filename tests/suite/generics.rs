@@ -302,7 +302,11 @@ fn integer_type_parameters(dev: &wp::Device) {
     wp::launch(int_mix, 4, (&a, 3, &out), dev).unwrap();
     let want: Vec<i32> = i32s
         .iter()
-        .map(|&x| (x >> 1) / 3 + x.wrapping_mul(3) + x.min(i32::MAX / 4))
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(i32::MAX / 4))
+        })
         .collect();
     assert_eq!(host(&out), want, "int_mix<i32>");
     // The same bits as u32: logical shift, unsigned division, another clamp bound.
@@ -312,7 +316,11 @@ fn integer_type_parameters(dev: &wp::Device) {
     wp::launch(int_mix, 4, (&a, 3u32, &out), dev).unwrap();
     let want: Vec<u32> = u32s
         .iter()
-        .map(|&x| (x >> 1) / 3 + x.wrapping_mul(3) + x.min(u32::MAX / 4))
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(u32::MAX / 4))
+        })
         .collect();
     assert_eq!(host(&out), want, "int_mix<u32>");
     let i64s = [-7i64, i64::MAX, 1 << 40, 5];
@@ -321,7 +329,11 @@ fn integer_type_parameters(dev: &wp::Device) {
     wp::launch(int_mix, 4, (&a, 3i64, &out), dev).unwrap();
     let want: Vec<i64> = i64s
         .iter()
-        .map(|&x| (x >> 1) / 3 + x.wrapping_mul(3) + x.min(i64::MAX / 4))
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(i64::MAX / 4))
+        })
         .collect();
     assert_eq!(host(&out), want, "int_mix<i64>");
     let u64s = i64s.map(|x| x as u64);
@@ -330,7 +342,11 @@ fn integer_type_parameters(dev: &wp::Device) {
     wp::launch(int_mix, 4, (&a, 3u64, &out), dev).unwrap();
     let want: Vec<u64> = u64s
         .iter()
-        .map(|&x| (x >> 1) / 3 + x.wrapping_mul(3) + x.min(u64::MAX / 4))
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(u64::MAX / 4))
+        })
         .collect();
     assert_eq!(host(&out), want, "int_mix<u64>");
     // A fault names the instance: division by a zero `s`.
@@ -474,7 +490,8 @@ struct Probe {
 fn gather<T: Element>(src: Array<T>, idx: Array<i32>, dst: Array<T>) {
     let i = tid();
     let j = idx[i];
-    dst[i] = pick::<T>(src[j], dst[i], j >= 0);
+    // A negative index keeps the destination (src is read at 0 then, not out of bounds).
+    dst[i] = pick::<T>(src[j.max(0)], dst[i], j >= 0);
 }
 
 /// Selects one of two values of any listed type.
