@@ -836,7 +836,7 @@ fn overload_member(
             errors.push(syn::Error::new(
                 k.span(),
                 format!(
-                    "two instances of this overload take a first parameter of type `{}`:                      overloads are told apart by their first parameter's type, so a type                      parameter must appear in it",
+                    "two instances of this overload take a first parameter of type `{}`: overloads are told apart by their first parameter's type, so a type parameter must appear in it",
                     text.replace(' ', "")
                 ),
             ));

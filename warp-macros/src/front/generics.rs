@@ -328,8 +328,7 @@ fn check_list(id: &syn::Ident, kind: &Kind, tys: &[syn::Type]) -> Result<(), Vec
                 errors.push(syn::Error::new(
                     t.span(),
                     format!(
-                        "`{name}` is not a `{}` type: `{id}: {}` is one of {}",
-                        kind.bound,
+                        "`{name}` is not one of the types of `{id}: {}`: {}",
                         kind.bound,
                         allowed.join(", ")
                     ),
