@@ -132,7 +132,7 @@ pub use warp_core::capability;
 pub use warp_core::f16;
 /// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
 pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
-pub use warp_core::{DTransform, Fault, FaultKind, Float, LaunchId, Transform};
+pub use warp_core::{DTransform, Fault, FaultKind, Float, Int, LaunchId, Transform, Vector};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`), its
 /// size bound (`WARP_LANG_CACHE_MAX_BYTES` wins over `set_cache_max_bytes`; least recently
 /// used entries go first) and emptying it.
@@ -205,11 +205,30 @@ pub use warp_runtime::{
 pub use warp_runtime::{hvp, jvp, Forward};
 pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
+/// Declares a set of overloaded funcs: `wp::overloads!(pub combine);`, then each overload is
+/// a `#[wp::func(overload)] fn combine(..)` (several may share the name) and callers name one
+/// by its first parameter's type, `combine::<i32>(a, b)`, or in a generic kernel
+/// `combine::<T>(a, b)`, which picks each instance's overload. A call that no overload takes
+/// fails to compile at the call.
+#[macro_export]
+macro_rules! overloads {
+    ($(#[$m:meta])* $vis:vis $name:ident) => {
+        $(#[$m])*
+        ///
+        /// A set of overloaded `#[func]`s, selected by the first argument's type:
+        /// `name::<i32>(..)`.
+        #[allow(non_camel_case_types)]
+        $vis struct $name<K> {
+            _overload: ::core::marker::PhantomData<K>,
+        }
+    };
+}
+
 /// Everything a kernel file needs: `use warp_lang::prelude::*;`.
 pub mod prelude {
     pub use crate::{
-        bf16, f16, func, kernel, Array, DSpatialMatrix, DSpatialVector, DTransform, Float,
-        SpatialMatrix, SpatialVector, Struct, Transform,
+        bf16, f16, func, kernel, Array, DSpatialMatrix, DSpatialVector, DTransform, Element, Float,
+        Int, SpatialMatrix, SpatialVector, Struct, Transform, Vector,
     };
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,

@@ -662,11 +662,17 @@ fn cpu_results(args: &[Arg]) -> Vec<String> {
 /// Compiles and runs `K`'s CUDA translation unit on the host over `dims`, with `args`
 /// (the state before the launch); returns what it printed, one value per line.
 fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
+    run_info_on_host(&K::INFO, dims, args)
+}
+
+/// [`run_on_host`] for a kernel's static facts (an instance of a generic kernel, from
+/// `wp::aot::instances`).
+fn run_info_on_host(info: &wp::KernelInfo, dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
     if Command::new("g++").arg("--version").output().is_err() {
         eprintln!("SKIPPED cuda_codegen_host: no g++ on this machine");
         return None;
     }
-    let src = wp::cuda_source::assemble(&K::INFO);
+    let src = wp::cuda_source::assemble(info);
     let (decl, print) = cpp_args(args);
     let mut dims4 = [1usize; 4];
     dims4[..dims.len()].copy_from_slice(dims);
@@ -700,7 +706,7 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
     };
     let dir = std::env::temp_dir().join(format!(
         "wp_codegen_{}_{}",
-        K::INFO.name,
+        info.name.replace(|c: char| !c.is_ascii_alphanumeric(), "_"),
         std::process::id()
     ));
     std::fs::create_dir_all(&dir).unwrap();
@@ -709,8 +715,8 @@ fn run_on_host<K: Kernel>(dims: &[usize], args: &[Arg]) -> Option<Vec<String>> {
     // launches whose arrays are all contiguous (the arrays here are); and for a kernel with an
     // adjoint, the unit that holds both halves (what a launch under a recording tape
     // compiles), whose forward must run as the forward's own unit does.
-    let differentiable = K::INFO.adjoint_error.is_none() && K::INFO.cuda_adjoint_error.is_none();
-    let both = wp::cuda_source::assemble_with_adjoint(&K::INFO);
+    let differentiable = info.adjoint_error.is_none() && info.cuda_adjoint_error.is_none();
+    let both = wp::cuda_source::assemble_with_adjoint(info);
     assert_eq!(both.thread_fn, src.thread_fn);
     let mut units = vec![
         (src.text.as_str(), "-DWP_GENERAL_STRIDES"),
@@ -2430,4 +2436,135 @@ fn struct_layouts_match_the_rust_side() {
     .map(|n| n.to_string())
     .collect();
     assert_eq!(got, want);
+}
+
+// Generic kernels beyond `T: Float`: integer, vector and element type parameters and
+// overloads; each instance's translation unit is compiled and run like a plain kernel's.
+
+#[wp::func]
+fn g_clamp<I: Int>(x: I, hi: I) -> I {
+    if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
+#[wp::kernel]
+fn g_int<I: Int>(a: Array<I>, out: Array<I>) {
+    let i = tid();
+    let x = a[i];
+    out[i] = (x >> 1) / 3 + x * 3 + g_clamp::<I>(x, I::MAX / 4);
+}
+
+#[wp::kernel]
+fn g_reject<V: Vector>(x: Array<V>, d: V, s: V::Scalar, out: Array<V>, len: Array<V::Scalar>) {
+    let i = tid();
+    let n = d.normalize();
+    let r = (x[i] - n * x[i].dot(n)) * s + V::ZERO;
+    out[i] = r;
+    len[i] = r.length() + r.length_squared() + (V::LEN as V::Scalar);
+}
+
+wp::overloads!(g_combine);
+
+#[wp::func(overload)]
+fn g_combine(a: i32, b: i32) -> i32 {
+    a - b
+}
+
+#[wp::func(overload)]
+fn g_combine<V: Vector>(a: V, b: V) -> V {
+    (a + b) * 0.5
+}
+
+#[wp::kernel(instances(T = [i32, Vec3]))]
+fn g_gather<T: Element>(src: Array<T>, idx: Array<i32>, dst: Array<T>) {
+    let i = tid();
+    let j = idx[i];
+    dst[i] = g_combine::<T>(src[j], dst[i]);
+}
+
+/// The instance of a generic kernel named `name`.
+fn instance<G: wp::GenericKernel>(kernel: G, name: &str) -> &'static wp::KernelInfo {
+    wp::aot::instances(kernel)
+        .into_iter()
+        .find(|i| i.name == name)
+        .unwrap_or_else(|| panic!("no instance {name}"))
+}
+
+#[test]
+fn generic_instances_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    // `Int`: the i32 instance (shifts, division, wrapping `*`, a generic func).
+    let a0 = [-7i32, 100, i32::MAX, 5, i32::MIN, 0];
+    let a = wp::Array::from_slice(&a0, &dev).unwrap();
+    let out = wp::Array::<i32>::zeros(6, &dev).unwrap();
+    let host = run_info_on_host(
+        instance(g_int, "g_int<i32>"),
+        &[6],
+        &[Arg::I32s(&a), Arg::I32s(&out)],
+    );
+    wp::launch(g_int, 6, (&a, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::I32s(&a), Arg::I32s(&out)]));
+    }
+    // `Vector`: the Vec3 instance (normalize, dot, length, `V::Scalar`, `V::LEN`).
+    let x0: Vec<Vec3> = (0..9)
+        .map(|k| Vec3::new(k as f32 * 0.3 - 1.0, 0.7, 2.0 - k as f32 * 0.11))
+        .collect();
+    let x = wp::Array::from_slice(&x0, &dev).unwrap();
+    let out = wp::Array::<Vec3>::zeros(9, &dev).unwrap();
+    let len = wp::Array::<f32>::zeros(9, &dev).unwrap();
+    let d = Vec3::new(0.3, -1.1, 0.6);
+    let args = |x, out, len| {
+        [
+            Arg::Vec3s(x),
+            Arg::Vec3(d),
+            Arg::F32(0.75),
+            Arg::Vec3s(out),
+            Arg::F32s(len),
+        ]
+    };
+    let host = run_info_on_host(
+        instance(g_reject, "g_reject<Vec3>"),
+        &[9],
+        &args(&x, &out, &len),
+    );
+    wp::launch(g_reject, 9, (&x, d, 0.75f32, &out, &len), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args(&x, &out, &len)));
+    }
+    // `Element` with overloads: the i32 instance calls the plain overload, the Vec3 one the
+    // generic overload's Vec3 instance.
+    let idx = wp::Array::from_slice(&[2i32, 0, 1, 2], &dev).unwrap();
+    let src = wp::Array::from_slice(&[10i32, 20, 30], &dev).unwrap();
+    let dst = wp::Array::from_slice(&[1i32, 2, 3, 4], &dev).unwrap();
+    let host = run_info_on_host(
+        instance(g_gather, "g_gather<i32>"),
+        &[4],
+        &[Arg::I32s(&src), Arg::I32s(&idx), Arg::I32s(&dst)],
+    );
+    wp::launch(g_gather, 4, (&src, &idx, &dst), &dev).unwrap();
+    assert_eq!(dst.to_vec().unwrap(), [29, 8, 17, 26]);
+    if let Some(host) = host {
+        assert_eq!(
+            host,
+            cpu_results(&[Arg::I32s(&src), Arg::I32s(&idx), Arg::I32s(&dst)])
+        );
+    }
+    let src = wp::Array::from_slice(&x0[..3], &dev).unwrap();
+    let dst = wp::Array::from_slice(&x0[5..9], &dev).unwrap();
+    let host = run_info_on_host(
+        instance(g_gather, "g_gather<Vec3>"),
+        &[4],
+        &[Arg::Vec3s(&src), Arg::I32s(&idx), Arg::Vec3s(&dst)],
+    );
+    wp::launch(g_gather, 4, (&src, &idx, &dst), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(
+            host,
+            cpu_results(&[Arg::Vec3s(&src), Arg::I32s(&idx), Arg::Vec3s(&dst)])
+        );
+    }
 }

@@ -14,6 +14,14 @@ backend_tests!(
     generic_kernel_gradients,
     instances_are_named,
     generic_transforms,
+    integer_type_parameters,
+    listed_integer_instances,
+    vector_type_parameters,
+    vector_kernel_gradients,
+    element_type_parameters,
+    element_kernel_gradients,
+    overloads_by_first_argument,
+    overload_gradients,
 );
 
 /// `y = a * x + y` in the array's precision.
@@ -267,4 +275,449 @@ fn generic_transforms(dev: &wp::Device) {
     let p32 = arr(&[Vec3::new(0.5, 0.25, -1.0)], dev);
     wp::launch(move_points, 1, (&arr(&[t32], dev), &p32), dev).unwrap();
     assert_eq!(host(&p32), [Vec3::new(1.5, 2.25, 2.0)]);
+}
+
+/// `I: Int`: the integer types' own semantics in each instance (unsigned shifts and division,
+/// `*` wrapping at the type's width).
+#[wp::kernel]
+fn int_mix<I: Int>(a: Array<I>, s: I, out: Array<I>) {
+    let i = tid();
+    let x = a[i];
+    out[i] = (x >> 1) / s + x * 3 + clamp_to::<I>(x, I::MAX / 4);
+}
+
+#[wp::func]
+fn clamp_to<I: Int>(x: I, hi: I) -> I {
+    if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
+fn integer_type_parameters(dev: &wp::Device) {
+    let i32s = [-7i32, 100, i32::MAX, 5];
+    let a = arr(&i32s, dev);
+    let out = zeros::<i32, 1>(4, dev);
+    wp::launch(int_mix, 4, (&a, 3, &out), dev).unwrap();
+    let want: Vec<i32> = i32s
+        .iter()
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(i32::MAX / 4))
+        })
+        .collect();
+    assert_eq!(host(&out), want, "int_mix<i32>");
+    // The same bits as u32: logical shift, unsigned division, another clamp bound.
+    let u32s = i32s.map(|x| x as u32);
+    let a = arr(&u32s, dev);
+    let out = zeros::<u32, 1>(4, dev);
+    wp::launch(int_mix, 4, (&a, 3u32, &out), dev).unwrap();
+    let want: Vec<u32> = u32s
+        .iter()
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(u32::MAX / 4))
+        })
+        .collect();
+    assert_eq!(host(&out), want, "int_mix<u32>");
+    let i64s = [-7i64, i64::MAX, 1 << 40, 5];
+    let a = arr(&i64s, dev);
+    let out = zeros::<i64, 1>(4, dev);
+    wp::launch(int_mix, 4, (&a, 3i64, &out), dev).unwrap();
+    let want: Vec<i64> = i64s
+        .iter()
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(i64::MAX / 4))
+        })
+        .collect();
+    assert_eq!(host(&out), want, "int_mix<i64>");
+    let u64s = i64s.map(|x| x as u64);
+    let a = arr(&u64s, dev);
+    let out = zeros::<u64, 1>(4, dev);
+    wp::launch(int_mix, 4, (&a, 3u64, &out), dev).unwrap();
+    let want: Vec<u64> = u64s
+        .iter()
+        .map(|&x| {
+            ((x >> 1) / 3)
+                .wrapping_add(x.wrapping_mul(3))
+                .wrapping_add(x.min(u64::MAX / 4))
+        })
+        .collect();
+    assert_eq!(host(&out), want, "int_mix<u64>");
+    // A fault names the instance: division by a zero `s`.
+    let err = wp::launch(int_mix, 4, (&a, 0u64, &out), dev).unwrap_err();
+    assert!(err.to_string().contains("int_mix<u64>"), "{err}");
+}
+
+/// A list picks other integer types than the defaults (`+` wraps at 8 and 16 bits).
+#[wp::kernel(instances(I = [u8, i16]))]
+fn narrow_sum<I: Int>(a: Array<I>, out: Array<I>) {
+    let i = tid();
+    out[i] = a[i] + a[i] + 1;
+}
+
+fn listed_integer_instances(dev: &wp::Device) {
+    let names: Vec<&str> = wp::aot::instances(narrow_sum)
+        .iter()
+        .map(|i| i.name)
+        .collect();
+    assert_eq!(names, ["narrow_sum<u8>", "narrow_sum<i16>"]);
+    let a = arr(&[200u8, 3], dev);
+    let out = zeros::<u8, 1>(2, dev);
+    wp::launch(narrow_sum, 2, (&a, &out), dev).unwrap();
+    assert_eq!(host(&out), [145, 7]);
+    let a = arr(&[-20000i16, 3], dev);
+    let out = zeros::<i16, 1>(2, dev);
+    wp::launch(narrow_sum, 2, (&a, &out), dev).unwrap();
+    assert_eq!(host(&out), [(-40000i32 + 65536 + 1) as i16, 7]);
+}
+
+/// `V: Vector`: the operations every float vector has, its lane type `V::Scalar` and lane
+/// count `V::LEN` (a literal in each instance).
+#[wp::kernel]
+fn reject<V: Vector>(x: Array<V>, d: V, s: V::Scalar, out: Array<V>, len: Array<V::Scalar>) {
+    let i = tid();
+    let n = d.normalize();
+    let r = (x[i] - n * x[i].dot(n)) * s + V::ZERO;
+    out[i] = r;
+    let sq: V::Scalar = r.length_squared();
+    len[i] = r.length() + sq + (V::LEN as V::Scalar);
+}
+
+fn vector_type_parameters(dev: &wp::Device) {
+    // Vec2 (f32): d = (0, 2) normalises exactly to (0, 1); rejection keeps x's first lane.
+    let x = arr(&[Vec2::new(3.0, 4.0), Vec2::new(-1.0, 0.5)], dev);
+    let out = zeros::<Vec2, 1>(2, dev);
+    let len = zeros::<f32, 1>(2, dev);
+    wp::launch(
+        reject,
+        2,
+        (&x, Vec2::new(0.0, 2.0), 2.0f32, &out, &len),
+        dev,
+    )
+    .unwrap();
+    // Exact: products by 0 and 1, doubling, and sums of small dyadic squares.
+    assert_eq!(host(&out), [Vec2::new(6.0, 0.0), Vec2::new(-2.0, 0.0)]);
+    assert_eq!(host(&len), [6.0 + 36.0 + 2.0, 2.0 + 4.0 + 2.0]);
+    // Vec4 (f32): the lane count is 4.
+    let x = arr(&[Vec4::new(1.0, 2.0, 3.0, 4.0)], dev);
+    let out = zeros::<Vec4, 1>(1, dev);
+    let len = zeros::<f32, 1>(1, dev);
+    wp::launch(reject, 1, (&x, Vec4::W, 1.0f32, &out, &len), dev).unwrap();
+    assert_eq!(host(&out), [Vec4::new(1.0, 2.0, 3.0, 0.0)]);
+    // length of (1, 2, 3) is sqrt(14), correctly rounded on both backends.
+    assert_eq!(host(&len), [14f32.sqrt() + 14.0 + 4.0]);
+    // DVec3 (f64): a general direction; compared with the same formula in f64.
+    let xs = [DVec3::new(0.3, -1.2, 2.5), DVec3::new(1.0, 1.0, 1.0)];
+    let d = DVec3::new(1.0, 2.0, -0.5);
+    let x = arr(&xs, dev);
+    let out = zeros::<DVec3, 1>(2, dev);
+    let len = zeros::<f64, 1>(2, dev);
+    wp::launch(reject, 2, (&x, d, 0.5f64, &out, &len), dev).unwrap();
+    let n = d.normalize();
+    for (k, xv) in xs.iter().enumerate() {
+        let want = (*xv - n * xv.dot(n)) * 0.5;
+        // A normalisation, a dot product and a few products of unit-size values: 16 ulp of
+        // the vector's size covers the rounding and CUDA's FMA contraction.
+        let got = host(&out)[k];
+        assert!(
+            (got - want).length() <= 16.0 * f64::EPSILON * xv.length(),
+            "reject<DVec3>: {got} vs {want}"
+        );
+        let want_len = want.length() + want.length_squared() + 3.0;
+        assert_close_f64(host(&len)[k], want_len, 1e-14, "reject<DVec3> length");
+    }
+}
+
+/// A vector-generic loss for gradients: sum of squared distances to a point, scaled.
+#[wp::kernel]
+fn spring_energy<V: Vector>(x: Array<V>, anchor: V, k: V::Scalar, e: Array<V::Scalar>) {
+    let i = tid();
+    let r = x[i] - anchor;
+    atomic_add(e, 0, k * r.dot(r) * r.length());
+}
+
+fn vector_kernel_gradients(dev: &wp::Device) {
+    let x = arr(
+        &[DVec3::new(0.3, -1.2, 2.5), DVec3::new(1.0, 0.5, -0.25)],
+        dev,
+    )
+    .with_grad()
+    .unwrap();
+    let e = zeros::<f64, 1>(1, dev).with_grad().unwrap();
+    let anchor = DVec3::new(0.1, 0.2, 0.3);
+    // f64 central differences (the f64 defaults: step 1e-6, atol 1e-8, rtol 1e-6) of a cubic
+    // in inputs of order 1 whose distances stay away from 0 (where |r| is not smooth).
+    let flat = x.reinterpret::<f64>().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(spring_energy, 2, (&x, anchor, 1.5f64, &e), dev),
+        &[&flat],
+        &[&e],
+        wp::GradcheckOptions::for_type::<f64>(),
+    )
+    .unwrap();
+    assert!(report.passed, "spring_energy<DVec3>: {:?}", report.worst);
+    // The Vec2 (f32) instance's gradient by hand: d/dx k |r|^3 = 3 k |r| r. r = (3, 4):
+    // |r| = 5, so the gradient is 3 * 2 * 5 * (3, 4) = (90, 120), exact in f32.
+    let x = arr(&[Vec2::new(3.0, 4.0)], dev).with_grad().unwrap();
+    let e = zeros::<f32, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(spring_energy, 1, (&x, Vec2::ZERO, 2.0f32, &e), dev).unwrap();
+    }
+    tape.backward(&e).unwrap();
+    assert_eq!(host(&e), [250.0]);
+    assert_eq!(host(&x.grad().unwrap()), [Vec2::new(90.0, 120.0)]);
+}
+
+/// A struct for `T: Element` instances.
+#[derive(Clone, Copy, Debug, PartialEq, wp::Struct)]
+#[repr(C)]
+struct Probe {
+    pos: DVec3,
+    weight: f64,
+}
+
+/// `T: Element` ranges over any array element type, so its instances are listed: a gather
+/// that only moves values, through a generic func.
+#[wp::kernel(instances(T = [i32, f64, DVec3, Probe]))]
+fn gather<T: Element>(src: Array<T>, idx: Array<i32>, dst: Array<T>) {
+    let i = tid();
+    let j = idx[i];
+    // A negative index keeps the destination (src is read at 0 then, not out of bounds).
+    dst[i] = pick::<T>(src[j.max(0)], dst[i], j >= 0);
+}
+
+/// Selects one of two values of any listed type.
+#[wp::func(instances(T = [i32, f64, DVec3, Probe]))]
+fn pick<T: Element>(a: T, b: T, first: bool) -> T {
+    let mut out: T = b;
+    if first {
+        out = a;
+    }
+    out
+}
+
+fn element_type_parameters(dev: &wp::Device) {
+    let names: Vec<&str> = wp::aot::instances(gather).iter().map(|i| i.name).collect();
+    assert_eq!(
+        names,
+        [
+            "gather<i32>",
+            "gather<f64>",
+            "gather<DVec3>",
+            "gather<Probe>"
+        ]
+    );
+    let idx = arr(&[2i32, 0, 1, 2], dev);
+    let src = arr(&[10i32, 20, 30], dev);
+    let dst = zeros::<i32, 1>(4, dev);
+    wp::launch(gather, 4, (&src, &idx, &dst), dev).unwrap();
+    assert_eq!(host(&dst), [30, 10, 20, 30]);
+    let src = arr(&[DVec3::X, DVec3::Y, DVec3::Z], dev);
+    let dst = zeros::<DVec3, 1>(4, dev);
+    wp::launch(gather, 4, (&src, &idx, &dst), dev).unwrap();
+    assert_eq!(host(&dst), [DVec3::Z, DVec3::X, DVec3::Y, DVec3::Z]);
+    let probes: Vec<Probe> = (0..3)
+        .map(|k| Probe {
+            pos: DVec3::splat(k as f64),
+            weight: 0.5 * k as f64,
+        })
+        .collect();
+    let src = arr(&probes, dev);
+    let dst = zeros::<Probe, 1>(4, dev);
+    // A negative index keeps the destination: the func's `else` value.
+    let idx = arr(&[2i32, -1, 1, 0], dev);
+    wp::launch(gather, 4, (&src, &idx, &dst), dev).unwrap();
+    let zero = Probe {
+        pos: DVec3::ZERO,
+        weight: 0.0,
+    };
+    assert_eq!(host(&dst), [probes[2], zero, probes[1], probes[0]]);
+}
+
+fn element_kernel_gradients(dev: &wp::Device) {
+    // The gather's adjoint scatters dst's gradient into src's: src[j] gets the sum of the
+    // seeds of the threads that read it. Exact (sums of small integers).
+    let idx = arr(&[2i32, 0, 2, -1], dev);
+    let src = arr(&[1.0f64, 2.0, 3.0], dev).with_grad().unwrap();
+    let dst = zeros::<f64, 1>(4, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(gather, 4, (&src, &idx, &dst), dev).unwrap();
+    }
+    dst.grad()
+        .unwrap()
+        .copy_from(&arr(&[1.0f64, 10.0, 100.0, 1000.0], dev))
+        .unwrap();
+    tape.backward_from_grads().unwrap();
+    assert_eq!(host(&src.grad().unwrap()), [10.0, 0.0, 101.0]);
+    // The struct instance: the same scatter, field by field.
+    let probes = [Probe {
+        pos: DVec3::new(1.0, 2.0, 3.0),
+        weight: 4.0,
+    }; 2];
+    let src = arr(&probes, dev).with_grad().unwrap();
+    let dst = zeros::<Probe, 1>(2, dev).with_grad().unwrap();
+    let idx = arr(&[1i32, 1], dev);
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(gather, 2, (&src, &idx, &dst), dev).unwrap();
+    }
+    let seed = Probe {
+        pos: DVec3::new(0.5, 1.0, 2.0),
+        weight: 8.0,
+    };
+    dst.grad().unwrap().fill(seed).unwrap();
+    tape.backward_from_grads().unwrap();
+    let g = host(&src.grad().unwrap());
+    assert_eq!(g[0].weight, 0.0);
+    assert_eq!(g[1].pos, DVec3::new(1.0, 2.0, 4.0));
+    assert_eq!(g[1].weight, 16.0);
+}
+
+wp::overloads!(
+    /// One name, a body per first-argument type (Warp's `@wp.func` overloads).
+    combine
+);
+
+/// Integers: the difference.
+#[wp::func(overload)]
+fn combine(a: i32, b: i32) -> i32 {
+    a - b
+}
+
+/// Float vectors: the midpoint (one generic overload gives one instance per vector type).
+#[wp::func(overload)]
+fn combine<V: Vector>(a: V, b: V) -> V {
+    (a + b) * 0.5
+}
+
+/// Structs: the first position, the weights summed.
+#[wp::func(overload)]
+fn combine(a: Probe, b: Probe) -> Probe {
+    Probe {
+        pos: a.pos,
+        weight: a.weight + b.weight,
+    }
+}
+
+/// A generic kernel whose instances each call their own overload.
+#[wp::kernel(instances(T = [i32, Vec2, DVec3, Probe]))]
+fn combine_all<T: Element>(a: Array<T>, b: Array<T>, out: Array<T>) {
+    let i = tid();
+    out[i] = combine::<T>(a[i], b[i]);
+}
+
+/// A plain kernel names the overload by the argument type.
+#[wp::kernel]
+fn combine_ints(out: Array<i32>) {
+    out[0] = combine::<i32>(7, 10) + combine::<i32>(out[1], 1);
+}
+
+fn overloads_by_first_argument(dev: &wp::Device) {
+    let out = zeros::<i32, 1>(2, dev);
+    wp::launch(
+        combine_all,
+        2,
+        (&arr(&[5i32, -1], dev), &arr(&[2i32, 4], dev), &out),
+        dev,
+    )
+    .unwrap();
+    assert_eq!(host(&out), [3, -5]);
+    let out = zeros::<Vec2, 1>(1, dev);
+    let a = arr(&[Vec2::new(1.0, 3.0)], dev);
+    let b = arr(&[Vec2::new(2.0, -1.0)], dev);
+    wp::launch(combine_all, 1, (&a, &b, &out), dev).unwrap();
+    // Dyadic values: exact.
+    assert_eq!(host(&out), [Vec2::new(1.5, 1.0)]);
+    let p = Probe {
+        pos: DVec3::new(1.0, 2.0, 3.0),
+        weight: 0.25,
+    };
+    let q = Probe {
+        pos: DVec3::ZERO,
+        weight: 0.5,
+    };
+    let out = zeros::<Probe, 1>(1, dev);
+    wp::launch(
+        combine_all,
+        1,
+        (&arr(&[p], dev), &arr(&[q], dev), &out),
+        dev,
+    )
+    .unwrap();
+    assert_eq!(
+        host(&out),
+        [Probe {
+            pos: p.pos,
+            weight: 0.75
+        }]
+    );
+    let out = arr(&[0i32, 9], dev);
+    wp::launch(combine_ints, 1, (&out,), dev).unwrap();
+    assert_eq!(host(&out)[0], (7 - 10) + (9 - 1));
+    // Each overload is a func of its own in reports: named by its first argument's type.
+    let info = wp::aot::instances(combine_all);
+    let callees: Vec<&str> = info.iter().map(|i| i.callees[0].name).collect();
+    assert_eq!(
+        callees,
+        [
+            "combine<i32>",
+            "combine<Vec2>",
+            "combine<DVec3>",
+            "combine<Probe>"
+        ]
+    );
+}
+
+fn overload_gradients(dev: &wp::Device) {
+    // d out / d a = d out / d b = 0.5 through the vector overload: exact.
+    let a = arr(&[DVec3::new(1.0, 2.0, 3.0)], dev).with_grad().unwrap();
+    let b = arr(&[DVec3::new(-1.0, 0.5, 8.0)], dev).with_grad().unwrap();
+    let out = zeros::<DVec3, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(combine_all, 1, (&a, &b, &out), dev).unwrap();
+    }
+    out.grad()
+        .unwrap()
+        .fill(DVec3::new(2.0, 4.0, -8.0))
+        .unwrap();
+    tape.backward_from_grads().unwrap();
+    assert_eq!(host(&a.grad().unwrap()), [DVec3::new(1.0, 2.0, -4.0)]);
+    assert_eq!(host(&b.grad().unwrap()), [DVec3::new(1.0, 2.0, -4.0)]);
+    // Through the struct overload: the weight's gradient reaches both, the position's only a.
+    let p = Probe {
+        pos: DVec3::ONE,
+        weight: 1.0,
+    };
+    let a = arr(&[p], dev).with_grad().unwrap();
+    let b = arr(&[p], dev).with_grad().unwrap();
+    let out = zeros::<Probe, 1>(1, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        wp::launch(combine_all, 1, (&a, &b, &out), dev).unwrap();
+    }
+    out.grad()
+        .unwrap()
+        .fill(Probe {
+            pos: DVec3::splat(3.0),
+            weight: 5.0,
+        })
+        .unwrap();
+    tape.backward_from_grads().unwrap();
+    let (ga, gb) = (host(&a.grad().unwrap())[0], host(&b.grad().unwrap())[0]);
+    assert_eq!((ga.pos, ga.weight), (DVec3::splat(3.0), 5.0));
+    assert_eq!((gb.pos, gb.weight), (DVec3::ZERO, 5.0));
 }

@@ -71,6 +71,51 @@ pub trait Float: Copy + private::Sealed {}
 impl Float for f32 {}
 impl Float for f64 {}
 
+/// The bound of an integer type parameter: `fn k<I: Int>(x: Array<I>)`.
+///
+/// Instantiated for i32, u32, i64 and u64, or for the types listed in
+/// `#[kernel(instances(I = [u8, i16]))]` (any of the eight integer types); sealed like
+/// [`Float`].
+pub trait Int: Copy + private::Sealed {}
+
+/// The bound of a float vector type parameter: `fn k<V: Vector>(x: Array<V>, s: V::Scalar)`.
+///
+/// Instantiated for `Vec2`, `Vec3`, `Vec4`, `DVec2`, `DVec3` and `DVec4` (or the ones listed
+/// in `instances(V = [..])`); in a generic kernel `V::Scalar` is the lane type and `V::LEN`
+/// the lane count, as here. Sealed like [`Float`].
+pub trait Vector: Copy + private::Sealed {
+    /// The lane type: f32 or f64.
+    type Scalar: Float;
+    /// The number of lanes.
+    const LEN: usize;
+}
+
+macro_rules! ints {
+    ($($t:ty),*) => {$(
+        impl Int for $t {}
+        impl private::Sealed for $t {}
+    )*};
+}
+ints!(i8, i16, i32, i64, u8, u16, u32, u64);
+
+macro_rules! vectors {
+    ($($t:ty: $s:ty, $n:literal;)*) => {$(
+        impl Vector for $t {
+            type Scalar = $s;
+            const LEN: usize = $n;
+        }
+        impl private::Sealed for $t {}
+    )*};
+}
+vectors! {
+    glam::Vec2: f32, 2;
+    glam::Vec3: f32, 3;
+    glam::Vec4: f32, 4;
+    glam::DVec2: f64, 2;
+    glam::DVec3: f64, 3;
+    glam::DVec4: f64, 4;
+}
+
 mod private {
     pub trait Sealed {}
     impl Sealed for f32 {}

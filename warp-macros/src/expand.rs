@@ -4,7 +4,7 @@ use crate::back::rust::RustEmitter;
 use crate::front::{attrs, generics, lower};
 use crate::ir::FnKind;
 use proc_macro2::{Literal, TokenStream};
-use quote::{format_ident, quote, quote_spanned};
+use quote::{format_ident, quote, quote_spanned, ToTokens};
 use syn::spanned::Spanned;
 
 mod checks;
@@ -43,7 +43,7 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
         let errs = errors_to_tokens(errors);
         quote!(#errs #[allow(non_camel_case_types)] #vis struct #name;)
     };
-    let generics = match generics::parse(&item) {
+    let generics = match generics::parse(&item, &opts.instances) {
         Ok(g) => g,
         Err(e) => {
             errors.extend(e);
@@ -737,13 +737,16 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         let errs = errors_to_tokens(errors);
         quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {})
     };
-    let generics = match generics::parse(&item) {
+    let generics = match generics::parse(&item, &fattrs.instances) {
         Ok(g) => g,
         Err(e) => {
             errors.extend(e);
             return failed(errors);
         }
     };
+    if fattrs.overload.is_some() {
+        return overload_member(&item, &fattrs, generics.as_ref(), errors);
+    }
     let Some(g) = generics else {
         if !errors.is_empty() {
             if let Err(e) = lower::lower_fn(&item, FnKind::Func) {
@@ -785,11 +788,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     let mut per_instance = Vec::new();
     for inst in generics::instances(&item, &g) {
         let display = inst.display_name(&name.to_string());
-        let tys: Vec<syn::Ident> = inst
-            .types
-            .iter()
-            .map(|t| syn::Ident::new(t, name.span()))
-            .collect();
+        let tys = &inst.types;
         match func_instance(&inst.item, &fattrs, Some(display.clone())) {
             Ok(items) => {
                 impls.extend(quote! {
@@ -808,7 +807,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         }
     }
     errors.extend(instance_errors(per_instance));
-    let params: Vec<&syn::Ident> = g.params.iter().map(|(id, _)| id).collect();
+    let params: Vec<&syn::Ident> = g.params.iter().map(|p| &p.ident).collect();
     if !errors.is_empty() {
         // Keep the generic type, so that callers' `f::<f32>(..)` add no errors of their own.
         let errs = errors_to_tokens(errors);
@@ -830,6 +829,107 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         #vis struct #name<#(#params),*> {
             _instance: ::core::marker::PhantomData<(#(#params,)*)>,
         }
+        #bound_check
+        #impls
+    }
+}
+
+/// `#[func(overload)]`: one overload of the set `wp::overloads!(name)` declares (the generic
+/// struct `name<K>`), for each of its instances (one for a plain func) an inherent impl of
+/// `name<K>`, `K` the instance's first parameter's type (a `&mut` parameter's referent):
+/// callers name the overload as `name::<K>(..)`, and in a generic kernel `name::<T>(..)` picks
+/// each instance's own overload. Emits no item of the func's own name, so several overloads
+/// may share it (`fn combine(a: i32, ..)`, `fn combine<V: Vector>(a: V, ..)`). Two overloads
+/// for one `K` are two inherent items of one name, rustc's error, spanned at the second's
+/// first parameter type; one func's instances with one `K` are refused here.
+fn overload_member(
+    item: &syn::ItemFn,
+    fattrs: &attrs::FuncAttrs,
+    g: Option<&generics::Generics>,
+    mut errors: Vec<syn::Error>,
+) -> TokenStream {
+    let name = &item.sig.ident;
+    let attr = fattrs.overload.as_ref().expect("an overload");
+    if !fattrs.grad.is_empty() {
+        errors.push(syn::Error::new(
+            attr.span(),
+            "custom gradients (`#[func(grad(..))]`) are not supported on overloads yet",
+        ));
+    }
+    let first_ty = |f: &syn::ItemFn| -> Option<syn::Type> {
+        match f.sig.inputs.first()? {
+            syn::FnArg::Typed(pt) => Some(match &*pt.ty {
+                syn::Type::Reference(r) => (*r.elem).clone(),
+                t => t.clone(),
+            }),
+            syn::FnArg::Receiver(_) => None,
+        }
+    };
+    let instances: Vec<syn::ItemFn> = match g {
+        Some(g) => generics::instances(item, g)
+            .into_iter()
+            .map(|i| i.item)
+            .collect(),
+        None => vec![item.clone()],
+    };
+    let mut keys: Vec<syn::Type> = Vec::new();
+    for inst in &instances {
+        let Some(k) = first_ty(inst) else {
+            errors.push(syn::Error::new(
+                item.sig.paren_token.span.join(),
+                "an overload is selected by its first parameter's type (`name::<i32>(..)`): it needs a parameter",
+            ));
+            return errors_to_tokens(errors);
+        };
+        let text = k.to_token_stream().to_string();
+        if keys.iter().any(|o| o.to_token_stream().to_string() == text) {
+            errors.push(syn::Error::new(
+                k.span(),
+                format!(
+                    "two instances of this overload take a first parameter of type `{}`: overloads are told apart by their first parameter's type, so a type parameter must appear in it",
+                    text.replace(' ', "")
+                ),
+            ));
+            return errors_to_tokens(errors);
+        }
+        keys.push(k);
+    }
+    if !errors.is_empty() {
+        return errors_to_tokens(errors);
+    }
+    let mut impls = TokenStream::new();
+    let mut per_instance = Vec::new();
+    for (inst, key) in instances.iter().zip(&keys) {
+        let display = format!(
+            "{name}<{}>",
+            key.to_token_stream().to_string().replace(' ', "")
+        );
+        match func_instance(inst, fattrs, Some(display.clone())) {
+            Ok(items) => {
+                let ksp = key.span();
+                let self_ty = quote_spanned!(ksp=> #name<#key>);
+                impls.extend(quote_spanned! {ksp=>
+                    impl #self_ty {
+                        #items
+                    }
+                });
+                impls.extend(quote! {
+                    const _: usize = <#self_ty>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
+                    const _: () = <#self_ty>::__WP_LOCAL_ARRAYS;
+                    const _: () = <#self_ty>::__WP_CALLS;
+                });
+                impls.extend(tile_map_impl(inst, self_ty));
+                per_instance.push((display, Vec::new()));
+            }
+            Err(e) => per_instance.push((display, e)),
+        }
+    }
+    errors.extend(instance_errors(per_instance));
+    if !errors.is_empty() {
+        return errors_to_tokens(errors);
+    }
+    let bound_check = g.map(generics::bound_check).unwrap_or_default();
+    quote! {
         #bound_check
         #impls
     }

@@ -409,11 +409,12 @@ pub trait CudaStruct {
 
 /// What [`launch`](crate::launch()) accepts as a kernel with the arguments `A`: every
 /// [`Kernel`] (with its parameters' [`KernelParams::Args`]), and a generic kernel
-/// (`#[kernel] fn k<T: Float>(..)`), which has one instance per float type and picks the one
-/// whose parameter types the arguments have. Implemented by `#[kernel]`.
+/// (`#[kernel] fn k<T: Float>(..)`), which has one instance per type of its parameters'
+/// bounds (or per listed type) and picks the one whose parameter types the arguments have.
+/// Implemented by `#[kernel]`.
 #[diagnostic::on_unimplemented(
     message = "`{Self}` takes no launch arguments of type `{A}`",
-    note = "a generic kernel has one instance per float type: its arrays and scalars must all agree on f32 or f64"
+    note = "a generic kernel has one instance per type its bound (`Float`, `Int`, `Vector`) or its `instances(..)` list names: the arguments must match one instance's parameter types exactly"
 )]
 pub trait Launchable<A>: Copy {
     /// The kernel (or the instance of a generic kernel) that runs.
@@ -425,7 +426,7 @@ impl<'a, K: Kernel> Launchable<ArgsOf<'a, K>> for K {
 }
 
 /// A generic kernel (`#[kernel] fn k<T: Float>(..)`): the set of its instances, one per
-/// float type (or combination of them). Implemented by `#[kernel]`; used by
+/// instance type (or combination of them). Implemented by `#[kernel]`; used by
 /// [`aot::instances`](crate::aot::instances) and by reports.
 pub trait GenericKernel: Copy {
     /// Every instance's static facts, in instance order (`k<f32>`, `k<f64>`).
@@ -438,7 +439,7 @@ pub trait GenericKernel: Copy {
 /// [`KernelParams`]); a kernel adds its static facts and its CPU thread bodies.
 #[diagnostic::on_unimplemented(
     message = "`{Self}` is not a kernel, or is a generic kernel without an instance for these launch arguments",
-    note = "kernels are made by `#[kernel]`; a generic kernel has one instance per float type, and its arrays and scalars must all agree on f32 or f64"
+    note = "kernels are made by `#[kernel]`; a generic kernel has one instance per type its bound (`Float`, `Int`, `Vector`) or its `instances(..)` list names, and the arguments must match one instance's parameter types exactly"
 )]
 pub trait Kernel: Copy + Send + Sync + 'static {
     /// The parameter types, as a tuple in parameter order: `(Array<Vec3>, f32)`.

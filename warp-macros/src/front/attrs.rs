@@ -17,6 +17,9 @@ pub struct KernelAttrs {
     /// are recorded and reduced after the launch in a fixed order (`Some(None)`: the limit of
     /// records per thread is counted, or `DEFAULT_MAX_RECORDS` under a loop).
     pub deterministic: Option<Option<u32>>,
+    /// `instances(T = [f32, Particle])`: the instance types of a generic kernel's parameters
+    /// (see `front::generics`).
+    pub instances: crate::front::generics::Lists,
 }
 
 /// Parses `#[kernel(same_shape(x, v, dim), ...)]`.
@@ -87,9 +90,12 @@ pub fn parse_kernel_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<Kerne
             }
             out.deterministic = Some(max);
             Ok(())
+        } else if meta.path.is_ident("instances") {
+            out.instances = crate::front::generics::parse_lists(meta)?;
+            Ok(())
         } else {
             Err(meta.error(
-                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N, deterministic, deterministic(max_records = N)",
+                "unknown kernel option; supported: same_shape(a, b, ..), enable_backward = false, block_dim = N, deterministic, deterministic(max_records = N), instances(T = [..])",
             ))
         }
     });
@@ -103,6 +109,11 @@ pub struct FuncAttrs {
     /// `grad(x = fx, y = fy)`: custom gradients, one func per parameter. `fx` takes the func's
     /// parameters followed by the adjoint of its result and returns the adjoint of `x`.
     pub grad: Vec<(syn::Ident, syn::Path)>,
+    /// `instances(T = [f32, Particle])`, as for kernels.
+    pub instances: crate::front::generics::Lists,
+    /// `overload`: the func is one overload of the set `wp::overloads!(name)` declares,
+    /// selected by its first parameter's type (`name::<i32>(..)`).
+    pub overload: Option<syn::Path>,
 }
 
 /// Parses `#[func(grad(x = dfdx, ..))]`.
@@ -116,8 +127,16 @@ pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<FuncAtt
                 out.grad.push((param, f));
                 Ok(())
             })
+        } else if meta.path.is_ident("instances") {
+            out.instances = crate::front::generics::parse_lists(meta)?;
+            Ok(())
+        } else if meta.path.is_ident("overload") {
+            out.overload = Some(meta.path.clone());
+            Ok(())
         } else {
-            Err(meta.error("unknown func option; supported: grad(param = gradient_func, ..)"))
+            Err(meta.error(
+                "unknown func option; supported: grad(param = gradient_func, ..), instances(T = [..]), overload",
+            ))
         }
     });
     parser.parse2(tokens)?;

@@ -352,7 +352,16 @@ fn every_function_in_the_repository_validates() {
     let (mut kernels, mut funcs) = (0, 0);
     let mut refused = Vec::new();
     for (item, is_kernel, args) in &found.0 {
-        let items = match crate::front::generics::parse(item) {
+        let lists = if *is_kernel {
+            crate::front::attrs::parse_kernel_attrs(args.clone())
+                .map(|a| a.instances)
+                .unwrap_or_default()
+        } else {
+            crate::front::attrs::parse_func_attrs(args.clone())
+                .map(|a| a.instances)
+                .unwrap_or_default()
+        };
+        let items = match crate::front::generics::parse(item, &lists) {
             Ok(Some(g)) => crate::front::generics::instances(item, &g)
                 .into_iter()
                 .map(|i| i.item)
