@@ -737,6 +737,18 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         let errs = errors_to_tokens(errors);
         quote!(#errs #[allow(non_camel_case_types)] #vis struct #name {})
     };
+    // A kernel's call `sign(x)` resolves to the builtin before any func, so a func named like
+    // a builtin would never be called: refused here rather than silently shadowed.
+    let fname = name.to_string();
+    if crate::builtins::lookup_user(&fname).is_some() {
+        errors.push(syn::Error::new(
+            name.span(),
+            format!(
+                "`{fname}` is a builtin's name: kernels calling `{fname}(..)` get the builtin, \
+                 never this func; give the func another name"
+            ),
+        ));
+    }
     let generics = match generics::parse(&item, &fattrs.instances) {
         Ok(g) => g,
         Err(e) => {
