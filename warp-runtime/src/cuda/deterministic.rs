@@ -138,14 +138,7 @@ pub(crate) fn records<'a>(
             i32::MAX
         ),
     })?;
-    if gpu::capture_stream(ordinal).is_some() {
-        return Err(Error::Deterministic {
-            kernel: info.name,
-            why: "a deterministic launch cannot be recorded into a graph yet (its record \
-                  buffer may have to grow): launch it outside the capture"
-                .to_string(),
-        });
-    }
+    refuse_capture(info, ordinal)?;
     let (at, need) = layout(n);
     let mut guard = st.det_records.lock().unwrap_or_else(|p| p.into_inner());
     if guard
@@ -246,6 +239,21 @@ impl Records<'_> {
 const BLOCK: u32 = 256;
 /// Their blocks at most: the loops cover the rest.
 const MAX_BLOCKS: u64 = 65_535;
+
+/// A deterministic launch inside a graph capture is refused (its record buffer may have to
+/// grow, an allocation a capture cannot hold). Checked before the kernel is compiled, so that
+/// the refusal is what a capture reports, not the compilation a capture cannot hold either.
+pub(crate) fn refuse_capture(info: &KernelInfo, ordinal: usize) -> Result<()> {
+    if info.deterministic.is_some() && gpu::capture_stream(ordinal).is_some() {
+        return Err(Error::Deterministic {
+            kernel: info.name,
+            why: "a deterministic launch cannot be recorded into a graph yet (its record \
+                  buffer may have to grow): launch it outside the capture"
+                .to_string(),
+        });
+    }
+    Ok(())
+}
 
 #[cfg(test)]
 mod tests {

@@ -128,6 +128,7 @@ impl<K: Kernel> Prepared<K> {
                 });
             }
         }
+        super::deterministic::refuse_capture(info, ordinal)?;
         // Arguments first: a wrong device is reported before anything is compiled.
         let params = K::Params::cuda_params(args, info, device)?;
         let grads = match adjoint {

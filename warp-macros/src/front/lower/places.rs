@@ -143,21 +143,22 @@ impl Lowerer {
         leaves: &mut Vec<(&'e Expr, VarId)>,
     ) -> R<()> {
         let n = t.elems.len();
-        let tys =
-            match self.ty(value) {
-                Ty::Tuple(tys) if tys.len() == n => tys,
-                Ty::Deferred => {
-                    let ty = Ty::Tuple(vec![Ty::Deferred; n]);
-                    value = self.def(Op::Copy(value), ty, t.span());
-                    vec![Ty::Deferred; n]
-                }
-                other => return err(
+        let tys = match self.ty(value) {
+            Ty::Tuple(tys) if tys.len() == n => tys,
+            Ty::Deferred => {
+                let ty = Ty::Tuple(vec![Ty::Deferred; n]);
+                value = self.def(Op::Copy(value), ty, t.span());
+                vec![Ty::Deferred; n]
+            }
+            other => {
+                return err(
                     t.span(),
                     format!(
                         "this assignment destructures {n} value(s), but the value is a `{other}`"
                     ),
-                ),
-            };
+                )
+            }
+        };
         for (k, (el, ty)) in t.elems.iter().zip(tys).enumerate() {
             let el = strip(el);
             if matches!(el, Expr::Infer(_)) {
