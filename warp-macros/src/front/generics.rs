@@ -15,7 +15,7 @@
 //! `#[kernel(instances(T = [f32, Particle]))]` picks the instances; without one, a parameter
 //! ranges over its kind's defaults. Each instance's body is checked with its concrete type,
 //! so a body that uses a parameter beyond what one of its instances has fails to compile at
-//! the use (`in `k<u32>`: ..`): for the closed bounds, the instances *are* the bound.
+//! the use (``in `k<u32>`: ..``): for the closed bounds, the instances *are* the bound.
 //!
 //! Inside a generic function the glam families take a float parameter as an argument:
 //! `Vec3<T>` is `Vec3` for `T = f32` and `DVec3` for `T = f64` (as a type, `Vec3<T>`, and in

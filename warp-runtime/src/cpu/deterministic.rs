@@ -141,7 +141,7 @@ fn limit_fault(kernel: &'static str, thread: usize, limit: u32) -> Box<Fault> {
 }
 
 /// `atomic_add(arr, idx, value)` in a deterministic kernel, thread `flat`: the index is
-/// checked now, the addition happens after the launch ([`reduce`]). The old value does not
+/// checked now, the addition happens after the launch (`reduce`). The old value does not
 /// exist (the macro refuses a use of the result, which is `value`).
 #[inline]
 pub fn add<T: AtomicElement, const N: usize, I: KernelIndex<N>>(
