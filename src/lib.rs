@@ -247,9 +247,13 @@ pub mod __private {
         adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, local_array,
         max_depth, objects, ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability,
         ConstLiteral, DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo, GradElement,
-        GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector, Transform,
+        GradSeed, GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector, Transform,
+        with_grad_stack,
     };
     pub use warp_macros::__object_rows;
+    /// The per-thread adjoint stack capacity (`wp::config::adstack_bytes`): a `wp::grad`
+    /// call's stack takes it.
+    pub use warp_runtime::config::adstack_bytes;
     pub use warp_runtime::__deterministic as deterministic;
     /// Whether `debug_assert!` is checked: the runtime's debug mode (`wp::config::debug`).
     pub use warp_runtime::config::debug as debug_mode;

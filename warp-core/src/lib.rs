@@ -17,6 +17,7 @@ pub mod capability;
 #[cfg(test)]
 mod cuda_constants;
 pub mod fault;
+pub mod func_grad;
 pub mod float16;
 pub mod grad;
 pub mod grid;
@@ -35,6 +36,7 @@ pub use adjoint::{adj_atomic_extreme, AtomicExtreme};
 pub use bfloat16::bf16;
 pub use capability::Capability;
 pub use fault::{Fault, FaultKind, KResult, LaunchId};
+pub use func_grad::{with_grad_stack, GradSeed};
 pub use float16::f16;
 pub use grad::{first_error, zero_like, AdStack, GradElement, GradView};
 pub use grid::Grid;

@@ -9,6 +9,7 @@ use syn::spanned::Spanned;
 
 mod checks;
 mod derive;
+mod grad_of;
 mod tiled;
 
 use checks::{call_checks, local_array_checks};
@@ -767,8 +768,9 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             return failed(errors);
         }
         let tile_map_impl = tile_map_impl(&item, quote!(#name));
-        return match func_instance(&item, &fattrs, None) {
-            Ok(items) => quote! {
+        let grad_name = format_ident!("{}", lower::calls::companion_of(&name.to_string()), span = name.span());
+        return match func_instance(&item, &fattrs, None, quote!(#name)) {
+            Ok((items, companion)) => quote! {
                 #(#doc_attrs)*
                 ///
                 /// A `#[func]`: callable from kernels and other funcs.
@@ -777,6 +779,15 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 
                 impl #name {
                     #items
+                }
+
+                /// `wp::grad(f)` of this func (`wp::grad` in kernels).
+                #[doc(hidden)]
+                #[allow(non_camel_case_types)]
+                #vis struct #grad_name {}
+
+                impl #grad_name {
+                    #companion
                 }
 
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
@@ -796,16 +807,29 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         ));
     }
     // (No `check_params_select` here: callers name a func's instance, `f::<f32>(..)`.)
+    let grad_name = format_ident!(
+        "{}",
+        lower::calls::companion_of(&name.to_string()),
+        span = name.span()
+    );
     let mut impls = TokenStream::new();
     let mut per_instance = Vec::new();
     for inst in generics::instances(&item, &g) {
         let display = inst.display_name(&name.to_string());
         let tys = &inst.types;
-        match func_instance(&inst.item, &fattrs, Some(display.clone())) {
-            Ok(items) => {
+        match func_instance(
+            &inst.item,
+            &fattrs,
+            Some(display.clone()),
+            quote!(#name<#(#tys),*>),
+        ) {
+            Ok((items, companion)) => {
                 impls.extend(quote! {
                     impl #name<#(#tys),*> {
                         #items
+                    }
+                    impl #grad_name<#(#tys),*> {
+                        #companion
                     }
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
@@ -839,6 +863,12 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         /// in a generic kernel, `name::<T>(..)`.
         #[allow(non_camel_case_types)]
         #vis struct #name<#(#params),*> {
+            _instance: ::core::marker::PhantomData<(#(#params,)*)>,
+        }
+        /// `wp::grad(f::<T>)` of this func's instances.
+        #[doc(hidden)]
+        #[allow(non_camel_case_types)]
+        #vis struct #grad_name<#(#params),*> {
             _instance: ::core::marker::PhantomData<(#(#params,)*)>,
         }
         #bound_check
@@ -916,10 +946,11 @@ fn overload_member(
             "{name}<{}>",
             key.to_token_stream().to_string().replace(' ', "")
         );
-        match func_instance(inst, fattrs, Some(display.clone())) {
-            Ok(items) => {
-                let ksp = key.span();
-                let self_ty = quote_spanned!(ksp=> #name<#key>);
+        let ksp = key.span();
+        let self_ty = quote_spanned!(ksp=> #name<#key>);
+        // (`wp::grad` of an overload: not yet; `wp::overloads!` declares no companion.)
+        match func_instance(inst, fattrs, Some(display.clone()), self_ty.clone()) {
+            Ok((items, _)) => {
                 impls.extend(quote_spanned! {ksp=>
                     impl #self_ty {
                         #items
@@ -1008,12 +1039,14 @@ fn func_instance(
     item: &syn::ItemFn,
     fattrs: &attrs::FuncAttrs,
     display: Option<String>,
-) -> Result<TokenStream, Vec<syn::Error>> {
+    func_ty: TokenStream,
+) -> Result<(TokenStream, TokenStream), Vec<syn::Error>> {
     let wp = crate::paths::private();
     let mut f = lower::lower_fn(item, FnKind::Func)?;
     if let Some(d) = display {
         f.name = d;
     }
+    f.custom_replay = fattrs.replay.is_some();
     if let (Some((id, _)), Some(p)) = (fattrs.grad.first(), f.params.iter().find(|p| p.by_ref)) {
         return Err(vec![syn::Error::new(
             id.span(),
@@ -1060,6 +1093,7 @@ fn func_instance(
     // Custom gradients replace the generated adjoint (`middle::adjoint::custom`): each named
     // parameter's adjoint is what its gradient func returns for (params.., adjoint of the
     // result); the validator checked that they name value parameters.
+    let callees_of_f = &f.callees;
     let generated = if fattrs.grad.is_empty() {
         crate::back::rust_adjoint::emit(&f)
     } else {
@@ -1068,14 +1102,29 @@ fn func_instance(
     // The CUDA replay and adjoint templates (custom gradients: calls of the gradient funcs,
     // which are recorded as extra callees after the body's).
     let mut all_callees: Vec<syn::Path> = f.callees.clone();
+    // Whether the CUDA adjoint may push (custom gradients: their funcs' forward code may call
+    // funcs whose replays push; assumed).
+    let mut cuda_stack = true;
     let (cuda_adj, cuda_adj_error) = if fattrs.grad.is_empty() {
-        match crate::back::cuda_adjoint::emit(&f, "@@FILE@@") {
-            Ok(a) => (a.source, None),
+        let replay = fattrs
+            .replay
+            .as_ref()
+            .map(|r| crate::back::cuda_adjoint::push_callee(&mut all_callees, r));
+        match crate::back::cuda_adjoint::emit_with_replay(&f, "@@FILE@@", replay) {
+            Ok(a) => {
+                cuda_stack = a.uses_stack;
+                (a.source, None)
+            }
             Err(why) => (String::new(), Some(why)),
         }
     } else {
-        match crate::back::cuda_adjoint::emit_custom(&f, "@@FILE@@", &fattrs.grad, &mut all_callees)
-        {
+        match crate::back::cuda_adjoint::emit_custom(
+            &f,
+            "@@FILE@@",
+            &fattrs.grad,
+            &mut all_callees,
+            fattrs.replay.as_ref(),
+        ) {
             Ok(src) => (src, None),
             Err(why) => (String::new(), Some(why)),
         }
@@ -1092,6 +1141,12 @@ fn func_instance(
         }
     };
     let (adj_body, adj_error) = match generated {
+        // The generated adjoint runs its callees' adjoints: it has none if one of them has
+        // none (a custom gradient runs its gradient funcs forward instead).
+        Ok(b) if fattrs.grad.is_empty() => (
+            b,
+            quote!(#wp::first_error(&[#(#callees_of_f::__WP_ADJOINT_ERROR),*])),
+        ),
         Ok(b) => (b, quote!(::core::option::Option::None)),
         Err(why) => {
             let why = Literal::string(&format!("calls func `{}`, which {why}", f.name));
@@ -1123,6 +1178,20 @@ fn func_instance(
             }
         })
         .collect();
+    // A custom replay (`#[func(replay = r)]`) is `r`'s forward code, as in Warp; rustc checks
+    // at the option that `r` takes these parameters and returns this result.
+    let replay_fn_body = match &fattrs.replay {
+        Some(r) => {
+            let names = f.params.iter().map(|p| em.var(p.var));
+            quote_spanned!(r.span()=> #r::__wp_cpu(#(#names),*))
+        }
+        None => quote! {
+            use #wp as __wp;
+            const __FAST: bool = false;
+            #replay_body
+            #tail
+        },
+    };
     let (cuda_src, cuda_sections, cuda_ret) = cuda_template(&f);
     let struct_tys = struct_types(&f);
     let name_str = Literal::string(&f.name);
@@ -1149,6 +1218,7 @@ fn func_instance(
             requires: &[#(#requires),*],
             asserts: #asserts,
             float_atomics: #float_atomics,
+            needs_adjoints: false,
         };
     };
     // Spanned at the func's name, so that rustc's cycle error for mutually recursive funcs
@@ -1170,7 +1240,21 @@ fn func_instance(
         .fold(0u64, |m, (k, _)| {
             m | 1u64.checked_shl(k as u32).unwrap_or(0)
         });
-    Ok(quote! {
+    let companion = grad_of::items(
+        &grad_of::Companion {
+            f: &f,
+            func_ty,
+            vis,
+            params: f
+                .params
+                .iter()
+                .map(|p| (em.var(p.var), func_param_ty(p, &wp)))
+                .collect(),
+            cuda_stack,
+        },
+        &wp,
+    );
+    let items = quote! {
             #depth_const
             #func_info
             /// Which parameters are `&mut` (bit `k`: parameter `k`), which callers' checks
@@ -1202,10 +1286,7 @@ fn func_instance(
             #[inline(always)]
             #[allow(unused_variables, unused_mut, unused_assignments, unused_parens, non_snake_case, unreachable_code, clippy::all)]
             #vis fn __wp_replay(#(#replay_params),*) -> #wp::KResult<#ret> {
-                use #wp as __wp;
-                const __FAST: bool = false;
-                #replay_body
-                #tail
+                #replay_fn_body
             }
 
             #[doc(hidden)]
@@ -1222,5 +1303,6 @@ fn func_instance(
                 #adj_body
                 ::core::result::Result::Ok(())
             }
-    })
+    };
+    Ok((items, companion))
 }
