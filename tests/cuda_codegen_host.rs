@@ -2647,7 +2647,10 @@ fn func_gradients_and_custom_replays_match_the_cpu_backend() {
     let got = out.to_vec().unwrap();
     for (k, (g, w)) in got.iter().zip(&want).enumerate() {
         // The closed form rounds in another order than the adjoint: a few ulps of f32.
-        assert!((g - w).abs() <= 1e-5 * w.abs().max(1.0), "out[{k}]: {g} vs {w}");
+        assert!(
+            (g - w).abs() <= 1e-5 * w.abs().max(1.0),
+            "out[{k}]: {g} vs {w}"
+        );
     }
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));

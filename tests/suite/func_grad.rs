@@ -192,7 +192,12 @@ fn inside_a_custom_gradient(dev: &wp::Device) {
     ys.grad().unwrap().fill(1.0).unwrap();
     tape.backward_from_grads().unwrap();
     for (k, g) in host(&xs.grad().unwrap()).into_iter().enumerate() {
-        assert_close_f64(g, 3.0 * XS[k].cos(), 1e-14, &format!("d(3 sin x)/dx at {k}"));
+        assert_close_f64(
+            g,
+            3.0 * XS[k].cos(),
+            1e-14,
+            &format!("d(3 sin x)/dx at {k}"),
+        );
     }
 }
 
@@ -218,7 +223,11 @@ fn constant_in_backward(dev: &wp::Device) {
     ys.grad().unwrap().fill(1.0).unwrap();
     tape.backward_from_grads().unwrap();
     let want: Vec<f64> = XS.iter().map(|x| 2.0 * x).collect();
-    assert_eq!(host(&xs.grad().unwrap()), want, "the gradient call is a constant");
+    assert_eq!(
+        host(&xs.grad().unwrap()),
+        want,
+        "the gradient call is a constant"
+    );
 }
 
 #[wp::func]
@@ -281,5 +290,8 @@ fn callee_without_adjoint_refuses_backward(dev: &wp::Device) {
         "want NotDifferentiable, got {e:?}"
     );
     let text = e.to_string();
-    assert!(text.contains("leaf") && text.contains("old value"), "{text}");
+    assert!(
+        text.contains("leaf") && text.contains("old value"),
+        "{text}"
+    );
 }

@@ -122,7 +122,10 @@ mod tests {
         let depth = with_grad_stack("k", 64, |outer| {
             outer.push(1.0f32, 1).unwrap();
             with_grad_stack("k", 64, |inner| {
-                assert!(inner.is_empty(), "the inner call must not see the outer pushes");
+                assert!(
+                    inner.is_empty(),
+                    "the inner call must not see the outer pushes"
+                );
                 inner.len()
             })
         });

@@ -768,7 +768,11 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             return failed(errors);
         }
         let tile_map_impl = tile_map_impl(&item, quote!(#name));
-        let grad_name = format_ident!("{}", lower::calls::companion_of(&name.to_string()), span = name.span());
+        let grad_name = format_ident!(
+            "{}",
+            lower::calls::companion_of(&name.to_string()),
+            span = name.span()
+        );
         return match func_instance(&item, &fattrs, None, quote!(#name)) {
             Ok((items, companion)) => quote! {
                 #(#doc_attrs)*
@@ -1249,6 +1253,20 @@ fn func_instance(
                 .params
                 .iter()
                 .map(|p| (em.var(p.var), func_param_ty(p, &wp)))
+                .collect(),
+            adj_tys: f
+                .params
+                .iter()
+                .map(|p| {
+                    let t = &p.syn_ty;
+                    match p.ty {
+                        crate::types::Ty::Array(..) => quote!(<#t as #wp::KernelArg>::GradView),
+                        _ => {
+                            let t = func_param_ty(p, &wp);
+                            quote!(&mut #t)
+                        }
+                    }
+                })
                 .collect(),
             cuda_stack,
         },

@@ -456,7 +456,11 @@ fn custom_replay_grad(dev: &wp::Device) {
     }
     output.grad().unwrap().fill(1.0).unwrap();
     tape.backward_from_grads().unwrap();
-    assert_eq!(host(&counter), vec![n as i32], "the replay took no more slots");
+    assert_eq!(
+        host(&counter),
+        vec![n as i32],
+        "the replay took no more slots"
+    );
     let grads = host(&input.grad().unwrap());
     for (k, g) in grads.into_iter().enumerate() {
         // Warp's tolerance 1e-4; 2k is exact in f32 for these k.

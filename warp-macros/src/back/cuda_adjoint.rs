@@ -103,7 +103,8 @@ fn custom_replay(f: &Function, k: usize) -> Result<String, String> {
     let mut decl = Vec::new();
     let mut xs = Vec::new();
     for (j, p) in f.params.iter().enumerate() {
-        let t = cpp_type(&p.ty).ok_or_else(|| format!("parameter `{}` has no CUDA type", p.name))?;
+        let t =
+            cpp_type(&p.ty).ok_or_else(|| format!("parameter `{}` has no CUDA type", p.name))?;
         decl.push(format!("{t} x{j}"));
         xs.push(format!("x{j}"));
     }

@@ -26,6 +26,9 @@ pub(super) struct Companion<'a> {
     pub vis: &'a syn::Visibility,
     /// The parameters' names and CPU types, as the func's replay declares them.
     pub params: Vec<(syn::Ident, TokenStream)>,
+    /// The types of the func's adjoint's gradient parameters, one per parameter, as callers'
+    /// adjoints pass them (an array's gradient view; `&mut` a value's adjoint).
+    pub adj_tys: Vec<TokenStream>,
     /// Whether the func's CUDA adjoint may push on its stack.
     pub cuda_stack: bool,
 }
@@ -72,6 +75,7 @@ pub(super) fn items(c: &Companion<'_>, wp: &TokenStream) -> TokenStream {
         func_ty,
         vis,
         params,
+        adj_tys,
         ..
     } = c;
     let name = Literal::string(&crate::front::lower::calls::companion_of(&f.name));
@@ -120,7 +124,7 @@ pub(super) fn items(c: &Companion<'_>, wp: &TokenStream) -> TokenStream {
             #[allow(unused_variables, clippy::all)]
             #vis fn __wp_adj<__R>(
                 #(#names: #tys,)*
-                #(#grads: &mut #tys,)*
+                #(#grads: #adj_tys,)*
                 __adj_ret: __R,
                 __stack: &mut #wp::AdStack,
             ) -> #wp::KResult<()> {
@@ -204,7 +208,7 @@ pub(super) fn items(c: &Companion<'_>, wp: &TokenStream) -> TokenStream {
         #[allow(unused_variables, clippy::all)]
         #vis fn __wp_adj(
             #(#names: #tys,)*
-            #(#grads: &mut #tys,)*
+            #(#grads: #adj_tys,)*
             __adj_ret: #out_tys,
             __stack: &mut #wp::AdStack,
         ) -> #wp::KResult<()> {

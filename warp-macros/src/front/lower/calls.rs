@@ -108,7 +108,10 @@ impl Lowerer {
             if segs_of(&companion) == [companion_of(&self.fn_name)] {
                 return err(
                     span,
-                    format!("recursion is not supported in kernels: `{}` takes its own gradient", self.fn_name),
+                    format!(
+                        "recursion is not supported in kernels: `{}` takes its own gradient",
+                        self.fn_name
+                    ),
                 );
             }
             return self.func_call(c, &companion, span);

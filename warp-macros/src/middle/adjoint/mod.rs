@@ -182,7 +182,8 @@ pub fn build(f: &Function, policy: Policy) -> Result<Adjoint, String> {
         // The old value an atomic returned cannot be recomputed by the replay below; with a
         // custom replay callers rerun that instead, and a func of no float data adds no
         // gradient anywhere, whatever its replay makes of the old value.
-        let harmless = f.custom_replay && !f.params.iter().any(|p| p.ty.may_hold_float())
+        let harmless = f.custom_replay
+            && !f.params.iter().any(|p| p.ty.may_hold_float())
             && !f.ret.may_hold_float();
         if !harmless {
             return Err(why);
