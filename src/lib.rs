@@ -245,12 +245,16 @@ pub mod __private {
     pub use glam;
     pub use warp_core::{
         adj_atomic_extreme, adjoint, bf16, block, builtins, f16, first_error, local_array,
-        max_depth, objects, ops, tile, zero_like, AdStack, ArrayView, AssertSite, Capability,
-        ConstLiteral, DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo, GradElement,
-        GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector, Transform,
+        max_depth, objects, ops, tile, with_grad_stack, zero_like, AdStack, ArrayView, AssertSite,
+        Capability, ConstLiteral, DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo,
+        GradElement, GradSeed, GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector,
+        Transform,
     };
     pub use warp_macros::__object_rows;
     pub use warp_runtime::__deterministic as deterministic;
+    /// The per-thread adjoint stack capacity (`wp::config::adstack_bytes`): a `wp::grad`
+    /// call's stack takes it.
+    pub use warp_runtime::config::adstack_bytes;
     /// Whether `debug_assert!` is checked: the runtime's debug mode (`wp::config::debug`).
     pub use warp_runtime::config::debug as debug_mode;
     pub use warp_runtime::kernel::{ArgsOf, CpuGradsOf, CpuParamsOf, Forward};

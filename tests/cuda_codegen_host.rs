@@ -2568,3 +2568,108 @@ fn generic_instances_match_the_cpu_backend() {
         );
     }
 }
+
+// `wp::grad(f)(..)`: the companion func's CUDA code runs `f`'s adjoint (in a forward unit,
+// which then carries the adjoint library) and must give the CPU's bits.
+#[wp::func]
+fn fg_mixed(a: f32, b: f32) -> f32 {
+    a * b + a.sin()
+}
+
+#[wp::func]
+fn fg_scaled(v: Vec3) -> Vec3 {
+    v * v.length()
+}
+
+#[wp::func]
+fn fg_power(x: f32, n: i32) -> f32 {
+    let mut acc = 1.0;
+    for _ in 0..n {
+        acc *= x;
+    }
+    acc
+}
+
+#[wp::kernel]
+fn k_func_grads(xs: Array<f32>, vs: Array<Vec3>, out: Array<f32>, outv: Array<Vec3>) {
+    let i = tid();
+    let x = xs[i];
+    let (ga, gb) = wp::grad(fg_mixed)(x, 0.5);
+    let (gp, _) = wp::grad(fg_power)(x, 4);
+    out[i] = ga + 3.0 * gb + x * gp;
+    outv[i] = wp::grad(fg_scaled)(vs[i]) * x;
+}
+
+#[wp::func(replay = fg_recall)]
+fn fg_take_slot(counter: Array<i32>, slots: Array<i32>, t: usize) -> i32 {
+    let s = atomic_add(counter, 0, 1);
+    slots[t] = s;
+    s
+}
+
+#[wp::func]
+fn fg_recall(counter: Array<i32>, slots: Array<i32>, t: usize) -> i32 {
+    slots[t]
+}
+
+#[wp::kernel]
+fn k_custom_replay(xs: Array<f32>, counter: Array<i32>, slots: Array<i32>, out: Array<f32>) {
+    let t = tid();
+    let s = fg_take_slot(counter, slots, t);
+    out[s] = xs[s] * xs[s];
+}
+
+#[test]
+fn func_gradients_and_custom_replays_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let x0 = [-2.5f32, -1.0, 0.0, 0.75, 3.0, 1.0e-3];
+    let v0: Vec<Vec3> = (0..6)
+        .map(|k| Vec3::new(k as f32 * 0.4 - 1.0, 0.7, 2.0 - k as f32 * 0.3))
+        .collect();
+    let xs = wp::Array::from_slice(&x0, &dev).unwrap();
+    let vs = wp::Array::from_slice(&v0, &dev).unwrap();
+    let out = wp::Array::<f32>::zeros(6, &dev).unwrap();
+    let outv = wp::Array::<Vec3>::zeros(6, &dev).unwrap();
+    let args = [
+        Arg::F32s(&xs),
+        Arg::Vec3s(&vs),
+        Arg::F32s(&out),
+        Arg::Vec3s(&outv),
+    ];
+    // Also compiles its adjoint unit (the kernel is differentiable: the gradient calls are
+    // constants there).
+    let host = run_on_host::<k_func_grads>(&[6], &args);
+    wp::launch(k_func_grads, 6, (&xs, &vs, &out, &outv), &dev).unwrap();
+    let want: Vec<f32> = x0
+        .iter()
+        .map(|&x| (0.5 + x.cos()) + 3.0 * x + x * (4.0 * x * x * x))
+        .collect();
+    let got = out.to_vec().unwrap();
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        // The closed form rounds in another order than the adjoint: a few ulps of f32.
+        assert!(
+            (g - w).abs() <= 1e-5 * w.abs().max(1.0),
+            "out[{k}]: {g} vs {w}"
+        );
+    }
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+    // One thread, so that the slot the counter gives is the same on both sides; the host run
+    // compiles the adjoint unit, whose replay of `fg_take_slot` is `fg_recall`.
+    let counter = wp::Array::<i32>::zeros(1, &dev).unwrap();
+    let slots = wp::Array::<i32>::zeros(1, &dev).unwrap();
+    let out = wp::Array::<f32>::zeros(1, &dev).unwrap();
+    let args = [
+        Arg::F32s(&xs),
+        Arg::I32s(&counter),
+        Arg::I32s(&slots),
+        Arg::F32s(&out),
+    ];
+    let host = run_on_host::<k_custom_replay>(&[1], &args);
+    wp::launch(k_custom_replay, 1, (&xs, &counter, &slots, &out), &dev).unwrap();
+    assert_eq!(out.to_vec().unwrap(), [x0[0] * x0[0]]);
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+}

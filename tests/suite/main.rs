@@ -98,6 +98,7 @@ mod dlpack;
 mod errors;
 mod extreme;
 mod f16;
+mod func_grad;
 mod funcs;
 mod generics;
 mod grad;

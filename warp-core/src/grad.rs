@@ -271,6 +271,11 @@ impl AdStack {
         self.buf.clear();
     }
 
+    /// Its capacity in bytes.
+    pub fn capacity(&self) -> usize {
+        self.cap
+    }
+
     /// Bytes in use.
     pub fn len(&self) -> usize {
         self.buf.len()

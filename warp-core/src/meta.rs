@@ -38,6 +38,9 @@ pub struct FuncInfo {
     /// `#[kernel(deterministic)]` kernel cannot record a func's accumulations, so launching
     /// one that calls such a func is refused.
     pub float_atomics: bool,
+    /// Whether its CUDA code calls another func's adjoint (`wp::grad(f)(..)`): a unit with
+    /// it, forward ones included, gets the adjoint headers and its funcs' `cuda_adj`.
+    pub needs_adjoints: bool,
 }
 
 /// An assertion in a kernel or func's source. A GPU fault record holds no text: a failed

@@ -75,6 +75,50 @@ template <typename T>
 WP_FN T zero_like(const T&) {
   return adj_zero<T>();
 }
+/// `warp_core::GradSeed`: the adjoint `wp::grad(f)(..)` gives f's result, one in every lane.
+template <typename T>
+WP_FN T adj_one() {
+  if constexpr (detail::adj_is_scalar<T>::value) {
+    return (T)1;
+  } else {
+    typedef typename vec_traits<T>::scalar S;
+    T r;
+    for (int i = 0; i < vec_traits<T>::N; ++i) vec_traits<T>::at(r, i) = (S)1;
+    return r;
+  }
+}
+template <typename A, typename B>
+WP_FN void adj_one_into(tuple_t<A, B>& t) {
+  t.f0 = adj_one<A>();
+  t.f1 = adj_one<B>();
+}
+template <typename A, typename B, typename C>
+WP_FN void adj_one_into(tuple_t<A, B, C>& t) {
+  t.f0 = adj_one<A>();
+  t.f1 = adj_one<B>();
+  t.f2 = adj_one<C>();
+}
+template <typename A, typename B, typename C, typename D>
+WP_FN void adj_one_into(tuple_t<A, B, C, D>& t) {
+  t.f0 = adj_one<A>();
+  t.f1 = adj_one<B>();
+  t.f2 = adj_one<C>();
+  t.f3 = adj_one<D>();
+}
+template <typename T>
+WP_FN void adj_one_into(T& t) {
+  t = adj_one<T>();
+}
+/// The stack a `wp::grad` call gives the func's adjoint: the adjoint units' per-thread size
+/// (`WP_ADSTACK_BYTES`, the runtime's `adstack_bytes`), or in a forward unit, which is
+/// compiled without it, the runtime's default (config.rs `DEFAULT_ADSTACK_BYTES`; a test
+/// there keeps the two equal).
+#ifdef WP_ADSTACK_BYTES
+#define WP_GRAD_STACK_BYTES WP_ADSTACK_BYTES
+#else
+#define WP_GRAD_STACK_BYTES 4096
+#endif
+
 /// `a += v` for float types (componentwise); a no-op for integer, integer-vector and bool
 /// types, whose adjoint is always zero.
 template <typename T>

@@ -94,6 +94,10 @@ pub struct Function {
     /// `#[kernel(deterministic)]`: the per-thread record limit of its float accumulations
     /// (`valid::deterministic`), which the emitters record instead of adding atomically.
     pub deterministic: Option<u32>,
+    /// A func with a custom replay (`#[func(replay = r)]`): callers' adjoints rerun `r`
+    /// instead of its replay, so its own body may use an atomic's old value when nothing it
+    /// takes or returns carries a float (its adjoint then adds nothing anywhere).
+    pub custom_replay: bool,
 }
 
 /// A tile dim that must equal another, checked by rustc (see `Function::shape_obligations`).

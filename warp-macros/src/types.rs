@@ -434,6 +434,19 @@ pub const USIZE: Ty = Ty::Scalar(Scalar::Usize);
 pub const I32: Ty = Ty::Scalar(Scalar::I32);
 
 impl Ty {
+    /// Whether a value of this type may hold a float (and so carry a gradient): a float
+    /// value, an array or tuple with one, and what the macro cannot see into (a struct, a
+    /// deferred type, an object, whose element may be a float).
+    pub fn may_hold_float(&self) -> bool {
+        match self {
+            Ty::Array(e, _) | Ty::LocalArray(e, _) | Ty::Tile(e, _) => e.may_hold_float(),
+            Ty::Tuple(ts) => ts.iter().any(Ty::may_hold_float),
+            Ty::Struct(_) | Ty::Deferred | Ty::Object(_) => true,
+            Ty::TidTuple(_) | Ty::Unit => false,
+            t => t.scalar().is_some_and(|s| s.is_float()),
+        }
+    }
+
     /// The scalar a value of this type is made of (`None` for arrays, structs, unit).
     pub fn scalar(&self) -> Option<Scalar> {
         match self {

@@ -281,6 +281,19 @@ pub fn aot_dir() -> Option<std::path::PathBuf> {
 mod tests {
     use super::*;
 
+    /// A forward CUDA unit, compiled without `WP_ADSTACK_BYTES`, gives a `wp::grad` call's
+    /// adjoint the default stack, which the header writes as a number of its own.
+    #[test]
+    fn the_headers_grad_stack_default_is_this_default() {
+        let header = include_str!("../../warp-cuda/cuda/wp_adjoint_core.h");
+        let line = format!("#define WP_GRAD_STACK_BYTES {DEFAULT_ADSTACK_BYTES}\n");
+        assert!(
+            header.contains(&line),
+            "wp_adjoint_core.h lacks `{}`",
+            line.trim()
+        );
+    }
+
     // Only the setters whose effect other tests cannot observe are exercised here: tests run in
     // parallel and share these globals.
     #[test]

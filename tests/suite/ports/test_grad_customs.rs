@@ -9,7 +9,9 @@
 //! `test_custom_grad_with_helper_dependency` -> [`custom_grad_with_helper_dependency`],
 //! `test_custom_grad_helper_backward_propagation` ->
 //! [`custom_grad_helper_backward_propagation`], `test_backward_use_propagation_across_kernels`
-//! -> [`backward_use_propagation_across_kernels`]. Tolerances are Warp's: exact for the
+//! -> [`backward_use_propagation_across_kernels`], `test_custom_replay_grad` ->
+//! [`custom_replay_grad`] (Warp's `@wp.func_replay` is `#[func(replay = r)]`). Tolerances are
+//! Warp's: exact for the
 //! overload tests (`assert_np_equal` without `tol`: small integers, exact in f32), absolute
 //! `1e-4` for the others.
 //!
@@ -20,11 +22,7 @@
 //! `overload_fn` overloads (floats; a struct) are two funcs. `aux_custom_fn`, imported by Warp
 //! from another file, lives in a module of its own here and is called by path.
 //!
-//! Not ported: `test_custom_replay_grad` (`@wp.func_replay`, a func's replacement in the
-//! backward pass's replay of the forward code, there recalling each thread's index taken from
-//! an atomic counter: not in the language; here backward through a kernel that uses the old
-//! value `atomic_add` returns is `Error::NotDifferentiable`, as the port's kernel showed);
-//! `test_custom_grad_no_return` and the `dense_gemm` code-generation
+//! Not ported: `test_custom_grad_no_return` and the `dense_gemm` code-generation
 //! check (custom gradients of array parameters, `wp.adjoint[xs][i]`: a custom gradient here
 //! is for value parameters, an array's gradient comes from its accesses);
 //! `test_native_snippet_in_forward_with_custom_grad` and `test_native_snippet_in_custom_grad`
@@ -44,6 +42,7 @@ backend_tests!(
     custom_grad_with_helper_dependency,
     custom_grad_helper_backward_propagation,
     backward_use_propagation_across_kernels,
+    custom_replay_grad,
 );
 
 #[track_caller]
@@ -401,4 +400,74 @@ fn backward_use_propagation_across_kernels(dev: &wp::Device) {
     tape.backward(&y).unwrap();
     near(&host(&y), &[9.0], 1e-4, "y");
     near(&host(&x.grad().unwrap()), &[6.0], 1e-4, "d(x²)/dx");
+}
+
+/// Warp's `test_custom_replay_grad` (test_grad_customs.py): each thread takes a slot from an
+/// atomic counter and remembers it; the replay recalls the remembered slot instead of taking
+/// another, so the adjoint sends each gradient to the slot the forward pass wrote.
+#[wp::func(replay = replay_reversible_increment)]
+fn reversible_increment(
+    counter: Array<i32>,
+    counter_index: i32,
+    value: i32,
+    thread_values: Array<i32>,
+    tid: usize,
+) -> i32 {
+    let next_index = atomic_add(counter, counter_index, value);
+    thread_values[tid] = next_index;
+    next_index
+}
+
+#[wp::func]
+fn replay_reversible_increment(
+    counter: Array<i32>,
+    counter_index: i32,
+    value: i32,
+    thread_values: Array<i32>,
+    tid: usize,
+) -> i32 {
+    thread_values[tid]
+}
+
+#[wp::kernel]
+fn k_run_atomic_add(
+    input: Array<f32>,
+    counter: Array<i32>,
+    thread_values: Array<i32>,
+    output: Array<f32>,
+) {
+    let t = tid();
+    let idx = reversible_increment(counter, 0, 1, thread_values, t);
+    output[idx] = input[idx].powf(2.0);
+}
+
+fn custom_replay_grad(dev: &wp::Device) {
+    let n = 128;
+    let inputs: Vec<f32> = (0..n).map(|k| k as f32).collect();
+    let input = arr(&inputs, dev).with_grad().unwrap();
+    let counter = zeros::<i32, 1>(1, dev);
+    let thread_values = zeros::<i32, 1>(n, dev);
+    let output = zeros::<f32, 1>(n, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        let args = (&input, &counter, &thread_values, &output);
+        wp::launch(k_run_atomic_add, n, args, dev).unwrap();
+    }
+    output.grad().unwrap().fill(1.0).unwrap();
+    tape.backward_from_grads().unwrap();
+    assert_eq!(
+        host(&counter),
+        vec![n as i32],
+        "the replay took no more slots"
+    );
+    let grads = host(&input.grad().unwrap());
+    for (k, g) in grads.into_iter().enumerate() {
+        // Warp's tolerance 1e-4; 2k is exact in f32 for these k.
+        assert!(
+            (g - 2.0 * inputs[k]).abs() <= 1e-4,
+            "slot {k}: gradient {g}, want {}",
+            2.0 * inputs[k]
+        );
+    }
 }

@@ -27,6 +27,16 @@ pub struct CudaAdjoint {
 
 /// Emits the CUDA adjoint of `f`, or why it cannot.
 pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
+    emit_with_replay(f, file, None)
+}
+
+/// As [`emit`], for a func whose replay is the func at `replay` in its callees
+/// (`#[func(replay = r)]`), if one is given.
+pub fn emit_with_replay(
+    f: &Function,
+    file: &str,
+    replay: Option<usize>,
+) -> Result<CudaAdjoint, String> {
     // A deterministic kernel's adjoint has the CPU's structure (no gradients gathered in
     // registers), so that both backends record the same accumulations in the same order.
     let policy = match f.deterministic {
@@ -35,7 +45,7 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaAdjoint, String> {
     };
     let adj = build(f, policy)?;
     let replay = match f.kind {
-        FnKind::Func => func_replay(f, file)?,
+        FnKind::Func => func_replay(f, file, replay)?,
         FnKind::Kernel => String::new(),
     };
     let text = Printer::new(&adj, file).function()?;
@@ -53,10 +63,12 @@ pub fn emit_custom(
     file: &str,
     grads: &[(syn::Ident, syn::Path)],
     callees: &mut Vec<syn::Path>,
+    replay: Option<&syn::Path>,
 ) -> Result<String, String> {
     let adj = custom(f, grads)?;
     callees.clone_from(&adj.f.callees);
-    let replay = func_replay(f, file)?;
+    let replay = replay.map(|r| push_callee(callees, r));
+    let replay = func_replay(f, file, replay)?;
     let text = Printer::new(&adj, file).function()?;
     fill_lengths(&adj.f, format!("{replay}{text}"))
 }
@@ -64,11 +76,50 @@ pub fn emit_custom(
 /// A func's replay (`@@SELF@@_replay`): its forward code as `replay_of` strips it, printed by
 /// the forward emitter in replay mode (atomics not redone, funcs called through their
 /// replays, a unit func returning `wp::unit_t`).
-fn func_replay(f: &Function, file: &str) -> Result<String, String> {
+fn func_replay(f: &Function, file: &str, custom: Option<usize>) -> Result<String, String> {
+    if let Some(k) = custom {
+        return custom_replay(f, k);
+    }
     let stripped = replay_of(f);
     let mut r = Emitter::new(&stripped, file);
     r.replay = true;
     r.function_text()
+}
+
+/// The index of `p` in `callees`, appended if absent.
+pub fn push_callee(callees: &mut Vec<syn::Path>, p: &syn::Path) -> usize {
+    match callees.iter().position(|c| c == p) {
+        Some(k) => k,
+        None => {
+            callees.push(p.clone());
+            callees.len() - 1
+        }
+    }
+}
+
+/// The replay of a func with a custom one (`#[func(replay = r)]`, `r` its callee `k`): a call
+/// of `r`'s forward code, as Warp's replay of such a func is.
+fn custom_replay(f: &Function, k: usize) -> Result<String, String> {
+    let mut decl = Vec::new();
+    let mut xs = Vec::new();
+    for (j, p) in f.params.iter().enumerate() {
+        let t =
+            cpp_type(&p.ty).ok_or_else(|| format!("parameter `{}` has no CUDA type", p.name))?;
+        decl.push(format!("{t} x{j}"));
+        xs.push(format!("x{j}"));
+    }
+    decl.push("wp::ctx_t* __ctx".into());
+    xs.push("__ctx".into());
+    let (decl, xs) = (decl.join(", "), xs.join(", "));
+    Ok(match &f.ret {
+        Ty::Unit => format!(
+            "static WP_FN wp::unit_t @@SELF@@_replay({decl}) {{\n    @@F{k}@@({xs});\n    return wp::unit_t{{}};\n}}\n"
+        ),
+        t => {
+            let ret = cpp_type(t).ok_or("the func's return type has no CUDA type")?;
+            format!("static WP_FN {ret} @@SELF@@_replay({decl}) {{\n    return @@F{k}@@({xs});\n}}\n")
+        }
+    })
 }
 
 pub(super) struct Printer<'a> {

@@ -76,8 +76,18 @@ pub(super) fn call_checks(f: &crate::ir::Function) -> TokenStream {
             let msg = format!(
                 "the `&mut` arguments of this call do not match the `&mut` parameters of `{name}` (this call passes {passed} as `&mut`)"
             );
+            // `wp::grad(f)(..)` calls `f`'s companion (`grad_of`), which says why it cannot
+            // take `f`, if it cannot.
+            let grad = name.starts_with("__wp_grad_").then(|| {
+                quote_spanned! {c.span=>
+                    const _: () = if let ::core::option::Option::Some(why) = #path::__WP_GRAD_REFUSAL {
+                        ::core::panic!("{}", why)
+                    };
+                }
+            });
             quote_spanned! {c.span=>
                 const _: () = ::core::assert!(#path::__WP_MUT_PARAMS == #mask, #msg);
+                #grad
             }
         })
         .collect()

@@ -114,6 +114,10 @@ pub struct FuncAttrs {
     /// `overload`: the func is one overload of the set `wp::overloads!(name)` declares,
     /// selected by its first parameter's type (`name::<i32>(..)`).
     pub overload: Option<syn::Path>,
+    /// `replay = r`: the func's replacement in the forward code an adjoint reruns (Warp's
+    /// `@wp.func_replay`): a func of the same signature, called where this one's replay would
+    /// run, typically returning what the forward pass saved instead of redoing an atomic.
+    pub replay: Option<syn::Path>,
 }
 
 /// Parses `#[func(grad(x = dfdx, ..))]`.
@@ -133,9 +137,12 @@ pub fn parse_func_attrs(tokens: proc_macro2::TokenStream) -> syn::Result<FuncAtt
         } else if meta.path.is_ident("overload") {
             out.overload = Some(meta.path.clone());
             Ok(())
+        } else if meta.path.is_ident("replay") {
+            out.replay = Some(meta.value()?.parse()?);
+            Ok(())
         } else {
             Err(meta.error(
-                "unknown func option; supported: grad(param = gradient_func, ..), instances(T = [..]), overload",
+                "unknown func option; supported: grad(param = gradient_func, ..), replay = replay_func, instances(T = [..]), overload",
             ))
         }
     });

@@ -31,7 +31,7 @@ use syn::spanned::Spanned;
 use syn::{Expr, Pat};
 
 mod asserts;
-mod calls;
+pub(crate) mod calls;
 mod control;
 mod expressions;
 mod local_arrays;
@@ -264,6 +264,7 @@ pub fn lower_kernel(
         shape_obligations: cx.obligations,
         deterministic: None,
         call_checks: cx.call_checks,
+        custom_replay: false,
     })
 }
 

@@ -140,6 +140,7 @@ pub fn build(f: &Function) -> Result<Function, String> {
         deterministic: f.deterministic.map(|n| n.saturating_mul(2)),
         // The primal's calls are the same calls, checked with the primal.
         call_checks: Vec::new(),
+        custom_replay: f.custom_replay,
     })
 }
 

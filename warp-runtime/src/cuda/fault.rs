@@ -491,6 +491,7 @@ mod tests {
                 message: "in the leaf",
             }],
             float_atomics: false,
+            needs_adjoints: false,
         };
         static MID: FuncInfo = FuncInfo {
             name: "mid",

@@ -995,6 +995,7 @@ mod tests {
         requires: &[Capability::AtomicMinMaxBits64],
         asserts: &[],
         float_atomics: false,
+        needs_adjoints: false,
     };
     static MID: FuncInfo = FuncInfo {
         name: "mid",

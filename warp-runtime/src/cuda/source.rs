@@ -134,9 +134,12 @@ pub fn assemble_with_adjoint(info: &KernelInfo) -> CudaSource {
 }
 
 fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
-    let adjoint = halves.adjoint();
     let mut funcs = Vec::new();
     collect(info.callees, &mut funcs);
+    // A func that evaluates another's gradient in forward code (`wp::grad(f)(..)`) needs the
+    // adjoint headers and its callees' adjoints in every unit, forward ones included; the
+    // kernel's own adjoint entry stays with the halves asked for.
+    let adjoint = halves.adjoint() || funcs.iter().any(|f| f.needs_adjoints);
     let name_of = |f: &FuncInfo| -> String {
         let k = funcs
             .iter()
@@ -236,7 +239,7 @@ fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
         text.push('\n');
         text.push_str(&kernel(info.cuda));
     }
-    if adjoint {
+    if halves.adjoint() {
         text.push('\n');
         text.push_str(&kernel(info.cuda_adjoint));
     }
@@ -277,6 +280,7 @@ mod tests {
         requires: &[],
         asserts: &[],
         float_atomics: false,
+        needs_adjoints: false,
     };
     // A func of the same name in another module.
     static OTHER_SQ: FuncInfo = FuncInfo {
@@ -294,6 +298,7 @@ mod tests {
         requires: &[],
         asserts: &[],
         float_atomics: false,
+        needs_adjoints: false,
     };
     static MID: FuncInfo = FuncInfo {
         name: "both",
@@ -310,6 +315,7 @@ mod tests {
         requires: &[],
         asserts: &[],
         float_atomics: false,
+        needs_adjoints: false,
     };
 
     static KERNEL_CALLEES: [&FuncInfo; 2] = [&MID, &LEAF];

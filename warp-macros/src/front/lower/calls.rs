@@ -48,9 +48,74 @@ fn mentions(e: &Expr, hit: &mut dyn FnMut(&str) -> bool) -> Option<String> {
     walk(quote::ToTokens::to_token_stream(e), hit)
 }
 
+/// The name of the companion `#[func]` emits for `wp::grad(f)`: `__wp_grad_f`.
+pub(crate) fn companion_of(func: &str) -> String {
+    format!("__wp_grad_{func}")
+}
+
+fn segs_of(p: &syn::Path) -> Vec<String> {
+    p.segments.iter().map(|s| s.ident.to_string()).collect()
+}
+
+/// `wp::grad(f)` (or `grad(f)`) as the callee of a call, `wp::grad(f)(x, y)`: the path of the
+/// companion `#[func]` emits next to `f` (`__wp_grad_f`, a func of `f`'s parameters that runs
+/// `f`'s adjoint with its result's adjoint one, Warp's `wp.grad`), with `f`'s module path and
+/// generic arguments. `None` when the callee is something else.
+fn grad_of(callee: &Expr) -> R<Option<syn::Path>> {
+    let Expr::Call(inner) = strip(callee) else {
+        return Ok(None);
+    };
+    let Expr::Path(g) = strip(&inner.func) else {
+        return Ok(None);
+    };
+    let segs = segs_of(&g.path);
+    let is_grad = match segs.as_slice() {
+        [one] => one == "grad",
+        [facade, one] => crate::paths::names_facade(facade) && one == "grad",
+        _ => false,
+    };
+    if !is_grad {
+        return Ok(None);
+    }
+    let target = match inner.args.iter().collect::<Vec<_>>().as_slice() {
+        [a] => match strip(a) {
+            Expr::Path(p) if p.qself.is_none() => p.path.clone(),
+            other => {
+                return err(
+                    other.span(),
+                    "`wp::grad` takes a `#[func]` by its path: `wp::grad(f)(x, y)`",
+                )
+            }
+        },
+        _ => {
+            return err(
+                inner.span(),
+                "`wp::grad` takes one `#[func]`: `wp::grad(f)(x, y)`",
+            )
+        }
+    };
+    let mut companion = target;
+    let last = companion.segments.last_mut().expect("a path has a segment");
+    let name = last.ident.to_string();
+    last.ident = syn::Ident::new(&companion_of(&name), last.ident.span());
+    Ok(Some(companion))
+}
+
 impl Lowerer {
     pub(super) fn call(&mut self, c: &syn::ExprCall, want: Option<&Ty>) -> R<VarId> {
         let span = c.span();
+        if let Some(companion) = grad_of(&c.func)? {
+            if segs_of(&companion) == [companion_of(&self.fn_name)] {
+                return err(
+                    span,
+                    format!(
+                        "recursion is not supported in kernels: `{}` takes its own gradient",
+                        self.fn_name
+                    ),
+                );
+            }
+            return self.func_call(c, &companion, span);
+        }
         let Expr::Path(fp) = strip(&c.func) else {
             return err(
                 c.func.span(),
