@@ -876,6 +876,7 @@ fn spatial(s: &mut Suite) {
             fwd2::<$v3, $v3, $sv>(s, "wp::spatial_vector(v0, v1)", bi::spatial_vector);
             fwd2::<$m3, $m3, $sm>(s, "wp::spatial_adjoint(v0, v1)", bi::spatial_adjoint);
             fwd2::<$x, $sv, $sv>(s, "wp::transform_twist(v0, v1)", bi::transform_twist);
+            fwd2::<$sv, $v3, $v3>(s, "wp::velocity_at_point(v0, v1)", bi::velocity_at_point);
             fwd2::<$x, $sv, $sv>(s, "wp::transform_wrench(v0, v1)", bi::transform_wrench);
             fwd2::<$sv, $sv, bool>(s, "v0 == v1 && !(v0 != v1)", |a, b| a == b);
             // Adjoints.
@@ -903,6 +904,7 @@ fn spatial(s: &mut Suite) {
             bin::<$v3, $v3, $sv>(s, "adj_spatial_vector", ad::adj_spatial_vector);
             bin::<$m3, $m3, $sm>(s, "adj_spatial_adjoint", ad::adj_spatial_adjoint);
             bin::<$x, $sv, $sv>(s, "adj_transform_twist", ad::adj_transform_twist);
+            bin::<$sv, $v3, $v3>(s, "adj_velocity_at_point", ad::adj_velocity_at_point);
             bin::<$x, $sv, $sv>(s, "adj_transform_wrench", ad::adj_transform_wrench);
             zero_accum::<$sv>(s);
             zero_accum::<$sm>(s);

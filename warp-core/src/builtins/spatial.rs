@@ -44,6 +44,8 @@ pub trait SpatialOps: Copy {
     fn w_spatial_cross(self, b: Self) -> Self;
     /// `spatial_cross_dual`.
     fn w_spatial_cross_dual(self, b: Self) -> Self;
+    /// `velocity_at_point`.
+    fn w_velocity_at_point(self, r: Self::V3) -> Self::V3;
 }
 
 /// `spatial_adjoint(r, s)`: `Mat3` (making a [`SpatialMatrix`]), `DMat3` (a [`DSpatialMatrix`]).
@@ -106,6 +108,13 @@ pub fn spatial_cross_dual<X: SpatialOps>(a: X, b: X) -> X {
     a.w_spatial_cross_dual(b)
 }
 
+/// The linear velocity `v + w × r` of the point at offset `r` from the origin of the twist
+/// `qd = (w, v)` (angular on top, as Warp's spatial vectors).
+#[inline(always)]
+pub fn velocity_at_point<X: SpatialOps>(qd: X, r: X::V3) -> X::V3 {
+    qd.w_velocity_at_point(r)
+}
+
 /// `[[r, 0], [s, r]]` in 3x3 blocks.
 #[inline(always)]
 pub fn spatial_adjoint<M: SpatialAdjointParts>(r: M, s: M) -> M::SM {
@@ -162,6 +171,10 @@ macro_rules! spatial_impl {
             #[inline(always)]
             fn w_spatial_cross_dual(self, b: Self) -> Self {
                 self.cross_dual(b)
+            }
+            #[inline(always)]
+            fn w_velocity_at_point(self, r: $v3) -> $v3 {
+                self.velocity_at_point(r)
             }
         }
         impl SpatialAdjointParts for $m3 {
