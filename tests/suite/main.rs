@@ -109,6 +109,7 @@ mod interop;
 mod jvp;
 mod launch;
 mod lbvh;
+mod lerp;
 mod local_arrays;
 mod mesh;
 mod misc;

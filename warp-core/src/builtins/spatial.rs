@@ -9,6 +9,7 @@
 use glam::{DMat3, DVec3, Mat3, Vec3};
 
 use super::linalg::{Outer, Transpose};
+use super::math::Lerp;
 use crate::spatial::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 use crate::transform::{DTransform, Transform};
 
@@ -193,6 +194,25 @@ macro_rules! spatial_impl {
             #[inline(always)]
             fn w_wrench(self, x: $sv) -> $sv {
                 x.transform_wrench(self)
+            }
+        }
+        // `lerp`: lane by lane (a spatial matrix row-major), as Warp's vectors and matrices.
+        impl Lerp for $sv {
+            type Scalar = $s;
+            #[inline(always)]
+            fn w_lerp(self, b: Self, t: $s) -> Self {
+                let (x, y) = (self.to_array(), b.to_array());
+                $sv::from_array(core::array::from_fn(|k| x[k].w_lerp(y[k], t)))
+            }
+        }
+        impl Lerp for $sm {
+            type Scalar = $s;
+            #[inline(always)]
+            fn w_lerp(self, b: Self, t: $s) -> Self {
+                let (x, y) = (self.to_rows_array(), b.to_rows_array());
+                $sm::from_rows_array(core::array::from_fn(|i| {
+                    core::array::from_fn(|j| x[i][j].w_lerp(y[i][j], t))
+                }))
             }
         }
         impl Outer for $sv {
