@@ -735,6 +735,9 @@ fn matrices_and_quats(s: &mut Suite) {
             bin::<$s, $m, $m>(s, "adj_mul", ad::adj_mul);
             bin::<$s, $m, $m>(s, "adj_div", ad::adj_div);
             un::<$m, $m>(s, "adj_neg", ad::adj_neg);
+            // lerp lane by lane (wp_scalar.h), t the second value.
+            fwd2::<$m, $s, $m>(s, "wp::lerp(v0, -v0, v1)", |a, t| bi::lerp(a, -a, t));
+            tri::<$m, $m, $s, $m>(s, "adj_lerp", ad::adj_lerp);
         )*};
     }
     mats!(Mat2: Vec2, f32, Mat3: Vec3, f32, Mat4: Vec4, f32);
@@ -748,6 +751,8 @@ fn matrices_and_quats(s: &mut Suite) {
             bin::<$q, $s, $q>(s, "adj_mul", ad::adj_mul);
             bin::<$q, $s, $q>(s, "adj_div", ad::adj_div);
             un::<$q, $q>(s, "adj_neg", ad::adj_neg);
+            fwd2::<$q, $s, $q>(s, "wp::lerp(v0, -v0, v1)", |a, t| bi::lerp(a, -a, t));
+            tri::<$q, $q, $s, $q>(s, "adj_lerp", ad::adj_lerp);
         )*};
     }
     quats!(Quat: Vec3, f32, DQuat: DVec3, f64);
@@ -876,6 +881,7 @@ fn spatial(s: &mut Suite) {
             fwd2::<$v3, $v3, $sv>(s, "wp::spatial_vector(v0, v1)", bi::spatial_vector);
             fwd2::<$m3, $m3, $sm>(s, "wp::spatial_adjoint(v0, v1)", bi::spatial_adjoint);
             fwd2::<$x, $sv, $sv>(s, "wp::transform_twist(v0, v1)", bi::transform_twist);
+            fwd2::<$sv, $v3, $v3>(s, "wp::velocity_at_point(v0, v1)", bi::velocity_at_point);
             fwd2::<$x, $sv, $sv>(s, "wp::transform_wrench(v0, v1)", bi::transform_wrench);
             fwd2::<$sv, $sv, bool>(s, "v0 == v1 && !(v0 != v1)", |a, b| a == b);
             // Adjoints.
@@ -903,6 +909,11 @@ fn spatial(s: &mut Suite) {
             bin::<$v3, $v3, $sv>(s, "adj_spatial_vector", ad::adj_spatial_vector);
             bin::<$m3, $m3, $sm>(s, "adj_spatial_adjoint", ad::adj_spatial_adjoint);
             bin::<$x, $sv, $sv>(s, "adj_transform_twist", ad::adj_transform_twist);
+            bin::<$sv, $v3, $v3>(s, "adj_velocity_at_point", ad::adj_velocity_at_point);
+            fwd2::<$sv, $s, $sv>(s, "wp::lerp(v0, -v0, v1)", |a, t| bi::lerp(a, -a, t));
+            fwd2::<$sm, $s, $sm>(s, "wp::lerp(v0, -v0, v1)", |a, t| bi::lerp(a, -a, t));
+            tri::<$sv, $sv, $s, $sv>(s, "adj_lerp", ad::adj_lerp);
+            tri::<$sm, $sm, $s, $sm>(s, "adj_lerp", ad::adj_lerp);
             bin::<$x, $sv, $sv>(s, "adj_transform_wrench", ad::adj_transform_wrench);
             zero_accum::<$sv>(s);
             zero_accum::<$sm>(s);

@@ -110,6 +110,7 @@ mod interop;
 mod jvp;
 mod launch;
 mod lbvh;
+mod lerp;
 mod local_arrays;
 mod mesh;
 mod misc;

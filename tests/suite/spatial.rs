@@ -20,6 +20,11 @@ backend_tests!(
     spatial_gradients_match_finite_differences,
     spatial_array_gradients,
     spatial_jvp_matches_the_jacobian,
+    velocity_at_point_f64,
+    velocity_at_point_f32,
+    velocity_at_point_nonfinite,
+    velocity_at_point_gradients,
+    velocity_at_point_jvp,
 );
 
 /// Backend parity, normwise: 0 on the CPU (the kernel runs the host's own Rust functions); on
@@ -704,6 +709,207 @@ fn spatial_jvp_matches_the_jacobian(dev: &wp::Device) {
         assert!(
             (got[k] - fd).abs() <= 1e-7 * fd.abs().max(1.0),
             "jvp vs central differences [{k}]: {} vs {fd}",
+            got[k]
+        );
+        assert!(got[k] != 0.0, "a nonzero tangent [{k}]");
+    }
+}
+
+// ----- velocity_at_point -----
+
+/// `velocity_at_point` in both spellings, for both precisions.
+macro_rules! velocity_kernel {
+    ($name:ident, $sv:ident, $v3:ident) => {
+        #[wp::kernel]
+        pub(crate) fn $name(qd: Array<$sv>, r: Array<$v3>, out: Array<$v3, 2>) {
+            let i = tid();
+            out[(i, 0)] = velocity_at_point(qd[i], r[i]);
+            out[(i, 1)] = qd[i].velocity_at_point(r[i]);
+        }
+    };
+}
+velocity_kernel!(k_velocity64, DSpatialVector, DVec3);
+velocity_kernel!(k_velocity32, SpatialVector, Vec3);
+
+/// The cases: Warp's own (`warp/tests/test_math.py`, `spatial_helpers`: the twist
+/// `((0, 0, 2), (1, 2, 3))` at `r = (0.5, 0, 0)` moves at `(1, 3, 3)`), then the inputs'
+/// twists at offsets of size <= 3.
+fn velocity_cases() -> Vec<(DSpatialVector, DVec3)> {
+    let mut c = vec![(
+        DSpatialVector::new(DVec3::new(0.0, 0.0, 2.0), DVec3::new(1.0, 2.0, 3.0)),
+        DVec3::new(0.5, 0.0, 0.0),
+    )];
+    for (k, (x, y, _, _)) in inputs().into_iter().enumerate() {
+        c.push((x, y.bottom() + DVec3::splat(k as f64 * 0.25)));
+    }
+    c
+}
+
+/// `v + w × r` in f64 as the matrix product `skew(w) r` (another order than the kernel's).
+fn velocity_ref(qd: DSpatialVector, r: DVec3) -> DVec3 {
+    qd.bottom() + skew(qd.top()) * r
+}
+
+fn velocity_at_point_f64(dev: &wp::Device) {
+    let cases = velocity_cases();
+    let n = cases.len();
+    let qd: Vec<DSpatialVector> = cases.iter().map(|c| c.0).collect();
+    let r: Vec<DVec3> = cases.iter().map(|c| c.1).collect();
+    let out = zeros::<DVec3, 2>((n, 2), dev);
+    wp::launch(k_velocity64, n, (&arr(&qd, dev), &arr(&r, dev), &out), dev).unwrap();
+    let got = host(&out);
+    let (gt, rt) = (gpu_tol(dev, false), ref_tol(false));
+    assert_eq!(got[0].to_array(), [1.0, 3.0, 3.0], "Warp's test_math case");
+    for k in 0..n {
+        let host_v = qd[k].velocity_at_point(r[k]);
+        for s in 0..2 {
+            let g = got[k * 2 + s].to_array();
+            close(
+                &g,
+                &host_v.to_array(),
+                gt,
+                &format!("case {k} spelling {s}: host"),
+            );
+            let want = velocity_ref(qd[k], r[k]).to_array();
+            close(
+                &g,
+                &want,
+                rt,
+                &format!("case {k} spelling {s}: v + skew(w) r"),
+            );
+        }
+    }
+}
+
+fn velocity_at_point_f32(dev: &wp::Device) {
+    let cases = velocity_cases();
+    let n = cases.len();
+    let qd: Vec<SpatialVector> = cases.iter().map(|c| c.0.as_spatial()).collect();
+    let r: Vec<Vec3> = cases.iter().map(|c| c.1.as_vec3()).collect();
+    let out = zeros::<Vec3, 2>((n, 2), dev);
+    wp::launch(k_velocity32, n, (&arr(&qd, dev), &arr(&r, dev), &out), dev).unwrap();
+    let got = host(&out);
+    let (gt, rt) = (gpu_tol(dev, true), ref_tol(true));
+    assert_eq!(got[0].to_array(), [1.0, 3.0, 3.0], "Warp's test_math case");
+    for k in 0..n {
+        let host_v = qd[k].velocity_at_point(r[k]);
+        let up = |v: Vec3| v.as_dvec3().to_array();
+        for s in 0..2 {
+            let g = up(got[k * 2 + s]);
+            close(&g, &up(host_v), gt, &format!("case {k} spelling {s}: host"));
+            // The reference of the f32 inputs, widened exactly.
+            let want = velocity_ref(qd[k].as_dspatial(), r[k].as_dvec3()).to_array();
+            close(
+                &g,
+                &want,
+                rt,
+                &format!("case {k} spelling {s}: v + skew(w) r"),
+            );
+        }
+    }
+}
+
+/// IEEE propagation, lane by lane as the formula reads: an infinite angular lane times a
+/// zero offset lane is NaN where the cross product forms that product (`w = (inf, 0, 0)`,
+/// `r = (0, 1, 0)`: `w × r = (0·0 - 1·0, 0·0 - 0·inf, inf·1 - 0·0) = (0, NaN, inf)`), and a
+/// NaN linear lane stays in its own lane.
+fn velocity_at_point_nonfinite(dev: &wp::Device) {
+    let qd = vec![
+        DSpatialVector::new(
+            DVec3::new(f64::INFINITY, 0.0, 0.0),
+            DVec3::new(1.0, 2.0, 3.0),
+        ),
+        DSpatialVector::new(DVec3::new(0.0, 0.0, 1.0), DVec3::new(f64::NAN, 2.0, 3.0)),
+    ];
+    let r = vec![DVec3::new(0.0, 1.0, 0.0), DVec3::new(1.0, 0.0, 0.0)];
+    let out = zeros::<DVec3, 2>((2, 2), dev);
+    wp::launch(k_velocity64, 2, (&arr(&qd, dev), &arr(&r, dev), &out), dev).unwrap();
+    let got = host(&out);
+    for s in 0..2 {
+        let a = got[s];
+        assert!(
+            a.x == 1.0 && a.y.is_nan() && a.z == f64::INFINITY,
+            "inf w: {a:?}"
+        );
+        let b = got[2 + s];
+        // w × r = (0, 1, 0) for w = (0, 0, 1), r = (1, 0, 0).
+        assert!(b.x.is_nan() && b.y == 3.0 && b.z == 3.0, "NaN v: {b:?}");
+    }
+}
+
+/// A loss through `velocity_at_point` in both spellings, nonlinear in the twist and the offset
+/// (so that every term of the adjoint meets a different weight).
+#[wp::kernel]
+pub(crate) fn k_velocity_loss(xs: Array<f64>, loss: Array<f64>) {
+    let i = tid();
+    let o = i * 9;
+    // Lane writes (the spatial constructors have no forward rule).
+    let mut qd = DSpatialVector::ZERO;
+    qd[0] = xs[o];
+    qd[1] = xs[o + 1];
+    qd[2] = xs[o + 2];
+    qd[3] = xs[o + 3];
+    qd[4] = xs[o + 4];
+    qd[5] = xs[o + 5];
+    let r = DVec3::new(xs[o + 6], xs[o + 7], xs[o + 8]);
+    let v = velocity_at_point(qd, r);
+    let u = (qd * 0.5).velocity_at_point(v);
+    loss[i] = v.dot(v) + u.dot(DVec3::new(0.3, -0.7, 0.2)) + v.x * r.y;
+}
+
+/// `gradcheck` in f64, central differences with step 1e-6: the loss is a polynomial of degree
+/// <= 4 in inputs of size <= 3, third derivatives below ~1e3, truncation below 1e-9 and
+/// rounding about 1e-16 · 1e3 / 1e-6 = 1e-7; atol = rtol = 1e-5 has margin and would miss no
+/// wrong rule (those are O(1) wrong).
+fn velocity_at_point_gradients(dev: &wp::Device) {
+    let n = 4;
+    let xs: Vec<f64> = (0..n * 9)
+        .map(|k| ((k as f64) * 0.77 + 0.3).sin() * 2.0)
+        .collect();
+    let xs = arr(&xs, dev).with_grad().unwrap();
+    let loss = zeros::<f64, 1>(n, dev).with_grad().unwrap();
+    let report = wp::gradcheck(
+        || wp::launch(k_velocity_loss, n, (&xs, &loss), dev),
+        &[&xs],
+        &[&loss],
+        wp::GradcheckOptions {
+            eps: 1e-6,
+            atol: 1e-5,
+            rtol: 1e-5,
+        },
+    )
+    .unwrap();
+    assert!(report.passed, "{report:?}");
+    let touched = (0..report.analytic[0].len())
+        .filter(|&c| report.analytic.iter().any(|r| r[c] != 0.0))
+        .count();
+    assert_eq!(touched, n * 9, "every input has a gradient");
+}
+
+/// Forward mode through `velocity_at_point`'s rule, against the reverse Jacobian times the
+/// direction (both exact derivatives, roundings in another order: relative 1e-12).
+fn velocity_at_point_jvp(dev: &wp::Device) {
+    let n = 3;
+    let xs: Vec<f64> = (0..n * 9)
+        .map(|k| ((k as f64) * 0.53).cos() * 1.5)
+        .collect();
+    let vs: Vec<f64> = (0..n * 9).map(|k| ((k as f64) * 1.31).sin()).collect();
+    let x = arr(&xs, dev).with_grad().unwrap();
+    let y = zeros::<f64, 1>(n, dev).with_grad().unwrap();
+    let (v, y_dot) = (arr(&vs, dev), zeros::<f64, 1>(n, dev));
+    wp::jvp(k_velocity_loss, n, (&x, &y), (&v, &y_dot), dev).unwrap();
+    let got = host(&y_dot);
+    let j = wp::jacobian(
+        || wp::launch(k_velocity_loss, n, (&x, &y), dev),
+        &[&x],
+        &[&y],
+    )
+    .unwrap();
+    for k in 0..n {
+        let jv: f64 = j[k].iter().zip(&vs).map(|(a, b)| a * b).sum();
+        assert!(
+            (got[k] - jv).abs() <= 1e-12 * jv.abs().max(1.0),
+            "jvp vs J v [{k}]: {} vs {jv}",
             got[k]
         );
         assert!(got[k] != 0.0, "a nonzero tangent [{k}]");

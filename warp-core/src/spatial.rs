@@ -129,6 +129,14 @@ macro_rules! spatial_types {
                 $m::from_rows_array(core::array::from_fn(|i| core::array::from_fn(|j| a[i] * b[j])))
             }
 
+            /// The linear velocity of the point at offset `r` from the origin of the twist
+            /// `self = (w, v)` (Warp's `velocity_at_point`): `v + w × r`, summed in that
+            /// order.
+            #[inline]
+            pub fn velocity_at_point(self, r: $v3) -> $v3 {
+                self.bottom() + self.top().cross(r)
+            }
+
             /// The twist `self = (w, v)` seen in the frame `t` maps into (Warp's
             /// `transform_twist`): `w' = q w`, `v' = q v + p × w'` (each rotation glam's
             /// `q * x`, as `transform_vector`).

@@ -1,5 +1,5 @@
 // wp_adjoint_builtins.h: adjoints of the "scalar" and "vector" sections (min, max, clamp, the
-// float functions, lerp, dot, length, normalize, cross).
+// float functions, lerp (of every type but transforms), dot, length, normalize, cross).
 // Part of the CUDA adjoint library; see wp_adjoint.h for its conventions. An adjoint
 // translation unit includes wp_adjoint_core.h and the adjoint headers of the builtin-table
 // sections its kernel uses (warp_cuda::ADJOINT_SECTIONS), so NVRTC parses no more than it
@@ -278,6 +278,29 @@ WP_ADJ_FVEC_FNS(DVec2, f64)
 WP_ADJ_FVEC_FNS(DVec3, f64)
 WP_ADJ_FVEC_FNS(DVec4, f64)
 #undef WP_ADJ_FVEC_FNS
+
+// ----- lerp of matrices, quaternions, spatial vectors and matrices: the lane rule in -----
+// ----- vec_traits' lane order (wp_scalar.h's forward), adj_t collecting every lane    -----
+#define WP_ADJ_LANES_LERP(T, S)                                                                  \
+  WP_FN void adj_lerp(const T& a, const T& b, S t, T& adj_a, T& adj_b, S& adj_t, const T& g) {   \
+    typedef vec_traits<T> L;                                                                     \
+    for (int i = 0; i < L::N; ++i)                                                               \
+      detail::l_lerp(L::get(a, i), L::get(b, i), t, L::at(adj_a, i), L::at(adj_b, i), adj_t,     \
+                     L::get(g, i));                                                              \
+  }
+WP_ADJ_LANES_LERP(Mat2, f32)
+WP_ADJ_LANES_LERP(Mat3, f32)
+WP_ADJ_LANES_LERP(Mat4, f32)
+WP_ADJ_LANES_LERP(DMat2, f64)
+WP_ADJ_LANES_LERP(DMat3, f64)
+WP_ADJ_LANES_LERP(DMat4, f64)
+WP_ADJ_LANES_LERP(Quat, f32)
+WP_ADJ_LANES_LERP(DQuat, f64)
+WP_ADJ_LANES_LERP(SpatialVector, f32)
+WP_ADJ_LANES_LERP(SpatialMatrix, f32)
+WP_ADJ_LANES_LERP(DSpatialVector, f64)
+WP_ADJ_LANES_LERP(DSpatialMatrix, f64)
+#undef WP_ADJ_LANES_LERP
 
 #define WP_ADJ_NOOP_DOT(V, S) \
   WP_FN void adj_dot(const V&, const V&, V&, V&, S) {}

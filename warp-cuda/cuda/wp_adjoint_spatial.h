@@ -136,6 +136,12 @@ namespace wp {
         vec_traits<V3>::at(mat_traits<M3>::at(adj_s, j), i) += TM::get(g, (i + 3) * 6 + j);    \
       }                                                                                        \
   }                                                                                            \
+  WP_FN void adj_velocity_at_point(const SV& qd, const V3& r, SV& adj_qd, V3& adj_r,            \
+                                   const V3& g) {                                              \
+    V3 aw = spatial_top(adj_qd);                                                               \
+    adj_cross(spatial_top(qd), r, aw, adj_r, g);                                               \
+    adj_qd = SV##_new(aw, spatial_bottom(adj_qd) + g);                                         \
+  }                                                                                            \
   WP_FN void adj_transform_twist(const X& t, const SV& x, X& adj_t, SV& adj_x, const SV& g) {  \
     const V3 w1 = t.q * spatial_top(x);                                                        \
     V3 gw = spatial_top(g);                                                                    \

@@ -5,7 +5,8 @@
 //   abs, sign         signed integers (abs wraps: abs(MIN) == MIN), f32, f64, float vectors,
 //                     IVec2-4; sign(x) = -1 if x < 0 else +1 (sign(0) = sign(-0.0) = sign(NaN) = 1).
 //   floor ceil sqrt exp log sin cos tan atan2 pow     f32 (the ...f functions), f64.
-//   lerp(a, b, t)     a * (1 - t) + b * t; f32, f64, float vectors with a scalar t.
+//   lerp(a, b, t)     a * (1 - t) + b * t; f32, f64, float vectors with a scalar t; square
+//                     matrices, quaternions, spatial vectors and matrices lane by lane.
 //   asin acos atan sinh cosh tanh exp2 log2 log10 cbrt erf erfc erfinv erfcinv round rint
 //   trunc frac degrees radians smoothstep                f32, f64;
 //   step              every integer and float scalar; isfinite isnan isinf   f32, f64, float
@@ -387,6 +388,29 @@ WP_VEC_LERP(DVec2, f64)
 WP_VEC_LERP(DVec3, f64)
 WP_VEC_LERP(DVec4, f64)
 #undef WP_VEC_LERP
+
+// Square matrices (column-major lanes), quaternions (x, y, z, w; not renormalized, as Warp),
+// spatial vectors and matrices (row-major lanes): lane by lane, in vec_traits' order.
+#define WP_LANES_LERP(T, S)                                                                 \
+  WP_FN T lerp(const T& a, const T& b, S t) {                                               \
+    T r = a;                                                                                \
+    for (int i = 0; i < vec_traits<T>::N; ++i)                                              \
+      vec_traits<T>::at(r, i) = lerp(vec_traits<T>::get(a, i), vec_traits<T>::get(b, i), t); \
+    return r;                                                                               \
+  }
+WP_LANES_LERP(Mat2, f32)
+WP_LANES_LERP(Mat3, f32)
+WP_LANES_LERP(Mat4, f32)
+WP_LANES_LERP(DMat2, f64)
+WP_LANES_LERP(DMat3, f64)
+WP_LANES_LERP(DMat4, f64)
+WP_LANES_LERP(Quat, f32)
+WP_LANES_LERP(DQuat, f64)
+WP_LANES_LERP(SpatialVector, f32)
+WP_LANES_LERP(SpatialMatrix, f32)
+WP_LANES_LERP(DSpatialVector, f64)
+WP_LANES_LERP(DSpatialMatrix, f64)
+#undef WP_LANES_LERP
 
 // ------------------------------------------------------------------------------------------
 // f16: every builtin is its f32 version on the widened arguments, rounded once to f16

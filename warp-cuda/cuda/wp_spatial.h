@@ -9,6 +9,7 @@
 //   spatial_cross_dual(a, b)        (wa x wb + va x vb, wa x vb)
 //   spatial_adjoint(r, s)           [[r, 0], [s, r]] in 3x3 blocks (entry (i, j) of a block is
 //                                   row i, column j of the glam column-major 3x3 matrix)
+//   velocity_at_point(qd, r)        v + w x r   (qd = (w, v))
 //   transform_twist(t, x)           w' = q w, v' = q v + p x w'   (q w: glam's rotation)
 //   transform_wrench(t, x)          f' = q f, tau' = q tau + p x f'
 //   transpose(m), outer(a, b)       the linalg rows' overloads for spatial types
@@ -46,6 +47,9 @@ namespace wp {
         vec_traits<SM>::at(m, (i + 3) * 6 + j) = vec_traits<V3>::get(mat_traits<M3>::get(s, j), i); \
       }                                                                                   \
     return m;                                                                             \
+  }                                                                                       \
+  WP_FN V3 velocity_at_point(const SV& qd, const V3& r) {                                 \
+    return spatial_bottom(qd) + cross(spatial_top(qd), r);                                \
   }                                                                                       \
   WP_FN SV transform_twist(const X& t, const SV& x) {                                     \
     const V3 w = t.q * spatial_top(x);                                                    \

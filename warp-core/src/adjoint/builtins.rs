@@ -24,11 +24,15 @@
 //!
 //! Integer operands (scalars and vectors) have no-op adjoints.
 
-use glam::{DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4, Vec2, Vec3, Vec4};
+use glam::{
+    DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
+    UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
+};
 
 use super::lanes::{l_abs, l_lerp, l_max, l_min, map1, zip_vv};
 use super::{AdjFloat, Adjoint};
 use crate::builtins::math::{Cross, FloatVec, Lerp, MinMax, Signed, VecOps};
+use crate::spatial::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 
 // ------------------------------------------------------------------------------------------
 // min, max, clamp
@@ -427,7 +431,8 @@ pub fn adj_smoothstep<F: AdjFloat>(
 // lerp
 // ------------------------------------------------------------------------------------------
 
-/// Adjoint of `lerp`: `f32`, `f64`, `Vec2-4` (with `f32`), `DVec2-4` (with `f64`), like
+/// Adjoint of `lerp`: `f32`, `f64`, `Vec2-4` (with `f32`), `DVec2-4` (with `f64`), matrices,
+/// quaternions, transforms and spatial types, like
 /// [`Lerp`].
 pub trait AdjLerp: Lerp<Scalar: AdjFloat> + Adjoint {
     /// The adjoint of `lerp(a, b, t)` (see [`adj_lerp`]).
@@ -484,6 +489,12 @@ macro_rules! fvec_lerp {
     )*};
 }
 fvec_lerp!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64);
+// Matrices, quaternions, spatial vectors and matrices: the same lane rule in their lane order
+// (`Lanes`: glam's column-major matrices, `x, y, z, w`, spatial matrices row-major).
+fvec_lerp!(
+    Mat2: f32, Mat3: f32, Mat4: f32, DMat2: f64, DMat3: f64, DMat4: f64, Quat: f32, DQuat: f64,
+    SpatialVector: f32, SpatialMatrix: f32, DSpatialVector: f64, DSpatialMatrix: f64
+);
 
 // ------------------------------------------------------------------------------------------
 // dot, length, normalize, cross

@@ -17,6 +17,8 @@
 //!   `g.bottom`, `adj_cross(wa, vb)` with `g.bottom`; `spatial_cross_dual(a, b)`:
 //!   `adj_cross(wa, wb)` with `g.top`, `adj_cross(va, vb)` with `g.top`, `adj_cross(wa, vb)`
 //!   with `g.bottom` (each the 3-vector `cross` adjoint);
+//! * `velocity_at_point(qd, r)`, forward `v + w × r`: `adj_cross(w, r)` with `g` into
+//!   `adj_qd.top` and `adj_r`, then `adj_qd.bottom += g`;
 //! * `spatial_adjoint(r, s)`: `adj_r[i][j] += g[i][j]`, then `+= g[i + 3][j + 3]`;
 //!   `adj_s[i][j] += g[i + 3][j]` (row `i`, column `j` of the 3x3 matrices);
 //! * `transform_twist(t, x)`, forward `w' = q w`, `v' = q v + p × w'`: with `gw = g.top`,
@@ -101,6 +103,8 @@ pub trait AdjSpatial: SpatialOps + Adjoint {
     fn adj_cross(a: Self, b: Self, adj_a: &mut Self, adj_b: &mut Self, g: Self);
     /// See [`adj_spatial_cross_dual`].
     fn adj_cross_dual(a: Self, b: Self, adj_a: &mut Self, adj_b: &mut Self, g: Self);
+    /// See [`adj_velocity_at_point`].
+    fn adj_velocity(qd: Self, r: Self::V3, adj_qd: &mut Self, adj_r: &mut Self::V3, g: Self::V3);
 }
 
 /// Adjoint of `spatial_top(a)`: lanes 0 to 2 of `adj_a` `+= g`.
@@ -125,6 +129,18 @@ pub fn adj_spatial_dot<X: AdjSpatial>(a: X, b: X, adj_a: &mut X, adj_b: &mut X, 
 #[inline(always)]
 pub fn adj_spatial_cross<X: AdjSpatial>(a: X, b: X, adj_a: &mut X, adj_b: &mut X, adj_ret: X) {
     X::adj_cross(a, b, adj_a, adj_b, adj_ret)
+}
+
+/// Adjoint of `velocity_at_point(qd, r)` (see the module documentation).
+#[inline(always)]
+pub fn adj_velocity_at_point<X: AdjSpatial>(
+    qd: X,
+    r: X::V3,
+    adj_qd: &mut X,
+    adj_r: &mut X::V3,
+    adj_ret: X::V3,
+) {
+    X::adj_velocity(qd, r, adj_qd, adj_r, adj_ret)
 }
 
 /// Adjoint of `spatial_cross_dual(a, b)` (see the module documentation).
@@ -339,6 +355,12 @@ macro_rules! spatial_adj {
                 <$v3 as AdjCross>::adj_cross(wa, vb, &mut awa, &mut avb, g.bottom());
                 *adj_a = $sv::new(awa, ava);
                 *adj_b = $sv::new(awb, avb);
+            }
+            #[inline(always)]
+            fn adj_velocity(qd: $sv, r: $v3, adj_qd: &mut $sv, adj_r: &mut $v3, g: $v3) {
+                let (mut aw, av) = (adj_qd.top(), adj_qd.bottom());
+                <$v3 as AdjCross>::adj_cross(qd.top(), r, &mut aw, adj_r, g);
+                *adj_qd = $sv::new(aw, av + g);
             }
             #[inline(always)]
             fn adj_cross_dual(a: $sv, b: $sv, adj_a: &mut $sv, adj_b: &mut $sv, g: $sv) {

@@ -29,7 +29,10 @@
 //! `glam`'s SIMD `min`/`max` do not have `fmin` NaN semantics and its integer `abs`/`dot`
 //! panic on overflow in debug builds.
 
-use glam::{DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, UVec2, UVec3, UVec4, Vec2, Vec3, Vec4};
+use glam::{
+    DMat2, DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
+    UVec2, UVec3, UVec4, Vec2, Vec3, Vec4,
+};
 
 use super::special;
 
@@ -533,6 +536,32 @@ macro_rules! vec_float {
     )*};
 }
 vec_float!(Vec2: f32, Vec3: f32, Vec4: f32, DVec2: f64, DVec3: f64, DVec4: f64);
+
+// `lerp` of square matrices (lane by lane, column-major as glam stores them) and quaternions
+// (lane by lane, `x, y, z, w`, not renormalized: Warp's, unlike glam's `Quat::lerp`).
+macro_rules! lanes_lerp {
+    ($($t:ident: $s:ident, $to:ident, $from:expr);* $(;)?) => {$(
+        impl Lerp for $t {
+            type Scalar = $s;
+            #[inline(always)]
+            fn w_lerp(self, b: Self, t: $s) -> Self {
+                let (x, y) = (self.$to(), b.$to());
+                let from: fn(_) -> Self = $from;
+                from(core::array::from_fn(|k| x[k].w_lerp(y[k], t)))
+            }
+        }
+    )*};
+}
+lanes_lerp!(
+    Mat2: f32, to_cols_array, |a| Mat2::from_cols_array(&a);
+    Mat3: f32, to_cols_array, |a| Mat3::from_cols_array(&a);
+    Mat4: f32, to_cols_array, |a| Mat4::from_cols_array(&a);
+    DMat2: f64, to_cols_array, |a| DMat2::from_cols_array(&a);
+    DMat3: f64, to_cols_array, |a| DMat3::from_cols_array(&a);
+    DMat4: f64, to_cols_array, |a| DMat4::from_cols_array(&a);
+    Quat: f32, to_array, Quat::from_array;
+    DQuat: f64, to_array, DQuat::from_array;
+);
 
 macro_rules! vec_classify {
     ($($v:ident),*) => {$(

@@ -9,6 +9,7 @@
 use glam::{DMat3, DVec3, Mat3, Vec3};
 
 use super::linalg::{Outer, Transpose};
+use super::math::Lerp;
 use crate::spatial::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 use crate::transform::{DTransform, Transform};
 
@@ -44,6 +45,8 @@ pub trait SpatialOps: Copy {
     fn w_spatial_cross(self, b: Self) -> Self;
     /// `spatial_cross_dual`.
     fn w_spatial_cross_dual(self, b: Self) -> Self;
+    /// `velocity_at_point`.
+    fn w_velocity_at_point(self, r: Self::V3) -> Self::V3;
 }
 
 /// `spatial_adjoint(r, s)`: `Mat3` (making a [`SpatialMatrix`]), `DMat3` (a [`DSpatialMatrix`]).
@@ -106,6 +109,13 @@ pub fn spatial_cross_dual<X: SpatialOps>(a: X, b: X) -> X {
     a.w_spatial_cross_dual(b)
 }
 
+/// The linear velocity `v + w × r` of the point at offset `r` from the origin of the twist
+/// `qd = (w, v)` (angular on top, as Warp's spatial vectors).
+#[inline(always)]
+pub fn velocity_at_point<X: SpatialOps>(qd: X, r: X::V3) -> X::V3 {
+    qd.w_velocity_at_point(r)
+}
+
 /// `[[r, 0], [s, r]]` in 3x3 blocks.
 #[inline(always)]
 pub fn spatial_adjoint<M: SpatialAdjointParts>(r: M, s: M) -> M::SM {
@@ -163,6 +173,10 @@ macro_rules! spatial_impl {
             fn w_spatial_cross_dual(self, b: Self) -> Self {
                 self.cross_dual(b)
             }
+            #[inline(always)]
+            fn w_velocity_at_point(self, r: $v3) -> $v3 {
+                self.velocity_at_point(r)
+            }
         }
         impl SpatialAdjointParts for $m3 {
             type SM = $sm;
@@ -180,6 +194,25 @@ macro_rules! spatial_impl {
             #[inline(always)]
             fn w_wrench(self, x: $sv) -> $sv {
                 x.transform_wrench(self)
+            }
+        }
+        // `lerp`: lane by lane (a spatial matrix row-major), as Warp's vectors and matrices.
+        impl Lerp for $sv {
+            type Scalar = $s;
+            #[inline(always)]
+            fn w_lerp(self, b: Self, t: $s) -> Self {
+                let (x, y) = (self.to_array(), b.to_array());
+                $sv::from_array(core::array::from_fn(|k| x[k].w_lerp(y[k], t)))
+            }
+        }
+        impl Lerp for $sm {
+            type Scalar = $s;
+            #[inline(always)]
+            fn w_lerp(self, b: Self, t: $s) -> Self {
+                let (x, y) = (self.to_rows_array(), b.to_rows_array());
+                $sm::from_rows_array(core::array::from_fn(|i| {
+                    core::array::from_fn(|j| x[i][j].w_lerp(y[i][j], t))
+                }))
             }
         }
         impl Outer for $sv {

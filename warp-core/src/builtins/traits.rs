@@ -124,7 +124,8 @@ pub trait Classify: Copy {
     fn w_isinf(self) -> bool;
 }
 
-/// `lerp`: `f32`, `f64`, `Vec2/3/4` (with `f32`), `DVec2/3/4` (with `f64`).
+/// `lerp`: `f32`, `f64`, `Vec2/3/4` (with `f32`), `DVec2/3/4` (with `f64`), square matrices,
+/// quaternions, transforms, spatial vectors and matrices (lane by lane).
 pub trait Lerp: Copy {
     /// The type of the interpolation parameter.
     type Scalar: Float;

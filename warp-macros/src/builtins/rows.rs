@@ -109,7 +109,17 @@ const FVEC_OR_SVEC: &[Class] = &[FloatVector, SpatialVector];
 const SVEC: &[Class] = &[SpatialVector];
 const SPATIAL_SCALAR: &[Class] = &[SpatialScalar];
 const MAT_QUAT_XFORM: &[Class] = &[Matrix, Quaternion, Transform];
-const LERP: &[Class] = &[Float, FloatVector, Transform];
+/// `lerp`: float scalars and vectors, square matrices, quaternions, transforms, spatial
+/// vectors and matrices.
+const LERP: &[Class] = &[
+    Float,
+    FloatVector,
+    Matrix,
+    Quaternion,
+    Transform,
+    SpatialVector,
+    SpatialMatrix,
+];
 const XFORM: &[Class] = &[Transform];
 const XFORM_OR_MAT4: &[Class] = &[Transform, Matrix4];
 const QUAT: &[Class] = &[Quaternion];

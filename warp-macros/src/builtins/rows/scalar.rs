@@ -92,11 +92,13 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // operator: truncated remainder for integers (a fault on zero), C `fmod` for floats, and
     // `%`'s adjoint and tangent.
     "mod":        NUMBER,         (T, T) -> T,              "scalar", Adjoint, operator(BinOp::Rem);
-    // lerp and inverse take transforms too (wp_transform.h: the emitter adds the section where
-    // a value is a transform). lerp(a, b, t) = a + t (b - a).
+    // lerp takes transforms too (wp_transform.h: the emitter adds the section where a value
+    // is a transform); matrices, quaternions and spatial types lane by lane (wp_scalar.h, whose
+    // core header defines those types). lerp(a, b, t) = a (1 - t) + b t, whose tangent is
+    // a' + (b' - a') t + (b - a) t' (the scalar on the right: quaternions have `q * s` only).
     "lerp":       LERP,           (T, T, ScalarOfT) -> T,   "scalar", Adjoint,
         tangent(Tangent::Rule(Add(
-            &Add(&D0, &Mul(&A2, &Sub(&D1, &D0))),
+            &Add(&D0, &Mul(&Sub(&D1, &D0), &A2)),
             &Mul(&Sub(&A1, &A0), &D2),
         ))),
         method;

@@ -20,4 +20,12 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // Warp's `@wp.func`s of math.py; transforms carry no tangents yet.
     "transform_twist": XFORM, (T, SVecOfT) -> SVecOfT, "spatial", Adjoint, no_tangent;
     "transform_wrench": XFORM, (T, SVecOfT) -> SVecOfT, "spatial", Adjoint, no_tangent;
+    // Warp's `@wp.func` of math.py: `v + w × r` of the twist `(w, v)`. Linear in the twist,
+    // so its tangent is the builtin of the twist's tangent plus `w × r'`.
+    "velocity_at_point": SVEC, (T, Vec3OfT) -> Vec3OfT, "spatial", Adjoint,
+        tangent(Tangent::Rule(Add(
+            &This(&[D0, A1]),
+            &Call("cross", &[Call("spatial_top", &[A0]), D1]),
+        ))),
+        method;
 };
