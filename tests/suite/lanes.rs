@@ -193,6 +193,7 @@ fn spatial_lanes(dev: &wp::Device) {
 struct Body {
     x: Vec3,
     w: f32,
+    r: Mat3,
 }
 
 /// `v[k] += x` through a `&mut` parameter.
@@ -213,6 +214,10 @@ fn k_places(k: Array<i32>, bodies: Array<Body>, xs: Array<Vec3>) {
     bodies[i].w = b.x[j] + bodies[i].x[(j + 1) % 3];
     xs[i][j] *= 4.0;
     bump(&mut xs[i], (j + 2) % 3, b.w);
+    // A matrix field: bound with its type, then indexed by entry.
+    let mut r: Mat3 = bodies[i].r;
+    r[(j, (j + 1) % 3)] += b.w;
+    bodies[i].r = r;
 }
 
 fn places_with_lanes(dev: &wp::Device) {
@@ -221,6 +226,7 @@ fn places_with_lanes(dev: &wp::Device) {
         .map(|k| Body {
             x: Vec3::new(1.0, 2.0, 3.0) * (k as f32 + 1.0),
             w: 0.5 + k as f32,
+            r: Mat3::from_diagonal(Vec3::splat(k as f32)),
         })
         .collect();
     let x0 = [Vec3::ONE, Vec3::new(1.0, 2.0, 3.0), Vec3::splat(-2.0)];
@@ -232,6 +238,8 @@ fn places_with_lanes(dev: &wp::Device) {
         let mut want = b0[i];
         want.x[(j + 1) % 3] -= 1.0;
         want.w = b0[i].w + want.x[(j + 1) % 3];
+        // Row j, column j + 1: lane j of that column.
+        want.r.col_mut((j + 1) % 3)[j] += b0[i].w;
         assert_eq!(b1[i], want, "body {i}");
         let mut x = x0[i];
         x[j] *= 4.0;
