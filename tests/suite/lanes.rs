@@ -14,6 +14,7 @@ backend_tests!(
     every_vector_type,
     spatial_lanes,
     places_with_lanes,
+    lanes_in_a_tiled_kernel,
     index_out_of_range_faults,
     gradients_route_lane_by_lane,
     gradient_of_a_quadratic_form,
@@ -245,6 +246,35 @@ fn places_with_lanes(dev: &wp::Device) {
         x[j] *= 4.0;
         x[(j + 2) % 3] += b0[i].w;
         assert_eq!(x1[i], x, "x {i}");
+    }
+}
+
+/// Lanes in a tiled kernel's per-lane code, around a block-cooperative sum.
+#[wp::kernel(block_dim = 64)]
+fn k_tiled_lanes(x: Array<Vec3>, out: Array<f32>, n: usize) {
+    let b = tid();
+    let i = b * 64 + lane();
+    let mut v = if i < n { x[i] } else { Vec3::ZERO };
+    let k = i % 3;
+    v[k] *= 2.0;
+    let s = tile_sum(tile(1.0f32));
+    if i < n {
+        out[i] = (v[k] + v[(k + 1) % 3]) * s[0];
+    }
+}
+
+/// The block sum of 64 ones is 64, exactly: every value is the host's, bit for bit.
+fn lanes_in_a_tiled_kernel(dev: &wp::Device) {
+    let n = 100;
+    let xs: Vec<Vec3> = (0..n)
+        .map(|k| Vec3::new(k as f32, 0.5 * k as f32, -0.25))
+        .collect();
+    let out = zeros::<f32, 1>(n, dev);
+    wp::launch_tiled(k_tiled_lanes, 2, (&arr(&xs, dev), &out, n), 64, dev).unwrap();
+    for (i, got) in host(&out).iter().enumerate() {
+        let (mut v, k) = (xs[i], i % 3);
+        v[k] *= 2.0;
+        assert_eq!(*got, (v[k] + v[(k + 1) % 3]) * 64.0, "lane {i}");
     }
 }
 
