@@ -246,6 +246,54 @@ fn spatial(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = spatial_dot(2.0 * p, q) + spatial_dot(sm[i % 2] * sa[j], w);
 }
 
+/// Lanes at run-time indices, as Warp code writes them: a vector's `v[k]` read, written and
+/// updated, a matrix-vector product by loops over `m[(r, c)]`, a quaternion's lane (x, y, z,
+/// w), a 4x4 matrix's entries and an integer vector's lanes, a spatial vector's lanes and a
+/// spatial matrix's rows and entries.
+#[wp::kernel]
+fn lanes(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let k = i % 3;
+    let mut v = vec3(a, a * 0.5, -a);
+    v[k] += 1.5;
+    v[(k + 1) % 3] = v[k] * 2.0;
+    let mut m = Mat3::from_cols(v, vec3(0.25, a, 2.0), vec3(-1.0, 0.5, a * a));
+    let mut y = Vec3::ZERO;
+    for r in 0..3 {
+        for c in 0..3 {
+            y[r] += m[(r, c)] * v[c];
+        }
+    }
+    m[(k, 2)] -= y[k];
+    let mut q = Quat::from_xyzw(a, 0.5, -0.25, 1.0);
+    q[3 - k] *= 2.0;
+    let mut w = Vec4::new(1.0, a, 2.0, -a);
+    let mut m4 = Mat4::IDENTITY * a;
+    for c in 0..4usize {
+        m4[(c, (c + k) % 4)] += w[c];
+        w[c] = q[c] + m4[(3, c)];
+    }
+    let mut iv = IVec3::new(1, 2, 3);
+    iv[k] = iv[(k + 2) % 3] * 7;
+    let mut sv = spatial_vector(a, 1.0, 2.0, 3.0, -a, 0.5);
+    let mut sm = SpatialMatrix::IDENTITY * a;
+    for r in 0..6usize {
+        sv[r] += sm[(r, (r + k) % 6)];
+        sm[r][k] = sv[r];
+    }
+    sm[(5 - k, k)] = 4.0;
+    let row = sm[k];
+    out[(i, 0)] = y[0];
+    out[(i, 1)] = y[1];
+    out[(i, 2)] = y[2];
+    out[(i, 3)] = m[(k, 2)] + m[(2, k)];
+    out[(i, 4)] = q[k] + q[3];
+    out[(i, 5)] = w[0] + w[3] + m4[(k, 3)];
+    out[(i, 6)] = iv[k] as f32 + iv[(k + 1) % 3] as f32;
+    out[(i, 7)] = sv[5] + row[k] + sm[(2, 2)] + sv[k];
+}
+
 /// The decompositions: tuple results destructured (with `_` and an annotation), inside a loop
 /// that overwrites them, and every output written out.
 #[wp::kernel]
@@ -1035,6 +1083,23 @@ fn spatial_types_match_the_cpu_backend() {
     let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
     let host = run_on_host::<spatial>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
     wp::launch(spatial, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+/// Lanes at run-time indices (`lanes`): the generated CUDA's `local_get`/`local_set`/
+/// `col_get`/`col_set` against the CPU's `Lanes` and `Columns`, bit for bit.
+#[test]
+fn lanes_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..20).map(|k| k as f32 * 0.37 - 3.0).collect();
+    xs.extend([0.0, -0.0, 1.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<lanes>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(lanes, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }

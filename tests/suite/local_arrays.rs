@@ -259,7 +259,9 @@ fn index_out_of_range_faults(dev: &wp::Device) {
     );
     let msg = err.to_string();
     assert!(
-        msg.contains("kernel `k_oob`: index 4 is out of bounds for a local array of length 4"),
+        msg.contains(
+            "kernel `k_oob`: index 4 is out of bounds for a local array or vector of length 4"
+        ),
         "{msg}"
     );
 }

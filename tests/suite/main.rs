@@ -108,6 +108,7 @@ mod hash_grid;
 mod host_objects;
 mod interop;
 mod jvp;
+mod lanes;
 mod launch;
 mod lbvh;
 mod lerp;

@@ -107,7 +107,9 @@ pub enum FaultKind {
         /// The tile's rank, 1..=4.
         rank: u8,
     },
-    /// An index outside a fixed-size local array (`a[i]` of `let mut a = [0.0f32; 8];`).
+    /// An index outside a fixed-size local array (`a[i]` of `let mut a = [0.0f32; 8];`), or
+    /// outside the lanes of a vector, quaternion or matrix (`v[i]`, `m[(i, j)]`; `len` is the
+    /// lane count, or a matrix's number of rows or columns).
     LocalIndex {
         /// The index as given (saturated to `i64`).
         index: i64,
@@ -242,8 +244,8 @@ impl Fault {
             }
             FaultKind::LocalIndex { index, len, line } => write!(
                 f,
-                "kernel `{}`: index {index} is out of bounds for a local array of length {len} \
-                 (line {line})",
+                "kernel `{}`: index {index} is out of bounds for a local array or vector of \
+                 length {len} (line {line})",
                 self.kernel
             ),
             FaultKind::AssertionFailed {

@@ -1956,6 +1956,56 @@ WP_FN T& local_at(local_array_t<T, N>& a, i64 i) {
   return a.data[(u64)i < (u64)N ? i : 0];
 }
 
+// Lanes at run-time indices (warp_core::local_array::Lanes and Columns): a kernel's `v[i]` of
+// a vector, quaternion (x, y, z, w) or spatial vector, a spatial matrix's row `m[i]`, and a
+// glam matrix's column (`col_get`: `m[(i, j)]` is lane i of column j), with local arrays'
+// faults and `local_at`'s in-bounds rule for adjoints.
+#define WP_LANES(PRE, T, E, NN, GET, AT)                                          \
+  WP_FN E PRE##_get(const T& a, i64 i, i64 line, ctx_t* ctx) {                     \
+    if ((u64)i < (u64)(NN)) return GET(a, (int)i);                                 \
+    detail::local_index_fault(i, NN, line, ctx);                                   \
+    return E{};                                                                    \
+  }                                                                                \
+  WP_FN void PRE##_set(T& a, i64 i, const E& v, i64 line, ctx_t* ctx) {            \
+    if ((u64)i < (u64)(NN)) {                                                      \
+      AT(a, (int)i) = v;                                                           \
+      return;                                                                      \
+    }                                                                              \
+    detail::local_index_fault(i, NN, line, ctx);                                   \
+  }                                                                                \
+  WP_FN E& PRE##_at(T& a, i64 i) { return AT(a, (u64)i < (u64)(NN) ? (int)i : 0); }
+#define WP_VEC_LANES(T) \
+  WP_LANES(local, T, vec_traits<T>::scalar, vec_traits<T>::N, vec_traits<T>::get, vec_traits<T>::at)
+#define WP_MAT_LANES(M) \
+  WP_LANES(col, M, mat_traits<M>::column, mat_traits<M>::N, mat_traits<M>::get, mat_traits<M>::at)
+WP_VEC_LANES(Vec2)
+WP_VEC_LANES(Vec3)
+WP_VEC_LANES(Vec4)
+WP_VEC_LANES(DVec2)
+WP_VEC_LANES(DVec3)
+WP_VEC_LANES(DVec4)
+WP_VEC_LANES(IVec2)
+WP_VEC_LANES(IVec3)
+WP_VEC_LANES(IVec4)
+WP_VEC_LANES(UVec2)
+WP_VEC_LANES(UVec3)
+WP_VEC_LANES(UVec4)
+WP_VEC_LANES(Quat)
+WP_VEC_LANES(DQuat)
+WP_VEC_LANES(SpatialVector)
+WP_VEC_LANES(DSpatialVector)
+WP_LANES(local, SpatialMatrix, SpatialVector, 6, SpatialMatrix_row, SpatialMatrix_row_at)
+WP_LANES(local, DSpatialMatrix, DSpatialVector, 6, DSpatialMatrix_row, DSpatialMatrix_row_at)
+WP_MAT_LANES(Mat2)
+WP_MAT_LANES(Mat3)
+WP_MAT_LANES(Mat4)
+WP_MAT_LANES(DMat2)
+WP_MAT_LANES(DMat3)
+WP_MAT_LANES(DMat4)
+#undef WP_VEC_LANES
+#undef WP_MAT_LANES
+#undef WP_LANES
+
 // ------------------------------------------------------------------------------------------
 // Range loops (warp_core::RangeProg)
 // ------------------------------------------------------------------------------------------

@@ -156,7 +156,8 @@ pub enum StmtKind {
         path: Vec<String>,
         value: VarId,
     },
-    /// `var[index] = value` on a local array (`Ty::LocalArray`): an overwrite of the array
+    /// `var[index] = value` on a local array (`Ty::LocalArray`) or a value with lanes
+    /// (`Ty::lane_elems`: `v[i] = x`, a glam matrix's column `index`): an overwrite of the
     /// variable (the adjoint treats it as `var = var with element index set`), checked
     /// against the length: an index outside it is a `LocalIndex` fault naming the line.
     SetElem {
@@ -305,7 +306,8 @@ pub enum Op {
     /// returns one: its result, then each such parameter's final value (see `front/lower.rs`).
     Tuple(Vec<VarId>),
     /// `a[index]` of a local array (`Ty::LocalArray`, or `Deferred`: a struct's array field,
-    /// `s.w[k]`), checked against its length (a `LocalIndex` fault naming the line).
+    /// `s.w[k]`) or of a value with lanes (`Ty::lane_elems`: a vector's lane, a glam
+    /// matrix's column), checked against its length (a `LocalIndex` fault naming the line).
     Index {
         array: VarId,
         index: VarId,

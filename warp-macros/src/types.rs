@@ -580,6 +580,37 @@ impl Ty {
     }
 }
 
+impl Ty {
+    /// What a run-time index reaches in a value with lanes (Warp's `v[i]`): the element type
+    /// and how many there are. A vector's or quaternion's lanes (x, y, z, w, glam's order)
+    /// and a spatial vector's six are scalars; a glam matrix's elements are its columns (its
+    /// storage: `m[(i, j)]` is lane i of column j) and a spatial matrix's its rows (`m[(i,
+    /// j)]` is lane j of row i).
+    pub fn lane_elems(&self) -> Option<(Ty, usize)> {
+        match self {
+            Ty::Vector(s, n) => Some((Ty::Scalar(*s), *n as usize)),
+            Ty::Quat(s) => Some((Ty::Scalar(*s), 4)),
+            Ty::Matrix(s, n) => Some((Ty::Vector(*s, *n), *n as usize)),
+            Ty::SpatialVector(s) => Some((Ty::Scalar(*s), 6)),
+            Ty::SpatialMatrix(s) => Some((Ty::SpatialVector(*s), 6)),
+            _ => None,
+        }
+    }
+
+    /// The member that element `k` of [`Ty::lane_elems`] is (`"y"`, `"x_axis"`, `"3"`): a
+    /// literal index is a field on both back ends, checked when the macro runs.
+    pub fn lane_member(&self, k: usize) -> Option<String> {
+        let named = |names: &[&str], n: usize| (k < n).then(|| names[k].to_string());
+        match self {
+            Ty::Vector(_, n) => named(&["x", "y", "z", "w"], *n as usize),
+            Ty::Quat(_) => named(&["x", "y", "z", "w"], 4),
+            Ty::Matrix(_, n) => named(&["x_axis", "y_axis", "z_axis", "w_axis"], *n as usize),
+            Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => (k < 6).then(|| k.to_string()),
+            _ => None,
+        }
+    }
+}
+
 /// Whether `name` is a lane of a spatial vector or a row of a spatial matrix: `"0"` to `"5"`.
 fn spatial_lane(name: &str) -> bool {
     matches!(name, "0" | "1" | "2" | "3" | "4" | "5")

@@ -608,9 +608,13 @@ impl<'a> Emitter<'a> {
             StmtKind::SetElem { var, index, value } => {
                 let (a, i, val) = (self.var(*var), self.var(*index), self.var(*value));
                 let line = sp.start().line;
+                let set = match self.f.vars[*var].ty {
+                    Ty::Matrix(..) => "col_set",
+                    _ => "local_set",
+                };
                 self.line(
                     sp,
-                    &format!("wp::local_set({a}, (wp::i64)({i}), {val}, {line}, __ctx);"),
+                    &format!("wp::{set}({a}, (wp::i64)({i}), {val}, {line}, __ctx);"),
                 );
             }
             StmtKind::If { cond, then, els } => {
@@ -927,7 +931,11 @@ impl<'a> Emitter<'a> {
             ),
             Op::Member(v, m) => format!("{}.{}", self.var(*v), cpp_member(m)),
             Op::Index { array, index } => format!(
-                "wp::local_get({}, (wp::i64)({}), {}, __ctx)",
+                "wp::{}({}, (wp::i64)({}), {}, __ctx)",
+                match self.f.vars[*array].ty {
+                    Ty::Matrix(..) => "col_get",
+                    _ => "local_get",
+                },
                 self.var(*array),
                 self.var(*index),
                 self.stmt_line

@@ -363,7 +363,11 @@ impl<'a> Printer<'a> {
             AKind::SetElem { var, index, value } => {
                 let (a, i, v) = (self.var(*var), self.var(*index), self.var(*value));
                 let line = sp.start().line;
-                format!("wp::local_set({a}, (wp::i64)({i}), {v}, {line}, __ctx);")
+                let set = match self.f().vars[*var].ty {
+                    Ty::Matrix(..) => "col_set",
+                    _ => "local_set",
+                };
+                format!("wp::{set}({a}, (wp::i64)({i}), {v}, {line}, __ctx);")
             }
             AKind::ClearAdjElem { var, index } => {
                 let e = self.adj_elem(*var, *index);
@@ -603,7 +607,11 @@ impl<'a> Printer<'a> {
     /// `local_at` keeps the access in bounds regardless, since a faulting thread goes on).
     fn adj_elem(&self, var: VarId, index: VarId) -> String {
         let (a, i) = (self.adj(var), self.var(index));
-        format!("wp::local_at({a}, (wp::i64)({i}))")
+        let at = match self.f().ty(var) {
+            Ty::Matrix(..) => "col_at",
+            _ => "local_at",
+        };
+        format!("wp::{at}({a}, (wp::i64)({i}))")
     }
 
     pub(super) fn grad_arg(&self, g: &GradArg) -> String {

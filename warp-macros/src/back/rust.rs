@@ -108,7 +108,11 @@ impl<'a> RustEmitter<'a> {
             StmtKind::SetElem { var, index, value } => {
                 let (a, i, val) = (self.var(*var), self.var(*index), self.var(*value));
                 let (name, line) = (self.name_lit(), line_lit(sp));
-                quote_spanned!(sp=> __wp::local_array::set(&mut #a, #i, #val, #name, #line)?;)
+                let set = match self.f.vars[*var].ty {
+                    Ty::Matrix(..) => quote!(col_set),
+                    _ => quote!(set),
+                };
+                quote_spanned!(sp=> __wp::local_array::#set(&mut #a, #i, #val, #name, #line)?;)
             }
             StmtKind::If { cond, then, els } => {
                 let c = self.var(*cond);
@@ -419,7 +423,14 @@ impl<'a> RustEmitter<'a> {
             }
             Op::Index { array, index } => {
                 let (a, i, line) = (self.var(*array), self.var(*index), line_lit(sp));
-                quote_spanned!(sp=> __wp::local_array::get(&#a, #i, #name, #line)?)
+                // A glam matrix's element is a column, read by its own function: `get` takes
+                // no matrix, so a struct field's matrix (`s.m[i]`, typed only by rustc) does
+                // not compile, as a single index of a matrix does not (`lane_index`).
+                let get = match self.f.vars[*array].ty {
+                    Ty::Matrix(..) => quote!(col_get),
+                    _ => quote!(get),
+                };
+                quote_spanned!(sp=> __wp::local_array::#get(&#a, #i, #name, #line)?)
             }
             // Printed as the user's literal, so that rustc checks its fields at their spans.
             Op::Construct {

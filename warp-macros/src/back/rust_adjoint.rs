@@ -10,6 +10,7 @@
 use super::rust::{member_tokens, ty_tokens, RustEmitter};
 use crate::ir::*;
 use crate::middle::adjoint::*;
+use crate::types::Ty;
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote, quote_spanned, ToTokens};
 
@@ -284,7 +285,11 @@ impl Printer<'_> {
     /// replay; `at_mut` keeps the access in bounds regardless).
     fn adj_elem(&self, var: VarId, index: VarId) -> TokenStream {
         let (a, i) = (self.adj(var), self.var(index));
-        quote!(__wp::local_array::at_mut(&mut #a, #i))
+        let at = match self.f().ty(var) {
+            Ty::Matrix(..) => quote!(col_at_mut),
+            _ => quote!(at_mut),
+        };
+        quote!(__wp::local_array::#at(&mut #a, #i))
     }
 
     /// A temporary or an adjoint as a `&mut` argument; an array's gradient view by value.

@@ -316,12 +316,22 @@ impl Lowerer {
                     }
                 }
                 let base = self.base_expr(&ix.expr)?;
-                // `v[3]`, `m[i][j]`, `m[(i, j)]`: members of a spatial value.
-                if let Some(lanes) = super::places::spatial_index(&self.ty(base), &ix.index)? {
+                // `v[i]`, `q[3]`, `m[(i, j)]`, `sm[i][j]`: lanes of a vector, quaternion or
+                // matrix (members at literal indices, checked elements at run-time ones).
+                let base_ty = self.ty(base);
+                if base_ty.lane_elems().is_some() {
                     let mut v = base;
-                    for m in lanes {
-                        let t = self.member_ty(&self.ty(v), &m, span)?;
-                        v = self.def(Op::Member(v, m), t, span);
+                    for step in self.lane_steps(&base_ty, &ix.index)? {
+                        v = match step {
+                            places::Step::Field(m) => {
+                                let t = self.member_ty(&self.ty(v), &m, span)?;
+                                self.def(Op::Member(v, m), t, span)
+                            }
+                            places::Step::Elem(index) => {
+                                let t = self.local_elem_ty(v);
+                                self.def(Op::Index { array: v, index }, t, span)
+                            }
+                        };
                     }
                     return Ok(v);
                 }

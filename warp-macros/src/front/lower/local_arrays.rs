@@ -12,11 +12,12 @@ use crate::front::signature::{
 use crate::types::Dim;
 
 impl Lowerer {
-    /// The element type of local array `v` (`Deferred` for anything else).
+    /// The element type of local array `v`, or of a value with lanes (`Ty::lane_elems`: a
+    /// vector's scalar, a glam matrix's column); `Deferred` for anything else.
     pub(super) fn local_elem_ty(&self, v: VarId) -> Ty {
         match self.ty(v) {
             Ty::LocalArray(e, _) => *e,
-            _ => Ty::Deferred,
+            t => t.lane_elems().map_or(Ty::Deferred, |(e, _)| e),
         }
     }
 
@@ -25,7 +26,9 @@ impl Lowerer {
         if let Expr::Tuple(_) = strip(e) {
             return err(
                 e.span(),
-                "a local array has one dimension: index an array of arrays as `a[i][j]`",
+                "a local array has one dimension: index an array of arrays as `a[i][j]` \
+                 (a matrix whose type the macro cannot see, a struct's field or a func's result, \
+                 takes `m[(i, j)]` once bound with its type: `let m: Mat3 = s.m;`)",
             );
         }
         let v = self.expr(e, Some(&USIZE))?;

@@ -2,8 +2,9 @@
 //! array elements of either), `=` and the compound assignments, reading and writing a place
 //! (writing a field of an array element loads, sets and stores the element; writing inside
 //! an element of a local array reads, sets and writes back the element), the types of
-//! members, array indexing with one index variable per dimension, and a spatial value's
-//! lanes by literal index (members).
+//! members, array indexing with one index variable per dimension, and the lanes of vectors,
+//! quaternions and matrices (`v[i]`, `m[(i, j)]`: members at literal indices, elements at
+//! run-time ones, as a local array's).
 
 use super::typing::flex_literal;
 
@@ -240,14 +241,13 @@ impl Lowerer {
             }
             Expr::Index(ix) => {
                 let base = self.peek_place_ty(&ix.expr);
-                // `v[3] = x`, `m[i][j] += x`, `a[i][3] = x`: members of a spatial value in a
-                // place.
-                if let Some(lanes) = base.as_ref().map(|t| spatial_index(t, &ix.index)) {
-                    if let Some(lanes) = lanes? {
-                        let mut inner = self.place(&ix.expr)?;
-                        inner.path_mut().extend(lanes.into_iter().map(Step::Field));
-                        return Ok(inner);
-                    }
+                // `v[i] = x`, `m[(i, j)] += x`, `a[k][3] = x`: lanes of a vector, quaternion
+                // or matrix in a place (members at literal indices, elements at others).
+                if let Some(t) = base.as_ref().filter(|t| t.lane_elems().is_some()) {
+                    let mut inner = self.place(&ix.expr)?;
+                    let steps = self.lane_steps(t, &ix.index)?;
+                    inner.path_mut().extend(steps);
+                    return Ok(inner);
                 }
                 // An element of a local array (or of a struct's array field, whose type only
                 // the target compilers see): a step of the array's own place.
@@ -297,7 +297,10 @@ impl Lowerer {
                 Step::Elem(_) => match t {
                     Ty::LocalArray(e, _) => *e,
                     Ty::Deferred => Ty::Deferred,
-                    t => return err(span, format!("`{t}` cannot be indexed")),
+                    t => match t.lane_elems() {
+                        Some((e, _)) => e,
+                        None => return err(span, format!("`{t}` cannot be indexed")),
+                    },
                 },
             };
         }
@@ -409,10 +412,13 @@ impl Lowerer {
             Expr::Index(ix) => match self.peek_place_ty(&ix.expr)? {
                 Ty::Array(e, _) | Ty::LocalArray(e, _) => Some(*e),
                 Ty::Deferred => Some(Ty::Deferred),
-                t => spatial_index(&t, &ix.index)
+                t => lane_index(&t, &ix.index)
                     .ok()??
                     .iter()
-                    .try_fold(t, |t, m| t.member_ty(m)),
+                    .try_fold(t, |t, step| match step {
+                        LaneStep::Member(m) => t.member_ty(m),
+                        LaneStep::Dyn(_) => t.lane_elems().map(|(e, _)| e),
+                    }),
             },
             _ => None,
         }
@@ -483,8 +489,8 @@ impl Lowerer {
     }
 
     /// `a[i]`, `a[(i, j)]`: the array variable and one index variable per dimension; or a
-    /// local array and its index (`a[i]`). A spatial value's lanes (`v[3]`) are members,
-    /// resolved by the callers through [`spatial_index`] before.
+    /// local array and its index (`a[i]`). The lanes of a vector, quaternion or matrix
+    /// (`v[i]`) are resolved by the callers through [`Lowerer::lane_steps`] before.
     pub(super) fn array_index(&mut self, ix: &syn::ExprIndex) -> R<Indexed> {
         let array = self.expr(&ix.expr, None)?;
         self.array_index_at(array, ix)
@@ -502,12 +508,6 @@ impl Lowerer {
             // only the target compilers see (rustc refuses any other value there).
             Ty::Deferred => {
                 return Ok(Indexed::Local(array, self.local_index(&ix.index)?));
-            }
-            t @ (Ty::Vector(..) | Ty::Quat(_)) => {
-                return err(
-                    ix.expr.span(),
-                    format!("`{t}` cannot be indexed: vectors use .x .y .z .w"),
-                )
             }
             t => return err(ix.expr.span(), format!("`{t}` cannot be indexed")),
         };
@@ -541,51 +541,121 @@ impl Lowerer {
     }
 }
 
-/// The members `base[index]` names where `base` is a spatial value: lane `k` of a spatial
-/// vector (`v[k]`: `["k"]`), row `i` of a spatial matrix (`m[i]`) or its entry (`m[(i, j)]`:
-/// `["i", "j"]`; `m[i][j]` is the row's lane). Indices are integer literals, checked here: a
-/// lane is a field of the type on both back ends, so no index is checked at run time. `None`
-/// for a base of another type.
-pub(super) fn spatial_index(base: &Ty, index: &Expr) -> R<Option<Vec<String>>> {
-    let (what, parts) = match base {
-        Ty::SpatialVector(_) => ("a spatial vector's lane", 1),
-        Ty::SpatialMatrix(_) => ("a spatial matrix's row", 2),
-        _ => return Ok(None),
-    };
-    let elems: Vec<&Expr> = match strip(index) {
-        Expr::Tuple(t) if parts == 2 => t.elems.iter().collect(),
+/// One step of `base[index]` into a value with lanes: a member (a literal index, checked when
+/// the macro runs) or an element at a run-time index (its expression, checked when it runs).
+pub(super) enum LaneStep<'e> {
+    Member(String),
+    Dyn(&'e Expr),
+}
+
+/// The steps `base[index]` takes where `base` is a value with lanes ([`Ty::lane_elems`]):
+/// `v[i]` of a vector, quaternion or spatial vector (lane i; a quaternion's in glam's x, y, z,
+/// w order); `m[(i, j)]` of a matrix, row i and column j (Warp's `m[i, j]`: for glam's
+/// column-major matrices column j then its lane i, for a spatial matrix row i then its lane
+/// j); `m[i]` of a spatial matrix (row i, as Warp's and warp-core's `Index`). A glam matrix
+/// takes no single index: glam's `m[i]` is column i and Warp's `m[i]` row i, and a port that
+/// silently took either would be wrong half the time. `None` for a base of another type.
+pub(super) fn lane_index<'e>(base: &Ty, index: &'e Expr) -> R<Option<Vec<LaneStep<'e>>>> {
+    if base.lane_elems().is_none() {
+        return Ok(None);
+    }
+    let parts: Vec<&Expr> = match strip(index) {
+        Expr::Tuple(t) => t.elems.iter().collect(),
         e => vec![e],
     };
-    if elems.len() > parts {
-        return err(
-            index.span(),
-            "a spatial matrix takes two indices, `m[(i, j)]`",
-        );
-    }
-    let mut lanes = Vec::new();
-    for e in elems {
-        let k = match strip(e) {
-            Expr::Lit(syn::ExprLit {
-                lit: syn::Lit::Int(i),
-                ..
-            }) => i.base10_parse::<u64>().ok(),
-            _ => None,
-        };
-        match k {
-            Some(k) if k < 6 => lanes.push(k.to_string()),
+    let parts = match (base, parts.len()) {
+        (Ty::Matrix(..), 1) => {
+            return err(
+                index.span(),
+                format!(
+                    "`{base}` takes two indices: write `m[(i, j)]` for row i, column j (Warp's \
+                     `m[i, j]`), or name a column, `m.x_axis`; a single index is not supported, \
+                     as glam's `m[i]` is column i and Warp's `m[i]` is row i"
+                ),
+            )
+        }
+        // Column-major: the column first.
+        (Ty::Matrix(..), 2) => vec![parts[1], parts[0]],
+        (Ty::SpatialMatrix(_), 1 | 2) | (_, 1) => parts,
+        (Ty::Matrix(..), _) => {
+            return err(
+                index.span(),
+                format!("`{base}` takes two indices, `m[(i, j)]`: row i, column j"),
+            )
+        }
+        (Ty::SpatialMatrix(_), _) => {
+            return err(
+                index.span(),
+                "a spatial matrix takes one or two indices, `m[i]` (a row) or `m[(i, j)]`",
+            )
+        }
+        _ => return err(index.span(), format!("`{base}` takes one index, `v[i]`")),
+    };
+    let mut ty = base.clone();
+    let mut steps = Vec::new();
+    for e in parts {
+        let (elem, n) = ty.lane_elems().expect("a value with lanes");
+        let step = match literal_index(e) {
+            Some(k) if (0..n as i128).contains(&k) => {
+                LaneStep::Member(ty.lane_member(k as usize).expect("in range"))
+            }
             Some(k) => {
                 return err(
                     e.span(),
-                    format!("index {k} is out of range: {what} is 0 to 5"),
+                    format!(
+                        "index {k} is out of range: `{base}` is indexed 0 to {}",
+                        n - 1
+                    ),
                 )
             }
-            None => {
-                return err(
-                    e.span(),
-                    format!("{what} is indexed by an integer literal, 0 to 5 (`v[3]`, `m[(1, 2)]`): a run-time index is not supported"),
-                )
-            }
-        }
+            None => LaneStep::Dyn(e),
+        };
+        steps.push(step);
+        ty = elem;
     }
-    Ok(Some(lanes))
+    Ok(Some(steps))
+}
+
+/// An integer literal index, negated or not (`3`, `-1`).
+fn literal_index(e: &Expr) -> Option<i128> {
+    match strip(e) {
+        Expr::Lit(syn::ExprLit {
+            lit: syn::Lit::Int(i),
+            ..
+        }) => i.base10_parse::<i128>().ok(),
+        Expr::Unary(u) if matches!(u.op, syn::UnOp::Neg(_)) => literal_index(&u.expr).map(|k| -k),
+        _ => None,
+    }
+}
+
+impl Lowerer {
+    /// [`lane_index`] lowered: the steps of a place (or a read) into `base[index]`, the
+    /// run-time indices lowered in source order (`m[(i, j)]` reads `i` first, as Rust
+    /// evaluates a tuple, though a glam matrix is stepped into by `j` first).
+    pub(super) fn lane_steps(&mut self, base: &Ty, index: &Expr) -> R<Vec<Step>> {
+        let lanes = lane_index(base, index)?.expect("a value with lanes");
+        let mut dyns: Vec<(usize, &Expr)> = lanes
+            .iter()
+            .enumerate()
+            .filter_map(|(k, s)| match s {
+                LaneStep::Dyn(e) => Some((k, *e)),
+                LaneStep::Member(_) => None,
+            })
+            .collect();
+        if matches!(base, Ty::Matrix(..)) {
+            dyns.reverse();
+        }
+        let mut index_of = vec![None; lanes.len()];
+        for (k, e) in dyns {
+            index_of[k] = Some(self.local_index(e)?);
+        }
+        Ok(lanes
+            .into_iter()
+            .zip(index_of)
+            .map(|(s, i)| match s {
+                LaneStep::Member(m) => Step::Field(m),
+                LaneStep::Dyn(_) => Step::Elem(i.expect("lowered")),
+            })
+            .collect())
+    }
 }

@@ -627,3 +627,61 @@ fn local_array_misuse_is_refused_at_the_use() {
         assert!(e.iter().any(|e| e.contains(want)), "{text}: {e:?}");
     }
 }
+
+/// A literal lane index is a member; a run-time one an element (`Op::Index`, `SetElem`), and
+/// a glam matrix's entry `m[(i, j)]` is element `i` of column `j`.
+#[test]
+fn lanes_lower_to_members_and_elements() {
+    let f = lower(parse_quote! {
+        fn k(v: Vec3, m: Mat3, q: Quat, k: i32, out: Array<f32>) {
+            let a = v[1];
+            let b = v[k];
+            let c = m[(k, 2)];
+            let d = q[3];
+            let mut w = v;
+            w[k] += a;
+            out[0] = a + b + c + d + w.x;
+        }
+    });
+    let def = |name: &str| {
+        let mut found = None;
+        walk_stmts(&f.body, &mut |s| {
+            if let StmtKind::Assign { dst, op, .. } = &s.kind {
+                if f.vars[*dst].name.as_deref() == Some(name) {
+                    found = Some(op.clone());
+                }
+            }
+        });
+        found.unwrap_or_else(|| panic!("no `{name}`"))
+    };
+    // Named locals are copies of the expression's temporary: follow one copy.
+    let through = |op: Op| match op {
+        Op::Copy(t) => {
+            let mut found = None;
+            walk_stmts(&f.body, &mut |s| {
+                if let StmtKind::Assign { dst, op, .. } = &s.kind {
+                    if *dst == t {
+                        found = Some(op.clone());
+                    }
+                }
+            });
+            found.expect("a temporary's definition")
+        }
+        op => op,
+    };
+    assert!(matches!(through(def("a")), Op::Member(_, m) if m == "y"));
+    assert!(matches!(through(def("d")), Op::Member(_, m) if m == "w"));
+    assert!(matches!(through(def("b")), Op::Index { .. }));
+    let Op::Index { array, .. } = through(def("c")) else {
+        panic!("`m[(k, 2)]` is an element")
+    };
+    assert_eq!(f.vars[array].ty.to_string(), "Vec3", "column 2 of m");
+    let mut sets = 0;
+    walk_stmts(&f.body, &mut |s| {
+        if let StmtKind::SetElem { var, .. } = &s.kind {
+            assert_eq!(f.vars[*var].name.as_deref(), Some("w"));
+            sets += 1;
+        }
+    });
+    assert_eq!(sets, 1);
+}
