@@ -281,8 +281,10 @@ fn toks<T: Val>(v: &T) -> Vec<Tok> {
 /// (and, for `erfinv`/`erfcinv`, the same transcribed algorithm), and they match exactly; against a GPU (CUDA's libdevice,
 /// documented to 1 to 4 ulp) they are compared within 8 ulps of `max(|want|, 8)`: the term
 /// added is at most `|want| + |starting adjoint|` in size, and starting adjoints are below 4.
-const LOOSE_ON_GPU: [&str; 19] = [
+const LOOSE_ON_GPU: [&str; 21] = [
     "adj_quat_rpy",
+    "adj_quat_from_euler",
+    "adj_quat_to_euler",
     "adj_quat_from_axis_angle",
     "adj_quat_slerp",
     "adj_exp",
@@ -572,6 +574,49 @@ fn bin<A: Val, B: Val, R: Val>(s: &mut Suite, name: &str, f: fn(A, B, &mut A, &m
 
 type Tri<A, B, C, R> = fn(A, B, C, &mut A, &mut B, &mut C, R);
 
+type Euler<A, R> = fn(A, i32, i32, i32, &mut A, &mut i32, &mut i32, &mut i32, R);
+
+/// `adj_<name>(a, i, j, k, adj_a, adj_i, adj_j, adj_k, adj_ret)` of `quat_from_euler` and
+/// `quat_to_euler`, the axis indices taken in turn from every Tait-Bryan and some proper
+/// sequences, and some no valid sequence (repeated, out of range: Warp's branches still give
+/// both sides the same steps).
+fn euler<A: Val, R: Val>(s: &mut Suite, name: &str, f: Euler<A, R>) {
+    let tys = [A::TY, i32::TY, i32::TY, i32::TY];
+    let op = s.sig(&call(name), &tys, &tys, Some(R::TY));
+    let seqs: [[i32; 3]; 11] = [
+        [0, 1, 2],
+        [0, 2, 1],
+        [1, 0, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [2, 1, 0],
+        [0, 1, 0],
+        [1, 2, 1],
+        [2, 0, 2],
+        [0, 0, 1],
+        [5, -1, 2],
+    ];
+    for (n, a) in s.inputs1::<A>().into_iter().enumerate() {
+        let [i, j, k] = seqs[n % seqs.len()];
+        let (mut aa, g) = (s.g.adj::<A>(), s.g.ret::<R>());
+        let (mut ai, mut aj, mut ak) = (0i32, 0i32, 0i32);
+        let words = [
+            a.bits(),
+            i.bits(),
+            j.bits(),
+            k.bits(),
+            aa.bits(),
+            ai.bits(),
+            aj.bits(),
+            ak.bits(),
+            g.bits(),
+        ];
+        f(a, i, j, k, &mut aa, &mut ai, &mut aj, &mut ak, g);
+        let got = [toks(&aa), toks(&ai), toks(&aj), toks(&ak)].concat();
+        s.case(op, &words.concat(), got);
+    }
+}
+
 /// `adj_<name>(a, b, c, adj_a, adj_b, adj_c, adj_ret)`.
 fn tri<A: Val, B: Val, C: Val, R: Val>(s: &mut Suite, name: &str, f: Tri<A, B, C, R>) {
     let tys = [A::TY, B::TY, C::TY];
@@ -796,6 +841,8 @@ fn linalg(s: &mut Suite) {
             un::<$q, $m>(s, "adj_quat_to_matrix", ad::adj_quat_to_matrix::<$q>);
             un::<$m, $q>(s, "adj_quat_from_matrix", ad::adj_quat_from_matrix::<$q>);
             tri::<$q, $q, $s, $q>(s, "adj_quat_slerp", ad::adj_quat_slerp::<$q>);
+            euler::<$v, $q>(s, "adj_quat_from_euler", ad::adj_quat_from_euler::<$v>);
+            euler::<$q, $v>(s, "adj_quat_to_euler", ad::adj_quat_to_euler::<$q>);
         )*};
     }
     quats!(Quat: Vec3, Mat3, f32, DQuat: DVec3, DMat3, f64);

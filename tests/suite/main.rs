@@ -96,6 +96,7 @@ mod decomp;
 mod deterministic;
 mod dlpack;
 mod errors;
+mod euler;
 mod extreme;
 mod f16;
 mod func_grad;

@@ -280,4 +280,80 @@ WP_ADJ_QUAT_LINALG(Quat, Vec3, Mat3, f32)
 WP_ADJ_QUAT_LINALG(DQuat, DVec3, DMat3, f64)
 #undef WP_ADJ_QUAT_LINALG
 
+// ----- quat_from_euler, quat_to_euler: warp-core/src/adjoint/euler.rs, step for step -----
+#define WP_ADJ_EULER(Q, V3, S)                                                                   \
+  WP_FN void adj_quat_from_euler(const V3& e, i32 i, i32 j, i32 k, V3& adj_e, i32&, i32&, i32&,  \
+                                 const Q& g) {                                                   \
+    const i32 idx[3] = {i, j, k};                                                                \
+    S h[3];                                                                                      \
+    Q qs[3];                                                                                     \
+    for (int n = 0; n < 3; ++n) qs[n] = euler_axis_quat(e, idx[n], h[n]);                        \
+    const Q t = qs[1] * qs[0];                                                                   \
+    Q gq[3] = {adj_zero<Q>(), adj_zero<Q>(), adj_zero<Q>()};                                     \
+    Q gt = adj_zero<Q>();                                                                        \
+    adj_mul(qs[2], t, gq[2], gt, g);                                                             \
+    adj_mul(qs[1], qs[0], gq[1], gq[0], gt);                                                     \
+    S ge[3] = {(S)0, (S)0, (S)0};                                                                \
+    for (int n = 2; n >= 0; --n) {                                                               \
+      const int ax = detail::euler_axis(idx[n]);                                                 \
+      S gh = (S)0;                                                                               \
+      adj_cos(h[n], gh, gq[n].w);                                                                \
+      adj_sin(h[n], gh, vec_traits<Q>::get(gq[n], ax));                                          \
+      ge[ax] += (S)0.5 * gh;                                                                     \
+    }                                                                                            \
+    adj_e.x += ge[0];                                                                            \
+    adj_e.y += ge[1];                                                                            \
+    adj_e.z += ge[2];                                                                            \
+  }                                                                                              \
+  WP_FN void adj_quat_to_euler(const Q& q, i32 i, i32 j, i32 k, Q& adj_q, i32&, i32&, i32&,      \
+                               const V3& g) {                                                    \
+    const detail::ToEuler<S> p = to_euler_steps(q, i, j, k);                                     \
+    S gt[3] = {(S)0, (S)0, (S)0};                                                                \
+    const S gl3[3] = {g.x, g.y, g.z};                                                            \
+    for (int m = 0; m < 3; ++m) gt[p.slot[m]] += gl3[m];                                         \
+    const S g1 = gt[0], g2 = gt[1];                                                              \
+    S g3 = gt[2];                                                                                \
+    if (p.not_proper) g3 *= p.e;                                                                 \
+    S gtp = (S)0, gtm = (S)0;                                                                    \
+    if (p.branch == 0) {                                                                         \
+      gtp += (S)2 * g3;                                                                          \
+    } else if (p.branch == 1) {                                                                  \
+      gtm += (S)2 * g3;                                                                          \
+    } else {                                                                                     \
+      gtp += g3;                                                                                 \
+      gtm += g3;                                                                                 \
+      gtp += g1;                                                                                 \
+      gtm -= g1;                                                                                 \
+    }                                                                                            \
+    S ga = (S)0, gb = (S)0, gc = (S)0, gd = (S)0;                                                \
+    adj_atan2(p.d, p.c, gd, gc, gtm);                                                            \
+    adj_atan2(p.b, p.a, gb, ga, gtp);                                                            \
+    S gquo = (S)0;                                                                               \
+    adj_acos(p.quo - (S)1, gquo, g2);                                                            \
+    const S gn = -(gquo * p.quo) / p.n;                                                          \
+    const S gs = (S)2 * (gquo / p.n) + gn;                                                       \
+    gc += (S)2 * p.c * gn;                                                                       \
+    gd += (S)2 * p.d * gn;                                                                       \
+    ga += (S)2 * p.a * gs;                                                                       \
+    gb += (S)2 * p.b * gs;                                                                       \
+    S gl[4] = {(S)0, (S)0, (S)0, (S)0};                                                          \
+    if (p.not_proper) {                                                                          \
+      gl[p.pi] -= gd;                                                                            \
+      gl[0] += gc;                                                                               \
+      gl[p.pk] += p.e * gb;                                                                      \
+      gl[p.pj] -= ga;                                                                            \
+    }                                                                                            \
+    gl[p.pk] += p.e * gd;                                                                        \
+    gl[p.pj] += gc;                                                                              \
+    gl[p.pi] += gb;                                                                              \
+    gl[0] += ga;                                                                                 \
+    adj_q.x += gl[1];                                                                            \
+    adj_q.y += gl[2];                                                                            \
+    adj_q.z += gl[3];                                                                            \
+    adj_q.w += gl[0];                                                                            \
+  }
+WP_ADJ_EULER(Quat, Vec3, f32)
+WP_ADJ_EULER(DQuat, DVec3, f64)
+#undef WP_ADJ_EULER
+
 }  // namespace wp

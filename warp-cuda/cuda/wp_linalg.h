@@ -19,6 +19,8 @@
 //   quat_from_axis_angle, quat_rotate (q * v), quat_rotate_inv (conjugate(q) * v),
 //   quat_inverse, quat_to_matrix (glam's Mat3::from_quat), quat_from_matrix (glam's
 //   Quat::from_mat3), quat_slerp (Warp's axis-angle definition).
+//   quat_from_euler, quat_to_euler (Warp's @wp.funcs of math.py, branch for branch;
+//                           warp-core/src/builtins/euler.rs).
 #pragma once
 #include "wp_scalar.h"
 #include "wp_vector.h"
@@ -343,5 +345,116 @@ WP_FN Mat4 inverse(const Mat4& m) {
 WP_LINALG_QUAT(Quat, Vec3, Mat3, f32)
 WP_LINALG_QUAT(DQuat, DVec3, DMat3, f64)
 #undef WP_LINALG_QUAT
+
+// ----- quat_from_euler, quat_to_euler: warp-core/src/builtins/euler.rs, step for step -----
+namespace detail {
+// The axis an index names in quat_from_euler (0 is x, 1 is y, else z).
+WP_FN int euler_axis(i32 n) { return n == 0 ? 0 : n == 1 ? 1 : 2; }
+// The lane of (w, x, y, z) a 1-based index reads in quat_to_euler (2: y, 3: z, else x).
+WP_FN int euler_pick(long long n) { return n == 2 ? 2 : n == 3 ? 3 : 1; }
+// quat_to_euler's steps, which its adjoint reads again (warp-core's ToEuler).
+template <typename S>
+struct ToEuler {
+  bool not_proper;
+  S e;
+  int pi, pj, pk;
+  S a, b, c, d, quo, n;
+  int branch;
+  int slot[3];
+  S out[3];
+};
+}  // namespace detail
+
+// EPS: Warp's 1e-6; PI, HALF_PI: Rust's consts of the type.
+#define WP_LINALG_EULER(Q, V3, S, EPS, PI, HALF_PI)                                     \
+  WP_FN detail::ToEuler<S> to_euler_steps(const Q& q, i32 i0, i32 j0, i32 k0) {         \
+    const S qa[4] = {q.w, q.x, q.y, q.z};                                               \
+    const long long i = (long long)i0 + 1, j = (long long)j0 + 1;                       \
+    long long k = (long long)k0 + 1;                                                    \
+    detail::ToEuler<S> p;                                                               \
+    p.not_proper = true;                                                                \
+    if (i == k) {                                                                       \
+      p.not_proper = false;                                                             \
+      k = 6 - i - j;                                                                    \
+    }                                                                                   \
+    p.e = (S)((double)(i - j) * (double)(j - k) * (double)(k - i) / 2.0);               \
+    p.pi = detail::euler_pick(i);                                                       \
+    p.pj = detail::euler_pick(j);                                                       \
+    p.pk = detail::euler_pick(k);                                                       \
+    S a = qa[0], b = qa[p.pi], c = qa[p.pj], d = qa[p.pk] * p.e;                        \
+    if (p.not_proper) {                                                                 \
+      a -= qa[p.pj];                                                                    \
+      b += qa[p.pk] * p.e;                                                              \
+      c += qa[0];                                                                       \
+      d -= qa[p.pi];                                                                    \
+    }                                                                                   \
+    const S s = a * a + b * b;                                                          \
+    p.n = s + c * c + d * d;                                                            \
+    p.quo = ((S)2 * s) / p.n;                                                           \
+    S t2 = acos(p.quo - (S)1);                                                          \
+    const S tp = atan2(b, a), tm = atan2(d, c);                                         \
+    const S zero = (S)0;                                                                \
+    S t1, t3;                                                                           \
+    if (abs(t2) < EPS) {                                                                \
+      t1 = zero;                                                                        \
+      t3 = (S)2 * tp - zero;                                                            \
+      p.branch = 0;                                                                     \
+    } else if (abs(t2 - PI) < EPS) {                                                    \
+      t1 = zero;                                                                        \
+      t3 = (S)2 * tm + zero;                                                            \
+      p.branch = 1;                                                                     \
+    } else {                                                                            \
+      t1 = tp - tm;                                                                     \
+      t3 = tp + tm;                                                                     \
+      p.branch = 2;                                                                     \
+    }                                                                                   \
+    if (p.not_proper) {                                                                 \
+      t2 -= HALF_PI;                                                                    \
+      t3 *= p.e;                                                                        \
+    }                                                                                   \
+    p.slot[0] = 0;                                                                      \
+    p.slot[1] = 1;                                                                      \
+    p.slot[2] = 2;                                                                      \
+    if (i == 2) {                                                                       \
+      p.slot[0] = 1;                                                                    \
+      p.slot[1] = 0;                                                                    \
+    } else if (i == 3) {                                                                \
+      p.slot[0] = 2;                                                                    \
+      p.slot[2] = 0;                                                                    \
+    }                                                                                   \
+    p.slot[j == 1 ? 0 : j == 2 ? 1 : 2] = 1;                                            \
+    p.slot[k == 1 ? 0 : k == 2 ? 1 : 2] = 2;                                            \
+    const S t[3] = {t1, t2, t3};                                                        \
+    p.a = a;                                                                            \
+    p.b = b;                                                                            \
+    p.c = c;                                                                            \
+    p.d = d;                                                                            \
+    for (int m = 0; m < 3; ++m) p.out[m] = t[p.slot[m]];                                \
+    return p;                                                                           \
+  }                                                                                     \
+  WP_FN V3 quat_to_euler(const Q& q, i32 i, i32 j, i32 k) {                             \
+    const detail::ToEuler<S> p = to_euler_steps(q, i, j, k);                            \
+    return V3##_new(p.out[0], p.out[1], p.out[2]);                                      \
+  }                                                                                     \
+  /* The axis quaternion n (0: i, 1: j, 2: k) of quat_from_euler and its half angle. */ \
+  WP_FN Q euler_axis_quat(const V3& e, i32 idx, S& h) {                                 \
+    const S ea[3] = {e.x, e.y, e.z};                                                    \
+    const int ax = detail::euler_axis(idx);                                             \
+    h = (S)0.5 * ea[ax];                                                                \
+    S l[4] = {(S)0, (S)0, (S)0, (S)0};                                                  \
+    l[ax] = sin(h);                                                                     \
+    l[3] = cos(h);                                                                      \
+    return Q##_from_xyzw(l[0], l[1], l[2], l[3]);                                       \
+  }                                                                                     \
+  WP_FN Q quat_from_euler(const V3& e, i32 i, i32 j, i32 k) {                           \
+    S h;                                                                                \
+    const Q qi = euler_axis_quat(e, i, h);                                              \
+    const Q qj = euler_axis_quat(e, j, h);                                              \
+    const Q qk = euler_axis_quat(e, k, h);                                              \
+    return qk * (qj * qi);                                                              \
+  }
+WP_LINALG_EULER(Quat, Vec3, f32, 1e-6f, 3.14159265358979323846f, 1.57079632679489661923f)
+WP_LINALG_EULER(DQuat, DVec3, f64, 1e-6, 3.14159265358979323846, 1.57079632679489661923)
+#undef WP_LINALG_EULER
 
 }  // namespace wp

@@ -37,6 +37,7 @@
 //!   variants).
 
 pub mod atomic;
+pub mod euler;
 pub mod expect;
 pub mod geometry;
 pub mod linalg;
@@ -53,6 +54,7 @@ pub mod transform;
 pub mod volume;
 
 pub use atomic::*;
+pub use euler::{quat_from_euler, quat_to_euler, EulerAngles, EulerOps};
 pub use expect::{expect_eq, expect_near, expect_neq, Near};
 pub use geometry::{
     bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,

@@ -58,6 +58,10 @@ pub(super) const ROWS: &[Builtin] = rows! {
         ctor(Matrix3, "from_quat");
     "quat_from_matrix": &[Matrix3], (T) -> QuatOfT, "linalg", Adjoint, no_tangent;
     "quat_slerp": QUAT,           (T, T, ScalarOfT) -> T,   "linalg", Adjoint, no_tangent;
+    // Warp's `@wp.func`s of math.py (warp-core `builtins/euler.rs`): the axis sequence is
+    // three run-time indices, 0 = x, 1 = y, 2 = z.
+    "quat_from_euler": FVEC3, (T, I32, I32, I32) -> QuatOfT, "linalg", Adjoint, no_tangent;
+    "quat_to_euler": QUAT, (T, I32, I32, I32) -> VecOfT, "linalg", Adjoint, no_tangent;
 };
 
 /// The decompositions (after the transforms in the table, as in docs/book/src/builtins.md).
