@@ -59,6 +59,17 @@ pub struct CallCheck {
     pub mut_args: u64,
 }
 
+/// The index of `p` in `callees` (a function's `@@F<k>@@` list), appended if absent.
+pub fn push_callee(callees: &mut Vec<syn::Path>, p: &syn::Path) -> usize {
+    match callees.iter().position(|c| c == p) {
+        Some(k) => k,
+        None => {
+            callees.push(p.clone());
+            callees.len() - 1
+        }
+    }
+}
+
 /// A lowered kernel or func.
 #[derive(Clone, Debug)]
 pub struct Function {

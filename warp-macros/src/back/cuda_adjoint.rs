@@ -67,7 +67,7 @@ pub fn emit_custom(
 ) -> Result<String, String> {
     let adj = custom(f, grads)?;
     callees.clone_from(&adj.f.callees);
-    let replay = replay.map(|r| push_callee(callees, r));
+    let replay = replay.map(|r| crate::ir::push_callee(callees, r));
     let replay = func_replay(f, file, replay)?;
     let text = Printer::new(&adj, file).function()?;
     fill_lengths(&adj.f, format!("{replay}{text}"))
@@ -84,17 +84,6 @@ fn func_replay(f: &Function, file: &str, custom: Option<usize>) -> Result<String
     let mut r = Emitter::new(&stripped, file);
     r.replay = true;
     r.function_text()
-}
-
-/// The index of `p` in `callees`, appended if absent.
-pub fn push_callee(callees: &mut Vec<syn::Path>, p: &syn::Path) -> usize {
-    match callees.iter().position(|c| c == p) {
-        Some(k) => k,
-        None => {
-            callees.push(p.clone());
-            callees.len() - 1
-        }
-    }
 }
 
 /// The replay of a func with a custom one (`#[func(replay = r)]`, `r` its callee `k`): a call

@@ -404,7 +404,7 @@ fn func_instance(
         let replay = fattrs
             .replay
             .as_ref()
-            .map(|r| crate::back::cuda_adjoint::push_callee(&mut all_callees, r));
+            .map(|r| crate::ir::push_callee(&mut all_callees, r));
         match crate::back::cuda_adjoint::emit_with_replay(&f, "@@FILE@@", replay) {
             Ok(a) => {
                 cuda_stack = a.uses_stack;

@@ -122,12 +122,7 @@ impl Lowerer {
                 "only functions named by a path can be called in kernels",
             );
         };
-        let segs: Vec<String> = fp
-            .path
-            .segments
-            .iter()
-            .map(|s| s.ident.to_string())
-            .collect();
+        let segs = segs_of(&fp.path);
         // `r#mod(a, b)`: a raw identifier names the builtin without its `r#`.
         let last = segs.last().cloned().unwrap_or_default();
         let last = last.strip_prefix("r#").map(str::to_owned).unwrap_or(last);

@@ -317,12 +317,8 @@ pub fn custom(f: &Function, grads: &[(syn::Ident, syn::Path)]) -> Result<Adjoint
             .iter()
             .position(|p| *param == p.name)
             .ok_or_else(|| format!("`{param}` is not a parameter of this func"))?;
-        if !g.callees.contains(func) {
-            g.callees.push(func.clone());
-        }
-        let callee = g.callees.iter().position(|p| p == func);
         let from = GradSrc::Custom {
-            func: callee.ok_or("internal: a gradient func missing from the callees")?,
+            func: push_callee(&mut g.callees, func),
             args: args.clone(),
         };
         let sp = syn::spanned::Spanned::span(func);
