@@ -158,6 +158,7 @@ pub mod docs;
 /// and in DLPack tensors.
 pub use warp_runtime::NdComponents;
 pub mod optim;
+mod overload;
 /// DLPack, the tensor exchange format: the `dlpark` crate, whose `Managed` tensors
 /// [`Array::to_dlpack`] makes and [`Array::from_dlpack`] takes (the `dlpack` feature).
 #[cfg(feature = "dlpack")]
@@ -206,21 +207,15 @@ pub use warp_runtime::{hvp, jvp, Forward};
 pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};
 
 /// Declares a set of overloaded funcs: `wp::overloads!(pub combine);`, then each overload is
-/// a `#[wp::func(overload)] fn combine(..)` (several may share the name) and callers name one
-/// by its first parameter's type, `combine::<i32>(a, b)`, or in a generic kernel
-/// `combine::<T>(a, b)`, which picks each instance's overload. A call that no overload takes
-/// fails to compile at the call.
+/// a `#[wp::func(overload)] fn combine(..)` (several may share the name). A call
+/// `combine(a, b)` runs the overload whose parameter types the arguments have, as Warp
+/// resolves its overloads; `combine::<i32>(a, b)` names the overloads of first parameter type
+/// `i32` (in a generic kernel `combine::<T>(a, b)`: each instance's own). A call that no
+/// overload takes fails to compile at the call.
 #[macro_export]
 macro_rules! overloads {
     ($(#[$m:meta])* $vis:vis $name:ident) => {
-        $(#[$m])*
-        ///
-        /// A set of overloaded `#[func]`s, selected by the first argument's type:
-        /// `name::<i32>(..)`.
-        #[allow(non_camel_case_types)]
-        $vis struct $name<K> {
-            _overload: ::core::marker::PhantomData<K>,
-        }
+        $crate::__private::overload_set! { $(#[$m])* $vis $name }
     };
 }
 
@@ -250,7 +245,9 @@ pub mod __private {
         GradElement, GradSeed, GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector,
         Transform,
     };
+    pub use crate::overload::{Callee, FuncRet, Resolve, RetOf, Unresolved};
     pub use warp_macros::__object_rows;
+    pub use warp_macros::__overload_set as overload_set;
     pub use warp_runtime::__deterministic as deterministic;
     /// The per-thread adjoint stack capacity (`wp::config::adstack_bytes`): a `wp::grad`
     /// call's stack takes it.

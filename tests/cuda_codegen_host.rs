@@ -543,6 +543,51 @@ fn hash_grid_queries(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<f32>, in
     ints[3 * i + 2] = nearest_other(grid, x, p, r * 0.5, i);
 }
 
+wp::overloads!(blend);
+
+/// Overloads told apart by their second parameter (the CUDA unit holds each as a function of
+/// its own; the call sites name the one rustc resolved).
+#[wp::func(overload)]
+fn blend(a: f32, b: f32) -> f32 {
+    a * 0.75 + b
+}
+
+#[wp::func(overload)]
+fn blend(a: f32, n: i32) -> f32 {
+    a * (n as f32) - 0.5
+}
+
+/// A vector overload with a custom gradient, itself an overload of another set.
+#[wp::func(overload, grad(a = dblend))]
+fn blend(a: Vec3, b: f32) -> Vec3 {
+    a * b + Vec3::X
+}
+
+wp::overloads!(dblend);
+
+#[wp::func(overload)]
+fn dblend(a: Vec3, b: f32, adj: Vec3) -> Vec3 {
+    adj * b
+}
+
+/// A generic func with a generic custom gradient, called without naming its instance.
+#[wp::func(grad(x = dcubic))]
+fn cubic<T: Float>(x: T) -> T {
+    x * x * x - x
+}
+
+#[wp::func]
+fn dcubic<T: Float>(x: T, adj: T) -> T {
+    (3.0 * x * x - 1.0) * adj
+}
+
+#[wp::kernel]
+fn overloaded(x: Array<f32>, n: Array<i32>, v: Array<Vec3>, out: Array<f32>) {
+    let i = tid();
+    out[i] = blend(x[i], 2.0f32) + blend(x[i], n[i]) + cubic(x[i]) + blend(cubic(x[i]), n[i]);
+    v[i] = blend(v[i], x[i]);
+}
+
 /// A host argument: how to declare it in C++, and how to print it back.
 enum Arg<'a> {
     F32(f32),
@@ -1138,6 +1183,39 @@ fn refs_and_tuples_match_the_cpu_backend() {
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));
     }
+}
+
+#[test]
+fn overloads_and_generic_funcs_by_arguments_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let n = 6;
+    let xs: Vec<f32> = (0..n).map(|k| k as f32 * 0.7 - 1.9).collect();
+    let ns: Vec<i32> = (0..n as i32).map(|k| 3 - k).collect();
+    let vs: Vec<Vec3> = (0..n)
+        .map(|k| Vec3::new(k as f32 * 0.3, 1.1, -0.2 * k as f32))
+        .collect();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let ni = wp::Array::from_slice(&ns, &dev).unwrap();
+    let v = wp::Array::from_slice(&vs, &dev).unwrap();
+    let out = wp::Array::<f32>::zeros(n, &dev).unwrap();
+    let args = [Arg::F32s(&x), Arg::I32s(&ni), Arg::Vec3s(&v), Arg::F32s(&out)];
+    let host = run_on_host::<overloaded>(&[n], &args);
+    wp::launch(overloaded, n, (&x, &ni, &v, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&args));
+    }
+    // The unit that holds the adjoint (the custom gradients' calls) compiled above; the
+    // callees are the resolved overloads and instance, each once.
+    let names: Vec<&str> = overloaded::INFO.callees.iter().map(|c| c.name).collect();
+    assert_eq!(
+        names,
+        [
+            "blend(f32, f32)",
+            "blend(f32, i32)",
+            "cubic<f32>",
+            "blend(Vec3, f32)"
+        ]
+    );
 }
 
 #[test]

@@ -117,6 +117,7 @@ mod local_arrays;
 mod mesh;
 mod misc;
 mod optim;
+mod overloads;
 mod params;
 mod ports;
 mod primitives;

@@ -11,11 +11,13 @@ mod checks;
 mod derive;
 mod funcs;
 mod grad_of;
+mod overloads;
 mod tiled;
 
 use checks::{call_checks, local_array_checks};
 pub use derive::derive_struct;
 pub use funcs::func;
+pub use overloads::overload_set;
 
 fn errors_to_tokens(errors: Vec<syn::Error>) -> TokenStream {
     errors.into_iter().map(|e| e.to_compile_error()).collect()

@@ -57,7 +57,8 @@ pub fn kernel(attr: TokenStream, item: TokenStream) -> TokenStream {
 /// and returning the adjoint of `x`; value parameters not listed get no gradient.
 ///
 /// Generic funcs (`fn f<T: Float>(v: Vec3<T>) -> T`) are instantiated like generic kernels;
-/// callers name the instance: `f::<T>(v)` in generic code, `f::<f32>(v)` elsewhere.
+/// a call `f(v)` runs the instance whose parameter types the arguments have, `f::<f32>(v)`
+/// names one (`f::<T>(v)` in generic code).
 #[proc_macro_attribute]
 pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     expand::func(attr.into(), item.into()).into()
@@ -68,6 +69,14 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
 #[proc_macro_derive(Struct)]
 pub fn derive_struct(item: TokenStream) -> TokenStream {
     expand::derive_struct(item.into()).into()
+}
+
+/// The items of `wp::overloads!(name)`: the set's type and its `wp::grad` companion's. Not
+/// part of the API.
+#[doc(hidden)]
+#[proc_macro]
+pub fn __overload_set(input: TokenStream) -> TokenStream {
+    expand::overload_set(input.into()).into()
 }
 
 /// Calls the macro named by its input with every row of the object table, one

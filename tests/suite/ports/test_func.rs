@@ -12,8 +12,10 @@
 //! [`custom_grad_sqrt`]. Tolerances are Warp's: exact (`expect_eq`, `assert_np_equal` without
 //! `tol`), `expect_near`'s `1e-6`, and `1e-5` for the custom gradient.
 //!
-//! Adapted: Rust has no overloading by argument type, so Warp's three `custom` overloads (int,
-//! float, vec3) are three funcs with their own names; `user_func_overload` (a `wp.array[Any]`
+//! Adapted: Warp's three `custom` overloads (int, float, vec3) are a `wp::overloads!` set,
+//! called as in Warp; Warp's literals `1` and `1.0` are typed by Python as int and float, so
+//! the port suffixes them (`1i32`, `1.0f32`: an unsuffixed literal fits both the int and the
+//! float overload); `user_func_overload` (a `wp.array[Any]`
 //! parameter, launched with `vec3` and `float` arrays) is a generic func over `T: Float`,
 //! called by generic kernels for `f32` and `Vec3<T>` arrays (and run for f64 too).
 //! `test_return_func` did not look at its output; the port checks that every element is
@@ -58,18 +60,22 @@ fn cube(x: f32) -> f32 {
     sqr(x) * x
 }
 
-#[wp::func]
-fn custom_i32(x: i32) -> i32 {
+wp::overloads!(custom);
+
+/// Warp's three `custom` overloads (int, float, vec3), one name: each call runs the overload
+/// its argument's type selects.
+#[wp::func(overload)]
+fn custom(x: i32) -> i32 {
     x + 1
 }
 
-#[wp::func]
-fn custom_f32(x: f32) -> f32 {
+#[wp::func(overload)]
+fn custom(x: f32) -> f32 {
     x + 1.0
 }
 
-#[wp::func]
-fn custom_vec3(x: Vec3) -> Vec3 {
+#[wp::func(overload)]
+fn custom(x: Vec3) -> Vec3 {
     x + vec3(1.0, 0.0, 0.0)
 }
 
@@ -82,9 +88,9 @@ fn noreturn(mut x: Vec3) {
 
 #[wp::kernel]
 fn k_overload_func() {
-    let i = custom_i32(1);
-    let f = custom_f32(1.0);
-    let v = custom_vec3(vec3(1.0, 0.0, 0.0));
+    let i = custom(1i32);
+    let f = custom(1.0f32);
+    let v = custom(vec3(1.0, 0.0, 0.0));
     expect_eq(i, 2);
     expect_eq(f, 2.0);
     expect_eq(v, vec3(2.0, 0.0, 0.0));

@@ -18,8 +18,8 @@
 //! Adapted: a Warp gradient func adds into `wp.adjoint[x]` for each parameter; here each
 //! parameter's gradient func returns that parameter's adjoint, given the func's arguments and
 //! the adjoint of its result (for a tuple result, the tuple of its elements' adjoints; for a
-//! struct parameter, a struct of its fields' adjoints). Rust has no overloading, so Warp's two
-//! `overload_fn` overloads (floats; a struct) are two funcs. `aux_custom_fn`, imported by Warp
+//! struct parameter, a struct of its fields' adjoints). Warp's two `overload_fn` overloads
+//! (floats; a struct) and their gradient funcs are `wp::overloads!` sets. `aux_custom_fn`, imported by Warp
 //! from another file, lives in a module of its own here and is called by path.
 //!
 //! Not ported: `test_custom_grad_no_return` and the `dense_gemm` code-generation
@@ -56,12 +56,17 @@ fn near(got: &[f32], want: &[f32], tol: f32, what: &str) {
     }
 }
 
-#[wp::func(grad(x = overload_fn_dx, y = overload_fn_dy))]
+wp::overloads!(overload_fn);
+wp::overloads!(overload_fn_dx);
+
+/// Warp's `overload_fn` for floats; its gradient funcs are overloads too (the struct
+/// overload's is below), each picked by the types it is called with.
+#[wp::func(overload, grad(x = overload_fn_dx, y = overload_fn_dy))]
 fn overload_fn(x: f32, y: f32) -> (f32, f32) {
     (x * 3.0 + y / 3.0, y.powf(2.5))
 }
 
-#[wp::func]
+#[wp::func(overload)]
 fn overload_fn_dx(x: f32, y: f32, adj_ret: (f32, f32)) -> f32 {
     x * adj_ret.0 * 42.0 + y * adj_ret.1 * 10.0
 }
@@ -167,8 +172,9 @@ struct MyStruct {
     vec: Vec3,
 }
 
-#[wp::func(grad(x = overload_fn_struct_dx))]
-fn overload_fn_struct(x: MyStruct) -> (f32, f32, f32) {
+/// Warp's `overload_fn` for the struct: another overload of the same name.
+#[wp::func(overload, grad(x = overload_fn_dx))]
+fn overload_fn(x: MyStruct) -> (f32, f32, f32) {
     (
         x.vec.x * x.vec.y * x.vec.z * 4.0,
         x.vec.length(),
@@ -177,8 +183,8 @@ fn overload_fn_struct(x: MyStruct) -> (f32, f32, f32) {
 }
 
 /// Warp's `overload_fn_grad` for the struct: one adjoint per field.
-#[wp::func]
-fn overload_fn_struct_dx(x: MyStruct, adj_ret: (f32, f32, f32)) -> MyStruct {
+#[wp::func(overload)]
+fn overload_fn_dx(x: MyStruct, adj_ret: (f32, f32, f32)) -> MyStruct {
     MyStruct {
         scalar: x.scalar * adj_ret.0 * 10.0,
         vec: vec3(
@@ -192,7 +198,7 @@ fn overload_fn_struct_dx(x: MyStruct, adj_ret: (f32, f32, f32)) -> MyStruct {
 #[wp::kernel]
 fn k_run_overload_struct_fn(xs: Array<MyStruct>, output: Array<f32>) {
     let i = tid();
-    let (out0, out1, out2) = overload_fn_struct(xs[i]);
+    let (out0, out1, out2) = overload_fn(xs[i]);
     output[i] = out0 + out1 + out2;
 }
 

@@ -64,7 +64,7 @@ pub(super) fn call_checks(f: &crate::ir::Function) -> TokenStream {
         .iter()
         .map(|c| {
             let (path, mask) = (&c.path, c.mut_args);
-            let name = c.path.segments.last().map(|s| s.ident.to_string()).unwrap_or_default();
+            let name = crate::front::lower::resolve::callee_name(&c.path);
             let passed: Vec<String> = (0..64)
                 .filter(|k| mask >> k & 1 == 1)
                 .map(|k| (k + 1).to_string())

@@ -2,6 +2,7 @@
 //! needs), per instance of a generic func and per overload, with the companion `wp::grad`
 //! calls (`grad_of`). Kernels are expanded by the parent module, whose helpers this uses.
 
+use super::overloads::{instance_attrs, key_tuple, param_key};
 use super::*;
 
 /// `#[func]`.
@@ -49,7 +50,7 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
         }
     };
     if fattrs.overload.is_some() {
-        return overload_member(&item, &fattrs, generics.as_ref(), errors);
+        return super::overloads::overload_member(&item, &fattrs, generics.as_ref(), errors);
     }
     let Some(g) = generics else {
         if !errors.is_empty() {
@@ -64,8 +65,11 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             lower::calls::companion_of(&name.to_string()),
             span = name.span()
         );
-        return match func_instance(&item, &fattrs, None, quote!(#name)) {
-            Ok((items, companion)) => quote! {
+        let wp = crate::paths::private();
+        let key = key_tuple(&param_key(&item));
+        let iattrs = instance_attrs(&fattrs, None, &item);
+        return match func_instance(&item, &iattrs, None, quote!(#name)) {
+            Ok((items, companion, ret)) => quote! {
                 #(#doc_attrs)*
                 ///
                 /// A `#[func]`: callable from kernels and other funcs.
@@ -85,6 +89,17 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     #companion
                 }
 
+                // A call `name(..)` of these argument types (`overloads`).
+                impl #wp::Resolve<#key> for #name {
+                    type Callee = #name;
+                }
+                impl #wp::Resolve<#key> for #grad_name {
+                    type Callee = #grad_name;
+                }
+                impl #wp::FuncRet for #name {
+                    type Ret = #ret;
+                }
+
                 const _: usize = #name::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                 const _: () = #name::__WP_LOCAL_ARRAYS;
                 const _: () = #name::__WP_CALLS;
@@ -93,15 +108,20 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
             Err(e) => failed(e),
         };
     };
-    // A generic func: `f<T>` is a type with one inherent impl per instance, so that a caller
-    // names the instance as `f::<T>(..)` (in a generic kernel, `T` is concrete by then).
-    if !fattrs.grad.is_empty() {
-        errors.push(syn::Error::new(
-            item.sig.generics.span(),
-            "custom gradients (`#[func(grad(..))]`) are not supported on generic funcs yet",
-        ));
-    }
-    // (No `check_params_select` here: callers name a func's instance, `f::<f32>(..)`.)
+    // A generic func: `f<T>` is a type with one inherent impl per instance. A call `f(x)`
+    // reaches the instance whose parameter types the arguments have (`overloads`), and
+    // `f::<T>(..)` names one (in a generic kernel, `T` is concrete by then).
+    // (No `check_params_select` here: a caller may name an instance its arguments do not
+    // tell apart, `zero::<f64>()`.)
+    let wp = crate::paths::private();
+    let instances = generics::instances(&item, &g);
+    let keys: Vec<String> = instances
+        .iter()
+        .map(|i| key_tuple(&param_key(&i.item)).to_string())
+        .collect();
+    // Instances with the same parameter types cannot be told apart by a call's arguments:
+    // such a func is called by naming its instance only.
+    let by_args = (0..keys.len()).all(|k| !keys[..k].contains(&keys[k]));
     let grad_name = format_ident!(
         "{}",
         lower::calls::companion_of(&name.to_string()),
@@ -109,16 +129,28 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     );
     let mut impls = TokenStream::new();
     let mut per_instance = Vec::new();
-    for inst in generics::instances(&item, &g) {
+    for inst in &instances {
         let display = inst.display_name(&name.to_string());
         let tys = &inst.types;
+        let key = key_tuple(&param_key(&inst.item));
+        let iattrs = instance_attrs(&fattrs, Some((&g, tys)), &inst.item);
         match func_instance(
             &inst.item,
-            &fattrs,
+            &iattrs,
             Some(display.clone()),
             quote!(#name<#(#tys),*>),
         ) {
-            Ok((items, companion)) => {
+            Ok((items, companion, ret)) => {
+                let inferred = by_args.then(|| {
+                    quote! {
+                        impl #wp::Resolve<#key> for #name {
+                            type Callee = #name<#(#tys),*>;
+                        }
+                        impl #wp::Resolve<#key> for #grad_name {
+                            type Callee = #grad_name<#(#tys),*>;
+                        }
+                    }
+                });
                 impls.extend(quote! {
                     impl #name<#(#tys),*> {
                         #items
@@ -126,6 +158,16 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
                     impl #grad_name<#(#tys),*> {
                         #companion
                     }
+                    impl #wp::Resolve<#key> for #name<#(#tys),*> {
+                        type Callee = Self;
+                    }
+                    impl #wp::Resolve<#key> for #grad_name<#(#tys),*> {
+                        type Callee = Self;
+                    }
+                    impl #wp::FuncRet for #name<#(#tys),*> {
+                        type Ret = #ret;
+                    }
+                    #inferred
                     const _: usize =
                         #name::<#(#tys),*>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
                     const _: () = #name::<#(#tys),*>::__WP_LOCAL_ARRAYS;
@@ -154,120 +196,19 @@ pub fn func(attr: TokenStream, item: TokenStream) -> TokenStream {
     quote! {
         #(#doc_attrs)*
         ///
-        /// A generic `#[func]`: callable from kernels and other funcs as `name::<f32>(..)` or,
-        /// in a generic kernel, `name::<T>(..)`.
+        /// A generic `#[func]`: callable from kernels and other funcs as `name(..)` (the
+        /// instance the arguments' types select), `name::<f32>(..)` or, in a generic kernel,
+        /// `name::<T>(..)`.
         #[allow(non_camel_case_types)]
-        #vis struct #name<#(#params),*> {
+        #vis struct #name<#(#params = #wp::Unresolved),*> {
             _instance: ::core::marker::PhantomData<(#(#params,)*)>,
         }
         /// `wp::grad(f::<T>)` of this func's instances.
         #[doc(hidden)]
         #[allow(non_camel_case_types)]
-        #vis struct #grad_name<#(#params),*> {
+        #vis struct #grad_name<#(#params = #wp::Unresolved),*> {
             _instance: ::core::marker::PhantomData<(#(#params,)*)>,
         }
-        #bound_check
-        #impls
-    }
-}
-
-/// `#[func(overload)]`: one overload of the set `wp::overloads!(name)` declares (the generic
-/// struct `name<K>`), for each of its instances (one for a plain func) an inherent impl of
-/// `name<K>`, `K` the instance's first parameter's type (a `&mut` parameter's referent):
-/// callers name the overload as `name::<K>(..)`, and in a generic kernel `name::<T>(..)` picks
-/// each instance's own overload. Emits no item of the func's own name, so several overloads
-/// may share it (`fn combine(a: i32, ..)`, `fn combine<V: Vector>(a: V, ..)`). Two overloads
-/// for one `K` are two inherent items of one name, rustc's error, spanned at the second's
-/// first parameter type; one func's instances with one `K` are refused here.
-fn overload_member(
-    item: &syn::ItemFn,
-    fattrs: &attrs::FuncAttrs,
-    g: Option<&generics::Generics>,
-    mut errors: Vec<syn::Error>,
-) -> TokenStream {
-    let name = &item.sig.ident;
-    let attr = fattrs.overload.as_ref().expect("an overload");
-    if !fattrs.grad.is_empty() {
-        errors.push(syn::Error::new(
-            attr.span(),
-            "custom gradients (`#[func(grad(..))]`) are not supported on overloads yet",
-        ));
-    }
-    let first_ty = |f: &syn::ItemFn| -> Option<syn::Type> {
-        match f.sig.inputs.first()? {
-            syn::FnArg::Typed(pt) => Some(match &*pt.ty {
-                syn::Type::Reference(r) => (*r.elem).clone(),
-                t => t.clone(),
-            }),
-            syn::FnArg::Receiver(_) => None,
-        }
-    };
-    let instances: Vec<syn::ItemFn> = match g {
-        Some(g) => generics::instances(item, g)
-            .into_iter()
-            .map(|i| i.item)
-            .collect(),
-        None => vec![item.clone()],
-    };
-    let mut keys: Vec<syn::Type> = Vec::new();
-    for inst in &instances {
-        let Some(k) = first_ty(inst) else {
-            errors.push(syn::Error::new(
-                item.sig.paren_token.span.join(),
-                "an overload is selected by its first parameter's type (`name::<i32>(..)`): it needs a parameter",
-            ));
-            return errors_to_tokens(errors);
-        };
-        let text = k.to_token_stream().to_string();
-        if keys.iter().any(|o| o.to_token_stream().to_string() == text) {
-            errors.push(syn::Error::new(
-                k.span(),
-                format!(
-                    "two instances of this overload take a first parameter of type `{}`: overloads are told apart by their first parameter's type, so a type parameter must appear in it",
-                    text.replace(' ', "")
-                ),
-            ));
-            return errors_to_tokens(errors);
-        }
-        keys.push(k);
-    }
-    if !errors.is_empty() {
-        return errors_to_tokens(errors);
-    }
-    let mut impls = TokenStream::new();
-    let mut per_instance = Vec::new();
-    for (inst, key) in instances.iter().zip(&keys) {
-        let display = format!(
-            "{name}<{}>",
-            key.to_token_stream().to_string().replace(' ', "")
-        );
-        let ksp = key.span();
-        let self_ty = quote_spanned!(ksp=> #name<#key>);
-        // (`wp::grad` of an overload: not yet; `wp::overloads!` declares no companion.)
-        match func_instance(inst, fattrs, Some(display.clone()), self_ty.clone()) {
-            Ok((items, _)) => {
-                impls.extend(quote_spanned! {ksp=>
-                    impl #self_ty {
-                        #items
-                    }
-                });
-                impls.extend(quote! {
-                    const _: usize = <#self_ty>::__WP_CALL_DEPTH__RECURSION_IS_NOT_SUPPORTED;
-                    const _: () = <#self_ty>::__WP_LOCAL_ARRAYS;
-                    const _: () = <#self_ty>::__WP_CALLS;
-                });
-                impls.extend(tile_map_impl(inst, self_ty));
-                per_instance.push((display, Vec::new()));
-            }
-            Err(e) => per_instance.push((display, e)),
-        }
-    }
-    errors.extend(instance_errors(per_instance));
-    if !errors.is_empty() {
-        return errors_to_tokens(errors);
-    }
-    let bound_check = g.map(generics::bound_check).unwrap_or_default();
-    quote! {
         #bound_check
         #impls
     }
@@ -276,7 +217,7 @@ fn overload_member(
 /// `impl TileMapFn<(params..), ret> for func {}` where every parameter and the result are
 /// scalars other than `bool` (what `tile_map` can apply; the kernel checks its use against
 /// it, as the kernel macro cannot see the func's signature); nothing otherwise.
-fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
+pub(super) fn tile_map_impl(item: &syn::ItemFn, self_ty: TokenStream) -> TokenStream {
     use crate::types::{Scalar, Ty};
     let wp = crate::paths::private();
     let scalar = |t: &syn::Type| matches!(crate::front::signature::parse_type(t), Ok(Ty::Scalar(s)) if s != Scalar::Bool);
@@ -330,12 +271,12 @@ fn func_param_ty(p: &crate::ir::Param, wp: &TokenStream) -> TokenStream {
 
 /// The inherent items of one func or one instance of a generic func (its CPU code, replay,
 /// adjoint, and what the CUDA assembler needs); `display` names a generic instance.
-fn func_instance(
+pub(super) fn func_instance(
     item: &syn::ItemFn,
     fattrs: &attrs::FuncAttrs,
     display: Option<String>,
     func_ty: TokenStream,
-) -> Result<(TokenStream, TokenStream), Vec<syn::Error>> {
+) -> Result<(TokenStream, TokenStream, TokenStream), Vec<syn::Error>> {
     let wp = crate::paths::private();
     let mut f = lower::lower_fn(item, FnKind::Func)?;
     if let Some(d) = display {
@@ -613,5 +554,5 @@ fn func_instance(
                 ::core::result::Result::Ok(())
             }
     };
-    Ok((items, companion))
+    Ok((items, companion, ret))
 }

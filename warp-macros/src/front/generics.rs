@@ -378,6 +378,22 @@ pub fn instances(item: &syn::ItemFn, g: &Generics) -> Vec<Instance> {
         .collect()
 }
 
+/// `path` (a custom gradient's or replay's func, `dcube::<T>`) with `g`'s parameters replaced
+/// by one instance's `types`, as in the instance's body.
+pub fn substitute_path(path: &syn::Path, g: &Generics, types: &[syn::Type]) -> syn::Path {
+    let mut s = Substitute {
+        map: g
+            .params
+            .iter()
+            .zip(types)
+            .map(|(p, t)| (p.ident.to_string(), t.clone()))
+            .collect(),
+    };
+    let mut out = path.clone();
+    s.visit_path_mut(&mut out);
+    out
+}
+
 /// Checks that every type parameter shows in a parameter's type: the launch arguments (or a
 /// func's call) must tell the instances apart.
 pub fn check_params_select(item: &syn::ItemFn, g: &Generics) -> Vec<syn::Error> {

@@ -12,6 +12,7 @@
 //! - `places`: assignment targets, assignment, array indexing, members.
 //! - `expressions`: operators, casts, fields, paths and constants; what is outside the subset.
 //! - `calls`: builtin, method, glam-constructor and func calls.
+//! - `resolve`: the func a call runs, from its arguments' types (overloads, generic funcs).
 //! - `views`: in-kernel views, rewritten into accesses of the viewed array.
 //! - `rng`: the random draws that advance a state in place; `rand_init`'s and `pnoise`'s
 //!   overloads by arity.
@@ -37,6 +38,7 @@ mod expressions;
 mod local_arrays;
 mod places;
 mod query;
+pub(crate) mod resolve;
 mod rng;
 mod statements;
 mod struct_literals;
@@ -78,6 +80,7 @@ pub fn lower_kernel(
         consts: Vec::new(),
         ref_params: Vec::new(),
         call_checks: Vec::new(),
+        param_tys: Vec::new(),
     };
     let sig = &item.sig;
     let unsupported = [
@@ -160,6 +163,7 @@ pub fn lower_kernel(
                         if by_ref {
                             cx.ref_params.push(var);
                         }
+                        cx.param_tys.push((var, ty_syn.clone()));
                         params.push(Param {
                             name,
                             var,
@@ -287,6 +291,8 @@ struct Lowerer {
     ref_params: Vec<VarId>,
     /// Every user func call's `&mut` arguments (`Function::call_checks`).
     call_checks: Vec<CallCheck>,
+    /// The parameters' types as written (a call's arguments' types, `resolve`).
+    param_tys: Vec<(VarId, syn::Type)>,
     /// Set by the first tile operation or `lane()`, or by `#[kernel(block_dim = N)]`.
     tiled: Option<Tiled>,
     /// Tile shape rules left to rustc (`Function::shape_obligations`).

@@ -570,12 +570,7 @@ impl Tx {
             }
             Op::Func { path, args } => {
                 if args.iter().any(|v| self.active[*v]) {
-                    let name = path
-                        .segments
-                        .iter()
-                        .map(|s| s.ident.to_string())
-                        .collect::<Vec<_>>()
-                        .join("::");
+                    let name = crate::front::lower::resolve::callee_name(path);
                     return Err(self.unsupported(&format!(
                         "calls the func `{name}` with a differentiated argument"
                     )));

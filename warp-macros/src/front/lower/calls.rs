@@ -291,6 +291,9 @@ impl Lowerer {
                 );
             }
         }
+        // The func the arguments' types select (overloads, generic funcs: `resolve`).
+        let resolved = self.resolve_callee(path, &args, span);
+        let path = &resolved;
         if !self.callees.iter().any(|p| p == path) {
             self.callees.push(path.clone());
         }
