@@ -245,7 +245,7 @@ pub mod __private {
         GradElement, GradSeed, GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector,
         Transform,
     };
-    pub use crate::overload::{Callee, FuncRet, Resolve, RetOf, Unresolved};
+    pub use crate::overload::{resolves, Callee, FuncRet, Resolve, RetOf, Unresolved};
     pub use warp_macros::__object_rows;
     pub use warp_macros::__overload_set as overload_set;
     pub use warp_runtime::__deterministic as deterministic;

@@ -38,3 +38,8 @@ pub trait FuncRet {
 
 /// The result type of func `F`.
 pub type RetOf<F> = <F as FuncRet>::Ret;
+
+/// Nothing, when `F` takes arguments of types `A`. A kernel calls it (in a `const`) for each
+/// call whose argument types it could not all tell: when several overloads fit, rustc's
+/// "type annotations needed" error here, at the call, lists them.
+pub const fn resolves<F: Resolve<A>, A>() {}

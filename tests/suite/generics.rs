@@ -665,16 +665,16 @@ fn overloads_by_first_argument(dev: &wp::Device) {
     let out = arr(&[0i32, 9], dev);
     wp::launch(combine_ints, 1, (&out,), dev).unwrap();
     assert_eq!(host(&out)[0], (7 - 10) + (9 - 1));
-    // Each overload is a func of its own in reports: named by its first argument's type.
+    // Each overload is a func of its own in reports: named by its parameter types.
     let info = wp::aot::instances(combine_all);
     let callees: Vec<&str> = info.iter().map(|i| i.callees[0].name).collect();
     assert_eq!(
         callees,
         [
-            "combine<i32>",
-            "combine<Vec2>",
-            "combine<DVec3>",
-            "combine<Probe>"
+            "combine(i32, i32)",
+            "combine(Vec2, Vec2)",
+            "combine(DVec3, DVec3)",
+            "combine(Probe, Probe)"
         ]
     );
 }

@@ -85,7 +85,14 @@ pub(super) fn call_checks(f: &crate::ir::Function) -> TokenStream {
                     };
                 }
             });
+            // An argument type left to rustc (`_`): when several overloads fit, rustc's
+            // ambiguity error here names them (the call's own paths only say `_`).
+            let open = crate::front::lower::resolve::unresolved_parts(path).map(|(f, a)| {
+                let wp = crate::paths::private_at(c.span);
+                quote_spanned! {c.span=> const _: () = #wp::resolves::<#f, #a>(); }
+            });
             quote_spanned! {c.span=>
+                #open
                 const _: () = ::core::assert!(#path::__WP_MUT_PARAMS == #mask, #msg);
                 #grad
             }

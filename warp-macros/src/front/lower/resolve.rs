@@ -31,6 +31,28 @@ pub(crate) fn callee_name(path: &syn::Path) -> String {
     last.ident.to_string()
 }
 
+/// The func and the argument types of a resolved callee path (`Callee::<f, (A, _)>`), when
+/// an argument's type was left to rustc (`_`): `expand::checks` asks rustc to resolve them
+/// once more where an ambiguity reads as one.
+pub(crate) fn unresolved_parts(path: &syn::Path) -> Option<(&syn::Type, &syn::Type)> {
+    let last = path.segments.last()?;
+    let syn::PathArguments::AngleBracketed(a) = &last.arguments else {
+        return None;
+    };
+    match (last.ident == "Callee", a.args.first(), a.args.get(1)) {
+        (true, Some(syn::GenericArgument::Type(f)), Some(syn::GenericArgument::Type(t))) => {
+            fn open(ts: proc_macro2::TokenStream) -> bool {
+                ts.into_iter().any(|tt| match tt {
+                    proc_macro2::TokenTree::Group(g) => open(g.stream()),
+                    tt => tt.to_string() == "_",
+                })
+            }
+            open(t.to_token_stream()).then_some((f, t))
+        }
+        _ => None,
+    }
+}
+
 /// `__wp::Vec3`-style tokens with `__wp` (the alias kernels' bodies import) replaced by the
 /// facade's full path, since a callee path is also used outside those bodies (the `FuncInfo`
 /// constants of a func).
@@ -152,8 +174,11 @@ mod tests {
                 format!("{wp}::Callee::<m::mix::<f32>,({wp}::RetOf<{wp}::Callee::<twice,(f32,)>>,_,)>"),
             ]
         );
-        // Messages name the func as written.
+        // Messages name the func as written; a key with `_` is checked once more.
         let p: syn::Path = syn::parse_str(&got[3]).unwrap();
         assert_eq!(callee_name(&p), "mix");
+        assert!(unresolved_parts(&p).is_some());
+        let p: syn::Path = syn::parse_str(&got[0]).unwrap();
+        assert!(unresolved_parts(&p).is_none());
     }
 }
