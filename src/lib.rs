@@ -236,6 +236,7 @@ pub mod prelude {
 /// Names that generated code refers to. Not part of the public API.
 #[doc(hidden)]
 pub mod __private {
+    pub use crate::overload::{resolves, Callee, FuncRet, Resolve, RetOf, Unresolved};
     pub use bytemuck;
     pub use glam;
     pub use warp_core::{
@@ -245,7 +246,6 @@ pub mod __private {
         GradElement, GradSeed, GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector,
         Transform,
     };
-    pub use crate::overload::{resolves, Callee, FuncRet, Resolve, RetOf, Unresolved};
     pub use warp_macros::__object_rows;
     pub use warp_macros::__overload_set as overload_set;
     pub use warp_runtime::__deterministic as deterministic;

@@ -256,8 +256,18 @@ fn generic_custom_gradient(dev: &wp::Device) {
     for k in 0..3 {
         // The custom gradient is exact, 24 x² - 1; central differences of a cubic are off by
         // h² f'''/6 = 8e-10 plus rounding (1e-16 |y| / h, about 1e-10): 1e-8 relative.
-        assert_close_f64(got[k], want[k], 1e-8, "d cube / dx against central differences");
-        assert_close_f64(got[k], 24.0 * xv[k] * xv[k] - 1.0, fma_rel64(dev), "d cube / dx");
+        assert_close_f64(
+            got[k],
+            want[k],
+            1e-8,
+            "d cube / dx against central differences",
+        );
+        assert_close_f64(
+            got[k],
+            24.0 * xv[k] * xv[k] - 1.0,
+            fma_rel64(dev),
+            "d cube / dx",
+        );
     }
     // The f32 instance runs its own gradient func (`dcube<f32>`).
     let x = arr(&[0.5f32], dev).with_grad().unwrap();
@@ -338,7 +348,12 @@ fn overload_custom_gradient(dev: &wp::Device) {
     for (k, (g, w)) in got.iter().zip(&want).enumerate() {
         // A product of quadratics (degree 4): central differences are off by h² f'''/6, under
         // 1e-8 here, plus rounding (1e-16 |e| / h, about 1e-10): 1e-7 relative.
-        assert_close_f64(*g, *w, 1e-7, &format!("input {k} against central differences"));
+        assert_close_f64(
+            *g,
+            *w,
+            1e-7,
+            &format!("input {k} against central differences"),
+        );
     }
 }
 

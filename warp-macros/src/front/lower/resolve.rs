@@ -74,12 +74,7 @@ fn absolute(ts: proc_macro2::TokenStream) -> proc_macro2::TokenStream {
 impl Lowerer {
     /// The path a call of the func written `path` with argument variables `args` names its
     /// callee by (see the module's comment).
-    pub(super) fn resolve_callee(
-        &self,
-        path: &syn::Path,
-        args: &[VarId],
-        span: Span,
-    ) -> syn::Path {
+    pub(super) fn resolve_callee(&self, path: &syn::Path, args: &[VarId], span: Span) -> syn::Path {
         let wp = crate::paths::private_at(span);
         let tys: Vec<proc_macro2::TokenStream> = args
             .iter()
@@ -146,8 +141,9 @@ mod tests {
 
     /// Every func call's callee, as text without spaces.
     fn callees(item: syn::ItemFn) -> Vec<String> {
-        let f = lower_fn(&item, FnKind::Kernel)
-            .unwrap_or_else(|e| panic!("{:?}", e.iter().map(|e| e.to_string()).collect::<Vec<_>>()));
+        let f = lower_fn(&item, FnKind::Kernel).unwrap_or_else(|e| {
+            panic!("{:?}", e.iter().map(|e| e.to_string()).collect::<Vec<_>>())
+        });
         f.callees
             .iter()
             .map(|p| p.to_token_stream().to_string().replace(' ', ""))
