@@ -2738,3 +2738,53 @@ fn func_gradients_and_custom_replays_match_the_cpu_backend() {
         assert_eq!(host, cpu_results(&args));
     }
 }
+
+#[wp::func]
+fn sl_pair(x: f32) -> (f32, Vec3) {
+    (x * 1.5, vec3(x, 2.0 * x, -x))
+}
+
+#[wp::func]
+fn sl_sq(x: f32) -> f32 {
+    x * x
+}
+
+/// Unsuffixed literals in builtins' scalar positions beside values the macro cannot type
+/// (funcs' results, tuple fields): each must be the lane type in C++ (a `double` there made
+/// `lerp` ambiguous and `expect_near` fail its deduction under NVRTC).
+#[wp::kernel]
+fn scalar_literals(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let t = sl_pair(a);
+    expect_near(t.0, a * 1.5, 1e-6);
+    expect_near(sl_sq(a), a * a, 0.0);
+    out[(i, 0)] = lerp(sl_sq(a), sl_sq(a + 1.0), 0.25);
+    out[(i, 1)] = lerp(t.1, sl_pair(2.0 * a).1, 0.75).y;
+    out[(i, 2)] = norm_huber(t.1, 0.5);
+    out[(i, 3)] = smooth_normalize(t.1, 0.5).z;
+    out[(i, 4)] = norm_pseudo_huber(t.1, 2.0);
+    out[(i, 5)] = lerp(sl_sq(a), 2.0, -1.0);
+}
+
+#[test]
+fn scalar_position_literals_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let xs: Vec<f32> = (0..9).map(|k| k as f32 * 0.61 - 2.2).collect();
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 6), &dev).unwrap();
+    let host = run_on_host::<scalar_literals>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(scalar_literals, n, (&x, &out), &dev).unwrap();
+    let got = out.to_vec().unwrap();
+    for (k, &a) in xs.iter().enumerate() {
+        // lerp(a², (a+1)², 0.25) and lerp(a², 2, -1) in f32: a few ulps from the f64 forms.
+        let l = (a * a) as f64 * 0.75 + ((a + 1.0) * (a + 1.0)) as f64 * 0.25;
+        assert!((got[k * 6] as f64 - l).abs() <= 1e-5 * l.abs().max(1.0));
+        let e = 2.0 * (a * a) as f64 - 2.0;
+        assert!((got[k * 6 + 5] as f64 - e).abs() <= 1e-5 * e.abs().max(1.0));
+    }
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}

@@ -303,7 +303,13 @@ impl<'a> Emitter<'a> {
             }
         });
         match found? {
-            Op::Copy(w) | Op::LitLike(_, w) | Op::ZeroLike(w) => self.type_expr(w, depth + 1),
+            Op::Copy(w) | Op::LitLike(_, w, Like::Value) | Op::ZeroLike(w) => {
+                self.type_expr(w, depth + 1)
+            }
+            Op::LitLike(_, w, Like::Scalar) => Some(format!(
+                "wp::scalar_of_t<{}>",
+                self.type_expr(w, depth + 1)?
+            )),
             Op::Func { path, .. } => Some(format!(
                 "@@R{}@@",
                 self.f.callees.iter().position(|p| p == &path)?
@@ -814,13 +820,17 @@ impl<'a> Emitter<'a> {
                 Ty::Scalar(s) if s.is_float() => float_lit(*v, *s),
                 _ => format!("{v:?}"),
             },
-            Op::LitLike(l, like) => {
+            Op::LitLike(l, like, kind) => {
                 let v = match l {
                     Lit::Int(i) => *i as f64,
                     Lit::Float(f) => *f,
                     Lit::Bool(_) => return Err("bool literal beside an untyped value".into()),
                 };
-                format!("wp::lit_like<decltype({})>({v:?})", self.var(*like))
+                let f = match kind {
+                    Like::Value => "lit_like",
+                    Like::Scalar => "scalar_lit_like",
+                };
+                format!("wp::{f}<decltype({})>({v:?})", self.var(*like))
             }
             // Value-initialised: zero for every kernel type (the C++ types are aggregates),
             // and needs no adjoint header (a tangent kernel is a forward unit).

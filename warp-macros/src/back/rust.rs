@@ -248,7 +248,10 @@ impl<'a> RustEmitter<'a> {
         let name = self.name_lit();
         match op {
             Op::Lit(l) => literal(l, ty),
-            Op::LitLike(l, like) => {
+            // rustc types a lane-type literal from the builtin's signature, as in the user's
+            // own code.
+            Op::LitLike(l, _, Like::Scalar) => literal(l, &Ty::Deferred),
+            Op::LitLike(l, like, Like::Value) => {
                 let like = self.var(*like);
                 let v = match l {
                     Lit::Int(i) => *i as f64,

@@ -255,7 +255,7 @@ impl Tx {
     fn lit(&mut self, like: VarId, x: f64) -> VarId {
         match self.ty(like).scalar() {
             Some(s) => self.tmp(Ty::Scalar(s), Op::Lit(Lit::Float(x))),
-            None => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(x), like)),
+            None => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(x), like, Like::Value)),
         }
     }
 

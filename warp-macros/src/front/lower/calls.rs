@@ -483,7 +483,8 @@ impl Lowerer {
         }
         let resolved = b.resolve(&arg_tys).map_err(|m| syn::Error::new(span, m))?;
         // A literal in a `T` position whose type the macro cannot see takes the type of an
-        // argument in another `T` position (`v.max(0.5)` with `v` from a user func).
+        // argument in another `T` position (`v.max(0.5)` with `v` from a user func); one in a
+        // `ScalarOfT` position takes that argument's lane type (`lerp(f(a), f(b), 0.5)`).
         let like = b.params.iter().zip(&vals).find_map(|(p, v)| match (p, v) {
             (Pos::T, Some(vs)) if self.ty(vs[0]).is_deferred() => Some(vs[0]),
             _ => None,
@@ -492,11 +493,12 @@ impl Lowerer {
         for (i, a) in args.iter().enumerate() {
             match vals[i].take() {
                 Some(vs) => out.extend(vs),
-                None => match (like, flex_value(a)) {
-                    (Some(w), Some(value))
-                        if b.params[i] == Pos::T && resolved.params[i].is_deferred() =>
+                None => match (like, flex_value(a), b.params[i]) {
+                    (Some(w), Some(value), pos @ (Pos::T | Pos::ScalarOfT))
+                        if resolved.params[i].is_deferred() =>
                     {
-                        out.push(self.def(Op::LitLike(value, w), Ty::Deferred, a.span()))
+                        let kind = if pos == Pos::T { Like::Value } else { Like::Scalar };
+                        out.push(self.def(Op::LitLike(value, w, kind), Ty::Deferred, a.span()))
                     }
                     _ => out.push(self.expr(a, Some(&resolved.params[i]))?),
                 },
