@@ -481,7 +481,19 @@ impl Lowerer {
                 vals[i] = Some(vs);
             }
         }
-        let resolved = b.resolve(&arg_tys).map_err(|m| syn::Error::new(span, m))?;
+        let resolved = match b.resolve(&arg_tys) {
+            Ok(r) => r,
+            Err(m) => {
+                // `max(acc, x)` with `acc` a literal `let` and `x` an f64: learn it.
+                let known: Vec<VarId> = vals.iter().flatten().flatten().copied().collect();
+                for (k, &a) in known.iter().enumerate() {
+                    for &b in &known[k + 1..] {
+                        self.learn_from_pair(a, b);
+                    }
+                }
+                return err(span, m);
+            }
+        };
         // A literal in a `T` position whose type the macro cannot see takes the type of an
         // argument in another `T` position (`v.max(0.5)` with `v` from a user func); one in a
         // `ScalarOfT` position takes that argument's lane type (`lerp(f(a), f(b), 0.5)`).
@@ -497,7 +509,11 @@ impl Lowerer {
                     (Some(w), Some(value), pos @ (Pos::T | Pos::ScalarOfT))
                         if resolved.params[i].is_deferred() =>
                     {
-                        let kind = if pos == Pos::T { Like::Value } else { Like::Scalar };
+                        let kind = if pos == Pos::T {
+                            Like::Value
+                        } else {
+                            Like::Scalar
+                        };
                         out.push(self.def(Op::LitLike(value, w, kind), Ty::Deferred, a.span()))
                     }
                     _ => out.push(self.expr(a, Some(&resolved.params[i]))?),

@@ -221,8 +221,13 @@ impl Lowerer {
                             .ok_or_else(|| syn::Error::new(span, "unsupported operator"))?;
                         let hint = if op.is_comparison() { None } else { want };
                         let (l, r) = self.operand_pair(&b.left, &b.right, hint, op)?;
-                        let res = binary_result(op, &self.ty(l), &self.ty(r))
-                            .map_err(|m| syn::Error::new(b.op.span(), m))?;
+                        let res = match binary_result(op, &self.ty(l), &self.ty(r)) {
+                            Ok(res) => res,
+                            Err(m) => {
+                                self.learn_from_pair(l, r);
+                                return err(b.op.span(), m);
+                            }
+                        };
                         // Tile shapes the macro cannot compare: rustc's.
                         if let (Ty::Tile(_, dl), Ty::Tile(_, dr)) = (self.ty(l), self.ty(r)) {
                             let msg = format!(

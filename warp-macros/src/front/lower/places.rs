@@ -100,6 +100,12 @@ impl Lowerer {
                 let v = self.expr(rhs, Some(&place_ty))?;
                 let vt = self.ty(v);
                 if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
+                    if let Place::Local { var, path } = &place {
+                        if path.is_empty() {
+                            self.learn_literal_type(*var, &vt);
+                        }
+                    }
+                    self.learn_literal_type(v, &place_ty);
                     return err(
                         rhs.span(),
                         format!("mismatched types: expected `{place_ty}`, found `{vt}`"),
@@ -115,8 +121,17 @@ impl Lowerer {
                     self.expr(rhs, None)?
                 };
                 let rt = self.ty(r);
-                let res =
-                    binary_result(op, &place_ty, &rt).map_err(|m| syn::Error::new(span, m))?;
+                let res = binary_result(op, &place_ty, &rt);
+                if !matches!(&res, Ok(t) if t.is_deferred() || place_ty.is_deferred() || *t == place_ty)
+                {
+                    if let Place::Local { var, path } = &place {
+                        if path.is_empty() {
+                            self.learn_literal_type(*var, &rt);
+                        }
+                    }
+                    self.learn_literal_type(r, &place_ty);
+                }
+                let res = res.map_err(|m| syn::Error::new(span, m))?;
                 if !res.is_deferred() && !place_ty.is_deferred() && res != place_ty {
                     return err(
                         span,
@@ -191,6 +206,12 @@ impl Lowerer {
         let place_ty = self.place_ty(&place, target.span())?;
         let vt = self.ty(value);
         if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
+            if let Place::Local { var, path } = &place {
+                if path.is_empty() {
+                    self.learn_literal_type(*var, &vt);
+                }
+            }
+            self.learn_literal_type(value, &place_ty);
             return err(
                 target.span(),
                 format!("mismatched types: expected `{place_ty}`, found `{vt}`"),

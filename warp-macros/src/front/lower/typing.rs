@@ -202,7 +202,11 @@ impl Lowerer {
     pub(super) fn literal_next_to(&mut self, lit: &Expr, other: VarId, op: BinOp) -> R<VarId> {
         if self.ty(other).is_deferred() {
             if let Some(value) = flex_value(lit) {
-                return Ok(self.def(Op::LitLike(value, other, Like::Value), Ty::Deferred, lit.span()));
+                return Ok(self.def(
+                    Op::LitLike(value, other, Like::Value),
+                    Ty::Deferred,
+                    lit.span(),
+                ));
             }
         }
         let hint = literal_hint(&self.ty(other), op);
