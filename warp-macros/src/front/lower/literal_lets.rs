@@ -9,6 +9,7 @@
 //! the lowering meets such `let`s, which is the same on every pass). A mismatch with nothing
 //! to learn from stays the error it was.
 
+use super::places::Place;
 use super::*;
 use std::collections::hash_map::Entry;
 
@@ -64,6 +65,16 @@ impl Lowerer {
         }
         if let Entry::Vacant(e) = self.defaults.found.entry(key) {
             e.insert(Ty::Scalar(want));
+        }
+    }
+
+    /// A place met a value of type `other`: learned if the place is a literal `let`'s
+    /// variable itself (not a field or lane of it).
+    pub(super) fn learn_for_place(&mut self, place: &Place, other: &Ty) {
+        if let Place::Local { var, path } = place {
+            if path.is_empty() {
+                self.learn_literal_type(*var, other);
+            }
         }
     }
 

@@ -100,11 +100,7 @@ impl Lowerer {
                 let v = self.expr(rhs, Some(&place_ty))?;
                 let vt = self.ty(v);
                 if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
-                    if let Place::Local { var, path } = &place {
-                        if path.is_empty() {
-                            self.learn_literal_type(*var, &vt);
-                        }
-                    }
+                    self.learn_for_place(&place, &vt);
                     self.learn_literal_type(v, &place_ty);
                     return err(
                         rhs.span(),
@@ -124,11 +120,7 @@ impl Lowerer {
                 let res = binary_result(op, &place_ty, &rt);
                 if !matches!(&res, Ok(t) if t.is_deferred() || place_ty.is_deferred() || *t == place_ty)
                 {
-                    if let Place::Local { var, path } = &place {
-                        if path.is_empty() {
-                            self.learn_literal_type(*var, &rt);
-                        }
-                    }
+                    self.learn_for_place(&place, &rt);
                     self.learn_literal_type(r, &place_ty);
                 }
                 let res = res.map_err(|m| syn::Error::new(span, m))?;
@@ -206,11 +198,7 @@ impl Lowerer {
         let place_ty = self.place_ty(&place, target.span())?;
         let vt = self.ty(value);
         if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
-            if let Place::Local { var, path } = &place {
-                if path.is_empty() {
-                    self.learn_literal_type(*var, &vt);
-                }
-            }
+            self.learn_for_place(&place, &vt);
             self.learn_literal_type(value, &place_ty);
             return err(
                 target.span(),
