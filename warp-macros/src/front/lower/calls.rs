@@ -394,6 +394,10 @@ impl Lowerer {
             (Ty::SpatialMatrix(s), "from_rows") => {
                 (Ctor::Components, vec![Ty::SpatialVector(*s); 6])
             }
+            (Ty::MatRC(_, r, _), "from_rows") => {
+                let (row, _) = ty.lane_elems().expect("a matrix has rows");
+                (Ctor::Components, vec![row; *r as usize])
+            }
             _ => {
                 return err(
                     c.func.span(),
