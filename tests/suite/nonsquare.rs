@@ -265,7 +265,7 @@ pub(crate) fn k_lanes(a: Array<Mat23>, idx: Array<i32>, out: Array<f32>, rows: A
     let mut loc = [Mat23::ZERO; 3];
     loc[r] = z;
     loc[2][(1, 0)] = 7.0;
-    out[i * 4 + 3] = loc[r][(0, 2)] + loc[2][(1, 0)];
+    out[i * 4 + 3] = loc[r][(1, 2)] + loc[2][(1, 0)];
 }
 
 /// Lanes and rows (literal and run-time indices, read and written), `from_rows`, `ZERO`,
