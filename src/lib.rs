@@ -130,14 +130,14 @@ pub use warp_core::bf16;
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::capability;
 pub use warp_core::f16;
-/// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
-pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 /// Non-square matrices (Warp's `matrix(shape=(R, C))` for `R != C` in {2, 3, 4, 6}): `Mat23`
 /// has 2 rows of `Vec3` (see `warp_core::matrix`).
 pub use warp_core::{
-    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63,
-    DMat64, Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64,
+    Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
 };
+/// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
+pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 pub use warp_core::{DTransform, Fault, FaultKind, Float, Int, LaunchId, Transform, Vector};
 /// The kernel cache: where it lives (`WARP_LANG_CACHE_DIR` wins over `set_cache_dir`), its
 /// size bound (`WARP_LANG_CACHE_MAX_BYTES` wins over `set_cache_max_bytes`; least recently

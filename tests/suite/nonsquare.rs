@@ -43,7 +43,10 @@ fn close(got: &[f64], want: &[f64], tol: f64, what: &str) {
         .zip(want)
         .map(|(g, w)| if g == w { 0.0 } else { (g - w).abs() / scale })
         .fold(0.0, f64::max);
-    assert!(d <= tol, "{what}: got {got:?}, want {want:?} ({d:e} > {tol:e})");
+    assert!(
+        d <= tol,
+        "{what}: got {got:?}, want {want:?} ({d:e} > {tol:e})"
+    );
 }
 
 fn m23(seed: f64) -> DMat23 {
@@ -131,8 +134,7 @@ fn nonsquare_ops_f64(dev: &wp::Device) {
         k_ops_f64,
         k,
         (
-            &aa, &ab, &as_, &ax, &ay, &an, &ov, &osq, &oas, &osb, &ot, &oo, &ol, &od, &osm,
-            &osv,
+            &aa, &ab, &as_, &ax, &ay, &an, &ov, &osq, &oas, &osb, &ot, &oo, &ol, &od, &osm, &osv,
         ),
         dev,
     )
@@ -180,7 +182,12 @@ fn nonsquare_ops_f64(dev: &wp::Device) {
         // outer(a, b)[i][j] = a[i] b[j] (shape (3, 2), Warp's).
         assert_eq!(go[i][(2, 1)], x[i].z * y[i].y);
         let lin = (ai + ai * 2.0 - ai / 3.0) - 0.5 * -ai;
-        close(&flat(gl[i].to_rows_array()), &flat(lin.to_rows_array()), tol, "lanes");
+        close(
+            &flat(gl[i].to_rows_array()),
+            &flat(lin.to_rows_array()),
+            tol,
+            "lanes",
+        );
         let dd = wp::__private::builtins::ddot(ai, b[i].transpose());
         close(&[gd[i]], &[dd], tol, "ddot");
         let sm: DSpatialMatrix = n[i] * n[i].transpose();
@@ -190,7 +197,12 @@ fn nonsquare_ops_f64(dev: &wp::Device) {
             tol,
             "Mat63 * Mat36",
         );
-        close(&gsv[i].to_array(), &(n[i] * x[i]).to_array(), tol, "Mat63 * Vec3");
+        close(
+            &gsv[i].to_array(),
+            &(n[i] * x[i]).to_array(),
+            tol,
+            "Mat63 * Vec3",
+        );
     }
 }
 
@@ -219,7 +231,9 @@ fn nonsquare_ops_f32(dev: &wp::Device) {
             }))
         })
         .collect();
-    let x: Vec<Vec4> = (0..k).map(|i| Vec4::new(1.0, -0.5, i as f32, 2.0)).collect();
+    let x: Vec<Vec4> = (0..k)
+        .map(|i| Vec4::new(1.0, -0.5, i as f32, 2.0))
+        .collect();
     let (aa, ax) = (arr(&a, dev), arr(&x, dev));
     let (out, out4) = (zeros::<Vec3, 1>(k, dev), zeros::<Vec4, 1>(k, dev));
     let t = zeros::<Mat43, 1>(k, dev);
@@ -228,9 +242,19 @@ fn nonsquare_ops_f32(dev: &wp::Device) {
     let tol = gpu_tol(dev, true);
     let f = |v: &[f32]| -> Vec<f64> { v.iter().map(|x| *x as f64).collect() };
     for i in 0..k {
-        close(&f(&go[i].to_array()), &f(&(a[i] * x[i]).to_array()), tol, "f32 m * x");
+        close(
+            &f(&go[i].to_array()),
+            &f(&(a[i] * x[i]).to_array()),
+            tol,
+            "f32 m * x",
+        );
         let w4 = a[i].transpose() * Vec3::new(1.0, 2.0, 3.0);
-        close(&f(&go4[i].to_array()), &f(&w4.to_array()), tol, "f32 transpose * x");
+        close(
+            &f(&go4[i].to_array()),
+            &f(&w4.to_array()),
+            tol,
+            "f32 transpose * x",
+        );
         let wt = (a[i] * 2.0).transpose() * Mat3::IDENTITY;
         let f = |m: Mat43| -> Vec<f64> {
             m.to_rows_array()
@@ -385,8 +409,7 @@ pub(crate) fn k_loss(xs: Array<f64>, loss: Array<f64>) {
     let mut c = a;
     c[(1, 2)] = c[(0, 1)] * s;
     c[0] = c[0] + u;
-    loss[i] = ddot(p, p) + ddot(q, c) + w.dot(v) + spatial_dot(sm * sv, sv) * 0.01
-        + ddot(-c, a);
+    loss[i] = ddot(p, p) + ddot(q, c) + w.dot(v) + spatial_dot(sm * sv, sv) * 0.01 + ddot(-c, a);
 }
 
 /// `gradcheck` of [`k_loss`] (f64; step 1e-6, central differences: truncation O(h^2) of
@@ -412,7 +435,11 @@ fn nonsquare_gradcheck(dev: &wp::Device) {
     let touched = (0..report.analytic[0].len())
         .filter(|&c| report.analytic.iter().any(|r| r[c] != 0.0))
         .count();
-    assert_eq!(touched, report.analytic[0].len(), "every input has a gradient");
+    assert_eq!(
+        touched,
+        report.analytic[0].len(),
+        "every input has a gradient"
+    );
 }
 
 #[wp::kernel]
@@ -426,7 +453,9 @@ pub(crate) fn k_array_loss(ms: Array<Mat23>, xs: Array<Vec3>, w: Vec2, loss: Arr
 fn nonsquare_array_gradients(dev: &wp::Device) {
     let k = 4;
     let m0: Vec<Mat23> = (0..k).map(|i| to_f32(m23(i as f64))).collect();
-    let x0: Vec<Vec3> = (0..k).map(|i| Vec3::new(1.0, -0.5 * i as f32, 0.25)).collect();
+    let x0: Vec<Vec3> = (0..k)
+        .map(|i| Vec3::new(1.0, -0.5 * i as f32, 0.25))
+        .collect();
     let w = Vec2::new(0.7, -1.3);
     let ms = arr(&m0, dev).with_grad().unwrap();
     let xs = arr(&x0, dev).with_grad().unwrap();
@@ -477,7 +506,9 @@ pub(crate) fn k_fwd(x: Array<f64>, y: Array<f64>) {
 /// (h = 1e-6: truncation and rounding about 1e-10 for this polynomial, relative 1e-7).
 fn nonsquare_jvp_matches_the_jacobian(dev: &wp::Device) {
     let n = 3;
-    let xs: Vec<f64> = (0..n * 5).map(|k| ((k as f64) * 0.61).sin() * 1.5).collect();
+    let xs: Vec<f64> = (0..n * 5)
+        .map(|k| ((k as f64) * 0.61).sin() * 1.5)
+        .collect();
     let vs: Vec<f64> = (0..n * 5).map(|k| ((k as f64) * 1.37).cos()).collect();
     let x = arr(&xs, dev).with_grad().unwrap();
     let y = zeros::<f64, 1>(n, dev).with_grad().unwrap();
@@ -499,7 +530,12 @@ fn nonsquare_jvp_matches_the_jacobian(dev: &wp::Device) {
     let (p, m) = (shifted(h), shifted(-h));
     for k in 0..n {
         let tol = 1e-12 * jv[k].abs().max(1.0);
-        assert!((got[k] - jv[k]).abs() <= tol, "jvp vs J v [{k}]: {} vs {}", got[k], jv[k]);
+        assert!(
+            (got[k] - jv[k]).abs() <= tol,
+            "jvp vs J v [{k}]: {} vs {}",
+            got[k],
+            jv[k]
+        );
         let fd = (p[k] - m[k]) / (2.0 * h);
         assert!(
             (got[k] - fd).abs() <= 1e-7 * fd.abs().max(1.0),

@@ -186,10 +186,7 @@ pub fn matmul<S: MatScalar, const R: usize, const K: usize, const C: usize>(
 
 /// `m * x`: lane `i` is `Σ_k m[i][k] x[k]`, `k` ascending.
 #[inline(always)]
-pub fn matvec<S: MatScalar, const R: usize, const C: usize>(
-    m: [[S; C]; R],
-    x: [S; C],
-) -> [S; R] {
+pub fn matvec<S: MatScalar, const R: usize, const C: usize>(m: [[S; C]; R], x: [S; C]) -> [S; R] {
     core::array::from_fn(|i| {
         let mut acc = m[i][0] * x[0];
         for k in 1..C {
@@ -670,7 +667,6 @@ macro_rules! for_each_nonsquare {
 }
 pub(crate) use for_each_nonsquare;
 
-
 // The builtins of the "linalg" section that take non-square matrices (warp-core `builtins`'
 // generic `transpose`, `ddot` and `outer` dispatch through these traits).
 macro_rules! builtin_impls {
@@ -774,10 +770,12 @@ mod tests {
                 assert!((as_[(i, j)] - want).abs() < 1e-14);
             }
         }
-        assert!(((sb.transpose() - b.transpose() * s.transpose()).to_rows_array())
-            .iter()
-            .flatten()
-            .all(|e| e.abs() < 1e-14));
+        assert!(
+            ((sb.transpose() - b.transpose() * s.transpose()).to_rows_array())
+                .iter()
+                .flatten()
+                .all(|e| e.abs() < 1e-14)
+        );
         // (a b) x = a (b x); transpose round trip; 6x3 times 3x6 is a spatial matrix.
         let x = DVec2::new(0.4, -0.7);
         let (l, r) = ((a * b) * x, a * (b * x));
@@ -787,7 +785,10 @@ mod tests {
             core::array::from_fn(|j| (i * 3 + j) as f64)
         }));
         let sm: DSpatialMatrix = m63 * m63.transpose();
-        assert_eq!(sm[(2, 5)], (6..9).zip(15..18).map(|(p, q)| (p * q) as f64).sum());
+        assert_eq!(
+            sm[(2, 5)],
+            (6..9).zip(15..18).map(|(p, q)| (p * q) as f64).sum()
+        );
         assert_eq!((a * 2.0) / 2.0, a);
         assert_eq!(2.0 * a, a + a);
         assert_eq!(-a + a, DMat23::ZERO);

@@ -184,23 +184,26 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
 /// outer shape, [`Ty::mat_of`]: `Mat23 * Mat32` is a `Mat2`).
 fn nonsquare_binary(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
     use Ty::*;
-    let bad = |why: String| Err(format!("cannot apply `{}` to `{l}` and `{r}`{why}", op.symbol()));
+    let bad = |why: String| {
+        Err(format!(
+            "cannot apply `{}` to `{l}` and `{r}`{why}",
+            op.symbol()
+        ))
+    };
     match (op, l, r) {
         (BinOp::Eq | BinOp::Ne, _, _) if l == r => Ok(BOOL),
         (BinOp::Add | BinOp::Sub, _, _) if l == r => Ok(l.clone()),
         (BinOp::Mul | BinOp::Div, MatRC(a, ..), Scalar(b)) if a == b => Ok(l.clone()),
         (BinOp::Mul, Scalar(a), MatRC(b, ..)) if a == b => Ok(r.clone()),
-        (BinOp::Mul, MatRC(s, rows, cols), v) if v.vec_shape().is_some() => {
-            match v.vec_shape() {
-                Some((t, n)) if t == *s && n == *cols => {
-                    Ty::vec_of(*s, *rows).ok_or_else(|| "no vector type".into())
-                }
-                _ => bad(format!(
-                    ": `{l}` has {cols} columns, so it multiplies a vector of {cols} lanes of `{}`",
-                    s.name()
-                )),
+        (BinOp::Mul, MatRC(s, rows, cols), v) if v.vec_shape().is_some() => match v.vec_shape() {
+            Some((t, n)) if t == *s && n == *cols => {
+                Ty::vec_of(*s, *rows).ok_or_else(|| "no vector type".into())
             }
-        }
+            _ => bad(format!(
+                ": `{l}` has {cols} columns, so it multiplies a vector of {cols} lanes of `{}`",
+                s.name()
+            )),
+        },
         (BinOp::Mul, a, b) if a.mat_shape().is_some() && b.mat_shape().is_some() => {
             let ((s, ra, ca), (t, rb, cb)) = (a.mat_shape().unwrap(), b.mat_shape().unwrap());
             if s != t {

@@ -872,8 +872,14 @@ mod tests {
             Ty::MatRC(Scalar::F64, 3, 6).lane_elems(),
             Some((Ty::SpatialVector(Scalar::F64), 3))
         );
-        assert_eq!(Ty::mat_of(Scalar::F32, 3, 3), Some(Ty::Matrix(Scalar::F32, 3)));
-        assert_eq!(Ty::mat_of(Scalar::F64, 6, 6), Some(Ty::SpatialMatrix(Scalar::F64)));
+        assert_eq!(
+            Ty::mat_of(Scalar::F32, 3, 3),
+            Some(Ty::Matrix(Scalar::F32, 3))
+        );
+        assert_eq!(
+            Ty::mat_of(Scalar::F64, 6, 6),
+            Some(Ty::SpatialMatrix(Scalar::F64))
+        );
         assert_eq!(Ty::mat_of(Scalar::F32, 5, 2), None);
         assert_eq!(Ty::mat_of(Scalar::I32, 2, 3), None);
     }

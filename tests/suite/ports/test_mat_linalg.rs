@@ -159,13 +159,20 @@ macro_rules! mat_ports {
                 let launch = || wp::launch(k_matvec, 1, (&av, &am, &out), dev).unwrap();
                 launch();
                 let (e, x) = (e32(m), [v.x as f64, v.y as f64]);
-                let want: Vec<f64> = (0..3).map(|i| 2.0 * (e[i][0] * x[0] + e[i][1] * x[1])).collect();
+                let want: Vec<f64> = (0..3)
+                    .map(|i| 2.0 * (e[i][0] * x[0] + e[i][1] * x[1]))
+                    .collect();
                 near(&f64s(&host(&out)), &want, 5.0 * tol, "2 m32 * v");
                 for i in 0..3 {
                     let (gv, gm) = grad_of(dev, &out, i, launch, || {
                         (host(&av.grad().unwrap())[0], host(&am.grad().unwrap())[0])
                     });
-                    near(&f64s(&gv.to_array()), &[2.0 * e[i][0], 2.0 * e[i][1]], 2.0 * tol, "d/dv");
+                    near(
+                        &f64s(&gv.to_array()),
+                        &[2.0 * e[i][0], 2.0 * e[i][1]],
+                        2.0 * tol,
+                        "d/dv",
+                    );
                     let mut want = [[0.0; 2]; 3];
                     want[i] = [2.0 * x[0], 2.0 * x[1]];
                     near(&flat(e32(gm)), &flat(want), 2.0 * tol, "d/dm");
@@ -195,13 +202,20 @@ macro_rules! mat_ports {
                 let launch = || wp::launch(k_vecmat, 1, (&av, &am, &out), dev).unwrap();
                 launch();
                 let (e, x) = (e23(m), [v.x as f64, v.y as f64]);
-                let want: Vec<f64> = (0..3).map(|i| 2.0 * (x[0] * e[0][i] + x[1] * e[1][i])).collect();
+                let want: Vec<f64> = (0..3)
+                    .map(|i| 2.0 * (x[0] * e[0][i] + x[1] * e[1][i]))
+                    .collect();
                 near(&f64s(&host(&out)), &want, 5.0 * tol, "2 v * m23");
                 for i in 0..3 {
                     let (gv, gm) = grad_of(dev, &out, i, launch, || {
                         (host(&av.grad().unwrap())[0], host(&am.grad().unwrap())[0])
                     });
-                    near(&f64s(&gv.to_array()), &[2.0 * e[0][i], 2.0 * e[1][i]], 2.0 * tol, "d/dv");
+                    near(
+                        &f64s(&gv.to_array()),
+                        &[2.0 * e[0][i], 2.0 * e[1][i]],
+                        2.0 * tol,
+                        "d/dv",
+                    );
                     let mut want = [[0.0; 3]; 2];
                     want[0][i] = 2.0 * x[0];
                     want[1][i] = 2.0 * x[1];

@@ -17,12 +17,12 @@ use super::linalg::{AdjDdot, AdjOuter, AdjTranspose};
 use super::ops::{AdjAdd, AdjDiv, AdjMul, AdjNeg, AdjSub};
 use super::Adjoint;
 use crate::matrix::{
-    for_each_nonsquare, for_each_outer, for_each_product, transpose_rc, MatScalar, RowMajor,
-    Shape, VecLanes, VecOf,
+    for_each_nonsquare, for_each_outer, for_each_product, transpose_rc, MatScalar, RowMajor, Shape,
+    VecLanes, VecOf,
 };
 use crate::matrix::{
-    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63,
-    DMat64, Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64,
+    Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
 };
 use crate::spatial::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 use glam::{DMat2, DMat3, DMat4, DVec2, DVec3, DVec4, Mat2, Mat3, Mat4, Vec2, Vec3, Vec4};
@@ -279,7 +279,10 @@ mod tests {
 
     #[test]
     fn products_against_central_differences() {
-        let (a, s) = (m23(0.1), DMat3::from_cols_array(&[0.3, -0.2, 0.9, 1.1, 0.4, -0.7, 0.2, 0.5, -1.3]));
+        let (a, s) = (
+            m23(0.1),
+            DMat3::from_cols_array(&[0.3, -0.2, 0.9, 1.1, 0.4, -0.7, 0.2, 0.5, -1.3]),
+        );
         let b = m23(0.7).transpose();
         let x = DVec3::new(0.5, -1.2, 0.8);
         // loss = ddot(probe, a * b) + ddot(probe2, a * s) + dot(probe3, a * x)
@@ -289,7 +292,8 @@ mod tests {
         let loss = |a: DMat23, b: DMat32, s: DMat3, x: DVec3| {
             ddot(p2, a * b) + ddot(p23, a * s) + p2v.dot(a * x)
         };
-        let (mut ga, mut gb, mut gs, mut gx) = (DMat23::ZERO, DMat32::ZERO, DMat3::ZERO, DVec3::ZERO);
+        let (mut ga, mut gb, mut gs, mut gx) =
+            (DMat23::ZERO, DMat32::ZERO, DMat3::ZERO, DVec3::ZERO);
         let (mut dummy2, mut dummy23, mut dv) = (DMat2::ZERO, DMat23::ZERO, DVec2::ZERO);
         let (mut ga2, mut ga3) = (DMat23::ZERO, DMat23::ZERO);
         // Seed each product's result with the probe's ddot/dot adjoint.

@@ -265,7 +265,11 @@ impl Builtin {
             Pos::Tuple(ps) => Ty::Tuple(ps.iter().map(&want).collect()),
             // `outer(a, b)`: shape `(len a, len b)`.
             Pos::OuterOfT => {
-                let b = self.params.iter().zip(&params).find(|(p, _)| **p == Pos::AnyVecOfT);
+                let b = self
+                    .params
+                    .iter()
+                    .zip(&params)
+                    .find(|(p, _)| **p == Pos::AnyVecOfT);
                 match (t.vec_shape(), b.and_then(|(_, b)| b.vec_shape())) {
                     (Some((s, n)), Some((_, m))) => Ty::mat_of(s, n, m).unwrap_or(Ty::Deferred),
                     _ => Ty::Deferred,

@@ -279,7 +279,9 @@ fn names_nonsquare(text: &str) -> bool {
             && b[0].is_ascii_digit()
             && b[1].is_ascii_digit()
             && b[0] != b[1]
-            && !b.get(2).is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
+            && !b
+                .get(2)
+                .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
     })
 }
 
