@@ -525,4 +525,13 @@ mod tests {
             ]
         );
     }
+
+    #[test]
+    fn struct_fields_of_nonsquare_matrices_are_found() {
+        assert!(names_nonsquare("struct S { wp::Mat23 j; wp::f32 w; };"));
+        assert!(names_nonsquare("wp::DMat63 m;"));
+        assert!(!names_nonsquare("struct S { wp::Mat3 m; wp::DMat4 n; };"));
+        assert!(!names_nonsquare("wp::Mat33 m; wp::Mat23_ZERO(); wp::Vec3 v;"));
+        assert!(!names_nonsquare("Mat23 m;"));
+    }
 }
