@@ -220,16 +220,18 @@ impl Builtin {
                 }
                 ArgTy::Known(_) if *pos == Pos::ArrayOfT => {}
                 ArgTy::Known(_) if *pos == Pos::AnyVolume => {}
-                ArgTy::Known(ty) if *pos == Pos::AnyVecOfT => {
-                    if ty.vec_shape().map(|(s, _)| Ty::Scalar(s)) != Some(scalar.clone()) {
-                        return Err(format!(
-                            "argument {} of `{}` must be a float vector of `{scalar}` (any \
-                             length), found `{ty}`",
-                            i + 1,
-                            self.name
-                        ));
-                    }
+                ArgTy::Known(ty)
+                    if *pos == Pos::AnyVecOfT
+                        && ty.vec_shape().map(|(s, _)| Ty::Scalar(s)) != Some(scalar.clone()) =>
+                {
+                    return Err(format!(
+                        "argument {} of `{}` must be a float vector of `{scalar}` (any \
+                         length), found `{ty}`",
+                        i + 1,
+                        self.name
+                    ))
                 }
+                ArgTy::Known(_) if *pos == Pos::AnyVecOfT => {}
                 ArgTy::Literal { .. } if *pos == Pos::AnyVecOfT => {
                     return Err(format!(
                         "argument {} of `{}` must be a vector, found a literal",

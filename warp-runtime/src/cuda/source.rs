@@ -531,7 +531,9 @@ mod tests {
         assert!(names_nonsquare("struct S { wp::Mat23 j; wp::f32 w; };"));
         assert!(names_nonsquare("wp::DMat63 m;"));
         assert!(!names_nonsquare("struct S { wp::Mat3 m; wp::DMat4 n; };"));
-        assert!(!names_nonsquare("wp::Mat33 m; wp::Mat23_ZERO(); wp::Vec3 v;"));
+        assert!(!names_nonsquare(
+            "wp::Mat33 m; wp::Mat23_ZERO(); wp::Vec3 v;"
+        ));
         assert!(!names_nonsquare("Mat23 m;"));
     }
 }
