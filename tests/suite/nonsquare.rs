@@ -310,7 +310,7 @@ fn nonsquare_lanes_rows_and_locals(dev: &wp::Device) {
         let mut w = m;
         w[(0, 1)] = 10.0;
         w[(1, 0)] += 1.0;
-        w[1] = w[1] * 2.0;
+        w[1] *= 2.0;
         assert_eq!(gr[i * 2 + 1], w[1]);
         assert_eq!(go[i * 4 + 2], 10.0);
         assert_eq!(go[i * 4 + 3], w[0].z + 7.0);
