@@ -285,7 +285,9 @@ pub(crate) fn k_lanes(a: Array<Mat23>, idx: Array<i32>, out: Array<f32>, rows: A
     rows[i * 2 + 1] = m[1];
     out[i * 4 + 2] = m[(0, 1)];
     // Constructors and a local array of matrices.
-    let z = Mat23::from_rows(Vec3::new(1.0, 2.0, 3.0), m[0]) + Mat23::ZERO;
+    let z = Mat23::from_rows(Vec3::new(1.0, 2.0, 3.0), m[0])
+        + Mat23::ZERO
+        + Mat23::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
     let mut loc = [Mat23::ZERO; 3];
     loc[r] = z;
     loc[2][(1, 0)] = 7.0;
@@ -313,7 +315,7 @@ fn nonsquare_lanes_rows_and_locals(dev: &wp::Device) {
         w[1] *= 2.0;
         assert_eq!(gr[i * 2 + 1], w[1]);
         assert_eq!(go[i * 4 + 2], 10.0);
-        assert_eq!(go[i * 4 + 3], w[0].z + 7.0);
+        assert_eq!(go[i * 4 + 3], (w[0].z + 0.5) + 7.0);
     }
     // Row 2 of a 2-row matrix.
     let bad = arr(&[2i32, 0], dev);
@@ -392,10 +394,8 @@ fn nonsquare_struct_field_and_func(dev: &wp::Device) {
 pub(crate) fn k_loss(xs: Array<f64>, loss: Array<f64>) {
     let i = tid();
     let o = i * 12;
-    let a = DMat23::from_rows(
-        DVec3::new(xs[o], xs[o + 1], xs[o + 2]),
-        DVec3::new(xs[o + 3], xs[o + 4], xs[o + 5]),
-    );
+    // Warp's scalar constructor, row by row.
+    let a = DMat23::new(xs[o], xs[o + 1], xs[o + 2], xs[o + 3], xs[o + 4], xs[o + 5]);
     let u = DVec3::new(xs[o + 6], xs[o + 7], xs[o + 8]);
     let v = DVec2::new(xs[o + 9], xs[o + 10]);
     let s = xs[o + 11];
@@ -482,8 +482,8 @@ fn nonsquare_array_gradients(dev: &wp::Device) {
     }
 }
 
-/// Forward mode through the operators, `transpose`, `outer`, `ddot` and lane writes; the
-/// values are assembled by lane writes (the constructors have no forward rule).
+/// Forward mode through the operators, `transpose`, `outer`, `ddot`, lane writes and the
+/// scalar constructor.
 #[wp::kernel]
 pub(crate) fn k_fwd(x: Array<f64>, y: Array<f64>) {
     let i = tid();
@@ -493,6 +493,7 @@ pub(crate) fn k_fwd(x: Array<f64>, y: Array<f64>) {
     a[(0, 2)] = x[o + 1] * x[o];
     a[(1, 1)] = x[o + 2];
     a[(1, 2)] = 0.5;
+    let a = a + DMat23::new(0.0, x[o + 3], 0.0, 1.0, 0.0, x[o + 4]);
     let mut u = DVec2::ZERO;
     u[0] = x[o + 3];
     u[1] = x[o + 4] * x[o + 2];

@@ -2,7 +2,8 @@ use warp_lang as wp;
 use wp::prelude::*;
 
 // A vector of the wrong length for a matrix's columns, products whose inner dimensions differ,
-// a row and a lane past the end, two shapes added, `ddot` of two shapes, `outer` of a literal.
+// a row and a lane past the end, two shapes added, `ddot` of two shapes, `outer` of a literal,
+// the scalar constructor with too few entries.
 #[wp::kernel]
 fn k(a: Array<Mat23>, v: Array<Vec3>, w: Array<Vec2>, m: Mat32, out: Array<f32>) {
     let i = tid();
@@ -14,6 +15,7 @@ fn k(a: Array<Mat23>, v: Array<Vec3>, w: Array<Vec2>, m: Mat32, out: Array<f32>)
     let s = a[i] + m;
     out[i] = ddot(a[i], m);
     let o = outer(v[i], 1.0);
+    let n = Mat23::new(1.0, 2.0);
 }
 
 fn main() {}

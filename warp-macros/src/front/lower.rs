@@ -35,6 +35,7 @@ pub(crate) mod calls;
 mod control;
 mod expressions;
 mod local_arrays;
+mod matrices;
 mod places;
 mod query;
 mod rng;

@@ -382,6 +382,9 @@ impl Lowerer {
     }
 
     fn construct(&mut self, ty: Ty, ctor: &str, c: &syn::ExprCall, span: Span) -> R<VarId> {
+        if let (Ty::MatRC(..), "new") = (&ty, ctor) {
+            return self.matrix_from_scalars(ty, c, span);
+        }
         let scalar = Ty::Scalar(ty.scalar().expect("glam types have a scalar"));
         let (ctor_kind, arg_tys): (Ctor, Vec<Ty>) = match (&ty, ctor) {
             (Ty::Vector(_, n), "new") => (Ctor::Components, vec![scalar.clone(); *n as usize]),
