@@ -246,6 +246,38 @@ fn spatial(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = spatial_dot(2.0 * p, q) + spatial_dot(sm[i % 2] * sa[j], w);
 }
 
+/// Non-square matrices: `from_rows`, `ZERO`, rows and entries at literal and run-time
+/// indices (read and written), the operators, products with glam's square and the spatial
+/// matrices on either side, `transpose`, `outer` of vectors of different lengths, `ddot`, `==`,
+/// and a local array of matrices.
+#[wp::kernel]
+fn nonsquare(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let mut m = Mat23::from_rows(vec3(a, 0.5, -a), vec3(1.0, a * 0.25, 2.0));
+    m[(0, 2)] = a * 3.0;
+    m[1].y -= 1.0;
+    let j = i % 2;
+    m[(j, j + 1)] += 0.5;
+    let t = transpose(m) * 2.0 - outer(vec3(a, 1.0, -0.5), vec2(0.25, a)) / 3.0;
+    let s = Mat3::from_cols(vec3(1.0, a, 0.0), vec3(0.5, -1.0, a), vec3(a, 2.0, 0.75));
+    let p = m * s * t + m * t * 0.5;
+    let big = Mat63::from_rows(m[0], m[1], m[0] * a, vec3(1.0, 2.0, 3.0), m[j], -m[1]);
+    let sm = big * transpose(big);
+    let sv = big * vec3(0.5, a, -1.0);
+    let mut loc = [Mat23::ZERO; 2];
+    loc[j] = m;
+    loc[1 - j][(1, 2)] = a;
+    out[(i, 0)] = p.x_axis.x + p.y_axis.y;
+    out[(i, 1)] = p.x_axis.y - p.y_axis.x;
+    out[(i, 2)] = ddot(m, transpose(t)) + ddot(loc[0], loc[1]);
+    out[(i, 3)] = sm[(2, 5)] + sm[4][4];
+    out[(i, 4)] = spatial_dot(sv, sv) + (m * vec3(1.0, -2.0, a)).x;
+    out[(i, 5)] = (s * t)[(2, 1)] + t[j].y;
+    out[(i, 6)] = if m == m && m != -m { 1.0 } else { 0.0 };
+    out[(i, 7)] = (m + m - m * 0.5)[(1, j)];
+}
+
 /// Lanes at run-time indices, as Warp code writes them: a vector's `v[k]` read, written and
 /// updated, a matrix-vector product by loops over `m[(r, c)]`, a quaternion's lane (x, y, z,
 /// w), a 4x4 matrix's entries and an integer vector's lanes, a spatial vector's lanes and a
@@ -1083,6 +1115,22 @@ fn spatial_types_match_the_cpu_backend() {
     let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
     let host = run_on_host::<spatial>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
     wp::launch(spatial, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+/// The non-square matrices' generated CUDA against the CPU backend, bit for bit.
+#[test]
+fn nonsquare_matrices_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..24).map(|k| k as f32 * 0.31 - 3.5).collect();
+    xs.extend([0.0, -0.0, 1.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<nonsquare>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(nonsquare, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }

@@ -58,6 +58,10 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     {
         e.section("spatial");
     }
+    // Non-square matrices: their types, operators and adjoints are wp_matrix.h's.
+    if f.vars.iter().any(|v| matches!(leaf(&v.ty), Ty::MatRC(..))) {
+        e.section("matrix");
+    }
     for v in &f.vars {
         if let Ty::Object(k) = v.ty {
             e.section(k.row().section);
@@ -138,7 +142,8 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
         | Ty::Quat(_)
         | Ty::Transform(_)
         | Ty::SpatialVector(_)
-        | Ty::SpatialMatrix(_) => format!("wp::{}", t.glam_name()?),
+        | Ty::SpatialMatrix(_)
+        | Ty::MatRC(..) => format!("wp::{}", t.glam_name()?),
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::LocalArray(e, n) => format!("wp::local_array_t<{}, {}>", cpp_type(e)?, dim_cpp(n)),
         Ty::Struct(name) => name.clone(),
@@ -992,7 +997,7 @@ impl<'a> Emitter<'a> {
                     (Ty::Matrix(..), Ctor::Components) => {
                         format!("wp::{name}_from_cols({})", args.join(", "))
                     }
-                    (Ty::SpatialMatrix(_), Ctor::Components) => {
+                    (Ty::SpatialMatrix(_) | Ty::MatRC(..), Ctor::Components) => {
                         format!("wp::{name}_from_rows({})", args.join(", "))
                     }
                     (Ty::Vector(..), Ctor::Splat) => {

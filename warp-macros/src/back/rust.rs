@@ -474,7 +474,9 @@ impl<'a> RustEmitter<'a> {
                     (Ty::Vector(..), Ctor::Components) => format_ident!("new"),
                     (Ty::Quat(_), Ctor::Components) => format_ident!("from_xyzw"),
                     (Ty::Matrix(..), Ctor::Components) => format_ident!("from_cols"),
-                    (Ty::SpatialMatrix(_), Ctor::Components) => format_ident!("from_rows"),
+                    (Ty::SpatialMatrix(_) | Ty::MatRC(..), Ctor::Components) => {
+                        format_ident!("from_rows")
+                    }
                     (Ty::Vector(..), Ctor::Splat) => format_ident!("splat"),
                     (Ty::Matrix(..), Ctor::Splat) => format_ident!("from_diagonal"),
                     (_, Ctor::Const(c)) => {
@@ -560,7 +562,7 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             Some(quote!(__wp::glam::#id))
         }
         // warp-core's transforms and spatial types, re-exported next to glam.
-        Ty::Transform(_) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => {
+        Ty::Transform(_) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) | Ty::MatRC(..) => {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::#id))
         }

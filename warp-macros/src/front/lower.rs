@@ -36,6 +36,7 @@ mod control;
 mod expressions;
 mod literal_lets;
 mod local_arrays;
+mod matrices;
 mod places;
 mod query;
 mod rng;

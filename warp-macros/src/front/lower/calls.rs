@@ -382,6 +382,9 @@ impl Lowerer {
     }
 
     fn construct(&mut self, ty: Ty, ctor: &str, c: &syn::ExprCall, span: Span) -> R<VarId> {
+        if let (Ty::MatRC(..), "new") = (&ty, ctor) {
+            return self.matrix_from_scalars(ty, c, span);
+        }
         let scalar = Ty::Scalar(ty.scalar().expect("glam types have a scalar"));
         let (ctor_kind, arg_tys): (Ctor, Vec<Ty>) = match (&ty, ctor) {
             (Ty::Vector(_, n), "new") => (Ctor::Components, vec![scalar.clone(); *n as usize]),
@@ -393,6 +396,10 @@ impl Lowerer {
             (Ty::Matrix(s, n), "from_diagonal") => (Ctor::Splat, vec![Ty::Vector(*s, *n)]),
             (Ty::SpatialMatrix(s), "from_rows") => {
                 (Ctor::Components, vec![Ty::SpatialVector(*s); 6])
+            }
+            (Ty::MatRC(_, r, _), "from_rows") => {
+                let (row, _) = ty.lane_elems().expect("a matrix has rows");
+                (Ctor::Components, vec![row; *r as usize])
             }
             _ => {
                 return err(

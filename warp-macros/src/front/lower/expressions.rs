@@ -179,6 +179,7 @@ impl Lowerer {
                         | Ty::Transform(_)
                         | Ty::SpatialVector(_)
                         | Ty::SpatialMatrix(_)
+                        | Ty::MatRC(..)
                         | Ty::Deferred => true,
                         Ty::Tile(e, _) => {
                             matches!(**e, Ty::Scalar(s) if s.is_float() || s.is_signed_int())
@@ -461,6 +462,7 @@ impl Lowerer {
                     Ty::Transform(_) => name == "IDENTITY",
                     Ty::SpatialVector(_) => name == "ZERO",
                     Ty::SpatialMatrix(_) => ["ZERO", "IDENTITY"].contains(&name.as_str()),
+                    Ty::MatRC(..) => name == "ZERO",
                     _ => false,
                 };
                 if !known {

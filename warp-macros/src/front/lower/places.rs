@@ -585,17 +585,17 @@ pub(super) fn lane_index<'e>(base: &Ty, index: &'e Expr) -> R<Option<Vec<LaneSte
         }
         // Column-major: the column first.
         (Ty::Matrix(..), 2) => vec![parts[1], parts[0]],
-        (Ty::SpatialMatrix(_), 1 | 2) | (_, 1) => parts,
+        (Ty::SpatialMatrix(_) | Ty::MatRC(..), 1 | 2) | (_, 1) => parts,
         (Ty::Matrix(..), _) => {
             return err(
                 index.span(),
                 format!("`{base}` takes two indices, `m[(i, j)]`: row i, column j"),
             )
         }
-        (Ty::SpatialMatrix(_), _) => {
+        (Ty::SpatialMatrix(_) | Ty::MatRC(..), _) => {
             return err(
                 index.span(),
-                "a spatial matrix takes one or two indices, `m[i]` (a row) or `m[(i, j)]`",
+                format!("`{base}` takes one or two indices, `m[i]` (a row) or `m[(i, j)]`"),
             )
         }
         _ => return err(index.span(), format!("`{base}` takes one index, `v[i]`")),

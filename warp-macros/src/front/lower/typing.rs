@@ -72,7 +72,8 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
             | Ty::Quat(s)
             | Ty::Transform(s)
             | Ty::SpatialVector(s)
-            | Ty::SpatialMatrix(s) => Some(Ty::Scalar(*s)),
+            | Ty::SpatialMatrix(s)
+            | Ty::MatRC(s, ..) => Some(Ty::Scalar(*s)),
             // A tile of vectors is scaled by their scalar.
             Ty::Tile(e, _) => literal_hint(e, op),
             Ty::Deferred => Some(Ty::Deferred),
@@ -226,7 +227,8 @@ impl Lowerer {
             | Ty::Quat(s)
             | Ty::Transform(s)
             | Ty::SpatialVector(s)
-            | Ty::SpatialMatrix(s) => Ty::Scalar(*s),
+            | Ty::SpatialMatrix(s)
+            | Ty::MatRC(s, ..) => Ty::Scalar(*s),
             t => t.clone(),
         });
         match lit {
