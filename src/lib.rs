@@ -130,6 +130,12 @@ pub use warp_core::bf16;
 /// (see `warp_core::float16` for its arithmetic, casts and builtins).
 pub use warp_core::capability;
 pub use warp_core::f16;
+/// Non-square matrices (Warp's `matrix(shape=(R, C))` for `R != C` in {2, 3, 4, 6}): `Mat23`
+/// has 2 rows of `Vec3` (see `warp_core::matrix`).
+pub use warp_core::{
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64,
+    Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+};
 /// Spatial vectors and 6x6 spatial matrices (Warp's `spatial_vector`, `spatial_matrix`).
 pub use warp_core::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};
 pub use warp_core::{DTransform, Fault, FaultKind, Float, Int, LaunchId, Transform, Vector};
@@ -225,6 +231,10 @@ pub mod prelude {
         bf16, f16, func, kernel, Array, DSpatialMatrix, DSpatialVector, DTransform, Element, Float,
         Int, SpatialMatrix, SpatialVector, Struct, Transform, Vector,
     };
+    pub use crate::{
+        DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63,
+        DMat64, Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+    };
     pub use glam::{
         dvec2, dvec3, dvec4, ivec2, ivec3, ivec4, uvec2, uvec3, uvec4, vec2, vec3, vec4, DMat2,
         DMat3, DMat4, DQuat, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, Mat2, Mat3, Mat4, Quat,
@@ -245,6 +255,10 @@ pub mod __private {
         Capability, ConstLiteral, DSpatialMatrix, DSpatialVector, DTransform, Fault, FuncInfo,
         GradElement, GradSeed, GradView, Grid, KResult, RangeProg, SpatialMatrix, SpatialVector,
         Transform,
+    };
+    pub use warp_core::{
+        DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63,
+        DMat64, Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
     };
     pub use warp_macros::__object_rows;
     pub use warp_macros::__overload_set as overload_set;

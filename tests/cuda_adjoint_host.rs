@@ -4,8 +4,8 @@
 //! Every adjoint function is called on both sides with the same inputs, the same nonzero
 //! starting adjoints (so that accumulation, not assignment, is checked) and the same `adj_ret`,
 //! for every operand-type combination the Rust side implements: operators and builtins on
-//! `f32`/`f64`, the float vectors, matrices, quaternions, transforms and spatial vectors and
-//! matrices (whose forward functions are compared too), the integer types (no-ops), all
+//! `f32`/`f64`, the float vectors, matrices, quaternions, transforms, spatial vectors and
+//! matrices and the non-square matrices (whose forward functions are compared too), the integer types (no-ops), all
 //! 13 x 13 casts, `adj_zero`/`zero`/`zero_like`/`adj_accum`, and the array gradient helpers
 //! `grad_accum`/`grad_take`/`grad_get` (1-D to 4-D, row- and column-major, in and out of
 //! bounds, with and without a gradient array). Inputs mix special values (0, -0, NaN,
@@ -42,8 +42,8 @@ use warp_lang::__private::glam::{
 };
 use warp_lang::__private::{zero_like, ArrayView, GradElement, GradView};
 use warp_lang::{
-    DSpatialMatrix, DSpatialVector, DTransform, Fault, FaultKind, SpatialMatrix, SpatialVector,
-    Transform,
+    DMat23, DMat32, DMat34, DMat36, DMat63, DSpatialMatrix, DSpatialVector, DTransform, Fault,
+    FaultKind, Mat23, Mat32, Mat34, Mat36, Mat63, SpatialMatrix, SpatialVector, Transform,
 };
 
 // ------------------------------------------------------------------------------------------
@@ -150,6 +150,29 @@ macro_rules! spatial_mat_val {
     )*};
 }
 spatial_mat_val!(SpatialMatrix: f32, DSpatialMatrix: f64);
+
+// Non-square matrices: R * C lanes, row by row (the C++ vec_traits order).
+macro_rules! nonsquare_val {
+    ($($t:ident: $s:ident, $r:literal, $c:literal);*) => {$(
+        impl Val for $t {
+            const TY: &'static str = stringify!($t);
+            const FLOAT: u32 = <$s as Val>::FLOAT;
+            const LANES: usize = $r * $c;
+            fn bits(&self) -> Vec<u64> {
+                self.to_rows_array().iter().flatten().flat_map(|x| x.bits()).collect()
+            }
+            fn from_bits(w: &[u64]) -> Self {
+                $t::from_rows_array(std::array::from_fn(|i| {
+                    std::array::from_fn(|j| <$s as Val>::from_bits(&w[i * $c + j..]))
+                }))
+            }
+        }
+    )*};
+}
+nonsquare_val!(
+    Mat23: f32, 2, 3; Mat32: f32, 3, 2; Mat34: f32, 3, 4; Mat36: f32, 3, 6; Mat63: f32, 6, 3;
+    DMat23: f64, 2, 3; DMat32: f64, 3, 2; DMat34: f64, 3, 4; DMat36: f64, 3, 6; DMat63: f64, 6, 3
+);
 
 fn cxx(ty: &str) -> String {
     if ty == "bool" {
@@ -898,6 +921,61 @@ fn fwd2<A: Val, B: Val, R: Val>(s: &mut Suite, expr: &str, f: fn(A, B) -> R) {
         let words = [a.bits(), b.bits(), r0.bits()].concat();
         s.case(op, &words, toks(&f(a, b)));
     }
+}
+
+/// The non-square matrices (wp_matrix.h's operators and builtins, wp_adjoint_matrix.h's
+/// adjoints), forward and adjoint, with glam's square and the spatial matrices in products.
+fn nonsquare(s: &mut Suite) {
+    macro_rules! each {
+        ($($m23:ident, $m32:ident, $m34:ident, $m36:ident, $m63:ident, $m2:ident, $m3:ident,
+           $sm:ident, $v2:ident, $v3:ident, $v4:ident, $sv:ident, $s:ident);*) => {$(
+            // Forward.
+            fwd2::<$m23, $m23, $m23>(s, "v0 + v1", |a, b| a + b);
+            fwd2::<$m23, $m23, $m23>(s, "v0 - v1", |a, b| a - b);
+            fwd2::<$m23, $s, $m23>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$s, $m23, $m23>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m23, $s, $m23>(s, "v0 / v1", |a, b| a / b);
+            fwd2::<$m23, $v3, $v2>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m34, $v4, $v3>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m63, $v3, $sv>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m23, $m32, $m2>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m23, $m3, $m23>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m3, $m32, $m32>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m63, $m36, $sm>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m36, $m63, $m3>(s, "v0 * v1", |a, b| a * b);
+            fwd2::<$m23, $m32, $m23>(s, "wp::transpose(v1) - v0", |a, b| bi::transpose(b) - a);
+            fwd2::<$v3, $v2, $m32>(s, "wp::outer(v0, v1)", bi::outer);
+            fwd2::<$sv, $v3, $m63>(s, "wp::outer(v0, v1)", bi::outer);
+            fwd2::<$m23, $m23, $s>(s, "wp::ddot(v0, v1)", bi::ddot);
+            fwd2::<$m23, $m23, bool>(s, "v0 == v1 && !(v0 != v1)", |a, b| a == b);
+            // Adjoints.
+            bin::<$m23, $m23, $m23>(s, "adj_add", ad::adj_add);
+            bin::<$m23, $m23, $m23>(s, "adj_sub", ad::adj_sub);
+            bin::<$m23, $s, $m23>(s, "adj_mul", ad::adj_mul);
+            bin::<$s, $m23, $m23>(s, "adj_mul", ad::adj_mul);
+            bin::<$m23, $s, $m23>(s, "adj_div", ad::adj_div);
+            un::<$m23, $m23>(s, "adj_neg", ad::adj_neg);
+            bin::<$m23, $v3, $v2>(s, "adj_mul", ad::adj_mul);
+            bin::<$m63, $v3, $sv>(s, "adj_mul", ad::adj_mul);
+            bin::<$m23, $m32, $m2>(s, "adj_mul", ad::adj_mul);
+            bin::<$m23, $m3, $m23>(s, "adj_mul", ad::adj_mul);
+            bin::<$m3, $m32, $m32>(s, "adj_mul", ad::adj_mul);
+            bin::<$m63, $m36, $sm>(s, "adj_mul", ad::adj_mul);
+            un::<$m23, $m32>(s, "adj_transpose", ad::adj_transpose);
+            bin::<$v3, $v2, $m32>(s, "adj_outer", ad::adj_outer);
+            bin::<$sv, $v3, $m63>(s, "adj_outer", ad::adj_outer);
+            bin::<$m23, $m23, $s>(s, "adj_ddot", ad::adj_ddot);
+            zero_accum::<$m23>(s);
+            zero_accum::<$m63>(s);
+            grad_cases::<$m23>(s);
+        )*};
+    }
+    each!(
+        Mat23, Mat32, Mat34, Mat36, Mat63, Mat2, Mat3, SpatialMatrix, Vec2, Vec3, Vec4,
+        SpatialVector, f32;
+        DMat23, DMat32, DMat34, DMat36, DMat63, DMat2, DMat3, DSpatialMatrix, DVec2, DVec3, DVec4,
+        DSpatialVector, f64
+    );
 }
 
 /// The spatial vectors and matrices (wp_core.h's operators, wp_spatial.h's builtins, and
@@ -1654,6 +1732,7 @@ fn cuda_adjoints_match_cpu_adjoints_on_the_host() {
     noise(&mut s);
     transforms(&mut s);
     spatial(&mut s);
+    nonsquare(&mut s);
     decomps(&mut s);
     misc(&mut s);
     integers(&mut s);

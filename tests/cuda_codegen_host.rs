@@ -246,6 +246,38 @@ fn spatial(x: Array<f32>, out: Array<f32, 2>) {
     out[(i, 7)] = spatial_dot(2.0 * p, q) + spatial_dot(sm[i % 2] * sa[j], w);
 }
 
+/// Non-square matrices: `from_rows`, `ZERO`, rows and entries at literal and run-time
+/// indices (read and written), the operators, products with glam's square and the spatial
+/// matrices on either side, `transpose`, `outer` of vectors of different lengths, `ddot`, `==`,
+/// and a local array of matrices.
+#[wp::kernel]
+fn nonsquare(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let mut m = Mat23::from_rows(vec3(a, 0.5, -a), vec3(1.0, a * 0.25, 2.0));
+    m[(0, 2)] = a * 3.0;
+    m[1].y -= 1.0;
+    let j = i % 2;
+    m[(j, j + 1)] += 0.5;
+    let t = transpose(m) * 2.0 - outer(vec3(a, 1.0, -0.5), vec2(0.25, a)) / 3.0;
+    let s = Mat3::from_cols(vec3(1.0, a, 0.0), vec3(0.5, -1.0, a), vec3(a, 2.0, 0.75));
+    let p = m * s * t + m * t * 0.5;
+    let big = Mat63::from_rows(m[0], m[1], m[0] * a, vec3(1.0, 2.0, 3.0), m[j], -m[1]);
+    let sm = big * transpose(big);
+    let sv = big * vec3(0.5, a, -1.0);
+    let mut loc = [Mat23::ZERO; 2];
+    loc[j] = m;
+    loc[1 - j][(1, 2)] = a;
+    out[(i, 0)] = p.x_axis.x + p.y_axis.y;
+    out[(i, 1)] = p.x_axis.y - p.y_axis.x;
+    out[(i, 2)] = ddot(m, transpose(t)) + ddot(loc[0], loc[1]);
+    out[(i, 3)] = sm[(2, 5)] + sm[4][4];
+    out[(i, 4)] = spatial_dot(sv, sv) + (m * vec3(1.0, -2.0, a)).x;
+    out[(i, 5)] = (s * t)[(2, 1)] + t[j].y;
+    out[(i, 6)] = if m == m && m != -m { 1.0 } else { 0.0 };
+    out[(i, 7)] = (m + m - m * 0.5)[(1, j)];
+}
+
 /// Lanes at run-time indices, as Warp code writes them: a vector's `v[k]` read, written and
 /// updated, a matrix-vector product by loops over `m[(r, c)]`, a quaternion's lane (x, y, z,
 /// w), a 4x4 matrix's entries and an integer vector's lanes, a spatial vector's lanes and a
@@ -1128,6 +1160,22 @@ fn spatial_types_match_the_cpu_backend() {
     let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
     let host = run_on_host::<spatial>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
     wp::launch(spatial, n, (&x, &out), &dev).unwrap();
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
+    }
+}
+
+/// The non-square matrices' generated CUDA against the CPU backend, bit for bit.
+#[test]
+fn nonsquare_matrices_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let mut xs: Vec<f32> = (0..24).map(|k| k as f32 * 0.31 - 3.5).collect();
+    xs.extend([0.0, -0.0, 1.0]);
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 8), &dev).unwrap();
+    let host = run_on_host::<nonsquare>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(nonsquare, n, (&x, &out), &dev).unwrap();
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }
@@ -2826,5 +2874,55 @@ fn func_gradients_and_custom_replays_match_the_cpu_backend() {
     assert_eq!(out.to_vec().unwrap(), [x0[0] * x0[0]]);
     if let Some(host) = host {
         assert_eq!(host, cpu_results(&args));
+    }
+}
+
+#[wp::func]
+fn sl_pair(x: f32) -> (f32, Vec3) {
+    (x * 1.5, vec3(x, 2.0 * x, -x))
+}
+
+#[wp::func]
+fn sl_sq(x: f32) -> f32 {
+    x * x
+}
+
+/// Unsuffixed literals in builtins' scalar positions beside values the macro cannot type
+/// (funcs' results, tuple fields): each must be the lane type in C++ (a `double` there made
+/// `lerp` ambiguous and `expect_near` fail its deduction under NVRTC).
+#[wp::kernel]
+fn scalar_literals(x: Array<f32>, out: Array<f32, 2>) {
+    let i = tid();
+    let a = x[i];
+    let t = sl_pair(a);
+    expect_near(t.0, a * 1.5, 1e-6);
+    expect_near(sl_sq(a), a * a, 0.0);
+    out[(i, 0)] = lerp(sl_sq(a), sl_sq(a + 1.0), 0.25);
+    out[(i, 1)] = lerp(t.1, sl_pair(2.0 * a).1, 0.75).y;
+    out[(i, 2)] = norm_huber(t.1, 0.5);
+    out[(i, 3)] = smooth_normalize(t.1, 0.5).z;
+    out[(i, 4)] = norm_pseudo_huber(t.1, 2.0);
+    out[(i, 5)] = lerp(sl_sq(a), 2.0, -1.0);
+}
+
+#[test]
+fn scalar_position_literals_match_the_cpu_backend() {
+    let dev = wp::cpu();
+    let xs: Vec<f32> = (0..9).map(|k| k as f32 * 0.61 - 2.2).collect();
+    let n = xs.len();
+    let x = wp::Array::from_slice(&xs, &dev).unwrap();
+    let out = wp::Array::<f32, 2>::zeros((n, 6), &dev).unwrap();
+    let host = run_on_host::<scalar_literals>(&[n], &[Arg::F32s(&x), Arg::F32Grid(&out)]);
+    wp::launch(scalar_literals, n, (&x, &out), &dev).unwrap();
+    let got = out.to_vec().unwrap();
+    for (k, &a) in xs.iter().enumerate() {
+        // lerp(a², (a+1)², 0.25) and lerp(a², 2, -1) in f32: a few ulps from the f64 forms.
+        let l = (a * a) as f64 * 0.75 + ((a + 1.0) * (a + 1.0)) as f64 * 0.25;
+        assert!((got[k * 6] as f64 - l).abs() <= 1e-5 * l.abs().max(1.0));
+        let e = 2.0 * (a * a) as f64 - 2.0;
+        assert!((got[k * 6 + 5] as f64 - e).abs() <= 1e-5 * e.abs().max(1.0));
+    }
+    if let Some(host) = host {
+        assert_eq!(host, cpu_results(&[Arg::F32s(&x), Arg::F32Grid(&out)]));
     }
 }

@@ -15,6 +15,7 @@ backend_tests!(
     func_writing_array,
     func_mutable_and_bool,
     literals_next_to_untyped_values,
+    literal_lets_typed_by_their_uses,
 );
 
 #[wp::func]
@@ -449,4 +450,43 @@ fn literals_next_to_untyped_values(dev: &wp::Device) {
         );
     }
     assert_eq!(host(&ov), vec![ivec3(2, -4, 6)]);
+}
+
+/// `acc` and `best` are f64 and `k` a usize by their uses, as rustc infers them (one pass
+/// over the body would have typed them f32 and i32 at their `let`s).
+#[wp::func]
+fn power64(x: f64, n: i32) -> f64 {
+    let mut acc = 1.0;
+    for _ in 0..n {
+        acc *= x;
+    }
+    let mut best = 0.0;
+    best = best.max(acc);
+    best
+}
+
+#[wp::kernel]
+fn k_literal_lets(x: Array<f64>, out: Array<f64>) {
+    let i = tid();
+    let mut k = 0;
+    k += i;
+    let mut sum = 0.0;
+    sum += x[k];
+    out[i] = power64(sum, 3) + 0.1;
+}
+
+fn literal_lets_typed_by_their_uses(dev: &wp::Device) {
+    let xs = [0.1f64, -1.3, 2.7];
+    let x = wp::Array::from_slice(&xs, dev).expect("upload");
+    let out = zeros::<f64, 1>(3, dev);
+    wp::launch(k_literal_lets, 3, (&x, &out), dev).expect("launch");
+    for (k, (g, x)) in host(&out).iter().zip(xs).enumerate() {
+        // x³ + 0.1 in f64, three roundings (FMA on CUDA may differ in the last bits); 0.1 and
+        // the inputs are not f32 values, so an f32 `acc` would be off by about 1e-8.
+        let want = (x * x * x).max(0.0) + 0.1;
+        assert!(
+            (g - want).abs() <= 4.0 * f64::EPSILON * want.abs().max(1.0),
+            "out[{k}] = {g}, expected {want}"
+        );
+    }
 }

@@ -116,6 +116,7 @@ mod lerp;
 mod local_arrays;
 mod mesh;
 mod misc;
+mod nonsquare;
 mod optim;
 mod overloads;
 mod params;

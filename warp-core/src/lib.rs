@@ -23,6 +23,7 @@ pub mod grad;
 pub mod grid;
 pub mod index;
 pub mod local_array;
+pub mod matrix;
 pub mod meta;
 pub mod objects;
 pub mod ops;
@@ -41,6 +42,10 @@ pub use func_grad::{with_grad_stack, GradSeed};
 pub use grad::{first_error, zero_like, AdStack, GradElement, GradView};
 pub use grid::Grid;
 pub use index::KernelIndex;
+pub use matrix::{
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64,
+    Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+};
 pub use meta::{AssertSite, ConstLiteral, FuncInfo, StructDefs};
 pub use range::RangeProg;
 pub use spatial::{DSpatialMatrix, DSpatialVector, SpatialMatrix, SpatialVector};

@@ -10,6 +10,7 @@
 #include "wp_linalg.h"
 #include "wp_transform.h"
 #include "wp_spatial.h"
+#include "wp_matrix.h"
 #include "wp_svd.h"
 #include "wp_misc.h"
 #include "wp_atomic.h"

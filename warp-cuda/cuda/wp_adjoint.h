@@ -56,6 +56,7 @@
 //   wp_adjoint_linalg.h     section "linalg"
 //   wp_adjoint_transform.h  section "transform" (and the transforms' operators)
 //   wp_adjoint_spatial.h    section "spatial" (and the spatial types' operators)
+//   wp_adjoint_matrix.h     section "matrix" (the non-square matrices' operators)
 //   wp_adjoint_svd.h        section "svd"
 //   wp_adjoint_misc.h       section "misc"
 //   wp_adjoint_rand.h       section "rand" (noise)
@@ -65,6 +66,7 @@
 #include "wp_adjoint_linalg.h"
 #include "wp_adjoint_transform.h"
 #include "wp_adjoint_spatial.h"
+#include "wp_adjoint_matrix.h"
 #include "wp_adjoint_svd.h"
 #include "wp_adjoint_misc.h"
 #include "wp_adjoint_rand.h"

@@ -17,14 +17,8 @@ namespace wp {
 
 namespace detail {
 /// The scalar type of T (T itself for scalars; the lane type of vectors, matrices, quats).
-template <typename T, bool Scalar = num<T>::is_int || num<T>::is_float || num<T>::is_bool>
-struct adj_scalar_of {
-  typedef T type;
-};
 template <typename T>
-struct adj_scalar_of<T, false> {
-  typedef typename vec_traits<T>::scalar type;
-};
+struct adj_scalar_of : scalar_of<T> {};
 template <typename T>
 struct adj_is_scalar {
   static constexpr bool value = num<T>::is_int || num<T>::is_float || num<T>::is_bool;

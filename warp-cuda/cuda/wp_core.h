@@ -19,7 +19,7 @@
 //   * warp-core's rigid transforms (`Transform`, `DTransform`: p, padding, q) and their
 //     operators (`Transform_new`, `Transform_IDENTITY()`, composition `*`, lane-by-lane ops);
 //   * integer semantics of warp_core::ops (`w_add` ... `w_shr`), Rust `as` casts (`cast<To>`),
-//     literals (`lit_like`, `int_like`);
+//     literals (`lit_like`, `scalar_lit_like`, `int_like`);
 //   * faults (`fault_t`, `ctx_t`, `raise`), arrays (`array_t`, `load`, `store`, ...), range
 //     loops (`range_t`), the launch grid (`launch_t`, `unflatten`).
 //
@@ -1659,6 +1659,28 @@ WP_FN typename detail::remove_cvref<T>::type lit_like(f64 v) {
 template <typename T>
 WP_FN T lit_like(const T&, f64 v) {
   return detail::literal<T>::from_f64(v);
+}
+namespace detail {
+/// The lane type of T: T itself for scalars; the scalar of vectors, matrices, quaternions,
+/// transforms and spatial values (their `vec_traits`).
+template <typename T, bool Scalar = num<T>::is_int || num<T>::is_float || num<T>::is_bool>
+struct scalar_of {
+  typedef T type;
+};
+template <typename T>
+struct scalar_of<T, false> {
+  typedef typename vec_traits<T>::scalar type;
+};
+}  // namespace detail
+/// The lane type of T, which may be cv/ref-qualified (a `decltype`).
+template <typename T>
+using scalar_of_t = typename detail::scalar_of<typename detail::remove_cvref<T>::type>::type;
+/// The literal `v` in T's lane type: an unsuffixed literal in a builtin's scalar position
+/// beside a value the macro could not type (`lerp(f(a), f(b), 0.5)`), which as a C++ `double`
+/// would make the call ambiguous or fail a template's deduction.
+template <typename T>
+WP_FN scalar_of_t<T> scalar_lit_like(f64 v) {
+  return cast<scalar_of_t<T>>(v);
 }
 /// The integer `v` (a range loop's value) as a `T`.
 template <typename T>

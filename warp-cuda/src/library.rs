@@ -189,6 +189,8 @@ pub static SECTIONS: &[Section] = &[
     kernel!("svd",       Some(header!("wp_adjoint_svd.h")),       No),
     kernel!("transform", Some(header!("wp_adjoint_transform.h")), No),
     kernel!("spatial",   Some(header!("wp_adjoint_spatial.h")),   No),
+    // The non-square matrices (their types too: only units that use them parse them).
+    kernel!("matrix",    Some(header!("wp_adjoint_matrix.h")),    No),
     kernel!("misc",      Some(header!("wp_adjoint_misc.h")),      No),
     kernel!("atomic",    None,                                    No),
     kernel!("rand",      Some(header!("wp_adjoint_rand.h")),      No),

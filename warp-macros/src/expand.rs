@@ -688,6 +688,7 @@ fn element_lanes(f: &crate::ir::Function, array: crate::ir::VarId) -> Option<Tok
         Ty::Transform(_) => 7,
         Ty::SpatialVector(_) => 6,
         Ty::SpatialMatrix(_) => 36,
+        Ty::MatRC(_, r, c) => (*r as usize) * (*c as usize),
         _ => {
             let p = f.params.iter().find(|p| p.var == array)?;
             let t = array_elem(&p.syn_ty)?;

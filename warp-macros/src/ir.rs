@@ -281,13 +281,25 @@ pub enum Ctor {
     },
 }
 
+/// What an [`Op::LitLike`] literal takes from the variable it is modelled on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Like {
+    /// The variable's type: `x * 2.0` with `x` a func's vector result splats the literal.
+    Value,
+    /// The variable's lane type (the type itself for a scalar): the scalar position beside
+    /// it in a builtin, `lerp(a, b, 0.5)` or `expect_near(x, 9.84, 1e-6)` with `a`, `x` a
+    /// func's result. Without it the C++ literal would be a `double` beside `float`s.
+    Scalar,
+}
+
 /// An operation producing one value.
 #[derive(Clone, Debug)]
 pub enum Op {
     Lit(Lit),
-    /// A literal of the same type as the variable (whose type the macro cannot see): an
-    /// unsuffixed literal next to a user func's result or a struct field.
-    LitLike(Lit, VarId),
+    /// A literal typed from the variable (whose type the macro cannot see): an unsuffixed
+    /// literal next to a user func's result or a struct field. [`Like`] says whether it takes
+    /// the variable's type or its lane type.
+    LitLike(Lit, VarId, Like),
     /// Zero of the variable's type, whatever it is (a matrix, a quaternion, a struct): a
     /// tangent where the macro cannot see the type and no literal would do (`lit_like` splats
     /// a literal into scalars and vectors only).
@@ -376,7 +388,7 @@ impl Op {
             | Op::Unary(_, v)
             | Op::Cast(v, _)
             | Op::Member(v, _)
-            | Op::LitLike(_, v)
+            | Op::LitLike(_, v, _)
             | Op::ZeroLike(v)
             | Op::TileReduce { arg: v, .. }
             | Op::Extent(v, _)

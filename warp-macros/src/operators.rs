@@ -84,6 +84,9 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
     if let (Tile(..), _) | (_, Tile(..)) = (l, r) {
         return tile_binary(op, l, r);
     }
+    if let (MatRC(..), _) | (_, MatRC(..)) = (l, r) {
+        return nonsquare_binary(op, l, r);
+    }
     match op {
         BinOp::Eq | BinOp::Ne => {
             if l == r
@@ -96,6 +99,7 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
                         | Transform(_)
                         | SpatialVector(_)
                         | SpatialMatrix(_)
+                        | MatRC(..)
                 )
             {
                 Ok(BOOL)
@@ -170,6 +174,49 @@ pub fn binary_result(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
             }
             _ => bad(),
         },
+    }
+}
+
+/// Operators with a non-square matrix (Warp's `mat_t<R, C>`): `==`, `!=`, `+`, `-` of two of
+/// one shape, `*` and `/` by their scalar (a scalar on the left with `*`), `m * x` with `x`
+/// the vector of the column count (the vector of the row count), and `a * b` of matrices
+/// whose inner dimensions agree, square glam and spatial ones included (the matrix of the
+/// outer shape, [`Ty::mat_of`]: `Mat23 * Mat32` is a `Mat2`).
+fn nonsquare_binary(op: BinOp, l: &Ty, r: &Ty) -> Result<Ty, String> {
+    use Ty::*;
+    let bad = |why: String| {
+        Err(format!(
+            "cannot apply `{}` to `{l}` and `{r}`{why}",
+            op.symbol()
+        ))
+    };
+    match (op, l, r) {
+        (BinOp::Eq | BinOp::Ne, _, _) if l == r => Ok(BOOL),
+        (BinOp::Add | BinOp::Sub, _, _) if l == r => Ok(l.clone()),
+        (BinOp::Mul | BinOp::Div, MatRC(a, ..), Scalar(b)) if a == b => Ok(l.clone()),
+        (BinOp::Mul, Scalar(a), MatRC(b, ..)) if a == b => Ok(r.clone()),
+        (BinOp::Mul, MatRC(s, rows, cols), v) if v.vec_shape().is_some() => match v.vec_shape() {
+            Some((t, n)) if t == *s && n == *cols => {
+                Ty::vec_of(*s, *rows).ok_or_else(|| "no vector type".into())
+            }
+            _ => bad(format!(
+                ": `{l}` has {cols} columns, so it multiplies a vector of {cols} lanes of `{}`",
+                s.name()
+            )),
+        },
+        (BinOp::Mul, a, b) if a.mat_shape().is_some() && b.mat_shape().is_some() => {
+            let ((s, ra, ca), (t, rb, cb)) = (a.mat_shape().unwrap(), b.mat_shape().unwrap());
+            if s != t {
+                return bad(String::new());
+            }
+            if ca != rb {
+                return bad(format!(
+                    ": the left matrix has {ca} columns and the right one {rb} rows"
+                ));
+            }
+            Ty::mat_of(s, ra, cb).ok_or_else(|| "no matrix type".into())
+        }
+        _ => bad(String::new()),
     }
 }
 

@@ -357,6 +357,11 @@ pub enum Ty {
     /// 6x6 spatial matrices: SpatialMatrix (f32), DSpatialMatrix (f64); row-major, members
     /// `"0"` to `"5"` are the rows (`m[i][j]`).
     SpatialMatrix(Scalar),
+    /// Non-square matrices (warp-core's `Mat23` .. `Mat64`, `DMat23` ..): rows, columns, every
+    /// `R != C` in {2, 3, 4, 6} (the square shapes are `Matrix` and `SpatialMatrix`: one type
+    /// per shape, made by [`Ty::mat_of`]). Row-major, members `"0"` to `"R-1"` are the rows,
+    /// each the vector of the column count ([`Ty::vec_of`]).
+    MatRC(Scalar, u8, u8),
     /// `Array<T, N>`.
     Array(Box<Ty>, u8),
     /// A fixed-size local array (`[f32; 8]`, `[Vec3; N]`): a value (copied, passed and
@@ -456,7 +461,49 @@ impl Ty {
             | Ty::Quat(s)
             | Ty::Transform(s)
             | Ty::SpatialVector(s)
-            | Ty::SpatialMatrix(s) => Some(*s),
+            | Ty::SpatialMatrix(s)
+            | Ty::MatRC(s, ..) => Some(*s),
+            _ => None,
+        }
+    }
+
+    /// The float vector of length `n` of scalar `s`: glam's `Vec2-4`, a spatial vector for 6.
+    pub fn vec_of(s: Scalar, n: u8) -> Option<Ty> {
+        match n {
+            _ if !matches!(s, Scalar::F32 | Scalar::F64) => None,
+            2..=4 => Some(Ty::Vector(s, n)),
+            6 => Some(Ty::SpatialVector(s)),
+            _ => None,
+        }
+    }
+
+    /// The matrix of shape `r x c` of scalar `s` (f32, f64; each size in {2, 3, 4, 6}): glam's
+    /// square `Mat2-4`, the spatial matrix for 6x6, a non-square matrix otherwise.
+    pub fn mat_of(s: Scalar, r: u8, c: u8) -> Option<Ty> {
+        Ty::vec_of(s, r)?;
+        Ty::vec_of(s, c)?;
+        Some(match (r, c) {
+            (6, 6) => Ty::SpatialMatrix(s),
+            _ if r == c => Ty::Matrix(s, r),
+            _ => Ty::MatRC(s, r, c),
+        })
+    }
+
+    /// A float matrix's scalar, rows and columns (glam's, spatial, non-square).
+    pub fn mat_shape(&self) -> Option<(Scalar, u8, u8)> {
+        match self {
+            Ty::Matrix(s, n) => Some((*s, *n, *n)),
+            Ty::SpatialMatrix(s) => Some((*s, 6, 6)),
+            Ty::MatRC(s, r, c) => Some((*s, *r, *c)),
+            _ => None,
+        }
+    }
+
+    /// A float vector's scalar and length (glam's float vectors, spatial vectors).
+    pub fn vec_shape(&self) -> Option<(Scalar, u8)> {
+        match self {
+            Ty::Vector(s, n) if s.is_float() => Some((*s, *n)),
+            Ty::SpatialVector(s) => Some((*s, 6)),
             _ => None,
         }
     }
@@ -514,6 +561,7 @@ impl Ty {
             Ty::Transform(s) if s.is_float() => Some(format!("{}Transform", prefix(*s)?)),
             Ty::SpatialVector(s) if s.is_float() => Some(format!("{}SpatialVector", prefix(*s)?)),
             Ty::SpatialMatrix(s) if s.is_float() => Some(format!("{}SpatialMatrix", prefix(*s)?)),
+            Ty::MatRC(s, r, c) if s.is_float() => Some(format!("{}Mat{r}{c}", prefix(*s)?)),
             _ => None,
         }
     }
@@ -541,6 +589,14 @@ impl Ty {
         }
         if rest == "SpatialMatrix" {
             return scalar.is_float().then_some(Ty::SpatialMatrix(scalar));
+        }
+        // `Mat23`: two digits, a non-square shape of float scalars.
+        if let Some(rc) = rest.strip_prefix("Mat").filter(|d| d.len() == 2) {
+            let d: Vec<u8> = rc.bytes().map(|b| b.wrapping_sub(b'0')).collect();
+            return match Ty::mat_of(scalar, d[0], d[1])? {
+                t @ Ty::MatRC(..) => Some(t),
+                _ => None,
+            };
         }
         let (kind, n) = rest.split_at(rest.len().checked_sub(1)?);
         let n: u8 = n.parse().ok().filter(|n| (2..=4).contains(n))?;
@@ -574,6 +630,11 @@ impl Ty {
             },
             Ty::SpatialVector(s) => spatial_lane(name).then_some(Ty::Scalar(*s)),
             Ty::SpatialMatrix(s) => spatial_lane(name).then_some(Ty::SpatialVector(*s)),
+            Ty::MatRC(s, r, c) => name
+                .parse::<u8>()
+                .ok()
+                .filter(|i| i < r && name == i.to_string())
+                .and_then(|_| Ty::vec_of(*s, *c)),
             Ty::Tuple(ts) => name.parse::<usize>().ok().and_then(|k| ts.get(k).cloned()),
             _ => None,
         }
@@ -593,6 +654,7 @@ impl Ty {
             Ty::Matrix(s, n) => Some((Ty::Vector(*s, *n), *n as usize)),
             Ty::SpatialVector(s) => Some((Ty::Scalar(*s), 6)),
             Ty::SpatialMatrix(s) => Some((Ty::SpatialVector(*s), 6)),
+            Ty::MatRC(s, r, c) => Some((Ty::vec_of(*s, *c)?, *r as usize)),
             _ => None,
         }
     }
@@ -606,6 +668,7 @@ impl Ty {
             Ty::Quat(_) => named(&["x", "y", "z", "w"], 4),
             Ty::Matrix(_, n) => named(&["x_axis", "y_axis", "z_axis", "w_axis"], *n as usize),
             Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => (k < 6).then(|| k.to_string()),
+            Ty::MatRC(_, r, _) => (k < *r as usize).then(|| k.to_string()),
             _ => None,
         }
     }
@@ -625,7 +688,8 @@ impl fmt::Display for Ty {
             | Ty::Quat(_)
             | Ty::Transform(_)
             | Ty::SpatialVector(_)
-            | Ty::SpatialMatrix(_) => f.write_str(&self.glam_name().unwrap_or_else(|| "?".into())),
+            | Ty::SpatialMatrix(_)
+            | Ty::MatRC(..) => f.write_str(&self.glam_name().unwrap_or_else(|| "?".into())),
             Ty::Array(t, 1) => write!(f, "Array<{t}>"),
             Ty::Array(t, n) => write!(f, "Array<{t}, {n}>"),
             Ty::LocalArray(t, n) => write!(f, "[{t}; {n}]"),
@@ -671,6 +735,9 @@ mod tests {
             "DTransform",
             "SpatialVector",
             "DSpatialMatrix",
+            "Mat23",
+            "DMat63",
+            "Mat46",
         ] {
             let ty = Ty::from_glam_name(name).unwrap();
             assert_eq!(ty.glam_name().unwrap(), name);
@@ -684,6 +751,11 @@ mod tests {
             "ITransform",
             "UTransform",
             "ISpatialVector",
+            "Mat33",
+            "Mat66",
+            "Mat25",
+            "IMat23",
+            "Mat2x",
         ] {
             assert_eq!(Ty::from_glam_name(bad), None, "{bad}");
         }
@@ -791,5 +863,24 @@ mod tests {
         assert_eq!(v.member_ty("x"), None);
         assert_eq!(m.member_ty("0"), Some(Ty::SpatialVector(Scalar::F64)));
         assert_eq!(m.to_string(), "DSpatialMatrix");
+        let n = Ty::MatRC(Scalar::F32, 2, 3);
+        assert_eq!(n.member_ty("1"), Some(Ty::Vector(Scalar::F32, 3)));
+        assert_eq!(n.member_ty("2"), None);
+        assert_eq!(n.member_ty("01"), None);
+        assert_eq!(n.lane_elems(), Some((Ty::Vector(Scalar::F32, 3), 2)));
+        assert_eq!(
+            Ty::MatRC(Scalar::F64, 3, 6).lane_elems(),
+            Some((Ty::SpatialVector(Scalar::F64), 3))
+        );
+        assert_eq!(
+            Ty::mat_of(Scalar::F32, 3, 3),
+            Some(Ty::Matrix(Scalar::F32, 3))
+        );
+        assert_eq!(
+            Ty::mat_of(Scalar::F64, 6, 6),
+            Some(Ty::SpatialMatrix(Scalar::F64))
+        );
+        assert_eq!(Ty::mat_of(Scalar::F32, 5, 2), None);
+        assert_eq!(Ty::mat_of(Scalar::I32, 2, 3), None);
     }
 }

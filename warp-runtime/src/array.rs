@@ -26,6 +26,10 @@ use warp_core::{
     bf16, f16, ArrayView, DSpatialMatrix, DSpatialVector, DTransform, SpatialMatrix, SpatialVector,
     Transform,
 };
+use warp_core::{
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64,
+    Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+};
 
 mod components;
 #[cfg(feature = "dlpack")]
@@ -85,6 +89,10 @@ float_elements!(f32, f64, f16, bf16, Vec2, Vec3, Vec4, DVec2, DVec3, DVec4);
 float_elements!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 float_elements!(Transform, DTransform);
 float_elements!(SpatialVector, DSpatialVector, SpatialMatrix, DSpatialMatrix);
+float_elements!(Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64);
+float_elements!(
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64
+);
 
 /// Something that names the shape of an `N`-dimensional array: a `usize` (for `N = 1`), an
 /// array `[usize; N]`, or a tuple of 2 to 4 `usize`s.
@@ -1085,6 +1093,12 @@ value_kernel_args!(Vec2, Vec3, Vec4, DVec2, DVec3, DVec4, IVec2, IVec3, IVec4, U
 value_kernel_args!(Mat2, Mat3, Mat4, DMat2, DMat3, DMat4, Quat, DQuat);
 value_kernel_args!(Transform, DTransform);
 value_kernel_args!(SpatialVector, DSpatialVector, SpatialMatrix, DSpatialMatrix);
+value_kernel_args!(
+    Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64
+);
+value_kernel_args!(
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64
+);
 
 #[cfg(test)]
 mod tests {

@@ -8,6 +8,7 @@ mod test_func;
 mod test_generics;
 mod test_grad_customs;
 mod test_lerp;
+mod test_mat_linalg;
 mod test_ref;
 mod test_smoothstep;
 mod test_spatial;

@@ -69,24 +69,44 @@ pub trait AdjVecMat: Adjoint + Sized {
     fn adj_diag(v: Self, adj_v: &mut Self, adj_ret: Self::Mat);
 }
 
-/// Adjoint of `outer`: the float vectors (through [`AdjVecMat`]) and the spatial vectors.
-pub trait AdjOuter: Adjoint + Sized {
+/// Adjoint of `outer`: the float vectors (through [`AdjVecMat`]) and the spatial vectors,
+/// and two vectors of different lengths (`crate::matrix`).
+pub trait AdjOuter<B = Self>: Adjoint + Sized {
     /// The matrix.
     type Mat;
     /// See [`adj_outer`].
-    fn adj_outer_of(a: Self, b: Self, adj_a: &mut Self, adj_b: &mut Self, adj_ret: Self::Mat);
+    fn adj_outer_of(a: Self, b: B, adj_a: &mut Self, adj_b: &mut B, adj_ret: Self::Mat);
 }
 
-/// Adjoint of `transpose`: the glam matrices (through [`AdjMat`]) and the spatial matrices.
+/// Adjoint of `transpose`: the glam matrices (through [`AdjMat`]), the spatial matrices and
+/// the non-square matrices.
 pub trait AdjTranspose: Adjoint + Sized {
+    /// The transpose's type.
+    type T;
     /// See [`adj_transpose`].
-    fn adj_transposed(m: Self, adj_m: &mut Self, adj_ret: Self);
+    fn adj_transposed(m: Self, adj_m: &mut Self, adj_ret: Self::T);
+}
+
+/// Adjoint of `ddot`: the glam matrices (through [`AdjMat`]) and the non-square matrices.
+pub trait AdjDdot: Adjoint + Sized {
+    /// The scalar.
+    type S;
+    /// See [`adj_ddot`].
+    fn adj_ddot_of(a: Self, b: Self, adj_a: &mut Self, adj_b: &mut Self, adj_ret: Self::S);
+}
+
+impl<M: AdjMat> AdjDdot for M {
+    type S = <M as SquareMat>::S;
+    #[inline(always)]
+    fn adj_ddot_of(a: M, b: M, adj_a: &mut M, adj_b: &mut M, g: Self::S) {
+        M::adj_ddot(a, b, adj_a, adj_b, g)
+    }
 }
 
 /// Adjoint of `outer(a, b)`: `adj_a += G * b`, `adj_b += Gᵀ * a`.
 #[inline(always)]
-pub fn adj_outer<V: AdjOuter>(a: V, b: V, adj_a: &mut V, adj_b: &mut V, adj_ret: V::Mat) {
-    V::adj_outer_of(a, b, adj_a, adj_b, adj_ret)
+pub fn adj_outer<A: AdjOuter<B>, B>(a: A, b: B, adj_a: &mut A, adj_b: &mut B, adj_ret: A::Mat) {
+    A::adj_outer_of(a, b, adj_a, adj_b, adj_ret)
 }
 
 /// Adjoint of `diag(v)`: `adj_v[i] += G[i][i]`.
@@ -129,7 +149,7 @@ pub trait AdjMat: SquareMat + Adjoint {
 
 /// Adjoint of `transpose(m)`: `adj_m += Gᵀ`.
 #[inline(always)]
-pub fn adj_transpose<M: AdjTranspose>(m: M, adj_m: &mut M, adj_ret: M) {
+pub fn adj_transpose<M: AdjTranspose>(m: M, adj_m: &mut M, adj_ret: M::T) {
     M::adj_transposed(m, adj_m, adj_ret)
 }
 
@@ -147,8 +167,8 @@ pub fn adj_trace<M: AdjMat>(m: M, adj_m: &mut M, adj_ret: M::S) {
 
 /// Adjoint of `ddot(a, b)`: `adj_a[k] += g * b[k]`, `adj_b[k] += g * a[k]`.
 #[inline(always)]
-pub fn adj_ddot<M: AdjMat>(a: M, b: M, adj_a: &mut M, adj_b: &mut M, adj_ret: M::S) {
-    M::adj_ddot(a, b, adj_a, adj_b, adj_ret)
+pub fn adj_ddot<M: AdjDdot>(a: M, b: M, adj_a: &mut M, adj_b: &mut M, adj_ret: M::S) {
+    M::adj_ddot_of(a, b, adj_a, adj_b, adj_ret)
 }
 
 /// Adjoint of `inverse`: matrices and quaternions.
@@ -333,6 +353,7 @@ macro_rules! vec_mat {
             }
         }
         impl AdjTranspose for $m {
+            type T = $m;
             #[inline(always)]
             fn adj_transposed(m: $m, adj_m: &mut $m, g: $m) {
                 <$m as AdjMat>::adj_transpose(m, adj_m, g)

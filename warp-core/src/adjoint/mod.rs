@@ -45,6 +45,7 @@ mod float16;
 mod geometry;
 mod lanes;
 mod linalg;
+mod matrix;
 mod misc;
 mod noise;
 mod ops;

@@ -292,6 +292,7 @@ macro_rules! spatial_adj {
             }
         }
         impl AdjTranspose for $sm {
+            type T = $sm;
             #[inline(always)]
             fn adj_transposed(_m: $sm, adj_m: &mut $sm, g: $sm) {
                 *adj_m += g.transpose();

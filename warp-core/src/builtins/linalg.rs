@@ -127,23 +127,44 @@ pub fn length_sq<V: VecOps>(v: V) -> V::Scalar {
     v.w_dot(v)
 }
 
-/// `outer`: the float vectors (through [`VecMat`]) and the spatial vectors.
-pub trait Outer: Copy {
-    /// The square matrix of the vector's size and scalar.
+/// `outer`: the float vectors (through [`VecMat`]) and the spatial vectors, and any two of
+/// them of one scalar and different lengths (a non-square matrix, `crate::matrix`).
+pub trait Outer<B = Self>: Copy {
+    /// The matrix of shape `(len self, len b)` of the vectors' scalar.
     type Mat: Copy;
     /// `self bᵀ`.
-    fn w_outer_of(self, b: Self) -> Self::Mat;
+    fn w_outer_of(self, b: B) -> Self::Mat;
 }
 
-/// `transpose`: the square glam matrices (through [`SquareMat`]) and the spatial matrices.
+/// `transpose`: the square glam matrices (through [`SquareMat`]), the spatial matrices and
+/// the non-square matrices.
 pub trait Transpose: Copy {
+    /// The transpose's type: `Self` for a square matrix, `Mat32` for a `Mat23`.
+    type T: Copy;
     /// The transpose.
-    fn w_transposed(self) -> Self;
+    fn w_transposed(self) -> Self::T;
 }
 
-/// The outer product `a bᵀ` (column `j` is `a * b[j]`; entry `(i, j)` is `a[i] b[j]`).
+/// `ddot`: the square glam matrices (through [`SquareMat`]) and the non-square matrices.
+pub trait Ddot: Copy {
+    /// The scalar.
+    type S: Copy;
+    /// The sum of the entry products (see [`ddot`]).
+    fn w_ddot_of(self, b: Self) -> Self::S;
+}
+
+impl<M: SquareMat> Ddot for M {
+    type S = M::S;
+    #[inline(always)]
+    fn w_ddot_of(self, b: Self) -> M::S {
+        self.w_ddot(b)
+    }
+}
+
+/// The outer product `a bᵀ` (column `j` is `a * b[j]`; entry `(i, j)` is `a[i] b[j]`), of
+/// shape `(len a, len b)`.
 #[inline(always)]
-pub fn outer<V: Outer>(a: V, b: V) -> V::Mat {
+pub fn outer<A: Outer<B>, B>(a: A, b: B) -> A::Mat {
     a.w_outer_of(b)
 }
 
@@ -165,9 +186,9 @@ pub fn cw_div<T: Cw>(a: T, b: T) -> T {
     a.w_cw_div(b)
 }
 
-/// The transpose of a square matrix (glam's, or a spatial matrix's).
+/// The transpose of a matrix (glam's, a spatial matrix's, a non-square one's).
 #[inline(always)]
-pub fn transpose<M: Transpose>(m: M) -> M {
+pub fn transpose<M: Transpose>(m: M) -> M::T {
     m.w_transposed()
 }
 
@@ -183,10 +204,11 @@ pub fn trace<M: SquareMat>(m: M) -> M::S {
     m.w_trace()
 }
 
-/// The double contraction `sum a[i][j] * b[i][j]`.
+/// The double contraction `sum a[i][j] * b[i][j]` (square glam matrices column-major,
+/// non-square ones row by row, left to right).
 #[inline(always)]
-pub fn ddot<M: SquareMat>(a: M, b: M) -> M::S {
-    a.w_ddot(b)
+pub fn ddot<M: Ddot>(a: M, b: M) -> M::S {
+    a.w_ddot_of(b)
 }
 
 /// The inverse: of a matrix (the zero matrix when its determinant is 0), or of a quaternion
@@ -269,6 +291,7 @@ macro_rules! vec_mat {
             }
         }
         impl Transpose for $m {
+            type T = $m;
             #[inline(always)]
             fn w_transposed(self) -> Self {
                 self.transpose()

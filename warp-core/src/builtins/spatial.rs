@@ -223,6 +223,7 @@ macro_rules! spatial_impl {
             }
         }
         impl Transpose for $sm {
+            type T = $sm;
             #[inline(always)]
             fn w_transposed(self) -> Self {
                 self.transpose()

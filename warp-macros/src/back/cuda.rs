@@ -58,6 +58,10 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     {
         e.section("spatial");
     }
+    // Non-square matrices: their types, operators and adjoints are wp_matrix.h's.
+    if f.vars.iter().any(|v| matches!(leaf(&v.ty), Ty::MatRC(..))) {
+        e.section("matrix");
+    }
     for v in &f.vars {
         if let Ty::Object(k) = v.ty {
             e.section(k.row().section);
@@ -138,7 +142,8 @@ pub fn cpp_type(t: &Ty) -> Option<String> {
         | Ty::Quat(_)
         | Ty::Transform(_)
         | Ty::SpatialVector(_)
-        | Ty::SpatialMatrix(_) => format!("wp::{}", t.glam_name()?),
+        | Ty::SpatialMatrix(_)
+        | Ty::MatRC(..) => format!("wp::{}", t.glam_name()?),
         Ty::Array(e, n) => format!("wp::array_t<{}, {n}>", cpp_type(e)?),
         Ty::LocalArray(e, n) => format!("wp::local_array_t<{}, {}>", cpp_type(e)?, dim_cpp(n)),
         Ty::Struct(name) => name.clone(),
@@ -303,7 +308,13 @@ impl<'a> Emitter<'a> {
             }
         });
         match found? {
-            Op::Copy(w) | Op::LitLike(_, w) | Op::ZeroLike(w) => self.type_expr(w, depth + 1),
+            Op::Copy(w) | Op::LitLike(_, w, Like::Value) | Op::ZeroLike(w) => {
+                self.type_expr(w, depth + 1)
+            }
+            Op::LitLike(_, w, Like::Scalar) => Some(format!(
+                "wp::scalar_of_t<{}>",
+                self.type_expr(w, depth + 1)?
+            )),
             Op::Func { path, .. } => Some(format!(
                 "@@R{}@@",
                 self.f.callees.iter().position(|p| p == &path)?
@@ -814,13 +825,17 @@ impl<'a> Emitter<'a> {
                 Ty::Scalar(s) if s.is_float() => float_lit(*v, *s),
                 _ => format!("{v:?}"),
             },
-            Op::LitLike(l, like) => {
+            Op::LitLike(l, like, kind) => {
                 let v = match l {
                     Lit::Int(i) => *i as f64,
                     Lit::Float(f) => *f,
                     Lit::Bool(_) => return Err("bool literal beside an untyped value".into()),
                 };
-                format!("wp::lit_like<decltype({})>({v:?})", self.var(*like))
+                let f = match kind {
+                    Like::Value => "lit_like",
+                    Like::Scalar => "scalar_lit_like",
+                };
+                format!("wp::{f}<decltype({})>({v:?})", self.var(*like))
             }
             // Value-initialised: zero for every kernel type (the C++ types are aggregates),
             // and needs no adjoint header (a tangent kernel is a forward unit).
@@ -982,7 +997,7 @@ impl<'a> Emitter<'a> {
                     (Ty::Matrix(..), Ctor::Components) => {
                         format!("wp::{name}_from_cols({})", args.join(", "))
                     }
-                    (Ty::SpatialMatrix(_), Ctor::Components) => {
+                    (Ty::SpatialMatrix(_) | Ty::MatRC(..), Ctor::Components) => {
                         format!("wp::{name}_from_rows({})", args.join(", "))
                     }
                     (Ty::Vector(..), Ctor::Splat) => {

@@ -248,7 +248,10 @@ impl<'a> RustEmitter<'a> {
         let name = self.name_lit();
         match op {
             Op::Lit(l) => literal(l, ty),
-            Op::LitLike(l, like) => {
+            // rustc types a lane-type literal from the builtin's signature, as in the user's
+            // own code.
+            Op::LitLike(l, _, Like::Scalar) => literal(l, &Ty::Deferred),
+            Op::LitLike(l, like, Like::Value) => {
                 let like = self.var(*like);
                 let v = match l {
                     Lit::Int(i) => *i as f64,
@@ -471,7 +474,9 @@ impl<'a> RustEmitter<'a> {
                     (Ty::Vector(..), Ctor::Components) => format_ident!("new"),
                     (Ty::Quat(_), Ctor::Components) => format_ident!("from_xyzw"),
                     (Ty::Matrix(..), Ctor::Components) => format_ident!("from_cols"),
-                    (Ty::SpatialMatrix(_), Ctor::Components) => format_ident!("from_rows"),
+                    (Ty::SpatialMatrix(_) | Ty::MatRC(..), Ctor::Components) => {
+                        format_ident!("from_rows")
+                    }
                     (Ty::Vector(..), Ctor::Splat) => format_ident!("splat"),
                     (Ty::Matrix(..), Ctor::Splat) => format_ident!("from_diagonal"),
                     (_, Ctor::Const(c)) => {
@@ -557,7 +562,7 @@ pub fn ty_tokens(t: &Ty) -> Option<TokenStream> {
             Some(quote!(__wp::glam::#id))
         }
         // warp-core's transforms and spatial types, re-exported next to glam.
-        Ty::Transform(_) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => {
+        Ty::Transform(_) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) | Ty::MatRC(..) => {
             let id = format_ident!("{}", t.glam_name()?);
             Some(quote!(__wp::#id))
         }

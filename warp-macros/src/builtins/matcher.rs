@@ -169,6 +169,12 @@ impl Builtin {
                 .scalar()
                 .map(Ty::SpatialMatrix)
                 .unwrap_or(Ty::Deferred),
+            Pos::TransposeOfT => match t.mat_shape() {
+                Some((s, r, c)) => Ty::mat_of(s, c, r).unwrap_or(Ty::Deferred),
+                None => Ty::Deferred,
+            },
+            // The argument's own type (checked below); the result from both arguments (below).
+            Pos::AnyVecOfT | Pos::OuterOfT => Ty::Deferred,
             Pos::Mat4OfT => scalar
                 .scalar()
                 .map(|s| Ty::Matrix(s, 4))
@@ -214,6 +220,25 @@ impl Builtin {
                 }
                 ArgTy::Known(_) if *pos == Pos::ArrayOfT => {}
                 ArgTy::Known(_) if *pos == Pos::AnyVolume => {}
+                ArgTy::Known(ty)
+                    if *pos == Pos::AnyVecOfT
+                        && ty.vec_shape().map(|(s, _)| Ty::Scalar(s)) != Some(scalar.clone()) =>
+                {
+                    return Err(format!(
+                        "argument {} of `{}` must be a float vector of `{scalar}` (any \
+                         length), found `{ty}`",
+                        i + 1,
+                        self.name
+                    ))
+                }
+                ArgTy::Known(_) if *pos == Pos::AnyVecOfT => {}
+                ArgTy::Literal { .. } if *pos == Pos::AnyVecOfT => {
+                    return Err(format!(
+                        "argument {} of `{}` must be a vector, found a literal",
+                        i + 1,
+                        self.name
+                    ))
+                }
                 ArgTy::Known(ty) if *ty != w => {
                     return Err(format!(
                         "mismatched types in `{}`: argument {} is `{ty}`, expected `{w}`",
@@ -233,13 +258,25 @@ impl Builtin {
                 _ => {}
             }
             let ty = match (arg, pos) {
-                (ArgTy::Known(ty), Pos::Index | Pos::AnyVolume) => ty.clone(),
+                (ArgTy::Known(ty), Pos::Index | Pos::AnyVolume | Pos::AnyVecOfT) => ty.clone(),
                 _ => w,
             };
             params.push(ty);
         }
         let ret = match self.ret {
             Pos::Tuple(ps) => Ty::Tuple(ps.iter().map(&want).collect()),
+            // `outer(a, b)`: shape `(len a, len b)`.
+            Pos::OuterOfT => {
+                let b = self
+                    .params
+                    .iter()
+                    .zip(&params)
+                    .find(|(p, _)| **p == Pos::AnyVecOfT);
+                match (t.vec_shape(), b.and_then(|(_, b)| b.vec_shape())) {
+                    (Some((s, n)), Some((_, m))) => Ty::mat_of(s, n, m).unwrap_or(Ty::Deferred),
+                    _ => Ty::Deferred,
+                }
+            }
             p => want(&p),
         };
         Ok(Resolved { params, ret })

@@ -102,8 +102,10 @@ const VEC_OR_QUAT: &[Class] = &[FloatVector, IntVector, Quaternion];
 const FVEC_OR_QUAT: &[Class] = &[FloatVector, Quaternion];
 const FVEC_OR_MAT: &[Class] = &[FloatVector, Matrix];
 const MAT: &[Class] = &[Matrix];
-/// `transpose`: glam's square matrices and the spatial matrices.
-const MAT_OR_SMAT: &[Class] = &[Matrix, SpatialMatrix];
+/// `transpose`: glam's square matrices, the spatial and the non-square matrices.
+const ANY_MAT: &[Class] = &[Matrix, SpatialMatrix, NonSquare];
+/// `ddot`: glam's square matrices and the non-square matrices.
+const MAT_OR_NONSQUARE: &[Class] = &[Matrix, NonSquare];
 /// `outer`: float vectors and spatial vectors.
 const FVEC_OR_SVEC: &[Class] = &[FloatVector, SpatialVector];
 const SVEC: &[Class] = &[SpatialVector];

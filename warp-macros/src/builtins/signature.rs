@@ -49,6 +49,8 @@ pub enum Class {
     SpatialVector,
     /// SpatialMatrix, DSpatialMatrix.
     SpatialMatrix,
+    /// The non-square matrices (Mat23 .. Mat64, DMat23 .. DMat64).
+    NonSquare,
     /// f32, f64: the scalars spatial vectors are made of (the six-scalar `spatial_vector`).
     SpatialScalar,
     /// The values a `Volume<T>` holds: f32, f64, i32, Vec3, DVec3 (lookups, stores).
@@ -100,6 +102,7 @@ impl Class {
             (Class::Matrix4, Ty::Matrix(_, 4)) => true,
             (Class::SpatialVector, Ty::SpatialVector(_)) => true,
             (Class::SpatialMatrix, Ty::SpatialMatrix(_)) => true,
+            (Class::NonSquare, Ty::MatRC(..)) => true,
             (Class::SpatialScalar, Ty::Scalar(s)) => matches!(s, Scalar::F32 | Scalar::F64),
             (Class::VolumeValue, t) => crate::types::VolumeElem::of(t).is_some(),
             (Class::VolumeFloat, t) => {
@@ -131,6 +134,7 @@ impl Class {
             Class::Matrix4 => "a 4x4 matrix (Mat4, DMat4)",
             Class::SpatialVector => "a spatial vector (SpatialVector, DSpatialVector)",
             Class::SpatialMatrix => "a spatial matrix (SpatialMatrix, DSpatialMatrix)",
+            Class::NonSquare => "a non-square matrix (Mat23 .. Mat64, DMat23 .. DMat64)",
             Class::SpatialScalar => "f32 or f64",
             Class::VolumeValue => "a volume value (f32, f64, i32, Vec3, DVec3)",
             Class::VolumeFloat => "a float volume value (f32, f64, Vec3, DVec3)",
@@ -174,6 +178,14 @@ pub enum Pos {
     SVecOfT,
     /// The spatial matrix of `T`'s scalar (`spatial_adjoint`).
     SMatOfT,
+    /// The transpose of the matrix `T`: `T` itself for a square one, `Mat32` for `Mat23`.
+    TransposeOfT,
+    /// A float vector of `T`'s scalar of any length (`outer`'s second argument): the
+    /// argument's own type.
+    AnyVecOfT,
+    /// The matrix of `T`'s scalar of shape `(len T, len b)`, `b` the [`Pos::AnyVecOfT`]
+    /// argument (`outer(a, b)`; results only).
+    OuterOfT,
     /// A tuple of these (results only: the decompositions, `svd3(a) -> (T, VecOfT, T)`).
     Tuple(&'static [Pos]),
     /// The 4x4 matrix of `T`'s scalar (`transform_compose`).

@@ -42,7 +42,8 @@ fn seedable(t: &Ty) -> bool {
         | Ty::Matrix(s, _)
         | Ty::Quat(s)
         | Ty::SpatialVector(s)
-        | Ty::SpatialMatrix(s) => float(s),
+        | Ty::SpatialMatrix(s)
+        | Ty::MatRC(s, ..) => float(s),
         Ty::Tuple(ts) => (2..=4).contains(&ts.len()) && ts.iter().all(seedable),
         _ => false,
     }

@@ -35,7 +35,9 @@ mod asserts;
 pub(crate) mod calls;
 mod control;
 mod expressions;
+mod literal_lets;
 mod local_arrays;
+mod matrices;
 mod places;
 mod query;
 pub(crate) mod resolve;
@@ -64,7 +66,29 @@ pub fn lower_kernel(
     kind: FnKind,
     block_dim: Option<crate::types::Dim>,
 ) -> Result<Function, Vec<syn::Error>> {
+    // Another pass only when a failed one learned a literal `let`'s type from its uses
+    // (`literal_lets`); each pass learns at least one, and a body has few such `let`s.
+    let mut given = HashMap::new();
+    for _ in 0..8 {
+        let (result, found) = lower_pass(item, kind, block_dim.clone(), given.clone());
+        if result.is_ok() || found.is_empty() {
+            return result;
+        }
+        given.extend(found);
+    }
+    lower_pass(item, kind, block_dim, given).0
+}
+
+/// One pass of [`lower_kernel`], with the literal `let`s' types known so far; also returns
+/// the types it learned.
+fn lower_pass(
+    item: &syn::ItemFn,
+    kind: FnKind,
+    block_dim: Option<crate::types::Dim>,
+    given: HashMap<usize, Ty>,
+) -> (Result<Function, Vec<syn::Error>>, HashMap<usize, Ty>) {
     let mut cx = Lowerer {
+        defaults: literal_lets::Defaults::new(given),
         tiled: block_dim.clone().map(|width| Tiled { width: Some(width) }),
         obligations: Vec::new(),
         kind,
@@ -215,7 +239,13 @@ pub fn lower_kernel(
         !matches!(ret, Ty::Unit),
     );
     match tail {
-        Ok(Some(v)) if kind == FnKind::Func => cx.push_return(Some(v), item.block.span()),
+        Ok(Some(v)) if kind == FnKind::Func => {
+            // rustc checks the tail's type; a literal `let`'s may still be learned from it.
+            if !cx.ty(v).is_deferred() && !ret.is_deferred() && cx.ty(v) != ret {
+                cx.learn_literal_type(v, &ret);
+            }
+            cx.push_return(Some(v), item.block.span())
+        }
         Ok(Some(_)) => {}
         Ok(None) if kind == FnKind::Func && !matches!(ret, Ty::Unit) => {
             // Allowed when every path returns explicitly; rustc checks that on the CPU side.
@@ -249,11 +279,12 @@ pub fn lower_kernel(
             "local arrays are not supported in tiled kernels yet: use a tile or lane variables",
         ));
     }
+    let found = std::mem::take(&mut cx.defaults.found);
     if !cx.errors.is_empty() {
-        return Err(cx.errors);
+        return (Err(cx.errors), found);
     }
     let body = cx.blocks.pop().expect("function block");
-    Ok(Function {
+    let function = Function {
         kind,
         name: cx.fn_name,
         params,
@@ -269,7 +300,8 @@ pub fn lower_kernel(
         deterministic: None,
         call_checks: cx.call_checks,
         custom_replay: false,
-    })
+    };
+    (Ok(function), found)
 }
 
 struct Lowerer {
@@ -297,6 +329,8 @@ struct Lowerer {
     tiled: Option<Tiled>,
     /// Tile shape rules left to rustc (`Function::shape_obligations`).
     obligations: Vec<ShapeObligation>,
+    /// Literal `let`s typed by their uses (`literal_lets`).
+    defaults: literal_lets::Defaults,
 }
 
 fn strip(e: &Expr) -> &Expr {

@@ -272,7 +272,8 @@ pub fn local_array_elem_error(t: &Ty) -> Option<String> {
         | Ty::Quat(_)
         | Ty::Transform(_)
         | Ty::SpatialVector(_)
-        | Ty::SpatialMatrix(_) => None,
+        | Ty::SpatialMatrix(_)
+        | Ty::MatRC(..) => None,
         Ty::LocalArray(e, _) => local_array_elem_error(e),
         Ty::Deferred => Some(
             "the elements' type is not known here: annotate it (`let a: [f32; 2] = [f(x), f(y)];`)"

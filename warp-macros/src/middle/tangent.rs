@@ -48,6 +48,7 @@ fn tangent_type(t: &Ty) -> bool {
         | Ty::Quat(_)
         | Ty::SpatialVector(_)
         | Ty::SpatialMatrix(_)
+        | Ty::MatRC(..)
         | Ty::Deferred => true,
         // A local array's tangent is a local array of its elements' tangents.
         Ty::LocalArray(e, _) => !e.is_deferred() && tangent_type(e),
@@ -255,7 +256,7 @@ impl Tx {
     fn lit(&mut self, like: VarId, x: f64) -> VarId {
         match self.ty(like).scalar() {
             Some(s) => self.tmp(Ty::Scalar(s), Op::Lit(Lit::Float(x))),
-            None => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(x), like)),
+            None => self.tmp(Ty::Deferred, Op::LitLike(Lit::Float(x), like, Like::Value)),
         }
     }
 
@@ -282,7 +283,11 @@ impl Tx {
                 self.tmp(ty.clone(), Op::Construct { ty, ctor, args })
             }
             Ty::Scalar(_) => self.tmp(ty.clone(), Op::Lit(Lit::Float(0.0))),
-            Ty::Vector(..) | Ty::Matrix(..) | Ty::SpatialVector(_) | Ty::SpatialMatrix(_) => self.tmp(
+            Ty::Vector(..)
+            | Ty::Matrix(..)
+            | Ty::SpatialVector(_)
+            | Ty::SpatialMatrix(_)
+            | Ty::MatRC(..) => self.tmp(
                 ty.clone(),
                 Op::Construct {
                     ty: ty.clone(),

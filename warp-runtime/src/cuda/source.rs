@@ -178,6 +178,10 @@ fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
     {
         sections.push("spatial");
     }
+    // And a non-square matrix field (`wp::Mat23`, `wp::DMat63`, ..) the matrix section.
+    if struct_defs.iter().any(|d| names_nonsquare(d)) && !sections.contains(&"matrix") {
+        sections.push("matrix");
+    }
     let used = SECTIONS
         .iter()
         .filter(|s| s.kernel && sections.contains(&s.name));
@@ -259,6 +263,26 @@ fn assemble_unit(info: &KernelInfo, halves: Halves) -> CudaSource {
         headers,
         adjoint,
     }
+}
+
+/// Whether C++ text names a non-square matrix type: `wp::Mat` or `wp::DMat` and two
+/// different digits (`wp::Mat23`; glam's square `wp::Mat3` has one).
+fn names_nonsquare(text: &str) -> bool {
+    text.match_indices("wp::").any(|(i, _)| {
+        let rest = &text[i + 4..];
+        let rest = rest.strip_prefix('D').unwrap_or(rest);
+        let Some(d) = rest.strip_prefix("Mat") else {
+            return false;
+        };
+        let b = d.as_bytes();
+        b.len() >= 2
+            && b[0].is_ascii_digit()
+            && b[1].is_ascii_digit()
+            && b[0] != b[1]
+            && !b
+                .get(2)
+                .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
+    })
 }
 
 #[cfg(test)]
@@ -500,5 +524,16 @@ mod tests {
                 "wp_adjoint_mesh.h"
             ]
         );
+    }
+
+    #[test]
+    fn struct_fields_of_nonsquare_matrices_are_found() {
+        assert!(names_nonsquare("struct S { wp::Mat23 j; wp::f32 w; };"));
+        assert!(names_nonsquare("wp::DMat63 m;"));
+        assert!(!names_nonsquare("struct S { wp::Mat3 m; wp::DMat4 n; };"));
+        assert!(!names_nonsquare(
+            "wp::Mat33 m; wp::Mat23_ZERO(); wp::Vec3 v;"
+        ));
+        assert!(!names_nonsquare("Mat23 m;"));
     }
 }

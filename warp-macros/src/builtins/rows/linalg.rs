@@ -19,7 +19,8 @@ pub(super) const ROWS: &[Builtin] = rows! {
     "length_sq":  VEC_OR_QUAT,    (T) -> ScalarOfT,         "linalg", Adjoint,
         tangent(Tangent::Rule(Add(&Call("dot", &[D0, A0]), &Call("dot", &[D0, A0])))),
         aliases(&["length_squared"]);
-    "outer":      FVEC_OR_SVEC,   (T, T) -> MatOfT,         "linalg", Adjoint,
+    // Of two vectors of one scalar, any lengths: shape `(len a, len b)`, Warp's.
+    "outer":      FVEC_OR_SVEC,   (T, AnyVecOfT) -> OuterOfT, "linalg", Adjoint,
         tangent(BILINEAR);
     "diag":       FVEC,           (T) -> MatOfT,            "linalg", Adjoint,
         tangent(LINEAR);
@@ -31,7 +32,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
             &This(&[D0, A1]),
             &Call("cw_mul", &[OUT, This(&[D1, A1])]),
         )));
-    "transpose":  MAT_OR_SMAT,    (T) -> T,                 "linalg", Adjoint,
+    "transpose":  ANY_MAT,        (T) -> TransposeOfT,      "linalg", Adjoint,
         tangent(LINEAR), method;
     // det(A)' = det(A) tr(A^-1 A')
     "determinant": MAT,           (T) -> ScalarOfT,         "linalg", Adjoint,
@@ -45,7 +46,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
         tangent(Tangent::RuleFor(MAT, Neg(&Mul(&Mul(&OUT, &D0), &OUT)))), method;
     "trace":      MAT,            (T) -> ScalarOfT,         "linalg", Adjoint,
         tangent(LINEAR);
-    "ddot":       MAT,            (T, T) -> ScalarOfT,      "linalg", Adjoint,
+    "ddot":       MAT_OR_NONSQUARE, (T, T) -> ScalarOfT,    "linalg", Adjoint,
         tangent(BILINEAR);
     "skew":       FVEC3,          (T) -> MatOfT,            "linalg", Adjoint,
         tangent(LINEAR);

@@ -385,6 +385,9 @@ impl Lowerer {
     }
 
     fn construct(&mut self, ty: Ty, ctor: &str, c: &syn::ExprCall, span: Span) -> R<VarId> {
+        if let (Ty::MatRC(..), "new") = (&ty, ctor) {
+            return self.matrix_from_scalars(ty, c, span);
+        }
         let scalar = Ty::Scalar(ty.scalar().expect("glam types have a scalar"));
         let (ctor_kind, arg_tys): (Ctor, Vec<Ty>) = match (&ty, ctor) {
             (Ty::Vector(_, n), "new") => (Ctor::Components, vec![scalar.clone(); *n as usize]),
@@ -396,6 +399,10 @@ impl Lowerer {
             (Ty::Matrix(s, n), "from_diagonal") => (Ctor::Splat, vec![Ty::Vector(*s, *n)]),
             (Ty::SpatialMatrix(s), "from_rows") => {
                 (Ctor::Components, vec![Ty::SpatialVector(*s); 6])
+            }
+            (Ty::MatRC(_, r, _), "from_rows") => {
+                let (row, _) = ty.lane_elems().expect("a matrix has rows");
+                (Ctor::Components, vec![row; *r as usize])
             }
             _ => {
                 return err(
@@ -484,9 +491,22 @@ impl Lowerer {
                 vals[i] = Some(vs);
             }
         }
-        let resolved = b.resolve(&arg_tys).map_err(|m| syn::Error::new(span, m))?;
+        let resolved = match b.resolve(&arg_tys) {
+            Ok(r) => r,
+            Err(m) => {
+                // `max(acc, x)` with `acc` a literal `let` and `x` an f64: learn it.
+                let known: Vec<VarId> = vals.iter().flatten().flatten().copied().collect();
+                for (k, &a) in known.iter().enumerate() {
+                    for &b in &known[k + 1..] {
+                        self.learn_from_pair(a, b);
+                    }
+                }
+                return err(span, m);
+            }
+        };
         // A literal in a `T` position whose type the macro cannot see takes the type of an
-        // argument in another `T` position (`v.max(0.5)` with `v` from a user func).
+        // argument in another `T` position (`v.max(0.5)` with `v` from a user func); one in a
+        // `ScalarOfT` position takes that argument's lane type (`lerp(f(a), f(b), 0.5)`).
         let like = b.params.iter().zip(&vals).find_map(|(p, v)| match (p, v) {
             (Pos::T, Some(vs)) if self.ty(vs[0]).is_deferred() => Some(vs[0]),
             _ => None,
@@ -495,11 +515,16 @@ impl Lowerer {
         for (i, a) in args.iter().enumerate() {
             match vals[i].take() {
                 Some(vs) => out.extend(vs),
-                None => match (like, flex_value(a)) {
-                    (Some(w), Some(value))
-                        if b.params[i] == Pos::T && resolved.params[i].is_deferred() =>
+                None => match (like, flex_value(a), b.params[i]) {
+                    (Some(w), Some(value), pos @ (Pos::T | Pos::ScalarOfT))
+                        if resolved.params[i].is_deferred() =>
                     {
-                        out.push(self.def(Op::LitLike(value, w), Ty::Deferred, a.span()))
+                        let kind = if pos == Pos::T {
+                            Like::Value
+                        } else {
+                            Like::Scalar
+                        };
+                        out.push(self.def(Op::LitLike(value, w, kind), Ty::Deferred, a.span()))
                     }
                     _ => out.push(self.expr(a, Some(&resolved.params[i]))?),
                 },

@@ -179,6 +179,7 @@ impl Lowerer {
                         | Ty::Transform(_)
                         | Ty::SpatialVector(_)
                         | Ty::SpatialMatrix(_)
+                        | Ty::MatRC(..)
                         | Ty::Deferred => true,
                         Ty::Tile(e, _) => {
                             matches!(**e, Ty::Scalar(s) if s.is_float() || s.is_signed_int())
@@ -221,8 +222,13 @@ impl Lowerer {
                             .ok_or_else(|| syn::Error::new(span, "unsupported operator"))?;
                         let hint = if op.is_comparison() { None } else { want };
                         let (l, r) = self.operand_pair(&b.left, &b.right, hint, op)?;
-                        let res = binary_result(op, &self.ty(l), &self.ty(r))
-                            .map_err(|m| syn::Error::new(b.op.span(), m))?;
+                        let res = match binary_result(op, &self.ty(l), &self.ty(r)) {
+                            Ok(res) => res,
+                            Err(m) => {
+                                self.learn_from_pair(l, r);
+                                return err(b.op.span(), m);
+                            }
+                        };
                         // Tile shapes the macro cannot compare: rustc's.
                         if let (Ty::Tile(_, dl), Ty::Tile(_, dr)) = (self.ty(l), self.ty(r)) {
                             let msg = format!(
@@ -456,6 +462,7 @@ impl Lowerer {
                     Ty::Transform(_) => name == "IDENTITY",
                     Ty::SpatialVector(_) => name == "ZERO",
                     Ty::SpatialMatrix(_) => ["ZERO", "IDENTITY"].contains(&name.as_str()),
+                    Ty::MatRC(..) => name == "ZERO",
                     _ => false,
                 };
                 if !known {

@@ -100,6 +100,8 @@ impl Lowerer {
                 let v = self.expr(rhs, Some(&place_ty))?;
                 let vt = self.ty(v);
                 if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
+                    self.learn_for_place(&place, &vt);
+                    self.learn_literal_type(v, &place_ty);
                     return err(
                         rhs.span(),
                         format!("mismatched types: expected `{place_ty}`, found `{vt}`"),
@@ -115,8 +117,13 @@ impl Lowerer {
                     self.expr(rhs, None)?
                 };
                 let rt = self.ty(r);
-                let res =
-                    binary_result(op, &place_ty, &rt).map_err(|m| syn::Error::new(span, m))?;
+                let res = binary_result(op, &place_ty, &rt);
+                if !matches!(&res, Ok(t) if t.is_deferred() || place_ty.is_deferred() || *t == place_ty)
+                {
+                    self.learn_for_place(&place, &rt);
+                    self.learn_literal_type(r, &place_ty);
+                }
+                let res = res.map_err(|m| syn::Error::new(span, m))?;
                 if !res.is_deferred() && !place_ty.is_deferred() && res != place_ty {
                     return err(
                         span,
@@ -191,6 +198,8 @@ impl Lowerer {
         let place_ty = self.place_ty(&place, target.span())?;
         let vt = self.ty(value);
         if !vt.is_deferred() && !place_ty.is_deferred() && vt != place_ty {
+            self.learn_for_place(&place, &vt);
+            self.learn_literal_type(value, &place_ty);
             return err(
                 target.span(),
                 format!("mismatched types: expected `{place_ty}`, found `{vt}`"),
@@ -576,17 +585,17 @@ pub(super) fn lane_index<'e>(base: &Ty, index: &'e Expr) -> R<Option<Vec<LaneSte
         }
         // Column-major: the column first.
         (Ty::Matrix(..), 2) => vec![parts[1], parts[0]],
-        (Ty::SpatialMatrix(_), 1 | 2) | (_, 1) => parts,
+        (Ty::SpatialMatrix(_) | Ty::MatRC(..), 1 | 2) | (_, 1) => parts,
         (Ty::Matrix(..), _) => {
             return err(
                 index.span(),
                 format!("`{base}` takes two indices, `m[(i, j)]`: row i, column j"),
             )
         }
-        (Ty::SpatialMatrix(_), _) => {
+        (Ty::SpatialMatrix(_) | Ty::MatRC(..), _) => {
             return err(
                 index.span(),
-                "a spatial matrix takes one or two indices, `m[i]` (a row) or `m[(i, j)]`",
+                format!("`{base}` takes one or two indices, `m[i]` (a row) or `m[(i, j)]`"),
             )
         }
         _ => return err(index.span(), format!("`{base}` takes one index, `v[i]`")),

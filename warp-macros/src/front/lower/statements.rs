@@ -4,6 +4,7 @@
 //! them), `return`, and `print!`/`println!` with their format strings.
 
 use super::expressions::{is_compound_assign, map_binop};
+use super::typing::flex_literal;
 use super::*;
 
 fn is_tid_call(e: &Expr) -> bool {
@@ -118,10 +119,19 @@ impl Lowerer {
             }
             return Ok(());
         }
-        let mut value = self.expr(&init.expr, annot.as_ref())?;
+        // `let mut acc = 1.0;`: typed as its uses want it, where an earlier pass learned that.
+        let literal_let = (annot.is_none()
+            && matches!(pat, Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none())
+            && flex_literal(&init.expr).is_some())
+        .then(|| self.defaults.meet());
+        let hint = annot
+            .clone()
+            .or_else(|| literal_let.as_ref().and_then(|(_, t)| t.clone()));
+        let mut value = self.expr(&init.expr, hint.as_ref())?;
         if let Some(a) = &annot {
             let vt = self.ty(value);
             if !vt.is_deferred() && vt != *a {
+                self.learn_literal_type(value, a);
                 return err(
                     init.expr.span(),
                     format!("mismatched types: expected `{a}`, found `{vt}`"),
@@ -135,7 +145,13 @@ impl Lowerer {
                 value = self.def(Op::Copy(value), a.clone(), init.expr.span());
             }
         }
-        self.bind_pat(pat, value, span)
+        self.bind_pat(pat, value, span)?;
+        if let (Some((key, _)), Pat::Ident(pi)) = (literal_let, pat) {
+            if let Some(v) = self.lookup(&pi.ident.to_string()) {
+                self.defaults.bound(v, key);
+            }
+        }
+        Ok(())
     }
 
     /// `let (a, b) = value;` (`value` a tuple: a decomposition's, a func's, a local, a
@@ -381,6 +397,7 @@ impl Lowerer {
                 let v = self.expr(e, Some(&ret))?;
                 let vt = self.ty(v);
                 if !vt.is_deferred() && !ret.is_deferred() && vt != ret {
+                    self.learn_literal_type(v, &ret);
                     return err(
                         e.span(),
                         format!("mismatched types: the func returns `{ret}`, found `{vt}`"),

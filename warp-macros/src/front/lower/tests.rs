@@ -685,3 +685,63 @@ fn lanes_lower_to_members_and_elements() {
     });
     assert_eq!(sets, 1);
 }
+
+#[test]
+fn literal_lets_take_the_type_their_uses_give_them() {
+    let f = lower_fn(
+        &parse_quote! {
+            fn power(x: f64, n: i32) -> f64 {
+                let mut acc = 1.0;
+                for _ in 0..n {
+                    acc *= x;
+                }
+                let mut best = 0.0;
+                best = best.max(acc);
+                let half = 0.5;
+                let scaled = half * best;
+                let mut tail = 0.0;
+                tail += scaled;
+                tail
+            }
+        },
+        FnKind::Func,
+    )
+    .unwrap_or_else(|e| panic!("{:?}", e.iter().map(|e| e.to_string()).collect::<Vec<_>>()));
+    for name in ["acc", "best", "half", "tail"] {
+        assert_eq!(find_var(&f, name), Ty::Scalar(Scalar::F64), "{name}");
+    }
+    let k = lower(parse_quote! {
+        fn k(out: Array<f32>) {
+            let i = tid();
+            let mut j = 0;
+            j += i;
+            let mut s = 0.0;
+            s += out[j];
+            out[i] = s;
+        }
+    });
+    assert_eq!(find_var(&k, "j"), USIZE);
+    assert_eq!(find_var(&k, "s"), F32);
+}
+
+#[test]
+fn literal_lets_keep_errors_their_uses_cannot_resolve() {
+    // An integer literal's `let` is not a float (Rust's rule), and an annotated `let` keeps
+    // its annotation: both stay errors, reported once.
+    let e = errors(
+        parse_quote! {
+            fn k(x: f64, out: Array<f64>) {
+                let n = 2;
+                let a: f32 = 1.0;
+                out[0] = x * n + a;
+            }
+        },
+        FnKind::Kernel,
+    );
+    assert_eq!(e.len(), 1, "{e:?}");
+    assert!(
+        e[0].contains("cannot apply `*` to `f64` and `i32`"),
+        "{}",
+        e[0]
+    );
+}

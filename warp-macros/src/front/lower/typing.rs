@@ -72,7 +72,8 @@ fn literal_hint(other: &Ty, op: BinOp) -> Option<Ty> {
             | Ty::Quat(s)
             | Ty::Transform(s)
             | Ty::SpatialVector(s)
-            | Ty::SpatialMatrix(s) => Some(Ty::Scalar(*s)),
+            | Ty::SpatialMatrix(s)
+            | Ty::MatRC(s, ..) => Some(Ty::Scalar(*s)),
             // A tile of vectors is scaled by their scalar.
             Ty::Tile(e, _) => literal_hint(e, op),
             Ty::Deferred => Some(Ty::Deferred),
@@ -202,7 +203,11 @@ impl Lowerer {
     pub(super) fn literal_next_to(&mut self, lit: &Expr, other: VarId, op: BinOp) -> R<VarId> {
         if self.ty(other).is_deferred() {
             if let Some(value) = flex_value(lit) {
-                return Ok(self.def(Op::LitLike(value, other), Ty::Deferred, lit.span()));
+                return Ok(self.def(
+                    Op::LitLike(value, other, Like::Value),
+                    Ty::Deferred,
+                    lit.span(),
+                ));
             }
         }
         let hint = literal_hint(&self.ty(other), op);
@@ -222,7 +227,8 @@ impl Lowerer {
             | Ty::Quat(s)
             | Ty::Transform(s)
             | Ty::SpatialVector(s)
-            | Ty::SpatialMatrix(s) => Ty::Scalar(*s),
+            | Ty::SpatialMatrix(s)
+            | Ty::MatRC(s, ..) => Ty::Scalar(*s),
             t => t.clone(),
         });
         match lit {

@@ -367,7 +367,7 @@ impl Cx<'_> {
                 let lanes: &[&str] = match ty {
                     Ty::Vector(..) | Ty::Quat(_) => &["x", "y", "z", "w"],
                     Ty::Matrix(..) => &["x_axis", "y_axis", "z_axis", "w_axis"],
-                    Ty::SpatialMatrix(_) => &["0", "1", "2", "3", "4", "5"],
+                    Ty::SpatialMatrix(_) | Ty::MatRC(..) => &["0", "1", "2", "3", "4", "5"],
                     _ => &[],
                 };
                 match (ctor, ty) {
