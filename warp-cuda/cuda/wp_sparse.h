@@ -539,14 +539,17 @@ WP_FN void sp_cg_direction(const sp_cg_vector_t& s, i64 i) {
 
 // ------------------------------------------------------------------------------------------
 // The kernels (only in the build library: WP_SPARSE_BUILD). Grid-stride loops; the dot
-// kernels are block-cooperative (blocks of SP_DOT_LANES threads).
+// kernels are block-cooperative (blocks of SP_DOT_LANES threads). WP_SPARSE_EMULATED: the
+// same kernels as host C++ under the block emulator (tests/cuda_sparse_host.rs defines the
+// CUDA names they use).
 // ------------------------------------------------------------------------------------------
-#if defined(__CUDACC__) && defined(WP_SPARSE_BUILD)
+#if defined(WP_SPARSE_BUILD) && (defined(__CUDACC__) || defined(WP_SPARSE_EMULATED))
 namespace wp {
-#define WP_SP_LOOP(i, n)                                                                \
-  for (i64 i = (i64)blockIdx.x * blockDim.x + threadIdx.x, i##_stride =                 \
-                                                               (i64)blockDim.x * gridDim.x; \
-       i < (i64)(n); i += i##_stride)
+// A grid-stride loop of i over [0, n) (the kernels' macros expand it outside namespace wp).
+#define WP_SP_LOOP(i, n)                                                              \
+  for (::wp::i64 i = (::wp::i64)blockIdx.x * blockDim.x + threadIdx.x,                \
+                 i##_stride = (::wp::i64)blockDim.x * gridDim.x;                      \
+       i < (::wp::i64)(n); i += i##_stride)
 
 template <typename S>
 __device__ void sp_dot_partials_kernel(const sp_dot_t& s) {
