@@ -173,13 +173,13 @@ pub use warp_runtime::dlpack;
 /// (the `python` feature).
 #[cfg(feature = "python")]
 pub use warp_runtime::python;
-/// The scalar types that DLPack exchanges (the `dlpack` feature).
-#[cfg(feature = "dlpack")]
-pub use warp_runtime::DlpackScalar;
 /// Block sparse matrices ([`sparse::Bsr`]), their products with vectors and the conjugate
 /// gradient solver (the `sparse` feature).
 #[cfg(feature = "sparse")]
 pub use warp_runtime::sparse;
+/// The scalar types that DLPack exchanges (the `dlpack` feature).
+#[cfg(feature = "dlpack")]
+pub use warp_runtime::DlpackScalar;
 
 /// Graphs: work recorded once and replayed ([`capture`], [`ScopedCapture`], [`Graph`]).
 pub use warp_runtime::graph;

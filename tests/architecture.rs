@@ -1255,11 +1255,18 @@ const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
     ),
     (1, "tape", &["tape.rs"]),
     (2, "graph", &["graph.rs"]),
-    // `objects/` sits beside `array`: it imports `array`, `primitives` and `dispatch`.
+    // `objects/` sits beside `array`: it imports `array`, `primitives` and `dispatch`; so does
+    // `sparse/` (the `sparse` feature).
     (
         3,
         "arrays and what is made of them",
-        &["array.rs", "array/", "objects/", "primitives/mod.rs"],
+        &[
+            "array.rs",
+            "array/",
+            "objects/",
+            "primitives/mod.rs",
+            "sparse/",
+        ],
     ),
     (4, "dispatch", &["dispatch.rs"]),
     (5, "capturing", &["capturing.rs"]),

@@ -391,7 +391,12 @@ fn uniform(i: usize) -> f64 {
 
 /// A random `nrow x ncol` matrix of `B` with duplicates, on the CPU, and its words for the
 /// driver (nrow, ncol, nnz, offsets, columns, values).
-fn random_matrix<B: Block>(nrow: usize, ncol: usize, count: usize, seed: usize) -> (Bsr<B>, Vec<u64>) {
+fn random_matrix<B: Block>(
+    nrow: usize,
+    ncol: usize,
+    count: usize,
+    seed: usize,
+) -> (Bsr<B>, Vec<u64>) {
     let cpu = wp::cpu();
     let rows: Vec<i32> = (0..count).map(|t| ((t * 7 + seed) % nrow) as i32).collect();
     let cols: Vec<i32> = (0..count)
@@ -420,8 +425,18 @@ fn random_matrix<B: Block>(nrow: usize, ncol: usize, count: usize, seed: usize) 
 fn matrix_words<B: Block>(a: &Bsr<B>) -> Vec<u64> {
     let nnz = a.nnz().unwrap();
     let mut w = vec![a.nrow() as u64, a.ncol() as u64, nnz as u64];
-    w.extend(a.offsets().to_vec().unwrap().iter().map(|&o| o as i64 as u64));
-    w.extend(a.columns().to_vec().unwrap()[..nnz].iter().map(|&c| c as i64 as u64));
+    w.extend(
+        a.offsets()
+            .to_vec()
+            .unwrap()
+            .iter()
+            .map(|&o| o as i64 as u64),
+    );
+    w.extend(
+        a.columns().to_vec().unwrap()[..nnz]
+            .iter()
+            .map(|&c| c as i64 as u64),
+    );
     w.extend(words(&a.values().to_vec().unwrap()[..nnz]));
     w
 }
@@ -459,7 +474,12 @@ fn mv_case<B: Block>(seed: usize) {
         input.extend(ys.iter().map(|&v| word(v)));
         input.extend([alpha.to_bits(), beta.to_bits()]);
         let got = hex(&run(&format!("mv{}", kind::<B>()), &input));
-        assert_eq!(got, want, "{}: alpha {alpha}, beta {beta}", std::any::type_name::<B>());
+        assert_eq!(
+            got,
+            want,
+            "{}: alpha {alpha}, beta {beta}",
+            std::any::type_name::<B>()
+        );
     }
 }
 
@@ -545,7 +565,9 @@ fn poisson<B: Block>(m: usize, k: B, neg: B) -> Bsr<B> {
 fn cg_case<B: sparse::SquareBlock>(a: &Bsr<B>, pre: Precond, o: SolveOptions, b: Vec<B::Scalar>) {
     let cpu = wp::cpu();
     let n = b.len();
-    let x0: Vec<B::Scalar> = (0..n).map(|i| B::Scalar::from_f64(value(i) * 0.01)).collect();
+    let x0: Vec<B::Scalar> = (0..n)
+        .map(|i| B::Scalar::from_f64(value(i) * 0.01))
+        .collect();
     let x = wp::Array::from_slice(&x0, &cpu).unwrap();
     let rep = sparse::cg(a, &wp::Array::from_slice(&b, &cpu).unwrap(), &x, pre, &o).unwrap();
     let mut input = vec![2, kind::<B>()];
@@ -574,7 +596,11 @@ fn cg_case<B: sparse::SquareBlock>(a: &Bsr<B>, pre: Precond, o: SolveOptions, b:
         Stop::SingularPreconditioner { .. } => 5,
     };
     let what = format!("{} {pre:?}", std::any::type_name::<B>());
-    assert_eq!((head[0], head[1] as usize), (stop, rep.iterations), "{what}: {rep:?}");
+    assert_eq!(
+        (head[0], head[1] as usize),
+        (stop, rep.iterations),
+        "{what}: {rep:?}"
+    );
     let words_out = hex(&out[1..]);
     let (hist, xs) = words_out.split_at(rep.iterations + 1);
     let want_hist: Vec<u64> = rep
@@ -608,7 +634,12 @@ fn cg_matches_the_cpu_bit_for_bit() {
     }
     let a32 = poisson::<f32>(8, 4.5, -1.0);
     let b32: Vec<f32> = b.iter().map(|&v| v as f32).collect();
-    cg_case(&a32, Precond::Jacobi, SolveOptions { rtol: 1e-4, ..o }, b32.clone());
+    cg_case(
+        &a32,
+        Precond::Jacobi,
+        SolveOptions { rtol: 1e-4, ..o },
+        b32.clone(),
+    );
     cg_case(&a32, Precond::None, SolveOptions { max_iter: 5, ..o }, b32);
     let k = DMat3::from_cols_array(&[4.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 2.0]);
     let a3 = poisson::<DMat3>(5, k * 4.0, -k);
@@ -625,7 +656,13 @@ fn cg_matches_the_cpu_bit_for_bit() {
     cg_case(&a4, Precond::Jacobi, o, vec![1.0f32; 16]);
 }
 
-fn triplet_words<B: Block>(nrow: usize, ncol: usize, rows: &[i32], cols: &[i32], vals: &[B]) -> Vec<u64> {
+fn triplet_words<B: Block>(
+    nrow: usize,
+    ncol: usize,
+    rows: &[i32],
+    cols: &[i32],
+    vals: &[B],
+) -> Vec<u64> {
     let mut w = vec![
         3,
         (std::mem::size_of::<B::Scalar>() == 8) as u64,
@@ -644,7 +681,9 @@ fn triplet_case<B: Block>(nrow: usize, ncol: usize, count: usize, seed: usize) {
     let (a, _) = random_matrix::<B>(nrow, ncol, count, seed);
     // The same triplets as random_matrix makes.
     let rows: Vec<i32> = (0..count).map(|t| ((t * 7 + seed) % nrow) as i32).collect();
-    let cols: Vec<i32> = (0..count).map(|t| ((t * t + 3 * seed) % ncol) as i32).collect();
+    let cols: Vec<i32> = (0..count)
+        .map(|t| ((t * t + 3 * seed) % ncol) as i32)
+        .collect();
     let rc = B::ROWS * B::COLS;
     let vals: Vec<B> = (0..count)
         .map(|t| {
@@ -660,10 +699,25 @@ fn triplet_case<B: Block>(nrow: usize, ncol: usize, count: usize, seed: usize) {
     );
     let nnz = a.nnz().unwrap();
     assert_eq!(out[0], format!("matrix {nnz}"));
-    let mut want: Vec<u64> = a.offsets().to_vec().unwrap().iter().map(|&o| o as u32 as u64).collect();
-    want.extend(a.columns().to_vec().unwrap()[..nnz].iter().map(|&c| c as u32 as u64));
+    let mut want: Vec<u64> = a
+        .offsets()
+        .to_vec()
+        .unwrap()
+        .iter()
+        .map(|&o| o as u32 as u64)
+        .collect();
+    want.extend(
+        a.columns().to_vec().unwrap()[..nnz]
+            .iter()
+            .map(|&c| c as u32 as u64),
+    );
     want.extend(words(&a.values().to_vec().unwrap()[..nnz]));
-    assert_eq!(hex(&out[1..]), want, "{} {nrow} x {ncol}", std::any::type_name::<B>());
+    assert_eq!(
+        hex(&out[1..]),
+        want,
+        "{} {nrow} x {ncol}",
+        std::any::type_name::<B>()
+    );
 }
 
 /// The triplet pipeline's C++ steps (keys, heads, run sums, offsets; one sort and two): the
@@ -684,7 +738,11 @@ fn triplets_match_the_cpu_bit_for_bit() {
     for (rows, cols, vals) in [
         (vec![0, 1, 9, 0], vec![0, 1, 1, -3], vec![1.0f32; 4]),
         (vec![0, 1, 1, 0], vec![0, 1, 2, 0], vec![1.0f32; 4]),
-        (vec![0, 1, 1, 0], vec![0, 1, 1, 0], vec![1.0, f32::NAN, 1.0, 1.0]),
+        (
+            vec![0, 1, 1, 0],
+            vec![0, 1, 1, 0],
+            vec![1.0, f32::NAN, 1.0, 1.0],
+        ),
     ] {
         let e = Bsr::from_triplets(
             2,

@@ -103,7 +103,11 @@ fn blocks<B: Block + Copy>(a: &Bsr<B>) -> std::collections::BTreeMap<(i32, i32),
         for k in off[r] as usize..off[r + 1] as usize {
             assert!((0..a.ncol() as i32).contains(&cols[k]));
             if k > off[r] as usize {
-                assert!(cols[k - 1] < cols[k], "row {r}: columns {:?}", &cols[off[r] as usize..]);
+                assert!(
+                    cols[k - 1] < cols[k],
+                    "row {r}: columns {:?}",
+                    &cols[off[r] as usize..]
+                );
             }
             m.insert((r as i32, cols[k]), vals[k]);
         }
@@ -121,8 +125,14 @@ fn check_triplets<B: Block + Copy + std::fmt::Debug>(
     add: impl Fn(B, B) -> B,
     bits: impl Fn(&B) -> Vec<u64>,
 ) {
-    let a = Bsr::from_triplets(nrow, ncol, &arr(&rows, dev), &arr(&cols, dev), &arr(&vals, dev))
-        .unwrap();
+    let a = Bsr::from_triplets(
+        nrow,
+        ncol,
+        &arr(&rows, dev),
+        &arr(&cols, dev),
+        &arr(&vals, dev),
+    )
+    .unwrap();
     assert_eq!((a.nrow(), a.ncol()), (nrow, ncol));
     let got = blocks(&a);
     let want = reference(&rows, &cols, &vals, add);
@@ -132,7 +142,12 @@ fn check_triplets<B: Block + Copy + std::fmt::Debug>(
         "the pattern"
     );
     for (k, w) in &want {
-        assert_eq!(bits(&got[k]), bits(w), "block {k:?}: got {:?}, want {w:?}", got[k]);
+        assert_eq!(
+            bits(&got[k]),
+            bits(w),
+            "block {k:?}: got {:?}, want {w:?}",
+            got[k]
+        );
     }
 }
 
@@ -163,7 +178,12 @@ fn triplets_mat3_sum_duplicates_in_order(dev: &wp::Device) {
         11,
         t,
         |a, b| a + b,
-        |m| m.to_cols_array().iter().map(|x| x.to_bits() as u64).collect(),
+        |m| {
+            m.to_cols_array()
+                .iter()
+                .map(|x| x.to_bits() as u64)
+                .collect()
+        },
     );
 }
 
@@ -207,8 +227,14 @@ fn assembly_fault(
     cols: &[i32],
     vals: &[f32],
 ) -> wp::Fault {
-    let r = Bsr::from_triplets(nrow, ncol, &arr(rows, dev), &arr(cols, dev), &arr(vals, dev))
-        .and_then(|a| a.nnz());
+    let r = Bsr::from_triplets(
+        nrow,
+        ncol,
+        &arr(rows, dev),
+        &arr(cols, dev),
+        &arr(vals, dev),
+    )
+    .and_then(|a| a.nnz());
     match r {
         Err(wp::Error::Fault(f)) => f,
         other => panic!("expected a fault, got {other:?}"),
@@ -217,14 +243,7 @@ fn assembly_fault(
 
 fn triplets_out_of_range_is_a_fault(dev: &wp::Device) {
     // Triplet 3 has row 5 of 4 (and triplet 4 a column of -1: the smaller t is reported).
-    let f = assembly_fault(
-        dev,
-        4,
-        3,
-        &[0, 1, 2, 5, 0],
-        &[0, 1, 2, 0, -1],
-        &[1.0; 5],
-    );
+    let f = assembly_fault(dev, 4, 3, &[0, 1, 2, 5, 0], &[0, 1, 2, 0, -1], &[1.0; 5]);
     assert_eq!(f.kernel, "sparse::from_triplets");
     assert_eq!(
         f.kind,
@@ -379,9 +398,17 @@ fn dense_mv<B: Block + Copy>(
 }
 
 /// On a GPU, `f` gives the same bits as on the CPU.
-fn same_on_cpu<T: PartialEq + std::fmt::Debug>(dev: &wp::Device, what: &str, f: impl Fn(&wp::Device) -> T) {
+fn same_on_cpu<T: PartialEq + std::fmt::Debug>(
+    dev: &wp::Device,
+    what: &str,
+    f: impl Fn(&wp::Device) -> T,
+) {
     if !dev.is_cpu() {
-        assert_eq!(f(dev), f(&wp::cpu()), "{what}: the GPU differs from the CPU");
+        assert_eq!(
+            f(dev),
+            f(&wp::cpu()),
+            "{what}: the GPU differs from the CPU"
+        );
     }
 }
 
@@ -421,7 +448,11 @@ fn mv_mat3_matches_dense_reference(dev: &wp::Device) {
         let y = arr(&[Vec3::ZERO; 20], d);
         sparse::mv(&a, &arr(&x, d), &y, 1.0, 0.0).unwrap();
         let got = host(&y);
-        let xs: Vec<f64> = x.iter().flat_map(|p| p.to_array()).map(|v| v as f64).collect();
+        let xs: Vec<f64> = x
+            .iter()
+            .flat_map(|p| p.to_array())
+            .map(|v| v as f64)
+            .collect();
         // glam's matrices index (column, row): entry (i, j) is col(j)[i].
         let want = dense_mv(&a, |b, i, j| b.col(j)[i] as f64, &xs, 1.0, 0.0, &[0.0; 60]);
         for (k, w) in want.iter().enumerate() {
@@ -465,8 +496,14 @@ fn mv_shape_mismatch(dev: &wp::Device) {
         &arr(&[DMat3::IDENTITY], dev),
     )
     .unwrap();
-    let e = sparse::mv(&a, &arr(&[DVec3::ONE; 3], dev), &arr(&[DVec3::ZERO; 3], dev), 1.0, 0.0)
-        .unwrap_err();
+    let e = sparse::mv(
+        &a,
+        &arr(&[DVec3::ONE; 3], dev),
+        &arr(&[DVec3::ZERO; 3], dev),
+        1.0,
+        0.0,
+    )
+    .unwrap_err();
     let msg = e.to_string();
     assert!(
         matches!(e, wp::Error::InvalidArgument { .. })
@@ -475,9 +512,15 @@ fn mv_shape_mismatch(dev: &wp::Device) {
             && msg.contains("3 x 2 blocks"),
         "{msg}"
     );
-    let e = sparse::mv(&a, &arr(&[DVec3::ONE; 2], dev), &arr(&[DVec3::ZERO; 2], dev), 1.0, 0.0)
-        .unwrap_err()
-        .to_string();
+    let e = sparse::mv(
+        &a,
+        &arr(&[DVec3::ONE; 2], dev),
+        &arr(&[DVec3::ZERO; 2], dev),
+        1.0,
+        0.0,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("`y` has shape [2]"), "{e}");
     let sq = Bsr::from_triplets(
         2,
@@ -504,7 +547,11 @@ fn dot_fixed_tree(dev: &wp::Device) {
             let want: f64 = a.iter().zip(&b).map(|(x, y)| *x as f64 * *y as f64).sum();
             // f32 products and sums of n terms of magnitude <= 1, in a tree of depth
             // log2(n) + 16 at most: 1e-6 * (|terms| sum) bounds the rounding.
-            let scale: f64 = a.iter().zip(&b).map(|(x, y)| (*x as f64 * *y as f64).abs()).sum();
+            let scale: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (*x as f64 * *y as f64).abs())
+                .sum();
             assert!(
                 (got as f64 - want).abs() <= 1e-6 * scale.max(1.0),
                 "n {n}: {got} vs {want}"
@@ -514,10 +561,17 @@ fn dot_fixed_tree(dev: &wp::Device) {
         run(dev);
         same_on_cpu(dev, &format!("dot of {n}"), run);
     }
-    let e = sparse::dot(&arr(&[1.0f64; 3], dev), &arr(&[1.0; 2], dev), &arr(&[0.0], dev))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("sparse::dot") && e.contains("[3] and [2]"), "{e}");
+    let e = sparse::dot(
+        &arr(&[1.0f64; 3], dev),
+        &arr(&[1.0; 2], dev),
+        &arr(&[0.0], dev),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("sparse::dot") && e.contains("[3] and [2]"),
+        "{e}"
+    );
 }
 
 /// `|b - A x|` by an independent host computation (f64, from the assembled blocks).
@@ -557,13 +611,21 @@ fn cg_poisson_point_jacobi_f64(dev: &wp::Device) {
         assert_eq!(rep.stop, Stop::Converged, "{rep:?}");
         assert!(rep.converged);
         assert_eq!(rep.history.len(), rep.iterations + 1);
-        assert!(rep.iterations > 10 && rep.iterations < 200, "{}", rep.iterations);
+        assert!(
+            rep.iterations > 10 && rep.iterations < 200,
+            "{}",
+            rep.iterations
+        );
         let bn = b.iter().map(|v| v * v).sum::<f64>().sqrt();
         assert!((rep.tolerance - 1e-6 * bn).abs() <= 1e-15 * bn);
         assert!(rep.residual <= rep.tolerance);
         let xs = host(&x);
         let tr = true_residual(&a, |b, _, _| *b, &b, &xs);
-        assert!(tr <= 1.01 * rep.tolerance, "true residual {tr} > {}", rep.tolerance);
+        assert!(
+            tr <= 1.01 * rep.tolerance,
+            "true residual {tr} > {}",
+            rep.tolerance
+        );
         (
             rep.iterations,
             rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
@@ -600,8 +662,15 @@ fn cg_poisson_f32(dev: &wp::Device) {
         let xs: Vec<f64> = host(&x).iter().map(|&v| v as f64).collect();
         let bs: Vec<f64> = b.iter().map(|&v| v as f64).collect();
         let tr = true_residual(&a, |b, _, _| *b as f64, &bs, &xs);
-        assert!(tr <= 2.0 * rep.tolerance, "true residual {tr}, tolerance {}", rep.tolerance);
-        (rep.iterations, host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+        assert!(
+            tr <= 2.0 * rep.tolerance,
+            "true residual {tr}, tolerance {}",
+            rep.tolerance
+        );
+        (
+            rep.iterations,
+            host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
     };
     run(dev);
     same_on_cpu(dev, "cg f32", run);
@@ -628,7 +697,11 @@ fn cg_block_jacobi_dmat3(dev: &wp::Device) {
         let rep = sparse::cg(&a, &arr(&b, d), &x, pre, &o).unwrap();
         assert_eq!(rep.stop, Stop::Converged, "{pre:?}: {rep:?}");
         let tr = true_residual(&a, |b, i, j| b.col(j)[i], &b, &host(&x));
-        assert!(tr <= 1.01 * rep.tolerance, "{pre:?}: {tr} > {}", rep.tolerance);
+        assert!(
+            tr <= 1.01 * rep.tolerance,
+            "{pre:?}: {tr} > {}",
+            rep.tolerance
+        );
         (
             rep.iterations,
             host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
@@ -652,14 +725,21 @@ fn cg_max_iterations_is_ok(dev: &wp::Device) {
         ..Default::default()
     };
     let rep = sparse::cg(&a, &arr(&vec![1.0; n], dev), &x, Precond::None, &o).unwrap();
-    assert_eq!((rep.stop, rep.iterations, rep.converged), (Stop::MaxIterations, 5, false));
+    assert_eq!(
+        (rep.stop, rep.iterations, rep.converged),
+        (Stop::MaxIterations, 5, false)
+    );
     assert_eq!(rep.history.len(), 6);
     assert!(rep.residual > rep.tolerance);
     // CG minimises the A-norm of the error, not |r|, whose history need not fall: only its
     // start (|b| from x = 0: 16) and that it ends at the report's residual are known.
     assert_eq!(rep.history[0], 16.0);
     assert_eq!(rep.history[5], rep.residual);
-    assert!(rep.history.iter().all(|h| h.is_finite() && *h > 0.0), "{:?}", rep.history);
+    assert!(
+        rep.history.iter().all(|h| h.is_finite() && *h > 0.0),
+        "{:?}",
+        rep.history
+    );
     // max_iter 0: no iteration.
     let o = SolveOptions { max_iter: 0, ..o };
     let rep = sparse::cg(&a, &arr(&vec![1.0; n], dev), &x, Precond::None, &o).unwrap();
@@ -677,8 +757,14 @@ fn cg_singular_preconditioner(dev: &wp::Device) {
     )
     .unwrap();
     let x = arr(&[7.0f64, 7.0, 7.0], dev);
-    let rep = sparse::cg(&a, &arr(&[1.0; 3], dev), &x, Precond::Jacobi, &SolveOptions::default())
-        .unwrap();
+    let rep = sparse::cg(
+        &a,
+        &arr(&[1.0; 3], dev),
+        &x,
+        Precond::Jacobi,
+        &SolveOptions::default(),
+    )
+    .unwrap();
     assert_eq!(rep.stop, Stop::SingularPreconditioner { block_row: 2 });
     assert_eq!(rep.iterations, 0);
     assert_eq!(host(&x), [7.0; 3], "x untouched");
@@ -693,8 +779,14 @@ fn cg_singular_preconditioner(dev: &wp::Device) {
     )
     .unwrap();
     let x = arr(&[0.0f32; 6], dev);
-    let rep = sparse::cg(&a, &arr(&[1.0; 6], dev), &x, Precond::Jacobi, &SolveOptions::default())
-        .unwrap();
+    let rep = sparse::cg(
+        &a,
+        &arr(&[1.0; 6], dev),
+        &x,
+        Precond::Jacobi,
+        &SolveOptions::default(),
+    )
+    .unwrap();
     assert_eq!(rep.stop, Stop::SingularPreconditioner { block_row: 1 });
 }
 
@@ -709,8 +801,14 @@ fn cg_breakdown_and_non_finite(dev: &wp::Device) {
     )
     .unwrap();
     let x = arr(&[0.0f64; 2], dev);
-    let rep = sparse::cg(&a, &arr(&[1.0; 2], dev), &x, Precond::None, &SolveOptions::default())
-        .unwrap();
+    let rep = sparse::cg(
+        &a,
+        &arr(&[1.0; 2], dev),
+        &x,
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap();
     assert_eq!(
         rep.stop,
         Stop::Breakdown {
@@ -729,42 +827,60 @@ fn cg_breakdown_and_non_finite(dev: &wp::Device) {
     .unwrap();
     assert_eq!((rep.stop, rep.iterations), (Stop::NonFinite, 0));
     // b = 0 from x = 0: converged at once.
-    let rep = sparse::cg(&a, &arr(&[0.0; 2], dev), &x, Precond::None, &SolveOptions::default())
-        .unwrap();
+    let rep = sparse::cg(
+        &a,
+        &arr(&[0.0; 2], dev),
+        &x,
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap();
     assert_eq!((rep.stop, rep.iterations), (Stop::Converged, 0));
 }
 
 fn cg_bad_arguments(dev: &wp::Device) {
-    let a = Bsr::from_triplets(
-        2,
-        3,
-        &arr(&[0], dev),
-        &arr(&[0], dev),
-        &arr(&[1.0f32], dev),
+    let a =
+        Bsr::from_triplets(2, 3, &arr(&[0], dev), &arr(&[0], dev), &arr(&[1.0f32], dev)).unwrap();
+    let e = sparse::cg(
+        &a,
+        &arr(&[0.0; 2], dev),
+        &arr(&[0.0; 2], dev),
+        Precond::None,
+        &SolveOptions::default(),
     )
-    .unwrap();
-    let e = sparse::cg(&a, &arr(&[0.0; 2], dev), &arr(&[0.0; 2], dev), Precond::None, &SolveOptions::default())
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("sparse::cg") && e.contains("2 x 3 blocks"), "{e}");
-    let a = Bsr::from_triplets(
-        2,
-        2,
-        &arr(&[0], dev),
-        &arr(&[0], dev),
-        &arr(&[1.0f32], dev),
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("sparse::cg") && e.contains("2 x 3 blocks"),
+        "{e}"
+    );
+    let a =
+        Bsr::from_triplets(2, 2, &arr(&[0], dev), &arr(&[0], dev), &arr(&[1.0f32], dev)).unwrap();
+    let e = sparse::cg(
+        &a,
+        &arr(&[0.0; 3], dev),
+        &arr(&[0.0; 2], dev),
+        Precond::None,
+        &SolveOptions::default(),
     )
-    .unwrap();
-    let e = sparse::cg(&a, &arr(&[0.0; 3], dev), &arr(&[0.0; 2], dev), Precond::None, &SolveOptions::default())
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("`b` has shape [3]") && e.contains("2 x 2 scalars"), "{e}");
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("`b` has shape [3]") && e.contains("2 x 2 scalars"),
+        "{e}"
+    );
     let o = SolveOptions {
         check_every: 0,
         ..Default::default()
     };
-    let e = sparse::cg(&a, &arr(&[0.0; 2], dev), &arr(&[0.0; 2], dev), Precond::None, &o)
-        .unwrap_err()
-        .to_string();
+    let e = sparse::cg(
+        &a,
+        &arr(&[0.0; 2], dev),
+        &arr(&[0.0; 2], dev),
+        Precond::None,
+        &o,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("check_every"), "{e}");
 }

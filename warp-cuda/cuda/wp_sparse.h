@@ -506,7 +506,7 @@ WP_FN void sp_cg_check(const sp_cg_scalar_t& s) {
     ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
     return;
   }
-  if (!(pap > (S)0)) {
+  if (pap <= (S)0) {
     sc[SP_BREAK] = pap;
     ctl[SP_CTL_STOP] = SP_STOP_BREAKDOWN;
     return;

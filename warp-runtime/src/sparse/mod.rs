@@ -209,7 +209,12 @@ impl<B: Block> Bsr<B> {
         // 32 bits; else by column, then stably by row.
         let cells = nrow as u64 * ncol as u64;
         let two_pass = cells > u32::MAX as u64;
-        let (ni, nr, nc, blk) = (n as i32, nrow as i32, ncol as i32, (B::ROWS * B::COLS) as i32);
+        let (ni, nr, nc, blk) = (
+            n as i32,
+            nrow as i32,
+            ncol as i32,
+            (B::ROWS * B::COLS) as i32,
+        );
         let (r_a, c_a, v_a) = (
             rows.device_address(),
             columns.device_address(),
@@ -517,7 +522,10 @@ pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Resul
     if out.len() != 1 {
         return Err(invalid(
             F,
-            format!("argument `out` must have one element, got shape {:?}", out.shape()),
+            format!(
+                "argument `out` must have one element, got shape {:?}",
+                out.shape()
+            ),
         ));
     }
     if overlap(out, a) || overlap(out, b) {

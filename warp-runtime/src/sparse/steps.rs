@@ -184,7 +184,11 @@ fn triplet_fault<S: SparseScalar>(r: &TplReport<S>, bad: [i32; 3]) -> Option<Fau
         // SAFETY: `n` blocks of `b` scalars.
         let v = unsafe { slice::<S>(r.values, n * b) };
         let block = &v[t * b..(t + 1) * b];
-        let x = block.iter().copied().find(|x| !x.finite()).unwrap_or(block[0]);
+        let x = block
+            .iter()
+            .copied()
+            .find(|x| !x.finite())
+            .unwrap_or(block[0]);
         FaultKind::NonFiniteInput {
             arg: TRIPLET_NAMES.params[2],
             index: t,
@@ -679,7 +683,11 @@ fn jacobi_row<B: Block>(
     let mut inv = [[z; 4]; 4];
     for i in 0..n {
         for j in 0..n {
-            a[i][j] = if !point || i == j { blk[at::<B>(i, j)] } else { z };
+            a[i][j] = if !point || i == j {
+                blk[at::<B>(i, j)]
+            } else {
+                z
+            };
         }
         inv[i][i] = one;
     }
@@ -797,18 +805,26 @@ unsafe impl<S: SparseScalar> ObjectStep for JacobiApply<S> {
     fn run_cpu(&self) -> Result<()> {
         let (nrow, d) = (self.len(), self.dim as usize);
         // SAFETY: see the impl.
-        let (dinv, r) = unsafe { (slice::<S>(self.dinv, nrow * d * d), slice::<S>(self.r, nrow * d)) };
+        let (dinv, r) = unsafe {
+            (
+                slice::<S>(self.dinv, nrow * d * d),
+                slice::<S>(self.r, nrow * d),
+            )
+        };
         let z = Ptr(self.z as *mut S);
-        (0..nrow).into_par_iter().with_min_len(1024).for_each(|row| {
-            for i in 0..d {
-                let mut acc = S::ZERO;
-                for j in 0..d {
-                    acc = acc.add(dinv[row * d * d + i * d + j].mul(r[row * d + j]));
+        (0..nrow)
+            .into_par_iter()
+            .with_min_len(1024)
+            .for_each(|row| {
+                for i in 0..d {
+                    let mut acc = S::ZERO;
+                    for j in 0..d {
+                        acc = acc.add(dinv[row * d * d + i * d + j].mul(r[row * d + j]));
+                    }
+                    // SAFETY: block row `row`'s own entries.
+                    unsafe { z.at(row * d + i).write(acc) };
                 }
-                // SAFETY: block row `row`'s own entries.
-                unsafe { z.at(row * d + i).write(acc) };
-            }
-        });
+            });
         Ok(())
     }
 }
@@ -891,7 +907,7 @@ impl<S: SparseScalar, const CHECK: bool> CgScalar<S, CHECK> {
             ctl[CTL_STOP] = STOP_NON_FINITE;
             return;
         }
-        if !(pap > S::ZERO) {
+        if pap <= S::ZERO {
             sc[BREAK] = pap;
             ctl[CTL_STOP] = STOP_BREAKDOWN;
             return;
@@ -979,7 +995,12 @@ unsafe impl<S: SparseScalar, const DIRECTION: bool> ObjectStep for CgVector<S, D
         use cg::*;
         let n = self.len();
         // SAFETY: see the impl (read only).
-        let (ctl, sc) = unsafe { (slice::<i32>(self.ctl, CTL_LEN), slice::<S>(self.scal, SCAL_LEN)) };
+        let (ctl, sc) = unsafe {
+            (
+                slice::<i32>(self.ctl, CTL_LEN),
+                slice::<S>(self.scal, SCAL_LEN),
+            )
+        };
         if ctl[CTL_STOP] != STOP_NONE {
             return Ok(());
         }
@@ -988,10 +1009,13 @@ unsafe impl<S: SparseScalar, const DIRECTION: bool> ObjectStep for CgVector<S, D
             // SAFETY: distinct arrays of n scalars; p is written by index, z read.
             let z = unsafe { slice::<S>(self.r, n) };
             let p = Ptr(self.p as *mut S);
-            (0..n).into_par_iter().with_min_len(4096).for_each(|i| unsafe {
-                let q = p.at(i);
-                q.write(z[i].add(beta.mul(*q)));
-            });
+            (0..n)
+                .into_par_iter()
+                .with_min_len(4096)
+                .for_each(|i| unsafe {
+                    let q = p.at(i);
+                    q.write(z[i].add(beta.mul(*q)));
+                });
             return Ok(());
         }
         let pap = sc[PAP];
@@ -1002,11 +1026,14 @@ unsafe impl<S: SparseScalar, const DIRECTION: bool> ObjectStep for CgVector<S, D
         // SAFETY: as above; x and r written by index, p and ap read.
         let (p, ap) = unsafe { (slice::<S>(self.p, n), slice::<S>(self.ap, n)) };
         let (x, r) = (Ptr(self.x as *mut S), Ptr(self.r as *mut S));
-        (0..n).into_par_iter().with_min_len(4096).for_each(|i| unsafe {
-            let (xi, ri) = (x.at(i), r.at(i));
-            xi.write((*xi).add(alpha.mul(p[i])));
-            ri.write((*ri).sub(alpha.mul(ap[i])));
-        });
+        (0..n)
+            .into_par_iter()
+            .with_min_len(4096)
+            .for_each(|i| unsafe {
+                let (xi, ri) = (x.at(i), r.at(i));
+                xi.write((*xi).add(alpha.mul(p[i])));
+                ri.write((*ri).sub(alpha.mul(ap[i])));
+            });
         Ok(())
     }
 }
