@@ -24,6 +24,7 @@ backend_tests!(
     mv_beta_zero_does_not_read_y,
     mv_shape_mismatch,
     dot_fixed_tree,
+    mv_in_a_capture,
     cg_poisson_point_jacobi_f64,
     cg_poisson_f32,
     cg_block_jacobi_dmat3,
@@ -883,4 +884,38 @@ fn cg_bad_arguments(dev: &wp::Device) {
     .unwrap_err()
     .to_string();
     assert!(e.contains("check_every"), "{e}");
+}
+
+/// `mv` is recorded by a capture: each replay multiplies the arrays' contents at that time
+/// (the same bits as a direct call); `dot` (it allocates scratch) and a CG solve (it reads
+/// back) are refused inside one.
+fn mv_in_a_capture(dev: &wp::Device) {
+    let (r, c, v) = poisson(6);
+    let a = Bsr::from_triplets(36, 36, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap();
+    let x = arr(&[1.0f64; 36], dev);
+    let y = arr(&[0.0f64; 36], dev);
+    // Once before capturing: a GPU loads the library at the first use.
+    sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+    let g = wp::capture(dev, || sparse::mv(&a, &x, &y, 2.0, 0.5)).unwrap();
+    let mut want = host(&y);
+    for k in 0..3 {
+        let xs: Vec<f64> = (0..36).map(|i| (i * (k + 1)) as f64 * 0.25).collect();
+        x.copy_from(&arr(&xs, dev)).unwrap();
+        g.launch().unwrap();
+        let w = arr(&want, dev);
+        sparse::mv(&a, &x, &w, 2.0, 0.5).unwrap();
+        want = host(&w);
+        assert_eq!(host(&y), want, "replay {k}");
+    }
+    let out = arr(&[0.0f64], dev);
+    let e = wp::capture(dev, || sparse::dot(&x, &x, &out)).unwrap_err();
+    assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    let e = wp::capture(dev, || {
+        sparse::cg(&a, &y, &x, Precond::None, &SolveOptions::default()).map(|_| ())
+    })
+    .unwrap_err();
+    assert!(
+        matches!(e, wp::Error::Capture { .. }) && e.to_string().contains("sparse::cg"),
+        "{e}"
+    );
 }

@@ -46,6 +46,7 @@ pub use solve::{cg, Precond, SolveOptions, SolveReport, Stop};
 
 use crate::array::{Array, Element};
 use crate::backend::StepFault;
+use crate::capturing::Keep;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
@@ -369,8 +370,17 @@ impl<B: Block> Bsr<B> {
 }
 
 /// Queues `y = alpha A x + beta y` over scalar addresses, lengths checked by the caller.
-fn mv_raw<B: Block>(a: &Bsr<B>, x: u64, y: u64, alpha: f64, beta: f64) -> Result<()> {
-    dispatch::object_step(
+/// Inside a capture the step is recorded, and the graph keeps `uses()` (the arrays the
+/// addresses point into) alive.
+fn mv_raw<B: Block>(
+    a: &Bsr<B>,
+    x: u64,
+    y: u64,
+    alpha: f64,
+    beta: f64,
+    uses: impl FnOnce() -> Keep,
+) -> Result<()> {
+    dispatch::object_step_keeping(
         a.device(),
         &BsrMv::<B> {
             offsets: a.offsets.device_address(),
@@ -384,6 +394,7 @@ fn mv_raw<B: Block>(a: &Bsr<B>, x: u64, y: u64, alpha: f64, beta: f64) -> Result
             ncol: a.ncol as i32,
             block: PhantomData,
         },
+        uses,
     )
 }
 
@@ -396,6 +407,10 @@ fn mv_raw<B: Block>(a: &Bsr<B>, x: u64, y: u64, alpha: f64, beta: f64) -> Result
 ///
 /// `x` has `ncol` elements (`B::In`: `Vec3` for `Mat3` blocks), `y` has `nrow` (`B::Out`);
 /// both contiguous, on the matrix's device, not overlapping.
+///
+/// A [capture](crate::capture) records it (each replay multiplies the arrays' contents at
+/// that time); on a GPU, call it once for the block type before capturing (its first call
+/// loads the CUDA library).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `sparse::mv`, the argument and both shapes when a length
@@ -448,6 +463,7 @@ pub fn mv<B: Block>(
         y.device_address(),
         alpha.to_f64(),
         beta.to_f64(),
+        || Box::new((a.clone(), x.clone(), y.clone())),
     )
 }
 
@@ -456,7 +472,8 @@ fn dot_partials<S: SparseScalar>(n: usize, dev: &Device) -> Result<Array<S>> {
     Array::zeros(steps::dot_chunks(n), dev)
 }
 
-/// Queues the dot product of `n` scalars at `a` and `b` into the scalar at `out`.
+/// Queues the dot product of `n` scalars at `a` and `b` into the scalar at `out` (recorded
+/// inside a capture, which keeps `uses()` and the partials alive).
 fn dot_raw<S: SparseScalar>(
     dev: &Device,
     a: u64,
@@ -464,10 +481,12 @@ fn dot_raw<S: SparseScalar>(
     n: usize,
     partials: &Array<S>,
     out: u64,
+    uses: impl Fn() -> Keep,
 ) -> Result<()> {
     let chunks = steps::dot_chunks(n) as i64;
     let p = partials.device_address();
-    dispatch::object_step(
+    let keep = || -> Keep { Box::new((uses(), partials.clone())) };
+    dispatch::object_step_keeping(
         dev,
         &Dot::<S, false> {
             a,
@@ -477,8 +496,9 @@ fn dot_raw<S: SparseScalar>(
             chunks,
             scalar: PhantomData,
         },
+        keep,
     )?;
-    dispatch::object_step(
+    dispatch::object_step_keeping(
         dev,
         &Dot::<S, true> {
             a: p,
@@ -488,6 +508,7 @@ fn dot_raw<S: SparseScalar>(
             chunks,
             scalar: PhantomData,
         },
+        keep,
     )
 }
 
@@ -499,8 +520,11 @@ fn dot_raw<S: SparseScalar>(
 /// 64, .., 1 (lane `l` gets `l + stride`); the chunks' partials are reduced the same way
 /// (lane `l` sums partials `l, l + 256, ..`, then the tree).
 ///
+/// It allocates its scratch (a partial sum per chunk), so it cannot be recorded by a
+/// [capture](crate::capture) (an [`Error::Capture`] there).
+///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `sparse::dot` when the lengths differ, `out` is not one
+/// [`Error::Capture`] inside a capture; [`Error::InvalidArgument`] naming `sparse::dot` when the lengths differ, `out` is not one
 /// element or overlaps an input, or an array is not contiguous; [`Error::DeviceMismatch`].
 pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Result<()> {
     const F: &str = "sparse::dot";
@@ -539,5 +563,6 @@ pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Resul
         a.len(),
         &partials,
         out.device_address(),
+        || Box::new((a.clone(), b.clone(), out.clone())),
     )
 }

@@ -11,6 +11,7 @@ use super::block::{Block, SparseScalar, SquareBlock};
 use super::steps::{cg as c, CgScalar, CgVector, JacobiApply, JacobiInv};
 use super::{contiguous, dot_partials, dot_raw, invalid, mv_raw, overlap, same_device, Bsr};
 use crate::array::Array;
+use crate::capturing::Keep;
 use crate::dispatch;
 use crate::error::Result;
 use std::marker::PhantomData;
@@ -110,6 +111,7 @@ pub struct SolveReport {
 /// result are the same bits on the CPU and a GPU.
 ///
 /// # Errors
+/// [`Error::Capture`](crate::Error::Capture) inside a capture (the loop reads back);
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::cg`, the
 /// argument and both shapes: a matrix that is not square in blocks, `b` or `x` of another
 /// length, arrays that are not contiguous or overlap, `check_every == 0`, `max_iter` above
@@ -124,6 +126,8 @@ pub fn cg<B: SquareBlock>(
 ) -> Result<SolveReport> {
     const F: &str = "sparse::cg";
     let dev = a.device().clone();
+    // The host-driven loop reads the solver's state back: never inside a capture.
+    crate::capturing::refuse(Some(&dev), "sparse::cg (a host-driven solve)")?;
     same_device(F, "b", &dev, b.device())?;
     same_device(F, "x", &dev, x.device())?;
     contiguous(F, "b", b)?;
@@ -181,12 +185,14 @@ pub fn cg<B: SquareBlock>(
     let history = Array::<S<B>>::zeros(o.max_iter + 1, &dev)?;
     let partials = dot_partials::<S<B>>(n, &dev)?;
     let s_at = |k: usize| scal.device_address() + k as u64 * sz;
+    // (A solve reads back, so it is never inside a capture: nothing to keep.)
+    let none = || -> Keep { Box::new(()) };
     let dot = |u: &Array<S<B>>, v: u64, k: usize| {
-        dot_raw(&dev, u.device_address(), v, n, &partials, s_at(k))
+        dot_raw(&dev, u.device_address(), v, n, &partials, s_at(k), none)
     };
     // r = b - A x.
     r.copy_from(b)?;
-    mv_raw(a, x.device_address(), r.device_address(), -1.0, 1.0)?;
+    mv_raw(a, x.device_address(), r.device_address(), -1.0, 1.0, none)?;
     // z = M^-1 r (z is r without a preconditioner).
     let pre = match precond {
         Precond::None => None,
@@ -306,7 +312,7 @@ pub fn cg<B: SquareBlock>(
     let mut words = ctl.to_vec()?;
     while words[c::CTL_STOP] == c::STOP_NONE && queued < o.max_iter {
         for _ in 0..o.check_every.min(o.max_iter - queued) {
-            mv_raw(a, p.device_address(), ap.device_address(), 1.0, 0.0)?;
+            mv_raw(a, p.device_address(), ap.device_address(), 1.0, 0.0, none)?;
             dot(&p, ap.device_address(), c::PAP)?;
             vec_step(false)?;
             if let Some((dinv, z)) = &pre {
