@@ -215,6 +215,12 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
 // the matrix.
 template <typename S> void triplets(const ScalarKernels& k) {
   const i32 block = (i32)word(), nrow = (i32)word(), ncol = (i32)word(), n = (i32)word();
+  // A device count: a word 1 then the count, or a word 0 (none).
+  i32 dcount = 0;
+  const bool has_count = word() != 0;
+  if (has_count) dcount = (i32)(i64)word();
+  const u64 ca = has_count ? addr(&dcount) : 0;
+  const i32 m = has_count ? sp_count(ca, n) : n;
   std::vector<i32> rows = ints(n), cols = ints(n);
   std::vector<S> values = scalars<S>((size_t)n * block);
   std::vector<u32> keys(n + 1);
@@ -222,12 +228,12 @@ template <typename S> void triplets(const ScalarKernels& k) {
   std::vector<S> out((size_t)n * block + 1);
   std::vector<i32> bad = {0x7fffffff, 0x7fffffff, 0x7fffffff};
   const bool two_pass = (u64)nrow * (u64)ncol > 0xffffffffull;
-  run(k.keys, GB, GT, sp_tpl_keys_t{addr(rows.data()), addr(cols.data()), addr(values.data()), n,
+  run(k.keys, GB, GT, sp_tpl_keys_t{ca, addr(rows.data()), addr(cols.data()), addr(values.data()), n,
                                     nrow, ncol, block, two_pass, 0, addr(keys.data()),
                                     addr(idx.data()), addr(bad.data())});
   fault_t f{};
   u32 flag = 0;
-  sp_tpl_report_t rep{addr(bad.data()), addr(rows.data()), addr(cols.data()), addr(values.data()),
+  sp_tpl_report_t rep{ca, addr(bad.data()), addr(rows.data()), addr(cols.data()), addr(values.data()),
                       n, nrow, ncol, block, step_fault_t{}};
   rep.fault.ctx.fault = &f;
   rep.fault.ctx.fault_flag = &flag;
@@ -238,24 +244,24 @@ template <typename S> void triplets(const ScalarKernels& k) {
     return;
   }
   auto sort = [&]() {
-    std::vector<std::pair<u32, i32>> kv(n);
-    for (i32 i = 0; i < n; ++i) kv[i] = {keys[i], idx[i]};
+    std::vector<std::pair<u32, i32>> kv(m);
+    for (i32 i = 0; i < m; ++i) kv[i] = {keys[i], idx[i]};
     std::stable_sort(kv.begin(), kv.end(), [](auto a, auto b) { return a.first < b.first; });
-    for (i32 i = 0; i < n; ++i) { keys[i] = kv[i].first; idx[i] = kv[i].second; }
+    for (i32 i = 0; i < m; ++i) { keys[i] = kv[i].first; idx[i] = kv[i].second; }
   };
   sort();
   if (two_pass) {
-    run(wp_sparse_tpl_row_keys, GB, GT, sp_tpl_row_keys_t{addr(rows.data()), addr(cols.data()),
+    run(wp_sparse_tpl_row_keys, GB, GT, sp_tpl_row_keys_t{ca, addr(rows.data()), addr(cols.data()),
                                                           addr(idx.data()), addr(keys.data()), n, nrow, ncol, 0});
     sort();
   }
-  run(wp_sparse_tpl_heads, GB, GT, sp_tpl_heads_t{addr(rows.data()), addr(cols.data()),
+  run(wp_sparse_tpl_heads, GB, GT, sp_tpl_heads_t{ca, addr(rows.data()), addr(cols.data()),
                                                   addr(idx.data()), addr(pos.data()), n, nrow, ncol, 0});
-  for (i32 i = 1; i < n; ++i) pos[i] += pos[i - 1];
-  run(k.sum, GB, GT, sp_tpl_sum_t{addr(rows.data()), addr(cols.data()), addr(values.data()),
+  for (i32 i = 1; i < m; ++i) pos[i] += pos[i - 1];
+  run(k.sum, GB, GT, sp_tpl_sum_t{ca, addr(rows.data()), addr(cols.data()), addr(values.data()),
                                   addr(idx.data()), addr(pos.data()), addr(brows.data()),
                                   addr(columns.data()), addr(out.data()), n, nrow, ncol, block});
-  run(wp_sparse_bsr_offsets, GB, GT, sp_bsr_offsets_t{addr(brows.data()), addr(pos.data()),
+  run(wp_sparse_bsr_offsets, GB, GT, sp_bsr_offsets_t{ca, addr(brows.data()), addr(pos.data()),
                                                       addr(offsets.data()), n, nrow});
   const i32 nnz = offsets[nrow];
   printf("matrix %d\n", nnz);
@@ -662,6 +668,7 @@ fn triplet_words<B: Block>(
     rows: &[i32],
     cols: &[i32],
     vals: &[B],
+    device_count: Option<i32>,
 ) -> Vec<u64> {
     let mut w = vec![
         3,
@@ -671,15 +678,25 @@ fn triplet_words<B: Block>(
         ncol as u64,
         rows.len() as u64,
     ];
+    match device_count {
+        Some(c) => w.extend([1, c as i64 as u64]),
+        None => w.push(0),
+    }
     w.extend(rows.iter().map(|&r| r as i64 as u64));
     w.extend(cols.iter().map(|&c| c as i64 as u64));
     w.extend(words(vals));
     w
 }
 
-fn triplet_case<B: Block>(nrow: usize, ncol: usize, count: usize, seed: usize) {
-    let (a, _) = random_matrix::<B>(nrow, ncol, count, seed);
-    // The same triplets as random_matrix makes.
+fn triplet_case<B: Block>(
+    nrow: usize,
+    ncol: usize,
+    count: usize,
+    seed: usize,
+    device_count: Option<i32>,
+) {
+    let cpu = wp::cpu();
+    // The triplets of random_matrix.
     let rows: Vec<i32> = (0..count).map(|t| ((t * 7 + seed) % nrow) as i32).collect();
     let cols: Vec<i32> = (0..count)
         .map(|t| ((t * t + 3 * seed) % ncol) as i32)
@@ -693,9 +710,21 @@ fn triplet_case<B: Block>(nrow: usize, ncol: usize, count: usize, seed: usize) {
             block::<B>(&s)
         })
         .collect();
+    let (r, c, v) = (
+        wp::Array::from_slice(&rows, &cpu).unwrap(),
+        wp::Array::from_slice(&cols, &cpu).unwrap(),
+        wp::Array::from_slice(&vals, &cpu).unwrap(),
+    );
+    let a = match device_count {
+        Some(k) => {
+            let k = wp::Array::from_slice(&[k], &cpu).unwrap();
+            Bsr::from_triplets_n(nrow, ncol, &r, &c, &v, &k).unwrap()
+        }
+        None => Bsr::from_triplets(nrow, ncol, &r, &c, &v).unwrap(),
+    };
     let out = run(
         &format!("tpl{}_{nrow}", kind::<B>()),
-        &triplet_words(nrow, ncol, &rows, &cols, &vals),
+        &triplet_words(nrow, ncol, &rows, &cols, &vals, device_count),
     );
     let nnz = a.nnz().unwrap();
     assert_eq!(out[0], format!("matrix {nnz}"));
@@ -727,12 +756,16 @@ fn triplets_match_the_cpu_bit_for_bit() {
     if skip("triplets_match_the_cpu_bit_for_bit") {
         return;
     }
-    triplet_case::<f32>(31, 17, 2000, 1);
-    triplet_case::<f64>(5, 300, 1000, 2);
-    triplet_case::<Mat3>(12, 9, 700, 3);
-    triplet_case::<DMat2>(8, 8, 300, 4);
+    triplet_case::<f32>(31, 17, 2000, 1, None);
+    triplet_case::<f64>(5, 300, 1000, 2, None);
+    triplet_case::<Mat3>(12, 9, 700, 3, None);
+    triplet_case::<DMat2>(8, 8, 300, 4, None);
     // Two sorts (more cells than 32 bits): column, then row.
-    triplet_case::<f32>(70_000, 70_000, 500, 5);
+    triplet_case::<f32>(70_000, 70_000, 500, 5, None);
+    // A device count: the first 1234 of 2000 triplets, and none of them.
+    triplet_case::<f32>(31, 17, 2000, 1, Some(1234));
+    triplet_case::<Mat3>(12, 9, 700, 3, Some(0));
+    triplet_case::<f32>(70_000, 70_000, 500, 5, Some(321));
     // Faults: the CPU's error and the C++ report's record agree.
     let cpu = wp::cpu();
     for (rows, cols, vals) in [
@@ -773,7 +806,29 @@ fn triplets_match_the_cpu_bit_for_bit() {
             }
             e => panic!("{e}"),
         };
-        let out = run("tplfault", &triplet_words(2, 2, &rows, &cols, &vals));
+        let out = run("tplfault", &triplet_words(2, 2, &rows, &cols, &vals, None));
         assert_eq!(out, [want]);
+    }
+    // A device count outside 0..=4 (of 4 triplets): out of bounds on `count` (argument 3).
+    for k in [5, -1] {
+        let (r, c, v) = ([0, 1, 1, 0], [0, 1, 1, 0], [1.0f32; 4]);
+        let e = Bsr::from_triplets_n(
+            2,
+            2,
+            &wp::Array::from_slice(&r, &cpu).unwrap(),
+            &wp::Array::from_slice(&c, &cpu).unwrap(),
+            &wp::Array::from_slice(&v, &cpu).unwrap(),
+            &wp::Array::from_slice(&[k], &cpu).unwrap(),
+        )
+        .unwrap_err();
+        match e {
+            wp::Error::Fault(wp::Fault {
+                kind: wp::FaultKind::OutOfBounds { arg, index, shape },
+                ..
+            }) => assert_eq!((arg, index, shape), ("count", vec![k as i128], vec![5])),
+            e => panic!("{e}"),
+        }
+        let out = run("tplcount", &triplet_words(2, 2, &r, &c, &v, Some(k)));
+        assert_eq!(out, [format!("fault 1 3 {k} 0 5 0")]);
     }
 }

@@ -16,6 +16,7 @@ backend_tests!(
     triplets_mat3_sum_duplicates_in_order,
     triplets_two_pass_sort,
     triplets_empty_and_empty_rows,
+    triplets_counts,
     triplets_out_of_range_is_a_fault,
     triplets_non_finite_is_a_fault,
     triplets_bad_arguments,
@@ -918,4 +919,59 @@ fn mv_in_a_capture(dev: &wp::Device) {
         matches!(e, wp::Error::Capture { .. }) && e.to_string().contains("sparse::cg"),
         "{e}"
     );
+}
+
+/// `from_triplets_n`: the first `count` triplets, the count on the host or on the device
+/// (read where the work runs); a device count leaves room for every triplet of the arrays.
+fn triplets_counts(dev: &wp::Device) {
+    let (r, c, v) = random_triplets(20, 30, 900, 11, |g| g.unit());
+    let (ra, ca, va) = (arr(&r, dev), arr(&c, dev), arr(&v, dev));
+    for k in [0usize, 1, 400, 900] {
+        let want = reference(&r[..k], &c[..k], &v[..k], |a, b| a + b);
+        let host_count = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, k).unwrap();
+        assert_eq!(host_count.nnz_bound(), k);
+        let count = arr(&[k as i32], dev);
+        let device_count = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, &count).unwrap();
+        assert_eq!(device_count.nnz_bound(), 900);
+        for a in [host_count, device_count] {
+            let got = blocks(&a);
+            assert_eq!(got.len(), want.len(), "count {k}");
+            for (p, w) in &want {
+                assert_eq!(got[p].to_bits(), w.to_bits(), "count {k}, block {p:?}");
+            }
+        }
+    }
+    // Only the counted triplets are checked: a bad one past the count is never read.
+    let bad_rows = arr(&[0, 1, 99], dev);
+    let a = Bsr::from_triplets_n(
+        2,
+        2,
+        &bad_rows,
+        &arr(&[0, 1, 0], dev),
+        &arr(&[1.0f64; 3], dev),
+        2,
+    )
+    .unwrap();
+    assert_eq!(a.nnz().unwrap(), 2);
+    let e = Bsr::from_triplets_n(2, 2, &ra, &ca, &va, 901)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("sparse::from_triplets") && e.contains("count 901"),
+        "{e}"
+    );
+    let e = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, &arr(&[901], dev))
+        .and_then(|a| a.nnz())
+        .unwrap_err();
+    match e {
+        wp::Error::Fault(f) => assert_eq!(
+            f.kind,
+            FaultKind::OutOfBounds {
+                arg: "count",
+                index: vec![901],
+                shape: vec![901]
+            }
+        ),
+        e => panic!("{e}"),
+    }
 }

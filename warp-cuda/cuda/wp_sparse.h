@@ -114,53 +114,63 @@ WP_FN void sp_tree_level(S* s, i32 stride, i32 lane) {
 // Records (each laid out as its Rust step's #[repr(C)] struct; both sides assert the size)
 // ------------------------------------------------------------------------------------------
 
-/// TplKeys: rows, cols (i32*), values (S*, `block` scalars per triplet), n, nrow, ncol,
+// The triplet steps' first field, `count`: the address of a device count of triplets (an
+// i32), or 0 when there is none and `n` is the count. With one, `n` is the capacity (the
+// arrays' length) and the steps process `sp_count(count, n)` triplets: the count clamped to
+// [0, n], so a bad count never reaches outside the arrays (the report raises it).
+WP_FN i32 sp_count(u64 count, i32 n) {
+  if (count == 0) return n;
+  const i32 c = *(const i32*)count;
+  return c < 0 ? 0 : (c > n ? n : c);
+}
+
+/// TplKeys: count, rows, cols (i32*), values (S*, `block` scalars per triplet), n, nrow, ncol,
 /// block, two_pass (0: key row * ncol + col; 1: key col), keys (u32*), idx (i32*), bad (i32[3]).
 struct sp_tpl_keys_t {
-  u64 rows, cols, values;
+  u64 count, rows, cols, values;
   i32 n, nrow, ncol, block, two_pass, pad;
   u64 keys, idx, bad;
 };
-static_assert(sizeof(sp_tpl_keys_t) == 72, "sp_tpl_keys_t layout");
+static_assert(sizeof(sp_tpl_keys_t) == 80, "sp_tpl_keys_t layout");
 
-/// TplReport: bad (i32[3], INT_MAX where nothing was found), rows, cols, values, n, nrow, ncol,
-/// block; the fault context (argument 0 rows, 1 columns, 2 values).
+/// TplReport: count, bad (i32[3], INT_MAX where nothing was found), rows, cols, values, n,
+/// nrow, ncol, block; the fault context (argument 0 rows, 1 columns, 2 values, 3 count).
 struct sp_tpl_report_t {
-  u64 bad, rows, cols, values;
+  u64 count, bad, rows, cols, values;
   i32 n, nrow, ncol, block;
   step_fault_t fault;
 };
-static_assert(sizeof(sp_tpl_report_t) == 88, "sp_tpl_report_t layout");
+static_assert(sizeof(sp_tpl_report_t) == 96, "sp_tpl_report_t layout");
 
-/// TplRowKeys: rows, cols, idx (sorted), keys (u32*, written), n, nrow, ncol.
+/// TplRowKeys: count, rows, cols, idx (sorted), keys (u32*, written), n, nrow, ncol.
 struct sp_tpl_row_keys_t {
-  u64 rows, cols, idx, keys;
+  u64 count, rows, cols, idx, keys;
   i32 n, nrow, ncol, pad;
 };
-static_assert(sizeof(sp_tpl_row_keys_t) == 48, "sp_tpl_row_keys_t layout");
+static_assert(sizeof(sp_tpl_row_keys_t) == 56, "sp_tpl_row_keys_t layout");
 
-/// TplHeads: rows, cols, idx (sorted), heads (i32*, written), n, nrow, ncol.
+/// TplHeads: count, rows, cols, idx (sorted), heads (i32*, written), n, nrow, ncol.
 struct sp_tpl_heads_t {
-  u64 rows, cols, idx, heads;
+  u64 count, rows, cols, idx, heads;
   i32 n, nrow, ncol, pad;
 };
-static_assert(sizeof(sp_tpl_heads_t) == 48, "sp_tpl_heads_t layout");
+static_assert(sizeof(sp_tpl_heads_t) == 56, "sp_tpl_heads_t layout");
 
-/// TplSum: rows, cols, values (S*), idx (sorted), pos (inclusive scan of the heads),
+/// TplSum: count, rows, cols, values (S*), idx (sorted), pos (inclusive scan of the heads),
 /// block_rows, columns (i32*), out (S*, `block` scalars per block), n, nrow, ncol, block.
 struct sp_tpl_sum_t {
-  u64 rows, cols, values, idx, pos, block_rows, columns, out;
+  u64 count, rows, cols, values, idx, pos, block_rows, columns, out;
   i32 n, nrow, ncol, block;
 };
-static_assert(sizeof(sp_tpl_sum_t) == 80, "sp_tpl_sum_t layout");
+static_assert(sizeof(sp_tpl_sum_t) == 88, "sp_tpl_sum_t layout");
 
-/// BsrOffsets: block_rows (sorted), pos (the scan: its last entry is the block count), n (the
-/// triplets: 0 means no block), offsets (i32*, nrow + 1, written), nrow.
+/// BsrOffsets: count, block_rows (sorted), pos (the scan: entry count - 1 is the block count),
+/// offsets (i32*, nrow + 1, written), n (the triplets: a count of 0 means no block), nrow.
 struct sp_bsr_offsets_t {
-  u64 block_rows, pos, offsets;
+  u64 count, block_rows, pos, offsets;
   i32 n, nrow;
 };
-static_assert(sizeof(sp_bsr_offsets_t) == 32, "sp_bsr_offsets_t layout");
+static_assert(sizeof(sp_bsr_offsets_t) == 40, "sp_bsr_offsets_t layout");
 
 /// BsrMv: offsets, columns, values, x, y, alpha, beta (as f64, rounded to S like Rust's `as`),
 /// nrow, ncol.
@@ -259,6 +269,17 @@ WP_FN void sp_tpl_keys(const sp_tpl_keys_t& s, i32 t) {
 /// (argument 2) with index t and the first non-finite scalar of its block.
 template <typename S>
 WP_FN void sp_tpl_report(const sp_tpl_report_t& s) {
+  ctx_t ctx = s.fault.ctx;
+  if (s.count != 0) {
+    const i32 c = *(const i32*)s.count;
+    if (c < 0 || c > s.n) {
+      const i64 index[1] = {(i64)c};
+      const i64 shape[1] = {(i64)s.n + 1};
+      raise(&ctx, FAULT_OUT_OF_BOUNDS, 3, 1, index, shape);
+      return;
+    }
+  }
+  const i32 n = sp_count(s.count, s.n);
   const i32* bad = (const i32*)s.bad;
   i32 which = -1, t = 0x7fffffff;
   for (i32 w = 0; w < 3; ++w)
@@ -267,11 +288,10 @@ WP_FN void sp_tpl_report(const sp_tpl_report_t& s) {
       which = w;
     }
   if (which < 0) return;
-  ctx_t ctx = s.fault.ctx;
   if (which < 2) {
     const i32 v = ((const i32*)(which == 0 ? s.rows : s.cols))[t];
     const i64 index[2] = {(i64)t, (i64)v};
-    const i64 shape[2] = {(i64)s.n, (i64)(which == 0 ? s.nrow : s.ncol)};
+    const i64 shape[2] = {(i64)n, (i64)(which == 0 ? s.nrow : s.ncol)};
     raise(&ctx, FAULT_OUT_OF_BOUNDS, which, 2, index, shape);
   } else {
     const S* v = (const S*)s.values + (i64)t * s.block;
@@ -321,7 +341,8 @@ WP_FN void sp_tpl_sum(const sp_tpl_sum_t& s, i32 k) {
   const S* values = (const S*)s.values;
   S* out = (S*)s.out + (i64)b * s.block;
   for (i32 e = 0; e < s.block; ++e) out[e] = values[(i64)t * s.block + e];
-  for (i32 m = k + 1; m < s.n; ++m) {
+  const i32 n = sp_count(s.count, s.n);
+  for (i32 m = k + 1; m < n; ++m) {
     const i32 u = idx[m];
     if (!sp_tpl_valid(rows, cols, u, s.nrow, s.ncol) || rows[u] != r || cols[u] != c) break;
     for (i32 e = 0; e < s.block; ++e) out[e] = sp_add(out[e], values[(i64)u * s.block + e]);
@@ -329,7 +350,8 @@ WP_FN void sp_tpl_sum(const sp_tpl_sum_t& s, i32 k) {
 }
 
 WP_FN void sp_bsr_offsets(const sp_bsr_offsets_t& s, i32 r) {
-  const i32 nnz = s.n > 0 ? ((const i32*)s.pos)[s.n - 1] : 0;
+  const i32 n = sp_count(s.count, s.n);
+  const i32 nnz = n > 0 ? ((const i32*)s.pos)[n - 1] : 0;
   const i32* rows = (const i32*)s.block_rows;
   i32 lo = 0, hi = nnz;  // the first block whose row is >= r
   while (lo < hi) {
@@ -546,9 +568,9 @@ WP_FN void sp_cg_direction(const sp_cg_vector_t& s, i64 i) {
 #if defined(WP_SPARSE_BUILD) && (defined(__CUDACC__) || defined(WP_SPARSE_EMULATED))
 namespace wp {
 // A grid-stride loop of i over [0, n) (the kernels' macros expand it outside namespace wp).
-#define WP_SP_LOOP(i, n)                                                              \
-  for (::wp::i64 i = (::wp::i64)blockIdx.x * blockDim.x + threadIdx.x,                \
-                 i##_stride = (::wp::i64)blockDim.x * gridDim.x;                      \
+#define WP_SP_LOOP(i, n)                                                                    \
+  for (::wp::i64 i = (::wp::i64)blockIdx.x * blockDim.x + threadIdx.x,                      \
+                 i##_stride = (::wp::i64)blockDim.x * gridDim.x;                            \
        i < (::wp::i64)(n); i += i##_stride)
 
 template <typename S>
@@ -584,51 +606,51 @@ __device__ void sp_dot_final_kernel(const sp_dot_t& s) {
 
 // The kernels of one scalar type.
 #define WP_SP_SCALAR_KERNELS(tag, S)                                                        \
-  extern "C" __global__ void wp_sparse_tpl_keys_##tag(wp::sp_tpl_keys_t s) {               \
-    WP_SP_LOOP(t, s.n) wp::sp_tpl_keys<S>(s, (wp::i32)t);                                   \
+  extern "C" __global__ void wp_sparse_tpl_keys_##tag(wp::sp_tpl_keys_t s) {                \
+    WP_SP_LOOP(t, wp::sp_count(s.count, s.n)) wp::sp_tpl_keys<S>(s, (wp::i32)t);            \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_tpl_report_##tag(wp::sp_tpl_report_t s) {           \
-    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_tpl_report<S>(s);                      \
+  extern "C" __global__ void wp_sparse_tpl_report_##tag(wp::sp_tpl_report_t s) {            \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_tpl_report<S>(s);                       \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_tpl_sum_##tag(wp::sp_tpl_sum_t s) {                 \
-    WP_SP_LOOP(k, s.n) wp::sp_tpl_sum<S>(s, (wp::i32)k);                                    \
+  extern "C" __global__ void wp_sparse_tpl_sum_##tag(wp::sp_tpl_sum_t s) {                  \
+    WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_tpl_sum<S>(s, (wp::i32)k);             \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_dot_partials_##tag(wp::sp_dot_t s) {                \
+  extern "C" __global__ void wp_sparse_dot_partials_##tag(wp::sp_dot_t s) {                 \
     wp::sp_dot_partials_kernel<S>(s);                                                       \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_dot_final_##tag(wp::sp_dot_t s) {                   \
+  extern "C" __global__ void wp_sparse_dot_final_##tag(wp::sp_dot_t s) {                    \
     wp::sp_dot_final_kernel<S>(s);                                                          \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_jacobi_apply_##tag(wp::sp_jacobi_apply_t s) {       \
+  extern "C" __global__ void wp_sparse_jacobi_apply_##tag(wp::sp_jacobi_apply_t s) {        \
     WP_SP_LOOP(r, s.nrow) wp::sp_jacobi_apply_row<S>(s, (wp::i32)r);                        \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_cg_init_##tag(wp::sp_cg_scalar_t s) {               \
-    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_cg_init<S>(s);                         \
+  extern "C" __global__ void wp_sparse_cg_init_##tag(wp::sp_cg_scalar_t s) {                \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_cg_init<S>(s);                          \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_cg_check_##tag(wp::sp_cg_scalar_t s) {              \
-    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_cg_check<S>(s);                        \
+  extern "C" __global__ void wp_sparse_cg_check_##tag(wp::sp_cg_scalar_t s) {               \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_cg_check<S>(s);                         \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_cg_update_##tag(wp::sp_cg_vector_t s) {             \
+  extern "C" __global__ void wp_sparse_cg_update_##tag(wp::sp_cg_vector_t s) {              \
     WP_SP_LOOP(i, s.n) wp::sp_cg_update<S>(s, i);                                           \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_cg_direction_##tag(wp::sp_cg_vector_t s) {          \
+  extern "C" __global__ void wp_sparse_cg_direction_##tag(wp::sp_cg_vector_t s) {           \
     WP_SP_LOOP(i, s.n) wp::sp_cg_direction<S>(s, i);                                        \
   }
 
 // The kernels of one block type (scalar S, R x C, column-major CM).
 #define WP_SP_BLOCK_KERNELS(tag, S, R, C, CM)                                               \
-  extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                   \
+  extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                    \
     WP_SP_LOOP(r, s.nrow) wp::sp_bsr_mv_row<S, R, C, CM>(s, (wp::i32)r);                    \
   }                                                                                         \
-  extern "C" __global__ void wp_sparse_jacobi_inv_##tag(wp::sp_jacobi_inv_t s) {           \
+  extern "C" __global__ void wp_sparse_jacobi_inv_##tag(wp::sp_jacobi_inv_t s) {            \
     WP_SP_LOOP(r, s.nrow) wp::sp_jacobi_inv_row<S, R, C, CM>(s, (wp::i32)r);                \
   }
 
 extern "C" __global__ void wp_sparse_tpl_row_keys(wp::sp_tpl_row_keys_t s) {
-  WP_SP_LOOP(k, s.n) wp::sp_tpl_row_keys(s, (wp::i32)k);
+  WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_tpl_row_keys(s, (wp::i32)k);
 }
 extern "C" __global__ void wp_sparse_tpl_heads(wp::sp_tpl_heads_t s) {
-  WP_SP_LOOP(k, s.n) wp::sp_tpl_heads(s, (wp::i32)k);
+  WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_tpl_heads(s, (wp::i32)k);
 }
 extern "C" __global__ void wp_sparse_bsr_offsets(wp::sp_bsr_offsets_t s) {
   WP_SP_LOOP(r, (wp::i64)s.nrow + 1) wp::sp_bsr_offsets(s, (wp::i32)r);

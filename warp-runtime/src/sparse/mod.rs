@@ -50,7 +50,7 @@ use crate::capturing::Keep;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::primitives::{array_scan, radix_sort_pairs};
+use crate::primitives::{array_scan_n, radix_sort_pairs, Count};
 use std::marker::PhantomData;
 use steps::{
     BsrMv, BsrOffsets, Dot, TplHeads, TplKeys, TplReport, TplRowKeys, TplSum, TRIPLET_NAMES,
@@ -155,6 +155,50 @@ impl<B: Block> Bsr<B> {
         columns: &Array<i32>,
         values: &Array<B>,
     ) -> Result<Self> {
+        Self::assemble(
+            nrow,
+            ncol,
+            rows,
+            columns,
+            values,
+            Count::Host(values.len()),
+            true,
+        )
+    }
+
+    /// [`Bsr::from_triplets`] of the first `count` triplets: a `usize`, or a 1-element
+    /// `Array<i32>` on the arrays' device whose value is read where the work runs (no host
+    /// synchronisation on a GPU: a count computed by an earlier kernel feeds the assembly
+    /// directly). With a device count the matrix has room for as many blocks as the arrays
+    /// hold triplets, and the arrays must hold at least as many as the count may reach.
+    ///
+    /// # Errors
+    /// As [`Bsr::from_triplets`]; a host count larger than the arrays is an
+    /// [`Error::InvalidArgument`]; a device count outside `0..=len` is a fault of
+    /// `sparse::from_triplets`, out of bounds on argument `count` (index `[count]`, shape
+    /// `[len + 1]`; then no triplet is assembled).
+    pub fn from_triplets_n<'c>(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: impl Into<Count<'c>>,
+    ) -> Result<Self> {
+        Self::assemble(nrow, ncol, rows, columns, values, count.into(), false)
+    }
+
+    /// The assembly of both: `whole` when the count is the arrays' length (the lengths must
+    /// then agree; else the count must fit each).
+    fn assemble(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: Count<'_>,
+        whole: bool,
+    ) -> Result<Self> {
         const F: &str = "sparse::from_triplets";
         let dev = values.device().clone();
         same_device(F, "rows", &dev, rows.device())?;
@@ -162,8 +206,8 @@ impl<B: Block> Bsr<B> {
         contiguous(F, "rows", rows)?;
         contiguous(F, "columns", columns)?;
         contiguous(F, "values", values)?;
-        let n = values.len();
-        if rows.len() != n || columns.len() != n {
+        let len = rows.len().min(columns.len()).min(values.len());
+        if whole && (rows.len() != values.len() || columns.len() != values.len()) {
             return Err(invalid(
                 F,
                 format!(
@@ -175,6 +219,35 @@ impl<B: Block> Bsr<B> {
                 ),
             ));
         }
+        // The triplets the steps may process (`n`), and the device count's address.
+        let (n, count_addr) = match count {
+            Count::Host(c) if c <= len => (c, 0),
+            Count::Host(c) => {
+                return Err(invalid(
+                    F,
+                    format!(
+                        "count {c} is larger than the triplet arrays (shapes {:?}, {:?} and \
+                         {:?})",
+                        rows.shape(),
+                        columns.shape(),
+                        values.shape()
+                    ),
+                ))
+            }
+            Count::Device(c) => {
+                same_device(F, "count", &dev, c.device())?;
+                if c.len() != 1 {
+                    return Err(invalid(
+                        F,
+                        format!(
+                            "argument `count` must be a 1-element array, got shape {:?}",
+                            c.shape()
+                        ),
+                    ));
+                }
+                (len, c.device_address())
+            }
+        };
         let limit = i32::MAX as usize - 1;
         if nrow > limit || ncol > limit {
             return Err(invalid(
@@ -195,9 +268,15 @@ impl<B: Block> Bsr<B> {
             columns: Array::zeros(n, &dev)?,
             values: Array::zeros(n, &dev)?,
         };
-        if n == 0 {
+        // (A device count is read and checked by the steps, even with no room for a triplet.)
+        if n == 0 && count_addr == 0 {
             return Ok(m);
         }
+        // What the primitives process: the same count.
+        let prim: Count<'_> = match count {
+            Count::Host(_) => Count::Host(n),
+            Count::Device(c) => Count::Device(c),
+        };
         // Scratch: the sort's keys and permutation, the heads' scan, the blocks' rows, and
         // the smallest bad triplet of each kind.
         let keys = Array::<u32>::zeros(n, &dev)?;
@@ -224,6 +303,7 @@ impl<B: Block> Bsr<B> {
         dispatch::object_step(
             &dev,
             &TplKeys::<B::Scalar> {
+                count: count_addr,
                 rows: r_a,
                 cols: c_a,
                 values: v_a,
@@ -242,6 +322,7 @@ impl<B: Block> Bsr<B> {
         dispatch::object_step(
             &dev,
             &TplReport::<B::Scalar> {
+                count: count_addr,
                 bad: bad.device_address(),
                 rows: r_a,
                 cols: c_a,
@@ -255,10 +336,11 @@ impl<B: Block> Bsr<B> {
             },
         )?;
         if two_pass {
-            radix_sort_pairs(&keys, &idx, n, Some(key_bits(ncol as u64)))?;
+            radix_sort_pairs(&keys, &idx, prim, Some(key_bits(ncol as u64)))?;
             dispatch::object_step(
                 &dev,
                 &TplRowKeys {
+                    count: count_addr,
                     rows: r_a,
                     cols: c_a,
                     idx: idx.device_address(),
@@ -269,13 +351,14 @@ impl<B: Block> Bsr<B> {
                     pad: 0,
                 },
             )?;
-            radix_sort_pairs(&keys, &idx, n, Some(key_bits(nrow as u64)))?;
+            radix_sort_pairs(&keys, &idx, prim, Some(key_bits(nrow as u64)))?;
         } else {
-            radix_sort_pairs(&keys, &idx, n, Some(key_bits(cells)))?;
+            radix_sort_pairs(&keys, &idx, prim, Some(key_bits(cells)))?;
         }
         dispatch::object_step(
             &dev,
             &TplHeads {
+                count: count_addr,
                 rows: r_a,
                 cols: c_a,
                 idx: idx.device_address(),
@@ -286,10 +369,11 @@ impl<B: Block> Bsr<B> {
                 pad: 0,
             },
         )?;
-        array_scan(&pos, &pos, true)?;
+        array_scan_n(&pos, &pos, prim, true)?;
         dispatch::object_step(
             &dev,
             &TplSum::<B::Scalar> {
+                count: count_addr,
                 rows: r_a,
                 cols: c_a,
                 values: v_a,
@@ -308,6 +392,7 @@ impl<B: Block> Bsr<B> {
         dispatch::object_step(
             &dev,
             &BsrOffsets {
+                count: count_addr,
                 block_rows: block_rows.device_address(),
                 pos: pos.device_address(),
                 offsets: m.offsets.device_address(),

@@ -28,7 +28,7 @@ const _: () = assert!(crate::cuda::objects::THREADS as usize == DOT_LANES);
 pub(crate) static TRIPLET_NAMES: KernelInfo = KernelInfo {
     name: "sparse::from_triplets",
     module: "warp_lang::sparse",
-    params: &["rows", "columns", "values"],
+    params: &["rows", "columns", "values", "count"],
     ..KernelInfo::BLANK
 };
 
@@ -56,6 +56,18 @@ unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
     std::slice::from_raw_parts(addr as *const T, n)
 }
 
+/// The triplets a step processes: `n`, or with a device count (`count`, the address of an
+/// `i32`, nonzero) its value clamped to `0..=n` (`wp_sparse.h`'s `sp_count`; the report step
+/// raises a count out of range).
+fn count(count: u64, n: i32) -> usize {
+    if count == 0 {
+        return n.max(0) as usize;
+    }
+    // SAFETY: a one-element i32 array on the host (from_triplets_n checked it).
+    let c = unsafe { *(count as *const i32) };
+    c.clamp(0, n.max(0)) as usize
+}
+
 /// Whether triplet `t` is in range.
 fn valid(rows: &[i32], cols: &[i32], t: usize, nrow: i32, ncol: i32) -> bool {
     let (r, c) = (rows[t], cols[t]);
@@ -70,6 +82,7 @@ fn valid(rows: &[i32], cols: &[i32], t: usize, nrow: i32, ncol: i32) -> bool {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TplKeys<S> {
+    pub count: u64,
     pub rows: u64,
     pub cols: u64,
     pub values: u64,
@@ -84,7 +97,7 @@ pub(crate) struct TplKeys<S> {
     pub bad: u64,
     pub scalar: PhantomData<S>,
 }
-const _: () = assert!(std::mem::size_of::<TplKeys<f32>>() == 72);
+const _: () = assert!(std::mem::size_of::<TplKeys<f32>>() == 80);
 
 // SAFETY: `#[repr(C)]`, the layout of `sp_tpl_keys_t`; from_triplets passes its n-element
 // inputs and scratch, and a 3-element i32 array at `bad`.
@@ -97,7 +110,7 @@ unsafe impl<S: SparseScalar> ObjectStep for TplKeys<S> {
     }
 
     fn run_cpu(&self) -> Result<()> {
-        let n = self.len();
+        let n = count(self.count, self.n);
         let b = self.block as usize;
         // SAFETY: see the impl.
         let (rows, cols, values) = unsafe {
@@ -148,6 +161,7 @@ unsafe impl<S: SparseScalar> ObjectStep for TplKeys<S> {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TplReport<S> {
+    pub count: u64,
     pub bad: u64,
     pub rows: u64,
     pub cols: u64,
@@ -159,18 +173,33 @@ pub(crate) struct TplReport<S> {
     pub fault: StepFault,
     pub scalar: PhantomData<S>,
 }
-const _: () = assert!(std::mem::size_of::<TplReport<f64>>() == 88);
+const _: () = assert!(std::mem::size_of::<TplReport<f64>>() == 96);
 
 /// The fault of triplet report `bad` (the smallest bad triplet of each kind), if any: the
 /// CPU's error, the same fault the CUDA step raises.
 fn triplet_fault<S: SparseScalar>(r: &TplReport<S>, bad: [i32; 3]) -> Option<Fault> {
+    if r.count != 0 {
+        // SAFETY: a one-element i32 array.
+        let c = unsafe { *(r.count as *const i32) };
+        if c < 0 || c > r.n {
+            return Some(Fault {
+                kernel: TRIPLET_NAMES.name,
+                kind: FaultKind::OutOfBounds {
+                    arg: TRIPLET_NAMES.params[3],
+                    index: vec![c as i128],
+                    shape: vec![r.n as usize + 1],
+                },
+                launch: None,
+            });
+        }
+    }
     let (which, t) = bad
         .iter()
         .enumerate()
         .filter(|(_, &t)| t != i32::MAX)
         .min_by_key(|(w, &t)| (t, *w))
         .map(|(w, &t)| (w, t as usize))?;
-    let n = r.n as usize;
+    let n = count(r.count, r.n);
     let kind = if which < 2 {
         // SAFETY: `n` i32s of each (see TplKeys).
         let v = unsafe { slice::<i32>(if which == 0 { r.rows } else { r.cols }, n) }[t];
@@ -230,6 +259,7 @@ unsafe impl<S: SparseScalar> ObjectStep for TplReport<S> {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TplRowKeys {
+    pub count: u64,
     pub rows: u64,
     pub cols: u64,
     pub idx: u64,
@@ -239,7 +269,7 @@ pub(crate) struct TplRowKeys {
     pub ncol: i32,
     pub pad: i32,
 }
-const _: () = assert!(std::mem::size_of::<TplRowKeys>() == 48);
+const _: () = assert!(std::mem::size_of::<TplRowKeys>() == 56);
 
 // SAFETY: `#[repr(C)]`, the layout of `sp_tpl_row_keys_t`; n-element arrays.
 unsafe impl ObjectStep for TplRowKeys {
@@ -251,7 +281,7 @@ unsafe impl ObjectStep for TplRowKeys {
     }
 
     fn run_cpu(&self) -> Result<()> {
-        let n = self.len();
+        let n = count(self.count, self.n);
         // SAFETY: see the impl; `keys` is written, the others read.
         let (rows, cols, idx) = unsafe {
             (
@@ -280,6 +310,7 @@ unsafe impl ObjectStep for TplRowKeys {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TplHeads {
+    pub count: u64,
     pub rows: u64,
     pub cols: u64,
     pub idx: u64,
@@ -289,7 +320,7 @@ pub(crate) struct TplHeads {
     pub ncol: i32,
     pub pad: i32,
 }
-const _: () = assert!(std::mem::size_of::<TplHeads>() == 48);
+const _: () = assert!(std::mem::size_of::<TplHeads>() == 56);
 
 // SAFETY: `#[repr(C)]`, the layout of `sp_tpl_heads_t`; n-element arrays.
 unsafe impl ObjectStep for TplHeads {
@@ -301,7 +332,7 @@ unsafe impl ObjectStep for TplHeads {
     }
 
     fn run_cpu(&self) -> Result<()> {
-        let n = self.len();
+        let n = count(self.count, self.n);
         // SAFETY: see the impl; `heads` is written, the others read.
         let (rows, cols, idx) = unsafe {
             (
@@ -332,6 +363,7 @@ unsafe impl ObjectStep for TplHeads {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TplSum<S> {
+    pub count: u64,
     pub rows: u64,
     pub cols: u64,
     pub values: u64,
@@ -346,7 +378,7 @@ pub(crate) struct TplSum<S> {
     pub block: i32,
     pub scalar: PhantomData<S>,
 }
-const _: () = assert!(std::mem::size_of::<TplSum<f32>>() == 80);
+const _: () = assert!(std::mem::size_of::<TplSum<f32>>() == 88);
 
 // SAFETY: `#[repr(C)]`, the layout of `sp_tpl_sum_t`; n-element inputs and scratch, and
 // outputs of n blocks (at most n runs).
@@ -359,7 +391,7 @@ unsafe impl<S: SparseScalar> ObjectStep for TplSum<S> {
     }
 
     fn run_cpu(&self) -> Result<()> {
-        let n = self.len();
+        let n = count(self.count, self.n);
         let b = self.block as usize;
         // SAFETY: see the impl; the outputs are written.
         let (rows, cols, values, idx, pos) = unsafe {
@@ -413,13 +445,14 @@ unsafe impl<S: SparseScalar> ObjectStep for TplSum<S> {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BsrOffsets {
+    pub count: u64,
     pub block_rows: u64,
     pub pos: u64,
     pub offsets: u64,
     pub n: i32,
     pub nrow: i32,
 }
-const _: () = assert!(std::mem::size_of::<BsrOffsets>() == 32);
+const _: () = assert!(std::mem::size_of::<BsrOffsets>() == 40);
 
 // SAFETY: `#[repr(C)]`, the layout of `sp_bsr_offsets_t`; `n` positions and block rows,
 // `nrow + 1` offsets.
@@ -432,7 +465,7 @@ unsafe impl ObjectStep for BsrOffsets {
     }
 
     fn run_cpu(&self) -> Result<()> {
-        let n = self.n as usize;
+        let n = count(self.count, self.n);
         // SAFETY: see the impl.
         let pos = unsafe { slice::<i32>(self.pos, n) };
         let nnz = pos.last().map_or(0, |&p| p as usize);
