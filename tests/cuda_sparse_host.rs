@@ -137,7 +137,8 @@ template <typename S> void mv(const BlockKernels& k) {
   const f64 alpha = scalar<f64>(), beta = scalar<f64>();
   run(k.mv, GB, GT,
       sp_bsr_mv_t{addr(m.offsets.data()), addr(m.columns.data()), addr(values.data()),
-                  addr(x.data()), addr(y.data()), alpha, beta, m.nrow, m.ncol});
+                  addr(x.data()), addr(y.data()), alpha, beta, m.nrow, m.ncol,
+                  m.nnz, 0});
   print(y.data(), (size_t)m.nrow * k.rows);
 }
 
@@ -171,7 +172,8 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
   std::vector<i32> ctl = {0, 0, 0x7fffffff};
   auto mvk = [&](const S* xv, S* yv, f64 al, f64 be) {
     run(bk.mv, GB, GT, sp_bsr_mv_t{addr(m.offsets.data()), addr(m.columns.data()),
-                                   addr(values.data()), addr(xv), addr(yv), al, be, m.nrow, m.ncol});
+                                   addr(values.data()), addr(xv), addr(yv), al, be, m.nrow, m.ncol,
+                                   m.nnz, 0});
   };
   S* zp = pre ? z.data() : r.data();
   auto apply = [&]() {
@@ -182,7 +184,7 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
   if (pre) {
     run(bk.jacobi, GB, GT, sp_jacobi_inv_t{addr(m.offsets.data()), addr(m.columns.data()),
                                            addr(values.data()), addr(dinv.data()),
-                                           addr(&ctl[SP_CTL_BAD]), m.nrow, pre == 2});
+                                           addr(&ctl[SP_CTL_BAD]), m.nrow, pre == 2, m.nnz, 0});
     apply();
   }
   for (i64 i = 0; i < n; ++i) p[i] = zp[i];

@@ -24,6 +24,7 @@ backend_tests!(
     mv_mat3_matches_dense_reference,
     mv_beta_zero_does_not_read_y,
     mv_shape_mismatch,
+    mv_survives_overwritten_structure,
     dot_fixed_tree,
     mv_in_a_capture,
     cg_poisson_point_jacobi_f64,
@@ -535,6 +536,25 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     let x = arr(&[DVec3::ONE; 2], dev);
     let e = sparse::mv(&sq, &x, &x, 1.0, 0.0).unwrap_err().to_string();
     assert!(e.contains("overlap"), "{e}");
+    // y over the matrix's own values (f32 blocks: the same element type).
+    let f = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[1.0f32, 2.0], dev),
+    )
+    .unwrap();
+    let e = sparse::mv(
+        &f,
+        &arr(&[1.0f32; 2], dev),
+        &f.values().view(0..2).unwrap(),
+        1.0,
+        0.0,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`y` overlaps the matrix"), "{e}");
 }
 
 fn dot_fixed_tree(dev: &wp::Device) {
@@ -974,4 +994,31 @@ fn triplets_counts(dev: &wp::Device) {
         ),
         e => panic!("{e}"),
     }
+}
+
+/// The structure arrays are handles anyone may write: overwritten offsets or columns never
+/// make `mv` or the Jacobi set-up read outside the arrays (blocks outside the clamped ranges
+/// or with a column out of range are skipped), and the result is still the same on every
+/// device.
+fn mv_survives_overwritten_structure(dev: &wp::Device) {
+    let run = |d: &wp::Device| {
+        let (r, c, v) = poisson(4);
+        let a = Bsr::from_triplets(16, 16, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let x = arr(&[1.0f64; 16], d);
+        let y = arr(&[0.0f64; 16], d);
+        a.columns().fill(1000).unwrap();
+        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+        assert_eq!(host(&y), [0.0; 16], "every column out of range: no block");
+        let off: Vec<i32> = (0..17).map(|i| [-7, 3, 1_000_000, 40][i % 4]).collect();
+        a.offsets().copy_from(&arr(&off, d)).unwrap();
+        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+        let rep = sparse::cg(&a, &x, &y, Precond::Jacobi, &SolveOptions::default()).unwrap();
+        assert!(
+            matches!(rep.stop, Stop::SingularPreconditioner { .. }),
+            "{rep:?}"
+        );
+        host(&y).iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    run(dev);
+    same_on_cpu(dev, "overwritten structure", run);
 }

@@ -173,13 +173,13 @@ struct sp_bsr_offsets_t {
 static_assert(sizeof(sp_bsr_offsets_t) == 40, "sp_bsr_offsets_t layout");
 
 /// BsrMv: offsets, columns, values, x, y, alpha, beta (as f64, rounded to S like Rust's `as`),
-/// nrow, ncol.
+/// nrow, ncol, cap (the capacity of columns and values: see `sp_row_range`).
 struct sp_bsr_mv_t {
   u64 offsets, columns, values, x, y;
   f64 alpha, beta;
-  i32 nrow, ncol;
+  i32 nrow, ncol, cap, pad;
 };
-static_assert(sizeof(sp_bsr_mv_t) == 64, "sp_bsr_mv_t layout");
+static_assert(sizeof(sp_bsr_mv_t) == 72, "sp_bsr_mv_t layout");
 
 /// DotPartials / DotFinal: a, b (S*, n each; DotFinal: the partials in a, b unused), n, out
 /// (S*: the partials, one per chunk, or the one result), chunks.
@@ -196,9 +196,9 @@ static_assert(sizeof(sp_dot_t) == 40, "sp_dot_t layout");
 /// nrow, point (1: the diagonal entries alone).
 struct sp_jacobi_inv_t {
   u64 offsets, columns, values, dinv, bad;
-  i32 nrow, point;
+  i32 nrow, point, cap, pad;
 };
-static_assert(sizeof(sp_jacobi_inv_t) == 48, "sp_jacobi_inv_t layout");
+static_assert(sizeof(sp_jacobi_inv_t) == 56, "sp_jacobi_inv_t layout");
 
 /// JacobiApply: dinv, r, z (S*), nrow, dim (R).
 struct sp_jacobi_apply_t {
@@ -364,6 +364,20 @@ WP_FN void sp_bsr_offsets(const sp_bsr_offsets_t& s, i32 r) {
   ((i32*)s.offsets)[r] = lo;
 }
 
+/// Block row r's blocks [*lo, *hi): offsets[r] .. offsets[r + 1], each clamped into
+/// [0, nnz] with nnz = offsets[nrow] clamped into [0, cap], so that offsets a user wrote
+/// (the arrays are handles anyone may fill) never make a step read outside the arrays.
+/// A matrix made by the assembly is unchanged by the clamps.
+WP_FN void sp_row_range(const i32* offsets, i32 nrow, i32 cap, i32 r, i32* lo, i32* hi) {
+  i32 nnz = offsets[nrow];
+  nnz = nnz < 0 ? 0 : (nnz > cap ? cap : nnz);
+  i32 a = offsets[r], b = offsets[r + 1];
+  a = a < 0 ? 0 : (a > nnz ? nnz : a);
+  b = b < a ? a : (b > nnz ? nnz : b);
+  *lo = a;
+  *hi = b;
+}
+
 /// Entry (i, j) of an R x C block stored column-major (CM) or row-major.
 template <int R, int C, bool CM>
 WP_FN i32 sp_at(i32 i, i32 j) {
@@ -379,9 +393,13 @@ WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
   S* y = (S*)s.y;
   S acc[R];
   for (i32 i = 0; i < R; ++i) acc[i] = (S)0;
-  for (i32 k = offsets[r]; k < offsets[r + 1]; ++k) {
+  i32 lo, hi;
+  sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
+  for (i32 k = lo; k < hi; ++k) {
+    const i32 c = columns[k];
+    if (c < 0 || c >= s.ncol) continue;  // (never in an assembled matrix)
     const S* a = values + (i64)k * (R * C);
-    const S* xc = x + (i64)columns[k] * C;
+    const S* xc = x + (i64)c * C;
     for (i32 i = 0; i < R; ++i)
       for (i32 j = 0; j < C; ++j) acc[i] = sp_add(acc[i], sp_mul(a[sp_at<R, C, CM>(i, j)], xc[j]));
   }
@@ -404,7 +422,9 @@ WP_FN void sp_jacobi_inv_row(const sp_jacobi_inv_t& s, i32 r) {
   S* out = (S*)s.dinv + (i64)r * (R * R);
   S a[R][R], inv[R][R];
   bool ok = false;
-  for (i32 k = offsets[r]; k < offsets[r + 1]; ++k) {
+  i32 lo, hi;
+  sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
+  for (i32 k = lo; k < hi; ++k) {
     if (columns[k] != r) continue;
     const S* b = (const S*)s.values + (i64)k * (R * C);
     for (i32 i = 0; i < R; ++i)

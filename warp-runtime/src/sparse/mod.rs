@@ -404,6 +404,11 @@ impl<B: Block> Bsr<B> {
         Ok(m)
     }
 
+    /// Whether `v`'s elements share memory with the matrix's arrays.
+    fn overlaps<T: Element>(&self, v: &Array<T>) -> bool {
+        overlap(v, &self.offsets) || overlap(v, &self.columns) || overlap(v, &self.values)
+    }
+
     /// Block rows.
     pub fn nrow(&self) -> usize {
         self.nrow
@@ -477,6 +482,8 @@ fn mv_raw<B: Block>(
             beta,
             nrow: a.nrow as i32,
             ncol: a.ncol as i32,
+            cap: a.nnz_bound() as i32,
+            pad: 0,
             block: PhantomData,
         },
         uses,
@@ -491,7 +498,7 @@ fn mv_raw<B: Block>(
 /// read (it may hold NaN).
 ///
 /// `x` has `ncol` elements (`B::In`: `Vec3` for `Mat3` blocks), `y` has `nrow` (`B::Out`);
-/// both contiguous, on the matrix's device, not overlapping.
+/// both contiguous, on the matrix's device, `y` overlapping neither `x` nor the matrix.
 ///
 /// A [capture](crate::capture) records it (each replay multiplies the arrays' contents at
 /// that time); on a GPU, call it once for the block type before capturing (its first call
@@ -541,6 +548,9 @@ pub fn mv<B: Block>(
     }
     if overlap(x, y) {
         return Err(invalid(F, "arguments `x` and `y` overlap in memory"));
+    }
+    if a.overlaps(y) {
+        return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
     }
     mv_raw(
         a,

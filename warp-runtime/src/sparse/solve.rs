@@ -157,6 +157,9 @@ pub fn cg<B: SquareBlock>(
     if overlap(b, x) {
         return Err(invalid(F, "arguments `b` and `x` overlap in memory"));
     }
+    if a.overlaps(x) {
+        return Err(invalid(F, "argument `x` overlaps the matrix's arrays"));
+    }
     if o.check_every == 0 {
         return Err(invalid(F, "`check_every` is 0; it must be at least 1"));
     }
@@ -208,6 +211,8 @@ pub fn cg<B: SquareBlock>(
                     bad: ctl.device_address() + 4 * c::CTL_BAD as u64,
                     nrow: a.nrow() as i32,
                     point: (precond == Precond::PointJacobi) as i32,
+                    cap: a.nnz_bound() as i32,
+                    pad: 0,
                     block: PhantomData,
                 },
             )?;

@@ -501,9 +501,25 @@ pub(crate) struct BsrMv<B> {
     pub beta: f64,
     pub nrow: i32,
     pub ncol: i32,
+    pub cap: i32,
+    pub pad: i32,
     pub block: PhantomData<B>,
 }
-const _: () = assert!(std::mem::size_of::<BsrMv<f32>>() == 64);
+const _: () = assert!(std::mem::size_of::<BsrMv<f32>>() == 72);
+
+/// Block row `r`'s blocks, clamped as `sp_row_range` does (offsets a user overwrote never
+/// reach outside the arrays; an assembled matrix is unchanged): `nnz` is `offsets[nrow]`
+/// clamped into `0..=cap`.
+fn row_range(offsets: &[i32], nnz: usize, r: usize) -> std::ops::Range<usize> {
+    let lo = (offsets[r].max(0) as usize).min(nnz);
+    let hi = (offsets[r + 1].max(0) as usize).clamp(lo, nnz);
+    lo..hi
+}
+
+/// `offsets[nrow]` clamped into `0..=cap`.
+fn clamped_nnz(offsets: &[i32], cap: i32) -> usize {
+    offsets[offsets.len() - 1].clamp(0, cap.max(0)) as usize
+}
 
 /// Block row `r` of `y = alpha A x + beta y` (the C++ `sp_bsr_mv_row`'s order): each row
 /// scalar's sum from 0 over the row's blocks in storage order, and in a block over ascending
@@ -517,10 +533,15 @@ fn mv_row<B: Block>(
     acc: &mut [B::Scalar],
 ) {
     let (rr, cc) = (B::ROWS, B::COLS);
+    let ncol = (x.len() / cc) as i32;
     acc.fill(B::Scalar::ZERO);
-    for k in offsets[r] as usize..offsets[r + 1] as usize {
+    for k in row_range(offsets, columns.len(), r) {
+        let c = columns[k];
+        if !(0..ncol).contains(&c) {
+            continue; // (never in an assembled matrix)
+        }
         let a = &values[k * rr * cc..(k + 1) * rr * cc];
-        let xc = &x[columns[k] as usize * cc..][..cc];
+        let xc = &x[c as usize * cc..][..cc];
         for (i, acc) in acc.iter_mut().enumerate() {
             for (j, &xj) in xc.iter().enumerate() {
                 *acc = acc.add(a[at::<B>(i, j)].mul(xj));
@@ -543,9 +564,10 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
     fn run_cpu(&self) -> Result<()> {
         let nrow = self.len();
         let (rr, cc) = (B::ROWS, B::COLS);
-        // SAFETY: see the impl. The block count is offsets[nrow] (written by assembly).
+        // SAFETY: see the impl. The block count is offsets[nrow] (written by assembly),
+        // clamped to the capacity.
         let offsets = unsafe { slice::<i32>(self.offsets, nrow + 1) };
-        let nnz = offsets[nrow] as usize;
+        let nnz = clamped_nnz(offsets, self.cap);
         // SAFETY: as above: `nnz` blocks, x of ncol COLS scalars.
         let (columns, values, x) = unsafe {
             (
@@ -695,9 +717,11 @@ pub(crate) struct JacobiInv<B> {
     pub bad: u64,
     pub nrow: i32,
     pub point: i32,
+    pub cap: i32,
+    pub pad: i32,
     pub block: PhantomData<B>,
 }
-const _: () = assert!(std::mem::size_of::<JacobiInv<f32>>() == 48);
+const _: () = assert!(std::mem::size_of::<JacobiInv<f32>>() == 56);
 
 /// Block row `r`'s inverse diagonal block, row-major, as `sp_jacobi_inv_row` computes it, or
 /// `None` (missing, singular or not finite).
@@ -710,7 +734,7 @@ fn jacobi_row<B: Block>(
 ) -> Option<[[B::Scalar; 4]; 4]> {
     let n = B::ROWS;
     let (z, one) = (B::Scalar::ZERO, B::Scalar::ONE);
-    let k = (offsets[r] as usize..offsets[r + 1] as usize).find(|&k| columns[k] as usize == r)?;
+    let k = row_range(offsets, columns.len(), r).find(|&k| columns[k] == r as i32)?;
     let blk = &values[k * n * B::COLS..(k + 1) * n * B::COLS];
     let mut a = [[z; 4]; 4];
     let mut inv = [[z; 4]; 4];
@@ -774,7 +798,8 @@ unsafe impl<B: Block> ObjectStep for JacobiInv<B> {
         let n = B::ROWS;
         // SAFETY: see the impl.
         let offsets = unsafe { slice::<i32>(self.offsets, nrow + 1) };
-        let nnz = offsets[nrow] as usize;
+        let nnz = clamped_nnz(offsets, self.cap);
+        // SAFETY: `nnz <= cap` blocks.
         let (columns, values) = unsafe {
             (
                 slice::<i32>(self.columns, nnz),
