@@ -169,7 +169,7 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
   const i32 max_iter = (i32)word(), every = (i32)word();
   std::vector<S> r(b), p(n + 1), ap(n + 1), z(n + 1), scal(SP_TOL + 1), hist(max_iter + 1);
   std::vector<S> dinv((size_t)m.nrow * bk.rows * bk.rows + 1);
-  std::vector<i32> ctl = {0, 0, 0x7fffffff};
+  std::vector<i32> ctl = {0, 0, 0x7fffffff, 0};
   auto mvk = [&](const S* xv, S* yv, f64 al, f64 be) {
     run(bk.mv, GB, GT, sp_bsr_mv_t{addr(m.offsets.data()), addr(m.columns.data()),
                                    addr(values.data()), addr(xv), addr(yv), al, be, m.nrow, m.ncol,

@@ -5,7 +5,7 @@
 
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use warp_lang as wp;
-use warp_runtime::sparse::{self, Block, Bsr, Precond, SolveOptions, Stop};
+use warp_runtime::sparse::{self, Block, Bsr, Mode, Precond, SolveOptions, Stop};
 use wp::FaultKind;
 
 use crate::{arr, host};
@@ -31,6 +31,7 @@ backend_tests!(
     cg_poisson_f32,
     cg_block_jacobi_dmat3,
     cg_max_iterations_is_ok,
+    cg_graph_mode_matches_host_mode,
     cg_singular_preconditioner,
     cg_breakdown_and_non_finite,
     cg_bad_arguments,
@@ -1021,4 +1022,56 @@ fn mv_survives_overwritten_structure(dev: &wp::Device) {
     };
     run(dev);
     same_on_cpu(dev, "overwritten structure", run);
+}
+
+/// `Mode::Graph` (the set-up and a `capture_while` loop on the device's stop flag, captured
+/// and launched once) gives what `Mode::Host` gives, bit for bit: the same stop, iterations,
+/// history and x, at any `check_every` (iterations after the stop do nothing). A GPU needs
+/// conditional graph nodes for it.
+fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
+    let (r, c, v) = poisson(12);
+    let n = 144;
+    let a = Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap();
+    let b: Vec<f64> = (0..n).map(|i| ((i % 9) as f64 - 4.0) * 0.3).collect();
+    let x0: Vec<f64> = (0..n).map(|i| (i % 4) as f64 * 0.01).collect();
+    let solve = |mode: Mode, every: usize, max_iter: usize, pre: Precond| {
+        let x = arr(&x0, dev);
+        let o = SolveOptions {
+            rtol: 1e-9,
+            max_iter,
+            check_every: every,
+            mode,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &arr(&b, dev), &x, pre, &o).unwrap();
+        assert_eq!(rep.history.len(), rep.iterations + 1);
+        (
+            rep.stop,
+            rep.iterations,
+            rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+            host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
+    };
+    for pre in [Precond::None, Precond::Jacobi] {
+        let host_mode = solve(Mode::Host, 10, 1000, pre);
+        assert_eq!(host_mode.0, Stop::Converged);
+        for every in [1, 7, 1000] {
+            assert_eq!(
+                solve(Mode::Graph, every, 1000, pre),
+                host_mode,
+                "{pre:?}, every {every}"
+            );
+        }
+        let capped = solve(Mode::Host, 3, 6, pre);
+        assert_eq!((capped.0, capped.1), (Stop::MaxIterations, 6));
+        assert_eq!(solve(Mode::Graph, 4, 6, pre), capped, "{pre:?}, max_iter 6");
+    }
+    // A stop before the first iteration: the captured loop never runs its body.
+    let z = arr(&[0.0f64; 144], dev);
+    let o = SolveOptions {
+        mode: Mode::Graph,
+        ..Default::default()
+    };
+    let rep = sparse::cg(&a, &z, &arr(&[0.0f64; 144], dev), Precond::None, &o).unwrap();
+    assert_eq!((rep.stop, rep.iterations), (Stop::Converged, 0));
 }

@@ -208,7 +208,9 @@ struct sp_jacobi_apply_t {
 static_assert(sizeof(sp_jacobi_apply_t) == 32, "sp_jacobi_apply_t layout");
 
 /// The CG's control words (i32) and scalars (S): see sparse/solve.rs, which names the same.
-constexpr i32 SP_CTL_STOP = 0, SP_CTL_ITER = 1, SP_CTL_BAD = 2;
+// SP_CTL_RUN: 1 while no stop is set (cg_init and cg_check write it): the flag a captured
+// solve's `capture_while` loops on.
+constexpr i32 SP_CTL_STOP = 0, SP_CTL_ITER = 1, SP_CTL_BAD = 2, SP_CTL_RUN = 3;
 constexpr i32 SP_STOP_NONE = 0, SP_STOP_CONVERGED = 1, SP_STOP_MAX_ITER = 2,
               SP_STOP_NON_FINITE = 3, SP_STOP_BREAKDOWN = 4, SP_STOP_SINGULAR = 5;
 constexpr i32 SP_RZ = 0, SP_RZ_NEW = 1, SP_PAP = 2, SP_RR = 3, SP_BB = 4, SP_TOL2 = 5,
@@ -514,6 +516,7 @@ WP_FN void sp_cg_init(const sp_cg_scalar_t& s) {
   else if (s.max_iter <= 0)
     stop = SP_STOP_MAX_ITER;
   ctl[SP_CTL_STOP] = stop;
+  ctl[SP_CTL_RUN] = stop == SP_STOP_NONE;
 }
 
 /// Whether an iteration may update x and r: not stopped, and p.Ap positive and finite.
@@ -539,7 +542,7 @@ WP_FN void sp_cg_update(const sp_cg_vector_t& s, i64 i) {
 /// norm goes to the history, and it stops on a non-finite residual, convergence or max_iter;
 /// else beta = (r.z)new / (r.z) for the direction.
 template <typename S>
-WP_FN void sp_cg_check(const sp_cg_scalar_t& s) {
+WP_FN void sp_cg_check_stop(const sp_cg_scalar_t& s) {
   i32* ctl = (i32*)s.ctl;
   S* sc = (S*)s.scal;
   if (ctl[SP_CTL_STOP] != SP_STOP_NONE) return;
@@ -567,6 +570,13 @@ WP_FN void sp_cg_check(const sp_cg_scalar_t& s) {
     sc[SP_BETA] = sp_div(sc[SP_RZ_NEW], sc[SP_RZ]);
     sc[SP_RZ] = sc[SP_RZ_NEW];
   }
+}
+
+template <typename S>
+WP_FN void sp_cg_check(const sp_cg_scalar_t& s) {
+  sp_cg_check_stop<S>(s);
+  i32* ctl = (i32*)s.ctl;
+  ctl[SP_CTL_RUN] = ctl[SP_CTL_STOP] == SP_STOP_NONE;
 }
 
 template <typename S>

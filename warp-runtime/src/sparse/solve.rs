@@ -11,7 +11,9 @@ use super::block::{Block, SparseScalar, SquareBlock};
 use super::steps::{cg as c, CgScalar, CgVector, JacobiApply, JacobiInv};
 use super::{contiguous, dot_partials, dot_raw, invalid, mv_raw, overlap, same_device, Bsr};
 use crate::array::Array;
+use crate::backend::ObjectStep;
 use crate::capturing::Keep;
+use crate::device::Device;
 use crate::dispatch;
 use crate::error::Result;
 use std::marker::PhantomData;
@@ -39,9 +41,27 @@ pub struct SolveOptions {
     pub atol: f64,
     /// The most iterations (default 1000); reaching it is [`Stop::MaxIterations`].
     pub max_iter: usize,
-    /// Iterations queued between two reads of the solver's state by the host (default 10;
-    /// at least 1). It changes the work done after a stop, never the result.
+    /// Iterations queued between two reads of the solver's state by the host
+    /// ([`Mode::Host`]), or per pass of the captured loop ([`Mode::Graph`]) (default 10; at
+    /// least 1). It changes the work done after a stop, never the result.
     pub check_every: usize,
+    /// How the iterations are driven (default [`Mode::Host`]).
+    pub mode: Mode,
+}
+
+/// How [`cg`] drives its iterations. Both run the same steps and give the same result,
+/// bit for bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mode {
+    /// The host queues [`SolveOptions::check_every`] iterations, then reads the solver's
+    /// state (a synchronisation), until a stop.
+    #[default]
+    Host,
+    /// The set-up and a [`capture_while`](crate::capture_while) loop on the device's stop
+    /// flag are captured once and the graph launched: no host synchronisation until the
+    /// report is read. On a GPU this needs conditional graph nodes (a CUDA 12.4 driver and
+    /// the toolkit's `libcudadevrt.a`), else it is an [`Error::Capture`](crate::Error::Capture).
+    Graph,
 }
 
 impl Default for SolveOptions {
@@ -51,6 +71,7 @@ impl Default for SolveOptions {
             atol: 0.0,
             max_iter: 1000,
             check_every: 10,
+            mode: Mode::Host,
         }
     }
 }
@@ -179,188 +200,267 @@ pub fn cg<B: SquareBlock>(
     }
     type S<B> = <B as Block>::Scalar;
     let n = nr;
-    let sz = std::mem::size_of::<S<B>>() as u64;
-    let r = Array::<S<B>>::zeros(n, &dev)?;
-    let p = Array::<S<B>>::zeros(n, &dev)?;
-    let ap = Array::<S<B>>::zeros(n, &dev)?;
-    let ctl = Array::from_slice(&[c::STOP_NONE, 0, i32::MAX], &dev)?;
-    let scal = Array::<S<B>>::zeros(c::SCAL_LEN, &dev)?;
-    let history = Array::<S<B>>::zeros(o.max_iter + 1, &dev)?;
-    let partials = dot_partials::<S<B>>(n, &dev)?;
-    let s_at = |k: usize| scal.device_address() + k as u64 * sz;
-    // (A solve reads back, so it is never inside a capture: nothing to keep.)
-    let none = || -> Keep { Box::new(()) };
-    let dot = |u: &Array<S<B>>, v: u64, k: usize| {
-        dot_raw(&dev, u.device_address(), v, n, &partials, s_at(k), none)
+    let z = Array::<S<B>>::zeros(n, &dev)?;
+    let cg = Cg {
+        a,
+        dev: dev.clone(),
+        n,
+        b,
+        x,
+        r: Array::zeros(n, &dev)?,
+        p: Array::zeros(n, &dev)?,
+        ap: Array::zeros(n, &dev)?,
+        pre: match precond {
+            Precond::None => None,
+            Precond::Jacobi | Precond::PointJacobi => Some(Jacobi {
+                dinv: Array::zeros(a.nrow() * B::ROWS * B::ROWS, &dev)?,
+                z,
+                point: precond == Precond::PointJacobi,
+            }),
+        },
+        ctl: Array::zeros(c::CTL_LEN, &dev)?,
+        ctl0: Array::from_slice(&[c::STOP_NONE, 0, i32::MAX, 0], &dev)?,
+        scal: Array::zeros(c::SCAL_LEN, &dev)?,
+        history: Array::zeros(o.max_iter + 1, &dev)?,
+        partials: dot_partials::<S<B>>(n, &dev)?,
+        o: *o,
     };
-    // r = b - A x.
-    r.copy_from(b)?;
-    mv_raw(a, x.device_address(), r.device_address(), -1.0, 1.0, none)?;
-    // z = M^-1 r (z is r without a preconditioner).
-    let pre = match precond {
-        Precond::None => None,
-        Precond::Jacobi | Precond::PointJacobi => {
-            let dinv = Array::<S<B>>::zeros(a.nrow() * B::ROWS * B::ROWS, &dev)?;
-            dispatch::object_step(
-                &dev,
-                &JacobiInv::<B> {
-                    offsets: a.offsets().device_address(),
-                    columns: a.columns().device_address(),
-                    values: a.values().device_address(),
-                    dinv: dinv.device_address(),
-                    bad: ctl.device_address() + 4 * c::CTL_BAD as u64,
-                    nrow: a.nrow() as i32,
-                    point: (precond == Precond::PointJacobi) as i32,
-                    cap: a.nnz_bound() as i32,
-                    pad: 0,
-                    block: PhantomData,
-                },
-            )?;
-            Some((dinv, Array::<S<B>>::zeros(n, &dev)?))
+    match o.mode {
+        Mode::Host => {
+            cg.setup()?;
+            let mut queued = 0;
+            let mut words = cg.ctl.to_vec()?;
+            while words[c::CTL_STOP] == c::STOP_NONE && queued < o.max_iter {
+                for _ in 0..o.check_every.min(o.max_iter - queued) {
+                    cg.iteration()?;
+                    queued += 1;
+                }
+                words = cg.ctl.to_vec()?;
+            }
         }
-    };
-    let apply = |z: &Array<S<B>>, dinv: &Array<S<B>>| {
-        dispatch::object_step(
-            &dev,
-            &JacobiApply::<S<B>> {
-                dinv: dinv.device_address(),
-                r: r.device_address(),
-                z: z.device_address(),
-                nrow: a.nrow() as i32,
+        Mode::Graph => {
+            // Every kernel of the solve runs once before the capture (a GPU loads them at
+            // their first use, which a capture refuses): the set-up, then an iteration with
+            // the stop word set, which leaves x alone (each step first reads the stop word).
+            cg.setup()?;
+            cg.ctl.fill(-1)?;
+            cg.iteration()?;
+            let run = cg.ctl.view(c::CTL_RUN..c::CTL_RUN + 1)?;
+            let graph = crate::graph::capture(&dev, || {
+                cg.setup()?;
+                crate::graph::capture_while(&run, || {
+                    for _ in 0..o.check_every {
+                        cg.iteration()?;
+                    }
+                    Ok(())
+                })
+            })?;
+            graph.launch()?;
+        }
+    }
+    cg.report()
+}
+
+/// The block Jacobi preconditioner's state: the inverted diagonal blocks and `z = D^-1 r`.
+struct Jacobi<S: SparseScalar> {
+    dinv: Array<S>,
+    z: Array<S>,
+    point: bool,
+}
+
+/// One CG solve's arrays (all allocated before anything is queued, so that the steps can be
+/// captured) and its queued steps.
+struct Cg<'a, B: Block> {
+    a: &'a Bsr<B>,
+    dev: Device,
+    n: usize,
+    b: &'a Array<B::Scalar>,
+    x: &'a Array<B::Scalar>,
+    r: Array<B::Scalar>,
+    p: Array<B::Scalar>,
+    ap: Array<B::Scalar>,
+    pre: Option<Jacobi<B::Scalar>>,
+    /// The control words (`steps::cg::CTL_*`) and their initial values.
+    ctl: Array<i32>,
+    ctl0: Array<i32>,
+    /// The scalars (`steps::cg::RZ` ..) and `|r|` per iteration.
+    scal: Array<B::Scalar>,
+    history: Array<B::Scalar>,
+    partials: Array<B::Scalar>,
+    o: SolveOptions,
+}
+
+impl<B: Block> Cg<'_, B> {
+    /// What a graph recording the steps keeps alive: every array they address.
+    fn keep(&self) -> impl Fn() -> Keep + '_ {
+        move || {
+            Box::new((
+                (self.a.clone(), self.b.clone(), self.x.clone()),
+                (self.r.clone(), self.p.clone(), self.ap.clone()),
+                self.pre.as_ref().map(|j| (j.dinv.clone(), j.z.clone())),
+                (self.ctl.clone(), self.ctl0.clone(), self.scal.clone()),
+                (self.history.clone(), self.partials.clone()),
+            ))
+        }
+    }
+
+    /// Queues (or records) an object step of the solve.
+    fn step<T: ObjectStep + 'static>(&self, step: T) -> Result<()> {
+        dispatch::object_step_keeping(&self.dev, &step, self.keep())
+    }
+
+    /// z: the preconditioned residual (r itself without a preconditioner).
+    fn z(&self) -> &Array<B::Scalar> {
+        self.pre.as_ref().map_or(&self.r, |j| &j.z)
+    }
+
+    /// `u . v` into scalar `k`.
+    fn dot(&self, u: &Array<B::Scalar>, v: &Array<B::Scalar>, k: usize) -> Result<()> {
+        let out = self.scal.device_address() + (k * std::mem::size_of::<B::Scalar>()) as u64;
+        let (u, v) = (u.device_address(), v.device_address());
+        dot_raw(&self.dev, u, v, self.n, &self.partials, out, self.keep())
+    }
+
+    /// `z = D^-1 r` (nothing without a preconditioner).
+    fn apply(&self) -> Result<()> {
+        match &self.pre {
+            Some(j) => self.step(JacobiApply::<B::Scalar> {
+                dinv: j.dinv.device_address(),
+                r: self.r.device_address(),
+                z: j.z.device_address(),
+                nrow: self.a.nrow() as i32,
                 dim: B::ROWS as i32,
                 scalar: PhantomData,
-            },
-        )
-    };
-    let z = match &pre {
-        Some((dinv, z)) => {
-            apply(z, dinv)?;
-            z
+            }),
+            None => Ok(()),
         }
-        None => &r,
-    };
-    p.copy_from(z)?;
-    dot(b, b.device_address(), c::BB)?;
-    dot(&r, z.device_address(), c::RZ)?;
-    dot(&r, r.device_address(), c::RR)?;
-    let scalar_step = |check: bool| {
-        let (ctl, scal, history) = (
-            ctl.device_address(),
-            scal.device_address(),
-            history.device_address(),
-        );
-        let (rtol, atol, max_iter) = (o.rtol, o.atol, o.max_iter as i32);
-        if check {
-            dispatch::object_step(
-                &dev,
-                &CgScalar::<S<B>, true> {
-                    ctl,
-                    scal,
-                    history,
-                    rtol,
-                    atol,
-                    max_iter,
-                    pad: 0,
-                    scalar: PhantomData,
-                },
-            )
-        } else {
-            dispatch::object_step(
-                &dev,
-                &CgScalar::<S<B>, false> {
-                    ctl,
-                    scal,
-                    history,
-                    rtol,
-                    atol,
-                    max_iter,
-                    pad: 0,
-                    scalar: PhantomData,
-                },
-            )
-        }
-    };
-    scalar_step(false)?;
-    let vec_step = |direction: bool| {
-        let (ctl, scal) = (ctl.device_address(), scal.device_address());
-        if direction {
-            dispatch::object_step(
-                &dev,
-                &CgVector::<S<B>, true> {
-                    ctl,
-                    scal,
-                    x: 0,
-                    r: z.device_address(),
-                    p: p.device_address(),
-                    ap: 0,
-                    n: n as i64,
-                    scalar: PhantomData,
-                },
-            )
-        } else {
-            dispatch::object_step(
-                &dev,
-                &CgVector::<S<B>, false> {
-                    ctl,
-                    scal,
-                    x: x.device_address(),
-                    r: r.device_address(),
-                    p: p.device_address(),
-                    ap: ap.device_address(),
-                    n: n as i64,
-                    scalar: PhantomData,
-                },
-            )
-        }
-    };
-    let mut queued = 0;
-    let mut words = ctl.to_vec()?;
-    while words[c::CTL_STOP] == c::STOP_NONE && queued < o.max_iter {
-        for _ in 0..o.check_every.min(o.max_iter - queued) {
-            mv_raw(a, p.device_address(), ap.device_address(), 1.0, 0.0, none)?;
-            dot(&p, ap.device_address(), c::PAP)?;
-            vec_step(false)?;
-            if let Some((dinv, z)) = &pre {
-                apply(z, dinv)?;
-            }
-            dot(&r, z.device_address(), c::RZ_NEW)?;
-            dot(&r, r.device_address(), c::RR)?;
-            scalar_step(true)?;
-            vec_step(true)?;
-            queued += 1;
-        }
-        words = ctl.to_vec()?;
     }
-    let sc = scal.to_vec()?;
-    let iterations = words[c::CTL_ITER] as usize;
-    let history: Vec<f64> = history.to_vec()?[..=iterations]
-        .iter()
-        .map(|v| v.to_f64())
-        .collect();
-    let stop = match words[c::CTL_STOP] {
-        c::STOP_CONVERGED => Stop::Converged,
-        c::STOP_MAX_ITER => Stop::MaxIterations,
-        c::STOP_NON_FINITE => Stop::NonFinite,
-        c::STOP_BREAKDOWN => Stop::Breakdown {
-            what: "p.Ap",
-            value: sc[c::BREAK].to_f64(),
-        },
-        c::STOP_SINGULAR => Stop::SingularPreconditioner {
-            block_row: words[c::CTL_BAD] as usize,
-        },
-        // The loop ends only at a stop (max_iter bounds it on the device).
-        w => {
-            return Err(crate::error::Error::invalid(format!(
-                "{F}: internal: the solver ended with stop word {w}"
-            )))
+
+    /// The set-up or a check (one thread).
+    fn scalar_step<const CHECK: bool>(&self) -> Result<()> {
+        self.step(CgScalar::<B::Scalar, CHECK> {
+            ctl: self.ctl.device_address(),
+            scal: self.scal.device_address(),
+            history: self.history.device_address(),
+            rtol: self.o.rtol,
+            atol: self.o.atol,
+            max_iter: self.o.max_iter as i32,
+            pad: 0,
+            scalar: PhantomData,
+        })
+    }
+
+    /// The set-up: control words reset, `r = b - A x`, the preconditioner, `z`, `p = z`, the
+    /// dots `b.b`, `r.z`, `r.r`, and the set-up check (tolerance, `history[0]`, a stop before
+    /// any iteration).
+    fn setup(&self) -> Result<()> {
+        let a = self.a;
+        self.ctl.copy_from(&self.ctl0)?;
+        self.r.copy_from(self.b)?;
+        mv_raw(
+            a,
+            self.x.device_address(),
+            self.r.device_address(),
+            -1.0,
+            1.0,
+            self.keep(),
+        )?;
+        if let Some(j) = &self.pre {
+            self.step(JacobiInv::<B> {
+                offsets: a.offsets().device_address(),
+                columns: a.columns().device_address(),
+                values: a.values().device_address(),
+                dinv: j.dinv.device_address(),
+                bad: self.ctl.device_address() + 4 * c::CTL_BAD as u64,
+                nrow: a.nrow() as i32,
+                point: j.point as i32,
+                cap: a.nnz_bound() as i32,
+                pad: 0,
+                block: PhantomData,
+            })?;
         }
-    };
-    Ok(SolveReport {
-        iterations,
-        residual: history[iterations],
-        tolerance: sc[c::TOL].to_f64(),
-        converged: stop == Stop::Converged,
-        stop,
-        history,
-    })
+        self.apply()?;
+        self.p.copy_from(self.z())?;
+        self.dot(self.b, self.b, c::BB)?;
+        self.dot(&self.r, self.z(), c::RZ)?;
+        self.dot(&self.r, &self.r, c::RR)?;
+        self.scalar_step::<false>()
+    }
+
+    /// One iteration: `Ap`, `p.Ap`, the x/r update, `z`, `r.z`, `r.r`, the check, `p`. Each
+    /// step does nothing once a stop is set.
+    fn iteration(&self) -> Result<()> {
+        let (ctl, scal) = (self.ctl.device_address(), self.scal.device_address());
+        mv_raw(
+            self.a,
+            self.p.device_address(),
+            self.ap.device_address(),
+            1.0,
+            0.0,
+            self.keep(),
+        )?;
+        self.dot(&self.p, &self.ap, c::PAP)?;
+        self.step(CgVector::<B::Scalar, false> {
+            ctl,
+            scal,
+            x: self.x.device_address(),
+            r: self.r.device_address(),
+            p: self.p.device_address(),
+            ap: self.ap.device_address(),
+            n: self.n as i64,
+            scalar: PhantomData,
+        })?;
+        self.apply()?;
+        self.dot(&self.r, self.z(), c::RZ_NEW)?;
+        self.dot(&self.r, &self.r, c::RR)?;
+        self.scalar_step::<true>()?;
+        self.step(CgVector::<B::Scalar, true> {
+            ctl,
+            scal,
+            x: 0,
+            r: self.z().device_address(),
+            p: self.p.device_address(),
+            ap: 0,
+            n: self.n as i64,
+            scalar: PhantomData,
+        })
+    }
+
+    /// The report, from the control words, scalars and history (read back).
+    fn report(&self) -> Result<SolveReport> {
+        const F: &str = "sparse::cg";
+        let words = self.ctl.to_vec()?;
+        let sc = self.scal.to_vec()?;
+        let iterations = words[c::CTL_ITER] as usize;
+        let history: Vec<f64> = self.history.to_vec()?[..=iterations]
+            .iter()
+            .map(|v| v.to_f64())
+            .collect();
+        let stop = match words[c::CTL_STOP] {
+            c::STOP_CONVERGED => Stop::Converged,
+            c::STOP_MAX_ITER => Stop::MaxIterations,
+            c::STOP_NON_FINITE => Stop::NonFinite,
+            c::STOP_BREAKDOWN => Stop::Breakdown {
+                what: "p.Ap",
+                value: sc[c::BREAK].to_f64(),
+            },
+            c::STOP_SINGULAR => Stop::SingularPreconditioner {
+                block_row: words[c::CTL_BAD] as usize,
+            },
+            // Both loops end only at a stop (max_iter bounds them on the device).
+            w => {
+                return Err(crate::error::Error::invalid(format!(
+                    "{F}: internal: the solver ended with stop word {w}"
+                )))
+            }
+        };
+        Ok(SolveReport {
+            iterations,
+            residual: history[iterations],
+            tolerance: sc[c::TOL].to_f64(),
+            converged: stop == Stop::Converged,
+            stop,
+            history,
+        })
+    }
 }

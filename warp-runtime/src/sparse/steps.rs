@@ -896,7 +896,9 @@ pub(crate) mod cg {
     pub const CTL_STOP: usize = 0;
     pub const CTL_ITER: usize = 1;
     pub const CTL_BAD: usize = 2;
-    pub const CTL_LEN: usize = 3;
+    /// 1 while no stop is set: the flag of a captured solve's `capture_while`.
+    pub const CTL_RUN: usize = 3;
+    pub const CTL_LEN: usize = 4;
     pub const STOP_NONE: i32 = 0;
     pub const STOP_CONVERGED: i32 = 1;
     pub const STOP_MAX_ITER: i32 = 2;
@@ -953,9 +955,15 @@ impl<S: SparseScalar, const CHECK: bool> CgScalar<S, CHECK> {
         } else {
             STOP_NONE
         };
+        ctl[CTL_RUN] = (ctl[CTL_STOP] == STOP_NONE) as i32;
     }
 
     fn check(&self, ctl: &mut [i32], sc: &mut [S], hist: &mut [S]) {
+        self.check_stop(ctl, sc, hist);
+        ctl[cg::CTL_RUN] = (ctl[cg::CTL_STOP] == cg::STOP_NONE) as i32;
+    }
+
+    fn check_stop(&self, ctl: &mut [i32], sc: &mut [S], hist: &mut [S]) {
         use cg::*;
         if ctl[CTL_STOP] != STOP_NONE {
             return;
