@@ -5,7 +5,8 @@
 //! glam's `Mat2`..`Mat4`, `DMat2`..`DMat4`) in block sparse row form: `offsets` (`nrow + 1`
 //! row starts), `columns` (one block column per stored block) and `values` (the blocks). It
 //! is made from triplets ([`Bsr::from_triplets`], duplicates summed), multiplies vectors
-//! ([`mv`]) and is solved with [`cg`].
+//! ([`mv`]) and is solved with [`cg`] (conjugate gradients with Jacobi preconditioning,
+//! driven from the host or captured into one graph: [`Mode`]).
 //!
 //! # Same bits on every device
 //! Every operation here gives the same bits on the CPU and on a GPU: each step runs the same
@@ -64,7 +65,11 @@ use steps::{
 /// host knows an upper bound, the capacity of `columns` and `values`
 /// ([`Bsr::nnz_bound`]), and [`Bsr::nnz`] reads the exact count.
 ///
-/// Cloning a `Bsr` clones its array handles: the clone shares the memory.
+/// The arrays are handles, as every [`Array`]: a kernel or copy may change the blocks'
+/// `values` in place (the structure stays), but `offsets` and `columns` are the structure
+/// and are meant to be read; overwriting them gives meaningless results (never a read
+/// outside the arrays: the steps clamp). Cloning a `Bsr` clones its array handles: the clone
+/// shares the memory.
 #[derive(Clone, Debug)]
 pub struct Bsr<B: Block> {
     nrow: usize,

@@ -131,6 +131,33 @@ pub struct SolveReport {
 /// preconditioner; each is an `Ok` report (see [`Stop`]). The iterations, residuals and the
 /// result are the same bits on the CPU and a GPU.
 ///
+/// ```
+/// # use warp_runtime as wp;
+/// use wp::sparse::{self, Bsr, Precond, SolveOptions, Stop};
+/// let dev = wp::cpu();
+/// // The 1-D Laplacian, tridiag(-1, 2, -1), of 100 unknowns.
+/// let n = 100;
+/// let (mut rows, mut cols, mut vals) = (vec![], vec![], vec![]);
+/// for i in 0..n as i32 {
+///     for (j, v) in [(i - 1, -1.0f64), (i, 2.0), (i + 1, -1.0)] {
+///         if (0..n as i32).contains(&j) {
+///             rows.push(i);
+///             cols.push(j);
+///             vals.push(v);
+///         }
+///     }
+/// }
+/// let arr = |v: &[i32]| wp::Array::from_slice(v, &dev);
+/// let a = Bsr::from_triplets(n, n, &arr(&rows)?, &arr(&cols)?, &wp::Array::from_slice(&vals, &dev)?)?;
+/// let b = wp::Array::from_slice(&vec![1.0f64; n], &dev)?;
+/// let x = wp::Array::<f64>::zeros(n, &dev)?;
+/// let report = sparse::cg(&a, &b, &x, Precond::Jacobi, &SolveOptions::default())?;
+/// assert_eq!(report.stop, Stop::Converged);
+/// assert!(report.residual <= report.tolerance);
+/// assert_eq!(report.history.len(), report.iterations + 1);
+/// # Ok::<(), wp::Error>(())
+/// ```
+///
 /// # Errors
 /// [`Error::Capture`](crate::Error::Capture) inside a capture (the loop reads back);
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::cg`, the
