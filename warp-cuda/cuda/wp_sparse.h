@@ -11,14 +11,16 @@
 // values + k R C, entry (i, j) at j R + i when the block is column-major (glam's matrices) and
 // i C + j otherwise (scalars). Vectors are flat arrays of S: x has ncol C, y nrow R scalars.
 //
-// Steps (one kernel each, grid-stride over the record's count; the shape-dependent ones are
-// instantiated per block type at the end of the file, named wp_sparse_<step>_<block>):
+// Steps (one kernel each, grid-stride over the record's count, which for the triplet steps
+// may be a device count (`sp_count`); the shape-dependent ones are instantiated per block type
+// at the end of the file, named wp_sparse_<step>_<block>, the others per scalar type):
 //   tpl_keys     per triplet t: the sort key (row * ncol + col, or col alone in the two-pass
 //                path; a sentinel past every valid key for an out-of-range triplet) and t;
 //                the smallest t with a row, a column or a value out of range / non-finite
 //                lowers bad[0], bad[1], bad[2].
-//   tpl_report   one thread: the smallest of those (rows, then columns, then values on a tie)
-//                raised as a fault, named by the runtime as `sparse::from_triplets`.
+//   tpl_report   one thread: a device count outside [0, capacity], else the smallest of
+//                those (rows, then columns, then values on a tie), raised as a fault, named
+//                by the runtime as `sparse::from_triplets`.
 //   tpl_row_keys per sorted position (two-pass path): the key of the second sort, the row.
 //   (the runtime's stable radix sort of (key, t))
 //   tpl_heads    per sorted position: 1 where a run of equal (row, col) starts, else 0.
@@ -26,7 +28,8 @@
 //   tpl_sum      per run head: block pos - 1 gets the row, column and the sum of the run's
 //                values in sorted order, which is ascending triplet order (the sort is stable).
 //   bsr_offsets  per block row r (and r = nrow): offsets[r] = the first block whose row is >= r.
-//   bsr_mv       per block row: y = alpha A x + beta y (y not read when beta == 0).
+//   bsr_mv       per block row: y = alpha A x + beta y (y not read when beta == 0); the
+//                row's range clamped (`sp_row_range`), columns out of range skipped.
 //   dot_partials per chunk of 4096 elements (a block of 256 threads): see `sp_dot_lane`.
 //   dot_final    one block of 256 threads: the partials reduced the same way.
 //   jacobi_inv   per block row: the inverse of the diagonal block (or of its diagonal alone).
