@@ -173,6 +173,10 @@ pub use warp_runtime::dlpack;
 /// (the `python` feature).
 #[cfg(feature = "python")]
 pub use warp_runtime::python;
+/// Block sparse matrices ([`sparse::Bsr`]), their products with vectors and the conjugate
+/// gradient solver (the `sparse` feature).
+#[cfg(feature = "sparse")]
+pub use warp_runtime::sparse;
 /// The scalar types that DLPack exchanges (the `dlpack` feature).
 #[cfg(feature = "dlpack")]
 pub use warp_runtime::DlpackScalar;

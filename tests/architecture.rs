@@ -1248,10 +1248,17 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
 /// import neither each other. `lib.rs`, the crate's face (its re-exports), is in no row: a
 /// file that imports an item of lib.rs climbs above every layer.
 const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
+    // `sparse/` (the `sparse` feature) captures its solver's loop (`graph`).
     (
         0,
         "entry points",
-        &["launch.rs", "autograd.rs", "checkpoint.rs", "python.rs"],
+        &[
+            "launch.rs",
+            "autograd.rs",
+            "checkpoint.rs",
+            "python.rs",
+            "sparse/",
+        ],
     ),
     (1, "tape", &["tape.rs"]),
     (2, "graph", &["graph.rs"]),

@@ -560,8 +560,8 @@ fn nvrtc_compiles_the_build_kernels() {
         eprintln!("SKIPPED hash_grid::nvrtc_compiles_the_build_kernels: {e}");
         return;
     }
-    // The hash grid's, the BVH's, marching cubes' and the volume's.
-    assert_eq!(wp::objects::build_libraries().count(), 4);
+    // The hash grid's, the BVH's, marching cubes', the volume's and the sparse tier's.
+    assert_eq!(wp::objects::build_libraries().count(), 5);
     for lib in wp::objects::build_libraries() {
         for arch in [90, 80] {
             let c = wp::objects::compile_library(&lib, arch)

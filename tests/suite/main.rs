@@ -126,6 +126,7 @@ mod race;
 mod refs_tuples;
 mod rng;
 mod scenes;
+mod sparse;
 mod spatial;
 mod stability;
 mod streams;

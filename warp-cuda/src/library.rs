@@ -216,6 +216,8 @@ pub static SECTIONS: &[Section] = &[
     standalone!("bvh_build",      Some("WP_BVH_BUILD")),
     standalone!("marching_cubes", Some("WP_MARCHING_CUBES_BUILD")),
     standalone!("volume_build",   Some("WP_VOLUME_BUILD")),
+    // The sparse tier's steps (warp-runtime's `sparse` feature): exact by spelling (`sp_add`..).
+    standalone!("sparse",         Some("WP_SPARSE_BUILD")),
     standalone!("primitives",     None),
 ];
 

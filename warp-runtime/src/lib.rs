@@ -49,6 +49,8 @@ mod launch_id;
 pub mod objects;
 mod params;
 pub mod primitives;
+#[cfg(feature = "sparse")]
+pub mod sparse;
 pub mod tape;
 
 // The CUDA backend's public modules, at the paths they had before they moved into `cuda/`.

@@ -20,8 +20,9 @@ use std::sync::{Arc, Mutex, OnceLock};
 use warp_cuda::library::{self, Section};
 use warp_cuda::{CompileOptions, CudaError, Function};
 
-/// Threads per block of the build kernels (grid-stride loops: any count of blocks works).
-const THREADS: u32 = 256;
+/// Threads per block of the build kernels (grid-stride loops: any count of blocks works; the
+/// sparse dot kernels are written for exactly this many).
+pub(crate) const THREADS: u32 = 256;
 
 /// A build library loaded on one GPU, with the functions looked up so far.
 struct Loaded {

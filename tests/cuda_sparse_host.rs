@@ -1,0 +1,836 @@
+//! The sparse tier's CUDA steps (`warp-cuda/cuda/wp_sparse.h`, the kernels themselves),
+//! checked without a GPU: compiled with g++ under the block emulator
+//! (`warp-cuda/cuda/tests/wp_prim_emu.h`: a block's threads are fibers, `__syncthreads` a
+//! barrier, blocks one after another), launched with small blocks and grids so the
+//! grid-stride loops wrap and the dot product's blocks loop over several chunks, and compared
+//! bit for bit with the CPU backend's bodies through the public API (`warp_runtime::sparse`):
+//! triplet assembly (the sort is the host's stable sort here, as the primitives' radix sort is
+//! stable on both backends), `mv` for every block type, `dot`, and whole CG solves (every
+//! step of the solver, with and without Jacobi). What this cannot check: NVRTC's acceptance
+//! of the CUDA-only lines (the rounded intrinsics, `atomicMin`), and hardware scheduling; the
+//! suite's `sparse::cuda_backend` tests and `hash_grid::nvrtc_compiles_the_build_kernels` do,
+//! on a machine with a GPU.
+//!
+//! Skipped, saying so, without g++.
+
+use glam::{DMat2, DMat3, DMat4, Mat2, Mat3, Mat4};
+use std::process::Command;
+use std::sync::OnceLock;
+use warp_lang as wp;
+use warp_runtime::sparse::{self, Block, Bsr, Precond, SolveOptions, SparseScalar, Stop};
+
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
+
+/// The driver: reads u64 words (a command, then its data; f32 scalars in the low 32 bits),
+/// runs the header's kernels under the emulator, prints hex words.
+const DRIVER: &str = r#"
+#include <algorithm>
+#include <cstdio>
+#include <vector>
+#include "wp_prim_emu.h"
+namespace wp_sp_emu {
+inline unsigned threads = 1, blocks = 1;
+}
+#define __global__
+#define __device__ inline
+#define __shared__ static
+#define blockIdx (::wp_emu::dim3_t{(unsigned)::wp_emu::bid, 0u, 0u})
+#define blockDim (::wp_emu::dim3_t{::wp_sp_emu::threads, 1u, 1u})
+#define gridDim (::wp_emu::dim3_t{::wp_sp_emu::blocks, 1u, 1u})
+#include "wp_sparse.h"
+using namespace wp;
+
+template <typename A>
+void run(void (*k)(A), unsigned blocks, unsigned threads, const A& a) {
+  wp_sp_emu::blocks = blocks;
+  wp_sp_emu::threads = threads;
+  wp_emu::launch(k, (long long)blocks, (int)threads, a);
+}
+
+std::vector<u64> in;
+size_t at = 0;
+u64 word() { return in.at(at++); }
+template <typename T> T scalar() {
+  const u64 w = word();
+  T x;
+  if (sizeof(T) == 4) { const u32 u = (u32)w; memcpy(&x, &u, 4); } else memcpy(&x, &w, 8);
+  return x;
+}
+template <typename T> std::vector<T> scalars(size_t n) {
+  std::vector<T> v(n + 1);  // one spare: never a null pointer
+  for (size_t i = 0; i < n; ++i) v[i] = scalar<T>();
+  return v;
+}
+std::vector<i32> ints(size_t n) {
+  std::vector<i32> v(n + 1);
+  for (size_t i = 0; i < n; ++i) v[i] = (i32)(i64)word();
+  return v;
+}
+template <typename T> void print(const T* v, size_t n) {
+  for (size_t i = 0; i < n; ++i) {
+    u64 w = 0;
+    memcpy(&w, &v[i], sizeof(T));
+    printf("%llx\n", (unsigned long long)w);
+  }
+}
+u64 addr(const void* p) { return (u64)p; }
+
+// The kernels of one block type.
+struct BlockKernels {
+  void (*mv)(sp_bsr_mv_t);
+  void (*jacobi)(sp_jacobi_inv_t);
+  int rows, cols;
+};
+// The kernels of one scalar type.
+struct ScalarKernels {
+  void (*keys)(sp_tpl_keys_t);
+  void (*report)(sp_tpl_report_t);
+  void (*sum)(sp_tpl_sum_t);
+  void (*partials)(sp_dot_t);
+  void (*final_)(sp_dot_t);
+  void (*apply)(sp_jacobi_apply_t);
+  void (*init)(sp_cg_scalar_t);
+  void (*check)(sp_cg_scalar_t);
+  void (*update)(sp_cg_vector_t);
+  void (*direction)(sp_cg_vector_t);
+};
+#define SK(t) ScalarKernels{wp_sparse_tpl_keys_##t, wp_sparse_tpl_report_##t, wp_sparse_tpl_sum_##t, \
+    wp_sparse_dot_partials_##t, wp_sparse_dot_final_##t, wp_sparse_jacobi_apply_##t,             \
+    wp_sparse_cg_init_##t, wp_sparse_cg_check_##t, wp_sparse_cg_update_##t,                      \
+    wp_sparse_cg_direction_##t}
+const BlockKernels BLOCKS[8] = {
+    {wp_sparse_bsr_mv_f32, wp_sparse_jacobi_inv_f32, 1, 1},
+    {wp_sparse_bsr_mv_f64, wp_sparse_jacobi_inv_f64, 1, 1},
+    {wp_sparse_bsr_mv_mat2, wp_sparse_jacobi_inv_mat2, 2, 2},
+    {wp_sparse_bsr_mv_mat3, wp_sparse_jacobi_inv_mat3, 3, 3},
+    {wp_sparse_bsr_mv_mat4, wp_sparse_jacobi_inv_mat4, 4, 4},
+    {wp_sparse_bsr_mv_dmat2, wp_sparse_jacobi_inv_dmat2, 2, 2},
+    {wp_sparse_bsr_mv_dmat3, wp_sparse_jacobi_inv_dmat3, 3, 3},
+    {wp_sparse_bsr_mv_dmat4, wp_sparse_jacobi_inv_dmat4, 4, 4},
+};
+
+// Small launches: 3 blocks of 32 threads (the grid-stride loops wrap); the dot's partials 2
+// blocks of 256 (each loops over several chunks), its final one block of 256.
+constexpr unsigned GB = 3, GT = 32;
+
+struct Matrix {
+  i32 nrow, ncol, nnz;
+  std::vector<i32> offsets, columns;
+};
+template <typename S> Matrix matrix(const BlockKernels& k, std::vector<S>& values) {
+  Matrix m;
+  m.nrow = (i32)word();
+  m.ncol = (i32)word();
+  m.nnz = (i32)word();
+  m.offsets = ints(m.nrow + 1);
+  m.columns = ints(m.nnz);
+  values = scalars<S>((size_t)m.nnz * k.rows * k.cols);
+  return m;
+}
+
+template <typename S> void mv(const BlockKernels& k) {
+  std::vector<S> values;
+  Matrix m = matrix<S>(k, values);
+  std::vector<S> x = scalars<S>((size_t)m.ncol * k.cols);
+  std::vector<S> y = scalars<S>((size_t)m.nrow * k.rows);
+  const f64 alpha = scalar<f64>(), beta = scalar<f64>();
+  run(k.mv, GB, GT,
+      sp_bsr_mv_t{addr(m.offsets.data()), addr(m.columns.data()), addr(values.data()),
+                  addr(x.data()), addr(y.data()), alpha, beta, m.nrow, m.ncol,
+                  m.nnz, 0});
+  print(y.data(), (size_t)m.nrow * k.rows);
+}
+
+template <typename S> void dot_into(const ScalarKernels& k, const S* a, const S* b, i64 n, S* out) {
+  const i64 chunks = std::max<i64>(1, (n + SP_DOT_CHUNK - 1) / SP_DOT_CHUNK);
+  std::vector<S> partials(chunks);
+  run(k.partials, 2, (unsigned)SP_DOT_LANES, sp_dot_t{addr(a), addr(b), n, addr(partials.data()), chunks});
+  run(k.final_, 1, (unsigned)SP_DOT_LANES, sp_dot_t{addr(partials.data()), 0, chunks, addr(out), chunks});
+}
+
+template <typename S> void dot(const ScalarKernels& k) {
+  const i64 n = (i64)word();
+  std::vector<S> a = scalars<S>(n), b = scalars<S>(n);
+  S out = (S)-1;
+  dot_into(k, a.data(), b.data(), n, &out);
+  print(&out, 1);
+}
+
+// The steps of warp-runtime's sparse/solve.rs, in its order (check_every iterations between
+// two reads of the control words).
+template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
+  std::vector<S> values;
+  Matrix m = matrix<S>(bk, values);
+  const i64 n = (i64)m.nrow * bk.rows;
+  std::vector<S> b = scalars<S>(n), x = scalars<S>(n);
+  const i32 pre = (i32)word();
+  const f64 rtol = scalar<f64>(), atol = scalar<f64>();
+  const i32 max_iter = (i32)word(), every = (i32)word();
+  std::vector<S> r(b), p(n + 1), ap(n + 1), z(n + 1), scal(SP_TOL + 1), hist(max_iter + 1);
+  std::vector<S> dinv((size_t)m.nrow * bk.rows * bk.rows + 1);
+  std::vector<i32> ctl = {0, 0, 0x7fffffff, 0};
+  auto mvk = [&](const S* xv, S* yv, f64 al, f64 be) {
+    run(bk.mv, GB, GT, sp_bsr_mv_t{addr(m.offsets.data()), addr(m.columns.data()),
+                                   addr(values.data()), addr(xv), addr(yv), al, be, m.nrow, m.ncol,
+                                   m.nnz, 0});
+  };
+  S* zp = pre ? z.data() : r.data();
+  auto apply = [&]() {
+    run(k.apply, GB, GT, sp_jacobi_apply_t{addr(dinv.data()), addr(r.data()), addr(z.data()), m.nrow, bk.rows});
+  };
+  const sp_cg_scalar_t sc{addr(ctl.data()), addr(scal.data()), addr(hist.data()), rtol, atol, max_iter, 0};
+  mvk(x.data(), r.data(), -1.0, 1.0);
+  if (pre) {
+    run(bk.jacobi, GB, GT, sp_jacobi_inv_t{addr(m.offsets.data()), addr(m.columns.data()),
+                                           addr(values.data()), addr(dinv.data()),
+                                           addr(&ctl[SP_CTL_BAD]), m.nrow, pre == 2, m.nnz, 0});
+    apply();
+  }
+  for (i64 i = 0; i < n; ++i) p[i] = zp[i];
+  dot_into(k, b.data(), b.data(), n, &scal[SP_BB]);
+  dot_into(k, r.data(), zp, n, &scal[SP_RZ]);
+  dot_into(k, r.data(), r.data(), n, &scal[SP_RR]);
+  run(k.init, 1, 1, sc);
+  i32 queued = 0;
+  while (ctl[SP_CTL_STOP] == SP_STOP_NONE && queued < max_iter) {
+    for (i32 j = 0; j < every && queued < max_iter; ++j, ++queued) {
+      mvk(p.data(), ap.data(), 1.0, 0.0);
+      dot_into(k, p.data(), ap.data(), n, &scal[SP_PAP]);
+      run(k.update, GB, GT, sp_cg_vector_t{addr(ctl.data()), addr(scal.data()), addr(x.data()),
+                                           addr(r.data()), addr(p.data()), addr(ap.data()), n});
+      if (pre) apply();
+      dot_into(k, r.data(), zp, n, &scal[SP_RZ_NEW]);
+      dot_into(k, r.data(), r.data(), n, &scal[SP_RR]);
+      run(k.check, 1, 1, sc);
+      run(k.direction, GB, GT, sp_cg_vector_t{addr(ctl.data()), addr(scal.data()), 0, addr(zp),
+                                              addr(p.data()), 0, n});
+    }
+  }
+  printf("%d %d %d\n", ctl[SP_CTL_STOP], ctl[SP_CTL_ITER], ctl[SP_CTL_BAD]);
+  print(hist.data(), (size_t)ctl[SP_CTL_ITER] + 1);
+  print(x.data(), (size_t)n);
+}
+
+// The triplet pipeline of warp-runtime's sparse/mod.rs (from_triplets), with the host's
+// stable sort in place of the radix sort; prints the fault if the report raised one, else
+// the matrix.
+template <typename S> void triplets(const ScalarKernels& k) {
+  const i32 block = (i32)word(), nrow = (i32)word(), ncol = (i32)word(), n = (i32)word();
+  // A device count: a word 1 then the count, or a word 0 (none).
+  i32 dcount = 0;
+  const bool has_count = word() != 0;
+  if (has_count) dcount = (i32)(i64)word();
+  const u64 ca = has_count ? addr(&dcount) : 0;
+  const i32 m = has_count ? sp_count(ca, n) : n;
+  std::vector<i32> rows = ints(n), cols = ints(n);
+  std::vector<S> values = scalars<S>((size_t)n * block);
+  std::vector<u32> keys(n + 1);
+  std::vector<i32> idx(n + 1), pos(n + 1), brows(n + 1), columns(n + 1), offsets(nrow + 1);
+  std::vector<S> out((size_t)n * block + 1);
+  std::vector<i32> bad = {0x7fffffff, 0x7fffffff, 0x7fffffff};
+  const bool two_pass = (u64)nrow * (u64)ncol > 0xffffffffull;
+  run(k.keys, GB, GT, sp_tpl_keys_t{ca, addr(rows.data()), addr(cols.data()), addr(values.data()), n,
+                                    nrow, ncol, block, two_pass, 0, addr(keys.data()),
+                                    addr(idx.data()), addr(bad.data())});
+  fault_t f{};
+  u32 flag = 0;
+  sp_tpl_report_t rep{ca, addr(bad.data()), addr(rows.data()), addr(cols.data()), addr(values.data()),
+                      n, nrow, ncol, block, step_fault_t{}};
+  rep.fault.ctx.fault = &f;
+  rep.fault.ctx.fault_flag = &flag;
+  run(k.report, 1, 1, rep);
+  if (flag) {
+    printf("fault %d %d %lld %lld %lld %lld\n", f.kind, f.arg, (long long)f.index[0],
+           (long long)f.index[1], (long long)f.shape[0], (long long)f.shape[1]);
+    return;
+  }
+  auto sort = [&]() {
+    std::vector<std::pair<u32, i32>> kv(m);
+    for (i32 i = 0; i < m; ++i) kv[i] = {keys[i], idx[i]};
+    std::stable_sort(kv.begin(), kv.end(), [](auto a, auto b) { return a.first < b.first; });
+    for (i32 i = 0; i < m; ++i) { keys[i] = kv[i].first; idx[i] = kv[i].second; }
+  };
+  sort();
+  if (two_pass) {
+    run(wp_sparse_tpl_row_keys, GB, GT, sp_tpl_row_keys_t{ca, addr(rows.data()), addr(cols.data()),
+                                                          addr(idx.data()), addr(keys.data()), n, nrow, ncol, 0});
+    sort();
+  }
+  run(wp_sparse_tpl_heads, GB, GT, sp_tpl_heads_t{ca, addr(rows.data()), addr(cols.data()),
+                                                  addr(idx.data()), addr(pos.data()), n, nrow, ncol, 0});
+  for (i32 i = 1; i < m; ++i) pos[i] += pos[i - 1];
+  run(k.sum, GB, GT, sp_tpl_sum_t{ca, addr(rows.data()), addr(cols.data()), addr(values.data()),
+                                  addr(idx.data()), addr(pos.data()), addr(brows.data()),
+                                  addr(columns.data()), addr(out.data()), n, nrow, ncol, block});
+  run(wp_sparse_bsr_offsets, GB, GT, sp_bsr_offsets_t{ca, addr(brows.data()), addr(pos.data()),
+                                                      addr(offsets.data()), n, nrow});
+  const i32 nnz = offsets[nrow];
+  printf("matrix %d\n", nnz);
+  print(offsets.data(), (size_t)nrow + 1);
+  print(columns.data(), (size_t)nnz);
+  print(out.data(), (size_t)nnz * block);
+}
+
+int main(int argc, char** argv) {
+  if (argc < 2) return 2;
+  FILE* file = fopen(argv[1], "rb");
+  if (!file) return 2;
+  u64 w;
+  while (fread(&w, 8, 1, file) == 1) in.push_back(w);
+  fclose(file);
+  const u64 cmd = word(), kind = word();
+  const ScalarKernels sk[2] = {SK(f32), SK(f64)};
+  const bool f64s = kind == 1 || kind >= 5;
+  switch (cmd) {
+    case 0: f64s ? mv<f64>(BLOCKS[kind]) : mv<f32>(BLOCKS[kind]); break;
+    case 1: kind ? dot<f64>(sk[1]) : dot<f32>(sk[0]); break;
+    case 2: f64s ? cg<f64>(BLOCKS[kind], sk[1]) : cg<f32>(BLOCKS[kind], sk[0]); break;
+    case 3: kind ? triplets<f64>(sk[1]) : triplets<f32>(sk[0]); break;
+    default: return 2;
+  }
+  return 0;
+}
+"#;
+
+/// The driver, compiled once per process (`None` without g++).
+fn driver() -> Option<&'static (std::path::PathBuf, std::path::PathBuf)> {
+    static EXE: OnceLock<Option<(std::path::PathBuf, std::path::PathBuf)>> = OnceLock::new();
+    EXE.get_or_init(|| {
+        host_cpp::gpp().then(|| {
+            host_cpp::compile_driver("sparse", DRIVER, &["WP_SPARSE_BUILD", "WP_SPARSE_EMULATED"])
+        })
+    })
+    .as_ref()
+}
+
+/// Runs the driver on `words` and returns its output lines.
+fn run(name: &str, words: &[u64]) -> Vec<String> {
+    let (dir, exe) = driver().expect("g++");
+    let input = dir.join(format!("{name}.bin"));
+    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+    std::fs::write(&input, bytes).unwrap();
+    let out = Command::new(exe).arg(&input).output().unwrap();
+    assert!(
+        out.status.success(),
+        "driver on {name}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+fn skip(test: &str) -> bool {
+    if driver().is_none() {
+        eprintln!("SKIPPED cuda_sparse_host::{test}: no g++ on this machine");
+        return true;
+    }
+    false
+}
+
+/// A scalar as the driver reads it (f32 in the low bits).
+fn word<S: SparseScalar>(x: S) -> u64 {
+    let b = bytemuck::bytes_of(&x);
+    let mut w = [0u8; 8];
+    w[..b.len()].copy_from_slice(b);
+    u64::from_le_bytes(w)
+}
+
+/// The scalars of `v` as words.
+fn words<B: Block>(v: &[B]) -> Vec<u64> {
+    v.iter()
+        .flat_map(|b| {
+            let s: &[B::Scalar] = bytemuck::cast_slice(bytemuck::bytes_of(b));
+            s.to_vec()
+        })
+        .map(word)
+        .collect()
+}
+
+/// The driver's hex lines as words.
+fn hex(lines: &[String]) -> Vec<u64> {
+    lines
+        .iter()
+        .map(|l| u64::from_str_radix(l, 16).unwrap())
+        .collect()
+}
+
+/// Elements of `T` from their scalars (copied: `T` may be more aligned than `S`).
+fn from_scalars<T: bytemuck::Pod, S: bytemuck::Pod>(s: &[S]) -> Vec<T> {
+    let n = std::mem::size_of_val(s) / std::mem::size_of::<T>();
+    let mut v = vec![<T as bytemuck::Zeroable>::zeroed(); n];
+    bytemuck::cast_slice_mut::<T, u8>(&mut v).copy_from_slice(bytemuck::cast_slice::<S, u8>(s));
+    v
+}
+
+/// A block of `B` from scalars.
+fn block<B: Block>(s: &[B::Scalar]) -> B {
+    let mut b = <B as bytemuck::Zeroable>::zeroed();
+    bytemuck::bytes_of_mut(&mut b).copy_from_slice(bytemuck::cast_slice(s));
+    b
+}
+
+/// The driver's code of a block type (its `BLOCKS` index).
+fn kind<B: Block>() -> u64 {
+    let f64s = std::mem::size_of::<B::Scalar>() == 8;
+    match (B::ROWS, f64s) {
+        (1, false) => 0,
+        (1, true) => 1,
+        (n, false) => n as u64,
+        (n, true) => n as u64 + 3,
+    }
+}
+
+/// Deterministic values in [-1, 1) with a spread of magnitudes.
+fn value(i: usize) -> f64 {
+    let h = (i as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    let u = (h >> 11) as f64 / (1u64 << 53) as f64;
+    (2.0 * u - 1.0) * 10f64.powi((h % 7) as i32 - 3)
+}
+
+/// Deterministic values in [-1, 1).
+fn uniform(i: usize) -> f64 {
+    let h = (i as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    2.0 * ((h >> 11) as f64 / (1u64 << 53) as f64) - 1.0
+}
+
+/// A random `nrow x ncol` matrix of `B` with duplicates, on the CPU, and its words for the
+/// driver (nrow, ncol, nnz, offsets, columns, values).
+fn random_matrix<B: Block>(
+    nrow: usize,
+    ncol: usize,
+    count: usize,
+    seed: usize,
+) -> (Bsr<B>, Vec<u64>) {
+    let cpu = wp::cpu();
+    let rows: Vec<i32> = (0..count).map(|t| ((t * 7 + seed) % nrow) as i32).collect();
+    let cols: Vec<i32> = (0..count)
+        .map(|t| ((t * t + 3 * seed) % ncol) as i32)
+        .collect();
+    let rc = B::ROWS * B::COLS;
+    let vals: Vec<B> = (0..count)
+        .map(|t| {
+            let s: Vec<B::Scalar> = (0..rc)
+                .map(|e| B::Scalar::from_f64(value(seed * 100_000 + t * rc + e)))
+                .collect();
+            block::<B>(&s)
+        })
+        .collect();
+    let a = Bsr::from_triplets(
+        nrow,
+        ncol,
+        &wp::Array::from_slice(&rows, &cpu).unwrap(),
+        &wp::Array::from_slice(&cols, &cpu).unwrap(),
+        &wp::Array::from_slice(&vals, &cpu).unwrap(),
+    )
+    .unwrap();
+    (a.clone(), matrix_words(&a))
+}
+
+fn matrix_words<B: Block>(a: &Bsr<B>) -> Vec<u64> {
+    let nnz = a.nnz().unwrap();
+    let mut w = vec![a.nrow() as u64, a.ncol() as u64, nnz as u64];
+    w.extend(
+        a.offsets()
+            .to_vec()
+            .unwrap()
+            .iter()
+            .map(|&o| o as i64 as u64),
+    );
+    w.extend(
+        a.columns().to_vec().unwrap()[..nnz]
+            .iter()
+            .map(|&c| c as i64 as u64),
+    );
+    w.extend(words(&a.values().to_vec().unwrap()[..nnz]));
+    w
+}
+
+fn mv_case<B: Block>(seed: usize) {
+    let cpu = wp::cpu();
+    let (nrow, ncol) = (37, 23);
+    let (a, mw) = random_matrix::<B>(nrow, ncol, 300, seed);
+    let xs: Vec<B::Scalar> = (0..ncol * B::COLS)
+        .map(|i| B::Scalar::from_f64(value(seed + 7 * i)))
+        .collect();
+    let ys: Vec<B::Scalar> = (0..nrow * B::ROWS)
+        .map(|i| B::Scalar::from_f64(value(seed + 11 * i + 5)))
+        .collect();
+    let x_in: Vec<B::In> = from_scalars(&xs);
+    let y_out: Vec<B::Out> = from_scalars(&ys);
+    for (alpha, beta) in [(0.75, -1.25), (1.0, 0.0), (-2.5, 1.0)] {
+        let y = wp::Array::from_slice(&y_out, &cpu).unwrap();
+        sparse::mv(
+            &a,
+            &wp::Array::from_slice(&x_in, &cpu).unwrap(),
+            &y,
+            B::Scalar::from_f64(alpha),
+            B::Scalar::from_f64(beta),
+        )
+        .unwrap();
+        let got_y = y.to_vec().unwrap();
+        let want: Vec<u64> = bytemuck::cast_slice::<B::Out, B::Scalar>(&got_y)
+            .iter()
+            .map(|&v| word(v))
+            .collect();
+        let mut input = vec![0, kind::<B>()];
+        input.extend(&mw);
+        input.extend(xs.iter().map(|&v| word(v)));
+        input.extend(ys.iter().map(|&v| word(v)));
+        input.extend([alpha.to_bits(), beta.to_bits()]);
+        let got = hex(&run(&format!("mv{}", kind::<B>()), &input));
+        assert_eq!(
+            got,
+            want,
+            "{}: alpha {alpha}, beta {beta}",
+            std::any::type_name::<B>()
+        );
+    }
+}
+
+/// `y = alpha A x + beta y` of every block type, at three (alpha, beta): the same bits as the
+/// CPU backend.
+#[test]
+fn mv_matches_the_cpu_bit_for_bit() {
+    if skip("mv_matches_the_cpu_bit_for_bit") {
+        return;
+    }
+    mv_case::<f32>(1);
+    mv_case::<f64>(2);
+    mv_case::<Mat2>(3);
+    mv_case::<Mat3>(4);
+    mv_case::<Mat4>(5);
+    mv_case::<DMat2>(6);
+    mv_case::<DMat3>(7);
+    mv_case::<DMat4>(8);
+}
+
+fn dot_case<S: SparseScalar + Block<Scalar = S>>(n: usize) {
+    let cpu = wp::cpu();
+    // Magnitudes of one order (values' spread would let the largest products hide the order
+    // of the others' additions).
+    let a: Vec<S> = (0..n).map(|i| S::from_f64(uniform(3 * i))).collect();
+    let b: Vec<S> = (0..n).map(|i| S::from_f64(uniform(3 * i + 1))).collect();
+    let out = wp::Array::from_slice(&[S::ZERO], &cpu).unwrap();
+    sparse::dot(
+        &wp::Array::from_slice(&a, &cpu).unwrap(),
+        &wp::Array::from_slice(&b, &cpu).unwrap(),
+        &out,
+    )
+    .unwrap();
+    let want = word(out.to_vec().unwrap()[0]);
+    let mut input = vec![1, (std::mem::size_of::<S>() == 8) as u64, n as u64];
+    input.extend(a.iter().map(|&v| word(v)));
+    input.extend(b.iter().map(|&v| word(v)));
+    let got = hex(&run(&format!("dot{n}"), &input));
+    assert_eq!(got, [want], "{} n {n}", std::any::type_name::<S>());
+}
+
+/// The fixed-tree dot product (two blocks looping over up to five chunks, then one block over
+/// the partials): the same bits as the CPU backend.
+#[test]
+fn dot_matches_the_cpu_bit_for_bit() {
+    if skip("dot_matches_the_cpu_bit_for_bit") {
+        return;
+    }
+    for n in [0, 1, 255, 4096, 4097, 19_000] {
+        dot_case::<f32>(n);
+        dot_case::<f64>(n);
+    }
+}
+
+/// The 2-D Laplacian on an `m x m` grid, its entries times `k` (a square block).
+fn poisson<B: Block>(m: usize, k: B, neg: B) -> Bsr<B> {
+    let cpu = wp::cpu();
+    let (mut r, mut c, mut v) = (vec![], vec![], vec![]);
+    for i in 0..m * m {
+        r.push(i as i32);
+        c.push(i as i32);
+        v.push(k);
+        let (y, x) = (i / m, i % m);
+        for (dy, dx) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (yy, xx) = (y as i64 + dy, x as i64 + dx);
+            if (0..m as i64).contains(&yy) && (0..m as i64).contains(&xx) {
+                r.push(i as i32);
+                c.push((yy as usize * m + xx as usize) as i32);
+                v.push(neg);
+            }
+        }
+    }
+    Bsr::from_triplets(
+        m * m,
+        m * m,
+        &wp::Array::from_slice(&r, &cpu).unwrap(),
+        &wp::Array::from_slice(&c, &cpu).unwrap(),
+        &wp::Array::from_slice(&v, &cpu).unwrap(),
+    )
+    .unwrap()
+}
+
+fn cg_case<B: sparse::SquareBlock>(a: &Bsr<B>, pre: Precond, o: SolveOptions, b: Vec<B::Scalar>) {
+    let cpu = wp::cpu();
+    let n = b.len();
+    let x0: Vec<B::Scalar> = (0..n)
+        .map(|i| B::Scalar::from_f64(value(i) * 0.01))
+        .collect();
+    let x = wp::Array::from_slice(&x0, &cpu).unwrap();
+    let rep = sparse::cg(a, &wp::Array::from_slice(&b, &cpu).unwrap(), &x, pre, &o).unwrap();
+    let mut input = vec![2, kind::<B>()];
+    input.extend(matrix_words(a));
+    input.extend(b.iter().map(|&v| word(v)));
+    input.extend(x0.iter().map(|&v| word(v)));
+    let code = match pre {
+        Precond::None => 0,
+        Precond::Jacobi => 1,
+        Precond::PointJacobi => 2,
+    };
+    input.extend([
+        code,
+        o.rtol.to_bits(),
+        o.atol.to_bits(),
+        o.max_iter as u64,
+        o.check_every as u64,
+    ]);
+    let out = run(&format!("cg{}_{code}", kind::<B>()), &input);
+    let head: Vec<i64> = out[0].split(' ').map(|t| t.parse().unwrap()).collect();
+    let stop = match rep.stop {
+        Stop::Converged => 1,
+        Stop::MaxIterations => 2,
+        Stop::NonFinite => 3,
+        Stop::Breakdown { .. } => 4,
+        Stop::SingularPreconditioner { .. } => 5,
+    };
+    let what = format!("{} {pre:?}", std::any::type_name::<B>());
+    assert_eq!(
+        (head[0], head[1] as usize),
+        (stop, rep.iterations),
+        "{what}: {rep:?}"
+    );
+    let words_out = hex(&out[1..]);
+    let (hist, xs) = words_out.split_at(rep.iterations + 1);
+    let want_hist: Vec<u64> = rep
+        .history
+        .iter()
+        .map(|&h| word(B::Scalar::from_f64(h)))
+        .collect();
+    assert_eq!(hist, want_hist, "{what}: history");
+    let want_x: Vec<u64> = x.to_vec().unwrap().iter().map(|&v| word(v)).collect();
+    assert_eq!(xs, want_x, "{what}: x");
+}
+
+/// Whole CG solves through the C++ steps (the solver's loop replayed by the driver): the
+/// same stop, iterations, history and x bits as the CPU backend; f64 and f32 scalars,
+/// `DMat3`/`Mat2` blocks, no preconditioner, block and point Jacobi, a run stopped by
+/// `max_iter`, and a singular preconditioner.
+#[test]
+fn cg_matches_the_cpu_bit_for_bit() {
+    if skip("cg_matches_the_cpu_bit_for_bit") {
+        return;
+    }
+    let o = SolveOptions {
+        rtol: 1e-8,
+        check_every: 4,
+        ..Default::default()
+    };
+    let a = poisson::<f64>(8, 4.0, -1.0);
+    let b: Vec<f64> = (0..64).map(value).collect();
+    for pre in [Precond::None, Precond::Jacobi, Precond::PointJacobi] {
+        cg_case(&a, pre, o, b.clone());
+    }
+    let a32 = poisson::<f32>(8, 4.5, -1.0);
+    let b32: Vec<f32> = b.iter().map(|&v| v as f32).collect();
+    cg_case(
+        &a32,
+        Precond::Jacobi,
+        SolveOptions { rtol: 1e-4, ..o },
+        b32.clone(),
+    );
+    cg_case(&a32, Precond::None, SolveOptions { max_iter: 5, ..o }, b32);
+    let k = DMat3::from_cols_array(&[4.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 2.0]);
+    let a3 = poisson::<DMat3>(5, k * 4.0, -k);
+    let b3: Vec<f64> = (0..75).map(|i| value(i + 9)).collect();
+    cg_case(&a3, Precond::Jacobi, o, b3.clone());
+    cg_case(&a3, Precond::PointJacobi, o, b3);
+    let k2 = Mat2::from_cols_array(&[2.0, 0.5, 0.5, 1.0]);
+    let a2 = poisson::<Mat2>(4, k2 * 4.0, -k2);
+    let b2: Vec<f32> = (0..32).map(|i| value(i) as f32).collect();
+    cg_case(&a2, Precond::Jacobi, SolveOptions { rtol: 1e-4, ..o }, b2);
+    // A singular diagonal block: the solve stops before iterating, on both.
+    let sing = Mat4::from_cols_array(&[1.0; 16]);
+    let a4 = poisson::<Mat4>(2, sing, Mat4::IDENTITY);
+    cg_case(&a4, Precond::Jacobi, o, vec![1.0f32; 16]);
+}
+
+fn triplet_words<B: Block>(
+    nrow: usize,
+    ncol: usize,
+    rows: &[i32],
+    cols: &[i32],
+    vals: &[B],
+    device_count: Option<i32>,
+) -> Vec<u64> {
+    let mut w = vec![
+        3,
+        (std::mem::size_of::<B::Scalar>() == 8) as u64,
+        (B::ROWS * B::COLS) as u64,
+        nrow as u64,
+        ncol as u64,
+        rows.len() as u64,
+    ];
+    match device_count {
+        Some(c) => w.extend([1, c as i64 as u64]),
+        None => w.push(0),
+    }
+    w.extend(rows.iter().map(|&r| r as i64 as u64));
+    w.extend(cols.iter().map(|&c| c as i64 as u64));
+    w.extend(words(vals));
+    w
+}
+
+fn triplet_case<B: Block>(
+    nrow: usize,
+    ncol: usize,
+    count: usize,
+    seed: usize,
+    device_count: Option<i32>,
+) {
+    let cpu = wp::cpu();
+    // The triplets of random_matrix.
+    let rows: Vec<i32> = (0..count).map(|t| ((t * 7 + seed) % nrow) as i32).collect();
+    let cols: Vec<i32> = (0..count)
+        .map(|t| ((t * t + 3 * seed) % ncol) as i32)
+        .collect();
+    let rc = B::ROWS * B::COLS;
+    let vals: Vec<B> = (0..count)
+        .map(|t| {
+            let s: Vec<B::Scalar> = (0..rc)
+                .map(|e| B::Scalar::from_f64(value(seed * 100_000 + t * rc + e)))
+                .collect();
+            block::<B>(&s)
+        })
+        .collect();
+    let (r, c, v) = (
+        wp::Array::from_slice(&rows, &cpu).unwrap(),
+        wp::Array::from_slice(&cols, &cpu).unwrap(),
+        wp::Array::from_slice(&vals, &cpu).unwrap(),
+    );
+    let a = match device_count {
+        Some(k) => {
+            let k = wp::Array::from_slice(&[k], &cpu).unwrap();
+            Bsr::from_triplets_n(nrow, ncol, &r, &c, &v, &k).unwrap()
+        }
+        None => Bsr::from_triplets(nrow, ncol, &r, &c, &v).unwrap(),
+    };
+    let out = run(
+        &format!("tpl{}_{nrow}", kind::<B>()),
+        &triplet_words(nrow, ncol, &rows, &cols, &vals, device_count),
+    );
+    let nnz = a.nnz().unwrap();
+    assert_eq!(out[0], format!("matrix {nnz}"));
+    let mut want: Vec<u64> = a
+        .offsets()
+        .to_vec()
+        .unwrap()
+        .iter()
+        .map(|&o| o as u32 as u64)
+        .collect();
+    want.extend(
+        a.columns().to_vec().unwrap()[..nnz]
+            .iter()
+            .map(|&c| c as u32 as u64),
+    );
+    want.extend(words(&a.values().to_vec().unwrap()[..nnz]));
+    assert_eq!(
+        hex(&out[1..]),
+        want,
+        "{} {nrow} x {ncol}",
+        std::any::type_name::<B>()
+    );
+}
+
+/// The triplet pipeline's C++ steps (keys, heads, run sums, offsets; one sort and two): the
+/// same matrix as the CPU backend, bit for bit; and the same fault for a bad triplet.
+#[test]
+fn triplets_match_the_cpu_bit_for_bit() {
+    if skip("triplets_match_the_cpu_bit_for_bit") {
+        return;
+    }
+    triplet_case::<f32>(31, 17, 2000, 1, None);
+    triplet_case::<f64>(5, 300, 1000, 2, None);
+    triplet_case::<Mat3>(12, 9, 700, 3, None);
+    triplet_case::<DMat2>(8, 8, 300, 4, None);
+    // Two sorts (more cells than 32 bits): column, then row.
+    triplet_case::<f32>(70_000, 70_000, 500, 5, None);
+    // A device count: the first 1234 of 2000 triplets, and none of them.
+    triplet_case::<f32>(31, 17, 2000, 1, Some(1234));
+    triplet_case::<Mat3>(12, 9, 700, 3, Some(0));
+    triplet_case::<f32>(70_000, 70_000, 500, 5, Some(321));
+    // Faults: the CPU's error and the C++ report's record agree.
+    let cpu = wp::cpu();
+    for (rows, cols, vals) in [
+        (vec![0, 1, 9, 0], vec![0, 1, 1, -3], vec![1.0f32; 4]),
+        (vec![0, 1, 1, 0], vec![0, 1, 2, 0], vec![1.0f32; 4]),
+        (
+            vec![0, 1, 1, 0],
+            vec![0, 1, 1, 0],
+            vec![1.0, f32::NAN, 1.0, 1.0],
+        ),
+    ] {
+        let e = Bsr::from_triplets(
+            2,
+            2,
+            &wp::Array::from_slice(&rows, &cpu).unwrap(),
+            &wp::Array::from_slice(&cols, &cpu).unwrap(),
+            &wp::Array::from_slice(&vals, &cpu).unwrap(),
+        )
+        .unwrap_err();
+        let want = match e {
+            wp::Error::Fault(wp::Fault {
+                kind: wp::FaultKind::OutOfBounds { arg, index, shape },
+                ..
+            }) => format!(
+                "fault 1 {} {} {} {} {}",
+                ["rows", "columns"].iter().position(|a| *a == arg).unwrap(),
+                index[0],
+                index[1],
+                shape[0],
+                shape[1]
+            ),
+            wp::Error::Fault(wp::Fault {
+                kind: wp::FaultKind::NonFiniteInput { arg, index, values },
+                ..
+            }) => {
+                assert_eq!(arg, "values");
+                format!("fault 7 2 {index} {} 0 0", values[0].to_bits() as i64)
+            }
+            e => panic!("{e}"),
+        };
+        let out = run("tplfault", &triplet_words(2, 2, &rows, &cols, &vals, None));
+        assert_eq!(out, [want]);
+    }
+    // A device count outside 0..=4 (of 4 triplets): out of bounds on `count` (argument 3).
+    for k in [5, -1] {
+        let (r, c, v) = ([0, 1, 1, 0], [0, 1, 1, 0], [1.0f32; 4]);
+        let e = Bsr::from_triplets_n(
+            2,
+            2,
+            &wp::Array::from_slice(&r, &cpu).unwrap(),
+            &wp::Array::from_slice(&c, &cpu).unwrap(),
+            &wp::Array::from_slice(&v, &cpu).unwrap(),
+            &wp::Array::from_slice(&[k], &cpu).unwrap(),
+        )
+        .unwrap_err();
+        match e {
+            wp::Error::Fault(wp::Fault {
+                kind: wp::FaultKind::OutOfBounds { arg, index, shape },
+                ..
+            }) => assert_eq!((arg, index, shape), ("count", vec![k as i128], vec![5])),
+            e => panic!("{e}"),
+        }
+        let out = run("tplcount", &triplet_words(2, 2, &r, &c, &v, Some(k)));
+        assert_eq!(out, [format!("fault 1 3 {k} 0 5 0")]);
+    }
+}

@@ -1,0 +1,1077 @@
+//! The sparse tier (`warp_runtime::sparse`, the facade's `sparse` feature; the suite's
+//! dev-dependency turns it on): BSR assembly from triplets against a dense host reference,
+//! bad triplets, `mv` and `dot` against references, and CG on a 2-D Poisson matrix. On a GPU
+//! every result is also compared with the CPU's bit for bit (the tier promises the same bits).
+
+use glam::{DMat3, DVec3, Mat3, Vec3};
+use warp_lang as wp;
+use warp_runtime::sparse::{self, Block, Bsr, Mode, Precond, SolveOptions, Stop};
+use wp::FaultKind;
+
+use crate::{arr, host};
+
+backend_tests!(
+    triplets_f32_sum_duplicates_in_order,
+    triplets_f64_sum_duplicates_in_order,
+    triplets_mat3_sum_duplicates_in_order,
+    triplets_two_pass_sort,
+    triplets_empty_and_empty_rows,
+    triplets_counts,
+    triplets_out_of_range_is_a_fault,
+    triplets_non_finite_is_a_fault,
+    triplets_bad_arguments,
+    mv_matches_dense_reference,
+    mv_mat3_matches_dense_reference,
+    mv_beta_zero_does_not_read_y,
+    mv_shape_mismatch,
+    mv_survives_overwritten_structure,
+    dot_fixed_tree,
+    mv_in_a_capture,
+    cg_poisson_point_jacobi_f64,
+    cg_poisson_f32,
+    cg_block_jacobi_dmat3,
+    cg_max_iterations_is_ok,
+    cg_graph_mode_matches_host_mode,
+    cg_singular_preconditioner,
+    cg_breakdown_and_non_finite,
+    cg_bad_arguments,
+);
+
+/// A small deterministic generator (xorshift64*), so the cases repeat.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+    /// In [-1, 1).
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
+
+/// `count` random triplets of an `nrow x ncol` matrix, with many duplicates (positions drawn
+/// from a few rows and columns).
+fn random_triplets<T>(
+    nrow: usize,
+    ncol: usize,
+    count: usize,
+    seed: u64,
+    value: impl Fn(&mut Rng) -> T,
+) -> (Vec<i32>, Vec<i32>, Vec<T>) {
+    let mut g = Rng(seed);
+    let (mut r, mut c, mut v) = (vec![], vec![], vec![]);
+    for _ in 0..count {
+        r.push(g.below(nrow) as i32);
+        c.push(g.below(ncol) as i32);
+        v.push(value(&mut g));
+    }
+    (r, c, v)
+}
+
+/// The reference assembly: each position's triplets summed in ascending triplet order (the
+/// first value, then `+` each next), as `(row, col) -> block`, sorted.
+fn reference<T: Copy>(
+    rows: &[i32],
+    cols: &[i32],
+    vals: &[T],
+    add: impl Fn(T, T) -> T,
+) -> std::collections::BTreeMap<(i32, i32), T> {
+    let mut m = std::collections::BTreeMap::new();
+    for t in 0..rows.len() {
+        m.entry((rows[t], cols[t]))
+            .and_modify(|s| *s = add(*s, vals[t]))
+            .or_insert(vals[t]);
+    }
+    m
+}
+
+/// The matrix's blocks as `(row, col) -> block`, checking the structure on the way: offsets
+/// start at 0 and never decrease, columns ascend strictly within a row and lie in range.
+fn blocks<B: Block + Copy>(a: &Bsr<B>) -> std::collections::BTreeMap<(i32, i32), B> {
+    let off = host(a.offsets());
+    let cols = host(a.columns());
+    let vals = host(a.values());
+    assert_eq!(off.len(), a.nrow() + 1);
+    assert_eq!(off[0], 0);
+    assert_eq!(a.nnz().unwrap(), off[a.nrow()] as usize);
+    assert!(off[a.nrow()] as usize <= a.nnz_bound());
+    let mut m = std::collections::BTreeMap::new();
+    for r in 0..a.nrow() {
+        assert!(off[r] <= off[r + 1], "offsets decrease at row {r}: {off:?}");
+        for k in off[r] as usize..off[r + 1] as usize {
+            assert!((0..a.ncol() as i32).contains(&cols[k]));
+            if k > off[r] as usize {
+                assert!(
+                    cols[k - 1] < cols[k],
+                    "row {r}: columns {:?}",
+                    &cols[off[r] as usize..]
+                );
+            }
+            m.insert((r as i32, cols[k]), vals[k]);
+        }
+    }
+    m
+}
+
+/// Assembles on `dev` and compares with the reference exactly (the sums run in the same order
+/// on every device, so even float sums are compared bit for bit: `to_bits` of each scalar).
+fn check_triplets<B: Block + Copy + std::fmt::Debug>(
+    dev: &wp::Device,
+    nrow: usize,
+    ncol: usize,
+    (rows, cols, vals): (Vec<i32>, Vec<i32>, Vec<B>),
+    add: impl Fn(B, B) -> B,
+    bits: impl Fn(&B) -> Vec<u64>,
+) {
+    let a = Bsr::from_triplets(
+        nrow,
+        ncol,
+        &arr(&rows, dev),
+        &arr(&cols, dev),
+        &arr(&vals, dev),
+    )
+    .unwrap();
+    assert_eq!((a.nrow(), a.ncol()), (nrow, ncol));
+    let got = blocks(&a);
+    let want = reference(&rows, &cols, &vals, add);
+    assert_eq!(
+        got.keys().collect::<Vec<_>>(),
+        want.keys().collect::<Vec<_>>(),
+        "the pattern"
+    );
+    for (k, w) in &want {
+        assert_eq!(
+            bits(&got[k]),
+            bits(w),
+            "block {k:?}: got {:?}, want {w:?}",
+            got[k]
+        );
+    }
+}
+
+fn triplets_f32_sum_duplicates_in_order(dev: &wp::Device) {
+    // Values of very different magnitudes: a sum in another order would differ in the bits.
+    let t = random_triplets(13, 7, 3000, 1, |g| {
+        (g.unit() * 10f64.powi(g.below(12) as i32 - 6)) as f32
+    });
+    check_triplets(dev, 13, 7, t, |a, b| a + b, |v| vec![v.to_bits() as u64]);
+}
+
+fn triplets_f64_sum_duplicates_in_order(dev: &wp::Device) {
+    let t = random_triplets(40, 50, 20_000, 2, |g| {
+        g.unit() * 10f64.powi(g.below(30) as i32 - 15)
+    });
+    check_triplets(dev, 40, 50, t, |a, b| a + b, |v| vec![v.to_bits()]);
+}
+
+fn triplets_mat3_sum_duplicates_in_order(dev: &wp::Device) {
+    let t = random_triplets(9, 11, 2000, 3, |g| {
+        Mat3::from_cols_array(&std::array::from_fn(|_| {
+            (g.unit() * 10f64.powi(g.below(8) as i32 - 4)) as f32
+        }))
+    });
+    check_triplets(
+        dev,
+        9,
+        11,
+        t,
+        |a, b| a + b,
+        |m| {
+            m.to_cols_array()
+                .iter()
+                .map(|x| x.to_bits() as u64)
+                .collect()
+        },
+    );
+}
+
+/// More cells than a 32-bit key holds (70000 x 70000 blocks): sorted by column, then stably
+/// by row; the result is the same as the one-sort path's.
+fn triplets_two_pass_sort(dev: &wp::Device) {
+    let n = 70_000;
+    let mut t = random_triplets(n, n, 500, 4, |g| g.unit() as f32);
+    // Duplicates far apart, and positions that differ only in the row or only in the column.
+    t.0.extend([69_999, 69_999, 0, 69_999, 5]);
+    t.1.extend([69_999, 0, 69_999, 69_999, 5]);
+    t.2.extend([1.0, 2.0, 3.0, 4.0, 0.1]);
+    check_triplets(dev, n, n, t, |a, b| a + b, |v| vec![v.to_bits() as u64]);
+}
+
+/// No triplets: offsets all zero; rows without triplets: empty rows.
+fn triplets_empty_and_empty_rows(dev: &wp::Device) {
+    let none = arr::<i32>(&[], dev);
+    let a = Bsr::<f32>::from_triplets(4, 3, &none, &none, &arr(&[], dev)).unwrap();
+    assert_eq!(host(a.offsets()), [0; 5]);
+    assert_eq!(a.nnz().unwrap(), 0);
+    let a = Bsr::from_triplets(
+        6,
+        6,
+        &arr(&[4, 1, 4], dev),
+        &arr(&[0, 5, 0], dev),
+        &arr(&[1.0f64, 2.0, 3.0], dev),
+    )
+    .unwrap();
+    assert_eq!(host(a.offsets()), [0, 0, 1, 1, 1, 2, 2]);
+    assert_eq!(&host(a.columns())[..2], [5, 0]);
+    assert_eq!(&host(a.values())[..2], [2.0, 4.0]);
+}
+
+/// The fault of an assembly (on a GPU the step raises it: synchronising reports it).
+fn assembly_fault(
+    dev: &wp::Device,
+    nrow: usize,
+    ncol: usize,
+    rows: &[i32],
+    cols: &[i32],
+    vals: &[f32],
+) -> wp::Fault {
+    let r = Bsr::from_triplets(
+        nrow,
+        ncol,
+        &arr(rows, dev),
+        &arr(cols, dev),
+        &arr(vals, dev),
+    )
+    .and_then(|a| a.nnz());
+    match r {
+        Err(wp::Error::Fault(f)) => f,
+        other => panic!("expected a fault, got {other:?}"),
+    }
+}
+
+fn triplets_out_of_range_is_a_fault(dev: &wp::Device) {
+    // Triplet 3 has row 5 of 4 (and triplet 4 a column of -1: the smaller t is reported).
+    let f = assembly_fault(dev, 4, 3, &[0, 1, 2, 5, 0], &[0, 1, 2, 0, -1], &[1.0; 5]);
+    assert_eq!(f.kernel, "sparse::from_triplets");
+    assert_eq!(
+        f.kind,
+        FaultKind::OutOfBounds {
+            arg: "rows",
+            index: vec![3, 5],
+            shape: vec![5, 4]
+        }
+    );
+    let f = assembly_fault(dev, 4, 3, &[0, 1, 2, 3], &[0, 1, 3, 0], &[1.0; 4]);
+    assert_eq!(
+        f.kind,
+        FaultKind::OutOfBounds {
+            arg: "columns",
+            index: vec![2, 3],
+            shape: vec![4, 3]
+        }
+    );
+    assert!(f.to_string().contains("sparse::from_triplets"), "{f}");
+}
+
+fn triplets_non_finite_is_a_fault(dev: &wp::Device) {
+    let f = assembly_fault(
+        dev,
+        2,
+        2,
+        &[0, 1, 1, 0],
+        &[0, 1, 1, 1],
+        &[1.0, 2.0, f32::INFINITY, f32::NAN],
+    );
+    match f.kind {
+        FaultKind::NonFiniteInput { arg, index, values } => {
+            assert_eq!((arg, index), ("values", 2));
+            assert_eq!(values, [f64::INFINITY]);
+        }
+        k => panic!("{k:?}"),
+    }
+    // A NaN inside a Mat3 block names its triplet.
+    let mut m = Mat3::IDENTITY;
+    m.y_axis.z = f32::NAN;
+    let r = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[Mat3::IDENTITY, m], dev),
+    )
+    .and_then(|a| a.nnz());
+    match r {
+        Err(wp::Error::Fault(f)) => match f.kind {
+            FaultKind::NonFiniteInput { arg, index, values } => {
+                assert_eq!((arg, index), ("values", 1));
+                assert!(values[0].is_nan());
+            }
+            k => panic!("{k:?}"),
+        },
+        other => panic!("{other:?}"),
+    }
+}
+
+fn triplets_bad_arguments(dev: &wp::Device) {
+    let e = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0], dev),
+        &arr(&[1.0f32, 2.0], dev),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("sparse::from_triplets") && e.contains("[2], [1] and [2]"),
+        "{e}"
+    );
+    let e = Bsr::from_triplets(
+        usize::MAX / 2,
+        2,
+        &arr(&[0], dev),
+        &arr(&[0], dev),
+        &arr(&[1.0f32], dev),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`nrow`"), "{e}");
+    if !dev.is_cpu() {
+        let e = Bsr::from_triplets(
+            2,
+            2,
+            &arr(&[0], &wp::cpu()),
+            &arr(&[0], dev),
+            &arr(&[1.0f32], dev),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("rows"), "{e}");
+    }
+}
+
+/// The 2-D 5-point Laplacian on an `m x m` grid (Dirichlet boundary): 4 on the diagonal, -1
+/// to each neighbour, as triplets (the diagonal split into two triplets of 3 and 1, so that
+/// assembly sums duplicates).
+fn poisson(m: usize) -> (Vec<i32>, Vec<i32>, Vec<f64>) {
+    let (mut r, mut c, mut v) = (vec![], vec![], vec![]);
+    let id = |i: usize, j: usize| (i * m + j) as i32;
+    for i in 0..m {
+        for j in 0..m {
+            r.extend([id(i, j), id(i, j)]);
+            c.extend([id(i, j), id(i, j)]);
+            v.extend([3.0, 1.0]);
+            let mut nb = vec![];
+            if i > 0 {
+                nb.push(id(i - 1, j));
+            }
+            if i + 1 < m {
+                nb.push(id(i + 1, j));
+            }
+            if j > 0 {
+                nb.push(id(i, j - 1));
+            }
+            if j + 1 < m {
+                nb.push(id(i, j + 1));
+            }
+            for k in nb {
+                r.push(id(i, j));
+                c.push(k);
+                v.push(-1.0);
+            }
+        }
+    }
+    (r, c, v)
+}
+
+/// `alpha A x + beta y` from the blocks, in f64 (`get(block, i, j)` reads an entry).
+fn dense_mv<B: Block + Copy>(
+    a: &Bsr<B>,
+    get: impl Fn(&B, usize, usize) -> f64,
+    x: &[f64],
+    alpha: f64,
+    beta: f64,
+    y: &[f64],
+) -> Vec<f64> {
+    let (rr, cc) = (B::ROWS, B::COLS);
+    let mut out: Vec<f64> = y.iter().map(|v| beta * v).collect();
+    for ((r, c), b) in blocks(a) {
+        for i in 0..rr {
+            for j in 0..cc {
+                out[r as usize * rr + i] += alpha * get(&b, i, j) * x[c as usize * cc + j];
+            }
+        }
+    }
+    out
+}
+
+/// On a GPU, `f` gives the same bits as on the CPU.
+fn same_on_cpu<T: PartialEq + std::fmt::Debug>(
+    dev: &wp::Device,
+    what: &str,
+    f: impl Fn(&wp::Device) -> T,
+) {
+    if !dev.is_cpu() {
+        assert_eq!(
+            f(dev),
+            f(&wp::cpu()),
+            "{what}: the GPU differs from the CPU"
+        );
+    }
+}
+
+fn mv_matches_dense_reference(dev: &wp::Device) {
+    let (r, c, v) = random_triplets(50, 30, 600, 5, |g| g.unit() as f32);
+    let run = |d: &wp::Device| {
+        let a = Bsr::from_triplets(50, 30, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let mut g = Rng(6);
+        let x: Vec<f32> = (0..30).map(|_| g.unit() as f32).collect();
+        let y0: Vec<f32> = (0..50).map(|_| g.unit() as f32).collect();
+        let y = arr(&y0, d);
+        sparse::mv(&a, &arr(&x, d), &y, 0.5f32, -2.0).unwrap();
+        let got = host(&y);
+        let f64s = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
+        let want = dense_mv(&a, |b, _, _| *b as f64, &f64s(&x), 0.5, -2.0, &f64s(&y0));
+        // f32 rounding of at most ~25 products per row of magnitude <= 1 (random duplicates
+        // summed first): 1e-5 absolute is ~100 ulps of the row sums' size.
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!((*g as f64 - w).abs() <= 1e-5, "row {i}: {g} vs {w}");
+        }
+        got.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    run(dev);
+    same_on_cpu(dev, "mv f32", run);
+}
+
+fn mv_mat3_matches_dense_reference(dev: &wp::Device) {
+    let (r, c, v) = random_triplets(20, 15, 200, 7, |g| {
+        Mat3::from_cols_array(&std::array::from_fn(|_| g.unit() as f32))
+    });
+    let run = |d: &wp::Device| {
+        let a = Bsr::from_triplets(20, 15, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let mut g = Rng(8);
+        let x: Vec<Vec3> = (0..15)
+            .map(|_| Vec3::new(g.unit() as f32, g.unit() as f32, g.unit() as f32))
+            .collect();
+        let y = arr(&[Vec3::ZERO; 20], d);
+        sparse::mv(&a, &arr(&x, d), &y, 1.0, 0.0).unwrap();
+        let got = host(&y);
+        let xs: Vec<f64> = x
+            .iter()
+            .flat_map(|p| p.to_array())
+            .map(|v| v as f64)
+            .collect();
+        // glam's matrices index (column, row): entry (i, j) is col(j)[i].
+        let want = dense_mv(&a, |b, i, j| b.col(j)[i] as f64, &xs, 1.0, 0.0, &[0.0; 60]);
+        for (k, w) in want.iter().enumerate() {
+            let g = got[k / 3][k % 3] as f64;
+            // As above, with 3 products per block entry of a row: 1e-5 absolute.
+            assert!((g - w).abs() <= 1e-5, "scalar row {k}: {g} vs {w}");
+        }
+        got.iter()
+            .flat_map(|p| p.to_array().map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    run(dev);
+    same_on_cpu(dev, "mv Mat3", run);
+}
+
+fn mv_beta_zero_does_not_read_y(dev: &wp::Device) {
+    let a = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[1, 0], dev),
+        &arr(&[2.0f64, 3.0], dev),
+    )
+    .unwrap();
+    let y = arr(&[f64::NAN, f64::NAN], dev);
+    sparse::mv(&a, &arr(&[1.0, 10.0], dev), &y, 1.0, 0.0).unwrap();
+    assert_eq!(host(&y), [20.0, 3.0]);
+    // beta != 0 reads it: a NaN stays.
+    let y = arr(&[f64::NAN, 1.0], dev);
+    sparse::mv(&a, &arr(&[1.0, 10.0], dev), &y, 1.0, 1.0).unwrap();
+    let got = host(&y);
+    assert!(got[0].is_nan() && got[1] == 4.0, "{got:?}");
+}
+
+fn mv_shape_mismatch(dev: &wp::Device) {
+    let a = Bsr::from_triplets(
+        3,
+        2,
+        &arr(&[0], dev),
+        &arr(&[1], dev),
+        &arr(&[DMat3::IDENTITY], dev),
+    )
+    .unwrap();
+    let e = sparse::mv(
+        &a,
+        &arr(&[DVec3::ONE; 3], dev),
+        &arr(&[DVec3::ZERO; 3], dev),
+        1.0,
+        0.0,
+    )
+    .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(e, wp::Error::InvalidArgument { .. })
+            && msg.contains("sparse::mv")
+            && msg.contains("`x` has shape [3]")
+            && msg.contains("3 x 2 blocks"),
+        "{msg}"
+    );
+    let e = sparse::mv(
+        &a,
+        &arr(&[DVec3::ONE; 2], dev),
+        &arr(&[DVec3::ZERO; 2], dev),
+        1.0,
+        0.0,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`y` has shape [2]"), "{e}");
+    let sq = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0], dev),
+        &arr(&[1], dev),
+        &arr(&[DMat3::IDENTITY], dev),
+    )
+    .unwrap();
+    let x = arr(&[DVec3::ONE; 2], dev);
+    let e = sparse::mv(&sq, &x, &x, 1.0, 0.0).unwrap_err().to_string();
+    assert!(e.contains("overlap"), "{e}");
+    // y over the matrix's own values (f32 blocks: the same element type).
+    let f = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[1.0f32, 2.0], dev),
+    )
+    .unwrap();
+    let e = sparse::mv(
+        &f,
+        &arr(&[1.0f32; 2], dev),
+        &f.values().view(0..2).unwrap(),
+        1.0,
+        0.0,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`y` overlaps the matrix"), "{e}");
+}
+
+fn dot_fixed_tree(dev: &wp::Device) {
+    for n in [0usize, 1, 255, 4096, 4097, 70_001] {
+        let run = |d: &wp::Device| {
+            let mut g = Rng(n as u64 + 9);
+            let a: Vec<f32> = (0..n).map(|_| g.unit() as f32).collect();
+            let b: Vec<f32> = (0..n).map(|_| g.unit() as f32).collect();
+            let out = arr(&[f32::NAN], d);
+            sparse::dot(&arr(&a, d), &arr(&b, d), &out).unwrap();
+            let got = host(&out)[0];
+            let want: f64 = a.iter().zip(&b).map(|(x, y)| *x as f64 * *y as f64).sum();
+            // f32 products and sums of n terms of magnitude <= 1, in a tree of depth
+            // log2(n) + 16 at most: 1e-6 * (|terms| sum) bounds the rounding.
+            let scale: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (*x as f64 * *y as f64).abs())
+                .sum();
+            assert!(
+                (got as f64 - want).abs() <= 1e-6 * scale.max(1.0),
+                "n {n}: {got} vs {want}"
+            );
+            got.to_bits()
+        };
+        run(dev);
+        same_on_cpu(dev, &format!("dot of {n}"), run);
+    }
+    let e = sparse::dot(
+        &arr(&[1.0f64; 3], dev),
+        &arr(&[1.0; 2], dev),
+        &arr(&[0.0], dev),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("sparse::dot") && e.contains("[3] and [2]"),
+        "{e}"
+    );
+}
+
+/// `|b - A x|` by an independent host computation (f64, from the assembled blocks).
+fn true_residual<B: Block + Copy>(
+    a: &Bsr<B>,
+    get: impl Fn(&B, usize, usize) -> f64,
+    b: &[f64],
+    x: &[f64],
+) -> f64 {
+    let ax = dense_mv(a, get, x, 1.0, 0.0, &vec![0.0; b.len()]);
+    b.iter()
+        .zip(&ax)
+        .map(|(b, y)| (b - y) * (b - y))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// CG with point Jacobi on the 32 x 32 Poisson matrix (1024 unknowns), f64, rtol 1e-6: it
+/// converges, its true residual (an independent host product) is within the tolerance (1.01
+/// times: the recurrence's residual drifts from the true one by rounding, ~1e-13 here), the
+/// history has one entry per iteration plus one, and a GPU takes the same iterations to the
+/// same bits.
+fn cg_poisson_point_jacobi_f64(dev: &wp::Device) {
+    let m = 32;
+    let (r, c, v) = poisson(m);
+    let n = m * m;
+    let mut g = Rng(10);
+    let b: Vec<f64> = (0..n).map(|_| g.unit()).collect();
+    let run = |d: &wp::Device, pre: Precond| {
+        let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let x = arr(&vec![0.0f64; n], d);
+        let o = SolveOptions {
+            rtol: 1e-6,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &arr(&b, d), &x, pre, &o).unwrap();
+        assert_eq!(rep.stop, Stop::Converged, "{rep:?}");
+        assert!(rep.converged);
+        assert_eq!(rep.history.len(), rep.iterations + 1);
+        assert!(
+            rep.iterations > 10 && rep.iterations < 200,
+            "{}",
+            rep.iterations
+        );
+        let bn = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!((rep.tolerance - 1e-6 * bn).abs() <= 1e-15 * bn);
+        assert!(rep.residual <= rep.tolerance);
+        let xs = host(&x);
+        let tr = true_residual(&a, |b, _, _| *b, &b, &xs);
+        assert!(
+            tr <= 1.01 * rep.tolerance,
+            "true residual {tr} > {}",
+            rep.tolerance
+        );
+        (
+            rep.iterations,
+            rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+            xs.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
+    };
+    let point = run(dev, Precond::PointJacobi);
+    // Block Jacobi of 1 x 1 blocks is point Jacobi; without a preconditioner (the diagonal is
+    // constant, so Jacobi only scales) the iterations are the same count.
+    assert_eq!(run(dev, Precond::Jacobi), point);
+    assert_eq!(run(dev, Precond::None).0, point.0);
+    same_on_cpu(dev, "cg f64", |d| run(d, Precond::PointJacobi));
+}
+
+/// f32: the recurrence reaches rtol 1e-5 (f32's rounding floor for this matrix, whose
+/// condition number is ~440, is near 1e-6 |b|), and the true residual is within 2x of the
+/// tolerance (f32 drift of the recurrence).
+fn cg_poisson_f32(dev: &wp::Device) {
+    let m = 32;
+    let (r, c, v) = poisson(m);
+    let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    let n = m * m;
+    let b: Vec<f32> = (0..n).map(|i| ((i % 7) as f32 - 3.0) / 3.0).collect();
+    let run = |d: &wp::Device| {
+        let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let x = arr(&vec![0.0f32; n], d);
+        let o = SolveOptions {
+            rtol: 1e-5,
+            check_every: 7,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &arr(&b, d), &x, Precond::Jacobi, &o).unwrap();
+        assert_eq!(rep.stop, Stop::Converged, "{rep:?}");
+        let xs: Vec<f64> = host(&x).iter().map(|&v| v as f64).collect();
+        let bs: Vec<f64> = b.iter().map(|&v| v as f64).collect();
+        let tr = true_residual(&a, |b, _, _| *b as f64, &bs, &xs);
+        assert!(
+            tr <= 2.0 * rep.tolerance,
+            "true residual {tr}, tolerance {}",
+            rep.tolerance
+        );
+        (
+            rep.iterations,
+            host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
+    };
+    run(dev);
+    same_on_cpu(dev, "cg f32", run);
+}
+
+/// Block Jacobi on `DMat3` blocks: the Poisson matrix (16 x 16 grid) Kronecker a symmetric
+/// positive definite 3 x 3 K (so SPD): each block is `L_ij K`. Block Jacobi inverts
+/// `4 K` exactly up to rounding, so it converges in the iterations of the scalar problem, and
+/// in fewer than point Jacobi.
+fn cg_block_jacobi_dmat3(dev: &wp::Device) {
+    let m = 16;
+    let (r, c, v) = poisson(m);
+    let k = DMat3::from_cols_array(&[4.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 2.0]);
+    let blocks_v: Vec<DMat3> = v.iter().map(|&s| k * s).collect();
+    let n = m * m;
+    let b: Vec<f64> = (0..3 * n).map(|i| ((i % 5) as f64 - 2.0) * 0.5).collect();
+    let run = |d: &wp::Device, pre: Precond| {
+        let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&blocks_v, d)).unwrap();
+        let x = arr(&vec![0.0f64; 3 * n], d);
+        let o = SolveOptions {
+            rtol: 1e-8,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &arr(&b, d), &x, pre, &o).unwrap();
+        assert_eq!(rep.stop, Stop::Converged, "{pre:?}: {rep:?}");
+        let tr = true_residual(&a, |b, i, j| b.col(j)[i], &b, &host(&x));
+        assert!(
+            tr <= 1.01 * rep.tolerance,
+            "{pre:?}: {tr} > {}",
+            rep.tolerance
+        );
+        (
+            rep.iterations,
+            host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
+    };
+    let block = run(dev, Precond::Jacobi);
+    let point = run(dev, Precond::PointJacobi);
+    assert!(block.0 < point.0, "block {} vs point {}", block.0, point.0);
+    same_on_cpu(dev, "cg DMat3", |d| run(d, Precond::Jacobi));
+}
+
+fn cg_max_iterations_is_ok(dev: &wp::Device) {
+    let (r, c, v) = poisson(16);
+    let n = 256;
+    let a = Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap();
+    let x = arr(&vec![0.0f64; n], dev);
+    let o = SolveOptions {
+        rtol: 1e-12,
+        max_iter: 5,
+        check_every: 3,
+        ..Default::default()
+    };
+    let rep = sparse::cg(&a, &arr(&vec![1.0; n], dev), &x, Precond::None, &o).unwrap();
+    assert_eq!(
+        (rep.stop, rep.iterations, rep.converged),
+        (Stop::MaxIterations, 5, false)
+    );
+    assert_eq!(rep.history.len(), 6);
+    assert!(rep.residual > rep.tolerance);
+    // CG minimises the A-norm of the error, not |r|, whose history need not fall: only its
+    // start (|b| from x = 0: 16) and that it ends at the report's residual are known.
+    assert_eq!(rep.history[0], 16.0);
+    assert_eq!(rep.history[5], rep.residual);
+    assert!(
+        rep.history.iter().all(|h| h.is_finite() && *h > 0.0),
+        "{:?}",
+        rep.history
+    );
+    // max_iter 0: no iteration.
+    let o = SolveOptions { max_iter: 0, ..o };
+    let rep = sparse::cg(&a, &arr(&vec![1.0; n], dev), &x, Precond::None, &o).unwrap();
+    assert_eq!((rep.stop, rep.iterations), (Stop::MaxIterations, 0));
+}
+
+fn cg_singular_preconditioner(dev: &wp::Device) {
+    // Row 2 has no diagonal block.
+    let a = Bsr::from_triplets(
+        3,
+        3,
+        &arr(&[0, 1, 2, 2], dev),
+        &arr(&[0, 1, 1, 0], dev),
+        &arr(&[2.0f64, 2.0, 1.0, 1.0], dev),
+    )
+    .unwrap();
+    let x = arr(&[7.0f64, 7.0, 7.0], dev);
+    let rep = sparse::cg(
+        &a,
+        &arr(&[1.0; 3], dev),
+        &x,
+        Precond::Jacobi,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(rep.stop, Stop::SingularPreconditioner { block_row: 2 });
+    assert_eq!(rep.iterations, 0);
+    assert_eq!(host(&x), [7.0; 3], "x untouched");
+    // A singular diagonal Mat3 block (rank 2) in row 1.
+    let sing = Mat3::from_cols_array(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0]);
+    let a = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[Mat3::IDENTITY, sing], dev),
+    )
+    .unwrap();
+    let x = arr(&[0.0f32; 6], dev);
+    let rep = sparse::cg(
+        &a,
+        &arr(&[1.0; 6], dev),
+        &x,
+        Precond::Jacobi,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(rep.stop, Stop::SingularPreconditioner { block_row: 1 });
+}
+
+fn cg_breakdown_and_non_finite(dev: &wp::Device) {
+    // diag(1, -1), b = (1, 1): p = b, p.Ap = 0.
+    let a = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[1.0f64, -1.0], dev),
+    )
+    .unwrap();
+    let x = arr(&[0.0f64; 2], dev);
+    let rep = sparse::cg(
+        &a,
+        &arr(&[1.0; 2], dev),
+        &x,
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(
+        rep.stop,
+        Stop::Breakdown {
+            what: "p.Ap",
+            value: 0.0
+        }
+    );
+    assert_eq!(host(&x), [0.0; 2], "x untouched by the broken iteration");
+    let rep = sparse::cg(
+        &a,
+        &arr(&[f64::NAN, 1.0], dev),
+        &x,
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    assert_eq!((rep.stop, rep.iterations), (Stop::NonFinite, 0));
+    // b = 0 from x = 0: converged at once.
+    let rep = sparse::cg(
+        &a,
+        &arr(&[0.0; 2], dev),
+        &x,
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    assert_eq!((rep.stop, rep.iterations), (Stop::Converged, 0));
+}
+
+fn cg_bad_arguments(dev: &wp::Device) {
+    let a =
+        Bsr::from_triplets(2, 3, &arr(&[0], dev), &arr(&[0], dev), &arr(&[1.0f32], dev)).unwrap();
+    let e = sparse::cg(
+        &a,
+        &arr(&[0.0; 2], dev),
+        &arr(&[0.0; 2], dev),
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("sparse::cg") && e.contains("2 x 3 blocks"),
+        "{e}"
+    );
+    let a =
+        Bsr::from_triplets(2, 2, &arr(&[0], dev), &arr(&[0], dev), &arr(&[1.0f32], dev)).unwrap();
+    let e = sparse::cg(
+        &a,
+        &arr(&[0.0; 3], dev),
+        &arr(&[0.0; 2], dev),
+        Precond::None,
+        &SolveOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("`b` has shape [3]") && e.contains("2 x 2 scalars"),
+        "{e}"
+    );
+    let o = SolveOptions {
+        check_every: 0,
+        ..Default::default()
+    };
+    let e = sparse::cg(
+        &a,
+        &arr(&[0.0; 2], dev),
+        &arr(&[0.0; 2], dev),
+        Precond::None,
+        &o,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("check_every"), "{e}");
+}
+
+/// `mv` is recorded by a capture: each replay multiplies the arrays' contents at that time
+/// (the same bits as a direct call); `dot` (it allocates scratch) and a CG solve (it reads
+/// back) are refused inside one.
+fn mv_in_a_capture(dev: &wp::Device) {
+    let (r, c, v) = poisson(6);
+    let a = Bsr::from_triplets(36, 36, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap();
+    let x = arr(&[1.0f64; 36], dev);
+    let y = arr(&[0.0f64; 36], dev);
+    // Once before capturing: a GPU loads the library at the first use.
+    sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+    let g = wp::capture(dev, || sparse::mv(&a, &x, &y, 2.0, 0.5)).unwrap();
+    let mut want = host(&y);
+    for k in 0..3 {
+        let xs: Vec<f64> = (0..36).map(|i| (i * (k + 1)) as f64 * 0.25).collect();
+        x.copy_from(&arr(&xs, dev)).unwrap();
+        g.launch().unwrap();
+        let w = arr(&want, dev);
+        sparse::mv(&a, &x, &w, 2.0, 0.5).unwrap();
+        want = host(&w);
+        assert_eq!(host(&y), want, "replay {k}");
+    }
+    let out = arr(&[0.0f64], dev);
+    let e = wp::capture(dev, || sparse::dot(&x, &x, &out)).unwrap_err();
+    assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    let e = wp::capture(dev, || {
+        sparse::cg(&a, &y, &x, Precond::None, &SolveOptions::default()).map(|_| ())
+    })
+    .unwrap_err();
+    assert!(
+        matches!(e, wp::Error::Capture { .. }) && e.to_string().contains("sparse::cg"),
+        "{e}"
+    );
+}
+
+/// `from_triplets_n`: the first `count` triplets, the count on the host or on the device
+/// (read where the work runs); a device count leaves room for every triplet of the arrays.
+fn triplets_counts(dev: &wp::Device) {
+    let (r, c, v) = random_triplets(20, 30, 900, 11, |g| g.unit());
+    let (ra, ca, va) = (arr(&r, dev), arr(&c, dev), arr(&v, dev));
+    for k in [0usize, 1, 400, 900] {
+        let want = reference(&r[..k], &c[..k], &v[..k], |a, b| a + b);
+        let host_count = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, k).unwrap();
+        assert_eq!(host_count.nnz_bound(), k);
+        let count = arr(&[k as i32], dev);
+        let device_count = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, &count).unwrap();
+        assert_eq!(device_count.nnz_bound(), 900);
+        for a in [host_count, device_count] {
+            let got = blocks(&a);
+            assert_eq!(got.len(), want.len(), "count {k}");
+            for (p, w) in &want {
+                assert_eq!(got[p].to_bits(), w.to_bits(), "count {k}, block {p:?}");
+            }
+        }
+    }
+    // Only the counted triplets are checked: a bad one past the count is never read.
+    let bad_rows = arr(&[0, 1, 99], dev);
+    let a = Bsr::from_triplets_n(
+        2,
+        2,
+        &bad_rows,
+        &arr(&[0, 1, 0], dev),
+        &arr(&[1.0f64; 3], dev),
+        2,
+    )
+    .unwrap();
+    assert_eq!(a.nnz().unwrap(), 2);
+    let e = Bsr::from_triplets_n(2, 2, &ra, &ca, &va, 901)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("sparse::from_triplets") && e.contains("count 901"),
+        "{e}"
+    );
+    let e = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, &arr(&[901], dev))
+        .and_then(|a| a.nnz())
+        .unwrap_err();
+    match e {
+        wp::Error::Fault(f) => assert_eq!(
+            f.kind,
+            FaultKind::OutOfBounds {
+                arg: "count",
+                index: vec![901],
+                shape: vec![901]
+            }
+        ),
+        e => panic!("{e}"),
+    }
+}
+
+/// The structure arrays are handles anyone may write: overwritten offsets or columns never
+/// make `mv` or the Jacobi set-up read outside the arrays (blocks outside the clamped ranges
+/// or with a column out of range are skipped), and the result is still the same on every
+/// device.
+fn mv_survives_overwritten_structure(dev: &wp::Device) {
+    let run = |d: &wp::Device| {
+        let (r, c, v) = poisson(4);
+        let a = Bsr::from_triplets(16, 16, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let x = arr(&[1.0f64; 16], d);
+        let y = arr(&[0.0f64; 16], d);
+        a.columns().fill(1000).unwrap();
+        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+        assert_eq!(host(&y), [0.0; 16], "every column out of range: no block");
+        let off: Vec<i32> = (0..17).map(|i| [-7, 3, 1_000_000, 40][i % 4]).collect();
+        a.offsets().copy_from(&arr(&off, d)).unwrap();
+        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+        let rep = sparse::cg(&a, &x, &y, Precond::Jacobi, &SolveOptions::default()).unwrap();
+        assert!(
+            matches!(rep.stop, Stop::SingularPreconditioner { .. }),
+            "{rep:?}"
+        );
+        host(&y).iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    run(dev);
+    same_on_cpu(dev, "overwritten structure", run);
+}
+
+/// `Mode::Graph` (the set-up and a `capture_while` loop on the device's stop flag, captured
+/// and launched once) gives what `Mode::Host` gives, bit for bit: the same stop, iterations,
+/// history and x, at any `check_every` (iterations after the stop do nothing). A GPU needs
+/// conditional graph nodes for it.
+fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
+    let (r, c, v) = poisson(12);
+    let n = 144;
+    let a = Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap();
+    let b: Vec<f64> = (0..n).map(|i| ((i % 9) as f64 - 4.0) * 0.3).collect();
+    let x0: Vec<f64> = (0..n).map(|i| (i % 4) as f64 * 0.01).collect();
+    let solve = |mode: Mode, every: usize, max_iter: usize, pre: Precond| {
+        let x = arr(&x0, dev);
+        let o = SolveOptions {
+            rtol: 1e-9,
+            max_iter,
+            check_every: every,
+            mode,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &arr(&b, dev), &x, pre, &o).unwrap();
+        assert_eq!(rep.history.len(), rep.iterations + 1);
+        (
+            rep.stop,
+            rep.iterations,
+            rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+            host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
+    };
+    for pre in [Precond::None, Precond::Jacobi] {
+        let host_mode = solve(Mode::Host, 10, 1000, pre);
+        assert_eq!(host_mode.0, Stop::Converged);
+        for every in [1, 7, 64] {
+            assert_eq!(
+                solve(Mode::Graph, every, 1000, pre),
+                host_mode,
+                "{pre:?}, every {every}"
+            );
+        }
+        let capped = solve(Mode::Host, 3, 6, pre);
+        assert_eq!((capped.0, capped.1), (Stop::MaxIterations, 6));
+        assert_eq!(solve(Mode::Graph, 4, 6, pre), capped, "{pre:?}, max_iter 6");
+    }
+    // A stop before the first iteration: the captured loop never runs its body.
+    let z = arr(&[0.0f64; 144], dev);
+    let o = SolveOptions {
+        mode: Mode::Graph,
+        ..Default::default()
+    };
+    let rep = sparse::cg(&a, &z, &arr(&[0.0f64; 144], dev), Precond::None, &o).unwrap();
+    assert_eq!((rep.stop, rep.iterations), (Stop::Converged, 0));
+}

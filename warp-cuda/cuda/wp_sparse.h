@@ -1,0 +1,703 @@
+// wp_sparse.h: the sparse tier's device steps (warp-runtime's `sparse` module, cargo feature
+// `sparse`): block sparse row (BSR) assembly from triplets, y = alpha A x + beta y, the dot
+// product with a fixed reduction tree, the Jacobi preconditioner and the conjugate gradient
+// updates. warp-runtime's sparse/steps.rs runs the same steps on the CPU with rayon; both give
+// the same bits. The integer steps are exact, and every float operation below is spelled with
+// the `sp_*` helpers (`__fadd_rn`, `__fmul_rn`, ... on a GPU: never contracted into an FMA,
+// whatever `--fmad` says), in the Rust code's order.
+//
+// Matrices: `nrow` x `ncol` blocks of R x C scalars S (float or double); block row r holds
+// blocks offsets[r] .. offsets[r + 1] (i32), block k in column columns[k], its scalars at
+// values + k R C, entry (i, j) at j R + i when the block is column-major (glam's matrices) and
+// i C + j otherwise (scalars). Vectors are flat arrays of S: x has ncol C, y nrow R scalars.
+//
+// Steps (one kernel each, grid-stride over the record's count, which for the triplet steps
+// may be a device count (`sp_count`); the shape-dependent ones are instantiated per block type
+// at the end of the file, named wp_sparse_<step>_<block>, the others per scalar type):
+//   tpl_keys     per triplet t: the sort key (row * ncol + col, or col alone in the two-pass
+//                path; a sentinel past every valid key for an out-of-range triplet) and t;
+//                the smallest t with a row, a column or a value out of range / non-finite
+//                lowers bad[0], bad[1], bad[2].
+//   tpl_report   one thread: a device count outside [0, capacity], else the smallest of
+//                those (rows, then columns, then values on a tie), raised as a fault, named
+//                by the runtime as `sparse::from_triplets`.
+//   tpl_row_keys per sorted position (two-pass path): the key of the second sort, the row.
+//   (the runtime's stable radix sort of (key, t))
+//   tpl_heads    per sorted position: 1 where a run of equal (row, col) starts, else 0.
+//   (the runtime's inclusive scan of the heads, in place: pos)
+//   tpl_sum      per run head: block pos - 1 gets the row, column and the sum of the run's
+//                values in sorted order, which is ascending triplet order (the sort is stable).
+//   bsr_offsets  per block row r (and r = nrow): offsets[r] = the first block whose row is >= r.
+//   bsr_mv       per block row: y = alpha A x + beta y (y not read when beta == 0); the
+//                row's range clamped (`sp_row_range`), columns out of range skipped.
+//   dot_partials per chunk of 4096 elements (a block of 256 threads): see `sp_dot_lane`.
+//   dot_final    one block of 256 threads: the partials reduced the same way.
+//   jacobi_inv   per block row: the inverse of the diagonal block (or of its diagonal alone).
+//   jacobi_apply per block row: z = D^-1 r.
+//   cg_init, cg_update, cg_check, cg_direction: the conjugate gradient's set-up, x/r update,
+//                convergence check (one thread) and search direction (see sparse/solve.rs).
+#pragma once
+#include "wp_core.h"
+
+namespace wp {
+
+// ------------------------------------------------------------------------------------------
+// Rounded arithmetic: the one spelling of every float operation of the steps.
+// ------------------------------------------------------------------------------------------
+#if defined(__CUDACC__)
+WP_FN f32 sp_add(f32 a, f32 b) { return __fadd_rn(a, b); }
+WP_FN f32 sp_sub(f32 a, f32 b) { return __fsub_rn(a, b); }
+WP_FN f32 sp_mul(f32 a, f32 b) { return __fmul_rn(a, b); }
+WP_FN f32 sp_div(f32 a, f32 b) { return __fdiv_rn(a, b); }
+WP_FN f32 sp_sqrt(f32 a) { return __fsqrt_rn(a); }
+WP_FN f64 sp_add(f64 a, f64 b) { return __dadd_rn(a, b); }
+WP_FN f64 sp_sub(f64 a, f64 b) { return __dsub_rn(a, b); }
+WP_FN f64 sp_mul(f64 a, f64 b) { return __dmul_rn(a, b); }
+WP_FN f64 sp_div(f64 a, f64 b) { return __ddiv_rn(a, b); }
+WP_FN f64 sp_sqrt(f64 a) { return __dsqrt_rn(a); }
+WP_FN void sp_min32(u64 addr, i32 v) { atomicMin((int*)addr, v); }
+#else
+WP_FN f32 sp_add(f32 a, f32 b) { return a + b; }
+WP_FN f32 sp_sub(f32 a, f32 b) { return a - b; }
+WP_FN f32 sp_mul(f32 a, f32 b) { return a * b; }
+WP_FN f32 sp_div(f32 a, f32 b) { return a / b; }
+WP_FN f32 sp_sqrt(f32 a) { return std::sqrt(a); }
+WP_FN f64 sp_add(f64 a, f64 b) { return a + b; }
+WP_FN f64 sp_sub(f64 a, f64 b) { return a - b; }
+WP_FN f64 sp_mul(f64 a, f64 b) { return a * b; }
+WP_FN f64 sp_div(f64 a, f64 b) { return a / b; }
+WP_FN f64 sp_sqrt(f64 a) { return std::sqrt(a); }
+WP_FN void sp_min32(u64 addr, i32 v) {
+  i32* p = (i32*)addr;
+  if (v < *p) *p = v;  // the host drivers run one thread
+}
+#endif
+
+/// Finite (neither NaN nor infinite), without library calls: x - x is 0 exactly then.
+template <typename S>
+WP_FN bool sp_finite(S x) {
+  return x - x == (S)0;
+}
+
+/// The dot product's shape: chunks of SP_DOT_CHUNK elements, one block of SP_DOT_LANES threads
+/// each (the object-step launcher's block size; the runtime asserts it), SP_DOT_CHUNK /
+/// SP_DOT_LANES elements per lane.
+constexpr i32 SP_DOT_LANES = 256;
+constexpr i64 SP_DOT_CHUNK = 4096;
+
+/// Lane `lane`'s serial sum over chunk `c` of the n-element vectors a and b: starting from 0,
+/// + a[i] b[i] for i = c CHUNK + lane + LANES m, m ascending, i < n.
+template <typename S>
+WP_FN S sp_dot_lane(const S* a, const S* b, i64 n, i64 c, i32 lane) {
+  S acc = (S)0;
+  const i64 base = c * SP_DOT_CHUNK + lane;
+  for (i64 m = 0; m < SP_DOT_CHUNK / SP_DOT_LANES; ++m) {
+    const i64 i = base + m * SP_DOT_LANES;
+    if (i < n) acc = sp_add(acc, sp_mul(a[i], b[i]));
+  }
+  return acc;
+}
+
+/// Lane `lane`'s serial sum of the partials lane, lane + LANES, .. below `count`, from 0.
+template <typename S>
+WP_FN S sp_dot_final_lane(const S* partials, i64 count, i32 lane) {
+  S acc = (S)0;
+  for (i64 i = lane; i < count; i += SP_DOT_LANES) acc = sp_add(acc, partials[i]);
+  return acc;
+}
+
+/// One level of the lanes' tree: s[l] = s[l] + s[l + stride] for l < stride (strides 128, 64,
+/// .., 1; the total ends in s[0]). On a GPU lane l does its own l between barriers.
+template <typename S>
+WP_FN void sp_tree_level(S* s, i32 stride, i32 lane) {
+  if (lane < stride) s[lane] = sp_add(s[lane], s[lane + stride]);
+}
+
+// ------------------------------------------------------------------------------------------
+// Records (each laid out as its Rust step's #[repr(C)] struct; both sides assert the size)
+// ------------------------------------------------------------------------------------------
+
+// The triplet steps' first field, `count`: the address of a device count of triplets (an
+// i32), or 0 when there is none and `n` is the count. With one, `n` is the capacity (the
+// arrays' length) and the steps process `sp_count(count, n)` triplets: the count clamped to
+// [0, n], so a bad count never reaches outside the arrays (the report raises it).
+WP_FN i32 sp_count(u64 count, i32 n) {
+  if (count == 0) return n;
+  const i32 c = *(const i32*)count;
+  return c < 0 ? 0 : (c > n ? n : c);
+}
+
+/// TplKeys: count, rows, cols (i32*), values (S*, `block` scalars per triplet), n, nrow, ncol,
+/// block, two_pass (0: key row * ncol + col; 1: key col), keys (u32*), idx (i32*), bad (i32[3]).
+struct sp_tpl_keys_t {
+  u64 count, rows, cols, values;
+  i32 n, nrow, ncol, block, two_pass, pad;
+  u64 keys, idx, bad;
+};
+static_assert(sizeof(sp_tpl_keys_t) == 80, "sp_tpl_keys_t layout");
+
+/// TplReport: count, bad (i32[3], INT_MAX where nothing was found), rows, cols, values, n,
+/// nrow, ncol, block; the fault context (argument 0 rows, 1 columns, 2 values, 3 count).
+struct sp_tpl_report_t {
+  u64 count, bad, rows, cols, values;
+  i32 n, nrow, ncol, block;
+  step_fault_t fault;
+};
+static_assert(sizeof(sp_tpl_report_t) == 96, "sp_tpl_report_t layout");
+
+/// TplRowKeys: count, rows, cols, idx (sorted), keys (u32*, written), n, nrow, ncol.
+struct sp_tpl_row_keys_t {
+  u64 count, rows, cols, idx, keys;
+  i32 n, nrow, ncol, pad;
+};
+static_assert(sizeof(sp_tpl_row_keys_t) == 56, "sp_tpl_row_keys_t layout");
+
+/// TplHeads: count, rows, cols, idx (sorted), heads (i32*, written), n, nrow, ncol.
+struct sp_tpl_heads_t {
+  u64 count, rows, cols, idx, heads;
+  i32 n, nrow, ncol, pad;
+};
+static_assert(sizeof(sp_tpl_heads_t) == 56, "sp_tpl_heads_t layout");
+
+/// TplSum: count, rows, cols, values (S*), idx (sorted), pos (inclusive scan of the heads),
+/// block_rows, columns (i32*), out (S*, `block` scalars per block), n, nrow, ncol, block.
+struct sp_tpl_sum_t {
+  u64 count, rows, cols, values, idx, pos, block_rows, columns, out;
+  i32 n, nrow, ncol, block;
+};
+static_assert(sizeof(sp_tpl_sum_t) == 88, "sp_tpl_sum_t layout");
+
+/// BsrOffsets: count, block_rows (sorted), pos (the scan: entry count - 1 is the block count),
+/// offsets (i32*, nrow + 1, written), n (the triplets: a count of 0 means no block), nrow.
+struct sp_bsr_offsets_t {
+  u64 count, block_rows, pos, offsets;
+  i32 n, nrow;
+};
+static_assert(sizeof(sp_bsr_offsets_t) == 40, "sp_bsr_offsets_t layout");
+
+/// BsrMv: offsets, columns, values, x, y, alpha, beta (as f64, rounded to S like Rust's `as`),
+/// nrow, ncol, cap (the capacity of columns and values: see `sp_row_range`).
+struct sp_bsr_mv_t {
+  u64 offsets, columns, values, x, y;
+  f64 alpha, beta;
+  i32 nrow, ncol, cap, pad;
+};
+static_assert(sizeof(sp_bsr_mv_t) == 72, "sp_bsr_mv_t layout");
+
+/// DotPartials / DotFinal: a, b (S*, n each; DotFinal: the partials in a, b unused), n, out
+/// (S*: the partials, one per chunk, or the one result), chunks.
+struct sp_dot_t {
+  u64 a, b;
+  i64 n;
+  u64 out;
+  i64 chunks;
+};
+static_assert(sizeof(sp_dot_t) == 40, "sp_dot_t layout");
+
+/// JacobiInv: offsets, columns, values, dinv (S*, R R per block row, row-major), bad (i32*:
+/// lowered to the first block row whose diagonal block is missing, singular or not finite),
+/// nrow, point (1: the diagonal entries alone).
+struct sp_jacobi_inv_t {
+  u64 offsets, columns, values, dinv, bad;
+  i32 nrow, point, cap, pad;
+};
+static_assert(sizeof(sp_jacobi_inv_t) == 56, "sp_jacobi_inv_t layout");
+
+/// JacobiApply: dinv, r, z (S*), nrow, dim (R).
+struct sp_jacobi_apply_t {
+  u64 dinv, r, z;
+  i32 nrow, dim;
+};
+static_assert(sizeof(sp_jacobi_apply_t) == 32, "sp_jacobi_apply_t layout");
+
+/// The CG's control words (i32) and scalars (S): see sparse/solve.rs, which names the same.
+// SP_CTL_RUN: 1 while no stop is set (cg_init and cg_check write it): the flag a captured
+// solve's `capture_while` loops on.
+constexpr i32 SP_CTL_STOP = 0, SP_CTL_ITER = 1, SP_CTL_BAD = 2, SP_CTL_RUN = 3;
+constexpr i32 SP_STOP_NONE = 0, SP_STOP_CONVERGED = 1, SP_STOP_MAX_ITER = 2,
+              SP_STOP_NON_FINITE = 3, SP_STOP_BREAKDOWN = 4, SP_STOP_SINGULAR = 5;
+constexpr i32 SP_RZ = 0, SP_RZ_NEW = 1, SP_PAP = 2, SP_RR = 3, SP_BB = 4, SP_TOL2 = 5,
+              SP_BETA = 6, SP_BREAK = 7, SP_TOL = 8;
+
+/// CgScalar (cg_init, cg_check; one thread): ctl, scal, history (S*), rtol, atol, max_iter.
+struct sp_cg_scalar_t {
+  u64 ctl, scal, history;
+  f64 rtol, atol;
+  i32 max_iter, pad;
+};
+static_assert(sizeof(sp_cg_scalar_t) == 48, "sp_cg_scalar_t layout");
+
+/// CgVector (cg_update: x += alpha p, r -= alpha ap; cg_direction: p = z + beta p): ctl, scal,
+/// x, r, p, ap (cg_direction: z in `r`), n.
+struct sp_cg_vector_t {
+  u64 ctl, scal, x, r, p, ap;
+  i64 n;
+};
+static_assert(sizeof(sp_cg_vector_t) == 56, "sp_cg_vector_t layout");
+
+// ------------------------------------------------------------------------------------------
+// Per-element steps (the kernels below loop over these; the host drivers call them directly)
+// ------------------------------------------------------------------------------------------
+
+/// Whether triplet t's row and column are in range.
+WP_FN bool sp_tpl_valid(const i32* rows, const i32* cols, i32 t, i32 nrow, i32 ncol) {
+  const i32 r = rows[t], c = cols[t];
+  return r >= 0 && r < nrow && c >= 0 && c < ncol;
+}
+
+template <typename S>
+WP_FN void sp_tpl_keys(const sp_tpl_keys_t& s, i32 t) {
+  const i32* rows = (const i32*)s.rows;
+  const i32* cols = (const i32*)s.cols;
+  const S* v = (const S*)s.values + (i64)t * s.block;
+  const i32 r = rows[t], c = cols[t];
+  const bool row_ok = r >= 0 && r < s.nrow, col_ok = c >= 0 && c < s.ncol;
+  if (!row_ok) sp_min32(s.bad, t);
+  if (!col_ok) sp_min32(s.bad + 4, t);
+  for (i32 e = 0; e < s.block; ++e)
+    if (!sp_finite(v[e])) {
+      sp_min32(s.bad + 8, t);
+      break;
+    }
+  u32 key;
+  if (s.two_pass)
+    key = row_ok && col_ok ? (u32)c : (u32)s.ncol;
+  else
+    key = row_ok && col_ok ? (u32)r * (u32)s.ncol + (u32)c : (u32)s.nrow * (u32)s.ncol;
+  ((u32*)s.keys)[t] = key;
+  ((i32*)s.idx)[t] = t;
+}
+
+/// The keys step's report (one thread): the smallest triplet found bad, rows before columns
+/// before values on a tie, raised as a fault: out of bounds on `rows` (argument 0) or
+/// `columns` (1) with index [t, value] and shape [n, nrow or ncol]; a non-finite value
+/// (argument 2) with index t and the first non-finite scalar of its block.
+template <typename S>
+WP_FN void sp_tpl_report(const sp_tpl_report_t& s) {
+  ctx_t ctx = s.fault.ctx;
+  if (s.count != 0) {
+    const i32 c = *(const i32*)s.count;
+    if (c < 0 || c > s.n) {
+      const i64 index[1] = {(i64)c};
+      const i64 shape[1] = {(i64)s.n + 1};
+      raise(&ctx, FAULT_OUT_OF_BOUNDS, 3, 1, index, shape);
+      return;
+    }
+  }
+  const i32 n = sp_count(s.count, s.n);
+  const i32* bad = (const i32*)s.bad;
+  i32 which = -1, t = 0x7fffffff;
+  for (i32 w = 0; w < 3; ++w)
+    if (bad[w] < t) {
+      t = bad[w];
+      which = w;
+    }
+  if (which < 0) return;
+  if (which < 2) {
+    const i32 v = ((const i32*)(which == 0 ? s.rows : s.cols))[t];
+    const i64 index[2] = {(i64)t, (i64)v};
+    const i64 shape[2] = {(i64)n, (i64)(which == 0 ? s.nrow : s.ncol)};
+    raise(&ctx, FAULT_OUT_OF_BOUNDS, which, 2, index, shape);
+  } else {
+    const S* v = (const S*)s.values + (i64)t * s.block;
+    S x = v[0];
+    for (i32 e = 0; e < s.block; ++e)
+      if (!sp_finite(v[e])) {
+        x = v[e];
+        break;
+      }
+    const i64 index[2] = {(i64)t, (i64)f64_to_bits((f64)x)};
+    raise(&ctx, FAULT_NON_FINITE_INPUT, 2, 2, index, nullptr);
+  }
+}
+
+WP_FN void sp_tpl_row_keys(const sp_tpl_row_keys_t& s, i32 k) {
+  const i32 t = ((const i32*)s.idx)[k];
+  const bool ok = sp_tpl_valid((const i32*)s.rows, (const i32*)s.cols, t, s.nrow, s.ncol);
+  ((u32*)s.keys)[k] = ok ? (u32)((const i32*)s.rows)[t] : (u32)s.nrow;
+}
+
+WP_FN void sp_tpl_heads(const sp_tpl_heads_t& s, i32 k) {
+  const i32* rows = (const i32*)s.rows;
+  const i32* cols = (const i32*)s.cols;
+  const i32* idx = (const i32*)s.idx;
+  const i32 t = idx[k];
+  i32 head = 0;
+  if (sp_tpl_valid(rows, cols, t, s.nrow, s.ncol)) {
+    // Out-of-range triplets sort after every valid one: a valid one's predecessor is valid.
+    head = k == 0 || rows[idx[k - 1]] != rows[t] || cols[idx[k - 1]] != cols[t];
+  }
+  ((i32*)s.heads)[k] = head;
+}
+
+template <typename S>
+WP_FN void sp_tpl_sum(const sp_tpl_sum_t& s, i32 k) {
+  const i32* rows = (const i32*)s.rows;
+  const i32* cols = (const i32*)s.cols;
+  const i32* idx = (const i32*)s.idx;
+  const i32* pos = (const i32*)s.pos;
+  const i32 t = idx[k];
+  if (!sp_tpl_valid(rows, cols, t, s.nrow, s.ncol)) return;
+  if (pos[k] - (k > 0 ? pos[k - 1] : 0) != 1) return;  // not the head of its run
+  const i32 b = pos[k] - 1;
+  const i32 r = rows[t], c = cols[t];
+  ((i32*)s.block_rows)[b] = r;
+  ((i32*)s.columns)[b] = c;
+  const S* values = (const S*)s.values;
+  S* out = (S*)s.out + (i64)b * s.block;
+  for (i32 e = 0; e < s.block; ++e) out[e] = values[(i64)t * s.block + e];
+  const i32 n = sp_count(s.count, s.n);
+  for (i32 m = k + 1; m < n; ++m) {
+    const i32 u = idx[m];
+    if (!sp_tpl_valid(rows, cols, u, s.nrow, s.ncol) || rows[u] != r || cols[u] != c) break;
+    for (i32 e = 0; e < s.block; ++e) out[e] = sp_add(out[e], values[(i64)u * s.block + e]);
+  }
+}
+
+WP_FN void sp_bsr_offsets(const sp_bsr_offsets_t& s, i32 r) {
+  const i32 n = sp_count(s.count, s.n);
+  const i32 nnz = n > 0 ? ((const i32*)s.pos)[n - 1] : 0;
+  const i32* rows = (const i32*)s.block_rows;
+  i32 lo = 0, hi = nnz;  // the first block whose row is >= r
+  while (lo < hi) {
+    const i32 mid = lo + (hi - lo) / 2;
+    if (rows[mid] < r)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  ((i32*)s.offsets)[r] = lo;
+}
+
+/// Block row r's blocks [*lo, *hi): offsets[r] .. offsets[r + 1], each clamped into
+/// [0, nnz] with nnz = offsets[nrow] clamped into [0, cap], so that offsets a user wrote
+/// (the arrays are handles anyone may fill) never make a step read outside the arrays.
+/// A matrix made by the assembly is unchanged by the clamps.
+WP_FN void sp_row_range(const i32* offsets, i32 nrow, i32 cap, i32 r, i32* lo, i32* hi) {
+  i32 nnz = offsets[nrow];
+  nnz = nnz < 0 ? 0 : (nnz > cap ? cap : nnz);
+  i32 a = offsets[r], b = offsets[r + 1];
+  a = a < 0 ? 0 : (a > nnz ? nnz : a);
+  b = b < a ? a : (b > nnz ? nnz : b);
+  *lo = a;
+  *hi = b;
+}
+
+/// Entry (i, j) of an R x C block stored column-major (CM) or row-major.
+template <int R, int C, bool CM>
+WP_FN i32 sp_at(i32 i, i32 j) {
+  return CM ? j * R + i : i * C + j;
+}
+
+template <typename S, int R, int C, bool CM>
+WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
+  const i32* offsets = (const i32*)s.offsets;
+  const i32* columns = (const i32*)s.columns;
+  const S* values = (const S*)s.values;
+  const S* x = (const S*)s.x;
+  S* y = (S*)s.y;
+  S acc[R];
+  for (i32 i = 0; i < R; ++i) acc[i] = (S)0;
+  i32 lo, hi;
+  sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
+  for (i32 k = lo; k < hi; ++k) {
+    const i32 c = columns[k];
+    if (c < 0 || c >= s.ncol) continue;  // (never in an assembled matrix)
+    const S* a = values + (i64)k * (R * C);
+    const S* xc = x + (i64)c * C;
+    for (i32 i = 0; i < R; ++i)
+      for (i32 j = 0; j < C; ++j) acc[i] = sp_add(acc[i], sp_mul(a[sp_at<R, C, CM>(i, j)], xc[j]));
+  }
+  const S alpha = (S)s.alpha, beta = (S)s.beta;
+  for (i32 i = 0; i < R; ++i) {
+    const i64 o = (i64)r * R + i;
+    // beta == 0: y is not read (it may hold NaN).
+    y[o] = beta == (S)0 ? sp_mul(alpha, acc[i]) : sp_add(sp_mul(alpha, acc[i]), sp_mul(beta, y[o]));
+  }
+}
+
+/// The inverse of block row r's diagonal block by Gauss-Jordan with partial pivoting (the
+/// first largest |pivot| of the column, rows swapped), or of its diagonal alone (`point`);
+/// zeros and `bad` lowered to r when the block is missing, a pivot is zero, or the inverse is
+/// not finite.
+template <typename S, int R, int C, bool CM>
+WP_FN void sp_jacobi_inv_row(const sp_jacobi_inv_t& s, i32 r) {
+  const i32* offsets = (const i32*)s.offsets;
+  const i32* columns = (const i32*)s.columns;
+  S* out = (S*)s.dinv + (i64)r * (R * R);
+  S a[R][R], inv[R][R];
+  bool ok = false;
+  i32 lo, hi;
+  sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
+  for (i32 k = lo; k < hi; ++k) {
+    if (columns[k] != r) continue;
+    const S* b = (const S*)s.values + (i64)k * (R * C);
+    for (i32 i = 0; i < R; ++i)
+      for (i32 j = 0; j < R; ++j) {
+        a[i][j] = (!s.point || i == j) ? b[sp_at<R, C, CM>(i, j)] : (S)0;
+        inv[i][j] = i == j ? (S)1 : (S)0;
+      }
+    ok = true;
+    break;
+  }
+  for (i32 col = 0; ok && col < R; ++col) {
+    i32 p = col;
+    for (i32 i = col + 1; i < R; ++i) {
+      const S ai = a[i][col] < (S)0 ? -a[i][col] : a[i][col];
+      const S ap = a[p][col] < (S)0 ? -a[p][col] : a[p][col];
+      if (ai > ap) p = i;
+    }
+    if (!(a[p][col] != (S)0)) {
+      ok = false;
+      break;
+    }
+    if (p != col)
+      for (i32 j = 0; j < R; ++j) {
+        S t = a[p][j];
+        a[p][j] = a[col][j];
+        a[col][j] = t;
+        t = inv[p][j];
+        inv[p][j] = inv[col][j];
+        inv[col][j] = t;
+      }
+    const S piv = a[col][col];
+    for (i32 j = 0; j < R; ++j) {
+      a[col][j] = sp_div(a[col][j], piv);
+      inv[col][j] = sp_div(inv[col][j], piv);
+    }
+    for (i32 i = 0; i < R; ++i) {
+      if (i == col) continue;
+      const S f = a[i][col];
+      for (i32 j = 0; j < R; ++j) {
+        a[i][j] = sp_sub(a[i][j], sp_mul(f, a[col][j]));
+        inv[i][j] = sp_sub(inv[i][j], sp_mul(f, inv[col][j]));
+      }
+    }
+  }
+  for (i32 i = 0; ok && i < R; ++i)
+    for (i32 j = 0; j < R; ++j) ok = ok && sp_finite(inv[i][j]);
+  for (i32 i = 0; i < R; ++i)
+    for (i32 j = 0; j < R; ++j) out[i * R + j] = ok ? inv[i][j] : (S)0;
+  if (!ok) sp_min32(s.bad, r);
+}
+
+template <typename S>
+WP_FN void sp_jacobi_apply_row(const sp_jacobi_apply_t& s, i32 r) {
+  const S* d = (const S*)s.dinv + (i64)r * s.dim * s.dim;
+  const S* rv = (const S*)s.r + (i64)r * s.dim;
+  S* z = (S*)s.z + (i64)r * s.dim;
+  for (i32 i = 0; i < s.dim; ++i) {
+    S acc = (S)0;
+    for (i32 j = 0; j < s.dim; ++j) acc = sp_add(acc, sp_mul(d[i * s.dim + j], rv[j]));
+    z[i] = acc;
+  }
+}
+
+/// The CG's set-up check (one thread): tolerance max(atol, rtol |b|), history[0] = |r|, and
+/// the stop before any iteration (a singular preconditioner, a non-finite residual,
+/// convergence, max_iter == 0).
+template <typename S>
+WP_FN void sp_cg_init(const sp_cg_scalar_t& s) {
+  i32* ctl = (i32*)s.ctl;
+  S* sc = (S*)s.scal;
+  S* hist = (S*)s.history;
+  const S rt = sp_mul((S)s.rtol, sp_sqrt(sc[SP_BB]));
+  const S at = (S)s.atol;
+  const S tol = at > rt ? at : rt;
+  sc[SP_TOL] = tol;
+  sc[SP_TOL2] = sp_mul(tol, tol);
+  const S rr = sc[SP_RR];
+  hist[0] = sp_sqrt(rr);
+  ctl[SP_CTL_ITER] = 0;
+  i32 stop = SP_STOP_NONE;
+  if (ctl[SP_CTL_BAD] != 0x7fffffff)
+    stop = SP_STOP_SINGULAR;
+  else if (!sp_finite(rr) || !sp_finite(sc[SP_RZ]))
+    stop = SP_STOP_NON_FINITE;
+  else if (rr <= sc[SP_TOL2])
+    stop = SP_STOP_CONVERGED;
+  else if (s.max_iter <= 0)
+    stop = SP_STOP_MAX_ITER;
+  ctl[SP_CTL_STOP] = stop;
+  ctl[SP_CTL_RUN] = stop == SP_STOP_NONE;
+}
+
+/// Whether an iteration may update x and r: not stopped, and p.Ap positive and finite.
+template <typename S>
+WP_FN bool sp_cg_step_ok(const i32* ctl, const S* sc) {
+  const S pap = sc[SP_PAP];
+  return ctl[SP_CTL_STOP] == SP_STOP_NONE && pap > (S)0 && sp_finite(pap);
+}
+
+template <typename S>
+WP_FN void sp_cg_update(const sp_cg_vector_t& s, i64 i) {
+  const S* sc = (const S*)s.scal;
+  if (!sp_cg_step_ok((const i32*)s.ctl, sc)) return;
+  const S alpha = sp_div(sc[SP_RZ], sc[SP_PAP]);
+  S* x = (S*)s.x;
+  S* r = (S*)s.r;
+  x[i] = sp_add(x[i], sp_mul(alpha, ((const S*)s.p)[i]));
+  r[i] = sp_sub(r[i], sp_mul(alpha, ((const S*)s.ap)[i]));
+}
+
+/// The CG's check after an iteration (one thread): a bad p.Ap stops it (NonFinite or
+/// Breakdown, x and r untouched by that iteration); else the iteration counts, its residual
+/// norm goes to the history, and it stops on a non-finite residual, convergence or max_iter;
+/// else beta = (r.z)new / (r.z) for the direction.
+template <typename S>
+WP_FN void sp_cg_check_stop(const sp_cg_scalar_t& s) {
+  i32* ctl = (i32*)s.ctl;
+  S* sc = (S*)s.scal;
+  if (ctl[SP_CTL_STOP] != SP_STOP_NONE) return;
+  const S pap = sc[SP_PAP];
+  if (!sp_finite(pap)) {
+    ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    return;
+  }
+  if (pap <= (S)0) {
+    sc[SP_BREAK] = pap;
+    ctl[SP_CTL_STOP] = SP_STOP_BREAKDOWN;
+    return;
+  }
+  const i32 it = ctl[SP_CTL_ITER] + 1;
+  ctl[SP_CTL_ITER] = it;
+  const S rr = sc[SP_RR];
+  ((S*)s.history)[it] = sp_sqrt(rr);
+  if (!sp_finite(rr) || !sp_finite(sc[SP_RZ_NEW]))
+    ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+  else if (rr <= sc[SP_TOL2])
+    ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
+  else if (it >= s.max_iter)
+    ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
+  else {
+    sc[SP_BETA] = sp_div(sc[SP_RZ_NEW], sc[SP_RZ]);
+    sc[SP_RZ] = sc[SP_RZ_NEW];
+  }
+}
+
+template <typename S>
+WP_FN void sp_cg_check(const sp_cg_scalar_t& s) {
+  sp_cg_check_stop<S>(s);
+  i32* ctl = (i32*)s.ctl;
+  ctl[SP_CTL_RUN] = ctl[SP_CTL_STOP] == SP_STOP_NONE;
+}
+
+template <typename S>
+WP_FN void sp_cg_direction(const sp_cg_vector_t& s, i64 i) {
+  if (((const i32*)s.ctl)[SP_CTL_STOP] != SP_STOP_NONE) return;
+  const S beta = ((const S*)s.scal)[SP_BETA];
+  S* p = (S*)s.p;
+  p[i] = sp_add(((const S*)s.r)[i], sp_mul(beta, p[i]));
+}
+
+}  // namespace wp
+
+// ------------------------------------------------------------------------------------------
+// The kernels (only in the build library: WP_SPARSE_BUILD). Grid-stride loops; the dot
+// kernels are block-cooperative (blocks of SP_DOT_LANES threads). WP_SPARSE_EMULATED: the
+// same kernels as host C++ under the block emulator (tests/cuda_sparse_host.rs defines the
+// CUDA names they use).
+// ------------------------------------------------------------------------------------------
+#if defined(WP_SPARSE_BUILD) && (defined(__CUDACC__) || defined(WP_SPARSE_EMULATED))
+namespace wp {
+// A grid-stride loop of i over [0, n) (the kernels' macros expand it outside namespace wp).
+#define WP_SP_LOOP(i, n)                                                                    \
+  for (::wp::i64 i = (::wp::i64)blockIdx.x * blockDim.x + threadIdx.x,                      \
+                 i##_stride = (::wp::i64)blockDim.x * gridDim.x;                            \
+       i < (::wp::i64)(n); i += i##_stride)
+
+template <typename S>
+__device__ void sp_dot_partials_kernel(const sp_dot_t& s) {
+  __shared__ S sh[SP_DOT_LANES];
+  const i32 lane = (i32)threadIdx.x;
+  for (i64 c = blockIdx.x; c < s.chunks; c += gridDim.x) {
+    sh[lane] = sp_dot_lane((const S*)s.a, (const S*)s.b, s.n, c, lane);
+    __syncthreads();
+    for (i32 stride = SP_DOT_LANES / 2; stride > 0; stride /= 2) {
+      sp_tree_level(sh, stride, lane);
+      __syncthreads();
+    }
+    if (lane == 0) ((S*)s.out)[c] = sh[0];
+    __syncthreads();
+  }
+}
+
+template <typename S>
+__device__ void sp_dot_final_kernel(const sp_dot_t& s) {
+  __shared__ S sh[SP_DOT_LANES];
+  const i32 lane = (i32)threadIdx.x;
+  if (blockIdx.x != 0) return;
+  sh[lane] = sp_dot_final_lane((const S*)s.a, s.chunks, lane);
+  __syncthreads();
+  for (i32 stride = SP_DOT_LANES / 2; stride > 0; stride /= 2) {
+    sp_tree_level(sh, stride, lane);
+    __syncthreads();
+  }
+  if (lane == 0) *(S*)s.out = sh[0];
+}
+}  // namespace wp
+
+// The kernels of one scalar type.
+#define WP_SP_SCALAR_KERNELS(tag, S)                                                        \
+  extern "C" __global__ void wp_sparse_tpl_keys_##tag(wp::sp_tpl_keys_t s) {                \
+    WP_SP_LOOP(t, wp::sp_count(s.count, s.n)) wp::sp_tpl_keys<S>(s, (wp::i32)t);            \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_tpl_report_##tag(wp::sp_tpl_report_t s) {            \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_tpl_report<S>(s);                       \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_tpl_sum_##tag(wp::sp_tpl_sum_t s) {                  \
+    WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_tpl_sum<S>(s, (wp::i32)k);             \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_dot_partials_##tag(wp::sp_dot_t s) {                 \
+    wp::sp_dot_partials_kernel<S>(s);                                                       \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_dot_final_##tag(wp::sp_dot_t s) {                    \
+    wp::sp_dot_final_kernel<S>(s);                                                          \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_jacobi_apply_##tag(wp::sp_jacobi_apply_t s) {        \
+    WP_SP_LOOP(r, s.nrow) wp::sp_jacobi_apply_row<S>(s, (wp::i32)r);                        \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_cg_init_##tag(wp::sp_cg_scalar_t s) {                \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_cg_init<S>(s);                          \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_cg_check_##tag(wp::sp_cg_scalar_t s) {               \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::sp_cg_check<S>(s);                         \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_cg_update_##tag(wp::sp_cg_vector_t s) {              \
+    WP_SP_LOOP(i, s.n) wp::sp_cg_update<S>(s, i);                                           \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_cg_direction_##tag(wp::sp_cg_vector_t s) {           \
+    WP_SP_LOOP(i, s.n) wp::sp_cg_direction<S>(s, i);                                        \
+  }
+
+// The kernels of one block type (scalar S, R x C, column-major CM).
+#define WP_SP_BLOCK_KERNELS(tag, S, R, C, CM)                                               \
+  extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                    \
+    WP_SP_LOOP(r, s.nrow) wp::sp_bsr_mv_row<S, R, C, CM>(s, (wp::i32)r);                    \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_jacobi_inv_##tag(wp::sp_jacobi_inv_t s) {            \
+    WP_SP_LOOP(r, s.nrow) wp::sp_jacobi_inv_row<S, R, C, CM>(s, (wp::i32)r);                \
+  }
+
+extern "C" __global__ void wp_sparse_tpl_row_keys(wp::sp_tpl_row_keys_t s) {
+  WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_tpl_row_keys(s, (wp::i32)k);
+}
+extern "C" __global__ void wp_sparse_tpl_heads(wp::sp_tpl_heads_t s) {
+  WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_tpl_heads(s, (wp::i32)k);
+}
+extern "C" __global__ void wp_sparse_bsr_offsets(wp::sp_bsr_offsets_t s) {
+  WP_SP_LOOP(r, (wp::i64)s.nrow + 1) wp::sp_bsr_offsets(s, (wp::i32)r);
+}
+
+WP_SP_SCALAR_KERNELS(f32, wp::f32)
+WP_SP_SCALAR_KERNELS(f64, wp::f64)
+// The block types of warp-runtime's sparse/block.rs (its `kernels!` names the same tags).
+WP_SP_BLOCK_KERNELS(f32, wp::f32, 1, 1, false)
+WP_SP_BLOCK_KERNELS(f64, wp::f64, 1, 1, false)
+WP_SP_BLOCK_KERNELS(mat2, wp::f32, 2, 2, true)
+WP_SP_BLOCK_KERNELS(mat3, wp::f32, 3, 3, true)
+WP_SP_BLOCK_KERNELS(mat4, wp::f32, 4, 4, true)
+WP_SP_BLOCK_KERNELS(dmat2, wp::f64, 2, 2, true)
+WP_SP_BLOCK_KERNELS(dmat3, wp::f64, 3, 3, true)
+WP_SP_BLOCK_KERNELS(dmat4, wp::f64, 4, 4, true)
+#endif

@@ -1,0 +1,668 @@
+//! Block sparse matrices and the conjugate gradient solver (cargo feature `sparse`), in the
+//! style of Warp's `warp.sparse` and `warp.optim.linear`.
+//!
+//! A [`Bsr<B>`] is a matrix of `nrow x ncol` blocks of type `B` ([`Block`]: `f32`, `f64`,
+//! glam's `Mat2`..`Mat4`, `DMat2`..`DMat4`) in block sparse row form: `offsets` (`nrow + 1`
+//! row starts), `columns` (one block column per stored block) and `values` (the blocks). It
+//! is made from triplets ([`Bsr::from_triplets`], duplicates summed), multiplies vectors
+//! ([`mv`]) and is solved with [`cg`] (conjugate gradients with Jacobi preconditioning,
+//! driven from the host or captured into one graph: [`Mode`]).
+//!
+//! # Same bits on every device
+//! Every operation here gives the same bits on the CPU and on a GPU: each step runs the same
+//! arithmetic in the same order on both (the CUDA steps spell every float operation with a
+//! rounded intrinsic, so FMA contraction never changes them), duplicates are summed in
+//! ascending triplet order after a stable sort, and [`dot`] reduces in a fixed tree (not
+//! [`array_sum`](crate::array_sum)'s blocked sums). So a CG solve takes the same iterations and
+//! residual history on both.
+//!
+//! # Errors
+//! Shapes, lengths and devices are checked on the host before anything is queued: a mismatch
+//! is an [`Error::InvalidArgument`] naming the function, the argument and both shapes. Bad
+//! values in the data (a triplet index out of range, a NaN) are found where the data is: a
+//! fault of `sparse::from_triplets`, returned at once on the CPU and reported at the next
+//! synchronisation on a GPU.
+//!
+//! ```
+//! # use warp_runtime as wp;
+//! use wp::sparse::{self, Bsr};
+//! let dev = wp::cpu();
+//! let rows = wp::Array::from_slice(&[0, 1, 1, 0], &dev)?;
+//! let cols = wp::Array::from_slice(&[0, 1, 1, 1], &dev)?;
+//! let vals = wp::Array::from_slice(&[2.0f32, 3.0, 1.0, -1.0], &dev)?;
+//! let a = Bsr::from_triplets(2, 2, &rows, &cols, &vals)?; // [[2, -1], [0, 4]]
+//! let x = wp::Array::from_slice(&[1.0f32, 1.0], &dev)?;
+//! let y = wp::Array::<f32>::zeros(2, &dev)?;
+//! sparse::mv(&a, &x, &y, 1.0, 0.0)?;
+//! assert_eq!(y.to_vec()?, [1.0, 4.0]);
+//! # Ok::<(), wp::Error>(())
+//! ```
+
+mod block;
+mod solve;
+mod steps;
+
+pub use block::{Block, SparseScalar, SquareBlock};
+pub use solve::{cg, Mode, Precond, SolveOptions, SolveReport, Stop};
+
+use crate::array::{Array, Element};
+use crate::backend::StepFault;
+use crate::capturing::Keep;
+use crate::device::Device;
+use crate::dispatch;
+use crate::error::{Error, Result};
+use crate::primitives::{array_scan_n, radix_sort_pairs, Count};
+use std::marker::PhantomData;
+use steps::{
+    BsrMv, BsrOffsets, Dot, TplHeads, TplKeys, TplReport, TplRowKeys, TplSum, TRIPLET_NAMES,
+};
+
+/// A block sparse row matrix of `nrow x ncol` blocks of `B` on one device.
+///
+/// Block row `r` holds blocks `offsets[r] .. offsets[r + 1]`; block `k` lies in block column
+/// `columns[k]` and is `values[k]`. Within a row, columns ascend and appear once. The exact
+/// block count `offsets[nrow]` lives on the device (a GPU assembly reads nothing back); the
+/// host knows an upper bound, the capacity of `columns` and `values`
+/// ([`Bsr::nnz_bound`]), and [`Bsr::nnz`] reads the exact count.
+///
+/// The arrays are handles, as every [`Array`]: a kernel or copy may change the blocks'
+/// `values` in place (the structure stays), but `offsets` and `columns` are the structure
+/// and are meant to be read; overwriting them gives meaningless results (never a read
+/// outside the arrays: the steps clamp). Cloning a `Bsr` clones its array handles: the clone
+/// shares the memory.
+#[derive(Clone, Debug)]
+pub struct Bsr<B: Block> {
+    nrow: usize,
+    ncol: usize,
+    offsets: Array<i32>,
+    columns: Array<i32>,
+    values: Array<B>,
+}
+
+/// `function: message`, as an [`Error::InvalidArgument`].
+fn invalid(func: &str, what: impl std::fmt::Display) -> Error {
+    Error::invalid(format!("{func}: {what}"))
+}
+
+/// `a` is contiguous.
+fn contiguous<T: Element>(func: &str, name: &str, a: &Array<T>) -> Result<()> {
+    if a.is_contiguous() {
+        return Ok(());
+    }
+    Err(invalid(
+        func,
+        format!(
+            "argument `{name}` is not contiguous (shape {:?}, strides {:?}); copy it into a new \
+             array first",
+            a.shape(),
+            a.strides()
+        ),
+    ))
+}
+
+/// `other` is on `dev`.
+fn same_device(func: &'static str, arg: &'static str, dev: &Device, other: &Device) -> Result<()> {
+    if dev == other {
+        return Ok(());
+    }
+    Err(Error::DeviceMismatch {
+        kernel: func,
+        arg,
+        expected: dev.alias().to_string(),
+        found: other.alias().to_string(),
+    })
+}
+
+/// The elements of `a` and `b` overlap in memory.
+fn overlap<T: Element, U: Element>(a: &Array<T>, b: &Array<U>) -> bool {
+    if !a.shares_storage_with(b) || a.is_empty() || b.is_empty() {
+        return false;
+    }
+    let (s, t) = (a.device_address(), b.device_address());
+    let (e, f) = (
+        s + (a.len() * std::mem::size_of::<T>()) as u64,
+        t + (b.len() * std::mem::size_of::<U>()) as u64,
+    );
+    s < f && t < e
+}
+
+/// Bits of a radix key whose largest value is `max`.
+fn key_bits(max: u64) -> u32 {
+    (u64::BITS - max.leading_zeros()).max(1)
+}
+
+impl<B: Block> Bsr<B> {
+    /// The matrix whose blocks are the sums of the triplets `(rows[t], columns[t],
+    /// values[t])` sharing a position: Warp's `bsr_from_triplets`, with the duplicates of a
+    /// position summed in ascending `t` (a stable sort of the positions, then each run summed
+    /// in order), so the sums are the same bits on every device. A position with no triplet
+    /// has no block; blocks that sum to zero are kept (the structure never depends on values).
+    ///
+    /// `nrow` and `ncol` count blocks. The three arrays have one element per triplet, on one
+    /// device, contiguous. The result is on their device, with room for one block per
+    /// triplet ([`Bsr::nnz_bound`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `sparse::from_triplets` and the argument: arrays of
+    /// different lengths or not contiguous, `nrow` or `ncol` above `i32::MAX - 1`, more than
+    /// `i32::MAX` triplets; [`Error::DeviceMismatch`]. A triplet whose row is outside
+    /// `0..nrow` or column outside `0..ncol` is an [`Error::Fault`] of
+    /// `sparse::from_triplets`: out of bounds on argument `rows` (or `columns`) with index
+    /// `[t, value]` for shape `[triplets, nrow]` (or `ncol`); a block with a NaN or infinite
+    /// scalar is a fault `NonFiniteInput` on `values` at index `t` (the smallest bad `t`; rows
+    /// before columns before values at one `t`). On the CPU the fault is returned at once; on
+    /// a GPU it is reported at the next synchronisation (the matrix then holds the valid
+    /// triplets' sums).
+    pub fn from_triplets(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+    ) -> Result<Self> {
+        Self::assemble(
+            nrow,
+            ncol,
+            rows,
+            columns,
+            values,
+            Count::Host(values.len()),
+            true,
+        )
+    }
+
+    /// [`Bsr::from_triplets`] of the first `count` triplets: a `usize`, or a 1-element
+    /// `Array<i32>` on the arrays' device whose value is read where the work runs (no host
+    /// synchronisation on a GPU: a count computed by an earlier kernel feeds the assembly
+    /// directly). With a device count the matrix has room for as many blocks as the arrays
+    /// hold triplets, and the arrays must hold at least as many as the count may reach.
+    ///
+    /// # Errors
+    /// As [`Bsr::from_triplets`]; a host count larger than the arrays is an
+    /// [`Error::InvalidArgument`]; a device count outside `0..=len` is a fault of
+    /// `sparse::from_triplets`, out of bounds on argument `count` (index `[count]`, shape
+    /// `[len + 1]`; then no triplet is assembled).
+    pub fn from_triplets_n<'c>(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: impl Into<Count<'c>>,
+    ) -> Result<Self> {
+        Self::assemble(nrow, ncol, rows, columns, values, count.into(), false)
+    }
+
+    /// The assembly of both: `whole` when the count is the arrays' length (the lengths must
+    /// then agree; else the count must fit each).
+    fn assemble(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: Count<'_>,
+        whole: bool,
+    ) -> Result<Self> {
+        const F: &str = "sparse::from_triplets";
+        let dev = values.device().clone();
+        same_device(F, "rows", &dev, rows.device())?;
+        same_device(F, "columns", &dev, columns.device())?;
+        contiguous(F, "rows", rows)?;
+        contiguous(F, "columns", columns)?;
+        contiguous(F, "values", values)?;
+        let len = rows.len().min(columns.len()).min(values.len());
+        if whole && (rows.len() != values.len() || columns.len() != values.len()) {
+            return Err(invalid(
+                F,
+                format!(
+                    "arguments `rows`, `columns` and `values` must have one element per \
+                     triplet; their shapes are {:?}, {:?} and {:?}",
+                    rows.shape(),
+                    columns.shape(),
+                    values.shape()
+                ),
+            ));
+        }
+        // The triplets the steps may process (`n`), and the device count's address.
+        let (n, count_addr) = match count {
+            Count::Host(c) if c <= len => (c, 0),
+            Count::Host(c) => {
+                return Err(invalid(
+                    F,
+                    format!(
+                        "count {c} is larger than the triplet arrays (shapes {:?}, {:?} and \
+                         {:?})",
+                        rows.shape(),
+                        columns.shape(),
+                        values.shape()
+                    ),
+                ))
+            }
+            Count::Device(c) => {
+                same_device(F, "count", &dev, c.device())?;
+                if c.len() != 1 {
+                    return Err(invalid(
+                        F,
+                        format!(
+                            "argument `count` must be a 1-element array, got shape {:?}",
+                            c.shape()
+                        ),
+                    ));
+                }
+                (len, c.device_address())
+            }
+        };
+        let limit = i32::MAX as usize - 1;
+        if nrow > limit || ncol > limit {
+            return Err(invalid(
+                F,
+                format!("`nrow` {nrow} and `ncol` {ncol} must be at most {limit} (i32 indices)"),
+            ));
+        }
+        if n > i32::MAX as usize {
+            return Err(invalid(
+                F,
+                format!("{n} triplets, more than the {} this counts", i32::MAX),
+            ));
+        }
+        let m = Bsr {
+            nrow,
+            ncol,
+            offsets: Array::zeros(nrow + 1, &dev)?,
+            columns: Array::zeros(n, &dev)?,
+            values: Array::zeros(n, &dev)?,
+        };
+        // (A device count is read and checked by the steps, even with no room for a triplet.)
+        if n == 0 && count_addr == 0 {
+            return Ok(m);
+        }
+        // What the primitives process: the same count.
+        let prim: Count<'_> = match count {
+            Count::Host(_) => Count::Host(n),
+            Count::Device(c) => Count::Device(c),
+        };
+        // Scratch: the sort's keys and permutation, the heads' scan, the blocks' rows, and
+        // the smallest bad triplet of each kind.
+        let keys = Array::<u32>::zeros(n, &dev)?;
+        let idx = Array::<i32>::zeros(n, &dev)?;
+        let pos = Array::<i32>::zeros(n, &dev)?;
+        let block_rows = Array::<i32>::zeros(n, &dev)?;
+        let bad = Array::<i32>::zeros(3, &dev)?;
+        bad.fill(i32::MAX)?;
+        // One sort by row * ncol + col when that (and the sentinel ncol * nrow past it) fits
+        // 32 bits; else by column, then stably by row.
+        let cells = nrow as u64 * ncol as u64;
+        let two_pass = cells > u32::MAX as u64;
+        let (ni, nr, nc, blk) = (
+            n as i32,
+            nrow as i32,
+            ncol as i32,
+            (B::ROWS * B::COLS) as i32,
+        );
+        let (r_a, c_a, v_a) = (
+            rows.device_address(),
+            columns.device_address(),
+            values.device_address(),
+        );
+        dispatch::object_step(
+            &dev,
+            &TplKeys::<B::Scalar> {
+                count: count_addr,
+                rows: r_a,
+                cols: c_a,
+                values: v_a,
+                n: ni,
+                nrow: nr,
+                ncol: nc,
+                block: blk,
+                two_pass: two_pass as i32,
+                pad: 0,
+                keys: keys.device_address(),
+                idx: idx.device_address(),
+                bad: bad.device_address(),
+                scalar: PhantomData,
+            },
+        )?;
+        dispatch::object_step(
+            &dev,
+            &TplReport::<B::Scalar> {
+                count: count_addr,
+                bad: bad.device_address(),
+                rows: r_a,
+                cols: c_a,
+                values: v_a,
+                n: ni,
+                nrow: nr,
+                ncol: nc,
+                block: blk,
+                fault: StepFault::new(&TRIPLET_NAMES),
+                scalar: PhantomData,
+            },
+        )?;
+        if two_pass {
+            radix_sort_pairs(&keys, &idx, prim, Some(key_bits(ncol as u64)))?;
+            dispatch::object_step(
+                &dev,
+                &TplRowKeys {
+                    count: count_addr,
+                    rows: r_a,
+                    cols: c_a,
+                    idx: idx.device_address(),
+                    keys: keys.device_address(),
+                    n: ni,
+                    nrow: nr,
+                    ncol: nc,
+                    pad: 0,
+                },
+            )?;
+            radix_sort_pairs(&keys, &idx, prim, Some(key_bits(nrow as u64)))?;
+        } else {
+            radix_sort_pairs(&keys, &idx, prim, Some(key_bits(cells)))?;
+        }
+        dispatch::object_step(
+            &dev,
+            &TplHeads {
+                count: count_addr,
+                rows: r_a,
+                cols: c_a,
+                idx: idx.device_address(),
+                heads: pos.device_address(),
+                n: ni,
+                nrow: nr,
+                ncol: nc,
+                pad: 0,
+            },
+        )?;
+        array_scan_n(&pos, &pos, prim, true)?;
+        dispatch::object_step(
+            &dev,
+            &TplSum::<B::Scalar> {
+                count: count_addr,
+                rows: r_a,
+                cols: c_a,
+                values: v_a,
+                idx: idx.device_address(),
+                pos: pos.device_address(),
+                block_rows: block_rows.device_address(),
+                columns: m.columns.device_address(),
+                out: m.values.device_address(),
+                n: ni,
+                nrow: nr,
+                ncol: nc,
+                block: blk,
+                scalar: PhantomData,
+            },
+        )?;
+        dispatch::object_step(
+            &dev,
+            &BsrOffsets {
+                count: count_addr,
+                block_rows: block_rows.device_address(),
+                pos: pos.device_address(),
+                offsets: m.offsets.device_address(),
+                n: ni,
+                nrow: nr,
+            },
+        )?;
+        // The scratch is freed after the queued steps (array memory orders its free).
+        Ok(m)
+    }
+
+    /// Whether `v`'s elements share memory with the matrix's arrays.
+    fn overlaps<T: Element>(&self, v: &Array<T>) -> bool {
+        overlap(v, &self.offsets) || overlap(v, &self.columns) || overlap(v, &self.values)
+    }
+
+    /// Block rows.
+    pub fn nrow(&self) -> usize {
+        self.nrow
+    }
+
+    /// Block columns.
+    pub fn ncol(&self) -> usize {
+        self.ncol
+    }
+
+    /// The shape in scalars: `(nrow * B::ROWS, ncol * B::COLS)`.
+    pub fn shape(&self) -> (usize, usize) {
+        (self.nrow * B::ROWS, self.ncol * B::COLS)
+    }
+
+    /// An upper bound of the block count: the capacity of [`Bsr::columns`] and
+    /// [`Bsr::values`].
+    pub fn nnz_bound(&self) -> usize {
+        self.values.len()
+    }
+
+    /// The block count, `offsets[nrow]`, read from the device (a synchronisation).
+    ///
+    /// # Errors
+    /// A fault of the queued work, or a read-back inside a capture.
+    pub fn nnz(&self) -> Result<usize> {
+        Ok(self.offsets.to_vec()?[self.nrow] as usize)
+    }
+
+    /// The row offsets (`nrow + 1`).
+    pub fn offsets(&self) -> &Array<i32> {
+        &self.offsets
+    }
+
+    /// The block columns (the first [`Bsr::nnz`] are the matrix's).
+    pub fn columns(&self) -> &Array<i32> {
+        &self.columns
+    }
+
+    /// The blocks (the first [`Bsr::nnz`] are the matrix's).
+    pub fn values(&self) -> &Array<B> {
+        &self.values
+    }
+
+    /// The device holding the matrix.
+    pub fn device(&self) -> &Device {
+        self.values.device()
+    }
+}
+
+/// Queues `y = alpha A x + beta y` over scalar addresses, lengths checked by the caller.
+/// Inside a capture the step is recorded, and the graph keeps `uses()` (the arrays the
+/// addresses point into) alive.
+fn mv_raw<B: Block>(
+    a: &Bsr<B>,
+    x: u64,
+    y: u64,
+    alpha: f64,
+    beta: f64,
+    uses: impl FnOnce() -> Keep,
+) -> Result<()> {
+    dispatch::object_step_keeping(
+        a.device(),
+        &BsrMv::<B> {
+            offsets: a.offsets.device_address(),
+            columns: a.columns.device_address(),
+            values: a.values.device_address(),
+            x,
+            y,
+            alpha,
+            beta,
+            nrow: a.nrow as i32,
+            ncol: a.ncol as i32,
+            cap: a.nnz_bound() as i32,
+            pad: 0,
+            block: PhantomData,
+        },
+        uses,
+    )
+}
+
+/// `y = alpha A x + beta y` (Warp's `bsr_mv`), a thread per block row on a GPU.
+///
+/// Each scalar of `y` is `alpha * acc + beta * y`, where `acc` sums from zero, over the row's
+/// blocks in storage order and within a block over ascending columns, the products
+/// `a_ij * x_j`, each rounded: the same bits on every device. When `beta == 0`, `y` is not
+/// read (it may hold NaN).
+///
+/// `x` has `ncol` elements (`B::In`: `Vec3` for `Mat3` blocks), `y` has `nrow` (`B::Out`);
+/// both contiguous, on the matrix's device, `y` overlapping neither `x` nor the matrix.
+///
+/// A [capture](crate::capture) records it (each replay multiplies the arrays' contents at
+/// that time); on a GPU, call it once for the block type before capturing (its first call
+/// loads the CUDA library).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `sparse::mv`, the argument and both shapes when a length
+/// differs; for arrays that are not contiguous or overlap; [`Error::DeviceMismatch`].
+pub fn mv<B: Block>(
+    a: &Bsr<B>,
+    x: &Array<B::In>,
+    y: &Array<B::Out>,
+    alpha: B::Scalar,
+    beta: B::Scalar,
+) -> Result<()> {
+    const F: &str = "sparse::mv";
+    let dev = a.device();
+    same_device(F, "x", dev, x.device())?;
+    same_device(F, "y", dev, y.device())?;
+    contiguous(F, "x", x)?;
+    contiguous(F, "y", y)?;
+    if x.len() != a.ncol {
+        return Err(invalid(
+            F,
+            format!(
+                "argument `x` has shape {:?}, but the matrix has {} x {} blocks: `x` needs {} \
+                 elements",
+                x.shape(),
+                a.nrow,
+                a.ncol,
+                a.ncol
+            ),
+        ));
+    }
+    if y.len() != a.nrow {
+        return Err(invalid(
+            F,
+            format!(
+                "argument `y` has shape {:?}, but the matrix has {} x {} blocks: `y` needs {} \
+                 elements",
+                y.shape(),
+                a.nrow,
+                a.ncol,
+                a.nrow
+            ),
+        ));
+    }
+    if overlap(x, y) {
+        return Err(invalid(F, "arguments `x` and `y` overlap in memory"));
+    }
+    if a.overlaps(y) {
+        return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
+    }
+    mv_raw(
+        a,
+        x.device_address(),
+        y.device_address(),
+        alpha.to_f64(),
+        beta.to_f64(),
+        || Box::new((a.clone(), x.clone(), y.clone())),
+    )
+}
+
+/// Scratch of [`dot_raw`]: one partial per chunk.
+fn dot_partials<S: SparseScalar>(n: usize, dev: &Device) -> Result<Array<S>> {
+    Array::zeros(steps::dot_chunks(n), dev)
+}
+
+/// Queues the dot product of `n` scalars at `a` and `b` into the scalar at `out` (recorded
+/// inside a capture, which keeps `uses()` and the partials alive).
+fn dot_raw<S: SparseScalar>(
+    dev: &Device,
+    a: u64,
+    b: u64,
+    n: usize,
+    partials: &Array<S>,
+    out: u64,
+    uses: impl Fn() -> Keep,
+) -> Result<()> {
+    let chunks = steps::dot_chunks(n) as i64;
+    let p = partials.device_address();
+    let keep = || -> Keep { Box::new((uses(), partials.clone())) };
+    dispatch::object_step_keeping(
+        dev,
+        &Dot::<S, false> {
+            a,
+            b,
+            n: n as i64,
+            out: p,
+            chunks,
+            scalar: PhantomData,
+        },
+        keep,
+    )?;
+    dispatch::object_step_keeping(
+        dev,
+        &Dot::<S, true> {
+            a: p,
+            b: 0,
+            n: chunks,
+            out,
+            chunks,
+            scalar: PhantomData,
+        },
+        keep,
+    )
+}
+
+/// The dot product `a . b` into `out[0]`, reduced in a fixed tree, so the result is the
+/// same bits on every device (unlike [`array_sum`](crate::array_sum)'s blocked float sums).
+///
+/// The order: chunks of 4096 elements; in a chunk, lane `l` of 256 sums from zero the products
+/// of elements `l, l + 256, ..` in order, then the lanes are added pairwise at strides 128,
+/// 64, .., 1 (lane `l` gets `l + stride`); the chunks' partials are reduced the same way
+/// (lane `l` sums partials `l, l + 256, ..`, then the tree).
+///
+/// It allocates its scratch (a partial sum per chunk), so it cannot be recorded by a
+/// [capture](crate::capture) (an [`Error::Capture`] there).
+///
+/// # Errors
+/// [`Error::Capture`] inside a capture; [`Error::InvalidArgument`] naming `sparse::dot` when the lengths differ, `out` is not one
+/// element or overlaps an input, or an array is not contiguous; [`Error::DeviceMismatch`].
+pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Result<()> {
+    const F: &str = "sparse::dot";
+    let dev = a.device();
+    same_device(F, "b", dev, b.device())?;
+    same_device(F, "out", dev, out.device())?;
+    contiguous(F, "a", a)?;
+    contiguous(F, "b", b)?;
+    if a.len() != b.len() {
+        return Err(invalid(
+            F,
+            format!(
+                "arguments `a` and `b` differ in length: shapes {:?} and {:?}",
+                a.shape(),
+                b.shape()
+            ),
+        ));
+    }
+    if out.len() != 1 {
+        return Err(invalid(
+            F,
+            format!(
+                "argument `out` must have one element, got shape {:?}",
+                out.shape()
+            ),
+        ));
+    }
+    if overlap(out, a) || overlap(out, b) {
+        return Err(invalid(F, "argument `out` overlaps `a` or `b`"));
+    }
+    let partials = dot_partials::<S>(a.len(), dev)?;
+    dot_raw(
+        dev,
+        a.device_address(),
+        b.device_address(),
+        a.len(),
+        &partials,
+        out.device_address(),
+        || Box::new((a.clone(), b.clone(), out.clone())),
+    )
+}
