@@ -82,7 +82,7 @@ WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_
   (void)adj_mesh;
   (void)adj_max_dist;
   detail::mesh_closest_t c;
-  if (!detail::mesh_closest(mesh, point, max_dist, &c, ctx)) return;
+  if (!detail::mesh_closest_search(mesh, point, max_dist, &c, ctx)) return;
   const triangle_closest_point_t g = detail::tri_cp(adj_ret.u, adj_ret.v, 0.0f, TRI_FEATURE_FACE);
   Vec3 t[3];
   detail::mesh_triangle(mesh, (i64)c.face, t, ctx);

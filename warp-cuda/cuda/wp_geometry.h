@@ -14,8 +14,15 @@
 //   ray_triangle_hit_t                              RayTriangleHit (result, t, u, v, sign)
 //   intersect_ray_triangle(start, dir, a, b, c)     watertight ray-triangle (f64 edge functions)
 //   ray_crosses_triangle(start, dir, a, b, c)       its crossing for parity counts (ties broken)
+//   ray_frame_t, ray_frame(dir)                     RayFrame: the per-ray part of the shear
+//   intersect_ray_triangle_in_frame(fr, start, dir, a, b, c), ray_crosses_triangle_in_frame(
+//       fr, start, dir, a, b, c)                    the two in a frame made once per ray; the
+//                                                   first returns a candidate (t, sign, uu, vv,
+//                                                   det) whose u, v the caller divides out
 //   aabb_overlap(al, au, bl, bu)                    box-box, touching included
 //   intersect_ray_aabb(start, inv_dir, lo, hi, &t)  slab test: Some(t_enter) is `true` and *t
+//   intersect_ray_aabb_finite(..), ray_inv_dir_finite(inv_dir)   its branch-free form for an
+//                                                   inv_dir with no infinite component
 //   ray_inv_dir(dir), aabb_distance_sq(p, lo, hi), aabb_distance_sq_scaled(p, lo, hi, s)
 //   intersect_tri_tri(v0, v1, v2, u0, u1, u2)       Möller's interval test, robust variant
 //
@@ -247,29 +254,23 @@ struct ray_triangle_hit_t {
 };
 static_assert(sizeof(ray_triangle_hit_t) == 20, "ray_triangle_hit_t layout");
 
-namespace detail {
-/// shear_triangle's frame: the direction's dominant axis kz (x and y following cyclically,
-/// swapped when it points backwards) and the shear sx, sy, sz; false for a zero or non-finite
-/// direction.
-WP_FN bool ray_frame(Vec3 dir, int& kx, int& ky, int& kz, f32& sx, f32& sy, f32& sz) {
-  const Vec3 ad = g_abs(dir);
-  kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
-  const f32 dz = g_comp(dir, kz);
-  kx = (kz + 1) % 3;
-  ky = (kz + 2) % 3;
-  sx = sy = sz = 0.0f;
-  if (!(dz != 0.0f && g_finite3(dir))) return false;
-  if (dz < 0.0f) {
-    const int t = kx;
-    kx = ky;
-    ky = t;
-  }
-  sx = g_comp(dir, kx) / dz;
-  sy = g_comp(dir, ky) / dz;
-  sz = 1.0f / dz;
-  return true;
-}
+/// A ray's frame for the watertight tests (Rust's `RayFrame`): the direction's dominant axis
+/// kz (x and y following cyclically, swapped when it points backwards) and the shear sx, sy.
+/// It depends on the direction only, so a walk makes it once per ray rather than once per
+/// face (two of the three divisions; sz = 1 / dir[kz] and the parallel test's |dir| are taken
+/// only for a face the ray hits). k packs kx | ky << 2 | kz << 4, or is -1 for a zero or
+/// non-finite direction (no face is hit or crossed then): fewer registers live across the
+/// walk.
+struct ray_frame_t {
+  i32 k;
+  f32 sx, sy;
+  WP_FN bool ok() const { return k >= 0; }
+  WP_FN int kx() const { return k & 3; }
+  WP_FN int ky() const { return (k >> 2) & 3; }
+  WP_FN int kz() const { return k >> 4; }
+};
 
+namespace detail {
 /// tie_broken_side: the sign of the edge function e = p.x * q.y - p.y * q.x once the origin
 /// moves by (eps, eps^2): its own, else that of p.y - q.y, else of q.x - p.x; 0 for NaN.
 WP_FN int tie_broken_side(f64 e, f32 px, f32 py, f32 qx, f32 qy) {
@@ -287,21 +288,20 @@ WP_FN int tie_broken_side(f64 e, f32 px, f32 py, f32 qx, f32 qy) {
 
 /// A triangle in a ray's frame (Rust's `Sheared`): the vertices relative to the start at the
 /// power-of-two scale s (q), their sheared x, y (xy) and the three edge functions (e: exact
-/// f32 products in f64), with the frame's kz and sz for the depths.
+/// f32 products in f64), with the frame's kz for the depths.
 struct sheared_t {
   int kz;
-  f32 sz, s;
+  f32 s;
   Vec3 q[3];
   f32 x[3], y[3];
   f64 e[3];
 };
 
-/// Shears triangle (a, b, c) into the frame of the ray start + t * dir: false for a zero or
-/// non-finite direction.
-WP_FN bool shear_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c, sheared_t& sh) {
-  int kx, ky;
-  f32 sx, sy;
-  if (!ray_frame(dir, kx, ky, sh.kz, sx, sy, sh.sz)) return false;
+/// Shears triangle (a, b, c) into the frame `fr` (ok) of a ray from `start`.
+WP_FN void shear_triangle(const ray_frame_t& fr, Vec3 start, Vec3 a, Vec3 b, Vec3 c,
+                          sheared_t& sh) {
+  const int kx = fr.kx(), ky = fr.ky(), kz = fr.kz();
+  sh.kz = kz;
   sh.q[0] = a - start;
   sh.q[1] = b - start;
   sh.q[2] = c - start;
@@ -312,74 +312,134 @@ WP_FN bool shear_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c, sheared_
 #endif
   for (int k = 0; k < 3; ++k) {
     sh.q[k] = sh.q[k] * sh.s;
-    sh.x[k] = g_comp(sh.q[k], kx) - sx * g_comp(sh.q[k], sh.kz);
-    sh.y[k] = g_comp(sh.q[k], ky) - sy * g_comp(sh.q[k], sh.kz);
+    sh.x[k] = g_comp(sh.q[k], kx) - fr.sx * g_comp(sh.q[k], kz);
+    sh.y[k] = g_comp(sh.q[k], ky) - fr.sy * g_comp(sh.q[k], kz);
   }
   // The products are exact in f64 (24-bit significands), so contraction cannot change these.
   sh.e[0] = (f64)sh.x[2] * (f64)sh.y[1] - (f64)sh.y[2] * (f64)sh.x[1];
   sh.e[1] = (f64)sh.x[0] * (f64)sh.y[2] - (f64)sh.y[0] * (f64)sh.x[2];
   sh.e[2] = (f64)sh.x[1] * (f64)sh.y[0] - (f64)sh.y[1] * (f64)sh.x[0];
-  return true;
 }
 
 /// The ray parameter where the sheared triangle's plane is met, from the edge functions and
-/// their sum `det` (nonzero); NaN or inf for a degenerate one.
-WP_FN f64 sheared_depth(const sheared_t& sh, f64 det) {
-  const f32 az = sh.sz * g_comp(sh.q[0], sh.kz), bz = sh.sz * g_comp(sh.q[1], sh.kz),
-            cz = sh.sz * g_comp(sh.q[2], sh.kz);
+/// their sum `det` (nonzero), for the ray along dir; NaN or inf for a degenerate one.
+WP_FN f64 sheared_depth(const sheared_t& sh, Vec3 dir, f64 det) {
+  const f32 sz = 1.0f / g_comp(dir, sh.kz);
+  const f32 az = sz * g_comp(sh.q[0], sh.kz), bz = sz * g_comp(sh.q[1], sh.kz),
+            cz = sz * g_comp(sh.q[2], sh.kz);
   const f64 tt = (sh.e[0] * (f64)az + sh.e[1] * (f64)bz) + sh.e[2] * (f64)cz;
   return tt / det;
 }
 }  // namespace detail
 
-/// Woop, Benthin and Wald's watertight test: shear into the ray's frame, then the signs of
-/// three edge functions computed as exact f32 products in f64 (one rounding each, so exact
-/// signs: a shared edge evaluates identically for both of its triangles).
-WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+/// The frame of the ray along `dir` (see ray_frame_t).
+WP_FN ray_frame_t ray_frame(Vec3 dir) {
   using namespace detail;
-  ray_triangle_hit_t miss;
+  ray_frame_t fr;
+  const Vec3 ad = g_abs(dir);
+  const int kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
+  const f32 dz = g_comp(dir, kz);
+  int kx = (kz + 1) % 3, ky = (kz + 2) % 3;
+  fr.k = -1;
+  fr.sx = fr.sy = 0.0f;
+  if (!(dz != 0.0f && g_finite3(dir))) return fr;
+  if (dz < 0.0f) {
+    const int t = kx;
+    kx = ky;
+    ky = t;
+  }
+  fr.k = kx | (ky << 2) | (kz << 4);
+  fr.sx = g_comp(dir, kx) / dz;
+  fr.sy = g_comp(dir, ky) / dz;
+  return fr;
+}
+
+/// A hit of intersect_ray_triangle before its barycentrics are divided out (Rust's
+/// `RayTriangleCandidate`): t, the sign, and the edge functions uu, vv with their sum det, from
+/// which u = (f32)(uu / det), v = (f32)(vv / det). A closest-hit search compares t with its
+/// bound first and divides only for a nearer hit.
+struct ray_triangle_candidate_t {
+  bool result;
+  f32 t;
+  f32 sign;
+  f64 uu, vv, det;
+};
+
+/// intersect_ray_triangle in the ray's frame `fr` (ray_frame(dir)), without the division of
+/// the barycentrics: the same hits, t and sign.
+WP_FN ray_triangle_candidate_t intersect_ray_triangle_in_frame(const ray_frame_t& fr, Vec3 start,
+                                                               Vec3 dir, Vec3 a, Vec3 b,
+                                                               Vec3 c) {
+  using namespace detail;
+  ray_triangle_candidate_t miss;
   miss.result = false;
   miss.t = 0.0f;
-  miss.u = 0.0f;
-  miss.v = 0.0f;
   miss.sign = 0.0f;
+  miss.uu = miss.vv = miss.det = 0.0;
+  if (!fr.ok()) return miss;
   sheared_t sh;
-  if (!shear_triangle(start, dir, a, b, c, sh)) return miss;
-  // Parallel rays (and degenerate triangles) never hit.
-  const Vec3 ab = sh.q[1] - sh.q[0], ac = sh.q[2] - sh.q[0];
-  const f32 dn = g_dot(dir, g_cross(ab, ac));
-  if (!(::fabsf(dn) > ((1e-6f * g_len(dir)) * g_len(ab)) * g_len(ac))) return miss;
+  shear_triangle(fr, start, a, b, c, sh);
+  // The hit is the conjunction of side-effect-free tests, so their order is free: the cheap
+  // sign test of the edge functions (most faces fail it) before the parallel test's cross
+  // product and square roots.
   const f64 uu = sh.e[0], vv = sh.e[1], ww = sh.e[2];
   const bool inside =
       (uu >= 0.0 && vv >= 0.0 && ww >= 0.0) || (uu <= 0.0 && vv <= 0.0 && ww <= 0.0);
   const f64 det = (uu + vv) + ww;
   if (!(inside && det != 0.0)) return miss;
-  const f32 t = (f32)sheared_depth(sh, det) / sh.s;
+  // Parallel rays (and degenerate triangles) never hit.
+  const Vec3 ab = sh.q[1] - sh.q[0], ac = sh.q[2] - sh.q[0];
+  const f32 dn = g_dot(dir, g_cross(ab, ac));
+  if (!(::fabsf(dn) > ((1e-6f * g_len(dir)) * g_len(ab)) * g_len(ac))) return miss;
+  const f32 t = (f32)sheared_depth(sh, dir, det) / sh.s;
   if (!(t >= 0.0f && g_finite(t))) return miss;
-  ray_triangle_hit_t h;
+  ray_triangle_candidate_t h;
   h.result = true;
   h.t = t;
-  h.u = (f32)(uu / det);
-  h.v = (f32)(vv / det);
   h.sign = dn < 0.0f ? 1.0f : -1.0f;
+  h.uu = uu;
+  h.vv = vv;
+  h.det = det;
   return h;
 }
 
-/// Whether the ray start + t * dir, t >= 0, crosses triangle (a, b, c) for a parity count:
-/// intersect_ray_triangle's sheared edge functions with their exact zeros tie-broken
-/// (simulation of simplicity) and no parallel rejection (see the Rust for why).
-WP_FN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+/// Woop, Benthin and Wald's watertight test: shear into the ray's frame, then the signs of
+/// three edge functions computed as exact f32 products in f64 (one rounding each, so exact
+/// signs: a shared edge evaluates identically for both of its triangles).
+WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+  const ray_triangle_candidate_t k =
+      intersect_ray_triangle_in_frame(ray_frame(dir), start, dir, a, b, c);
+  ray_triangle_hit_t h;
+  h.result = k.result;
+  h.t = k.t;
+  h.u = k.result ? (f32)(k.uu / k.det) : 0.0f;
+  h.v = k.result ? (f32)(k.vv / k.det) : 0.0f;
+  h.sign = k.sign;
+  return h;
+}
+
+/// ray_crosses_triangle in the frame `fr` (ray_frame(dir)) of the ray along dir.
+WP_FN bool ray_crosses_triangle_in_frame(const ray_frame_t& fr, Vec3 start, Vec3 dir, Vec3 a,
+                                         Vec3 b, Vec3 c) {
   using namespace detail;
+  if (!fr.ok()) return false;
   sheared_t sh;
-  if (!shear_triangle(start, dir, a, b, c, sh)) return false;
+  shear_triangle(fr, start, a, b, c, sh);
   const int su = tie_broken_side(sh.e[0], sh.x[2], sh.y[2], sh.x[1], sh.y[1]);
   const int sv = tie_broken_side(sh.e[1], sh.x[0], sh.y[0], sh.x[2], sh.y[2]);
   const int sw = tie_broken_side(sh.e[2], sh.x[1], sh.y[1], sh.x[0], sh.y[0]);
   if (!(su != 0 && su == sv && sv == sw)) return false;
   const f64 det = (sh.e[0] + sh.e[1]) + sh.e[2];
   if (det == 0.0) return false;
-  const f64 t = sheared_depth(sh, det);
+  const f64 t = sheared_depth(sh, dir, det);
   return t >= 0.0 && t - t == 0.0;  // finite: inf - inf and NaN - NaN are NaN
+}
+
+/// Whether the ray start + t * dir, t >= 0, crosses triangle (a, b, c) for a parity count:
+/// intersect_ray_triangle's sheared edge functions with their exact zeros tie-broken
+/// (simulation of simplicity) and no parallel rejection (see the Rust for why).
+WP_FN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+  return ray_crosses_triangle_in_frame(ray_frame(dir), start, dir, a, b, c);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -417,6 +477,41 @@ WP_FN bool intersect_ray_aabb(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper, 
     return true;
   }
   return false;
+}
+
+/// intersect_ray_aabb for an inv_dir with no infinite component (a direction with no zero
+/// component; NaN allowed), without a branch: per axis the same two products, the same near
+/// and far choice by the sign of inv, and the same updates of t0 and t1, with the early
+/// `return false` of an inverted slab folded into `ok`. While ok holds every step is the
+/// branching version's; once it fails that version returns false and so does this one: the
+/// same result and the same *t_enter.
+WP_FN bool intersect_ray_aabb_finite(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper,
+                                     f32* t_enter) {
+  using namespace detail;
+  f32 t0 = -f32_inf();
+  f32 t1 = f32_inf();
+  bool ok = true;
+#if defined(__CUDACC__)
+#pragma unroll
+#endif
+  for (int k = 0; k < 3; ++k) {
+    const f32 o = g_comp(start, k), inv = g_comp(inv_dir, k);
+    const f32 ta = (g_comp(lower, k) - o) * inv, tb = (g_comp(upper, k) - o) * inv;
+    const bool pos = inv >= 0.0f;
+    const f32 nr = pos ? ta : tb;
+    const f32 fr = pos ? tb : ta;
+    ok = ok && nr <= fr;
+    t0 = nr > t0 ? nr : t0;
+    t1 = fr < t1 ? fr : t1;
+  }
+  *t_enter = t0;
+  return ok && t0 <= t1 && t1 >= 0.0f;
+}
+
+/// Whether intersect_ray_aabb_finite serves inv_dir (no component infinite).
+WP_FN bool ray_inv_dir_finite(Vec3 inv_dir) {
+  return !detail::g_is_inf(inv_dir.x) && !detail::g_is_inf(inv_dir.y) &&
+         !detail::g_is_inf(inv_dir.z);
 }
 
 /// 1 / dir per component (±inf for zero components).

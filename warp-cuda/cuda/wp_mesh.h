@@ -3,7 +3,12 @@
 // u * p0 + v * p1 + (1 - u - v) * p2, point queries report a point strictly within max_dist,
 // sign -1 inside by the angle-weighted pseudonormal, distances measured in a power-of-two
 // unit chosen from the root box). Every step is the Rust one in the same order, over the same
-// traversals (wp_bvh.h), so both backends visit the same faces in the same order.
+// traversals (wp_bvh.h), so both backends visit the same faces in the same order. Where the
+// code is arranged differently for the GPU, the values are still the Rust's bit for bit: the
+// closest-point search keeps only the best face during its walk and recomputes that face's
+// closest point once afterwards (the same inputs, the same code), and the signed query's edge
+// and vertex pseudonormals share one touching walk (mesh_feature_normal) where the Rust has
+// two functions.
 //
 //   mesh_t                                       a Mesh kernel parameter (warp_runtime's CudaMesh)
 //   mesh_query_point_t                           MeshQueryPoint (result, sign, face, u, v)
@@ -216,25 +221,23 @@ WP_FN bool mesh_tri_contains(const Vec3* t, const Vec3& x) {
   return g_eq(t[0], x) || g_eq(t[1], x) || g_eq(t[2], x);
 }
 
-/// edge_normal: the sum of the unit normals of the faces having both x and y as vertices.
-WP_FN Vec3 mesh_edge_normal(const mesh_t& m, Vec3 x, Vec3 y, ctx_t* ctx) {
+/// The pseudonormal of a closest feature other than the face (edge_normal and vertex_normal
+/// in one walk): for an edge x y (vertex false), the sum of the unit normals of the faces
+/// having both x and y as vertices; for the vertex x (vertex true, y == x), the angle-weighted
+/// sum of the unit normals of the faces around x. Both visit the faces in walk order and add
+/// the same terms in the same order as the Rust's two functions. One function, so that the
+/// signed query inlines one touching walk rather than one per feature (six copies made a
+/// 128 KB kernel that spilled inside the closest walk's loop).
+WP_FN Vec3 mesh_feature_normal(const mesh_t& m, Vec3 x, Vec3 y, bool vertex, ctx_t* ctx) {
   Vec3 n = Vec3_ZERO();
   mesh_for_faces_touching(
       m, g_vmin(x, y), g_vmax(x, y),
-      [&n, x, y](const Vec3* t) {
-        if (mesh_tri_contains(t, x) && mesh_tri_contains(t, y))
-          n = n + mesh_unit_normal(t[0], t[1], t[2]);
-      },
-      ctx);
-  return n;
-}
-
-/// vertex_normal: the angle-weighted sum of the unit normals of the faces around x.
-WP_FN Vec3 mesh_vertex_normal(const mesh_t& m, Vec3 x, ctx_t* ctx) {
-  Vec3 n = Vec3_ZERO();
-  mesh_for_faces_touching(
-      m, x, x,
-      [&n, x](const Vec3* t) {
+      [&n, x, y, vertex](const Vec3* t) {
+        if (!vertex) {
+          if (mesh_tri_contains(t, x) && mesh_tri_contains(t, y))
+            n = n + mesh_unit_normal(t[0], t[1], t[2]);
+          return;
+        }
         // The vertex at x and the two after it, selected without indexing t by a runtime
         // value (which would put t in local memory).
         const bool k0 = g_eq(t[0], x), k1 = !k0 && g_eq(t[1], x), k2 = !k0 && !k1 && g_eq(t[2], x);
@@ -252,16 +255,17 @@ WP_FN Vec3 mesh_vertex_normal(const mesh_t& m, Vec3 x, ctx_t* ctx) {
   return n;
 }
 
-/// The closest-point search (Closest): squared distances in units of 1 / s. It keeps the
-/// best face's index, not its vertices (the sign reads them again once): fewer registers
-/// live across the walk, whose loads are what the query waits on.
+/// The closest-point search (Closest): squared distances in units of 1 / s. During the walk
+/// it keeps only the best distance and face (the Rust keeps the face's vertices and closest
+/// point too): fewer registers live across the walk, whose loads are what the query waits
+/// on. mesh_closest recomputes the winning face's closest point once afterwards, from the
+/// same vertices and s by the same code, so the same bits as the visit that chose it.
 struct mesh_closest_t {
   const mesh_t* mesh;
   Vec3 p;
   f32 s;
   f32 best;
   i32 face;
-  triangle_closest_point_t bary;
   WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
     return aabb_distance_sq_scaled(p, lower, upper, s);
   }
@@ -285,13 +289,14 @@ struct mesh_closest_t {
     if (d < best) {
       best = d;
       face = id;
-      bary = r;
     }
   }
 };
 
 /// closest(): the search run; false (None) when nothing lies within max_dist or on a fault.
-WP_FN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c, ctx_t* ctx) {
+/// On true, c->face is the closest face.
+WP_FN bool mesh_closest_search(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c,
+                               ctx_t* ctx) {
   if (!(max_dist > 0.0f)) return false;
   const f32 s = mesh_measure_scale(m, p, ctx);
   if (faulted(ctx)) return false;
@@ -301,10 +306,23 @@ WP_FN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c
   c->s = s;
   c->best = bound * bound;
   c->face = -1;
-  c->bary = tri_cp(0.0f, 0.0f, 0.0f, TRI_FEATURE_FACE);
   bvh_walk_ordered(m.tree, *c, ctx);
   if (faulted(ctx)) return false;
   return c->face >= 0;
+}
+
+/// mesh_closest_search, then the closest point on the face found (*bary) and its vertices
+/// (tri[0..3]): Closest::visit's computation repeated on the face the walk chose, from the
+/// same vertices and s (its index was checked by the walk, so the second read cannot fault).
+WP_FN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c, Vec3* tri,
+                        triangle_closest_point_t* bary, ctx_t* ctx) {
+  if (!mesh_closest_search(m, p, max_dist, c, ctx)) return false;
+  mesh_triangle(m, (i64)c->face, tri, ctx);
+  if (faulted(ctx)) return false;
+  const Vec3 a = tri[0];
+  const f32 s = c->s;
+  *bary = closest_point_triangle_scaled((tri[1] - a) * s, (tri[2] - a) * s, (p - a) * s);
+  return true;
 }
 
 /// The furthest-point search (Furthest): negated squared distances (the walk minimises).
@@ -344,31 +362,40 @@ struct mesh_furthest_t {
   }
 };
 
-/// The closest-hit search along a ray (ClosestHit).
+/// The closest-hit search along a ray (ClosestHit). The ray's frame is made once (the Rust
+/// makes it once per ray too), boxes are tested by the branch-free slab test when no
+/// component of inv_dir is infinite (intersect_ray_aabb otherwise: the same keys), and a
+/// face's barycentrics are divided out only for a hit nearer than the bound (the Rust's
+/// order too).
 struct mesh_closest_hit_t {
   const mesh_t* mesh;
   Vec3 start;
   Vec3 dir;
   Vec3 inv_dir;
+  ray_frame_t frame;
+  bool finite_inv;
   mesh_query_ray_t best;
   f32 max_t;
   WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
     f32 t;
-    return intersect_ray_aabb(start, inv_dir, lower, upper, &t) ? t : f32_inf();
+    const bool hit = finite_inv ? intersect_ray_aabb_finite(start, inv_dir, lower, upper, &t)
+                                : intersect_ray_aabb(start, inv_dir, lower, upper, &t);
+    return hit ? t : f32_inf();
   }
   WP_FN f32 bound() const { return best.result ? best.t : max_t; }
   WP_FN void visit(i32 id, ctx_t* ctx) {
     Vec3 t[3];
     mesh_triangle(*mesh, (i64)id, t, ctx);
     if (faulted(ctx)) return;
-    const ray_triangle_hit_t h = intersect_ray_triangle(start, dir, t[0], t[1], t[2]);
+    const ray_triangle_candidate_t h =
+        intersect_ray_triangle_in_frame(frame, start, dir, t[0], t[1], t[2]);
     if (h.result && h.t < bound()) {
       best.result = true;
       best.sign = h.sign;
       best.face = id;
       best.t = h.t;
-      best.u = h.u;
-      best.v = h.v;
+      best.u = (f32)(h.uu / h.det);
+      best.v = (f32)(h.vv / h.det);
       best.normal = Vec3_ZERO();
     }
   }
@@ -384,39 +411,44 @@ struct mesh_closest_hit_t {
 WP_FN mesh_query_point_t mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                                   ctx_t* ctx) {
   detail::mesh_closest_t c;
-  if (!detail::mesh_closest(mesh, point, max_dist, &c, ctx)) return detail::mesh_point_none();
+  Vec3 t[3];
+  triangle_closest_point_t bary;
+  if (!detail::mesh_closest(mesh, point, max_dist, &c, t, &bary, ctx))
+    return detail::mesh_point_none();
   mesh_query_point_t r;
   r.result = true;
   r.sign = 0.0f;
   r.face = c.face;
-  r.u = c.bary.u;
-  r.v = c.bary.v;
+  r.u = bary.u;
+  r.v = bary.v;
   return r;
 }
 
 namespace detail {
 
-/// The sign of `point` (-1 inside) from the closest point the search found on `face`: the
-/// angle-weighted pseudonormal of its feature. (Inlined: as a call of its own the kernel's
-/// fault context would live in local memory, and 1M signed queries took 99 ms against 76 on
-/// an H200.)
-WP_FN f32 mesh_point_sign(const mesh_t& mesh, Vec3 point, i32 face, triangle_closest_point_t bary,
-                          f32 s, ctx_t* ctx) {
-  Vec3 t[3];
-  mesh_triangle(mesh, (i64)face, t, ctx);
-  if (faulted(ctx)) return 0.0f;
+/// The sign of `point` (-1 inside) from the closest point `bary` the search found on the
+/// face with vertices t[0..3]: the angle-weighted pseudonormal of its feature. The edge's or
+/// vertex's ends are selected from the feature and one walk (mesh_feature_normal) serves all
+/// six. (Inlined: as a call of its own the kernel's fault context would live in local memory,
+/// and 1M signed queries took 99 ms against 76 on an H200.)
+WP_FN f32 mesh_point_sign(const mesh_t& mesh, Vec3 point, const Vec3* t,
+                          triangle_closest_point_t bary, f32 s, ctx_t* ctx) {
   const Vec3 a = t[0], b = t[1], cc = t[2];
+  const i32 f = bary.feature;
   Vec3 n;
-  switch (bary.feature) {
-    case TRI_FEATURE_FACE: n = mesh_unit_normal(a, b, cc); break;
-    case TRI_FEATURE_EDGE_AB: n = mesh_edge_normal(mesh, a, b, ctx); break;
-    case TRI_FEATURE_EDGE_BC: n = mesh_edge_normal(mesh, b, cc, ctx); break;
-    case TRI_FEATURE_EDGE_CA: n = mesh_edge_normal(mesh, cc, a, ctx); break;
-    case TRI_FEATURE_VERTEX_A: n = mesh_vertex_normal(mesh, a, ctx); break;
-    case TRI_FEATURE_VERTEX_B: n = mesh_vertex_normal(mesh, b, ctx); break;
-    default: n = mesh_vertex_normal(mesh, cc, ctx); break;
+  if (f == TRI_FEATURE_FACE) {
+    n = mesh_unit_normal(a, b, cc);
+  } else {
+    // Edge ab, bc, ca: (x, y) = (a, b), (b, c), (c, a); vertex a, b, c: x = y = the vertex.
+    const bool vertex = f == TRI_FEATURE_VERTEX_A || f == TRI_FEATURE_VERTEX_B ||
+                        f == TRI_FEATURE_VERTEX_C;
+    const Vec3 x = (f == TRI_FEATURE_EDGE_AB || f == TRI_FEATURE_VERTEX_A)   ? a
+                   : (f == TRI_FEATURE_EDGE_BC || f == TRI_FEATURE_VERTEX_B) ? b
+                                                                              : cc;
+    const Vec3 y = vertex ? x : (f == TRI_FEATURE_EDGE_AB ? b : (f == TRI_FEATURE_EDGE_BC ? cc : a));
+    n = mesh_feature_normal(mesh, x, y, vertex, ctx);
+    if (faulted(ctx)) return 0.0f;
   }
-  if (faulted(ctx)) return 0.0f;
   const Vec3 away = (point - triangle_closest_point_position(bary, a, b, cc)) * s;
   return g_dot(n, away) > 0.0f ? 1.0f : -1.0f;
 }
@@ -429,15 +461,17 @@ WP_FN mesh_query_point_t mesh_query_point(const mesh_t& mesh, Vec3 point, f32 ma
                                           ctx_t* ctx) {
   using namespace detail;
   mesh_closest_t c;
-  if (!mesh_closest(mesh, point, max_dist, &c, ctx)) return mesh_point_none();
-  const f32 sign = mesh_point_sign(mesh, point, c.face, c.bary, c.s, ctx);
+  Vec3 t[3];
+  triangle_closest_point_t bary;
+  if (!mesh_closest(mesh, point, max_dist, &c, t, &bary, ctx)) return mesh_point_none();
+  const f32 sign = mesh_point_sign(mesh, point, t, bary, c.s, ctx);
   if (faulted(ctx)) return mesh_point_none();
   mesh_query_point_t r;
   r.result = true;
   r.sign = sign;
   r.face = c.face;
-  r.u = c.bary.u;
-  r.v = c.bary.v;
+  r.u = bary.u;
+  r.v = bary.v;
   return r;
 }
 
@@ -475,6 +509,7 @@ struct mesh_crossings_t {
   const mesh_t* mesh;
   Vec3 start;
   Vec3 inv_dir;
+  ray_frame_t frame;  // ray_frame(mesh_parity_dir()), made once per query
   bool odd;
   WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
     return mesh_ray_may_meet_box(start, inv_dir, lower, upper) ? 0.0f : f32_inf();
@@ -484,7 +519,7 @@ struct mesh_crossings_t {
     Vec3 t[3];
     mesh_triangle(*mesh, (i64)id, t, ctx);
     if (faulted(ctx)) return;
-    if (ray_crosses_triangle(start, mesh_parity_dir(), t[0], t[1], t[2])) odd = !odd;
+    if (ray_crosses_triangle_in_frame(frame, start, mesh_parity_dir(), t[0], t[1], t[2])) odd = !odd;
   }
 };
 
@@ -496,11 +531,14 @@ WP_FN mesh_query_point_t mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 p
                                                       ctx_t* ctx) {
   using namespace detail;
   mesh_closest_t c;
-  if (!mesh_closest(mesh, point, max_dist, &c, ctx)) return mesh_point_none();
+  Vec3 t[3];
+  triangle_closest_point_t bary;
+  if (!mesh_closest(mesh, point, max_dist, &c, t, &bary, ctx)) return mesh_point_none();
   mesh_crossings_t x;
   x.mesh = &mesh;
   x.start = point;
   x.inv_dir = ray_inv_dir(mesh_parity_dir());
+  x.frame = ray_frame(mesh_parity_dir());
   x.odd = false;
   bvh_walk_ordered(mesh.tree, x, ctx);
   if (faulted(ctx)) return mesh_point_none();
@@ -508,8 +546,8 @@ WP_FN mesh_query_point_t mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 p
   r.result = true;
   r.sign = x.odd ? -1.0f : 1.0f;
   r.face = c.face;
-  r.u = c.bary.u;
-  r.v = c.bary.v;
+  r.u = bary.u;
+  r.v = bary.v;
   return r;
 }
 
@@ -555,6 +593,8 @@ WP_FN mesh_query_ray_t mesh_query_ray(const mesh_t& mesh, Vec3 start, Vec3 dir, 
   h.start = start;
   h.dir = dir;
   h.inv_dir = ray_inv_dir(dir);
+  h.frame = ray_frame(dir);
+  h.finite_inv = ray_inv_dir_finite(h.inv_dir);
   h.best = mesh_ray_none();
   h.max_t = max_t;
   bvh_walk_ordered(mesh.tree, h, ctx);

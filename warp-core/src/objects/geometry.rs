@@ -364,44 +364,139 @@ pub struct RayTriangleHit {
 /// back exactly.
 #[inline]
 pub fn intersect_ray_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> RayTriangleHit {
-    let miss = RayTriangleHit::default();
-    let Some(sh) = shear_triangle(start, dir, a, b, c) else {
-        return miss;
-    };
-    let [aa, bb, cc] = sh.q;
-    // Parallel rays (and degenerate triangles) never hit.
-    let (ab, ac) = (bb - aa, cc - aa);
-    let dn = dir.dot(ab.cross(ac));
-    if !(dn.abs() > 1e-6 * dir.length() * ab.length() * ac.length()) {
-        return miss;
+    let hit =
+        RayFrame::new(dir).and_then(|fr| intersect_ray_triangle_in_frame(&fr, start, dir, a, b, c));
+    match hit {
+        Some(h) => RayTriangleHit {
+            result: true,
+            t: h.t,
+            u: h.u(),
+            v: h.v(),
+            sign: h.sign,
+        },
+        None => RayTriangleHit::default(),
     }
+}
+
+/// The part of the watertight tests' shear that depends on the ray's direction only, made
+/// once per ray by a search over many faces (two divisions per face saved): the direction's
+/// dominant axis `kz`, which becomes z, with x and y following cyclically (`kx`, `ky`,
+/// swapped when z points backwards to keep the winding), and the shear `sx = dir[kx] /
+/// dir[kz]`, `sy = dir[ky] / dir[kz]`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayFrame {
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+}
+
+impl RayFrame {
+    /// The frame of the ray along `dir`; `None` for a zero or non-finite direction (which
+    /// hits and crosses nothing).
+    #[inline(always)]
+    pub(crate) fn new(dir: Vec3) -> Option<RayFrame> {
+        let ad = dir.abs();
+        let kz = if ad.x >= ad.y && ad.x >= ad.z {
+            0
+        } else if ad.y >= ad.z {
+            1
+        } else {
+            2
+        };
+        let dz = dir[kz];
+        if !(dz != 0.0 && dir.is_finite()) {
+            return None;
+        }
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if dz < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        Some(RayFrame {
+            kx,
+            ky,
+            kz,
+            sx: dir[kx] / dz,
+            sy: dir[ky] / dz,
+        })
+    }
+}
+
+/// A hit of [`intersect_ray_triangle`] before its barycentrics are divided out: a search for
+/// the nearest hit compares `t` with its bound first and divides only for a nearer one.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayTriangleCandidate {
+    /// The hit's ray parameter.
+    pub(crate) t: f32,
+    /// `1.0` for the front face, `-1.0` for the back face.
+    pub(crate) sign: f32,
+    uu: f64,
+    vv: f64,
+    det: f64,
+}
+
+impl RayTriangleCandidate {
+    /// The weight of `a` at the hit.
+    #[inline(always)]
+    pub(crate) fn u(&self) -> f32 {
+        (self.uu / self.det) as f32
+    }
+    /// The weight of `b` at the hit.
+    #[inline(always)]
+    pub(crate) fn v(&self) -> f32 {
+        (self.vv / self.det) as f32
+    }
+}
+
+/// [`intersect_ray_triangle`] in the frame `fr` of the ray along `dir`: the same hits, `t`
+/// and sign, the barycentrics left to the caller.
+#[inline(always)]
+pub(crate) fn intersect_ray_triangle_in_frame(
+    fr: &RayFrame,
+    start: Vec3,
+    dir: Vec3,
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+) -> Option<RayTriangleCandidate> {
+    let sh = shear_triangle(fr, start, a, b, c);
+    // A hit is the conjunction of side-effect-free tests, so their order is free: the cheap
+    // sign test of the edge functions (most faces fail it) comes before the parallel test's
+    // cross product and square roots.
     let [uu, vv, ww] = sh.e;
     let inside = (uu >= 0.0 && vv >= 0.0 && ww >= 0.0) || (uu <= 0.0 && vv <= 0.0 && ww <= 0.0);
     let det = uu + vv + ww;
     if !(inside && det != 0.0) {
-        return miss;
+        return None;
     }
-    let t = (sh.depth() / det) as f32 / sh.s;
+    // Parallel rays (and degenerate triangles) never hit.
+    let [aa, bb, cc] = sh.q;
+    let (ab, ac) = (bb - aa, cc - aa);
+    let dn = dir.dot(ab.cross(ac));
+    if !(dn.abs() > 1e-6 * dir.length() * ab.length() * ac.length()) {
+        return None;
+    }
+    let t = (sh.depth(dir) / det) as f32 / sh.s;
     if !(t >= 0.0 && t.is_finite()) {
-        return miss;
+        return None;
     }
-    RayTriangleHit {
-        result: true,
+    Some(RayTriangleCandidate {
         t,
-        u: (uu / det) as f32,
-        v: (vv / det) as f32,
         sign: if dn < 0.0 { 1.0 } else { -1.0 },
-    }
+        uu,
+        vv,
+        det,
+    })
 }
 
-/// A triangle in a ray's frame, as the watertight tests see it: the direction's dominant
-/// axis `kz` (its scale `sz = 1 / dir[kz]`), the vertices translated to the ray's start and
-/// scaled by the power of two `s` (`q`), their sheared 2D positions (`xy`: the ray is the
-/// origin), and the three edge functions `e` (`e[0]` of the edge `b c`, `e[1]` of `c a`,
-/// `e[2]` of `a b`; twice the signed areas of the origin with each edge, exact in sign).
+/// A triangle in a ray's frame, as the watertight tests see it: the frame's `kz`, the
+/// vertices translated to the ray's start and scaled by the power of two `s` (`q`), their
+/// sheared 2D positions (`xy`: the ray is the origin), and the three edge functions `e`
+/// (`e[0]` of the edge `b c`, `e[1]` of `c a`, `e[2]` of `a b`; twice the signed areas of the
+/// origin with each edge, exact in sign).
 struct Sheared {
     kz: usize,
-    sz: f32,
     s: f32,
     q: [Vec3; 3],
     xy: [(f32, f32); 3],
@@ -410,39 +505,20 @@ struct Sheared {
 
 impl Sheared {
     /// The hit's depth times `det = e[0] + e[1] + e[2]`, in units of `1 / s` (the depths
-    /// of the vertices weighted by their edge functions).
+    /// of the vertices weighted by their edge functions), for the ray along `dir`.
     #[inline(always)]
-    fn depth(&self) -> f64 {
+    fn depth(&self, dir: Vec3) -> f64 {
         let [uu, vv, ww] = self.e;
-        let z = self.q.map(|q| (self.sz * q[self.kz]) as f64);
+        let sz = 1.0 / dir[self.kz];
+        let z = self.q.map(|q| (sz * q[self.kz]) as f64);
         uu * z[0] + vv * z[1] + ww * z[2]
     }
 }
 
-/// The shear of [`intersect_ray_triangle`] and [`ray_crosses_triangle`]; `None` for a zero or
-/// non-finite direction.
+/// The shear of [`intersect_ray_triangle`] and [`ray_crosses_triangle`] in the ray's frame.
 #[inline(always)]
-fn shear_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<Sheared> {
-    let ad = dir.abs();
-    // The dominant axis of the direction becomes z; x and y follow cyclically, swapped when
-    // z points backwards to keep the winding.
-    let kz = if ad.x >= ad.y && ad.x >= ad.z {
-        0
-    } else if ad.y >= ad.z {
-        1
-    } else {
-        2
-    };
-    let dz = dir[kz];
-    if !(dz != 0.0 && dir.is_finite()) {
-        return None;
-    }
-    let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-    if dz < 0.0 {
-        std::mem::swap(&mut kx, &mut ky);
-    }
-    let (sx, sy, sz) = (dir[kx] / dz, dir[ky] / dz, 1.0 / dz);
-
+fn shear_triangle(fr: &RayFrame, start: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Sheared {
+    let RayFrame { kx, ky, kz, sx, sy } = *fr;
     let (aa, bb, cc) = (a - start, b - start, c - start);
     let s = pow2_scale(max_abs(&[aa, bb, cc]));
     let q = [aa * s, bb * s, cc * s];
@@ -456,14 +532,7 @@ fn shear_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<S
         det2(ax, cy, ay, cx),
         det2(bx, ay, by, ax),
     ];
-    Some(Sheared {
-        kz,
-        sz,
-        s,
-        q,
-        xy,
-        e,
-    })
+    Sheared { kz, s, q, xy, e }
 }
 
 /// Whether the ray `start + t * dir`, `t >= 0`, crosses triangle `(a, b, c)`, counted so that
@@ -493,9 +562,20 @@ fn shear_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<S
 /// vertex unless the scaled coordinates underflow, below 1e-38 of the face's extent).
 #[inline]
 pub fn ray_crosses_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> bool {
-    let Some(sh) = shear_triangle(start, dir, a, b, c) else {
-        return false;
-    };
+    RayFrame::new(dir).is_some_and(|fr| ray_crosses_triangle_in_frame(&fr, start, dir, a, b, c))
+}
+
+/// [`ray_crosses_triangle`] in the frame `fr` of the ray along `dir`.
+#[inline(always)]
+pub(crate) fn ray_crosses_triangle_in_frame(
+    fr: &RayFrame,
+    start: Vec3,
+    dir: Vec3,
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+) -> bool {
+    let sh = shear_triangle(fr, start, a, b, c);
     let [pa, pb, pc] = sh.xy;
     let [uu, vv, ww] = sh.e;
     let (su, sv, sw) = (
@@ -510,7 +590,7 @@ pub fn ray_crosses_triangle(start: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -
     if det == 0.0 {
         return false;
     }
-    let t = sh.depth() / det;
+    let t = sh.depth(dir) / det;
     t >= 0.0 && t.is_finite()
 }
 
@@ -598,6 +678,41 @@ pub fn intersect_ray_aabb(start: Vec3, inv_dir: Vec3, lower: Vec3, upper: Vec3) 
     } else {
         None
     }
+}
+
+/// [`intersect_ray_aabb`] for an `inv_dir` with no infinite component (a direction with no
+/// zero component; NaN allowed), without a branch: per axis the same two products, the same
+/// choice of near and far by the sign of `inv`, the same updates of `t0` and `t1`, with the
+/// early `None` of an inverted slab folded into `ok`. While `ok` holds every step is the
+/// branching version's; once it fails, that version returns `None` and so does this one: the
+/// same result, bit for bit. (The GPU's slab test of a ray's walk, where branches diverge.)
+#[inline(always)]
+pub(crate) fn intersect_ray_aabb_finite(
+    start: Vec3,
+    inv_dir: Vec3,
+    lower: Vec3,
+    upper: Vec3,
+) -> Option<f32> {
+    let mut t0 = f32::NEG_INFINITY;
+    let mut t1 = f32::INFINITY;
+    let mut ok = true;
+    for k in 0..3 {
+        let (o, inv) = (start[k], inv_dir[k]);
+        let (ta, tb) = ((lower[k] - o) * inv, (upper[k] - o) * inv);
+        let pos = inv >= 0.0;
+        let near = if pos { ta } else { tb };
+        let far = if pos { tb } else { ta };
+        ok = ok && near <= far;
+        t0 = if near > t0 { near } else { t0 };
+        t1 = if far < t1 { far } else { t1 };
+    }
+    (ok && t0 <= t1 && t1 >= 0.0).then_some(t0)
+}
+
+/// Whether [`intersect_ray_aabb_finite`] serves `inv_dir` (no component infinite).
+#[inline(always)]
+pub(crate) fn ray_inv_dir_finite(inv_dir: Vec3) -> bool {
+    !(inv_dir.x.is_infinite() || inv_dir.y.is_infinite() || inv_dir.z.is_infinite())
 }
 
 /// The componentwise `1 / dir` that [`intersect_ray_aabb`] takes (`±inf` for zero
@@ -1308,6 +1423,83 @@ pub(crate) mod tests {
             }
             assert!(h1.result || h2.result, "crack at {target}");
         }
+    }
+
+    /// The branch-free slab test against the branching one, bit for bit (no tolerance: it
+    /// claims the same result and the same entry parameter), on every ray whose inv_dir has
+    /// no infinite component: random rays and boxes with special values mixed in (signed
+    /// zeros, infinities and NaN in the box and the start, infinite direction components, whose
+    /// inv is a signed zero, NaN directions, inverted boxes, starts on the slab boundaries).
+    #[test]
+    fn ray_aabb_finite_matches_the_branching_test() {
+        let specials = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            1e-30,
+            1e30,
+        ];
+        let mut rng = Rng(4242);
+        let (mut some, mut none, mut checked) = (0, 0, 0);
+        let pick = |rng: &mut Rng, lo: f32, hi: f32| {
+            if rng.below(6) == 0 {
+                specials[rng.below(specials.len())]
+            } else {
+                rng.f(lo, hi)
+            }
+        };
+        for _ in 0..200_000 {
+            let o = Vec3::new(
+                pick(&mut rng, -3.0, 3.0),
+                pick(&mut rng, -3.0, 3.0),
+                pick(&mut rng, -3.0, 3.0),
+            );
+            let d = Vec3::new(
+                pick(&mut rng, -1.0, 1.0),
+                pick(&mut rng, -1.0, 1.0),
+                pick(&mut rng, -1.0, 1.0),
+            );
+            let (mut l, mut h) = (rng.v(-1.0, 0.0), rng.v(0.0, 1.0));
+            // Half of the rays aimed at a point of the box, so that both outcomes are common.
+            let d = if rng.below(2) == 0 {
+                rng.v(-0.5, 0.5) - o
+            } else {
+                d
+            };
+            match rng.below(8) {
+                0 => std::mem::swap(&mut l, &mut h),
+                1 => l[rng.below(3)] = specials[rng.below(specials.len())],
+                2 => h[rng.below(3)] = specials[rng.below(specials.len())],
+                3 => l[rng.below(3)] = o[rng.below(3)],
+                _ => {}
+            }
+            let inv = ray_inv_dir(d);
+            if !ray_inv_dir_finite(inv) {
+                continue;
+            }
+            checked += 1;
+            let want = intersect_ray_aabb(o, inv, l, h);
+            let got = intersect_ray_aabb_finite(o, inv, l, h);
+            assert_eq!(
+                got.map(f32::to_bits),
+                want.map(f32::to_bits),
+                "{o} {d} {l} {h}"
+            );
+            if want.is_some() {
+                some += 1;
+            } else {
+                none += 1;
+            }
+        }
+        // Both outcomes exercised, on most of the cases.
+        assert!(
+            checked > 100_000 && some > 10_000 && none > 10_000,
+            "{checked} {some} {none}"
+        );
     }
 
     #[test]

@@ -72,7 +72,8 @@ use glam::Vec3;
 use super::bvh::{walk_ordered, BvhTree, OrderedSearch, Walk};
 use super::geometry::{
     aabb_distance_sq_scaled, aabb_overlap, closest_point_triangle_scaled, intersect_ray_aabb,
-    intersect_ray_triangle, pow2_scale, ray_crosses_triangle, ray_inv_dir, TriFeature,
+    intersect_ray_aabb_finite, intersect_ray_triangle_in_frame, pow2_scale,
+    ray_crosses_triangle_in_frame, ray_inv_dir, ray_inv_dir_finite, RayFrame, TriFeature,
     TriangleClosestPoint, SLIVER_RATIO,
 };
 use crate::{ArrayView, KResult, KernelIndex};
@@ -446,7 +447,7 @@ pub fn mesh_query_point_sign_normal(
 /// direction [`PARITY_DIR`]: odd inside (`-1`), even outside (`+1`); `sign` 0 when nothing is
 /// found (Warp's `mesh_query_point_sign_parity`).
 ///
-/// The faces are counted by [`ray_crosses_triangle`], whose crossings are exact in sign and
+/// The faces are counted by [`ray_crosses_triangle`](super::geometry::ray_crosses_triangle), whose crossings are exact in sign and
 /// whose ties (a ray through an edge or a vertex) are broken consistently between the faces
 /// sharing them, so on a closed mesh (every edge shared by an even number of faces, shared
 /// vertices at equal positions) the sign is exact whatever the orientation of the faces or
@@ -472,6 +473,7 @@ pub fn mesh_query_point_sign_parity(
         mesh: &mesh,
         start: point,
         inv_dir: ray_inv_dir(PARITY_DIR),
+        frame: RayFrame::new(PARITY_DIR),
         odd: false,
     };
     walk_ordered(&mesh.tree, &mut x)?;
@@ -494,7 +496,7 @@ pub const PARITY_DIR: Vec3 = Vec3::new(0.9375, 0.75, 1.0);
 
 /// The slack of [`ray_may_meet_box`], relative to the ray parameters it compares: `2^-18`,
 /// 64 units in the last place, above the few roundings of the slab test's parameters and the
-/// few of [`ray_crosses_triangle`]'s sheared ray (each a few units relative to the distance
+/// few of [`ray_crosses_triangle`](super::geometry::ray_crosses_triangle)'s sheared ray (each a few units relative to the distance
 /// from the start).
 const PARITY_BOX_SLACK: f32 = 1.0 / 262144.0;
 
@@ -504,6 +506,9 @@ struct Crossings<'a> {
     mesh: &'a MeshView,
     start: Vec3,
     inv_dir: Vec3,
+    /// `RayFrame::new(PARITY_DIR)`, made once per query (never `None`: the direction is
+    /// finite and nonzero).
+    frame: Option<RayFrame>,
     odd: bool,
 }
 
@@ -523,7 +528,10 @@ impl OrderedSearch for Crossings<'_> {
     #[inline(always)]
     fn visit(&mut self, id: i32) -> KResult<()> {
         let [a, b, c] = self.mesh.triangle(id)?;
-        if ray_crosses_triangle(self.start, PARITY_DIR, a, b, c) {
+        let crosses = self
+            .frame
+            .is_some_and(|fr| ray_crosses_triangle_in_frame(&fr, self.start, PARITY_DIR, a, b, c));
+        if crosses {
             self.odd = !self.odd;
         }
         Ok(())
@@ -534,7 +542,7 @@ impl OrderedSearch for Crossings<'_> {
 /// direction whose components are all positive (`inv_dir = 1 / dir`): the slab test with its
 /// interval widened by [`PARITY_BOX_SLACK`]. The plain test ([`intersect_ray_aabb`]) can
 /// reject by a rounding a box the ray touches at an edge or a corner, where a face's vertex or
-/// edge may lie that [`ray_crosses_triangle`] counts; a face missed would flip the parity, a
+/// edge may lie that [`ray_crosses_triangle`](super::geometry::ray_crosses_triangle) counts; a face missed would flip the parity, a
 /// box entered needlessly costs a test. Inverted boxes (the empty tree's root) and NaN miss.
 #[inline(always)]
 fn ray_may_meet_box(start: Vec3, inv_dir: Vec3, lower: Vec3, upper: Vec3) -> bool {
@@ -723,12 +731,18 @@ pub fn mesh_query_furthest_point_no_sign(
     })
 }
 
-/// The closest-hit search along a ray.
+/// The closest-hit search along a ray. The ray's frame is made once; boxes are tested by the
+/// branch-free slab test when no component of `inv_dir` is infinite ([`intersect_ray_aabb`]
+/// otherwise: the same keys); a face's barycentrics are divided out only for a hit nearer
+/// than the bound.
 struct ClosestHit<'a> {
     mesh: &'a MeshView,
     start: Vec3,
     dir: Vec3,
     inv_dir: Vec3,
+    /// `None` for a zero or non-finite direction, which hits no face.
+    frame: Option<RayFrame>,
+    finite_inv: bool,
     best: MeshQueryRay,
     max_t: f32,
 }
@@ -736,7 +750,12 @@ struct ClosestHit<'a> {
 impl OrderedSearch for ClosestHit<'_> {
     #[inline(always)]
     fn node_key(&self, lower: Vec3, upper: Vec3) -> f32 {
-        intersect_ray_aabb(self.start, self.inv_dir, lower, upper).unwrap_or(f32::INFINITY)
+        let hit = if self.finite_inv {
+            intersect_ray_aabb_finite(self.start, self.inv_dir, lower, upper)
+        } else {
+            intersect_ray_aabb(self.start, self.inv_dir, lower, upper)
+        };
+        hit.unwrap_or(f32::INFINITY)
     }
     #[inline(always)]
     fn bound(&self) -> f32 {
@@ -749,24 +768,28 @@ impl OrderedSearch for ClosestHit<'_> {
     #[inline(always)]
     fn visit(&mut self, id: i32) -> KResult<()> {
         let [a, b, c] = self.mesh.triangle(id)?;
-        let h = intersect_ray_triangle(self.start, self.dir, a, b, c);
-        if h.result && h.t < self.bound() {
-            self.best = MeshQueryRay {
-                result: true,
-                sign: h.sign,
-                face: id,
-                t: h.t,
-                u: h.u,
-                v: h.v,
-                normal: Vec3::ZERO,
-            };
+        let Some(fr) = &self.frame else {
+            return Ok(());
+        };
+        if let Some(h) = intersect_ray_triangle_in_frame(fr, self.start, self.dir, a, b, c) {
+            if h.t < self.bound() {
+                self.best = MeshQueryRay {
+                    result: true,
+                    sign: h.sign,
+                    face: id,
+                    t: h.t,
+                    u: h.u(),
+                    v: h.v(),
+                    normal: Vec3::ZERO,
+                };
+            }
         }
         Ok(())
     }
 }
 
 /// The first hit of the ray `start + t * dir` with the mesh at `0 <= t < max_t` (Warp's
-/// `mesh_query_ray`), by the watertight ray-triangle test ([`intersect_ray_triangle`]: a ray
+/// `mesh_query_ray`), by the watertight ray-triangle test ([`intersect_ray_triangle`](super::geometry::intersect_ray_triangle): a ray
 /// through a shared edge hits one of its faces, a ray parallel to a face never hits it). Ties
 /// at equal `t` (a shared edge) go to the face visited first.
 #[inline]
@@ -776,6 +799,8 @@ pub fn mesh_query_ray(mesh: MeshView, start: Vec3, dir: Vec3, max_t: f32) -> KRe
         start,
         dir,
         inv_dir: ray_inv_dir(dir),
+        frame: RayFrame::new(dir),
+        finite_inv: ray_inv_dir_finite(ray_inv_dir(dir)),
         best: MeshQueryRay::default(),
         max_t,
     };
@@ -1069,8 +1094,8 @@ impl crate::adjoint::Adjoint for TriangleClosestPoint {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::super::bvh::tests::Built;
-    use super::super::geometry::closest_point_triangle;
     use super::super::geometry::tests::Rng;
+    use super::super::geometry::{closest_point_triangle, intersect_ray_triangle};
     use super::*;
 
     /// A mesh and a tree over its triangles' boxes.
