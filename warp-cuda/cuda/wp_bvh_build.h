@@ -22,8 +22,9 @@
 //                      primitive; an internal node over at most leaf_size primitives is
 //                      written as a leaf of their range (the nodes under it stay, unreached)
 //   wp_lbvh_refit      each leaf's box, then up the parent links: the second thread to reach a
-//                      node (an atomic counter per node, zero at the start, which that thread
-//                      sets to zero again for the next refit) writes its box as the union of
+//                      node (an atomic counter per node, incremented with release-acquire
+//                      semantics, zero at the start, which that thread sets to zero again
+//                      for the next refit) writes its box as the union of
 //                      its children's, or of its primitives' for an internal node the hierarchy
 //                      made a leaf (fminf/fmaxf: exact and order-free). With a check word pair
 //                      `bad`, it also checks each box it reads for NaN and infinite coordinates
@@ -311,6 +312,19 @@ extern "C" __global__ void wp_lbvh_hierarchy(wp::lbvh_hierarchy_t s) {
   }
 }
 
+namespace wp {
+/// The refit's arrival at a node: an atomic increment of its counter with release-acquire
+/// semantics at device scope (PTX `atom.acq_rel.gpu`), returning the old count. Release: the
+/// boxes this thread wrote (and its check words) are visible to whoever observes the increment;
+/// acquire: the second arrival sees its sibling's boxes. It replaces two sequentially consistent
+/// fences (`__threadfence()` before and after a relaxed atomicAdd) per level of the climb.
+__device__ __forceinline__ i32 lbvh_arrive(i32* counter) {
+  i32 old;
+  asm volatile("atom.acq_rel.gpu.global.add.s32 %0, [%1], 1;" : "=r"(old) : "l"(counter) : "memory");
+  return old;
+}
+}  // namespace wp
+
 /// The refit's report (by the thread that wrote the root, after every other thread's check):
 /// both check words reset, the first one set raised as a fault of argument 0 or 1.
 __device__ void wp_lbvh_refit_report(const wp::lbvh_refit_t& s) {
@@ -351,14 +365,12 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
     __stcg(&nodes[2 * leaf + 1], make_float4(h.x, h.y, h.z, __int_as_float((wp::i32)k + 1)));
     wp::i32 c = parents[leaf];
     while (c >= 0) {
-      // Publish this subtree's boxes (and checks) before arriving; the second arrival reads
-      // both children.
-      __threadfence();
-      if (atomicAdd(&counters[c], 1) == 0) break;
+      // Arrive with a release-acquire increment (lbvh_arrive): this subtree's boxes (and
+      // checks) are published before it, and the second arrival reads both children after it.
+      if (wp::lbvh_arrive(&counters[c]) == 0) break;
       // The second arrival: the node's last visitor in this refit, which leaves its counter
       // zero for the next (no fill before a refit).
       counters[c] = 0;
-      __threadfence();
       const float4 a = __ldcg(&nodes[2 * c]), b = __ldcg(&nodes[2 * c + 1]);
       const wp::i32 left = __float_as_int(a.w), right = __float_as_int(b.w);
       float3 bl, bu;
