@@ -1065,6 +1065,14 @@ fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
         let capped = solve(Mode::Host, 3, 6, pre);
         assert_eq!((capped.0, capped.1), (Stop::MaxIterations, 6));
         assert_eq!(solve(Mode::Graph, 4, 6, pre), capped, "{pre:?}, max_iter 6");
+        // A huge check_every is capped at max_iter per pass (not recorded as is: that would
+        // record forever), and gives the same result.
+        assert_eq!(
+            solve(Mode::Graph, usize::MAX, 6, pre),
+            capped,
+            "{pre:?}, every usize::MAX"
+        );
+        assert_eq!(solve(Mode::Host, usize::MAX, 6, pre), capped, "{pre:?}, Host");
     }
     // A stop before the first iteration: the captured loop never runs its body.
     let z = arr(&[0.0f64; 144], dev);

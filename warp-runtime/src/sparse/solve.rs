@@ -43,7 +43,9 @@ pub struct SolveOptions {
     pub max_iter: usize,
     /// Iterations queued between two reads of the solver's state by the host
     /// ([`Mode::Host`]), or per pass of the captured loop ([`Mode::Graph`]) (default 10; at
-    /// least 1). It changes the work done after a stop, never the result.
+    /// least 1). Either way at most `max_iter` are queued at once (a larger value, even
+    /// `usize::MAX`, means "check only at the end"). It changes the work done after a stop,
+    /// never the result.
     pub check_every: usize,
     /// How the iterations are driven (default [`Mode::Host`]).
     pub mode: Mode,
@@ -273,10 +275,16 @@ pub fn cg<B: SquareBlock>(
             cg.ctl.fill(-1)?;
             cg.iteration()?;
             let run = cg.ctl.view(c::CTL_RUN..c::CTL_RUN + 1)?;
+            // Each pass records its iterations, so a huge `check_every` (a sensible "never
+            // sync" in Host mode) must not be recorded as is: a pass never needs more than
+            // `max_iter` iterations, since the check stops the solve at `max_iter` and every
+            // iteration after a stop does nothing. So the cap cannot change the result, only
+            // the size of the graph (at least 1: an empty body would record nothing).
+            let per_pass = o.check_every.min(o.max_iter.max(1));
             let graph = crate::graph::capture(&dev, || {
                 cg.setup()?;
                 crate::graph::capture_while(&run, || {
-                    for _ in 0..o.check_every {
+                    for _ in 0..per_pass {
                         cg.iteration()?;
                     }
                     Ok(())
