@@ -119,12 +119,13 @@ WP_FN void sp_tree_level(S* s, i32 stride, i32 lane) {
 
 // The triplet steps' first field, `count`: the address of a device count of triplets (an
 // i32), or 0 when there is none and `n` is the count. With one, `n` is the capacity (the
-// arrays' length) and the steps process `sp_count(count, n)` triplets: the count clamped to
-// [0, n], so a bad count never reaches outside the arrays (the report raises it).
+// arrays' length) and the steps process `sp_count(count, n)` triplets: the count, or 0 when
+// it is outside [0, n] (the primitives' rule for a bad count, so that the sort, the scan and
+// these steps agree and the matrix is empty; the report raises the fault).
 WP_FN i32 sp_count(u64 count, i32 n) {
   if (count == 0) return n;
   const i32 c = *(const i32*)count;
-  return c < 0 ? 0 : (c > n ? n : c);
+  return (c < 0 || c > n) ? 0 : c;
 }
 
 /// TplKeys: count, rows, cols (i32*), values (S*, `block` scalars per triplet), n, nrow, ncol,

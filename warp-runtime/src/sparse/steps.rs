@@ -57,15 +57,20 @@ unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
 }
 
 /// The triplets a step processes: `n`, or with a device count (`count`, the address of an
-/// `i32`, nonzero) its value clamped to `0..=n` (`wp_sparse.h`'s `sp_count`; the report step
-/// raises a count out of range).
+/// `i32`, nonzero) its value, or 0 when it is outside `0..=n` (`wp_sparse.h`'s `sp_count`:
+/// the primitives' rule for a bad count, so every step and primitive processes nothing; the
+/// report step raises the fault).
 fn count(count: u64, n: i32) -> usize {
     if count == 0 {
         return n.max(0) as usize;
     }
     // SAFETY: a one-element i32 array on the host (from_triplets_n checked it).
     let c = unsafe { *(count as *const i32) };
-    c.clamp(0, n.max(0)) as usize
+    if (0..=n).contains(&c) {
+        c as usize
+    } else {
+        0
+    }
 }
 
 /// Whether triplet `t` is in range.
