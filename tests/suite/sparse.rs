@@ -5,7 +5,9 @@
 
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use warp_lang as wp;
-use warp_runtime::sparse::{self, Block, Bsr, Mode, Precond, SolveOptions, Stop};
+use warp_runtime::sparse::{
+    self, Block, Bsr, Mode, Precond, SolveOptions, SparseScalar, SquareBlock, Stop,
+};
 use wp::FaultKind;
 
 use crate::{arr, host};
@@ -35,6 +37,7 @@ backend_tests!(
     cg_singular_preconditioner,
     cg_breakdown_and_non_finite,
     cg_bad_arguments,
+    every_block_type_mv_and_cg,
 );
 
 /// A small deterministic generator (xorshift64*), so the cases repeat.
@@ -1090,7 +1093,11 @@ fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
             capped,
             "{pre:?}, every usize::MAX"
         );
-        assert_eq!(solve(Mode::Host, usize::MAX, 6, pre), capped, "{pre:?}, Host");
+        assert_eq!(
+            solve(Mode::Host, usize::MAX, 6, pre),
+            capped,
+            "{pre:?}, Host"
+        );
     }
     // A stop before the first iteration: the captured loop never runs its body.
     let z = arr(&[0.0f64; 144], dev);
@@ -1100,4 +1107,172 @@ fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
     };
     let rep = sparse::cg(&a, &z, &arr(&[0.0f64; 144], dev), Precond::None, &o).unwrap();
     assert_eq!((rep.stop, rep.iterations), (Stop::Converged, 0));
+}
+
+/// Every block type, each with its own kernels (a GPU looks them up by the type's tag: a wrong
+/// tag or a missing instantiation in `wp_sparse.h` fails here): `mv` against a host reference
+/// and CG with block Jacobi converging, and on a GPU both the same bits as on the CPU.
+fn every_block_type_mv_and_cg(dev: &wp::Device) {
+    use glam::{DMat2, DMat4, Mat2, Mat4};
+    block_type_case::<f32>(dev);
+    block_type_case::<f64>(dev);
+    block_type_case::<Mat2>(dev);
+    block_type_case::<Mat3>(dev);
+    block_type_case::<Mat4>(dev);
+    block_type_case::<DMat2>(dev);
+    block_type_case::<DMat3>(dev);
+    block_type_case::<DMat4>(dev);
+}
+
+/// A `B` array from its scalars (`B::ROWS * B::COLS` per block, in `B`'s storage order).
+fn blocks_of<B: Block>(scalars: &[f64], d: &wp::Device) -> wp::Array<B> {
+    let s: Vec<B::Scalar> = scalars.iter().map(|&v| B::Scalar::from_f64(v)).collect();
+    arr(&s, d).reinterpret::<B>().unwrap()
+}
+
+/// `mv` of a random non-symmetric 9 x 7 block matrix (duplicates summed) and a CG solve with
+/// block Jacobi of the 5 x 5 Poisson matrix Kronecker an SPD K (so SPD), for block type `B`.
+fn block_type_case<B: SquareBlock + Copy>(dev: &wp::Device) {
+    let name = std::any::type_name::<B>();
+    let d = B::ROWS;
+    let f32s = std::mem::size_of::<B::Scalar>() == 4;
+    // Scalar entry (i, j) of a block in storage order.
+    let at = |i: usize, j: usize| if B::COL_MAJOR { j * d + i } else { i * d + j };
+    let bits = |v: Vec<B::Scalar>| v.iter().map(|s| s.to_f64().to_bits()).collect::<Vec<_>>();
+    let scal = |v: &[f64], dv: &wp::Device| {
+        arr(
+            &v.iter()
+                .map(|&x| B::Scalar::from_f64(x))
+                .collect::<Vec<_>>(),
+            dv,
+        )
+    };
+    // What the device holds of an f64 value (f32 rounds it).
+    let held = |v: f64| B::Scalar::from_f64(v).to_f64();
+
+    // mv: 40 random triplets of 9 x 7 blocks, y = 0.5 A x - 1.5 y.
+    let (nrow, ncol) = (9, 7);
+    let mut g = Rng(21 + d as u64);
+    let t = 40;
+    let rows: Vec<i32> = (0..t).map(|_| g.below(nrow) as i32).collect();
+    let cols: Vec<i32> = (0..t).map(|_| g.below(ncol) as i32).collect();
+    let vals: Vec<f64> = (0..t * d * d).map(|_| held(g.unit())).collect();
+    let x: Vec<f64> = (0..ncol * d).map(|_| held(g.unit())).collect();
+    let y0: Vec<f64> = (0..nrow * d).map(|_| held(g.unit())).collect();
+    let mut want: Vec<f64> = y0.iter().map(|v| -1.5 * v).collect();
+    for k in 0..t {
+        let (r, c) = (rows[k] as usize, cols[k] as usize);
+        for i in 0..d {
+            for j in 0..d {
+                want[r * d + i] += 0.5 * vals[k * d * d + at(i, j)] * x[c * d + j];
+            }
+        }
+    }
+    let mv_run = |dv: &wp::Device| {
+        let a = Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&rows, dv),
+            &arr(&cols, dv),
+            &blocks_of::<B>(&vals, dv),
+        )
+        .unwrap();
+        let y = scal(&y0, dv);
+        let (xv, yv) = (
+            scal(&x, dv).reinterpret::<B::In>().unwrap(),
+            y.reinterpret::<B::Out>().unwrap(),
+        );
+        let (alpha, beta) = (B::Scalar::from_f64(0.5), B::Scalar::from_f64(-1.5));
+        sparse::mv(&a, &xv, &yv, alpha, beta).unwrap();
+        host(&y)
+    };
+    let got = mv_run(dev);
+    // Each y entry sums at most ~40 x 4 products of magnitude <= 1 (and 1.5 y): f32 rounding
+    // of such sums stays well under 1e-4 absolute (~1e-5 expected), f64's under 1e-12.
+    let tol = if f32s { 1e-4 } else { 1e-12 };
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            (g.to_f64() - w).abs() <= tol,
+            "{name} mv, scalar row {k}: {g:?} vs {w}"
+        );
+    }
+    same_on_cpu(dev, &format!("{name} mv"), |dv| bits(mv_run(dv)));
+
+    // CG: block (p, q) is L_pq K, K = (d + 1) I + 0.5 (off the diagonal) + 0.1 (i + j):
+    // symmetric and diagonally dominant, so SPD, and so is the Kronecker product.
+    let m = 5;
+    let (pr, pc, pv) = poisson(m);
+    let n = m * m;
+    let kk = |i: usize, j: usize| {
+        if i == j {
+            d as f64 + 1.0
+        } else {
+            0.5 + 0.1 * (i + j) as f64
+        }
+    };
+    let cg_vals: Vec<f64> = pv
+        .iter()
+        .flat_map(|&l| {
+            let mut b = vec![0.0; d * d];
+            for i in 0..d {
+                for j in 0..d {
+                    b[at(i, j)] = l * kk(i, j);
+                }
+            }
+            b
+        })
+        .collect();
+    let b: Vec<f64> = (0..n * d).map(|i| ((i % 5) as f64 - 2.0) * 0.5).collect();
+    // f32: its rounding floor for this small, well-conditioned system is far below 1e-5.
+    let rtol = if f32s { 1e-5 } else { 1e-9 };
+    let cg_run = |dv: &wp::Device| {
+        let a = Bsr::from_triplets(
+            n,
+            n,
+            &arr(&pr, dv),
+            &arr(&pc, dv),
+            &blocks_of::<B>(&cg_vals, dv),
+        )
+        .unwrap();
+        let xv = scal(&vec![0.0; n * d], dv);
+        let o = SolveOptions {
+            rtol,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &scal(&b, dv), &xv, Precond::Jacobi, &o).unwrap();
+        (rep, host(&xv))
+    };
+    let (rep, xs) = cg_run(dev);
+    assert_eq!(rep.stop, Stop::Converged, "{name}: {rep:?}");
+    // The true residual |b - A x| from the triplets in f64: within 2x the tolerance for f32
+    // (the recurrence's residual drifts from the true one by rounding), 1.01x for f64.
+    let mut ax = vec![0.0; n * d];
+    for k in 0..pr.len() {
+        let (r, c) = (pr[k] as usize, pc[k] as usize);
+        for i in 0..d {
+            for j in 0..d {
+                ax[r * d + i] += cg_vals[k * d * d + at(i, j)] * xs[c * d + j].to_f64();
+            }
+        }
+    }
+    let tr = b
+        .iter()
+        .zip(&ax)
+        .map(|(b, y)| (b - y) * (b - y))
+        .sum::<f64>()
+        .sqrt();
+    let slack = if f32s { 2.0 } else { 1.01 };
+    assert!(
+        tr <= slack * rep.tolerance,
+        "{name}: true residual {tr}, {}",
+        rep.tolerance
+    );
+    same_on_cpu(dev, &format!("{name} cg"), |dv| {
+        let (rep, xs) = cg_run(dv);
+        (
+            rep.iterations,
+            rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+            bits(xs),
+        )
+    });
 }
