@@ -211,7 +211,8 @@ struct sp_jacobi_apply_t {
 };
 static_assert(sizeof(sp_jacobi_apply_t) == 32, "sp_jacobi_apply_t layout");
 
-/// The CG's control words (i32) and scalars (S): see sparse/solve.rs, which names the same.
+/// The CG's control words (i32) and scalars (S): see sparse/solve.rs, which names the same
+/// (a unit test of sparse/steps.rs parses these SP_ constants and compares the records' offsets).
 // SP_CTL_RUN: 1 while no stop is set (cg_init and cg_check write it): the flag a captured
 // solve's `capture_while` loops on.
 constexpr i32 SP_CTL_STOP = 0, SP_CTL_ITER = 1, SP_CTL_BAD = 2, SP_CTL_RUN = 3;

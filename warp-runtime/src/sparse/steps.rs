@@ -1108,3 +1108,173 @@ unsafe impl<S: SparseScalar, const DIRECTION: bool> ObjectStep for CgVector<S, D
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::mem::offset_of;
+
+    /// `wp_sparse.h`, which the C++ side of every record and constant here comes from.
+    const HEADER: &str = include_str!("../../../warp-cuda/cuda/wp_sparse.h");
+    const CUDA_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda");
+
+    /// Every `constexpr i32|i64 SP_NAME = value` of the header (several per declaration).
+    fn header_constants() -> Vec<(String, i64)> {
+        let mut out = vec![];
+        for decl in HEADER.split("constexpr ").skip(1) {
+            let decl = &decl[..decl.find(';').expect("a declaration ends with `;`")];
+            let Some(rest) = decl
+                .strip_prefix("i32 ")
+                .or_else(|| decl.strip_prefix("i64 "))
+            else {
+                continue;
+            };
+            for item in rest.split(',') {
+                let (name, value) = item.split_once('=').expect("NAME = value");
+                let name = name.trim();
+                if name.starts_with("SP_") {
+                    out.push((name.to_string(), value.trim().parse().expect("an integer")));
+                }
+            }
+        }
+        out
+    }
+
+    /// The header's `SP_*` constants are Rust's, one for one: the Rust side addresses the
+    /// scalars and control words the kernels write, and decodes their stop codes, by its own
+    /// constants, so a swap on one side alone would otherwise pass every CPU test.
+    #[test]
+    fn header_constants_are_rusts() {
+        use cg::*;
+        let rust: Vec<(&str, i64)> = vec![
+            ("SP_DOT_LANES", DOT_LANES as i64),
+            ("SP_DOT_CHUNK", DOT_CHUNK as i64),
+            ("SP_CTL_STOP", CTL_STOP as i64),
+            ("SP_CTL_ITER", CTL_ITER as i64),
+            ("SP_CTL_BAD", CTL_BAD as i64),
+            ("SP_CTL_RUN", CTL_RUN as i64),
+            ("SP_STOP_NONE", STOP_NONE as i64),
+            ("SP_STOP_CONVERGED", STOP_CONVERGED as i64),
+            ("SP_STOP_MAX_ITER", STOP_MAX_ITER as i64),
+            ("SP_STOP_NON_FINITE", STOP_NON_FINITE as i64),
+            ("SP_STOP_BREAKDOWN", STOP_BREAKDOWN as i64),
+            ("SP_STOP_SINGULAR", STOP_SINGULAR as i64),
+            ("SP_RZ", RZ as i64),
+            ("SP_RZ_NEW", RZ_NEW as i64),
+            ("SP_PAP", PAP as i64),
+            ("SP_RR", RR as i64),
+            ("SP_BB", BB as i64),
+            ("SP_TOL2", TOL2 as i64),
+            ("SP_BETA", BETA as i64),
+            ("SP_BREAK", BREAK as i64),
+            ("SP_TOL", TOL as i64),
+        ];
+        let mut header = header_constants();
+        header.sort();
+        let mut rust: Vec<(String, i64)> = rust.into_iter().map(|(n, v)| (n.into(), v)).collect();
+        rust.sort();
+        assert_eq!(header, rust);
+        // The indices fit the arrays Rust allocates.
+        assert!([RZ, RZ_NEW, PAP, RR, BB, TOL2, BETA, BREAK, TOL]
+            .iter()
+            .all(|&k| k < SCAL_LEN));
+        assert!([CTL_STOP, CTL_ITER, CTL_BAD, CTL_RUN]
+            .iter()
+            .all(|&k| k < CTL_LEN));
+    }
+
+    /// (C++ record, field, Rust's offset) for every field of every record (the names are the
+    /// same on both sides).
+    macro_rules! layouts {
+        ($($rust:ty => $c:literal { $($f:ident),* $(,)? }),* $(,)?) => {
+            vec![$($(($c, stringify!($f), offset_of!($rust, $f))),*),*]
+        };
+    }
+
+    /// Each record's fields sit at the same offsets in Rust and in C++ (g++'s `offsetof`): the
+    /// sizes are asserted on both sides, but two swapped fields of one size (`rows` and
+    /// `cols`) keep the size. Skipped, saying so, without g++.
+    #[test]
+    fn record_offsets_are_the_headers() {
+        let fields = layouts![
+            TplKeys<f32> => "sp_tpl_keys_t" {
+                count, rows, cols, values, n, nrow, ncol, block, two_pass, pad, keys, idx, bad
+            },
+            TplReport<f32> => "sp_tpl_report_t" {
+                count, bad, rows, cols, values, n, nrow, ncol, block, fault
+            },
+            TplRowKeys => "sp_tpl_row_keys_t" { count, rows, cols, idx, keys, n, nrow, ncol, pad },
+            TplHeads => "sp_tpl_heads_t" { count, rows, cols, idx, heads, n, nrow, ncol, pad },
+            TplSum<f32> => "sp_tpl_sum_t" {
+                count, rows, cols, values, idx, pos, block_rows, columns, out, n, nrow, ncol,
+                block
+            },
+            BsrOffsets => "sp_bsr_offsets_t" { count, block_rows, pos, offsets, n, nrow },
+            BsrMv<f32> => "sp_bsr_mv_t" {
+                offsets, columns, values, x, y, alpha, beta, nrow, ncol, cap, pad
+            },
+            Dot<f32, false> => "sp_dot_t" { a, b, n, out, chunks },
+            JacobiInv<f32> => "sp_jacobi_inv_t" {
+                offsets, columns, values, dinv, bad, nrow, point, cap, pad
+            },
+            JacobiApply<f32> => "sp_jacobi_apply_t" { dinv, r, z, nrow, dim },
+            CgScalar<f32, false> => "sp_cg_scalar_t" {
+                ctl, scal, history, rtol, atol, max_iter, pad
+            },
+            CgVector<f32, false> => "sp_cg_vector_t" { ctl, scal, x, r, p, ap, n },
+        ];
+        if std::process::Command::new("g++")
+            .arg("--version")
+            .output()
+            .is_err()
+        {
+            eprintln!("SKIPPED record_offsets_are_the_headers: no g++ on this machine");
+            return;
+        }
+        // The header as the emulator tests compile it (tests/cuda_sparse_host.rs).
+        let mut src = String::from(
+            "#include <cstddef>\n#include <cstdio>\n#include \"wp_prim_emu.h\"\n\
+             #define __global__\n#define __device__ inline\n#define __shared__ static\n\
+             #include \"wp_sparse.h\"\nusing namespace wp;\n\
+             #define P(T, f) printf(\"%s %s %zu\\n\", #T, #f, offsetof(T, f))\n\
+             int main() {\n",
+        );
+        for (c, f, _) in &fields {
+            src += &format!("  P({c}, {f});\n");
+        }
+        src += "  return 0;\n}\n";
+        let dir = std::env::temp_dir().join(format!("wp_sparse_offsets_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
+        std::fs::write(&cpp, src).unwrap();
+        let out = std::process::Command::new("g++")
+            .args([
+                "-std=c++17",
+                "-Wall",
+                "-Wextra",
+                "-Werror",
+                "-I",
+                CUDA_DIR,
+                "-I",
+            ])
+            .arg(format!("{CUDA_DIR}/tests"))
+            .arg(&cpp)
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "g++: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let out = std::process::Command::new(&exe).output().unwrap();
+        let got = String::from_utf8(out.stdout).unwrap();
+        let want: String = fields
+            .iter()
+            .map(|(c, f, o)| format!("{c} {f} {o}\n"))
+            .collect();
+        assert_eq!(got, want);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
