@@ -1019,27 +1019,89 @@ fn triplets_counts(dev: &wp::Device) {
 }
 
 /// The structure arrays are handles anyone may write: overwritten offsets or columns never
-/// make `mv` or the Jacobi set-up read outside the arrays (blocks outside the clamped ranges
-/// or with a column out of range are skipped), and the result is still the same on every
+/// make `mv` or the Jacobi set-up read outside the arrays, and the result is what the
+/// documented clamps give (a host reference): `nnz = offsets[nrow]` clamped into
+/// `0..=capacity`, row `r`'s blocks `offsets[r]..offsets[r + 1]` each clamped into `0..=nnz`
+/// (the end at least the start), blocks with a column out of range skipped; the same on every
 /// device.
 fn mv_survives_overwritten_structure(dev: &wp::Device) {
+    /// `A x` under the clamps, in f64 (exact here: small integers).
+    fn reference(off: &[i32], cols: &[i32], vals: &[f64], x: &[f64]) -> Vec<f64> {
+        let (nrow, ncol, cap) = (off.len() - 1, x.len() as i32, cols.len() as i32);
+        let nnz = off[nrow].clamp(0, cap) as usize;
+        (0..nrow)
+            .map(|r| {
+                let lo = (off[r].max(0) as usize).min(nnz);
+                let hi = (off[r + 1].max(0) as usize).clamp(lo, nnz);
+                (lo..hi)
+                    .filter(|&k| (0..ncol).contains(&cols[k]))
+                    .map(|k| vals[k] * x[cols[k] as usize])
+                    .sum()
+            })
+            .collect()
+    }
+    /// The first block row whose clamped range holds no diagonal block (Jacobi's singular
+    /// row: the Poisson diagonal is 4 wherever it is present).
+    fn first_without_diagonal(off: &[i32], cols: &[i32]) -> Option<usize> {
+        let (nrow, cap) = (off.len() - 1, cols.len() as i32);
+        let nnz = off[nrow].clamp(0, cap) as usize;
+        (0..nrow).find(|&r| {
+            let lo = (off[r].max(0) as usize).min(nnz);
+            let hi = (off[r + 1].max(0) as usize).clamp(lo, nnz);
+            !(lo..hi).any(|k| cols[k] == r as i32)
+        })
+    }
     let run = |d: &wp::Device| {
         let (r, c, v) = poisson(4);
         let a = Bsr::from_triplets(16, 16, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
-        let x = arr(&[1.0f64; 16], d);
+        // 80 triplets, 64 blocks: the capacity is above the block count.
+        assert_eq!((a.nnz_bound(), a.nnz().unwrap()), (80, 64));
+        let xs: Vec<f64> = (0..16).map(|i| (i % 5) as f64 - 2.0).collect();
+        let x = arr(&xs, d);
         let y = arr(&[0.0f64; 16], d);
-        a.columns().fill(1000).unwrap();
+        let off0 = host(a.offsets());
+        let vals = host(a.values());
+        let mut out = vec![];
+        // 1. A few columns out of range (negative, ncol, far off) among valid blocks: those
+        // blocks alone are skipped.
+        let cols0 = host(a.columns());
+        let mut cols = cols0.clone();
+        for (k, bad) in [(5, -1), (20, 16), (33, 1000), (63, i32::MIN)] {
+            cols[k] = bad;
+        }
+        a.columns().copy_from(&arr(&cols, d)).unwrap();
         sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
-        assert_eq!(host(&y), [0.0; 16], "every column out of range: no block");
-        let off: Vec<i32> = (0..17).map(|i| [-7, 3, 1_000_000, 40][i % 4]).collect();
+        assert_eq!(host(&y), reference(&off0, &cols, &vals, &xs), "bad columns");
+        out.push(host(&y));
+        // 2. The columns valid again; offsets[nrow] above the capacity (clamped to it: the
+        // last row reaches the unused tail of the arrays), a negative offset, a decreasing
+        // pair, one past the block count but below the capacity.
+        a.columns().copy_from(&arr(&cols0, d)).unwrap();
+        let mut off = off0.clone();
+        off[16] = 1_000_000;
+        off[3] = -5;
+        off[7] = off[6] - 3;
+        off[12] = 70;
         a.offsets().copy_from(&arr(&off, d)).unwrap();
         sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
-        let rep = sparse::cg(&a, &x, &y, Precond::Jacobi, &SolveOptions::default()).unwrap();
+        let want = reference(&off, &cols0, &vals, &xs);
+        assert_eq!(host(&y), want, "bad offsets");
+        // Clamped rows that are not empty: row 3 starts at the negative offset (clamped to
+        // 0), row 7 at the decreased one, row 15 ends at the capacity (the clamped nnz);
+        // and the product differs from the untouched matrix's.
         assert!(
-            matches!(rep.stop, Stop::SingularPreconditioner { .. }),
-            "{rep:?}"
+            want[3] != 0.0 && want[7] != 0.0 && want[15] != 0.0,
+            "{want:?}"
         );
-        host(&y).iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        assert_ne!(want, reference(&off0, &cols0, &vals, &xs));
+        out.push(host(&y));
+        // The Jacobi set-up under the same clamps: the first row without a diagonal block.
+        let rep = sparse::cg(&a, &x, &y, Precond::Jacobi, &SolveOptions::default()).unwrap();
+        let row = first_without_diagonal(&off, &cols0).expect("a row loses its diagonal");
+        assert_eq!(rep.stop, Stop::SingularPreconditioner { block_row: row });
+        out.iter()
+            .map(|y| y.iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
     };
     run(dev);
     same_on_cpu(dev, "overwritten structure", run);
