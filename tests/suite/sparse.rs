@@ -843,6 +843,51 @@ fn cg_breakdown_and_non_finite(dev: &wp::Device) {
         }
     );
     assert_eq!(host(&x), [0.0; 2], "x untouched by the broken iteration");
+    // An indefinite Jacobi preconditioner: r.z <= 0 is a breakdown, not a NaN later.
+    // [[1, -0.5], [-0.5, -1]], b = (1, 1): z = (1, -1), r.z = 0 at the set-up.
+    let ind = |n: usize, t: &[(i32, i32, f64)]| {
+        let r: Vec<i32> = t.iter().map(|e| e.0).collect();
+        let c: Vec<i32> = t.iter().map(|e| e.1).collect();
+        let v: Vec<f64> = t.iter().map(|e| e.2).collect();
+        Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap()
+    };
+    let a2 = ind(2, &[(0, 0, 1.0), (0, 1, -0.5), (1, 0, -0.5), (1, 1, -1.0)]);
+    let x = arr(&[0.0f64; 2], dev);
+    let rep = sparse::cg(
+        &a2,
+        &arr(&[1.0; 2], dev),
+        &x,
+        Precond::Jacobi,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    let rz = |value| Stop::Breakdown { what: "r.z", value };
+    assert_eq!((rep.stop, rep.iterations), (rz(0.0), 0), "{rep:?}");
+    assert_eq!(host(&x), [0.0; 2], "x untouched");
+    // [[1, 0.5, 0], [0.5, -1, 0], [0, 0, 1]], b = (1, -1, 1): r.z = 1, p.Ap = 2, then the
+    // first iteration's r.z = -0.25 (exact in binary); x holds that iteration, 0.5 p.
+    let t = [
+        (0, 0, 1.0),
+        (0, 1, 0.5),
+        (1, 0, 0.5),
+        (1, 1, -1.0),
+        (2, 2, 1.0),
+    ];
+    for mode in [Mode::Host, Mode::Graph] {
+        let x3 = arr(&[0.0f64; 3], dev);
+        let o = SolveOptions {
+            mode,
+            ..Default::default()
+        };
+        let b3 = arr(&[1.0, -1.0, 1.0], dev);
+        let rep = sparse::cg(&ind(3, &t), &b3, &x3, Precond::Jacobi, &o).unwrap();
+        assert_eq!(
+            (rep.stop, rep.iterations),
+            (rz(-0.25), 1),
+            "{mode:?}: {rep:?}"
+        );
+        assert_eq!(host(&x3), [0.5; 3], "{mode:?}");
+    }
     let rep = sparse::cg(
         &a,
         &arr(&[f64::NAN, 1.0], dev),

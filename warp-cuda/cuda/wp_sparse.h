@@ -217,7 +217,8 @@ static_assert(sizeof(sp_jacobi_apply_t) == 32, "sp_jacobi_apply_t layout");
 // solve's `capture_while` loops on.
 constexpr i32 SP_CTL_STOP = 0, SP_CTL_ITER = 1, SP_CTL_BAD = 2, SP_CTL_RUN = 3;
 constexpr i32 SP_STOP_NONE = 0, SP_STOP_CONVERGED = 1, SP_STOP_MAX_ITER = 2,
-              SP_STOP_NON_FINITE = 3, SP_STOP_BREAKDOWN = 4, SP_STOP_SINGULAR = 5;
+              SP_STOP_NON_FINITE = 3, SP_STOP_BREAKDOWN = 4, SP_STOP_SINGULAR = 5,
+              SP_STOP_BREAKDOWN_RZ = 6;
 constexpr i32 SP_RZ = 0, SP_RZ_NEW = 1, SP_PAP = 2, SP_RR = 3, SP_BB = 4, SP_TOL2 = 5,
               SP_BETA = 6, SP_BREAK = 7, SP_TOL = 8;
 
@@ -497,7 +498,7 @@ WP_FN void sp_jacobi_apply_row(const sp_jacobi_apply_t& s, i32 r) {
 
 /// The CG's set-up check (one thread): tolerance max(atol, rtol |b|), history[0] = |r|, and
 /// the stop before any iteration (a singular preconditioner, a non-finite residual,
-/// convergence, max_iter == 0).
+/// convergence, r.z <= 0, max_iter == 0).
 template <typename S>
 WP_FN void sp_cg_init(const sp_cg_scalar_t& s) {
   i32* ctl = (i32*)s.ctl;
@@ -508,17 +509,21 @@ WP_FN void sp_cg_init(const sp_cg_scalar_t& s) {
   const S tol = at > rt ? at : rt;
   sc[SP_TOL] = tol;
   sc[SP_TOL2] = sp_mul(tol, tol);
-  const S rr = sc[SP_RR];
+  const S rr = sc[SP_RR], rz = sc[SP_RZ];
   hist[0] = sp_sqrt(rr);
   ctl[SP_CTL_ITER] = 0;
   i32 stop = SP_STOP_NONE;
   if (ctl[SP_CTL_BAD] != 0x7fffffff)
     stop = SP_STOP_SINGULAR;
-  else if (!sp_finite(rr) || !sp_finite(sc[SP_RZ]))
+  else if (!sp_finite(rr) || !sp_finite(rz))
     stop = SP_STOP_NON_FINITE;
   else if (rr <= sc[SP_TOL2])
     stop = SP_STOP_CONVERGED;
-  else if (s.max_iter <= 0)
+  else if (rz <= (S)0) {
+    // An indefinite preconditioner (r != 0 here, so an SPD one gives r.z > 0).
+    sc[SP_BREAK] = rz;
+    stop = SP_STOP_BREAKDOWN_RZ;
+  } else if (s.max_iter <= 0)
     stop = SP_STOP_MAX_ITER;
   ctl[SP_CTL_STOP] = stop;
   ctl[SP_CTL_RUN] = stop == SP_STOP_NONE;
@@ -544,8 +549,8 @@ WP_FN void sp_cg_update(const sp_cg_vector_t& s, i64 i) {
 
 /// The CG's check after an iteration (one thread): a bad p.Ap stops it (NonFinite or
 /// Breakdown, x and r untouched by that iteration); else the iteration counts, its residual
-/// norm goes to the history, and it stops on a non-finite residual, convergence or max_iter;
-/// else beta = (r.z)new / (r.z) for the direction.
+/// norm goes to the history, and it stops on a non-finite residual, convergence, a new r.z
+/// <= 0 (a breakdown) or max_iter; else beta = (r.z)new / (r.z) for the direction.
 template <typename S>
 WP_FN void sp_cg_check_stop(const sp_cg_scalar_t& s) {
   i32* ctl = (i32*)s.ctl;
@@ -569,7 +574,10 @@ WP_FN void sp_cg_check_stop(const sp_cg_scalar_t& s) {
     ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
   else if (rr <= sc[SP_TOL2])
     ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
-  else if (it >= s.max_iter)
+  else if (sc[SP_RZ_NEW] <= (S)0) {
+    sc[SP_BREAK] = sc[SP_RZ_NEW];
+    ctl[SP_CTL_STOP] = SP_STOP_BREAKDOWN_RZ;
+  } else if (it >= s.max_iter)
     ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
   else {
     sc[SP_BETA] = sp_div(sc[SP_RZ_NEW], sc[SP_RZ]);

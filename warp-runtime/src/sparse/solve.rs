@@ -89,7 +89,11 @@ pub enum Stop {
     /// the initial `x` or the preconditioner holds one, or the iteration overflowed.
     NonFinite,
     /// The method broke down: for CG `p . Ap <= 0` (`what` is `"p.Ap"`, `value` its value),
-    /// which a symmetric positive definite matrix never gives.
+    /// which a symmetric positive definite matrix never gives, or `r . z <= 0` for a nonzero
+    /// residual (`what` is `"r.z"`), which a symmetric positive definite preconditioner never
+    /// gives (a Jacobi preconditioner of a diagonal with a negative entry may). `x` holds the
+    /// last iterate: a `p . Ap` breakdown leaves it as the iteration before found it, an
+    /// `r . z` breakdown after the iteration that computed it.
     Breakdown {
         /// The quantity that broke down.
         what: &'static str,
@@ -129,8 +133,8 @@ pub struct SolveReport {
 /// `A` must be symmetric positive definite; `b` and `x` are scalar vectors of `A`'s scalar
 /// size (`nrow * B::ROWS`), contiguous, on the matrix's device, not overlapping. The solve
 /// stops at convergence (`|r| <= max(atol, rtol |b|)`), after `max_iter` iterations, at a
-/// non-finite value, at a breakdown (`p . Ap <= 0`) or, before iterating, at a singular
-/// preconditioner; each is an `Ok` report (see [`Stop`]). The iterations, residuals and the
+/// non-finite value, at a breakdown (`p . Ap <= 0` or `r . z <= 0`) or, before iterating, at
+/// a singular preconditioner; each is an `Ok` report (see [`Stop`]). The iterations, residuals and the
 /// result are the same bits on the CPU and a GPU.
 ///
 /// ```
@@ -477,6 +481,10 @@ impl<B: Block> Cg<'_, B> {
             c::STOP_NON_FINITE => Stop::NonFinite,
             c::STOP_BREAKDOWN => Stop::Breakdown {
                 what: "p.Ap",
+                value: sc[c::BREAK].to_f64(),
+            },
+            c::STOP_BREAKDOWN_RZ => Stop::Breakdown {
+                what: "r.z",
                 value: sc[c::BREAK].to_f64(),
             },
             c::STOP_SINGULAR => Stop::SingularPreconditioner {

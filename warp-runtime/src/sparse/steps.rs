@@ -910,6 +910,8 @@ pub(crate) mod cg {
     pub const STOP_NON_FINITE: i32 = 3;
     pub const STOP_BREAKDOWN: i32 = 4;
     pub const STOP_SINGULAR: i32 = 5;
+    /// A breakdown of `r . z` (`STOP_BREAKDOWN` is one of `p . Ap`).
+    pub const STOP_BREAKDOWN_RZ: i32 = 6;
     pub const RZ: usize = 0;
     pub const RZ_NEW: usize = 1;
     pub const PAP: usize = 2;
@@ -949,12 +951,17 @@ impl<S: SparseScalar, const CHECK: bool> CgScalar<S, CHECK> {
         let rr = sc[RR];
         hist[0] = rr.sqrt();
         ctl[CTL_ITER] = 0;
+        let rz = sc[RZ];
         ctl[CTL_STOP] = if ctl[CTL_BAD] != i32::MAX {
             STOP_SINGULAR
-        } else if !rr.finite() || !sc[RZ].finite() {
+        } else if !rr.finite() || !rz.finite() {
             STOP_NON_FINITE
         } else if rr <= sc[TOL2] {
             STOP_CONVERGED
+        } else if rz <= S::ZERO {
+            // An indefinite preconditioner (r != 0 here, so an SPD one gives r.z > 0).
+            sc[BREAK] = rz;
+            STOP_BREAKDOWN_RZ
         } else if self.max_iter <= 0 {
             STOP_MAX_ITER
         } else {
@@ -991,6 +998,9 @@ impl<S: SparseScalar, const CHECK: bool> CgScalar<S, CHECK> {
             ctl[CTL_STOP] = STOP_NON_FINITE;
         } else if rr <= sc[TOL2] {
             ctl[CTL_STOP] = STOP_CONVERGED;
+        } else if sc[RZ_NEW] <= S::ZERO {
+            sc[BREAK] = sc[RZ_NEW];
+            ctl[CTL_STOP] = STOP_BREAKDOWN_RZ;
         } else if it >= self.max_iter {
             ctl[CTL_STOP] = STOP_MAX_ITER;
         } else {
@@ -1159,6 +1169,7 @@ mod tests {
             ("SP_STOP_NON_FINITE", STOP_NON_FINITE as i64),
             ("SP_STOP_BREAKDOWN", STOP_BREAKDOWN as i64),
             ("SP_STOP_SINGULAR", STOP_SINGULAR as i64),
+            ("SP_STOP_BREAKDOWN_RZ", STOP_BREAKDOWN_RZ as i64),
             ("SP_RZ", RZ as i64),
             ("SP_RZ_NEW", RZ_NEW as i64),
             ("SP_PAP", PAP as i64),
