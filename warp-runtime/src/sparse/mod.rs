@@ -435,12 +435,16 @@ impl<B: Block> Bsr<B> {
         self.values.len()
     }
 
-    /// The block count, `offsets[nrow]`, read from the device (a synchronisation).
+    /// The block count, `offsets[nrow]`, read from the device (a synchronisation of that one
+    /// element), clamped into `0..=nnz_bound()` as the steps clamp it: an assembled matrix's
+    /// count is in range, and one whose offsets were overwritten still gives a count that
+    /// indexes [`Bsr::columns`] and [`Bsr::values`].
     ///
     /// # Errors
     /// A fault of the queued work, or a read-back inside a capture.
     pub fn nnz(&self) -> Result<usize> {
-        Ok(self.offsets.to_vec()?[self.nrow] as usize)
+        let v = self.offsets.view(self.nrow..self.nrow + 1)?.to_vec()?[0];
+        Ok(v.clamp(0, self.nnz_bound() as i32) as usize)
     }
 
     /// The row offsets (`nrow + 1`).
