@@ -463,11 +463,11 @@ fn mv_case<B: Block>(seed: usize) {
     for (alpha, beta) in [(0.75, -1.25), (1.0, 0.0), (-2.5, 1.0)] {
         let y = wp::Array::from_slice(&y_out, &cpu).unwrap();
         sparse::mv(
+            B::Scalar::from_f64(alpha),
             &a,
             &wp::Array::from_slice(&x_in, &cpu).unwrap(),
-            &y,
-            B::Scalar::from_f64(alpha),
             B::Scalar::from_f64(beta),
+            &y,
         )
         .unwrap();
         let got_y = y.to_vec().unwrap();

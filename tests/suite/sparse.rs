@@ -427,7 +427,7 @@ fn mv_matches_dense_reference(dev: &wp::Device) {
         let x: Vec<f32> = (0..30).map(|_| g.unit() as f32).collect();
         let y0: Vec<f32> = (0..50).map(|_| g.unit() as f32).collect();
         let y = arr(&y0, d);
-        sparse::mv(&a, &arr(&x, d), &y, 0.5f32, -2.0).unwrap();
+        sparse::mv(0.5f32, &a, &arr(&x, d), -2.0, &y).unwrap();
         let got = host(&y);
         let f64s = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
         let want = dense_mv(&a, |b, _, _| *b as f64, &f64s(&x), 0.5, -2.0, &f64s(&y0));
@@ -453,7 +453,7 @@ fn mv_mat3_matches_dense_reference(dev: &wp::Device) {
             .map(|_| Vec3::new(g.unit() as f32, g.unit() as f32, g.unit() as f32))
             .collect();
         let y = arr(&[Vec3::ZERO; 20], d);
-        sparse::mv(&a, &arr(&x, d), &y, 1.0, 0.0).unwrap();
+        sparse::mv(1.0, &a, &arr(&x, d), 0.0, &y).unwrap();
         let got = host(&y);
         let xs: Vec<f64> = x
             .iter()
@@ -485,11 +485,11 @@ fn mv_beta_zero_does_not_read_y(dev: &wp::Device) {
     )
     .unwrap();
     let y = arr(&[f64::NAN, f64::NAN], dev);
-    sparse::mv(&a, &arr(&[1.0, 10.0], dev), &y, 1.0, 0.0).unwrap();
+    sparse::mv(1.0, &a, &arr(&[1.0, 10.0], dev), 0.0, &y).unwrap();
     assert_eq!(host(&y), [20.0, 3.0]);
     // beta != 0 reads it: a NaN stays.
     let y = arr(&[f64::NAN, 1.0], dev);
-    sparse::mv(&a, &arr(&[1.0, 10.0], dev), &y, 1.0, 1.0).unwrap();
+    sparse::mv(1.0, &a, &arr(&[1.0, 10.0], dev), 1.0, &y).unwrap();
     let got = host(&y);
     assert!(got[0].is_nan() && got[1] == 4.0, "{got:?}");
 }
@@ -504,11 +504,11 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap();
     let e = sparse::mv(
+        1.0,
         &a,
         &arr(&[DVec3::ONE; 3], dev),
-        &arr(&[DVec3::ZERO; 3], dev),
-        1.0,
         0.0,
+        &arr(&[DVec3::ZERO; 3], dev),
     )
     .unwrap_err();
     let msg = e.to_string();
@@ -520,11 +520,11 @@ fn mv_shape_mismatch(dev: &wp::Device) {
         "{msg}"
     );
     let e = sparse::mv(
+        1.0,
         &a,
         &arr(&[DVec3::ONE; 2], dev),
-        &arr(&[DVec3::ZERO; 2], dev),
-        1.0,
         0.0,
+        &arr(&[DVec3::ZERO; 2], dev),
     )
     .unwrap_err()
     .to_string();
@@ -538,7 +538,7 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap();
     let x = arr(&[DVec3::ONE; 2], dev);
-    let e = sparse::mv(&sq, &x, &x, 1.0, 0.0).unwrap_err().to_string();
+    let e = sparse::mv(1.0, &sq, &x, 0.0, &x).unwrap_err().to_string();
     assert!(e.contains("overlap"), "{e}");
     // y over the matrix's own values (f32 blocks: the same element type).
     let f = Bsr::from_triplets(
@@ -550,11 +550,11 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap();
     let e = sparse::mv(
+        1.0,
         &f,
         &arr(&[1.0f32; 2], dev),
-        &f.values().view(0..2).unwrap(),
-        1.0,
         0.0,
+        &f.values().view(0..2).unwrap(),
     )
     .unwrap_err()
     .to_string();
@@ -965,15 +965,15 @@ fn mv_in_a_capture(dev: &wp::Device) {
     let x = arr(&[1.0f64; 36], dev);
     let y = arr(&[0.0f64; 36], dev);
     // Once before capturing: a GPU loads the library at the first use.
-    sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
-    let g = wp::capture(dev, || sparse::mv(&a, &x, &y, 2.0, 0.5)).unwrap();
+    sparse::mv(1.0, &a, &x, 0.0, &y).unwrap();
+    let g = wp::capture(dev, || sparse::mv(2.0, &a, &x, 0.5, &y)).unwrap();
     let mut want = host(&y);
     for k in 0..3 {
         let xs: Vec<f64> = (0..36).map(|i| (i * (k + 1)) as f64 * 0.25).collect();
         x.copy_from(&arr(&xs, dev)).unwrap();
         g.launch().unwrap();
         let w = arr(&want, dev);
-        sparse::mv(&a, &x, &w, 2.0, 0.5).unwrap();
+        sparse::mv(2.0, &a, &x, 0.5, &w).unwrap();
         want = host(&w);
         assert_eq!(host(&y), want, "replay {k}");
     }
@@ -1115,7 +1115,7 @@ fn mv_survives_overwritten_structure(dev: &wp::Device) {
             cols[k] = bad;
         }
         a.columns().copy_from(&arr(&cols, d)).unwrap();
-        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+        sparse::mv(1.0, &a, &x, 0.0, &y).unwrap();
         assert_eq!(host(&y), reference(&off0, &cols, &vals, &xs), "bad columns");
         out.push(host(&y));
         // 2. The columns valid again; offsets[nrow] above the capacity (clamped to it: the
@@ -1131,7 +1131,7 @@ fn mv_survives_overwritten_structure(dev: &wp::Device) {
         // nnz() clamps as the steps do (a count that indexes the arrays); a negative count
         // reads as 0.
         assert_eq!(a.nnz().unwrap(), 80);
-        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
+        sparse::mv(1.0, &a, &x, 0.0, &y).unwrap();
         let want = reference(&off, &cols0, &vals, &xs);
         assert_eq!(host(&y), want, "bad offsets");
         // Clamped rows that are not empty: row 3 starts at the negative offset (clamped to
@@ -1295,7 +1295,7 @@ fn block_type_case<B: SquareBlock + Copy>(dev: &wp::Device) {
             y.reinterpret::<B::Out>().unwrap(),
         );
         let (alpha, beta) = (B::Scalar::from_f64(0.5), B::Scalar::from_f64(-1.5));
-        sparse::mv(&a, &xv, &yv, alpha, beta).unwrap();
+        sparse::mv(alpha, &a, &xv, beta, &yv).unwrap();
         host(&y)
     };
     let got = mv_run(dev);

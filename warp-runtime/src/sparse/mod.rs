@@ -33,7 +33,7 @@
 //! let a = Bsr::from_triplets(2, 2, &rows, &cols, &vals)?; // [[2, -1], [0, 4]]
 //! let x = wp::Array::from_slice(&[1.0f32, 1.0], &dev)?;
 //! let y = wp::Array::<f32>::zeros(2, &dev)?;
-//! sparse::mv(&a, &x, &y, 1.0, 0.0)?;
+//! sparse::mv(1.0, &a, &x, 0.0, &y)?;
 //! assert_eq!(y.to_vec()?, [1.0, 4.0]);
 //! # Ok::<(), wp::Error>(())
 //! ```
@@ -517,11 +517,11 @@ fn mv_raw<B: Block>(
 /// [`Error::InvalidArgument`] naming `sparse::mv`, the argument and both shapes when a length
 /// differs; for arrays that are not contiguous or overlap; [`Error::DeviceMismatch`].
 pub fn mv<B: Block>(
+    alpha: B::Scalar,
     a: &Bsr<B>,
     x: &Array<B::In>,
-    y: &Array<B::Out>,
-    alpha: B::Scalar,
     beta: B::Scalar,
+    y: &Array<B::Out>,
 ) -> Result<()> {
     const F: &str = "sparse::mv";
     let dev = a.device();
