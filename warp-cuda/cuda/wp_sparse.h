@@ -32,6 +32,8 @@
 //                row's range clamped (`sp_row_range`), columns out of range skipped.
 //   dot_partials per chunk of 4096 elements (a block of 256 threads): see `sp_dot_lane`.
 //   dot_final    one block of 256 threads: the partials reduced the same way.
+//                (Both index their shared lanes by threadIdx.x: correct only for blocks of
+//                exactly SP_DOT_LANES threads, which the runtime's launcher asserts.)
 //   jacobi_inv   per block row: the inverse of the diagonal block (or of its diagonal alone).
 //   jacobi_apply per block row: z = D^-1 r.
 //   cg_init, cg_update, cg_check, cg_direction: the conjugate gradient's set-up, x/r update,

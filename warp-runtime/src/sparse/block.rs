@@ -161,6 +161,10 @@ pub unsafe trait Block: Element + Default + sealed::SealedBlock {
 /// preconditioner take.
 pub trait SquareBlock: Block<In = <Self as Block>::Out> {}
 
+/// The largest block dimension: the CPU steps size their per-row buffers by it (the macro
+/// below asserts it of every block type; a larger block, as slice 2's 6 x 6, raises it).
+pub(crate) const MAX_DIM: usize = 4;
+
 macro_rules! block {
     ($t:ty, $s:ty, $in:ty, $n:literal, $cm:literal, $tag:literal) => {
         impl sealed::SealedBlock for $t {
@@ -186,6 +190,7 @@ macro_rules! block {
         const _: () = assert!(
             std::mem::size_of::<$t>() == $n * $n * std::mem::size_of::<$s>()
                 && std::mem::size_of::<$in>() == $n * std::mem::size_of::<$s>()
+                && $n <= MAX_DIM
         );
     };
 }

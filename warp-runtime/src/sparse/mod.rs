@@ -137,6 +137,8 @@ impl<B: Block> Bsr<B> {
     /// position summed in ascending `t` (a stable sort of the positions, then each run summed
     /// in order), so the sums are the same bits on every device. A position with no triplet
     /// has no block; blocks that sum to zero are kept (the structure never depends on values).
+    /// That order makes each position's sum serial: one thread adds all its duplicates, so a
+    /// position with a million duplicates costs a million dependent adds on one GPU thread.
     ///
     /// `nrow` and `ncol` count blocks. The three arrays have one element per triplet, on one
     /// device, contiguous. The result is on their device, with room for one block per
@@ -151,8 +153,8 @@ impl<B: Block> Bsr<B> {
     /// `[t, value]` for shape `[triplets, nrow]` (or `ncol`); a block with a NaN or infinite
     /// scalar is a fault `NonFiniteInput` on `values` at index `t` (the smallest bad `t`; rows
     /// before columns before values at one `t`). On the CPU the fault is returned at once; on
-    /// a GPU it is reported at the next synchronisation (the matrix then holds the valid
-    /// triplets' sums).
+    /// a GPU it is reported at the next synchronisation (the matrix then holds the in-range
+    /// triplets' sums, a non-finite value included).
     pub fn from_triplets(
         nrow: usize,
         ncol: usize,
@@ -628,8 +630,9 @@ fn dot_raw<S: SparseScalar>(
 /// [capture](crate::capture) (an [`Error::Capture`] there).
 ///
 /// # Errors
-/// [`Error::Capture`] inside a capture; [`Error::InvalidArgument`] naming `sparse::dot` when the lengths differ, `out` is not one
-/// element or overlaps an input, or an array is not contiguous; [`Error::DeviceMismatch`].
+/// [`Error::Capture`] inside a capture; [`Error::InvalidArgument`] naming `sparse::dot` when
+/// the lengths differ, `out` is not one element or overlaps an input, or an array is not
+/// contiguous; [`Error::DeviceMismatch`].
 pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Result<()> {
     const F: &str = "sparse::dot";
     let dev = a.device();

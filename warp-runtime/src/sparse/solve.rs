@@ -1,4 +1,5 @@
-//! The conjugate gradient solver with Jacobi preconditioning, driven from the host.
+//! The conjugate gradient solver with Jacobi preconditioning, driven from the host or
+//! captured (`Mode::Graph`).
 //!
 //! Every scalar of the iteration (the dots, alpha, beta, the tolerance) lives on the device and
 //! is computed there by the same steps on every backend, so the CPU and a GPU take the same
@@ -35,7 +36,11 @@ pub enum Precond {
 /// Options of [`cg`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolveOptions {
-    /// Stop when `|r| <= max(atol, rtol * |b|)` (default 1e-6).
+    /// Stop when `|r| <= max(atol, rtol * |b|)` (default 1e-6). The test compares squared
+    /// norms in the scalar type, so the tolerance must be representable squared: for `f32`,
+    /// a tolerance below about 1e-19 squares to 0 (only an exact zero residual converges),
+    /// and `|b|` above about 1e19 overflows `b . b` (reported as [`Stop::NonFinite`] or
+    /// an infinite tolerance).
     pub rtol: f64,
     /// The absolute tolerance (default 0).
     pub atol: f64,
@@ -134,8 +139,8 @@ pub struct SolveReport {
 /// size (`nrow * B::ROWS`), contiguous, on the matrix's device, not overlapping. The solve
 /// stops at convergence (`|r| <= max(atol, rtol |b|)`), after `max_iter` iterations, at a
 /// non-finite value, at a breakdown (`p . Ap <= 0` or `r . z <= 0`) or, before iterating, at
-/// a singular preconditioner; each is an `Ok` report (see [`Stop`]). The iterations, residuals and the
-/// result are the same bits on the CPU and a GPU.
+/// a singular preconditioner; each is an `Ok` report (see [`Stop`]). The iterations,
+/// residuals and the result are the same bits on the CPU and a GPU.
 ///
 /// ```
 /// # use warp_runtime as wp;
@@ -154,7 +159,8 @@ pub struct SolveReport {
 ///     }
 /// }
 /// let arr = |v: &[i32]| wp::Array::from_slice(v, &dev);
-/// let a = Bsr::from_triplets(n, n, &arr(&rows)?, &arr(&cols)?, &wp::Array::from_slice(&vals, &dev)?)?;
+/// let vals = wp::Array::from_slice(&vals, &dev)?;
+/// let a = Bsr::from_triplets(n, n, &arr(&rows)?, &arr(&cols)?, &vals)?;
 /// let b = wp::Array::from_slice(&vec![1.0f64; n], &dev)?;
 /// let x = wp::Array::<f64>::zeros(n, &dev)?;
 /// let report = sparse::cg(&a, &b, &x, Precond::Jacobi, &SolveOptions::default())?;
@@ -169,8 +175,9 @@ pub struct SolveReport {
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::cg`, the
 /// argument and both shapes: a matrix that is not square in blocks, `b` or `x` of another
 /// length, arrays that are not contiguous or overlap, `check_every == 0`, `max_iter` above
-/// `i32::MAX - 1`, a negative or non-finite tolerance; [`Error::DeviceMismatch`](crate::Error::DeviceMismatch);
-/// a fault of the queued work (reported by its read-backs).
+/// `i32::MAX - 1`, a negative or non-finite tolerance;
+/// [`Error::DeviceMismatch`](crate::Error::DeviceMismatch); a fault of the queued work
+/// (reported by its read-backs).
 pub fn cg<B: SquareBlock>(
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
@@ -410,7 +417,7 @@ impl<B: Block> Cg<'_, B> {
                 columns: a.columns().device_address(),
                 values: a.values().device_address(),
                 dinv: j.dinv.device_address(),
-                bad: self.ctl.device_address() + 4 * c::CTL_BAD as u64,
+                bad: self.ctl.view(c::CTL_BAD..c::CTL_BAD + 1)?.device_address(),
                 nrow: a.nrow() as i32,
                 point: j.point as i32,
                 cap: a.nnz_bound() as i32,
@@ -470,11 +477,20 @@ impl<B: Block> Cg<'_, B> {
         const F: &str = "sparse::cg";
         let words = self.ctl.to_vec()?;
         let sc = self.scal.to_vec()?;
-        let iterations = words[c::CTL_ITER] as usize;
-        let history: Vec<f64> = self.history.to_vec()?[..=iterations]
+        let iterations = words[c::CTL_ITER];
+        let internal = |what: String| {
+            crate::error::Error::invalid(format!("{F}: internal: the solver ended with {what}"))
+        };
+        // The device caps the count at max_iter; a bad word is an internal error, not a panic.
+        let all = self.history.to_vec()?;
+        let history: Vec<f64> = usize::try_from(iterations)
+            .ok()
+            .and_then(|i| all.get(..=i))
+            .ok_or_else(|| internal(format!("iteration count {iterations}")))?
             .iter()
             .map(|v| v.to_f64())
             .collect();
+        let iterations = history.len() - 1;
         let stop = match words[c::CTL_STOP] {
             c::STOP_CONVERGED => Stop::Converged,
             c::STOP_MAX_ITER => Stop::MaxIterations,
@@ -491,11 +507,7 @@ impl<B: Block> Cg<'_, B> {
                 block_row: words[c::CTL_BAD] as usize,
             },
             // Both loops end only at a stop (max_iter bounds them on the device).
-            w => {
-                return Err(crate::error::Error::invalid(format!(
-                    "{F}: internal: the solver ended with stop word {w}"
-                )))
-            }
+            w => return Err(internal(format!("stop word {w}"))),
         };
         Ok(SolveReport {
             iterations,

@@ -6,7 +6,7 @@
 //! Addresses are of contiguous arrays on the step's device that the caller checked and sized
 //! (the callers' comments say how many elements each holds).
 
-use super::block::{at, sealed::SealedBlock, sealed::SealedScalar, Block, SparseScalar};
+use super::block::{at, sealed::SealedBlock, sealed::SealedScalar, Block, SparseScalar, MAX_DIM};
 use crate::backend::{ObjectLibrary, ObjectStep, StepFault};
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
@@ -534,11 +534,11 @@ fn mv_row<B: Block>(
     columns: &[i32],
     values: &[B::Scalar],
     x: &[B::Scalar],
+    ncol: i32,
     r: usize,
     acc: &mut [B::Scalar],
 ) {
     let (rr, cc) = (B::ROWS, B::COLS);
-    let ncol = (x.len() / cc) as i32;
     acc.fill(B::Scalar::ZERO);
     for k in row_range(offsets, columns.len(), r) {
         let c = columns[k];
@@ -585,9 +585,9 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
         let alpha = B::Scalar::from_f64(self.alpha);
         let beta = B::Scalar::from_f64(self.beta);
         (0..nrow).into_par_iter().with_min_len(256).for_each(|r| {
-            let mut acc = [B::Scalar::ZERO; 4];
+            let mut acc = [B::Scalar::ZERO; MAX_DIM];
             let acc = &mut acc[..rr];
-            mv_row::<B>(offsets, columns, values, x, r, acc);
+            mv_row::<B>(offsets, columns, values, x, self.ncol, r, acc);
             for (i, &a) in acc.iter().enumerate() {
                 // SAFETY: y's scalars of block row r, written by this task alone (y does not
                 // overlap x).
@@ -736,13 +736,13 @@ fn jacobi_row<B: Block>(
     values: &[B::Scalar],
     r: usize,
     point: bool,
-) -> Option<[[B::Scalar; 4]; 4]> {
+) -> Option<[[B::Scalar; MAX_DIM]; MAX_DIM]> {
     let n = B::ROWS;
     let (z, one) = (B::Scalar::ZERO, B::Scalar::ONE);
     let k = row_range(offsets, columns.len(), r).find(|&k| columns[k] == r as i32)?;
     let blk = &values[k * n * B::COLS..(k + 1) * n * B::COLS];
-    let mut a = [[z; 4]; 4];
-    let mut inv = [[z; 4]; 4];
+    let mut a = [[z; MAX_DIM]; MAX_DIM];
+    let mut inv = [[z; MAX_DIM]; MAX_DIM];
     for i in 0..n {
         for j in 0..n {
             a[i][j] = if !point || i == j {
