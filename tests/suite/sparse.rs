@@ -1228,6 +1228,12 @@ fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
 /// and CG with block Jacobi converging, and on a GPU both the same bits as on the CPU.
 fn every_block_type_mv_and_cg(dev: &wp::Device) {
     use glam::{DMat2, DMat4, Mat2, Mat4};
+    // `SparseScalar` (imported above) has no arithmetic methods to clash with std's: with
+    // both in scope, `x.add(y)` is `Add::add`, not an ambiguity (E0034).
+    {
+        use std::ops::Add;
+        assert_eq!(1.5f32.add(2.0), 3.5);
+    }
     block_type_case::<f32>(dev);
     block_type_case::<f64>(dev);
     block_type_case::<Mat2>(dev);
