@@ -470,10 +470,15 @@ impl<B: Block> Bsr<B> {
     }
 }
 
-/// Queues `y = alpha A x + beta y` over scalar addresses, lengths checked by the caller.
-/// Inside a capture the step is recorded, and the graph keeps `uses()` (the arrays the
-/// addresses point into) alive.
-fn mv_raw<B: Block>(
+/// Queues `y = alpha A x + beta y` over scalar addresses. Inside a capture the step is
+/// recorded, and the graph keeps `uses()` (the arrays the addresses point into) alive.
+///
+/// # Safety
+/// `x` and `y` are addresses of contiguous memory on `a`'s device holding `a.ncol() *
+/// B::COLS` and `a.nrow() * B::ROWS` scalars, alive until the step has run (or, captured,
+/// kept alive by `uses()`); `y` overlaps neither `x` nor the matrix's arrays. The step reads
+/// and writes them with no bounds check.
+unsafe fn mv_raw<B: Block>(
     a: &Bsr<B>,
     x: u64,
     y: u64,
@@ -563,14 +568,18 @@ pub fn mv<B: Block>(
     if a.overlaps(y) {
         return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
     }
-    mv_raw(
-        a,
-        x.device_address(),
-        y.device_address(),
-        alpha.to_f64(),
-        beta.to_f64(),
-        || Box::new((a.clone(), x.clone(), y.clone())),
-    )
+    // SAFETY: x and y are contiguous on a's device with the lengths checked above, y
+    // overlaps neither x nor the matrix (checked), and the arrays are kept by `uses`.
+    unsafe {
+        mv_raw(
+            a,
+            x.device_address(),
+            y.device_address(),
+            alpha.to_f64(),
+            beta.to_f64(),
+            || Box::new((a.clone(), x.clone(), y.clone())),
+        )
+    }
 }
 
 /// Scratch of [`dot_raw`]: one partial per chunk.
@@ -580,7 +589,13 @@ fn dot_partials<S: SparseScalar>(n: usize, dev: &Device) -> Result<Array<S>> {
 
 /// Queues the dot product of `n` scalars at `a` and `b` into the scalar at `out` (recorded
 /// inside a capture, which keeps `uses()` and the partials alive).
-fn dot_raw<S: SparseScalar>(
+///
+/// # Safety
+/// `a` and `b` address `n` contiguous scalars each and `out` one, on `dev`, alive until the
+/// steps have run (or, captured, kept alive by `uses()`); `out` overlaps neither input;
+/// `partials` holds `dot_partials(n)`'s length. The steps read and write them with no bounds
+/// check.
+unsafe fn dot_raw<S: SparseScalar>(
     dev: &Device,
     a: u64,
     b: u64,
@@ -663,13 +678,18 @@ pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Resul
         return Err(invalid(F, "argument `out` overlaps `a` or `b`"));
     }
     let partials = dot_partials::<S>(a.len(), dev)?;
-    dot_raw(
-        dev,
-        a.device_address(),
-        b.device_address(),
-        a.len(),
-        &partials,
-        out.device_address(),
-        || Box::new((a.clone(), b.clone(), out.clone())),
-    )
+    // SAFETY: a and b are contiguous on dev with a.len() scalars each, out is one scalar not
+    // overlapping them (checked above), the partials are sized for a.len(), and the arrays
+    // are kept by `uses`.
+    unsafe {
+        dot_raw(
+            dev,
+            a.device_address(),
+            b.device_address(),
+            a.len(),
+            &partials,
+            out.device_address(),
+            || Box::new((a.clone(), b.clone(), out.clone())),
+        )
+    }
 }

@@ -364,7 +364,10 @@ impl<B: Block> Cg<'_, B> {
     fn dot(&self, u: &Array<B::Scalar>, v: &Array<B::Scalar>, k: usize) -> Result<()> {
         let out = self.scal.device_address() + (k * std::mem::size_of::<B::Scalar>()) as u64;
         let (u, v) = (u.device_address(), v.device_address());
-        dot_raw(&self.dev, u, v, self.n, &self.partials, out, self.keep())
+        // SAFETY: u and v are the solve's n-scalar vectors (checked or allocated so), out is
+        // scalar k < SCAL_LEN of `scal` (another array), partials are sized for n, and
+        // `keep` holds every array of the solve.
+        unsafe { dot_raw(&self.dev, u, v, self.n, &self.partials, out, self.keep()) }
     }
 
     /// `z = D^-1 r` (nothing without a preconditioner).
@@ -403,14 +406,19 @@ impl<B: Block> Cg<'_, B> {
         let a = self.a;
         self.ctl.copy_from(&self.ctl0)?;
         self.r.copy_from(self.b)?;
-        mv_raw(
-            a,
-            self.x.device_address(),
-            self.r.device_address(),
-            -1.0,
-            1.0,
-            self.keep(),
-        )?;
+        // SAFETY: x and r hold n = nrow * ROWS scalars (the matrix is square in blocks:
+        // checked), r is the solve's own array (overlapping neither x nor the matrix: x was
+        // checked against the matrix), and `keep` holds every array of the solve.
+        unsafe {
+            mv_raw(
+                a,
+                self.x.device_address(),
+                self.r.device_address(),
+                -1.0,
+                1.0,
+                self.keep(),
+            )?;
+        }
         if let Some(j) = &self.pre {
             self.step(JacobiInv::<B> {
                 offsets: a.offsets().device_address(),
@@ -437,14 +445,18 @@ impl<B: Block> Cg<'_, B> {
     /// step does nothing once a stop is set.
     fn iteration(&self) -> Result<()> {
         let (ctl, scal) = (self.ctl.device_address(), self.scal.device_address());
-        mv_raw(
-            self.a,
-            self.p.device_address(),
-            self.ap.device_address(),
-            1.0,
-            0.0,
-            self.keep(),
-        )?;
+        // SAFETY: p and ap are the solve's own n-scalar arrays (distinct, not the matrix's),
+        // and `keep` holds every array of the solve.
+        unsafe {
+            mv_raw(
+                self.a,
+                self.p.device_address(),
+                self.ap.device_address(),
+                1.0,
+                0.0,
+                self.keep(),
+            )?;
+        }
         self.dot(&self.p, &self.ap, c::PAP)?;
         self.step(CgVector::<B::Scalar, false> {
             ctl,
