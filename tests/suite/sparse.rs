@@ -956,6 +956,79 @@ fn cg_bad_arguments(dev: &wp::Device) {
     .unwrap_err()
     .to_string();
     assert!(e.contains("check_every"), "{e}");
+    // Each further bad argument: the message names sparse::cg and the argument.
+    let cg_err = |a: &Bsr<f32>, b: &wp::Array<f32>, x: &wp::Array<f32>, o: SolveOptions| {
+        sparse::cg(a, b, x, Precond::None, &o)
+            .unwrap_err()
+            .to_string()
+    };
+    let x = arr(&[0.0f32; 2], dev);
+    let d = SolveOptions::default();
+    let e = cg_err(&a, &x, &x, d);
+    assert!(
+        e.contains("sparse::cg") && e.contains("`b` and `x` overlap"),
+        "{e}"
+    );
+    // A matrix of two blocks: its values are two scalars, the length of x.
+    let a2 = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[1.0f32, 1.0], dev),
+    )
+    .unwrap();
+    let e = cg_err(&a2, &arr(&[0.0; 2], dev), a2.values(), d);
+    assert!(
+        e.contains("sparse::cg") && e.contains("`x` overlaps the matrix"),
+        "{e}"
+    );
+    let b = arr(&[1.0f32; 2], dev);
+    for (name, o) in [
+        (
+            "rtol",
+            SolveOptions {
+                rtol: f64::NAN,
+                ..d
+            },
+        ),
+        ("rtol", SolveOptions { rtol: -1.0, ..d }),
+        (
+            "atol",
+            SolveOptions {
+                atol: f64::INFINITY,
+                ..d
+            },
+        ),
+        ("atol", SolveOptions { atol: -1e-3, ..d }),
+        (
+            "max_iter",
+            SolveOptions {
+                max_iter: i32::MAX as usize,
+                ..d
+            },
+        ),
+    ] {
+        let e = cg_err(&a, &b, &x, o);
+        assert!(
+            e.contains("sparse::cg") && e.contains(&format!("`{name}`")),
+            "{o:?}: {e}"
+        );
+    }
+    if !dev.is_cpu() {
+        let e = sparse::cg(&a, &arr(&[1.0f32; 2], &wp::cpu()), &x, Precond::None, &d).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                wp::Error::DeviceMismatch {
+                    kernel: "sparse::cg",
+                    arg: "b",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+    }
 }
 
 /// `mv` is recorded by a capture: each replay multiplies the arrays' contents at that time
