@@ -515,8 +515,9 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     assert!(
         matches!(e, wp::Error::InvalidArgument { .. })
             && msg.contains("sparse::mv")
-            && msg.contains("`x` has shape [3]")
-            && msg.contains("3 x 2 blocks"),
+            && msg.contains("`x` has shape [3] of DVec3")
+            && msg.contains("3 x 2 blocks of 3 x 3 (9 x 6 scalars)")
+            && msg.contains("needs 2 DVec3 elements"),
         "{msg}"
     );
     let e = sparse::mv(
@@ -528,7 +529,10 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("`y` has shape [2]"), "{e}");
+    assert!(
+        e.contains("`y` has shape [2] of DVec3") && e.contains("needs 3 DVec3 elements"),
+        "{e}"
+    );
     let sq = Bsr::from_triplets(
         2,
         2,

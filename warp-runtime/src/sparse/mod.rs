@@ -411,6 +411,18 @@ impl<B: Block> Bsr<B> {
         Ok(m)
     }
 
+    /// `"N x M blocks of R x C (NR x MC scalars)"`, for messages.
+    fn describe(&self) -> String {
+        let (r, c) = self.shape();
+        format!(
+            "{} x {} blocks of {} x {} ({r} x {c} scalars)",
+            self.nrow,
+            self.ncol,
+            B::ROWS,
+            B::COLS
+        )
+    }
+
     /// Whether `v`'s elements share memory with the matrix's arrays.
     fn overlaps<T: Element>(&self, v: &Array<T>) -> bool {
         overlap(v, &self.offsets) || overlap(v, &self.columns) || overlap(v, &self.values)
@@ -540,12 +552,13 @@ pub fn mv<B: Block>(
         return Err(invalid(
             F,
             format!(
-                "argument `x` has shape {:?}, but the matrix has {} x {} blocks: `x` needs {} \
+                "argument `x` has shape {:?} of {}, but the matrix has {}: `x` needs {} {} \
                  elements",
                 x.shape(),
-                a.nrow,
+                B::In::TYPE_NAME,
+                a.describe(),
                 a.ncol,
-                a.ncol
+                B::In::TYPE_NAME
             ),
         ));
     }
@@ -553,12 +566,13 @@ pub fn mv<B: Block>(
         return Err(invalid(
             F,
             format!(
-                "argument `y` has shape {:?}, but the matrix has {} x {} blocks: `y` needs {} \
+                "argument `y` has shape {:?} of {}, but the matrix has {}: `y` needs {} {} \
                  elements",
                 y.shape(),
+                B::Out::TYPE_NAME,
+                a.describe(),
                 a.nrow,
-                a.ncol,
-                a.nrow
+                B::Out::TYPE_NAME
             ),
         ));
     }
