@@ -419,6 +419,62 @@ fn same_on_cpu<T: PartialEq + std::fmt::Debug>(
     }
 }
 
+/// `sparse::dot`'s documented order in plain Rust (which never contracts into an FMA): chunks
+/// of 4096; lane `l` of 256 sums from 0 the products of the chunk's elements `l, l + 256, ..`;
+/// the lanes added pairwise at strides 128, .., 1; the chunks' partials reduced the same way.
+fn documented_dot(a: &[f32], b: &[f32]) -> f32 {
+    fn tree(mut s: Vec<f32>) -> f32 {
+        let mut stride = 128;
+        while stride > 0 {
+            for l in 0..stride {
+                s[l] += s[l + stride];
+            }
+            stride /= 2;
+        }
+        s[0]
+    }
+    let n = a.len();
+    let chunks = n.div_ceil(4096).max(1);
+    let partials: Vec<f32> = (0..chunks)
+        .map(|c| {
+            tree(
+                (0..256)
+                    .map(|l| {
+                        let idx = (c * 4096 + l..(c + 1) * 4096).step_by(256);
+                        idx.filter(|&i| i < n).fold(0.0, |acc, i| acc + a[i] * b[i])
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    tree(
+        (0..256)
+            .map(|l| {
+                (l..chunks)
+                    .step_by(256)
+                    .fold(0.0, |acc, i| acc + partials[i])
+            })
+            .collect(),
+    )
+}
+
+/// `sparse::mv`'s documented order for scalar blocks: each row's sum from 0 over its blocks
+/// in storage order of `a_k * x[col_k]`, then `alpha * acc`, plus `beta * y` unless beta is 0.
+fn documented_mv(a: &Bsr<f32>, x: &[f32], alpha: f32, beta: f32, y: &[f32]) -> Vec<f32> {
+    let (off, cols, vals) = (host(a.offsets()), host(a.columns()), host(a.values()));
+    (0..a.nrow())
+        .map(|r| {
+            let blocks = off[r] as usize..off[r + 1] as usize;
+            let acc = blocks.fold(0.0f32, |acc, k| acc + vals[k] * x[cols[k] as usize]);
+            if beta == 0.0 {
+                alpha * acc
+            } else {
+                alpha * acc + beta * y[r]
+            }
+        })
+        .collect()
+}
+
 fn mv_matches_dense_reference(dev: &wp::Device) {
     let (r, c, v) = random_triplets(50, 30, 600, 5, |g| g.unit() as f32);
     let run = |d: &wp::Device| {
@@ -436,6 +492,10 @@ fn mv_matches_dense_reference(dev: &wp::Device) {
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             assert!((*g as f64 - w).abs() <= 1e-5, "row {i}: {g} vs {w}");
         }
+        // The documented order, bit for bit.
+        let doc = documented_mv(&a, &x, 0.5, -2.0, &y0);
+        let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&got), bits(&doc));
         got.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
     };
     run(dev);
@@ -588,6 +648,8 @@ fn dot_fixed_tree(dev: &wp::Device) {
                 (got as f64 - want).abs() <= 2e-6 * scale.max(1.0),
                 "n {n}: {got} vs {want}"
             );
+            // The documented order, bit for bit (a promise, not only CPU-GPU agreement).
+            assert_eq!(got.to_bits(), documented_dot(&a, &b).to_bits(), "n {n}");
             got.to_bits()
         };
         run(dev);
