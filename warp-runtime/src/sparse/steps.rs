@@ -1194,6 +1194,63 @@ mod tests {
             .all(|&k| k < CTL_LEN));
     }
 
+    /// Every kernel name the Rust side launches (each block type's and each scalar's
+    /// `KERNELS`) is a kernel of the compiled build library: a wrong tag in `block!` or a
+    /// type missing from the header's instantiation list fails here, not at a user's first
+    /// call on a GPU. Needs only libnvrtc (skipped, saying so, without it).
+    #[cfg(feature = "cuda")]
+    #[test]
+    fn every_kernel_name_is_in_the_compiled_library() {
+        use crate::sparse::block::sealed::{BlockKernels, ScalarKernels};
+        use glam::{DMat2, DMat3, DMat4, Mat2, Mat3, Mat4};
+        if let Err(e) = warp_cuda::nvrtc_version() {
+            eprintln!("SKIPPED every_kernel_name_is_in_the_compiled_library: {e}");
+            return;
+        }
+        let c = crate::cuda::objects::compile_library(&LIBRARY, 90).unwrap();
+        let has = |name: &str| {
+            let pat = format!("{name}\0");
+            c.cubin.windows(pat.len()).any(|w| w == pat.as_bytes())
+        };
+        let blocks: [BlockKernels; 8] = [
+            <f32 as SealedBlock>::KERNELS,
+            <f64 as SealedBlock>::KERNELS,
+            <Mat2 as SealedBlock>::KERNELS,
+            <Mat3 as SealedBlock>::KERNELS,
+            <Mat4 as SealedBlock>::KERNELS,
+            <DMat2 as SealedBlock>::KERNELS,
+            <DMat3 as SealedBlock>::KERNELS,
+            <DMat4 as SealedBlock>::KERNELS,
+        ];
+        let scalars: [ScalarKernels; 2] = [
+            <f32 as SealedScalar>::KERNELS,
+            <f64 as SealedScalar>::KERNELS,
+        ];
+        let mut names: Vec<&str> = blocks.iter().flat_map(|k| [k.mv, k.jacobi_inv]).collect();
+        for k in scalars {
+            names.extend([
+                k.tpl_keys,
+                k.tpl_report,
+                k.tpl_sum,
+                k.dot_partials,
+                k.dot_final,
+                k.jacobi_apply,
+                k.cg_init,
+                k.cg_check,
+                k.cg_update,
+                k.cg_direction,
+            ]);
+        }
+        // The scalar-free steps.
+        names.extend([TplRowKeys::KERNEL, TplHeads::KERNEL, BsrOffsets::KERNEL]);
+        assert_eq!(names.len(), 8 * 2 + 2 * 10 + 3);
+        for n in &names {
+            assert!(has(n), "{n} is not a kernel of the compiled library");
+        }
+        // The search can fail: a name of no kernel is absent.
+        assert!(!has("wp_sparse_bsr_mv_mat5"));
+    }
+
     /// (C++ record, field, Rust's offset) for every field of every record (the names are the
     /// same on both sides).
     macro_rules! layouts {
