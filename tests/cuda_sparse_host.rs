@@ -213,8 +213,8 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
 }
 
 // The triplet pipeline of warp-runtime's sparse/mod.rs (from_triplets), with the host's
-// stable sort in place of the radix sort; prints the fault if the report raised one, else
-// the matrix.
+// stable sort in place of the radix sort; prints the fault if the report raised one, then
+// the matrix (a GPU runs every queued step after a fault too; the CPU stops at it).
 template <typename S> void triplets(const ScalarKernels& k) {
   const i32 block = (i32)word(), nrow = (i32)word(), ncol = (i32)word(), n = (i32)word();
   // A device count: a word 1 then the count, or a word 0 (none).
@@ -243,7 +243,6 @@ template <typename S> void triplets(const ScalarKernels& k) {
   if (flag) {
     printf("fault %d %d %lld %lld %lld %lld\n", f.kind, f.arg, (long long)f.index[0],
            (long long)f.index[1], (long long)f.shape[0], (long long)f.shape[1]);
-    return;
   }
   auto sort = [&]() {
     std::vector<std::pair<u32, i32>> kv(m);
@@ -464,11 +463,11 @@ fn mv_case<B: Block>(seed: usize) {
     for (alpha, beta) in [(0.75, -1.25), (1.0, 0.0), (-2.5, 1.0)] {
         let y = wp::Array::from_slice(&y_out, &cpu).unwrap();
         sparse::mv(
+            B::Scalar::from_f64(alpha),
             &a,
             &wp::Array::from_slice(&x_in, &cpu).unwrap(),
-            &y,
-            B::Scalar::from_f64(alpha),
             B::Scalar::from_f64(beta),
+            &y,
         )
         .unwrap();
         let got_y = y.to_vec().unwrap();
@@ -571,11 +570,21 @@ fn poisson<B: Block>(m: usize, k: B, neg: B) -> Bsr<B> {
 }
 
 fn cg_case<B: sparse::SquareBlock>(a: &Bsr<B>, pre: Precond, o: SolveOptions, b: Vec<B::Scalar>) {
-    let cpu = wp::cpu();
-    let n = b.len();
-    let x0: Vec<B::Scalar> = (0..n)
+    let x0: Vec<B::Scalar> = (0..b.len())
         .map(|i| B::Scalar::from_f64(value(i) * 0.01))
         .collect();
+    cg_case_from(a, pre, o, b, x0);
+}
+
+/// [`cg_case`] from the initial guess `x0`; the CPU's report.
+fn cg_case_from<B: sparse::SquareBlock>(
+    a: &Bsr<B>,
+    pre: Precond,
+    o: SolveOptions,
+    b: Vec<B::Scalar>,
+    x0: Vec<B::Scalar>,
+) -> sparse::SolveReport {
+    let cpu = wp::cpu();
     let x = wp::Array::from_slice(&x0, &cpu).unwrap();
     let rep = sparse::cg(a, &wp::Array::from_slice(&b, &cpu).unwrap(), &x, pre, &o).unwrap();
     let mut input = vec![2, kind::<B>()];
@@ -600,7 +609,11 @@ fn cg_case<B: sparse::SquareBlock>(a: &Bsr<B>, pre: Precond, o: SolveOptions, b:
         Stop::Converged => 1,
         Stop::MaxIterations => 2,
         Stop::NonFinite => 3,
-        Stop::Breakdown { .. } => 4,
+        Stop::Breakdown { what: "p.Ap", .. } => 4,
+        Stop::Breakdown { what, .. } => {
+            assert_eq!(what, "r.z");
+            6
+        }
         Stop::SingularPreconditioner { .. } => 5,
     };
     let what = format!("{} {pre:?}", std::any::type_name::<B>());
@@ -619,12 +632,13 @@ fn cg_case<B: sparse::SquareBlock>(a: &Bsr<B>, pre: Precond, o: SolveOptions, b:
     assert_eq!(hist, want_hist, "{what}: history");
     let want_x: Vec<u64> = x.to_vec().unwrap().iter().map(|&v| word(v)).collect();
     assert_eq!(xs, want_x, "{what}: x");
+    rep
 }
 
 /// Whole CG solves through the C++ steps (the solver's loop replayed by the driver): the
 /// same stop, iterations, history and x bits as the CPU backend; f64 and f32 scalars,
 /// `DMat3`/`Mat2` blocks, no preconditioner, block and point Jacobi, a run stopped by
-/// `max_iter`, and a singular preconditioner.
+/// `max_iter`, a singular preconditioner, and `r . z` breakdowns.
 #[test]
 fn cg_matches_the_cpu_bit_for_bit() {
     if skip("cg_matches_the_cpu_bit_for_bit") {
@@ -662,6 +676,65 @@ fn cg_matches_the_cpu_bit_for_bit() {
     let sing = Mat4::from_cols_array(&[1.0; 16]);
     let a4 = poisson::<Mat4>(2, sing, Mat4::IDENTITY);
     cg_case(&a4, Precond::Jacobi, o, vec![1.0f32; 16]);
+    // An indefinite Jacobi preconditioner (a negative diagonal entry): r.z <= 0 stops the
+    // solve as a breakdown, at the set-up (r.z = 1 - 4 < 0) or after an iteration (r.z = 1,
+    // p.Ap = 2, then r.z = -0.25).
+    let cpu = wp::cpu();
+    let scalars = |n: usize, t: &[(i32, i32, f64)]| {
+        let (r, c, v): (Vec<i32>, Vec<i32>, Vec<f64>) = t.iter().copied().fold(
+            (vec![], vec![], vec![]),
+            |(mut r, mut c, mut v), (i, j, x)| {
+                r.push(i);
+                c.push(j);
+                v.push(x);
+                (r, c, v)
+            },
+        );
+        Bsr::from_triplets(
+            n,
+            n,
+            &wp::Array::from_slice(&r, &cpu).unwrap(),
+            &wp::Array::from_slice(&c, &cpu).unwrap(),
+            &wp::Array::from_slice(&v, &cpu).unwrap(),
+        )
+        .unwrap()
+    };
+    let a = scalars(2, &[(0, 0, 1.0), (0, 1, -0.5), (1, 0, -0.5), (1, 1, -1.0)]);
+    let rep = cg_case_from(&a, Precond::Jacobi, o, vec![1.0, 2.0], vec![0.0; 2]);
+    assert_eq!(
+        (rep.stop, rep.iterations),
+        (
+            Stop::Breakdown {
+                what: "r.z",
+                value: -3.0
+            },
+            0
+        )
+    );
+    let t = [
+        (0, 0, 1.0),
+        (0, 1, 0.5),
+        (1, 0, 0.5),
+        (1, 1, -1.0),
+        (2, 2, 1.0),
+    ];
+    let rep = cg_case_from(
+        &scalars(3, &t),
+        Precond::Jacobi,
+        o,
+        vec![1.0, -1.0, 1.0],
+        vec![0.0; 3],
+    );
+    assert_eq!(
+        (rep.stop, rep.iterations),
+        (
+            Stop::Breakdown {
+                what: "r.z",
+                value: -0.25
+            },
+            1
+        )
+    );
 }
 
 fn triplet_words<B: Block>(
@@ -809,7 +882,7 @@ fn triplets_match_the_cpu_bit_for_bit() {
             e => panic!("{e}"),
         };
         let out = run("tplfault", &triplet_words(2, 2, &rows, &cols, &vals, None));
-        assert_eq!(out, [want]);
+        assert_eq!(out[0], want);
     }
     // A device count outside 0..=4 (of 4 triplets): out of bounds on `count` (argument 3).
     for k in [5, -1] {
@@ -831,6 +904,9 @@ fn triplets_match_the_cpu_bit_for_bit() {
             e => panic!("{e}"),
         }
         let out = run("tplcount", &triplet_words(2, 2, &r, &c, &v, Some(k)));
-        assert_eq!(out, [format!("fault 1 3 {k} 0 5 0")]);
+        assert_eq!(out[0], format!("fault 1 3 {k} 0 5 0"));
+        // The steps after the fault (which a GPU runs) treat the count as 0, the primitives'
+        // rule: they process nothing, and the matrix is empty (offsets all 0).
+        assert_eq!(out[1..], ["matrix 0", "0", "0", "0"], "count {k}");
     }
 }

@@ -5,7 +5,9 @@
 
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use warp_lang as wp;
-use warp_runtime::sparse::{self, Block, Bsr, Mode, Precond, SolveOptions, Stop};
+use warp_runtime::sparse::{
+    self, Block, Bsr, Mode, Precond, SolveOptions, SparseScalar, SquareBlock, Stop,
+};
 use wp::FaultKind;
 
 use crate::{arr, host};
@@ -35,6 +37,7 @@ backend_tests!(
     cg_singular_preconditioner,
     cg_breakdown_and_non_finite,
     cg_bad_arguments,
+    every_block_type_mv_and_cg,
 );
 
 /// A small deterministic generator (xorshift64*), so the cases repeat.
@@ -416,6 +419,62 @@ fn same_on_cpu<T: PartialEq + std::fmt::Debug>(
     }
 }
 
+/// `sparse::dot`'s documented order in plain Rust (which never contracts into an FMA): chunks
+/// of 4096; lane `l` of 256 sums from 0 the products of the chunk's elements `l, l + 256, ..`;
+/// the lanes added pairwise at strides 128, .., 1; the chunks' partials reduced the same way.
+fn documented_dot(a: &[f32], b: &[f32]) -> f32 {
+    fn tree(mut s: Vec<f32>) -> f32 {
+        let mut stride = 128;
+        while stride > 0 {
+            for l in 0..stride {
+                s[l] += s[l + stride];
+            }
+            stride /= 2;
+        }
+        s[0]
+    }
+    let n = a.len();
+    let chunks = n.div_ceil(4096).max(1);
+    let partials: Vec<f32> = (0..chunks)
+        .map(|c| {
+            tree(
+                (0..256)
+                    .map(|l| {
+                        let idx = (c * 4096 + l..(c + 1) * 4096).step_by(256);
+                        idx.filter(|&i| i < n).fold(0.0, |acc, i| acc + a[i] * b[i])
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    tree(
+        (0..256)
+            .map(|l| {
+                (l..chunks)
+                    .step_by(256)
+                    .fold(0.0, |acc, i| acc + partials[i])
+            })
+            .collect(),
+    )
+}
+
+/// `sparse::mv`'s documented order for scalar blocks: each row's sum from 0 over its blocks
+/// in storage order of `a_k * x[col_k]`, then `alpha * acc`, plus `beta * y` unless beta is 0.
+fn documented_mv(a: &Bsr<f32>, x: &[f32], alpha: f32, beta: f32, y: &[f32]) -> Vec<f32> {
+    let (off, cols, vals) = (host(a.offsets()), host(a.columns()), host(a.values()));
+    (0..a.nrow())
+        .map(|r| {
+            let blocks = off[r] as usize..off[r + 1] as usize;
+            let acc = blocks.fold(0.0f32, |acc, k| acc + vals[k] * x[cols[k] as usize]);
+            if beta == 0.0 {
+                alpha * acc
+            } else {
+                alpha * acc + beta * y[r]
+            }
+        })
+        .collect()
+}
+
 fn mv_matches_dense_reference(dev: &wp::Device) {
     let (r, c, v) = random_triplets(50, 30, 600, 5, |g| g.unit() as f32);
     let run = |d: &wp::Device| {
@@ -424,7 +483,7 @@ fn mv_matches_dense_reference(dev: &wp::Device) {
         let x: Vec<f32> = (0..30).map(|_| g.unit() as f32).collect();
         let y0: Vec<f32> = (0..50).map(|_| g.unit() as f32).collect();
         let y = arr(&y0, d);
-        sparse::mv(&a, &arr(&x, d), &y, 0.5f32, -2.0).unwrap();
+        sparse::mv(0.5f32, &a, &arr(&x, d), -2.0, &y).unwrap();
         let got = host(&y);
         let f64s = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
         let want = dense_mv(&a, |b, _, _| *b as f64, &f64s(&x), 0.5, -2.0, &f64s(&y0));
@@ -433,6 +492,10 @@ fn mv_matches_dense_reference(dev: &wp::Device) {
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             assert!((*g as f64 - w).abs() <= 1e-5, "row {i}: {g} vs {w}");
         }
+        // The documented order, bit for bit.
+        let doc = documented_mv(&a, &x, 0.5, -2.0, &y0);
+        let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&got), bits(&doc));
         got.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
     };
     run(dev);
@@ -450,7 +513,7 @@ fn mv_mat3_matches_dense_reference(dev: &wp::Device) {
             .map(|_| Vec3::new(g.unit() as f32, g.unit() as f32, g.unit() as f32))
             .collect();
         let y = arr(&[Vec3::ZERO; 20], d);
-        sparse::mv(&a, &arr(&x, d), &y, 1.0, 0.0).unwrap();
+        sparse::mv(1.0, &a, &arr(&x, d), 0.0, &y).unwrap();
         let got = host(&y);
         let xs: Vec<f64> = x
             .iter()
@@ -482,11 +545,11 @@ fn mv_beta_zero_does_not_read_y(dev: &wp::Device) {
     )
     .unwrap();
     let y = arr(&[f64::NAN, f64::NAN], dev);
-    sparse::mv(&a, &arr(&[1.0, 10.0], dev), &y, 1.0, 0.0).unwrap();
+    sparse::mv(1.0, &a, &arr(&[1.0, 10.0], dev), 0.0, &y).unwrap();
     assert_eq!(host(&y), [20.0, 3.0]);
     // beta != 0 reads it: a NaN stays.
     let y = arr(&[f64::NAN, 1.0], dev);
-    sparse::mv(&a, &arr(&[1.0, 10.0], dev), &y, 1.0, 1.0).unwrap();
+    sparse::mv(1.0, &a, &arr(&[1.0, 10.0], dev), 1.0, &y).unwrap();
     let got = host(&y);
     assert!(got[0].is_nan() && got[1] == 4.0, "{got:?}");
 }
@@ -501,31 +564,35 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap();
     let e = sparse::mv(
+        1.0,
         &a,
         &arr(&[DVec3::ONE; 3], dev),
-        &arr(&[DVec3::ZERO; 3], dev),
-        1.0,
         0.0,
+        &arr(&[DVec3::ZERO; 3], dev),
     )
     .unwrap_err();
     let msg = e.to_string();
     assert!(
         matches!(e, wp::Error::InvalidArgument { .. })
             && msg.contains("sparse::mv")
-            && msg.contains("`x` has shape [3]")
-            && msg.contains("3 x 2 blocks"),
+            && msg.contains("`x` has shape [3] of DVec3")
+            && msg.contains("3 x 2 blocks of 3 x 3 (9 x 6 scalars)")
+            && msg.contains("needs 2 DVec3 elements"),
         "{msg}"
     );
     let e = sparse::mv(
+        1.0,
         &a,
         &arr(&[DVec3::ONE; 2], dev),
-        &arr(&[DVec3::ZERO; 2], dev),
-        1.0,
         0.0,
+        &arr(&[DVec3::ZERO; 2], dev),
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("`y` has shape [2]"), "{e}");
+    assert!(
+        e.contains("`y` has shape [2] of DVec3") && e.contains("needs 3 DVec3 elements"),
+        "{e}"
+    );
     let sq = Bsr::from_triplets(
         2,
         2,
@@ -535,7 +602,7 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap();
     let x = arr(&[DVec3::ONE; 2], dev);
-    let e = sparse::mv(&sq, &x, &x, 1.0, 0.0).unwrap_err().to_string();
+    let e = sparse::mv(1.0, &sq, &x, 0.0, &x).unwrap_err().to_string();
     assert!(e.contains("overlap"), "{e}");
     // y over the matrix's own values (f32 blocks: the same element type).
     let f = Bsr::from_triplets(
@@ -547,11 +614,11 @@ fn mv_shape_mismatch(dev: &wp::Device) {
     )
     .unwrap();
     let e = sparse::mv(
+        1.0,
         &f,
         &arr(&[1.0f32; 2], dev),
-        &f.values().view(0..2).unwrap(),
-        1.0,
         0.0,
+        &f.values().view(0..2).unwrap(),
     )
     .unwrap_err()
     .to_string();
@@ -568,17 +635,21 @@ fn dot_fixed_tree(dev: &wp::Device) {
             sparse::dot(&arr(&a, d), &arr(&b, d), &out).unwrap();
             let got = host(&out)[0];
             let want: f64 = a.iter().zip(&b).map(|(x, y)| *x as f64 * *y as f64).sum();
-            // f32 products and sums of n terms of magnitude <= 1, in a tree of depth
-            // log2(n) + 16 at most: 1e-6 * (|terms| sum) bounds the rounding.
+            // f32 products and sums of n terms of magnitude <= 1: each term goes through at
+            // most ~30 roundings (its product, 16 serial adds in its lane, 8 tree levels, the
+            // final step's few), so 30 u = 30 x 2^-24 ~ 1.8e-6 times the sum of |terms|
+            // bounds the error: 2e-6.
             let scale: f64 = a
                 .iter()
                 .zip(&b)
                 .map(|(x, y)| (*x as f64 * *y as f64).abs())
                 .sum();
             assert!(
-                (got as f64 - want).abs() <= 1e-6 * scale.max(1.0),
+                (got as f64 - want).abs() <= 2e-6 * scale.max(1.0),
                 "n {n}: {got} vs {want}"
             );
+            // The documented order, bit for bit (a promise, not only CPU-GPU agreement).
+            assert_eq!(got.to_bits(), documented_dot(&a, &b).to_bits(), "n {n}");
             got.to_bits()
         };
         run(dev);
@@ -840,6 +911,51 @@ fn cg_breakdown_and_non_finite(dev: &wp::Device) {
         }
     );
     assert_eq!(host(&x), [0.0; 2], "x untouched by the broken iteration");
+    // An indefinite Jacobi preconditioner: r.z <= 0 is a breakdown, not a NaN later.
+    // [[1, -0.5], [-0.5, -1]], b = (1, 1): z = (1, -1), r.z = 0 at the set-up.
+    let ind = |n: usize, t: &[(i32, i32, f64)]| {
+        let r: Vec<i32> = t.iter().map(|e| e.0).collect();
+        let c: Vec<i32> = t.iter().map(|e| e.1).collect();
+        let v: Vec<f64> = t.iter().map(|e| e.2).collect();
+        Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap()
+    };
+    let a2 = ind(2, &[(0, 0, 1.0), (0, 1, -0.5), (1, 0, -0.5), (1, 1, -1.0)]);
+    let x = arr(&[0.0f64; 2], dev);
+    let rep = sparse::cg(
+        &a2,
+        &arr(&[1.0; 2], dev),
+        &x,
+        Precond::Jacobi,
+        &SolveOptions::default(),
+    )
+    .unwrap();
+    let rz = |value| Stop::Breakdown { what: "r.z", value };
+    assert_eq!((rep.stop, rep.iterations), (rz(0.0), 0), "{rep:?}");
+    assert_eq!(host(&x), [0.0; 2], "x untouched");
+    // [[1, 0.5, 0], [0.5, -1, 0], [0, 0, 1]], b = (1, -1, 1): r.z = 1, p.Ap = 2, then the
+    // first iteration's r.z = -0.25 (exact in binary); x holds that iteration, 0.5 p.
+    let t = [
+        (0, 0, 1.0),
+        (0, 1, 0.5),
+        (1, 0, 0.5),
+        (1, 1, -1.0),
+        (2, 2, 1.0),
+    ];
+    for mode in [Mode::Host, Mode::Graph] {
+        let x3 = arr(&[0.0f64; 3], dev);
+        let o = SolveOptions {
+            mode,
+            ..Default::default()
+        };
+        let b3 = arr(&[1.0, -1.0, 1.0], dev);
+        let rep = sparse::cg(&ind(3, &t), &b3, &x3, Precond::Jacobi, &o).unwrap();
+        assert_eq!(
+            (rep.stop, rep.iterations),
+            (rz(-0.25), 1),
+            "{mode:?}: {rep:?}"
+        );
+        assert_eq!(host(&x3), [0.5; 3], "{mode:?}");
+    }
     let rep = sparse::cg(
         &a,
         &arr(&[f64::NAN, 1.0], dev),
@@ -906,6 +1022,79 @@ fn cg_bad_arguments(dev: &wp::Device) {
     .unwrap_err()
     .to_string();
     assert!(e.contains("check_every"), "{e}");
+    // Each further bad argument: the message names sparse::cg and the argument.
+    let cg_err = |a: &Bsr<f32>, b: &wp::Array<f32>, x: &wp::Array<f32>, o: SolveOptions| {
+        sparse::cg(a, b, x, Precond::None, &o)
+            .unwrap_err()
+            .to_string()
+    };
+    let x = arr(&[0.0f32; 2], dev);
+    let d = SolveOptions::default();
+    let e = cg_err(&a, &x, &x, d);
+    assert!(
+        e.contains("sparse::cg") && e.contains("`b` and `x` overlap"),
+        "{e}"
+    );
+    // A matrix of two blocks: its values are two scalars, the length of x.
+    let a2 = Bsr::from_triplets(
+        2,
+        2,
+        &arr(&[0, 1], dev),
+        &arr(&[0, 1], dev),
+        &arr(&[1.0f32, 1.0], dev),
+    )
+    .unwrap();
+    let e = cg_err(&a2, &arr(&[0.0; 2], dev), a2.values(), d);
+    assert!(
+        e.contains("sparse::cg") && e.contains("`x` overlaps the matrix"),
+        "{e}"
+    );
+    let b = arr(&[1.0f32; 2], dev);
+    for (name, o) in [
+        (
+            "rtol",
+            SolveOptions {
+                rtol: f64::NAN,
+                ..d
+            },
+        ),
+        ("rtol", SolveOptions { rtol: -1.0, ..d }),
+        (
+            "atol",
+            SolveOptions {
+                atol: f64::INFINITY,
+                ..d
+            },
+        ),
+        ("atol", SolveOptions { atol: -1e-3, ..d }),
+        (
+            "max_iter",
+            SolveOptions {
+                max_iter: i32::MAX as usize,
+                ..d
+            },
+        ),
+    ] {
+        let e = cg_err(&a, &b, &x, o);
+        assert!(
+            e.contains("sparse::cg") && e.contains(&format!("`{name}`")),
+            "{o:?}: {e}"
+        );
+    }
+    if !dev.is_cpu() {
+        let e = sparse::cg(&a, &arr(&[1.0f32; 2], &wp::cpu()), &x, Precond::None, &d).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                wp::Error::DeviceMismatch {
+                    kernel: "sparse::cg",
+                    arg: "b",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+    }
 }
 
 /// `mv` is recorded by a capture: each replay multiplies the arrays' contents at that time
@@ -917,15 +1106,15 @@ fn mv_in_a_capture(dev: &wp::Device) {
     let x = arr(&[1.0f64; 36], dev);
     let y = arr(&[0.0f64; 36], dev);
     // Once before capturing: a GPU loads the library at the first use.
-    sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
-    let g = wp::capture(dev, || sparse::mv(&a, &x, &y, 2.0, 0.5)).unwrap();
+    sparse::mv(1.0, &a, &x, 0.0, &y).unwrap();
+    let g = wp::capture(dev, || sparse::mv(2.0, &a, &x, 0.5, &y)).unwrap();
     let mut want = host(&y);
     for k in 0..3 {
         let xs: Vec<f64> = (0..36).map(|i| (i * (k + 1)) as f64 * 0.25).collect();
         x.copy_from(&arr(&xs, dev)).unwrap();
         g.launch().unwrap();
         let w = arr(&want, dev);
-        sparse::mv(&a, &x, &w, 2.0, 0.5).unwrap();
+        sparse::mv(2.0, &a, &x, 0.5, &w).unwrap();
         want = host(&w);
         assert_eq!(host(&y), want, "replay {k}");
     }
@@ -981,44 +1170,129 @@ fn triplets_counts(dev: &wp::Device) {
         e.contains("sparse::from_triplets") && e.contains("count 901"),
         "{e}"
     );
-    let e = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, &arr(&[901], dev))
-        .and_then(|a| a.nnz())
-        .unwrap_err();
+    // A device count out of range: the fault is the report step's (the sort and scan raise
+    // the same kind for the same count, so the kernel tells them apart), and every step and
+    // primitive treats the count as 0. The CPU stops at the fault; a GPU (out of debug mode,
+    // which would report it at the launch) queues the rest, and the matrix is empty.
+    let count = arr(&[901], dev);
+    let was = wp::config::debug();
+    wp::config::set_debug(false);
+    let res = Bsr::from_triplets_n(20, 30, &ra, &ca, &va, &count);
+    wp::config::set_debug(was);
+    let (e, matrix) = match res {
+        Err(e) => (e, None),
+        Ok(a) => (a.nnz().unwrap_err(), Some(a)),
+    };
+    assert_eq!(dev.is_cpu(), matrix.is_none(), "{e}");
     match e {
-        wp::Error::Fault(f) => assert_eq!(
-            f.kind,
-            FaultKind::OutOfBounds {
-                arg: "count",
-                index: vec![901],
-                shape: vec![901]
-            }
-        ),
+        wp::Error::Fault(f) => {
+            assert_eq!(f.kernel, "sparse::from_triplets");
+            assert_eq!(
+                f.kind,
+                FaultKind::OutOfBounds {
+                    arg: "count",
+                    index: vec![901],
+                    shape: vec![901]
+                }
+            );
+        }
         e => panic!("{e}"),
+    }
+    if let Some(a) = matrix {
+        assert_eq!(host(a.offsets()), [0; 21], "no triplet assembled");
+        assert_eq!(a.nnz().unwrap(), 0);
     }
 }
 
 /// The structure arrays are handles anyone may write: overwritten offsets or columns never
-/// make `mv` or the Jacobi set-up read outside the arrays (blocks outside the clamped ranges
-/// or with a column out of range are skipped), and the result is still the same on every
+/// make `mv` or the Jacobi set-up read outside the arrays, and the result is what the
+/// documented clamps give (a host reference): `nnz = offsets[nrow]` clamped into
+/// `0..=capacity`, row `r`'s blocks `offsets[r]..offsets[r + 1]` each clamped into `0..=nnz`
+/// (the end at least the start), blocks with a column out of range skipped; the same on every
 /// device.
 fn mv_survives_overwritten_structure(dev: &wp::Device) {
+    /// `A x` under the clamps, in f64 (exact here: small integers).
+    fn reference(off: &[i32], cols: &[i32], vals: &[f64], x: &[f64]) -> Vec<f64> {
+        let (nrow, ncol, cap) = (off.len() - 1, x.len() as i32, cols.len() as i32);
+        let nnz = off[nrow].clamp(0, cap) as usize;
+        (0..nrow)
+            .map(|r| {
+                let lo = (off[r].max(0) as usize).min(nnz);
+                let hi = (off[r + 1].max(0) as usize).clamp(lo, nnz);
+                (lo..hi)
+                    .filter(|&k| (0..ncol).contains(&cols[k]))
+                    .map(|k| vals[k] * x[cols[k] as usize])
+                    .sum()
+            })
+            .collect()
+    }
+    /// The first block row whose clamped range holds no diagonal block (Jacobi's singular
+    /// row: the Poisson diagonal is 4 wherever it is present).
+    fn first_without_diagonal(off: &[i32], cols: &[i32]) -> Option<usize> {
+        let (nrow, cap) = (off.len() - 1, cols.len() as i32);
+        let nnz = off[nrow].clamp(0, cap) as usize;
+        (0..nrow).find(|&r| {
+            let lo = (off[r].max(0) as usize).min(nnz);
+            let hi = (off[r + 1].max(0) as usize).clamp(lo, nnz);
+            !(lo..hi).any(|k| cols[k] == r as i32)
+        })
+    }
     let run = |d: &wp::Device| {
         let (r, c, v) = poisson(4);
         let a = Bsr::from_triplets(16, 16, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
-        let x = arr(&[1.0f64; 16], d);
+        // 80 triplets, 64 blocks: the capacity is above the block count.
+        assert_eq!((a.nnz_bound(), a.nnz().unwrap()), (80, 64));
+        let xs: Vec<f64> = (0..16).map(|i| (i % 5) as f64 - 2.0).collect();
+        let x = arr(&xs, d);
         let y = arr(&[0.0f64; 16], d);
-        a.columns().fill(1000).unwrap();
-        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
-        assert_eq!(host(&y), [0.0; 16], "every column out of range: no block");
-        let off: Vec<i32> = (0..17).map(|i| [-7, 3, 1_000_000, 40][i % 4]).collect();
+        let off0 = host(a.offsets());
+        let vals = host(a.values());
+        let mut out = vec![];
+        // 1. A few columns out of range (negative, ncol, far off) among valid blocks: those
+        // blocks alone are skipped.
+        let cols0 = host(a.columns());
+        let mut cols = cols0.clone();
+        for (k, bad) in [(5, -1), (20, 16), (33, 1000), (63, i32::MIN)] {
+            cols[k] = bad;
+        }
+        a.columns().copy_from(&arr(&cols, d)).unwrap();
+        sparse::mv(1.0, &a, &x, 0.0, &y).unwrap();
+        assert_eq!(host(&y), reference(&off0, &cols, &vals, &xs), "bad columns");
+        out.push(host(&y));
+        // 2. The columns valid again; offsets[nrow] above the capacity (clamped to it: the
+        // last row reaches the unused tail of the arrays), a negative offset, a decreasing
+        // pair, one past the block count but below the capacity.
+        a.columns().copy_from(&arr(&cols0, d)).unwrap();
+        let mut off = off0.clone();
+        off[16] = 1_000_000;
+        off[3] = -5;
+        off[7] = off[6] - 3;
+        off[12] = 70;
         a.offsets().copy_from(&arr(&off, d)).unwrap();
-        sparse::mv(&a, &x, &y, 1.0, 0.0).unwrap();
-        let rep = sparse::cg(&a, &x, &y, Precond::Jacobi, &SolveOptions::default()).unwrap();
+        // nnz() clamps as the steps do (a count that indexes the arrays); a negative count
+        // reads as 0.
+        assert_eq!(a.nnz().unwrap(), 80);
+        sparse::mv(1.0, &a, &x, 0.0, &y).unwrap();
+        let want = reference(&off, &cols0, &vals, &xs);
+        assert_eq!(host(&y), want, "bad offsets");
+        // Clamped rows that are not empty: row 3 starts at the negative offset (clamped to
+        // 0), row 7 at the decreased one, row 15 ends at the capacity (the clamped nnz);
+        // and the product differs from the untouched matrix's.
         assert!(
-            matches!(rep.stop, Stop::SingularPreconditioner { .. }),
-            "{rep:?}"
+            want[3] != 0.0 && want[7] != 0.0 && want[15] != 0.0,
+            "{want:?}"
         );
-        host(&y).iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        assert_ne!(want, reference(&off0, &cols0, &vals, &xs));
+        out.push(host(&y));
+        // The Jacobi set-up under the same clamps: the first row without a diagonal block.
+        let rep = sparse::cg(&a, &x, &y, Precond::Jacobi, &SolveOptions::default()).unwrap();
+        let row = first_without_diagonal(&off, &cols0).expect("a row loses its diagonal");
+        assert_eq!(rep.stop, Stop::SingularPreconditioner { block_row: row });
+        a.offsets().view(16..17).unwrap().fill(-7).unwrap();
+        assert_eq!(a.nnz().unwrap(), 0);
+        out.iter()
+            .map(|y| y.iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
     };
     run(dev);
     same_on_cpu(dev, "overwritten structure", run);
@@ -1065,6 +1339,18 @@ fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
         let capped = solve(Mode::Host, 3, 6, pre);
         assert_eq!((capped.0, capped.1), (Stop::MaxIterations, 6));
         assert_eq!(solve(Mode::Graph, 4, 6, pre), capped, "{pre:?}, max_iter 6");
+        // A huge check_every is capped at max_iter per pass (not recorded as is: that would
+        // record forever), and gives the same result.
+        assert_eq!(
+            solve(Mode::Graph, usize::MAX, 6, pre),
+            capped,
+            "{pre:?}, every usize::MAX"
+        );
+        assert_eq!(
+            solve(Mode::Host, usize::MAX, 6, pre),
+            capped,
+            "{pre:?}, Host"
+        );
     }
     // A stop before the first iteration: the captured loop never runs its body.
     let z = arr(&[0.0f64; 144], dev);
@@ -1074,4 +1360,178 @@ fn cg_graph_mode_matches_host_mode(dev: &wp::Device) {
     };
     let rep = sparse::cg(&a, &z, &arr(&[0.0f64; 144], dev), Precond::None, &o).unwrap();
     assert_eq!((rep.stop, rep.iterations), (Stop::Converged, 0));
+}
+
+/// Every block type, each with its own kernels (a GPU looks them up by the type's tag: a wrong
+/// tag or a missing instantiation in `wp_sparse.h` fails here): `mv` against a host reference
+/// and CG with block Jacobi converging, and on a GPU both the same bits as on the CPU.
+fn every_block_type_mv_and_cg(dev: &wp::Device) {
+    use glam::{DMat2, DMat4, Mat2, Mat4};
+    // `SparseScalar` (imported above) has no arithmetic methods to clash with std's: with
+    // both in scope, `x.add(y)` is `Add::add`, not an ambiguity (E0034).
+    {
+        use std::ops::Add;
+        assert_eq!(1.5f32.add(2.0), 3.5);
+    }
+    block_type_case::<f32>(dev);
+    block_type_case::<f64>(dev);
+    block_type_case::<Mat2>(dev);
+    block_type_case::<Mat3>(dev);
+    block_type_case::<Mat4>(dev);
+    block_type_case::<DMat2>(dev);
+    block_type_case::<DMat3>(dev);
+    block_type_case::<DMat4>(dev);
+}
+
+/// A `B` array from its scalars (`B::ROWS * B::COLS` per block, in `B`'s storage order).
+fn blocks_of<B: Block>(scalars: &[f64], d: &wp::Device) -> wp::Array<B> {
+    let s: Vec<B::Scalar> = scalars.iter().map(|&v| B::Scalar::from_f64(v)).collect();
+    arr(&s, d).reinterpret::<B>().unwrap()
+}
+
+/// `mv` of a random non-symmetric 9 x 7 block matrix (duplicates summed) and a CG solve with
+/// block Jacobi of the 5 x 5 Poisson matrix Kronecker an SPD K (so SPD), for block type `B`.
+fn block_type_case<B: SquareBlock + Copy>(dev: &wp::Device) {
+    let name = std::any::type_name::<B>();
+    let d = B::ROWS;
+    let f32s = std::mem::size_of::<B::Scalar>() == 4;
+    // Scalar entry (i, j) of a block in storage order.
+    let at = |i: usize, j: usize| if B::COL_MAJOR { j * d + i } else { i * d + j };
+    let bits = |v: Vec<B::Scalar>| v.iter().map(|s| s.to_f64().to_bits()).collect::<Vec<_>>();
+    let scal = |v: &[f64], dv: &wp::Device| {
+        arr(
+            &v.iter()
+                .map(|&x| B::Scalar::from_f64(x))
+                .collect::<Vec<_>>(),
+            dv,
+        )
+    };
+    // What the device holds of an f64 value (f32 rounds it).
+    let held = |v: f64| B::Scalar::from_f64(v).to_f64();
+
+    // mv: 40 random triplets of 9 x 7 blocks, y = 0.5 A x - 1.5 y.
+    let (nrow, ncol) = (9, 7);
+    let mut g = Rng(21 + d as u64);
+    let t = 40;
+    let rows: Vec<i32> = (0..t).map(|_| g.below(nrow) as i32).collect();
+    let cols: Vec<i32> = (0..t).map(|_| g.below(ncol) as i32).collect();
+    let vals: Vec<f64> = (0..t * d * d).map(|_| held(g.unit())).collect();
+    let x: Vec<f64> = (0..ncol * d).map(|_| held(g.unit())).collect();
+    let y0: Vec<f64> = (0..nrow * d).map(|_| held(g.unit())).collect();
+    let mut want: Vec<f64> = y0.iter().map(|v| -1.5 * v).collect();
+    for k in 0..t {
+        let (r, c) = (rows[k] as usize, cols[k] as usize);
+        for i in 0..d {
+            for j in 0..d {
+                want[r * d + i] += 0.5 * vals[k * d * d + at(i, j)] * x[c * d + j];
+            }
+        }
+    }
+    let mv_run = |dv: &wp::Device| {
+        let a = Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&rows, dv),
+            &arr(&cols, dv),
+            &blocks_of::<B>(&vals, dv),
+        )
+        .unwrap();
+        let y = scal(&y0, dv);
+        let (xv, yv) = (
+            scal(&x, dv).reinterpret::<B::In>().unwrap(),
+            y.reinterpret::<B::Out>().unwrap(),
+        );
+        let (alpha, beta) = (B::Scalar::from_f64(0.5), B::Scalar::from_f64(-1.5));
+        sparse::mv(alpha, &a, &xv, beta, &yv).unwrap();
+        host(&y)
+    };
+    let got = mv_run(dev);
+    // Each y entry sums at most ~40 x 4 products of magnitude <= 1 (and 1.5 y): f32 rounding
+    // of such sums stays well under 1e-4 absolute (~1e-5 expected), f64's under 1e-12.
+    let tol = if f32s { 1e-4 } else { 1e-12 };
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            (g.to_f64() - w).abs() <= tol,
+            "{name} mv, scalar row {k}: {g:?} vs {w}"
+        );
+    }
+    same_on_cpu(dev, &format!("{name} mv"), |dv| bits(mv_run(dv)));
+
+    // CG: block (p, q) is L_pq K, K = (d + 1) I + 0.5 (off the diagonal) + 0.1 (i + j):
+    // symmetric and diagonally dominant, so SPD, and so is the Kronecker product.
+    let m = 5;
+    let (pr, pc, pv) = poisson(m);
+    let n = m * m;
+    let kk = |i: usize, j: usize| {
+        if i == j {
+            d as f64 + 1.0
+        } else {
+            0.5 + 0.1 * (i + j) as f64
+        }
+    };
+    let cg_vals: Vec<f64> = pv
+        .iter()
+        .flat_map(|&l| {
+            let mut b = vec![0.0; d * d];
+            for i in 0..d {
+                for j in 0..d {
+                    b[at(i, j)] = l * kk(i, j);
+                }
+            }
+            b
+        })
+        .collect();
+    let b: Vec<f64> = (0..n * d).map(|i| ((i % 5) as f64 - 2.0) * 0.5).collect();
+    // f32: its rounding floor for this small, well-conditioned system is far below 1e-5.
+    let rtol = if f32s { 1e-5 } else { 1e-9 };
+    let cg_run = |dv: &wp::Device| {
+        let a = Bsr::from_triplets(
+            n,
+            n,
+            &arr(&pr, dv),
+            &arr(&pc, dv),
+            &blocks_of::<B>(&cg_vals, dv),
+        )
+        .unwrap();
+        let xv = scal(&vec![0.0; n * d], dv);
+        let o = SolveOptions {
+            rtol,
+            ..Default::default()
+        };
+        let rep = sparse::cg(&a, &scal(&b, dv), &xv, Precond::Jacobi, &o).unwrap();
+        (rep, host(&xv))
+    };
+    let (rep, xs) = cg_run(dev);
+    assert_eq!(rep.stop, Stop::Converged, "{name}: {rep:?}");
+    // The true residual |b - A x| from the triplets in f64: within 2x the tolerance for f32
+    // (the recurrence's residual drifts from the true one by rounding), 1.01x for f64.
+    let mut ax = vec![0.0; n * d];
+    for k in 0..pr.len() {
+        let (r, c) = (pr[k] as usize, pc[k] as usize);
+        for i in 0..d {
+            for j in 0..d {
+                ax[r * d + i] += cg_vals[k * d * d + at(i, j)] * xs[c * d + j].to_f64();
+            }
+        }
+    }
+    let tr = b
+        .iter()
+        .zip(&ax)
+        .map(|(b, y)| (b - y) * (b - y))
+        .sum::<f64>()
+        .sqrt();
+    let slack = if f32s { 2.0 } else { 1.01 };
+    assert!(
+        tr <= slack * rep.tolerance,
+        "{name}: true residual {tr}, {}",
+        rep.tolerance
+    );
+    same_on_cpu(dev, &format!("{name} cg"), |dv| {
+        let (rep, xs) = cg_run(dv);
+        (
+            rep.iterations,
+            rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+            bits(xs),
+        )
+    });
 }

@@ -32,6 +32,8 @@
 //                row's range clamped (`sp_row_range`), columns out of range skipped.
 //   dot_partials per chunk of 4096 elements (a block of 256 threads): see `sp_dot_lane`.
 //   dot_final    one block of 256 threads: the partials reduced the same way.
+//                (Both index their shared lanes by threadIdx.x: correct only for blocks of
+//                exactly SP_DOT_LANES threads, which the runtime's launcher asserts.)
 //   jacobi_inv   per block row: the inverse of the diagonal block (or of its diagonal alone).
 //   jacobi_apply per block row: z = D^-1 r.
 //   cg_init, cg_update, cg_check, cg_direction: the conjugate gradient's set-up, x/r update,
@@ -119,12 +121,13 @@ WP_FN void sp_tree_level(S* s, i32 stride, i32 lane) {
 
 // The triplet steps' first field, `count`: the address of a device count of triplets (an
 // i32), or 0 when there is none and `n` is the count. With one, `n` is the capacity (the
-// arrays' length) and the steps process `sp_count(count, n)` triplets: the count clamped to
-// [0, n], so a bad count never reaches outside the arrays (the report raises it).
+// arrays' length) and the steps process `sp_count(count, n)` triplets: the count, or 0 when
+// it is outside [0, n] (the primitives' rule for a bad count, so that the sort, the scan and
+// these steps agree and the matrix is empty; the report raises the fault).
 WP_FN i32 sp_count(u64 count, i32 n) {
   if (count == 0) return n;
   const i32 c = *(const i32*)count;
-  return c < 0 ? 0 : (c > n ? n : c);
+  return (c < 0 || c > n) ? 0 : c;
 }
 
 /// TplKeys: count, rows, cols (i32*), values (S*, `block` scalars per triplet), n, nrow, ncol,
@@ -210,12 +213,14 @@ struct sp_jacobi_apply_t {
 };
 static_assert(sizeof(sp_jacobi_apply_t) == 32, "sp_jacobi_apply_t layout");
 
-/// The CG's control words (i32) and scalars (S): see sparse/solve.rs, which names the same.
+/// The CG's control words (i32) and scalars (S): see sparse/solve.rs, which names the same
+/// (a unit test of sparse/steps.rs parses these SP_ constants and compares the records' offsets).
 // SP_CTL_RUN: 1 while no stop is set (cg_init and cg_check write it): the flag a captured
 // solve's `capture_while` loops on.
 constexpr i32 SP_CTL_STOP = 0, SP_CTL_ITER = 1, SP_CTL_BAD = 2, SP_CTL_RUN = 3;
 constexpr i32 SP_STOP_NONE = 0, SP_STOP_CONVERGED = 1, SP_STOP_MAX_ITER = 2,
-              SP_STOP_NON_FINITE = 3, SP_STOP_BREAKDOWN = 4, SP_STOP_SINGULAR = 5;
+              SP_STOP_NON_FINITE = 3, SP_STOP_BREAKDOWN = 4, SP_STOP_SINGULAR = 5,
+              SP_STOP_BREAKDOWN_RZ = 6;
 constexpr i32 SP_RZ = 0, SP_RZ_NEW = 1, SP_PAP = 2, SP_RR = 3, SP_BB = 4, SP_TOL2 = 5,
               SP_BETA = 6, SP_BREAK = 7, SP_TOL = 8;
 
@@ -495,7 +500,7 @@ WP_FN void sp_jacobi_apply_row(const sp_jacobi_apply_t& s, i32 r) {
 
 /// The CG's set-up check (one thread): tolerance max(atol, rtol |b|), history[0] = |r|, and
 /// the stop before any iteration (a singular preconditioner, a non-finite residual,
-/// convergence, max_iter == 0).
+/// convergence, r.z <= 0, max_iter == 0).
 template <typename S>
 WP_FN void sp_cg_init(const sp_cg_scalar_t& s) {
   i32* ctl = (i32*)s.ctl;
@@ -506,17 +511,21 @@ WP_FN void sp_cg_init(const sp_cg_scalar_t& s) {
   const S tol = at > rt ? at : rt;
   sc[SP_TOL] = tol;
   sc[SP_TOL2] = sp_mul(tol, tol);
-  const S rr = sc[SP_RR];
+  const S rr = sc[SP_RR], rz = sc[SP_RZ];
   hist[0] = sp_sqrt(rr);
   ctl[SP_CTL_ITER] = 0;
   i32 stop = SP_STOP_NONE;
   if (ctl[SP_CTL_BAD] != 0x7fffffff)
     stop = SP_STOP_SINGULAR;
-  else if (!sp_finite(rr) || !sp_finite(sc[SP_RZ]))
+  else if (!sp_finite(rr) || !sp_finite(rz))
     stop = SP_STOP_NON_FINITE;
   else if (rr <= sc[SP_TOL2])
     stop = SP_STOP_CONVERGED;
-  else if (s.max_iter <= 0)
+  else if (rz <= (S)0) {
+    // An indefinite preconditioner (r != 0 here, so an SPD one gives r.z > 0).
+    sc[SP_BREAK] = rz;
+    stop = SP_STOP_BREAKDOWN_RZ;
+  } else if (s.max_iter <= 0)
     stop = SP_STOP_MAX_ITER;
   ctl[SP_CTL_STOP] = stop;
   ctl[SP_CTL_RUN] = stop == SP_STOP_NONE;
@@ -542,8 +551,8 @@ WP_FN void sp_cg_update(const sp_cg_vector_t& s, i64 i) {
 
 /// The CG's check after an iteration (one thread): a bad p.Ap stops it (NonFinite or
 /// Breakdown, x and r untouched by that iteration); else the iteration counts, its residual
-/// norm goes to the history, and it stops on a non-finite residual, convergence or max_iter;
-/// else beta = (r.z)new / (r.z) for the direction.
+/// norm goes to the history, and it stops on a non-finite residual, convergence, a new r.z
+/// <= 0 (a breakdown) or max_iter; else beta = (r.z)new / (r.z) for the direction.
 template <typename S>
 WP_FN void sp_cg_check_stop(const sp_cg_scalar_t& s) {
   i32* ctl = (i32*)s.ctl;
@@ -567,7 +576,10 @@ WP_FN void sp_cg_check_stop(const sp_cg_scalar_t& s) {
     ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
   else if (rr <= sc[SP_TOL2])
     ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
-  else if (it >= s.max_iter)
+  else if (sc[SP_RZ_NEW] <= (S)0) {
+    sc[SP_BREAK] = sc[SP_RZ_NEW];
+    ctl[SP_CTL_STOP] = SP_STOP_BREAKDOWN_RZ;
+  } else if (it >= s.max_iter)
     ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
   else {
     sc[SP_BETA] = sp_div(sc[SP_RZ_NEW], sc[SP_RZ]);

@@ -37,15 +37,25 @@ pub(crate) mod sealed {
         const KERNELS: BlockKernels;
     }
 
-    /// The scalar types `wp_sparse.h` instantiates.
-    pub trait SealedScalar {
+    /// The scalar types `wp_sparse.h` instantiates, and the arithmetic of the CPU steps:
+    /// each operation rounds once, as the CUDA steps' `sp_add`, `sp_mul`, .. do. (Here, not
+    /// in the public trait: a user importing it and `std::ops::Add` would otherwise get an
+    /// ambiguous `x.add(y)`.)
+    pub trait SealedScalar: Sized {
         const KERNELS: ScalarKernels;
+        /// `self + b`, rounded once.
+        fn add(self, b: Self) -> Self;
+        /// `self - b`, rounded once.
+        fn sub(self, b: Self) -> Self;
+        /// `self * b`, rounded once.
+        fn mul(self, b: Self) -> Self;
+        /// `self / b`, rounded once.
+        fn div(self, b: Self) -> Self;
     }
 }
 
-/// The scalar of a block: `f32` or `f64`. The arithmetic here is what the CPU bodies of the
-/// sparse steps run; each operation rounds once, as the CUDA steps' `sp_add`, `sp_mul`, ..
-/// do, so both backends give the same bits.
+/// The scalar of a block: `f32` or `f64`. The CPU bodies of the sparse steps round each
+/// operation once, as the CUDA steps do, so both backends give the same bits.
 pub trait SparseScalar:
     Element + Default + Copy + PartialOrd + std::fmt::Debug + sealed::SealedScalar
 {
@@ -53,14 +63,6 @@ pub trait SparseScalar:
     const ZERO: Self;
     /// 1.
     const ONE: Self;
-    /// `self + b`, rounded once.
-    fn add(self, b: Self) -> Self;
-    /// `self - b`, rounded once.
-    fn sub(self, b: Self) -> Self;
-    /// `self * b`, rounded once.
-    fn mul(self, b: Self) -> Self;
-    /// `self / b`, rounded once.
-    fn div(self, b: Self) -> Self;
     /// The square root, correctly rounded.
     fn sqrt(self) -> Self;
     /// Neither NaN nor infinite.
@@ -86,11 +88,6 @@ macro_rules! scalar {
                 cg_update: concat!("wp_sparse_cg_update_", $tag),
                 cg_direction: concat!("wp_sparse_cg_direction_", $tag),
             };
-        }
-
-        impl SparseScalar for $t {
-            const ZERO: Self = 0.0;
-            const ONE: Self = 1.0;
             #[inline]
             fn add(self, b: Self) -> Self {
                 self + b
@@ -107,6 +104,11 @@ macro_rules! scalar {
             fn div(self, b: Self) -> Self {
                 self / b
             }
+        }
+
+        impl SparseScalar for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
             #[inline]
             fn sqrt(self) -> Self {
                 <$t>::sqrt(self)
@@ -161,6 +163,10 @@ pub unsafe trait Block: Element + Default + sealed::SealedBlock {
 /// preconditioner take.
 pub trait SquareBlock: Block<In = <Self as Block>::Out> {}
 
+/// The largest block dimension: the CPU steps size their per-row buffers by it (the macro
+/// below asserts it of every block type; a larger block, as slice 2's 6 x 6, raises it).
+pub(crate) const MAX_DIM: usize = 4;
+
 macro_rules! block {
     ($t:ty, $s:ty, $in:ty, $n:literal, $cm:literal, $tag:literal) => {
         impl sealed::SealedBlock for $t {
@@ -186,6 +192,7 @@ macro_rules! block {
         const _: () = assert!(
             std::mem::size_of::<$t>() == $n * $n * std::mem::size_of::<$s>()
                 && std::mem::size_of::<$in>() == $n * std::mem::size_of::<$s>()
+                && $n <= MAX_DIM
         );
     };
 }

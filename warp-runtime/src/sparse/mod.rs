@@ -33,7 +33,7 @@
 //! let a = Bsr::from_triplets(2, 2, &rows, &cols, &vals)?; // [[2, -1], [0, 4]]
 //! let x = wp::Array::from_slice(&[1.0f32, 1.0], &dev)?;
 //! let y = wp::Array::<f32>::zeros(2, &dev)?;
-//! sparse::mv(&a, &x, &y, 1.0, 0.0)?;
+//! sparse::mv(1.0, &a, &x, 0.0, &y)?;
 //! assert_eq!(y.to_vec()?, [1.0, 4.0]);
 //! # Ok::<(), wp::Error>(())
 //! ```
@@ -137,6 +137,8 @@ impl<B: Block> Bsr<B> {
     /// position summed in ascending `t` (a stable sort of the positions, then each run summed
     /// in order), so the sums are the same bits on every device. A position with no triplet
     /// has no block; blocks that sum to zero are kept (the structure never depends on values).
+    /// That order makes each position's sum serial: one thread adds all its duplicates, so a
+    /// position with a million duplicates costs a million dependent adds on one GPU thread.
     ///
     /// `nrow` and `ncol` count blocks. The three arrays have one element per triplet, on one
     /// device, contiguous. The result is on their device, with room for one block per
@@ -151,8 +153,8 @@ impl<B: Block> Bsr<B> {
     /// `[t, value]` for shape `[triplets, nrow]` (or `ncol`); a block with a NaN or infinite
     /// scalar is a fault `NonFiniteInput` on `values` at index `t` (the smallest bad `t`; rows
     /// before columns before values at one `t`). On the CPU the fault is returned at once; on
-    /// a GPU it is reported at the next synchronisation (the matrix then holds the valid
-    /// triplets' sums).
+    /// a GPU it is reported at the next synchronisation (the matrix then holds the in-range
+    /// triplets' sums, a non-finite value included).
     pub fn from_triplets(
         nrow: usize,
         ncol: usize,
@@ -409,6 +411,18 @@ impl<B: Block> Bsr<B> {
         Ok(m)
     }
 
+    /// `"N x M blocks of R x C (NR x MC scalars)"`, for messages.
+    fn describe(&self) -> String {
+        let (r, c) = self.shape();
+        format!(
+            "{} x {} blocks of {} x {} ({r} x {c} scalars)",
+            self.nrow,
+            self.ncol,
+            B::ROWS,
+            B::COLS
+        )
+    }
+
     /// Whether `v`'s elements share memory with the matrix's arrays.
     fn overlaps<T: Element>(&self, v: &Array<T>) -> bool {
         overlap(v, &self.offsets) || overlap(v, &self.columns) || overlap(v, &self.values)
@@ -435,12 +449,16 @@ impl<B: Block> Bsr<B> {
         self.values.len()
     }
 
-    /// The block count, `offsets[nrow]`, read from the device (a synchronisation).
+    /// The block count, `offsets[nrow]`, read from the device (a synchronisation of that one
+    /// element), clamped into `0..=nnz_bound()` as the steps clamp it: an assembled matrix's
+    /// count is in range, and one whose offsets were overwritten still gives a count that
+    /// indexes [`Bsr::columns`] and [`Bsr::values`].
     ///
     /// # Errors
     /// A fault of the queued work, or a read-back inside a capture.
     pub fn nnz(&self) -> Result<usize> {
-        Ok(self.offsets.to_vec()?[self.nrow] as usize)
+        let v = self.offsets.view(self.nrow..self.nrow + 1)?.to_vec()?[0];
+        Ok(v.clamp(0, self.nnz_bound() as i32) as usize)
     }
 
     /// The row offsets (`nrow + 1`).
@@ -464,10 +482,15 @@ impl<B: Block> Bsr<B> {
     }
 }
 
-/// Queues `y = alpha A x + beta y` over scalar addresses, lengths checked by the caller.
-/// Inside a capture the step is recorded, and the graph keeps `uses()` (the arrays the
-/// addresses point into) alive.
-fn mv_raw<B: Block>(
+/// Queues `y = alpha A x + beta y` over scalar addresses. Inside a capture the step is
+/// recorded, and the graph keeps `uses()` (the arrays the addresses point into) alive.
+///
+/// # Safety
+/// `x` and `y` are addresses of contiguous memory on `a`'s device holding `a.ncol() *
+/// B::COLS` and `a.nrow() * B::ROWS` scalars, alive until the step has run (or, captured,
+/// kept alive by `uses()`); `y` overlaps neither `x` nor the matrix's arrays. The step reads
+/// and writes them with no bounds check.
+unsafe fn mv_raw<B: Block>(
     a: &Bsr<B>,
     x: u64,
     y: u64,
@@ -513,11 +536,11 @@ fn mv_raw<B: Block>(
 /// [`Error::InvalidArgument`] naming `sparse::mv`, the argument and both shapes when a length
 /// differs; for arrays that are not contiguous or overlap; [`Error::DeviceMismatch`].
 pub fn mv<B: Block>(
+    alpha: B::Scalar,
     a: &Bsr<B>,
     x: &Array<B::In>,
-    y: &Array<B::Out>,
-    alpha: B::Scalar,
     beta: B::Scalar,
+    y: &Array<B::Out>,
 ) -> Result<()> {
     const F: &str = "sparse::mv";
     let dev = a.device();
@@ -529,12 +552,13 @@ pub fn mv<B: Block>(
         return Err(invalid(
             F,
             format!(
-                "argument `x` has shape {:?}, but the matrix has {} x {} blocks: `x` needs {} \
+                "argument `x` has shape {:?} of {}, but the matrix has {}: `x` needs {} {} \
                  elements",
                 x.shape(),
-                a.nrow,
+                B::In::TYPE_NAME,
+                a.describe(),
                 a.ncol,
-                a.ncol
+                B::In::TYPE_NAME
             ),
         ));
     }
@@ -542,12 +566,13 @@ pub fn mv<B: Block>(
         return Err(invalid(
             F,
             format!(
-                "argument `y` has shape {:?}, but the matrix has {} x {} blocks: `y` needs {} \
+                "argument `y` has shape {:?} of {}, but the matrix has {}: `y` needs {} {} \
                  elements",
                 y.shape(),
+                B::Out::TYPE_NAME,
+                a.describe(),
                 a.nrow,
-                a.ncol,
-                a.nrow
+                B::Out::TYPE_NAME
             ),
         ));
     }
@@ -557,14 +582,18 @@ pub fn mv<B: Block>(
     if a.overlaps(y) {
         return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
     }
-    mv_raw(
-        a,
-        x.device_address(),
-        y.device_address(),
-        alpha.to_f64(),
-        beta.to_f64(),
-        || Box::new((a.clone(), x.clone(), y.clone())),
-    )
+    // SAFETY: x and y are contiguous on a's device with the lengths checked above, y
+    // overlaps neither x nor the matrix (checked), and the arrays are kept by `uses`.
+    unsafe {
+        mv_raw(
+            a,
+            x.device_address(),
+            y.device_address(),
+            alpha.to_f64(),
+            beta.to_f64(),
+            || Box::new((a.clone(), x.clone(), y.clone())),
+        )
+    }
 }
 
 /// Scratch of [`dot_raw`]: one partial per chunk.
@@ -574,7 +603,13 @@ fn dot_partials<S: SparseScalar>(n: usize, dev: &Device) -> Result<Array<S>> {
 
 /// Queues the dot product of `n` scalars at `a` and `b` into the scalar at `out` (recorded
 /// inside a capture, which keeps `uses()` and the partials alive).
-fn dot_raw<S: SparseScalar>(
+///
+/// # Safety
+/// `a` and `b` address `n` contiguous scalars each and `out` one, on `dev`, alive until the
+/// steps have run (or, captured, kept alive by `uses()`); `out` overlaps neither input;
+/// `partials` holds `dot_partials(n)`'s length. The steps read and write them with no bounds
+/// check.
+unsafe fn dot_raw<S: SparseScalar>(
     dev: &Device,
     a: u64,
     b: u64,
@@ -624,8 +659,9 @@ fn dot_raw<S: SparseScalar>(
 /// [capture](crate::capture) (an [`Error::Capture`] there).
 ///
 /// # Errors
-/// [`Error::Capture`] inside a capture; [`Error::InvalidArgument`] naming `sparse::dot` when the lengths differ, `out` is not one
-/// element or overlaps an input, or an array is not contiguous; [`Error::DeviceMismatch`].
+/// [`Error::Capture`] inside a capture; [`Error::InvalidArgument`] naming `sparse::dot` when
+/// the lengths differ, `out` is not one element or overlaps an input, or an array is not
+/// contiguous; [`Error::DeviceMismatch`].
 pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Result<()> {
     const F: &str = "sparse::dot";
     let dev = a.device();
@@ -656,13 +692,18 @@ pub fn dot<S: SparseScalar>(a: &Array<S>, b: &Array<S>, out: &Array<S>) -> Resul
         return Err(invalid(F, "argument `out` overlaps `a` or `b`"));
     }
     let partials = dot_partials::<S>(a.len(), dev)?;
-    dot_raw(
-        dev,
-        a.device_address(),
-        b.device_address(),
-        a.len(),
-        &partials,
-        out.device_address(),
-        || Box::new((a.clone(), b.clone(), out.clone())),
-    )
+    // SAFETY: a and b are contiguous on dev with a.len() scalars each, out is one scalar not
+    // overlapping them (checked above), the partials are sized for a.len(), and the arrays
+    // are kept by `uses`.
+    unsafe {
+        dot_raw(
+            dev,
+            a.device_address(),
+            b.device_address(),
+            a.len(),
+            &partials,
+            out.device_address(),
+            || Box::new((a.clone(), b.clone(), out.clone())),
+        )
+    }
 }

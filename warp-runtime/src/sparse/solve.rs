@@ -1,4 +1,5 @@
-//! The conjugate gradient solver with Jacobi preconditioning, driven from the host.
+//! The conjugate gradient solver with Jacobi preconditioning, driven from the host or
+//! captured (`Mode::Graph`).
 //!
 //! Every scalar of the iteration (the dots, alpha, beta, the tolerance) lives on the device and
 //! is computed there by the same steps on every backend, so the CPU and a GPU take the same
@@ -35,7 +36,11 @@ pub enum Precond {
 /// Options of [`cg`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolveOptions {
-    /// Stop when `|r| <= max(atol, rtol * |b|)` (default 1e-6).
+    /// Stop when `|r| <= max(atol, rtol * |b|)` (default 1e-6). The test compares squared
+    /// norms in the scalar type, so the tolerance must be representable squared: for `f32`,
+    /// a tolerance below about 1e-19 squares to 0 (only an exact zero residual converges),
+    /// and `|b|` above about 1e19 overflows `b . b` (reported as [`Stop::NonFinite`] or
+    /// an infinite tolerance).
     pub rtol: f64,
     /// The absolute tolerance (default 0).
     pub atol: f64,
@@ -43,7 +48,9 @@ pub struct SolveOptions {
     pub max_iter: usize,
     /// Iterations queued between two reads of the solver's state by the host
     /// ([`Mode::Host`]), or per pass of the captured loop ([`Mode::Graph`]) (default 10; at
-    /// least 1). It changes the work done after a stop, never the result.
+    /// least 1). Either way at most `max_iter` are queued at once (a larger value, even
+    /// `usize::MAX`, means "check only at the end"). It changes the work done after a stop,
+    /// never the result.
     pub check_every: usize,
     /// How the iterations are driven (default [`Mode::Host`]).
     pub mode: Mode,
@@ -87,7 +94,11 @@ pub enum Stop {
     /// the initial `x` or the preconditioner holds one, or the iteration overflowed.
     NonFinite,
     /// The method broke down: for CG `p . Ap <= 0` (`what` is `"p.Ap"`, `value` its value),
-    /// which a symmetric positive definite matrix never gives.
+    /// which a symmetric positive definite matrix never gives, or `r . z <= 0` for a nonzero
+    /// residual (`what` is `"r.z"`), which a symmetric positive definite preconditioner never
+    /// gives (a Jacobi preconditioner of a diagonal with a negative entry may). `x` holds the
+    /// last iterate: a `p . Ap` breakdown leaves it as the iteration before found it, an
+    /// `r . z` breakdown after the iteration that computed it.
     Breakdown {
         /// The quantity that broke down.
         what: &'static str,
@@ -127,9 +138,9 @@ pub struct SolveReport {
 /// `A` must be symmetric positive definite; `b` and `x` are scalar vectors of `A`'s scalar
 /// size (`nrow * B::ROWS`), contiguous, on the matrix's device, not overlapping. The solve
 /// stops at convergence (`|r| <= max(atol, rtol |b|)`), after `max_iter` iterations, at a
-/// non-finite value, at a breakdown (`p . Ap <= 0`) or, before iterating, at a singular
-/// preconditioner; each is an `Ok` report (see [`Stop`]). The iterations, residuals and the
-/// result are the same bits on the CPU and a GPU.
+/// non-finite value, at a breakdown (`p . Ap <= 0` or `r . z <= 0`) or, before iterating, at
+/// a singular preconditioner; each is an `Ok` report (see [`Stop`]). The iterations,
+/// residuals and the result are the same bits on the CPU and a GPU.
 ///
 /// ```
 /// # use warp_runtime as wp;
@@ -148,7 +159,8 @@ pub struct SolveReport {
 ///     }
 /// }
 /// let arr = |v: &[i32]| wp::Array::from_slice(v, &dev);
-/// let a = Bsr::from_triplets(n, n, &arr(&rows)?, &arr(&cols)?, &wp::Array::from_slice(&vals, &dev)?)?;
+/// let vals = wp::Array::from_slice(&vals, &dev)?;
+/// let a = Bsr::from_triplets(n, n, &arr(&rows)?, &arr(&cols)?, &vals)?;
 /// let b = wp::Array::from_slice(&vec![1.0f64; n], &dev)?;
 /// let x = wp::Array::<f64>::zeros(n, &dev)?;
 /// let report = sparse::cg(&a, &b, &x, Precond::Jacobi, &SolveOptions::default())?;
@@ -163,8 +175,9 @@ pub struct SolveReport {
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::cg`, the
 /// argument and both shapes: a matrix that is not square in blocks, `b` or `x` of another
 /// length, arrays that are not contiguous or overlap, `check_every == 0`, `max_iter` above
-/// `i32::MAX - 1`, a negative or non-finite tolerance; [`Error::DeviceMismatch`](crate::Error::DeviceMismatch);
-/// a fault of the queued work (reported by its read-backs).
+/// `i32::MAX - 1`, a negative or non-finite tolerance;
+/// [`Error::DeviceMismatch`](crate::Error::DeviceMismatch); a fault of the queued work
+/// (reported by its read-backs).
 pub fn cg<B: SquareBlock>(
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
@@ -273,10 +286,16 @@ pub fn cg<B: SquareBlock>(
             cg.ctl.fill(-1)?;
             cg.iteration()?;
             let run = cg.ctl.view(c::CTL_RUN..c::CTL_RUN + 1)?;
+            // Each pass records its iterations, so a huge `check_every` (a sensible "never
+            // sync" in Host mode) must not be recorded as is: a pass never needs more than
+            // `max_iter` iterations, since the check stops the solve at `max_iter` and every
+            // iteration after a stop does nothing. So the cap cannot change the result, only
+            // the size of the graph (at least 1: an empty body would record nothing).
+            let per_pass = o.check_every.min(o.max_iter.max(1));
             let graph = crate::graph::capture(&dev, || {
                 cg.setup()?;
                 crate::graph::capture_while(&run, || {
-                    for _ in 0..o.check_every {
+                    for _ in 0..per_pass {
                         cg.iteration()?;
                     }
                     Ok(())
@@ -345,7 +364,10 @@ impl<B: Block> Cg<'_, B> {
     fn dot(&self, u: &Array<B::Scalar>, v: &Array<B::Scalar>, k: usize) -> Result<()> {
         let out = self.scal.device_address() + (k * std::mem::size_of::<B::Scalar>()) as u64;
         let (u, v) = (u.device_address(), v.device_address());
-        dot_raw(&self.dev, u, v, self.n, &self.partials, out, self.keep())
+        // SAFETY: u and v are the solve's n-scalar vectors (checked or allocated so), out is
+        // scalar k < SCAL_LEN of `scal` (another array), partials are sized for n, and
+        // `keep` holds every array of the solve.
+        unsafe { dot_raw(&self.dev, u, v, self.n, &self.partials, out, self.keep()) }
     }
 
     /// `z = D^-1 r` (nothing without a preconditioner).
@@ -384,21 +406,26 @@ impl<B: Block> Cg<'_, B> {
         let a = self.a;
         self.ctl.copy_from(&self.ctl0)?;
         self.r.copy_from(self.b)?;
-        mv_raw(
-            a,
-            self.x.device_address(),
-            self.r.device_address(),
-            -1.0,
-            1.0,
-            self.keep(),
-        )?;
+        // SAFETY: x and r hold n = nrow * ROWS scalars (the matrix is square in blocks:
+        // checked), r is the solve's own array (overlapping neither x nor the matrix: x was
+        // checked against the matrix), and `keep` holds every array of the solve.
+        unsafe {
+            mv_raw(
+                a,
+                self.x.device_address(),
+                self.r.device_address(),
+                -1.0,
+                1.0,
+                self.keep(),
+            )?;
+        }
         if let Some(j) = &self.pre {
             self.step(JacobiInv::<B> {
                 offsets: a.offsets().device_address(),
                 columns: a.columns().device_address(),
                 values: a.values().device_address(),
                 dinv: j.dinv.device_address(),
-                bad: self.ctl.device_address() + 4 * c::CTL_BAD as u64,
+                bad: self.ctl.view(c::CTL_BAD..c::CTL_BAD + 1)?.device_address(),
                 nrow: a.nrow() as i32,
                 point: j.point as i32,
                 cap: a.nnz_bound() as i32,
@@ -418,14 +445,18 @@ impl<B: Block> Cg<'_, B> {
     /// step does nothing once a stop is set.
     fn iteration(&self) -> Result<()> {
         let (ctl, scal) = (self.ctl.device_address(), self.scal.device_address());
-        mv_raw(
-            self.a,
-            self.p.device_address(),
-            self.ap.device_address(),
-            1.0,
-            0.0,
-            self.keep(),
-        )?;
+        // SAFETY: p and ap are the solve's own n-scalar arrays (distinct, not the matrix's),
+        // and `keep` holds every array of the solve.
+        unsafe {
+            mv_raw(
+                self.a,
+                self.p.device_address(),
+                self.ap.device_address(),
+                1.0,
+                0.0,
+                self.keep(),
+            )?;
+        }
         self.dot(&self.p, &self.ap, c::PAP)?;
         self.step(CgVector::<B::Scalar, false> {
             ctl,
@@ -458,11 +489,20 @@ impl<B: Block> Cg<'_, B> {
         const F: &str = "sparse::cg";
         let words = self.ctl.to_vec()?;
         let sc = self.scal.to_vec()?;
-        let iterations = words[c::CTL_ITER] as usize;
-        let history: Vec<f64> = self.history.to_vec()?[..=iterations]
+        let iterations = words[c::CTL_ITER];
+        let internal = |what: String| {
+            crate::error::Error::invalid(format!("{F}: internal: the solver ended with {what}"))
+        };
+        // The device caps the count at max_iter; a bad word is an internal error, not a panic.
+        let all = self.history.to_vec()?;
+        let history: Vec<f64> = usize::try_from(iterations)
+            .ok()
+            .and_then(|i| all.get(..=i))
+            .ok_or_else(|| internal(format!("iteration count {iterations}")))?
             .iter()
             .map(|v| v.to_f64())
             .collect();
+        let iterations = history.len() - 1;
         let stop = match words[c::CTL_STOP] {
             c::STOP_CONVERGED => Stop::Converged,
             c::STOP_MAX_ITER => Stop::MaxIterations,
@@ -471,15 +511,15 @@ impl<B: Block> Cg<'_, B> {
                 what: "p.Ap",
                 value: sc[c::BREAK].to_f64(),
             },
+            c::STOP_BREAKDOWN_RZ => Stop::Breakdown {
+                what: "r.z",
+                value: sc[c::BREAK].to_f64(),
+            },
             c::STOP_SINGULAR => Stop::SingularPreconditioner {
                 block_row: words[c::CTL_BAD] as usize,
             },
             // Both loops end only at a stop (max_iter bounds them on the device).
-            w => {
-                return Err(crate::error::Error::invalid(format!(
-                    "{F}: internal: the solver ended with stop word {w}"
-                )))
-            }
+            w => return Err(internal(format!("stop word {w}"))),
         };
         Ok(SolveReport {
             iterations,

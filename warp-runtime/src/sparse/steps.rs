@@ -6,7 +6,7 @@
 //! Addresses are of contiguous arrays on the step's device that the caller checked and sized
 //! (the callers' comments say how many elements each holds).
 
-use super::block::{at, sealed::SealedBlock, sealed::SealedScalar, Block, SparseScalar};
+use super::block::{at, sealed::SealedBlock, sealed::SealedScalar, Block, SparseScalar, MAX_DIM};
 use crate::backend::{ObjectLibrary, ObjectStep, StepFault};
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
@@ -57,15 +57,20 @@ unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
 }
 
 /// The triplets a step processes: `n`, or with a device count (`count`, the address of an
-/// `i32`, nonzero) its value clamped to `0..=n` (`wp_sparse.h`'s `sp_count`; the report step
-/// raises a count out of range).
+/// `i32`, nonzero) its value, or 0 when it is outside `0..=n` (`wp_sparse.h`'s `sp_count`:
+/// the primitives' rule for a bad count, so every step and primitive processes nothing; the
+/// report step raises the fault).
 fn count(count: u64, n: i32) -> usize {
     if count == 0 {
         return n.max(0) as usize;
     }
     // SAFETY: a one-element i32 array on the host (from_triplets_n checked it).
     let c = unsafe { *(count as *const i32) };
-    c.clamp(0, n.max(0)) as usize
+    if (0..=n).contains(&c) {
+        c as usize
+    } else {
+        0
+    }
 }
 
 /// Whether triplet `t` is in range.
@@ -529,11 +534,11 @@ fn mv_row<B: Block>(
     columns: &[i32],
     values: &[B::Scalar],
     x: &[B::Scalar],
+    ncol: i32,
     r: usize,
     acc: &mut [B::Scalar],
 ) {
     let (rr, cc) = (B::ROWS, B::COLS);
-    let ncol = (x.len() / cc) as i32;
     acc.fill(B::Scalar::ZERO);
     for k in row_range(offsets, columns.len(), r) {
         let c = columns[k];
@@ -580,9 +585,9 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
         let alpha = B::Scalar::from_f64(self.alpha);
         let beta = B::Scalar::from_f64(self.beta);
         (0..nrow).into_par_iter().with_min_len(256).for_each(|r| {
-            let mut acc = [B::Scalar::ZERO; 4];
+            let mut acc = [B::Scalar::ZERO; MAX_DIM];
             let acc = &mut acc[..rr];
-            mv_row::<B>(offsets, columns, values, x, r, acc);
+            mv_row::<B>(offsets, columns, values, x, self.ncol, r, acc);
             for (i, &a) in acc.iter().enumerate() {
                 // SAFETY: y's scalars of block row r, written by this task alone (y does not
                 // overlap x).
@@ -731,13 +736,13 @@ fn jacobi_row<B: Block>(
     values: &[B::Scalar],
     r: usize,
     point: bool,
-) -> Option<[[B::Scalar; 4]; 4]> {
+) -> Option<[[B::Scalar; MAX_DIM]; MAX_DIM]> {
     let n = B::ROWS;
     let (z, one) = (B::Scalar::ZERO, B::Scalar::ONE);
     let k = row_range(offsets, columns.len(), r).find(|&k| columns[k] == r as i32)?;
     let blk = &values[k * n * B::COLS..(k + 1) * n * B::COLS];
-    let mut a = [[z; 4]; 4];
-    let mut inv = [[z; 4]; 4];
+    let mut a = [[z; MAX_DIM]; MAX_DIM];
+    let mut inv = [[z; MAX_DIM]; MAX_DIM];
     for i in 0..n {
         for j in 0..n {
             a[i][j] = if !point || i == j {
@@ -905,6 +910,8 @@ pub(crate) mod cg {
     pub const STOP_NON_FINITE: i32 = 3;
     pub const STOP_BREAKDOWN: i32 = 4;
     pub const STOP_SINGULAR: i32 = 5;
+    /// A breakdown of `r . z` (`STOP_BREAKDOWN` is one of `p . Ap`).
+    pub const STOP_BREAKDOWN_RZ: i32 = 6;
     pub const RZ: usize = 0;
     pub const RZ_NEW: usize = 1;
     pub const PAP: usize = 2;
@@ -944,12 +951,17 @@ impl<S: SparseScalar, const CHECK: bool> CgScalar<S, CHECK> {
         let rr = sc[RR];
         hist[0] = rr.sqrt();
         ctl[CTL_ITER] = 0;
+        let rz = sc[RZ];
         ctl[CTL_STOP] = if ctl[CTL_BAD] != i32::MAX {
             STOP_SINGULAR
-        } else if !rr.finite() || !sc[RZ].finite() {
+        } else if !rr.finite() || !rz.finite() {
             STOP_NON_FINITE
         } else if rr <= sc[TOL2] {
             STOP_CONVERGED
+        } else if rz <= S::ZERO {
+            // An indefinite preconditioner (r != 0 here, so an SPD one gives r.z > 0).
+            sc[BREAK] = rz;
+            STOP_BREAKDOWN_RZ
         } else if self.max_iter <= 0 {
             STOP_MAX_ITER
         } else {
@@ -986,6 +998,9 @@ impl<S: SparseScalar, const CHECK: bool> CgScalar<S, CHECK> {
             ctl[CTL_STOP] = STOP_NON_FINITE;
         } else if rr <= sc[TOL2] {
             ctl[CTL_STOP] = STOP_CONVERGED;
+        } else if sc[RZ_NEW] <= S::ZERO {
+            sc[BREAK] = sc[RZ_NEW];
+            ctl[CTL_STOP] = STOP_BREAKDOWN_RZ;
         } else if it >= self.max_iter {
             ctl[CTL_STOP] = STOP_MAX_ITER;
         } else {
@@ -1101,5 +1116,233 @@ unsafe impl<S: SparseScalar, const DIRECTION: bool> ObjectStep for CgVector<S, D
                 ri.write((*ri).sub(alpha.mul(ap[i])));
             });
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::mem::offset_of;
+
+    /// `wp_sparse.h`, which the C++ side of every record and constant here comes from.
+    const HEADER: &str = include_str!("../../../warp-cuda/cuda/wp_sparse.h");
+    const CUDA_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda");
+
+    /// Every `constexpr i32|i64 SP_NAME = value` of the header (several per declaration).
+    fn header_constants() -> Vec<(String, i64)> {
+        let mut out = vec![];
+        for decl in HEADER.split("constexpr ").skip(1) {
+            let decl = &decl[..decl.find(';').expect("a declaration ends with `;`")];
+            let Some(rest) = decl
+                .strip_prefix("i32 ")
+                .or_else(|| decl.strip_prefix("i64 "))
+            else {
+                continue;
+            };
+            for item in rest.split(',') {
+                let (name, value) = item.split_once('=').expect("NAME = value");
+                let name = name.trim();
+                if name.starts_with("SP_") {
+                    out.push((name.to_string(), value.trim().parse().expect("an integer")));
+                }
+            }
+        }
+        out
+    }
+
+    /// The header's `SP_*` constants are Rust's, one for one: the Rust side addresses the
+    /// scalars and control words the kernels write, and decodes their stop codes, by its own
+    /// constants, so a swap on one side alone would otherwise pass every CPU test.
+    #[test]
+    fn header_constants_are_rusts() {
+        use cg::*;
+        let rust: Vec<(&str, i64)> = vec![
+            ("SP_DOT_LANES", DOT_LANES as i64),
+            ("SP_DOT_CHUNK", DOT_CHUNK as i64),
+            ("SP_CTL_STOP", CTL_STOP as i64),
+            ("SP_CTL_ITER", CTL_ITER as i64),
+            ("SP_CTL_BAD", CTL_BAD as i64),
+            ("SP_CTL_RUN", CTL_RUN as i64),
+            ("SP_STOP_NONE", STOP_NONE as i64),
+            ("SP_STOP_CONVERGED", STOP_CONVERGED as i64),
+            ("SP_STOP_MAX_ITER", STOP_MAX_ITER as i64),
+            ("SP_STOP_NON_FINITE", STOP_NON_FINITE as i64),
+            ("SP_STOP_BREAKDOWN", STOP_BREAKDOWN as i64),
+            ("SP_STOP_SINGULAR", STOP_SINGULAR as i64),
+            ("SP_STOP_BREAKDOWN_RZ", STOP_BREAKDOWN_RZ as i64),
+            ("SP_RZ", RZ as i64),
+            ("SP_RZ_NEW", RZ_NEW as i64),
+            ("SP_PAP", PAP as i64),
+            ("SP_RR", RR as i64),
+            ("SP_BB", BB as i64),
+            ("SP_TOL2", TOL2 as i64),
+            ("SP_BETA", BETA as i64),
+            ("SP_BREAK", BREAK as i64),
+            ("SP_TOL", TOL as i64),
+        ];
+        let mut header = header_constants();
+        header.sort();
+        let mut rust: Vec<(String, i64)> = rust.into_iter().map(|(n, v)| (n.into(), v)).collect();
+        rust.sort();
+        assert_eq!(header, rust);
+        // The indices fit the arrays Rust allocates.
+        assert!([RZ, RZ_NEW, PAP, RR, BB, TOL2, BETA, BREAK, TOL]
+            .iter()
+            .all(|&k| k < SCAL_LEN));
+        assert!([CTL_STOP, CTL_ITER, CTL_BAD, CTL_RUN]
+            .iter()
+            .all(|&k| k < CTL_LEN));
+    }
+
+    /// Every kernel name the Rust side launches (each block type's and each scalar's
+    /// `KERNELS`) is a kernel of the compiled build library: a wrong tag in `block!` or a
+    /// type missing from the header's instantiation list fails here, not at a user's first
+    /// call on a GPU. Needs only libnvrtc (skipped, saying so, without it).
+    #[cfg(feature = "cuda")]
+    #[test]
+    fn every_kernel_name_is_in_the_compiled_library() {
+        use crate::sparse::block::sealed::{BlockKernels, ScalarKernels};
+        use glam::{DMat2, DMat3, DMat4, Mat2, Mat3, Mat4};
+        if let Err(e) = warp_cuda::nvrtc_version() {
+            eprintln!("SKIPPED every_kernel_name_is_in_the_compiled_library: {e}");
+            return;
+        }
+        let c = crate::cuda::objects::compile_library(&LIBRARY, 90).unwrap();
+        let has = |name: &str| {
+            let pat = format!("{name}\0");
+            c.cubin.windows(pat.len()).any(|w| w == pat.as_bytes())
+        };
+        let blocks: [BlockKernels; 8] = [
+            <f32 as SealedBlock>::KERNELS,
+            <f64 as SealedBlock>::KERNELS,
+            <Mat2 as SealedBlock>::KERNELS,
+            <Mat3 as SealedBlock>::KERNELS,
+            <Mat4 as SealedBlock>::KERNELS,
+            <DMat2 as SealedBlock>::KERNELS,
+            <DMat3 as SealedBlock>::KERNELS,
+            <DMat4 as SealedBlock>::KERNELS,
+        ];
+        let scalars: [ScalarKernels; 2] = [
+            <f32 as SealedScalar>::KERNELS,
+            <f64 as SealedScalar>::KERNELS,
+        ];
+        let mut names: Vec<&str> = blocks.iter().flat_map(|k| [k.mv, k.jacobi_inv]).collect();
+        for k in scalars {
+            names.extend([
+                k.tpl_keys,
+                k.tpl_report,
+                k.tpl_sum,
+                k.dot_partials,
+                k.dot_final,
+                k.jacobi_apply,
+                k.cg_init,
+                k.cg_check,
+                k.cg_update,
+                k.cg_direction,
+            ]);
+        }
+        // The scalar-free steps.
+        names.extend([TplRowKeys::KERNEL, TplHeads::KERNEL, BsrOffsets::KERNEL]);
+        assert_eq!(names.len(), 8 * 2 + 2 * 10 + 3);
+        for n in &names {
+            assert!(has(n), "{n} is not a kernel of the compiled library");
+        }
+        // The search can fail: a name of no kernel is absent.
+        assert!(!has("wp_sparse_bsr_mv_mat5"));
+    }
+
+    /// (C++ record, field, Rust's offset) for every field of every record (the names are the
+    /// same on both sides).
+    macro_rules! layouts {
+        ($($rust:ty => $c:literal { $($f:ident),* $(,)? }),* $(,)?) => {
+            vec![$($(($c, stringify!($f), offset_of!($rust, $f))),*),*]
+        };
+    }
+
+    /// Each record's fields sit at the same offsets in Rust and in C++ (g++'s `offsetof`): the
+    /// sizes are asserted on both sides, but two swapped fields of one size (`rows` and
+    /// `cols`) keep the size. Skipped, saying so, without g++.
+    #[test]
+    fn record_offsets_are_the_headers() {
+        let fields = layouts![
+            TplKeys<f32> => "sp_tpl_keys_t" {
+                count, rows, cols, values, n, nrow, ncol, block, two_pass, pad, keys, idx, bad
+            },
+            TplReport<f32> => "sp_tpl_report_t" {
+                count, bad, rows, cols, values, n, nrow, ncol, block, fault
+            },
+            TplRowKeys => "sp_tpl_row_keys_t" { count, rows, cols, idx, keys, n, nrow, ncol, pad },
+            TplHeads => "sp_tpl_heads_t" { count, rows, cols, idx, heads, n, nrow, ncol, pad },
+            TplSum<f32> => "sp_tpl_sum_t" {
+                count, rows, cols, values, idx, pos, block_rows, columns, out, n, nrow, ncol,
+                block
+            },
+            BsrOffsets => "sp_bsr_offsets_t" { count, block_rows, pos, offsets, n, nrow },
+            BsrMv<f32> => "sp_bsr_mv_t" {
+                offsets, columns, values, x, y, alpha, beta, nrow, ncol, cap, pad
+            },
+            Dot<f32, false> => "sp_dot_t" { a, b, n, out, chunks },
+            JacobiInv<f32> => "sp_jacobi_inv_t" {
+                offsets, columns, values, dinv, bad, nrow, point, cap, pad
+            },
+            JacobiApply<f32> => "sp_jacobi_apply_t" { dinv, r, z, nrow, dim },
+            CgScalar<f32, false> => "sp_cg_scalar_t" {
+                ctl, scal, history, rtol, atol, max_iter, pad
+            },
+            CgVector<f32, false> => "sp_cg_vector_t" { ctl, scal, x, r, p, ap, n },
+        ];
+        if std::process::Command::new("g++")
+            .arg("--version")
+            .output()
+            .is_err()
+        {
+            eprintln!("SKIPPED record_offsets_are_the_headers: no g++ on this machine");
+            return;
+        }
+        // The header as the emulator tests compile it (tests/cuda_sparse_host.rs).
+        let mut src = String::from(
+            "#include <cstddef>\n#include <cstdio>\n#include \"wp_prim_emu.h\"\n\
+             #define __global__\n#define __device__ inline\n#define __shared__ static\n\
+             #include \"wp_sparse.h\"\nusing namespace wp;\n\
+             #define P(T, f) printf(\"%s %s %zu\\n\", #T, #f, offsetof(T, f))\n\
+             int main() {\n",
+        );
+        for (c, f, _) in &fields {
+            src += &format!("  P({c}, {f});\n");
+        }
+        src += "  return 0;\n}\n";
+        let dir = std::env::temp_dir().join(format!("wp_sparse_offsets_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
+        std::fs::write(&cpp, src).unwrap();
+        let out = std::process::Command::new("g++")
+            .args([
+                "-std=c++17",
+                "-Wall",
+                "-Wextra",
+                "-Werror",
+                "-I",
+                CUDA_DIR,
+                "-I",
+            ])
+            .arg(format!("{CUDA_DIR}/tests"))
+            .arg(&cpp)
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "g++: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let out = std::process::Command::new(&exe).output().unwrap();
+        let got = String::from_utf8(out.stdout).unwrap();
+        let want: String = fields
+            .iter()
+            .map(|(c, f, o)| format!("{c} {f} {o}\n"))
+            .collect();
+        assert_eq!(got, want);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
