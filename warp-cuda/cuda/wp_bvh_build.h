@@ -118,7 +118,12 @@ static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
 /// triangle) into lowers and uppers; the smallest position of an index outside the points
 /// into *bad (i32, atomically lowered; `bad` 0: not recorded, for indices checked before),
 /// whose triangle gets an empty box and reads no point; the smallest index of a point with a
-/// NaN or infinite coordinate into *bad_point (i32, likewise; 0: not checked).
+/// NaN or infinite coordinate into *bad_point (i32, likewise; 0: not checked). With leaf_tris
+/// (f32*, 12 per triangle, 16-aligned; 0: none) and a built tree's prim_ids (i32*, n): the
+/// step runs over the leaf positions k, writing the box of face prim_ids[k] (the same values)
+/// and that face's corners {x, y, z, 0} at leaf_tris[12k..12k + 12] (NaN corners for a face
+/// with an index outside the points, or an id outside [0, n)): a mesh's leaf-ordered
+/// triangles (warp_core's leaf_triangles), gathered where the vertices are read anyway.
 struct lbvh_triangle_boxes_t {
   u64 points;
   u64 indices;
@@ -128,8 +133,10 @@ struct lbvh_triangle_boxes_t {
   i64 n;
   i64 num_points;
   u64 bad_point;
+  u64 prim_ids;
+  u64 leaf_tris;
 };
-static_assert(sizeof(lbvh_triangle_boxes_t) == 64, "lbvh_triangle_boxes_t layout");
+static_assert(sizeof(lbvh_triangle_boxes_t) == 80, "lbvh_triangle_boxes_t layout");
 
 /// Whether every coordinate of `v` is finite (x - x is 0 exactly when x is finite).
 WP_FN bool lbvh_finite(const Vec3& v) {
@@ -404,7 +411,18 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
   const wp::i32* ix = (const wp::i32*)s.indices;
   wp::Vec3* lo = (wp::Vec3*)s.lowers;
   wp::Vec3* hi = (wp::Vec3*)s.uppers;
-  WP_LBVH_LOOP(f, s.n) {
+  const wp::i32* ids = (const wp::i32*)s.prim_ids;
+  float4* tris = (float4*)s.leaf_tris;
+  WP_LBVH_LOOP(i, s.n) {
+    // Face order, or leaf order (position i holds face ids[i]) with the corners' copy.
+    const wp::i64 f = tris != nullptr ? (wp::i64)ids[i] : i;
+    const float4 nan4 = make_float4(__int_as_float(0x7fc00000), __int_as_float(0x7fc00000),
+                                    __int_as_float(0x7fc00000), 0.0f);
+    if (f < 0 || f >= s.n) {
+      // Only a corrupt tree's id: no box to write, NaN corners.
+      for (int j = 0; j < 3; ++j) tris[3 * i + j] = nan4;
+      continue;
+    }
     bool in_range = true;
     for (int k = 0; k < 3; ++k) {
       const wp::i32 v = ix[3 * f + k];
@@ -416,9 +434,16 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
     if (!in_range) {
       lo[f] = wp::Vec3_new(0.0f, 0.0f, 0.0f);
       hi[f] = lo[f];
+      if (tris != nullptr)
+        for (int j = 0; j < 3; ++j) tris[3 * i + j] = nan4;
       continue;
     }
     const wp::Vec3 a = p[ix[3 * f]], b = p[ix[3 * f + 1]], c = p[ix[3 * f + 2]];
+    if (tris != nullptr) {
+      tris[3 * i] = make_float4(a.x, a.y, a.z, 0.0f);
+      tris[3 * i + 1] = make_float4(b.x, b.y, b.z, 0.0f);
+      tris[3 * i + 2] = make_float4(c.x, c.y, c.z, 0.0f);
+    }
     // Finite points (checked, here or by the caller): fminf/fmaxf are the CPU's f32::min/max.
     lo[f] = wp::Vec3_new(fminf(fminf(a.x, b.x), c.x), fminf(fminf(a.y, b.y), c.y),
                          fminf(fminf(a.z, b.z), c.z));

@@ -993,6 +993,7 @@ mod tests {
             .unzip();
         let mut b = build_sah(&lo, &hi);
         check_layout(&b.nodes, &b.parents, &b.prim_ids, &lo, &hi).unwrap();
+        let mut soup = warp_core::objects::mesh::leaf_triangles(&b.prim_ids, &ix, &pts);
         let v = unsafe {
             let tree = BvhTree::new(
                 ArrayView::new(b.nodes.as_mut_ptr(), [b.nodes.len()], [1], "k", "mesh"),
@@ -1010,6 +1011,7 @@ mod tests {
                 ArrayView::new(pts.as_mut_ptr(), [pts.len()], [1], "k", "mesh"),
                 None,
                 ArrayView::new(ix.as_mut_ptr(), [ix.len()], [1], "k", "mesh"),
+                ArrayView::new(soup.as_mut_ptr(), [soup.len()], [1], "k", "mesh"),
             )
         };
         let mut rng = Rng(3);

@@ -22,7 +22,7 @@ use crate::dispatch;
 use crate::error::Result;
 use crate::kernel::KernelInfo;
 use crate::primitives::radix_sort_pairs;
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 use warp_core::objects::bvh::BvhNode;
 use warp_core::{Fault, FaultKind};
@@ -261,14 +261,19 @@ pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
 /// into `lowers` and `uppers`; the smallest position of an index outside the points lowers
 /// the `i32` at `bad` (0: not recorded, for indices checked before); that triangle reads no
 /// point and gets an empty box. The smallest index of a point with a NaN or infinite
-/// coordinate lowers the `i32` at `bad_point` (0: not checked). A capture records the step,
-/// keeping `uses()`.
+/// coordinate lowers the `i32` at `bad_point` (0: not checked). With `leaf`, a built tree's
+/// `prim_ids` and a mesh's leaf-ordered triangles (`3 * n` corners): the step runs over the
+/// leaf positions `k`, writing the box of face `prim_ids[k]` (the same values) and its
+/// corners at `3k..3k + 3` (`warp_core::objects::mesh::leaf_triangles`; NaN for a face with
+/// an index outside the points): the gather the walks need, fused into the step that reads
+/// the vertices anyway. A capture records the step, keeping `uses()`.
 pub(crate) fn triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
     lowers: &Array<Vec3>,
     uppers: &Array<Vec3>,
     [bad, bad_point]: [u64; 2],
+    leaf: Option<(&Array<i32>, &Array<Vec4>)>,
     uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
     dispatch::object_step_keeping(
@@ -282,6 +287,8 @@ pub(crate) fn triangle_boxes(
             n: lowers.len() as i64,
             num_points: points.len() as i64,
             bad_point,
+            prim_ids: leaf.map_or(0, |l| l.0.device_address()),
+            leaf_tris: leaf.map_or(0, |l| l.1.device_address()),
         },
         uses,
     )
@@ -309,8 +316,10 @@ struct LbvhTriangleBoxes {
     n: i64,
     num_points: i64,
     bad_point: u64,
+    prim_ids: u64,
+    leaf_tris: u64,
 }
-const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 64);
+const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 80);
 
 unsafe impl ObjectStep for LbvhFinite {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
@@ -392,6 +401,17 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
                 *l = Vec3::new(min(a.x, b.x, c.x), min(a.y, b.y, c.y), min(a.z, b.z, c.z));
                 *h = Vec3::new(max(a.x, b.x, c.x), max(a.y, b.y, c.y), max(a.z, b.z, c.z));
             });
+        if self.leaf_tris != 0 {
+            // The kernel's leaf order writes the same boxes; the corners by position.
+            // SAFETY: `n` ids and `3n` corners the caller owns.
+            let (ids, out) = unsafe {
+                (
+                    std::slice::from_raw_parts(self.prim_ids as *const i32, n),
+                    std::slice::from_raw_parts_mut(self.leaf_tris as *mut Vec4, 3 * n),
+                )
+            };
+            super::bvh::write_leaf_triangles_par(out, ids, ix, points);
+        }
         Ok(())
     }
 }
@@ -983,6 +1003,7 @@ mod tests {
             &tl,
             &th,
             [0, bad.device_address()],
+            None,
             || Box::new(()),
         )
         .unwrap();

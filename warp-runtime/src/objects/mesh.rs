@@ -23,7 +23,7 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use warp_core::objects::MeshView;
 
 use super::bvh::{bad, contiguous, first_non_finite, same_device, RefitFrom, Tree, MAX_PRIMS};
@@ -97,7 +97,7 @@ fn device_triangle_boxes(
     // Written whole by the boxes' step.
     let lo = Array::empty(faces, points.device())?;
     let hi = Array::empty(faces, points.device())?;
-    lbvh::triangle_boxes(points, indices, &lo, &hi, flags, || Box::new(()))?;
+    lbvh::triangle_boxes(points, indices, &lo, &hi, flags, None, || Box::new(()))?;
     Ok((lo, hi))
 }
 
@@ -225,8 +225,10 @@ impl Mesh {
             check_indices(WHAT, &ix, n)?;
             let p = read_points(WHAT, points, n)?;
             let (lo, hi) = triangle_boxes(&p, &ix).map_err(|k| bad_index(WHAT, k, ix[k], n))?;
-            let tree = Tree::build_on_host(&lo, &hi, &device)?;
-            (Array::from_slice(&ix, &device)?, tree)
+            let mut tree = Tree::build_on_host(&lo, &hi, &device)?;
+            let own = Array::from_slice(&ix, &device)?;
+            tree.set_leaf_triangles(points, &own)?;
+            (own, tree)
         } else {
             // Everything on the device: the indices and the points are checked by the
             // triangles' boxes step, and only its two flags come back (after the build).
@@ -236,7 +238,10 @@ impl Mesh {
             let at = flags.device_address();
             let (lo, hi) = device_triangle_boxes(points, &own, [at, at + 4])?;
             // The tree keeps the boxes: its refits write them.
-            let tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE, true)?;
+            let mut tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE, true)?;
+            // The walks' copy of the triangles, in leaf order (a bad index, refused below,
+            // reads no point there).
+            tree.set_leaf_triangles(points, &own)?;
             let f = flags.to_vec()?;
             if f[0] != i32::MAX {
                 let k = f[0] as usize;
@@ -356,6 +361,13 @@ impl Mesh {
         self.tree.host()
     }
 
+    /// The tree's leaf-ordered triangles (a mesh's tree always has them).
+    fn leaf_tris(&self) -> &Array<Vec4> {
+        self.tree
+            .leaf_triangles()
+            .expect("a mesh's tree has its leaf-ordered triangles")
+    }
+
     /// The checks of a launch beyond its device: the points as many as built with.
     fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
         if self.points.len() != self.num_points {
@@ -393,6 +405,7 @@ impl HostObject for Mesh {
                 .as_ref()
                 .map(|v| v.cpu_view(ctx.kernel, ctx.arg)),
             self.indices.cpu_view(ctx.kernel, ctx.arg),
+            self.leaf_tris().cpu_view(ctx.kernel, ctx.arg),
         ))
     }
 
@@ -410,6 +423,7 @@ impl HostObject for Mesh {
             indices: self.indices.device_address(),
             num_points: self.num_points as i32,
             pad: 0,
+            leaf_tris: self.leaf_tris().device_address(),
         })
     }
 }
