@@ -57,11 +57,21 @@
 //! point in its own unit (`Closest::visit`): the same bits, but for a face and a query point
 //! both within about 1e-10 of the root box's extent around the point.
 //!
+//! # The triangles the walks read
+//!
+//! The closest-point, furthest-point, ray and parity queries (and the sign's walk around an
+//! edge or a vertex) read each triangle from the mesh's leaf-ordered copy
+//! ([`leaf_triangles`]) at its position in the tree's `prim_ids`, and map only their result
+//! to a face (`prim_ids`, checked). The runtime writes that copy at the build and every
+//! refit, so these queries see the vertices as of then (as the tree's boxes); the box query
+//! and the `mesh_eval_*` functions read `indices` and `points` as they are.
+//!
 //! # Safety
 //!
 //! Every index read from the buffers is checked (a face, a vertex index, and the tree's, see
-//! [`super::bvh`]): a corrupt mesh is a fault naming its kernel parameter, never undefined
-//! behaviour; traversals are bounded.
+//! [`super::bvh`]; a leaf position, which the walks take from a checked leaf range): a
+//! corrupt mesh is a fault naming its kernel parameter, never undefined behaviour;
+//! traversals are bounded.
 
 // `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
 // rejecting branch, on purpose.

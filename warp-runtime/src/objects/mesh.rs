@@ -9,6 +9,23 @@
 //! [`Mesh::refit`] recomputes the tree's boxes. The indices are copied (the mesh validated
 //! them against the points; a later change could not be).
 //!
+//! # What the queries see: the geometry of the last build or refit
+//!
+//! The mesh also keeps its triangles in the order of its tree's leaves (three corners per
+//! triangle, written at the build and by every refit from the points then): the
+//! closest-point, furthest-point, ray and parity queries (`mesh_query_point*`,
+//! `mesh_query_furthest_point_no_sign`, `mesh_query_ray`) read the triangles there, a
+//! leaf's triangles from consecutive memory, rather than following each face's indices into
+//! the points. So these queries see the vertices as of the last [`Mesh::new`] or
+//! [`Mesh::refit`], as the tree's boxes already were. Warp's queries read the points array
+//! directly; here, after writing the points (or indices) without a refit, those queries go
+//! on answering for the mesh as it was at the last refit (consistently: boxes and triangles
+//! agree), while `mesh_eval_position`, `mesh_eval_velocity`, `mesh_eval_face_normal` and
+//! the box query `mesh_query_aabb` read the current points and indices. A query's
+//! `(face, u, v)` fed to `mesh_eval_position` is therefore the closest point found only when
+//! the points were not changed since the refit: call [`Mesh::refit`] after moving the points
+//! (Warp requires it too, for its boxes). The copy costs 48 bytes per triangle.
+//!
 //! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
 //! SAH builder over the triangles' boxes; on a GPU the triangles' boxes (with the checks of
 //! the indices and the points) and a linear BVH are kernels (`lbvh.rs`), and only the checks'
@@ -62,6 +79,12 @@ use crate::kernel::ArgCtx;
 /// wp::launch(closest, 1, (&mesh, &q, &out), &dev).unwrap();
 /// assert_eq!(out.to_vec().unwrap(), vec![Vec3::new(0.25, 0.25, 0.0)]);
 /// ```
+///
+/// Queries see the geometry of the last build or [`refit`](Mesh::refit): the point and ray
+/// queries read a copy of the triangles in the tree's leaf order that the build and every
+/// refit write (Warp's read the points array). After changing the points, refit: until then
+/// those queries answer for the previous points (with boxes to match), while `mesh_eval_*`
+/// and `mesh_query_aabb` read the new ones (see the module docs).
 #[derive(Clone)]
 pub struct Mesh {
     device: Device,
@@ -281,8 +304,13 @@ impl Mesh {
     /// results unspecified until a refit from finite points). A mesh without triangles has no
     /// box to refit: a GPU checks nothing then. (An index a kernel wrote outside the points
     /// since the build, through [`indices`](Mesh::indices): the CPU's refit refuses it, naming
-    /// `indices`; a GPU's gives its triangle an empty box, and the queries' checked reads
-    /// fault on it.)
+    /// `indices`; a GPU's gives its triangle an empty box and NaN corners in the leaf-ordered
+    /// triangles the walks read, so the point and ray queries never report it, and
+    /// `mesh_eval_*` and the box query, which read the indices, fault on it.)
+    ///
+    /// The refit also rewrites the leaf-ordered triangles the queries read (module docs), in
+    /// the same step that reads the vertices for the boxes: queries see the points as of the
+    /// last refit.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `points` when the points array (replaced by
@@ -321,7 +349,8 @@ impl Mesh {
     }
 
     /// The points: the user's array, shared (writing it deforms the mesh; call
-    /// [`refit`](Mesh::refit) before querying the deformed mesh).
+    /// [`refit`](Mesh::refit) before querying the deformed mesh: until then the point and ray
+    /// queries see the points of the last refit, the `mesh_eval_*` functions the new ones).
     pub fn points(&self) -> &Array<Vec3> {
         &self.points
     }
