@@ -515,4 +515,41 @@ mod tests {
         let e = Mesh::new(&pts(&[]), &ix(&[]), None).unwrap();
         assert_eq!((e.num_faces(), e.num_points()), (0, 0));
     }
+
+    /// The leaf-ordered triangles the walks read are warp-core's `leaf_triangles` of the
+    /// tree's ids, the indices and the points of the last build or refit, bit for bit
+    /// (compared exactly: a copy, no arithmetic): unchanged by moving the points until the
+    /// refit, and a clone made before a refit keeps its own. On the CPU, and on `cuda:0`
+    /// when there is one (where the build's and the refit's triangle boxes step writes them).
+    #[test]
+    fn leaf_triangles_follow_the_build_and_the_refits() {
+        let mut devices = vec![crate::cpu()];
+        devices.extend(crate::get_device("cuda:0").ok());
+        for dev in devices {
+            let p0: Vec<Vec3> = (0..40)
+                .map(|i| Vec3::new((i % 7) as f32, (i / 7) as f32, (i * i % 5) as f32 * 0.25))
+                .collect();
+            let faces: Vec<i32> = (0..30)
+                .flat_map(|f| [f, f + 1, f + 7].map(|i| i % 40))
+                .collect();
+            let p = Array::from_slice(&p0, &dev).unwrap();
+            let mut m = Mesh::new(&p, &Array::from_slice(&faces, &dev).unwrap(), None).unwrap();
+            let got = |m: &Mesh| m.leaf_tris().to_vec().unwrap();
+            let want = |m: &Mesh, points: &[Vec3]| {
+                let (_, _, ids) = m.tree_host().unwrap();
+                let mut sorted = ids.clone();
+                sorted.sort_unstable();
+                assert_eq!(sorted, (0..30).collect::<Vec<_>>());
+                warp_core::objects::mesh::leaf_triangles(&ids, &faces, points)
+            };
+            assert_eq!(got(&m), want(&m, &p0), "{}: build", dev.alias());
+            let before = m.clone();
+            let p1: Vec<Vec3> = p0.iter().map(|q| *q * 1.5 + Vec3::Z).collect();
+            p.copy_from(&Array::from_slice(&p1, &dev).unwrap()).unwrap();
+            assert_eq!(got(&m), want(&m, &p0), "{}: moved, not refit", dev.alias());
+            m.refit().unwrap();
+            assert_eq!(got(&m), want(&m, &p1), "{}: refit", dev.alias());
+            assert_eq!(got(&before), want(&before, &p0), "{}: the clone", dev.alias());
+        }
+    }
 }
