@@ -310,8 +310,8 @@ impl Tree {
     /// Makes a mesh's tree's leaf-ordered triangles from `points` and `indices` (the mesh's,
     /// checked against each other by the caller, or refused after this on a GPU: a bad index
     /// gives its triangle NaN corners and reads no point). On the CPU on the host; on a GPU by
-    /// the triangle boxes' step in leaf order (queued), which rewrites the boxes the build
-    /// made, with the same values.
+    /// the triangle boxes' step in leaf order (queued), which also writes the tree's kept
+    /// boxes, by position (what the refits read them as; the build is done with them).
     pub(crate) fn set_leaf_triangles(
         &mut self,
         points: &Array<Vec3>,
@@ -534,6 +534,7 @@ impl Tree {
                     bad: &r.bad,
                     sources: [Some(lowers), Some(uppers)],
                     check_boxes: true,
+                    by_position: false,
                     names: &BVH_REFIT,
                 };
                 lbvh::refit(lowers, uppers, &buffers, Some(&check), uses)
@@ -557,6 +558,8 @@ impl Tree {
                     bad: &r.bad,
                     sources: [Some(points), None],
                     check_boxes: false,
+                    // The leaf-order step above wrote them by position.
+                    by_position: true,
                     names: &MESH_REFIT,
                 };
                 lbvh::refit(lo, hi, &buffers, Some(&check), uses)
