@@ -405,7 +405,10 @@ impl Tree {
             at(self.prim_ids.device_address()),
         );
         let (num_nodes, num_prims) = (self.num_nodes, self.num_prims);
-        let tris = self.leaf_tris.as_ref().map_or(0, |t| at(t.device_address()));
+        let tris = self
+            .leaf_tris
+            .as_ref()
+            .map_or(0, |t| at(t.device_address()));
         let uses = || -> Keep {
             Box::new((
                 [&self.parents, &self.prim_ids].map(Array::clone),
@@ -544,7 +547,10 @@ impl Tree {
                 // The indices were checked at the mesh's build: no index flag. The step runs in
                 // leaf order and writes the walks' copy of the triangles too.
                 let flags = [0, r.bad.device_address()];
-                let tris = self.leaf_tris.as_ref().expect("a mesh's tree has its triangles");
+                let tris = self
+                    .leaf_tris
+                    .as_ref()
+                    .expect("a mesh's tree has its triangles");
                 lbvh::triangle_boxes(
                     points,
                     indices,

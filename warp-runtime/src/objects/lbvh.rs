@@ -421,8 +421,7 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
             });
         if let Some(ids) = ids {
             // SAFETY: `3n` corners the caller owns.
-            let out =
-                unsafe { std::slice::from_raw_parts_mut(self.leaf_tris as *mut Vec4, 3 * n) };
+            let out = unsafe { std::slice::from_raw_parts_mut(self.leaf_tris as *mut Vec4, 3 * n) };
             super::bvh::write_leaf_triangles_par(out, ids, ix, points);
         }
         Ok(())
@@ -956,7 +955,9 @@ mod tests {
         for dev in devices {
             let (pl, _) = boxes(200, 5, false);
             let faces = 300;
-            let ix: Vec<i32> = (0..3 * faces).map(|i| ((i * 37 + i / 3) % 200) as i32).collect();
+            let ix: Vec<i32> = (0..3 * faces)
+                .map(|i| ((i * 37 + i / 3) % 200) as i32)
+                .collect();
             let moved: Vec<Vec3> = pl.iter().map(|p| *p * 0.75 + Vec3::X).collect();
             let a = |v: &[Vec3]| Array::from_slice(v, &dev).unwrap();
             let (points, points2) = (a(&pl), a(&moved));
@@ -974,7 +975,10 @@ mod tests {
                 counters: &counters,
             };
             triangle_boxes(&points, &indices, &lo, &hi, [0, 0], None, || Box::new(())).unwrap();
-            Lbvh::new(&dev).unwrap().build(&lo, &hi, &tree, MESH_LEAF_SIZE).unwrap();
+            Lbvh::new(&dev)
+                .unwrap()
+                .build(&lo, &hi, &tree, MESH_LEAF_SIZE)
+                .unwrap();
             // By face, by primitive: the reference.
             triangle_boxes(&points2, &indices, &lo, &hi, [0, 0], None, || Box::new(())).unwrap();
             refit(&lo, &hi, &tree, None, || Box::new(())).unwrap();

@@ -549,7 +549,12 @@ mod tests {
             assert_eq!(got(&m), want(&m, &p0), "{}: moved, not refit", dev.alias());
             m.refit().unwrap();
             assert_eq!(got(&m), want(&m, &p1), "{}: refit", dev.alias());
-            assert_eq!(got(&before), want(&before, &p0), "{}: the clone", dev.alias());
+            assert_eq!(
+                got(&before),
+                want(&before, &p0),
+                "{}: the clone",
+                dev.alias()
+            );
         }
     }
 }
