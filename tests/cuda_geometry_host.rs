@@ -40,14 +40,14 @@ use warp_core::objects::geometry::{
 use warp_core::objects::mesh::{
     adj_mesh_eval_position, adj_mesh_eval_velocity, adj_mesh_query_point,
     adj_mesh_query_point_no_sign, adj_mesh_query_point_sign_normal,
-    adj_mesh_query_point_sign_parity, leaf_triangles, mesh_eval_face_normal, mesh_eval_position,
+    adj_mesh_query_point_sign_parity, mesh_eval_face_normal, mesh_eval_position,
     mesh_eval_velocity, mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item,
     mesh_query_aabb_next, mesh_query_furthest_point_no_sign, mesh_query_point,
     mesh_query_point_no_sign, mesh_query_point_sign_normal, mesh_query_point_sign_parity,
     mesh_query_ray, MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView, PARITY_DIR,
 };
 use warp_core::{Fault, FaultKind, KResult};
-use warp_runtime::objects::bvh_build::{build_sah, check_layout};
+use warp_runtime::objects::bvh_build::{build_sah, check_layout, leaf_triangles};
 
 #[path = "common/host_cpp.rs"]
 mod host_cpp;

@@ -61,7 +61,7 @@
 //!
 //! The closest-point, furthest-point, ray and parity queries (and the sign's walk around an
 //! edge or a vertex) read each triangle from the mesh's leaf-ordered copy
-//! ([`leaf_triangles`]) at its position in the tree's `prim_ids`, and map only their result
+//! ([`write_leaf_triangles`]) at its position in the tree's `prim_ids`, and map only their result
 //! to a face (`prim_ids`, checked). The runtime writes that copy at the build and every
 //! refit, so these queries see the vertices as of then (as the tree's boxes); the box query
 //! and the `mesh_eval_*` functions read `indices` and `points` as they are.
@@ -90,7 +90,7 @@ use crate::{ArrayView, KResult, KernelIndex};
 
 /// A built mesh as a kernel thread sees it: the BVH over its triangles, the points, the
 /// optional velocities, the indices, and the triangles in leaf order (see
-/// [`leaf_triangles`]). `Copy`, owns nothing; 104 bytes (small on purpose: query steps take
+/// [`write_leaf_triangles`]). `Copy`, owns nothing; 104 bytes (small on purpose: query steps take
 /// it by value, see `HashGridView`).
 #[derive(Clone, Copy, Debug)]
 pub struct MeshView {
@@ -108,21 +108,15 @@ pub struct MeshView {
 #[cfg(target_pointer_width = "64")]
 const _: () = assert!(std::mem::size_of::<MeshView>() == 104);
 
-/// The triangles of a mesh in the order of its tree's leaves (what the closest-point,
-/// furthest-point, ray and parity walks read): entry `3k + j` is corner `j` of face
+/// Writes the triangles of a mesh in the order of its tree's leaves into `out` (what the
+/// closest-point, furthest-point, ray and parity walks read; `3 * prim_ids.len()` entries,
+/// extra entries left alone): entry `3k + j` is corner `j` of face
 /// `prim_ids[k]`, `points[indices[3 * prim_ids[k] + j]]`, with `w = 0`. The walks then read a
 /// leaf's triangles from consecutive memory at its positions, instead of the dependent chain
 /// `prim_ids -> indices -> points`. The runtime writes it at a mesh's build and at every
 /// refit, from the points as they are then (as it does the boxes). A face whose id or vertex
 /// index is out of range (only in a corrupt mesh: the runtime checks both) gets NaN
 /// corners, which no query reports (every comparison with NaN is false).
-pub fn leaf_triangles(prim_ids: &[i32], indices: &[i32], points: &[Vec3]) -> Vec<Vec4> {
-    let mut out = vec![Vec4::ZERO; 3 * prim_ids.len()];
-    write_leaf_triangles(&mut out, prim_ids, indices, points);
-    out
-}
-
-/// [`leaf_triangles`] into `out` (`3 * prim_ids.len()` entries; extra entries are left alone).
 pub fn write_leaf_triangles(out: &mut [Vec4], prim_ids: &[i32], indices: &[i32], points: &[Vec3]) {
     let corner = |f: i32, j: usize| -> Option<Vec4> {
         let f = usize::try_from(f).ok()?;
@@ -163,7 +157,7 @@ fn contiguous<T: Copy>(v: &ArrayView<T, 1>, what: &str) -> *const T {
 impl MeshView {
     /// A view of a mesh: the BVH over its triangles (one primitive per triangle), its points,
     /// optional velocities (one per point), indices (three per triangle) and its triangles in
-    /// leaf order ([`leaf_triangles`] of the tree, three corners per triangle).
+    /// leaf order ([`write_leaf_triangles`] of the tree, three corners per triangle).
     ///
     /// Faults carry the names of `points` (the tree's are replaced: the mesh is one kernel
     /// parameter).
@@ -214,7 +208,7 @@ impl MeshView {
     /// # Safety
     /// `points` (and `velocities` unless null) must address `num_points` valid elements,
     /// `indices` `3 * tree.num_prims()` and `leaf_tris` `3 * tree.num_prims()` (the
-    /// triangles in leaf order, [`leaf_triangles`]), alive and unchanged while the view is
+    /// triangles in leaf order, [`write_leaf_triangles`]), alive and unchanged while the view is
     /// used.
     pub unsafe fn from_raw(
         tree: BvhTree,
@@ -297,7 +291,7 @@ impl MeshView {
     }
 
     /// The triangle at position `k` of the tree's `prim_ids`, from the leaf-ordered copy
-    /// ([`leaf_triangles`]): the walks pass positions within a leaf's range, which they
+    /// ([`write_leaf_triangles`]): the walks pass positions within a leaf's range, which they
     /// checked against `prim_ids`; anything else is a fault (as a `prim_ids` position).
     #[inline(always)]
     fn leaf_triangle(&self, k: i32) -> KResult<[Vec3; 3]> {
@@ -1218,7 +1212,13 @@ pub(crate) mod tests {
 
         /// The leaf-ordered triangles of the current points (what a refit writes).
         fn leaf_view(&mut self) -> ArrayView<Vec4, 1> {
-            self.leaf_tris = leaf_triangles(&self.built.prim_ids, &self.indices, &self.points);
+            self.leaf_tris = vec![Vec4::ZERO; self.indices.len()];
+            write_leaf_triangles(
+                &mut self.leaf_tris,
+                &self.built.prim_ids,
+                &self.indices,
+                &self.points,
+            );
             unsafe {
                 ArrayView::new(
                     self.leaf_tris.as_mut_ptr(),

@@ -32,7 +32,10 @@ use warp_core::objects::bvh::{BvhNode, BvhTree};
 use warp_core::objects::BvhView;
 use warp_core::ArrayView;
 
-use super::bvh_build::{build_sah, refit as refit_nodes, triangle_boxes, BuiltBvh};
+use super::bvh_build::{
+    build_sah, leaf_triangles, refit as refit_nodes, triangle_boxes, write_leaf_triangles_par,
+    BuiltBvh,
+};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
 use super::lbvh::{self, Lbvh, LbvhTree, RefitCheck};
 use super::HostObject;
@@ -157,7 +160,7 @@ pub(crate) struct Tree {
     num_prims: usize,
     /// A GPU-built tree's refit state (`None` for a tree built on the host, the CPU's).
     device_refit: Option<DeviceRefit>,
-    /// A mesh's triangles in leaf order (`warp_core::objects::mesh::leaf_triangles`: three
+    /// A mesh's triangles in leaf order (`bvh_build::leaf_triangles`: three
     /// corners per `prim_ids` position, 16-byte aligned), which the mesh's walks read: written
     /// with the tree at the mesh's build ([`Tree::set_leaf_triangles`]) and by every refit
     /// from triangles, copied with the nodes by a shared tree's refit. `None` for a BVH's.
@@ -189,16 +192,6 @@ impl DeviceRefit {
             },
         })
     }
-}
-
-/// `warp_core::objects::mesh::write_leaf_triangles` over rayon, in chunks of positions (each
-/// position's corners depend on it alone, so the same values in any order).
-pub(crate) fn write_leaf_triangles_par(out: &mut [Vec4], ids: &[i32], ix: &[i32], p: &[Vec3]) {
-    use rayon::prelude::*;
-    const CHUNK: usize = 4096;
-    out.par_chunks_mut(3 * CHUNK)
-        .zip(ids.par_chunks(CHUNK))
-        .for_each(|(o, i)| warp_core::objects::mesh::write_leaf_triangles(o, i, ix, p));
 }
 
 /// The nodes as the device buffer holds them.
@@ -322,7 +315,7 @@ impl Tree {
         let out = Array::<Vec4>::empty(3 * self.num_prims, &device)?;
         match &self.device_refit {
             None => {
-                let t = warp_core::objects::mesh::leaf_triangles(
+                let t = leaf_triangles(
                     &self.prim_ids.to_vec()?,
                     &indices.to_vec()?,
                     &points.to_vec()?,

@@ -97,7 +97,7 @@ pub struct CudaMesh {
     /// Padding to 8 bytes (0).
     pub pad: i32,
     /// Device address of the triangles in leaf order: three corners `{x, y, z, 0}` per
-    /// position of the tree's `prim_ids` (`warp_core::objects::mesh::leaf_triangles`),
+    /// position of the tree's `prim_ids` (`warp_core::objects::mesh::write_leaf_triangles`),
     /// written at the build and every refit; 16-byte aligned.
     pub leaf_tris: u64,
 }

@@ -269,7 +269,7 @@ pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
 /// `prim_ids` and a mesh's leaf-ordered triangles (`3 * n` corners): the step runs over the
 /// leaf positions `k`, writing the box of face `prim_ids[k]` at position `k` (for a refit with
 /// [`RefitCheck::by_position`]) and its corners at `3k..3k + 3`
-/// (`warp_core::objects::mesh::leaf_triangles`; NaN for a face with an index outside the
+/// (`bvh_build::leaf_triangles`; NaN for a face with an index outside the
 /// points): the gather the walks need, fused into the step that reads the vertices anyway. A capture records the step, keeping `uses()`.
 pub(crate) fn triangle_boxes(
     points: &Array<Vec3>,
@@ -422,7 +422,7 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
         if let Some(ids) = ids {
             // SAFETY: `3n` corners the caller owns.
             let out = unsafe { std::slice::from_raw_parts_mut(self.leaf_tris as *mut Vec4, 3 * n) };
-            super::bvh::write_leaf_triangles_par(out, ids, ix, points);
+            bvh_build::write_leaf_triangles_par(out, ids, ix, points);
         }
         Ok(())
     }
@@ -946,10 +946,15 @@ mod tests {
     /// A mesh's refit as the runtime queues it: the triangle boxes' step in leaf order (boxes
     /// by position, the corners' copy) and a refit reading the boxes by position gives the
     /// same nodes, bit for bit, as boxes by face and a refit by primitive (the same unions of
-    /// the same boxes), and the copy is warp-core's `leaf_triangles`. On the CPU, and on
+    /// the same boxes), and the copy is `bvh_build::leaf_triangles`. On the CPU, and on
     /// `cuda:0` when there is one (the kernels).
     #[test]
     fn a_mesh_refit_in_leaf_order_gives_the_same_tree() {
+        static MESH_NAMES: KernelInfo = KernelInfo {
+            name: "Mesh::refit",
+            params: &["points"],
+            ..KernelInfo::BLANK
+        };
         let mut devices = vec![crate::device::get_device("cpu").unwrap()];
         devices.extend(crate::device::get_device("cuda:0").ok());
         for dev in devices {
@@ -994,7 +999,7 @@ mod tests {
                 sources: [Some(&points2), None],
                 check_boxes: false,
                 by_position: true,
-                names: &super::super::bvh::MESH_REFIT,
+                names: &MESH_NAMES,
             };
             triangle_boxes(
                 &points2,
@@ -1011,7 +1016,7 @@ mod tests {
             let host_ids = ids.to_vec().unwrap();
             assert_eq!(
                 tris.to_vec().unwrap(),
-                warp_core::objects::mesh::leaf_triangles(&host_ids, &ix, &moved),
+                bvh_build::leaf_triangles(&host_ids, &ix, &moved),
                 "{}",
                 dev.alias()
             );

@@ -516,7 +516,7 @@ mod tests {
         assert_eq!((e.num_faces(), e.num_points()), (0, 0));
     }
 
-    /// The leaf-ordered triangles the walks read are warp-core's `leaf_triangles` of the
+    /// The leaf-ordered triangles the walks read are `bvh_build::leaf_triangles` of the
     /// tree's ids, the indices and the points of the last build or refit, bit for bit
     /// (compared exactly: a copy, no arithmetic): unchanged by moving the points until the
     /// refit, and a clone made before a refit keeps its own. On the CPU, and on `cuda:0`
@@ -540,7 +540,7 @@ mod tests {
                 let mut sorted = ids.clone();
                 sorted.sort_unstable();
                 assert_eq!(sorted, (0..30).collect::<Vec<_>>());
-                warp_core::objects::mesh::leaf_triangles(&ids, &faces, points)
+                super::super::bvh_build::leaf_triangles(&ids, &faces, points)
             };
             assert_eq!(got(&m), want(&m, &p0), "{}: build", dev.alias());
             let before = m.clone();
