@@ -555,6 +555,16 @@ mod tests {
                 "{}: the clone",
                 dev.alias()
             );
+            // The empty mesh: an empty copy, through a shared tree's refit too.
+            let mut e = Mesh::new(
+                &Array::<Vec3>::empty(0, &dev).unwrap(),
+                &Array::<i32>::empty(0, &dev).unwrap(),
+                None,
+            )
+            .unwrap();
+            let shared = e.clone();
+            e.refit().unwrap();
+            assert!(got(&e).is_empty() && got(&shared).is_empty());
         }
     }
 }
