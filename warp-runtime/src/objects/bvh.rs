@@ -343,7 +343,7 @@ impl Tree {
         Ok(())
     }
 
-    /// A mesh's tree's leaf-ordered triangles (empty for a BVH's tree, which has none).
+    /// A mesh's tree's leaf-ordered triangles (`None` for a BVH's tree).
     pub(crate) fn leaf_triangles(&self) -> Option<&Array<Vec4>> {
         self.leaf_tris.as_ref()
     }
@@ -487,6 +487,8 @@ impl Tree {
                     // The walks' copy of the triangles, in leaf order, from the checked
                     // indices and points.
                     if tris != 0 && num_prims > 0 {
+                        // SAFETY: the tree's ids and its `3 * num_prims` corners (see above:
+                        // alive for every run, written only by this operation).
                         let (ids, out) = unsafe {
                             (
                                 std::slice::from_raw_parts(ids as *const i32, num_prims),
