@@ -25,7 +25,7 @@
 use std::fmt::Write as _;
 use std::process::Command;
 
-use warp_core::glam::Vec3;
+use warp_core::glam::{Vec3, Vec4};
 use warp_core::objects::bvh::{
     bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,
     bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, BvhNode, BvhQueryAabb, BvhQueryRay,
@@ -47,7 +47,7 @@ use warp_core::objects::mesh::{
     mesh_query_ray, MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView, PARITY_DIR,
 };
 use warp_core::{Fault, FaultKind, KResult};
-use warp_runtime::objects::bvh_build::{build_sah, check_layout};
+use warp_runtime::objects::bvh_build::{build_sah, check_layout, leaf_triangles};
 
 #[path = "common/host_cpp.rs"]
 mod host_cpp;
@@ -90,6 +90,7 @@ static bool pfault(const ctx_t& c) {
 static std::vector<bvh_node_t> nodes;
 static std::vector<i32> parents, prim_ids, indices;
 static std::vector<Vec3> lowers, uppers, points, velocities;
+static std::vector<f32> leaf_tris;
 static bvh_tree_t read_tree() {
   const i32 nn = wi();
   nodes.resize(nn);
@@ -225,6 +226,9 @@ int main(int argc, char** argv) {
         for (size_t i = 0; i < velocities.size(); ++i) velocities[i] = wv();
         indices.resize(3 * (size_t)mesh.tree.num_prims);
         for (size_t i = 0; i < indices.size(); ++i) indices[i] = wi();
+        leaf_tris.resize(12 * (size_t)mesh.tree.num_prims);
+        for (size_t i = 0; i < leaf_tris.size(); ++i) leaf_tris[i] = wf();
+        mesh.leaf_tris = leaf_tris.data();
         mesh.points = points.data();
         mesh.velocities = has_vel ? velocities.data() : nullptr;
         mesh.indices = indices.data();
@@ -1002,6 +1006,9 @@ struct Mesh {
     velocities: Option<Vec<Vec3>>,
     indices: Vec<i32>,
     tree: Tree,
+    /// The triangles in leaf order (`leaf_triangles`), as a build or refit writes them; NaN
+    /// corners for a corrupt mesh's bad ids and indices. Remade by `soup` after a change.
+    leaf_tris: Vec<Vec4>,
 }
 
 impl Mesh {
@@ -1018,12 +1025,19 @@ impl Mesh {
                 .map(|p| Vec3::new(p.y, -p.x, 2.0 * p.z))
                 .collect()
         });
-        Mesh {
+        let mut m = Mesh {
             tree: Tree::sah(&lo, &hi),
             points,
             velocities,
             indices,
-        }
+            leaf_tris: Vec::new(),
+        };
+        m.soup();
+        m
+    }
+    /// Remakes the leaf-ordered triangles from the tree, indices and points.
+    fn soup(&mut self) {
+        self.leaf_tris = leaf_triangles(&self.tree.prim_ids, &self.indices, &self.points);
     }
     fn view(&self) -> MeshView {
         let vel = self
@@ -1039,6 +1053,7 @@ impl Mesh {
                 vel,
                 self.points.len() as i32,
                 self.indices.as_ptr(),
+                self.leaf_tris.as_ptr(),
             )
         }
     }
@@ -1062,6 +1077,12 @@ impl Mesh {
         }
         for i in &self.indices {
             c.i(*i);
+        }
+        assert_eq!(self.leaf_tris.len(), self.indices.len());
+        for t in &self.leaf_tris {
+            for x in t.to_array() {
+                c.f(x);
+            }
         }
         c.expect("mesh".into());
     }
@@ -1426,6 +1447,7 @@ fn mesh_cases(c: &mut Cases) {
         })
         .unzip();
     deep.tree = caterpillar(&lo, &hi);
+    deep.soup();
     meshes.push(("deep strip".into(), deep, 1.3));
     for (name, m, scale) in &meshes {
         c.label = format!("mesh {name}");
@@ -1443,6 +1465,7 @@ fn mesh_cases(c: &mut Cases) {
             velocities: base.velocities.clone(),
             indices: base.indices.clone(),
             tree: base.tree.clone(),
+            leaf_tris: Vec::new(),
         };
         if k % 2 == 0 {
             let i = rng.below(m.indices.len());
@@ -1454,6 +1477,10 @@ fn mesh_cases(c: &mut Cases) {
         } else {
             m.tree = corrupt(&m.tree, &mut rng);
         }
+        // As a refit would write it (the runtime refuses a bad index at a CPU refit; a GPU's
+        // writes NaN corners): the walks read the copy, the box query and evaluations the
+        // indices.
+        m.soup();
         m.load(c);
         mesh_queries(c, &m, &mut rng, 12, 1.0);
     }

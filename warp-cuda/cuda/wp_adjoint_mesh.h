@@ -85,8 +85,7 @@ WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_
   if (!detail::mesh_closest_search(mesh, point, max_dist, &c, ctx)) return;
   const triangle_closest_point_t g = detail::tri_cp(adj_ret.u, adj_ret.v, 0.0f, TRI_FEATURE_FACE);
   Vec3 t[3];
-  detail::mesh_triangle(mesh, (i64)c.face, t, ctx);
-  if (faulted(ctx)) return;
+  detail::mesh_leaf_triangle(mesh, c.at, t);
   Vec3 x = Vec3_ZERO(), y = Vec3_ZERO(), z = Vec3_ZERO();
   adj_closest_point_triangle(t[0], t[1], t[2], c.p, x, y, z, adj_point, g);
 }

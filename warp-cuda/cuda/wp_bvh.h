@@ -291,7 +291,8 @@ WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_
 WP_FN f32 bvh_key(f32 k) { return k < f32_inf() ? k : f32_inf(); }
 
 /// ordered_children: the children of internal node n nearest first (ties to the left), with
-/// their keys and nodes. S: node_key(lower, upper) -> f32, bound() -> f32, visit(id, ctx).
+/// their keys and nodes. S: node_key(lower, upper) -> f32, bound() -> f32, visit(k, ctx) with
+/// k a position in prim_ids within a leaf's checked range.
 template <typename S>
 WP_FN void bvh_ordered_children(const bvh_tree_t& t, const S& s, const bvh_node_t& n, i32* a,
                                 f32* ka, bvh_node_t* an, i32* b, f32* kb, bvh_node_t* bn,
@@ -339,10 +340,10 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
       i32 start, end;
       bvh_leaf_range(t, node, &start, &end, ctx);
       if (faulted(ctx)) return;
+      // visit takes the position in prim_ids (inside the range just checked); a search
+      // reads the id (bvh_prim, checked) only where it needs it.
       for (i32 k = start; k < end; ++k) {
-        const i32 id = bvh_prim(t, k, ctx);
-        if (faulted(ctx)) return;
-        s.visit(id, ctx);
+        s.visit(k, ctx);
         if (faulted(ctx)) return;
       }
     } else {

@@ -90,7 +90,9 @@ static_assert(sizeof(lbvh_hierarchy_t) == 56, "lbvh_hierarchy_t layout");
 /// bad[0], of an upper one bad[1] (an earlier step may have lowered them too); the thread that
 /// writes the root resets both and reports the first word that is set as a fault of argument
 /// 0 or 1, with the element of `sources[0]` or `sources[1]` (Vec3*) at that index; `fault`
-/// is the fault context.
+/// is the fault context. `check` bit 0: check the boxes; bit 1: the boxes are by leaf
+/// position (box k is that of prim_ids[k], as the triangle boxes' step writes them in leaf
+/// order), else by primitive.
 struct lbvh_refit_t {
   u64 lowers;
   u64 uppers;
@@ -119,7 +121,12 @@ static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
 /// triangle) into lowers and uppers; the smallest position of an index outside the points
 /// into *bad (i32, atomically lowered; `bad` 0: not recorded, for indices checked before),
 /// whose triangle gets an empty box and reads no point; the smallest index of a point with a
-/// NaN or infinite coordinate into *bad_point (i32, likewise; 0: not checked).
+/// NaN or infinite coordinate into *bad_point (i32, likewise; 0: not checked). With leaf_tris
+/// (f32*, 12 per triangle, 16-aligned; 0: none) and a built tree's prim_ids (i32*, n): the
+/// step runs over the leaf positions k, writing the box of face prim_ids[k] at position k (for
+/// a refit whose boxes are by position, check bit 1) and that face's corners {x, y, z, 0} at leaf_tris[12k..12k + 12] (NaN corners for a face
+/// with an index outside the points, or an id outside [0, n)): a mesh's leaf-ordered
+/// triangles (warp_core's leaf_triangles), gathered where the vertices are read anyway.
 struct lbvh_triangle_boxes_t {
   u64 points;
   u64 indices;
@@ -129,8 +136,10 @@ struct lbvh_triangle_boxes_t {
   i64 n;
   i64 num_points;
   u64 bad_point;
+  u64 prim_ids;
+  u64 leaf_tris;
 };
-static_assert(sizeof(lbvh_triangle_boxes_t) == 64, "lbvh_triangle_boxes_t layout");
+static_assert(sizeof(lbvh_triangle_boxes_t) == 80, "lbvh_triangle_boxes_t layout");
 
 /// Whether every coordinate of `v` is finite (x - x is 0 exactly when x is finite).
 WP_FN bool lbvh_finite(const Vec3& v) {
@@ -353,10 +362,11 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
   wp::i32* bad = (wp::i32*)s.bad;
   WP_LBVH_LOOP(k, s.n) {
     const wp::i64 leaf = s.n - 1 + k;
-    const wp::i32 p = prim_ids[k];
+    const bool by_position = (s.check & 2) != 0;
+    const wp::i32 p = by_position ? (wp::i32)k : prim_ids[k];
     const wp::Vec3 l = lo[p], h = hi[p];
     // Every primitive is one leaf's: checked once, before this thread arrives anywhere.
-    if (s.check != 0) {
+    if ((s.check & 1) != 0) {
       if (!wp::lbvh_finite(l)) atomicMin(&bad[0], p);
       if (!wp::lbvh_finite(h)) atomicMin(&bad[1], p);
     }
@@ -376,11 +386,11 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
       float3 bl, bu;
       if (left < 0) {
         // A leaf over several primitives (leaf_size > 1): the union of their boxes.
-        wp::i32 q = prim_ids[~left];
+        wp::i32 q = by_position ? ~left : prim_ids[~left];
         bl = make_float3(lo[q].x, lo[q].y, lo[q].z);
         bu = make_float3(hi[q].x, hi[q].y, hi[q].z);
         for (wp::i32 j = ~left + 1; j < right; ++j) {
-          q = prim_ids[j];
+          q = by_position ? j : prim_ids[j];
           bl = make_float3(fminf(bl.x, lo[q].x), fminf(bl.y, lo[q].y), fminf(bl.z, lo[q].z));
           bu = make_float3(fmaxf(bu.x, hi[q].x), fmaxf(bu.y, hi[q].y), fmaxf(bu.z, hi[q].z));
         }
@@ -416,7 +426,21 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
   const wp::i32* ix = (const wp::i32*)s.indices;
   wp::Vec3* lo = (wp::Vec3*)s.lowers;
   wp::Vec3* hi = (wp::Vec3*)s.uppers;
-  WP_LBVH_LOOP(f, s.n) {
+  const wp::i32* ids = (const wp::i32*)s.prim_ids;
+  float4* tris = (float4*)s.leaf_tris;
+  WP_LBVH_LOOP(i, s.n) {
+    // Face order, or leaf order (position i holds face ids[i]) with the corners' copy; the
+    // box goes to index i either way (by face, or by position for a refit that reads them so).
+    const wp::i64 f = tris != nullptr ? (wp::i64)ids[i] : i;
+    const float4 nan4 = make_float4(__int_as_float(0x7fc00000), __int_as_float(0x7fc00000),
+                                    __int_as_float(0x7fc00000), 0.0f);
+    if (f < 0 || f >= s.n) {
+      // Only a corrupt tree's id: an empty box, NaN corners.
+      lo[i] = wp::Vec3_new(0.0f, 0.0f, 0.0f);
+      hi[i] = lo[i];
+      for (int j = 0; j < 3; ++j) tris[3 * i + j] = nan4;
+      continue;
+    }
     bool in_range = true;
     for (int k = 0; k < 3; ++k) {
       const wp::i32 v = ix[3 * f + k];
@@ -426,15 +450,22 @@ extern "C" __global__ void wp_lbvh_triangle_boxes(wp::lbvh_triangle_boxes_t s) {
       }
     }
     if (!in_range) {
-      lo[f] = wp::Vec3_new(0.0f, 0.0f, 0.0f);
-      hi[f] = lo[f];
+      lo[i] = wp::Vec3_new(0.0f, 0.0f, 0.0f);
+      hi[i] = lo[i];
+      if (tris != nullptr)
+        for (int j = 0; j < 3; ++j) tris[3 * i + j] = nan4;
       continue;
     }
     const wp::Vec3 a = p[ix[3 * f]], b = p[ix[3 * f + 1]], c = p[ix[3 * f + 2]];
+    if (tris != nullptr) {
+      tris[3 * i] = make_float4(a.x, a.y, a.z, 0.0f);
+      tris[3 * i + 1] = make_float4(b.x, b.y, b.z, 0.0f);
+      tris[3 * i + 2] = make_float4(c.x, c.y, c.z, 0.0f);
+    }
     // Finite points (checked, here or by the caller): fminf/fmaxf are the CPU's f32::min/max.
-    lo[f] = wp::Vec3_new(fminf(fminf(a.x, b.x), c.x), fminf(fminf(a.y, b.y), c.y),
+    lo[i] = wp::Vec3_new(fminf(fminf(a.x, b.x), c.x), fminf(fminf(a.y, b.y), c.y),
                          fminf(fminf(a.z, b.z), c.z));
-    hi[f] = wp::Vec3_new(fmaxf(fmaxf(a.x, b.x), c.x), fmaxf(fmaxf(a.y, b.y), c.y),
+    hi[i] = wp::Vec3_new(fmaxf(fmaxf(a.x, b.x), c.x), fmaxf(fmaxf(a.y, b.y), c.y),
                          fmaxf(fmaxf(a.z, b.z), c.z));
   }
   if (s.bad_point != 0) {

@@ -10,6 +10,15 @@
 // and vertex pseudonormals share one touching walk (mesh_feature_normal) where the Rust has
 // two functions.
 //
+// The walks (closest, furthest, ray, parity, touching) read each triangle from the mesh's
+// leaf-ordered copy (`leaf_tris`, warp_core's leaf_triangles: the corners of face
+// prim_ids[k] at positions 3k..3k+3, written at build and refit from the points then): three
+// 16-byte loads at the leaf position k, instead of the dependent chain prim_ids[k] ->
+// indices[3 * id + j] -> points[i] with its checks. They keep k and map only their result to
+// a face (prim_ids[k], checked) at the end. k lies in a leaf's range, which the walk checked
+// against prim_ids, so the copy's reads are in bounds without a check of their own; the box
+// query and mesh_eval_* read the user's indices and points, checked as before.
+//
 //   mesh_t                                       a Mesh kernel parameter (warp_runtime's CudaMesh)
 //   mesh_query_point_t                           MeshQueryPoint (result, sign, face, u, v)
 //   mesh_query_ray_t                             MeshQueryRay (result, sign, face, t, u, v, normal)
@@ -38,7 +47,7 @@
 //
 // Kernel-argument layout (align 8; warp_runtime's #[repr(C)] CudaMesh must match):
 //
-//   mesh_t, 72 bytes:
+//   mesh_t, 80 bytes:
 //      0 nodes      (const bvh_node_t*)     -+
 //      8 parents    (const i32*)             |  a bvh_tree_t over the triangles (see wp_bvh.h):
 //     16 prim_ids   (const i32*)             |  primitive ids are face indices;
@@ -51,12 +60,14 @@
 //     56 indices    (const i32*, 3 * num_prims entries)
 //     64 num_points (i32)
 //     68 pad        (i32, 0)
+//     72 leaf_tris  (const f32*, 12 * num_prims entries, 16-byte aligned: per leaf position
+//                    three corners {x, y, z, 0})
 #pragma once
 #include "wp_bvh.h"
 
 namespace wp {
 
-/// A Mesh kernel parameter (72 bytes, see the top).
+/// A Mesh kernel parameter (80 bytes, see the top).
 struct mesh_t {
   bvh_tree_t tree;
   const Vec3* points;
@@ -64,9 +75,10 @@ struct mesh_t {
   const i32* indices;
   i32 num_points;
   i32 pad;
+  const f32* leaf_tris;
   typedef void wp_object_tag;
 };
-static_assert(sizeof(mesh_t) == 72 && alignof(mesh_t) == 8, "mesh_t layout");
+static_assert(sizeof(mesh_t) == 80 && alignof(mesh_t) == 8, "mesh_t layout");
 
 /// MeshQueryPoint (20 bytes): 0 result (bool), 4 sign, 8 face, 12 u, 16 v.
 struct mesh_query_point_t {
@@ -156,6 +168,24 @@ WP_FN void mesh_triangle(const mesh_t& m, i64 f, Vec3* t, ctx_t* ctx) {
   for (int k = 0; k < 3; ++k) t[k] = m.points[ix[k]];
 }
 
+/// MeshView::leaf_triangle: the triangle at position k of prim_ids, from the leaf-ordered
+/// copy. k is a position inside a leaf's range, checked by the walk (the Rust's check of k
+/// never fails there): no check here.
+WP_FN void mesh_leaf_triangle(const mesh_t& m, i32 k, Vec3* t) {
+#if defined(__CUDACC__)
+  // Three 16-byte read-only loads (the runtime allocates the copy 16-byte aligned), issued
+  // together: the whole dependent chain of a triangle read is this one step.
+  const float4* q = reinterpret_cast<const float4*>(m.leaf_tris) + 3 * (i64)k;
+  const float4 a = __ldg(q), b = __ldg(q + 1), c = __ldg(q + 2);
+  t[0] = Vec3_new(a.x, a.y, a.z);
+  t[1] = Vec3_new(b.x, b.y, b.z);
+  t[2] = Vec3_new(c.x, c.y, c.z);
+#else
+  const f32* q = m.leaf_tris + 12 * (i64)k;
+  for (int j = 0; j < 3; ++j) t[j] = Vec3_new(q[4 * j], q[4 * j + 1], q[4 * j + 2]);
+#endif
+}
+
 /// MeshView::measure_scale: the root box's farthest extent from p, as a power of two.
 WP_FN f32 mesh_measure_scale(const mesh_t& m, Vec3 p, ctx_t* ctx) {
   const bvh_node_t root = bvh_node(m.tree, 0, ctx);
@@ -198,10 +228,11 @@ struct mesh_touching_t {
     return aabb_overlap(lower, upper, lo, hi) ? 0.0f : f32_inf();
   }
   WP_FN f32 bound() const { return 1.0f; }
-  WP_FN void visit(i32 id, ctx_t* ctx) {
+  WP_FN void visit(i32 k, ctx_t* ctx) {
+    (void)ctx;
     Vec3 t[3];
-    mesh_triangle(*mesh, (i64)id, t, ctx);
-    if (!faulted(ctx)) (*f)(t);
+    mesh_leaf_triangle(*mesh, k, t);
+    (*f)(t);
   }
 };
 
@@ -256,15 +287,17 @@ WP_FN Vec3 mesh_feature_normal(const mesh_t& m, Vec3 x, Vec3 y, bool vertex, ctx
 }
 
 /// The closest-point search (Closest): squared distances in units of 1 / s. During the walk
-/// it keeps only the best distance and face (the Rust keeps the face's vertices and closest
-/// point too): fewer registers live across the walk, whose loads are what the query waits
-/// on. mesh_closest recomputes the winning face's closest point once afterwards, from the
-/// same vertices and s by the same code, so the same bits as the visit that chose it.
+/// it keeps only the best distance and the best triangle's leaf position `at` (the Rust keeps
+/// the triangle and its closest point too): fewer registers live across the walk, whose
+/// loads are what the query waits on. mesh_closest_search maps `at` to the face (prim_ids,
+/// checked) after the walk; mesh_closest recomputes the winning triangle's closest point once,
+/// from the same vertices and s by the same code, so the same bits as the visit that chose it.
 struct mesh_closest_t {
   const mesh_t* mesh;
   Vec3 p;
   f32 s;
   f32 best;
+  i32 at;
   i32 face;
   WP_FN f32 node_key(Vec3 lower, Vec3 upper) const {
     return aabb_distance_sq_scaled(p, lower, upper, s);
@@ -273,10 +306,10 @@ struct mesh_closest_t {
   /// Closest::visit: a face whose own box is no nearer than the best is skipped (see the Rust
   /// for why that is exact up to ties within rounding); the closest point is computed in the
   /// search's unit s and the distance from the scaled edges.
-  WP_FN void visit(i32 id, ctx_t* ctx) {
+  WP_FN void visit(i32 k, ctx_t* ctx) {
+    (void)ctx;
     Vec3 t[3];
-    mesh_triangle(*mesh, (i64)id, t, ctx);
-    if (faulted(ctx)) return;
+    mesh_leaf_triangle(*mesh, k, t);
     const Vec3 a = t[0], b = t[1], c = t[2];
     const Vec3 lower = Vec3_new(::fminf(::fminf(a.x, b.x), c.x), ::fminf(::fminf(a.y, b.y), c.y),
                                 ::fminf(::fminf(a.z, b.z), c.z));
@@ -288,13 +321,13 @@ struct mesh_closest_t {
     const f32 d = g_len_sq((ab * r.v + ac * r.w) - ap);
     if (d < best) {
       best = d;
-      face = id;
+      at = k;
     }
   }
 };
 
 /// closest(): the search run; false (None) when nothing lies within max_dist or on a fault.
-/// On true, c->face is the closest face.
+/// On true, c->at is the closest triangle's leaf position and c->face its face.
 WP_FN bool mesh_closest_search(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c,
                                ctx_t* ctx) {
   if (!(max_dist > 0.0f)) return false;
@@ -305,27 +338,29 @@ WP_FN bool mesh_closest_search(const mesh_t& m, Vec3 p, f32 max_dist, mesh_close
   c->p = p;
   c->s = s;
   c->best = bound * bound;
+  c->at = -1;
   c->face = -1;
   bvh_walk_ordered(m.tree, *c, ctx);
-  if (faulted(ctx)) return false;
-  return c->face >= 0;
+  if (faulted(ctx) || c->at < 0) return false;
+  c->face = bvh_prim(m.tree, c->at, ctx);
+  return !faulted(ctx);
 }
 
-/// mesh_closest_search, then the closest point on the face found (*bary) and its vertices
-/// (tri[0..3]): Closest::visit's computation repeated on the face the walk chose, from the
-/// same vertices and s (its index was checked by the walk, so the second read cannot fault).
+/// mesh_closest_search, then the closest point on the triangle found (*bary) and its
+/// vertices (tri[0..3]): Closest::visit's computation repeated on the triangle the walk
+/// chose, read again at its leaf position, from the same vertices and s.
 WP_FN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c, Vec3* tri,
                         triangle_closest_point_t* bary, ctx_t* ctx) {
   if (!mesh_closest_search(m, p, max_dist, c, ctx)) return false;
-  mesh_triangle(m, (i64)c->face, tri, ctx);
-  if (faulted(ctx)) return false;
+  mesh_leaf_triangle(m, c->at, tri);
   const Vec3 a = tri[0];
   const f32 s = c->s;
   *bary = closest_point_triangle_scaled((tri[1] - a) * s, (tri[2] - a) * s, (p - a) * s);
   return true;
 }
 
-/// The furthest-point search (Furthest): negated squared distances (the walk minimises).
+/// The furthest-point search (Furthest): negated squared distances (the walk minimises);
+/// `face` is the best triangle's leaf position during the walk, mapped to its face after.
 struct mesh_furthest_t {
   const mesh_t* mesh;
   Vec3 p;
@@ -339,10 +374,10 @@ struct mesh_furthest_t {
     return -g_len_sq(g_vmax(g_abs(ps - lo), g_abs(ps - hi)));
   }
   WP_FN f32 bound() const { return -best; }
-  WP_FN void visit(i32 id, ctx_t* ctx) {
+  WP_FN void visit(i32 k, ctx_t* ctx) {
+    (void)ctx;
     Vec3 t[3];
-    mesh_triangle(*mesh, (i64)id, t, ctx);
-    if (faulted(ctx)) return;
+    mesh_leaf_triangle(*mesh, k, t);
     const f32 da = g_len_sq((t[0] - p) * s), db = g_len_sq((t[1] - p) * s),
               dc = g_len_sq((t[2] - p) * s);
     f32 dist, uu, vv;
@@ -355,7 +390,7 @@ struct mesh_furthest_t {
     }
     if (dist > best) {
       best = dist;
-      face = id;
+      face = k;
       u = uu;
       v = vv;
     }
@@ -366,7 +401,8 @@ struct mesh_furthest_t {
 /// makes it once per ray too), boxes are tested by the branch-free slab test when no
 /// component of inv_dir is infinite (intersect_ray_aabb otherwise: the same keys), and a
 /// face's barycentrics are divided out only for a hit nearer than the bound (the Rust's
-/// order too).
+/// order too). best.face is the hit triangle's leaf position during the walk, mapped to its
+/// face after.
 struct mesh_closest_hit_t {
   const mesh_t* mesh;
   Vec3 start;
@@ -383,16 +419,16 @@ struct mesh_closest_hit_t {
     return hit ? t : f32_inf();
   }
   WP_FN f32 bound() const { return best.result ? best.t : max_t; }
-  WP_FN void visit(i32 id, ctx_t* ctx) {
+  WP_FN void visit(i32 k, ctx_t* ctx) {
+    (void)ctx;
     Vec3 t[3];
-    mesh_triangle(*mesh, (i64)id, t, ctx);
-    if (faulted(ctx)) return;
+    mesh_leaf_triangle(*mesh, k, t);
     const ray_triangle_candidate_t h =
         intersect_ray_triangle_in_frame(frame, start, dir, t[0], t[1], t[2]);
     if (h.result && h.t < bound()) {
       best.result = true;
       best.sign = h.sign;
-      best.face = id;
+      best.face = k;
       best.t = h.t;
       best.u = (f32)(h.uu / h.det);
       best.v = (f32)(h.vv / h.det);
@@ -515,10 +551,10 @@ struct mesh_crossings_t {
     return mesh_ray_may_meet_box(start, inv_dir, lower, upper) ? 0.0f : f32_inf();
   }
   WP_FN f32 bound() const { return f32_inf(); }
-  WP_FN void visit(i32 id, ctx_t* ctx) {
+  WP_FN void visit(i32 k, ctx_t* ctx) {
+    (void)ctx;
     Vec3 t[3];
-    mesh_triangle(*mesh, (i64)id, t, ctx);
-    if (faulted(ctx)) return;
+    mesh_leaf_triangle(*mesh, k, t);
     if (ray_crosses_triangle_in_frame(frame, start, mesh_parity_dir(), t[0], t[1], t[2])) odd = !odd;
   }
 };
@@ -570,10 +606,12 @@ WP_FN mesh_query_point_t mesh_query_furthest_point_no_sign(const mesh_t& mesh, V
   f.v = 0.0f;
   bvh_walk_ordered(mesh.tree, f, ctx);
   if (faulted(ctx) || f.face < 0) return mesh_point_none();
+  const i32 face = bvh_prim(mesh.tree, f.face, ctx);
+  if (faulted(ctx)) return mesh_point_none();
   mesh_query_point_t r;
   r.result = true;
   r.sign = 0.0f;
-  r.face = f.face;
+  r.face = face;
   r.u = f.u;
   r.v = f.v;
   return r;
@@ -601,10 +639,12 @@ WP_FN mesh_query_ray_t mesh_query_ray(const mesh_t& mesh, Vec3 start, Vec3 dir, 
   if (faulted(ctx)) return mesh_ray_none();
   mesh_query_ray_t r = h.best;
   if (r.result) {
+    // The normal of the triangle hit (the leaf-ordered copy's), then its face.
     Vec3 t[3];
-    mesh_triangle(mesh, (i64)r.face, t, ctx);
-    if (faulted(ctx)) return mesh_ray_none();
+    mesh_leaf_triangle(mesh, r.face, t);
     r.normal = mesh_face_normal(t[0], t[1], t[2]);
+    r.face = bvh_prim(mesh.tree, r.face, ctx);
+    if (faulted(ctx)) return mesh_ray_none();
   }
   return r;
 }

@@ -687,8 +687,12 @@ pub(crate) trait OrderedSearch {
     /// The best cost so far: a box is entered only when its key is strictly below it. It
     /// never rises during a walk (the walk relies on it: see [`walk_ordered`]).
     fn bound(&self) -> f32;
-    /// Tests primitive `id` (lowering the bound when it improves on it).
-    fn visit(&mut self, id: i32) -> KResult<()>;
+    /// Tests the primitive at position `k` of the tree's `prim_ids` (lowering the bound when
+    /// it improves on it). `k` lies in the leaf's range, which the walk checked to be within
+    /// `[0, num_prims)`; the primitive's id is `tree.prim(k)` (checked), which a search reads
+    /// only where it needs it (a mesh's searches read the triangle at `k` from the mesh's
+    /// leaf-ordered copy and map only their result to a face).
+    fn visit(&mut self, k: i32) -> KResult<()>;
 }
 
 /// A key with NaN mapped to +inf, so that keys are totally ordered.
@@ -756,7 +760,7 @@ pub(crate) fn walk_ordered<S: OrderedSearch>(tree: &BvhTree, s: &mut S) -> KResu
         if node.is_leaf() {
             let (start, end) = tree.leaf_range(&node)?;
             for k in start..end {
-                s.visit(tree.prim(k)?)?;
+                s.visit(k)?;
             }
         } else {
             // ka <= kb (keys are totally ordered, NaN counting as +inf): when the nearer
@@ -1118,7 +1122,8 @@ pub(crate) mod tests {
         fn bound(&self) -> f32 {
             self.best
         }
-        fn visit(&mut self, id: i32) -> KResult<()> {
+        fn visit(&mut self, k: i32) -> KResult<()> {
+            let id = self.b.prim_ids[k as usize];
             self.seen.push(id);
             let (lo, hi) = (self.b.lowers[id as usize], self.b.uppers[id as usize]);
             let d = self.node_key(lo, hi);
@@ -1136,7 +1141,7 @@ pub(crate) mod tests {
         if n.is_leaf() {
             let (start, end) = n.leaf_range();
             for k in start..end {
-                r.visit(b.prim_ids[k as usize]).unwrap();
+                r.visit(k).unwrap();
             }
             return;
         }

@@ -57,17 +57,27 @@
 //! point in its own unit (`Closest::visit`): the same bits, but for a face and a query point
 //! both within about 1e-10 of the root box's extent around the point.
 //!
+//! # The triangles the walks read
+//!
+//! The closest-point, furthest-point, ray and parity queries (and the sign's walk around an
+//! edge or a vertex) read each triangle from the mesh's leaf-ordered copy
+//! ([`write_leaf_triangles`]) at its position in the tree's `prim_ids`, and map only their result
+//! to a face (`prim_ids`, checked). The runtime writes that copy at the build and every
+//! refit, so these queries see the vertices as of then (as the tree's boxes); the box query
+//! and the `mesh_eval_*` functions read `indices` and `points` as they are.
+//!
 //! # Safety
 //!
 //! Every index read from the buffers is checked (a face, a vertex index, and the tree's, see
-//! [`super::bvh`]): a corrupt mesh is a fault naming its kernel parameter, never undefined
-//! behaviour; traversals are bounded.
+//! [`super::bvh`]; a leaf position, which the walks take from a checked leaf range): a
+//! corrupt mesh is a fault naming its kernel parameter, never undefined behaviour;
+//! traversals are bounded.
 
 // `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
 // rejecting branch, on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 use super::bvh::{walk_ordered, BvhTree, OrderedSearch, Walk};
 use super::geometry::{
@@ -79,8 +89,9 @@ use super::geometry::{
 use crate::{ArrayView, KResult, KernelIndex};
 
 /// A built mesh as a kernel thread sees it: the BVH over its triangles, the points, the
-/// optional velocities, the indices. `Copy`, owns nothing; 96 bytes (small on purpose: query
-/// steps take it by value, see `HashGridView`).
+/// optional velocities, the indices, and the triangles in leaf order (see
+/// [`write_leaf_triangles`]). `Copy`, owns nothing; 104 bytes (small on purpose: query steps take
+/// it by value, see `HashGridView`).
 #[derive(Clone, Copy, Debug)]
 pub struct MeshView {
     tree: BvhTree,
@@ -88,11 +99,41 @@ pub struct MeshView {
     /// Null when the mesh has no velocities.
     velocities: *const Vec3,
     indices: *const i32,
+    /// `3 * num_prims` corners: the triangle at position `k` of the tree's `prim_ids` is
+    /// `leaf_tris[3k..3k + 3]` (`w` unused).
+    leaf_tris: *const Vec4,
     num_points: i32,
 }
 
 #[cfg(target_pointer_width = "64")]
-const _: () = assert!(std::mem::size_of::<MeshView>() == 96);
+const _: () = assert!(std::mem::size_of::<MeshView>() == 104);
+
+/// Writes the triangles of a mesh in the order of its tree's leaves into `out` (what the
+/// closest-point, furthest-point, ray and parity walks read; `3 * prim_ids.len()` entries,
+/// extra entries left alone): entry `3k + j` is corner `j` of face
+/// `prim_ids[k]`, `points[indices[3 * prim_ids[k] + j]]`, with `w = 0`. The walks then read a
+/// leaf's triangles from consecutive memory at its positions, instead of the dependent chain
+/// `prim_ids -> indices -> points`. The runtime writes it at a mesh's build and at every
+/// refit, from the points as they are then (as it does the boxes). A face whose id or vertex
+/// index is out of range (only in a corrupt mesh: the runtime checks both) gets NaN
+/// corners, which no query reports (every comparison with NaN is false).
+pub fn write_leaf_triangles(out: &mut [Vec4], prim_ids: &[i32], indices: &[i32], points: &[Vec3]) {
+    let corner = |f: i32, j: usize| -> Option<Vec4> {
+        let f = usize::try_from(f).ok()?;
+        let i = *indices.get(3 * f + j)?;
+        Some(points.get(usize::try_from(i).ok()?)?.extend(0.0))
+    };
+    for (t, &f) in out.chunks_exact_mut(3).zip(prim_ids) {
+        let c = [0, 1, 2].map(|j| corner(f, j));
+        let ok = c.iter().all(Option::is_some);
+        for (o, c) in t.iter_mut().zip(c) {
+            *o = match (ok, c) {
+                (true, Some(v)) => v,
+                _ => Vec4::new(f32::NAN, f32::NAN, f32::NAN, 0.0),
+            };
+        }
+    }
+}
 
 // SAFETY: read-only pointers into buffers the runtime keeps alive for the whole launch.
 unsafe impl Send for MeshView {}
@@ -115,7 +156,8 @@ fn contiguous<T: Copy>(v: &ArrayView<T, 1>, what: &str) -> *const T {
 
 impl MeshView {
     /// A view of a mesh: the BVH over its triangles (one primitive per triangle), its points,
-    /// optional velocities (one per point) and indices (three per triangle).
+    /// optional velocities (one per point), indices (three per triangle) and its triangles in
+    /// leaf order ([`write_leaf_triangles`] of the tree, three corners per triangle).
     ///
     /// Faults carry the names of `points` (the tree's are replaced: the mesh is one kernel
     /// parameter).
@@ -127,11 +169,18 @@ impl MeshView {
         points: ArrayView<Vec3, 1>,
         velocities: Option<ArrayView<Vec3, 1>>,
         indices: ArrayView<i32, 1>,
+        leaf_tris: ArrayView<Vec4, 1>,
     ) -> Self {
         assert!(
             indices.len() == 3 * tree.num_prims(),
             "mesh: {} indices for a tree of {} triangles",
             indices.len(),
+            tree.num_prims()
+        );
+        assert!(
+            leaf_tris.len() == 3 * tree.num_prims(),
+            "mesh: {} leaf-ordered corners for a tree of {} triangles",
+            leaf_tris.len(),
             tree.num_prims()
         );
         assert!(points.len() <= i32::MAX as usize);
@@ -149,6 +198,7 @@ impl MeshView {
             points: contiguous(&points, "mesh points"),
             velocities,
             indices: contiguous(&indices, "mesh indices"),
+            leaf_tris: contiguous(&leaf_tris, "mesh leaf triangles"),
             num_points: points.len() as i32,
         }
     }
@@ -156,14 +206,17 @@ impl MeshView {
     /// A view over raw buffers (`velocities` null for none).
     ///
     /// # Safety
-    /// `points` (and `velocities` unless null) must address `num_points` valid elements and
-    /// `indices` `3 * tree.num_prims()`, alive and unchanged while the view is used.
+    /// `points` (and `velocities` unless null) must address `num_points` valid elements,
+    /// `indices` `3 * tree.num_prims()` and `leaf_tris` `3 * tree.num_prims()` (the
+    /// triangles in leaf order, [`write_leaf_triangles`]), alive and unchanged while the view is
+    /// used.
     pub unsafe fn from_raw(
         tree: BvhTree,
         points: *const Vec3,
         velocities: *const Vec3,
         num_points: i32,
         indices: *const i32,
+        leaf_tris: *const Vec4,
     ) -> Self {
         assert!(num_points >= 0);
         MeshView {
@@ -171,6 +224,7 @@ impl MeshView {
             points,
             velocities,
             indices,
+            leaf_tris,
             num_points,
         }
     }
@@ -183,6 +237,7 @@ impl MeshView {
             points: std::ptr::NonNull::dangling().as_ptr(),
             velocities: std::ptr::null(),
             indices: std::ptr::NonNull::dangling().as_ptr(),
+            leaf_tris: std::ptr::NonNull::dangling().as_ptr(),
             num_points: 0,
         }
     }
@@ -233,6 +288,19 @@ impl MeshView {
         let ix = self.face_indices(f)?;
         // SAFETY: checked point indices.
         Ok(ix.map(|i| unsafe { self.points.add(i).read() }))
+    }
+
+    /// The triangle at position `k` of the tree's `prim_ids`, from the leaf-ordered copy
+    /// ([`write_leaf_triangles`]): the walks pass positions within a leaf's range, which they
+    /// checked against `prim_ids`; anything else is a fault (as a `prim_ids` position).
+    #[inline(always)]
+    fn leaf_triangle(&self, k: i32) -> KResult<[Vec3; 3]> {
+        if (k as u32) >= self.tree.num_prims() as u32 {
+            return Err(self.tree.fault(k as i128, self.tree.num_prims()));
+        }
+        let k = k as usize;
+        // SAFETY: 3k + 2 < 3 * num_prims, which `new` checked (`from_raw`'s contract).
+        Ok([0, 1, 2].map(|j| unsafe { self.leaf_tris.add(3 * k + j).read() }.truncate()))
     }
 
     /// The three vertex velocities of face `f`, or `None` without velocities.
@@ -292,7 +360,9 @@ pub struct MeshQueryRay {
     pub normal: Vec3,
 }
 
-/// The closest-point search: squared distances in units of `1 / s`.
+/// The closest-point search: squared distances in units of `1 / s`. During the walk `face`
+/// is the best triangle's position in `prim_ids` (the walk reads triangles by position);
+/// [`closest`] maps it to the face at the end.
 struct Closest<'a> {
     mesh: &'a MeshView,
     p: Vec3,
@@ -327,8 +397,8 @@ impl OrderedSearch for Closest<'_> {
     /// around the point, and there the error stays below the face's size. The distance is
     /// then taken from the translated, scaled edges already at hand.
     #[inline(always)]
-    fn visit(&mut self, id: i32) -> KResult<()> {
-        let [a, b, c] = self.mesh.triangle(id)?;
+    fn visit(&mut self, k: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.leaf_triangle(k)?;
         // Rust's f32::min/max (IEEE minNum/maxNum), as fminf/fmaxf on the GPU.
         let lower = Vec3::new(
             a.x.min(b.x).min(c.x),
@@ -349,7 +419,7 @@ impl OrderedSearch for Closest<'_> {
         let d = (ab * r.v + ac * r.w - ap).length_squared();
         if d < self.best {
             self.best = d;
-            self.face = id;
+            self.face = k;
             self.bary = r;
             self.tri = [a, b, c];
         }
@@ -375,7 +445,12 @@ fn closest(mesh: &MeshView, p: Vec3, max_dist: f32) -> KResult<Option<Closest<'_
         tri: [Vec3::ZERO; 3],
     };
     walk_ordered(&mesh.tree, &mut c)?;
-    Ok((c.face >= 0).then_some(c))
+    if c.face < 0 {
+        return Ok(None);
+    }
+    // The winning position's face (checked: a corrupt prim_ids faults here).
+    c.face = mesh.tree.prim(c.face)?;
+    Ok(Some(c))
 }
 
 /// The closest point of the mesh to `point` lying strictly within `max_dist`, without a sign
@@ -526,8 +601,8 @@ impl OrderedSearch for Crossings<'_> {
         f32::INFINITY
     }
     #[inline(always)]
-    fn visit(&mut self, id: i32) -> KResult<()> {
-        let [a, b, c] = self.mesh.triangle(id)?;
+    fn visit(&mut self, k: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.leaf_triangle(k)?;
         let crosses = self
             .frame
             .is_some_and(|fr| ray_crosses_triangle_in_frame(&fr, self.start, PARITY_DIR, a, b, c));
@@ -612,8 +687,8 @@ impl<F: FnMut([Vec3; 3])> OrderedSearch for Touching<'_, F> {
         1.0
     }
     #[inline(always)]
-    fn visit(&mut self, id: i32) -> KResult<()> {
-        (self.f)(self.mesh.triangle(id)?);
+    fn visit(&mut self, k: i32) -> KResult<()> {
+        (self.f)(self.mesh.leaf_triangle(k)?);
         Ok(())
     }
 }
@@ -672,9 +747,11 @@ impl OrderedSearch for Furthest<'_> {
     fn bound(&self) -> f32 {
         -self.best
     }
+    /// `face` is the best triangle's position in `prim_ids` during the walk (mapped to the
+    /// face at the end, as [`Closest`]).
     #[inline(always)]
-    fn visit(&mut self, id: i32) -> KResult<()> {
-        let [a, b, c] = self.mesh.triangle(id)?;
+    fn visit(&mut self, k: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.leaf_triangle(k)?;
         let d = |q: Vec3| ((q - self.p) * self.s).length_squared();
         let (da, db, dc) = (d(a), d(b), d(c));
         // Warp's choice among the vertices (ties to the later vertex).
@@ -687,7 +764,7 @@ impl OrderedSearch for Furthest<'_> {
         };
         if dist > self.best {
             self.best = dist;
-            self.face = id;
+            self.face = k;
             self.uv = uv;
         }
         Ok(())
@@ -722,7 +799,7 @@ pub fn mesh_query_furthest_point_no_sign(
         MeshQueryPoint {
             result: true,
             sign: 0.0,
-            face: f.face,
+            face: mesh.tree.prim(f.face)?,
             u: f.uv.0,
             v: f.uv.1,
         }
@@ -765,9 +842,11 @@ impl OrderedSearch for ClosestHit<'_> {
             self.max_t
         }
     }
+    /// `best.face` is the hit triangle's position in `prim_ids` during the walk (mapped to
+    /// the face at the end, as [`Closest`]).
     #[inline(always)]
-    fn visit(&mut self, id: i32) -> KResult<()> {
-        let [a, b, c] = self.mesh.triangle(id)?;
+    fn visit(&mut self, k: i32) -> KResult<()> {
+        let [a, b, c] = self.mesh.leaf_triangle(k)?;
         let Some(fr) = &self.frame else {
             return Ok(());
         };
@@ -776,7 +855,7 @@ impl OrderedSearch for ClosestHit<'_> {
                 self.best = MeshQueryRay {
                     result: true,
                     sign: h.sign,
-                    face: id,
+                    face: k,
                     t: h.t,
                     u: h.u(),
                     v: h.v(),
@@ -807,8 +886,10 @@ pub fn mesh_query_ray(mesh: MeshView, start: Vec3, dir: Vec3, max_t: f32) -> KRe
     walk_ordered(&mesh.tree, &mut h)?;
     let mut r = h.best;
     if r.result {
-        let [a, b, c] = mesh.triangle(r.face)?;
+        // The normal of the triangle hit (the leaf-ordered copy's), then its face.
+        let [a, b, c] = mesh.leaf_triangle(r.face)?;
         r.normal = face_normal(a, b, c);
+        r.face = mesh.tree.prim(r.face)?;
     }
     Ok(r)
 }
@@ -1104,6 +1185,8 @@ pub(crate) mod tests {
         pub velocities: Vec<Vec3>,
         pub indices: Vec<i32>,
         pub built: Built,
+        /// The triangles in leaf order, made by `view` from the points as they are then.
+        pub leaf_tris: Vec<Vec4>,
     }
 
     impl TestMesh {
@@ -1123,6 +1206,27 @@ pub(crate) mod tests {
                 velocities,
                 indices,
                 built: Built::new(&lo, &hi, leaf),
+                leaf_tris: Vec::new(),
+            }
+        }
+
+        /// The leaf-ordered triangles of the current points (what a refit writes).
+        fn leaf_view(&mut self) -> ArrayView<Vec4, 1> {
+            self.leaf_tris = vec![Vec4::ZERO; self.indices.len()];
+            write_leaf_triangles(
+                &mut self.leaf_tris,
+                &self.built.prim_ids,
+                &self.indices,
+                &self.points,
+            );
+            unsafe {
+                ArrayView::new(
+                    self.leaf_tris.as_mut_ptr(),
+                    [self.leaf_tris.len()],
+                    [1],
+                    "k",
+                    "mesh",
+                )
             }
         }
 
@@ -1140,8 +1244,9 @@ pub(crate) mod tests {
                     "mesh",
                 )
             };
+            let lt = self.leaf_view();
             let vel = v(&mut self.velocities);
-            MeshView::new(tree, v(&mut self.points), Some(vel), ix)
+            MeshView::new(tree, v(&mut self.points), Some(vel), ix, lt)
         }
 
         fn tri(&self, f: usize) -> [Vec3; 3] {
@@ -1523,7 +1628,13 @@ pub(crate) mod tests {
         m.indices[4] = 1000;
         let v = m.view();
         assert!(mesh_eval_velocity(v, 1, 0.0, 0.0).is_err());
-        assert!(mesh_query_point_no_sign(v, Vec3::ZERO, f32::MAX).is_err());
+        // The walks read the leaf-ordered copy, where that face's corners are NaN: it is
+        // never reported (the runtime refuses such an index at a refit; this is a view made
+        // over a corrupt mesh).
+        let q = mesh_query_point_no_sign(v, Vec3::ZERO, f32::MAX).unwrap();
+        assert!(q.result && q.face != 1, "{q:?}");
+        let q = mesh_query_point_no_sign(v, m.points[m.indices[3] as usize], f32::MAX).unwrap();
+        assert!(q.result && q.face != 1, "{q:?}");
     }
 
     #[test]
@@ -1558,7 +1669,8 @@ pub(crate) mod tests {
                 "mesh",
             )
         };
-        let v2 = MeshView::new(tree, pv, None, iv);
+        let lt = m2.leaf_view();
+        let v2 = MeshView::new(tree, pv, None, iv, lt);
         assert_eq!(mesh_eval_velocity(v2, 0, 0.2, 0.3).unwrap(), Vec3::ZERO);
         // A degenerate face's normal is zero.
         let mut d = TestMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0], vec![0, 1, 2], 1);
@@ -1811,23 +1923,24 @@ pub(crate) mod tests {
             let q = mesh_query_point_sign_parity(v, Vec3::ZERO, f32::MAX).unwrap();
             assert_eq!(q, MeshQueryPoint::default());
         }
-        // A bad vertex index (of a face at the south pole) faults, naming the parameter:
-        // found by the closest point's walk, or by the ray's.
+        // A corrupt prim_ids entry faults, naming the parameter, when the walk's result is
+        // mapped to its face (the walks read triangles by leaf position): here every
+        // position's, so whichever wins.
         let (pts, ix) = sphere(1.0, 4, 6);
         let mut m = TestMesh::new(pts, ix, 1);
-        m.indices[4] = 1000;
         let v = m.view();
-        for (p, closest_faults) in [(Vec3::ZERO, true), (-Vec3::Z - PARITY_DIR * 2.0, false)] {
-            let e = mesh_query_point_sign_parity(v, p, f32::MAX).unwrap_err();
-            assert!(e.to_string().contains("argument `mesh`"), "{e}");
-            assert_eq!(
-                mesh_query_point_no_sign(v, p, f32::MAX).is_err(),
-                closest_faults
-            );
-            assert_eq!(
-                mesh_query_point_sign_normal(v, p, f32::MAX).is_err(),
-                closest_faults
-            );
+        let n = m.built.prim_ids.len() as i32;
+        m.built.prim_ids.iter_mut().for_each(|i| *i += n);
+        let bad = MeshView {
+            tree: m.built.tree(),
+            ..v
+        };
+        for p in [Vec3::ZERO, -Vec3::Z - PARITY_DIR * 2.0] {
+            // (This view's tree keeps the test tree's parameter name.)
+            let e = mesh_query_point_sign_parity(bad, p, f32::MAX).unwrap_err();
+            assert!(e.to_string().contains("out of bounds"), "{e}");
+            assert!(mesh_query_point_no_sign(bad, p, f32::MAX).is_err());
+            assert!(mesh_query_point_sign_normal(bad, p, f32::MAX).is_err());
         }
     }
 
@@ -1850,6 +1963,9 @@ pub(crate) mod tests {
             Vec3::new(1.0, -1.0, 1.5),
         ];
         let mut m = TestMesh::new(pts, (0..9).collect(), 4);
+        // One leaf over the three faces in order: `visit` takes a position in prim_ids,
+        // which is then the face.
+        assert_eq!(m.built.prim_ids, [0, 1, 2]);
         let v = m.view();
         let p = Vec3::new(0.25, 0.25, 1.0);
         let search = |best: f32| Closest {

@@ -32,7 +32,10 @@ use warp_core::objects::bvh::{BvhNode, BvhTree};
 use warp_core::objects::BvhView;
 use warp_core::ArrayView;
 
-use super::bvh_build::{build_sah, refit as refit_nodes, triangle_boxes, BuiltBvh};
+use super::bvh_build::{
+    build_sah, leaf_triangles, refit as refit_nodes, triangle_boxes, write_leaf_triangles_par,
+    BuiltBvh,
+};
 use super::geometry_abi::{CudaBvh, CudaBvhTree};
 use super::lbvh::{self, Lbvh, LbvhTree, RefitCheck};
 use super::HostObject;
@@ -157,6 +160,11 @@ pub(crate) struct Tree {
     num_prims: usize,
     /// A GPU-built tree's refit state (`None` for a tree built on the host, the CPU's).
     device_refit: Option<DeviceRefit>,
+    /// A mesh's triangles in leaf order (`bvh_build::leaf_triangles`: three
+    /// corners per `prim_ids` position, 16-byte aligned), which the mesh's walks read: written
+    /// with the tree at the mesh's build ([`Tree::set_leaf_triangles`]) and by every refit
+    /// from triangles, copied with the nodes by a shared tree's refit. `None` for a BVH's.
+    leaf_tris: Option<Array<Vec4>>,
 }
 
 /// What a GPU tree's refit uses, made with the tree: a refit allocates nothing.
@@ -207,6 +215,7 @@ impl Tree {
             num_nodes: nodes.len(),
             num_prims: prim_ids.len(),
             device_refit: None,
+            leaf_tris: None,
         })
     }
 
@@ -235,6 +244,7 @@ impl Tree {
                 boxes: mesh.then(|| [lowers.clone(), uppers.clone()]),
                 ..DeviceRefit::new(count, None, device)?
             }),
+            leaf_tris: None,
         };
         let refit = tree.device_refit.as_ref().expect("made above");
         Lbvh::new(device)?.build(
@@ -270,6 +280,15 @@ impl Tree {
             )?),
             None => None,
         };
+        // The triangles too: a CPU refit that refuses its input leaves the copy as it was.
+        let leaf_tris = match &self.leaf_tris {
+            Some(t) => {
+                let c = Array::<Vec4>::empty(t.len(), device)?;
+                c.copy_from(t)?;
+                Some(c)
+            }
+            None => None,
+        };
         Ok(Tree {
             nodes,
             parents: self.parents.clone(),
@@ -277,7 +296,56 @@ impl Tree {
             num_nodes: self.num_nodes,
             num_prims: self.num_prims,
             device_refit,
+            leaf_tris,
         })
+    }
+
+    /// Makes a mesh's tree's leaf-ordered triangles from `points` and `indices` (the mesh's,
+    /// checked against each other by the caller, or refused after this on a GPU: a bad index
+    /// gives its triangle NaN corners and reads no point). On the CPU on the host; on a GPU by
+    /// the triangle boxes' step in leaf order (queued), which also writes the tree's kept
+    /// boxes, by position (what the refits read them as; the build is done with them).
+    pub(crate) fn set_leaf_triangles(
+        &mut self,
+        points: &Array<Vec3>,
+        indices: &Array<i32>,
+    ) -> Result<()> {
+        let device = self.nodes.device().clone();
+        // Written whole below (a GPU's step writes every position).
+        let out = Array::<Vec4>::empty(3 * self.num_prims, &device)?;
+        match &self.device_refit {
+            None => {
+                let t = leaf_triangles(
+                    &self.prim_ids.to_vec()?,
+                    &indices.to_vec()?,
+                    &points.to_vec()?,
+                );
+                if !t.is_empty() {
+                    out.copy_from(&Array::from_slice(&t, &device)?)?;
+                }
+            }
+            Some(r) => {
+                if self.num_prims > 0 {
+                    let [lo, hi] = r.boxes.as_ref().expect("a mesh's tree keeps its boxes");
+                    lbvh::triangle_boxes(
+                        points,
+                        indices,
+                        lo,
+                        hi,
+                        [0, 0],
+                        Some((&self.prim_ids, &out)),
+                        || Box::new(()),
+                    )?;
+                }
+            }
+        }
+        self.leaf_tris = Some(out);
+        Ok(())
+    }
+
+    /// A mesh's tree's leaf-ordered triangles (`None` for a BVH's tree).
+    pub(crate) fn leaf_triangles(&self) -> Option<&Array<Vec4>> {
+        self.leaf_tris.as_ref()
     }
 
     /// Recomputes the tree's boxes from `from`, keeping its shape, where the tree is (the
@@ -330,10 +398,15 @@ impl Tree {
             at(self.prim_ids.device_address()),
         );
         let (num_nodes, num_prims) = (self.num_nodes, self.num_prims);
+        let tris = self
+            .leaf_tris
+            .as_ref()
+            .map_or(0, |t| at(t.device_address()));
         let uses = || -> Keep {
             Box::new((
                 [&self.parents, &self.prim_ids].map(Array::clone),
                 self.nodes.clone(),
+                self.leaf_tris.clone(),
                 from.uses(),
             ))
         };
@@ -411,6 +484,19 @@ impl Tree {
                         )
                     })?;
                     refit(&lo, &hi);
+                    // The walks' copy of the triangles, in leaf order, from the checked
+                    // indices and points.
+                    if tris != 0 && num_prims > 0 {
+                        // SAFETY: the tree's ids and its `3 * num_prims` corners (see above:
+                        // alive for every run, written only by this operation).
+                        let (ids, out) = unsafe {
+                            (
+                                std::slice::from_raw_parts(ids as *const i32, num_prims),
+                                std::slice::from_raw_parts_mut(tris as *mut Vec4, 3 * num_prims),
+                            )
+                        };
+                        write_leaf_triangles_par(out, ids, ix, p);
+                    }
                     Ok(())
                 })
             }
@@ -436,7 +522,7 @@ impl Tree {
             Box::new((
                 [&self.parents, &self.prim_ids, &r.counters, &r.bad].map(Array::clone),
                 self.nodes.clone(),
-                r.boxes.clone(),
+                (r.boxes.clone(), self.leaf_tris.clone()),
                 from.uses(),
             ))
         };
@@ -446,19 +532,35 @@ impl Tree {
                     bad: &r.bad,
                     sources: [Some(lowers), Some(uppers)],
                     check_boxes: true,
+                    by_position: false,
                     names: &BVH_REFIT,
                 };
                 lbvh::refit(lowers, uppers, &buffers, Some(&check), uses)
             }
             RefitFrom::Triangles { points, indices } => {
                 let [lo, hi] = r.boxes.as_ref().expect("a mesh's tree keeps its boxes");
-                // The indices were checked at the mesh's build: no index flag.
+                // The indices were checked at the mesh's build: no index flag. The step runs in
+                // leaf order and writes the walks' copy of the triangles too.
                 let flags = [0, r.bad.device_address()];
-                lbvh::triangle_boxes(points, indices, lo, hi, flags, uses)?;
+                let tris = self
+                    .leaf_tris
+                    .as_ref()
+                    .expect("a mesh's tree has its triangles");
+                lbvh::triangle_boxes(
+                    points,
+                    indices,
+                    lo,
+                    hi,
+                    flags,
+                    Some((&self.prim_ids, tris)),
+                    uses,
+                )?;
                 let check = RefitCheck {
                     bad: &r.bad,
                     sources: [Some(points), None],
                     check_boxes: false,
+                    // The leaf-order step above wrote them by position.
+                    by_position: true,
                     names: &MESH_REFIT,
                 };
                 lbvh::refit(lo, hi, &buffers, Some(&check), uses)

@@ -32,7 +32,7 @@
 //! `prim_ids` and cost a handful of box or triangle tests. Larger leaves would make every
 //! query pay for tests the tree could have culled.
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
 use warp_core::objects::bvh::BvhNode;
@@ -477,6 +477,25 @@ pub fn build_sah(lowers: &[Vec3], uppers: &[Vec3]) -> BuiltBvh {
         parents,
         prim_ids,
     }
+}
+
+/// A mesh's triangles in its tree's leaf order, as its build and refits write them (what
+/// the mesh queries' walks read; `warp_core::objects::mesh::write_leaf_triangles`): three
+/// corners `{x, y, z, 0}` per position of `prim_ids`, NaN corners for an id or index out of
+/// range. For the CPU's build and tests comparing the backends.
+pub fn leaf_triangles(prim_ids: &[i32], indices: &[i32], points: &[Vec3]) -> Vec<Vec4> {
+    let mut out = vec![Vec4::ZERO; 3 * prim_ids.len()];
+    write_leaf_triangles_par(&mut out, prim_ids, indices, points);
+    out
+}
+
+/// `warp_core::objects::mesh::write_leaf_triangles` over rayon, in chunks of positions (each
+/// position's corners depend on it alone, so the same values in any order).
+pub(crate) fn write_leaf_triangles_par(out: &mut [Vec4], ids: &[i32], ix: &[i32], p: &[Vec3]) {
+    const CHUNK: usize = 4096;
+    out.par_chunks_mut(3 * CHUNK)
+        .zip(ids.par_chunks(CHUNK))
+        .for_each(|(o, i)| warp_core::objects::mesh::write_leaf_triangles(o, i, ix, p));
 }
 
 /// The boxes of the triangles `indices[3f..3f + 3]` of `points`, or the first position of an
@@ -993,6 +1012,7 @@ mod tests {
             .unzip();
         let mut b = build_sah(&lo, &hi);
         check_layout(&b.nodes, &b.parents, &b.prim_ids, &lo, &hi).unwrap();
+        let mut soup = leaf_triangles(&b.prim_ids, &ix, &pts);
         let v = unsafe {
             let tree = BvhTree::new(
                 ArrayView::new(b.nodes.as_mut_ptr(), [b.nodes.len()], [1], "k", "mesh"),
@@ -1010,6 +1030,7 @@ mod tests {
                 ArrayView::new(pts.as_mut_ptr(), [pts.len()], [1], "k", "mesh"),
                 None,
                 ArrayView::new(ix.as_mut_ptr(), [ix.len()], [1], "k", "mesh"),
+                ArrayView::new(soup.as_mut_ptr(), [soup.len()], [1], "k", "mesh"),
             )
         };
         let mut rng = Rng(3);

@@ -32,7 +32,7 @@
 //! | 40 | `lowers` | `u64` (`num_prims` `vec3`, 12 bytes each) |
 //! | 48 | `uppers` | `u64` (`num_prims` `vec3`) |
 //!
-//! `CudaMesh` (`wp::mesh_t`), 72 bytes, 8-aligned:
+//! `CudaMesh` (`wp::mesh_t`), 80 bytes, 8-aligned:
 //!
 //! | offset | field | type |
 //! |---|---|---|
@@ -42,6 +42,7 @@
 //! | 56 | `indices` | `u64` (`3 * num_prims` `i32`) |
 //! | 64 | `num_points` | `i32` |
 //! | 68 | `pad` | `i32` (0) |
+//! | 72 | `leaf_tris` | `u64` (`3 * num_prims` `vec4`, 16-aligned: the triangles in leaf order) |
 
 use std::mem::{offset_of, size_of};
 
@@ -78,7 +79,7 @@ pub struct CudaBvh {
     pub uppers: u64,
 }
 
-/// A `Mesh` kernel parameter as CUDA kernels receive it (`wp::mesh_t`; module docs: 72
+/// A `Mesh` kernel parameter as CUDA kernels receive it (`wp::mesh_t`; module docs: 80
 /// bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,6 +96,10 @@ pub struct CudaMesh {
     pub num_points: i32,
     /// Padding to 8 bytes (0).
     pub pad: i32,
+    /// Device address of the triangles in leaf order: three corners `{x, y, z, 0}` per
+    /// position of the tree's `prim_ids` (`warp_core::objects::mesh::write_leaf_triangles`),
+    /// written at the build and every refit; 16-byte aligned.
+    pub leaf_tris: u64,
 }
 
 const _: () = {
@@ -110,9 +115,10 @@ const _: () = {
     assert!(offset_of!(CudaBvh, lowers) == 40);
     assert!(offset_of!(CudaBvh, uppers) == 48);
 
-    assert!(size_of::<CudaMesh>() == 72);
+    assert!(size_of::<CudaMesh>() == 80);
     assert!(offset_of!(CudaMesh, points) == 40);
     assert!(offset_of!(CudaMesh, velocities) == 48);
     assert!(offset_of!(CudaMesh, indices) == 56);
     assert!(offset_of!(CudaMesh, num_points) == 64);
+    assert!(offset_of!(CudaMesh, leaf_tris) == 72);
 };

@@ -22,7 +22,7 @@ use crate::dispatch;
 use crate::error::Result;
 use crate::kernel::KernelInfo;
 use crate::primitives::radix_sort_pairs;
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 use warp_core::objects::bvh::BvhNode;
 use warp_core::{Fault, FaultKind};
@@ -68,6 +68,9 @@ pub(crate) struct RefitCheck<'a> {
     /// uppers), or only reports what an earlier step found (a mesh's points, checked by
     /// [`triangle_boxes`]).
     pub check_boxes: bool,
+    /// Whether the boxes are by leaf position (box `k` is that of `prim_ids[k]`, as the
+    /// triangle boxes' step writes them in leaf order) rather than by primitive.
+    pub by_position: bool,
     /// The operation and its arguments, as the fault names them.
     pub names: &'static KernelInfo,
 }
@@ -185,7 +188,8 @@ pub(crate) fn refit(
         n: n as i64,
         bad: check.map_or(0, |c| c.bad.device_address()),
         sources: check.map_or([0; 2], |c| c.sources.map(addr)),
-        check: check.is_some_and(|c| c.check_boxes) as i64,
+        // Bit 0: check the boxes; bit 1: the boxes are by leaf position.
+        check: check.map_or(0, |c| c.check_boxes as i64 | ((c.by_position as i64) << 1)),
         fault: StepFault::new(check.map_or(&NO_NAMES, |c| c.names)),
     };
     dispatch::object_step_keeping(lowers.device(), &step, uses)
@@ -261,14 +265,19 @@ pub(crate) fn check_finite(values: &Array<Vec3>, bad: u64) -> Result<()> {
 /// into `lowers` and `uppers`; the smallest position of an index outside the points lowers
 /// the `i32` at `bad` (0: not recorded, for indices checked before); that triangle reads no
 /// point and gets an empty box. The smallest index of a point with a NaN or infinite
-/// coordinate lowers the `i32` at `bad_point` (0: not checked). A capture records the step,
-/// keeping `uses()`.
+/// coordinate lowers the `i32` at `bad_point` (0: not checked). With `leaf`, a built tree's
+/// `prim_ids` and a mesh's leaf-ordered triangles (`3 * n` corners): the step runs over the
+/// leaf positions `k`, writing the box of face `prim_ids[k]` at position `k` (for a refit with
+/// [`RefitCheck::by_position`]) and its corners at `3k..3k + 3`
+/// (`bvh_build::leaf_triangles`; NaN for a face with an index outside the
+/// points): the gather the walks need, fused into the step that reads the vertices anyway. A capture records the step, keeping `uses()`.
 pub(crate) fn triangle_boxes(
     points: &Array<Vec3>,
     indices: &Array<i32>,
     lowers: &Array<Vec3>,
     uppers: &Array<Vec3>,
     [bad, bad_point]: [u64; 2],
+    leaf: Option<(&Array<i32>, &Array<Vec4>)>,
     uses: impl FnOnce() -> Keep,
 ) -> Result<()> {
     dispatch::object_step_keeping(
@@ -282,6 +291,8 @@ pub(crate) fn triangle_boxes(
             n: lowers.len() as i64,
             num_points: points.len() as i64,
             bad_point,
+            prim_ids: leaf.map_or(0, |l| l.0.device_address()),
+            leaf_tris: leaf.map_or(0, |l| l.1.device_address()),
         },
         uses,
     )
@@ -309,8 +320,10 @@ struct LbvhTriangleBoxes {
     n: i64,
     num_points: i64,
     bad_point: u64,
+    prim_ids: u64,
+    leaf_tris: u64,
 }
-const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 64);
+const _: () = assert!(std::mem::size_of::<LbvhTriangleBoxes>() == 80);
 
 unsafe impl ObjectStep for LbvhFinite {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
@@ -373,10 +386,24 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
                 (self.bad as *const std::sync::atomic::AtomicI32).as_ref(),
             )
         };
+        // SAFETY: unless 0, `n` ids (a permutation of 0..n for a built tree).
+        let ids = (self.leaf_tris != 0)
+            .then(|| unsafe { std::slice::from_raw_parts(self.prim_ids as *const i32, n) });
         lo.par_iter_mut()
             .zip(hi.par_iter_mut())
             .enumerate()
-            .for_each(|(f, (l, h))| {
+            .for_each(|(k, (l, h))| {
+                // Face order, or (with the corners' copy) leaf order: position k, face ids[k].
+                let f = match ids {
+                    None => k,
+                    Some(ids) => match usize::try_from(ids[k]).ok().filter(|&f| f < n) {
+                        Some(f) => f,
+                        None => {
+                            (*l, *h) = (Vec3::ZERO, Vec3::ZERO);
+                            return;
+                        }
+                    },
+                };
                 let corner = |k: usize| points.get(usize::try_from(ix[3 * f + k]).ok()?).copied();
                 let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
                     for k in 0..3 {
@@ -392,6 +419,11 @@ unsafe impl ObjectStep for LbvhTriangleBoxes {
                 *l = Vec3::new(min(a.x, b.x, c.x), min(a.y, b.y, c.y), min(a.z, b.z, c.z));
                 *h = Vec3::new(max(a.x, b.x, c.x), max(a.y, b.y, c.y), max(a.z, b.z, c.z));
             });
+        if let Some(ids) = ids {
+            // SAFETY: `3n` corners the caller owns.
+            let out = unsafe { std::slice::from_raw_parts_mut(self.leaf_tris as *mut Vec4, 3 * n) };
+            bvh_build::write_leaf_triangles_par(out, ids, ix, points);
+        }
         Ok(())
     }
 }
@@ -743,7 +775,7 @@ unsafe impl ObjectStep for LbvhRefit {
         // an AtomicI32).
         let bad = (self.bad != 0)
             .then(|| unsafe { &*(self.bad as *const [std::sync::atomic::AtomicI32; 2]) });
-        if let (Some(bad), 1) = (bad, self.check) {
+        if let (Some(bad), 1) = (bad, self.check & 1) {
             for (word, boxes) in bad.iter().zip([lo, hi]) {
                 if let Some(i) = boxes.par_iter().position_first(|p| !p.is_finite()) {
                     word.fetch_min(i as i32, std::sync::atomic::Ordering::Relaxed);
@@ -754,7 +786,13 @@ unsafe impl ObjectStep for LbvhRefit {
         // one the hierarchy made from an internal node: reached by climbing), with the same
         // unions (min/max: exact and order-free), in any order.
         let first_leaf = n - 1;
-        bvh_build::refit_from(nodes, parents, ids, lo, hi, first_leaf..first_leaf + n);
+        if self.check & 2 != 0 {
+            // Boxes by leaf position: position k's box is box k.
+            let at: Vec<i32> = (0..n as i32).collect();
+            bvh_build::refit_from(nodes, parents, &at, lo, hi, first_leaf..first_leaf + n);
+        } else {
+            bvh_build::refit_from(nodes, parents, ids, lo, hi, first_leaf..first_leaf + n);
+        }
         // The kernel's report: both words reset, the first one set is the fault.
         let Some(bad) = bad else {
             return Ok(());
@@ -905,6 +943,87 @@ mod tests {
         }
     }
 
+    /// A mesh's refit as the runtime queues it: the triangle boxes' step in leaf order (boxes
+    /// by position, the corners' copy) and a refit reading the boxes by position gives the
+    /// same nodes, bit for bit, as boxes by face and a refit by primitive (the same unions of
+    /// the same boxes), and the copy is `bvh_build::leaf_triangles`. On the CPU, and on
+    /// `cuda:0` when there is one (the kernels).
+    #[test]
+    fn a_mesh_refit_in_leaf_order_gives_the_same_tree() {
+        static MESH_NAMES: KernelInfo = KernelInfo {
+            name: "Mesh::refit",
+            params: &["points"],
+            ..KernelInfo::BLANK
+        };
+        let mut devices = vec![crate::device::get_device("cpu").unwrap()];
+        devices.extend(crate::device::get_device("cuda:0").ok());
+        for dev in devices {
+            let (pl, _) = boxes(200, 5, false);
+            let faces = 300;
+            let ix: Vec<i32> = (0..3 * faces)
+                .map(|i| ((i * 37 + i / 3) % 200) as i32)
+                .collect();
+            let moved: Vec<Vec3> = pl.iter().map(|p| *p * 0.75 + Vec3::X).collect();
+            let a = |v: &[Vec3]| Array::from_slice(v, &dev).unwrap();
+            let (points, points2) = (a(&pl), a(&moved));
+            let indices = Array::from_slice(&ix, &dev).unwrap();
+            let n = faces;
+            let (lo, hi) = (a(&vec![Vec3::ZERO; n]), a(&vec![Vec3::ZERO; n]));
+            let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
+            let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+            let ids = Array::<i32>::zeros(n, &dev).unwrap();
+            let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+            let tree = LbvhTree {
+                nodes: &nodes,
+                parents: &parents,
+                prim_ids: &ids,
+                counters: &counters,
+            };
+            triangle_boxes(&points, &indices, &lo, &hi, [0, 0], None, || Box::new(())).unwrap();
+            Lbvh::new(&dev)
+                .unwrap()
+                .build(&lo, &hi, &tree, MESH_LEAF_SIZE)
+                .unwrap();
+            // By face, by primitive: the reference.
+            triangle_boxes(&points2, &indices, &lo, &hi, [0, 0], None, || Box::new(())).unwrap();
+            refit(&lo, &hi, &tree, None, || Box::new(())).unwrap();
+            let want = nodes.to_vec().unwrap();
+            // Scramble the boxes, then the runtime's way.
+            triangle_boxes(&points, &indices, &lo, &hi, [0, 0], None, || Box::new(())).unwrap();
+            refit(&lo, &hi, &tree, None, || Box::new(())).unwrap();
+            assert_ne!(nodes.to_vec().unwrap(), want);
+            let tris = Array::<glam::Vec4>::zeros(3 * n, &dev).unwrap();
+            let bad = Array::from_slice(&[i32::MAX; 2], &dev).unwrap();
+            let check = RefitCheck {
+                bad: &bad,
+                sources: [Some(&points2), None],
+                check_boxes: false,
+                by_position: true,
+                names: &MESH_NAMES,
+            };
+            triangle_boxes(
+                &points2,
+                &indices,
+                &lo,
+                &hi,
+                [0, bad.device_address()],
+                Some((&ids, &tris)),
+                || Box::new(()),
+            )
+            .unwrap();
+            refit(&lo, &hi, &tree, Some(&check), || Box::new(())).unwrap();
+            assert_eq!(nodes.to_vec().unwrap(), want, "{}", dev.alias());
+            let host_ids = ids.to_vec().unwrap();
+            assert_eq!(
+                tris.to_vec().unwrap(),
+                bvh_build::leaf_triangles(&host_ids, &ix, &moved),
+                "{}",
+                dev.alias()
+            );
+            assert_eq!(bad.to_vec().unwrap(), vec![i32::MAX; 2]);
+        }
+    }
+
     /// The refit's check on the CPU mirrors the kernel's: the smallest bad index, lowers
     /// before uppers, the words reset for the next refit; a mesh's points checked by its
     /// triangle boxes' step and reported by the refit.
@@ -936,6 +1055,7 @@ mod tests {
             bad: &bad,
             sources: [Some(&l), Some(&h)],
             check_boxes: true,
+            by_position: false,
             names: &NAMES,
         };
         let refit_err = || match refit(&l, &h, &tree, Some(&check), || Box::new(())) {
@@ -983,6 +1103,7 @@ mod tests {
             &tl,
             &th,
             [0, bad.device_address()],
+            None,
             || Box::new(()),
         )
         .unwrap();

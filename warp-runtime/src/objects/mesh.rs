@@ -9,6 +9,23 @@
 //! [`Mesh::refit`] recomputes the tree's boxes. The indices are copied (the mesh validated
 //! them against the points; a later change could not be).
 //!
+//! # What the queries see: the geometry of the last build or refit
+//!
+//! The mesh also keeps its triangles in the order of its tree's leaves (three corners per
+//! triangle, written at the build and by every refit from the points then): the
+//! closest-point, furthest-point, ray and parity queries (`mesh_query_point*`,
+//! `mesh_query_furthest_point_no_sign`, `mesh_query_ray`) read the triangles there, a
+//! leaf's triangles from consecutive memory, rather than following each face's indices into
+//! the points. So these queries see the vertices as of the last [`Mesh::new`] or
+//! [`Mesh::refit`], as the tree's boxes already were. Warp's queries read the points array
+//! directly; here, after writing the points (or indices) without a refit, those queries go
+//! on answering for the mesh as it was at the last refit (consistently: boxes and triangles
+//! agree), while `mesh_eval_position`, `mesh_eval_velocity`, `mesh_eval_face_normal` and
+//! the box query `mesh_query_aabb` read the current points and indices. A query's
+//! `(face, u, v)` fed to `mesh_eval_position` is therefore the closest point found only when
+//! the points were not changed since the refit: call [`Mesh::refit`] after moving the points
+//! (Warp requires it too, for its boxes). The copy costs 48 bytes per triangle.
+//!
 //! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
 //! SAH builder over the triangles' boxes; on a GPU the triangles' boxes (with the checks of
 //! the indices and the points) and a linear BVH are kernels (`lbvh.rs`), and only the checks'
@@ -23,7 +40,7 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use warp_core::objects::MeshView;
 
 use super::bvh::{bad, contiguous, first_non_finite, same_device, RefitFrom, Tree, MAX_PRIMS};
@@ -62,6 +79,12 @@ use crate::kernel::ArgCtx;
 /// wp::launch(closest, 1, (&mesh, &q, &out), &dev).unwrap();
 /// assert_eq!(out.to_vec().unwrap(), vec![Vec3::new(0.25, 0.25, 0.0)]);
 /// ```
+///
+/// Queries see the geometry of the last build or [`refit`](Mesh::refit): the point and ray
+/// queries read a copy of the triangles in the tree's leaf order that the build and every
+/// refit write (Warp's read the points array). After changing the points, refit: until then
+/// those queries answer for the previous points (with boxes to match), while `mesh_eval_*`
+/// and `mesh_query_aabb` read the new ones (see the module docs).
 #[derive(Clone)]
 pub struct Mesh {
     device: Device,
@@ -97,7 +120,7 @@ fn device_triangle_boxes(
     // Written whole by the boxes' step.
     let lo = Array::empty(faces, points.device())?;
     let hi = Array::empty(faces, points.device())?;
-    lbvh::triangle_boxes(points, indices, &lo, &hi, flags, || Box::new(()))?;
+    lbvh::triangle_boxes(points, indices, &lo, &hi, flags, None, || Box::new(()))?;
     Ok((lo, hi))
 }
 
@@ -225,8 +248,10 @@ impl Mesh {
             check_indices(WHAT, &ix, n)?;
             let p = read_points(WHAT, points, n)?;
             let (lo, hi) = triangle_boxes(&p, &ix).map_err(|k| bad_index(WHAT, k, ix[k], n))?;
-            let tree = Tree::build_on_host(&lo, &hi, &device)?;
-            (Array::from_slice(&ix, &device)?, tree)
+            let mut tree = Tree::build_on_host(&lo, &hi, &device)?;
+            let own = Array::from_slice(&ix, &device)?;
+            tree.set_leaf_triangles(points, &own)?;
+            (own, tree)
         } else {
             // Everything on the device: the indices and the points are checked by the
             // triangles' boxes step, and only its two flags come back (after the build).
@@ -236,7 +261,10 @@ impl Mesh {
             let at = flags.device_address();
             let (lo, hi) = device_triangle_boxes(points, &own, [at, at + 4])?;
             // The tree keeps the boxes: its refits write them.
-            let tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE, true)?;
+            let mut tree = Tree::build_on_device(&lo, &hi, lbvh::MESH_LEAF_SIZE, true)?;
+            // The walks' copy of the triangles, in leaf order (a bad index, refused below,
+            // reads no point there).
+            tree.set_leaf_triangles(points, &own)?;
             let f = flags.to_vec()?;
             if f[0] != i32::MAX {
                 let k = f[0] as usize;
@@ -276,8 +304,13 @@ impl Mesh {
     /// results unspecified until a refit from finite points). A mesh without triangles has no
     /// box to refit: a GPU checks nothing then. (An index a kernel wrote outside the points
     /// since the build, through [`indices`](Mesh::indices): the CPU's refit refuses it, naming
-    /// `indices`; a GPU's gives its triangle an empty box, and the queries' checked reads
-    /// fault on it.)
+    /// `indices`; a GPU's gives its triangle an empty box and NaN corners in the leaf-ordered
+    /// triangles the walks read, so the point and ray queries never report it, and
+    /// `mesh_eval_*` and the box query, which read the indices, fault on it.)
+    ///
+    /// The refit also rewrites the leaf-ordered triangles the queries read (module docs), in
+    /// the same step that reads the vertices for the boxes: queries see the points as of the
+    /// last refit.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `points` when the points array (replaced by
@@ -316,7 +349,8 @@ impl Mesh {
     }
 
     /// The points: the user's array, shared (writing it deforms the mesh; call
-    /// [`refit`](Mesh::refit) before querying the deformed mesh).
+    /// [`refit`](Mesh::refit) before querying the deformed mesh: until then the point and ray
+    /// queries see the points of the last refit, the `mesh_eval_*` functions the new ones).
     pub fn points(&self) -> &Array<Vec3> {
         &self.points
     }
@@ -356,6 +390,13 @@ impl Mesh {
         self.tree.host()
     }
 
+    /// The tree's leaf-ordered triangles (a mesh's tree always has them).
+    fn leaf_tris(&self) -> &Array<Vec4> {
+        self.tree
+            .leaf_triangles()
+            .expect("a mesh's tree has its leaf-ordered triangles")
+    }
+
     /// The checks of a launch beyond its device: the points as many as built with.
     fn check_launch(&self, ctx: &ArgCtx<'_>) -> Result<()> {
         if self.points.len() != self.num_points {
@@ -393,6 +434,7 @@ impl HostObject for Mesh {
                 .as_ref()
                 .map(|v| v.cpu_view(ctx.kernel, ctx.arg)),
             self.indices.cpu_view(ctx.kernel, ctx.arg),
+            self.leaf_tris().cpu_view(ctx.kernel, ctx.arg),
         ))
     }
 
@@ -410,6 +452,7 @@ impl HostObject for Mesh {
             indices: self.indices.device_address(),
             num_points: self.num_points as i32,
             pad: 0,
+            leaf_tris: self.leaf_tris().device_address(),
         })
     }
 }
@@ -471,5 +514,57 @@ mod tests {
         );
         let e = Mesh::new(&pts(&[]), &ix(&[]), None).unwrap();
         assert_eq!((e.num_faces(), e.num_points()), (0, 0));
+    }
+
+    /// The leaf-ordered triangles the walks read are `bvh_build::leaf_triangles` of the
+    /// tree's ids, the indices and the points of the last build or refit, bit for bit
+    /// (compared exactly: a copy, no arithmetic): unchanged by moving the points until the
+    /// refit, and a clone made before a refit keeps its own. On the CPU, and on `cuda:0`
+    /// when there is one (where the build's and the refit's triangle boxes step writes them).
+    #[test]
+    fn leaf_triangles_follow_the_build_and_the_refits() {
+        let mut devices = vec![crate::cpu()];
+        devices.extend(crate::get_device("cuda:0").ok());
+        for dev in devices {
+            let p0: Vec<Vec3> = (0..40)
+                .map(|i| Vec3::new((i % 7) as f32, (i / 7) as f32, (i * i % 5) as f32 * 0.25))
+                .collect();
+            let faces: Vec<i32> = (0..30)
+                .flat_map(|f| [f, f + 1, f + 7].map(|i| i % 40))
+                .collect();
+            let p = Array::from_slice(&p0, &dev).unwrap();
+            let mut m = Mesh::new(&p, &Array::from_slice(&faces, &dev).unwrap(), None).unwrap();
+            let got = |m: &Mesh| m.leaf_tris().to_vec().unwrap();
+            let want = |m: &Mesh, points: &[Vec3]| {
+                let (_, _, ids) = m.tree_host().unwrap();
+                let mut sorted = ids.clone();
+                sorted.sort_unstable();
+                assert_eq!(sorted, (0..30).collect::<Vec<_>>());
+                super::super::bvh_build::leaf_triangles(&ids, &faces, points)
+            };
+            assert_eq!(got(&m), want(&m, &p0), "{}: build", dev.alias());
+            let before = m.clone();
+            let p1: Vec<Vec3> = p0.iter().map(|q| *q * 1.5 + Vec3::Z).collect();
+            p.copy_from(&Array::from_slice(&p1, &dev).unwrap()).unwrap();
+            assert_eq!(got(&m), want(&m, &p0), "{}: moved, not refit", dev.alias());
+            m.refit().unwrap();
+            assert_eq!(got(&m), want(&m, &p1), "{}: refit", dev.alias());
+            assert_eq!(
+                got(&before),
+                want(&before, &p0),
+                "{}: the clone",
+                dev.alias()
+            );
+            // The empty mesh: an empty copy, through a shared tree's refit too.
+            let mut e = Mesh::new(
+                &Array::<Vec3>::empty(0, &dev).unwrap(),
+                &Array::<i32>::empty(0, &dev).unwrap(),
+                None,
+            )
+            .unwrap();
+            let shared = e.clone();
+            e.refit().unwrap();
+            assert!(got(&e).is_empty() && got(&shared).is_empty());
+        }
     }
 }
