@@ -345,8 +345,8 @@ fn k_set_index(ix: Array<i32>, k: usize, v: i32) {
 /// synchronisation after another kernel's launch. Valid again, the refit is clean (its check
 /// word reset).
 #[test]
-fn a_mesh_refit_faults_on_an_index_outside_the_points() {
-    on_every_backend("a_mesh_refit_faults_on_an_index_outside_the_points", |dev| {
+fn mesh_refit_faults_on_a_bad_index() {
+    on_every_backend("mesh_refit_faults_on_a_bad_index", |dev| {
         let pts: Vec<Vec3> = (0..6)
             .map(|i| Vec3::new(i as f32, (i * i) as f32, 0.5))
             .collect();

@@ -1179,7 +1179,14 @@ mod tests {
             points.view(5..6).unwrap().copy_from(&a(&[nan])).unwrap();
             let f = fault(mesh_refit());
             assert!(
-                matches!(f.kind, FaultKind::NonFiniteInput { arg: "points", index: 5, .. }),
+                matches!(
+                    f.kind,
+                    FaultKind::NonFiniteInput {
+                        arg: "points",
+                        index: 5,
+                        ..
+                    }
+                ),
                 "{}: {f:?}",
                 dev.alias()
             );
