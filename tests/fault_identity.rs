@@ -332,6 +332,66 @@ fn refit_faults_reach_the_next_synchronisation() {
     });
 }
 
+/// Writes `v` at `ix[k]` (one thread): a kernel that corrupts a mesh's indices.
+#[wp::kernel]
+fn k_set_index(ix: Array<i32>, k: usize, v: i32) {
+    ix[k] = v;
+}
+
+/// A mesh's index a kernel wrote outside the points after the build: the CPU's refit refuses
+/// it, naming `indices`, the value and its position; a GPU's refit (which reads nothing back)
+/// raises it as an out-of-bounds fault of `Mesh::refit` on `indices`, index `[position,
+/// value]` of shape `[indices, points]` (the smallest bad position), reported by the next
+/// synchronisation after another kernel's launch. Valid again, the refit is clean (its check
+/// word reset).
+#[test]
+fn mesh_refit_faults_on_a_bad_index() {
+    on_every_backend("mesh_refit_faults_on_a_bad_index", |dev| {
+        let pts: Vec<Vec3> = (0..6)
+            .map(|i| Vec3::new(i as f32, (i * i) as f32, 0.5))
+            .collect();
+        let points = Array::from_slice(&pts, dev).unwrap();
+        let ix = [0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5];
+        let indices = Array::from_slice(&ix, dev).unwrap();
+        let mut mesh = wp::Mesh::new(&points, &indices, None).unwrap();
+        wp::launch(k_set_index, 1, (mesh.indices(), 10usize, -3i32), dev).unwrap();
+        wp::launch(k_set_index, 1, (mesh.indices(), 7usize, 6i32), dev).unwrap();
+        let x = Array::<f32>::zeros(4, dev).unwrap();
+        let r = mesh.refit();
+        if dev.is_cpu() {
+            let e = r.unwrap_err().to_string();
+            assert!(
+                e.contains("Mesh::refit")
+                    && e.contains("argument `indices`")
+                    && e.contains("6 at position 7"),
+                "{e}"
+            );
+        } else {
+            r.unwrap();
+            let refit = wp::last_launch_id();
+            wp::launch(k_double, 4, (&x,), dev).unwrap();
+            let f = fault(wp::synchronize());
+            assert_eq!(
+                f,
+                Fault {
+                    kernel: "Mesh::refit",
+                    kind: FaultKind::OutOfBounds {
+                        arg: "indices",
+                        index: vec![7, 6],
+                        shape: vec![12, 6],
+                    },
+                    launch: refit,
+                }
+            );
+            wp::synchronize().unwrap();
+        }
+        wp::launch(k_set_index, 1, (mesh.indices(), 7usize, ix[7]), dev).unwrap();
+        wp::launch(k_set_index, 1, (mesh.indices(), 10usize, ix[10]), dev).unwrap();
+        mesh.refit().unwrap();
+        wp::synchronize().unwrap();
+    });
+}
+
 /// A thread that faults and ends without synchronising: its fault is not handed to another
 /// thread (it is logged), and a new thread taking over its record starts clean.
 #[test]

@@ -29,8 +29,11 @@
 //                      made a leaf (fminf/fmaxf: exact and order-free). With a check word pair
 //                      `bad`, it also checks each box it reads for NaN and infinite coordinates
 //                      (when asked) and the thread that writes the root reports the smallest
-//                      bad index as a fault (FAULT_NON_FINITE_INPUT), resetting the words: a
-//                      refit is one launch, with no read-back, that a graph can record.
+//                      bad index as a fault (FAULT_NON_FINITE_INPUT; for a mesh also the
+//                      smallest position of an index outside the points, which its triangle
+//                      boxes' step found, as FAULT_OUT_OF_BOUNDS on `indices`), resetting the
+//                      words: a refit is one launch, with no read-back, that a graph can
+//                      record.
 //
 // Only compiled with WP_BVH_BUILD (the runtime's BVH build library); kernels that query a BVH
 // never include this file.
@@ -92,7 +95,10 @@ static_assert(sizeof(lbvh_hierarchy_t) == 56, "lbvh_hierarchy_t layout");
 /// 0 or 1, with the element of `sources[0]` or `sources[1]` (Vec3*) at that index; `fault`
 /// is the fault context. `check` bit 0: check the boxes; bit 1: the boxes are by leaf
 /// position (box k is that of prim_ids[k], as the triangle boxes' step writes them in leaf
-/// order), else by primitive.
+/// order), else by primitive; bit 2: bad[1] is instead the smallest position of an index
+/// outside the `num_points` points (a mesh's triangle boxes' step lowered it) in sources[1]
+/// (i32*, 3 per primitive), reported as out of bounds on argument 1: index {position,
+/// value}, shape {3n, num_points}.
 struct lbvh_refit_t {
   u64 lowers;
   u64 uppers;
@@ -104,9 +110,10 @@ struct lbvh_refit_t {
   u64 bad;
   u64 sources[2];
   i64 check;
+  i64 num_points;
   step_fault_t fault;
 };
-static_assert(sizeof(lbvh_refit_t) == 128, "lbvh_refit_t layout");
+static_assert(sizeof(lbvh_refit_t) == 136, "lbvh_refit_t layout");
 
 /// LbvhFinite: the smallest index of a non-finite vector of `n` (Vec3*) into *bad (i32,
 /// atomically lowered; left alone when all are finite).
@@ -119,14 +126,16 @@ static_assert(sizeof(lbvh_finite_t) == 24, "lbvh_finite_t layout");
 
 /// LbvhTriangleBoxes: each of the `n` triangles' box (points: `num_points`, indices: 3 per
 /// triangle) into lowers and uppers; the smallest position of an index outside the points
-/// into *bad (i32, atomically lowered; `bad` 0: not recorded, for indices checked before),
-/// whose triangle gets an empty box and reads no point; the smallest index of a point with a
-/// NaN or infinite coordinate into *bad_point (i32, likewise; 0: not checked). With leaf_tris
-/// (f32*, 12 per triangle, 16-aligned; 0: none) and a built tree's prim_ids (i32*, n): the
-/// step runs over the leaf positions k, writing the box of face prim_ids[k] at position k (for
-/// a refit whose boxes are by position, check bit 1) and that face's corners {x, y, z, 0} at leaf_tris[12k..12k + 12] (NaN corners for a face
-/// with an index outside the points, or an id outside [0, n)): a mesh's leaf-ordered
-/// triangles (warp_core's leaf_triangles), gathered where the vertices are read anyway.
+/// into *bad (i32, atomically lowered; `bad` 0: not recorded), whose triangle gets an empty
+/// box and reads no point (a build refuses such an index, a refit's report raises it as a
+/// fault); the smallest index of a point with a NaN or infinite coordinate into *bad_point
+/// (i32, likewise; 0: not checked). With leaf_tris (f32*, 12 per triangle, 16-aligned; 0:
+/// none) and a built tree's prim_ids (i32*, n): the step runs over the leaf positions k,
+/// writing the box of face prim_ids[k] at position k (for a refit whose boxes are by
+/// position, check bit 1) and that face's corners {x, y, z, 0} at leaf_tris[12k..12k + 12]
+/// (NaN corners for a face with an index outside the points, or an id outside [0, n)): a
+/// mesh's leaf-ordered triangles (warp_core's leaf_triangles), gathered where the vertices
+/// are read anyway.
 struct lbvh_triangle_boxes_t {
   u64 points;
   u64 indices;
@@ -342,6 +351,14 @@ __device__ void wp_lbvh_refit_report(const wp::lbvh_refit_t& s) {
   for (int a = 0; a < 2; ++a) {
     const wp::i32 i = atomicExch(&bad[a], 0x7fffffff);
     if (i == 0x7fffffff || wp::faulted(&ctx) || s.sources[a] == 0) continue;
+    if (a == 1 && (s.check & 4) != 0) {
+      // A mesh's index outside its points (written by a kernel since the build): position
+      // i of the indices holds it, as the CPU's refit names it.
+      const wp::i64 index[2] = {(wp::i64)i, (wp::i64)((const wp::i32*)s.sources[1])[i]};
+      const wp::i64 shape[2] = {3 * s.n, s.num_points};
+      wp::raise(&ctx, wp::FAULT_OUT_OF_BOUNDS, a, 2, index, shape);
+      continue;
+    }
     const wp::Vec3 v = ((const wp::Vec3*)s.sources[a])[i];
     const wp::i64 index[4] = {(wp::i64)i, (wp::i64)wp::f64_to_bits((wp::f64)v.x),
                               (wp::i64)wp::f64_to_bits((wp::f64)v.y),

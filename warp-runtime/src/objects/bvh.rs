@@ -111,11 +111,12 @@ pub(crate) static BVH_REFIT: KernelInfo = KernelInfo {
     ..KernelInfo::BLANK
 };
 
-/// What a mesh's refit names its faults by (the GPU's check of the points).
+/// What a mesh's refit names its faults by (the GPU's check of the points, argument 0, and of
+/// the indices, argument 1).
 pub(crate) static MESH_REFIT: KernelInfo = KernelInfo {
     name: "Mesh::refit",
     module: "warp_lang::objects",
-    params: &["points"],
+    params: &["points", "indices"],
     ..KernelInfo::BLANK
 };
 
@@ -357,7 +358,10 @@ impl Tree {
     /// Non-finite input is an [`Error::InvalidArgument`] on the CPU, checked before the tree is
     /// written (it is left as it was); on a GPU a fault ([`FaultKind::NonFiniteInput`](
     /// warp_core::FaultKind::NonFiniteInput)) that the refit's step raises, reported at the
-    /// next synchronisation, after the tree was refit from what it read.
+    /// next synchronisation, after the tree was refit from what it read. A mesh's index
+    /// outside its points (written since the build) likewise: refused on the CPU, on a GPU a
+    /// [`FaultKind::OutOfBounds`](warp_core::FaultKind::OutOfBounds) on `indices` (index
+    /// `[position, value]`, shape `[indices, points]`), its face refit as an empty box.
     pub(crate) fn refit(tree: &mut Arc<Tree>, from: RefitFrom<'_>) -> Result<()> {
         let what = match from {
             RefitFrom::Boxes { .. } => BVH_REFIT.name,
@@ -533,15 +537,21 @@ impl Tree {
                     sources: [Some(lowers), Some(uppers)],
                     check_boxes: true,
                     by_position: false,
+                    indices: None,
                     names: &BVH_REFIT,
                 };
                 lbvh::refit(lowers, uppers, &buffers, Some(&check), uses)
             }
             RefitFrom::Triangles { points, indices } => {
                 let [lo, hi] = r.boxes.as_ref().expect("a mesh's tree keeps its boxes");
-                // The indices were checked at the mesh's build: no index flag. The step runs in
-                // leaf order and writes the walks' copy of the triangles too.
-                let flags = [0, r.bad.device_address()];
+                // The indices were checked at the mesh's build, but a kernel may have written
+                // them since (`Mesh::indices`): the step lowers word 1 to the first position
+                // of an index outside the points (that face gets an empty box and NaN
+                // corners, reading no point through it), word 0 to the first non-finite
+                // point, and the refit reports either as a fault. The step runs in leaf order
+                // and writes the walks' copy of the triangles too.
+                let word = r.bad.device_address();
+                let flags = [word + 4, word];
                 let tris = self
                     .leaf_tris
                     .as_ref()
@@ -561,6 +571,7 @@ impl Tree {
                     check_boxes: false,
                     // The leaf-order step above wrote them by position.
                     by_position: true,
+                    indices: Some((indices, points.len())),
                     names: &MESH_REFIT,
                 };
                 lbvh::refit(lo, hi, &buffers, Some(&check), uses)

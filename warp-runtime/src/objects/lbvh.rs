@@ -54,16 +54,22 @@ pub(crate) struct LbvhTree<'a> {
     pub counters: &'a Array<i32>,
 }
 
-/// What a refit checks and reports (`wp::lbvh_refit_t`'s `bad`, `sources`, `check` and
-/// `fault`): the smallest index of a non-finite element, as a fault named by `names` (a
-/// `NonFiniteInput` of argument 0 or 1) raised by the refit itself, so that a refit is one
-/// launch that reads nothing back.
+/// What a refit checks and reports (`wp::lbvh_refit_t`'s `bad`, `sources`, `check`,
+/// `num_points` and `fault`): the smallest index of a non-finite element, as a fault named by
+/// `names` (a `NonFiniteInput` of argument 0 or 1), or a mesh's smallest position of an index
+/// outside its points (an `OutOfBounds` of argument 1), raised by the refit itself, so that a
+/// refit is one launch that reads nothing back.
 pub(crate) struct RefitCheck<'a> {
     /// Two `i32` words at `i32::MAX` (the refit leaves them so): the smallest bad index of
     /// argument 0 and of argument 1.
     pub bad: &'a Array<i32>,
     /// The elements the words index, by argument (reported with the index).
     pub sources: [Option<&'a Array<Vec3>>; 2],
+    /// A mesh's indices and its number of points: word 1 is then the smallest position of an
+    /// index outside the points (lowered by [`triangle_boxes`]), reported as out of bounds
+    /// of argument 1 with index `[position, value]` and shape `[indices, points]` (`sources[1]`
+    /// is then `None`).
+    pub indices: Option<(&'a Array<i32>, usize)>,
     /// Whether the refit checks the boxes it reads (then `sources` are the lowers and
     /// uppers), or only reports what an earlier step found (a mesh's points, checked by
     /// [`triangle_boxes`]).
@@ -187,9 +193,18 @@ pub(crate) fn refit(
         counters: tree.counters.device_address(),
         n: n as i64,
         bad: check.map_or(0, |c| c.bad.device_address()),
-        sources: check.map_or([0; 2], |c| c.sources.map(addr)),
-        // Bit 0: check the boxes; bit 1: the boxes are by leaf position.
-        check: check.map_or(0, |c| c.check_boxes as i64 | ((c.by_position as i64) << 1)),
+        sources: check.map_or([0; 2], |c| {
+            let [a, b] = c.sources.map(addr);
+            [a, c.indices.map_or(b, |(ix, _)| ix.device_address())]
+        }),
+        // Bit 0: check the boxes; bit 1: the boxes are by leaf position; bit 2: word 1 is an
+        // index position.
+        check: check.map_or(0, |c| {
+            c.check_boxes as i64
+                | ((c.by_position as i64) << 1)
+                | ((c.indices.is_some() as i64) << 2)
+        }),
+        num_points: check.and_then(|c| c.indices).map_or(0, |(_, n)| n as i64),
         fault: StepFault::new(check.map_or(&NO_NAMES, |c| c.names)),
     };
     dispatch::object_step_keeping(lowers.device(), &step, uses)
@@ -480,9 +495,10 @@ struct LbvhRefit {
     bad: u64,
     sources: [u64; 2],
     check: i64,
+    num_points: i64,
     fault: StepFault,
 }
-const _: () = assert!(std::mem::size_of::<LbvhRefit>() == 128);
+const _: () = assert!(std::mem::size_of::<LbvhRefit>() == 136);
 
 /// The order-preserving `u32` image of an `f32` (`wp::lbvh_ordered`).
 fn ordered(x: f32) -> u32 {
@@ -805,14 +821,30 @@ unsafe impl ObjectStep for LbvhRefit {
             if i == i32::MAX || source == 0 {
                 continue;
             }
+            let names = self.fault.names;
+            let arg_name = names.params.get(arg).copied().unwrap_or("?");
+            if arg == 1 && self.check & 4 != 0 {
+                // A mesh's index outside its points, at position `i` of the indices.
+                // SAFETY: the source is the `3n` indices, where the boxes' step found it.
+                let v = unsafe { *(source as *const i32).add(i as usize) };
+                return Err(Fault {
+                    kernel: names.name,
+                    kind: FaultKind::OutOfBounds {
+                        arg: arg_name,
+                        index: vec![i128::from(i), i128::from(v)],
+                        shape: vec![3 * n, self.num_points as usize],
+                    },
+                    launch: None,
+                }
+                .into());
+            }
             // SAFETY: the source holds the element the word indexes (the check found it
             // there).
             let v = unsafe { *(source as *const Vec3).add(i as usize) };
-            let names = self.fault.names;
             return Err(Fault {
                 kernel: names.name,
                 kind: FaultKind::NonFiniteInput {
-                    arg: names.params.get(arg).copied().unwrap_or("?"),
+                    arg: arg_name,
                     index: i as usize,
                     values: v.to_array().map(f64::from).to_vec(),
                 },
@@ -999,6 +1031,7 @@ mod tests {
                 sources: [Some(&points2), None],
                 check_boxes: false,
                 by_position: true,
+                indices: None,
                 names: &MESH_NAMES,
             };
             triangle_boxes(
@@ -1021,6 +1054,155 @@ mod tests {
                 dev.alias()
             );
             assert_eq!(bad.to_vec().unwrap(), vec![i32::MAX; 2]);
+        }
+    }
+
+    /// A mesh's index written outside its points after the build: the triangle boxes' step
+    /// lowers word 1 to its smallest position, and the refit reports it as `OutOfBounds` on
+    /// `indices` with index `[position, value]` and shape `[3 * faces, points]` (what the
+    /// CPU's `Mesh::refit` error names), a non-finite point first (as the CPU checks the
+    /// points first); the bad face gets an empty box and NaN corners, the words are reset,
+    /// and a refit from valid indices again gives the reference tree. On the CPU (the step
+    /// returns the fault) and on `cuda:0` when there is one (the fault reaches the next
+    /// synchronisation).
+    #[test]
+    fn a_mesh_refit_reports_an_index_outside_the_points() {
+        static MESH_NAMES: KernelInfo = KernelInfo {
+            name: "Mesh::refit",
+            params: &["points", "indices"],
+            ..KernelInfo::BLANK
+        };
+        let mut devices = vec![crate::device::get_device("cpu").unwrap()];
+        devices.extend(crate::device::get_device("cuda:0").ok());
+        for dev in devices {
+            let (pl, _) = boxes(200, 11, false);
+            let faces = 300;
+            let ix: Vec<i32> = (0..3 * faces)
+                .map(|i| ((i * 37 + i / 3) % 200) as i32)
+                .collect();
+            let a = |v: &[Vec3]| Array::from_slice(v, &dev).unwrap();
+            let points = a(&pl);
+            let indices = Array::from_slice(&ix, &dev).unwrap();
+            let n = faces;
+            let (lo, hi) = (a(&vec![Vec3::ZERO; n]), a(&vec![Vec3::ZERO; n]));
+            let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
+            let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+            let ids = Array::<i32>::zeros(n, &dev).unwrap();
+            let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+            let tree = LbvhTree {
+                nodes: &nodes,
+                parents: &parents,
+                prim_ids: &ids,
+                counters: &counters,
+            };
+            triangle_boxes(&points, &indices, &lo, &hi, [0, 0], None, || Box::new(())).unwrap();
+            Lbvh::new(&dev)
+                .unwrap()
+                .build(&lo, &hi, &tree, MESH_LEAF_SIZE)
+                .unwrap();
+            let tris = Array::<glam::Vec4>::zeros(3 * n, &dev).unwrap();
+            let bad = Array::from_slice(&[i32::MAX; 2], &dev).unwrap();
+            let check = RefitCheck {
+                bad: &bad,
+                sources: [Some(&points), None],
+                check_boxes: false,
+                by_position: true,
+                indices: Some((&indices, pl.len())),
+                names: &MESH_NAMES,
+            };
+            // The runtime's refit: the leaf-order boxes' step into both words, then the refit.
+            let mesh_refit = || -> Result<()> {
+                let word = bad.device_address();
+                triangle_boxes(
+                    &points,
+                    &indices,
+                    &lo,
+                    &hi,
+                    [word + 4, word],
+                    Some((&ids, &tris)),
+                    || Box::new(()),
+                )?;
+                refit(&lo, &hi, &tree, Some(&check), || Box::new(()))
+            };
+            mesh_refit().unwrap();
+            crate::synchronize().unwrap();
+            let want = nodes.to_vec().unwrap();
+            let fault = |r: Result<()>| -> Fault {
+                let r = if dev.is_cpu() {
+                    r
+                } else {
+                    r.unwrap();
+                    crate::synchronize()
+                };
+                match r {
+                    Err(crate::error::Error::Fault(f)) => {
+                        assert_eq!(bad.to_vec().unwrap(), vec![i32::MAX; 2], "the words reset");
+                        f
+                    }
+                    r => panic!("{}: {r:?}", dev.alias()),
+                }
+            };
+            let set_index = |k: usize, v: i32| {
+                indices
+                    .view(k..k + 1)
+                    .unwrap()
+                    .copy_from(&Array::from_slice(&[v], &dev).unwrap())
+                    .unwrap();
+            };
+            // Two bad indices (one past the end, one negative): the smaller position is named.
+            set_index(700, -1);
+            set_index(301, 200);
+            let f = fault(mesh_refit());
+            assert_eq!(f.kernel, "Mesh::refit", "{}", dev.alias());
+            assert_eq!(
+                f.kind,
+                FaultKind::OutOfBounds {
+                    arg: "indices",
+                    index: vec![301, 200],
+                    shape: vec![900, 200],
+                },
+                "{}",
+                dev.alias()
+            );
+            // Face 100 (position 301's) read no point: an empty box at its leaf position and
+            // NaN corners in the walks' copy; every other face as the reference has it.
+            let host_ids = ids.to_vec().unwrap();
+            let k = host_ids.iter().position(|&f| f == 100).unwrap();
+            assert_eq!(lo.to_vec().unwrap()[k], Vec3::ZERO);
+            assert_eq!(hi.to_vec().unwrap()[k], Vec3::ZERO);
+            let corners = tris.to_vec().unwrap();
+            assert!(corners[3 * k..3 * k + 3]
+                .iter()
+                .all(|c| c.x.is_nan() && c.y.is_nan() && c.z.is_nan()));
+            // A non-finite point as well: the points are reported first, as on the CPU.
+            let nan = Vec3::new(f32::NAN, 0.0, 1.0);
+            points.view(5..6).unwrap().copy_from(&a(&[nan])).unwrap();
+            let f = fault(mesh_refit());
+            assert!(
+                matches!(
+                    f.kind,
+                    FaultKind::NonFiniteInput {
+                        arg: "points",
+                        index: 5,
+                        ..
+                    }
+                ),
+                "{}: {f:?}",
+                dev.alias()
+            );
+            // Valid again: the refit is clean and gives the reference tree and copy.
+            points.view(5..6).unwrap().copy_from(&a(&[pl[5]])).unwrap();
+            set_index(301, ix[301]);
+            set_index(700, ix[700]);
+            mesh_refit().unwrap();
+            crate::synchronize().unwrap();
+            assert_eq!(nodes.to_vec().unwrap(), want, "{}", dev.alias());
+            assert_eq!(
+                tris.to_vec().unwrap(),
+                bvh_build::leaf_triangles(&host_ids, &ix, &pl),
+                "{}",
+                dev.alias()
+            );
         }
     }
 
@@ -1056,6 +1238,7 @@ mod tests {
             sources: [Some(&l), Some(&h)],
             check_boxes: true,
             by_position: false,
+            indices: None,
             names: &NAMES,
         };
         let refit_err = || match refit(&l, &h, &tree, Some(&check), || Box::new(())) {

@@ -29,10 +29,11 @@
 //! The tree is built where the mesh is, as for [`Bvh`](super::Bvh): on the CPU by the binned
 //! SAH builder over the triangles' boxes; on a GPU the triangles' boxes (with the checks of
 //! the indices and the points) and a linear BVH are kernels (`lbvh.rs`), and only the checks'
-//! flags are read back, at `new`. The indices are checked once, at `new` (on a GPU by the
-//! triangles' boxes step, which reads no point through a bad index). A refit reads nothing
-//! back: on a GPU the boxes step checks the points and the refit step reports a non-finite
-//! one as a fault.
+//! flags are read back, at `new`. The indices are checked at `new` (on a GPU by the
+//! triangles' boxes step, which reads no point through a bad index) and again by every
+//! refit, since a kernel may write them. A refit reads nothing back: on a GPU the boxes step
+//! checks the points and the indices and the refit step reports a non-finite point or an
+//! index outside the points as a fault.
 //!
 //! Copy-on-write: a clone (what a [`Tape`](crate::Tape) keeps) shares the tree; a refit of a
 //! shared tree gives the refit mesh a new node buffer, so a recorded launch replays against
@@ -302,11 +303,15 @@ impl Mesh {
     /// naming `Mesh::refit`, `points` and the first such index, reported at the next
     /// synchronisation, the tree refit from the values read (queries stay in bounds, their
     /// results unspecified until a refit from finite points). A mesh without triangles has no
-    /// box to refit: a GPU checks nothing then. (An index a kernel wrote outside the points
-    /// since the build, through [`indices`](Mesh::indices): the CPU's refit refuses it, naming
-    /// `indices`; a GPU's gives its triangle an empty box and NaN corners in the leaf-ordered
-    /// triangles the walks read, so the point and ray queries never report it, and
-    /// `mesh_eval_*` and the box query, which read the indices, fault on it.)
+    /// box to refit: a GPU checks nothing then. An index a kernel wrote outside the points
+    /// since the build, through [`indices`](Mesh::indices), is refused by the CPU's refit,
+    /// naming `indices`, its position and value; on a GPU it is a fault
+    /// ([`FaultKind::OutOfBounds`](warp_core::FaultKind::OutOfBounds) of `Mesh::refit` on
+    /// `indices`, index `[position, value]`, shape `[3 * faces, points]`), reported at the
+    /// next synchronisation like a non-finite point's, the refit reading no point through
+    /// that index: its triangle gets an empty box and NaN corners in the leaf-ordered
+    /// triangles the walks read (the point and ray queries skip it until a refit from valid
+    /// indices).
     ///
     /// The refit also rewrites the leaf-ordered triangles the queries read (module docs), in
     /// the same step that reads the vertices for the boxes: queries see the points as of the
