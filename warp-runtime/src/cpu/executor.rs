@@ -86,20 +86,37 @@ where
 {
     let pool = tile_pool()?;
     let min_chunk = config::cpu_min_chunk() / block_dim.max(1);
-    pool.install(|| {
-        if blocks <= min_chunk.max(1) {
-            // Waking more threads costs microseconds; one task of the pool runs it all.
-            return run(0..blocks).map_err(Error::from);
-        }
-        let chunk = chunk_len(blocks, min_chunk, pool.current_num_threads());
-        (0..blocks.div_ceil(chunk))
-            .into_par_iter()
-            .try_for_each(|c| {
-                let start = c * chunk;
-                run(start..(start + chunk).min(blocks))
-            })
-            .map_err(Error::from)
-    })
+    pool.install(|| blocks_on_pool(pool, blocks, min_chunk, &run))
+}
+
+/// The body of [`for_each_block`], run by a thread of [`tile_pool`]. Never inlined: rayon's
+/// `install` runs its closure in the calling thread's frame when that thread is a worker, so
+/// with the closure inlined, LLVM hoists the block's frame (megabytes of tiles, allocated at
+/// function entry) into the caller's own frame even when the caller is not a worker and
+/// merely waits: a release build then overflowed the 2 MiB stack of the thread that launched
+/// (found by `blocks_run_once_each_on_big_stacks`).
+#[inline(never)]
+fn blocks_on_pool<F>(
+    pool: &rayon::ThreadPool,
+    blocks: usize,
+    min_chunk: usize,
+    run: &F,
+) -> Result<()>
+where
+    F: Fn(std::ops::Range<usize>) -> KResult<()> + Sync + Send,
+{
+    if blocks <= min_chunk.max(1) {
+        // Waking more threads costs microseconds; one task of the pool runs it all.
+        return run(0..blocks).map_err(Error::from);
+    }
+    let chunk = chunk_len(blocks, min_chunk, pool.current_num_threads());
+    (0..blocks.div_ceil(chunk))
+        .into_par_iter()
+        .try_for_each(|c| {
+            let start = c * chunk;
+            run(start..(start + chunk).min(blocks))
+        })
+        .map_err(Error::from)
 }
 
 #[cfg(test)]
