@@ -187,7 +187,7 @@ fn main() -> wp::Result<()> {
     let path = cli.obj.unwrap_or_else(|| {
         concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/examples/assets/torus_knot.obj"
+            "/assets/torus_knot.obj"
         )
         .to_string()
     });
