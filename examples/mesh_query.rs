@@ -185,11 +185,7 @@ fn main() -> wp::Result<()> {
 
     // 3. A mesh from an OBJ file.
     let path = cli.obj.unwrap_or_else(|| {
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/assets/torus_knot.obj"
-        )
-        .to_string()
+        concat!(env!("CARGO_MANIFEST_DIR"), "/assets/torus_knot.obj").to_string()
     });
     let obj = wp::objects::ObjMesh::load(&path)?;
     let m = meshes::TriMesh {
