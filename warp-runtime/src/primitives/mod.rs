@@ -113,9 +113,23 @@ impl<'a> From<&'a Array<i32>> for Count<'a> {
 // Checks shared by every primitive
 // ------------------------------------------------------------------------------------------
 
-/// The checks of one call, naming the function in every message.
-struct Check {
-    func: &'static str,
+/// The checks of one call, naming the function in every message (the sparse tier's calls use
+/// them too).
+pub(crate) struct Check {
+    pub(crate) func: &'static str,
+}
+
+/// Whether the elements of `a` and `b` share any byte of memory.
+pub(crate) fn overlap<T: Element, U: Element>(a: &Array<T>, b: &Array<U>) -> bool {
+    if !a.shares_storage_with(b) || a.is_empty() || b.is_empty() {
+        return false;
+    }
+    let (s, t) = (a.device_address() as usize, b.device_address() as usize);
+    let (e, f) = (
+        s + a.len() * std::mem::size_of::<T>(),
+        t + b.len() * std::mem::size_of::<U>(),
+    );
+    s < f && t < e
 }
 
 impl Check {
@@ -124,7 +138,7 @@ impl Check {
     }
 
     /// Primitives address arrays as flat runs of elements.
-    fn contiguous<T: Element>(&self, name: &str, a: &Array<T>) -> Result<()> {
+    pub(crate) fn contiguous<T: Element>(&self, name: &str, a: &Array<T>) -> Result<()> {
         if a.is_contiguous() {
             return Ok(());
         }
@@ -136,7 +150,11 @@ impl Check {
         )))
     }
 
-    fn same_device(&self, first: (&str, &Device), other: (&'static str, &Device)) -> Result<()> {
+    pub(crate) fn same_device(
+        &self,
+        first: (&str, &Device),
+        other: (&'static str, &Device),
+    ) -> Result<()> {
         if first.1 == other.1 {
             return Ok(());
         }
@@ -158,16 +176,13 @@ impl Check {
     ) -> Result<()> {
         let (wn, w) = written;
         let (on, o) = other;
-        if !w.shares_storage_with(o) || w.is_empty() || o.is_empty() {
+        if !overlap(w, o) {
             return Ok(());
         }
-        let (ws, os) = (w.device_address() as usize, o.device_address() as usize);
-        let we = ws + w.len() * std::mem::size_of::<T>();
-        let oe = os + o.len() * std::mem::size_of::<U>();
-        if we <= os || oe <= ws {
-            return Ok(());
-        }
-        if in_place && ws == os && std::mem::size_of::<T>() == std::mem::size_of::<U>() {
+        if in_place
+            && w.device_address() == o.device_address()
+            && std::mem::size_of::<T>() == std::mem::size_of::<U>()
+        {
             return Ok(());
         }
         let how = if in_place {

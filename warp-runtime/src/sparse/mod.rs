@@ -51,7 +51,7 @@ use crate::capturing::Keep;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
-use crate::primitives::{array_scan_n, radix_sort_pairs, Count};
+use crate::primitives::{array_scan_n, overlap, radix_sort_pairs, Check, Count};
 use std::marker::PhantomData;
 use steps::{
     BsrMv, BsrOffsets, Dot, TplHeads, TplKeys, TplReport, TplRowKeys, TplSum, TRIPLET_NAMES,
@@ -84,46 +84,14 @@ fn invalid(func: &str, what: impl std::fmt::Display) -> Error {
     Error::invalid(format!("{func}: {what}"))
 }
 
-/// `a` is contiguous.
-fn contiguous<T: Element>(func: &str, name: &str, a: &Array<T>) -> Result<()> {
-    if a.is_contiguous() {
-        return Ok(());
-    }
-    Err(invalid(
-        func,
-        format!(
-            "argument `{name}` is not contiguous (shape {:?}, strides {:?}); copy it into a new \
-             array first",
-            a.shape(),
-            a.strides()
-        ),
-    ))
+/// `a` is contiguous (the primitives' check, naming the function).
+fn contiguous<T: Element>(func: &'static str, name: &str, a: &Array<T>) -> Result<()> {
+    Check { func }.contiguous(name, a)
 }
 
-/// `other` is on `dev`.
+/// `other` is on `dev` (the primitives' check).
 fn same_device(func: &'static str, arg: &'static str, dev: &Device, other: &Device) -> Result<()> {
-    if dev == other {
-        return Ok(());
-    }
-    Err(Error::DeviceMismatch {
-        kernel: func,
-        arg,
-        expected: dev.alias().to_string(),
-        found: other.alias().to_string(),
-    })
-}
-
-/// The elements of `a` and `b` overlap in memory.
-fn overlap<T: Element, U: Element>(a: &Array<T>, b: &Array<U>) -> bool {
-    if !a.shares_storage_with(b) || a.is_empty() || b.is_empty() {
-        return false;
-    }
-    let (s, t) = (a.device_address(), b.device_address());
-    let (e, f) = (
-        s + (a.len() * std::mem::size_of::<T>()) as u64,
-        t + (b.len() * std::mem::size_of::<U>()) as u64,
-    );
-    s < f && t < e
+    Check { func }.same_device(("", dev), (arg, other))
 }
 
 /// Bits of a radix key whose largest value is `max`.
