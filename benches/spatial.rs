@@ -20,13 +20,12 @@
 //! torch.sum; CuPy, where it is installed: argsort, CUB's radix sort through Thrust, and two
 //! gathers): a stable key/value radix sort (i32 and f32 keys), inclusive scans and a sum, at
 //! 1M and 16M elements. Each figure is a median of timed repetitions after a warm-up
-//! (compilation excluded); every result is checked against the CPU backend's. Sorts are timed
-//! by CUDA events around the sort (on random keys restored before each repetition, as the
-//! Python sides time theirs), scans and sums by the host clock, synchronised around each.
-//! Then the GPU sort's kernel configurations (`SortConfig`) are timed side by side on random
-//! i32 keys and on 21-bit keys (the hash grid's), and the GPU scan's algorithms
-//! (`ScanAlgorithm`: three-phase and single-pass) by CUDA events beside `torch.cumsum`, with
-//! the sum beside `torch.sum`.
+//! (compilation excluded); every result is checked against the CPU backend's. Sorts, scans
+//! and sums are timed by CUDA events around the call, as the PyTorch side times its own (sorts
+//! on random keys restored before each repetition). Then the GPU sort's kernel configurations
+//! (`SortConfig`) are timed side by side on random i32 keys and on 21-bit keys (the hash
+//! grid's), and the GPU scan's algorithms (`ScanAlgorithm`: three-phase and single-pass) in
+//! several block shapes (`Tile`) beside `torch.cumsum`, with the sum beside `torch.sum`.
 //!
 //! ```text
 //! .gpu/bin/spatial-* --primitives              # the primitives and sort kernels only
@@ -101,6 +100,9 @@ fn hash_grid(dev: &wp::Device) -> wp::Result<()> {
     let out = wp::Array::<i32>::zeros(n, dev)?;
     let mut grid = wp::HashGrid::new(128, 128, 128, dev)?;
     let build = median_ms(|| grid.build(&x, r))?;
+    // The device's share of a build (CUDA events, both sides): what is left of the host-timed
+    // figure is launch and synchronisation overhead.
+    let build_events = event_ms(dev, || grid.build(&x, r))?;
     let point = median_ms(|| wp::launch(count_point_order, n, (&grid, &x, r, &out), dev))?;
     let counts = out.to_vec()?;
     let cell = median_ms(|| wp::launch(count_cell_order, n, (&grid, &x, r, &out), dev))?;
@@ -147,6 +149,11 @@ fn hash_grid(dev: &wp::Device) -> wp::Result<()> {
         "{:<28} {build:7.3} ms   {}",
         "build",
         ratio(build, theirs("build_ms"))
+    );
+    println!(
+        "{:<28} {build_events:7.3} ms   {}",
+        "build (GPU, CUDA events)",
+        ratio(build_events, theirs("build_events_ms"))
     );
     println!(
         "{:<28} {point:7.3} ms   {}",
@@ -248,7 +255,7 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
             })
             .collect();
         assert_eq!(out.to_vec()?, want, "scan i32");
-        let ms = median_ms(|| wp::array_scan(&a, &out, true))?;
+        let ms = event_ms(dev, || wp::array_scan(&a, &out, true))?;
         println!(
             "{:<28} {ms:7.3} ms   {}",
             format!("inclusive scan i32 ({n})"),
@@ -257,7 +264,7 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
 
         let f = wp::Array::from_slice(&kf, dev)?;
         let fout = wp::Array::<f32>::zeros(n, dev)?;
-        let ms = median_ms(|| wp::array_scan(&f, &fout, true))?;
+        let ms = event_ms(dev, || wp::array_scan(&f, &fout, true))?;
         let last = fout.to_vec()?[n - 1] as f64;
         let exact: f64 = kf.iter().map(|&x| x as f64).sum();
         println!(
@@ -268,7 +275,7 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
         );
 
         let sum = wp::Array::<f32>::zeros(1, dev)?;
-        let ms = median_ms(|| wp::array_sum(&f, &sum))?;
+        let ms = event_ms(dev, || wp::array_sum(&f, &sum))?;
         let got = sum.to_vec()?[0] as f64;
         println!(
             "{:<28} {ms:7.3} ms   {}   rel err vs f64 {:.1e}",
@@ -298,14 +305,24 @@ fn event_ms(dev: &wp::Device, mut f: impl FnMut() -> wp::Result<()>) -> wp::Resu
 }
 
 /// The GPU scan's algorithms (`wp::primitives::plan::ScanAlgorithm`: the three-phase scan, the
-/// default, and the single-pass decoupled look-back) timed one after the other in this
-/// process by CUDA events, inclusive scans of i32 (0..100, as PyTorch's) and f32 (uniform in
-/// [0, 1)) beside `torch.cumsum`, and the f32 sum beside `torch.sum`: the run that decides the
-/// default (`plan::GPU_SCAN`). The i32 results are checked against the CPU backend's, the f32
-/// ones by the last prefix's error against an f64 sum.
+/// floats' default, and the single-pass decoupled look-back, the integers') and block shapes
+/// (`plan::Tile`, each a module of its own), timed one after the other in this process by
+/// CUDA events: inclusive scans of i32 (0..100, as PyTorch's) and f32 (uniform in [0, 1))
+/// beside `torch.cumsum`, and the f32 sum beside `torch.sum`: the run that decides the
+/// defaults (`plan::default_gpu_scan`). The i32 results are checked against the CPU's, the
+/// f32 ones by the last prefix's error against an f64 sum.
 fn scan_algorithms(dev: &wp::Device, torch: Option<&serde_json::Value>) -> wp::Result<()> {
-    use wp::primitives::plan::{self, ScanAlgorithm};
+    use wp::primitives::plan::{self, ScanAlgorithm, Tile};
     println!("scans (GPU ms between CUDA events; the PyTorch column as above):");
+    let tile = |threads, items| Tile { threads, items };
+    let tiles = [
+        plan::GPU_TILE,
+        tile(256, 16),
+        tile(512, 8),
+        tile(512, 16),
+        tile(1024, 8),
+        tile(128, 16),
+    ];
     for n in [1usize << 20, 1 << 24] {
         let section = torch.and_then(|t| size_section(t, n));
         let theirs = |k: &str| section.and_then(|s| json_number(s, k));
@@ -328,35 +345,39 @@ fn scan_algorithms(dev: &wp::Device, torch: Option<&serde_json::Value>) -> wp::R
             wp::Array::from_slice(&kf, dev)?,
             wp::Array::<f32>::zeros(n, dev)?,
         );
-        for alg in [ScanAlgorithm::ThreePass, ScanAlgorithm::OnePass] {
-            plan::set_gpu_scan_algorithm(Some(alg));
-            let ms = event_ms(dev, || wp::array_scan(&a, &out, true))?;
-            assert_eq!(out.to_vec()?, want, "{alg:?} scan i32 ({n})");
+        for t in tiles {
+            plan::set_gpu_scan_tile(Some(t))?;
+            let shape = format!("{}x{}", t.threads, t.items);
+            for alg in [ScanAlgorithm::ThreePass, ScanAlgorithm::OnePass] {
+                plan::set_gpu_scan_algorithm(Some(alg));
+                let name = format!("{alg:?} {shape}");
+                let ms = event_ms(dev, || wp::array_scan(&a, &out, true))?;
+                assert_eq!(out.to_vec()?, want, "{name} scan i32 ({n})");
+                println!(
+                    "  {name:<18} inclusive scan i32 ({n:>8}) {ms:7.3} ms   {}",
+                    ratio(ms, theirs("cumsum_i32_ms"))
+                );
+                let ms = event_ms(dev, || wp::array_scan(&f, &fout, true))?;
+                let last = fout.to_vec()?[n - 1] as f64;
+                println!(
+                    "  {name:<18} inclusive scan f32 ({n:>8}) {ms:7.3} ms   {}   last element rel \
+                     err vs f64 {:.1e}",
+                    ratio(ms, theirs("cumsum_f32_ms")),
+                    ((last - exact) / exact).abs()
+                );
+            }
+            plan::set_gpu_scan_algorithm(None);
+            let sum = wp::Array::<f32>::zeros(1, dev)?;
+            let ms = event_ms(dev, || wp::array_sum(&f, &sum))?;
+            let got = sum.to_vec()?[0] as f64;
             println!(
-                "  {:<10} inclusive scan i32 ({n:>8}) {ms:7.3} ms   {}",
-                format!("{alg:?}"),
-                ratio(ms, theirs("cumsum_i32_ms"))
-            );
-            let ms = event_ms(dev, || wp::array_scan(&f, &fout, true))?;
-            let last = fout.to_vec()?[n - 1] as f64;
-            println!(
-                "  {:<10} inclusive scan f32 ({n:>8}) {ms:7.3} ms   {}   last element rel err \
-                 vs f64 {:.1e}",
-                format!("{alg:?}"),
-                ratio(ms, theirs("cumsum_f32_ms")),
-                ((last - exact) / exact).abs()
+                "  {:<18} sum f32            ({n:>8}) {ms:7.3} ms   {}   rel err vs f64 {:.1e}",
+                shape,
+                ratio(ms, theirs("sum_f32_ms")),
+                ((got - exact) / exact).abs()
             );
         }
-        plan::set_gpu_scan_algorithm(None);
-        let sum = wp::Array::<f32>::zeros(1, dev)?;
-        let ms = event_ms(dev, || wp::array_sum(&f, &sum))?;
-        let got = sum.to_vec()?[0] as f64;
-        println!(
-            "  {:<10} sum f32            ({n:>8}) {ms:7.3} ms   {}   rel err vs f64 {:.1e}",
-            "",
-            ratio(ms, theirs("sum_f32_ms")),
-            ((got - exact) / exact).abs()
-        );
+        plan::set_gpu_scan_tile(None)?;
     }
     Ok(())
 }

@@ -945,10 +945,24 @@ fn nvrtc_compiles_every_module() {
         eprintln!("SKIPPED nvrtc_compiles_every_module: {e}");
         return;
     }
-    let mut modules: Vec<Module> = ["i32", "u32", "i64", "u64", "f32", "f64"]
-        .into_iter()
-        .map(Module::Scan)
-        .collect();
+    // Each scan type in its default block shape and in the three-phase scan's 256 x 8.
+    let mut modules: Vec<Module> = [
+        ("i32", 4),
+        ("u32", 4),
+        ("i64", 8),
+        ("u64", 8),
+        ("f32", 4),
+        ("f64", 8),
+    ]
+    .into_iter()
+    .flat_map(|(t, size)| {
+        [
+            Module::Scan(t, plan::default_gpu_scan(t, size).1),
+            Module::Scan(t, plan::GPU_TILE),
+        ]
+    })
+    .collect();
+    modules.dedup();
     let gpu = plan::GPU_SORT;
     modules.extend(["u32", "i32", "f32"].map(|k| Module::Sort(k, gpu)));
     // The other kernels, and a block of 384 threads (12 keys each: the keys and values of a
@@ -977,6 +991,11 @@ fn nvrtc_compiles_every_module() {
                 min_blocks: 2,
             },
         ));
+    }
+    // The scans' largest block shapes (the spatial bench times them): 8192 elements of a
+    // 4-byte type, 4096 of an 8-byte one, in the static shared memory.
+    for (t, threads, items) in [("f32", 1024, 8), ("f32", 512, 16), ("f64", 512, 8)] {
+        modules.push(Module::Scan(t, Tile { threads, items }));
     }
     for word in [1, 2, 4, 8] {
         for words in [1, 3] {

@@ -450,3 +450,72 @@ fn primitive_fault_names_the_primitive_launch() {
         );
     });
 }
+
+/// Counts the points of `x` within `r` of `x[0]` through the grid (one thread).
+#[wp::kernel]
+fn k_count_near_first(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<i32>) {
+    let p = x[0];
+    let mut c = 0;
+    for j in hash_grid_query(grid, p, r) {
+        if length(p - x[j]) <= r {
+            c += 1;
+        }
+    }
+    out[0] = c;
+}
+
+/// A bucket start a kernel wrote below 0 after the build: a query entering that bucket
+/// faults as the out-of-bounds read of the grid's points there (the grid's parameter, index
+/// the start, shape the point count) on both backends, and the query ends (on a GPU the
+/// thread goes on without the bucket). An end past the points is clamped, no fault.
+#[test]
+fn hash_grid_query_faults_on_a_corrupt_start() {
+    on_every_backend("hash_grid_query_faults_on_a_corrupt_start", |dev| {
+        let pts = [
+            Vec3::new(0.1, 0.1, 0.1),
+            Vec3::new(0.2, 0.1, 0.1),
+            Vec3::new(2.5, 2.5, 2.5),
+        ];
+        let x = Array::from_slice(&pts, dev).unwrap();
+        let mut grid = wp::HashGrid::new(4, 4, 4, dev).unwrap();
+        grid.build(&x, 1.0).unwrap();
+        let out = Array::<i32>::zeros(1, dev).unwrap();
+        let (starts, ends) = grid.cell_ranges().unwrap();
+        // Cell (0, 0, 0) is bucket 0 and holds points 0 and 1; (2, 2, 2) holds point 2.
+        assert_eq!(
+            (starts.to_vec().unwrap()[0], ends.to_vec().unwrap()[0]),
+            (0, 2)
+        );
+        wp::launch(k_count_near_first, 1, (&grid, &x, 0.5f32, &out), dev).unwrap();
+        wp::synchronize().unwrap();
+        assert_eq!(out.to_vec().unwrap(), [2]);
+        // An end past the points: clamped to the point count, so bucket 0 reads points 0..3
+        // (the third is out of reach); no fault.
+        wp::launch(k_set_index, 1, (&ends, 0usize, 7i32), dev).unwrap();
+        wp::launch(k_count_near_first, 1, (&grid, &x, 0.5f32, &out), dev).unwrap();
+        wp::synchronize().unwrap();
+        assert_eq!(out.to_vec().unwrap(), [2]);
+        // A start below 0: the fault of the query's launch.
+        wp::launch(k_set_index, 1, (&starts, 0usize, -2i32), dev).unwrap();
+        let r = wp::launch(k_count_near_first, 1, (&grid, &x, 0.5f32, &out), dev);
+        let launch = wp::last_launch_id().unwrap();
+        let f = fault(r.and_then(|()| wp::synchronize()));
+        assert_eq!(
+            f,
+            Fault {
+                kernel: "k_count_near_first",
+                kind: FaultKind::OutOfBounds {
+                    arg: "grid",
+                    index: vec![-2],
+                    shape: vec![3],
+                },
+                launch: Some(launch),
+            }
+        );
+        // Mended, the grid answers again.
+        wp::launch(k_set_index, 1, (&starts, 0usize, 0i32), dev).unwrap();
+        wp::launch(k_count_near_first, 1, (&grid, &x, 0.5f32, &out), dev).unwrap();
+        wp::synchronize().unwrap();
+        assert_eq!(out.to_vec().unwrap(), [2]);
+    });
+}

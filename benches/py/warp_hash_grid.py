@@ -64,12 +64,28 @@ def median_ms(fn):
     return statistics.median(times)
 
 
+def event_ms(fn):
+    """GPU milliseconds between CUDA events around `fn` (median of REPS after a warm-up): the
+    device's share of a call, without the host's synchronisation."""
+    fn()
+    times = []
+    for _ in range(REPS):
+        a, b = wp.Event(enable_timing=True), wp.Event(enable_timing=True)
+        wp.record_event(a)
+        fn()
+        wp.record_event(b)
+        wp.synchronize_event(b)
+        times.append(wp.get_event_elapsed_time(a, b))
+    return statistics.median(times)
+
+
 rng = np.random.default_rng(1)
 points = wp.array(rng.random((N, 3), dtype=np.float32) * 10.0, dtype=wp.vec3)
 counts = wp.zeros(N, dtype=int)
 grid = wp.HashGrid(DIM, DIM, DIM)
 
 build = median_ms(lambda: grid.build(points, RADIUS))
+build_events = event_ms(lambda: grid.build(points, RADIUS))
 point = median_ms(lambda: wp.launch(count_point_order, N, inputs=[grid.id, points, RADIUS, counts]))
 mean_point = float(counts.numpy().mean())
 cell = median_ms(lambda: wp.launch(count_cell_order, N, inputs=[grid.id, points, RADIUS, counts]))
@@ -97,6 +113,7 @@ print(json.dumps({
     "warp": wp.config.version,
     "n": N,
     "build_ms": build,
+    "build_events_ms": build_events,
     "query_point_order_ms": point,
     "query_cell_order_ms": cell,
     "mean_neighbours_point_order": mean_point,

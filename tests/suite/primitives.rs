@@ -18,6 +18,7 @@ backend_tests!(
     scan_in_place_and_counts,
     scan_float_fractional_within_rounding,
     scan_onepass_kernel,
+    scan_threepass_kernel,
     reductions_all_types,
     reductions_nan_and_empty,
     sort_u32_stable_with_duplicates,
@@ -144,15 +145,27 @@ fn scan_float_fractional_within_rounding(dev: &wp::Device) {
     );
 }
 
-/// The GPU's single-pass scan (decoupled look-back, `plan::ScanAlgorithm::OnePass`), whatever
-/// the default: the checks of `scan_all_types_and_sizes` and `scan_in_place_and_counts`,
-/// fractional floats within rounding (not run to run: which tile ends a look-back depends on
-/// timing, and with it the order of float additions), and inputs of thousands of tiles, where
-/// blocks run at once and look-backs meet tiles that have published only their aggregate.
-/// On the CPU the algorithm plays no part, and is left alone (the CPU instances run beside the
-/// GPU's): the same checks run once.
+/// The GPU's single-pass scan (decoupled look-back, `plan::ScanAlgorithm::OnePass`, the
+/// integers' default), whatever the default: see `scan_by`.
 fn scan_onepass_kernel(dev: &wp::Device) {
-    use wp::primitives::plan::{self, ScanAlgorithm};
+    scan_by(dev, wp::primitives::plan::ScanAlgorithm::OnePass);
+}
+
+/// The GPU's three-phase scan (`plan::ScanAlgorithm::ThreePass`, the floats' default),
+/// whatever the default: see `scan_by`.
+fn scan_threepass_kernel(dev: &wp::Device) {
+    scan_by(dev, wp::primitives::plan::ScanAlgorithm::ThreePass);
+}
+
+/// Every scan through one GPU algorithm, for every element type: the checks of
+/// `scan_all_types_and_sizes` and `scan_in_place_and_counts`, fractional floats within
+/// rounding (the single-pass scan's not the same run to run: which tile ends a look-back
+/// depends on timing, and with it the order of float additions), and inputs of thousands of
+/// tiles, where blocks run at once and look-backs meet tiles that have published only their
+/// aggregate. On the CPU the algorithm plays no part, and is left alone (the CPU instances run
+/// beside the GPU's): the same checks run once.
+fn scan_by(dev: &wp::Device, algorithm: wp::primitives::plan::ScanAlgorithm) {
+    use wp::primitives::plan;
     /// Puts the default back however the test ends (the GPU instances run one at a time: no
     /// other scan sees the choice).
     struct Restore;
@@ -162,7 +175,7 @@ fn scan_onepass_kernel(dev: &wp::Device) {
         }
     }
     let _restore = dev.is_cuda().then(|| {
-        plan::set_gpu_scan_algorithm(Some(ScanAlgorithm::OnePass));
+        plan::set_gpu_scan_algorithm(Some(algorithm));
         Restore
     });
     scan_all_types_and_sizes(dev);

@@ -301,7 +301,8 @@ pub(super) fn scan<T: ScanOps>(
     let mut users = vec![input, output];
     let len = plan_len(len, &mut users, 2);
     let size = std::mem::size_of::<T>() as u64;
-    let p = plan::gpu_scan_algorithm().plan(GPU_TILE, T::CUDA, size, len, inclusive);
+    let (algorithm, tile) = plan::gpu_scan(T::CUDA, size);
+    let p = algorithm.plan(tile, T::CUDA, size, len, inclusive);
     let params = &["input", "output", "count"];
     run(device, ordinal, func, params, &p, &users)
 }
@@ -319,7 +320,7 @@ pub(super) fn reduce<T: ScanOps>(
     let mut users = vec![input, out];
     let len = plan_len(len, &mut users, 2);
     let size = std::mem::size_of::<T>() as u64;
-    let p = plan::reduce(GPU_TILE, T::CUDA, size, op, len);
+    let p = plan::reduce(plan::gpu_scan(T::CUDA, size).1, T::CUDA, size, op, len);
     run(
         device,
         ordinal,

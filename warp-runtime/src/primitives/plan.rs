@@ -171,36 +171,88 @@ impl ScanAlgorithm {
     }
 }
 
-/// The scan GPUs use unless a benchmark chose another: the three-phase scan. Timed side by
-/// side (`cargo bench --bench spatial -- --primitives`, CUDA events, H200, 2026-11-30), the
-/// single-pass scan is not ahead at every size: inclusive i32 at 1M 0.016 ms against 0.019,
-/// at 16M 0.103 against 0.096 (f32 at 16M 0.083 against 0.088, its sums not the same from run
-/// to run); PyTorch took 0.029 and 0.072.
-pub const GPU_SCAN: ScanAlgorithm = ScanAlgorithm::ThreePass;
-
-/// An algorithm a benchmark or test chose in place of [`GPU_SCAN`] (`set_gpu_scan_algorithm`).
-static SCAN_CHOICE: std::sync::RwLock<Option<ScanAlgorithm>> = std::sync::RwLock::new(None);
-
-/// The algorithm GPU scans use now: [`GPU_SCAN`], unless a benchmark chose another.
-pub fn gpu_scan_algorithm() -> ScanAlgorithm {
-    SCAN_CHOICE
-        .read()
-        .unwrap_or_else(|p| p.into_inner())
-        .unwrap_or(GPU_SCAN)
+/// The scan and block shape GPUs use for elements of C++ type `t` (`size` bytes) unless a
+/// benchmark chose others ([`set_gpu_scan_algorithm`], [`set_gpu_scan_tile`]); the
+/// reductions of `t` use the same shape (one module per type).
+///
+/// - Integers: the single-pass scan in tiles of 512 threads of 16 elements (8 for 8-byte
+///   types, whose tile must fit the static shared memory). Integer sums do not depend on
+///   their order, so its results are the three-phase scan's.
+/// - Floats: the three-phase scan, 256 threads of 8, whose sums are added in one order from
+///   run to run (the single-pass scan's order depends on which tiles have published when a
+///   look-back reads them).
+///
+/// Timed in one run (`cargo bench --bench spatial -- --primitives`, CUDA events, H200,
+/// 2026-12-01; PyTorch's `cumsum` 0.031 and 0.069 ms), inclusive i32 scans at 1M and 16M:
+/// single-pass 512 x 16 0.015 and 0.072 ms, three-phase 256 x 8 0.021 and 0.096; f32:
+/// three-phase 256 x 8 0.020 and 0.088 (no other shape of it was ahead by more than the
+/// noise: 512 x 8 0.017 and 0.085). The f32 sum took 0.027-0.030 ms at 16M in every shape
+/// (PyTorch 0.032).
+pub fn default_gpu_scan(t: &str, size: u64) -> (ScanAlgorithm, Tile) {
+    if t.starts_with('i') || t.starts_with('u') {
+        let items = if size <= 4 { 16 } else { 8 };
+        (ScanAlgorithm::OnePass, Tile { threads: 512, items })
+    } else {
+        (ScanAlgorithm::ThreePass, GPU_TILE)
+    }
 }
 
+/// The scan and block shape GPUs use now for elements of C++ type `t` (`size` bytes):
+/// [`default_gpu_scan`]'s, or what a benchmark or test chose in their place.
+pub fn gpu_scan(t: &str, size: u64) -> (ScanAlgorithm, Tile) {
+    let (algorithm, tile) = default_gpu_scan(t, size);
+    let chosen_alg = *SCAN_CHOICE.read().unwrap_or_else(|p| p.into_inner());
+    let chosen_tile = *SCAN_TILE_CHOICE.read().unwrap_or_else(|p| p.into_inner());
+    (chosen_alg.unwrap_or(algorithm), chosen_tile.unwrap_or(tile))
+}
+
+/// An algorithm a benchmark or test chose in place of the default (`set_gpu_scan_algorithm`).
+static SCAN_CHOICE: std::sync::RwLock<Option<ScanAlgorithm>> = std::sync::RwLock::new(None);
+
 /// For benchmarks and tests that compare the scans in one process: makes the GPU scans that
-/// follow use `algorithm` (`None`: [`GPU_SCAN`] again). Both are in every scan module.
+/// follow use `algorithm` for every element type (`None`: [`default_gpu_scan`]'s again). Both
+/// are in every scan module.
 #[doc(hidden)]
 pub fn set_gpu_scan_algorithm(algorithm: Option<ScanAlgorithm>) {
     *SCAN_CHOICE.write().unwrap_or_else(|p| p.into_inner()) = algorithm;
+}
+
+/// A block shape a benchmark chose for the GPU scans and reductions in place of the default
+/// (`set_gpu_scan_tile`).
+static SCAN_TILE_CHOICE: std::sync::RwLock<Option<Tile>> = std::sync::RwLock::new(None);
+
+/// For benchmarks that time block shapes in one process: makes the GPU scans and reductions
+/// (`array_scan`, `array_sum/min/max`) that follow compile for `tile`, for every element type
+/// (`None`: [`default_gpu_scan`]'s again). Each shape is a module of its
+/// own per element type, compiled and loaded at its first use. The kernels need whole warps
+/// (a multiple of 32 threads, at most 1024) and, for the scans' tile in shared memory, at
+/// most 8192 elements (4-byte types: 8-byte ones need at most 4096, or NVRTC refuses the
+/// module's static shared memory).
+///
+/// # Errors
+/// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming the shape the kernels do
+/// not support.
+#[doc(hidden)]
+pub fn set_gpu_scan_tile(tile: Option<Tile>) -> crate::Result<()> {
+    if let Some(t) = tile {
+        let warps = t.threads >= 32 && t.threads % 32 == 0 && t.threads <= 1024;
+        if !warps || t.items == 0 || t.elements() > 8192 {
+            return Err(crate::Error::invalid(format!(
+                "set_gpu_scan_tile({t:?}): the scans need whole warps (32 to 1024 threads) and \
+                 1 to 8192 elements per block"
+            )));
+        }
+    }
+    *SCAN_TILE_CHOICE.write().unwrap_or_else(|p| p.into_inner()) = tile;
+    Ok(())
 }
 
 /// The tile a module is compiled for on GPUs.
 pub fn gpu_tile(module: &Module) -> Tile {
     match module {
         Module::Sort(_, config) => config.tile,
-        _ => GPU_TILE,
+        Module::Scan(_, tile) => *tile,
+        Module::Compact { .. } => GPU_TILE,
     }
 }
 
@@ -253,8 +305,9 @@ pub struct Step {
 /// Which module of `wp_primitives.h` a plan needs (each is compiled once per GPU and cached).
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub enum Module {
-    /// Scan and reductions of one element type (its C++ name: `i32`, `f64`, ...).
-    Scan(&'static str),
+    /// Scan and reductions of one element type (its C++ name: `i32`, `f64`, ...), compiled for
+    /// one block shape.
+    Scan(&'static str, Tile),
     /// Radix sort with one key type (`u32`, `i32`, `f32`), in one configuration.
     Sort(&'static str, SortConfig),
     /// Compaction of elements of `words` words of `word` bytes.
@@ -270,7 +323,9 @@ impl Module {
     /// A name unique to the module (cache key and NVRTC program name).
     pub fn name(&self) -> String {
         match self {
-            Module::Scan(t) => format!("wp_prim_scan_{t}"),
+            Module::Scan(t, tile) => {
+                format!("wp_prim_scan_{t}_{}x{}", tile.threads, tile.items)
+            }
             Module::Sort(k, c) => format!(
                 "wp_prim_sort_{k}_v{}_{}x{}_m{}",
                 c.variant as u32, c.tile.threads, c.tile.items, c.min_blocks
@@ -282,7 +337,7 @@ impl Module {
     /// The module's translation unit: the library header and the entry macro.
     pub fn source(&self) -> String {
         let entries = match self {
-            Module::Scan(t) => format!("WP_PRIM_SCAN_MODULE({t})"),
+            Module::Scan(t, _) => format!("WP_PRIM_SCAN_MODULE({t})"),
             Module::Sort(k, _) => format!("WP_PRIM_SORT_MODULE({k})"),
             Module::Compact { word, words } => {
                 let w = match word {
@@ -425,7 +480,7 @@ pub fn scan(tile: Tile, t: &'static str, size: u64, len: Len, inclusive: bool) -
     let [count, cap] = len.words();
     let s = ReduceOp::Sum as usize;
     Plan {
-        module: Module::Scan(t),
+        module: Module::Scan(t, tile),
         scratch: vec![nb * size],
         steps: vec![
             step(
@@ -470,7 +525,7 @@ pub fn scan_onepass(tile: Tile, t: &'static str, size: u64, len: Len, inclusive:
     let nb = tile.blocks(len.capacity());
     let [count, cap] = len.words();
     Plan {
-        module: Module::Scan(t),
+        module: Module::Scan(t, tile),
         scratch: vec![4, nb * 8, 2 * nb * size],
         steps: vec![
             step(
@@ -510,7 +565,7 @@ pub fn reduce(tile: Tile, t: &'static str, size: u64, op: ReduceOp, len: Len) ->
     let nb = tile.blocks(len.capacity()).div_ceil(REDUCE_TILES_PER_BLOCK);
     let [count, cap] = len.words();
     Plan {
-        module: Module::Scan(t),
+        module: Module::Scan(t, tile),
         scratch: vec![nb * size],
         steps: vec![
             step(
@@ -803,7 +858,7 @@ mod tests {
     fn onepass_scan_plan() {
         let t = GPU_TILE;
         let p = scan_onepass(t, "f64", 8, Len::Host(5000), false);
-        assert_eq!(p.module, Module::Scan("f64"));
+        assert_eq!(p.module, Module::Scan("f64", GPU_TILE));
         // Counter, a status word per tile, two values per tile.
         assert_eq!(p.scratch, vec![4, 3 * 8, 2 * 3 * 8]);
         assert_eq!(
@@ -835,8 +890,17 @@ mod tests {
         );
         assert!(!p.steps[1].args.contains(&Word::Fault));
         assert_eq!(p.steps[1].args[2], Word::Addr(Buf::User(2), 0));
-        // The switch picks the plan; the default is the three-phase scan.
-        assert_eq!(GPU_SCAN, ScanAlgorithm::ThreePass);
+        // The switch picks the plan; the defaults: integers single-pass, floats three-phase.
+        assert_eq!(
+            default_gpu_scan("i32", 4),
+            (ScanAlgorithm::OnePass, Tile { threads: 512, items: 16 })
+        );
+        assert_eq!(
+            default_gpu_scan("u64", 8),
+            (ScanAlgorithm::OnePass, Tile { threads: 512, items: 8 })
+        );
+        assert_eq!(default_gpu_scan("f32", 4), (ScanAlgorithm::ThreePass, GPU_TILE));
+        assert_eq!(default_gpu_scan("f64", 8), (ScanAlgorithm::ThreePass, GPU_TILE));
         assert_eq!(
             ScanAlgorithm::OnePass.plan(t, "u32", 4, len, true),
             scan_onepass(t, "u32", 4, len, true)
@@ -853,6 +917,26 @@ mod tests {
             Module::Compact { word: 4, words: 3 }.source(),
             "#include \"wp_primitives.h\"\nWP_PRIM_COMPACT_MODULE(u32, 3)\n"
         );
-        assert_eq!(Module::Scan("i64").name(), "wp_prim_scan_i64");
+        assert_eq!(
+            Module::Scan("i64", GPU_TILE).name(),
+            "wp_prim_scan_i64_256x8"
+        );
+        // Each block shape is a module of its own.
+        let wide = Tile {
+            threads: 512,
+            items: 16,
+        };
+        assert_eq!(gpu_tile(&Module::Scan("f32", wide)), wide);
+        assert_eq!(Module::Scan("f32", wide).name(), "wp_prim_scan_f32_512x16");
+        assert!(set_gpu_scan_tile(Some(Tile {
+            threads: 48,
+            items: 8
+        }))
+        .is_err());
+        assert!(set_gpu_scan_tile(Some(Tile {
+            threads: 1024,
+            items: 16
+        }))
+        .is_err());
     }
 }
