@@ -191,7 +191,13 @@ impl ScanAlgorithm {
 pub fn default_gpu_scan(t: &str, size: u64) -> (ScanAlgorithm, Tile) {
     if t.starts_with('i') || t.starts_with('u') {
         let items = if size <= 4 { 16 } else { 8 };
-        (ScanAlgorithm::OnePass, Tile { threads: 512, items })
+        (
+            ScanAlgorithm::OnePass,
+            Tile {
+                threads: 512,
+                items,
+            },
+        )
     } else {
         (ScanAlgorithm::ThreePass, GPU_TILE)
     }
@@ -893,14 +899,32 @@ mod tests {
         // The switch picks the plan; the defaults: integers single-pass, floats three-phase.
         assert_eq!(
             default_gpu_scan("i32", 4),
-            (ScanAlgorithm::OnePass, Tile { threads: 512, items: 16 })
+            (
+                ScanAlgorithm::OnePass,
+                Tile {
+                    threads: 512,
+                    items: 16
+                }
+            )
         );
         assert_eq!(
             default_gpu_scan("u64", 8),
-            (ScanAlgorithm::OnePass, Tile { threads: 512, items: 8 })
+            (
+                ScanAlgorithm::OnePass,
+                Tile {
+                    threads: 512,
+                    items: 8
+                }
+            )
         );
-        assert_eq!(default_gpu_scan("f32", 4), (ScanAlgorithm::ThreePass, GPU_TILE));
-        assert_eq!(default_gpu_scan("f64", 8), (ScanAlgorithm::ThreePass, GPU_TILE));
+        assert_eq!(
+            default_gpu_scan("f32", 4),
+            (ScanAlgorithm::ThreePass, GPU_TILE)
+        );
+        assert_eq!(
+            default_gpu_scan("f64", 8),
+            (ScanAlgorithm::ThreePass, GPU_TILE)
+        );
         assert_eq!(
             ScanAlgorithm::OnePass.plan(t, "u32", 4, len, true),
             scan_onepass(t, "u32", 4, len, true)
