@@ -150,6 +150,9 @@ pub unsafe trait Block: Element + Default + sealed::SealedBlock {
     type In: Element;
     /// The element of `A x` (`ROWS` scalars).
     type Out: Element;
+    /// The block of the transposed matrix ([`Bsr::transpose`](super::Bsr::transpose)):
+    /// `COLS x ROWS` scalars (`Self` for a square block).
+    type Transpose: Block<Scalar = Self::Scalar, In = Self::Out, Out = Self::In>;
     /// Scalar rows of a block.
     const ROWS: usize;
     /// Scalar columns of a block.
@@ -182,6 +185,7 @@ macro_rules! block {
             type Scalar = $s;
             type In = $in;
             type Out = $in;
+            type Transpose = $t;
             const ROWS: usize = $n;
             const COLS: usize = $n;
             const COL_MAJOR: bool = $cm;
@@ -215,3 +219,29 @@ pub(crate) fn at<B: Block>(i: usize, j: usize) -> usize {
         i * B::COLS + j
     }
 }
+
+// ------------------------------------------------------------------------------------------
+// Products of blocks (slice 2: `mm`)
+// ------------------------------------------------------------------------------------------
+
+/// Blocks whose product `Self x Rhs` is a block: `Self::COLS == Rhs::ROWS`, one scalar type.
+/// [`mm`](super::mm) multiplies matrices of such blocks; other pairs do not compile.
+#[diagnostic::on_unimplemented(
+    message = "`sparse::mm`: blocks of `{Self}` times blocks of `{Rhs}` have no product block \
+               (the inner dimensions or the scalar types differ)",
+    label = "no block product `{Self}` x `{Rhs}`"
+)]
+pub trait BlockMul<Rhs: Block>: Block {
+    /// The product's block (`Self::ROWS x Rhs::COLS`).
+    type Output: Block<Scalar = Self::Scalar>;
+}
+
+macro_rules! block_mul {
+    ($($t:ty),*) => {
+        $(impl BlockMul<$t> for $t {
+            type Output = $t;
+        })*
+    };
+}
+
+block_mul!(f32, f64, Mat2, Mat3, Mat4, DMat2, DMat3, DMat4);
