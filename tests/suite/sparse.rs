@@ -1544,6 +1544,10 @@ fn block_type_case<B: SquareBlock + Copy>(dev: &wp::Device) {
 mod ops {
     use super::*;
     use glam::{DMat2, Mat2, Mat4};
+    use wp::{
+        DMat23, DMat26, DMat32, DMat43, DMat46, DMat63, Mat23, Mat24, Mat26, Mat32, Mat34, Mat43,
+        Mat63,
+    };
     use warp_runtime::sparse::{BlockMul, MmWork};
 
     backend_tests!(
@@ -1557,6 +1561,9 @@ mod ops {
         ops_axpy_bad_input,
         ops_mm,
         ops_mm_capacity_and_bad_input,
+        ops_rect_mv,
+        ops_rect_transpose_dense_axpy,
+        ops_rect_mm,
     );
 
     /// The scalars of an array of blocks, in storage order.
@@ -2132,5 +2139,142 @@ mod ops {
             .unwrap_err()
             .to_string();
         assert!(e.contains("`alpha` is NaN"), "{e}");
+    }
+
+    // --------------------------------------------------------------------------------------
+    // Rectangular blocks (warp-core's row-major Mat23 .. Mat64)
+    // --------------------------------------------------------------------------------------
+
+    /// `mv` of a random matrix of `B` against the dense f64 product, and its documented
+    /// order bit for bit: each row scalar's sum from 0 over the row's blocks in storage order
+    /// and ascending columns in a block, then `alpha acc + beta y`.
+    fn rect_mv_case<B: Block + Copy>(dev: &wp::Device, seed: u64) -> Vec<u64> {
+        let (nrow, ncol) = (13, 8);
+        let a = random::<B>(dev, nrow, ncol, 50, seed);
+        let mut g = Rng(seed + 1);
+        let xs: Vec<f64> = (0..ncol * B::COLS).map(|_| g.unit()).collect();
+        let ys: Vec<f64> = (0..nrow * B::ROWS).map(|_| g.unit()).collect();
+        let sc = |v: &[f64]| v.iter().map(|&x| B::Scalar::from_f64(x)).collect::<Vec<_>>();
+        let (xs, ys) = (sc(&xs), sc(&ys));
+        let x = arr(&xs, dev).reinterpret::<B::In>().unwrap();
+        let y = arr(&ys, dev).reinterpret::<B::Out>().unwrap();
+        let (alpha, beta) = (B::Scalar::from_f64(0.5), B::Scalar::from_f64(-2.0));
+        sparse::mv(alpha, &a, &x, beta, &y).unwrap();
+        let got = host(&y.reinterpret::<B::Scalar>().unwrap());
+        let d = dense_of(&a);
+        let w = ncol * B::COLS;
+        let f32s = std::mem::size_of::<B::Scalar>() == 4;
+        let (off, cols, vals) = (host(a.offsets()), host(a.columns()), scalars(a.values()));
+        let rc = B::ROWS * B::COLS;
+        for i in 0..nrow * B::ROWS {
+            let mut want = -2.0 * ys[i].to_f64();
+            for j in 0..w {
+                want += 0.5 * d[i * w + j] * xs[j].to_f64();
+            }
+            // f32: at most ~40 rounded products and sums of magnitude <= 10: 1e-5 absolute.
+            let tol = if f32s { 1e-5 } else { 1e-13 };
+            assert!((got[i].to_f64() - want).abs() <= tol, "row {i}: {:?} vs {want}", got[i]);
+            // The documented order.
+            let (r, p) = (i / B::ROWS, i % B::ROWS);
+            let mut acc = B::Scalar::ZERO;
+            for k in off[r] as usize..off[r + 1] as usize {
+                for q in 0..B::COLS {
+                    let prod = B::Scalar::from_f64(
+                        vals[k * rc + at::<B>(p, q)].to_f64() * xs[cols[k] as usize * B::COLS + q].to_f64(),
+                    );
+                    acc = B::Scalar::from_f64(acc.to_f64() + prod.to_f64());
+                }
+            }
+            let want = B::Scalar::from_f64(
+                B::Scalar::from_f64(0.5 * acc.to_f64()).to_f64()
+                    + B::Scalar::from_f64(-2.0 * ys[i].to_f64()).to_f64(),
+            );
+            assert_eq!(got[i].to_f64().to_bits(), want.to_f64().to_bits(), "row {i}");
+        }
+        bits(&got)
+    }
+
+    fn ops_rect_mv(dev: &wp::Device) {
+        rect_mv_case::<Mat23>(dev, 61);
+        rect_mv_case::<Mat63>(dev, 62);
+        rect_mv_case::<DMat26>(dev, 63);
+        rect_mv_case::<DMat43>(dev, 64);
+        same_on_cpu(dev, "mv Mat26", |d| rect_mv_case::<Mat26>(d, 65));
+        same_on_cpu(dev, "mv DMat32", |d| rect_mv_case::<DMat32>(d, 66));
+        // x of the wrong length names the block's vector types.
+        let a = random::<Mat23>(dev, 4, 5, 6, 67);
+        let e = sparse::mv(
+            1.0,
+            &a,
+            &wp::Array::<glam::Vec3>::zeros(4, dev).unwrap(),
+            0.0,
+            &wp::Array::<glam::Vec2>::zeros(4, dev).unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`x` has shape [4] of Vec3")
+                && e.contains("4 x 5 blocks of 2 x 3 (8 x 15 scalars)")
+                && e.contains("needs 5 Vec3 elements"),
+            "{e}"
+        );
+    }
+
+    fn ops_rect_transpose_dense_axpy(dev: &wp::Device) {
+        // The transpose of Mat23 blocks is of Mat32 blocks (exact), and back.
+        transpose_case::<Mat23>(dev, 12, 7, 71);
+        transpose_case::<DMat46>(dev, 6, 9, 72);
+        same_on_cpu(dev, "transpose Mat63", |d| transpose_case::<Mat63>(d, 8, 10, 73));
+        // Dense both ways with row-major rectangular blocks.
+        dense_case::<Mat34>(dev, 5, 6, 74);
+        same_on_cpu(dev, "dense DMat26", |d| dense_case::<DMat26>(d, 4, 3, 75));
+        // axpy, its order bit for bit.
+        axpy_case::<Mat24>(dev, 76);
+        same_on_cpu(dev, "axpy DMat63", |d| axpy_case::<DMat63>(d, 77));
+    }
+
+    /// `alpha A B + beta C` of blocks `A x B -> O` against the dense f64 product.
+    fn rect_mm_case<A, B>(dev: &wp::Device, beta: f64, seed: u64) -> Vec<u64>
+    where
+        A: BlockMul<B> + Copy,
+        B: Block<Scalar = A::Scalar> + Copy,
+        A::Output: Copy,
+    {
+        let (m, k, n) = (8, 6, 9);
+        let a = random::<A>(dev, m, k, 25, seed);
+        let b = random::<B>(dev, k, n, 25, seed + 1);
+        let mut c = random::<A::Output>(dev, m, n, 15, seed + 2);
+        let (da, db, dc) = (dense_of(&a), dense_of(&b), dense_of(&c));
+        let alpha = A::Scalar::from_f64(0.75);
+        sparse::mm(alpha, &a, &b, A::Scalar::from_f64(beta), &mut c, &mut MmWork::new()).unwrap();
+        assert_eq!((c.nrow(), c.ncol()), (m, n));
+        let got = dense_of(&c);
+        let (rows, inner, cols) = (m * A::ROWS, k * A::COLS, n * B::COLS);
+        let u = if std::mem::size_of::<A::Scalar>() == 4 { 2f64.powi(-24) } else { 2f64.powi(-53) };
+        for i in 0..rows {
+            for j in 0..cols {
+                let mut want = beta * dc[i * cols + j];
+                let mut mag = want.abs();
+                for q in 0..inner {
+                    want += 0.75 * da[i * inner + q] * db[q * cols + j];
+                    mag += (0.75 * da[i * inner + q] * db[q * cols + j]).abs();
+                }
+                // As mm_case: 30 u times the sum of the magnitudes.
+                let g = got[i * cols + j];
+                assert!((g - want).abs() <= 30.0 * u * mag.max(1e-300), "({i}, {j}): {g} vs {want}");
+            }
+        }
+        bits(&scalars(c.values()))
+    }
+
+    fn ops_rect_mm(dev: &wp::Device) {
+        // Rectangular times rectangular into a square (glam, column-major) block and into a
+        // rectangular one; square (column-major) times rectangular (row-major).
+        rect_mm_case::<Mat23, Mat32>(dev, 0.0, 81);
+        rect_mm_case::<Mat32, Mat23>(dev, 0.5, 82);
+        rect_mm_case::<Mat24, Mat43>(dev, -1.0, 83);
+        rect_mm_case::<DMat2, DMat26>(dev, 0.25, 84);
+        same_on_cpu(dev, "mm Mat63 x Mat32", |d| rect_mm_case::<Mat63, Mat32>(d, 0.5, 85));
+        same_on_cpu(dev, "mm DMat32 x DMat23", |d| rect_mm_case::<DMat32, DMat23>(d, 0.0, 86));
     }
 }

@@ -465,6 +465,38 @@ WP_FN void sp_ops_mm_expand(const sp_ops_mm_expand_t& s, i32 r) {
 WP_SP_OPS_KERNELS(f32, wp::f32)
 WP_SP_OPS_KERNELS(f64, wp::f64)
 
+// `y = alpha A x + beta y` of the rectangular blocks (warp-core's row-major Mat23 .. Mat64),
+// wp_sparse.h's step instantiated here, named as it names the square blocks' (the runtime's
+// BsrMv picks this library for them).
+#define WP_SP_OPS_MV(tag, S, R, C)                                                          \
+  extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                    \
+    WP_SP_LOOP(r, s.nrow) wp::sp_bsr_mv_row<S, R, C, false>(s, (wp::i32)r);                 \
+  }
+WP_SP_OPS_MV(mat23, wp::f32, 2, 3)
+WP_SP_OPS_MV(mat24, wp::f32, 2, 4)
+WP_SP_OPS_MV(mat26, wp::f32, 2, 6)
+WP_SP_OPS_MV(mat32, wp::f32, 3, 2)
+WP_SP_OPS_MV(mat34, wp::f32, 3, 4)
+WP_SP_OPS_MV(mat36, wp::f32, 3, 6)
+WP_SP_OPS_MV(mat42, wp::f32, 4, 2)
+WP_SP_OPS_MV(mat43, wp::f32, 4, 3)
+WP_SP_OPS_MV(mat46, wp::f32, 4, 6)
+WP_SP_OPS_MV(mat62, wp::f32, 6, 2)
+WP_SP_OPS_MV(mat63, wp::f32, 6, 3)
+WP_SP_OPS_MV(mat64, wp::f32, 6, 4)
+WP_SP_OPS_MV(dmat23, wp::f64, 2, 3)
+WP_SP_OPS_MV(dmat24, wp::f64, 2, 4)
+WP_SP_OPS_MV(dmat26, wp::f64, 2, 6)
+WP_SP_OPS_MV(dmat32, wp::f64, 3, 2)
+WP_SP_OPS_MV(dmat34, wp::f64, 3, 4)
+WP_SP_OPS_MV(dmat36, wp::f64, 3, 6)
+WP_SP_OPS_MV(dmat42, wp::f64, 4, 2)
+WP_SP_OPS_MV(dmat43, wp::f64, 4, 3)
+WP_SP_OPS_MV(dmat46, wp::f64, 4, 6)
+WP_SP_OPS_MV(dmat62, wp::f64, 6, 2)
+WP_SP_OPS_MV(dmat63, wp::f64, 6, 3)
+WP_SP_OPS_MV(dmat64, wp::f64, 6, 4)
+
 extern "C" __global__ void wp_sparse_ops_row_keys(wp::sp_ops_row_keys_t s) {
   WP_SP_LOOP(r, s.nrow) wp::sp_ops_row_keys(s, (wp::i32)r);
 }

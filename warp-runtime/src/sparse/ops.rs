@@ -682,7 +682,7 @@ impl<B: Block> MmWork<B> {
 /// shapes named), `alpha` or `beta` is not finite, or the product count exceeds `i32::MAX`;
 /// [`Error::DeviceMismatch`](crate::Error::DeviceMismatch); with a fixed [`MmWork`], the
 /// fault above.
-pub fn mm<A: BlockMul<B>, B: Block>(
+pub fn mm<A: BlockMul<B>, B: Block<Scalar = A::Scalar>>(
     alpha: A::Scalar,
     a: &Bsr<A>,
     b: &Bsr<B>,

@@ -27,6 +27,16 @@ pub(crate) static DENSE_NAMES: KernelInfo = KernelInfo {
     ..KernelInfo::BLANK
 };
 
+/// The library of block type `B`'s `mv` kernel: `wp_sparse.h`'s for the square blocks (slice
+/// 1), this one's for the rectangular ones.
+pub(crate) const fn mv_library<B: super::block::Block>() -> &'static ObjectLibrary {
+    if B::ROWS == B::COLS {
+        &super::steps::LIBRARY
+    } else {
+        &OPS_LIBRARY
+    }
+}
+
 /// The kernel of scalar `S`: `f32` or `f64` (the sealed scalars).
 const fn pick<S>(f32: &'static str, f64: &'static str) -> &'static str {
     if std::mem::size_of::<S>() == 8 {
@@ -934,7 +944,31 @@ mod tests {
         let mut names = scalar::<f32>();
         names.extend(scalar::<f64>());
         names.extend([RowKeys::KERNEL, MmCount::KERNEL, MmTotal::KERNEL]);
-        assert_eq!(names.len(), 23);
+        // The rectangular blocks' mv (BsrMv picks this library for them).
+        use super::super::block::sealed::SealedBlock;
+        use super::super::steps::BsrMv;
+        use warp_core::*;
+        macro_rules! mv {
+            ($($t:ty),*) => {
+                $(
+                    assert!(std::ptr::eq(
+                        <BsrMv<$t> as ObjectStep>::LIBRARY,
+                        &OPS_LIBRARY
+                    ));
+                    names.push(<$t as SealedBlock>::KERNELS.mv);
+                )*
+            };
+        }
+        mv!(
+            Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
+            DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62,
+            DMat63, DMat64
+        );
+        assert!(std::ptr::eq(
+            <BsrMv<glam::Mat3> as ObjectStep>::LIBRARY,
+            &super::super::steps::LIBRARY
+        ));
+        assert_eq!(names.len(), 23 + 24);
         let distinct: std::collections::BTreeSet<_> = names.iter().collect();
         assert_eq!(distinct.len(), names.len(), "a name twice: {names:?}");
         for n in &names {

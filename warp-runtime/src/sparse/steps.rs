@@ -564,7 +564,8 @@ fn mv_row<B: Block>(
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
 // not overlapping x (mv checked).
 unsafe impl<B: Block> ObjectStep for BsrMv<B> {
-    const LIBRARY: &'static ObjectLibrary = &LIBRARY;
+    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library.
+    const LIBRARY: &'static ObjectLibrary = super::ops_steps::mv_library::<B>();
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
     fn len(&self) -> usize {
