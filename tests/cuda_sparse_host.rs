@@ -100,7 +100,7 @@ struct ScalarKernels {
     wp_sparse_dot_partials_##t, wp_sparse_dot_final_##t, wp_sparse_jacobi_apply_##t,             \
     wp_sparse_cg_init_##t, wp_sparse_cg_check_##t, wp_sparse_cg_update_##t,                      \
     wp_sparse_cg_direction_##t}
-const BlockKernels BLOCKS[8] = {
+const BlockKernels BLOCKS[32] = {
     {wp_sparse_bsr_mv_f32, wp_sparse_jacobi_inv_f32, 1, 1},
     {wp_sparse_bsr_mv_f64, wp_sparse_jacobi_inv_f64, 1, 1},
     {wp_sparse_bsr_mv_mat2, wp_sparse_jacobi_inv_mat2, 2, 2},
@@ -109,6 +109,31 @@ const BlockKernels BLOCKS[8] = {
     {wp_sparse_bsr_mv_dmat2, wp_sparse_jacobi_inv_dmat2, 2, 2},
     {wp_sparse_bsr_mv_dmat3, wp_sparse_jacobi_inv_dmat3, 3, 3},
     {wp_sparse_bsr_mv_dmat4, wp_sparse_jacobi_inv_dmat4, 4, 4},
+    // The rectangular blocks (wp_sparse_ops.h; no Jacobi), f32 then f64, R then C ascending.
+    {wp_sparse_bsr_mv_mat23, nullptr, 2, 3},
+    {wp_sparse_bsr_mv_mat24, nullptr, 2, 4},
+    {wp_sparse_bsr_mv_mat26, nullptr, 2, 6},
+    {wp_sparse_bsr_mv_mat32, nullptr, 3, 2},
+    {wp_sparse_bsr_mv_mat34, nullptr, 3, 4},
+    {wp_sparse_bsr_mv_mat36, nullptr, 3, 6},
+    {wp_sparse_bsr_mv_mat42, nullptr, 4, 2},
+    {wp_sparse_bsr_mv_mat43, nullptr, 4, 3},
+    {wp_sparse_bsr_mv_mat46, nullptr, 4, 6},
+    {wp_sparse_bsr_mv_mat62, nullptr, 6, 2},
+    {wp_sparse_bsr_mv_mat63, nullptr, 6, 3},
+    {wp_sparse_bsr_mv_mat64, nullptr, 6, 4},
+    {wp_sparse_bsr_mv_dmat23, nullptr, 2, 3},
+    {wp_sparse_bsr_mv_dmat24, nullptr, 2, 4},
+    {wp_sparse_bsr_mv_dmat26, nullptr, 2, 6},
+    {wp_sparse_bsr_mv_dmat32, nullptr, 3, 2},
+    {wp_sparse_bsr_mv_dmat34, nullptr, 3, 4},
+    {wp_sparse_bsr_mv_dmat36, nullptr, 3, 6},
+    {wp_sparse_bsr_mv_dmat42, nullptr, 4, 2},
+    {wp_sparse_bsr_mv_dmat43, nullptr, 4, 3},
+    {wp_sparse_bsr_mv_dmat46, nullptr, 4, 6},
+    {wp_sparse_bsr_mv_dmat62, nullptr, 6, 2},
+    {wp_sparse_bsr_mv_dmat63, nullptr, 6, 3},
+    {wp_sparse_bsr_mv_dmat64, nullptr, 6, 4},
 };
 
 // Small launches: 3 blocks of 32 threads (the grid-stride loops wrap); the dot's partials 2
@@ -429,11 +454,14 @@ template <typename S> void ops(const OpsKernels& o, const ScalarKernels& k, u64 
       pipeline<S>(k, rc, y.nrow, y.ncol, n, addr(&counts[1]), rows, cols, vals, 1);
       break;
     }
-    case 7: {  // mm (square blocks r x r): a, b, c, alpha, beta, capacity (-1: exact)
+    case 7: {  // mm: (A's r, c, cm in the head) B's cols, B's and C's layouts; a, b, c,
+               // alpha, beta, capacity (-1: exact)
+      const i32 cn = (i32)word(), cm_b = (i32)word(), cm_c = (i32)word();
+      const i32 rc_b = c * cn, rc_c = r * cn;
       std::vector<S> av, bv, cv;
       Matrix a = mat<S>(rc, av);
-      Matrix b = mat<S>(rc, bv);
-      Matrix cm_ = mat<S>(rc, cv);
+      Matrix b = mat<S>(rc_b, bv);
+      Matrix cm_ = mat<S>(rc_c, cv);
       const f64 alpha = scalar<f64>(), beta = scalar<f64>();
       const i64 fixed = (i64)word();
       std::vector<i64> starts(a.nrow + 1);
@@ -447,18 +475,18 @@ template <typename S> void ops(const OpsKernels& o, const ScalarKernels& k, u64 
       const bool with_c = beta != 0.0;
       const i64 n = fixed >= 0 ? fixed : starts[a.nrow] + (with_c ? cm_.nnz : 0);
       std::vector<i32> rows(n + 1), cols(n + 1);
-      std::vector<S> vals((size_t)n * rc + 1);
+      std::vector<S> vals((size_t)n * rc_c + 1);
       run(o.expand, GB, GT, sp_ops_mm_expand_t{addr(a.offsets.data()), addr(a.columns.data()), addr(av.data()),
                                                addr(b.offsets.data()), addr(b.columns.data()), addr(bv.data()),
                                                addr(starts.data()), addr(rows.data()), addr(cols.data()),
                                                addr(vals.data()), alpha, n, a.nrow, a.nnz, b.nrow, b.nnz,
-                                               r, r, r, cm, cm, cm});
+                                               r, c, cn, cm, cm_b, cm_c});
       if (with_c)
         run(o.to_triplets, GB, GT, sp_ops_to_triplets_t{addr(cm_.offsets.data()), addr(cm_.columns.data()),
                                                         addr(cv.data()), addr(&cells[0]), addr(rows.data()),
                                                         addr(cols.data()), addr(vals.data()), addr(&cells[1]),
-                                                        beta, cm_.nrow, cm_.nnz, rc, (i32)n});
-      pipeline<S>(k, rc, a.nrow, b.ncol, (i32)n, addr(&cells[with_c ? 1 : 0]), rows, cols, vals, 1);
+                                                        beta, cm_.nrow, cm_.nnz, rc_c, (i32)n});
+      pipeline<S>(k, rc_c, a.nrow, b.ncol, (i32)n, addr(&cells[with_c ? 1 : 0]), rows, cols, vals, 1);
       break;
     }
     default:
@@ -475,7 +503,7 @@ int main(int argc, char** argv) {
   fclose(file);
   const u64 cmd = word(), kind = word();
   const ScalarKernels sk[2] = {SK(f32), SK(f64)};
-  const bool f64s = kind == 1 || kind >= 5;
+  const bool f64s = kind == 1 || (kind >= 5 && kind < 8) || kind >= 20;
   switch (cmd) {
     case 0: f64s ? mv<f64>(BLOCKS[kind]) : mv<f32>(BLOCKS[kind]); break;
     case 1: kind ? dot<f64>(sk[1]) : dot<f32>(sk[0]); break;
@@ -580,6 +608,16 @@ fn block<B: Block>(s: &[B::Scalar]) -> B {
 /// The driver's code of a block type (its `BLOCKS` index).
 fn kind<B: Block>() -> u64 {
     let f64s = std::mem::size_of::<B::Scalar>() == 8;
+    if B::ROWS != B::COLS {
+        // The rectangular blocks, after the 8 square ones: f32 then f64, R then C ascending.
+        let shapes: Vec<(usize, usize)> = [2, 3, 4, 6]
+            .iter()
+            .flat_map(|&r| [2, 3, 4, 6].map(move |c| (r, c)))
+            .filter(|(r, c)| r != c)
+            .collect();
+        let i = shapes.iter().position(|&s| s == (B::ROWS, B::COLS)).unwrap();
+        return 8 + 12 * f64s as u64 + i as u64;
+    }
     match (B::ROWS, f64s) {
         (1, false) => 0,
         (1, true) => 1,
@@ -1248,6 +1286,7 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
         )
         .unwrap();
         let mut input = ops_head::<B>(7);
+        input.extend([B::COLS as u64, B::COL_MAJOR as u64, B::COL_MAJOR as u64]);
         input.extend(&aw);
         input.extend(&bw);
         input.extend(&cw);
@@ -1288,6 +1327,7 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
     }
     let (_, cw) = random_matrix::<B>(nrow, 19, 40, seed + 6);
     let mut input = ops_head::<B>(7);
+    input.extend([B::COLS as u64, B::COL_MAJOR as u64, B::COL_MAJOR as u64]);
     input.extend(&aw);
     input.extend(&bw);
     input.extend(&cw);
@@ -1350,4 +1390,122 @@ fn from_dense_fault_matches_the_cpu() {
         out[0],
         format!("fault 7 0 {index} {}", x.to_bits() as i64)
     );
+}
+
+/// The rectangular blocks' operations through the C++ steps: mv (wp_sparse_ops.h's
+/// instantiations), transpose (into the transposed shape), dense both ways, axpy, and mm of
+/// mixed shapes and layouts; the same bits as the CPU backend.
+fn rect_case<A, B>(seed: usize)
+where
+    A: sparse::BlockMul<B>,
+    B: Block<Scalar = A::Scalar>,
+{
+    let what = std::any::type_name::<A>();
+    let cpu = wp::cpu();
+    mv_case::<A>(seed);
+    let (nrow, ncol) = (19, 11);
+    let (a, aw) = random_matrix::<A>(nrow, ncol, 120, seed);
+    // transpose
+    let t = a.transpose().unwrap();
+    let mut input = ops_head::<A>(5);
+    input.push(<A::Transpose as Block>::COL_MAJOR as u64);
+    input.extend(&aw);
+    assert_eq!(run(&format!("rtr_{seed}"), &input), matrix_lines(&t), "{what} transpose");
+    // dense both ways
+    let (r, c) = a.shape();
+    let dense = wp::Array::<A::Scalar, 2>::zeros([r, c], &cpu).unwrap();
+    a.to_dense(&dense).unwrap();
+    let dv = dense.to_vec().unwrap();
+    let mut input = ops_head::<A>(3);
+    input.extend(&aw);
+    let got = run(&format!("rdense_{seed}"), &input);
+    assert_eq!(got, lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()), "{what} to_dense");
+    let back = Bsr::<A>::from_dense(&dense).unwrap();
+    let mut input = ops_head::<A>(4);
+    input.extend([nrow as u64, ncol as u64]);
+    input.extend(dv.iter().map(|&v| word(v)));
+    assert_eq!(run(&format!("rfdense_{seed}"), &input), matrix_lines(&back), "{what} from_dense");
+    // axpy
+    let (x, xw) = random_matrix::<A>(nrow, ncol, 70, seed + 1);
+    let (mut y, yw) = random_matrix::<A>(nrow, ncol, 60, seed + 2);
+    sparse::axpy(A::Scalar::from_f64(-0.5), &x, A::Scalar::from_f64(2.0), &mut y).unwrap();
+    let mut input = ops_head::<A>(6);
+    input.extend(&xw);
+    input.extend(&yw);
+    input.extend([(-0.5f64).to_bits(), 2f64.to_bits()]);
+    assert_eq!(run(&format!("raxpy_{seed}"), &input), matrix_lines(&y), "{what} axpy");
+    // mm: A (nrow x ncol) times B (ncol x 13), plus beta C
+    let (b, bw) = random_matrix::<B>(ncol, 13, 60, seed + 3);
+    let (mut cm, cw) = random_matrix::<A::Output>(nrow, 13, 30, seed + 4);
+    sparse::mm(
+        A::Scalar::from_f64(1.25),
+        &a,
+        &b,
+        A::Scalar::from_f64(-0.75),
+        &mut cm,
+        &mut sparse::MmWork::new(),
+    )
+    .unwrap();
+    let mut input = ops_head::<A>(7);
+    input.extend([
+        B::COLS as u64,
+        B::COL_MAJOR as u64,
+        <A::Output as Block>::COL_MAJOR as u64,
+    ]);
+    input.extend(&aw);
+    input.extend(&bw);
+    input.extend(&cw);
+    input.extend([1.25f64.to_bits(), (-0.75f64).to_bits(), -1i64 as u64]);
+    assert_eq!(run(&format!("rmm_{seed}"), &input), matrix_lines(&cm), "{what} mm");
+}
+
+/// Rectangular (row-major) blocks, alone and mixed with glam's column-major squares: the
+/// C++ steps give the CPU backend's bits.
+#[test]
+fn rectangular_blocks_match_the_cpu_bit_for_bit() {
+    use warp_lang::{DMat26, DMat32, DMat46, DMat63, Mat23, Mat24, Mat32, Mat43, Mat62, Mat64};
+    if skip("rectangular_blocks_match_the_cpu_bit_for_bit") {
+        return;
+    }
+    rect_case::<Mat23, Mat32>(1);
+    rect_case::<Mat32, Mat23>(2);
+    rect_case::<Mat24, Mat43>(3);
+    rect_case::<Mat62, Mat23>(4);
+    rect_case::<Mat64, Mat4>(5);
+    rect_case::<DMat26, DMat63>(6);
+    rect_case::<DMat32, DMat2>(7);
+    rect_case::<DMat46, DMat63>(8);
+    // A square (column-major) block times a rectangular one.
+    rect_case_square::<DMat3, DMat32>(9);
+}
+
+/// mm of a square block by a rectangular one (the other operations are ops_case's).
+fn rect_case_square<A, B>(seed: usize)
+where
+    A: sparse::BlockMul<B>,
+    B: Block<Scalar = A::Scalar>,
+{
+    let (a, aw) = random_matrix::<A>(10, 7, 50, seed);
+    let (b, bw) = random_matrix::<B>(7, 9, 40, seed + 1);
+    let (mut cm, cw) = random_matrix::<A::Output>(10, 9, 20, seed + 2);
+    sparse::mm(
+        A::Scalar::from_f64(0.5),
+        &a,
+        &b,
+        A::Scalar::from_f64(1.0),
+        &mut cm,
+        &mut sparse::MmWork::new(),
+    )
+    .unwrap();
+    let mut input = ops_head::<A>(7);
+    input.extend([
+        B::COLS as u64,
+        B::COL_MAJOR as u64,
+        <A::Output as Block>::COL_MAJOR as u64,
+    ]);
+    input.extend(&aw);
+    input.extend(&bw);
+    input.extend(&cw);
+    input.extend([0.5f64.to_bits(), 1f64.to_bits(), -1i64 as u64]);
+    assert_eq!(run(&format!("rsmm_{seed}"), &input), matrix_lines(&cm));
 }
