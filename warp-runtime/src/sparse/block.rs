@@ -1,8 +1,10 @@
 //! The block types of [`Bsr`](super::Bsr) matrices and their scalars.
 //!
 //! A block is `ROWS x COLS` scalars of one [`SparseScalar`] (`f32` or `f64`), stored as the
-//! type stores them: a scalar alone, or glam's column-major square matrices. The traits are
-//! sealed: the device steps of `wp_sparse.h` are instantiated for exactly these types.
+//! type stores them: a scalar alone, glam's column-major square matrices, or warp-core's
+//! row-major rectangular ones (`Mat23` .. `Mat64`, `DMat23` .. `DMat64`). The traits are
+//! sealed: the device steps of `wp_sparse.h` and `wp_sparse_ops.h` are instantiated for
+//! exactly these types.
 
 use crate::array::Element;
 use glam::{DMat2, DMat3, DMat4, DVec2, DVec3, DVec4, Mat2, Mat3, Mat4, Vec2, Vec3, Vec4};
@@ -138,12 +140,14 @@ scalar!(f32, "f32");
 scalar!(f64, "f64");
 
 /// A block of a [`Bsr`](super::Bsr) matrix: `f32`, `f64` (1 x 1), glam's `Mat2`, `Mat3`,
-/// `Mat4` and `DMat2`, `DMat3`, `DMat4`.
+/// `Mat4` and `DMat2`, `DMat3`, `DMat4`, and the rectangular `Mat23`, `Mat24`, `Mat26`,
+/// `Mat32`, .., `Mat64` with their `f64` twins `DMat23` .. `DMat64` (every shape `R x C`,
+/// `R != C` in {2, 3, 4, 6}).
 ///
 /// `In` is the element of the vectors a matrix multiplies (`COLS` scalars: `Vec3` for
-/// `Mat3`), `Out` the element of its products (`ROWS` scalars). The traits are sealed: the
-/// steps' CUDA kernels are instantiated for these types (the non-square and spatial matrices
-/// of the design come in a later slice).
+/// `Mat3` and `Mat23`, `SpatialVector` for `Mat26`), `Out` the element of its products
+/// (`ROWS` scalars: `Vec2` for `Mat23`). The traits are sealed: the steps' CUDA kernels are
+/// instantiated for these types (the spatial matrices of the design are no block type yet).
 ///
 /// # Safety
 /// (For this crate, which alone implements it.) `Self` is exactly `ROWS * COLS` scalars of

@@ -16,6 +16,14 @@
 //! [`array_sum`](crate::array_sum)'s blocked sums). So a CG solve takes the same iterations and
 //! residual history on both.
 //!
+//! # Structure operations
+//! [`Bsr::scale`], [`diag`], [`set_diag`], [`Bsr::from_diag`], [`Bsr::identity`], dense
+//! matrices both ways ([`Bsr::to_dense`], [`Bsr::from_dense`]), [`Bsr::transpose`], [`axpy`]
+//! (`y = alpha x + beta y` on the union of the structures) and [`mm`] (`C = alpha A B + beta
+//! C`, one triplet per product of blocks, then the assembly's sort and ordered sums). These
+//! also take warp-core's rectangular blocks (`Mat23` .. `DMat64`, row-major), as [`mv`] does;
+//! [`BlockMul`] says which block types multiply. The same-bits rule holds for each.
+//!
 //! # Errors
 //! Shapes, lengths and devices are checked on the host before anything is queued: a mismatch
 //! is an [`Error::InvalidArgument`] naming the function, the argument and both shapes. Bad
