@@ -529,7 +529,11 @@ fn driver() -> Option<&'static (std::path::PathBuf, std::path::PathBuf)> {
             host_cpp::compile_driver(
                 "sparse",
                 DRIVER,
-                &["WP_SPARSE_BUILD", "WP_SPARSE_OPS_BUILD", "WP_SPARSE_EMULATED"],
+                &[
+                    "WP_SPARSE_BUILD",
+                    "WP_SPARSE_OPS_BUILD",
+                    "WP_SPARSE_EMULATED",
+                ],
             )
         })
     })
@@ -615,7 +619,10 @@ fn kind<B: Block>() -> u64 {
             .flat_map(|&r| [2, 3, 4, 6].map(move |c| (r, c)))
             .filter(|(r, c)| r != c)
             .collect();
-        let i = shapes.iter().position(|&s| s == (B::ROWS, B::COLS)).unwrap();
+        let i = shapes
+            .iter()
+            .position(|&s| s == (B::ROWS, B::COLS))
+            .unwrap();
         return 8 + 12 * f64s as u64 + i as u64;
     }
     match (B::ROWS, f64s) {
@@ -1211,7 +1218,11 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
     input.extend(&aw);
     input.push((-0.3f64).to_bits());
     let got = run(&format!("scale_{seed}"), &input);
-    assert_eq!(got, lines(&words(&s.values().to_vec().unwrap()[..nnz])), "{what} scale");
+    assert_eq!(
+        got,
+        lines(&words(&s.values().to_vec().unwrap()[..nnz])),
+        "{what} scale"
+    );
     // diag
     let (a, aw) = random_matrix::<B>(nrow, ncol, 300, seed + 1);
     let out = wp::Array::<B>::zeros(ncol, &cpu).unwrap();
@@ -1229,11 +1240,19 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
     let mut input = ops_head::<B>(2);
     input.extend([nrow as u64, ncol as u64, 1]);
     input.extend(dw.iter().map(|&v| word(v)));
-    assert_eq!(run(&format!("fdiag_{seed}"), &input), matrix_lines(&m), "{what} from_diag");
+    assert_eq!(
+        run(&format!("fdiag_{seed}"), &input),
+        matrix_lines(&m),
+        "{what} from_diag"
+    );
     let id = Bsr::<B>::identity(9, &cpu).unwrap();
     let mut input = ops_head::<B>(2);
     input.extend([9, 9, 0]);
-    assert_eq!(run(&format!("id_{seed}"), &input), matrix_lines(&id), "{what} identity");
+    assert_eq!(
+        run(&format!("id_{seed}"), &input),
+        matrix_lines(&id),
+        "{what} identity"
+    );
     // to_dense
     let (r, c) = a.shape();
     let dense = wp::Array::<B::Scalar, 2>::zeros([r, c], &cpu).unwrap();
@@ -1242,19 +1261,31 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
     let mut input = ops_head::<B>(3);
     input.extend(&aw);
     let got = run(&format!("dense_{seed}"), &input);
-    assert_eq!(got, lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()), "{what} to_dense");
+    assert_eq!(
+        got,
+        lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()),
+        "{what} to_dense"
+    );
     // from_dense (the dense matrix of `a`: zero blocks where `a` has none)
     let back = Bsr::<B>::from_dense(&dense).unwrap();
     let mut input = ops_head::<B>(4);
     input.extend([nrow as u64, ncol as u64]);
     input.extend(dv.iter().map(|&v| word(v)));
-    assert_eq!(run(&format!("fdense_{seed}"), &input), matrix_lines(&back), "{what} from_dense");
+    assert_eq!(
+        run(&format!("fdense_{seed}"), &input),
+        matrix_lines(&back),
+        "{what} from_dense"
+    );
     // transpose
     let t = a.transpose().unwrap();
     let mut input = ops_head::<B>(5);
     input.push(<B::Transpose as Block>::COL_MAJOR as u64);
     input.extend(&aw);
-    assert_eq!(run(&format!("tr_{seed}"), &input), matrix_lines(&t), "{what} transpose");
+    assert_eq!(
+        run(&format!("tr_{seed}"), &input),
+        matrix_lines(&t),
+        "{what} transpose"
+    );
     // axpy (different structures, duplicates between them)
     let (x, xw) = random_matrix::<B>(nrow, ncol, 120, seed + 2);
     let (mut y, yw) = random_matrix::<B>(nrow, ncol, 90, seed + 3);
@@ -1269,7 +1300,11 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
     input.extend(&xw);
     input.extend(&yw);
     input.extend([0.75f64.to_bits(), (-1.25f64).to_bits()]);
-    assert_eq!(run(&format!("axpy_{seed}"), &input), matrix_lines(&y), "{what} axpy");
+    assert_eq!(
+        run(&format!("axpy_{seed}"), &input),
+        matrix_lines(&y),
+        "{what} axpy"
+    );
     // mm: alpha A B, and alpha A B + beta C; a fixed capacity one product short faults
     let (a, aw) = random_matrix::<B>(nrow, ncol, 90, seed + 4);
     let (b, bw) = random_matrix::<B>(ncol, 19, 80, seed + 5);
@@ -1335,7 +1370,11 @@ fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usiz
     let out = run(&format!("mmcap_{seed}"), &input);
     // The same fault (out of bounds on argument 3, `products`), then (as a GPU runs on)
     // an empty product.
-    assert_eq!(out[0], format!("fault 1 3 {products} 0 {products} 0"), "{what}");
+    assert_eq!(
+        out[0],
+        format!("fault 1 3 {products} 0 {products} 0"),
+        "{what}"
+    );
     assert_eq!(out[1], "matrix 0");
 }
 
@@ -1376,7 +1415,12 @@ fn from_dense_fault_matches_the_cpu() {
     let (index, x) = match e {
         wp::Error::Fault(wp::Fault {
             kernel: "sparse::from_dense",
-            kind: wp::FaultKind::NonFiniteInput { arg: "a", index, values },
+            kind:
+                wp::FaultKind::NonFiniteInput {
+                    arg: "a",
+                    index,
+                    values,
+                },
             ..
         }) => (index, values[0]),
         e => panic!("{e}"),
@@ -1386,10 +1430,7 @@ fn from_dense_fault_matches_the_cpu() {
     input.extend([3, 2]);
     input.extend(v.iter().map(|&x| word(x)));
     let out = run("fdense_fault", &input);
-    assert_eq!(
-        out[0],
-        format!("fault 7 0 {index} {}", x.to_bits() as i64)
-    );
+    assert_eq!(out[0], format!("fault 7 0 {index} {}", x.to_bits() as i64));
 }
 
 /// The rectangular blocks' operations through the C++ steps: mv (wp_sparse_ops.h's
@@ -1410,7 +1451,11 @@ where
     let mut input = ops_head::<A>(5);
     input.push(<A::Transpose as Block>::COL_MAJOR as u64);
     input.extend(&aw);
-    assert_eq!(run(&format!("rtr_{seed}"), &input), matrix_lines(&t), "{what} transpose");
+    assert_eq!(
+        run(&format!("rtr_{seed}"), &input),
+        matrix_lines(&t),
+        "{what} transpose"
+    );
     // dense both ways
     let (r, c) = a.shape();
     let dense = wp::Array::<A::Scalar, 2>::zeros([r, c], &cpu).unwrap();
@@ -1419,21 +1464,39 @@ where
     let mut input = ops_head::<A>(3);
     input.extend(&aw);
     let got = run(&format!("rdense_{seed}"), &input);
-    assert_eq!(got, lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()), "{what} to_dense");
+    assert_eq!(
+        got,
+        lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()),
+        "{what} to_dense"
+    );
     let back = Bsr::<A>::from_dense(&dense).unwrap();
     let mut input = ops_head::<A>(4);
     input.extend([nrow as u64, ncol as u64]);
     input.extend(dv.iter().map(|&v| word(v)));
-    assert_eq!(run(&format!("rfdense_{seed}"), &input), matrix_lines(&back), "{what} from_dense");
+    assert_eq!(
+        run(&format!("rfdense_{seed}"), &input),
+        matrix_lines(&back),
+        "{what} from_dense"
+    );
     // axpy
     let (x, xw) = random_matrix::<A>(nrow, ncol, 70, seed + 1);
     let (mut y, yw) = random_matrix::<A>(nrow, ncol, 60, seed + 2);
-    sparse::axpy(A::Scalar::from_f64(-0.5), &x, A::Scalar::from_f64(2.0), &mut y).unwrap();
+    sparse::axpy(
+        A::Scalar::from_f64(-0.5),
+        &x,
+        A::Scalar::from_f64(2.0),
+        &mut y,
+    )
+    .unwrap();
     let mut input = ops_head::<A>(6);
     input.extend(&xw);
     input.extend(&yw);
     input.extend([(-0.5f64).to_bits(), 2f64.to_bits()]);
-    assert_eq!(run(&format!("raxpy_{seed}"), &input), matrix_lines(&y), "{what} axpy");
+    assert_eq!(
+        run(&format!("raxpy_{seed}"), &input),
+        matrix_lines(&y),
+        "{what} axpy"
+    );
     // mm: A (nrow x ncol) times B (ncol x 13), plus beta C
     let (b, bw) = random_matrix::<B>(ncol, 13, 60, seed + 3);
     let (mut cm, cw) = random_matrix::<A::Output>(nrow, 13, 30, seed + 4);
@@ -1456,7 +1519,11 @@ where
     input.extend(&bw);
     input.extend(&cw);
     input.extend([1.25f64.to_bits(), (-0.75f64).to_bits(), -1i64 as u64]);
-    assert_eq!(run(&format!("rmm_{seed}"), &input), matrix_lines(&cm), "{what} mm");
+    assert_eq!(
+        run(&format!("rmm_{seed}"), &input),
+        matrix_lines(&cm),
+        "{what} mm"
+    );
 }
 
 /// Rectangular (row-major) blocks, alone and mixed with glam's column-major squares: the

@@ -1544,11 +1544,11 @@ fn block_type_case<B: SquareBlock + Copy>(dev: &wp::Device) {
 mod ops {
     use super::*;
     use glam::{DMat2, Mat2, Mat4};
+    use warp_runtime::sparse::{BlockMul, MmWork};
     use wp::{
         DMat23, DMat26, DMat32, DMat43, DMat46, DMat63, Mat23, Mat24, Mat26, Mat32, Mat34, Mat43,
         Mat63,
     };
-    use warp_runtime::sparse::{BlockMul, MmWork};
 
     backend_tests!(
         ops_scale,
@@ -1620,8 +1620,14 @@ mod ops {
             (0..rc).map(|_| g.unit()).collect::<Vec<f64>>()
         });
         let flat: Vec<f64> = v.concat();
-        Bsr::from_triplets(nrow, ncol, &arr(&r, dev), &arr(&c, dev), &blocks_of::<B>(&flat, dev))
-            .unwrap()
+        Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&r, dev),
+            &arr(&c, dev),
+            &blocks_of::<B>(&flat, dev),
+        )
+        .unwrap()
     }
 
     fn scale_case<B: Block + Copy>(dev: &wp::Device, seed: u64) -> Vec<u64> {
@@ -1634,9 +1640,17 @@ mod ops {
         // Each stored scalar is `alpha * v` rounded once: the test's own product, bit for bit
         // (Rust never contracts); the slack past nnz is untouched.
         for k in 0..before.len() {
-            let want = if k < nnz { alpha.to_f64() * before[k].to_f64() } else { before[k].to_f64() };
+            let want = if k < nnz {
+                alpha.to_f64() * before[k].to_f64()
+            } else {
+                before[k].to_f64()
+            };
             let want = B::Scalar::from_f64(want);
-            assert_eq!(after[k].to_f64().to_bits(), want.to_f64().to_bits(), "scalar {k}");
+            assert_eq!(
+                after[k].to_f64().to_bits(),
+                want.to_f64().to_bits(),
+                "scalar {k}"
+            );
         }
         bits(&after)
     }
@@ -1676,8 +1690,14 @@ mod ops {
             c.push(i as i32);
             flat.extend((0..rc).map(|e| (i * rc + e) as f64 * 0.25 + 1.0));
         }
-        let a = Bsr::from_triplets(nrow, ncol, &arr(&r, dev), &arr(&c, dev), &blocks_of::<B>(&flat, dev))
-            .unwrap();
+        let a = Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&r, dev),
+            &arr(&c, dev),
+            &blocks_of::<B>(&flat, dev),
+        )
+        .unwrap();
         let out = wp::Array::<B>::zeros(n, dev).unwrap();
         sparse::diag(&a, &out).unwrap();
         let got = scalars(&out);
@@ -1692,7 +1712,11 @@ mod ops {
                 for j in 0..B::COLS {
                     // Copied unchanged (zero where no block is stored): exact.
                     let want = d[(b * B::ROWS + i) * w + b * B::COLS + j];
-                    assert_eq!(got[b * rc + at::<B>(i, j)].to_f64(), want, "block {b} ({i}, {j})");
+                    assert_eq!(
+                        got[b * rc + at::<B>(i, j)].to_f64(),
+                        want,
+                        "block {b} ({i}, {j})"
+                    );
                 }
             }
         }
@@ -1765,15 +1789,27 @@ mod ops {
         let e = sparse::set_diag(&mut a, &wp::Array::<DMat2>::zeros(3, dev).unwrap())
             .unwrap_err()
             .to_string();
-        assert!(e.contains("sparse::set_diag") && e.contains("has 4 diagonal"), "{e}");
+        assert!(
+            e.contains("sparse::set_diag") && e.contains("has 4 diagonal"),
+            "{e}"
+        );
         same_on_cpu(dev, "from_diag", |d| {
             let v: Vec<f64> = (0..8 * 4).map(|i| i as f64 * 0.5 - 3.0).collect();
             let m = Bsr::<DMat2>::from_diag(8, 9, &blocks_of::<DMat2>(&v, d)).unwrap();
-            (host(m.offsets()), host(m.columns()), bits(&scalars(m.values())))
+            (
+                host(m.offsets()),
+                host(m.columns()),
+                bits(&scalars(m.values())),
+            )
         });
     }
 
-    fn dense_case<B: Block + Copy>(dev: &wp::Device, nrow: usize, ncol: usize, seed: u64) -> Vec<u64> {
+    fn dense_case<B: Block + Copy>(
+        dev: &wp::Device,
+        nrow: usize,
+        ncol: usize,
+        seed: u64,
+    ) -> Vec<u64> {
         // Triplets that cancel make a stored block of zeros (kept by from_triplets, dropped by
         // from_dense).
         let rc = B::ROWS * B::COLS;
@@ -1785,8 +1821,14 @@ mod ops {
         c.extend([(ncol - 1) as i32, (ncol - 1) as i32]);
         flat.extend((0..rc).map(|e| e as f64 + 0.5));
         flat.extend((0..rc).map(|e| -(e as f64 + 0.5)));
-        let a = Bsr::from_triplets(nrow, ncol, &arr(&r, dev), &arr(&c, dev), &blocks_of::<B>(&flat, dev))
-            .unwrap();
+        let a = Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&r, dev),
+            &arr(&c, dev),
+            &blocks_of::<B>(&flat, dev),
+        )
+        .unwrap();
         let (nr, nc) = a.shape();
         let out = wp::Array::<B::Scalar, 2>::zeros([nr, nc], dev).unwrap();
         out.fill(B::Scalar::from_f64(7.0)).unwrap(); // overwritten: every entry
@@ -1867,7 +1909,12 @@ mod ops {
 
     /// The transpose against the dense one (exact: values are copied), with the structure
     /// checked (offsets, ascending columns).
-    fn transpose_case<B: Block + Copy>(dev: &wp::Device, nrow: usize, ncol: usize, seed: u64) -> Vec<u64>
+    fn transpose_case<B: Block + Copy>(
+        dev: &wp::Device,
+        nrow: usize,
+        ncol: usize,
+        seed: u64,
+    ) -> Vec<u64>
     where
         B::Transpose: Copy,
     {
@@ -1879,7 +1926,11 @@ mod ops {
         let (nr, nc) = a.shape();
         for i in 0..nr {
             for j in 0..nc {
-                assert_eq!(dt[j * nr + i].to_bits(), d[i * nc + j].to_bits(), "({i}, {j})");
+                assert_eq!(
+                    dt[j * nr + i].to_bits(),
+                    d[i * nc + j].to_bits(),
+                    "({i}, {j})"
+                );
             }
         }
         // Twice is the matrix, bit for bit (same structure, same blocks).
@@ -1926,9 +1977,17 @@ mod ops {
         for k in 0..got.len() {
             let (a, b) = (dx[k], dy[k]);
             // f32: two products and a sum of magnitudes <= 3, each rounded: 2e-6 absolute.
-            let tol = if std::mem::size_of::<B::Scalar>() == 4 { 2e-6 } else { 1e-14 };
+            let tol = if std::mem::size_of::<B::Scalar>() == 4 {
+                2e-6
+            } else {
+                1e-14
+            };
             let exact = alpha.to_f64() * a + beta.to_f64() * b;
-            assert!((got[k] - exact).abs() <= tol, "scalar {k}: {} vs {exact}", got[k]);
+            assert!(
+                (got[k] - exact).abs() <= tol,
+                "scalar {k}: {} vs {exact}",
+                got[k]
+            );
         }
         for (&(r, c), _) in blocks(&y).iter() {
             for i in 0..B::ROWS {
@@ -1943,7 +2002,11 @@ mod ops {
                         (Some(p), None) | (None, Some(p)) => p,
                         (None, None) => unreachable!(),
                     };
-                    assert_eq!(got[k].to_bits(), want.to_f64().to_bits(), "({r}, {c}) ({i}, {j})");
+                    assert_eq!(
+                        got[k].to_bits(),
+                        want.to_f64().to_bits(),
+                        "({r}, {c}) ({i}, {j})"
+                    );
                 }
             }
         }
@@ -1977,8 +2040,13 @@ mod ops {
             "{e}"
         );
         let mut y = random::<Mat3>(dev, 4, 5, 6, 38);
-        let e = sparse::axpy(1.0, &x, f32::INFINITY, &mut y).unwrap_err().to_string();
-        assert!(e.contains("sparse::axpy") && e.contains("`beta` is inf"), "{e}");
+        let e = sparse::axpy(1.0, &x, f32::INFINITY, &mut y)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::axpy") && e.contains("`beta` is inf"),
+            "{e}"
+        );
         if !dev.is_cpu() {
             let xc = random::<Mat3>(&wp::cpu(), 4, 5, 6, 36);
             let e = sparse::axpy(1.0, &xc, 1.0, &mut y).unwrap_err();
@@ -2018,14 +2086,23 @@ mod ops {
                 // row's products): 30 u times the sum of the magnitudes.
                 let u = if f32s { 2f64.powi(-24) } else { 2f64.powi(-53) };
                 let g = got[i * cols + j];
-                assert!((g - want).abs() <= 30.0 * u * mag.max(1e-300), "({i}, {j}): {g} vs {want}");
+                assert!(
+                    (g - want).abs() <= 30.0 * u * mag.max(1e-300),
+                    "({i}, {j}): {g} vs {want}"
+                );
             }
         }
         bits(&scalars(c.values()))
     }
 
     /// The documented order for f64 scalar blocks, as a map (row, col) -> value.
-    fn mm_documented(a: &Bsr<f64>, b: &Bsr<f64>, alpha: f64, beta: f64, c: &Bsr<f64>) -> std::collections::BTreeMap<(i32, i32), f64> {
+    fn mm_documented(
+        a: &Bsr<f64>,
+        b: &Bsr<f64>,
+        alpha: f64,
+        beta: f64,
+        c: &Bsr<f64>,
+    ) -> std::collections::BTreeMap<(i32, i32), f64> {
         let (ao, ac, av) = (host(a.offsets()), host(a.columns()), host(a.values()));
         let (bo, bc, bv) = (host(b.offsets()), host(b.columns()), host(b.values()));
         let mut out = std::collections::BTreeMap::new();
@@ -2042,7 +2119,9 @@ mod ops {
         }
         if beta != 0.0 {
             for (&(r, cc), &v) in blocks(c).iter() {
-                out.entry((r, cc)).and_modify(|s| *s += beta * v).or_insert(beta * v);
+                out.entry((r, cc))
+                    .and_modify(|s| *s += beta * v)
+                    .or_insert(beta * v);
             }
         }
         out
@@ -2065,7 +2144,10 @@ mod ops {
             let mut c = c0.clone();
             sparse::mm(0.7, &a, &b, beta, &mut c, &mut work).unwrap();
             let got = blocks(&c);
-            assert_eq!(got.keys().collect::<Vec<_>>(), want.keys().collect::<Vec<_>>());
+            assert_eq!(
+                got.keys().collect::<Vec<_>>(),
+                want.keys().collect::<Vec<_>>()
+            );
             for (k, w) in &want {
                 assert_eq!(got[k].to_bits(), w.to_bits(), "beta {beta}: {k:?}");
             }
@@ -2091,7 +2173,15 @@ mod ops {
         let mut c1 = Bsr::<f32>::zeros(8, 9, dev).unwrap();
         let mut c2 = c1.clone();
         sparse::mm(1.0, &a, &b, 0.0, &mut c1, &mut MmWork::new()).unwrap();
-        sparse::mm(1.0, &a, &b, 0.0, &mut c2, &mut MmWork::with_capacity(products as usize)).unwrap();
+        sparse::mm(
+            1.0,
+            &a,
+            &b,
+            0.0,
+            &mut c2,
+            &mut MmWork::with_capacity(products as usize),
+        )
+        .unwrap();
         assert_eq!(dense_of(&c1), dense_of(&c2));
         // One product too many: a fault of sparse::mm on `products`, and C empty.
         let mut c3 = Bsr::<f32>::zeros(8, 9, dev).unwrap();
@@ -2154,7 +2244,11 @@ mod ops {
         let mut g = Rng(seed + 1);
         let xs: Vec<f64> = (0..ncol * B::COLS).map(|_| g.unit()).collect();
         let ys: Vec<f64> = (0..nrow * B::ROWS).map(|_| g.unit()).collect();
-        let sc = |v: &[f64]| v.iter().map(|&x| B::Scalar::from_f64(x)).collect::<Vec<_>>();
+        let sc = |v: &[f64]| {
+            v.iter()
+                .map(|&x| B::Scalar::from_f64(x))
+                .collect::<Vec<_>>()
+        };
         let (xs, ys) = (sc(&xs), sc(&ys));
         let x = arr(&xs, dev).reinterpret::<B::In>().unwrap();
         let y = arr(&ys, dev).reinterpret::<B::Out>().unwrap();
@@ -2173,14 +2267,19 @@ mod ops {
             }
             // f32: at most ~40 rounded products and sums of magnitude <= 10: 1e-5 absolute.
             let tol = if f32s { 1e-5 } else { 1e-13 };
-            assert!((got[i].to_f64() - want).abs() <= tol, "row {i}: {:?} vs {want}", got[i]);
+            assert!(
+                (got[i].to_f64() - want).abs() <= tol,
+                "row {i}: {:?} vs {want}",
+                got[i]
+            );
             // The documented order.
             let (r, p) = (i / B::ROWS, i % B::ROWS);
             let mut acc = B::Scalar::ZERO;
             for k in off[r] as usize..off[r + 1] as usize {
                 for q in 0..B::COLS {
                     let prod = B::Scalar::from_f64(
-                        vals[k * rc + at::<B>(p, q)].to_f64() * xs[cols[k] as usize * B::COLS + q].to_f64(),
+                        vals[k * rc + at::<B>(p, q)].to_f64()
+                            * xs[cols[k] as usize * B::COLS + q].to_f64(),
                     );
                     acc = B::Scalar::from_f64(acc.to_f64() + prod.to_f64());
                 }
@@ -2189,7 +2288,11 @@ mod ops {
                 B::Scalar::from_f64(0.5 * acc.to_f64()).to_f64()
                     + B::Scalar::from_f64(-2.0 * ys[i].to_f64()).to_f64(),
             );
-            assert_eq!(got[i].to_f64().to_bits(), want.to_f64().to_bits(), "row {i}");
+            assert_eq!(
+                got[i].to_f64().to_bits(),
+                want.to_f64().to_bits(),
+                "row {i}"
+            );
         }
         bits(&got)
     }
@@ -2224,7 +2327,9 @@ mod ops {
         // The transpose of Mat23 blocks is of Mat32 blocks (exact), and back.
         transpose_case::<Mat23>(dev, 12, 7, 71);
         transpose_case::<DMat46>(dev, 6, 9, 72);
-        same_on_cpu(dev, "transpose Mat63", |d| transpose_case::<Mat63>(d, 8, 10, 73));
+        same_on_cpu(dev, "transpose Mat63", |d| {
+            transpose_case::<Mat63>(d, 8, 10, 73)
+        });
         // Dense both ways with row-major rectangular blocks.
         dense_case::<Mat34>(dev, 5, 6, 74);
         same_on_cpu(dev, "dense DMat26", |d| dense_case::<DMat26>(d, 4, 3, 75));
@@ -2246,11 +2351,23 @@ mod ops {
         let mut c = random::<A::Output>(dev, m, n, 15, seed + 2);
         let (da, db, dc) = (dense_of(&a), dense_of(&b), dense_of(&c));
         let alpha = A::Scalar::from_f64(0.75);
-        sparse::mm(alpha, &a, &b, A::Scalar::from_f64(beta), &mut c, &mut MmWork::new()).unwrap();
+        sparse::mm(
+            alpha,
+            &a,
+            &b,
+            A::Scalar::from_f64(beta),
+            &mut c,
+            &mut MmWork::new(),
+        )
+        .unwrap();
         assert_eq!((c.nrow(), c.ncol()), (m, n));
         let got = dense_of(&c);
         let (rows, inner, cols) = (m * A::ROWS, k * A::COLS, n * B::COLS);
-        let u = if std::mem::size_of::<A::Scalar>() == 4 { 2f64.powi(-24) } else { 2f64.powi(-53) };
+        let u = if std::mem::size_of::<A::Scalar>() == 4 {
+            2f64.powi(-24)
+        } else {
+            2f64.powi(-53)
+        };
         for i in 0..rows {
             for j in 0..cols {
                 let mut want = beta * dc[i * cols + j];
@@ -2261,7 +2378,10 @@ mod ops {
                 }
                 // As mm_case: 30 u times the sum of the magnitudes.
                 let g = got[i * cols + j];
-                assert!((g - want).abs() <= 30.0 * u * mag.max(1e-300), "({i}, {j}): {g} vs {want}");
+                assert!(
+                    (g - want).abs() <= 30.0 * u * mag.max(1e-300),
+                    "({i}, {j}): {g} vs {want}"
+                );
             }
         }
         bits(&scalars(c.values()))
@@ -2274,7 +2394,11 @@ mod ops {
         rect_mm_case::<Mat32, Mat23>(dev, 0.5, 82);
         rect_mm_case::<Mat24, Mat43>(dev, -1.0, 83);
         rect_mm_case::<DMat2, DMat26>(dev, 0.25, 84);
-        same_on_cpu(dev, "mm Mat63 x Mat32", |d| rect_mm_case::<Mat63, Mat32>(d, 0.5, 85));
-        same_on_cpu(dev, "mm DMat32 x DMat23", |d| rect_mm_case::<DMat32, DMat23>(d, 0.0, 86));
+        same_on_cpu(dev, "mm Mat63 x Mat32", |d| {
+            rect_mm_case::<Mat63, Mat32>(d, 0.5, 85)
+        });
+        same_on_cpu(dev, "mm DMat32 x DMat23", |d| {
+            rect_mm_case::<DMat32, DMat23>(d, 0.0, 86)
+        });
     }
 }

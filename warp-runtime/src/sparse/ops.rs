@@ -83,7 +83,10 @@ fn fits(func: &str, what: &str, n: usize) -> Result<i32> {
     i32::try_from(n).map_err(|_| {
         invalid(
             func,
-            format!("{what}: {n}, more than the {} an i32 index counts", i32::MAX),
+            format!(
+                "{what}: {n}, more than the {} an i32 index counts",
+                i32::MAX
+            ),
         )
     })
 }
@@ -562,12 +565,7 @@ pub fn set_diag<B: SquareBlock>(a: &mut Bsr<B>, d: &Array<B>) -> Result<()> {
 /// matrices' dimensions differ (both shapes named), `alpha` or `beta` is not finite, or the
 /// two capacities together exceed `i32::MAX`; [`Error::DeviceMismatch`](crate::Error::DeviceMismatch);
 /// an allocation's error (so [`Error::Capture`](crate::Error::Capture) inside a capture).
-pub fn axpy<B: Block>(
-    alpha: B::Scalar,
-    x: &Bsr<B>,
-    beta: B::Scalar,
-    y: &mut Bsr<B>,
-) -> Result<()> {
+pub fn axpy<B: Block>(alpha: B::Scalar, x: &Bsr<B>, beta: B::Scalar, y: &mut Bsr<B>) -> Result<()> {
     const F: &str = "sparse::axpy";
     let dev = y.device().clone();
     same_device(F, "x", &dev, x.device())?;

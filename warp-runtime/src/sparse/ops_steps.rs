@@ -611,7 +611,8 @@ unsafe impl<S: SparseScalar> ObjectStep for Transpose<S> {
                         }
                     }
                     if t <= ncol {
-                        oo.at(t).write(keys.partition_point(|&x| x < t as u32) as i32);
+                        oo.at(t)
+                            .write(keys.partition_point(|&x| x < t as u32) as i32);
                     }
                 }
             });
@@ -961,8 +962,8 @@ mod tests {
         }
         mv!(
             Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63, Mat64,
-            DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62,
-            DMat63, DMat64
+            DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63,
+            DMat64
         );
         assert!(std::ptr::eq(
             <BsrMv<glam::Mat3> as ObjectStep>::LIBRARY,
@@ -1042,7 +1043,8 @@ mod tests {
             src += &format!("  P({c}, {f});\n");
         }
         src += "  return 0;\n}\n";
-        let dir = std::env::temp_dir().join(format!("wp_sparse_ops_offsets_{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("wp_sparse_ops_offsets_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
         std::fs::write(&cpp, src).unwrap();
