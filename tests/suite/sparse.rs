@@ -1564,6 +1564,7 @@ mod ops {
         ops_rect_mv,
         ops_rect_transpose_dense_axpy,
         ops_rect_mm,
+        ops_in_a_capture,
     );
 
     /// The scalars of an array of blocks, in storage order.
@@ -2401,4 +2402,56 @@ mod ops {
             rect_mm_case::<DMat32, DMat23>(d, 0.0, 86)
         });
     }
+
+    /// `scale`, `diag` and `to_dense` are recorded by a capture (each replay works on the
+    /// arrays' contents then); the operations that allocate are refused there.
+    fn ops_in_a_capture(dev: &wp::Device) {
+        let mut a = random::<Mat3>(dev, 6, 6, 20, 91);
+        let nnz = a.nnz().unwrap();
+        let out = wp::Array::<Mat3>::zeros(6, dev).unwrap();
+        let dense = wp::Array::<f32, 2>::zeros([18, 18], dev).unwrap();
+        // Once before capturing: a GPU loads the library at the first use.
+        a.scale(1.0).unwrap();
+        sparse::diag(&a, &out).unwrap();
+        a.to_dense(&dense).unwrap();
+        let b = a.clone();
+        let g = wp::capture(dev, || {
+            a.scale(2.0)?;
+            sparse::diag(&a, &out)?;
+            a.to_dense(&dense)
+        })
+        .unwrap();
+        let v0 = scalars(b.values());
+        for k in 1..=2 {
+            g.launch().unwrap();
+            // Each replay doubles the values (exactly: a power of two).
+            let f = (1u32 << k) as f32;
+            let want: Vec<f32> = v0[..nnz * 9].iter().map(|v| v * f).collect();
+            assert_eq!(scalars(b.values())[..nnz * 9], want[..], "replay {k}");
+            assert_eq!(
+                host(&dense).iter().map(|&v| v as f64).collect::<Vec<_>>(),
+                dense_of(&b),
+                "replay {k}"
+            );
+            let d = dense_of(&b);
+            let got = scalars(&out);
+            for i in 0..6 {
+                for p in 0..3 {
+                    for q in 0..3 {
+                        assert_eq!(
+                            got[i * 9 + at::<Mat3>(p, q)] as f64,
+                            d[(i * 3 + p) * 18 + i * 3 + q],
+                            "replay {k}"
+                        );
+                    }
+                }
+            }
+        }
+        let e = wp::capture(dev, || b.transpose().map(|_| ())).unwrap_err();
+        assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+        let mut y = b.clone();
+        let e = wp::capture(dev, || sparse::axpy(1.0, &b, 1.0, &mut y)).unwrap_err();
+        assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    }
 }
+
