@@ -423,7 +423,8 @@ fn addr_of(a: &Array<i32>, i: usize) -> u64 {
 
 impl<B: SquareBlock> Bsr<B> {
     /// The block diagonal matrix of `nrow x ncol` blocks whose block `(i, i)` is `d[i]`, for
-    /// `i < min(nrow, ncol)` (every diagonal block stored, zero or not), on `d`'s device.
+    /// `i < min(nrow, ncol)` (every diagonal block stored, zero or not), on `d`'s device. The
+    /// blocks are copied unchanged (values are data: a NaN is kept, as a kernel may write one).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::from_diag`
