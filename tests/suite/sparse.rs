@@ -2454,4 +2454,3 @@ mod ops {
         assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
     }
 }
-

@@ -564,8 +564,13 @@ fn mv_row<B: Block>(
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
 // not overlapping x (mv checked).
 unsafe impl<B: Block> ObjectStep for BsrMv<B> {
-    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library.
-    const LIBRARY: &'static ObjectLibrary = super::ops_steps::mv_library::<B>();
+    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library
+    // (ops_steps.rs' OPS_LIBRARY, named here: ops_steps imports this file).
+    const LIBRARY: &'static ObjectLibrary = if B::ROWS == B::COLS {
+        &LIBRARY
+    } else {
+        &ObjectLibrary::of("sparse_ops")
+    };
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
     fn len(&self) -> usize {
