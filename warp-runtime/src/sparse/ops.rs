@@ -675,6 +675,26 @@ impl<B: Block> MmWork<B> {
 /// old `C` keep the old ones), of `work`'s capacity. The products' triplets live in `work`
 /// (see [`MmWork`]); `mm` allocates (so it is not recorded by a capture).
 ///
+/// ```
+/// # use warp_runtime as wp;
+/// use wp::sparse::{self, Bsr, MmWork};
+/// let dev = wp::cpu();
+/// let a = Bsr::from_triplets(
+///     2,
+///     2,
+///     &wp::Array::from_slice(&[0, 0, 1], &dev)?,
+///     &wp::Array::from_slice(&[0, 1, 1], &dev)?,
+///     &wp::Array::from_slice(&[1.0f64, 2.0, 3.0], &dev)?,
+/// )?; // [[1, 2], [0, 3]]
+/// let at = a.transpose()?; // [[1, 0], [2, 3]]
+/// let mut c = Bsr::zeros(2, 2, &dev)?;
+/// sparse::mm(1.0, &at, &a, 0.0, &mut c, &mut MmWork::new())?; // A^T A
+/// let d = wp::Array::<f64, 2>::zeros([2, 2], &dev)?;
+/// c.to_dense(&d)?;
+/// assert_eq!(d.to_vec()?, [1.0, 2.0, 2.0, 13.0]);
+/// # Ok::<(), wp::Error>(())
+/// ```
+///
 /// # Errors
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::mm` when `A`'s
 /// block columns differ from `B`'s block rows or `C`'s dimensions from the product's (the
