@@ -1565,6 +1565,7 @@ mod ops {
         ops_rect_transpose_dense_axpy,
         ops_rect_mm,
         ops_in_a_capture,
+        ops_mv_transpose,
     );
 
     /// The scalars of an array of blocks, in storage order.
@@ -2452,5 +2453,74 @@ mod ops {
         let mut y = b.clone();
         let e = wp::capture(dev, || sparse::axpy(1.0, &b, 1.0, &mut y)).unwrap_err();
         assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    }
+
+    /// `alpha Aᵀ x + beta y` against the dense f64 product (tolerance) and against `mv` of the
+    /// transpose (bit for bit: it is that).
+    fn mv_transpose_case<B: Block + Copy>(dev: &wp::Device, beta: f64, seed: u64) -> Vec<u64>
+    where
+        B::Transpose: Copy,
+    {
+        let (nrow, ncol) = (11, 14);
+        let a = random::<B>(dev, nrow, ncol, 40, seed);
+        let mut g = Rng(seed + 1);
+        let sc = |v: Vec<f64>| v.into_iter().map(B::Scalar::from_f64).collect::<Vec<_>>();
+        let xs = sc((0..nrow * B::ROWS).map(|_| g.unit()).collect());
+        let ys = sc((0..ncol * B::COLS).map(|_| g.unit()).collect());
+        let x = arr(&xs, dev).reinterpret::<B::Out>().unwrap();
+        let y = arr(&ys, dev).reinterpret::<B::In>().unwrap();
+        let (al, be) = (B::Scalar::from_f64(-0.75), B::Scalar::from_f64(beta));
+        sparse::mv_transpose(al, &a, &x, be, &y).unwrap();
+        let got = host(&y.reinterpret::<B::Scalar>().unwrap());
+        let d = dense_of(&a);
+        let (h, w) = a.shape();
+        let f32s = std::mem::size_of::<B::Scalar>() == 4;
+        for j in 0..w {
+            let mut want = beta * ys[j].to_f64();
+            for i in 0..h {
+                want += -0.75 * d[i * w + j] * xs[i].to_f64();
+            }
+            // f32: ~50 rounded terms of magnitude <= 1: 1e-5 absolute.
+            let tol = if f32s { 1e-5 } else { 1e-13 };
+            assert!(
+                (got[j].to_f64() - want).abs() <= tol,
+                "{j}: {:?} vs {want}",
+                got[j]
+            );
+        }
+        let y2 = arr(&ys, dev).reinterpret::<B::In>().unwrap();
+        sparse::mv(al, &a.transpose().unwrap(), &x, be, &y2).unwrap();
+        assert_eq!(
+            bits(&host(&y2.reinterpret::<B::Scalar>().unwrap())),
+            bits(&got)
+        );
+        bits(&got)
+    }
+
+    fn ops_mv_transpose(dev: &wp::Device) {
+        mv_transpose_case::<f32>(dev, 0.0, 101);
+        mv_transpose_case::<Mat3>(dev, 1.5, 102);
+        mv_transpose_case::<Mat23>(dev, -1.0, 103);
+        same_on_cpu(dev, "mv_transpose DMat46", |d| {
+            mv_transpose_case::<DMat46>(d, 0.5, 104)
+        });
+        // Lengths are those of the transpose: x has nrow, y ncol elements.
+        let a = random::<Mat23>(dev, 4, 5, 6, 105);
+        let e = sparse::mv_transpose(
+            1.0,
+            &a,
+            &wp::Array::<glam::Vec2>::zeros(5, dev).unwrap(),
+            0.0,
+            &wp::Array::<glam::Vec3>::zeros(5, dev).unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("sparse::mv_transpose")
+                && e.contains("`x` has 5 Vec2 elements")
+                && e.contains("4 x 5 blocks of 2 x 3")
+                && e.contains("needs 4 Vec2 elements"),
+            "{e}"
+        );
     }
 }

@@ -19,8 +19,9 @@
 //! # Structure operations
 //! [`Bsr::scale`], [`diag`], [`set_diag`], [`Bsr::from_diag`], [`Bsr::identity`], dense
 //! matrices both ways ([`Bsr::to_dense`], [`Bsr::from_dense`]), [`Bsr::transpose`], [`axpy`]
-//! (`y = alpha x + beta y` on the union of the structures) and [`mm`] (`C = alpha A B + beta
-//! C`, one triplet per product of blocks, then the assembly's sort and ordered sums). These
+//! (`y = alpha x + beta y` on the union of the structures), [`mm`] (`C = alpha A B + beta
+//! C`, one triplet per product of blocks, then the assembly's sort and ordered sums) and
+//! [`mv_transpose`]. These
 //! also take warp-core's rectangular blocks (`Mat23` .. `DMat64`, row-major), as [`mv`] does;
 //! [`BlockMul`] says which block types multiply. The same-bits rule holds for each.
 //!
@@ -54,7 +55,7 @@ mod ops;
 mod ops_steps;
 
 pub use block::{Block, BlockMul, SparseScalar, SquareBlock};
-pub use ops::{axpy, diag, mm, set_diag, MmWork};
+pub use ops::{axpy, diag, mm, mv_transpose, set_diag, MmWork};
 pub use solve::{cg, Mode, Precond, SolveOptions, SolveReport, Stop};
 
 use crate::array::{Array, Element};

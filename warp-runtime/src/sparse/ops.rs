@@ -610,6 +610,68 @@ pub fn axpy<B: Block>(alpha: B::Scalar, x: &Bsr<B>, beta: B::Scalar, y: &mut Bsr
     Ok(())
 }
 
+/// `y = alpha Aᵀ x + beta y`: [`mv`](super::mv) of [`Bsr::transpose`] (so the same bits on
+/// every device). Scalar `j` of block column `c` of `y` is `alpha * acc + beta * y` with
+/// `acc` summed from 0 over A's blocks of column `c` in ascending block row, and in a block
+/// over ascending row `i`, of `a_ij * x_i`; `y` is not read when `beta == 0`.
+///
+/// `x` has `nrow` elements (`B::Out`), `y` has `ncol` (`B::In`); both contiguous, on the
+/// matrix's device, `y` overlapping neither `x` nor the matrix. Each call transposes the
+/// matrix (a sort on the device, new arrays: not recorded by a capture; for repeated
+/// products, transpose once and call [`mv`](super::mv)).
+///
+/// # Errors
+/// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming
+/// `sparse::mv_transpose`, the argument and both shapes when a length differs; for arrays
+/// that are not contiguous or overlap; [`Error::DeviceMismatch`](crate::Error::DeviceMismatch);
+/// an allocation's error ([`Error::Capture`](crate::Error::Capture) inside a capture).
+pub fn mv_transpose<B: Block>(
+    alpha: B::Scalar,
+    a: &Bsr<B>,
+    x: &Array<B::Out>,
+    beta: B::Scalar,
+    y: &Array<B::In>,
+) -> Result<()> {
+    const F: &str = "sparse::mv_transpose";
+    let dev = a.device();
+    same_device(F, "x", dev, x.device())?;
+    same_device(F, "y", dev, y.device())?;
+    contiguous(F, "x", x)?;
+    contiguous(F, "y", y)?;
+    for (name, len, want, ty) in [
+        (
+            "x",
+            x.len(),
+            a.nrow,
+            <B::Out as crate::array::Element>::TYPE_NAME,
+        ),
+        (
+            "y",
+            y.len(),
+            a.ncol,
+            <B::In as crate::array::Element>::TYPE_NAME,
+        ),
+    ] {
+        if len != want {
+            return Err(invalid(
+                F,
+                format!(
+                    "argument `{name}` has {len} {ty} elements, but the matrix has {}: its \
+                     transpose needs {want} {ty} elements for `{name}`",
+                    a.describe()
+                ),
+            ));
+        }
+    }
+    if crate::primitives::overlap(x, y) {
+        return Err(invalid(F, "arguments `x` and `y` overlap in memory"));
+    }
+    if a.overlaps(y) {
+        return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
+    }
+    super::mv(alpha, &a.transpose()?, x, beta, y)
+}
+
 /// The triplet arrays of [`mm`]'s products, kept between calls.
 ///
 /// [`MmWork::new`] sizes them on each call to the product count, which it reads back from
