@@ -39,6 +39,7 @@ inline unsigned threads = 1, blocks = 1;
 #define blockDim (::wp_emu::dim3_t{::wp_sp_emu::threads, 1u, 1u})
 #define gridDim (::wp_emu::dim3_t{::wp_sp_emu::blocks, 1u, 1u})
 #include "wp_sparse.h"
+#include "wp_sparse_ops.h"
 using namespace wp;
 
 template <typename A>
@@ -99,7 +100,7 @@ struct ScalarKernels {
     wp_sparse_dot_partials_##t, wp_sparse_dot_final_##t, wp_sparse_jacobi_apply_##t,             \
     wp_sparse_cg_init_##t, wp_sparse_cg_check_##t, wp_sparse_cg_update_##t,                      \
     wp_sparse_cg_direction_##t}
-const BlockKernels BLOCKS[8] = {
+const BlockKernels BLOCKS[32] = {
     {wp_sparse_bsr_mv_f32, wp_sparse_jacobi_inv_f32, 1, 1},
     {wp_sparse_bsr_mv_f64, wp_sparse_jacobi_inv_f64, 1, 1},
     {wp_sparse_bsr_mv_mat2, wp_sparse_jacobi_inv_mat2, 2, 2},
@@ -108,6 +109,31 @@ const BlockKernels BLOCKS[8] = {
     {wp_sparse_bsr_mv_dmat2, wp_sparse_jacobi_inv_dmat2, 2, 2},
     {wp_sparse_bsr_mv_dmat3, wp_sparse_jacobi_inv_dmat3, 3, 3},
     {wp_sparse_bsr_mv_dmat4, wp_sparse_jacobi_inv_dmat4, 4, 4},
+    // The rectangular blocks (wp_sparse_ops.h; no Jacobi), f32 then f64, R then C ascending.
+    {wp_sparse_bsr_mv_mat23, nullptr, 2, 3},
+    {wp_sparse_bsr_mv_mat24, nullptr, 2, 4},
+    {wp_sparse_bsr_mv_mat26, nullptr, 2, 6},
+    {wp_sparse_bsr_mv_mat32, nullptr, 3, 2},
+    {wp_sparse_bsr_mv_mat34, nullptr, 3, 4},
+    {wp_sparse_bsr_mv_mat36, nullptr, 3, 6},
+    {wp_sparse_bsr_mv_mat42, nullptr, 4, 2},
+    {wp_sparse_bsr_mv_mat43, nullptr, 4, 3},
+    {wp_sparse_bsr_mv_mat46, nullptr, 4, 6},
+    {wp_sparse_bsr_mv_mat62, nullptr, 6, 2},
+    {wp_sparse_bsr_mv_mat63, nullptr, 6, 3},
+    {wp_sparse_bsr_mv_mat64, nullptr, 6, 4},
+    {wp_sparse_bsr_mv_dmat23, nullptr, 2, 3},
+    {wp_sparse_bsr_mv_dmat24, nullptr, 2, 4},
+    {wp_sparse_bsr_mv_dmat26, nullptr, 2, 6},
+    {wp_sparse_bsr_mv_dmat32, nullptr, 3, 2},
+    {wp_sparse_bsr_mv_dmat34, nullptr, 3, 4},
+    {wp_sparse_bsr_mv_dmat36, nullptr, 3, 6},
+    {wp_sparse_bsr_mv_dmat42, nullptr, 4, 2},
+    {wp_sparse_bsr_mv_dmat43, nullptr, 4, 3},
+    {wp_sparse_bsr_mv_dmat46, nullptr, 4, 6},
+    {wp_sparse_bsr_mv_dmat62, nullptr, 6, 2},
+    {wp_sparse_bsr_mv_dmat63, nullptr, 6, 3},
+    {wp_sparse_bsr_mv_dmat64, nullptr, 6, 4},
 };
 
 // Small launches: 3 blocks of 32 threads (the grid-stride loops wrap); the dot's partials 2
@@ -215,6 +241,10 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
 // The triplet pipeline of warp-runtime's sparse/mod.rs (from_triplets), with the host's
 // stable sort in place of the radix sort; prints the fault if the report raised one, then
 // the matrix (a GPU runs every queued step after a fault too; the CPU stops at it).
+template <typename S> void pipeline(const ScalarKernels& k, i32 block, i32 nrow, i32 ncol, i32 n,
+                                    u64 ca, std::vector<i32>& rows, std::vector<i32>& cols,
+                                    std::vector<S>& values, i32 no_finite_check);
+
 template <typename S> void triplets(const ScalarKernels& k) {
   const i32 block = (i32)word(), nrow = (i32)word(), ncol = (i32)word(), n = (i32)word();
   // A device count: a word 1 then the count, or a word 0 (none).
@@ -222,16 +252,24 @@ template <typename S> void triplets(const ScalarKernels& k) {
   const bool has_count = word() != 0;
   if (has_count) dcount = (i32)(i64)word();
   const u64 ca = has_count ? addr(&dcount) : 0;
-  const i32 m = has_count ? sp_count(ca, n) : n;
   std::vector<i32> rows = ints(n), cols = ints(n);
   std::vector<S> values = scalars<S>((size_t)n * block);
+  pipeline<S>(k, block, nrow, ncol, n, ca, rows, cols, values, 0);
+}
+
+// The pipeline of `n` triplets (a device count at `ca`, or none); `no_finite_check` as the
+// structure operations of wp_sparse_ops.h run it.
+template <typename S> void pipeline(const ScalarKernels& k, i32 block, i32 nrow, i32 ncol, i32 n,
+                                    u64 ca, std::vector<i32>& rows, std::vector<i32>& cols,
+                                    std::vector<S>& values, i32 no_finite_check) {
+  const i32 m = ca ? sp_count(ca, n) : n;
   std::vector<u32> keys(n + 1);
   std::vector<i32> idx(n + 1), pos(n + 1), brows(n + 1), columns(n + 1), offsets(nrow + 1);
   std::vector<S> out((size_t)n * block + 1);
   std::vector<i32> bad = {0x7fffffff, 0x7fffffff, 0x7fffffff};
   const bool two_pass = (u64)nrow * (u64)ncol > 0xffffffffull;
   run(k.keys, GB, GT, sp_tpl_keys_t{ca, addr(rows.data()), addr(cols.data()), addr(values.data()), n,
-                                    nrow, ncol, block, two_pass, 0, addr(keys.data()),
+                                    nrow, ncol, block, two_pass, no_finite_check, addr(keys.data()),
                                     addr(idx.data()), addr(bad.data())});
   fault_t f{};
   u32 flag = 0;
@@ -271,6 +309,191 @@ template <typename S> void triplets(const ScalarKernels& k) {
   print(out.data(), (size_t)nnz * block);
 }
 
+
+// ---- Slice 2: the structure operations (wp_sparse_ops.h), in warp-runtime's sparse/ops.rs
+// order, the primitives replaced by the host's stable sort and scans ----
+struct OpsKernels {
+  void (*scale)(sp_ops_scale_t);
+  void (*diag)(sp_ops_diag_t);
+  void (*set_diag)(sp_ops_set_diag_t);
+  void (*to_dense)(sp_ops_to_dense_t);
+  void (*flags)(sp_ops_dense_t);
+  void (*report)(sp_ops_dense_report_t);
+  void (*gather)(sp_ops_dense_t);
+  void (*transpose)(sp_ops_transpose_t);
+  void (*to_triplets)(sp_ops_to_triplets_t);
+  void (*expand)(sp_ops_mm_expand_t);
+};
+#define OK(t) OpsKernels{wp_sparse_ops_scale_##t, wp_sparse_ops_diag_##t, wp_sparse_ops_set_diag_##t, \
+    wp_sparse_ops_to_dense_##t, wp_sparse_ops_dense_flags_##t, wp_sparse_ops_dense_report_##t,      \
+    wp_sparse_ops_dense_gather_##t, wp_sparse_ops_transpose_##t, wp_sparse_ops_to_triplets_##t,     \
+    wp_sparse_ops_mm_expand_##t}
+
+// A matrix of blocks of `rc` scalars (nrow, ncol, nnz, offsets, columns, values); cap = nnz.
+template <typename S> Matrix mat(i32 rc, std::vector<S>& values) {
+  Matrix m;
+  m.nrow = (i32)word();
+  m.ncol = (i32)word();
+  m.nnz = (i32)word();
+  m.offsets = ints(m.nrow + 1);
+  m.columns = ints(m.nnz);
+  values = scalars<S>((size_t)m.nnz * rc);
+  return m;
+}
+
+template <typename S> void print_matrix(i32 nrow, i32 nnz, i32 rc, const i32* offsets, const i32* columns,
+                                        const S* values) {
+  printf("matrix %d\n", nnz);
+  print(offsets, (size_t)nrow + 1);
+  print(columns, (size_t)nnz);
+  print(values, (size_t)nnz * rc);
+}
+
+template <typename S> void ops(const OpsKernels& o, const ScalarKernels& k, u64 op) {
+  const i32 r = (i32)word(), c = (i32)word(), cm = (i32)word(), rc = r * c;
+  switch (op) {
+    case 0: {  // scale
+      std::vector<S> v;
+      Matrix m = mat<S>(rc, v);
+      run(o.scale, GB, GT, sp_ops_scale_t{addr(m.offsets.data()), addr(v.data()), scalar<f64>(), m.nrow, m.nnz, rc, 0});
+      print(v.data(), (size_t)m.nnz * rc);
+      break;
+    }
+    case 1: {  // diag
+      std::vector<S> v;
+      Matrix m = mat<S>(rc, v);
+      const i32 n = m.nrow < m.ncol ? m.nrow : m.ncol;
+      std::vector<S> out((size_t)n * rc + 1);
+      run(o.diag, GB, GT, sp_ops_diag_t{addr(m.offsets.data()), addr(m.columns.data()), addr(v.data()),
+                                        addr(out.data()), m.nrow, m.ncol, m.nnz, rc});
+      print(out.data(), (size_t)n * rc);
+      break;
+    }
+    case 2: {  // from_diag / identity: nrow, ncol, has_d, d
+      const i32 nrow = (i32)word(), ncol = (i32)word(), n = nrow < ncol ? nrow : ncol;
+      const bool has_d = word() != 0;
+      std::vector<S> d = scalars<S>(has_d ? (size_t)n * rc : 0);
+      std::vector<i32> offsets(nrow + 1), columns(n + 1);
+      std::vector<S> v((size_t)n * rc + 1);
+      run(o.set_diag, GB, GT, sp_ops_set_diag_t{addr(offsets.data()), addr(columns.data()), addr(v.data()),
+                                                has_d ? addr(d.data()) : 0, nrow, n, r, rc});
+      print_matrix(nrow, n, rc, offsets.data(), columns.data(), v.data());
+      break;
+    }
+    case 3: {  // to_dense
+      std::vector<S> v;
+      Matrix m = mat<S>(rc, v);
+      const size_t len = (size_t)m.nrow * r * m.ncol * c;
+      std::vector<S> out(len + 1, (S)7);
+      run(o.to_dense, GB, GT, sp_ops_to_dense_t{addr(m.offsets.data()), addr(m.columns.data()), addr(v.data()),
+                                                addr(out.data()), m.nrow, m.ncol, m.nnz, r, c, cm});
+      print(out.data(), len);
+      break;
+    }
+    case 4: {  // from_dense: nrow, ncol (blocks), the dense scalars
+      const i32 nrow = (i32)word(), ncol = (i32)word(), nb = nrow * ncol;
+      std::vector<S> dense = scalars<S>((size_t)nb * rc);
+      std::vector<i32> pos(nb + 1), brows(nb + 1), columns(nb + 1), offsets(nrow + 1);
+      std::vector<S> v((size_t)nb * rc + 1);
+      i32 bad = 0x7fffffff;
+      const sp_ops_dense_t st{addr(dense.data()), addr(pos.data()), addr(&bad), addr(brows.data()),
+                              addr(columns.data()), addr(v.data()), nrow, ncol, r, c, cm, 0};
+      run(o.flags, GB, GT, st);
+      fault_t f{};
+      u32 flag = 0;
+      sp_ops_dense_report_t rep{addr(dense.data()), addr(&bad), (i64)ncol * c, step_fault_t{}};
+      rep.fault.ctx.fault = &f;
+      rep.fault.ctx.fault_flag = &flag;
+      run(o.report, 1, 1, rep);
+      if (flag)
+        printf("fault %d %d %lld %lld\n", f.kind, f.arg, (long long)f.index[0], (long long)f.index[1]);
+      for (i32 i = 1; i < nb; ++i) pos[i] += pos[i - 1];
+      run(o.gather, GB, GT, st);
+      run(wp_sparse_bsr_offsets, GB, GT, sp_bsr_offsets_t{0, addr(brows.data()), addr(pos.data()),
+                                                          addr(offsets.data()), nb, nrow});
+      print_matrix(nrow, offsets[nrow], rc, offsets.data(), columns.data(), v.data());
+      break;
+    }
+    case 5: {  // transpose: cm_t, the matrix
+      const i32 cm_t = (i32)word();
+      std::vector<S> v;
+      Matrix m = mat<S>(rc, v);
+      const i32 cap = m.nnz;
+      std::vector<i32> brows(cap + 1), idx(cap + 1), offsets(m.ncol + 1), columns(cap + 1);
+      std::vector<u32> keys(cap + 1);
+      std::vector<S> out((size_t)cap * rc + 1);
+      run(wp_sparse_ops_row_keys, GB, GT, sp_ops_row_keys_t{addr(m.offsets.data()), addr(m.columns.data()),
+                                                            addr(brows.data()), addr(keys.data()),
+                                                            addr(idx.data()), m.nrow, m.ncol, cap, 0});
+      const i32 nnz = sp_nnz(m.offsets.data(), m.nrow, cap);
+      std::vector<std::pair<u32, i32>> kv(nnz);
+      for (i32 i = 0; i < nnz; ++i) kv[i] = {keys[i], idx[i]};
+      std::stable_sort(kv.begin(), kv.end(), [](auto a, auto b) { return a.first < b.first; });
+      for (i32 i = 0; i < nnz; ++i) { keys[i] = kv[i].first; idx[i] = kv[i].second; }
+      run(o.transpose, GB, GT, sp_ops_transpose_t{addr(m.offsets.data()), addr(brows.data()), addr(keys.data()),
+                                                  addr(idx.data()), addr(v.data()), addr(offsets.data()),
+                                                  addr(columns.data()), addr(out.data()), m.nrow, m.ncol, cap,
+                                                  r, c, cm, cm_t, 0});
+      print_matrix(m.ncol, nnz, rc, offsets.data(), columns.data(), out.data());
+      break;
+    }
+    case 6: {  // axpy: x, y, alpha, beta
+      std::vector<S> xv, yv;
+      Matrix x = mat<S>(rc, xv);
+      Matrix y = mat<S>(rc, yv);
+      const f64 alpha = scalar<f64>(), beta = scalar<f64>();
+      const i32 n = x.nnz + y.nnz;
+      std::vector<i32> rows(n + 1), cols(n + 1), counts(2, 0);
+      std::vector<S> vals((size_t)n * rc + 1);
+      run(o.to_triplets, GB, GT, sp_ops_to_triplets_t{addr(x.offsets.data()), addr(x.columns.data()), addr(xv.data()),
+                                                      0, addr(rows.data()), addr(cols.data()), addr(vals.data()),
+                                                      addr(&counts[0]), alpha, x.nrow, x.nnz, rc, n});
+      run(o.to_triplets, GB, GT, sp_ops_to_triplets_t{addr(y.offsets.data()), addr(y.columns.data()), addr(yv.data()),
+                                                      addr(&counts[0]), addr(rows.data()), addr(cols.data()),
+                                                      addr(vals.data()), addr(&counts[1]), beta, y.nrow, y.nnz, rc, n});
+      pipeline<S>(k, rc, y.nrow, y.ncol, n, addr(&counts[1]), rows, cols, vals, 1);
+      break;
+    }
+    case 7: {  // mm: (A's r, c, cm in the head) B's cols, B's and C's layouts; a, b, c,
+               // alpha, beta, capacity (-1: exact)
+      const i32 cn = (i32)word(), cm_b = (i32)word(), cm_c = (i32)word();
+      const i32 rc_b = c * cn, rc_c = r * cn;
+      std::vector<S> av, bv, cv;
+      Matrix a = mat<S>(rc, av);
+      Matrix b = mat<S>(rc_b, bv);
+      Matrix cm_ = mat<S>(rc_c, cv);
+      const f64 alpha = scalar<f64>(), beta = scalar<f64>();
+      const i64 fixed = (i64)word();
+      std::vector<i64> starts(a.nrow + 1);
+      run(wp_sparse_ops_mm_count, GB, GT, sp_ops_mm_count_t{addr(a.offsets.data()), addr(a.columns.data()),
+                                                            addr(b.offsets.data()), addr(starts.data()),
+                                                            a.nrow, a.nnz, b.nrow, b.nnz});
+      i64 acc = 0;  // the exclusive scan
+      for (i32 i = 0; i <= a.nrow; ++i) { const i64 t = starts[i]; starts[i] = acc; acc += t; }
+      std::vector<i32> cells(2, 0);
+      run(wp_sparse_ops_mm_total, 1, 1, sp_ops_mm_total_t{addr(starts.data()), addr(&cells[0]), a.nrow, 0});
+      const bool with_c = beta != 0.0;
+      const i64 n = fixed >= 0 ? fixed : starts[a.nrow] + (with_c ? cm_.nnz : 0);
+      std::vector<i32> rows(n + 1), cols(n + 1);
+      std::vector<S> vals((size_t)n * rc_c + 1);
+      run(o.expand, GB, GT, sp_ops_mm_expand_t{addr(a.offsets.data()), addr(a.columns.data()), addr(av.data()),
+                                               addr(b.offsets.data()), addr(b.columns.data()), addr(bv.data()),
+                                               addr(starts.data()), addr(rows.data()), addr(cols.data()),
+                                               addr(vals.data()), alpha, n, a.nrow, a.nnz, b.nrow, b.nnz,
+                                               r, c, cn, cm, cm_b, cm_c});
+      if (with_c)
+        run(o.to_triplets, GB, GT, sp_ops_to_triplets_t{addr(cm_.offsets.data()), addr(cm_.columns.data()),
+                                                        addr(cv.data()), addr(&cells[0]), addr(rows.data()),
+                                                        addr(cols.data()), addr(vals.data()), addr(&cells[1]),
+                                                        beta, cm_.nrow, cm_.nnz, rc_c, (i32)n});
+      pipeline<S>(k, rc_c, a.nrow, b.ncol, (i32)n, addr(&cells[with_c ? 1 : 0]), rows, cols, vals, 1);
+      break;
+    }
+    default:
+      exit(2);
+  }
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   FILE* file = fopen(argv[1], "rb");
@@ -280,12 +503,18 @@ int main(int argc, char** argv) {
   fclose(file);
   const u64 cmd = word(), kind = word();
   const ScalarKernels sk[2] = {SK(f32), SK(f64)};
-  const bool f64s = kind == 1 || kind >= 5;
+  const bool f64s = kind == 1 || (kind >= 5 && kind < 8) || kind >= 20;
   switch (cmd) {
     case 0: f64s ? mv<f64>(BLOCKS[kind]) : mv<f32>(BLOCKS[kind]); break;
     case 1: kind ? dot<f64>(sk[1]) : dot<f32>(sk[0]); break;
     case 2: f64s ? cg<f64>(BLOCKS[kind], sk[1]) : cg<f32>(BLOCKS[kind], sk[0]); break;
     case 3: kind ? triplets<f64>(sk[1]) : triplets<f32>(sk[0]); break;
+    // The structure operations: a third word names the operation (`ops`), kind the scalar.
+    case 4: {
+      const u64 op = word();
+      kind ? ops<f64>(OK(f64), sk[1], op) : ops<f32>(OK(f32), sk[0], op);
+      break;
+    }
     default: return 2;
   }
   return 0;
@@ -297,7 +526,15 @@ fn driver() -> Option<&'static (std::path::PathBuf, std::path::PathBuf)> {
     static EXE: OnceLock<Option<(std::path::PathBuf, std::path::PathBuf)>> = OnceLock::new();
     EXE.get_or_init(|| {
         host_cpp::gpp().then(|| {
-            host_cpp::compile_driver("sparse", DRIVER, &["WP_SPARSE_BUILD", "WP_SPARSE_EMULATED"])
+            host_cpp::compile_driver(
+                "sparse",
+                DRIVER,
+                &[
+                    "WP_SPARSE_BUILD",
+                    "WP_SPARSE_OPS_BUILD",
+                    "WP_SPARSE_EMULATED",
+                ],
+            )
         })
     })
     .as_ref()
@@ -375,6 +612,19 @@ fn block<B: Block>(s: &[B::Scalar]) -> B {
 /// The driver's code of a block type (its `BLOCKS` index).
 fn kind<B: Block>() -> u64 {
     let f64s = std::mem::size_of::<B::Scalar>() == 8;
+    if B::ROWS != B::COLS {
+        // The rectangular blocks, after the 8 square ones: f32 then f64, R then C ascending.
+        let shapes: Vec<(usize, usize)> = [2, 3, 4, 6]
+            .iter()
+            .flat_map(|&r| [2, 3, 4, 6].map(move |c| (r, c)))
+            .filter(|(r, c)| r != c)
+            .collect();
+        let i = shapes
+            .iter()
+            .position(|&s| s == (B::ROWS, B::COLS))
+            .unwrap();
+        return 8 + 12 * f64s as u64 + i as u64;
+    }
     match (B::ROWS, f64s) {
         (1, false) => 0,
         (1, true) => 1,
@@ -909,4 +1159,420 @@ fn triplets_match_the_cpu_bit_for_bit() {
         // rule: they process nothing, and the matrix is empty (offsets all 0).
         assert_eq!(out[1..], ["matrix 0", "0", "0", "0"], "count {k}");
     }
+}
+
+// ------------------------------------------------------------------------------------------
+// Slice 2: the structure operations (wp_sparse_ops.h)
+// ------------------------------------------------------------------------------------------
+
+/// The head of an `ops` command: 4, the scalar, the operation, the block's R, C and layout.
+fn ops_head<B: Block>(op: u64) -> Vec<u64> {
+    vec![
+        4,
+        (std::mem::size_of::<B::Scalar>() == 8) as u64,
+        op,
+        B::ROWS as u64,
+        B::COLS as u64,
+        B::COL_MAJOR as u64,
+    ]
+}
+
+/// Hex lines of words, as the driver prints them.
+fn lines(words: &[u64]) -> Vec<String> {
+    words.iter().map(|w| format!("{w:x}")).collect()
+}
+
+/// A CPU matrix as the driver's `print_matrix` prints it.
+fn matrix_lines<B: Block>(a: &Bsr<B>) -> Vec<String> {
+    let nnz = a.nnz().unwrap();
+    let mut w: Vec<u64> = a
+        .offsets()
+        .to_vec()
+        .unwrap()
+        .iter()
+        .map(|&o| o as u32 as u64)
+        .collect();
+    w.extend(
+        a.columns().to_vec().unwrap()[..nnz]
+            .iter()
+            .map(|&c| c as u32 as u64),
+    );
+    w.extend(words(&a.values().to_vec().unwrap()[..nnz]));
+    let mut out = vec![format!("matrix {nnz}")];
+    out.extend(lines(&w));
+    out
+}
+
+/// Every structure operation on blocks of `B`, through the C++ steps and through the CPU
+/// backend's bodies (the public API): the same bits.
+fn ops_case<B: sparse::SquareBlock + sparse::BlockMul<B, Output = B>>(seed: usize) {
+    let what = std::any::type_name::<B>();
+    let cpu = wp::cpu();
+    let (nrow, ncol) = (23, 17);
+    // scale
+    let (a, aw) = random_matrix::<B>(nrow, ncol, 150, seed);
+    let mut s = a.clone();
+    s.scale(B::Scalar::from_f64(-0.3)).unwrap();
+    let nnz = a.nnz().unwrap();
+    let mut input = ops_head::<B>(0);
+    input.extend(&aw);
+    input.push((-0.3f64).to_bits());
+    let got = run(&format!("scale_{seed}"), &input);
+    assert_eq!(
+        got,
+        lines(&words(&s.values().to_vec().unwrap()[..nnz])),
+        "{what} scale"
+    );
+    // diag
+    let (a, aw) = random_matrix::<B>(nrow, ncol, 300, seed + 1);
+    let out = wp::Array::<B>::zeros(ncol, &cpu).unwrap();
+    sparse::diag(&a, &out).unwrap();
+    let mut input = ops_head::<B>(1);
+    input.extend(&aw);
+    let got = run(&format!("diag_{seed}"), &input);
+    assert_eq!(got, lines(&words(&out.to_vec().unwrap())), "{what} diag");
+    // from_diag and identity
+    let dw: Vec<B::Scalar> = (0..ncol * B::ROWS * B::COLS)
+        .map(|i| B::Scalar::from_f64(value(seed + 3 * i)))
+        .collect();
+    let d: Vec<B> = from_scalars(&dw);
+    let m = Bsr::from_diag(nrow, ncol, &wp::Array::from_slice(&d, &cpu).unwrap()).unwrap();
+    let mut input = ops_head::<B>(2);
+    input.extend([nrow as u64, ncol as u64, 1]);
+    input.extend(dw.iter().map(|&v| word(v)));
+    assert_eq!(
+        run(&format!("fdiag_{seed}"), &input),
+        matrix_lines(&m),
+        "{what} from_diag"
+    );
+    let id = Bsr::<B>::identity(9, &cpu).unwrap();
+    let mut input = ops_head::<B>(2);
+    input.extend([9, 9, 0]);
+    assert_eq!(
+        run(&format!("id_{seed}"), &input),
+        matrix_lines(&id),
+        "{what} identity"
+    );
+    // to_dense
+    let (r, c) = a.shape();
+    let dense = wp::Array::<B::Scalar, 2>::zeros([r, c], &cpu).unwrap();
+    a.to_dense(&dense).unwrap();
+    let dv = dense.to_vec().unwrap();
+    let mut input = ops_head::<B>(3);
+    input.extend(&aw);
+    let got = run(&format!("dense_{seed}"), &input);
+    assert_eq!(
+        got,
+        lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()),
+        "{what} to_dense"
+    );
+    // from_dense (the dense matrix of `a`: zero blocks where `a` has none)
+    let back = Bsr::<B>::from_dense(&dense).unwrap();
+    let mut input = ops_head::<B>(4);
+    input.extend([nrow as u64, ncol as u64]);
+    input.extend(dv.iter().map(|&v| word(v)));
+    assert_eq!(
+        run(&format!("fdense_{seed}"), &input),
+        matrix_lines(&back),
+        "{what} from_dense"
+    );
+    // transpose
+    let t = a.transpose().unwrap();
+    let mut input = ops_head::<B>(5);
+    input.push(<B::Transpose as Block>::COL_MAJOR as u64);
+    input.extend(&aw);
+    assert_eq!(
+        run(&format!("tr_{seed}"), &input),
+        matrix_lines(&t),
+        "{what} transpose"
+    );
+    // axpy (different structures, duplicates between them)
+    let (x, xw) = random_matrix::<B>(nrow, ncol, 120, seed + 2);
+    let (mut y, yw) = random_matrix::<B>(nrow, ncol, 90, seed + 3);
+    sparse::axpy(
+        B::Scalar::from_f64(0.75),
+        &x,
+        B::Scalar::from_f64(-1.25),
+        &mut y,
+    )
+    .unwrap();
+    let mut input = ops_head::<B>(6);
+    input.extend(&xw);
+    input.extend(&yw);
+    input.extend([0.75f64.to_bits(), (-1.25f64).to_bits()]);
+    assert_eq!(
+        run(&format!("axpy_{seed}"), &input),
+        matrix_lines(&y),
+        "{what} axpy"
+    );
+    // mm: alpha A B, and alpha A B + beta C; a fixed capacity one product short faults
+    let (a, aw) = random_matrix::<B>(nrow, ncol, 90, seed + 4);
+    let (b, bw) = random_matrix::<B>(ncol, 19, 80, seed + 5);
+    for beta in [0.0, 0.5] {
+        let (mut cm, cw) = random_matrix::<B>(nrow, 19, 40, seed + 6);
+        let alpha = B::Scalar::from_f64(-1.5);
+        sparse::mm(
+            alpha,
+            &a,
+            &b,
+            B::Scalar::from_f64(beta),
+            &mut cm,
+            &mut sparse::MmWork::new(),
+        )
+        .unwrap();
+        let mut input = ops_head::<B>(7);
+        input.extend([B::COLS as u64, B::COL_MAJOR as u64, B::COL_MAJOR as u64]);
+        input.extend(&aw);
+        input.extend(&bw);
+        input.extend(&cw);
+        input.extend([(-1.5f64).to_bits(), f64::to_bits(beta), -1i64 as u64]);
+        assert_eq!(
+            run(&format!("mm_{seed}_{beta}"), &input),
+            matrix_lines(&cm),
+            "{what} mm beta {beta}"
+        );
+    }
+    let products: usize = {
+        let ac = a.columns().to_vec().unwrap();
+        let bo = b.offsets().to_vec().unwrap();
+        (0..a.nnz().unwrap())
+            .map(|k| (bo[ac[k] as usize + 1] - bo[ac[k] as usize]) as usize)
+            .sum()
+    };
+    let mut cm = Bsr::<B>::zeros(nrow, 19, &cpu).unwrap();
+    let e = sparse::mm(
+        B::Scalar::ONE,
+        &a,
+        &b,
+        B::Scalar::ZERO,
+        &mut cm,
+        &mut sparse::MmWork::with_capacity(products - 1),
+    )
+    .unwrap_err();
+    match e {
+        wp::Error::Fault(wp::Fault {
+            kernel: "sparse::mm",
+            kind: wp::FaultKind::OutOfBounds { arg, index, shape },
+            ..
+        }) => assert_eq!(
+            (arg, index, shape),
+            ("products", vec![products as i128], vec![products])
+        ),
+        e => panic!("{what}: {e}"),
+    }
+    let (_, cw) = random_matrix::<B>(nrow, 19, 40, seed + 6);
+    let mut input = ops_head::<B>(7);
+    input.extend([B::COLS as u64, B::COL_MAJOR as u64, B::COL_MAJOR as u64]);
+    input.extend(&aw);
+    input.extend(&bw);
+    input.extend(&cw);
+    input.extend([1f64.to_bits(), 0f64.to_bits(), (products - 1) as u64]);
+    let out = run(&format!("mmcap_{seed}"), &input);
+    // The same fault (out of bounds on argument 3, `products`), then (as a GPU runs on)
+    // an empty product.
+    assert_eq!(
+        out[0],
+        format!("fault 1 3 {products} 0 {products} 0"),
+        "{what}"
+    );
+    assert_eq!(out[1], "matrix 0");
+}
+
+/// The structure operations' C++ steps (scale, diag, from_diag, identity, to_dense,
+/// from_dense, transpose, axpy and mm through the triplet pipeline, mm's capacity fault) give
+/// the CPU backend's bits, for scalar, glam f32 and f64 blocks.
+#[test]
+fn structure_ops_match_the_cpu_bit_for_bit() {
+    if skip("structure_ops_match_the_cpu_bit_for_bit") {
+        return;
+    }
+    ops_case::<f32>(1);
+    ops_case::<f64>(2);
+    ops_case::<Mat2>(3);
+    ops_case::<Mat3>(4);
+    ops_case::<Mat4>(5);
+    ops_case::<DMat2>(6);
+    ops_case::<DMat3>(7);
+    ops_case::<DMat4>(8);
+}
+
+/// from_dense's non-finite fault: the same index (the first in row-major order) and value on
+/// both.
+#[test]
+fn from_dense_fault_matches_the_cpu() {
+    if skip("from_dense_fault_matches_the_cpu") {
+        return;
+    }
+    let cpu = wp::cpu();
+    let mut v = vec![1.0f32; 6 * 4];
+    v[4 + 3] = f32::NEG_INFINITY;
+    v[2 * 4] = f32::NAN;
+    let a = wp::Array::from_slice(&v, &cpu)
+        .unwrap()
+        .reshape([6, 4])
+        .unwrap();
+    let e = Bsr::<Mat2>::from_dense(&a).unwrap_err();
+    let (index, x) = match e {
+        wp::Error::Fault(wp::Fault {
+            kernel: "sparse::from_dense",
+            kind:
+                wp::FaultKind::NonFiniteInput {
+                    arg: "a",
+                    index,
+                    values,
+                },
+            ..
+        }) => (index, values[0]),
+        e => panic!("{e}"),
+    };
+    assert_eq!((index, x), (7, f64::NEG_INFINITY));
+    let mut input = ops_head::<Mat2>(4);
+    input.extend([3, 2]);
+    input.extend(v.iter().map(|&x| word(x)));
+    let out = run("fdense_fault", &input);
+    assert_eq!(out[0], format!("fault 7 0 {index} {}", x.to_bits() as i64));
+}
+
+/// The rectangular blocks' operations through the C++ steps: mv (wp_sparse_ops.h's
+/// instantiations), transpose (into the transposed shape), dense both ways, axpy, and mm of
+/// mixed shapes and layouts; the same bits as the CPU backend.
+fn rect_case<A, B>(seed: usize)
+where
+    A: sparse::BlockMul<B>,
+    B: Block<Scalar = A::Scalar>,
+{
+    let what = std::any::type_name::<A>();
+    let cpu = wp::cpu();
+    mv_case::<A>(seed);
+    let (nrow, ncol) = (19, 11);
+    let (a, aw) = random_matrix::<A>(nrow, ncol, 120, seed);
+    // transpose
+    let t = a.transpose().unwrap();
+    let mut input = ops_head::<A>(5);
+    input.push(<A::Transpose as Block>::COL_MAJOR as u64);
+    input.extend(&aw);
+    assert_eq!(
+        run(&format!("rtr_{seed}"), &input),
+        matrix_lines(&t),
+        "{what} transpose"
+    );
+    // dense both ways
+    let (r, c) = a.shape();
+    let dense = wp::Array::<A::Scalar, 2>::zeros([r, c], &cpu).unwrap();
+    a.to_dense(&dense).unwrap();
+    let dv = dense.to_vec().unwrap();
+    let mut input = ops_head::<A>(3);
+    input.extend(&aw);
+    let got = run(&format!("rdense_{seed}"), &input);
+    assert_eq!(
+        got,
+        lines(&dv.iter().map(|&v| word(v)).collect::<Vec<_>>()),
+        "{what} to_dense"
+    );
+    let back = Bsr::<A>::from_dense(&dense).unwrap();
+    let mut input = ops_head::<A>(4);
+    input.extend([nrow as u64, ncol as u64]);
+    input.extend(dv.iter().map(|&v| word(v)));
+    assert_eq!(
+        run(&format!("rfdense_{seed}"), &input),
+        matrix_lines(&back),
+        "{what} from_dense"
+    );
+    // axpy
+    let (x, xw) = random_matrix::<A>(nrow, ncol, 70, seed + 1);
+    let (mut y, yw) = random_matrix::<A>(nrow, ncol, 60, seed + 2);
+    sparse::axpy(
+        A::Scalar::from_f64(-0.5),
+        &x,
+        A::Scalar::from_f64(2.0),
+        &mut y,
+    )
+    .unwrap();
+    let mut input = ops_head::<A>(6);
+    input.extend(&xw);
+    input.extend(&yw);
+    input.extend([(-0.5f64).to_bits(), 2f64.to_bits()]);
+    assert_eq!(
+        run(&format!("raxpy_{seed}"), &input),
+        matrix_lines(&y),
+        "{what} axpy"
+    );
+    // mm: A (nrow x ncol) times B (ncol x 13), plus beta C
+    let (b, bw) = random_matrix::<B>(ncol, 13, 60, seed + 3);
+    let (mut cm, cw) = random_matrix::<A::Output>(nrow, 13, 30, seed + 4);
+    sparse::mm(
+        A::Scalar::from_f64(1.25),
+        &a,
+        &b,
+        A::Scalar::from_f64(-0.75),
+        &mut cm,
+        &mut sparse::MmWork::new(),
+    )
+    .unwrap();
+    let mut input = ops_head::<A>(7);
+    input.extend([
+        B::COLS as u64,
+        B::COL_MAJOR as u64,
+        <A::Output as Block>::COL_MAJOR as u64,
+    ]);
+    input.extend(&aw);
+    input.extend(&bw);
+    input.extend(&cw);
+    input.extend([1.25f64.to_bits(), (-0.75f64).to_bits(), -1i64 as u64]);
+    assert_eq!(
+        run(&format!("rmm_{seed}"), &input),
+        matrix_lines(&cm),
+        "{what} mm"
+    );
+}
+
+/// Rectangular (row-major) blocks, alone and mixed with glam's column-major squares: the
+/// C++ steps give the CPU backend's bits.
+#[test]
+fn rectangular_blocks_match_the_cpu_bit_for_bit() {
+    use warp_lang::{DMat26, DMat32, DMat46, DMat63, Mat23, Mat24, Mat32, Mat43, Mat62, Mat64};
+    if skip("rectangular_blocks_match_the_cpu_bit_for_bit") {
+        return;
+    }
+    rect_case::<Mat23, Mat32>(1);
+    rect_case::<Mat32, Mat23>(2);
+    rect_case::<Mat24, Mat43>(3);
+    rect_case::<Mat62, Mat23>(4);
+    rect_case::<Mat64, Mat4>(5);
+    rect_case::<DMat26, DMat63>(6);
+    rect_case::<DMat32, DMat2>(7);
+    rect_case::<DMat46, DMat63>(8);
+    // A square (column-major) block times a rectangular one.
+    rect_case_square::<DMat3, DMat32>(9);
+}
+
+/// mm of a square block by a rectangular one (the other operations are ops_case's).
+fn rect_case_square<A, B>(seed: usize)
+where
+    A: sparse::BlockMul<B>,
+    B: Block<Scalar = A::Scalar>,
+{
+    let (a, aw) = random_matrix::<A>(10, 7, 50, seed);
+    let (b, bw) = random_matrix::<B>(7, 9, 40, seed + 1);
+    let (mut cm, cw) = random_matrix::<A::Output>(10, 9, 20, seed + 2);
+    sparse::mm(
+        A::Scalar::from_f64(0.5),
+        &a,
+        &b,
+        A::Scalar::from_f64(1.0),
+        &mut cm,
+        &mut sparse::MmWork::new(),
+    )
+    .unwrap();
+    let mut input = ops_head::<A>(7);
+    input.extend([
+        B::COLS as u64,
+        B::COL_MAJOR as u64,
+        <A::Output as Block>::COL_MAJOR as u64,
+    ]);
+    input.extend(&aw);
+    input.extend(&bw);
+    input.extend(&cw);
+    input.extend([0.5f64.to_bits(), 1f64.to_bits(), -1i64 as u64]);
+    assert_eq!(run(&format!("rsmm_{seed}"), &input), matrix_lines(&cm));
 }

@@ -1535,3 +1535,992 @@ fn block_type_case<B: SquareBlock + Copy>(dev: &wp::Device) {
         )
     });
 }
+
+// ------------------------------------------------------------------------------------------
+// Slice 2: the structure operations (scale, diag, set_diag/identity, dense both ways,
+// transpose, axpy, mm), each against a dense f64 reference built here and against its
+// documented order of roundings bit for bit; on a GPU also against the CPU's bits.
+// ------------------------------------------------------------------------------------------
+mod ops {
+    use super::*;
+    use glam::{DMat2, Mat2, Mat4};
+    use warp_runtime::sparse::{BlockMul, MmWork};
+    use wp::{
+        DMat23, DMat26, DMat32, DMat43, DMat46, DMat63, Mat23, Mat24, Mat26, Mat32, Mat34, Mat43,
+        Mat63,
+    };
+
+    backend_tests!(
+        ops_scale,
+        ops_diag,
+        ops_set_diag_and_identity,
+        ops_dense_round_trip,
+        ops_from_dense_bad_input,
+        ops_transpose,
+        ops_axpy,
+        ops_axpy_bad_input,
+        ops_mm,
+        ops_mm_capacity_and_bad_input,
+        ops_rect_mv,
+        ops_rect_transpose_dense_axpy,
+        ops_rect_mm,
+        ops_in_a_capture,
+        ops_mv_transpose,
+    );
+
+    /// The scalars of an array of blocks, in storage order.
+    fn scalars<B: Block>(a: &wp::Array<B>) -> Vec<B::Scalar> {
+        host(&a.reinterpret::<B::Scalar>().unwrap())
+    }
+
+    /// The bits of scalars (f32 widened exactly to f64 first).
+    fn bits<S: SparseScalar>(v: &[S]) -> Vec<u64> {
+        v.iter().map(|s| s.to_f64().to_bits()).collect()
+    }
+
+    /// Scalar entry `(i, j)` of a block stored as `s`.
+    fn at<B: Block>(i: usize, j: usize) -> usize {
+        if B::COL_MAJOR {
+            j * B::ROWS + i
+        } else {
+            i * B::COLS + j
+        }
+    }
+
+    /// The matrix as a dense row-major `Vec` of its scalars' f64 values, from its arrays
+    /// (the structure checked by `blocks` on the way).
+    fn dense_of<B: Block + Copy>(a: &Bsr<B>) -> Vec<f64> {
+        blocks(a);
+        let (nr, nc) = a.shape();
+        let (off, cols, vals) = (host(a.offsets()), host(a.columns()), scalars(a.values()));
+        let rc = B::ROWS * B::COLS;
+        let mut d = vec![0.0; nr * nc];
+        for r in 0..a.nrow() {
+            for k in off[r] as usize..off[r + 1] as usize {
+                let c = cols[k] as usize;
+                for i in 0..B::ROWS {
+                    for j in 0..B::COLS {
+                        d[(r * B::ROWS + i) * nc + c * B::COLS + j] =
+                            vals[k * rc + at::<B>(i, j)].to_f64();
+                    }
+                }
+            }
+        }
+        d
+    }
+
+    /// A random `nrow x ncol` matrix of `B` (duplicates summed) from `count` triplets.
+    fn random<B: Block>(
+        dev: &wp::Device,
+        nrow: usize,
+        ncol: usize,
+        count: usize,
+        seed: u64,
+    ) -> Bsr<B> {
+        let rc = B::ROWS * B::COLS;
+        let (r, c, v) = random_triplets(nrow, ncol, count, seed, |g| {
+            (0..rc).map(|_| g.unit()).collect::<Vec<f64>>()
+        });
+        let flat: Vec<f64> = v.concat();
+        Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&r, dev),
+            &arr(&c, dev),
+            &blocks_of::<B>(&flat, dev),
+        )
+        .unwrap()
+    }
+
+    fn scale_case<B: Block + Copy>(dev: &wp::Device, seed: u64) -> Vec<u64> {
+        let mut a = random::<B>(dev, 13, 9, 60, seed);
+        let before = scalars(a.values());
+        let alpha = B::Scalar::from_f64(-0.37);
+        a.scale(alpha).unwrap();
+        let after = scalars(a.values());
+        let nnz = a.nnz().unwrap() * B::ROWS * B::COLS;
+        // Each stored scalar is `alpha * v` rounded once: the test's own product, bit for bit
+        // (Rust never contracts); the slack past nnz is untouched.
+        for k in 0..before.len() {
+            let want = if k < nnz {
+                alpha.to_f64() * before[k].to_f64()
+            } else {
+                before[k].to_f64()
+            };
+            let want = B::Scalar::from_f64(want);
+            assert_eq!(
+                after[k].to_f64().to_bits(),
+                want.to_f64().to_bits(),
+                "scalar {k}"
+            );
+        }
+        bits(&after)
+    }
+
+    fn ops_scale(dev: &wp::Device) {
+        scale_case::<f32>(dev, 1);
+        scale_case::<Mat3>(dev, 2);
+        scale_case::<DMat3>(dev, 3);
+        same_on_cpu(dev, "scale", |d| scale_case::<Mat2>(d, 4));
+        // A non-finite alpha is an error naming it; the matrix is unchanged.
+        let mut a = random::<f64>(dev, 3, 3, 5, 5);
+        let before = host(a.values());
+        let e = a.scale(f64::NAN).unwrap_err();
+        assert!(
+            matches!(e, wp::Error::InvalidArgument { .. })
+                && e.to_string().contains("sparse::scale")
+                && e.to_string().contains("`alpha` is NaN"),
+            "{e}"
+        );
+        assert_eq!(host(a.values()), before);
+        // An empty matrix scales to itself.
+        let mut z = Bsr::<Mat3>::zeros(4, 2, dev).unwrap();
+        z.scale(2.0).unwrap();
+        assert_eq!(z.nnz().unwrap(), 0);
+    }
+
+    fn diag_case<B: SquareBlock + Copy>(dev: &wp::Device, nrow: usize, ncol: usize) -> Vec<u64> {
+        let n = nrow.min(ncol);
+        // Random blocks, and every third diagonal block for sure.
+        let rc = B::ROWS * B::COLS;
+        let (mut r, mut c, v) = random_triplets(nrow, ncol, 3 * nrow, 7, |g| {
+            (0..rc).map(|_| g.unit()).collect::<Vec<f64>>()
+        });
+        let mut flat = v.concat();
+        for i in (0..n).step_by(3) {
+            r.push(i as i32);
+            c.push(i as i32);
+            flat.extend((0..rc).map(|e| (i * rc + e) as f64 * 0.25 + 1.0));
+        }
+        let a = Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&r, dev),
+            &arr(&c, dev),
+            &blocks_of::<B>(&flat, dev),
+        )
+        .unwrap();
+        let out = wp::Array::<B>::zeros(n, dev).unwrap();
+        sparse::diag(&a, &out).unwrap();
+        let got = scalars(&out);
+        let d = dense_of(&a);
+        let w = ncol * B::COLS;
+        let rc = B::ROWS * B::COLS;
+        let mut missing = 0;
+        for b in 0..n {
+            let stored = blocks(&a).contains_key(&(b as i32, b as i32));
+            missing += !stored as usize;
+            for i in 0..B::ROWS {
+                for j in 0..B::COLS {
+                    // Copied unchanged (zero where no block is stored): exact.
+                    let want = d[(b * B::ROWS + i) * w + b * B::COLS + j];
+                    assert_eq!(
+                        got[b * rc + at::<B>(i, j)].to_f64(),
+                        want,
+                        "block {b} ({i}, {j})"
+                    );
+                }
+            }
+        }
+        // The case has both stored and missing diagonal blocks.
+        assert!(missing > 0 && missing < n, "missing {missing} of {n}");
+        bits(&got)
+    }
+
+    fn ops_diag(dev: &wp::Device) {
+        diag_case::<f32>(dev, 30, 20);
+        diag_case::<Mat3>(dev, 12, 15);
+        same_on_cpu(dev, "diag", |d| diag_case::<DMat2>(d, 16, 16));
+        // Bad input: the length, an overlap with the matrix, a device.
+        let a = random::<f32>(dev, 4, 6, 12, 8);
+        let e = sparse::diag(&a, &wp::Array::<f32>::zeros(5, dev).unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::diag")
+                && e.contains("`out` has shape [5] of f32")
+                && e.contains("4 x 6 blocks of 1 x 1")
+                && e.contains("needs 4 elements"),
+            "{e}"
+        );
+        let e = sparse::diag(&a, &a.values().view(0..4).unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`out` overlaps the matrix"), "{e}");
+        if !dev.is_cpu() {
+            let e = sparse::diag(&a, &wp::Array::<f32>::zeros(4, &wp::cpu()).unwrap()).unwrap_err();
+            assert!(matches!(e, wp::Error::DeviceMismatch { .. }), "{e}");
+        }
+    }
+
+    fn ops_set_diag_and_identity(dev: &wp::Device) {
+        // The identity of Mat3 and DMat2 blocks: its dense matrix is the identity.
+        let i3 = Bsr::<Mat3>::identity(5, dev).unwrap();
+        let d = dense_of(&i3);
+        for r in 0..15 {
+            for c in 0..15 {
+                assert_eq!(d[r * 15 + c], (r == c) as i32 as f64, "({r}, {c})");
+            }
+        }
+        assert_eq!(i3.nnz().unwrap(), 5);
+        // set_diag of a non-square (block) matrix: min(nrow, ncol) blocks, the structure
+        // replaced, the dimensions kept; d may be the matrix's own diagonal.
+        let mut a = random::<DMat2>(dev, 7, 4, 30, 9);
+        let old = a.clone();
+        let dg = wp::Array::<DMat2>::zeros(4, dev).unwrap();
+        sparse::diag(&a, &dg).unwrap();
+        sparse::set_diag(&mut a, &dg).unwrap();
+        assert_eq!((a.nrow(), a.ncol(), a.nnz().unwrap()), (7, 4, 4));
+        let (d, od) = (dense_of(&a), dense_of(&old));
+        for r in 0..14 {
+            for c in 0..8 {
+                let want = if r / 2 == c / 2 { od[r * 8 + c] } else { 0.0 };
+                assert_eq!(d[r * 8 + c].to_bits(), want.to_bits(), "({r}, {c})");
+            }
+        }
+        // The old matrix's clone keeps its own arrays.
+        assert_eq!(dense_of(&old), od);
+        // from_diag's bad length names both.
+        let e = Bsr::<f32>::from_diag(3, 5, &arr(&[1.0f32; 4], dev))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::from_diag") && e.contains("[4] of f32") && e.contains("3 diagonal"),
+            "{e}"
+        );
+        let e = sparse::set_diag(&mut a, &wp::Array::<DMat2>::zeros(3, dev).unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::set_diag") && e.contains("has 4 diagonal"),
+            "{e}"
+        );
+        same_on_cpu(dev, "from_diag", |d| {
+            let v: Vec<f64> = (0..8 * 4).map(|i| i as f64 * 0.5 - 3.0).collect();
+            let m = Bsr::<DMat2>::from_diag(8, 9, &blocks_of::<DMat2>(&v, d)).unwrap();
+            (
+                host(m.offsets()),
+                host(m.columns()),
+                bits(&scalars(m.values())),
+            )
+        });
+    }
+
+    fn dense_case<B: Block + Copy>(
+        dev: &wp::Device,
+        nrow: usize,
+        ncol: usize,
+        seed: u64,
+    ) -> Vec<u64> {
+        // Triplets that cancel make a stored block of zeros (kept by from_triplets, dropped by
+        // from_dense).
+        let rc = B::ROWS * B::COLS;
+        let (mut r, mut c, v) = random_triplets(nrow, ncol, 2 * nrow, seed, |g| {
+            (0..rc).map(|_| g.unit()).collect::<Vec<f64>>()
+        });
+        let mut flat: Vec<f64> = v.concat();
+        r.extend([0, 0]);
+        c.extend([(ncol - 1) as i32, (ncol - 1) as i32]);
+        flat.extend((0..rc).map(|e| e as f64 + 0.5));
+        flat.extend((0..rc).map(|e| -(e as f64 + 0.5)));
+        let a = Bsr::from_triplets(
+            nrow,
+            ncol,
+            &arr(&r, dev),
+            &arr(&c, dev),
+            &blocks_of::<B>(&flat, dev),
+        )
+        .unwrap();
+        let (nr, nc) = a.shape();
+        let out = wp::Array::<B::Scalar, 2>::zeros([nr, nc], dev).unwrap();
+        out.fill(B::Scalar::from_f64(7.0)).unwrap(); // overwritten: every entry
+        a.to_dense(&out).unwrap();
+        let got = host(&out);
+        let want = dense_of(&a);
+        assert_eq!(
+            got.iter().map(|v| v.to_f64().to_bits()).collect::<Vec<_>>(),
+            want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            "to_dense"
+        );
+        // Back: the same blocks except the zero one.
+        let b = Bsr::<B>::from_dense(&out).unwrap();
+        assert_eq!((b.nrow(), b.ncol()), (nrow, ncol));
+        assert_eq!(b.nnz().unwrap() + 1, a.nnz().unwrap());
+        assert!(!blocks(&b).contains_key(&(0, ncol as i32 - 1)));
+        assert_eq!(dense_of(&b), want);
+        let mut all = bits(&got);
+        all.extend(host(b.offsets()).iter().map(|&o| o as u64));
+        all
+    }
+
+    fn ops_dense_round_trip(dev: &wp::Device) {
+        // Mat3 and DMat2 (column-major: the dense layout is row-major whatever the block's),
+        // scalars, non-square dims.
+        dense_case::<Mat3>(dev, 5, 7, 11);
+        dense_case::<f64>(dev, 20, 3, 12);
+        same_on_cpu(dev, "dense", |d| dense_case::<DMat2>(d, 6, 4, 13));
+        // An empty shape.
+        let e = wp::Array::<f32, 2>::zeros([0, 4], dev).unwrap();
+        let b = Bsr::<f32>::from_dense(&e).unwrap();
+        assert_eq!((b.nrow(), b.ncol(), b.nnz().unwrap()), (0, 4, 0));
+        // to_dense's bad shape names both.
+        let a = random::<Mat3>(dev, 2, 3, 4, 14);
+        let e = a
+            .to_dense(&wp::Array::<f32, 2>::zeros([6, 8], dev).unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::to_dense")
+                && e.contains("`out` has shape [6, 8]")
+                && e.contains("2 x 3 blocks of 3 x 3 (6 x 9 scalars)")
+                && e.contains("needs shape [6, 9]"),
+            "{e}"
+        );
+    }
+
+    fn ops_from_dense_bad_input(dev: &wp::Device) {
+        // Not a whole number of blocks.
+        let a = wp::Array::<f32, 2>::zeros([6, 8], dev).unwrap();
+        let e = Bsr::<Mat3>::from_dense(&a).unwrap_err().to_string();
+        assert!(
+            e.contains("sparse::from_dense") && e.contains("[6, 8]") && e.contains("3 x 3 blocks"),
+            "{e}"
+        );
+        // Non-finite scalars: the first in row-major order (row 1, column 5: index 1 * 6 + 5)
+        // although a NaN sits in an earlier block (block (0, 0), row 2).
+        let mut v = vec![1.0f64; 4 * 6];
+        v[6 + 5] = f64::INFINITY;
+        v[2 * 6] = f64::NAN;
+        let a = arr(&v, dev).reshape([4, 6]).unwrap();
+        let r = Bsr::<DMat2>::from_dense(&a).and_then(|m| m.nnz());
+        match r {
+            Err(wp::Error::Fault(f)) => {
+                assert_eq!(f.kernel, "sparse::from_dense");
+                assert_eq!(
+                    f.kind,
+                    FaultKind::NonFiniteInput {
+                        arg: "a",
+                        index: 11,
+                        values: vec![f64::INFINITY]
+                    }
+                );
+            }
+            other => panic!("expected a fault, got {other:?}"),
+        }
+    }
+
+    /// The transpose against the dense one (exact: values are copied), with the structure
+    /// checked (offsets, ascending columns).
+    fn transpose_case<B: Block + Copy>(
+        dev: &wp::Device,
+        nrow: usize,
+        ncol: usize,
+        seed: u64,
+    ) -> Vec<u64>
+    where
+        B::Transpose: Copy,
+    {
+        let a = random::<B>(dev, nrow, ncol, 4 * nrow, seed);
+        let t = a.transpose().unwrap();
+        assert_eq!((t.nrow(), t.ncol()), (ncol, nrow));
+        assert_eq!(t.nnz().unwrap(), a.nnz().unwrap());
+        let (d, dt) = (dense_of(&a), dense_of(&t));
+        let (nr, nc) = a.shape();
+        for i in 0..nr {
+            for j in 0..nc {
+                assert_eq!(
+                    dt[j * nr + i].to_bits(),
+                    d[i * nc + j].to_bits(),
+                    "({i}, {j})"
+                );
+            }
+        }
+        // Twice is the matrix, bit for bit (same structure, same blocks).
+        let tt = t.transpose().unwrap();
+        let n = a.nnz().unwrap();
+        assert_eq!(host(tt.offsets()), host(a.offsets()));
+        assert_eq!(host(tt.columns())[..n], host(a.columns())[..n]);
+        let mut out = bits(&scalars(t.values()));
+        out.extend(host(t.offsets()).iter().map(|&o| o as u64));
+        out.extend(host(t.columns()).iter().map(|&o| o as u64));
+        out
+    }
+
+    fn ops_transpose(dev: &wp::Device) {
+        transpose_case::<f32>(dev, 100, 60, 21);
+        transpose_case::<Mat3>(dev, 9, 14, 22);
+        transpose_case::<DMat2>(dev, 17, 5, 23);
+        same_on_cpu(dev, "transpose", |d| transpose_case::<Mat4>(d, 11, 13, 24));
+        // Empty matrices: no block, and no block row.
+        let z = Bsr::<Mat2>::zeros(3, 5, dev).unwrap().transpose().unwrap();
+        assert_eq!((z.nrow(), z.ncol(), z.nnz().unwrap()), (5, 3, 0));
+        let z = Bsr::<f64>::zeros(0, 5, dev).unwrap().transpose().unwrap();
+        assert_eq!((z.nrow(), z.ncol(), host(z.offsets())), (5, 0, vec![0; 6]));
+    }
+
+    /// axpy against the dense `alpha X + beta Y` (f64, with a tolerance) and against its
+    /// documented rounding bit for bit: `alpha * x` and `beta * y` each rounded, then their
+    /// rounded sum where both have the block.
+    fn axpy_case<B: Block + Copy>(dev: &wp::Device, seed: u64) -> Vec<u64> {
+        let (nrow, ncol) = (11, 8);
+        let x = random::<B>(dev, nrow, ncol, 25, seed);
+        let mut y = random::<B>(dev, nrow, ncol, 25, seed + 100);
+        let (dx, dy) = (dense_of(&x), dense_of(&y));
+        let (alpha, beta) = (B::Scalar::from_f64(0.75), B::Scalar::from_f64(-1.5));
+        let (px, py) = (blocks(&x), blocks(&y));
+        sparse::axpy(alpha, &x, beta, &mut y).unwrap();
+        let got = dense_of(&y);
+        // The union structure.
+        let mut keys: Vec<_> = px.keys().chain(py.keys()).copied().collect();
+        keys.sort();
+        keys.dedup();
+        assert_eq!(blocks(&y).keys().copied().collect::<Vec<_>>(), keys);
+        let s = |v: f64| B::Scalar::from_f64(v);
+        for k in 0..got.len() {
+            let (a, b) = (dx[k], dy[k]);
+            // f32: two products and a sum of magnitudes <= 3, each rounded: 2e-6 absolute.
+            let tol = if std::mem::size_of::<B::Scalar>() == 4 {
+                2e-6
+            } else {
+                1e-14
+            };
+            let exact = alpha.to_f64() * a + beta.to_f64() * b;
+            assert!(
+                (got[k] - exact).abs() <= tol,
+                "scalar {k}: {} vs {exact}",
+                got[k]
+            );
+        }
+        for (&(r, c), _) in blocks(&y).iter() {
+            for i in 0..B::ROWS {
+                for j in 0..B::COLS {
+                    let k = (r as usize * B::ROWS + i) * ncol * B::COLS + c as usize * B::COLS + j;
+                    // (An f32 product or sum computed in f64, then rounded to f32, is the
+                    // correctly rounded f32 one: f64 has more than 2 x 24 + 2 bits.)
+                    let ax = px.contains_key(&(r, c)).then(|| s(alpha.to_f64() * dx[k]));
+                    let by = py.contains_key(&(r, c)).then(|| s(beta.to_f64() * dy[k]));
+                    let want = match (ax, by) {
+                        (Some(p), Some(q)) => s(p.to_f64() + q.to_f64()),
+                        (Some(p), None) | (None, Some(p)) => p,
+                        (None, None) => unreachable!(),
+                    };
+                    assert_eq!(
+                        got[k].to_bits(),
+                        want.to_f64().to_bits(),
+                        "({r}, {c}) ({i}, {j})"
+                    );
+                }
+            }
+        }
+        bits(&scalars(y.values()))
+    }
+
+    fn ops_axpy(dev: &wp::Device) {
+        axpy_case::<f32>(dev, 31);
+        axpy_case::<Mat3>(dev, 32);
+        axpy_case::<DMat3>(dev, 33);
+        same_on_cpu(dev, "axpy", |d| axpy_case::<Mat2>(d, 34));
+        // x and y the same matrix (a clone): y = (alpha + beta) y's values, structure kept.
+        let x = random::<f64>(dev, 6, 6, 12, 35);
+        let mut y = x.clone();
+        sparse::axpy(2.0, &x, 3.0, &mut y).unwrap();
+        let (dx, dy) = (dense_of(&x), dense_of(&y));
+        for k in 0..dx.len() {
+            assert_eq!(dy[k], 2.0 * dx[k] + 3.0 * dx[k], "{k}");
+        }
+        assert_eq!(y.nnz().unwrap(), x.nnz().unwrap());
+    }
+
+    fn ops_axpy_bad_input(dev: &wp::Device) {
+        let x = random::<Mat3>(dev, 4, 5, 6, 36);
+        let mut y = random::<Mat3>(dev, 5, 4, 6, 37);
+        let e = sparse::axpy(1.0, &x, 1.0, &mut y).unwrap_err().to_string();
+        assert!(
+            e.contains("sparse::axpy")
+                && e.contains("`x` is 4 x 5 blocks of 3 x 3 (12 x 15 scalars)")
+                && e.contains("`y` is 5 x 4 blocks of 3 x 3 (15 x 12 scalars)"),
+            "{e}"
+        );
+        let mut y = random::<Mat3>(dev, 4, 5, 6, 38);
+        let e = sparse::axpy(1.0, &x, f32::INFINITY, &mut y)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::axpy") && e.contains("`beta` is inf"),
+            "{e}"
+        );
+        if !dev.is_cpu() {
+            let xc = random::<Mat3>(&wp::cpu(), 4, 5, 6, 36);
+            let e = sparse::axpy(1.0, &xc, 1.0, &mut y).unwrap_err();
+            assert!(matches!(e, wp::Error::DeviceMismatch { .. }), "{e}");
+        }
+    }
+
+    /// `alpha A B + beta C` against the dense product (f64, with a tolerance), and against
+    /// the documented order bit for bit for scalar blocks: per position, the products
+    /// `alpha (0 + a b)` in the order of A's blocks then B's, summed left to right, then `+
+    /// beta c`.
+    fn mm_case<B: BlockMul<B, Output = B> + Copy>(
+        dev: &wp::Device,
+        beta: f64,
+        seed: u64,
+    ) -> Vec<u64> {
+        let (m, k, n) = (9, 7, 10);
+        let a = random::<B>(dev, m, k, 30, seed);
+        let b = random::<B>(dev, k, n, 30, seed + 1);
+        let mut c = random::<B>(dev, m, n, 20, seed + 2);
+        let (da, db, dc) = (dense_of(&a), dense_of(&b), dense_of(&c));
+        let alpha = B::Scalar::from_f64(-1.25);
+        let mut work = MmWork::new();
+        sparse::mm(alpha, &a, &b, B::Scalar::from_f64(beta), &mut c, &mut work).unwrap();
+        let got = dense_of(&c);
+        let (rows, inner, cols) = (m * B::ROWS, k * B::COLS, n * B::COLS);
+        let f32s = std::mem::size_of::<B::Scalar>() == 4;
+        for i in 0..rows {
+            for j in 0..cols {
+                let mut want = beta * dc[i * cols + j];
+                let mut mag = (beta * dc[i * cols + j]).abs();
+                for q in 0..inner {
+                    want += -1.25 * da[i * inner + q] * db[q * cols + j];
+                    mag += (1.25 * da[i * inner + q] * db[q * cols + j]).abs();
+                }
+                // Each term through at most ~30 roundings (products of <= 4 terms, sums of the
+                // row's products): 30 u times the sum of the magnitudes.
+                let u = if f32s { 2f64.powi(-24) } else { 2f64.powi(-53) };
+                let g = got[i * cols + j];
+                assert!(
+                    (g - want).abs() <= 30.0 * u * mag.max(1e-300),
+                    "({i}, {j}): {g} vs {want}"
+                );
+            }
+        }
+        bits(&scalars(c.values()))
+    }
+
+    /// The documented order for f64 scalar blocks, as a map (row, col) -> value.
+    fn mm_documented(
+        a: &Bsr<f64>,
+        b: &Bsr<f64>,
+        alpha: f64,
+        beta: f64,
+        c: &Bsr<f64>,
+    ) -> std::collections::BTreeMap<(i32, i32), f64> {
+        let (ao, ac, av) = (host(a.offsets()), host(a.columns()), host(a.values()));
+        let (bo, bc, bv) = (host(b.offsets()), host(b.columns()), host(b.values()));
+        let mut out = std::collections::BTreeMap::new();
+        for r in 0..a.nrow() {
+            for k in ao[r] as usize..ao[r + 1] as usize {
+                let q = ac[k] as usize;
+                for l in bo[q] as usize..bo[q + 1] as usize {
+                    let p = alpha * (0.0 + av[k] * bv[l]);
+                    out.entry((r as i32, bc[l]))
+                        .and_modify(|s: &mut f64| *s += p)
+                        .or_insert(p);
+                }
+            }
+        }
+        if beta != 0.0 {
+            for (&(r, cc), &v) in blocks(c).iter() {
+                out.entry((r, cc))
+                    .and_modify(|s| *s += beta * v)
+                    .or_insert(beta * v);
+            }
+        }
+        out
+    }
+
+    fn ops_mm(dev: &wp::Device) {
+        mm_case::<f32>(dev, 0.0, 41);
+        mm_case::<Mat3>(dev, 0.5, 42);
+        mm_case::<DMat3>(dev, -2.0, 43);
+        same_on_cpu(dev, "mm Mat3", |d| mm_case::<Mat3>(d, 0.5, 44));
+        same_on_cpu(dev, "mm DMat2", |d| mm_case::<DMat2>(d, 0.0, 45));
+        // The documented order, bit for bit (f64 scalars with duplicates: many products per
+        // position), with and without C; a reused, growing MmWork.
+        let mut work = MmWork::new();
+        for (beta, seed) in [(0.0, 46), (0.3, 47), (1.0, 48)] {
+            let a = random::<f64>(dev, 20, 15, 120, seed);
+            let b = random::<f64>(dev, 15, 25, 150, seed + 1);
+            let c0 = random::<f64>(dev, 20, 25, 50, seed + 2);
+            let want = mm_documented(&a, &b, 0.7, beta, &c0);
+            let mut c = c0.clone();
+            sparse::mm(0.7, &a, &b, beta, &mut c, &mut work).unwrap();
+            let got = blocks(&c);
+            assert_eq!(
+                got.keys().collect::<Vec<_>>(),
+                want.keys().collect::<Vec<_>>()
+            );
+            for (k, w) in &want {
+                assert_eq!(got[k].to_bits(), w.to_bits(), "beta {beta}: {k:?}");
+            }
+        }
+        // An empty factor: an empty product.
+        let a = random::<Mat3>(dev, 4, 3, 6, 49);
+        let z = Bsr::<Mat3>::zeros(3, 5, dev).unwrap();
+        let mut c = Bsr::<Mat3>::zeros(4, 5, dev).unwrap();
+        sparse::mm(1.0, &a, &z, 0.0, &mut c, &mut MmWork::new()).unwrap();
+        assert_eq!(c.nnz().unwrap(), 0);
+    }
+
+    fn ops_mm_capacity_and_bad_input(dev: &wp::Device) {
+        let a = random::<f32>(dev, 8, 6, 30, 51);
+        let b = random::<f32>(dev, 6, 9, 30, 52);
+        // The product count, by hand.
+        let (ao, ac) = (host(a.offsets()), host(a.columns()));
+        let bo = host(b.offsets());
+        let products: i32 = (0..ao[8] as usize)
+            .map(|k| bo[ac[k] as usize + 1] - bo[ac[k] as usize])
+            .sum();
+        // Room enough: the same result as a growing work's.
+        let mut c1 = Bsr::<f32>::zeros(8, 9, dev).unwrap();
+        let mut c2 = c1.clone();
+        sparse::mm(1.0, &a, &b, 0.0, &mut c1, &mut MmWork::new()).unwrap();
+        sparse::mm(
+            1.0,
+            &a,
+            &b,
+            0.0,
+            &mut c2,
+            &mut MmWork::with_capacity(products as usize),
+        )
+        .unwrap();
+        assert_eq!(dense_of(&c1), dense_of(&c2));
+        // One product too many: a fault of sparse::mm on `products`, and C empty.
+        let mut c3 = Bsr::<f32>::zeros(8, 9, dev).unwrap();
+        let cap = products as usize - 1;
+        let r = sparse::mm(1.0, &a, &b, 0.0, &mut c3, &mut MmWork::with_capacity(cap))
+            .and_then(|()| c3.nnz());
+        match r {
+            Err(wp::Error::Fault(f)) => {
+                assert_eq!(f.kernel, "sparse::mm");
+                assert_eq!(
+                    f.kind,
+                    FaultKind::OutOfBounds {
+                        arg: "products",
+                        index: vec![products as i128],
+                        shape: vec![cap + 1]
+                    }
+                );
+            }
+            other => panic!("expected a fault, got {other:?}"),
+        }
+        if !dev.is_cpu() {
+            // A GPU ran the steps after the fault: the product is empty (the count read as 0).
+            assert_eq!(c3.nnz().unwrap(), 0);
+        }
+        // Dimension mismatches name the shapes.
+        let mut c = Bsr::<f32>::zeros(8, 9, dev).unwrap();
+        let e = sparse::mm(1.0, &a, &a, 0.0, &mut c, &mut MmWork::new())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse::mm")
+                && e.contains("`a`'s 6 block columns must equal `b`'s 8 block rows"),
+            "{e}"
+        );
+        let mut c = Bsr::<f32>::zeros(9, 8, dev).unwrap();
+        let e = sparse::mm(1.0, &a, &b, 0.0, &mut c, &mut MmWork::new())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`c` is 9 x 8 blocks of 1 x 1") && e.contains("has 8 x 9 blocks"),
+            "{e}"
+        );
+        let mut c = Bsr::<f32>::zeros(8, 9, dev).unwrap();
+        let e = sparse::mm(f32::NAN, &a, &b, 0.0, &mut c, &mut MmWork::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`alpha` is NaN"), "{e}");
+    }
+
+    // --------------------------------------------------------------------------------------
+    // Rectangular blocks (warp-core's row-major Mat23 .. Mat64)
+    // --------------------------------------------------------------------------------------
+
+    /// `mv` of a random matrix of `B` against the dense f64 product, and its documented
+    /// order bit for bit: each row scalar's sum from 0 over the row's blocks in storage order
+    /// and ascending columns in a block, then `alpha acc + beta y`.
+    fn rect_mv_case<B: Block + Copy>(dev: &wp::Device, seed: u64) -> Vec<u64> {
+        let (nrow, ncol) = (13, 8);
+        let a = random::<B>(dev, nrow, ncol, 50, seed);
+        let mut g = Rng(seed + 1);
+        let xs: Vec<f64> = (0..ncol * B::COLS).map(|_| g.unit()).collect();
+        let ys: Vec<f64> = (0..nrow * B::ROWS).map(|_| g.unit()).collect();
+        let sc = |v: &[f64]| {
+            v.iter()
+                .map(|&x| B::Scalar::from_f64(x))
+                .collect::<Vec<_>>()
+        };
+        let (xs, ys) = (sc(&xs), sc(&ys));
+        let x = arr(&xs, dev).reinterpret::<B::In>().unwrap();
+        let y = arr(&ys, dev).reinterpret::<B::Out>().unwrap();
+        let (alpha, beta) = (B::Scalar::from_f64(0.5), B::Scalar::from_f64(-2.0));
+        sparse::mv(alpha, &a, &x, beta, &y).unwrap();
+        let got = host(&y.reinterpret::<B::Scalar>().unwrap());
+        let d = dense_of(&a);
+        let w = ncol * B::COLS;
+        let f32s = std::mem::size_of::<B::Scalar>() == 4;
+        let (off, cols, vals) = (host(a.offsets()), host(a.columns()), scalars(a.values()));
+        let rc = B::ROWS * B::COLS;
+        for i in 0..nrow * B::ROWS {
+            let mut want = -2.0 * ys[i].to_f64();
+            for j in 0..w {
+                want += 0.5 * d[i * w + j] * xs[j].to_f64();
+            }
+            // f32: at most ~40 rounded products and sums of magnitude <= 10: 1e-5 absolute.
+            let tol = if f32s { 1e-5 } else { 1e-13 };
+            assert!(
+                (got[i].to_f64() - want).abs() <= tol,
+                "row {i}: {:?} vs {want}",
+                got[i]
+            );
+            // The documented order.
+            let (r, p) = (i / B::ROWS, i % B::ROWS);
+            let mut acc = B::Scalar::ZERO;
+            for k in off[r] as usize..off[r + 1] as usize {
+                for q in 0..B::COLS {
+                    let prod = B::Scalar::from_f64(
+                        vals[k * rc + at::<B>(p, q)].to_f64()
+                            * xs[cols[k] as usize * B::COLS + q].to_f64(),
+                    );
+                    acc = B::Scalar::from_f64(acc.to_f64() + prod.to_f64());
+                }
+            }
+            let want = B::Scalar::from_f64(
+                B::Scalar::from_f64(0.5 * acc.to_f64()).to_f64()
+                    + B::Scalar::from_f64(-2.0 * ys[i].to_f64()).to_f64(),
+            );
+            assert_eq!(
+                got[i].to_f64().to_bits(),
+                want.to_f64().to_bits(),
+                "row {i}"
+            );
+        }
+        bits(&got)
+    }
+
+    fn ops_rect_mv(dev: &wp::Device) {
+        rect_mv_case::<Mat23>(dev, 61);
+        rect_mv_case::<Mat63>(dev, 62);
+        rect_mv_case::<DMat26>(dev, 63);
+        rect_mv_case::<DMat43>(dev, 64);
+        same_on_cpu(dev, "mv Mat26", |d| rect_mv_case::<Mat26>(d, 65));
+        same_on_cpu(dev, "mv DMat32", |d| rect_mv_case::<DMat32>(d, 66));
+        // x of the wrong length names the block's vector types.
+        let a = random::<Mat23>(dev, 4, 5, 6, 67);
+        let e = sparse::mv(
+            1.0,
+            &a,
+            &wp::Array::<glam::Vec3>::zeros(4, dev).unwrap(),
+            0.0,
+            &wp::Array::<glam::Vec2>::zeros(4, dev).unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`x` has shape [4] of Vec3")
+                && e.contains("4 x 5 blocks of 2 x 3 (8 x 15 scalars)")
+                && e.contains("needs 5 Vec3 elements"),
+            "{e}"
+        );
+    }
+
+    fn ops_rect_transpose_dense_axpy(dev: &wp::Device) {
+        // The transpose of Mat23 blocks is of Mat32 blocks (exact), and back.
+        transpose_case::<Mat23>(dev, 12, 7, 71);
+        transpose_case::<DMat46>(dev, 6, 9, 72);
+        same_on_cpu(dev, "transpose Mat63", |d| {
+            transpose_case::<Mat63>(d, 8, 10, 73)
+        });
+        // Dense both ways with row-major rectangular blocks.
+        dense_case::<Mat34>(dev, 5, 6, 74);
+        same_on_cpu(dev, "dense DMat26", |d| dense_case::<DMat26>(d, 4, 3, 75));
+        // axpy, its order bit for bit.
+        axpy_case::<Mat24>(dev, 76);
+        same_on_cpu(dev, "axpy DMat63", |d| axpy_case::<DMat63>(d, 77));
+    }
+
+    /// `alpha A B + beta C` of blocks `A x B -> O` against the dense f64 product.
+    fn rect_mm_case<A, B>(dev: &wp::Device, beta: f64, seed: u64) -> Vec<u64>
+    where
+        A: BlockMul<B> + Copy,
+        B: Block<Scalar = A::Scalar> + Copy,
+        A::Output: Copy,
+    {
+        let (m, k, n) = (8, 6, 9);
+        let a = random::<A>(dev, m, k, 25, seed);
+        let b = random::<B>(dev, k, n, 25, seed + 1);
+        let mut c = random::<A::Output>(dev, m, n, 15, seed + 2);
+        let (da, db, dc) = (dense_of(&a), dense_of(&b), dense_of(&c));
+        let alpha = A::Scalar::from_f64(0.75);
+        sparse::mm(
+            alpha,
+            &a,
+            &b,
+            A::Scalar::from_f64(beta),
+            &mut c,
+            &mut MmWork::new(),
+        )
+        .unwrap();
+        assert_eq!((c.nrow(), c.ncol()), (m, n));
+        let got = dense_of(&c);
+        let (rows, inner, cols) = (m * A::ROWS, k * A::COLS, n * B::COLS);
+        let u = if std::mem::size_of::<A::Scalar>() == 4 {
+            2f64.powi(-24)
+        } else {
+            2f64.powi(-53)
+        };
+        for i in 0..rows {
+            for j in 0..cols {
+                let mut want = beta * dc[i * cols + j];
+                let mut mag = want.abs();
+                for q in 0..inner {
+                    want += 0.75 * da[i * inner + q] * db[q * cols + j];
+                    mag += (0.75 * da[i * inner + q] * db[q * cols + j]).abs();
+                }
+                // As mm_case: 30 u times the sum of the magnitudes.
+                let g = got[i * cols + j];
+                assert!(
+                    (g - want).abs() <= 30.0 * u * mag.max(1e-300),
+                    "({i}, {j}): {g} vs {want}"
+                );
+            }
+        }
+        bits(&scalars(c.values()))
+    }
+
+    fn ops_rect_mm(dev: &wp::Device) {
+        // Rectangular times rectangular into a square (glam, column-major) block and into a
+        // rectangular one; square (column-major) times rectangular (row-major).
+        rect_mm_case::<Mat23, Mat32>(dev, 0.0, 81);
+        rect_mm_case::<Mat32, Mat23>(dev, 0.5, 82);
+        rect_mm_case::<Mat24, Mat43>(dev, -1.0, 83);
+        rect_mm_case::<DMat2, DMat26>(dev, 0.25, 84);
+        same_on_cpu(dev, "mm Mat63 x Mat32", |d| {
+            rect_mm_case::<Mat63, Mat32>(d, 0.5, 85)
+        });
+        same_on_cpu(dev, "mm DMat32 x DMat23", |d| {
+            rect_mm_case::<DMat32, DMat23>(d, 0.0, 86)
+        });
+    }
+
+    /// `scale`, `diag` and `to_dense` are recorded by a capture (each replay works on the
+    /// arrays' contents then); the operations that allocate are refused there.
+    fn ops_in_a_capture(dev: &wp::Device) {
+        let mut a = random::<Mat3>(dev, 6, 6, 20, 91);
+        let nnz = a.nnz().unwrap();
+        let out = wp::Array::<Mat3>::zeros(6, dev).unwrap();
+        let dense = wp::Array::<f32, 2>::zeros([18, 18], dev).unwrap();
+        // Once before capturing: a GPU loads the library at the first use.
+        a.scale(1.0).unwrap();
+        sparse::diag(&a, &out).unwrap();
+        a.to_dense(&dense).unwrap();
+        let b = a.clone();
+        let g = wp::capture(dev, || {
+            a.scale(2.0)?;
+            sparse::diag(&a, &out)?;
+            a.to_dense(&dense)
+        })
+        .unwrap();
+        let v0 = scalars(b.values());
+        for k in 1..=2 {
+            g.launch().unwrap();
+            // Each replay doubles the values (exactly: a power of two).
+            let f = (1u32 << k) as f32;
+            let want: Vec<f32> = v0[..nnz * 9].iter().map(|v| v * f).collect();
+            assert_eq!(scalars(b.values())[..nnz * 9], want[..], "replay {k}");
+            assert_eq!(
+                host(&dense).iter().map(|&v| v as f64).collect::<Vec<_>>(),
+                dense_of(&b),
+                "replay {k}"
+            );
+            let d = dense_of(&b);
+            let got = scalars(&out);
+            for i in 0..6 {
+                for p in 0..3 {
+                    for q in 0..3 {
+                        assert_eq!(
+                            got[i * 9 + at::<Mat3>(p, q)] as f64,
+                            d[(i * 3 + p) * 18 + i * 3 + q],
+                            "replay {k}"
+                        );
+                    }
+                }
+            }
+        }
+        let e = wp::capture(dev, || b.transpose().map(|_| ())).unwrap_err();
+        assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+        let mut y = b.clone();
+        let e = wp::capture(dev, || sparse::axpy(1.0, &b, 1.0, &mut y)).unwrap_err();
+        assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    }
+
+    /// `alpha Aᵀ x + beta y` against the dense f64 product (tolerance) and against `mv` of the
+    /// transpose (bit for bit: it is that).
+    fn mv_transpose_case<B: Block + Copy>(dev: &wp::Device, beta: f64, seed: u64) -> Vec<u64>
+    where
+        B::Transpose: Copy,
+    {
+        let (nrow, ncol) = (11, 14);
+        let a = random::<B>(dev, nrow, ncol, 40, seed);
+        let mut g = Rng(seed + 1);
+        let sc = |v: Vec<f64>| v.into_iter().map(B::Scalar::from_f64).collect::<Vec<_>>();
+        let xs = sc((0..nrow * B::ROWS).map(|_| g.unit()).collect());
+        let ys = sc((0..ncol * B::COLS).map(|_| g.unit()).collect());
+        let x = arr(&xs, dev).reinterpret::<B::Out>().unwrap();
+        let y = arr(&ys, dev).reinterpret::<B::In>().unwrap();
+        let (al, be) = (B::Scalar::from_f64(-0.75), B::Scalar::from_f64(beta));
+        sparse::mv_transpose(al, &a, &x, be, &y).unwrap();
+        let got = host(&y.reinterpret::<B::Scalar>().unwrap());
+        let d = dense_of(&a);
+        let (h, w) = a.shape();
+        let f32s = std::mem::size_of::<B::Scalar>() == 4;
+        for j in 0..w {
+            let mut want = beta * ys[j].to_f64();
+            for i in 0..h {
+                want += -0.75 * d[i * w + j] * xs[i].to_f64();
+            }
+            // f32: ~50 rounded terms of magnitude <= 1: 1e-5 absolute.
+            let tol = if f32s { 1e-5 } else { 1e-13 };
+            assert!(
+                (got[j].to_f64() - want).abs() <= tol,
+                "{j}: {:?} vs {want}",
+                got[j]
+            );
+        }
+        let y2 = arr(&ys, dev).reinterpret::<B::In>().unwrap();
+        sparse::mv(al, &a.transpose().unwrap(), &x, be, &y2).unwrap();
+        assert_eq!(
+            bits(&host(&y2.reinterpret::<B::Scalar>().unwrap())),
+            bits(&got)
+        );
+        bits(&got)
+    }
+
+    fn ops_mv_transpose(dev: &wp::Device) {
+        mv_transpose_case::<f32>(dev, 0.0, 101);
+        mv_transpose_case::<Mat3>(dev, 1.5, 102);
+        mv_transpose_case::<Mat23>(dev, -1.0, 103);
+        same_on_cpu(dev, "mv_transpose DMat46", |d| {
+            mv_transpose_case::<DMat46>(d, 0.5, 104)
+        });
+        // Lengths are those of the transpose: x has nrow, y ncol elements.
+        let a = random::<Mat23>(dev, 4, 5, 6, 105);
+        let e = sparse::mv_transpose(
+            1.0,
+            &a,
+            &wp::Array::<glam::Vec2>::zeros(5, dev).unwrap(),
+            0.0,
+            &wp::Array::<glam::Vec3>::zeros(5, dev).unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("sparse::mv_transpose")
+                && e.contains("`x` has 5 Vec2 elements")
+                && e.contains("4 x 5 blocks of 2 x 3")
+                && e.contains("needs 4 Vec2 elements"),
+            "{e}"
+        );
+    }
+}

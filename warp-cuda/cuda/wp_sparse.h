@@ -131,10 +131,12 @@ WP_FN i32 sp_count(u64 count, i32 n) {
 }
 
 /// TplKeys: count, rows, cols (i32*), values (S*, `block` scalars per triplet), n, nrow, ncol,
-/// block, two_pass (0: key row * ncol + col; 1: key col), keys (u32*), idx (i32*), bad (i32[3]).
+/// block, two_pass (0: key row * ncol + col; 1: key col), no_finite_check (1: values are not
+/// checked, for the structure operations of wp_sparse_ops.h, whose values are a matrix's),
+/// keys (u32*), idx (i32*), bad (i32[3]).
 struct sp_tpl_keys_t {
   u64 count, rows, cols, values;
-  i32 n, nrow, ncol, block, two_pass, pad;
+  i32 n, nrow, ncol, block, two_pass, no_finite_check;
   u64 keys, idx, bad;
 };
 static_assert(sizeof(sp_tpl_keys_t) == 80, "sp_tpl_keys_t layout");
@@ -259,7 +261,7 @@ WP_FN void sp_tpl_keys(const sp_tpl_keys_t& s, i32 t) {
   const bool row_ok = r >= 0 && r < s.nrow, col_ok = c >= 0 && c < s.ncol;
   if (!row_ok) sp_min32(s.bad, t);
   if (!col_ok) sp_min32(s.bad + 4, t);
-  for (i32 e = 0; e < s.block; ++e)
+  for (i32 e = 0; !s.no_finite_check && e < s.block; ++e)
     if (!sp_finite(v[e])) {
       sp_min32(s.bad + 8, t);
       break;

@@ -124,9 +124,26 @@ impl Section {
     }
 
     /// The headers a unit compiled on its own from this section needs (a build library, a
-    /// primitives module): the core and this section's.
-    pub fn standalone_headers(&self) -> [(&'static str, &'static str); 2] {
-        [(CORE.name, CORE.text), (self.header.name, self.header.text)]
+    /// primitives module): the core, the standalone sections above it whose headers this
+    /// one includes (the sparse operations include the sparse steps' header), and this
+    /// section's.
+    pub fn standalone_headers(&self) -> Vec<(&'static str, &'static str)> {
+        let mut out = vec![(CORE.name, CORE.text)];
+        out.extend(
+            SECTIONS
+                .iter()
+                .filter(|s| {
+                    !s.kernel
+                        && s.name != self.name
+                        && self
+                            .header
+                            .text
+                            .contains(&format!("#include \"{}\"", s.header.name))
+                })
+                .map(|s| (s.header.name, s.header.text)),
+        );
+        out.push((self.header.name, self.header.text));
+        out
     }
 }
 
@@ -218,6 +235,9 @@ pub static SECTIONS: &[Section] = &[
     standalone!("volume_build",   Some("WP_VOLUME_BUILD")),
     // The sparse tier's steps (warp-runtime's `sparse` feature): exact by spelling (`sp_add`..).
     standalone!("sparse",         Some("WP_SPARSE_BUILD")),
+    // Its structure operations (transpose, products, dense), a library of their own that
+    // includes wp_sparse.h (its helpers and records, not its kernels).
+    standalone!("sparse_ops",     Some("WP_SPARSE_OPS_BUILD")),
     standalone!("primitives",     None),
 ];
 
@@ -408,8 +428,9 @@ mod tests {
 
     /// The table's order is an include order: a kernel section's header includes only the
     /// core and the sections above it; an adjoint part includes the adjoint core, its section
-    /// and parts and sections of rows above; a standalone header only the core (and itself);
-    /// and every header that any embedded header includes is embedded.
+    /// and parts and sections of rows above; a standalone header only the core, itself and
+    /// standalone headers above it; and every header that any embedded header includes is
+    /// embedded.
     #[test]
     fn the_table_is_in_include_order() {
         for (name, text) in HEADERS {
@@ -423,9 +444,13 @@ mod tests {
         for (i, s) in SECTIONS.iter().enumerate() {
             let above = &SECTIONS[..i];
             for inc in includes(s.header.text) {
+                // (A standalone header may build on a standalone one above it: the sparse
+                // operations on the sparse steps' helpers.)
                 let ok = inc == CORE.name
                     || inc == s.header.name
-                    || (s.kernel && above.iter().any(|t| t.kernel && t.header.name == inc));
+                    || above
+                        .iter()
+                        .any(|t| t.kernel == s.kernel && t.header.name == inc);
                 assert!(
                     ok,
                     "{} includes {inc}, which is not above it",

@@ -1,11 +1,18 @@
 //! The block types of [`Bsr`](super::Bsr) matrices and their scalars.
 //!
 //! A block is `ROWS x COLS` scalars of one [`SparseScalar`] (`f32` or `f64`), stored as the
-//! type stores them: a scalar alone, or glam's column-major square matrices. The traits are
-//! sealed: the device steps of `wp_sparse.h` are instantiated for exactly these types.
+//! type stores them: a scalar alone, glam's column-major square matrices, or warp-core's
+//! row-major rectangular ones (`Mat23` .. `Mat64`, `DMat23` .. `DMat64`). The traits are
+//! sealed: the device steps of `wp_sparse.h` and `wp_sparse_ops.h` are instantiated for
+//! exactly these types.
 
 use crate::array::Element;
 use glam::{DMat2, DMat3, DMat4, DVec2, DVec3, DVec4, Mat2, Mat3, Mat4, Vec2, Vec3, Vec4};
+use warp_core::{
+    DMat23, DMat24, DMat26, DMat32, DMat34, DMat36, DMat42, DMat43, DMat46, DMat62, DMat63, DMat64,
+    DSpatialVector, Mat23, Mat24, Mat26, Mat32, Mat34, Mat36, Mat42, Mat43, Mat46, Mat62, Mat63,
+    Mat64, SpatialVector,
+};
 
 pub(crate) mod sealed {
     /// The CUDA kernels of a block type (`wp_sparse.h`'s `WP_SP_BLOCK_KERNELS` names the same).
@@ -133,12 +140,14 @@ scalar!(f32, "f32");
 scalar!(f64, "f64");
 
 /// A block of a [`Bsr`](super::Bsr) matrix: `f32`, `f64` (1 x 1), glam's `Mat2`, `Mat3`,
-/// `Mat4` and `DMat2`, `DMat3`, `DMat4`.
+/// `Mat4` and `DMat2`, `DMat3`, `DMat4`, and the rectangular `Mat23`, `Mat24`, `Mat26`,
+/// `Mat32`, .., `Mat64` with their `f64` twins `DMat23` .. `DMat64` (every shape `R x C`,
+/// `R != C` in {2, 3, 4, 6}).
 ///
 /// `In` is the element of the vectors a matrix multiplies (`COLS` scalars: `Vec3` for
-/// `Mat3`), `Out` the element of its products (`ROWS` scalars). The traits are sealed: the
-/// steps' CUDA kernels are instantiated for these types (the non-square and spatial matrices
-/// of the design come in a later slice).
+/// `Mat3` and `Mat23`, `SpatialVector` for `Mat26`), `Out` the element of its products
+/// (`ROWS` scalars: `Vec2` for `Mat23`). The traits are sealed: the steps' CUDA kernels are
+/// instantiated for these types (the spatial matrices of the design are no block type yet).
 ///
 /// # Safety
 /// (For this crate, which alone implements it.) `Self` is exactly `ROWS * COLS` scalars of
@@ -150,6 +159,9 @@ pub unsafe trait Block: Element + Default + sealed::SealedBlock {
     type In: Element;
     /// The element of `A x` (`ROWS` scalars).
     type Out: Element;
+    /// The block of the transposed matrix ([`Bsr::transpose`](super::Bsr::transpose)):
+    /// `COLS x ROWS` scalars (`Self` for a square block).
+    type Transpose: Block<Scalar = Self::Scalar, In = Self::Out, Out = Self::In>;
     /// Scalar rows of a block.
     const ROWS: usize;
     /// Scalar columns of a block.
@@ -163,9 +175,9 @@ pub unsafe trait Block: Element + Default + sealed::SealedBlock {
 /// preconditioner take.
 pub trait SquareBlock: Block<In = <Self as Block>::Out> {}
 
-/// The largest block dimension: the CPU steps size their per-row buffers by it (the macro
-/// below asserts it of every block type; a larger block, as slice 2's 6 x 6, raises it).
-pub(crate) const MAX_DIM: usize = 4;
+/// The largest block dimension: the CPU steps size their per-row buffers by it (the macros
+/// below assert it of every block type; slice 2's rectangular blocks have 6 rows or columns).
+pub(crate) const MAX_DIM: usize = 6;
 
 macro_rules! block {
     ($t:ty, $s:ty, $in:ty, $n:literal, $cm:literal, $tag:literal) => {
@@ -182,6 +194,7 @@ macro_rules! block {
             type Scalar = $s;
             type In = $in;
             type Out = $in;
+            type Transpose = $t;
             const ROWS: usize = $n;
             const COLS: usize = $n;
             const COL_MAJOR: bool = $cm;
@@ -214,4 +227,209 @@ pub(crate) fn at<B: Block>(i: usize, j: usize) -> usize {
     } else {
         i * B::COLS + j
     }
+}
+
+// ------------------------------------------------------------------------------------------
+// Products of blocks (slice 2: `mm`)
+// ------------------------------------------------------------------------------------------
+
+/// Blocks whose product `Self x Rhs` is a block: `Self::COLS == Rhs::ROWS`, one scalar type.
+/// [`mm`](super::mm) multiplies matrices of such blocks; other pairs do not compile.
+#[diagnostic::on_unimplemented(
+    message = "`sparse::mm`: blocks of `{Self}` times blocks of `{Rhs}` have no product block \
+               (the inner dimensions or the scalar types differ)",
+    label = "no block product `{Self}` x `{Rhs}`"
+)]
+pub trait BlockMul<Rhs: Block>: Block {
+    /// The product's block (`Self::ROWS x Rhs::COLS`).
+    type Output: Block<Scalar = Self::Scalar>;
+}
+
+macro_rules! block_mul {
+    ($($t:ty),*) => {
+        $(impl BlockMul<$t> for $t {
+            type Output = $t;
+        })*
+    };
+    ($($a:ty, $b:ty => $o:ty);* $(;)?) => {
+        $(impl BlockMul<$b> for $a {
+            type Output = $o;
+        })*
+    };
+}
+
+block_mul!(f32, f64, Mat2, Mat3, Mat4, DMat2, DMat3, DMat4);
+
+// Every product of a rectangular block with a rectangular or square one whose result is a
+// block type (not 6 x 6: the spatial matrices are no block type yet).
+block_mul!(
+    Mat2, Mat23 => Mat23;
+    Mat2, Mat24 => Mat24;
+    Mat2, Mat26 => Mat26;
+    Mat23, Mat32 => Mat2;
+    Mat23, Mat3 => Mat23;
+    Mat23, Mat34 => Mat24;
+    Mat23, Mat36 => Mat26;
+    Mat24, Mat42 => Mat2;
+    Mat24, Mat43 => Mat23;
+    Mat24, Mat4 => Mat24;
+    Mat24, Mat46 => Mat26;
+    Mat26, Mat62 => Mat2;
+    Mat26, Mat63 => Mat23;
+    Mat26, Mat64 => Mat24;
+    Mat32, Mat2 => Mat32;
+    Mat32, Mat23 => Mat3;
+    Mat32, Mat24 => Mat34;
+    Mat32, Mat26 => Mat36;
+    Mat3, Mat32 => Mat32;
+    Mat3, Mat34 => Mat34;
+    Mat3, Mat36 => Mat36;
+    Mat34, Mat42 => Mat32;
+    Mat34, Mat43 => Mat3;
+    Mat34, Mat4 => Mat34;
+    Mat34, Mat46 => Mat36;
+    Mat36, Mat62 => Mat32;
+    Mat36, Mat63 => Mat3;
+    Mat36, Mat64 => Mat34;
+    Mat42, Mat2 => Mat42;
+    Mat42, Mat23 => Mat43;
+    Mat42, Mat24 => Mat4;
+    Mat42, Mat26 => Mat46;
+    Mat43, Mat32 => Mat42;
+    Mat43, Mat3 => Mat43;
+    Mat43, Mat34 => Mat4;
+    Mat43, Mat36 => Mat46;
+    Mat4, Mat42 => Mat42;
+    Mat4, Mat43 => Mat43;
+    Mat4, Mat46 => Mat46;
+    Mat46, Mat62 => Mat42;
+    Mat46, Mat63 => Mat43;
+    Mat46, Mat64 => Mat4;
+    Mat62, Mat2 => Mat62;
+    Mat62, Mat23 => Mat63;
+    Mat62, Mat24 => Mat64;
+    Mat63, Mat32 => Mat62;
+    Mat63, Mat3 => Mat63;
+    Mat63, Mat34 => Mat64;
+    Mat64, Mat42 => Mat62;
+    Mat64, Mat43 => Mat63;
+    Mat64, Mat4 => Mat64;
+    DMat2, DMat23 => DMat23;
+    DMat2, DMat24 => DMat24;
+    DMat2, DMat26 => DMat26;
+    DMat23, DMat32 => DMat2;
+    DMat23, DMat3 => DMat23;
+    DMat23, DMat34 => DMat24;
+    DMat23, DMat36 => DMat26;
+    DMat24, DMat42 => DMat2;
+    DMat24, DMat43 => DMat23;
+    DMat24, DMat4 => DMat24;
+    DMat24, DMat46 => DMat26;
+    DMat26, DMat62 => DMat2;
+    DMat26, DMat63 => DMat23;
+    DMat26, DMat64 => DMat24;
+    DMat32, DMat2 => DMat32;
+    DMat32, DMat23 => DMat3;
+    DMat32, DMat24 => DMat34;
+    DMat32, DMat26 => DMat36;
+    DMat3, DMat32 => DMat32;
+    DMat3, DMat34 => DMat34;
+    DMat3, DMat36 => DMat36;
+    DMat34, DMat42 => DMat32;
+    DMat34, DMat43 => DMat3;
+    DMat34, DMat4 => DMat34;
+    DMat34, DMat46 => DMat36;
+    DMat36, DMat62 => DMat32;
+    DMat36, DMat63 => DMat3;
+    DMat36, DMat64 => DMat34;
+    DMat42, DMat2 => DMat42;
+    DMat42, DMat23 => DMat43;
+    DMat42, DMat24 => DMat4;
+    DMat42, DMat26 => DMat46;
+    DMat43, DMat32 => DMat42;
+    DMat43, DMat3 => DMat43;
+    DMat43, DMat34 => DMat4;
+    DMat43, DMat36 => DMat46;
+    DMat4, DMat42 => DMat42;
+    DMat4, DMat43 => DMat43;
+    DMat4, DMat46 => DMat46;
+    DMat46, DMat62 => DMat42;
+    DMat46, DMat63 => DMat43;
+    DMat46, DMat64 => DMat4;
+    DMat62, DMat2 => DMat62;
+    DMat62, DMat23 => DMat63;
+    DMat62, DMat24 => DMat64;
+    DMat63, DMat32 => DMat62;
+    DMat63, DMat3 => DMat63;
+    DMat63, DMat34 => DMat64;
+    DMat64, DMat42 => DMat62;
+    DMat64, DMat43 => DMat63;
+    DMat64, DMat4 => DMat64;
+);
+
+// ------------------------------------------------------------------------------------------
+// Rectangular blocks (slice 2): warp-core's row-major `Mat23` .. `Mat64`, `DMat23` .. `DMat64`
+// ------------------------------------------------------------------------------------------
+
+macro_rules! rect_block {
+    ($($t:ident: $s:ty, $r:literal x $c:literal, in $in:ty, out $out:ty, transpose $tt:ident, $tag:literal;)*) => {
+        $(
+            impl sealed::SealedBlock for $t {
+                const KERNELS: sealed::BlockKernels = sealed::BlockKernels {
+                    // (in wp_sparse_ops.h's library: see `BsrMv`)
+                    mv: concat!("wp_sparse_bsr_mv_", $tag),
+                    // No Jacobi: only square blocks (`SquareBlock`) are solved.
+                    jacobi_inv: "",
+                };
+            }
+
+            // SAFETY: the sizes are asserted below; warp-core's non-square matrices are
+            // `#[repr(C)]` rows of `$c` scalars each, no padding (row-major), its vectors
+            // (glam's and the spatial vector) arrays of their scalar.
+            unsafe impl Block for $t {
+                type Scalar = $s;
+                type In = $in;
+                type Out = $out;
+                type Transpose = $tt;
+                const ROWS: usize = $r;
+                const COLS: usize = $c;
+                const COL_MAJOR: bool = false;
+            }
+
+            const _: () = assert!(
+                std::mem::size_of::<$t>() == $r * $c * std::mem::size_of::<$s>()
+                    && std::mem::size_of::<$in>() == $c * std::mem::size_of::<$s>()
+                    && std::mem::size_of::<$out>() == $r * std::mem::size_of::<$s>()
+                    && $r <= MAX_DIM
+                    && $c <= MAX_DIM
+            );
+        )*
+    };
+}
+
+rect_block! {
+    Mat23: f32, 2 x 3, in Vec3, out Vec2, transpose Mat32, "mat23";
+    Mat24: f32, 2 x 4, in Vec4, out Vec2, transpose Mat42, "mat24";
+    Mat26: f32, 2 x 6, in SpatialVector, out Vec2, transpose Mat62, "mat26";
+    Mat32: f32, 3 x 2, in Vec2, out Vec3, transpose Mat23, "mat32";
+    Mat34: f32, 3 x 4, in Vec4, out Vec3, transpose Mat43, "mat34";
+    Mat36: f32, 3 x 6, in SpatialVector, out Vec3, transpose Mat63, "mat36";
+    Mat42: f32, 4 x 2, in Vec2, out Vec4, transpose Mat24, "mat42";
+    Mat43: f32, 4 x 3, in Vec3, out Vec4, transpose Mat34, "mat43";
+    Mat46: f32, 4 x 6, in SpatialVector, out Vec4, transpose Mat64, "mat46";
+    Mat62: f32, 6 x 2, in Vec2, out SpatialVector, transpose Mat26, "mat62";
+    Mat63: f32, 6 x 3, in Vec3, out SpatialVector, transpose Mat36, "mat63";
+    Mat64: f32, 6 x 4, in Vec4, out SpatialVector, transpose Mat46, "mat64";
+    DMat23: f64, 2 x 3, in DVec3, out DVec2, transpose DMat32, "dmat23";
+    DMat24: f64, 2 x 4, in DVec4, out DVec2, transpose DMat42, "dmat24";
+    DMat26: f64, 2 x 6, in DSpatialVector, out DVec2, transpose DMat62, "dmat26";
+    DMat32: f64, 3 x 2, in DVec2, out DVec3, transpose DMat23, "dmat32";
+    DMat34: f64, 3 x 4, in DVec4, out DVec3, transpose DMat43, "dmat34";
+    DMat36: f64, 3 x 6, in DSpatialVector, out DVec3, transpose DMat63, "dmat36";
+    DMat42: f64, 4 x 2, in DVec2, out DVec4, transpose DMat24, "dmat42";
+    DMat43: f64, 4 x 3, in DVec3, out DVec4, transpose DMat34, "dmat43";
+    DMat46: f64, 4 x 6, in DSpatialVector, out DVec4, transpose DMat64, "dmat46";
+    DMat62: f64, 6 x 2, in DVec2, out DSpatialVector, transpose DMat26, "dmat62";
+    DMat63: f64, 6 x 3, in DVec3, out DSpatialVector, transpose DMat36, "dmat63";
+    DMat64: f64, 6 x 4, in DVec4, out DSpatialVector, transpose DMat46, "dmat64";
 }

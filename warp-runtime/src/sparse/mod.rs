@@ -16,6 +16,15 @@
 //! [`array_sum`](crate::array_sum)'s blocked sums). So a CG solve takes the same iterations and
 //! residual history on both.
 //!
+//! # Structure operations
+//! [`Bsr::scale`], [`diag`], [`set_diag`], [`Bsr::from_diag`], [`Bsr::identity`], dense
+//! matrices both ways ([`Bsr::to_dense`], [`Bsr::from_dense`]), [`Bsr::transpose`], [`axpy`]
+//! (`y = alpha x + beta y` on the union of the structures), [`mm`] (`C = alpha A B + beta
+//! C`, one triplet per product of blocks, then the assembly's sort and ordered sums) and
+//! [`mv_transpose`]. These
+//! also take warp-core's rectangular blocks (`Mat23` .. `DMat64`, row-major), as [`mv`] does;
+//! [`BlockMul`] says which block types multiply. The same-bits rule holds for each.
+//!
 //! # Errors
 //! Shapes, lengths and devices are checked on the host before anything is queued: a mismatch
 //! is an [`Error::InvalidArgument`] naming the function, the argument and both shapes. Bad
@@ -41,8 +50,12 @@
 mod block;
 mod solve;
 mod steps;
+// Slice 2: the structure operations (scale, diag, dense, transpose, axpy, mm).
+mod ops;
+mod ops_steps;
 
-pub use block::{Block, SparseScalar, SquareBlock};
+pub use block::{Block, BlockMul, SparseScalar, SquareBlock};
+pub use ops::{axpy, diag, mm, mv_transpose, set_diag, MmWork};
 pub use solve::{cg, Mode, Precond, SolveOptions, SolveReport, Stop};
 
 use crate::array::{Array, Element};
@@ -51,6 +64,7 @@ use crate::capturing::Keep;
 use crate::device::Device;
 use crate::dispatch;
 use crate::error::{Error, Result};
+use crate::kernel::KernelInfo;
 use crate::primitives::{array_scan_n, overlap, radix_sort_pairs, Check, Count};
 use std::marker::PhantomData;
 use steps::{
@@ -174,17 +188,46 @@ impl<B: Block> Bsr<B> {
         count: Count<'_>,
         whole: bool,
     ) -> Result<Self> {
-        const F: &str = "sparse::from_triplets";
+        Self::assemble_with(
+            nrow,
+            ncol,
+            rows,
+            columns,
+            values,
+            count,
+            whole,
+            &TRIPLET_NAMES,
+            true,
+        )
+    }
+
+    /// [`Bsr::assemble`] with the names its errors and faults carry (`names.name` the
+    /// function, `names.params` the arguments rows, columns, values, count) and whether the
+    /// values are checked for finiteness: the structure operations (`ops.rs`) feed the
+    /// pipeline a matrix's blocks, whose values are data, not input to check.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn assemble_with(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: Count<'_>,
+        whole: bool,
+        names: &'static KernelInfo,
+        check_finite: bool,
+    ) -> Result<Self> {
+        let func = names.name;
         let dev = values.device().clone();
-        same_device(F, "rows", &dev, rows.device())?;
-        same_device(F, "columns", &dev, columns.device())?;
-        contiguous(F, "rows", rows)?;
-        contiguous(F, "columns", columns)?;
-        contiguous(F, "values", values)?;
+        same_device(func, "rows", &dev, rows.device())?;
+        same_device(func, "columns", &dev, columns.device())?;
+        contiguous(func, "rows", rows)?;
+        contiguous(func, "columns", columns)?;
+        contiguous(func, "values", values)?;
         let len = rows.len().min(columns.len()).min(values.len());
         if whole && (rows.len() != values.len() || columns.len() != values.len()) {
             return Err(invalid(
-                F,
+                func,
                 format!(
                     "arguments `rows`, `columns` and `values` must have one element per \
                      triplet; their shapes are {:?}, {:?} and {:?}",
@@ -199,7 +242,7 @@ impl<B: Block> Bsr<B> {
             Count::Host(c) if c <= len => (c, 0),
             Count::Host(c) => {
                 return Err(invalid(
-                    F,
+                    func,
                     format!(
                         "count {c} is larger than the triplet arrays (shapes {:?}, {:?} and \
                          {:?})",
@@ -210,10 +253,10 @@ impl<B: Block> Bsr<B> {
                 ))
             }
             Count::Device(c) => {
-                same_device(F, "count", &dev, c.device())?;
+                same_device(func, "count", &dev, c.device())?;
                 if c.len() != 1 {
                     return Err(invalid(
-                        F,
+                        func,
                         format!(
                             "argument `count` must be a 1-element array, got shape {:?}",
                             c.shape()
@@ -226,13 +269,13 @@ impl<B: Block> Bsr<B> {
         let limit = i32::MAX as usize - 1;
         if nrow > limit || ncol > limit {
             return Err(invalid(
-                F,
+                func,
                 format!("`nrow` {nrow} and `ncol` {ncol} must be at most {limit} (i32 indices)"),
             ));
         }
         if n > i32::MAX as usize {
             return Err(invalid(
-                F,
+                func,
                 format!("{n} triplets, more than the {} this counts", i32::MAX),
             ));
         }
@@ -287,7 +330,7 @@ impl<B: Block> Bsr<B> {
                 ncol: nc,
                 block: blk,
                 two_pass: two_pass as i32,
-                pad: 0,
+                no_finite_check: !check_finite as i32,
                 keys: keys.device_address(),
                 idx: idx.device_address(),
                 bad: bad.device_address(),
@@ -306,7 +349,7 @@ impl<B: Block> Bsr<B> {
                 nrow: nr,
                 ncol: nc,
                 block: blk,
-                fault: StepFault::new(&TRIPLET_NAMES),
+                fault: StepFault::new(names),
                 scalar: PhantomData,
             },
         )?;

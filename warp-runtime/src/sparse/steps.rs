@@ -34,13 +34,13 @@ pub(crate) static TRIPLET_NAMES: KernelInfo = KernelInfo {
 
 /// A pointer rayon tasks share, for writes to elements no two tasks share.
 #[derive(Clone, Copy)]
-struct Ptr<T>(*mut T);
+pub(super) struct Ptr<T>(pub(super) *mut T);
 // SAFETY: every use writes elements no other task touches (see the callers).
 unsafe impl<T> Send for Ptr<T> {}
 unsafe impl<T> Sync for Ptr<T> {}
 impl<T> Ptr<T> {
     /// Element `i` (a method, so that closures capture the `Ptr`).
-    fn at(self, i: usize) -> *mut T {
+    pub(super) fn at(self, i: usize) -> *mut T {
         self.0.wrapping_add(i)
     }
 }
@@ -49,7 +49,7 @@ impl<T> Ptr<T> {
 ///
 /// # Safety
 /// `addr` holds `n` initialised `T`s that nothing writes during the borrow.
-unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
+pub(super) unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
     if n == 0 {
         return &[];
     }
@@ -96,7 +96,8 @@ pub(crate) struct TplKeys<S> {
     pub ncol: i32,
     pub block: i32,
     pub two_pass: i32,
-    pub pad: i32,
+    /// 1: values are not checked (the structure operations' triplets are a matrix's blocks).
+    pub no_finite_check: i32,
     pub keys: u64,
     pub idx: u64,
     pub bad: u64,
@@ -127,6 +128,7 @@ unsafe impl<S: SparseScalar> ObjectStep for TplKeys<S> {
         };
         let (keys, idx) = (Ptr(self.keys as *mut u32), Ptr(self.idx as *mut i32));
         let (nrow, ncol, two_pass) = (self.nrow, self.ncol, self.two_pass != 0);
+        let check = self.no_finite_check == 0;
         // The smallest bad triplet of each kind (a min over threads: order-free).
         let bad = (0..n)
             .into_par_iter()
@@ -134,7 +136,7 @@ unsafe impl<S: SparseScalar> ObjectStep for TplKeys<S> {
             .map(|t| {
                 let (r, c) = (rows[t], cols[t]);
                 let (row_ok, col_ok) = ((0..nrow).contains(&r), (0..ncol).contains(&c));
-                let fin = values[t * b..(t + 1) * b].iter().all(|v| v.finite());
+                let fin = !check || values[t * b..(t + 1) * b].iter().all(|v| v.finite());
                 let key = match (row_ok && col_ok, two_pass) {
                     (true, false) => r as u32 * ncol as u32 + c as u32,
                     (true, true) => c as u32,
@@ -183,14 +185,17 @@ const _: () = assert!(std::mem::size_of::<TplReport<f64>>() == 96);
 /// The fault of triplet report `bad` (the smallest bad triplet of each kind), if any: the
 /// CPU's error, the same fault the CUDA step raises.
 fn triplet_fault<S: SparseScalar>(r: &TplReport<S>, bad: [i32; 3]) -> Option<Fault> {
+    // The names the step's fault context carries (`from_triplets`', or an operation's that
+    // feeds the pipeline).
+    let names = r.fault.names;
     if r.count != 0 {
         // SAFETY: a one-element i32 array.
         let c = unsafe { *(r.count as *const i32) };
         if c < 0 || c > r.n {
             return Some(Fault {
-                kernel: TRIPLET_NAMES.name,
+                kernel: names.name,
                 kind: FaultKind::OutOfBounds {
-                    arg: TRIPLET_NAMES.params[3],
+                    arg: names.params[3],
                     index: vec![c as i128],
                     shape: vec![r.n as usize + 1],
                 },
@@ -209,7 +214,7 @@ fn triplet_fault<S: SparseScalar>(r: &TplReport<S>, bad: [i32; 3]) -> Option<Fau
         // SAFETY: `n` i32s of each (see TplKeys).
         let v = unsafe { slice::<i32>(if which == 0 { r.rows } else { r.cols }, n) }[t];
         FaultKind::OutOfBounds {
-            arg: TRIPLET_NAMES.params[which],
+            arg: names.params[which],
             index: vec![t as i128, v as i128],
             shape: vec![n, if which == 0 { r.nrow } else { r.ncol } as usize],
         }
@@ -224,13 +229,13 @@ fn triplet_fault<S: SparseScalar>(r: &TplReport<S>, bad: [i32; 3]) -> Option<Fau
             .find(|x| !x.finite())
             .unwrap_or(block[0]);
         FaultKind::NonFiniteInput {
-            arg: TRIPLET_NAMES.params[2],
+            arg: names.params[2],
             index: t,
             values: vec![x.to_f64()],
         }
     };
     Some(Fault {
-        kernel: TRIPLET_NAMES.name,
+        kernel: names.name,
         kind,
         launch: None,
     })
@@ -559,7 +564,13 @@ fn mv_row<B: Block>(
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
 // not overlapping x (mv checked).
 unsafe impl<B: Block> ObjectStep for BsrMv<B> {
-    const LIBRARY: &'static ObjectLibrary = &LIBRARY;
+    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library
+    // (ops_steps.rs' OPS_LIBRARY, named here: ops_steps imports this file).
+    const LIBRARY: &'static ObjectLibrary = if B::ROWS == B::COLS {
+        &LIBRARY
+    } else {
+        &ObjectLibrary::of("sparse_ops")
+    };
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
     fn len(&self) -> usize {
@@ -1266,7 +1277,8 @@ mod tests {
     fn record_offsets_are_the_headers() {
         let fields = layouts![
             TplKeys<f32> => "sp_tpl_keys_t" {
-                count, rows, cols, values, n, nrow, ncol, block, two_pass, pad, keys, idx, bad
+                count, rows, cols, values, n, nrow, ncol, block, two_pass, no_finite_check, keys, idx,
+                bad
             },
             TplReport<f32> => "sp_tpl_report_t" {
                 count, bad, rows, cols, values, n, nrow, ncol, block, fault
