@@ -630,3 +630,220 @@ unsafe impl<S: SparseScalar, const METHOD: u8> ObjectStep for KrScalar<S, METHOD
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::mem::offset_of;
+
+    /// `wp_sparse.h`, whose Krylov section is the C++ side of every record and constant here.
+    const HEADER: &str = include_str!("../../../../warp-cuda/cuda/wp_sparse.h");
+    const CUDA_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda");
+
+    /// Every `constexpr i32 SPK_NAME = value` of the header (several per declaration).
+    fn header_constants() -> Vec<(String, i64)> {
+        let mut out = vec![];
+        for decl in HEADER.split("constexpr i32 ").skip(1) {
+            let decl = &decl[..decl.find(';').expect("a declaration ends with `;`")];
+            for item in decl.split(',') {
+                let (name, value) = item.split_once('=').expect("NAME = value");
+                let name = name.trim();
+                if name.starts_with("SPK_") {
+                    out.push((name.to_string(), value.trim().parse().expect("an integer")));
+                }
+            }
+        }
+        out
+    }
+
+    /// The header's `SPK_*` constants are Rust's `kr` constants, one for one (the Rust side
+    /// addresses the control words and scalars the kernels write, and decodes the breakdown
+    /// codes, by its own constants: a change on one side alone would pass every CPU test),
+    /// and GMRES's layout functions agree with the header's formulas.
+    #[test]
+    fn header_constants_are_rusts() {
+        let rust: Vec<(&str, i64)> = vec![
+            ("SPK_CTL_WHAT", CTL_WHAT as i64),
+            ("SPK_CTL_ACTIVE", CTL_ACTIVE as i64),
+            ("SPK_CTL_PENDING", CTL_PENDING as i64),
+            ("SPK_CTL_K", CTL_K as i64),
+            ("SPK_CTL_LEN", CTL_LEN as i64),
+            ("SPK_TOL", TOL as i64),
+            ("SPK_TOL2", TOL2 as i64),
+            ("SPK_BB", BB as i64),
+            ("SPK_RR", RR as i64),
+            ("SPK_BREAK", BREAK as i64),
+            ("SPK_WHAT_RHO", WHAT_RHO as i64),
+            ("SPK_WHAT_OMEGA", WHAT_OMEGA as i64),
+            ("SPK_WHAT_R0V", WHAT_R0V as i64),
+            ("SPK_WHAT_APAP", WHAT_APAP as i64),
+            ("SPK_WHAT_ZAZ", WHAT_ZAZ as i64),
+            ("SPK_WHAT_HJJ", WHAT_HJJ as i64),
+            ("SPK_OP_AXPY", OP_AXPY as i64),
+            ("SPK_OP_AXMY", OP_AXMY as i64),
+            ("SPK_OP_XPAY", OP_XPAY as i64),
+            ("SPK_OP_P", OP_P as i64),
+            ("SPK_OP_DIV", OP_DIV as i64),
+            ("SPK_OP_ADD", OP_ADD as i64),
+            ("SPK_GATE_RUN", GATE_RUN as i64),
+            ("SPK_GATE_ACTIVE", GATE_ACTIVE as i64),
+            ("SPK_GATE_PENDING", GATE_PENDING as i64),
+            ("SPK_B_RHO", B_RHO as i64),
+            ("SPK_B_R0V", B_R0V as i64),
+            ("SPK_B_ALPHA", B_ALPHA as i64),
+            ("SPK_B_SS", B_SS as i64),
+            ("SPK_B_TS", B_TS as i64),
+            ("SPK_B_TT", B_TT as i64),
+            ("SPK_B_OMEGA", B_OMEGA as i64),
+            ("SPK_B_RHO_NEW", B_RHO_NEW as i64),
+            ("SPK_B_BETA", B_BETA as i64),
+            ("SPK_B_LEN", B_LEN as i64),
+            ("SPK_C_ZAZ", C_ZAZ as i64),
+            ("SPK_C_ZAZ_NEW", C_ZAZ_NEW as i64),
+            ("SPK_C_APAP", C_APAP as i64),
+            ("SPK_C_ALPHA", C_ALPHA as i64),
+            ("SPK_C_BETA", C_BETA as i64),
+            ("SPK_C_LEN", C_LEN as i64),
+            ("SPK_G_HN", G_HN as i64),
+            ("SPK_G_H", G_H as i64),
+        ];
+        let mut header = header_constants();
+        header.sort();
+        let mut rust: Vec<(String, i64)> = rust.into_iter().map(|(n, v)| (n.into(), v)).collect();
+        rust.sort();
+        assert_eq!(header, rust);
+        // The control words extend cg's; the breakdown names cover the codes; each method's
+        // slots fit its scalars.
+        assert_eq!(CTL_WHAT, c::CTL_LEN);
+        assert_eq!(WHATS.len() as i32, WHAT_HJJ + 1);
+        assert!(B_BETA < B_LEN && C_BETA < C_LEN && BREAK < G_HN);
+        // The header's GMRES layout: the same formulas (`spk_g_*`), spelled there as here.
+        for (f, want) in [
+            (
+                "spk_g_cs(i32 m) { return SPK_G_H + (m + 1) * m; }",
+                g_cs(3) == G_H + 12,
+            ),
+            (
+                "spk_g_sn(i32 m) { return spk_g_cs(m) + m; }",
+                g_sn(3) == g_cs(3) + 3,
+            ),
+            (
+                "spk_g_g(i32 m) { return spk_g_sn(m) + m; }",
+                g_g(3) == g_sn(3) + 3,
+            ),
+            (
+                "spk_g_y(i32 m) { return spk_g_g(m) + m + 1; }",
+                g_y(3) == g_g(3) + 4,
+            ),
+        ] {
+            assert!(HEADER.contains(f) && want, "{f}");
+        }
+        assert_eq!(g_len(3), g_y(3) + 3);
+    }
+
+    /// (C++ record, field, Rust's offset) for every field of every record.
+    macro_rules! layouts {
+        ($($rust:ty => $c:literal { $($f:ident),* $(,)? }),* $(,)?) => {
+            vec![$($(($c, stringify!($f), offset_of!($rust, $f))),*),*]
+        };
+    }
+
+    /// Each record's fields sit at the same offsets in Rust and in C++ (g++'s `offsetof`).
+    /// Skipped, saying so, without g++.
+    #[test]
+    fn record_offsets_are_the_headers() {
+        let fields = layouts![
+            KrVec<f32> => "spk_vec_t" { ctl, scal, y, x, w, n, op, ia, ib, gate },
+            KrComb<f32> => "spk_comb_t" { ctl, scal, out, v, n, iy, add, m, pad },
+            KrScalar<f32, 0> => "spk_scalar_t" {
+                ctl, scal, history, rtol, atol, max_iter, phase, m, j
+            },
+        ];
+        if std::process::Command::new("g++")
+            .arg("--version")
+            .output()
+            .is_err()
+        {
+            eprintln!("SKIPPED record_offsets_are_the_headers: no g++ on this machine");
+            return;
+        }
+        let mut src = String::from(
+            "#include <cstddef>\n#include <cstdio>\n#include \"wp_prim_emu.h\"\n\
+             #define __global__\n#define __device__ inline\n#define __shared__ static\n\
+             #include \"wp_sparse.h\"\nusing namespace wp;\n\
+             #define P(T, f) printf(\"%s %s %zu\\n\", #T, #f, offsetof(T, f))\n\
+             int main() {\n",
+        );
+        for (c, f, _) in &fields {
+            src += &format!("  P({c}, {f});\n");
+        }
+        src += "  return 0;\n}\n";
+        let dir = std::env::temp_dir().join(format!("wp_sparse_kr_offsets_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
+        std::fs::write(&cpp, src).unwrap();
+        let out = std::process::Command::new("g++")
+            .args([
+                "-std=c++17",
+                "-Wall",
+                "-Wextra",
+                "-Werror",
+                "-I",
+                CUDA_DIR,
+                "-I",
+            ])
+            .arg(format!("{CUDA_DIR}/tests"))
+            .arg(&cpp)
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "g++: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let out = std::process::Command::new(&exe).output().unwrap();
+        let got = String::from_utf8(out.stdout).unwrap();
+        let want: String = fields
+            .iter()
+            .map(|(c, f, o)| format!("{c} {f} {o}\n"))
+            .collect();
+        assert_eq!(got, want);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Every Krylov kernel name the Rust side launches is a kernel of the compiled build
+    /// library. Needs only libnvrtc (skipped, saying so, without it).
+    #[cfg(feature = "cuda")]
+    #[test]
+    fn every_kernel_name_is_in_the_compiled_library() {
+        if let Err(e) = warp_cuda::nvrtc_version() {
+            eprintln!("SKIPPED every_kernel_name_is_in_the_compiled_library: {e}");
+            return;
+        }
+        let lib = crate::cuda::objects::compile_library(&LIBRARY, 90).unwrap();
+        let has = |name: &str| {
+            let pat = format!("{name}\0");
+            lib.cubin.windows(pat.len()).any(|w| w == pat.as_bytes())
+        };
+        let names = [
+            KrVec::<f32>::KERNEL,
+            KrVec::<f64>::KERNEL,
+            KrComb::<f32>::KERNEL,
+            KrComb::<f64>::KERNEL,
+            KrScalar::<f32, BICGSTAB>::KERNEL,
+            KrScalar::<f64, BICGSTAB>::KERNEL,
+            KrScalar::<f32, CR>::KERNEL,
+            KrScalar::<f64, CR>::KERNEL,
+            KrScalar::<f32, GMRES>::KERNEL,
+            KrScalar::<f64, GMRES>::KERNEL,
+        ];
+        let distinct: std::collections::BTreeSet<_> = names.iter().collect();
+        assert_eq!(distinct.len(), names.len(), "{names:?}");
+        for n in &names {
+            assert!(has(n), "{n} is not a kernel of the compiled library");
+        }
+        assert!(!has("wp_sparse_kr_vec_f16"));
+    }
+}
