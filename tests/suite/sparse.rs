@@ -46,6 +46,7 @@ backend_tests!(
     krylov_non_finite_zero_and_singular,
     krylov_bad_arguments,
     krylov_block_types,
+    krylov_user_preconditioner,
 );
 
 /// A small deterministic generator (xorshift64*), so the cases repeat.
@@ -2131,5 +2132,112 @@ fn krylov_block_types(dev: &wp::Device) {
         };
         run2(dev);
         same_on_cpu(dev, &format!("{method:?} Mat2"), run2);
+    }
+}
+
+/// A user preconditioner (`&p` for `p: Preconditioner`, here a closure): point Jacobi written
+/// as `z = D^-1 r` by `sparse::mv` with a diagonal matrix of the host's `1 / a_ii` gives
+/// exactly what the built-in `PointJacobi` gives (its inverse of a 1 x 1 block is the one
+/// rounded division, and its apply sums `0 + d r` as mv does), for every method, in both
+/// modes (in `Mode::Graph` the closure's mv is recorded into the solver's graph and replayed
+/// each iteration). Its errors come back from the solve: an mv of the wrong length, and a
+/// read-back inside `Mode::Graph`'s capture.
+fn krylov_user_preconditioner(dev: &wp::Device) {
+    let m = 10;
+    let n = m * m;
+    let conv = convection_diffusion(m, 0.3, 0.15);
+    // Scale the rows so that the diagonal is not constant (Jacobi then changes the iterates).
+    let scale = |i: i32| 1.0 + (i % 3) as f64;
+    let t: Vec<(i32, i32, f64)> = conv.iter().map(|&(r, c, v)| (r, c, v * scale(r))).collect();
+    let (pr, pc, pv) = poisson(m);
+    let ts: Vec<(i32, i32, f64)> = (0..pr.len())
+        .map(|k| (pr[k], pc[k], pv[k] * scale(pr[k]) * scale(pc[k])))
+        .collect();
+    let b: Vec<f64> = (0..n).map(|i| ((i % 9) as f64 - 4.0) * 0.3).collect();
+    let methods: [(&str, bool); 4] = [
+        ("cg", true),
+        ("cr", true),
+        ("bicgstab", false),
+        ("gmres", false),
+    ];
+    for (name, symmetric) in methods {
+        let trip = if symmetric { &ts } else { &t };
+        let a = scalar_matrix(n, trip, dev);
+        let mut diag = vec![0.0; n];
+        for &(r, c, v) in trip.iter() {
+            if r == c {
+                diag[r as usize] += v;
+            }
+        }
+        let inv: Vec<(i32, i32, f64)> = (0..n as i32)
+            .map(|i| (i, i, 1.0 / diag[i as usize]))
+            .collect();
+        let dm = scalar_matrix(n, &inv, dev);
+        let user = |r: &wp::Array<f64>, z: &wp::Array<f64>| sparse::mv(1.0, &dm, r, 0.0, z);
+        for mode in [Mode::Host, Mode::Graph] {
+            let o = SolveOptions {
+                rtol: 1e-9,
+                restart: 12,
+                mode,
+                ..Default::default()
+            };
+            let solve = |pre_user: bool| {
+                let x = arr(&vec![0.0f64; n], dev);
+                let bb = arr(&b, dev);
+                let rep = match (name, pre_user) {
+                    ("cg", true) => sparse::cg(&a, &bb, &x, &user, &o),
+                    ("cg", false) => sparse::cg(&a, &bb, &x, Precond::PointJacobi, &o),
+                    ("cr", true) => sparse::cr(&a, &bb, &x, &user, &o),
+                    ("cr", false) => sparse::cr(&a, &bb, &x, Precond::PointJacobi, &o),
+                    ("bicgstab", true) => sparse::bicgstab(&a, &bb, &x, &user, &o),
+                    ("bicgstab", false) => sparse::bicgstab(&a, &bb, &x, Precond::PointJacobi, &o),
+                    (_, true) => sparse::gmres(&a, &bb, &x, &user, &o),
+                    (_, false) => sparse::gmres(&a, &bb, &x, Precond::PointJacobi, &o),
+                }
+                .unwrap();
+                assert_eq!(rep.stop, Stop::Converged, "{name} {mode:?} user {pre_user}");
+                (
+                    rep.iterations,
+                    rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+                    host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                )
+            };
+            let builtin = solve(false);
+            assert_eq!(solve(true), builtin, "{name} {mode:?}");
+            // Jacobi matters here: without it the iterations differ.
+            let x = arr(&vec![0.0f64; n], dev);
+            let plain = match name {
+                "cg" => sparse::cg(&a, &arr(&b, dev), &x, Precond::None, &o),
+                "cr" => sparse::cr(&a, &arr(&b, dev), &x, Precond::None, &o),
+                "bicgstab" => sparse::bicgstab(&a, &arr(&b, dev), &x, Precond::None, &o),
+                _ => sparse::gmres(&a, &arr(&b, dev), &x, Precond::None, &o),
+            }
+            .unwrap();
+            assert_ne!(plain.iterations, builtin.0, "{name} {mode:?}");
+        }
+        // The closure's errors are the solve's.
+        let short = arr(&[0.0f64; 3], dev);
+        let bad = |r: &wp::Array<f64>, _z: &wp::Array<f64>| sparse::mv(1.0, &dm, r, 0.0, &short);
+        let e = sparse::gmres(
+            &a,
+            &arr(&b, dev),
+            &arr(&vec![0.0; n], dev),
+            &bad,
+            &SolveOptions::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("sparse::mv") && e.contains("`y`"), "{e}");
+        let reads = |r: &wp::Array<f64>, z: &wp::Array<f64>| {
+            r.to_vec()?;
+            sparse::mv(1.0, &dm, r, 0.0, z)
+        };
+        let o = SolveOptions {
+            mode: Mode::Graph,
+            ..Default::default()
+        };
+        let e =
+            sparse::bicgstab(&a, &arr(&b, dev), &arr(&vec![0.0; n], dev), &reads, &o).unwrap_err();
+        assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
     }
 }

@@ -43,7 +43,10 @@ mod solve;
 mod steps;
 
 pub use block::{Block, SparseScalar, SquareBlock};
-pub use solve::{bicgstab, cg, cr, gmres, Mode, Precond, SolveOptions, SolveReport, Stop};
+pub use solve::{
+    bicgstab, cg, cr, gmres, IntoPrecond, Mode, Precond, Preconditioner, SolveOptions, SolveReport,
+    Stop,
+};
 
 use crate::array::{Array, Element};
 use crate::backend::StepFault;

@@ -2,7 +2,7 @@
 
 use super::steps::kr::{self, *};
 use super::work::Work;
-use super::{check_args, drive, Precond, Queued, SolveOptions, SolveReport};
+use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -58,16 +58,16 @@ use crate::sparse::Bsr;
 ///
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::bicgstab`.
-pub fn bicgstab<B: SquareBlock>(
+pub fn bicgstab<'p, B: SquareBlock>(
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
     x: &Array<B::Scalar>,
-    precond: Precond,
+    precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
     const F: &str = "sparse::bicgstab";
     let dev = check_args(F, a, b, x, o)?;
-    let mut w = Work::new(a, &dev, b, x, precond, B_LEN, o)?;
+    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), B_LEN, o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = BiCgStab {
@@ -120,7 +120,9 @@ impl<B: SquareBlock> Queued for BiCgStab<'_, B> {
         );
         let ph = self.ph.as_ref().map_or(p, |a| a.device_address());
         let sh = self.sh.as_ref().map_or(r, |a| a.device_address());
-        w.apply(p, ph)?;
+        if let Some(pa) = &self.ph {
+            w.apply(&self.p, pa)?;
+        }
         w.mv(ph, v, 1.0, 0.0)?;
         w.dot(r0, v, B_R0V)?;
         w.scalar::<{ kr::BICGSTAB }>(1, 0, 0)?;
@@ -128,7 +130,9 @@ impl<B: SquareBlock> Queued for BiCgStab<'_, B> {
         w.vec(OP_AXMY, r, v, 0, B_ALPHA, 0, GATE_RUN)?;
         w.dot(r, r, B_SS)?;
         w.scalar::<{ kr::BICGSTAB }>(2, 0, 0)?;
-        w.apply(r, sh)?;
+        if let Some(sa) = &self.sh {
+            w.apply(&w.r, sa)?;
+        }
         w.mv(sh, t, 1.0, 0.0)?;
         w.dot(t, r, B_TS)?;
         w.dot(t, t, B_TT)?;

@@ -1,6 +1,9 @@
 //! The conjugate gradient solver ([`cg`]) with Jacobi preconditioning.
 
-use super::{check_args, drive, report, Precond, Queued, SolveOptions, SolveReport};
+use super::{
+    check_args, drive, report, IntoPrecond, Pre, Precond, Preconditioner, Queued, SolveOptions,
+    SolveReport,
+};
 use crate::array::Array;
 use crate::backend::ObjectStep;
 use crate::capturing::Keep;
@@ -58,11 +61,11 @@ use std::marker::PhantomData;
 /// `i32::MAX - 1`, a negative or non-finite tolerance;
 /// [`Error::DeviceMismatch`](crate::Error::DeviceMismatch); a fault of the queued work
 /// (reported by its read-backs).
-pub fn cg<B: SquareBlock>(
+pub fn cg<'p, B: SquareBlock>(
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
     x: &Array<B::Scalar>,
-    precond: Precond,
+    precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
     const F: &str = "sparse::cg";
@@ -71,6 +74,7 @@ pub fn cg<B: SquareBlock>(
     type S<B> = <B as Block>::Scalar;
     let n = nr;
     let z = Array::<S<B>>::zeros(n, &dev)?;
+    let pre = precond.into_pre();
     let cg = Cg {
         a,
         dev: dev.clone(),
@@ -80,13 +84,22 @@ pub fn cg<B: SquareBlock>(
         r: Array::zeros(n, &dev)?,
         p: Array::zeros(n, &dev)?,
         ap: Array::zeros(n, &dev)?,
-        pre: match precond {
-            Precond::None => None,
-            Precond::Jacobi | Precond::PointJacobi => Some(Jacobi {
-                dinv: Array::zeros(a.nrow() * B::ROWS * B::ROWS, &dev)?,
+        pre: match pre {
+            Pre::Builtin(Precond::None) => None,
+            Pre::Builtin(p) => Some(Jacobi {
+                dinv: Some(Array::zeros(a.nrow() * B::ROWS * B::ROWS, &dev)?),
                 z,
-                point: precond == Precond::PointJacobi,
+                point: p == Precond::PointJacobi,
             }),
+            Pre::User(_) => Some(Jacobi {
+                dinv: None,
+                z,
+                point: false,
+            }),
+        },
+        user: match pre {
+            Pre::User(u) => Some(u),
+            Pre::Builtin(_) => None,
         },
         ctl: Array::zeros(c::CTL_LEN, &dev)?,
         ctl0: Array::from_slice(&[c::STOP_NONE, 0, i32::MAX, 0], &dev)?,
@@ -99,9 +112,10 @@ pub fn cg<B: SquareBlock>(
     cg.report()
 }
 
-/// The block Jacobi preconditioner's state: the inverted diagonal blocks and `z = D^-1 r`.
+/// The preconditioner's state: the inverted diagonal blocks (none for a user preconditioner)
+/// and `z = M^-1 r`.
 struct Jacobi<S: SparseScalar> {
-    dinv: Array<S>,
+    dinv: Option<Array<S>>,
     z: Array<S>,
     point: bool,
 }
@@ -118,6 +132,8 @@ struct Cg<'a, B: Block> {
     p: Array<B::Scalar>,
     ap: Array<B::Scalar>,
     pre: Option<Jacobi<B::Scalar>>,
+    /// The user's preconditioner, if any.
+    user: Option<&'a dyn Preconditioner<B::Scalar>>,
     /// The control words (`steps::cg::CTL_*`) and their initial values.
     ctl: Array<i32>,
     ctl0: Array<i32>,
@@ -162,18 +178,24 @@ impl<B: Block> Cg<'_, B> {
         unsafe { dot_raw(&self.dev, u, v, self.n, &self.partials, out, self.keep()) }
     }
 
-    /// `z = D^-1 r` (nothing without a preconditioner).
+    /// `z = M^-1 r` (nothing without a preconditioner).
     fn apply(&self) -> Result<()> {
-        match &self.pre {
-            Some(j) => self.step(JacobiApply::<B::Scalar> {
-                dinv: j.dinv.device_address(),
+        match (&self.pre, self.user) {
+            (Some(j), Some(u)) => u.apply(&self.r, &j.z),
+            (
+                Some(Jacobi {
+                    dinv: Some(dinv), ..
+                }),
+                None,
+            ) => self.step(JacobiApply::<B::Scalar> {
+                dinv: dinv.device_address(),
                 r: self.r.device_address(),
-                z: j.z.device_address(),
+                z: self.z().device_address(),
                 nrow: self.a.nrow() as i32,
                 dim: B::ROWS as i32,
                 scalar: PhantomData,
             }),
-            None => Ok(()),
+            _ => Ok(()),
         }
     }
 
@@ -211,15 +233,20 @@ impl<B: Block> Cg<'_, B> {
                 self.keep(),
             )?;
         }
-        if let Some(j) = &self.pre {
+        if let Some(Jacobi {
+            dinv: Some(dinv),
+            point,
+            ..
+        }) = &self.pre
+        {
             self.step(JacobiInv::<B> {
                 offsets: a.offsets().device_address(),
                 columns: a.columns().device_address(),
                 values: a.values().device_address(),
-                dinv: j.dinv.device_address(),
+                dinv: dinv.device_address(),
                 bad: self.ctl.view(c::CTL_BAD..c::CTL_BAD + 1)?.device_address(),
                 nrow: a.nrow() as i32,
-                point: j.point as i32,
+                point: *point as i32,
                 cap: a.nnz_bound() as i32,
                 pad: 0,
                 block: PhantomData,

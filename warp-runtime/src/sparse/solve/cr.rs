@@ -2,7 +2,7 @@
 
 use super::steps::kr::{self, *};
 use super::work::Work;
-use super::{check_args, drive, Precond, Queued, SolveOptions, SolveReport};
+use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -59,16 +59,16 @@ use crate::sparse::Bsr;
 ///
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::cr`.
-pub fn cr<B: SquareBlock>(
+pub fn cr<'p, B: SquareBlock>(
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
     x: &Array<B::Scalar>,
-    precond: Precond,
+    precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
     const F: &str = "sparse::cr";
     let dev = check_args(F, a, b, x, o)?;
-    let mut w = Work::new(a, &dev, b, x, precond, C_LEN, o)?;
+    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), C_LEN, o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = Cr {
@@ -111,8 +111,10 @@ impl<B: SquareBlock> Queued for Cr<'_, B> {
     fn setup(&self) -> Result<()> {
         let w = &self.w;
         w.setup()?;
-        let (r, z, az) = (w.r.device_address(), self.z(), self.az.device_address());
-        w.apply(r, z)?;
+        let (z, az) = (self.z(), self.az.device_address());
+        if let Some(za) = &self.z {
+            w.apply(&w.r, za)?;
+        }
         match &self.z {
             Some(za) => self.p.copy_from(za)?,
             None => self.p.copy_from(&w.r)?,
@@ -132,12 +134,16 @@ impl<B: SquareBlock> Queued for Cr<'_, B> {
             self.az.device_address(),
         );
         let q = self.q.as_ref().map_or(ap, |a| a.device_address());
-        w.apply(ap, q)?;
+        if let Some(qa) = &self.q {
+            w.apply(&self.ap, qa)?;
+        }
         w.dot(ap, q, C_APAP)?;
         w.scalar::<{ kr::CR }>(1, 0, 0)?;
         w.vec(OP_AXPY, x, p, 0, C_ALPHA, 0, GATE_RUN)?;
         w.vec(OP_AXMY, r, ap, 0, C_ALPHA, 0, GATE_RUN)?;
-        w.apply(r, z)?;
+        if let Some(za) = &self.z {
+            w.apply(&w.r, za)?;
+        }
         w.mv(z, az, 1.0, 0.0)?;
         w.dot(z, az, C_ZAZ_NEW)?;
         w.dot(r, r, RR)?;

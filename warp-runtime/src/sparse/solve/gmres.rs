@@ -2,7 +2,7 @@
 
 use super::steps::kr::{self, *};
 use super::work::{at, Work};
-use super::{check_args, drive, Precond, Queued, SolveOptions, SolveReport};
+use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -64,11 +64,11 @@ use crate::sparse::{invalid, Bsr};
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::gmres`, and `restart` 0 or above 1024 (the
 /// Hessenberg matrix, `(m + 1) m` scalars, lives in the one-thread step's reach).
-pub fn gmres<B: SquareBlock>(
+pub fn gmres<'p, B: SquareBlock>(
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
     x: &Array<B::Scalar>,
-    precond: Precond,
+    precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
     const F: &str = "sparse::gmres";
@@ -80,7 +80,7 @@ pub fn gmres<B: SquareBlock>(
             format!("`restart` is {m}; it must be in 1..={MAX_RESTART}"),
         ));
     }
-    let mut w = Work::new(a, &dev, b, x, precond, g_len(m), o)?;
+    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), g_len(m), o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = Gmres {
@@ -137,8 +137,14 @@ impl<B: SquareBlock> Queued for Gmres<'_, B> {
         w.vec(OP_DIV, self.v(0), r, 0, g, 0, GATE_ACTIVE)?;
         for j in 0..m {
             let (vj, wv) = (self.v(j), self.v(j + 1));
-            let z = self.z.as_ref().map_or(vj, |a| a.device_address());
-            w.apply(vj, z)?;
+            let z = match &self.z {
+                Some(za) => {
+                    let n = w.n;
+                    w.apply(&self.basis.view(j * n..(j + 1) * n)?, za)?;
+                    za.device_address()
+                }
+                None => vj,
+            };
             // w = A M^-1 v_j into the next basis vector, orthogonalised in place.
             w.mv(z, wv, 1.0, 0.0)?;
             for i in 0..=j {
@@ -152,12 +158,11 @@ impl<B: SquareBlock> Queued for Gmres<'_, B> {
         }
         w.scalar::<{ kr::GMRES }>(3, m, 0)?;
         match &self.z {
-            Some(z) => {
-                let z = z.device_address();
+            Some(za) => {
                 // u = V y into r (free until the next residual), z = M^-1 u, x += z.
                 w.comb(r, self.basis.device_address(), m, false)?;
-                w.apply(r, z)?;
-                w.vec(OP_ADD, x, z, 0, 0, 0, GATE_PENDING)?;
+                w.apply(&w.r, za)?;
+                w.vec(OP_ADD, x, za.device_address(), 0, 0, 0, GATE_PENDING)?;
             }
             None => w.comb(x, self.basis.device_address(), m, true)?,
         }

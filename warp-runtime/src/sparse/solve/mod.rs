@@ -24,6 +24,7 @@ pub use bicgstab::bicgstab;
 pub use cg::cg;
 pub use cr::cr;
 pub use gmres::gmres;
+pub(crate) use sealed::Pre;
 
 use super::block::{Block, SparseScalar};
 use super::steps::cg as c;
@@ -32,7 +33,8 @@ use crate::array::Array;
 use crate::device::Device;
 use crate::error::Result;
 
-/// The preconditioner of a solve.
+/// The built-in preconditioners of a solve. A solver's `precond` argument is one of these or
+/// `&p` for your own `p:` [`Preconditioner`] (see [`IntoPrecond`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Precond {
     /// None: `z = r`.
@@ -44,6 +46,80 @@ pub enum Precond {
     /// Point Jacobi: the diagonal scalars alone inverted (Warp's `"diag"` preconditioner; for
     /// 1 x 1 blocks the same as [`Precond::Jacobi`]).
     PointJacobi,
+}
+
+/// A user preconditioner: applies `z = M^-1 r` by queuing device work on the solve's device
+/// (kernel launches, [`mv`](crate::sparse::mv), array copies). Pass `&p` as a solver's
+/// `precond`; a closure `|r: &Array<S>, z: &Array<S>| -> Result<()>` is one.
+///
+/// The solver calls it with two distinct arrays of the system's scalar length, `r` to read
+/// and `z` to write completely (views of the solver's own arrays), once in the set-up and
+/// once or twice per iteration, each call queued in order with the solver's steps. In
+/// [`Mode::Graph`] the calls happen inside the solver's capture, so the work it queues is
+/// recorded (and replayed each iteration of the captured loop): it must be capturable (no
+/// read-back or allocation, which a capture refuses with an error that the solve returns),
+/// and it must not depend on host state that changes between calls. `M` must be the same
+/// linear operator at every call (the methods are not flexible), symmetric positive
+/// definite for [`cg`] and [`cr`]. The same bits on the CPU and a GPU hold only when the
+/// operator gives them.
+pub trait Preconditioner<S: SparseScalar> {
+    /// Queues `z = M^-1 r`.
+    ///
+    /// # Errors
+    /// Whatever the queued work returns; the solve stops and returns it.
+    fn apply(&self, r: &Array<S>, z: &Array<S>) -> Result<()>;
+}
+
+impl<S: SparseScalar, F: Fn(&Array<S>, &Array<S>) -> Result<()>> Preconditioner<S> for F {
+    fn apply(&self, r: &Array<S>, z: &Array<S>) -> Result<()> {
+        self(r, z)
+    }
+}
+
+/// What a solver's `precond` argument accepts: a built-in [`Precond`], or `&p` for a user
+/// [`Preconditioner`] `p` (a closure included). Sealed.
+pub trait IntoPrecond<'p, S: SparseScalar>: sealed::Sealed<'p, S> {}
+
+impl<'p, S: SparseScalar> IntoPrecond<'p, S> for Precond {}
+impl<'p, S: SparseScalar, P: Preconditioner<S>> IntoPrecond<'p, S> for &'p P {}
+
+pub(crate) mod sealed {
+    use super::{Precond, Preconditioner};
+    use crate::sparse::block::SparseScalar;
+
+    /// A solve's preconditioner, resolved.
+    pub enum Pre<'p, S> {
+        /// A built-in one.
+        Builtin(Precond),
+        /// The user's.
+        User(&'p dyn Preconditioner<S>),
+    }
+
+    impl<S> std::fmt::Debug for Pre<'_, S> {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            match self {
+                Pre::Builtin(p) => write!(f, "{p:?}"),
+                Pre::User(_) => f.write_str("User"),
+            }
+        }
+    }
+
+    /// The conversion behind [`IntoPrecond`](super::IntoPrecond).
+    pub trait Sealed<'p, S> {
+        fn into_pre(self) -> Pre<'p, S>;
+    }
+
+    impl<'p, S: SparseScalar> Sealed<'p, S> for Precond {
+        fn into_pre(self) -> Pre<'p, S> {
+            Pre::Builtin(self)
+        }
+    }
+
+    impl<'p, S: SparseScalar, P: Preconditioner<S>> Sealed<'p, S> for &'p P {
+        fn into_pre(self) -> Pre<'p, S> {
+            Pre::User(self)
+        }
+    }
 }
 
 /// Options of the solvers.

@@ -2,7 +2,7 @@
 //! so that the steps can be captured) and the queueing of their steps over addresses.
 
 use super::steps::{kr, KrComb, KrScalar, KrVec};
-use super::{report, Precond, SolveOptions, SolveReport};
+use super::{report, Pre, Precond, Preconditioner, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::backend::ObjectStep;
 use crate::capturing::Keep;
@@ -27,6 +27,8 @@ pub(super) struct Work<'a, B: Block> {
     pub r: Array<B::Scalar>,
     /// The inverted diagonal blocks (block or point Jacobi), if any.
     pub dinv: Option<(Array<B::Scalar>, bool)>,
+    /// The user's preconditioner, if any.
+    user: Option<&'a dyn Preconditioner<B::Scalar>>,
     pub ctl: Array<i32>,
     ctl0: Array<i32>,
     pub scal: Array<B::Scalar>,
@@ -43,7 +45,7 @@ impl<'a, B: Block> Work<'a, B> {
         dev: &Device,
         b: &'a Array<B::Scalar>,
         x: &'a Array<B::Scalar>,
-        precond: Precond,
+        precond: Pre<'a, B::Scalar>,
         scalars: usize,
         o: &SolveOptions,
     ) -> Result<Self> {
@@ -59,11 +61,15 @@ impl<'a, B: Block> Work<'a, B> {
             x,
             r: Array::zeros(n, dev)?,
             dinv: match precond {
-                Precond::None => None,
-                Precond::Jacobi | Precond::PointJacobi => Some((
+                Pre::Builtin(p @ (Precond::Jacobi | Precond::PointJacobi)) => Some((
                     Array::zeros(a.nrow() * B::ROWS * B::ROWS, dev)?,
-                    precond == Precond::PointJacobi,
+                    p == Precond::PointJacobi,
                 )),
+                Pre::Builtin(Precond::None) | Pre::User(_) => None,
+            },
+            user: match precond {
+                Pre::User(u) => Some(u),
+                Pre::Builtin(_) => None,
             },
             ctl: Array::zeros(kr::CTL_LEN, dev)?,
             ctl0: Array::from_slice(&ctl0, dev)?,
@@ -137,14 +143,17 @@ impl<'a, B: Block> Work<'a, B> {
         unsafe { mv_raw(self.a, x, y, alpha, beta, self.keep()) }
     }
 
-    /// `z = M^-1 r` over addresses (distinct n-scalar vectors of the solve), with a
-    /// preconditioner; nothing without one (the callers then use r for z).
-    pub fn apply(&self, r: u64, z: u64) -> Result<()> {
+    /// `z = M^-1 r` (distinct n-scalar vectors of the solve), with a preconditioner; nothing
+    /// without one (the callers then use r for z).
+    pub fn apply(&self, r: &Array<B::Scalar>, z: &Array<B::Scalar>) -> Result<()> {
+        if let Some(u) = self.user {
+            return u.apply(r, z);
+        }
         match &self.dinv {
             Some((dinv, _)) => self.step(JacobiApply::<B::Scalar> {
                 dinv: dinv.device_address(),
-                r,
-                z,
+                r: r.device_address(),
+                z: z.device_address(),
                 nrow: self.a.nrow() as i32,
                 dim: B::ROWS as i32,
                 scalar: PhantomData,
@@ -155,7 +164,7 @@ impl<'a, B: Block> Work<'a, B> {
 
     /// Whether there is a preconditioner.
     pub fn preconditioned(&self) -> bool {
-        self.dinv.is_some()
+        self.dinv.is_some() || self.user.is_some()
     }
 
     /// A gated vector update `op` of the n-scalar vectors at y, x, w with scalars `ia`, `ib`.
