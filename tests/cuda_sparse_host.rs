@@ -1321,7 +1321,9 @@ fn krylov_matches_the_cpu_bit_for_bit() {
         )
         .unwrap()
     };
-    let cases: [(u64, usize, Vec<(i32, i32, f64)>, Vec<f64>, &str); 5] = [
+    // (method, n, triplets, b, the breakdown's quantity)
+    type Case = (u64, usize, Vec<(i32, i32, f64)>, Vec<f64>, &'static str);
+    let cases: [Case; 5] = [
         (
             0,
             2,

@@ -1636,11 +1636,13 @@ fn dense_solve(n: usize, t: &[(i32, i32, f64)], b: &[f64]) -> Vec<f64> {
             .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
             .unwrap();
         a.swap(p, col);
-        for i in col + 1..n {
-            let f = a[i][col] / a[col][col];
+        let (top, rest) = a.split_at_mut(col + 1);
+        let pivot = &top[col];
+        for row in rest {
+            let f = row[col] / pivot[col];
             if f != 0.0 {
-                for j in col..=n {
-                    a[i][j] -= f * a[col][j];
+                for (x, p) in row[col..].iter_mut().zip(&pivot[col..]) {
+                    *x -= f * p;
                 }
             }
         }
@@ -1657,7 +1659,7 @@ fn dense_solve(n: usize, t: &[(i32, i32, f64)], b: &[f64]) -> Vec<f64> {
 /// history entries, the true residual `|b - A x|` (an independent host product) within
 /// `slack` times the tolerance, and x within `rel` (relative, in the 2-norm) of the dense
 /// reference solution. Returns (iterations, history bits, x bits).
-#[allow(clippy::type_complexity)]
+#[allow(clippy::too_many_arguments)]
 fn krylov_case(
     method: Method,
     t: &[(i32, i32, f64)],

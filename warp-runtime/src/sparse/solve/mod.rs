@@ -62,6 +62,35 @@ pub enum Precond {
 /// linear operator at every call (the methods are not flexible), symmetric positive
 /// definite for [`cg`] and [`cr`]. The same bits on the CPU and a GPU hold only when the
 /// operator gives them.
+///
+/// ```
+/// # use warp_runtime as wp;
+/// use wp::sparse::{self, Bsr, SolveOptions, Stop};
+/// let dev = wp::cpu();
+/// // A = diag(1, 2, .., 8) plus 0.25 between neighbours; M^-1 = diag(1, 1/2, ..) as a matrix.
+/// let n = 8i32;
+/// let (mut r, mut c, mut v) = (vec![], vec![], vec![]);
+/// for i in 0..n {
+///     for (j, x) in [(i - 1, 0.25f64), (i, (i + 1) as f64), (i + 1, 0.25)] {
+///         if (0..n).contains(&j) {
+///             r.push(i);
+///             c.push(j);
+///             v.push(x);
+///         }
+///     }
+/// }
+/// let arr = |v: &[i32]| wp::Array::from_slice(v, &dev);
+/// let a = Bsr::from_triplets(8, 8, &arr(&r)?, &arr(&c)?, &wp::Array::from_slice(&v, &dev)?)?;
+/// let inv: Vec<f64> = (0..n).map(|i| 1.0 / (i + 1) as f64).collect();
+/// let ids: Vec<i32> = (0..n).collect();
+/// let m = Bsr::from_triplets(8, 8, &arr(&ids)?, &arr(&ids)?, &wp::Array::from_slice(&inv, &dev)?)?;
+/// let precond = |r: &wp::Array<f64>, z: &wp::Array<f64>| sparse::mv(1.0, &m, r, 0.0, z);
+/// let b = wp::Array::from_slice(&[1.0f64; 8], &dev)?;
+/// let x = wp::Array::<f64>::zeros(8, &dev)?;
+/// let report = sparse::cg(&a, &b, &x, &precond, &SolveOptions::default())?;
+/// assert_eq!(report.stop, Stop::Converged);
+/// # Ok::<(), wp::Error>(())
+/// ```
 pub trait Preconditioner<S: SparseScalar> {
     /// Queues `z = M^-1 r`.
     ///

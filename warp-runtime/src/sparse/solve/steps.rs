@@ -716,7 +716,7 @@ mod tests {
         // slots fit its scalars.
         assert_eq!(CTL_WHAT, c::CTL_LEN);
         assert_eq!(WHATS.len() as i32, WHAT_HJJ + 1);
-        assert!(B_BETA < B_LEN && C_BETA < C_LEN && BREAK < G_HN);
+        const { assert!(B_BETA < B_LEN && C_BETA < C_LEN && BREAK < G_HN) };
         // The header's GMRES layout: the same formulas (`spk_g_*`), spelled there as here.
         for (f, want) in [
             (
