@@ -11,7 +11,8 @@ use crate::sparse::Bsr;
 /// Solves `A x = b` by BiCGSTAB (van der Vorst's stabilised biconjugate gradients; Warp's
 /// `warp.optim.linear.bicgstab`) from the initial guess in `x`, which it overwrites, with
 /// `precond` applied on the right (`A M^-1 u = b`, `x = M^-1 u`), so the residual it
-/// monitors is the true system's.
+/// monitors is the true system's. `precond` is a built-in
+/// [`Precond`](super::Precond) or `&p` for your own [`Preconditioner`](super::Preconditioner) `p`.
 ///
 /// `A` need not be symmetric. Each iteration takes two products with `A` (and two
 /// preconditioner applications): `p̂ = M^-1 p`, `v = A p̂`, `alpha = rho / (r0 . v)`,

@@ -16,13 +16,14 @@ use crate::sparse::{dot_partials, dot_raw, mv_raw, Bsr};
 use std::marker::PhantomData;
 
 /// Solves `A x = b` by the conjugate gradient method from the initial guess in `x`, which it
-/// overwrites (Warp's `warp.optim.linear.cg`), with `precond`.
+/// overwrites (Warp's `warp.optim.linear.cg`), with `precond`: a built-in [`Precond`] or `&p`
+/// for your own [`Preconditioner`] `p` (symmetric positive definite).
 ///
 /// `A` must be symmetric positive definite; `b` and `x` are scalar vectors of `A`'s scalar
 /// size (`nrow * B::ROWS`), contiguous, on the matrix's device, not overlapping. The solve
 /// stops at convergence (`|r| <= max(atol, rtol |b|)`), after `max_iter` iterations, at a
 /// non-finite value, at a breakdown (`p . Ap <= 0` or `r . z <= 0`) or, before iterating, at
-/// a singular preconditioner; each is an `Ok` report (see [`Stop`]). The iterations,
+/// a singular preconditioner; each is an `Ok` report (see [`Stop`](super::Stop)). The iterations,
 /// residuals and the result are the same bits on the CPU and a GPU.
 ///
 /// ```

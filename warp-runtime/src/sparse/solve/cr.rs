@@ -10,7 +10,8 @@ use crate::sparse::Bsr;
 
 /// Solves `A x = b` by the conjugate residual method (Warp's `warp.optim.linear.cr`) from the
 /// initial guess in `x`, which it overwrites, with `precond` (`M`, symmetric positive
-/// definite).
+/// definite). `precond` is a built-in
+/// [`Precond`](super::Precond) or `&p` for your own [`Preconditioner`](super::Preconditioner) `p`.
 ///
 /// `A` must be symmetric; unlike [`cg`](super::cg) it may be indefinite. Without a
 /// preconditioner CR minimises `|r|` over the Krylov space, so the history does not increase

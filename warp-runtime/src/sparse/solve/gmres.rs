@@ -11,7 +11,8 @@ use crate::sparse::{invalid, Bsr};
 /// Solves `A x = b` by restarted GMRES(m), `m = options.restart` (Warp's
 /// `warp.optim.linear.gmres`), from the initial guess in `x`, which it overwrites, with
 /// `precond` applied on the right (`A M^-1 u = b`, `x = M^-1 u`), so the residual it
-/// minimises is the true system's.
+/// minimises is the true system's. `precond` is a built-in
+/// [`Precond`](super::Precond) or `&p` for your own [`Preconditioner`](super::Preconditioner) `p`.
 ///
 /// `A` need not be symmetric. A cycle starts from `r = b - A x` and builds an orthonormal
 /// basis `v_0 = r / |r|`, `v_1`, .. of the Krylov space of `A M^-1` by Arnoldi's process with
