@@ -47,6 +47,7 @@ backend_tests!(
     krylov_bad_arguments,
     krylov_block_types,
     krylov_user_preconditioner,
+    krylov_poisson_f32,
 );
 
 /// A small deterministic generator (xorshift64*), so the cases repeat.
@@ -2241,5 +2242,46 @@ fn krylov_user_preconditioner(dev: &wp::Device) {
         let e =
             sparse::bicgstab(&a, &arr(&b, dev), &arr(&vec![0.0; n], dev), &reads, &o).unwrap_err();
         assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    }
+}
+
+/// f32: each method on the 16 x 16 Poisson matrix with Jacobi to rtol 1e-5 (f32's rounding
+/// floor for this matrix, condition number ~120, is near 1e-6 |b|): converged, the true
+/// residual (f64, from the f32 data) within 3x the tolerance (the recurrences' drift in f32;
+/// GMRES's estimate drifts from the true residual too), and the same bits on a GPU.
+fn krylov_poisson_f32(dev: &wp::Device) {
+    let m = 16;
+    let (r, c, v) = poisson(m);
+    let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    let n = m * m;
+    let b: Vec<f32> = (0..n).map(|i| ((i % 7) as f32 - 3.0) / 3.0).collect();
+    for method in METHODS {
+        let run = |d: &wp::Device| {
+            let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+            let x = arr(&vec![0.0f32; n], d);
+            let o = SolveOptions {
+                rtol: 1e-5,
+                restart: 20,
+                ..Default::default()
+            };
+            let rep = method
+                .solve(&a, &arr(&b, d), &x, Precond::Jacobi, &o)
+                .unwrap();
+            assert_eq!(rep.stop, Stop::Converged, "{method:?}: {rep:?}");
+            let xs: Vec<f64> = host(&x).iter().map(|&v| v as f64).collect();
+            let bs: Vec<f64> = b.iter().map(|&v| v as f64).collect();
+            let tr = true_residual(&a, |b, _, _| *b as f64, &bs, &xs);
+            assert!(
+                tr <= 3.0 * rep.tolerance,
+                "{method:?}: true residual {tr}, tolerance {}",
+                rep.tolerance
+            );
+            (
+                rep.iterations,
+                host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        run(dev);
+        same_on_cpu(dev, &format!("{method:?} f32"), run);
     }
 }
