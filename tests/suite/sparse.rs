@@ -2043,6 +2043,16 @@ fn krylov_bad_arguments(dev: &wp::Device) {
             .unwrap_err()
             .to_string();
         assert!(e.contains(f) && e.contains("`b` and `x` overlap"), "{e}");
+        // Inside a user's capture: refused (the host-driven loop reads back).
+        let (bb, xx) = (arr(&[1.0f64; 2], dev), arr(&[0.0f64; 2], dev));
+        let e = wp::capture(dev, || {
+            method.solve(&sq, &bb, &xx, Precond::None, &d).map(|_| ())
+        })
+        .unwrap_err();
+        assert!(
+            matches!(e, wp::Error::Capture { .. }) && e.to_string().contains(f),
+            "{e}"
+        );
     }
     for restart in [0, 1025] {
         let e = err(
