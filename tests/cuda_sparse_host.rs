@@ -27,6 +27,7 @@ mod host_cpp;
 const DRIVER: &str = r#"
 #include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <vector>
 #include "wp_prim_emu.h"
 namespace wp_sp_emu {
@@ -234,6 +235,169 @@ template <typename S> void cg(const BlockKernels& bk, const ScalarKernels& k) {
     }
   }
   printf("%d %d %d\n", ctl[SP_CTL_STOP], ctl[SP_CTL_ITER], ctl[SP_CTL_BAD]);
+  print(hist.data(), (size_t)ctl[SP_CTL_ITER] + 1);
+  print(x.data(), (size_t)n);
+}
+
+// The Krylov kernels of one scalar type.
+struct KrylovKernels {
+  void (*vec)(spk_vec_t);
+  void (*comb)(spk_comb_t);
+  void (*scalar[3])(spk_scalar_t);
+};
+#define KK(t) KrylovKernels{wp_sparse_kr_vec_##t, wp_sparse_kr_comb_##t, \
+    {wp_sparse_bicgstab_scalar_##t, wp_sparse_cr_scalar_##t, wp_sparse_gmres_scalar_##t}}
+
+// The steps of warp-runtime's sparse/solve/{bicgstab,cr,gmres}.rs, in their order, under
+// the drivers of sparse/solve/mod.rs (`drive`, Host mode): method 0 BiCGSTAB, 1 CR, 2 GMRES.
+template <typename S> void krylov(const BlockKernels& bk, const ScalarKernels& k,
+                                  const KrylovKernels& kk) {
+  std::vector<S> values;
+  Matrix mat = matrix<S>(bk, values);
+  const i64 n = (i64)mat.nrow * bk.rows;
+  std::vector<S> b = scalars<S>(n), x = scalars<S>(n);
+  const i32 method = (i32)word(), pre = (i32)word();
+  const f64 rtol = scalar<f64>(), atol = scalar<f64>();
+  const i32 max_iter = (i32)word(), every = (i32)word(), m = (i32)word();
+  const i32 len = method == 0 ? SPK_B_LEN : method == 1 ? SPK_C_LEN : spk_g_y(m) + m;
+  std::vector<S> scal(len + 1), hist(max_iter + 1), r(n + 1), partials(1);
+  std::vector<S> dinv((size_t)mat.nrow * bk.rows * bk.rows + 1);
+  std::vector<i32> ctl(SPK_CTL_LEN), ctl0(SPK_CTL_LEN, 0);
+  ctl0[SP_CTL_BAD] = 0x7fffffff;
+  // The method's vectors: 8 of n (BiCGSTAB, CR), or the basis of m + 1 and one more (GMRES).
+  std::vector<std::vector<S>> vs(8, std::vector<S>(n + 1));
+  std::vector<S> basis((size_t)(m + 1) * n + 1);
+  auto A = [](std::vector<S>& v) { return addr(v.data()); };
+  auto mvk = [&](u64 xv, u64 yv, f64 al, f64 be) {
+    run(bk.mv, GB, GT, sp_bsr_mv_t{addr(mat.offsets.data()), addr(mat.columns.data()),
+                                   addr(values.data()), xv, yv, al, be, mat.nrow, mat.ncol,
+                                   mat.nnz, 0});
+  };
+  auto dot = [&](u64 a, u64 bb, i32 slot) { dot_into(k, (const S*)a, (const S*)bb, n, &scal[slot]); };
+  auto apply = [&](u64 rv, u64 zv) {
+    if (pre) run(k.apply, GB, GT, sp_jacobi_apply_t{A(dinv), rv, zv, mat.nrow, bk.rows});
+  };
+  auto vec = [&](i32 op, u64 y, u64 xv, u64 w, i32 ia, i32 ib, i32 gate) {
+    run(kk.vec, GB, GT, spk_vec_t{addr(ctl.data()), A(scal), y, xv, w, n, op, ia, ib, gate});
+  };
+  auto sc = [&](i32 phase, i32 j) {
+    run(kk.scalar[method], 1, 1, spk_scalar_t{addr(ctl.data()), A(scal), A(hist), rtol, atol,
+                                              max_iter, phase, m, j});
+  };
+  auto residual = [&]() {
+    for (i64 i = 0; i < n; ++i) r[i] = b[i];
+    mvk(A(x), A(r), -1.0, 1.0);
+  };
+  auto setup = [&]() {
+    ctl = ctl0;
+    residual();
+    if (pre)
+      run(bk.jacobi, GB, GT, sp_jacobi_inv_t{addr(mat.offsets.data()), addr(mat.columns.data()),
+                                             A(values), A(dinv), addr(&ctl[SP_CTL_BAD]),
+                                             mat.nrow, pre == 2, mat.nnz, 0});
+    dot(A(b), A(b), SPK_BB);
+    dot(A(r), A(r), SPK_RR);
+  };
+  auto copy = [&](std::vector<S>& to, const std::vector<S>& from) {
+    for (i64 i = 0; i < n; ++i) to[i] = from[i];
+  };
+  const u64 rr = A(r), xx = A(x);
+  // BiCGSTAB: r0 p v t p^ s^; CR: p Ap Az z q.
+  std::vector<S>&r0 = vs[0], &p = vs[1], &v = vs[2], &t = vs[3], &ph = vs[4], &sh = vs[5];
+  std::vector<S>&ap = vs[2], &az = vs[3], &z = vs[4], &q = vs[5];
+  std::vector<S>& gz = vs[6];
+  auto vb = [&](i32 kidx) { return A(basis) + (u64)kidx * (u64)n * sizeof(S); };
+  std::function<void()> unit;
+  if (method == 0) {
+    setup();
+    copy(r0, r);
+    copy(p, r);
+    sc(0, 0);
+    unit = [&]() {
+      const u64 phat = pre ? A(ph) : A(p), shat = pre ? A(sh) : rr;
+      apply(A(p), phat);
+      mvk(phat, A(v), 1.0, 0.0);
+      dot(A(r0), A(v), SPK_B_R0V);
+      sc(1, 0);
+      vec(SPK_OP_AXPY, xx, phat, 0, SPK_B_ALPHA, 0, SPK_GATE_RUN);
+      vec(SPK_OP_AXMY, rr, A(v), 0, SPK_B_ALPHA, 0, SPK_GATE_RUN);
+      dot(rr, rr, SPK_B_SS);
+      sc(2, 0);
+      apply(rr, shat);
+      mvk(shat, A(t), 1.0, 0.0);
+      dot(A(t), rr, SPK_B_TS);
+      dot(A(t), A(t), SPK_B_TT);
+      sc(3, 0);
+      vec(SPK_OP_AXPY, xx, shat, 0, SPK_B_OMEGA, 0, SPK_GATE_RUN);
+      vec(SPK_OP_AXMY, rr, A(t), 0, SPK_B_OMEGA, 0, SPK_GATE_RUN);
+      dot(rr, rr, SPK_RR);
+      dot(A(r0), rr, SPK_B_RHO_NEW);
+      sc(4, 0);
+      vec(SPK_OP_P, A(p), rr, A(v), SPK_B_BETA, SPK_B_OMEGA, SPK_GATE_RUN);
+    };
+  } else if (method == 1) {
+    const u64 zz = pre ? A(z) : rr;
+    setup();
+    apply(rr, zz);
+    for (i64 i = 0; i < n; ++i) p[i] = ((const S*)zz)[i];
+    mvk(zz, A(az), 1.0, 0.0);
+    copy(ap, az);
+    dot(zz, A(az), SPK_C_ZAZ);
+    sc(0, 0);
+    unit = [&, zz]() {
+      const u64 qq = pre ? A(q) : A(ap);
+      apply(A(ap), qq);
+      dot(A(ap), qq, SPK_C_APAP);
+      sc(1, 0);
+      vec(SPK_OP_AXPY, xx, A(p), 0, SPK_C_ALPHA, 0, SPK_GATE_RUN);
+      vec(SPK_OP_AXMY, rr, A(ap), 0, SPK_C_ALPHA, 0, SPK_GATE_RUN);
+      apply(rr, zz);
+      mvk(zz, A(az), 1.0, 0.0);
+      dot(zz, A(az), SPK_C_ZAZ_NEW);
+      dot(rr, rr, SPK_RR);
+      sc(2, 0);
+      vec(SPK_OP_XPAY, A(p), zz, 0, SPK_C_BETA, 0, SPK_GATE_RUN);
+      vec(SPK_OP_XPAY, A(ap), A(az), 0, SPK_C_BETA, 0, SPK_GATE_RUN);
+    };
+  } else {
+    setup();
+    sc(0, 0);
+    unit = [&]() {
+      vec(SPK_OP_DIV, vb(0), rr, 0, spk_g_g(m), 0, SPK_GATE_ACTIVE);
+      for (i32 j = 0; j < m; ++j) {
+        const u64 vj = vb(j), wv = vb(j + 1), zj = pre ? A(gz) : vj;
+        apply(vj, zj);
+        mvk(zj, wv, 1.0, 0.0);
+        for (i32 i = 0; i <= j; ++i) {
+          const i32 h = SPK_G_H + i * m + j;
+          dot(wv, vb(i), h);
+          vec(SPK_OP_AXMY, wv, vb(i), 0, h, 0, SPK_GATE_ACTIVE);
+        }
+        dot(wv, wv, SPK_G_HN);
+        sc(2, j);
+        vec(SPK_OP_DIV, wv, wv, 0, SPK_G_HN, 0, SPK_GATE_ACTIVE);
+      }
+      sc(3, 0);
+      if (pre) {
+        run(kk.comb, GB, GT, spk_comb_t{addr(ctl.data()), A(scal), rr, A(basis), n, spk_g_y(m), 0, m, 0});
+        apply(rr, A(gz));
+        vec(SPK_OP_ADD, xx, A(gz), 0, 0, 0, SPK_GATE_PENDING);
+      } else {
+        run(kk.comb, GB, GT, spk_comb_t{addr(ctl.data()), A(scal), xx, A(basis), n, spk_g_y(m), 1, m, 0});
+      }
+      sc(4, 0);
+      residual();
+      dot(rr, rr, SPK_RR);
+      sc(1, 0);
+    };
+  }
+  const i32 per_unit = method == 2 ? m : 1;
+  const i32 per_check = std::max(1, every / per_unit);
+  const i32 max_units = (max_iter + per_unit - 1) / per_unit;
+  i32 queued = 0;
+  while (ctl[SP_CTL_STOP] == SP_STOP_NONE && queued < max_units)
+    for (i32 j = 0; j < std::min(per_check, max_units - queued); ++j, ++queued) unit();
+  printf("%d %d %d %d\n", ctl[SP_CTL_STOP], ctl[SP_CTL_ITER], ctl[SP_CTL_BAD], ctl[SPK_CTL_WHAT]);
   print(hist.data(), (size_t)ctl[SP_CTL_ITER] + 1);
   print(x.data(), (size_t)n);
 }
@@ -513,6 +677,11 @@ int main(int argc, char** argv) {
     case 4: {
       const u64 op = word();
       kind ? ops<f64>(OK(f64), sk[1], op) : ops<f32>(OK(f32), sk[0], op);
+      break;
+    }
+    case 5: {
+      const KrylovKernels kk[2] = {KK(f32), KK(f64)};
+      f64s ? krylov<f64>(BLOCKS[kind], sk[1], kk[1]) : krylov<f32>(BLOCKS[kind], sk[0], kk[0]);
       break;
     }
     default: return 2;
@@ -1575,4 +1744,301 @@ where
     input.extend(&cw);
     input.extend([0.5f64.to_bits(), 1f64.to_bits(), -1i64 as u64]);
     assert_eq!(run(&format!("rsmm_{seed}"), &input), matrix_lines(&cm));
+}
+
+/// A whole BiCGSTAB (method 0), CR (1) or GMRES (2) solve through the C++ steps (the
+/// solver's steps and host loop replayed by the driver) against the CPU backend's: the same
+/// stop (and breakdown quantity), iterations, history and x bits. Returns the CPU's report.
+fn krylov_case<B: sparse::SquareBlock>(
+    method: u64,
+    a: &Bsr<B>,
+    pre: Precond,
+    o: SolveOptions,
+    b: Vec<B::Scalar>,
+    x0: Vec<B::Scalar>,
+) -> sparse::SolveReport {
+    let cpu = wp::cpu();
+    let x = wp::Array::from_slice(&x0, &cpu).unwrap();
+    let bb = wp::Array::from_slice(&b, &cpu).unwrap();
+    let rep = match method {
+        0 => sparse::bicgstab(a, &bb, &x, pre, &o),
+        1 => sparse::cr(a, &bb, &x, pre, &o),
+        _ => sparse::gmres(a, &bb, &x, pre, &o),
+    }
+    .unwrap();
+    let mut input = vec![5, kind::<B>()];
+    input.extend(matrix_words(a));
+    input.extend(b.iter().map(|&v| word(v)));
+    input.extend(x0.iter().map(|&v| word(v)));
+    let code = match pre {
+        Precond::None => 0,
+        Precond::Jacobi => 1,
+        Precond::PointJacobi => 2,
+    };
+    input.extend([
+        method,
+        code,
+        o.rtol.to_bits(),
+        o.atol.to_bits(),
+        o.max_iter as u64,
+        o.check_every as u64,
+        o.restart as u64,
+    ]);
+    let out = run(&format!("kr{method}_{}_{code}", kind::<B>()), &input);
+    let head: Vec<i64> = out[0].split(' ').map(|t| t.parse().unwrap()).collect();
+    const WHATS: [&str; 6] = ["rho", "omega", "r0.v", "Ap.M^-1Ap", "z.Az", "H_jj"];
+    let (stop, what) = match rep.stop {
+        Stop::Converged => (1, None),
+        Stop::MaxIterations => (2, None),
+        Stop::NonFinite => (3, None),
+        Stop::Breakdown { what, .. } => (4, Some(what)),
+        Stop::SingularPreconditioner { .. } => (5, None),
+    };
+    let name = format!("method {method} {} {pre:?}", std::any::type_name::<B>());
+    assert_eq!(
+        (head[0], head[1] as usize),
+        (stop, rep.iterations),
+        "{name}: {rep:?}"
+    );
+    if let Some(what) = what {
+        assert_eq!(WHATS[head[3] as usize], what, "{name}");
+    }
+    let words_out = hex(&out[1..]);
+    let (hist, xs) = words_out.split_at(rep.iterations + 1);
+    let want_hist: Vec<u64> = rep
+        .history
+        .iter()
+        .map(|&h| word(B::Scalar::from_f64(h)))
+        .collect();
+    assert_eq!(hist, want_hist, "{name}: history");
+    let want_x: Vec<u64> = x.to_vec().unwrap().iter().map(|&v| word(v)).collect();
+    assert_eq!(xs, want_x, "{name}: x");
+    rep
+}
+
+/// The 2-D convection-diffusion operator on an `m x m` grid (4 on the diagonal, `-1 -/+ c`
+/// to the neighbours along x, `-1 -/+ c / 2` along y), scaled by `k` (a block type's
+/// scalar multiple): non-symmetric.
+fn convection<B: Block + std::ops::Mul<<B as Block>::Scalar, Output = B>>(
+    m: usize,
+    c: f64,
+    k: B,
+) -> Bsr<B> {
+    let s = B::Scalar::from_f64;
+    let cpu = wp::cpu();
+    let (mut r, mut cc, mut v) = (vec![], vec![], vec![]);
+    for i in 0..m * m {
+        let (y, x) = (i / m, i % m);
+        r.push(i as i32);
+        cc.push(i as i32);
+        v.push(k * s(4.0));
+        for (dy, dx, w) in [
+            (0i64, -1i64, -1.0 - c),
+            (0, 1, -1.0 + c),
+            (-1, 0, -1.0 - c / 2.0),
+            (1, 0, -1.0 + c / 2.0),
+        ] {
+            let (yy, xx) = (y as i64 + dy, x as i64 + dx);
+            if (0..m as i64).contains(&yy) && (0..m as i64).contains(&xx) {
+                r.push(i as i32);
+                cc.push((yy as usize * m + xx as usize) as i32);
+                v.push(k * s(w));
+            }
+        }
+    }
+    Bsr::from_triplets(
+        m * m,
+        m * m,
+        &wp::Array::from_slice(&r, &cpu).unwrap(),
+        &wp::Array::from_slice(&cc, &cpu).unwrap(),
+        &wp::Array::from_slice(&v, &cpu).unwrap(),
+    )
+    .unwrap()
+}
+
+/// Whole BiCGSTAB, CR and GMRES solves through the C++ steps: the same stop, iterations,
+/// history and x bits as the CPU backend; f64 and f32 scalars, `DMat3`/`Mat2` blocks, no
+/// preconditioner, block and point Jacobi, GMRES restarts (cycles of 5, and of 30: one) with
+/// `max_iter` stopping inside a cycle, a singular preconditioner, and each breakdown.
+#[test]
+fn krylov_matches_the_cpu_bit_for_bit() {
+    if skip("krylov_matches_the_cpu_bit_for_bit") {
+        return;
+    }
+    // Small systems and tolerances: the emulator runs each dot's 256-thread blocks as fibers.
+    let o = SolveOptions {
+        rtol: 1e-6,
+        check_every: 4,
+        restart: 5,
+        ..Default::default()
+    };
+    let sym = poisson::<f64>(5, 4.0, -1.0);
+    let conv = convection::<f64>(5, 0.6, 1.0f64);
+    let b: Vec<f64> = (0..25).map(value).collect();
+    let x0: Vec<f64> = (0..25).map(|i| value(i + 3) * 0.01).collect();
+    for pre in [Precond::None, Precond::Jacobi, Precond::PointJacobi] {
+        for method in [0, 2] {
+            let rep = krylov_case(method, &conv, pre, o, b.clone(), x0.clone());
+            assert_eq!(rep.stop, Stop::Converged, "{method} {pre:?}");
+        }
+        let rep = krylov_case(1, &sym, pre, o, b.clone(), x0.clone());
+        assert_eq!(rep.stop, Stop::Converged, "CR {pre:?}");
+    }
+    // A cycle long enough to converge in one.
+    let rep = krylov_case(
+        2,
+        &conv,
+        Precond::Jacobi,
+        SolveOptions { restart: 30, ..o },
+        b.clone(),
+        x0.clone(),
+    );
+    assert_eq!(rep.stop, Stop::Converged, "GMRES(30)");
+    // max_iter inside a GMRES cycle, and for the others.
+    for method in [0, 1, 2] {
+        let a = if method == 1 { &sym } else { &conv };
+        let rep = krylov_case(
+            method,
+            a,
+            Precond::Jacobi,
+            SolveOptions {
+                max_iter: 7,
+                rtol: 1e-14,
+                ..o
+            },
+            b.clone(),
+            x0.clone(),
+        );
+        assert_eq!(
+            (rep.stop, rep.iterations),
+            (Stop::MaxIterations, 7),
+            "{method}"
+        );
+    }
+    // f32 and blocks.
+    let conv32 = convection::<f32>(5, 0.5, 1.0f32);
+    let b32: Vec<f32> = (0..25).map(|i| value(i) as f32).collect();
+    for method in [0, 2] {
+        krylov_case(
+            method,
+            &conv32,
+            Precond::Jacobi,
+            SolveOptions { rtol: 1e-4, ..o },
+            b32.clone(),
+            vec![0.0; 25],
+        );
+    }
+    let k = DMat3::from_cols_array(&[4.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 2.0]);
+    let a3 = poisson::<DMat3>(3, k * 4.0, -k);
+    let b3: Vec<f64> = (0..27).map(|i| value(i + 9)).collect();
+    for method in [0, 1, 2] {
+        for pre in [Precond::Jacobi, Precond::PointJacobi] {
+            krylov_case(method, &a3, pre, o, b3.clone(), vec![0.0; 27]);
+        }
+    }
+    let k2 = Mat2::from_cols_array(&[2.0, 0.5, -0.5, 1.0]);
+    let a2 = convection::<Mat2>(3, 0.4, k2);
+    let b2: Vec<f32> = (0..18).map(|i| value(i) as f32).collect();
+    krylov_case(
+        0,
+        &a2,
+        Precond::Jacobi,
+        SolveOptions { rtol: 1e-4, ..o },
+        b2.clone(),
+        vec![0.0; 18],
+    );
+    krylov_case(
+        2,
+        &a2,
+        Precond::Jacobi,
+        SolveOptions { rtol: 1e-4, ..o },
+        b2,
+        vec![0.0; 18],
+    );
+    // A singular diagonal block: every method stops before iterating.
+    let sing = Mat4::from_cols_array(&[1.0; 16]);
+    let a4 = poisson::<Mat4>(2, sing, Mat4::IDENTITY);
+    for method in [0, 1, 2] {
+        let rep = krylov_case(
+            method,
+            &a4,
+            Precond::Jacobi,
+            o,
+            vec![1.0f32; 16],
+            vec![0.0; 16],
+        );
+        assert!(
+            matches!(rep.stop, Stop::SingularPreconditioner { .. }),
+            "{rep:?}"
+        );
+    }
+    // The breakdowns (exact in binary; see the suite's `krylov_breakdowns`).
+    let cpu = wp::cpu();
+    let scalars = |n: usize, t: &[(i32, i32, f64)]| {
+        let r: Vec<i32> = t.iter().map(|e| e.0).collect();
+        let c: Vec<i32> = t.iter().map(|e| e.1).collect();
+        let v: Vec<f64> = t.iter().map(|e| e.2).collect();
+        Bsr::from_triplets(
+            n,
+            n,
+            &wp::Array::from_slice(&r, &cpu).unwrap(),
+            &wp::Array::from_slice(&c, &cpu).unwrap(),
+            &wp::Array::from_slice(&v, &cpu).unwrap(),
+        )
+        .unwrap()
+    };
+    // (method, n, triplets, b, the breakdown's quantity)
+    type Case = (u64, usize, Vec<(i32, i32, f64)>, Vec<f64>, &'static str);
+    let cases: [Case; 5] = [
+        (
+            0,
+            2,
+            vec![(0, 1, 1.0), (1, 0, -1.0)],
+            vec![1.0, 0.0],
+            "r0.v",
+        ),
+        (
+            0,
+            3,
+            vec![
+                (0, 0, 1.0),
+                (0, 2, 1.0),
+                (1, 0, 1.0),
+                (1, 1, -2.0),
+                (1, 2, -2.0),
+                (2, 1, 1.0),
+            ],
+            vec![1.0, -1.0, 0.0],
+            "omega",
+        ),
+        (
+            0,
+            3,
+            vec![
+                (0, 0, 2.0),
+                (0, 1, -1.0),
+                (1, 1, 2.0),
+                (1, 2, 1.0),
+                (2, 0, 2.0),
+                (2, 2, 2.0),
+            ],
+            vec![0.0, -1.0, 0.0],
+            "rho",
+        ),
+        (
+            1,
+            2,
+            vec![(0, 0, 1.0), (1, 1, -1.0)],
+            vec![1.0, 1.0],
+            "z.Az",
+        ),
+        (2, 2, vec![(0, 1, 1.0)], vec![0.0, 1.0], "H_jj"),
+    ];
+    for (method, n, t, b, what) in cases {
+        let rep = krylov_case(method, &scalars(n, &t), Precond::None, o, b, vec![0.0; n]);
+        assert!(
+            matches!(rep.stop, Stop::Breakdown { what: w, .. } if w == what),
+            "{rep:?}"
+        );
+    }
 }

@@ -38,6 +38,16 @@ backend_tests!(
     cg_breakdown_and_non_finite,
     cg_bad_arguments,
     every_block_type_mv_and_cg,
+    krylov_poisson_converges,
+    krylov_convection_diffusion,
+    krylov_graph_mode_matches_host_mode,
+    krylov_max_iterations_is_ok,
+    krylov_breakdowns,
+    krylov_non_finite_zero_and_singular,
+    krylov_bad_arguments,
+    krylov_block_types,
+    krylov_user_preconditioner,
+    krylov_poisson_f32,
 );
 
 /// A small deterministic generator (xorshift64*), so the cases repeat.
@@ -2522,5 +2532,755 @@ mod ops {
                 && e.contains("needs 4 Vec2 elements"),
             "{e}"
         );
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Krylov solvers beyond CG: BiCGSTAB, CR, restarted GMRES (slice 3)
+// ------------------------------------------------------------------------------------------
+
+/// A Krylov method of the tier, by name (the suite runs each through the same cases).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Method {
+    BiCgStab,
+    Cr,
+    Gmres,
+}
+
+impl Method {
+    /// The solve.
+    fn solve<B: SquareBlock>(
+        self,
+        a: &Bsr<B>,
+        b: &wp::Array<B::Scalar>,
+        x: &wp::Array<B::Scalar>,
+        pre: Precond,
+        o: &SolveOptions,
+    ) -> wp::Result<sparse::SolveReport> {
+        match self {
+            Method::BiCgStab => sparse::bicgstab(a, b, x, pre, o),
+            Method::Cr => sparse::cr(a, b, x, pre, o),
+            Method::Gmres => sparse::gmres(a, b, x, pre, o),
+        }
+    }
+
+    /// The function name in its errors.
+    fn name(self) -> &'static str {
+        match self {
+            Method::BiCgStab => "sparse::bicgstab",
+            Method::Cr => "sparse::cr",
+            Method::Gmres => "sparse::gmres",
+        }
+    }
+}
+
+const METHODS: [Method; 3] = [Method::BiCgStab, Method::Cr, Method::Gmres];
+
+/// A scalar matrix from triplets `(row, col, value)` on `dev`.
+fn scalar_matrix(n: usize, t: &[(i32, i32, f64)], dev: &wp::Device) -> Bsr<f64> {
+    let r: Vec<i32> = t.iter().map(|e| e.0).collect();
+    let c: Vec<i32> = t.iter().map(|e| e.1).collect();
+    let v: Vec<f64> = t.iter().map(|e| e.2).collect();
+    Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap()
+}
+
+/// The 2-D convection-diffusion operator on an `m x m` grid (Dirichlet boundary), central
+/// differences: 4 on the diagonal, `-1 -/+ cx` to the west/east and `-1 -/+ cy` to the
+/// south/north neighbours: non-symmetric for nonzero `(cx, cy)` (cell Peclet numbers 2 cx,
+/// 2 cy below 1 keep it diagonally dominant).
+fn convection_diffusion(m: usize, cx: f64, cy: f64) -> Vec<(i32, i32, f64)> {
+    let id = |i: usize, j: usize| (i * m + j) as i32;
+    let mut t = vec![];
+    for i in 0..m {
+        for j in 0..m {
+            t.push((id(i, j), id(i, j), 4.0));
+            if j > 0 {
+                t.push((id(i, j), id(i, j - 1), -1.0 - cx));
+            }
+            if j + 1 < m {
+                t.push((id(i, j), id(i, j + 1), -1.0 + cx));
+            }
+            if i > 0 {
+                t.push((id(i, j), id(i - 1, j), -1.0 - cy));
+            }
+            if i + 1 < m {
+                t.push((id(i, j), id(i + 1, j), -1.0 + cy));
+            }
+        }
+    }
+    t
+}
+
+/// The f64 reference solution of the dense system from triplets (summed), by Gaussian
+/// elimination with partial pivoting on the host: independent of the tier's code.
+fn dense_solve(n: usize, t: &[(i32, i32, f64)], b: &[f64]) -> Vec<f64> {
+    let mut a = vec![vec![0.0; n + 1]; n];
+    for &(r, c, v) in t {
+        a[r as usize][c as usize] += v;
+    }
+    for (row, &bi) in a.iter_mut().zip(b) {
+        row[n] = bi;
+    }
+    for col in 0..n {
+        let p = (col..n)
+            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+            .unwrap();
+        a.swap(p, col);
+        let (top, rest) = a.split_at_mut(col + 1);
+        let pivot = &top[col];
+        for row in rest {
+            let f = row[col] / pivot[col];
+            if f != 0.0 {
+                for (x, p) in row[col..].iter_mut().zip(&pivot[col..]) {
+                    *x -= f * p;
+                }
+            }
+        }
+    }
+    let mut x = vec![0.0; n];
+    for i in (0..n).rev() {
+        let s: f64 = (i + 1..n).map(|j| a[i][j] * x[j]).sum();
+        x[i] = (a[i][n] - s) / a[i][i];
+    }
+    x
+}
+
+/// Solves with `method` on `dev` from x = 0 and checks it: converged, `iterations + 1`
+/// history entries, the true residual `|b - A x|` (an independent host product) within
+/// `slack` times the tolerance, and x within `rel` (relative, in the 2-norm) of the dense
+/// reference solution. Returns (iterations, history bits, x bits).
+#[allow(clippy::too_many_arguments)]
+fn krylov_case(
+    method: Method,
+    t: &[(i32, i32, f64)],
+    n: usize,
+    b: &[f64],
+    pre: Precond,
+    o: &SolveOptions,
+    (slack, rel): (f64, f64),
+    dev: &wp::Device,
+) -> (usize, Vec<u64>, Vec<u64>) {
+    let what = format!("{method:?} {pre:?}");
+    let a = scalar_matrix(n, t, dev);
+    let x = arr(&vec![0.0f64; n], dev);
+    let rep = method.solve(&a, &arr(b, dev), &x, pre, o).unwrap();
+    assert_eq!(rep.stop, Stop::Converged, "{what}: {rep:?}");
+    assert!(rep.converged);
+    assert_eq!(rep.history.len(), rep.iterations + 1, "{what}");
+    assert!(rep.residual <= rep.tolerance, "{what}: {rep:?}");
+    let xs = host(&x);
+    let tr = true_residual(&a, |b, _, _| *b, b, &xs);
+    assert!(
+        tr <= slack * rep.tolerance,
+        "{what}: true residual {tr}, tolerance {}",
+        rep.tolerance
+    );
+    let xr = dense_solve(n, t, b);
+    let err = xs
+        .iter()
+        .zip(&xr)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    let norm = xr.iter().map(|v| v * v).sum::<f64>().sqrt();
+    assert!(
+        err <= rel * norm,
+        "{what}: |x - x_ref| = {err}, |x_ref| = {norm}"
+    );
+    (
+        rep.iterations,
+        rep.history.iter().map(|h| h.to_bits()).collect(),
+        xs.iter().map(|v| v.to_bits()).collect(),
+    )
+}
+
+/// Each method on the 16 x 16 Poisson matrix (256 unknowns, condition number ~120), f64,
+/// rtol 1e-10, without and with Jacobi: it converges, the true residual is within 1.5x the
+/// tolerance (the recurrences' residuals drift from the true one by rounding, ~1e-14 |b|
+/// here; GMRES's estimate is exact in exact arithmetic), and x is within 1e-7 of the dense
+/// f64 reference (cond x rtol ~ 1.2e-8, with margin for the drift). CR without a
+/// preconditioner minimises |r|: its history does not increase (1e-12 relative slack for
+/// rounding). A GPU gives the same bits as the CPU.
+fn krylov_poisson_converges(dev: &wp::Device) {
+    let m = 16;
+    let (r, c, v) = poisson(m);
+    let t: Vec<(i32, i32, f64)> = (0..r.len()).map(|k| (r[k], c[k], v[k])).collect();
+    let n = m * m;
+    let mut g = Rng(33);
+    let b: Vec<f64> = (0..n).map(|_| g.unit()).collect();
+    let o = SolveOptions {
+        rtol: 1e-10,
+        ..Default::default()
+    };
+    for method in METHODS {
+        for pre in [Precond::None, Precond::Jacobi] {
+            let run = |d: &wp::Device| krylov_case(method, &t, n, &b, pre, &o, (1.5, 1e-7), d);
+            let (iters, hist, _) = run(dev);
+            assert!(iters > 5 && iters < 400, "{method:?} {pre:?}: {iters}");
+            if method == Method::Cr && pre == Precond::None {
+                let h: Vec<f64> = hist.iter().map(|&b| f64::from_bits(b)).collect();
+                for w in h.windows(2) {
+                    assert!(w[1] <= w[0] * (1.0 + 1e-12), "CR history rose: {h:?}");
+                }
+            }
+            same_on_cpu(dev, &format!("{method:?} {pre:?} poisson"), run);
+        }
+    }
+}
+
+/// BiCGSTAB and GMRES(20) on a non-symmetric convection-diffusion matrix (16 x 16 grid,
+/// cell Peclet numbers 0.8 and 0.4), f64, rtol 1e-10: converged, the true residual within
+/// 1.5x the tolerance, x within 1e-7 of the dense reference (the matrix is diagonally
+/// dominant with a condition number near the Poisson matrix's), the same bits on a GPU.
+/// GMRES takes no more iterations than 20 per restart times the cycles it needs; BiCGSTAB
+/// takes two products per iteration.
+fn krylov_convection_diffusion(dev: &wp::Device) {
+    let m = 16;
+    let n = m * m;
+    let t = convection_diffusion(m, 0.4, 0.2);
+    let b: Vec<f64> = (0..n).map(|i| ((i % 11) as f64 - 5.0) * 0.2).collect();
+    for method in [Method::BiCgStab, Method::Gmres] {
+        for pre in [Precond::None, Precond::Jacobi, Precond::PointJacobi] {
+            let o = SolveOptions {
+                rtol: 1e-10,
+                restart: 20,
+                ..Default::default()
+            };
+            let run = |d: &wp::Device| krylov_case(method, &t, n, &b, pre, &o, (1.5, 1e-7), d);
+            run(dev);
+            same_on_cpu(dev, &format!("{method:?} {pre:?} convection"), run);
+        }
+    }
+}
+
+/// `Mode::Graph` gives what `Mode::Host` gives, bit for bit, for every method: the same stop,
+/// iterations, history and x, at any `check_every` (GMRES: restart 7, so a pass holds one
+/// cycle or several), also when `max_iter` stops the solve (for GMRES inside a cycle).
+fn krylov_graph_mode_matches_host_mode(dev: &wp::Device) {
+    let m = 10;
+    let n = m * m;
+    let t = convection_diffusion(m, 0.3, -0.1);
+    // CR needs a symmetric matrix: the symmetric part's pattern is the same (cx = cy = 0).
+    let ts = convection_diffusion(m, 0.0, 0.0);
+    let b: Vec<f64> = (0..n).map(|i| ((i % 9) as f64 - 4.0) * 0.3).collect();
+    let x0: Vec<f64> = (0..n).map(|i| (i % 4) as f64 * 0.01).collect();
+    for method in METHODS {
+        let a = scalar_matrix(n, if method == Method::Cr { &ts } else { &t }, dev);
+        let solve = |mode: Mode, every: usize, max_iter: usize, pre: Precond| {
+            let x = arr(&x0, dev);
+            let o = SolveOptions {
+                rtol: 1e-9,
+                max_iter,
+                check_every: every,
+                mode,
+                restart: 7,
+                ..Default::default()
+            };
+            let rep = method.solve(&a, &arr(&b, dev), &x, pre, &o).unwrap();
+            assert_eq!(rep.history.len(), rep.iterations + 1);
+            (
+                rep.stop,
+                rep.iterations,
+                rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+                host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        for pre in [Precond::None, Precond::Jacobi] {
+            let what = format!("{method:?} {pre:?}");
+            let host_mode = solve(Mode::Host, 10, 1000, pre);
+            assert_eq!(host_mode.0, Stop::Converged, "{what}");
+            for every in [1, 7, 64, usize::MAX] {
+                assert_eq!(
+                    solve(Mode::Graph, every, 1000, pre),
+                    host_mode,
+                    "{what}, every {every}"
+                );
+                assert_eq!(solve(Mode::Host, every, 1000, pre), host_mode, "{what}");
+            }
+            let capped = solve(Mode::Host, 3, 9, pre);
+            assert_eq!((capped.0, capped.1), (Stop::MaxIterations, 9), "{what}");
+            assert_ne!(
+                capped.3,
+                host(&arr(&x0, dev))
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            );
+            assert_eq!(solve(Mode::Graph, 4, 9, pre), capped, "{what}, max_iter 9");
+            assert_eq!(solve(Mode::Graph, usize::MAX, 9, pre), capped, "{what}");
+        }
+    }
+}
+
+/// `max_iter` reached: `Ok` with `MaxIterations`, `max_iter` iterations and their history;
+/// `max_iter` 0: no iteration (for GMRES also when the restart is longer).
+fn krylov_max_iterations_is_ok(dev: &wp::Device) {
+    let (r, c, v) = poisson(16);
+    let n = 256;
+    let a = Bsr::from_triplets(n, n, &arr(&r, dev), &arr(&c, dev), &arr(&v, dev)).unwrap();
+    for method in METHODS {
+        let x = arr(&vec![0.0f64; n], dev);
+        let o = SolveOptions {
+            rtol: 1e-12,
+            max_iter: 5,
+            check_every: 3,
+            restart: 4,
+            ..Default::default()
+        };
+        let rep = method
+            .solve(&a, &arr(&vec![1.0; n], dev), &x, Precond::None, &o)
+            .unwrap();
+        assert_eq!(
+            (rep.stop, rep.iterations, rep.converged),
+            (Stop::MaxIterations, 5, false),
+            "{method:?}"
+        );
+        assert_eq!(rep.history.len(), 6);
+        assert_eq!(rep.history[0], 16.0, "{method:?}: |b| from x = 0");
+        assert!(rep.residual > rep.tolerance);
+        assert!(rep.history.iter().all(|h| h.is_finite() && *h > 0.0));
+        assert!(host(&x).iter().any(|&v| v != 0.0), "{method:?}: x moved");
+        let o = SolveOptions { max_iter: 0, ..o };
+        let x = arr(&vec![0.0f64; n], dev);
+        let rep = method
+            .solve(&a, &arr(&vec![1.0; n], dev), &x, Precond::None, &o)
+            .unwrap();
+        assert_eq!((rep.stop, rep.iterations), (Stop::MaxIterations, 0));
+        assert_eq!(host(&x), vec![0.0; n], "{method:?}: x untouched");
+    }
+}
+
+/// The breakdowns, each built so that every quantity is exact in binary (found by a search
+/// over small integer systems in exact rational arithmetic), in both modes:
+/// - BiCGSTAB: `r0 . v = 0` at once (a rotation), `omega = 0` and `rho = 0` after the first
+///   iteration;
+/// - CR: `z . Az = 0` at the set-up (diag(1, -1), b = (1, 1));
+/// - GMRES: a zero Hessenberg column at the second step (a nilpotent A): x gets the first
+///   column's contribution (0 here).
+fn krylov_breakdowns(dev: &wp::Device) {
+    let brk = |what, value| Stop::Breakdown { what, value };
+    type Case = (Method, usize, Vec<(i32, i32, f64)>, Vec<f64>, Stop, usize);
+    let cases: Vec<Case> = vec![
+        (
+            Method::BiCgStab,
+            2,
+            vec![(0, 1, 1.0), (1, 0, -1.0)],
+            vec![1.0, 0.0],
+            brk("r0.v", 0.0),
+            0,
+        ),
+        (
+            Method::BiCgStab,
+            3,
+            vec![
+                (0, 0, 1.0),
+                (0, 2, 1.0),
+                (1, 0, 1.0),
+                (1, 1, -2.0),
+                (1, 2, -2.0),
+                (2, 1, 1.0),
+            ],
+            vec![1.0, -1.0, 0.0],
+            brk("omega", 0.0),
+            1,
+        ),
+        (
+            Method::BiCgStab,
+            3,
+            vec![
+                (0, 0, 2.0),
+                (0, 1, -1.0),
+                (1, 1, 2.0),
+                (1, 2, 1.0),
+                (2, 0, 2.0),
+                (2, 2, 2.0),
+            ],
+            vec![0.0, -1.0, 0.0],
+            brk("rho", 0.0),
+            1,
+        ),
+        (
+            Method::Cr,
+            2,
+            vec![(0, 0, 1.0), (1, 1, -1.0)],
+            vec![1.0, 1.0],
+            brk("z.Az", 0.0),
+            0,
+        ),
+        (
+            Method::Gmres,
+            2,
+            vec![(0, 1, 1.0)],
+            vec![0.0, 1.0],
+            brk("H_jj", 0.0),
+            1,
+        ),
+    ];
+    for (method, n, t, b, stop, iters) in cases {
+        let a = scalar_matrix(n, &t, dev);
+        for mode in [Mode::Host, Mode::Graph] {
+            let x = arr(&vec![0.0f64; n], dev);
+            let o = SolveOptions {
+                mode,
+                ..Default::default()
+            };
+            let rep = method
+                .solve(&a, &arr(&b, dev), &x, Precond::None, &o)
+                .unwrap();
+            assert_eq!(
+                (rep.stop, rep.iterations),
+                (stop, iters),
+                "{method:?} {mode:?}: {rep:?}"
+            );
+            assert_eq!(rep.history.len(), iters + 1);
+            if iters == 0 || method == Method::Gmres {
+                assert_eq!(host(&x), vec![0.0; n], "{method:?}: x untouched");
+            }
+        }
+    }
+}
+
+/// NaN in b: `NonFinite` before any iteration; b = 0 from x = 0: converged at once; a
+/// missing diagonal block with Jacobi: `SingularPreconditioner`, x untouched. Every method.
+fn krylov_non_finite_zero_and_singular(dev: &wp::Device) {
+    let a = scalar_matrix(
+        2,
+        &[(0, 0, 2.0), (1, 1, 3.0), (0, 1, 0.5), (1, 0, 0.5)],
+        dev,
+    );
+    let d = SolveOptions::default();
+    for method in METHODS {
+        let x = arr(&[0.0f64; 2], dev);
+        let rep = method
+            .solve(&a, &arr(&[f64::NAN, 1.0], dev), &x, Precond::None, &d)
+            .unwrap();
+        assert_eq!(
+            (rep.stop, rep.iterations),
+            (Stop::NonFinite, 0),
+            "{method:?}"
+        );
+        let rep = method
+            .solve(&a, &arr(&[0.0; 2], dev), &x, Precond::Jacobi, &d)
+            .unwrap();
+        assert_eq!(
+            (rep.stop, rep.iterations),
+            (Stop::Converged, 0),
+            "{method:?}"
+        );
+        // Row 2 has no diagonal block.
+        let s = scalar_matrix(
+            3,
+            &[(0, 0, 2.0), (1, 1, 2.0), (2, 1, 1.0), (2, 0, 1.0)],
+            dev,
+        );
+        let x = arr(&[7.0f64; 3], dev);
+        for pre in [Precond::Jacobi, Precond::PointJacobi] {
+            let rep = method.solve(&s, &arr(&[1.0; 3], dev), &x, pre, &d).unwrap();
+            assert_eq!(
+                (rep.stop, rep.iterations),
+                (Stop::SingularPreconditioner { block_row: 2 }, 0),
+                "{method:?}"
+            );
+            assert_eq!(host(&x), [7.0; 3], "{method:?}: x untouched");
+        }
+    }
+}
+
+/// Bad arguments: each an `Err` naming the method and the argument.
+fn krylov_bad_arguments(dev: &wp::Device) {
+    let rect =
+        Bsr::from_triplets(2, 3, &arr(&[0], dev), &arr(&[0], dev), &arr(&[1.0f64], dev)).unwrap();
+    let sq = scalar_matrix(2, &[(0, 0, 1.0), (1, 1, 1.0)], dev);
+    let d = SolveOptions::default();
+    let err = |method: Method, a: &Bsr<f64>, b: &[f64], x: &[f64], o: SolveOptions| {
+        method
+            .solve(a, &arr(b, dev), &arr(x, dev), Precond::None, &o)
+            .unwrap_err()
+            .to_string()
+    };
+    for method in METHODS {
+        let f = method.name();
+        let e = err(method, &rect, &[0.0; 2], &[0.0; 2], d);
+        assert!(e.contains(f) && e.contains("2 x 3 blocks"), "{e}");
+        let e = err(method, &sq, &[0.0; 3], &[0.0; 2], d);
+        assert!(e.contains(f) && e.contains("`b` has shape [3]"), "{e}");
+        let e = err(
+            method,
+            &sq,
+            &[0.0; 2],
+            &[0.0; 2],
+            SolveOptions {
+                check_every: 0,
+                ..d
+            },
+        );
+        assert!(e.contains(f) && e.contains("check_every"), "{e}");
+        let e = err(
+            method,
+            &sq,
+            &[0.0; 2],
+            &[0.0; 2],
+            SolveOptions {
+                rtol: f64::NAN,
+                ..d
+            },
+        );
+        assert!(e.contains(f) && e.contains("`rtol`"), "{e}");
+        let x = arr(&[0.0f64; 2], dev);
+        let e = method
+            .solve(&sq, &x, &x, Precond::None, &d)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(f) && e.contains("`b` and `x` overlap"), "{e}");
+        // Inside a user's capture: refused (the host-driven loop reads back).
+        let (bb, xx) = (arr(&[1.0f64; 2], dev), arr(&[0.0f64; 2], dev));
+        let e = wp::capture(dev, || {
+            method.solve(&sq, &bb, &xx, Precond::None, &d).map(|_| ())
+        })
+        .unwrap_err();
+        assert!(
+            matches!(e, wp::Error::Capture { .. }) && e.to_string().contains(f),
+            "{e}"
+        );
+    }
+    for restart in [0, 1025] {
+        let e = err(
+            Method::Gmres,
+            &sq,
+            &[1.0; 2],
+            &[0.0; 2],
+            SolveOptions { restart, ..d },
+        );
+        assert!(
+            e.contains("sparse::gmres") && e.contains("`restart` is"),
+            "{e}"
+        );
+    }
+    // CR and BiCGSTAB ignore `restart`.
+    for method in [Method::BiCgStab, Method::Cr] {
+        let x = arr(&[0.0f64; 2], dev);
+        let o = SolveOptions { restart: 0, ..d };
+        let rep = method
+            .solve(&sq, &arr(&[1.0; 2], dev), &x, Precond::None, &o)
+            .unwrap();
+        assert_eq!(rep.stop, Stop::Converged);
+    }
+}
+
+/// Block types: the 6 x 6 Poisson matrix Kronecker an SPD 3 x 3 K (`DMat3`, so symmetric
+/// positive definite) and a non-symmetric `Mat2` version (K non-symmetric, diagonally
+/// dominant): every method (CR on the symmetric one) converges with block Jacobi, the true
+/// residual within 1.5x (f64) or 3x (f32: the recurrences drift more) the tolerance, and a
+/// GPU gives the same bits.
+fn krylov_block_types(dev: &wp::Device) {
+    let m = 6;
+    let (r, c, v) = poisson(m);
+    let n = m * m;
+    let k3 = DMat3::from_cols_array(&[4.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 2.0]);
+    let v3: Vec<DMat3> = v.iter().map(|&s| k3 * s).collect();
+    let k2 = glam::Mat2::from_cols_array(&[3.0, 0.5, -1.0, 2.0]);
+    let v2: Vec<glam::Mat2> = v.iter().map(|&s| k2 * s as f32).collect();
+    let b3: Vec<f64> = (0..3 * n).map(|i| ((i % 5) as f64 - 2.0) * 0.5).collect();
+    let b2: Vec<f32> = (0..2 * n).map(|i| ((i % 7) as f32 - 3.0) * 0.25).collect();
+    for method in METHODS {
+        let run3 = |d: &wp::Device| {
+            let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&v3, d)).unwrap();
+            let x = arr(&vec![0.0f64; 3 * n], d);
+            let o = SolveOptions {
+                rtol: 1e-9,
+                restart: 15,
+                ..Default::default()
+            };
+            let rep = method
+                .solve(&a, &arr(&b3, d), &x, Precond::Jacobi, &o)
+                .unwrap();
+            assert_eq!(rep.stop, Stop::Converged, "{method:?} DMat3: {rep:?}");
+            let tr = true_residual(&a, |b, i, j| b.col(j)[i], &b3, &host(&x));
+            assert!(tr <= 1.5 * rep.tolerance, "{method:?} DMat3: {tr}");
+            (
+                rep.iterations,
+                host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        run3(dev);
+        same_on_cpu(dev, &format!("{method:?} DMat3"), run3);
+        if method == Method::Cr {
+            continue;
+        }
+        let run2 = |d: &wp::Device| {
+            let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&v2, d)).unwrap();
+            let x = arr(&vec![0.0f32; 2 * n], d);
+            let o = SolveOptions {
+                rtol: 1e-5,
+                restart: 15,
+                ..Default::default()
+            };
+            let rep = method
+                .solve(&a, &arr(&b2, d), &x, Precond::Jacobi, &o)
+                .unwrap();
+            assert_eq!(rep.stop, Stop::Converged, "{method:?} Mat2: {rep:?}");
+            let xs: Vec<f64> = host(&x).iter().map(|&v| v as f64).collect();
+            let bs: Vec<f64> = b2.iter().map(|&v| v as f64).collect();
+            let tr = true_residual(&a, |b, i, j| b.col(j)[i] as f64, &bs, &xs);
+            assert!(
+                tr <= 3.0 * rep.tolerance,
+                "{method:?} Mat2: {tr}, {}",
+                rep.tolerance
+            );
+            (
+                rep.iterations,
+                host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        run2(dev);
+        same_on_cpu(dev, &format!("{method:?} Mat2"), run2);
+    }
+}
+
+/// A user preconditioner (`&p` for `p: Preconditioner`, here a closure): point Jacobi written
+/// as `z = D^-1 r` by `sparse::mv` with a diagonal matrix of the host's `1 / a_ii` gives
+/// exactly what the built-in `PointJacobi` gives (its inverse of a 1 x 1 block is the one
+/// rounded division, and its apply sums `0 + d r` as mv does), for every method, in both
+/// modes (in `Mode::Graph` the closure's mv is recorded into the solver's graph and replayed
+/// each iteration). Its errors come back from the solve: an mv of the wrong length, and a
+/// read-back inside `Mode::Graph`'s capture.
+fn krylov_user_preconditioner(dev: &wp::Device) {
+    let m = 10;
+    let n = m * m;
+    let conv = convection_diffusion(m, 0.3, 0.15);
+    // Scale the rows so that the diagonal is not constant (Jacobi then changes the iterates).
+    let scale = |i: i32| 1.0 + (i % 3) as f64;
+    let t: Vec<(i32, i32, f64)> = conv.iter().map(|&(r, c, v)| (r, c, v * scale(r))).collect();
+    let (pr, pc, pv) = poisson(m);
+    let ts: Vec<(i32, i32, f64)> = (0..pr.len())
+        .map(|k| (pr[k], pc[k], pv[k] * scale(pr[k]) * scale(pc[k])))
+        .collect();
+    let b: Vec<f64> = (0..n).map(|i| ((i % 9) as f64 - 4.0) * 0.3).collect();
+    let methods: [(&str, bool); 4] = [
+        ("cg", true),
+        ("cr", true),
+        ("bicgstab", false),
+        ("gmres", false),
+    ];
+    for (name, symmetric) in methods {
+        let trip = if symmetric { &ts } else { &t };
+        let a = scalar_matrix(n, trip, dev);
+        let mut diag = vec![0.0; n];
+        for &(r, c, v) in trip.iter() {
+            if r == c {
+                diag[r as usize] += v;
+            }
+        }
+        let inv: Vec<(i32, i32, f64)> = (0..n as i32)
+            .map(|i| (i, i, 1.0 / diag[i as usize]))
+            .collect();
+        let dm = scalar_matrix(n, &inv, dev);
+        let user = |r: &wp::Array<f64>, z: &wp::Array<f64>| sparse::mv(1.0, &dm, r, 0.0, z);
+        for mode in [Mode::Host, Mode::Graph] {
+            let o = SolveOptions {
+                rtol: 1e-9,
+                restart: 12,
+                mode,
+                ..Default::default()
+            };
+            let solve = |pre_user: bool| {
+                let x = arr(&vec![0.0f64; n], dev);
+                let bb = arr(&b, dev);
+                let rep = match (name, pre_user) {
+                    ("cg", true) => sparse::cg(&a, &bb, &x, &user, &o),
+                    ("cg", false) => sparse::cg(&a, &bb, &x, Precond::PointJacobi, &o),
+                    ("cr", true) => sparse::cr(&a, &bb, &x, &user, &o),
+                    ("cr", false) => sparse::cr(&a, &bb, &x, Precond::PointJacobi, &o),
+                    ("bicgstab", true) => sparse::bicgstab(&a, &bb, &x, &user, &o),
+                    ("bicgstab", false) => sparse::bicgstab(&a, &bb, &x, Precond::PointJacobi, &o),
+                    (_, true) => sparse::gmres(&a, &bb, &x, &user, &o),
+                    (_, false) => sparse::gmres(&a, &bb, &x, Precond::PointJacobi, &o),
+                }
+                .unwrap();
+                assert_eq!(rep.stop, Stop::Converged, "{name} {mode:?} user {pre_user}");
+                (
+                    rep.iterations,
+                    rep.history.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+                    host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                )
+            };
+            let builtin = solve(false);
+            assert_eq!(solve(true), builtin, "{name} {mode:?}");
+            // Jacobi matters here: without it the iterations differ.
+            let x = arr(&vec![0.0f64; n], dev);
+            let plain = match name {
+                "cg" => sparse::cg(&a, &arr(&b, dev), &x, Precond::None, &o),
+                "cr" => sparse::cr(&a, &arr(&b, dev), &x, Precond::None, &o),
+                "bicgstab" => sparse::bicgstab(&a, &arr(&b, dev), &x, Precond::None, &o),
+                _ => sparse::gmres(&a, &arr(&b, dev), &x, Precond::None, &o),
+            }
+            .unwrap();
+            assert_ne!(plain.iterations, builtin.0, "{name} {mode:?}");
+        }
+        // The closure's errors are the solve's.
+        let short = arr(&[0.0f64; 3], dev);
+        let bad = |r: &wp::Array<f64>, _z: &wp::Array<f64>| sparse::mv(1.0, &dm, r, 0.0, &short);
+        let e = sparse::gmres(
+            &a,
+            &arr(&b, dev),
+            &arr(&vec![0.0; n], dev),
+            &bad,
+            &SolveOptions::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("sparse::mv") && e.contains("`y`"), "{e}");
+        let reads = |r: &wp::Array<f64>, z: &wp::Array<f64>| {
+            r.to_vec()?;
+            sparse::mv(1.0, &dm, r, 0.0, z)
+        };
+        let o = SolveOptions {
+            mode: Mode::Graph,
+            ..Default::default()
+        };
+        let e =
+            sparse::bicgstab(&a, &arr(&b, dev), &arr(&vec![0.0; n], dev), &reads, &o).unwrap_err();
+        assert!(matches!(e, wp::Error::Capture { .. }), "{e}");
+    }
+}
+
+/// f32: each method on the 16 x 16 Poisson matrix with Jacobi to rtol 1e-5 (f32's rounding
+/// floor for this matrix, condition number ~120, is near 1e-6 |b|): converged, the true
+/// residual (f64, from the f32 data) within 3x the tolerance (the recurrences' drift in f32;
+/// GMRES's estimate drifts from the true residual too), and the same bits on a GPU.
+fn krylov_poisson_f32(dev: &wp::Device) {
+    let m = 16;
+    let (r, c, v) = poisson(m);
+    let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    let n = m * m;
+    let b: Vec<f32> = (0..n).map(|i| ((i % 7) as f32 - 3.0) / 3.0).collect();
+    for method in METHODS {
+        let run = |d: &wp::Device| {
+            let a = Bsr::from_triplets(n, n, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+            let x = arr(&vec![0.0f32; n], d);
+            let o = SolveOptions {
+                rtol: 1e-5,
+                restart: 20,
+                ..Default::default()
+            };
+            let rep = method
+                .solve(&a, &arr(&b, d), &x, Precond::Jacobi, &o)
+                .unwrap();
+            assert_eq!(rep.stop, Stop::Converged, "{method:?}: {rep:?}");
+            let xs: Vec<f64> = host(&x).iter().map(|&v| v as f64).collect();
+            let bs: Vec<f64> = b.iter().map(|&v| v as f64).collect();
+            let tr = true_residual(&a, |b, _, _| *b as f64, &bs, &xs);
+            assert!(
+                tr <= 3.0 * rep.tolerance,
+                "{method:?}: true residual {tr}, tolerance {}",
+                rep.tolerance
+            );
+            (
+                rep.iterations,
+                host(&x).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        run(dev);
+        same_on_cpu(dev, &format!("{method:?} f32"), run);
     }
 }

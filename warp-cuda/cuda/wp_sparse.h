@@ -715,3 +715,408 @@ WP_SP_BLOCK_KERNELS(dmat2, wp::f64, 2, 2, true)
 WP_SP_BLOCK_KERNELS(dmat3, wp::f64, 3, 3, true)
 WP_SP_BLOCK_KERNELS(dmat4, wp::f64, 4, 4, true)
 #endif
+
+// ==========================================================================================
+// Krylov solvers beyond CG: BiCGSTAB, CR, restarted GMRES (warp-runtime's sparse/solve/
+// {bicgstab,cr,gmres}.rs; the steps' CPU bodies are sparse/solve/steps.rs, in the same order
+// of operations). They reuse the products, dots and Jacobi steps above, and add:
+//   kr_vec       per element: a vector update (SPK_OP_*) of y, x, w with a = scal[ia], b =
+//                scal[ib], when its gate (SPK_GATE_*) is open (the control words).
+//   kr_comb      per element: GMRES's basis combination sum_k y_k V_k, added to or stored in
+//                `out`, while the cycle's update is pending.
+//   bicgstab_scalar, cr_scalar, gmres_scalar: one thread: the method's check of `phase`.
+// ==========================================================================================
+namespace wp {
+
+/// The control words beyond SP_CTL_RUN, the first scalars of every method, the breakdown
+/// codes, the vector operations and gates, and the per-method scalars (sparse/solve/steps.rs's
+/// `kr` module names the same; a unit test there parses these SPK_ constants).
+constexpr i32 SPK_CTL_WHAT = 4, SPK_CTL_ACTIVE = 5, SPK_CTL_PENDING = 6, SPK_CTL_K = 7,
+              SPK_CTL_LEN = 8;
+constexpr i32 SPK_TOL = 0, SPK_TOL2 = 1, SPK_BB = 2, SPK_RR = 3, SPK_BREAK = 4;
+constexpr i32 SPK_WHAT_RHO = 0, SPK_WHAT_OMEGA = 1, SPK_WHAT_R0V = 2, SPK_WHAT_APAP = 3,
+              SPK_WHAT_ZAZ = 4, SPK_WHAT_HJJ = 5;
+constexpr i32 SPK_OP_AXPY = 0, SPK_OP_AXMY = 1, SPK_OP_XPAY = 2, SPK_OP_P = 3, SPK_OP_DIV = 4,
+              SPK_OP_ADD = 5;
+constexpr i32 SPK_GATE_RUN = 0, SPK_GATE_ACTIVE = 1, SPK_GATE_PENDING = 2;
+constexpr i32 SPK_B_RHO = 5, SPK_B_R0V = 6, SPK_B_ALPHA = 7, SPK_B_SS = 8, SPK_B_TS = 9,
+              SPK_B_TT = 10, SPK_B_OMEGA = 11, SPK_B_RHO_NEW = 12, SPK_B_BETA = 13,
+              SPK_B_LEN = 14;
+constexpr i32 SPK_C_ZAZ = 5, SPK_C_ZAZ_NEW = 6, SPK_C_APAP = 7, SPK_C_ALPHA = 8,
+              SPK_C_BETA = 9, SPK_C_LEN = 10;
+constexpr i32 SPK_G_HN = 5, SPK_G_H = 6;
+/// GMRES's scalars after H ((m + 1) x m, row-major from SPK_G_H): cosines, sines (m each),
+/// g (m + 1), y (m).
+WP_FN i32 spk_g_cs(i32 m) { return SPK_G_H + (m + 1) * m; }
+WP_FN i32 spk_g_sn(i32 m) { return spk_g_cs(m) + m; }
+WP_FN i32 spk_g_g(i32 m) { return spk_g_sn(m) + m; }
+WP_FN i32 spk_g_y(i32 m) { return spk_g_g(m) + m + 1; }
+
+/// KrVec: ctl, scal, y, x, w (S*, n each; x may be y for SPK_OP_DIV), n, op, ia, ib, gate.
+struct spk_vec_t {
+  u64 ctl, scal, y, x, w;
+  i64 n;
+  i32 op, ia, ib, gate;
+};
+static_assert(sizeof(spk_vec_t) == 64, "spk_vec_t layout");
+
+/// KrComb: ctl, scal, out (S*, n), v (S*, (m + 1) n: the basis), n, iy (y's first slot in
+/// scal), add (1: out += sum, 0: out = sum), m.
+struct spk_comb_t {
+  u64 ctl, scal, out, v;
+  i64 n;
+  i32 iy, add, m, pad;
+};
+static_assert(sizeof(spk_comb_t) == 56, "spk_comb_t layout");
+
+/// KrScalar: ctl, scal, history (S*), rtol, atol, max_iter, phase, m, j (GMRES's restart
+/// length and column).
+struct spk_scalar_t {
+  u64 ctl, scal, history;
+  f64 rtol, atol;
+  i32 max_iter, phase, m, j;
+};
+static_assert(sizeof(spk_scalar_t) == 56, "spk_scalar_t layout");
+
+WP_FN bool spk_open(const i32* ctl, i32 gate) {
+  if (gate == SPK_GATE_RUN) return ctl[SP_CTL_STOP] == SP_STOP_NONE;
+  if (gate == SPK_GATE_ACTIVE)
+    return ctl[SP_CTL_STOP] == SP_STOP_NONE && ctl[SPK_CTL_ACTIVE] == 1;
+  return ctl[SPK_CTL_PENDING] == 1;
+}
+
+template <typename S>
+WP_FN void spk_vec(const spk_vec_t& s, i64 i) {
+  if (!spk_open((const i32*)s.ctl, s.gate)) return;
+  const S* sc = (const S*)s.scal;
+  const S a = sc[s.ia], b = sc[s.ib];
+  S* y = (S*)s.y;
+  const S* x = (const S*)s.x;
+  const S* w = (const S*)s.w;
+  S v;
+  switch (s.op) {
+    case SPK_OP_AXPY: v = sp_add(y[i], sp_mul(a, x[i])); break;
+    case SPK_OP_AXMY: v = sp_sub(y[i], sp_mul(a, x[i])); break;
+    case SPK_OP_XPAY: v = sp_add(x[i], sp_mul(a, y[i])); break;
+    case SPK_OP_P: v = sp_add(x[i], sp_mul(a, sp_sub(y[i], sp_mul(b, w[i])))); break;
+    case SPK_OP_DIV: v = sp_div(x[i], a); break;
+    default: v = sp_add(y[i], x[i]); break;
+  }
+  y[i] = v;
+}
+
+template <typename S>
+WP_FN void spk_comb(const spk_comb_t& s, i64 i) {
+  const i32* ctl = (const i32*)s.ctl;
+  if (!spk_open(ctl, SPK_GATE_PENDING)) return;
+  const i32 m = s.m < 0 ? 0 : s.m;
+  i32 k = ctl[SPK_CTL_K];
+  k = k < 0 ? 0 : (k > m ? m : k);
+  const S* y = (const S*)s.scal + s.iy;
+  const S* v = (const S*)s.v;
+  S acc = (S)0;
+  for (i32 kk = 0; kk < k; ++kk) acc = sp_add(acc, sp_mul(y[kk], v[(i64)kk * s.n + i]));
+  S* out = (S*)s.out;
+  out[i] = s.add ? sp_add(out[i], acc) : acc;
+}
+
+/// The tolerance max(atol, rtol |b|) and its square (the order of sp_cg_init).
+template <typename S>
+WP_FN void spk_init_tol(const spk_scalar_t& s, S* sc) {
+  const S rt = sp_mul((S)s.rtol, sp_sqrt(sc[SPK_BB]));
+  const S at = (S)s.atol;
+  const S tol = at > rt ? at : rt;
+  sc[SPK_TOL] = tol;
+  sc[SPK_TOL2] = sp_mul(tol, tol);
+}
+
+template <typename S>
+WP_FN void spk_breakdown(i32* ctl, S* sc, i32 what, S v) {
+  sc[SPK_BREAK] = v;
+  ctl[SPK_CTL_WHAT] = what;
+  ctl[SP_CTL_STOP] = SP_STOP_BREAKDOWN;
+}
+
+/// The stop before any iteration of BiCGSTAB and CR: a singular preconditioner, a
+/// non-finite residual (or q), convergence; SP_STOP_NONE to go on.
+template <typename S>
+WP_FN i32 spk_first_stop(const i32* ctl, const S* sc, S q) {
+  const S rr = sc[SPK_RR];
+  if (ctl[SP_CTL_BAD] != 0x7fffffff) return SP_STOP_SINGULAR;
+  if (!sp_finite(rr) || !sp_finite(q)) return SP_STOP_NON_FINITE;
+  if (rr <= sc[SPK_TOL2]) return SP_STOP_CONVERGED;
+  return SP_STOP_NONE;
+}
+
+template <typename S>
+WP_FN void spk_bicgstab(const spk_scalar_t& s, i32* ctl, S* sc, S* hist) {
+  if (s.phase == 0) {
+    spk_init_tol(s, sc);
+    const S rr = sc[SPK_RR];
+    hist[0] = sp_sqrt(rr);
+    ctl[SP_CTL_ITER] = 0;
+    sc[SPK_B_RHO] = rr;
+    i32 stop = spk_first_stop(ctl, sc, rr);
+    if (stop == SP_STOP_NONE && s.max_iter <= 0) stop = SP_STOP_MAX_ITER;
+    ctl[SP_CTL_STOP] = stop;
+    return;
+  }
+  if (ctl[SP_CTL_STOP] != SP_STOP_NONE) return;
+  if (s.phase == 1) {
+    const S r0v = sc[SPK_B_R0V];
+    if (!sp_finite(r0v))
+      ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    else if (r0v == (S)0)
+      spk_breakdown(ctl, sc, SPK_WHAT_R0V, r0v);
+    else
+      sc[SPK_B_ALPHA] = sp_div(sc[SPK_B_RHO], r0v);
+  } else if (s.phase == 2) {
+    const S ss = sc[SPK_B_SS];
+    if (!sp_finite(ss))
+      ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    else if (ss <= sc[SPK_TOL2]) {
+      const i32 it = ctl[SP_CTL_ITER] + 1;
+      ctl[SP_CTL_ITER] = it;
+      hist[it] = sp_sqrt(ss);
+      ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
+    }
+  } else if (s.phase == 3) {
+    const S ts = sc[SPK_B_TS], tt = sc[SPK_B_TT];
+    if (!sp_finite(ts) || !sp_finite(tt))
+      ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    else if (tt == (S)0)
+      sc[SPK_B_OMEGA] = (S)0;  // t = 0: no stabilising step (the check names the breakdown)
+    else
+      sc[SPK_B_OMEGA] = sp_div(ts, tt);
+  } else {
+    const i32 it = ctl[SP_CTL_ITER] + 1;
+    ctl[SP_CTL_ITER] = it;
+    const S rr = sc[SPK_RR], rho_new = sc[SPK_B_RHO_NEW], omega = sc[SPK_B_OMEGA];
+    hist[it] = sp_sqrt(rr);
+    if (!sp_finite(rr) || !sp_finite(rho_new))
+      ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    else if (rr <= sc[SPK_TOL2])
+      ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
+    else if (omega == (S)0)
+      spk_breakdown(ctl, sc, SPK_WHAT_OMEGA, omega);
+    else if (rho_new == (S)0)
+      spk_breakdown(ctl, sc, SPK_WHAT_RHO, rho_new);
+    else if (it >= s.max_iter)
+      ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
+    else {
+      sc[SPK_B_BETA] = sp_mul(sp_div(rho_new, sc[SPK_B_RHO]), sp_div(sc[SPK_B_ALPHA], omega));
+      sc[SPK_B_RHO] = rho_new;
+    }
+  }
+}
+
+template <typename S>
+WP_FN void spk_cr(const spk_scalar_t& s, i32* ctl, S* sc, S* hist) {
+  if (s.phase == 0) {
+    spk_init_tol(s, sc);
+    const S rr = sc[SPK_RR];
+    hist[0] = sp_sqrt(rr);
+    ctl[SP_CTL_ITER] = 0;
+    const S zaz = sc[SPK_C_ZAZ];
+    const i32 stop = spk_first_stop(ctl, sc, zaz);
+    if (stop != SP_STOP_NONE)
+      ctl[SP_CTL_STOP] = stop;
+    else if (zaz == (S)0)
+      spk_breakdown(ctl, sc, SPK_WHAT_ZAZ, zaz);
+    else if (s.max_iter <= 0)
+      ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
+    else
+      ctl[SP_CTL_STOP] = SP_STOP_NONE;
+    return;
+  }
+  if (ctl[SP_CTL_STOP] != SP_STOP_NONE) return;
+  if (s.phase == 1) {
+    const S apap = sc[SPK_C_APAP];
+    if (!sp_finite(apap))
+      ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    else if (apap == (S)0)
+      spk_breakdown(ctl, sc, SPK_WHAT_APAP, apap);
+    else
+      sc[SPK_C_ALPHA] = sp_div(sc[SPK_C_ZAZ], apap);
+    return;
+  }
+  const i32 it = ctl[SP_CTL_ITER] + 1;
+  ctl[SP_CTL_ITER] = it;
+  const S rr = sc[SPK_RR], zn = sc[SPK_C_ZAZ_NEW];
+  hist[it] = sp_sqrt(rr);
+  if (!sp_finite(rr) || !sp_finite(zn))
+    ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+  else if (rr <= sc[SPK_TOL2])
+    ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
+  else if (zn == (S)0)
+    spk_breakdown(ctl, sc, SPK_WHAT_ZAZ, zn);
+  else if (it >= s.max_iter)
+    ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
+  else {
+    sc[SPK_C_BETA] = sp_div(zn, sc[SPK_C_ZAZ]);
+    sc[SPK_C_ZAZ] = zn;
+  }
+}
+
+/// GMRES's cycle start: from |r|^2 in SPK_RR, the true residual norm replaces the history's
+/// last entry; then a stop (non-finite, converged, max_iter) or g = (|r|, 0, ..) and the cycle
+/// active and pending.
+template <typename S>
+WP_FN void spk_gmres_start(const spk_scalar_t& s, i32* ctl, S* sc, S* hist) {
+  const i32 m = s.m;
+  ctl[SPK_CTL_ACTIVE] = 0;
+  ctl[SPK_CTL_PENDING] = 0;
+  ctl[SPK_CTL_K] = 0;
+  if (ctl[SP_CTL_STOP] != SP_STOP_NONE) return;
+  const S rr = sc[SPK_RR];
+  const S beta = sp_sqrt(rr);
+  const i32 it = ctl[SP_CTL_ITER];
+  hist[it] = beta;
+  if (!sp_finite(rr))
+    ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+  else if (rr <= sc[SPK_TOL2])
+    ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
+  else if (it >= s.max_iter)
+    ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
+  else {
+    const i32 g = spk_g_g(m);
+    sc[g] = beta;
+    for (i32 i = 1; i <= m; ++i) sc[g + i] = (S)0;
+    ctl[SPK_CTL_ACTIVE] = 1;
+    ctl[SPK_CTL_PENDING] = 1;
+  }
+}
+
+/// GMRES's Arnoldi check of column j: H's new entry |w|, the earlier rotations applied to the
+/// column, its own rotation, g rotated, the iteration counted with |g_(j+1)| as its residual;
+/// then a stop, or the cycle's end at j = m - 1.
+template <typename S>
+WP_FN void spk_gmres_column(const spk_scalar_t& s, i32* ctl, S* sc, S* hist) {
+  if (ctl[SP_CTL_STOP] != SP_STOP_NONE || ctl[SPK_CTL_ACTIVE] != 1) return;
+  const i32 m = s.m, j = s.j;
+#define SPK_H(i) sc[SPK_G_H + (i) * m + j]
+  const S hn = sp_sqrt(sc[SPK_G_HN]);
+  sc[SPK_G_HN] = hn;
+  bool finite = sp_finite(hn);
+  for (i32 i = 0; i <= j; ++i) finite = finite && sp_finite(SPK_H(i));
+  if (!finite) {
+    ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    ctl[SPK_CTL_ACTIVE] = 0;
+    ctl[SPK_CTL_PENDING] = 0;
+    return;
+  }
+  SPK_H(j + 1) = hn;
+  const i32 cs = spk_g_cs(m), sn = spk_g_sn(m), g = spk_g_g(m);
+  for (i32 i = 0; i < j; ++i) {
+    const S a = SPK_H(i), b = SPK_H(i + 1);
+    const S cc = sc[cs + i], ss = sc[sn + i];
+    SPK_H(i) = sp_add(sp_mul(cc, a), sp_mul(ss, b));
+    SPK_H(i + 1) = sp_sub(sp_mul(cc, b), sp_mul(ss, a));
+  }
+  const S a = SPK_H(j), b = SPK_H(j + 1);
+  const S rho = sp_sqrt(sp_add(sp_mul(a, a), sp_mul(b, b)));
+  if (rho == (S)0) {
+    // The column is zero: H is singular. The cycle's earlier columns still update x.
+    spk_breakdown(ctl, sc, SPK_WHAT_HJJ, rho);
+    ctl[SPK_CTL_ACTIVE] = 0;
+    return;
+  }
+  const S cc = sp_div(a, rho), ss = sp_div(b, rho);
+  sc[cs + j] = cc;
+  sc[sn + j] = ss;
+  SPK_H(j) = rho;
+  SPK_H(j + 1) = (S)0;
+#undef SPK_H
+  const S gj = sc[g + j];
+  sc[g + j + 1] = sp_sub((S)0, sp_mul(ss, gj));
+  sc[g + j] = sp_mul(cc, gj);
+  ctl[SPK_CTL_K] = j + 1;
+  const i32 it = ctl[SP_CTL_ITER] + 1;
+  ctl[SP_CTL_ITER] = it;
+  const S gn = sc[g + j + 1];
+  const S res = gn < (S)0 ? sp_sub((S)0, gn) : gn;
+  hist[it] = res;
+  if (!sp_finite(res) || !sp_finite(rho)) {
+    ctl[SP_CTL_STOP] = SP_STOP_NON_FINITE;
+    ctl[SPK_CTL_PENDING] = 0;
+  } else if (res <= sc[SPK_TOL])
+    ctl[SP_CTL_STOP] = SP_STOP_CONVERGED;
+  else if (it >= s.max_iter)
+    ctl[SP_CTL_STOP] = SP_STOP_MAX_ITER;
+  if (ctl[SP_CTL_STOP] != SP_STOP_NONE || j + 1 == m) ctl[SPK_CTL_ACTIVE] = 0;
+}
+
+/// GMRES's least-squares solve while pending: H y = g over the cycle's K columns (H upper
+/// triangular after the rotations), by back substitution.
+template <typename S>
+WP_FN void spk_gmres_solve(const spk_scalar_t& s, const i32* ctl, S* sc) {
+  if (ctl[SPK_CTL_PENDING] != 1) return;
+  const i32 m = s.m;
+  i32 k = ctl[SPK_CTL_K];
+  k = k < 0 ? 0 : (k > m ? m : k);
+  const i32 g = spk_g_g(m), y = spk_g_y(m);
+  for (i32 i = k - 1; i >= 0; --i) {
+    S acc = sc[g + i];
+    for (i32 l = i + 1; l < k; ++l) acc = sp_sub(acc, sp_mul(sc[SPK_G_H + i * m + l], sc[y + l]));
+    sc[y + i] = sp_div(acc, sc[SPK_G_H + i * m + i]);
+  }
+}
+
+template <typename S>
+WP_FN void spk_gmres(const spk_scalar_t& s, i32* ctl, S* sc, S* hist) {
+  switch (s.phase) {
+    case 0:
+      spk_init_tol(s, sc);
+      ctl[SP_CTL_ITER] = 0;
+      if (ctl[SP_CTL_BAD] != 0x7fffffff) {
+        ctl[SP_CTL_STOP] = SP_STOP_SINGULAR;
+        hist[0] = sp_sqrt(sc[SPK_RR]);
+      }
+      spk_gmres_start(s, ctl, sc, hist);
+      break;
+    case 1: spk_gmres_start(s, ctl, sc, hist); break;
+    case 2: spk_gmres_column(s, ctl, sc, hist); break;
+    case 3: spk_gmres_solve(s, ctl, sc); break;
+    default: ctl[SPK_CTL_PENDING] = 0; break;
+  }
+}
+
+/// One method's one-thread step (0 BiCGSTAB, 1 CR, 2 GMRES), then the loop's flag.
+template <typename S, int METHOD>
+WP_FN void spk_scalar(const spk_scalar_t& s) {
+  i32* ctl = (i32*)s.ctl;
+  S* sc = (S*)s.scal;
+  S* hist = (S*)s.history;
+  if (METHOD == 0)
+    spk_bicgstab(s, ctl, sc, hist);
+  else if (METHOD == 1)
+    spk_cr(s, ctl, sc, hist);
+  else
+    spk_gmres(s, ctl, sc, hist);
+  ctl[SP_CTL_RUN] = ctl[SP_CTL_STOP] == SP_STOP_NONE;
+}
+
+}  // namespace wp
+
+#if defined(WP_SPARSE_BUILD) && (defined(__CUDACC__) || defined(WP_SPARSE_EMULATED))
+// The Krylov kernels of one scalar type.
+#define WP_SPK_SCALAR_KERNELS(tag, S)                                                       \
+  extern "C" __global__ void wp_sparse_kr_vec_##tag(wp::spk_vec_t s) {                      \
+    WP_SP_LOOP(i, s.n) wp::spk_vec<S>(s, i);                                                \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_kr_comb_##tag(wp::spk_comb_t s) {                    \
+    WP_SP_LOOP(i, s.n) wp::spk_comb<S>(s, i);                                               \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_bicgstab_scalar_##tag(wp::spk_scalar_t s) {          \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::spk_scalar<S, 0>(s);                       \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_cr_scalar_##tag(wp::spk_scalar_t s) {                \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::spk_scalar<S, 1>(s);                       \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_gmres_scalar_##tag(wp::spk_scalar_t s) {             \
+    if (blockIdx.x == 0 && threadIdx.x == 0) wp::spk_scalar<S, 2>(s);                       \
+  }
+
+WP_SPK_SCALAR_KERNELS(f32, wp::f32)
+WP_SPK_SCALAR_KERNELS(f64, wp::f64)
+#endif

@@ -56,7 +56,10 @@ mod ops_steps;
 
 pub use block::{Block, BlockMul, SparseScalar, SquareBlock};
 pub use ops::{axpy, diag, mm, mv_transpose, set_diag, MmWork};
-pub use solve::{cg, Mode, Precond, SolveOptions, SolveReport, Stop};
+pub use solve::{
+    bicgstab, cg, cr, gmres, IntoPrecond, Mode, Precond, Preconditioner, SolveOptions, SolveReport,
+    Stop,
+};
 
 use crate::array::{Array, Element};
 use crate::backend::StepFault;
