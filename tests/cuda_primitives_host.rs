@@ -365,46 +365,6 @@ fn scan_odd_tile() {
     scan_cases::<f64>(WARPS_TILE);
 }
 
-/// Scans whose whole tiles move by 16-byte vectors straight between memory and registers
-/// (`VEC_TILE`: whole vectors per thread for every type; the driver's buffers are malloc'd,
-/// 16-byte aligned), by both algorithms, the single-pass one also walking back over
-/// aggregates; and the same scans with the input one element in (the kernels check the
-/// addresses: those tiles go through shared memory), against the serial scan.
-#[test]
-fn scan_vector_loads() {
-    scan_cases::<i32>(VEC_TILE);
-    scan_cases::<f32>(VEC_TILE);
-    scan_cases::<u64>(VEC_TILE);
-    scan_cases::<f64>(VEC_TILE);
-    let walk = ["WP_PRIM_SCAN_INCLUSIVE_EVERY=5"];
-    scan_cases_with::<u32>(VEC_TILE, &walk, &[ScanAlgorithm::OnePass]);
-    if !have_gpp() {
-        return;
-    }
-    let x: Vec<i32> = (0..5000).map(|i| (i * 7919 % 1001) - 500).collect();
-    let n = x.len() - 1;
-    let mut cases = Vec::new();
-    for alg in SCANS {
-        let mut p = alg.plan(VEC_TILE, "i32", 4, Len::Host(n as u64), true);
-        for step in &mut p.steps {
-            for w in &mut step.args {
-                if *w == plan::Word::Addr(plan::Buf::User(0), 0) {
-                    *w = plan::Word::Addr(plan::Buf::User(0), 4);
-                }
-            }
-        }
-        cases.push(Case {
-            plan: p,
-            users: vec![bytes(&x), bytes(&vec![0i32; n])],
-        });
-    }
-    let want = serial_scan(&x[1..], true);
-    for (r, alg) in run(VEC_TILE, &cases).iter().zip(SCANS) {
-        assert_eq!(r.fault, None, "{alg:?}");
-        assert_eq!(typed::<i32>(&r.users[1]), want, "{alg:?}, input one element in");
-    }
-}
-
 /// The single-pass scan's look-back over tiles that have published only their aggregate:
 /// in the emulator the tile before is always finished, so without this every walk would end
 /// at once. With an inclusive prefix published by every 5th tile, walks add aggregates within

@@ -464,84 +464,6 @@ struct store_array {
   WP_PRIM_FN void operator()(i64 i, T v) const { a[i] = v; }
 };
 
-/// Whether block `b`'s tile of `in` and `out` can be moved by 16-byte vectors straight between
-/// global memory and registers: a whole tile (`(b + 1) * TILE <= n`), both arrays 16-byte
-/// aligned, and each thread's ITEMS elements whole vectors. The same for every thread of the
-/// block, so the barriers of either path are reached by all.
-template <typename T>
-WP_PRIM_FN bool vec_tile(const T* in, const T* out, i64 b, i64 n) {
-  if constexpr (vec_load<T>::OK) {
-    return ((((u64)in) | ((u64)out)) & 15u) == 0 && (b + 1) * TILE <= n;
-  } else {
-    return false;
-  }
-}
-
-/// Thread `t`'s ITEMS consecutive elements of the whole tile at `base` (`vec_tile` holds):
-/// ITEMS / V vector loads. Lane l reads 16 bytes at l * ITEMS * sizeof(T) + 16 k: a warp's
-/// load touches whole lines that its next loads finish (in L1), so DRAM moves each line once
-/// and no shared-memory transpose (with its barriers) is needed.
-template <typename T>
-WP_PRIM_FN void vec_load_items(const T* in, i64 base, T* vals) {
-  if constexpr (vec_load<T>::OK) {
-    typedef typename vec_load<T>::vec_t vec_t;
-    constexpr i32 V = vec_load<T>::V;
-    const vec_t* src = reinterpret_cast<const vec_t*>(in + base);
-    WP_PRIM_UNROLL
-    for (i32 k = 0; k < ITEMS / V; ++k) {
-      const vec_t x = src[k];
-      WP_PRIM_UNROLL
-      for (i32 e = 0; e < V; ++e) vals[k * V + e] = x.v[e];
-    }
-  }
-}
-
-/// The scan of thread `t`'s ITEMS elements from `run` (inclusive or exclusive), stored as
-/// ITEMS / V vectors at `base` (`vec_tile` holds; only this thread reads or writes them, so
-/// `out` may be `in`).
-template <typename T, typename Op>
-WP_PRIM_FN void vec_store_scan(T* out, i64 base, const T* vals, T run, bool inclusive) {
-  if constexpr (vec_load<T>::OK) {
-    typedef typename vec_load<T>::vec_t vec_t;
-    constexpr i32 V = vec_load<T>::V;
-    vec_t* dst = reinterpret_cast<vec_t*>(out + base);
-    WP_PRIM_UNROLL
-    for (i32 k = 0; k < ITEMS / V; ++k) {
-      vec_t y;
-      WP_PRIM_UNROLL
-      for (i32 e = 0; e < V; ++e) {
-        const T v = vals[k * V + e];
-        if (inclusive) {
-          run = Op::apply(run, v);
-          y.v[e] = run;
-        } else {
-          y.v[e] = run;
-          run = Op::apply(run, v);
-        }
-      }
-      dst[k] = y;
-    }
-  }
-}
-
-/// Phase 3 of a whole, aligned tile (`vec_tile` holds): `tile_scan` with each thread's
-/// elements moved by vectors straight to and from registers. The same elements per thread
-/// and the same order of operations as `tile_scan`, so the same bits.
-template <typename T, typename Op>
-WP_PRIM_FN void tile_scan_vec(const T* in, T* out, const T* prefixes, bool inclusive) {
-  WP_PRIM_SHARED T warp_totals[WARPS];
-  const i64 b = WP_PRIM_BID;
-  const i64 base = b * TILE + (i64)WP_PRIM_TID * ITEMS;
-  T vals[ITEMS];
-  vec_load_items<T>(in, base, vals);
-  T acc = Op::identity();
-  WP_PRIM_UNROLL
-  for (i32 k = 0; k < ITEMS; ++k) acc = Op::apply(acc, vals[k]);
-  T total = Op::identity();  // (the tile's total: not needed)
-  const T excl = block_scan_warps<T, Op>(acc, warp_totals, &total);
-  vec_store_scan<T, Op>(out, base, vals, Op::apply(prefixes[b], excl), inclusive);
-}
-
 /// A compaction flag as a count: 1 when nonzero.
 struct load_flag {
   const i32* a;
@@ -577,14 +499,8 @@ WP_PRIM_FN void k_spine(const args_t& a) {
 template <typename T>
 WP_PRIM_FN void k_scan_down(const args_t& a) {
   const i64 n = resolve_count(ptr<const i32>(a, 2), int_arg(a, 3), nullptr, nullptr, 0, false);
-  const T* in = ptr<const T>(a, 0);
-  T* out = ptr<T>(a, 1);
-  if (vec_tile<T>(in, out, WP_PRIM_BID, n)) {
-    tile_scan_vec<T, op_sum<T>>(in, out, ptr<const T>(a, 4), int_arg(a, 5) != 0);
-    return;
-  }
-  tile_scan<T, op_sum<T>>(load_array<T>{in}, store_array<T>{out}, n, ptr<const T>(a, 4),
-                          int_arg(a, 5) != 0);
+  tile_scan<T, op_sum<T>>(load_array<T>{ptr<const T>(a, 0)}, store_array<T>{ptr<T>(a, 1)}, n,
+                          ptr<const T>(a, 4), int_arg(a, 5) != 0);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -718,14 +634,12 @@ WP_PRIM_FN void k_scan_init(const args_t& a) {
 /// T only, else 0), 7 tile counter (u32*, zeroed), 8 number of tiles.
 ///
 /// A block takes the next tile from the counter (so every tile before it belongs to a block
-/// that has started: waiting for them cannot deadlock), loads it (a whole aligned tile by
-/// vectors straight into each thread's registers, `vec_tile`; else striped through shared
-/// memory, coalesced), scans it (each thread its ITEMS consecutive elements, then
+/// that has started: waiting for them cannot deadlock), loads it striped through shared
+/// memory (coalesced), scans it (each thread its ITEMS consecutive elements, then
 /// `block_scan_warps`), publishes its aggregate (tile 0: its inclusive prefix), looks back
 /// with its first warp (`scan_lookback`), publishes its inclusive prefix, and writes its
-/// results (by vectors, or striped). Every load of the tile happens before the first barrier
-/// and every store after the last, and a thread stores only what it loaded, so `out` may be
-/// `in`.
+/// results striped. Every load of the tile happens before the first barrier and every store
+/// after the last, so `out` may be `in`.
 template <typename T, typename Op>
 WP_PRIM_FN void k_scan_onepass(const args_t& a) {
   WP_PRIM_SHARED T stile[TILE_SLOTS];
@@ -744,28 +658,20 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
   const i64 tb = tile * TILE;
   if (tb >= n) return;  // the whole block: tiles past n are nobody's predecessors
   const i64 tn = n - tb < TILE ? n - tb : TILE;
-  const i64 mine = (i64)t * ITEMS;
-  // A whole aligned tile moves by vectors straight to and from registers (the same elements
-  // per thread as through `stile`, so the same bits); else through shared memory, striped.
-  const bool vec = vec_tile<T>(in, out, tile, n);
-  T vals[ITEMS];
-  if (vec) {
-    vec_load_items<T>(in, tb + mine, vals);
-  } else {
-    WP_PRIM_UNROLL
-    for (i32 k = 0; k < ITEMS; ++k) {
-      const i64 li = t + (i64)k * THREADS;
-      if (li < tn) stile[slot(li)] = in[tb + li];
-    }
-    WP_PRIM_SYNC();
-    WP_PRIM_UNROLL
-    for (i32 k = 0; k < ITEMS; ++k) {
-      vals[k] = mine + k < tn ? stile[slot(mine + k)] : Op::identity();
-    }
+  WP_PRIM_UNROLL
+  for (i32 k = 0; k < ITEMS; ++k) {
+    const i64 li = t + (i64)k * THREADS;
+    if (li < tn) stile[slot(li)] = in[tb + li];
   }
+  WP_PRIM_SYNC();
+  const i64 mine = (i64)t * ITEMS;
+  T vals[ITEMS];
   T acc = Op::identity();
   WP_PRIM_UNROLL
-  for (i32 k = 0; k < ITEMS; ++k) acc = Op::apply(acc, vals[k]);
+  for (i32 k = 0; k < ITEMS; ++k) {
+    vals[k] = mine + k < tn ? stile[slot(mine + k)] : Op::identity();
+    acc = Op::apply(acc, vals[k]);
+  }
   T total = Op::identity();  // (set in thread 0, which alone publishes it)
   const T excl = block_scan_warps<T, Op>(acc, warp_totals, &total);
   // Published as early as possible: later tiles wait for it.
@@ -783,10 +689,6 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
     }
   }
   WP_PRIM_SYNC();
-  if (vec) {
-    vec_store_scan<T, Op>(out, tb + mine, vals, Op::apply(prefix_sh, excl), inclusive);
-    return;
-  }
   // Each thread rewrites only its own slots of `stile`, which only it has read.
   T run = Op::apply(prefix_sh, excl);
   WP_PRIM_UNROLL
