@@ -47,6 +47,9 @@
 //! # Ok::<(), wp::Error>(())
 //! ```
 
+#[cfg(test)]
+#[macro_use]
+mod record_check;
 mod block;
 mod solve;
 mod steps;

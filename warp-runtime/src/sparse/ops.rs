@@ -558,8 +558,11 @@ pub fn set_diag<B: SquareBlock>(a: &mut Bsr<B>, d: &Array<B>) -> Result<()> {
 /// structures, and each block is `alpha * x_b + beta * y_b`, computed as the triplet
 /// pipeline sums `alpha x`'s blocks then `beta y`'s (each scalar product rounded, then one
 /// rounded add where both have the block): the same bits on every device. `y` gets new
-/// arrays (clones of the old `y` keep the old ones) with room for both matrices' blocks.
-/// Nothing is read back. `y`'s values are read whatever `beta` is (`0 * NaN` is NaN).
+/// arrays (clones of the old `y` keep the old ones) with room for both matrices' blocks:
+/// its capacity ([`Bsr::nnz_bound`]) becomes the sum of both capacities, whatever the union
+/// holds, so in a loop of `axpy` into one `y` the capacity (and the work of the steps that
+/// run over it) grows by `x`'s each call; rebuild `y` (say with [`axpy`] into a fresh
+/// matrix, or [`Bsr::from_triplets`]) when that matters. Nothing is read back. `y`'s values are read whatever `beta` is (`0 * NaN` is NaN).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::axpy` when the
@@ -678,7 +681,8 @@ pub fn mv_transpose<B: Block>(
 /// the device (one synchronisation, as Warp's `bsr_mm`). [`MmWork::with_capacity`] never
 /// reads back: a product count above its capacity is a fault of `sparse::mm`, out of bounds
 /// on argument `products` (index `[count]`, shape `[capacity + 1]`), returned at once on the
-/// CPU and reported at the next synchronisation on a GPU, where the product is left empty.
+/// CPU, where `c` keeps its value, and reported at the next synchronisation on a GPU, where
+/// the product is left empty.
 #[derive(Debug)]
 pub struct MmWork<B: Block> {
     fixed: Option<usize>,
@@ -831,7 +835,9 @@ pub fn mm<A: BlockMul<B>, B: Block<Scalar = A::Scalar>>(
         },
     )?;
     let n = match work.fixed {
-        Some(n) => n,
+        // Room for the products the caller named, and for C's blocks (their bound: known
+        // on the host, nothing read back) when they join the products.
+        Some(n) => n + if with_c { c.nnz_bound() } else { 0 },
         None => {
             let products = starts.view(a.nrow..a.nrow + 1)?.to_vec()?[0].max(0) as usize;
             let own = if with_c { c.nnz()? } else { 0 };

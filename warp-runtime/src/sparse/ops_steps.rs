@@ -514,13 +514,13 @@ unsafe impl ObjectStep for RowKeys {
                 let c = cols[k];
                 // A column out of range (never in an assembled matrix) sorts last.
                 let key = if (0..ncol).contains(&c) { c } else { ncol } as u32;
-                // SAFETY: the rows' ranges are disjoint in a matrix whose offsets ascend
-                // (an assembled one); overwritten offsets may make two rows write one k, the
-                // same values the C++ step's threads would race on.
+                // SAFETY: k < nnz <= the capacity these arrays hold. The rows' ranges are
+                // disjoint while the offsets ascend (an assembled matrix); overwritten ones
+                // may make two rows write one k, hence atomic stores (`store_shared`).
                 unsafe {
-                    brows.at(k).write(r as i32);
-                    keys.at(k).write(key);
-                    idx.at(k).write(k as i32);
+                    brows.store_shared(k, r as i32);
+                    keys.store_shared(k, key);
+                    idx.store_shared(k, k as i32);
                 }
             }
         });
@@ -686,13 +686,15 @@ unsafe impl<S: SparseScalar> ObjectStep for ToTriplets<S> {
                     continue;
                 }
                 let t = t as usize;
-                // SAFETY: triplet t is block k's alone (rows' ranges are disjoint in an
-                // assembled matrix).
+                // SAFETY: t < limit, the triplet arrays' length. Triplet t is block k's
+                // alone while the rows' ranges are disjoint (ascending offsets: an assembled
+                // matrix); overwritten ones may make two rows write one t, hence atomic
+                // stores (`store_shared`).
                 unsafe {
-                    tr.at(t).write(r as i32);
-                    tc.at(t).write(cols[k]);
+                    tr.store_shared(t, r as i32);
+                    tc.store_shared(t, cols[k]);
                     for e in 0..b {
-                        tv.at(t * b + e).write(f.mul(vals[k * b + e]));
+                        tv.store_shared(t * b + e, f.mul(vals[k * b + e]));
                     }
                 }
             }
@@ -899,9 +901,6 @@ unsafe impl<S: SparseScalar> ObjectStep for MmExpand<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::mem::offset_of;
-
-    const CUDA_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda");
 
     /// Every kernel name the Rust side launches is a kernel of the compiled `sparse_ops`
     /// library (NVRTC, no GPU; skipped, saying so, without libnvrtc).
@@ -971,17 +970,11 @@ mod tests {
         assert!(!has("wp_sparse_ops_scale_f16"));
     }
 
-    macro_rules! layouts {
-        ($($rust:ty => $c:literal { $($f:ident),* $(,)? }),* $(,)?) => {
-            vec![$($(($c, stringify!($f), offset_of!($rust, $f))),*),*]
-        };
-    }
-
     /// Each record's fields sit at the same offsets in Rust and in C++ (g++'s `offsetof`).
     /// Skipped, saying so, without g++.
     #[test]
     fn ops_record_offsets_are_the_headers() {
-        let fields = layouts![
+        let fields = record_layouts![
             Scale<f32> => "sp_ops_scale_t" { offsets, values, alpha, nrow, cap, block, pad },
             Diag<f32> => "sp_ops_diag_t" {
                 offsets, columns, values, out, nrow, ncol, cap, block
@@ -1017,58 +1010,10 @@ mod tests {
                 cm_c
             },
         ];
-        if std::process::Command::new("g++")
-            .arg("--version")
-            .output()
-            .is_err()
-        {
-            eprintln!("SKIPPED ops_record_offsets_are_the_headers: no g++ on this machine");
-            return;
-        }
-        let mut src = String::from(
-            "#include <cstddef>\n#include <cstdio>\n#include \"wp_prim_emu.h\"\n\
-             #define __global__\n#define __device__ inline\n#define __shared__ static\n\
-             #include \"wp_sparse_ops.h\"\nusing namespace wp;\n\
-             #define P(T, f) printf(\"%s %s %zu\\n\", #T, #f, offsetof(T, f))\n\
-             int main() {\n",
+        crate::sparse::record_check::check_record_offsets(
+            "sparse::ops_steps::ops_record_offsets_are_the_headers",
+            "wp_sparse_ops.h",
+            &fields,
         );
-        for (c, f, _) in &fields {
-            src += &format!("  P({c}, {f});\n");
-        }
-        src += "  return 0;\n}\n";
-        let dir =
-            std::env::temp_dir().join(format!("wp_sparse_ops_offsets_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
-        std::fs::write(&cpp, src).unwrap();
-        let out = std::process::Command::new("g++")
-            .args([
-                "-std=c++17",
-                "-Wall",
-                "-Wextra",
-                "-Werror",
-                "-I",
-                CUDA_DIR,
-                "-I",
-            ])
-            .arg(format!("{CUDA_DIR}/tests"))
-            .arg(&cpp)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "g++: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let out = std::process::Command::new(&exe).output().unwrap();
-        let got = String::from_utf8(out.stdout).unwrap();
-        let want: String = fields
-            .iter()
-            .map(|(c, f, o)| format!("{c} {f} {o}\n"))
-            .collect();
-        assert_eq!(got, want);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

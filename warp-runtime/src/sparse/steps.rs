@@ -45,6 +45,34 @@ impl<T> Ptr<T> {
     }
 }
 
+impl<T: Copy> Ptr<T> {
+    /// Stores `v` at element `i` by a relaxed atomic store, for steps whose tasks write
+    /// disjoint elements only while a matrix's offsets ascend: a user may overwrite them
+    /// through [`Bsr::offsets`](super::Bsr::offsets), and then two tasks may write one
+    /// element. As atomics that is defined behaviour (one of the values stays, as when the
+    /// CUDA step's threads race there); plain writes would be a data race. 4- and 8-byte
+    /// elements only (checked at compile time); a relaxed store is a plain store on x86-64
+    /// and AArch64.
+    ///
+    /// # Safety
+    /// Element `i` is in bounds of the allocation, aligned, and no task reads it during the
+    /// step.
+    pub(super) unsafe fn store_shared(self, i: usize, v: T) {
+        use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::Relaxed};
+        const {
+            assert!(std::mem::size_of::<T>() == 4 || std::mem::size_of::<T>() == 8);
+        }
+        let p = self.at(i);
+        if std::mem::size_of::<T>() == 4 {
+            // SAFETY: 4 aligned bytes in bounds (the caller), read as the bits of `v`.
+            AtomicU32::from_ptr(p.cast()).store(std::mem::transmute_copy(&v), Relaxed);
+        } else {
+            // SAFETY: as above, 8 bytes (an f64 or i64 element is 8-aligned).
+            AtomicU64::from_ptr(p.cast()).store(std::mem::transmute_copy(&v), Relaxed);
+        }
+    }
+}
+
 /// `n` elements at `addr`.
 ///
 /// # Safety
@@ -564,12 +592,12 @@ fn mv_row<B: Block>(
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
 // not overlapping x (mv checked).
 unsafe impl<B: Block> ObjectStep for BsrMv<B> {
-    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library
-    // (ops_steps.rs' OPS_LIBRARY, named here: ops_steps imports this file).
+    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library: the
+    // one static of it, so that both kinds of step share its compiled module.
     const LIBRARY: &'static ObjectLibrary = if B::ROWS == B::COLS {
         &LIBRARY
     } else {
-        &ObjectLibrary::of("sparse_ops")
+        &super::ops_steps::OPS_LIBRARY
     };
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
@@ -1133,11 +1161,9 @@ unsafe impl<S: SparseScalar, const DIRECTION: bool> ObjectStep for CgVector<S, D
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::mem::offset_of;
 
     /// `wp_sparse.h`, which the C++ side of every record and constant here comes from.
     const HEADER: &str = include_str!("../../../warp-cuda/cuda/wp_sparse.h");
-    const CUDA_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda");
 
     /// Every `constexpr i32|i64 SP_NAME = value` of the header (several per declaration).
     fn header_constants() -> Vec<(String, i64)> {
@@ -1262,20 +1288,12 @@ mod tests {
         assert!(!has("wp_sparse_bsr_mv_mat5"));
     }
 
-    /// (C++ record, field, Rust's offset) for every field of every record (the names are the
-    /// same on both sides).
-    macro_rules! layouts {
-        ($($rust:ty => $c:literal { $($f:ident),* $(,)? }),* $(,)?) => {
-            vec![$($(($c, stringify!($f), offset_of!($rust, $f))),*),*]
-        };
-    }
-
     /// Each record's fields sit at the same offsets in Rust and in C++ (g++'s `offsetof`): the
     /// sizes are asserted on both sides, but two swapped fields of one size (`rows` and
     /// `cols`) keep the size. Skipped, saying so, without g++.
     #[test]
     fn record_offsets_are_the_headers() {
-        let fields = layouts![
+        let fields = record_layouts![
             TplKeys<f32> => "sp_tpl_keys_t" {
                 count, rows, cols, values, n, nrow, ncol, block, two_pass, no_finite_check, keys, idx,
                 bad
@@ -1303,58 +1321,10 @@ mod tests {
             },
             CgVector<f32, false> => "sp_cg_vector_t" { ctl, scal, x, r, p, ap, n },
         ];
-        if std::process::Command::new("g++")
-            .arg("--version")
-            .output()
-            .is_err()
-        {
-            eprintln!("SKIPPED record_offsets_are_the_headers: no g++ on this machine");
-            return;
-        }
-        // The header as the emulator tests compile it (tests/cuda_sparse_host.rs).
-        let mut src = String::from(
-            "#include <cstddef>\n#include <cstdio>\n#include \"wp_prim_emu.h\"\n\
-             #define __global__\n#define __device__ inline\n#define __shared__ static\n\
-             #include \"wp_sparse.h\"\nusing namespace wp;\n\
-             #define P(T, f) printf(\"%s %s %zu\\n\", #T, #f, offsetof(T, f))\n\
-             int main() {\n",
+        crate::sparse::record_check::check_record_offsets(
+            "sparse::steps::record_offsets_are_the_headers",
+            "wp_sparse.h",
+            &fields,
         );
-        for (c, f, _) in &fields {
-            src += &format!("  P({c}, {f});\n");
-        }
-        src += "  return 0;\n}\n";
-        let dir = std::env::temp_dir().join(format!("wp_sparse_offsets_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
-        std::fs::write(&cpp, src).unwrap();
-        let out = std::process::Command::new("g++")
-            .args([
-                "-std=c++17",
-                "-Wall",
-                "-Wextra",
-                "-Werror",
-                "-I",
-                CUDA_DIR,
-                "-I",
-            ])
-            .arg(format!("{CUDA_DIR}/tests"))
-            .arg(&cpp)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "g++: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let out = std::process::Command::new(&exe).output().unwrap();
-        let got = String::from_utf8(out.stdout).unwrap();
-        let want: String = fields
-            .iter()
-            .map(|(c, f, o)| format!("{c} {f} {o}\n"))
-            .collect();
-        assert_eq!(got, want);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

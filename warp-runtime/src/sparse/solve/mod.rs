@@ -53,8 +53,14 @@ pub enum Precond {
 /// `precond`; a closure `|r: &Array<S>, z: &Array<S>| -> Result<()>` is one.
 ///
 /// The solver calls it with two distinct arrays of the system's scalar length, `r` to read
-/// and `z` to write completely (views of the solver's own arrays), once in the set-up and
-/// once or twice per iteration, each call queued in order with the solver's steps. In
+/// and `z` to write completely (views of the solver's own arrays), each call queued in order
+/// with the solver's steps: [`cg`] once in the set-up and once per iteration, [`cr`] once in
+/// the set-up and twice per iteration, [`bicgstab`] twice per iteration, [`gmres`] once per
+/// Arnoldi step and once per restart cycle. It is also called for the iterations queued after the solve stopped (up to
+/// `check_every` of them, and in [`Mode::Graph`] once more before the capture, to load the
+/// kernels): those outputs are unused, and their inputs may be stale or non-finite (after
+/// [`Stop::NonFinite`]), so it must neither fail on such input (a fault it raises would turn
+/// the solve's `Ok` into an error) nor keep state from it. In
 /// [`Mode::Graph`] the calls happen inside the solver's capture, so the work it queues is
 /// recorded (and replayed each iteration of the captured loop): it must be capturable (no
 /// read-back or allocation, which a capture refuses with an error that the solve returns),
@@ -174,8 +180,11 @@ pub struct SolveOptions {
     pub check_every: usize,
     /// How the iterations are driven (default [`Mode::Host`]).
     pub mode: Mode,
-    /// [`gmres`]'s restart length: Arnoldi steps per cycle, each keeping one more basis
-    /// vector (default 30; at least 1). The other methods ignore it.
+    /// [`gmres`]'s restart length `m`: Arnoldi steps per cycle, each keeping one more basis
+    /// vector (default 30; 1 to 1024). A cycle queues about `6 m + 3 m (m + 1) / 2` steps
+    /// (modified Gram-Schmidt: a dot and an update per pair), which a [`Mode::Graph`] solve
+    /// records as graph nodes: about 1,500 at 30, 26,000 at 128, 1.6 million at 1024, whose
+    /// instantiation takes seconds and much memory. The other methods ignore it.
     pub restart: usize,
 }
 

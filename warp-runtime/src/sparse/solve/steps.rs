@@ -634,11 +634,9 @@ unsafe impl<S: SparseScalar, const METHOD: u8> ObjectStep for KrScalar<S, METHOD
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::mem::offset_of;
 
     /// `wp_sparse.h`, whose Krylov section is the C++ side of every record and constant here.
     const HEADER: &str = include_str!("../../../../warp-cuda/cuda/wp_sparse.h");
-    const CUDA_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../warp-cuda/cuda");
 
     /// Every `constexpr i32 SPK_NAME = value` of the header (several per declaration).
     fn header_constants() -> Vec<(String, i64)> {
@@ -741,76 +739,22 @@ mod tests {
         assert_eq!(g_len(3), g_y(3) + 3);
     }
 
-    /// (C++ record, field, Rust's offset) for every field of every record.
-    macro_rules! layouts {
-        ($($rust:ty => $c:literal { $($f:ident),* $(,)? }),* $(,)?) => {
-            vec![$($(($c, stringify!($f), offset_of!($rust, $f))),*),*]
-        };
-    }
-
     /// Each record's fields sit at the same offsets in Rust and in C++ (g++'s `offsetof`).
     /// Skipped, saying so, without g++.
     #[test]
     fn record_offsets_are_the_headers() {
-        let fields = layouts![
+        let fields = record_layouts![
             KrVec<f32> => "spk_vec_t" { ctl, scal, y, x, w, n, op, ia, ib, gate },
             KrComb<f32> => "spk_comb_t" { ctl, scal, out, v, n, iy, add, m, pad },
             KrScalar<f32, 0> => "spk_scalar_t" {
                 ctl, scal, history, rtol, atol, max_iter, phase, m, j
             },
         ];
-        if std::process::Command::new("g++")
-            .arg("--version")
-            .output()
-            .is_err()
-        {
-            eprintln!("SKIPPED record_offsets_are_the_headers: no g++ on this machine");
-            return;
-        }
-        let mut src = String::from(
-            "#include <cstddef>\n#include <cstdio>\n#include \"wp_prim_emu.h\"\n\
-             #define __global__\n#define __device__ inline\n#define __shared__ static\n\
-             #include \"wp_sparse.h\"\nusing namespace wp;\n\
-             #define P(T, f) printf(\"%s %s %zu\\n\", #T, #f, offsetof(T, f))\n\
-             int main() {\n",
+        crate::sparse::record_check::check_record_offsets(
+            "sparse::solve::steps::record_offsets_are_the_headers",
+            "wp_sparse.h",
+            &fields,
         );
-        for (c, f, _) in &fields {
-            src += &format!("  P({c}, {f});\n");
-        }
-        src += "  return 0;\n}\n";
-        let dir = std::env::temp_dir().join(format!("wp_sparse_kr_offsets_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let (cpp, exe) = (dir.join("offsets.cpp"), dir.join("offsets"));
-        std::fs::write(&cpp, src).unwrap();
-        let out = std::process::Command::new("g++")
-            .args([
-                "-std=c++17",
-                "-Wall",
-                "-Wextra",
-                "-Werror",
-                "-I",
-                CUDA_DIR,
-                "-I",
-            ])
-            .arg(format!("{CUDA_DIR}/tests"))
-            .arg(&cpp)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "g++: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let out = std::process::Command::new(&exe).output().unwrap();
-        let got = String::from_utf8(out.stdout).unwrap();
-        let want: String = fields
-            .iter()
-            .map(|(c, f, o)| format!("{c} {f} {o}\n"))
-            .collect();
-        assert_eq!(got, want);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// Every Krylov kernel name the Rust side launches is a kernel of the compiled build
