@@ -1,6 +1,6 @@
-//! Tests only: the step records' layouts against their C++ structs. The sizes are asserted on
-//! both sides at compile time, but two swapped fields of one size (`rows` and `cols`) keep
-//! the size; g++'s `offsetof` of every field catches them.
+//! Tests only: the step records' layouts and the constants against their C++ side. The sizes
+//! are asserted on both sides at compile time, but two swapped fields of one size (`rows` and
+//! `cols`) keep the size; g++'s `offsetof` of every field catches them.
 
 /// `(C++ struct, field, Rust offset)` of every listed field of every record:
 /// `record_layouts![Rust<T> => "c_struct_t" { field, .. }, ..]`.
@@ -68,4 +68,27 @@ pub(super) fn check_record_offsets(test: &str, header: &str, fields: &[(&str, &s
         .collect();
     assert_eq!(got, want);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every `constexpr i32|i64 NAME = value` of `header` whose name starts with `prefix` (several
+/// per declaration), for the tests that compare them with Rust's constants.
+pub(super) fn header_constants(header: &str, prefix: &str) -> Vec<(String, i64)> {
+    let mut out = vec![];
+    for decl in header.split("constexpr ").skip(1) {
+        let decl = &decl[..decl.find(';').expect("a declaration ends with `;`")];
+        let Some(rest) = decl
+            .strip_prefix("i32 ")
+            .or_else(|| decl.strip_prefix("i64 "))
+        else {
+            continue;
+        };
+        for item in rest.split(',') {
+            let (name, value) = item.split_once('=').expect("NAME = value");
+            let name = name.trim();
+            if name.starts_with(prefix) {
+                out.push((name.to_string(), value.trim().parse().expect("an integer")));
+            }
+        }
+    }
+    out
 }

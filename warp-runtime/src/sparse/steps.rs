@@ -1167,24 +1167,7 @@ mod tests {
 
     /// Every `constexpr i32|i64 SP_NAME = value` of the header (several per declaration).
     fn header_constants() -> Vec<(String, i64)> {
-        let mut out = vec![];
-        for decl in HEADER.split("constexpr ").skip(1) {
-            let decl = &decl[..decl.find(';').expect("a declaration ends with `;`")];
-            let Some(rest) = decl
-                .strip_prefix("i32 ")
-                .or_else(|| decl.strip_prefix("i64 "))
-            else {
-                continue;
-            };
-            for item in rest.split(',') {
-                let (name, value) = item.split_once('=').expect("NAME = value");
-                let name = name.trim();
-                if name.starts_with("SP_") {
-                    out.push((name.to_string(), value.trim().parse().expect("an integer")));
-                }
-            }
-        }
-        out
+        crate::sparse::record_check::header_constants(HEADER, "SP_")
     }
 
     /// The header's `SP_*` constants are Rust's, one for one: the Rust side addresses the

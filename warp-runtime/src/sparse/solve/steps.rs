@@ -638,20 +638,9 @@ mod tests {
     /// `wp_sparse.h`, whose Krylov section is the C++ side of every record and constant here.
     const HEADER: &str = include_str!("../../../../warp-cuda/cuda/wp_sparse.h");
 
-    /// Every `constexpr i32 SPK_NAME = value` of the header (several per declaration).
+    /// Every `constexpr i32 SPK_NAME = value` of the header.
     fn header_constants() -> Vec<(String, i64)> {
-        let mut out = vec![];
-        for decl in HEADER.split("constexpr i32 ").skip(1) {
-            let decl = &decl[..decl.find(';').expect("a declaration ends with `;`")];
-            for item in decl.split(',') {
-                let (name, value) = item.split_once('=').expect("NAME = value");
-                let name = name.trim();
-                if name.starts_with("SPK_") {
-                    out.push((name.to_string(), value.trim().parse().expect("an integer")));
-                }
-            }
-        }
-        out
+        crate::sparse::record_check::header_constants(HEADER, "SPK_")
     }
 
     /// The header's `SPK_*` constants are Rust's `kr` constants, one for one (the Rust side
