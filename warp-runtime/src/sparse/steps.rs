@@ -592,12 +592,13 @@ fn mv_row<B: Block>(
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
 // not overlapping x (mv checked).
 unsafe impl<B: Block> ObjectStep for BsrMv<B> {
-    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library: the
-    // one static of it, so that both kinds of step share its compiled module.
+    // The rectangular blocks' (slice 2) are instantiated in wp_sparse_ops.h's library
+    // (ops_steps.rs' OPS_LIBRARY, spelled here: ops_steps imports this file, and files import
+    // one way, tests/architecture.rs; a library is its section name, nothing more).
     const LIBRARY: &'static ObjectLibrary = if B::ROWS == B::COLS {
         &LIBRARY
     } else {
-        &super::ops_steps::OPS_LIBRARY
+        &ObjectLibrary::of("sparse_ops")
     };
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
