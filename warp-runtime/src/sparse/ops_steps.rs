@@ -8,7 +8,7 @@
 //! kernel per scalar type (or one, for the integer steps), whatever the block type.
 
 use super::block::SparseScalar;
-use super::steps::{slice, Ptr};
+use super::steps::{by_scalar, slice, Ptr};
 use crate::backend::{ObjectLibrary, ObjectStep, StepFault};
 use crate::error::{Error, Result};
 use crate::kernel::KernelInfo;
@@ -26,15 +26,6 @@ pub(crate) static DENSE_NAMES: KernelInfo = KernelInfo {
     params: &["a"],
     ..KernelInfo::BLANK
 };
-
-/// The kernel of scalar `S`: `f32` or `f64` (the sealed scalars).
-const fn pick<S>(f32: &'static str, f64: &'static str) -> &'static str {
-    if std::mem::size_of::<S>() == 8 {
-        f64
-    } else {
-        f32
-    }
-}
 
 /// A matrix's block count (`sp_nnz`): `offsets[nrow]` if it is in `0..=cap`, else 0 (the
 /// primitives' rule for a device count, which the transpose's sort reads from the same word).
@@ -94,7 +85,8 @@ const _: () = assert!(std::mem::size_of::<Scale<f32>>() == 40);
 // (cap blocks of `block` scalars).
 unsafe impl<S: SparseScalar> ObjectStep for Scale<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
-    const KERNEL: &'static str = pick::<S>("wp_sparse_ops_scale_f32", "wp_sparse_ops_scale_f64");
+    const KERNEL: &'static str =
+        by_scalar::<S>("wp_sparse_ops_scale_f32", "wp_sparse_ops_scale_f64");
 
     fn len(&self) -> usize {
         self.cap as usize * self.block as usize
@@ -154,7 +146,7 @@ fn find(offsets: &[i32], columns: &[i32], nnz: usize, r: usize, c: i32) -> Optio
 // blocks not overlapping them (diag checked).
 unsafe impl<S: SparseScalar> ObjectStep for Diag<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
-    const KERNEL: &'static str = pick::<S>("wp_sparse_ops_diag_f32", "wp_sparse_ops_diag_f64");
+    const KERNEL: &'static str = by_scalar::<S>("wp_sparse_ops_diag_f32", "wp_sparse_ops_diag_f64");
 
     fn len(&self) -> usize {
         self.nrow.min(self.ncol) as usize
@@ -205,7 +197,7 @@ const _: () = assert!(std::mem::size_of::<SetDiag<f32>>() == 48);
 unsafe impl<S: SparseScalar> ObjectStep for SetDiag<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
     const KERNEL: &'static str =
-        pick::<S>("wp_sparse_ops_set_diag_f32", "wp_sparse_ops_set_diag_f64");
+        by_scalar::<S>("wp_sparse_ops_set_diag_f32", "wp_sparse_ops_set_diag_f64");
 
     fn len(&self) -> usize {
         self.nrow as usize + 1
@@ -266,7 +258,7 @@ const _: () = assert!(std::mem::size_of::<ToDense<f32>>() == 56);
 unsafe impl<S: SparseScalar> ObjectStep for ToDense<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
     const KERNEL: &'static str =
-        pick::<S>("wp_sparse_ops_to_dense_f32", "wp_sparse_ops_to_dense_f64");
+        by_scalar::<S>("wp_sparse_ops_to_dense_f32", "wp_sparse_ops_to_dense_f64");
 
     fn len(&self) -> usize {
         self.nrow as usize * self.rows as usize
@@ -331,12 +323,12 @@ const _: () = assert!(std::mem::size_of::<Dense<f32, false>>() == 72);
 unsafe impl<S: SparseScalar, const GATHER: bool> ObjectStep for Dense<S, GATHER> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
     const KERNEL: &'static str = if GATHER {
-        pick::<S>(
+        by_scalar::<S>(
             "wp_sparse_ops_dense_gather_f32",
             "wp_sparse_ops_dense_gather_f64",
         )
     } else {
-        pick::<S>(
+        by_scalar::<S>(
             "wp_sparse_ops_dense_flags_f32",
             "wp_sparse_ops_dense_flags_f64",
         )
@@ -431,7 +423,7 @@ const _: () = assert!(std::mem::size_of::<DenseReport<f32>>() == 64);
 // of its rows, or is i32::MAX).
 unsafe impl<S: SparseScalar> ObjectStep for DenseReport<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
-    const KERNEL: &'static str = pick::<S>(
+    const KERNEL: &'static str = by_scalar::<S>(
         "wp_sparse_ops_dense_report_f32",
         "wp_sparse_ops_dense_report_f64",
     );
@@ -557,7 +549,7 @@ const _: () = assert!(std::mem::size_of::<Transpose<f32>>() == 96);
 unsafe impl<S: SparseScalar> ObjectStep for Transpose<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
     const KERNEL: &'static str =
-        pick::<S>("wp_sparse_ops_transpose_f32", "wp_sparse_ops_transpose_f64");
+        by_scalar::<S>("wp_sparse_ops_transpose_f32", "wp_sparse_ops_transpose_f64");
 
     fn len(&self) -> usize {
         (self.cap as usize).max(self.ncol as usize + 1)
@@ -641,7 +633,7 @@ const _: () = assert!(std::mem::size_of::<ToTriplets<f32>>() == 88);
 // the matrix.
 unsafe impl<S: SparseScalar> ObjectStep for ToTriplets<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
-    const KERNEL: &'static str = pick::<S>(
+    const KERNEL: &'static str = by_scalar::<S>(
         "wp_sparse_ops_to_triplets_f32",
         "wp_sparse_ops_to_triplets_f64",
     );
@@ -824,7 +816,7 @@ const _: () = assert!(std::mem::size_of::<MmExpand<f32>>() == 136);
 unsafe impl<S: SparseScalar> ObjectStep for MmExpand<S> {
     const LIBRARY: &'static ObjectLibrary = &OPS_LIBRARY;
     const KERNEL: &'static str =
-        pick::<S>("wp_sparse_ops_mm_expand_f32", "wp_sparse_ops_mm_expand_f64");
+        by_scalar::<S>("wp_sparse_ops_mm_expand_f32", "wp_sparse_ops_mm_expand_f64");
 
     fn len(&self) -> usize {
         self.a_nrow as usize

@@ -45,7 +45,25 @@ impl<T> Ptr<T> {
     }
 }
 
+/// The kernel of a scalar-generic step: `f32_name` or `f64_name` by the scalar's size (the
+/// sealed scalars are `f32` and `f64`).
+pub(super) const fn by_scalar<S>(f32_name: &'static str, f64_name: &'static str) -> &'static str {
+    if std::mem::size_of::<S>() == 8 {
+        f64_name
+    } else {
+        f32_name
+    }
+}
+
 impl<T: Copy> Ptr<T> {
+    /// Reads element `i`.
+    ///
+    /// # Safety
+    /// Element `i` is initialised and no other task writes it.
+    pub(super) unsafe fn get(self, i: usize) -> T {
+        *self.at(i)
+    }
+
     /// Stores `v` at element `i` by a relaxed atomic store, for steps whose tasks write
     /// disjoint elements only while a matrix's offsets ascend: a user may overwrite them
     /// through [`Bsr::offsets`](super::Bsr::offsets), and then two tasks may write one

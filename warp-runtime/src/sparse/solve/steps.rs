@@ -12,7 +12,7 @@
 use crate::backend::{ObjectLibrary, ObjectStep};
 use crate::error::Result;
 use crate::sparse::block::SparseScalar;
-use crate::sparse::steps::{cg as c, LIBRARY};
+use crate::sparse::steps::{by_scalar, cg as c, Ptr, LIBRARY};
 use rayon::prelude::*;
 use std::marker::PhantomData;
 
@@ -114,35 +114,6 @@ pub(crate) mod kr {
 }
 
 use kr::*;
-
-/// A pointer rayon tasks share, for element-wise access no two tasks share.
-#[derive(Clone, Copy)]
-struct Ptr<T>(*mut T);
-// SAFETY: every use touches elements no other task touches (see the callers).
-unsafe impl<T> Send for Ptr<T> {}
-unsafe impl<T> Sync for Ptr<T> {}
-impl<T: Copy> Ptr<T> {
-    /// Element `i` (a method, so that closures capture the `Ptr`).
-    fn at(self, i: usize) -> *mut T {
-        self.0.wrapping_add(i)
-    }
-    /// Reads element `i`.
-    ///
-    /// # Safety
-    /// Element `i` is initialised and no other task writes it.
-    unsafe fn get(self, i: usize) -> T {
-        *self.at(i)
-    }
-}
-
-/// The kernel of a scalar-generic step: `f32` or `f64` by the scalar's size.
-const fn by_scalar<S>(f32_name: &'static str, f64_name: &'static str) -> &'static str {
-    if std::mem::size_of::<S>() == 4 {
-        f32_name
-    } else {
-        f64_name
-    }
-}
 
 /// Whether a gated step runs (`spk_open`).
 fn open(ctl: &[i32], gate: i32) -> bool {
