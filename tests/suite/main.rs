@@ -87,6 +87,7 @@ mod arith;
 mod arrays;
 mod asserts;
 mod atomics;
+mod bsr;
 mod bf16;
 mod builtins;
 mod bvh;
