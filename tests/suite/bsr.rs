@@ -345,10 +345,10 @@ fn k_add_at(a: Bsr<Mat3>, k: i32) {
 
 fn out_of_bounds(r: wp::Result<()>) -> (Vec<i128>, Vec<usize>) {
     match r {
-        Err(Error::Fault(f)) => match f.kind {
+        Err(Error::Fault(f)) => match &f.kind {
             FaultKind::OutOfBounds { arg, index, shape } => {
-                assert_eq!(arg, "a", "{f}");
-                (index, shape)
+                assert_eq!(*arg, "a", "{f}");
+                (index.clone(), shape.clone())
             }
             k => panic!("{k:?}"),
         },
@@ -415,7 +415,11 @@ fn value_gradients_are_exact_for_a_linear_loss(dev: &wp::Device) {
         wp::launch(k_ddot, n, (&a, &arr(&w, dev), &out), dev).unwrap();
     }
     tape.backward(&out).unwrap();
-    let grad = host(&a.values().grad().expect("with_grad gave the values a gradient"));
+    let grad = host(
+        &a.values()
+            .grad()
+            .expect("with_grad gave the values a gradient"),
+    );
     let nnz = a.nnz().unwrap();
     // Each stored slot is read once, with seed 1: its gradient is w exactly; the capacity
     // past nnz is never read.

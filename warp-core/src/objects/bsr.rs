@@ -270,15 +270,8 @@ impl<B: BsrBlock> BsrView<B> {
     pub fn empty() -> Self {
         static ZERO: i32 = 0;
         // SAFETY: one element, `ZERO`, only ever read (offsets are never written).
-        let offsets = unsafe {
-            ArrayView::new(
-                (&ZERO as *const i32).cast_mut(),
-                [1],
-                [1],
-                "bsr",
-                "a",
-            )
-        };
+        let offsets =
+            unsafe { ArrayView::new((&ZERO as *const i32).cast_mut(), [1], [1], "bsr", "a") };
         BsrView {
             offsets,
             columns: std::ptr::NonNull::dangling().as_ptr(),
@@ -461,11 +454,13 @@ pub fn bsr_block_index<B: BsrBlock>(a: BsrView<B>, r: i32, c: i32) -> KResult<i3
     }
     let (_, end) = a.range(r);
     // SAFETY: as above.
-    Ok(if lo < end && unsafe { a.columns.add(lo as usize).read() } == c {
-        lo
-    } else {
-        -1
-    })
+    Ok(
+        if lo < end && unsafe { a.columns.add(lo as usize).read() } == c {
+            lo
+        } else {
+            -1
+        },
+    )
 }
 
 /// Warp-lang's `bsr_row_index`: the row that holds slot `k` (the first row whose end is past
@@ -569,7 +564,11 @@ mod tests {
         let mut m = M::new();
         let a = m.view();
         assert_eq!(
-            (bsr_nrow(a).unwrap(), bsr_ncol(a).unwrap(), bsr_nnz(a).unwrap()),
+            (
+                bsr_nrow(a).unwrap(),
+                bsr_ncol(a).unwrap(),
+                bsr_nnz(a).unwrap()
+            ),
             (3, 3, 4)
         );
         assert_eq!(row(a, 0), [0, 1]);
@@ -577,7 +576,14 @@ mod tests {
         assert_eq!(row(a, 2), [2, 3]);
         assert_eq!(bsr_col(a, 3).unwrap(), 2);
         assert_eq!(bsr_block(a, 2).unwrap(), 3.0);
-        for (r, c, k) in [(0, 0, 0), (0, 2, 1), (0, 1, -1), (1, 1, -1), (2, 1, 2), (2, 2, 3)] {
+        for (r, c, k) in [
+            (0, 0, 0),
+            (0, 2, 1),
+            (0, 1, -1),
+            (1, 1, -1),
+            (2, 1, 2),
+            (2, 2, 3),
+        ] {
             assert_eq!(bsr_block_index(a, r, c).unwrap(), k, "({r}, {c})");
         }
         assert_eq!(bsr_block_index(a, 0, 3).unwrap(), -1);
