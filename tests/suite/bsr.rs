@@ -507,3 +507,39 @@ fn backward_through_a_block_write_is_refused(dev: &wp::Device) {
     let e = tape.backward(&s).unwrap_err().to_string();
     assert!(e.contains("bsr_set_block"), "{e}");
 }
+
+/// NVRTC accepts every kernel above, forward, and with its adjoint where it has one (the
+/// generated code against `wp_bsr.h` and `wp_adjoint_bsr.h`), for sm_90 and sm_80: needs
+/// libnvrtc, no GPU; skipped, saying so, without it.
+#[test]
+fn nvrtc_compiles_the_kernels() {
+    if let Err(e) = warp_cuda::nvrtc_version() {
+        eprintln!("SKIPPED bsr::nvrtc_compiles_the_kernels: {e}");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("wp_bsr_aot_{}", std::process::id()));
+    let forward = [
+        wp::aot::kernel(k_assemble),
+        wp::aot::kernel(k_write_rect),
+        wp::aot::kernel(k_write_dmat3),
+        wp::aot::kernel(k_add_at),
+        wp::aot::kernel(k_scale_blocks),
+    ];
+    let both = [
+        wp::aot::kernel(k_residual_f64),
+        wp::aot::kernel(k_residual_mat3),
+        wp::aot::kernel(k_block_index),
+        wp::aot::kernel(k_slots),
+        wp::aot::kernel(k_row_lengths),
+        wp::aot::kernel(k_read_slot),
+        wp::aot::kernel(k_row_at),
+        wp::aot::kernel(k_index_at),
+        wp::aot::kernel(k_ddot),
+        wp::aot::kernel(k_nonlinear),
+    ];
+    let built = wp::aot::compile(&forward, &[90, 80], &dir).unwrap();
+    assert_eq!(built.len(), forward.len() * 2 * 2);
+    let built = wp::aot::compile_with_adjoints(&both, &[90, 80], &dir).unwrap();
+    assert_eq!(built.len(), both.len() * 2 * 2 * 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}
