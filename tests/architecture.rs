@@ -1301,12 +1301,6 @@ const RUNTIME_LAYER_EXCEPTIONS: &[(&str, &[&str], &str)] = &[
         &["array.rs", "array/"],
         "collectives take `Array`s",
     ),
-    (
-        "objects/mod.rs",
-        &["sparse/"],
-        "re-exports the sparse tier's `Bsr` (a kernel-visible host object, behind the `sparse` \
-         feature) beside the other objects, into the prelude kernel files import",
-    ),
 ];
 
 const RUNTIME_SRC: &str = "warp-runtime/src/";
