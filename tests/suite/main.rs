@@ -88,6 +88,7 @@ mod arrays;
 mod asserts;
 mod atomics;
 mod bf16;
+mod bsr;
 mod builtins;
 mod bvh;
 mod checkpoint;

@@ -216,6 +216,9 @@ pub static SECTIONS: &[Section] = &[
     kernel!("bvh",       None,                                    Yes),
     kernel!("mesh",      Some(header!("wp_adjoint_mesh.h")),      WithRegisterCap),
     kernel!("volume",    Some(header!("wp_adjoint_volume.h")),    Yes),
+    // Sparse matrices in kernels (the sparse tier's Bsr<B>): loads, stores and atomic adds,
+    // no arithmetic of their own to round.
+    kernel!("bsr",       Some(header!("wp_adjoint_bsr.h")),       No),
     kernel!("print",     None,                                    No),
     // Tiles (docs: the tiles chapter): exact, so that elementwise results match the CPU.
     kernel!("tile",      Some(header!("wp_adjoint_tile.h")),      Yes),

@@ -175,18 +175,19 @@ macro_rules! object_kinds {
 
         impl ObjectKind {
             /// The view's or C++ type's generic argument, where the kind has one
-            /// (`Volume<T>`'s `T`).
-            pub fn elem(self) -> Option<VolumeElem> {
+            /// (`Volume<T>`'s `T`, `Bsr<B>`'s `B`).
+            pub fn elem(self) -> Option<Elem> {
                 match self {
                     $( object_kinds!(@pat e $kind $($elem)?) => object_kinds!(@get e $($elem)?), )*
                 }
             }
 
-            /// This kind with element `e` (itself for kinds without one).
-            pub fn with_elem(self, e: VolumeElem) -> ObjectKind {
+            /// This kind with element `e` (itself for kinds without one, or whose element is
+            /// of another kind than `e`).
+            pub fn with_elem(self, e: Elem) -> ObjectKind {
                 let _ = e;
                 match self {
-                    $( object_kinds!(@pat _old $kind $($elem)?) => object_kinds!(@set e $kind $($elem)?), )*
+                    $( object_kinds!(@pat _old $kind $($elem)?) => object_kinds!(@set e self $kind $($elem)?), )*
                 }
             }
         }
@@ -199,9 +200,14 @@ macro_rules! object_kinds {
     (@pat $x:ident $kind:ident) => { ObjectKind::$kind };
     (@pat $x:ident $kind:ident $elem:ident) => { ObjectKind::$kind($x) };
     (@get $x:ident) => { None };
-    (@get $x:ident $elem:ident) => { Some($x) };
-    (@set $x:ident $kind:ident) => { ObjectKind::$kind };
-    (@set $x:ident $kind:ident $elem:ident) => { ObjectKind::$kind($x) };
+    (@get $x:ident $elem:ident) => { Some(Elem::from($x)) };
+    (@set $x:ident $me:ident $kind:ident) => { ObjectKind::$kind };
+    (@set $x:ident $me:ident $kind:ident $elem:ident) => {
+        match $elem::try_from($x) {
+            Ok(e) => ObjectKind::$kind(e),
+            Err(()) => $me,
+        }
+    };
 }
 
 object_kinds! {
@@ -228,6 +234,109 @@ object_kinds! {
     /// The element is part of the type, so a grid of one type where another is declared does
     /// not compile (the runtime's `Volume<T>` is the launch argument's type).
     Volume(VolumeElem): param, "VolumeView", "wp::volume_t", "volume";
+    /// `Bsr<B>`: a kernel parameter, a block sparse row matrix of `B` blocks (the `sparse`
+    /// tier's); its CPU view is `warp_core::objects::BsrView<B>`, its CUDA type
+    /// `wp::bsr_t<B>`. Kernels read its structure and read and write its values.
+    Bsr(BlockElem): param, "BsrView", "wp::bsr_t", "bsr";
+    /// The state of a row's iteration (`for k in bsr_row(a, r)`).
+    BsrRow: state, "BsrRowQuery", "wp::bsr_row_query_t", "bsr";
+}
+
+/// The element of an object generic over one: a volume's value type or a matrix's block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Elem {
+    Volume(VolumeElem),
+    Block(BlockElem),
+}
+
+impl From<VolumeElem> for Elem {
+    fn from(e: VolumeElem) -> Elem {
+        Elem::Volume(e)
+    }
+}
+
+impl From<BlockElem> for Elem {
+    fn from(e: BlockElem) -> Elem {
+        Elem::Block(e)
+    }
+}
+
+impl TryFrom<Elem> for VolumeElem {
+    type Error = ();
+    fn try_from(e: Elem) -> Result<VolumeElem, ()> {
+        match e {
+            Elem::Volume(v) => Ok(v),
+            Elem::Block(_) => Err(()),
+        }
+    }
+}
+
+impl TryFrom<Elem> for BlockElem {
+    type Error = ();
+    fn try_from(e: Elem) -> Result<BlockElem, ()> {
+        match e {
+            Elem::Block(b) => Ok(b),
+            Elem::Volume(_) => Err(()),
+        }
+    }
+}
+
+impl Elem {
+    /// The element's type (`None` for an index grid's, which has none).
+    pub fn ty(self) -> Option<Ty> {
+        match self {
+            Elem::Volume(v) => v.ty(),
+            Elem::Block(b) => Some(b.ty()),
+        }
+    }
+}
+
+/// What a `Bsr<B>` holds: `rows x cols` scalars of `f32` or `f64` (the sparse tier's block
+/// types): `1 x 1` is the scalar itself, a square `2..4` glam's `Mat2`..`DMat4`, and `R != C`
+/// in {2, 3, 4, 6} warp-core's `Mat23`..`DMat64`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BlockElem {
+    pub scalar: Scalar,
+    pub rows: u8,
+    pub cols: u8,
+}
+
+impl BlockElem {
+    /// The element of the row `Bsr(BlockElem)` is written with (its kinds share the row).
+    pub const ROW: BlockElem = BlockElem {
+        scalar: Scalar::F32,
+        rows: 1,
+        cols: 1,
+    };
+
+    /// The block of a value type, if it is one.
+    pub fn of(t: &Ty) -> Option<BlockElem> {
+        let (scalar, rows, cols) = match t {
+            Ty::Scalar(s) => (*s, 1, 1),
+            Ty::Matrix(s, n) => (*s, *n, *n),
+            Ty::MatRC(s, r, c) => (*s, *r, *c),
+            _ => return None,
+        };
+        let dims = [2, 3, 4, 6];
+        let ok = matches!(scalar, Scalar::F32 | Scalar::F64)
+            && ((rows, cols) == (1, 1)
+                || (rows == cols && (2..=4).contains(&rows))
+                || (rows != cols && dims.contains(&rows) && dims.contains(&cols)));
+        ok.then_some(BlockElem { scalar, rows, cols })
+    }
+
+    /// The block's value type.
+    pub fn ty(self) -> Ty {
+        match (self.rows, self.cols) {
+            (1, 1) => Ty::Scalar(self.scalar),
+            (r, c) if r == c => Ty::Matrix(self.scalar, r),
+            (r, c) => Ty::MatRC(self.scalar, r, c),
+        }
+    }
+
+    /// The block types, as messages list them.
+    pub const DESCRIBE: &'static str =
+        "f32, f64, Mat2-4, DMat2-4, Mat23 .. Mat64 or DMat23 .. DMat64";
 }
 
 /// What a `Volume<T>` holds: the value types a kernel can sample, or voxel indices (Warp's
@@ -700,6 +809,7 @@ impl fmt::Display for Ty {
                 write!(f, "({})", ts.join(", "))
             }
             Ty::Object(ObjectKind::Volume(e)) => write!(f, "Volume<{}>", e.name()),
+            Ty::Object(ObjectKind::Bsr(e)) => write!(f, "Bsr<{}>", e.ty()),
             Ty::Object(k) => f.write_str(k.row().name),
             Ty::Tile(e, dims) => {
                 write!(f, "Tile<{e}")?;
@@ -825,12 +935,25 @@ mod tests {
         );
         let v3 = ObjectKind::Volume(VolumeElem::Vec3);
         assert_eq!(v3.row().name, "Volume");
-        assert_eq!(v3.elem(), Some(VolumeElem::Vec3));
+        assert_eq!(v3.elem(), Some(VolumeElem::Vec3.into()));
         assert_eq!(
-            v3.with_elem(VolumeElem::Index).elem(),
-            Some(VolumeElem::Index)
+            v3.with_elem(VolumeElem::Index.into()).elem(),
+            Some(VolumeElem::Index.into())
         );
-        assert_eq!(ObjectKind::Bvh.with_elem(VolumeElem::F64), ObjectKind::Bvh);
+        // A volume given a block keeps its own element; a matrix takes a block.
+        let m = BlockElem::of(&Ty::MatRC(Scalar::F64, 2, 6)).unwrap();
+        assert_eq!(v3.with_elem(m.into()), v3);
+        let bsr = ObjectKind::Bsr(BlockElem::ROW).with_elem(m.into());
+        assert_eq!(bsr.elem(), Some(m.into()));
+        assert_eq!(bsr.row().name, "Bsr");
+        assert_eq!(Ty::Object(bsr).to_string(), "Bsr<DMat26>");
+        assert_eq!(BlockElem::of(&Ty::Matrix(Scalar::F16, 3)), None);
+        assert_eq!(BlockElem::of(&Ty::SpatialMatrix(Scalar::F32)), None);
+        assert_eq!(BlockElem::of(&Ty::Scalar(Scalar::I32)), None);
+        assert_eq!(
+            ObjectKind::Bvh.with_elem(VolumeElem::F64.into()),
+            ObjectKind::Bvh
+        );
         assert_eq!(ObjectKind::Bvh.elem(), None);
         assert_eq!(Ty::Object(v3).to_string(), "Volume<Vec3>");
         for e in VolumeElem::ALL {

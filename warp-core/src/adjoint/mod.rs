@@ -69,6 +69,8 @@ pub use spatial::*;
 pub use svd::*;
 pub use transform::*;
 pub use volume::*;
+// The sparse matrices' one adjoint lives with their view.
+pub use crate::objects::bsr::adj_bsr_block;
 
 /// A type whose values have an adjoint of the same type.
 ///

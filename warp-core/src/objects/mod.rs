@@ -8,6 +8,8 @@
 //! kernel macro lowers `for j in query(..)` into, so the adjoint replays it like any other
 //! value. The CUDA library mirrors each view and query step by step (`wp_<object>.h`).
 //!
+//! - [`bsr`]: block sparse row matrices (the `sparse` tier's `Bsr<B>`): row iteration, block
+//!   reads, writes and atomic adds, block and row lookups, the gradient through block reads.
 //! - [`hash_grid`]: Warp's hash grid: points bucketed into a wrapping uniform grid of cells.
 //! - [`geometry`]: the triangle, ray and box tests the BVH and mesh queries are made of.
 //! - [`bvh`]: Warp's BVH over boxes: the node layout every builder produces, the box and ray
@@ -39,6 +41,7 @@ macro_rules! no_gradient {
     )*};
 }
 
+pub mod bsr;
 pub mod bvh;
 pub mod geometry;
 pub mod hash_grid;
@@ -50,12 +53,17 @@ pub mod volume;
 /// re-exports whole (generated code calls `builtins::NAME`): an object whose builtins are
 /// written in its own module lists them here, and edits no other list.
 pub mod builtins {
+    pub use super::bsr::{
+        bsr_add_block, bsr_block, bsr_block_index, bsr_col, bsr_ncol, bsr_nnz, bsr_nrow, bsr_row,
+        bsr_row_done, bsr_row_index, bsr_row_item, bsr_row_next, bsr_set_block,
+    };
     pub use super::hash_grid::{
         hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,
         hash_grid_query_point,
     };
 }
 
+pub use bsr::{BsrBlock, BsrRowQuery, BsrScalar, BsrView};
 pub use bvh::{BvhNode, BvhQueryAabb, BvhQueryRay, BvhTree, BvhView};
 pub use hash_grid::{HashGridQuery, HashGridView};
 pub use mesh::{MeshQueryAabb, MeshQueryPoint, MeshQueryRay, MeshView};

@@ -65,6 +65,10 @@ pub fn emit(f: &Function, file: &str) -> Result<CudaTemplate, String> {
     for v in &f.vars {
         if let Ty::Object(k) = v.ty {
             e.section(k.row().section);
+            // A matrix of non-square blocks names their type (`wp::bsr_t<wp::Mat23>`).
+            if let Some(Ty::MatRC(..)) = k.elem().and_then(|e| e.ty()) {
+                e.section("matrix");
+            }
         }
     }
     let ret = if matches!(f.ret, Ty::Unit) {

@@ -262,6 +262,8 @@ fn pos(p: &Pos) -> String {
         Pos::VolumeOfT => "Volume<T>".into(),
         Pos::AnyVolume => "Volume<_>".into(),
         Pos::VolumeGradOfT => "Grad(T)".into(),
+        Pos::BsrOfT => "Bsr<T>".into(),
+        Pos::AnyBsr => "Bsr<_>".into(),
         Pos::Unit => "()".into(),
         Pos::Tile => "Tile<T>".into(),
         Pos::TileShape => "shape".into(),

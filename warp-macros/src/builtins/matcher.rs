@@ -76,6 +76,18 @@ impl Builtin {
                         self.name
                     ))
                 }
+                (Pos::BsrOfT, ArgTy::Known(Ty::Object(ObjectKind::Bsr(b)))) if t.is_none() => {
+                    t = Some(b.ty())
+                }
+                (Pos::BsrOfT | Pos::AnyBsr, ArgTy::Known(ty))
+                    if !ty.is_deferred() && !matches!(ty, Ty::Object(ObjectKind::Bsr(_))) =>
+                {
+                    return Err(format!(
+                        "`{}` expects a `Bsr<B>` (a sparse matrix) as its first argument, \
+                         found `{ty}`",
+                        self.name
+                    ))
+                }
                 _ => {}
             }
         }
@@ -185,6 +197,10 @@ impl Builtin {
                 .unwrap_or(Ty::Deferred),
             // Any element: the argument's own type (checked above).
             Pos::AnyVolume => Ty::Deferred,
+            Pos::BsrOfT => crate::types::BlockElem::of(&t)
+                .map(|b| Ty::Object(ObjectKind::Bsr(b)))
+                .unwrap_or(Ty::Deferred),
+            Pos::AnyBsr => Ty::Deferred,
             Pos::VolumeGradOfT => match &t {
                 Ty::Scalar(s) => Ty::Vector(*s, 3),
                 Ty::Vector(s, 3) => Ty::Matrix(*s, 3),
@@ -219,7 +235,7 @@ impl Builtin {
                     ));
                 }
                 ArgTy::Known(_) if *pos == Pos::ArrayOfT => {}
-                ArgTy::Known(_) if *pos == Pos::AnyVolume => {}
+                ArgTy::Known(_) if matches!(pos, Pos::AnyVolume | Pos::AnyBsr) => {}
                 ArgTy::Known(ty)
                     if *pos == Pos::AnyVecOfT
                         && ty.vec_shape().map(|(s, _)| Ty::Scalar(s)) != Some(scalar.clone()) =>
@@ -258,7 +274,9 @@ impl Builtin {
                 _ => {}
             }
             let ty = match (arg, pos) {
-                (ArgTy::Known(ty), Pos::Index | Pos::AnyVolume | Pos::AnyVecOfT) => ty.clone(),
+                (ArgTy::Known(ty), Pos::Index | Pos::AnyVolume | Pos::AnyBsr | Pos::AnyVecOfT) => {
+                    ty.clone()
+                }
                 _ => w,
             };
             params.push(ty);

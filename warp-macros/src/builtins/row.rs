@@ -336,7 +336,10 @@ impl Builtin {
     pub fn reads_object(&self) -> bool {
         self.params.iter().any(|p| {
             matches!(p, Pos::Object(k) if k.row().param)
-                || matches!(p, Pos::VolumeOfT | Pos::AnyVolume)
+                || matches!(
+                    p,
+                    Pos::VolumeOfT | Pos::AnyVolume | Pos::BsrOfT | Pos::AnyBsr
+                )
         })
     }
 

@@ -26,6 +26,7 @@ macro_rules! rows {
 }
 
 mod atomic;
+mod bsr;
 mod geometry;
 mod linalg;
 mod misc;
@@ -48,6 +49,7 @@ const SECTIONS: &[&[Builtin]] = &[
     misc::ROWS,
     geometry::ROWS,
     volume::ROWS,
+    bsr::ROWS,
     tile::ROWS,
 ];
 
@@ -145,6 +147,8 @@ const MESH: Pos = Object(ObjectKind::Mesh);
 pub(super) const MESH_AABB: Pos = Object(ObjectKind::MeshQueryAabb);
 const VOL_VALUE: &[Class] = &[Class::VolumeValue];
 const VOL_FLOAT: &[Class] = &[Class::VolumeFloat];
+const BSR_BLOCK: &[Class] = &[Class::BsrBlock];
+pub(super) const BSR_ROW: Pos = Object(ObjectKind::BsrRow);
 /// A point query's result: `(result, sign, face, u, v)` (Warp's `mesh_query_point_t`).
 const POINT_RESULT: Pos = Tuple(&[BOOL, F32, I32, F32, F32]);
 /// A ray query's result: `(result, sign, face, t, u, v, normal)` (Warp's `mesh_query_ray_t`).

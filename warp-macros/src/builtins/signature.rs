@@ -57,6 +57,8 @@ pub enum Class {
     VolumeValue,
     /// The values a volume interpolates: f32, f64, Vec3, DVec3 (sampling).
     VolumeFloat,
+    /// The block types of a `Bsr<B>`: f32, f64, Mat2-4, DMat2-4, Mat23 .. DMat64.
+    BsrBlock,
 }
 
 impl Class {
@@ -108,6 +110,7 @@ impl Class {
             (Class::VolumeFloat, t) => {
                 crate::types::VolumeElem::of(t).is_some() && *t != Ty::Scalar(Scalar::I32)
             }
+            (Class::BsrBlock, t) => crate::types::BlockElem::of(t).is_some(),
             _ => false,
         }
     }
@@ -138,6 +141,9 @@ impl Class {
             Class::SpatialScalar => "f32 or f64",
             Class::VolumeValue => "a volume value (f32, f64, i32, Vec3, DVec3)",
             Class::VolumeFloat => "a float volume value (f32, f64, Vec3, DVec3)",
+            Class::BsrBlock => {
+                "a sparse matrix block (f32, f64, Mat2-4, DMat2-4, Mat23 .. Mat64, DMat23 .. DMat64)"
+            }
         }
     }
 }
@@ -200,6 +206,10 @@ pub enum Pos {
     /// The gradient of a `T` sample: `Vec3` of `T`'s scalar for a scalar, the 3x3 matrix of
     /// its scalar (row `c`: component `c`'s gradient) for a 3-vector.
     VolumeGradOfT,
+    /// A `Bsr<T>`: binds `T` to the matrix's block type (`bsr_block(a, k) -> T`).
+    BsrOfT,
+    /// A `Bsr` of any block type (the structure's queries).
+    AnyBsr,
     /// `()`: the builtin is a statement (`volume_store`).
     Unit,
     /// A tile of `T` (its shape is the tile typer's business: `front::lower::tiles`).
@@ -222,6 +232,7 @@ impl Pos {
             | Pos::Index
             | Pos::Object(_)
             | Pos::AnyVolume
+            | Pos::AnyBsr
             | Pos::Unit => true,
             // A tuple of fixed types (the mesh queries' results).
             Pos::Tuple(ps) => ps.iter().all(Pos::fixed),

@@ -28,6 +28,7 @@ fn every_entry_is_unique_and_well_formed() {
         let binds_t = b.params.contains(&Pos::T)
             || b.params.contains(&Pos::ArrayOfT)
             || b.params.contains(&Pos::VolumeOfT)
+            || b.params.contains(&Pos::BsrOfT)
             || b.params.iter().any(tile_pos);
         let all_fixed = b.params.iter().chain([&b.ret]).all(Pos::fixed);
         assert!(binds_t || all_fixed, "{} cannot bind T", b.name);

@@ -1,6 +1,6 @@
 //! Kernel and func signatures: parameter types and the return type.
 
-use crate::types::{Dim, ObjectRow, Scalar, Ty, VolumeElem};
+use crate::types::{BlockElem, Dim, Elem, ObjectKind, ObjectRow, Scalar, Ty, VolumeElem};
 use syn::spanned::Spanned;
 use syn::{GenericArgument, PathArguments, Type};
 
@@ -179,18 +179,24 @@ fn parse_array(seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
 }
 
 /// An object generic over its element (`Volume<T>`: a NanoVDB grid of one of the value types,
-/// or `Volume<VoxelIndex>`).
+/// or `Volume<VoxelIndex>`; `Bsr<B>`: a block sparse matrix of `B` blocks).
 fn parse_elem_object(row: &ObjectRow, seg: &syn::PathSegment, whole: &Type) -> syn::Result<Ty> {
     let name = row.name;
+    let is_bsr = matches!(row.kind, ObjectKind::Bsr(_));
     let elems = || {
+        if is_bsr {
+            return BlockElem::DESCRIBE.to_string();
+        }
         let names: Vec<String> = VolumeElem::ALL.iter().map(|e| e.name()).collect();
         names.join(", ")
     };
+    let example = if is_bsr { "Mat3" } else { "f32" };
+    let what = if is_bsr { "block" } else { "value" };
     let PathArguments::AngleBracketed(args) = &seg.arguments else {
         return Err(syn::Error::new(
             whole.span(),
             format!(
-                "{name} needs its value type: {name}<f32> (one of {})",
+                "{name} needs its {what} type: {name}<{example}> (one of {})",
                 elems()
             ),
         ));
@@ -199,14 +205,22 @@ fn parse_elem_object(row: &ObjectRow, seg: &syn::PathSegment, whole: &Type) -> s
     let (Some(GenericArgument::Type(t)), None) = (it.next(), it.next()) else {
         return Err(syn::Error::new(
             whole.span(),
-            format!("{name} takes one type argument: {name}<f32>"),
+            format!("{name} takes one type argument: {name}<{example}>"),
         ));
     };
-    let is_index = matches!(t, Type::Path(p) if p.path.segments.last().is_some_and(|s| s.ident == "VoxelIndex"));
-    let elem = if is_index {
-        Some(VolumeElem::Index)
+    let elem: Option<Elem> = if is_bsr {
+        parse_type(t)
+            .ok()
+            .and_then(|t| BlockElem::of(&t))
+            .map(Elem::from)
+    } else if matches!(t, Type::Path(p) if p.path.segments.last().is_some_and(|s| s.ident == "VoxelIndex"))
+    {
+        Some(VolumeElem::Index.into())
     } else {
-        parse_type(t).ok().and_then(|t| VolumeElem::of(&t))
+        parse_type(t)
+            .ok()
+            .and_then(|t| VolumeElem::of(&t))
+            .map(Elem::from)
     };
     match elem {
         Some(e) => Ok(Ty::Object(row.kind.with_elem(e))),
@@ -379,7 +393,6 @@ fn const_usize(arg: &GenericArgument) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::types::ObjectKind;
     use syn::parse_quote;
 
     #[test]
@@ -416,6 +429,28 @@ mod tests {
             parse_type(&parse_quote!(wp::Volume<wp::VoxelIndex>)).unwrap(),
             Ty::Object(ObjectKind::Volume(VolumeElem::Index))
         );
+        assert_eq!(
+            parse_type(&parse_quote!(wp::Bsr<glam::Mat3>)).unwrap(),
+            Ty::Object(ObjectKind::Bsr(BlockElem {
+                scalar: Scalar::F32,
+                rows: 3,
+                cols: 3
+            }))
+        );
+        assert_eq!(
+            parse_type(&parse_quote!(Bsr<f64>)).unwrap().to_string(),
+            "Bsr<f64>"
+        );
+        for bad in [
+            quote::quote!(Bsr),
+            quote::quote!(Bsr<Vec3>),
+            quote::quote!(Bsr<i32>),
+            quote::quote!(Bsr<SpatialMatrix>),
+            quote::quote!(Bsr<f32, f32>),
+        ] {
+            let t: Type = syn::parse2(bad.clone()).unwrap();
+            assert!(parse_type(&t).is_err(), "{bad}");
+        }
         // Local arrays, nested, of a literal or a const length.
         let t = parse_type(&parse_quote!([[Vec3; 2]; consts::N])).unwrap();
         assert_eq!(t.to_string(), "[[Vec3; 2]; consts::N]");

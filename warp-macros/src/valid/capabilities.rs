@@ -77,6 +77,10 @@ pub fn required_capabilities(f: &Function) -> Vec<Capability> {
             Ty::Object(ObjectKind::Volume(VolumeElem::F64 | VolumeElem::DVec3)) => {
                 Some(Capability::AtomicAddF64)
             }
+            // `bsr_add_block` and `bsr_block`'s adjoint add f64 blocks atomically.
+            Ty::Object(ObjectKind::Bsr(b)) if b.scalar == Scalar::F64 => {
+                Some(Capability::AtomicAddF64)
+            }
             _ => None,
         };
         out.extend(needs);

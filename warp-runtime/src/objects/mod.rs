@@ -46,12 +46,18 @@ pub use mesh::Mesh;
 #[cfg(feature = "obj")]
 pub use obj::ObjMesh;
 pub use volume::{Volume, VOLUME_CLOSEST, VOLUME_LINEAR};
+// The sparse tier's matrix is a kernel parameter too (its module is `sparse`, behind the
+// feature; kernels name it `Bsr<B>`).
+#[cfg(feature = "sparse")]
+pub use crate::sparse::Bsr;
 pub use warp_core::objects::nanovdb::Map as VolumeMap;
 pub use warp_core::objects::VoxelIndex;
 
 /// The names a kernel file uses: the objects' parameter types and what their builtins take
 /// (`warp_lang::prelude` re-exports this module whole).
 pub mod prelude {
+    #[cfg(feature = "sparse")]
+    pub use super::Bsr;
     pub use super::{Bvh, HashGrid, Mesh, Volume, VoxelIndex, VOLUME_CLOSEST, VOLUME_LINEAR};
 }
 

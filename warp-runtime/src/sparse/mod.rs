@@ -51,6 +51,8 @@
 #[macro_use]
 mod record_check;
 mod block;
+// Slice 4: the matrix as a kernel parameter (`HostObject`).
+mod kernel_arg;
 mod solve;
 mod steps;
 // Slice 2: the structure operations (scale, diag, dense, transpose, axpy, mm).
@@ -58,6 +60,7 @@ mod ops;
 mod ops_steps;
 
 pub use block::{Block, BlockMul, SparseScalar, SquareBlock};
+pub use kernel_arg::CudaBsr;
 pub use ops::{axpy, diag, mm, mv_transpose, set_diag, MmWork};
 pub use solve::{
     bicgstab, cg, cr, gmres, IntoPrecond, Mode, Precond, Preconditioner, SolveOptions, SolveReport,
