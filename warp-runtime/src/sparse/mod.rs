@@ -58,8 +58,12 @@ mod steps;
 // Slice 2: the structure operations (scale, diag, dense, transpose, axpy, mm).
 mod ops;
 mod ops_steps;
+// Slice 6: graph colouring (adjacency, Jones-Plassmann).
+mod color;
+mod color_steps;
 
 pub use block::{Block, BlockMul, SparseScalar, SquareBlock};
+pub use color::{Adjacency, Coloring};
 pub use kernel_arg::CudaBsr;
 pub use ops::{axpy, diag, mm, mv_transpose, set_diag, MmWork};
 pub use solve::{
