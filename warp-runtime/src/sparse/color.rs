@@ -117,7 +117,6 @@ impl Adjacency {
         }
         let rows = Array::<i32>::zeros(total, &dev)?;
         let cols = Array::<i32>::zeros(total, &dev)?;
-        let p = pairs(rows.device_address(), cols.device_address(), total as i64);
         run(
             &dev,
             &pairs(rows.device_address(), cols.device_address(), total as i64).step::<false>(),
