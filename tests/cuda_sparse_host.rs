@@ -2158,9 +2158,15 @@ fn coloring_matches_the_cpu() {
             .wrapping_add(1442695040888963407);
         ((state >> 33) % n as u64) as i32
     };
-    for (case, &(n, m)) in [(1usize, 1usize), (7, 12), (60, 300), (500, 1500), (90, 4000)]
-        .iter()
-        .enumerate()
+    for (case, &(n, m)) in [
+        (1usize, 1usize),
+        (7, 12),
+        (60, 300),
+        (500, 1500),
+        (90, 4000),
+    ]
+    .iter()
+    .enumerate()
     {
         let edges: Vec<IVec2> = (0..m)
             .map(|_| IVec2::new(below(n as u32), below(n as u32)))
@@ -2170,22 +2176,41 @@ fn coloring_matches_the_cpu() {
         let (off, cols) = (g.offsets().to_vec().unwrap(), g.columns().to_vec().unwrap());
         for (seed, (threads, blocks)) in [(0u32, (1u64, 1u64)), (77, (32, 3)), (9, (5, 2))] {
             let c = Coloring::new(&g, seed).unwrap();
-            let mut w = vec![6, 0, n as u64, cols.len() as u64, seed as u64, threads, blocks];
+            let mut w = vec![
+                6,
+                0,
+                n as u64,
+                cols.len() as u64,
+                seed as u64,
+                threads,
+                blocks,
+            ];
             w.extend(off.iter().map(|&v| v as i64 as u64));
             w.extend(cols.iter().map(|&v| v as i64 as u64));
             let out = i32s(&run(&format!("color_{case}_{seed}"), &w));
             let k = c.count();
             assert_eq!(out.len(), 2 * n + k + 1);
             assert_eq!(out[..n], c.colors.to_vec().unwrap(), "case {case}: colours");
-            assert_eq!(out[n..2 * n], c.order.to_vec().unwrap(), "case {case}: order");
-            assert_eq!(out[2 * n..], c.offsets.to_vec().unwrap(), "case {case}: offsets");
+            assert_eq!(
+                out[n..2 * n],
+                c.order.to_vec().unwrap(),
+                "case {case}: order"
+            );
+            assert_eq!(
+                out[2 * n..],
+                c.offsets.to_vec().unwrap(),
+                "case {case}: offsets"
+            );
         }
         // The split, both ways and as incidence; an endpoint out of range (n) in edge m / 2.
         let mut bad = edges.clone();
         bad[m / 2].y = n as i32;
         for incidence in [0u64, 1] {
             let mut w = vec![7, 0, m as u64, n as u64, incidence, 32, 2];
-            w.extend(bad.iter().flat_map(|e| [e.x as i64 as u64, e.y as i64 as u64]));
+            w.extend(
+                bad.iter()
+                    .flat_map(|e| [e.x as i64 as u64, e.y as i64 as u64]),
+            );
             let out = i32s(&run(&format!("split_{case}_{incidence}"), &w));
             assert_eq!(out.len(), 6 * m + 1);
             for (t, e) in bad.iter().enumerate() {
@@ -2201,9 +2226,9 @@ fn coloring_matches_the_cpu() {
                 }
                 assert_eq!(flags[2 * t], flags[2 * t + 1]);
             }
-            let first_bad = bad.iter().position(|e| {
-                !((0..n as i32).contains(&e.x) && (0..n as i32).contains(&e.y))
-            });
+            let first_bad = bad
+                .iter()
+                .position(|e| !((0..n as i32).contains(&e.x) && (0..n as i32).contains(&e.y)));
             assert_eq!(out[6 * m], first_bad.map_or(i32::MAX, |t| t as i32));
         }
         // The pairs of the graph's rows taken as an incidence pattern: every ordered pair of
@@ -2226,6 +2251,10 @@ fn coloring_matches_the_cpu() {
         }
         let p = want.0.len();
         assert_eq!(out.len(), 2 * p);
-        assert_eq!((&out[..p], &out[p..]), (&want.0[..], &want.1[..]), "case {case}: pairs");
+        assert_eq!(
+            (&out[..p], &out[p..]),
+            (&want.0[..], &want.1[..]),
+            "case {case}: pairs"
+        );
     }
 }

@@ -289,11 +289,17 @@ pub fn omega_max(k: f64) -> f64 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
     Euler,
-    Xpbd { substeps: i32, iterations: i32 },
+    Xpbd {
+        substeps: i32,
+        iterations: i32,
+    },
     /// XPBD with the springs coloured on the device (`Adjacency::of_constraints`, then
     /// `Coloring`): each substep launches a thread per spring of a colour, colour after colour,
     /// instead of a thread per chain sweeping its springs in order.
-    XpbdColored { substeps: i32, iterations: i32 },
+    XpbdColored {
+        substeps: i32,
+        iterations: i32,
+    },
 }
 
 /// Device state of `chains` chains and a stepper for them.

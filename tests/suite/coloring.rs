@@ -133,7 +133,10 @@ fn check_colouring(g: &Adjacency, adj: &[BTreeSet<i32>], seed: u32, dev: &wp::De
     assert_eq!(colors, host_colours(adj, seed), "colours against the host");
     for (v, nb) in adj.iter().enumerate() {
         for &u in nb {
-            assert_ne!(colors[v], colors[u as usize], "edge ({v}, {u}) inside a colour");
+            assert_ne!(
+                colors[v], colors[u as usize],
+                "edge ({v}, {u}) inside a colour"
+            );
         }
     }
     let degree = adj.iter().map(|s| s.len()).max().unwrap_or(0);
@@ -169,7 +172,10 @@ fn check_colouring(g: &Adjacency, adj: &[BTreeSet<i32>], seed: u32, dev: &wp::De
         )
         .unwrap();
         assert_eq!(host(gc.offsets()), host(g.offsets()));
-        assert_eq!(&host(gc.columns())[..gc.nnz().unwrap()], &cols[..g.nnz().unwrap()]);
+        assert_eq!(
+            &host(gc.columns())[..gc.nnz().unwrap()],
+            &cols[..g.nnz().unwrap()]
+        );
         let cc = Coloring::new(&gc, seed).unwrap();
         assert_eq!(host(&cc.colors), colors, "GPU colours against the CPU's");
         assert_eq!(host(&cc.order), host(&c.order));
@@ -182,7 +188,14 @@ fn check_colouring(g: &Adjacency, adj: &[BTreeSet<i32>], seed: u32, dev: &wp::De
 /// and self-loops; each coloured with two seeds.
 fn random_graphs(dev: &wp::Device) {
     let mut rng = Lcg(7);
-    for &(n, m) in &[(1usize, 3usize), (2, 1), (50, 40), (300, 2000), (3000, 9000), (200, 8000)] {
+    for &(n, m) in &[
+        (1usize, 3usize),
+        (2, 1),
+        (50, 40),
+        (300, 2000),
+        (3000, 9000),
+        (200, 8000),
+    ] {
         let edges: Vec<IVec2> = (0..m)
             .map(|_| IVec2::new(rng.below(n as u32), rng.below(n as u32)))
             .collect();
@@ -271,7 +284,10 @@ fn cloth_constraints(dev: &wp::Device) {
         let mut seen = BTreeSet::new();
         for (i, e) in c.iter().enumerate() {
             if colors[i] == k {
-                assert!(seen.insert(e.x) && seen.insert(e.y), "colour {k}: spring {i}");
+                assert!(
+                    seen.insert(e.x) && seen.insert(e.y),
+                    "colour {k}: spring {i}"
+                );
             }
         }
     }
@@ -295,7 +311,12 @@ fn same_colours_at_any_thread_count(dev: &wp::Device) {
         pool.install(|| {
             let g = Adjacency::from_edges(n, &arr(&edges, dev)).unwrap();
             let c = Coloring::new(&g, 42).unwrap();
-            (host(g.columns()), host(&c.colors), host(&c.order), host(&c.offsets))
+            (
+                host(g.columns()),
+                host(&c.colors),
+                host(&c.order),
+                host(&c.offsets),
+            )
         })
     };
     let one = run(1);
@@ -348,7 +369,10 @@ fn out_of_range_endpoints_fault(dev: &wp::Device) {
             shape: vec![1, 5]
         }
     );
-    assert!(f.to_string().contains("sparse::Adjacency::from_edges"), "{f}");
+    assert!(
+        f.to_string().contains("sparse::Adjacency::from_edges"),
+        "{f}"
+    );
     // After the fault the device works on (and a good graph colours).
     let g = Adjacency::from_edges(5, &arr(&e[..2], dev)).unwrap();
     assert_eq!(Coloring::new(&g, 0).unwrap().count(), 2);

@@ -269,7 +269,10 @@ fn colored_xpbd_chain(dev: &wp::Device) {
         let mut seen = std::collections::BTreeSet::new();
         for &s in &order[r.clone()] {
             let e = c[s as usize];
-            assert!(seen.insert(e.x) && seen.insert(e.y), "spring {s} shares a particle");
+            assert!(
+                seen.insert(e.x) && seen.insert(e.y),
+                "spring {s} shares a particle"
+            );
         }
     }
     let (sweep, colored) = (
@@ -290,7 +293,10 @@ fn colored_xpbd_chain(dev: &wp::Device) {
         ch.x.check_finite("x").unwrap();
         ch
     };
-    for (k, dt, bound) in [(1e3f64, 1.0 / 240.0, 1e-2), (1e5, 1.0 / 60.0, f64::INFINITY)] {
+    for (k, dt, bound) in [
+        (1e3f64, 1.0 / 240.0, 1e-2),
+        (1e5, 1.0 / 60.0, f64::INFINITY),
+    ] {
         let reference = springs::reference(k, 0.5, (0.05 / springs::omega_max(k)).min(1e-4));
         let error = |solver| {
             let (x, _) = run(solver, k, dt, 0.5).first().unwrap();
@@ -305,7 +311,10 @@ fn colored_xpbd_chain(dev: &wp::Device) {
             (e_colored - e_sweep).abs() <= 0.25 * e_sweep,
             "k = {k:e}: colored {e_colored:e} against {e_sweep:e}"
         );
-        assert!(e_colored < bound && e_sweep < bound, "{e_colored:e} {e_sweep:e}");
+        assert!(
+            e_colored < bound && e_sweep < bound,
+            "{e_colored:e} {e_sweep:e}"
+        );
     }
     let length = (springs::SEGMENTS as f64 * springs::REST) as f32;
     let mut ch = springs::Chains::new(2, dev).unwrap();
@@ -318,7 +327,10 @@ fn colored_xpbd_chain(dev: &wp::Device) {
     }
     println!("XPBD colored k = 1e7, 60 Hz, 2 s: farthest particle {farthest} m (chain {length} m)");
     assert!(farthest < 1.5 * length, "farthest particle at {farthest} m");
-    assert!(farthest > 0.99 * length, "the chain did fall and swing out: {farthest}");
+    assert!(
+        farthest > 0.99 * length,
+        "the chain did fall and swing out: {farthest}"
+    );
 }
 
 /// The `finite_difference` example's kernels, forward and adjoint, in f32 and f64:

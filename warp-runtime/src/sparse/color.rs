@@ -344,7 +344,10 @@ impl Coloring {
             })?
             + 1;
         let offsets = Array::<i32>::zeros(ncolors as usize + 1, &dev)?;
-        run(&dev, &sort(offsets.device_address(), ncolors).step::<false>())?;
+        run(
+            &dev,
+            &sort(offsets.device_address(), ncolors).step::<false>(),
+        )?;
         Ok(Coloring {
             colors,
             order,

@@ -236,7 +236,11 @@ unsafe impl<const COUNT: bool> ObjectStep for Pairs<COUNT> {
         let starts = Ptr(self.starts as *mut i64);
         if COUNT {
             (0..n + 1).into_par_iter().with_min_len(4096).for_each(|r| {
-                let k = if r < n { row(off, r, nnz).len() as i64 } else { 0 };
+                let k = if r < n {
+                    row(off, r, nnz).len() as i64
+                } else {
+                    0
+                };
                 // SAFETY: each task writes its own r <= n.
                 unsafe { starts.at(r).write(k * (k - 1).max(0)) };
             });
