@@ -26,6 +26,8 @@ use std::time::Instant;
 
 use springs::{Chains, Solver};
 use warp_lang as wp;
+// The sparse tier, for common/springs.rs (its coloured XPBD series).
+use wp::sparse;
 use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Run, Sweep, Table};
 

@@ -11,8 +11,11 @@
 #![allow(dead_code)] // the test uses part of it
 
 use warp_lang as wp;
-use warp_runtime::sparse::{Adjacency, Coloring};
 use wp::prelude::*;
+// The sparse tier, named by the including file (`use warp_lang::sparse;` in the example, whose
+// crate turns on the facade's `sparse` feature; `use warp_runtime::sparse;` in the tests and
+// benchmarks, which get the tier from the runtime dev-dependency).
+use super::sparse::{Adjacency, Coloring};
 
 pub const SEGMENTS: usize = 20;
 pub const PARTICLES: usize = SEGMENTS + 1;

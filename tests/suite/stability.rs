@@ -22,6 +22,8 @@ backend_tests!(
 
 #[path = "../../examples/common/springs.rs"]
 mod springs;
+// The sparse tier, for common/springs.rs (its coloured XPBD series).
+use warp_runtime::sparse;
 
 #[path = "../../examples/common/finite_difference.rs"]
 mod finite_difference;
