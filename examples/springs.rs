@@ -27,9 +27,9 @@ use std::time::Instant;
 use springs::{Chains, Solver};
 use warp_lang as wp;
 // The sparse tier, for common/springs.rs (its coloured XPBD series).
-use wp::sparse;
 use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Run, Sweep, Table};
+use wp::sparse;
 
 /// Runs `solver` at stiffness `k` and step `dt` until `t_end` and measures it against `reference`
 /// (with `graph`, each 256 steps as a replay of a captured graph).

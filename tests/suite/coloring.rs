@@ -24,6 +24,7 @@ backend_tests!(
     out_of_range_endpoints_fault,
     empty_graphs,
     high_degree_uses_the_second_window,
+    bad_arguments,
 );
 
 /// A reproducible stream (64-bit LCG, high bits): the graphs need no quality, only variety.
@@ -414,4 +415,32 @@ fn high_degree_uses_the_second_window(dev: &wp::Device) {
     let g = Adjacency::from_edges(n as usize, &arr(&edges, dev)).unwrap();
     let adj = host_adjacency(n as usize, &edges);
     assert_eq!(check_colouring(&g, &adj, 5, dev), 70);
+}
+
+/// Arguments checked on the host: an `Err` naming the function, the argument and the values.
+fn bad_arguments(dev: &wp::Device) {
+    let err = |r: wp::Result<Adjacency>| match r {
+        Err(e @ wp::Error::InvalidArgument { .. }) => e.to_string(),
+        other => panic!("expected InvalidArgument, got {other:?}"),
+    };
+    // Not contiguous: every other element of a 2-D array's column.
+    let m = wp::Array::<IVec2, 2>::zeros((4, 2), dev).unwrap();
+    let col = m.transpose().row(0).unwrap();
+    let e = err(Adjacency::from_edges(3, &col));
+    assert!(
+        e.contains("sparse::Adjacency::from_edges") && e.contains("`edges` is not contiguous"),
+        "{e}"
+    );
+    let e = err(Adjacency::of_constraints(3, &col));
+    assert!(
+        e.contains("sparse::Adjacency::of_constraints")
+            && e.contains("`constraints` is not contiguous"),
+        "{e}"
+    );
+    let none = arr::<IVec2>(&[], dev);
+    let e = err(Adjacency::from_edges(i32::MAX as usize, &none));
+    assert!(
+        e.contains("`n` is 2147483647; it must be at most 2147483646"),
+        "{e}"
+    );
 }
