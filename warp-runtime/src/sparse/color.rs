@@ -261,6 +261,25 @@ impl Adjacency {
 /// ascending within a colour, and colour `c`'s vertices are `order[offsets[c] ..
 /// offsets[c + 1]]` (`offsets` has `count() + 1` entries). Every colour below `count()` has a
 /// vertex.
+///
+/// ```
+/// # use warp_runtime as wp;
+/// use glam::IVec2;
+/// use wp::sparse::{Adjacency, Coloring};
+/// let dev = wp::cpu();
+/// // Three springs of a chain of four particles: the middle one touches both others.
+/// let springs = [IVec2::new(0, 1), IVec2::new(1, 2), IVec2::new(2, 3)];
+/// let g = Adjacency::of_constraints(4, &wp::Array::from_slice(&springs, &dev)?)?;
+/// let c = Coloring::new(&g, 0)?;
+/// let colors = c.colors.to_vec()?;
+/// assert!(colors[0] != colors[1] && colors[1] != colors[2]);
+/// assert!(c.count() <= 3); // at most the largest degree (2) plus one
+/// for r in c.ranges()? {
+///     // A kernel launched over `r.len()` threads reads its spring from `order[r.start + i]`.
+///     assert!(!r.is_empty());
+/// }
+/// # Ok::<(), wp::Error>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct Coloring {
     /// Each vertex's colour.
