@@ -28,6 +28,8 @@ use common::{json_number, python_side};
 /// The springs scene's chain and its kernels.
 #[path = "../examples/common/springs.rs"]
 mod springs;
+// The sparse tier, for common/springs.rs (its coloured XPBD series).
+use warp_runtime::sparse;
 
 const N: usize = 1024;
 const SUBSTEPS: usize = 1000;

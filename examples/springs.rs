@@ -1,5 +1,7 @@
 //! A hanging mass-spring chain with stiffness from 1e2 to 1e7 N/m: semi-implicit Euler
-//! against XPBD, each against an f64 Runge-Kutta reference at a fine step.
+//! against XPBD (a thread per chain sweeping its springs in order) and XPBD by colour (the
+//! springs coloured on the device, a thread per spring of a colour), each against an f64
+//! Runge-Kutta reference at a fine step.
 //!
 //! ```text
 //! cargo run --release --example springs -- [--device cpu|cuda:0] [--chains N]
@@ -24,8 +26,10 @@ use std::time::Instant;
 
 use springs::{Chains, Solver};
 use warp_lang as wp;
+// The sparse tier, for common/springs.rs (its coloured XPBD series).
 use warp_report::frame::{Camera, Frame, Lines, Points};
 use warp_report::{sci, Run, Sweep, Table};
+use wp::sparse;
 
 /// Runs `solver` at stiffness `k` and step `dt` until `t_end` and measures it against `reference`
 /// (with `graph`, each 256 steps as a replay of a captured graph).
@@ -40,8 +44,12 @@ fn run(
 ) -> wp::Result<Run> {
     let steps = (t_end / dt).round() as u64;
     let mut state = Chains::new(chains, dev)?;
-    // Warm-up (compiles on a GPU) on a throwaway state, outside the timing.
+    // Warm-up (compiles on a GPU) on a throwaway state, outside the timing; the coloured
+    // series colours its springs here too (allocations and read-backs, which a capture refuses).
     Chains::new(1, dev)?.step(solver, k as f32, dt as f32, dev)?;
+    if let Solver::XpbdColored { .. } = solver {
+        state.colouring(dev)?;
+    }
     wp::synchronize()?;
     let e0 = springs::energy(
         &springs::start(),
@@ -87,7 +95,7 @@ fn run(
 }
 
 /// A hanging mass-spring chain, stiffness 1e2 to 1e7 N/m: semi-implicit Euler against
-/// XPBD, each against an f64 Runge-Kutta reference.
+/// XPBD and XPBD by colour, each against an f64 Runge-Kutta reference.
 #[derive(Parser)]
 struct Cli {
     /// Chains simulated side by side [default: 4096 on a GPU, 16 on the CPU]
@@ -129,6 +137,13 @@ fn main() -> wp::Result<()> {
                 iterations,
             },
         ),
+        (
+            "XPBD colored",
+            Solver::XpbdColored {
+                substeps,
+                iterations,
+            },
+        ),
     ];
     let steps: Vec<f64> = (0..=halvings)
         .map(|j| 1.0 / 60.0 / 2f64.powi(j as i32))
@@ -137,6 +152,13 @@ fn main() -> wp::Result<()> {
         "mass-spring chain: {} springs, {chains} chains on \"{dev}\", until t = {t_end} s, \
          XPBD with {substeps} substeps of {iterations} Gauss-Seidel sweep(s)",
         springs::SEGMENTS
+    );
+    let mut probe = Chains::new(chains, &dev)?;
+    let colours = probe.colouring(&dev)?.1.len();
+    println!(
+        "XPBD colored: the {} springs in {colours} colours (Jones-Plassmann on the device), \
+         a launch per colour and sweep",
+        chains * springs::SEGMENTS
     );
 
     let mut largest: HashMap<(usize, &str), Option<f64>> = HashMap::new();
@@ -214,8 +236,10 @@ fn main() -> wp::Result<()> {
         "2/omega_max",
         "semi-implicit Euler",
         "XPBD",
+        "XPBD colored",
         "Euler drift @60Hz",
         "XPBD drift @60Hz",
+        "colored drift @60Hz",
     ]);
     let show = |v: Option<f64>| v.map_or("none".to_string(), sci);
     let drift = |v: f64| {
@@ -232,8 +256,10 @@ fn main() -> wp::Result<()> {
             sci(2.0 / springs::omega_max(k)),
             show(largest[&(ki, e)]),
             show(largest[&(ki, "XPBD")]),
+            show(largest[&(ki, "XPBD colored")]),
             drift(drift_at_60hz[&(ki, e)]),
             drift(drift_at_60hz[&(ki, "XPBD")]),
+            drift(drift_at_60hz[&(ki, "XPBD colored")]),
         ]);
     }
     print!("{t}");

@@ -41,6 +41,7 @@ inline unsigned threads = 1, blocks = 1;
 #define gridDim (::wp_emu::dim3_t{::wp_sp_emu::blocks, 1u, 1u})
 #include "wp_sparse.h"
 #include "wp_sparse_ops.h"
+#include "wp_sparse_color.h"
 using namespace wp;
 
 template <typename A>
@@ -658,6 +659,88 @@ template <typename S> void ops(const OpsKernels& o, const ScalarKernels& k, u64 
   }
 }
 
+// ---- Slice 6: graph colouring (wp_sparse_color.h), in warp-runtime's sparse/color.rs order.
+// Words: n, cap, seed, threads, blocks, offsets (n + 1), columns (cap). Jones-Plassmann rounds
+// two at a time until the flag is 0 (as `Coloring::new`), then the sort keys, the host's stable
+// sort (the primitives' radix sort is stable), the offsets. Prints the colours, the order, the
+// offsets.
+void color() {
+  const i32 n = (i32)word(), cap = (i32)word();
+  const u32 seed = (u32)word();
+  const unsigned threads = (unsigned)word(), blocks = (unsigned)word();
+  std::vector<i32> off = ints(n + 1), cols = ints(cap);
+  std::vector<i32> a(n + 1, -1), b(n + 1, 0), flag{1, 0};
+  for (i32 rounds = 0; flag[0] != 0; ++rounds) {
+    if (rounds > n + 1) exit(3);  // each pass colours a vertex at least
+    sp_color_round_t r{addr(off.data()), addr(cols.data()), addr(a.data()), addr(b.data()),
+                       addr(flag.data()), n, cap, seed, 1};
+    run(wp_sparse_color_round, blocks, threads, r);
+    r.prev = addr(b.data());
+    r.next = addr(a.data());
+    r.clear = 0;
+    run(wp_sparse_color_round, blocks, threads, r);
+  }
+  std::vector<u32> keys(n + 1);
+  std::vector<i32> order(n + 1);
+  sp_color_sort_t s{addr(a.data()), addr(keys.data()), addr(order.data()), 0, n, 0};
+  run(wp_sparse_color_keys, blocks, threads, s);
+  std::vector<std::pair<u32, i32>> p;
+  for (i32 i = 0; i < n; ++i) p.push_back({keys[i], order[i]});
+  std::stable_sort(p.begin(), p.end(), [](auto x, auto y) { return x.first < y.first; });
+  for (i32 i = 0; i < n; ++i) {
+    keys[i] = p[i].first;
+    order[i] = p[i].second;
+  }
+  const i32 ncolors = n ? (i32)keys[n - 1] + 1 : 0;
+  std::vector<i32> offsets(ncolors + 2, 0);
+  s.offsets = addr(offsets.data());
+  s.ncolors = ncolors;
+  run(wp_sparse_color_offsets, blocks, threads, s);
+  print(a.data(), n);
+  print(order.data(), n);
+  print(offsets.data(), ncolors + 1);
+}
+
+// Words: m, n, incidence, threads, blocks, edges (2 m). The split step; prints rows, cols,
+// flags (2 m each) and the smallest bad edge.
+void color_split() {
+  const i32 m = (i32)word(), n = (i32)word(), incidence = (i32)word();
+  const unsigned threads = (unsigned)word(), blocks = (unsigned)word();
+  std::vector<i32> edges = ints(2 * m), rows(2 * m + 1), cols(2 * m + 1), flags(2 * m + 1);
+  std::vector<i32> bad{0x7fffffff, 0};
+  sp_color_split_t s{addr(edges.data()), addr(rows.data()), addr(cols.data()), addr(flags.data()),
+                     addr(bad.data()), m, n, incidence, 0};
+  run(wp_sparse_color_split, blocks, threads, s);
+  print(rows.data(), 2 * m);
+  print(cols.data(), 2 * m);
+  print(flags.data(), 2 * m);
+  print(bad.data(), 1);
+}
+
+// Words: n, cap, threads, blocks, offsets (n + 1), columns (cap) of an incidence pattern.
+// pair_count, the host's exclusive scan, pair_expand; prints the pairs' rows and columns.
+void color_pairs() {
+  const i32 n = (i32)word(), cap = (i32)word();
+  const unsigned threads = (unsigned)word(), blocks = (unsigned)word();
+  std::vector<i32> off = ints(n + 1), cols = ints(cap);
+  std::vector<i64> starts(n + 2, 0);
+  sp_color_pairs_t s{addr(off.data()), addr(cols.data()), addr(starts.data()), 0, 0, 0, n, cap};
+  run(wp_sparse_color_pair_count, blocks, threads, s);
+  i64 total = 0;
+  for (i32 r = 0; r <= n; ++r) {
+    const i64 c = starts[r];
+    starts[r] = total;
+    total += c;
+  }
+  std::vector<i32> rows(total + 1), pcols(total + 1);
+  s.rows = addr(rows.data());
+  s.cols = addr(pcols.data());
+  s.limit = total;
+  run(wp_sparse_color_pair_expand, blocks, threads, s);
+  print(rows.data(), total);
+  print(pcols.data(), total);
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   FILE* file = fopen(argv[1], "rb");
@@ -684,6 +767,9 @@ int main(int argc, char** argv) {
       f64s ? krylov<f64>(BLOCKS[kind], sk[1], kk[1]) : krylov<f32>(BLOCKS[kind], sk[0], kk[0]);
       break;
     }
+    case 6: color(); break;
+    case 7: color_split(); break;
+    case 8: color_pairs(); break;
     default: return 2;
   }
   return 0;
@@ -701,6 +787,7 @@ fn driver() -> Option<&'static (std::path::PathBuf, std::path::PathBuf)> {
                 &[
                     "WP_SPARSE_BUILD",
                     "WP_SPARSE_OPS_BUILD",
+                    "WP_SPARSE_COLOR_BUILD",
                     "WP_SPARSE_EMULATED",
                 ],
             )
@@ -2039,6 +2126,135 @@ fn krylov_matches_the_cpu_bit_for_bit() {
         assert!(
             matches!(rep.stop, Stop::Breakdown { what: w, .. } if w == what),
             "{rep:?}"
+        );
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Slice 6: graph colouring (wp_sparse_color.h)
+// ------------------------------------------------------------------------------------------
+
+/// The driver's i32 lines (printed as the low 32 bits).
+fn i32s(lines: &[String]) -> Vec<i32> {
+    hex(lines).into_iter().map(|w| w as u32 as i32).collect()
+}
+
+/// Random graphs (with repeats and self-loops in the edge list) coloured by the header's
+/// rounds, keys and offsets under the emulator at several block shapes (grid-stride loops
+/// that wrap), against `Coloring::new` on the CPU: the same colours, order and offsets. And
+/// the split and pair steps against their definitions.
+#[test]
+fn coloring_matches_the_cpu() {
+    use glam::IVec2;
+    use sparse::{Adjacency, Coloring};
+    if skip("coloring_matches_the_cpu") {
+        return;
+    }
+    let cpu = wp::cpu();
+    let mut state = 12345u64;
+    let mut below = |n: u32| {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 33) % n as u64) as i32
+    };
+    for (case, &(n, m)) in [
+        (1usize, 1usize),
+        (7, 12),
+        (60, 300),
+        (500, 1500),
+        (90, 4000),
+    ]
+    .iter()
+    .enumerate()
+    {
+        let edges: Vec<IVec2> = (0..m)
+            .map(|_| IVec2::new(below(n as u32), below(n as u32)))
+            .collect();
+        let e = wp::Array::from_slice(&edges, &cpu).unwrap();
+        let g = Adjacency::from_edges(n, &e).unwrap();
+        let (off, cols) = (g.offsets().to_vec().unwrap(), g.columns().to_vec().unwrap());
+        for (seed, (threads, blocks)) in [(0u32, (1u64, 1u64)), (77, (32, 3)), (9, (5, 2))] {
+            let c = Coloring::new(&g, seed).unwrap();
+            let mut w = vec![
+                6,
+                0,
+                n as u64,
+                cols.len() as u64,
+                seed as u64,
+                threads,
+                blocks,
+            ];
+            w.extend(off.iter().map(|&v| v as i64 as u64));
+            w.extend(cols.iter().map(|&v| v as i64 as u64));
+            let out = i32s(&run(&format!("color_{case}_{seed}"), &w));
+            let k = c.count();
+            assert_eq!(out.len(), 2 * n + k + 1);
+            assert_eq!(out[..n], c.colors.to_vec().unwrap(), "case {case}: colours");
+            assert_eq!(
+                out[n..2 * n],
+                c.order.to_vec().unwrap(),
+                "case {case}: order"
+            );
+            assert_eq!(
+                out[2 * n..],
+                c.offsets.to_vec().unwrap(),
+                "case {case}: offsets"
+            );
+        }
+        // The split, both ways and as incidence; an endpoint out of range (n) in edge m / 2.
+        let mut bad = edges.clone();
+        bad[m / 2].y = n as i32;
+        for incidence in [0u64, 1] {
+            let mut w = vec![7, 0, m as u64, n as u64, incidence, 32, 2];
+            w.extend(
+                bad.iter()
+                    .flat_map(|e| [e.x as i64 as u64, e.y as i64 as u64]),
+            );
+            let out = i32s(&run(&format!("split_{case}_{incidence}"), &w));
+            assert_eq!(out.len(), 6 * m + 1);
+            for (t, e) in bad.iter().enumerate() {
+                let ok = (0..n as i32).contains(&e.x) && (0..n as i32).contains(&e.y);
+                let (rows, cols, flags) = (&out[..2 * m], &out[2 * m..4 * m], &out[4 * m..6 * m]);
+                assert_eq!([rows[2 * t], rows[2 * t + 1]], [e.x, e.y]);
+                if incidence == 1 {
+                    assert_eq!([cols[2 * t], cols[2 * t + 1]], [t as i32; 2]);
+                    assert_eq!(flags[2 * t], ok as i32);
+                } else {
+                    assert_eq!([cols[2 * t], cols[2 * t + 1]], [e.y, e.x]);
+                    assert_eq!(flags[2 * t], (ok && e.x != e.y) as i32);
+                }
+                assert_eq!(flags[2 * t], flags[2 * t + 1]);
+            }
+            let first_bad = bad
+                .iter()
+                .position(|e| !((0..n as i32).contains(&e.x) && (0..n as i32).contains(&e.y)));
+            assert_eq!(out[6 * m], first_bad.map_or(i32::MAX, |t| t as i32));
+        }
+        // The pairs of the graph's rows taken as an incidence pattern: every ordered pair of
+        // distinct entries of a row, rows in order, in the row's order.
+        let mut w = vec![8, 0, n as u64, cols.len() as u64, 32, 2];
+        w.extend(off.iter().map(|&v| v as i64 as u64));
+        w.extend(cols.iter().map(|&v| v as i64 as u64));
+        let out = i32s(&run(&format!("pairs_{case}"), &w));
+        let mut want = (vec![], vec![]);
+        for r in 0..n {
+            let row = &cols[off[r] as usize..off[r + 1] as usize];
+            for (i, &a) in row.iter().enumerate() {
+                for (j, &b) in row.iter().enumerate() {
+                    if i != j {
+                        want.0.push(a);
+                        want.1.push(b);
+                    }
+                }
+            }
+        }
+        let p = want.0.len();
+        assert_eq!(out.len(), 2 * p);
+        assert_eq!(
+            (&out[..p], &out[p..]),
+            (&want.0[..], &want.1[..]),
+            "case {case}: pairs"
         );
     }
 }

@@ -37,6 +37,8 @@ use wp::prelude::*;
 
 #[path = "../examples/common/springs.rs"]
 mod springs;
+// The sparse tier, for common/springs.rs (its coloured XPBD series).
+use warp_runtime::sparse;
 
 // ---------------------------------------------------------------------------------------------
 // Measuring memory

@@ -12,6 +12,10 @@
 
 use warp_lang as wp;
 use wp::prelude::*;
+// The sparse tier, named by the including file (`use warp_lang::sparse;` in the example, whose
+// crate turns on the facade's `sparse` feature; `use warp_runtime::sparse;` in the tests and
+// benchmarks, which get the tier from the runtime dev-dependency).
+use super::sparse::{Adjacency, Coloring};
 
 pub const SEGMENTS: usize = 20;
 pub const PARTICLES: usize = SEGMENTS + 1;
@@ -116,6 +120,89 @@ pub fn xpbd_step(
     }
 }
 
+/// XPBD by colour, part 1 of a substep: a thread per particle predicts under gravity (the
+/// pinned particle 0 stays) and keeps the position before it; the thread of particle `i` below
+/// `SEGMENTS` also zeroes spring `i`'s multiplier.
+#[wp::kernel]
+pub fn xpbd_predict(
+    x: Array<Vec3, 2>,
+    v: Array<Vec3, 2>,
+    x_prev: Array<Vec3, 2>,
+    lambda: Array<f32, 2>,
+    gravity: Vec3,
+    h: f32,
+) {
+    let (c, i) = tid();
+    if i < lambda.shape()[1] {
+        lambda[(c, i)] = 0.0;
+    }
+    if i > 0 {
+        let xi = x[(c, i)];
+        x_prev[(c, i)] = xi;
+        x[(c, i)] = xi + (v[(c, i)] + gravity * h) * h;
+    }
+}
+
+/// XPBD by colour, part 2: a thread per spring of one colour (`order[start + tid]`; spring
+/// `c * SEGMENTS + s` joins particles `s` and `s + 1` of chain `c`) projects its spring with
+/// compliance `alpha` (already over h^2). The springs of a colour share no particle, so the
+/// threads write disjoint particles; the colours run one after another (Gauss-Seidel across
+/// colours, Jacobi within one).
+#[wp::kernel]
+pub fn xpbd_project_colour(
+    x: Array<Vec3, 2>,
+    lambda: Array<f32, 2>,
+    order: Array<i32>,
+    start: i32,
+    alpha: f32,
+    rest: f32,
+    mass: f32,
+) {
+    let id = order[start as usize + tid()] as usize;
+    let segments = lambda.shape()[1];
+    let c = id / segments;
+    let s = id % segments;
+    let w = 1.0 / mass;
+    let a = x[(c, s)];
+    let b = x[(c, s + 1)];
+    let d = b - a;
+    let len = length(d);
+    // The pinned particle does not move: inverse mass 0.
+    let mut wa = w;
+    if s == 0 {
+        wa = 0.0;
+    }
+    let l = lambda[(c, s)];
+    let dl = (rest - len - alpha * l) / (wa + w + alpha);
+    lambda[(c, s)] = l + dl;
+    let dir = d / len;
+    x[(c, s)] = a - dir * (wa * dl);
+    x[(c, s + 1)] = b + dir * (w * dl);
+}
+
+/// XPBD by colour, part 3: velocities from the change in position, a thread per particle.
+#[wp::kernel]
+pub fn xpbd_velocity(x: Array<Vec3, 2>, v: Array<Vec3, 2>, x_prev: Array<Vec3, 2>, h: f32) {
+    let (c, i) = tid();
+    if i > 0 {
+        v[(c, i)] = (x[(c, i)] - x_prev[(c, i)]) / h;
+    }
+}
+
+/// The springs of `chains` chains as constraints (pairs of particles, the particles of chain
+/// `c` numbered from `c * PARTICLES`), spring `c * SEGMENTS + s` joining particles `s` and
+/// `s + 1` of chain `c`.
+pub fn constraints(chains: usize) -> Vec<IVec2> {
+    (0..chains)
+        .flat_map(|c| {
+            (0..SEGMENTS).map(move |s| {
+                let p = (c * PARTICLES + s) as i32;
+                IVec2::new(p, p + 1)
+            })
+        })
+        .collect()
+}
+
 /// The start state of one chain: along +x at rest lengths, at rest.
 pub fn start() -> Vec<DVec3> {
     (0..PARTICLES)
@@ -205,7 +292,17 @@ pub fn omega_max(k: f64) -> f64 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
     Euler,
-    Xpbd { substeps: i32, iterations: i32 },
+    Xpbd {
+        substeps: i32,
+        iterations: i32,
+    },
+    /// XPBD with the springs coloured on the device (`Adjacency::of_constraints`, then
+    /// `Coloring`): each substep launches a thread per spring of a colour, colour after colour,
+    /// instead of a thread per chain sweeping its springs in order.
+    XpbdColored {
+        substeps: i32,
+        iterations: i32,
+    },
 }
 
 /// Device state of `chains` chains and a stepper for them.
@@ -215,6 +312,9 @@ pub struct Chains {
     scratch: wp::Array<Vec3, 2>,
     lambda: wp::Array<f32, 2>,
     chains: usize,
+    /// The springs by colour (`Coloring::order`) and each colour's range in it, made at the
+    /// first coloured step.
+    colored: Option<(wp::Array<i32>, Vec<std::ops::Range<usize>>)>,
 }
 
 impl Chains {
@@ -227,6 +327,7 @@ impl Chains {
             scratch: wp::Array::zeros((chains, PARTICLES), dev)?,
             lambda: wp::Array::zeros((chains, SEGMENTS), dev)?,
             chains,
+            colored: None,
         })
     }
 
@@ -265,8 +366,44 @@ impl Chains {
                 ),
                 dev,
             )?,
+            Solver::XpbdColored {
+                substeps,
+                iterations,
+            } => {
+                let h = dt / substeps as f32;
+                let alpha = 1.0 / k / (h * h);
+                let (order, colours) = self.colouring(dev)?.clone();
+                let dims = (self.chains, PARTICLES);
+                for _sub in 0..substeps {
+                    let (x, v, p, l) = (&self.x, &self.v, &self.scratch, &self.lambda);
+                    wp::launch(xpbd_predict, dims, (x, v, p, l, gravity, h), dev)?;
+                    for _sweep in 0..iterations {
+                        for r in &colours {
+                            let args = (x, l, &order, r.start as i32, alpha, rest, mass);
+                            wp::launch(xpbd_project_colour, r.len(), args, dev)?;
+                        }
+                    }
+                    wp::launch(xpbd_velocity, dims, (x, v, p, h), dev)?;
+                }
+            }
         }
         Ok(())
+    }
+
+    /// The springs' colouring (made once, on the device): the order of the springs by colour
+    /// and each colour's range in it.
+    pub fn colouring(
+        &mut self,
+        dev: &wp::Device,
+    ) -> wp::Result<&(wp::Array<i32>, Vec<std::ops::Range<usize>>)> {
+        if self.colored.is_none() {
+            let c = wp::Array::from_slice(&constraints(self.chains), dev)?;
+            let g = Adjacency::of_constraints(self.chains * PARTICLES, &c)?;
+            let colouring = Coloring::new(&g, 0)?;
+            let ranges = colouring.ranges()?;
+            self.colored = Some((colouring.order, ranges));
+        }
+        Ok(self.colored.as_ref().expect("made above"))
     }
 
     /// Whether every particle of every chain is within `radius` of the pin: a chain that

@@ -92,6 +92,7 @@ mod bsr;
 mod builtins;
 mod bvh;
 mod checkpoint;
+mod coloring;
 mod control;
 mod decomp;
 mod deterministic;

@@ -241,6 +241,9 @@ pub static SECTIONS: &[Section] = &[
     // Its structure operations (transpose, products, dense), a library of their own that
     // includes wp_sparse.h (its helpers and records, not its kernels).
     standalone!("sparse_ops",     Some("WP_SPARSE_OPS_BUILD")),
+    // Its graph colouring (adjacency, Jones-Plassmann rounds): integer steps, a library of its
+    // own that includes wp_sparse.h and wp_sparse_ops.h (helpers and records).
+    standalone!("sparse_color",   Some("WP_SPARSE_COLOR_BUILD")),
     standalone!("primitives",     None),
 ];
 

@@ -25,6 +25,14 @@
 //! also take warp-core's rectangular blocks (`Mat23` .. `DMat64`, row-major), as [`mv`] does;
 //! [`BlockMul`] says which block types multiply. The same-bits rule holds for each.
 //!
+//! # Graph colouring
+//! [`Adjacency`] (a graph's symmetric pattern, from edges or from constraints that share a
+//! particle) and [`Coloring`] (Jones-Plassmann on the device with hashed priorities) split
+//! constraints into sets that touch disjoint particles, so a Gauss-Seidel sweep (XPBD, a
+//! smoother) runs a thread per constraint of a set. Each round reads the last round's colours
+//! and writes new ones, so the colours depend on the graph and the seed alone: the same on
+//! the CPU, at any thread count, and on a GPU.
+//!
 //! # Errors
 //! Shapes, lengths and devices are checked on the host before anything is queued: a mismatch
 //! is an [`Error::InvalidArgument`] naming the function, the argument and both shapes. Bad
@@ -58,8 +66,12 @@ mod steps;
 // Slice 2: the structure operations (scale, diag, dense, transpose, axpy, mm).
 mod ops;
 mod ops_steps;
+// Slice 6: graph colouring (adjacency, Jones-Plassmann).
+mod color;
+mod color_steps;
 
 pub use block::{Block, BlockMul, SparseScalar, SquareBlock};
+pub use color::{Adjacency, Coloring};
 pub use kernel_arg::CudaBsr;
 pub use ops::{axpy, diag, mm, mv_transpose, set_diag, MmWork};
 pub use solve::{
