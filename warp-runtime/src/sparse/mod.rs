@@ -50,6 +50,8 @@
 #[cfg(test)]
 #[macro_use]
 mod record_check;
+// Slice 5: the tier on a tape (the adjoint steps; the assembly's and mv's records).
+mod adjoint;
 mod block;
 // Slice 4: the matrix as a kernel parameter (`HostObject`).
 mod kernel_arg;
@@ -187,7 +189,8 @@ impl<B: Block> Bsr<B> {
     }
 
     /// The assembly of both: `whole` when the count is the arrays' length (the lengths must
-    /// then agree; else the count must fit each).
+    /// then agree; else the count must fit each). With differentiable `values` the matrix's
+    /// values get a gradient, and a recording tape records the assembly's adjoint.
     fn assemble(
         nrow: usize,
         ncol: usize,
@@ -197,7 +200,7 @@ impl<B: Block> Bsr<B> {
         count: Count<'_>,
         whole: bool,
     ) -> Result<Self> {
-        Self::assemble_with(
+        let (m, sorted) = Self::assemble_sorted(
             nrow,
             ncol,
             rows,
@@ -207,7 +210,15 @@ impl<B: Block> Bsr<B> {
             whole,
             &TRIPLET_NAMES,
             true,
-        )
+        )?;
+        if !values.requires_grad() {
+            return Ok(m);
+        }
+        let m = m.with_grad()?;
+        if let (Some(sorted), true) = (sorted, crate::tape::recording()) {
+            adjoint::record_assembly(&m, values, sorted)?;
+        }
+        Ok(m)
     }
 
     /// [`Bsr::assemble`] with the names its errors and faults carry (`names.name` the
@@ -226,6 +237,34 @@ impl<B: Block> Bsr<B> {
         names: &'static KernelInfo,
         check_finite: bool,
     ) -> Result<Self> {
+        Self::assemble_sorted(
+            nrow,
+            ncol,
+            rows,
+            columns,
+            values,
+            count,
+            whole,
+            names,
+            check_finite,
+        )
+        .map(|(m, _)| m)
+    }
+
+    /// [`Bsr::assemble_with`], also handing back the sort's scratch (`None` when nothing was
+    /// sorted) for the assembly's adjoint.
+    #[allow(clippy::too_many_arguments)]
+    fn assemble_sorted(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: Count<'_>,
+        whole: bool,
+        names: &'static KernelInfo,
+        check_finite: bool,
+    ) -> Result<(Self, Option<adjoint::Sorted>)> {
         let func = names.name;
         let dev = values.device().clone();
         same_device(func, "rows", &dev, rows.device())?;
@@ -297,7 +336,7 @@ impl<B: Block> Bsr<B> {
         };
         // (A device count is read and checked by the steps, even with no room for a triplet.)
         if n == 0 && count_addr == 0 {
-            return Ok(m);
+            return Ok((m, None));
         }
         // What the primitives process: the same count.
         let prim: Count<'_> = match count {
@@ -427,8 +466,21 @@ impl<B: Block> Bsr<B> {
                 nrow: nr,
             },
         )?;
-        // The scratch is freed after the queued steps (array memory orders its free).
-        Ok(m)
+        // The scratch is freed after the queued steps (array memory orders its free), or
+        // kept by the assembly's adjoint. The sorted keys of triplets out of range are
+        // `nrow * ncol` (one pass) or `nrow` (the second pass's row keys).
+        let sorted = adjoint::Sorted {
+            keys,
+            idx,
+            pos,
+            count: match count {
+                Count::Device(c) => Some(c.clone()),
+                Count::Host(_) => None,
+            },
+            n,
+            sentinel: if two_pass { nrow as u32 } else { cells as u32 },
+        };
+        Ok((m, Some(sorted)))
     }
 
     /// `"N x M blocks of R x C (NR x MC scalars)"`, for messages.
@@ -562,6 +614,18 @@ pub fn mv<B: Block>(
     beta: B::Scalar,
     y: &Array<B::Out>,
 ) -> Result<()> {
+    mv_unrecorded(alpha, a, x, beta, y)?;
+    adjoint::record_mv(alpha.to_f64(), a, x, beta.to_f64(), y, false)
+}
+
+/// [`mv`] without its tape record.
+fn mv_unrecorded<B: Block>(
+    alpha: B::Scalar,
+    a: &Bsr<B>,
+    x: &Array<B::In>,
+    beta: B::Scalar,
+    y: &Array<B::Out>,
+) -> Result<()> {
     const F: &str = "sparse::mv";
     let dev = a.device();
     same_device(F, "x", dev, x.device())?;
@@ -611,6 +675,39 @@ pub fn mv<B: Block>(
             y.device_address(),
             alpha.to_f64(),
             beta.to_f64(),
+            || Box::new((a.clone(), x.clone(), y.clone())),
+        )
+    }
+}
+
+/// `y = alpha A x + beta y` over scalar vectors (`x` of A's scalar columns, `y` of its rows,
+/// contiguous, on its device, `y` overlapping neither), unrecorded: the adjoints' products.
+fn mv_scalars<B: Block>(
+    a: &Bsr<B>,
+    x: &Array<B::Scalar>,
+    y: &Array<B::Scalar>,
+    alpha: f64,
+    beta: f64,
+) -> Result<()> {
+    let (nr, nc) = a.shape();
+    if x.len() != nc || y.len() != nr || overlap(x, y) || a.overlaps(y) {
+        return Err(Error::invalid(format!(
+            "sparse: internal: an adjoint's product with {} got x of {} and y of {} scalars",
+            a.describe(),
+            x.len(),
+            y.len()
+        )));
+    }
+    // SAFETY: x and y are contiguous (reinterpreted gradients) scalar vectors of the lengths
+    // checked above on the matrix's device, y overlapping neither x nor the matrix; the
+    // arrays are kept by `uses`.
+    unsafe {
+        mv_raw(
+            a,
+            x.device_address(),
+            y.device_address(),
+            alpha,
+            beta,
             || Box::new((a.clone(), x.clone(), y.clone())),
         )
     }

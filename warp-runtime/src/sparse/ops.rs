@@ -672,7 +672,8 @@ pub fn mv_transpose<B: Block>(
     if a.overlaps(y) {
         return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
     }
-    super::mv(alpha, &a.transpose()?, x, beta, y)
+    super::mv_unrecorded(alpha, &a.transpose()?, x, beta, y)?;
+    super::adjoint::record_mv(alpha.to_f64(), a, x, beta.to_f64(), y, true)
 }
 
 /// The triplet arrays of [`mm`]'s products, kept between calls.

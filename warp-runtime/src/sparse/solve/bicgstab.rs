@@ -2,7 +2,8 @@
 
 use super::steps::kr::{self, *};
 use super::work::Work;
-use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
+use super::adjoint::{self, Method};
+use super::{check_args, drive, IntoPrecond, Pre, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -66,9 +67,29 @@ pub fn bicgstab<'p, B: SquareBlock>(
     precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
+    let pre = precond.into_pre();
+    let adjoint_pre = adjoint::adjoint_precond(&pre);
+    let report = {
+        // The solve's own steps and the preconditioner's launches reach no tape: it is
+        // recorded as one step below.
+        let _paused = crate::tape::pause_recording();
+        solve(a, b, x, pre, o)?
+    };
+    adjoint::record(Method::BiCgStab, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
+/// The solve of [`bicgstab`], unrecorded.
+fn solve<'p, B: SquareBlock>(
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
+    o: &SolveOptions,
+) -> Result<SolveReport> {
     const F: &str = "sparse::bicgstab";
     let dev = check_args(F, a, b, x, o)?;
-    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), B_LEN, o)?;
+    let mut w = Work::new(a, &dev, b, x, pre, B_LEN, o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = BiCgStab {

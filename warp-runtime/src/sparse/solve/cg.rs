@@ -1,5 +1,6 @@
 //! The conjugate gradient solver ([`cg`]) with Jacobi preconditioning.
 
+use super::adjoint::{self, Method};
 use super::{
     check_args, drive, report, IntoPrecond, Pre, Precond, Preconditioner, Queued, SolveOptions,
     SolveReport,
@@ -69,14 +70,33 @@ pub fn cg<'p, B: SquareBlock>(
     precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
+    let pre = precond.into_pre();
+    let adjoint_pre = adjoint::adjoint_precond(&pre);
+    let report = {
+        // The solve's own steps and the preconditioner's launches reach no tape: it is
+        // recorded as one step below.
+        let _paused = crate::tape::pause_recording();
+        solve(a, b, x, pre, o)?
+    };
+    adjoint::record(Method::Cg, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
+/// The solve of [`cg`], unrecorded.
+fn solve<'p, B: SquareBlock>(
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
+    o: &SolveOptions,
+) -> Result<SolveReport> {
     const F: &str = "sparse::cg";
     let dev = check_args(F, a, b, x, o)?;
     let nr = a.shape().0;
     type S<B> = <B as Block>::Scalar;
     let n = nr;
     let z = Array::<S<B>>::zeros(n, &dev)?;
-    let pre = precond.into_pre();
-    let cg = Cg {
+        let cg = Cg {
         a,
         dev: dev.clone(),
         n,

@@ -2,7 +2,8 @@
 
 use super::steps::kr::{self, *};
 use super::work::{at, Work};
-use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
+use super::adjoint::{self, Method};
+use super::{check_args, drive, IntoPrecond, Pre, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -72,6 +73,26 @@ pub fn gmres<'p, B: SquareBlock>(
     precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
+    let pre = precond.into_pre();
+    let adjoint_pre = adjoint::adjoint_precond(&pre);
+    let report = {
+        // The solve's own steps and the preconditioner's launches reach no tape: it is
+        // recorded as one step below.
+        let _paused = crate::tape::pause_recording();
+        solve(a, b, x, pre, o)?
+    };
+    adjoint::record(Method::Gmres, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
+/// The solve of [`gmres`], unrecorded.
+fn solve<'p, B: SquareBlock>(
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
+    o: &SolveOptions,
+) -> Result<SolveReport> {
     const F: &str = "sparse::gmres";
     let dev = check_args(F, a, b, x, o)?;
     let m = o.restart;
@@ -81,7 +102,7 @@ pub fn gmres<'p, B: SquareBlock>(
             format!("`restart` is {m}; it must be in 1..={MAX_RESTART}"),
         ));
     }
-    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), g_len(m), o)?;
+    let mut w = Work::new(a, &dev, b, x, pre, g_len(m), o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = Gmres {
