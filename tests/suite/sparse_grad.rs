@@ -92,9 +92,9 @@ fn solve<B: sparse::SquareBlock>(
     }
 }
 
-/// A symmetric `n x n` matrix from parameters: `A_ii = s_i (3 + p_i)` with `s_i` 1 or, for
-/// CR (`indefinite`), alternately -1 (a symmetric indefinite matrix); `A_ij = A_ji = p_(n+k)`
-/// for the k-th pair of `pairs`. Returns the triplets' rows, columns and parameter indices.
+/// The pattern of a symmetric `n x n` matrix from parameters: `A_ii = p_i`, and `A_ij = A_ji
+/// = p_(n+k)` for the k-th pair `(i, j)` of `pairs`. Returns the triplets' rows, columns and
+/// parameter indices.
 fn symmetric_pattern(n: usize, pairs: &[(i32, i32)]) -> (Vec<i32>, Vec<i32>, Vec<i32>) {
     let (mut rows, mut cols, mut src) = (vec![], vec![], vec![]);
     for i in 0..n as i32 {
@@ -118,8 +118,8 @@ fn gradcheck_through_assembly(dev: &wp::Device, method: Method, indefinite: bool
     let n = 6;
     let pairs = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 3)];
     let (rows, cols, src) = symmetric_pattern(n, &pairs);
-    // Diagonal parameters 3 + small (sign alternating when indefinite, applied below through
-    // the parameter itself), couplings of about 0.5: diagonally dominant either way.
+    // Diagonal parameters 3 + small (negative at odd i when indefinite: a symmetric
+    // indefinite matrix for CR), couplings of about 0.5: diagonally dominant either way.
     let mut p: Vec<f64> = (0..n)
         .map(|i| {
             let d = 3.0 + 0.1 * i as f64;

@@ -400,3 +400,67 @@ pub(super) fn record_mv<B: Block, X: Element, Y: Element>(
         },
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The block row of each stored block, empty rows included (rows 0 and 2 here), and the
+    /// last row's blocks.
+    #[test]
+    fn block_row_finds_each_blocks_row() {
+        let offsets = [0, 0, 2, 2, 5];
+        let rows: Vec<usize> = (0..5).map(|k| block_row(&offsets, 4, k)).collect();
+        assert_eq!(rows, [1, 1, 3, 3, 3]);
+        // One row: every block is row 0.
+        assert_eq!(block_row(&[0, 3], 1, 2), 0);
+        // Overwritten (descending) offsets still give a row in range.
+        assert!(block_row(&[0, 9, 1, 0], 3, 4) < 3);
+    }
+
+    /// Each record's fields sit at the C++ struct's offsets (g++'s `offsetof`; skipped,
+    /// saying so, without g++).
+    #[test]
+    fn record_offsets_are_the_headers() {
+        let fields = record_layouts![
+            AdjTpl<f32> => "sp_adj_tpl_t" {
+                count, idx, pos, keys, vgrad, tgrad, n, block, sentinel, pad
+            },
+            AdjAxpby<f32> => "sp_adj_axpby_t" { y, x, a, b, n },
+            AdjOuter<f32> => "sp_adj_outer_t" {
+                offsets, columns, grad, u, v, alpha, nrow, ncol, cap, rows, cols, cm
+            },
+        ];
+        crate::sparse::record_check::check_record_offsets(
+            "sparse::adjoint::record_offsets_are_the_headers",
+            "wp_sparse.h",
+            &fields,
+        );
+    }
+
+    /// The adjoint kernels the Rust side names are kernels of the compiled build library.
+    /// Needs only libnvrtc (skipped, saying so, without it).
+    #[cfg(feature = "cuda")]
+    #[test]
+    fn kernel_names_are_in_the_compiled_library() {
+        if let Err(e) = warp_cuda::nvrtc_version() {
+            eprintln!("SKIPPED kernel_names_are_in_the_compiled_library: {e}");
+            return;
+        }
+        let c = crate::cuda::objects::compile_library(&LIBRARY, 90).unwrap();
+        let has = |name: &str| {
+            let pat = format!("{name}\0");
+            c.cubin.windows(pat.len()).any(|w| w == pat.as_bytes())
+        };
+        for n in [
+            AdjTpl::<f32>::KERNEL,
+            AdjTpl::<f64>::KERNEL,
+            AdjAxpby::<f32>::KERNEL,
+            AdjAxpby::<f64>::KERNEL,
+            AdjOuter::<f32>::KERNEL,
+            AdjOuter::<f64>::KERNEL,
+        ] {
+            assert!(has(n), "{n} is not a kernel of the compiled library");
+        }
+    }
+}

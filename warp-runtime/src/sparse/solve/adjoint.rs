@@ -1,4 +1,5 @@
-//! Differentiable solves (design §8): each of [`cg`], [`cr`], [`bicgstab`] and [`gmres`]
+//! Differentiable solves (design §8): each of [`cg`](super::cg), [`cr`](super::cr),
+//! [`bicgstab`](super::bicgstab) and [`gmres`](super::gmres)
 //! records one step on the tapes recording on its thread (its own steps reach no tape: the
 //! solve runs with recording paused), whose backward solves the adjoint system.
 //!
@@ -24,34 +25,32 @@
 //!
 //! `A` and `b` are read when backward runs, as a kernel's adjoint reads its arrays.
 
-use super::{bicgstab, cg, cr, gmres, Pre, Precond, SolveOptions, SolveReport, Stop};
+use super::{Pre, Precond, SolveOptions, SolveReport, Stop};
 use crate::array::Array;
 use crate::error::{Error, Result};
 use crate::sparse::adjoint::{axpby, outer};
-use crate::sparse::block::{SparseScalar, SquareBlock};
+use crate::sparse::block::{Block, SparseScalar, SquareBlock};
 use crate::sparse::Bsr;
 use crate::tape;
 
-/// The method a record's backward solves with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Method {
-    Cg,
-    Cr,
-    BiCgStab,
-    Gmres,
+/// The method a record's backward solves with: the solver's name, whether the adjoint solves
+/// with A's transpose (BiCGSTAB, GMRES) or A itself (CG, CR: symmetric by requirement), and
+/// the solver (the public function, passed in so that this file names none of theirs).
+#[derive(Clone, Copy)]
+pub(super) struct Method<B: SquareBlock> {
+    pub name: &'static str,
+    pub transpose: bool,
+    pub solve: Solver<B>,
 }
 
-impl Method {
-    /// The solver's name, as its errors give it.
-    fn name(self) -> &'static str {
-        match self {
-            Method::Cg => "sparse::cg",
-            Method::Cr => "sparse::cr",
-            Method::BiCgStab => "sparse::bicgstab",
-            Method::Gmres => "sparse::gmres",
-        }
-    }
-}
+/// A solver: `(A, b, x, precond, options)`.
+pub(super) type Solver<B> = fn(
+    &Bsr<B>,
+    &Array<<B as Block>::Scalar>,
+    &Array<<B as Block>::Scalar>,
+    Precond,
+    &SolveOptions,
+) -> Result<SolveReport>;
 
 /// The adjoint solve's preconditioner for a forward preconditioned by `p`: the same built-in
 /// one, none for a user's.
@@ -66,7 +65,7 @@ pub(super) fn adjoint_precond<S>(p: &Pre<'_, S>) -> Precond {
 /// recording on this thread (when one does and `x` has a gradient: without one nothing
 /// flows back through x).
 pub(super) fn record<B: SquareBlock>(
-    method: Method,
+    method: Method<B>,
     a: &Bsr<B>,
     b: &Array<B::Scalar>,
     x: &Array<B::Scalar>,
@@ -88,13 +87,14 @@ pub(super) fn record<B: SquareBlock>(
         report.tolerance,
         report.iterations,
     );
+    let name = method.name;
     tape::on_op(
-        method.name(),
+        name,
         move || {
             let Some(xg) = x.grad() else { return Ok(()) };
             if stop != Stop::Converged {
                 return Err(Error::NotDifferentiable {
-                    kernel: method.name(),
+                    kernel: name,
                     reason: format!(
                         "is a solve that stopped at {stop:?} after {iterations} iterations, \
                          residual {residual:e} above its tolerance {tolerance:e}: x is not \
@@ -110,15 +110,14 @@ pub(super) fn record<B: SquareBlock>(
             xg.fill(B::Scalar::ZERO)?;
             let lambda = Array::<B::Scalar>::zeros(x.len(), dev)?;
             let adj = adjoint_options(&o, tolerance, &b)?;
-            let rep = match method {
-                Method::Cg => cg(&a, &seed, &lambda, precond, &adj)?,
-                Method::Cr => cr(&a, &seed, &lambda, precond, &adj)?,
-                Method::BiCgStab => bicgstab(&a.transpose()?, &seed, &lambda, precond, &adj)?,
-                Method::Gmres => gmres(&a.transpose()?, &seed, &lambda, precond, &adj)?,
+            let rep = if method.transpose {
+                (method.solve)(&a.transpose()?, &seed, &lambda, precond, &adj)?
+            } else {
+                (method.solve)(&a, &seed, &lambda, precond, &adj)?
             };
             if !rep.converged {
                 return Err(Error::NotDifferentiable {
-                    kernel: method.name(),
+                    kernel: name,
                     reason: format!(
                         "has an adjoint solve A^T lambda = x.grad (with {precond:?} \
                          preconditioning) that stopped at {:?} after {} iterations, residual \

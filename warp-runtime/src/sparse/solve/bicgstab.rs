@@ -75,7 +75,12 @@ pub fn bicgstab<'p, B: SquareBlock>(
         let _paused = crate::tape::pause_recording();
         solve(a, b, x, pre, o)?
     };
-    adjoint::record(Method::BiCgStab, a, b, x, adjoint_pre, o, &report)?;
+    let method = Method {
+        name: "sparse::bicgstab",
+        transpose: true,
+        solve: |a, b, x, p, o| bicgstab(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
     Ok(report)
 }
 

@@ -78,7 +78,12 @@ pub fn cg<'p, B: SquareBlock>(
         let _paused = crate::tape::pause_recording();
         solve(a, b, x, pre, o)?
     };
-    adjoint::record(Method::Cg, a, b, x, adjoint_pre, o, &report)?;
+    let method = Method {
+        name: "sparse::cg",
+        transpose: false,
+        solve: |a, b, x, p, o| cg(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
     Ok(report)
 }
 

@@ -76,7 +76,12 @@ pub fn cr<'p, B: SquareBlock>(
         let _paused = crate::tape::pause_recording();
         solve(a, b, x, pre, o)?
     };
-    adjoint::record(Method::Cr, a, b, x, adjoint_pre, o, &report)?;
+    let method = Method {
+        name: "sparse::cr",
+        transpose: false,
+        solve: |a, b, x, p, o| cr(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
     Ok(report)
 }
 

@@ -81,7 +81,12 @@ pub fn gmres<'p, B: SquareBlock>(
         let _paused = crate::tape::pause_recording();
         solve(a, b, x, pre, o)?
     };
-    adjoint::record(Method::Gmres, a, b, x, adjoint_pre, o, &report)?;
+    let method = Method {
+        name: "sparse::gmres",
+        transpose: true,
+        solve: |a, b, x, p, o| gmres(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
     Ok(report)
 }
 
