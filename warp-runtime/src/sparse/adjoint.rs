@@ -7,7 +7,7 @@
 //! gradients are the same bits on the CPU and a GPU, and no float atomics: each thread owns
 //! the elements it writes (a triplet, a vector element, a stored block).
 
-use super::block::{sealed::SealedScalar as _, Block, SparseScalar};
+use super::block::{Block, SparseScalar};
 use super::steps::{by_scalar, clamped_nnz, count, slice, Ptr, LIBRARY};
 use super::Bsr;
 use crate::array::{Array, Element};
