@@ -52,19 +52,14 @@ fn tight() -> SolveOptions {
     }
 }
 
-/// The gradchecks' step and tolerances. The solves stop at a relative residual of 1e-13 on
-/// matrices of condition number about 10, so each solution is accurate to about 1e-12
-/// relative; the central difference divides the difference of two such solutions by 2e-6,
-/// which leaves up to ~1e-6 of noise where the two solves stop after different iteration
-/// counts (their truncation error is ~1e-12). 1e-6 absolute plus 1e-5 relative passes that
-/// and still fails a wrong gradient (a missing term, a transpose, a sign) by orders of
-/// magnitude: the gradients here are of order 0.01 to 1.
+/// The gradchecks' step and tolerances: f64's defaults (step 1e-6, 1e-8 absolute plus 1e-6
+/// relative). The solves stop at a relative residual of 1e-13 on matrices of condition number
+/// about 10, so each solution is accurate to about 1e-12 relative, and the central
+/// difference of two of them over 2e-6 carries up to ~1e-9 of noise where the two stop after
+/// different iteration counts (2e-10 at most measured here), within 1e-8; a wrong gradient
+/// (a missing term, a transpose, a sign) misses by the gradients' own size, 0.01 to 1.
 fn opts() -> wp::GradcheckOptions {
-    wp::GradcheckOptions {
-        eps: 1e-6,
-        atol: 1e-6,
-        rtol: 1e-5,
-    }
+    wp::GradcheckOptions::for_type::<f64>()
 }
 
 /// Which solver.
@@ -480,14 +475,7 @@ fn gradcheck_mv(dev: &wp::Device, transposed: bool) {
         }
         wp::launch(k_loss, n, (&y, &w, &out), dev)
     };
-    // (No solve here: the products are exact up to rounding, so the default f64 options.)
-    let report = wp::gradcheck(
-        &mut forward,
-        &[a.values(), &x, &y0],
-        &[&out],
-        wp::GradcheckOptions::for_type::<f64>(),
-    )
-    .unwrap();
+    let report = wp::gradcheck(&mut forward, &[a.values(), &x, &y0], &[&out], opts()).unwrap();
     assert!(report.passed, "transposed {transposed}: worst {:?}", report.worst);
 }
 
