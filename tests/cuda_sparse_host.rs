@@ -2248,8 +2248,10 @@ fn adjoint_mv_case<B: Block>(seed: usize, transposed: bool) {
             sparse::mv(al, &a, &x, be, &y).unwrap();
         }
         let yg = y.grad().unwrap();
-        yg.copy_from(&wp::Array::from_slice(&from_scalars::<B::Out, B::Scalar>(&ys), &cpu).unwrap())
-            .unwrap();
+        yg.copy_from(
+            &wp::Array::from_slice(&from_scalars::<B::Out, B::Scalar>(&ys), &cpu).unwrap(),
+        )
+        .unwrap();
         tape.backward_from_grads().unwrap();
         let v = yg.to_vec().unwrap();
         bytemuck::cast_slice::<B::Out, B::Scalar>(&v)
@@ -2268,7 +2270,10 @@ fn adjoint_mv_case<B: Block>(seed: usize, transposed: bool) {
     input.extend(g0[..nnz * rc].iter().map(|&s| word(s)));
     input.push(alpha.to_bits());
     let got = hex(&run(&format!("adj_outer{}", kind::<B>()), &input));
-    assert_eq!(got, want_g, "{name} (transposed {transposed}): A's gradient");
+    assert_eq!(
+        got, want_g,
+        "{name} (transposed {transposed}): A's gradient"
+    );
     let mut input = vec![6, scalar_kind::<B::Scalar>(), 2, ys.len() as u64];
     input.extend(ys.iter().map(|&s| word(s)));
     input.push(0);
@@ -2282,7 +2287,9 @@ fn adjoint_mv_case<B: Block>(seed: usize, transposed: bool) {
 fn adjoint_axpby_case<S: SparseScalar + Block<Scalar = S>>(seed: usize) {
     let n = 1000;
     let ys: Vec<S> = (0..n).map(|i| S::from_f64(value(seed + 3 * i))).collect();
-    let xs: Vec<S> = (0..n).map(|i| S::from_f64(value(seed + 5 * i + 1))).collect();
+    let xs: Vec<S> = (0..n)
+        .map(|i| S::from_f64(value(seed + 5 * i + 1)))
+        .collect();
     for (a, b) in [(1.0, 1.0), (0.75, -2.5)] {
         let (sa, sb) = (S::from_f64(a).to_f64(), S::from_f64(b).to_f64());
         // Each operation rounded once in S: for f64 directly; for f32, f64 holds the exact

@@ -441,7 +441,9 @@ fn assembly_adjoint_is_exact(dev: &wp::Device) {
             // The first five triplets: (0,0) <- 1, 4; (1,2) <- 3; (2,1) <- 0, 2.
             Some(_) => {
                 let of = [2, 0, 2, 1, 0];
-                (0..7).map(|t| if t < 5 { wv[of[t]] } else { 0.0 }).collect()
+                (0..7)
+                    .map(|t| if t < 5 { wv[of[t]] } else { 0.0 })
+                    .collect()
             }
         };
         assert_eq!(host(&tv.grad().unwrap()), want, "count {count:?}");
@@ -476,7 +478,11 @@ fn gradcheck_mv(dev: &wp::Device, transposed: bool) {
         wp::launch(k_loss, n, (&y, &w, &out), dev)
     };
     let report = wp::gradcheck(&mut forward, &[a.values(), &x, &y0], &[&out], opts()).unwrap();
-    assert!(report.passed, "transposed {transposed}: worst {:?}", report.worst);
+    assert!(
+        report.passed,
+        "transposed {transposed}: worst {:?}",
+        report.worst
+    );
 }
 
 fn mv_gradcheck(dev: &wp::Device) {

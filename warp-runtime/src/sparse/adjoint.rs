@@ -49,8 +49,7 @@ const _: () = assert!(std::mem::size_of::<AdjTpl<f32>>() == 64);
 // scalars each.
 unsafe impl<S: SparseScalar> ObjectStep for AdjTpl<S> {
     const LIBRARY: &'static ObjectLibrary = &LIBRARY;
-    const KERNEL: &'static str =
-        by_scalar::<S>("wp_sparse_adj_tpl_f32", "wp_sparse_adj_tpl_f64");
+    const KERNEL: &'static str = by_scalar::<S>("wp_sparse_adj_tpl_f32", "wp_sparse_adj_tpl_f64");
 
     fn len(&self) -> usize {
         self.n as usize
@@ -231,7 +230,12 @@ unsafe impl<S: SparseScalar> ObjectStep for AdjOuter<S> {
 
 /// `y = a y + b x` (`x` `None`: `y = a y`) over two scalar arrays of one length on one
 /// device.
-pub(crate) fn axpby<S: SparseScalar>(y: &Array<S>, a: f64, x: Option<&Array<S>>, b: f64) -> Result<()> {
+pub(crate) fn axpby<S: SparseScalar>(
+    y: &Array<S>,
+    a: f64,
+    x: Option<&Array<S>>,
+    b: f64,
+) -> Result<()> {
     if let Some(x) = x {
         debug_assert_eq!(x.len(), y.len());
     }

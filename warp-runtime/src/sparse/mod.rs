@@ -25,6 +25,15 @@
 //! also take warp-core's rectangular blocks (`Mat23` .. `DMat64`, row-major), as [`mv`] does;
 //! [`BlockMul`] says which block types multiply. The same-bits rule holds for each.
 //!
+//! # Gradients
+//! The tier works with a recording [`Tape`](crate::Tape): a solve ([`cg`], [`cr`],
+//! [`bicgstab`], [`gmres`]) is one step whose backward solves the adjoint system `Aᵀ λ =
+//! x̄` and adds `λ` into `b`'s gradient and `-λ_r x_cᵀ` into the gradient of each stored block
+//! of `A` ([`Bsr::with_grad`]); [`Bsr::from_triplets`] of values with a gradient hands each
+//! block's gradient back to its triplets; [`mv`] and [`mv_transpose`] are recorded too. So an
+//! assembly, a solve and a loss differentiate end to end. Backward through a solve that did
+//! not converge is an [`Error::NotDifferentiable`]: its gradient would be wrong.
+//!
 //! # Errors
 //! Shapes, lengths and devices are checked on the host before anything is queued: a mismatch
 //! is an [`Error::InvalidArgument`] naming the function, the argument and both shapes. Bad
@@ -136,6 +145,11 @@ impl<B: Block> Bsr<B> {
     /// `nrow` and `ncol` count blocks. The three arrays have one element per triplet, on one
     /// device, contiguous. The result is on their device, with room for one block per
     /// triplet ([`Bsr::nnz_bound`]).
+    ///
+    /// When `values` has a gradient ([`Array::with_grad`]), so have the matrix's values, and
+    /// a recording [`Tape`](crate::Tape) records the assembly: its backward adds each
+    /// block's gradient into the gradients of the triplets summed into it (and clears the
+    /// block's: the assembly wrote it).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `sparse::from_triplets` and the argument: arrays of
@@ -603,6 +617,12 @@ unsafe fn mv_raw<B: Block>(
 /// A [capture](crate::capture) records it (each replay multiplies the arrays' contents at
 /// that time); on a GPU, call it once for the block type before capturing (its first call
 /// loads the CUDA library).
+///
+/// A recording [`Tape`](crate::Tape) records it when `y` has a gradient: backward adds
+/// `alpha Aᵀ ȳ` into `x`'s gradient (when it has one; through a transpose of `A`), `alpha ȳ_r
+/// x_cᵀ` into the gradient of each stored block (when [`Bsr::with_grad`]), then scales `ȳ`
+/// by `beta` (`y` was read scaled by `beta`, and written). `x` and `A` are read when
+/// backward runs, as a kernel's adjoint reads its arrays.
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `sparse::mv`, the argument and both shapes when a length

@@ -1,8 +1,8 @@
 //! The conjugate residual method ([`cr`]) for symmetric, possibly indefinite systems.
 
+use super::adjoint::{self, Method};
 use super::steps::kr::{self, *};
 use super::work::Work;
-use super::adjoint::{self, Method};
 use super::{check_args, drive, IntoPrecond, Pre, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
@@ -58,6 +58,11 @@ use crate::sparse::Bsr;
 /// ```
 ///
 /// [`Stop::Breakdown`]: super::Stop::Breakdown
+///
+/// # Gradients
+/// A recording [`Tape`](crate::Tape) records the solve as one step, differentiable with
+/// respect to `b` and `A`'s values as [`cg`](super::cg)'s (its backward solves `Aᵀ λ = x̄`
+/// by this method with `A`, symmetric by requirement).
 ///
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::cr`.

@@ -1,8 +1,8 @@
 //! Restarted GMRES ([`gmres`]), right-preconditioned, for general systems.
 
+use super::adjoint::{self, Method};
 use super::steps::kr::{self, *};
 use super::work::{at, Work};
-use super::adjoint::{self, Method};
 use super::{check_args, drive, IntoPrecond, Pre, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
@@ -62,6 +62,11 @@ use crate::sparse::{invalid, Bsr};
 /// assert!(report.residual <= report.tolerance);
 /// # Ok::<(), wp::Error>(())
 /// ```
+///
+/// # Gradients
+/// A recording [`Tape`](crate::Tape) records the solve as one step, differentiable with
+/// respect to `b` and `A`'s values as [`cg`](super::cg)'s (its backward solves `Aᵀ λ = x̄`
+/// by this method with a transpose of `A`).
 ///
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::gmres`, and `restart` 0 or above 1024 (the
