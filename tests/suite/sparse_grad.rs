@@ -27,6 +27,7 @@ backend_tests!(
     backward_through_an_unconverged_solve_is_refused,
     unconverged_adjoint_solve_is_refused,
     user_preconditioner_and_what_is_recorded,
+    gradients_are_the_cpus_bits,
 );
 
 /// `tv[t] = p[src[t]]`: the triplet values from the parameters (a parameter may feed
@@ -614,4 +615,57 @@ fn user_preconditioner_and_what_is_recorded(dev: &wp::Device) {
     tape.zero().unwrap();
     assert!(host(&b.grad().unwrap()).iter().all(|&g| g == 0.0));
     assert!(host(&a.values().grad().unwrap()).iter().all(|&g| g == 0.0));
+}
+
+/// The gradients of an assembly -> CG (Jacobi) solve and of a BiCGSTAB (Jacobi) solve, seeded
+/// with `x̄ = w`: the triplets', b's and the blocks' gradients.
+fn seeded_gradients(dev: &wp::Device) -> Vec<u64> {
+    let n = 6;
+    let pairs = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 3)];
+    let (rows, cols, src) = symmetric_pattern(n, &pairs);
+    let p = [
+        3.0, 3.1, 3.2, 3.3, 3.4, 3.5, 0.5, -0.4, 0.3, 0.45, -0.35, 0.2,
+    ];
+    let tv: Vec<f64> = src.iter().map(|&k| p[k as usize]).collect();
+    let tv = arr(&tv, dev).with_grad().unwrap();
+    let w = [0.3, -0.2, 0.5, 0.1, 0.7, -0.4, 0.25];
+    let mut bits = vec![];
+    let tape = wp::Tape::new();
+    let b = arr(&[1.0, -0.5, 0.25, 2.0, -1.0, 0.75], dev)
+        .with_grad()
+        .unwrap();
+    let x = zeros::<f64, 1>(n, dev).with_grad().unwrap();
+    {
+        let _rec = tape.record();
+        let a = Bsr::from_triplets(n, n, &arr(&rows, dev), &arr(&cols, dev), &tv).unwrap();
+        sparse::cg(&a, &b, &x, Precond::Jacobi, &tight()).unwrap();
+    }
+    x.grad().unwrap().copy_from(&arr(&w[..n], dev)).unwrap();
+    tape.backward_from_grads().unwrap();
+    for g in [tv.grad().unwrap(), b.grad().unwrap()] {
+        bits.extend(host(&g).iter().map(|v| v.to_bits()));
+    }
+    let a = nonsymmetric(7, dev).with_grad().unwrap();
+    let b = arr(&[1.0, -0.5, 0.25, 2.0, -1.0, 0.75, 0.5], dev)
+        .with_grad()
+        .unwrap();
+    let x = zeros::<f64, 1>(7, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        sparse::bicgstab(&a, &b, &x, Precond::Jacobi, &tight()).unwrap();
+    }
+    x.grad().unwrap().copy_from(&arr(&w, dev)).unwrap();
+    tape.backward_from_grads().unwrap();
+    for g in [b.grad().unwrap(), a.values().grad().unwrap()] {
+        bits.extend(host(&g).iter().map(|v| v.to_bits()));
+    }
+    bits
+}
+
+/// The gradients of the solves and the assembly are the same bits on every device as on
+/// the CPU (the adjoint solves, with built-in preconditioners, and the adjoint steps run the
+/// same operations in the same order everywhere).
+fn gradients_are_the_cpus_bits(dev: &wp::Device) {
+    assert_eq!(seeded_gradients(dev), seeded_gradients(&wp::cpu()));
 }
