@@ -309,16 +309,16 @@ pub(super) struct Sorted {
 /// t]` for each assembled triplet, then `m`'s values gradient is cleared (the assembly wrote
 /// the values).
 pub(super) fn record_assembly<B: Block>(m: &Bsr<B>, values: &Array<B>, s: Sorted) -> Result<()> {
-    let (mv, tv) = (m.values().clone(), values.clone());
-    let (mz, tz) = (mv.clone(), tv.clone());
+    let (blocks, tv) = (m.values().clone(), values.clone());
+    let (bz, tz) = (blocks.clone(), tv.clone());
     tape::on_op(
         "sparse::from_triplets",
         move || {
-            let (Some(vg), Some(tg)) = (mv.grad(), tv.grad()) else {
+            let (Some(vg), Some(tg)) = (blocks.grad(), tv.grad()) else {
                 return Ok(());
             };
             dispatch::object_step(
-                mv.device(),
+                blocks.device(),
                 &AdjTpl::<B::Scalar> {
                     count: s.count.as_ref().map_or(0, |c| c.device_address()),
                     idx: s.idx.device_address(),
@@ -333,10 +333,10 @@ pub(super) fn record_assembly<B: Block>(m: &Bsr<B>, values: &Array<B>, s: Sorted
                     scalar: PhantomData,
                 },
             )?;
-            mv.zero_grad()
+            blocks.zero_grad()
         },
         move || {
-            mz.zero_grad()?;
+            bz.zero_grad()?;
             tz.zero_grad()
         },
     )
