@@ -83,9 +83,10 @@ use std::marker::PhantomData;
 /// let b = wp::Array::from_slice(&[1.0f64, 2.0], &dev)?.with_grad()?;
 /// let x = wp::Array::<f64>::zeros(2, &dev)?.with_grad()?;
 /// let tape = wp::Tape::new();
+/// let o = SolveOptions { rtol: 1e-12, ..Default::default() };
 /// {
 ///     let _rec = tape.record();
-///     sparse::cg(&a, &b, &x, Precond::None, &SolveOptions { rtol: 1e-12, ..Default::default() })?;
+///     sparse::cg(&a, &b, &x, Precond::None, &o)?;
 /// }
 /// x.grad().unwrap().copy_from(&wp::Array::from_slice(&[1.0, 0.0], &dev)?)?;
 /// tape.backward_from_grads()?;
