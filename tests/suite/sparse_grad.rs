@@ -617,8 +617,9 @@ fn user_preconditioner_and_what_is_recorded(dev: &wp::Device) {
     assert!(host(&a.values().grad().unwrap()).iter().all(|&g| g == 0.0));
 }
 
-/// The gradients of an assembly -> CG (Jacobi) solve and of a BiCGSTAB (Jacobi) solve, seeded
-/// with `x̄ = w`: the triplets', b's and the blocks' gradients.
+/// The gradients of an assembly -> CG (Jacobi) solve, of a BiCGSTAB (Jacobi) solve, and of an
+/// assembly of `Mat3` triplets -> CG in f32, seeded with `x̄ = w`: the triplets', b's and the
+/// blocks' gradients, as bits.
 fn seeded_gradients(dev: &wp::Device) -> Vec<u64> {
     let n = 6;
     let pairs = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 3)];
@@ -660,6 +661,49 @@ fn seeded_gradients(dev: &wp::Device) -> Vec<u64> {
     for g in [b.grad().unwrap(), a.values().grad().unwrap()] {
         bits.extend(host(&g).iter().map(|v| v.to_bits()));
     }
+    // f32 and 3 x 3 blocks: a symmetric block tridiagonal matrix assembled from `Mat3`
+    // triplets with a gradient ((i, j) gets M, (j, i) its transpose), solved by CG.
+    let nb = 5;
+    let (mut rows, mut cols, mut vals) = (vec![], vec![], vec![]);
+    for i in 0..nb as i32 {
+        let d = Mat3::from_diagonal(Vec3::splat(6.0 + i as f32));
+        rows.push(i);
+        cols.push(i);
+        vals.push(d);
+        if i + 1 < nb as i32 {
+            let m = Mat3::from_cols_array(&std::array::from_fn(|e| {
+                0.1 * ((i as usize * 5 + e * 3) % 7) as f32 - 0.3
+            }));
+            rows.extend([i, i + 1]);
+            cols.extend([i + 1, i]);
+            vals.extend([m, m.transpose()]);
+        }
+    }
+    let tv = arr(&vals, dev).with_grad().unwrap();
+    let b: Vec<f32> = (0..3 * nb).map(|i| ((i * 3) % 5) as f32 - 2.0).collect();
+    let b = arr(&b, dev).with_grad().unwrap();
+    let x = zeros::<f32, 1>(3 * nb, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _rec = tape.record();
+        let a = Bsr::from_triplets(nb, nb, &arr(&rows, dev), &arr(&cols, dev), &tv).unwrap();
+        let o = SolveOptions {
+            rtol: 1e-6,
+            ..Default::default()
+        };
+        let r = sparse::cg(&a, &b, &x, Precond::Jacobi, &o).unwrap();
+        assert_eq!(r.stop, Stop::Converged);
+    }
+    let w: Vec<f32> = (0..3 * nb).map(|i| 0.25 * i as f32 - 1.0).collect();
+    x.grad().unwrap().copy_from(&arr(&w, dev)).unwrap();
+    tape.backward_from_grads().unwrap();
+    let tg: Vec<Mat3> = host(&tv.grad().unwrap());
+    bits.extend(
+        tg.iter()
+            .flat_map(|m| m.to_cols_array())
+            .map(|v| v.to_bits() as u64),
+    );
+    bits.extend(host(&b.grad().unwrap()).iter().map(|v| v.to_bits() as u64));
     bits
 }
 
