@@ -741,6 +741,86 @@ void color_pairs() {
   print(pcols.data(), total);
 }
 
+// ---- Slice 5: the adjoint kernels (wp_sparse.h's adjoint section), in warp-runtime's
+// sparse/adjoint.rs order ----
+struct AdjointKernels {
+  void (*tpl)(sp_adj_tpl_t);
+  void (*axpby)(sp_adj_axpby_t);
+  void (*outer)(sp_adj_outer_t);
+};
+#define AK(t) AdjointKernels{wp_sparse_adj_tpl_##t, wp_sparse_adj_axpby_##t, wp_sparse_adj_outer_##t}
+
+template <typename S> void adjoint(const AdjointKernels& a, const ScalarKernels& k, u64 op) {
+  switch (op) {
+    case 0: {  // the assembly's adjoint: block, nrow, ncol, n, count (flag, value), rows, cols,
+               // values, the blocks' gradient (n blocks, the matrix's capacity)
+      const i32 block = (i32)word(), nrow = (i32)word(), ncol = (i32)word(), n = (i32)word();
+      i32 dcount = 0;
+      const bool has_count = word() != 0;
+      if (has_count) dcount = (i32)(i64)word();
+      const u64 ca = has_count ? addr(&dcount) : 0;
+      std::vector<i32> rows = ints(n), cols = ints(n);
+      std::vector<S> values = scalars<S>((size_t)n * block);
+      std::vector<S> vgrad = scalars<S>((size_t)n * block);
+      const i32 m = ca ? sp_count(ca, n) : n;
+      std::vector<u32> keys(n + 1);
+      std::vector<i32> idx(n + 1), pos(n + 1);
+      std::vector<i32> bad = {0x7fffffff, 0x7fffffff, 0x7fffffff};
+      const bool two_pass = (u64)nrow * (u64)ncol > 0xffffffffull;
+      run(k.keys, GB, GT, sp_tpl_keys_t{ca, addr(rows.data()), addr(cols.data()), addr(values.data()), n,
+                                        nrow, ncol, block, two_pass, 0, addr(keys.data()),
+                                        addr(idx.data()), addr(bad.data())});
+      auto sort = [&]() {
+        std::vector<std::pair<u32, i32>> kv(m);
+        for (i32 i = 0; i < m; ++i) kv[i] = {keys[i], idx[i]};
+        std::stable_sort(kv.begin(), kv.end(), [](auto x, auto y) { return x.first < y.first; });
+        for (i32 i = 0; i < m; ++i) { keys[i] = kv[i].first; idx[i] = kv[i].second; }
+      };
+      sort();
+      if (two_pass) {
+        run(wp_sparse_tpl_row_keys, GB, GT, sp_tpl_row_keys_t{ca, addr(rows.data()), addr(cols.data()),
+                                                              addr(idx.data()), addr(keys.data()), n, nrow, ncol, 0});
+        sort();
+      }
+      run(wp_sparse_tpl_heads, GB, GT, sp_tpl_heads_t{ca, addr(rows.data()), addr(cols.data()),
+                                                      addr(idx.data()), addr(pos.data()), n, nrow, ncol, 0});
+      for (i32 i = 1; i < m; ++i) pos[i] += pos[i - 1];
+      std::vector<S> tgrad((size_t)n * block + 1);
+      const u32 sentinel = two_pass ? (u32)nrow : (u32)((u64)nrow * (u64)ncol);
+      run(a.tpl, GB, GT, sp_adj_tpl_t{ca, addr(idx.data()), addr(pos.data()), addr(keys.data()),
+                                      addr(vgrad.data()), addr(tgrad.data()), n, block, sentinel, 0});
+      print(tgrad.data(), (size_t)n * block);
+      break;
+    }
+    case 1: {  // the outer product: r, c, cm, the matrix, u (rows), v (columns), the gradient
+               // (nnz blocks), alpha
+      const i32 r = (i32)word(), c = (i32)word(), cm = (i32)word(), rc = r * c;
+      std::vector<S> vals;
+      Matrix mt = mat<S>(rc, vals);
+      std::vector<S> u = scalars<S>((size_t)mt.nrow * r), v = scalars<S>((size_t)mt.ncol * c);
+      std::vector<S> g = scalars<S>((size_t)mt.nnz * rc);
+      const f64 alpha = scalar<f64>();
+      run(a.outer, GB, GT, sp_adj_outer_t{addr(mt.offsets.data()), addr(mt.columns.data()), addr(g.data()),
+                                          addr(u.data()), addr(v.data()), alpha, mt.nrow, mt.ncol, mt.nnz,
+                                          r, c, cm});
+      print(g.data(), (size_t)mt.nnz * rc);
+      break;
+    }
+    case 2: {  // y = a y + b x: n, y, has_x, x, a, b
+      const i64 n = (i64)word();
+      std::vector<S> y = scalars<S>(n);
+      const bool has_x = word() != 0;
+      std::vector<S> x = scalars<S>(has_x ? n : 0);
+      const f64 al = scalar<f64>(), be = scalar<f64>();
+      run(a.axpby, GB, GT, sp_adj_axpby_t{addr(y.data()), has_x ? addr(x.data()) : 0, al, be, n});
+      print(y.data(), (size_t)n);
+      break;
+    }
+    default:
+      exit(2);
+  }
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   FILE* file = fopen(argv[1], "rb");
@@ -770,6 +850,13 @@ int main(int argc, char** argv) {
     case 6: color(); break;
     case 7: color_split(); break;
     case 8: color_pairs(); break;
+    // The adjoint kernels: a third word names the operation (`adjoint`), kind the scalar.
+    case 9: {
+      const u64 op = word();
+      const AdjointKernels ak[2] = {AK(f32), AK(f64)};
+      kind ? adjoint<f64>(ak[1], sk[1], op) : adjoint<f32>(ak[0], sk[0], op);
+      break;
+    }
     default: return 2;
   }
   return 0;
@@ -2257,4 +2344,216 @@ fn coloring_matches_the_cpu() {
             "case {case}: pairs"
         );
     }
+}
+
+// ---- Slice 5: the adjoint kernels ----
+
+/// The driver's scalar code (0 f32, 1 f64).
+fn scalar_kind<S: SparseScalar>() -> u64 {
+    (std::mem::size_of::<S>() == 8) as u64
+}
+
+/// The assembly's adjoint (`adj_tpl`) of random triplets with duplicates, a host or a device
+/// count: the triplets' gradient from the blocks' through the tape on the CPU, and the
+/// kernel after the header's own pipeline.
+fn adjoint_tpl_case<B: Block>(count: Option<i32>, seed: usize) {
+    let cpu = wp::cpu();
+    let (nrow, ncol, n) = (13, 11, 90);
+    let rc = B::ROWS * B::COLS;
+    let rows: Vec<i32> = (0..n).map(|t| ((t * 7 + seed) % nrow) as i32).collect();
+    let cols: Vec<i32> = (0..n).map(|t| ((t * t + 3 * seed) % ncol) as i32).collect();
+    let scal = |off: usize| -> Vec<B::Scalar> {
+        (0..n * rc)
+            .map(|e| B::Scalar::from_f64(value(seed * 1000 + off + e)))
+            .collect()
+    };
+    let (vs, gs) = (scal(0), scal(500_000));
+    let tv = wp::Array::from_slice(&from_scalars::<B, B::Scalar>(&vs), &cpu)
+        .unwrap()
+        .with_grad()
+        .unwrap();
+    let (r, c) = (
+        wp::Array::from_slice(&rows, &cpu).unwrap(),
+        wp::Array::from_slice(&cols, &cpu).unwrap(),
+    );
+    let dc = wp::Array::from_slice(&[count.unwrap_or(0)], &cpu).unwrap();
+    let tape = wp::Tape::new();
+    let a = {
+        let _rec = tape.record();
+        match count {
+            None => Bsr::from_triplets(nrow, ncol, &r, &c, &tv).unwrap(),
+            Some(_) => Bsr::from_triplets_n(nrow, ncol, &r, &c, &tv, &dc).unwrap(),
+        }
+    };
+    let g = a.values().grad().unwrap();
+    g.copy_from(&wp::Array::from_slice(&from_scalars::<B, B::Scalar>(&gs), &cpu).unwrap())
+        .unwrap();
+    tape.backward_from_grads().unwrap();
+    let want = words(&tv.grad().unwrap().to_vec().unwrap());
+    let mut input = vec![9, scalar_kind::<B::Scalar>(), 0];
+    input.extend([rc as u64, nrow as u64, ncol as u64, n as u64]);
+    match count {
+        None => input.push(0),
+        Some(k) => input.extend([1, k as i64 as u64]),
+    }
+    input.extend(rows.iter().map(|&v| v as i64 as u64));
+    input.extend(cols.iter().map(|&v| v as i64 as u64));
+    input.extend(vs.iter().map(|&v| word(v)));
+    input.extend(gs.iter().map(|&v| word(v)));
+    let got = hex(&run(&format!("adj_tpl{}", kind::<B>()), &input));
+    assert_eq!(got, want, "{}: count {count:?}", std::any::type_name::<B>());
+}
+
+/// mv's adjoint (`adj_outer` into a preset gradient, `adj_axpby` scaling y's gradient by
+/// beta) through the tape on the CPU, against the kernels; `transposed`: mv_transpose's
+/// (the outer product's factors swapped).
+fn adjoint_mv_case<B: Block>(seed: usize, transposed: bool) {
+    let cpu = wp::cpu();
+    let (nrow, ncol) = (17, 12);
+    let (a, mw) = random_matrix::<B>(nrow, ncol, 120, seed);
+    let a = a.with_grad().unwrap();
+    let (nnz, cap, rc) = (a.nnz().unwrap(), a.nnz_bound(), B::ROWS * B::COLS);
+    let vals = |len: usize, off: usize| -> Vec<B::Scalar> {
+        (0..len)
+            .map(|i| B::Scalar::from_f64(value(seed * 977 + off + i)))
+            .collect()
+    };
+    let g0 = vals(cap * rc, 0);
+    a.values()
+        .grad()
+        .unwrap()
+        .copy_from(&wp::Array::from_slice(&from_scalars::<B, B::Scalar>(&g0), &cpu).unwrap())
+        .unwrap();
+    let (rows, cols) = (nrow * B::ROWS, ncol * B::COLS);
+    let (alpha, beta) = (-1.75, 0.625);
+    let (al, be) = (B::Scalar::from_f64(alpha), B::Scalar::from_f64(beta));
+    let tape = wp::Tape::new();
+    // x in A's columns and ȳ in its rows (mv), or the other way round (mv_transpose).
+    let (xs, ys) = if transposed {
+        (vals(rows, 900_000), vals(cols, 800_000))
+    } else {
+        (vals(cols, 900_000), vals(rows, 800_000))
+    };
+    let ygrad: Vec<u64> = if transposed {
+        let x = wp::Array::from_slice(&from_scalars::<B::Out, B::Scalar>(&xs), &cpu).unwrap();
+        let y = wp::Array::<B::In>::zeros(ncol, &cpu)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        {
+            let _rec = tape.record();
+            sparse::mv_transpose(al, &a, &x, be, &y).unwrap();
+        }
+        let yg = y.grad().unwrap();
+        yg.copy_from(&wp::Array::from_slice(&from_scalars::<B::In, B::Scalar>(&ys), &cpu).unwrap())
+            .unwrap();
+        tape.backward_from_grads().unwrap();
+        let v = yg.to_vec().unwrap();
+        bytemuck::cast_slice::<B::In, B::Scalar>(&v)
+            .iter()
+            .map(|&s| word(s))
+            .collect()
+    } else {
+        let x = wp::Array::from_slice(&from_scalars::<B::In, B::Scalar>(&xs), &cpu).unwrap();
+        let y = wp::Array::<B::Out>::zeros(nrow, &cpu)
+            .unwrap()
+            .with_grad()
+            .unwrap();
+        {
+            let _rec = tape.record();
+            sparse::mv(al, &a, &x, be, &y).unwrap();
+        }
+        let yg = y.grad().unwrap();
+        yg.copy_from(
+            &wp::Array::from_slice(&from_scalars::<B::Out, B::Scalar>(&ys), &cpu).unwrap(),
+        )
+        .unwrap();
+        tape.backward_from_grads().unwrap();
+        let v = yg.to_vec().unwrap();
+        bytemuck::cast_slice::<B::Out, B::Scalar>(&v)
+            .iter()
+            .map(|&s| word(s))
+            .collect()
+    };
+    let name = std::any::type_name::<B>();
+    let want_g = words(&a.values().grad().unwrap().to_vec().unwrap()[..nnz]);
+    let (u, v) = if transposed { (&xs, &ys) } else { (&ys, &xs) };
+    let mut input = vec![9, scalar_kind::<B::Scalar>(), 1];
+    input.extend([B::ROWS as u64, B::COLS as u64, B::COL_MAJOR as u64]);
+    input.extend(&mw);
+    input.extend(u.iter().map(|&s| word(s)));
+    input.extend(v.iter().map(|&s| word(s)));
+    input.extend(g0[..nnz * rc].iter().map(|&s| word(s)));
+    input.push(alpha.to_bits());
+    let got = hex(&run(&format!("adj_outer{}", kind::<B>()), &input));
+    assert_eq!(
+        got, want_g,
+        "{name} (transposed {transposed}): A's gradient"
+    );
+    let mut input = vec![9, scalar_kind::<B::Scalar>(), 2, ys.len() as u64];
+    input.extend(ys.iter().map(|&s| word(s)));
+    input.push(0);
+    input.extend([beta.to_bits(), 0f64.to_bits()]);
+    let got = hex(&run(&format!("adj_scale{}", kind::<B>()), &input));
+    assert_eq!(got, ygrad, "{name} (transposed {transposed}): y's gradient");
+}
+
+/// `y = a y + b x` with an x (a solve's `b.grad += lambda`), against the same formula on
+/// the host (each product and the sum rounded once in S).
+fn adjoint_axpby_case<S: SparseScalar + Block<Scalar = S>>(seed: usize) {
+    let n = 1000;
+    let ys: Vec<S> = (0..n).map(|i| S::from_f64(value(seed + 3 * i))).collect();
+    let xs: Vec<S> = (0..n)
+        .map(|i| S::from_f64(value(seed + 5 * i + 1)))
+        .collect();
+    for (a, b) in [(1.0, 1.0), (0.75, -2.5)] {
+        let (sa, sb) = (S::from_f64(a).to_f64(), S::from_f64(b).to_f64());
+        // Each operation rounded once in S: for f64 directly; for f32, f64 holds the exact
+        // product of two f32s (48 bits), and the exact sum of two f32s within 2^29 of each
+        // other in magnitude (`value`'s spread is 10^6), so one rounding to f32 each.
+        let want: Vec<u64> = ys
+            .iter()
+            .zip(&xs)
+            .map(|(&y, &x)| {
+                let ay = S::from_f64(sa * y.to_f64());
+                let bx = S::from_f64(sb * x.to_f64());
+                word(S::from_f64(ay.to_f64() + bx.to_f64()))
+            })
+            .collect();
+        let mut input = vec![9, scalar_kind::<S>(), 2, n as u64];
+        input.extend(ys.iter().map(|&v| word(v)));
+        input.push(1);
+        input.extend(xs.iter().map(|&v| word(v)));
+        input.extend([a.to_bits(), b.to_bits()]);
+        let got = hex(&run(&format!("adj_axpby{}", kind::<S>()), &input));
+        assert_eq!(got, want, "{}: a {a}, b {b}", std::any::type_name::<S>());
+    }
+}
+
+/// Slice 5's adjoint kernels give the CPU backend's bits: the assembly's adjoint (host and
+/// device counts, scalar and block values), mv's and mv_transpose's (the outer product for
+/// square and rectangular, column- and row-major blocks, and the scaling of y's gradient),
+/// and `y = a y + b x`.
+#[test]
+fn adjoints_match_the_cpu_bit_for_bit() {
+    if skip("adjoints_match_the_cpu_bit_for_bit") {
+        return;
+    }
+    use warp_lang::{DMat32, Mat23};
+    for count in [None, Some(57)] {
+        adjoint_tpl_case::<f32>(count, 1);
+        adjoint_tpl_case::<f64>(count, 2);
+        adjoint_tpl_case::<Mat3>(count, 3);
+        adjoint_tpl_case::<DMat2>(count, 4);
+    }
+    for transposed in [false, true] {
+        adjoint_mv_case::<f32>(5, transposed);
+        adjoint_mv_case::<f64>(6, transposed);
+        adjoint_mv_case::<Mat3>(7, transposed);
+        adjoint_mv_case::<DMat4>(8, transposed);
+        adjoint_mv_case::<Mat23>(9, transposed);
+        adjoint_mv_case::<DMat32>(10, transposed);
+    }
+    adjoint_axpby_case::<f32>(11);
+    adjoint_axpby_case::<f64>(12);
 }

@@ -129,6 +129,7 @@ mod refs_tuples;
 mod rng;
 mod scenes;
 mod sparse;
+mod sparse_grad;
 mod spatial;
 mod stability;
 mod streams;

@@ -1120,3 +1120,118 @@ WP_FN void spk_scalar(const spk_scalar_t& s) {
 WP_SPK_SCALAR_KERNELS(f32, wp::f32)
 WP_SPK_SCALAR_KERNELS(f64, wp::f64)
 #endif
+
+// ==========================================================================================
+// Adjoints (slice 5: warp-runtime's sparse/adjoint.rs, whose CPU bodies run the same order of
+// operations; the solves' records in sparse/solve/adjoint.rs queue them). No float atomics:
+// each thread owns what it writes.
+//   adj_tpl      per sorted triplet k: tgrad[idx[k]] += vgrad[pos[k] - 1] (scalar by scalar)
+//                when its sorted key is below the sentinel (an assembled triplet): the
+//                assembly's adjoint, over from_triplets' kept sort.
+//   adj_axpby    per element: y = a y + b x (x 0: y = a y).
+//   adj_outer    per stored block k < nnz: with r its block row (a binary search of the
+//                offsets) and c its column (skipped outside [0, ncol)), grad_k(i, j) +=
+//                alpha (u[r R + i] v[c C + j]).
+// ==========================================================================================
+namespace wp {
+
+/// AdjTpl: count (as the triplet steps'), idx, pos (i32*), keys (u32*), vgrad, tgrad (S*,
+/// `block` scalars per block / triplet), n, block, sentinel.
+struct sp_adj_tpl_t {
+  u64 count, idx, pos, keys, vgrad, tgrad;
+  i32 n, block;
+  u32 sentinel;
+  i32 pad;
+};
+static_assert(sizeof(sp_adj_tpl_t) == 64, "sp_adj_tpl_t layout");
+
+/// AdjAxpby: y, x (S*, n each; x 0 for none), a, b (as f64, rounded to S), n.
+struct sp_adj_axpby_t {
+  u64 y, x;
+  f64 a, b;
+  i64 n;
+};
+static_assert(sizeof(sp_adj_axpby_t) == 40, "sp_adj_axpby_t layout");
+
+/// AdjOuter: offsets, columns (i32*), grad (S*, cap blocks of rows x cols), u (S*, nrow rows),
+/// v (S*, ncol cols), alpha (as f64, rounded to S), nrow, ncol, cap, rows, cols, cm (1:
+/// column-major blocks).
+struct sp_adj_outer_t {
+  u64 offsets, columns, grad, u, v;
+  f64 alpha;
+  i32 nrow, ncol, cap, rows, cols, cm;
+};
+static_assert(sizeof(sp_adj_outer_t) == 72, "sp_adj_outer_t layout");
+
+template <typename S>
+WP_FN void sp_adj_tpl(const sp_adj_tpl_t& s, i32 k) {
+  if (((const u32*)s.keys)[k] >= s.sentinel) return;
+  const i64 t = ((const i32*)s.idx)[k];
+  const i64 blk = (i64)((const i32*)s.pos)[k] - 1;
+  const S* g = (const S*)s.vgrad + blk * s.block;
+  S* o = (S*)s.tgrad + t * s.block;
+  for (i32 e = 0; e < s.block; ++e) o[e] = sp_add(o[e], g[e]);
+}
+
+template <typename S>
+WP_FN void sp_adj_axpby(const sp_adj_axpby_t& s, i64 i) {
+  S* y = (S*)s.y;
+  const S ay = sp_mul((S)s.a, y[i]);
+  y[i] = s.x != 0 ? sp_add(ay, sp_mul((S)s.b, ((const S*)s.x)[i])) : ay;
+}
+
+/// The block row of stored block k: the last r < nrow with offsets[r] <= k, by binary search
+/// over [1, nrow) (Rust's `block_row`; nrow >= 1).
+WP_FN i32 sp_adj_block_row(const i32* offsets, i32 nrow, i32 k) {
+  i32 lo = 1, hi = nrow;
+  while (lo < hi) {
+    const i32 mid = lo + (hi - lo) / 2;
+    if (offsets[mid] <= k)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo - 1;
+}
+
+/// The clamped block count, as `sp_row_range` clamps it: offsets[nrow] in [0, cap].
+WP_FN i32 sp_adj_nnz(const sp_adj_outer_t& s) {
+  const i32 v = ((const i32*)s.offsets)[s.nrow];
+  const i32 cap = s.cap < 0 ? 0 : s.cap;
+  return v < 0 ? 0 : (v > cap ? cap : v);
+}
+
+template <typename S>
+WP_FN void sp_adj_outer(const sp_adj_outer_t& s, i32 k) {
+  const i32 r = sp_adj_block_row((const i32*)s.offsets, s.nrow, k);
+  const i32 c = ((const i32*)s.columns)[k];
+  if (c < 0 || c >= s.ncol) return;
+  const S* u = (const S*)s.u + (i64)r * s.rows;
+  const S* v = (const S*)s.v + (i64)c * s.cols;
+  S* g = (S*)s.grad + (i64)k * s.rows * s.cols;
+  const S alpha = (S)s.alpha;
+  for (i32 i = 0; i < s.rows; ++i)
+    for (i32 j = 0; j < s.cols; ++j) {
+      const i32 e = s.cm ? j * s.rows + i : i * s.cols + j;
+      g[e] = sp_add(g[e], sp_mul(alpha, sp_mul(u[i], v[j])));
+    }
+}
+
+}  // namespace wp
+
+#if defined(WP_SPARSE_BUILD) && (defined(__CUDACC__) || defined(WP_SPARSE_EMULATED))
+// The adjoint kernels of one scalar type.
+#define WP_SPA_SCALAR_KERNELS(tag, S)                                                       \
+  extern "C" __global__ void wp_sparse_adj_tpl_##tag(wp::sp_adj_tpl_t s) {                  \
+    WP_SP_LOOP(k, wp::sp_count(s.count, s.n)) wp::sp_adj_tpl<S>(s, (wp::i32)k);             \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_adj_axpby_##tag(wp::sp_adj_axpby_t s) {              \
+    WP_SP_LOOP(i, s.n) wp::sp_adj_axpby<S>(s, i);                                           \
+  }                                                                                         \
+  extern "C" __global__ void wp_sparse_adj_outer_##tag(wp::sp_adj_outer_t s) {              \
+    if (s.nrow > 0) WP_SP_LOOP(k, wp::sp_adj_nnz(s)) wp::sp_adj_outer<S>(s, (wp::i32)k);    \
+  }
+
+WP_SPA_SCALAR_KERNELS(f32, wp::f32)
+WP_SPA_SCALAR_KERNELS(f64, wp::f64)
+#endif

@@ -360,6 +360,45 @@ pub(crate) fn on_launch<K: Kernel>(
     })
 }
 
+/// Whether a tape records on this thread (library operations that record themselves, such
+/// as the sparse solves, skip the work of a record when none does).
+#[cfg_attr(not(feature = "sparse"), allow(dead_code))]
+pub(crate) fn recording() -> bool {
+    RECORDING.with(|r| r.borrow().iter().any(|w| w.strong_count() > 0))
+}
+
+/// Records a library operation named `name` on every tape recording on this thread (the
+/// sibling of [`on_launch`] for work that is not one kernel: a sparse solve, an assembly):
+/// `backward` runs at its place in the reverse order, `zero` clears the gradients of the
+/// arrays it reads and writes ([`Tape::zero`]). Both are shared by the tapes that record it.
+///
+/// # Errors
+/// When one of the tapes is running its backward pass (the operation came from one of its
+/// steps).
+#[cfg_attr(not(feature = "sparse"), allow(dead_code))]
+pub(crate) fn on_op(
+    name: &'static str,
+    backward: impl Fn() -> Result<()> + 'static,
+    zero: impl Fn() -> Result<()> + 'static,
+) -> Result<()> {
+    let backward: Rc<dyn Fn() -> Result<()>> = Rc::new(backward);
+    let zero: Rc<dyn Fn() -> Result<()>> = Rc::new(zero);
+    RECORDING.with(|r| {
+        for inner in r.borrow().iter().filter_map(Weak::upgrade) {
+            let mut records = inner
+                .try_borrow_mut()
+                .map_err(|_| running_backward(&format!("`{name}`")))?;
+            let (b, z) = (backward.clone(), zero.clone());
+            records.records.push(Record {
+                name,
+                backward: Box::new(move |_| b()),
+                zero: Box::new(move || z()),
+            });
+        }
+        Ok(())
+    })
+}
+
 /// Copies `src` into `dst` (same shape); see [`Array::copy_from`]. A recording [`Tape`]
 /// records it: backward adds `dst`'s gradient into `src`'s and clears `dst`'s.
 pub fn copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> Result<()> {

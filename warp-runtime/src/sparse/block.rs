@@ -171,9 +171,9 @@ pub unsafe trait Block: Element + Default + sealed::SealedBlock {
     const COL_MAJOR: bool;
 }
 
-/// A square block (`ROWS == COLS`, `In == Out`): what the solvers and the Jacobi
-/// preconditioner take.
-pub trait SquareBlock: Block<In = <Self as Block>::Out> {}
+/// A square block (`ROWS == COLS`, `In == Out`, its own transpose): what the solvers and the
+/// Jacobi preconditioner take (a solve's adjoint solves with the transposed matrix).
+pub trait SquareBlock: Block<In = <Self as Block>::Out, Transpose = Self> {}
 
 /// The largest block dimension: the CPU steps size their per-row buffers by it (the macros
 /// below assert it of every block type; slice 2's rectangular blocks have 6 rows or columns).

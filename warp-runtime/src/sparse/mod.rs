@@ -33,6 +33,15 @@
 //! and writes new ones, so the colours depend on the graph and the seed alone: the same on
 //! the CPU, at any thread count, and on a GPU.
 //!
+//! # Gradients
+//! The tier works with a recording [`Tape`](crate::Tape): a solve ([`cg`], [`cr`],
+//! [`bicgstab`], [`gmres`]) is one step whose backward solves the adjoint system `Aᵀ λ =
+//! x̄` and adds `λ` into `b`'s gradient and `-λ_r x_cᵀ` into the gradient of each stored block
+//! of `A` ([`Bsr::with_grad`]); [`Bsr::from_triplets`] of values with a gradient hands each
+//! block's gradient back to its triplets; [`mv`] and [`mv_transpose`] are recorded too. So an
+//! assembly, a solve and a loss differentiate end to end. Backward through a solve that did
+//! not converge is an [`Error::NotDifferentiable`]: its gradient would be wrong.
+//!
 //! # Errors
 //! Shapes, lengths and devices are checked on the host before anything is queued: a mismatch
 //! is an [`Error::InvalidArgument`] naming the function, the argument and both shapes. Bad
@@ -58,6 +67,8 @@
 #[cfg(test)]
 #[macro_use]
 mod record_check;
+// Slice 5: the tier on a tape (the adjoint steps; the assembly's and mv's records).
+mod adjoint;
 mod block;
 // Slice 4: the matrix as a kernel parameter (`HostObject`).
 mod kernel_arg;
@@ -147,6 +158,11 @@ impl<B: Block> Bsr<B> {
     /// device, contiguous. The result is on their device, with room for one block per
     /// triplet ([`Bsr::nnz_bound`]).
     ///
+    /// When `values` has a gradient ([`Array::with_grad`]), so have the matrix's values, and
+    /// a recording [`Tape`](crate::Tape) records the assembly: its backward adds each
+    /// block's gradient into the gradients of the triplets summed into it (and clears the
+    /// block's: the assembly wrote it).
+    ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `sparse::from_triplets` and the argument: arrays of
     /// different lengths or not contiguous, `nrow` or `ncol` above `i32::MAX - 1`, more than
@@ -199,7 +215,8 @@ impl<B: Block> Bsr<B> {
     }
 
     /// The assembly of both: `whole` when the count is the arrays' length (the lengths must
-    /// then agree; else the count must fit each).
+    /// then agree; else the count must fit each). With differentiable `values` the matrix's
+    /// values get a gradient, and a recording tape records the assembly's adjoint.
     fn assemble(
         nrow: usize,
         ncol: usize,
@@ -209,7 +226,7 @@ impl<B: Block> Bsr<B> {
         count: Count<'_>,
         whole: bool,
     ) -> Result<Self> {
-        Self::assemble_with(
+        let (m, sorted) = Self::assemble_sorted(
             nrow,
             ncol,
             rows,
@@ -219,7 +236,15 @@ impl<B: Block> Bsr<B> {
             whole,
             &TRIPLET_NAMES,
             true,
-        )
+        )?;
+        if !values.requires_grad() {
+            return Ok(m);
+        }
+        let m = m.with_grad()?;
+        if let (Some(sorted), true) = (sorted, crate::tape::recording()) {
+            adjoint::record_assembly(&m, values, sorted)?;
+        }
+        Ok(m)
     }
 
     /// [`Bsr::assemble`] with the names its errors and faults carry (`names.name` the
@@ -238,6 +263,34 @@ impl<B: Block> Bsr<B> {
         names: &'static KernelInfo,
         check_finite: bool,
     ) -> Result<Self> {
+        Self::assemble_sorted(
+            nrow,
+            ncol,
+            rows,
+            columns,
+            values,
+            count,
+            whole,
+            names,
+            check_finite,
+        )
+        .map(|(m, _)| m)
+    }
+
+    /// [`Bsr::assemble_with`], also handing back the sort's scratch (`None` when nothing was
+    /// sorted) for the assembly's adjoint.
+    #[allow(clippy::too_many_arguments)]
+    fn assemble_sorted(
+        nrow: usize,
+        ncol: usize,
+        rows: &Array<i32>,
+        columns: &Array<i32>,
+        values: &Array<B>,
+        count: Count<'_>,
+        whole: bool,
+        names: &'static KernelInfo,
+        check_finite: bool,
+    ) -> Result<(Self, Option<adjoint::Sorted>)> {
         let func = names.name;
         let dev = values.device().clone();
         same_device(func, "rows", &dev, rows.device())?;
@@ -309,7 +362,7 @@ impl<B: Block> Bsr<B> {
         };
         // (A device count is read and checked by the steps, even with no room for a triplet.)
         if n == 0 && count_addr == 0 {
-            return Ok(m);
+            return Ok((m, None));
         }
         // What the primitives process: the same count.
         let prim: Count<'_> = match count {
@@ -439,8 +492,21 @@ impl<B: Block> Bsr<B> {
                 nrow: nr,
             },
         )?;
-        // The scratch is freed after the queued steps (array memory orders its free).
-        Ok(m)
+        // The scratch is freed after the queued steps (array memory orders its free), or
+        // kept by the assembly's adjoint. The sorted keys of triplets out of range are
+        // `nrow * ncol` (one pass) or `nrow` (the second pass's row keys).
+        let sorted = adjoint::Sorted {
+            keys,
+            idx,
+            pos,
+            count: match count {
+                Count::Device(c) => Some(c.clone()),
+                Count::Host(_) => None,
+            },
+            n,
+            sentinel: if two_pass { nrow as u32 } else { cells as u32 },
+        };
+        Ok((m, Some(sorted)))
     }
 
     /// `"N x M blocks of R x C (NR x MC scalars)"`, for messages.
@@ -564,10 +630,28 @@ unsafe fn mv_raw<B: Block>(
 /// that time); on a GPU, call it once for the block type before capturing (its first call
 /// loads the CUDA library).
 ///
+/// A recording [`Tape`](crate::Tape) records it when `y` has a gradient: backward adds
+/// `alpha Aᵀ ȳ` into `x`'s gradient (when it has one; through a transpose of `A`), `alpha ȳ_r
+/// x_cᵀ` into the gradient of each stored block (when [`Bsr::with_grad`]), then scales `ȳ`
+/// by `beta` (`y` was read scaled by `beta`, and written). `x` and `A` are read when
+/// backward runs, as a kernel's adjoint reads its arrays.
+///
 /// # Errors
 /// [`Error::InvalidArgument`] naming `sparse::mv`, the argument and both shapes when a length
 /// differs; for arrays that are not contiguous or overlap; [`Error::DeviceMismatch`].
 pub fn mv<B: Block>(
+    alpha: B::Scalar,
+    a: &Bsr<B>,
+    x: &Array<B::In>,
+    beta: B::Scalar,
+    y: &Array<B::Out>,
+) -> Result<()> {
+    mv_unrecorded(alpha, a, x, beta, y)?;
+    adjoint::record_mv(alpha.to_f64(), a, x, beta.to_f64(), y, false)
+}
+
+/// [`mv`] without its tape record.
+fn mv_unrecorded<B: Block>(
     alpha: B::Scalar,
     a: &Bsr<B>,
     x: &Array<B::In>,
@@ -623,6 +707,39 @@ pub fn mv<B: Block>(
             y.device_address(),
             alpha.to_f64(),
             beta.to_f64(),
+            || Box::new((a.clone(), x.clone(), y.clone())),
+        )
+    }
+}
+
+/// `y = alpha A x + beta y` over scalar vectors (`x` of A's scalar columns, `y` of its rows,
+/// contiguous, on its device, `y` overlapping neither), unrecorded: the adjoints' products.
+fn mv_scalars<B: Block>(
+    a: &Bsr<B>,
+    x: &Array<B::Scalar>,
+    y: &Array<B::Scalar>,
+    alpha: f64,
+    beta: f64,
+) -> Result<()> {
+    let (nr, nc) = a.shape();
+    if x.len() != nc || y.len() != nr || overlap(x, y) || a.overlaps(y) {
+        return Err(Error::invalid(format!(
+            "sparse: internal: an adjoint's product with {} got x of {} and y of {} scalars",
+            a.describe(),
+            x.len(),
+            y.len()
+        )));
+    }
+    // SAFETY: x and y are contiguous (reinterpreted gradients) scalar vectors of the lengths
+    // checked above on the matrix's device, y overlapping neither x nor the matrix; the
+    // arrays are kept by `uses`.
+    unsafe {
+        mv_raw(
+            a,
+            x.device_address(),
+            y.device_address(),
+            alpha,
+            beta,
             || Box::new((a.clone(), x.clone(), y.clone())),
         )
     }

@@ -621,7 +621,9 @@ pub fn axpy<B: Block>(alpha: B::Scalar, x: &Bsr<B>, beta: B::Scalar, y: &mut Bsr
 /// `x` has `nrow` elements (`B::Out`), `y` has `ncol` (`B::In`); both contiguous, on the
 /// matrix's device, `y` overlapping neither `x` nor the matrix. Each call transposes the
 /// matrix (a sort on the device, new arrays: not recorded by a capture; for repeated
-/// products, transpose once and call [`mv`](super::mv)).
+/// products, transpose once and call [`mv`](super::mv)). A recording
+/// [`Tape`](crate::Tape) records it as it records [`mv`](super::mv) (backward: `alpha A ȳ`
+/// into `x`'s gradient, `alpha x_r ȳ_cᵀ` into each stored block's, `ȳ` scaled by `beta`).
 ///
 /// # Errors
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming
@@ -672,7 +674,8 @@ pub fn mv_transpose<B: Block>(
     if a.overlaps(y) {
         return Err(invalid(F, "argument `y` overlaps the matrix's arrays"));
     }
-    super::mv(alpha, &a.transpose()?, x, beta, y)
+    super::mv_unrecorded(alpha, &a.transpose()?, x, beta, y)?;
+    super::adjoint::record_mv(alpha.to_f64(), a, x, beta.to_f64(), y, true)
 }
 
 /// The triplet arrays of [`mm`]'s products, kept between calls.

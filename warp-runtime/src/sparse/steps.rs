@@ -106,7 +106,7 @@ pub(super) unsafe fn slice<'a, T>(addr: u64, n: usize) -> &'a [T] {
 /// `i32`, nonzero) its value, or 0 when it is outside `0..=n` (`wp_sparse.h`'s `sp_count`:
 /// the primitives' rule for a bad count, so every step and primitive processes nothing; the
 /// report step raises the fault).
-fn count(count: u64, n: i32) -> usize {
+pub(super) fn count(count: u64, n: i32) -> usize {
     if count == 0 {
         return n.max(0) as usize;
     }
@@ -573,7 +573,7 @@ fn row_range(offsets: &[i32], nnz: usize, r: usize) -> std::ops::Range<usize> {
 }
 
 /// `offsets[nrow]` clamped into `0..=cap`.
-fn clamped_nnz(offsets: &[i32], cap: i32) -> usize {
+pub(super) fn clamped_nnz(offsets: &[i32], cap: i32) -> usize {
     offsets[offsets.len() - 1].clamp(0, cap.max(0)) as usize
 }
 

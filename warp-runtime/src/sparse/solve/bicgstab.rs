@@ -1,8 +1,9 @@
 //! BiCGSTAB ([`bicgstab`]), right-preconditioned, for non-symmetric systems.
 
+use super::adjoint::{self, Method};
 use super::steps::kr::{self, *};
 use super::work::Work;
-use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
+use super::{check_args, drive, IntoPrecond, Pre, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -57,6 +58,11 @@ use crate::sparse::Bsr;
 ///
 /// [`Stop::Breakdown`]: super::Stop::Breakdown
 ///
+/// # Gradients
+/// A recording [`Tape`](crate::Tape) records the solve as one step, differentiable with
+/// respect to `b` and `A`'s values as [`cg`](super::cg)'s (its backward solves `Aᵀ λ = x̄`
+/// by this method with a transpose of `A`).
+///
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::bicgstab`.
 pub fn bicgstab<'p, B: SquareBlock>(
@@ -66,9 +72,34 @@ pub fn bicgstab<'p, B: SquareBlock>(
     precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
+    let pre = precond.into_pre();
+    let adjoint_pre = adjoint::adjoint_precond(&pre);
+    let report = {
+        // The solve's own steps and the preconditioner's launches reach no tape: it is
+        // recorded as one step below.
+        let _paused = crate::tape::pause_recording();
+        solve(a, b, x, pre, o)?
+    };
+    let method = Method {
+        name: "sparse::bicgstab",
+        transpose: true,
+        solve: |a, b, x, p, o| bicgstab(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
+/// The solve of [`bicgstab`], unrecorded.
+fn solve<'p, B: SquareBlock>(
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
+    o: &SolveOptions,
+) -> Result<SolveReport> {
     const F: &str = "sparse::bicgstab";
     let dev = check_args(F, a, b, x, o)?;
-    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), B_LEN, o)?;
+    let mut w = Work::new(a, &dev, b, x, pre, B_LEN, o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = BiCgStab {

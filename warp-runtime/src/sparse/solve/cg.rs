@@ -1,5 +1,6 @@
 //! The conjugate gradient solver ([`cg`]) with Jacobi preconditioning.
 
+use super::adjoint::{self, Method};
 use super::{
     check_args, drive, report, IntoPrecond, Pre, Precond, Preconditioner, Queued, SolveOptions,
     SolveReport,
@@ -54,6 +55,47 @@ use std::marker::PhantomData;
 /// # Ok::<(), wp::Error>(())
 /// ```
 ///
+/// # Gradients
+/// A recording [`Tape`](crate::Tape) records the solve as one step when `x` has a gradient
+/// (its own steps, and a user preconditioner's launches, reach no tape). Its backward takes
+/// `x̄`, x's gradient, and clears it (the solve wrote x: the initial guess gets no gradient),
+/// solves `Aᵀ λ = x̄` from zero by the same method (cg and cr with `A`, which they require
+/// symmetric; bicgstab and gmres with a transpose of `A` made then), with the same built-in
+/// preconditioner (a user preconditioner is not reused: that adjoint solve runs without one),
+/// `rtol` the forward's relative to `|x̄|` (or the relative tolerance the forward's `atol`
+/// gave, when its `rtol` is 0) and `atol` 0, then adds `λ` into `b`'s gradient and `-λ_r
+/// x_cᵀ` into the gradient of each stored block of `A` (when [`Bsr::with_grad`]), `x` being
+/// the solution as the forward left it. `A` and `b` are read when backward runs. Backward
+/// through a solve that stopped other than [`Stop::Converged`](super::Stop::Converged), or
+/// whose adjoint solve does not converge, is an
+/// [`Error::NotDifferentiable`](crate::Error::NotDifferentiable) naming the solver, the stop,
+/// the residual and the tolerance: the gradient would be wrong.
+///
+/// ```
+/// # use warp_runtime as wp;
+/// use wp::sparse::{self, Bsr, Precond, SolveOptions};
+/// let dev = wp::cpu();
+/// // A = [[4, 1], [1, 3]], with a gradient for its blocks; a loss L = w . x, so x̄ = w.
+/// let arr = |v: &[i32]| wp::Array::from_slice(v, &dev);
+/// let vals = wp::Array::from_slice(&[4.0f64, 1.0, 1.0, 3.0], &dev)?;
+/// let a = Bsr::from_triplets(2, 2, &arr(&[0, 0, 1, 1])?, &arr(&[0, 1, 0, 1])?, &vals)?
+///     .with_grad()?;
+/// let b = wp::Array::from_slice(&[1.0f64, 2.0], &dev)?.with_grad()?;
+/// let x = wp::Array::<f64>::zeros(2, &dev)?.with_grad()?;
+/// let tape = wp::Tape::new();
+/// let o = SolveOptions { rtol: 1e-12, ..Default::default() };
+/// {
+///     let _rec = tape.record();
+///     sparse::cg(&a, &b, &x, Precond::None, &o)?;
+/// }
+/// x.grad().unwrap().copy_from(&wp::Array::from_slice(&[1.0, 0.0], &dev)?)?;
+/// tape.backward_from_grads()?;
+/// // b̄ = A⁻ᵀ w = [3, -1] / 11.
+/// let bg = b.grad().unwrap().to_vec()?;
+/// assert!((bg[0] - 3.0 / 11.0).abs() < 1e-10 && (bg[1] + 1.0 / 11.0).abs() < 1e-10);
+/// # Ok::<(), wp::Error>(())
+/// ```
+///
 /// # Errors
 /// [`Error::Capture`](crate::Error::Capture) inside a capture (the loop reads back);
 /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) naming `sparse::cg`, the
@@ -69,13 +111,37 @@ pub fn cg<'p, B: SquareBlock>(
     precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
+    let pre = precond.into_pre();
+    let adjoint_pre = adjoint::adjoint_precond(&pre);
+    let report = {
+        // The solve's own steps and the preconditioner's launches reach no tape: it is
+        // recorded as one step below.
+        let _paused = crate::tape::pause_recording();
+        solve(a, b, x, pre, o)?
+    };
+    let method = Method {
+        name: "sparse::cg",
+        transpose: false,
+        solve: |a, b, x, p, o| cg(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
+/// The solve of [`cg`], unrecorded.
+fn solve<'p, B: SquareBlock>(
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
+    o: &SolveOptions,
+) -> Result<SolveReport> {
     const F: &str = "sparse::cg";
     let dev = check_args(F, a, b, x, o)?;
     let nr = a.shape().0;
     type S<B> = <B as Block>::Scalar;
     let n = nr;
     let z = Array::<S<B>>::zeros(n, &dev)?;
-    let pre = precond.into_pre();
     let cg = Cg {
         a,
         dev: dev.clone(),

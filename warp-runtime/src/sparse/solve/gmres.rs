@@ -1,8 +1,9 @@
 //! Restarted GMRES ([`gmres`]), right-preconditioned, for general systems.
 
+use super::adjoint::{self, Method};
 use super::steps::kr::{self, *};
 use super::work::{at, Work};
-use super::{check_args, drive, IntoPrecond, Queued, SolveOptions, SolveReport};
+use super::{check_args, drive, IntoPrecond, Pre, Queued, SolveOptions, SolveReport};
 use crate::array::Array;
 use crate::error::Result;
 use crate::sparse::block::SquareBlock;
@@ -62,6 +63,11 @@ use crate::sparse::{invalid, Bsr};
 /// # Ok::<(), wp::Error>(())
 /// ```
 ///
+/// # Gradients
+/// A recording [`Tape`](crate::Tape) records the solve as one step, differentiable with
+/// respect to `b` and `A`'s values as [`cg`](super::cg)'s (its backward solves `Aᵀ λ = x̄`
+/// by this method with a transpose of `A`).
+///
 /// # Errors
 /// As [`cg`](super::cg)'s, naming `sparse::gmres`, and `restart` 0 or above 1024 (the
 /// Hessenberg matrix, `(m + 1) m` scalars, lives in the one-thread step's reach).
@@ -70,6 +76,31 @@ pub fn gmres<'p, B: SquareBlock>(
     b: &Array<B::Scalar>,
     x: &Array<B::Scalar>,
     precond: impl IntoPrecond<'p, B::Scalar>,
+    o: &SolveOptions,
+) -> Result<SolveReport> {
+    let pre = precond.into_pre();
+    let adjoint_pre = adjoint::adjoint_precond(&pre);
+    let report = {
+        // The solve's own steps and the preconditioner's launches reach no tape: it is
+        // recorded as one step below.
+        let _paused = crate::tape::pause_recording();
+        solve(a, b, x, pre, o)?
+    };
+    let method = Method {
+        name: "sparse::gmres",
+        transpose: true,
+        solve: |a, b, x, p, o| gmres(a, b, x, p, o),
+    };
+    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
+/// The solve of [`gmres`], unrecorded.
+fn solve<'p, B: SquareBlock>(
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
     const F: &str = "sparse::gmres";
@@ -81,7 +112,7 @@ pub fn gmres<'p, B: SquareBlock>(
             format!("`restart` is {m}; it must be in 1..={MAX_RESTART}"),
         ));
     }
-    let mut w = Work::new(a, &dev, b, x, precond.into_pre(), g_len(m), o)?;
+    let mut w = Work::new(a, &dev, b, x, pre, g_len(m), o)?;
     let n = w.n;
     let pre = w.preconditioned();
     let s = Gmres {

@@ -13,6 +13,8 @@
 //! method's steps are in its own file (`cg.rs`, `bicgstab.rs`, `cr.rs`, `gmres.rs`), and the
 //! steps of the last three in `steps.rs` (`wp_sparse.h`'s Krylov section).
 
+// Slice 5: the solves on a tape.
+mod adjoint;
 mod bicgstab;
 mod cg;
 mod cr;
