@@ -148,7 +148,11 @@ pub fn quadrature(dim: usize) -> Vec<DVec4> {
         0.652_145_154_862_546_1,
         0.347_854_845_137_453_9,
     ];
-    let gl: Vec<(f64, f64)> = X.iter().zip(W).map(|(&x, w)| ((1.0 + x) / 2.0, w / 2.0)).collect();
+    let gl: Vec<(f64, f64)> = X
+        .iter()
+        .zip(W)
+        .map(|(&x, w)| ((1.0 + x) / 2.0, w / 2.0))
+        .collect();
     let mut rule = Vec::new();
     for &(a, wa) in &gl {
         for &(b, wb) in &gl {
@@ -568,14 +572,7 @@ pub fn poisson2_error(n: i32, quad: Array<DVec4>, nq: i32, x: Array<f64>, err: A
 
 /// [`poisson2_error`] on tetrahedra, `comps` 1 (Poisson) or 3 (elasticity: `|u_h - u|²`).
 #[wp::kernel]
-pub fn tet_error(
-    n: i32,
-    comps: i32,
-    quad: Array<DVec4>,
-    nq: i32,
-    x: Array<f64>,
-    err: Array<f64>,
-) {
+pub fn tet_error(n: i32, comps: i32, quad: Array<DVec4>, nq: i32, x: Array<f64>, err: Array<f64>) {
     let e = tid() as i32;
     let h = 1.0 / (n as f64);
     let mut uh = [DVec3::ZERO; 4];
@@ -684,7 +681,12 @@ pub fn solve_level(
                 wp::launch(poisson3_element, elements, args, dev)?;
             }
             let d = dim as i32;
-            wp::launch(node_diagonal, nodes, (ni, d, offset, &rows, &cols, &vals), dev)?;
+            wp::launch(
+                node_diagonal,
+                nodes,
+                (ni, d, offset, &rows, &cols, &vals),
+                dev,
+            )?;
             System::Scalar(Bsr::from_triplets(nodes, nodes, &rows, &cols, &vals)?)
         }
         Problem::Elasticity => {
