@@ -71,7 +71,8 @@ fn run(
     fem::solve_level(problem, 2, &options, dev)?;
     let mut rows: Vec<Level> = Vec::new();
     for k in 0..levels {
-        let n = 8usize << k;
+        // 8 << k, refused by solve_level long before it overflows.
+        let n = 8usize.saturating_mul(1 << k.min(40));
         let level = fem::solve_level(problem, n, &options, dev)?;
         let seconds = level.assembly_s + level.solve_s;
         sweep.record(

@@ -652,10 +652,28 @@ pub fn solve_level(
         });
     }
     let dim = problem.dim();
-    let nodes = (n + 1).pow(dim as u32);
-    let elements = n.pow(dim as u32) * problem.per_cell();
     let per = dim + 1; // vertices per element
     let comps = problem.components();
+    // The kernels index with i32: every triplet, node and unknown index must fit (f64 holds
+    // these counts exactly near i32::MAX, and cannot overflow).
+    let (nf, d) = (n as f64, dim as i32);
+    let (nodes_f, elements_f) = ((nf + 1.0).powi(d), nf.powi(d) * problem.per_cell() as f64);
+    let (per_f, comps_f) = (per as f64, comps as f64);
+    let largest = (elements_f * per_f * per_f + nodes_f)
+        .max(elements_f * per_f * comps_f)
+        .max(nodes_f * comps_f);
+    let fits = largest <= i32::MAX as f64;
+    if !fits {
+        return Err(wp::Error::InvalidArgument {
+            what: format!(
+                "fem::solve_level: `n` = {n} cells per side is too fine for {}: its triplets \
+                 would not fit i32 indices",
+                problem.name()
+            ),
+        });
+    }
+    let nodes = (n + 1).pow(dim as u32);
+    let elements = n.pow(dim as u32) * problem.per_cell();
     let unknowns = nodes * comps;
     let quad = wp::Array::from_slice(&quadrature(dim), dev)?;
     let nq = quad.len() as i32;

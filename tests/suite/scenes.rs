@@ -161,6 +161,15 @@ fn fem_poisson_order(dev: &wp::Device) {
         1.8,
         dev,
     );
+    // A level whose triplet indices would overflow the kernels' i32 is refused before any
+    // allocation (281 cells per side: 6 · 281³ tetrahedra · 16 + 282³ nodes > i32::MAX; 280 fit).
+    let e = fem::solve_level(fem::Problem::Poisson3, 281, &fem::options(1e-10, 10), dev)
+        .expect_err("too fine a level");
+    let text = e.to_string();
+    assert!(
+        text.contains("fem::solve_level") && text.contains("281"),
+        "{text}"
+    );
 }
 
 /// Linear elasticity on tetrahedra (`Bsr<DMat3>`) at h = 1/4, 1/8, 1/16 (orders 1.747, 1.913).
