@@ -156,8 +156,16 @@ fn run(
 /// finest level of at most 32 (16) cells per side.
 fn frame(levels: &[Level]) -> wp::Result<Option<Frame>> {
     let elastic = levels.iter().any(|l| l.problem == Problem::Elasticity);
-    let most = if elastic { 16 } else { 32 };
-    let Some(l) = levels.iter().filter(|l| l.n <= most).max_by_key(|l| l.n) else {
+    let (shown, most) = if elastic {
+        (Problem::Elasticity, 16)
+    } else {
+        (Problem::Poisson2, 32)
+    };
+    let Some(l) = levels
+        .iter()
+        .filter(|l| l.problem == shown && l.n <= most)
+        .max_by_key(|l| l.n)
+    else {
         return Ok(None);
     };
     let (n, x) = (l.n, l.x.to_vec()?);
