@@ -26,7 +26,7 @@ mod fem;
 use clap::Parser;
 use fem::{Level, Problem};
 use warp_lang as wp;
-use warp_report::frame::{Frame, Points, TriMesh};
+use warp_report::frame::{Frame, Lines, TriMesh};
 use warp_report::{sci, Run, Sweep, Table};
 // `fem` reaches the sparse tier as `super::sparse`.
 use wp::sparse;
@@ -35,7 +35,7 @@ use wp::sparse;
 /// observed order, CG iterations and times per level.
 #[derive(Parser)]
 struct Cli {
-    /// 2-D levels, h = 1/8, 1/16, .. [default: 9 on a GPU (to h = 1/2048), 4 on the CPU (to 1/64)]
+    /// 2-D levels, h = 1/8, 1/16, .. [default: 9 on a GPU (to h = 1/2048), 5 on the CPU (to 1/128)]
     #[arg(long, value_name = "N", value_parser = common::num::<u32>)]
     levels: Option<u32>,
     /// 3-D levels, h = 1/8, 1/16, .. [default: 5 on a GPU (to h = 1/128), 3 on the CPU (to 1/32)]
@@ -151,9 +151,9 @@ fn run(
     Ok((ok, rows))
 }
 
-/// The picture: the 2-D solution as a height field over the square (Poisson), or the nodes of
-/// the cube displaced by the elastic solution and coloured by its size (elasticity), at the
-/// finest level of at most 32 (16) cells per side.
+/// The picture: the 2-D solution as a height field over the square (Poisson), or the cube's
+/// mid-plane displaced by the elastic solution (elasticity), at the finest level of at most
+/// 32 (16) cells per side.
 fn frame(levels: &[Level]) -> wp::Result<Option<Frame>> {
     let elastic = levels.iter().any(|l| l.problem == Problem::Elasticity);
     let (shown, most) = if elastic {
@@ -196,30 +196,42 @@ fn frame(levels: &[Level]) -> wp::Result<Option<Frame>> {
         .mesh(TriMesh::new(points, tris).colour([90, 140, 200]));
         return Ok(Some(frame));
     }
+    // The mid-plane z = 1/2 (n is even) displaced by 0.5 u_h (|u| is at most about 1.15).
     let m = n + 1;
-    let scale = 0.2;
-    let mut pos = Vec::new();
-    let mut size = Vec::new();
-    for i in 0..m * m * m {
-        let g = [i % m, (i / m) % m, i / (m * m)];
-        let u = [x[3 * i], x[3 * i + 1], x[3 * i + 2]];
-        pos.push([
-            g[0] as f64 * h + scale * u[0],
-            g[1] as f64 * h + scale * u[1],
-            g[2] as f64 * h + scale * u[2],
-        ]);
-        size.push((u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt());
+    let scale = 0.5;
+    let k = n / 2;
+    let mut points = Vec::new();
+    for j in 0..m {
+        for i in 0..m {
+            let node = i + m * (j + m * k);
+            let g = [i as f64 * h, j as f64 * h, k as f64 * h];
+            points.push([
+                g[0] + scale * x[3 * node],
+                g[1] + scale * x[3 * node + 1],
+                g[2] + scale * x[3 * node + 2],
+            ]);
+        }
+    }
+    let mut tris = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let c = i + m * j;
+            tris.push([c, c + 1, c + 1 + m]);
+            tris.push([c, c + 1 + m, c + m]);
+        }
     }
     let camera = common::camera([0.0; 3], [1.0; 3], [1.3, -1.6, 1.1], [0.0, 0.0, 1.0]);
     let frame = Frame::new(
-        format!("fem_poisson --elasticity: the unit cube's nodes displaced by 0.2 u_h, h = 1/{n}"),
+        format!("fem_poisson --elasticity: the cube's mid-plane z = 1/2 displaced by 0.5 u_h, h = 1/{n}"),
         camera,
     )
     .note(format!(
-        "colour: |u_h|; u = (1, -1/2, 1/4) sin(πx) sin(πy) sin(πz), λ = μ = 1; L2 error {}",
-        sci(l.error)
+        "u = (1, -1/2, 1/4) sin(πx) sin(πy) sin(πz), λ = μ = 1; L2 error {} (the interpolant's {})",
+        sci(l.error),
+        sci(l.interp_error)
     ))
-    .points(Points::new(pos, 0.004).values("|u_h|", size));
+    .lines(Lines::bounding_box([0.0; 3], [1.0; 3]).colour([150, 150, 150]))
+    .mesh(TriMesh::new(points, tris).colour([200, 120, 80]));
     Ok(Some(frame))
 }
 
@@ -227,7 +239,7 @@ fn main() -> wp::Result<()> {
     let cli = Cli::parse();
     let dev = cli.scene.init()?;
     let gpu = dev.is_cuda();
-    let levels_2d = cli.levels.unwrap_or(if gpu { 9 } else { 4 });
+    let levels_2d = cli.levels.unwrap_or(if gpu { 9 } else { 5 });
     let levels_3d = cli.levels_3d.unwrap_or(if gpu { 5 } else { 3 });
     let (name, problems) = if cli.elasticity {
         ("fem_elasticity", vec![(Problem::Elasticity, levels_3d)])

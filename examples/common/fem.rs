@@ -728,11 +728,15 @@ pub fn solve_level(
 
     let x = wp::Array::<f64>::zeros(unknowns, dev)?;
     let t = Instant::now();
-    let (report, nnz) = match &system {
-        System::Scalar(a) => (sparse::cg(a, &b, &x, Precond::Jacobi, options)?, a.nnz()?),
-        System::Block(a) => (sparse::cg(a, &b, &x, Precond::Jacobi, options)?, a.nnz()?),
+    let report = match &system {
+        System::Scalar(a) => sparse::cg(a, &b, &x, Precond::Jacobi, options)?,
+        System::Block(a) => sparse::cg(a, &b, &x, Precond::Jacobi, options)?,
     };
     let solve_s = t.elapsed().as_secs_f64();
+    let nnz = match &system {
+        System::Scalar(a) => a.nnz()?,
+        System::Block(a) => a.nnz()?,
+    };
     let error = l2_error(problem, n, &quad, &x, dev)?;
     let interp = wp::Array::<f64>::zeros(unknowns, dev)?;
     let (d, c) = (dim as i32, comps as i32);
