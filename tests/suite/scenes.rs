@@ -1,17 +1,24 @@
 //! The differentiable scenes' claims, on every backend: the bouncing ball's time-of-impact
 //! gradient is the derivative of the motion (it matches central differences of the TOI
 //! program), and the naive contact's gradient, though the exact derivative of its own program,
-//! has the wrong sign against it (examples/bounce.rs).
+//! has the wrong sign against it (examples/bounce.rs); and the finite-element scene's
+//! (examples/fem_poisson.rs, kernels in examples/common/fem.rs): P1 Poisson in 2-D and 3-D
+//! and linear elasticity on `Bsr<DMat3>`, assembled from triplets and solved by captured CG,
+//! converge at order 2 in L2 at small sizes, with errors beside the interpolant's.
 
 use warp_lang as wp;
 use wp::prelude::*;
 
 #[path = "../../examples/common/bounce.rs"]
 mod bounce;
+#[path = "../../examples/common/fem.rs"]
+mod fem;
 
 use bounce::{Balls, Contact, Setup};
+// `fem` reaches the sparse tier as `super::sparse` (the example: `wp::sparse`).
+use warp_runtime::sparse;
 
-backend_tests!(bounce_gradients);
+backend_tests!(bounce_gradients, fem_poisson_order, fem_elasticity_order);
 
 /// One ball launched at (1, 3) m/s aiming where a launch at (2, -1) m/s is at T (the scene's
 /// ball 0), plus one at (1, 0) m/s aiming at the same point: the bounce then comes in the
@@ -69,4 +76,113 @@ fn bounce_gradients(dev: &wp::Device) {
     }
     // Without friction the horizontal derivative is the same for both: -2 (x_T - target_x) T.
     assert!((toi[0].x - naive[0].x).abs() < 1e-12);
+}
+
+/// Solves `problem` at `ns` cells per side (CG to rtol 1e-10, captured) and checks the
+/// scene's claims at these small sizes:
+/// - every solve converged;
+/// - the observed L2 order `log2(e_h / e_{h/2})` between the two finest levels is at least
+///   1.9 (the scene's criterion; P1's order is 2), and at least `coarse_order` between the
+///   coarser ones (pre-asymptotic there);
+/// - the Galerkin solution's L2 error is within a factor [1, 2] of the nodal interpolant's
+///   (both O(h^2), computed by the same quadrature; no solve in the latter; measured ratio
+///   1.36 to 1.48 for Poisson, 1.64 to 1.71 for elasticity);
+/// - each error equals the value this test recorded on the CPU (`want`) within 1e-8 relative:
+///   the solve's algebraic error moves `u_h` by at most about rtol / (d π^2) ≈ 5e-12 in L2
+///   against errors above 5e-3 (1e-9 relative), and a GPU's FMA contraction and `sin` change
+///   the assembly by about 1e-15 relative.
+fn fem_check(
+    problem: fem::Problem,
+    ns: &[usize],
+    want: &[f64],
+    coarse_order: f64,
+    dev: &wp::Device,
+) {
+    let o = fem::options(1e-10, 10_000);
+    let levels: Vec<fem::Level> = ns
+        .iter()
+        .map(|&n| fem::solve_level(problem, n, &o, dev).unwrap())
+        .collect();
+    for (l, &w) in levels.iter().zip(want) {
+        let what = format!("{} at h = 1/{}", problem.name(), l.n);
+        assert_eq!(l.stop, sparse::Stop::Converged, "{what}: {l:?}");
+        assert!(
+            (l.error - w).abs() <= 1e-8 * w,
+            "{what}: L2 error {:e}, recorded {w:e} (relative tolerance 1e-8)",
+            l.error
+        );
+        let ratio = l.error / l.interp_error;
+        assert!(
+            (1.0..=2.0).contains(&ratio),
+            "{what}: L2 error {:e} against the interpolant's {:e}: ratio {ratio} outside [1, 2]",
+            l.error,
+            l.interp_error
+        );
+    }
+    for (k, w) in levels.windows(2).enumerate() {
+        let order = fem::order(w[0].error, w[1].error);
+        let least = if k + 2 == levels.len() {
+            1.9
+        } else {
+            coarse_order
+        };
+        assert!(
+            order >= least,
+            "{}: order {order} between h = 1/{} and 1/{} (want >= {least})",
+            problem.name(),
+            w[0].n,
+            w[1].n
+        );
+    }
+}
+
+/// Poisson's equation, P1: triangles at h = 1/8, 1/16, 1/32 (orders 1.974, 1.993), tetrahedra
+/// at 1/4, 1/8, 1/16 (orders 1.829, 1.953).
+fn fem_poisson_order(dev: &wp::Device) {
+    fem_check(
+        fem::Problem::Poisson2,
+        &[8, 16, 32],
+        &[
+            0.021132772788698576,
+            0.005377434999491251,
+            0.0013504362483865917,
+        ],
+        1.9,
+        dev,
+    );
+    fem_check(
+        fem::Problem::Poisson3,
+        &[4, 8, 16],
+        &[
+            0.08718483932944314,
+            0.024542335021116603,
+            0.006337498738376774,
+        ],
+        1.8,
+        dev,
+    );
+    // A level whose triplet indices would overflow the kernels' i32 is refused before any
+    // allocation (281 cells per side: 6 · 281³ tetrahedra · 16 + 282³ nodes > i32::MAX; 280 fit).
+    let e = fem::solve_level(fem::Problem::Poisson3, 281, &fem::options(1e-10, 10), dev)
+        .expect_err("too fine a level");
+    let text = e.to_string();
+    assert!(
+        text.contains("fem::solve_level") && text.contains("281"),
+        "{text}"
+    );
+}
+
+/// Linear elasticity on tetrahedra (`Bsr<DMat3>`) at h = 1/4, 1/8, 1/16 (orders 1.747, 1.913).
+fn fem_elasticity_order(dev: &wp::Device) {
+    fem_check(
+        fem::Problem::Elasticity,
+        &[4, 8, 16],
+        &[
+            0.10631647631288836,
+            0.031665660046517975,
+            0.008406419322281828,
+        ],
+        1.7,
+        dev,
+    );
 }
