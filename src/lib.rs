@@ -323,6 +323,8 @@ mod book {
     struct Scenes;
     #[doc = include_str!("../docs/book/src/spatial.md")]
     struct Spatial;
+    #[doc = include_str!("../docs/book/src/sparse.md")]
+    struct Sparse;
     #[doc = include_str!("../docs/book/src/tiles.md")]
     struct Tiles;
     #[doc = include_str!("../docs/book/src/testing.md")]
