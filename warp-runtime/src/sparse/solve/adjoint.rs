@@ -54,17 +54,38 @@ pub(super) type Solver<B> = fn(
 
 /// The adjoint solve's preconditioner for a forward preconditioned by `p`: the same built-in
 /// one, none for a user's.
-pub(super) fn adjoint_precond<S>(p: &Pre<'_, S>) -> Precond {
+fn adjoint_precond<S>(p: &Pre<'_, S>) -> Precond {
     match p {
         Pre::Builtin(p) => *p,
         Pre::User(_) => Precond::None,
     }
 }
 
+/// A solver's public entry: runs the unrecorded `solve` with this thread's tapes paused (its
+/// own steps and a user preconditioner's launches reach no tape), then records the whole solve
+/// as one step of `method` ([`record`]).
+pub(super) fn solve_recorded<'p, B: SquareBlock>(
+    method: Method<B>,
+    a: &Bsr<B>,
+    b: &Array<B::Scalar>,
+    x: &Array<B::Scalar>,
+    pre: Pre<'p, B::Scalar>,
+    o: &SolveOptions,
+    solve: impl FnOnce(Pre<'p, B::Scalar>) -> Result<SolveReport>,
+) -> Result<SolveReport> {
+    let adjoint_pre = adjoint_precond(&pre);
+    let report = {
+        let _paused = tape::pause_recording();
+        solve(pre)?
+    };
+    record(method, a, b, x, adjoint_pre, o, &report)?;
+    Ok(report)
+}
+
 /// Records the solve `A x = b` by `method`, which stopped with `report`, on the tapes
 /// recording on this thread (when one does and `x` has a gradient: without one nothing
 /// flows back through x).
-pub(super) fn record<B: SquareBlock>(
+fn record<B: SquareBlock>(
     method: Method<B>,
     a: &Bsr<B>,
     b: &Array<B::Scalar>,

@@ -73,21 +73,14 @@ pub fn cr<'p, B: SquareBlock>(
     precond: impl IntoPrecond<'p, B::Scalar>,
     o: &SolveOptions,
 ) -> Result<SolveReport> {
-    let pre = precond.into_pre();
-    let adjoint_pre = adjoint::adjoint_precond(&pre);
-    let report = {
-        // The solve's own steps and the preconditioner's launches reach no tape: it is
-        // recorded as one step below.
-        let _paused = crate::tape::pause_recording();
-        solve(a, b, x, pre, o)?
-    };
     let method = Method {
         name: "sparse::cr",
         transpose: false,
         solve: |a, b, x, p, o| cr(a, b, x, p, o),
     };
-    adjoint::record(method, a, b, x, adjoint_pre, o, &report)?;
-    Ok(report)
+    adjoint::solve_recorded(method, a, b, x, precond.into_pre(), o, |pre| {
+        solve(a, b, x, pre, o)
+    })
 }
 
 /// The solve of [`cr`], unrecorded.
