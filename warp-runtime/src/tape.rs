@@ -368,14 +368,14 @@ pub(crate) fn recording() -> bool {
 }
 
 /// Records a library operation named `name` on every tape recording on this thread (the
-/// sibling of [`on_launch`] for work that is not one kernel: a sparse solve, an assembly):
+/// sibling of [`on_launch`] for work that is not one kernel: [`copy`], a sparse solve, an
+/// assembly):
 /// `backward` runs at its place in the reverse order, `zero` clears the gradients of the
 /// arrays it reads and writes ([`Tape::zero`]). Both are shared by the tapes that record it.
 ///
 /// # Errors
 /// When one of the tapes is running its backward pass (the operation came from one of its
 /// steps).
-#[cfg_attr(not(feature = "sparse"), allow(dead_code))]
 pub(crate) fn on_op(
     name: &'static str,
     backward: impl Fn() -> Result<()> + 'static,
@@ -412,37 +412,28 @@ fn on_copy<T: Element, const N: usize>(dst: &Array<T, N>, src: &Array<T, N>) -> 
     if !dst.requires_grad() {
         return Ok(());
     }
-    RECORDING.with(|r| {
-        for inner in r.borrow().iter().filter_map(Weak::upgrade) {
-            let mut records = inner
-                .try_borrow_mut()
-                .map_err(|_| running_backward("a copy"))?;
-            let (d, s) = (dst.clone(), src.clone());
-            let (d2, s2) = (dst.clone(), src.clone());
-            records.records.push(Record {
-                name: "copy",
-                backward: Box::new(move |_| {
-                    let Some(dg) = d.grad() else { return Ok(()) };
-                    if let Some(sg) = s.grad() {
-                        let mut acc = sg.to_vec()?;
-                        for (a, b) in acc.iter_mut().zip(dg.to_vec()?) {
-                            // SAFETY: `a` is a live, aligned element of a local vector.
-                            unsafe { <T as warp_core::GradElement>::grad_add(a, b) };
-                        }
-                        let host =
-                            Array::from_slice_shape(&acc, sg.shape(), &crate::device::cpu())?;
-                        sg.copy_from(&host)?;
-                    }
-                    dg.fill(T::zeroed())
-                }),
-                zero: Box::new(move || {
-                    d2.zero_grad()?;
-                    s2.zero_grad()
-                }),
-            });
-        }
-        Ok(())
-    })
+    let (d, s) = (dst.clone(), src.clone());
+    let (d2, s2) = (dst.clone(), src.clone());
+    on_op(
+        "copy",
+        move || {
+            let Some(dg) = d.grad() else { return Ok(()) };
+            if let Some(sg) = s.grad() {
+                let mut acc = sg.to_vec()?;
+                for (a, b) in acc.iter_mut().zip(dg.to_vec()?) {
+                    // SAFETY: `a` is a live, aligned element of a local vector.
+                    unsafe { <T as warp_core::GradElement>::grad_add(a, b) };
+                }
+                let host = Array::from_slice_shape(&acc, sg.shape(), &crate::device::cpu())?;
+                sg.copy_from(&host)?;
+            }
+            dg.fill(T::zeroed())
+        },
+        move || {
+            d2.zero_grad()?;
+            s2.zero_grad()
+        },
+    )
 }
 
 #[cfg(test)]
