@@ -13,12 +13,19 @@ use wp::prelude::*;
 mod bounce;
 #[path = "../../examples/common/fem.rs"]
 mod fem;
+#[path = "../../examples/common/implicit_cloth.rs"]
+mod implicit_cloth;
 
 use bounce::{Balls, Contact, Setup};
 // `fem` reaches the sparse tier as `super::sparse` (the example: `wp::sparse`).
 use warp_runtime::sparse;
 
-backend_tests!(bounce_gradients, fem_poisson_order, fem_elasticity_order);
+backend_tests!(
+    bounce_gradients,
+    fem_poisson_order,
+    fem_elasticity_order,
+    implicit_cloth_explore,
+);
 
 /// One ball launched at (1, 3) m/s aiming where a launch at (2, -1) m/s is at T (the scene's
 /// ball 0), plus one at (1, 0) m/s aiming at the same point: the bounce then comes in the
@@ -185,4 +192,29 @@ fn fem_elasticity_order(dev: &wp::Device) {
         1.7,
         dev,
     );
+}
+
+fn implicit_cloth_explore(dev: &wp::Device) {
+    use implicit_cloth::{simulate, Params, Series};
+    let t_end = 0.25;
+    for k in [1e2, 1e3] {
+        let p = Params { n: 5, k, kd: 0.0 };
+        let w = p.omega_max();
+        let t = std::time::Instant::now();
+        let (xr, _) = p.reference(t_end, 2.0 / w / 16.0);
+        println!("k {k}: omega {w}, bound {}, ref {:.2}s", 2.0 / w, t.elapsed().as_secs_f64());
+        let be = Series::BackwardEuler { newton: 3, rtol: 1e-6, max_iter: 500 };
+        for s in [Series::Euler, Series::XpbdColored { substeps: 4, iterations: 1 }, be] {
+            for j in 0..6 {
+                let dt = 1.0 / 30.0 / 2f64.powi(j);
+                let t = std::time::Instant::now();
+                let o = simulate(p, s, dt, t_end, 5, j == 0, dev).unwrap();
+                println!(
+                    "  {} dt {dt:.5}: stable {} {} err {:.3e} drift {:.3e} cg {:.1} unconv {} {:.2}s res {:?}",
+                    s.name(), o.stable, o.why, o.error(&xr), o.drift(), o.mean_cg(), o.cg_unconverged,
+                    t.elapsed().as_secs_f64(), o.residuals.first()
+                );
+            }
+        }
+    }
 }
