@@ -111,7 +111,7 @@ fn main() -> wp::Result<()> {
     let n = cli.n.unwrap_or(if gpu { 64 } else { 12 });
     let halvings = cli.halvings.unwrap_or(if gpu { 6 } else { 4 });
     let t_end = cli.t_end;
-    if n < 3 || cli.n_ref < 3 || cli.k.is_empty() || !(t_end > 0.0) {
+    if n < 3 || cli.n_ref < 3 || cli.k.is_empty() || t_end.is_nan() || t_end <= 0.0 {
         eprintln!("implicit_cloth: --n and --n-ref must be at least 3, --k non-empty, --t-end > 0");
         std::process::exit(2);
     }
@@ -246,7 +246,7 @@ fn main() -> wp::Result<()> {
                 sci(steps[l - 2]),
                 sci(steps[l - 1])
             );
-            if !(order >= MIN_ORDER) {
+            if order.is_nan() || order < MIN_ORDER {
                 pass = false;
                 why.push(format!(
                     "backward Euler's order {order:.3} at k = {} is below {MIN_ORDER}",

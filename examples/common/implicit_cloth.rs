@@ -624,7 +624,8 @@ impl Cloth {
                 ),
             });
         }
-        if !(params.k > 0.0 && params.k.is_finite() && params.kd >= 0.0) {
+        let good_k = params.k > 0.0 && params.k.is_finite();
+        if !good_k || params.kd.is_nan() || params.kd < 0.0 {
             return Err(wp::Error::InvalidArgument {
                 what: format!(
                     "implicit_cloth::Cloth::new: `k` must be positive and `kd` not negative, \
