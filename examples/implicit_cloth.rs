@@ -190,7 +190,12 @@ fn main() -> wp::Result<()> {
             format!("implicit cloth {n} x {n}, k = {} N/m, on {dev}", sci(k)),
             "dt",
         )
-        .with_extras(&["energy drift", "max |drift|", "CG its/Newton", "wall s/sim s"])
+        .with_extras(&[
+            "energy drift",
+            "max |drift|",
+            "CG its/Newton",
+            "wall s/sim s",
+        ])
         .progress((steps.len() * series.len()) as u64);
         let mut be_errors = Vec::new();
         for s in series {
@@ -297,15 +302,11 @@ fn main() -> wp::Result<()> {
 
     if let Some(x) = last_frame {
         let points: Vec<[f64; 3]> = x.iter().map(|&p| common::p3(p)).collect();
-        let start: Vec<[f64; 3]> = Params {
-            n,
-            k: ks[0],
-            kd,
-        }
-        .start()
-        .iter()
-        .map(|&p| common::p3(p))
-        .collect();
+        let start: Vec<[f64; 3]> = Params { n, k: ks[0], kd }
+            .start()
+            .iter()
+            .map(|&p| common::p3(p))
+            .collect();
         let grid: Vec<[usize; 3]> = (0..n - 1)
             .flat_map(|r| (0..n - 1).map(move |c| (r, c)))
             .flat_map(|(r, c)| {

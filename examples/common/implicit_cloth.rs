@@ -440,7 +440,10 @@ impl Params {
         springs
             .iter()
             .map(|s| (x[s.b] - x[s.a]).length() / s.rest)
-            .fold(0.0, |a: f64, b| if b.is_nan() { f64::NAN } else { a.max(b) })
+            .fold(
+                0.0,
+                |a: f64, b| if b.is_nan() { f64::NAN } else { a.max(b) },
+            )
     }
 
     /// Forces at (x, v), in f64 (held particles' forces are not used).
@@ -511,7 +514,11 @@ impl Params {
         let np = self.particles();
         let mut y: Vec<DVec3> = (0..np)
             .map(|i| {
-                let s = if (i / self.n + i % self.n) % 2 == 0 { 1.0 } else { -1.0 };
+                let s = if (i / self.n + i % self.n).is_multiple_of(2) {
+                    1.0
+                } else {
+                    -1.0
+                };
                 DVec3::new(0.3, 1.0, -0.7) * s
             })
             .collect();
@@ -796,8 +803,8 @@ impl Cloth {
                 wp::launch(copy_vec3, np, (&self.v, &self.v0), dev)?;
                 let assemble = |first: i32| {
                     let args = (
-                        a, &self.x, &self.v0, &self.v, &self.rhs, n, spacing, k, kd, mass,
-                        gravity, dt, first,
+                        a, &self.x, &self.v0, &self.v, &self.rhs, n, spacing, k, kd, mass, gravity,
+                        dt, first,
                     );
                     wp::launch(be_assemble, np, args, dev)
                 };
@@ -901,7 +908,10 @@ impl Outcome {
             .iter()
             .zip(reference)
             .map(|(a, b)| a.distance(*b))
-            .fold(0.0, |a: f64, b| if b.is_nan() { f64::NAN } else { a.max(b) })
+            .fold(
+                0.0,
+                |a: f64, b| if b.is_nan() { f64::NAN } else { a.max(b) },
+            )
     }
 }
 

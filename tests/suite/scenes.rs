@@ -250,9 +250,15 @@ fn implicit_cloth_stability(dev: &wp::Device) {
         kd: 0.0,
     };
     let (dt, t_end) = (1.0 / 60.0, 0.25);
-    assert!(2.0 / p.omega_max() < dt / 4.0, "the step is not past the bound");
+    assert!(
+        2.0 / p.omega_max() < dt / 4.0,
+        "the step is not past the bound"
+    );
     let euler = simulate(p, Series::Euler, dt, t_end, 5, false, dev).unwrap();
-    assert!(!euler.stable, "semi-implicit Euler stayed stable at 1/60 s: {euler:?}");
+    assert!(
+        !euler.stable,
+        "semi-implicit Euler stayed stable at 1/60 s: {euler:?}"
+    );
     let be = simulate(p, CLOTH_BE, dt, t_end, 5, true, dev).unwrap();
     assert!(be.stable, "backward Euler unstable: {}", be.why);
     assert_eq!(be.cg_unconverged, 0, "a CG solve did not converge");
@@ -264,7 +270,10 @@ fn implicit_cloth_stability(dev: &wp::Device) {
         );
     }
     let stretch = p.max_stretch(&p.springs(), &be.x);
-    assert!(stretch < 1.2, "backward Euler: a spring at {stretch} rest lengths");
+    assert!(
+        stretch < 1.2,
+        "backward Euler: a spring at {stretch} rest lengths"
+    );
     let xpbd = Series::XpbdColored {
         substeps: 4,
         iterations: 1,
