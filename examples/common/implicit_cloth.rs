@@ -549,6 +549,29 @@ impl Params {
     }
 }
 
+/// Backward Euler's matrix pattern for a cloth of `params`: a diagonal block per particle and
+/// a block per spring both ways, from triplets of zero blocks (so each row's columns ascend).
+pub fn pattern(params: Params, dev: &wp::Device) -> wp::Result<Bsr<Mat3>> {
+    let np = params.particles();
+    let (mut rows, mut cols) = (Vec::new(), Vec::new());
+    for i in 0..np as i32 {
+        rows.push(i);
+        cols.push(i);
+    }
+    for s in &params.springs() {
+        rows.extend([s.a as i32, s.b as i32]);
+        cols.extend([s.b as i32, s.a as i32]);
+    }
+    let zero = vec![Mat3::ZERO; rows.len()];
+    Bsr::from_triplets(
+        np,
+        np,
+        &wp::Array::from_slice(&rows, dev)?,
+        &wp::Array::from_slice(&cols, dev)?,
+        &wp::Array::from_slice(&zero, dev)?,
+    )
+}
+
 /// Which integrator a run uses.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Series {
@@ -706,30 +729,10 @@ impl Cloth {
         Ok(self.xpbd.as_ref().expect("made above"))
     }
 
-    /// Backward Euler's matrix: the pattern (a block per particle, and per spring both ways)
-    /// from triplets of zero blocks, made once.
+    /// Backward Euler's matrix, made once ([`pattern`]).
     fn matrix(&mut self, dev: &wp::Device) -> wp::Result<&Bsr<Mat3>> {
         if self.matrix.is_none() {
-            let np = self.params.particles();
-            let springs = self.params.springs();
-            let (mut rows, mut cols) = (Vec::new(), Vec::new());
-            for i in 0..np as i32 {
-                rows.push(i);
-                cols.push(i);
-            }
-            for s in &springs {
-                rows.extend([s.a as i32, s.b as i32]);
-                cols.extend([s.b as i32, s.a as i32]);
-            }
-            let zero = vec![Mat3::ZERO; rows.len()];
-            let a = Bsr::from_triplets(
-                np,
-                np,
-                &wp::Array::from_slice(&rows, dev)?,
-                &wp::Array::from_slice(&cols, dev)?,
-                &wp::Array::from_slice(&zero, dev)?,
-            )?;
-            self.matrix = Some(a);
+            self.matrix = Some(pattern(self.params, dev)?);
         }
         Ok(self.matrix.as_ref().expect("made above"))
     }
