@@ -336,7 +336,7 @@ fn cloth_kernels_match_the_cpu_bit_for_bit() {
     let order: Vec<i32> = springs
         .iter()
         .enumerate()
-        .filter(|(_, s)| s.b == s.a + 1 && (s.a % p.n) % 2 == 0)
+        .filter(|(_, s)| s.b == s.a + 1 && (s.a % p.n).is_multiple_of(2))
         .map(|(k, _)| k as i32)
         .collect();
     let pairs: Vec<IVec2> = springs
