@@ -102,6 +102,7 @@ fn to_run(big: &Outcome, error: f64, t_end: f64) -> Run {
         .extra(big.max_drift())
         .extra(big.mean_cg())
         .extra(big.seconds / t_end)
+        .extra(big.cg_unconverged as f64)
 }
 
 fn main() -> wp::Result<()> {
@@ -111,8 +112,17 @@ fn main() -> wp::Result<()> {
     let n = cli.n.unwrap_or(if gpu { 64 } else { 12 });
     let halvings = cli.halvings.unwrap_or(if gpu { 6 } else { 4 });
     let t_end = cli.t_end;
-    if n < 3 || cli.n_ref < 3 || cli.k.is_empty() || t_end.is_nan() || t_end <= 0.0 {
-        eprintln!("implicit_cloth: --n and --n-ref must be at least 3, --k non-empty, --t-end > 0");
+    let bad_k = cli.k.is_empty() || cli.k.iter().any(|k| !(k.is_finite() && *k > 0.0));
+    let bad_t = t_end.is_nan() || t_end <= 0.0;
+    let bad_rtol = cli.rtol.is_nan() || cli.rtol <= 0.0;
+    let bad_damping = cli.damping.is_nan() || cli.damping < 0.0;
+    let bad_counts = cli.newton < 1 || cli.substeps < 1 || cli.max_iter < 1;
+    if n < 3 || cli.n_ref < 3 || bad_k || bad_t || bad_rtol || bad_damping || bad_counts {
+        eprintln!(
+            "implicit_cloth: --n and --n-ref must be at least 3, --k positive and finite, \
+             --t-end and --rtol positive, --damping not negative, --newton, --substeps and \
+             --max-iter at least 1"
+        );
         std::process::exit(2);
     }
     let mut ks = cli.k.clone();
@@ -195,6 +205,7 @@ fn main() -> wp::Result<()> {
             "max |drift|",
             "CG its/Newton",
             "wall s/sim s",
+            "CG at max-iter",
         ])
         .progress((steps.len() * series.len()) as u64);
         let mut be_errors = Vec::new();
