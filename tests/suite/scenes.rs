@@ -284,9 +284,10 @@ fn implicit_cloth_stability(dev: &wp::Device) {
 }
 
 /// A 5 x 5 cloth at k = 1e2 N/m for 0.25 s, backward Euler at dt = 1/120, 1/240, 1/480 s
-/// (h ω_max from 2.5 to 0.6) and semi-implicit Euler at 1/240, 1/480, 1/960 s, against RK4 in f64 at 1/16 of the explicit bound (its own error below 1e-9 m):
-/// backward Euler's and semi-implicit Euler's errors fall at first order, the observed order
-/// `log2(e_h / e_{h/2})` within [0.85, 1.15] (measured on the CPU: 0.99 and 1.00 for both);
+/// (h ω_max from 2.5 to 0.6) and semi-implicit Euler at 1/240, 1/480, 1/960 s, against RK4 in
+/// f64 at 1/16 of the explicit bound (its own error below 1e-9 m): backward Euler's and
+/// semi-implicit Euler's errors fall at first order, the observed order `log2(e_h / e_{h/2})`
+/// within [0.85, 1.15] (measured on the CPU: 0.99 and 1.00 for both);
 /// and backward Euler again with damping 0.05 N s/m along the springs (against a damped
 /// reference; orders 0.99, 1.00).
 fn implicit_cloth_order(dev: &wp::Device) {
