@@ -919,8 +919,9 @@ impl Outcome {
 }
 
 /// Runs `series` on a cloth of `params` with step about `dt` until `t_end` (the step count
-/// `t_end / dt` rounded to the nearest, at least 1, and the step `t_end` over it), checking the state (finite, stretch, energy) `checks` times
-/// along the way; `track` records Newton's residuals. A warm-up step on a throwaway cloth
+/// `t_end / dt` rounded to the nearest, at least 1, and the step `t_end` over it), checking
+/// the state (finite, stretch, energy) `checks` times along the way; `track` records Newton's
+/// residuals. A warm-up step on a throwaway cloth
 /// loads the kernels first (outside the timing).
 pub fn simulate(
     params: Params,
