@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release --example implicit_cloth -- [--device cpu|cuda:0] [--n N] [--n-ref 6]
 //!     [--k 1e2,1e3,1e4,1e5] [--t-end 0.5] [--halvings N] [--newton 3] [--substeps 10]
-//!     [--rtol 1e-5] [--max-iter 1000] [--damping 0] [--plot-dir DIR]
+//!     [--rtol 1e-5] [--max-iter 1000] [--cg-graph] [--damping 0] [--plot-dir DIR]
 //! ```
 //! The cloth (examples/cloth.rs's, without drag): 1 m x 1 m, 0.2 kg, an n x n grid of
 //! particles (`--n`: 64 on a GPU, 12 on the CPU) joined by structural and shear springs of
@@ -77,6 +77,10 @@ struct Cli {
     /// CG's iteration limit (a solve stopped there is an inexact Newton step, counted)
     #[arg(long, default_value_t = 1000, value_parser = common::num::<usize>)]
     max_iter: usize,
+    /// Run each CG solve as a graph it captures and launches (`Mode::Graph`) instead of
+    /// reading its state back every 10 iterations (`Mode::Host`)
+    #[arg(long)]
+    cg_graph: bool,
     /// Damping along each spring (N s/m)
     #[arg(long, default_value_t = 0.0)]
     damping: f64,
@@ -137,6 +141,7 @@ fn main() -> wp::Result<()> {
             newton: cli.newton,
             rtol: cli.rtol,
             max_iter: cli.max_iter,
+            graph: cli.cg_graph,
         },
     ];
     let steps: Vec<f64> = (0..=halvings)

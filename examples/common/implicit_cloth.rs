@@ -581,11 +581,14 @@ pub enum Series {
     /// colour and sweep, a thread per spring.
     XpbdColored { substeps: i32, iterations: i32 },
     /// Backward Euler by `newton` Newton iterations (the first Baraff-Witkin's), each a CG
-    /// solve with block Jacobi to `rtol` (at most `max_iter` iterations).
+    /// solve with block Jacobi to `rtol` (at most `max_iter` iterations), driven from the host
+    /// (`Mode::Host`, a read-back every 10 iterations) or, with `graph`, as a graph each solve
+    /// captures and launches (`Mode::Graph`; the same iterations and bits).
     BackwardEuler {
         newton: usize,
         rtol: f64,
         max_iter: usize,
+        graph: bool,
     },
 }
 
@@ -791,6 +794,7 @@ impl Cloth {
                 newton,
                 rtol,
                 max_iter,
+                graph,
             } => {
                 self.matrix(dev)?;
                 let a = self.matrix.as_ref().expect("made above");
@@ -798,7 +802,7 @@ impl Cloth {
                     rtol,
                     max_iter,
                     check_every: 10,
-                    mode: Mode::Host,
+                    mode: if graph { Mode::Graph } else { Mode::Host },
                     ..SolveOptions::default()
                 };
                 let b = self.rhs.reinterpret::<f32>()?;

@@ -205,6 +205,7 @@ const CLOTH_BE: implicit_cloth::Series = implicit_cloth::Series::BackwardEuler {
     newton: 3,
     rtol: 1e-6,
     max_iter: 500,
+    graph: false,
 };
 
 /// On a GPU the same run on the CPU, and the final positions compared: the two backends run
@@ -281,6 +282,19 @@ fn implicit_cloth_stability(dev: &wp::Device) {
     let x = simulate(p, xpbd, dt, t_end, 5, false, dev).unwrap();
     assert!(x.stable, "XPBD by colour unstable: {}", x.why);
     cloth_same_on_cpu(p, CLOTH_BE, dt, t_end, &be, dev);
+    // The solves as captured graphs (`Mode::Graph`): the same steps, so the same bits.
+    let graph = Series::BackwardEuler {
+        newton: 3,
+        rtol: 1e-6,
+        max_iter: 500,
+        graph: true,
+    };
+    let g = simulate(p, graph, dt, t_end, 5, false, dev).unwrap();
+    assert_eq!(
+        g.x, be.x,
+        "backward Euler: captured solves against host-driven ones"
+    );
+    assert_eq!(g.cg_iterations, be.cg_iterations);
 }
 
 /// A 5 x 5 cloth at k = 1e2 N/m for 0.25 s, backward Euler at dt = 1/120, 1/240, 1/480 s
