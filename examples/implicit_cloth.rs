@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release --example implicit_cloth -- [--device cpu|cuda:0] [--n N] [--n-ref 6]
 //!     [--k 1e2,1e3,1e4,1e5] [--t-end 0.5] [--halvings N] [--newton 3] [--substeps 10]
-//!     [--rtol 1e-5] [--max-iter 1000] [--cg-graph] [--damping 0] [--plot-dir DIR]
+//!     [--rtol 1e-5] [--max-iter 2000] [--cg-graph] [--damping 0] [--plot-dir DIR]
 //! ```
 //! The cloth (examples/cloth.rs's, without drag): 1 m x 1 m, 0.2 kg, an n x n grid of
 //! particles (`--n`: 64 on a GPU, 12 on the CPU) joined by structural and shear springs of
@@ -62,7 +62,7 @@ struct Cli {
     /// Simulated time (s)
     #[arg(long, default_value_t = 0.5)]
     t_end: f64,
-    /// Halvings of the step from 1/30 s [default: 6 on a GPU, 4 on the CPU]
+    /// Halvings of the step from 1/30 s [default: 5 on a GPU, 4 on the CPU]
     #[arg(long, value_name = "N", value_parser = common::num::<u32>)]
     halvings: Option<u32>,
     /// Newton iterations per backward Euler step
@@ -75,7 +75,7 @@ struct Cli {
     #[arg(long, default_value_t = 1e-5)]
     rtol: f64,
     /// CG's iteration limit (a solve stopped there is an inexact Newton step, counted)
-    #[arg(long, default_value_t = 1000, value_parser = common::num::<usize>)]
+    #[arg(long, default_value_t = 2000, value_parser = common::num::<usize>)]
     max_iter: usize,
     /// Run each CG solve as a graph it captures and launches (`Mode::Graph`) instead of
     /// reading its state back every 10 iterations (`Mode::Host`)
@@ -114,7 +114,7 @@ fn main() -> wp::Result<()> {
     let dev = cli.scene.init()?;
     let gpu = dev.is_cuda();
     let n = cli.n.unwrap_or(if gpu { 64 } else { 12 });
-    let halvings = cli.halvings.unwrap_or(if gpu { 6 } else { 4 });
+    let halvings = cli.halvings.unwrap_or(if gpu { 5 } else { 4 });
     let t_end = cli.t_end;
     let bad_k = cli.k.is_empty() || cli.k.iter().any(|k| !(k.is_finite() && *k > 0.0));
     let bad_t = t_end.is_nan() || t_end <= 0.0;
