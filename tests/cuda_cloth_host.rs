@@ -253,9 +253,9 @@ fn compare(name: &str, want: &[u32], got: &[u32]) {
     );
 }
 
-/// Semi-implicit Euler's step and backward Euler's assembly (Baraff-Witkin's first iteration
-/// and a Newton iteration, with damping), on the CPU backend and as CUDA C++ under g++: the
-/// same bits in every output array and every stored block.
+/// Semi-implicit Euler's step, backward Euler's assembly (Baraff-Witkin's first iteration and
+/// a Newton iteration, with damping) and positions, and XPBD's three kernels, on the CPU
+/// backend and as CUDA C++ under g++: the same bits in every output array and stored block.
 #[test]
 fn cloth_kernels_match_the_cpu_bit_for_bit() {
     use implicit_cloth::{be_assemble, euler_step, xpbd_project_colour};
@@ -369,4 +369,23 @@ fn cloth_kernels_match_the_cpu_bit_for_bit() {
     let want = words(&[a3(&xa), af(&la), ai2(&pa), af(&ra), af(&sa), ai(&oa)]);
     let got = host_run::<xpbd_project_colour>(order.len(), &host).expect("g++ ran above");
     compare("xpbd_project_colour", &want, &got);
+
+    // XPBD's predictor and velocities, backward Euler's positions (a thread per particle).
+    use implicit_cloth::{be_positions, xpbd_predict, xpbd_velocity};
+    let (xa, va, pa) = (arr(&x), arr(&v), arr(&vec![Vec3::ZERO; np]));
+    let host = [a3(&xa), a3(&va), a3(&pa), i(n), v3(gravity), f(h)];
+    wp::launch(xpbd_predict, np, (&xa, &va, &pa, n, gravity, h), &dev).unwrap();
+    let want = words(&[a3(&xa), a3(&va), a3(&pa)]);
+    let got = host_run::<xpbd_predict>(np, &host).expect("g++ ran above");
+    compare("xpbd_predict", &want, &got);
+    let host = [a3(&xa), a3(&va), a3(&pa), f(h)];
+    wp::launch(xpbd_velocity, np, (&xa, &va, &pa, h), &dev).unwrap();
+    let want = words(&[a3(&xa), a3(&va), a3(&pa)]);
+    let got = host_run::<xpbd_velocity>(np, &host).expect("g++ ran above");
+    compare("xpbd_velocity", &want, &got);
+    let host = [a3(&xa), a3(&va), f(h)];
+    wp::launch(be_positions, np, (&xa, &va, h), &dev).unwrap();
+    let want = words(&[a3(&xa), a3(&va)]);
+    let got = host_run::<be_positions>(np, &host).expect("g++ ran above");
+    compare("be_positions", &want, &got);
 }
