@@ -6,8 +6,10 @@
 //! ```text
 //! cargo bench --features sparse --bench sparse            # GPU sections SKIPPED without a GPU
 //! cargo bench --features sparse --bench sparse -- --quick # smaller sizes (the CPU run: ~1 min)
-//! # on the GPU machine, with Warp unpacked by ../shared/tools/warp-bundle:
-//! PYTHONPATH=/root/warp-lang .gpu/bin/sparse-* [--quick] [--gpu-only | --cpu-only] [--cg-all]
+//! # on a GPU machine, with Warp 1.19 (and CuPy, for cuSPARSE) importable by python3:
+//! cargo bench --features sparse --bench sparse -- [--quick] [--gpu-only | --cpu-only] [--cg-all]
+//!     [--only poisson2|poisson3|elasticity ..]
+//! # the Python side is benches/py/sparse.py from the working directory, or $SPARSE_BENCH_PY
 //! ```
 //!
 //! Matrices, each in f32 and f64: the 2-D 5-point Poisson matrix on n x n interior nodes
@@ -252,10 +254,10 @@ fn elasticity(n: usize, dev: &wp::Device) -> wp::Result<Csr> {
     drop((rows, cols, vals));
     let nnz = a.nnz()?;
     let offsets = a.offsets().to_vec()?;
-    let mut columns = a.columns().to_vec()?;
-    columns.truncate(nnz);
-    let blocks = a.values().to_vec()?;
-    let values = blocks[..nnz]
+    // The stored blocks alone (the capacity is one block per triplet).
+    let columns = a.columns().view(..nnz)?.to_vec()?;
+    let blocks = a.values().view(..nnz)?.to_vec()?;
+    let values = blocks
         .iter()
         .flat_map(|m| m.transpose().to_cols_array()) // glam is column-major: rows of m
         .collect();
@@ -497,6 +499,14 @@ impl Peaks {
 
 #[cfg(feature = "cuda")]
 fn gpu_section(quick: bool, cg_all: bool) -> wp::Result<()> {
+    // `--only poisson2|poisson3|elasticity` (repeatable): those families alone.
+    let args: Vec<String> = std::env::args().collect();
+    let only: Vec<&str> = args
+        .windows(2)
+        .filter(|w| w[0] == "--only")
+        .map(|w| w[1].as_str())
+        .collect();
+    let wanted = |f: &str| only.is_empty() || only.contains(&f);
     let dev = match wp::get_device("cuda:0") {
         Ok(d) => d,
         Err(e) => {
@@ -532,6 +542,12 @@ fn gpu_section(quick: bool, cg_all: bool) -> wp::Result<()> {
     // Each matrix is made when its turn comes (the largest take GBs of host memory).
     type Make = Box<dyn Fn() -> wp::Result<Csr>>;
     let mut families: Vec<(usize, Make)> = Vec::new();
+    let none: &[usize] = &[];
+    let (p2, p3, el) = (
+        if wanted("poisson2") { p2 } else { none },
+        if wanted("poisson3") { p3 } else { none },
+        if wanted("elasticity") { el } else { none },
+    );
     for (i, &n) in p2.iter().enumerate() {
         families.push((i, Box::new(move || Ok(poisson2(n)))));
     }

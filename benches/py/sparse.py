@@ -68,18 +68,20 @@ assert len(values) == NNZ * R * R and len(x64) == N, "values or x"
 if R == 1:
     s_off, s_col, s_val = offsets, columns, values
 else:
-    nb = np.diff(offsets)
+    # Scalar row R r + i holds, for each block k of block row r in order, its row i: entry
+    # (k, i, j) goes to s_off[R r + i] + R (k - offsets[r]) + j (a scatter, no sort).
+    nb = np.diff(offsets).astype(np.int64)
+    s_off = np.concatenate([[0], np.cumsum(np.repeat(nb * R, R))]).astype(np.int64)
     brow = np.repeat(np.arange(NROW, dtype=np.int64), nb)
+    kin = np.arange(NNZ, dtype=np.int64) - offsets[:-1].astype(np.int64)[brow]
     i, j = np.meshgrid(np.arange(R), np.arange(R), indexing="ij")
-    srow = (brow[:, None, None] * R + i[None]).reshape(-1)
-    scol = (columns.astype(np.int64)[:, None, None] * R + j[None]).reshape(-1)
-    # Enumerated block by block, (i, j) within: a stable sort by scalar row keeps a row's
-    # entries in block order, then j, so its columns ascend.
-    order = np.argsort(srow, kind="stable")
-    s_col = scol[order].astype(np.int32)
-    s_val = values[order]
-    s_off = np.concatenate([[0], np.cumsum(np.repeat(nb * R, R))]).astype(np.int32)
-    del brow, srow, scol, order
+    dest = (s_off[(brow * R)[:, None, None] + i[None]] + (R * kin)[:, None, None] + j[None]).reshape(-1)
+    s_col = np.empty(NNZ * R * R, dtype=np.int32)
+    s_val = np.empty(NNZ * R * R, dtype=np.float64)
+    s_col[dest] = (columns.astype(np.int64)[:, None, None] * R + j[None]).reshape(-1)
+    s_val[dest] = values
+    s_off = s_off.astype(np.int32)
+    del brow, kin, dest
 
 
 def csr_mv(vals, x):
