@@ -905,9 +905,9 @@ fn cpu_section(quick: bool) -> wp::Result<()> {
     Ok(())
 }
 
-fn cpu_case<S: Real + Case>(m: &Csr, x64: &[f64], y_ref: &[f64], with_cg: bool) -> wp::Result<()>
+fn cpu_case<S>(m: &Csr, x64: &[f64], y_ref: &[f64], with_cg: bool) -> wp::Result<()>
 where
-    S: Block<Scalar = S, In = S, Out = S>,
+    S: Real + Case + Block<Scalar = S, In = S, Out = S>,
 {
     let d = S::LABEL;
     let cpu = wp::cpu();
