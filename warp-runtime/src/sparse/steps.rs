@@ -589,18 +589,21 @@ fn mv_row<B: Block>(
     x: &[B::Scalar],
     ncol: i32,
     r: usize,
-    acc: &mut [B::Scalar],
+    acc: &mut [B::Scalar; MAX_DIM],
 ) {
+    // (The row's slices and fixed-size chunks of them: the loop over a row's blocks then has
+    // no bounds check of its own.)
     let (rr, cc) = (B::ROWS, B::COLS);
-    acc.fill(B::Scalar::ZERO);
-    for k in row_range(offsets, columns.len(), r) {
-        let c = columns[k];
+    *acc = [B::Scalar::ZERO; MAX_DIM];
+    let range = row_range(offsets, columns.len(), r);
+    let cols = &columns[range.clone()];
+    let vals = &values[range.start * rr * cc..range.end * rr * cc];
+    for (&c, a) in cols.iter().zip(vals.chunks_exact(rr * cc)) {
         if !(0..ncol).contains(&c) {
             continue; // (never in an assembled matrix)
         }
-        let a = &values[k * rr * cc..(k + 1) * rr * cc];
         let xc = &x[c as usize * cc..][..cc];
-        for (i, acc) in acc.iter_mut().enumerate() {
+        for (i, acc) in acc.iter_mut().take(rr).enumerate() {
             for (j, &xj) in xc.iter().enumerate() {
                 *acc = acc.add(a[at::<B>(i, j)].mul(xj));
             }
@@ -653,9 +656,8 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
             .for_each(|chunk| {
                 for r in chunk * MV_ROWS..((chunk + 1) * MV_ROWS).min(nrow) {
                     let mut acc = [B::Scalar::ZERO; MAX_DIM];
-                    let acc = &mut acc[..rr];
-                    mv_row::<B>(offsets, columns, values, x, self.ncol, r, acc);
-                    for (i, &a) in acc.iter().enumerate() {
+                    mv_row::<B>(offsets, columns, values, x, self.ncol, r, &mut acc);
+                    for (i, &a) in acc.iter().take(rr).enumerate() {
                         // SAFETY: y's scalars of block row r, written by this task alone (y does
                         // not overlap x).
                         unsafe {
