@@ -28,8 +28,8 @@
 //   tpl_sum      per run head: block pos - 1 gets the row, column and the sum of the run's
 //                values in sorted order, which is ascending triplet order (the sort is stable).
 //   bsr_offsets  per block row r (and r = nrow): offsets[r] = the first block whose row is >= r.
-//   bsr_mv       per block row: y = alpha A x + beta y (y not read when beta == 0); the
-//                row's range clamped (`sp_row_range`), columns out of range skipped.
+//   bsr_mv       per (block row, sub-row): y = alpha A x + beta y (y not read when beta == 0);
+//                the row's range clamped (`sp_row_range`), columns out of range skipped.
 //   dot_partials per chunk of 4096 elements (a block of 256 threads): see `sp_dot_lane`.
 //   dot_final    one block of 256 threads: the partials reduced the same way.
 //                (Both index their shared lanes by threadIdx.x: correct only for blocks of
@@ -396,15 +396,21 @@ WP_FN i32 sp_at(i32 i, i32 j) {
   return CM ? j * R + i : i * C + j;
 }
 
+/// Scalar row i of block row r of y = alpha A x + beta y: the sum from 0, over the row's
+/// blocks in storage order and within a block over ascending j, of a_ij * x_j, each
+/// operation rounded; then alpha * acc (+ beta * y when beta != 0). A thread per (block row,
+/// sub-row), as Warp's bsr_mv: R times the threads of a thread per block row, and the R
+/// threads of a block row read its blocks side by side. Each scalar's sum is the one the CPU
+/// body computes (its R accumulators run the same order), so the bits do not depend on the
+/// split.
 template <typename S, int R, int C, bool CM>
-WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
+WP_FN void sp_bsr_mv_sub(const sp_bsr_mv_t& s, i32 r, i32 i) {
   const i32* offsets = (const i32*)s.offsets;
   const i32* columns = (const i32*)s.columns;
   const S* values = (const S*)s.values;
   const S* x = (const S*)s.x;
   S* y = (S*)s.y;
-  S acc[R];
-  for (i32 i = 0; i < R; ++i) acc[i] = (S)0;
+  S acc = (S)0;
   i32 lo, hi;
   sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
   for (i32 k = lo; k < hi; ++k) {
@@ -412,15 +418,18 @@ WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
     if (c < 0 || c >= s.ncol) continue;  // (never in an assembled matrix)
     const S* a = values + (i64)k * (R * C);
     const S* xc = x + (i64)c * C;
-    for (i32 i = 0; i < R; ++i)
-      for (i32 j = 0; j < C; ++j) acc[i] = sp_add(acc[i], sp_mul(a[sp_at<R, C, CM>(i, j)], xc[j]));
+    for (i32 j = 0; j < C; ++j) acc = sp_add(acc, sp_mul(a[sp_at<R, C, CM>(i, j)], xc[j]));
   }
   const S alpha = (S)s.alpha, beta = (S)s.beta;
-  for (i32 i = 0; i < R; ++i) {
-    const i64 o = (i64)r * R + i;
-    // beta == 0: y is not read (it may hold NaN).
-    y[o] = beta == (S)0 ? sp_mul(alpha, acc[i]) : sp_add(sp_mul(alpha, acc[i]), sp_mul(beta, y[o]));
-  }
+  const i64 o = (i64)r * R + i;
+  // beta == 0: y is not read (it may hold NaN).
+  y[o] = beta == (S)0 ? sp_mul(alpha, acc) : sp_add(sp_mul(alpha, acc), sp_mul(beta, y[o]));
+}
+
+/// Block row r of the product: its R scalar rows, one after the other.
+template <typename S, int R, int C, bool CM>
+WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
+  for (i32 i = 0; i < R; ++i) sp_bsr_mv_sub<S, R, C, CM>(s, r, i);
 }
 
 /// The inverse of block row r's diagonal block by Gauss-Jordan with partial pivoting (the
@@ -687,7 +696,8 @@ __device__ void sp_dot_final_kernel(const sp_dot_t& s) {
 // The kernels of one block type (scalar S, R x C, column-major CM).
 #define WP_SP_BLOCK_KERNELS(tag, S, R, C, CM)                                               \
   extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                    \
-    WP_SP_LOOP(r, s.nrow) wp::sp_bsr_mv_row<S, R, C, CM>(s, (wp::i32)r);                    \
+    WP_SP_LOOP(t, (wp::i64)s.nrow * R)                                                      \
+    wp::sp_bsr_mv_sub<S, R, C, CM>(s, (wp::i32)(t / R), (wp::i32)(t % R));                  \
   }                                                                                         \
   extern "C" __global__ void wp_sparse_jacobi_inv_##tag(wp::sp_jacobi_inv_t s) {            \
     WP_SP_LOOP(r, s.nrow) wp::sp_jacobi_inv_row<S, R, C, CM>(s, (wp::i32)r);                \

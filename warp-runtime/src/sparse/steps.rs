@@ -625,12 +625,13 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
     };
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
+    /// A GPU thread per scalar row (block row and sub-row, `sp_bsr_mv_sub`).
     fn len(&self) -> usize {
-        self.nrow as usize
+        self.nrow as usize * B::ROWS
     }
 
     fn run_cpu(&self) -> Result<()> {
-        let nrow = self.len();
+        let nrow = self.nrow as usize;
         let (rr, cc) = (B::ROWS, B::COLS);
         // SAFETY: see the impl. The block count is offsets[nrow] (written by assembly),
         // clamped to the capacity.
