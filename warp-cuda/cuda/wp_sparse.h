@@ -390,6 +390,17 @@ WP_FN void sp_row_range(const i32* offsets, i32 nrow, i32 cap, i32 r, i32* lo, i
   *hi = b;
 }
 
+/// A load through the read-only data cache on a GPU (`__ldg`; a plain load under the host
+/// emulator): for arrays no thread of the kernel writes.
+template <typename T>
+WP_FN T sp_ldg(const T* p) {
+#if defined(__CUDA_ARCH__)
+  return __ldg(p);
+#else
+  return *p;
+#endif
+}
+
 /// Entry (i, j) of an R x C block stored column-major (CM) or row-major.
 template <int R, int C, bool CM>
 WP_FN i32 sp_at(i32 i, i32 j) {
@@ -405,6 +416,8 @@ WP_FN i32 sp_at(i32 i, i32 j) {
 /// split.
 template <typename S, int R, int C, bool CM>
 WP_FN void sp_bsr_mv_sub(const sp_bsr_mv_t& s, i32 r, i32 i) {
+  // The matrix and x are read-only here (mv checks that y overlaps neither): their loads go
+  // through the read-only data cache.
   const i32* offsets = (const i32*)s.offsets;
   const i32* columns = (const i32*)s.columns;
   const S* values = (const S*)s.values;
@@ -414,11 +427,12 @@ WP_FN void sp_bsr_mv_sub(const sp_bsr_mv_t& s, i32 r, i32 i) {
   i32 lo, hi;
   sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
   for (i32 k = lo; k < hi; ++k) {
-    const i32 c = columns[k];
+    const i32 c = sp_ldg(columns + k);
     if (c < 0 || c >= s.ncol) continue;  // (never in an assembled matrix)
     const S* a = values + (i64)k * (R * C);
     const S* xc = x + (i64)c * C;
-    for (i32 j = 0; j < C; ++j) acc = sp_add(acc, sp_mul(a[sp_at<R, C, CM>(i, j)], xc[j]));
+    for (i32 j = 0; j < C; ++j)
+      acc = sp_add(acc, sp_mul(sp_ldg(a + sp_at<R, C, CM>(i, j)), sp_ldg(xc + j)));
   }
   const S alpha = (S)s.alpha, beta = (S)s.beta;
   const i64 o = (i64)r * R + i;
