@@ -28,7 +28,8 @@
 //!   warm-up; GB/s over the compulsory bytes of the block form (offsets, columns and values
 //!   read once, x read once, y written), against the peak of the device attributes (memory
 //!   clock x bus width x 2) and against a device-to-device copy timed in the same run; the
-//!   error max |y - y_ref| / max |y_ref| against the f64 product on the host.
+//!   error max |y - y_ref| / max |y_ref| against the f64 product on the host. Ours also with
+//!   2 to 32 lanes per scalar row (`sparse::set_mv_lanes`).
 //! - **CG** from 0 with b = x to |r| <= 1e-6 |b| with point Jacobi (`Precond::PointJacobi`:
 //!   the same preconditioner as Warp's `preconditioner(A, "diag")` and CuPy's diagonal
 //!   operator; the 3 x 3 case also with block Jacobi): ours in `Mode::Graph` (one captured
@@ -744,6 +745,20 @@ fn gpu_case<B: Case>(
             }
         }
     };
+    // Our product with w lanes per scalar row (`sparse::set_mv_lanes`; the default is 1):
+    // the run that decides the default.
+    for w in [2usize, 4, 8, 16, 32] {
+        sparse::set_mv_lanes(Some(w))?;
+        let ms = event_ms(dev, || sparse::mv(one, &a, &xv, B::Scalar::ZERO, &yv))?;
+        let err = rel_err(&to_f64(&y.to_vec()?), y_ref);
+        println!(
+            "  {:<30} {ms:8.3} ms  {}  err {err:.1e}   /w=1 {:.2}",
+            format!("ours, {w} lanes per row"),
+            peaks.describe(gbs(ms)),
+            ms / ours
+        );
+    }
+    sparse::set_mv_lanes(None)?;
     let warp = row("Warp bsr_mv", "warp");
     let cusparse = row(
         if m.block == 1 {

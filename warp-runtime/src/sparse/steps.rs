@@ -558,7 +558,8 @@ pub(crate) struct BsrMv<B> {
     pub nrow: i32,
     pub ncol: i32,
     pub cap: i32,
-    pub pad: i32,
+    /// Lanes per scalar row (`w`: 1, 2, 4, .., 32): see [`mv_row`].
+    pub lanes: i32,
     pub block: PhantomData<B>,
 }
 const _: () = assert!(std::mem::size_of::<BsrMv<f32>>() == 72);
@@ -578,10 +579,14 @@ pub(super) fn clamped_nnz(offsets: &[i32], cap: i32) -> usize {
     offsets[offsets.len() - 1].clamp(0, cap.max(0)) as usize
 }
 
-/// Block row `r` of `y = alpha A x + beta y` (the C++ `sp_bsr_mv_row`'s order): each row
-/// scalar's sum from 0 over the row's blocks in storage order, and in a block over ascending
-/// columns, of `a_ij * x_j`; then `alpha * acc`, plus `beta * y` when `beta != 0`.
+/// Block row `r` of `A x` into `acc` (the C++ `sp_bsr_mv_lane` and `sp_bsr_mv_lanes`'
+/// order). With `w` lanes, each row scalar's lane `l` sums from 0, over the row's blocks at
+/// positions `l, l + w, ..` in storage order and in a block over ascending columns, the
+/// products `a_ij * x_j`; the lanes' partials are then added pairwise at strides `w/2, ..,
+/// 1` (lane `l` gets `l + stride`), each operation rounded. `w = 1` is the plain sum in
+/// storage order.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn mv_row<B: Block>(
     offsets: &[i32],
     columns: &[i32],
@@ -589,6 +594,7 @@ fn mv_row<B: Block>(
     x: &[B::Scalar],
     ncol: i32,
     r: usize,
+    w: usize,
     acc: &mut [B::Scalar; MAX_DIM],
 ) {
     // (The row's slices and fixed-size chunks of them: the loop over a row's blocks then has
@@ -598,18 +604,45 @@ fn mv_row<B: Block>(
     let range = row_range(offsets, columns.len(), r);
     let cols = &columns[range.clone()];
     let vals = &values[range.start * rr * cc..range.end * rr * cc];
-    for (&c, a) in cols.iter().zip(vals.chunks_exact(rr * cc)) {
-        if !(0..ncol).contains(&c) {
-            continue; // (never in an assembled matrix)
-        }
-        let xc = &x[c as usize * cc..][..cc];
-        for (i, acc) in acc.iter_mut().take(rr).enumerate() {
-            for (j, &xj) in xc.iter().enumerate() {
-                *acc = acc.add(a[at::<B>(i, j)].mul(xj));
+    if w <= 1 {
+        for (&c, a) in cols.iter().zip(vals.chunks_exact(rr * cc)) {
+            if !(0..ncol).contains(&c) {
+                continue; // (never in an assembled matrix)
+            }
+            let xc = &x[c as usize * cc..][..cc];
+            for (i, acc) in acc.iter_mut().take(rr).enumerate() {
+                for (j, &xj) in xc.iter().enumerate() {
+                    *acc = acc.add(a[at::<B>(i, j)].mul(xj));
+                }
             }
         }
+        return;
+    }
+    for (i, acc) in acc.iter_mut().take(rr).enumerate() {
+        let mut lanes = [B::Scalar::ZERO; MAX_LANES];
+        for (n, (&c, a)) in cols.iter().zip(vals.chunks_exact(rr * cc)).enumerate() {
+            if !(0..ncol).contains(&c) {
+                continue;
+            }
+            let xc = &x[c as usize * cc..][..cc];
+            let s = &mut lanes[n % w];
+            for (j, &xj) in xc.iter().enumerate() {
+                *s = s.add(a[at::<B>(i, j)].mul(xj));
+            }
+        }
+        let mut stride = w / 2;
+        while stride > 0 {
+            for l in 0..stride {
+                lanes[l] = lanes[l].add(lanes[l + stride]);
+            }
+            stride /= 2;
+        }
+        *acc = lanes[0];
     }
 }
+
+/// The most lanes per scalar row of `mv` (a warp).
+pub(crate) const MAX_LANES: usize = 32;
 
 // SAFETY: `#[repr(C)]`, the layout of `sp_bsr_mv_t`; a Bsr's arrays (offsets nrow + 1,
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
@@ -625,9 +658,9 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
     };
     const KERNEL: &'static str = <B as SealedBlock>::KERNELS.mv;
 
-    /// A GPU thread per scalar row (block row and sub-row, `sp_bsr_mv_sub`).
+    /// A GPU thread per scalar row (block row and sub-row, `sp_bsr_mv_sub`), times the lanes.
     fn len(&self) -> usize {
-        self.nrow as usize * B::ROWS
+        self.nrow as usize * B::ROWS * self.lanes.max(1) as usize
     }
 
     fn run_cpu(&self) -> Result<()> {
@@ -648,6 +681,7 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
         let y = Ptr(self.y as *mut B::Scalar);
         let alpha = B::Scalar::from_f64(self.alpha);
         let beta = B::Scalar::from_f64(self.beta);
+        let w = (self.lanes.max(1) as usize).min(MAX_LANES);
         // A task per run of MV_ROWS block rows (the benchmark's rows hold 5 to 15 blocks: a
         // task per row spent more on scheduling than on the row). Rows are independent, so
         // the split changes no result.
@@ -657,7 +691,7 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
             .for_each(|chunk| {
                 for r in chunk * MV_ROWS..((chunk + 1) * MV_ROWS).min(nrow) {
                     let mut acc = [B::Scalar::ZERO; MAX_DIM];
-                    mv_row::<B>(offsets, columns, values, x, self.ncol, r, &mut acc);
+                    mv_row::<B>(offsets, columns, values, x, self.ncol, r, w, &mut acc);
                     for (i, &a) in acc.iter().take(rr).enumerate() {
                         // SAFETY: y's scalars of block row r, written by this task alone (y does
                         // not overlap x).
@@ -1324,7 +1358,7 @@ mod tests {
             },
             BsrOffsets => "sp_bsr_offsets_t" { count, block_rows, pos, offsets, n, nrow },
             BsrMv<f32> => "sp_bsr_mv_t" {
-                offsets, columns, values, x, y, alpha, beta, nrow, ncol, cap, pad
+                offsets, columns, values, x, y, alpha, beta, nrow, ncol, cap, lanes
             },
             Dot<f32, false> => "sp_dot_t" { a, b, n, out, chunks },
             JacobiInv<f32> => "sp_jacobi_inv_t" {
