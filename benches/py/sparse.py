@@ -10,8 +10,11 @@ For each dtype (--dtypes f32,f64):
 - mv, y = A x: Warp 1.19's `bsr_mv` on `bsr_from_triplets` of the same blocks (no pruning:
   the same structure), and cuSPARSE's SpMV through CuPy (`csr_matrix @ x`; a 3 x 3 block
   matrix expanded to a scalar CSR of 9 entries per block). GPU milliseconds between CUDA
-  events, median of --reps after a warm-up; the error is max |y - y_ref| / max |y_ref| with
-  y_ref the f64 product on the host (numpy).
+  events, median of --reps after a warm-up: around one call (`*_mv_ms`: the events also hold
+  the host's dispatch of the call, Python's included, for which the GPU waits), and around
+  50 calls queued back to back, per call (`*_mv_b2b_ms`: the device's time once the host
+  queues faster than the GPU runs). The error is max |y - y_ref| / max |y_ref| with y_ref the
+  f64 product on the host (numpy).
 - CG (--cg 1), b = x, from x0 = 0 to rtol (|r| <= rtol |b|) with point Jacobi: Warp's
   `warp.optim.linear.cg(check_every=0)` with `preconditioner(A, "diag")`, and CuPy's
   `cupyx.scipy.sparse.linalg.cg` with M = diag(1 / a_ii) as a LinearOperator. Wall
@@ -47,6 +50,8 @@ ap.add_argument("--maxiter", type=int, default=20000)
 args = ap.parse_args()
 
 R = args.block
+# Calls per timing of the back-to-back figures (the Rust side's BATCH).
+BATCH = 50
 NROW = args.nrow
 N = NROW * R
 
@@ -168,6 +173,9 @@ try:
             except AttributeError:  # (older Warp: the host count is exact after a sync)
                 sec["warp_nnz"] = int(A.nnz)
             sec["warp_mv_ms"] = events_ms(lambda: wsp.bsr_mv(A, x, y, alpha=1.0, beta=0.0), args.reps)
+            sec["warp_mv_b2b_ms"] = events_ms(
+                lambda: [wsp.bsr_mv(A, x, y, alpha=1.0, beta=0.0) for _ in range(BATCH)], args.reps
+            ) / BATCH
             sec["warp_mv_err"] = mv_err(y.numpy())
             if args.cg:
                 M = warp_preconditioner(A, "diag")
@@ -228,6 +236,7 @@ try:
                 box["y"] = A @ x
 
             sec["cupy_mv_ms"] = cupy_events_ms(mv, args.reps)
+            sec["cupy_mv_b2b_ms"] = cupy_events_ms(lambda: [mv() for _ in range(BATCH)], args.reps) / BATCH
             sec["cupy_mv_err"] = mv_err(cp.asnumpy(box["y"]))
             if args.cg:
                 dinv = cp.asarray((1.0 / diag).astype(t))
