@@ -29,17 +29,18 @@
 //!   call (the GPU waits for it: a few microseconds from Rust, tens from Python, which
 //!   dominate at 1M unknowns), and around `BATCH` calls queued back to back, per call (the
 //!   device's time once the host queues calls faster than the GPU runs them; the verdicts
-//!   are given for both); GB/s over the compulsory bytes of the block form (offsets, columns and values
-//!   read once, x read once, y written), against the peak of the device attributes (memory
-//!   clock x bus width x 2) and against a device-to-device copy timed in the same run; the
-//!   error max |y - y_ref| / max |y_ref| against the f64 product on the host. Ours also with
-//!   2 to 32 lanes per scalar row (`sparse::set_mv_lanes`).
+//!   are given for both); GB/s over the compulsory bytes of the block form (offsets,
+//!   columns and values read once, x read once, y written), against the peak of the device
+//!   attributes (memory clock x bus width x 2) and against a device-to-device copy timed in
+//!   the same run; the error max |y - y_ref| / max |y_ref| against the f64 product on the
+//!   host. Ours also with 2 to 32 lanes per scalar row (`sparse::set_mv_lanes`).
 //! - **CG** from 0 with b = x to |r| <= 1e-6 |b| with point Jacobi (`Precond::PointJacobi`:
 //!   the same preconditioner as Warp's `preconditioner(A, "diag")` and CuPy's diagonal
 //!   operator; the 3 x 3 case also with block Jacobi): ours in `Mode::Graph` (one captured
 //!   graph of the set-up and a conditional loop), Warp's `cg(check_every=0)` and CuPy's
-//!   `cupyx.scipy.sparse.linalg.cg`. Wall milliseconds of the whole call (allocation and
-//!   capture included, synchronised), median of 3 after a warm-up; iterations; the true
+//!   `cupyx.scipy.sparse.linalg.cg`. Wall milliseconds of the whole call on every side (the
+//!   host's work, allocation and capture included, synchronised; CuPy's loop reads the
+//!   residual back every iteration), median of 3 after a warm-up; iterations; the true
 //!   residual |b - A x| / |b| in f64 against the f64 matrix. By default at the first size of
 //!   each family (`--cg-all`: every size).
 //!
