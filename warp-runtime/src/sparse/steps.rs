@@ -644,6 +644,42 @@ fn mv_row<B: Block>(
 /// The most lanes per scalar row of `mv` (a warp).
 pub(crate) const MAX_LANES: usize = 32;
 
+/// The matrix's offsets, columns and values and x, as the CPU body reads them.
+type MvArrays<'a, S> = (&'a [i32], &'a [i32], &'a [S], &'a [S]);
+
+/// Block rows `rows` of `y = alpha A x + beta y` with `w` lanes (`LANES`: `w > 1`; else the
+/// one-lane loop, `w` unused), each row scalar as `mv_row` sums it.
+#[inline(always)]
+fn mv_rows<B: Block, const LANES: bool>(
+    (offsets, columns, values, x): MvArrays<'_, B::Scalar>,
+    ncol: i32,
+    rows: std::ops::Range<usize>,
+    w: usize,
+    alpha: B::Scalar,
+    beta: B::Scalar,
+    y: Ptr<B::Scalar>,
+) {
+    let rr = B::ROWS;
+    for r in rows {
+        let mut acc = [B::Scalar::ZERO; MAX_DIM];
+        let w = if LANES { w } else { 1 };
+        mv_row::<B>(offsets, columns, values, x, ncol, r, w, &mut acc);
+        for (i, &a) in acc.iter().take(rr).enumerate() {
+            // SAFETY: y's scalars of block row r, written by this task alone (y does not
+            // overlap x); the caller's contract (`run_cpu`).
+            unsafe {
+                let p = y.at(r * rr + i);
+                let v = if beta == B::Scalar::ZERO {
+                    alpha.mul(a)
+                } else {
+                    alpha.mul(a).add(beta.mul(*p))
+                };
+                p.write(v);
+            }
+        }
+    }
+}
+
 // SAFETY: `#[repr(C)]`, the layout of `sp_bsr_mv_t`; a Bsr's arrays (offsets nrow + 1,
 // columns and values at least offsets[nrow] blocks), x of ncol COLS scalars and y of nrow ROWS,
 // not overlapping x (mv checked).
@@ -689,22 +725,13 @@ unsafe impl<B: Block> ObjectStep for BsrMv<B> {
         (0..nrow.div_ceil(MV_ROWS))
             .into_par_iter()
             .for_each(|chunk| {
-                for r in chunk * MV_ROWS..((chunk + 1) * MV_ROWS).min(nrow) {
-                    let mut acc = [B::Scalar::ZERO; MAX_DIM];
-                    mv_row::<B>(offsets, columns, values, x, self.ncol, r, w, &mut acc);
-                    for (i, &a) in acc.iter().take(rr).enumerate() {
-                        // SAFETY: y's scalars of block row r, written by this task alone (y does
-                        // not overlap x).
-                        unsafe {
-                            let p = y.at(r * rr + i);
-                            let v = if beta == B::Scalar::ZERO {
-                                alpha.mul(a)
-                            } else {
-                                alpha.mul(a).add(beta.mul(*p))
-                            };
-                            p.write(v);
-                        }
-                    }
+                let rows = chunk * MV_ROWS..((chunk + 1) * MV_ROWS).min(nrow);
+                let (m, ncol) = ((offsets, columns, values, x), self.ncol);
+                // (One lane, the default, as a constant: its loop keeps no lane logic.)
+                if w <= 1 {
+                    mv_rows::<B, false>(m, ncol, rows, 1, alpha, beta, y);
+                } else {
+                    mv_rows::<B, true>(m, ncol, rows, w, alpha, beta, y);
                 }
             });
         Ok(())
