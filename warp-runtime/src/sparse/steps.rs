@@ -765,16 +765,16 @@ fn tree<S: SparseScalar>(s: &mut [S; DOT_LANES]) -> S {
 
 /// Chunk `c`'s partial sum of `a . b` (lanes as `sp_dot_lane`, then the tree).
 fn chunk_partial<S: SparseScalar>(a: &[S], b: &[S], c: usize) -> S {
+    // Lane l sums the products of elements l, l + 256, .. of the chunk in that order: taken
+    // a row of 256 at a time, all lanes at once (independent sums, so the compiler may use
+    // vector registers; each lane's order is unchanged).
     let mut s = [S::ZERO; DOT_LANES];
-    for (lane, s) in s.iter_mut().enumerate() {
-        let mut acc = S::ZERO;
-        for m in 0..DOT_CHUNK / DOT_LANES {
-            let i = c * DOT_CHUNK + lane + m * DOT_LANES;
-            if i < a.len() {
-                acc = acc.add(a[i].mul(b[i]));
-            }
+    let lo = (c * DOT_CHUNK).min(a.len());
+    let hi = (lo + DOT_CHUNK).min(a.len());
+    for (ra, rb) in a[lo..hi].chunks(DOT_LANES).zip(b[lo..hi].chunks(DOT_LANES)) {
+        for ((s, &x), &y) in s.iter_mut().zip(ra).zip(rb) {
+            *s = s.add(x.mul(y));
         }
-        *s = acc;
     }
     tree(&mut s)
 }
