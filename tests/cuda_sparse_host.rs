@@ -163,10 +163,11 @@ template <typename S> void mv(const BlockKernels& k) {
   std::vector<S> x = scalars<S>((size_t)m.ncol * k.cols);
   std::vector<S> y = scalars<S>((size_t)m.nrow * k.rows);
   const f64 alpha = scalar<f64>(), beta = scalar<f64>();
+  const i32 lanes = (i32)word();
   run(k.mv, GB, GT,
       sp_bsr_mv_t{addr(m.offsets.data()), addr(m.columns.data()), addr(values.data()),
                   addr(x.data()), addr(y.data()), alpha, beta, m.nrow, m.ncol,
-                  m.nnz, 0});
+                  m.nnz, lanes});
   print(y.data(), (size_t)m.nrow * k.rows);
 }
 
@@ -1053,7 +1054,13 @@ fn mv_case<B: Block>(seed: usize) {
         .collect();
     let x_in: Vec<B::In> = from_scalars(&xs);
     let y_out: Vec<B::Out> = from_scalars(&ys);
-    for (alpha, beta) in [(0.75, -1.25), (1.0, 0.0), (-2.5, 1.0)] {
+    // Every lane count (lanes per scalar row, `set_mv_lanes`): 1 at three (alpha, beta), the
+    // others at one, each of the CPU backend's results against the header's.
+    let cases = [(1, 0.75, -1.25), (1, 1.0, 0.0), (1, -2.5, 1.0)]
+        .into_iter()
+        .chain([2, 4, 8, 16, 32].map(|w| (w, 0.75, -1.25)));
+    for (lanes, alpha, beta) in cases {
+        sparse::set_mv_lanes(Some(lanes)).unwrap();
         let y = wp::Array::from_slice(&y_out, &cpu).unwrap();
         sparse::mv(
             B::Scalar::from_f64(alpha),
@@ -1072,15 +1079,16 @@ fn mv_case<B: Block>(seed: usize) {
         input.extend(&mw);
         input.extend(xs.iter().map(|&v| word(v)));
         input.extend(ys.iter().map(|&v| word(v)));
-        input.extend([alpha.to_bits(), beta.to_bits()]);
+        input.extend([alpha.to_bits(), beta.to_bits(), lanes as u64]);
         let got = hex(&run(&format!("mv{}", kind::<B>()), &input));
         assert_eq!(
             got,
             want,
-            "{}: alpha {alpha}, beta {beta}",
+            "{}: {lanes} lanes, alpha {alpha}, beta {beta}",
             std::any::type_name::<B>()
         );
     }
+    sparse::set_mv_lanes(None).unwrap();
 }
 
 /// `y = alpha A x + beta y` of every block type, at three (alpha, beta): the same bits as the

@@ -25,6 +25,7 @@ backend_tests!(
     mv_matches_dense_reference,
     mv_mat3_matches_dense_reference,
     mv_beta_zero_does_not_read_y,
+    mv_lanes_documented_order,
     mv_shape_mismatch,
     mv_survives_overwritten_structure,
     dot_fixed_tree,
@@ -543,6 +544,110 @@ fn mv_mat3_matches_dense_reference(dev: &wp::Device) {
     };
     run(dev);
     same_on_cpu(dev, "mv Mat3", run);
+}
+
+/// `sparse::set_mv_lanes`: with `w` lanes each row sums its blocks `l, l + w, ..` into lane
+/// `l` and adds the lanes pairwise at strides `w/2, .., 1`, bit for bit (f32 and `DMat3`
+/// blocks, rows of 0 to ~40 blocks, so some lanes stay empty); the GPU gives the CPU's bits
+/// for each `w`; another `w` is refused; `None` is `w = 1` again.
+fn mv_lanes_documented_order(dev: &wp::Device) {
+    let (r, c, v) = random_triplets(40, 60, 900, 11, |g| g.unit() as f32);
+    let (rb, cb, vb) = random_triplets(12, 9, 150, 12, |g| {
+        DMat3::from_cols_array(&std::array::from_fn(|_| g.unit()))
+    });
+    let lanes_sum = |terms: &[f64], w: usize| -> f64 {
+        let mut s = vec![0.0f64; w];
+        for (n, t) in terms.iter().enumerate() {
+            s[n % w] += t;
+        }
+        let mut stride = w / 2;
+        while stride > 0 {
+            for l in 0..stride {
+                s[l] += s[l + stride];
+            }
+            stride /= 2;
+        }
+        s[0]
+    };
+    let run = |d: &wp::Device| {
+        let a = Bsr::from_triplets(40, 60, &arr(&r, d), &arr(&c, d), &arr(&v, d)).unwrap();
+        let ab = Bsr::from_triplets(12, 9, &arr(&rb, d), &arr(&cb, d), &arr(&vb, d)).unwrap();
+        let mut g = Rng(13);
+        let x: Vec<f32> = (0..60).map(|_| g.unit() as f32).collect();
+        let xb: Vec<DVec3> = (0..9)
+            .map(|_| DVec3::new(g.unit(), g.unit(), g.unit()))
+            .collect();
+        let (off, cols, vals) = (host(a.offsets()), host(a.columns()), host(a.values()));
+        let (offb, colsb, valsb) = (host(ab.offsets()), host(ab.columns()), host(ab.values()));
+        let mut out = Vec::new();
+        for w in [1usize, 2, 4, 8, 16, 32] {
+            sparse::set_mv_lanes(Some(w)).unwrap();
+            let y = arr(&[0.0f32; 40], d);
+            sparse::mv(1.0f32, &a, &arr(&x, d), 0.0, &y).unwrap();
+            let yb = arr(&[DVec3::ZERO; 12], d);
+            sparse::mv(1.0, &ab, &arr(&xb, d), 0.0, &yb).unwrap();
+            sparse::set_mv_lanes(None).unwrap();
+            let got = host(&y);
+            for (row, g) in got.iter().enumerate() {
+                // f32: the same order in f32 arithmetic (each lane's sum, then the tree).
+                let ks = off[row] as usize..off[row + 1] as usize;
+                let mut s = vec![0.0f32; w];
+                for (n, k) in ks.enumerate() {
+                    s[n % w] += vals[k] * x[cols[k] as usize];
+                }
+                let mut stride = w / 2;
+                while stride > 0 {
+                    for l in 0..stride {
+                        s[l] += s[l + stride];
+                    }
+                    stride /= 2;
+                }
+                assert_eq!(g.to_bits(), s[0].to_bits(), "f32, {w} lanes, row {row}");
+            }
+            let gotb = host(&yb);
+            for (row, g) in gotb.iter().enumerate() {
+                for i in 0..3 {
+                    // A block's scalar row i: its columns in ascending order, one term each
+                    // (glam: entry (i, j) is col(j)[i]).
+                    let ks = offb[row] as usize..offb[row + 1] as usize;
+                    let per_block: Vec<f64> = ks
+                        .map(|k| {
+                            let xc = xb[colsb[k] as usize];
+                            (0..3).fold(0.0, |acc, j| acc + valsb[k].col(j)[i] * xc[j])
+                        })
+                        .collect();
+                    // A lane adds a block's three products to its partial one by one, not
+                    // the block's sum as here: equal within f64 rounding (~40 terms of
+                    // size <= 3), which the f32 rows above check bit for bit.
+                    let want = lanes_sum(&per_block, w);
+                    assert!(
+                        (g[i] - want).abs() <= 1e-12 * (1.0 + want.abs()),
+                        "DMat3, {w} lanes, row {row}.{i}: {} vs {want}",
+                        g[i]
+                    );
+                }
+            }
+            out.push((
+                got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                gotb.iter()
+                    .flat_map(|p| p.to_array().map(f64::to_bits))
+                    .collect::<Vec<_>>(),
+            ));
+        }
+        out
+    };
+    let cpu = run(dev);
+    // More lanes than blocks in a row change nothing but the order: w = 1 and 32 differ
+    // somewhere (the order matters), which shows the setting reached the product.
+    assert_ne!(cpu[0].0, cpu[5].0, "32 lanes gave w = 1's bits everywhere");
+    same_on_cpu(dev, "mv with lanes", run);
+    for bad in [0usize, 3, 64] {
+        let e = sparse::set_mv_lanes(Some(bad)).unwrap_err().to_string();
+        assert!(
+            e.contains("sparse::set_mv_lanes") && e.contains(&format!("`lanes` is {bad}")),
+            "{e}"
+        );
+    }
 }
 
 fn mv_beta_zero_does_not_read_y(dev: &wp::Device) {

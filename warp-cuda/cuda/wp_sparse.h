@@ -28,8 +28,8 @@
 //   tpl_sum      per run head: block pos - 1 gets the row, column and the sum of the run's
 //                values in sorted order, which is ascending triplet order (the sort is stable).
 //   bsr_offsets  per block row r (and r = nrow): offsets[r] = the first block whose row is >= r.
-//   bsr_mv       per block row: y = alpha A x + beta y (y not read when beta == 0); the
-//                row's range clamped (`sp_row_range`), columns out of range skipped.
+//   bsr_mv       per (block row, sub-row): y = alpha A x + beta y (y not read when beta == 0);
+//                the row's range clamped (`sp_row_range`), columns out of range skipped.
 //   dot_partials per chunk of 4096 elements (a block of 256 threads): see `sp_dot_lane`.
 //   dot_final    one block of 256 threads: the partials reduced the same way.
 //                (Both index their shared lanes by threadIdx.x: correct only for blocks of
@@ -181,11 +181,12 @@ struct sp_bsr_offsets_t {
 static_assert(sizeof(sp_bsr_offsets_t) == 40, "sp_bsr_offsets_t layout");
 
 /// BsrMv: offsets, columns, values, x, y, alpha, beta (as f64, rounded to S like Rust's `as`),
-/// nrow, ncol, cap (the capacity of columns and values: see `sp_row_range`).
+/// nrow, ncol, cap (the capacity of columns and values: see `sp_row_range`), lanes (w, a
+/// power of two up to 32, lanes per scalar row: see `sp_bsr_mv_lane`; below 1 means 1).
 struct sp_bsr_mv_t {
   u64 offsets, columns, values, x, y;
   f64 alpha, beta;
-  i32 nrow, ncol, cap, pad;
+  i32 nrow, ncol, cap, lanes;
 };
 static_assert(sizeof(sp_bsr_mv_t) == 72, "sp_bsr_mv_t layout");
 
@@ -390,38 +391,106 @@ WP_FN void sp_row_range(const i32* offsets, i32 nrow, i32 cap, i32 r, i32* lo, i
   *hi = b;
 }
 
+/// A load through the read-only data cache on a GPU (`__ldg`; a plain load under the host
+/// emulator): for arrays no thread of the kernel writes.
+template <typename T>
+WP_FN T sp_ldg(const T* p) {
+#if defined(__CUDA_ARCH__)
+  return __ldg(p);
+#else
+  return *p;
+#endif
+}
+
 /// Entry (i, j) of an R x C block stored column-major (CM) or row-major.
 template <int R, int C, bool CM>
 WP_FN i32 sp_at(i32 i, i32 j) {
   return CM ? j * R + i : i * C + j;
 }
 
+/// Lane l's partial sum of scalar row i of block row r of A x, for w lanes per scalar row:
+/// from 0, over the row's blocks l, l + w, l + 2w, .. (positions in the row, in storage
+/// order) and within a block over ascending j, of a_ij * x_j, each operation rounded. The w
+/// partials are then added in a butterfly with partners w/2, .., 1 (`sp_bsr_mv_tree`), so a
+/// scalar's sum depends on w alone, never on the device: the CPU body runs the same lanes
+/// and tree. (w = 1: the row's plain sum in storage order.)
 template <typename S, int R, int C, bool CM>
-WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
+WP_FN S sp_bsr_mv_lane(const sp_bsr_mv_t& s, i32 r, i32 i, i32 l, i32 w) {
+  // The matrix and x are read-only here (mv checks that y overlaps neither): their loads go
+  // through the read-only data cache.
   const i32* offsets = (const i32*)s.offsets;
   const i32* columns = (const i32*)s.columns;
   const S* values = (const S*)s.values;
   const S* x = (const S*)s.x;
-  S* y = (S*)s.y;
-  S acc[R];
-  for (i32 i = 0; i < R; ++i) acc[i] = (S)0;
+  S acc = (S)0;
   i32 lo, hi;
   sp_row_range(offsets, s.nrow, s.cap, r, &lo, &hi);
-  for (i32 k = lo; k < hi; ++k) {
-    const i32 c = columns[k];
+  for (i32 k = lo + l; k < hi; k += w) {
+    const i32 c = sp_ldg(columns + k);
     if (c < 0 || c >= s.ncol) continue;  // (never in an assembled matrix)
     const S* a = values + (i64)k * (R * C);
     const S* xc = x + (i64)c * C;
-    for (i32 i = 0; i < R; ++i)
-      for (i32 j = 0; j < C; ++j) acc[i] = sp_add(acc[i], sp_mul(a[sp_at<R, C, CM>(i, j)], xc[j]));
+    for (i32 j = 0; j < C; ++j)
+      acc = sp_add(acc, sp_mul(sp_ldg(a + sp_at<R, C, CM>(i, j)), sp_ldg(xc + j)));
   }
+  return acc;
+}
+
+/// y's scalar i of block row r from the row's sum: alpha * acc (+ beta * y when beta != 0;
+/// when beta == 0, y is not read: it may hold NaN).
+template <typename S, int R>
+WP_FN void sp_bsr_mv_store(const sp_bsr_mv_t& s, i32 r, i32 i, S acc) {
+  S* y = (S*)s.y;
   const S alpha = (S)s.alpha, beta = (S)s.beta;
-  for (i32 i = 0; i < R; ++i) {
-    const i64 o = (i64)r * R + i;
-    // beta == 0: y is not read (it may hold NaN).
-    y[o] = beta == (S)0 ? sp_mul(alpha, acc[i]) : sp_add(sp_mul(alpha, acc[i]), sp_mul(beta, y[o]));
+  const i64 o = (i64)r * R + i;
+  y[o] = beta == (S)0 ? sp_mul(alpha, acc) : sp_add(sp_mul(alpha, acc), sp_mul(beta, y[o]));
+}
+
+/// Scalar row i of block row r of y = alpha A x + beta y with one lane (w = 1). A thread per
+/// (block row, sub-row), as Warp's bsr_mv: R times the threads of a thread per block row,
+/// and the R threads of a block row read its blocks side by side. Each scalar's sum is the
+/// one the CPU body computes, so the bits do not depend on the split.
+template <typename S, int R, int C, bool CM>
+WP_FN void sp_bsr_mv_sub(const sp_bsr_mv_t& s, i32 r, i32 i) {
+  sp_bsr_mv_store<S, R>(s, r, i, sp_bsr_mv_lane<S, R, C, CM>(s, r, i, 0, 1));
+}
+
+/// Block row r of the product: its R scalar rows, one after the other.
+template <typename S, int R, int C, bool CM>
+WP_FN void sp_bsr_mv_row(const sp_bsr_mv_t& s, i32 r) {
+  for (i32 i = 0; i < R; ++i) sp_bsr_mv_sub<S, R, C, CM>(s, r, i);
+}
+
+// (Device code: in every build library that includes this header, for the mv kernels of
+// wp_sparse_ops.h too; also under the host emulator.)
+#if defined(__CUDACC__) || defined(WP_SPARSE_EMULATED)
+/// y = alpha A x + beta y with w = s.lanes > 1 lanes per scalar row: thread t is lane t % w
+/// of scalar row t / w (w divides 32 and a block's threads are whole warps, so a row's lanes
+/// are consecutive lanes of one warp); each lane sums its blocks (`sp_bsr_mv_lane`), the
+/// butterfly adds the partials (partners w/2, .., 1: the order of `sp_bsr_mv_tree` on the
+/// CPU), and lane 0 writes. The loop advances a whole warp at a time, so a warp's lanes meet
+/// every shuffle together; the rows' total (nrow R w) is a multiple of w, so a row's lanes
+/// are all in range or all out.
+template <typename S, int R, int C, bool CM>
+__device__ void sp_bsr_mv_lanes(const sp_bsr_mv_t& s) {
+  const i32 w = s.lanes;
+  const i64 total = (i64)s.nrow * R * w;
+  const i64 stride = (i64)blockDim.x * gridDim.x;
+  const i32 lane = (i32)(threadIdx.x & 31u);
+  for (i64 base = (i64)blockIdx.x * blockDim.x + (threadIdx.x & ~31u); base < total;
+       base += stride) {
+    const i64 t = base + lane;
+    const bool on = t < total;
+    const unsigned mask = __ballot_sync(0xffffffffu, on);
+    if (!on) continue;
+    const i64 g = t / w;
+    const i32 l = (i32)(t % w), r = (i32)(g / R), i = (i32)(g % R);
+    S acc = sp_bsr_mv_lane<S, R, C, CM>(s, r, i, l, w);
+    for (i32 d = w / 2; d >= 1; d /= 2) acc = sp_add(acc, __shfl_sync(mask, acc, lane ^ d));
+    if (l == 0) sp_bsr_mv_store<S, R>(s, r, i, acc);
   }
 }
+#endif
 
 /// The inverse of block row r's diagonal block by Gauss-Jordan with partial pivoting (the
 /// first largest |pivot| of the column, rows swapped), or of its diagonal alone (`point`);
@@ -687,7 +756,12 @@ __device__ void sp_dot_final_kernel(const sp_dot_t& s) {
 // The kernels of one block type (scalar S, R x C, column-major CM).
 #define WP_SP_BLOCK_KERNELS(tag, S, R, C, CM)                                               \
   extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                    \
-    WP_SP_LOOP(r, s.nrow) wp::sp_bsr_mv_row<S, R, C, CM>(s, (wp::i32)r);                    \
+    if (s.lanes > 1) {                                                                      \
+      wp::sp_bsr_mv_lanes<S, R, C, CM>(s);                                                  \
+      return;                                                                               \
+    }                                                                                       \
+    WP_SP_LOOP(t, (wp::i64)s.nrow * R)                                                      \
+    wp::sp_bsr_mv_sub<S, R, C, CM>(s, (wp::i32)(t / R), (wp::i32)(t % R));                  \
   }                                                                                         \
   extern "C" __global__ void wp_sparse_jacobi_inv_##tag(wp::sp_jacobi_inv_t s) {            \
     WP_SP_LOOP(r, s.nrow) wp::sp_jacobi_inv_row<S, R, C, CM>(s, (wp::i32)r);                \

@@ -470,7 +470,12 @@ WP_SP_OPS_KERNELS(f64, wp::f64)
 // BsrMv picks this library for them).
 #define WP_SP_OPS_MV(tag, S, R, C)                                                          \
   extern "C" __global__ void wp_sparse_bsr_mv_##tag(wp::sp_bsr_mv_t s) {                    \
-    WP_SP_LOOP(r, s.nrow) wp::sp_bsr_mv_row<S, R, C, false>(s, (wp::i32)r);                 \
+    if (s.lanes > 1) {                                                                      \
+      wp::sp_bsr_mv_lanes<S, R, C, false>(s);                                               \
+      return;                                                                               \
+    }                                                                                       \
+    WP_SP_LOOP(t, (wp::i64)s.nrow * R)                                                      \
+    wp::sp_bsr_mv_sub<S, R, C, false>(s, (wp::i32)(t / R), (wp::i32)(t % R));              \
   }
 WP_SP_OPS_MV(mat23, wp::f32, 2, 3)
 WP_SP_OPS_MV(mat24, wp::f32, 2, 4)

@@ -609,11 +609,48 @@ unsafe fn mv_raw<B: Block>(
             nrow: a.nrow as i32,
             ncol: a.ncol as i32,
             cap: a.nnz_bound() as i32,
-            pad: 0,
+            lanes: mv_lanes() as i32,
             block: PhantomData,
         },
         uses,
     )
+}
+
+thread_local! {
+    /// Lanes per scalar row of the calling thread's [`mv`]s ([`set_mv_lanes`]; 0: the
+    /// default, 1). Per thread: a setting changes results in the last bits, so it must not
+    /// reach other threads' work (tests running side by side).
+    static MV_LANES: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// The lanes per scalar row of the calling thread's [`mv`]s from now on (and of the solvers'
+/// products it queues): `Some(w)` with `w` in 1, 2, 4, 8, 16, 32, or `None` for the default
+/// (1). For benchmarks and tuning.
+///
+/// With `w` lanes, each scalar of `y` sums its row's blocks in `w` interleaved partial sums
+/// (lane `l` takes the blocks at positions `l, l + w, ..` of the row), added pairwise at
+/// strides `w/2, .., 1`; a GPU runs the lanes as `w` threads of a warp: more threads and
+/// coalesced loads for long rows. The order of the sums depends on `w`, so results differ in
+/// the last bits between settings; for one setting they are the same bits on the CPU and a
+/// GPU, as always. The setting is read when the work is queued (a capture keeps it).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `sparse::set_mv_lanes` for another `w`.
+pub fn set_mv_lanes(lanes: Option<usize>) -> Result<()> {
+    let w = lanes.unwrap_or(0);
+    if lanes.is_some() && !(w.is_power_of_two() && w <= steps::MAX_LANES) {
+        return Err(invalid(
+            "sparse::set_mv_lanes",
+            format!("`lanes` is {w}; it must be 1, 2, 4, 8, 16 or 32"),
+        ));
+    }
+    MV_LANES.with(|c| c.set(w));
+    Ok(())
+}
+
+/// The lanes per scalar row of the calling thread's next [`mv`].
+fn mv_lanes() -> usize {
+    MV_LANES.with(|c| c.get()).max(1)
 }
 
 /// `y = alpha A x + beta y` (Warp's `bsr_mv`), a thread per block row on a GPU.
