@@ -10,13 +10,14 @@
 //! row iteration `for s in bsr_row(a, i)`, `bsr_col`, `bsr_set_block` of `Mat3` blocks,
 //! `outer`'s orientation, the neighbour offsets and the held corners.
 
-use std::process::Command;
 use warp_lang as wp;
 use wp::prelude::*;
 
 // `implicit_cloth` reaches the sparse tier as `super::sparse`.
 #[allow(unused_imports)]
 use warp_runtime::sparse;
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
 #[path = "../examples/common/implicit_cloth.rs"]
 mod implicit_cloth;
 
@@ -93,7 +94,7 @@ fn words(args: &[HArg]) -> Vec<u32> {
 /// Runs K's CUDA unit under g++ (no FMA contraction) over `dim` threads, one after another,
 /// with `args`; returns `words` of the arguments after the run, or None without g++.
 fn host_run<K: wp::Kernel>(dim: usize, args: &[HArg]) -> Option<Vec<u32>> {
-    if Command::new("g++").arg("--version").output().is_err() {
+    if !host_cpp::gpp() {
         eprintln!("SKIPPED cuda_cloth_host: no g++ on this machine");
         return None;
     }
@@ -160,53 +161,15 @@ fn host_run<K: wp::Kernel>(dim: usize, args: &[HArg]) -> Option<Vec<u32>> {
             }
         }
     }
-    let params: Vec<String> = (0..args.len()).map(|k| format!("p{k}")).collect();
-    let program = format!(
-        "#include <cstring>\n#include <cstdio>\n{text}\nint main() {{\n{decl}\nwp::fault_t fault = {{}}; unsigned int flag = 0;\nwp::ctx_t ctx = {{&fault, &flag}};\nwp::launch_t launch = {{{{{dim}, 1, 1, 1}}, {dim}, 1, 1}};\nfor (wp::i64 flat = 0; flat < {dim}; ++flat) {thread}({params}, launch, flat, &ctx);\nif (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n{print}\nreturn 0;\n}}\n",
-        text = src.text,
-        thread = src.thread_fn,
-        params = params.join(", ")
-    );
-    let dir = std::env::temp_dir().join(format!("wp_cloth_host_{}", info.name));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cpp = dir.join("k.cpp");
-    std::fs::write(&cpp, program).unwrap();
-    let exe = dir.join("k");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wno-unused",
-            "-DWP_CONTIGUOUS=1",
-            "-I",
-            concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"),
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}: {}",
-        info.name,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let run = Command::new(&exe).output().unwrap();
-    assert!(
-        run.status.success(),
-        "{}: {}",
-        info.name,
-        String::from_utf8_lossy(&run.stdout)
-    );
-    Some(
-        String::from_utf8(run.stdout)
-            .unwrap()
-            .lines()
-            .map(|l| l.parse().unwrap())
-            .collect(),
-    )
+    Some(host_cpp::run_unit(
+        &format!("cloth_{}", info.name),
+        &src.text,
+        &src.thread_fn,
+        args.len(),
+        &decl,
+        &print,
+        dim,
+    ))
 }
 
 /// A 5 x 5 cloth bent out of its plane (some springs compressed, some stretched, so both

@@ -8,7 +8,6 @@
 //! scene tests (tests/suite/scenes.rs) allow for; this test is about the generated code's
 //! meaning: vertex numbering, lane writes, `outer`'s orientation, the boundary's redirection.
 
-use std::process::Command;
 use warp_lang as wp;
 
 // `fem` reaches the sparse tier as `super::sparse`.
@@ -16,6 +15,8 @@ use warp_lang as wp;
 use warp_runtime::sparse;
 #[path = "../examples/common/fem.rs"]
 mod fem;
+#[path = "common/host_cpp.rs"]
+mod host_cpp;
 
 /// A kernel argument: an `i32`, or an array the program declares and prints.
 enum HArg<'a> {
@@ -83,7 +84,7 @@ fn words(a: &HArg) -> Option<(Vec<u64>, usize, &'static str, bool)> {
 /// Runs K's CUDA unit under g++ (no FMA contraction) over `dim` threads with `args` as they
 /// are now; returns the arrays' words after the run, or None without g++.
 fn host_run<K: wp::Kernel>(dim: usize, args: &[HArg]) -> Option<Vec<u64>> {
-    if Command::new("g++").arg("--version").output().is_err() {
+    if !host_cpp::gpp() {
         eprintln!("SKIPPED cuda_fem_host: no g++ on this machine");
         return None;
     }
@@ -127,51 +128,15 @@ fn host_run<K: wp::Kernel>(dim: usize, args: &[HArg]) -> Option<Vec<u64>> {
             }
         }
     }
-    let params: Vec<String> = (0..args.len()).map(|k| format!("p{k}")).collect();
-    let program = format!(
-        "#include <cstring>\n#include <cstdio>\n{text}\nint main() {{\n{decl}\nwp::fault_t fault = {{}}; unsigned int flag = 0;\nwp::ctx_t ctx = {{&fault, &flag}};\nwp::launch_t launch = {{{{{dim}, 1, 1, 1}}, {dim}, 1, 1}};\nfor (wp::i64 flat = 0; flat < {dim}; ++flat) {thread}({params}, launch, flat, &ctx);\nif (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n{print}\nreturn 0;\n}}\n",
-        text = src.text,
-        thread = src.thread_fn,
-        params = params.join(", ")
-    );
-    let dir = std::env::temp_dir().join(format!("wp_fem_host_{}", info.name));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cpp = dir.join("k.cpp");
-    std::fs::write(&cpp, program).unwrap();
-    let exe = dir.join("k");
-    let out = Command::new("g++")
-        .args([
-            "-std=c++17",
-            "-O1",
-            "-ffp-contract=off",
-            "-Wno-unused",
-            "-DWP_CONTIGUOUS=1",
-            "-I",
-            concat!(env!("CARGO_MANIFEST_DIR"), "/warp-cuda/cuda"),
-        ])
-        .arg(&cpp)
-        .arg("-o")
-        .arg(&exe)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let run = Command::new(&exe).output().unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stdout)
-    );
-    Some(
-        String::from_utf8(run.stdout)
-            .unwrap()
-            .lines()
-            .map(|l| l.parse().unwrap())
-            .collect(),
-    )
+    Some(host_cpp::run_unit(
+        &format!("fem_{}", info.name),
+        &src.text,
+        &src.thread_fn,
+        args.len(),
+        &decl,
+        &print,
+        dim,
+    ))
 }
 
 /// The words of every array argument, in order.
