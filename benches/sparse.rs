@@ -66,6 +66,8 @@ mod common;
 #[path = "../examples/common/fem.rs"]
 mod fem;
 
+#[cfg(feature = "cuda")]
+use common::{event_ms, event_ms_per_call};
 use common::{median_of, REPS};
 
 /// Relative tolerance of every CG solve.
@@ -457,44 +459,9 @@ fn peak_gbs(ordinal: usize) -> Result<f64, String> {
     Ok(2.0 * clock as f64 * 1e3 * (bus as f64 / 8.0) / 1e9)
 }
 
-/// GPU milliseconds between CUDA events around `f`: median of `REPS` after a warm-up.
-#[cfg(feature = "cuda")]
-fn event_ms(dev: &wp::Device, mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
-    let stream = wp::get_stream(dev)?;
-    f()?;
-    let mut times = Vec::with_capacity(REPS);
-    for _ in 0..REPS {
-        let start = stream.record_event()?;
-        f()?;
-        let end = stream.record_event()?;
-        times.push(start.elapsed_ms(&end)? as f64);
-    }
-    Ok(median_of(times))
-}
-
 /// Calls per timing of the back-to-back figures.
 #[cfg(feature = "cuda")]
 const BATCH: usize = 50;
-
-/// GPU milliseconds per call of `BATCH` calls of `f` queued back to back between two CUDA
-/// events: median of `REPS` after a warm-up. Once the host queues calls faster than the GPU
-/// runs them, this is the device's time alone (a single call's events also hold the host's
-/// dispatch of that call: the GPU waits for it).
-#[cfg(feature = "cuda")]
-fn batch_ms(dev: &wp::Device, mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
-    let stream = wp::get_stream(dev)?;
-    f()?;
-    let mut times = Vec::with_capacity(REPS);
-    for _ in 0..REPS {
-        let start = stream.record_event()?;
-        for _ in 0..BATCH {
-            f()?;
-        }
-        let end = stream.record_event()?;
-        times.push(start.elapsed_ms(&end)? as f64 / BATCH as f64);
-    }
-    Ok(median_of(times))
-}
 
 /// The bandwidth of a device-to-device copy of 1 GiB (read + write), GB/s.
 #[cfg(feature = "cuda")]
@@ -747,7 +714,9 @@ fn gpu_case<B: Case>(
     let (xv, yv) = (x.reinterpret::<B::In>()?, y.reinterpret::<B::Out>()?);
     let one = B::Scalar::ONE;
     let ours = event_ms(dev, || sparse::mv(one, &a, &xv, B::Scalar::ZERO, &yv))?;
-    let ours_b2b = batch_ms(dev, || sparse::mv(one, &a, &xv, B::Scalar::ZERO, &yv))?;
+    let ours_b2b = event_ms_per_call(dev, BATCH, || {
+        sparse::mv(one, &a, &xv, B::Scalar::ZERO, &yv)
+    })?;
     let err = rel_err(&to_f64(&y.to_vec()?), y_ref);
     let gbs = |ms: f64| bytes / (ms * 1e-3) / 1e9;
     println!(

@@ -37,7 +37,8 @@ use wp::prelude::*;
 mod common;
 
 use common::{
-    json_number, median_ms, median_of, python_side, ratio, size_section, uniform_points, REPS,
+    event_ms, json_number, median_ms, median_of, python_side, ratio, size_section, uniform_points,
+    REPS,
 };
 use rand::Rng as _;
 
@@ -286,22 +287,6 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
     }
     sort_kernels(dev, torch.as_ref().ok())?;
     scan_algorithms(dev, torch.as_ref().ok())
-}
-
-/// GPU milliseconds between CUDA events around `f` on the device's current stream: median of
-/// `REPS` after a warm-up (compilation and scratch growth out of the timing), as the PyTorch
-/// side times its calls.
-fn event_ms(dev: &wp::Device, mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
-    let stream = wp::get_stream(dev)?;
-    f()?;
-    let mut times = Vec::with_capacity(REPS);
-    for _ in 0..REPS {
-        let start = stream.record_event()?;
-        f()?;
-        let end = stream.record_event()?;
-        times.push(start.elapsed_ms(&end)? as f64);
-    }
-    Ok(median_of(times))
 }
 
 /// The GPU scan's algorithms (`wp::primitives::plan::ScanAlgorithm`: the three-phase scan, the

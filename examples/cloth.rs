@@ -731,16 +731,7 @@ fn main() -> wp::Result<()> {
     c64.set_v0(&field.velocities(&v_start, &kept), &dev)?;
     let (com, _) = c64.forward(target, &dev)?;
     let steps = c64.setup.steps;
-    let grid: Vec<[usize; 3]> = (0..n - 1)
-        .flat_map(|r| (0..n - 1).map(move |c| (r, c)))
-        .flat_map(|(r, c)| {
-            let at = |r: usize, c: usize| r * n + c;
-            [
-                [at(r, c), at(r, c + 1), at(r + 1, c + 1)],
-                [at(r, c), at(r + 1, c + 1), at(r + 1, c)],
-            ]
-        })
-        .collect();
+    let grid = common::grid_triangles(n);
     let cloth_at = |k: usize| -> wp::Result<Vec<[f64; 3]>> {
         Ok(c64.xs[k].to_vec()?.iter().map(|&p| common::p3(p)).collect())
     };

@@ -323,16 +323,7 @@ fn main() -> wp::Result<()> {
             .iter()
             .map(|&p| common::p3(p))
             .collect();
-        let grid: Vec<[usize; 3]> = (0..n - 1)
-            .flat_map(|r| (0..n - 1).map(move |c| (r, c)))
-            .flat_map(|(r, c)| {
-                let at = |r: usize, c: usize| r * n + c;
-                [
-                    [at(r, c), at(r, c + 1), at(r + 1, c + 1)],
-                    [at(r, c), at(r + 1, c + 1), at(r + 1, c)],
-                ]
-            })
-            .collect();
+        let grid = common::grid_triangles(n);
         let all: Vec<[f64; 3]> = [&start[..], &points[..]].concat();
         let (lo, hi) = common::bounds(&all);
         let frame = Frame::new(

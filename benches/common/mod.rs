@@ -37,6 +37,38 @@ pub fn median_ms(mut f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
     Ok(median_of(t))
 }
 
+/// GPU milliseconds per call of `calls` calls of `f` queued back to back between two CUDA
+/// events on the device's current stream: median of `REPS` after a warm-up (compilation and
+/// scratch growth out of the timing). With one call the events also hold the host's dispatch
+/// of it (the GPU waits for it); once the host queues calls faster than the GPU runs them, the
+/// per-call figure of many is the device's time alone.
+#[cfg(feature = "cuda")]
+pub fn event_ms_per_call(
+    dev: &wp::Device,
+    calls: usize,
+    mut f: impl FnMut() -> wp::Result<()>,
+) -> wp::Result<f64> {
+    let stream = wp::get_stream(dev)?;
+    f()?;
+    let mut times = Vec::with_capacity(REPS);
+    for _ in 0..REPS {
+        let start = stream.record_event()?;
+        for _ in 0..calls {
+            f()?;
+        }
+        let end = stream.record_event()?;
+        times.push(start.elapsed_ms(&end)? as f64 / calls as f64);
+    }
+    Ok(median_of(times))
+}
+
+/// GPU milliseconds between CUDA events around one call of `f` ([`event_ms_per_call`] of 1),
+/// as the Python sides time theirs.
+#[cfg(feature = "cuda")]
+pub fn event_ms(dev: &wp::Device, f: impl FnMut() -> wp::Result<()>) -> wp::Result<f64> {
+    event_ms_per_call(dev, 1, f)
+}
+
 /// Median of `runs` timings of `f` on `state`, each after an untimed `setup` of it (a CPU
 /// call: nothing to synchronise).
 pub fn median_on<S>(

@@ -204,6 +204,21 @@ pub fn camera(
     warp_report::frame::Camera::perspective(eye.to_array(), centre.to_array(), up)
 }
 
+/// The triangles of an n x n grid of points numbered row by row (`r * n + c`), two a cell
+/// (the cloth scenes' frames draw their cloth with them).
+pub fn grid_triangles(n: usize) -> Vec<[usize; 3]> {
+    let at = |r: usize, c: usize| r * n + c;
+    (0..n.saturating_sub(1))
+        .flat_map(|r| (0..n - 1).map(move |c| (r, c)))
+        .flat_map(|(r, c)| {
+            [
+                [at(r, c), at(r, c + 1), at(r + 1, c + 1)],
+                [at(r, c), at(r + 1, c + 1), at(r + 1, c)],
+            ]
+        })
+        .collect()
+}
+
 /// The smallest box holding `points` (a unit box at the origin for none).
 pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     if points.is_empty() {
