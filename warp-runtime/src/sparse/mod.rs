@@ -653,11 +653,13 @@ fn mv_lanes() -> usize {
     MV_LANES.with(|c| c.get()).max(1)
 }
 
-/// `y = alpha A x + beta y` (Warp's `bsr_mv`), a thread per block row on a GPU.
+/// `y = alpha A x + beta y` (Warp's `bsr_mv`), a thread per scalar row on a GPU (`w` per row
+/// with [`set_mv_lanes`]).
 ///
 /// Each scalar of `y` is `alpha * acc + beta * y`, where `acc` sums from zero, over the row's
 /// blocks in storage order and within a block over ascending columns, the products
-/// `a_ij * x_j`, each rounded: the same bits on every device. When `beta == 0`, `y` is not
+/// `a_ij * x_j`, each rounded (with `w` lanes, in the order [`set_mv_lanes`] describes): the
+/// same bits on every device. When `beta == 0`, `y` is not
 /// read (it may hold NaN).
 ///
 /// `x` has `ncol` elements (`B::In`: `Vec3` for `Mat3` blocks), `y` has `nrow` (`B::Out`);
