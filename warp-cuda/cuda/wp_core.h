@@ -48,7 +48,10 @@
 // The template parameter is never deduced or named (an enum class that no caller spells), so
 // the parameter types stay fixed: the same implicit conversions apply as for a plain function,
 // explicit template arguments (`f<T>(..)`) never select one, and in a tie with a real template
-// it is preferred, as a plain function is (checked with NVRTC and g++).
+// it is preferred, as a plain function is (checked with NVRTC and g++). A new function at
+// namespace scope in a kernel section uses it; WP_FN stays on templates, members, functions
+// declared before their definition (the two would repeat the default template argument) and
+// the standalone build libraries.
 namespace wp {
 enum class lazy_t {};
 }  // namespace wp
