@@ -145,10 +145,10 @@ WP_FN T local_sum(const local_array_t<T, N>& a) {
 
 namespace detail {
 template <typename F> WP_FN bool adj_isnan(F x) { return !(x == x); }
-WP_FN f32 adj_trunc(f32 x) { return ::truncf(x); }
-WP_FN f64 adj_trunc(f64 x) { return ::trunc(x); }
-WP_FN f16 adj_trunc(f16 x) { return f16_from_f32(::truncf(f16_to_f32(x))); }
-WP_FN bf16 adj_trunc(bf16 x) { return bf16_from_f32(::truncf(bf16_to_f32(x))); }
+WP_LFN f32 adj_trunc(f32 x) { return ::truncf(x); }
+WP_LFN f64 adj_trunc(f64 x) { return ::trunc(x); }
+WP_LFN f16 adj_trunc(f16 x) { return f16_from_f32(::truncf(f16_to_f32(x))); }
+WP_LFN bf16 adj_trunc(bf16 x) { return bf16_from_f32(::truncf(bf16_to_f32(x))); }
 
 /// `min(a, b)` returned `a`: `a <= b`, or `b` alone is NaN, or both are NaN.
 template <typename F>
@@ -271,14 +271,14 @@ WP_FN typename vec_traits<V3>::scalar glam_dot3(const V3& a, const V3& b) {
 // ----- integers: no-ops -----
 // (LT, RT, OT: the operand and result types as passed; L, R: the operand types.)
 #define WP_ADJ_NOOP_BIN(LT, RT, OT, L, R)                                           \
-  WP_FN void adj_add(LT, RT, L&, R&, OT) {}                                         \
-  WP_FN void adj_sub(LT, RT, L&, R&, OT) {}                                         \
-  WP_FN void adj_mul(LT, RT, L&, R&, OT) {}                                         \
-  WP_FN void adj_div(LT, RT, L&, R&, OT) {}                                         \
-  WP_FN void adj_rem(LT, RT, L&, R&, OT) {}
+  WP_LFN void adj_add(LT, RT, L&, R&, OT) {}                                         \
+  WP_LFN void adj_sub(LT, RT, L&, R&, OT) {}                                         \
+  WP_LFN void adj_mul(LT, RT, L&, R&, OT) {}                                         \
+  WP_LFN void adj_div(LT, RT, L&, R&, OT) {}                                         \
+  WP_LFN void adj_rem(LT, RT, L&, R&, OT) {}
 #define WP_ADJ_NOOP_INT(T)          \
   WP_ADJ_NOOP_BIN(T, T, T, T, T)    \
-  WP_FN void adj_neg(T, T&, T) {}
+  WP_LFN void adj_neg(T, T&, T) {}
 WP_ADJ_NOOP_INT(i8)
 WP_ADJ_NOOP_INT(i16)
 WP_ADJ_NOOP_INT(i32)
@@ -291,7 +291,7 @@ WP_ADJ_NOOP_INT(u64)
   WP_ADJ_NOOP_BIN(const V&, const V&, const V&, V, V)          \
   WP_ADJ_NOOP_BIN(const V&, S, const V&, V, S)                 \
   WP_ADJ_NOOP_BIN(S, const V&, const V&, S, V)                 \
-  WP_FN void adj_neg(const V&, V&, const V&) {}
+  WP_LFN void adj_neg(const V&, V&, const V&) {}
 WP_ADJ_NOOP_IVEC(IVec2, i32)
 WP_ADJ_NOOP_IVEC(IVec3, i32)
 WP_ADJ_NOOP_IVEC(IVec4, i32)
@@ -304,14 +304,14 @@ WP_ADJ_NOOP_IVEC(UVec4, u32)
 
 // ----- float scalars -----
 #define WP_ADJ_FSCALAR_OPS(S)                                                                        \
-  WP_FN void adj_add(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_add()(a, b, adj_a, adj_b, adj_ret); } \
-  WP_FN void adj_sub(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_sub()(a, b, adj_a, adj_b, adj_ret); } \
-  WP_FN void adj_mul(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_mul()(a, b, adj_a, adj_b, adj_ret); } \
-  WP_FN void adj_div(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_div()(a, b, adj_a, adj_b, adj_ret); } \
-  WP_FN void adj_rem(S a, S b, S& adj_a, S& adj_b, S adj_ret) {                                      \
+  WP_LFN void adj_add(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_add()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_LFN void adj_sub(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_sub()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_LFN void adj_mul(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_mul()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_LFN void adj_div(S a, S b, S& adj_a, S& adj_b, S adj_ret) { detail::l_div()(a, b, adj_a, adj_b, adj_ret); } \
+  WP_LFN void adj_rem(S a, S b, S& adj_a, S& adj_b, S adj_ret) {                                      \
     detail::l_rem_trunc()(a, b, adj_a, adj_b, adj_ret);                                              \
   }                                                                                                  \
-  WP_FN void adj_neg(S, S& adj_a, S adj_ret) { adj_a -= adj_ret; }
+  WP_LFN void adj_neg(S, S& adj_a, S adj_ret) { adj_a -= adj_ret; }
 WP_ADJ_FSCALAR_OPS(f32)
 WP_ADJ_FSCALAR_OPS(f64)
 WP_ADJ_FSCALAR_OPS(f16)
@@ -320,13 +320,13 @@ WP_ADJ_FSCALAR_OPS(bf16)
 
 // ----- float vectors: lane by lane, with a scalar on either side -----
 #define WP_ADJ_FVEC_OP(V, S, NAME, LANE)                                                          \
-  WP_FN void NAME(const V& a, const V& b, V& adj_a, V& adj_b, const V& adj_ret) {                \
+  WP_LFN void NAME(const V& a, const V& b, V& adj_a, V& adj_b, const V& adj_ret) {                \
     detail::zip_vv(a, b, adj_a, adj_b, adj_ret, LANE());                                         \
   }                                                                                              \
-  WP_FN void NAME(const V& a, S b, V& adj_a, S& adj_b, const V& adj_ret) {                       \
+  WP_LFN void NAME(const V& a, S b, V& adj_a, S& adj_b, const V& adj_ret) {                       \
     detail::zip_vs(a, b, adj_a, adj_b, adj_ret, LANE());                                         \
   }                                                                                              \
-  WP_FN void NAME(S a, const V& b, S& adj_a, V& adj_b, const V& adj_ret) {                       \
+  WP_LFN void NAME(S a, const V& b, S& adj_a, V& adj_b, const V& adj_ret) {                       \
     detail::zip_sv(a, b, adj_a, adj_b, adj_ret, LANE());                                         \
   }
 #define WP_ADJ_FVEC_OPS(V, S, REM)                                     \
@@ -335,7 +335,7 @@ WP_ADJ_FSCALAR_OPS(bf16)
   WP_ADJ_FVEC_OP(V, S, adj_mul, detail::l_mul)                         \
   WP_ADJ_FVEC_OP(V, S, adj_div, detail::l_div)                         \
   WP_ADJ_FVEC_OP(V, S, adj_rem, REM)                                   \
-  WP_FN void adj_neg(const V&, V& adj_a, const V& adj_ret) { adj_a -= adj_ret; }
+  WP_LFN void adj_neg(const V&, V& adj_a, const V& adj_ret) { adj_a -= adj_ret; }
 WP_ADJ_FVEC_OPS(Vec2, f32, detail::l_rem_trunc)
 WP_ADJ_FVEC_OPS(Vec3, f32, detail::l_rem_trunc)
 WP_ADJ_FVEC_OPS(Vec4, f32, detail::l_rem_floor)  // Vec4 `%` is floored (see the top)
@@ -348,39 +348,39 @@ WP_ADJ_FVEC_OPS(DVec4, f64, detail::l_rem_trunc)
 // ----- matrices (column-major) -----
 #define WP_ADJ_MAT_OPS(M, V, S)                                                                  \
   /* A + B, A - B */                                                                             \
-  WP_FN void adj_add(const M&, const M&, M& adj_a, M& adj_b, const M& adj_ret) {                 \
+  WP_LFN void adj_add(const M&, const M&, M& adj_a, M& adj_b, const M& adj_ret) {                 \
     adj_a += adj_ret;                                                                            \
     adj_b += adj_ret;                                                                            \
   }                                                                                              \
-  WP_FN void adj_sub(const M&, const M&, M& adj_a, M& adj_b, const M& adj_ret) {                 \
+  WP_LFN void adj_sub(const M&, const M&, M& adj_a, M& adj_b, const M& adj_ret) {                 \
     adj_a += adj_ret;                                                                            \
     adj_b -= adj_ret;                                                                            \
   }                                                                                              \
   /* A * B: adj_a += g * B^T; adj_b += A^T * g (glam products). */                               \
-  WP_FN void adj_mul(const M& a, const M& b, M& adj_a, M& adj_b, const M& adj_ret) {             \
+  WP_LFN void adj_mul(const M& a, const M& b, M& adj_a, M& adj_b, const M& adj_ret) {             \
     adj_a += adj_ret * detail::adj_transpose(b);                                                 \
     adj_b += detail::adj_transpose(a) * adj_ret;                                                 \
   }                                                                                              \
   /* M * v: adj_m.col(j) += g * v[j]; adj_v += M^T * g. */                                       \
-  WP_FN void adj_mul(const M& a, const V& b, M& adj_a, V& adj_b, const V& adj_ret) {             \
+  WP_LFN void adj_mul(const M& a, const V& b, M& adj_a, V& adj_b, const V& adj_ret) {             \
     for (int j = 0; j < mat_traits<M>::N; ++j)                                                   \
       mat_traits<M>::at(adj_a, j) += adj_ret * vec_traits<V>::get(b, j);                         \
     adj_b += detail::adj_transpose(a) * adj_ret;                                                 \
   }                                                                                              \
-  WP_FN void adj_mul(const M& a, S b, M& adj_a, S& adj_b, const M& adj_ret) {                    \
+  WP_LFN void adj_mul(const M& a, S b, M& adj_a, S& adj_b, const M& adj_ret) {                    \
     detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_mul());                                \
   }                                                                                              \
-  WP_FN void adj_div(const M& a, S b, M& adj_a, S& adj_b, const M& adj_ret) {                    \
+  WP_LFN void adj_div(const M& a, S b, M& adj_a, S& adj_b, const M& adj_ret) {                    \
     detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_div());                                \
   }                                                                                              \
-  WP_FN void adj_mul(S a, const M& b, S& adj_a, M& adj_b, const M& adj_ret) {                    \
+  WP_LFN void adj_mul(S a, const M& b, S& adj_a, M& adj_b, const M& adj_ret) {                    \
     detail::zip_sv(a, b, adj_a, adj_b, adj_ret, detail::l_mul());                                \
   }                                                                                              \
   /* s / M is M / s (glam 0.30's quirk, mirrored by the forward): roles swapped back. */         \
-  WP_FN void adj_div(S a, const M& b, S& adj_a, M& adj_b, const M& adj_ret) {                    \
+  WP_LFN void adj_div(S a, const M& b, S& adj_a, M& adj_b, const M& adj_ret) {                    \
     detail::zip_vs(b, a, adj_b, adj_a, adj_ret, detail::l_div());                                \
   }                                                                                              \
-  WP_FN void adj_neg(const M&, M& adj_a, const M& adj_ret) { adj_a -= adj_ret; }
+  WP_LFN void adj_neg(const M&, M& adj_a, const M& adj_ret) { adj_a -= adj_ret; }
 WP_ADJ_MAT_OPS(Mat2, Vec2, f32)
 WP_ADJ_MAT_OPS(Mat3, Vec3, f32)
 WP_ADJ_MAT_OPS(Mat4, Vec4, f32)
@@ -391,16 +391,16 @@ WP_ADJ_MAT_OPS(DMat4, DVec4, f64)
 
 // ----- quaternions -----
 #define WP_ADJ_QUAT_OPS(Q, V3, S)                                                                \
-  WP_FN void adj_add(const Q&, const Q&, Q& adj_a, Q& adj_b, const Q& adj_ret) {                 \
+  WP_LFN void adj_add(const Q&, const Q&, Q& adj_a, Q& adj_b, const Q& adj_ret) {                 \
     adj_a += adj_ret;                                                                            \
     adj_b += adj_ret;                                                                            \
   }                                                                                              \
-  WP_FN void adj_sub(const Q&, const Q&, Q& adj_a, Q& adj_b, const Q& adj_ret) {                 \
+  WP_LFN void adj_sub(const Q&, const Q&, Q& adj_a, Q& adj_b, const Q& adj_ret) {                 \
     adj_a += adj_ret;                                                                            \
     adj_b -= adj_ret;                                                                            \
   }                                                                                              \
   /* p * q (Hamilton): the transpose of the bilinear map in each argument. */                    \
-  WP_FN void adj_mul(const Q& a, const Q& b, Q& adj_a, Q& adj_b, const Q& adj_ret) {             \
+  WP_LFN void adj_mul(const Q& a, const Q& b, Q& adj_a, Q& adj_b, const Q& adj_ret) {             \
     const S x0 = a.x, y0 = a.y, z0 = a.z, w0 = a.w;                                              \
     const S x1 = b.x, y1 = b.y, z1 = b.z, w1 = b.w;                                              \
     const S gx = adj_ret.x, gy = adj_ret.y, gz = adj_ret.z, gw = adj_ret.w;                      \
@@ -417,7 +417,7 @@ WP_ADJ_MAT_OPS(DMat4, DVec4, f64)
   /*   adj_v += g (w^2 - b.b) + b (2 b.g) + (g x b)(2 w)                         */              \
   /*   adj_w += 2 (w (g.v) + g.(b x v))                                          */              \
   /*   adj_b += g (2 v.b) + v (2 b.g) - b (2 v.g) + (v x g)(2 w)                 */              \
-  WP_FN void adj_mul(const Q& a, const V3& v, Q& adj_a, V3& adj_b, const V3& adj_ret) {          \
+  WP_LFN void adj_mul(const Q& a, const V3& v, Q& adj_a, V3& adj_b, const V3& adj_ret) {          \
     const S two = (S)2;                                                                          \
     const S w = a.w;                                                                             \
     const V3 b = V3##_new(a.x, a.y, a.z);                                                        \
@@ -431,13 +431,13 @@ WP_ADJ_MAT_OPS(DMat4, DVec4, f64)
     const S aw = two * (w * vg + detail::glam_dot3(g, wp::cross(b, v)));                         \
     adj_a += Q##_from_xyzw(ab.x, ab.y, ab.z, aw);                                                \
   }                                                                                              \
-  WP_FN void adj_mul(const Q& a, S b, Q& adj_a, S& adj_b, const Q& adj_ret) {                    \
+  WP_LFN void adj_mul(const Q& a, S b, Q& adj_a, S& adj_b, const Q& adj_ret) {                    \
     detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_mul());                                \
   }                                                                                              \
-  WP_FN void adj_div(const Q& a, S b, Q& adj_a, S& adj_b, const Q& adj_ret) {                    \
+  WP_LFN void adj_div(const Q& a, S b, Q& adj_a, S& adj_b, const Q& adj_ret) {                    \
     detail::zip_vs(a, b, adj_a, adj_b, adj_ret, detail::l_div());                                \
   }                                                                                              \
-  WP_FN void adj_neg(const Q&, Q& adj_a, const Q& adj_ret) { adj_a -= adj_ret; }
+  WP_LFN void adj_neg(const Q&, Q& adj_a, const Q& adj_ret) { adj_a -= adj_ret; }
 WP_ADJ_QUAT_OPS(Quat, Vec3, f32)
 WP_ADJ_QUAT_OPS(DQuat, DVec3, f64)
 #undef WP_ADJ_QUAT_OPS
@@ -613,8 +613,8 @@ WP_FN void adj_accum(tuple_t<A, B, C, D, E, F, G>& a, const tuple_t<A, B, C, D, 
 }
 
 /// A unit value (`unit_t`, wp_core.h) carries no gradient.
-WP_FN unit_t zero_like(const unit_t&) { return unit_t{}; }
-WP_FN void adj_accum(unit_t&, const unit_t&) {}
+WP_LFN unit_t zero_like(const unit_t&) { return unit_t{}; }
+WP_LFN void adj_accum(unit_t&, const unit_t&) {}
 /// A value type for a declared result: `void` (a unit func's) becomes `unit_t`.
 template <typename T>
 struct value_of {
@@ -640,7 +640,7 @@ struct adstack_t {
   i32 pad;
 };
 
-WP_FN adstack_t adstack_new(char* buf, i32 cap) {
+WP_LFN adstack_t adstack_new(char* buf, i32 cap) {
   adstack_t s;
   s.base = buf;
   s.cap = cap;
@@ -652,7 +652,7 @@ WP_FN adstack_t adstack_new(char* buf, i32 cap) {
 
 namespace detail {
 // Byte copy (NVRTC has no __builtin_memcpy; the compiler turns this into plain moves).
-WP_FN void copy_bytes(char* dst, const char* src, int n) {
+WP_LFN void copy_bytes(char* dst, const char* src, int n) {
   for (int i = 0; i < n; ++i) dst[i] = src[i];
 }
 }  // namespace detail

@@ -18,10 +18,10 @@ template <>
 WP_FN triangle_closest_point_t adj_zero<triangle_closest_point_t>() {
   return triangle_closest_point_t{};
 }
-WP_FN triangle_closest_point_t zero_like(const triangle_closest_point_t&) {
+WP_LFN triangle_closest_point_t zero_like(const triangle_closest_point_t&) {
   return triangle_closest_point_t{};
 }
-WP_FN void adj_accum(triangle_closest_point_t& a, const triangle_closest_point_t& v) {
+WP_LFN void adj_accum(triangle_closest_point_t& a, const triangle_closest_point_t& v) {
   a.u += v.u;
   a.v += v.v;
   a.w += v.w;
@@ -31,13 +31,13 @@ template <>
 WP_FN ray_triangle_hit_t adj_zero<ray_triangle_hit_t>() {
   return ray_triangle_hit_t{};
 }
-WP_FN ray_triangle_hit_t zero_like(const ray_triangle_hit_t&) { return ray_triangle_hit_t{}; }
-WP_FN void adj_accum(ray_triangle_hit_t&, const ray_triangle_hit_t&) {}
+WP_LFN ray_triangle_hit_t zero_like(const ray_triangle_hit_t&) { return ray_triangle_hit_t{}; }
+WP_LFN void adj_accum(ray_triangle_hit_t&, const ray_triangle_hit_t&) {}
 
 namespace detail {
 /// closest_point_triangle_jacobian: rows du/dp, dv/dp, dw/dp for `feature`, computed on the
 /// translated, scaled triangle and scaled back.
-WP_FN void closest_point_triangle_jacobian(Vec3 a, Vec3 b, Vec3 c, Vec3 p, i32 feature,
+WP_LFN void closest_point_triangle_jacobian(Vec3 a, Vec3 b, Vec3 c, Vec3 p, i32 feature,
                                            Vec3* rows) {
   Vec3 ab = b - a, ac = c - a;
   const Vec3 ap = p - a;
@@ -88,7 +88,7 @@ WP_FN void closest_point_triangle_jacobian(Vec3 a, Vec3 b, Vec3 c, Vec3 p, i32 f
 }
 }  // namespace detail
 
-WP_FN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_a, Vec3& adj_b,
+WP_LFN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_a, Vec3& adj_b,
                                       Vec3& adj_c, Vec3& adj_p,
                                       const triangle_closest_point_t& adj_ret) {
   (void)adj_a;
@@ -102,7 +102,7 @@ WP_FN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_
 
 /// The kernel language's `closest_point_triangle` returns the barycentrics as a Vec3 (the
 /// struct's conversion): its adjoint arrives as one.
-WP_FN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_a, Vec3& adj_b,
+WP_LFN void adj_closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p, Vec3& adj_a, Vec3& adj_b,
                                       Vec3& adj_c, Vec3& adj_p, Vec3 adj_ret) {
   adj_closest_point_triangle(a, b, c, p, adj_a, adj_b, adj_c, adj_p,
                              triangle_closest_point_t{adj_ret.x, adj_ret.y, adj_ret.z, 0});

@@ -15,7 +15,7 @@ namespace wp {
 
 // ----- length_sq: adj_v[i] += (v[i] + v[i]) * g -----
 #define WP_ADJ_LENSQ(V, S)                                                       \
-  WP_FN void adj_length_sq(const V& v, V& adj_v, S g) {                          \
+  WP_LFN void adj_length_sq(const V& v, V& adj_v, S g) {                          \
     typedef vec_traits<V> T;                                                     \
     for (int i = 0; i < T::N; ++i) T::at(adj_v, i) += (T::get(v, i) + T::get(v, i)) * g; \
   }
@@ -28,41 +28,41 @@ WP_ADJ_LENSQ(DVec4, f64)
 WP_ADJ_LENSQ(Quat, f32)
 WP_ADJ_LENSQ(DQuat, f64)
 #undef WP_ADJ_LENSQ
-WP_FN void adj_length_sq(const IVec2&, IVec2&, i32) {}
-WP_FN void adj_length_sq(const IVec3&, IVec3&, i32) {}
-WP_FN void adj_length_sq(const IVec4&, IVec4&, i32) {}
-WP_FN void adj_length_sq(const UVec2&, UVec2&, u32) {}
-WP_FN void adj_length_sq(const UVec3&, UVec3&, u32) {}
-WP_FN void adj_length_sq(const UVec4&, UVec4&, u32) {}
+WP_LFN void adj_length_sq(const IVec2&, IVec2&, i32) {}
+WP_LFN void adj_length_sq(const IVec3&, IVec3&, i32) {}
+WP_LFN void adj_length_sq(const IVec4&, IVec4&, i32) {}
+WP_LFN void adj_length_sq(const UVec2&, UVec2&, u32) {}
+WP_LFN void adj_length_sq(const UVec3&, UVec3&, u32) {}
+WP_LFN void adj_length_sq(const UVec4&, UVec4&, u32) {}
 
 // ----- outer, diag, cw_mul, cw_div (vectors), and the matrix builtins -----
 #define WP_ADJ_LINALG(V, M, S)                                                           \
-  WP_FN void adj_outer(const V& a, const V& b, V& adj_a, V& adj_b, const M& g) {         \
+  WP_LFN void adj_outer(const V& a, const V& b, V& adj_a, V& adj_b, const M& g) {         \
     adj_a += g * b;                                                                      \
     adj_b += detail::adj_transpose(g) * a;                                               \
   }                                                                                      \
-  WP_FN void adj_diag(const V&, V& adj_v, const M& g) {                                  \
+  WP_LFN void adj_diag(const V&, V& adj_v, const M& g) {                                  \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                           \
       vec_traits<V>::at(adj_v, i) += vec_traits<V>::get(mat_traits<M>::get(g, i), i);    \
   }                                                                                      \
-  WP_FN void adj_cw_mul(const V& a, const V& b, V& adj_a, V& adj_b, const V& g) {        \
+  WP_LFN void adj_cw_mul(const V& a, const V& b, V& adj_a, V& adj_b, const V& g) {        \
     detail::zip_vv(a, b, adj_a, adj_b, g, detail::l_mul());                              \
   }                                                                                      \
-  WP_FN void adj_cw_div(const V& a, const V& b, V& adj_a, V& adj_b, const V& g) {        \
+  WP_LFN void adj_cw_div(const V& a, const V& b, V& adj_a, V& adj_b, const V& g) {        \
     detail::zip_vv(a, b, adj_a, adj_b, g, detail::l_div());                              \
   }                                                                                      \
-  WP_FN void adj_cw_mul(const M& a, const M& b, M& adj_a, M& adj_b, const M& g) {        \
+  WP_LFN void adj_cw_mul(const M& a, const M& b, M& adj_a, M& adj_b, const M& g) {        \
     detail::zip_vv(a, b, adj_a, adj_b, g, detail::l_mul());                              \
   }                                                                                      \
-  WP_FN void adj_cw_div(const M& a, const M& b, M& adj_a, M& adj_b, const M& g) {        \
+  WP_LFN void adj_cw_div(const M& a, const M& b, M& adj_a, M& adj_b, const M& g) {        \
     detail::zip_vv(a, b, adj_a, adj_b, g, detail::l_div());                              \
   }                                                                                      \
-  WP_FN void adj_transpose(const M&, M& adj_m, const M& g) { adj_m += detail::adj_transpose(g); } \
-  WP_FN void adj_trace(const M&, M& adj_m, S g) {                                        \
+  WP_LFN void adj_transpose(const M&, M& adj_m, const M& g) { adj_m += detail::adj_transpose(g); } \
+  WP_LFN void adj_trace(const M&, M& adj_m, S g) {                                        \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                           \
       vec_traits<V>::at(mat_traits<M>::at(adj_m, i), i) += g;                            \
   }                                                                                      \
-  WP_FN void adj_ddot(const M& a, const M& b, M& adj_a, M& adj_b, S g) {                 \
+  WP_LFN void adj_ddot(const M& a, const M& b, M& adj_a, M& adj_b, S g) {                 \
     typedef vec_traits<M> T;                                                             \
     for (int k = 0; k < T::N; ++k) {                                                     \
       T::at(adj_a, k) += g * T::get(b, k);                                               \
@@ -70,7 +70,7 @@ WP_FN void adj_length_sq(const UVec4&, UVec4&, u32) {}
     }                                                                                    \
   }                                                                                      \
   /* inverse: T = transpose(inverse(m)); adj_m -= (T * G) * T. */                        \
-  WP_FN void adj_inverse(const M& m, M& adj_m, const M& g) {                             \
+  WP_LFN void adj_inverse(const M& m, M& adj_m, const M& g) {                             \
     const M t = detail::adj_transpose(inverse(m));                                       \
     adj_m -= (t * g) * t;                                                                \
   }
@@ -84,7 +84,7 @@ WP_ADJ_LINALG(DVec4, DMat4, f64)
 
 // ----- determinant: adj_m += g * cofactor(m) -----
 #define WP_ADJ_DET2(M, S)                                                         \
-  WP_FN void adj_determinant(const M& m, M& a, S g) {                             \
+  WP_LFN void adj_determinant(const M& m, M& a, S g) {                             \
     a.x_axis.x += g * m.y_axis.y;                                                 \
     a.x_axis.y -= g * m.y_axis.x;                                                 \
     a.y_axis.x -= g * m.x_axis.y;                                                 \
@@ -94,12 +94,12 @@ WP_ADJ_DET2(Mat2, f32)
 WP_ADJ_DET2(DMat2, f64)
 #undef WP_ADJ_DET2
 #define WP_ADJ_DET3(M, V, S)                                                      \
-  WP_FN void adj_determinant(const M& m, M& a, S g) {                             \
+  WP_LFN void adj_determinant(const M& m, M& a, S g) {                             \
     a.x_axis += wp::cross(m.y_axis, m.z_axis) * g;                                \
     a.y_axis += wp::cross(m.z_axis, m.x_axis) * g;                                \
     a.z_axis += wp::cross(m.x_axis, m.y_axis) * g;                                \
   }                                                                               \
-  WP_FN void adj_skew(const V&, V& adj_v, const M& g) {                           \
+  WP_LFN void adj_skew(const V&, V& adj_v, const M& g) {                           \
     adj_v.x += g.y_axis.z - g.z_axis.y;                                           \
     adj_v.y += g.z_axis.x - g.x_axis.z;                                           \
     adj_v.z += g.x_axis.y - g.y_axis.x;                                           \
@@ -109,7 +109,7 @@ WP_ADJ_DET3(DMat3, DVec3, f64)
 #undef WP_ADJ_DET3
 /* 4x4: each entry's signed 3x3 minor (the remaining columns and rows in order). */
 #define WP_ADJ_DET4(M, M3, V3, S)                                                  \
-  WP_FN void adj_determinant(const M& m, M& a, S g) {                              \
+  WP_LFN void adj_determinant(const M& m, M& a, S g) {                              \
     for (int c = 0; c < 4; ++c) {                                                  \
       for (int r = 0; r < 4; ++r) {                                                \
         V3 cols[3];                                                                \
@@ -131,14 +131,14 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
 
 // ----- quaternions -----
 #define WP_ADJ_QUAT_LINALG(Q, V3, M3, S)                                                         \
-  WP_FN void adj_dot(const Q& a, const Q& b, Q& adj_a, Q& adj_b, S g) {                          \
+  WP_LFN void adj_dot(const Q& a, const Q& b, Q& adj_a, Q& adj_b, S g) {                          \
     for (int i = 0; i < 4; ++i) {                                                                \
       vec_traits<Q>::at(adj_a, i) += g * vec_traits<Q>::get(b, i);                               \
       vec_traits<Q>::at(adj_b, i) += g * vec_traits<Q>::get(a, i);                               \
     }                                                                                            \
   }                                                                                              \
   /* length, normalize: the vector rules, rescaled likewise (detail::norm_scaled). */           \
-  WP_FN void adj_length(const Q& v, Q& adj_v, S g) {                                             \
+  WP_LFN void adj_length(const Q& v, Q& adj_v, S g) {                                             \
     Q w;                                                                                         \
     S l, k, inv;                                                                                   \
     detail::norm_scaled(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv);          \
@@ -147,7 +147,7 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
       for (int i = 0; i < 4; ++i) vec_traits<Q>::at(adj_v, i) += vec_traits<Q>::get(w, i) * gl;  \
     }                                                                                            \
   }                                                                                              \
-  WP_FN void adj_normalize(const Q& v, Q& adj_v, const Q& g) {                                   \
+  WP_LFN void adj_normalize(const Q& v, Q& adj_v, const Q& g) {                                   \
     Q w;                                                                                         \
     S l, k, inv;                                                                                   \
     detail::norm_scaled(v, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv);          \
@@ -159,14 +159,14 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
             ((vec_traits<Q>::get(g, i) - vec_traits<Q>::get(n, i) * d) / l) * k;                 \
     }                                                                                            \
   }                                                                                              \
-  WP_FN void adj_quat_inverse(const Q&, Q& adj_q, const Q& g) {                                  \
+  WP_LFN void adj_quat_inverse(const Q&, Q& adj_q, const Q& g) {                                  \
     adj_q.x -= g.x;                                                                              \
     adj_q.y -= g.y;                                                                              \
     adj_q.z -= g.z;                                                                              \
     adj_q.w += g.w;                                                                              \
   }                                                                                              \
-  WP_FN void adj_inverse(const Q& q, Q& adj_q, const Q& g) { adj_quat_inverse(q, adj_q, g); }    \
-  WP_FN void adj_quat_from_axis_angle(const V3& axis, S angle, V3& adj_axis, S& adj_angle,       \
+  WP_LFN void adj_inverse(const Q& q, Q& adj_q, const Q& g) { adj_quat_inverse(q, adj_q, g); }    \
+  WP_LFN void adj_quat_from_axis_angle(const V3& axis, S angle, V3& adj_axis, S& adj_angle,       \
                                       const Q& g) {                                              \
     const S h = angle * (S)0.5;                                                                  \
     const S s = sin(h), c = cos(h);                                                              \
@@ -174,15 +174,15 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
     const S d = (g.x * axis.x + g.y * axis.y) + g.z * axis.z;                                    \
     adj_angle += (d * c - g.w * s) * (S)0.5;                                                     \
   }                                                                                              \
-  WP_FN void adj_quat_rotate(const Q& q, const V3& v, Q& adj_q, V3& adj_v, const V3& g) {        \
+  WP_LFN void adj_quat_rotate(const Q& q, const V3& v, Q& adj_q, V3& adj_v, const V3& g) {        \
     adj_mul(q, v, adj_q, adj_v, g);                                                              \
   }                                                                                              \
-  WP_FN void adj_quat_rotate_inv(const Q& q, const V3& v, Q& adj_q, V3& adj_v, const V3& g) {    \
+  WP_LFN void adj_quat_rotate_inv(const Q& q, const V3& v, Q& adj_q, V3& adj_v, const V3& g) {    \
     Q ac = adj_zero<Q>();                                                                        \
     adj_mul(quat_inverse(q), v, ac, adj_v, g);                                                   \
     adj_quat_inverse(q, adj_q, ac);                                                              \
   }                                                                                              \
-  WP_FN void adj_quat_to_matrix(const Q& q, Q& adj_q, const M3& gm) {                            \
+  WP_LFN void adj_quat_to_matrix(const Q& q, Q& adj_q, const M3& gm) {                            \
     const V3 g0 = gm.x_axis, g1 = gm.y_axis, g2 = gm.z_axis;                                     \
     const S x = q.x, y = q.y, z = q.z, w = q.w;                                                  \
     const S a = g0.y + g1.x, b = g0.z + g2.x, c = g1.z + g2.y;                                   \
@@ -193,7 +193,7 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
     adj_q.z += (((b * x + c * y) + s * w) - (dz * z + dz * z)) * (S)2;                           \
     adj_q.w += ((p * x + r * y) + s * z) * (S)2;                                                 \
   }                                                                                              \
-  WP_FN void adj_quat_from_matrix(const M3& m, M3& adj_m, const Q& g) {                          \
+  WP_LFN void adj_quat_from_matrix(const M3& m, M3& adj_m, const Q& g) {                          \
     S l[9];                                                                                      \
     for (int i = 0; i < 9; ++i) l[i] = vec_traits<M3>::get(m, i);                                \
     const S m00 = l[0], m11 = l[4], m22 = l[8];                                                  \
@@ -243,7 +243,7 @@ WP_ADJ_DET4(DMat4, DMat3, DVec3, f64)
     }                                                                                            \
     for (int i = 0; i < 9; ++i) vec_traits<M3>::at(adj_m, i) = a[i];                             \
   }                                                                                              \
-  WP_FN void adj_quat_slerp(const Q& q0, const Q& q1, S t, Q& adj_q0, Q& adj_q1, S& adj_t,       \
+  WP_LFN void adj_quat_slerp(const Q& q0, const Q& q1, S t, Q& adj_q0, Q& adj_q1, S& adj_t,       \
                             const Q& g) {                                                        \
     const Q c = quat_inverse(q0);                                                                \
     const Q d = c * q1;                                                                          \
@@ -282,7 +282,7 @@ WP_ADJ_QUAT_LINALG(DQuat, DVec3, DMat3, f64)
 
 // ----- quat_from_euler, quat_to_euler: warp-core/src/adjoint/euler.rs, step for step -----
 #define WP_ADJ_EULER(Q, V3, S)                                                                   \
-  WP_FN void adj_quat_from_euler(const V3& e, i32 i, i32 j, i32 k, V3& adj_e, i32&, i32&, i32&,  \
+  WP_LFN void adj_quat_from_euler(const V3& e, i32 i, i32 j, i32 k, V3& adj_e, i32&, i32&, i32&,  \
                                  const Q& g) {                                                   \
     const i32 idx[3] = {i, j, k};                                                                \
     S h[3];                                                                                      \
@@ -305,7 +305,7 @@ WP_ADJ_QUAT_LINALG(DQuat, DVec3, DMat3, f64)
     adj_e.y += ge[1];                                                                            \
     adj_e.z += ge[2];                                                                            \
   }                                                                                              \
-  WP_FN void adj_quat_to_euler(const Q& q, i32 i, i32 j, i32 k, Q& adj_q, i32&, i32&, i32&,      \
+  WP_LFN void adj_quat_to_euler(const Q& q, i32 i, i32 j, i32 k, Q& adj_q, i32&, i32&, i32&,      \
                                const V3& g) {                                                    \
     const detail::ToEuler<S> p = to_euler_steps(q, i, j, k);                                     \
     S gt[3] = {(S)0, (S)0, (S)0};                                                                \

@@ -25,8 +25,8 @@ template <>
 WP_FN mesh_query_point_t adj_zero<mesh_query_point_t>() {
   return mesh_query_point_t{};
 }
-WP_FN mesh_query_point_t zero_like(const mesh_query_point_t&) { return mesh_query_point_t{}; }
-WP_FN void adj_accum(mesh_query_point_t& a, const mesh_query_point_t& v) {
+WP_LFN mesh_query_point_t zero_like(const mesh_query_point_t&) { return mesh_query_point_t{}; }
+WP_LFN void adj_accum(mesh_query_point_t& a, const mesh_query_point_t& v) {
   a.sign += v.sign;
   a.u += v.u;
   a.v += v.v;
@@ -36,8 +36,8 @@ template <>
 WP_FN mesh_query_ray_t adj_zero<mesh_query_ray_t>() {
   return mesh_query_ray_t{};
 }
-WP_FN mesh_query_ray_t zero_like(const mesh_query_ray_t&) { return mesh_query_ray_t{}; }
-WP_FN void adj_accum(mesh_query_ray_t& a, const mesh_query_ray_t& v) {
+WP_LFN mesh_query_ray_t zero_like(const mesh_query_ray_t&) { return mesh_query_ray_t{}; }
+WP_LFN void adj_accum(mesh_query_ray_t& a, const mesh_query_ray_t& v) {
   a.sign += v.sign;
   a.t += v.t;
   a.u += v.u;
@@ -76,7 +76,7 @@ WP_FN void adj_mesh_eval_velocity(const mesh_t& mesh, I face, f32 u, f32 v, mesh
   adj_v += detail::g_dot(b - c, adj_ret);
 }
 
-WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                         mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
                                         const mesh_query_point_t& adj_ret, ctx_t* ctx) {
   (void)adj_mesh;
@@ -90,63 +90,63 @@ WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_
   adj_closest_point_triangle(t[0], t[1], t[2], c.p, x, y, z, adj_point, g);
 }
 
-WP_FN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, mesh_t& adj_mesh,
+WP_LFN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, mesh_t& adj_mesh,
                                 Vec3& adj_point, f32& adj_max_dist,
                                 const mesh_query_point_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist, adj_ret,
                                ctx);
 }
 
-WP_FN void adj_mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN void adj_mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                             mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
                                             const mesh_query_point_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist, adj_ret,
                                ctx);
 }
 
-WP_FN void adj_mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN void adj_mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                             mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
                                             const mesh_query_point_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist, adj_ret,
                                ctx);
 }
 
-WP_FN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
+WP_LFN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
                                                  const mesh_query_point_t&, ctx_t*) {}
 
 // The kernel language binds the point queries' results as tuples (mesh_query_point_t's
 // conversion): their adjoints arrive as tuples and go on as the struct.
 typedef tuple_t<bool, f32, i32, f32, f32> mesh_query_point_tuple_t;
 namespace detail {
-WP_FN mesh_query_point_t mesh_query_point_of(const mesh_query_point_tuple_t& t) {
+WP_LFN mesh_query_point_t mesh_query_point_of(const mesh_query_point_tuple_t& t) {
   return mesh_query_point_t{t.f0, t.f1, t.f2, t.f3, t.f4};
 }
 }  // namespace detail
-WP_FN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, mesh_t& adj_mesh,
+WP_LFN void adj_mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist, mesh_t& adj_mesh,
                                 Vec3& adj_point, f32& adj_max_dist,
                                 const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
                        detail::mesh_query_point_of(adj_ret), ctx);
 }
-WP_FN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN void adj_mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                         mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
                                         const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_no_sign(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
                                detail::mesh_query_point_of(adj_ret), ctx);
 }
-WP_FN void adj_mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN void adj_mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                             mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
                                             const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_sign_normal(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
                               detail::mesh_query_point_of(adj_ret), ctx);
 }
-WP_FN void adj_mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN void adj_mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                             mesh_t& adj_mesh, Vec3& adj_point, f32& adj_max_dist,
                                             const mesh_query_point_tuple_t& adj_ret, ctx_t* ctx) {
   adj_mesh_query_point_sign_parity(mesh, point, max_dist, adj_mesh, adj_point, adj_max_dist,
                               detail::mesh_query_point_of(adj_ret), ctx);
 }
-WP_FN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
+WP_LFN void adj_mesh_query_furthest_point_no_sign(const mesh_t&, Vec3, f32, mesh_t&, Vec3&, f32&,
                                                  const mesh_query_point_tuple_t&, ctx_t*) {}
 
 }  // namespace wp

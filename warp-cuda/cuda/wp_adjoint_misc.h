@@ -10,22 +10,22 @@
 
 namespace wp {
 
-WP_FN void adj_copysign(f32 x, f32 y, f32& adj_x, f32&, f32 adj_ret) {
+WP_LFN void adj_copysign(f32 x, f32 y, f32& adj_x, f32&, f32 adj_ret) {
   if (copysign(1.0f, x) == copysign(1.0f, y)) adj_x += adj_ret; else adj_x -= adj_ret;
 }
-WP_FN void adj_copysign(f64 x, f64 y, f64& adj_x, f64&, f64 adj_ret) {
+WP_LFN void adj_copysign(f64 x, f64 y, f64& adj_x, f64&, f64 adj_ret) {
   if (copysign(1.0, x) == copysign(1.0, y)) adj_x += adj_ret; else adj_x -= adj_ret;
 }
 
 #define WP_ADJ_MISC_FVEC(V, S)                                                                  \
-  WP_FN void adj_min_element(const V& v, V& adj_v, S g) { vec_traits<V>::at(adj_v, (int)argmin(v)) += g; } \
-  WP_FN void adj_max_element(const V& v, V& adj_v, S g) { vec_traits<V>::at(adj_v, (int)argmax(v)) += g; } \
-  WP_FN void adj_norm_l1(const V& v, V& adj_v, S g) {                                           \
+  WP_LFN void adj_min_element(const V& v, V& adj_v, S g) { vec_traits<V>::at(adj_v, (int)argmin(v)) += g; } \
+  WP_LFN void adj_max_element(const V& v, V& adj_v, S g) { vec_traits<V>::at(adj_v, (int)argmax(v)) += g; } \
+  WP_LFN void adj_norm_l1(const V& v, V& adj_v, S g) {                                           \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                                  \
       adj_abs(vec_traits<V>::get(v, i), vec_traits<V>::at(adj_v, i), g);                       \
   }                                                                                             \
-  WP_FN void adj_norm_l2(const V& v, V& adj_v, S g) { adj_length(v, adj_v, g); }               \
-  WP_FN void adj_norm_huber(const V& v, S delta, V& adj_v, S& adj_delta, S g) {                 \
+  WP_LFN void adj_norm_l2(const V& v, V& adj_v, S g) { adj_length(v, adj_v, g); }               \
+  WP_LFN void adj_norm_huber(const V& v, S delta, V& adj_v, S& adj_delta, S g) {                 \
     const S half = (S)1 / ((S)1 + (S)1);                                                        \
     const S a = dot(v, v);                                                                      \
     if (a <= delta * delta) {                                                                   \
@@ -40,7 +40,7 @@ WP_FN void adj_copysign(f64 x, f64 y, f64& adj_x, f64&, f64 adj_ret) {
       adj_length_sq(v, adj_v, adj_a);                                                           \
     }                                                                                           \
   }                                                                                             \
-  WP_FN void adj_norm_pseudo_huber(const V& v, S delta, V& adj_v, S& adj_delta, S g) {          \
+  WP_LFN void adj_norm_pseudo_huber(const V& v, S delta, V& adj_v, S& adj_delta, S g) {          \
     const S a = dot(v, v);                                                                      \
     const S dd = delta * delta;                                                                 \
     const S q = a / dd;                                                                         \
@@ -55,7 +55,7 @@ WP_FN void adj_copysign(f64 x, f64 y, f64& adj_x, f64&, f64 adj_ret) {
     adj_delta += adj_dd * delta;                                                                \
     adj_length_sq(v, adj_v, gb);                                                                \
   }                                                                                             \
-  WP_FN void adj_smooth_normalize(const V& v, S delta, V& adj_v, S& adj_delta, const V& g) {    \
+  WP_LFN void adj_smooth_normalize(const V& v, S delta, V& adj_v, S& adj_delta, const V& g) {    \
     const S n = norm_pseudo_huber(v, delta);                                                    \
     S adj_n = (S)0;                                                                             \
     for (int i = 0; i < vec_traits<V>::N; ++i) {                                                \
@@ -74,8 +74,8 @@ WP_ADJ_MISC_FVEC(DVec4, f64)
 #undef WP_ADJ_MISC_FVEC
 
 #define WP_ADJ_MISC_IVEC(V, S)                                                                  \
-  WP_FN void adj_min_element(const V&, V&, S) {}                                                \
-  WP_FN void adj_max_element(const V&, V&, S) {}
+  WP_LFN void adj_min_element(const V&, V&, S) {}                                                \
+  WP_LFN void adj_max_element(const V&, V&, S) {}
 WP_ADJ_MISC_IVEC(IVec2, i32)
 WP_ADJ_MISC_IVEC(IVec3, i32)
 WP_ADJ_MISC_IVEC(IVec4, i32)
@@ -85,7 +85,7 @@ WP_ADJ_MISC_IVEC(UVec4, u32)
 #undef WP_ADJ_MISC_IVEC
 
 #define WP_ADJ_MISC_DIAG(M, V)                                                                  \
-  WP_FN void adj_get_diag(const M&, M& adj_m, const V& g) {                                     \
+  WP_LFN void adj_get_diag(const M&, M& adj_m, const V& g) {                                     \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                                  \
       vec_traits<V>::at(mat_traits<M>::at(adj_m, i), i) += vec_traits<V>::get(g, i);            \
   }
@@ -108,7 +108,7 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
 }  // namespace detail
 
 #define WP_ADJ_MISC_QUAT(Q, V3, M3, M4, S)                                                      \
-  WP_FN void adj_quat_to_axis_angle(const Q& q, Q& adj_q, const tuple_t<V3, S>& g) {            \
+  WP_LFN void adj_quat_to_axis_angle(const Q& q, Q& adj_q, const tuple_t<V3, S>& g) {            \
     const V3 v = V3##_new(q.x, q.y, q.z);                                                       \
     const bool neg = q.w < (S)0;                                                                \
     const S len = length(v);                                                                    \
@@ -123,7 +123,7 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
     adj_normalize(v, adj_v, adj_n);                                                             \
     detail::quat_add_lanes(adj_q, adj_v.x, adj_v.y, adj_v.z, adj_w);                            \
   }                                                                                             \
-  WP_FN void adj_quat_rpy(S roll, S pitch, S yaw, S& adj_roll, S& adj_pitch, S& adj_yaw,        \
+  WP_LFN void adj_quat_rpy(S roll, S pitch, S yaw, S& adj_roll, S& adj_pitch, S& adj_yaw,        \
                           const Q& g) {                                                         \
     const S hy = yaw * (S)0.5, hr = roll * (S)0.5, hp = pitch * (S)0.5;                         \
     const S cy = cos(hy), sy = sin(hy), cr = cos(hr), sr = sin(hr), cp = cos(hp), sp = sin(hp); \
@@ -137,7 +137,7 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
     adj_roll += (gsr * cr - gcr * sr) * (S)0.5;                                                 \
     adj_pitch += (gsp * cp - gcp * sp) * (S)0.5;                                                \
   }                                                                                             \
-  WP_FN void adj_quat_to_rpy(const Q& q, Q& adj_q, const V3& g) {                               \
+  WP_LFN void adj_quat_to_rpy(const Q& q, Q& adj_q, const V3& g) {                               \
     const S x = q.x, y = q.y, z = q.z, w = q.w;                                                 \
     const S t0 = (S)2 * (w * x + y * z);                                                        \
     const S t1 = (S)1 - (S)2 * (x * x + y * y);                                                 \
@@ -175,7 +175,7 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
     gz -= b4 * (z + z);                                                                         \
     detail::quat_add_lanes(adj_q, gx, gy, gz, gw);                                              \
   }                                                                                             \
-  WP_FN void adj_quat_twist(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q, const Q& g) {   \
+  WP_LFN void adj_quat_twist(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q, const Q& g) {   \
     const V3 a = V3##_new(q.x, q.y, q.z);                                                       \
     const S p = dot(a, axis);                                                                   \
     const Q t = Q##_from_xyzw(p * axis.x, p * axis.y, p * axis.z, q.w);                         \
@@ -188,7 +188,7 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
     adj_dot(a, axis, adj_a, adj_axis, adj_p);                                                   \
     detail::quat_add_lanes(adj_q, adj_a.x, adj_a.y, adj_a.z, adj_t.w);                          \
   }                                                                                             \
-  WP_FN void adj_misc_twist_angle(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q, S g,      \
+  WP_LFN void adj_misc_twist_angle(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q, S g,      \
                                   bool is_signed) {                                             \
     const V3 v = V3##_new(q.x, q.y, q.z);                                                       \
     const S d = dot(axis, v);                                                                   \
@@ -204,14 +204,14 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
     adj_dot(axis, v, adj_axis, adj_v, adj_d);                                                   \
     detail::quat_add_lanes(adj_q, adj_v.x, adj_v.y, adj_v.z, adj_w);                            \
   }                                                                                             \
-  WP_FN void adj_quat_twist_angle(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q, S g) {    \
+  WP_LFN void adj_quat_twist_angle(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q, S g) {    \
     adj_misc_twist_angle(axis, q, adj_axis, adj_q, g, false);                                   \
   }                                                                                             \
-  WP_FN void adj_quat_twist_angle_signed(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q,    \
+  WP_LFN void adj_quat_twist_angle_signed(const V3& axis, const Q& q, V3& adj_axis, Q& adj_q,    \
                                          S g) {                                                 \
     adj_misc_twist_angle(axis, q, adj_axis, adj_q, g, true);                                    \
   }                                                                                             \
-  WP_FN void adj_transform_compose(const V3&, const Q& q, const V3& s, V3& adj_p, Q& adj_q,     \
+  WP_LFN void adj_transform_compose(const V3&, const Q& q, const V3& s, V3& adj_p, Q& adj_q,     \
                                    V3& adj_s, const M4& g) {                                    \
     const M3 r = quat_to_matrix(q);                                                             \
     const V3 g0 = V3##_new(g.x_axis.x, g.x_axis.y, g.x_axis.z);                                 \
@@ -223,7 +223,7 @@ WP_FN void quat_add_lanes(Q& q, S x, S y, S z, S w) {
     adj_p += V3##_new(g.w_axis.x, g.w_axis.y, g.w_axis.z);                                      \
     adj_quat_to_matrix(q, adj_q, M3##_from_cols(g0 * s.x, g1 * s.y, g2 * s.z));                 \
   }                                                                                             \
-  WP_FN void adj_transform_decompose(const M4& m, M4& adj_m, const tuple_t<V3, Q, V3>& g) {     \
+  WP_LFN void adj_transform_decompose(const M4& m, M4& adj_m, const tuple_t<V3, Q, V3>& g) {     \
     const V3 c[3] = {V3##_new(m.x_axis.x, m.x_axis.y, m.x_axis.z),                              \
                      V3##_new(m.y_axis.x, m.y_axis.y, m.y_axis.z),                              \
                      V3##_new(m.z_axis.x, m.z_axis.y, m.z_axis.z)};                             \

@@ -16,7 +16,7 @@ namespace wp {
 // ------------------------------------------------------------------------------------------
 
 namespace detail {
-WP_FN void adj_noise_accum(f32& adj_x, const f32* g, f32 adj_ret) {
+WP_LFN void adj_noise_accum(f32& adj_x, const f32* g, f32 adj_ret) {
   adj_x = rn_add(adj_x, rn_mul(g[0], adj_ret));
 }
 template <typename V>
@@ -28,14 +28,14 @@ WP_FN void adj_noise_accum(V& adj_x, const f32* g, f32 adj_ret) {
 }  // namespace detail
 
 #define WP_ADJ_NOISE(V, P)                                                                  \
-  WP_FN void adj_noise(u32 state, V x, u32& adj_state, V& adj_x, f32 adj_ret) {             \
+  WP_LFN void adj_noise(u32 state, V x, u32& adj_state, V& adj_x, f32 adj_ret) {             \
     (void)adj_state;                                                                        \
     f32 l[4], g[4];                                                                         \
     detail::noise_lanes(x, l);                                                              \
     detail::perlin(state, l, nullptr, detail::noise_dim<V>::N, g);                          \
     detail::adj_noise_accum(adj_x, g, adj_ret);                                             \
   }                                                                                         \
-  WP_FN void adj_pnoise(u32 state, V x, P period, u32& adj_state, V& adj_x, P& adj_period, \
+  WP_LFN void adj_pnoise(u32 state, V x, P period, u32& adj_state, V& adj_x, P& adj_period, \
                         f32 adj_ret) {                                                      \
     (void)adj_state;                                                                        \
     (void)adj_period;                                                                       \

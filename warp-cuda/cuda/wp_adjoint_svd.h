@@ -97,7 +97,7 @@ WP_FN R adj_svd_rows(const R& u, const S* s, const R& v, const R& gu, const S* g
 }  // namespace detail
 
 #define WP_ADJ_SVD3(M, V, S)                                                                  \
-  WP_FN void adj_svd3(const M& a, M& adj_a, const tuple_t<M, V, M>& g) {                      \
+  WP_LFN void adj_svd3(const M& a, M& adj_a, const tuple_t<M, V, M>& g) {                      \
     namespace d = detail::svd;                                                                \
     d::rows3<S> u, v;                                                                         \
     S s[3];                                                                                   \
@@ -108,7 +108,7 @@ WP_FN R adj_svd_rows(const R& u, const S* s, const R& v, const R& gu, const S* g
         d::mul3_nt<S>);                                                                       \
     adj_accum(adj_a, d::from_rows<M>(total));                                                \
   }                                                                                           \
-  WP_FN void adj_eig3(const M& a, M& adj_a, const tuple_t<M, V>& g) {                         \
+  WP_LFN void adj_eig3(const M& a, M& adj_a, const tuple_t<M, V>& g) {                         \
     namespace d = detail::svd;                                                                \
     d::rows3<S> q;                                                                            \
     S e[3];                                                                                   \
@@ -125,7 +125,7 @@ WP_FN R adj_svd_rows(const R& u, const S* s, const R& v, const R& gu, const S* g
     d::zip_rows(dbar, h.m, inner.m, d::add_<S>);                                              \
     adj_accum(adj_a, d::from_rows<M>(d::mul3(q, d::mul3_nt(inner, q))));                     \
   }                                                                                           \
-  WP_FN void adj_qr3(const M& a, M& adj_a, const tuple_t<M, M>& g) {                          \
+  WP_LFN void adj_qr3(const M& a, M& adj_a, const tuple_t<M, M>& g) {                          \
     namespace d = detail::svd;                                                                \
     d::rows3<S> q, r;                                                                         \
     d::qr_rows(d::to_rows<3>(a), q, r);                                                         \
@@ -146,7 +146,7 @@ WP_ADJ_SVD3(DMat3, DVec3, f64)
 #undef WP_ADJ_SVD3
 
 #define WP_ADJ_SVD2(M, V, S)                                                                  \
-  WP_FN void adj_svd2(const M& a, M& adj_a, const tuple_t<M, V, M>& g) {                      \
+  WP_LFN void adj_svd2(const M& a, M& adj_a, const tuple_t<M, V, M>& g) {                      \
     namespace d = detail::svd;                                                                \
     d::rows2<S> u, v;                                                                         \
     S s[2];                                                                                   \

@@ -37,11 +37,11 @@ WP_FN void shared_add(T* p, T v) {
 }
 
 /// A vector element (a tile of `Vec2`/`DVec2`): component by component.
-WP_FN void shared_add(Vec2* p, Vec2 v) {
+WP_LFN void shared_add(Vec2* p, Vec2 v) {
   shared_add(&p->x, v.x);
   shared_add(&p->y, v.y);
 }
-WP_FN void shared_add(DVec2* p, DVec2 v) {
+WP_LFN void shared_add(DVec2* p, DVec2 v) {
   shared_add(&p->x, v.x);
   shared_add(&p->y, v.y);
 }
@@ -90,8 +90,8 @@ WP_FN T exchange(T* p, const T& zero) {
   return r;
 }
 #if defined(__CUDACC__)
-WP_FN f32 exchange(f32* p, const f32& zero) { return atomicExch(p, zero); }
-WP_FN f64 exchange(f64* p, const f64& zero) {
+WP_LFN f32 exchange(f32* p, const f32& zero) { return atomicExch(p, zero); }
+WP_LFN f64 exchange(f64* p, const f64& zero) {
   const unsigned long long z = (unsigned long long)__double_as_longlong(zero);
   return __longlong_as_double((long long)atomicExch((unsigned long long*)p, z));
 }

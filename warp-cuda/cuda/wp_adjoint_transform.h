@@ -13,64 +13,64 @@ namespace wp {
 // ------------------------------------------------------------------------------------------
 
 #define WP_ADJ_XFORM(X, V3, V4, Q, M3, M4, S)                                                    \
-  WP_FN void adj_add(const X&, const X&, X& adj_a, X& adj_b, const X& g) {                       \
+  WP_LFN void adj_add(const X&, const X&, X& adj_a, X& adj_b, const X& g) {                       \
     adj_a += g;                                                                                  \
     adj_b += g;                                                                                  \
   }                                                                                              \
-  WP_FN void adj_sub(const X&, const X&, X& adj_a, X& adj_b, const X& g) {                       \
+  WP_LFN void adj_sub(const X&, const X&, X& adj_a, X& adj_b, const X& g) {                       \
     adj_a += g;                                                                                  \
     adj_b -= g;                                                                                  \
   }                                                                                              \
-  WP_FN void adj_neg(const X&, X& adj_a, const X& g) { adj_a -= g; }                             \
-  WP_FN void adj_mul(const X& a, S s, X& adj_a, S& adj_s, const X& g) {                          \
+  WP_LFN void adj_neg(const X&, X& adj_a, const X& g) { adj_a -= g; }                             \
+  WP_LFN void adj_mul(const X& a, S s, X& adj_a, S& adj_s, const X& g) {                          \
     detail::zip_vs(a, s, adj_a, adj_s, g, detail::l_mul());                                      \
   }                                                                                              \
-  WP_FN void adj_mul(S s, const X& b, S& adj_s, X& adj_b, const X& g) {                          \
+  WP_LFN void adj_mul(S s, const X& b, S& adj_s, X& adj_b, const X& g) {                          \
     detail::zip_sv(s, b, adj_s, adj_b, g, detail::l_mul());                                      \
   }                                                                                              \
-  WP_FN void adj_transform_multiply(const X& a, const X& b, X& adj_a, X& adj_b, const X& g) {    \
+  WP_LFN void adj_transform_multiply(const X& a, const X& b, X& adj_a, X& adj_b, const X& g) {    \
     adj_mul(a.q, b.p, adj_a.q, adj_b.p, g.p);                                                    \
     adj_a.p += g.p;                                                                              \
     adj_mul(a.q, b.q, adj_a.q, adj_b.q, g.q);                                                    \
   }                                                                                              \
-  WP_FN void adj_mul(const X& a, const X& b, X& adj_a, X& adj_b, const X& g) {                   \
+  WP_LFN void adj_mul(const X& a, const X& b, X& adj_a, X& adj_b, const X& g) {                   \
     adj_transform_multiply(a, b, adj_a, adj_b, g);                                               \
   }                                                                                              \
-  WP_FN void adj_lerp(const X& a, const X& b, S t, X& adj_a, X& adj_b, S& adj_t, const X& g) {   \
+  WP_LFN void adj_lerp(const X& a, const X& b, S t, X& adj_a, X& adj_b, S& adj_t, const X& g) {   \
     typedef vec_traits<X> T;                                                                     \
     for (int i = 0; i < 7; ++i)                                                                  \
       detail::l_lerp(T::get(a, i), T::get(b, i), t, T::at(adj_a, i), T::at(adj_b, i), adj_t,    \
                      T::get(g, i));                                                              \
   }                                                                                              \
-  WP_FN void adj_transformation(const V3&, const Q&, V3& adj_p, Q& adj_q, const X& g) {          \
+  WP_LFN void adj_transformation(const V3&, const Q&, V3& adj_p, Q& adj_q, const X& g) {          \
     adj_p += g.p;                                                                                \
     adj_q += g.q;                                                                                \
   }                                                                                              \
-  WP_FN void adj_transform_get_translation(const X&, X& adj_t, const V3& g) { adj_t.p += g; }    \
-  WP_FN void adj_transform_get_rotation(const X&, X& adj_t, const Q& g) { adj_t.q += g; }        \
-  WP_FN void adj_transform_point(const X& t, const V3& x, X& adj_t, V3& adj_x, const V3& g) {    \
+  WP_LFN void adj_transform_get_translation(const X&, X& adj_t, const V3& g) { adj_t.p += g; }    \
+  WP_LFN void adj_transform_get_rotation(const X&, X& adj_t, const Q& g) { adj_t.q += g; }        \
+  WP_LFN void adj_transform_point(const X& t, const V3& x, X& adj_t, V3& adj_x, const V3& g) {    \
     adj_mul(t.q, x, adj_t.q, adj_x, g);                                                          \
     adj_t.p += g;                                                                                \
   }                                                                                              \
-  WP_FN void adj_transform_vector(const X& t, const V3& x, X& adj_t, V3& adj_x, const V3& g) {   \
+  WP_LFN void adj_transform_vector(const X& t, const V3& x, X& adj_t, V3& adj_x, const V3& g) {   \
     adj_mul(t.q, x, adj_t.q, adj_x, g);                                                          \
   }                                                                                              \
   /* forward: qi = conj(q), r = -(qi * p) */                                                     \
-  WP_FN void adj_transform_inverse(const X& t, X& adj_t, const X& g) {                           \
+  WP_LFN void adj_transform_inverse(const X& t, X& adj_t, const X& g) {                           \
     const Q qi = quat_inverse(t.q);                                                              \
     Q adj_qi = g.q;                                                                              \
     adj_mul(qi, t.p, adj_qi, adj_t.p, -g.p);                                                     \
     adj_quat_inverse(t.q, adj_t.q, adj_qi);                                                      \
   }                                                                                              \
-  WP_FN void adj_inverse(const X& t, X& adj_t, const X& g) { adj_transform_inverse(t, adj_t, g); } \
-  WP_FN void adj_transform_to_matrix(const X& t, X& adj_t, const M4& g) {                        \
+  WP_LFN void adj_inverse(const X& t, X& adj_t, const X& g) { adj_transform_inverse(t, adj_t, g); } \
+  WP_LFN void adj_transform_to_matrix(const X& t, X& adj_t, const M4& g) {                        \
     const M3 g3 = M3##_from_cols(V3##_new(g.x_axis.x, g.x_axis.y, g.x_axis.z),                   \
                                  V3##_new(g.y_axis.x, g.y_axis.y, g.y_axis.z),                   \
                                  V3##_new(g.z_axis.x, g.z_axis.y, g.z_axis.z));                  \
     adj_quat_to_matrix(t.q, adj_t.q, g3);                                                        \
     adj_t.p += V3##_new(g.w_axis.x, g.w_axis.y, g.w_axis.z);                                     \
   }                                                                                              \
-  WP_FN void adj_transform_from_matrix(const M4& m, M4& adj_m, const X& g) {                     \
+  WP_LFN void adj_transform_from_matrix(const M4& m, M4& adj_m, const X& g) {                     \
     const M3 m3 = M3##_from_cols(V3##_new(m.x_axis.x, m.x_axis.y, m.x_axis.z),                   \
                                  V3##_new(m.y_axis.x, m.y_axis.y, m.y_axis.z),                   \
                                  V3##_new(m.z_axis.x, m.z_axis.y, m.z_axis.z));                  \
@@ -86,7 +86,7 @@ namespace wp {
     adj_m.w_axis.z += g.p.z;                                                                     \
   }                                                                                              \
   /* 4x4 matrices: adj_m.{x,y,z}_axis[k] += g[k] * x.{x,y,z}; adj_x.c += column c . g. */       \
-  WP_FN void adj_transform_vector(const M4& m, const V3& x, M4& adj_m, V3& adj_x, const V3& g) { \
+  WP_LFN void adj_transform_vector(const M4& m, const V3& x, M4& adj_m, V3& adj_x, const V3& g) { \
     adj_m.x_axis.x += g.x * x.x;                                                                 \
     adj_m.x_axis.y += g.y * x.x;                                                                 \
     adj_m.x_axis.z += g.z * x.x;                                                                 \
@@ -100,7 +100,7 @@ namespace wp {
     adj_x.y += (m.y_axis.x * g.x + m.y_axis.y * g.y) + m.y_axis.z * g.z;                         \
     adj_x.z += (m.z_axis.x * g.x + m.z_axis.y * g.y) + m.z_axis.z * g.z;                         \
   }                                                                                              \
-  WP_FN void adj_transform_point(const M4& m, const V3& x, M4& adj_m, V3& adj_x, const V3& g) {  \
+  WP_LFN void adj_transform_point(const M4& m, const V3& x, M4& adj_m, V3& adj_x, const V3& g) {  \
     adj_transform_vector(m, x, adj_m, adj_x, g);                                                 \
     adj_m.w_axis.x += g.x;                                                                       \
     adj_m.w_axis.y += g.y;                                                                       \

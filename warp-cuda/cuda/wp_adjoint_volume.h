@@ -36,18 +36,18 @@ namespace wp {
 namespace detail {
 
 /// grad_add: `*p += x`, atomically per component (i32: nothing, it has no gradient).
-WP_FN void vol_grad_add(u64 p, f32 x) { atomic_add_p((f32*)p, x); }
-WP_FN void vol_grad_add(u64 p, f64 x) { atomic_add_p((f64*)p, x); }
-WP_FN void vol_grad_add(u64 p, i32 x) {
+WP_LFN void vol_grad_add(u64 p, f32 x) { atomic_add_p((f32*)p, x); }
+WP_LFN void vol_grad_add(u64 p, f64 x) { atomic_add_p((f64*)p, x); }
+WP_LFN void vol_grad_add(u64 p, i32 x) {
   (void)p;
   (void)x;
 }
-WP_FN void vol_grad_add(u64 p, Vec3 x) {
+WP_LFN void vol_grad_add(u64 p, Vec3 x) {
   atomic_add_p((f32*)p, x.x);
   atomic_add_p((f32*)(p + 4), x.y);
   atomic_add_p((f32*)(p + 8), x.z);
 }
-WP_FN void vol_grad_add(u64 p, DVec3 x) {
+WP_LFN void vol_grad_add(u64 p, DVec3 x) {
   atomic_add_p((f64*)p, x.x);
   atomic_add_p((f64*)(p + 8), x.y);
   atomic_add_p((f64*)(p + 16), x.z);
@@ -60,29 +60,29 @@ WP_FN void vol_grad_add_at(const volume_t<T>& v, vol_addr_t at, const T& x) {
 }
 
 /// dot(v, a): scalar `v * a`; vector `(v.x*a.x + v.y*a.y) + v.z*a.z`.
-WP_FN f32 vol_dot(f32 v, f32 a) { return v * a; }
-WP_FN f64 vol_dot(f64 v, f64 a) { return v * a; }
-WP_FN f32 vol_dot(Vec3 v, Vec3 a) { return (v.x * a.x + v.y * a.y) + v.z * a.z; }
-WP_FN f64 vol_dot(DVec3 v, DVec3 a) { return (v.x * a.x + v.y * a.y) + v.z * a.z; }
+WP_LFN f32 vol_dot(f32 v, f32 a) { return v * a; }
+WP_LFN f64 vol_dot(f64 v, f64 a) { return v * a; }
+WP_LFN f32 vol_dot(Vec3 v, Vec3 a) { return (v.x * a.x + v.y * a.y) + v.z * a.z; }
+WP_LFN f64 vol_dot(DVec3 v, DVec3 a) { return (v.x * a.x + v.y * a.y) + v.z * a.z; }
 
 /// vec_mul_grad: `v^T g` per axis a: scalar `v * g_a`; vector
 /// `(v.x*g[x][a] + v.y*g[y][a]) + v.z*g[z][a]` (g[c][a]: column a's component c).
-WP_FN void vol_vec_mul_grad(f32 v, Vec3 g, f32* r) {
+WP_LFN void vol_vec_mul_grad(f32 v, Vec3 g, f32* r) {
   r[0] = v * g.x;
   r[1] = v * g.y;
   r[2] = v * g.z;
 }
-WP_FN void vol_vec_mul_grad(f64 v, DVec3 g, f64* r) {
+WP_LFN void vol_vec_mul_grad(f64 v, DVec3 g, f64* r) {
   r[0] = v * g.x;
   r[1] = v * g.y;
   r[2] = v * g.z;
 }
-WP_FN void vol_vec_mul_grad(Vec3 v, const Mat3& g, f32* r) {
+WP_LFN void vol_vec_mul_grad(Vec3 v, const Mat3& g, f32* r) {
   r[0] = vol_dot(v, g.x_axis);
   r[1] = vol_dot(v, g.y_axis);
   r[2] = vol_dot(v, g.z_axis);
 }
-WP_FN void vol_vec_mul_grad(DVec3 v, const DMat3& g, f64* r) {
+WP_LFN void vol_vec_mul_grad(DVec3 v, const DMat3& g, f64* r) {
   r[0] = vol_dot(v, g.x_axis);
   r[1] = vol_dot(v, g.y_axis);
   r[2] = vol_dot(v, g.z_axis);
@@ -90,10 +90,10 @@ WP_FN void vol_vec_mul_grad(DVec3 v, const DMat3& g, f64* r) {
 
 /// grad_mul_vec: `g gw`: scalar `(g_x*gw_x + g_y*gw_y) + g_z*gw_z`; vector, per component c,
 /// `(g[c][x]*gw_x + g[c][y]*gw_y) + g[c][z]*gw_z`.
-WP_FN f32 vol_grad_mul_vec(Vec3 g, const f32* gw) {
+WP_LFN f32 vol_grad_mul_vec(Vec3 g, const f32* gw) {
   return (g.x * gw[0] + g.y * gw[1]) + g.z * gw[2];
 }
-WP_FN f64 vol_grad_mul_vec(DVec3 g, const f64* gw) {
+WP_LFN f64 vol_grad_mul_vec(DVec3 g, const f64* gw) {
   return (g.x * gw[0] + g.y * gw[1]) + g.z * gw[2];
 }
 template <typename V, typename M, typename S>
@@ -105,8 +105,8 @@ WP_FN V vol_mat_mul_vec(const M& g, const S* gw) {
   r.z = (a.z * gw[0] + b.z * gw[1]) + c.z * gw[2];
   return r;
 }
-WP_FN Vec3 vol_grad_mul_vec(const Mat3& g, const f32* gw) { return vol_mat_mul_vec<Vec3>(g, gw); }
-WP_FN DVec3 vol_grad_mul_vec(const DMat3& g, const f64* gw) {
+WP_LFN Vec3 vol_grad_mul_vec(const Mat3& g, const f32* gw) { return vol_mat_mul_vec<Vec3>(g, gw); }
+WP_LFN DVec3 vol_grad_mul_vec(const DMat3& g, const f64* gw) {
   return vol_mat_mul_vec<DVec3>(g, gw);
 }
 
@@ -173,7 +173,7 @@ WP_FN bool vol_adj_linear(const volume_t<G>& v, Vec3 uvw, const T& adj_ret,
   return true;
 }
 
-WP_FN void vol_uvw_add(Vec3& adj_uvw, const f32* g) {
+WP_LFN void vol_uvw_add(Vec3& adj_uvw, const f32* g) {
   adj_uvw.x += g[0];
   adj_uvw.y += g[1];
   adj_uvw.z += g[2];

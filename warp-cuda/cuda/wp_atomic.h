@@ -25,26 +25,26 @@ namespace detail {
 #if defined(__CUDACC__)
 
 // ----- integers -----
-WP_FN i32 atomic_add_p(i32* p, i32 v) { return atomicAdd(p, v); }
-WP_FN i32 atomic_sub_p(i32* p, i32 v) { return atomicSub(p, v); }
-WP_FN i32 atomic_min_p(i32* p, i32 v) { return atomicMin(p, v); }
-WP_FN i32 atomic_max_p(i32* p, i32 v) { return atomicMax(p, v); }
-WP_FN u32 atomic_add_p(u32* p, u32 v) { return atomicAdd(p, v); }
-WP_FN u32 atomic_sub_p(u32* p, u32 v) { return atomicSub(p, v); }
-WP_FN u32 atomic_min_p(u32* p, u32 v) { return atomicMin(p, v); }
-WP_FN u32 atomic_max_p(u32* p, u32 v) { return atomicMax(p, v); }
-WP_FN i64 atomic_add_p(i64* p, i64 v) {
+WP_LFN i32 atomic_add_p(i32* p, i32 v) { return atomicAdd(p, v); }
+WP_LFN i32 atomic_sub_p(i32* p, i32 v) { return atomicSub(p, v); }
+WP_LFN i32 atomic_min_p(i32* p, i32 v) { return atomicMin(p, v); }
+WP_LFN i32 atomic_max_p(i32* p, i32 v) { return atomicMax(p, v); }
+WP_LFN u32 atomic_add_p(u32* p, u32 v) { return atomicAdd(p, v); }
+WP_LFN u32 atomic_sub_p(u32* p, u32 v) { return atomicSub(p, v); }
+WP_LFN u32 atomic_min_p(u32* p, u32 v) { return atomicMin(p, v); }
+WP_LFN u32 atomic_max_p(u32* p, u32 v) { return atomicMax(p, v); }
+WP_LFN i64 atomic_add_p(i64* p, i64 v) {
   return (i64)atomicAdd((unsigned long long*)p, (unsigned long long)v);
 }
-WP_FN i64 atomic_sub_p(i64* p, i64 v) {
+WP_LFN i64 atomic_sub_p(i64* p, i64 v) {
   return (i64)atomicAdd((unsigned long long*)p, 0ull - (unsigned long long)v);
 }
-WP_FN i64 atomic_min_p(i64* p, i64 v) { return (i64)atomicMin((long long*)p, (long long)v); }
-WP_FN i64 atomic_max_p(i64* p, i64 v) { return (i64)atomicMax((long long*)p, (long long)v); }
-WP_FN u64 atomic_add_p(u64* p, u64 v) { return atomicAdd((unsigned long long*)p, v); }
-WP_FN u64 atomic_sub_p(u64* p, u64 v) { return atomicAdd((unsigned long long*)p, 0ull - v); }
-WP_FN u64 atomic_min_p(u64* p, u64 v) { return atomicMin((unsigned long long*)p, v); }
-WP_FN u64 atomic_max_p(u64* p, u64 v) { return atomicMax((unsigned long long*)p, v); }
+WP_LFN i64 atomic_min_p(i64* p, i64 v) { return (i64)atomicMin((long long*)p, (long long)v); }
+WP_LFN i64 atomic_max_p(i64* p, i64 v) { return (i64)atomicMax((long long*)p, (long long)v); }
+WP_LFN u64 atomic_add_p(u64* p, u64 v) { return atomicAdd((unsigned long long*)p, v); }
+WP_LFN u64 atomic_sub_p(u64* p, u64 v) { return atomicAdd((unsigned long long*)p, 0ull - v); }
+WP_LFN u64 atomic_min_p(u64* p, u64 v) { return atomicMin((unsigned long long*)p, v); }
+WP_LFN u64 atomic_max_p(u64* p, u64 v) { return atomicMax((unsigned long long*)p, v); }
 
 // ----- floats -----
 template <typename F>
@@ -69,19 +69,19 @@ WP_FN f64 cas_loop_f64(f64* p, F f) {
   } while (old != assumed);
   return f64_from_bits(old);
 }
-WP_FN f32 atomic_add_p(f32* p, f32 v) { return atomicAdd(p, v); }
-WP_FN f32 atomic_sub_p(f32* p, f32 v) { return atomicAdd(p, -v); }  // x + (-v) == x - v
-WP_FN f32 atomic_min_p(f32* p, f32 v) { return cas_loop_f32(p, [v](f32 x) { return ::fminf(x, v); }); }
-WP_FN f32 atomic_max_p(f32* p, f32 v) { return cas_loop_f32(p, [v](f32 x) { return ::fmaxf(x, v); }); }
+WP_LFN f32 atomic_add_p(f32* p, f32 v) { return atomicAdd(p, v); }
+WP_LFN f32 atomic_sub_p(f32* p, f32 v) { return atomicAdd(p, -v); }  // x + (-v) == x - v
+WP_LFN f32 atomic_min_p(f32* p, f32 v) { return cas_loop_f32(p, [v](f32 x) { return ::fminf(x, v); }); }
+WP_LFN f32 atomic_max_p(f32* p, f32 v) { return cas_loop_f32(p, [v](f32 x) { return ::fmaxf(x, v); }); }
 #if !defined(__CUDA_ARCH__) || __CUDA_ARCH__ >= 600
-WP_FN f64 atomic_add_p(f64* p, f64 v) { return atomicAdd(p, v); }
-WP_FN f64 atomic_sub_p(f64* p, f64 v) { return atomicAdd(p, -v); }
+WP_LFN f64 atomic_add_p(f64* p, f64 v) { return atomicAdd(p, v); }
+WP_LFN f64 atomic_sub_p(f64* p, f64 v) { return atomicAdd(p, -v); }
 #else
-WP_FN f64 atomic_add_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return x + v; }); }
-WP_FN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return x - v; }); }
+WP_LFN f64 atomic_add_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return x + v; }); }
+WP_LFN f64 atomic_sub_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return x - v; }); }
 #endif
-WP_FN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
-WP_FN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
+WP_LFN f64 atomic_min_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmin(x, v); }); }
+WP_LFN f64 atomic_max_p(f64* p, f64 v) { return cas_loop_f64(p, [v](f64 x) { return ::fmax(x, v); }); }
 
 // ----- f16 and bf16: a CAS loop on the element's 16 bits -----
 // sm_70 and newer (every architecture CUDA 13's NVRTC targets) have a 16-bit atomicCAS.
@@ -123,47 +123,47 @@ WP_FN H cas_loop_h16(H* p, F f) {
   return h16_from_bits<H>((u16)(old >> shift));
 #endif
 }
-WP_FN f16 atomic_add_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return x + v; }); }
-WP_FN f16 atomic_sub_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return x - v; }); }
-WP_FN f16 atomic_min_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return wp::min(x, v); }); }
-WP_FN f16 atomic_max_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return wp::max(x, v); }); }
-WP_FN bf16 atomic_add_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return x + v; }); }
-WP_FN bf16 atomic_sub_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return x - v; }); }
-WP_FN bf16 atomic_min_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return wp::min(x, v); }); }
-WP_FN bf16 atomic_max_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return wp::max(x, v); }); }
+WP_LFN f16 atomic_add_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return x + v; }); }
+WP_LFN f16 atomic_sub_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return x - v; }); }
+WP_LFN f16 atomic_min_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return wp::min(x, v); }); }
+WP_LFN f16 atomic_max_p(f16* p, f16 v) { return cas_loop_h16(p, [v](f16 x) { return wp::max(x, v); }); }
+WP_LFN bf16 atomic_add_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return x + v; }); }
+WP_LFN bf16 atomic_sub_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return x - v; }); }
+WP_LFN bf16 atomic_min_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return wp::min(x, v); }); }
+WP_LFN bf16 atomic_max_p(bf16* p, bf16 v) { return cas_loop_h16(p, [v](bf16 x) { return wp::max(x, v); }); }
 
 // ----- compare-and-swap, exchange, bitwise (no adjoint) -----
 // Floats compare and swap bit patterns (as warp-core's AtomicSwapElement).
-WP_FN i32 atomic_cas_p(i32* p, i32 c, i32 v) { return atomicCAS(p, c, v); }
-WP_FN u32 atomic_cas_p(u32* p, u32 c, u32 v) { return atomicCAS(p, c, v); }
-WP_FN i64 atomic_cas_p(i64* p, i64 c, i64 v) {
+WP_LFN i32 atomic_cas_p(i32* p, i32 c, i32 v) { return atomicCAS(p, c, v); }
+WP_LFN u32 atomic_cas_p(u32* p, u32 c, u32 v) { return atomicCAS(p, c, v); }
+WP_LFN i64 atomic_cas_p(i64* p, i64 c, i64 v) {
   return (i64)atomicCAS((unsigned long long*)p, (unsigned long long)c, (unsigned long long)v);
 }
-WP_FN u64 atomic_cas_p(u64* p, u64 c, u64 v) { return atomicCAS((unsigned long long*)p, c, v); }
-WP_FN f32 atomic_cas_p(f32* p, f32 c, f32 v) {
+WP_LFN u64 atomic_cas_p(u64* p, u64 c, u64 v) { return atomicCAS((unsigned long long*)p, c, v); }
+WP_LFN f32 atomic_cas_p(f32* p, f32 c, f32 v) {
   return f32_from_bits(atomicCAS((unsigned int*)p, f32_to_bits(c), f32_to_bits(v)));
 }
-WP_FN f64 atomic_cas_p(f64* p, f64 c, f64 v) {
+WP_LFN f64 atomic_cas_p(f64* p, f64 c, f64 v) {
   return f64_from_bits(atomicCAS((unsigned long long*)p, (unsigned long long)f64_to_bits(c),
                                  (unsigned long long)f64_to_bits(v)));
 }
-WP_FN i32 atomic_exch_p(i32* p, i32 v) { return atomicExch(p, v); }
-WP_FN u32 atomic_exch_p(u32* p, u32 v) { return atomicExch(p, v); }
-WP_FN i64 atomic_exch_p(i64* p, i64 v) {
+WP_LFN i32 atomic_exch_p(i32* p, i32 v) { return atomicExch(p, v); }
+WP_LFN u32 atomic_exch_p(u32* p, u32 v) { return atomicExch(p, v); }
+WP_LFN i64 atomic_exch_p(i64* p, i64 v) {
   return (i64)atomicExch((unsigned long long*)p, (unsigned long long)v);
 }
-WP_FN u64 atomic_exch_p(u64* p, u64 v) { return atomicExch((unsigned long long*)p, v); }
-WP_FN f32 atomic_exch_p(f32* p, f32 v) { return atomicExch(p, v); }
-WP_FN f64 atomic_exch_p(f64* p, f64 v) {
+WP_LFN u64 atomic_exch_p(u64* p, u64 v) { return atomicExch((unsigned long long*)p, v); }
+WP_LFN f32 atomic_exch_p(f32* p, f32 v) { return atomicExch(p, v); }
+WP_LFN f64 atomic_exch_p(f64* p, f64 v) {
   return f64_from_bits(atomicExch((unsigned long long*)p, (unsigned long long)f64_to_bits(v)));
 }
 #define WP_BITS_ATOMIC(OP, CU)                                                         \
-  WP_FN i32 atomic_##OP##_p(i32* p, i32 v) { return CU(p, v); }                        \
-  WP_FN u32 atomic_##OP##_p(u32* p, u32 v) { return CU(p, v); }                        \
-  WP_FN i64 atomic_##OP##_p(i64* p, i64 v) {                                           \
+  WP_LFN i32 atomic_##OP##_p(i32* p, i32 v) { return CU(p, v); }                        \
+  WP_LFN u32 atomic_##OP##_p(u32* p, u32 v) { return CU(p, v); }                        \
+  WP_LFN i64 atomic_##OP##_p(i64* p, i64 v) {                                           \
     return (i64)CU((unsigned long long*)p, (unsigned long long)v);                     \
   }                                                                                    \
-  WP_FN u64 atomic_##OP##_p(u64* p, u64 v) { return CU((unsigned long long*)p, v); }
+  WP_LFN u64 atomic_##OP##_p(u64* p, u64 v) { return CU((unsigned long long*)p, v); }
 WP_BITS_ATOMIC(and, atomicAnd)
 WP_BITS_ATOMIC(or, atomicOr)
 WP_BITS_ATOMIC(xor, atomicXor)
@@ -172,32 +172,32 @@ WP_BITS_ATOMIC(xor, atomicXor)
 #else  // host: single-threaded read-modify-write (not atomic)
 
 #define WP_HOST_RMW(T)                                                           \
-  WP_FN T atomic_add_p(T* p, T v) { const T o = *p; *p = w_add(o, v); return o; } \
-  WP_FN T atomic_sub_p(T* p, T v) { const T o = *p; *p = w_sub(o, v); return o; } \
-  WP_FN T atomic_min_p(T* p, T v) { const T o = *p; *p = min(o, v); return o; }   \
-  WP_FN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
+  WP_LFN T atomic_add_p(T* p, T v) { const T o = *p; *p = w_add(o, v); return o; } \
+  WP_LFN T atomic_sub_p(T* p, T v) { const T o = *p; *p = w_sub(o, v); return o; } \
+  WP_LFN T atomic_min_p(T* p, T v) { const T o = *p; *p = min(o, v); return o; }   \
+  WP_LFN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
 WP_HOST_RMW(i32)
 WP_HOST_RMW(u32)
 WP_HOST_RMW(i64)
 WP_HOST_RMW(u64)
 #undef WP_HOST_RMW
 #define WP_HOST_RMW_F(T)                                                         \
-  WP_FN T atomic_add_p(T* p, T v) { const T o = *p; *p = o + v; return o; }      \
-  WP_FN T atomic_sub_p(T* p, T v) { const T o = *p; *p = o - v; return o; }      \
-  WP_FN T atomic_min_p(T* p, T v) { const T o = *p; *p = min(o, v); return o; }  \
-  WP_FN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
+  WP_LFN T atomic_add_p(T* p, T v) { const T o = *p; *p = o + v; return o; }      \
+  WP_LFN T atomic_sub_p(T* p, T v) { const T o = *p; *p = o - v; return o; }      \
+  WP_LFN T atomic_min_p(T* p, T v) { const T o = *p; *p = min(o, v); return o; }  \
+  WP_LFN T atomic_max_p(T* p, T v) { const T o = *p; *p = max(o, v); return o; }
 WP_HOST_RMW_F(f32)
 WP_HOST_RMW_F(f64)
 WP_HOST_RMW_F(f16)
 WP_HOST_RMW_F(bf16)
 #undef WP_HOST_RMW_F
 #define WP_HOST_SWAP(T, BITS)                                                    \
-  WP_FN T atomic_cas_p(T* p, T c, T v) {                                         \
+  WP_LFN T atomic_cas_p(T* p, T c, T v) {                                         \
     const T o = *p;                                                              \
     if (BITS(o) == BITS(c)) *p = v;                                              \
     return o;                                                                    \
   }                                                                              \
-  WP_FN T atomic_exch_p(T* p, T v) { const T o = *p; *p = v; return o; }
+  WP_LFN T atomic_exch_p(T* p, T v) { const T o = *p; *p = v; return o; }
 #define WP_SAME(x) (x)
 WP_HOST_SWAP(i32, WP_SAME)
 WP_HOST_SWAP(u32, WP_SAME)
@@ -208,9 +208,9 @@ WP_HOST_SWAP(f64, f64_to_bits)
 #undef WP_SAME
 #undef WP_HOST_SWAP
 #define WP_HOST_BITS(T)                                                          \
-  WP_FN T atomic_and_p(T* p, T v) { const T o = *p; *p = o & v; return o; }      \
-  WP_FN T atomic_or_p(T* p, T v) { const T o = *p; *p = o | v; return o; }       \
-  WP_FN T atomic_xor_p(T* p, T v) { const T o = *p; *p = o ^ v; return o; }
+  WP_LFN T atomic_and_p(T* p, T v) { const T o = *p; *p = o & v; return o; }      \
+  WP_LFN T atomic_or_p(T* p, T v) { const T o = *p; *p = o | v; return o; }       \
+  WP_LFN T atomic_xor_p(T* p, T v) { const T o = *p; *p = o ^ v; return o; }
 WP_HOST_BITS(i32)
 WP_HOST_BITS(u32)
 WP_HOST_BITS(i64)
@@ -221,7 +221,7 @@ WP_HOST_BITS(u64)
 
 // ----- float vectors: componentwise, x first -----
 #define WP_VEC_ATOMIC(V, S, OP)                                                  \
-  WP_FN V atomic_##OP##_p(V* p, V v) {                                           \
+  WP_LFN V atomic_##OP##_p(V* p, V v) {                                           \
     V old;                                                                       \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                   \
       vec_traits<V>::at(old, i) =                                                \

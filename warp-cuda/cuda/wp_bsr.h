@@ -86,7 +86,7 @@ WP_FN array_t<i32, 1> bsr_offsets(const bsr_t<B>& a) {
   return v;
 }
 
-WP_FN i32 bsr_clamp(i32 x, i32 lo, i32 hi) { return x < lo ? lo : (x > hi ? hi : x); }
+WP_LFN i32 bsr_clamp(i32 x, i32 lo, i32 hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
 template <typename B>
 WP_FN i32 bsr_nnz_of(const bsr_t<B>& a) {
@@ -184,8 +184,8 @@ WP_FN bsr_row_query_t bsr_row_next(const bsr_t<B>& a, bsr_row_query_t q, ctx_t* 
   return q;
 }
 
-WP_FN bool bsr_row_done(bsr_row_query_t q) { return q.cur >= q.end; }
-WP_FN i32 bsr_row_item(bsr_row_query_t q) { return q.cur; }
+WP_LFN bool bsr_row_done(bsr_row_query_t q) { return q.cur >= q.end; }
+WP_LFN i32 bsr_row_item(bsr_row_query_t q) { return q.cur; }
 
 template <typename B>
 WP_FN i32 bsr_col(const bsr_t<B>& a, i32 k, ctx_t* ctx) {

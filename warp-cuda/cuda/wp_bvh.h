@@ -109,7 +109,7 @@ namespace detail {
 #define WP_BVH_WALK_START (-2)
 #define WP_BVH_WALK_END (-1)
 
-WP_FN bvh_walk_t bvh_walk_start() {
+WP_LFN bvh_walk_t bvh_walk_start() {
   bvh_walk_t w;
   w.node = WP_BVH_WALK_START;
   w.next = 0;
@@ -136,11 +136,11 @@ WP_FN void bvh_fault(const bvh_tree_t& t, i64 index, i64 len, ctx_t* ctx) {
   }
 }
 
-WP_FN Vec3 bvh_node_lower(const bvh_node_t& n) { return Vec3_new(n.lower[0], n.lower[1], n.lower[2]); }
-WP_FN Vec3 bvh_node_upper(const bvh_node_t& n) { return Vec3_new(n.upper[0], n.upper[1], n.upper[2]); }
+WP_LFN Vec3 bvh_node_lower(const bvh_node_t& n) { return Vec3_new(n.lower[0], n.lower[1], n.lower[2]); }
+WP_LFN Vec3 bvh_node_upper(const bvh_node_t& n) { return Vec3_new(n.upper[0], n.upper[1], n.upper[2]); }
 
 /// Node i, which the caller has checked to be one of the nodes.
-WP_FN bvh_node_t bvh_node_in_bounds(const bvh_tree_t& t, i32 i) {
+WP_LFN bvh_node_t bvh_node_in_bounds(const bvh_tree_t& t, i32 i) {
 #if defined(__CUDACC__)
   // Two 16-byte read-only loads (the runtime allocates nodes 16-byte aligned) instead of
   // eight 4-byte ones: the traversals are bound by these loads.
@@ -167,7 +167,7 @@ WP_FN bvh_node_t bvh_node(const bvh_tree_t& t, i32 i, ctx_t* ctx) {
 /// indices are checked before either node is read, so that the two reads are issued together:
 /// a read after a check that may return cannot be hoisted above it, and the ordered walk reads
 /// both children of every node it enters.
-WP_FN void bvh_node_pair(const bvh_tree_t& t, i32 i, i32 j, bvh_node_t* a, bvh_node_t* b,
+WP_LFN void bvh_node_pair(const bvh_tree_t& t, i32 i, i32 j, bvh_node_t* a, bvh_node_t* b,
                          ctx_t* ctx) {
   const bool ok_i = (u32)i < (u32)t.num_nodes, ok_j = (u32)j < (u32)t.num_nodes;
   if (ok_i && ok_j) {
@@ -212,7 +212,7 @@ WP_FN void bvh_leaf_range(const bvh_tree_t& t, const bvh_node_t& n, i32* start, 
 }
 
 /// The move budget: 2 * num_nodes + 2, at most u32::MAX.
-WP_FN u32 bvh_max_steps(const bvh_tree_t& t) {
+WP_LFN u32 bvh_max_steps(const bvh_tree_t& t) {
   const i64 m = 2 * (i64)t.num_nodes + 2;
   return m < (i64)0xffffffffu ? (u32)m : 0xffffffffu;
 }
@@ -220,7 +220,7 @@ WP_FN u32 bvh_max_steps(const bvh_tree_t& t) {
 /// BvhTree::climb: from finished node c to the right child of the nearest ancestor reached
 /// from its left child. Returns whether there is one (*out); false at the end (the root
 /// finished, the budget spent, a parent link that does not lead back) and on a fault.
-WP_FN bool bvh_climb(const bvh_tree_t& t, i32 c, u32* steps, i32* out, ctx_t* ctx) {
+WP_LFN bool bvh_climb(const bvh_tree_t& t, i32 c, u32* steps, i32* out, ctx_t* ctx) {
   for (;;) {
     *steps += 1u;
     if (*steps > bvh_max_steps(t)) return false;
@@ -304,7 +304,7 @@ WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_
 }
 
 /// A NaN key as +inf (keys totally ordered).
-WP_FN f32 bvh_key(f32 k) { return k < f32_inf() ? k : f32_inf(); }
+WP_LFN f32 bvh_key(f32 k) { return k < f32_inf() ? k : f32_inf(); }
 
 /// ordered_children: the children of internal node n nearest first (ties to the left), with
 /// their keys and nodes. S: node_key(lower, upper) -> f32, bound() -> f32, visit(k, ctx) with
@@ -436,7 +436,7 @@ WP_FN void bvh_walk_ordered(const bvh_tree_t& t, S& s, ctx_t* ctx) {
 // ------------------------------------------------------------------------------------------
 
 /// Starts a query for the primitives whose boxes overlap [lower, upper] (touching counts).
-WP_FN bvh_query_aabb_t bvh_query_aabb(const bvh_t& bvh, Vec3 lower, Vec3 upper, ctx_t* ctx) {
+WP_LFN bvh_query_aabb_t bvh_query_aabb(const bvh_t& bvh, Vec3 lower, Vec3 upper, ctx_t* ctx) {
   (void)bvh;
   (void)ctx;
   bvh_query_aabb_t q;
@@ -446,7 +446,7 @@ WP_FN bvh_query_aabb_t bvh_query_aabb(const bvh_t& bvh, Vec3 lower, Vec3 upper, 
   return q;
 }
 
-WP_FN bvh_query_aabb_t bvh_query_aabb_next(const bvh_t& bvh, bvh_query_aabb_t q, ctx_t* ctx) {
+WP_LFN bvh_query_aabb_t bvh_query_aabb_next(const bvh_t& bvh, bvh_query_aabb_t q, ctx_t* ctx) {
   const Vec3 lo = q.lower, hi = q.upper;
   q.walk = detail::bvh_walk_next(
       q.walk, bvh.tree, [lo, hi](Vec3 l, Vec3 u) { return aabb_overlap(l, u, lo, hi); },
@@ -457,16 +457,16 @@ WP_FN bvh_query_aabb_t bvh_query_aabb_next(const bvh_t& bvh, bvh_query_aabb_t q,
   return q;
 }
 
-WP_FN bool bvh_query_aabb_done(bvh_query_aabb_t q) { return q.walk.item < 0; }
+WP_LFN bool bvh_query_aabb_done(bvh_query_aabb_t q) { return q.walk.item < 0; }
 
-WP_FN i32 bvh_query_aabb_item(bvh_query_aabb_t q) { return q.walk.item; }
+WP_LFN i32 bvh_query_aabb_item(bvh_query_aabb_t q) { return q.walk.item; }
 
 // ------------------------------------------------------------------------------------------
 // Ray query
 // ------------------------------------------------------------------------------------------
 
 /// Starts a query for the primitives whose boxes the ray start + t * dir, t >= 0, meets.
-WP_FN bvh_query_ray_t bvh_query_ray(const bvh_t& bvh, Vec3 start, Vec3 dir, ctx_t* ctx) {
+WP_LFN bvh_query_ray_t bvh_query_ray(const bvh_t& bvh, Vec3 start, Vec3 dir, ctx_t* ctx) {
   (void)bvh;
   (void)ctx;
   bvh_query_ray_t q;
@@ -476,7 +476,7 @@ WP_FN bvh_query_ray_t bvh_query_ray(const bvh_t& bvh, Vec3 start, Vec3 dir, ctx_
   return q;
 }
 
-WP_FN bvh_query_ray_t bvh_query_ray_next(const bvh_t& bvh, bvh_query_ray_t q, ctx_t* ctx) {
+WP_LFN bvh_query_ray_t bvh_query_ray_next(const bvh_t& bvh, bvh_query_ray_t q, ctx_t* ctx) {
   const Vec3 o = q.start, inv = q.inv_dir;
   q.walk = detail::bvh_walk_next(
       q.walk, bvh.tree,
@@ -492,8 +492,8 @@ WP_FN bvh_query_ray_t bvh_query_ray_next(const bvh_t& bvh, bvh_query_ray_t q, ct
   return q;
 }
 
-WP_FN bool bvh_query_ray_done(bvh_query_ray_t q) { return q.walk.item < 0; }
+WP_LFN bool bvh_query_ray_done(bvh_query_ray_t q) { return q.walk.item < 0; }
 
-WP_FN i32 bvh_query_ray_item(bvh_query_ray_t q) { return q.walk.item; }
+WP_LFN i32 bvh_query_ray_item(bvh_query_ray_t q) { return q.walk.item; }
 
 }  // namespace wp

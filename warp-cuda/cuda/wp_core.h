@@ -41,6 +41,22 @@
 #include <cstring>
 #endif
 
+// WP_LFN: a library function that the front end analyses only where a unit calls it. NVRTC's
+// C++ front end checks every non-template function body it is handed, and the families of
+// operators and adjoints (one overload per scalar, vector and matrix type) were most of a
+// unit's front-end time; a function template's body is analysed only when it is instantiated.
+// The template parameter is never deduced or named (an enum class that no caller spells), so
+// the parameter types stay fixed: the same implicit conversions apply as for a plain function,
+// explicit template arguments (`f<T>(..)`) never select one, and in a tie with a real template
+// it is preferred, as a plain function is (checked with NVRTC and g++). A new function at
+// namespace scope in a kernel section uses it; WP_FN stays on templates, members, functions
+// declared before their definition (the two would repeat the default template argument) and
+// the standalone build libraries.
+namespace wp {
+enum class lazy_t {};
+}  // namespace wp
+#define WP_LFN template <::wp::lazy_t = ::wp::lazy_t{}> WP_FN
+
 namespace wp {
 
 // ------------------------------------------------------------------------------------------
@@ -131,7 +147,7 @@ struct num<bool> {
 };
 
 // Bit casts (IEEE bit patterns).
-WP_FN u32 f32_to_bits(f32 x) {
+WP_LFN u32 f32_to_bits(f32 x) {
 #if defined(__CUDACC__)
   return __float_as_uint(x);
 #else
@@ -140,7 +156,7 @@ WP_FN u32 f32_to_bits(f32 x) {
   return u;
 #endif
 }
-WP_FN f32 f32_from_bits(u32 u) {
+WP_LFN f32 f32_from_bits(u32 u) {
 #if defined(__CUDACC__)
   return __uint_as_float(u);
 #else
@@ -149,7 +165,7 @@ WP_FN f32 f32_from_bits(u32 u) {
   return x;
 #endif
 }
-WP_FN u64 f64_to_bits(f64 x) {
+WP_LFN u64 f64_to_bits(f64 x) {
 #if defined(__CUDACC__)
   return (u64)__double_as_longlong(x);
 #else
@@ -158,7 +174,7 @@ WP_FN u64 f64_to_bits(f64 x) {
   return u;
 #endif
 }
-WP_FN f64 f64_from_bits(u64 u) {
+WP_LFN f64 f64_from_bits(u64 u) {
 #if defined(__CUDACC__)
   return __longlong_as_double((long long)u);
 #else
@@ -169,12 +185,12 @@ WP_FN f64 f64_from_bits(u64 u) {
 }
 
 /// Rust's float constants (bit exact).
-WP_FN f32 f32_nan() { return f32_from_bits(0x7fc00000u); }
-WP_FN f32 f32_inf() { return f32_from_bits(0x7f800000u); }
-WP_FN f32 f32_max() { return f32_from_bits(0x7f7fffffu); }
-WP_FN f64 f64_nan() { return f64_from_bits(0x7ff8000000000000ull); }
-WP_FN f64 f64_inf() { return f64_from_bits(0x7ff0000000000000ull); }
-WP_FN f64 f64_max() { return f64_from_bits(0x7fefffffffffffffull); }
+WP_LFN f32 f32_nan() { return f32_from_bits(0x7fc00000u); }
+WP_LFN f32 f32_inf() { return f32_from_bits(0x7f800000u); }
+WP_LFN f32 f32_max() { return f32_from_bits(0x7f7fffffu); }
+WP_LFN f64 f64_nan() { return f64_from_bits(0x7ff8000000000000ull); }
+WP_LFN f64 f64_inf() { return f64_from_bits(0x7ff0000000000000ull); }
+WP_LFN f64 f64_max() { return f64_from_bits(0x7fefffffffffffffull); }
 template <typename S> WP_FN S float_nan();
 template <> WP_FN f32 float_nan<f32>() { return f32_nan(); }
 template <> WP_FN f64 float_nan<f64>() { return f64_nan(); }
@@ -207,13 +223,13 @@ template <typename T> WP_FN T inf() { return float_inf<T>(); }
 
 namespace detail {
 /// Leading zeros of the low 16 bits of `x` (x < 2^16).
-WP_FN i32 clz16(u32 x) {
+WP_LFN i32 clz16(u32 x) {
   i32 n = 0;
   for (u32 bit = 0x8000u; bit != 0 && (x & bit) == 0; bit >>= 1) ++n;
   return n;
 }
 /// `half`'s f32_to_f16_fallback, transcribed: round to nearest even, overflow to infinity.
-WP_FN u16 f32_to_f16_soft(f32 value) {
+WP_LFN u16 f32_to_f16_soft(f32 value) {
   const u32 x = f32_to_bits(value);
   const u32 sign = x & 0x80000000u;
   const u32 exp = x & 0x7F800000u;
@@ -241,7 +257,7 @@ WP_FN u16 f32_to_f16_soft(f32 value) {
   return (u16)(half_sign | he | hm);
 }
 /// `half`'s f16_to_f32_fallback, transcribed: exact (NaNs made quiet).
-WP_FN f32 f16_to_f32_soft(u16 i) {
+WP_LFN f32 f16_to_f32_soft(u16 i) {
   if ((i & 0x7FFFu) == 0) return f32_from_bits((u32)i << 16);
   const u32 half_sign = i & 0x8000u;
   const u32 half_exp = i & 0x7C00u;
@@ -263,7 +279,7 @@ WP_FN f32 f16_to_f32_soft(u16 i) {
 }  // namespace detail
 
 /// f32 -> f16 bits, round to nearest even.
-WP_FN u16 f32_to_f16_bits(f32 x) {
+WP_LFN u16 f32_to_f16_bits(f32 x) {
 #if defined(__CUDACC__)
   u16 r;
   asm("cvt.rn.f16.f32 %0, %1;" : "=h"(r) : "f"(x));
@@ -273,7 +289,7 @@ WP_FN u16 f32_to_f16_bits(f32 x) {
 #endif
 }
 /// f16 bits -> f32, exact.
-WP_FN f32 f16_bits_to_f32(u16 b) {
+WP_LFN f32 f16_bits_to_f32(u16 b) {
 #if defined(__CUDACC__)
   f32 r;
   asm("cvt.f32.f16 %0, %1;" : "=f"(r) : "h"(b));
@@ -285,7 +301,7 @@ WP_FN f32 f16_bits_to_f32(u16 b) {
 /// f64 -> f16 bits, rounded once to nearest even (Rust's `x as f16`; not f64 -> f32 -> f16,
 /// which rounds twice): the value is scaled by a power of two to units of its f16 ulp,
 /// rounded to an integer (rint: ties to even) and scaled back, all exact in f64.
-WP_FN u16 f64_to_f16_bits(f64 x) {
+WP_LFN u16 f64_to_f16_bits(f64 x) {
   const u64 bits = f64_to_bits(x);
   const u16 sign = (u16)((bits >> 48) & 0x8000u);
   const f64 a = f64_from_bits(bits & 0x7FFFFFFFFFFFFFFFull);
@@ -320,25 +336,25 @@ WP_FN f16 f16_from_bits(u16 b) {
   h.bits = b;
   return h;
 }
-WP_FN f16 f16_from_f32(f32 x) { return f16_from_bits(f32_to_f16_bits(x)); }
-WP_FN f16 f16_from_f64(f64 x) { return f16_from_bits(f64_to_f16_bits(x)); }
-WP_FN f32 f16_to_f32(f16 h) { return f16_bits_to_f32(h.bits); }
+WP_LFN f16 f16_from_f32(f32 x) { return f16_from_bits(f32_to_f16_bits(x)); }
+WP_LFN f16 f16_from_f64(f64 x) { return f16_from_bits(f64_to_f16_bits(x)); }
+WP_LFN f32 f16_to_f32(f16 h) { return f16_bits_to_f32(h.bits); }
 
-WP_FN f16 operator+(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) + f16_to_f32(b)); }
-WP_FN f16 operator-(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) - f16_to_f32(b)); }
-WP_FN f16 operator*(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) * f16_to_f32(b)); }
-WP_FN f16 operator/(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) / f16_to_f32(b)); }
-WP_FN f16 operator-(f16 a) { return f16_from_bits((u16)(a.bits ^ 0x8000u)); }
-WP_FN f16& operator+=(f16& a, f16 b) { return a = a + b; }
-WP_FN f16& operator-=(f16& a, f16 b) { return a = a - b; }
-WP_FN f16& operator*=(f16& a, f16 b) { return a = a * b; }
-WP_FN f16& operator/=(f16& a, f16 b) { return a = a / b; }
-WP_FN bool operator==(f16 a, f16 b) { return f16_to_f32(a) == f16_to_f32(b); }
-WP_FN bool operator!=(f16 a, f16 b) { return f16_to_f32(a) != f16_to_f32(b); }
-WP_FN bool operator<(f16 a, f16 b) { return f16_to_f32(a) < f16_to_f32(b); }
-WP_FN bool operator<=(f16 a, f16 b) { return f16_to_f32(a) <= f16_to_f32(b); }
-WP_FN bool operator>(f16 a, f16 b) { return f16_to_f32(a) > f16_to_f32(b); }
-WP_FN bool operator>=(f16 a, f16 b) { return f16_to_f32(a) >= f16_to_f32(b); }
+WP_LFN f16 operator+(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) + f16_to_f32(b)); }
+WP_LFN f16 operator-(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) - f16_to_f32(b)); }
+WP_LFN f16 operator*(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) * f16_to_f32(b)); }
+WP_LFN f16 operator/(f16 a, f16 b) { return f16_from_f32(f16_to_f32(a) / f16_to_f32(b)); }
+WP_LFN f16 operator-(f16 a) { return f16_from_bits((u16)(a.bits ^ 0x8000u)); }
+WP_LFN f16& operator+=(f16& a, f16 b) { return a = a + b; }
+WP_LFN f16& operator-=(f16& a, f16 b) { return a = a - b; }
+WP_LFN f16& operator*=(f16& a, f16 b) { return a = a * b; }
+WP_LFN f16& operator/=(f16& a, f16 b) { return a = a / b; }
+WP_LFN bool operator==(f16 a, f16 b) { return f16_to_f32(a) == f16_to_f32(b); }
+WP_LFN bool operator!=(f16 a, f16 b) { return f16_to_f32(a) != f16_to_f32(b); }
+WP_LFN bool operator<(f16 a, f16 b) { return f16_to_f32(a) < f16_to_f32(b); }
+WP_LFN bool operator<=(f16 a, f16 b) { return f16_to_f32(a) <= f16_to_f32(b); }
+WP_LFN bool operator>(f16 a, f16 b) { return f16_to_f32(a) > f16_to_f32(b); }
+WP_LFN bool operator>=(f16 a, f16 b) { return f16_to_f32(a) >= f16_to_f32(b); }
 
 template <>
 struct num<f16> {
@@ -367,21 +383,21 @@ template <> WP_FN f16 float_max<f16>() { return f16_from_bits(0x7BFFu); }
 // f32's 24 bits are more than twice bf16's 8 plus two, so + - * / and sqrt rounded twice are
 // correctly rounded bf16 operations.
 
-WP_FN u16 f32_to_bf16_bits(f32 x) {
+WP_LFN u16 f32_to_bf16_bits(f32 x) {
   const u32 u = f32_to_bits(x);
   if ((u & 0x7FFFFFFFu) > 0x7F800000u) return (u16)((u >> 16) | 0x0040u);
   // Round bit set, and a sticky bit or the kept lowest bit set: up (ties to even).
   const bool up = (u & 0x8000u) != 0 && (u & 0x17FFFu) != 0;
   return (u16)((u >> 16) + (up ? 1u : 0u));
 }
-WP_FN f32 bf16_bits_to_f32(u16 b) {
+WP_LFN f32 bf16_bits_to_f32(u16 b) {
   const u32 u = (u32)b << 16;
   // A NaN gets its quiet bit, as `half`'s bf16_to_f32.
   return f32_from_bits((b & 0x7FFFu) > 0x7F80u ? (u | 0x00400000u) : u);
 }
 /// f64 -> bf16 bits, rounded once to nearest even (warp_core::bfloat16::bf16_from_f64): as
 /// f64_to_f16_bits, in units of the bf16 ulp (2^(e-7), 2^-133 below 2^-126).
-WP_FN u16 f64_to_bf16_bits(f64 x) {
+WP_LFN u16 f64_to_bf16_bits(f64 x) {
   const u64 bits = f64_to_bits(x);
   const u16 sign = (u16)((bits >> 48) & 0x8000u);
   const f64 a = f64_from_bits(bits & 0x7FFFFFFFFFFFFFFFull);
@@ -399,7 +415,7 @@ WP_FN u16 f64_to_bf16_bits(f64 x) {
 /// An integer's magnitude rounded once to bf16 bits: above 2^25 the bits below the 25th
 /// are folded into a sticky bit (exact in f64 then), so f32's own rounding of a large
 /// integer cannot round a second time (warp_core::bfloat16's int_to_bf16).
-WP_FN u16 u64_to_bf16_bits(u64 a) {
+WP_LFN u16 u64_to_bf16_bits(u64 a) {
   i32 cut = 0;
   u64 sticky = 0;
   while ((a >> 25) != 0) {
@@ -428,25 +444,25 @@ WP_FN bf16 bf16_from_bits(u16 b) {
   h.bits = b;
   return h;
 }
-WP_FN bf16 bf16_from_f32(f32 x) { return bf16_from_bits(f32_to_bf16_bits(x)); }
-WP_FN bf16 bf16_from_f64(f64 x) { return bf16_from_bits(f64_to_bf16_bits(x)); }
-WP_FN f32 bf16_to_f32(bf16 h) { return bf16_bits_to_f32(h.bits); }
+WP_LFN bf16 bf16_from_f32(f32 x) { return bf16_from_bits(f32_to_bf16_bits(x)); }
+WP_LFN bf16 bf16_from_f64(f64 x) { return bf16_from_bits(f64_to_bf16_bits(x)); }
+WP_LFN f32 bf16_to_f32(bf16 h) { return bf16_bits_to_f32(h.bits); }
 
-WP_FN bf16 operator+(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) + bf16_to_f32(b)); }
-WP_FN bf16 operator-(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) - bf16_to_f32(b)); }
-WP_FN bf16 operator*(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) * bf16_to_f32(b)); }
-WP_FN bf16 operator/(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) / bf16_to_f32(b)); }
-WP_FN bf16 operator-(bf16 a) { return bf16_from_bits((u16)(a.bits ^ 0x8000u)); }
-WP_FN bf16& operator+=(bf16& a, bf16 b) { return a = a + b; }
-WP_FN bf16& operator-=(bf16& a, bf16 b) { return a = a - b; }
-WP_FN bf16& operator*=(bf16& a, bf16 b) { return a = a * b; }
-WP_FN bf16& operator/=(bf16& a, bf16 b) { return a = a / b; }
-WP_FN bool operator==(bf16 a, bf16 b) { return bf16_to_f32(a) == bf16_to_f32(b); }
-WP_FN bool operator!=(bf16 a, bf16 b) { return bf16_to_f32(a) != bf16_to_f32(b); }
-WP_FN bool operator<(bf16 a, bf16 b) { return bf16_to_f32(a) < bf16_to_f32(b); }
-WP_FN bool operator<=(bf16 a, bf16 b) { return bf16_to_f32(a) <= bf16_to_f32(b); }
-WP_FN bool operator>(bf16 a, bf16 b) { return bf16_to_f32(a) > bf16_to_f32(b); }
-WP_FN bool operator>=(bf16 a, bf16 b) { return bf16_to_f32(a) >= bf16_to_f32(b); }
+WP_LFN bf16 operator+(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) + bf16_to_f32(b)); }
+WP_LFN bf16 operator-(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) - bf16_to_f32(b)); }
+WP_LFN bf16 operator*(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) * bf16_to_f32(b)); }
+WP_LFN bf16 operator/(bf16 a, bf16 b) { return bf16_from_f32(bf16_to_f32(a) / bf16_to_f32(b)); }
+WP_LFN bf16 operator-(bf16 a) { return bf16_from_bits((u16)(a.bits ^ 0x8000u)); }
+WP_LFN bf16& operator+=(bf16& a, bf16 b) { return a = a + b; }
+WP_LFN bf16& operator-=(bf16& a, bf16 b) { return a = a - b; }
+WP_LFN bf16& operator*=(bf16& a, bf16 b) { return a = a * b; }
+WP_LFN bf16& operator/=(bf16& a, bf16 b) { return a = a / b; }
+WP_LFN bool operator==(bf16 a, bf16 b) { return bf16_to_f32(a) == bf16_to_f32(b); }
+WP_LFN bool operator!=(bf16 a, bf16 b) { return bf16_to_f32(a) != bf16_to_f32(b); }
+WP_LFN bool operator<(bf16 a, bf16 b) { return bf16_to_f32(a) < bf16_to_f32(b); }
+WP_LFN bool operator<=(bf16 a, bf16 b) { return bf16_to_f32(a) <= bf16_to_f32(b); }
+WP_LFN bool operator>(bf16 a, bf16 b) { return bf16_to_f32(a) > bf16_to_f32(b); }
+WP_LFN bool operator>=(bf16 a, bf16 b) { return bf16_to_f32(a) >= bf16_to_f32(b); }
 
 template <>
 struct num<bf16> {
@@ -648,7 +664,7 @@ struct step_fault_t {
 };
 static_assert(sizeof(step_fault_t) == 40 && alignof(step_fault_t) == 8, "step_fault_t layout");
 
-WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
+WP_LFN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
   ctx_t c;
   c.fault = fault;
   c.fault_flag = fault_flag;
@@ -661,7 +677,7 @@ WP_FN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
 
 /// Records a fault: marks this thread's context, and if this is the first fault of the launch
 /// (compare-and-swap of `*fault_flag` from 0 to 1) fills the shared record.
-WP_FN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* index = nullptr,
+WP_LFN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* index = nullptr,
                  const i64* shape = nullptr) {
   ctx->raised = 1;
   if (ctx->fault_flag == nullptr || ctx->fault == nullptr) return;
@@ -709,19 +725,19 @@ inline void raise_out_of_bounds_1d(ctx_t c, i32 arg, i64 index, i64 len) {
 }
 
 /// True once this thread raised a fault.
-WP_FN bool faulted(const ctx_t* ctx) { return ctx->raised != 0; }
+WP_LFN bool faulted(const ctx_t* ctx) { return ctx->raised != 0; }
 
 /// A failed assertion (`assert!`, `debug_assert!` in debug mode, `expect_*`) at `line` and
 /// `column` of the user's source, in the thread of flat launch index `thread` (-1 in a func).
 /// The thread goes on, as after any fault on a GPU.
-WP_FN void assert_fail(ctx_t* ctx, i64 line, i64 column, i64 thread) {
+WP_LFN void assert_fail(ctx_t* ctx, i64 line, i64 column, i64 thread) {
   const i64 at[3] = {line, column, thread};
   raise(ctx, FAULT_ASSERTION, -1, 3, at, nullptr);
 }
 
 /// Whether the launch runs in the runtime's debug mode (the guard of `debug_assert!`): the
 /// same for every thread of a launch, so the branch on it is uniform.
-WP_FN bool debug_mode(const ctx_t* ctx) { return (ctx->flags & CTX_DEBUG) != 0; }
+WP_LFN bool debug_mode(const ctx_t* ctx) { return (ctx->flags & CTX_DEBUG) != 0; }
 
 // ------------------------------------------------------------------------------------------
 // Casts: Rust `as`
@@ -789,28 +805,28 @@ WP_FN To cast(From x) {
 // ------------------------------------------------------------------------------------------
 
 #define WP_INT_OPS(T)                                                                       \
-  WP_FN T w_add(T a, T b) {                                                                 \
+  WP_LFN T w_add(T a, T b) {                                                                 \
     typedef num<T>::unsigned_t U;                                                           \
     typedef num<T>::wide_t W;                                                               \
     return (T)(U)((W)(U)a + (W)(U)b);                                                       \
   }                                                                                         \
-  WP_FN T w_sub(T a, T b) {                                                                 \
+  WP_LFN T w_sub(T a, T b) {                                                                 \
     typedef num<T>::unsigned_t U;                                                           \
     typedef num<T>::wide_t W;                                                               \
     return (T)(U)((W)(U)a - (W)(U)b);                                                       \
   }                                                                                         \
-  WP_FN T w_mul(T a, T b) {                                                                 \
+  WP_LFN T w_mul(T a, T b) {                                                                 \
     typedef num<T>::unsigned_t U;                                                           \
     typedef num<T>::wide_t W;                                                               \
     return (T)(U)((W)(U)a * (W)(U)b);                                                       \
   }                                                                                         \
-  WP_FN T w_neg(T a) {                                                                      \
+  WP_LFN T w_neg(T a) {                                                                      \
     typedef num<T>::unsigned_t U;                                                           \
     typedef num<T>::wide_t W;                                                               \
     return (T)(U)((W)0 - (W)(U)a);                                                          \
   }                                                                                         \
   /* `/`: DivisionByZero fault (returns 0) on b == 0; MIN / -1 wraps to MIN. */             \
-  WP_FN T w_div(T a, T b, ctx_t* ctx) {                                                     \
+  WP_LFN T w_div(T a, T b, ctx_t* ctx) {                                                     \
     if (b == (T)0) {                                                                        \
       raise(ctx, FAULT_DIVISION_BY_ZERO);                                                   \
       return (T)0;                                                                          \
@@ -819,7 +835,7 @@ WP_FN To cast(From x) {
     return (T)(a / b);                                                                      \
   }                                                                                         \
   /* `%`: DivisionByZero fault (returns 0) on b == 0; MIN % -1 is 0. Sign of the dividend. */ \
-  WP_FN T w_rem(T a, T b, ctx_t* ctx) {                                                     \
+  WP_LFN T w_rem(T a, T b, ctx_t* ctx) {                                                     \
     if (b == (T)0) {                                                                        \
       raise(ctx, FAULT_DIVISION_BY_ZERO);                                                   \
       return (T)0;                                                                          \
@@ -828,13 +844,13 @@ WP_FN To cast(From x) {
     return (T)(a % b);                                                                      \
   }                                                                                         \
   /* `<<`: the shift amount is masked to the bit width (Rust wrapping_shl). */              \
-  WP_FN T w_shl(T a, u32 s) {                                                               \
+  WP_LFN T w_shl(T a, u32 s) {                                                               \
     typedef num<T>::unsigned_t U;                                                           \
     typedef num<T>::wide_t W;                                                               \
     return (T)(U)((W)(U)a << (s & (u32)(num<T>::bits - 1)));                                \
   }                                                                                         \
   /* `>>`: arithmetic for signed types, amount masked (Rust wrapping_shr). */               \
-  WP_FN T w_shr(T a, u32 s) { return (T)(a >> (s & (u32)(num<T>::bits - 1))); }
+  WP_LFN T w_shr(T a, u32 s) { return (T)(a >> (s & (u32)(num<T>::bits - 1))); }
 
 WP_INT_OPS(i8)
 WP_INT_OPS(i16)
@@ -847,22 +863,22 @@ WP_INT_OPS(u64)
 #undef WP_INT_OPS
 
 /// Float `%` (Rust's `%` on f32/f64 is C's fmod: the result has the sign of the dividend).
-WP_FN f32 frem(f32 a, f32 b) { return ::fmodf(a, b); }
-WP_FN f64 frem(f64 a, f64 b) { return ::fmod(a, b); }
-WP_FN f32 fmod(f32 a, f32 b) { return ::fmodf(a, b); }  // same as frem
-WP_FN f64 fmod(f64 a, f64 b) { return ::fmod(a, b); }
+WP_LFN f32 frem(f32 a, f32 b) { return ::fmodf(a, b); }
+WP_LFN f64 frem(f64 a, f64 b) { return ::fmod(a, b); }
+WP_LFN f32 fmod(f32 a, f32 b) { return ::fmodf(a, b); }  // same as frem
+WP_LFN f64 fmod(f64 a, f64 b) { return ::fmod(a, b); }
 // f16 `%`: fmod in f32 (exact), rounded to f16 (exact too), as `half`'s `%`.
-WP_FN f16 frem(f16 a, f16 b) { return f16_from_f32(::fmodf(f16_to_f32(a), f16_to_f32(b))); }
-WP_FN f16 fmod(f16 a, f16 b) { return frem(a, b); }
-WP_FN bf16 frem(bf16 a, bf16 b) { return bf16_from_f32(::fmodf(bf16_to_f32(a), bf16_to_f32(b))); }
-WP_FN bf16 fmod(bf16 a, bf16 b) { return frem(a, b); }
+WP_LFN f16 frem(f16 a, f16 b) { return f16_from_f32(::fmodf(f16_to_f32(a), f16_to_f32(b))); }
+WP_LFN f16 fmod(f16 a, f16 b) { return frem(a, b); }
+WP_LFN bf16 frem(bf16 a, bf16 b) { return bf16_from_f32(::fmodf(bf16_to_f32(a), bf16_to_f32(b))); }
+WP_LFN bf16 fmod(bf16 a, bf16 b) { return frem(a, b); }
 
 namespace detail {
 // Scalar arithmetic of builtins (warp_core::builtins::Scalar): wrapping for ints, IEEE else.
 #define WP_S_INT(T)                                       \
-  WP_FN T s_add(T a, T b) { return w_add(a, b); }         \
-  WP_FN T s_sub(T a, T b) { return w_sub(a, b); }         \
-  WP_FN T s_mul(T a, T b) { return w_mul(a, b); }
+  WP_LFN T s_add(T a, T b) { return w_add(a, b); }         \
+  WP_LFN T s_sub(T a, T b) { return w_sub(a, b); }         \
+  WP_LFN T s_mul(T a, T b) { return w_mul(a, b); }
 WP_S_INT(i8)
 WP_S_INT(i16)
 WP_S_INT(i32)
@@ -872,19 +888,19 @@ WP_S_INT(u16)
 WP_S_INT(u32)
 WP_S_INT(u64)
 #undef WP_S_INT
-WP_FN f32 s_add(f32 a, f32 b) { return a + b; }
-WP_FN f32 s_sub(f32 a, f32 b) { return a - b; }
-WP_FN f32 s_mul(f32 a, f32 b) { return a * b; }
-WP_FN f64 s_add(f64 a, f64 b) { return a + b; }
-WP_FN f64 s_sub(f64 a, f64 b) { return a - b; }
-WP_FN f64 s_mul(f64 a, f64 b) { return a * b; }
+WP_LFN f32 s_add(f32 a, f32 b) { return a + b; }
+WP_LFN f32 s_sub(f32 a, f32 b) { return a - b; }
+WP_LFN f32 s_mul(f32 a, f32 b) { return a * b; }
+WP_LFN f64 s_add(f64 a, f64 b) { return a + b; }
+WP_LFN f64 s_sub(f64 a, f64 b) { return a - b; }
+WP_LFN f64 s_mul(f64 a, f64 b) { return a * b; }
 // f16: its operators (one f32 operation, rounded once), as `half`'s.
-WP_FN f16 s_add(f16 a, f16 b) { return a + b; }
-WP_FN f16 s_sub(f16 a, f16 b) { return a - b; }
-WP_FN f16 s_mul(f16 a, f16 b) { return a * b; }
-WP_FN bf16 s_add(bf16 a, bf16 b) { return a + b; }
-WP_FN bf16 s_sub(bf16 a, bf16 b) { return a - b; }
-WP_FN bf16 s_mul(bf16 a, bf16 b) { return a * b; }
+WP_LFN f16 s_add(f16 a, f16 b) { return a + b; }
+WP_LFN f16 s_sub(f16 a, f16 b) { return a - b; }
+WP_LFN f16 s_mul(f16 a, f16 b) { return a * b; }
+WP_LFN bf16 s_add(bf16 a, bf16 b) { return a + b; }
+WP_LFN bf16 s_sub(bf16 a, bf16 b) { return a - b; }
+WP_LFN bf16 s_mul(bf16 a, bf16 b) { return a * b; }
 }  // namespace detail
 
 // ------------------------------------------------------------------------------------------
@@ -907,26 +923,26 @@ struct vec_traits {
     static WP_FN S get(const V& v, int i) { return GET; }                             \
     static WP_FN S& at(V& v, int i) { return GET; }                                   \
   };                                                                                  \
-  WP_FN V V##_splat(S s) {                                                            \
+  WP_LFN V V##_splat(S s) {                                                            \
     V r;                                                                              \
     for (int i = 0; i < NN; ++i) vec_traits<V>::at(r, i) = s;                         \
     return r;                                                                         \
   }                                                                                   \
-  WP_FN V V##_ZERO() { return V##_splat((S)0); }                                      \
-  WP_FN V V##_ONE() { return V##_splat((S)1); }                                       \
-  WP_FN V V##_unit(int k, S s) {                                                      \
+  WP_LFN V V##_ZERO() { return V##_splat((S)0); }                                      \
+  WP_LFN V V##_ONE() { return V##_splat((S)1); }                                       \
+  WP_LFN V V##_unit(int k, S s) {                                                      \
     V r = V##_ZERO();                                                                 \
     vec_traits<V>::at(r, k) = s;                                                      \
     return r;                                                                         \
   }                                                                                   \
-  WP_FN V V##_X() { return V##_unit(0, (S)1); }                                       \
-  WP_FN V V##_Y() { return V##_unit(1, (S)1); }                                       \
-  WP_FN bool operator==(const V& a, const V& b) {                                     \
+  WP_LFN V V##_X() { return V##_unit(0, (S)1); }                                       \
+  WP_LFN V V##_Y() { return V##_unit(1, (S)1); }                                       \
+  WP_LFN bool operator==(const V& a, const V& b) {                                     \
     bool r = true;                                                                    \
     for (int i = 0; i < NN; ++i) r = r && (vec_traits<V>::get(a, i) == vec_traits<V>::get(b, i)); \
     return r;                                                                         \
   }                                                                                   \
-  WP_FN bool operator!=(const V& a, const V& b) { return !(a == b); }
+  WP_LFN bool operator!=(const V& a, const V& b) { return !(a == b); }
 
 #define WP_GET2 (i == 0 ? v.x : v.y)
 #define WP_GET3 (i == 0 ? v.x : (i == 1 ? v.y : v.z))
@@ -936,7 +952,7 @@ struct vec_traits {
   struct alignas(AL) V {                                                             \
     S x, y;                                                                          \
   };                                                                                 \
-  WP_FN V V##_new(S x, S y) {                                                        \
+  WP_LFN V V##_new(S x, S y) {                                                        \
     V r;                                                                             \
     r.x = x;                                                                         \
     r.y = y;                                                                         \
@@ -947,7 +963,7 @@ struct vec_traits {
   struct alignas(AL) V {                                                             \
     S x, y, z;                                                                       \
   };                                                                                 \
-  WP_FN V V##_new(S x, S y, S z) {                                                   \
+  WP_LFN V V##_new(S x, S y, S z) {                                                   \
     V r;                                                                             \
     r.x = x;                                                                         \
     r.y = y;                                                                         \
@@ -955,12 +971,12 @@ struct vec_traits {
     return r;                                                                        \
   }                                                                                  \
   WP_VEC_COMMON(V, S, 3, WP_GET3)                                                    \
-  WP_FN V V##_Z() { return V##_unit(2, (S)1); }
+  WP_LFN V V##_Z() { return V##_unit(2, (S)1); }
 #define WP_VEC4(V, S, AL)                                                            \
   struct alignas(AL) V {                                                             \
     S x, y, z, w;                                                                    \
   };                                                                                 \
-  WP_FN V V##_new(S x, S y, S z, S w) {                                              \
+  WP_LFN V V##_new(S x, S y, S z, S w) {                                              \
     V r;                                                                             \
     r.x = x;                                                                         \
     r.y = y;                                                                         \
@@ -969,8 +985,8 @@ struct vec_traits {
     return r;                                                                        \
   }                                                                                  \
   WP_VEC_COMMON(V, S, 4, WP_GET4)                                                    \
-  WP_FN V V##_Z() { return V##_unit(2, (S)1); }                                      \
-  WP_FN V V##_W() { return V##_unit(3, (S)1); }
+  WP_LFN V V##_Z() { return V##_unit(2, (S)1); }                                      \
+  WP_LFN V V##_W() { return V##_unit(3, (S)1); }
 
 WP_VEC2(Vec2, f32, 4)
 WP_VEC3(Vec3, f32, 4)
@@ -987,15 +1003,15 @@ WP_VEC4(UVec4, u32, 4)
 
 // Signed constants (float and IVec): NEG_ONE, NEG_X.. NEG_W; MIN/MAX for every vector.
 #define WP_VEC_NEG2(V, S)                                        \
-  WP_FN V V##_NEG_ONE() { return V##_splat((S)-1); }             \
-  WP_FN V V##_NEG_X() { return V##_unit(0, (S)-1); }             \
-  WP_FN V V##_NEG_Y() { return V##_unit(1, (S)-1); }
+  WP_LFN V V##_NEG_ONE() { return V##_splat((S)-1); }             \
+  WP_LFN V V##_NEG_X() { return V##_unit(0, (S)-1); }             \
+  WP_LFN V V##_NEG_Y() { return V##_unit(1, (S)-1); }
 #define WP_VEC_NEG3(V, S) \
   WP_VEC_NEG2(V, S)       \
-  WP_FN V V##_NEG_Z() { return V##_unit(2, (S)-1); }
+  WP_LFN V V##_NEG_Z() { return V##_unit(2, (S)-1); }
 #define WP_VEC_NEG4(V, S) \
   WP_VEC_NEG3(V, S)       \
-  WP_FN V V##_NEG_W() { return V##_unit(3, (S)-1); }
+  WP_LFN V V##_NEG_W() { return V##_unit(3, (S)-1); }
 WP_VEC_NEG2(Vec2, f32)
 WP_VEC_NEG3(Vec3, f32)
 WP_VEC_NEG4(Vec4, f32)
@@ -1010,11 +1026,11 @@ WP_VEC_NEG4(IVec4, i32)
 #undef WP_VEC_NEG4
 
 #define WP_VEC_FLOAT_CONSTS(V, S)                                      \
-  WP_FN V V##_MIN() { return V##_splat(-float_max<S>()); }             \
-  WP_FN V V##_MAX() { return V##_splat(float_max<S>()); }              \
-  WP_FN V V##_INFINITY() { return V##_splat(float_inf<S>()); }         \
-  WP_FN V V##_NEG_INFINITY() { return V##_splat(-float_inf<S>()); }    \
-  WP_FN V V##_NAN() { return V##_splat(float_nan<S>()); }
+  WP_LFN V V##_MIN() { return V##_splat(-float_max<S>()); }             \
+  WP_LFN V V##_MAX() { return V##_splat(float_max<S>()); }              \
+  WP_LFN V V##_INFINITY() { return V##_splat(float_inf<S>()); }         \
+  WP_LFN V V##_NEG_INFINITY() { return V##_splat(-float_inf<S>()); }    \
+  WP_LFN V V##_NAN() { return V##_splat(float_nan<S>()); }
 WP_VEC_FLOAT_CONSTS(Vec2, f32)
 WP_VEC_FLOAT_CONSTS(Vec3, f32)
 WP_VEC_FLOAT_CONSTS(Vec4, f32)
@@ -1023,8 +1039,8 @@ WP_VEC_FLOAT_CONSTS(DVec3, f64)
 WP_VEC_FLOAT_CONSTS(DVec4, f64)
 #undef WP_VEC_FLOAT_CONSTS
 #define WP_VEC_INT_CONSTS(V, S)                                        \
-  WP_FN V V##_MIN() { return V##_splat(num<S>::min_value); }           \
-  WP_FN V V##_MAX() { return V##_splat(num<S>::max_value); }
+  WP_LFN V V##_MIN() { return V##_splat(num<S>::min_value); }           \
+  WP_LFN V V##_MAX() { return V##_splat(num<S>::max_value); }
 WP_VEC_INT_CONSTS(IVec2, i32)
 WP_VEC_INT_CONSTS(IVec3, i32)
 WP_VEC_INT_CONSTS(IVec4, i32)
@@ -1054,7 +1070,7 @@ WP_FN V vzip(const V& a, const V& b, F f) {
 }
 /// glam's SSE floor (DirectXMath XMVectorFloor): as floorf except that -0.0 floors to +0.0
 /// (and values in (-1, 0) go through truncation then -1). Used by Vec4's `%` only.
-WP_FN f32 sse_floor(f32 v) {
+WP_LFN f32 sse_floor(f32 v) {
   const u32 mag = f32_to_bits(v) & 0x7fffffffu;
   if ((i32)mag < (i32)0x4b000000) {  // |v| < 2^23: has a fraction; NaN and inf excluded
     f32 r = (f32)(i32)v;             // truncate (cvttps2dq + cvtdq2ps)
@@ -1067,39 +1083,39 @@ WP_FN f32 sse_floor(f32 v) {
 
 // Float vector arithmetic: componentwise, glam's operators.
 #define WP_FVEC_OPS(V, S)                                                                        \
-  WP_FN V operator+(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x + y; }); } \
-  WP_FN V operator-(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x - y; }); } \
-  WP_FN V operator*(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x * y; }); } \
-  WP_FN V operator/(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x / y; }); } \
-  WP_FN V operator+(const V& a, S s) { return a + V##_splat(s); }                               \
-  WP_FN V operator-(const V& a, S s) { return a - V##_splat(s); }                               \
-  WP_FN V operator*(const V& a, S s) { return a * V##_splat(s); }                               \
-  WP_FN V operator/(const V& a, S s) { return a / V##_splat(s); }                               \
-  WP_FN V operator%(const V& a, S s) { return a % V##_splat(s); }                               \
-  WP_FN V operator+(S s, const V& a) { return V##_splat(s) + a; }                               \
-  WP_FN V operator-(S s, const V& a) { return V##_splat(s) - a; }                               \
-  WP_FN V operator*(S s, const V& a) { return V##_splat(s) * a; }                               \
-  WP_FN V operator/(S s, const V& a) { return V##_splat(s) / a; }                               \
-  WP_FN V operator%(S s, const V& a) { return V##_splat(s) % a; }                               \
-  WP_FN V operator-(const V& a) { return detail::vmap(a, [](S x) { return -x; }); }            \
-  WP_FN V& operator+=(V& a, const V& b) { return a = a + b; }                                   \
-  WP_FN V& operator-=(V& a, const V& b) { return a = a - b; }                                   \
-  WP_FN V& operator*=(V& a, const V& b) { return a = a * b; }                                   \
-  WP_FN V& operator/=(V& a, const V& b) { return a = a / b; }                                   \
-  WP_FN V& operator%=(V& a, const V& b) { return a = a % b; }                                   \
-  WP_FN V& operator*=(V& a, S s) { return a = a * s; }                                          \
-  WP_FN V& operator/=(V& a, S s) { return a = a / s; }
+  WP_LFN V operator+(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x + y; }); } \
+  WP_LFN V operator-(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x - y; }); } \
+  WP_LFN V operator*(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x * y; }); } \
+  WP_LFN V operator/(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return x / y; }); } \
+  WP_LFN V operator+(const V& a, S s) { return a + V##_splat(s); }                               \
+  WP_LFN V operator-(const V& a, S s) { return a - V##_splat(s); }                               \
+  WP_LFN V operator*(const V& a, S s) { return a * V##_splat(s); }                               \
+  WP_LFN V operator/(const V& a, S s) { return a / V##_splat(s); }                               \
+  WP_LFN V operator%(const V& a, S s) { return a % V##_splat(s); }                               \
+  WP_LFN V operator+(S s, const V& a) { return V##_splat(s) + a; }                               \
+  WP_LFN V operator-(S s, const V& a) { return V##_splat(s) - a; }                               \
+  WP_LFN V operator*(S s, const V& a) { return V##_splat(s) * a; }                               \
+  WP_LFN V operator/(S s, const V& a) { return V##_splat(s) / a; }                               \
+  WP_LFN V operator%(S s, const V& a) { return V##_splat(s) % a; }                               \
+  WP_LFN V operator-(const V& a) { return detail::vmap(a, [](S x) { return -x; }); }            \
+  WP_LFN V& operator+=(V& a, const V& b) { return a = a + b; }                                   \
+  WP_LFN V& operator-=(V& a, const V& b) { return a = a - b; }                                   \
+  WP_LFN V& operator*=(V& a, const V& b) { return a = a * b; }                                   \
+  WP_LFN V& operator/=(V& a, const V& b) { return a = a / b; }                                   \
+  WP_LFN V& operator%=(V& a, const V& b) { return a = a % b; }                                   \
+  WP_LFN V& operator*=(V& a, S s) { return a = a * s; }                                          \
+  WP_LFN V& operator/=(V& a, S s) { return a = a / s; }
 
 // `%` is Rust's float `%` (fmod) per component, except for Vec4: glam's SSE Vec4 computes
 // `a - floor(a / b) * b` (a floored modulo, with glam's SSE floor).
-WP_FN Vec2 operator%(const Vec2& a, const Vec2& b) { return detail::vzip(a, b, [](f32 x, f32 y) { return frem(x, y); }); }
-WP_FN Vec3 operator%(const Vec3& a, const Vec3& b) { return detail::vzip(a, b, [](f32 x, f32 y) { return frem(x, y); }); }
-WP_FN Vec4 operator%(const Vec4& a, const Vec4& b) {
+WP_LFN Vec2 operator%(const Vec2& a, const Vec2& b) { return detail::vzip(a, b, [](f32 x, f32 y) { return frem(x, y); }); }
+WP_LFN Vec3 operator%(const Vec3& a, const Vec3& b) { return detail::vzip(a, b, [](f32 x, f32 y) { return frem(x, y); }); }
+WP_LFN Vec4 operator%(const Vec4& a, const Vec4& b) {
   return detail::vzip(a, b, [](f32 x, f32 y) { return x - detail::sse_floor(x / y) * y; });
 }
-WP_FN DVec2 operator%(const DVec2& a, const DVec2& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
-WP_FN DVec3 operator%(const DVec3& a, const DVec3& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
-WP_FN DVec4 operator%(const DVec4& a, const DVec4& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
+WP_LFN DVec2 operator%(const DVec2& a, const DVec2& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
+WP_LFN DVec3 operator%(const DVec3& a, const DVec3& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
+WP_LFN DVec4 operator%(const DVec4& a, const DVec4& b) { return detail::vzip(a, b, [](f64 x, f64 y) { return frem(x, y); }); }
 
 WP_FVEC_OPS(Vec2, f32)
 WP_FVEC_OPS(Vec3, f32)
@@ -1112,35 +1128,35 @@ WP_FVEC_OPS(DVec4, f64)
 // Integer vectors: arithmetic only through w_* (componentwise; a zero in any component of a
 // divisor faults before anything is computed, as in warp_core::ops).
 #define WP_IVEC_OPS(V, S)                                                                        \
-  WP_FN V w_add(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_add(x, y); }); } \
-  WP_FN V w_sub(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_sub(x, y); }); } \
-  WP_FN V w_mul(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_mul(x, y); }); } \
-  WP_FN V w_neg(const V& a) { return detail::vmap(a, [](S x) { return w_neg(x); }); }           \
-  WP_FN bool any_zero(const V& b) {                                                             \
+  WP_LFN V w_add(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_add(x, y); }); } \
+  WP_LFN V w_sub(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_sub(x, y); }); } \
+  WP_LFN V w_mul(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return w_mul(x, y); }); } \
+  WP_LFN V w_neg(const V& a) { return detail::vmap(a, [](S x) { return w_neg(x); }); }           \
+  WP_LFN bool any_zero(const V& b) {                                                             \
     bool z = false;                                                                             \
     for (int i = 0; i < vec_traits<V>::N; ++i) z = z || vec_traits<V>::get(b, i) == (S)0;      \
     return z;                                                                                   \
   }                                                                                             \
-  WP_FN V w_div(const V& a, const V& b, ctx_t* ctx) {                                           \
+  WP_LFN V w_div(const V& a, const V& b, ctx_t* ctx) {                                           \
     if (any_zero(b)) {                                                                          \
       raise(ctx, FAULT_DIVISION_BY_ZERO);                                                       \
       return V##_ZERO();                                                                        \
     }                                                                                           \
     return detail::vzip(a, b, [ctx](S x, S y) { return w_div(x, y, ctx); });                    \
   }                                                                                             \
-  WP_FN V w_rem(const V& a, const V& b, ctx_t* ctx) {                                           \
+  WP_LFN V w_rem(const V& a, const V& b, ctx_t* ctx) {                                           \
     if (any_zero(b)) {                                                                          \
       raise(ctx, FAULT_DIVISION_BY_ZERO);                                                       \
       return V##_ZERO();                                                                        \
     }                                                                                           \
     return detail::vzip(a, b, [ctx](S x, S y) { return w_rem(x, y, ctx); });                    \
   }                                                                                             \
-  WP_FN V w_shl(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shl(x, s); }); } \
-  WP_FN V w_shr(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shr(x, s); }); } \
-  WP_FN V operator&(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x & y); }); } \
-  WP_FN V operator|(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x | y); }); } \
-  WP_FN V operator^(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x ^ y); }); } \
-  WP_FN V operator~(const V& a) { return detail::vmap(a, [](S x) { return (S)~x; }); }
+  WP_LFN V w_shl(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shl(x, s); }); } \
+  WP_LFN V w_shr(const V& a, u32 s) { return detail::vmap(a, [s](S x) { return w_shr(x, s); }); } \
+  WP_LFN V operator&(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x & y); }); } \
+  WP_LFN V operator|(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x | y); }); } \
+  WP_LFN V operator^(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return (S)(x ^ y); }); } \
+  WP_LFN V operator~(const V& a) { return detail::vmap(a, [](S x) { return (S)~x; }); }
 WP_IVEC_OPS(IVec2, i32)
 WP_IVEC_OPS(IVec3, i32)
 WP_IVEC_OPS(IVec4, i32)
@@ -1198,12 +1214,12 @@ struct mat_traits {
     }                                                                                          \
     static WP_FN S& at(M& m, int i) { return vec_traits<V>::at(mat_traits<M>::at(m, i / NN), i % NN); } \
   };                                                                                           \
-  WP_FN M M##_from_cols FROMCOLS_PARAMS {                                                      \
+  WP_LFN M M##_from_cols FROMCOLS_PARAMS {                                                      \
     M m;                                                                                       \
     FROMCOLS_BODY;                                                                             \
     return m;                                                                                  \
   }                                                                                            \
-  WP_FN M M##_from_diagonal(const V& d) {                                                      \
+  WP_LFN M M##_from_diagonal(const V& d) {                                                      \
     M m;                                                                                       \
     for (int i = 0; i < NN; ++i) {                                                             \
       V c = V##_ZERO();                                                                        \
@@ -1212,58 +1228,58 @@ struct mat_traits {
     }                                                                                          \
     return m;                                                                                  \
   }                                                                                            \
-  WP_FN M M##_splat_cols(const V& c) {                                                         \
+  WP_LFN M M##_splat_cols(const V& c) {                                                         \
     M m;                                                                                       \
     for (int i = 0; i < NN; ++i) mat_traits<M>::at(m, i) = c;                                  \
     return m;                                                                                  \
   }                                                                                            \
-  WP_FN M M##_ZERO() { return M##_splat_cols(V##_ZERO()); }                                    \
-  WP_FN M M##_NAN() { return M##_splat_cols(V##_NAN()); }                                      \
-  WP_FN M M##_IDENTITY() { return M##_from_diagonal(V##_ONE()); }                              \
+  WP_LFN M M##_ZERO() { return M##_splat_cols(V##_ZERO()); }                                    \
+  WP_LFN M M##_NAN() { return M##_splat_cols(V##_NAN()); }                                      \
+  WP_LFN M M##_IDENTITY() { return M##_from_diagonal(V##_ONE()); }                              \
   template <typename F>                                                                        \
   WP_FN M mmap_##M(const M& a, F f) {                                                          \
     M r;                                                                                       \
     for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = f(mat_traits<M>::get(a, i));       \
     return r;                                                                                  \
   }                                                                                            \
-  WP_FN M operator+(const M& a, const M& b) {                                                  \
+  WP_LFN M operator+(const M& a, const M& b) {                                                  \
     M r;                                                                                       \
     for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = mat_traits<M>::get(a, i) + mat_traits<M>::get(b, i); \
     return r;                                                                                  \
   }                                                                                            \
-  WP_FN M operator-(const M& a, const M& b) {                                                  \
+  WP_LFN M operator-(const M& a, const M& b) {                                                  \
     M r;                                                                                       \
     for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = mat_traits<M>::get(a, i) - mat_traits<M>::get(b, i); \
     return r;                                                                                  \
   }                                                                                            \
-  WP_FN M operator-(const M& a) { return mmap_##M(a, [](const V& c) { return -c; }); }         \
+  WP_LFN M operator-(const M& a) { return mmap_##M(a, [](const V& c) { return -c; }); }         \
   /* M * v: x_axis * v.x + y_axis * v.y + ..., summed left to right. */                        \
-  WP_FN V operator*(const M& a, const V& v) {                                                  \
+  WP_LFN V operator*(const M& a, const V& v) {                                                  \
     V r = mat_traits<M>::get(a, 0) * vec_traits<V>::get(v, 0);                                 \
     for (int i = 1; i < NN; ++i) r = r + mat_traits<M>::get(a, i) * vec_traits<V>::get(v, i);  \
     return r;                                                                                  \
   }                                                                                            \
-  WP_FN M operator*(const M& a, const M& b) {                                                  \
+  WP_LFN M operator*(const M& a, const M& b) {                                                  \
     M r;                                                                                       \
     for (int i = 0; i < NN; ++i) mat_traits<M>::at(r, i) = a * mat_traits<M>::get(b, i);       \
     return r;                                                                                  \
   }                                                                                            \
-  WP_FN M operator*(const M& a, S s) { return mmap_##M(a, [s](const V& c) { return c * s; }); } \
-  WP_FN M operator*(S s, const M& a) { return a * s; }                                         \
-  WP_FN M operator/(const M& a, S s) { return mmap_##M(a, [s](const V& c) { return c / s; }); } \
+  WP_LFN M operator*(const M& a, S s) { return mmap_##M(a, [s](const V& c) { return c * s; }); } \
+  WP_LFN M operator*(S s, const M& a) { return a * s; }                                         \
+  WP_LFN M operator/(const M& a, S s) { return mmap_##M(a, [s](const V& c) { return c / s; }); } \
   /* glam 0.30 quirk: `s / M` is implemented as `M.div_scalar(s)`, i.e. M / s. */              \
-  WP_FN M operator/(S s, const M& a) { return a / s; }                                         \
-  WP_FN M& operator+=(M& a, const M& b) { return a = a + b; }                                  \
-  WP_FN M& operator-=(M& a, const M& b) { return a = a - b; }                                  \
-  WP_FN M& operator*=(M& a, const M& b) { return a = a * b; }                                  \
-  WP_FN M& operator*=(M& a, S s) { return a = a * s; }                                         \
-  WP_FN M& operator/=(M& a, S s) { return a = a / s; }                                         \
-  WP_FN bool operator==(const M& a, const M& b) {                                              \
+  WP_LFN M operator/(S s, const M& a) { return a / s; }                                         \
+  WP_LFN M& operator+=(M& a, const M& b) { return a = a + b; }                                  \
+  WP_LFN M& operator-=(M& a, const M& b) { return a = a - b; }                                  \
+  WP_LFN M& operator*=(M& a, const M& b) { return a = a * b; }                                  \
+  WP_LFN M& operator*=(M& a, S s) { return a = a * s; }                                         \
+  WP_LFN M& operator/=(M& a, S s) { return a = a / s; }                                         \
+  WP_LFN bool operator==(const M& a, const M& b) {                                              \
     bool r = true;                                                                             \
     for (int i = 0; i < NN; ++i) r = r && (mat_traits<M>::get(a, i) == mat_traits<M>::get(b, i)); \
     return r;                                                                                  \
   }                                                                                            \
-  WP_FN bool operator!=(const M& a, const M& b) { return !(a == b); }
+  WP_LFN bool operator!=(const M& a, const M& b) { return !(a == b); }
 
 #define WP_GETC2 (i == 0 ? m.x_axis : m.y_axis)
 #define WP_GETC3 (i == 0 ? m.x_axis : (i == 1 ? m.y_axis : m.z_axis))
@@ -1312,7 +1328,7 @@ struct DQuat {
     static WP_FN S get(const Q& v, int i) { return WP_GET4; }                             \
     static WP_FN S& at(Q& v, int i) { return WP_GET4; }                                   \
   };                                                                                      \
-  WP_FN Q Q##_from_xyzw(S x, S y, S z, S w) {                                             \
+  WP_LFN Q Q##_from_xyzw(S x, S y, S z, S w) {                                             \
     Q q;                                                                                  \
     q.x = x;                                                                              \
     q.y = y;                                                                              \
@@ -1320,19 +1336,19 @@ struct DQuat {
     q.w = w;                                                                              \
     return q;                                                                             \
   }                                                                                       \
-  WP_FN Q Q##_IDENTITY() { return Q##_from_xyzw((S)0, (S)0, (S)0, (S)1); }                \
-  WP_FN Q Q##_NAN() {                                                                     \
+  WP_LFN Q Q##_IDENTITY() { return Q##_from_xyzw((S)0, (S)0, (S)0, (S)1); }                \
+  WP_LFN Q Q##_NAN() {                                                                     \
     const S n = float_nan<S>();                                                           \
     return Q##_from_xyzw(n, n, n, n);                                                     \
   }                                                                                       \
-  WP_FN Q operator+(const Q& a, const Q& b) { return detail::vzip(a, b, [](S p, S q) { return p + q; }); } \
-  WP_FN Q operator-(const Q& a, const Q& b) { return detail::vzip(a, b, [](S p, S q) { return p - q; }); } \
-  WP_FN Q operator*(const Q& a, S s) { return detail::vmap(a, [s](S p) { return p * s; }); }   \
-  WP_FN Q operator/(const Q& a, S s) { return detail::vmap(a, [s](S p) { return p / s; }); }   \
+  WP_LFN Q operator+(const Q& a, const Q& b) { return detail::vzip(a, b, [](S p, S q) { return p + q; }); } \
+  WP_LFN Q operator-(const Q& a, const Q& b) { return detail::vzip(a, b, [](S p, S q) { return p - q; }); } \
+  WP_LFN Q operator*(const Q& a, S s) { return detail::vmap(a, [s](S p) { return p * s; }); }   \
+  WP_LFN Q operator/(const Q& a, S s) { return detail::vmap(a, [s](S p) { return p / s; }); }   \
   /* glam: -q is q * -1.0 */                                                              \
-  WP_FN Q operator-(const Q& a) { return a * (S)-1; }                                     \
+  WP_LFN Q operator-(const Q& a) { return a * (S)-1; }                                     \
   /* glam's mul_vec3: v*(w*w - b.b) + b*(2 v.b) + (b x v)*(2w), b = (x, y, z). */         \
-  WP_FN V3 operator*(const Q& q, const V3& v) {                                           \
+  WP_LFN V3 operator*(const Q& q, const V3& v) {                                           \
     const S w = q.w;                                                                      \
     const V3 b = V3##_new(q.x, q.y, q.z);                                                 \
     const S b2 = (b.x * b.x + b.y * b.y) + b.z * b.z;                                     \
@@ -1340,15 +1356,15 @@ struct DQuat {
     const V3 c = V3##_new(b.y * v.z - v.y * b.z, b.z * v.x - v.z * b.x, b.x * v.y - v.x * b.y); \
     return (v * (w * w - b2) + b * (vb * (S)2)) + c * (w * (S)2);                         \
   }                                                                                       \
-  WP_FN Q& operator+=(Q& a, const Q& b) { return a = a + b; }                             \
-  WP_FN Q& operator-=(Q& a, const Q& b) { return a = a - b; }                             \
-  WP_FN Q& operator*=(Q& a, const Q& b) { return a = a * b; }                             \
-  WP_FN Q& operator*=(Q& a, S s) { return a = a * s; }                                    \
-  WP_FN Q& operator/=(Q& a, S s) { return a = a / s; }                                    \
-  WP_FN bool operator==(const Q& a, const Q& b) {                                         \
+  WP_LFN Q& operator+=(Q& a, const Q& b) { return a = a + b; }                             \
+  WP_LFN Q& operator-=(Q& a, const Q& b) { return a = a - b; }                             \
+  WP_LFN Q& operator*=(Q& a, const Q& b) { return a = a * b; }                             \
+  WP_LFN Q& operator*=(Q& a, S s) { return a = a * s; }                                    \
+  WP_LFN Q& operator/=(Q& a, S s) { return a = a / s; }                                    \
+  WP_LFN bool operator==(const Q& a, const Q& b) {                                         \
     return a.x == b.x && a.y == b.y && a.z == b.z && a.w == b.w;                          \
   }                                                                                       \
-  WP_FN bool operator!=(const Q& a, const Q& b) { return !(a == b); }
+  WP_LFN bool operator!=(const Q& a, const Q& b) { return !(a == b); }
 
 // Hamilton products, each in glam's exact evaluation order (they differ: Quat uses SSE).
 struct Quat;
@@ -1413,26 +1429,26 @@ struct DTransform {
       return i < 3 ? vec_traits<V3>::at(t.p, i) : vec_traits<Q>::at(t.q, i - 3);          \
     }                                                                                     \
   };                                                                                      \
-  WP_FN X X##_new(const V3& p, const Q& q) {                                              \
+  WP_LFN X X##_new(const V3& p, const Q& q) {                                              \
     X t;                                                                                  \
     t.p = p;                                                                              \
     t.q = q;                                                                              \
     return t;                                                                             \
   }                                                                                       \
-  WP_FN X X##_IDENTITY() { return X##_new(V3##_ZERO(), Q##_IDENTITY()); }                 \
+  WP_LFN X X##_IDENTITY() { return X##_new(V3##_ZERO(), Q##_IDENTITY()); }                 \
   /* a * b: b applies first (Warp's transform_multiply). */                               \
-  WP_FN X operator*(const X& a, const X& b) { return X##_new(a.q * b.p + a.p, a.q * b.q); } \
-  WP_FN X operator*(const X& a, S s) { return X##_new(a.p * s, a.q * s); }                \
-  WP_FN X operator*(S s, const X& a) { return a * s; }                                    \
-  WP_FN X operator+(const X& a, const X& b) { return X##_new(a.p + b.p, a.q + b.q); }     \
-  WP_FN X operator-(const X& a, const X& b) { return X##_new(a.p - b.p, a.q - b.q); }     \
-  WP_FN X operator-(const X& a) { return X##_new(-a.p, -a.q); }                           \
-  WP_FN X& operator+=(X& a, const X& b) { return a = a + b; }                             \
-  WP_FN X& operator-=(X& a, const X& b) { return a = a - b; }                             \
-  WP_FN X& operator*=(X& a, const X& b) { return a = a * b; }                             \
-  WP_FN X& operator*=(X& a, S s) { return a = a * s; }                                    \
-  WP_FN bool operator==(const X& a, const X& b) { return a.p == b.p && a.q == b.q; }      \
-  WP_FN bool operator!=(const X& a, const X& b) { return !(a == b); }
+  WP_LFN X operator*(const X& a, const X& b) { return X##_new(a.q * b.p + a.p, a.q * b.q); } \
+  WP_LFN X operator*(const X& a, S s) { return X##_new(a.p * s, a.q * s); }                \
+  WP_LFN X operator*(S s, const X& a) { return a * s; }                                    \
+  WP_LFN X operator+(const X& a, const X& b) { return X##_new(a.p + b.p, a.q + b.q); }     \
+  WP_LFN X operator-(const X& a, const X& b) { return X##_new(a.p - b.p, a.q - b.q); }     \
+  WP_LFN X operator-(const X& a) { return X##_new(-a.p, -a.q); }                           \
+  WP_LFN X& operator+=(X& a, const X& b) { return a = a + b; }                             \
+  WP_LFN X& operator-=(X& a, const X& b) { return a = a - b; }                             \
+  WP_LFN X& operator*=(X& a, const X& b) { return a = a * b; }                             \
+  WP_LFN X& operator*=(X& a, S s) { return a = a * s; }                                    \
+  WP_LFN bool operator==(const X& a, const X& b) { return a.p == b.p && a.q == b.q; }      \
+  WP_LFN bool operator!=(const X& a, const X& b) { return !(a == b); }
 WP_XFORM_COMMON(Transform, Vec3, Quat, f32)
 WP_XFORM_COMMON(DTransform, DVec3, DQuat, f64)
 #undef WP_XFORM_COMMON
@@ -1472,8 +1488,8 @@ struct DSpatialMatrix {
     static WP_FN S get(const SV& v, int i) { return WP_SPATIAL_PICK6(v, i); }                   \
     static WP_FN S& at(SV& v, int i) { return WP_SPATIAL_PICK6(v, i); }                         \
   };                                                                                            \
-  WP_FN const SV& SM##_row(const SM& m, int i) { return WP_SPATIAL_PICK6(m, i); }              \
-  WP_FN SV& SM##_row_at(SM& m, int i) { return WP_SPATIAL_PICK6(m, i); }                        \
+  WP_LFN const SV& SM##_row(const SM& m, int i) { return WP_SPATIAL_PICK6(m, i); }              \
+  WP_LFN SV& SM##_row_at(SM& m, int i) { return WP_SPATIAL_PICK6(m, i); }                        \
   template <>                                                                                   \
   struct vec_traits<SM> {                                                                       \
     typedef S scalar;                                                                           \
@@ -1482,7 +1498,7 @@ struct DSpatialMatrix {
     static WP_FN S get(const SM& m, int i) { return vec_traits<SV>::get(SM##_row(m, i / 6), i % 6); } \
     static WP_FN S& at(SM& m, int i) { return vec_traits<SV>::at(SM##_row_at(m, i / 6), i % 6); } \
   };                                                                                            \
-  WP_FN SV SV##_new6(S a0, S a1, S a2, S a3, S a4, S a5) {                                      \
+  WP_LFN SV SV##_new6(S a0, S a1, S a2, S a3, S a4, S a5) {                                      \
     SV r;                                                                                       \
     r.f0 = a0;                                                                                  \
     r.f1 = a1;                                                                                  \
@@ -1492,9 +1508,9 @@ struct DSpatialMatrix {
     r.f5 = a5;                                                                                  \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN SV SV##_ZERO() { return SV##_new6((S)0, (S)0, (S)0, (S)0, (S)0, (S)0); }                \
-  WP_FN SV SV##_new(const V3& w, const V3& v) { return SV##_new6(w.x, w.y, w.z, v.x, v.y, v.z); } \
-  WP_FN SM SM##_from_rows(const SV& r0, const SV& r1, const SV& r2, const SV& r3, const SV& r4,  \
+  WP_LFN SV SV##_ZERO() { return SV##_new6((S)0, (S)0, (S)0, (S)0, (S)0, (S)0); }                \
+  WP_LFN SV SV##_new(const V3& w, const V3& v) { return SV##_new6(w.x, w.y, w.z, v.x, v.y, v.z); } \
+  WP_LFN SM SM##_from_rows(const SV& r0, const SV& r1, const SV& r2, const SV& r3, const SV& r4,  \
                           const SV& r5) {                                                       \
     SM m;                                                                                       \
     m.f0 = r0;                                                                                  \
@@ -1505,11 +1521,11 @@ struct DSpatialMatrix {
     m.f5 = r5;                                                                                  \
     return m;                                                                                   \
   }                                                                                             \
-  WP_FN SM SM##_ZERO() {                                                                        \
+  WP_LFN SM SM##_ZERO() {                                                                        \
     const SV z = SV##_ZERO();                                                                   \
     return SM##_from_rows(z, z, z, z, z, z);                                                    \
   }                                                                                             \
-  WP_FN SM SM##_IDENTITY() {                                                                    \
+  WP_LFN SM SM##_IDENTITY() {                                                                    \
     SM m = SM##_ZERO();                                                                         \
     for (int i = 0; i < 6; ++i) vec_traits<SV>::at(SM##_row_at(m, i), i) = (S)1;               \
     return m;                                                                                   \
@@ -1517,17 +1533,17 @@ struct DSpatialMatrix {
   WP_SPATIAL_LANES(SV, S)                                                                       \
   WP_SPATIAL_LANES(SM, S)                                                                       \
   /* ((((a0 b0 + a1 b1) + a2 b2) + a3 b3) + a4 b4) + a5 b5 */                                   \
-  WP_FN S SV##_dot(const SV& a, const SV& b) {                                                  \
+  WP_LFN S SV##_dot(const SV& a, const SV& b) {                                                  \
     S r = a.f0 * b.f0;                                                                          \
     for (int k = 1; k < 6; ++k) r += vec_traits<SV>::get(a, k) * vec_traits<SV>::get(b, k);    \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN SV operator*(const SM& m, const SV& x) {                                                \
+  WP_LFN SV operator*(const SM& m, const SV& x) {                                                \
     SV r;                                                                                       \
     for (int i = 0; i < 6; ++i) vec_traits<SV>::at(r, i) = SV##_dot(SM##_row(m, i), x);        \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN SM operator*(const SM& a, const SM& b) {                                                \
+  WP_LFN SM operator*(const SM& a, const SM& b) {                                                \
     SM r;                                                                                       \
     for (int i = 0; i < 6; ++i)                                                                 \
       for (int j = 0; j < 6; ++j) {                                                             \
@@ -1538,51 +1554,51 @@ struct DSpatialMatrix {
       }                                                                                         \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN SM& operator*=(SM& a, const SM& b) { return a = a * b; }
+  WP_LFN SM& operator*=(SM& a, const SM& b) { return a = a * b; }
 // Lane-by-lane operators of a spatial type T of scalar S.
 #define WP_SPATIAL_LANES(T, S)                                                                  \
-  WP_FN T operator+(const T& a, const T& b) {                                                   \
+  WP_LFN T operator+(const T& a, const T& b) {                                                   \
     T r;                                                                                        \
     for (int k = 0; k < vec_traits<T>::N; ++k)                                                  \
       vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) + vec_traits<T>::get(b, k);           \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN T operator-(const T& a, const T& b) {                                                   \
+  WP_LFN T operator-(const T& a, const T& b) {                                                   \
     T r;                                                                                        \
     for (int k = 0; k < vec_traits<T>::N; ++k)                                                  \
       vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) - vec_traits<T>::get(b, k);           \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN T operator-(const T& a) {                                                               \
+  WP_LFN T operator-(const T& a) {                                                               \
     T r;                                                                                        \
     for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = -vec_traits<T>::get(a, k); \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN T operator*(const T& a, S s) {                                                          \
+  WP_LFN T operator*(const T& a, S s) {                                                          \
     T r;                                                                                        \
     for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) * s; \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN T operator*(S s, const T& a) {                                                          \
+  WP_LFN T operator*(S s, const T& a) {                                                          \
     T r;                                                                                        \
     for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = s * vec_traits<T>::get(a, k); \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN T operator/(const T& a, S s) {                                                          \
+  WP_LFN T operator/(const T& a, S s) {                                                          \
     T r;                                                                                        \
     for (int k = 0; k < vec_traits<T>::N; ++k) vec_traits<T>::at(r, k) = vec_traits<T>::get(a, k) / s; \
     return r;                                                                                   \
   }                                                                                             \
-  WP_FN T& operator+=(T& a, const T& b) { return a = a + b; }                                   \
-  WP_FN T& operator-=(T& a, const T& b) { return a = a - b; }                                   \
-  WP_FN T& operator*=(T& a, S s) { return a = a * s; }                                          \
-  WP_FN T& operator/=(T& a, S s) { return a = a / s; }                                          \
-  WP_FN bool operator==(const T& a, const T& b) {                                               \
+  WP_LFN T& operator+=(T& a, const T& b) { return a = a + b; }                                   \
+  WP_LFN T& operator-=(T& a, const T& b) { return a = a - b; }                                   \
+  WP_LFN T& operator*=(T& a, S s) { return a = a * s; }                                          \
+  WP_LFN T& operator/=(T& a, S s) { return a = a / s; }                                          \
+  WP_LFN bool operator==(const T& a, const T& b) {                                               \
     for (int k = 0; k < vec_traits<T>::N; ++k)                                                  \
       if (!(vec_traits<T>::get(a, k) == vec_traits<T>::get(b, k))) return false;                \
     return true;                                                                                \
   }                                                                                             \
-  WP_FN bool operator!=(const T& a, const T& b) { return !(a == b); }
+  WP_LFN bool operator!=(const T& a, const T& b) { return !(a == b); }
 WP_SPATIAL_COMMON(SpatialVector, SpatialMatrix, Vec3, f32)
 WP_SPATIAL_COMMON(DSpatialVector, DSpatialMatrix, DVec3, f64)
 #undef WP_SPATIAL_COMMON
@@ -1966,7 +1982,7 @@ struct is_local_array<local_array_t<T, N>> {
   typedef T elem;
 };
 /// The fault of an index outside `0..n` at `line` (FAULT_LOCAL_INDEX, see fault_t).
-WP_FN void local_index_fault(i64 i, i64 n, i64 line, ctx_t* ctx) {
+WP_LFN void local_index_fault(i64 i, i64 n, i64 line, ctx_t* ctx) {
   const i64 at[3] = {i, n, line};
   raise(ctx, FAULT_LOCAL_INDEX, -1, 3, at, nullptr);
 }
@@ -2008,19 +2024,19 @@ WP_FN T& local_at(local_array_t<T, N>& a, i64 i) {
 // glam matrix's column (`col_get`: `m[(i, j)]` is lane i of column j), with local arrays'
 // faults and `local_at`'s in-bounds rule for adjoints.
 #define WP_LANES(PRE, T, E, NN, GET, AT)                                          \
-  WP_FN E PRE##_get(const T& a, i64 i, i64 line, ctx_t* ctx) {                     \
+  WP_LFN E PRE##_get(const T& a, i64 i, i64 line, ctx_t* ctx) {                     \
     if ((u64)i < (u64)(NN)) return GET(a, (int)i);                                 \
     detail::local_index_fault(i, NN, line, ctx);                                   \
     return E{};                                                                    \
   }                                                                                \
-  WP_FN void PRE##_set(T& a, i64 i, const E& v, i64 line, ctx_t* ctx) {            \
+  WP_LFN void PRE##_set(T& a, i64 i, const E& v, i64 line, ctx_t* ctx) {            \
     if ((u64)i < (u64)(NN)) {                                                      \
       AT(a, (int)i) = v;                                                           \
       return;                                                                      \
     }                                                                              \
     detail::local_index_fault(i, NN, line, ctx);                                   \
   }                                                                                \
-  WP_FN E& PRE##_at(T& a, i64 i) { return AT(a, (u64)i < (u64)(NN) ? (int)i : 0); }
+  WP_LFN E& PRE##_at(T& a, i64 i) { return AT(a, (u64)i < (u64)(NN) ? (int)i : 0); }
 #define WP_VEC_LANES(T) \
   WP_LANES(local, T, vec_traits<T>::scalar, vec_traits<T>::N, vec_traits<T>::get, vec_traits<T>::at)
 #define WP_MAT_LANES(M) \
@@ -2066,12 +2082,12 @@ struct range_t {
 
 namespace detail {
 // Wrapping i64 arithmetic (Rust release-build semantics; no C++ signed-overflow UB).
-WP_FN i64 wadd64(i64 a, i64 b) { return (i64)((u64)a + (u64)b); }
-WP_FN i64 wmul64(i64 a, i64 b) { return (i64)((u64)a * (u64)b); }
+WP_LFN i64 wadd64(i64 a, i64 b) { return (i64)((u64)a + (u64)b); }
+WP_LFN i64 wmul64(i64 a, i64 b) { return (i64)((u64)a * (u64)b); }
 }  // namespace detail
 
 /// `start..end`, or `start..=end` when `inclusive`; count clamped to [0, i64::MAX].
-WP_FN range_t range_new(i64 start, i64 end, bool inclusive) {
+WP_LFN range_t range_new(i64 start, i64 end, bool inclusive) {
   range_t r;
   r.first = start;
   r.step = 1;
@@ -2088,7 +2104,7 @@ WP_FN range_t range_new(i64 start, i64 end, bool inclusive) {
   return r;
 }
 /// `.rev()`.
-WP_FN range_t range_rev(range_t r) {
+WP_LFN range_t range_rev(range_t r) {
   if (r.count == 0) return r;
   range_t o;
   o.first = detail::wadd64(r.first, detail::wmul64(r.step, r.count - 1));
@@ -2097,7 +2113,7 @@ WP_FN range_t range_rev(range_t r) {
   return o;
 }
 /// `.step_by(k)`; k <= 0 records BadStep (ndim 1, index[0] = k) and gives an empty range.
-WP_FN range_t range_step_by(range_t r, i64 k, ctx_t* ctx) {
+WP_LFN range_t range_step_by(range_t r, i64 k, ctx_t* ctx) {
   if (k <= 0) {
     const i64 idx[1] = {k};
     raise(ctx, FAULT_BAD_STEP, -1, 1, idx, nullptr);
@@ -2114,7 +2130,7 @@ WP_FN range_t range_step_by(range_t r, i64 k, ctx_t* ctx) {
   return o;
 }
 /// The n-th value.
-WP_FN i64 range_at(const range_t& r, i64 n) { return detail::wadd64(r.first, detail::wmul64(n, r.step)); }
+WP_LFN i64 range_at(const range_t& r, i64 n) { return detail::wadd64(r.first, detail::wmul64(n, r.step)); }
 
 // ------------------------------------------------------------------------------------------
 // Launch grid (warp_core::Grid)
@@ -2140,7 +2156,7 @@ constexpr i32 LAUNCH_ALONE = 2;
 static_assert(sizeof(launch_t) == 48 && alignof(launch_t) == 8, "launch_t layout");
 
 /// The n-dimensional index of thread `flat`, row-major (the last dimension varies fastest).
-WP_FN void unflatten(const launch_t& l, i64 flat, i64* out, int n) {
+WP_LFN void unflatten(const launch_t& l, i64 flat, i64* out, int n) {
   for (int d = n - 1; d >= 1; --d) {
     const i64 e = l.dims[d];
     out[d] = flat % e;
@@ -2151,7 +2167,7 @@ WP_FN void unflatten(const launch_t& l, i64 flat, i64* out, int n) {
 
 #if defined(__CUDACC__)
 /// This thread's flat index in a 1-D CUDA launch (i64, so that grids over 2^31 work).
-WP_FN i64 flat_thread_id() { return (i64)blockIdx.x * (i64)blockDim.x + (i64)threadIdx.x; }
+WP_LFN i64 flat_thread_id() { return (i64)blockIdx.x * (i64)blockDim.x + (i64)threadIdx.x; }
 #endif
 
 }  // namespace wp
@@ -2211,7 +2227,7 @@ struct det_thread_t {
   i32 limit;
 };
 
-WP_FN det_thread_t det_begin(const det_t& d, i64 flat) {
+WP_LFN det_thread_t det_begin(const det_t& d, i64 flat) {
   det_thread_t t;
   t.keys = d.keys;
   t.values = d.values;
@@ -2227,19 +2243,19 @@ WP_FN det_thread_t det_begin(const det_t& d, i64 flat) {
 
 /// The end of a thread: its unused slots marked (every slot is written each launch, so the
 /// buffer needs no clearing).
-WP_FN void det_end(det_thread_t* t) {
+WP_LFN void det_end(det_thread_t* t) {
   for (i64 s = t->used; s < t->cap; ++s) t->keys[t->base + s] = DET_UNUSED;
 }
 
 /// The fault of a thread past its limit (the CPU's `FaultKind::DeterministicRecords`).
-WP_FN void det_fault(det_thread_t* t, ctx_t* ctx) {
+WP_LFN void det_fault(det_thread_t* t, ctx_t* ctx) {
   const i64 at[2] = {t->flat, (i64)t->limit};
   raise(ctx, FAULT_DETERMINISTIC_RECORDS, -1, 2, at, nullptr);
 }
 
 /// Counts one recorded call (an accumulation, whatever its lane count); past the limit a
 /// fault, and the call records nothing.
-WP_FN bool det_call(det_thread_t* t, ctx_t* ctx) {
+WP_LFN bool det_call(det_thread_t* t, ctx_t* ctx) {
   if (t->calls >= t->limit) {
     det_fault(t, ctx);
     return false;
@@ -2364,14 +2380,14 @@ WP_DET_FNS(4, i64 i0 WP_COMMA i64 i1 WP_COMMA i64 i2 WP_COMMA i64 i3, i0, i1, i2
 // tests/cuda_deterministic_host.rs calls them directly).
 
 /// Step 1: slot `i`'s low address word, and its index, for the first stable sort.
-WP_FN void det_prepare_at(const det_t& d, u32* word, u32* order, i64 i) {
+WP_LFN void det_prepare_at(const det_t& d, u32* word, u32* order, i64 i) {
   word[i] = (u32)d.keys[i];
   order[i] = (u32)i;
 }
 
 /// Step 2: after the sort by low words, the high word of the slot at position `j`, for the
 /// second stable sort (which leaves the slots in (address, slot) order).
-WP_FN void det_high_at(const det_t& d, u32* word, const u32* order, i64 j) {
+WP_LFN void det_high_at(const det_t& d, u32* word, const u32* order, i64 j) {
   word[j] = (u32)(d.keys[order[j]] >> 32);
 }
 
@@ -2397,7 +2413,7 @@ WP_FN i64 det_run(const det_t& d, const u32* order, i64 n, i64 j, u64 key) {
 
 /// Step 3: if position `j` of the ordered slots (`n` of them) starts a lane's records, adds
 /// them all into the lane, in order; other positions and unused slots do nothing.
-WP_FN void det_apply_at(const det_t& d, const u32* order, i64 n, i64 j) {
+WP_LFN void det_apply_at(const det_t& d, const u32* order, i64 n, i64 j) {
   const u64 key = d.keys[order[j]];
   if (key == DET_UNUSED) return;
   if (j > 0 && d.keys[order[j - 1]] == key) return;
@@ -2416,6 +2432,6 @@ WP_FN void det_apply_at(const det_t& d, const u32* order, i64 n, i64 j) {
 namespace wp {
 /// Rust's `!` on a value whose type the macro could not see: logical on bool, bitwise on
 /// integers (what `!` means in Rust for each).
-WP_FN bool not_(bool x) { return !x; }
+WP_LFN bool not_(bool x) { return !x; }
 template <typename T> WP_FN T not_(T x) { return ~x; }
 }  // namespace wp

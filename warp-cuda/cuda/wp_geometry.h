@@ -49,32 +49,32 @@ namespace wp {
 #define WP_TRI_TRI_EPS 1e-6f
 
 namespace detail {
-WP_FN f32 g_dot(const Vec3& a, const Vec3& b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
-WP_FN Vec3 g_cross(const Vec3& a, const Vec3& b) {
+WP_LFN f32 g_dot(const Vec3& a, const Vec3& b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
+WP_LFN Vec3 g_cross(const Vec3& a, const Vec3& b) {
   return Vec3_new(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
 }
-WP_FN f32 g_len_sq(const Vec3& a) { return g_dot(a, a); }
-WP_FN f32 g_len(const Vec3& a) { return ::sqrtf(g_dot(a, a)); }
-WP_FN Vec3 g_abs(const Vec3& a) { return Vec3_new(::fabsf(a.x), ::fabsf(a.y), ::fabsf(a.z)); }
-WP_FN Vec3 g_vmin(const Vec3& a, const Vec3& b) {
+WP_LFN f32 g_len_sq(const Vec3& a) { return g_dot(a, a); }
+WP_LFN f32 g_len(const Vec3& a) { return ::sqrtf(g_dot(a, a)); }
+WP_LFN Vec3 g_abs(const Vec3& a) { return Vec3_new(::fabsf(a.x), ::fabsf(a.y), ::fabsf(a.z)); }
+WP_LFN Vec3 g_vmin(const Vec3& a, const Vec3& b) {
   return Vec3_new(a.x < b.x ? a.x : b.x, a.y < b.y ? a.y : b.y, a.z < b.z ? a.z : b.z);
 }
-WP_FN Vec3 g_vmax(const Vec3& a, const Vec3& b) {
+WP_LFN Vec3 g_vmax(const Vec3& a, const Vec3& b) {
   return Vec3_new(a.x > b.x ? a.x : b.x, a.y > b.y ? a.y : b.y, a.z > b.z ? a.z : b.z);
 }
-WP_FN f32 g_gt_max(f32 a, f32 b) { return a > b ? a : b; }
-WP_FN f32 g_max_elem(const Vec3& v) { return g_gt_max(v.x, g_gt_max(v.y, v.z)); }
-WP_FN f32 g_clamp(f32 x, f32 lo, f32 hi) {
+WP_LFN f32 g_gt_max(f32 a, f32 b) { return a > b ? a : b; }
+WP_LFN f32 g_max_elem(const Vec3& v) { return g_gt_max(v.x, g_gt_max(v.y, v.z)); }
+WP_LFN f32 g_clamp(f32 x, f32 lo, f32 hi) {
   if (x < lo) x = lo;
   if (x > hi) x = hi;
   return x;
 }
-WP_FN f32 g_comp(const Vec3& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
-WP_FN bool g_finite(f32 x) { return (f32_to_bits(x) & 0x7f800000u) != 0x7f800000u; }
-WP_FN bool g_finite3(const Vec3& v) { return g_finite(v.x) && g_finite(v.y) && g_finite(v.z); }
-WP_FN bool g_is_inf(f32 x) { return (f32_to_bits(x) & 0x7fffffffu) == 0x7f800000u; }
+WP_LFN f32 g_comp(const Vec3& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+WP_LFN bool g_finite(f32 x) { return (f32_to_bits(x) & 0x7f800000u) != 0x7f800000u; }
+WP_LFN bool g_finite3(const Vec3& v) { return g_finite(v.x) && g_finite(v.y) && g_finite(v.z); }
+WP_LFN bool g_is_inf(f32 x) { return (f32_to_bits(x) & 0x7fffffffu) == 0x7f800000u; }
 /// glam's `==` (per component; -0 == +0, NaN != NaN).
-WP_FN bool g_eq(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+WP_LFN bool g_eq(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
 /// geometry.rs's max_abs: `m = m.max(v.abs().max_element())` over the vectors, from 0. The
 /// size is a template parameter and the loop unrolled, so the array stays in registers (over a
 /// runtime count it went to local memory, a store per call, in the signed mesh query).
@@ -91,7 +91,7 @@ WP_FN f32 g_max_abs(const Vec3 (&vs)[N]) {
 
 /// A power of two s with m * s in [1, 2) (normal finite positive m; 2^±126 at the clamp), or 1
 /// for 0, infinite or NaN m.
-WP_FN f32 pow2_scale(f32 m) {
+WP_LFN f32 pow2_scale(f32 m) {
   if (!(m > 0.0f && m <= f32_max())) return 1.0f;
   const i32 e = (i32)((f32_to_bits(m) >> 23) & 0xffu) - 127;
   i32 k = -e;
@@ -125,13 +125,13 @@ struct triangle_closest_point_t {
 static_assert(sizeof(triangle_closest_point_t) == 16, "triangle_closest_point_t layout");
 
 /// The point u * a + v * b + w * c.
-WP_FN Vec3 triangle_closest_point_position(const triangle_closest_point_t& r, const Vec3& a,
+WP_LFN Vec3 triangle_closest_point_position(const triangle_closest_point_t& r, const Vec3& a,
                                            const Vec3& b, const Vec3& c) {
   return (a * r.u + b * r.v) + c * r.w;
 }
 
 namespace detail {
-WP_FN triangle_closest_point_t tri_cp(f32 u, f32 v, f32 w, i32 f) {
+WP_LFN triangle_closest_point_t tri_cp(f32 u, f32 v, f32 w, i32 f) {
   triangle_closest_point_t r;
   r.u = u;
   r.v = v;
@@ -140,7 +140,7 @@ WP_FN triangle_closest_point_t tri_cp(f32 u, f32 v, f32 w, i32 f) {
   return r;
 }
 /// geometry.rs's on_edge.
-WP_FN triangle_closest_point_t on_edge(i32 edge, f32 t) {
+WP_LFN triangle_closest_point_t on_edge(i32 edge, f32 t) {
   f32 u, v, w;
   i32 f;
   if (edge == TRI_FEATURE_EDGE_AB) {
@@ -164,19 +164,19 @@ WP_FN triangle_closest_point_t on_edge(i32 edge, f32 t) {
   }
   return tri_cp(u, v, w, feature);
 }
-WP_FN f32 segment_param(const Vec3& s0, const Vec3& d, const Vec3& q) {
+WP_LFN f32 segment_param(const Vec3& s0, const Vec3& d, const Vec3& q) {
   const f32 dd = g_dot(d, d);
   const f32 t = g_dot(q - s0, d) / dd;
   if (dd > 0.0f && t > 0.0f) return ::fminf(t, 1.0f);
   return 0.0f;
 }
-WP_FN f32 ratio(f32 num, f32 den) {
+WP_LFN f32 ratio(f32 num, f32 den) {
   const f32 t = num / den;
   if (t > 0.0f) return ::fminf(t, 1.0f);
   return 0.0f;
 }
 /// The degenerate case: the closest of the three edges (ties to ab, bc, ca).
-WP_FN triangle_closest_point_t closest_point_segments(const Vec3& ab, const Vec3& ac,
+WP_LFN triangle_closest_point_t closest_point_segments(const Vec3& ab, const Vec3& ac,
                                                       const Vec3& ap) {
   const Vec3 zero = Vec3_ZERO();
   const f32 t_ab = segment_param(zero, ab, ap);
@@ -194,7 +194,7 @@ WP_FN triangle_closest_point_t closest_point_segments(const Vec3& ab, const Vec3
 /// closest_point_triangle_scaled: the closest point on the triangle translated to a and
 /// scaled by a power of two of the caller's choosing (ab = (b - a) * s, ...); the same bits
 /// for every s under which no intermediate leaves the normal range (see the Rust).
-WP_FN triangle_closest_point_t closest_point_triangle_scaled(Vec3 ab, Vec3 ac, Vec3 ap) {
+WP_LFN triangle_closest_point_t closest_point_triangle_scaled(Vec3 ab, Vec3 ac, Vec3 ap) {
   using namespace detail;
   const Vec3 bc = ac - ab;
   const Vec3 n = g_cross(ab, ac);
@@ -233,7 +233,7 @@ WP_FN triangle_closest_point_t closest_point_triangle_scaled(Vec3 ab, Vec3 ac, V
 
 /// The closest point of triangle (a, b, c) to p (Ericson 5.1.5 on the translated, scaled
 /// triangle; degenerate triangles as their three edges).
-WP_FN triangle_closest_point_t closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p) {
+WP_LFN triangle_closest_point_t closest_point_triangle(Vec3 a, Vec3 b, Vec3 c, Vec3 p) {
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
   const Vec3 vs[3] = {ab, ac, ap};
   const f32 s = pow2_scale(detail::g_max_abs(vs));
@@ -273,7 +273,7 @@ struct ray_frame_t {
 namespace detail {
 /// tie_broken_side: the sign of the edge function e = p.x * q.y - p.y * q.x once the origin
 /// moves by (eps, eps^2): its own, else that of p.y - q.y, else of q.x - p.x; 0 for NaN.
-WP_FN int tie_broken_side(f64 e, f32 px, f32 py, f32 qx, f32 qy) {
+WP_LFN int tie_broken_side(f64 e, f32 px, f32 py, f32 qx, f32 qy) {
   if (e > 0.0) return 1;
   if (e < 0.0) return -1;
   if (!(e == 0.0)) return 0;
@@ -298,7 +298,7 @@ struct sheared_t {
 };
 
 /// Shears triangle (a, b, c) into the frame `fr` (ok) of a ray from `start`.
-WP_FN void shear_triangle(const ray_frame_t& fr, Vec3 start, Vec3 a, Vec3 b, Vec3 c,
+WP_LFN void shear_triangle(const ray_frame_t& fr, Vec3 start, Vec3 a, Vec3 b, Vec3 c,
                           sheared_t& sh) {
   const int kx = fr.kx(), ky = fr.ky(), kz = fr.kz();
   sh.kz = kz;
@@ -323,7 +323,7 @@ WP_FN void shear_triangle(const ray_frame_t& fr, Vec3 start, Vec3 a, Vec3 b, Vec
 
 /// The ray parameter where the sheared triangle's plane is met, from the edge functions and
 /// their sum `det` (nonzero), for the ray along dir; NaN or inf for a degenerate one.
-WP_FN f64 sheared_depth(const sheared_t& sh, Vec3 dir, f64 det) {
+WP_LFN f64 sheared_depth(const sheared_t& sh, Vec3 dir, f64 det) {
   const f32 sz = 1.0f / g_comp(dir, sh.kz);
   const f32 az = sz * g_comp(sh.q[0], sh.kz), bz = sz * g_comp(sh.q[1], sh.kz),
             cz = sz * g_comp(sh.q[2], sh.kz);
@@ -333,7 +333,7 @@ WP_FN f64 sheared_depth(const sheared_t& sh, Vec3 dir, f64 det) {
 }  // namespace detail
 
 /// The frame of the ray along `dir` (see ray_frame_t).
-WP_FN ray_frame_t ray_frame(Vec3 dir) {
+WP_LFN ray_frame_t ray_frame(Vec3 dir) {
   using namespace detail;
   ray_frame_t fr;
   const Vec3 ad = g_abs(dir);
@@ -367,7 +367,7 @@ struct ray_triangle_candidate_t {
 
 /// intersect_ray_triangle in the ray's frame `fr` (ray_frame(dir)), without the division of
 /// the barycentrics: the same hits, t and sign.
-WP_FN ray_triangle_candidate_t intersect_ray_triangle_in_frame(const ray_frame_t& fr, Vec3 start,
+WP_LFN ray_triangle_candidate_t intersect_ray_triangle_in_frame(const ray_frame_t& fr, Vec3 start,
                                                                Vec3 dir, Vec3 a, Vec3 b,
                                                                Vec3 c) {
   using namespace detail;
@@ -406,7 +406,7 @@ WP_FN ray_triangle_candidate_t intersect_ray_triangle_in_frame(const ray_frame_t
 /// Woop, Benthin and Wald's watertight test: shear into the ray's frame, then the signs of
 /// three edge functions computed as exact f32 products in f64 (one rounding each, so exact
 /// signs: a shared edge evaluates identically for both of its triangles).
-WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+WP_LFN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
   const ray_triangle_candidate_t k =
       intersect_ray_triangle_in_frame(ray_frame(dir), start, dir, a, b, c);
   ray_triangle_hit_t h;
@@ -419,7 +419,7 @@ WP_FN ray_triangle_hit_t intersect_ray_triangle(Vec3 start, Vec3 dir, Vec3 a, Ve
 }
 
 /// ray_crosses_triangle in the frame `fr` (ray_frame(dir)) of the ray along dir.
-WP_FN bool ray_crosses_triangle_in_frame(const ray_frame_t& fr, Vec3 start, Vec3 dir, Vec3 a,
+WP_LFN bool ray_crosses_triangle_in_frame(const ray_frame_t& fr, Vec3 start, Vec3 dir, Vec3 a,
                                          Vec3 b, Vec3 c) {
   using namespace detail;
   if (!fr.ok()) return false;
@@ -438,7 +438,7 @@ WP_FN bool ray_crosses_triangle_in_frame(const ray_frame_t& fr, Vec3 start, Vec3
 /// Whether the ray start + t * dir, t >= 0, crosses triangle (a, b, c) for a parity count:
 /// intersect_ray_triangle's sheared edge functions with their exact zeros tie-broken
 /// (simulation of simplicity) and no parallel rejection (see the Rust for why).
-WP_FN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
+WP_LFN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
   return ray_crosses_triangle_in_frame(ray_frame(dir), start, dir, a, b, c);
 }
 
@@ -447,14 +447,14 @@ WP_FN bool ray_crosses_triangle(Vec3 start, Vec3 dir, Vec3 a, Vec3 b, Vec3 c) {
 // ------------------------------------------------------------------------------------------
 
 /// Whether boxes [al, au] and [bl, bu] overlap (touching counts); inverted or NaN boxes never.
-WP_FN bool aabb_overlap(Vec3 al, Vec3 au, Vec3 bl, Vec3 bu) {
+WP_LFN bool aabb_overlap(Vec3 al, Vec3 au, Vec3 bl, Vec3 bu) {
   return al.x <= bu.x && al.y <= bu.y && al.z <= bu.z && bl.x <= au.x && bl.y <= au.y &&
          bl.z <= au.z && al.x <= au.x && al.y <= au.y && al.z <= au.z;
 }
 
 /// The slab test: true (Rust's Some) when the ray meets [lo, hi] at some t >= 0, with the
 /// entry parameter in *t_enter (negative from inside); false (None) otherwise.
-WP_FN bool intersect_ray_aabb(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper, f32* t_enter) {
+WP_LFN bool intersect_ray_aabb(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper, f32* t_enter) {
   using namespace detail;
   f32 t0 = -f32_inf();
   f32 t1 = f32_inf();
@@ -485,7 +485,7 @@ WP_FN bool intersect_ray_aabb(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper, 
 /// `return false` of an inverted slab folded into `ok`. While ok holds every step is the
 /// branching version's; once it fails that version returns false and so does this one: the
 /// same result and the same *t_enter.
-WP_FN bool intersect_ray_aabb_finite(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper,
+WP_LFN bool intersect_ray_aabb_finite(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper,
                                      f32* t_enter) {
   using namespace detail;
   f32 t0 = -f32_inf();
@@ -509,17 +509,17 @@ WP_FN bool intersect_ray_aabb_finite(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 
 }
 
 /// Whether intersect_ray_aabb_finite serves inv_dir (no component infinite).
-WP_FN bool ray_inv_dir_finite(Vec3 inv_dir) {
+WP_LFN bool ray_inv_dir_finite(Vec3 inv_dir) {
   return !detail::g_is_inf(inv_dir.x) && !detail::g_is_inf(inv_dir.y) &&
          !detail::g_is_inf(inv_dir.z);
 }
 
 /// 1 / dir per component (±inf for zero components).
-WP_FN Vec3 ray_inv_dir(Vec3 dir) { return Vec3_new(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z); }
+WP_LFN Vec3 ray_inv_dir(Vec3 dir) { return Vec3_new(1.0f / dir.x, 1.0f / dir.y, 1.0f / dir.z); }
 
 /// Squared distance from p to [lower, upper] (0 inside); clamps by comparisons, so an inverted
 /// box is fine.
-WP_FN f32 aabb_distance_sq(Vec3 p, Vec3 lower, Vec3 upper) {
+WP_LFN f32 aabb_distance_sq(Vec3 p, Vec3 lower, Vec3 upper) {
   const auto c = [](f32 x, f32 l, f32 h) {
     const f32 y = x > h ? h : x;
     return y < l ? l : y;
@@ -534,7 +534,7 @@ WP_FN f32 aabb_distance_sq(Vec3 p, Vec3 lower, Vec3 upper) {
 /// two) selects the same value as the Rust comparisons in every case, NaN included (a NaN
 /// bound is passed over by both; a NaN p makes the difference NaN either way), except the
 /// sign of a zero, which the difference and its square do not keep: the same bits.
-WP_FN f32 aabb_distance_sq_scaled(Vec3 p, Vec3 lower, Vec3 upper, f32 s) {
+WP_LFN f32 aabb_distance_sq_scaled(Vec3 p, Vec3 lower, Vec3 upper, f32 s) {
   const Vec3 q = Vec3_new(::fmaxf(::fminf(p.x, upper.x), lower.x),
                           ::fmaxf(::fminf(p.y, upper.y), lower.y),
                           ::fmaxf(::fminf(p.z, upper.z), lower.z));
@@ -549,19 +549,19 @@ namespace detail {
 struct g_pt2 {
   f32 x, y;
 };
-WP_FN g_pt2 g_p2(f32 x, f32 y) {
+WP_LFN g_pt2 g_p2(f32 x, f32 y) {
   g_pt2 r;
   r.x = x;
   r.y = y;
   return r;
 }
-WP_FN bool tt_degenerate(const Vec3* t) {
+WP_LFN bool tt_degenerate(const Vec3* t) {
   const Vec3 e0 = t[1] - t[0], e1 = t[2] - t[0], e2 = t[2] - t[1];
   const f32 sum = (g_len_sq(e0) + g_len_sq(e1)) + g_len_sq(e2);
   return !(g_len(g_cross(e0, e1)) > WP_SLIVER_RATIO * sum);
 }
 /// Signed distances (times |n|) of pts from t's plane, snapped to 0 within the tolerance.
-WP_FN Vec3 tt_plane_distances(const Vec3* t, const Vec3* pts, f32* d) {
+WP_LFN Vec3 tt_plane_distances(const Vec3* t, const Vec3* pts, f32* d) {
   const Vec3 n = g_cross(t[1] - t[0], t[2] - t[0]);
   const f32 eps = WP_TRI_TRI_EPS * g_len(n);
   for (int i = 0; i < 3; ++i) {
@@ -570,11 +570,11 @@ WP_FN Vec3 tt_plane_distances(const Vec3* t, const Vec3* pts, f32* d) {
   }
   return n;
 }
-WP_FN bool tt_same_side(const f32* d) {
+WP_LFN bool tt_same_side(const f32* d) {
   return (d[0] > 0.0f && d[1] > 0.0f && d[2] > 0.0f) ||
          (d[0] < 0.0f && d[1] < 0.0f && d[2] < 0.0f);
 }
-WP_FN void tt_projection_axes(const Vec3& n, int* i, int* j) {
+WP_LFN void tt_projection_axes(const Vec3& n, int* i, int* j) {
   const Vec3 m = g_abs(n);
   if (m.x >= m.y && m.x >= m.z) {
     *i = 1;
@@ -587,14 +587,14 @@ WP_FN void tt_projection_axes(const Vec3& n, int* i, int* j) {
     *j = 1;
   }
 }
-WP_FN f32 tt_orient2(g_pt2 p, g_pt2 q, g_pt2 r) {
+WP_LFN f32 tt_orient2(g_pt2 p, g_pt2 q, g_pt2 r) {
   return (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x);
 }
-WP_FN bool tt_between(g_pt2 a, g_pt2 b, g_pt2 c) {
+WP_LFN bool tt_between(g_pt2 a, g_pt2 b, g_pt2 c) {
   return c.x >= ::fminf(a.x, b.x) && c.x <= ::fmaxf(a.x, b.x) && c.y >= ::fminf(a.y, b.y) &&
          c.y <= ::fmaxf(a.y, b.y);
 }
-WP_FN bool tt_segments_2d(g_pt2 p, g_pt2 q, g_pt2 r, g_pt2 s) {
+WP_LFN bool tt_segments_2d(g_pt2 p, g_pt2 q, g_pt2 r, g_pt2 s) {
   const f32 o1 = tt_orient2(p, q, r), o2 = tt_orient2(p, q, s);
   const f32 o3 = tt_orient2(r, s, p), o4 = tt_orient2(r, s, q);
   if (((o1 > 0.0f && o2 < 0.0f) || (o1 < 0.0f && o2 > 0.0f)) &&
@@ -603,12 +603,12 @@ WP_FN bool tt_segments_2d(g_pt2 p, g_pt2 q, g_pt2 r, g_pt2 s) {
   return (o1 == 0.0f && tt_between(p, q, r)) || (o2 == 0.0f && tt_between(p, q, s)) ||
          (o3 == 0.0f && tt_between(r, s, p)) || (o4 == 0.0f && tt_between(r, s, q));
 }
-WP_FN bool tt_in_triangle_2d(g_pt2 x, const g_pt2* t) {
+WP_LFN bool tt_in_triangle_2d(g_pt2 x, const g_pt2* t) {
   const f32 o0 = tt_orient2(t[0], t[1], x), o1 = tt_orient2(t[1], t[2], x),
             o2 = tt_orient2(t[2], t[0], x);
   return (o0 >= 0.0f && o1 >= 0.0f && o2 >= 0.0f) || (o0 <= 0.0f && o1 <= 0.0f && o2 <= 0.0f);
 }
-WP_FN bool tt_coplanar(const Vec3& n, const Vec3* a, const Vec3* b) {
+WP_LFN bool tt_coplanar(const Vec3& n, const Vec3* a, const Vec3* b) {
   int i, j;
   tt_projection_axes(n, &i, &j);
   g_pt2 pa[3], pb[3];
@@ -622,7 +622,7 @@ WP_FN bool tt_coplanar(const Vec3& n, const Vec3* a, const Vec3* b) {
   return tt_in_triangle_2d(pa[0], pb) || tt_in_triangle_2d(pb[0], pa);
 }
 /// The interval a triangle covers on the planes' line; false (None) when every d is zero.
-WP_FN bool tt_interval(const f32* p, const f32* d, f32* lo, f32* hi) {
+WP_LFN bool tt_interval(const f32* p, const f32* d, f32* lo, f32* hi) {
   int lone;
   if (d[0] * d[1] > 0.0f)
     lone = 2;
@@ -648,7 +648,7 @@ WP_FN bool tt_interval(const f32* p, const f32* d, f32* lo, f32* hi) {
   }
   return true;
 }
-WP_FN bool tt_tri_tri(const Vec3* a, const Vec3* b) {
+WP_LFN bool tt_tri_tri(const Vec3* a, const Vec3* b) {
   f32 da[3], db[3];
   const Vec3 nb = tt_plane_distances(b, a, da);
   if (tt_same_side(da)) return false;
@@ -668,7 +668,7 @@ WP_FN bool tt_tri_tri(const Vec3* a, const Vec3* b) {
   return a0 <= b1 && b0 <= a1;
 }
 /// Whether segment pq meets the non-degenerate triangle t.
-WP_FN bool tt_segment_triangle(const Vec3& p, const Vec3& q, const Vec3* t) {
+WP_LFN bool tt_segment_triangle(const Vec3& p, const Vec3& q, const Vec3* t) {
   const Vec3 pts[3] = {p, q, p};
   f32 d[3];
   const Vec3 n = tt_plane_distances(t, pts, d);
@@ -689,7 +689,7 @@ WP_FN bool tt_segment_triangle(const Vec3& p, const Vec3& q, const Vec3* t) {
   return tt_in_triangle_2d(g_p2(g_comp(x, i), g_comp(x, j)), pt);
 }
 /// Whether two segments come within 4 * TRI_TRI_EPS (Ericson 5.1.9, clamped).
-WP_FN bool tt_segments_touch(const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+WP_LFN bool tt_segments_touch(const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
   const Vec3 d1 = p1 - p0, d2 = q1 - q0, r = p0 - q0;
   const f32 a = g_dot(d1, d1), e = g_dot(d2, d2), f = g_dot(d2, r);
   f32 s, t;
@@ -724,7 +724,7 @@ WP_FN bool tt_segments_touch(const Vec3& p0, const Vec3& p1, const Vec3& q0, con
 }  // namespace detail
 
 /// Whether triangles (v0, v1, v2) and (u0, u1, u2) intersect, touching included.
-WP_FN bool intersect_tri_tri(Vec3 v0, Vec3 v1, Vec3 v2, Vec3 u0, Vec3 u1, Vec3 u2) {
+WP_LFN bool intersect_tri_tri(Vec3 v0, Vec3 v1, Vec3 v2, Vec3 u0, Vec3 u1, Vec3 u2) {
   using namespace detail;
   const Vec3 o = v0;
   Vec3 a[3] = {v0 - o, v1 - o, v2 - o};

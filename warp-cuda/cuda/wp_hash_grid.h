@@ -63,17 +63,17 @@ static_assert(sizeof(hash_grid_query_t) == 48, "hash_grid_query_t layout");
 
 namespace detail {
 /// floor(x * inv) as i32, Rust's `as` (saturating, NaN to 0).
-WP_FN i32 hash_grid_cell(f32 x, f32 inv) { return cast<i32>(::floorf(x * inv)); }
+WP_LFN i32 hash_grid_cell(f32 x, f32 inv) { return cast<i32>(::floorf(x * inv)); }
 /// The Euclidean remainder of c by d > 0, without dividing when c is in [0, d) already (a
 /// 64-bit remainder is a long software sequence on a GPU).
-WP_FN i32 hash_grid_wrap(i64 c, i32 d) {
+WP_LFN i32 hash_grid_wrap(i64 c, i32 d) {
   if ((u64)c < (u64)d) return (i32)c;
   i64 r = c % (i64)d;
   if (r < 0) r += (i64)d;
   return (i32)r;
 }
 /// A checked view of one of the grid's buffers, reporting the grid's parameter.
-WP_FN array_t<i32, 1> hash_grid_buffer(const i32* p, i64 n, i32 arg) {
+WP_LFN array_t<i32, 1> hash_grid_buffer(const i32* p, i64 n, i32 arg) {
   array_t<i32, 1> a;
   a.data = const_cast<i32*>(p);
   a.shape[0] = n;
@@ -85,7 +85,7 @@ WP_FN array_t<i32, 1> hash_grid_buffer(const i32* p, i64 n, i32 arg) {
 }  // namespace detail
 
 /// The bucket of cell (x, y, z): each wrapped into [0, dim), then (z * dim_y + y) * dim_x + x.
-WP_FN i32 hash_grid_bucket(const i32* dims, i64 x, i64 y, i64 z) {
+WP_LFN i32 hash_grid_bucket(const i32* dims, i64 x, i64 y, i64 z) {
   const i32 bx = detail::hash_grid_wrap(x, dims[0]);
   const i32 by = detail::hash_grid_wrap(y, dims[1]);
   const i32 bz = detail::hash_grid_wrap(z, dims[2]);
@@ -93,13 +93,13 @@ WP_FN i32 hash_grid_bucket(const i32* dims, i64 x, i64 y, i64 z) {
 }
 
 /// The bucket of point p (what a build sorts by).
-WP_FN i32 hash_grid_point_bucket(const i32* dims, f32 inv, Vec3 p) {
+WP_LFN i32 hash_grid_point_bucket(const i32* dims, f32 inv, Vec3 p) {
   return hash_grid_bucket(dims, (i64)detail::hash_grid_cell(p.x, inv),
                           (i64)detail::hash_grid_cell(p.y, inv),
                           (i64)detail::hash_grid_cell(p.z, inv));
 }
 
-WP_FN hash_grid_query_t hash_grid_query(const hash_grid_t& grid, Vec3 p, f32 radius, ctx_t* ctx) {
+WP_LFN hash_grid_query_t hash_grid_query(const hash_grid_t& grid, Vec3 p, f32 radius, ctx_t* ctx) {
   (void)ctx;
   hash_grid_query_t q{};
   q.at[0] = -1;
@@ -123,7 +123,7 @@ WP_FN hash_grid_query_t hash_grid_query(const hash_grid_t& grid, Vec3 p, f32 rad
 namespace detail {
 /// The bucket of the query's current cell: first cell plus offset, each below the dim, so one
 /// subtraction wraps their sum (as u32, which holds twice any i32).
-WP_FN i32 hash_grid_query_bucket(const i32* dims, const hash_grid_query_t& q) {
+WP_LFN i32 hash_grid_query_bucket(const i32* dims, const hash_grid_query_t& q) {
   i32 c[3];
   for (int a = 0; a < 3; ++a) {
     const u32 s = (u32)q.lo[a] + (u32)q.at[a];
@@ -133,7 +133,7 @@ WP_FN i32 hash_grid_query_bucket(const i32* dims, const hash_grid_query_t& q) {
 }
 }  // namespace detail
 
-WP_FN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_query_t q,
+WP_LFN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_query_t q,
                                              ctx_t* ctx) {
   const array_t<i32, 1> ids =
       detail::hash_grid_buffer(grid.point_ids, (i64)grid.num_points, grid.arg);
@@ -175,9 +175,9 @@ WP_FN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid_
   }
 }
 
-WP_FN bool hash_grid_query_done(hash_grid_query_t q) { return q.point < 0; }
+WP_LFN bool hash_grid_query_done(hash_grid_query_t q) { return q.point < 0; }
 
-WP_FN usize hash_grid_query_point(hash_grid_query_t q) { return (usize)(i64)q.point; }
+WP_LFN usize hash_grid_query_point(hash_grid_query_t q) { return (usize)(i64)q.point; }
 
 template <typename I>
 WP_FN usize hash_grid_point_id(const hash_grid_t& grid, I i, ctx_t* ctx) {
@@ -196,7 +196,7 @@ WP_FN usize hash_grid_point_id(const hash_grid_t& grid, I i, ctx_t* ctx) {
 
 /// Point i's bucket and index, and whether the point is finite (a build refuses NaN and
 /// infinite points: the caller records the first such index).
-WP_FN bool hash_grid_build_key(const i32* dims, f32 inv, Vec3 p, i32 i, i32* key, i32* value) {
+WP_LFN bool hash_grid_build_key(const i32* dims, f32 inv, Vec3 p, i32 i, i32* key, i32* value) {
   *key = hash_grid_point_bucket(dims, inv, p);
   *value = i;
   return p.x - p.x == 0.0f && p.y - p.y == 0.0f && p.z - p.z == 0.0f;
@@ -206,7 +206,7 @@ WP_FN bool hash_grid_build_key(const i32* dims, f32 inv, Vec3 p, i32 i, i32* key
 /// first of its bucket, and ends after it if k is the last; with `clear`, the same entries are
 /// zeroed instead (undoing a build from its keys). Keys are buckets by construction; one
 /// outside [0, buckets) is skipped, never written.
-WP_FN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* starts, i32* ends,
+WP_LFN void hash_grid_build_range(const i32* sorted_keys, i32 n, i32 k, i32* starts, i32* ends,
                                  i32 buckets, bool clear) {
   const i32 b = sorted_keys[k];
   if (b < 0 || b >= buckets) return;

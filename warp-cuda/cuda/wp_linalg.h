@@ -32,26 +32,26 @@ namespace detail {
 struct m4 {
   f32 v[4];
 };
-WP_FN m4 m4_of(const Vec4& a) { return m4{{a.x, a.y, a.z, a.w}}; }
-WP_FN Vec4 m4_vec(const m4& a) { return Vec4_new(a.v[0], a.v[1], a.v[2], a.v[3]); }
-WP_FN m4 m4_set(f32 a, f32 b, f32 c, f32 d) { return m4{{a, b, c, d}}; }
+WP_LFN m4 m4_of(const Vec4& a) { return m4{{a.x, a.y, a.z, a.w}}; }
+WP_LFN Vec4 m4_vec(const m4& a) { return Vec4_new(a.v[0], a.v[1], a.v[2], a.v[3]); }
+WP_LFN m4 m4_set(f32 a, f32 b, f32 c, f32 d) { return m4{{a, b, c, d}}; }
 /// _mm_shuffle_ps(a, b, imm): lanes a[imm&3], a[(imm>>2)&3], b[(imm>>4)&3], b[(imm>>6)&3].
-WP_FN m4 shuf(const m4& a, const m4& b, int imm) {
+WP_LFN m4 shuf(const m4& a, const m4& b, int imm) {
   return m4{{a.v[imm & 3], a.v[(imm >> 2) & 3], b.v[(imm >> 4) & 3], b.v[(imm >> 6) & 3]}};
 }
 /// _mm_movehl_ps(a, b): b2, b3, a2, a3.
-WP_FN m4 movehl(const m4& a, const m4& b) { return m4{{b.v[2], b.v[3], a.v[2], a.v[3]}}; }
-WP_FN m4 operator*(const m4& a, const m4& b) {
+WP_LFN m4 movehl(const m4& a, const m4& b) { return m4{{b.v[2], b.v[3], a.v[2], a.v[3]}}; }
+WP_LFN m4 operator*(const m4& a, const m4& b) {
   return m4{{a.v[0] * b.v[0], a.v[1] * b.v[1], a.v[2] * b.v[2], a.v[3] * b.v[3]}};
 }
-WP_FN m4 operator+(const m4& a, const m4& b) {
+WP_LFN m4 operator+(const m4& a, const m4& b) {
   return m4{{a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]}};
 }
-WP_FN m4 operator-(const m4& a, const m4& b) {
+WP_LFN m4 operator-(const m4& a, const m4& b) {
   return m4{{a.v[0] - b.v[0], a.v[1] - b.v[1], a.v[2] - b.v[2], a.v[3] - b.v[3]}};
 }
 /// glam's SSE2 dot4: (x*x' + z*z') + (y*y' + w*w').
-WP_FN f32 dot4(const m4& a, const m4& b) {
+WP_LFN f32 dot4(const m4& a, const m4& b) {
   const m4 p = a * b;
   return (p.v[0] + p.v[2]) + (p.v[1] + p.v[3]);
 }
@@ -72,15 +72,15 @@ WP_FN typename vec_traits<Q>::scalar qdot(const Q& a, const Q& b) {
 // ------------------------------------------------------------------------------------------
 
 #define WP_LINALG_VEC(V, M, S)                                                          \
-  WP_FN S length_sq(const V& v) { return dot(v, v); }                                   \
-  WP_FN M outer(const V& a, const V& b) {                                               \
+  WP_LFN S length_sq(const V& v) { return dot(v, v); }                                   \
+  WP_LFN M outer(const V& a, const V& b) {                                               \
     M m;                                                                                \
     for (int j = 0; j < vec_traits<V>::N; ++j) mat_traits<M>::at(m, j) = a * vec_traits<V>::get(b, j); \
     return m;                                                                           \
   }                                                                                     \
-  WP_FN M diag(const V& v) { return M##_from_diagonal(v); }                             \
-  WP_FN V cw_mul(const V& a, const V& b) { return a * b; }                              \
-  WP_FN V cw_div(const V& a, const V& b) { return a / b; }
+  WP_LFN M diag(const V& v) { return M##_from_diagonal(v); }                             \
+  WP_LFN V cw_mul(const V& a, const V& b) { return a * b; }                              \
+  WP_LFN V cw_div(const V& a, const V& b) { return a / b; }
 WP_LINALG_VEC(Vec2, Mat2, f32)
 WP_LINALG_VEC(Vec3, Mat3, f32)
 WP_LINALG_VEC(Vec4, Mat4, f32)
@@ -88,41 +88,41 @@ WP_LINALG_VEC(DVec2, DMat2, f64)
 WP_LINALG_VEC(DVec3, DMat3, f64)
 WP_LINALG_VEC(DVec4, DMat4, f64)
 #undef WP_LINALG_VEC
-WP_FN i32 length_sq(const IVec2& v) { return dot(v, v); }
-WP_FN i32 length_sq(const IVec3& v) { return dot(v, v); }
-WP_FN i32 length_sq(const IVec4& v) { return dot(v, v); }
-WP_FN u32 length_sq(const UVec2& v) { return dot(v, v); }
-WP_FN u32 length_sq(const UVec3& v) { return dot(v, v); }
-WP_FN u32 length_sq(const UVec4& v) { return dot(v, v); }
+WP_LFN i32 length_sq(const IVec2& v) { return dot(v, v); }
+WP_LFN i32 length_sq(const IVec3& v) { return dot(v, v); }
+WP_LFN i32 length_sq(const IVec4& v) { return dot(v, v); }
+WP_LFN u32 length_sq(const UVec2& v) { return dot(v, v); }
+WP_LFN u32 length_sq(const UVec3& v) { return dot(v, v); }
+WP_LFN u32 length_sq(const UVec4& v) { return dot(v, v); }
 
 // ------------------------------------------------------------------------------------------
 // Matrices
 // ------------------------------------------------------------------------------------------
 
 #define WP_LINALG_MAT(M, V, S)                                                          \
-  WP_FN M cw_mul(const M& a, const M& b) {                                              \
+  WP_LFN M cw_mul(const M& a, const M& b) {                                              \
     M r;                                                                                \
     for (int i = 0; i < mat_traits<M>::N; ++i) mat_traits<M>::at(r, i) = mat_traits<M>::get(a, i) * mat_traits<M>::get(b, i); \
     return r;                                                                           \
   }                                                                                     \
-  WP_FN M cw_div(const M& a, const M& b) {                                              \
+  WP_LFN M cw_div(const M& a, const M& b) {                                              \
     M r;                                                                                \
     for (int i = 0; i < mat_traits<M>::N; ++i) mat_traits<M>::at(r, i) = mat_traits<M>::get(a, i) / mat_traits<M>::get(b, i); \
     return r;                                                                           \
   }                                                                                     \
-  WP_FN M transpose(const M& m) {                                                       \
+  WP_LFN M transpose(const M& m) {                                                       \
     M r;                                                                                \
     for (int i = 0; i < mat_traits<M>::N; ++i)                                          \
       for (int j = 0; j < mat_traits<M>::N; ++j)                                        \
         vec_traits<V>::at(mat_traits<M>::at(r, i), j) = vec_traits<V>::get(mat_traits<M>::get(m, j), i); \
     return r;                                                                           \
   }                                                                                     \
-  WP_FN S trace(const M& m) {                                                           \
+  WP_LFN S trace(const M& m) {                                                           \
     S acc = m.x_axis.x;                                                                 \
     for (int i = 1; i < mat_traits<M>::N; ++i) acc = acc + vec_traits<V>::get(mat_traits<M>::get(m, i), i); \
     return acc;                                                                         \
   }                                                                                     \
-  WP_FN S ddot(const M& a, const M& b) {                                                \
+  WP_LFN S ddot(const M& a, const M& b) {                                                \
     S acc = (S)0;                                                                       \
     for (int k = 0; k < vec_traits<M>::N; ++k) acc = acc + vec_traits<M>::get(a, k) * vec_traits<M>::get(b, k); \
     return acc;                                                                         \
@@ -137,8 +137,8 @@ WP_LINALG_MAT(DMat4, DVec4, f64)
 
 // 2x2 (glam's SSE2 Mat2 and scalar DMat2 agree lane for lane).
 #define WP_LINALG_MAT2(M, V, S)                                                         \
-  WP_FN S determinant(const M& m) { return m.x_axis.x * m.y_axis.y - m.x_axis.y * m.y_axis.x; } \
-  WP_FN M inverse(const M& m) {                                                         \
+  WP_LFN S determinant(const M& m) { return m.x_axis.x * m.y_axis.y - m.x_axis.y * m.y_axis.x; } \
+  WP_LFN M inverse(const M& m) {                                                         \
     const S det = determinant(m);                                                       \
     if (det == (S)0) return M##_ZERO();                                                 \
     const S r = (S)1 / det;                                                             \
@@ -151,8 +151,8 @@ WP_LINALG_MAT2(DMat2, DVec2, f64)
 
 // 3x3 (glam's scalar Mat3/DMat3).
 #define WP_LINALG_MAT3(M, V, S)                                                         \
-  WP_FN S determinant(const M& m) { return detail::dot3(m.z_axis, cross(m.x_axis, m.y_axis)); } \
-  WP_FN M inverse(const M& m) {                                                         \
+  WP_LFN S determinant(const M& m) { return detail::dot3(m.z_axis, cross(m.x_axis, m.y_axis)); } \
+  WP_LFN M inverse(const M& m) {                                                         \
     const V t0 = cross(m.y_axis, m.z_axis);                                             \
     const V t1 = cross(m.z_axis, m.x_axis);                                             \
     const V t2 = cross(m.x_axis, m.y_axis);                                             \
@@ -161,7 +161,7 @@ WP_LINALG_MAT2(DMat2, DVec2, f64)
     const V r = V##_splat((S)1 / det);                                                  \
     return transpose(M##_from_cols(t0 * r, t1 * r, t2 * r));                            \
   }                                                                                     \
-  WP_FN M skew(const V& v) {                                                            \
+  WP_LFN M skew(const V& v) {                                                            \
     const S z = (S)0;                                                                   \
     return M##_from_cols(V##_new(z, v.z, -v.y), V##_new(-v.z, z, v.x), V##_new(v.y, -v.x, z)); \
   }
@@ -170,7 +170,7 @@ WP_LINALG_MAT3(DMat3, DVec3, f64)
 #undef WP_LINALG_MAT3
 
 // DMat4: glam's scalar code.
-WP_FN f64 determinant(const DMat4& m) {
+WP_LFN f64 determinant(const DMat4& m) {
   const f64 m00 = m.x_axis.x, m01 = m.x_axis.y, m02 = m.x_axis.z, m03 = m.x_axis.w;
   const f64 m10 = m.y_axis.x, m11 = m.y_axis.y, m12 = m.y_axis.z, m13 = m.y_axis.w;
   const f64 m20 = m.z_axis.x, m21 = m.z_axis.y, m22 = m.z_axis.z, m23 = m.z_axis.w;
@@ -186,7 +186,7 @@ WP_FN f64 determinant(const DMat4& m) {
          m02 * (m10 * a1323 - m11 * a0323 + m13 * a0123) -
          m03 * (m10 * a1223 - m11 * a0223 + m12 * a0123);
 }
-WP_FN DMat4 inverse(const DMat4& m) {
+WP_LFN DMat4 inverse(const DMat4& m) {
   if (determinant(m) == 0.0) return DMat4_ZERO();
   const f64 m00 = m.x_axis.x, m01 = m.x_axis.y, m02 = m.x_axis.z, m03 = m.x_axis.w;
   const f64 m10 = m.y_axis.x, m11 = m.y_axis.y, m12 = m.y_axis.z, m13 = m.y_axis.w;
@@ -216,7 +216,7 @@ WP_FN DMat4 inverse(const DMat4& m) {
 }
 
 // Mat4: glam's SSE2 code, lane by lane (shuffles are exact; the arithmetic is per lane).
-WP_FN f32 determinant(const Mat4& m) {
+WP_LFN f32 determinant(const Mat4& m) {
   using namespace detail;
   const m4 y = m4_of(m.y_axis), z = m4_of(m.z_axis), w = m4_of(m.w_axis);
   const m4 swp2a = shuf(z, z, 0x16), swp3a = shuf(w, w, 0xEF);
@@ -237,7 +237,7 @@ WP_FN f32 determinant(const Mat4& m) {
   const m4 detcof = (subres + mulfacc) * m4_set(1.0f, -1.0f, 1.0f, -1.0f);
   return dot4(m4_of(m.x_axis), detcof);
 }
-WP_FN Mat4 inverse(const Mat4& m) {
+WP_LFN Mat4 inverse(const Mat4& m) {
   using namespace detail;
   if (determinant(m) == 0.0f) return Mat4_ZERO();
   const m4 x = m4_of(m.x_axis), y = m4_of(m.y_axis), z = m4_of(m.z_axis), w = m4_of(m.w_axis);
@@ -275,33 +275,33 @@ WP_FN Mat4 inverse(const Mat4& m) {
 // ------------------------------------------------------------------------------------------
 
 #define WP_LINALG_QUAT(Q, V3, M3, S)                                                    \
-  WP_FN S dot(const Q& a, const Q& b) { return detail::qdot(a, b); }                    \
-  WP_FN S length_sq(const Q& q) { return detail::qdot(q, q); }                          \
+  WP_LFN S dot(const Q& a, const Q& b) { return detail::qdot(a, b); }                    \
+  WP_LFN S length_sq(const Q& q) { return detail::qdot(q, q); }                          \
   /* length, normalize: rescaled by a power of two (wp_vector.h). */                   \
-  WP_FN S length(const Q& q) {                                                          \
+  WP_LFN S length(const Q& q) {                                                          \
     Q w;                                                                                \
     S l, k, inv;                                                                        \
     detail::norm_scaled(q, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv); \
     return l * inv;                                                                     \
   }                                                                                     \
-  WP_FN Q normalize(const Q& q) {                                                       \
+  WP_LFN Q normalize(const Q& q) {                                                       \
     Q w;                                                                                \
     S l, k, inv;                                                                        \
     detail::norm_scaled(q, [](const Q& a) { return detail::qdot(a, a); }, w, l, k, inv); \
     if (l > (S)0) return Q##_from_xyzw(w.x / l, w.y / l, w.z / l, w.w / l);             \
     return Q##_IDENTITY();                                                              \
   }                                                                                     \
-  WP_FN Q quat_inverse(const Q& q) { return Q##_from_xyzw(-q.x, -q.y, -q.z, q.w); }     \
-  WP_FN Q inverse(const Q& q) { return quat_inverse(q); }                               \
-  WP_FN Q quat_from_axis_angle(const V3& axis, S angle) {                               \
+  WP_LFN Q quat_inverse(const Q& q) { return Q##_from_xyzw(-q.x, -q.y, -q.z, q.w); }     \
+  WP_LFN Q inverse(const Q& q) { return quat_inverse(q); }                               \
+  WP_LFN Q quat_from_axis_angle(const V3& axis, S angle) {                               \
     const S h = angle * (S)0.5;                                                         \
     const S s = sin(h), c = cos(h);                                                     \
     const V3 v = axis * s;                                                              \
     return Q##_from_xyzw(v.x, v.y, v.z, c);                                             \
   }                                                                                     \
-  WP_FN V3 quat_rotate(const Q& q, const V3& v) { return q * v; }                       \
-  WP_FN V3 quat_rotate_inv(const Q& q, const V3& v) { return quat_inverse(q) * v; }     \
-  WP_FN M3 quat_to_matrix(const Q& q) {                                                 \
+  WP_LFN V3 quat_rotate(const Q& q, const V3& v) { return q * v; }                       \
+  WP_LFN V3 quat_rotate_inv(const Q& q, const V3& v) { return quat_inverse(q) * v; }     \
+  WP_LFN M3 quat_to_matrix(const Q& q) {                                                 \
     const S x2 = q.x + q.x, y2 = q.y + q.y, z2 = q.z + q.z;                             \
     const S xx = q.x * x2, xy = q.x * y2, xz = q.x * z2;                                \
     const S yy = q.y * y2, yz = q.y * z2, zz = q.z * z2;                                \
@@ -310,7 +310,7 @@ WP_FN Mat4 inverse(const Mat4& m) {
                           V3##_new(xy - wz, (S)1 - (xx + zz), yz + wx),                 \
                           V3##_new(xz + wy, yz - wx, (S)1 - (xx + yy)));                \
   }                                                                                     \
-  WP_FN Q quat_from_matrix(const M3& m) {                                               \
+  WP_LFN Q quat_from_matrix(const M3& m) {                                               \
     const S m00 = m.x_axis.x, m01 = m.x_axis.y, m02 = m.x_axis.z;                       \
     const S m10 = m.y_axis.x, m11 = m.y_axis.y, m12 = m.y_axis.z;                       \
     const S m20 = m.z_axis.x, m21 = m.z_axis.y, m22 = m.z_axis.z;                       \
@@ -334,7 +334,7 @@ WP_FN Mat4 inverse(const Mat4& m) {
       }                                                                                 \
     }                                                                                   \
   }                                                                                     \
-  WP_FN Q quat_slerp(const Q& q0, const Q& q1, S t) {                                   \
+  WP_LFN Q quat_slerp(const Q& q0, const Q& q1, S t) {                                   \
     const Q d = quat_inverse(q0) * q1;                                                  \
     const V3 v = V3##_new(d.x, d.y, d.z);                                               \
     const V3 n = normalize(v);                                                          \
@@ -349,9 +349,9 @@ WP_LINALG_QUAT(DQuat, DVec3, DMat3, f64)
 // ----- quat_from_euler, quat_to_euler: warp-core/src/builtins/euler.rs, step for step -----
 namespace detail {
 // The axis an index names in quat_from_euler (0 is x, 1 is y, else z).
-WP_FN int euler_axis(i32 n) { return n == 0 ? 0 : n == 1 ? 1 : 2; }
+WP_LFN int euler_axis(i32 n) { return n == 0 ? 0 : n == 1 ? 1 : 2; }
 // The lane of (w, x, y, z) a 1-based index reads in quat_to_euler (2: y, 3: z, else x).
-WP_FN int euler_pick(long long n) { return n == 2 ? 2 : n == 3 ? 3 : 1; }
+WP_LFN int euler_pick(long long n) { return n == 2 ? 2 : n == 3 ? 3 : 1; }
 // quat_to_euler's steps, which its adjoint reads again (warp-core's ToEuler).
 template <typename S>
 struct ToEuler {
@@ -367,7 +367,7 @@ struct ToEuler {
 
 // EPS: Warp's 1e-6; PI, HALF_PI: Rust's consts of the type.
 #define WP_LINALG_EULER(Q, V3, S, EPS, PI, HALF_PI)                                     \
-  WP_FN detail::ToEuler<S> to_euler_steps(const Q& q, i32 i0, i32 j0, i32 k0) {         \
+  WP_LFN detail::ToEuler<S> to_euler_steps(const Q& q, i32 i0, i32 j0, i32 k0) {         \
     const S qa[4] = {q.w, q.x, q.y, q.z};                                               \
     const long long i = (long long)i0 + 1, j = (long long)j0 + 1;                       \
     long long k = (long long)k0 + 1;                                                    \
@@ -432,12 +432,12 @@ struct ToEuler {
     for (int m = 0; m < 3; ++m) p.out[m] = t[p.slot[m]];                                \
     return p;                                                                           \
   }                                                                                     \
-  WP_FN V3 quat_to_euler(const Q& q, i32 i, i32 j, i32 k) {                             \
+  WP_LFN V3 quat_to_euler(const Q& q, i32 i, i32 j, i32 k) {                             \
     const detail::ToEuler<S> p = to_euler_steps(q, i, j, k);                            \
     return V3##_new(p.out[0], p.out[1], p.out[2]);                                      \
   }                                                                                     \
   /* The axis quaternion n (0: i, 1: j, 2: k) of quat_from_euler and its half angle. */ \
-  WP_FN Q euler_axis_quat(const V3& e, i32 idx, S& h) {                                 \
+  WP_LFN Q euler_axis_quat(const V3& e, i32 idx, S& h) {                                 \
     const S ea[3] = {e.x, e.y, e.z};                                                    \
     const int ax = detail::euler_axis(idx);                                             \
     h = (S)0.5 * ea[ax];                                                                \
@@ -446,7 +446,7 @@ struct ToEuler {
     l[3] = cos(h);                                                                      \
     return Q##_from_xyzw(l[0], l[1], l[2], l[3]);                                       \
   }                                                                                     \
-  WP_FN Q quat_from_euler(const V3& e, i32 i, i32 j, i32 k) {                           \
+  WP_LFN Q quat_from_euler(const V3& e, i32 i, i32 j, i32 k) {                           \
     S h;                                                                                \
     const Q qi = euler_axis_quat(e, i, h);                                              \
     const Q qj = euler_axis_quat(e, j, h);                                              \

@@ -182,7 +182,7 @@ WP_MSHAPE_SPATIAL(DSpatialMatrix, f64)
     static WP_FN S get(const M& m, int k) { return mshape<M>::get(m, k / CC, k % CC); }      \
     static WP_FN S& at(M& m, int k) { return mshape<M>::at(m, k / CC, k % CC); }             \
   };                                                                                          \
-  WP_FN M M##_ZERO() {                                                                        \
+  WP_LFN M M##_ZERO() {                                                                        \
     M r;                                                                                      \
     for (int k = 0; k < RR * CC; ++k) vec_traits<M>::at(r, k) = (S)0;                         \
     return r;                                                                                 \
@@ -219,15 +219,15 @@ WP_RC(DMat64, f64, 6, 4, DVec4, WP_PICK6)
 
 // Constructors from rows (one per row count).
 #define WP_FROM_ROWS2(M, V) \
-  WP_FN M M##_from_rows(const V& r0, const V& r1) { return M{r0, r1}; }
+  WP_LFN M M##_from_rows(const V& r0, const V& r1) { return M{r0, r1}; }
 #define WP_FROM_ROWS3(M, V) \
-  WP_FN M M##_from_rows(const V& r0, const V& r1, const V& r2) { return M{r0, r1, r2}; }
+  WP_LFN M M##_from_rows(const V& r0, const V& r1, const V& r2) { return M{r0, r1, r2}; }
 #define WP_FROM_ROWS4(M, V)                                                      \
-  WP_FN M M##_from_rows(const V& r0, const V& r1, const V& r2, const V& r3) {    \
+  WP_LFN M M##_from_rows(const V& r0, const V& r1, const V& r2, const V& r3) {    \
     return M{r0, r1, r2, r3};                                                    \
   }
 #define WP_FROM_ROWS6(M, V)                                                                  \
-  WP_FN M M##_from_rows(const V& r0, const V& r1, const V& r2, const V& r3, const V& r4,     \
+  WP_LFN M M##_from_rows(const V& r0, const V& r1, const V& r2, const V& r3, const V& r4,     \
                         const V& r5) {                                                       \
     return M{r0, r1, r2, r3, r4, r5};                                                        \
   }

@@ -119,7 +119,7 @@ static_assert(sizeof(mesh_query_aabb_t) == 44, "mesh_query_aabb_t layout");
 
 namespace detail {
 
-WP_FN mesh_query_point_t mesh_point_none() {
+WP_LFN mesh_query_point_t mesh_point_none() {
   mesh_query_point_t r;
   r.result = false;
   r.sign = 0.0f;
@@ -129,7 +129,7 @@ WP_FN mesh_query_point_t mesh_point_none() {
   return r;
 }
 
-WP_FN mesh_query_ray_t mesh_ray_none() {
+WP_LFN mesh_query_ray_t mesh_ray_none() {
   mesh_query_ray_t r;
   r.result = false;
   r.sign = 0.0f;
@@ -145,7 +145,7 @@ WP_FN mesh_query_ray_t mesh_ray_none() {
 /// The three are read before any is checked (all lie in the buffer once f is a face), so
 /// that the reads are issued together instead of each waiting on the check before it; the
 /// checks then run in the Rust order, so the same index faults.
-WP_FN void mesh_face_indices(const mesh_t& m, i64 f, i32* ix, ctx_t* ctx) {
+WP_LFN void mesh_face_indices(const mesh_t& m, i64 f, i32* ix, ctx_t* ctx) {
   if ((u64)f >= (u64)(i64)m.tree.num_prims) {
     bvh_fault(m.tree, f, (i64)m.tree.num_prims, ctx);
     return;
@@ -161,7 +161,7 @@ WP_FN void mesh_face_indices(const mesh_t& m, i64 f, i32* ix, ctx_t* ctx) {
 }
 
 /// MeshView::triangle: the three vertices of face f (checked).
-WP_FN void mesh_triangle(const mesh_t& m, i64 f, Vec3* t, ctx_t* ctx) {
+WP_LFN void mesh_triangle(const mesh_t& m, i64 f, Vec3* t, ctx_t* ctx) {
   i32 ix[3];
   mesh_face_indices(m, f, ix, ctx);
   if (faulted(ctx)) return;
@@ -171,7 +171,7 @@ WP_FN void mesh_triangle(const mesh_t& m, i64 f, Vec3* t, ctx_t* ctx) {
 /// MeshView::leaf_triangle: the triangle at position k of prim_ids, from the leaf-ordered
 /// copy. k is a position inside a leaf's range, checked by the walk (the Rust's check of k
 /// never fails there): no check here.
-WP_FN void mesh_leaf_triangle(const mesh_t& m, i32 k, Vec3* t) {
+WP_LFN void mesh_leaf_triangle(const mesh_t& m, i32 k, Vec3* t) {
 #if defined(__CUDACC__)
   // Three 16-byte read-only loads (the runtime allocates the copy 16-byte aligned), issued
   // together: the whole dependent chain of a triangle read is this one step.
@@ -187,7 +187,7 @@ WP_FN void mesh_leaf_triangle(const mesh_t& m, i32 k, Vec3* t) {
 }
 
 /// MeshView::measure_scale: the root box's farthest extent from p, as a power of two.
-WP_FN f32 mesh_measure_scale(const mesh_t& m, Vec3 p, ctx_t* ctx) {
+WP_LFN f32 mesh_measure_scale(const mesh_t& m, Vec3 p, ctx_t* ctx) {
   const bvh_node_t root = bvh_node(m.tree, 0, ctx);
   if (faulted(ctx)) return 1.0f;
   const Vec3 e = g_vmax(g_abs(bvh_node_lower(root) - p), g_abs(bvh_node_upper(root) - p));
@@ -195,7 +195,7 @@ WP_FN f32 mesh_measure_scale(const mesh_t& m, Vec3 p, ctx_t* ctx) {
 }
 
 /// unit_normal: the unit normal at a power-of-two scale, zero for a sliver.
-WP_FN Vec3 mesh_unit_normal(Vec3 a, Vec3 b, Vec3 c) {
+WP_LFN Vec3 mesh_unit_normal(Vec3 a, Vec3 b, Vec3 c) {
   Vec3 e1 = b - a, e2 = c - a;
   const f32 s = pow2_scale(g_max_elem(g_vmax(g_abs(e1), g_abs(e2))));
   e1 = e1 * s;
@@ -207,7 +207,7 @@ WP_FN Vec3 mesh_unit_normal(Vec3 a, Vec3 b, Vec3 c) {
 }
 
 /// face_normal: normalize_or_zero of the scaled cross product.
-WP_FN Vec3 mesh_face_normal(Vec3 a, Vec3 b, Vec3 c) {
+WP_LFN Vec3 mesh_face_normal(Vec3 a, Vec3 b, Vec3 c) {
   const Vec3 e1 = b - a, e2 = c - a;
   const f32 s = pow2_scale(g_max_elem(g_vmax(g_abs(e1), g_abs(e2))));
   const Vec3 n = g_cross(e1 * s, e2 * s);
@@ -248,7 +248,7 @@ WP_FN void mesh_for_faces_touching(const mesh_t& m, Vec3 lo, Vec3 hi, F f, ctx_t
   bvh_walk_ordered(m.tree, s, ctx);
 }
 
-WP_FN bool mesh_tri_contains(const Vec3* t, const Vec3& x) {
+WP_LFN bool mesh_tri_contains(const Vec3* t, const Vec3& x) {
   return g_eq(t[0], x) || g_eq(t[1], x) || g_eq(t[2], x);
 }
 
@@ -259,7 +259,7 @@ WP_FN bool mesh_tri_contains(const Vec3* t, const Vec3& x) {
 /// the same terms in the same order as the Rust's two functions. One function, so that the
 /// signed query inlines one touching walk rather than one per feature (six copies made a
 /// 128 KB kernel that spilled inside the closest walk's loop).
-WP_FN Vec3 mesh_feature_normal(const mesh_t& m, Vec3 x, Vec3 y, bool vertex, ctx_t* ctx) {
+WP_LFN Vec3 mesh_feature_normal(const mesh_t& m, Vec3 x, Vec3 y, bool vertex, ctx_t* ctx) {
   Vec3 n = Vec3_ZERO();
   mesh_for_faces_touching(
       m, g_vmin(x, y), g_vmax(x, y),
@@ -328,7 +328,7 @@ struct mesh_closest_t {
 
 /// closest(): the search run; false (None) when nothing lies within max_dist or on a fault.
 /// On true, c->at is the closest triangle's leaf position and c->face its face.
-WP_FN bool mesh_closest_search(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c,
+WP_LFN bool mesh_closest_search(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c,
                                ctx_t* ctx) {
   if (!(max_dist > 0.0f)) return false;
   const f32 s = mesh_measure_scale(m, p, ctx);
@@ -349,7 +349,7 @@ WP_FN bool mesh_closest_search(const mesh_t& m, Vec3 p, f32 max_dist, mesh_close
 /// mesh_closest_search, then the closest point on the triangle found (*bary) and its
 /// vertices (tri[0..3]): Closest::visit's computation repeated on the triangle the walk
 /// chose, read again at its leaf position, from the same vertices and s.
-WP_FN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c, Vec3* tri,
+WP_LFN bool mesh_closest(const mesh_t& m, Vec3 p, f32 max_dist, mesh_closest_t* c, Vec3* tri,
                         triangle_closest_point_t* bary, ctx_t* ctx) {
   if (!mesh_closest_search(m, p, max_dist, c, ctx)) return false;
   mesh_leaf_triangle(m, c->at, tri);
@@ -444,7 +444,7 @@ struct mesh_closest_hit_t {
 // ------------------------------------------------------------------------------------------
 
 /// The closest point strictly within max_dist, without a sign (sign 0).
-WP_FN mesh_query_point_t mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN mesh_query_point_t mesh_query_point_no_sign(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                                   ctx_t* ctx) {
   detail::mesh_closest_t c;
   Vec3 t[3];
@@ -467,7 +467,7 @@ namespace detail {
 /// vertex's ends are selected from the feature and one walk (mesh_feature_normal) serves all
 /// six. (Inlined: as a call of its own the kernel's fault context would live in local memory,
 /// and 1M signed queries took 99 ms against 76 on an H200.)
-WP_FN f32 mesh_point_sign(const mesh_t& mesh, Vec3 point, const Vec3* t,
+WP_LFN f32 mesh_point_sign(const mesh_t& mesh, Vec3 point, const Vec3* t,
                           triangle_closest_point_t bary, f32 s, ctx_t* ctx) {
   const Vec3 a = t[0], b = t[1], cc = t[2];
   const i32 f = bary.feature;
@@ -493,7 +493,7 @@ WP_FN f32 mesh_point_sign(const mesh_t& mesh, Vec3 point, const Vec3* t,
 
 /// The closest point strictly within max_dist, with the sign of the point (-1 inside) by the
 /// angle-weighted pseudonormal of the closest feature.
-WP_FN mesh_query_point_t mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN mesh_query_point_t mesh_query_point(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                           ctx_t* ctx) {
   using namespace detail;
   mesh_closest_t c;
@@ -512,7 +512,7 @@ WP_FN mesh_query_point_t mesh_query_point(const mesh_t& mesh, Vec3 point, f32 ma
 }
 
 /// Warp's mesh_query_point_sign_normal: mesh_query_point under Warp's name for its method.
-WP_FN mesh_query_point_t mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN mesh_query_point_t mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                                       ctx_t* ctx) {
   return mesh_query_point(mesh, point, max_dist, ctx);
 }
@@ -520,14 +520,14 @@ WP_FN mesh_query_point_t mesh_query_point_sign_normal(const mesh_t& mesh, Vec3 p
 namespace detail {
 
 /// PARITY_DIR: the direction of (0.6, 0.48, 0.64), held exactly as (15/16, 3/4, 1).
-WP_FN Vec3 mesh_parity_dir() { return Vec3_new(0.9375f, 0.75f, 1.0f); }
+WP_LFN Vec3 mesh_parity_dir() { return Vec3_new(0.9375f, 0.75f, 1.0f); }
 
 /// PARITY_BOX_SLACK: 2^-18.
 #define WP_PARITY_BOX_SLACK (1.0f / 262144.0f)
 
 /// ray_may_meet_box: the slab test for a direction of positive components, widened by the
 /// slack relative to the parameters compared; inverted boxes and NaN miss.
-WP_FN bool mesh_ray_may_meet_box(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper) {
+WP_LFN bool mesh_ray_may_meet_box(Vec3 start, Vec3 inv_dir, Vec3 lower, Vec3 upper) {
   if (!(lower.x <= upper.x && lower.y <= upper.y && lower.z <= upper.z)) return false;
   const Vec3 lo = lower - start, hi = upper - start;
   const f32 nx = lo.x * inv_dir.x, ny = lo.y * inv_dir.y, nz = lo.z * inv_dir.z;
@@ -563,7 +563,7 @@ struct mesh_crossings_t {
 
 /// The closest point strictly within max_dist as mesh_query_point_no_sign finds it, with the
 /// sign from the parity of the faces one ray from the point crosses (odd: inside, -1).
-WP_FN mesh_query_point_t mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
+WP_LFN mesh_query_point_t mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 point, f32 max_dist,
                                                       ctx_t* ctx) {
   using namespace detail;
   mesh_closest_t c;
@@ -589,7 +589,7 @@ WP_FN mesh_query_point_t mesh_query_point_sign_parity(const mesh_t& mesh, Vec3 p
 
 /// The furthest point strictly beyond min_dist (a vertex: barycentrics (1, 0), (0, 1) or
 /// (0, 0)); min_dist below 0 counts as 0, NaN finds nothing.
-WP_FN mesh_query_point_t mesh_query_furthest_point_no_sign(const mesh_t& mesh, Vec3 point,
+WP_LFN mesh_query_point_t mesh_query_furthest_point_no_sign(const mesh_t& mesh, Vec3 point,
                                                            f32 min_dist, ctx_t* ctx) {
   using namespace detail;
   if (min_dist != min_dist) return mesh_point_none();
@@ -623,7 +623,7 @@ WP_FN mesh_query_point_t mesh_query_furthest_point_no_sign(const mesh_t& mesh, V
 
 /// The first hit of start + t * dir with the mesh at 0 <= t < max_t (ties at equal t to the
 /// face visited first).
-WP_FN mesh_query_ray_t mesh_query_ray(const mesh_t& mesh, Vec3 start, Vec3 dir, f32 max_t,
+WP_LFN mesh_query_ray_t mesh_query_ray(const mesh_t& mesh, Vec3 start, Vec3 dir, f32 max_t,
                                       ctx_t* ctx) {
   using namespace detail;
   mesh_closest_hit_t h;
@@ -653,7 +653,7 @@ WP_FN mesh_query_ray_t mesh_query_ray(const mesh_t& mesh, Vec3 start, Vec3 dir, 
 // Box query (over the faces' bounding boxes)
 // ------------------------------------------------------------------------------------------
 
-WP_FN mesh_query_aabb_t mesh_query_aabb(const mesh_t& mesh, Vec3 lower, Vec3 upper, ctx_t* ctx) {
+WP_LFN mesh_query_aabb_t mesh_query_aabb(const mesh_t& mesh, Vec3 lower, Vec3 upper, ctx_t* ctx) {
   (void)mesh;
   (void)ctx;
   mesh_query_aabb_t q;
@@ -663,7 +663,7 @@ WP_FN mesh_query_aabb_t mesh_query_aabb(const mesh_t& mesh, Vec3 lower, Vec3 upp
   return q;
 }
 
-WP_FN mesh_query_aabb_t mesh_query_aabb_next(const mesh_t& mesh, mesh_query_aabb_t q,
+WP_LFN mesh_query_aabb_t mesh_query_aabb_next(const mesh_t& mesh, mesh_query_aabb_t q,
                                              ctx_t* ctx) {
   const Vec3 lo = q.lower, hi = q.upper;
   q.walk = detail::bvh_walk_next(
@@ -680,9 +680,9 @@ WP_FN mesh_query_aabb_t mesh_query_aabb_next(const mesh_t& mesh, mesh_query_aabb
   return q;
 }
 
-WP_FN bool mesh_query_aabb_done(mesh_query_aabb_t q) { return q.walk.item < 0; }
+WP_LFN bool mesh_query_aabb_done(mesh_query_aabb_t q) { return q.walk.item < 0; }
 
-WP_FN i32 mesh_query_aabb_item(mesh_query_aabb_t q) { return q.walk.item; }
+WP_LFN i32 mesh_query_aabb_item(mesh_query_aabb_t q) { return q.walk.item; }
 
 // ------------------------------------------------------------------------------------------
 // Evaluation at barycentrics

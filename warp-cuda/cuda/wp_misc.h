@@ -29,15 +29,15 @@ namespace wp {
 // ----- scalars -----
 // On the sign bits, as IEEE and Rust define it: CUDA's copysign leaves a NaN's sign alone
 // (measured on sm_90), which would make the backends disagree on NaN inputs.
-WP_FN f32 copysign(f32 x, f32 y) {
+WP_LFN f32 copysign(f32 x, f32 y) {
   return f32_from_bits((f32_to_bits(x) & 0x7fffffffu) | (f32_to_bits(y) & 0x80000000u));
 }
-WP_FN f64 copysign(f64 x, f64 y) {
+WP_LFN f64 copysign(f64 x, f64 y) {
   return f64_from_bits((f64_to_bits(x) & 0x7fffffffffffffffull) |
                        (f64_to_bits(y) & 0x8000000000000000ull));
 }
 
-WP_FN i32 block_dim() {
+WP_LFN i32 block_dim() {
 #if defined(__CUDA_ARCH__)
   return (i32)blockDim.x;
 #else
@@ -98,18 +98,18 @@ WP_FN u32 arg_extreme(const V& v) {
 }  // namespace detail
 
 #define WP_MISC_REDUCE(V, S)                                                            \
-  WP_FN S min_element(const V& v) {                                                     \
+  WP_LFN S min_element(const V& v) {                                                     \
     S r = vec_traits<V>::get(v, 0);                                                     \
     for (int i = 1; i < vec_traits<V>::N; ++i) r = min(r, vec_traits<V>::get(v, i));    \
     return r;                                                                           \
   }                                                                                     \
-  WP_FN S max_element(const V& v) {                                                     \
+  WP_LFN S max_element(const V& v) {                                                     \
     S r = vec_traits<V>::get(v, 0);                                                     \
     for (int i = 1; i < vec_traits<V>::N; ++i) r = max(r, vec_traits<V>::get(v, i));    \
     return r;                                                                           \
   }                                                                                     \
-  WP_FN u32 argmin(const V& v) { return detail::arg_extreme<V, true>(v); }             \
-  WP_FN u32 argmax(const V& v) { return detail::arg_extreme<V, false>(v); }
+  WP_LFN u32 argmin(const V& v) { return detail::arg_extreme<V, true>(v); }             \
+  WP_LFN u32 argmax(const V& v) { return detail::arg_extreme<V, false>(v); }
 WP_MISC_REDUCE(Vec2, f32)
 WP_MISC_REDUCE(Vec3, f32)
 WP_MISC_REDUCE(Vec4, f32)
@@ -126,7 +126,7 @@ WP_MISC_REDUCE(UVec4, u32)
 
 // ----- matrices: get_diag -----
 #define WP_MISC_DIAG(M, V)                                                              \
-  WP_FN V get_diag(const M& m) {                                                        \
+  WP_LFN V get_diag(const M& m) {                                                        \
     V r;                                                                                \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                          \
       vec_traits<V>::at(r, i) = vec_traits<V>::get(mat_traits<M>::get(m, i), i);        \
@@ -142,22 +142,22 @@ WP_MISC_DIAG(DMat4, DVec4)
 
 // ----- norms (Warp's math.py) -----
 #define WP_MISC_NORMS(V, S)                                                             \
-  WP_FN S norm_l1(const V& v) {                                                         \
+  WP_LFN S norm_l1(const V& v) {                                                         \
     S n = (S)0;                                                                         \
     for (int i = 0; i < vec_traits<V>::N; ++i) n += abs(vec_traits<V>::get(v, i));      \
     return n;                                                                           \
   }                                                                                     \
-  WP_FN S norm_l2(const V& v) { return length(v); }                                     \
-  WP_FN S norm_huber(const V& v, S delta) {                                             \
+  WP_LFN S norm_l2(const V& v) { return length(v); }                                     \
+  WP_LFN S norm_huber(const V& v, S delta) {                                             \
     const S a = dot(v, v);                                                              \
     if (a <= delta * delta) return (S)0.5 * a;                                          \
     return delta * (sqrt(a) - (S)0.5 * delta);                                          \
   }                                                                                     \
-  WP_FN S norm_pseudo_huber(const V& v, S delta) {                                      \
+  WP_LFN S norm_pseudo_huber(const V& v, S delta) {                                      \
     const S a = dot(v, v);                                                              \
     return delta * sqrt((S)1 + a / (delta * delta));                                    \
   }                                                                                     \
-  WP_FN V smooth_normalize(const V& v, S delta) {                                       \
+  WP_LFN V smooth_normalize(const V& v, S delta) {                                       \
     const S n = norm_pseudo_huber(v, delta);                                            \
     return detail::vmap(v, [n](S x) { return x / n; });                                 \
   }
@@ -171,13 +171,13 @@ WP_MISC_NORMS(DVec4, f64)
 
 // ----- quaternions and transforms -----
 #define WP_MISC_QUAT(Q, V3, V4, M3, M4, S)                                              \
-  WP_FN tuple_t<V3, S> quat_to_axis_angle(const Q& q) {                                 \
+  WP_LFN tuple_t<V3, S> quat_to_axis_angle(const Q& q) {                                 \
     const V3 v = V3##_new(q.x, q.y, q.z);                                               \
     const V3 n = normalize(v);                                                          \
     const V3 axis = q.w < (S)0 ? -n : n;                                                \
     return tuple_t<V3, S>{axis, (S)2 * atan2(length(v), abs(q.w))};                     \
   }                                                                                     \
-  WP_FN Q quat_rpy(S roll, S pitch, S yaw) {                                            \
+  WP_LFN Q quat_rpy(S roll, S pitch, S yaw) {                                            \
     const S cy = cos(yaw * (S)0.5), sy = sin(yaw * (S)0.5);                             \
     const S cr = cos(roll * (S)0.5), sr = sin(roll * (S)0.5);                           \
     const S cp = cos(pitch * (S)0.5), sp = sin(pitch * (S)0.5);                         \
@@ -187,7 +187,7 @@ WP_MISC_NORMS(DVec4, f64)
     const S z = sy * cr * cp - cy * sr * sp;                                            \
     return Q##_from_xyzw(x, y, z, w);                                                   \
   }                                                                                     \
-  WP_FN V3 quat_to_rpy(const Q& q) {                                                    \
+  WP_LFN V3 quat_to_rpy(const Q& q) {                                                    \
     const S x = q.x, y = q.y, z = q.z, w = q.w;                                         \
     const S t0 = (S)2 * (w * x + y * z);                                                \
     const S t1 = (S)1 - (S)2 * (x * x + y * y);                                         \
@@ -196,23 +196,23 @@ WP_MISC_NORMS(DVec4, f64)
     const S t4 = (S)1 - (S)2 * (y * y + z * z);                                         \
     return V3##_new(atan2(t0, t1), asin(t2), atan2(t3, t4));                            \
   }                                                                                     \
-  WP_FN Q quat_twist(const V3& axis, const Q& q) {                                      \
+  WP_LFN Q quat_twist(const V3& axis, const Q& q) {                                      \
     const S p = dot(V3##_new(q.x, q.y, q.z), axis);                                     \
     return normalize(Q##_from_xyzw(p * axis.x, p * axis.y, p * axis.z, q.w));           \
   }                                                                                     \
-  WP_FN S quat_twist_angle(const V3& axis, const Q& q) {                                \
+  WP_LFN S quat_twist_angle(const V3& axis, const Q& q) {                                \
     return (S)2 * atan2(abs(dot(axis, V3##_new(q.x, q.y, q.z))), q.w);                  \
   }                                                                                     \
-  WP_FN S quat_twist_angle_signed(const V3& axis, const Q& q) {                         \
+  WP_LFN S quat_twist_angle_signed(const V3& axis, const Q& q) {                         \
     return (S)2 * atan2(dot(axis, V3##_new(q.x, q.y, q.z)), q.w);                       \
   }                                                                                     \
-  WP_FN M4 transform_compose(const V3& p, const Q& q, const V3& s) {                    \
+  WP_LFN M4 transform_compose(const V3& p, const Q& q, const V3& s) {                    \
     const M3 r = quat_to_matrix(q);                                                     \
     const V3 c0 = r.x_axis * s.x, c1 = r.y_axis * s.y, c2 = r.z_axis * s.z;             \
     return M4##_from_cols(V4##_new(c0.x, c0.y, c0.z, (S)0), V4##_new(c1.x, c1.y, c1.z, (S)0), \
                           V4##_new(c2.x, c2.y, c2.z, (S)0), V4##_new(p.x, p.y, p.z, (S)1)); \
   }                                                                                     \
-  WP_FN tuple_t<V3, Q, V3> transform_decompose(const M4& m) {                           \
+  WP_LFN tuple_t<V3, Q, V3> transform_decompose(const M4& m) {                           \
     const V3 p = V3##_new(m.w_axis.x, m.w_axis.y, m.w_axis.z);                          \
     V3 c[3] = {V3##_new(m.x_axis.x, m.x_axis.y, m.x_axis.z),                            \
                V3##_new(m.y_axis.x, m.y_axis.y, m.y_axis.z),                            \

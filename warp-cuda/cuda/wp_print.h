@@ -16,24 +16,24 @@
 
 namespace wp {
 
-WP_FN void print_value(bool x) { printf("%s", x ? "true" : "false"); }
-WP_FN void print_value(i8 x) { printf("%d", (int)x); }
-WP_FN void print_value(i16 x) { printf("%d", (int)x); }
-WP_FN void print_value(i32 x) { printf("%d", x); }
-WP_FN void print_value(i64 x) { printf("%lld", x); }
-WP_FN void print_value(u8 x) { printf("%u", (unsigned)x); }
-WP_FN void print_value(u16 x) { printf("%u", (unsigned)x); }
-WP_FN void print_value(u32 x) { printf("%u", x); }
-WP_FN void print_value(u64 x) { printf("%llu", x); }
-WP_FN void print_value(f64 x) {
+WP_LFN void print_value(bool x) { printf("%s", x ? "true" : "false"); }
+WP_LFN void print_value(i8 x) { printf("%d", (int)x); }
+WP_LFN void print_value(i16 x) { printf("%d", (int)x); }
+WP_LFN void print_value(i32 x) { printf("%d", x); }
+WP_LFN void print_value(i64 x) { printf("%lld", x); }
+WP_LFN void print_value(u8 x) { printf("%u", (unsigned)x); }
+WP_LFN void print_value(u16 x) { printf("%u", (unsigned)x); }
+WP_LFN void print_value(u32 x) { printf("%u", x); }
+WP_LFN void print_value(u64 x) { printf("%llu", x); }
+WP_LFN void print_value(f64 x) {
   if (x != x)
     printf("NaN");
   else
     printf("%g", x);
 }
-WP_FN void print_value(f32 x) { print_value((f64)x); }
-WP_FN void print_value(f16 x) { print_value((f64)f16_to_f32(x)); }
-WP_FN void print_value(bf16 x) { print_value((f64)bf16_to_f32(x)); }
+WP_LFN void print_value(f32 x) { print_value((f64)x); }
+WP_LFN void print_value(f16 x) { print_value((f64)f16_to_f32(x)); }
+WP_LFN void print_value(bf16 x) { print_value((f64)bf16_to_f32(x)); }
 
 namespace detail {
 template <typename V>
@@ -57,7 +57,7 @@ WP_FN void print_columns(const M& m) {
 }  // namespace detail
 
 #define WP_PRINT_VEC(V) \
-  WP_FN void print_value(const V& v) { detail::print_components(v); }
+  WP_LFN void print_value(const V& v) { detail::print_components(v); }
 WP_PRINT_VEC(Vec2)
 WP_PRINT_VEC(Vec3)
 WP_PRINT_VEC(Vec4)
@@ -74,7 +74,7 @@ WP_PRINT_VEC(Quat)
 WP_PRINT_VEC(DQuat)
 #undef WP_PRINT_VEC
 #define WP_PRINT_MAT(M) \
-  WP_FN void print_value(const M& m) { detail::print_columns(m); }
+  WP_LFN void print_value(const M& m) { detail::print_columns(m); }
 WP_PRINT_MAT(Mat2)
 WP_PRINT_MAT(Mat3)
 WP_PRINT_MAT(Mat4)
@@ -84,7 +84,7 @@ WP_PRINT_MAT(DMat4)
 #undef WP_PRINT_MAT
 /// Transforms: `{p: [x, y, z], q: [x, y, z, w]}` (warp-core's Display).
 #define WP_PRINT_XFORM(X)                  \
-  WP_FN void print_value(const X& t) {     \
+  WP_LFN void print_value(const X& t) {     \
     printf("{p: ");                        \
     detail::print_components(t.p);         \
     printf(", q: ");                       \
@@ -97,8 +97,8 @@ WP_PRINT_XFORM(DTransform)
 /// Spatial vectors: `[a, b, c, d, e, f]`; spatial matrices: `[[row0], .., [row5]]`
 /// (warp-core's Display).
 #define WP_PRINT_SPATIAL(SV, SM)                                        \
-  WP_FN void print_value(const SV& v) { detail::print_components(v); } \
-  WP_FN void print_value(const SM& m) {                                 \
+  WP_LFN void print_value(const SV& v) { detail::print_components(v); } \
+  WP_LFN void print_value(const SM& m) {                                 \
     printf("[");                                                        \
     for (int i = 0; i < 6; ++i) {                                       \
       if (i > 0) printf(", ");                                          \

@@ -28,13 +28,13 @@ namespace wp {
 namespace detail {
 // IEEE operations that the compiler may not fuse.
 #if defined(__CUDA_ARCH__)
-WP_FN f32 rn_mul(f32 a, f32 b) { return __fmul_rn(a, b); }
-WP_FN f32 rn_add(f32 a, f32 b) { return __fadd_rn(a, b); }
-WP_FN f32 rn_sub(f32 a, f32 b) { return __fsub_rn(a, b); }
+WP_LFN f32 rn_mul(f32 a, f32 b) { return __fmul_rn(a, b); }
+WP_LFN f32 rn_add(f32 a, f32 b) { return __fadd_rn(a, b); }
+WP_LFN f32 rn_sub(f32 a, f32 b) { return __fsub_rn(a, b); }
 #else
-WP_FN f32 rn_mul(f32 a, f32 b) { return a * b; }
-WP_FN f32 rn_add(f32 a, f32 b) { return a + b; }
-WP_FN f32 rn_sub(f32 a, f32 b) { return a - b; }
+WP_LFN f32 rn_mul(f32 a, f32 b) { return a * b; }
+WP_LFN f32 rn_add(f32 a, f32 b) { return a + b; }
+WP_LFN f32 rn_sub(f32 a, f32 b) { return a - b; }
 #endif
 }  // namespace detail
 
@@ -42,18 +42,18 @@ WP_FN f32 rn_sub(f32 a, f32 b) { return a - b; }
 // The generator
 // ------------------------------------------------------------------------------------------
 
-WP_FN u32 rand_pcg(u32 state) {
+WP_LFN u32 rand_pcg(u32 state) {
   u32 b = state * 747796405u + 2891336453u;
   u32 c = ((b >> ((b >> 28u) + 4u)) ^ b) * 277803737u;
   return (c >> 22u) ^ c;
 }
 
-WP_FN u32 rand_init(i32 seed) { return rand_pcg((u32)seed); }
-WP_FN u32 rand_init_offset(i32 seed, i32 offset) { return rand_pcg((u32)seed + rand_pcg((u32)offset)); }
+WP_LFN u32 rand_init(i32 seed) { return rand_pcg((u32)seed); }
+WP_LFN u32 rand_init_offset(i32 seed, i32 offset) { return rand_pcg((u32)seed + rand_pcg((u32)offset)); }
 
 namespace detail {
 /// The uniform float of an advanced state: top 24 bits times 2^-24 (exact).
-WP_FN f32 rand_unit(u32 s) { return (f32)(s >> 8) * (1.0f / 16777216.0f); }
+WP_LFN f32 rand_unit(u32 s) { return (f32)(s >> 8) * (1.0f / 16777216.0f); }
 
 /// Successive uniform draws (warp-core's `Draws`).
 struct draws_t {
@@ -69,24 +69,24 @@ constexpr f32 RAND_TWO_PI = 6.28318548202514648438f;  // 2 * (f32)pi, exact
 constexpr f32 RANDN_EPSILON = 5.96e-8f;
 }  // namespace detail
 
-WP_FN f32 randf(u32 state) {
+WP_LFN f32 randf(u32 state) {
   detail::draws_t d{state};
   return d.f();
 }
 
-WP_FN f32 randf_range(u32 state, f32 lo, f32 hi) {
+WP_LFN f32 randf_range(u32 state, f32 lo, f32 hi) {
   detail::draws_t d{state};
   return d.range(lo, hi);
 }
 
-WP_FN f32 randn(u32 state) {
+WP_LFN f32 randn(u32 state) {
   detail::draws_t d{state};
   f32 r = d.f();
   f32 t = d.f();
   return ::sqrtf(-2.0f * ::logf(r + detail::RANDN_EPSILON)) * ::cosf(detail::RAND_TWO_PI * t);
 }
 
-WP_FN Vec2 sample_triangle(u32 state) {
+WP_LFN Vec2 sample_triangle(u32 state) {
   detail::draws_t d{state};
   f32 r = ::sqrtf(d.f());
   f32 u = 1.0f - r;
@@ -94,27 +94,27 @@ WP_FN Vec2 sample_triangle(u32 state) {
   return Vec2_new(u, v);
 }
 
-WP_FN Vec2 sample_unit_ring(u32 state) {
+WP_LFN Vec2 sample_unit_ring(u32 state) {
   detail::draws_t d{state};
   f32 theta = d.range(0.0f, detail::RAND_TWO_PI);
   return Vec2_new(::cosf(theta), ::sinf(theta));
 }
 
-WP_FN Vec2 sample_unit_disk(u32 state) {
+WP_LFN Vec2 sample_unit_disk(u32 state) {
   detail::draws_t d{state};
   f32 r = ::sqrtf(d.f());
   f32 theta = d.range(0.0f, detail::RAND_TWO_PI);
   return Vec2_new(r * ::cosf(theta), r * ::sinf(theta));
 }
 
-WP_FN Vec2 sample_unit_square(u32 state) {
+WP_LFN Vec2 sample_unit_square(u32 state) {
   detail::draws_t d{state};
   f32 x = d.f() - 0.5f;
   f32 y = d.f() - 0.5f;
   return Vec2_new(x, y);
 }
 
-WP_FN Vec3 sample_unit_cube(u32 state) {
+WP_LFN Vec3 sample_unit_cube(u32 state) {
   detail::draws_t d{state};
   f32 x = d.f() - 0.5f;
   f32 y = d.f() - 0.5f;
@@ -124,21 +124,21 @@ WP_FN Vec3 sample_unit_cube(u32 state) {
 
 namespace detail {
 /// (r cos t sin p, r sin t sin p, r cos p), products left to right; r < 0: no radius.
-WP_FN Vec3 spherical(f32 r, bool has_r, f32 phi, f32 theta) {
+WP_LFN Vec3 spherical(f32 r, bool has_r, f32 phi, f32 theta) {
   f32 ct = ::cosf(theta), st = ::sinf(theta), sp = ::sinf(phi), cp = ::cosf(phi);
   if (!has_r) return Vec3_new(ct * sp, st * sp, cp);
   return Vec3_new(r * ct * sp, r * st * sp, r * cp);
 }
 }  // namespace detail
 
-WP_FN Vec3 sample_unit_sphere_surface(u32 state) {
+WP_LFN Vec3 sample_unit_sphere_surface(u32 state) {
   detail::draws_t d{state};
   f32 phi = ::acosf(1.0f - 2.0f * d.f());
   f32 theta = d.range(0.0f, detail::RAND_TWO_PI);
   return detail::spherical(0.0f, false, phi, theta);
 }
 
-WP_FN Vec3 sample_unit_sphere(u32 state) {
+WP_LFN Vec3 sample_unit_sphere(u32 state) {
   detail::draws_t d{state};
   f32 phi = ::acosf(1.0f - 2.0f * d.f());
   f32 theta = d.range(0.0f, detail::RAND_TWO_PI);
@@ -146,14 +146,14 @@ WP_FN Vec3 sample_unit_sphere(u32 state) {
   return detail::spherical(r, true, phi, theta);
 }
 
-WP_FN Vec3 sample_unit_hemisphere_surface(u32 state) {
+WP_LFN Vec3 sample_unit_hemisphere_surface(u32 state) {
   detail::draws_t d{state};
   f32 phi = ::acosf(1.0f - d.f());
   f32 theta = d.range(0.0f, detail::RAND_TWO_PI);
   return detail::spherical(0.0f, false, phi, theta);
 }
 
-WP_FN Vec3 sample_unit_hemisphere(u32 state) {
+WP_LFN Vec3 sample_unit_hemisphere(u32 state) {
   detail::draws_t d{state};
   f32 phi = ::acosf(1.0f - d.f());
   f32 theta = d.range(0.0f, detail::RAND_TWO_PI);
@@ -168,7 +168,7 @@ WP_FN Vec3 sample_unit_hemisphere(u32 state) {
 constexpr u32 POISSON_MAX_DRAWS = 1024;
 
 namespace detail {
-WP_FN f32 rand_loggam(f32 x) {
+WP_LFN f32 rand_loggam(f32 x) {
   const f32 a[10] = {8.333333333333333e-02f, -2.777777777777778e-03f, 7.936507936507937e-04f,
                      -5.952380952380952e-04f, 8.417508417508418e-04f, -1.917526917526918e-03f,
                      6.410256410256410e-03f,  -2.955065359477124e-02f, 1.796443723688307e-01f,
@@ -194,7 +194,7 @@ WP_FN f32 rand_loggam(f32 x) {
 }
 
 /// One Poisson draw: the count, and the state after it in `*after`.
-WP_FN u32 poisson_draw(u32 state, f32 lam, u32* after) {
+WP_LFN u32 poisson_draw(u32 state, f32 lam, u32* after) {
   draws_t d{state};
   if (lam >= 10.0f) {
     f32 slam = ::sqrtf(lam);
@@ -247,12 +247,12 @@ WP_FN u32 poisson_draw(u32 state, f32 lam, u32* after) {
 }
 }  // namespace detail
 
-WP_FN u32 poisson(u32 state, f32 lam) {
+WP_LFN u32 poisson(u32 state, f32 lam) {
   u32 after;
   return detail::poisson_draw(state, lam, &after);
 }
 
-WP_FN u32 poisson_state(u32 state, f32 lam) {
+WP_LFN u32 poisson_state(u32 state, f32 lam) {
   u32 after;
   detail::poisson_draw(state, lam, &after);
   return after;
@@ -263,22 +263,22 @@ WP_FN u32 poisson_state(u32 state, f32 lam) {
 // ------------------------------------------------------------------------------------------
 
 namespace detail {
-WP_FN f32 noise_fade(f32 t) {
+WP_LFN f32 noise_fade(f32 t) {
   return rn_mul(rn_mul(rn_mul(t, t), t), rn_add(rn_mul(t, rn_sub(rn_mul(t, 6.0f), 15.0f)), 10.0f));
 }
-WP_FN f32 noise_fade_d(f32 t) {
+WP_LFN f32 noise_fade_d(f32 t) {
   return rn_mul(rn_mul(rn_mul(30.0f, t), t), rn_add(rn_mul(t, rn_sub(t, 2.0f)), 1.0f));
 }
-WP_FN f32 noise_blend(f32 a, f32 b, f32 t) { return rn_add(rn_mul(rn_sub(b, a), noise_fade(t)), a); }
+WP_LFN f32 noise_blend(f32 a, f32 b, f32 t) { return rn_add(rn_mul(rn_sub(b, a), noise_fade(t)), a); }
 
-WP_FN u32 noise_corner_seed(u32 state, const i32* idx, int n) {
+WP_LFN u32 noise_corner_seed(u32 state, const i32* idx, int n) {
   const u32 primes[4] = {73856093u, 19349663u, 53471161u, 10000019u};
   u32 h = 0;
   for (int k = 0; k < n - 1; ++k) h ^= (u32)idx[k] * primes[k];
   return h ^ ((u32)idx[n - 1] * primes[n - 1] + state);
 }
 
-WP_FN void noise_corner_gradient(u32 seed, int n, f32* g) {
+WP_LFN void noise_corner_gradient(u32 seed, int n, f32* g) {
   draws_t d{seed};
   for (int k = 0; k < 4; ++k) g[k] = 0.0f;
   if (n == 1) {
@@ -292,7 +292,7 @@ WP_FN void noise_corner_gradient(u32 seed, int n, f32* g) {
   for (int k = 0; k < n; ++k) g[k] = len > 0.0f ? g[k] / len : 0.0f;
 }
 
-WP_FN i32 noise_wrap(i32 i, i32 p) {
+WP_LFN i32 noise_wrap(i32 i, i32 p) {
   if (p == 0) return i;
   i64 m = p < 0 ? -(i64)p : (i64)p;
   i64 r = (i64)i % m;
@@ -301,7 +301,7 @@ WP_FN i32 noise_wrap(i32 i, i32 p) {
 }
 
 /// The noise's value, and its gradient into `grad` when `grad` is not null.
-WP_FN f32 perlin(u32 state, const f32* x, const i32* period, int n, f32* grad) {
+WP_LFN f32 perlin(u32 state, const f32* x, const i32* period, int n, f32* grad) {
   i32 lo[4], hi[4];
   f32 d[4];
   for (int k = 0; k < n; ++k) {
@@ -360,12 +360,12 @@ template <typename V>
 WP_FN void noise_lanes(const V& v, f32* x) {
   for (int k = 0; k < vec_traits<V>::N; ++k) x[k] = vec_traits<V>::get(v, k);
 }
-WP_FN void noise_lanes(f32 v, f32* x) { x[0] = v; }
+WP_LFN void noise_lanes(f32 v, f32* x) { x[0] = v; }
 template <typename P>
 WP_FN void noise_periods(const P& p, i32* x) {
   for (int k = 0; k < vec_traits<P>::N; ++k) x[k] = vec_traits<P>::get(p, k);
 }
-WP_FN void noise_periods(i32 p, i32* x) { x[0] = p; }
+WP_LFN void noise_periods(i32 p, i32* x) { x[0] = p; }
 template <typename V>
 struct noise_dim {
   static constexpr int N = vec_traits<V>::N;
@@ -377,12 +377,12 @@ struct noise_dim<f32> {
 }  // namespace detail
 
 #define WP_NOISE(V, P)                                                  \
-  WP_FN f32 noise(u32 state, V x) {                                     \
+  WP_LFN f32 noise(u32 state, V x) {                                     \
     f32 l[4];                                                           \
     detail::noise_lanes(x, l);                                          \
     return detail::perlin(state, l, nullptr, detail::noise_dim<V>::N, nullptr); \
   }                                                                     \
-  WP_FN f32 pnoise(u32 state, V x, P period) {                          \
+  WP_LFN f32 pnoise(u32 state, V x, P period) {                          \
     f32 l[4];                                                           \
     i32 p[4];                                                           \
     detail::noise_lanes(x, l);                                          \

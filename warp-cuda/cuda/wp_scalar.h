@@ -41,9 +41,9 @@ namespace wp {
 // ------------------------------------------------------------------------------------------
 
 #define WP_INT_MINMAX(T)                                           \
-  WP_FN T min(T a, T b) { return b < a ? b : a; }                  \
-  WP_FN T max(T a, T b) { return a < b ? b : a; }                  \
-  WP_FN T clamp(T x, T lo, T hi) { return min(max(x, lo), hi); }
+  WP_LFN T min(T a, T b) { return b < a ? b : a; }                  \
+  WP_LFN T max(T a, T b) { return a < b ? b : a; }                  \
+  WP_LFN T clamp(T x, T lo, T hi) { return min(max(x, lo), hi); }
 WP_INT_MINMAX(i8)
 WP_INT_MINMAX(i16)
 WP_INT_MINMAX(i32)
@@ -54,17 +54,17 @@ WP_INT_MINMAX(u32)
 WP_INT_MINMAX(u64)
 #undef WP_INT_MINMAX
 
-WP_FN f32 min(f32 a, f32 b) { return ::fminf(a, b); }
-WP_FN f32 max(f32 a, f32 b) { return ::fmaxf(a, b); }
-WP_FN f32 clamp(f32 x, f32 lo, f32 hi) { return min(max(x, lo), hi); }
-WP_FN f64 min(f64 a, f64 b) { return ::fmin(a, b); }
-WP_FN f64 max(f64 a, f64 b) { return ::fmax(a, b); }
-WP_FN f64 clamp(f64 x, f64 lo, f64 hi) { return min(max(x, lo), hi); }
+WP_LFN f32 min(f32 a, f32 b) { return ::fminf(a, b); }
+WP_LFN f32 max(f32 a, f32 b) { return ::fmaxf(a, b); }
+WP_LFN f32 clamp(f32 x, f32 lo, f32 hi) { return min(max(x, lo), hi); }
+WP_LFN f64 min(f64 a, f64 b) { return ::fmin(a, b); }
+WP_LFN f64 max(f64 a, f64 b) { return ::fmax(a, b); }
+WP_LFN f64 clamp(f64 x, f64 lo, f64 hi) { return min(max(x, lo), hi); }
 
 #define WP_VEC_MINMAX(V, S)                                                                   \
-  WP_FN V min(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return min(x, y); }); } \
-  WP_FN V max(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return max(x, y); }); } \
-  WP_FN V clamp(const V& x, const V& lo, const V& hi) { return min(max(x, lo), hi); }
+  WP_LFN V min(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return min(x, y); }); } \
+  WP_LFN V max(const V& a, const V& b) { return detail::vzip(a, b, [](S x, S y) { return max(x, y); }); } \
+  WP_LFN V clamp(const V& x, const V& lo, const V& hi) { return min(max(x, lo), hi); }
 WP_VEC_MINMAX(Vec2, f32)
 WP_VEC_MINMAX(Vec3, f32)
 WP_VEC_MINMAX(Vec4, f32)
@@ -84,22 +84,22 @@ WP_VEC_MINMAX(UVec4, u32)
 // ------------------------------------------------------------------------------------------
 
 #define WP_INT_SIGNED(T)                                         \
-  WP_FN T abs(T x) { return x < (T)0 ? w_neg(x) : x; }           \
-  WP_FN T sign(T x) { return x < (T)0 ? (T)-1 : (T)1; }
+  WP_LFN T abs(T x) { return x < (T)0 ? w_neg(x) : x; }           \
+  WP_LFN T sign(T x) { return x < (T)0 ? (T)-1 : (T)1; }
 WP_INT_SIGNED(i8)
 WP_INT_SIGNED(i16)
 WP_INT_SIGNED(i32)
 WP_INT_SIGNED(i64)
 #undef WP_INT_SIGNED
 
-WP_FN f32 abs(f32 x) { return ::fabsf(x); }
-WP_FN f32 sign(f32 x) { return x < 0.0f ? -1.0f : 1.0f; }
-WP_FN f64 abs(f64 x) { return ::fabs(x); }
-WP_FN f64 sign(f64 x) { return x < 0.0 ? -1.0 : 1.0; }
+WP_LFN f32 abs(f32 x) { return ::fabsf(x); }
+WP_LFN f32 sign(f32 x) { return x < 0.0f ? -1.0f : 1.0f; }
+WP_LFN f64 abs(f64 x) { return ::fabs(x); }
+WP_LFN f64 sign(f64 x) { return x < 0.0 ? -1.0 : 1.0; }
 
 #define WP_VEC_SIGNED(V, S)                                                                \
-  WP_FN V abs(const V& a) { return detail::vmap(a, [](S x) { return abs(x); }); }          \
-  WP_FN V sign(const V& a) { return detail::vmap(a, [](S x) { return sign(x); }); }
+  WP_LFN V abs(const V& a) { return detail::vmap(a, [](S x) { return abs(x); }); }          \
+  WP_LFN V sign(const V& a) { return detail::vmap(a, [](S x) { return sign(x); }); }
 WP_VEC_SIGNED(Vec2, f32)
 WP_VEC_SIGNED(Vec3, f32)
 WP_VEC_SIGNED(Vec4, f32)
@@ -115,27 +115,27 @@ WP_VEC_SIGNED(IVec4, i32)
 // Float functions (f32 stays f32: the ...f variants, never a silent double)
 // ------------------------------------------------------------------------------------------
 
-WP_FN f32 floor(f32 x) { return ::floorf(x); }
-WP_FN f32 ceil(f32 x) { return ::ceilf(x); }
-WP_FN f32 sqrt(f32 x) { return ::sqrtf(x); }
-WP_FN f32 exp(f32 x) { return ::expf(x); }
-WP_FN f32 log(f32 x) { return ::logf(x); }
-WP_FN f32 sin(f32 x) { return ::sinf(x); }
-WP_FN f32 cos(f32 x) { return ::cosf(x); }
-WP_FN f32 tan(f32 x) { return ::tanf(x); }
-WP_FN f32 atan2(f32 y, f32 x) { return ::atan2f(y, x); }
-WP_FN f32 pow(f32 x, f32 y) { return ::powf(x, y); }
+WP_LFN f32 floor(f32 x) { return ::floorf(x); }
+WP_LFN f32 ceil(f32 x) { return ::ceilf(x); }
+WP_LFN f32 sqrt(f32 x) { return ::sqrtf(x); }
+WP_LFN f32 exp(f32 x) { return ::expf(x); }
+WP_LFN f32 log(f32 x) { return ::logf(x); }
+WP_LFN f32 sin(f32 x) { return ::sinf(x); }
+WP_LFN f32 cos(f32 x) { return ::cosf(x); }
+WP_LFN f32 tan(f32 x) { return ::tanf(x); }
+WP_LFN f32 atan2(f32 y, f32 x) { return ::atan2f(y, x); }
+WP_LFN f32 pow(f32 x, f32 y) { return ::powf(x, y); }
 
-WP_FN f64 floor(f64 x) { return ::floor(x); }
-WP_FN f64 ceil(f64 x) { return ::ceil(x); }
-WP_FN f64 sqrt(f64 x) { return ::sqrt(x); }
-WP_FN f64 exp(f64 x) { return ::exp(x); }
-WP_FN f64 log(f64 x) { return ::log(x); }
-WP_FN f64 sin(f64 x) { return ::sin(x); }
-WP_FN f64 cos(f64 x) { return ::cos(x); }
-WP_FN f64 tan(f64 x) { return ::tan(x); }
-WP_FN f64 atan2(f64 y, f64 x) { return ::atan2(y, x); }
-WP_FN f64 pow(f64 x, f64 y) { return ::pow(x, y); }
+WP_LFN f64 floor(f64 x) { return ::floor(x); }
+WP_LFN f64 ceil(f64 x) { return ::ceil(x); }
+WP_LFN f64 sqrt(f64 x) { return ::sqrt(x); }
+WP_LFN f64 exp(f64 x) { return ::exp(x); }
+WP_LFN f64 log(f64 x) { return ::log(x); }
+WP_LFN f64 sin(f64 x) { return ::sin(x); }
+WP_LFN f64 cos(f64 x) { return ::cos(x); }
+WP_LFN f64 tan(f64 x) { return ::tan(x); }
+WP_LFN f64 atan2(f64 y, f64 x) { return ::atan2(y, x); }
+WP_LFN f64 pow(f64 x, f64 y) { return ::pow(x, y); }
 
 // ------------------------------------------------------------------------------------------
 // More float functions (see the top for their semantics)
@@ -147,55 +147,55 @@ template <typename S>
 WP_FN S unit_clamp(S x) { return x < (S)-1 ? (S)-1 : (x > (S)1 ? (S)1 : x); }
 }  // namespace detail
 
-WP_FN f32 asin(f32 x) { return ::asinf(detail::unit_clamp(x)); }
-WP_FN f32 acos(f32 x) { return ::acosf(detail::unit_clamp(x)); }
-WP_FN f32 atan(f32 x) { return ::atanf(x); }
-WP_FN f32 sinh(f32 x) { return ::sinhf(x); }
-WP_FN f32 cosh(f32 x) { return ::coshf(x); }
-WP_FN f32 tanh(f32 x) { return ::tanhf(x); }
-WP_FN f32 exp2(f32 x) { return ::exp2f(x); }
-WP_FN f32 log2(f32 x) { return ::log2f(x); }
-WP_FN f32 log10(f32 x) { return ::log10f(x); }
-WP_FN f32 cbrt(f32 x) { return ::cbrtf(x); }
-WP_FN f32 round(f32 x) { return ::roundf(x); }
-WP_FN f32 rint(f32 x) { return ::rintf(x); }
-WP_FN f32 trunc(f32 x) { return ::truncf(x); }
-WP_FN f32 frac(f32 x) { return x - ::truncf(x); }
+WP_LFN f32 asin(f32 x) { return ::asinf(detail::unit_clamp(x)); }
+WP_LFN f32 acos(f32 x) { return ::acosf(detail::unit_clamp(x)); }
+WP_LFN f32 atan(f32 x) { return ::atanf(x); }
+WP_LFN f32 sinh(f32 x) { return ::sinhf(x); }
+WP_LFN f32 cosh(f32 x) { return ::coshf(x); }
+WP_LFN f32 tanh(f32 x) { return ::tanhf(x); }
+WP_LFN f32 exp2(f32 x) { return ::exp2f(x); }
+WP_LFN f32 log2(f32 x) { return ::log2f(x); }
+WP_LFN f32 log10(f32 x) { return ::log10f(x); }
+WP_LFN f32 cbrt(f32 x) { return ::cbrtf(x); }
+WP_LFN f32 round(f32 x) { return ::roundf(x); }
+WP_LFN f32 rint(f32 x) { return ::rintf(x); }
+WP_LFN f32 trunc(f32 x) { return ::truncf(x); }
+WP_LFN f32 frac(f32 x) { return x - ::truncf(x); }
 // 180/pi and pi/180 rounded to f32 (Rust's f32::to_degrees / to_radians).
-WP_FN f32 degrees(f32 x) { return x * f32_from_bits(0x42652ee1u); }
-WP_FN f32 radians(f32 x) { return x * f32_from_bits(0x3c8efa35u); }
-WP_FN f32 smoothstep(f32 e0, f32 e1, f32 x) {
+WP_LFN f32 degrees(f32 x) { return x * f32_from_bits(0x42652ee1u); }
+WP_LFN f32 radians(f32 x) { return x * f32_from_bits(0x3c8efa35u); }
+WP_LFN f32 smoothstep(f32 e0, f32 e1, f32 x) {
   const f32 t = clamp((x - e0) / (e1 - e0), 0.0f, 1.0f);
   return t * t * (3.0f - 2.0f * t);
 }
 
-WP_FN f64 asin(f64 x) { return ::asin(detail::unit_clamp(x)); }
-WP_FN f64 acos(f64 x) { return ::acos(detail::unit_clamp(x)); }
-WP_FN f64 atan(f64 x) { return ::atan(x); }
-WP_FN f64 sinh(f64 x) { return ::sinh(x); }
-WP_FN f64 cosh(f64 x) { return ::cosh(x); }
-WP_FN f64 tanh(f64 x) { return ::tanh(x); }
-WP_FN f64 exp2(f64 x) { return ::exp2(x); }
-WP_FN f64 log2(f64 x) { return ::log2(x); }
-WP_FN f64 log10(f64 x) { return ::log10(x); }
-WP_FN f64 cbrt(f64 x) { return ::cbrt(x); }
-WP_FN f64 round(f64 x) { return ::round(x); }
-WP_FN f64 rint(f64 x) { return ::rint(x); }
-WP_FN f64 trunc(f64 x) { return ::trunc(x); }
-WP_FN f64 frac(f64 x) { return x - ::trunc(x); }
+WP_LFN f64 asin(f64 x) { return ::asin(detail::unit_clamp(x)); }
+WP_LFN f64 acos(f64 x) { return ::acos(detail::unit_clamp(x)); }
+WP_LFN f64 atan(f64 x) { return ::atan(x); }
+WP_LFN f64 sinh(f64 x) { return ::sinh(x); }
+WP_LFN f64 cosh(f64 x) { return ::cosh(x); }
+WP_LFN f64 tanh(f64 x) { return ::tanh(x); }
+WP_LFN f64 exp2(f64 x) { return ::exp2(x); }
+WP_LFN f64 log2(f64 x) { return ::log2(x); }
+WP_LFN f64 log10(f64 x) { return ::log10(x); }
+WP_LFN f64 cbrt(f64 x) { return ::cbrt(x); }
+WP_LFN f64 round(f64 x) { return ::round(x); }
+WP_LFN f64 rint(f64 x) { return ::rint(x); }
+WP_LFN f64 trunc(f64 x) { return ::trunc(x); }
+WP_LFN f64 frac(f64 x) { return x - ::trunc(x); }
 // 180/pi and pi/180 rounded to f64 (Rust's f64::to_degrees / to_radians).
-WP_FN f64 degrees(f64 x) { return x * f64_from_bits(0x404ca5dc1a63c1f8ull); }
-WP_FN f64 radians(f64 x) { return x * f64_from_bits(0x3f91df46a2529d39ull); }
-WP_FN f64 smoothstep(f64 e0, f64 e1, f64 x) {
+WP_LFN f64 degrees(f64 x) { return x * f64_from_bits(0x404ca5dc1a63c1f8ull); }
+WP_LFN f64 radians(f64 x) { return x * f64_from_bits(0x3f91df46a2529d39ull); }
+WP_LFN f64 smoothstep(f64 e0, f64 e1, f64 x) {
   const f64 t = clamp((x - e0) / (e1 - e0), 0.0, 1.0);
   return t * t * (3.0 - 2.0 * t);
 }
 
 // ----- step: 1 if x < 0 else 0 (unsigned: always 0) -----
 #define WP_STEP_SIGNED(T) \
-  WP_FN T step(T x) { return x < (T)0 ? (T)1 : (T)0; }
+  WP_LFN T step(T x) { return x < (T)0 ? (T)1 : (T)0; }
 #define WP_STEP_UNSIGNED(T) \
-  WP_FN T step(T) { return (T)0; }
+  WP_LFN T step(T) { return (T)0; }
 WP_STEP_SIGNED(i8)
 WP_STEP_SIGNED(i16)
 WP_STEP_SIGNED(i32)
@@ -210,24 +210,24 @@ WP_STEP_UNSIGNED(u64)
 #undef WP_STEP_UNSIGNED
 
 // ----- isfinite / isnan / isinf (comparisons only: no dependence on <cmath> macros) -----
-WP_FN bool isnan(f32 x) { return x != x; }
-WP_FN bool isinf(f32 x) { return ::fabsf(x) == f32_inf(); }
-WP_FN bool isfinite(f32 x) { return ::fabsf(x) < f32_inf(); }
-WP_FN bool isnan(f64 x) { return x != x; }
-WP_FN bool isinf(f64 x) { return ::fabs(x) == f64_inf(); }
-WP_FN bool isfinite(f64 x) { return ::fabs(x) < f64_inf(); }
+WP_LFN bool isnan(f32 x) { return x != x; }
+WP_LFN bool isinf(f32 x) { return ::fabsf(x) == f32_inf(); }
+WP_LFN bool isfinite(f32 x) { return ::fabsf(x) < f32_inf(); }
+WP_LFN bool isnan(f64 x) { return x != x; }
+WP_LFN bool isinf(f64 x) { return ::fabs(x) == f64_inf(); }
+WP_LFN bool isfinite(f64 x) { return ::fabs(x) < f64_inf(); }
 #define WP_VEC_CLASSIFY(V)                                                     \
-  WP_FN bool isfinite(const V& v) {                                            \
+  WP_LFN bool isfinite(const V& v) {                                            \
     bool r = true;                                                             \
     for (int i = 0; i < vec_traits<V>::N; ++i) r = r && isfinite(vec_traits<V>::get(v, i)); \
     return r;                                                                  \
   }                                                                            \
-  WP_FN bool isnan(const V& v) {                                               \
+  WP_LFN bool isnan(const V& v) {                                               \
     bool r = false;                                                            \
     for (int i = 0; i < vec_traits<V>::N; ++i) r = r || isnan(vec_traits<V>::get(v, i)); \
     return r;                                                                  \
   }                                                                            \
-  WP_FN bool isinf(const V& v) {                                               \
+  WP_LFN bool isinf(const V& v) {                                               \
     bool r = false;                                                            \
     for (int i = 0; i < vec_traits<V>::N; ++i) r = r || isinf(vec_traits<V>::get(v, i)); \
     return r;                                                                  \
@@ -242,14 +242,14 @@ WP_VEC_CLASSIFY(DVec4)
 
 // ----- erf, erfc, erfinv, erfcinv -----
 #if defined(__CUDACC__)
-WP_FN f32 erf(f32 x) { return ::erff(x); }
-WP_FN f32 erfc(f32 x) { return ::erfcf(x); }
-WP_FN f32 erfinv(f32 x) { return ::erfinvf(x); }
-WP_FN f32 erfcinv(f32 x) { return ::erfcinvf(x); }
-WP_FN f64 erf(f64 x) { return ::erf(x); }
-WP_FN f64 erfc(f64 x) { return ::erfc(x); }
-WP_FN f64 erfinv(f64 x) { return ::erfinv(x); }
-WP_FN f64 erfcinv(f64 x) { return ::erfcinv(x); }
+WP_LFN f32 erf(f32 x) { return ::erff(x); }
+WP_LFN f32 erfc(f32 x) { return ::erfcf(x); }
+WP_LFN f32 erfinv(f32 x) { return ::erfinvf(x); }
+WP_LFN f32 erfcinv(f32 x) { return ::erfcinvf(x); }
+WP_LFN f64 erf(f64 x) { return ::erf(x); }
+WP_LFN f64 erfc(f64 x) { return ::erfc(x); }
+WP_LFN f64 erfinv(f64 x) { return ::erfinv(x); }
+WP_LFN f64 erfcinv(f64 x) { return ::erfcinv(x); }
 #else
 namespace detail {
 namespace special {
@@ -362,25 +362,25 @@ inline f64 erfcinv(f64 z) {
 }
 }  // namespace special
 }  // namespace detail
-WP_FN f32 erf(f32 x) { return (f32)detail::special::erf((f64)x); }
-WP_FN f32 erfc(f32 x) { return (f32)detail::special::erfc((f64)x); }
-WP_FN f32 erfinv(f32 x) { return (f32)detail::special::erfinv((f64)x); }
-WP_FN f32 erfcinv(f32 x) { return (f32)detail::special::erfcinv((f64)x); }
-WP_FN f64 erf(f64 x) { return detail::special::erf(x); }
-WP_FN f64 erfc(f64 x) { return detail::special::erfc(x); }
-WP_FN f64 erfinv(f64 x) { return detail::special::erfinv(x); }
-WP_FN f64 erfcinv(f64 x) { return detail::special::erfcinv(x); }
+WP_LFN f32 erf(f32 x) { return (f32)detail::special::erf((f64)x); }
+WP_LFN f32 erfc(f32 x) { return (f32)detail::special::erfc((f64)x); }
+WP_LFN f32 erfinv(f32 x) { return (f32)detail::special::erfinv((f64)x); }
+WP_LFN f32 erfcinv(f32 x) { return (f32)detail::special::erfcinv((f64)x); }
+WP_LFN f64 erf(f64 x) { return detail::special::erf(x); }
+WP_LFN f64 erfc(f64 x) { return detail::special::erfc(x); }
+WP_LFN f64 erfinv(f64 x) { return detail::special::erfinv(x); }
+WP_LFN f64 erfcinv(f64 x) { return detail::special::erfcinv(x); }
 #endif
 
 // ------------------------------------------------------------------------------------------
 // lerp
 // ------------------------------------------------------------------------------------------
 
-WP_FN f32 lerp(f32 a, f32 b, f32 t) { return a * (1.0f - t) + b * t; }
-WP_FN f64 lerp(f64 a, f64 b, f64 t) { return a * (1.0 - t) + b * t; }
+WP_LFN f32 lerp(f32 a, f32 b, f32 t) { return a * (1.0f - t) + b * t; }
+WP_LFN f64 lerp(f64 a, f64 b, f64 t) { return a * (1.0 - t) + b * t; }
 
 #define WP_VEC_LERP(V, S) \
-  WP_FN V lerp(const V& a, const V& b, S t) { return detail::vzip(a, b, [t](S x, S y) { return lerp(x, y, t); }); }
+  WP_LFN V lerp(const V& a, const V& b, S t) { return detail::vzip(a, b, [t](S x, S y) { return lerp(x, y, t); }); }
 WP_VEC_LERP(Vec2, f32)
 WP_VEC_LERP(Vec3, f32)
 WP_VEC_LERP(Vec4, f32)
@@ -392,7 +392,7 @@ WP_VEC_LERP(DVec4, f64)
 // Square matrices (column-major lanes), quaternions (x, y, z, w; not renormalized, as Warp),
 // spatial vectors and matrices (row-major lanes): lane by lane, in vec_traits' order.
 #define WP_LANES_LERP(T, S)                                                                 \
-  WP_FN T lerp(const T& a, const T& b, S t) {                                               \
+  WP_LFN T lerp(const T& a, const T& b, S t) {                                               \
     T r = a;                                                                                \
     for (int i = 0; i < vec_traits<T>::N; ++i)                                              \
       vec_traits<T>::at(r, i) = lerp(vec_traits<T>::get(a, i), vec_traits<T>::get(b, i), t); \
@@ -421,11 +421,11 @@ WP_LANES_LERP(DSpatialMatrix, f64)
 // ------------------------------------------------------------------------------------------
 
 #define WP_F16_1(NAME) \
-  WP_FN f16 NAME(f16 x) { return f16_from_f32(NAME(f16_to_f32(x))); }
+  WP_LFN f16 NAME(f16 x) { return f16_from_f32(NAME(f16_to_f32(x))); }
 #define WP_F16_2(NAME) \
-  WP_FN f16 NAME(f16 x, f16 y) { return f16_from_f32(NAME(f16_to_f32(x), f16_to_f32(y))); }
+  WP_LFN f16 NAME(f16 x, f16 y) { return f16_from_f32(NAME(f16_to_f32(x), f16_to_f32(y))); }
 #define WP_F16_3(NAME)                                                                  \
-  WP_FN f16 NAME(f16 x, f16 y, f16 z) {                                                 \
+  WP_LFN f16 NAME(f16 x, f16 y, f16 z) {                                                 \
     return f16_from_f32(NAME(f16_to_f32(x), f16_to_f32(y), f16_to_f32(z)));             \
   }
 WP_F16_2(min)
@@ -468,17 +468,17 @@ WP_F16_3(lerp)
 #undef WP_F16_3
 #undef WP_F16_2
 #undef WP_F16_1
-WP_FN f16 step(f16 x) { return f16_from_f32(step(f16_to_f32(x))); }
-WP_FN bool isnan(f16 x) { return isnan(f16_to_f32(x)); }
-WP_FN bool isinf(f16 x) { return isinf(f16_to_f32(x)); }
-WP_FN bool isfinite(f16 x) { return isfinite(f16_to_f32(x)); }
+WP_LFN f16 step(f16 x) { return f16_from_f32(step(f16_to_f32(x))); }
+WP_LFN bool isnan(f16 x) { return isnan(f16_to_f32(x)); }
+WP_LFN bool isinf(f16 x) { return isinf(f16_to_f32(x)); }
+WP_LFN bool isfinite(f16 x) { return isfinite(f16_to_f32(x)); }
 // bf16: the same, rounded once to bf16 (warp-core/src/bfloat16.rs).
 #define WP_BF16_1(NAME) \
-  WP_FN bf16 NAME(bf16 x) { return bf16_from_f32(NAME(bf16_to_f32(x))); }
+  WP_LFN bf16 NAME(bf16 x) { return bf16_from_f32(NAME(bf16_to_f32(x))); }
 #define WP_BF16_2(NAME) \
-  WP_FN bf16 NAME(bf16 x, bf16 y) { return bf16_from_f32(NAME(bf16_to_f32(x), bf16_to_f32(y))); }
+  WP_LFN bf16 NAME(bf16 x, bf16 y) { return bf16_from_f32(NAME(bf16_to_f32(x), bf16_to_f32(y))); }
 #define WP_BF16_3(NAME)                                                                  \
-  WP_FN bf16 NAME(bf16 x, bf16 y, bf16 z) {                                                 \
+  WP_LFN bf16 NAME(bf16 x, bf16 y, bf16 z) {                                                 \
     return bf16_from_f32(NAME(bf16_to_f32(x), bf16_to_f32(y), bf16_to_f32(z)));             \
   }
 WP_BF16_2(min)
@@ -521,25 +521,25 @@ WP_BF16_3(lerp)
 #undef WP_BF16_3
 #undef WP_BF16_2
 #undef WP_BF16_1
-WP_FN bf16 step(bf16 x) { return bf16_from_f32(step(bf16_to_f32(x))); }
-WP_FN bool isnan(bf16 x) { return isnan(bf16_to_f32(x)); }
-WP_FN bool isinf(bf16 x) { return isinf(bf16_to_f32(x)); }
-WP_FN bool isfinite(bf16 x) { return isfinite(bf16_to_f32(x)); }
+WP_LFN bf16 step(bf16 x) { return bf16_from_f32(step(bf16_to_f32(x))); }
+WP_LFN bool isnan(bf16 x) { return isnan(bf16_to_f32(x)); }
+WP_LFN bool isinf(bf16 x) { return isinf(bf16_to_f32(x)); }
+WP_LFN bool isfinite(bf16 x) { return isfinite(bf16_to_f32(x)); }
 
 // ----- isfinite / isnan / isinf of quaternions and matrices (warp-core builtins::misc):
 // every lane finite, some lane NaN, some lane infinite (the vector rules over vec_traits) -----
 #define WP_LANES_CLASSIFY(T)                                                   \
-  WP_FN bool isfinite(const T& v) {                                            \
+  WP_LFN bool isfinite(const T& v) {                                            \
     bool r = true;                                                             \
     for (int i = 0; i < vec_traits<T>::N; ++i) r = r && isfinite(vec_traits<T>::get(v, i)); \
     return r;                                                                  \
   }                                                                            \
-  WP_FN bool isnan(const T& v) {                                               \
+  WP_LFN bool isnan(const T& v) {                                               \
     bool r = false;                                                            \
     for (int i = 0; i < vec_traits<T>::N; ++i) r = r || isnan(vec_traits<T>::get(v, i)); \
     return r;                                                                  \
   }                                                                            \
-  WP_FN bool isinf(const T& v) {                                               \
+  WP_LFN bool isinf(const T& v) {                                               \
     bool r = false;                                                            \
     for (int i = 0; i < vec_traits<T>::N; ++i) r = r || isinf(vec_traits<T>::get(v, i)); \
     return r;                                                                  \

@@ -20,24 +20,24 @@
 namespace wp {
 
 #define WP_SPATIAL(SV, SM, V3, M3, X, S)                                                  \
-  WP_FN SV spatial_vector(const V3& w, const V3& v) { return SV##_new(w, v); }            \
-  WP_FN SV spatial_vector_scalars(S a0, S a1, S a2, S a3, S a4, S a5) {                   \
+  WP_LFN SV spatial_vector(const V3& w, const V3& v) { return SV##_new(w, v); }            \
+  WP_LFN SV spatial_vector_scalars(S a0, S a1, S a2, S a3, S a4, S a5) {                   \
     return SV##_new6(a0, a1, a2, a3, a4, a5);                                             \
   }                                                                                       \
-  WP_FN V3 spatial_top(const SV& a) { return V3##_new(a.f0, a.f1, a.f2); }                \
-  WP_FN V3 spatial_bottom(const SV& a) { return V3##_new(a.f3, a.f4, a.f5); }             \
-  WP_FN S spatial_dot(const SV& a, const SV& b) { return SV##_dot(a, b); }                \
-  WP_FN SV spatial_cross(const SV& a, const SV& b) {                                      \
+  WP_LFN V3 spatial_top(const SV& a) { return V3##_new(a.f0, a.f1, a.f2); }                \
+  WP_LFN V3 spatial_bottom(const SV& a) { return V3##_new(a.f3, a.f4, a.f5); }             \
+  WP_LFN S spatial_dot(const SV& a, const SV& b) { return SV##_dot(a, b); }                \
+  WP_LFN SV spatial_cross(const SV& a, const SV& b) {                                      \
     const V3 wa = spatial_top(a), va = spatial_bottom(a);                                 \
     const V3 wb = spatial_top(b), vb = spatial_bottom(b);                                 \
     return SV##_new(cross(wa, wb), cross(va, wb) + cross(wa, vb));                        \
   }                                                                                       \
-  WP_FN SV spatial_cross_dual(const SV& a, const SV& b) {                                 \
+  WP_LFN SV spatial_cross_dual(const SV& a, const SV& b) {                                 \
     const V3 wa = spatial_top(a), va = spatial_bottom(a);                                 \
     const V3 wb = spatial_top(b), vb = spatial_bottom(b);                                 \
     return SV##_new(cross(wa, wb) + cross(va, vb), cross(wa, vb));                        \
   }                                                                                       \
-  WP_FN SM spatial_adjoint(const M3& r, const M3& s) {                                    \
+  WP_LFN SM spatial_adjoint(const M3& r, const M3& s) {                                    \
     SM m = SM##_ZERO();                                                                   \
     for (int i = 0; i < 3; ++i)                                                           \
       for (int j = 0; j < 3; ++j) {                                                       \
@@ -48,24 +48,24 @@ namespace wp {
       }                                                                                   \
     return m;                                                                             \
   }                                                                                       \
-  WP_FN V3 velocity_at_point(const SV& qd, const V3& r) {                                 \
+  WP_LFN V3 velocity_at_point(const SV& qd, const V3& r) {                                 \
     return spatial_bottom(qd) + cross(spatial_top(qd), r);                                \
   }                                                                                       \
-  WP_FN SV transform_twist(const X& t, const SV& x) {                                     \
+  WP_LFN SV transform_twist(const X& t, const SV& x) {                                     \
     const V3 w = t.q * spatial_top(x);                                                    \
     return SV##_new(w, t.q * spatial_bottom(x) + cross(t.p, w));                          \
   }                                                                                       \
-  WP_FN SV transform_wrench(const X& t, const SV& x) {                                    \
+  WP_LFN SV transform_wrench(const X& t, const SV& x) {                                    \
     const V3 f = t.q * spatial_bottom(x);                                                 \
     return SV##_new(t.q * spatial_top(x) + cross(t.p, f), f);                             \
   }                                                                                       \
-  WP_FN SM transpose(const SM& m) {                                                       \
+  WP_LFN SM transpose(const SM& m) {                                                       \
     SM r;                                                                                 \
     for (int i = 0; i < 6; ++i)                                                           \
       for (int j = 0; j < 6; ++j) vec_traits<SM>::at(r, j * 6 + i) = vec_traits<SM>::get(m, i * 6 + j); \
     return r;                                                                             \
   }                                                                                       \
-  WP_FN SM outer(const SV& a, const SV& b) {                                              \
+  WP_LFN SM outer(const SV& a, const SV& b) {                                              \
     SM r;                                                                                 \
     for (int i = 0; i < 6; ++i)                                                           \
       for (int j = 0; j < 6; ++j)                                                         \

@@ -340,20 +340,20 @@ WP_FN void svd2_rows(const rows2<S>& a, rows2<S>& u, S* sigma, rows2<S>& v) {
 }  // namespace detail
 
 #define WP_SVD3_OPS(M, V, S)                                                                  \
-  WP_FN tuple_t<M, V, M> svd3(const M& a) {                                                   \
+  WP_LFN tuple_t<M, V, M> svd3(const M& a) {                                                   \
     detail::svd::rows3<S> u, v;                                                               \
     S s[3];                                                                                   \
     detail::svd::svd3_rows(detail::svd::to_rows<3>(a), u, s, v);                                \
     return tuple_t<M, V, M>{detail::svd::from_rows<M>(u), V##_new(s[0], s[1], s[2]),         \
                             detail::svd::from_rows<M>(v)};                                   \
   }                                                                                           \
-  WP_FN tuple_t<M, V> eig3(const M& a) {                                                      \
+  WP_LFN tuple_t<M, V> eig3(const M& a) {                                                      \
     detail::svd::rows3<S> q;                                                                  \
     S d[3];                                                                                   \
     detail::svd::eig3_rows(detail::svd::to_rows<3>(a), q, d);                                   \
     return tuple_t<M, V>{detail::svd::from_rows<M>(q), V##_new(d[0], d[1], d[2])};           \
   }                                                                                           \
-  WP_FN tuple_t<M, M> qr3(const M& a) {                                                       \
+  WP_LFN tuple_t<M, M> qr3(const M& a) {                                                       \
     detail::svd::rows3<S> q, r;                                                               \
     detail::svd::qr_rows(detail::svd::to_rows<3>(a), q, r);                                     \
     return tuple_t<M, M>{detail::svd::from_rows<M>(q), detail::svd::from_rows<M>(r)};       \
@@ -363,7 +363,7 @@ WP_SVD3_OPS(DMat3, DVec3, f64)
 #undef WP_SVD3_OPS
 
 #define WP_SVD2_OPS(M, V, S)                                                                  \
-  WP_FN tuple_t<M, V, M> svd2(const M& a) {                                                   \
+  WP_LFN tuple_t<M, V, M> svd2(const M& a) {                                                   \
     detail::svd::rows2<S> u, v;                                                               \
     S s[2];                                                                                   \
     detail::svd::svd2_rows(detail::svd::to_rows<2>(a), u, s, v);                                \

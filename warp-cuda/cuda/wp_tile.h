@@ -162,16 +162,16 @@ WP_FN bool coords4(int e, const i64* shape, O0 o0, O1 o1, O2 o2, O3 o3, i64* c) 
 
 /// The builtins' min and max (wp_scalar.h's; repeated here so that the header needs only the
 /// core): IEEE fmin/fmax for floats (a NaN operand loses), `<` for integers.
-WP_FN f32 tmin(f32 a, f32 b) { return ::fminf(a, b); }
-WP_FN f32 tmax(f32 a, f32 b) { return ::fmaxf(a, b); }
-WP_FN f64 tmin(f64 a, f64 b) { return ::fmin(a, b); }
-WP_FN f64 tmax(f64 a, f64 b) { return ::fmax(a, b); }
+WP_LFN f32 tmin(f32 a, f32 b) { return ::fminf(a, b); }
+WP_LFN f32 tmax(f32 a, f32 b) { return ::fmaxf(a, b); }
+WP_LFN f64 tmin(f64 a, f64 b) { return ::fmin(a, b); }
+WP_LFN f64 tmax(f64 a, f64 b) { return ::fmax(a, b); }
 // f16: the f32 ones on the widened values, rounded back (exact: the result is an operand),
 // as warp-core's `MinMax for f16`.
-WP_FN f16 tmin(f16 a, f16 b) { return f16_from_f32(::fminf(f16_to_f32(a), f16_to_f32(b))); }
-WP_FN f16 tmax(f16 a, f16 b) { return f16_from_f32(::fmaxf(f16_to_f32(a), f16_to_f32(b))); }
-WP_FN bf16 tmin(bf16 a, bf16 b) { return bf16_from_f32(::fminf(bf16_to_f32(a), bf16_to_f32(b))); }
-WP_FN bf16 tmax(bf16 a, bf16 b) { return bf16_from_f32(::fmaxf(bf16_to_f32(a), bf16_to_f32(b))); }
+WP_LFN f16 tmin(f16 a, f16 b) { return f16_from_f32(::fminf(f16_to_f32(a), f16_to_f32(b))); }
+WP_LFN f16 tmax(f16 a, f16 b) { return f16_from_f32(::fmaxf(f16_to_f32(a), f16_to_f32(b))); }
+WP_LFN bf16 tmin(bf16 a, bf16 b) { return bf16_from_f32(::fminf(bf16_to_f32(a), bf16_to_f32(b))); }
+WP_LFN bf16 tmax(bf16 a, bf16 b) { return bf16_from_f32(::fmaxf(bf16_to_f32(a), bf16_to_f32(b))); }
 template <typename T>
 WP_FN T tmin(T a, T b) {
   return b < a ? b : a;
@@ -236,10 +236,10 @@ struct max_op {
 };
 
 /// `-v`: the builtins' wrapping negation for integers, IEEE negation (the sign bit) for floats.
-WP_FN f32 neg(f32 v) { return -v; }
-WP_FN f64 neg(f64 v) { return -v; }
-WP_FN f16 neg(f16 v) { return -v; }
-WP_FN bf16 neg(bf16 v) { return -v; }
+WP_LFN f32 neg(f32 v) { return -v; }
+WP_LFN f64 neg(f64 v) { return -v; }
+WP_LFN f16 neg(f16 v) { return -v; }
+WP_LFN bf16 neg(bf16 v) { return -v; }
 template <typename T>
 WP_FN T neg(T v) {
   return w_neg(v);
@@ -247,20 +247,20 @@ WP_FN T neg(T v) {
 
 /// `__shfl_down_sync` for the element types: the 32- and 64-bit types CUDA overloads, and the
 /// narrower integers through 32 bits.
-WP_FN f32 shfl_down(unsigned mask, f32 v, int off) { return __shfl_down_sync(mask, v, off); }
-WP_FN f64 shfl_down(unsigned mask, f64 v, int off) { return __shfl_down_sync(mask, v, off); }
-WP_FN i32 shfl_down(unsigned mask, i32 v, int off) { return __shfl_down_sync(mask, v, off); }
-WP_FN u32 shfl_down(unsigned mask, u32 v, int off) { return __shfl_down_sync(mask, v, off); }
-WP_FN i64 shfl_down(unsigned mask, i64 v, int off) { return __shfl_down_sync(mask, v, off); }
-WP_FN u64 shfl_down(unsigned mask, u64 v, int off) { return __shfl_down_sync(mask, v, off); }
-WP_FN i8 shfl_down(unsigned mask, i8 v, int off) { return (i8)__shfl_down_sync(mask, (i32)v, off); }
-WP_FN i16 shfl_down(unsigned mask, i16 v, int off) { return (i16)__shfl_down_sync(mask, (i32)v, off); }
-WP_FN u8 shfl_down(unsigned mask, u8 v, int off) { return (u8)__shfl_down_sync(mask, (u32)v, off); }
-WP_FN u16 shfl_down(unsigned mask, u16 v, int off) { return (u16)__shfl_down_sync(mask, (u32)v, off); }
-WP_FN f16 shfl_down(unsigned mask, f16 v, int off) {
+WP_LFN f32 shfl_down(unsigned mask, f32 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_LFN f64 shfl_down(unsigned mask, f64 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_LFN i32 shfl_down(unsigned mask, i32 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_LFN u32 shfl_down(unsigned mask, u32 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_LFN i64 shfl_down(unsigned mask, i64 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_LFN u64 shfl_down(unsigned mask, u64 v, int off) { return __shfl_down_sync(mask, v, off); }
+WP_LFN i8 shfl_down(unsigned mask, i8 v, int off) { return (i8)__shfl_down_sync(mask, (i32)v, off); }
+WP_LFN i16 shfl_down(unsigned mask, i16 v, int off) { return (i16)__shfl_down_sync(mask, (i32)v, off); }
+WP_LFN u8 shfl_down(unsigned mask, u8 v, int off) { return (u8)__shfl_down_sync(mask, (u32)v, off); }
+WP_LFN u16 shfl_down(unsigned mask, u16 v, int off) { return (u16)__shfl_down_sync(mask, (u32)v, off); }
+WP_LFN f16 shfl_down(unsigned mask, f16 v, int off) {
   return f16_from_bits((u16)__shfl_down_sync(mask, (u32)v.bits, off));
 }
-WP_FN bf16 shfl_down(unsigned mask, bf16 v, int off) {
+WP_LFN bf16 shfl_down(unsigned mask, bf16 v, int off) {
   return bf16_from_bits((u16)__shfl_down_sync(mask, (u32)v.bits, off));
 }
 
@@ -327,10 +327,10 @@ WP_FN arg_t<T> shfl_down(unsigned mask, const arg_t<T>& a, int off) {
 }
 
 /// NaN (a value unordered with itself); never for integers.
-WP_FN bool tnan(f32 v) { return v != v; }
-WP_FN bool tnan(f64 v) { return v != v; }
-WP_FN bool tnan(f16 v) { return v != v; }
-WP_FN bool tnan(bf16 v) { return v != v; }
+WP_LFN bool tnan(f32 v) { return v != v; }
+WP_LFN bool tnan(f64 v) { return v != v; }
+WP_LFN bool tnan(f16 v) { return v != v; }
+WP_LFN bool tnan(bf16 v) { return v != v; }
 template <typename T>
 WP_FN bool tnan(T) {
   return false;
@@ -406,7 +406,7 @@ WP_FN void tile_arange(const tile_t<T, N0>& out, T start, T step) {
 namespace tile_detail {
 
 /// 16-byte alignment of a shared or global address (the vector paths' precondition).
-WP_FN bool aligned16(const void* p) { return ((usize)p & 15) == 0; }
+WP_LFN bool aligned16(const void* p) { return ((usize)p & 15) == 0; }
 
 /// 16 raw bytes, copied as one access (LDG.128 / STG.128 / LDS.128 / STS.128): the loads'
 /// and stores' vector path moves bits, whatever the element type.
@@ -812,7 +812,7 @@ WP_FN T tile_extract(const tile_t<T, N0, N1, N2, N3>& t, I i, J j, K k, L l, ctx
 
 /// The end of a tile's slot at `offset` holding `bytes`, rounded up to 16 bytes (the next
 /// slot's offset). warp-macros' TileInfo computes the block's total with the same rule.
-WP_FN constexpr usize tile_slot_end(usize offset, usize bytes) {
+WP_LFN constexpr usize tile_slot_end(usize offset, usize bytes) {
   return (offset + bytes + 15) / 16 * 16;
 }
 
@@ -862,8 +862,8 @@ WP_FN void tile_reduce(const tile_t<T, 1>& out, const tile_t<T, D...>& t, Op op)
 // ------------------------------------------------------------------------------------------
 
 namespace tile_detail {
-WP_FN f32 fma_(f32 a, f32 b, f32 c) { return ::fmaf(a, b, c); }
-WP_FN f64 fma_(f64 a, f64 b, f64 c) { return ::fma(a, b, c); }
+WP_LFN f32 fma_(f32 a, f32 b, f32 c) { return ::fmaf(a, b, c); }
+WP_LFN f64 fma_(f64 a, f64 b, f64 c) { return ::fma(a, b, c); }
 
 /// 16 bytes of floats read or written as one access (LDS.128 / STS.128 on the GPU): `W`
 /// elements of `T`, `p` 16-byte aligned (the callers check it). On the host, a plain copy.

@@ -49,7 +49,7 @@ struct cx<DVec2> {
 
 /// log2 of a power of two.
 // Device-callable (as wp_tile.h's `tile_slot_end`): NVRTC runs without --expt-relaxed-constexpr.
-WP_FN constexpr int log2_pow2(int n) {
+WP_LFN constexpr int log2_pow2(int n) {
   int l = 0;
   for (; n > 1; n /= 2) ++l;
   return l;
@@ -115,7 +115,7 @@ WP_FN void butterfly(C& x0, C& x1, const C w) {
   x1 = o1;
 }
 
-WP_FN constexpr int cdiv(int a, int b) { return (a + b - 1) / b; }
+WP_LFN constexpr int cdiv(int a, int b) { return (a + b - 1) / b; }
 
 /// Stages S0 .. S0 + R of one group, in registers: the group is the 2^R elements
 /// `base + j 2^S0` of a row (`base = g 2^(S0+R) + p`, `p < 2^S0`), closed under those stages'

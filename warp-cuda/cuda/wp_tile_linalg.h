@@ -60,10 +60,10 @@ namespace wp {
 
 namespace tile_linalg_detail {
 
-WP_FN f32 tsqrt(f32 v) { return ::sqrtf(v); }
-WP_FN f64 tsqrt(f64 v) { return ::sqrt(v); }
-WP_FN f32 tnan(f32) { return f32_nan(); }
-WP_FN f64 tnan(f64) { return f64_nan(); }
+WP_LFN f32 tsqrt(f32 v) { return ::sqrtf(v); }
+WP_LFN f64 tsqrt(f64 v) { return ::sqrt(v); }
+WP_LFN f32 tnan(f32) { return f32_nan(); }
+WP_LFN f64 tnan(f64) { return f64_nan(); }
 
 /// The rows and columns of a right-hand side: `N` rows of `K` values.
 template <typename X>

@@ -132,24 +132,24 @@ WP_FN void matmul_fma(C* c, const E* a, const E* b) {
 #define WP_TILE_MMA 1
 
 /// A shared-memory address for ldmatrix.
-WP_FN unsigned smem_addr(const void* p) { return (unsigned)__cvta_generic_to_shared(p); }
+WP_LFN unsigned smem_addr(const void* p) { return (unsigned)__cvta_generic_to_shared(p); }
 
 /// Four 8 x 8 b16 matrices: lane l names row l % 8 of matrix l / 8; register r of every lane
 /// receives matrix r's elements (row lane / 4, columns 2 (lane % 4) + {0, 1}).
-WP_FN void ldmatrix_x4(unsigned* r, const void* p) {
+WP_LFN void ldmatrix_x4(unsigned* r, const void* p) {
   asm volatile("ldmatrix.sync.aligned.m8n8.x4.shared.b16 {%0, %1, %2, %3}, [%4];\n"
                : "=r"(r[0]), "=r"(r[1]), "=r"(r[2]), "=r"(r[3])
                : "r"(smem_addr(p)));
 }
 /// The same, transposed: register r receives matrix r's (row 2 (lane % 4) + {0, 1}, column
 /// lane / 4).
-WP_FN void ldmatrix_x4_trans(unsigned* r, const void* p) {
+WP_LFN void ldmatrix_x4_trans(unsigned* r, const void* p) {
   asm volatile("ldmatrix.sync.aligned.m8n8.x4.trans.shared.b16 {%0, %1, %2, %3}, [%4];\n"
                : "=r"(r[0]), "=r"(r[1]), "=r"(r[2]), "=r"(r[3])
                : "r"(smem_addr(p)));
 }
 /// Two matrices, transposed (lanes 0..15 name their rows).
-WP_FN void ldmatrix_x2_trans(unsigned* r, const void* p) {
+WP_LFN void ldmatrix_x2_trans(unsigned* r, const void* p) {
   asm volatile("ldmatrix.sync.aligned.m8n8.x2.trans.shared.b16 {%0, %1}, [%2];\n"
                : "=r"(r[0]), "=r"(r[1])
                : "r"(smem_addr(p)));
@@ -284,7 +284,7 @@ WP_TILE_UNROLL
 /// the leading and stride byte offsets (16-byte units), and the swizzle mode (1: 128-byte,
 /// 2: 64-byte, 3: 32-byte). The swizzle patterns repeat every 8 rows, so stage buffers are
 /// 1024-byte aligned and the base-offset field stays 0.
-WP_FN unsigned long long wg_desc(const void* p, int lbo, int sbo, int mode) {
+WP_LFN unsigned long long wg_desc(const void* p, int lbo, int sbo, int mode) {
   unsigned long long d = (unsigned long long)((smem_addr(p) & 0x3FFFF) >> 4);
   d |= (unsigned long long)((lbo >> 4) & 0x3FFF) << 16;
   d |= (unsigned long long)((sbo >> 4) & 0x3FFF) << 32;
@@ -294,7 +294,7 @@ WP_FN unsigned long long wg_desc(const void* p, int lbo, int sbo, int mode) {
 
 /// d (m64 x n64, f32) += A . B for one k-step of 16 (`wgmma` m64n64k16, f16 inputs; A from
 /// its K-major descriptor, B from its MN-major one; every warp of the warpgroup issues it).
-WP_FN void wgmma_n64(f32* d, unsigned long long da, unsigned long long db) {
+WP_LFN void wgmma_n64(f32* d, unsigned long long da, unsigned long long db) {
   asm volatile(
       "{\n.reg .pred p;\nsetp.ne.b32 p, 1, 0;\n"
       "wgmma.mma_async.sync.aligned.m64n64k16.f32.f16.f16 {%0, %1, %2, %3, %4, %5, %6, %7, %8, %9, %10, %11, %12, %13, %14, %15, %16, %17, %18, %19, %20, %21, %22, %23, %24, %25, %26, %27, %28, %29, %30, %31}, %32, %33, p, 1, 1, 0, 1;\n}\n"
@@ -307,7 +307,7 @@ WP_FN void wgmma_n64(f32* d, unsigned long long da, unsigned long long db) {
 
 /// d (m64 x n128, f32) += A . B for one k-step of 16 (`wgmma` m64n128k16, f16 inputs; A from
 /// its K-major descriptor, B from its MN-major one; every warp of the warpgroup issues it).
-WP_FN void wgmma_n128(f32* d, unsigned long long da, unsigned long long db) {
+WP_LFN void wgmma_n128(f32* d, unsigned long long da, unsigned long long db) {
   asm volatile(
       "{\n.reg .pred p;\nsetp.ne.b32 p, 1, 0;\n"
       "wgmma.mma_async.sync.aligned.m64n128k16.f32.f16.f16 {%0, %1, %2, %3, %4, %5, %6, %7, %8, %9, %10, %11, %12, %13, %14, %15, %16, %17, %18, %19, %20, %21, %22, %23, %24, %25, %26, %27, %28, %29, %30, %31, %32, %33, %34, %35, %36, %37, %38, %39, %40, %41, %42, %43, %44, %45, %46, %47, %48, %49, %50, %51, %52, %53, %54, %55, %56, %57, %58, %59, %60, %61, %62, %63}, %64, %65, p, 1, 1, 0, 1;\n}\n"
@@ -324,7 +324,7 @@ WP_FN void wgmma_n128(f32* d, unsigned long long da, unsigned long long db) {
 
 /// d (m64 x n256, f32) += A . B for one k-step of 16 (`wgmma` m64n256k16, f16 inputs; A from
 /// its K-major descriptor, B from its MN-major one; every warp of the warpgroup issues it).
-WP_FN void wgmma_n256(f32* d, unsigned long long da, unsigned long long db) {
+WP_LFN void wgmma_n256(f32* d, unsigned long long da, unsigned long long db) {
   asm volatile(
       "{\n.reg .pred p;\nsetp.ne.b32 p, 1, 0;\n"
       "wgmma.mma_async.sync.aligned.m64n256k16.f32.f16.f16 {%0, %1, %2, %3, %4, %5, %6, %7, %8, %9, %10, %11, %12, %13, %14, %15, %16, %17, %18, %19, %20, %21, %22, %23, %24, %25, %26, %27, %28, %29, %30, %31, %32, %33, %34, %35, %36, %37, %38, %39, %40, %41, %42, %43, %44, %45, %46, %47, %48, %49, %50, %51, %52, %53, %54, %55, %56, %57, %58, %59, %60, %61, %62, %63, %64, %65, %66, %67, %68, %69, %70, %71, %72, %73, %74, %75, %76, %77, %78, %79, %80, %81, %82, %83, %84, %85, %86, %87, %88, %89, %90, %91, %92, %93, %94, %95, %96, %97, %98, %99, %100, %101, %102, %103, %104, %105, %106, %107, %108, %109, %110, %111, %112, %113, %114, %115, %116, %117, %118, %119, %120, %121, %122, %123, %124, %125, %126, %127}, %128, %129, p, 1, 1, 0, 1;\n}\n"
@@ -457,14 +457,14 @@ struct wg_plan {
 
 /// cp.async of 16 bytes, global to shared, bypassing L1 (the stages are read once from shared
 /// memory). No-ops below sm_80, where the pipeline is never switched on.
-WP_FN void cp_async16(void* dst, const void* src) {
+WP_LFN void cp_async16(void* dst, const void* src) {
 #if defined(WP_TILE_MMA)
   asm volatile("cp.async.cg.shared.global [%0], [%1], 16;\n" ::"r"(smem_addr(dst)), "l"(src));
 #else
   *reinterpret_cast<tile_detail::raw16*>(dst) = *reinterpret_cast<const tile_detail::raw16*>(src);
 #endif
 }
-WP_FN void cp_async_commit() {
+WP_LFN void cp_async_commit() {
 #if defined(WP_TILE_MMA)
   asm volatile("cp.async.commit_group;\n" ::);
 #endif

@@ -32,15 +32,15 @@ namespace wp {
 namespace tile_sort_detail {
 
 /// Whether key `a` comes strictly before `b`: `<`, a NaN after every number, NaNs tied.
-WP_FN bool key_lt(f32 a, f32 b) { return !(a != a) && ((b != b) || a < b); }
-WP_FN bool key_lt(f64 a, f64 b) { return !(a != a) && ((b != b) || a < b); }
+WP_LFN bool key_lt(f32 a, f32 b) { return !(a != a) && ((b != b) || a < b); }
+WP_LFN bool key_lt(f64 a, f64 b) { return !(a != a) && ((b != b) || a < b); }
 template <typename T>
 WP_FN bool key_lt(T a, T b) {
   return a < b;
 }
 
 /// The smallest power of two >= n (n >= 1).
-WP_FN constexpr int pow2_at_least(int n, int p = 1) { return p >= n ? p : pow2_at_least(n, 2 * p); }
+WP_LFN constexpr int pow2_at_least(int n, int p = 1) { return p >= n ? p : pow2_at_least(n, 2 * p); }
 
 }  // namespace tile_sort_detail
 

@@ -20,43 +20,43 @@
 namespace wp {
 
 #define WP_TRANSFORM(X, V3, V4, Q, M3, M4, S)                                             \
-  WP_FN X transformation(const V3& p, const Q& q) { return X##_new(p, q); }               \
-  WP_FN V3 transform_get_translation(const X& t) { return t.p; }                          \
-  WP_FN Q transform_get_rotation(const X& t) { return t.q; }                              \
-  WP_FN X transform_multiply(const X& a, const X& b) { return a * b; }                    \
-  WP_FN V3 transform_point(const X& t, const V3& x) { return t.q * x + t.p; }             \
-  WP_FN V3 transform_vector(const X& t, const V3& x) { return t.q * x; }                  \
-  WP_FN X transform_inverse(const X& t) {                                                 \
+  WP_LFN X transformation(const V3& p, const Q& q) { return X##_new(p, q); }               \
+  WP_LFN V3 transform_get_translation(const X& t) { return t.p; }                          \
+  WP_LFN Q transform_get_rotation(const X& t) { return t.q; }                              \
+  WP_LFN X transform_multiply(const X& a, const X& b) { return a * b; }                    \
+  WP_LFN V3 transform_point(const X& t, const V3& x) { return t.q * x + t.p; }             \
+  WP_LFN V3 transform_vector(const X& t, const V3& x) { return t.q * x; }                  \
+  WP_LFN X transform_inverse(const X& t) {                                                 \
     const Q qi = quat_inverse(t.q);                                                       \
     return X##_new(-(qi * t.p), qi);                                                      \
   }                                                                                       \
-  WP_FN X inverse(const X& t) { return transform_inverse(t); }                            \
-  WP_FN M4 transform_to_matrix(const X& t) {                                              \
+  WP_LFN X inverse(const X& t) { return transform_inverse(t); }                            \
+  WP_LFN M4 transform_to_matrix(const X& t) {                                              \
     const M3 r = quat_to_matrix(t.q);                                                     \
     return M4##_from_cols(V4##_new(r.x_axis.x, r.x_axis.y, r.x_axis.z, (S)0),             \
                           V4##_new(r.y_axis.x, r.y_axis.y, r.y_axis.z, (S)0),             \
                           V4##_new(r.z_axis.x, r.z_axis.y, r.z_axis.z, (S)0),             \
                           V4##_new(t.p.x, t.p.y, t.p.z, (S)1));                           \
   }                                                                                       \
-  WP_FN X transform_from_matrix(const M4& m) {                                            \
+  WP_LFN X transform_from_matrix(const M4& m) {                                            \
     const M3 r = M3##_from_cols(V3##_new(m.x_axis.x, m.x_axis.y, m.x_axis.z),             \
                                 V3##_new(m.y_axis.x, m.y_axis.y, m.y_axis.z),             \
                                 V3##_new(m.z_axis.x, m.z_axis.y, m.z_axis.z));            \
     return X##_new(V3##_new(m.w_axis.x, m.w_axis.y, m.w_axis.z), quat_from_matrix(r));    \
   }                                                                                       \
-  WP_FN X lerp(const X& a, const X& b, S t) {                                             \
+  WP_LFN X lerp(const X& a, const X& b, S t) {                                             \
     X r = a;                                                                              \
     for (int i = 0; i < 7; ++i)                                                           \
       vec_traits<X>::at(r, i) =                                                           \
           vec_traits<X>::get(a, i) * ((S)1 - t) + vec_traits<X>::get(b, i) * t;           \
     return r;                                                                             \
   }                                                                                       \
-  WP_FN V3 transform_point(const M4& m, const V3& x) {                                    \
+  WP_LFN V3 transform_point(const M4& m, const V3& x) {                                    \
     return V3##_new(((m.x_axis.x * x.x + m.y_axis.x * x.y) + m.z_axis.x * x.z) + m.w_axis.x, \
                     ((m.x_axis.y * x.x + m.y_axis.y * x.y) + m.z_axis.y * x.z) + m.w_axis.y, \
                     ((m.x_axis.z * x.x + m.y_axis.z * x.y) + m.z_axis.z * x.z) + m.w_axis.z); \
   }                                                                                       \
-  WP_FN V3 transform_vector(const M4& m, const V3& x) {                                   \
+  WP_LFN V3 transform_vector(const M4& m, const V3& x) {                                   \
     return V3##_new((m.x_axis.x * x.x + m.y_axis.x * x.y) + m.z_axis.x * x.z,             \
                     (m.x_axis.y * x.x + m.y_axis.y * x.y) + m.z_axis.y * x.z,             \
                     (m.x_axis.z * x.x + m.y_axis.z * x.y) + m.z_axis.z * x.z);            \

@@ -24,7 +24,7 @@
 namespace wp {
 
 #define WP_VEC_DOT(V, S)                                                              \
-  WP_FN S dot(const V& a, const V& b) {                                               \
+  WP_LFN S dot(const V& a, const V& b) {                                               \
     S acc = (S)0;                                                                     \
     for (int i = 0; i < vec_traits<V>::N; ++i)                                        \
       acc = detail::s_add(acc, detail::s_mul(vec_traits<V>::get(a, i), vec_traits<V>::get(b, i))); \
@@ -45,7 +45,7 @@ WP_VEC_DOT(UVec4, u32)
 #undef WP_VEC_DOT
 
 #define WP_VEC_CROSS(V)                                                         \
-  WP_FN V cross(const V& a, const V& b) {                                       \
+  WP_LFN V cross(const V& a, const V& b) {                                       \
     using detail::s_mul;                                                        \
     using detail::s_sub;                                                        \
     return V##_new(s_sub(s_mul(a.y, b.z), s_mul(a.z, b.y)),                     \
@@ -62,7 +62,7 @@ namespace detail {
 /// For m >= 0 (not NaN): k, the power of two with m * k in [1, 2) clamped to 2^+-126, and
 /// inv = 1/k (warp-core's NormScalar::pow2_pair): m clamped to [2^-126, 2^126] by selects,
 /// its exponent bits eb are 1/k (the mantissa cleared), and k has the exponent 254 - E.
-WP_FN void pow2_pair(f32 m, f32& k, f32& inv) {
+WP_LFN void pow2_pair(f32 m, f32& k, f32& inv) {
   const f32 lo = f32_from_bits(1u << 23), hi = f32_from_bits(253u << 23);
   m = m > lo ? m : lo;
   m = m < hi ? m : hi;
@@ -70,7 +70,7 @@ WP_FN void pow2_pair(f32 m, f32& k, f32& inv) {
   k = f32_from_bits(0x7f000000u - eb);
   inv = f32_from_bits(eb);
 }
-WP_FN void pow2_pair(f64 m, f64& k, f64& inv) {
+WP_LFN void pow2_pair(f64 m, f64& k, f64& inv) {
   const f64 lo = f64_from_bits(1ull << 52), hi = f64_from_bits(2045ull << 52);
   m = m > lo ? m : lo;
   m = m < hi ? m : hi;
@@ -98,13 +98,13 @@ WP_FN void norm_scaled(const V& v, Dot dotself, V& w, S& l, S& k, S& inv) {
 }  // namespace detail
 
 #define WP_VEC_LENGTH(V, S)                                                     \
-  WP_FN S length(const V& v) {                                                  \
+  WP_LFN S length(const V& v) {                                                  \
     V w;                                                                        \
     S l, k, inv;                                                                \
     detail::norm_scaled(v, [](const V& a) { return dot(a, a); }, w, l, k, inv); \
     return l * inv;                                                             \
   }                                                                             \
-  WP_FN V normalize(const V& v) {                                               \
+  WP_LFN V normalize(const V& v) {                                               \
     V w;                                                                        \
     S l, k, inv;                                                                \
     detail::norm_scaled(v, [](const V& a) { return dot(a, a); }, w, l, k, inv); \

@@ -117,8 +117,8 @@ enum : u32 {
 
 #if defined(__CUDACC__)
 /// Structure words (read-only for a whole launch).
-WP_FN u64 vol_u64(u64 a) { return (u64)__ldg((const unsigned long long*)a); }
-WP_FN f32 vol_map_f32(u64 a) { return __ldg((const float*)a); }
+WP_LFN u64 vol_u64(u64 a) { return (u64)__ldg((const unsigned long long*)a); }
+WP_LFN f32 vol_map_f32(u64 a) { return __ldg((const float*)a); }
 /// Values: plain loads unless no kernel store can change them during the launch.
 #if defined(WP_VOLUME_NO_STORE)
 template <typename S>
@@ -136,8 +136,8 @@ WP_FN S vol_host_load(u64 a) {
   std::memcpy(&x, (const void*)(uintptr_t)a, sizeof(S));
   return x;
 }
-WP_FN u64 vol_u64(u64 a) { return vol_host_load<u64>(a); }
-WP_FN f32 vol_map_f32(u64 a) { return vol_host_load<f32>(a); }
+WP_LFN u64 vol_u64(u64 a) { return vol_host_load<u64>(a); }
+WP_LFN f32 vol_map_f32(u64 a) { return vol_host_load<f32>(a); }
 template <typename S>
 WP_FN S vol_val(u64 a) { return vol_host_load<S>(a); }
 template <typename S>
@@ -207,35 +207,35 @@ struct vol_value<DVec3> {
 // The elementary steps of the sampling formulas (VolumeSample's methods), in their order.
 
 /// add_scaled: `acc + w * v`, componentwise.
-WP_FN f32 vol_add_scaled(f32 acc, f32 w, f32 v) { return acc + w * v; }
-WP_FN f64 vol_add_scaled(f64 acc, f64 w, f64 v) { return acc + w * v; }
-WP_FN Vec3 vol_add_scaled(Vec3 acc, f32 w, Vec3 v) {
+WP_LFN f32 vol_add_scaled(f32 acc, f32 w, f32 v) { return acc + w * v; }
+WP_LFN f64 vol_add_scaled(f64 acc, f64 w, f64 v) { return acc + w * v; }
+WP_LFN Vec3 vol_add_scaled(Vec3 acc, f32 w, Vec3 v) {
   return Vec3_new(acc.x + w * v.x, acc.y + w * v.y, acc.z + w * v.z);
 }
-WP_FN DVec3 vol_add_scaled(DVec3 acc, f64 w, DVec3 v) {
+WP_LFN DVec3 vol_add_scaled(DVec3 acc, f64 w, DVec3 v) {
   return DVec3_new(acc.x + w * v.x, acc.y + w * v.y, acc.z + w * v.z);
 }
 /// scale: `w * a`, componentwise.
-WP_FN f32 vol_scale(f32 w, f32 a) { return w * a; }
-WP_FN f64 vol_scale(f64 w, f64 a) { return w * a; }
-WP_FN Vec3 vol_scale(f32 w, Vec3 a) { return Vec3_new(w * a.x, w * a.y, w * a.z); }
-WP_FN DVec3 vol_scale(f64 w, DVec3 a) { return DVec3_new(w * a.x, w * a.y, w * a.z); }
+WP_LFN f32 vol_scale(f32 w, f32 a) { return w * a; }
+WP_LFN f64 vol_scale(f64 w, f64 a) { return w * a; }
+WP_LFN Vec3 vol_scale(f32 w, Vec3 a) { return Vec3_new(w * a.x, w * a.y, w * a.z); }
+WP_LFN DVec3 vol_scale(f64 w, DVec3 a) { return DVec3_new(w * a.x, w * a.y, w * a.z); }
 /// add: `a + b`, componentwise.
-WP_FN f32 vol_add(f32 a, f32 b) { return a + b; }
-WP_FN f64 vol_add(f64 a, f64 b) { return a + b; }
-WP_FN Vec3 vol_add(Vec3 a, Vec3 b) { return Vec3_new(a.x + b.x, a.y + b.y, a.z + b.z); }
-WP_FN DVec3 vol_add(DVec3 a, DVec3 b) { return DVec3_new(a.x + b.x, a.y + b.y, a.z + b.z); }
+WP_LFN f32 vol_add(f32 a, f32 b) { return a + b; }
+WP_LFN f64 vol_add(f64 a, f64 b) { return a + b; }
+WP_LFN Vec3 vol_add(Vec3 a, Vec3 b) { return Vec3_new(a.x + b.x, a.y + b.y, a.z + b.z); }
+WP_LFN DVec3 vol_add(DVec3 a, DVec3 b) { return DVec3_new(a.x + b.x, a.y + b.y, a.z + b.z); }
 /// grad_zero.
-WP_FN void vol_grad_zero(Vec3& g) { g = Vec3_ZERO(); }
-WP_FN void vol_grad_zero(DVec3& g) { g = DVec3_ZERO(); }
-WP_FN void vol_grad_zero(Mat3& g) { g = Mat3{Vec3_ZERO(), Vec3_ZERO(), Vec3_ZERO()}; }
-WP_FN void vol_grad_zero(DMat3& g) { g = DMat3{DVec3_ZERO(), DVec3_ZERO(), DVec3_ZERO()}; }
+WP_LFN void vol_grad_zero(Vec3& g) { g = Vec3_ZERO(); }
+WP_LFN void vol_grad_zero(DVec3& g) { g = DVec3_ZERO(); }
+WP_LFN void vol_grad_zero(Mat3& g) { g = Mat3{Vec3_ZERO(), Vec3_ZERO(), Vec3_ZERO()}; }
+WP_LFN void vol_grad_zero(DMat3& g) { g = DMat3{DVec3_ZERO(), DVec3_ZERO(), DVec3_ZERO()}; }
 /// grad_add_outer: `g + outer(v, gw)`, entry (component c, axis a) `g + v_c * gw_a`; column
 /// a of a matrix is the derivative along axis a.
-WP_FN Vec3 vol_grad_add_outer(Vec3 g, f32 v, const f32* gw) {
+WP_LFN Vec3 vol_grad_add_outer(Vec3 g, f32 v, const f32* gw) {
   return Vec3_new(g.x + v * gw[0], g.y + v * gw[1], g.z + v * gw[2]);
 }
-WP_FN DVec3 vol_grad_add_outer(DVec3 g, f64 v, const f64* gw) {
+WP_LFN DVec3 vol_grad_add_outer(DVec3 g, f64 v, const f64* gw) {
   return DVec3_new(g.x + v * gw[0], g.y + v * gw[1], g.z + v * gw[2]);
 }
 template <typename V, typename M, typename S>
@@ -246,10 +246,10 @@ WP_FN M vol_outer_cols(const M& g, const V& v, const S* gw) {
   r.z_axis = vol_add_scaled(g.z_axis, gw[2], v);
   return r;
 }
-WP_FN Mat3 vol_grad_add_outer(const Mat3& g, Vec3 v, const f32* gw) {
+WP_LFN Mat3 vol_grad_add_outer(const Mat3& g, Vec3 v, const f32* gw) {
   return vol_outer_cols(g, v, gw);
 }
-WP_FN DMat3 vol_grad_add_outer(const DMat3& g, DVec3 v, const f64* gw) {
+WP_LFN DMat3 vol_grad_add_outer(const DMat3& g, DVec3 v, const f64* gw) {
   return vol_outer_cols(g, v, gw);
 }
 
@@ -265,7 +265,7 @@ struct vol_addr_t {
   u32 level;
   u32 pad;
 };
-WP_FN vol_addr_t vol_addr(u64 offset, u32 level) {
+WP_LFN vol_addr_t vol_addr(u64 offset, u32 level) {
   vol_addr_t a;
   a.offset = offset;
   a.level = level;
@@ -279,29 +279,29 @@ struct vol_acc_t {
   i32 key[3];
   u64 leaf, lower, upper;
 };
-WP_FN vol_acc_t vol_acc_new() {
+WP_LFN vol_acc_t vol_acc_new() {
   vol_acc_t a;
   a.key[0] = a.key[1] = a.key[2] = 2147483647;
   a.leaf = a.lower = a.upper = 0;
   return a;
 }
-WP_FN void vol_acc_set_key(vol_acc_t& a, i32 i, i32 j, i32 k) {
+WP_LFN void vol_acc_set_key(vol_acc_t& a, i32 i, i32 j, i32 k) {
   a.key[0] = i;
   a.key[1] = j;
   a.key[2] = k;
 }
 
-WP_FN u64 vol_leaf_voxel(i32 i, i32 j, i32 k) {
+WP_LFN u64 vol_leaf_voxel(i32 i, i32 j, i32 k) {
   return (u64)(u32)(((i & 7) << 6) | ((j & 7) << 3) | (k & 7));
 }
-WP_FN u64 vol_lower_slot(i32 i, i32 j, i32 k) {
+WP_LFN u64 vol_lower_slot(i32 i, i32 j, i32 k) {
   return (u64)(u32)((((i & 127) >> 3) << 8) | (((j & 127) >> 3) << 4) | ((k & 127) >> 3));
 }
-WP_FN u64 vol_upper_slot(i32 i, i32 j, i32 k) {
+WP_LFN u64 vol_upper_slot(i32 i, i32 j, i32 k) {
   return (u64)(u32)((((i & 4095) >> 7) << 10) | (((j & 4095) >> 7) << 5) | ((k & 4095) >> 7));
 }
 /// The root table key (nanovdb::root_key): each coordinate as unsigned, shifted by 12.
-WP_FN u64 vol_root_key(i32 i, i32 j, i32 k) {
+WP_LFN u64 vol_root_key(i32 i, i32 j, i32 k) {
   return (u64)((u32)k >> 12) | ((u64)((u32)j >> 12) << 21) | ((u64)((u32)i >> 12) << 42);
 }
 
@@ -389,7 +389,7 @@ WP_FN vol_addr_t vol_locate(const volume_t<T>& v, i32 i, i32 j, i32 k) {
   return vol_locate_cached(v, i, j, k, acc);
 }
 
-WP_FN bool vol_inside_i32(i64 x) { return x >= -2147483648ll && x <= 2147483647ll; }
+WP_LFN bool vol_inside_i32(i64 x) { return x >= -2147483648ll && x <= 2147483647ll; }
 
 /// locate_wide: a voxel coordinate in i64; outside the i32 range the root background.
 template <typename T>
@@ -401,11 +401,11 @@ WP_FN vol_addr_t vol_locate_wide(const volume_t<T>& v, const i64* c, vol_acc_t& 
 
 /// The voxel coordinate clamped into i32 (what the Rust taps pass on; meaningful only where
 /// the address is not the range rule's background).
-WP_FN i32 vol_clamp_i32(i64 x) {
+WP_LFN i32 vol_clamp_i32(i64 x) {
   return x < -2147483648ll ? (i32)(-2147483647 - 1) : x > 2147483647ll ? 2147483647 : (i32)x;
 }
 
-WP_FN u64 vol_popc(u64 x) {
+WP_LFN u64 vol_popc(u64 x) {
 #if defined(__CUDACC__)
   return (u64)__popcll(x);
 #else
@@ -441,7 +441,7 @@ WP_FN u64 vol_voxel_index(const volume_t<T>& v, vol_addr_t at, i32 i, i32 j, i32
 
 /// check_position: false, and a NonFinite fault with the coordinates' f64 bit patterns,
 /// unless every coordinate is finite.
-WP_FN bool vol_check_position(Vec3 uvw, ctx_t* ctx) {
+WP_LFN bool vol_check_position(Vec3 uvw, ctx_t* ctx) {
   const f32 m = 3.40282347e38f;  // f32::MAX: NaN and the infinities fail the test
   if (::fabsf(uvw.x) <= m && ::fabsf(uvw.y) <= m && ::fabsf(uvw.z) <= m) return true;
   const i64 bits[3] = {(i64)f64_to_bits((f64)uvw.x), (i64)f64_to_bits((f64)uvw.y),
@@ -452,7 +452,7 @@ WP_FN bool vol_check_position(Vec3 uvw, ctx_t* ctx) {
 
 /// wide: an integral finite f32 as an i64 voxel coordinate, clamped to +-2^40 first (exact;
 /// far outside the i32 range, so anything clamped is background).
-WP_FN i64 vol_wide(f32 c) {
+WP_LFN i64 vol_wide(f32 c) {
   const f32 lim = 1099511627776.0f;
   return (i64)(c < -lim ? -lim : c > lim ? lim : c);
 }
@@ -462,7 +462,7 @@ struct vol_cell_t {
   i64 base[3];
   f32 wx[2], wy[2], wz[2];
 };
-WP_FN vol_cell_t vol_cell(Vec3 uvw) {
+WP_LFN vol_cell_t vol_cell(Vec3 uvw) {
   vol_cell_t c;
   const f32 bx = ::floorf(uvw.x), by = ::floorf(uvw.y), bz = ::floorf(uvw.z);
   const f32 fx = uvw.x - bx, fy = uvw.y - by, fz = uvw.z - bz;
@@ -485,7 +485,7 @@ struct vol_corner_t {
   f32 gw[3];
   f32 h[3];
 };
-WP_FN vol_corner_t vol_corner(const vol_cell_t& c, int n) {
+WP_LFN vol_corner_t vol_corner(const vol_cell_t& c, int n) {
   const int ox = (n >> 2) & 1, oy = (n >> 1) & 1, oz = n & 1;
   const f32 sx = ox == 1 ? 1.0f : -1.0f, sy = oy == 1 ? 1.0f : -1.0f, sz = oz == 1 ? 1.0f : -1.0f;
   const f32 x = c.wx[ox], y = c.wy[oy], z = c.wz[oz];
@@ -645,9 +645,9 @@ WP_FN void volume_store(const volume_t<T>& v, i32 i, i32 j, i32 k,
 namespace detail {
 /// The grid's f32 map: matF (row-major) at 0, invMatF at 36, vecF at 72 of the Map.
 enum : u32 { VOL_MAT_F = 0u, VOL_INV_MAT_F = 36u, VOL_VEC_F = 72u };
-WP_FN f32 vol_map_at(u64 data, u32 m, int k) { return vol_map_f32(data + VOL_MAP + m + 4u * (u32)k); }
+WP_LFN f32 vol_map_at(u64 data, u32 m, int k) { return vol_map_f32(data + VOL_MAP + m + 4u * (u32)k); }
 /// linear_map: row r of M times p, `(p.x*M[r][0] + p.y*M[r][1]) + p.z*M[r][2]`.
-WP_FN Vec3 vol_linear_map(u64 data, u32 m, Vec3 p) {
+WP_LFN Vec3 vol_linear_map(u64 data, u32 m, Vec3 p) {
   f32 r[3];
   for (int row = 0; row < 3; ++row)
     r[row] = (p.x * vol_map_at(data, m, 3 * row) + p.y * vol_map_at(data, m, 3 * row + 1)) +
@@ -655,14 +655,14 @@ WP_FN Vec3 vol_linear_map(u64 data, u32 m, Vec3 p) {
   return Vec3_new(r[0], r[1], r[2]);
 }
 /// transposed: column c of M times a, `(a.x*M[0][c] + a.y*M[1][c]) + a.z*M[2][c]`.
-WP_FN Vec3 vol_transposed(u64 data, u32 m, Vec3 a) {
+WP_LFN Vec3 vol_transposed(u64 data, u32 m, Vec3 a) {
   f32 r[3];
   for (int col = 0; col < 3; ++col)
     r[col] = (a.x * vol_map_at(data, m, col) + a.y * vol_map_at(data, m, 3 + col)) +
              a.z * vol_map_at(data, m, 6 + col);
   return Vec3_new(r[0], r[1], r[2]);
 }
-WP_FN Vec3 vol_map_t(u64 data) {
+WP_LFN Vec3 vol_map_t(u64 data) {
   return Vec3_new(vol_map_at(data, VOL_VEC_F, 0), vol_map_at(data, VOL_VEC_F, 1),
                   vol_map_at(data, VOL_VEC_F, 2));
 }
