@@ -235,6 +235,39 @@ pub(crate) fn launch_adjoint<K: Kernel>(
     run_launch::<K>(device, args, grid, Some(adstack_bytes), id)
 }
 
+/// Queues the adjoint of a launch of `K` on `stream` (a CUDA stream), as [`launch_on`]
+/// queues a launch; see [`launch_adjoint`].
+#[cfg(feature = "cuda")]
+pub(crate) fn launch_adjoint_on<K: Kernel>(
+    stream: &crate::cuda::stream::Stream,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adstack_bytes: usize,
+) -> Result<()> {
+    names_every_param::<K>();
+    if let Some(reason) = K::INFO.adjoint_error {
+        return Err(Error::NotDifferentiable {
+            kernel: K::INFO.name,
+            reason: reason.to_string(),
+        });
+    }
+    let capturing = capturing::capturing();
+    if capturing {
+        capturing::check_device(stream.device(), &|| {
+            format!("the adjoint of kernel `{}`", K::INFO.name)
+        })?;
+    }
+    let id = launch_id::next();
+    Cuda::of_stream(stream)
+        .launch_adjoint_on::<K>(args, grid, stream, adstack_bytes, id)
+        .map_err(|e| e.in_launch(id))?;
+    if capturing {
+        capturing::keep(Box::new(K::Params::own(args)));
+        capturing::launched();
+    }
+    Ok(())
+}
+
 /// An operation (`what`) that `run` enqueues on `device`'s backend, using the memory of
 /// `uses()` by address: run now, or inside the calling thread's capture recorded (on the
 /// capture's device only), with `uses()` kept for the graph's replays. (A host object's
