@@ -14,6 +14,7 @@
 
 use crate::{arr, host, zeros};
 use warp_lang as wp;
+use warp_runtime::ops::{Buffer, CallArg, Dtype, Exec, LaunchDims, Op, Role, Shape, Value};
 use wp::prelude::*;
 
 backend_tests!(
@@ -23,6 +24,15 @@ backend_tests!(
     launch_adjoint_refuses_kernels_without_adjoint,
     with_grad_array_is_the_gradient,
     with_grad_array_errors,
+    kernel_op_forward_matches_launch,
+    kernel_op_backward_matches_tape,
+    kernel_op_generic_instance,
+    kernel_op_spec,
+    kernel_op_build_errors,
+    kernel_op_call_errors,
+    kernel_op_registry,
+    caller_ordered_capture_replays,
+    scoped_launch_in_a_capture_is_refused,
 );
 
 /// Two outputs, every gradient thread-owned.
@@ -252,5 +262,517 @@ fn with_grad_array_errors(dev: &wp::Device) {
             e.contains("\"cpu\"") && e.contains(&format!("\"{dev}\"")),
             "{e}"
         );
+    }
+}
+
+/// `y = a x + y`, any float type (the generic-instance case).
+#[wp::kernel]
+fn k_axpy<T: Float>(a: T, x: Array<T>, y: Array<T>) {
+    let i = tid();
+    y[i] = a * x[i] + y[i];
+}
+
+/// A framework's buffer over `a`'s memory (the op call's view of a tensor).
+fn buf<T: wp::Element, const M: usize>(a: &wp::Array<T, M>, dtype: Dtype) -> Buffer {
+    let ptr = if a.device().is_cpu() {
+        a.as_mut_ptr().unwrap() as u64
+    } else {
+        a.device_ptr()
+    };
+    Buffer::contiguous(ptr, &a.shape(), dtype)
+}
+
+/// Runs `f` with where a call's launches go on `dev`: the CPU, or a stream of the caller's
+/// wrapped as caller-ordered (the arrays were written on the default stream: synchronised
+/// first, as the mode's contract asks; the stream is synchronised after).
+fn with_exec(dev: &wp::Device, f: impl FnOnce(&Exec<'_>)) {
+    if dev.is_cpu() {
+        return f(&Exec::cpu());
+    }
+    #[cfg(feature = "cuda")]
+    {
+        wp::synchronize().unwrap();
+        let owner = wp::Stream::new(dev).unwrap();
+        // SAFETY: `owner` is a live stream of the device for the whole call, and the arrays
+        // were synchronised above.
+        let s = unsafe {
+            wp::Stream::from_raw_caller_ordered(owner.cuda_stream().cu_stream().cast(), dev)
+        }
+        .unwrap();
+        assert!(s.is_caller_ordered() && !owner.is_caller_ordered());
+        f(&Exec::stream(&s));
+        s.synchronize().unwrap();
+    }
+}
+
+fn own_op() -> Op {
+    Op::kernel("own", k_own)
+        .outputs(["y", "z"])
+        .build()
+        .unwrap()
+}
+
+fn kernel_op_forward_matches_launch(dev: &wp::Device) {
+    let (xh, s) = (xs(), 0.75);
+    let x = arr(&xh, dev);
+    let (y1, z1) = (zeros::<f64, 1>(N, dev), zeros::<f64, 1>(N, dev));
+    wp::launch(k_own, N, (&x, s, &y1, &z1), dev).unwrap();
+    let (y2, z2) = (zeros::<f64, 1>(N, dev), zeros::<f64, 1>(N, dev));
+    let op = own_op();
+    let (bx, by, bz) = (
+        buf(&x, Dtype::F64),
+        buf(&y2, Dtype::F64),
+        buf(&z2, Dtype::F64),
+    );
+    let args = [
+        CallArg::Buffer(&bx),
+        CallArg::Value(Value::Float(s)),
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&bz),
+    ];
+    // The shapes a framework allocates by: the launch dims (x's), outputs like them.
+    let (dims, outs) = op
+        .shapes(&[args[0], args[1], CallArg::Absent, CallArg::Absent])
+        .unwrap();
+    assert_eq!((dims, outs), (vec![N], vec![vec![N], vec![N]]));
+    // SAFETY: the buffers are the arrays' memory, alive for the call.
+    with_exec(dev, |e| unsafe { op.forward(&args, e) }.unwrap());
+    let bits = |a: &wp::Array<f64>| host(a).iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&y1), bits(&y2));
+    assert_eq!(bits(&z1), bits(&z2));
+}
+
+fn kernel_op_backward_matches_tape(dev: &wp::Device) {
+    let (xh, gy, gz, s) = (xs(), seeds(1.0), seeds(-2.0), 0.75);
+    let x1 = arr(&xh, dev).with_grad().unwrap();
+    let y1 = zeros::<f64, 1>(N, dev).with_grad().unwrap();
+    let z1 = zeros::<f64, 1>(N, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _r = tape.record();
+        wp::launch(k_own, N, (&x1, s, &y1, &z1), dev).unwrap();
+    }
+    y1.grad().unwrap().copy_from(&arr(&gy, dev)).unwrap();
+    z1.grad().unwrap().copy_from(&arr(&gz, dev)).unwrap();
+    tape.backward_from_grads().unwrap();
+    // The op's backward on the forward's values, with the framework's gradient memory.
+    let (x, y, z) = (arr(&xh, dev), arr(&host(&y1), dev), arr(&host(&z1), dev));
+    let (gx, gyb, gzb) = (zeros::<f64, 1>(N, dev), arr(&gy, dev), arr(&gz, dev));
+    let op = own_op();
+    let b = |a: &wp::Array<f64>| buf(a, Dtype::F64);
+    let (bx, by, bz, bgx, bgy, bgz) = (b(&x), b(&y), b(&z), b(&gx), b(&gyb), b(&gzb));
+    let args = [
+        CallArg::Buffer(&bx),
+        CallArg::Value(Value::Float(s)),
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&bz),
+    ];
+    let grads = [Some(&bgx), None, Some(&bgy), Some(&bgz)];
+    // SAFETY: as in the forward test.
+    with_exec(dev, |e| unsafe { op.backward(&args, &grads, e) }.unwrap());
+    let (g1, g2) = (host(&x1.grad().unwrap()), host(&gx));
+    assert!(
+        g1.iter().zip(&g2).all(|(a, b)| a.to_bits() == b.to_bits()),
+        "thread-owned gradients bit for bit"
+    );
+    // Output gradients taken; primal values untouched.
+    assert!(host(&gyb).iter().chain(&host(&gzb)).all(|&v| v == 0.0));
+    assert_eq!(host(&x), xh);
+    assert_eq!(host(&y), host(&y1));
+
+    // A shared gradient (amp): 1e-12 relative (the header).
+    let amp = [1.5, -0.5];
+    let (x1, a1) = (
+        arr(&xh, dev).with_grad().unwrap(),
+        arr(&amp, dev).with_grad().unwrap(),
+    );
+    let y1 = zeros::<f64, 1>(N, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _r = tape.record();
+        wp::launch(k_shared, N, (&x1, &a1, &y1), dev).unwrap();
+    }
+    y1.grad().unwrap().copy_from(&arr(&gy, dev)).unwrap();
+    tape.backward_from_grads().unwrap();
+    let op = Op::kernel("shared", k_shared)
+        .outputs(["y"])
+        .build()
+        .unwrap();
+    let (x, a, y) = (arr(&xh, dev), arr(&amp, dev), arr(&host(&y1), dev));
+    let (gx, ga, gyb) = (
+        zeros::<f64, 1>(N, dev),
+        zeros::<f64, 1>(2, dev),
+        arr(&gy, dev),
+    );
+    let (bx, ba, by, bga, bgy) = (b(&x), b(&a), b(&y), b(&ga), b(&gyb));
+    let args = [
+        CallArg::Buffer(&bx),
+        CallArg::Buffer(&ba),
+        CallArg::Buffer(&by),
+    ];
+    // x's gradient not asked for (torch's needs_input_grad false): only amp's.
+    let grads = [None, Some(&bga), Some(&bgy)];
+    // SAFETY: as above.
+    with_exec(dev, |e| unsafe { op.backward(&args, &grads, e) }.unwrap());
+    let (ga1, ga2) = (host(&a1.grad().unwrap()), host(&ga));
+    for k in 0..2 {
+        assert!(
+            (ga1[k] - ga2[k]).abs() <= 1e-12 * ga1[k].abs(),
+            "{ga1:?} {ga2:?}"
+        );
+    }
+    assert!(host(&gx).iter().all(|&v| v == 0.0));
+}
+
+fn kernel_op_generic_instance(dev: &wp::Device) {
+    // A generic kernel is named as a value only as the whole set of instances: the instance
+    // is picked by its owned argument types.
+    let op = Op::instance::<_, (f64, wp::Array<f64>, wp::Array<f64>)>("axpy64", k_axpy)
+        .outputs(["y"])
+        .build()
+        .unwrap();
+    assert_eq!(
+        op.spec().params[0].kind,
+        warp_runtime::ops::ArgKind::Value { dtype: Dtype::F64 }
+    );
+    let x = arr(&[1.0, 2.0, 3.0], dev);
+    let y = arr(&[0.5, 0.25, 0.125], dev);
+    let (bx, by) = (buf(&x, Dtype::F64), buf(&y, Dtype::F64));
+    let args = [
+        CallArg::Value(Value::Int(2)),
+        CallArg::Buffer(&bx),
+        CallArg::Buffer(&by),
+    ];
+    // SAFETY: as above.
+    with_exec(dev, |e| unsafe { op.forward(&args, e) }.unwrap());
+    // Exact: small dyadic values.
+    assert_eq!(host(&y), [2.5, 4.25, 6.125]);
+    let op32 = Op::instance::<_, (f32, wp::Array<f32>, wp::Array<f32>)>("axpy32", k_axpy)
+        .outputs(["y"])
+        .build()
+        .unwrap();
+    let e = unsafe { op32.forward(&args, &Exec::cpu()) }
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("axpy32: argument 'x': a float64 buffer"), "{e}");
+}
+
+fn kernel_op_spec(_dev: &wp::Device) {
+    let op = own_op();
+    assert_eq!(op.name(), "own");
+    let p = &op.spec().params;
+    let names: Vec<_> = p
+        .iter()
+        .map(|p| (p.name, p.role, p.differentiable))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            ("x", Role::Input, true),
+            ("s", Role::Scalar, false),
+            ("y", Role::Output, true),
+            ("z", Role::Output, true)
+        ]
+    );
+    assert_eq!(
+        p[0].kind.describe(),
+        "Array<f64, 1> (float64)",
+        "how messages name the type"
+    );
+    assert!(p[2].zeroed);
+    let op = Op::kernel("own", k_own)
+        .outputs(["y", "z"])
+        .init("z", warp_runtime::ops::Init::Uninit)
+        .build()
+        .unwrap();
+    assert!(op.spec().params[2].zeroed && !op.spec().params[3].zeroed);
+}
+
+fn kernel_op_build_errors(_dev: &wp::Device) {
+    let err = |r: wp::Result<Op>| r.unwrap_err().to_string();
+    let e = err(Op::kernel("own", k_own).outputs(["nrm"]).build());
+    assert!(
+        e.contains("op own (kernel `k_own`): output 'nrm' is not a parameter"),
+        "{e}"
+    );
+    assert!(e.contains("x, s, y, z"), "{e}");
+    let e = err(Op::kernel("own", k_own).outputs(["s"]).build());
+    assert!(e.contains("output 's' is a value"), "{e}");
+    let e = err(Op::kernel("own", k_own).build());
+    assert!(e.contains("names no output"), "{e}");
+    let e = err(Op::kernel("own", k_own).outputs(["y", "y"]).build());
+    assert!(e.contains("'y' is named twice"), "{e}");
+    let e = err(Op::kernel("own", k_own)
+        .outputs(["y", "z"])
+        .shape("x", Shape::Dims)
+        .build());
+    assert!(
+        e.contains("a shape is given for 'x', which is not an output"),
+        "{e}"
+    );
+    let e = err(Op::kernel("own", k_own)
+        .outputs(["y", "z"])
+        .dims(LaunchDims::Like("y"))
+        .build());
+    assert!(e.contains("like 'y', which is not an input array"), "{e}");
+    let e = err(Op::kernel("own", k_own)
+        .outputs(["y", "z"])
+        .shape("y", Shape::Like("s"))
+        .build());
+    assert!(e.contains("output 'y' is shaped like 's'"), "{e}");
+    let e = err(Op::kernel("allout", k_shared)
+        .outputs(["x", "amp", "y"])
+        .build());
+    assert!(
+        e.contains("no input array to take the launch dimensions from"),
+        "{e}"
+    );
+}
+
+fn kernel_op_call_errors(dev: &wp::Device) {
+    let op = own_op();
+    let x = arr(&xs(), dev);
+    let y = zeros::<f64, 1>(N, dev);
+    let short = zeros::<f64, 1>(N - 1, dev);
+    let x32 = zeros::<f32, 1>(N, dev);
+    let m = zeros::<f64, 2>((N, 1), dev);
+    let b = |a: &wp::Array<f64>| buf(a, Dtype::F64);
+    let (bx, by, bs, b32, bm) = (
+        b(&x),
+        b(&y),
+        b(&short),
+        buf(&x32, Dtype::F32),
+        buf(&m, Dtype::F64),
+    );
+    let s = CallArg::Value(Value::Float(1.0));
+    let call = |args: &[CallArg<'_>]| {
+        let mut out = String::new();
+        with_exec(dev, |e| {
+            // SAFETY: every buffer is an array's memory, alive for the call.
+            out = unsafe { op.forward(args, e) }.unwrap_err().to_string()
+        });
+        out
+    };
+    let e = call(&[
+        CallArg::Buffer(&b32),
+        s,
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&by),
+    ]);
+    assert!(
+        e.contains(
+            "own: argument 'x': a float32 buffer; the kernel takes Array<f64, 1> of float64"
+        ),
+        "{e}"
+    );
+    let e = call(&[
+        CallArg::Buffer(&bm),
+        s,
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&by),
+    ]);
+    assert!(
+        e.contains("own: argument 'x': shape [1000, 1]; Array<f64, 1>"),
+        "{e}"
+    );
+    let e = call(&[s, s, CallArg::Buffer(&by), CallArg::Buffer(&by)]);
+    assert!(
+        e.contains("own: argument 'x' (0): the value 1.0; the kernel takes Array<f64, 1>"),
+        "{e}"
+    );
+    let e = call(&[
+        CallArg::Buffer(&bx),
+        CallArg::Value(Value::Bool(true)),
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&by),
+    ]);
+    assert!(
+        e.contains("own: argument 's': true is not a float64"),
+        "{e}"
+    );
+    let e = call(&[CallArg::Buffer(&bx), s, CallArg::Buffer(&by)]);
+    assert!(
+        e.contains("own: called with 3 arguments; the op takes 4 (x, s, y, z)"),
+        "{e}"
+    );
+    let e = call(&[
+        CallArg::Buffer(&bx),
+        s,
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&bs),
+    ]);
+    assert!(
+        e.contains("own: output 'z': a buffer of shape [999]; its shape rule gives [1000]"),
+        "{e}"
+    );
+    // A gradient for a value.
+    let mut e = String::new();
+    with_exec(dev, |ex| {
+        // SAFETY: as above.
+        e = unsafe {
+            op.backward(
+                &[
+                    CallArg::Buffer(&bx),
+                    s,
+                    CallArg::Buffer(&by),
+                    CallArg::Buffer(&by),
+                ],
+                &[None, Some(&by), None, None],
+                ex,
+            )
+        }
+        .unwrap_err()
+        .to_string()
+    });
+    assert!(
+        e.contains("own: argument 's' (a static float64) has no gradient"),
+        "{e}"
+    );
+    // Integer values are range-checked.
+    let op = Op::instance::<_, (i32, wp::Array<i32>, wp::Array<i32>)>("axpyi", k_axpy_int)
+        .outputs(["y"])
+        .build()
+        .unwrap();
+    let yi = zeros::<i32, 1>(2, dev);
+    let byi = buf(&yi, Dtype::I32);
+    let mut e = String::new();
+    with_exec(dev, |ex| {
+        // SAFETY: as above.
+        e = unsafe {
+            op.forward(
+                &[
+                    CallArg::Value(Value::Int(1 << 40)),
+                    CallArg::Buffer(&byi),
+                    CallArg::Buffer(&byi),
+                ],
+                ex,
+            )
+        }
+        .unwrap_err()
+        .to_string()
+    });
+    assert!(
+        e.contains("axpyi: argument 'a': 1099511627776 is not a int32"),
+        "{e}"
+    );
+}
+
+/// An integer `axpy` (the range check of integer values).
+#[wp::kernel]
+fn k_axpy_int<T: Int>(a: T, x: Array<T>, y: Array<T>) {
+    let i = tid();
+    y[i] = a * x[i] + y[i];
+}
+
+fn kernel_op_registry(_dev: &wp::Device) {
+    let op = own_op();
+    let id = warp_runtime::ops::register(&op);
+    assert_eq!(warp_runtime::ops::registered(id).unwrap().name(), "own");
+    let id2 = warp_runtime::ops::register(&op);
+    assert_ne!(id, id2);
+    let e = warp_runtime::ops::registered(u64::MAX)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no op is registered under id 18446744073709551615"),
+        "{e}"
+    );
+}
+
+/// The reason the caller-ordered mode exists: a kernel op's launch inside a CUDA graph capture
+/// of the caller's stream (as torch's CUDA graphs and XLA's command buffers make), replayed
+/// with new input values.
+fn caller_ordered_capture_replays(dev: &wp::Device) {
+    if dev.is_cpu() {
+        // CPU launches finish before they return: there is no stream to wrap.
+        #[cfg(feature = "cuda")]
+        {
+            let mut h = 0u8;
+            // SAFETY: refused before the handle is used.
+            let e = unsafe { wp::Stream::from_raw_caller_ordered((&mut h as *mut u8).cast(), dev) }
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("Stream::from_raw_caller_ordered needs a CUDA device"),
+                "{e}"
+            );
+        }
+        return;
+    }
+    #[cfg(feature = "cuda")]
+    {
+        let op = Op::instance::<_, (f64, wp::Array<f64>, wp::Array<f64>)>("axpy64", k_axpy)
+            .outputs(["y"])
+            .build()
+            .unwrap();
+        let x = arr(&[1.0, 2.0, 3.0], dev);
+        let y = zeros::<f64, 1>(3, dev);
+        let (bx, by) = (buf(&x, Dtype::F64), buf(&y, Dtype::F64));
+        let args = [
+            CallArg::Value(Value::Float(2.0)),
+            CallArg::Buffer(&bx),
+            CallArg::Buffer(&by),
+        ];
+        wp::synchronize().unwrap();
+        let owner = wp::Stream::new(dev).unwrap();
+        let raw = owner.cuda_stream();
+        // SAFETY: a live stream of the device; the arrays were synchronised above.
+        let s =
+            unsafe { wp::Stream::from_raw_caller_ordered(raw.cu_stream().cast(), dev) }.unwrap();
+        // Debug mode synchronises after each launch, which a capture forbids (the suite turns
+        // it on for GPU tests).
+        wp::config::set_debug(false);
+        raw.begin_capture().unwrap();
+        // SAFETY: as above.
+        let r = unsafe { op.forward(&args, &Exec::stream(&s)) };
+        let gpu = warp_cuda::Gpu::open(raw.ordinal()).unwrap();
+        let graph = raw.end_capture(&gpu);
+        r.unwrap();
+        let graph = graph.unwrap();
+        // Nothing ran at capture.
+        assert_eq!(host(&y), [0.0; 3]);
+        graph.launch(raw).unwrap();
+        raw.synchronize().unwrap();
+        assert_eq!(host(&y), [2.0, 4.0, 6.0]);
+        // New values in the same memory: the replay reads them.
+        x.copy_from(&arr(&[10.0, 20.0, 30.0], dev)).unwrap();
+        wp::synchronize().unwrap();
+        graph.launch(raw).unwrap();
+        raw.synchronize().unwrap();
+        assert_eq!(host(&y), [22.0, 44.0, 66.0]);
+        wp::config::set_debug(true);
+    }
+}
+
+/// A launch on a stream wrapped by `from_raw` (the scoped mode: joined with this crate's
+/// default stream) inside its owner's capture is refused, naming the caller-ordered mode.
+fn scoped_launch_in_a_capture_is_refused(dev: &wp::Device) {
+    if dev.is_cpu() {
+        return;
+    }
+    #[cfg(feature = "cuda")]
+    {
+        let x = arr(&[1.0, 2.0, 3.0], dev);
+        let y = zeros::<f64, 1>(3, dev);
+        wp::synchronize().unwrap();
+        let owner = wp::Stream::new(dev).unwrap();
+        let raw = owner.cuda_stream();
+        // SAFETY: a live stream of the device, alive longer than the wrapper.
+        let s = unsafe { wp::Stream::from_raw(raw.cu_stream().cast(), dev, ()) }.unwrap();
+        wp::config::set_debug(false);
+        raw.begin_capture().unwrap();
+        let r = wp::launch_on(k_axpy, 3, (2.0, &x, &y), &s);
+        let gpu = warp_cuda::Gpu::open(raw.ordinal()).unwrap();
+        let ended = raw.end_capture(&gpu);
+        wp::config::set_debug(true);
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("another library is capturing"), "{e}");
+        assert!(e.contains("from_raw_caller_ordered"), "{e}");
+        // The refused launch queued nothing into the capture.
+        drop(ended);
+        // And outside a capture the same launch runs.
+        wp::launch_on(k_axpy, 3, (2.0, &x, &y), &s).unwrap();
+        s.synchronize().unwrap();
+        assert_eq!(host(&y), [2.0, 4.0, 6.0]);
     }
 }
