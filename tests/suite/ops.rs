@@ -13,6 +13,7 @@
 //! most about 1e-13 relative).
 
 use crate::{arr, host, zeros};
+use std::sync::Arc;
 use warp_lang as wp;
 use warp_runtime::ops::{Buffer, CallArg, Dtype, Exec, LaunchDims, Op, Role, Shape, Value};
 use wp::prelude::*;
@@ -31,6 +32,8 @@ backend_tests!(
     kernel_op_build_errors,
     kernel_op_call_errors,
     kernel_op_registry,
+    computation_op_forward_and_backward,
+    computation_op_errors,
     caller_ordered_capture_replays,
     scoped_launch_in_a_capture_is_refused,
 );
@@ -286,6 +289,12 @@ fn buf<T: wp::Element, const M: usize>(a: &wp::Array<T, M>, dtype: Dtype) -> Buf
 /// wrapped as caller-ordered (the arrays were written on the default stream: synchronised
 /// first, as the mode's contract asks; the stream is synchronised after).
 fn with_exec(dev: &wp::Device, f: impl FnOnce(&Exec<'_>)) {
+    with_exec_mode(dev, true, f)
+}
+
+/// [`with_exec`], with the stream caller-ordered (kernel ops) or wrapped by `from_raw`
+/// (computation ops: joined with the default stream).
+fn with_exec_mode(dev: &wp::Device, caller_ordered: bool, f: impl FnOnce(&Exec<'_>)) {
     if dev.is_cpu() {
         return f(&Exec::cpu());
     }
@@ -295,11 +304,14 @@ fn with_exec(dev: &wp::Device, f: impl FnOnce(&Exec<'_>)) {
         let owner = wp::Stream::new(dev).unwrap();
         // SAFETY: `owner` is a live stream of the device for the whole call, and the arrays
         // were synchronised above.
-        let s = unsafe {
-            wp::Stream::from_raw_caller_ordered(owner.cuda_stream().cu_stream().cast(), dev)
+        let raw = owner.cuda_stream().cu_stream().cast();
+        let s = match caller_ordered {
+            true => unsafe { wp::Stream::from_raw_caller_ordered(raw, dev) },
+            false => unsafe { wp::Stream::from_raw(raw, dev, ()) },
         }
         .unwrap();
-        assert!(s.is_caller_ordered() && !owner.is_caller_ordered());
+        assert_eq!(s.is_caller_ordered(), caller_ordered);
+        assert!(!owner.is_caller_ordered());
         f(&Exec::stream(&s));
         s.synchronize().unwrap();
     }
@@ -774,5 +786,242 @@ fn scoped_launch_in_a_capture_is_refused(dev: &wp::Device) {
         wp::launch_on(k_axpy, 3, (2.0, &x, &y), &s).unwrap();
         s.synchronize().unwrap();
         assert_eq!(host(&y), [2.0, 4.0, 6.0]);
+    }
+}
+
+/// One step of a pendulum-like rollout (semi-implicit Euler), every gradient thread-owned.
+#[wp::kernel]
+fn k_step(x0: Array<f64>, v0: Array<f64>, dt: f64, x1: Array<f64>, v1: Array<f64>) {
+    let i = tid();
+    v1[i] = v0[i] - dt * sin(x0[i]);
+    x1[i] = x0[i] + dt * v1[i];
+}
+
+/// The rollout: rows of `xs`/`vs` are the states; `out` the last positions.
+fn rollout(
+    x0: &wp::Array<f64>,
+    v0: &wp::Array<f64>,
+    xs: &wp::Array<f64, 2>,
+    vs: &wp::Array<f64, 2>,
+    out: &wp::Array<f64>,
+    dt: f64,
+    steps: usize,
+    dev: &wp::Device,
+) -> wp::Result<()> {
+    wp::copy(&xs.row(0)?, x0)?;
+    wp::copy(&vs.row(0)?, v0)?;
+    for k in 0..steps {
+        let n = x0.len();
+        let (xa, va, xb, vb) = (xs.row(k)?, vs.row(k)?, xs.row(k + 1)?, vs.row(k + 1)?);
+        wp::launch(k_step, n, (&xa, &va, dt, &xb, &vb), dev)?;
+    }
+    wp::copy(out, &xs.row(steps)?)
+}
+
+fn rollout_op() -> Op {
+    let states = || {
+        Shape::Fn(Arc::new(|s| {
+            Ok(vec![s.scalar::<i64>("steps")? as usize + 1, s.len("x0")?])
+        }))
+    };
+    Op::computation("rollout", |c| {
+        let (x0, v0) = (c.input::<f64, 1>("x0")?, c.input::<f64, 1>("v0")?);
+        let (xs, vs) = (c.scratch::<f64, 2>("xs")?, c.scratch::<f64, 2>("vs")?);
+        let out = c.output::<f64, 1>("x_final")?;
+        let (dt, steps) = (c.scalar::<f64>("dt")?, c.scalar::<i64>("steps")? as usize);
+        rollout(x0, v0, xs, vs, out, dt, steps, c.device())
+    })
+    .input::<f64, 1>("x0")
+    .input::<f64, 1>("v0")
+    .scalar::<f64>("dt")
+    .scalar::<i64>("steps")
+    .scratch::<f64, 2>("xs", states())
+    .scratch::<f64, 2>("vs", states())
+    .output::<f64, 1>("x_final", Shape::Like("x0"))
+    .build()
+    .unwrap()
+}
+
+fn computation_op_forward_and_backward(dev: &wp::Device) {
+    let (n, steps, dt) = (64usize, 20usize, 0.05);
+    let x0h: Vec<f64> = (0..n).map(|i| 0.1 * i as f64 - 2.0).collect();
+    let v0h: Vec<f64> = (0..n).map(|i| 0.5 - 0.02 * i as f64).collect();
+    let seed: Vec<f64> = (0..n).map(|i| 1.0 + (i % 3) as f64).collect();
+    // The reference: the rollout recorded on a tape by hand.
+    let x0 = arr(&x0h, dev).with_grad().unwrap();
+    let v0 = arr(&v0h, dev).with_grad().unwrap();
+    let xs = zeros::<f64, 2>((steps + 1, n), dev).with_grad().unwrap();
+    let vs = zeros::<f64, 2>((steps + 1, n), dev).with_grad().unwrap();
+    let out = zeros::<f64, 1>(n, dev).with_grad().unwrap();
+    let tape = wp::Tape::new();
+    {
+        let _r = tape.record();
+        rollout(&x0, &v0, &xs, &vs, &out, dt, steps, dev).unwrap();
+    }
+    out.grad().unwrap().copy_from(&arr(&seed, dev)).unwrap();
+    tape.backward_from_grads().unwrap();
+
+    let op = rollout_op();
+    let roles: Vec<_> = op.spec().params.iter().map(|p| p.role).collect();
+    assert_eq!(
+        roles,
+        [
+            Role::Input,
+            Role::Input,
+            Role::Scalar,
+            Role::Scalar,
+            Role::Scratch,
+            Role::Scratch,
+            Role::Output
+        ]
+    );
+    let (ix, iv) = (arr(&x0h, dev), arr(&v0h, dev));
+    let b1 = |a: &wp::Array<f64>| buf(a, Dtype::F64);
+    let b2 = |a: &wp::Array<f64, 2>| buf(a, Dtype::F64);
+    let (bx, bv) = (b1(&ix), b1(&iv));
+    let (dtv, stv) = (
+        CallArg::Value(Value::Float(dt)),
+        CallArg::Value(Value::Int(steps as i64)),
+    );
+    let absent = CallArg::Absent;
+    let (_, shapes) = op
+        .shapes(&[
+            CallArg::Buffer(&bx),
+            CallArg::Buffer(&bv),
+            dtv,
+            stv,
+            absent,
+            absent,
+            absent,
+        ])
+        .unwrap();
+    assert_eq!(shapes, [vec![steps + 1, n], vec![steps + 1, n], vec![n]]);
+    // Forward: the framework's zeroed scratch and output.
+    let (sx, sv, o) = (
+        zeros::<f64, 2>((steps + 1, n), dev),
+        zeros::<f64, 2>((steps + 1, n), dev),
+        zeros::<f64, 1>(n, dev),
+    );
+    let (bsx, bsv, bo) = (b2(&sx), b2(&sv), b1(&o));
+    let args = [
+        CallArg::Buffer(&bx),
+        CallArg::Buffer(&bv),
+        dtv,
+        stv,
+        CallArg::Buffer(&bsx),
+        CallArg::Buffer(&bsv),
+        CallArg::Buffer(&bo),
+    ];
+    // SAFETY: every buffer is an array's memory, alive for the call.
+    with_exec_mode(dev, false, |e| unsafe { op.forward(&args, e) }.unwrap());
+    let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(host(&o)), bits(host(&out)), "forward bit for bit");
+    // Backward: fresh zeroed scratch and output again, zeroed input gradients, the output's
+    // gradient (the scratch's gradients are the op's own).
+    let (sx, sv, o) = (
+        zeros::<f64, 2>((steps + 1, n), dev),
+        zeros::<f64, 2>((steps + 1, n), dev),
+        zeros::<f64, 1>(n, dev),
+    );
+    let (gx, gv, go) = (
+        zeros::<f64, 1>(n, dev),
+        zeros::<f64, 1>(n, dev),
+        arr(&seed, dev),
+    );
+    let (bsx, bsv, bo, bgx, bgv, bgo) = (b2(&sx), b2(&sv), b1(&o), b1(&gx), b1(&gv), b1(&go));
+    let args = [
+        CallArg::Buffer(&bx),
+        CallArg::Buffer(&bv),
+        dtv,
+        stv,
+        CallArg::Buffer(&bsx),
+        CallArg::Buffer(&bsv),
+        CallArg::Buffer(&bo),
+    ];
+    let grads = [Some(&bgx), Some(&bgv), None, None, None, None, Some(&bgo)];
+    // SAFETY: as above.
+    with_exec_mode(dev, false, |e| {
+        unsafe { op.backward(&args, &grads, e) }.unwrap()
+    });
+    // The same launches and copies in the same order: bit for bit.
+    assert_eq!(bits(host(&gx)), bits(host(&x0.grad().unwrap())));
+    assert_eq!(bits(host(&gv)), bits(host(&v0.grad().unwrap())));
+    assert!(host(&gx).iter().any(|&g| g != 0.0));
+    // The inputs are untouched.
+    assert_eq!(host(&ix), x0h);
+}
+
+fn computation_op_errors(dev: &wp::Device) {
+    let err = |r: wp::Result<Op>| r.unwrap_err().to_string();
+    let ok = |_: &mut warp_runtime::ops::Ctx<'_>| Ok(());
+    let e = err(Op::computation("c", ok).input::<f64, 1>("a").build());
+    assert!(
+        e.contains("op c (a computation): declares no output"),
+        "{e}"
+    );
+    let e = err(Op::computation("c", ok)
+        .input::<f64, 1>("a")
+        .output::<f64, 1>("a", Shape::Like("a"))
+        .build());
+    assert!(e.contains("'a' is declared twice"), "{e}");
+    let e = err(Op::computation("c", ok)
+        .input::<f64, 1>("a")
+        .output::<f64, 1>("b", Shape::Dims)
+        .build());
+    assert!(e.contains("'b' is shaped by the launch dimensions"), "{e}");
+    let e = err(Op::computation("c", ok)
+        .scalar::<f64>("s")
+        .output::<f64, 1>("b", Shape::Like("s"))
+        .build());
+    assert!(
+        e.contains("'b' is shaped like 's', which is not an input array"),
+        "{e}"
+    );
+    // A body's errors: a name it does not declare, a wrong type, a panic.
+    let run = |body: fn(&mut warp_runtime::ops::Ctx<'_>) -> wp::Result<()>| {
+        let op = Op::computation("c", body)
+            .input::<f64, 1>("a")
+            .output::<f64, 1>("b", Shape::Like("a"))
+            .build()
+            .unwrap();
+        let (a, b) = (zeros::<f64, 1>(2, dev), zeros::<f64, 1>(2, dev));
+        let (ba, bb) = (buf(&a, Dtype::F64), buf(&b, Dtype::F64));
+        let mut out = String::new();
+        with_exec_mode(dev, false, |e| {
+            // SAFETY: the arrays' memory, alive for the call.
+            out = unsafe { op.forward(&[CallArg::Buffer(&ba), CallArg::Buffer(&bb)], e) }
+                .unwrap_err()
+                .to_string()
+        });
+        out
+    };
+    let e = run(|c| c.input::<f64, 1>("zz").map(|_| ()));
+    assert!(
+        e.contains("c: the body asks for Input 'zz', which the op does not declare"),
+        "{e}"
+    );
+    let e = run(|c| c.input::<f32, 1>("a").map(|_| ()));
+    assert!(
+        e.contains("asks for 'a' as Array<f32, 1>; it is declared as Array<f64, 1>"),
+        "{e}"
+    );
+    let e = run(|_| panic!("boom"));
+    assert!(e.contains("c: the body panicked: boom"), "{e}");
+    // A caller-ordered stream is refused (the body's array operations are not ordered with it).
+    #[cfg(feature = "cuda")]
+    if !dev.is_cpu() {
+        let op = rollout_op();
+        let mut e = String::new();
+        with_exec(dev, |ex| {
+            let a = zeros::<f64, 1>(2, dev);
+            let ba = buf(&a, Dtype::F64);
+            let v = CallArg::Value(Value::Int(1));
+            let b = CallArg::Buffer(&ba);
+            // SAFETY: refused before any buffer is used.
+            e = unsafe { op.forward(&[b, b, v, v, b, b, b], ex) }
+                .unwrap_err()
+                .to_string();
+        });
+        assert!(e.contains("not a caller-ordered one"), "{e}");
     }
 }

@@ -530,6 +530,13 @@ impl<T: Element, const N: usize> Array<T, N> {
         }
     }
 
+    /// How many handles (this one, its clones and views) share this array's memory: an op
+    /// checks that none of a call-scoped array's escaped its call (`ops/computation.rs`).
+    #[cfg(feature = "ops")]
+    pub(crate) fn storage_handles(&self) -> usize {
+        Arc::strong_count(&self.storage)
+    }
+
     /// True when `self` and `other` share storage (one is a clone or view of the other).
     pub fn shares_storage_with<U: Element, const M: usize>(&self, other: &Array<U, M>) -> bool {
         Arc::ptr_eq(&self.storage, &other.storage)

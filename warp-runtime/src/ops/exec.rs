@@ -48,6 +48,12 @@ impl<'s> Exec<'s> {
         }
     }
 
+    /// The stream, if the launches go to one.
+    #[cfg(feature = "cuda")]
+    pub(crate) fn stream_of(&self) -> Option<&'s Stream> {
+        self.stream
+    }
+
     /// The device the call's buffers are on.
     pub fn device(&self) -> &Device {
         &self.device
@@ -108,21 +114,9 @@ where
     /// The call's launch dimensions, after checking every output buffer against its shape.
     fn checked_dims(&self, spec: &OpSpec, args: &[CallArg<'_>]) -> Result<Vec<usize>> {
         let (dims, outs) = self.shapes(spec, args)?;
-        for ((k, _), want) in self.shapes.iter().zip(&outs) {
-            let rank = match spec.params[*k].kind {
-                ArgKind::Array { rank, .. } => rank,
-                ArgKind::Value { .. } => 0,
-            };
-            if let CallArg::Buffer(b) = &args[*k] {
-                if b.dims.len() < rank || b.dims[..rank] != want[..] {
-                    return Err(Error::invalid(format!(
-                        "{}: output '{}': a buffer of shape {:?}; its shape rule gives {:?} \
-                         (then the element's trailing axes)",
-                        spec.name, spec.params[*k].name, b.dims, want
-                    )));
-                }
-            }
-        }
+        let shaped: Vec<(usize, Vec<usize>)> =
+            self.shapes.iter().map(|(k, _)| *k).zip(outs).collect();
+        check_outputs(spec, args, &shaped)?;
         Ok(dims)
     }
 
@@ -202,6 +196,31 @@ where
     }
 }
 
+/// Checks each output (and scratch) buffer `(position, leading shape)` against its rule's
+/// shape.
+pub(crate) fn check_outputs(
+    spec: &OpSpec,
+    args: &[CallArg<'_>],
+    shaped: &[(usize, Vec<usize>)],
+) -> Result<()> {
+    for (k, want) in shaped {
+        let rank = match spec.params[*k].kind {
+            ArgKind::Array { rank, .. } => rank,
+            ArgKind::Value { .. } => 0,
+        };
+        if let CallArg::Buffer(b) = &args[*k] {
+            if b.dims.len() < rank || b.dims[..rank] != want[..] {
+                return Err(Error::invalid(format!(
+                    "{}: output '{}': a buffer of shape {:?}; its shape rule gives {:?} (then \
+                     the element's trailing axes)",
+                    spec.name, spec.params[*k].name, b.dims, want
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Checks a call's argument count and that every array parameter got a buffer and every
 /// scalar a value (the per-type checks follow when the arguments are made).
 pub(crate) fn check_call(spec: &OpSpec, args: &[CallArg<'_>], what: &str) -> Result<()> {
@@ -221,7 +240,7 @@ pub(crate) fn check_call(spec: &OpSpec, args: &[CallArg<'_>], what: &str) -> Res
     for (k, (p, a)) in spec.params.iter().zip(args).enumerate() {
         let ok = match (p.role, a) {
             (Role::Scalar, CallArg::Value(_)) => true,
-            (Role::Input | Role::Output, CallArg::Buffer(_)) => true,
+            (Role::Input | Role::Output | Role::Scratch, CallArg::Buffer(_)) => true,
             _ => false,
         };
         if !ok {

@@ -14,17 +14,22 @@
 //!   ([`Array::with_grad_array`](crate::Array::with_grad_array)): input gradients are added
 //!   to, output gradients are read and cleared. No tape and no second forward.
 //!
+//! A computation op ([`Op::computation`]) runs a Rust body that may launch any kernels on
+//! declared arrays; its backward replays the body under a tape inside the backward call.
+//!
 //! Ops registered with [`register`] get a process-wide id that a native dispatcher (the XLA
 //! handler) finds them by without a lock on a Python object.
 
 mod args;
 mod buffer;
+mod computation;
 mod exec;
 mod shape;
 mod spec;
 
 pub use args::{CallArg, OpArg, OpArgs};
 pub use buffer::Buffer;
+pub use computation::{ComputationOp, Ctx};
 pub use exec::Exec;
 pub use shape::{LaunchDims, Shape, ShapeFn, Shapes};
 pub use spec::{ArgKind, Dtype, OpElement, OpScalar, OpSpec, ParamSpec, Role, Value};

@@ -229,6 +229,9 @@ pub enum Role {
     Output,
     /// A static value.
     Scalar,
+    /// A computation op's intermediate array (allocated and zeroed by the framework, dropped
+    /// after the call; the backward gets it again, with a gradient).
+    Scratch,
 }
 
 /// One parameter of an op.
