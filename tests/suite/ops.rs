@@ -15,7 +15,7 @@
 use crate::{arr, host, zeros};
 use std::sync::Arc;
 use warp_lang as wp;
-use warp_runtime::ops::{Buffer, CallArg, Dtype, Exec, LaunchDims, Op, Role, Shape, Value};
+use warp_runtime::ops::{Buffer, CallArg, Dtype, Exec, LaunchDims, Op, Role, Shape, Value, Vmap};
 use wp::prelude::*;
 
 backend_tests!(
@@ -32,6 +32,8 @@ backend_tests!(
     kernel_op_build_errors,
     kernel_op_call_errors,
     kernel_op_registry,
+    batched_calls_match_a_loop,
+    batched_call_errors,
     computation_op_forward_and_backward,
     computation_op_errors,
     caller_ordered_capture_replays,
@@ -1024,4 +1026,161 @@ fn computation_op_errors(dev: &wp::Device) {
         });
         assert!(e.contains("not a caller-ordered one"), "{e}");
     }
+}
+
+/// `expand_dims` batching: a batch of 3 against 3 unbatched calls on the rows, bit for bit (the
+/// same launches on the same data); an unbatched operand (extent 1) is read by every element;
+/// `Vmap::Fold` (one launch) gives the same bits for a row-wise kernel and falls back to the
+/// loop when an operand is unbatched.
+fn batched_calls_match_a_loop(dev: &wp::Device) {
+    let (nb, n, s) = (3usize, 100usize, 0.5);
+    let xh: Vec<f64> = (0..nb * n).map(|i| 0.01 * i as f64 - 1.0).collect();
+    let x = wp::Array::from_slice_shape(&xh, (nb, n), dev).unwrap();
+    let b2 = |a: &wp::Array<f64, 2>| buf(a, Dtype::F64);
+    let b1 = |a: &wp::Array<f64>| buf(a, Dtype::F64);
+    let sv = CallArg::Value(Value::Float(s));
+    // Reference: one unbatched call per row.
+    let (yr, zr) = (zeros::<f64, 2>((nb, n), dev), zeros::<f64, 2>((nb, n), dev));
+    let op = own_op();
+    for k in 0..nb {
+        let (xk, yk, zk) = (x.row(k).unwrap(), yr.row(k).unwrap(), zr.row(k).unwrap());
+        let (bx, by, bz) = (b1(&xk), b1(&yk), b1(&zk));
+        let args = [
+            CallArg::Buffer(&bx),
+            sv,
+            CallArg::Buffer(&by),
+            CallArg::Buffer(&bz),
+        ];
+        // SAFETY: the arrays' memory, alive for the call.
+        with_exec(dev, |e| unsafe { op.forward(&args, e) }.unwrap());
+    }
+    let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for fold in [false, true] {
+        let op = match fold {
+            false => own_op(),
+            true => Op::kernel("own", k_own)
+                .outputs(["y", "z"])
+                .vmap(Vmap::Fold)
+                .build()
+                .unwrap(),
+        };
+        let (y, z) = (zeros::<f64, 2>((nb, n), dev), zeros::<f64, 2>((nb, n), dev));
+        let (bx, by, bz) = (b2(&x), b2(&y), b2(&z));
+        let args = [
+            CallArg::Buffer(&bx),
+            sv,
+            CallArg::Buffer(&by),
+            CallArg::Buffer(&bz),
+        ];
+        // SAFETY: as above.
+        with_exec(dev, |e| unsafe { op.forward_batched(&args, e) }.unwrap());
+        assert_eq!(bits(host(&y)), bits(host(&yr)), "fold {fold}");
+        assert_eq!(bits(host(&z)), bits(host(&zr)), "fold {fold}");
+    }
+    // An unbatched amplitude (batch extent 1) beside a batched x; forward and backward.
+    let amp = wp::Array::from_slice_shape(&[1.5, -0.5], (1, 2), dev).unwrap();
+    let gyh: Vec<f64> = (0..nb * n).map(|i| 1.0 + (i % 5) as f64).collect();
+    for vmap in [Vmap::Loop, Vmap::Fold] {
+        let op = Op::kernel("shared", k_shared)
+            .outputs(["y"])
+            .vmap(vmap)
+            .build()
+            .unwrap();
+        let y = zeros::<f64, 2>((nb, n), dev);
+        let (bx, ba, by) = (b2(&x), b2(&amp), b2(&y));
+        let args = [
+            CallArg::Buffer(&bx),
+            CallArg::Buffer(&ba),
+            CallArg::Buffer(&by),
+        ];
+        // SAFETY: as above.
+        with_exec(dev, |e| unsafe { op.forward_batched(&args, e) }.unwrap());
+        // Backward: per-element gradients of every input (amp's too: (3, 2)).
+        let (gx, ga) = (zeros::<f64, 2>((nb, n), dev), zeros::<f64, 2>((nb, 2), dev));
+        let gy = wp::Array::from_slice_shape(&gyh, (nb, n), dev).unwrap();
+        let (bgx, bga, bgy) = (b2(&gx), b2(&ga), b2(&gy));
+        // SAFETY: as above.
+        with_exec(dev, |e| {
+            unsafe { op.backward_batched(&args, &[Some(&bgx), Some(&bga), Some(&bgy)], e) }.unwrap()
+        });
+        let (yv, gxv, gav) = (host(&y), host(&gx), host(&ga));
+        for k in 0..nb {
+            // Each element against an unbatched call on its row.
+            let (xk, yk) = (x.row(k).unwrap(), zeros::<f64, 1>(n, dev));
+            let a1 = arr(&[1.5, -0.5], dev);
+            let (bxk, bak, byk) = (b1(&xk), b1(&a1), b1(&yk));
+            let one = [
+                CallArg::Buffer(&bxk),
+                CallArg::Buffer(&bak),
+                CallArg::Buffer(&byk),
+            ];
+            // SAFETY: as above.
+            with_exec(dev, |e| unsafe { op.forward(&one, e) }.unwrap());
+            assert_eq!(
+                bits(host(&yk)),
+                bits(yv[k * n..(k + 1) * n].to_vec()),
+                "{vmap:?} y[{k}]"
+            );
+            let (gxk, gak) = (zeros::<f64, 1>(n, dev), zeros::<f64, 1>(2, dev));
+            let gyk = arr(&gyh[k * n..(k + 1) * n], dev);
+            let (bgxk, bgak, bgyk) = (b1(&gxk), b1(&gak), b1(&gyk));
+            // SAFETY: as above.
+            with_exec(dev, |e| {
+                unsafe { op.backward(&one, &[Some(&bgxk), Some(&bgak), Some(&bgyk)], e) }.unwrap()
+            });
+            assert_eq!(bits(host(&gxk)), bits(gxv[k * n..(k + 1) * n].to_vec()));
+            // amp's gradient is a sum over the row's threads: 1e-12 relative (the header).
+            let gak = host(&gak);
+            for j in 0..2 {
+                let (a, b) = (gak[j], gav[k * 2 + j]);
+                assert!(
+                    (a - b).abs() <= 1e-12 * a.abs(),
+                    "{vmap:?} amp[{k}][{j}]: {a} {b}"
+                );
+            }
+        }
+    }
+}
+
+fn batched_call_errors(dev: &wp::Device) {
+    let op = own_op();
+    let x = zeros::<f64, 2>((3, 4), dev);
+    let y = zeros::<f64, 1>(4, dev);
+    let y2 = zeros::<f64, 2>((2, 4), dev);
+    let (bx, by, by2) = (
+        buf(&x, Dtype::F64),
+        buf(&y, Dtype::F64),
+        buf(&y2, Dtype::F64),
+    );
+    let sv = CallArg::Value(Value::Float(1.0));
+    let call = |args: &[CallArg<'_>]| {
+        let mut out = String::new();
+        with_exec(dev, |e| {
+            // SAFETY: refused before any buffer is used.
+            out = unsafe { op.forward_batched(args, e) }
+                .unwrap_err()
+                .to_string()
+        });
+        out
+    };
+    let e = call(&[
+        CallArg::Buffer(&bx),
+        sv,
+        CallArg::Buffer(&by),
+        CallArg::Buffer(&bx),
+    ]);
+    assert!(
+        e.contains("own: batched call: 'x' has 1 leading batch axes and 'y' has 0"),
+        "{e}"
+    );
+    let e = call(&[
+        CallArg::Buffer(&bx),
+        sv,
+        CallArg::Buffer(&by2),
+        CallArg::Buffer(&bx),
+    ]);
+    assert!(
+        e.contains("own: batched call: 'y' has extent 2 on batch axis 0; the batch has 3"),
+        "{e}"
+    );
 }

@@ -32,7 +32,7 @@ impl Buffer {
     }
 
     /// The byte strides, row-major ones when none were given.
-    fn strides(&self) -> Vec<isize> {
+    pub(crate) fn byte_strides_or_row_major(&self) -> Vec<isize> {
         match &self.byte_strides {
             Some(s) => s.clone(),
             None => {
@@ -81,7 +81,7 @@ impl Buffer {
                 wanted()
             )));
         }
-        let strides = self.strides();
+        let strides = self.byte_strides_or_row_major();
         if self.dims.len() != N + tail.len()
             || strides.len() != self.dims.len()
             || self.dims[N..] != *tail

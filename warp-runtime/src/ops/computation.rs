@@ -41,6 +41,9 @@ unsafe fn make<T: OpElement, const N: usize>(
     Ok(Box::new(a))
 }
 
+/// Counts the handles sharing a declared array's memory.
+type Handles = fn(&Erased) -> usize;
+
 /// How many handles share a declared array's memory.
 fn handles<T: OpElement, const N: usize>(a: &Erased) -> usize {
     a.downcast_ref::<Array<T, N>>()
@@ -52,7 +55,7 @@ fn handles<T: OpElement, const N: usize>(a: &Erased) -> usize {
 struct Declared {
     spec: ParamSpec,
     /// Arrays: how to make one, and how to count its handles.
-    array: Option<(Maker, fn(&Erased) -> usize)>,
+    array: Option<(Maker, Handles)>,
     /// Outputs and scratch: the shape rule.
     shape: Option<Shape>,
 }
@@ -207,6 +210,7 @@ where
                     body: self.body,
                     params: self.params,
                 }),
+                vmap: super::Vmap::Loop,
             }),
         })
     }

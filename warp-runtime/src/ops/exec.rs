@@ -238,11 +238,14 @@ pub(crate) fn check_call(spec: &OpSpec, args: &[CallArg<'_>], what: &str) -> Res
         )));
     }
     for (k, (p, a)) in spec.params.iter().zip(args).enumerate() {
-        let ok = match (p.role, a) {
-            (Role::Scalar, CallArg::Value(_)) => true,
-            (Role::Input | Role::Output | Role::Scratch, CallArg::Buffer(_)) => true,
-            _ => false,
-        };
+        let ok = matches!(
+            (p.role, a),
+            (Role::Scalar, CallArg::Value(_))
+                | (
+                    Role::Input | Role::Output | Role::Scratch,
+                    CallArg::Buffer(_)
+                )
+        );
         if !ok {
             let given = match a {
                 CallArg::Buffer(b) => format!("a {} buffer of shape {:?}", b.dtype.name(), b.dims),

@@ -21,6 +21,7 @@
 //! handler) finds them by without a lock on a Python object.
 
 mod args;
+mod batch;
 mod buffer;
 mod computation;
 mod exec;
@@ -28,6 +29,7 @@ mod shape;
 mod spec;
 
 pub use args::{CallArg, OpArg, OpArgs};
+pub use batch::Vmap;
 pub use buffer::Buffer;
 pub use computation::{ComputationOp, Ctx};
 pub use exec::Exec;
@@ -59,6 +61,8 @@ pub struct Op {
 struct OpInner {
     spec: OpSpec,
     run: Box<dyn ErasedOp>,
+    /// How a batched call runs.
+    vmap: Vmap,
 }
 
 impl std::fmt::Debug for Op {
@@ -86,6 +90,7 @@ impl Op {
             dims: None,
             uninit: Vec::new(),
             block_dim: None,
+            vmap: Vmap::Loop,
             _kernel: PhantomData,
         }
     }
@@ -107,6 +112,7 @@ impl Op {
             dims: None,
             uninit: Vec::new(),
             block_dim: None,
+            vmap: Vmap::Loop,
             _kernel: PhantomData,
         }
     }
@@ -119,6 +125,11 @@ impl Op {
     /// What it takes.
     pub fn spec(&self) -> &OpSpec {
         &self.inner.spec
+    }
+
+    /// How a batched call runs ([`forward_batched`](Self::forward_batched)).
+    pub fn vmap(&self) -> Vmap {
+        self.inner.vmap
     }
 
     /// The launch dimensions and each output's leading shape (in parameter order) for a call
@@ -211,6 +222,7 @@ pub struct KernelOp<K: Kernel> {
     dims: Option<LaunchDims>,
     uninit: Vec<&'static str>,
     block_dim: Option<usize>,
+    vmap: Vmap,
     _kernel: PhantomData<fn() -> K>,
 }
 
@@ -224,6 +236,7 @@ impl<K: Kernel> std::fmt::Debug for KernelOp<K> {
             .field("dims", &self.dims)
             .field("uninit", &self.uninit)
             .field("block_dim", &self.block_dim)
+            .field("vmap", &self.vmap)
             .finish()
     }
 }
@@ -262,6 +275,13 @@ where
     /// A tiled kernel's threads per block (its launches are `launch_tiled`'s).
     pub fn block_dim(mut self, n: usize) -> Self {
         self.block_dim = Some(n);
+        self
+    }
+
+    /// How a batched call runs (default [`Vmap::Loop`]; [`Vmap::Fold`] is the caller's promise
+    /// that thread `i` touches row `i` of every array and nothing else).
+    pub fn vmap(mut self, v: Vmap) -> Self {
+        self.vmap = v;
         self
     }
 
@@ -394,6 +414,7 @@ where
                     block_dim: self.block_dim,
                     _kernel: PhantomData,
                 }),
+                vmap: self.vmap,
             }),
         })
     }
