@@ -75,8 +75,8 @@ fn batch_of(
     let b = b.map_or(0, |(e, _)| e);
     let mut shape = vec![1usize; b];
     for (_, buf) in &operands {
-        for d in 0..b.min(buf.dims.len()) {
-            shape[d] = shape[d].max(buf.dims[d]);
+        for (s, &e) in shape.iter_mut().zip(&buf.dims) {
+            *s = (*s).max(e);
         }
     }
     for (p, buf) in &operands {

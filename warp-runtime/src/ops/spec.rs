@@ -97,6 +97,15 @@ impl std::fmt::Display for Value {
 }
 
 /// A scalar type an op's arrays and values may have.
+// (A kernel parameter that is neither an array nor a scalar fails here first, through
+// `OpArg`'s blanket impl for scalars: the message is the one `OpArg` gives.)
+#[diagnostic::on_unimplemented(
+    message = "kernel parameter type `{Self}` cannot cross into an op",
+    note = "ops take Array<T, N> of numeric T (scalars, vectors, matrices, quaternions) and \
+            numeric value parameters (bool, integers, f16, bf16, f32, f64); wrap a kernel that \
+            takes structs, meshes or other objects in an Op::computation and build those inside \
+            the body"
+)]
 pub trait OpScalar: Copy + Send + Sync + 'static {
     /// Its dtype.
     const DTYPE: Dtype;
