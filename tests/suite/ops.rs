@@ -733,6 +733,14 @@ fn caller_ordered_capture_replays(dev: &wp::Device) {
         // SAFETY: a live stream of the device; the arrays were synchronised above.
         let s =
             unsafe { wp::Stream::from_raw_caller_ordered(raw.cu_stream().cast(), dev) }.unwrap();
+        // The first launch compiles and loads the kernel and makes this thread's fault record
+        // (an allocation), which a capture in thread-local mode forbids: warm up first, as a
+        // framework's eager first call does. Then zero the output again.
+        // SAFETY: as below.
+        unsafe { op.forward(&args, &Exec::stream(&s)) }.unwrap();
+        s.synchronize().unwrap();
+        y.fill(0.0).unwrap();
+        wp::synchronize().unwrap();
         // Debug mode synchronises after each launch, which a capture forbids (the suite turns
         // it on for GPU tests).
         wp::config::set_debug(false);
@@ -773,6 +781,11 @@ fn scoped_launch_in_a_capture_is_refused(dev: &wp::Device) {
         let raw = owner.cuda_stream();
         // SAFETY: a live stream of the device, alive longer than the wrapper.
         let s = unsafe { wp::Stream::from_raw(raw.cu_stream().cast(), dev, ()) }.unwrap();
+        // Warm up (compile, load, this thread's fault record) outside the capture: the refusal
+        // under test is this crate's, not CUDA's of a first launch's allocations.
+        wp::launch_on(k_axpy, 3, (2.0, &x, &y), &s).unwrap();
+        s.synchronize().unwrap();
+        y.fill(0.0).unwrap();
         wp::config::set_debug(false);
         raw.begin_capture().unwrap();
         let r = wp::launch_on(k_axpy, 3, (2.0, &x, &y), &s);

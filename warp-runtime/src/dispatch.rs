@@ -583,16 +583,18 @@ impl Storage {
     }
 
     /// External memory of `bytes` bytes at `address` on `device`, not freed by the storage;
-    /// `owner` drops with it (on a GPU once the work queued there has finished).
+    /// `owner` drops with it (on a GPU once the work queued there has finished). Without an
+    /// owner nothing waits at the drop (an op call's memory, which the caller orders).
     ///
     /// # Safety
     /// The memory must be valid on `device` (host memory for the CPU, device memory of that
-    /// GPU's context) for reads and writes of `bytes` bytes for as long as `owner` lives.
+    /// GPU's context) for reads and writes of `bytes` bytes for as long as `owner` lives (or,
+    /// without one, as long as the storage and the work queued on it).
     pub(crate) unsafe fn external(
         device: &Device,
         address: u64,
         bytes: usize,
-        owner: Box<dyn std::any::Any + Send + Sync>,
+        owner: Option<Box<dyn std::any::Any + Send + Sync>>,
     ) -> Result<Storage> {
         match device.kind() {
             DeviceKind::Cpu => {
@@ -600,14 +602,13 @@ impl Storage {
                     .ok_or_else(|| Error::invalid("external memory at address 0"))?;
                 // SAFETY: the caller's contract.
                 Ok(Storage::Host(unsafe {
-                    HostBuffer::external(ptr, bytes, Some(owner))
+                    HostBuffer::external(ptr, bytes, owner)
                 }))
             }
             #[cfg(feature = "cuda")]
             DeviceKind::Cuda { ordinal } => {
                 // SAFETY: the caller's contract.
-                unsafe { CudaBuffer::external(ordinal, address, bytes, Some(owner)) }
-                    .map(Storage::Cuda)
+                unsafe { CudaBuffer::external(ordinal, address, bytes, owner) }.map(Storage::Cuda)
             }
             #[cfg(not(feature = "cuda"))]
             DeviceKind::Cuda { .. } => Err(Error::NoDevice {

@@ -112,14 +112,8 @@ impl Buffer {
         shape.copy_from_slice(&self.dims[..N]);
         let mut lead = [0isize; N];
         lead.copy_from_slice(&strides[..N]);
-        // SAFETY: the caller's contract; the callees check layout and alignment.
-        let made = unsafe {
-            if device.is_cpu() {
-                Array::from_host_ptr(self.ptr as usize as *mut T, shape, Some(lead), device, ())
-            } else {
-                Array::from_device_ptr(self.ptr, shape, Some(lead), device, ())
-            }
-        };
+        // SAFETY: the caller's contract; the callee checks layout and alignment.
+        let made = unsafe { Array::call_scoped("op buffer", self.ptr, shape, lead, device) };
         made.map_err(|e| Error::invalid(format!("{op}: argument '{param}': {e}")))
     }
 }
