@@ -36,6 +36,7 @@ backend_tests!(
     batched_call_errors,
     computation_op_forward_and_backward,
     computation_op_errors,
+    computation_op_escape_aborts,
     caller_ordered_capture_replays,
     scoped_launch_in_a_capture_is_refused,
 );
@@ -814,10 +815,8 @@ fn k_step(x0: Array<f64>, v0: Array<f64>, dt: f64, x1: Array<f64>, v1: Array<f64
 
 /// The rollout: rows of `xs`/`vs` are the states; `out` the last positions.
 fn rollout(
-    x0: &wp::Array<f64>,
-    v0: &wp::Array<f64>,
-    xs: &wp::Array<f64, 2>,
-    vs: &wp::Array<f64, 2>,
+    (x0, v0): (&wp::Array<f64>, &wp::Array<f64>),
+    (xs, vs): (&wp::Array<f64, 2>, &wp::Array<f64, 2>),
     out: &wp::Array<f64>,
     dt: f64,
     steps: usize,
@@ -844,7 +843,7 @@ fn rollout_op() -> Op {
         let (xs, vs) = (c.scratch::<f64, 2>("xs")?, c.scratch::<f64, 2>("vs")?);
         let out = c.output::<f64, 1>("x_final")?;
         let (dt, steps) = (c.scalar::<f64>("dt")?, c.scalar::<i64>("steps")? as usize);
-        rollout(x0, v0, xs, vs, out, dt, steps, c.device())
+        rollout((x0, v0), (xs, vs), out, dt, steps, c.device())
     })
     .input::<f64, 1>("x0")
     .input::<f64, 1>("v0")
@@ -871,7 +870,7 @@ fn computation_op_forward_and_backward(dev: &wp::Device) {
     let tape = wp::Tape::new();
     {
         let _r = tape.record();
-        rollout(&x0, &v0, &xs, &vs, &out, dt, steps, dev).unwrap();
+        rollout((&x0, &v0), (&xs, &vs), &out, dt, steps, dev).unwrap();
     }
     out.grad().unwrap().copy_from(&arr(&seed, dev)).unwrap();
     tape.backward_from_grads().unwrap();
@@ -1195,5 +1194,46 @@ fn batched_call_errors(dev: &wp::Device) {
     assert!(
         e.contains("own: batched call: 'y' has extent 2 on batch axis 0; the batch has 3"),
         "{e}"
+    );
+}
+
+/// A body that keeps a handle to a call's array past the call aborts the process, naming the
+/// op and the array (an error could not take back a later read of freed memory). Run in a
+/// child process: this test's binary again, on this test alone, with a variable set.
+fn computation_op_escape_aborts(dev: &wp::Device) {
+    const CHILD: &str = "WARP_LANG_TEST_OPS_ESCAPE";
+    static KEPT: std::sync::Mutex<Option<wp::Array<f64>>> = std::sync::Mutex::new(None);
+    if !dev.is_cpu() {
+        return; // The check is the same on every device; the CPU's child needs no GPU.
+    }
+    if std::env::var_os(CHILD).is_some() {
+        let op = Op::computation("keeper", |c| {
+            *KEPT.lock().unwrap() = Some(c.input::<f64, 1>("a")?.clone());
+            Ok(())
+        })
+        .input::<f64, 1>("a")
+        .output::<f64, 1>("b", Shape::Like("a"))
+        .build()
+        .unwrap();
+        let (a, b) = (zeros::<f64, 1>(2, dev), zeros::<f64, 1>(2, dev));
+        let (ba, bb) = (buf(&a, Dtype::F64), buf(&b, Dtype::F64));
+        // SAFETY: the arrays' memory, alive for the call.
+        let _ = unsafe { op.forward(&[CallArg::Buffer(&ba), CallArg::Buffer(&bb)], &Exec::cpu()) };
+        unreachable!("the escape check aborts");
+    }
+    let module = module_path!()
+        .split_once("::")
+        .map_or(module_path!(), |(_, m)| m);
+    let name = format!("{module}::cpu_backend::computation_op_escape_aborts");
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([name.as_str(), "--exact", "--nocapture", "--test-threads=1"])
+        .env(CHILD, "1")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "the child did not abort: {err}");
+    assert!(
+        err.contains("op keeper: the body kept a handle to array 'a' past the call"),
+        "{err}"
     );
 }
