@@ -169,6 +169,10 @@ mod overload;
 /// [`Array::to_dlpack`] makes and [`Array::from_dlpack`] takes (the `dlpack` feature).
 #[cfg(feature = "dlpack")]
 pub use warp_runtime::dlpack;
+/// Kernels as framework ops on raw buffers ([`ops::Op`]): the pure-Rust half of the PyTorch
+/// and JAX ops (the `ops` feature).
+#[cfg(feature = "ops")]
+pub use warp_runtime::ops;
 /// Python extension modules: PyTorch, JAX, CuPy and NumPy tensors in and out without a copy
 /// (the `python` feature).
 #[cfg(feature = "python")]
@@ -203,15 +207,16 @@ pub use warp_runtime::{
 pub use warp_runtime::{capture, capture_if, capture_while, CaptureOn, Graph, ScopedCapture};
 pub use warp_runtime::{
     cast_slice, compile_summary, config, copy, cpu, cpu_fallback_reason, devices, get_device,
-    get_preferred_device, init, kernel_info, last_launch_id, launch, launch_tiled, load,
-    load_tiled, load_with_adjoints, synchronize, ArgCtx, Array, Device, DeviceKind, Dim, Element,
-    Error, GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launch,
+    get_preferred_device, init, kernel_info, last_launch_id, launch, launch_adjoint, launch_tiled,
+    load, load_tiled, load_with_adjoints, synchronize, ArgCtx, Array, Device, DeviceKind, Dim,
+    Element, Error, GenericKernel, IntoShape, Kernel, KernelArg, KernelInfo, KernelParams, Launch,
     Launchable, MemoryInfo, OwnedArgsOf, Recording, Result, Runtime, Seed, Tape, TileInfo,
     MAX_BLOCK_DIM,
 };
 #[cfg(feature = "cuda")]
 pub use warp_runtime::{
-    get_stream, launch_on, launch_tiled_on, Event, PinnedVec, ScopedStream, Stream,
+    get_stream, launch_adjoint_on, launch_on, launch_tiled_on, Event, PinnedVec, ScopedStream,
+    Stream,
 };
 pub use warp_runtime::{hvp, jvp, Forward};
 pub use warp_runtime::{CheckpointReport, CheckpointState, Checkpointed};

@@ -1248,7 +1248,8 @@ fn the_reader_finds_cycles_through_uses_and_paths_but_not_through_reexports() {
 /// import neither each other. `lib.rs`, the crate's face (its re-exports), is in no row: a
 /// file that imports an item of lib.rs climbs above every layer.
 const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
-    // `sparse/` (the `sparse` feature) captures its solver's loop (`graph`).
+    // `sparse/` (the `sparse` feature) captures its solver's loop (`graph`); `ops/` (the `ops`
+    // feature) launches kernels and their adjoints and replays bodies under tapes.
     (
         0,
         "entry points",
@@ -1258,6 +1259,7 @@ const RUNTIME_LAYERS: &[(u32, &str, &[&str])] = &[
             "checkpoint.rs",
             "python.rs",
             "sparse/",
+            "ops/",
         ],
     ),
     (1, "tape", &["tape.rs"]),

@@ -119,6 +119,7 @@ mod local_arrays;
 mod mesh;
 mod misc;
 mod nonsquare;
+mod ops;
 mod optim;
 mod overloads;
 mod params;

@@ -302,6 +302,7 @@ impl Gpu {
                 inner: cu,
                 ordinal,
                 _owner: None,
+                caller_ordered: false,
             },
             async_alloc,
         });
@@ -394,6 +395,7 @@ impl Gpu {
             inner,
             ordinal: self.ordinal(),
             _owner: None,
+            caller_ordered: false,
         })
     }
 
@@ -415,6 +417,7 @@ impl Gpu {
             inner,
             ordinal: self.ordinal(),
             _owner: owner,
+            caller_ordered: false,
         }
     }
 
@@ -538,6 +541,8 @@ pub struct Stream {
     ordinal: usize,
     /// What keeps a wrapped external stream alive ([`Gpu::wrap_stream`]).
     _owner: Option<Arc<dyn std::any::Any + Send + Sync>>,
+    /// Ordered by its owner alone ([`Stream::caller_ordered`]).
+    caller_ordered: bool,
 }
 
 impl Stream {
@@ -590,6 +595,20 @@ impl Stream {
     /// Ordinal of the device this stream belongs to.
     pub fn ordinal(&self) -> usize {
         self.ordinal
+    }
+
+    /// This handle marked as ordered by its owner alone: the runtime queues work on it with no
+    /// joins of its own (no wait for its default stream, nothing for the default stream to
+    /// wait for), as work a CUDA graph capture of the owner's stream may contain. Only this
+    /// handle and its clones carry the mark.
+    pub fn caller_ordered(mut self) -> Stream {
+        self.caller_ordered = true;
+        self
+    }
+
+    /// Whether this handle is [`caller_ordered`](Self::caller_ordered).
+    pub fn is_caller_ordered(&self) -> bool {
+        self.caller_ordered
     }
 
     /// Whether `self` and `other` are handles of the same stream.

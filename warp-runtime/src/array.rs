@@ -417,6 +417,63 @@ impl<T: Element, const N: usize> Array<T, N> {
         Ok(self)
     }
 
+    /// This array with `grad`'s memory as its gradient: another library's buffer (a torch
+    /// tensor, an XLA result, imported with `from_dlpack` or `from_device_ptr`) instead of fresh
+    /// memory, so that kernels and adjoints write the gradient where that library reads it
+    /// (Warp's `from_torch(t, grad=g)`). A gradient the array had is replaced (its clones keep
+    /// theirs); `grad`'s own gradient, if any, is not used.
+    ///
+    /// The gradient shares the array's layout (views, rows and reshapes of the result index
+    /// both with one offset and one set of strides), so `grad` must be on the same device,
+    /// have the same shape and element strides, start at the same byte offset within its
+    /// memory, and span at least as much memory as the array's (every view of the array is
+    /// then inside the gradient); it must not share the array's memory.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming both devices or both layouts, or the shared memory.
+    pub fn with_grad_array(mut self, grad: Array<T, N>) -> Result<Self> {
+        let what = format!("with_grad_array (Array<{}, {N}>)", T::TYPE_NAME);
+        if grad.device != self.device {
+            return Err(Error::invalid(format!(
+                "{what}: the array is on \"{}\" and the gradient on \"{}\"; a gradient lives on \
+                 its array's device",
+                self.device, grad.device
+            )));
+        }
+        if Arc::ptr_eq(&grad.storage, &self.storage) {
+            return Err(Error::invalid(format!(
+                "{what}: the gradient shares the array's memory; kernels would write gradients \
+                 over the values"
+            )));
+        }
+        // Empty arrays address nothing: only their shapes must agree.
+        let empty = self.shape.contains(&0);
+        let same = grad.shape == self.shape
+            && (empty
+                || (grad.strides == self.strides
+                    && grad.byte_offset == self.byte_offset
+                    && grad.storage.len() >= self.storage.len()));
+        if !same {
+            return Err(Error::invalid(format!(
+                "{what}: the gradient's layout (shape {:?}, strides {:?}, byte offset {} in \
+                 {} bytes) differs from the array's (shape {:?}, strides {:?}, byte offset {} \
+                 in {} bytes); the gradient needs the array's shape, strides and byte offset, \
+                 and at least its memory (make it like the array: zeros of the same shape for a \
+                 contiguous array)",
+                grad.shape,
+                grad.strides,
+                grad.byte_offset,
+                grad.storage.len(),
+                self.shape,
+                self.strides,
+                self.byte_offset,
+                self.storage.len()
+            )));
+        }
+        self.grad = Some(grad.storage);
+        Ok(self)
+    }
+
     /// Whether the array has a gradient ([`with_grad`](Self::with_grad)).
     pub fn requires_grad(&self) -> bool {
         self.grad.is_some()
@@ -471,6 +528,13 @@ impl<T: Element, const N: usize> Array<T, N> {
                 value,
             }),
         }
+    }
+
+    /// How many handles (this one, its clones and views) share this array's memory: an op
+    /// checks that none of a call-scoped array's escaped its call (`ops/computation.rs`).
+    #[cfg(feature = "ops")]
+    pub(crate) fn storage_handles(&self) -> usize {
+        Arc::strong_count(&self.storage)
     }
 
     /// True when `self` and `other` share storage (one is a clone or view of the other).

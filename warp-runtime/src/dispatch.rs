@@ -235,6 +235,39 @@ pub(crate) fn launch_adjoint<K: Kernel>(
     run_launch::<K>(device, args, grid, Some(adstack_bytes), id)
 }
 
+/// Queues the adjoint of a launch of `K` on `stream` (a CUDA stream), as [`launch_on`]
+/// queues a launch; see [`launch_adjoint`].
+#[cfg(feature = "cuda")]
+pub(crate) fn launch_adjoint_on<K: Kernel>(
+    stream: &crate::cuda::stream::Stream,
+    args: &ArgsOf<'_, K>,
+    grid: &Grid,
+    adstack_bytes: usize,
+) -> Result<()> {
+    names_every_param::<K>();
+    if let Some(reason) = K::INFO.adjoint_error {
+        return Err(Error::NotDifferentiable {
+            kernel: K::INFO.name,
+            reason: reason.to_string(),
+        });
+    }
+    let capturing = capturing::capturing();
+    if capturing {
+        capturing::check_device(stream.device(), &|| {
+            format!("the adjoint of kernel `{}`", K::INFO.name)
+        })?;
+    }
+    let id = launch_id::next();
+    Cuda::of_stream(stream)
+        .launch_adjoint_on::<K>(args, grid, stream, adstack_bytes, id)
+        .map_err(|e| e.in_launch(id))?;
+    if capturing {
+        capturing::keep(Box::new(K::Params::own(args)));
+        capturing::launched();
+    }
+    Ok(())
+}
+
 /// An operation (`what`) that `run` enqueues on `device`'s backend, using the memory of
 /// `uses()` by address: run now, or inside the calling thread's capture recorded (on the
 /// capture's device only), with `uses()` kept for the graph's replays. (A host object's
@@ -550,16 +583,18 @@ impl Storage {
     }
 
     /// External memory of `bytes` bytes at `address` on `device`, not freed by the storage;
-    /// `owner` drops with it (on a GPU once the work queued there has finished).
+    /// `owner` drops with it (on a GPU once the work queued there has finished). Without an
+    /// owner nothing waits at the drop (an op call's memory, which the caller orders).
     ///
     /// # Safety
     /// The memory must be valid on `device` (host memory for the CPU, device memory of that
-    /// GPU's context) for reads and writes of `bytes` bytes for as long as `owner` lives.
+    /// GPU's context) for reads and writes of `bytes` bytes for as long as `owner` lives (or,
+    /// without one, as long as the storage and the work queued on it).
     pub(crate) unsafe fn external(
         device: &Device,
         address: u64,
         bytes: usize,
-        owner: Box<dyn std::any::Any + Send + Sync>,
+        owner: Option<Box<dyn std::any::Any + Send + Sync>>,
     ) -> Result<Storage> {
         match device.kind() {
             DeviceKind::Cpu => {
@@ -567,14 +602,13 @@ impl Storage {
                     .ok_or_else(|| Error::invalid("external memory at address 0"))?;
                 // SAFETY: the caller's contract.
                 Ok(Storage::Host(unsafe {
-                    HostBuffer::external(ptr, bytes, Some(owner))
+                    HostBuffer::external(ptr, bytes, owner)
                 }))
             }
             #[cfg(feature = "cuda")]
             DeviceKind::Cuda { ordinal } => {
                 // SAFETY: the caller's contract.
-                unsafe { CudaBuffer::external(ordinal, address, bytes, Some(owner)) }
-                    .map(Storage::Cuda)
+                unsafe { CudaBuffer::external(ordinal, address, bytes, owner) }.map(Storage::Cuda)
             }
             #[cfg(not(feature = "cuda"))]
             DeviceKind::Cuda { .. } => Err(Error::NoDevice {

@@ -421,6 +421,104 @@ where
     )
 }
 
+/// Runs `kernel`'s adjoint once over `dim` with `args` on `device` (Warp's
+/// `wp.launch(adjoint=True)`): the adjoint a [`Tape`](crate::Tape)'s backward runs for the same
+/// launch, without a tape and without running the forward first. The arrays of `args` that
+/// carry gradients ([`Array::with_grad`](crate::Array::with_grad),
+/// [`Array::with_grad_array`](crate::Array::with_grad_array)) receive them: input gradients
+/// are added to, and the gradients of what the kernel stores are read and cleared, as in a
+/// tape's backward (the adjoint of a store takes its output's gradient). The primal arrays
+/// are read, never written: the adjoint replays the forward without its stores and atomics.
+/// Nothing is recorded on a recording tape; inside a capture the adjoint is captured.
+///
+/// On the CPU the adjoint has finished when this returns; on a GPU it is queued on the calling
+/// thread's current stream, as [`launch`] queues.
+///
+/// # Errors
+/// As [`launch`], and [`Error::NotDifferentiable`] for a kernel without an adjoint;
+/// [`Error::Fault`] from an adjoint thread (an adjoint stack overflow included).
+pub fn launch_adjoint<'a, L, A>(
+    kernel: L,
+    dim: impl Into<Dim>,
+    args: A,
+    device: &Device,
+) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
+{
+    let _ = kernel;
+    adjoint_with::<L::Kernel>(dim.into(), None, &args, |args, grid, bytes| {
+        dispatch::launch_adjoint::<L::Kernel>(device, args, grid, bytes)
+    })
+}
+
+/// [`launch_adjoint`] queued on `stream` (a CUDA stream), as [`launch_on`] queues a launch.
+///
+/// # Errors
+/// As [`launch_adjoint`].
+#[cfg(feature = "cuda")]
+pub fn launch_adjoint_on<'a, L, A>(
+    kernel: L,
+    dim: impl Into<Dim>,
+    args: A,
+    stream: &Stream,
+) -> Result<()>
+where
+    L: Launchable<A>,
+    L::Kernel: Kernel<Params: KernelParams<Args<'a> = A>>,
+{
+    let _ = kernel;
+    adjoint_with::<L::Kernel>(dim.into(), None, &args, |args, grid, bytes| {
+        dispatch::launch_adjoint_on::<L::Kernel>(stream, args, grid, bytes)
+    })
+}
+
+/// Checks an adjoint launch of `K` (a tiled one with `block_dim: Some(threads per block)`) as
+/// [`launch`] checks a launch, then has `run` run it with the process-wide adjoint stack size
+/// (what a tape without its own setting runs with). Nothing is recorded on tapes.
+pub(crate) fn adjoint_with<'a, K: Kernel>(
+    dim: Dim,
+    block_dim: Option<usize>,
+    args: &ArgsOf<'a, K>,
+    run: impl FnOnce(&ArgsOf<'a, K>, &Grid, usize) -> Result<()>,
+) -> Result<()> {
+    let grid = checked_grid::<K>(dim, block_dim)?;
+    check_shapes::<K>(args, &grid)?;
+    run(args, &grid, config::adstack_bytes())
+}
+
+/// A launch of `K` (its adjoint with `adjoint`) with owned arguments, on `stream` when given,
+/// checked and recorded as [`launch`] does (the adjoint as [`launch_adjoint`]): the path of
+/// kernel ops (`ops/exec.rs`), whose arguments are made as owned tuples.
+#[cfg(feature = "ops")]
+pub(crate) fn launch_owned<K: Kernel>(
+    dim: Dim,
+    block_dim: Option<usize>,
+    args: &OwnedArgsOf<K>,
+    device: &Device,
+    #[cfg(feature = "cuda")] stream: Option<&Stream>,
+    adjoint: bool,
+) -> Result<()> {
+    let args = K::Params::borrow(args);
+    if adjoint {
+        return adjoint_with::<K>(dim, block_dim, &args, |args, grid, bytes| {
+            #[cfg(feature = "cuda")]
+            if let Some(s) = stream {
+                return dispatch::launch_adjoint_on::<K>(s, args, grid, bytes);
+            }
+            dispatch::launch_adjoint::<K>(device, args, grid, bytes)
+        });
+    }
+    launch_with::<K>(dim, block_dim, args, device, |args, grid| {
+        #[cfg(feature = "cuda")]
+        if let Some(s) = stream {
+            return dispatch::launch_on::<K>(s, args, grid);
+        }
+        dispatch::launch::<K>(device, args, grid)
+    })
+}
+
 /// The owned launch arguments of kernel `K` (array handles and values), as a [`Launch`]
 /// holds them: for `fn k(x: Array<f32>, dt: f32)`, `(Array<f32>, f32)`.
 pub type OwnedArgsOf<K> = <<K as Kernel>::Params as KernelParams>::Owned;

@@ -18,6 +18,8 @@
 //! - [`primitives`]: scan, reductions, radix sort and stream compaction on arrays.
 //! - [`graph`]: work recorded once and replayed ([`capture`], [`Graph`]): CUDA graphs on a
 //!   GPU, the list of recorded operations on the CPU.
+//! - `ops` (feature `ops`): kernels as framework ops on a call's raw buffers, the pure-Rust
+//!   half of the PyTorch and JAX ops.
 //! - [`config`]: process-wide settings (debug mode, CPU chunk size), and what
 //!   warp-lang sends to the `log` facade ([targets and levels](config#logging)).
 //!
@@ -47,6 +49,8 @@ pub mod kernel;
 pub mod launch;
 mod launch_id;
 pub mod objects;
+#[cfg(feature = "ops")]
+pub mod ops;
 mod params;
 pub mod primitives;
 #[cfg(feature = "sparse")]
@@ -88,11 +92,11 @@ pub use kernel::{
     GenericKernel, Kernel, KernelArg, KernelInfo, KernelParams, Launchable, TileInfo,
 };
 pub use launch::{
-    launch, launch_tiled, load, load_tiled, load_with_adjoints, synchronize, Dim, Launch,
-    OwnedArgsOf, MAX_BLOCK_DIM,
+    launch, launch_adjoint, launch_tiled, load, load_tiled, load_with_adjoints, synchronize, Dim,
+    Launch, OwnedArgsOf, MAX_BLOCK_DIM,
 };
 #[cfg(feature = "cuda")]
-pub use launch::{launch_on, launch_tiled_on};
+pub use launch::{launch_adjoint_on, launch_on, launch_tiled_on};
 pub use launch_id::{last_launch_id, LaunchId};
 /// What generated code of a `#[kernel(deterministic)]` kernel calls on the CPU (its float
 /// `atomic_add`/`atomic_sub`); not an API.

@@ -302,7 +302,7 @@ where
                 dims,
                 Some(byte_strides),
                 &device,
-                Box::new(owner),
+                Some(Box::new(owner)),
             )
         }
     }

@@ -188,7 +188,7 @@ impl<T: Element, const N: usize> Array<T, N> {
                 shape.into_shape(),
                 byte_strides,
                 device,
-                Box::new(owner),
+                Some(Box::new(owner)),
             )
         }
     }
@@ -228,9 +228,29 @@ impl<T: Element, const N: usize> Array<T, N> {
                 shape.into_shape(),
                 byte_strides,
                 device,
-                Box::new(owner),
+                Some(Box::new(owner)),
             )
         }
+    }
+
+    /// An array over an op call's memory (`ops/buffer.rs`): as
+    /// [`from_host_ptr`](Self::from_host_ptr) / [`from_device_ptr`](Self::from_device_ptr) by
+    /// `device`, but with no owner, so that dropping it waits for nothing (the caller orders
+    /// the memory; a GPU synchronisation per call would serialise the framework's stream).
+    ///
+    /// # Safety
+    /// As [`from_device_ptr`](Self::from_device_ptr), the memory valid while the array, its
+    /// clones and the work queued on it live.
+    #[cfg(feature = "ops")]
+    pub(crate) unsafe fn call_scoped(
+        what: &str,
+        ptr: u64,
+        shape: [usize; N],
+        byte_strides: [isize; N],
+        device: &Device,
+    ) -> Result<Self> {
+        // SAFETY: the caller's contract.
+        unsafe { Self::from_external(what, ptr, shape, Some(byte_strides), device, None) }
     }
 
     /// See [`from_host_ptr`](Self::from_host_ptr) and
@@ -241,7 +261,7 @@ impl<T: Element, const N: usize> Array<T, N> {
         shape: [usize; N],
         byte_strides: Option<[isize; N]>,
         device: &Device,
-        owner: Box<dyn std::any::Any + Send + Sync>,
+        owner: Option<Box<dyn std::any::Any + Send + Sync>>,
     ) -> Result<Self> {
         let () = Self::VALID_NDIM;
         capturing::refuse(Some(device), "wrapping external memory")?;
@@ -518,7 +538,7 @@ mod nd {
                     shape,
                     Some(byte_strides),
                     device,
-                    Box::new(a),
+                    Some(Box::new(a)),
                 )
             }
         }

@@ -41,6 +41,27 @@ impl<'d> Cuda<'d> {
         launch::launch::<K>(args, grid, self.device, self.ordinal, on, None, id)
     }
 
+    /// [`Backend::launch_adjoint`] on `stream`.
+    pub(crate) fn launch_adjoint_on<K: Kernel>(
+        &self,
+        args: &ArgsOf<'_, K>,
+        grid: &Grid,
+        stream: &Stream,
+        adstack_bytes: usize,
+        id: LaunchId,
+    ) -> Result<()> {
+        let on = Some(stream.cuda_stream());
+        launch::launch::<K>(
+            args,
+            grid,
+            self.device,
+            self.ordinal,
+            on,
+            Some(adstack_bytes),
+            id,
+        )
+    }
+
     /// [`Backend::begin_capture`] on `stream` (not the default stream).
     pub(crate) fn begin_capture_on(&self, stream: &Stream) -> Result<()> {
         capture::begin(self.device, self.ordinal, Some(stream))

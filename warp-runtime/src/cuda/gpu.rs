@@ -248,8 +248,6 @@ impl GpuState {
             }
             return enqueue(&capture);
         }
-        let _order = ordered.then(|| self.order.lock().unwrap_or_else(|p| p.into_inner()));
-        let default = self.gpu.default_stream();
         let scoped;
         let user = match stream {
             Some(s) => Some(s),
@@ -257,10 +255,31 @@ impl GpuState {
                 scoped = current(ordinal);
                 scoped.as_ref()
             }
+        };
+        if let Some(s) = user.filter(|s| s.is_caller_ordered()) {
+            // The caller orders it (`Stream::from_raw_caller_ordered`): no join either way,
+            // so nothing here touches another stream, and a capture of it by its owner
+            // (torch's, XLA's) holds just this work.
+            return enqueue(s);
         }
-        .filter(|s| !s.is(default));
-        match user {
+        let _order = ordered.then(|| self.order.lock().unwrap_or_else(|p| p.into_inner()));
+        let default = self.gpu.default_stream();
+        match user.filter(|s| !s.is(default)) {
             Some(s) => {
+                // A capture its owner began (torch's, XLA's): the join below would tie the
+                // captured graph to the default stream's uncaptured work and, once marked
+                // pending, the default stream to captured work, which CUDA refuses or breaks
+                // the capture with. Refused here, with the mode that is allowed.
+                if s.is_capturing().map_err(|e| err(&self.device, e))? {
+                    return Err(Error::Capture {
+                        what: format!(
+                            "work queued on a stream of cuda:{ordinal} that another library is \
+                             capturing into a CUDA graph (this crate's streams join its default \
+                             stream; wrap the stream with Stream::from_raw_caller_ordered for \
+                             work that uses only the caller's memory)"
+                        ),
+                    });
+                }
                 // Arrays are allocated and written on the default stream.
                 s.wait_stream(default).map_err(|e| err(&self.device, e))?;
                 // Pending even when `enqueue` failed: it may have queued part of its work.

@@ -96,6 +96,52 @@ impl Stream {
         })
     }
 
+    /// Wraps a CUDA stream that another library created and orders (a framework's stream an
+    /// op runs on), as [`from_raw`](Self::from_raw), but ordered by its owner alone: launches
+    /// on it neither wait for this crate's default stream nor make the default stream (and
+    /// so array operations, `to_vec`, [`synchronize`](crate::synchronize)) wait for them.
+    /// Such a launch is one `cuLaunchKernel` on the stream and nothing else, so it may run
+    /// inside a CUDA graph capture of the stream that its owner began (PyTorch's, XLA's
+    /// command buffers), where a [`from_raw`](Self::from_raw) stream's launch is refused.
+    /// As a [`ScopedStream`] it keeps the mode for the launches in the scope.
+    ///
+    /// For work whose arrays are all the caller's (a framework's tensors): this crate's array
+    /// operations still run on its default stream, unordered with this stream.
+    ///
+    /// # Safety
+    /// As [`from_raw`](Self::from_raw) (`cu_stream` alive while the wrapper or a clone is
+    /// used; it is never destroyed here); and every array a launch on it uses is ordered by the
+    /// caller: no array this crate allocated, uploaded, copied or filled on its default stream
+    /// is used on it unless that work has finished or the caller ordered it before (a
+    /// [`wait_stream`](Self::wait_stream)), and no array is dropped, read back or written by
+    /// this crate's default stream while work on this stream may still use it (synchronize
+    /// this stream first).
+    ///
+    /// # Errors
+    /// As [`from_raw`](Self::from_raw).
+    pub unsafe fn from_raw_caller_ordered(
+        cu_stream: *mut std::ffi::c_void,
+        device: &Device,
+    ) -> Result<Stream> {
+        // SAFETY: the caller's contract (nothing is destroyed when the wrapper drops).
+        let s = unsafe { Self::from_raw(cu_stream, device, ()) }.map_err(|e| match e {
+            Error::InvalidArgument { what } => Error::InvalidArgument {
+                what: what.replacen("Stream::from_raw", "Stream::from_raw_caller_ordered", 1),
+            },
+            e => e,
+        })?;
+        Ok(Stream {
+            device: s.device,
+            inner: s.inner.caller_ordered(),
+        })
+    }
+
+    /// Whether the stream is ordered by its owner alone
+    /// ([`from_raw_caller_ordered`](Self::from_raw_caller_ordered)).
+    pub fn is_caller_ordered(&self) -> bool {
+        self.inner.is_caller_ordered()
+    }
+
     /// The device the stream belongs to.
     pub fn device(&self) -> &Device {
         &self.device
