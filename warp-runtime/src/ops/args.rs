@@ -15,7 +15,7 @@ pub enum CallArg<'a> {
     /// A value parameter's static value.
     Value(Value),
     /// Not given: an output's place when only the shapes are asked for
-    /// ([`Op::output_shapes`](super::Op::output_shapes)).
+    /// ([`Op::shapes`](super::Op::shapes)).
     Absent,
 }
 

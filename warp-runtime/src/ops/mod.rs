@@ -157,7 +157,7 @@ impl Op {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming the op, the parameter and what was given against what
-    /// the kernel takes; a launch's errors ([`crate::launch`]).
+    /// the kernel takes; a launch's errors ([`crate::launch()`]).
     pub unsafe fn forward(&self, args: &[CallArg<'_>], exec: &Exec<'_>) -> Result<()> {
         let spec = &self.inner.spec;
         exec::check_call(spec, args, "called")?;
