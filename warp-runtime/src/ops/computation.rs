@@ -5,7 +5,7 @@
 
 use super::args::{CallArg, OpArg};
 use super::buffer::Buffer;
-use super::exec::{check_outputs, ErasedOp, Exec};
+use super::exec::{check_grads, check_outputs, ErasedOp, Exec};
 use super::shape::{Shape, Shapes};
 use super::spec::{ArgKind, OpElement, OpScalar, OpSpec, ParamSpec, Role, Value};
 use super::{Op, OpInner};
@@ -464,16 +464,7 @@ where
         grads: &[Option<&Buffer>],
         exec: &Exec<'_>,
     ) -> Result<()> {
-        for (p, g) in spec.params.iter().zip(grads) {
-            if g.is_some() && !p.differentiable {
-                return Err(Error::invalid(format!(
-                    "{}: argument '{}' ({}) has no gradient, and one was given",
-                    spec.name,
-                    p.name,
-                    p.kind.describe()
-                )));
-            }
-        }
+        check_grads(spec, grads)?;
         // SAFETY: forwarded contract.
         unsafe { self.run(spec, args, Some(grads), exec) }
     }

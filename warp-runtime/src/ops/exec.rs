@@ -181,16 +181,7 @@ where
         grads: &[Option<&Buffer>],
         exec: &Exec<'_>,
     ) -> Result<()> {
-        for (p, g) in spec.params.iter().zip(grads) {
-            if g.is_some() && !p.differentiable {
-                return Err(Error::invalid(format!(
-                    "{}: argument '{}' ({}) has no gradient, and one was given",
-                    spec.name,
-                    p.name,
-                    p.kind.describe()
-                )));
-            }
-        }
+        check_grads(spec, grads)?;
         // SAFETY: forwarded contract.
         unsafe { self.run(spec, args, grads, exec, true) }
     }
@@ -216,6 +207,22 @@ pub(crate) fn check_outputs(
                     spec.name, spec.params[*k].name, b.dims, want
                 )));
             }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a gradient given for a parameter that has none (an integer array, a scalar): the
+/// one check both op tiers' backward make before anything runs.
+pub(crate) fn check_grads(spec: &OpSpec, grads: &[Option<&Buffer>]) -> Result<()> {
+    for (p, g) in spec.params.iter().zip(grads) {
+        if g.is_some() && !p.differentiable {
+            return Err(Error::invalid(format!(
+                "{}: argument '{}' ({}) has no gradient, and one was given",
+                spec.name,
+                p.name,
+                p.kind.describe()
+            )));
         }
     }
     Ok(())
