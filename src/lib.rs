@@ -324,6 +324,8 @@ mod book {
     struct Performance;
     #[doc = include_str!("../docs/book/src/primitives.md")]
     struct Primitives;
+    #[doc = include_str!("../docs/book/src/python-ops.md")]
+    struct PythonOps;
     #[doc = include_str!("../docs/book/src/scenes.md")]
     struct Scenes;
     #[doc = include_str!("../docs/book/src/spatial.md")]

@@ -1,4 +1,4 @@
-"""Tests of the warp_torch example module: zero-copy round trips through DLPack with NumPy (CPU),
+"""Tests of the warp_sim example module's interop functions: zero-copy round trips through DLPack with NumPy (CPU),
 PyTorch (CPU and CUDA) and JAX (where installed), in-place kernels, and a Tape wrapped in a
 torch.autograd.Function checked by torch.autograd.gradcheck.
 
@@ -13,7 +13,7 @@ import sys
 # JAX would otherwise take most of the GPU's memory at its first use.
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import warp_torch as wt  # noqa: E402
+import warp_sim as wt  # noqa: E402
 
 passed = []
 

@@ -120,6 +120,7 @@ mod mesh;
 mod misc;
 mod nonsquare;
 mod ops;
+mod ops_xla;
 mod optim;
 mod overloads;
 mod params;

@@ -58,7 +58,7 @@ pub use device::{driver_version, probe, Event, Gpu, GpuInfo, Stream, MIN_DRIVER_
 pub use error::{CudaError, Result};
 pub use graph::{Conditional, Graph, CONDITIONAL_DRIVER_VERSION};
 pub use launch::{Function, Module};
-pub use memory::{DeviceBuffer, PinnedBuffer};
+pub use memory::{pointer_device_ordinal, DeviceBuffer, PinnedBuffer};
 
 /// The raw bindings, for callers that need a driver call this crate does not wrap.
 pub use cudarc;

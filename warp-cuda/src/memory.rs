@@ -52,6 +52,29 @@ fn is_page_locked(ptr: *const u8) -> bool {
     r == sys::CUresult::CUDA_SUCCESS && kind == sys::CUmemorytype::CU_MEMORYTYPE_HOST as u32
 }
 
+/// The ordinal of the GPU whose memory `ptr` addresses (a buffer another library allocated:
+/// an XLA operand), or `None` for memory the driver does not know as a device's (host memory,
+/// a dangling address). The plural `cuPointerGetAttributes` for the reason given at
+/// [`is_page_locked`]: unknown memory is not an API error.
+pub fn pointer_device_ordinal(ptr: u64) -> Option<usize> {
+    let mut ordinal: i32 = -1;
+    let mut attribute = sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_DEVICE_ORDINAL;
+    let mut data = [&mut ordinal as *mut i32 as *mut c_void];
+    // SAFETY: one attribute, DEVICE_ORDINAL, which writes one int through `data[0]`.
+    let r = unsafe {
+        sys::cuPointerGetAttributes(
+            1,
+            &mut attribute,
+            data.as_mut_ptr(),
+            ptr as sys::CUdeviceptr,
+        )
+    };
+    match r == sys::CUresult::CUDA_SUCCESS {
+        true => usize::try_from(ordinal).ok(),
+        false => None,
+    }
+}
+
 /// The shortest prefix length `d` (dividing the length) such that `pattern` is that prefix
 /// repeated.
 fn minimal_period(pattern: &[u8]) -> usize {

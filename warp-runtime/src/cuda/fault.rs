@@ -53,6 +53,18 @@ impl RecordPool {
     fn spare(&self) -> MutexGuard<'_, SpareRecords> {
         self.spare.lock().unwrap_or_else(|p| p.into_inner())
     }
+
+    /// Makes clean spare records until there are at least `n`: a thread's first launch on
+    /// this GPU then takes one instead of allocating, so that it may fall inside another
+    /// library's stream capture (XLA's command buffers call an op's handler from their own
+    /// threads while capturing, where CUDA refuses an allocation).
+    pub(crate) fn reserve(&self, n: usize) -> Result<()> {
+        while self.spare().clean.len() < n {
+            let rec = FaultRecord::new(self)?;
+            self.spare().clean.push(rec);
+        }
+        Ok(())
+    }
 }
 
 /// `wp::fault_t` (88 bytes, `wp_core.h`) followed by the `u32` flag the first faulting thread

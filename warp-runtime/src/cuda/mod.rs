@@ -55,9 +55,21 @@ pub(crate) mod primitives;
 pub mod stream;
 
 #[cfg(feature = "cuda")]
+pub(crate) use gpu::{err as gpu_err, state as gpu_state};
+#[cfg(feature = "cuda")]
 pub(crate) use module::format_compile_reports;
 #[cfg(feature = "cuda")]
 pub use module::{compile_reports, CompileReport};
 
 #[cfg(feature = "cuda")]
 pub(crate) use backend::Cuda;
+
+/// Makes sure GPU `device` holds at least `n` spare fault records, so that the first launch of
+/// up to `n` new threads there allocates nothing (see `RecordPool::reserve`).
+#[cfg(feature = "cuda")]
+pub(crate) fn reserve_fault_records(device: &crate::device::Device, n: usize) -> crate::Result<()> {
+    if let crate::device::DeviceKind::Cuda { ordinal } = device.kind() {
+        gpu::state(device, ordinal)?.faults.reserve(n)?;
+    }
+    Ok(())
+}

@@ -441,6 +441,10 @@ impl<F> ErasedOp for ComputationRunner<F>
 where
     F: Fn(&mut Ctx<'_>) -> Result<()> + Send + Sync + 'static,
 {
+    fn is_computation(&self) -> bool {
+        true
+    }
+
     fn shapes(&self, spec: &OpSpec, args: &[CallArg<'_>]) -> Result<(Vec<usize>, Vec<Vec<usize>>)> {
         let shapes = Shapes::of_call(spec, args);
         let outs = self

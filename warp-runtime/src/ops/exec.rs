@@ -73,9 +73,22 @@ fn dim_of(v: &[usize]) -> Dim {
 
 /// The type-erased side of an op (kernel or computation): what the registry holds.
 pub(crate) trait ErasedOp: Send + Sync {
+    /// Whether this is a computation op (its backward replays the body on fresh outputs and
+    /// scratch) rather than a kernel op (its backward reads the forward's outputs).
+    fn is_computation(&self) -> bool {
+        false
+    }
+
     /// The launch dimensions and each output's leading shape (in parameter order) for a
     /// call's inputs and values.
     fn shapes(&self, spec: &OpSpec, args: &[CallArg<'_>]) -> Result<(Vec<usize>, Vec<Vec<usize>>)>;
+
+    /// Compiles and loads what a call on `device` launches (a kernel op: its kernel and
+    /// adjoint), so that no call compiles. A computation op's body is opaque: nothing.
+    fn prepare(&self, device: &crate::device::Device) -> Result<()> {
+        let _ = device;
+        Ok(())
+    }
 
     /// Runs the forward on the call's arguments (checked against `spec` by the caller).
     ///
@@ -157,6 +170,15 @@ impl<K: Kernel> ErasedOp for KernelRunner<K>
 where
     OwnedArgsOf<K>: OpArgs,
 {
+    fn prepare(&self, device: &crate::device::Device) -> Result<()> {
+        match self.block_dim {
+            Some(b) if K::info().tile.is_some() => {
+                crate::launch::load_tiled(&[K::info()], b, device)
+            }
+            _ => crate::launch::load_with_adjoints(&[K::info()], device),
+        }
+    }
+
     fn shapes(&self, spec: &OpSpec, args: &[CallArg<'_>]) -> Result<(Vec<usize>, Vec<Vec<usize>>)> {
         let shapes = Shapes::of_call(spec, args);
         let dims = self.dims.eval(&shapes)?;

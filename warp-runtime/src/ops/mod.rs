@@ -27,6 +27,7 @@ mod computation;
 mod exec;
 mod shape;
 mod spec;
+pub mod xla_ffi;
 
 pub use args::{CallArg, OpArg, OpArgs};
 pub use batch::Vmap;
@@ -125,6 +126,30 @@ impl Op {
     /// What it takes.
     pub fn spec(&self) -> &OpSpec {
         &self.inner.spec
+    }
+
+    /// Whether this is a computation op ([`Op::computation`]): its backward takes fresh
+    /// outputs and scratch (the body is replayed), where a kernel op's takes the forward's
+    /// outputs.
+    pub fn is_computation(&self) -> bool {
+        self.inner.run.is_computation()
+    }
+
+    /// Readies the op for calls on `device` that must not compile, allocate or load anything,
+    /// as inside another library's stream capture (XLA's command buffers, a torch CUDA graph):
+    /// a kernel op's kernel and adjoint are compiled and loaded, and on a GPU `threads` spare
+    /// fault records are made, one per thread whose first launch may fall inside a capture.
+    /// A computation op's body is opaque: only the records.
+    ///
+    /// # Errors
+    /// A kernel that does not compile; [`Error::NoDevice`](crate::Error::NoDevice).
+    pub fn prepare(&self, device: &crate::device::Device, threads: usize) -> crate::Result<()> {
+        self.inner.run.prepare(device)?;
+        #[cfg(feature = "cuda")]
+        crate::cuda::reserve_fault_records(device, threads)?;
+        #[cfg(not(feature = "cuda"))]
+        let _ = threads;
+        Ok(())
     }
 
     /// How a batched call runs ([`forward_batched`](Self::forward_batched)).

@@ -9,6 +9,10 @@
 //! consumer's stream `s` wait for the work queued here (on the device, without blocking the
 //! host; the legacy default stream, `1` or an omitted stream, included).
 
+mod ops;
+
+pub use ops::{NativeOp, Ops};
+
 use crate::array::{Array, DlpackScalar, NdComponents};
 use crate::device::Device;
 #[cfg(feature = "cuda")]
