@@ -1556,7 +1556,8 @@ DRV void grad_case(R& r) {
   }
   g.arg = 3;
   g.pad = 0;
-  wp::ctx_t ctx = wp::ctx_make(&f, &flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(&f, &flag);
+  wp::ctx_t ctx = wp::ctx_make(&rec);
   const T res = grad_op(g, idx, op, v, &ctx);
   if (op != 0) wr(r, res);
   wr_word(r, flag);

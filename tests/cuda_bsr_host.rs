@@ -47,7 +47,13 @@ static void pf(f32 x) { u32 u; memcpy(&u, &x, 4); printf(" %08x", u); }
 static void pm(const Mat3& m) { const f32* p = (const f32*)&m; for (int i = 0; i < 9; ++i) pf(p[i]); }
 static fault_t fault;
 static u32 flag;
-static ctx_t fresh() { memset(&fault, 0, sizeof fault); flag = 0; return ctx_make(&fault, &flag); }
+static launch_ctx_t rec;
+static ctx_t fresh() {
+  memset(&fault, 0, sizeof fault);
+  flag = 0;
+  rec = launch_ctx_make(&fault, &flag);
+  return ctx_make(&rec);
+}
 static bool pfault(const ctx_t& c) {
   if (!c.raised) return false;
   printf(" F %d %lld %lld", fault.arg, (long long)fault.index[0], (long long)fault.shape[0]);
@@ -421,7 +427,8 @@ __device__ wp::i32 all(const wp::bsr_t<B>& a, wp::ctx_t* c) {
 extern "C" __global__ void bsr_all(wp::bsr_t<double> a, wp::bsr_t<wp::Mat3> b,
                                    wp::bsr_t<wp::Mat23> m, wp::i32* out, wp::fault_t* fault,
                                    wp::u32* flag) {
-  wp::ctx_t c = wp::ctx_make(fault, flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(fault, flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   out[threadIdx.x] = all(a, &c) + all(b, &c) + all(m, &c);
 }
 "#;

@@ -811,7 +811,8 @@ fn run_info_on_host(info: &wp::KernelInfo, dims: &[usize], args: &[Arg]) -> Opti
          template <bool FAST> static int run() {{\n\
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-         wp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+         wp::ctx_t ctx = wp::ctx_make(&rec);\n\
          wp::launch_t launch = {{{{{d0}, {d1}, {d2}, {d3}}}, {total}, {ndim}, FAST ? 1 : 0}};\n\
          for (wp::i64 flat = 0; flat < {total}; ++flat) {thread}({params}, launch, flat, &ctx);\n\
          if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n\
@@ -1654,7 +1655,8 @@ fn run_tiled_on_host<K: Kernel>(
          int main() {{\n\
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-         wp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+         wp::ctx_t ctx = wp::ctx_make(&rec);\n\
          wp::launch_t launch = {{{{{blocks}, 1, 1, 1}}, {blocks}, 1, 0}};\n\
          std::function<void()> body = [&] {{\n\
            {stack_decl}\n\
@@ -2110,8 +2112,9 @@ fn assertions_fault_as_on_the_cpu_backend() {
              int main() {{\n\
              {decl}\n\
              wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-             wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
-             ctx.flags = {flags};\n\
+             wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+             wp::ctx_t ctx = wp::ctx_make(&rec);\n\
+             rec.flags = {flags};\n\
              wp::launch_t launch = {{{{{n}, 1, 1, 1}}, {n}, 1, 0}};\n\
              for (wp::i64 flat = 0; flat < {n}; ++flat) {thread}(p0, p1, p2, launch, flat, &ctx);\n\
              if (flag) printf(\"%d %lld %lld %lld\\n\", fault.kind, (long long)fault.index[0],\n\
@@ -2312,7 +2315,8 @@ fn local_array_index_faults_like_the_cpu_backend() {
              int main() {{\n\
              {decl}\n\
              wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-             wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+             wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+             wp::ctx_t ctx = wp::ctx_make(&rec);\n\
              wp::launch_t launch = {{{{3, 1, 1, 1}}, 3, 1, 0}};\n\
              for (wp::i64 flat = 0; flat < 3; ++flat) {thread}(p0, p1, launch, flat, &ctx);\n\
              if (flag) printf(\"%d %d %lld %lld %lld\\n\", fault.kind, fault.ndim,\n\
@@ -2384,7 +2388,8 @@ fn run_adjoint_on_host<K: Kernel>(n: usize, args: &[Arg]) -> Option<Vec<String>>
          int main() {{\n\
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-         wp::ctx_t ctx = wp::ctx_make(&fault, &flag);\n\
+         wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+         wp::ctx_t ctx = wp::ctx_make(&rec);\n\
          wp::launch_t launch = {{{{{n}, 1, 1, 1}}, {n}, 1, 0}};\n\
          static char buf[1 << 16];\n\
          wp::adstack_t st = wp::adstack_new(buf, sizeof buf);\n\

@@ -124,7 +124,8 @@ fn run_on_host<K: Kernel>(n: usize, args: &[Arg]) -> Option<Vec<String>> {
          int main() {{\n\
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-         wp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+         wp::ctx_t ctx = wp::ctx_make(&rec);\n\
          wp::launch_t launch = {{{{{n}, 1, 1, 1}}, {n}, 1, 0}};\n\
          const wp::i64 lanes = (wp::i64){limit} * {width}, slots = lanes * {n};\n\
          std::vector<wp::u64> keys(slots, 0x5555u), values(slots);\n\

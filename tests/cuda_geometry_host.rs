@@ -80,7 +80,13 @@ static void pf(f32 x) { if (x != x) printf(" nan"); else { u32 u; memcpy(&u, &x,
 static void pv(Vec3 v) { pf(v.x); pf(v.y); pf(v.z); }
 static fault_t fault;
 static u32 flag;
-static ctx_t fresh() { memset(&fault, 0, sizeof fault); flag = 0; return ctx_make(&fault, &flag); }
+static launch_ctx_t rec;
+static ctx_t fresh() {
+  memset(&fault, 0, sizeof fault);
+  flag = 0;
+  rec = launch_ctx_make(&fault, &flag);
+  return ctx_make(&rec);
+}
 static bool pfault(const ctx_t& c) {
   if (!c.raised) return false;
   printf(" F %d %lld %lld", fault.arg, (long long)fault.index[0], (long long)fault.shape[0]);
@@ -1586,7 +1592,8 @@ fn nvrtc_compiles_the_geometry_headers() {
 extern "C" __global__ void geometry_all(wp::bvh_t bvh, wp::mesh_t mesh, wp::Vec3* out,
                                         wp::i32* iout, wp::fault_t* fault, wp::u32* flag) {
   using namespace wp;
-  ctx_t c = ctx_make(fault, flag);
+  launch_ctx_t rec = launch_ctx_make(fault, flag);
+  ctx_t c = ctx_make(&rec);
   const Vec3 p = out[threadIdx.x], d = out[threadIdx.x + 1];
   triangle_closest_point_t r = closest_point_triangle(p, d, p + d, d - p);
   const triangle_closest_point_t rs = closest_point_triangle_scaled(p, d, d - p);

@@ -1214,7 +1214,8 @@ extern "C" __global__ void __launch_bounds__(WP_TILE_BLOCK_DIM)
              wp::array_t<float, 3> f3, wp::array_t<float, 4> f4, wp::fault_t* fault,
              wp::u32* flag) {
   extern __shared__ __align__(16) unsigned char smem[];
-  wp::ctx_t c = wp::ctx_make(fault, flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(fault, flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   unsigned char* at = smem;
   at = all_ops(f1, f2, at, &c);
   at = all_ops(d1, d2, at, &c);

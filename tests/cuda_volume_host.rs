@@ -98,7 +98,13 @@ template <> DMat3 rd<DMat3>() { const DVec3 a = rd<DVec3>(); const DVec3 b = rd<
 
 static fault_t fault;
 static u32 flag;
-static ctx_t fresh() { memset(&fault, 0, sizeof fault); flag = 0; return ctx_make(&fault, &flag); }
+static launch_ctx_t rec;
+static ctx_t fresh() {
+  memset(&fault, 0, sizeof fault);
+  flag = 0;
+  rec = launch_ctx_make(&fault, &flag);
+  return ctx_make(&rec);
+}
 /// ` F kind arg ndim index..` (index words in hex; OutOfBounds also the shape), if a fault.
 static bool pfault(const ctx_t& c) {
   if (!c.raised) return false;
@@ -1564,7 +1570,8 @@ extern "C" __global__ void volume_all(wp::volume_t<float> a, wp::volume_t<double
                                       float* o1, double* o2, wp::Vec3* o3, wp::DVec3* o4,
                                       int* o5, wp::fault_t* fault, wp::u32* flag) {
   using namespace wp;
-  ctx_t c = ctx_make(fault, flag);
+  launch_ctx_t rec = launch_ctx_make(fault, flag);
+  ctx_t c = ctx_make(&rec);
   const Vec3 p = o3[threadIdx.x];
   all_float(a, p, &c, o1, o3);
   all_float(b, p, &c, o2, o3);

@@ -84,7 +84,9 @@ where
     let params: Vec<String> = (0..nargs).map(|k| format!("p{k}")).collect();
     let program = format!(
         "#include <cstring>\n#include <cstdio>\n{unit}\nint main() {{\n{decl}\n\
-         wp::fault_t fault = {{}}; unsigned int flag = 0;\nwp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
+         wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+         wp::ctx_t ctx = wp::ctx_make(&rec);\n\
          wp::launch_t launch = {{{{{dim}, 1, 1, 1}}, {dim}, 1, 1}};\n\
          for (wp::i64 flat = 0; flat < {dim}; ++flat) {thread}({params}, launch, flat, &ctx);\n\
          if (flag) {{ printf(\"fault %d\\n\", fault.kind); return 1; }}\n{print}\nreturn 0;\n}}\n",

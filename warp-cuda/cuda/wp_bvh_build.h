@@ -347,7 +347,7 @@ __device__ __forceinline__ i32 lbvh_arrive(i32* counter) {
 /// both check words reset, the first one set raised as a fault of argument 0 or 1.
 __device__ void wp_lbvh_refit_report(const wp::lbvh_refit_t& s) {
   wp::i32* bad = (wp::i32*)s.bad;
-  wp::ctx_t ctx = s.fault.ctx;
+  wp::ctx_t ctx = wp::ctx_make(&s.fault.ctx);
   for (int a = 0; a < 2; ++a) {
     const wp::i32 i = atomicExch(&bad[a], 0x7fffffff);
     if (i == 0x7fffffff || wp::faulted(&ctx) || s.sources[a] == 0) continue;

@@ -20,8 +20,8 @@
 //     operators (`Transform_new`, `Transform_IDENTITY()`, composition `*`, lane-by-lane ops);
 //   * integer semantics of warp_core::ops (`w_add` ... `w_shr`), Rust `as` casts (`cast<To>`),
 //     literals (`lit_like`, `scalar_lit_like`, `int_like`);
-//   * faults (`fault_t`, `ctx_t`, `raise`), arrays (`array_t`, `load`, `store`, ...), range
-//     loops (`range_t`), the launch grid (`launch_t`, `unflatten`).
+//   * faults (`fault_t`, `launch_ctx_t`, `ctx_t`, `raise`), arrays (`array_t`, `load`, `store`,
+//     ...), range loops (`range_t`), the launch grid (`launch_t`, `unflatten`).
 //
 // Floating point: results match the CPU only if the compiler does not contract a*b+c into an
 // FMA. NVRTC contracts by default: compile with `--fmad=false` (and without
@@ -598,8 +598,9 @@ enum fault_kind : i32 {
 /// (88 bytes, align 8):
 ///   0 kind (i32), 4 arg (i32: the kernel parameter index for OutOfBounds, else -1),
 ///   8 index[4] (i64), 40 shape[4] (i64), 72 ndim (i32), 76 kernel (i32: the faulting launch's
-///   kernel id, copied from ctx_t::kernel; 0 when the launcher set none), 80 launch (u64: the
-///   faulting launch's number, copied from ctx_t::launch; 0 when the launcher set none).
+///   kernel id, copied from launch_ctx_t::kernel; 0 when the launcher set none), 80 launch
+///   (u64: the faulting launch's number, copied from launch_ctx_t::launch; 0 when the launcher
+///   set none).
 /// OutOfBounds: index/shape hold `ndim` entries. DivisionByZero: ndim 0. BadStep: ndim 1,
 /// index[0] is the step, shape all 0. NonFinite (a NaN or infinite volume sample position,
 /// warp_core::FaultKind::NonFinite): ndim 3, index[0..3] are the coordinates' f64 bit
@@ -629,76 +630,104 @@ struct fault_t {
 };
 static_assert(sizeof(fault_t) == 88 && alignof(fault_t) == 8, "fault_t layout");
 
-/// Per-thread fault context (32 bytes, align 8):
+/// A launch's fault record (32 bytes, align 8), the same for all its threads:
 ///   0 fault (fault_t*, device memory), 8 fault_flag (u32*, device memory, 0 = no fault yet),
-///   16 raised (i16: set to 1 by `raise` in this thread; starts at 0), 18 flags (i16: the
+///   16 reserved (i16, 0; a thread's own fault mark is ctx_t::raised), 18 flags (i16: the
 ///   launch's CTX_* bits, set by the host: CTX_DEBUG, the runtime's debug mode, which
 ///   `debug_assert!` reads through `debug_mode`), 20 kernel (i32: an id
 ///   the host gives each loaded kernel, copied into the fault record so that a fault names its
 ///   kernel even when launches of several kernels are in flight, as in a replayed graph),
 ///   24 launch (u64: the launch's number, copied into the fault record likewise).
-/// A kernel builds one per thread (`ctx_make(fault, flag)`) and passes its address down. A
-/// faulting call returns a harmless value and the thread goes on (unlike the CPU's `?`, which
-/// stops it); library code checks `faulted(ctx)` where going on would be unsafe, and a failed
-/// assertion in a kernel ends its thread.
-/// `fault` and `fault_flag` may be null: faults then only set `raised`.
-struct ctx_t {
+/// A kernel entry takes it as a `WP_GRID_CONST` parameter; `fault` and `fault_flag` may be
+/// null: faults then only mark the thread's ctx_t.
+struct launch_ctx_t {
   fault_t* fault;
   u32* fault_flag;
-  i16 raised;
+  i16 reserved;
   i16 flags;
   i32 kernel;
   u64 launch;
 };
-static_assert(sizeof(ctx_t) == 32 && alignof(ctx_t) == 8, "ctx_t layout");
-/// ctx_t::flags: the runtime's debug mode is on for this launch (`debug_assert!` is checked).
+static_assert(sizeof(launch_ctx_t) == 32 && alignof(launch_ctx_t) == 8, "launch_ctx_t layout");
+/// launch_ctx_t::flags: the runtime's debug mode is on for this launch (`debug_assert!` is
+/// checked).
 constexpr i16 CTX_DEBUG = 1;
 
+/// A kernel entry's launch_ctx_t parameter is `__grid_constant__` (sm_70 and later, which
+/// covers every architecture CUDA 13 compiles for): it stays in the parameter space, so its
+/// address is a constant the compiler can rematerialize where it is needed (the cold fault
+/// path) instead of holding the record's fields in registers, or copying the record to local
+/// memory, through the whole kernel.
+#if defined(__CUDACC__)
+#define WP_GRID_CONST __grid_constant__
+#else
+#define WP_GRID_CONST
+#endif
+
+/// Per-thread fault context: the launch's record and this thread's mark (`raised`: set to 1
+/// by `raise`; starts at 0). A kernel builds one per thread (`ctx_make(&record)`) and passes
+/// its address down. A faulting call returns a harmless value and the thread goes on (unlike
+/// the CPU's `?`, which stops it); library code checks `faulted(ctx)` where going on would be
+/// unsafe, and a failed assertion in a kernel ends its thread.
+struct ctx_t {
+  const launch_ctx_t* rec;
+  i32 raised;
+};
+
 /// The fault context of a host object's build step whose kernel raises faults (40 bytes, in
-/// the step's record): the ctx_t its threads raise with (the runtime fills fault, fault_flag,
-/// kernel and launch before the launch; raised is 0), then `names`, the runtime's own (what
-/// it names the fault's operation and arguments by; never read here).
+/// the step's record): the launch_ctx_t its threads raise with (the runtime fills fault,
+/// fault_flag, kernel and launch before the launch), then `names`, the runtime's own (what it
+/// names the fault's operation and arguments by; never read here).
 struct step_fault_t {
-  ctx_t ctx;
+  launch_ctx_t ctx;
   u64 names;
 };
 static_assert(sizeof(step_fault_t) == 40 && alignof(step_fault_t) == 8, "step_fault_t layout");
 
-WP_LFN ctx_t ctx_make(fault_t* fault, u32* fault_flag) {
+/// A launch record with no flags, kernel id or launch number (device helpers that raise
+/// outside a kernel launch's record, and host tests).
+WP_LFN launch_ctx_t launch_ctx_make(fault_t* fault, u32* fault_flag) {
+  launch_ctx_t r;
+  r.fault = fault;
+  r.fault_flag = fault_flag;
+  r.reserved = 0;
+  r.flags = 0;
+  r.kernel = 0;
+  r.launch = 0;
+  return r;
+}
+
+/// A thread's fresh context on `rec`, which must outlive it.
+WP_LFN ctx_t ctx_make(const launch_ctx_t* rec) {
   ctx_t c;
-  c.fault = fault;
-  c.fault_flag = fault_flag;
+  c.rec = rec;
   c.raised = 0;
-  c.flags = 0;
-  c.kernel = 0;
-  c.launch = 0;
   return c;
 }
 
-/// Records a fault: marks this thread's context, and if this is the first fault of the launch
-/// (compare-and-swap of `*fault_flag` from 0 to 1) fills the shared record.
-WP_LFN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* index = nullptr,
-                 const i64* shape = nullptr) {
-  ctx->raised = 1;
-  if (ctx->fault_flag == nullptr || ctx->fault == nullptr) return;
+/// Fills the shared record if this is the first fault of the launch (compare-and-swap of
+/// `*fault_flag` from 0 to 1). Does not mark the thread: `raise` and its callers do.
+WP_LFN void raise_record(const launch_ctx_t* rec, i32 kind, i32 arg, i32 ndim, const i64* index,
+                         const i64* shape) {
+  if (rec->fault_flag == nullptr || rec->fault == nullptr) return;
   bool first;
 #if defined(__CUDACC__)
-  first = atomicCAS(ctx->fault_flag, 0u, 1u) == 0u;
+  first = atomicCAS(rec->fault_flag, 0u, 1u) == 0u;
 #elif defined(__GNUC__) || defined(__clang__)
   u32 expected = 0u;
-  first = __atomic_compare_exchange_n(ctx->fault_flag, &expected, 1u, false, __ATOMIC_ACQ_REL,
+  first = __atomic_compare_exchange_n(rec->fault_flag, &expected, 1u, false, __ATOMIC_ACQ_REL,
                                       __ATOMIC_ACQUIRE);
 #else
-  first = *ctx->fault_flag == 0u;  // single-threaded host fallback
-  if (first) *ctx->fault_flag = 1u;
+  first = *rec->fault_flag == 0u;  // single-threaded host fallback
+  if (first) *rec->fault_flag = 1u;
 #endif
   if (!first) return;
-  fault_t* f = ctx->fault;
+  fault_t* f = rec->fault;
   f->kind = kind;
   f->arg = arg;
   f->ndim = ndim;
-  f->kernel = ctx->kernel;
-  f->launch = ctx->launch;
+  f->kernel = rec->kernel;
+  f->launch = rec->launch;
   for (int k = 0; k < 4; ++k) {
     f->index[k] = (index != nullptr && k < ndim) ? index[k] : 0;
     f->shape[k] = (shape != nullptr && k < ndim) ? shape[k] : 0;
@@ -708,20 +737,32 @@ WP_LFN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* i
 #endif
 }
 
+/// Records a fault: marks this thread's context, and if this is the first fault of the launch
+/// fills the shared record.
+WP_LFN void raise(ctx_t* ctx, i32 kind, i32 arg = -1, i32 ndim = 0, const i64* index = nullptr,
+                 const i64* shape = nullptr) {
+  ctx->raised = 1;
+  raise_record(ctx->rec, kind, arg, ndim, index, shape);
+}
+
 /// The out-of-bounds fault of a 1-D access, out of line: a call on the cold path keeps the
 /// checked access itself a compare and a branch that rarely goes, where `raise` inlined at
 /// every access lengthened the hot path (the DEM's contact kernel, H200: 204 us inlined,
-/// 187 us with this call; 166 us with no checks at all). `c` is the caller's context by value
-/// (its `raised` is set by the caller): passing its address would move it to local memory
-/// (394 us). The fault's record is what `raise` writes.
+/// 187 us with this call; 166 us with no checks at all). It takes the launch's record alone
+/// (the caller marks its thread's ctx_t): in a kernel that record is the entry's
+/// `WP_GRID_CONST` parameter, whose address costs no register to keep. The context's address
+/// would move the thread's ctx_t to local memory (394 us), and the record by value kept its
+/// five fields live in registers through the kernel (the BVH box query: 46 registers against
+/// 38).
 #if defined(__CUDACC__)
-static __device__ __noinline__ void raise_out_of_bounds_1d(ctx_t c, i32 arg, i64 index, i64 len) {
+static __device__ __noinline__ void raise_out_of_bounds_1d(const launch_ctx_t* rec, i32 arg,
+                                                           i64 index, i64 len) {
 #else
-inline void raise_out_of_bounds_1d(ctx_t c, i32 arg, i64 index, i64 len) {
+inline void raise_out_of_bounds_1d(const launch_ctx_t* rec, i32 arg, i64 index, i64 len) {
 #endif
   const i64 idx[1] = {index};
   const i64 shape[1] = {len};
-  raise(&c, FAULT_OUT_OF_BOUNDS, arg, 1, idx, shape);
+  raise_record(rec, FAULT_OUT_OF_BOUNDS, arg, 1, idx, shape);
 }
 
 /// True once this thread raised a fault.
@@ -737,7 +778,7 @@ WP_LFN void assert_fail(ctx_t* ctx, i64 line, i64 column, i64 thread) {
 
 /// Whether the launch runs in the runtime's debug mode (the guard of `debug_assert!`): the
 /// same for every thread of a launch, so the branch on it is uniform.
-WP_LFN bool debug_mode(const ctx_t* ctx) { return (ctx->flags & CTX_DEBUG) != 0; }
+WP_LFN bool debug_mode(const ctx_t* ctx) { return (ctx->rec->flags & CTX_DEBUG) != 0; }
 
 // ------------------------------------------------------------------------------------------
 // Casts: Rust `as`
@@ -1798,7 +1839,7 @@ WP_FN bool check_idx(const array_t<T, N>& a, const i64* idx, ctx_t* ctx) {
   if constexpr (N == 1) {
     if ((u64)idx[0] >= (u64)a.shape[0]) {
       ctx->raised = 1;
-      raise_out_of_bounds_1d(*ctx, a.arg, idx[0], a.shape[0]);
+      raise_out_of_bounds_1d(ctx->rec, a.arg, idx[0], a.shape[0]);
       return false;
     }
     return true;
@@ -2199,8 +2240,8 @@ constexpr u8 DET_SUB = 1;
 /// The key of an unused slot: after every address in the order.
 constexpr u64 DET_UNUSED = ~0ull;
 
-/// A deterministic launch's record buffer, passed to its entry after the ctx_t (40 bytes,
-/// align 8; warp-runtime's cuda/deterministic.rs `DetArgs`):
+/// A deterministic launch's record buffer, passed to its entry after the launch_ctx_t (40
+/// bytes, align 8; warp-runtime's cuda/deterministic.rs `DetArgs`):
 ///   0 keys (u64*: each slot's lane address, DET_UNUSED when unused), 8 values (u64*: the
 ///   value's bits, zero-extended), 16 tags (u8*), 24 lanes (i64: lane slots per thread),
 ///   32 limit (i32: recorded calls per thread), 36 pad.

@@ -283,7 +283,7 @@ extern "C" __global__ void wp_hash_grid_ranges(wp::hash_grid_ranges_t s) {
       const wp::i64 index[4] = {(wp::i64)i, (wp::i64)wp::f64_to_bits((wp::f64)p.x),
                                 (wp::i64)wp::f64_to_bits((wp::f64)p.y),
                                 (wp::i64)wp::f64_to_bits((wp::f64)p.z)};
-      wp::ctx_t ctx = s.fault.ctx;
+      wp::ctx_t ctx = wp::ctx_make(&s.fault.ctx);
       wp::raise(&ctx, wp::FAULT_NON_FINITE_INPUT, 0, 4, index, nullptr);
     }
   }

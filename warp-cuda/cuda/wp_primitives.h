@@ -207,10 +207,10 @@ WP_PRIM_FN i64 resolve_count(const i32* count, i64 capacity, fault_t* fault, u32
   i64 c = (i64)*count;
   if (c >= 0 && c <= capacity) return c;
   if (report && WP_PRIM_TID == 0 && WP_PRIM_BID == 0) {
-    ctx_t ctx = ctx_make(fault, flag);
+    const launch_ctx_t rec = launch_ctx_make(fault, flag);
     i64 index[1] = {c};
     i64 shape[1] = {capacity + 1};
-    raise(&ctx, FAULT_OUT_OF_BOUNDS, (i32)count_arg, 1, index, shape);
+    raise_record(&rec, FAULT_OUT_OF_BOUNDS, (i32)count_arg, 1, index, shape);
   }
   return 0;
 }

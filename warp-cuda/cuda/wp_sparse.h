@@ -282,7 +282,7 @@ WP_FN void sp_tpl_keys(const sp_tpl_keys_t& s, i32 t) {
 /// (argument 2) with index t and the first non-finite scalar of its block.
 template <typename S>
 WP_FN void sp_tpl_report(const sp_tpl_report_t& s) {
-  ctx_t ctx = s.fault.ctx;
+  ctx_t ctx = ctx_make(&s.fault.ctx);
   if (s.count != 0) {
     const i32 c = *(const i32*)s.count;
     if (c < 0 || c > s.n) {

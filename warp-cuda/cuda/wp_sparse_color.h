@@ -132,7 +132,7 @@ WP_FN void sp_color_split(const sp_color_split_t& s, i32 e) {
 WP_FN void sp_color_report(const sp_color_report_t& s) {
   const i32 e = *(const i32*)s.bad;
   if (e == 0x7fffffff) return;
-  ctx_t ctx = s.fault.ctx;
+  ctx_t ctx = ctx_make(&s.fault.ctx);
   const i32 u = ((const i32*)s.edges)[2 * (i64)e], v = ((const i32*)s.edges)[2 * (i64)e + 1];
   const i32 bad = (u >= 0 && u < s.n) ? v : u;
   const i64 index[2] = {(i64)e, (i64)bad};

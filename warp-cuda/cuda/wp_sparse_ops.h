@@ -259,7 +259,7 @@ WP_FN void sp_ops_dense_report(const sp_ops_dense_report_t& s) {
   const S* r = (const S*)s.dense + (i64)row * s.width;
   for (i64 j = 0; j < s.width; ++j)
     if (!sp_finite(r[j])) {
-      ctx_t ctx = s.fault.ctx;
+      ctx_t ctx = ctx_make(&s.fault.ctx);
       const i64 index[2] = {(i64)row * s.width + j, (i64)f64_to_bits((f64)r[j])};
       raise(&ctx, FAULT_NON_FINITE_INPUT, 0, 2, index, nullptr);
       return;

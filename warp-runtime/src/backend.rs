@@ -242,13 +242,13 @@ pub(crate) unsafe trait ObjectStep: Copy + Send + Sync {
 }
 
 /// The fault context of a build step whose kernel raises faults (`wp::step_fault_t`: a
-/// `wp::ctx_t`, then the names), part of the step's record.
+/// `wp::launch_ctx_t`, then the names), part of the step's record.
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub(crate) struct StepFault {
-    /// The `wp::ctx_t` the step's threads raise with: fault record and flag addresses,
-    /// `raised` (0), the kernel id of `names`, the launch number (the GPU backend's to fill;
-    /// zeros on the CPU).
+    /// The `wp::launch_ctx_t` the step's threads raise with: fault record and flag
+    /// addresses, `reserved` (0), the kernel id of `names`, the launch number (the GPU
+    /// backend's to fill; zeros on the CPU).
     pub(crate) ctx: [u64; 4],
     /// What the step's faults are named by: the operation (`Bvh::refit`) as the kernel and
     /// its arguments by index (the kernel never reads it).
@@ -268,8 +268,8 @@ impl StepFault {
     // Called by the CUDA backend alone.
     #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
     pub(crate) fn fill(&mut self, fault: u64, flag: u64, kernel: i32, launch: u64) {
-        // ctx_t: 0 fault, 8 fault_flag, 16 raised (i16, 0), 18 flags (i16, 0), 20 kernel
-        // (i32), 24 launch.
+        // launch_ctx_t: 0 fault, 8 fault_flag, 16 reserved (i16, 0), 18 flags (i16, 0),
+        // 20 kernel (i32), 24 launch.
         self.ctx = [fault, flag, ((kernel as u32 as u64) << 32), launch];
     }
 }

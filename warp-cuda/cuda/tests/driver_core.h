@@ -856,7 +856,8 @@ DRV_FN void run_unflatten(reader& r, out_t& o) {
 DRV_FN void compute(const case_t& c, out_t& o) {
   o.n = 0;
   o.flag = 0;
-  ctx_t ctxv = ctx_make(&o.fault, &o.flag);
+  launch_ctx_t rec = launch_ctx_make(&o.fault, &o.flag);
+  ctx_t ctxv = ctx_make(&rec);
   ctx_t* ctx = &ctxv;
   reader r;
   r.a = c.a;

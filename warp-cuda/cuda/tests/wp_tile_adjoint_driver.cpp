@@ -145,7 +145,8 @@ static void dump_lanes(const args_t& a, T v) {
 /// adj_tile_load1 of a 37-element tile at o0, its adjoint from buffer 2.
 template <typename T>
 static void k_load1(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto r = SLOT(tile_t<T, 37>);
   fill(a, 2, r);
@@ -157,7 +158,8 @@ static void k_load1(args_t a) {
 /// adj_tile_load2 of a 5 x 7 tile at (o0, o1) (i32 column offset), adjoint from buffer 2.
 template <typename T>
 static void k_load2(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto r = SLOT(tile_t<T, 5, 7>);
   fill(a, 2, r);
@@ -170,7 +172,8 @@ static void k_load2(args_t a) {
 /// adj_tile_load3 of a 3 x 4 x 5 f32 tile at (o0, o1, o2) (the last offset an i32), adjoint
 /// from buffer 2.
 static void k_load3(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto r = SLOT(tile_t<f32, 3, 4, 5>);
   fill(a, 2, r);
@@ -181,7 +184,8 @@ static void k_load3(args_t a) {
 
 /// adj_tile_load4 of a 2 x 3 x 2 x 3 f32 tile at (o0, o1, o2, o3), adjoint from buffer 2.
 static void k_load4(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto r = SLOT(tile_t<f32, 2, 3, 2, 3>);
   fill(a, 2, r);
@@ -193,7 +197,8 @@ static void k_load4(args_t a) {
 /// adj_tile_store3 of a 3 x 4 x 5 f32 tile at (o0, o1, o2): the tile's adjoint starts from
 /// buffer 2 (the tile from buffer 3); outputs the tile's adjoint.
 static void k_store3(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 3, 4, 5>);
   auto at = SLOT(tile_t<f32, 3, 4, 5>);
@@ -207,7 +212,8 @@ static void k_store3(args_t a) {
 
 /// adj_tile_store4 of a 2 x 3 x 2 x 3 f32 tile at (o0, o1, o2, o3), as k_store3.
 static void k_store4(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 2, 3, 2, 3>);
   auto at = SLOT(tile_t<f32, 2, 3, 2, 3>);
@@ -223,7 +229,8 @@ static void k_store4(args_t a) {
 /// a 2 x 1 x 3 x 2 tile (from buffer 0) with adjoint 1 + l / 8 (exact sums in any order); the
 /// adjoints start at zero. Outputs both adjoints.
 static void k_extract_nd(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t3 = SLOT(tile_t<f32, 2, 3, 4>);
   auto a3 = SLOT(tile_t<f32, 2, 3, 4>);
@@ -250,7 +257,8 @@ static void k_extract_nd(args_t a) {
 /// (the tile itself from buffer 3); outputs the tile's adjoint.
 template <typename T>
 static void k_store1(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, 37>);
   auto at = SLOT(tile_t<T, 37>);
@@ -265,7 +273,8 @@ static void k_store1(args_t a) {
 /// adj_tile_store2 of a 5 x 7 tile at (o0, o1), as k_store1.
 template <typename T>
 static void k_store2(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, 5, 7>);
   auto at = SLOT(tile_t<T, 5, 7>);
@@ -507,7 +516,8 @@ static void k_matmul_h(args_t a) {
 /// the tile from buffer 3, the old values' adjoint from buffer 4; outputs the tile's adjoint.
 template <typename T>
 static void k_atomic1(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, 37>);
   auto at = SLOT(tile_t<T, 37>);
@@ -524,7 +534,8 @@ static void k_atomic1(args_t a) {
 /// adj_tile_atomic_add2 of a 5 x 7 tile at (o0, o1) (i32 column offset), as k_atomic1.
 template <typename T>
 static void k_atomic2(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, 5, 7>);
   auto at = SLOT(tile_t<T, 5, 7>);
@@ -562,7 +573,8 @@ static void k_lanes(args_t a) {
 /// adjoints r. Threads below o0 call adj_tile_extract1; outputs adj_t.
 template <typename T>
 static void k_extract1(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, 40>);
   auto at = SLOT(tile_t<T, 40>);
@@ -580,7 +592,8 @@ static void k_extract1(args_t a) {
 /// As k_extract1 for a 5 x 7 tile: buffer 2 holds (i, j) pairs, j as i32.
 template <typename T>
 static void k_extract2(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, 5, 7>);
   auto at = SLOT(tile_t<T, 5, 7>);

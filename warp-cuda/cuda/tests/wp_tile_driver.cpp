@@ -78,7 +78,8 @@ void dump(const args_t& a, size_t& at, const Tile& t) {
 }
 
 static void k_load1(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 37>);
   wp::tile_load(t, a.f1[0], a.o[0], &c);
@@ -91,7 +92,8 @@ static void k_load1(args_t a) {
 /// (o1, o2, o3), an element read at (o3 & 1, 2, 4) appended; then atomically added into f3[1]
 /// at (o2, o3, o0), the old values appended. Outputs: the tile, the element, the old values.
 static void k_load3(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 3, 4, 5>);
   auto old = SLOT(tile_t<f32, 3, 4, 5>);
@@ -110,7 +112,8 @@ static void k_load3(args_t a) {
 /// Rank 4: a (2, 3, 2, 3) tile loaded from f4[0] at (o0, o1, o2, o3), stored into f4[1] at
 /// (o3, o2, o1, o0), an element read at (1, 2, 0, 2) appended.
 static void k_load4(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 2, 3, 2, 3>);
   wp::tile_load(t, a.f4[0], a.o[0], a.o[1], a.o[2], a.o[3], &c);
@@ -124,7 +127,8 @@ static void k_load4(args_t a) {
 }
 
 static void k_load2(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 5, 7>);
   wp::tile_load(t, a.f2[0], a.o[0], a.o[1], &c);
@@ -150,7 +154,8 @@ static void reductions(const args_t& a, size_t& smem_at_, const Tile& t) {
 }
 
 static void k_red_f32_300(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 300>);
   wp::tile_load(t, a.f1[0], 0, &c);
@@ -158,7 +163,8 @@ static void k_red_f32_300(args_t a) {
 }
 
 static void k_red_f32_5(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 5>);
   wp::tile_load(t, a.f1[0], 0, &c);
@@ -166,7 +172,8 @@ static void k_red_f32_5(args_t a) {
 }
 
 static void k_red_f32_2d(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 13, 11>);
   wp::tile_load(t, a.f2[0], 0, 0, &c);
@@ -174,7 +181,8 @@ static void k_red_f32_2d(args_t a) {
 }
 
 static void k_red_i32(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<i32, 200>);
   wp::tile_load(t, a.i1[0], 0, &c);
@@ -194,7 +202,8 @@ static void arg_reductions(const args_t& a, size_t& smem_at_, const Tile& t) {
 }
 
 static void k_arg_f32_300(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 300>);
   wp::tile_load(t, a.f1[0], 0, &c);
@@ -202,7 +211,8 @@ static void k_arg_f32_300(args_t a) {
 }
 
 static void k_arg_f32_5(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 5>);
   wp::tile_load(t, a.f1[0], 0, &c);
@@ -210,7 +220,8 @@ static void k_arg_f32_5(args_t a) {
 }
 
 static void k_arg_f32_2d(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f32, 13, 11>);
   wp::tile_load(t, a.f2[0], 0, 0, &c);
@@ -218,7 +229,8 @@ static void k_arg_f32_2d(args_t a) {
 }
 
 static void k_arg_i32(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<i32, 200>);
   wp::tile_load(t, a.i1[0], 0, &c);
@@ -227,7 +239,8 @@ static void k_arg_i32(args_t a) {
 
 /// `-x` of a 40-element f32 tile and of a 40-element i32 tile, then `-x` in place.
 static void k_neg(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto x = SLOT(tile_t<f32, 40>);
   auto r = SLOT(tile_t<f32, 40>);
@@ -245,7 +258,8 @@ static void k_neg(args_t a) {
 }
 
 static void k_red_f64(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<f64, 150>);
   wp::tile_load(t, a.d1[0], 0, &c);
@@ -256,7 +270,8 @@ static void k_red_f64(args_t a) {
 /// arrays of T and the scalars (f32 bit patterns, read as T's bits for i32).
 template <typename T>
 static void arith(const args_t& a, const wp::array_t<T, 1>& ax, const wp::array_t<T, 1>& ay) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   typedef tile_t<T, 40> T40;
   static_assert(sizeof(T) == 4, "scalars are 32-bit patterns");
@@ -296,7 +311,8 @@ static void k_arith(args_t a) { arith(a, a.f1[0], a.f1[1]); }
 static void k_arith_i32(args_t a) { arith(a, a.i1[0], a.i1[1]); }
 
 static void k_matmul_f32(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto ta = SLOT(tile_t<f32, 7, 13>);
   auto tb = SLOT(tile_t<f32, 13, 5>);
@@ -313,7 +329,8 @@ static void k_matmul_f32(args_t a) {
 }
 
 static void k_matmul_f64(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto ta = SLOT(tile_t<f64, 3, 4>);
   auto tb = SLOT(tile_t<f64, 4, 6>);
@@ -330,7 +347,8 @@ static void k_matmul_f64(args_t a) {
 /// `c2 += a b` (f32, c2 from array 2); outputs p, then c2.
 template <int M, int K, int N>
 static void k_mm16(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto fa = SLOT(tile_t<f32, M, K>);
   auto fb = SLOT(tile_t<f32, K, N>);
@@ -358,7 +376,8 @@ static void k_mm16(args_t a) {
 /// (f32, c2 from array 2); outputs p, then c2.
 template <int M, int K, int N>
 static void k_mmb16(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto fa = SLOT(tile_t<f32, M, K>);
   auto fb = SLOT(tile_t<f32, K, N>);
@@ -400,7 +419,8 @@ const wp::array_t<f64, 1>* arrays1<f64>(const args_t& a) { return a.d1; }
 /// boundary (the matmul's and the loads' scalar fallbacks).
 template <typename T, int M, int K, int N, bool Mis>
 static void k_mm(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   const int sh = Mis ? 1 : 0;
   auto sa = SLOT(tile_t<T, M * K + 1>);
@@ -425,7 +445,8 @@ static void k_mm(args_t a) {
 /// (o2, o3); outputs the tile (the caller dumps array 1).
 template <typename T, int N0, int N1>
 static void k_ld2(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, N0, N1>);
   const wp::array_t<T, 2>* arr = arrays2<T>(a);
@@ -439,7 +460,8 @@ static void k_ld2(args_t a) {
 /// arguments have one rank-1 slot: f64 stores go back into it, at o1).
 template <typename T, int N0>
 static void k_ld1(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   SLOTS_BEGIN();
   auto t = SLOT(tile_t<T, N0>);
   const wp::array_t<T, 1>* arr = arrays1<T>(a);

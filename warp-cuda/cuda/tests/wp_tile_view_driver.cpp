@@ -75,7 +75,8 @@ void copy(const Tile& out, const Tile& t) {
 }
 
 void k_view(args_t a) {
-  wp::ctx_t c = wp::ctx_make(a.fault, a.flag);
+  wp::launch_ctx_t rec = wp::launch_ctx_make(a.fault, a.flag);
+  wp::ctx_t c = wp::ctx_make(&rec);
   size_t s = 0;
   auto X = slot_at<tile_t<f32, 4, 6>>(s);
   auto S = slot_at<tile_t<f32, 2, 3>>(s);

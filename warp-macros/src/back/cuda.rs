@@ -133,6 +133,13 @@ extern \"C\" __global__ void @@ENTRY@@_det_apply(wp::det_t d, wp::u32* word, wp:
 for (wp::i64 i = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += (wp::i64)blockDim.x * gridDim.x) wp::det_apply_at(d, order, n, i);\n}\n\
 #endif\n";
 
+/// An entry's parameter for the launch's fault record (`wp::launch_ctx_t`), which
+/// `WP_GRID_CONST` keeps in parameter space (the library says why).
+pub(crate) const ENTRY_CTX_PARAM: &str = "const WP_GRID_CONST wp::launch_ctx_t __ctx_launch";
+/// The entry's line that makes a thread's context on that record (`__ctx_value`, whose address
+/// the thread function takes).
+pub(crate) const THREAD_CTX: &str = "wp::ctx_t __ctx_value = wp::ctx_make(&__ctx_launch);";
+
 /// Unswitched loops nest at most this deep; deeper ones test their flag at each access.
 const MAX_UNSWITCH_DEPTH: usize = 2;
 
@@ -449,10 +456,8 @@ impl<'a> Emitter<'a> {
         self.out.push_str("}\n");
         if self.f.kind == FnKind::Kernel {
             // The entry point: a grid-stride loop over the launch, one call per thread.
-            let mut decl: Vec<String> = vec![
-                "wp::launch_t __launch".into(),
-                "wp::ctx_t __ctx_value".into(),
-            ];
+            let mut decl: Vec<String> =
+                vec!["wp::launch_t __launch".into(), ENTRY_CTX_PARAM.into()];
             let mut call: Vec<String> = Vec::new();
             for p in &self.f.params {
                 decl.push(format!(
@@ -485,7 +490,7 @@ impl<'a> Emitter<'a> {
                 "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@({}) {{\n    \
                  const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
                  for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
-                 {begin}@@SELF@@({1});{end}\n    }}\n}}\n#endif\n",
+                 {THREAD_CTX}\n        {begin}@@SELF@@({1});{end}\n    }}\n}}\n#endif\n",
                 decl.join(", "),
                 call.join(", ")
             );

@@ -267,7 +267,7 @@ impl<'a> Printer<'a> {
         }
         let mut decl = vec![
             "wp::launch_t __launch".into(),
-            "wp::ctx_t __ctx_value".into(),
+            super::cuda::ENTRY_CTX_PARAM.into(),
         ];
         decl.extend(self.params()?);
         let mut call: Vec<String> = self.f().params.iter().map(|p| self.var(p.var)).collect();
@@ -301,8 +301,10 @@ impl<'a> Printer<'a> {
              wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n    \
              const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
              for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
-             __st.top = 0;\n        {begin}@@SELF@@_adj({});{end}\n    }}\n}}\n#endif\n",
+             __st.top = 0;\n        {}\n        \
+             {begin}@@SELF@@_adj({});{end}\n    }}\n}}\n#endif\n",
             decl.join(", "),
+            super::cuda::THREAD_CTX,
             call.join(", ")
         );
         if det {

@@ -336,7 +336,9 @@ impl Emitter<'_> {
         format!(
         "#ifdef __CUDACC__\nextern \"C\" __global__ void __launch_bounds__({bounds}) @@ENTRY@@({decl}) {{\n    \
          const wp::i64 __flat = (wp::i64)blockIdx.x;\n    \
-         if (__flat < __launch.total) @@SELF@@({call});\n}}\n#endif\n"
+         {}\n    \
+         if (__flat < __launch.total) @@SELF@@({call});\n}}\n#endif\n",
+        super::cuda::THREAD_CTX
     )
     }
 }

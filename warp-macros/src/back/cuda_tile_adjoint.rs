@@ -92,7 +92,7 @@ impl Printer<'_> {
     pub(super) fn tile_entry(&mut self) -> Result<(), String> {
         let mut decl = vec![
             "wp::launch_t __launch".into(),
-            "wp::ctx_t __ctx_value".into(),
+            super::cuda::ENTRY_CTX_PARAM.into(),
         ];
         decl.extend(self.params()?);
         let mut call: Vec<String> = self.f().params.iter().map(|p| self.var(p.var)).collect();
@@ -112,8 +112,10 @@ impl Printer<'_> {
              char __buf[{bytes} > 0 ? {bytes} : 1];\n    \
              wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n    \
              const wp::i64 __flat = (wp::i64)blockIdx.x;\n    \
+             {}\n    \
              if (__flat < __launch.total) @@SELF@@_adj({});\n}}\n#endif\n",
             decl.join(", "),
+            super::cuda::THREAD_CTX,
             call.join(", ")
         );
         Ok(())

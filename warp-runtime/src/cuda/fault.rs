@@ -4,10 +4,10 @@
 //! Every host thread has a record of its own on each GPU it launches on, so that two threads
 //! launching on one GPU never receive each other's faults, and one thread's faulting launch
 //! is not lost behind another thread's. A launch writes into its launching thread's record
-//! (`wp::ctx_t` carries the record's address, the kernel's id and the launch's number); a
-//! synchronisation reads and clears the calling thread's record. A graph has a record of its
-//! own, made when its capture began: a thread that replays a graph also reads the graph's
-//! record at its next synchronisation.
+//! (`wp::launch_ctx_t` carries the record's address, the kernel's id and the launch's
+//! number); a synchronisation reads and clears the calling thread's record. A graph has a
+//! record of its own, made when its capture began: a thread that replays a graph also reads
+//! the graph's record at its next synchronisation.
 //!
 //! A record outlives its thread: when the thread ends it goes back to its GPU's spare list
 //! (a kernel still running may write into it; device memory is never freed under it) and the
@@ -103,7 +103,7 @@ impl FaultRecord {
         }))
     }
 
-    /// The device addresses of the record and of its flag, for a launch's `wp::ctx_t`.
+    /// The device addresses of the record and of its flag, for a launch's `wp::launch_ctx_t`.
     pub(crate) fn addresses(&self) -> (u64, u64) {
         let base = self.buffer.device_ptr();
         (base, base + RECORD_BYTES as u64)
@@ -285,8 +285,8 @@ static UNKNOWN: KernelInfo = KernelInfo {
     ..KernelInfo::BLANK
 };
 
-/// Gives `info` a kernel id for fault records (`wp::ctx_t::kernel`): ids start at 1, and 0
-/// means "not set". A kernel loaded several times (variants, GPUs) has several ids.
+/// Gives `info` a kernel id for fault records (`wp::launch_ctx_t::kernel`): ids start at 1,
+/// and 0 means "not set". A kernel loaded several times (variants, GPUs) has several ids.
 pub(crate) fn kernel_id(info: &'static KernelInfo) -> i32 {
     let mut ids = kernel_ids().lock().unwrap_or_else(|p| p.into_inner());
     ids.push(info);

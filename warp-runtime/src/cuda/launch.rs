@@ -33,14 +33,14 @@ const LAUNCH_FAST: i32 = 1;
 /// [`GpuState::alone`]: super::gpu::GpuState::alone
 const LAUNCH_ALONE: i32 = 2;
 
-/// `wp::ctx_t`.
+/// `wp::launch_ctx_t`.
 #[repr(C)]
 #[derive(Clone, Copy)]
 struct Ctx {
     fault: u64,
     fault_flag: u64,
-    raised: i16,
-    /// `CTX_DEBUG` (see `wp::ctx_t`).
+    reserved: i16,
+    /// `CTX_DEBUG` (see `wp::launch_ctx_t`).
     flags: i16,
     kernel: i32,
     launch: u64,
@@ -49,14 +49,17 @@ struct Ctx {
 /// `wp::CTX_DEBUG`: the runtime's debug mode is on for this launch, so `debug_assert!` is
 /// checked (read at each enqueue: a graph keeps the setting of its capture).
 const CTX_DEBUG: i16 = 1;
-const _: () = assert!(std::mem::size_of::<Ctx>() == 32, "wp::ctx_t is 32 bytes");
-// The offsets `wp::ctx_t` declares (and `StepFault::fill` writes).
 const _: () = assert!(
-    std::mem::offset_of!(Ctx, raised) == 16
+    std::mem::size_of::<Ctx>() == 32,
+    "wp::launch_ctx_t is 32 bytes"
+);
+// The offsets `wp::launch_ctx_t` declares (and `StepFault::fill` writes).
+const _: () = assert!(
+    std::mem::offset_of!(Ctx, reserved) == 16
         && std::mem::offset_of!(Ctx, flags) == 18
         && std::mem::offset_of!(Ctx, kernel) == 20
         && std::mem::offset_of!(Ctx, launch) == 24,
-    "wp::ctx_t's field offsets"
+    "wp::launch_ctx_t's field offsets"
 );
 
 /// Launches `K` over `grid` on GPU `ordinal`: on `stream` when given, else on the calling
@@ -152,7 +155,7 @@ impl<K: Kernel> Prepared<K> {
         let ctx = Ctx {
             fault: 0,
             fault_flag: 0,
-            raised: 0,
+            reserved: 0,
             flags: 0,
             kernel: kernel.id,
             launch: 0,
@@ -291,7 +294,7 @@ impl<K: Kernel> Prepared<K> {
                 n += K::Params::cuda_grad_ptrs(g, &mut ptrs[n..]);
             }
             // SAFETY: `ptrs[..n]` point at values laid out as the kernel's C++ parameters
-            // (launch_t, ctx_t, a deterministic kernel's det_t, then each parameter's
+            // (launch_t, launch_ctx_t, a deterministic kernel's det_t, then each parameter's
             // CudaArg, which mirrors its C++ type),
             // alive until the call returns; cuLaunchKernel copies them.
             unsafe {

@@ -24,7 +24,7 @@ pub(crate) struct Loaded {
     pub(crate) st: Arc<GpuState>,
     _module: Module,
     pub(crate) function: Function,
-    /// What its launches put in `wp::ctx_t::kernel`, so that a fault names this kernel.
+    /// What its launches put in `wp::launch_ctx_t::kernel`, so that a fault names this kernel.
     pub(crate) id: i32,
     /// The dynamic shared memory each block of its launches takes ([`tile_shared`]).
     pub(crate) shared_bytes: usize,
