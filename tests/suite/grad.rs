@@ -1846,7 +1846,8 @@ fn run_adjoint_on_host(
          template <bool FAST> static int run() {{\n\
          {decl}\n\
          wp::fault_t fault = {{}}; unsigned int flag = 0;\n\
-         wp::ctx_t ctx = {{&fault, &flag}};\n\
+         wp::launch_ctx_t rec = wp::launch_ctx_make(&fault, &flag);\n\
+         wp::ctx_t ctx = wp::ctx_make(&rec);\n\
          wp::launch_t launch = {{{{{threads}, 1, 1, 1}}, {threads}, 1, FAST ? 1 : 0}};\n\
          static char buf[WP_ADSTACK_BYTES];\n\
          wp::adstack_t st = wp::adstack_new(buf, WP_ADSTACK_BYTES);\n\

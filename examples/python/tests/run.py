@@ -17,6 +17,9 @@ import sys
 import time
 import traceback
 
+# PyTorch and JAX share the GPU in this process: JAX would otherwise take most of its memory
+# at its first use.
+os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 HERE = os.path.dirname(os.path.abspath(__file__))
 # After PYTHONPATH's entries: a module given there wins over a stale copy in the checkout.
 sys.path.append(os.path.dirname(HERE))

@@ -342,7 +342,9 @@ def _make_torch_function(op):
         @staticmethod
         @torch.autograd.function.once_differentiable
         def backward(ctx, *grad_outs):
-            saved = ctx.saved_tensors
+            # Saved outputs come back attached to the graph, and DLPack (torch's CPU export)
+            # refuses a tensor that requires grad: the op reads values only.
+            saved = [t.detach() for t in ctx.saved_tensors]
             bound = dict(ctx.op_bound)
             for p, t in zip(inputs, saved):
                 bound[p["name"]] = t
