@@ -173,16 +173,27 @@ fn invoke_frame(
     for (k, (_, a)) in attrs.iter().enumerate() {
         let p = &mut storage[k] as *mut u64;
         // SAFETY: an 8-byte slot for each value.
-        let (t, dtype) = unsafe {
+        let dtype = unsafe {
             match *a {
-                A::I64(v) => (p.cast::<i64>().write(v), DataType::S64),
-                A::I32(v) => (p.cast::<i32>().write(v), DataType::S32),
-                A::F64(v) => (p.cast::<f64>().write(v), DataType::F64),
-                A::F32(v) => (p.cast::<f32>().write(v), DataType::F32),
-                A::Array => ((), 0),
+                A::I64(v) => {
+                    p.cast::<i64>().write(v);
+                    DataType::S64
+                }
+                A::I32(v) => {
+                    p.cast::<i32>().write(v);
+                    DataType::S32
+                }
+                A::F64(v) => {
+                    p.cast::<f64>().write(v);
+                    DataType::F64
+                }
+                A::F32(v) => {
+                    p.cast::<f32>().write(v);
+                    DataType::F32
+                }
+                A::Array => 0,
             }
         };
-        let _ = t;
         types.push(match a {
             A::Array => AttrType::ARRAY,
             _ => AttrType::SCALAR,
@@ -809,7 +820,7 @@ fn xla_batched_matches_a_loop(dev: &wp::Device) {
     let cy = wp::Array::<f64, 2>::from_slice_shape(&gy, [1, N], dev).unwrap();
     let ct = wp::Array::<f64, 2>::from_slice_shape(&[0.5], [1, 1], dev).unwrap();
     let gxb = arr(&vec![9.0; B * N], dev);
-    let gampb = arr(&vec![9.0; B * 2], dev);
+    let gampb = arr(&[9.0; B * 2], dev);
     let (copy_y, copy_t) = (zeros::<f64, 2>([B, N], dev), zeros::<f64, 2>([B, 1], dev));
     let shaped = |a: &wp::Array<f64>, d: &[usize]| {
         let mut b = buf(a, Dtype::F64);

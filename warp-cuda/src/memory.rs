@@ -55,7 +55,7 @@ fn is_page_locked(ptr: *const u8) -> bool {
 /// The ordinal of the GPU whose memory `ptr` addresses (a buffer another library allocated:
 /// an XLA operand), or `None` for memory the driver does not know as a device's (host memory,
 /// a dangling address). The plural `cuPointerGetAttributes` for the reason given at
-/// [`is_page_locked`]: unknown memory is not an API error.
+/// `is_page_locked`: unknown memory is not an API error.
 pub fn pointer_device_ordinal(ptr: u64) -> Option<usize> {
     let mut ordinal: i32 = -1;
     let mut attribute = sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_DEVICE_ORDINAL;

@@ -142,7 +142,7 @@ impl Op {
     /// A computation op's body is opaque: only the records.
     ///
     /// # Errors
-    /// A kernel that does not compile; [`Error::NoDevice`](crate::Error::NoDevice).
+    /// A kernel that does not compile; [`Error::NoDevice`].
     pub fn prepare(&self, device: &crate::device::Device, threads: usize) -> crate::Result<()> {
         self.inner.run.prepare(device)?;
         #[cfg(feature = "cuda")]
