@@ -38,10 +38,20 @@ class Op:
         self._outputs = [p for p in params if p["role"] == "output"]
         self._lock = threading.Lock()
         self._torch_fn = None
+        self._torch_op = None
         self._jax_fns = {}
         self._alloc_cache = {}
         self._jax_prepared = False
         self.__doc__ = "%s\n\n%s" % (self.signature(), Op.__doc__)
+        import sys
+
+        if "torch" in sys.modules:
+            # torch is loaded already: register the op with torch.library now, so that its
+            # first torch_op call may be inside torch.compile.
+            try:
+                self._torch_library()
+            except Exception:  # an old torch without custom_op: torch_op says so when called
+                pass
 
     # ---- signature and arguments
 
@@ -239,6 +249,26 @@ class Op:
         fn = self._torch_function()
         return fn.apply(*[bound[p["name"]] for p in self._call])
 
+    def torch_op(self, *args, **kwargs):
+        """The op as a ``torch.library.custom_op`` (``torch.ops.warp_lang_<module>.<name>``):
+        the same computation as :meth:`torch`, but ``torch.compile`` keeps it in its graph as
+        an opaque call (a fake implementation gives the outputs' shapes; the backward is a
+        second custom op), so a compiled model need not break its graph around it."""
+        bound = self._bind(args, kwargs)
+        fn = self._torch_op
+        if fn is None:
+            # Registering the custom ops is Python that torch.compile cannot trace: it happens
+            # at the first call, which must be outside a compiled function (or torch was
+            # imported before this module, and it happened then).
+            fn = self._torch_library()
+        return fn(*[bound[p["name"]] for p in self._call])
+
+    def _torch_library(self):
+        with self._lock:
+            if self._torch_op is None:
+                self._torch_op = _make_torch_op(self)
+            return self._torch_op
+
     def _torch_function(self):
         with self._lock:
             if self._torch_fn is None:
@@ -313,42 +343,86 @@ def _torch_stream(torch, dev):
     return torch.cuda.current_stream(dev).cuda_stream if dev.type == "cuda" else None
 
 
+def _torch_dtype(torch, p):
+    return getattr(torch, p["dtype"])
+
+
+def _torch_fresh(op, torch, bound, dev):
+    """The call's outputs and scratch as new tensors, and whether the call launches."""
+    allocs, launches = op._allocs(bound, lambda t, p: t.shape)
+    made = {
+        p["name"]: (torch.zeros if p["zeroed"] or p["role"] == "scratch" else torch.empty)(
+            shape, dtype=_torch_dtype(torch, p), device=dev
+        )
+        for p, shape in allocs
+    }
+    return made, launches
+
+
+def _torch_forward(op, torch, bound):
+    """The forward on torch tensors: ``bound`` holds the call's values by name (its input
+    tensors are replaced by detached views: DLPack refuses tensors that require grad). Returns
+    the outputs in order and the device."""
+    dev = _torch_device_check(op, bound)
+    for p in op._call:
+        if p["role"] == "input":
+            bound[p["name"]] = bound[p["name"]].detach()
+    made, launches = _torch_fresh(op, torch, bound, dev)
+    if launches:
+        op._native._forward(_torch_stream(torch, dev), op._args(bound, made))
+    return [made[p["name"]] for p in op._outputs], dev
+
+
+def _torch_backward(op, torch, bound, dev, outs, grad_outs, wanted):
+    """The backward on torch tensors: ``bound`` the call's values by name (detached inputs),
+    ``outs`` the forward's outputs (a kernel op's adjoint reads them; ignored for a
+    computation op, whose body is replayed on fresh ones), ``grad_outs`` one gradient (or
+    None) per output, ``wanted`` one flag per call parameter. Returns one entry per call
+    parameter: the input's gradient, or None."""
+    by_name = {p["name"]: k for k, p in enumerate(op._params)}
+    if op.kind == "kernel":
+        made = {p["name"]: t for p, t in zip(op._outputs, outs)}
+        _, launches = op._allocs(bound, lambda t, p: t.shape)
+    else:
+        made, launches = _torch_fresh(op, torch, bound, dev)
+    grads = [None] * len(op._params)
+    for p, g in zip(op._outputs, grad_outs):
+        if not p["differentiable"]:
+            continue
+        if g is None:
+            g = torch.zeros_like(made[p["name"]])
+        # The adjoint reads and clears it; a contiguous copy (for `sum()` also the
+        # materialisation of an expanded tensor of ones).
+        grads[by_name[p["name"]]] = g.detach().to(_torch_dtype(torch, p)).clone(memory_format=torch.contiguous_format)
+    result = []
+    for p, want in zip(op._call, wanted):
+        if p["role"] == "input" and want and p["differentiable"]:
+            x = bound[p["name"]]
+            # The gradient shares its array's layout (strides), whatever the view.
+            g = torch.empty_strided(x.size(), x.stride(), dtype=x.dtype, device=x.device).zero_()
+            grads[by_name[p["name"]]] = g
+            result.append(g)
+        else:
+            result.append(None)
+    if launches and any(r is not None for r in result):
+        op._native._backward(_torch_stream(torch, dev), op._args(bound, made), grads)
+    return result
+
+
 def _make_torch_function(op):
     import torch
 
     call_names = [p["name"] for p in op._call]
     inputs = [p for p in op._call if p["role"] == "input"]
-    by_name = {p["name"]: k for k, p in enumerate(op._params)}
-    native = op._native
-
-    def dtype_of(p):
-        return getattr(torch, p["dtype"])
-
-    def fresh(bound, dev):
-        allocs, launches = op._allocs(bound, lambda t, p: t.shape)
-        made = {
-            p["name"]: (torch.zeros if p["zeroed"] or p["role"] == "scratch" else torch.empty)(
-                shape, dtype=dtype_of(p), device=dev
-            )
-            for p, shape in allocs
-        }
-        return made, launches
 
     class Function(torch.autograd.Function):
         @staticmethod
         def forward(ctx, *flat):
             bound = dict(zip(call_names, flat))
-            dev = _torch_device_check(op, bound)
-            # DLPack refuses tensors that require grad: the op sees the values.
-            for p in inputs:
-                bound[p["name"]] = bound[p["name"]].detach()
-            made, launches = fresh(bound, dev)
-            if launches:
-                native._forward(_torch_stream(torch, dev), op._args(bound, made))
+            outs, dev = _torch_forward(op, torch, bound)
             ctx.op_bound = {n: v for n, v in bound.items() if n not in {p["name"] for p in inputs}}
             ctx.op_device = dev
             arrays = [bound[p["name"]] for p in inputs]
-            outs = [made[p["name"]] for p in op._outputs]
             ctx.save_for_backward(*arrays, *(outs if op.kind == "kernel" else []))
             nondiff = [o for p, o in zip(op._outputs, outs) if not p["differentiable"]]
             if nondiff:
@@ -364,40 +438,101 @@ def _make_torch_function(op):
             bound = dict(ctx.op_bound)
             for p, t in zip(inputs, saved):
                 bound[p["name"]] = t
-            dev = ctx.op_device
-            if op.kind == "kernel":
-                made = {p["name"]: t for p, t in zip(op._outputs, saved[len(inputs) :])}
-                _, launches = op._allocs(bound, lambda t, p: t.shape)
-            else:
-                # The body is replayed on fresh outputs and scratch.
-                made, launches = fresh(bound, dev)
-            grads = [None] * len(op._params)
-            any_grad = False
-            for p, g in zip(op._outputs, grad_outs):
-                if not p["differentiable"]:
-                    continue
-                if g is None:
-                    g = torch.zeros_like(made[p["name"]])
-                # The adjoint reads and clears it; a contiguous copy (for `sum()` also the
-                # materialisation of an expanded tensor of ones).
-                grads[by_name[p["name"]]] = g.to(dtype_of(p)).clone(memory_format=torch.contiguous_format)
-            result = []
-            for p, need in zip(op._call, ctx.needs_input_grad):
-                if p["role"] == "input" and need and p["differentiable"]:
-                    x = bound[p["name"]]
-                    # The gradient shares its array's layout (strides), whatever the view.
-                    g = torch.empty_strided(x.size(), x.stride(), dtype=x.dtype, device=x.device).zero_()
-                    grads[by_name[p["name"]]] = g
-                    result.append(g)
-                    any_grad = True
-                else:
-                    result.append(None)
-            if any_grad and launches:
-                native._backward(_torch_stream(torch, dev), op._args(bound, made), grads)
-            return tuple(result)
+            grads = _torch_backward(
+                op, torch, bound, ctx.op_device, saved[len(inputs) :], grad_outs, ctx.needs_input_grad
+            )
+            return tuple(grads)
 
     Function.__name__ = Function.__qualname__ = "_TorchFn_%s" % op.name
     return Function
+
+
+def _schema_type(p):
+    if p["role"] == "input":
+        return "Tensor"
+    if p["dtype"] == "bool":
+        return "bool"
+    return "float" if "float" in p["dtype"] else "int"
+
+
+def _make_torch_op(op):
+    """The op as a ``torch.library.custom_op`` (``<namespace>::<name>``), with a fake
+    implementation (the shape rules) and autograd through a second custom op for the
+    backward, so that ``torch.compile`` keeps it in its graph as an opaque call."""
+    import torch
+
+    ns = "warp_lang_" + "".join(c if c.isalnum() else "_" for c in _FFI_PREFIX.split(".", 1)[1])
+    call_names = [p["name"] for p in op._call]
+    in_params = [p for p in op._call if p["role"] == "input"]
+    diff_in = [p for p in in_params if p["differentiable"]]
+    diff_out = [p for p in op._outputs if p["differentiable"]]
+    kept = op._outputs if op.kind == "kernel" else []
+
+    def returns(n):
+        return "Tensor" if n == 1 else "(%s)" % ", ".join(["Tensor"] * n)
+
+    args = ", ".join("%s %s" % (_schema_type(p), p["name"]) for p in op._call)
+    fwd_schema = "(%s) -> %s" % (args, returns(len(op._outputs)))
+
+    def result(xs):
+        return xs[0] if len(xs) == 1 else tuple(xs)
+
+    def fwd_impl(*flat):
+        outs, _ = _torch_forward(op, torch, dict(zip(call_names, flat)))
+        return result(outs)
+
+    def fake_outs(flat):
+        bound = dict(zip(call_names, flat))
+        dev = next(bound[p["name"]].device for p in in_params)
+        allocs, _ = op._allocs(bound, lambda t, p: t.shape)
+        made = {p["name"]: torch.empty(shape, dtype=_torch_dtype(torch, p), device=dev) for p, shape in allocs}
+        return [made[p["name"]] for p in op._outputs]
+
+    fwd = torch.library.custom_op("%s::%s" % (ns, op.name), mutates_args=(), schema=fwd_schema)(fwd_impl)
+    fwd.register_fake(lambda *flat: result(fake_outs(flat)))
+    if not diff_in:
+        return fwd
+
+    bwd_args = args
+    if kept:
+        bwd_args += ", " + ", ".join("Tensor out_%s" % p["name"] for p in kept)
+    bwd_args += ", " + ", ".join("Tensor ct_%s" % p["name"] for p in diff_out) if diff_out else ""
+    bwd_schema = "(%s) -> %s" % (bwd_args, returns(len(diff_in)))
+    n_call, n_kept = len(call_names), len(kept)
+
+    def bwd_impl(*flat):
+        bound = dict(zip(call_names, flat[:n_call]))
+        dev = _torch_device_check(op, bound)
+        for p in in_params:
+            bound[p["name"]] = bound[p["name"]].detach()
+        outs = [t.detach() for t in flat[n_call : n_call + n_kept]]
+        cts = dict(zip((p["name"] for p in diff_out), flat[n_call + n_kept :]))
+        grad_outs = [cts.get(p["name"]) for p in op._outputs]
+        wanted = [p["role"] == "input" and p["differentiable"] for p in op._call]
+        grads = _torch_backward(op, torch, bound, dev, outs, grad_outs, wanted)
+        return result([g for g, p in zip(grads, op._call) if p["role"] == "input" and p["differentiable"]])
+
+    bwd = torch.library.custom_op("%s::%s_bwd" % (ns, op.name), mutates_args=(), schema=bwd_schema)(bwd_impl)
+    bwd.register_fake(lambda *flat: result([torch.empty_like(flat[call_names.index(p["name"])]) for p in diff_in]))
+
+    def setup_context(ctx, inputs, output):
+        outs = list(output) if isinstance(output, tuple) else [output]
+        ctx.scalars = {p["name"]: v for p, v in zip(op._call, inputs) if p["role"] != "input"}
+        tensors = [v for p, v in zip(op._call, inputs) if p["role"] == "input"]
+        ctx.save_for_backward(*tensors, *(outs[op._outputs.index(p)] for p in kept))
+
+    def backward(ctx, *grads):
+        ct = [g for p, g in zip(op._outputs, grads) if p["differentiable"]]
+        saved = list(ctx.saved_tensors)
+        tensors = iter(saved[: len(in_params)])
+        flat = [next(tensors) if p["role"] == "input" else ctx.scalars[p["name"]] for p in op._call]
+        got = bwd(*flat, *saved[len(in_params) :], *ct)
+        got = list(got) if isinstance(got, tuple) else [got]
+        by = dict(zip((p["name"] for p in diff_in), got))
+        return tuple(by.get(p["name"]) if p["role"] == "input" else None for p in op._call)
+
+    fwd.register_autograd(backward, setup_context=setup_context)
+    return fwd
 
 
 # ---- JAX: the op as XLA FFI calls (`ops/xla_ffi.rs` holds the handlers)
