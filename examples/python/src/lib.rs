@@ -6,10 +6,14 @@
 //!   `out = a x + y`). Each is `ws.energy.numpy(..)`, `ws.energy.vjp_numpy(..)`,
 //!   `ws.energy.torch(..)` (a `torch.autograd.Function` whose backward is the kernel's
 //!   adjoint) and `ws.energy(..)`; tests/ holds their tests.
+//! - **The ocean scene** (ocean.rs, driven by ocean.py): `ocean` and `ocean64` (a surface of
+//!   Gerstner waves with analytic normals, the f32 and f64 instances of one generic kernel)
+//!   and `fd_normals` / `fd_normals64` (normals by finite differences).
 //! - **Interop** (interop.rs): zero-copy DLPack round trips and a Tape behind a hand-written
 //!   autograd.Function, the pattern the ops replace.
 
 mod interop;
+mod ocean;
 
 use pyo3::prelude::*;
 use warp_lang as wp;
@@ -35,5 +39,8 @@ fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
             .build()?,
     )?;
     ops.add(Op::kernel("axpy", axpy).outputs(["out"]).build()?)?;
+    for op in ocean::ops()? {
+        ops.add(op)?;
+    }
     Ok(())
 }

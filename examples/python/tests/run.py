@@ -1,5 +1,5 @@
 """Runs the Python tests of the `warp_sim` example module: every `test_*` function of
-test_ops_numpy.py, test_ops_torch.py and test_ops_jax.py (or of the files named on the command line).
+test_ops_numpy.py, test_ops_torch.py, test_ops_jax.py and test_ocean.py (or of the files named on the command line).
 
     python3 examples/python/tests/run.py                      # CI: torch and GPU parts SKIPPED
     python3 examples/python/tests/run.py --require torch,jax,cuda  # the GPU machine: none may skip
@@ -27,7 +27,7 @@ sys.path.insert(0, HERE)
 
 from _harness import Skip  # noqa: E402
 
-FILES = ["test_ops_numpy.py", "test_ops_torch.py", "test_ops_jax.py"]
+FILES = ["test_ops_numpy.py", "test_ops_torch.py", "test_ops_jax.py", "test_ocean.py"]
 
 
 def run_file(path, require, counts):
