@@ -9,6 +9,7 @@
 //! - **Interop** (interop.rs): zero-copy DLPack round trips and a Tape behind a hand-written
 //!   autograd.Function, the pattern the ops replace.
 
+mod bounce;
 mod interop;
 
 use pyo3::prelude::*;
@@ -28,6 +29,7 @@ fn axpy(a: f32, x: Array<f32>, y: Array<f32>, out: Array<f32>) {
 #[pymodule]
 fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     interop::register(m)?;
+    bounce::register(m)?;
     let ops = wp::python::Ops::new(m)?;
     ops.add(
         Op::kernel("energy", interop::energy)
@@ -35,5 +37,6 @@ fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
             .build()?,
     )?;
     ops.add(Op::kernel("axpy", axpy).outputs(["out"]).build()?)?;
+    ops.add(bounce::op()?)?;
     Ok(())
 }
