@@ -132,7 +132,7 @@ def _gradient_torch(kind):
     loss = ((ws.bounce.torch(v) - t) ** 2).sum()
     (g,) = torch.autograd.grad(loss, v)
     assert g.device == dev
-    assert abs(float(loss) - loss_ref) <= REL * loss_ref
+    assert abs(float(loss.detach()) - loss_ref) <= REL * loss_ref
     _close(g.cpu().numpy(), g_ref.cpu().numpy(), "torch.autograd.grad (%s)" % kind)
 
 
@@ -152,6 +152,13 @@ MIN_FALL = 50.0
 MAX_HELD_OUT = 0.05
 
 
+# JAX's and torch's runs start from the same weights and targets and take the same Adam steps
+# through the same op: measured, their loss curves agree to 7e-14 relative over the 200
+# iterations (rounding in the network's matrix products and in Adam's update, which the
+# training does not amplify at this scale); 1e-9 fails on any difference in the method.
+SAME_CURVE = 1e-9
+
+
 def _train(framework, device):
     import train_bounce
 
@@ -161,6 +168,7 @@ def _train(framework, device):
         r["held_out_after"],
         framework,
     )
+    return np.array(r["losses"])
 
 
 def test_train_jax():
@@ -170,4 +178,11 @@ def test_train_jax():
 
 def test_train_torch():
     _torch()
-    _train("torch", "cpu")
+    curve = _train("torch", "cpu")
+    try:
+        _jax()
+    except Skip:
+        return
+    other = _train("jax", "cpu")
+    err = (np.abs(curve - other) / other).max()
+    assert err <= SAME_CURVE, "torch's and JAX's loss curves differ by %.3e relative" % err
