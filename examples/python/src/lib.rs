@@ -12,6 +12,7 @@
 //! - **Interop** (interop.rs): zero-copy DLPack round trips and a Tape behind a hand-written
 //!   autograd.Function, the pattern the ops replace.
 
+mod bounce;
 mod interop;
 mod ocean;
 
@@ -32,6 +33,7 @@ fn axpy(a: f32, x: Array<f32>, y: Array<f32>, out: Array<f32>) {
 #[pymodule]
 fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     interop::register(m)?;
+    bounce::register(m)?;
     let ops = wp::python::Ops::new(m)?;
     ops.add(
         Op::kernel("energy", interop::energy)
@@ -42,5 +44,6 @@ fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     for op in ocean::ops()? {
         ops.add(op)?;
     }
+    ops.add(bounce::op()?)?;
     Ok(())
 }

@@ -27,7 +27,7 @@ sys.path.insert(0, HERE)
 
 from _harness import Skip  # noqa: E402
 
-FILES = ["test_ops_numpy.py", "test_ops_torch.py", "test_ops_jax.py", "test_ocean.py"]
+FILES = ["test_ops_numpy.py", "test_ops_torch.py", "test_ops_jax.py", "test_ocean.py", "test_bounce.py"]
 
 
 def run_file(path, require, counts):
