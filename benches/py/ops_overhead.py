@@ -114,7 +114,7 @@ def torch_rows(ws, wp):
             ws.axpy.torch(A, xg, yg).sum().backward()
 
         row(group, "torch eager", per_call_us(step_eager, sync), "us")
-        xg.grad = None
+        xg.grad = yg.grad = None
         ws.axpy.torch(A, xg, yg).sum().backward()
         e = max(rel_err(xg.grad.cpu(), torch.full((SMALL,), A)), rel_err(yg.grad.cpu(), torch.ones(SMALL)))
         row(group, "warp-lang op.torch", per_call_us(step_ours, sync), "us", e)
@@ -237,6 +237,15 @@ def warp_torch_backward(wp, torch, dev, x, y, group, sync):
 # JAX
 
 
+def _warp_jax_kernel(wp):
+    """Warp's jax_kernel: `warp.jax_kernel` in 1.19, `warp.jax_experimental` before."""
+    if hasattr(wp, "jax_kernel"):
+        return wp.jax_kernel
+    from warp.jax_experimental import jax_kernel
+
+    return jax_kernel
+
+
 def jax_rows(ws, wp):
     try:
         import jax
@@ -281,8 +290,7 @@ def jax_rows(ws, wp):
             skipped(group, "Warp jax_kernel", "Warp's jax_kernel runs on GPUs only")
         else:
             try:
-                from warp.jax_experimental import jax_kernel
-
+                jax_kernel = _warp_jax_kernel(wp)
                 jk = jax_kernel(warp_kernel(wp), num_outputs=1)
                 warp_jax = jax.jit(lambda x, y: jk(A, x, y)[0])
                 row(group, "Warp jax_kernel under jit", per_call_us(runner(warp_jax), sync), "us", rel_err(warp_jax(x, y), want))
@@ -322,6 +330,19 @@ def jax_rows(ws, wp):
                 last["v"] = g(x, y)[0]
 
             row(group, name, per_call_us(call, sync), "us", e)
+        if warp_jax is not None:
+            try:
+                jkb = _warp_jax_kernel(wp)(warp_kernel(wp), num_outputs=1, enable_backward=True)
+                g = jax.jit(jax.grad(lambda x, y: jkb(A, x, y)[0].sum(), argnums=(0, 1)))
+                gx, gy = g(x, y)
+                e = max(rel_err(gx, np.full(SMALL, A)), rel_err(gy, np.ones(SMALL)))
+
+                def callw(g=g):
+                    last["v"] = g(x, y)[0]
+
+                row(group, "Warp jax_kernel(enable_backward)", per_call_us(callw, sync), "us", e)
+            except Exception as exc:  # noqa: BLE001
+                skipped(group, "Warp jax_kernel(enable_backward)", "%s: %s" % (type(exc).__name__, exc))
         if label != "cuda:0":
             continue
         group = "jax %s, GPU time per call (16 Mi)" % label
