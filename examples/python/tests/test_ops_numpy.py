@@ -27,8 +27,11 @@ def energy_grad_closed(x, k, g):
 
 
 def test_module_layout():
-    # The helper is installed as a submodule of the extension and each op is its Op.
-    assert "warp_sim._warp_lang" in sys.modules
+    # The helper is installed as a submodule of the extension (`warp_sim._warp_lang`, or
+    # `warp_sim.warp_sim._warp_lang` inside the package a maturin wheel installs) and each
+    # op is its Op.
+    helper = ws._warp_lang.__name__
+    assert helper.endswith("warp_sim._warp_lang") and sys.modules[helper] is ws._warp_lang, helper
     assert isinstance(ws.energy, ws._warp_lang.Op)
     assert isinstance(ws.axpy, ws._warp_lang.Op)
     # The interop functions are still there.

@@ -110,7 +110,9 @@ impl<'py> Ops<'py> {
             },
         )?;
         let wrapped = self.helper.getattr("Op")?.call1((native,))?;
-        self.module.setattr(name.as_str(), wrapped)?;
+        // `add`, not `setattr`: it also lists the op in the module's `__all__`, which the
+        // package maturin wraps an extension in re-exports with `from .<module> import *`.
+        self.module.add(name.as_str(), wrapped)?;
         Ok(self)
     }
 }
