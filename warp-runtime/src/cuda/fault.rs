@@ -58,6 +58,7 @@ impl RecordPool {
     /// this GPU then takes one instead of allocating, so that it may fall inside another
     /// library's stream capture (XLA's command buffers call an op's handler from their own
     /// threads while capturing, where CUDA refuses an allocation).
+    #[cfg(feature = "ops")]
     pub(crate) fn reserve(&self, n: usize) -> Result<()> {
         while self.spare().clean.len() < n {
             let rec = FaultRecord::new(self)?;

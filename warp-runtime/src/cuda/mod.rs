@@ -54,7 +54,8 @@ pub(crate) mod primitives;
 #[cfg(feature = "cuda")]
 pub mod stream;
 
-#[cfg(feature = "cuda")]
+// The XLA handlers (`ops::xla_ffi`) reach a GPU's state directly.
+#[cfg(all(feature = "cuda", feature = "ops"))]
 pub(crate) use gpu::{err as gpu_err, state as gpu_state};
 #[cfg(feature = "cuda")]
 pub(crate) use module::format_compile_reports;
@@ -66,7 +67,7 @@ pub(crate) use backend::Cuda;
 
 /// Makes sure GPU `device` holds at least `n` spare fault records, so that the first launch of
 /// up to `n` new threads there allocates nothing (see `RecordPool::reserve`).
-#[cfg(feature = "cuda")]
+#[cfg(all(feature = "cuda", feature = "ops"))]
 pub(crate) fn reserve_fault_records(device: &crate::device::Device, n: usize) -> crate::Result<()> {
     if let crate::device::DeviceKind::Cuda { ordinal } = device.kind() {
         gpu::state(device, ordinal)?.faults.reserve(n)?;
