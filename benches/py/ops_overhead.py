@@ -249,7 +249,6 @@ def _warp_jax_kernel(wp):
 def jax_rows(ws, wp):
     try:
         import jax
-        import jax.numpy as jnp
     except ImportError:
         skipped("jax", "all rows", "JAX not installed")
         return

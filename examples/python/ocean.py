@@ -412,12 +412,6 @@ def main(argv=None):
             write_png(path, shade(p, n, w["amp"].sum()))
             saved.append(path)
     print("frames: %d PNGs in %s" % (len(saved), args.out))
-    try:
-        import rerun  # noqa: F401
-
-        print("rerun: installed, but this example writes no recording yet")
-    except ImportError:
-        print("rerun: not installed, no recording")
 
     # (a) Error against the closed form (the saved frames' times; NumPy f64).
     b_pos, b_ang = f32_bounds(rest, w, ts)

@@ -24,3 +24,26 @@ def raises(exc_type, fn, *words):
     except Exception as e:  # the wrong type: say which
         raise AssertionError("expected %s, got %s: %s" % (exc_type.__name__, type(e).__name__, e))
     raise AssertionError("expected %s, nothing was raised" % exc_type.__name__)
+
+
+def jax_x64():
+    """JAX with float64 on (the ops' f64 tests need it), or Skip("jax")."""
+    try:
+        import jax
+    except ImportError:
+        raise Skip("jax", "JAX not installed")
+    jax.config.update("jax_enable_x64", True)
+    return jax
+
+
+def jax_device(jax, kind):
+    """JAX's CPU device for `kind` "cpu", else its first GPU, or Skip("cuda")."""
+    if kind == "cpu":
+        return jax.devices("cpu")[0]
+    try:
+        gpus = jax.devices("gpu")
+    except RuntimeError:
+        gpus = []
+    if not gpus:
+        raise Skip("cuda", "no GPU backend in this jaxlib (jax.devices('gpu') is empty)")
+    return gpus[0]

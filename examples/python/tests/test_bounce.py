@@ -23,6 +23,8 @@ The torch and CUDA tests SKIP without torch or a GPU. Run through run.py."""
 import numpy as np
 import warp_sim as ws
 from _harness import Skip
+from _harness import jax_device as _device
+from _harness import jax_x64 as _jax
 
 BALLS = 64
 REL = 1e-12
@@ -63,27 +65,10 @@ def test_gradient_numpy():
     assert np.abs(g_ref).max() > 0.1
 
 
-def _jax():
-    try:
-        import jax
-    except ImportError:
-        raise Skip("jax", "JAX not installed")
-    jax.config.update("jax_enable_x64", True)
-    return jax
-
 
 def _gradient_jax(kind):
     jax = _jax()
-    if kind == "cpu":
-        dev = jax.devices("cpu")[0]
-    else:
-        try:
-            gpus = jax.devices("gpu")
-        except RuntimeError:
-            gpus = []
-        if not gpus:
-            raise Skip("cuda", "no GPU backend in this jaxlib (jax.devices('gpu') is empty)")
-        dev = gpus[0]
+    dev = _device(jax, kind)
     v0, target = _case()
     # The reference on the op's device (from host arrays); its gradient comes back through
     # JAX's DLPack import, which also takes a GPU array.

@@ -8,31 +8,13 @@ through run.py."""
 import numpy as np
 import ocean
 import warp_sim as ws
-from _harness import Skip
+from _harness import jax_device as _device
+from _harness import jax_x64 as _jax
 
 # Times with phases of both signs and a few periods of the slowest wave.
 TIMES = (0.0, 1.3, 4.0)
 
 
-def _jax():
-    try:
-        import jax
-    except ImportError:
-        raise Skip("jax", "JAX not installed")
-    jax.config.update("jax_enable_x64", True)
-    return jax
-
-
-def _device(jax, kind):
-    if kind == "cpu":
-        return jax.devices("cpu")[0]
-    try:
-        gpus = jax.devices("gpu")
-    except RuntimeError:
-        gpus = []
-    if not gpus:
-        raise Skip("cuda", "no GPU backend in this jaxlib (jax.devices('gpu') is empty)")
-    return gpus[0]
 
 
 def _scene(n=96, m=16, q=0.6):

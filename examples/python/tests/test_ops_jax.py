@@ -7,7 +7,9 @@ test prints SKIPPED. Run through run.py."""
 
 import numpy as np
 import warp_sim as ws
-from _harness import Skip, raises
+from _harness import jax_device as _device
+from _harness import jax_x64 as _jax
+from _harness import raises
 
 K = 1.75
 # check_grads' tolerances: f64 central differences of smooth kernels with values of order 1
@@ -16,25 +18,6 @@ K = 1.75
 CHECK = dict(atol=1e-6, rtol=1e-6)
 
 
-def _jax():
-    try:
-        import jax
-    except ImportError:
-        raise Skip("jax", "JAX not installed")
-    jax.config.update("jax_enable_x64", True)
-    return jax
-
-
-def _device(jax, kind):
-    if kind == "cpu":
-        return jax.devices("cpu")[0]
-    try:
-        gpus = jax.devices("gpu")
-    except RuntimeError:
-        gpus = []
-    if not gpus:
-        raise Skip("cuda", "no GPU backend in this jaxlib (jax.devices('gpu') is empty)")
-    return gpus[0]
 
 
 def _energy_closed(jnp, x, k):
