@@ -429,6 +429,57 @@ fn scan_f32_fractional_within_rounding() {
     }
 }
 
+/// The single-pass scan's float results do not depend on where a look-back ends: with an
+/// inclusive prefix published by every tile, every 3rd, 5th and 40th (walks of one tile,
+/// within a window and across windows, as timing decides on a GPU), f32 and f64 results are
+/// the same bit for bit, in blocks of two warps (32 lanes) and of one partial warp (16). The
+/// tree walk's sums (integers' look-back) differ with it: adding a window's aggregates in a
+/// tree and then onto the inclusive prefix is another order than tile after tile.
+#[test]
+fn scan_onepass_floats_same_bits_wherever_the_walk_ends() {
+    if !have_gpp() {
+        return;
+    }
+    fn check<T: Elem>(tile: Tile, x: &[T]) {
+        let n = x.len();
+        let runs: Vec<(&str, Vec<u8>)> = ["1", "3", "5", "40"]
+            .iter()
+            .map(|every| {
+                let define = format!("WP_PRIM_SCAN_INCLUSIVE_EVERY={every}");
+                let size = std::mem::size_of::<T>() as u64;
+                let plan =
+                    ScanAlgorithm::OnePass.plan(tile, T::CUDA, size, Len::Host(n as u64), true);
+                let ran = run_with(
+                    tile,
+                    &[define.as_str()],
+                    &[Case {
+                        plan,
+                        users: vec![bytes(x), bytes(&vec![T::ZERO; n])],
+                    }],
+                );
+                (*every, ran[0].users[1].clone())
+            })
+            .collect();
+        for (every, got) in &runs[1..] {
+            assert!(
+                got == &runs[0].1,
+                "{} {tile:?}: inclusive every {every} tiles gives other bits than every tile",
+                T::CUDA
+            );
+        }
+    }
+    let mut rng = Rng(11);
+    // Enough tiles for walks across two windows: 64 x 2 = 128 elements a tile, 90 tiles.
+    let n = 128 * 90 - 17;
+    let x32: Vec<f32> = (0..n)
+        .map(|_| (rng.below(2_000_001) as f32 - 1e6) * 1e-3)
+        .collect();
+    let x64: Vec<f64> = x32.iter().map(|&v| v as f64 * 1.000_000_1).collect();
+    check(TILE, &x32);
+    check(TILE, &x64);
+    check(ODD_TILE, &x32[..48 * 90]);
+}
+
 fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {
     reduce_cases_on::<T>(TILE, extra)
 }

@@ -159,10 +159,9 @@ fn scan_threepass_kernel(dev: &wp::Device) {
 
 /// Every scan through one GPU algorithm, for every element type: the checks of
 /// `scan_all_types_and_sizes` and `scan_in_place_and_counts`, fractional floats within
-/// rounding (the single-pass scan's not the same run to run: which tile ends a look-back
-/// depends on timing, and with it the order of float additions), and inputs of thousands of
-/// tiles, where blocks run at once and look-backs meet tiles that have published only their
-/// aggregate. On the CPU the algorithm plays no part, and is left alone (the CPU instances run
+/// rounding and the same bits in five runs (which tiles a look-back finds published depends
+/// on timing; the float sums' order must not), and inputs of thousands of tiles, where blocks
+/// run at once and look-backs meet tiles that have published only their aggregate. On the CPU the algorithm plays no part, and is left alone (the CPU instances run
 /// beside the GPU's): the same checks run once.
 fn scan_by(dev: &wp::Device, algorithm: wp::primitives::plan::ScanAlgorithm) {
     use wp::primitives::plan;
@@ -180,7 +179,16 @@ fn scan_by(dev: &wp::Device, algorithm: wp::primitives::plan::ScanAlgorithm) {
     });
     scan_all_types_and_sizes(dev);
     scan_in_place_and_counts(dev);
-    fractional_scan_within_rounding(dev, 1 << 20);
+    let (x, first) = fractional_scan_within_rounding(dev, 1 << 20);
+    let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for run in 1..5 {
+        let again = zeros::<f32, 1>(x.len(), dev);
+        wp::array_scan(&arr(&x, dev), &again, true).unwrap();
+        assert!(
+            bits(&host(&again)) == bits(&first),
+            "{algorithm:?}: run {run} of a fractional f32 scan gives other bits than run 0"
+        );
+    }
     let mut rng = Rng(41);
     for n in [1 << 20, (1 << 22) + 5] {
         let x: Vec<i32> = (0..n).map(|_| i32::small(rng.next())).collect();

@@ -40,12 +40,12 @@
 //     first warp looks back over a window of WARP_LANES earlier tiles at a time (the nearest
 //     tile that has published its inclusive prefix ends the walk; the others' aggregates are
 //     added), publishes its inclusive prefix and writes the tile. The input is read once.
-//     Integer results equal the three-phase scan's. Float sums are added in another order:
-//     a tile's prefix is the nearest published inclusive prefix plus the aggregates of the
-//     tiles after it (a shuffle tree within each window), where the three-phase scan adds
-//     the tile totals by the spine's block scan; which tile ends a walk depends on timing,
-//     so float results may differ between runs (each within the bound of any summation
-//     order, |error| <= 2 k eps sum |x| for the k-th prefix).
+//     Integer results equal the three-phase scan's. Float tiles' prefixes are the tiles'
+//     aggregates added one after another from tile 0 (the three-phase scan adds them by the
+//     spine's block scan: another order, so other bits, each within the bound of any
+//     summation order, |error| <= 2 k eps sum |x| for the k-th prefix). Which tile ends a walk
+//     depends on timing, so the walk adds forward from there, in that one order: float
+//     results are the same from run to run (`scan_lookback_ordered`).
 //   * Compaction: the scan of the flags (nonzero = keep) gives each kept element its output
 //     position; the spine's total is the count.
 //   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
@@ -90,6 +90,7 @@
 // them: between a look-back value and its flag.
 #define WP_PRIM_FENCE() __threadfence()
 #define WP_PRIM_UNROLL _Pragma("unroll")
+#define WP_PRIM_NO_UNROLL _Pragma("unroll 1")
 #elif !defined(WP_PRIM_EMULATOR)
 #error "wp_primitives.h on the host needs the block emulator (include tests/wp_prim_emu.h first)"
 #endif
@@ -583,15 +584,15 @@ struct scan_status {
   }
 };
 
-/// The exclusive prefix of tile `tile` (> 0): called by every lane of the block's first warp
-/// (the same result in each). The lanes read a window of WARP_LANES tiles before it at once,
-/// lane l tile `end - 1 - l` (tiles before 0 count as the identity, inclusive); the nearest
-/// tile of the window that has published its inclusive prefix ends the walk, and the values
-/// of the tiles from there to the window's nearest are combined by a shuffle tree (earlier
-/// tiles on the left); else the whole window's aggregates are, and the walk goes on with the
-/// window before.
+/// The exclusive prefix of tile `tile` (> 0) for integers, whose sums do not depend on their
+/// order: called by every lane of the block's first warp (the same result in each). The lanes
+/// read a window of WARP_LANES tiles before it at once, lane l tile `end - 1 - l` (tiles before
+/// 0 count as the identity, inclusive); the nearest tile of the window that has published its
+/// inclusive prefix ends the walk, and the values of the tiles from there to the window's
+/// nearest are combined by a shuffle tree (earlier tiles on the left); else the whole window's
+/// aggregates are, and the walk goes on with the window before.
 template <typename T, typename Op>
-WP_PRIM_FN T scan_lookback(const scan_status<T>& st, i64 tile) {
+WP_PRIM_FN T scan_lookback_tree(const scan_status<T>& st, i64 tile) {
   const i32 lane = WP_PRIM_TID;
   T excl = Op::identity();
   for (i64 end = tile;; end -= WARP_LANES) {
@@ -609,6 +610,64 @@ WP_PRIM_FN T scan_lookback(const scan_status<T>& st, i64 tile) {
     x = __shfl_sync(WARP_MASK, x, 0);
     excl = Op::apply(x, excl);
     if (incl != 0) return excl;
+  }
+}
+
+/// The exclusive prefix of tile `tile` (> 0) for floats, the same bit for bit whatever the
+/// timing. Float sums depend on their order, and which tiles have published their inclusive
+/// prefix when a look-back reads them depends on timing; so the prefixes are defined by one
+/// order: P(0) = A(0) and P(k) = P(k-1) + A(k), the tiles' aggregates A added one after another
+/// (a left fold). Every inclusive prefix a tile publishes is its P (by induction: tile 0
+/// publishes A(0), and a tile publishes what this returns plus its A). So a walk that ends at
+/// any tile j that has published P(j), and adds A(j+1), ..., A(tile-1) in this order, returns
+/// P(tile-1) exactly, wherever it ended. The walk is the tree walk's (windows of WARP_LANES
+/// tiles, lane l tile `end - 1 - l`, back to the window holding the nearest inclusive prefix);
+/// the adding goes forward: from that prefix through the lanes of its window below it, then
+/// through each nearer window again, re-read (every tile there has published: the re-read
+/// does not wait, and a tile that has published its P since counts as its P, which the fold
+/// would have reached anyway). Usually the tile before has published its P: one shuffle.
+template <typename T, typename Op>
+WP_PRIM_FN T scan_lookback_ordered(const scan_status<T>& st, i64 tile) {
+  const i32 lane = WP_PRIM_TID;
+  i64 end = tile;
+  T v = Op::identity();
+  u32 incl = 0;
+  for (;; end -= WARP_LANES) {
+    const i64 k = end - 1 - lane;
+    v = Op::identity();
+    const u32 flag = k >= 0 ? st.wait(k, &v) : SCAN_INCLUSIVE;
+    incl = __ballot_sync(WARP_MASK, flag == SCAN_INCLUSIVE);
+    if (incl != 0) break;
+  }
+  // The lowest inclusive lane: the nearest tile with its P (tiles before 0 are further).
+  i32 from = __popc((incl & (0u - incl)) - 1u);
+  T p = __shfl_sync(WARP_MASK, v, from);
+  for (;;) {
+    // Lanes below `from`, tile after tile. In the window that ended the walk none of them is
+    // inclusive; in a nearer one, re-read, a tile that has published its P since restarts
+    // the fold from it (the value the fold would have reached).
+    WP_PRIM_NO_UNROLL
+    for (i32 l = from - 1; l >= 0; --l) {
+      const T x = __shfl_sync(WARP_MASK, v, l);
+      p = ((incl >> l) & 1u) ? x : Op::apply(p, x);
+    }
+    end += WARP_LANES;
+    if (end > tile) return p;
+    // A nearer window (rare: the walk crossed windows). Every tile there has published.
+    const u32 flag = st.wait(end - 1 - lane, &v);
+    incl = __ballot_sync(WARP_MASK, flag == SCAN_INCLUSIVE);
+    from = WARP_LANES;
+  }
+}
+
+/// The exclusive prefix of tile `tile` (> 0): the tree walk for integers, the ordered one for
+/// floats (see both).
+template <typename T, typename Op>
+WP_PRIM_FN T scan_lookback(const scan_status<T>& st, i64 tile) {
+  if constexpr (num<T>::is_int) {
+    return scan_lookback_tree<T, Op>(st, tile);
+  } else {
+    return scan_lookback_ordered<T, Op>(st, tile);
   }
 }
 

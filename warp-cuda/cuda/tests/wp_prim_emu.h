@@ -417,5 +417,6 @@ inline int clz(int x) { return x == 0 ? 32 : __builtin_clz((unsigned)x); }
 // check: that the kernels fence where a GPU needs it).
 #define WP_PRIM_FENCE() ((void)0)
 #define WP_PRIM_UNROLL
+#define WP_PRIM_NO_UNROLL
 #define WP_PRIM_REGISTER(name) \
   static ::wp_emu::registrar wp_emu_registrar_##name(#name, reinterpret_cast<void*>(&name));

@@ -155,9 +155,11 @@ pub enum ScanAlgorithm {
     /// results are the same from run to run.
     ThreePass,
     /// One launch after a small init step: decoupled look-back over per-tile status words
-    /// ([`scan_onepass`]). Reads the input once. Integer results equal `ThreePass`'s; float
-    /// sums are added in another order, which depends on timing (within the same rounding
-    /// bound, but not the same from run to run: see `k_scan_onepass` in `wp_primitives.h`).
+    /// ([`scan_onepass`]). Reads the input once. Integer results equal `ThreePass`'s. Float
+    /// results are the same from run to run, whichever tiles a look-back finds published:
+    /// the tiles' totals are added one after another from the first (`scan_lookback_ordered`
+    /// in `wp_primitives.h`), another order than `ThreePass`'s, so other bits within the
+    /// same rounding bound.
     OnePass,
 }
 
@@ -178,9 +180,9 @@ impl ScanAlgorithm {
 /// - Integers: the single-pass scan in tiles of 512 threads of 16 elements (8 for 8-byte
 ///   types, whose tile must fit the static shared memory). Integer sums do not depend on
 ///   their order, so its results are the three-phase scan's.
-/// - Floats: the three-phase scan, 256 threads of 8, whose sums are added in one order from
-///   run to run (the single-pass scan's order depends on which tiles have published when a
-///   look-back reads them).
+/// - Floats: the three-phase scan, 256 threads of 8. (The single-pass scan's float results
+///   are now the same from run to run too; it becomes the floats' default once a GPU run
+///   has timed it against this one.)
 ///
 /// Timed in one run (`cargo bench --bench spatial -- --primitives`, CUDA events, H200,
 /// 2026-12-01; PyTorch's `cumsum` 0.031 and 0.069 ms), inclusive i32 scans at 1M and 16M:
