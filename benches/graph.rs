@@ -4,7 +4,10 @@
 //! (`cuLaunchKernel` through `warp_cuda`) and as a raw graph, and beside NVIDIA Warp 1.19
 //! (`benches/py/warp_graph.py`: `wp.launch`, `wp.Launch`, `wp.capture_launch`) in the same
 //! run. Every mode's result is compared with the plain launches' (bit for bit) and with the
-//! closed form of the oscillator it integrates.
+//! closed form of the oscillator it integrates. Two more raw graphs of the hand-written
+//! kernels, one with as many parameter bytes as warp-lang's kernels take and one with its
+//! 64-bit grid-stride loop, say which of the two explains the gap between warp-lang's graph
+//! replay and the raw one.
 //!
 //! ```text
 //! cargo bench --bench graph                    # needs a CUDA device; SKIPPED otherwise
@@ -68,6 +71,28 @@ extern "C" __global__ void hand_velocity(const float* x, float* v, float k, floa
 extern "C" __global__ void hand_position(float* x, const float* v, float dt, int n) {
     int i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i < n) x[i] = x[i] + v[i] * dt;
+}
+// The same with 128 parameter bytes more, unused: as many as warp-lang's kernels take (152
+// for `velocity`: the 48-byte grid, the 32-byte fault record, two 32-byte arrays, two f32).
+struct pad_t { long long w[16]; };
+extern "C" __global__ void hand_velocity_pad(pad_t pad, const float* x, float* v, float k, float dt, int n) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) v[i] = v[i] - k * x[i] * dt;
+}
+extern "C" __global__ void hand_position_pad(pad_t pad, float* x, const float* v, float dt, int n) {
+    int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) x[i] = x[i] + v[i] * dt;
+}
+// The same with warp-lang's loop: 64-bit indices striding over the grid.
+extern "C" __global__ void hand_velocity_stride(const float* x, float* v, float k, float dt, int n) {
+    const long long stride = (long long)blockDim.x * gridDim.x;
+    for (long long i = (long long)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride)
+        v[i] = v[i] - k * x[i] * dt;
+}
+extern "C" __global__ void hand_position_stride(float* x, const float* v, float dt, int n) {
+    const long long stride = (long long)blockDim.x * gridDim.x;
+    for (long long i = (long long)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride)
+        x[i] = x[i] + v[i] * dt;
 }
 "#;
 
@@ -299,11 +324,14 @@ fn main() -> wp::Result<()> {
         .expect("upload");
     let hv = warp_cuda::DeviceBuffer::zeros(&hand.gpu, 4 * N).expect("alloc");
     let (xp, vp) = (hx.device_ptr(), hv.device_ptr());
-    let raw_loop = |stream: &warp_cuda::Stream| -> wp::Result<()> {
+    let raw_loop_of = |variant: HandVariant, stream: &warp_cuda::Stream| {
         for _ in 0..SUBSTEPS * PAIRS {
-            hand.velocity(stream, xp, vp);
-            hand.position(stream, xp, vp);
+            hand.velocity(variant, stream, xp, vp);
+            hand.position(variant, stream, xp, vp);
         }
+    };
+    let raw_loop = |stream: &warp_cuda::Stream| -> wp::Result<()> {
+        raw_loop_of(HandVariant::Plain, stream);
         Ok(())
     };
     let raw_result = |run: &mut dyn FnMut() -> wp::Result<()>| -> wp::Result<Vec<f32>> {
@@ -315,7 +343,7 @@ fn main() -> wp::Result<()> {
     };
     let default = hand.gpu.default_stream().clone();
     let host_raw = host_cost(|| {
-        hand.velocity(&default, xp, vp);
+        hand.velocity(HandVariant::Plain, &default, xp, vp);
         Ok(())
     })?;
     let t = timed(|| raw_loop(&default))?;
@@ -332,6 +360,24 @@ fn main() -> wp::Result<()> {
     let t = timed(&mut raw_replay)?;
     let r = raw_result(&mut raw_replay)?;
     record("hand-written CUDA, one raw graph", t, r, None);
+    // What of the gap between warp-lang's graph and the raw one is parameter bytes, and what
+    // the loop: the hand kernels with warp-lang's parameter size, and with its loop.
+    for (variant, name) in [
+        (HandVariant::Padded, "hand, +128 param bytes, raw graph"),
+        (HandVariant::Stride, "hand, 64-bit stride, raw graph"),
+    ] {
+        let stream = hand.gpu.new_stream().expect("stream");
+        stream.begin_capture().expect("capture");
+        raw_loop_of(variant, &stream);
+        let graph = stream.end_capture(&hand.gpu).expect("graph");
+        let mut replay = || -> wp::Result<()> {
+            graph.launch(&default).expect("graph launch");
+            Ok(())
+        };
+        let t = timed(&mut replay)?;
+        let r = raw_result(&mut replay)?;
+        record(name, t, r, None);
+    }
 
     // A scene's loop end to end: the springs scene's chains (semi-implicit Euler, a kernel a
     // step over 4096 chains of 21 particles), 512 steps plainly and as two replays of a
@@ -449,8 +495,17 @@ fn main() -> wp::Result<()> {
 struct Hand {
     gpu: std::sync::Arc<warp_cuda::Gpu>,
     _module: warp_cuda::Module,
-    velocity: warp_cuda::Function,
-    position: warp_cuda::Function,
+    /// `velocity` and `position` of each [`HandVariant`], in its order.
+    kernels: Vec<(warp_cuda::Function, warp_cuda::Function)>,
+}
+
+/// Which of the hand-written pairs: the plain one, with 128 unused parameter bytes first, or
+/// with a 64-bit grid-stride loop.
+#[derive(Clone, Copy)]
+enum HandVariant {
+    Plain,
+    Padded,
+    Stride,
 }
 
 impl Hand {
@@ -459,30 +514,46 @@ impl Hand {
         let compiled =
             warp_cuda::compile(HAND, "hand", &Default::default(), gpu.arch()).expect("nvrtc");
         let module = gpu.load_module(&compiled.cubin).expect("load");
+        let kernels = ["", "_pad", "_stride"]
+            .iter()
+            .map(|suffix| {
+                let f = |name: &str| {
+                    module
+                        .function(&format!("{name}{suffix}"))
+                        .expect("function")
+                };
+                (f("hand_velocity"), f("hand_position"))
+            })
+            .collect();
         Hand {
-            velocity: module.function("hand_velocity").expect("function"),
-            position: module.function("hand_position").expect("function"),
+            kernels,
             gpu,
             _module: module,
         }
     }
 
-    fn velocity(&self, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
-        let (mut k, mut dt, mut n) = (K, DT, N as i32);
-        let mut args: [*mut c_void; 5] = [
+    fn velocity(&self, variant: HandVariant, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
+        let (mut k, mut dt, mut n, mut pad) = (K, DT, N as i32, [0i64; 16]);
+        let mut args = vec![
             ptr(&mut x),
             ptr(&mut v),
             ptr(&mut k),
             ptr(&mut dt),
             ptr(&mut n),
         ];
-        self.launch(&self.velocity, stream, &mut args);
+        if let HandVariant::Padded = variant {
+            args.insert(0, ptr(&mut pad));
+        }
+        self.launch(&self.kernels[variant as usize].0, stream, &mut args);
     }
 
-    fn position(&self, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
-        let (mut dt, mut n) = (DT, N as i32);
-        let mut args: [*mut c_void; 4] = [ptr(&mut x), ptr(&mut v), ptr(&mut dt), ptr(&mut n)];
-        self.launch(&self.position, stream, &mut args);
+    fn position(&self, variant: HandVariant, stream: &warp_cuda::Stream, mut x: u64, mut v: u64) {
+        let (mut dt, mut n, mut pad) = (DT, N as i32, [0i64; 16]);
+        let mut args = vec![ptr(&mut x), ptr(&mut v), ptr(&mut dt), ptr(&mut n)];
+        if let HandVariant::Padded = variant {
+            args.insert(0, ptr(&mut pad));
+        }
+        self.launch(&self.kernels[variant as usize].1, stream, &mut args);
     }
 
     fn launch(
