@@ -349,20 +349,11 @@ fn main() -> wp::Result<()> {
     let t = timed(|| raw_loop(&default))?;
     let r = raw_result(&mut || raw_loop(&default))?;
     record("hand-written CUDA, raw launches", t, r, None);
-    let capture_stream = hand.gpu.new_stream().expect("stream");
-    capture_stream.begin_capture().expect("capture");
-    raw_loop(&capture_stream)?;
-    let raw_graph = capture_stream.end_capture(&hand.gpu).expect("graph");
-    let mut raw_replay = || -> wp::Result<()> {
-        raw_graph.launch(&default).expect("graph launch");
-        Ok(())
-    };
-    let t = timed(&mut raw_replay)?;
-    let r = raw_result(&mut raw_replay)?;
-    record("hand-written CUDA, one raw graph", t, r, None);
-    // What of the gap between warp-lang's graph and the raw one is parameter bytes, and what
-    // the loop: the hand kernels with warp-lang's parameter size, and with its loop.
+    // Raw graphs: the hand kernels, and, to tell what of the gap between warp-lang's graph and
+    // the raw one is parameter bytes and what the loop, the same with warp-lang's parameter
+    // size and with its loop.
     for (variant, name) in [
+        (HandVariant::Plain, "hand-written CUDA, one raw graph"),
         (HandVariant::Padded, "hand, +128 param bytes, raw graph"),
         (HandVariant::Stride, "hand, 64-bit stride, raw graph"),
     ] {
