@@ -28,6 +28,7 @@ backend_tests!(
     kernel_op_forward_matches_launch,
     kernel_op_backward_matches_tape,
     kernel_op_generic_instance,
+    kernel_op_vector_and_matrix_values,
     kernel_op_spec,
     kernel_op_build_errors,
     kernel_op_call_errors,
@@ -448,7 +449,7 @@ fn kernel_op_generic_instance(dev: &wp::Device) {
         .unwrap();
     assert_eq!(
         op.spec().params[0].kind,
-        warp_runtime::ops::ArgKind::Value { dtype: Dtype::F64 }
+        warp_runtime::ops::ArgKind::scalar_value(Dtype::F64)
     );
     let x = arr(&[1.0, 2.0, 3.0], dev);
     let y = arr(&[0.5, 0.25, 0.125], dev);
@@ -470,6 +471,131 @@ fn kernel_op_generic_instance(dev: &wp::Device) {
         .unwrap_err()
         .to_string();
     assert!(e.contains("axpy32: argument 'x': a float64 buffer"), "{e}");
+}
+
+/// Values of vector, matrix, quaternion and integer-vector types: `y = m x + b` rotated by
+/// `q`, shifted by `shift`'s components.
+#[wp::kernel]
+fn k_values(m: DMat3, b: DVec3, q: DQuat, shift: IVec2, x: Array<DVec3>, y: Array<DVec3>) {
+    let i = tid();
+    let s = DVec3::new(shift.x as f64, shift.y as f64, 0.0);
+    y[i] = q * (m * x[i] + b) + s;
+}
+
+fn kernel_op_vector_and_matrix_values(dev: &wp::Device) {
+    let op = Op::kernel("values", k_values)
+        .outputs(["y"])
+        .build()
+        .unwrap();
+    let p = &op.spec().params;
+    assert_eq!(
+        p[0].kind,
+        warp_runtime::ops::ArgKind::Value {
+            dtype: Dtype::F64,
+            element: &[3, 3],
+            type_name: "DMat3"
+        }
+    );
+    assert_eq!(
+        p[3].kind.describe(),
+        "a static IVec2 (2 components of int32, shape [2])"
+    );
+    assert_eq!(p[0].role, Role::Scalar);
+    let xs: Vec<glam::DVec3> = (0..50)
+        .map(|i| glam::DVec3::new(i as f64 * 0.25, 1.0 - i as f64 * 0.5, 2.0))
+        .collect();
+    let x = arr(&xs, dev);
+    let y = zeros::<glam::DVec3, 1>(xs.len(), dev);
+    // Buffers of shape (50, 3): the vectors' components as a trailing axis.
+    let buf3 = |a: &wp::Array<glam::DVec3>| {
+        let b = buf(a, Dtype::F64);
+        Buffer::contiguous(b.ptr, &[xs.len(), 3], Dtype::F64)
+    };
+    let (bx, by) = (buf3(&x), buf3(&y));
+    // Row-major components: m's row 0 is (1, 2, 0); a quarter turn about z; integer shift.
+    let m = [1.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 3.0].map(Value::Float);
+    let b = [0.5, 0.0, -1.0].map(Value::Float);
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let q = [0.0, 0.0, h, h].map(Value::Float);
+    let shift = [Value::Int(3), Value::Int(-4)];
+    let args = [
+        CallArg::Values(&m),
+        CallArg::Values(&b),
+        CallArg::Values(&q),
+        CallArg::Values(&shift),
+        CallArg::Buffer(&bx),
+        CallArg::Buffer(&by),
+    ];
+    // SAFETY: the buffers are the arrays' memory, which outlives the call.
+    with_exec(dev, |e| unsafe { op.forward(&args, e) }.unwrap());
+    let mm = glam::DMat3::from_cols_array(&[1.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 3.0]);
+    let qq = glam::DQuat::from_xyzw(0.0, 0.0, h, h);
+    for (got, x) in host(&y).iter().zip(&xs) {
+        let want =
+            qq * (mm * *x + glam::DVec3::new(0.5, 0.0, -1.0)) + glam::DVec3::new(3.0, -4.0, 0.0);
+        // The quaternion rotation's few f64 products and adds: 1e-14 on values of order 10.
+        assert!(
+            (*got - want).abs().max_element() <= 1e-13,
+            "{got} vs {want}"
+        );
+    }
+    // Wrong counts and kinds name the parameter, what was given and the type.
+    let short = [Value::Float(1.0); 2];
+    let e = unsafe {
+        op.forward(
+            &[
+                CallArg::Values(&m),
+                CallArg::Values(&short),
+                CallArg::Values(&q),
+                CallArg::Values(&shift),
+                CallArg::Buffer(&bx),
+                CallArg::Buffer(&by),
+            ],
+            &Exec::cpu(),
+        )
+    }
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("'b'") && e.contains("the 2 values [1.0, 1.0]") && e.contains("DVec3"),
+        "{e}"
+    );
+    let e = unsafe {
+        op.forward(
+            &[
+                CallArg::Values(&m),
+                CallArg::Value(Value::Float(1.0)),
+                CallArg::Values(&q),
+                CallArg::Values(&shift),
+                CallArg::Buffer(&bx),
+                CallArg::Buffer(&by),
+            ],
+            &Exec::cpu(),
+        )
+    }
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("'b'") && e.contains("the value 1.0"), "{e}");
+    let fractional = [Value::Float(0.5), Value::Int(1)];
+    let e = unsafe {
+        op.forward(
+            &[
+                CallArg::Values(&m),
+                CallArg::Values(&b),
+                CallArg::Values(&q),
+                CallArg::Values(&fractional),
+                CallArg::Buffer(&bx),
+                CallArg::Buffer(&by),
+            ],
+            &Exec::cpu(),
+        )
+    }
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("'shift'") && e.contains("0.5") && e.contains("int32"),
+        "{e}"
+    );
 }
 
 fn kernel_op_spec(_dev: &wp::Device) {

@@ -27,6 +27,7 @@ backend_tests!(
     xla_forward_matches_launch,
     xla_backward_matches_op_backward,
     xla_attribute_errors,
+    xla_vector_values,
     xla_buffer_errors,
     xla_batched_matches_a_loop,
     xla_computation_op,
@@ -325,6 +326,26 @@ fn on_xla_stream<R>(dev: &wp::Device, f: impl FnOnce() -> R) -> R {
     unreachable!("a GPU device without the cuda feature")
 }
 
+/// Runs `f` with the device's [`Exec`]: the CPU's, or on a GPU a caller-ordered stream (as a
+/// framework's), synchronised before and after.
+fn with_exec(dev: &wp::Device, f: impl FnOnce(&Exec<'_>)) {
+    if dev.is_cpu() {
+        return f(&Exec::cpu());
+    }
+    #[cfg(feature = "cuda")]
+    {
+        wp::synchronize().unwrap();
+        let owner = wp::Stream::new(dev).unwrap();
+        // SAFETY: a live stream of the device; the arrays were synchronised.
+        let st = unsafe {
+            wp::Stream::from_raw_caller_ordered(owner.cuda_stream().cu_stream().cast(), dev)
+        }
+        .unwrap();
+        f(&Exec::stream(&st));
+        st.synchronize().unwrap();
+    }
+}
+
 /// A framework's buffer over `a`'s memory.
 fn buf<T: wp::Element, const M: usize>(a: &wp::Array<T, M>, dtype: Dtype) -> Buffer {
     let ptr = if a.device().is_cpu() {
@@ -543,23 +564,8 @@ fn xla_backward_matches_op_backward(dev: &wp::Device) {
         CallArg::Buffer(&bz),
     ];
     let grads = [Some(&bgx1), None, Some(&bcy1), Some(&bcz1)];
-    if dev.is_cpu() {
-        // SAFETY: the arrays' memory, alive for the call.
-        unsafe { op.backward(&args, &grads, &Exec::cpu()) }.unwrap();
-    } else {
-        #[cfg(feature = "cuda")]
-        {
-            wp::synchronize().unwrap();
-            let owner = wp::Stream::new(dev).unwrap();
-            // SAFETY: a live stream of the device; the arrays were synchronised.
-            let st = unsafe {
-                wp::Stream::from_raw_caller_ordered(owner.cuda_stream().cu_stream().cast(), dev)
-            }
-            .unwrap();
-            unsafe { op.backward(&args, &grads, &Exec::stream(&st)) }.unwrap();
-            st.synchronize().unwrap();
-        }
-    }
+    // SAFETY: the arrays' memory, alive for the call.
+    with_exec(dev, |e| unsafe { op.backward(&args, &grads, e) }.unwrap());
     // The handler: cotangents are read-only operands; the input gradient arrives as garbage
     // (XLA's results are uninitialised) and the copies too.
     for target in ["bwd.graph", "bwd.eager"] {
@@ -688,6 +694,89 @@ fn xla_attribute_errors(dev: &wp::Device) {
     assert!(
         msg.contains("op rollout") && msg.contains("eager targets"),
         "{msg}"
+    );
+}
+
+/// `y = x d.x + d.y`: a vector value (the mock's array attribute is [1, 2] of f64).
+#[wp::kernel]
+fn kx_vec(d: DVec2, x: Array<f64>, y: Array<f64>) {
+    let i = tid();
+    y[i] = x[i] * d.x + d.y;
+}
+
+/// The same with a DVec3, which the mock's two-element array cannot be.
+#[wp::kernel]
+fn kx_vec3(d: DVec3, x: Array<f64>, y: Array<f64>) {
+    let i = tid();
+    y[i] = x[i] * d.x + d.y + d.z;
+}
+
+fn xla_vector_values(dev: &wp::Device) {
+    let api = mock_api();
+    let op = Op::kernel("xvec", kx_vec).outputs(["y"]).build().unwrap();
+    let id = warp_runtime::ops::register(&op) as i64;
+    let x = arr(&xs(0), dev);
+    let y = zeros::<f64, 1>(N, dev);
+    let (bx, by) = (buf(&x, Dtype::F64), buf(&y, Dtype::F64));
+    let run = |id: i64, attrs: &[(&str, A)]| {
+        on_xla_stream(dev, || {
+            invoke(
+                handler("fwd.graph", dev),
+                &api,
+                &[&bx],
+                &[&by],
+                &[&[("warp_op", A::I64(id))], attrs].concat(),
+            )
+        })
+    };
+    run(id, &[("d", A::Array)]).unwrap();
+    // The op's own call with the same components: bit for bit.
+    let want = zeros::<f64, 1>(N, dev);
+    let bw = buf(&want, Dtype::F64);
+    let d = [Value::Float(1.0), Value::Float(2.0)];
+    let args = [
+        CallArg::Values(&d),
+        CallArg::Buffer(&bx),
+        CallArg::Buffer(&bw),
+    ];
+    // SAFETY: the buffers are the arrays' memory, alive for the call.
+    with_exec(dev, |e| unsafe { op.forward(&args, e) }.unwrap());
+    assert_eq!(bits(&host(&y)), bits(&host(&want)));
+    // x * 1 + 2: exact for these x.
+    assert!(host(&y).iter().zip(xs(0)).all(|(y, x)| *y == x + 2.0));
+    let expect = |id: i64, attrs: &[(&str, A)], parts: &[&str]| {
+        let (code, msg) = run(id, attrs).unwrap_err();
+        assert_eq!(code, 3, "{msg}");
+        for p in parts {
+            assert!(msg.contains(p), "{msg:?} lacks {p:?}");
+        }
+    };
+    expect(
+        id,
+        &[("d", A::F64(1.0))],
+        &[
+            "value 'd' (0)",
+            "a float64 scalar",
+            "an array of 2 float64",
+            "DVec2",
+            "np.asarray(value, np.float64).ravel()",
+        ],
+    );
+    expect(
+        id,
+        &[],
+        &["value 'd' (0)", "no attribute 'd'", "an array of 2 float64"],
+    );
+    let op3 = Op::kernel("xvec3", kx_vec3).outputs(["y"]).build().unwrap();
+    let id3 = warp_runtime::ops::register(&op3) as i64;
+    expect(
+        id3,
+        &[("d", A::Array)],
+        &[
+            "value 'd' (0)",
+            "the attribute is an array of 2 float64",
+            "an array of 3 float64",
+        ],
     );
 }
 

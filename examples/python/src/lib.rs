@@ -5,7 +5,8 @@
 //!   (float64, a kernel op: per-particle energies of `(n, 3)` positions) and `axpy` (float32,
 //!   `out = a x + y`). Each is `ws.energy.numpy(..)`, `ws.energy.vjp_numpy(..)`,
 //!   `ws.energy.torch(..)` (a `torch.autograd.Function` whose backward is the kernel's
-//!   adjoint) and `ws.energy(..)`; tests/ holds their tests.
+//!   adjoint) and `ws.energy(..)`; tests/ holds their tests. `affine` (float64, `y = m x + b`)
+//!   takes a matrix and a vector as values.
 //! - **The ocean scene** (ocean.rs, driven by ocean.py): `ocean` and `ocean64` (a surface of
 //!   Gerstner waves with analytic normals, the f32 and f64 instances of one generic kernel)
 //!   and `fd_normals` / `fd_normals64` (normals by finite differences).
@@ -29,6 +30,14 @@ fn axpy(a: f32, x: Array<f32>, y: Array<f32>, out: Array<f32>) {
     out[i] = a * x[i] + y[i];
 }
 
+/// `y[i] = m x[i] + b`: an op whose value parameters are a matrix and a vector (from Python:
+/// nested sequences, flat ones or NumPy arrays, row-major; under JAX, array attributes).
+#[wp::kernel]
+fn affine(m: DMat3, b: DVec3, x: Array<DVec3>, y: Array<DVec3>) {
+    let i = tid();
+    y[i] = m * x[i] + b;
+}
+
 /// The module.
 #[pymodule]
 fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -48,6 +57,7 @@ fn warp_sim(m: &Bound<'_, PyModule>) -> PyResult<()> {
             .init("out", wp::ops::Init::Uninit)
             .build()?,
     )?;
+    ops.add(Op::kernel("affine", affine).outputs(["y"]).build()?)?;
     for op in ocean::ops()? {
         ops.add(op)?;
     }

@@ -119,6 +119,33 @@ def _axpy_grads(kind):
     np.testing.assert_array_equal(np.asarray(gy), g)
 
 
+def _affine(kind):
+    # A matrix and a vector value under jit: array attributes, row-major; jax.grad through
+    # the adjoint (m^T ct); one jitted function per set of values.
+    jax = _jax()
+    dev = _device(jax, kind)
+    rng = np.random.default_rng(5)
+    x, m, b = rng.normal(size=(65, 3)), rng.normal(size=(3, 3)), rng.normal(size=3)
+    xj = jax.device_put(x, dev)
+    y = jax.jit(lambda x: ws.affine.jax(m, b, x))(xj)
+    np.testing.assert_allclose(np.asarray(y), x @ m.T + b, rtol=1e-13, atol=1e-13)
+    y2 = jax.jit(lambda x: ws.affine.jax(m.tolist(), tuple(b), x))(xj)
+    np.testing.assert_array_equal(np.asarray(y2), np.asarray(y))
+    ct = rng.normal(size=(65, 3))
+    gx = jax.grad(lambda x: (ws.affine.jax(m, b, x) * ct).sum())(xj)
+    np.testing.assert_allclose(np.asarray(gx), ct @ m, rtol=1e-13, atol=1e-13)
+    # A traced matrix is refused at trace time, naming the parameter.
+    raises(TypeError, lambda: jax.jit(lambda m, x: ws.affine.jax(m, b, x))(m, xj), "affine", "'m'", "static")
+
+
+def test_affine_values_cpu():
+    _affine("cpu")
+
+
+def test_affine_values_cuda():
+    _affine("cuda")
+
+
 def test_forward_jit_cpu():
     _forward_jit("cpu")
 

@@ -191,6 +191,50 @@ def test_error_scalars():
     raises(ValueError, lambda: ws.axpy.numpy(True, xs, xs), "axpy", "'a'", "true", "float32")
 
 
+def affine_closed(m, b, x):
+    """`affine`'s y = m x + b for each row of x, m given row-major."""
+    return x @ np.asarray(m, dtype=np.float64).reshape(3, 3).T + np.asarray(b, dtype=np.float64)
+
+
+def test_affine_matrix_and_vector_values():
+    x = RNG.normal(size=(33, 3))
+    m = RNG.normal(size=(3, 3))
+    b = RNG.normal(size=3)
+    want = affine_closed(m, b, x)
+    # Nested or flat, lists, tuples or NumPy arrays: the same components, row-major. f64 with
+    # three products a row: only the order of two adds may differ from NumPy's matmul.
+    for mm, bb in ((m, b), (m.tolist(), tuple(b)), (m.ravel().tolist(), list(b)), (m.ravel(), b.tolist())):
+        np.testing.assert_allclose(ws.affine.numpy(mm, bb, x), want, rtol=1e-13, atol=1e-13)
+    # Row i, column j is m[i][j]: one nonzero entry, no rounding at all.
+    e = np.zeros((3, 3))
+    e[0, 2] = 2.0
+    y = ws.affine.numpy(e, (0, 0, 1), x)
+    assert (y[:, 0] == 2 * x[:, 2]).all() and (y[:, 1] == 0).all() and (y[:, 2] == 1).all()
+    # Integers are values of a float64 matrix too.
+    np.testing.assert_array_equal(ws.affine.numpy([[1, 0, 0], [0, 1, 0], [0, 0, 1]], [0, 0, 0], x), x)
+    spec = {p["name"]: p for p in ws.affine.spec["params"]}
+    assert (spec["m"]["role"], spec["m"]["element"], spec["m"]["type"]) == ("scalar", [3, 3], "DMat3")
+    assert spec["b"]["element"] == [3] and "a static DVec3" in spec["b"]["describe"]
+
+
+def test_affine_vjp_transposes_the_matrix():
+    x = RNG.normal(size=(20, 3))
+    m = RNG.normal(size=(3, 3))
+    ct = RNG.normal(size=(20, 3))
+    (gx,) = ws.affine.vjp_numpy((m, np.ones(3), x), ct)
+    # dy/dx = m: the gradient is ct m (m^T ct per row).
+    np.testing.assert_allclose(gx, ct @ m, rtol=1e-13, atol=1e-13)
+
+
+def test_error_vector_values():
+    x = np.zeros((4, 3))
+    eye = np.eye(3)
+    raises(ValueError, lambda: ws.affine.numpy(eye, [1.0, 2.0], x), "affine", "'b'", "2 numbers", "DVec3", "3 numbers")
+    raises(ValueError, lambda: ws.affine.numpy(np.eye(4), [0, 0, 0], x), "affine", "'m'", "16 numbers", "DMat3")
+    raises(ValueError, lambda: ws.affine.numpy(eye, 1.0, x), "affine", "'b'", "1 number;", "DVec3")
+    raises(TypeError, lambda: ws.affine.numpy(eye, ["a", 0, 0], x), "affine", "'b'", "str")
+
+
 def test_error_arguments():
     x = np.zeros((4, 3))
     raises(TypeError, lambda: ws.energy.numpy(x, K, 3), "energy takes 2 arguments (3 given)", "energy(x: Array<DVec3")

@@ -268,6 +268,43 @@ def _torch_op(torch, dev):
     torch.testing.assert_close(y.grad, torch.full_like(y, 3.0), rtol=0, atol=0)
 
 
+def _affine(torch, dev):
+    # A matrix and a vector value: through the autograd.Function (nested lists, a NumPy
+    # array) and through torch_op (float[] in its schema), with torch.library.opcheck; the
+    # gradient is m^T ct per row.
+    import numpy as np
+
+    gen = torch.Generator().manual_seed(9)
+    x = torch.randn(40, 3, dtype=torch.float64, generator=gen).to(dev)
+    m = torch.randn(3, 3, dtype=torch.float64, generator=gen)
+    b = [0.5, -1.0, 2.0]
+    ct = torch.randn(40, 3, dtype=torch.float64, generator=gen).to(dev)
+    want = x @ m.to(dev).T + torch.tensor(b, dtype=torch.float64, device=dev)
+    xa = x.clone().requires_grad_()
+    y = ws.affine.torch(m.tolist(), b, xa)
+    torch.testing.assert_close(y, want, rtol=1e-13, atol=1e-13)
+    y.backward(ct)
+    torch.testing.assert_close(xa.grad, ct @ m.to(dev), rtol=1e-13, atol=1e-13)
+    xb = x.clone().requires_grad_()
+    yb = ws.affine.torch_op(np.asarray(m), b, xb)
+    yb.backward(ct)
+    torch.testing.assert_close(yb.detach(), y.detach(), rtol=0, atol=0)
+    torch.testing.assert_close(xb.grad, xa.grad, rtol=0, atol=0)
+    ns = [n for n in dir(torch.ops) if n.startswith("warp_lang_")]
+    overload = getattr(getattr(torch.ops, ns[0]), "affine").default
+    torch.library.opcheck(overload, (m.ravel().tolist(), b, x.clone().requires_grad_()))
+
+
+def test_affine_values_cpu():
+    torch = _torch()
+    _affine(torch, torch.device("cpu"))
+
+
+def test_affine_values_cuda():
+    torch = _torch()
+    _affine(torch, _cuda(torch))
+
+
 def test_torch_op_cpu():
     torch = _torch()
     _torch_op(torch, torch.device("cpu"))

@@ -1,5 +1,6 @@
 //! The element types as array libraries see them: a scalar type and trailing axes (NumPy's
-//! view of Warp's vector and matrix arrays), shared by the ndarray views and DLPack.
+//! view of Warp's vector and matrix arrays), shared by the ndarray views, DLPack and the
+//! value parameters of ops (`ops::OpValue`).
 
 use super::Element;
 
@@ -22,6 +23,8 @@ macro_rules! nd_scalars {
             const SHAPE: &'static [usize] = &[];
             const STRIDES: &'static [isize] = &[];
         }
+        #[cfg(feature = "ops")]
+        impl crate::ops::OpValue for $t {}
     )*};
 }
 nd_scalars!(
@@ -46,6 +49,8 @@ macro_rules! nd_vectors {
             const SHAPE: &'static [usize] = &[$k];
             const STRIDES: &'static [isize] = &[1];
         }
+        #[cfg(feature = "ops")]
+        impl crate::ops::OpValue for $t {}
     )*};
 }
 nd_vectors!(
@@ -65,6 +70,8 @@ macro_rules! nd_matrices {
             const SHAPE: &'static [usize] = &[$k, $k];
             const STRIDES: &'static [isize] = &[1, $k];
         }
+        #[cfg(feature = "ops")]
+        impl crate::ops::OpValue for $t {}
     )*};
 }
 nd_matrices!(

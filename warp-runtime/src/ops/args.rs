@@ -2,7 +2,7 @@
 //! at compile time, which kernels can become ops ([`OpArg`], [`OpArgs`]).
 
 use super::buffer::Buffer;
-use super::spec::{ArgKind, OpElement, OpScalar, Value};
+use super::spec::{ArgKind, OpElement, OpScalar, OpValue, Value};
 use crate::array::Array;
 use crate::device::Device;
 use crate::error::{Error, Result};
@@ -12,8 +12,11 @@ use crate::error::{Error, Result};
 pub enum CallArg<'a> {
     /// An array parameter's memory.
     Buffer(&'a Buffer),
-    /// A value parameter's static value.
+    /// A scalar value parameter's static value.
     Value(Value),
+    /// A vector, quaternion or matrix value parameter's components, row-major over its
+    /// component axes (as NumPy lays out `np.asarray(v)`: a `Mat3`'s rows one after another).
+    Values(&'a [Value]),
     /// Not given: an output's place when only the shapes are asked for
     /// ([`Op::shapes`](super::Op::shapes)).
     Absent,
@@ -24,8 +27,8 @@ pub enum CallArg<'a> {
 #[diagnostic::on_unimplemented(
     message = "kernel parameter type `{Self}` cannot cross into an op",
     note = "ops take Array<T, N> of numeric T (scalars, vectors, matrices, quaternions) and \
-            numeric value parameters; wrap a kernel that takes structs, meshes or other objects \
-            in an Op::computation and build those inside the body"
+            value parameters of those types; wrap a kernel that takes structs, meshes or other \
+            objects in an Op::computation and build those inside the body"
 )]
 pub trait OpArg: Sized + Send + Sync + 'static {
     /// The parameter's type as an op sees it.
@@ -73,15 +76,9 @@ impl<T: OpElement, const N: usize> OpArg for Array<T, N> {
     ) -> Result<Self> {
         let b = match src {
             CallArg::Buffer(b) => b,
-            CallArg::Value(v) => {
-                return Err(wrong_kind(
-                    &Self::KIND,
-                    &format!("the value {v}"),
-                    op,
-                    param,
-                ))
+            CallArg::Value(_) | CallArg::Values(_) | CallArg::Absent => {
+                return Err(wrong_kind(&Self::KIND, &src.describe(), op, param))
             }
-            CallArg::Absent => return Err(wrong_kind(&Self::KIND, "nothing", op, param)),
         };
         // SAFETY: forwarded contract.
         let array = unsafe { b.array::<T, N>(device, op, param)? };
@@ -98,8 +95,63 @@ impl<T: OpElement, const N: usize> OpArg for Array<T, N> {
     }
 }
 
-impl<S: OpScalar> OpArg for S {
-    const KIND: ArgKind = ArgKind::Value { dtype: S::DTYPE };
+impl<'a> CallArg<'a> {
+    /// How a message names what was given: "the value 2.5", "the values [1.0, 2.0]".
+    pub fn describe(&self) -> String {
+        match self {
+            CallArg::Buffer(b) => format!("a {} buffer of shape {:?}", b.dtype.name(), b.dims),
+            CallArg::Value(v) => format!("the value {v}"),
+            CallArg::Values(vs) => {
+                let vs: Vec<String> = vs.iter().map(|v| v.to_string()).collect();
+                format!("the {} values [{}]", vs.len(), vs.join(", "))
+            }
+            CallArg::Absent => "nothing".to_string(),
+        }
+    }
+}
+
+/// A value parameter's value as a call holds it (owned), what [`CallArg::Value`] and
+/// [`CallArg::Values`] borrow: the Python binding's and the XLA handlers' storage.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum Given {
+    /// Not a value parameter.
+    None,
+    /// A scalar's value.
+    One(Value),
+    /// A vector's, quaternion's or matrix's components.
+    Components(Vec<Value>),
+}
+
+impl Given {
+    /// The argument borrowing it ([`CallArg::Absent`] for none).
+    pub(crate) fn arg(&self) -> CallArg<'_> {
+        match self {
+            Given::None => CallArg::Absent,
+            Given::One(v) => CallArg::Value(*v),
+            Given::Components(vs) => CallArg::Values(vs),
+        }
+    }
+}
+
+/// A value parameter's check: no gradient.
+fn no_grad(grad: Option<&Buffer>, op: &str, param: &str) -> Result<()> {
+    match grad {
+        Some(_) => Err(Error::invalid(format!(
+            "{op}: argument '{param}': a static value has no gradient"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// A value parameter of a numeric type: a scalar from [`CallArg::Value`], a vector,
+/// quaternion or matrix from [`CallArg::Values`] (its components row-major over its
+/// component axes, each converted as a scalar of its type is).
+impl<T: OpValue> OpArg for T {
+    const KIND: ArgKind = ArgKind::Value {
+        dtype: <T::Scalar as OpScalar>::DTYPE,
+        element: T::SHAPE,
+        type_name: T::TYPE_NAME,
+    };
 
     unsafe fn from_call(
         src: &CallArg<'_>,
@@ -108,20 +160,50 @@ impl<S: OpScalar> OpArg for S {
         op: &str,
         param: &str,
     ) -> Result<Self> {
-        if grad.is_some() {
-            return Err(Error::invalid(format!(
-                "{op}: argument '{param}': a static value has no gradient"
-            )));
+        no_grad(grad, op, param)?;
+        let scalar = |v: &Value| <T::Scalar as OpScalar>::from_value(*v, op, param);
+        let given: &[Value] = match (src, T::SHAPE.is_empty()) {
+            (CallArg::Value(v), true) => std::slice::from_ref(v),
+            (CallArg::Values(vs), false) => vs,
+            _ => return Err(wrong_kind(&Self::KIND, &src.describe(), op, param)),
+        };
+        let count: usize = T::SHAPE.iter().product();
+        if given.len() != count {
+            return Err(wrong_kind(&Self::KIND, &src.describe(), op, param));
         }
+        // Component k (row-major over SHAPE) lies at the dot product of its index with
+        // STRIDES, in scalars (a glam matrix stores its columns: strides [1, rows]).
+        let mut out = <T as bytemuck::Zeroable>::zeroed();
+        let bytes = bytemuck::bytes_of_mut(&mut out);
+        let size = std::mem::size_of::<T::Scalar>();
+        for (k, v) in given.iter().enumerate() {
+            let (mut rest, mut at) = (k, 0isize);
+            for (&extent, &stride) in T::SHAPE.iter().zip(T::STRIDES).rev() {
+                at += (rest % extent) as isize * stride;
+                rest /= extent;
+            }
+            let at = at as usize * size;
+            bytes[at..at + size].copy_from_slice(bytemuck::bytes_of(&scalar(v)?));
+        }
+        Ok(out)
+    }
+}
+
+/// A `bool` value parameter (`bool` is a value type of ops, not an array element).
+impl OpArg for bool {
+    const KIND: ArgKind = ArgKind::scalar_value(<bool as OpScalar>::DTYPE);
+
+    unsafe fn from_call(
+        src: &CallArg<'_>,
+        grad: Option<&Buffer>,
+        _device: &Device,
+        op: &str,
+        param: &str,
+    ) -> Result<Self> {
+        no_grad(grad, op, param)?;
         match src {
-            CallArg::Value(v) => S::from_value(*v, op, param),
-            CallArg::Buffer(b) => Err(wrong_kind(
-                &Self::KIND,
-                &format!("a {} buffer of shape {:?}", b.dtype.name(), b.dims),
-                op,
-                param,
-            )),
-            CallArg::Absent => Err(wrong_kind(&Self::KIND, "nothing", op, param)),
+            CallArg::Value(v) => bool::from_value(*v, op, param),
+            _ => Err(wrong_kind(&Self::KIND, &src.describe(), op, param)),
         }
     }
 }

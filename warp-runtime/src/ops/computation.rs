@@ -137,7 +137,7 @@ where
             spec: ParamSpec {
                 name,
                 role: Role::Scalar,
-                kind: ArgKind::Value { dtype: S::DTYPE },
+                kind: ArgKind::scalar_value(S::DTYPE),
                 differentiable: false,
                 zeroed: false,
             },

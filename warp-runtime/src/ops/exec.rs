@@ -267,20 +267,15 @@ pub(crate) fn check_call(spec: &OpSpec, args: &[CallArg<'_>], what: &str) -> Res
         )));
     }
     for (k, (p, a)) in spec.params.iter().zip(args).enumerate() {
-        let ok = matches!(
-            (p.role, a),
-            (Role::Scalar, CallArg::Value(_))
-                | (
-                    Role::Input | Role::Output | Role::Scratch,
-                    CallArg::Buffer(_)
-                )
-        );
+        // A scalar value comes as one value, a vector's or matrix's as its components.
+        let ok = match (p.role, a) {
+            (Role::Scalar, CallArg::Value(_)) => p.kind.is_scalar_value(),
+            (Role::Scalar, CallArg::Values(_)) => !p.kind.is_scalar_value(),
+            (Role::Input | Role::Output | Role::Scratch, CallArg::Buffer(_)) => true,
+            _ => false,
+        };
         if !ok {
-            let given = match a {
-                CallArg::Buffer(b) => format!("a {} buffer of shape {:?}", b.dtype.name(), b.dims),
-                CallArg::Value(v) => format!("the value {v}"),
-                CallArg::Absent => "nothing".to_string(),
-            };
+            let given = a.describe();
             return Err(Error::invalid(format!(
                 "{}: argument '{}' ({k}): {given}; the kernel takes {}",
                 spec.name,

@@ -29,13 +29,15 @@ mod shape;
 mod spec;
 pub mod xla_ffi;
 
+#[cfg(feature = "python")]
+pub(crate) use args::Given;
 pub use args::{CallArg, OpArg, OpArgs};
 pub use batch::Vmap;
 pub use buffer::Buffer;
 pub use computation::{ComputationOp, Ctx};
 pub use exec::Exec;
 pub use shape::{LaunchDims, Shape, ShapeFn, Shapes};
-pub use spec::{ArgKind, Dtype, OpElement, OpScalar, OpSpec, ParamSpec, Role, Value};
+pub use spec::{ArgKind, Dtype, OpElement, OpScalar, OpSpec, OpValue, ParamSpec, Role, Value};
 
 use crate::error::{Error, Result};
 use crate::kernel::Kernel;

@@ -68,6 +68,25 @@ impl Dtype {
         }
     }
 
+    /// The Rust name of the type (`f32`, `bf16`, `bool`).
+    pub const fn rust_name(self) -> &'static str {
+        match self {
+            Dtype::Bool => "bool",
+            Dtype::I8 => "i8",
+            Dtype::I16 => "i16",
+            Dtype::I32 => "i32",
+            Dtype::I64 => "i64",
+            Dtype::U8 => "u8",
+            Dtype::U16 => "u16",
+            Dtype::U32 => "u32",
+            Dtype::U64 => "u64",
+            Dtype::F16 => "f16",
+            Dtype::Bf16 => "bf16",
+            Dtype::F32 => "f32",
+            Dtype::F64 => "f64",
+        }
+    }
+
     /// Whether gradients flow through values of this type (floating point).
     pub fn is_float(self) -> bool {
         matches!(self, Dtype::F16 | Dtype::Bf16 | Dtype::F32 | Dtype::F64)
@@ -102,9 +121,9 @@ impl std::fmt::Display for Value {
 #[diagnostic::on_unimplemented(
     message = "kernel parameter type `{Self}` cannot cross into an op",
     note = "ops take Array<T, N> of numeric T (scalars, vectors, matrices, quaternions) and \
-            numeric value parameters (bool, integers, f16, bf16, f32, f64); wrap a kernel that \
-            takes structs, meshes or other objects in an Op::computation and build those inside \
-            the body"
+            numeric value parameters (bool, integers, f16, bf16, f32, f64, and vectors, \
+            matrices and quaternions of them); wrap a kernel that takes structs, meshes or \
+            other objects in an Op::computation and build those inside the body"
 )]
 pub trait OpScalar: Copy + Send + Sync + 'static {
     /// Its dtype.
@@ -172,6 +191,17 @@ impl OpScalar for bool {
     }
 }
 
+/// A type an op's value parameters may have: a numeric scalar, vector, quaternion or matrix
+/// (`f32`, `DVec3`, `Quat`, `Mat3`; `bool` too, apart). A marker over [`NdComponents`], whose
+/// components say how a call's numbers fill the value; implemented beside it for each type.
+#[diagnostic::on_unimplemented(
+    message = "kernel parameter type `{Self}` cannot cross into an op",
+    note = "ops take Array<T, N> of numeric T (scalars, vectors, matrices, quaternions) and \
+            value parameters of those types and bool; wrap a kernel that takes structs, meshes \
+            or other objects in an Op::computation and build those inside the body"
+)]
+pub trait OpValue: NdComponents<Scalar: OpScalar> {}
+
 /// An element type an op's arrays may have: a scalar, vector, quaternion or matrix of an
 /// [`OpScalar`] (its components are the buffer's trailing axes, as [`NdComponents`] lays
 /// them out).
@@ -201,10 +231,15 @@ pub enum ArgKind {
         /// `T`'s name (`DVec3`).
         type_name: &'static str,
     },
-    /// A value parameter (static: a number the call gives).
+    /// A value parameter (static: a number the call gives, or for a vector, quaternion or
+    /// matrix its components, row-major over `element`, as NumPy lays out `np.asarray(v)`).
     Value {
-        /// Its type.
+        /// The scalar type (of the components).
         dtype: Dtype,
+        /// The type's component axes (`[3]` for a vector of 3, `[]` for a scalar).
+        element: &'static [usize],
+        /// The type's name (`f32`, `Vec3`).
+        type_name: &'static str,
     },
 }
 
@@ -224,7 +259,33 @@ impl ArgKind {
                 };
                 format!("Array<{type_name}, {rank}> ({}{tail})", dtype.name())
             }
-            ArgKind::Value { dtype } => format!("a static {}", dtype.name()),
+            ArgKind::Value {
+                dtype, element: [], ..
+            } => format!("a static {}", dtype.name()),
+            ArgKind::Value {
+                dtype,
+                element,
+                type_name,
+            } => format!(
+                "a static {type_name} ({} components of {}, shape {element:?})",
+                element.iter().product::<usize>(),
+                dtype.name()
+            ),
+        }
+    }
+
+    /// Whether this is a value of a scalar type (given as one [`Value`]), not an array nor a
+    /// vector, quaternion or matrix value (given as its components).
+    pub fn is_scalar_value(&self) -> bool {
+        matches!(self, ArgKind::Value { element: [], .. })
+    }
+
+    /// A value parameter of scalar type `dtype`.
+    pub const fn scalar_value(dtype: Dtype) -> ArgKind {
+        ArgKind::Value {
+            dtype,
+            element: &[],
+            type_name: dtype.rust_name(),
         }
     }
 }

@@ -8,8 +8,10 @@
 //!
 //! **What a call passes** ([`layout`] says it per op, for the glue that builds the
 //! `ffi_call`): attributes `warp_op` (an `int64` scalar: the id [`register`](super::register)
-//! gave) and one scalar attribute per scalar parameter, named as the parameter and of exactly
-//! its dtype (`np.float32(x)` for an `f32`); operands and results as [`Slot`]s list them. With
+//! gave) and one attribute per value parameter, named as the parameter and of exactly its
+//! dtype: a scalar (`np.float32(x)` for an `f32`), or for a vector, quaternion or matrix an
+//! array of its components, row-major (`np.asarray(v, np.float32).ravel()` for a `Vec3` or a
+//! `Mat3`); operands and results as [`Slot`]s list them. With
 //! `vmap_method="expand_dims"` every operand and result may carry the same number of leading
 //! batch axes (extent 1 for an unbatched operand); the op then runs as its [`Vmap`] says.
 //!
@@ -26,7 +28,7 @@
 //!
 //! [`Vmap`]: super::Vmap
 
-use super::args::CallArg;
+use super::args::{CallArg, Given};
 use super::buffer::Buffer;
 use super::exec::Exec;
 use super::spec::{ArgKind, Dtype, Role, Value};
@@ -200,7 +202,7 @@ pub struct Scalar {
     pub value: *mut c_void,
 }
 
-/// `XLA_FFI_Array`: an array attribute (vector values; refused here, values are scalars).
+/// `XLA_FFI_Array`: an array attribute (a vector's, quaternion's or matrix's components).
 #[repr(C)]
 #[derive(Debug)]
 pub struct ArrayAttr {
@@ -784,7 +786,15 @@ fn check_api(api: *const Api) -> Result<(), Fail> {
 
 /// A decoded attribute.
 enum Attr {
-    Scalar { dtype: c_int, value: *const c_void },
+    Scalar {
+        dtype: c_int,
+        value: *const c_void,
+    },
+    Array {
+        dtype: c_int,
+        size: usize,
+        data: *const c_void,
+    },
     Other(c_int),
 }
 
@@ -795,6 +805,9 @@ fn attr_kind(a: &Attr) -> String {
             // "an int32", "a float64", "a uint8".
             let article = if name.starts_with('i') { "an" } else { "a" };
             format!("{article} {name} scalar")
+        }
+        Attr::Array { dtype, size, .. } => {
+            format!("an array of {size} {}", dtype_name(*dtype))
         }
         Attr::Other(AttrType::ARRAY) => "an array".into(),
         Attr::Other(AttrType::DICTIONARY) => "a dictionary".into(),
@@ -852,6 +865,22 @@ unsafe fn read_attrs(attrs: &Attrs) -> Result<Vec<(String, Attr)>, Fail> {
                 Attr::Scalar {
                     dtype: s.dtype,
                     value: s.value,
+                }
+            }
+            AttrType::ARRAY => {
+                // SAFETY: an array attribute points to an XLA_FFI_Array.
+                let a = unsafe { v.cast::<ArrayAttr>().as_ref() }
+                    .ok_or_else(|| invalid(format!("attribute '{name}' is null")))?;
+                if a.size > 0 && a.data.is_null() {
+                    return Err(invalid(format!(
+                        "attribute '{name}': {} elements at a null address",
+                        a.size
+                    )));
+                }
+                Attr::Array {
+                    dtype: a.dtype,
+                    size: a.size,
+                    data: a.data,
                 }
             }
             t => Attr::Other(t),
@@ -1016,7 +1045,7 @@ unsafe fn call(
         // SAFETY: XLA's scalar.
         Some((_, a)) => match a {
             Attr::Scalar { dtype, value } => unsafe { scalar_value(*dtype, *value, Dtype::I64) },
-            Attr::Other(_) => None,
+            Attr::Array { .. } | Attr::Other(_) => None,
         }
         .and_then(|v| match v {
             Value::Int(i) => u64::try_from(i).ok(),
@@ -1039,37 +1068,70 @@ unsafe fn call(
              synchronise, which a command buffer cannot hold), not the graph ones",
         ));
     }
-    // Scalars by parameter name, each of exactly its dtype.
-    let mut values: Vec<Option<Value>> = vec![None; spec.params.len()];
+    // Values by parameter name, each of exactly its dtype: a scalar's one, a vector's or
+    // matrix's components (an array attribute of as many).
+    let mut values: Vec<Given> = (0..spec.params.len()).map(|_| Given::None).collect();
     for (k, p) in spec.params.iter().enumerate() {
-        let ArgKind::Value { dtype } = p.kind else {
+        let ArgKind::Value { dtype, element, .. } = p.kind else {
             continue;
+        };
+        let count: usize = element.iter().product();
+        let what = if element.is_empty() {
+            "scalar"
+        } else {
+            "value"
+        };
+        let want = match element {
+            [] => format!("a {} scalar", dtype.name()),
+            _ => format!(
+                "an array of {count} {} ({})",
+                dtype.name(),
+                p.kind.describe()
+            ),
         };
         let a = attrs.iter().find(|(n, _)| n == p.name).map(|(_, a)| a);
         let Some(a) = a else {
             return Err(invalid(format!(
-                "scalar '{}' ({k}): no attribute '{}' (a {} scalar); the call has [{}]",
+                "{what} '{}' ({k}): no attribute '{}' ({want}); the call has [{}]",
                 p.name,
                 p.name,
-                dtype.name(),
                 given()
             )));
         };
-        let v = match a {
+        let v = match (a, element.is_empty()) {
             // SAFETY: XLA's scalar.
-            Attr::Scalar { dtype: d, value } => unsafe { scalar_value(*d, *value, dtype) },
-            Attr::Other(_) => None,
+            (Attr::Scalar { dtype: d, value }, true) => {
+                unsafe { scalar_value(*d, *value, dtype) }.map(Given::One)
+            }
+            (
+                Attr::Array {
+                    dtype: d,
+                    size,
+                    data,
+                },
+                false,
+            ) if *size == count => (0..count)
+                .map(|i| {
+                    // SAFETY: XLA's array of `size` elements of `d`; `scalar_value` refuses a
+                    // `d` other than `dtype` before reading, so `i` steps by `dtype`'s size.
+                    let at = unsafe { data.cast::<u8>().add(i * dtype.size()) };
+                    unsafe { scalar_value(*d, at.cast(), dtype) }
+                })
+                .collect::<Option<Vec<Value>>>()
+                .map(Given::Components),
+            _ => None,
         };
-        values[k] = Some(v.ok_or_else(|| {
+        let hint = match element {
+            [] => format!("np.{}(value)", dtype.name()),
+            _ => format!("np.asarray(value, np.{}).ravel()", dtype.name()),
+        };
+        values[k] = v.ok_or_else(|| {
             invalid(format!(
-                "scalar '{}' ({k}): the attribute is {}; the kernel takes a {} scalar (pass \
-                 np.{}(value))",
+                "{what} '{}' ({k}): the attribute is {}; the kernel takes {want} (pass {hint})",
                 p.name,
                 attr_kind(a),
-                dtype.name(),
-                dtype.name()
             ))
-        })?);
+        })?;
     }
     if let Some((n, _)) = attrs
         .iter()
@@ -1077,7 +1139,7 @@ unsafe fn call(
     {
         let scalars: Vec<&str> = spec.with_role(Role::Scalar).map(|(_, p)| p.name).collect();
         return Err(invalid(format!(
-            "unknown attribute '{n}'; the op's scalars are [{}] (and warp_op)",
+            "unknown attribute '{n}'; the op's values are [{}] (and warp_op)",
             scalars.join(", ")
         )));
     }
@@ -1115,10 +1177,7 @@ unsafe fn call(
     let exec_owner = unsafe { Launch::new(f, cuda, graph, &all)? };
     let exec = exec_owner.exec();
     // Arguments in parameter order, gradients beside them.
-    let mut args: Vec<CallArg<'_>> = values
-        .iter()
-        .map(|v| v.map_or(CallArg::Absent, CallArg::Value))
-        .collect();
+    let mut args: Vec<CallArg<'_>> = values.iter().map(Given::arg).collect();
     let mut grads: Vec<Option<&Buffer>> = vec![None; spec.params.len()];
     let mut cotangents: Vec<Option<&Buffer>> = vec![None; spec.params.len()];
     for (s, b) in lay.operands.iter().zip(&operands) {

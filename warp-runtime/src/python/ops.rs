@@ -11,14 +11,14 @@
 
 use super::stream_from_handle;
 use crate::device::{Device, DeviceKind};
-use crate::ops::{ArgKind, Buffer, CallArg, Dtype, Exec, Op, OpSpec, Role, Value};
+use crate::ops::{ArgKind, Buffer, CallArg, Dtype, Exec, Given, Op, OpSpec, Role, Value};
 use dlpark::ffi::{DLDataType, DLDevice};
 use dlpark::python::consumer::stream as dlstream;
 use dlpark::python::{DlpackStream, ImportRequest, ImportedDlpack, StreamArg};
 use dlpark::DlpackFlags;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict, PyFloat, PyList, PyModule};
+use pyo3::types::{PyBool, PyDict, PyFloat, PyList, PyModule, PyTuple};
 use std::ffi::{c_void, CString};
 use std::sync::Mutex;
 
@@ -385,11 +385,11 @@ impl NativeOp {
             )));
         }
         let mut pending = Vec::new();
-        let mut values: Vec<Option<Value>> = vec![None; n];
+        let mut values: Vec<Given> = vec![Given::None; n];
         for (k, p) in spec.params.iter().enumerate() {
             let a = args.get_item(k)?;
             match p.role {
-                Role::Scalar => values[k] = Some(self.value(&a, k)?),
+                Role::Scalar => values[k] = self.value(&a, k)?,
                 _ => pending.push(self.request(&a, k, false)?),
             }
             if let Some(g) = grads {
@@ -472,8 +472,59 @@ impl NativeOp {
         })
     }
 
-    /// A Python number as the value of scalar parameter `k` (range-checked by the op).
-    fn value(&self, v: &Bound<'_, PyAny>, k: usize) -> PyResult<Value> {
+    /// The value of value parameter `k`: a Python number for a scalar, a sequence of them
+    /// (nested as the component axes, or flat; a NumPy array) for a vector, quaternion or
+    /// matrix (each number range-checked by the op).
+    fn value(&self, v: &Bound<'_, PyAny>, k: usize) -> PyResult<Given> {
+        let spec = self.op.spec();
+        let ArgKind::Value { element, .. } = spec.params[k].kind else {
+            unreachable!("only value parameters have values")
+        };
+        if element.is_empty() {
+            return Ok(Given::One(self.number(v, k)?));
+        }
+        let count: usize = element.iter().product();
+        let mut leaves = Vec::with_capacity(count);
+        self.components(v, k, &mut leaves, 0)?;
+        if leaves.len() != count {
+            return Err(PyValueError::new_err(format!(
+                "{}: {}: {} number{}; the kernel takes {} ({count} numbers, nested as {:?} or \
+                 flat)",
+                spec.name,
+                param_label(spec, k),
+                leaves.len(),
+                if leaves.len() == 1 { "" } else { "s" },
+                spec.params[k].kind.describe(),
+                element
+            )));
+        }
+        Ok(Given::Components(leaves))
+    }
+
+    /// The numbers of `v` (a number, or a sequence of sequences..) into `out`, in order.
+    fn components(
+        &self,
+        v: &Bound<'_, PyAny>,
+        k: usize,
+        out: &mut Vec<Value>,
+        depth: usize,
+    ) -> PyResult<()> {
+        // A NumPy array as nested lists of Python numbers.
+        if v.hasattr("tolist")? && v.hasattr("ndim")? {
+            return self.components(&v.call_method0("tolist")?, k, out, depth);
+        }
+        if depth < 3 && (v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>()) {
+            for item in v.try_iter()? {
+                self.components(&item?, k, out, depth + 1)?;
+            }
+            return Ok(());
+        }
+        out.push(self.number(v, k)?);
+        Ok(())
+    }
+
+    /// A Python number as a value of parameter `k`'s scalar type (range-checked by the op).
+    fn number(&self, v: &Bound<'_, PyAny>, k: usize) -> PyResult<Value> {
         let spec = self.op.spec();
         if v.is_instance_of::<PyBool>() {
             return Ok(Value::Bool(v.extract()?));
@@ -512,16 +563,7 @@ impl NativeOp {
         caller_stream: bool,
         f: impl FnOnce(&Op, &[CallArg<'_>], &Exec<'_>) -> crate::Result<()> + Send,
     ) -> PyResult<()> {
-        let args: Vec<CallArg<'_>> = call
-            .buffers
-            .iter()
-            .zip(&call.values)
-            .map(|(b, v)| match (b, v) {
-                (Some(b), _) => CallArg::Buffer(b),
-                (None, Some(v)) => CallArg::Value(*v),
-                (None, None) => CallArg::Absent,
-            })
-            .collect();
+        let args = call_args(&call.buffers, &call.values);
         let op = &self.op;
         match (call.device.kind(), call.stream) {
             (DeviceKind::Cpu, _) | (DeviceKind::Cuda { .. }, None) => {
@@ -571,13 +613,25 @@ impl NativeOp {
     }
 }
 
+/// A call's arguments in parameter order: each array's buffer, each value as given.
+fn call_args<'a>(buffers: &'a [Option<Buffer>], values: &'a [Given]) -> Vec<CallArg<'a>> {
+    buffers
+        .iter()
+        .zip(values)
+        .map(|(b, v)| match b {
+            Some(b) => CallArg::Buffer(b),
+            None => v.arg(),
+        })
+        .collect()
+}
+
 /// A call's imported tensors (kept alive until the call returns) and values.
 struct CallBuffers {
     device: Device,
     stream: Option<usize>,
     buffers: Vec<Option<Buffer>>,
     grads: Vec<Option<Buffer>>,
-    values: Vec<Option<Value>>,
+    values: Vec<Given>,
     _keep: Vec<Imported>,
 }
 
@@ -630,11 +684,21 @@ impl NativeOp {
                     e.set_item("element", element.to_vec())?;
                     e.set_item("type", format!("Array<{type_name}, {rank}>"))?;
                 }
-                ArgKind::Value { dtype } => {
+                ArgKind::Value {
+                    dtype,
+                    element,
+                    type_name,
+                } => {
                     e.set_item("dtype", dtype.name())?;
                     e.set_item("rank", 0)?;
-                    e.set_item("element", Vec::<usize>::new())?;
-                    e.set_item("type", dtype.name())?;
+                    e.set_item("element", element.to_vec())?;
+                    e.set_item(
+                        "type",
+                        match element {
+                            [] => dtype.name(),
+                            _ => type_name,
+                        },
+                    )?;
                 }
             }
             e.set_item("describe", p.kind.describe())?;
@@ -664,10 +728,10 @@ impl NativeOp {
             )));
         }
         let mut buffers: Vec<Option<Buffer>> = vec![None; n];
-        let mut vals: Vec<Option<Value>> = vec![None; n];
+        let mut vals: Vec<Given> = vec![Given::None; n];
         for (k, p) in spec.params.iter().enumerate() {
             match (p.role, p.kind) {
-                (Role::Scalar, _) => vals[k] = Some(self.value(&values.get_item(k)?, k)?),
+                (Role::Scalar, _) => vals[k] = self.value(&values.get_item(k)?, k)?,
                 (Role::Input, ArgKind::Array { dtype, .. }) => {
                     let dims = shapes[k].clone().ok_or_else(|| {
                         PyValueError::new_err(format!(
@@ -698,16 +762,7 @@ impl NativeOp {
                 }
             }
         }
-        let args: Vec<CallArg<'_>> = buffers
-            .iter()
-            .zip(&vals)
-            .map(|(b, v)| match (b, v) {
-                (Some(b), _) => CallArg::Buffer(b),
-                (None, Some(v)) => CallArg::Value(*v),
-                (None, None) => CallArg::Absent,
-            })
-            .collect();
-        Ok(self.op.shapes(&args)?)
+        Ok(self.op.shapes(&call_args(&buffers, &vals))?)
     }
 
     /// The forward: `args` aligned with the parameters (a `__dlpack__` object for each array,

@@ -15,7 +15,8 @@ _ARRAYS = ("input", "output", "scratch")
 class Op:
     """A warp-lang op. Call it with the kernel's parameters minus its outputs, in kernel order
     (each may be given by keyword): arrays as tensors of the scalar dtype with the element's
-    components as trailing axes, scalars as Python numbers.
+    components as trailing axes, scalars as Python numbers, vector, quaternion and matrix
+    values as sequences of them (nested as the component axes, or flat; a NumPy array).
 
     - ``op.numpy(*args)``: NumPy arrays on the CPU; returns new arrays.
     - ``op.vjp_numpy(primals, cotangents)``: the input gradients (CPU).
@@ -102,6 +103,9 @@ class Op:
                     self.signature(),
                 )
             )
+        for p in self._call:
+            if p["role"] == "scalar" and p["element"]:
+                bound[p["name"]] = _components(bound[p["name"]])
         return bound
 
     def _allocs(self, bound, shape_of):
@@ -289,11 +293,12 @@ class Op:
             if p["role"] != "scalar":
                 continue
             v = bound[p["name"]]
-            if not _is_number(v):
+            if not _is_static(p, v):
                 raise TypeError(
                     "%s: scalar '%s' (%d) is a %s; an op's scalars are static (a Python or NumPy "
-                    "number), not traced values: pass a value to differentiate or to vary under "
-                    "jit as an array input" % (self.name, p["name"], k, type(v).__name__)
+                    "number, or for a vector or matrix a sequence of them or a NumPy array), not "
+                    "traced values: pass a value to differentiate or to vary under jit as an array "
+                    "input" % (self.name, p["name"], k, type(v).__name__)
                 )
             scalars.append((p["name"], v))
         key = tuple((n, type(v).__name__, v) for n, v in scalars)
@@ -451,8 +456,11 @@ def _schema_type(p):
     if p["role"] == "input":
         return "Tensor"
     if p["dtype"] == "bool":
-        return "bool"
-    return "float" if "float" in p["dtype"] else "int"
+        one = "bool"
+    else:
+        one = "float" if "float" in p["dtype"] else "int"
+    # A vector's, quaternion's or matrix's components: a flat list.
+    return one + "[]" if p["element"] else one
 
 
 def _make_torch_op(op):
@@ -553,6 +561,31 @@ def _is_number(v):
     return isinstance(v, (numbers.Number, np.number, np.bool_)) and not hasattr(v, "aval")
 
 
+def _is_static(p, v):
+    """Whether `v` (bound, so a vector's components are a tuple) is a static value of `p`."""
+    if p["element"]:
+        return isinstance(v, tuple) and all(_is_number(x) for x in v)
+    return _is_number(v)
+
+
+def _components(v):
+    """A vector's, quaternion's or matrix's value as the flat tuple of its components (row-major
+    over nested sequences; a NumPy array or a tensor through ``tolist``); anything else as it
+    is, for the native side to name."""
+    if hasattr(v, "tolist") and hasattr(v, "ndim") and not hasattr(v, "aval"):
+        v = v.tolist()
+    if not isinstance(v, (list, tuple)):
+        return v
+    out = []
+    for x in v:
+        x = _components(x)
+        if isinstance(x, tuple):
+            out.extend(x)
+        else:
+            out.append(x)
+    return tuple(out)
+
+
 def _jax_register(jax):
     """Registers the module's handlers with XLA, once per process."""
     global _FFI_REGISTERED
@@ -609,7 +642,10 @@ def _make_jax_function(op, scalars):
     attrs = {"warp_op": np.int64(op._native.id)}
     for p in params:
         if p["role"] == "scalar":
-            attrs[p["name"]] = np.dtype(_jax_dtype(jnp, p)).type(scalars[p["name"]])
+            dt = np.dtype(_jax_dtype(jnp, p))
+            v = scalars[p["name"]]
+            # A vector's or matrix's components: an array attribute, row-major.
+            attrs[p["name"]] = np.asarray(v, dtype=dt).ravel() if p["element"] else dt.type(v)
     mode = "graph" if op.kind == "kernel" else "eager"
     target = {d: "%s.%s.%s" % (_FFI_PREFIX, d, mode) for d in ("fwd", "bwd")}
     layout = {d: op._native._layout(d) for d in ("fwd", "bwd")}
