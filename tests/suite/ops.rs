@@ -868,9 +868,10 @@ fn caller_ordered_capture_replays(dev: &wp::Device) {
         s.synchronize().unwrap();
         y.fill(0.0).unwrap();
         wp::synchronize().unwrap();
-        // Debug mode synchronises after each launch, which a capture forbids (the suite turns
-        // it on for GPU tests).
-        wp::config::set_debug(false);
+        // Debug mode (the suite's for GPU tests) waits after each launch: on a caller-ordered
+        // stream for that stream alone, and not while its owner captures it (CUDA refuses a
+        // synchronisation inside a capture, and nothing has run).
+        wp::config::set_debug(true);
         raw.begin_capture().unwrap();
         // SAFETY: as above.
         let r = unsafe { op.forward(&args, &Exec::stream(&s)) };
@@ -889,7 +890,6 @@ fn caller_ordered_capture_replays(dev: &wp::Device) {
         graph.launch(raw).unwrap();
         raw.synchronize().unwrap();
         assert_eq!(host(&y), [22.0, 44.0, 66.0]);
-        wp::config::set_debug(true);
     }
 }
 

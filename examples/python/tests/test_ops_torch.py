@@ -216,7 +216,9 @@ def test_stream_cuda():
         xg = x.clone().requires_grad_()
         ws.energy.torch(xg, K).sum().backward()
     side.synchronize()
-    assert still_running, "the op's call waited for the stream's earlier work"
+    # In debug mode (a debug build's default) every launch waits for its kernel, on the
+    # caller's stream alone: the ordering is still checked below.
+    assert still_running or ws._warp_lang._DEBUG, "the op's call waited for the stream's earlier work"
     want = 0.5 * K * 3 + math.sin(1.0) + 1.0 / 3.0
     torch.testing.assert_close(e.cpu(), torch.full((n,), want, dtype=torch.float64), rtol=1e-12, atol=1e-12)
     g_row = torch.tensor([K + math.cos(1.0), K + math.sin(1.0), K + 1.0], dtype=torch.float64)

@@ -3,7 +3,7 @@
 
 use super::deterministic;
 use super::fault;
-use super::gpu::{check_state, err};
+use super::gpu::{check_state, err, read_fault};
 use super::module::{loaded, Loaded};
 use crate::config;
 use crate::device::Device;
@@ -272,7 +272,13 @@ impl<K: Kernel> Prepared<K> {
         if config::debug() {
             ctx.flags |= CTX_DEBUG;
         }
+        // Debug mode's wait after the launch: on a stream the caller orders (torch's, XLA's),
+        // that stream alone (see below).
+        let mut caller_stream = None;
         st.queue(ordinal, stream, |on| {
+            if config::debug() && on.is_caller_ordered() {
+                caller_stream = Some(on.clone());
+            }
             if plain_own && st.alone(on) {
                 dims.flags |= LAUNCH_ALONE;
             }
@@ -319,7 +325,18 @@ impl<K: Kernel> Prepared<K> {
         }
         // (Inside a capture nothing has run yet: there is nothing to check.)
         if config::debug() && super::gpu::capture_stream(ordinal).is_none() {
-            check_state(st)?;
+            match caller_stream {
+                // The caller's stream: waiting for the whole device would wait for its other
+                // streams too and, while the caller captures this one into a graph (XLA's
+                // command buffers), break the capture (CUDA refuses the synchronisation).
+                Some(on) => {
+                    if !on.is_capturing().map_err(|e| err(device, e))? {
+                        on.synchronize().map_err(|e| err(device, e))?;
+                        read_fault(st)?;
+                    }
+                }
+                None => check_state(st)?,
+            }
         }
         Ok(())
     }

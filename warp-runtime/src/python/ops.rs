@@ -80,6 +80,9 @@ impl<'py> Ops<'py> {
         }
         helper.setattr("_FFI_PREFIX", format!("warp_lang.{name}"))?;
         helper.setattr("_FFI_HANDLERS", handlers)?;
+        // Whether every GPU launch waits for its kernel (`config::debug`, a debug build's
+        // default): the tests that prove a call does not wait read it.
+        helper.setattr("_DEBUG", crate::config::debug())?;
         Ok(Ops {
             module: m.clone(),
             helper,
