@@ -290,7 +290,8 @@ fn primitives(dev: &wp::Device) -> wp::Result<()> {
 }
 
 /// The GPU scan's algorithms (`wp::primitives::plan::ScanAlgorithm`: the three-phase scan, the
-/// floats' default, and the single-pass decoupled look-back, the integers') and block shapes
+/// default of f64, f16 and bf16, and the single-pass decoupled look-back, that of the integers
+/// and f32) and block shapes
 /// (`plan::Tile`, each a module of its own), timed one after the other in this process by
 /// CUDA events: inclusive scans of i32 (0..100, as PyTorch's) and f32 (uniform in [0, 1))
 /// beside `torch.cumsum`, and the f32 sum beside `torch.sum`: the run that decides the

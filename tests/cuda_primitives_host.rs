@@ -429,12 +429,12 @@ fn scan_f32_fractional_within_rounding() {
     }
 }
 
-/// The single-pass scan's float results do not depend on where a look-back ends: with an
-/// inclusive prefix published by every tile, every 3rd, 5th and 40th (walks of one tile,
-/// within a window and across windows, as timing decides on a GPU), f32 and f64 results are
-/// the same bit for bit, in blocks of two warps (32 lanes) and of one partial warp (16). The
-/// tree walk's sums (integers' look-back) differ with it: adding a window's aggregates in a
-/// tree and then onto the inclusive prefix is another order than tile after tile.
+/// The single-pass scan's float results do not depend on where a look-back ends: with the
+/// groups' inclusive values (a group: 32 tiles in blocks of two warps, 16 in a block of one
+/// partial warp) published by every group, every 3rd, 5th and 40th (walks of one group, within
+/// a window of groups and, in the 16-lane blocks' 300 tiles, across windows, as timing decides
+/// on a GPU), f32 and f64 results are the same bit for bit. (The tree walk of the integers'
+/// look-back would not pass this: its sums depend on where the walk ends.)
 #[test]
 fn scan_onepass_floats_same_bits_wherever_the_walk_ends() {
     if !have_gpp() {
@@ -463,21 +463,25 @@ fn scan_onepass_floats_same_bits_wherever_the_walk_ends() {
         for (every, got) in &runs[1..] {
             assert!(
                 got == &runs[0].1,
-                "{} {tile:?}: inclusive every {every} tiles gives other bits than every tile",
+                "{} {tile:?}: groups published every {every} give other bits than every group",
                 T::CUDA
             );
         }
     }
     let mut rng = Rng(11);
-    // Enough tiles for walks across two windows: 64 x 2 = 128 elements a tile, 90 tiles.
-    let n = 128 * 90 - 17;
+    // 16 x 3 = 48 elements a tile in the 16-lane blocks: 300 tiles are 19 groups of 16, more
+    // than a window of 16 groups. 64 x 2 = 128 elements a tile in the others: 90 tiles, three
+    // groups of 32.
+    let n = 48 * 300 - 5;
     let x32: Vec<f32> = (0..n)
         .map(|_| (rng.below(2_000_001) as f32 - 1e6) * 1e-3)
         .collect();
     let x64: Vec<f64> = x32.iter().map(|&v| v as f64 * 1.000_000_1).collect();
-    check(TILE, &x32);
-    check(TILE, &x64);
-    check(ODD_TILE, &x32[..48 * 90]);
+    let wide = 128 * 90 - 17;
+    check(TILE, &x32[..wide]);
+    check(TILE, &x64[..wide]);
+    check(ODD_TILE, &x32);
+    check(ODD_TILE, &x64);
 }
 
 fn reduce_cases<T: Elem>(extra: &[Vec<T>]) {

@@ -146,13 +146,13 @@ fn scan_float_fractional_within_rounding(dev: &wp::Device) {
 }
 
 /// The GPU's single-pass scan (decoupled look-back, `plan::ScanAlgorithm::OnePass`, the
-/// integers' default), whatever the default: see `scan_by`.
+/// integers' and f32's default), whatever the default: see `scan_by`.
 fn scan_onepass_kernel(dev: &wp::Device) {
     scan_by(dev, wp::primitives::plan::ScanAlgorithm::OnePass);
 }
 
-/// The GPU's three-phase scan (`plan::ScanAlgorithm::ThreePass`, the floats' default),
-/// whatever the default: see `scan_by`.
+/// The GPU's three-phase scan (`plan::ScanAlgorithm::ThreePass`, the default of f64, f16 and
+/// bf16), whatever the default: see `scan_by`.
 fn scan_threepass_kernel(dev: &wp::Device) {
     scan_by(dev, wp::primitives::plan::ScanAlgorithm::ThreePass);
 }

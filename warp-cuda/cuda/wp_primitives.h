@@ -40,12 +40,12 @@
 //     first warp looks back over a window of WARP_LANES earlier tiles at a time (the nearest
 //     tile that has published its inclusive prefix ends the walk; the others' aggregates are
 //     added), publishes its inclusive prefix and writes the tile. The input is read once.
-//     Integer results equal the three-phase scan's. Float tiles' prefixes are the tiles'
-//     aggregates added one after another from tile 0 (the three-phase scan adds them by the
-//     spine's block scan: another order, so other bits, each within the bound of any
-//     summation order, |error| <= 2 k eps sum |x| for the k-th prefix). Which tile ends a walk
-//     depends on timing, so the walk adds forward from there, in that one order: float
-//     results are the same from run to run (`scan_lookback_ordered`).
+//     Integer results equal the three-phase scan's. Float prefixes follow one fixed grouping
+//     of the tiles' aggregates (groups of WARP_LANES tiles, each scanned by a fixed shuffle
+//     tree, the groups' sums added one after another: `scan_lookback_grouped`), whichever
+//     tiles a walk finds published, so float results are the same from run to run (another
+//     order than the three-phase scan's spine, so other bits, each within the bound of any
+//     summation order, |error| <= 2 k eps sum |x| for the k-th prefix).
 //   * Compaction: the scan of the flags (nonzero = keep) gives each kept element its output
 //     position; the spine's total is the count.
 //   * Radix sort: LSD "onesweep", 8 bits per pass, stable. One upfront kernel reads the keys
@@ -517,9 +517,10 @@ WP_PRIM_FN void store_status(u64* p, u64 v) { *(volatile u64*)p = v; }
 constexpr u32 SCAN_AGGREGATE = 1;
 constexpr u32 SCAN_INCLUSIVE = 2;
 
-/// Host tests only: a tile publishes its inclusive prefix only when its index is a multiple
-/// of this (tile 0 always), so that look-backs, which in the emulator always find the tile
-/// before inclusive, walk back over aggregates and across windows as they may on a GPU.
+/// Host tests only: an integer scan's tile publishes its inclusive prefix only when its index
+/// is a multiple of this (tile 0 always), a float scan's group (`scan_lookback_grouped`) only
+/// when the group's is, so that look-backs, which in the emulator always find the tile or
+/// group before inclusive, walk back over aggregates and across windows as they may on a GPU.
 #ifndef WP_PRIM_SCAN_INCLUSIVE_EVERY
 #define WP_PRIM_SCAN_INCLUSIVE_EVERY 1
 #endif
@@ -613,62 +614,87 @@ WP_PRIM_FN T scan_lookback_tree(const scan_status<T>& st, i64 tile) {
   }
 }
 
-/// The exclusive prefix of tile `tile` (> 0) for floats, the same bit for bit whatever the
-/// timing. Float sums depend on their order, and which tiles have published their inclusive
-/// prefix when a look-back reads them depends on timing; so the prefixes are defined by one
-/// order: P(0) = A(0) and P(k) = P(k-1) + A(k), the tiles' aggregates A added one after another
-/// (a left fold). Every inclusive prefix a tile publishes is its P (by induction: tile 0
-/// publishes A(0), and a tile publishes what this returns plus its A). So a walk that ends at
-/// any tile j that has published P(j), and adds A(j+1), ..., A(tile-1) in this order, returns
-/// P(tile-1) exactly, wherever it ended. The walk is the tree walk's (windows of WARP_LANES
-/// tiles, lane l tile `end - 1 - l`, back to the window holding the nearest inclusive prefix);
-/// the adding goes forward: from that prefix through the lanes of its window below it, then
-/// through each nearer window again, re-read (every tile there has published: the re-read
-/// does not wait, and a tile that has published its P since counts as its P, which the fold
-/// would have reached anyway). Usually the tile before has published its P: one shuffle.
+/// A fixed-shape inclusive scan of one value per lane of the first warp (lane l: lanes 0..l
+/// combined by `__shfl_up_sync` steps, always the same tree): the same bits wherever it runs.
 template <typename T, typename Op>
-WP_PRIM_FN T scan_lookback_ordered(const scan_status<T>& st, i64 tile) {
+WP_PRIM_FN T warp_scan_fixed(T x) {
   const i32 lane = WP_PRIM_TID;
-  i64 end = tile;
+  WP_PRIM_UNROLL
+  for (i32 off = 1; off < WARP_LANES; off <<= 1) {
+    const T y = __shfl_up_sync(WARP_MASK, x, off);
+    if (lane >= off) x = Op::apply(y, x);
+  }
+  return x;
+}
+
+/// The exclusive prefix of group `group` (> 0) of the grouped float look-back (see
+/// `scan_lookback_grouped`): G(group), the groups' sums S(0), ..., S(group - 1) added one after
+/// another. The last tile of group h publishes G(h + 1) as its inclusive value; the walk reads
+/// the last tiles of WARP_LANES groups at once (lane l: group `end - 1 - l`), back to the
+/// window holding the nearest published G, and adds the sums of the groups after it in order,
+/// each from its tiles' aggregates by `warp_scan_fixed` (every tile there has published: the
+/// re-read does not wait). A group whose G has been published since counts as that G, the
+/// value the adding reaches. Usually the group before has published: one read.
+template <typename T, typename Op>
+WP_PRIM_FN T scan_group_prefix(const scan_status<T>& st, i64 group) {
+  const i32 lane = WP_PRIM_TID;
+  i64 end = group;
   T v = Op::identity();
   u32 incl = 0;
   for (;; end -= WARP_LANES) {
-    const i64 k = end - 1 - lane;
+    const i64 h = end - 1 - lane;
     v = Op::identity();
-    const u32 flag = k >= 0 ? st.wait(k, &v) : SCAN_INCLUSIVE;
+    const u32 flag = h >= 0 ? st.wait(h * WARP_LANES + (WARP_LANES - 1), &v) : SCAN_INCLUSIVE;
     incl = __ballot_sync(WARP_MASK, flag == SCAN_INCLUSIVE);
     if (incl != 0) break;
   }
-  // The lowest inclusive lane: the nearest tile with its P (tiles before 0 are further).
-  i32 from = __popc((incl & (0u - incl)) - 1u);
-  T p = __shfl_sync(WARP_MASK, v, from);
-  for (;;) {
-    // Lanes below `from`, tile after tile. In the window that ended the walk none of them is
-    // inclusive; in a nearer one, re-read, a tile that has published its P since restarts
-    // the fold from it (the value the fold would have reached).
-    WP_PRIM_NO_UNROLL
-    for (i32 l = from - 1; l >= 0; --l) {
-      const T x = __shfl_sync(WARP_MASK, v, l);
-      p = ((incl >> l) & 1u) ? x : Op::apply(p, x);
-    }
-    end += WARP_LANES;
-    if (end > tile) return p;
-    // A nearer window (rare: the walk crossed windows). Every tile there has published.
-    const u32 flag = st.wait(end - 1 - lane, &v);
-    incl = __ballot_sync(WARP_MASK, flag == SCAN_INCLUSIVE);
-    from = WARP_LANES;
+  // The lowest inclusive lane: the nearest group with its G published (before group 0: the
+  // identity, G(0)).
+  const i32 from = __popc((incl & (0u - incl)) - 1u);
+  T g = __shfl_sync(WARP_MASK, v, from);
+  WP_PRIM_NO_UNROLL
+  for (i64 h = end - from; h < group; ++h) {
+    T x = Op::identity();
+    const u32 flag = st.wait(h * WARP_LANES + lane, &x);
+    const bool last_incl = __shfl_sync(WARP_MASK, flag, WARP_LANES - 1) == SCAN_INCLUSIVE;
+    // A G(h + 1) published since is the value the adding reaches (it took the place of the
+    // last tile's aggregate).
+    const T published = __shfl_sync(WARP_MASK, x, WARP_LANES - 1);
+    x = warp_scan_fixed<T, Op>(x);
+    const T sum = __shfl_sync(WARP_MASK, x, WARP_LANES - 1);
+    g = last_incl ? published : Op::apply(g, sum);
   }
+  return g;
 }
 
-/// The exclusive prefix of tile `tile` (> 0): the tree walk for integers, the ordered one for
-/// floats (see both).
+/// The exclusive prefix of tile `tile` for floats, the same bit for bit whatever the timing,
+/// called by every lane of the block's first warp. Float sums depend on their order, and
+/// which tiles have published when a look-back reads them depends on timing; so the prefixes
+/// are defined by one grouping. Tiles fall in aligned groups of WARP_LANES. A tile's
+/// exclusive prefix is G(g) + W, with W the `warp_scan_fixed` of its group's aggregates up to
+/// the tile before it, and G(g) the groups' sums S added one after another (S: the same scan's
+/// last lane over the whole group). Only a group's last tile publishes an inclusive value, and
+/// it is G(g + 1) = G(g) + S(g); the other tiles publish only their aggregate. Every value is
+/// then a fixed function of the aggregates, wherever a walk ends (`scan_group_prefix`). The
+/// adding one after another is over groups, not tiles: the serial part of a walk is short.
+/// Sets `*group_incl` to G(g) + S(g) (what a group's last tile publishes); `own` is the
+/// tile's aggregate.
 template <typename T, typename Op>
-WP_PRIM_FN T scan_lookback(const scan_status<T>& st, i64 tile) {
-  if constexpr (num<T>::is_int) {
-    return scan_lookback_tree<T, Op>(st, tile);
-  } else {
-    return scan_lookback_ordered<T, Op>(st, tile);
-  }
+WP_PRIM_FN T scan_lookback_grouped(const scan_status<T>& st, i64 tile, T own, T* group_incl) {
+  const i32 lane = WP_PRIM_TID;
+  const i64 group = tile / WARP_LANES;
+  const i64 first = group * WARP_LANES;
+  const i32 pos = (i32)(tile - first);
+  // This group's tiles before this one publish only their aggregates.
+  T a = Op::identity();
+  if (lane < pos) (void)st.wait(first + lane, &a);
+  if (lane == pos) a = own;
+  a = warp_scan_fixed<T, Op>(a);
+  const T within = __shfl_sync(WARP_MASK, a, pos == 0 ? 0 : pos - 1);
+  const T through = __shfl_sync(WARP_MASK, a, WARP_LANES - 1);
+  const T g = group == 0 ? Op::identity() : scan_group_prefix<T, Op>(st, group);
+  *group_incl = Op::apply(g, through);
+  return pos == 0 ? g : Op::apply(g, within);
 }
 
 /// args: 0 count (const i32* or 0), 1 capacity, 2 status words (u64*, `tiles`), 3 number of
@@ -733,18 +759,35 @@ WP_PRIM_FN void k_scan_onepass(const args_t& a) {
   }
   T total = Op::identity();  // (set in thread 0, which alone publishes it)
   const T excl = block_scan_warps<T, Op>(acc, warp_totals, &total);
-  // Published as early as possible: later tiles wait for it.
+  // Published as early as possible: later tiles wait for it. Integers: tile 0's is its
+  // inclusive prefix too, and every tile publishes that after its look-back (the tree walk).
+  // Floats: only a group's last tile publishes an inclusive value (`scan_lookback_grouped`).
   if (t == 0) {
-    st.publish(tile, tile == 0 ? SCAN_INCLUSIVE : SCAN_AGGREGATE, total);
+    st.publish(tile, num<T>::is_int && tile == 0 ? SCAN_INCLUSIVE : SCAN_AGGREGATE, total);
     if (tile == 0) prefix_sh = Op::identity();
   }
-  if (tile > 0 && t < WARP_LANES) {
-    const T prefix = scan_lookback<T, Op>(st, tile);
-    if (t == 0) {
-      if (tile % WP_PRIM_SCAN_INCLUSIVE_EVERY == 0) {
-        st.publish(tile, SCAN_INCLUSIVE, Op::apply(prefix, total));
+  if constexpr (num<T>::is_int) {
+    if (tile > 0 && t < WARP_LANES) {
+      const T prefix = scan_lookback_tree<T, Op>(st, tile);
+      if (t == 0) {
+        if (tile % WP_PRIM_SCAN_INCLUSIVE_EVERY == 0) {
+          st.publish(tile, SCAN_INCLUSIVE, Op::apply(prefix, total));
+        }
+        prefix_sh = prefix;
       }
-      prefix_sh = prefix;
+    }
+  } else {
+    if (t < WARP_LANES) {
+      T group_incl = Op::identity();
+      const T own = __shfl_sync(WARP_MASK, total, 0);
+      const T prefix = scan_lookback_grouped<T, Op>(st, tile, own, &group_incl);
+      if (t == 0) {
+        const i64 group = tile / WARP_LANES;
+        if (tile % WARP_LANES == WARP_LANES - 1 && group % WP_PRIM_SCAN_INCLUSIVE_EVERY == 0) {
+          st.publish(tile, SCAN_INCLUSIVE, group_incl);
+        }
+        if (tile > 0) prefix_sh = prefix;
+      }
     }
   }
   WP_PRIM_SYNC();

@@ -157,9 +157,9 @@ pub enum ScanAlgorithm {
     /// One launch after a small init step: decoupled look-back over per-tile status words
     /// ([`scan_onepass`]). Reads the input once. Integer results equal `ThreePass`'s. Float
     /// results are the same from run to run, whichever tiles a look-back finds published:
-    /// the tiles' totals are added one after another from the first (`scan_lookback_ordered`
-    /// in `wp_primitives.h`), another order than `ThreePass`'s, so other bits within the
-    /// same rounding bound.
+    /// the tiles' totals are added in one fixed grouping (`scan_lookback_grouped` in
+    /// `wp_primitives.h`), another order than `ThreePass`'s, so other bits within the same
+    /// rounding bound.
     OnePass,
 }
 
@@ -180,16 +180,21 @@ impl ScanAlgorithm {
 /// - Integers: the single-pass scan in tiles of 512 threads of 16 elements (8 for 8-byte
 ///   types, whose tile must fit the static shared memory). Integer sums do not depend on
 ///   their order, so its results are the three-phase scan's.
-/// - Floats: the three-phase scan, 256 threads of 8. (The single-pass scan's float results
-///   are now the same from run to run too; it becomes the floats' default once a GPU run
-///   has timed it against this one.)
+/// - `f32`: the single-pass scan in tiles of 256 threads of 16. Its float results are the
+///   same from run to run (the grouped look-back, `scan_lookback_grouped` in
+///   `wp_primitives.h`), as the three-phase scan's are; the two add in other orders, so other
+///   bits within the same rounding bound.
+/// - Other floats (`f64`, `f16`, `bf16`): the three-phase scan, 256 threads of 8 (their
+///   single-pass scan, whose values lie apart from the status words, is untimed).
 ///
 /// Timed in one run (`cargo bench --bench spatial -- --primitives`, CUDA events, H200,
-/// 2026-12-01; PyTorch's `cumsum` 0.031 and 0.069 ms), inclusive i32 scans at 1M and 16M:
-/// single-pass 512 x 16 0.015 and 0.072 ms, three-phase 256 x 8 0.021 and 0.096; f32:
-/// three-phase 256 x 8 0.020 and 0.088 (no other shape of it was ahead by more than the
-/// noise: 512 x 8 0.017 and 0.085). The f32 sum took 0.027-0.030 ms at 16M in every shape
-/// (PyTorch 0.032).
+/// 2026-12-03; PyTorch's `cumsum` 0.034 and 0.074 ms), inclusive f32 scans at 1M and 16M:
+/// single-pass 256 x 16 0.016 and 0.078 ms (512 x 16 and 1024 x 8 0.080 at 16M), three-phase
+/// 256 x 8 0.020 and 0.086 (its best shape, 512 x 8, 0.080 at 16M); the single-pass scan's
+/// earlier look-back, which added tiles one after another, took 0.104-0.344 ms at 16M. i32
+/// (2026-12-01; `cumsum` 0.031 and 0.069 ms): single-pass 512 x 16 0.015 and 0.072 ms,
+/// three-phase 256 x 8 0.021 and 0.096. The f32 sum took 0.027-0.030 ms at 16M in every shape
+/// (PyTorch 0.032-0.035).
 pub fn default_gpu_scan(t: &str, size: u64) -> (ScanAlgorithm, Tile) {
     if t.starts_with('i') || t.starts_with('u') {
         let items = if size <= 4 { 16 } else { 8 };
@@ -198,6 +203,14 @@ pub fn default_gpu_scan(t: &str, size: u64) -> (ScanAlgorithm, Tile) {
             Tile {
                 threads: 512,
                 items,
+            },
+        )
+    } else if size == 4 {
+        (
+            ScanAlgorithm::OnePass,
+            Tile {
+                threads: 256,
+                items: 16,
             },
         )
     } else {
@@ -921,7 +934,13 @@ mod tests {
         );
         assert_eq!(
             default_gpu_scan("f32", 4),
-            (ScanAlgorithm::ThreePass, GPU_TILE)
+            (
+                ScanAlgorithm::OnePass,
+                Tile {
+                    threads: 256,
+                    items: 16
+                }
+            )
         );
         assert_eq!(
             default_gpu_scan("f64", 8),
