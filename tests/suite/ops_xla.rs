@@ -944,6 +944,10 @@ fn xla_batched_matches_a_loop(dev: &wp::Device) {
         let (y, t) = (arr(&yh[b * N..(b + 1) * N], dev), arr(&[th[b]], dev));
         let (gx, ga) = (zeros::<f64, 1>(N, dev), zeros::<f64, 1>(2, dev));
         let (c1, c2) = (arr(&gy, dev), arr(&[0.5], dev));
+        // The cotangents, made before the call (on_xla_stream synchronises first): arrays
+        // made inside it would be uploaded on this crate's default stream, which nothing
+        // orders before the caller's stream.
+        let (gy_in, ct_in) = (arr(&gy, dev), arr(&[0.5], dev));
         let r = on_xla_stream(dev, || {
             invoke(
                 handler("bwd.graph", dev),
@@ -953,8 +957,8 @@ fn xla_batched_matches_a_loop(dev: &wp::Device) {
                     &buf(&amp, Dtype::F64),
                     &buf(&y, Dtype::F64),
                     &buf(&t, Dtype::F64),
-                    &buf(&arr(&gy, dev), Dtype::F64),
-                    &buf(&arr(&[0.5], dev), Dtype::F64),
+                    &buf(&gy_in, Dtype::F64),
+                    &buf(&ct_in, Dtype::F64),
                 ],
                 &[
                     &buf(&gx, Dtype::F64),
