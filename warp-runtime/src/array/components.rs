@@ -1,12 +1,19 @@
 //! The element types as array libraries see them: a scalar type and trailing axes (NumPy's
-//! view of Warp's vector and matrix arrays), shared by the ndarray views, DLPack and the
-//! value parameters of ops (`ops::OpValue`).
+//! view of Warp's vector and matrix arrays), shared by the ndarray views, DLPack and ops (their
+//! arrays' elements and value parameters).
 
 use super::Element;
 
 /// An element type as NumPy sees it in Warp: scalars of type `Scalar` on trailing axes of
 /// shape `SHAPE` (none for a scalar, `[K]` for a vector or quaternion, `[rows, columns]`
 /// for a matrix), at element strides `STRIDES` within one element.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a numeric scalar, vector, quaternion or matrix type",
+    note = "array interop (ndarray views, DLPack) and ops (their arrays' elements and value \
+            parameters) take the numeric scalars and glam's vectors, quaternions and matrices of \
+            them; for an op, wrap a kernel that takes structs, meshes or other objects in an \
+            Op::computation and build those inside the body"
+)]
 pub trait NdComponents: Element {
     /// The scalar type of the components.
     type Scalar: Element;
@@ -23,8 +30,6 @@ macro_rules! nd_scalars {
             const SHAPE: &'static [usize] = &[];
             const STRIDES: &'static [isize] = &[];
         }
-        #[cfg(feature = "ops")]
-        impl crate::ops::OpValue for $t {}
     )*};
 }
 nd_scalars!(
@@ -49,8 +54,6 @@ macro_rules! nd_vectors {
             const SHAPE: &'static [usize] = &[$k];
             const STRIDES: &'static [isize] = &[1];
         }
-        #[cfg(feature = "ops")]
-        impl crate::ops::OpValue for $t {}
     )*};
 }
 nd_vectors!(
@@ -70,8 +73,6 @@ macro_rules! nd_matrices {
             const SHAPE: &'static [usize] = &[$k, $k];
             const STRIDES: &'static [isize] = &[1, $k];
         }
-        #[cfg(feature = "ops")]
-        impl crate::ops::OpValue for $t {}
     )*};
 }
 nd_matrices!(

@@ -192,8 +192,8 @@ impl OpScalar for bool {
 }
 
 /// A type an op's value parameters may have: a numeric scalar, vector, quaternion or matrix
-/// (`f32`, `DVec3`, `Quat`, `Mat3`; `bool` too, apart). A marker over [`NdComponents`], whose
-/// components say how a call's numbers fill the value; implemented beside it for each type.
+/// (`f32`, `DVec3`, `Quat`, `Mat3`; `bool` too, apart): every [`NdComponents`] type of an
+/// [`OpScalar`], whose components say how a call's numbers fill the value.
 #[diagnostic::on_unimplemented(
     message = "kernel parameter type `{Self}` cannot cross into an op",
     note = "ops take Array<T, N> of numeric T (scalars, vectors, matrices, quaternions) and \
@@ -201,6 +201,8 @@ impl OpScalar for bool {
             or other objects in an Op::computation and build those inside the body"
 )]
 pub trait OpValue: NdComponents<Scalar: OpScalar> {}
+
+impl<T: NdComponents<Scalar: OpScalar>> OpValue for T {}
 
 /// An element type an op's arrays may have: a scalar, vector, quaternion or matrix of an
 /// [`OpScalar`] (its components are the buffer's trailing axes, as [`NdComponents`] lays
